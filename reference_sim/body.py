@@ -1,0 +1,127 @@
+"""Rigid body mass properties: mass (kg) and body-frame inertia about the COM (kg m²)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["RigidBody", "inertia_from_particles", "check_inertia"]
+
+# Relative tolerance for symmetry and the triangle inequality of an inertia tensor: a few ulps of
+# the largest moment, so tensors typed with ~15 significant digits pass and real violations do not.
+_INERTIA_REL_TOL = 1e-12
+
+
+def check_inertia(inertia_B) -> np.ndarray:
+    """Validate a body-frame inertia (3 principal moments or a 3×3 tensor, kg m²); return the 3×3 tensor.
+
+    Raises ValueError naming the reason: wrong shape, non-finite, not symmetric, not positive
+    definite, or principal moments violating the triangle inequality ``A + B >= C``.
+    """
+    I = np.asarray(inertia_B, dtype=float)
+    if I.shape == (3,):
+        I = np.diag(I)
+    elif I.shape != (3, 3):
+        raise ValueError(f"must be 3 principal moments or a 3x3 tensor, got shape {I.shape}")
+    if not np.all(np.isfinite(I)):
+        raise ValueError("must be finite numbers")
+    scale = float(np.max(np.abs(I)))
+    if scale == 0.0:
+        raise ValueError("is zero; must be positive definite")
+    if np.max(np.abs(I - I.T)) > _INERTIA_REL_TOL * scale:
+        raise ValueError("is not symmetric")
+    moments = np.linalg.eigvalsh(0.5 * (I + I.T))
+    if moments[0] <= 0.0:
+        raise ValueError(f"is not positive definite (principal moments {moments.tolist()})")
+    a, b, c = np.sort(moments)
+    if a + b < c * (1.0 - _INERTIA_REL_TOL):
+        raise ValueError(
+            f"violates the triangle inequality: principal moments {a:g} + {b:g} < {c:g} "
+            "(no physical body has these)"
+        )
+    return 0.5 * (I + I.T)
+
+
+def inertia_from_particles(masses_kg, points_B_m):
+    """Mass, COM and inertia of point masses, as the course defines them.
+
+    Parameters
+    ----------
+    masses_kg : (K,) masses, kg.
+    points_B_m : (K, 3) positions in body coordinates, m.
+
+    Returns
+    -------
+    mass_kg : float
+    com_B_m : (3,) centre of mass in the given body coordinates, m.
+    inertia_B : (3, 3) ``I_ref = Σ m_i [(r_iᵀ r_i) I₃ − r_i r_iᵀ]`` about the COM, with
+        ``r_i = points_B_m[i] − com_B_m``, kg m².
+    """
+    m = np.asarray(masses_kg, dtype=float)
+    p = np.asarray(points_B_m, dtype=float)
+    mass = float(np.sum(m))
+    com = (m[:, None] * p).sum(axis=0) / mass
+    r = p - com
+    I = np.einsum("k,kij->ij", m, np.einsum("ki,ki->k", r, r)[:, None, None] * np.eye(3) - r[:, :, None] * r[:, None, :])
+    return mass, com, I
+
+
+@dataclass(frozen=True, eq=False)
+class RigidBody:
+    """Mass properties of one rigid body whose body frame has its origin at the COM.
+
+    Attributes
+    ----------
+    mass_kg : float, kg.
+    inertia_B : (3, 3) inertia tensor about the COM in body axes, kg m² (symmetric, positive definite).
+    particles : optional (K, 4) ``[m, x, y, z]`` point masses (body coordinates relative to the COM,
+        m) when the body was built from particles; kept so the course's per-particle view is available.
+    """
+
+    mass_kg: float
+    inertia_B: np.ndarray
+    particles: np.ndarray | None = None
+
+    def __post_init__(self):
+        if not (np.isfinite(self.mass_kg) and self.mass_kg > 0.0):
+            raise ValueError(f"mass must be a positive finite number, got {self.mass_kg!r}")
+        object.__setattr__(self, "inertia_B", check_inertia(self.inertia_B))
+        inv = np.linalg.inv(self.inertia_B)
+        object.__setattr__(self, "inertia_inv_B", 0.5 * (inv + inv.T))
+
+    @classmethod
+    def from_particles(cls, particles):
+        """Body from point masses ``[[m, x, y, z], ...]`` (kg, m, body coordinates).
+
+        Returns ``(body, com_B_m)``: the body's frame is moved to the COM, and ``com_B_m`` says where
+        that COM was in the coordinates the particles were given in.
+        """
+        P = np.asarray(particles, dtype=float)
+        if P.ndim != 2 or P.shape[1] != 4 or P.shape[0] < 1:
+            raise ValueError(f"particles must be a list of [m, x, y, z], got shape {P.shape}")
+        if np.any(~(P[:, 0] > 0.0)):
+            raise ValueError("every particle mass must be positive")
+        mass, com, I = inertia_from_particles(P[:, 0], P[:, 1:])
+        rel = P.copy()
+        rel[:, 1:] -= com
+        return cls(mass, I, rel), com
+
+    def principal_axes(self):
+        """Principal moments ``(3,)`` ascending (kg m²) and ``R_BP`` (3, 3), det +1, with
+        ``inertia_B = R_BP diag(moments) R_BPᵀ`` (columns: principal axes in body coordinates)."""
+        moments, R = np.linalg.eigh(self.inertia_B)
+        if np.linalg.det(R) < 0:
+            R[:, 2] *= -1.0
+        return moments, R
+
+    def is_diagonal(self) -> bool:
+        off = self.inertia_B - np.diag(np.diag(self.inertia_B))
+        return bool(np.all(off == 0.0))
+
+    def world_inertia(self, R_WB):
+        """World-frame inertia ``R I_B Rᵀ`` (kg m²) for rotations ``R_WB`` (..., 3, 3)."""
+        return R_WB @ self.inertia_B @ np.swapaxes(R_WB, -1, -2)
+
+    def world_inertia_inv(self, R_WB):
+        """``R I_B⁻¹ Rᵀ`` (1/(kg m²)) for rotations ``R_WB`` (..., 3, 3)."""
+        return R_WB @ self.inertia_inv_B @ np.swapaxes(R_WB, -1, -2)

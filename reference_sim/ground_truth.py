@@ -1,0 +1,51 @@
+"""High-accuracy ground truth of any free-body problem: the full equations integrated by DOP853."""
+from __future__ import annotations
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from .integrators import rhs
+from .state import Q, V, W, Problem
+
+__all__ = ["ground_truth", "GROUND_TRUTH_RTOL", "GROUND_TRUTH_ATOL"]
+
+#: DOP853 tolerances. rtol 1e-12 is what the issue requires (≤ 1e-12); atol 1e-12 because every state
+#: component of the catalog is O(0.1–10) in SI units, so it never dominates. Measured against the
+#: closed forms over 10 s the resulting error is ≤ 1e-10 (tests/reference_sim/test_ground_truth.py).
+GROUND_TRUTH_RTOL = 1e-12
+GROUND_TRUTH_ATOL = 1e-12
+
+
+def ground_truth(problem: Problem, t_s, decay_rates_per_s=(0.0, 0.0), y0=None,
+                 rtol: float = GROUND_TRUTH_RTOL, atol: float = GROUND_TRUTH_ATOL):
+    """Solve ``ẏ = F(y)`` (reference_sim.integrators.rhs: gyroscopic term included) with DOP853.
+
+    Parameters
+    ----------
+    problem : single-body Problem.
+    t_s : (T,) increasing output times, s, starting at 0.
+    decay_rates_per_s : (k_v, k_ω), 1/s: continuous damping ``v̇ −= k_v v``, ``ω̇ −= k_ω ω``; the
+        frame-rate independent form ``e^{−kΔt}`` of the course's per-step decay (COURSE_EQUATIONS.md).
+        The problem's own per-step decay factors are ignored here (they are not an ODE).
+    Returns
+    -------
+    y : (T, 13) packed states [x_W, v_W, q_WB (w x y z, renormalised), w_W].
+    """
+    t_s = np.asarray(t_s, dtype=float)
+    y0 = problem.initial_packed() if y0 is None else np.asarray(y0, dtype=float)
+    k_v, k_w = decay_rates_per_s
+
+    def f(_t, y):
+        d = rhs(problem, y)
+        if k_v:
+            d[V] -= k_v * y[V]
+        if k_w:
+            d[W] -= k_w * y[W]
+        return d
+
+    sol = solve_ivp(f, (t_s[0], t_s[-1]), y0, method="DOP853", t_eval=t_s, rtol=rtol, atol=atol)
+    if not sol.success:
+        raise RuntimeError(f"ground truth integration failed: {sol.message}")
+    y = sol.y.T.copy()
+    y[:, Q] /= np.linalg.norm(y[:, Q], axis=1, keepdims=True)
+    return y
