@@ -31,7 +31,6 @@ __all__ = [
     "quat_canonical",
     "euler_zxy_from_quat",
     "quat_from_euler_zxy",
-    "GimbalLockWarning",
     "IDENTITY",
 ]
 
@@ -198,10 +197,6 @@ def geodesic_angle(q_ref, q):
     """
     d = quat_mul(quat_conj(q_ref), q)
     return 2.0 * np.arctan2(np.linalg.norm(d[..., 1:], axis=-1), np.abs(d[..., 0]))
-
-
-class GimbalLockWarning(UserWarning):
-    """Euler angles requested at (or numerically at) gimbal lock: only a sum of angles is defined."""
 
 
 def quat_from_euler_zxy(angles_deg):
