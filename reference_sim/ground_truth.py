@@ -9,11 +9,12 @@ from .state import Q, V, W, Problem
 
 __all__ = ["ground_truth", "GROUND_TRUTH_RTOL", "GROUND_TRUTH_ATOL"]
 
-#: DOP853 tolerances. rtol 1e-12 is what the issue requires (≤ 1e-12); atol 1e-12 because every state
-#: component of the catalog is O(0.1–10) in SI units, so it never dominates. Measured against the
-#: closed forms over 10 s the resulting error is ≤ 1e-10 (tests/reference_sim/test_ground_truth.py).
-GROUND_TRUTH_RTOL = 1e-12
-GROUND_TRUTH_ATOL = 1e-12
+#: DOP853 tolerances. The issue requires rtol ≤ 1e-12; at exactly 1e-12 the tennis racket's 10 s
+#: ground truth is 4e-10 from the Jacobi closed form (the flip amplifies local errors), at 1e-13 it is
+#: 5e-12 (tests/cross_checks/test_references.py), so 1e-13 is used. atol 1e-14: every state component
+#: of the catalog is O(0.01–10) in SI units, so the absolute part never dominates.
+GROUND_TRUTH_RTOL = 1e-13
+GROUND_TRUTH_ATOL = 1e-14
 
 
 def ground_truth(problem: Problem, t_s, decay_rates_per_s=(0.0, 0.0), y0=None,
