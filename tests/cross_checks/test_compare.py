@@ -1,0 +1,99 @@
+"""`rbcheck compare`: direction-aware, names the regressed row, exit 0/1/2."""
+import json
+
+import pandas as pd
+import pytest
+
+from cross_checks.compare import CompareInputError, compare_dirs, to_markdown
+
+ROWS = [
+    dict(scenario="tennis_racket", engine="mujoco:euler", dt=1e-3, steps=10000, wall_s=0.1, pos_err_final=0.0,
+         vel_err_final=0.0, orient_err_final=0.0125, angvel_err_final=0.02, energy_drift_max=4.6e-3,
+         angmom_drift_max=2.4e-3, status="ok"),
+    dict(scenario="tennis_racket", engine="reference:course", dt=1e-3, steps=10000, wall_s=1.2, pos_err_final=0.0,
+         vel_err_final=0.0, orient_err_final=3.05, angvel_err_final=2.9, energy_drift_max=0.0,
+         angmom_drift_max=0.5, status="ok"),
+    dict(scenario="projectile", engine="mujoco:rk4", dt=1e-2, steps=100, wall_s=0.01, pos_err_final=1e-15,
+         vel_err_final=1e-15, orient_err_final=0.0, angvel_err_final=0.0, energy_drift_max=1e-15,
+         angmom_drift_max=0.0, status="ok"),
+]
+CONV = [dict(scenario="tennis_racket", engine="mujoco:euler", quantity="orientation", order=1.01,
+             pairwise_orders=[1.0, 1.01], verdict="converges", expected_order=1)]
+PROV = {"versions": {"rbcheck": "0.1.0", "mujoco": "4.0.0", "pybullet": "3.2.7", "numpy": "2.4.6"}}
+
+
+def write(d, rows=ROWS, conv=CONV, prov=PROV):
+    d.mkdir(parents=True, exist_ok=True)
+    pd.DataFrame(rows).to_csv(d / "results.csv", index=False)
+    (d / "summary.json").write_text(json.dumps({"provenance": prov, "convergence": conv}))
+    return d
+
+
+def test_identical_results_pass(tmp_path):
+    c = compare_dirs(write(tmp_path / "a"), write(tmp_path / "b"))
+    assert c.exit_code() == 0 and c.matched_rows == 3 and not c.changes
+
+
+def test_planted_regression_fails_and_is_named_in_markdown(tmp_path):
+    rows = [dict(r) for r in ROWS]
+    rows[0]["orient_err_final"] *= 1.5
+    c = compare_dirs(write(tmp_path / "a"), write(tmp_path / "b", rows))
+    assert c.exit_code() == 1
+    [reg] = c.of("regression")
+    assert (reg.scenario, reg.engine) == ("tennis_racket", "mujoco:euler") and "orient_err_final" in reg.what
+    md = to_markdown(c, "a", "b")
+    assert "| tennis_racket | mujoco:euler | dt=0.001 orient_err_final |" in md
+
+
+def test_lower_error_is_an_improvement_not_a_regression(tmp_path):
+    rows = [dict(r) for r in ROWS]
+    rows[1]["orient_err_final"] = 1e-3
+    c = compare_dirs(write(tmp_path / "a"), write(tmp_path / "b", rows))
+    assert c.exit_code() == 0 and len(c.of("improvement")) == 1
+
+
+def test_roundoff_noise_is_not_a_change(tmp_path):
+    rows = [dict(r) for r in ROWS]
+    rows[2]["pos_err_final"] = 9e-13  # was 1e-15: both at the round-off floor
+    rows[0]["energy_drift_max"] *= 1.01  # 1 % < the 5 % relative tolerance
+    assert not compare_dirs(write(tmp_path / "a"), write(tmp_path / "b", rows)).changes
+
+
+def test_status_change_to_diverged_is_a_regression(tmp_path):
+    rows = [dict(r) for r in ROWS]
+    rows[2]["status"] = "diverged"
+    c = compare_dirs(write(tmp_path / "a"), write(tmp_path / "b", rows))
+    assert c.exit_code() == 1 and "status" in c.of("regression")[0].what
+
+
+def test_order_further_from_expected_is_a_regression(tmp_path):
+    conv = [dict(CONV[0], order=0.5)]
+    c = compare_dirs(write(tmp_path / "a"), write(tmp_path / "b", conv=conv))
+    assert c.exit_code() == 1 and "order of orientation" in c.of("regression")[0].what
+
+
+def test_verdict_change_is_a_regression(tmp_path):
+    conv = [dict(CONV[0], verdict="does_not_converge")]
+    assert compare_dirs(write(tmp_path / "a"), write(tmp_path / "b", conv=conv)).exit_code() == 1
+
+
+def test_missing_and_new_rows_and_versions_reported(tmp_path):
+    rows = ROWS[:2] + [dict(ROWS[2], scenario="linear_drag")]
+    c = compare_dirs(write(tmp_path / "a"), write(tmp_path / "b", rows, prov={"versions": {**PROV["versions"],
+                                                                                           "mujoco": "4.1.0"}}))
+    assert len(c.of("missing")) == 1 and len(c.of("new")) == 1
+    assert c.exit_code() == 1 and c.exit_code(allow_missing=True) == 0
+    assert ("mujoco", "4.0.0", "4.1.0") in c.version_diffs
+
+
+@pytest.mark.parametrize("setup, words", [
+    (lambda d: None, "not a directory"),
+    (lambda d: d.mkdir(), "results.csv: missing"),
+    (lambda d: (d.mkdir(), (d / "results.csv").write_text("a,b\n1,2\n")), "columns"),
+    (lambda d: (write(d), (d / "summary.json").write_text("{")), "cannot parse JSON"),
+])
+def test_unusable_input_is_an_input_error(tmp_path, setup, words):
+    bad = tmp_path / "bad"
+    setup(bad)
+    with pytest.raises(CompareInputError, match=words):
+        compare_dirs(write(tmp_path / "a"), bad)
