@@ -9,6 +9,13 @@ QUAT_ALGEBRA = 1e-14
 #: Round trips through matrices / axis-angle / Euler angles: each conversion loses ~10 ε, and the
 #: acos/atan2 near 0 or π amplify it by ~1/sin; 1e-12 rad covers the test sets (measured ≤ 4e-15).
 QUAT_ROUND_TRIP = 1e-12
+#: Euler-angle round trip near gimbal lock: y and z come from atan2 of entries scaled by cos(pitch),
+#: so their error is ~ε/|cos pitch| (conditioning of the parameterisation, not of the rotation);
+#: 10 ε / |cos pitch| covers it (hypothesis found 2.3e-11 rad at cos pitch = 2e-5, i.e. 2.3 ε/cos).
+def euler_round_trip_tol(cos_pitch: float) -> float:
+    return QUAT_ROUND_TRIP + 10 * 2.2e-16 / max(abs(cos_pitch), 1e-300)
+
+
 #: Readable single-body path vs batched path: same formulas, different evaluation order (einsum vs
 #: @, vectorised cross): per-step difference ~ ε|y|, accumulated over ≤ 1000 steps of a bounded
 #: problem: 1000 · 10 ε ≈ 2e-12 relative.
@@ -28,3 +35,46 @@ CLOSED_FORM_VS_GROUND_TRUTH_TUMBLING_BOX = 3e-8
 COURSE_NONCONVERGENCE_MIN_RAD = 1.0
 #: Implicit-solve residual (reference_sim.integrators.IMPLICIT_TOL) is 1e-13 relative.
 IMPLICIT_SOLVE = 1e-13
+
+# --- sweeps, metrics and verdicts (cross_checks.metrics, cross_checks.sweep, `rbcheck check`) -------
+
+#: Round-off accumulated per step, relative to a quantity's scale: a step does ~8 roundings of ε =
+#: 2.2e-16 on each component; added linearly (an upper bound: a random walk gives √N) that is
+#: 1.8e-15 per step, 7e-11 over the longest ladder run (4e4 steps).
+ROUNDOFF_PER_STEP_REL = 8 * 2.2e-16
+#: Accuracy of the references relative to a quantity's scale: closed forms (polynomials, exponentials,
+#: Jacobi elliptic functions from scipy, ~1e-15 each, a few hundred periods at most) 1e-12; the DOP853
+#: ground truth (rtol 1e-12) is within CLOSED_FORM_VS_GROUND_TRUTH of the closed forms over 10 s.
+REFERENCE_ACCURACY_REL = {"analytic": 1e-12, "ground_truth": 1e-10}
+#: A fitted order below this means "does not converge": a consistent scheme has order ≥ 1, an error
+#: plateau (missing physics) has order ≈ 0; 0.5 is halfway.
+CONVERGES_MIN_ORDER = 0.5
+#: Observed vs expected order in a sweep verdict. Expected orders are the integers 1, 2 and 4; ±0.3
+#: separates neighbours with margin and absorbs the curvature left in a 16× ladder once the coarsest
+#: pre-asymptotic point is dropped (ORDER_TOL = 0.1 is for the dedicated order studies of issue 2).
+SWEEP_ORDER_TOL = 0.3
+#: The coarsest ladder point is pre-asymptotic (dropped from the fit when ≥ 3 points remain) when
+#: its pairwise order differs from the median of the finer pairs by more than this: half an order
+#: is beyond the ±0.3 match tolerance, so keeping it could flip a verdict.
+PRE_ASYMPTOTIC_ORDER_DEV = 0.5
+#: Energy drift is "secular" when the least-squares trend over the run exceeds this many standard
+#: deviations of the residual oscillation (and the round-off floor); otherwise "bounded". A sinusoid
+#: fitted over ≥ 1 period leaves a spurious trend below ~1.5 σ of itself; 2 σ keeps it bounded.
+SECULAR_TREND_VS_RESIDUAL = 2.0
+#: Two variants implementing the same arithmetic (expectations.EQUIVALENT_PAIRS) must agree to this,
+#: relative to max(1, |state|): 4e4 steps × ~10 roundings × ε ≈ 1e-10, ×10 for the amplification
+#: near the tennis racket's separatrix.
+SAME_SCHEME_REL = 1e-9
+#: `rbcheck check`: a trajectory "is" a reference variant when every quantity agrees to this relative
+#: to max(1, |state|) — the same reasoning as SAME_SCHEME_REL, plus CSV printing of ≥ 15 digits.
+CHECK_SAME_SCHEME_REL = 1e-9
+#: `rbcheck check`: a trajectory agrees with the physical reference when each final error is within
+#: this factor of a correct first-order scheme's error at the same Δt (reference:expmap_gyro): first-
+#: order schemes differ by their error constants, which stay within a factor of a few on the catalog.
+CHECK_BUDGET_FACTOR = 10.0
+#: `rbcheck check`: times count as a uniform grid when every step is within this fraction of the
+#: median step: a CSV printed with 6 decimals at Δt = 1e-3 s has step errors up to 1e-6 s = 1e-3 Δt.
+CHECK_UNIFORM_DT_REL = 2e-3
+#: `rbcheck check`: the first row counts as the scenario's initial state within this (relative to
+#: max(1, |state|)): 6 printed decimals, as above.
+CHECK_INITIAL_STATE_REL = 1e-5

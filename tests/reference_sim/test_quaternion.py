@@ -1,0 +1,146 @@
+"""Quaternion algebra against scipy.spatial.transform.Rotation (scalar_first=True) and its properties."""
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+from hypothesis.extra.numpy import arrays
+from scipy.spatial.transform import Rotation
+
+from cross_checks.tolerances import QUAT_ALGEBRA, QUAT_ROUND_TRIP, euler_round_trip_tol
+from reference_sim.quaternion import (
+    axis_angle_from_quat, euler_zxy_from_quat, geodesic_angle, matrix_from_quat, quat_conj,
+    quat_exp, quat_from_axis_angle, quat_from_euler_zxy, quat_from_matrix, quat_log, quat_mul, quat_norm,
+    quat_normalize, rotate, skew,
+)
+
+finite = st.floats(-10, 10, allow_nan=False, allow_infinity=False)
+quats = arrays(float, 4, elements=finite).filter(lambda q: np.linalg.norm(q) > 1e-3).map(quat_normalize)
+vecs = arrays(float, 3, elements=finite)
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(1234)
+
+
+def _random_quats(rng, n=500):
+    return quat_normalize(rng.normal(size=(n, 4)))
+
+
+def test_product_matches_scipy(rng):
+    q1, q2 = _random_quats(rng), _random_quats(rng)
+    expected = (Rotation.from_quat(q1, scalar_first=True) * Rotation.from_quat(q2, scalar_first=True)).as_quat(
+        scalar_first=True)
+    assert np.max(geodesic_angle(expected, quat_mul(q1, q2))) < QUAT_ROUND_TRIP
+
+
+def test_product_formula_is_the_course_one():
+    q1, q2 = np.array([1.0, 2.0, 3.0, 4.0]), np.array([-0.5, 0.1, 0.7, -2.0])
+    s1, v1, s2, v2 = q1[0], q1[1:], q2[0], q2[1:]
+    expected = np.concatenate([[s1 * s2 - v1 @ v2], s1 * v2 + s2 * v1 + np.cross(v1, v2)])
+    np.testing.assert_allclose(quat_mul(q1, q2), expected, rtol=QUAT_ALGEBRA)
+
+
+def test_product_not_commutative():
+    a, b = quat_from_axis_angle([1, 0, 0], 0.5), quat_from_axis_angle([0, 1, 0], 0.5)
+    assert np.max(np.abs(quat_mul(a, b) - quat_mul(b, a))) > 0.1
+
+
+def test_matrix_matches_scipy(rng):
+    q = _random_quats(rng)
+    np.testing.assert_allclose(matrix_from_quat(q), Rotation.from_quat(q, scalar_first=True).as_matrix(),
+                               atol=QUAT_ALGEBRA)
+
+
+def test_matrix_round_trip(rng):
+    q = _random_quats(rng)
+    assert np.max(geodesic_angle(q, quat_from_matrix(matrix_from_quat(q)))) < QUAT_ROUND_TRIP
+
+
+def test_exp_matches_scipy_rotvec(rng):
+    w = rng.normal(size=(200, 3)) * 2.0
+    np.testing.assert_allclose(quat_exp(w), Rotation.from_rotvec(w).as_quat(scalar_first=True), atol=QUAT_ALGEBRA)
+    tiny = np.array([[1e-9, -2e-9, 3e-10], [0.0, 0.0, 0.0]])
+    np.testing.assert_allclose(quat_exp(tiny), Rotation.from_rotvec(tiny).as_quat(scalar_first=True), atol=1e-18)
+
+
+def test_axis_angle_round_trip(rng):
+    axis = rng.normal(size=(200, 3))
+    angle = rng.uniform(0, np.pi, size=200)
+    u, a = axis_angle_from_quat(quat_from_axis_angle(axis, angle))
+    np.testing.assert_allclose(a, angle, atol=QUAT_ROUND_TRIP)
+    np.testing.assert_allclose(u, axis / np.linalg.norm(axis, axis=1, keepdims=True), atol=1e-9)
+    np.testing.assert_allclose(quat_log(quat_exp(0.5 * axis)), 0.5 * axis, atol=QUAT_ROUND_TRIP)
+
+
+def test_skew_is_cross_product(rng):
+    a, b = rng.normal(size=(50, 3)), rng.normal(size=(50, 3))
+    np.testing.assert_allclose(np.einsum("nij,nj->ni", skew(a), b), np.cross(a, b), atol=QUAT_ALGEBRA)
+
+
+def test_conjugate_inverts(rng):
+    q = _random_quats(rng)
+    np.testing.assert_allclose(quat_mul(q, quat_conj(q)), np.tile([1.0, 0, 0, 0], (len(q), 1)), atol=QUAT_ALGEBRA)
+
+
+def test_normalize_rejects_zero():
+    with pytest.raises(ValueError):
+        quat_normalize([0.0, 0.0, 0.0, 0.0])
+
+
+def test_euler_zxy_matches_scipy_extrinsic_zxy(rng):
+    # Unity: rotate about Z, then X, then Y (fixed axes) == scipy extrinsic "zxy" with angles (z, x, y).
+    ang = rng.uniform(-85, 85, size=(100, 3))
+    expected = Rotation.from_euler("zxy", ang[:, [2, 0, 1]], degrees=True).as_quat(scalar_first=True)
+    assert np.max(geodesic_angle(expected, quat_from_euler_zxy(ang))) < QUAT_ROUND_TRIP
+
+
+@settings(max_examples=200, deadline=None)
+@given(quats)
+def test_unit_norm_kept_by_product_and_exp(q):
+    assert abs(quat_norm(quat_mul(q, q)) - 1.0) < QUAT_ALGEBRA
+    assert abs(quat_norm(quat_mul(quat_exp(q[1:]), q)) - 1.0) < QUAT_ALGEBRA
+
+
+@settings(max_examples=200, deadline=None)
+@given(quats)
+def test_rotation_matrix_is_orthonormal(q):
+    R = matrix_from_quat(q)
+    np.testing.assert_allclose(R @ R.T, np.eye(3), atol=QUAT_ALGEBRA)
+    assert abs(np.linalg.det(R) - 1.0) < QUAT_ALGEBRA
+
+
+@settings(max_examples=200, deadline=None)
+@given(quats)
+def test_quat_double_cover(q):
+    np.testing.assert_allclose(matrix_from_quat(q), matrix_from_quat(-q), atol=0)
+    assert geodesic_angle(q, -q) < QUAT_ALGEBRA
+
+
+@settings(max_examples=200, deadline=None)
+@given(quats, vecs, vecs)
+def test_rotation_preserves_distances(q, a, b):
+    assert abs(np.linalg.norm(rotate(q, a) - rotate(q, b)) - np.linalg.norm(a - b)) < QUAT_ALGEBRA * (
+        1 + np.linalg.norm(a - b)) * 10
+
+
+@settings(max_examples=200, deadline=None)
+@given(quats)
+def test_euler_round_trip(q):
+    angles, locked = euler_zxy_from_quat(q)
+    tol = QUAT_ROUND_TRIP if locked else euler_round_trip_tol(np.cos(np.deg2rad(angles[0])))
+    assert geodesic_angle(q, quat_from_euler_zxy(angles)) < tol
+
+
+@pytest.mark.parametrize("pitch", [90.0, -90.0])
+@pytest.mark.parametrize("yaw_roll", [(30.0, 10.0), (0.0, 50.0), (-70.0, 20.0)])
+def test_gimbal_lock_flagged_at_pm90_pitch(pitch, yaw_roll):
+    q = quat_from_euler_zxy([pitch, *yaw_roll])
+    angles, locked = euler_zxy_from_quat(q)
+    assert locked
+    assert angles[2] == 0.0  # z set to 0: only y ± z is defined
+    assert geodesic_angle(q, quat_from_euler_zxy(angles)) < QUAT_ROUND_TRIP
+
+
+def test_no_gimbal_lock_just_off_90():
+    _, locked = euler_zxy_from_quat(quat_from_euler_zxy([89.999, 30.0, 10.0]))
+    assert not locked
