@@ -1,0 +1,161 @@
+"""Integrators: the batched path equals the readable path, and each scheme has its order."""
+import numpy as np
+import pytest
+
+from cross_checks.tolerances import COURSE_NONCONVERGENCE_MIN_RAD, ORDER_TOL, READABLE_VS_BATCHED
+from reference_sim.body import RigidBody
+from reference_sim.forces import ForceModel, PointForce, Spring, Torque
+from reference_sim.ground_truth import ground_truth
+from reference_sim.integrators import EXPECTED_ORDER, VARIANTS, get_step
+from reference_sim.quaternion import geodesic_angle, quat_exp, quat_mul, quat_normalize
+from reference_sim.readable import step_readable
+from reference_sim.simulate import simulate
+from reference_sim.state import Problem, State
+
+
+def coupled_problem(decay=(1.0, 1.0)):
+    """Every force type at once: springs off the COM, drag, body and world point forces, torques."""
+    fm = ForceModel(
+        gravity_W=np.array([0.0, 0.0, -9.81]), linear_drag_N_s_per_m=0.3,
+        velocity_decay=decay[0], angular_velocity_decay=decay[1],
+        springs=(Spring(np.array([0.0, 0.0, 1.0]), np.array([0.1, 0.0, 0.05]), 40.0, 0.5),),
+        point_forces=(PointForce(np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.1, 0.0]), "world"),
+                      PointForce(np.array([0.0, 0.5, 0.0]), np.array([0.0, 0.0, 0.2]), "body")),
+        torques=(Torque(np.array([0.0, 0.0, 0.2]), "body"), Torque(np.array([0.1, 0.0, 0.0]), "world")),
+    )
+    body = RigidBody(1.5, [[0.05, 0.01, 0.0], [0.01, 0.06, 0.005], [0.0, 0.005, 0.08]])
+    init = State(np.array([0.3, 0.0, 0.4]), np.array([0.0, 0.5, 0.0]), quat_normalize([1.0, 0.2, -0.1, 0.3]),
+                 np.array([0.5, -1.0, 2.0]))
+    return Problem(body, fm, init)
+
+
+@pytest.mark.parametrize("variant", list(VARIANTS))
+@pytest.mark.parametrize("decay", [(1.0, 1.0), (0.99, 0.995)])
+def test_batched_equals_readable(variant, decay):
+    problem = coupled_problem(decay)
+    rng = np.random.default_rng(7)
+    y = np.tile(problem.initial_packed(), (4, 1))
+    y[:, 0:3] += rng.normal(scale=0.1, size=(4, 3))
+    y[:, 10:13] += rng.normal(scale=0.5, size=(4, 3))
+    y_read = y.copy()
+    step = get_step(variant)
+    for _ in range(200):
+        y = step(problem, y, 2e-3)
+        y_read = np.array([step_readable(variant, problem, row, 2e-3) for row in y_read])
+    np.testing.assert_allclose(y, y_read, rtol=READABLE_VS_BATCHED, atol=READABLE_VS_BATCHED)
+
+
+@pytest.mark.parametrize("variant", ["course", "course_gyro", "expmap_gyro"])
+def test_course_type_batched_is_bit_identical_to_single_body_calls(variant):
+    # The same arithmetic, one body at a time or four at once: exactly equal.
+    problem = coupled_problem((0.99, 0.995))
+    y = np.tile(problem.initial_packed(), (4, 1)) * np.array([[1.0], [1.01], [0.99], [1.02]])
+    step = get_step(variant)
+    batched = step(problem, y, 1e-3)
+    single = np.array([step(problem, row, 1e-3) for row in y])
+    assert np.array_equal(batched, single)
+
+
+def test_constant_spin_about_w_at_speed_w_course():
+    # The course's sanity check: torque-free, isotropic body, constant ω -> rotation about ω/|ω| by |ω| t
+    # (up to the course update's known phase lag, checked in test_analytic).
+    w = np.array([0.3, -1.2, 0.8])
+    problem = Problem(RigidBody(1.0, [1.0, 1.0, 1.0]), ForceModel(),
+                      State(np.zeros(3), np.zeros(3), np.array([1.0, 0, 0, 0]), w))
+    run = simulate(problem, "course", 1e-4, 10000)
+    q_exact = quat_exp(run.t_s[:, None] * w)
+    np.testing.assert_allclose(run.y[:, 10:13], np.tile(w, (len(run.t_s), 1)), atol=0)
+    assert np.max(geodesic_angle(q_exact, run.y[:, 6:10])) < 1e-8  # lag T|ω|³Δt²/12 = 3e-10
+
+
+def test_gravity_alone_changes_v_not_w():
+    problem = Problem(RigidBody(1.0, [1.0, 2.0, 3.0]), ForceModel(gravity_W=np.array([0, 0, -9.81])),
+                      State(np.zeros(3), np.zeros(3), np.array([1.0, 0, 0, 0]), np.zeros(3)))
+    for v in VARIANTS:
+        run = simulate(problem, v, 1e-2, 50)
+        assert np.all(run.y[:, 10:13] == 0.0), v
+        assert run.y[-1, 5] < 0, v
+
+
+def _orders(errs, dts):
+    return np.polyfit(np.log(dts), np.log(errs), 1)[0]
+
+
+def translation_problem():
+    # Zero-length spring at the COM + gravity: harmonic oscillator, closed form below.
+    k, m = 40.0, 1.0
+    fm = ForceModel(gravity_W=np.array([0, 0, -9.81]), springs=(Spring(np.array([0, 0, 1.0]), np.zeros(3), k, 0.0),))
+    return Problem(RigidBody(m, [0.05, 0.05, 0.05]), fm,
+                   State(np.array([0.2, -0.1, 0.5]), np.array([0, 0.3, 0]), np.array([1.0, 0, 0, 0]), np.zeros(3)))
+
+
+def harmonic_exact(problem, t):
+    s = problem.forces.springs[0]
+    k, m = s.stiffness_N_per_m, problem.body.mass_kg
+    eq = s.anchor_W + m * problem.forces.gravity_W / k
+    om = np.sqrt(k / m)
+    x0, v0 = problem.initial.x_W - eq, problem.initial.v_W
+    return eq + x0 * np.cos(om * t) + v0 / om * np.sin(om * t)
+
+
+def rotation_problem():
+    # Asymmetric torque-free body: compared with the DOP853 ground truth.
+    return Problem(RigidBody(1.0, [1.0, 2.0, 3.0]), ForceModel(),
+                   State(np.zeros(3), np.zeros(3), np.array([1.0, 0, 0, 0]), np.array([0.5, 1.0, 0.3])))
+
+
+# dt ladders per expected order: asymptotic (ω Δt ≤ 0.13 for the oscillator's ω = 6.3 rad/s) and, for
+# RK4, errors kept above the ground truth's ~1e-12 floor.
+LADDERS = {1: [4e-3, 2e-3, 1e-3, 5e-4], 2: [8e-3, 4e-3, 2e-3, 1e-3], 4: [2e-2, 1e-2, 5e-3, 2.5e-3]}
+LADDERS_ROTATION = {**LADDERS, 4: [1e-1, 5e-2, 2.5e-2, 1.25e-2]}
+
+
+@pytest.mark.parametrize("variant", ["explicit_euler", "implicit_euler", "course", "expmap_gyro", "midpoint",
+                                     "leapfrog", "rk4"])
+def test_global_order_translation(variant):
+    problem, T = translation_problem(), 1.0
+    dts = LADDERS[EXPECTED_ORDER[variant]]
+    errs = []
+    for dt in dts:
+        run = simulate(problem, variant, dt, int(round(T / dt)))
+        errs.append(np.linalg.norm(run.y[-1, 0:3] - harmonic_exact(problem, T)))
+    assert abs(_orders(errs, dts) - EXPECTED_ORDER[variant]) < ORDER_TOL, errs
+
+
+@pytest.mark.parametrize("variant", ["explicit_euler", "implicit_euler", "course_gyro", "expmap_gyro", "midpoint",
+                                     "leapfrog", "rk4"])
+def test_global_order_rotation(variant):
+    problem, T = rotation_problem(), 1.0
+    dts = LADDERS[EXPECTED_ORDER[variant]]
+    truth = ground_truth(problem, np.array([0.0, T]))[-1]
+    dts = LADDERS_ROTATION[EXPECTED_ORDER[variant]]
+    errs = []
+    for dt in dts:
+        run = simulate(problem, variant, dt, int(round(T / dt)))
+        errs.append(float(geodesic_angle(truth[6:10], run.y[-1, 6:10])))
+    assert abs(_orders(errs, dts) - EXPECTED_ORDER[variant]) < ORDER_TOL, errs
+
+
+@pytest.mark.parametrize("variant", ["explicit_euler", "implicit_euler", "course", "expmap_gyro"])
+def test_euler_local_error_is_second_order(variant):
+    # One step from the exact initial state: error O(Δt²), as the course teaches (order 2 ± 0.1).
+    problem = translation_problem()
+    dts = np.array([1e-2, 5e-3, 2.5e-3, 1.25e-3])
+    errs = [np.linalg.norm(simulate(problem, variant, dt, 1).y[-1, 0:3] - harmonic_exact(problem, dt)) for dt in dts]
+    assert abs(_orders(errs, dts) - 2.0) < ORDER_TOL, errs
+
+
+def test_course_does_not_converge_on_tennis_racket_but_gyro_variants_do():
+    from cross_checks.references import reference_solution
+    from cross_checks.scenario import load_scenario
+    sc = load_scenario("tennis_racket")
+    y_ref, _ = reference_solution(sc, np.array([0.0, sc.duration_s]))
+    for variant in ["course", "course_gyro", "expmap_gyro"]:
+        errs = []
+        for dt in sc.dt_ladder_s:
+            run = simulate(sc.problem, variant, dt, sc.n_steps(dt))
+            errs.append(float(geodesic_angle(y_ref[-1, 6:10], run.y[-1, 6:10])))
+        if variant == "course":
+            assert min(errs) > COURSE_NONCONVERGENCE_MIN_RAD, errs
+        else:
+            assert abs(_orders(errs, sc.dt_ladder_s) - 1.0) < ORDER_TOL, (variant, errs)
