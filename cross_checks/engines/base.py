@@ -1,0 +1,48 @@
+"""What every engine adapter provides, and the harness semantics they share.
+
+An adapter module (``cross_checks.engines.<engine>``) defines:
+
+``ENGINE``            the engine name used in ``ENGINE:VARIANT``.
+``VARIANTS``          dict variant -> one-line description.
+``version()``         the engine's version string (raises ImportError when the engine is missing).
+``simulate(scenario, variant, dt_s, n_steps) -> reference_sim.simulate.Run``
+                      free-running run from the scenario's initial state, every step recorded
+                      (``Run.y``: (n+1, 13) packed [x_W, v_W, q_WB (w x y z), w_W]); a blow-up stops the
+                      run with ``diverged_at_s`` set, never an exception.
+``one_step(scenario, variant, dt_s, y_start) -> y_next``
+                      for each row of ``y_start`` (T, 13), one step of ``dt_s`` from exactly that
+                      state (the local error mode of the metrics).
+
+Harness semantics (identical in every adapter, DESIGN.md):
+
+* Forces and torques are evaluated by ``scenario.problem.forces.force_torque`` from the state at the
+  start of each step and held over the step (zero-order hold) unless the engine can evaluate them at
+  every stage (MuJoCo RK4 through its control callback).
+* The course's per-step velocity decay γ has no engine equivalent. The harness applies it BEFORE the
+  step: ``v ← γ v``, ``ω ← γ_ω ω``, and scales that step's applied force by γ and torque by γ_ω. For a
+  semi-implicit (Euler-type) engine this reproduces the reference's ``v ← γ (v + Δt f/m)`` exactly,
+  and the rotation exactly whenever the gyroscopic torque vanishes (spin about a principal axis);
+  otherwise the gyroscopic term sees γ_ω² instead of γ_ω — a difference of order (1 − γ_ω) Δt.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["harness_force_torque"]
+
+
+def harness_force_torque(scenario, y):
+    """World force (N, at the COM) and world torque (N m) to apply for the step starting at ``y`` (13,),
+    decay scaling included (see the module docstring)."""
+    fm = scenario.problem.forces
+    f_W, tau_W = fm.force_torque(scenario.problem.body, y[0:3], y[3:6], y[6:10])
+    return np.asarray(f_W) * fm.velocity_decay, np.asarray(tau_W) * fm.angular_velocity_decay
+
+
+def apply_decay_prestep(scenario, y):
+    """The state with the pre-step decay applied (a copy)."""
+    fm = scenario.problem.forces
+    y = np.array(y, dtype=float)
+    y[3:6] *= fm.velocity_decay
+    y[10:13] *= fm.angular_velocity_decay
+    return y

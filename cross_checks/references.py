@@ -1,0 +1,134 @@
+"""The reference solution of a scenario: a closed form where one exists, else the DOP853 ground truth.
+
+Translation and rotation decouple when no force produces a torque (forces at the COM only); then
+each part gets its own closed form:
+
+* translation: gravity (+ constant world forces at the COM) -> projectile; + linear drag or the
+  course's velocity decay -> exponential drag; one spring at the COM -> harmonic oscillator;
+* rotation (torque-free): reference_sim.analytic.torque_free (constant spin, axisymmetric top, or the
+  Jacobi elliptic solution); with angular velocity decay, only a spin about a principal axis.
+
+The course's per-step decay factor γ is not an ODE; its frame-rate independent counterpart
+``e^{−kΔt}`` with ``k = −ln γ / dt`` (dt = the scenario's default step, COURSE_EQUATIONS.md) defines
+the reference. At any other Δt the per-step factor means a different decay rate, so such scenarios
+are expected not to converge (that is the point of `velocity_decay`).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from reference_sim import analytic
+from reference_sim.ground_truth import ground_truth
+from reference_sim.quaternion import quat_exp, quat_mul
+from reference_sim.state import Q, V, W, X
+
+__all__ = ["reference_solution", "analytic_available", "decay_rates_per_s"]
+
+
+def decay_rates_per_s(scenario):
+    """Continuous rates (k_v, k_ω), 1/s, equal to the per-step decay factors at the scenario's dt."""
+    fm = scenario.problem.forces
+    return (-math.log(fm.velocity_decay) / scenario.dt_s, -math.log(fm.angular_velocity_decay) / scenario.dt_s)
+
+
+def _principal_spin(body, w_W, q_WB):
+    """True when ω is (to round-off) along a principal axis, or the inertia is isotropic."""
+    from reference_sim.quaternion import rotate, quat_conj
+    w_B = rotate(quat_conj(q_WB), w_W)
+    L_B = body.inertia_B @ w_B
+    return float(np.linalg.norm(np.cross(w_B, L_B))) <= 1e-12 * max(float(np.linalg.norm(w_B) * np.linalg.norm(L_B)), 1e-300)
+
+
+def _translation_kind(scenario):
+    fm = scenario.problem.forces
+    if not fm.torque_free:
+        return None, "a force acts off the COM or a torque acts (translation and rotation coupled)"
+    if any(p.frame == "body" for p in fm.point_forces):
+        return None, "a body-frame force at the COM turns with the body"
+    if fm.springs:
+        if len(fm.springs) > 1:
+            return None, "more than one spring"
+        if fm.linear_drag_N_s_per_m != 0.0 or fm.velocity_decay != 1.0:
+            return None, "a spring with drag or velocity decay"
+        return "harmonic", ""
+    if fm.linear_drag_N_s_per_m != 0.0 or fm.velocity_decay != 1.0:
+        return "drag", ""
+    return "projectile", ""
+
+
+def _rotation_kind(scenario):
+    fm = scenario.problem.forces
+    p = scenario.problem
+    if not fm.torque_free:
+        return None, "torques act on the body"
+    if fm.angular_velocity_decay != 1.0:
+        if _principal_spin(p.body, p.initial.w_W, p.initial.q_WB):
+            return "decaying_spin", ""
+        return None, "angular velocity decay on a body not spinning about a principal axis"
+    return "torque_free", ""
+
+
+def analytic_available(scenario):
+    """``(True, "")`` when a closed form covers the scenario, else ``(False, why)``."""
+    t, why_t = _translation_kind(scenario)
+    if t is None:
+        return False, why_t
+    r, why_r = _rotation_kind(scenario)
+    if r is None:
+        return False, why_r
+    if t == "harmonic":
+        s = scenario.problem.forces.springs[0]
+        if s.rest_length_m != 0.0:
+            try:
+                _translation(scenario, np.array([0.0]))
+            except ValueError as exc:
+                return False, str(exc)
+    return True, ""
+
+
+def _translation(scenario, t_s):
+    p = scenario.problem
+    fm = p.forces
+    m = p.body.mass_kg
+    g_eff = np.asarray(fm.gravity_W, float) + sum((pf.force for pf in fm.point_forces), np.zeros(3)) / m
+    kind, _ = _translation_kind(scenario)
+    if kind == "projectile":
+        return analytic.projectile(p.initial.x_W, p.initial.v_W, g_eff, t_s)
+    if kind == "drag":
+        c = fm.linear_drag_N_s_per_m + m * decay_rates_per_s(scenario)[0]
+        return analytic.linear_drag(m, c, p.initial.x_W, p.initial.v_W, g_eff, t_s)
+    s = fm.springs[0]
+    return analytic.harmonic_oscillator(m, s.stiffness_N_per_m, s.rest_length_m, s.anchor_W,
+                                        p.initial.x_W, p.initial.v_W, g_eff, t_s)
+
+
+def _rotation(scenario, t_s):
+    p = scenario.problem
+    kind, _ = _rotation_kind(scenario)
+    if kind == "torque_free":
+        return analytic.torque_free(p.body.inertia_B, p.initial.q_WB, p.initial.w_W, t_s)
+    # Spin about a fixed principal axis with ω(t) = ω0 e^{−kt}: angle ∫ω = ω0 (1 − e^{−kt}) / k.
+    k = decay_rates_per_s(scenario)[1]
+    w0 = np.asarray(p.initial.w_W, float)
+    frac = -np.expm1(-k * t_s) / k  # (1 − e^{−kt}) / k, s
+    q = quat_mul(quat_exp(frac[:, None] * w0), p.initial.q_WB)
+    w = np.exp(-k * t_s)[:, None] * w0
+    return q, w
+
+
+def reference_solution(scenario, t_s):
+    """Reference states at times ``t_s`` (T,): ``(y (T, 13), label)``.
+
+    ``label`` is "analytic" or "ground_truth (DOP853 rtol 1e-12)". A scenario that asks for
+    ``reference = "ground_truth"`` gets the ground truth even where a closed form exists.
+    """
+    t_s = np.asarray(t_s, dtype=float)
+    use_analytic = scenario.reference != "ground_truth" and analytic_available(scenario)[0]
+    if use_analytic:
+        y = np.empty((t_s.size, 13))
+        y[:, X], y[:, V] = _translation(scenario, t_s)
+        y[:, Q], y[:, W] = _rotation(scenario, t_s)
+        return y, "analytic"
+    return ground_truth(scenario.problem, t_s, decay_rates_per_s(scenario)), "ground_truth (DOP853, rtol 1e-12)"
