@@ -1,0 +1,173 @@
+"""Scenario files: every catalog entry loads; every kind of bad input names file, field and reason."""
+import numpy as np
+import pytest
+
+from cross_checks.references import analytic_available
+from cross_checks.scenario import ScenarioError, catalog_names, load_scenario, parse_scenario
+from reference_sim.quaternion import geodesic_angle, quat_from_euler_zxy, rotate
+
+GOOD = """
+name = "demo"
+description = "demo"
+duration = 1.0
+dt = 0.01
+dt_ladder = [0.02, 0.01]
+
+[body]
+mass = 1.0
+inertia = [1.0, 2.0, 3.0]
+
+[initial]
+position = [0.0, 0.0, 0.0]
+velocity = [0.0, 0.0, 0.0]
+orientation = [1.0, 0.0, 0.0, 0.0]
+angular_velocity = [0.01, 2.0, 0.01]
+
+[forces]
+gravity = [0.0, 0.0, -9.81]
+linear_drag = 0.0
+velocity_decay = 1.0
+
+[[forces.spring]]
+anchor = [0.0, 1.0, 0.0]
+attach = [0.1, 0.0, 0.0]
+stiffness = 40.0
+rest_length = 0.5
+
+[[forces.point]]
+force = [1.0, 0.0, 0.0]
+point = [0.0, 0.1, 0.0]
+frame = "world"
+
+[[forces.torque]]
+torque = [0.0, 0.0, 0.2]
+frame = "body"
+"""
+
+#: (old text, new text, field named in the message, words of the reason)
+BAD = [
+    ("mass = 1.0", "mass = -1.0", "body.mass", "> 0"),
+    ("mass = 1.0", "mass = 0", "body.mass", "> 0"),
+    ("mass = 1.0", 'mass = "heavy"', "body.mass", "number"),
+    ("mass = 1.0", "mass = nan", "body.mass", "finite"),
+    ("mass = 1.0", "mass = inf", "body.mass", "finite"),
+    ("mass = 1.0\n", "", "body.mass", "missing"),
+    ("inertia = [1.0, 2.0, 3.0]", "inertia = [1.0, 1.0, 3.0]", "body.inertia", "triangle"),
+    ("inertia = [1.0, 2.0, 3.0]", "inertia = [1.0, -2.0, 3.0]", "body.inertia", "positive definite"),
+    ("inertia = [1.0, 2.0, 3.0]", "inertia = [[1, 0.5, 0], [0, 2, 0], [0, 0, 3]]", "body.inertia", "symmetric"),
+    ("inertia = [1.0, 2.0, 3.0]", "inertia = [1.0, 2.0]", "body.inertia", "3 numbers"),
+    ("inertia = [1.0, 2.0, 3.0]", "inertia = [1.0, 2.0, inf]", "body.inertia[2]", "finite"),
+    ("inertia = [1.0, 2.0, 3.0]", "inertia = [[1, 0, 0], [0, 1, 0]]", "body.inertia", "3 principal moments"),
+    ("orientation = [1.0, 0.0, 0.0, 0.0]", "orientation = [0.0, 0.0, 0.0, 0.0]", "initial.orientation", "zero"),
+    ("orientation = [1.0, 0.0, 0.0, 0.0]", "orientation = [1.0, 0.0, 0.0]", "initial.orientation", "4 numbers"),
+    ("position = [0.0, 0.0, 0.0]", "position = [0.0, nan, 0.0]", "initial.position[1]", "finite"),
+    ("velocity = [0.0, 0.0, 0.0]", 'velocity = "fast"', "initial.velocity", "list of 3"),
+    ("dt = 0.01", "dt = 0.0", "dt", "> 0"),
+    ("dt = 0.01", "dt = -0.01", "dt", "> 0"),
+    ("dt = 0.01", "dt = 2.0", "dt", "<= duration"),
+    ("duration = 1.0", "duration = 0", "duration", "> 0"),
+    ("dt_ladder = [0.02, 0.01]", "dt_ladder = [0.02, 5.0]", "dt_ladder[1]", "<= duration"),
+    ("dt_ladder = [0.02, 0.01]", "dt_ladder = []", "dt_ladder", "non-empty"),
+    ("stiffness = 40.0", "stiffness = -40.0", "forces.spring[0].stiffness", ">= 0"),
+    ("rest_length = 0.5", "rest_length = -0.5", "forces.spring[0].rest_length", ">= 0"),
+    ('frame = "world"', 'frame = "wrold"', "forces.point[0].frame", "one of"),
+    ('frame = "body"', 'frame = "local"', "forces.torque[0].frame", "one of"),
+    ("linear_drag = 0.0", "linear_drag = -1.0", "forces.linear_drag", ">= 0"),
+    ("velocity_decay = 1.0", "velocity_decay = 1.5", "forces.velocity_decay", "(0, 1]"),
+    ("velocity_decay = 1.0", "velocity_decay = 0.0", "forces.velocity_decay", "(0, 1]"),
+    ("gravity = [0.0, 0.0, -9.81]", "gravty = [0.0, 0.0, -9.81]", "forces.gravty", "did you mean 'gravity'"),
+    ("mass = 1.0", "mass = 1.0\nmas = 2.0", "body.mas", "unknown key"),
+    ('name = "demo"', 'name = "Demo Case"', "name", "[a-z0-9_]+"),
+    ('name = "demo"', 'name = "../../etc"', "name", "[a-z0-9_]+"),
+    ('name = "demo"\n', "", "name", "missing"),
+    ("[body]", "[bodies]", "bodies", "unknown key"),
+    ("[initial]\n", "[start]\n", "start", "unknown key"),
+    ("stiffness = 40.0", "stiffness = 40.0\nstiff = 1", "forces.spring[0].stiff", "unknown key"),
+    ("anchor = [0.0, 1.0, 0.0]\n", "", "forces.spring[0].anchor", "missing"),
+    ("torque = [0.0, 0.0, 0.2]", "torque = [0.0, 0.2]", "forces.torque[0].torque", "3 numbers"),
+    ("dt = 0.01", "dt = 0.01\ndt = 0.02", "", "TOML syntax error"),
+    ("mass = 1.0", "mass = = 1", "", "line"),
+    ("mass = 1.0\ninertia = [1.0, 2.0, 3.0]", "particles = [[1.0, 0, 0, -1], [1.0, 0, 0, 1]]", "body.particles",
+     "positive definite"),
+    ("mass = 1.0\ninertia = [1.0, 2.0, 3.0]", "particles = [[-1.0, 0, 0, -1], [1.0, 0, 1, 1]]", "body.particles[0]",
+     "mass"),
+    ("orientation = [1.0, 0.0, 0.0, 0.0]", "orientation = [1.0, 0.0, 0.0, 0.0]\neuler_zxy_deg = [0, 0, 0]",
+     "initial.orientation", "exactly one"),
+    ('description = "demo"', 'description = 3', "description", "string"),
+    ('description = "demo"', 'description = "x"\nreference = "exact"', "reference", "one of"),
+]
+
+
+def test_good_scenario_loads():
+    sc = parse_scenario(GOOD, "good.toml")
+    assert sc.name == "demo" and sc.dt_ladder_s == (0.02, 0.01)
+    assert len(sc.problem.forces.springs) == 1
+
+
+@pytest.mark.parametrize("old, new, field, reason", BAD, ids=[f"{b[2] or 'syntax'}-{i}" for i, b in enumerate(BAD)])
+def test_bad_input_names_file_field_reason(old, new, field, reason):
+    assert old in GOOD
+    with pytest.raises(ScenarioError) as info:
+        parse_scenario(GOOD.replace(old, new, 1), "user/bad.toml")
+    msg = str(info.value)
+    assert msg.startswith("user/bad.toml: "), msg
+    assert info.value.field == field, msg
+    assert reason in msg, msg
+
+
+def test_toml_syntax_error_names_the_line():
+    with pytest.raises(ScenarioError, match=r"line 9"):
+        parse_scenario(GOOD.replace("mass = 1.0", "mass = = 1"), "x.toml")
+
+
+@pytest.mark.parametrize("name", catalog_names())
+def test_catalog_scenario_loads_and_names_its_reference(name):
+    sc = load_scenario(name)
+    assert sc.name == name
+    assert len(sc.dt_ladder_s) >= 4
+    assert sc.reference in ("analytic", "ground_truth")
+    if sc.reference == "analytic":
+        assert analytic_available(sc)[0]
+
+
+def test_catalog_has_the_required_scenarios():
+    required = {"projectile", "linear_drag", "velocity_decay", "spring_oscillator", "spring_pendulum", "constant_spin",
+                "symmetric_top", "tennis_racket", "tumbling_box", "applied_torque", "particle_body"}
+    assert required <= set(catalog_names())
+
+
+def test_tumbling_box_is_the_gazebo_case():
+    sc = load_scenario("tumbling_box")
+    a, b, c, m = 0.1, 0.4, 0.9, 10.0
+    np.testing.assert_allclose(np.diag(sc.problem.body.inertia_B), m / 12 * np.array([b*b + c*c, a*a + c*c, a*a + b*b]))
+    np.testing.assert_allclose(sc.problem.initial.v_W, [-2, 2, 8])
+    np.testing.assert_allclose(sc.problem.initial.w_W, [0.1, 5, 0.1])  # identity orientation: body = world
+    assert sc.duration_s == 10.0
+
+
+def test_unity_euler_and_body_rates_are_alternatives():
+    text = GOOD.replace("orientation = [1.0, 0.0, 0.0, 0.0]", "euler_zxy_deg = [10.0, 20.0, 30.0]").replace(
+        "angular_velocity = [0.01, 2.0, 0.01]", "angular_velocity_body = [1.0, 0.0, 0.0]")
+    sc = parse_scenario(text, "alt.toml")
+    q = quat_from_euler_zxy([10.0, 20.0, 30.0])
+    assert geodesic_angle(q, sc.problem.initial.q_WB) < 1e-15
+    np.testing.assert_allclose(sc.problem.initial.w_W, rotate(q, [1.0, 0.0, 0.0]))
+
+
+def test_content_hash_tracks_physics_not_formatting():
+    a = parse_scenario(GOOD, "a.toml")
+    b = parse_scenario("# comment\n" + GOOD.replace("mass = 1.0", "mass   =   1.0"), "b.toml")
+    c = parse_scenario(GOOD.replace("mass = 1.0", "mass = 1.5"), "c.toml")
+    assert a.content_hash == b.content_hash != c.content_hash
+
+
+def test_missing_file_and_unknown_name():
+    with pytest.raises(ScenarioError, match="no catalog scenario"):
+        load_scenario("no_such_scenario")
+    with pytest.raises(ScenarioError, match="no such file"):
+        load_scenario("/nonexistent/x.toml")
+
+
+def test_analytic_requested_where_none_exists_is_rejected():
+    with pytest.raises(ScenarioError, match="reference"):
+        parse_scenario(GOOD.replace('name = "demo"', 'name = "demo"\nreference = "analytic"'), "r.toml")
