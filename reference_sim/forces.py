@@ -11,6 +11,7 @@ import numpy as np
 
 from .body import RigidBody
 from .quaternion import matrix_from_quat, rotate
+from .vec import cross3
 
 __all__ = ["Spring", "PointForce", "Torque", "ForceModel"]
 
@@ -112,12 +113,12 @@ class ForceModel:
             with np.errstate(invalid="ignore", divide="ignore"):
                 fs = np.where(L > 0.0, -s.stiffness_N_per_m * (L - s.rest_length_m) * d / L, 0.0)
             f_W += fs
-            tau_W += np.cross(r_W, fs)
+            tau_W += cross3(r_W, fs)
         for p in self.point_forces:
             fp = (R_WB @ p.force) if p.frame == "body" else np.broadcast_to(p.force, shape)
             f_W += fp
             if np.any(p.point_B != 0):
-                tau_W += np.cross(R_WB @ p.point_B, fp)
+                tau_W += cross3(R_WB @ p.point_B, fp)
         for t in self.torques:
             tau_W += (R_WB @ t.torque) if t.frame == "body" else t.torque
         return f_W, tau_W

@@ -33,6 +33,7 @@ from __future__ import annotations
 import numpy as np
 
 from .quaternion import matrix_from_quat, quat_exp, quat_mul
+from .vec import cross3 as _cross, matvec3 as _mv
 from .state import Q, STATE_SIZE, V, W, X, Problem
 
 __all__ = ["VARIANTS", "DESCRIPTIONS", "get_step", "rhs", "IMPLICIT_TOL", "ImplicitSolveError"]
@@ -46,21 +47,6 @@ _MAX_ITER = 50
 
 class ImplicitSolveError(ArithmeticError):
     """An implicit solve did not converge (the step is too large for the problem's stiffness)."""
-
-
-def _cross(a, b):
-    """Cross product of (..., 3) arrays without np.cross's overhead (same arithmetic order)."""
-    return np.stack(
-        [a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
-         a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
-         a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]],
-        axis=-1,
-    )
-
-
-def _mv(M, v):
-    """Matrix (..., 3, 3) times vector (..., 3)."""
-    return np.einsum("...ij,...j->...i", M, v)
 
 
 def _omega_quat(w_W):

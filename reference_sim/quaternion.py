@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .vec import cross3
+
 __all__ = [
     "quat_mul",
     "quat_conj",
@@ -44,7 +46,7 @@ def quat_mul(q1, q2):
     s1, v1 = q1[..., :1], q1[..., 1:]
     s2, v2 = q2[..., :1], q2[..., 1:]
     s = s1 * s2 - np.sum(v1 * v2, axis=-1, keepdims=True)
-    v = s1 * v2 + s2 * v1 + np.cross(v1, v2)
+    v = s1 * v2 + s2 * v1 + cross3(v1, v2)
     return np.concatenate([s, v], axis=-1)
 
 
@@ -176,8 +178,8 @@ def rotate(q, v):
     q = np.asarray(q, dtype=float)
     v = np.asarray(v, dtype=float)
     s, u = q[..., :1], q[..., 1:]
-    t = 2.0 * np.cross(u, v)
-    return v + s * t + np.cross(u, t)
+    t = 2.0 * cross3(u, v)
+    return v + s * t + cross3(u, t)
 
 
 def quat_canonical(q):

@@ -28,7 +28,12 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["harness_force_torque"]
+__all__ = ["harness_force_torque", "apply_decay_prestep", "EngineError"]
+
+
+class EngineError(RuntimeError):
+    """The engine rejected the model or failed during a run; the message carries the engine's own words.
+    A sweep records the run as `failed` with this message and goes on."""
 
 
 def harness_force_torque(scenario, y):
@@ -40,9 +45,9 @@ def harness_force_torque(scenario, y):
 
 
 def apply_decay_prestep(scenario, y):
-    """The state with the pre-step decay applied (a copy)."""
+    """The state(s) ``y`` (..., 13) with the pre-step decay applied (a copy)."""
     fm = scenario.problem.forces
     y = np.array(y, dtype=float)
-    y[3:6] *= fm.velocity_decay
-    y[10:13] *= fm.angular_velocity_decay
+    y[..., 3:6] *= fm.velocity_decay
+    y[..., 10:13] *= fm.angular_velocity_decay
     return y

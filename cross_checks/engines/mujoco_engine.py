@@ -1,0 +1,351 @@
+"""MuJoCo as an engine adapter (``mujoco:VARIANT``); the interface is cross_checks.engines.base.
+
+Model: one body with a free joint and an explicit inertial (``ipos = 0``, so body origin = COM; a
+full inertia tensor is given as its principal moments plus ``iquat`` = the principal axes in body
+coordinates, so the BODY frame stays the scenario's body frame and ``qpos[3:7]`` is ``q_WB``), no
+geoms, gravity and timestep from the scenario, ``autoreset`` disabled so divergence is seen.
+
+State mapping (ENGINE_FACTS.md): ``qpos = [x_W, q_WB (w x y z)]``; ``qvel = [v_W (COM, world),
+ω_B (BODY axes)]``, so ``ω_W = R(q) ω_B``. The state is read from qpos/qvel, never from xpos/xquat
+(those are one step stale after ``mj_step``).
+
+Forces (harness semantics of base.py): the world force at the COM and the world torque of
+``base.harness_force_torque`` minus the weight ``m g`` (MuJoCo applies gravity itself) go into
+``xfrc_applied``. Every step they are evaluated from the start-of-step state and overwritten (MuJoCo
+never clears them). ``mujoco:rk4`` with state-dependent forces evaluates them at every RK4 stage from
+the stage state through MuJoCo's control callback, so it keeps its 4th order; the callback is
+process-global, so it is installed only for the duration of a run, under a module lock, and the
+previous one is restored. With the course's velocity decay the decay is applied to qvel before the
+step (base.apply_decay_prestep) and the stage forces of rk4 are evaluated from the decayed stage states.
+
+MuJoCo's warnings ("Nan, Inf or huge value in QACC ...") are routed to a handler during a run, so no
+MUJOCO_LOG.TXT is written into the working directory; such a warning counts as divergence at the step
+it was raised in, as does a non-finite state or a component beyond BLOWUP_LIMIT.
+"""
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+
+from reference_sim.quaternion import quat_from_matrix, rotate, quat_conj
+from reference_sim.simulate import BLOWUP_LIMIT, Run
+
+from .base import EngineError, apply_decay_prestep, harness_force_torque
+
+try:  # the module imports without mujoco so the registry can report why it is unavailable
+    import mujoco
+except ImportError as _exc:  # pragma: no cover - exercised only where mujoco is missing
+    mujoco = None
+    _IMPORT_ERROR = _exc
+else:
+    _IMPORT_ERROR = None
+
+__all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate", "one_step", "build_model"]
+
+ENGINE = "mujoco"
+VARIANTS = {
+    "euler": "MuJoCo Euler: semi-implicit Euler, explicit gyroscopic term, quaternion by the exponential map",
+    "rk4": "MuJoCo RK4: classical 4th-order Runge-Kutta; state-dependent forces evaluated at every stage",
+    "implicit": "MuJoCo implicit: velocity-implicit Euler (gyroscopic/velocity derivatives in the step)",
+    "implicitfast": "MuJoCo implicitfast: implicit Euler without the Coriolis/centrifugal derivatives",
+}
+
+#: Steps between divergence checks of a free-running simulation (checked vectorised per chunk).
+_CHUNK = 256
+_BODY = 1  # body id of the free body (0 is the world)
+
+_LOCK = threading.RLock()
+
+#: Evaluate state-dependent forces at every RK4 stage (True) or hold the start-of-step value over the
+#: step like the other variants (False: first order in the force; kept for the tests that show why).
+_RK4_STAGE_FORCES = True
+
+
+
+
+def _require():
+    if mujoco is None:
+        raise ImportError(f"mujoco is not installed: {_IMPORT_ERROR}")
+
+
+def version() -> str:
+    _require()
+    return mujoco.__version__
+
+
+def _integrator(variant):
+    _require()
+    table = {
+        "euler": mujoco.mjtIntegrator.mjINT_EULER,
+        "rk4": mujoco.mjtIntegrator.mjINT_RK4,
+        "implicit": mujoco.mjtIntegrator.mjINT_IMPLICIT,
+        "implicitfast": mujoco.mjtIntegrator.mjINT_IMPLICITFAST,
+    }
+    if variant not in table:
+        raise ValueError(f"unknown mujoco variant {variant!r}; variants: {', '.join(VARIANTS)}")
+    return table[variant]
+
+
+def build_model(scenario, variant: str, dt_s: float):
+    """Compile the scenario's free body for ``variant`` at step ``dt_s``; returns ``mujoco.MjModel``.
+
+    Raises EngineError with MuJoCo's message when the compiler rejects the model (e.g. principal
+    moments violating MuJoCo's own ``A + B >= C`` check).
+    """
+    integrator = _integrator(variant)
+    body = scenario.problem.body
+    forces = scenario.problem.forces
+    spec = mujoco.MjSpec()
+    spec.modelname = f"rbcheck_{scenario.name}"
+    spec.compiler.alignfree = False        # keep the joint (= qpos) on the body frame, not the inertial frame
+    spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
+    spec.compiler.balanceinertia = False   # never alter the scenario's inertia silently
+    spec.compiler.boundmass = 0.0
+    spec.compiler.boundinertia = 0.0
+    spec.option.timestep = float(dt_s)
+    spec.option.gravity = np.asarray(forces.gravity_W, dtype=float)
+    spec.option.integrator = integrator
+    spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_AUTORESET
+    b = spec.worldbody.add_body()
+    b.name = "body"
+    b.add_freejoint()
+    b.explicitinertial = True
+    b.ipos = [0.0, 0.0, 0.0]               # explicit: unset (NaN) would let geoms override the inertial
+    b.mass = float(body.mass_kg)
+    if body.is_diagonal():
+        b.iquat = [1.0, 0.0, 0.0, 0.0]
+        b.inertia = np.diag(body.inertia_B).copy()
+    else:
+        moments, R_BP = body.principal_axes()
+        b.iquat = quat_from_matrix(R_BP)   # principal frame P in body coordinates (w x y z)
+        b.inertia = moments
+    try:
+        with _LOCK:
+            prev = _clear_force_callbacks()
+            try:
+                return spec.compile()
+            finally:
+                _restore_force_callbacks(prev)
+    except ValueError as exc:
+        raise EngineError(f"MuJoCo {mujoco.__version__} rejected the model of scenario "
+                          f"{scenario.name!r}: {exc}") from None
+
+
+# --- state conversion --------------------------------------------------------------------------------
+
+def _to_qpos_qvel(y):
+    """Packed states (..., 13) -> qpos (..., 7), qvel (..., 6) with ω in BODY axes."""
+    y = np.asarray(y, dtype=float)
+    q = y[..., 6:10]
+    qpos = np.concatenate([y[..., 0:3], q], axis=-1)
+    qvel = np.concatenate([y[..., 3:6], rotate(quat_conj(q), y[..., 10:13])], axis=-1)
+    return qpos, qvel
+
+
+def _to_packed(qpos, qvel):
+    """qpos (..., 7), qvel (..., 6) -> packed states (..., 13) with ω in WORLD axes."""
+    q = qpos[..., 3:7]
+    return np.concatenate([qpos[..., 0:3], qvel[..., 0:3], q, rotate(q, qvel[..., 3:6])], axis=-1)
+
+
+def _packed1(qpos, qvel):
+    """One state: qpos (7,), qvel (6,) -> packed (13,) with ω in WORLD axes (scalar code: this runs
+    inside the per-step loop and the RK4 stage callback, where NumPy's small-array overhead dominates)."""
+    x0, x1, x2, s, a, b, c = qpos.tolist()
+    v0, v1, v2, p0, p1, p2 = qvel.tolist()
+    # ω_W = R(q) ω_B = ω + s t + u × t with t = 2 u × ω, u = (a, b, c)
+    t0, t1, t2 = 2.0 * (b * p2 - c * p1), 2.0 * (c * p0 - a * p2), 2.0 * (a * p1 - b * p0)
+    return np.array([x0, x1, x2, v0, v1, v2, s, a, b, c,
+                     p0 + s * t0 + (b * t2 - c * t1),
+                     p1 + s * t1 + (c * t0 - a * t2),
+                     p2 + s * t2 + (a * t1 - b * t0)])
+
+
+def _bad_rows(y):
+    """Boolean (T,) rows that are non-finite or beyond BLOWUP_LIMIT."""
+    with np.errstate(invalid="ignore"):
+        return ~np.all(np.isfinite(y), axis=-1) | (np.max(np.abs(y), axis=-1) > BLOWUP_LIMIT)
+
+
+# --- the global-state guard -----------------------------------------------------------------------
+
+def _clear_force_callbacks():
+    """Remove the process-global control and passive callbacks (returned for _restore_force_callbacks).
+
+    Any Python callback installed there breaks ``MjSpec.compile`` ("engine error: Python exception
+    raised": the compiler's internal mj_forward has no Python wrappers to pass it), and a user's
+    callback would add forces to the adapter's free body.
+    """
+    prev = (mujoco.get_mjcb_control(), mujoco.get_mjcb_passive())
+    mujoco.set_mjcb_control(None)
+    mujoco.set_mjcb_passive(None)
+    return prev
+
+
+def _restore_force_callbacks(prev):
+    mujoco.set_mjcb_control(prev[0])
+    mujoco.set_mjcb_passive(prev[1])
+
+
+class _Session:
+    """Installs the warning handler (and, when given, the control callback) for one run.
+
+    MuJoCo's callbacks and warning handler are process-global: the session holds a module lock,
+    clears any control/passive callback (a user's would add forces to this body), stores the previous
+    handlers and restores them on exit. The lock serialises this adapter's own runs only: another
+    thread calling MuJoCo meanwhile would see these handlers. The callback acts only on this run's
+    MjData; an exception inside it is kept and re-raised (as EngineError) after the step.
+    """
+
+    def __init__(self, data, control=None):
+        self.data = data
+        self.control = control
+        self.warnings: list[tuple[float, str]] = []   # (d.time when raised, message)
+        self.callback_error: BaseException | None = None
+
+    def _on_warning(self, msg):
+        self.warnings.append((float(self.data.time), str(msg)))
+
+    def _on_control(self, m, d):
+        if d is not self.data or self.callback_error is not None:
+            return
+        try:
+            self.control(m, d)
+        except BaseException as exc:  # noqa: BLE001 - re-raised after the step
+            self.callback_error = exc
+
+    def __enter__(self):
+        _LOCK.acquire()
+        try:
+            self._prev = _clear_force_callbacks()
+            self._prev_warn = mujoco.get_mju_user_warning()
+            mujoco.set_mju_user_warning(self._on_warning)
+            if self.control is not None:
+                mujoco.set_mjcb_control(self._on_control)
+        except BaseException:
+            _LOCK.release()
+            raise
+        return self
+
+    def __exit__(self, *exc):
+        try:
+            mujoco.set_mju_user_warning(self._prev_warn)
+            _restore_force_callbacks(self._prev)
+        finally:
+            _LOCK.release()
+        return False
+
+    def raise_callback_error(self):
+        if self.callback_error is not None:
+            exc, self.callback_error = self.callback_error, None
+            raise EngineError(f"force evaluation inside MuJoCo's control callback failed: {exc!r}") from exc
+
+
+def _stage_force_writer(scenario, xfrc, weight):
+    """Control callback body: forces from the (stage) state in qpos/qvel into xfrc_applied."""
+    def control(_m, d):
+        f, tau = harness_force_torque(scenario, _packed1(d.qpos, d.qvel))
+        xfrc[0:3] = f - weight
+        xfrc[3:6] = tau
+    return control
+
+
+# --- adapter entry points ----------------------------------------------------------------------------
+
+def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
+    """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded."""
+    m = build_model(scenario, variant, dt_s)
+    d = mujoco.MjData(m)
+    forces = scenario.problem.forces
+    weight = scenario.problem.body.mass_kg * np.asarray(forces.gravity_W, dtype=float)
+    y0 = scenario.problem.initial_packed()
+    qpos0, qvel0 = _to_qpos_qvel(y0)
+    d.qpos[:] = qpos0
+    d.qvel[:] = qvel0
+    xfrc = d.xfrc_applied[_BODY]
+
+    decay = forces.has_decay
+    gv, gw = forces.velocity_decay, forces.angular_velocity_decay
+    per_stage = variant == "rk4" and forces.state_dependent and _RK4_STAGE_FORCES
+    per_step = forces.state_dependent and not per_stage
+    if not forces.state_dependent:
+        f, tau = harness_force_torque(scenario, y0)    # constant (decay scaling included)
+        xfrc[0:3] = f - weight
+        xfrc[3:6] = tau
+
+    qpos_out = np.empty((n_steps + 1, 7))
+    qvel_out = np.empty((n_steps + 1, 6))
+    qpos_out[0] = qpos0
+    qvel_out[0] = qvel0
+    control = _stage_force_writer(scenario, xfrc, weight) if per_stage else None
+    step = mujoco.mj_step
+    with _Session(d, control) as session, np.errstate(all="ignore"):
+        start = 1
+        while start <= n_steps:
+            stop = min(start + _CHUNK, n_steps + 1)
+            for n in range(start, stop):
+                if per_step:
+                    f, tau = harness_force_torque(scenario, _packed1(qpos_out[n - 1], qvel_out[n - 1]))
+                    xfrc[0:3] = f - weight
+                    xfrc[3:6] = tau
+                if decay:
+                    d.qvel[0:3] *= gv
+                    d.qvel[3:6] *= gw
+                step(m, d)
+                session.raise_callback_error()
+                qpos_out[n] = d.qpos
+                qvel_out[n] = d.qvel
+            y_chunk = _to_packed(qpos_out[start:stop], qvel_out[start:stop])
+            bad = _bad_rows(y_chunk)
+            candidates = []                     # (step index, reason)
+            if bad.any():
+                k = int(np.argmax(bad))
+                finite = bool(np.all(np.isfinite(y_chunk[k])))
+                candidates.append((start + k, f"state beyond {BLOWUP_LIMIT:g}" if finite else "non-finite state"))
+            if session.warnings:
+                t_warn, msg = session.warnings[0]
+                n_warn = min(max(int(round(t_warn / dt_s)) + 1, start), stop - 1)  # the step begun at t_warn
+                candidates.append((n_warn, f"MuJoCo: {msg}"))
+            if candidates:
+                n_bad = min(c[0] for c in candidates)
+                what = "; ".join(c[1] for c in sorted(candidates))
+                y = _to_packed(qpos_out[:n_bad], qvel_out[:n_bad])
+                return Run(dt_s * np.arange(n_bad), y, n_bad * dt_s,
+                           f"diverged at t = {n_bad * dt_s:.6g} s ({what})")
+            start = stop
+    return Run(dt_s * np.arange(n_steps + 1), _to_packed(qpos_out, qvel_out))
+
+
+def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
+    """One step of ``dt_s`` from each row of ``y_start`` (T, 13); rows the engine blows up come back as
+    whatever MuJoCo produced (possibly non-finite)."""
+    shape = np.shape(y_start)
+    y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
+    m = build_model(scenario, variant, dt_s)
+    d = mujoco.MjData(m)
+    forces = scenario.problem.forces
+    weight = scenario.problem.body.mass_kg * np.asarray(forces.gravity_W, dtype=float)
+    xfrc = d.xfrc_applied[_BODY]
+    per_stage = variant == "rk4" and forces.state_dependent and _RK4_STAGE_FORCES
+    control = _stage_force_writer(scenario, xfrc, weight) if per_stage else None
+    y_dec = apply_decay_prestep(scenario, y_start)
+    qpos_in, qvel_in = _to_qpos_qvel(y_dec)
+    qpos_out = np.empty((len(y_start), 7))
+    qvel_out = np.empty((len(y_start), 6))
+    with _Session(d, control) as session, np.errstate(all="ignore"):
+        for i in range(len(y_start)):
+            if not per_stage:
+                f, tau = harness_force_torque(scenario, y_start[i])
+                xfrc[0:3] = f - weight
+                xfrc[3:6] = tau
+            d.time = 0.0
+            d.qpos[:] = qpos_in[i]
+            d.qvel[:] = qvel_in[i]
+            mujoco.mj_step(m, d)
+            session.raise_callback_error()
+            qpos_out[i] = d.qpos
+            qvel_out[i] = d.qvel
+            session.warnings.clear()
+    with np.errstate(all="ignore"):
+        return _to_packed(qpos_out, qvel_out).reshape(shape)
