@@ -118,6 +118,14 @@ class RigidBody:
         off = self.inertia_B - np.diag(np.diag(self.inertia_B))
         return bool(np.all(off == 0.0))
 
+    def inertia_times_B(self, w_B):
+        """``I_B @ w_B`` for body-axes vectors (..., 3) (kg m² × the vector's unit)."""
+        return np.asarray(w_B, dtype=float) @ self.inertia_B.T
+
+    def inertia_solve_B(self, tau_B):
+        """``I_B⁻¹ @ tau_B`` for body-axes vectors (..., 3)."""
+        return np.asarray(tau_B, dtype=float) @ self.inertia_inv_B.T
+
     def world_inertia(self, R_WB):
         """World-frame inertia ``R I_B Rᵀ`` (kg m²) for rotations ``R_WB`` (..., 3, 3)."""
         return R_WB @ self.inertia_B @ np.swapaxes(R_WB, -1, -2)

@@ -33,7 +33,7 @@ from __future__ import annotations
 import numpy as np
 
 from .quaternion import matrix_from_quat, quat_exp, quat_mul
-from .vec import cross3 as _cross, matvec3 as _mv
+from .vec import cross3 as _cross, mat_t_vec3 as _mtv, matvec3 as _mv
 from .state import Q, STATE_SIZE, V, W, X, Problem
 
 __all__ = ["VARIANTS", "DESCRIPTIONS", "get_step", "rhs", "IMPLICIT_TOL", "ImplicitSolveError"]
@@ -65,11 +65,19 @@ def rhs(problem: Problem, y):
     qn = q / np.linalg.norm(q, axis=-1, keepdims=True)
     R = matrix_from_quat(qn)
     f, tau = forces.force_torque(body, x, v, qn, R)
-    I_W = body.world_inertia(R)
-    I_W_inv = body.world_inertia_inv(R)
-    dw = _mv(I_W_inv, tau - _cross(w, _mv(I_W, w)))
+    dw = _angular_acceleration(body, R, w, tau, gyro=True)
     dq = 0.5 * quat_mul(_omega_quat(w), q)
     return np.concatenate([v, f / body.mass_kg, dq, dw], axis=-1)
+
+
+def _angular_acceleration(body, R, w_W, tau_W, *, gyro: bool):
+    """``I_W⁻¹ (τ − ω × I_W ω)`` (world axes, rad/s²), computed in body axes where I_B is constant:
+    ``R I_B⁻¹ (Rᵀτ − ω_B × I_B ω_B)`` with ``ω_B = Rᵀω`` — the same quantity without forming I_W."""
+    tau_B = _mtv(R, tau_W)
+    if gyro:
+        w_B = _mtv(R, w_W)
+        tau_B = tau_B - _cross(w_B, body.inertia_times_B(w_B))
+    return _mv(R, body.inertia_solve_B(tau_B))
 
 
 def _dt(dt, y):
@@ -104,10 +112,7 @@ def _course_type(problem: Problem, y, dt, *, gyro: bool, expmap: bool):
     if fm.velocity_decay != 1.0:
         v1 = fm.velocity_decay * v1
     x1 = x + h * v1
-    I_W_inv = body.world_inertia_inv(R)
-    if gyro:
-        tau = tau - _cross(w, _mv(body.world_inertia(R), w))
-    w1 = w + h * _mv(I_W_inv, tau)
+    w1 = w + h * _angular_acceleration(body, R, w, tau, gyro=gyro)
     if fm.angular_velocity_decay != 1.0:
         w1 = fm.angular_velocity_decay * w1
     if expmap:

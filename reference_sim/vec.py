@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["cross3", "matvec3"]
+__all__ = ["cross3", "matvec3", "mat_t_vec3"]
 
 
 def cross3(a, b):
@@ -17,4 +17,11 @@ def cross3(a, b):
 
 def matvec3(M, v):
     """``M @ v`` for matrices (..., 3, 3) and vectors (..., 3), broadcasting over the leading axes."""
-    return np.einsum("...ij,...j->...i", M, v)
+    v = np.asarray(v, dtype=float)
+    return M[..., :, 0] * v[..., 0:1] + M[..., :, 1] * v[..., 1:2] + M[..., :, 2] * v[..., 2:3]
+
+
+def mat_t_vec3(M, v):
+    """``Mᵀ @ v`` for matrices (..., 3, 3) and vectors (..., 3): e.g. world → body with ``M = R_WB``."""
+    v = np.asarray(v, dtype=float)
+    return M[..., 0, :] * v[..., 0:1] + M[..., 1, :] * v[..., 1:2] + M[..., 2, :] * v[..., 2:3]
