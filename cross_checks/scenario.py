@@ -297,10 +297,11 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
         q0 = quat_from_euler_zxy(r.vector(ini, "euler_zxy_deg", "initial.euler_zxy_deg", 3))
     else:
         q0 = r.vector(ini, "orientation", "initial.orientation", 4, default=[1.0, 0.0, 0.0, 0.0])
-        nq = float(np.linalg.norm(q0))
-        if not nq > 1e-12:
+        big = float(np.max(np.abs(q0)))
+        if not big > 1e-12:  # (w, x, y, z) all ~0: no rotation can be recovered
             raise r.err("initial.orientation", "is zero; must be a non-zero quaternion (w, x, y, z)")
-        q0 = q0 / nq
+        q0 = q0 / big  # scale first so the norm cannot overflow (components up to 1.8e308 are finite)
+        q0 = q0 / float(np.linalg.norm(q0))
     if "angular_velocity" in ini and "angular_velocity_body" in ini:
         raise r.err("initial.angular_velocity", "give exactly one of angular_velocity (world) and angular_velocity_body")
     if "angular_velocity_body" in ini:

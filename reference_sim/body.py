@@ -10,6 +10,12 @@ __all__ = ["RigidBody", "inertia_from_particles", "check_inertia"]
 # Relative tolerance for symmetry and the triangle inequality of an inertia tensor: a few ulps of
 # the largest moment, so tensors typed with ~15 significant digits pass and real violations do not.
 _INERTIA_REL_TOL = 1e-12
+# Largest inertia entry accepted: sums and products of moments and angular velocities must stay far
+# from float overflow (1.8e308); 1e150 kg m² is ~1e100 times any physical body (a galaxy is ~1e70).
+_INERTIA_MAX = 1e150
+# Smallest/largest principal moment accepted: below 1e-12 the inverse inertia keeps < 4 significant
+# digits in double precision (condition number 1e12), so no integrator result would mean anything.
+_INERTIA_MIN_RATIO = 1e-12
 
 
 def check_inertia(inertia_B) -> np.ndarray:
@@ -28,11 +34,17 @@ def check_inertia(inertia_B) -> np.ndarray:
     scale = float(np.max(np.abs(I)))
     if scale == 0.0:
         raise ValueError("is zero; must be positive definite")
+    if scale > _INERTIA_MAX:
+        raise ValueError(f"has an entry of magnitude {scale:g} kg m^2, beyond {_INERTIA_MAX:g} (overflow range)")
     if np.max(np.abs(I - I.T)) > _INERTIA_REL_TOL * scale:
         raise ValueError("is not symmetric")
     moments = np.linalg.eigvalsh(0.5 * (I + I.T))
     if moments[0] <= 0.0:
         raise ValueError(f"is not positive definite (principal moments {moments.tolist()})")
+    if moments[0] < _INERTIA_MIN_RATIO * moments[-1] or moments[0] < 1.0 / _INERTIA_MAX:
+        raise ValueError(f"is ill-conditioned: smallest principal moment {moments[0]:g} is below "
+                         f"{_INERTIA_MIN_RATIO:g} x the largest {moments[-1]:g} (or below {1.0 / _INERTIA_MAX:g}); "
+                         "its inverse would lose all digits")
     a, b, c = np.sort(moments)
     if a + b < c * (1.0 - _INERTIA_REL_TOL):
         raise ValueError(

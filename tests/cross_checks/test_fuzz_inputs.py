@@ -1,4 +1,5 @@
 """Random and mutated scenario files: the only outcomes are a valid Scenario / a run, or exit 2 with a message."""
+import os
 import re
 
 from hypothesis import HealthCheck, given, settings, strategies as st
@@ -42,7 +43,8 @@ def mutated_scenario(draw):
     return text
 
 
-@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=int(os.environ.get("RBCHECK_FUZZ_EXAMPLES", 300)), deadline=None,
+          suppress_health_check=[HealthCheck.too_slow], derandomize=not os.environ.get("RBCHECK_FUZZ_EXAMPLES"))
 @given(mutated_scenario())
 def test_loader_accepts_or_rejects_with_a_located_message(text):
     try:
@@ -54,7 +56,8 @@ def test_loader_accepts_or_rejects_with_a_located_message(text):
     assert sc.problem.body.mass_kg > 0 and 0 < sc.dt_s <= sc.duration_s
 
 
-@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@settings(max_examples=40, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(text=mutated_scenario())
 def test_cli_run_gives_a_run_or_exit_2(tmp_path, capsys, text):
     path = tmp_path / "fuzz.toml"
