@@ -1,8 +1,10 @@
-"""The fast single-body path: every variant's step in plain Python floats.
+"""The fast paths: every variant's step written once on plain numbers, run on two backends.
 
 NumPy costs ~1 µs per call whatever the array size, so one body stepped through the batched
 integrators pays ~100 µs per step in call overhead. Here the same equations are written on Python
-floats (one body, (13,) state as a list), which is ~10× faster for one trajectory. The batched
+floats (one body, (13,) state as a list), which is ~20× faster for one trajectory. With the NumPy backend the same code steps N bodies
+held as 13 contiguous (N,) arrays (structure of arrays), which avoids the strided (N, 13) columns
+and (N, 3, 3) temporaries of the batched definition. The batched
 integrators (:mod:`reference_sim.integrators`) remain the definition; this module is tested against
 them (tests/reference_sim/test_scalar.py) to round-off.
 
@@ -24,12 +26,39 @@ SCALAR_VARIANTS = ("course", "course_gyro", "expmap_gyro", "explicit_euler", "mi
                    "implicit_euler")
 
 
-class ScalarStepper:
-    """``step(y) -> y_new`` for one body, in Python floats, for ``problem`` and ``variant``."""
+class _FloatBackend:
+    sqrt, cos, sin = staticmethod(math.sqrt), staticmethod(math.cos), staticmethod(math.sin)
 
-    def __init__(self, problem: Problem, variant: str, dt_s: float):
+    @staticmethod
+    def where(cond, a, b):
+        return a if cond else b
+
+    @staticmethod
+    def maxabs(values):
+        return max(abs(v) for v in values)
+
+
+class _NumpyBackend:
+    sqrt, cos, sin, where = staticmethod(np.sqrt), staticmethod(np.cos), staticmethod(np.sin), staticmethod(np.where)
+
+    @staticmethod
+    def maxabs(values):
+        return max(float(np.max(np.abs(v))) for v in values)
+
+
+class ScalarStepper:
+    """``step(y) -> y_new`` for ``problem`` and ``variant``.
+
+    ``backend="float"``: ONE body, ``y`` a list of 13 Python floats.
+    ``backend="numpy"``: N bodies in structure-of-arrays layout, ``y`` a list of 13 contiguous (N,)
+    arrays — the same code, each float operation becoming one vectorised NumPy operation.
+    """
+
+    def __init__(self, problem: Problem, variant: str, dt_s: float, backend: str = "float"):
         get_step(variant)  # validates the name
         self.problem, self.variant, self.h = problem, variant, float(dt_s)
+        self.xp = {"float": _FloatBackend, "numpy": _NumpyBackend}[backend]
+        self.backend = backend
         b, fm = problem.body, problem.forces
         self.m = float(b.mass_kg)
         self.I = [list(map(float, row)) for row in b.inertia_B]
@@ -92,16 +121,19 @@ class ScalarStepper:
             ry = r10 * a[0] + r11 * a[1] + r12 * a[2]
             rz = r20 * a[0] + r21 * a[1] + r22 * a[2]
             dx, dy, dz = x[0] + rx - anchor[0], x[1] + ry - anchor[1], x[2] + rz - anchor[2]
-            L = math.sqrt(dx * dx + dy * dy + dz * dz)
-            if L > 0.0:
-                s = -k * (L - L0) / L
-                sx, sy, sz = s * dx, s * dy, s * dz
-                fx += sx
-                fy += sy
-                fz += sz
-                tx += ry * sz - rz * sy
-                ty += rz * sx - rx * sz
-                tz += rx * sy - ry * sx
+            L = self.xp.sqrt(dx * dx + dy * dy + dz * dz)
+            if self.backend == "float":  # zero force when L == 0 (no direction)
+                s = -k * (L - L0) / L if L > 0.0 else 0.0
+            else:
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    s = np.where(L > 0.0, -k * (L - L0) / L, 0.0)
+            sx, sy, sz = s * dx, s * dy, s * dz
+            fx += sx
+            fy += sy
+            fz += sz
+            tx += ry * sz - rz * sy
+            ty += rz * sx - rx * sz
+            tz += rx * sy - ry * sx
         for f, r in self.world_point:
             rx = r00 * r[0] + r01 * r[1] + r02 * r[2]
             ry = r10 * r[0] + r11 * r[1] + r12 * r[2]
@@ -155,6 +187,18 @@ class ScalarStepper:
         az = J[2][0] * bx + J[2][1] * by + J[2][2] * bz
         return (r00 * ax + r01 * ay + r02 * az, r10 * ax + r11 * ay + r12 * az, r20 * ax + r21 * ay + r22 * az)
 
+    def _exp(self, wx, wy, wz):
+        """exp(h ω) as a quaternion (w, x, y, z); Taylor series for sin(θ/2)/θ below θ = 1e-4."""
+        h, xp = self.h, self.xp
+        th = h * xp.sqrt(wx * wx + wy * wy + wz * wz)
+        t2 = th * th
+        if self.backend == "float":
+            s = h * (0.5 - t2 / 48.0 + t2 * t2 / 3840.0 if th < 1e-4 else math.sin(0.5 * th) / th)
+        else:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                s = h * np.where(th < 1e-4, 0.5 - t2 / 48.0 + t2 * t2 / 3840.0, np.sin(0.5 * th) / th)
+        return xp.cos(0.5 * th), s * wx, s * wy, s * wz
+
     # -- course-type schemes -----------------------------------------------------------------------------
     def _course(self, y, gyro, expmap):
         h, m = self.h, self.m
@@ -169,10 +213,7 @@ class ScalarStepper:
         gw = self.gw
         wx, wy, wz = gw * (wx + h * ax), gw * (wy + h * ay), gw * (wz + h * az)
         if expmap:
-            th = h * math.sqrt(wx * wx + wy * wy + wz * wz)
-            c = math.cos(0.5 * th)
-            s = (h * (0.5 - th * th / 48.0 + th ** 4 / 3840.0)) if th < 1e-4 else math.sin(0.5 * th) * h / th
-            ew, ex, ey, ez = c, s * wx, s * wy, s * wz
+            ew, ex, ey, ez = self._exp(wx, wy, wz)
             nw = ew * qw - ex * qx - ey * qy - ez * qz
             nx = ew * qx + ex * qw + ey * qz - ez * qy
             ny = ew * qy + ey * qw + ez * qx - ex * qz
@@ -183,14 +224,14 @@ class ScalarStepper:
             nx = qx + (hx * qw + hy * qz - hz * qy)
             ny = qy + (hy * qw + hz * qx - hx * qz)
             nz = qz + (hz * qw + hx * qy - hy * qx)
-        n = math.sqrt(nw * nw + nx * nx + ny * ny + nz * nz)
+        n = self.xp.sqrt(nw * nw + nx * nx + ny * ny + nz * nz)
         return [x[0] + h * vx, x[1] + h * vy, x[2] + h * vz, vx, vy, vz, nw / n, nx / n, ny / n, nz / n, wx, wy, wz]
 
     # -- whole-state schemes --------------------------------------------------------------------------------
     def rhs(self, y):
         """dy/dt (13 floats), gyroscopic term included, rotation from q/|q|."""
         qw, qx, qy, qz = y[6:10]
-        n = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+        n = self.xp.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
         R = self._rot(qw / n, qx / n, qy / n, qz / n)
         wx, wy, wz = y[10:13]
         fx, fy, fz, tx, ty, tz = self._force_torque(y[0:3], y[3:6], R)
@@ -201,7 +242,7 @@ class ScalarStepper:
                 0.5 * (wy * qw + wz * qx - wx * qz), 0.5 * (wz * qw + wx * qy - wy * qx), ax, ay, az]
 
     def _finish(self, y):
-        n = math.sqrt(y[6] * y[6] + y[7] * y[7] + y[8] * y[8] + y[9] * y[9])
+        n = self.xp.sqrt(y[6] * y[6] + y[7] * y[7] + y[8] * y[8] + y[9] * y[9])
         y[6], y[7], y[8], y[9] = y[6] / n, y[7] / n, y[8] / n, y[9] / n
         if self.gv != 1.0:
             y[3], y[4], y[5] = self.gv * y[3], self.gv * y[4], self.gv * y[5]
@@ -239,7 +280,7 @@ class ScalarStepper:
             z[3:6], z[10:13] = u[0:3], u[3:6]
             d = self.rhs(z)
             u_new = [a + half * b for a, b in zip(u0, d[3:6] + d[10:13])]
-            done = max(abs(a - b) / (1.0 + abs(a)) for a, b in zip(u_new, u)) <= IMPLICIT_TOL
+            done = self.xp.maxabs([(a - b) / (1.0 + abs(a)) for a, b in zip(u_new, u)]) <= IMPLICIT_TOL
             u = u_new
             if done:
                 break
@@ -248,16 +289,13 @@ class ScalarStepper:
         z[3:6], z[10:13] = u[0:3], u[3:6]
         z[0], z[1], z[2] = y[0] + h * u[0], y[1] + h * u[1], y[2] + h * u[2]
         wx, wy, wz = u[3:6]
-        th = h * math.sqrt(wx * wx + wy * wy + wz * wz)
-        c = math.cos(0.5 * th)
-        s = (h * (0.5 - th * th / 48.0 + th ** 4 / 3840.0)) if th < 1e-4 else math.sin(0.5 * th) * h / th
-        ew, ex, ey, ez = c, s * wx, s * wy, s * wz
+        ew, ex, ey, ez = self._exp(wx, wy, wz)
         qw, qx, qy, qz = y[6:10]
         nw = ew * qw - ex * qx - ey * qy - ez * qz
         nx = ew * qx + ex * qw + ey * qz - ez * qy
         ny = ew * qy + ey * qw + ez * qx - ex * qz
         nz = ew * qz + ez * qw + ex * qy - ey * qx
-        n = math.sqrt(nw * nw + nx * nx + ny * ny + nz * nz)
+        n = self.xp.sqrt(nw * nw + nx * nx + ny * ny + nz * nz)
         z[6], z[7], z[8], z[9] = nw / n, nx / n, ny / n, nz / n
         d = self.rhs(z)
         z[3:6] = [a + half * b for a, b in zip(u[0:3], d[3:6])]
@@ -270,4 +308,5 @@ class ScalarStepper:
 
     def _implicit_euler(self, y):
         # Newton with a Jacobian needs linear algebra: delegate to the batched (NumPy) definition.
-        return list(get_step("implicit_euler")(self.problem, np.asarray(y, dtype=float), self.h))
+        out = get_step("implicit_euler")(self.problem, np.stack(y, axis=-1).astype(float), self.h)
+        return list(out) if self.backend == "float" else [np.ascontiguousarray(c) for c in out.T]
