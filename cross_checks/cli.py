@@ -54,7 +54,48 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--dt", type=_positive_float, metavar="DT", help="time step, s (default: the scenario's dt)")
     r.add_argument("--duration", type=_positive_float, metavar="T", help="simulated time, s (default: the scenario's)")
     r.add_argument("--out", required=True, metavar="FILE.csv", help="trajectory CSV (sidecar FILE.json beside it)")
+
+    s = sub.add_parser(
+        "sweep", help="run scenarios x engine variants x dt ladders; write results, convergence verdicts and the report",
+        description="Run every scenario (default: the whole catalog) with every engine variant (default: all "
+                    "available) at every dt of its ladder, in parallel; write DIR/results.csv, DIR/summary.json, "
+                    "DIR/series/, DIR/plots/ and the HTML report. DIR is replaced only when the sweep is complete. "
+                    "Exit 1 when a result contradicts the expectations (cross_checks/expectations.py), a run fails, "
+                    "or two schemes that must be identical disagree.")
+    s.add_argument("scenarios", nargs="*", metavar="SCENARIO", help="catalog names or TOML paths (default: the catalog)")
+    s.add_argument("--engines", nargs="+", metavar="ENGINE[:VARIANT]",
+                   help="variants to run, e.g. reference:rk4 mujoco (an engine name means all its variants); "
+                        "default: every available variant")
+    s.add_argument("--jobs", type=_positive_int, metavar="N", help="worker processes (default: all cores)")
+    s.add_argument("--out", required=True, metavar="DIR", help="results directory (replaced atomically)")
+    s.add_argument("--no-cache", action="store_true",
+                   help="recompute every run instead of reusing cached results ($RBCHECK_CACHE_DIR or ~/.cache/rbcheck)")
+    s.add_argument("--self-contained", action="store_true", help="embed the plots in the HTML pages (for CI artifacts)")
+
+    rp = sub.add_parser("report", help="re-render the plots and HTML of a results directory from its saved data")
+    rp.add_argument("dir", metavar="DIR")
+    rp.add_argument("--self-contained", action="store_true", help="embed the plots in the HTML pages")
+    rp.add_argument("--jobs", type=_positive_int, metavar="N", help="processes drawing figures (default: all cores)")
+
+    c = sub.add_parser(
+        "check", help="score a trajectory CSV from any simulator against a scenario's reference and reference:course",
+        description="Compare TRAJ.csv (DESIGN.md trajectory format) with the scenario's reference and with the "
+                    "course-type reference variants run at the trajectory's own dt. Exit 0 when it IS one of those "
+                    "schemes (e.g. reference:course) or agrees with the reference within a first-order scheme's "
+                    "error; 1 when it disagrees; 2 on bad input.")
+    c.add_argument("trajectory", metavar="TRAJ.csv")
+    c.add_argument("--scenario", required=True, metavar="SCENARIO")
     return p
+
+
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a whole number, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {v}")
+    return v
 
 
 def cmd_list(args) -> int:
@@ -114,7 +155,112 @@ def cmd_run(args) -> int:
     return EXIT_OK
 
 
-COMMANDS = {"list": cmd_list, "run": cmd_run}
+def _resolve_engines(specs):
+    """``--engines`` values -> (variants to run, {variant: why skipped}) ; BadInput for unknown or
+    explicitly requested unavailable ones."""
+    from .engines import STATIC_VARIANTS, UnknownVariant, all_variants, split_variant
+
+    infos = {v.name: v for v in all_variants()}
+    if not specs:
+        run = [n for n, v in infos.items() if v.available]
+        skipped = {n: v.reason for n, v in infos.items() if not v.available}
+        return run, skipped
+    out = []
+    for spec in (x for s in specs for x in s.split(",") if x):
+        names = [f"{spec}:{v}" for v in STATIC_VARIANTS[spec]] if spec in STATIC_VARIANTS else [spec]
+        for n in names:
+            try:
+                split_variant(n)
+            except UnknownVariant as exc:
+                raise BadInput(f"--engines: {exc}") from None
+            if not infos[n].available:
+                raise BadInput(f"--engines {n}: {infos[n].reason}")
+            if n not in out:
+                out.append(n)
+    return out, {}
+
+
+def _gate_failures(summary) -> list:
+    """Lines naming what makes a sweep exit 1."""
+    out = []
+    for r in summary.get("convergence", []):
+        if r.get("matches_expectation") is False:
+            out.append(f"{r['engine']} on {r['scenario']}: {r['quantity']} {r['assessment']}")
+    for a in summary.get("agreement", []):
+        if not a.get("agrees"):
+            out.append(f"{a['a']} and {a['b']} differ on {a['scenario']} (should be the same scheme)")
+    n_failed = summary.get("run", {}).get("failed_runs", 0)
+    if n_failed:
+        out.append(f"{n_failed} run(s) failed (status 'failed' in results.csv)")
+    return out
+
+
+def cmd_sweep(args) -> int:
+    from .scenario import catalog_names, load_scenario
+    from .sweep import SweepError, SweepInterrupted, run_sweep
+
+    specs = args.scenarios or catalog_names()
+    scenarios = [load_scenario(s) for s in specs]
+    variants, skipped = _resolve_engines(args.engines)
+    if not variants:
+        raise BadInput("--engines: no available engine variant to run")
+    import time
+    t0 = time.perf_counter()
+    try:
+        summary = run_sweep(scenarios, variants, args.out, jobs=args.jobs, use_cache=not args.no_cache,
+                            self_contained=args.self_contained, skipped=skipped)
+    except SweepError as exc:
+        raise BadInput(str(exc)) from None
+    except SweepInterrupted:
+        print(f"rbcheck sweep: interrupted; {args.out} left as it was", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    run = summary["run"]
+    print(f"rbcheck sweep: {len(scenarios)} scenario(s) x {len(variants)} variant(s): {run['runs']} runs "
+          f"({run['cached_runs']} cached, {run['diverged_runs']} diverged, {run['failed_runs']} failed) "
+          f"in {time.perf_counter() - t0:.1f} s on {run['jobs']} worker(s) (runs and metrics {run['wall_s']:.1f} s, "
+          f"then the report) -> {Path(args.out) / 'index.html'}")
+    fails = _gate_failures(summary)
+    if fails:
+        print(f"rbcheck sweep: {len(fails)} result(s) contradict the expectations:", file=sys.stderr)
+        for line in fails[:20]:
+            print(f"  {line}", file=sys.stderr)
+        if len(fails) > 20:
+            print(f"  ... and {len(fails) - 20} more (see the findings in index.html)", file=sys.stderr)
+        return EXIT_FAIL
+    return EXIT_OK
+
+
+def cmd_report(args) -> int:
+    import os
+
+    import reports
+    from reports import ResultsError
+
+    jobs = args.jobs or (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
+    try:
+        written = reports.render(args.dir, self_contained=args.self_contained, jobs=jobs)
+    except ResultsError as exc:
+        raise BadInput(str(exc)) from None
+    print(f"rbcheck report: wrote {len(written)} page(s) -> {Path(args.dir) / 'index.html'}")
+    return EXIT_OK
+
+
+def cmd_check(args) -> int:
+    from .check import CheckError, check_trajectory, format_report
+    from .scenario import load_scenario
+    from .trajectory import Trajectory
+
+    sc = load_scenario(args.scenario)
+    traj = Trajectory.read(args.trajectory)
+    try:
+        res = check_trajectory(traj, sc, source=args.trajectory)
+    except CheckError as exc:
+        raise BadInput(str(exc)) from None
+    print(format_report(res, args.trajectory))
+    return EXIT_OK if res.passed else EXIT_FAIL
+
+
+COMMANDS = {"list": cmd_list, "run": cmd_run, "sweep": cmd_sweep, "report": cmd_report, "check": cmd_check}
 
 
 def main(argv=None) -> int:

@@ -12,7 +12,11 @@ QUAT_ROUND_TRIP = 1e-12
 #: Euler-angle round trip near gimbal lock: y and z come from atan2 of entries scaled by cos(pitch),
 #: so their error is ~ε/|cos pitch| (conditioning of the parameterisation, not of the rotation);
 #: 10 ε / |cos pitch| covers it (hypothesis found 2.3e-11 rad at cos pitch = 2e-5, i.e. 2.3 ε/cos).
-def euler_round_trip_tol(cos_pitch: float) -> float:
+#: At lock (|cos pitch| < the gimbal threshold 1e-9 of euler_zxy_from_quat) z is set to 0 by
+#: convention, dropping a rotation of at most ~2·|cos pitch|: the round trip is exact to 2e-9 rad.
+def euler_round_trip_tol(cos_pitch: float, locked: bool = False) -> float:
+    if locked:
+        return QUAT_ROUND_TRIP + 2e-9
     return QUAT_ROUND_TRIP + 10 * 2.2e-16 / max(abs(cos_pitch), 1e-300)
 
 
@@ -38,13 +42,24 @@ IMPLICIT_SOLVE = 1e-13
 
 # --- sweeps, metrics and verdicts (cross_checks.metrics, cross_checks.sweep, `rbcheck check`) -------
 
-#: Round-off accumulated per step, relative to a quantity's scale: a step does ~8 roundings of ε =
-#: 2.2e-16 on each component; added linearly (an upper bound: a random walk gives √N) that is
-#: 1.8e-15 per step, 7e-11 over the longest ladder run (4e4 steps).
-ROUNDOFF_PER_STEP_REL = 8 * 2.2e-16
-#: Accuracy of the references relative to a quantity's scale: closed forms (polynomials, exponentials,
-#: Jacobi elliptic functions from scipy, ~1e-15 each, a few hundred periods at most) 1e-12; the DOP853
-#: ground truth (rtol 1e-12) is within CLOSED_FORM_VS_GROUND_TRUTH of the closed forms over 10 s.
+#: Round-off of a run, relative to a quantity's scale, per step: each step rounds every component
+#: by ~ε|y|, and when the increments keep their sign (a falling body) the roundings add up linearly:
+#: N ε |y|. Measured: RK4 position on tumbling_box 8.5e-11 m after N = 4e4 steps at |x| = 28 m,
+#: i.e. 0.34 N ε |x|; RK4 orientation on tennis_racket flattens at 1e-13 rad after 16000 steps.
+ROUNDOFF_PER_STEP_REL = 2.2e-16
+#: Round-off scatters about its estimate: a point within this factor of its floor, finer than one
+#: at the floor, is round-off noise too.
+ROUNDOFF_NOISE_FACTOR = 10.0
+#: Near an unstable rotation (the tennis racket's and tumbling box's separatrix) the dynamics
+#: amplify round-off: DOP853 at rtol 1e-13 and the closed form of tumbling_box part by 2e-9 rad at
+#: 10 s. An error that grows again at the fine end while below this multiple of the floor is
+#: amplified round-off, not a failure to converge.
+AMPLIFIED_ROUNDOFF_FACTOR = 1e4
+#: Accuracy of the references relative to a quantity's scale: closed forms 1e-12 — Jacobi elliptic
+#: functions from scipy, evaluated at arbitrary times: one RK4 step (local error ~1e-20) from the
+#: tennis-racket closed form at one time lands 1.6e-12 rad from it at the next, in MuJoCo and NumPy
+#: alike; the DOP853 ground truth (rtol 1e-12) is within CLOSED_FORM_VS_GROUND_TRUTH = 1e-10 of the
+#: closed forms over 10 s (but see AMPLIFIED_ROUNDOFF_FACTOR for tumbling bodies).
 REFERENCE_ACCURACY_REL = {"analytic": 1e-12, "ground_truth": 1e-10}
 #: A fitted order below this means "does not converge": a consistent scheme has order ≥ 1, an error
 #: plateau (missing physics) has order ≈ 0; 0.5 is halfway.

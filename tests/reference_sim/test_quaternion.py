@@ -94,14 +94,14 @@ def test_euler_zxy_matches_scipy_extrinsic_zxy(rng):
     assert np.max(geodesic_angle(expected, quat_from_euler_zxy(ang))) < QUAT_ROUND_TRIP
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=200, deadline=None, derandomize=True)
 @given(quats)
 def test_unit_norm_kept_by_product_and_exp(q):
     assert abs(quat_norm(quat_mul(q, q)) - 1.0) < QUAT_ALGEBRA
     assert abs(quat_norm(quat_mul(quat_exp(q[1:]), q)) - 1.0) < QUAT_ALGEBRA
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=200, deadline=None, derandomize=True)
 @given(quats)
 def test_rotation_matrix_is_orthonormal(q):
     R = matrix_from_quat(q)
@@ -109,25 +109,25 @@ def test_rotation_matrix_is_orthonormal(q):
     assert abs(np.linalg.det(R) - 1.0) < QUAT_ALGEBRA
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=200, deadline=None, derandomize=True)
 @given(quats)
 def test_quat_double_cover(q):
     np.testing.assert_allclose(matrix_from_quat(q), matrix_from_quat(-q), atol=0)
     assert geodesic_angle(q, -q) < QUAT_ALGEBRA
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=200, deadline=None, derandomize=True)
 @given(quats, vecs, vecs)
 def test_rotation_preserves_distances(q, a, b):
     assert abs(np.linalg.norm(rotate(q, a) - rotate(q, b)) - np.linalg.norm(a - b)) < QUAT_ALGEBRA * (
         1 + np.linalg.norm(a - b)) * 10
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=200, deadline=None, derandomize=True)
 @given(quats)
 def test_euler_round_trip(q):
     angles, locked = euler_zxy_from_quat(q)
-    tol = QUAT_ROUND_TRIP if locked else euler_round_trip_tol(np.cos(np.deg2rad(angles[0])))
+    tol = euler_round_trip_tol(np.cos(np.deg2rad(angles[0])), bool(locked))
     assert geodesic_angle(q, quat_from_euler_zxy(angles)) < tol
 
 

@@ -1,0 +1,179 @@
+"""What each engine variant is expected to do on each scenario: the ONE place for expected orders.
+
+A sweep fits a convergence order per (scenario, variant, quantity) and compares it with
+:func:`expectation`: the nominal order of the variant, unless a rule of this module says the variant
+cannot converge on that scenario (and why). The reason strings end up, verbatim, in summary.json and
+in the report's findings, so they are written as sentences for users.
+
+Orders are global orders of the error at a fixed final time, ``e(Δt) ≈ C Δt^p``. In the one-step mode
+(each step restarted from the reference state) the local error of an order-p scheme is O(Δt^{p+1}).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from reference_sim.integrators import EXPECTED_ORDER as _REFERENCE_ORDER
+
+__all__ = ["QUANTITIES", "NOMINAL_ORDER", "NO_GYROSCOPIC_TERM", "EQUIVALENT_PAIRS", "Expectation",
+           "expectation", "expected_order", "nominal_order", "gyroscopic_term_matters", "rotation_drives_translation"]
+
+#: The quantities a convergence verdict is given for (DESIGN.md).
+QUANTITIES = ("position", "orientation", "velocity", "angular_velocity")
+
+#: Nominal global order per ENGINE:VARIANT, the same for every quantity.
+NOMINAL_ORDER = {
+    # reference:* — reference_sim.integrators.EXPECTED_ORDER is the single source for the NumPy
+    # schemes (its own tests prove them): course / course_gyro / expmap_gyro are symplectic Euler
+    # (one force evaluation, O(Δt²) local error -> 1); explicit and implicit Euler: 1; mid-point and
+    # leapfrog (Störmer–Verlet): 2; classical RK4: 4.
+    **{f"reference:{v}": float(p) for v, p in _REFERENCE_ORDER.items()},
+    # MuJoCo Euler is semi-implicit Euler + exp-map quaternion = reference:expmap_gyro (ENGINE_FACTS): 1.
+    "mujoco:euler": 1.0,
+    # MuJoCo RK4: classical RK4 on (qpos, qvel); forces re-evaluated at every stage by the adapter: 4.
+    "mujoco:rk4": 4.0,
+    # MuJoCo implicit(fast): velocity-implicit Euler, one linearised solve per step -> 1.
+    "mujoco:implicit": 1.0,
+    "mujoco:implicitfast": 1.0,
+    # PyBullet: semi-implicit Euler in both modes (multibody explicit gyro, maximal implicit gyro): 1.
+    "pybullet:multibody": 1.0,
+    "pybullet:maximal": 1.0,
+}
+
+#: Variants whose rotation update has no gyroscopic torque −ω × (I ω) (the course's own step).
+NO_GYROSCOPIC_TERM = frozenset({"reference:course"})
+
+#: Pairs that implement the same arithmetic and must agree to round-off (tolerances.SAME_SCHEME_REL).
+EQUIVALENT_PAIRS = (
+    ("reference:expmap_gyro", "mujoco:euler",
+     "MuJoCo's Euler is semi-implicit Euler with an explicit gyroscopic term and the exp-map "
+     "quaternion update, which is what reference:expmap_gyro implements (ENGINE_FACTS.md)"),
+    ("mujoco:implicit", "mujoco:implicitfast",
+     "for a single free body without joints or contacts the two implicit integrators solve the same "
+     "linear system (ENGINE_FACTS.md: 1e-13 apart)"),
+    ("mujoco:euler", "pybullet:multibody",
+     "PyBullet's multibody mode with damping off integrates a free body exactly like MuJoCo Euler "
+     "(ENGINE_FACTS.md: 2.3e-14 rad apart)"),
+)
+
+_TRANSLATION = ("position", "velocity")
+_ROTATION = ("orientation", "angular_velocity")
+
+
+@dataclass(frozen=True)
+class Expectation:
+    """What a (scenario, variant, quantity) should show.
+
+    verdict : "converges", "does_not_converge", or None (no expectation; one-step mode only).
+    order : expected order (float) when it converges, else None.
+    reason : one sentence saying why (for a non-convergence: the physics the variant misses).
+    """
+
+    verdict: str | None
+    order: float | None
+    reason: str
+
+    def as_dict(self) -> dict:
+        return {"expected_verdict": self.verdict, "expected_order": self.order, "reason": self.reason}
+
+
+def nominal_order(variant: str) -> float | None:
+    """The nominal global order of ``ENGINE:VARIANT`` (None for a name this module does not know)."""
+    return NOMINAL_ORDER.get(variant)
+
+
+def _isotropic(inertia_B) -> bool:
+    m = np.linalg.eigvalsh(np.asarray(inertia_B, float))
+    return bool(m[-1] - m[0] <= 1e-12 * m[-1])
+
+
+def gyroscopic_term_matters(scenario) -> bool:
+    """True when ω × (I ω) is non-zero somewhere along the true motion.
+
+    It vanishes identically only for an isotropic inertia, or for a torque-free body whose initial
+    ω lies along a principal axis (then ω stays there). Any torque on an anisotropic body moves ω off
+    the principal axes sooner or later.
+    """
+    p = scenario.problem
+    if _isotropic(p.body.inertia_B):
+        return False
+    if not p.forces.torque_free:
+        return True
+    from reference_sim.quaternion import quat_conj, rotate
+    w_B = rotate(quat_conj(p.initial.q_WB), p.initial.w_W)
+    L_B = p.body.inertia_B @ w_B
+    scale = float(np.linalg.norm(w_B) * np.linalg.norm(L_B))
+    return bool(np.linalg.norm(np.cross(w_B, L_B)) > 1e-12 * scale) if scale > 0 else False
+
+
+def rotation_drives_translation(scenario) -> bool:
+    """True when the force on the COM depends on the orientation (a spring attached off the COM, a
+    body-frame force), so an orientation error becomes a position error."""
+    fm = scenario.problem.forces
+    return bool(any(np.any(s.attach_B != 0) for s in fm.springs)
+                or any(pf.frame == "body" for pf in fm.point_forces))
+
+
+def expectation(scenario, variant: str, quantity: str, mode: str = "free_running") -> Expectation:
+    """The expected verdict and order of ``variant`` on ``scenario`` for ``quantity``.
+
+    ``mode`` "free_running" gives the global order p; "one_step" gives the local order p + 1, and no
+    expectation (verdict None) where the free run is expected not to converge: a missing term shows
+    up as an O(Δt) local error in some quantities and O(Δt²) in others.
+    """
+    if mode not in ("free_running", "one_step"):
+        raise ValueError(f"unknown mode {mode!r}; modes: free_running, one_step")
+    free = _free_running(scenario, variant, quantity)
+    if mode == "free_running":
+        return free
+    if free.verdict != "converges" or free.order is None:
+        return Expectation(None, None, free.reason)
+    return Expectation("converges", free.order + 1.0,
+                       f"one step of an order-{free.order:g} scheme has an O(Δt^{free.order + 1:g}) local error")
+
+
+def _free_running(scenario, variant: str, quantity: str) -> Expectation:
+    if quantity not in QUANTITIES:
+        raise ValueError(f"unknown quantity {quantity!r}; quantities: {', '.join(QUANTITIES)}")
+    fm = scenario.problem.forces
+
+    # The course's per-step decay factor is a different physical damping at every Δt.
+    affected = set()
+    if fm.velocity_decay != 1.0:
+        affected |= set(_TRANSLATION)
+    if fm.angular_velocity_decay != 1.0:
+        affected |= set(_ROTATION)
+    if affected and (rotation_drives_translation(scenario) or not fm.torque_free):
+        affected = set(QUANTITIES)
+    if quantity in affected:
+        return Expectation(
+            "does_not_converge", None,
+            f"the course's per-step velocity decay is frame-rate dependent: at Δt ≠ {scenario.dt_s:g} s the "
+            f"factor γ means another decay rate k = −ln γ / Δt, so each Δt solves a different problem "
+            f"and the error is smallest at Δt = {scenario.dt_s:g} s, where the reference rate was defined")
+
+    if variant in NO_GYROSCOPIC_TERM and gyroscopic_term_matters(scenario):
+        if quantity in _ROTATION or rotation_drives_translation(scenario):
+            coupled = ("" if quantity in _ROTATION else
+                       "; the spring or body-frame force carries that rotation error into the translation")
+            return Expectation(
+                "does_not_converge", None,
+                "the course update has no gyroscopic term −ω × (I ω), which is not zero on this body "
+                f"(anisotropic inertia, ω off the principal axes){coupled}")
+
+    p = nominal_order(variant)
+    if p is None:
+        return Expectation("converges", None, f"no nominal order is recorded for {variant}")
+    return Expectation("converges", p, f"{variant} is an order-{p:g} scheme")
+
+
+def expected_order(variant: str, quantity: str, scenario=None) -> float | None:
+    """The expected global order of ``variant`` for ``quantity`` (None where it is expected not to
+    converge). ``scenario``: a Scenario, a catalog name, or None (then the nominal order)."""
+    if scenario is None:
+        return nominal_order(variant)
+    if isinstance(scenario, str):
+        from .scenario import load_scenario
+        scenario = load_scenario(scenario)
+    return expectation(scenario, variant, quantity).order

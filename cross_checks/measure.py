@@ -1,0 +1,376 @@
+"""One sweep job — a (scenario, engine variant, Δt) run — and its measurement; the job cache.
+
+A worker process calls :func:`run_job`: it runs the variant through the engine registry, compares
+every step with the scenario's reference (computed once per scenario by :func:`reference_job` on the
+union of the scenario's time grids), measures conservation drifts, takes the one-step (local) errors
+from ``LOCAL_SAMPLES`` reference states, and returns small summaries — plus, at the scenario's default
+Δt only, series decimated to ``MAX_SERIES_POINTS`` points for the plots. Full trajectories never leave
+the worker.
+
+Results are cached per job under the user's cache directory (``$RBCHECK_CACHE_DIR``, else
+``$XDG_CACHE_HOME/rbcheck``, else ``~/.cache/rbcheck``; never inside a results directory), keyed by
+the scenario's content hash, the variant, Δt, the engine version and a fingerprint of the source
+files that determine a job's result (reference_sim, the engine adapter, this module, metrics,
+references, scenario parsing, tolerances) — orchestration and report changes keep the cache.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from reference_sim.state import Q
+from . import metrics as M
+from .expectations import QUANTITIES
+
+__all__ = ["SCHEMA_VERSION", "MAX_SERIES_POINTS", "LOCAL_SAMPLES", "RESULT_COLUMNS", "COLUMN_STEM", "Job",
+           "job_dts", "run_job", "reference_job", "load_reference", "failed_record", "cache_dir",
+           "code_fingerprint", "save_npz_atomic", "varies"]
+
+#: Version of the results-directory layout and of the cached job records.
+SCHEMA_VERSION = 1
+#: Points kept per plotted series: enough for a smooth curve at ~1000 px, small on disk.
+MAX_SERIES_POINTS = 500
+#: Reference states each one-step (local error) measurement starts from, spread over the run.
+LOCAL_SAMPLES = 64
+
+RESULT_COLUMNS = (
+    "scenario", "engine", "dt", "steps", "wall_s",
+    "pos_err_final", "vel_err_final", "orient_err_final", "angvel_err_final",
+    "pos_err_max", "vel_err_max", "orient_err_max", "angvel_err_max",
+    "energy_drift_max", "energy_drift_final", "energy_drift_kind",
+    "angmom_drift_max", "linmom_drift_max",
+    "pos_local_err", "vel_local_err", "orient_local_err", "angvel_local_err",
+    "status", "diverged_at_s", "message",
+    "default_dt", "in_ladder", "reference", "engine_version", "cached",
+)
+#: quantity -> column stem in results.csv
+COLUMN_STEM = {"position": "pos", "velocity": "vel", "orientation": "orient", "angular_velocity": "angvel"}
+
+
+@dataclass(frozen=True)
+class Job:
+    """One run: scenario index (into the sweep's list), variant, Δt, and its role."""
+
+    scenario_index: int
+    scenario: str
+    variant: str
+    dt_s: float
+    in_ladder: bool
+    default_dt: bool
+    cost: float
+
+
+
+def job_dts(scenario):
+    """Δt values of a scenario: its ladder, plus its default Δt when the ladder lacks it (descending)."""
+    dts = list(scenario.dt_ladder_s)
+    if not any(d == scenario.dt_s for d in dts):
+        dts.append(scenario.dt_s)
+    return sorted(dts, reverse=True)
+
+
+
+# --- cache -----------------------------------------------------------------------------------------
+
+def cache_dir() -> Path:
+    """The user's rbcheck cache directory (never inside a results directory)."""
+    if os.environ.get("RBCHECK_CACHE_DIR"):
+        return Path(os.environ["RBCHECK_CACHE_DIR"])
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "rbcheck"
+
+
+_FINGERPRINTS: dict = {}
+
+
+def code_fingerprint(engine: str) -> str:
+    """SHA-256 (16 hex digits) of the source files that determine a job's result for ``engine``:
+    reference_sim, the engine registry and adapter, this module, references, metrics, scenario parsing,
+    tolerances, expectations (QUANTITIES) and trajectories."""
+    if engine in _FINGERPRINTS:
+        return _FINGERPRINTS[engine]
+    import reference_sim
+    here = Path(__file__).resolve().parent
+    files = sorted(Path(reference_sim.__file__).resolve().parent.glob("*.py"))
+    files += [here / n for n in ("measure.py", "references.py", "metrics.py", "scenario.py", "tolerances.py",
+                                 "expectations.py", "trajectory.py")]
+    eng = here / "engines"
+    files += [eng / "__init__.py", eng / "base.py"]
+    from .engines import ENGINE_MODULES
+    mod_file = eng / (ENGINE_MODULES[engine].rsplit(".", 1)[1] + ".py")
+    files.append(mod_file)
+    h = hashlib.sha256()
+    for f in files:
+        h.update(f.name.encode())
+        try:
+            h.update(f.read_bytes())
+        except OSError:
+            h.update(b"<missing>")
+    _FINGERPRINTS[engine] = h.hexdigest()[:16]
+    return _FINGERPRINTS[engine]
+
+
+def _job_key(scenario, variant, dt, engine_version):
+    engine = variant.split(":", 1)[0]
+    blob = json.dumps([SCHEMA_VERSION, scenario.content_hash, variant, repr(float(dt)), repr(scenario.duration_s),
+                       engine_version, code_fingerprint(engine), LOCAL_SAMPLES, MAX_SERIES_POINTS])
+    return hashlib.sha256(blob.encode()).hexdigest()
+
+
+def _cache_file(root: Path, kind: str, key: str) -> Path:
+    return root / kind / key[:2] / f"{key}.npz"
+
+
+def save_npz_atomic(path: Path, arrays: dict) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".npz", dir=path.parent)
+    os.close(fd)
+    try:
+        np.savez_compressed(tmp, **arrays)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _pack_record(rec: dict) -> dict:
+    """A job record as npz arrays (JSON for the scalars; no pickles)."""
+    arrays = {"__json__": np.array(json.dumps({k: v for k, v in rec.items() if k != "series"},
+                                              default=_json_default))}
+    for k, a in (rec.get("series") or {}).items():
+        arrays[f"series::{k}"] = a
+    return arrays
+
+
+def _unpack_record(data) -> dict:
+    rec = json.loads(str(data["__json__"]))
+    series = {k[len("series::"):]: data[k] for k in data.files if k.startswith("series::")}
+    rec["series"] = series or None
+    return rec
+
+
+def _cache_load(path: Path):
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            return _unpack_record(data)
+    except (OSError, ValueError, KeyError, EOFError):
+        return None
+
+
+def _cache_store(path: Path, rec: dict) -> None:
+    try:
+        save_npz_atomic(path, _pack_record(rec))
+    except OSError:
+        pass  # a read-only or full cache must never break a sweep
+
+
+# --- references ------------------------------------------------------------------------------------
+
+def _time_grids(scenario):
+    return {dt: dt * np.arange(scenario.n_steps(dt) + 1) for dt in job_dts(scenario)}
+
+
+def reference_job(scenario, out_path: str, cache_root: str | None, use_cache: bool):
+    """Compute (or load) the reference on the union of the scenario's time grids; save it to
+    ``out_path`` (npz: t_s, y, label). Returns ``(label, error message or "", scales, varies)``."""
+    label, err = _reference_solution_file(scenario, out_path, cache_root, use_cache)
+    if err:
+        return label, err, {q: 1.0 for q in QUANTITIES}, {}
+    with np.load(out_path, allow_pickle=False) as d:
+        y = d["y"]
+        return label, "", M.quantity_scales(y), varies(y)
+
+
+def _reference_solution_file(scenario, out_path, cache_root, use_cache):
+    from .references import reference_solution
+    grids = _time_grids(scenario)
+    t_union = np.unique(np.concatenate(list(grids.values())))
+    key = hashlib.sha256(json.dumps([SCHEMA_VERSION, scenario.content_hash, code_fingerprint("reference"),
+                                     t_union.size, repr(float(t_union[-1]))]).encode()).hexdigest()
+    cpath = _cache_file(Path(cache_root), "reference", key) if cache_root else None
+    if cpath is not None and use_cache and cpath.is_file():
+        try:
+            with np.load(cpath, allow_pickle=False) as d:
+                t, y, label = d["t_s"], d["y"], str(d["label"])
+            if np.array_equal(t, t_union):
+                save_npz_atomic(Path(out_path), {"t_s": t, "y": y, "label": np.array(label)})
+                return label, ""
+        except (OSError, ValueError, KeyError):
+            pass
+    try:
+        y, label = reference_solution(scenario, t_union)
+    except Exception as exc:  # noqa: BLE001 - reported per scenario, the sweep goes on
+        return "", f"reference solution failed: {type(exc).__name__}: {exc}"
+    arrays = {"t_s": t_union, "y": y, "label": np.array(label)}
+    save_npz_atomic(Path(out_path), arrays)
+    if cpath is not None:
+        try:
+            save_npz_atomic(cpath, arrays)
+        except OSError:
+            pass
+    return label, ""
+
+
+_REF_MEMO: dict = {}
+
+
+def load_reference(path: str):
+    if path not in _REF_MEMO:
+        _REF_MEMO.clear()  # one scenario's reference in memory at a time per worker
+        with np.load(path, allow_pickle=False) as d:
+            _REF_MEMO[path] = (d["t_s"], d["y"], str(d["label"]))
+    return _REF_MEMO[path]
+
+
+def clear_reference_memo() -> None:
+    _REF_MEMO.clear()
+
+
+# --- one job ---------------------------------------------------------------------------------------
+
+def _nan_row(job, scenario, status, message, label, version):
+    row = {c: math.nan for c in RESULT_COLUMNS}
+    row.update(scenario=job.scenario, engine=job.variant, dt=job.dt_s, steps=0, wall_s=math.nan,
+               energy_drift_kind="n/a", status=status, diverged_at_s=math.nan, message=message,
+               default_dt=job.default_dt, in_ladder=job.in_ladder, reference=label, engine_version=version,
+               cached=False)
+    return row
+
+
+def _canonical_to(q, q_ref):
+    """q or −q, whichever is in the hemisphere of q_ref (row-wise), so components can be plotted."""
+    s = np.sign(np.sum(q * q_ref, axis=-1, keepdims=True))
+    s[s == 0] = 1.0
+    return q * s
+
+
+def run_job(job: Job, scenario, ref_path: str, cache_root: str | None = None, use_cache: bool = True) -> dict:
+    """Run one job and measure it. Returns a record: ``row`` (results.csv columns), ``y_final``
+    (13 numbers or None), ``series`` (dict of float32 arrays for the default Δt, else None),
+    ``scales`` (per quantity)."""
+    from .engines import get_adapter, run_variant, split_variant
+    engine, variant = split_variant(job.variant)
+    try:
+        adapter = get_adapter(engine)
+        version = adapter.version()
+    except Exception as exc:  # noqa: BLE001
+        return {"row": _nan_row(job, scenario, "failed", str(exc), "", ""), "y_final": None, "series": None}
+
+    cpath = None
+    if cache_root:
+        cpath = _cache_file(Path(cache_root), "job", _job_key(scenario, job.variant, job.dt_s, version))
+        if use_cache and cpath.is_file():
+            rec = _cache_load(cpath)
+            if rec is not None:
+                rec["row"].update(default_dt=job.default_dt, in_ladder=job.in_ladder, cached=True)
+                return rec
+
+    t_ref_all, y_ref_all, label = load_reference(ref_path)
+    try:
+        traj = run_variant(scenario, job.variant, job.dt_s)
+    except KeyboardInterrupt:
+        raise
+    except Exception as exc:  # noqa: BLE001 - an engine failure is a row, not a crash
+        msg = f"{type(exc).__name__}: {exc}".strip()
+        return {"row": _nan_row(job, scenario, "failed", msg, label, version), "y_final": None, "series": None}
+
+    meta = traj.meta
+    t, y = traj.t_s, traj.y
+    idx = np.searchsorted(t_ref_all, t)
+    idx = np.minimum(idx, len(t_ref_all) - 1)
+    if np.array_equal(t_ref_all[idx], t):
+        y_ref = y_ref_all[idx]
+    else:  # an adapter with its own time grid: evaluate the reference there
+        from .references import reference_solution
+        y_ref, label = reference_solution(scenario, t)
+
+    status = meta.get("status", "ok")
+    errs = M.state_errors(y, y_ref)
+    summ = M.error_summary(errs)
+    row = _nan_row(job, scenario, status, meta.get("message", "") or "", label, version)
+    row.update(steps=len(t) - 1, wall_s=float(meta.get("wall_s", math.nan)))
+    if status == "diverged":
+        row["diverged_at_s"] = float(meta.get("diverged_at_s"))
+    for q in QUANTITIES:
+        stem = COLUMN_STEM[q]
+        row[f"{stem}_err_final"] = summ[q]["final"] if status == "ok" else math.nan
+        row[f"{stem}_err_max"] = summ[q]["max"]
+
+    # Conservation drifts (only where the physics conserves the quantity).
+    problem = scenario.problem
+    cons = M.conserved(problem.forces)
+    drifts = {}
+    with np.errstate(all="ignore"):
+        if cons["energy"][0]:
+            E, E_terms = M.energy_J(problem, y, with_scale=True)
+            drifts["energy"] = M.relative_drift(E)
+            d = drifts["energy"]
+            amp = float(np.max(E_terms) / abs(E[0])) if E[0] != 0 else 1.0
+            row["energy_drift_max"] = float(np.max(np.abs(d)))
+            row["energy_drift_final"] = float(d[-1])
+            row["energy_drift_kind"] = M.drift_kind(t, d, M.drift_floor(len(t) - 1, amp))
+        if cons["angular_momentum"][0]:
+            drifts["angular_momentum"] = M.relative_drift(M.angular_momentum_W(problem, y))
+            row["angmom_drift_max"] = float(np.max(drifts["angular_momentum"]))
+        if cons["linear_momentum"][0]:
+            drifts["linear_momentum"] = M.relative_drift(M.linear_momentum_W(problem, y))
+            row["linmom_drift_max"] = float(np.max(drifts["linear_momentum"]))
+
+    # One-step (local) errors from reference states on this run's own grid.
+    grid_idx = np.searchsorted(t_ref_all, job.dt_s * np.arange(scenario.n_steps(job.dt_s) + 1))
+    starts = M.decimation_indices(len(grid_idx) - 1, LOCAL_SAMPLES)
+    y0 = y_ref_all[grid_idx[starts]]
+    y1_ref = y_ref_all[grid_idx[starts + 1]]
+    try:
+        with np.errstate(all="ignore"):
+            y1 = np.asarray(adapter.one_step(scenario, variant, job.dt_s, y0), dtype=float)
+        lerr = M.state_errors(y1, y1_ref)
+        for q in QUANTITIES:
+            e = lerr[q]
+            row[f"{COLUMN_STEM[q]}_local_err"] = float(np.max(e)) if np.all(np.isfinite(e)) else math.nan
+    except KeyboardInterrupt:
+        raise
+    except Exception as exc:  # noqa: BLE001 - no one-step mode: leave the local errors empty
+        row["message"] = (row["message"] + "; " if row["message"] else "") + f"one-step mode failed: {exc}"
+
+    series = None
+    if job.default_dt:
+        k = M.decimation_indices(len(t), MAX_SERIES_POINTS)
+        series = {"t_s": t[k], "x_W": y[k, 0:3], "q_WB": _canonical_to(y[k][:, Q], y_ref[k][:, Q])}
+        for q in QUANTITIES:
+            series[f"err_{q}"] = errs[q][k]
+        for name, d in drifts.items():
+            series[f"drift_{name}"] = d[k]
+        series = {key: np.asarray(a, dtype=np.float32) for key, a in series.items()}
+    rec = {"row": row, "y_final": y[-1].tolist() if status == "ok" else None, "series": series}
+    if cpath is not None and status in ("ok", "diverged"):
+        _cache_store(cpath, rec)
+    return rec
+
+
+
+def varies(y_ref) -> dict:
+    """Which quantities change at all along the reference (an exact zero error is only news where they do)."""
+    e = M.state_errors(y_ref, np.broadcast_to(y_ref[0], y_ref.shape))
+    return {q: bool(np.max(e[q]) > 1e-12) for q in QUANTITIES}
+
+
+
+def failed_record(job, scenario, message):
+    return {"row": _nan_row(job, scenario, "failed", message, "", ""), "y_final": None, "series": None}
+
+
+
+def _json_default(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")

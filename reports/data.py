@@ -1,0 +1,124 @@
+"""Reading a results directory (DESIGN.md): results.csv, summary.json and series/*.npz.
+
+This is all the report knows about a sweep: it never runs a simulation nor imports an engine.
+"""
+from __future__ import annotations
+
+import csv
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["Results", "ResultsError", "load_results", "QUANTITIES", "UNITS", "COLUMN_STEM", "LABELS"]
+
+QUANTITIES = ("position", "orientation", "velocity", "angular_velocity")
+UNITS = {"position": "m", "velocity": "m/s", "orientation": "rad", "angular_velocity": "rad/s"}
+COLUMN_STEM = {"position": "pos", "velocity": "vel", "orientation": "orient", "angular_velocity": "angvel"}
+LABELS = {"position": "position", "velocity": "velocity", "orientation": "orientation",
+          "angular_velocity": "angular velocity"}
+
+_INT = {"steps"}
+_BOOL = {"default_dt", "in_ladder", "cached"}
+_STR = {"scenario", "engine", "status", "message", "reference", "engine_version", "energy_drift_kind"}
+_REQUIRED = ("scenario", "engine", "dt", "steps", "wall_s", "pos_err_final", "vel_err_final", "orient_err_final",
+             "angvel_err_final", "energy_drift_max", "angmom_drift_max", "status")
+
+
+class ResultsError(ValueError):
+    """A results directory that cannot be read; the message names the file and the reason."""
+
+
+def _parse(col, text):
+    if col in _STR:
+        return text
+    if col in _BOOL:
+        return text.strip().lower() == "true"
+    if col in _INT:
+        return int(text) if text.strip() else 0
+    return float(text) if text.strip() else math.nan
+
+
+@dataclass
+class Results:
+    """A loaded results directory: ``rows`` (results.csv as typed dicts) and ``summary`` (summary.json)."""
+
+    directory: Path
+    rows: list
+    summary: dict
+    _series: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def scenarios(self) -> list:
+        return self.summary.get("scenarios", [])
+
+    @property
+    def variants(self) -> list:
+        return [v["name"] for v in self.summary.get("variants", [])]
+
+    def scenario(self, name) -> dict:
+        return next(s for s in self.scenarios if s["name"] == name)
+
+    def rows_for(self, scenario, engine=None) -> list:
+        return [r for r in self.rows if r["scenario"] == scenario and (engine is None or r["engine"] == engine)]
+
+    def default_row(self, scenario, engine):
+        dt = self.scenario(scenario)["dt_s"]
+        return next((r for r in self.rows_for(scenario, engine) if r["dt"] == dt), None)
+
+    def records(self, scenario=None, engine=None, quantity=None, mode="free_running") -> list:
+        key = "convergence" if mode == "free_running" else "local_convergence"
+        return [r for r in self.summary.get(key, [])
+                if (scenario is None or r["scenario"] == scenario) and (engine is None or r["engine"] == engine)
+                and (quantity is None or r["quantity"] == quantity)]
+
+    def series(self, scenario) -> dict:
+        """``{variant: {field: array}}`` plus ``"reference"``, from series/<scenario>.npz (empty when absent)."""
+        if scenario not in self._series:
+            path = self.directory / "series" / f"{scenario}.npz"
+            out = {}
+            if path.is_file():
+                try:
+                    with np.load(path, allow_pickle=False) as d:
+                        for k in d.files:
+                            who, fld = k.split("::", 1)
+                            out.setdefault(who, {})[fld] = np.asarray(d[k], dtype=float)
+                except (OSError, ValueError) as exc:
+                    raise ResultsError(f"{path}: cannot read: {exc}") from None
+            self._series[scenario] = out
+        return self._series[scenario]
+
+
+def load_results(directory) -> Results:
+    """Load a results directory; raises ResultsError naming the file and the reason."""
+    d = Path(directory)
+    if not d.is_dir():
+        raise ResultsError(f"{d}: no such directory")
+    sj = d / "summary.json"
+    rc = d / "results.csv"
+    for p in (sj, rc):
+        if not p.is_file():
+            raise ResultsError(f"{p}: missing (not an rbcheck results directory?)")
+    try:
+        summary = json.loads(sj.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise ResultsError(f"{sj}: cannot parse: {exc}") from None
+    if not isinstance(summary, dict) or "provenance" not in summary or "convergence" not in summary:
+        raise ResultsError(f"{sj}: provenance/convergence: missing (not written by rbcheck sweep?)")
+    try:
+        with rc.open(encoding="utf-8", newline="") as fh:
+            reader = csv.DictReader(fh)
+            missing = [c for c in _REQUIRED if c not in (reader.fieldnames or [])]
+            if missing:
+                raise ResultsError(f"{rc}: header: missing column(s) {', '.join(missing)}")
+            rows = []
+            for i, raw in enumerate(reader, start=2):
+                try:
+                    rows.append({k: _parse(k, v if v is not None else "") for k, v in raw.items()})
+                except ValueError as exc:
+                    raise ResultsError(f"{rc}: line {i}: {exc}") from None
+    except OSError as exc:
+        raise ResultsError(f"{rc}: cannot read: {exc}") from None
+    return Results(d, rows, summary)

@@ -1,0 +1,211 @@
+"""Findings: sentences written from the saved results (summary.json records and results.csv rows).
+
+Each finding has a severity — "bad" (a result that contradicts the expectations recorded by the
+sweep, a failure, or a disagreement between schemes that should be identical), "explained" (an
+expected non-convergence, with the physics the variant misses), "info" — and the text (plain text;
+the templates escape it).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .data import LABELS, QUANTITIES, UNITS
+
+__all__ = ["Finding", "findings", "fmt", "fmt_dt"]
+
+
+@dataclass(frozen=True)
+class Finding:
+    severity: str          # "bad", "explained", "info"
+    text: str
+    scenario: str | None = None
+    engine: str | None = None
+
+
+def fmt(v, unit: str = "", digits: int = 2) -> str:
+    """Compact number: 2 significant digits, scientific below 1e-3 or above 1e4; "–" for NaN/None."""
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "–"
+    v = float(v)
+    if v == 0:
+        s = "0"
+    elif 1e-3 <= abs(v) < 1e4:
+        s = f"{v:.{digits}g}"
+    else:
+        s = f"{v:.{max(digits - 1, 0)}e}".replace("e-0", "e-").replace("e+0", "e+")
+    return f"{s} {unit}".strip()
+
+
+def fmt_dt(v) -> str:
+    return f"{float(v):g}"
+
+
+def _and(items) -> str:
+    items = list(items)
+    if len(items) <= 1:
+        return "".join(items)
+    return ", ".join(items[:-1]) + " and " + items[-1]
+
+
+def _error_part(rec):
+    """("orientation error ≈ 3.1 rad", flat) or ("… 0.1 … 0.3 m, smallest at Δt = 0.01 s", not flat)."""
+    errs = [e for e in rec["errors"] if e is not None and math.isfinite(e)]
+    unit = UNITS[rec["quantity"]]
+    name = f"{LABELS[rec['quantity']]} error"
+    if not errs:
+        return f"{name} unavailable", True
+    lo, hi = min(errs), max(errs)
+    if lo > 0 and hi / lo <= 3.0:
+        g = math.exp(sum(math.log(e) for e in errs) / len(errs))
+        return f"{name} ≈ {fmt(g, unit)}", True
+    finite = [(e, d) for e, d in zip(rec["errors"], rec["dt_s"]) if e is not None and math.isfinite(e)]
+    best_dt = min(finite)[1]
+    return f"{name} {fmt(lo, unit)} … {fmt(hi, unit)} (smallest at Δt = {fmt_dt(best_dt)} s)", False
+
+
+def _error_ranges(recs) -> str:
+    """The errors of several quantities over the ladder, in one clause."""
+    parts = [_error_part(r) for r in recs]
+    dts = recs[0]["dt_s"]
+    span = f"Δt = {fmt_dt(dts[0])} … {fmt_dt(dts[-1])} s"
+    if all(flat for _, flat in parts):
+        return _and(p for p, _ in parts) + f" at every {span}"
+    return _and(p for p, _ in parts) + f" over {span}"
+
+
+def _group(records, key):
+    out = {}
+    for r in records:
+        out.setdefault(key(r), []).append(r)
+    return out
+
+
+def findings(res) -> list:
+    """All findings of a results directory, most important first."""
+    bad, explained, info = [], [], []
+    recs = res.summary.get("convergence", [])
+    scen_order = {s["name"]: i for i, s in enumerate(res.scenarios)}
+    var_order = {v: i for i, v in enumerate(res.variants)}
+    varies = {s["name"]: s.get("varies", {}) for s in res.scenarios}
+
+    # 1. results that contradict the expectations
+    for (sc, eng), rs in sorted(_group([r for r in recs if r["matches_expectation"] is False],
+                                       lambda r: (r["scenario"], r["engine"])).items(),
+                                key=lambda kv: (scen_order.get(kv[0][0], 99), var_order.get(kv[0][1], 99))):
+        parts = [f"{LABELS[r['quantity']]} {r['assessment']}" for r in rs]
+        why = {r["reason"] for r in rs if r["expected_verdict"] == "does_not_converge"}
+        notes = {r["note"] for r in rs if r.get("note")}
+        text = f"{eng} on {sc}: " + "; ".join(parts) + "."
+        if why:
+            text += " Expected not to converge because " + "; ".join(sorted(why)) + "."
+        if notes:
+            text += " (" + "; ".join(sorted(notes)) + ")"
+        bad.append(Finding("bad", text, sc, eng))
+
+    # 2. failed and diverged runs
+    for (sc, eng), rows in _group([r for r in res.rows if r["status"] == "failed"],
+                                  lambda r: (r["scenario"], r["engine"])).items():
+        msgs = sorted({r["message"] for r in rows})
+        dts = ", ".join(fmt_dt(r["dt"]) for r in rows)
+        bad.append(Finding("bad", f"{eng} failed on {sc} at Δt = {dts} s: {'; '.join(msgs)}", sc, eng))
+    for (sc, eng), rows in _group([r for r in res.rows if r["status"] == "diverged"],
+                                  lambda r: (r["scenario"], r["engine"])).items():
+        where = ", ".join(f"Δt = {fmt_dt(r['dt'])} s (at t = {fmt(r['diverged_at_s'], 's', 3)})" for r in rows)
+        info.append(Finding("info", f"{eng} diverged on {sc} at {where}; those runs are left out of the order fits.",
+                            sc, eng))
+
+    # 3. expected non-convergence, with the reason
+    exp_rs = [r for r in recs if r["expected_verdict"] == "does_not_converge" and r["matches_expectation"]]
+    per_engine = {}
+    for (sc, reason), rs in sorted(_group(exp_rs, lambda r: (r["scenario"], r["reason"])).items(),
+                                   key=lambda kv: scen_order.get(kv[0][0], 99)):
+        engines = sorted({r["engine"] for r in rs}, key=lambda e: var_order.get(e, 99))
+        if len(engines) > 2:
+            n_run = len({r["engine"] for r in recs if r["scenario"] == sc})
+            qs = sorted({r["quantity"] for r in rs}, key=QUANTITIES.index)
+            sample = [r for r in rs if r["engine"] == engines[0]]
+            shown = [r for r in sample if r["quantity"] in ("position", "orientation")] or sample[:1]
+            ranges = _error_ranges(shown)
+            text = (f"No variant converges on {sc} ({len(engines)} of {n_run}; "
+                    f"{_and(LABELS[q] for q in qs)}): {reason}. For example {engines[0]}: {ranges}.")
+            explained.append(Finding("explained", text, sc, None))
+        else:
+            for eng in engines:
+                per_engine.setdefault((sc, eng), []).extend(r for r in rs if r["engine"] == eng)
+    for (sc, eng), er in per_engine.items():
+        er.sort(key=lambda r: QUANTITIES.index(r["quantity"]))
+        reasons = sorted({r["reason"] for r in er}, key=len)
+        # "X" and "X; the spring carries it into the translation": say the longer one only
+        reasons = [a for a in reasons if not any(b != a and b.startswith(a) for b in reasons)]
+        explained.append(Finding("explained", f"{eng} does not converge on {sc}: {_error_ranges(er)}; "
+                                              + "; ".join(reasons) + ".", sc, eng))
+
+    # 4. exact to round-off, and orders above the nominal one (information)
+    exact = [r for r in recs if r["verdict"] == "at_roundoff" and varies.get(r["scenario"], {}).get(r["quantity"], True)]
+    for (sc, q), rs in sorted(_group(exact, lambda r: (r["scenario"], r["quantity"])).items(),
+                              key=lambda kv: (scen_order.get(kv[0][0], 99), QUANTITIES.index(kv[0][1]))):
+        engines = sorted({r["engine"] for r in rs}, key=lambda e: var_order.get(e, 99))
+        info.append(Finding("info", f"On {sc}, {LABELS[q]} is exact to round-off at every Δt with "
+                                    f"{_and(engines)}: the scheme integrates this motion exactly.", sc, None))
+    above = [r for r in recs if r["verdict"] == "converges" and r["matches_expectation"] and r["order"] is not None
+             and r["expected_order"] is not None and r["order"] > r["expected_order"] + 0.3]
+    for (sc, q), rs in sorted(_group(above, lambda r: (r["scenario"], r["quantity"])).items(),
+                              key=lambda kv: (scen_order.get(kv[0][0], 99), QUANTITIES.index(kv[0][1]))):
+        rs.sort(key=lambda r: var_order.get(r["engine"], 99))
+        lo, hi = min(r["order"] for r in rs), max(r["order"] for r in rs)
+        orders = f"{lo:.2f}" if hi - lo < 0.05 else f"{lo:.2f} … {hi:.2f}"
+        info.append(Finding("info", f"On {sc}, {LABELS[q]} converges faster than the nominal order (order {orders}) "
+                                    f"with " + _and(f"{r['engine']} (nominal {r['expected_order']:g})" for r in rs)
+                                    + ".", sc, None))
+
+    # 5. conservation at the default Δt
+    for s in res.scenarios:
+        sc = s["name"]
+        rows = [r for r in res.rows if r["scenario"] == sc and r["dt"] == s["dt_s"] and r["status"] == "ok"]
+        if s["conserved"]["energy"]["conserved"] and rows:
+            sec = [r for r in rows if r["energy_drift_kind"] == "secular"]
+            bnd = [r for r in rows if r["energy_drift_kind"] == "bounded"]
+            rnd = [r for r in rows if r["energy_drift_kind"] == "roundoff"]
+            parts = []
+            if sec:
+                sec.sort(key=lambda r: -abs(r["energy_drift_final"]))
+                parts.append("secular with " + _and(f"{r['engine']} ({fmt(r['energy_drift_final'])})" for r in sec))
+            if bnd:
+                parts.append(f"bounded with {len(bnd)} variant(s) (at most {fmt(max(r['energy_drift_max'] for r in bnd))})")
+            if rnd:
+                parts.append(f"conserved to round-off with {_and(r['engine'] for r in rnd)}")
+            info.append(Finding("info", f"Energy on {sc} at Δt = {fmt_dt(s['dt_s'])} s over {fmt_dt(s['duration_s'])} s "
+                                        f"(relative drift): " + "; ".join(parts) + ".", sc, None))
+        if s["conserved"]["angular_momentum"]["conserved"] and rows:
+            worst = sorted([r for r in rows if np.isfinite(r["angmom_drift_max"]) and r["angmom_drift_max"] > 1e-6],
+                           key=lambda r: -r["angmom_drift_max"])
+            if worst:
+                info.append(Finding("info", f"World angular momentum on {sc} (conserved by the physics) drifts by "
+                                            "up to " + _and(f"{fmt(r['angmom_drift_max'])} with {r['engine']}"
+                                                            for r in worst[:4])
+                                    + (f" (and {len(worst) - 4} more)" if len(worst) > 4 else "")
+                                    + f" at Δt = {fmt_dt(s['dt_s'])} s.", sc, None))
+
+    # 6. schemes that must be identical
+    for (a, b), rs in _group(res.summary.get("agreement", []), lambda r: (r["a"], r["b"])).items():
+        good = [r for r in rs if r["agrees"]]
+        badr = [r for r in rs if not r["agrees"]]
+        if badr:
+            parts = _and(f"{r['scenario']} ({fmt(r['max_rel'])})" if r["max_rel"] is not None
+                         else f"{r['scenario']} ({r['note']})" for r in badr)
+            bad.append(Finding("bad", f"{a} and {b} should be the same scheme ({rs[0]['reason']}) but their final "
+                                      f"states differ beyond {fmt(rs[0].get('tolerance', 1e-9))} (relative) on {parts}.",
+                               None, b))
+        if good:
+            worst = max(r["max_rel"] for r in good)
+            info.append(Finding("info", f"{b} reproduces {a} on {len(good)} scenario(s) to {fmt(worst)} (largest "
+                                        f"relative final-state difference at the default Δt): {rs[0]['reason']}.",
+                                None, b))
+
+    # 7. variants not run
+    for s in res.summary.get("skipped_variants", []):
+        info.append(Finding("info", f"{s['name']} was not run: {s['reason']}.", None, s["name"]))
+    return bad + explained + info

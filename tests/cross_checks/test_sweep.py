@@ -1,0 +1,293 @@
+"""`rbcheck sweep` and `rbcheck check` end to end on tiny scenarios (short durations, 3-point ladders)."""
+import csv
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cross_checks import sweep as sweep_mod
+from cross_checks.cli import main
+from cross_checks.sweep import RESULT_COLUMNS, run_sweep
+from cross_checks.trajectory import Trajectory
+
+SPIN = """
+name = "tiny_spin"
+description = "Torque-free spin near the intermediate axis, short"
+duration = 0.5
+dt = 0.01
+dt_ladder = [0.02, 0.01, 0.005]
+[body]
+mass = 1.0
+inertia = [1.0, 2.0, 3.0]
+[initial]
+angular_velocity = [0.3, 2.0, 0.2]
+"""
+
+DROP = """
+name = "tiny_drop"
+description = "Projectile with linear drag, short"
+duration = 0.4
+dt = 0.01
+dt_ladder = [0.02, 0.01, 0.005]
+[body]
+mass = 2.0
+inertia = [0.2, 0.2, 0.2]
+[initial]
+velocity = [1.0, 0.0, 3.0]
+[forces]
+gravity = [0.0, 0.0, -9.81]
+linear_drag = 0.5
+"""
+
+STIFF = """
+name = "tiny_stiff"
+description = "A spring far too stiff for the steps: explicit Euler blows up"
+duration = 2.0
+dt = 0.05
+dt_ladder = [0.1, 0.05]
+[body]
+mass = 1.0
+inertia = [0.1, 0.1, 0.1]
+[initial]
+position = [0.1, 0.0, 0.0]
+[[forces.spring]]
+anchor = [0.0, 0.0, 0.0]
+stiffness = 10000.0
+"""
+
+VARIANTS = ["reference:course", "reference:midpoint", "reference:rk4"]
+
+
+@pytest.fixture(autouse=True)
+def _cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "cache"))
+
+
+@pytest.fixture
+def scenario_files(tmp_path):
+    out = []
+    for text in (SPIN, DROP):
+        name = text.split('"')[1]
+        p = tmp_path / f"{name}.toml"
+        p.write_text(text)
+        out.append(str(p))
+    return out
+
+
+def read_rows(d):
+    with open(Path(d) / "results.csv", newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def comparable(rows):
+    """Rows without the columns that legitimately differ between runs (timing, cache use)."""
+    return [{k: v for k, v in r.items() if k not in ("wall_s", "cached")} for r in rows]
+
+
+def sweep(args, out):
+    return main(["sweep", *args, "--out", str(out)])
+
+
+def test_sweep_writes_the_results_directory(tmp_path, scenario_files):
+    out = tmp_path / "res"
+    assert sweep([*scenario_files, "--engines", *VARIANTS, "--jobs", "1"], out) == 0
+    for f in ("results.csv", "summary.json", "index.html", "scenario-tiny_spin.html", "series/tiny_spin.npz"):
+        assert (out / f).is_file(), f
+    rows = read_rows(out)
+    assert tuple(rows[0].keys()) == RESULT_COLUMNS
+    assert len(rows) == 2 * 3 * 3
+    assert {r["status"] for r in rows} == {"ok"}
+    summary = json.loads((out / "summary.json").read_text())
+    for k in ("rbcheck", "numpy", "scipy", "mujoco", "pybullet", "python", "platform", "started_at"):
+        assert k in summary["provenance"]
+    recs = summary["convergence"]
+    assert len(recs) == 2 * 3 * 4
+    assert {"scenario", "engine", "quantity", "order", "pairwise_orders", "verdict"} <= set(recs[0])
+    by = {(r["scenario"], r["engine"], r["quantity"]): r for r in recs}
+    assert by[("tiny_spin", "reference:course", "orientation")]["verdict"] == "does_not_converge"
+    assert by[("tiny_spin", "reference:course", "orientation")]["matches_expectation"] is True
+    assert by[("tiny_spin", "reference:rk4", "orientation")]["order"] == pytest.approx(4.0, abs=0.3)
+    assert by[("tiny_spin", "reference:midpoint", "angular_velocity")]["order"] == pytest.approx(2.0, abs=0.3)
+    assert by[("tiny_drop", "reference:course", "position")]["order"] == pytest.approx(1.0, abs=0.1)
+    local = {(r["scenario"], r["engine"], r["quantity"]): r for r in summary["local_convergence"]}
+    assert local[("tiny_drop", "reference:midpoint", "position")]["order"] == pytest.approx(3.0, abs=0.3)
+    # no staging directories left behind, no cache inside the results
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+    assert not any("cache" in p.name for p in out.rglob("*"))
+
+
+def test_parallel_and_cached_sweeps_give_the_same_results(tmp_path, scenario_files):
+    from cross_checks.scenario import load_scenario
+    scs = [load_scenario(f) for f in scenario_files]
+    a, b, c = tmp_path / "a", tmp_path / "b", tmp_path / "c"
+    ja = run_sweep(scs, VARIANTS, a, jobs=1, use_cache=False, render=False)
+    jb = run_sweep(scs, VARIANTS, b, jobs=2, use_cache=False, render=False)
+    assert comparable(read_rows(a)) == comparable(read_rows(b))
+    assert ja["convergence"] == jb["convergence"] and ja["agreement"] == jb["agreement"]
+    with np.load(a / "series" / "tiny_spin.npz") as sa, np.load(b / "series" / "tiny_spin.npz") as sb:
+        assert sorted(sa.files) == sorted(sb.files)
+        assert all(np.array_equal(sa[k], sb[k], equal_nan=True) for k in sa.files)
+    jc = run_sweep(scs, VARIANTS, c, jobs=2, render=False)
+    assert jc["run"]["cached_runs"] == jc["run"]["runs"]
+    assert comparable(read_rows(c)) == comparable(read_rows(a))
+    assert jc["convergence"] == ja["convergence"]
+
+
+def test_a_diverged_run_is_a_row_and_the_sweep_goes_on(tmp_path):
+    p = tmp_path / "tiny_stiff.toml"
+    p.write_text(STIFF)
+    out = tmp_path / "res"
+    code = sweep([str(p), "--engines", "reference:explicit_euler", "reference:rk4", "--jobs", "1"], out)
+    rows = read_rows(out)
+    ee = [r for r in rows if r["engine"] == "reference:explicit_euler"]
+    assert {r["status"] for r in ee} == {"diverged"}
+    assert all(float(r["diverged_at_s"]) > 0 and r["pos_err_final"] == "" for r in ee)
+    summary = json.loads((out / "summary.json").read_text())
+    v = {r["verdict"] for r in summary["convergence"] if r["engine"] == "reference:explicit_euler"}
+    assert v == {"diverged"}
+    assert code == 1  # a diverged ladder contradicts "converges at order 1"
+
+
+def test_an_engine_exception_is_a_failed_row(tmp_path, scenario_files, monkeypatch):
+    import cross_checks.engines as engines
+    real = engines.run_variant
+
+    def flaky(scenario, name, dt_s=None, duration_s=None):
+        if name == "reference:midpoint":
+            raise RuntimeError("engine exploded")
+        return real(scenario, name, dt_s, duration_s)
+
+    monkeypatch.setattr(engines, "run_variant", flaky)
+    out = tmp_path / "res"
+    assert sweep([scenario_files[0], "--engines", *VARIANTS, "--jobs", "1", "--no-cache"], out) == 1
+    failed = [r for r in read_rows(out) if r["status"] == "failed"]
+    assert len(failed) == 3 and all("engine exploded" in r["message"] for r in failed)
+    assert "engine exploded" in (out / "index.html").read_text()
+
+
+def test_interrupted_sweep_leaves_the_previous_results(tmp_path, scenario_files, monkeypatch, capsys):
+    out = tmp_path / "res"
+    assert sweep([scenario_files[1], "--engines", "reference:course", "--jobs", "1"], out) == 0
+    before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+
+    def interrupt(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(sweep_mod, "run_job", interrupt)
+    assert sweep([*scenario_files, "--engines", *VARIANTS, "--jobs", "1", "--no-cache"], out) == 130
+    err = capsys.readouterr().err
+    assert "interrupted" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+    after = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    assert after == before
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+
+
+def test_sweep_refuses_to_replace_a_directory_that_is_not_results(tmp_path, scenario_files, capsys):
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "thesis.tex").write_text("precious")
+    assert sweep([scenario_files[0], "--engines", "reference:course"], out) == 2
+    assert "refusing" in capsys.readouterr().err
+    assert (out / "thesis.tex").read_text() == "precious"
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["--engines", "reference:nope"], "unknown variant"),
+    (["--engines", "warp:drive"], "unknown engine"),
+    (["no_such_scenario"], "no_such_scenario"),
+    (["--jobs", "0"], "--jobs"),
+])
+def test_sweep_bad_input_exits_2_with_one_line(tmp_path, args, needle, capsys):
+    assert sweep(args, tmp_path / "res") == 2
+    err = capsys.readouterr().err
+    assert needle in err and "Traceback" not in err
+
+
+# --- rbcheck check --------------------------------------------------------------------------------
+
+def _run(scenario, engine, out, dt=None):
+    args = ["run", scenario, "--engine", engine, "--out", str(out)]
+    if dt:
+        args += ["--dt", str(dt)]
+    assert main(args) == 0
+    return out
+
+
+def test_check_recognises_the_course_scheme(tmp_path, capsys):
+    traj = _run("tennis_racket", "reference:course", tmp_path / "student.csv", dt=0.01)
+    capsys.readouterr()
+    assert main(["check", str(traj), "--scenario", "tennis_racket"]) == 0
+    out = capsys.readouterr().out
+    assert "PASS: is reference:course" in out
+    assert "does not converge" in out and "gyroscopic" in out   # the course's own limitation, as a note
+
+
+def test_check_accepts_a_converging_scheme_and_rejects_a_wrong_one(tmp_path, capsys):
+    traj = _run("projectile", "reference:rk4", tmp_path / "rk4.csv")
+    assert main(["check", str(traj), "--scenario", "projectile"]) == 0
+    assert "agrees with the reference" in capsys.readouterr().out
+    t = Trajectory.read(traj)
+    t.y[:, 2] += 1.0 * t.t_s             # drifting 1 m/s upwards: 20× a first-order scheme's error
+    t.write(tmp_path / "bad.csv")
+    assert main(["check", str(tmp_path / "bad.csv"), "--scenario", "projectile"]) == 1
+    out = capsys.readouterr().out
+    assert "FAIL: disagrees" in out and "position" in out
+
+
+def test_check_infers_dt_from_rounded_times(tmp_path, capsys):
+    traj = Trajectory.read(_run("projectile", "reference:course", tmp_path / "c.csv"))
+    traj.t_s = np.round(traj.t_s, 6)
+    traj.write(tmp_path / "rounded.csv")
+    assert main(["check", str(tmp_path / "rounded.csv"), "--scenario", "projectile"]) == 0
+    assert "Δt = 0.01 s" in capsys.readouterr().out
+
+
+def test_check_bad_trajectory_exits_2(tmp_path, capsys):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("t,x\n0,1\n")
+    assert main(["check", str(bad), "--scenario", "projectile"]) == 2
+    err = capsys.readouterr().err
+    assert "header" in err and "Traceback" not in err
+    traj = Trajectory.read(_run("projectile", "reference:course", tmp_path / "c.csv"))
+    traj.t_s = traj.t_s + 1.0
+    traj.write(tmp_path / "late.csv")
+    assert main(["check", str(tmp_path / "late.csv"), "--scenario", "projectile"]) == 2
+    assert "must start at 0" in capsys.readouterr().err
+
+
+def test_check_flags_a_wrong_initial_state(tmp_path, capsys):
+    traj = Trajectory.read(_run("projectile", "reference:course", tmp_path / "c.csv"))
+    traj.y[:, 0] += 1.0
+    traj.write(tmp_path / "moved.csv")
+    assert main(["check", str(tmp_path / "moved.csv"), "--scenario", "projectile"]) == 1
+    assert "initial state" in capsys.readouterr().out
+
+
+def test_check_reports_non_finite_rows_as_diverged(tmp_path, capsys):
+    traj = Trajectory.read(_run("projectile", "reference:course", tmp_path / "c.csv"))
+    traj.y[50:, 3] = math.nan
+    traj.write(tmp_path / "nan.csv")
+    assert main(["check", str(tmp_path / "nan.csv"), "--scenario", "projectile"]) == 1
+    assert "diverged" in capsys.readouterr().out
+
+
+def test_a_worker_crash_fails_only_its_own_job(tmp_path, scenario_files, monkeypatch):
+    import os
+    real = sweep_mod.run_job
+
+    def crashing(job, *args):
+        if job.variant == "reference:midpoint" and job.dt_s == 0.01:
+            os._exit(3)  # a segfault in an engine looks like this to the pool
+        return real(job, *args)
+
+    monkeypatch.setattr(sweep_mod, "run_job", crashing)   # inherited by the forked workers
+    from cross_checks.scenario import load_scenario
+    out = tmp_path / "res"
+    summary = run_sweep([load_scenario(scenario_files[1])], VARIANTS, out, jobs=2, use_cache=False, render=False)
+    rows = read_rows(out)
+    failed = [r for r in rows if r["status"] == "failed"]
+    assert [(r["engine"], r["dt"]) for r in failed] == [("reference:midpoint", "0.01")]
+    assert "worker process died" in failed[0]["message"]
+    assert summary["run"]["failed_runs"] == 1 and len(rows) == 9

@@ -1,0 +1,151 @@
+"""The HTML report: parses, every image resolves, user text is escaped, re-rendering is reproducible."""
+import base64
+import json
+from html.parser import HTMLParser
+from pathlib import Path
+
+import pytest
+
+import reports
+from cross_checks.cli import main
+from cross_checks.scenario import parse_scenario
+from cross_checks.sweep import run_sweep
+
+HOSTILE = '<script>alert("pwned")</script> & <b>bold</b>'
+SCENARIO = f"""
+name = "hostile_spin"
+description = '{HOSTILE}'
+duration = 0.4
+dt = 0.01
+dt_ladder = [0.02, 0.01, 0.005]
+[body]
+mass = 1.0
+inertia = [1.0, 2.0, 3.0]
+[initial]
+velocity = [0.0, 0.0, 2.0]
+angular_velocity = [0.3, 2.0, 0.2]
+[forces]
+gravity = [0.0, 0.0, -9.81]
+"""
+VOID = {"area", "base", "br", "col", "embed", "hr", "img", "input", "link", "meta", "source", "track", "wbr"}
+
+
+class StrictParser(HTMLParser):
+    """Collects tags, <img src>, <a href> and checks that every non-void element is closed in order."""
+
+    def __init__(self):
+        super().__init__(convert_charrefs=True)
+        self.stack, self.errors, self.imgs, self.links, self.tags, self.text = [], [], [], [], [], []
+
+    def handle_starttag(self, tag, attrs):
+        a = dict(attrs)
+        self.tags.append(tag)
+        if tag == "img":
+            self.imgs.append(a.get("src"))
+            if not a.get("alt"):
+                self.errors.append("img without alt")
+        if tag == "a" and a.get("href"):
+            self.links.append(a["href"])
+        if tag not in VOID:
+            self.stack.append(tag)
+
+    def handle_endtag(self, tag):
+        if not self.stack or self.stack[-1] != tag:
+            self.errors.append(f"unexpected </{tag}> (open: {self.stack[-3:]})")
+        else:
+            self.stack.pop()
+
+    def handle_data(self, data):
+        self.text.append(data)
+
+
+def parse(html):
+    p = StrictParser()
+    p.feed(html)
+    p.close()
+    assert not p.errors, p.errors[:5]
+    assert p.stack == [], p.stack
+    return p
+
+
+@pytest.fixture(scope="module")
+def results(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("report")
+    import os
+    old = os.environ.get("RBCHECK_CACHE_DIR")
+    os.environ["RBCHECK_CACHE_DIR"] = str(tmp / "cache")
+    try:
+        sc = parse_scenario(SCENARIO, source="hostile.toml")
+        run_sweep([sc], ["reference:course", "reference:rk4"], tmp / "res", jobs=1)
+    finally:
+        if old is None:
+            os.environ.pop("RBCHECK_CACHE_DIR")
+        else:
+            os.environ["RBCHECK_CACHE_DIR"] = old
+    return tmp / "res"
+
+
+def pages(d):
+    return {p.name: p.read_text(encoding="utf-8") for p in sorted(Path(d).glob("*.html"))}
+
+
+def test_pages_parse_and_every_image_resolves(results):
+    ps = pages(results)
+    assert set(ps) == {"index.html", "scenario-hostile_spin.html"}
+    n_img = 0
+    for name, html in ps.items():
+        p = parse(html)
+        assert p.tags.count("html") == 1 and "title" in p.tags
+        for src in p.imgs:
+            assert (results / src).is_file(), src
+            assert (results / src).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+            n_img += 1
+        for href in p.links:
+            assert (results / href).exists(), href
+    assert n_img >= 5
+
+
+def test_scenario_description_is_escaped(results):
+    for name, html in pages(results).items():
+        assert "<script" not in html.lower(), name
+        assert "<b>bold</b>" not in html
+    html = pages(results)["scenario-hostile_spin.html"]
+    assert "&lt;script&gt;alert(&#34;pwned&#34;)&lt;/script&gt; &amp; &lt;b&gt;bold&lt;/b&gt;" in html
+    assert HOSTILE in "".join(parse(html).text)   # shown to the reader as the literal text
+
+
+def test_findings_are_sentences_from_the_data(results):
+    html = pages(results)["index.html"]
+    text = " ".join("".join(parse(html).text).split())
+    assert "reference:course does not converge on hostile_spin" in text
+    assert "gyroscopic term" in text
+    summary = json.loads((results / "summary.json").read_text())
+    assert summary["provenance"]["started_at"] in text
+
+
+def test_rerendering_from_saved_data_gives_the_same_html(results):
+    before = pages(results)
+    pngs = sorted(p.name for p in (results / "plots").glob("*.png"))
+    reports.render(results, jobs=1)
+    assert pages(results) == before
+    assert sorted(p.name for p in (results / "plots").glob("*.png")) == pngs
+
+
+def test_self_contained_pages_embed_every_image(results, tmp_path):
+    import shutil
+    d = tmp_path / "copy"
+    shutil.copytree(results, d)
+    assert main(["report", str(d), "--self-contained", "--jobs", "1"]) == 0
+    for name, html in pages(d).items():
+        for src in parse(html).imgs:
+            assert src.startswith("data:image/png;base64,")
+            assert base64.b64decode(src.split(",", 1)[1])[:4] == b"\x89PNG"
+    shutil.rmtree(d / "plots")
+    shutil.rmtree(d / "series")   # pages stand alone once rendered
+    assert "data:image/png" in (d / "scenario-hostile_spin.html").read_text()
+
+
+def test_report_on_something_else_exits_2(tmp_path, capsys):
+    assert main(["report", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "summary.json" in err and "Traceback" not in err
