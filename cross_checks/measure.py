@@ -179,13 +179,15 @@ def _time_grids(scenario):
 
 def reference_job(scenario, out_path: str, cache_root: str | None, use_cache: bool):
     """Compute (or load) the reference on the union of the scenario's time grids; save it to
-    ``out_path`` (npz: t_s, y, label). Returns ``(label, error message or "", scales, varies)``."""
+    ``out_path`` (npz: t_s, y, label). Returns ``(label, error message or "", scales, varies,
+    amplification)`` — the last from references.error_amplification, to scale round-off floors."""
     label, err = _reference_solution_file(scenario, out_path, cache_root, use_cache)
     if err:
-        return label, err, {q: 1.0 for q in QUANTITIES}, {}
+        return label, err, {q: 1.0 for q in QUANTITIES}, {}, {q: 1.0 for q in QUANTITIES}
+    from .references import error_amplification
     with np.load(out_path, allow_pickle=False) as d:
         y = d["y"]
-        return label, "", M.quantity_scales(y), varies(y)
+        return label, "", M.quantity_scales(y), varies(y), error_amplification(scenario)
 
 
 def _reference_solution_file(scenario, out_path, cache_root, use_cache):

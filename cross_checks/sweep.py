@@ -246,7 +246,11 @@ def results_csv_text(rows) -> str:
     return buf.getvalue()
 
 
-def _convergence_records(scenario, variant, rows, scales, mode):
+def _convergence_records(scenario, variant, rows, scales, mode, amplification=None):
+    """Convergence records of one (scenario, variant). Free-running floors are scaled by the
+    scenario's measured error amplification (references.error_amplification): round-off and
+    reference errors grow with the dynamics exactly like any other initial error."""
+    amplification = amplification or {}
     ladder = sorted([r for r in rows if r["in_ladder"]], key=lambda r: -r["dt"])
     out = []
     if len(ladder) < 2:
@@ -257,7 +261,8 @@ def _convergence_records(scenario, variant, rows, scales, mode):
         stem = COLUMN_STEM[q]
         if mode == "free_running":
             errs = [r[f"{stem}_err_final"] for r in ladder]
-            floors = [M.roundoff_floor(scales.get(q, 1.0), max(int(r["steps"]), 1), label) for r in ladder]
+            floors = [M.roundoff_floor(scales.get(q, 1.0), max(int(r["steps"]), 1), label)
+                      * max(1.0, amplification.get(q, 1.0)) for r in ladder]
             statuses = [r["status"] for r in ladder]
         else:
             errs = [r[f"{stem}_local_err"] for r in ladder]
@@ -455,6 +460,7 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
         ref_fail = {i: ref_results[i][1] for i in range(len(scenarios)) if ref_results[i][1]}
         ref_scales = {i: ref_results[i][2] for i in range(len(scenarios))}
         ref_varies = {i: ref_results[i][3] for i in range(len(scenarios))}
+        ref_amp = {i: ref_results[i][4] for i in range(len(scenarios))}
 
         # 2. the runs, longest first
         all_jobs = plan_jobs(scenarios, variants)
@@ -499,10 +505,11 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
         for i, sc in enumerate(scenarios):
             scales = ref_scales[i]
             scenario_info.append(_scenario_info(sc, labels.get(i, ""), scales))
+            scenario_info[-1]["error_amplification"] = ref_amp.get(i, {})
             scenario_info[-1]["varies"] = ref_varies[i]
             for v in variants:
                 vrows = [r for r in rows if r["scenario"] == sc.name and r["engine"] == v]
-                convergence += _convergence_records(sc, v, vrows, scales, "free_running")
+                convergence += _convergence_records(sc, v, vrows, scales, "free_running", ref_amp.get(i))
                 local += _convergence_records(sc, v, vrows, scales, "one_step")
             # series for the plots at the default Δt
             arrays = {}

@@ -307,6 +307,23 @@ class ScalarStepper:
         return z
 
     def _implicit_euler(self, y):
+        """Backward Euler. Fixed point ``z ← y + Δt F(z)`` from the explicit Euler predictor: it
+        contracts by ~Δt·|∂F/∂y| (0.02–0.25 on the catalog ladders), so ~10 cheap RHS evaluations reach
+        IMPLICIT_TOL. When it stalls or diverges (stiff cases) the Newton solve of the batched
+        definition takes over; both stop at the same root to IMPLICIT_TOL."""
+        h = self.h
+        if self.backend == "float":
+            z = [a + h * b for a, b in zip(y, self.rhs(y))]
+            prev = float("inf")
+            for _ in range(_MAX_ITER):
+                z_new = [a + h * b for a, b in zip(y, self.rhs(z))]
+                d = max(abs(a - b) / (1.0 + abs(a)) for a, b in zip(z_new, z))
+                z = z_new
+                if d <= IMPLICIT_TOL:
+                    return self._finish(z)
+                if not d < 0.9 * prev:  # not contracting: hand over to Newton
+                    break
+                prev = d
         # Newton with a Jacobian needs linear algebra: delegate to the batched (NumPy) definition.
         out = get_step("implicit_euler")(self.problem, np.stack(y, axis=-1).astype(float), self.h)
         return list(out) if self.backend == "float" else [np.ascontiguousarray(c) for c in out.T]
