@@ -85,6 +85,25 @@ def build_parser() -> argparse.ArgumentParser:
                     "error; 1 when it disagrees; 2 on bad input.")
     c.add_argument("trajectory", metavar="TRAJ.csv")
     c.add_argument("--scenario", required=True, metavar="SCENARIO")
+
+    cmp_ = sub.add_parser(
+        "compare", help="compare a new results directory with a baseline: regressions, improvements, new/missing rows",
+        description="Match rows of BASELINE_DIR/results.csv and NEW_DIR/results.csv by (scenario, engine, dt). Errors "
+                    "and drifts are better when lower, orders when closer to the expected order; each metric has an "
+                    "absolute + relative tolerance (cross_checks/compare.py). Exit 0: no regression; 1: a regression "
+                    "(or rows missing from NEW_DIR, unless --allow-missing); 2: unusable input.")
+    cmp_.add_argument("baseline", metavar="BASELINE_DIR")
+    cmp_.add_argument("new", metavar="NEW_DIR")
+    cmp_.add_argument("--markdown", metavar="FILE", help="also write the comparison as a markdown table (CI job summary)")
+    cmp_.add_argument("--allow-missing", action="store_true",
+                      help="rows absent from NEW_DIR (e.g. a sweep of a subset) are reported but not a regression")
+
+    b = sub.add_parser("bench", help="throughput of the batched reference vs MuJoCo and PyBullet, measured in one run",
+                       description="Step the same free bodies (gravity + a body torque) in the batched reference, "
+                                   "MuJoCo (N bodies in one model; rollout) and PyBullet, and a single trajectory in "
+                                   "the reference and mj_step; print body-steps/s and the ratios (benchmarks/bench.py).")
+    b.add_argument("--quick", action="store_true", help="fewer bodies and steps (seconds instead of a minute)")
+    b.add_argument("--json", metavar="FILE", help="write the measurements as JSON")
     return p
 
 
@@ -260,7 +279,35 @@ def cmd_check(args) -> int:
     return EXIT_OK if res.passed else EXIT_FAIL
 
 
-COMMANDS = {"list": cmd_list, "run": cmd_run, "sweep": cmd_sweep, "report": cmd_report, "check": cmd_check}
+def cmd_compare(args) -> int:
+    from .compare import CompareInputError, compare_dirs, to_markdown, to_text
+    from .trajectory import atomic_write_text
+
+    if args.markdown:
+        md = Path(args.markdown)
+        if not md.parent.exists() or md.is_dir():
+            raise BadInput(f"--markdown {args.markdown}: directory {md.parent} does not exist or the path is a directory")
+    try:
+        c = compare_dirs(args.baseline, args.new)
+    except CompareInputError as exc:
+        raise BadInput(str(exc)) from None
+    print(to_text(c, args.allow_missing))
+    if args.markdown:
+        atomic_write_text(args.markdown, to_markdown(c, args.baseline, args.new, args.allow_missing) + "\n")
+    return c.exit_code(args.allow_missing)
+
+
+def cmd_bench(args) -> int:
+    from benchmarks.bench import main as bench_main
+    if args.json:
+        j = Path(args.json)
+        if not j.parent.exists() or j.is_dir():
+            raise BadInput(f"--json {args.json}: directory {j.parent} does not exist or the path is a directory")
+    return bench_main(args.quick, args.json)
+
+
+COMMANDS = {"list": cmd_list, "run": cmd_run, "sweep": cmd_sweep, "report": cmd_report, "check": cmd_check,
+            "compare": cmd_compare, "bench": cmd_bench}
 
 
 def main(argv=None) -> int:

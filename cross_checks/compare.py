@@ -53,7 +53,7 @@ class CompareInputError(ValueError):
 
 @dataclass
 class Change:
-    kind: str          # regression | improvement | new | missing
+    kind: str          # regression | improvement | new | missing | changed (informational)
     scenario: str
     engine: str
     what: str          # dt=... metric, or quantity
@@ -186,6 +186,8 @@ def _compare_convergence(old_recs, new_recs, out: Comparison):
                 kind = "regression"
             elif vn in GOOD_VERDICTS and vo not in GOOD_VERDICTS:
                 kind = "improvement"
+            elif vo in GOOD_VERDICTS and vn in GOOD_VERDICTS:
+                kind = "changed"  # e.g. converges <-> at_roundoff: both say the scheme is right
             else:
                 kind = "regression" if vn in ("diverged", "failed") else "improvement" if vo in ("diverged", "failed") else "regression"
             out.changes.append(Change(kind, scen, eng, f"verdict of {qty}", str(vo), str(vn)))
@@ -220,7 +222,7 @@ def to_text(c: Comparison, allow_missing=False) -> str:
              f"{len(c.of('improvement'))} improvements, {len(c.of('new'))} new, {len(c.of('missing'))} missing"]
     for pkg, a, b in c.version_diffs:
         lines.append(f"  version of {pkg}: {a} -> {b}")
-    for kind in ("regression", "missing", "improvement", "new"):
+    for kind in ("regression", "missing", "improvement", "new", "changed"):
         for ch in c.of(kind):
             lines.append(f"  {kind.upper():<11} {ch.scenario} {ch.engine} {ch.what}: {ch.old} -> {ch.new} {ch.note}".rstrip())
     verdict = {0: "OK: no regression", 1: "REGRESSION"}[c.exit_code(allow_missing)]
@@ -244,7 +246,7 @@ def to_markdown(c: Comparison, baseline_dir, new_dir, allow_missing=False) -> st
         md += [f"| {_md_escape(p)} | {_md_escape(a)} | {_md_escape(b)} |" for p, a, b in c.version_diffs]
         md.append("")
     for kind, title in (("regression", "Regressions"), ("missing", "Missing rows"), ("improvement", "Improvements"),
-                        ("new", "New rows")):
+                        ("new", "New rows"), ("changed", "Other changes (not regressions)")):
         rows = c.of(kind)
         if not rows:
             continue

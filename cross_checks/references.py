@@ -20,7 +20,7 @@ import math
 import numpy as np
 
 from reference_sim import analytic
-from reference_sim.ground_truth import ground_truth
+from reference_sim.ground_truth import GROUND_TRUTH_RTOL, ground_truth
 from reference_sim.quaternion import quat_exp, quat_mul
 from reference_sim.state import Q, V, W, X
 
@@ -121,7 +121,7 @@ def _rotation(scenario, t_s):
 def reference_solution(scenario, t_s):
     """Reference states at times ``t_s`` (T,): ``(y (T, 13), label)``.
 
-    ``label`` is "analytic" or "ground_truth (DOP853 rtol 1e-12)". A scenario that asks for
+    ``label`` is "analytic" or "ground_truth (DOP853, rtol GROUND_TRUTH_RTOL)". A scenario that asks for
     ``reference = "ground_truth"`` gets the ground truth even where a closed form exists.
     """
     t_s = np.asarray(t_s, dtype=float)
@@ -131,7 +131,8 @@ def reference_solution(scenario, t_s):
         y[:, X], y[:, V] = _translation(scenario, t_s)
         y[:, Q], y[:, W] = _rotation(scenario, t_s)
         return y, "analytic"
-    return ground_truth(scenario.problem, t_s, decay_rates_per_s(scenario)), "ground_truth (DOP853, rtol 1e-12)"
+    return (ground_truth(scenario.problem, t_s, decay_rates_per_s(scenario)),
+            f"ground_truth (DOP853, rtol {GROUND_TRUTH_RTOL:g})")
 
 
 #: Relative size of the initial-ω perturbation used to measure error amplification: large enough

@@ -97,3 +97,23 @@ def test_unusable_input_is_an_input_error(tmp_path, setup, words):
     setup(bad)
     with pytest.raises(CompareInputError, match=words):
         compare_dirs(write(tmp_path / "a"), bad)
+
+
+def test_change_between_two_good_verdicts_is_not_a_regression(tmp_path):
+    conv = [dict(CONV[0], verdict="at_roundoff", order=None)]
+    c = compare_dirs(write(tmp_path / "a"), write(tmp_path / "b", conv=conv))
+    assert c.exit_code() == 0 and len(c.of("changed")) == 1
+
+
+def test_cli_compare_exit_codes_and_markdown(tmp_path, capsys):
+    from cross_checks.cli import main
+    a, b = write(tmp_path / "a"), write(tmp_path / "b")
+    assert main(["compare", str(a), str(b)]) == 0
+    rows = [dict(r) for r in ROWS]
+    rows[1]["angvel_err_final"] *= 2
+    write(tmp_path / "c", rows)
+    md = tmp_path / "diff.md"
+    assert main(["compare", str(a), str(tmp_path / "c"), "--markdown", str(md)]) == 1
+    assert "| tennis_racket | reference:course | dt=0.001 angvel_err_final |" in md.read_text()
+    assert main(["compare", str(a), str(tmp_path / "nope")]) == 2
+    assert "nope: not a directory" in capsys.readouterr().err
