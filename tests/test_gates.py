@@ -1,0 +1,135 @@
+"""Regression gates: a fresh sweep judged by cross_checks/expectations.py and against the committed baseline.
+
+The default run sweeps FAST_SUBSET (every available variant, each scenario's full dt ladder); the
+whole catalog runs under ``-m slow``. Every number comes from cross_checks.expectations /
+cross_checks.tolerances, each with its derivation there.
+"""
+import json
+import os
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from cross_checks.compare import compare_dirs, to_text
+from cross_checks.engines import available_variants
+from cross_checks.expectations import EQUIVALENT_PAIRS, energy_drift_bound
+from cross_checks.scenario import catalog_names, load_scenario
+from cross_checks.sweep import run_sweep
+from cross_checks.tolerances import SAME_SCHEME_REL
+
+ROOT = Path(__file__).resolve().parents[1]
+BASELINE = ROOT / "baselines" / "default"
+#: Scenarios of the default gate: every force type (gravity, drag-free decay, spring, body torque,
+#: off-COM force), a full inertia tensor, and the two asymmetric tumbling bodies the course gets wrong.
+FAST_SUBSET = ["projectile", "velocity_decay", "spring_oscillator", "applied_torque", "particle_body", "tennis_racket"]
+ASYMMETRIC_TUMBLING = ["tennis_racket", "particle_body", "tumbling_box"]
+
+
+def _sweep(tmp_path_factory, names, tag):
+    out = tmp_path_factory.mktemp(tag) / "results"
+    old = os.environ.get("RBCHECK_CACHE_DIR")
+    os.environ["RBCHECK_CACHE_DIR"] = str(tmp_path_factory.mktemp(f"{tag}-cache"))
+    try:
+        run_sweep([load_scenario(n) for n in names], available_variants(), out, jobs=2, use_cache=False,
+                  progress=False, render=False)
+    finally:
+        if old is None:
+            os.environ.pop("RBCHECK_CACHE_DIR", None)
+        else:
+            os.environ["RBCHECK_CACHE_DIR"] = old
+    return out, pd.read_csv(out / "results.csv"), json.loads((out / "summary.json").read_text())
+
+
+@pytest.fixture(scope="module")
+def fast(tmp_path_factory):
+    return _sweep(tmp_path_factory, FAST_SUBSET, "fast")
+
+
+@pytest.fixture(scope="module")
+def full(tmp_path_factory):
+    return _sweep(tmp_path_factory, catalog_names(), "full")
+
+
+def _check_expectations(summary, scenario):
+    recs = [r for r in summary["convergence"] if r["scenario"] == scenario]
+    assert recs, f"no convergence records for {scenario}"
+    wrong = [f"{r['engine']} {r['quantity']}: {r['assessment']} ({r['reason']})" for r in recs
+             if r["matches_expectation"] is False]
+    assert not wrong, "\n".join(wrong)
+
+
+def _check_energy_bounds(results, scenario):
+    sc = load_scenario(scenario)
+    over = []
+    for _, r in results[(results["scenario"] == scenario) & (results["status"] == "ok")].iterrows():
+        bound = energy_drift_bound(sc, r["engine"], float(r["dt"]))
+        if bound is not None and not r["energy_drift_max"] <= bound:
+            over.append(f"{r['engine']} dt={r['dt']:g}: {r['energy_drift_max']:.3g} > {bound:.3g}")
+    assert not over, "\n".join(over)
+
+
+@pytest.mark.parametrize("scenario", FAST_SUBSET)
+def test_every_verdict_matches_its_expectation(fast, scenario):
+    _check_expectations(fast[2], scenario)
+
+
+@pytest.mark.parametrize("scenario", FAST_SUBSET)
+def test_energy_drift_within_its_bound(fast, scenario):
+    _check_energy_bounds(fast[1], scenario)
+
+
+@pytest.mark.parametrize("a, b", [(p[0], p[1]) for p in EQUIVALENT_PAIRS])
+def test_same_scheme_pairs_agree_on_every_scenario(fast, a, b):
+    recs = [r for r in fast[2]["agreement"] if (r["a"], r["b"]) == (a, b)]
+    if not recs:
+        pytest.skip(f"{a} or {b} unavailable here")
+    assert {r["scenario"] for r in recs} == set(FAST_SUBSET)
+    bad = [f"{r['scenario']}: {r['max_rel']:.3g}" for r in recs if not r["max_rel"] <= SAME_SCHEME_REL]
+    assert not bad, bad
+
+
+@pytest.mark.parametrize("scenario", [s for s in ASYMMETRIC_TUMBLING if s in FAST_SUBSET])
+def test_course_does_not_converge_on_asymmetric_tumbling_bodies(fast, scenario):
+    verdict = {(r["engine"], r["quantity"]): r["verdict"] for r in fast[2]["convergence"] if r["scenario"] == scenario}
+    assert verdict[("reference:course", "orientation")] == "does_not_converge"
+    assert verdict[("reference:course_gyro", "orientation")] == "converges"
+    assert verdict[("reference:expmap_gyro", "orientation")] == "converges"
+
+
+def test_fresh_sweep_matches_the_committed_baseline(fast):
+    assert (BASELINE / "results.csv").is_file(), f"{BASELINE} missing: see baselines/README.md to regenerate it"
+    c = compare_dirs(BASELINE, fast[0])
+    assert c.matched_rows == len(fast[1]), "every row of the fresh subset must exist in the baseline"
+    assert c.exit_code(allow_missing=True) == 0, to_text(c, allow_missing=True)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scenario", catalog_names())
+def test_full_catalog_matches_expectations_and_bounds(full, scenario):
+    _check_expectations(full[2], scenario)
+    _check_energy_bounds(full[1], scenario)
+
+
+@pytest.mark.slow
+def test_full_sweep_matches_the_baseline_row_for_row(full):
+    c = compare_dirs(BASELINE, full[0])
+    assert c.exit_code() == 0, to_text(c)
+
+
+def test_planted_regression_in_the_baseline_is_caught_and_named(tmp_path):
+    import shutil
+
+    from cross_checks.cli import main
+    new = tmp_path / "new"
+    shutil.copytree(BASELINE, new)
+    assert main(["compare", str(BASELINE), str(new)]) == 0  # identical results
+    df = pd.read_csv(new / "results.csv")
+    i = df.index[(df["scenario"] == "tennis_racket") & (df["engine"] == "mujoco:euler") & (df["dt"] == 0.00125)][0]
+    df.loc[i, "orient_err_final"] *= 1.5
+    df.to_csv(new / "results.csv", index=False)
+    md = tmp_path / "summary.md"
+    assert main(["compare", str(BASELINE), str(new), "--markdown", str(md)]) == 1
+    text = md.read_text()
+    assert "| tennis_racket | mujoco:euler | dt=0.00125 orient_err_final |" in text
+    assert text.count("\n| tennis_racket") == 1  # that row and nothing else
