@@ -96,3 +96,24 @@ def test_written_files_have_the_users_usual_permissions(tmp_path):
     os.umask(mask)
     assert (out.stat().st_mode & 0o777) == (0o666 & ~mask)
     assert (out.with_suffix(".json").stat().st_mode & 0o777) == (0o666 & ~mask)
+
+
+def test_reruns_are_bit_identical_across_engines(tmp_path, monkeypatch):
+    pytest.importorskip("mujoco")
+    pytest.importorskip("pybullet")
+    import csv
+
+    from cross_checks.engines import available_variants
+    from cross_checks.scenario import parse_scenario
+    from cross_checks.sweep import run_sweep
+    monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "cache"))
+    sc = parse_scenario(TINY.format(name="spin").replace("duration = 4.0", "duration = 0.5"), "spin.toml")
+    texts = []
+    for k in range(2):
+        out = tmp_path / f"r{k}"
+        run_sweep([sc], available_variants(), out, jobs=2, use_cache=False, progress=False, render=False)
+        with open(out / "results.csv", newline="") as fh:
+            rows = [{c: v for c, v in r.items() if c not in ("wall_s", "cached")} for r in csv.DictReader(fh)]
+        texts.append(rows)
+    assert texts[0] == texts[1]  # every digit of every metric, all 14 variants
+    assert {r["engine"].split(":")[0] for r in texts[0]} == {"reference", "mujoco", "pybullet"}
