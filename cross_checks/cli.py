@@ -71,6 +71,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--no-cache", action="store_true",
                    help="recompute every run instead of reusing cached results ($RBCHECK_CACHE_DIR or ~/.cache/rbcheck)")
     s.add_argument("--self-contained", action="store_true", help="embed the plots in the HTML pages (for CI artifacts)")
+    s.add_argument("--dask", metavar="ADDRESS",
+                   help="run the jobs on a Dask cluster (scheduler address, e.g. tcp://host:8786) through "
+                        "distributed's Client.get_executor(); needs the optional extra: pip install 'rbcheck[dask]'. "
+                        "Workers must share this machine's filesystem for DIR's parent and the cache")
 
     rp = sub.add_parser("report", help="re-render the plots and HTML of a results directory from its saved data")
     rp.add_argument("dir", metavar="DIR")
@@ -214,6 +218,18 @@ def _gate_failures(summary) -> list:
     return out
 
 
+def _dask_client(address: str):
+    try:
+        from distributed import Client
+    except ImportError:
+        raise BadInput("--dask: the 'distributed' package is not installed; install the optional extra: "
+                       "pip install -e '.[dask]'") from None
+    try:
+        return Client(address, timeout=10)
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise BadInput(f"--dask {address}: cannot connect to the Dask scheduler: {exc}") from None
+
+
 def cmd_sweep(args) -> int:
     from .scenario import catalog_names, load_scenario
     from .sweep import SweepError, SweepInterrupted, run_sweep
@@ -224,15 +240,20 @@ def cmd_sweep(args) -> int:
     if not variants:
         raise BadInput("--engines: no available engine variant to run")
     import time
+    client = _dask_client(args.dask) if args.dask else None
     t0 = time.perf_counter()
     try:
         summary = run_sweep(scenarios, variants, args.out, jobs=args.jobs, use_cache=not args.no_cache,
-                            self_contained=args.self_contained, skipped=skipped)
+                            self_contained=args.self_contained, skipped=skipped,
+                            executor=client.get_executor() if client is not None else None)
     except SweepError as exc:
         raise BadInput(str(exc)) from None
     except SweepInterrupted:
         print(f"rbcheck sweep: interrupted; {args.out} left as it was", file=sys.stderr)
         return EXIT_INTERRUPTED
+    finally:
+        if client is not None:
+            client.close()
     run = summary["run"]
     print(f"rbcheck sweep: {len(scenarios)} scenario(s) x {len(variants)} variant(s): {run['runs']} runs "
           f"({run['cached_runs']} cached, {run['diverged_runs']} diverged, {run['failed_runs']} failed) "

@@ -106,11 +106,15 @@ def _worker_init():
 
 
 class _Runner:
-    """Runs callables either here (jobs == 1) or in a process pool, yielding results as they finish."""
+    """Runs callables here (jobs == 1), in a process pool, or on any ``concurrent.futures.Executor``
+    given by the caller (e.g. a Dask cluster's ``Client.get_executor()``), yielding results as they
+    finish. An external executor is used as it is: never shut down or replaced here."""
 
-    def __init__(self, jobs: int):
+    def __init__(self, jobs: int, executor=None):
         self.jobs = jobs
-        self.pool = self._new_pool() if jobs > 1 else None
+        self.external = executor is not None
+        self.submitted = []
+        self.pool = executor if self.external else (self._new_pool() if jobs > 1 else None)
 
     def _new_pool(self):
         import multiprocessing as mp
@@ -149,6 +153,8 @@ class _Runner:
                 record(it, r)
             isolate = []
             futs = {self.pool.submit(fn, it): it for it in todo}
+            if self.external:
+                self.submitted.extend(futs)
             todo = []
             pending = set(futs)
             broken = False
@@ -170,11 +176,19 @@ class _Runner:
         return out
 
     def _renew(self):
+        if self.external:
+            raise BrokenProcessPool("a worker of the external executor died")
         self.pool.shutdown(wait=True, cancel_futures=True)
         self.pool = self._new_pool()
 
     def close(self, kill=False):
         if self.pool is None:
+            return
+        if self.external:
+            if kill:
+                for f in self.submitted:
+                    f.cancel()
+            self.pool = None
             return
         if kill:
             # Stop the workers this sweep started (they ignore SIGINT): by their own process ids.
@@ -412,7 +426,8 @@ def _swap_into_place(staging: Path, out: Path) -> None:
 
 
 def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cache: bool = True,
-              self_contained: bool = False, progress: bool | None = None, skipped=None, render=True) -> dict:
+              self_contained: bool = False, progress: bool | None = None, skipped=None, render=True,
+              executor=None) -> dict:
     """Run the sweep and write the results directory ``out_dir`` (atomically).
 
     Parameters
@@ -423,6 +438,9 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
     use_cache : read cached job results (they are always written).
     skipped : ``{variant: reason}`` of variants left out (recorded in summary.json).
     progress : show a progress bar (default: when stderr is a terminal).
+    executor : any ``concurrent.futures.Executor`` to run the jobs on instead of the local process
+        pool (e.g. ``distributed.Client(address).get_executor()``); its workers must see the parent
+        directory of ``out_dir`` and the cache directory (jobs exchange reference solutions as files).
 
     Returns the summary dict (as written to summary.json). Raises SweepError (bad input) or
     SweepInterrupted (Ctrl-C: nothing was replaced).
@@ -451,7 +469,7 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
     show = sys.stderr.isatty() if progress is None else progress
     bar = None
     try:
-        runner = _Runner(jobs)
+        runner = _Runner(jobs, executor)
         # 1. references (one per scenario)
         ref_task = _RefTask(scenarios, str(work), cache_root, use_cache)
         ref_results = dict(runner.map_unordered(ref_task, range(len(scenarios))))
