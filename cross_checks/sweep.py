@@ -305,6 +305,15 @@ def _agreement_records(scenarios, records_by_key):
             rb = records_by_key.get((sc.name, b, sc.dt_s))
             if ra is None or rb is None:
                 continue
+            ta, tb = ra["row"].get("diverged_at_s"), rb["row"].get("diverged_at_s")
+            if ra["row"]["status"] == "diverged" == rb["row"]["status"] and ta is not None and tb is not None:
+                # The same scheme blows up at the same step; detection may differ by a step (MuJoCo flags
+                # its instability warning during the step that starts the blow-up): allow 2 steps.
+                agrees = abs(float(ta) - float(tb)) <= 2.0 * sc.dt_s + 1e-12
+                out.append({"a": a, "b": b, "scenario": sc.name, "dt_s": sc.dt_s, "differences": None,
+                            "max_rel": None, "agrees": bool(agrees), "reason": reason,
+                            "note": f"both diverged, at t = {float(ta):.6g} s and {float(tb):.6g} s"})
+                continue
             if ra["y_final"] is None or rb["y_final"] is None:
                 out.append({"a": a, "b": b, "scenario": sc.name, "dt_s": sc.dt_s, "differences": None,
                             "max_rel": None, "agrees": False, "reason": reason,
