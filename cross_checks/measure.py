@@ -28,6 +28,7 @@ import numpy as np
 from reference_sim.state import Q
 from . import metrics as M
 from .expectations import QUANTITIES
+from .trajectory import json_default
 
 __all__ = ["SCHEMA_VERSION", "MAX_SERIES_POINTS", "LOCAL_SAMPLES", "RESULT_COLUMNS", "COLUMN_STEM", "Job",
            "job_dts", "run_job", "reference_job", "load_reference", "failed_record", "cache_dir",
@@ -143,7 +144,7 @@ def save_npz_atomic(path: Path, arrays: dict) -> None:
 def _pack_record(rec: dict) -> dict:
     """A job record as npz arrays (JSON for the scalars; no pickles)."""
     arrays = {"__json__": np.array(json.dumps({k: v for k, v in rec.items() if k != "series"},
-                                              default=_json_default))}
+                                              default=json_default))}
     for k, a in (rec.get("series") or {}).items():
         arrays[f"series::{k}"] = a
     return arrays
@@ -370,9 +371,3 @@ def failed_record(job, scenario, message):
 
 
 
-def _json_default(o):
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    raise TypeError(f"not JSON serialisable: {type(o).__name__}")

@@ -46,9 +46,9 @@ from reference_sim.state import Q
 from . import metrics as M
 from . import tolerances as tol
 from .expectations import EQUIVALENT_PAIRS, QUANTITIES, expectation
-from .trajectory import atomic_write_text
+from .trajectory import atomic_write_text, json_default
 from .measure import (COLUMN_STEM, LOCAL_SAMPLES, MAX_SERIES_POINTS, RESULT_COLUMNS, SCHEMA_VERSION, Job,
-                      _json_default, cache_dir, code_fingerprint, failed_record, job_dts, load_reference,
+                      cache_dir, code_fingerprint, failed_record, job_dts, load_reference,
                       reference_job, run_job, save_npz_atomic, clear_reference_memo)
 
 __all__ = ["RESULT_COLUMNS", "SweepError", "SweepInterrupted", "Job", "plan_jobs", "run_sweep", "cache_dir",
@@ -401,7 +401,7 @@ def _nan_to_none(o):
 
 
 def write_json(path, obj) -> None:
-    atomic_write_text(path, json.dumps(_nan_to_none(obj), indent=1, sort_keys=False, default=_json_default,
+    atomic_write_text(path, json.dumps(_nan_to_none(obj), indent=1, sort_keys=False, default=json_default,
                                        allow_nan=False) + "\n")
 
 

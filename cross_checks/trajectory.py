@@ -16,7 +16,7 @@ import numpy as np
 
 from reference_sim.state import Q, V, W, X
 
-__all__ = ["Trajectory", "COLUMNS", "TrajectoryError", "sidecar_path", "atomic_write_text"]
+__all__ = ["Trajectory", "COLUMNS", "TrajectoryError", "sidecar_path", "atomic_write_text", "json_default"]
 
 COLUMNS = ("t", "x", "y", "z", "vx", "vy", "vz", "qw", "qx", "qy", "qz", "wx", "wy", "wz")
 
@@ -93,7 +93,7 @@ class Trajectory:
         """Write the CSV and its sidecar JSON (atomically each; the JSON last)."""
         csv_path = Path(csv_path)
         atomic_write_text(csv_path, self.to_csv_text())
-        atomic_write_text(sidecar_path(csv_path), json.dumps(self.meta, indent=2, sort_keys=True, default=_json_default) + "\n")
+        atomic_write_text(sidecar_path(csv_path), json.dumps(self.meta, indent=2, sort_keys=True, default=json_default) + "\n")
 
     @classmethod
     def read(cls, csv_path) -> "Trajectory":
@@ -134,7 +134,8 @@ class Trajectory:
         return cls(data[:, 0], data[:, 1:], meta)
 
 
-def _json_default(o):
+def json_default(o):
+    """``json.dumps(default=...)`` for NumPy scalars and arrays (shared by every JSON rbcheck writes)."""
     if isinstance(o, np.generic):
         return o.item()
     if isinstance(o, np.ndarray):

@@ -242,8 +242,12 @@ class ScalarStepper:
                 0.5 * (wy * qw + wz * qx - wx * qz), 0.5 * (wz * qw + wx * qy - wy * qx), ax, ay, az]
 
     def _finish(self, y):
+        """Renormalise q, then the end-of-step velocity decay (whole-state schemes)."""
         n = self.xp.sqrt(y[6] * y[6] + y[7] * y[7] + y[8] * y[8] + y[9] * y[9])
         y[6], y[7], y[8], y[9] = y[6] / n, y[7] / n, y[8] / n, y[9] / n
+        return self._decay(y)
+
+    def _decay(self, y):
         if self.gv != 1.0:
             y[3], y[4], y[5] = self.gv * y[3], self.gv * y[4], self.gv * y[5]
         if self.gw != 1.0:
@@ -300,11 +304,7 @@ class ScalarStepper:
         d = self.rhs(z)
         z[3:6] = [a + half * b for a, b in zip(u[0:3], d[3:6])]
         z[10:13] = [a + half * b for a, b in zip(u[3:6], d[10:13])]
-        if self.gv != 1.0:
-            z[3], z[4], z[5] = self.gv * z[3], self.gv * z[4], self.gv * z[5]
-        if self.gw != 1.0:
-            z[10], z[11], z[12] = self.gw * z[10], self.gw * z[11], self.gw * z[12]
-        return z
+        return self._decay(z)
 
     def _implicit_euler(self, y):
         """Backward Euler. Fixed point ``z ← y + Δt F(z)`` from the explicit Euler predictor: it
