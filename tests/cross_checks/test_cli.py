@@ -109,3 +109,17 @@ def test_list_shows_scenarios_and_variants(capsys):
     out = capsys.readouterr().out
     for word in ["tennis_racket", "reference:course", "reference:rk4", "mujoco:euler", "pybullet:multibody"]:
         assert word in out
+
+
+from .test_scenario import BAD, GOOD  # noqa: E402  (the loader's table of bad inputs)
+
+
+@pytest.mark.parametrize("old, new, field, reason", BAD, ids=[f"{b[2] or 'syntax'}-{i}" for i, b in enumerate(BAD)])
+def test_every_bad_scenario_exits_2_through_the_cli(tmp_path, capsys, old, new, field, reason):
+    bad = tmp_path / "bad.toml"
+    bad.write_text(GOOD.replace(old, new, 1))
+    out = tmp_path / "t.csv"
+    assert main(["run", str(bad), "--engine", "reference:course", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"rbcheck run: error: {bad}: {field + ': ' if field else ''}") and reason in err, err
+    assert err.count("\n") == 1 and not out.exists()
