@@ -138,14 +138,15 @@ def cmd_list(args) -> int:
     return EXIT_OK
 
 
-def _check_out_path(out: str, suffix: str = ".csv") -> Path:
+def _check_out_path(out: str, suffix: str | None = ".csv", option: str = "--out") -> Path:
+    """An output file the user named: the right suffix (when given), an existing directory, not a directory."""
     path = Path(out)
-    if path.suffix != suffix:
-        raise BadInput(f"--out {out}: must end in {suffix}")
+    if suffix is not None and path.suffix != suffix:
+        raise BadInput(f"{option} {out}: must end in {suffix}")
     if not path.parent.exists():
-        raise BadInput(f"--out {out}: directory {path.parent} does not exist")
+        raise BadInput(f"{option} {out}: directory {path.parent} does not exist")
     if path.exists() and path.is_dir():
-        raise BadInput(f"--out {out}: is a directory")
+        raise BadInput(f"{option} {out}: is a directory")
     return path
 
 
@@ -305,9 +306,7 @@ def cmd_compare(args) -> int:
     from .trajectory import atomic_write_text
 
     if args.markdown:
-        md = Path(args.markdown)
-        if not md.parent.exists() or md.is_dir():
-            raise BadInput(f"--markdown {args.markdown}: directory {md.parent} does not exist or the path is a directory")
+        _check_out_path(args.markdown, None, "--markdown")
     try:
         c = compare_dirs(args.baseline, args.new)
     except CompareInputError as exc:
@@ -321,9 +320,7 @@ def cmd_compare(args) -> int:
 def cmd_bench(args) -> int:
     from benchmarks.bench import main as bench_main
     if args.json:
-        j = Path(args.json)
-        if not j.parent.exists() or j.is_dir():
-            raise BadInput(f"--json {args.json}: directory {j.parent} does not exist or the path is a directory")
+        _check_out_path(args.json, None, "--json")
     return bench_main(args.quick, args.json)
 
 

@@ -124,11 +124,7 @@ def gyroscopic_term_matters(scenario) -> bool:
         return False
     if not p.forces.torque_free:
         return True
-    from reference_sim.quaternion import quat_conj, rotate
-    w_B = rotate(quat_conj(p.initial.q_WB), p.initial.w_W)
-    L_B = p.body.inertia_B @ w_B
-    scale = float(np.linalg.norm(w_B) * np.linalg.norm(L_B))
-    return bool(np.linalg.norm(np.cross(w_B, L_B)) > 1e-12 * scale) if scale > 0 else False
+    return not p.body.gyroscopic_torque_vanishes(p.initial.q_WB, p.initial.w_W)
 
 
 def rotation_drives_translation(scenario) -> bool:

@@ -33,14 +33,6 @@ def decay_rates_per_s(scenario):
     return (-math.log(fm.velocity_decay) / scenario.dt_s, -math.log(fm.angular_velocity_decay) / scenario.dt_s)
 
 
-def _principal_spin(body, w_W, q_WB):
-    """True when ω is (to round-off) along a principal axis, or the inertia is isotropic."""
-    from reference_sim.quaternion import rotate, quat_conj
-    w_B = rotate(quat_conj(q_WB), w_W)
-    L_B = body.inertia_B @ w_B
-    return float(np.linalg.norm(np.cross(w_B, L_B))) <= 1e-12 * max(float(np.linalg.norm(w_B) * np.linalg.norm(L_B)), 1e-300)
-
-
 def _translation_kind(scenario):
     fm = scenario.problem.forces
     if not fm.torque_free:
@@ -64,7 +56,7 @@ def _rotation_kind(scenario):
     if not fm.torque_free:
         return None, "torques act on the body"
     if fm.angular_velocity_decay != 1.0:
-        if _principal_spin(p.body, p.initial.w_W, p.initial.q_WB):
+        if p.body.gyroscopic_torque_vanishes(p.initial.q_WB, p.initial.w_W):
             return "decaying_spin", ""
         return None, "angular velocity decay on a body not spinning about a principal axis"
     return "torque_free", ""

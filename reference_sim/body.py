@@ -138,6 +138,15 @@ class RigidBody:
         """``I_B⁻¹ @ tau_B`` for body-axes vectors (..., 3)."""
         return np.asarray(tau_B, dtype=float) @ self.inertia_inv_B.T
 
+    def gyroscopic_torque_vanishes(self, q_WB, w_W) -> bool:
+        """True when ``ω × (I ω) = 0`` to round-off (relative 1e-12): ω along a principal axis, an
+        isotropic inertia, or ω = 0. Then a torque-free body keeps spinning about that axis."""
+        from .quaternion import quat_conj, rotate
+        w_B = rotate(quat_conj(q_WB), w_W)
+        L_B = self.inertia_B @ w_B
+        scale = float(np.linalg.norm(w_B) * np.linalg.norm(L_B))
+        return scale == 0.0 or float(np.linalg.norm(np.cross(w_B, L_B))) <= 1e-12 * scale
+
     def world_inertia(self, R_WB):
         """World-frame inertia ``R I_B Rᵀ`` (kg m²) for rotations ``R_WB`` (..., 3, 3)."""
         return R_WB @ self.inertia_B @ np.swapaxes(R_WB, -1, -2)

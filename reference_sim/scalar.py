@@ -164,6 +164,14 @@ class ScalarStepper:
             tz += r20 * b[0] + r21 * b[1] + r22 * b[2]
         return fx, fy, fz, tx, ty, tz
 
+    def force_torque(self, y):
+        """World force at the COM and world torque about it (6 floats) at state ``y`` (13 numbers),
+        the rotation taken from q/|q| — ForceModel.force_torque in plain floats."""
+        qw, qx, qy, qz = (float(c) for c in y[6:10])
+        n = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+        x, v = [float(c) for c in y[0:3]], [float(c) for c in y[3:6]]
+        return self._force_torque(x, v, self._rot(qw / n, qx / n, qy / n, qz / n))
+
     def _ang_acc(self, R, wx, wy, wz, tx, ty, tz, gyro):
         """``R I_B⁻¹ (Rᵀτ − ω_B × I_B ω_B)`` in world axes (rad/s²)."""
         (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R

@@ -27,7 +27,6 @@ Harness semantics (identical in every adapter, DESIGN.md):
 from __future__ import annotations
 
 import functools
-import math
 
 import numpy as np
 
@@ -55,11 +54,7 @@ def harness_force_torque(scenario, y):
     where NumPy's per-call overhead would dominate the engine's own step time.
     """
     fm = scenario.problem.forces
-    ev = _float_forces(scenario)
-    y = [float(c) for c in y]
-    qw, qx, qy, qz = y[6:10]
-    n = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
-    fx, fy, fz, tx, ty, tz = ev._force_torque(y[0:3], y[3:6], ev._rot(qw / n, qx / n, qy / n, qz / n))
+    fx, fy, fz, tx, ty, tz = _float_forces(scenario).force_torque(y)
     gv, gw = fm.velocity_decay, fm.angular_velocity_decay
     return np.array([gv * fx, gv * fy, gv * fz]), np.array([gw * tx, gw * ty, gw * tz])
 

@@ -33,23 +33,7 @@ RK4_ORDER_TOL = 0.1
 HELD_ORDER_TOL = 0.1
 
 
-def _scenario(body='mass = 1.0\ninertia = [1.0, 2.0, 3.0]', initial="", forces="", dt=0.01, duration=1.0):
-    return parse_scenario(f"""
-name = "t"
-duration = {duration}
-dt = {dt}
-reference = "ground_truth"
-[body]
-{body}
-[initial]
-{initial}
-[forces]
-{forces}
-""")
-
-
-SQ = float(np.sqrt(0.5))
-YAW90 = f"orientation = [{SQ!r}, 0.0, 0.0, {SQ!r}]"   # 90° about world z (w, x, y, z)
+from .engine_helpers import SQ, YAW90, scenario_from_parts as _scenario  # noqa: E402,F401
 
 
 # --- model ----------------------------------------------------------------------------------------
