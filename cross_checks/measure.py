@@ -104,9 +104,8 @@ def code_fingerprint(engine: str) -> str:
                                  "expectations.py", "trajectory.py")]
     eng = here / "engines"
     files += [eng / "__init__.py", eng / "base.py"]
-    from .engines import ENGINE_MODULES
-    mod_file = eng / (ENGINE_MODULES[engine].rsplit(".", 1)[1] + ".py")
-    files.append(mod_file)
+    from .engines import get_adapter
+    files += [Path(f) for f in get_adapter(engine).source_files()]  # the adapter's module (+ an engine file's)
     h = hashlib.sha256()
     for f in files:
         h.update(f.name.encode())
@@ -247,6 +246,10 @@ def _nan_row(job, scenario, status, message, label, version):
     return row
 
 
+class _NoOneStep(Exception):
+    """The engine has no one-step mode (EngineAdapter.has_one_step is False)."""
+
+
 def _canonical_to(q, q_ref):
     """q or −q, whichever is in the hemisphere of q_ref (row-wise), so components can be plotted."""
     s = np.sign(np.sum(q * q_ref, axis=-1, keepdims=True))
@@ -332,6 +335,8 @@ def run_job(job: Job, scenario, ref_path: str, cache_root: str | None = None, us
     y0 = y_ref_all[grid_idx[starts]]
     y1_ref = y_ref_all[grid_idx[starts + 1]]
     try:
+        if not adapter.has_one_step:  # e.g. an engine file: whole runs only; the local errors stay empty
+            raise _NoOneStep
         with np.errstate(all="ignore"):
             y1 = np.asarray(adapter.one_step(scenario, variant, job.dt_s, y0), dtype=float)
         lerr = M.state_errors(y1, y1_ref)
@@ -340,6 +345,8 @@ def run_job(job: Job, scenario, ref_path: str, cache_root: str | None = None, us
             row[f"{COLUMN_STEM[q]}_local_err"] = float(np.max(e)) if np.all(np.isfinite(e)) else math.nan
     except KeyboardInterrupt:
         raise
+    except _NoOneStep:
+        pass
     except Exception as exc:  # noqa: BLE001 - no one-step mode: leave the local errors empty
         row["message"] = (row["message"] + "; " if row["message"] else "") + f"one-step mode failed: {exc}"
 
