@@ -89,32 +89,44 @@ def cache_dir() -> Path:
 
 
 _FINGERPRINTS: dict = {}
+_BASE_FINGERPRINT: list = []
+
+
+def _base_fingerprint() -> bytes:
+    """SHA-256 of rbcheck's own files that determine a job's result (computed once per process)."""
+    if not _BASE_FINGERPRINT:
+        import reference_sim
+        here = Path(__file__).resolve().parent
+        files = sorted(Path(reference_sim.__file__).resolve().parent.glob("*.py"))
+        files += [here / n for n in ("measure.py", "references.py", "metrics.py", "scenario.py", "tolerances.py",
+                                     "expectations.py", "trajectory.py", "resolved.py")]
+        files += [here / "engines" / "__init__.py", here / "engines" / "base.py"]
+        h = hashlib.sha256()
+        for f in files:
+            h.update(f.name.encode())
+            try:
+                h.update(f.read_bytes())
+            except OSError:
+                h.update(b"<missing>")
+        _BASE_FINGERPRINT.append(h.digest())
+    return _BASE_FINGERPRINT[0]
 
 
 def code_fingerprint(engine: str) -> str:
-    """SHA-256 (16 hex digits) of the source files that determine a job's result for ``engine``:
-    reference_sim, the engine registry and adapter, this module, references, metrics, scenario parsing,
-    tolerances, expectations (QUANTITIES) and trajectories."""
-    if engine in _FINGERPRINTS:
-        return _FINGERPRINTS[engine]
-    import reference_sim
-    here = Path(__file__).resolve().parent
-    files = sorted(Path(reference_sim.__file__).resolve().parent.glob("*.py"))
-    files += [here / n for n in ("measure.py", "references.py", "metrics.py", "scenario.py", "tolerances.py",
-                                 "expectations.py", "trajectory.py")]
-    eng = here / "engines"
-    files += [eng / "__init__.py", eng / "base.py"]
+    """SHA-256 (16 hex digits) of what determines a job's result for ``engine`` besides its inputs:
+    reference_sim, this module, references, metrics, scenario parsing, the resolved scenario, tolerances,
+    expectations (QUANTITIES), trajectories, the engine registry, and the adapter's own
+    ``cache_token()`` (its module; for an engine file, the file and the programs it names, as loaded).
+    Memoised per adapter instance, so an engine file re-registered under the same name (a rebuilt
+    program) gets its own fingerprint."""
     from .engines import get_adapter
-    files += [Path(f) for f in get_adapter(engine).source_files()]  # the adapter's module (+ an engine file's)
-    h = hashlib.sha256()
-    for f in files:
-        h.update(f.name.encode())
-        try:
-            h.update(f.read_bytes())
-        except OSError:
-            h.update(b"<missing>")
-    _FINGERPRINTS[engine] = h.hexdigest()[:16]
-    return _FINGERPRINTS[engine]
+    adapter = get_adapter(engine)
+    key = (engine, id(adapter))
+    if key not in _FINGERPRINTS:
+        h = hashlib.sha256(_base_fingerprint())
+        h.update(str(adapter.cache_token()).encode())
+        _FINGERPRINTS[key] = (adapter, h.hexdigest()[:16])  # the adapter is kept so its id stays unique
+    return _FINGERPRINTS[key][1]
 
 
 def _job_key(scenario, variant, dt, engine_version):

@@ -58,25 +58,28 @@ def assert_engine(variant, scenarios, *, engine_file=None) -> dict:
 def run_engine_checks(variant, scenarios, *, engine_file=None, out_dir=None, cache_dir=None, jobs=None) -> dict:
     """:func:`assert_engine` with the plugin's settings: ``out_dir`` keeps the results directory and its
     HTML report there; ``cache_dir`` replaces the user's rbcheck cache; ``jobs`` worker processes."""
-    from .engines import EngineUnavailable, get_adapter, load_engine_files
-    from .sweep import run_sweep
+    from .engines import EngineUnavailable, engine_files_registered, get_adapter
+    from .sweep import SweepError, run_sweep
 
-    load_engine_files(_as_list(engine_file))
-    variants = _variants(variant)
-    for engine in dict.fromkeys(v.split(":", 1)[0] for v in variants):
-        try:
-            get_adapter(engine)
-        except EngineUnavailable as exc:
-            raise AssertionError(f"assert_engine({variant!r}): the engine is unavailable here: {exc}") from None
-    scs = _scenarios(scenarios)
     with contextlib.ExitStack() as stack:
+        stack.enter_context(engine_files_registered(_as_list(engine_file)))
+        variants = _variants(variant)
+        for engine in dict.fromkeys(v.split(":", 1)[0] for v in variants):
+            try:
+                get_adapter(engine)
+            except EngineUnavailable as exc:
+                raise AssertionError(f"assert_engine({variant!r}): the engine is unavailable here: {exc}") from None
+        scs = _scenarios(scenarios)
         if out_dir is None:
             out = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="rbcheck-assert-"))) / "results"
         else:
             out = Path(out_dir)
         if cache_dir is not None:
             stack.enter_context(_cache_env(cache_dir))
-        summary = run_sweep(scs, variants, out, jobs=jobs, progress=False, render=out_dir is not None)
+        try:
+            summary = run_sweep(scs, variants, out, jobs=jobs, progress=False, render=out_dir is not None)
+        except SweepError as exc:
+            raise ValueError(str(exc)) from None
         rows = _read_rows(out / "results.csv")
     problems = verdict_problems(summary, rows)
     if problems:

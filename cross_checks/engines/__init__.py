@@ -10,6 +10,7 @@ installed), is listed as unavailable with the reason; it never stops rbcheck.
 """
 from __future__ import annotations
 
+import contextlib
 import re
 import time
 from dataclasses import dataclass
@@ -19,7 +20,7 @@ from .base import EngineAdapter, EngineError, Variant
 
 __all__ = ["ENTRY_POINT_GROUP", "VariantInfo", "EngineEntry", "all_variants", "available_variants", "get_adapter",
            "split_variant", "run_variant", "engine_entries", "engine_variants", "declared_order", "has_one_step",
-           "load_engine_files", "register_adapter", "user_engines", "adopt_user_engines", "engine_provenance",
+           "load_engine_files", "engine_files_registered", "register_adapter", "user_engines", "adopt_user_engines", "engine_provenance",
            "reset_registry", "EngineUnavailable", "UnknownVariant", "EngineAdapter", "EngineError", "Variant"]
 
 ENTRY_POINT_GROUP = "rbcheck.engines"
@@ -195,6 +196,20 @@ def load_engine_files(paths) -> list:
         except ValueError as exc:
             raise EngineFileError(a.path, "name", str(exc)) from None
     return out
+
+
+@contextlib.contextmanager
+def engine_files_registered(paths):
+    """Register the engine files ``paths`` for the duration of the block (engines registered before
+    it stay): how assert_engine keeps one test's engine files from leaking into the next."""
+    before = set(_user)
+    try:
+        yield load_engine_files(paths)
+    finally:
+        for name in set(_user) - before:
+            del _user[name]
+            _versions.pop(name, None)
+            _failures.pop(name, None)
 
 
 def user_engines() -> list:

@@ -136,6 +136,19 @@ class EngineAdapter:
         """True when the class implements :meth:`one_step` (the local-error mode of a sweep)."""
         return type(self).one_step is not EngineAdapter.one_step
 
+    def cache_token(self) -> str:
+        """What identifies this adapter's code for the result cache: by default a SHA-256 of the
+        contents of :meth:`source_files`."""
+        import hashlib
+        h = hashlib.sha256()
+        for f in self.source_files():
+            h.update(str(f).encode())
+            try:
+                h.update(Path(f).read_bytes())
+            except OSError:
+                h.update(b"<missing>")
+        return h.hexdigest()
+
     def source_files(self) -> list:
         """Files whose content determines this adapter's results (hashed into the cache key):
         by default the module that defines the class."""

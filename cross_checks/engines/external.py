@@ -367,6 +367,10 @@ class ExternalEngine(EngineAdapter):
     def source_files(self) -> list:
         return [self.path] + [Path(p) for p in sorted(self.program_hashes)]
 
+    def cache_token(self) -> str:
+        """The engine file and the programs it names, as hashed when the file was loaded."""
+        return self.sha256 + "".join(f"|{k}={v}" for k, v in sorted(self.program_hashes.items()))
+
     def provenance(self) -> dict:
         return {"engine_file": str(self.path), "engine_file_sha256": self.sha256,
                 "programs_sha256": dict(self.program_hashes), "timeout_s": self.timeout_s}
