@@ -441,7 +441,7 @@ def _read_output(out_csv: Path, scenario, dt_s: float, n_steps: int, where: str,
     off = np.abs(t - grid) > 0.5 * dt_s
     if np.any(off):
         k = int(np.argmax(off))
-        raise EngineError(f"{where}: row {k} (line {k + 2}) has t = {t[k]!r}, expected {grid[k]!r} (one row per step "
+        raise EngineError(f"{where}: row {k} (line {k + 2}) has t = {float(t[k])!r}, expected {float(grid[k])!r} (one row per step "
                           f"of {dt_s:g} s from t = 0)")
     bad = np.max(np.where(np.isfinite(y), np.abs(y), np.inf), axis=1) > BLOWUP_LIMIT  # non-finite or blown up
     if bad[0]:
