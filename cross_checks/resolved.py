@@ -120,11 +120,14 @@ def _dumps(o, pad: str) -> str:
 
 
 def _num(v) -> str:
-    return repr(float(v))
+    """12 significant digits (round-off such as 0.5000000000000001 hidden; --json has every digit)."""
+    return f"{float(v) + 0.0:.12g}"
 
 
 def _triple(v) -> str:
-    return "[" + ", ".join(_num(x) for x in v) + "]"
+    """A vector for reading: components below 1e-12 of its largest are round-off, shown as 0."""
+    big = max((abs(float(x)) for x in v), default=0.0)
+    return "[" + ", ".join(_num(0.0 if abs(float(x)) < 1e-12 * big else x) for x in v) + "]"
 
 
 def format_resolved(r: dict) -> str:
@@ -165,4 +168,5 @@ def format_resolved(r: dict) -> str:
     for t in f["torque"]:
         lines.append(f"  torque            {_triple(t['torque'])} N m ({t['frame']} axes)")
     lines.append(f"trajectory CSV columns: {','.join(r['csv_columns'])}")
+    lines.append("(numbers rounded to 12 significant digits; `rbcheck show --json` gives every digit)")
     return "\n".join(lines)
