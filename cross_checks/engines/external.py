@@ -31,15 +31,18 @@ the rows before it, as for every other engine.
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import math
 import os
+import select
 import shutil
 import signal
 import string
 import subprocess
 import tempfile
 import threading
+import time
 import tomllib
 from pathlib import Path
 
@@ -322,26 +325,46 @@ def _run_command(argv: list, cwd: Path, timeout_s: float):
                                     start_new_session=True)
         except OSError as exc:
             raise EngineError(f"cannot start {argv[0]!r}: {exc.strerror or exc}") from None
-        timed_out = threading.Event()
+        try:
+            with _TermKillsGroup(proc):
+                timed_out = _wait(proc, timeout_s)
+        finally:
+            _kill_group(proc)  # on time-out, Ctrl-C, or stray children of a finished command
+        words = _tail(err) or _tail(out)
+    return proc.returncode, timed_out, words
+
+
+def _wait(proc, timeout_s: float) -> bool:
+    """Wait for ``proc`` at most ``timeout_s``; True when the time ran out. A pidfd (Linux) wakes the
+    instant the process exits; elsewhere a timer thread kills the group at the limit."""
+    try:
+        fd = os.pidfd_open(proc.pid)
+    except (AttributeError, OSError):
+        expired = threading.Event()
 
         def on_timeout():
-            timed_out.set()
-            try:
+            expired.set()
+            with contextlib.suppress(ProcessLookupError, PermissionError):
                 os.killpg(proc.pid, signal.SIGKILL)
-            except (ProcessLookupError, PermissionError):
-                pass
 
         timer = threading.Timer(timeout_s, on_timeout)
         timer.daemon = True
+        timer.start()
         try:
-            with _TermKillsGroup(proc):
-                timer.start()
-                rc = proc.wait()
+            proc.wait()
         finally:
             timer.cancel()
-            _kill_group(proc)
-        words = _tail(err) or _tail(out)
-    return rc, timed_out.is_set(), words
+        return expired.is_set()
+    try:
+        poller = select.poll()
+        poller.register(fd, select.POLLIN)
+        deadline = time.monotonic() + timeout_s
+        while not poller.poll(max(0.0, deadline - time.monotonic()) * 1000.0):
+            if time.monotonic() >= deadline:
+                return True
+        return False
+    finally:
+        os.close(fd)
 
 
 class ExternalEngine(EngineAdapter):
