@@ -42,7 +42,8 @@ def build_parser() -> argparse.ArgumentParser:
         description="Validate rigid-body simulators: a NumPy reference of the GAMES103 course equations, "
                     "MuJoCo and PyBullet on identical free-body scenarios, against analytic or DOP853 references.",
         epilog="SCENARIO is a catalog name (see `rbcheck list`) or a path to a scenario TOML file. "
-               "Exit codes: 0 ok; 1 regression/disagreement or a diverged run; 2 bad input; 130 interrupted.",
+               "Exit codes: 0 ok; 1 regression/disagreement, a failed or a diverged run; 2 bad input; 130 interrupted. "
+               "Your own engines: --engine-file (docs/engines.md).",
     )
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_Parser)
 
