@@ -24,8 +24,8 @@ own process group, with stdin closed, under the time limit; on time-out the whol
 A run is ``failed`` (its message carries the command's own words: the tail of its stderr, else
 stdout) when the program cannot be started, times out, exits non-zero or by a signal, writes no CSV,
 a CSV the shared trajectory reader rejects, a CSV with more or fewer rows than steps + 1 or times
-off the Δt grid, a first row that is not finite, or files in the engine file's folder (outside its
-output path; ``__pycache__`` excepted; only the folder itself is watched). A row that becomes
+off the Δt grid, a first row that is not finite, or files written directly into the engine file's
+folder (outside its output path; only the files of that folder itself are watched). A row that becomes
 non-finite or exceeds BLOWUP_LIMIT after t = 0 is a divergence, reported as "diverged at t = …" with
 the rows before it, as for every other engine.
 """
@@ -68,7 +68,6 @@ OUTPUT_TAIL_CHARS = 600
 
 _TOP = {"name", "version", "description", "timeout", "variants"}
 _VARIANT = {"order", "description", "command"}
-_IGNORED_IN_FOLDER = {"__pycache__"}
 
 
 class EngineFileError(ValueError):
@@ -255,18 +254,19 @@ def load_engine_file(path) -> "ExternalEngine":
 # --- running ----------------------------------------------------------------------------------------
 
 def _folder_snapshot(folder: Path) -> dict:
-    """Top-level entries of a folder: files by (mtime, size), directories by presence."""
+    """The files directly in a folder, by (mtime, size). Directories are not watched: rbcheck itself may
+    create one there while a command runs (a results directory being staged, a cache)."""
     out = {}
     try:
         with os.scandir(folder) as it:
             for e in it:
-                if e.name in _IGNORED_IN_FOLDER:
-                    continue
                 try:
+                    if e.is_dir(follow_symlinks=False):
+                        continue
                     st = e.stat(follow_symlinks=False)
                 except OSError:
                     continue
-                out[e.name] = None if e.is_dir(follow_symlinks=False) else (st.st_mtime_ns, st.st_size)
+                out[e.name] = (st.st_mtime_ns, st.st_size)
     except OSError:
         pass
     return out

@@ -171,6 +171,8 @@ def test_compare_catches_a_regressed_build_and_passes_an_unchanged_one(swept, by
     assert summary["run"]["failed_runs"] == 0
     c = compare_dirs(swept["dir"], new)
     assert c.exit_code(allow_missing=True) == 1
+    (_, old_v, new_v), = [d for d in c.version_diffs if d[0] == "engine cbody"]  # the rebuild is named
+    assert old_v.startswith("1.0 (engine file ") and old_v.split("programs ")[1] != new_v.split("programs ")[1]
     regressed = {(ch.engine, ch.what) for ch in c.of("regression")}
     for v in GOOD:
         assert (v, "dt=0.0025 orient_err_final") in regressed, to_text(c, True)
