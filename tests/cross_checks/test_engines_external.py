@@ -13,7 +13,7 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 from cross_checks import engines
 from cross_checks.cli import main
 from cross_checks.engines.base import EngineError
-from cross_checks.engines.external import EngineFileError, load_engine_file
+from cross_checks.engines.external import load_engine_file
 from cross_checks.scenario import parse_scenario
 from cross_checks.sweep import run_sweep
 
