@@ -423,9 +423,7 @@ class ExternalEngine(EngineAdapter):
                 raise EngineError(f"{where}: no result within the time limit of {self.timeout_s:g} s (set `timeout` "
                                   f"in {self.path.name}); the command was killed{said}")
             if rc != 0:
-                how = (f"was killed by signal {signal.Signals(-rc).name}" if rc < 0 and -rc in signal.valid_signals()
-                       else f"exited with status {rc}")
-                raise EngineError(f"{where}: the command {how}{said}")
+                raise EngineError(f"{where}: the command {_exit_words(rc)}{said}")
             outside = sorted(k for k in set(before) | set(after) if before.get(k, "-") != after.get(k, "-"))
             if outside:
                 raise EngineError(f"{where}: the command wrote outside its output path: {', '.join(outside[:5])} in "
@@ -435,6 +433,15 @@ class ExternalEngine(EngineAdapter):
             return run
         finally:
             shutil.rmtree(run_dir, ignore_errors=True)
+
+
+def _exit_words(rc: int) -> str:
+    if rc >= 0:
+        return f"exited with status {rc}"
+    try:
+        return f"was killed by signal {signal.Signals(-rc).name}"
+    except ValueError:  # e.g. a real-time signal, which has no name
+        return f"was killed by signal {-rc}"
 
 
 def _read_output(out_csv: Path, scenario, dt_s: float, n_steps: int, where: str, said: str) -> Run:
