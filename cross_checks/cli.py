@@ -42,11 +42,24 @@ def build_parser() -> argparse.ArgumentParser:
         description="Validate rigid-body simulators: a NumPy reference of the GAMES103 course equations, "
                     "MuJoCo and PyBullet on identical free-body scenarios, against analytic or DOP853 references.",
         epilog="SCENARIO is a catalog name (see `rbcheck list`) or a path to a scenario TOML file. "
-               "Exit codes: 0 ok; 1 regression/disagreement or a diverged run; 2 bad input; 130 interrupted.",
+               "Exit codes: 0 ok; 1 regression/disagreement, a failed or a diverged run; 2 bad input; 130 interrupted. "
+               "Your own engines: --engine-file (docs/engines.md).",
     )
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_Parser)
 
-    sub.add_parser("list", help="list catalog scenarios and engine variants (with availability)")
+    ls = sub.add_parser("list", help="list catalog scenarios and engine variants (with availability)")
+    _add_engine_file_option(ls)
+
+    sh = sub.add_parser(
+        "show", help="the resolved scenario: body, initial state and forces exactly as every engine receives them",
+        description="Print the scenario with every alternative resolved (inertia 3x3 about the COM in body axes, "
+                    "orientation as a unit quaternion w x y z, angular velocity in WORLD axes, body points from the "
+                    "COM, velocity-decay factors per step at the run's dt). --json prints the exact JSON an "
+                    "engine-file command receives as {scenario_json} (docs/engines.md).")
+    sh.add_argument("scenario", metavar="SCENARIO")
+    sh.add_argument("--json", action="store_true", help="print the resolved scenario JSON instead of the text")
+    sh.add_argument("--dt", type=_positive_float, metavar="DT", help="resolve at this time step, s (default: the scenario's dt)")
+    sh.add_argument("--duration", type=_positive_float, metavar="T", help="simulated time, s (default: the scenario's)")
 
     r = sub.add_parser("run", help="run one scenario with one engine variant and write the trajectory CSV")
     r.add_argument("scenario", metavar="SCENARIO")
@@ -54,6 +67,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--dt", type=_positive_float, metavar="DT", help="time step, s (default: the scenario's dt)")
     r.add_argument("--duration", type=_positive_float, metavar="T", help="simulated time, s (default: the scenario's)")
     r.add_argument("--out", required=True, metavar="FILE.csv", help="trajectory CSV (sidecar FILE.json beside it)")
+    _add_engine_file_option(r)
 
     s = sub.add_parser(
         "sweep", help="run scenarios x engine variants x dt ladders; write results, convergence verdicts and the report",
@@ -71,6 +85,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--no-cache", action="store_true",
                    help="recompute every run instead of reusing cached results ($RBCHECK_CACHE_DIR or ~/.cache/rbcheck)")
     s.add_argument("--self-contained", action="store_true", help="embed the plots in the HTML pages (for CI artifacts)")
+    _add_engine_file_option(s)
     s.add_argument("--dask", metavar="ADDRESS",
                    help="run the jobs on a Dask cluster (scheduler address, e.g. tcp://host:8786) through "
                         "distributed's Client.get_executor(); needs the optional extra: pip install 'rbcheck[dask]'. "
@@ -111,6 +126,22 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _add_engine_file_option(p) -> None:
+    """``--engine-file FILE`` (repeatable): engines main() registers before the command runs."""
+    p.add_argument("--engine-file", action="append", metavar="FILE", default=[],
+                   help="add the engine of this engine file (TOML: name, version, [variants.X] order, description, "
+                        "command; docs/engines.md); repeatable. Its variants are NAME:VARIANT")
+
+
+def _use_engine_files(paths) -> None:
+    from .engines import load_engine_files
+    from .engines.external import EngineFileError
+    try:
+        load_engine_files(paths)
+    except EngineFileError as exc:
+        raise BadInput(str(exc)) from None
+
+
 def _positive_int(text: str) -> int:
     try:
         v = int(text)
@@ -130,11 +161,32 @@ def cmd_list(args) -> int:
         sc = load_scenario(name)
         print(f"  {name:<18} {sc.description}")
     print("\nEngine variants:")
+    shown = set()
     for v in all_variants():
+        if v.engine not in shown and not v.source.endswith("(rbcheck)"):
+            print(f"  {v.engine}: from {v.source}")
+        shown.add(v.engine)
         state = f"available ({v.engine} {v.version})" if v.available else f"UNAVAILABLE: {v.reason}"
         print(f"  {v.name:<26} {state}")
-        if v.description:
-            print(f"  {'':<26} {v.description}")
+        text = v.description + (f" (order {v.order:g})" if v.order is not None else "")
+        if text:
+            print(f"  {'':<26} {text.strip()}")
+    return EXIT_OK
+
+
+def cmd_show(args) -> int:
+    from .resolved import format_resolved, resolved_json, resolved_scenario
+    from .scenario import load_scenario
+
+    sc = load_scenario(args.scenario)
+    dt = args.dt if args.dt is not None else sc.dt_s
+    T = args.duration if args.duration is not None else sc.duration_s
+    if dt > T:
+        raise BadInput(f"--dt {dt:g}: must be <= the duration ({T:g} s)")
+    if args.json:
+        sys.stdout.write(resolved_json(sc, dt, T))
+    else:
+        print(format_resolved(resolved_scenario(sc, dt, T)))
     return EXIT_OK
 
 
@@ -151,7 +203,7 @@ def _check_out_path(out: str, suffix: str | None = ".csv", option: str = "--out"
 
 
 def cmd_run(args) -> int:
-    from .engines import EngineUnavailable, UnknownVariant, run_variant, split_variant
+    from .engines import EngineError, EngineUnavailable, UnknownVariant, run_variant, split_variant
     from .scenario import load_scenario
 
     try:
@@ -168,6 +220,9 @@ def cmd_run(args) -> int:
         traj = run_variant(sc, args.engine, dt, T)
     except EngineUnavailable as exc:
         raise BadInput(f"--engine {args.engine}: {exc}") from None
+    except EngineError as exc:  # the engine refused or failed: its own words, nothing written
+        print(f"rbcheck run: {sc.name} with {args.engine} failed: {exc}", file=sys.stderr)
+        return EXIT_FAIL
     traj.write(out)
     n = len(traj.t_s) - 1
     if traj.meta["status"] == "diverged":
@@ -182,7 +237,7 @@ def cmd_run(args) -> int:
 def _resolve_engines(specs):
     """``--engines`` values -> (variants to run, {variant: why skipped}) ; BadInput for unknown or
     explicitly requested unavailable ones."""
-    from .engines import STATIC_VARIANTS, UnknownVariant, all_variants, split_variant
+    from .engines import UnknownVariant, all_variants, engine_variants, split_variant
 
     infos = {v.name: v for v in all_variants()}
     if not specs:
@@ -191,7 +246,12 @@ def _resolve_engines(specs):
         return run, skipped
     out = []
     for spec in (x for s in specs for x in s.split(",") if x):
-        names = [f"{spec}:{v}" for v in STATIC_VARIANTS[spec]] if spec in STATIC_VARIANTS else [spec]
+        try:
+            names = [f"{spec}:{v}" for v in engine_variants(spec)] if ":" not in spec else [spec]
+        except UnknownVariant as exc:
+            raise BadInput(f"--engines: {exc}") from None
+        if not names:
+            raise BadInput(f"--engines {spec}: {infos[spec + ':*'].reason}")
         for n in names:
             try:
                 split_variant(n)
@@ -324,7 +384,7 @@ def cmd_bench(args) -> int:
     return bench_main(args.quick, args.json)
 
 
-COMMANDS = {"list": cmd_list, "run": cmd_run, "sweep": cmd_sweep, "report": cmd_report, "check": cmd_check,
+COMMANDS = {"list": cmd_list, "show": cmd_show, "run": cmd_run, "sweep": cmd_sweep, "report": cmd_report, "check": cmd_check,
             "compare": cmd_compare, "bench": cmd_bench}
 
 
@@ -337,6 +397,8 @@ def main(argv=None) -> int:
     except SystemExit as exc:  # usage errors (exit 2) and --help (exit 0) return instead of raising
         return int(exc.code or 0)
     try:
+        if getattr(args, "engine_file", None):
+            _use_engine_files(args.engine_file)
         return COMMANDS[args.command](args)
     except (ScenarioError, TrajectoryError, BadInput) as exc:
         print(f"rbcheck {args.command}: error: {exc}", file=sys.stderr)

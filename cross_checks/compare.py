@@ -12,6 +12,7 @@ Exit codes: 0 no regression; 1 regression (or missing rows, unless allowed); 2 u
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 from dataclasses import dataclass, field
@@ -207,7 +208,15 @@ def _compare_convergence(old_recs, new_recs, out: Comparison):
 
 def _versions(prov):
     v = prov.get("versions", prov)
-    return {k: str(val) for k, val in v.items() if k in ("rbcheck", "numpy", "scipy", "mujoco", "pybullet", "python")}
+    out = {k: str(val) for k, val in v.items() if k in ("rbcheck", "numpy", "scipy", "mujoco", "pybullet", "python")}
+    for name, e in (prov.get("engines") or {}).items():  # user engines: version, and an engine file's hash
+        if name not in out and isinstance(e, dict):
+            sha = e.get("engine_file_sha256")
+            progs = "".join(sorted((e.get("programs_sha256") or {}).values()))
+            progs = hashlib.sha256(progs.encode()).hexdigest()[:12] if progs else ""
+            out[f"engine {name}"] = (str(e.get("version", "")) + (f" (engine file {sha[:12]}" if sha else "")
+                                     + (f", programs {progs}" if progs else "") + (")" if sha else ""))
+    return out
 
 
 def _compare_versions(po, pn, out: Comparison):

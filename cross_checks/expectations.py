@@ -103,8 +103,13 @@ class Expectation:
 
 
 def nominal_order(variant: str) -> float | None:
-    """The nominal global order of ``ENGINE:VARIANT`` (None for a name this module does not know)."""
-    return NOMINAL_ORDER.get(variant)
+    """The nominal global order of ``ENGINE:VARIANT``: NOMINAL_ORDER, else the order a user engine
+    declares (engine file or entry-point adapter); None for a name nobody declares."""
+    p = NOMINAL_ORDER.get(variant)
+    if p is None:  # user engines declare their own order, which their verdicts then check
+        from .engines import declared_order
+        p = declared_order(variant)
+    return p
 
 
 def _isotropic(inertia_B) -> bool:

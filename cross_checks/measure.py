@@ -89,33 +89,44 @@ def cache_dir() -> Path:
 
 
 _FINGERPRINTS: dict = {}
+_BASE_FINGERPRINT: list = []
+
+
+def _base_fingerprint() -> bytes:
+    """SHA-256 of rbcheck's own files that determine a job's result (computed once per process)."""
+    if not _BASE_FINGERPRINT:
+        import reference_sim
+        here = Path(__file__).resolve().parent
+        files = sorted(Path(reference_sim.__file__).resolve().parent.glob("*.py"))
+        files += [here / n for n in ("measure.py", "references.py", "metrics.py", "scenario.py", "tolerances.py",
+                                     "expectations.py", "trajectory.py", "resolved.py")]
+        files += [here / "engines" / "__init__.py", here / "engines" / "base.py"]
+        h = hashlib.sha256()
+        for f in files:
+            h.update(f.name.encode())
+            try:
+                h.update(f.read_bytes())
+            except OSError:
+                h.update(b"<missing>")
+        _BASE_FINGERPRINT.append(h.digest())
+    return _BASE_FINGERPRINT[0]
 
 
 def code_fingerprint(engine: str) -> str:
-    """SHA-256 (16 hex digits) of the source files that determine a job's result for ``engine``:
-    reference_sim, the engine registry and adapter, this module, references, metrics, scenario parsing,
-    tolerances, expectations (QUANTITIES) and trajectories."""
-    if engine in _FINGERPRINTS:
-        return _FINGERPRINTS[engine]
-    import reference_sim
-    here = Path(__file__).resolve().parent
-    files = sorted(Path(reference_sim.__file__).resolve().parent.glob("*.py"))
-    files += [here / n for n in ("measure.py", "references.py", "metrics.py", "scenario.py", "tolerances.py",
-                                 "expectations.py", "trajectory.py")]
-    eng = here / "engines"
-    files += [eng / "__init__.py", eng / "base.py"]
-    from .engines import ENGINE_MODULES
-    mod_file = eng / (ENGINE_MODULES[engine].rsplit(".", 1)[1] + ".py")
-    files.append(mod_file)
-    h = hashlib.sha256()
-    for f in files:
-        h.update(f.name.encode())
-        try:
-            h.update(f.read_bytes())
-        except OSError:
-            h.update(b"<missing>")
-    _FINGERPRINTS[engine] = h.hexdigest()[:16]
-    return _FINGERPRINTS[engine]
+    """SHA-256 (16 hex digits) of what determines a job's result for ``engine`` besides its inputs:
+    reference_sim, this module, references, metrics, scenario parsing, the resolved scenario, tolerances,
+    expectations (QUANTITIES), trajectories, the engine registry, and the adapter's own
+    ``cache_token()`` (its module; for an engine file, the file and the programs it names, as loaded).
+    Memoised per adapter instance, so an engine file re-registered under the same name (a rebuilt
+    program) gets its own fingerprint."""
+    from .engines import get_adapter
+    adapter = get_adapter(engine)
+    key = (engine, id(adapter))
+    if key not in _FINGERPRINTS:
+        h = hashlib.sha256(_base_fingerprint())
+        h.update(str(adapter.cache_token()).encode())
+        _FINGERPRINTS[key] = (adapter, h.hexdigest()[:16])  # the adapter is kept so its id stays unique
+    return _FINGERPRINTS[key][1]
 
 
 def _job_key(scenario, variant, dt, engine_version):
@@ -247,6 +258,10 @@ def _nan_row(job, scenario, status, message, label, version):
     return row
 
 
+class _NoOneStep(Exception):
+    """The engine has no one-step mode (EngineAdapter.has_one_step is False)."""
+
+
 def _canonical_to(q, q_ref):
     """q or −q, whichever is in the hemisphere of q_ref (row-wise), so components can be plotted."""
     s = np.sign(np.sum(q * q_ref, axis=-1, keepdims=True))
@@ -332,6 +347,8 @@ def run_job(job: Job, scenario, ref_path: str, cache_root: str | None = None, us
     y0 = y_ref_all[grid_idx[starts]]
     y1_ref = y_ref_all[grid_idx[starts + 1]]
     try:
+        if not adapter.has_one_step:  # e.g. an engine file: whole runs only; the local errors stay empty
+            raise _NoOneStep
         with np.errstate(all="ignore"):
             y1 = np.asarray(adapter.one_step(scenario, variant, job.dt_s, y0), dtype=float)
         lerr = M.state_errors(y1, y1_ref)
@@ -340,6 +357,8 @@ def run_job(job: Job, scenario, ref_path: str, cache_root: str | None = None, us
             row[f"{COLUMN_STEM[q]}_local_err"] = float(np.max(e)) if np.all(np.isfinite(e)) else math.nan
     except KeyboardInterrupt:
         raise
+    except _NoOneStep:
+        pass
     except Exception as exc:  # noqa: BLE001 - no one-step mode: leave the local errors empty
         row["message"] = (row["message"] + "; " if row["message"] else "") + f"one-step mode failed: {exc}"
 

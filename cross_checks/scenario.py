@@ -309,7 +309,9 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
     else:
         w0 = r.vector(ini, "angular_velocity", "initial.angular_velocity", 3, default=[0.0, 0.0, 0.0])
 
-    # forces
+    # forces. Body points (spring attach, force point) are given from the body origin; for a body made
+    # of particles that origin is the particles' coordinate origin, so they are shifted to the COM.
+    shift_B = np.zeros(3) if com_offset is None else np.asarray(com_offset, dtype=float)
     fr = r.table(raw, "forces", required=False)
     r.check_keys(fr, _FORCES, "forces")
     gravity = r.vector(fr, "gravity", "forces.gravity", 3, default=[0.0, 0.0, 0.0])
@@ -326,7 +328,7 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
         r.check_keys(s, _SPRING, where)
         springs.append(Spring(
             anchor_W=r.vector(s, "anchor", f"{where}.anchor", 3, required=True),
-            attach_B=r.vector(s, "attach", f"{where}.attach", 3, default=[0.0, 0.0, 0.0]),
+            attach_B=r.vector(s, "attach", f"{where}.attach", 3, default=[0.0, 0.0, 0.0]) - shift_B,
             stiffness_N_per_m=r.number(s, "stiffness", f"{where}.stiffness", required=True, nonneg=True),
             rest_length_m=r.number(s, "rest_length", f"{where}.rest_length", default=0.0, nonneg=True),
         ))
@@ -336,7 +338,7 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
         r.check_keys(p, _POINT, where)
         points.append(PointForce(
             force=r.vector(p, "force", f"{where}.force", 3, required=True),
-            point_B=r.vector(p, "point", f"{where}.point", 3, default=[0.0, 0.0, 0.0]),
+            point_B=r.vector(p, "point", f"{where}.point", 3, default=[0.0, 0.0, 0.0]) - shift_B,
             frame=r.string(p, "frame", f"{where}.frame", default="world", choices=FRAMES),
         ))
     torques = []

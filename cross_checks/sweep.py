@@ -216,15 +216,19 @@ class _RefTask:
 
 
 def _run_job_item(item):
-    """``item`` = (job, scenario, ref_path, cache_root, use_cache, marker): one small pickle per job.
+    """``item`` = (job, scenario, ref_path, cache_root, use_cache, user_engines, marker): one small
+    pickle per job.
 
-    ``marker`` (a file path) exists while the job runs, so after a worker crash the parent knows
-    which jobs were in flight. Any error of the harness itself becomes a failed row, so one bad job
-    never stops the sweep.
+    ``user_engines`` are the parent's engine-file adapters (a worker that was not forked from the
+    parent, e.g. on Dask, registers them here). ``marker`` (a file path) exists while the job runs,
+    so after a worker crash the parent knows which jobs were in flight. Any error of the harness
+    itself becomes a failed row, so one bad job never stops the sweep.
     """
-    job, scenario, ref_path, cache_root, use_cache, marker = item
+    job, scenario, ref_path, cache_root, use_cache, user_engines, marker = item
     Path(marker).touch()
     try:
+        from .engines import adopt_user_engines
+        adopt_user_engines(user_engines)
         return run_job(job, scenario, ref_path, cache_root, use_cache)
     except (KeyboardInterrupt, SystemExit):
         raise
@@ -363,7 +367,20 @@ def _cpu_model() -> str:
     return platform.processor()
 
 
-def provenance(started_at: str) -> dict:
+def _variant_info(name: str, info) -> dict:
+    """summary.json's record of a variant: description, version, declared order, whether it has a
+    one-step mode, and where its engine comes from (an engine file with its SHA-256)."""
+    from .engines import engine_provenance, has_one_step
+    out = {"name": name, "description": info.description if info else "", "version": info.version if info else "",
+           "declared_order": info.order if info else None, "one_step": has_one_step(name)}
+    try:
+        out.update({k: v for k, v in engine_provenance(name.split(":", 1)[0]).items() if k != "version"})
+    except Exception:  # noqa: BLE001 - an engine that vanished from the registry keeps its basic record
+        pass
+    return out
+
+
+def provenance(started_at: str, variants=()) -> dict:
     import numpy
     import scipy
 
@@ -379,7 +396,22 @@ def provenance(started_at: str) -> dict:
         "machine": f"{platform.machine()}, {os.cpu_count()} CPUs, {_cpu_model()}",
         "git_commit": _git_commit(), "started_at": started_at,
         "command": "rbcheck " + " ".join(sys.argv[1:]) if sys.argv and sys.argv[0].endswith("rbcheck") else "",
+        "engines": _engines_provenance(variants),
     }
+
+
+def _engines_provenance(variants) -> dict:
+    """Version and origin of every engine the sweep ran (an engine file's SHA-256 included)."""
+    from .engines import engine_provenance
+    out = {}
+    for v in variants:
+        engine = v.split(":", 1)[0]
+        if engine not in out:
+            try:
+                out[engine] = engine_provenance(engine)
+            except Exception:  # noqa: BLE001
+                out[engine] = {}
+    return out
 
 
 def _scenario_info(sc, label, scales):
@@ -505,8 +537,10 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
             bar.set_postfix_str(f"{job.scenario} {job.variant}", refresh=False)
 
         (work / "inflight").mkdir()
+        from .engines import user_engines
+        extra_engines = user_engines()
         items = [(j, scenarios[j.scenario_index], ref_paths[j.scenario_index], cache_root, use_cache,
-                  str(work / "inflight" / str(k))) for k, j in enumerate(todo)]
+                  extra_engines, str(work / "inflight" / str(k))) for k, j in enumerate(todo)]
 
         def crashed(item):
             Path(item[-1]).unlink(missing_ok=True)
@@ -526,6 +560,7 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
         atomic_write_text(staging / "results.csv", results_csv_text(rows))
 
         by_key = {(j.scenario, j.variant, j.dt_s): rec for j, rec in records.items()}
+        from .engines import has_one_step
         convergence, local = [], []
         scenario_info = []
         (staging / "series").mkdir()
@@ -537,7 +572,8 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
             for v in variants:
                 vrows = [r for r in rows if r["scenario"] == sc.name and r["engine"] == v]
                 convergence += _convergence_records(sc, v, vrows, scales, "free_running", ref_amp.get(i))
-                local += _convergence_records(sc, v, vrows, scales, "one_step")
+                if has_one_step(v):  # engines without a one-step mode have no local errors to fit
+                    local += _convergence_records(sc, v, vrows, scales, "one_step")
             # series for the plots at the default Δt
             arrays = {}
             if i not in ref_fail:
@@ -553,17 +589,16 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
                     arrays[f"{v}::{key}"] = np.asarray(a, dtype=np.float32)
             save_npz_atomic(staging / "series" / f"{sc.name}.npz", arrays)
         clear_reference_memo()
+        from .engines import all_variants
 
         agreement = _agreement_records(scenarios, by_key)
-        from .engines import all_variants
         infos = {v.name: v for v in all_variants()}
         n_cached = sum(1 for rec in records.values() if rec["row"].get("cached"))
         summary = {
             "schema_version": SCHEMA_VERSION,
-            "provenance": provenance(started),
+            "provenance": provenance(started, variants),
             "scenarios": scenario_info,
-            "variants": [{"name": v, "description": infos[v].description if v in infos else "",
-                          "version": infos[v].version if v in infos else ""} for v in variants],
+            "variants": [_variant_info(v, infos.get(v)) for v in variants],
             "skipped_variants": [{"name": k, "reason": r} for k, r in (skipped or {}).items()],
             "convergence": convergence,
             "local_convergence": local,

@@ -93,3 +93,10 @@ CHECK_UNIFORM_DT_REL = 2e-3
 #: `rbcheck check`: the first row counts as the scenario's initial state within this (relative to
 #: max(1, |state|)): 6 printed decimals, as above.
 CHECK_INITIAL_STATE_REL = 1e-5
+
+# --- Bring your own engine: any simulator in sweeps, baselines, reports and pytest gates ---
+
+#: Engine files: a first row farther than this from the scenario's initial state (relative to
+#: max(1, |state|); rad for the orientation) gets a note in the run's message (the engine may misread
+#: the resolved JSON). 1e-5: a CSV printed with 6 significant digits, as CHECK_INITIAL_STATE_REL.
+ENGINE_FILE_INITIAL_STATE_REL = 1e-5

@@ -131,7 +131,32 @@ class Trajectory:
         return cls(t, y, meta)
 
 
-def read_columns(csv_path, *, require: tuple = QUANTITY_GROUPS):
+def _fast_table(text: str):
+    """``(header cells, (N, ncol) float array)`` when the CSV is plain — no quotes or NULs, every
+    non-blank line with the header's number of fields, every field a number for ``float()`` — else
+    None. The same strings go through the same ``float()`` as the general path, so where this
+    succeeds the values are identical; anything else is left to the general path and its messages.
+    (An engine's 40 000-row trajectory: ~10x faster than csv.reader and one float() per cell.)"""
+    if '"' in text or "\x00" in text:
+        return None
+    lines = text.split("\n")
+    if not all(map(str.strip, lines)):  # (C-speed checks: this runs on every row of every engine run)
+        lines = [ln for ln in lines if ln.strip()]
+    if len(lines) < 2:
+        return None
+    ncol = lines[0].count(",") + 1
+    body = lines[1:]
+    counts = list(map(str.count, body, [","] * len(body)))
+    if min(counts) != ncol - 1 or max(counts) != ncol - 1:
+        return None
+    try:
+        values = np.array(list(map(float, ",".join(body).split(","))), dtype=float)
+    except ValueError:
+        return None
+    return lines[0].split(","), values.reshape(len(body), ncol)
+
+
+def read_columns(csv_path, *, require: tuple = QUANTITY_GROUPS, _fast: bool = True):
     """Parse a trajectory CSV by column NAME.
 
     The header is required; names are matched case-sensitively after stripping spaces; columns may
@@ -153,7 +178,14 @@ def read_columns(csv_path, *, require: tuple = QUANTITY_GROUPS):
         text = Path(csv_path).read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as exc:
         raise TrajectoryError(f"{name}: cannot read: {exc}") from None
-    rows = [r for r in csv.reader(io.StringIO(text)) if any(c.strip() for c in r)]
+    fast = _fast_table(text) if _fast else None  # (header cells, (N, ncol) floats) of a plain numeric CSV
+    if fast is not None:
+        rows = [fast[0]]
+    else:
+        try:
+            rows = [r for r in csv.reader(io.StringIO(text)) if any(c.strip() for c in r)]
+        except csv.Error as exc:
+            raise TrajectoryError(f"{name}: cannot parse as CSV: {exc}") from None
     if not rows:
         raise TrajectoryError(f"{name}: header: file is empty")
     header = [h.strip() for h in rows[0]]
@@ -181,9 +213,14 @@ def read_columns(csv_path, *, require: tuple = QUANTITY_GROUPS):
         raise TrajectoryError(f"{name}: header: no state columns (expected {','.join(COLUMNS)}, by name, any order)")
     wanted = [("t", index["t"])] + [(c, index[c]) for g in present for c in _GROUP_COLUMNS[g]]
     ncol = len(header)
-    data = np.full((len(rows) - 1, len(COLUMNS)), np.nan)
     pos = {c: COLUMNS.index(c) for c in COLUMNS}
-    for k, row in enumerate(rows[1:]):
+    if fast is not None:
+        data = np.full((len(fast[1]), len(COLUMNS)), np.nan)
+        for c, i in wanted:
+            data[:, pos[c]] = fast[1][:, i]
+    else:
+        data = np.full((len(rows) - 1, len(COLUMNS)), np.nan)
+    for k, row in enumerate(rows[1:] if fast is None else ()):
         line = k + 2
         if len(row) != ncol:
             raise TrajectoryError(f"{name}: line {line}: expected {ncol} values (as in the header), got {len(row)}")

@@ -58,6 +58,11 @@ class Results:
     def variants(self) -> list:
         return [v["name"] for v in self.summary.get("variants", [])]
 
+    def has_one_step(self, variant) -> bool:
+        """Whether the variant's engine has a one-step mode (summary.json ``variants[].one_step``;
+        results written before that key existed: True)."""
+        return next((v.get("one_step", True) for v in self.summary.get("variants", []) if v["name"] == variant), True)
+
     def scenario(self, name) -> dict:
         return next(s for s in self.scenarios if s["name"] == name)
 

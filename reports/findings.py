@@ -205,7 +205,15 @@ def findings(res) -> list:
                                         f"relative final-state difference at the default Δt): {rs[0]['reason']}.",
                                 None, b))
 
-    # 7. variants not run
+    # 7. variants without a one-step mode (engine-file engines run whole trajectories only)
+    whole_runs_only = [v for v in res.variants if not res.has_one_step(v)]
+    if whole_runs_only:
+        info.append(Finding("info", f"{_and(whole_runs_only)} {'has' if len(whole_runs_only) == 1 else 'have'} no "
+                                    "one-step mode (an engine file runs whole trajectories only): local (one-step) "
+                                    "errors are not measured for them; their verdicts come from the free-running "
+                                    "errors alone.", None, None))
+
+    # 8. variants not run
     for s in res.summary.get("skipped_variants", []):
         info.append(Finding("info", f"{s['name']} was not run: {s['reason']}.", None, s["name"]))
     return bad + explained + info

@@ -29,6 +29,7 @@ _FIG_CAPTIONS = {
              "order-p scheme shows slope p + 1.",
     "work": "Work-precision: final error against the wall time of each run of the ladder.",
 }
+_NO_ONE_STEP = "no one-step mode: an engine file runs whole trajectories only, so local errors are not measured"
 _FIG_TITLES = {"trajectories": "Trajectories", "errors": "Error vs time", "conservation": "Conservation",
                "convergence": "Convergence (free-running)", "local": "Local error (one-step mode)",
                "work": "Work-precision"}
@@ -89,6 +90,11 @@ def _provenance(res):
             ("pybullet", "PyBullet"), ("python", "Python"), ("platform", "platform"), ("machine", "machine"),
             ("git_commit", "commit"), ("started_at", "started (UTC)"), ("command", "command")]
     out = [(label, str(p.get(k, "")) or "–") for k, label in keys]
+    for name, e in (p.get("engines") or {}).items():  # engines from outside rbcheck: where from, which file
+        if e.get("source", "").endswith("(rbcheck)"):
+            continue
+        sha = f", SHA-256 {e['engine_file_sha256'][:16]}…" if e.get("engine_file_sha256") else ""
+        out.append((f"engine {name}", f"{e.get('version') or '–'} — {e.get('source', '')}{sha}"))
     if run:
         out.append(("runs", f"{run.get('runs')} ({run.get('cached_runs')} from cache, {run.get('diverged_runs')} "
                             f"diverged, {run.get('failed_runs')} failed) on {run.get('jobs')} worker(s)"))
@@ -174,7 +180,8 @@ def _scenario_view(res, s, figs, all_findings, self_contained):
             "local_orders": [{"text": _order_text(lrecs.get(q)),
                               "cls": "good" if lrecs.get(q) and lrecs[q]["matches_expectation"] else
                               ("bad" if lrecs.get(q) and lrecs[q]["matches_expectation"] is False else "missing"),
-                              "title": lrecs[q]["assessment"] if q in lrecs else ""} for q in QUANTITIES],
+                              "title": lrecs[q]["assessment"] if q in lrecs else ""} for q in QUANTITIES]
+            if res.has_one_step(v) else [{"text": "n/a", "cls": "missing", "title": _NO_ONE_STEP} for _ in QUANTITIES],
         })
     ladder = []
     for r in res.rows_for(sc):
@@ -184,6 +191,10 @@ def _scenario_view(res, s, figs, all_findings, self_contained):
                        "errors": [fmt(r[f"{COLUMN_STEM[q]}_err_final"]) for q in QUANTITIES],
                        "local": [fmt(r[f"{COLUMN_STEM[q]}_local_err"]) for q in QUANTITIES],
                        "wall": fmt(r["wall_s"], "s"), "message": r["message"]})
+    no_local = [v for v in res.variants if not res.has_one_step(v)]
+    captions = dict(_FIG_CAPTIONS)
+    if no_local:
+        captions["local"] += f" Not shown ({_NO_ONE_STEP}): {', '.join(no_local)}."
     return {
         "name": sc, "description": s["description"], "source": s["source"], "hash": s["content_hash"],
         "duration": fmt_dt(s["duration_s"]), "dt": fmt_dt(s["dt_s"]),
@@ -194,7 +205,7 @@ def _scenario_view(res, s, figs, all_findings, self_contained):
         "quantity_names": [LABELS[q] for q in QUANTITIES],
         "table": table, "ladder_rows": ladder,
         "figures": [{"src": _img_src(res, fname, self_contained), "title": _FIG_TITLES[kind],
-                     "caption": _FIG_CAPTIONS[kind], "alt": f"{sc}: {_FIG_TITLES[kind]}"} for kind, fname in figs],
+                     "caption": captions[kind], "alt": f"{sc}: {_FIG_TITLES[kind]}"} for kind, fname in figs],
     }
 
 

@@ -1,33 +1,36 @@
-"""Engine registry: ``ENGINE:VARIANT`` names, availability, and running a scenario into a Trajectory."""
+"""Engine registry: ``ENGINE:VARIANT`` names, availability, and running a scenario into a Trajectory.
+
+One way in: every engine is an adapter class (:class:`~cross_checks.engines.base.EngineAdapter`)
+registered under the entry-point group ``rbcheck.engines`` — rbcheck's own reference, MuJoCo and
+PyBullet adapters included (see pyproject.toml) — or an engine file given with ``--engine-file``
+(:mod:`cross_checks.engines.external`), which becomes an adapter of the same interface.
+
+An entry point that cannot be loaded, or whose ``version()`` raises (e.g. its engine is not
+installed), is listed as unavailable with the reason; it never stops rbcheck.
+"""
 from __future__ import annotations
 
-import importlib
+import contextlib
+import re
 import time
 from dataclasses import dataclass
 
 from ..trajectory import Trajectory
+from .base import EngineAdapter, EngineError, Variant
 
-__all__ = ["ENGINE_MODULES", "VariantInfo", "all_variants", "available_variants", "get_adapter",
-           "split_variant", "run_variant", "EngineUnavailable", "UnknownVariant"]
+__all__ = ["ENTRY_POINT_GROUP", "VariantInfo", "EngineEntry", "all_variants", "available_variants", "get_adapter",
+           "split_variant", "run_variant", "engine_entries", "engine_variants", "declared_order", "has_one_step",
+           "load_engine_files", "engine_files_registered", "register_adapter", "user_engines", "adopt_user_engines", "engine_provenance",
+           "reset_registry", "EngineUnavailable", "UnknownVariant", "EngineAdapter", "EngineError", "Variant"]
 
-#: Engine name -> adapter module. Order is the order of `rbcheck list`.
-ENGINE_MODULES = {
-    "reference": "cross_checks.engines.reference",
-    "mujoco": "cross_checks.engines.mujoco_engine",
-    "pybullet": "cross_checks.engines.pybullet_engine",
-}
-
-#: Variants each engine offers, listed even when the engine cannot be imported.
-STATIC_VARIANTS = {
-    "reference": ["course", "course_gyro", "expmap_gyro", "explicit_euler", "implicit_euler", "midpoint",
-                  "leapfrog", "rk4"],
-    "mujoco": ["euler", "rk4", "implicit", "implicitfast"],
-    "pybullet": ["multibody", "maximal"],
-}
+ENTRY_POINT_GROUP = "rbcheck.engines"
+#: rbcheck's own engines, in the order of `rbcheck list`; other engines follow by name.
+BUILTIN_ENGINES = ("reference", "mujoco", "pybullet")
+NAME_RE = re.compile(r"^[a-z0-9_]+$")
 
 
 class EngineUnavailable(RuntimeError):
-    """The engine's Python package cannot be imported here."""
+    """The engine cannot run here (its package cannot be imported, or its adapter cannot be loaded)."""
 
 
 class UnknownVariant(ValueError):
@@ -36,61 +39,265 @@ class UnknownVariant(ValueError):
 
 @dataclass(frozen=True)
 class VariantInfo:
-    name: str          # ENGINE:VARIANT
+    name: str          # ENGINE:VARIANT ("ENGINE:*" for an engine whose adapter cannot be loaded)
     engine: str
     variant: str
     available: bool
     reason: str        # why unavailable ("" when available)
     description: str
     version: str
+    order: float | None = None   # declared global order
+    source: str = ""             # where the engine comes from (entry point or engine file)
 
 
-_adapters: dict = {}
-_failures: dict = {}
+@dataclass
+class EngineEntry:
+    """A registered engine: its adapter (None when it could not be loaded, ``load_error`` says why)."""
+
+    name: str
+    adapter: EngineAdapter | None
+    source: str
+    load_error: str = ""
+    builtin: bool = False
 
 
-def get_adapter(engine: str):
-    """The adapter module of an engine; raises EngineUnavailable (with the import error) or UnknownVariant."""
-    if engine not in ENGINE_MODULES:
-        raise UnknownVariant(f"unknown engine {engine!r}; engines: {', '.join(ENGINE_MODULES)}")
-    if engine in _adapters:
-        return _adapters[engine]
+_entries: dict | None = None      # name -> EngineEntry (entry points), built on first use
+_user: dict = {}                   # name -> EngineEntry (engine files / register_adapter), in order
+_versions: dict = {}               # name -> version string (available engines)
+_failures: dict = {}               # name -> why unavailable
+
+
+def _validate_adapter(adapter, name: str) -> str:
+    """"" when ``adapter`` fulfils the interface under ``name``, else the reason."""
+    if getattr(adapter, "name", None) != name:
+        return f"its adapter's name is {getattr(adapter, 'name', None)!r}, not {name!r}"
+    variants = getattr(adapter, "variants", None)
+    if not isinstance(variants, dict) or not variants:
+        return "its adapter declares no variants (variants must be a non-empty dict of Variant)"
+    for v, spec in variants.items():
+        if not isinstance(v, str) or not NAME_RE.match(v):
+            return f"variant name {v!r} must match [a-z0-9_]+"
+        if not isinstance(spec, Variant):
+            return f"variants[{v!r}] must be a Variant(order, description), got {type(spec).__name__}"
+    for meth in ("version", "simulate"):
+        if not callable(getattr(adapter, meth, None)):
+            return f"its adapter has no {meth}() method"
+    return ""
+
+
+def _load_entry_point(ep, dist_name: str) -> EngineEntry:
+    entry = EngineEntry(ep.name, None, f"entry point {ep.name} = {ep.value} ({dist_name})",
+                        builtin=(dist_name == "rbcheck" and ep.name in BUILTIN_ENGINES))
+    if not NAME_RE.match(ep.name):
+        entry.load_error = f"entry point name {ep.name!r} must match [a-z0-9_]+"
+        return entry
+    try:
+        adapter = ep.load()()
+    except Exception as exc:  # noqa: BLE001 - a broken plug-in is listed as unavailable, never fatal
+        entry.load_error = f"cannot load {ep.value}: {type(exc).__name__}: {exc}"
+        return entry
+    why = _validate_adapter(adapter, ep.name)
+    if why:
+        entry.load_error = f"{ep.value}: {why}"
+    else:
+        entry.adapter = adapter
+    return entry
+
+
+def _load_entry_points() -> dict:
+    """Every entry point of the group, loaded; a name registered twice keeps rbcheck's own engine (else
+    the first found) and lists the other as unavailable under ``NAME (DISTRIBUTION)``."""
+    from importlib.metadata import entry_points
+    found = {}
+    for ep in entry_points(group=ENTRY_POINT_GROUP):
+        dist = getattr(ep, "dist", None)
+        dist_name = dist.metadata["Name"] if dist is not None else "?"
+        entry = _load_entry_point(ep, dist_name)
+        prev = found.get(ep.name)
+        if prev is not None:
+            if prev.source == entry.source:
+                continue
+            if entry.builtin and not prev.builtin:
+                prev, entry = entry, prev
+            found[ep.name] = prev
+            loser = entry.source.rsplit("(", 1)[-1].rstrip(")")
+            found[f"{ep.name} ({loser})"] = EngineEntry(
+                ep.name, None, entry.source, f"the engine name {ep.name!r} is already registered by {prev.source}")
+            continue
+        found[ep.name] = entry
+    order = {n: i for i, n in enumerate(BUILTIN_ENGINES)}
+    return dict(sorted(found.items(), key=lambda kv: (order.get(kv[0], len(order)), kv[0])))
+
+
+def _registry() -> dict:
+    global _entries
+    if _entries is None:
+        _entries = _load_entry_points()
+        if "reference" not in _entries:
+            raise EngineUnavailable(
+                f"no 'reference' engine under the entry-point group {ENTRY_POINT_GROUP!r}: rbcheck's installation "
+                "metadata is missing or stale; reinstall it (pip install -e .)")
+    return _entries
+
+
+def engine_entries() -> list:
+    """Every registered engine (entry points first, then engine files), including unloadable ones."""
+    return list(_registry().values()) + list(_user.values())
+
+
+def _entry(engine: str) -> EngineEntry:
+    if engine in _user:
+        return _user[engine]
+    reg = _registry()
+    if engine in reg:
+        return reg[engine]
+    names = [e.name for e in engine_entries()]
+    raise UnknownVariant(f"unknown engine {engine!r}; engines: {', '.join(dict.fromkeys(names))}"
+                         + ("" if _user else " (add your own with --engine-file FILE)"))
+
+
+def reset_registry() -> None:
+    """Forget every engine: entry points are scanned again on next use, engine files dropped."""
+    global _entries
+    _entries = None
+    _user.clear()
+    _versions.clear()
+    _failures.clear()
+
+
+def register_adapter(adapter: EngineAdapter, source: str) -> EngineEntry:
+    """Add an adapter (an engine file's) to this process's registry. Raises ValueError when its name is
+    taken by another engine or the adapter does not fulfil the interface."""
+    name = getattr(adapter, "name", "")
+    if name in _registry():
+        raise ValueError(f"name {name!r} is already an engine ({_registry()[name].source}); choose another name")
+    if name in _user:
+        prev = _user[name]
+        if prev.source == source and getattr(prev.adapter, "same_as", lambda _: False)(adapter):
+            return prev
+        raise ValueError(f"name {name!r} is already registered by {prev.source}; choose another name")
+    why = _validate_adapter(adapter, name)
+    if why:
+        raise ValueError(why)
+    entry = EngineEntry(name, adapter, source)
+    _user[name] = entry
+    return entry
+
+
+def load_engine_files(paths) -> list:
+    """Register the engine files ``paths`` (validated first, all or none). Raises
+    :class:`~cross_checks.engines.external.EngineFileError` (``FILE: FIELD: REASON``)."""
+    from .external import EngineFileError, load_engine_file
+    adapters = [load_engine_file(p) for p in paths or []]
+    out = []
+    for a in adapters:
+        try:
+            out.append(register_adapter(a, a.source))
+        except ValueError as exc:
+            raise EngineFileError(a.path, "name", str(exc)) from None
+    return out
+
+
+@contextlib.contextmanager
+def engine_files_registered(paths):
+    """Register the engine files ``paths`` for the duration of the block (engines registered before
+    it stay): how assert_engine keeps one test's engine files from leaking into the next."""
+    before = set(_user)
+    try:
+        yield load_engine_files(paths)
+    finally:
+        for name in set(_user) - before:
+            del _user[name]
+            _versions.pop(name, None)
+            _failures.pop(name, None)
+
+
+def user_engines() -> list:
+    """The engine-file adapters registered in this process (picklable), for worker processes."""
+    return [e.adapter for e in _user.values()]
+
+
+def adopt_user_engines(adapters) -> None:
+    """Register in this (worker) process the engines :func:`user_engines` listed in the parent."""
+    for a in adapters or ():
+        if a.name not in _user:
+            register_adapter(a, a.source)
+
+
+def get_adapter(engine: str) -> EngineAdapter:
+    """The adapter of an engine; raises EngineUnavailable (with the reason) or UnknownVariant."""
+    e = _entry(engine)
+    if e.adapter is None:
+        raise EngineUnavailable(f"{engine}: {e.load_error}")
     if engine in _failures:
         raise EngineUnavailable(_failures[engine])
-    try:
-        mod = importlib.import_module(ENGINE_MODULES[engine])
-        mod.version()
-    except ImportError as exc:
-        _failures[engine] = f"{engine} cannot be imported: {exc}"
-        raise EngineUnavailable(_failures[engine]) from None
-    _adapters[engine] = mod
-    return mod
+    if engine not in _versions:
+        try:
+            _versions[engine] = str(e.adapter.version())
+        except ImportError as exc:
+            _failures[engine] = f"{engine} cannot be imported: {exc}"
+            raise EngineUnavailable(_failures[engine]) from None
+        except Exception as exc:  # noqa: BLE001 - a plug-in's version() may fail in any way
+            _failures[engine] = f"{engine}: version() failed: {type(exc).__name__}: {exc}"
+            raise EngineUnavailable(_failures[engine]) from None
+    return e.adapter
+
+
+def engine_variants(engine: str) -> list:
+    """Variant names an engine offers ([] when its adapter cannot be loaded)."""
+    e = _entry(engine)
+    return list(e.adapter.variants) if e.adapter is not None else []
 
 
 def split_variant(name: str):
-    """``"mujoco:rk4"`` -> ``("mujoco", "rk4")``, validated against the known variants."""
+    """``"mujoco:rk4"`` -> ``("mujoco", "rk4")``, validated against the registered variants."""
     if ":" not in name:
         raise UnknownVariant(f"engine variant must be ENGINE:VARIANT (e.g. reference:course), got {name!r}")
     engine, variant = name.split(":", 1)
-    if engine not in STATIC_VARIANTS:
-        raise UnknownVariant(f"unknown engine {engine!r} in {name!r}; engines: {', '.join(STATIC_VARIANTS)}")
-    if variant not in STATIC_VARIANTS[engine]:
+    e = _entry(engine)
+    if e.adapter is None:
+        raise UnknownVariant(f"engine {engine} cannot be loaded: {e.load_error}")
+    if variant not in e.adapter.variants:
         raise UnknownVariant(f"unknown variant {variant!r} of {engine}; variants: "
-                             + ", ".join(f"{engine}:{v}" for v in STATIC_VARIANTS[engine]))
+                             + ", ".join(f"{engine}:{v}" for v in e.adapter.variants))
     return engine, variant
 
 
+def declared_order(name: str) -> float | None:
+    """The order an engine declares for ``ENGINE:VARIANT`` (None when unknown)."""
+    engine, _, variant = name.partition(":")
+    try:
+        e = _entry(engine)
+    except (UnknownVariant, EngineUnavailable):
+        return None
+    spec = e.adapter.variants.get(variant) if e.adapter is not None else None
+    return spec.order if spec is not None else None
+
+
+def has_one_step(name: str) -> bool:
+    """Whether the engine of ``ENGINE[:VARIANT]`` has a one-step (local error) mode."""
+    try:
+        e = _entry(name.split(":", 1)[0])
+    except (UnknownVariant, EngineUnavailable):
+        return False
+    return bool(e.adapter is not None and e.adapter.has_one_step)
+
+
 def all_variants() -> list[VariantInfo]:
-    """Every ENGINE:VARIANT with availability and a one-line description."""
+    """Every ENGINE:VARIANT with availability, declared order and a one-line description."""
     out = []
-    for engine, variants in STATIC_VARIANTS.items():
+    for e in engine_entries():
+        if e.adapter is None:
+            out.append(VariantInfo(f"{e.name}:*", e.name, "*", False, f"{e.name}: {e.load_error}", "", "",
+                                   None, e.source))
+            continue
         try:
-            mod = get_adapter(engine)
-            ok, reason, ver, desc = True, "", mod.version(), mod.VARIANTS
+            get_adapter(e.name)
+            ok, reason, ver = True, "", _versions[e.name]
         except EngineUnavailable as exc:
-            ok, reason, ver, desc = False, str(exc), "", {}
-        for v in variants:
-            out.append(VariantInfo(f"{engine}:{v}", engine, v, ok, reason, desc.get(v, ""), ver))
+            ok, reason, ver = False, str(exc), ""
+        for v, spec in e.adapter.variants.items():
+            out.append(VariantInfo(f"{e.name}:{v}", e.name, v, ok, reason, spec.description, ver, spec.order, e.source))
     return out
 
 
@@ -98,21 +305,32 @@ def available_variants() -> list[str]:
     return [v.name for v in all_variants() if v.available]
 
 
+def engine_provenance(engine: str) -> dict:
+    """What identifies an engine's results: version, where it comes from, and for an engine file its
+    SHA-256 (and that of the programs its commands name)."""
+    e = _entry(engine)
+    info = {"version": _versions.get(engine, ""), "source": e.source}
+    extra = getattr(e.adapter, "provenance", None)
+    if callable(extra):
+        info.update(extra())
+    return info
+
+
 def run_variant(scenario, name: str, dt_s: float | None = None, duration_s: float | None = None) -> Trajectory:
     """Run ``scenario`` with engine variant ``name``; the Trajectory's meta records engine, version,
     variant, dt, scenario hash, status (``ok``/``diverged``) and ``diverged_at_s``."""
     engine, variant = split_variant(name)
-    mod = get_adapter(engine)
+    adapter = get_adapter(engine)
     dt = scenario.dt_s if dt_s is None else float(dt_s)
     T = scenario.duration_s if duration_s is None else float(duration_s)
     n = scenario.n_steps(dt, T)
     t0 = time.perf_counter()
-    run = mod.simulate(scenario, variant, dt, n)
+    run = adapter.simulate(scenario, variant, dt, n)
     wall = time.perf_counter() - t0
     import reference_sim
     meta = {
         "engine": engine,
-        "engine_version": mod.version(),
+        "engine_version": adapter.version(),
         "variant": name,
         "dt_s": dt,
         "duration_s": T,

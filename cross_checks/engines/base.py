@@ -1,19 +1,29 @@
-"""What every engine adapter provides, and the harness semantics they share.
+"""The engine adapter interface (:class:`EngineAdapter`), and the harness semantics adapters share.
 
-An adapter module (``cross_checks.engines.<engine>``) defines:
+An engine is an adapter CLASS registered under the entry-point group ``rbcheck.engines`` (the
+built-in reference, MuJoCo and PyBullet adapters are registered that way in rbcheck's own
+pyproject.toml), or an engine file (TOML, :mod:`cross_checks.engines.external`), which rbcheck turns
+into an adapter of the same interface. The registry (:mod:`cross_checks.engines`) instantiates the
+class with no arguments. See docs/engines.md for a worked example.
 
-``ENGINE``            the engine name used in ``ENGINE:VARIANT``.
-``VARIANTS``          dict variant -> one-line description.
-``version()``         the engine's version string (raises ImportError when the engine is missing).
+An adapter provides:
+
+``name``              the engine name used in ``ENGINE:VARIANT`` (the entry point's name).
+``variants``          dict variant -> :class:`Variant` (declared global order, one-line description);
+                      verdicts check the declared order.
+``version()``         the engine's version string; raises ImportError (or any exception) when the
+                      engine cannot run here: the engine is then listed as unavailable with that reason.
 ``simulate(scenario, variant, dt_s, n_steps) -> reference_sim.simulate.Run``
                       free-running run from the scenario's initial state, every step recorded
                       (``Run.y``: (n+1, 13) packed [x_W, v_W, q_WB (w x y z), w_W]); a blow-up stops the
-                      run with ``diverged_at_s`` set, never an exception.
-``one_step(scenario, variant, dt_s, y_start) -> y_next``
+                      run with ``diverged_at_s`` set, never an exception. :class:`EngineError` says the
+                      engine refused or failed (a ``failed`` row with its message).
+``one_step(scenario, variant, dt_s, y_start) -> y_next``   (optional)
                       for each row of ``y_start`` (T, 13), one step of ``dt_s`` from exactly that
-                      state (the local error mode of the metrics).
+                      state (the local error mode of the metrics). Without it the local-error columns
+                      stay empty.
 
-Harness semantics (identical in every adapter, DESIGN.md):
+Harness semantics (identical in every built-in adapter):
 
 * Forces and torques are evaluated by ``scenario.problem.forces.force_torque`` from the state at the
   start of each step and held over the step (zero-order hold) unless the engine can evaluate them at
@@ -27,10 +37,14 @@ Harness semantics (identical in every adapter, DESIGN.md):
 from __future__ import annotations
 
 import functools
+import inspect
+import math
+from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
-__all__ = ["harness_force_torque", "apply_decay_prestep", "EngineError"]
+__all__ = ["EngineAdapter", "Variant", "harness_force_torque", "apply_decay_prestep", "EngineError"]
 
 
 class EngineError(RuntimeError):
@@ -66,3 +80,79 @@ def apply_decay_prestep(scenario, y):
     y[..., 3:6] *= fm.velocity_decay
     y[..., 10:13] *= fm.angular_velocity_decay
     return y
+
+
+@dataclass(frozen=True)
+class Variant:
+    """A variant an engine offers: its declared global order (the error at a fixed final time shrinks
+    like Δt^order; verdicts check it) and a one-line description for ``rbcheck list`` and the report."""
+
+    order: float
+    description: str = ""
+
+    def __post_init__(self):
+        o = self.order
+        if isinstance(o, bool) or not isinstance(o, (int, float)) or not math.isfinite(o) or not 0 < o <= 20:
+            raise ValueError(f"order must be a number in (0, 20], got {o!r}")
+        if not isinstance(self.description, str):
+            raise ValueError(f"description must be a string, got {self.description!r}")
+        object.__setattr__(self, "order", float(o))
+
+
+class EngineAdapter:
+    """Base class of every engine adapter (see the module docstring for the contract).
+
+    Subclass it, set ``name`` and ``variants``, implement ``version`` and ``simulate`` (and
+    ``one_step`` if the engine can restart a step from any state), and register the class::
+
+        # pyproject.toml of your package
+        [project.entry-points."rbcheck.engines"]
+        mysim = "mysim_rbcheck:MySimAdapter"
+
+    The class is instantiated once per process with no arguments. Results are cached by scenario,
+    variant, Δt, ``version()`` and a hash of :meth:`source_files`: bump the version (or run with
+    ``--no-cache``) when the engine changes outside those files.
+    """
+
+    #: Engine name in ``ENGINE:VARIANT`` ([a-z0-9_]+); must equal the entry point's name.
+    name: str = ""
+    #: variant name -> Variant(order, description).
+    variants: dict = {}
+
+    def version(self) -> str:
+        """The engine's version; raise ImportError (or any exception) when it cannot run here."""
+        raise NotImplementedError(f"{type(self).__name__}.version() is not implemented")
+
+    def simulate(self, scenario, variant: str, dt_s: float, n_steps: int):
+        """``n_steps`` steps of ``dt_s`` from the scenario's initial state -> reference_sim.simulate.Run."""
+        raise NotImplementedError(f"{type(self).__name__}.simulate() is not implemented")
+
+    def one_step(self, scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
+        """One step from each row of ``y_start`` (T, 13) -> (T, 13). Optional (see :attr:`has_one_step`)."""
+        raise NotImplementedError(f"{type(self).__name__} has no one-step mode")
+
+    @property
+    def has_one_step(self) -> bool:
+        """True when the class implements :meth:`one_step` (the local-error mode of a sweep)."""
+        return type(self).one_step is not EngineAdapter.one_step
+
+    def cache_token(self) -> str:
+        """What identifies this adapter's code for the result cache: by default a SHA-256 of the
+        contents of :meth:`source_files`."""
+        import hashlib
+        h = hashlib.sha256()
+        for f in self.source_files():
+            h.update(str(f).encode())
+            try:
+                h.update(Path(f).read_bytes())
+            except OSError:
+                h.update(b"<missing>")
+        return h.hexdigest()
+
+    def source_files(self) -> list:
+        """Files whose content determines this adapter's results (hashed into the cache key):
+        by default the module that defines the class."""
+        try:
+            return [Path(inspect.getsourcefile(type(self)))]
+        except (TypeError, OSError):
+            return []

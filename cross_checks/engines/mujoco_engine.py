@@ -31,7 +31,7 @@ import numpy as np
 from reference_sim.quaternion import quat_from_matrix, rotate, quat_conj
 from reference_sim.simulate import BLOWUP_LIMIT, Run
 
-from .base import EngineError, apply_decay_prestep, harness_force_torque
+from .base import EngineAdapter, EngineError, Variant, apply_decay_prestep, harness_force_torque
 
 try:  # the module imports without mujoco so the registry can report why it is unavailable
     import mujoco
@@ -385,3 +385,28 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
             session.warnings.clear()
     with np.errstate(all="ignore"):
         return _to_packed(qpos_out, qvel_out).reshape(shape)
+
+
+#: Declared global order of each variant (see MujocoAdapter).
+_ORDERS = {"euler": 1, "rk4": 4, "implicit": 1, "implicitfast": 1}
+
+
+class MujocoAdapter(EngineAdapter):
+    """``mujoco:VARIANT`` — registered under the entry-point group ``rbcheck.engines``.
+
+    Declared orders: Euler is semi-implicit Euler + exp-map quaternion (order 1); RK4 is classical
+    RK4 with the forces evaluated at every stage (order 4); implicit(fast) is velocity-implicit Euler,
+    one linearised solve per step (order 1).
+    """
+
+    name = ENGINE
+    variants = {v: Variant(float(_ORDERS[v]), d) for v, d in VARIANTS.items()}
+
+    def version(self) -> str:
+        return version()
+
+    def simulate(self, scenario, variant: str, dt_s: float, n_steps: int) -> Run:
+        return simulate(scenario, variant, dt_s, n_steps)
+
+    def one_step(self, scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
+        return one_step(scenario, variant, dt_s, y_start)

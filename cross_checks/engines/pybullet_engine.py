@@ -37,7 +37,7 @@ import numpy as np
 from reference_sim.quaternion import quat_conj, quat_from_matrix, quat_mul
 from reference_sim.simulate import BLOWUP_LIMIT, Run
 
-from .base import EngineError, apply_decay_prestep, harness_force_torque
+from .base import EngineAdapter, EngineError, Variant, apply_decay_prestep, harness_force_torque
 
 def _import_pybullet_quietly():
     """``import pybullet`` with file descriptor 2 silenced: the extension prints its build time to
@@ -268,3 +268,27 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
             p.stepSimulation(physicsClientId=B.c)
             out[i] = B.read_raw()
         return B.raw_to_packed(out).reshape(shape)
+
+
+#: Declared global order of each variant (see PybulletAdapter).
+_ORDERS = {"multibody": 1, "maximal": 1}
+
+
+class PybulletAdapter(EngineAdapter):
+    """``pybullet:VARIANT`` — registered under the entry-point group ``rbcheck.engines``.
+
+    Declared orders: both modes are semi-implicit Euler (explicit gyroscopic term in multibody,
+    implicit in maximal coordinates): order 1.
+    """
+
+    name = ENGINE
+    variants = {v: Variant(float(_ORDERS[v]), d) for v, d in VARIANTS.items()}
+
+    def version(self) -> str:
+        return version()
+
+    def simulate(self, scenario, variant: str, dt_s: float, n_steps: int) -> Run:
+        return simulate(scenario, variant, dt_s, n_steps)
+
+    def one_step(self, scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
+        return one_step(scenario, variant, dt_s, y_start)

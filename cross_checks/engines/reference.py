@@ -4,8 +4,10 @@ from __future__ import annotations
 import numpy as np
 
 import reference_sim
-from reference_sim.integrators import DESCRIPTIONS, ImplicitSolveError, get_step
+from reference_sim.integrators import DESCRIPTIONS, EXPECTED_ORDER, ImplicitSolveError, get_step
 from reference_sim.simulate import Run, simulate as _simulate
+
+from .base import EngineAdapter, Variant
 
 ENGINE = "reference"
 VARIANTS = dict(DESCRIPTIONS)
@@ -27,3 +29,21 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
             return step(scenario.problem, np.asarray(y_start, dtype=float), dt_s)
         except ImplicitSolveError:
             return np.full(np.shape(y_start), np.nan)
+
+
+class ReferenceAdapter(EngineAdapter):
+    """``reference:VARIANT`` — registered under the entry-point group ``rbcheck.engines``.
+
+    Declared orders are reference_sim.integrators.EXPECTED_ORDER (proven by its own tests)."""
+
+    name = ENGINE
+    variants = {v: Variant(float(EXPECTED_ORDER[v]), d) for v, d in DESCRIPTIONS.items()}
+
+    def version(self) -> str:
+        return version()
+
+    def simulate(self, scenario, variant: str, dt_s: float, n_steps: int) -> Run:
+        return simulate(scenario, variant, dt_s, n_steps)
+
+    def one_step(self, scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
+        return one_step(scenario, variant, dt_s, y_start)

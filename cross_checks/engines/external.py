@@ -1,0 +1,505 @@
+"""Engine files: any simulator, in any language, as an rbcheck engine (``--engine-file FILE``).
+
+An engine file is TOML (docs/engines.md)::
+
+    name = "mysim"                 # variants are mysim:VARIANT; [a-z0-9_]+, not a built-in engine's name
+    version = "0.3"                # optional string; recorded in every result and in the cache key
+    description = "..."            # optional
+    timeout = 300                  # optional: seconds one run may take (default DEFAULT_TIMEOUT_S)
+    [variants.euler]
+    order = 1                      # the global order its author claims; verdicts check it
+    description = "semi-implicit Euler, exp-map rotation"
+    command = ["./mysim", "{scenario_json}", "{dt}", "{out_csv}"]
+
+Placeholders (anywhere inside an argument; ``{{``/``}}`` are literal braces): ``{scenario_json}`` the
+resolved scenario JSON of this run (:mod:`cross_checks.resolved`, Δt-specific), ``{dt}`` (s),
+``{steps}``, ``{duration}`` (s) and ``{out_csv}``, where the command writes the trajectory CSV (one
+row per step from t = 0, columns by name: ``t,x,y,z,vx,vy,vz,qw,qx,qy,qz,wx,wy,wz``). The command must
+name both ``{scenario_json}`` and ``{out_csv}``; its program (first element) is named literally: a
+path (relative to the engine file's folder) or a program on PATH.
+
+Each run gets a private temporary directory holding the JSON and ``{out_csv}`` (the command may use
+it as scratch space); it is removed afterwards. The command runs in the engine file's folder, in its
+own process group, with stdin closed, under the time limit; on time-out the whole group is killed.
+A run is ``failed`` (its message carries the command's own words: the tail of its stderr, else
+stdout) when the program cannot be started, times out, exits non-zero or by a signal, writes no CSV,
+a CSV the shared trajectory reader rejects, a CSV with more or fewer rows than steps + 1 or times
+off the Δt grid, a first row that is not finite, or files written directly into the engine file's
+folder (outside its output path; only the files of that folder itself are watched). A row that becomes
+non-finite or exceeds BLOWUP_LIMIT after t = 0 is a divergence, reported as "diverged at t = …" with
+the rows before it, as for every other engine.
+"""
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import math
+import os
+import select
+import shutil
+import signal
+import string
+import subprocess
+import tempfile
+import threading
+import time
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from reference_sim.simulate import BLOWUP_LIMIT, Run
+
+from .. import tolerances as tol
+from .base import EngineAdapter, EngineError, Variant
+
+__all__ = ["EngineFileError", "ExternalEngine", "load_engine_file", "PLACEHOLDERS", "DEFAULT_TIMEOUT_S"]
+
+PLACEHOLDERS = ("scenario_json", "dt", "steps", "duration", "out_csv")
+#: Time limit of one run when the engine file sets none: generous for any compiled engine on the
+#: catalog (40 000 steps at 1 ms/step is 40 s), short enough that a hung command is noticed.
+DEFAULT_TIMEOUT_S = 300.0
+MAX_TIMEOUT_S = 86400.0
+#: A trajectory row holds 14 numbers of ≤ 25 characters; 1 KiB per row leaves room for extra columns.
+#: A larger CSV is garbage and is not read.
+MAX_CSV_BYTES_PER_ROW = 1024
+#: Characters of the command's stderr/stdout kept in a failed row's message.
+OUTPUT_TAIL_CHARS = 600
+
+_TOP = {"name", "version", "description", "timeout", "variants"}
+_VARIANT = {"order", "description", "command"}
+
+
+class EngineFileError(ValueError):
+    """A bad engine file; ``str()`` is ``FILE: FIELD: REASON``."""
+
+    def __init__(self, path, field_: str, reason: str):
+        self.path, self.field, self.reason = str(path), field_, reason
+        super().__init__(f"{path}: {field_}: {reason}" if field_ else f"{path}: {reason}")
+
+
+# --- loading and validation -------------------------------------------------------------------------
+
+def _closest(key, allowed):
+    import difflib
+    m = difflib.get_close_matches(key, list(allowed), n=1, cutoff=0.6)
+    return f" (did you mean {m[0]!r}?)" if m else ""
+
+
+def _check_keys(path, table: dict, allowed, where: str):
+    for k in table:
+        if k not in allowed:
+            raise EngineFileError(path, f"{where}{k}", f"unknown key{_closest(k, allowed)}; allowed: "
+                                                       f"{', '.join(sorted(allowed))}")
+
+
+def _parse_argument(path, fld: str, arg) -> list:
+    """``[(literal, placeholder or None), ...]`` of one command argument; EngineFileError when bad."""
+    if not isinstance(arg, str):
+        raise EngineFileError(path, fld, f"must be a string, got {arg!r}")
+    try:
+        parts = list(string.Formatter().parse(arg))
+    except ValueError as exc:
+        raise EngineFileError(path, fld, f"bad placeholder syntax in {arg!r}: {exc} (write {{{{ and }}}} for "
+                                         "literal braces)") from None
+    out = []
+    for literal, name, spec, conv in parts:
+        if name is not None:
+            if name not in PLACEHOLDERS:
+                raise EngineFileError(path, fld, f"unknown placeholder {{{name}}} in {arg!r}; placeholders: "
+                                                 + ", ".join(f"{{{p}}}" for p in PLACEHOLDERS))
+            if spec or conv:
+                raise EngineFileError(path, fld, f"placeholder {{{name}}} takes no format spec or conversion "
+                                                 f"(got {arg!r}); values are printed to full precision")
+        out.append((literal, name))
+    return out
+
+
+def _resolve_program(path, folder: Path, fld: str, program: str) -> str:
+    """The program to run: a path (relative to the engine file's folder) that must be an executable
+    file, or a name found on PATH."""
+    if not program:
+        raise EngineFileError(path, fld, "is empty; name the program to run")
+    if "/" in program:
+        p = Path(program) if Path(program).is_absolute() else folder / program
+        if not p.exists():
+            raise EngineFileError(path, fld, f"{program}: no such file (looked in {folder}; build it first?)")
+        if not p.is_file():
+            raise EngineFileError(path, fld, f"{program}: is not a file")
+        if not os.access(p, os.X_OK):
+            raise EngineFileError(path, fld, f"{program}: is not executable (chmod +x?)")
+        return str(p.resolve())
+    if shutil.which(program) is None:
+        raise EngineFileError(path, fld, f"{program!r}: no such program on PATH")
+    return program
+
+
+def _parse_command(path, folder: Path, fld: str, cmd) -> list:
+    if not isinstance(cmd, list) or not cmd:
+        raise EngineFileError(path, fld, f"must be a non-empty list of strings, e.g. [\"./mysim\", \"{{scenario_json}}\", "
+                                         f"\"{{out_csv}}\"], got {cmd!r}"[:300])
+    parsed = [_parse_argument(path, f"{fld}[{i}]", a) for i, a in enumerate(cmd)]
+    if any(name for _, name in parsed[0]):
+        raise EngineFileError(path, f"{fld}[0]", "the program must be named literally (placeholders are for its "
+                                                 "arguments)")
+    used = {name for arg in parsed for _, name in arg if name}
+    for need, why in (("out_csv", "where to write the trajectory"), ("scenario_json", "what to simulate")):
+        if need not in used:
+            raise EngineFileError(path, fld, f"never mentions {{{need}}}: the command cannot know {why}")
+    program = _resolve_program(path, folder, f"{fld}[0]", parsed[0][0][0])
+    return [[(program, None)]] + parsed[1:]
+
+
+def _number(path, d: dict, key: str, fld: str, lo: float, hi: float, what: str):
+    v = d[key]
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not lo < v <= hi:
+        raise EngineFileError(path, fld, f"must be {what}, got {v!r}")
+    return float(v)
+
+
+def _string(path, d: dict, key: str, fld: str, default=None, nonempty=False):
+    if key not in d:
+        return default
+    v = d[key]
+    if not isinstance(v, str) or (nonempty and not v.strip()):
+        hint = f" (quote it: {key} = \"{v}\")" if isinstance(v, (int, float)) and not isinstance(v, bool) else ""
+        raise EngineFileError(path, fld, f"must be a{' non-empty' if nonempty else ''} string, got {v!r}{hint}")
+    return v
+
+
+def _hash_file(p: Path) -> str:
+    h = hashlib.sha256()
+    with open(p, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def _program_files(folder: Path, commands: dict) -> dict:
+    """Files inside the engine's folder that its commands name literally (the program, a script):
+    their hashes go into the cache key, so rebuilding the engine invalidates its cached results."""
+    out = {}
+    root = folder.resolve()
+    for parsed in commands.values():
+        for arg in parsed:
+            if len(arg) != 1 or arg[0][1] is not None or not arg[0][0]:
+                continue
+            p = Path(arg[0][0])
+            p = (p if p.is_absolute() else folder / p)
+            try:
+                p = p.resolve()
+                if p.is_file() and p.is_relative_to(root):
+                    out[str(p)] = _hash_file(p)
+            except OSError:
+                continue
+    return out
+
+
+def load_engine_file(path) -> "ExternalEngine":
+    """Read and validate an engine file. Raises EngineFileError (``FILE: FIELD: REASON``)."""
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise EngineFileError(path, "", "no such file") from None
+    except IsADirectoryError:
+        raise EngineFileError(path, "", "is a directory, not an engine file") from None
+    except OSError as exc:
+        raise EngineFileError(path, "", f"cannot read: {exc}") from None
+    try:
+        raw = tomllib.loads(data.decode("utf-8"))
+    except UnicodeDecodeError as exc:
+        raise EngineFileError(path, "", f"is not UTF-8 text: {exc}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise EngineFileError(path, "", f"TOML syntax error: {exc}") from None
+    from . import NAME_RE
+    _check_keys(path, raw, _TOP, "")
+    name = _string(path, raw, "name", "name")
+    if name is None:
+        raise EngineFileError(path, "name", "missing (required): the engine name, used as NAME:VARIANT")
+    if not NAME_RE.match(name):
+        raise EngineFileError(path, "name", f"must match [a-z0-9_]+ (lower-case letters, digits, underscore), got {name!r}")
+    version = _string(path, raw, "version", "version", default="", nonempty=True)
+    description = _string(path, raw, "description", "description", default="")
+    timeout = (_number(path, raw, "timeout", "timeout", 0.0, MAX_TIMEOUT_S, f"a number of seconds in (0, {MAX_TIMEOUT_S:g}]")
+               if "timeout" in raw else DEFAULT_TIMEOUT_S)
+    if "variants" not in raw:
+        raise EngineFileError(path, "variants", "missing (required): at least one [variants.NAME] table")
+    vt = raw["variants"]
+    if not isinstance(vt, dict) or not vt:
+        raise EngineFileError(path, "variants", "must contain at least one [variants.NAME] table")
+    folder = path.resolve().parent
+    variants, commands = {}, {}
+    for vname, spec in vt.items():
+        where = f"variants.{vname}"
+        if not NAME_RE.match(vname):
+            raise EngineFileError(path, where, f"variant name must match [a-z0-9_]+, got {vname!r}")
+        if not isinstance(spec, dict):
+            raise EngineFileError(path, where, f"must be a table [{where}], got {spec!r}")
+        _check_keys(path, spec, _VARIANT, where + ".")
+        if "order" not in spec:
+            raise EngineFileError(path, f"{where}.order", "missing (required): the global order of accuracy its "
+                                                          "author claims (e.g. 1 for semi-implicit Euler)")
+        order = _number(path, spec, "order", f"{where}.order", 0.0, 20.0, "a number in (0, 20]")
+        desc = _string(path, spec, "description", f"{where}.description", default="")
+        if "command" not in spec:
+            raise EngineFileError(path, f"{where}.command", "missing (required): the command that runs one simulation")
+        commands[vname] = _parse_command(path, folder, f"{where}.command", spec["command"])
+        variants[vname] = Variant(order, desc)
+    sha = hashlib.sha256(data).hexdigest()
+    return ExternalEngine(path.resolve(), name, version, description, timeout, variants, commands, sha,
+                          _program_files(folder, commands))
+
+
+# --- running ----------------------------------------------------------------------------------------
+
+def _folder_snapshot(folder: Path) -> dict:
+    """The files directly in a folder, by (mtime, size). Directories are not watched: rbcheck itself may
+    create one there while a command runs (a results directory being staged, a cache)."""
+    out = {}
+    try:
+        with os.scandir(folder) as it:
+            for e in it:
+                try:
+                    if e.is_dir(follow_symlinks=False):
+                        continue
+                    st = e.stat(follow_symlinks=False)
+                except OSError:
+                    continue
+                out[e.name] = (st.st_mtime_ns, st.st_size)
+    except OSError:
+        pass
+    return out
+
+
+def _kill_group(proc) -> None:
+    """SIGKILL the command's process group (the command and anything it started), then reap it."""
+    try:
+        os.killpg(proc.pid, signal.SIGKILL)
+    except (ProcessLookupError, PermissionError):
+        pass
+    proc.wait()
+
+
+class _TermKillsGroup:
+    """While a command runs in the main thread: SIGTERM (a sweep stopping its workers) first kills the
+    command's process group, so no engine outlives the worker that started it."""
+
+    def __init__(self, proc):
+        self.proc, self.prev = proc, None
+
+    def __enter__(self):
+        if threading.current_thread() is threading.main_thread() and signal.getsignal(signal.SIGTERM) == signal.SIG_DFL:
+            def on_term(signum, frame):
+                _kill_group(self.proc)
+                signal.signal(signal.SIGTERM, signal.SIG_DFL)
+                os.kill(os.getpid(), signal.SIGTERM)
+            self.prev = signal.signal(signal.SIGTERM, on_term)
+        return self
+
+    def __exit__(self, *exc):
+        if self.prev is not None:
+            signal.signal(signal.SIGTERM, self.prev)
+        return False
+
+
+def _tail(fh) -> str:
+    fh.seek(0, os.SEEK_END)
+    size = fh.tell()
+    fh.seek(max(0, size - 4 * OUTPUT_TAIL_CHARS))
+    text = fh.read().decode("utf-8", errors="replace")
+    lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
+    text = " | ".join(lines)
+    return text if len(text) <= OUTPUT_TAIL_CHARS else "…" + text[-OUTPUT_TAIL_CHARS:]
+
+
+def _run_command(argv: list, cwd: Path, timeout_s: float):
+    """Run ``argv`` in ``cwd`` in a new process group under a time limit.
+
+    Returns ``(returncode, timed_out, output_tail)``; raises EngineError when it cannot be started.
+    The wait is a blocking ``waitpid`` (no polling latency); a timer thread kills the group at the limit.
+    """
+    with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
+        try:
+            proc = subprocess.Popen(argv, cwd=cwd, stdin=subprocess.DEVNULL, stdout=out, stderr=err,
+                                    start_new_session=True)
+        except OSError as exc:
+            raise EngineError(f"cannot start {argv[0]!r}: {exc.strerror or exc}") from None
+        try:
+            with _TermKillsGroup(proc):
+                timed_out = _wait(proc, timeout_s)
+        finally:
+            _kill_group(proc)  # on time-out, Ctrl-C, or stray children of a finished command
+        words = _tail(err) or _tail(out)
+    return proc.returncode, timed_out, words
+
+
+def _wait(proc, timeout_s: float) -> bool:
+    """Wait for ``proc`` at most ``timeout_s``; True when the time ran out. A pidfd (Linux) wakes the
+    instant the process exits; elsewhere a timer thread kills the group at the limit."""
+    try:
+        fd = os.pidfd_open(proc.pid)
+    except (AttributeError, OSError):
+        expired = threading.Event()
+
+        def on_timeout():
+            expired.set()
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.killpg(proc.pid, signal.SIGKILL)
+
+        timer = threading.Timer(timeout_s, on_timeout)
+        timer.daemon = True
+        timer.start()
+        try:
+            proc.wait()
+        finally:
+            timer.cancel()
+        return expired.is_set()
+    try:
+        poller = select.poll()
+        poller.register(fd, select.POLLIN)
+        deadline = time.monotonic() + timeout_s
+        while not poller.poll(max(0.0, deadline - time.monotonic()) * 1000.0):
+            if time.monotonic() >= deadline:
+                return True
+        return False
+    finally:
+        os.close(fd)
+
+
+class ExternalEngine(EngineAdapter):
+    """An engine file as an adapter (picklable: plain data, so sweep workers receive it)."""
+
+    def __init__(self, path: Path, name: str, version: str, description: str, timeout_s: float,
+                 variants: dict, commands: dict, sha256: str, program_hashes: dict):
+        self.path, self.name, self._version, self.description = Path(path), name, version, description
+        self.timeout_s, self.variants, self.commands = timeout_s, variants, commands
+        self.sha256, self.program_hashes = sha256, program_hashes
+
+    @property
+    def folder(self) -> Path:
+        return self.path.parent
+
+    @property
+    def source(self) -> str:
+        return f"engine file {self.path}"
+
+    def version(self) -> str:
+        return self._version or "unversioned"
+
+    def source_files(self) -> list:
+        return [self.path] + [Path(p) for p in sorted(self.program_hashes)]
+
+    def cache_token(self) -> str:
+        """The engine file and the programs it names, as hashed when the file was loaded."""
+        return self.sha256 + "".join(f"|{k}={v}" for k, v in sorted(self.program_hashes.items()))
+
+    def provenance(self) -> dict:
+        return {"engine_file": str(self.path), "engine_file_sha256": self.sha256,
+                "programs_sha256": dict(self.program_hashes), "timeout_s": self.timeout_s}
+
+    def same_as(self, other) -> bool:
+        return isinstance(other, ExternalEngine) and (other.path, other.sha256) == (self.path, self.sha256)
+
+    def argv(self, variant: str, values: dict) -> list:
+        """The command of ``variant`` with its placeholders replaced by ``values`` (strings)."""
+        return ["".join(lit + (values[name] if name else "") for lit, name in arg) for arg in self.commands[variant]]
+
+    def simulate(self, scenario, variant: str, dt_s: float, n_steps: int) -> Run:
+        from ..resolved import resolved_json
+        T = scenario.duration_s if n_steps == scenario.n_steps(dt_s) else n_steps * dt_s
+        run_dir = Path(tempfile.mkdtemp(prefix=f"rbcheck-{self.name}-"))
+        try:
+            json_path, out_csv = run_dir / "scenario.json", run_dir / "trajectory.csv"
+            json_path.write_text(resolved_json(scenario, dt_s, T), encoding="utf-8")
+            argv = self.argv(variant, {"scenario_json": str(json_path), "dt": repr(float(dt_s)), "steps": str(n_steps),
+                                       "duration": repr(float(T)), "out_csv": str(out_csv)})
+            before = _folder_snapshot(self.folder)
+            rc, timed_out, words = _run_command(argv, self.folder, self.timeout_s)
+            after = _folder_snapshot(self.folder)
+            where = f"{self.name}:{variant} at Δt = {dt_s:g} s"
+            said = f" — it said: {words}" if words else " (it printed nothing)"
+            if timed_out:
+                raise EngineError(f"{where}: no result within the time limit of {self.timeout_s:g} s (set `timeout` "
+                                  f"in {self.path.name}); the command was killed{said}")
+            if rc != 0:
+                raise EngineError(f"{where}: the command {_exit_words(rc)}{said}")
+            outside = sorted(k for k in set(before) | set(after) if before.get(k, "-") != after.get(k, "-"))
+            if outside:
+                raise EngineError(f"{where}: the command wrote outside its output path: {', '.join(outside[:5])} in "
+                                  f"{self.folder} (write the trajectory to {{out_csv}}, a private directory rbcheck "
+                                  f"removes after the run){said}")
+            run = _read_output(out_csv, scenario, dt_s, n_steps, where, said)
+            return run
+        finally:
+            shutil.rmtree(run_dir, ignore_errors=True)
+
+
+def _exit_words(rc: int) -> str:
+    if rc >= 0:
+        return f"exited with status {rc}"
+    try:
+        return f"was killed by signal {signal.Signals(-rc).name}"
+    except ValueError:  # e.g. a real-time signal, which has no name
+        return f"was killed by signal {-rc}"
+
+
+def _read_output(out_csv: Path, scenario, dt_s: float, n_steps: int, where: str, said: str) -> Run:
+    """The trajectory the command wrote, through the shared reader (columns by name), checked against
+    the contract: steps + 1 rows on the Δt grid from t = 0, a finite first row; a later non-finite or
+    blown-up row is a divergence."""
+    from ..trajectory import TrajectoryError, read_columns
+    if not out_csv.is_file():
+        raise EngineError(f"{where}: the command exited 0 but wrote no CSV at {{out_csv}}{said}")
+    size = out_csv.stat().st_size
+    if size > (n_steps + 2) * MAX_CSV_BYTES_PER_ROW:
+        raise EngineError(f"{where}: the CSV is {size} bytes, more than {MAX_CSV_BYTES_PER_ROW} bytes per row for "
+                          f"{n_steps + 1} rows: not a trajectory")
+    try:
+        t, y, _ = read_columns(out_csv)
+    except TrajectoryError as exc:
+        msg = str(exc).replace(str(out_csv), "{out_csv}")
+        raise EngineError(f"{where}: the CSV is not a trajectory: {msg}{said}") from None
+    n_rows = len(t)
+    if n_rows < n_steps + 1 and not np.any(np.max(np.where(np.isfinite(y), np.abs(y), np.inf), axis=1) > BLOWUP_LIMIT):
+        raise EngineError(f"{where}: the CSV has {n_rows} rows, expected {n_steps + 1} (t = 0 and each of the "
+                          f"{n_steps} steps){said}")
+    if n_rows > n_steps + 1:
+        raise EngineError(f"{where}: the CSV has {n_rows} rows, more than the {n_steps + 1} of t = 0 and "
+                          f"{n_steps} steps{said}")
+    grid = dt_s * np.arange(n_rows)
+    off = np.abs(t - grid) > 0.5 * dt_s
+    if np.any(off):
+        k = int(np.argmax(off))
+        raise EngineError(f"{where}: row {k} (line {k + 2}) has t = {float(t[k])!r}, expected {float(grid[k])!r} (one row per step "
+                          f"of {dt_s:g} s from t = 0)")
+    bad = np.max(np.where(np.isfinite(y), np.abs(y), np.inf), axis=1) > BLOWUP_LIMIT  # non-finite or blown up
+    if bad[0]:
+        raise EngineError(f"{where}: the first row (t = 0) is not a finite state{said}")
+    note = _initial_state_note(y[0], scenario)
+    if np.any(bad):
+        k = int(np.argmax(bad))
+        what = "non-finite state" if not np.all(np.isfinite(y[k])) else f"state beyond {BLOWUP_LIMIT:g}"
+        msg = f"diverged at t = {k * dt_s:.6g} s ({what}, written by the engine)"
+        return Run(dt_s * np.arange(k), y[:k], k * dt_s, msg + (f"; {note}" if note else ""))
+    return Run(dt_s * np.arange(n_steps + 1), y, None, note)
+
+
+def _initial_state_note(y0, scenario) -> str:
+    """A hint when the first row is not the scenario's initial state (the engine misread the JSON?)."""
+    from reference_sim.quaternion import geodesic_angle
+    ref = scenario.problem.initial_packed()
+    scale = max(1.0, float(np.max(np.abs(ref))))
+    parts = []
+    for name, sl in (("position", slice(0, 3)), ("velocity", slice(3, 6)), ("angular velocity", slice(10, 13))):
+        d = float(np.max(np.abs(y0[sl] - ref[sl])))
+        if d > tol.ENGINE_FILE_INITIAL_STATE_REL * scale:
+            parts.append(f"{name} by {d:.3g}")
+    qn = float(np.linalg.norm(y0[6:10]))
+    ang = float(geodesic_angle(ref[6:10], y0[6:10] / qn)) if qn > 0 else math.pi
+    if ang > tol.ENGINE_FILE_INITIAL_STATE_REL:
+        parts.append(f"orientation by {ang:.3g} rad")
+    if not parts:
+        return ""
+    return ("its first row differs from the scenario's initial state (" + ", ".join(parts)
+            + "): does the engine read the resolved JSON as documented?")

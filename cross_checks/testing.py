@@ -1,0 +1,174 @@
+"""Public testing API: check your own simulator's declared order of accuracy in your own pytest suite.
+
+:func:`assert_engine` is stable: its signature and behaviour change only with a major version. It is
+also offered as the ``assert_engine`` fixture of rbcheck's pytest plugin (entry point ``pytest11``,
+:mod:`cross_checks.pytest_plugin`), which adds a per-session cache and ``--rbcheck-keep-reports DIR``.
+
+A complete user test file (docs/engines.md)::
+
+    from pathlib import Path
+    ENGINE = Path(__file__).parent / "cbody.toml"
+
+    def test_cbody_euler_is_first_order(assert_engine):
+        assert_engine("cbody:euler", ["projectile", "tennis_racket"], engine_file=ENGINE)
+"""
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import tempfile
+from pathlib import Path
+
+__all__ = ["assert_engine"]
+
+
+def assert_engine(variant, scenarios, *, engine_file=None) -> dict:
+    """Sweep ``variant`` over the Δt ladders of ``scenarios`` and assert that its verdicts agree with the
+    order its engine declares, and that no run failed or diverged.
+
+    Parameters
+    ----------
+    variant : str
+        ``"ENGINE:VARIANT"`` (e.g. ``"mysim:euler"``), or an engine name for all its variants.
+    scenarios : str, path, Scenario, or a list of them
+        Catalog names (``rbcheck list``) or scenario TOML files; each needs a ``dt_ladder`` of at least
+        two steps (the order is fitted over it).
+    engine_file : str or path, or a list of them, optional
+        Engine file(s) to register first (engine-file engines). Entry-point engines need none.
+
+    Returns
+    -------
+    dict
+        The sweep's summary (as summary.json: provenance, variants, convergence records, ...).
+
+    Raises
+    ------
+    AssertionError
+        One line per problem, each a verdict sentence: a quantity whose errors do not shrink at the
+        declared order (with the errors and steps), a failed run (with the engine's own words), a
+        diverged run (with the time), or an engine that is unavailable here.
+    ValueError
+        Bad input: an unknown variant or scenario, a bad engine file (``FILE: FIELD: REASON``), a
+        scenario without a Δt ladder.
+    """
+    return run_engine_checks(variant, scenarios, engine_file=engine_file)
+
+
+def run_engine_checks(variant, scenarios, *, engine_file=None, out_dir=None, cache_dir=None, jobs=None) -> dict:
+    """:func:`assert_engine` with the plugin's settings: ``out_dir`` keeps the results directory and its
+    HTML report there; ``cache_dir`` replaces the user's rbcheck cache; ``jobs`` worker processes."""
+    from .engines import EngineUnavailable, engine_files_registered, get_adapter
+    from .sweep import SweepError, run_sweep
+
+    with contextlib.ExitStack() as stack:
+        stack.enter_context(engine_files_registered(_as_list(engine_file)))
+        variants = _variants(variant)
+        for engine in dict.fromkeys(v.split(":", 1)[0] for v in variants):
+            try:
+                get_adapter(engine)
+            except EngineUnavailable as exc:
+                raise AssertionError(f"assert_engine({variant!r}): the engine is unavailable here: {exc}") from None
+        scs = _scenarios(scenarios)
+        if out_dir is None:
+            out = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="rbcheck-assert-"))) / "results"
+        else:
+            out = Path(out_dir)
+        if cache_dir is not None:
+            stack.enter_context(_cache_env(cache_dir))
+        try:
+            summary = run_sweep(scs, variants, out, jobs=jobs, progress=False, render=out_dir is not None)
+        except SweepError as exc:
+            raise ValueError(str(exc)) from None
+        rows = _read_rows(out / "results.csv")
+    problems = verdict_problems(summary, rows)
+    if problems:
+        where = f" (results and report: {out})" if out_dir is not None else ""
+        raise AssertionError(f"assert_engine({variant!r}) on {', '.join(s.name for s in scs)}: {len(problems)} "
+                             f"problem(s){where}:\n" + "\n".join(f"  {p}" for p in problems))
+    return summary
+
+
+def verdict_problems(summary: dict, rows: list) -> list:
+    """The sentences :func:`assert_engine` raises with: failed and diverged runs, then every convergence
+    verdict that contradicts its expectation (the declared order)."""
+    out = []
+    for r in rows:
+        if r["status"] == "failed":
+            out.append(f"{r['engine']} on {r['scenario']} at Δt = {float(r['dt']):g} s failed: {r['message']}")
+        elif r["status"] == "diverged":
+            out.append(f"{r['engine']} on {r['scenario']} at Δt = {float(r['dt']):g} s diverged: {r['message']}")
+    for rec in summary.get("convergence", []):
+        if rec.get("matches_expectation") is False:
+            out.append(_verdict_sentence(rec))
+    return out
+
+
+def _verdict_sentence(rec: dict) -> str:
+    pts = [(d, e) for d, e in zip(rec["dt_s"], rec["errors"]) if e is not None and math.isfinite(e)]
+    errs = ", ".join(f"{e:.3g}" for _, e in pts)
+    dts = ", ".join(f"{d:g}" for d, _ in pts)
+    text = (f"{rec['engine']} on {rec['scenario']}: {rec['quantity'].replace('_', ' ')} {rec['assessment']}"
+            f" — final errors {errs} {rec.get('unit', '')} at Δt = {dts} s").rstrip()
+    if rec.get("expected_verdict") == "does_not_converge" and rec.get("reason"):
+        text += f"; expected not to converge: {rec['reason']}"
+    if rec.get("note"):
+        text += f" ({rec['note']})"
+    return text
+
+
+def _as_list(x) -> list:
+    if x is None:
+        return []
+    if isinstance(x, (str, os.PathLike)):
+        return [x]
+    return list(x)
+
+
+def _variants(variant) -> list:
+    from .engines import UnknownVariant, engine_variants, split_variant
+    if not isinstance(variant, str) or not variant:
+        raise ValueError(f"variant must be 'ENGINE:VARIANT' or an engine name, got {variant!r}")
+    try:
+        if ":" in variant:
+            split_variant(variant)
+            return [variant]
+        names = [f"{variant}:{v}" for v in engine_variants(variant)]
+    except UnknownVariant as exc:
+        raise ValueError(str(exc)) from None
+    if not names:
+        raise ValueError(f"engine {variant!r} cannot be loaded (see `rbcheck list`)")
+    return names
+
+
+def _scenarios(scenarios) -> list:
+    from .scenario import Scenario, load_scenario
+    items = [scenarios] if isinstance(scenarios, (str, os.PathLike, Scenario)) else list(scenarios)
+    if not items:
+        raise ValueError("scenarios: give at least one scenario (catalog name or TOML path)")
+    out = [s if isinstance(s, Scenario) else load_scenario(s) for s in items]
+    for s in out:
+        if len(s.dt_ladder_s) < 2:
+            raise ValueError(f"{s.source}: dt_ladder: needs at least two steps to fit an order, got "
+                             f"{list(s.dt_ladder_s)}")
+    return out
+
+
+@contextlib.contextmanager
+def _cache_env(cache_dir):
+    """Use ``cache_dir`` as rbcheck's job cache for the duration (the sweep reads $RBCHECK_CACHE_DIR)."""
+    old = os.environ.get("RBCHECK_CACHE_DIR")
+    os.environ["RBCHECK_CACHE_DIR"] = str(cache_dir)
+    try:
+        yield
+    finally:
+        if old is None:
+            os.environ.pop("RBCHECK_CACHE_DIR", None)
+        else:
+            os.environ["RBCHECK_CACHE_DIR"] = old
+
+
+def _read_rows(path: Path) -> list:
+    import csv
+    with open(path, newline="", encoding="utf-8") as fh:
+        return list(csv.DictReader(fh))
