@@ -164,6 +164,11 @@ def cmd_run(args) -> int:
     T = args.duration if args.duration is not None else sc.duration_s
     if dt > T:
         raise BadInput(f"--dt {dt:g}: must be <= the duration ({T:g} s)")
+    from .limits import LimitExceeded, check_run_steps
+    try:
+        check_run_steps(T, dt, "--dt" if args.dt is not None else "--duration")
+    except LimitExceeded as exc:
+        raise BadInput(str(exc)) from None
     try:
         traj = run_variant(sc, args.engine, dt, T)
     except EngineUnavailable as exc:
