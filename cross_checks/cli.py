@@ -1,18 +1,20 @@
 """``rbcheck`` command line (DESIGN.md contract).
 
 Exit codes: 0 success; 1 a comparison or gate found a regression / disagreement, or a run diverged;
-2 bad input (file, field and reason on stderr, no traceback); 130 interrupted (Ctrl-C).
+2 bad input or an output that cannot be written (one line naming the file, the field and the reason,
+no traceback); 130 interrupted (Ctrl-C); 143 terminated (SIGTERM). The README has the table per command.
 """
 from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 from pathlib import Path
 
 __all__ = ["main"]
 
-EXIT_OK, EXIT_FAIL, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
+EXIT_OK, EXIT_FAIL, EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_TERMINATED = 0, 1, 2, 130, 143
 
 
 class BadInput(Exception):
@@ -42,7 +44,8 @@ def build_parser() -> argparse.ArgumentParser:
         description="Validate rigid-body simulators: a NumPy reference of the GAMES103 course equations, "
                     "MuJoCo and PyBullet on identical free-body scenarios, against analytic or DOP853 references.",
         epilog="SCENARIO is a catalog name (see `rbcheck list`) or a path to a scenario TOML file. "
-               "Exit codes: 0 ok; 1 regression/disagreement or a diverged run; 2 bad input; 130 interrupted.",
+               "Exit codes: 0 ok; 1 regression/disagreement or a diverged run; 2 bad input or an unwritable output "
+               "(one line); 130 interrupted (Ctrl-C); 143 terminated (SIGTERM).",
     )
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_Parser)
 
@@ -139,14 +142,24 @@ def cmd_list(args) -> int:
 
 
 def _check_out_path(out: str, suffix: str | None = ".csv", option: str = "--out") -> Path:
-    """An output file the user named: the right suffix (when given), an existing directory, not a directory."""
+    """An output file the user named, checked before any work: the right suffix (when given), a
+    directory that exists and can be written in (tried for real), not itself a directory."""
+    from .results_dir import ResultsDirError, check_writable_dir
+    if not str(out).strip():
+        raise BadInput(f"{option}: empty path; name a file")
     path = Path(out)
     if suffix is not None and path.suffix != suffix:
         raise BadInput(f"{option} {out}: must end in {suffix}")
-    if not path.parent.exists():
-        raise BadInput(f"{option} {out}: directory {path.parent} does not exist")
-    if path.exists() and path.is_dir():
+    parent = path.parent
+    if not parent.is_dir():
+        what = "is not a directory" if parent.exists() else "does not exist"
+        raise BadInput(f"{option} {out}: directory {parent} {what}")
+    if path.is_dir():
         raise BadInput(f"{option} {out}: is a directory")
+    try:
+        check_writable_dir(parent, option, out)
+    except ResultsDirError as exc:
+        raise BadInput(str(exc)) from None
     return path
 
 
@@ -240,6 +253,11 @@ def cmd_sweep(args) -> int:
     from .scenario import catalog_names, load_scenario
     from .sweep import SweepError, SweepInterrupted, run_sweep
 
+    from .results_dir import ResultsDirError, check_output_dir
+    try:
+        check_output_dir(args.out)  # before any work (run_sweep checks again just before it starts)
+    except ResultsDirError as exc:
+        raise BadInput(str(exc)) from None
     specs = args.scenarios or catalog_names()
     scenarios = [load_scenario(s) for s in specs]
     variants, skipped = _resolve_engines(args.engines)
@@ -254,9 +272,10 @@ def cmd_sweep(args) -> int:
                             executor=client.get_executor() if client is not None else None)
     except SweepError as exc:
         raise BadInput(str(exc)) from None
-    except SweepInterrupted:
-        print(f"rbcheck sweep: interrupted; {args.out} left as it was", file=sys.stderr)
-        return EXIT_INTERRUPTED
+    except SweepInterrupted as exc:
+        print(f"rbcheck sweep: {'terminated' if exc.terminated else 'interrupted'}; {args.out} left as it was",
+              file=sys.stderr)
+        return EXIT_TERMINATED if exc.terminated else EXIT_INTERRUPTED
     finally:
         if client is not None:
             client.close()
@@ -282,10 +301,15 @@ def cmd_report(args) -> int:
     import reports
     from reports import ResultsError
 
+    from .results_dir import ResultsDirError, check_writable_dir
+
     jobs = args.jobs or (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
+    if not Path(args.dir).is_dir():
+        raise BadInput(f"{args.dir}: no such directory")
     try:
+        check_writable_dir(Path(args.dir), "DIR", args.dir)
         written = reports.render(args.dir, self_contained=args.self_contained, jobs=jobs)
-    except ResultsError as exc:
+    except (ResultsError, ResultsDirError) as exc:
         raise BadInput(str(exc)) from None
     print(f"rbcheck report: wrote {len(written)} page(s) -> {Path(args.dir) / 'index.html'}")
     return EXIT_OK
@@ -334,6 +358,7 @@ COMMANDS = {"list": cmd_list, "run": cmd_run, "sweep": cmd_sweep, "report": cmd_
 
 
 def main(argv=None) -> int:
+    from .lifecycle import Terminated, handle_sigterm
     from .scenario import ScenarioError
     from .trajectory import TrajectoryError
 
@@ -341,14 +366,30 @@ def main(argv=None) -> int:
         args = build_parser().parse_args(argv)
     except SystemExit as exc:  # usage errors (exit 2) and --help (exit 0) return instead of raising
         return int(exc.code or 0)
+    handle_sigterm()
     try:
         return COMMANDS[args.command](args)
     except (ScenarioError, TrajectoryError, BadInput) as exc:
-        print(f"rbcheck {args.command}: error: {exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
+        return _error(args.command, str(exc))
+    except Terminated:
+        print(f"rbcheck {args.command}: terminated", file=sys.stderr)
+        return EXIT_TERMINATED
     except KeyboardInterrupt:
         print(f"rbcheck {args.command}: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except OSError as exc:  # a file that could not be read or written: name it, no traceback
+        where = f"{exc.filename}: " if exc.filename else ""
+        return _error(args.command, f"{where}{exc.strerror or exc}")
+    except (MemoryError, RecursionError, Exception) as exc:  # noqa: BLE001 - every error path: one line, exit 2
+        if os.environ.get("RBCHECK_DEBUG"):
+            raise
+        return _error(args.command, f"internal error: {type(exc).__name__}: {exc} (RBCHECK_DEBUG=1 shows the traceback)")
+
+
+def _error(command: str, message: str) -> int:
+    message = " ".join(str(message).split())  # one line, whatever the message holds
+    print(f"rbcheck {command}: error: {message}", file=sys.stderr)
+    return EXIT_BAD_INPUT
 
 
 if __name__ == "__main__":
