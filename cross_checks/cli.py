@@ -74,6 +74,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--no-cache", action="store_true",
                    help="recompute every run instead of reusing cached results ($RBCHECK_CACHE_DIR or ~/.cache/rbcheck)")
     s.add_argument("--self-contained", action="store_true", help="embed the plots in the HTML pages (for CI artifacts)")
+    s.add_argument("--time-limit", type=_positive_float, metavar="S",
+                   help="wall-time limit of each run and of each reference solve, s; one over it is a failed row "
+                        "(default: 900, cross_checks/tolerances.py)")
     s.add_argument("--dask", metavar="ADDRESS",
                    help="run the jobs on a Dask cluster (scheduler address, e.g. tcp://host:8786) through "
                         "distributed's Client.get_executor(); needs the optional extra: pip install 'rbcheck[dask]'. "
@@ -249,6 +252,10 @@ def _dask_client(address: str):
         raise BadInput(f"--dask {address}: cannot connect to the Dask scheduler: {exc}") from None
 
 
+def _time_limits(seconds) -> dict:
+    return {} if seconds is None else {"run_time_limit_s": seconds, "reference_time_limit_s": seconds}
+
+
 def cmd_sweep(args) -> int:
     from .scenario import catalog_names, load_scenario
     from .sweep import SweepError, SweepInterrupted, run_sweep
@@ -268,7 +275,7 @@ def cmd_sweep(args) -> int:
     t0 = time.perf_counter()
     try:
         summary = run_sweep(scenarios, variants, args.out, jobs=args.jobs, use_cache=not args.no_cache,
-                            self_contained=args.self_contained, skipped=skipped,
+                            self_contained=args.self_contained, skipped=skipped, **_time_limits(args.time_limit),
                             executor=client.get_executor() if client is not None else None)
     except SweepError as exc:
         raise BadInput(str(exc)) from None

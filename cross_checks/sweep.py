@@ -209,27 +209,28 @@ class _Runner:
 
 
 class _RefTask:
-    def __init__(self, scenarios, work_dir, cache_root, use_cache):
+    def __init__(self, scenarios, work_dir, cache_root, use_cache, time_limit_s):
         self.scenarios, self.work_dir, self.cache_root, self.use_cache = scenarios, work_dir, cache_root, use_cache
+        self.time_limit_s = time_limit_s
 
     def path(self, i):
         return str(Path(self.work_dir) / f"ref_{i}.npz")
 
     def __call__(self, i):
-        return reference_job(self.scenarios[i], self.path(i), self.cache_root, self.use_cache)
+        return reference_job(self.scenarios[i], self.path(i), self.cache_root, self.use_cache, self.time_limit_s)
 
 
 def _run_job_item(item):
-    """``item`` = (job, scenario, ref_path, cache_root, use_cache, marker): one small pickle per job.
+    """``item`` = (job, scenario, ref_path, cache_root, use_cache, time_limit_s, marker): one small pickle per job.
 
     ``marker`` (a file path) exists while the job runs, so after a worker crash the parent knows
     which jobs were in flight. Any error of the harness itself becomes a failed row, so one bad job
     never stops the sweep.
     """
-    job, scenario, ref_path, cache_root, use_cache, marker = item
+    job, scenario, ref_path, cache_root, use_cache, time_limit_s, marker = item
     Path(marker).touch()
     try:
-        return run_job(job, scenario, ref_path, cache_root, use_cache)
+        return run_job(job, scenario, ref_path, cache_root, use_cache, time_limit_s)
     except (KeyboardInterrupt, SystemExit):
         raise
     except Exception as exc:  # noqa: BLE001
@@ -413,7 +414,8 @@ def write_json(path, obj) -> None:
 
 def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cache: bool = True,
               self_contained: bool = False, progress: bool | None = None, skipped=None, render=True,
-              executor=None) -> dict:
+              executor=None, run_time_limit_s: float | None = tol.RUN_TIME_LIMIT_S,
+              reference_time_limit_s: float | None = tol.REFERENCE_TIME_LIMIT_S) -> dict:
     """Run the sweep and write the results directory ``out_dir`` (atomically).
 
     Parameters
@@ -424,6 +426,8 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
     use_cache : read cached job results (they are always written).
     skipped : ``{variant: reason}`` of variants left out (recorded in summary.json).
     progress : show a progress bar (default: when stderr is a terminal).
+    run_time_limit_s, reference_time_limit_s : wall-time limits of one run and of one reference solve
+        (None: none); a run or reference over its limit is a ``failed`` row saying so.
     executor : any ``concurrent.futures.Executor`` to run the jobs on instead of the local process
         pool (e.g. ``distributed.Client(address).get_executor()``); its workers must see the parent
         directory of ``out_dir`` and the cache directory (jobs exchange reference solutions as files).
@@ -461,7 +465,7 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
     try:
         runner = _Runner(jobs, executor)
         # 1. references (one per scenario)
-        ref_task = _RefTask(scenarios, str(work), cache_root, use_cache)
+        ref_task = _RefTask(scenarios, str(work), cache_root, use_cache, reference_time_limit_s)
         ref_results = dict(runner.map_unordered(ref_task, range(len(scenarios))))
         ref_paths = [ref_task.path(i) for i in range(len(scenarios))]
         labels = {i: ref_results[i][0] for i in range(len(scenarios))}
@@ -487,7 +491,7 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
 
         (work / "inflight").mkdir()
         items = [(j, scenarios[j.scenario_index], ref_paths[j.scenario_index], cache_root, use_cache,
-                  str(work / "inflight" / str(k))) for k, j in enumerate(todo)]
+                  run_time_limit_s, str(work / "inflight" / str(k))) for k, j in enumerate(todo)]
 
         def crashed(item):
             Path(item[-1]).unlink(missing_ok=True)

@@ -25,7 +25,7 @@ PROV = {"versions": {"rbcheck": "0.1.0", "mujoco": "4.0.0", "pybullet": "3.2.7",
 def write(d, rows=ROWS, conv=CONV, prov=PROV):
     d.mkdir(parents=True, exist_ok=True)
     pd.DataFrame(rows).to_csv(d / "results.csv", index=False)
-    (d / "summary.json").write_text(json.dumps({"provenance": prov, "convergence": conv}))
+    (d / "summary.json").write_text(json.dumps({"schema_version": 1, "provenance": prov, "convergence": conv}))
     return d
 
 
