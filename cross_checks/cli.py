@@ -280,8 +280,9 @@ def cmd_sweep(args) -> int:
     except SweepError as exc:
         raise BadInput(str(exc)) from None
     except SweepInterrupted as exc:
-        print(f"rbcheck sweep: {'terminated' if exc.terminated else 'interrupted'}; {args.out} left as it was",
-              file=sys.stderr)
+        what = (f"after the new results were complete in {args.out}" if exc.replaced
+                else f"{args.out} left as it was")
+        print(f"rbcheck sweep: {'terminated' if exc.terminated else 'interrupted'}; {what}", file=sys.stderr)
         return EXIT_TERMINATED if exc.terminated else EXIT_INTERRUPTED
     finally:
         if client is not None:

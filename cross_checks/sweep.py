@@ -74,9 +74,9 @@ class SweepError(Exception):
 class SweepInterrupted(KeyboardInterrupt):
     """Ctrl-C (or SIGTERM: ``terminated``) during a sweep; the previous results directory is untouched."""
 
-    def __init__(self, terminated: bool = False):
+    def __init__(self, terminated: bool = False, replaced: bool = False):
         super().__init__()
-        self.terminated = terminated
+        self.terminated, self.replaced = terminated, replaced
 
 
 # --- planning --------------------------------------------------------------------------------------
@@ -578,8 +578,8 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
         replace_dir(staging, out)
         staging = None
         return summary
-    except KeyboardInterrupt as exc:
-        raise SweepInterrupted(isinstance(exc, Terminated)) from None
+    except KeyboardInterrupt as exc:  # after the swap (staging is None) the new results are complete
+        raise SweepInterrupted(isinstance(exc, Terminated), replaced=staging is None or not staging.exists()) from None
     finally:
         if bar is not None:
             bar.close()

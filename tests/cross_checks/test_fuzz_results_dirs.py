@@ -6,7 +6,6 @@ import os
 import random
 import shutil
 import tempfile
-import uuid
 from pathlib import Path
 
 import pytest
@@ -15,7 +14,7 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 from cross_checks.cli import main
 
 EXAMPLES = int(os.environ.get("RBCHECK_FUZZ_EXAMPLES", 0))
-OUTSIDE = Path(tempfile.gettempdir()) / f"rbcheck-fuzz-escape-{uuid.uuid4().hex[:8]}"
+OUTSIDE = Path(tempfile.gettempdir()) / "rbcheck-fuzz-escape-target"  # fixed: xdist workers must collect the same ids
 HOSTILE_NAMES = ["../../x", "../escaped", str(OUTSIDE), "a\x00b", "x" * 300, "", ".", "..", "plots/../../y",
                  "scenario-../../z", "<script>"]
 TOKENS = ["", "nan", "inf", "-inf", "-1", "1e308", "oops", "true", "../../x", "\x00", "ok", "diverged", "0",
