@@ -23,35 +23,9 @@ JSON_VALUES = st.recursive(st.none() | st.booleans() | st.integers(-10, 10) | st
                            | st.sampled_from(HOSTILE_NAMES), lambda c: st.lists(c, max_size=3)
                            | st.dictionaries(st.text(max_size=5), c, max_size=3), max_leaves=6)
 
-TINY = """
-name = "tiny"
-duration = 0.2
-dt = 0.01
-dt_ladder = [0.02, 0.01]
-[body]
-mass = 1.0
-inertia = [1.0, 2.0, 3.0]
-[initial]
-velocity = [0.0, 0.0, 1.0]
-angular_velocity = [0.3, 1.0, 0.2]
-[forces]
-gravity = [0.0, 0.0, -9.81]
-"""
-
-
-@pytest.fixture(scope="module")
-def made(tmp_path_factory):
-    from cross_checks.scenario import parse_scenario
-    from cross_checks.sweep import run_sweep
-    tmp = tmp_path_factory.mktemp("fuzzsrc")
-    old = os.environ.get("RBCHECK_CACHE_DIR")
-    os.environ["RBCHECK_CACHE_DIR"] = str(tmp / "cache")
-    try:
-        run_sweep([parse_scenario(TINY, "tiny.toml")], ["reference:course", "reference:rk4"], tmp / "res", jobs=1,
-                  progress=False)
-    finally:
-        os.environ.pop("RBCHECK_CACHE_DIR") if old is None else os.environ.__setitem__("RBCHECK_CACHE_DIR", old)
-    return tmp / "res"
+@pytest.fixture
+def made(tiny_results):
+    return tiny_results
 
 
 def _paths(obj, path=()):
