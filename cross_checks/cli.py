@@ -391,7 +391,8 @@ def main(argv=None) -> int:
     except (MemoryError, RecursionError, Exception) as exc:  # noqa: BLE001 - every error path: one line, exit 2
         if os.environ.get("RBCHECK_DEBUG"):
             raise
-        return _error(args.command, f"internal error: {type(exc).__name__}: {exc} (RBCHECK_DEBUG=1 shows the traceback)")
+        return _error(args.command, f"internal error: {type(exc).__name__}: {exc} "
+                                    "(RBCHECK_DEBUG=1 shows the traceback)")
 
 
 def _error(command: str, message: str) -> int:

@@ -77,8 +77,8 @@ def write_marker(d: Path, files=None) -> None:
     from .trajectory import atomic_write_text
     listed = sorted(set(_all_files(d) if files is None else files))
     atomic_write_text(Path(d) / MARKER, json.dumps({
-        "format": MARKER_FORMAT, "schema_version": _schema_version(), "written_by": f"rbcheck {reference_sim.__version__}",
-        "files": listed}, indent=1) + "\n")
+        "format": MARKER_FORMAT, "schema_version": _schema_version(),
+        "written_by": f"rbcheck {reference_sim.__version__}", "files": listed}, indent=1) + "\n")
 
 
 def listed_files(d: Path) -> set:
@@ -133,7 +133,8 @@ def is_owned_stale(name: str, prefix: str, kind: str | None = None) -> bool:
 
 
 _TEMP = re.compile(r"^\.(?P<base>.+)\.[A-Za-z0-9_]{8}(\.npz)?$")
-_OUTPUT = re.compile(r"^(index\.html|results\.csv|summary\.json|\.rbcheck-results\.json|scenario-.+\.html|.+\.png|.+\.npz)$")
+_OUTPUT = re.compile(r"^(index\.html|results\.csv|summary\.json|\.rbcheck-results\.json|scenario-.+\.html"
+                     r"|.+\.png|.+\.npz)$")
 
 
 def is_temp_leftover(name: str) -> bool:
@@ -193,11 +194,14 @@ def check_output_dir(out_text: str, option: str = "--out") -> Path:
     if out.is_dir() and any(out.iterdir()):
         marker = read_marker(out)
         if marker is None:
+            old = (" (results of an rbcheck older than the marker? delete them yourself)"
+                   if (out / "summary.json").is_file() else "")
             raise ResultsDirError(f"{option} {out_text}: is not empty and is not an rbcheck results directory (no "
-                                  f"valid {MARKER}); refusing to replace it: name a new or empty directory")
+                                  f"valid {MARKER}); refusing to replace it: name a new or empty directory{old}")
         if marker["schema_version"] > _schema_version():
             raise ResultsDirError(f"{option} {out_text}: written by a newer rbcheck (results schema "
-                                  f"{marker['schema_version']}, this one knows {_schema_version()}); refusing to replace it")
+                                  f"{marker['schema_version']}, this one knows {_schema_version()}); "
+                                  "refusing to replace it")
         foreign = foreign_entries(out, set(marker["files"]))
         if foreign:
             shown = ", ".join(foreign[:3]) + (f" and {len(foreign) - 3} more" if len(foreign) > 3 else "")

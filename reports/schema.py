@@ -98,8 +98,8 @@ CONVERGENCE_RECORD = {
     "matches_expectation?": Nullable(bool), "assessment?": str, "reason?": str,
 }
 #: What the report needs beyond what compare needs.
-REPORT_RECORD = {"expected_verdict": Nullable(str), "matches_expectation": Nullable(bool), "assessment": str, "note": str,
-                 "reason": str, "dt_s": [NUM], "errors": [Nullable(NUM)], "floors": [Nullable(NUM)],
+REPORT_RECORD = {"expected_verdict": Nullable(str), "matches_expectation": Nullable(bool), "assessment": str,
+                 "note": str, "reason": str, "dt_s": [NUM], "errors": [Nullable(NUM)], "floors": [Nullable(NUM)],
                  "fitted": [bool], "pairwise_orders": [Nullable(NUM)]}
 AGREEMENT = {"a": str, "b": str, "scenario": str, "dt_s": NUM, "agrees": bool, "max_rel": Nullable(NUM),
              "reason": str, "note?": str}
@@ -133,8 +133,9 @@ def check_summary(summary, for_report: bool = False) -> None:
     check(summary, SUMMARY, "summary")
     v = summary["schema_version"]
     if not 1 <= v <= KNOWN_SCHEMA_VERSION:
+        newer = "; written by a newer rbcheck?" if v > KNOWN_SCHEMA_VERSION else ""
         raise SchemaError(f"summary.schema_version: {v} is not a results schema this rbcheck reads "
-                          f"(1..{KNOWN_SCHEMA_VERSION}){'; written by a newer rbcheck?' if v > KNOWN_SCHEMA_VERSION else ''}")
+                          f"(1..{KNOWN_SCHEMA_VERSION}){newer}")
     for key in ("convergence", "local_convergence"):
         recs = summary.get(key, [])
         _unique(recs, lambda r: (r["scenario"], r["engine"], r["quantity"]), f"summary.{key}", "record")

@@ -38,25 +38,33 @@ def _paths(obj, path=()):
             yield from _paths(v, path + (i,))
 
 
+def _slot(obj, path):
+    """``(container, key)`` of ``path`` in ``obj`` as it is now (earlier edits may have changed it), or None."""
+    parent = obj
+    for k in path[:-1]:
+        if isinstance(parent, dict) and k in parent or isinstance(parent, list) and isinstance(k, int) and k < len(parent):
+            parent = parent[k]
+        else:
+            return None
+    k = path[-1]
+    ok = (isinstance(parent, dict) and k in parent) or (isinstance(parent, list) and isinstance(k, int)
+                                                        and k < len(parent))
+    return (parent, k) if ok else None
+
+
 def _damage_json(d: Path, draw):
     sj = d / "summary.json"
     obj = json.loads(sj.read_text())
     paths = [p for p in _paths(obj) if p]
     for _ in range(draw(st.integers(1, 3))):
-        path = draw(st.sampled_from(paths))
-        parent = obj
-        for k in path[:-1]:
-            parent = parent[k] if isinstance(parent, (dict, list)) and (isinstance(parent, dict) and k in parent or
-                                                                       isinstance(parent, list) and k < len(parent)) else None
-            if parent is None:
-                break
-        if parent is None or (isinstance(parent, list) and path[-1] >= len(parent)) or (
-                isinstance(parent, dict) and path[-1] not in parent):
+        slot = _slot(obj, draw(st.sampled_from(paths)))
+        if slot is None:
             continue
-        if draw(st.booleans()) and isinstance(parent, dict):
-            del parent[path[-1]]
+        parent, k = slot
+        if isinstance(parent, dict) and draw(st.booleans()):
+            del parent[k]
         else:
-            parent[path[-1]] = draw(JSON_VALUES)
+            parent[k] = draw(JSON_VALUES)
     sj.write_text(json.dumps(obj))
 
 
