@@ -109,7 +109,7 @@ SUMMARY = {
                                                     "platform", "machine", "git_commit", "started_at", "command")},
     "convergence": [CONVERGENCE_RECORD],
     "scenarios?": [SCENARIO],
-    "variants?": [{"name": str, "description?": str, "version?": str}],
+    "variants?": [{"name": str, "description?": Nullable(str), "version?": Nullable(str)}],
     "skipped_variants?": [{"name": str, "reason": str}],
     "local_convergence?": [CONVERGENCE_RECORD],
     "agreement?": [AGREEMENT],
