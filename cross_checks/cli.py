@@ -70,7 +70,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="variants to run, e.g. reference:rk4 mujoco (an engine name means all its variants); "
                         "default: every available variant")
     s.add_argument("--jobs", type=_positive_int, metavar="N", help="worker processes (default: all cores)")
-    s.add_argument("--out", required=True, metavar="DIR", help="results directory (replaced atomically)")
+    s.add_argument("--out", required=True, metavar="DIR",
+                   help="results directory, replaced atomically and only when absent, empty or rbcheck's own (its marker)")
     s.add_argument("--no-cache", action="store_true",
                    help="recompute every run instead of reusing cached results ($RBCHECK_CACHE_DIR or ~/.cache/rbcheck)")
     s.add_argument("--self-contained", action="store_true", help="embed the plots in the HTML pages (for CI artifacts)")
