@@ -194,7 +194,7 @@ def check_output_dir(out_text: str, option: str = "--out") -> Path:
     if out.is_dir() and any(out.iterdir()):
         marker = read_marker(out)
         if marker is None:
-            old = (" (results of an rbcheck older than the marker? delete them yourself)"
+            old = (" (results of an rbcheck older than the marker are never replaced either)"
                    if (out / "summary.json").is_file() else "")
             raise ResultsDirError(f"{option} {out_text}: is not empty and is not an rbcheck results directory (no "
                                   f"valid {MARKER}); refusing to replace it: name a new or empty directory{old}")
