@@ -222,4 +222,10 @@ if __name__ == "__main__":
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--json")
     a = ap.parse_args()
+    if a.json:  # fail at once, not after the benchmark
+        from cross_checks.results_dir import ResultsDirError, check_writable_dir
+        try:
+            check_writable_dir(os.path.dirname(os.path.abspath(a.json)), "--json", a.json)
+        except ResultsDirError as exc:
+            ap.error(str(exc))
     raise SystemExit(main(a.quick, a.json))

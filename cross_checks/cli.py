@@ -1,18 +1,20 @@
 """``rbcheck`` command line (DESIGN.md contract).
 
 Exit codes: 0 success; 1 a comparison or gate found a regression / disagreement, or a run diverged;
-2 bad input (file, field and reason on stderr, no traceback); 130 interrupted (Ctrl-C).
+2 bad input or an output that cannot be written (one line naming the file, the field and the reason,
+no traceback); 130 interrupted (Ctrl-C); 143 terminated (SIGTERM). The README has the table per command.
 """
 from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 from pathlib import Path
 
 __all__ = ["main"]
 
-EXIT_OK, EXIT_FAIL, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
+EXIT_OK, EXIT_FAIL, EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_TERMINATED = 0, 1, 2, 130, 143
 
 
 class BadInput(Exception):
@@ -42,7 +44,8 @@ def build_parser() -> argparse.ArgumentParser:
         description="Validate rigid-body simulators: a NumPy reference of the GAMES103 course equations, "
                     "MuJoCo and PyBullet on identical free-body scenarios, against analytic or DOP853 references.",
         epilog="SCENARIO is a catalog name (see `rbcheck list`) or a path to a scenario TOML file. "
-               "Exit codes: 0 ok; 1 regression/disagreement, a failed or a diverged run; 2 bad input; 130 interrupted. "
+               "Exit codes: 0 ok; 1 regression/disagreement, a failed or a diverged run; 2 bad input or an "
+               "unwritable output (one line); 130 interrupted (Ctrl-C); 143 terminated (SIGTERM). "
                "Your own engines: --engine-file (docs/engines.md).",
     )
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_Parser)
@@ -81,11 +84,15 @@ def build_parser() -> argparse.ArgumentParser:
                    help="variants to run, e.g. reference:rk4 mujoco (an engine name means all its variants); "
                         "default: every available variant")
     s.add_argument("--jobs", type=_positive_int, metavar="N", help="worker processes (default: all cores)")
-    s.add_argument("--out", required=True, metavar="DIR", help="results directory (replaced atomically)")
+    s.add_argument("--out", required=True, metavar="DIR",
+                   help="results directory, replaced atomically and only when absent, empty or rbcheck's own (its marker)")
     s.add_argument("--no-cache", action="store_true",
                    help="recompute every run instead of reusing cached results ($RBCHECK_CACHE_DIR or ~/.cache/rbcheck)")
     s.add_argument("--self-contained", action="store_true", help="embed the plots in the HTML pages (for CI artifacts)")
     _add_engine_file_option(s)
+    s.add_argument("--time-limit", type=_positive_float, metavar="S",
+                   help="wall-time limit of each run and of each reference solve, s; one over it is a failed row "
+                        "(default: 900, cross_checks/tolerances.py)")
     s.add_argument("--dask", metavar="ADDRESS",
                    help="run the jobs on a Dask cluster (scheduler address, e.g. tcp://host:8786) through "
                         "distributed's Client.get_executor(); needs the optional extra: pip install 'rbcheck[dask]'. "
@@ -191,14 +198,24 @@ def cmd_show(args) -> int:
 
 
 def _check_out_path(out: str, suffix: str | None = ".csv", option: str = "--out") -> Path:
-    """An output file the user named: the right suffix (when given), an existing directory, not a directory."""
+    """An output file the user named, checked before any work: the right suffix (when given), a
+    directory that exists and can be written in (tried for real), not itself a directory."""
+    from .results_dir import ResultsDirError, check_writable_dir
+    if not str(out).strip():
+        raise BadInput(f"{option}: empty path; name a file")
     path = Path(out)
     if suffix is not None and path.suffix != suffix:
         raise BadInput(f"{option} {out}: must end in {suffix}")
-    if not path.parent.exists():
-        raise BadInput(f"{option} {out}: directory {path.parent} does not exist")
-    if path.exists() and path.is_dir():
+    parent = path.parent
+    if not parent.is_dir():
+        what = "is not a directory" if parent.exists() else "does not exist"
+        raise BadInput(f"{option} {out}: directory {parent} {what}")
+    if path.is_dir():
         raise BadInput(f"{option} {out}: is a directory")
+    try:
+        check_writable_dir(parent, option, out)
+    except ResultsDirError as exc:
+        raise BadInput(str(exc)) from None
     return path
 
 
@@ -216,6 +233,11 @@ def cmd_run(args) -> int:
     T = args.duration if args.duration is not None else sc.duration_s
     if dt > T:
         raise BadInput(f"--dt {dt:g}: must be <= the duration ({T:g} s)")
+    from .limits import LimitExceeded, check_run_steps
+    try:
+        check_run_steps(T, dt, "--dt" if args.dt is not None else "--duration")
+    except LimitExceeded as exc:
+        raise BadInput(str(exc)) from None
     try:
         traj = run_variant(sc, args.engine, dt, T)
     except EngineUnavailable as exc:
@@ -291,10 +313,19 @@ def _dask_client(address: str):
         raise BadInput(f"--dask {address}: cannot connect to the Dask scheduler: {exc}") from None
 
 
+def _time_limits(seconds) -> dict:
+    return {} if seconds is None else {"run_time_limit_s": seconds, "reference_time_limit_s": seconds}
+
+
 def cmd_sweep(args) -> int:
     from .scenario import catalog_names, load_scenario
     from .sweep import SweepError, SweepInterrupted, run_sweep
 
+    from .results_dir import ResultsDirError, check_output_dir
+    try:
+        check_output_dir(args.out)  # before any work (run_sweep checks again just before it starts)
+    except ResultsDirError as exc:
+        raise BadInput(str(exc)) from None
     specs = args.scenarios or catalog_names()
     scenarios = [load_scenario(s) for s in specs]
     variants, skipped = _resolve_engines(args.engines)
@@ -305,13 +336,15 @@ def cmd_sweep(args) -> int:
     t0 = time.perf_counter()
     try:
         summary = run_sweep(scenarios, variants, args.out, jobs=args.jobs, use_cache=not args.no_cache,
-                            self_contained=args.self_contained, skipped=skipped,
+                            self_contained=args.self_contained, skipped=skipped, **_time_limits(args.time_limit),
                             executor=client.get_executor() if client is not None else None)
     except SweepError as exc:
         raise BadInput(str(exc)) from None
-    except SweepInterrupted:
-        print(f"rbcheck sweep: interrupted; {args.out} left as it was", file=sys.stderr)
-        return EXIT_INTERRUPTED
+    except SweepInterrupted as exc:
+        what = (f"after the new results were complete in {args.out}" if exc.replaced
+                else f"{args.out} left as it was")
+        print(f"rbcheck sweep: {'terminated' if exc.terminated else 'interrupted'}; {what}", file=sys.stderr)
+        return EXIT_TERMINATED if exc.terminated else EXIT_INTERRUPTED
     finally:
         if client is not None:
             client.close()
@@ -337,10 +370,15 @@ def cmd_report(args) -> int:
     import reports
     from reports import ResultsError
 
+    from .results_dir import ResultsDirError, check_writable_dir
+
     jobs = args.jobs or (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
+    if not Path(args.dir).is_dir():
+        raise BadInput(f"{args.dir}: no such directory")
     try:
+        check_writable_dir(Path(args.dir), "DIR", args.dir)
         written = reports.render(args.dir, self_contained=args.self_contained, jobs=jobs)
-    except ResultsError as exc:
+    except (ResultsError, ResultsDirError) as exc:
         raise BadInput(str(exc)) from None
     print(f"rbcheck report: wrote {len(written)} page(s) -> {Path(args.dir) / 'index.html'}")
     return EXIT_OK
@@ -389,6 +427,7 @@ COMMANDS = {"list": cmd_list, "show": cmd_show, "run": cmd_run, "sweep": cmd_swe
 
 
 def main(argv=None) -> int:
+    from .lifecycle import Terminated, handle_sigterm
     from .scenario import ScenarioError
     from .trajectory import TrajectoryError
 
@@ -396,16 +435,33 @@ def main(argv=None) -> int:
         args = build_parser().parse_args(argv)
     except SystemExit as exc:  # usage errors (exit 2) and --help (exit 0) return instead of raising
         return int(exc.code or 0)
+    handle_sigterm()
     try:
         if getattr(args, "engine_file", None):
             _use_engine_files(args.engine_file)
         return COMMANDS[args.command](args)
     except (ScenarioError, TrajectoryError, BadInput) as exc:
-        print(f"rbcheck {args.command}: error: {exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
+        return _error(args.command, str(exc))
+    except Terminated:
+        print(f"rbcheck {args.command}: terminated", file=sys.stderr)
+        return EXIT_TERMINATED
     except KeyboardInterrupt:
         print(f"rbcheck {args.command}: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except OSError as exc:  # a file that could not be read or written: name it, no traceback
+        where = f"{exc.filename}: " if exc.filename else ""
+        return _error(args.command, f"{where}{exc.strerror or exc}")
+    except (MemoryError, RecursionError, Exception) as exc:  # noqa: BLE001 - every error path: one line, exit 2
+        if os.environ.get("RBCHECK_DEBUG"):
+            raise
+        return _error(args.command, f"internal error: {type(exc).__name__}: {exc} "
+                                    "(RBCHECK_DEBUG=1 shows the traceback)")
+
+
+def _error(command: str, message: str) -> int:
+    message = " ".join(str(message).split())  # one line, whatever the message holds
+    print(f"rbcheck {command}: error: {message}", file=sys.stderr)
+    return EXIT_BAD_INPUT
 
 
 if __name__ == "__main__":

@@ -8,6 +8,12 @@ Convergence records of ``summary.json`` are matched by (scenario, engine, quanti
 moves further from its expected value by more than ``ORDER_TOL`` or a verdict that changes from
 ``converges`` is a regression. Engine versions of both provenances are compared and reported.
 
+Both directories are validated in full before anything is compared (required columns, a number in
+every numeric cell, no negative error or drift, known statuses, no duplicate rows, a summary.json of
+a known schema version with well-formed convergence records): damaged input is exit 2 with one line,
+never read as "no regression". A metric column the baseline has and the new results lack, or an
+order that vanished, is a regression.
+
 Exit codes: 0 no regression; 1 regression (or missing rows, unless allowed); 2 unusable input.
 """
 from __future__ import annotations
@@ -78,7 +84,79 @@ class Comparison:
         return 0
 
 
+#: The columns DESIGN.md promises in every results.csv.
+REQUIRED_COLUMNS = ("scenario", "engine", "dt", "steps", "wall_s", "pos_err_final", "vel_err_final", "orient_err_final",
+                    "angvel_err_final", "energy_drift_max", "angmom_drift_max", "status")
+STATUSES = ("ok", "diverged", "failed")
+
+
+def _number(csv, line, col, text, *, nonneg=False, positive=False):
+    """A results.csv cell as a float (empty = NaN); CompareInputError naming line, column and reason."""
+    t = text.strip()
+    if t == "":
+        if positive:
+            raise CompareInputError(f"{csv}: line {line}: {col}: missing")
+        return math.nan
+    try:
+        v = float(t)
+    except ValueError:
+        raise CompareInputError(f"{csv}: line {line}: {col}: not a number: {t[:40]!r}") from None
+    if math.isnan(v):
+        return v
+    if not math.isfinite(v) or (nonneg and v < 0) or (positive and v <= 0):
+        need = "a positive finite number" if positive else "a finite number >= 0 (or empty)" if nonneg else "finite"
+        raise CompareInputError(f"{csv}: line {line}: {col}: must be {need}, got {t[:40]}")
+    return v
+
+
+def _read_csv(csv: Path) -> pd.DataFrame:
+    try:
+        raw = pd.read_csv(csv, dtype=str, keep_default_na=False, na_filter=False)
+    except Exception as exc:  # noqa: BLE001 - pandas raises many kinds; all mean "unusable"
+        raise CompareInputError(f"{csv}: cannot parse: {' '.join(str(exc).split()) or type(exc).__name__}") from None
+    missing = [c for c in REQUIRED_COLUMNS if c not in raw.columns]
+    if missing:
+        raise CompareInputError(f"{csv}: columns {', '.join(missing)} missing")
+    metrics = [m for m in METRIC_RULES if m in raw.columns]
+    out = {c: [] for c in ["scenario", "engine", "dt", "status", *metrics]}
+    for i, r in enumerate(raw.itertuples(index=False), start=2):
+        r = r._asdict() if hasattr(r, "_asdict") else dict(zip(raw.columns, r))
+        for c in ("scenario", "engine"):
+            if not r[c].strip():
+                raise CompareInputError(f"{csv}: line {i}: {c}: empty")
+            out[c].append(r[c])
+        if r["status"] not in STATUSES:
+            raise CompareInputError(f"{csv}: line {i}: status: must be one of {', '.join(STATUSES)}, "
+                                    f"got {r['status'][:40]!r}")
+        out["status"].append(r["status"])
+        out["dt"].append(_number(csv, i, "dt", r["dt"], positive=True))
+        _number(csv, i, "steps", r["steps"], nonneg=True)
+        for m in metrics:
+            out[m].append(_number(csv, i, m, r[m], nonneg=True))
+    df = pd.DataFrame(out)
+    if df.duplicated(KEY).any():
+        dup = df[df.duplicated(KEY)].iloc[0]
+        raise CompareInputError(f"{csv}: duplicate row for {dup['scenario']}, {dup['engine']}, dt={dup['dt']}")
+    return df
+
+
+def _read_summary(sj: Path) -> dict:
+    from reports.schema import SchemaError, check_summary
+    if not sj.is_file():
+        raise CompareInputError(f"{sj}: missing (every results directory written by `rbcheck sweep` has one)")
+    try:
+        summary = json.loads(sj.read_text(encoding="utf-8"))
+    except (ValueError, RecursionError) as exc:
+        raise CompareInputError(f"{sj}: cannot parse JSON: {str(exc) or type(exc).__name__}") from None
+    try:
+        check_summary(summary)
+    except SchemaError as exc:
+        raise CompareInputError(f"{sj}: {exc}") from None
+    return summary
+
+
 def _read_dir(d: Path):
+    """results.csv and summary.json of a results directory, validated in full (CompareInputError)."""
     d = Path(d)
     if not d.is_dir():
         raise CompareInputError(f"{d}: not a directory")
@@ -86,23 +164,9 @@ def _read_dir(d: Path):
     if not csv.is_file():
         raise CompareInputError(f"{csv}: missing (is {d} a results directory written by `rbcheck sweep`?)")
     try:
-        df = pd.read_csv(csv)
-    except Exception as exc:  # pandas raises many kinds; all mean "unusable"
-        raise CompareInputError(f"{csv}: cannot parse: {exc}") from None
-    missing = [c for c in KEY + ["status"] if c not in df.columns]
-    if missing:
-        raise CompareInputError(f"{csv}: columns {', '.join(missing)} missing")
-    if df.duplicated(KEY).any():
-        dup = df[df.duplicated(KEY)].iloc[0]
-        raise CompareInputError(f"{csv}: duplicate row for {dup['scenario']}, {dup['engine']}, dt={dup['dt']}")
-    summary = {}
-    sj = d / "summary.json"
-    if sj.is_file():
-        try:
-            summary = json.loads(sj.read_text(encoding="utf-8"))
-        except ValueError as exc:
-            raise CompareInputError(f"{sj}: cannot parse JSON: {exc}") from None
-    return df, summary
+        return _read_csv(csv), _read_summary(d / "summary.json")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CompareInputError(f"{d}: cannot read: {exc}") from None
 
 
 def _fmt(v):
@@ -127,8 +191,12 @@ def compare_dirs(baseline_dir, new_dir) -> Comparison:
     old_df, old_sum = _read_dir(Path(baseline_dir))
     new_df, new_sum = _read_dir(Path(new_dir))
     out = Comparison()
-    for df in (old_df, new_df):
-        df["dt"] = df["dt"].astype(float)
+    for metric in METRIC_RULES:  # a metric the baseline has and the new results lack cannot pass
+        if metric in old_df.columns and metric not in new_df.columns:
+            out.changes.append(Change("regression", "(all)", "(all)", f"column {metric}",
+                                      note="metric missing from the new results.csv"))
+        elif metric in new_df.columns and metric not in old_df.columns:
+            out.changes.append(Change("new", "(all)", "(all)", f"column {metric}", note="metric new in these results"))
     merged = old_df.merge(new_df, on=KEY, how="outer", suffixes=("_old", "_new"), indicator=True)
     for _, r in merged.iterrows():
         where = f"dt={r['dt']:g}"
@@ -194,8 +262,19 @@ def _compare_convergence(old_recs, new_recs, out: Comparison):
             out.changes.append(Change(kind, scen, eng, f"verdict of {qty}", str(vo), str(vn)))
             continue
         oo, on = ro.get("order"), rn.get("order")
+        if oo is None and on is None:
+            continue
+        if oo is None or on is None:  # an order that appeared or vanished under the same verdict
+            out.changes.append(Change("regression" if on is None else "changed", scen, eng, f"order of {qty}",
+                                      _fmt(oo), _fmt(on), "no order fitted" if on is None else "order now fitted"))
+            continue
         exp = _expected_order(rn)
-        if oo is None or on is None or exp is None or any(isinstance(v, float) and math.isnan(v) for v in (oo, on)):
+        if exp is None:  # no expected order: a converging order that moves beyond the tolerance is a
+            # regression (nothing says which way is better); the order of a record that does not converge
+            # measures no scheme and is not compared
+            if vn in GOOD_VERDICTS and abs(float(on) - float(oo)) > ORDER_TOL:
+                out.changes.append(Change("regression", scen, eng, f"order of {qty}", _fmt(float(oo)),
+                                          _fmt(float(on)), "no expected order to judge the change by"))
             continue
         do, dn = abs(float(oo) - exp), abs(float(on) - exp)
         if dn > do + ORDER_TOL:

@@ -26,7 +26,10 @@ from pathlib import Path
 import numpy as np
 
 from reference_sim.state import Q
+from . import cache
 from . import metrics as M
+from . import tolerances as tol
+from .limits import TimeLimitExceeded, time_limit
 from .expectations import QUANTITIES
 from .trajectory import json_default
 
@@ -132,7 +135,7 @@ def code_fingerprint(engine: str) -> str:
 def _job_key(scenario, variant, dt, engine_version):
     engine = variant.split(":", 1)[0]
     blob = json.dumps([SCHEMA_VERSION, scenario.content_hash, variant, repr(float(dt)), repr(scenario.duration_s),
-                       engine_version, code_fingerprint(engine), LOCAL_SAMPLES, MAX_SERIES_POINTS])
+                       engine_version, code_fingerprint(engine), LOCAL_SAMPLES, MAX_SERIES_POINTS, cache.environment()])
     return hashlib.sha256(blob.encode()).hexdigest()
 
 
@@ -161,26 +164,37 @@ def _pack_record(rec: dict) -> dict:
     return arrays
 
 
-def _unpack_record(data) -> dict:
-    rec = json.loads(str(data["__json__"]))
-    series = {k[len("series::"):]: data[k] for k in data.files if k.startswith("series::")}
+def _unpack_record(arrays: dict) -> dict:
+    rec = json.loads(str(arrays["__json__"]))
+    series = {k[len("series::"):]: v for k, v in arrays.items() if k.startswith("series::")}
     rec["series"] = series or None
     return rec
 
 
-def _cache_load(path: Path):
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            return _unpack_record(data)
-    except (OSError, ValueError, KeyError, EOFError):
+def _record_is_for(rec, job) -> bool:
+    """A cached record that verified is also checked to be a whole record of this very job."""
+    row = rec.get("row") if isinstance(rec, dict) else None
+    if not isinstance(row, dict) or any(c not in row for c in RESULT_COLUMNS):
+        return False
+    y = rec.get("y_final")
+    y_ok = y is None or (isinstance(y, list) and len(y) == 13 and all(isinstance(v, (int, float)) for v in y))
+    return (row["scenario"] == job.scenario and row["engine"] == job.variant and row["dt"] == job.dt_s
+            and row["status"] in ("ok", "diverged") and y_ok)
+
+
+def _cache_load(root, path: Path, key: str, job):
+    arrays = cache.load(root, path, key)
+    if arrays is None:
         return None
-
-
-def _cache_store(path: Path, rec: dict) -> None:
     try:
-        save_npz_atomic(path, _pack_record(rec))
-    except OSError:
-        pass  # a read-only or full cache must never break a sweep
+        rec = _unpack_record(arrays)
+    except (KeyError, ValueError, TypeError):
+        return None
+    return rec if _record_is_for(rec, job) else None
+
+
+def _cache_store(root, path: Path, key: str, rec: dict) -> None:
+    cache.store(root, path, key, _pack_record(rec))  # a read-only or full cache never breaks a sweep
 
 
 # --- references ------------------------------------------------------------------------------------
@@ -189,11 +203,12 @@ def _time_grids(scenario):
     return {dt: dt * np.arange(scenario.n_steps(dt) + 1) for dt in job_dts(scenario)}
 
 
-def reference_job(scenario, out_path: str, cache_root: str | None, use_cache: bool):
+def reference_job(scenario, out_path: str, cache_root: str | None, use_cache: bool,
+                  time_limit_s: float | None = tol.REFERENCE_TIME_LIMIT_S):
     """Compute (or load) the reference on the union of the scenario's time grids; save it to
     ``out_path`` (npz: t_s, y, label). Returns ``(label, error message or "", scales, varies,
     amplification)`` — the last from references.error_amplification, to scale round-off floors."""
-    label, err = _reference_solution_file(scenario, out_path, cache_root, use_cache)
+    label, err = _reference_solution_file(scenario, out_path, cache_root, use_cache, time_limit_s)
     if err:
         return label, err, {q: 1.0 for q in QUANTITIES}, {}, {q: 1.0 for q in QUANTITIES}
     from .references import error_amplification
@@ -202,34 +217,40 @@ def reference_job(scenario, out_path: str, cache_root: str | None, use_cache: bo
         return label, "", M.quantity_scales(y), varies(y), error_amplification(scenario)
 
 
-def _reference_solution_file(scenario, out_path, cache_root, use_cache):
+def _reference_solution_file(scenario, out_path, cache_root, use_cache, time_limit_s):
     from .references import reference_solution
     grids = _time_grids(scenario)
     t_union = np.unique(np.concatenate(list(grids.values())))
     key = hashlib.sha256(json.dumps([SCHEMA_VERSION, scenario.content_hash, code_fingerprint("reference"),
-                                     t_union.size, repr(float(t_union[-1]))]).encode()).hexdigest()
+                                     t_union.size, repr(float(t_union[-1])), cache.environment()]).encode()).hexdigest()
     cpath = _cache_file(Path(cache_root), "reference", key) if cache_root else None
-    if cpath is not None and use_cache and cpath.is_file():
-        try:
-            with np.load(cpath, allow_pickle=False) as d:
-                t, y, label = d["t_s"], d["y"], str(d["label"])
-            if np.array_equal(t, t_union):
-                save_npz_atomic(Path(out_path), {"t_s": t, "y": y, "label": np.array(label)})
-                return label, ""
-        except (OSError, ValueError, KeyError):
-            pass
+    if cpath is not None and use_cache:
+        arrays = cache.load(cache_root, cpath, key)
+        if arrays is not None and _reference_is_for(arrays, t_union):
+            save_npz_atomic(Path(out_path), arrays)
+            return str(arrays["label"]), ""
     try:
-        y, label = reference_solution(scenario, t_union)
+        with time_limit(time_limit_s, "the reference solution"):
+            y, label = reference_solution(scenario, t_union)
+    except TimeLimitExceeded as exc:
+        return "", f"reference solution failed: {exc} (cross_checks/tolerances.py)"
     except Exception as exc:  # noqa: BLE001 - reported per scenario, the sweep goes on
         return "", f"reference solution failed: {type(exc).__name__}: {exc}"
     arrays = {"t_s": t_union, "y": y, "label": np.array(label)}
     save_npz_atomic(Path(out_path), arrays)
     if cpath is not None:
-        try:
-            save_npz_atomic(cpath, arrays)
-        except OSError:
-            pass
+        cache.store(cache_root, cpath, key, arrays)
     return label, ""
+
+
+def _reference_is_for(arrays: dict, t_union) -> bool:
+    """A verified reference entry is also checked to be a whole, finite reference on this grid."""
+    try:
+        t, y, label = arrays["t_s"], arrays["y"], str(arrays["label"])
+    except KeyError:
+        return False
+    return (np.array_equal(t, t_union) and y.shape == (t_union.size, 13) and y.dtype == np.float64
+            and bool(np.all(np.isfinite(y))) and bool(label))
 
 
 _REF_MEMO: dict = {}
@@ -269,7 +290,8 @@ def _canonical_to(q, q_ref):
     return q * s
 
 
-def run_job(job: Job, scenario, ref_path: str, cache_root: str | None = None, use_cache: bool = True) -> dict:
+def run_job(job: Job, scenario, ref_path: str, cache_root: str | None = None, use_cache: bool = True,
+            time_limit_s: float | None = tol.RUN_TIME_LIMIT_S) -> dict:
     """Run one job and measure it. Returns a record: ``row`` (results.csv columns), ``y_final``
     (13 numbers or None), ``series`` (dict of float32 arrays for the default Δt, else None),
     ``scales`` (per quantity)."""
@@ -283,20 +305,23 @@ def run_job(job: Job, scenario, ref_path: str, cache_root: str | None = None, us
 
     cpath = None
     if cache_root:
-        cpath = _cache_file(Path(cache_root), "job", _job_key(scenario, job.variant, job.dt_s, version))
-        if use_cache and cpath.is_file():
-            rec = _cache_load(cpath)
+        ckey = _job_key(scenario, job.variant, job.dt_s, version)
+        cpath = _cache_file(Path(cache_root), "job", ckey)
+        if use_cache:
+            rec = _cache_load(cache_root, cpath, ckey, job)
             if rec is not None:
                 rec["row"].update(default_dt=job.default_dt, in_ladder=job.in_ladder, cached=True)
                 return rec
 
     t_ref_all, y_ref_all, label = load_reference(ref_path)
     try:
-        traj = run_variant(scenario, job.variant, job.dt_s)
+        with time_limit(time_limit_s, "the run"):
+            traj = run_variant(scenario, job.variant, job.dt_s)
     except KeyboardInterrupt:
         raise
     except Exception as exc:  # noqa: BLE001 - an engine failure is a row, not a crash
-        msg = f"{type(exc).__name__}: {exc}".strip()
+        msg = (f"{exc} (cross_checks/tolerances.py)" if isinstance(exc, TimeLimitExceeded)
+               else f"{type(exc).__name__}: {exc}".strip())
         return {"row": _nan_row(job, scenario, "failed", msg, label, version), "y_final": None, "series": None}
 
     meta = traj.meta
@@ -373,7 +398,7 @@ def run_job(job: Job, scenario, ref_path: str, cache_root: str | None = None, us
         series = {key: np.asarray(a, dtype=np.float32) for key, a in series.items()}
     rec = {"row": row, "y_final": y[-1].tolist() if status == "ok" else None, "series": series}
     if cpath is not None and status in ("ok", "diverged"):
-        _cache_store(cpath, rec)
+        _cache_store(cache_root, cpath, ckey, rec)
     return rec
 
 

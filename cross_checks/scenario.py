@@ -20,6 +20,7 @@ from reference_sim.body import RigidBody, check_inertia
 from reference_sim.forces import PointForce, Spring, Torque, ForceModel
 from reference_sim.quaternion import quat_from_euler_zxy, rotate
 from reference_sim.state import Problem, State
+from .tolerances import MAX_NAME_CHARS, MIN_LADDER_RATIO
 
 __all__ = ["Scenario", "ScenarioError", "load_scenario", "parse_scenario", "catalog_names", "catalog_path",
            "REFERENCE_KINDS"]
@@ -218,6 +219,9 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(source, "", f"TOML syntax error: {exc}") from None
+    except RecursionError:
+        raise ScenarioError(source, "", "TOML nested too deeply (arrays or tables inside each other "
+                                        "hundreds of levels deep); a scenario needs at most 3 levels") from None
     r.check_keys(raw, _TOP, "")
 
     # identity and timing
@@ -225,7 +229,9 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
         raise r.err("name", "missing (required)")
     name = r.string(raw, "name", "name")
     if not NAME_RE.match(name):
-        raise r.err("name", f"must match [a-z0-9_]+ (lower-case letters, digits, underscore), got {name!r}")
+        raise r.err("name", f"must match [a-z0-9_]+ (lower-case letters, digits, underscore), got {_show(name)}")
+    if len(name) > MAX_NAME_CHARS:
+        raise r.err("name", f"must have at most {MAX_NAME_CHARS} characters (it names files), got {len(name)}")
     description = r.string(raw, "description", "description", default="")
     duration = r.number(raw, "duration", "duration", required=True, positive=True)
     dt = r.number(raw, "dt", "dt", required=True, positive=True)
@@ -245,6 +251,7 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
         if len(set(vals)) != len(vals):
             raise r.err("dt_ladder", "has repeated values")
         ladder = tuple(sorted(vals, reverse=True))
+        _check_ladder_spacing(r, vals, ladder)
     reference = r.string(raw, "reference", "reference", default="auto", choices=REFERENCE_KINDS)
 
     # body
@@ -360,4 +367,20 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
         ok, why = analytic_available(sc)
         if not ok:
             raise r.err("reference", f"'analytic' requested but no closed form covers this scenario: {why}")
+    from .limits import LimitExceeded, check_scenario_limits
+    try:
+        check_scenario_limits(sc)
+    except LimitExceeded as exc:
+        raise r.err(exc.field, exc.reason) from None
     return sc
+
+
+def _check_ladder_spacing(r, vals, ladder):
+    """Adjacent rungs closer than MIN_LADDER_RATIO cannot resolve an order (their errors differ by
+    noise): refuse them, naming both entries as the user wrote them."""
+    for a, b in zip(ladder, ladder[1:]):
+        if a / b < MIN_LADDER_RATIO:
+            ia, ib = sorted((vals.index(a), vals.index(b)))
+            raise r.err(f"dt_ladder[{ib}]", f"{vals[ib]!r} is too close to dt_ladder[{ia}] = {vals[ia]!r} (ratio "
+                                            f"{max(a, b) / min(a, b):.17g}); adjacent rungs must differ by a factor of "
+                                            f"at least {MIN_LADDER_RATIO:g} for their errors to give an order")

@@ -12,10 +12,12 @@ Trajectory → :mod:`cross_checks.metrics` → results files → :mod:`reports` 
   cores); ``--jobs 1`` runs in this process. A diverged run is a row with status ``diverged``; an
   engine exception (or a worker process that dies) is a row with status ``failed`` and the message;
   the sweep goes on.
-* Everything is written into a temporary sibling of DIR, which replaces DIR only when complete.
+* Everything is written into a temporary sibling of DIR, which replaces DIR only when complete, and
+  only when DIR is rbcheck's own (:mod:`cross_checks.results_dir`: the marker, what a killed run leaves).
 
 Results directory::
 
+    .rbcheck-results.json  the marker: format, schema_version, every file rbcheck wrote here
     results.csv            one row per (scenario, engine, dt): RESULT_COLUMNS
     summary.json           provenance, scenarios, variants, convergence (+ local_convergence),
                            agreement of equivalent schemes, run statistics
@@ -31,9 +33,7 @@ import math
 import os
 import platform
 import shutil
-import signal
 import sys
-import tempfile
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
@@ -46,6 +46,9 @@ from reference_sim.state import Q
 from . import metrics as M
 from . import tolerances as tol
 from .expectations import EQUIVALENT_PAIRS, QUANTITIES, expectation
+from .lifecycle import Terminated, worker_init
+from .results_dir import (ResultsDirError, check_output_dir, remove_stale_siblings, replace_dir, staging_dir,
+                          write_marker)
 from .trajectory import atomic_write_text, json_default
 from .measure import (COLUMN_STEM, LOCAL_SAMPLES, MAX_SERIES_POINTS, RESULT_COLUMNS, SCHEMA_VERSION, Job,
                       cache_dir, code_fingerprint, failed_record, job_dts, load_reference,
@@ -69,7 +72,11 @@ class SweepError(Exception):
 
 
 class SweepInterrupted(KeyboardInterrupt):
-    """Ctrl-C during a sweep; the previous results directory is untouched."""
+    """Ctrl-C (or SIGTERM: ``terminated``) during a sweep; the previous results directory is untouched."""
+
+    def __init__(self, terminated: bool = False, replaced: bool = False):
+        super().__init__()
+        self.terminated, self.replaced = terminated, replaced
 
 
 # --- planning --------------------------------------------------------------------------------------
@@ -99,10 +106,6 @@ def plan_jobs(scenarios, variants) -> list:
 
 # --- worker plumbing --------------------------------------------------------------------------------
 
-def _worker_init():
-    # Ctrl-C is handled by the parent, which then stops the workers; a worker must not print its own
-    # KeyboardInterrupt traceback.
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 class _Runner:
@@ -119,7 +122,8 @@ class _Runner:
     def _new_pool(self):
         import multiprocessing as mp
         ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else None
-        return ProcessPoolExecutor(max_workers=self.jobs, mp_context=ctx, initializer=_worker_init)
+        return ProcessPoolExecutor(max_workers=self.jobs, mp_context=ctx, initializer=worker_init,
+                                   initargs=(os.getpid(),))
 
     def map_unordered(self, fn, items, on_done=None, on_crash=None, in_flight=None):
         """``fn(item)`` for each item; returns ``[(item, result)]`` in completion order.
@@ -205,31 +209,32 @@ class _Runner:
 
 
 class _RefTask:
-    def __init__(self, scenarios, work_dir, cache_root, use_cache):
+    def __init__(self, scenarios, work_dir, cache_root, use_cache, time_limit_s):
         self.scenarios, self.work_dir, self.cache_root, self.use_cache = scenarios, work_dir, cache_root, use_cache
+        self.time_limit_s = time_limit_s
 
     def path(self, i):
         return str(Path(self.work_dir) / f"ref_{i}.npz")
 
     def __call__(self, i):
-        return reference_job(self.scenarios[i], self.path(i), self.cache_root, self.use_cache)
+        return reference_job(self.scenarios[i], self.path(i), self.cache_root, self.use_cache, self.time_limit_s)
 
 
 def _run_job_item(item):
-    """``item`` = (job, scenario, ref_path, cache_root, use_cache, user_engines, marker): one small
-    pickle per job.
+    """``item`` = (job, scenario, ref_path, cache_root, use_cache, user_engines, time_limit_s, marker): one
+    small pickle per job.
 
     ``user_engines`` are the parent's engine-file adapters (a worker that was not forked from the
     parent, e.g. on Dask, registers them here). ``marker`` (a file path) exists while the job runs,
     so after a worker crash the parent knows which jobs were in flight. Any error of the harness
     itself becomes a failed row, so one bad job never stops the sweep.
     """
-    job, scenario, ref_path, cache_root, use_cache, user_engines, marker = item
+    job, scenario, ref_path, cache_root, use_cache, user_engines, time_limit_s, marker = item
     Path(marker).touch()
     try:
         from .engines import adopt_user_engines
         adopt_user_engines(user_engines)
-        return run_job(job, scenario, ref_path, cache_root, use_cache)
+        return run_job(job, scenario, ref_path, cache_root, use_cache, time_limit_s)
     except (KeyboardInterrupt, SystemExit):
         raise
     except Exception as exc:  # noqa: BLE001
@@ -439,36 +444,10 @@ def write_json(path, obj) -> None:
 
 # --- the sweep --------------------------------------------------------------------------------------
 
-def _check_out_dir(out: Path) -> None:
-    if out.exists() and not out.is_dir():
-        raise SweepError(f"--out {out}: exists and is not a directory")
-    if out.is_dir() and any(out.iterdir()) and not (out / "summary.json").is_file():
-        raise SweepError(f"--out {out}: exists, is not empty and is not an rbcheck results directory "
-                         "(no summary.json); refusing to replace it")
-    if not out.parent.exists():
-        raise SweepError(f"--out {out}: parent directory {out.parent} does not exist")
-
-
-def _swap_into_place(staging: Path, out: Path) -> None:
-    """Replace ``out`` by ``staging`` with renames only: at every instant ``out`` is either the old
-    complete directory or the new complete one (between the two renames, briefly, absent)."""
-    if out.exists():
-        backup = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-", dir=out.parent))
-        backup.rmdir()
-        os.replace(out, backup)
-        try:
-            os.replace(staging, out)
-        except BaseException:
-            os.replace(backup, out)
-            raise
-        shutil.rmtree(backup, ignore_errors=True)
-    else:
-        os.replace(staging, out)
-
-
 def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cache: bool = True,
               self_contained: bool = False, progress: bool | None = None, skipped=None, render=True,
-              executor=None) -> dict:
+              executor=None, run_time_limit_s: float | None = tol.RUN_TIME_LIMIT_S,
+              reference_time_limit_s: float | None = tol.REFERENCE_TIME_LIMIT_S) -> dict:
     """Run the sweep and write the results directory ``out_dir`` (atomically).
 
     Parameters
@@ -479,6 +458,8 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
     use_cache : read cached job results (they are always written).
     skipped : ``{variant: reason}`` of variants left out (recorded in summary.json).
     progress : show a progress bar (default: when stderr is a terminal).
+    run_time_limit_s, reference_time_limit_s : wall-time limits of one run and of one reference solve
+        (None: none); a run or reference over its limit is a ``failed`` row saying so.
     executor : any ``concurrent.futures.Executor`` to run the jobs on instead of the local process
         pool (e.g. ``distributed.Client(address).get_executor()``); its workers must see the parent
         directory of ``out_dir`` and the cache directory (jobs exchange reference solutions as files).
@@ -488,8 +469,12 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
     """
     from tqdm import tqdm
 
-    out = Path(out_dir).absolute()
-    _check_out_dir(out)
+    try:
+        out = check_output_dir(str(out_dir))
+    except ResultsDirError as exc:
+        raise SweepError(str(exc)) from None
+    for line in remove_stale_siblings(out):
+        print(f"rbcheck sweep: {line} (left by a run that was killed)", file=sys.stderr)
     names = [s.name for s in scenarios]
     if len(set(names)) != len(names):
         dup = sorted({n for n in names if names.count(n) > 1})
@@ -503,7 +488,7 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
     for v in variants:  # fingerprint the code once, here: forked workers inherit it
         code_fingerprint(v.split(":", 1)[0])
     code_fingerprint("reference")
-    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=out.parent))
+    staging = staging_dir(out)
     work = staging / "_work"
     work.mkdir()
     runner = None
@@ -512,7 +497,7 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
     try:
         runner = _Runner(jobs, executor)
         # 1. references (one per scenario)
-        ref_task = _RefTask(scenarios, str(work), cache_root, use_cache)
+        ref_task = _RefTask(scenarios, str(work), cache_root, use_cache, reference_time_limit_s)
         ref_results = dict(runner.map_unordered(ref_task, range(len(scenarios))))
         ref_paths = [ref_task.path(i) for i in range(len(scenarios))]
         labels = {i: ref_results[i][0] for i in range(len(scenarios))}
@@ -540,7 +525,7 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
         from .engines import user_engines
         extra_engines = user_engines()
         items = [(j, scenarios[j.scenario_index], ref_paths[j.scenario_index], cache_root, use_cache,
-                  extra_engines, str(work / "inflight" / str(k))) for k, j in enumerate(todo)]
+                  extra_engines, run_time_limit_s, str(work / "inflight" / str(k))) for k, j in enumerate(todo)]
 
         def crashed(item):
             Path(item[-1]).unlink(missing_ok=True)
@@ -623,12 +608,13 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
         import reports
         if render:
             reports.render(staging, self_contained=self_contained, jobs=jobs)
+        write_marker(staging)
         reports.fix_permissions(staging)
-        _swap_into_place(staging, out)
+        replace_dir(staging, out)
         staging = None
         return summary
-    except KeyboardInterrupt:
-        raise SweepInterrupted() from None
+    except KeyboardInterrupt as exc:  # after the swap (staging is None) the new results are complete
+        raise SweepInterrupted(isinstance(exc, Terminated), replaced=staging is None or not staging.exists()) from None
     finally:
         if bar is not None:
             bar.close()

@@ -100,3 +100,41 @@ CHECK_INITIAL_STATE_REL = 1e-5
 #: max(1, |state|); rad for the orientation) gets a note in the run's message (the engine may misread
 #: the resolved JSON). 1e-5: a CSV printed with 6 significant digits, as CHECK_INITIAL_STATE_REL.
 ENGINE_FILE_INITIAL_STATE_REL = 1e-5
+
+# --- hardening: bounded work, honest inputs (issue 13) ----------------------------------------------
+
+#: Peak memory of one sweep job per recorded step (its run plus the reference on the same grid),
+#: measured as the growth of the worker's max RSS: 1090 B/step at 2e5 steps, 890 at 1e6
+#: (reference:course), 780 (mujoco:euler); the trajectory alone is 14 float64 = 112 B, the rest is
+#: the error arrays, drifts and the reference slice. 1100 covers every measurement.
+BYTES_PER_RECORDED_STEP = 1100
+#: Memory one job may use: 2 GiB, so a laptop with 8 GiB and 4 cores runs 4 jobs side by side and
+#: keeps half its memory. At BYTES_PER_RECORDED_STEP this allows ~1.9e6 steps per run; the catalog's
+#: largest run has 2e4 (100x inside), a user's 60 s at Δt = 1e-4 has 6e5.
+JOB_MEMORY_LIMIT_BYTES = 2 * 2 ** 30
+#: DOP853 (rtol 1e-13) right-hand-side evaluations per radian of the fastest rate of the dynamics:
+#: measured 90–93 for springs from k = 40 to 1e6 N/m and 64 for spins of 50–500 rad/s; 100 covers both.
+DOP853_EVALS_PER_RAD = 100
+#: CPU seconds per right-hand-side evaluation inside solve_ivp (reference_sim.integrators.rhs on one
+#: body plus DOP853's own work): measured 211–246 µs on this 2-core machine; 250 µs.
+DOP853_S_PER_EVAL = 250e-6
+#: A scenario whose DOP853 reference is estimated above this is refused up front: 300 s, while the
+#: catalog's two DOP853 references take < 1 s (applied_torque, spring_pendulum); a stiff spring
+#: (k = 1e9 N/m, ~620 s of CPU per simulated second) is refused at once instead of running for hours.
+REFERENCE_COST_LIMIT_S = 300.0
+#: Wall-time limit of one reference solve while it runs: 3x the up-front limit, so only an estimate
+#: that is 3x too low (a much slower machine) meets it; the solve then is a `failed` scenario.
+REFERENCE_TIME_LIMIT_S = 900.0
+#: Wall-time limit of one run while it runs: the largest run allowed (~1.9e6 steps) at the slowest
+#: measured per-step cost (MuJoCo RK4 evaluating forces in Python at its 4 stages, 270 µs) takes
+#: ~530 s; 900 s leaves 1.7x for a slower machine. The catalog's longest run takes 0.8 s.
+RUN_TIME_LIMIT_S = 900.0
+#: Adjacent rungs of a Δt ladder must differ by at least this ratio. The order from a pair is
+#: ln(e_a/e_b) / ln(h_a/h_b); a relative error perturbation δ (the next-order term, a few % at a
+#: catalog Δt; round-off near the floor) moves it by δ / ln(ratio). With δ = 5 % and the ±0.3
+#: tolerance of a sweep verdict (SWEEP_ORDER_TOL), ln(ratio) ≥ 0.05/0.3 gives ratio ≥ 1.18: 1.2.
+#: [0.01, 0.010000000000000002] (ratio 1 + 2e-16) would otherwise read as "does not converge".
+MIN_LADDER_RATIO = 1.2
+#: Longest scenario name: it becomes file names (scenario-<name>.html, plots/<name>__conservation.png,
+#: series/<name>.npz) that must fit the 255-byte limit of common filesystems with room to spare.
+MAX_NAME_CHARS = 100

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import os
 import shutil
-import tempfile
 from pathlib import Path
 
 from .data import Results, ResultsError, load_results
@@ -23,9 +22,9 @@ def _draw(directory: str, scenario: str, plot_dir: str):
     return scenario, scenario_figures(res, scenario, Path(plot_dir))
 
 
-def _quiet_init():
-    import signal
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+def _quiet_init(parent_pid):
+    from cross_checks.lifecycle import worker_init
+    worker_init(parent_pid)
 
 
 def render(directory, *, self_contained: bool = False, jobs: int | None = 1) -> list:
@@ -34,54 +33,75 @@ def render(directory, *, self_contained: bool = False, jobs: int | None = 1) -> 
     self_contained : embed the PNGs in the pages (data: URIs) so each page stands alone (CI artifacts);
         the PNG files are kept beside them as well.
     jobs : processes drawing figures (one scenario each); 1 draws here.
-    Raises ResultsError when the directory is not a readable results directory.
+    Raises ResultsError when the directory is not a readable results directory. Every file name comes
+    from a sanitised name and is checked to stay inside the directory. Only files the directory's
+    marker lists are ever removed (stale plots and pages); a directory without the marker (written
+    before it existed) gets its pages and plots written, and nothing removed.
     """
     from .html import page_name, render_pages
+    from cross_checks.results_dir import inside, is_owned_stale, listed_files, owned_name, read_marker, write_marker
     from cross_checks.trajectory import atomic_write_text
 
     d = Path(directory)
     res = load_results(d)
     names = [s["name"] for s in res.scenarios]
-    new_plots = Path(tempfile.mkdtemp(prefix=".plots.", dir=d))
+    for p in d.iterdir():  # drawing folders of a report that was killed
+        if p.is_dir() and is_owned_stale(p.name, ".", "plots"):
+            shutil.rmtree(p, ignore_errors=True)
+    marked = read_marker(d) is not None
+    listed = listed_files(d)
+    new_plots = d / owned_name(".", "plots")
+    new_plots.mkdir()
     try:
-        figures = {}
-        if jobs and jobs > 1 and len(names) > 1:
-            import multiprocessing as mp
-            from concurrent.futures import ProcessPoolExecutor
-            ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else None
-            with ProcessPoolExecutor(max_workers=min(jobs, len(names)), mp_context=ctx,
-                                     initializer=_quiet_init) as pool:
-                for sc, figs in pool.map(_draw, [str(d)] * len(names), names, [str(new_plots)] * len(names)):
-                    figures[sc] = figs
-        else:
-            for sc in names:
-                figures[sc] = _draw(str(d), sc, str(new_plots))[1]
-        os.chmod(new_plots, 0o777 & ~_umask())
-        old = d / "plots"
-        if old.exists():
-            trash = Path(tempfile.mkdtemp(prefix=".plots-old.", dir=d))
-            trash.rmdir()
-            os.replace(old, trash)
-            os.replace(new_plots, old)
-            shutil.rmtree(trash, ignore_errors=True)
-        else:
-            os.replace(new_plots, old)
-        new_plots = None
+        figures = _draw_all(d, names, new_plots, jobs)
+        drawn = _move_plots(new_plots, d / "plots")
     finally:
-        if new_plots is not None:
-            shutil.rmtree(new_plots, ignore_errors=True)
+        shutil.rmtree(new_plots, ignore_errors=True)
     pages = render_pages(res, figures, self_contained=self_contained)
     written = []
     for name, html in pages.items():
-        atomic_write_text(d / name, html)
+        atomic_write_text(inside(d, name), html)
         written.append(d / name)
-    # pages of scenarios that are no longer in the results
-    keep = {page_name(n) for n in names}
-    for p in d.glob("scenario-*.html"):
-        if p.name not in keep:
-            p.unlink()
+    # plots and pages rbcheck wrote before that the data no longer has (listed in the marker only)
+    keep = {p.name for p in written} | {f"plots/{n}" for n in drawn}
+    for rel in sorted(listed):
+        stale_page = rel.startswith("scenario-") and rel.endswith(".html") and rel not in keep
+        stale_plot = rel.startswith("plots/") and rel.endswith(".png") and rel not in keep
+        if stale_page or stale_plot:
+            (d / rel).unlink(missing_ok=True)
+    if marked:
+        write_marker(d, [f for f in listed | keep if (d / f).is_file()])
     fix_permissions(d)
     return written
+
+
+def _draw_all(d: Path, names, plot_dir: Path, jobs) -> dict:
+    figures = {}
+    if jobs and jobs > 1 and len(names) > 1:
+        import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor
+        ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else None
+        with ProcessPoolExecutor(max_workers=min(jobs, len(names)), mp_context=ctx,
+                                 initializer=_quiet_init, initargs=(os.getpid(),)) as pool:
+            for sc, figs in pool.map(_draw, [str(d)] * len(names), names, [str(plot_dir)] * len(names)):
+                figures[sc] = figs
+    else:
+        for sc in names:
+            figures[sc] = _draw(str(d), sc, str(plot_dir))[1]
+    return figures
+
+
+def _move_plots(src: Path, plots: Path) -> list:
+    """Move the freshly drawn PNGs into ``plots/`` one by one (a file there that the user put in
+    stays); returns their names."""
+    if plots.is_symlink() or (plots.exists() and not plots.is_dir()):
+        raise ResultsError(f"{plots}: exists and is not a directory")
+    plots.mkdir(exist_ok=True)
+    names = sorted(p.name for p in src.glob("*.png"))
+    for n in names:
+        os.chmod(src / n, 0o666 & ~_umask())
+        os.replace(src / n, plots / n)
+    return names
 
 
 def _umask() -> int:

@@ -12,7 +12,10 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["Results", "ResultsError", "load_results", "QUANTITIES", "UNITS", "COLUMN_STEM", "LABELS"]
+from cross_checks.results_dir import inside, safe_file_stem
+from .schema import STATUSES
+
+__all__ = ["Results", "ResultsError", "load_results", "read_summary", "QUANTITIES", "UNITS", "COLUMN_STEM", "LABELS"]
 
 QUANTITIES = ("position", "orientation", "velocity", "angular_velocity")
 UNITS = {"position": "m", "velocity": "m/s", "orientation": "rad", "angular_velocity": "rad/s"}
@@ -82,7 +85,7 @@ class Results:
     def series(self, scenario) -> dict:
         """``{variant: {field: array}}`` plus ``"reference"``, from series/<scenario>.npz (empty when absent)."""
         if scenario not in self._series:
-            path = self.directory / "series" / f"{scenario}.npz"
+            path = inside(self.directory, "series", f"{safe_file_stem(scenario)}.npz")
             out = {}
             if path.is_file():
                 try:
@@ -90,10 +93,27 @@ class Results:
                         for k in d.files:
                             who, fld = k.split("::", 1)
                             out.setdefault(who, {})[fld] = np.asarray(d[k], dtype=float)
-                except (OSError, ValueError) as exc:
-                    raise ResultsError(f"{path}: cannot read: {exc}") from None
+                except Exception as exc:  # noqa: BLE001 - zip, npy and dtype errors all mean "damaged"
+                    raise ResultsError(f"{path}: cannot read: {type(exc).__name__}: {exc}") from None
+                _check_series(path, out)
             self._series[scenario] = out
         return self._series[scenario]
+
+
+_SERIES_WIDTH = {"t_s": 0, "x_W": 3, "q_WB": 4}
+
+
+def _check_series(path, out) -> None:
+    """Every series of one owner shares t_s's length; vectors have their width (ResultsError otherwise)."""
+    for who, fields in out.items():
+        if "t_s" not in fields:
+            raise ResultsError(f"{path}: {who}::t_s: missing")
+        n = fields["t_s"].shape
+        for fld, a in fields.items():
+            width = _SERIES_WIDTH.get(fld, 0)
+            want = n if width == 0 else (n[0], width) if len(n) == 1 else None
+            if len(n) != 1 or a.shape != want:
+                raise ResultsError(f"{path}: {who}::{fld}: shape {a.shape} does not match {who}::t_s {n}")
 
 
 def load_results(directory) -> Results:
@@ -106,12 +126,7 @@ def load_results(directory) -> Results:
     for p in (sj, rc):
         if not p.is_file():
             raise ResultsError(f"{p}: missing (not an rbcheck results directory?)")
-    try:
-        summary = json.loads(sj.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
-        raise ResultsError(f"{sj}: cannot parse: {exc}") from None
-    if not isinstance(summary, dict) or "provenance" not in summary or "convergence" not in summary:
-        raise ResultsError(f"{sj}: provenance/convergence: missing (not written by rbcheck sweep?)")
+    summary = read_summary(sj, for_report=True)
     try:
         with rc.open(encoding="utf-8", newline="") as fh:
             reader = csv.DictReader(fh)
@@ -120,10 +135,39 @@ def load_results(directory) -> Results:
                 raise ResultsError(f"{rc}: header: missing column(s) {', '.join(missing)}")
             rows = []
             for i, raw in enumerate(reader, start=2):
-                try:
-                    rows.append({k: _parse(k, v if v is not None else "") for k, v in raw.items()})
-                except ValueError as exc:
-                    raise ResultsError(f"{rc}: line {i}: {exc}") from None
+                rows.append(_parse_row(rc, i, raw))
     except OSError as exc:
         raise ResultsError(f"{rc}: cannot read: {exc}") from None
+    except (csv.Error, UnicodeDecodeError) as exc:
+        raise ResultsError(f"{rc}: cannot parse: {exc}") from None
     return Results(d, rows, summary)
+
+
+def read_summary(sj: Path, for_report: bool = False) -> dict:
+    """summary.json, checked against reports.schema (ResultsError naming the file and the field)."""
+    from .schema import SchemaError, check_summary
+    try:
+        summary = json.loads(sj.read_text(encoding="utf-8"))
+    except (OSError, ValueError, RecursionError) as exc:
+        raise ResultsError(f"{sj}: cannot parse: {str(exc) or type(exc).__name__}") from None
+    try:
+        check_summary(summary, for_report=for_report)
+    except SchemaError as exc:
+        raise ResultsError(f"{sj}: {exc}") from None
+    return summary
+
+
+def _parse_row(rc, line, raw) -> dict:
+    if None in raw:
+        raise ResultsError(f"{rc}: line {line}: more cells than columns")
+    row = {}
+    for k, v in raw.items():
+        try:
+            row[k] = _parse(k, v if v is not None else "")
+        except ValueError:
+            raise ResultsError(f"{rc}: line {line}: {k}: not a number: {v[:40]!r}") from None
+    if row["status"] not in STATUSES:
+        raise ResultsError(f"{rc}: line {line}: status: must be one of {', '.join(STATUSES)}, got {row['status'][:40]!r}")
+    if not (row["dt"] > 0 and math.isfinite(row["dt"])):
+        raise ResultsError(f"{rc}: line {line}: dt: must be a positive finite number, got {row['dt']}")
+    return row

@@ -42,7 +42,9 @@ def environment() -> Environment:
 
 
 def page_name(scenario: str) -> str:
-    return f"scenario-{scenario}.html"
+    """The page of a scenario; the name read from the data is made a safe file name first."""
+    from cross_checks.results_dir import safe_file_stem
+    return f"scenario-{safe_file_stem(scenario)}.html"
 
 
 def _img_src(res, fname, self_contained):

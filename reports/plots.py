@@ -306,11 +306,12 @@ def fig_work(res, sc, styles, path):
 
 def scenario_figures(res, sc, plot_dir) -> list:
     """Draw every figure of scenario ``sc`` into ``plot_dir``; returns ``[(kind, filename)]`` drawn."""
+    from cross_checks.results_dir import inside, safe_file_stem
     styles = variant_styles(res.variants)
     out = []
     for kind in KINDS:
-        name = f"{sc}__{kind}.png"
-        path = plot_dir / name
+        name = f"{safe_file_stem(sc)}__{kind}.png"
+        path = inside(plot_dir, name)
         if kind == "trajectories":
             ok = bool(res.series(sc).get("reference")) or any(v in res.series(sc) for v in res.variants)
             if ok:

@@ -25,7 +25,7 @@ PROV = {"versions": {"rbcheck": "0.1.0", "mujoco": "4.0.0", "pybullet": "3.2.7",
 def write(d, rows=ROWS, conv=CONV, prov=PROV):
     d.mkdir(parents=True, exist_ok=True)
     pd.DataFrame(rows).to_csv(d / "results.csv", index=False)
-    (d / "summary.json").write_text(json.dumps({"provenance": prov, "convergence": conv}))
+    (d / "summary.json").write_text(json.dumps({"schema_version": 1, "provenance": prov, "convergence": conv}))
     return d
 
 
@@ -117,3 +117,76 @@ def test_cli_compare_exit_codes_and_markdown(tmp_path, capsys):
     assert "| tennis_racket | reference:course | dt=0.001 angvel_err_final |" in md.read_text()
     assert main(["compare", str(a), str(tmp_path / "nope")]) == 2
     assert "nope: not a directory" in capsys.readouterr().err
+
+
+# --- damaged input is exit 2, never "no regression" (issue 13) ---------------------------------------
+
+def _cli(capsys, a, b):
+    from cross_checks.cli import main
+    rc = main(["compare", str(a), str(b)])
+    return rc, capsys.readouterr()
+
+
+def test_a_metric_missing_from_the_new_results_is_a_failure(tmp_path):
+    with_metric = [dict(r, orient_err_max=r["orient_err_final"]) for r in ROWS]
+    c = compare_dirs(write(tmp_path / "a", with_metric), write(tmp_path / "b"))  # b lacks orient_err_max
+    [reg] = c.of("regression")
+    assert reg.what == "column orient_err_max" and c.exit_code() == 1
+
+
+@pytest.mark.parametrize("edit, words", [
+    (lambda r: r[0].update(orient_err_final="oops"), "line 2: orient_err_final: not a number: 'oops'"),
+    (lambda r: r[1].update(pos_err_final=-0.5), "line 3: pos_err_final: must be a finite number >= 0"),
+    (lambda r: r[2].update(energy_drift_max=float("inf")), "line 4: energy_drift_max: must be a finite number >= 0"),
+    (lambda r: r[0].update(status="great"), "line 2: status: must be one of ok, diverged, failed"),
+    (lambda r: r[0].update(dt=0.0), "line 2: dt: must be a positive finite number"),
+    (lambda r: r.append(dict(r[0])), "duplicate row for tennis_racket, mujoco:euler"),
+])
+def test_damaged_rows_are_unusable_input_not_a_pass(tmp_path, capsys, edit, words):
+    rows = [dict(r) for r in ROWS]
+    edit(rows)
+    rc, out = _cli(capsys, write(tmp_path / "a"), write(tmp_path / "b", rows))
+    assert rc == 2 and words in out.err and out.err.count("\n") == 1 and "Traceback" not in out.err
+
+
+@pytest.mark.parametrize("summary, words", [
+    ("[1, 2]", "summary: must be an object"),
+    ('{"schema_version": 1, "provenance": {}}', "summary.convergence: missing"),
+    ('{"schema_version": 99, "provenance": {}, "convergence": []}', "schema_version: 99"),
+    ('{"schema_version": 1, "provenance": {}, "convergence": [{"scenario": "x"}]}', "convergence[0].engine: missing"),
+    ('{"schema_version": 1, "provenance": {}, "convergence": [{"scenario": "x", "engine": "e", "quantity": "position", '
+     '"order": "fast", "verdict": "converges"}]}', "convergence[0].order: must be a number"),
+    ("[" * 100000 + "]" * 100000, "cannot parse JSON"),
+])
+def test_a_malformed_summary_is_unusable_input(tmp_path, capsys, summary, words):
+    b = write(tmp_path / "b")
+    (b / "summary.json").write_text(summary)
+    rc, out = _cli(capsys, write(tmp_path / "a"), b)
+    assert rc == 2 and words in out.err and out.err.count("\n") == 1 and "Traceback" not in out.err
+
+
+def test_a_summary_is_required(tmp_path, capsys):
+    b = write(tmp_path / "b")
+    (b / "summary.json").unlink()
+    rc, out = _cli(capsys, write(tmp_path / "a"), b)
+    assert rc == 2 and "summary.json: missing" in out.err
+
+
+def test_an_order_that_vanished_is_a_regression_not_ignored(tmp_path):
+    conv = [dict(CONV[0], order=None)]
+    c = compare_dirs(write(tmp_path / "a"), write(tmp_path / "b", conv=conv))
+    assert c.exit_code() == 1 and c.of("regression")[0].note == "no order fitted"
+
+
+def test_a_converging_order_without_expectation_that_moves_is_a_regression(tmp_path):
+    old = [dict(CONV[0], expected_order=None, scenario="mystery", engine="user:x")]
+    new = [dict(old[0], order=0.6)]
+    c = compare_dirs(write(tmp_path / "a", conv=old), write(tmp_path / "b", conv=new))
+    assert c.exit_code() == 1
+
+
+def test_the_committed_baseline_without_a_marker_is_still_valid_input():
+    from pathlib import Path
+    base = Path(__file__).resolve().parents[2] / "baselines" / "default"
+    c = compare_dirs(base, base)
+    assert c.exit_code() == 0 and c.matched_rows > 100 and not c.changes

@@ -1,0 +1,157 @@
+"""What a summary.json must hold for ``report`` and ``compare`` to use it: every field they read,
+with its type, checked once when the directory is loaded, so a damaged or hand-edited file is one
+line naming the file, the field and the reason (exit 2) instead of a traceback while rendering.
+
+A spec is a type (``str``, ``NUM`` = int or float, ``bool``, ``int``), ``[spec]`` (a list of spec),
+a dict ``{key: spec}`` (keys ending in ``?`` are optional), or ``Nullable(spec)`` (null allowed).
+Extra keys are allowed everywhere (DESIGN.md: keys may be added, never renamed).
+"""
+from __future__ import annotations
+
+import math
+import numbers
+
+__all__ = ["SchemaError", "check", "SUMMARY", "CONVERGENCE_RECORD", "QUANTITIES", "VERDICTS", "STATUSES",
+           "KNOWN_SCHEMA_VERSION", "check_summary"]
+
+QUANTITIES = ("position", "orientation", "velocity", "angular_velocity")
+VERDICTS = ("converges", "does_not_converge", "at_roundoff", "diverged", "failed", "insufficient")
+STATUSES = ("ok", "diverged", "failed")
+#: The results schema this code reads (cross_checks.measure.SCHEMA_VERSION; kept equal by a test).
+KNOWN_SCHEMA_VERSION = 1
+
+
+class SchemaError(ValueError):
+    """``str()`` is ``FIELD: REASON``."""
+
+
+class Nullable:
+    def __init__(self, spec):
+        self.spec = spec
+
+
+class _Num:
+    """A finite or non-finite JSON number (not a bool)."""
+
+
+NUM = _Num
+_NAMES = {str: "a string", bool: "true or false", int: "a whole number", NUM: "a number", dict: "an object",
+          list: "a list"}
+
+
+def _type_ok(v, t) -> bool:
+    if t is NUM:
+        return isinstance(v, numbers.Real) and not isinstance(v, bool)
+    if t is int:
+        return isinstance(v, int) and not isinstance(v, bool)
+    return isinstance(v, t)
+
+
+def _show(v) -> str:
+    s = repr(v)
+    return s if len(s) <= 40 else s[:37] + "..."
+
+
+def check(obj, spec, where: str) -> None:
+    """Raise SchemaError naming the first field of ``obj`` that does not follow ``spec``."""
+    if isinstance(spec, Nullable):
+        if obj is not None:
+            check(obj, spec.spec, where)
+        return
+    if isinstance(spec, dict):
+        if not isinstance(obj, dict):
+            raise SchemaError(f"{where}: must be an object, got {_show(obj)}")
+        for key, sub in spec.items():
+            optional = key.endswith("?")
+            k = key.rstrip("?")
+            if k not in obj:
+                if optional:
+                    continue
+                raise SchemaError(f"{where}.{k}: missing")
+            check(obj[k], sub, f"{where}.{k}")
+        return
+    if isinstance(spec, list):
+        if not isinstance(obj, list):
+            raise SchemaError(f"{where}: must be a list, got {_show(obj)}")
+        for i, e in enumerate(obj):
+            check(e, spec[0], f"{where}[{i}]")
+        return
+    if isinstance(spec, tuple):  # a choice of string values
+        if obj not in spec:
+            raise SchemaError(f"{where}: must be one of {', '.join(spec)}, got {_show(obj)}")
+        return
+    if not _type_ok(obj, spec):
+        raise SchemaError(f"{where}: must be {_NAMES[spec]}, got {_show(obj)}")
+
+
+_CONSERVED = {"conserved": bool, "why_not": str}
+SCENARIO = {
+    "name": str, "description": str, "source": str, "content_hash": str, "duration_s": NUM, "dt_s": NUM,
+    "dt_ladder_s": [NUM], "reference": str,
+    "conserved": {"energy": _CONSERVED, "angular_momentum": _CONSERVED, "linear_momentum": _CONSERVED},
+    "varies?": {q + "?": bool for q in QUANTITIES},
+}
+CONVERGENCE_RECORD = {
+    "scenario": str, "engine": str, "quantity": QUANTITIES, "order": Nullable(NUM), "verdict": str,
+    "pairwise_orders?": [Nullable(NUM)], "dt_s?": [NUM], "errors?": [Nullable(NUM)], "floors?": [Nullable(NUM)],
+    "fitted?": [bool], "note?": str, "expected_order?": Nullable(NUM), "expected_verdict?": Nullable(str),
+    "matches_expectation?": Nullable(bool), "assessment?": str, "reason?": str,
+}
+#: What the report needs beyond what compare needs.
+REPORT_RECORD = {"expected_verdict": Nullable(str), "matches_expectation": Nullable(bool), "assessment": str,
+                 "note": str, "reason": str, "dt_s": [NUM], "errors": [Nullable(NUM)], "floors": [Nullable(NUM)],
+                 "fitted": [bool], "pairwise_orders": [Nullable(NUM)]}
+AGREEMENT = {"a": str, "b": str, "scenario": str, "dt_s": NUM, "agrees": bool, "max_rel": Nullable(NUM),
+             "reason": str, "note?": str}
+SUMMARY = {
+    "schema_version": int,
+    "provenance": {k + "?": Nullable(str) for k in ("rbcheck", "numpy", "scipy", "mujoco", "pybullet", "python",
+                                                    "platform", "machine", "git_commit", "started_at", "command")},
+    "convergence": [CONVERGENCE_RECORD],
+    "scenarios?": [SCENARIO],
+    "variants?": [{"name": str, "description?": Nullable(str), "version?": Nullable(str)}],
+    "skipped_variants?": [{"name": str, "reason": str}],
+    "local_convergence?": [CONVERGENCE_RECORD],
+    "agreement?": [AGREEMENT],
+    "run?": {k + "?": Nullable(NUM) for k in ("jobs", "runs", "cached_runs", "diverged_runs", "failed_runs",
+                                               "wall_s", "cpu_s_in_runs")},
+}
+
+
+def _unique(items, key, where, what):
+    seen = set()
+    for i, it in enumerate(items):
+        k = key(it)
+        if k in seen:
+            raise SchemaError(f"{where}[{i}]: {what} {', '.join(map(str, k)) if isinstance(k, tuple) else k} "
+                              "appears twice")
+        seen.add(k)
+
+
+def check_summary(summary, for_report: bool = False) -> None:
+    """SchemaError (FIELD: REASON) unless ``summary`` is a summary.json this code can use."""
+    check(summary, SUMMARY, "summary")
+    v = summary["schema_version"]
+    if not 1 <= v <= KNOWN_SCHEMA_VERSION:
+        newer = "; written by a newer rbcheck?" if v > KNOWN_SCHEMA_VERSION else ""
+        raise SchemaError(f"summary.schema_version: {v} is not a results schema this rbcheck reads "
+                          f"(1..{KNOWN_SCHEMA_VERSION}){newer}")
+    for key in ("convergence", "local_convergence"):
+        recs = summary.get(key, [])
+        _unique(recs, lambda r: (r["scenario"], r["engine"], r["quantity"]), f"summary.{key}", "record")
+        for i, r in enumerate(recs):
+            if r["order"] is not None and not math.isfinite(r["order"]):
+                raise SchemaError(f"summary.{key}[{i}].order: must be a finite number or null, got {r['order']}")
+            if for_report:
+                check(r, REPORT_RECORD, f"summary.{key}[{i}]")
+    if for_report:
+        for key in ("scenarios", "variants"):
+            if key not in summary:
+                raise SchemaError(f"summary.{key}: missing")
+        _unique(summary["scenarios"], lambda s: s["name"], "summary.scenarios", "scenario")
+        _unique(summary["variants"], lambda s: s["name"], "summary.variants", "variant")
+        for i, s in enumerate(summary["scenarios"]):
+            if not s["name"]:
+                raise SchemaError(f"summary.scenarios[{i}].name: must not be empty")
+            if not (s["dt_s"] > 0 and math.isfinite(s["dt_s"])):
+                raise SchemaError(f"summary.scenarios[{i}].dt_s: must be a positive finite number, got {s['dt_s']}")

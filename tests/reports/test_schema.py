@@ -1,0 +1,37 @@
+"""summary.json's schema: what sweeps write (and the committed baseline) passes; each damaged field is named."""
+import json
+from pathlib import Path
+
+import pytest
+
+from cross_checks.measure import SCHEMA_VERSION
+from reports.schema import KNOWN_SCHEMA_VERSION, SchemaError, check_summary
+
+BASELINE = json.loads((Path(__file__).resolve().parents[2] / "baselines" / "default" / "summary.json").read_text())
+
+
+def test_the_schema_version_read_is_the_one_written():
+    assert KNOWN_SCHEMA_VERSION == SCHEMA_VERSION
+
+
+def test_the_committed_baseline_follows_the_schema():
+    check_summary(BASELINE, for_report=True)
+
+
+@pytest.mark.parametrize("edit, field", [
+    (lambda s: s["scenarios"][0].__setitem__("dt_s", "fast"), "summary.scenarios[0].dt_s: must be a number"),
+    (lambda s: s["scenarios"][0].__setitem__("dt_s", -1.0), "summary.scenarios[0].dt_s: must be a positive"),
+    (lambda s: s["scenarios"].append(dict(s["scenarios"][0])), "scenario applied_torque appears twice"),
+    (lambda s: s["convergence"][3].__setitem__("quantity", "speed"), "summary.convergence[3].quantity: must be one of"),
+    (lambda s: s["convergence"][3].pop("assessment"), "summary.convergence[3].assessment: missing"),
+    (lambda s: s["convergence"][3].__setitem__("order", float("inf")), "summary.convergence[3].order: must be a finite"),
+    (lambda s: s["convergence"][3].__setitem__("matches_expectation", "yes"), "matches_expectation: must be true or false"),
+    (lambda s: s["variants"][0].__setitem__("name", 7), "summary.variants[0].name: must be a string"),
+    (lambda s: s.__setitem__("schema_version", True), "summary.schema_version: must be a whole number"),
+    (lambda s: s.__setitem__("schema_version", 0), "summary.schema_version: 0 is not a results schema"),
+])
+def test_each_damaged_field_is_named(edit, field):
+    s = json.loads(json.dumps(BASELINE))
+    edit(s)
+    with pytest.raises(SchemaError, match=field.replace("[", r"\[").replace("]", r"\]")):
+        check_summary(s, for_report=True)
