@@ -30,6 +30,7 @@ BAD = {
     "list": ["list"],  # takes no input: its exit 2 is an unexpected error, planted below
     "run": ["run", "projectile", "--engine", "reference:nope", "--out", "{tmp}/t.csv"],
     "sweep": ["sweep", "projectile", "--out", ""],
+    "show": ["show", "projectile", "--dt", "2.0"],
     "report": ["report", "{tmp}/missing"],
     "check": ["check", "{tmp}/missing.csv", "--scenario", "projectile"],
     "compare": ["compare", "{tmp}/missing", "{tmp}/missing"],
