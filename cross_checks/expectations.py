@@ -175,21 +175,6 @@ def _free_running(scenario, variant: str, quantity: str) -> Expectation:
         raise ValueError(f"unknown quantity {quantity!r}; quantities: {', '.join(QUANTITIES)}")
     fm = scenario.problem.forces
 
-    # The course's per-step decay factor is a different physical damping at every Δt.
-    affected = set()
-    if fm.velocity_decay != 1.0:
-        affected |= set(_TRANSLATION)
-    if fm.angular_velocity_decay != 1.0:
-        affected |= set(_ROTATION)
-    if affected and (rotation_drives_translation(scenario) or not fm.torque_free):
-        affected = set(QUANTITIES)
-    if quantity in affected:
-        return Expectation(
-            "does_not_converge", None,
-            f"the course's per-step velocity decay is frame-rate dependent: at Δt ≠ {scenario.dt_s:g} s the "
-            f"factor γ means another decay rate k = −ln γ / Δt, so each Δt solves a different problem "
-            f"and the error is smallest at Δt = {scenario.dt_s:g} s, where the reference rate was defined")
-
     if variant in NO_GYROSCOPIC_TERM and gyroscopic_term_matters(scenario):
         if quantity in _ROTATION or rotation_drives_translation(scenario):
             coupled = ("" if quantity in _ROTATION else

@@ -8,10 +8,10 @@ each part gets its own closed form:
 * rotation (torque-free): reference_sim.analytic.torque_free (constant spin, axisymmetric top, or the
   Jacobi elliptic solution); with angular velocity decay, only a spin about a principal axis.
 
-The course's per-step decay factor γ is not an ODE; its frame-rate independent counterpart
-``e^{−kΔt}`` with ``k = −ln γ / dt`` (dt = the scenario's default step, COURSE_EQUATIONS.md) defines
-the reference. At any other Δt the per-step factor means a different decay rate, so such scenarios
-are expected not to converge (that is the point of `velocity_decay`).
+The course's per-step decay factor γ (given at the scenario's dt) is, physically, exponential
+damping at the rate ``k = −ln γ / dt``: ``v̇ = f/m − k v`` (and the same for ω). The reference is that
+continuously damped motion; every engine variant applies ``e^{−kΔt}`` per step or ``−k v`` in its
+right-hand side, so every variant converges to it (at Δt = dt the course variants apply exactly γ).
 """
 from __future__ import annotations
 
@@ -29,8 +29,7 @@ __all__ = ["reference_solution", "analytic_available", "decay_rates_per_s"]
 
 def decay_rates_per_s(scenario):
     """Continuous rates (k_v, k_ω), 1/s, equal to the per-step decay factors at the scenario's dt."""
-    fm = scenario.problem.forces
-    return (-math.log(fm.velocity_decay) / scenario.dt_s, -math.log(fm.angular_velocity_decay) / scenario.dt_s)
+    return scenario.problem.forces.decay_rates_per_s()
 
 
 def _translation_kind(scenario):
@@ -123,7 +122,7 @@ def reference_solution(scenario, t_s):
         y[:, X], y[:, V] = _translation(scenario, t_s)
         y[:, Q], y[:, W] = _rotation(scenario, t_s)
         return y, "analytic"
-    return (ground_truth(scenario.problem, t_s, decay_rates_per_s(scenario)),
+    return (ground_truth(scenario.problem, t_s),
             f"ground_truth (DOP853, rtol {GROUND_TRUTH_RTOL:g})")
 
 

@@ -348,7 +348,7 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
             frame=r.string(t, "frame", f"{where}.frame", default="world", choices=FRAMES),
         ))
     forces = ForceModel(gravity_W=gravity, linear_drag_N_s_per_m=drag, velocity_decay=decays[0],
-                        angular_velocity_decay=decays[1], springs=tuple(springs),
+                        angular_velocity_decay=decays[1], decay_dt_s=dt, springs=tuple(springs),
                         point_forces=tuple(points), torques=tuple(torques))
     problem = Problem(body, forces, State(x0, v0, q0, w0))
     sc = Scenario(name=name, description=description, duration_s=duration, dt_s=dt, dt_ladder_s=ladder,
