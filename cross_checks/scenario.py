@@ -50,6 +50,9 @@ class Scenario:
     problem : the reference_sim Problem (body at its COM, forces, initial state with world ω).
     source : file path or "catalog:NAME".
     raw : the parsed TOML (for hashing and provenance).
+    com_offset_B_m : for a body given as ``particles``, where their COM is in the particles' own
+        coordinates (m); every body point of the file (spring ``attach``, force ``point``) is in those
+        coordinates and was shifted by it, so the Problem's points are from the COM. None otherwise.
     """
 
     name: str
@@ -320,13 +323,21 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
         if not 0.0 < g <= 1.0:
             raise r.err(f"forces.{key}", f"must be in (0, 1] (a per-step factor; 1 = off), got {g:g}")
         decays.append(g)
+    def body_point(d, key, fld):
+        """A body point of the file (attach, point) -> from the COM (m, body axes). For a particle body
+        the file gives it in the particles' own coordinates: shifted by their COM. Omitted: the COM."""
+        if key not in d:
+            return np.zeros(3)
+        p = r.vector(d, key, fld, 3)
+        return p if com_offset is None else p - com_offset
+
     springs = []
     for i, s in enumerate(r.array_of_tables(fr, "spring", "forces.spring")):
         where = f"forces.spring[{i}]"
         r.check_keys(s, _SPRING, where)
         springs.append(Spring(
             anchor_W=r.vector(s, "anchor", f"{where}.anchor", 3, required=True),
-            attach_B=r.vector(s, "attach", f"{where}.attach", 3, default=[0.0, 0.0, 0.0]),
+            attach_B=body_point(s, "attach", f"{where}.attach"),
             stiffness_N_per_m=r.number(s, "stiffness", f"{where}.stiffness", required=True, nonneg=True),
             rest_length_m=r.number(s, "rest_length", f"{where}.rest_length", default=0.0, nonneg=True),
         ))
@@ -336,7 +347,7 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
         r.check_keys(p, _POINT, where)
         points.append(PointForce(
             force=r.vector(p, "force", f"{where}.force", 3, required=True),
-            point_B=r.vector(p, "point", f"{where}.point", 3, default=[0.0, 0.0, 0.0]),
+            point_B=body_point(p, "point", f"{where}.point"),
             frame=r.string(p, "frame", f"{where}.frame", default="world", choices=FRAMES),
         ))
     torques = []
