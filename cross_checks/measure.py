@@ -31,7 +31,7 @@ from .expectations import QUANTITIES
 from .trajectory import json_default
 
 __all__ = ["SCHEMA_VERSION", "MAX_SERIES_POINTS", "LOCAL_SAMPLES", "RESULT_COLUMNS", "COLUMN_STEM", "Job",
-           "job_dts", "run_job", "reference_job", "load_reference", "failed_record", "cache_dir",
+           "job_dts", "run_job", "reference_job", "measure_reference", "load_reference", "failed_record", "cache_dir",
            "code_fingerprint", "save_npz_atomic", "varies"]
 
 #: Version of the results-directory layout and of the cached job records.
@@ -101,7 +101,7 @@ def code_fingerprint(engine: str) -> str:
     here = Path(__file__).resolve().parent
     files = sorted(Path(reference_sim.__file__).resolve().parent.glob("*.py"))
     files += [here / n for n in ("measure.py", "references.py", "metrics.py", "scenario.py", "tolerances.py",
-                                 "expectations.py", "trajectory.py")]
+                                 "expectations.py", "physics.py", "trajectory.py")]
     eng = here / "engines"
     files += [eng / "__init__.py", eng / "base.py"]
     from .engines import ENGINE_MODULES
@@ -180,15 +180,51 @@ def _time_grids(scenario):
 
 def reference_job(scenario, out_path: str, cache_root: str | None, use_cache: bool):
     """Compute (or load) the reference on the union of the scenario's time grids; save it to
-    ``out_path`` (npz: t_s, y, label). Returns ``(label, error message or "", scales, varies,
-    amplification)`` — the last from references.error_amplification, to scale round-off floors."""
-    label, err = _reference_solution_file(scenario, out_path, cache_root, use_cache)
+    ``out_path`` (npz: t_s, y, label). Returns ``(label, error message or "", scales, varies, measured)``
+    — ``measured`` (:func:`measure_reference`) holds what the convergence floors and the expectations
+    are decided from: the reference's measured error, the error amplification and the physics."""
+    label, err, measured = _reference_solution_file(scenario, out_path, cache_root, use_cache)
     if err:
-        return label, err, {q: 1.0 for q in QUANTITIES}, {}, {q: 1.0 for q in QUANTITIES}
-    from .references import error_amplification
+        ones = {q: 1.0 for q in QUANTITIES}
+        return label, err, ones, {}, {"amplification": ones, "reference_error": None, "local_reference_error": {},
+                                      "physics": None}
     with np.load(out_path, allow_pickle=False) as d:
         y = d["y"]
-        return label, "", M.quantity_scales(y), varies(y), error_amplification(scenario)
+        return label, "", M.quantity_scales(y), varies(y), measured
+
+
+def measure_reference(scenario, t_s, y, label) -> dict:
+    """Measurements of a scenario's reference ``y`` (on the union grid ``t_s``), JSON-ready:
+
+    ``reference_error`` {quantity: its measured error at the final time} (references.reference_error);
+    ``local_reference_error`` {repr(Δt): {quantity: error}}: how far each reference step of Δt, at the
+    LOCAL_SAMPLES starts of the one-step mode, is from a DOP853 step from the same state (rtol
+    GROUND_TRUTH_RTOL) — the floor of the one-step errors; ``amplification`` {quantity: A};
+    ``physics`` (physics.ScenarioPhysics.as_dict: rates on the default-Δt grid, separatrix proximity).
+    """
+    from .physics import RATE_SAMPLES, scenario_physics
+    from .references import error_amplification, reference_error
+    scales = M.quantity_scales(y)
+    amp = error_amplification(scenario, scales)
+    grid = np.searchsorted(t_s, scenario.dt_s * np.arange(scenario.n_steps() + 1))
+    rows = grid[M.decimation_indices(len(grid), RATE_SAMPLES)]
+    phys = scenario_physics(scenario, amplification=amp, y_ref=y[rows])
+    return {"reference_error": reference_error(scenario, y[-1], label, scales),
+            "local_reference_error": _local_reference_errors(scenario, t_s, y),
+            "amplification": amp, "physics": phys.as_dict()}
+
+
+def _local_reference_errors(scenario, t_s, y) -> dict:
+    from reference_sim.ground_truth import ground_truth
+    out = {}
+    for dt in scenario.dt_ladder_s:
+        grid = np.searchsorted(t_s, dt * np.arange(scenario.n_steps(dt) + 1))
+        starts = M.decimation_indices(len(grid) - 1, LOCAL_SAMPLES)
+        y0, y1 = y[grid[starts]], y[grid[starts + 1]]
+        y1_acc = ground_truth(scenario.problem, np.array([0.0, dt]), y0=y0)[-1]
+        e = M.state_errors(y1_acc, y1)
+        out[repr(float(dt))] = {q: float(np.max(e[q])) for q in QUANTITIES}
+    return out
 
 
 def _reference_solution_file(scenario, out_path, cache_root, use_cache):
@@ -201,24 +237,25 @@ def _reference_solution_file(scenario, out_path, cache_root, use_cache):
     if cpath is not None and use_cache and cpath.is_file():
         try:
             with np.load(cpath, allow_pickle=False) as d:
-                t, y, label = d["t_s"], d["y"], str(d["label"])
+                t, y, label, measured = d["t_s"], d["y"], str(d["label"]), json.loads(str(d["measured"]))
             if np.array_equal(t, t_union):
                 save_npz_atomic(Path(out_path), {"t_s": t, "y": y, "label": np.array(label)})
-                return label, ""
+                return label, "", measured
         except (OSError, ValueError, KeyError):
             pass
     try:
         y, label = reference_solution(scenario, t_union)
+        measured = measure_reference(scenario, t_union, y, label)
     except Exception as exc:  # noqa: BLE001 - reported per scenario, the sweep goes on
-        return "", f"reference solution failed: {type(exc).__name__}: {exc}"
-    arrays = {"t_s": t_union, "y": y, "label": np.array(label)}
-    save_npz_atomic(Path(out_path), arrays)
+        return "", f"reference solution failed: {type(exc).__name__}: {exc}", None
+    save_npz_atomic(Path(out_path), {"t_s": t_union, "y": y, "label": np.array(label)})
     if cpath is not None:
         try:
-            save_npz_atomic(cpath, arrays)
+            save_npz_atomic(cpath, {"t_s": t_union, "y": y, "label": np.array(label),
+                                    "measured": np.array(json.dumps(measured, default=json_default))})
         except OSError:
             pass
-    return label, ""
+    return label, "", measured
 
 
 _REF_MEMO: dict = {}

@@ -93,3 +93,32 @@ CHECK_UNIFORM_DT_REL = 2e-3
 #: `rbcheck check`: the first row counts as the scenario's initial state within this (relative to
 #: max(1, |state|)): 6 printed decimals, as above.
 CHECK_INITIAL_STATE_REL = 1e-5
+
+# --- Sweep verdicts: true orders, and expectations decided by physics (issue 11) ----------------------
+
+#: Relative size of the initial-state perturbations that measure the error amplification: far above
+#: the references' accuracy (closed forms ~1e-13; DOP853 at AMPLIFICATION_RTOL, whose batched members
+#: share their steps, so their differences are finer than the tolerance), small enough to stay linear
+#: (tumbling_box, amplification ~1e3: 1e-3 of its scale; the second-order part is ~1e-3 of the first).
+AMPLIFICATION_EPS = 1e-6
+#: DOP853 tolerance of the batched amplification solve: measured on spring_pendulum, the amplification
+#: at (ε, rtol) = (1e-6, 1e-8) equals that at (1e-7, 1e-10) to 4 digits, at 60 % of the cost.
+AMPLIFICATION_RTOL = 1e-8
+#: A DOP853 reference's error is measured as its difference from a solution at this many times its
+#: tolerance: the looser solution's error, an upper bound of the reference's (measured on the catalog:
+#: |y(1e-12) − y(1e-13)| is 4–7× |y(1e-13) − closed form| wherever there is a closed form).
+REFERENCE_CHECK_RTOL_FACTOR = 10.0
+#: A closed form's round-off is measured by moving its inputs (initial state, final time) by this many
+#: ulps of their scale: a closed form rounds ~1e2 intermediate results (Jacobi elliptic functions plus
+#: Carlson integrals), whose errors add like a random walk, ~√100 = 10 ulps; 16 covers it.
+CLOSED_FORM_INPUT_ULPS = 16
+#: An amplitude drift may bend the fitted order by at most this before the sweep stops claiming an
+#: order (verdict "pre_asymptotic"): half the match tolerance SWEEP_ORDER_TOL, the other half left for
+#: the scheme's error constants, other error terms and the fit. (The model is exact for a linear
+#: oscillator: spring_oscillator's explicit/implicit Euler fit 1.14/0.88, predicted 1.14/0.87.)
+AMPLITUDE_MODEL_ORDER_DEV = 0.15
+#: An error is used in an order fit only above this multiple of its floor (metrics.fit_convergence):
+#: round-off then makes at most a tenth of it, which moves a pairwise order by ≤ log2(1.1) = 0.14 —
+#: within AMPLITUDE_MODEL_ORDER_DEV. (Measured: mujoco:rk4 on tumbling_box, ω error 3.2e-10 at 1.7× its
+#: floor, bent the fitted order from 3.9 to 3.4.)
+RESOLVED_ABOVE_FLOOR = 10.0

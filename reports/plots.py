@@ -255,6 +255,8 @@ def _order_table(res, sc, mode):
             if r["order"] is None:
                 return {"diverged": "diverged", "failed": "failed"}.get(r["verdict"], "n/a")
             o = 0.0 if abs(r["order"]) < 0.005 else r["order"]
+            if r["verdict"] == "pre_asymptotic":
+                return f"({o:.2f})"
             return f"{o:.2f}" if r["verdict"] == "converges" else "no"
         lines.append((v, " / ".join(one(q) for q in QUANTITIES)))
     return lines
