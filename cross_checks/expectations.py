@@ -297,14 +297,14 @@ def _pre_asymptotic_reason(scenario, variant, quantity, tr: Traits, physics) -> 
         sep = phys.separatrix_proximity
         near = (f"; the body is near the intermediate-axis separatrix (δ = {sep:.2g})"
                 if sep is not None and abs(sep) < 1e-2 and saturate else "")
-        amp_txt = (f"; that perturbation of the motion grows {phys.amplification.get(quantity, 1.0):.3g}× by the "
-                   "final time (measured amplification) and saturates at the quantity's scale" if saturate else "")
-        kind = {1: "grows", -1: "damps"}.get(signs[0], "grows or damps") if len(signs) == 1 else "grows or damps"
-        return (f"pre-asymptotic on this ladder: {variant} {kind} the amplitude of {what} by e^(±χ) over the run, "
-                f"χ = ω_c²ΔtT/2 = {chis[0]:.2g} at the coarsest Δt and {chis[-1]:.2g} at the finest "
-                f"(ω_c = {math.sqrt(rate_sq):.3g} rad/s, measured on the reference){amp_txt}{near}; that drift "
-                f"alone would fit order {model:.2f} here (beyond 1 ± {tol.AMPLITUDE_MODEL_ORDER_DEV:g}), so no "
-                "order is claimed; the local (one-step) order is still checked")
+        amp_txt = (f"; the motion amplifies that perturbation {phys.amplification.get(quantity, 1.0):.3g}× by the "
+                   "final time (measured) until it saturates" if saturate else "")
+        how = {1: "grows it by e^(+χ)", -1: "damps it by e^(−χ)"}.get(signs[0]) if len(signs) == 1 else None
+        return (f"pre-asymptotic on this ladder: a first-order step that does not keep the amplitude of {what} "
+                f"{how or 'grows or damps it by e^(±χ)'} over the run, χ = ω_c²ΔtT/2 from {chis[0]:.2g} "
+                f"(coarsest Δt) to {chis[-1]:.2g} (finest), ω_c = {math.sqrt(rate_sq):.3g} rad/s measured on the "
+                f"reference{amp_txt}{near}; that drift alone would fit order {model:.2f} here, beyond "
+                f"1 ± {tol.AMPLITUDE_MODEL_ORDER_DEV:g}")
     return ""
 
 
