@@ -133,6 +133,8 @@ def test_parallel_and_cached_sweeps_give_the_same_results(tmp_path, scenario_fil
     assert jc["run"]["cached_runs"] == jc["run"]["runs"]
     assert comparable(read_rows(c)) == comparable(read_rows(a))
     assert jc["convergence"] == ja["convergence"]
+    # the reference's measurements (its error, the amplification, the physics) are cached with it
+    assert jc["scenarios"] == ja["scenarios"] and ja["scenarios"][0]["reference_error"]
 
 
 def test_a_diverged_run_is_a_row_and_the_sweep_goes_on(tmp_path):
