@@ -55,7 +55,9 @@ ROUNDOFF_NOISE_FACTOR = 10.0
 #: 10 s. An error that grows again at the fine end while below this multiple of the floor is
 #: amplified round-off, not a failure to converge.
 AMPLIFIED_ROUNDOFF_FACTOR = 1e4
-#: Accuracy of the references relative to a quantity's scale: closed forms 1e-12 — Jacobi elliptic
+#: Fallback only, for a caller with no measurement of its reference (sweeps measure it: see
+#: references.reference_error and metrics.roundoff_floor). Accuracy of the references relative to a
+#: quantity's scale: closed forms 1e-12 — Jacobi elliptic
 #: functions from scipy, evaluated at arbitrary times: one RK4 step (local error ~1e-20) from the
 #: tennis-racket closed form at one time lands 1.6e-12 rad from it at the next, in MuJoCo and NumPy
 #: alike; the DOP853 ground truth (rtol 1e-13) is within CLOSED_FORM_VS_GROUND_TRUTH = 1e-10 of the
