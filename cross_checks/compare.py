@@ -52,6 +52,8 @@ METRIC_RULES = {
 #: a ladder changes by ~0.01 between machines; 0.1 is the tolerance of the order tests (issue 2).
 ORDER_TOL = 0.1
 GOOD_VERDICTS = ("converges", "at_roundoff")
+#: No claim on the ladder: a change to or from it is information, never a regression or improvement.
+NEUTRAL_VERDICTS = ("pre_asymptotic",)
 
 
 class CompareInputError(ValueError):
@@ -251,7 +253,9 @@ def _compare_convergence(old_recs, new_recs, out: Comparison):
         ro, rn = old[k], new[k]
         vo, vn = ro.get("verdict"), rn.get("verdict")
         if vo != vn:
-            if vo in GOOD_VERDICTS and vn not in GOOD_VERDICTS:
+            if vo in NEUTRAL_VERDICTS or vn in NEUTRAL_VERDICTS:
+                kind = "changed"  # a claim appears or disappears: information
+            elif vo in GOOD_VERDICTS and vn not in GOOD_VERDICTS:
                 kind = "regression"
             elif vn in GOOD_VERDICTS and vo not in GOOD_VERDICTS:
                 kind = "improvement"

@@ -34,7 +34,7 @@ from .expectations import QUANTITIES
 from .trajectory import json_default
 
 __all__ = ["SCHEMA_VERSION", "MAX_SERIES_POINTS", "LOCAL_SAMPLES", "RESULT_COLUMNS", "COLUMN_STEM", "Job",
-           "job_dts", "run_job", "reference_job", "load_reference", "failed_record", "cache_dir",
+           "job_dts", "run_job", "reference_job", "measure_reference", "load_reference", "failed_record", "cache_dir",
            "code_fingerprint", "save_npz_atomic", "varies"]
 
 #: Version of the results-directory layout and of the cached job records.
@@ -102,7 +102,7 @@ def _base_fingerprint() -> bytes:
         here = Path(__file__).resolve().parent
         files = sorted(Path(reference_sim.__file__).resolve().parent.glob("*.py"))
         files += [here / n for n in ("measure.py", "references.py", "metrics.py", "scenario.py", "tolerances.py",
-                                     "expectations.py", "trajectory.py", "resolved.py")]
+                                     "expectations.py", "physics.py", "trajectory.py", "resolved.py")]
         files += [here / "engines" / "__init__.py", here / "engines" / "base.py"]
         h = hashlib.sha256()
         for f in files:
@@ -206,15 +206,51 @@ def _time_grids(scenario):
 def reference_job(scenario, out_path: str, cache_root: str | None, use_cache: bool,
                   time_limit_s: float | None = tol.REFERENCE_TIME_LIMIT_S):
     """Compute (or load) the reference on the union of the scenario's time grids; save it to
-    ``out_path`` (npz: t_s, y, label). Returns ``(label, error message or "", scales, varies,
-    amplification)`` — the last from references.error_amplification, to scale round-off floors."""
-    label, err = _reference_solution_file(scenario, out_path, cache_root, use_cache, time_limit_s)
+    ``out_path`` (npz: t_s, y, label). Returns ``(label, error message or "", scales, varies, measured)``
+    — ``measured`` (:func:`measure_reference`) holds what the convergence floors and the expectations
+    are decided from: the reference's measured error, the error amplification and the physics."""
+    label, err, measured = _reference_solution_file(scenario, out_path, cache_root, use_cache, time_limit_s)
     if err:
-        return label, err, {q: 1.0 for q in QUANTITIES}, {}, {q: 1.0 for q in QUANTITIES}
-    from .references import error_amplification
+        ones = {q: 1.0 for q in QUANTITIES}
+        return label, err, ones, {}, {"amplification": ones, "reference_error": None, "local_reference_error": {},
+                                      "physics": None}
     with np.load(out_path, allow_pickle=False) as d:
         y = d["y"]
-        return label, "", M.quantity_scales(y), varies(y), error_amplification(scenario)
+        return label, "", M.quantity_scales(y), varies(y), measured
+
+
+def measure_reference(scenario, t_s, y, label) -> dict:
+    """Measurements of a scenario's reference ``y`` (on the union grid ``t_s``), JSON-ready:
+
+    ``reference_error`` {quantity: its measured error at the final time} (references.reference_error);
+    ``local_reference_error`` {repr(Δt): {quantity: error}}: how far each reference step of Δt, at the
+    LOCAL_SAMPLES starts of the one-step mode, is from a DOP853 step from the same state (rtol
+    GROUND_TRUTH_RTOL) — the floor of the one-step errors; ``amplification`` {quantity: A};
+    ``physics`` (physics.ScenarioPhysics.as_dict: rates on the default-Δt grid, separatrix proximity).
+    """
+    from .physics import RATE_SAMPLES, scenario_physics
+    from .references import error_amplification, reference_error
+    scales = M.quantity_scales(y)
+    amp = error_amplification(scenario, scales)
+    grid = np.searchsorted(t_s, scenario.dt_s * np.arange(scenario.n_steps() + 1))
+    rows = grid[M.decimation_indices(len(grid), RATE_SAMPLES)]
+    phys = scenario_physics(scenario, amplification=amp, y_ref=y[rows])
+    return {"reference_error": reference_error(scenario, y[-1], label, scales),
+            "local_reference_error": _local_reference_errors(scenario, t_s, y),
+            "amplification": amp, "physics": phys.as_dict()}
+
+
+def _local_reference_errors(scenario, t_s, y) -> dict:
+    from reference_sim.ground_truth import ground_truth
+    out = {}
+    for dt in scenario.dt_ladder_s:
+        grid = np.searchsorted(t_s, dt * np.arange(scenario.n_steps(dt) + 1))
+        starts = M.decimation_indices(len(grid) - 1, LOCAL_SAMPLES)
+        y0, y1 = y[grid[starts]], y[grid[starts + 1]]
+        y1_acc = ground_truth(scenario.problem, np.array([0.0, dt]), y0=y0)[-1]
+        e = M.state_errors(y1_acc, y1)
+        out[repr(float(dt))] = {q: float(np.max(e[q])) for q in QUANTITIES}
+    return out
 
 
 def _reference_solution_file(scenario, out_path, cache_root, use_cache, time_limit_s):
@@ -226,21 +262,23 @@ def _reference_solution_file(scenario, out_path, cache_root, use_cache, time_lim
     cpath = _cache_file(Path(cache_root), "reference", key) if cache_root else None
     if cpath is not None and use_cache:
         arrays = cache.load(cache_root, cpath, key)
-        if arrays is not None and _reference_is_for(arrays, t_union):
-            save_npz_atomic(Path(out_path), arrays)
-            return str(arrays["label"]), ""
+        measured = _measured_of(arrays) if arrays is not None and _reference_is_for(arrays, t_union) else None
+        if measured is not None:
+            save_npz_atomic(Path(out_path), {k: arrays[k] for k in ("t_s", "y", "label")})
+            return str(arrays["label"]), "", measured
     try:
         with time_limit(time_limit_s, "the reference solution"):
             y, label = reference_solution(scenario, t_union)
+            measured = measure_reference(scenario, t_union, y, label)
     except TimeLimitExceeded as exc:
-        return "", f"reference solution failed: {exc} (cross_checks/tolerances.py)"
+        return "", f"reference solution failed: {exc} (cross_checks/tolerances.py)", None
     except Exception as exc:  # noqa: BLE001 - reported per scenario, the sweep goes on
-        return "", f"reference solution failed: {type(exc).__name__}: {exc}"
-    arrays = {"t_s": t_union, "y": y, "label": np.array(label)}
-    save_npz_atomic(Path(out_path), arrays)
+        return "", f"reference solution failed: {type(exc).__name__}: {exc}", None
+    save_npz_atomic(Path(out_path), {"t_s": t_union, "y": y, "label": np.array(label)})
     if cpath is not None:
-        cache.store(cache_root, cpath, key, arrays)
-    return label, ""
+        cache.store(cache_root, cpath, key, {"t_s": t_union, "y": y, "label": np.array(label),
+                                             "measured": np.array(json.dumps(measured, default=json_default))})
+    return label, "", measured
 
 
 def _reference_is_for(arrays: dict, t_union) -> bool:
@@ -251,6 +289,16 @@ def _reference_is_for(arrays: dict, t_union) -> bool:
         return False
     return (np.array_equal(t, t_union) and y.shape == (t_union.size, 13) and y.dtype == np.float64
             and bool(np.all(np.isfinite(y))) and bool(label))
+
+
+def _measured_of(arrays: dict):
+    """The reference's measurements stored with a verified cache entry (None when absent or unreadable:
+    the entry is then recomputed like any other that does not verify)."""
+    try:
+        measured = json.loads(str(arrays["measured"]))
+    except (KeyError, ValueError):
+        return None
+    return measured if isinstance(measured, dict) and "amplification" in measured else None
 
 
 _REF_MEMO: dict = {}

@@ -8,10 +8,10 @@ each part gets its own closed form:
 * rotation (torque-free): reference_sim.analytic.torque_free (constant spin, axisymmetric top, or the
   Jacobi elliptic solution); with angular velocity decay, only a spin about a principal axis.
 
-The course's per-step decay factor γ is not an ODE; its frame-rate independent counterpart
-``e^{−kΔt}`` with ``k = −ln γ / dt`` (dt = the scenario's default step, COURSE_EQUATIONS.md) defines
-the reference. At any other Δt the per-step factor means a different decay rate, so such scenarios
-are expected not to converge (that is the point of `velocity_decay`).
+The course's per-step decay factor γ (given at the scenario's dt) is, physically, exponential
+damping at the rate ``k = −ln γ / dt``: ``v̇ = f/m − k v`` (and the same for ω). The reference is that
+continuously damped motion; every engine variant applies ``e^{−kΔt}`` per step or ``−k v`` in its
+right-hand side, so every variant converges to it (at Δt = dt the course variants apply exactly γ).
 """
 from __future__ import annotations
 
@@ -24,13 +24,13 @@ from reference_sim.ground_truth import GROUND_TRUTH_RTOL, ground_truth
 from reference_sim.quaternion import quat_exp, quat_mul
 from reference_sim.state import Q, V, W, X
 
-__all__ = ["reference_solution", "analytic_available", "decay_rates_per_s"]
+__all__ = ["reference_solution", "analytic_available", "decay_rates_per_s", "error_amplification", "reference_error",
+           "final_states", "perturbed_initial_states"]
 
 
 def decay_rates_per_s(scenario):
     """Continuous rates (k_v, k_ω), 1/s, equal to the per-step decay factors at the scenario's dt."""
-    fm = scenario.problem.forces
-    return (-math.log(fm.velocity_decay) / scenario.dt_s, -math.log(fm.angular_velocity_decay) / scenario.dt_s)
+    return scenario.problem.forces.decay_rates_per_s()
 
 
 def _translation_kind(scenario):
@@ -123,51 +123,91 @@ def reference_solution(scenario, t_s):
         y[:, X], y[:, V] = _translation(scenario, t_s)
         y[:, Q], y[:, W] = _rotation(scenario, t_s)
         return y, "analytic"
-    return (ground_truth(scenario.problem, t_s, decay_rates_per_s(scenario)),
+    return (ground_truth(scenario.problem, t_s),
             f"ground_truth (DOP853, rtol {GROUND_TRUTH_RTOL:g})")
 
 
-#: Relative size of the initial-ω perturbation used to measure error amplification: large enough
-#: that the closed form resolves the response (1e-7 ≫ its 1e-12 accuracy), small enough to stay
-#: linear over the catalog's durations.
-AMPLIFICATION_EPS = 1e-7
-
-
-def error_amplification(scenario) -> dict:
-    """How much the dynamics amplify an error in the initial angular velocity by the final time.
-
-    For each quantity: ``max_k |Δq(T)| / scale_q / ε`` over perturbations ``ω0 → ω0 + ε|ω0| e_k``,
-    computed with the closed form (cheap). Near an unstable rotation (tumbling_box flips ~8 times)
-    this is ~1e2–1e3: round-off and reference errors grow by as much, so the round-off floor of a
-    convergence fit must too. Scenarios without a closed form return 1 (their DOP853 floor, 1e-10
-    relative, already dominates). Values are ≥ 1.
-    """
+def _with_initial(scenario, y0):
+    """``scenario`` started from the packed state ``y0`` (13,) instead of its own initial state."""
     import dataclasses
 
     from reference_sim.state import Problem, State
-    from .expectations import QUANTITIES
-    ones = {q: 1.0 for q in QUANTITIES}
-    if scenario.reference == "ground_truth" or not analytic_available(scenario)[0]:
-        return ones
     p = scenario.problem
-    w0 = np.asarray(p.initial.w_W, float)
-    size = AMPLIFICATION_EPS * max(float(np.linalg.norm(w0)), 1e-3)
-    t = np.array([0.0, scenario.duration_s])
-    y0, _ = reference_solution(scenario, t)
-    from reference_sim.quaternion import geodesic_angle
-    scales = {"position": max(1.0, float(np.linalg.norm(y0[-1, X]))), "velocity": max(1.0, float(np.linalg.norm(y0[-1, V]))),
-              "orientation": math.pi, "angular_velocity": max(1.0, float(np.linalg.norm(w0)))}
-    amp = dict(ones)
+    return dataclasses.replace(scenario, problem=Problem(p.body, p.forces, State(y0[X], y0[V], y0[Q], y0[W])))
+
+
+def perturbed_initial_states(scenario, size: float, scales: dict) -> np.ndarray:
+    """The initial state perturbed along each of its 12 directions: ``(13, 13)``, row 0 unperturbed, then
+    x0 and v0 by ``size·scale`` along each world axis, the orientation by a rotation of ``size·π`` rad
+    about each world axis, ω0 by ``size·scale`` along each world axis (``scales``: per quantity)."""
+    y0 = scenario.problem.initial_packed()
+    out = np.tile(y0, (13, 1))
     for k in range(3):
-        w = w0.copy()
-        w[k] += size
-        sc = dataclasses.replace(scenario, problem=Problem(p.body, p.forces, State(p.initial.x_W, p.initial.v_W,
-                                                                                   p.initial.q_WB, w)))
-        y1, _ = reference_solution(sc, t)
-        rel = size / scales["angular_velocity"]
-        d = {"position": np.linalg.norm(y1[-1, X] - y0[-1, X]), "velocity": np.linalg.norm(y1[-1, V] - y0[-1, V]),
-             "orientation": float(geodesic_angle(y0[-1, Q], y1[-1, Q])),
-             "angular_velocity": np.linalg.norm(y1[-1, W] - y0[-1, W])}
-        for q in QUANTITIES:
-            amp[q] = max(amp[q], float(d[q]) / scales[q] / rel)
-    return amp
+        out[1 + k, k] += size * scales["position"]
+        out[4 + k, 3 + k] += size * scales["velocity"]
+        out[7 + k, Q] = quat_mul(quat_exp(size * math.pi * np.eye(3)[k]), y0[Q])
+        out[10 + k, 10 + k] += size * scales["angular_velocity"]
+    return out
+
+
+def final_states(scenario, y0s, rtol: float | None = None) -> np.ndarray:
+    """The reference's state at the scenario's final time from each initial state of ``y0s`` (B, 13):
+    the closed form where it covers the scenario, else one batched DOP853 solve (at ``rtol``)."""
+    t = np.array([0.0, scenario.duration_s])
+    if scenario.reference != "ground_truth" and analytic_available(scenario)[0]:
+        return np.array([reference_solution(_with_initial(scenario, y0), t)[0][-1] for y0 in y0s])
+    kw = {} if rtol is None else {"rtol": rtol}
+    return ground_truth(scenario.problem, t, y0=np.asarray(y0s, dtype=float), **kw)[-1]
+
+
+def _default_scales(scenario):
+    from .metrics import quantity_scales
+    y, _ = reference_solution(scenario, np.linspace(0.0, scenario.duration_s, 201))
+    return quantity_scales(y)
+
+
+def error_amplification(scenario, scales: dict | None = None) -> dict:
+    """How much the dynamics amplify an initial error by the final time, per quantity (values ≥ 1):
+    ``max_k |Δq(T)| / scale_q / ε`` over perturbations of relative size ε = AMPLIFICATION_EPS along each
+    of the 12 directions of the initial state (:func:`perturbed_initial_states`; ``scales`` as in
+    metrics.quantity_scales). The closed form where there is one, else a batched DOP853 solve at
+    AMPLIFICATION_RTOL. Near an unstable rotation this is ~1e2–1e3 (tumbling_box flips ~8 times in
+    10 s): round-off grows by as much.
+    """
+    from . import tolerances as tol
+    from .metrics import QUANTITIES, state_errors
+    scales = scales or _default_scales(scenario)
+    y0s = perturbed_initial_states(scenario, tol.AMPLIFICATION_EPS, scales)
+    yT = final_states(scenario, y0s, rtol=tol.AMPLIFICATION_RTOL)
+    d = state_errors(yT[1:], np.broadcast_to(yT[0], yT[1:].shape))
+    return {q: max(1.0, float(np.max(d[q])) / scales[q] / tol.AMPLIFICATION_EPS) for q in QUANTITIES}
+
+
+def reference_error(scenario, y_final, label: str, scales: dict | None = None) -> dict:
+    """The measured error of the reference's final state ``y_final`` (13,), per quantity (its unit).
+
+    * DOP853: the difference from a second solution at a REFERENCE_CHECK_RTOL_FACTOR times looser
+      tolerance — that solution's error, an upper bound of the reference's own (DOP853's error falls
+      with its tolerance: measured 4–7× per decade on the catalog).
+    * Closed form: its own round-off, seen by evaluating it in a perturbed way — its inputs (each
+      direction of the initial state, :func:`perturbed_initial_states`) and the final time moved by
+      CLOSED_FORM_INPUT_ULPS ulps, as its internal roundings move them: the largest change.
+    """
+    from . import tolerances as tol
+    from .metrics import QUANTITIES, state_errors
+    y_final = np.asarray(y_final, dtype=float)
+    if label.startswith("ground_truth"):
+        y_check = ground_truth(scenario.problem, np.array([0.0, scenario.duration_s]),
+                               rtol=tol.REFERENCE_CHECK_RTOL_FACTOR * GROUND_TRUTH_RTOL)[-1]
+        d = state_errors(y_check[None], y_final[None])
+        return {q: float(d[q][0]) for q in QUANTITIES}
+    scales = scales or _default_scales(scenario)
+    size = tol.CLOSED_FORM_INPUT_ULPS * np.finfo(float).eps
+    y0s = perturbed_initial_states(scenario, size, scales)
+    finals = [final_states(scenario, y0s[1:])]
+    T = scenario.duration_s
+    for t in (T * (1.0 + size), T * (1.0 - size)):
+        finals.append(reference_solution(scenario, np.array([0.0, t]))[0][-1:])
+    yT = np.concatenate(finals)
+    d = state_errors(yT, np.broadcast_to(y_final, yT.shape))
+    return {q: float(np.max(d[q])) for q in QUANTITIES}

@@ -23,26 +23,13 @@ Extra keys (informative; the keys above never change): ``scenario_dt`` and ``dt_
 from __future__ import annotations
 
 import json
-import math
 
 import numpy as np
 
 from reference_sim.quaternion import euler_zxy_from_quat, quat_conj, rotate
 from reference_sim.state import Q, V, W, X
 
-__all__ = ["resolved_scenario", "resolved_json", "decay_factor_at", "format_resolved"]
-
-
-def decay_factor_at(gamma: float, scenario_dt_s: float, dt_s: float) -> float:
-    """Per-step decay factor at step ``dt_s`` of a factor ``gamma`` defined at ``scenario_dt_s``:
-    ``γ^(Δt/dt)`` (= e^(−kΔt) with k = −ln γ / dt); exactly ``gamma`` when the steps are equal."""
-    if gamma == 1.0 or dt_s == scenario_dt_s:
-        return float(gamma)
-    return float(math.exp(math.log(gamma) * (dt_s / scenario_dt_s)))
-
-
-def _rate(gamma: float, scenario_dt_s: float) -> float:
-    return -math.log(gamma) / scenario_dt_s if gamma != 1.0 else 0.0
+__all__ = ["resolved_scenario", "resolved_json", "format_resolved"]
 
 
 def _vec(a) -> list:
@@ -61,7 +48,8 @@ def resolved_scenario(scenario, dt_s: float | None = None, duration_s: float | N
     y0 = p.initial_packed()
     q0 = y0[Q]
     fm = p.forces
-    gv, gw = fm.velocity_decay, fm.angular_velocity_decay
+    gv, gw = fm.decay_factors(dt)     # e^(−kΔt) = γ^(Δt/dt), what the reference variants apply
+    kv, kw = fm.decay_rates_per_s()
     return {
         "name": scenario.name,
         "description": scenario.description,
@@ -88,10 +76,10 @@ def resolved_scenario(scenario, dt_s: float | None = None, duration_s: float | N
         "forces": {
             "gravity": _vec(fm.gravity_W),
             "linear_drag": float(fm.linear_drag_N_s_per_m),
-            "velocity_decay": decay_factor_at(gv, scenario.dt_s, dt),
-            "angular_velocity_decay": decay_factor_at(gw, scenario.dt_s, dt),
-            "velocity_decay_rate": _rate(gv, scenario.dt_s),
-            "angular_velocity_decay_rate": _rate(gw, scenario.dt_s),
+            "velocity_decay": float(gv),
+            "angular_velocity_decay": float(gw),
+            "velocity_decay_rate": float(kv),
+            "angular_velocity_decay_rate": float(kw),
             "spring": [{"anchor": _vec(s.anchor_W), "attach": _vec(s.attach_B), "stiffness": float(s.stiffness_N_per_m),
                         "rest_length": float(s.rest_length_m)} for s in fm.springs],
             "point": [{"force": _vec(f.force), "point": _vec(f.point_B), "frame": f.frame} for f in fm.point_forces],

@@ -51,6 +51,9 @@ class Scenario:
     problem : the reference_sim Problem (body at its COM, forces, initial state with world ω).
     source : file path or "catalog:NAME".
     raw : the parsed TOML (for hashing and provenance).
+    com_offset_B_m : for a body given as ``particles``, where their COM is in the particles' own
+        coordinates (m); every body point of the file (spring ``attach``, force ``point``) is in those
+        coordinates and was shifted by it, so the Problem's points are from the COM. None otherwise.
     """
 
     name: str
@@ -316,9 +319,7 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
     else:
         w0 = r.vector(ini, "angular_velocity", "initial.angular_velocity", 3, default=[0.0, 0.0, 0.0])
 
-    # forces. Body points (spring attach, force point) are given from the body origin; for a body made
-    # of particles that origin is the particles' coordinate origin, so they are shifted to the COM.
-    shift_B = np.zeros(3) if com_offset is None else np.asarray(com_offset, dtype=float)
+    # forces
     fr = r.table(raw, "forces", required=False)
     r.check_keys(fr, _FORCES, "forces")
     gravity = r.vector(fr, "gravity", "forces.gravity", 3, default=[0.0, 0.0, 0.0])
@@ -329,13 +330,22 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
         if not 0.0 < g <= 1.0:
             raise r.err(f"forces.{key}", f"must be in (0, 1] (a per-step factor; 1 = off), got {g:g}")
         decays.append(g)
+
+    def body_point(d, key, fld):
+        """A body point of the file (attach, point) -> from the COM (m, body axes). For a particle body
+        the file gives it in the particles' own coordinates: shifted by their COM. Omitted: the COM."""
+        if key not in d:
+            return np.zeros(3)
+        p = r.vector(d, key, fld, 3)
+        return p if com_offset is None else p - com_offset
+
     springs = []
     for i, s in enumerate(r.array_of_tables(fr, "spring", "forces.spring")):
         where = f"forces.spring[{i}]"
         r.check_keys(s, _SPRING, where)
         springs.append(Spring(
             anchor_W=r.vector(s, "anchor", f"{where}.anchor", 3, required=True),
-            attach_B=r.vector(s, "attach", f"{where}.attach", 3, default=[0.0, 0.0, 0.0]) - shift_B,
+            attach_B=body_point(s, "attach", f"{where}.attach"),
             stiffness_N_per_m=r.number(s, "stiffness", f"{where}.stiffness", required=True, nonneg=True),
             rest_length_m=r.number(s, "rest_length", f"{where}.rest_length", default=0.0, nonneg=True),
         ))
@@ -345,7 +355,7 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
         r.check_keys(p, _POINT, where)
         points.append(PointForce(
             force=r.vector(p, "force", f"{where}.force", 3, required=True),
-            point_B=r.vector(p, "point", f"{where}.point", 3, default=[0.0, 0.0, 0.0]) - shift_B,
+            point_B=body_point(p, "point", f"{where}.point"),
             frame=r.string(p, "frame", f"{where}.frame", default="world", choices=FRAMES),
         ))
     torques = []
@@ -357,7 +367,7 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
             frame=r.string(t, "frame", f"{where}.frame", default="world", choices=FRAMES),
         ))
     forces = ForceModel(gravity_W=gravity, linear_drag_N_s_per_m=drag, velocity_decay=decays[0],
-                        angular_velocity_decay=decays[1], springs=tuple(springs),
+                        angular_velocity_decay=decays[1], decay_dt_s=dt, springs=tuple(springs),
                         point_forces=tuple(points), torques=tuple(torques))
     problem = Problem(body, forces, State(x0, v0, q0, w0))
     sc = Scenario(name=name, description=description, duration_s=duration, dt_s=dt, dt_ladder_s=ladder,

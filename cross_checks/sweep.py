@@ -269,11 +269,30 @@ def results_csv_text(rows) -> str:
     return buf.getvalue()
 
 
-def _convergence_records(scenario, variant, rows, scales, mode, amplification=None):
-    """Convergence records of one (scenario, variant). Free-running floors are scaled by the
-    scenario's measured error amplification (references.error_amplification): round-off and
-    reference errors grow with the dynamics exactly like any other initial error."""
-    amplification = amplification or {}
+def _floors(ladder, q, scales, mode, label, measured):
+    """Round-off floor of each ladder point for quantity ``q`` (metrics.roundoff_floor): the reference's
+    MEASURED error (at the final time, or of one step in the one-step mode) plus the run's own
+    round-off, amplified by the scenario's measured error amplification."""
+    scale = scales.get(q, 1.0)
+    if mode == "free_running":
+        ref = (measured.get("reference_error") or {}).get(q)
+        amp = measured.get("amplification", {}).get(q, 1.0)
+        return [M.roundoff_floor(scale, max(int(r["steps"]), 1), label, reference_error=ref, amplification=amp,
+                                 quantity=q) for r in ladder]
+    local = measured.get("local_reference_error") or {}
+    return [M.roundoff_floor(scale, 1, label, reference_error=(local.get(repr(float(r["dt"]))) or {}).get(q),
+                             quantity=q) for r in ladder]
+
+
+def _convergence_records(scenario, variant, rows, scales, mode, measured=None):
+    """Convergence records of one (scenario, variant): the fit over the ladder against floors from
+    measurement (:func:`_floors`), and the expectation decided from the scenario's measured physics.
+    Where the expectation makes no claim on this ladder (pre-asymptotic), a fitted converges /
+    does_not_converge becomes the verdict ``pre_asymptotic`` (the fit's own verdict is kept in
+    ``fit_verdict``)."""
+    from .physics import physics_from_dict
+    measured = measured or {}
+    phys = physics_from_dict(measured["physics"]) if measured.get("physics") else None
     ladder = sorted([r for r in rows if r["in_ladder"]], key=lambda r: -r["dt"])
     out = []
     if len(ladder) < 2:
@@ -284,22 +303,28 @@ def _convergence_records(scenario, variant, rows, scales, mode, amplification=No
         stem = COLUMN_STEM[q]
         if mode == "free_running":
             errs = [r[f"{stem}_err_final"] for r in ladder]
-            floors = [M.roundoff_floor(scales.get(q, 1.0), max(int(r["steps"]), 1), label)
-                      * max(1.0, amplification.get(q, 1.0)) for r in ladder]
             statuses = [r["status"] for r in ladder]
         else:
             errs = [r[f"{stem}_local_err"] for r in ladder]
-            floors = [M.roundoff_floor(scales.get(q, 1.0), 1, label) for r in ladder]
             statuses = ["ok" if r["status"] in ("ok", "diverged") and np.isfinite(r[f"{stem}_local_err"])
                         else "failed" for r in ladder]
-        fit = M.fit_convergence(dts, errs, floors, statuses)
-        exp = expectation(scenario, variant, q, mode)
-        matches, phrase = M.compare_with_expectation(fit.verdict, fit.order, exp)
+        fit = M.fit_convergence(dts, errs, _floors(ladder, q, scales, mode, label, measured), statuses)
+        exp = expectation(scenario, variant, q, mode, physics=phys)
+        verdict = fit.verdict
+        matches, phrase = M.compare_with_expectation(fit.verdict, fit.order, exp, fit.order_is_lower_bound)
+        if exp.verdict == "pre_asymptotic" and verdict in ("converges", "does_not_converge"):
+            verdict = "pre_asymptotic"
+        elif matches is False and exp.verdict == "converges":
+            why = M.measured_pre_asymptotic(fit, exp.order)
+            if why:
+                verdict, matches, phrase = "pre_asymptotic", None, why
         out.append({
             "scenario": scenario.name, "engine": variant, "quantity": q, "mode": mode,
-            "order": fit.order, "pairwise_orders": fit.pairwise_orders, "verdict": fit.verdict,
+            "order": fit.order, "pairwise_orders": fit.pairwise_orders, "verdict": verdict,
+            "fit_verdict": fit.verdict,
             "dt_s": fit.dt_s, "errors": [None if not np.isfinite(e) else e for e in fit.errors],
-            "floors": fit.floors, "fitted": fit.fitted, "note": fit.note, "unit": M.UNITS[q],
+            "floors": fit.floors, "fitted": fit.fitted, "order_is_lower_bound": fit.order_is_lower_bound,
+            "note": fit.note, "unit": M.UNITS[q],
             **exp.as_dict(), "matches_expectation": matches, "assessment": phrase,
         })
     return out
@@ -504,7 +529,7 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
         ref_fail = {i: ref_results[i][1] for i in range(len(scenarios)) if ref_results[i][1]}
         ref_scales = {i: ref_results[i][2] for i in range(len(scenarios))}
         ref_varies = {i: ref_results[i][3] for i in range(len(scenarios))}
-        ref_amp = {i: ref_results[i][4] for i in range(len(scenarios))}
+        ref_measured = {i: ref_results[i][4] for i in range(len(scenarios))}
 
         # 2. the runs, longest first
         all_jobs = plan_jobs(scenarios, variants)
@@ -552,13 +577,16 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
         for i, sc in enumerate(scenarios):
             scales = ref_scales[i]
             scenario_info.append(_scenario_info(sc, labels.get(i, ""), scales))
-            scenario_info[-1]["error_amplification"] = ref_amp.get(i, {})
+            meas = ref_measured.get(i) or {}
+            scenario_info[-1]["error_amplification"] = meas.get("amplification", {})
+            scenario_info[-1]["reference_error"] = meas.get("reference_error")
+            scenario_info[-1]["physics"] = meas.get("physics")
             scenario_info[-1]["varies"] = ref_varies[i]
             for v in variants:
                 vrows = [r for r in rows if r["scenario"] == sc.name and r["engine"] == v]
-                convergence += _convergence_records(sc, v, vrows, scales, "free_running", ref_amp.get(i))
+                convergence += _convergence_records(sc, v, vrows, scales, "free_running", ref_measured.get(i))
                 if has_one_step(v):  # engines without a one-step mode have no local errors to fit
-                    local += _convergence_records(sc, v, vrows, scales, "one_step")
+                    local += _convergence_records(sc, v, vrows, scales, "one_step", ref_measured.get(i))
             # series for the plots at the default Δt
             arrays = {}
             if i not in ref_fail:

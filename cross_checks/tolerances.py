@@ -55,7 +55,9 @@ ROUNDOFF_NOISE_FACTOR = 10.0
 #: 10 s. An error that grows again at the fine end while below this multiple of the floor is
 #: amplified round-off, not a failure to converge.
 AMPLIFIED_ROUNDOFF_FACTOR = 1e4
-#: Accuracy of the references relative to a quantity's scale: closed forms 1e-12 — Jacobi elliptic
+#: Fallback only, for a caller with no measurement of its reference (sweeps measure it: see
+#: references.reference_error and metrics.roundoff_floor). Accuracy of the references relative to a
+#: quantity's scale: closed forms 1e-12 — Jacobi elliptic
 #: functions from scipy, evaluated at arbitrary times: one RK4 step (local error ~1e-20) from the
 #: tennis-racket closed form at one time lands 1.6e-12 rad from it at the next, in MuJoCo and NumPy
 #: alike; the DOP853 ground truth (rtol 1e-13) is within CLOSED_FORM_VS_GROUND_TRUTH = 1e-10 of the
@@ -138,3 +140,32 @@ MIN_LADDER_RATIO = 1.2
 #: Longest scenario name: it becomes file names (scenario-<name>.html, plots/<name>__conservation.png,
 #: series/<name>.npz) that must fit the 255-byte limit of common filesystems with room to spare.
 MAX_NAME_CHARS = 100
+
+# --- Sweep verdicts: true orders, and expectations decided by physics (issue 11) ----------------------
+
+#: Relative size of the initial-state perturbations that measure the error amplification: far above
+#: the references' accuracy (closed forms ~1e-13; DOP853 at AMPLIFICATION_RTOL, whose batched members
+#: share their steps, so their differences are finer than the tolerance), small enough to stay linear
+#: (tumbling_box, amplification ~1e3: 1e-3 of its scale; the second-order part is ~1e-3 of the first).
+AMPLIFICATION_EPS = 1e-6
+#: DOP853 tolerance of the batched amplification solve: measured on spring_pendulum, the amplification
+#: at (ε, rtol) = (1e-6, 1e-8) equals that at (1e-7, 1e-10) to 4 digits, at 60 % of the cost.
+AMPLIFICATION_RTOL = 1e-8
+#: A DOP853 reference's error is measured as its difference from a solution at this many times its
+#: tolerance: the looser solution's error, an upper bound of the reference's (measured on the catalog:
+#: |y(1e-12) − y(1e-13)| is 4–7× |y(1e-13) − closed form| wherever there is a closed form).
+REFERENCE_CHECK_RTOL_FACTOR = 10.0
+#: A closed form's round-off is measured by moving its inputs (initial state, final time) by this many
+#: ulps of their scale: a closed form rounds ~1e2 intermediate results (Jacobi elliptic functions plus
+#: Carlson integrals), whose errors add like a random walk, ~√100 = 10 ulps; 16 covers it.
+CLOSED_FORM_INPUT_ULPS = 16
+#: An amplitude drift may bend the fitted order by at most this before the sweep stops claiming an
+#: order (verdict "pre_asymptotic"): half the match tolerance SWEEP_ORDER_TOL, the other half left for
+#: the scheme's error constants, other error terms and the fit. (The model is exact for a linear
+#: oscillator: spring_oscillator's explicit/implicit Euler fit 1.14/0.88, predicted 1.14/0.87.)
+AMPLITUDE_MODEL_ORDER_DEV = 0.15
+#: An error is used in an order fit only above this multiple of its floor (metrics.fit_convergence):
+#: round-off then makes at most a tenth of it, which moves a pairwise order by ≤ log2(1.1) = 0.14 —
+#: within AMPLITUDE_MODEL_ORDER_DEV. (Measured: mujoco:rk4 on tumbling_box, ω error 3.2e-10 at 1.7× its
+#: floor, bent the fitted order from 3.9 to 3.4.)
+RESOLVED_ABOVE_FLOOR = 10.0

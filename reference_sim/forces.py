@@ -5,6 +5,7 @@ the torque of a force ``f_W`` applied at body point ``r_B`` is ``τ_W = (R r_B) 
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -58,7 +59,13 @@ class ForceModel:
     ----------
     gravity_W : (3,) m/s², uniform: acts at the COM, no torque.
     linear_drag_N_s_per_m : c in ``f = −c v_W`` at the COM.
-    velocity_decay, angular_velocity_decay : the course's per-step factors γ on v and ω (1 = off).
+    velocity_decay, angular_velocity_decay : the course's per-step factors γ on v and ω (1 = off),
+        given at the step ``decay_dt_s``.
+    decay_dt_s : s, the step at which the factors are the course's (the scenario's dt); required when
+        a factor is not 1. Physically the factors are exponential damping at the rates
+        ``k = −ln γ / decay_dt_s`` (1/s): ``v̇ = f/m − k_v v``, ``ω̇ = … − k_ω ω`` (see
+        :meth:`decay_rates_per_s`); a scheme with step Δt applies :meth:`decay_factors` ``(Δt)`` per
+        step, or puts the rates in its right-hand side.
     springs, point_forces, torques : tuples of the above.
     """
 
@@ -66,9 +73,44 @@ class ForceModel:
     linear_drag_N_s_per_m: float = 0.0
     velocity_decay: float = 1.0
     angular_velocity_decay: float = 1.0
+    decay_dt_s: float | None = None
     springs: tuple = ()
     point_forces: tuple = ()
     torques: tuple = ()
+
+    def __post_init__(self):
+        for name in ("velocity_decay", "angular_velocity_decay"):
+            g = getattr(self, name)
+            if not 0.0 < g <= 1.0:
+                raise ValueError(f"{name} must be in (0, 1] (a per-step factor; 1 = off), got {g!r}")
+        if self.has_decay and not (self.decay_dt_s is not None and self.decay_dt_s > 0.0):
+            raise ValueError("decay_dt_s (the step at which the decay factors are given) must be > 0 when a "
+                             f"decay factor is not 1, got {self.decay_dt_s!r}")
+
+    # -- velocity decay: the course's per-step factor, as a rate ------------------------------------
+    def decay_rates_per_s(self):
+        """``(k_v, k_ω)`` (1/s): the continuous damping rates ``k = −ln γ / decay_dt_s`` (0 when off)."""
+        if not self.has_decay:
+            return 0.0, 0.0
+        return (-math.log(self.velocity_decay) / self.decay_dt_s,
+                -math.log(self.angular_velocity_decay) / self.decay_dt_s)
+
+    def decay_factors(self, dt_s):
+        """``(γ_v, γ_ω)`` per step of ``dt_s`` (s; a float or an array): ``e^{−k Δt} = γ^(Δt / decay_dt_s)``.
+
+        At ``dt_s == decay_dt_s`` these are exactly the course's factors (bit for bit), so the course
+        variants at the scenario's own step are the course's simulator.
+        """
+        if not self.has_decay:
+            return 1.0, 1.0
+        if np.ndim(dt_s) == 0 and float(dt_s) == self.decay_dt_s:
+            return self.velocity_decay, self.angular_velocity_decay
+        ratio = np.asarray(dt_s, dtype=float) / self.decay_dt_s
+        gv = self.velocity_decay ** ratio if self.velocity_decay != 1.0 else 1.0
+        gw = self.angular_velocity_decay ** ratio if self.angular_velocity_decay != 1.0 else 1.0
+        if np.ndim(dt_s) == 0:
+            return float(gv), float(gw)
+        return gv, gw
 
     # -- classification used to pick references and engine force paths ---------------------------
     @property

@@ -5,7 +5,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from .integrators import rhs
-from .state import Q, V, W, Problem
+from .state import Q, Problem
 
 __all__ = ["ground_truth", "GROUND_TRUTH_RTOL", "GROUND_TRUTH_ATOL"]
 
@@ -17,36 +17,29 @@ GROUND_TRUTH_RTOL = 1e-13
 GROUND_TRUTH_ATOL = 1e-14
 
 
-def ground_truth(problem: Problem, t_s, decay_rates_per_s=(0.0, 0.0), y0=None,
-                 rtol: float = GROUND_TRUTH_RTOL, atol: float = GROUND_TRUTH_ATOL):
-    """Solve ``ẏ = F(y)`` (reference_sim.integrators.rhs: gyroscopic term included) with DOP853.
+def ground_truth(problem: Problem, t_s, y0=None, rtol: float = GROUND_TRUTH_RTOL, atol: float = GROUND_TRUTH_ATOL):
+    """Solve ``ẏ = F(y)`` (reference_sim.integrators.rhs: gyroscopic term and the continuous velocity
+    decay ``−k v``, ``−k ω`` included) with DOP853.
 
     Parameters
     ----------
-    problem : single-body Problem.
+    problem : single-body Problem, or a batch: ``y0`` of shape (B, 13) solves B initial states as one
+        system (the same steps for all; used to measure how the dynamics amplify perturbations).
     t_s : (T,) increasing output times, s, starting at 0.
-    decay_rates_per_s : (k_v, k_ω), 1/s: continuous damping ``v̇ −= k_v v``, ``ω̇ −= k_ω ω``; the
-        frame-rate independent form ``e^{−kΔt}`` of the course's per-step decay (COURSE_EQUATIONS.md).
-        The problem's own per-step decay factors are ignored here (they are not an ODE).
     Returns
     -------
-    y : (T, 13) packed states [x_W, v_W, q_WB (w x y z, renormalised), w_W].
+    y : (T, 13) (or (T, B, 13)) packed states [x_W, v_W, q_WB (w x y z, renormalised), w_W].
     """
     t_s = np.asarray(t_s, dtype=float)
     y0 = problem.initial_packed() if y0 is None else np.asarray(y0, dtype=float)
-    k_v, k_w = decay_rates_per_s
+    shape = y0.shape
 
     def f(_t, y):
-        d = rhs(problem, y)
-        if k_v:
-            d[V] -= k_v * y[V]
-        if k_w:
-            d[W] -= k_w * y[W]
-        return d
+        return rhs(problem, y.reshape(shape)).reshape(-1)
 
-    sol = solve_ivp(f, (t_s[0], t_s[-1]), y0, method="DOP853", t_eval=t_s, rtol=rtol, atol=atol)
+    sol = solve_ivp(f, (t_s[0], t_s[-1]), y0.reshape(-1), method="DOP853", t_eval=t_s, rtol=rtol, atol=atol)
     if not sol.success:
         raise RuntimeError(f"ground truth integration failed: {sol.message}")
-    y = sol.y.T.copy()
-    y[:, Q] /= np.linalg.norm(y[:, Q], axis=1, keepdims=True)
+    y = sol.y.T.reshape((len(t_s),) + shape).copy()
+    y[..., Q] /= np.linalg.norm(y[..., Q], axis=-1, keepdims=True)
     return y

@@ -23,10 +23,14 @@ Variants (names fixed by DESIGN.md):
                   velocity-dependent forces and the gyroscopic term; velocities reported at integer steps.
 ``rk4``           classical Runge–Kutta 4.
 
-Whole-state schemes renormalise the quaternion after the step. Velocity decay (the course's
-per-step factors γ) multiplies v and ω right after the velocity update in the three course-type
-schemes (course, course_gyro, expmap_gyro) as DESIGN.md says, and at the end of the step in the
-whole-state schemes (they have no separate velocity update).
+Whole-state schemes renormalise the quaternion after the step.
+
+Velocity decay: the course's per-step factors γ are given at the scenario's step dt; physically they
+are exponential damping at the rates ``k = −ln γ / dt`` (``ForceModel.decay_rates_per_s``). The three
+course-type schemes (course, course_gyro, expmap_gyro) multiply v and ω by ``e^{−kΔt}``
+(``ForceModel.decay_factors``) right after their velocity update — exactly the course's γ when
+Δt = dt; the whole-state schemes have ``−k v`` and ``−k ω`` in their right-hand side (:func:`rhs`), so
+each converges at its order to the continuously damped motion.
 """
 from __future__ import annotations
 
@@ -58,16 +62,22 @@ def rhs(problem: Problem, y):
     """Time derivative ``F(y)`` (..., 13) of the full rigid-body equations (gyroscopic term included).
 
     The quaternion part is ``½ [0, ω] q`` with ``q`` as given (not normalised); the rotation used for
-    forces and inertia is that of ``q / |q|``.
+    forces and inertia is that of ``q / |q|``. Velocity decay enters as the continuous damping
+    ``−k_v v`` and ``−k_ω ω`` (``ForceModel.decay_rates_per_s``).
     """
     body, forces = problem.body, problem.forces
     x, v, q, w = y[..., X], y[..., V], y[..., Q], y[..., W]
     qn = q / np.linalg.norm(q, axis=-1, keepdims=True)
     R = matrix_from_quat(qn)
     f, tau = forces.force_torque(body, x, v, qn, R)
+    dv = f / body.mass_kg
     dw = _angular_acceleration(body, R, w, tau, gyro=True)
+    if forces.has_decay:
+        k_v, k_w = forces.decay_rates_per_s()
+        dv = dv - k_v * v
+        dw = dw - k_w * w
     dq = 0.5 * quat_mul(_omega_quat(w), q)
-    return np.concatenate([v, f / body.mass_kg, dq, dw], axis=-1)
+    return np.concatenate([v, dv, dq, dw], axis=-1)
 
 
 def _angular_acceleration(body, R, w_W, tau_W, *, gyro: bool):
@@ -90,15 +100,6 @@ def _normalized(y):
     return y
 
 
-def _decay_end(problem: Problem, y):
-    fm = problem.forces
-    if fm.velocity_decay != 1.0:
-        y[..., V] *= fm.velocity_decay
-    if fm.angular_velocity_decay != 1.0:
-        y[..., W] *= fm.angular_velocity_decay
-    return y
-
-
 # --- course-type (semi-implicit) schemes --------------------------------------------------------
 
 def _course_type(problem: Problem, y, dt, *, gyro: bool, expmap: bool):
@@ -108,13 +109,16 @@ def _course_type(problem: Problem, y, dt, *, gyro: bool, expmap: bool):
     R = matrix_from_quat(q)
     # All forces and torques from the start-of-step state (course: f_i ← Force_i(x, v); τ uses R(q)).
     f, tau = fm.force_torque(body, x, v, q, R)
+    # Decay e^{−kΔt} right after the velocity update (exactly the course's γ at the scenario's dt).
+    g_v, g_w = fm.decay_factors(dt)
+    g_v, g_w = _dt(g_v, y), _dt(g_w, y)
     v1 = v + h * (f / body.mass_kg)
     if fm.velocity_decay != 1.0:
-        v1 = fm.velocity_decay * v1
+        v1 = g_v * v1
     x1 = x + h * v1
     w1 = w + h * _angular_acceleration(body, R, w, tau, gyro=gyro)
     if fm.angular_velocity_decay != 1.0:
-        w1 = fm.angular_velocity_decay * w1
+        w1 = g_w * w1
     if expmap:
         q1 = quat_mul(quat_exp(h * w1), q)
     else:
@@ -142,14 +146,14 @@ def step_expmap_gyro(problem, y, dt):
 
 def step_explicit_euler(problem, y, dt):
     h = _dt(dt, y)
-    return _decay_end(problem, _normalized(y + h * rhs(problem, y)))
+    return _normalized(y + h * rhs(problem, y))
 
 
 def step_midpoint(problem, y, dt):
     h = _dt(dt, y)
     k1 = rhs(problem, y)
     k2 = rhs(problem, y + (0.5 * h) * k1)
-    return _decay_end(problem, _normalized(y + h * k2))
+    return _normalized(y + h * k2)
 
 
 def step_rk4(problem, y, dt):
@@ -158,7 +162,7 @@ def step_rk4(problem, y, dt):
     k2 = rhs(problem, y + (0.5 * h) * k1)
     k3 = rhs(problem, y + (0.5 * h) * k2)
     k4 = rhs(problem, y + h * k3)
-    return _decay_end(problem, _normalized(y + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)))
+    return _normalized(y + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4))
 
 
 def _converged(delta, y):
@@ -192,7 +196,7 @@ def step_implicit_euler(problem, y, dt):
         delta = np.linalg.solve(J, -G[..., None])[..., 0]
         z = z + delta
         if _converged(delta, z):
-            return _decay_end(problem, _normalized(z))
+            return _normalized(z)
     raise ImplicitSolveError(f"implicit Euler: Newton did not converge in {_MAX_ITER} iterations (dt={dt})")
 
 
@@ -234,7 +238,7 @@ def step_leapfrog(problem, y, dt):
     z[..., Q] = q1 / np.linalg.norm(q1, axis=-1, keepdims=True)
     u1 = u + half * accel(z)
     z[..., V], z[..., W] = u1[..., :3], u1[..., 3:]
-    return _decay_end(problem, z)
+    return z
 
 
 VARIANTS = {

@@ -46,7 +46,8 @@ def rhs_readable(problem: Problem, y):
     I = R @ body.inertia_B @ R.T  # world inertia
     dw = np.linalg.solve(I, tau - np.cross(w, I @ w))
     dq = 0.5 * quat_mul(np.concatenate([[0.0], w]), q)
-    return np.concatenate([v, f / body.mass_kg, dq, dw])
+    k_v, k_w = fm.decay_rates_per_s()            # velocity decay as the continuous damping −k v, −k ω
+    return np.concatenate([v, f / body.mass_kg - k_v * v, dq, dw - k_w * w])
 
 
 def _course_like(problem: Problem, y, dt, gyro, expmap):
@@ -55,13 +56,14 @@ def _course_like(problem: Problem, y, dt, gyro, expmap):
     R = matrix_from_quat(q)                      # R ← Rotate(q)
     f, tau = _forces(body, fm, x, v, R)          # f ← Σ f_i ;  τ ← Σ (R r_i) × f_i
     v = v + dt * f / body.mass_kg                # v ← v + Δt M⁻¹ f
-    v = fm.velocity_decay * v                    # course decay (1 = off)
+    g_v, g_w = fm.decay_factors(dt)              # e^{−kΔt}: the course's γ when Δt = the scenario's dt
+    v = g_v * v                                  # course decay (1 = off)
     x = x + dt * v                               # x ← x + Δt v
     I = R @ body.inertia_B @ R.T                 # I ← R I_ref Rᵀ
     if gyro:
         tau = tau - np.cross(w, I @ w)           # gyroscopic torque (NOT in the course)
     w = w + dt * np.linalg.solve(I, tau)         # ω ← ω + Δt I⁻¹ τ
-    w = fm.angular_velocity_decay * w
+    w = g_w * w
     if expmap:
         q = quat_mul(quat_exp(dt * w), q)        # q ← exp(Δt ω) q
     else:
@@ -73,8 +75,6 @@ def _course_like(problem: Problem, y, dt, gyro, expmap):
 def _finish(problem, y):
     y = y.copy()
     y[6:10] /= np.linalg.norm(y[6:10])
-    y[3:6] *= problem.forces.velocity_decay
-    y[10:13] *= problem.forces.angular_velocity_decay
     return y
 
 
@@ -125,7 +125,5 @@ def step_readable(variant: str, problem: Problem, y, dt: float):
         d = F(z)
         z[3:6] = u[:3] + 0.5 * dt * d[3:6]                        # second half kick
         z[10:13] = u[3:] + 0.5 * dt * d[10:13]
-        z[3:6] *= problem.forces.velocity_decay
-        z[10:13] *= problem.forces.angular_velocity_decay
         return z
     raise KeyError(variant)

@@ -66,7 +66,10 @@ class ScalarStepper:
         g = [float(c) for c in fm.gravity_W]
         self.mg = [self.m * c for c in g]
         self.c = float(fm.linear_drag_N_s_per_m)
-        self.gv, self.gw = float(fm.velocity_decay), float(fm.angular_velocity_decay)
+        # decay: per-step factors e^{−kΔt} after the velocity update (course-type schemes; exactly the
+        # course's γ at the scenario's dt) and rates k in the right-hand side (whole-state schemes)
+        self.gv, self.gw = (float(g) for g in fm.decay_factors(self.h))
+        self.kv, self.kw = (float(k) for k in fm.decay_rates_per_s())
         self.springs = [(list(map(float, s.anchor_W)), list(map(float, s.attach_B)), float(s.stiffness_N_per_m),
                          float(s.rest_length_m)) for s in fm.springs]
         self.fixed_f = [0.0, 0.0, 0.0]     # world forces at the COM: constant
@@ -172,6 +175,20 @@ class ScalarStepper:
         x, v = [float(c) for c in y[0:3]], [float(c) for c in y[3:6]]
         return self._force_torque(x, v, self._rot(qw / n, qx / n, qy / n, qz / n))
 
+    def world_inertia_times(self, y, ax, ay, az):
+        """``I_W a = R I_B Rᵀ a`` (world axes) for the orientation of state ``y`` (rotation of q/|q|)."""
+        qw, qx, qy, qz = (float(c) for c in y[6:10])
+        n = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+        (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = self._rot(qw / n, qx / n, qy / n, qz / n)
+        bx = r00 * ax + r10 * ay + r20 * az
+        by = r01 * ax + r11 * ay + r21 * az
+        bz = r02 * ax + r12 * ay + r22 * az
+        I = self.I
+        lx = I[0][0] * bx + I[0][1] * by + I[0][2] * bz
+        ly = I[1][0] * bx + I[1][1] * by + I[1][2] * bz
+        lz = I[2][0] * bx + I[2][1] * by + I[2][2] * bz
+        return (r00 * lx + r01 * ly + r02 * lz, r10 * lx + r11 * ly + r12 * lz, r20 * lx + r21 * ly + r22 * lz)
+
     def _ang_acc(self, R, wx, wy, wz, tx, ty, tz, gyro):
         """``R I_B⁻¹ (Rᵀτ − ω_B × I_B ω_B)`` in world axes (rad/s²)."""
         (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R
@@ -245,21 +262,19 @@ class ScalarStepper:
         fx, fy, fz, tx, ty, tz = self._force_torque(y[0:3], y[3:6], R)
         ax, ay, az = self._ang_acc(R, wx, wy, wz, tx, ty, tz, True)
         m = self.m
-        return [y[3], y[4], y[5], fx / m, fy / m, fz / m,
+        dvx, dvy, dvz = fx / m, fy / m, fz / m
+        if self.kv:  # continuous decay −k v, −k ω (ForceModel.decay_rates_per_s)
+            dvx, dvy, dvz = dvx - self.kv * y[3], dvy - self.kv * y[4], dvz - self.kv * y[5]
+        if self.kw:
+            ax, ay, az = ax - self.kw * wx, ay - self.kw * wy, az - self.kw * wz
+        return [y[3], y[4], y[5], dvx, dvy, dvz,
                 0.5 * (-wx * qx - wy * qy - wz * qz), 0.5 * (wx * qw + wy * qz - wz * qy),
                 0.5 * (wy * qw + wz * qx - wx * qz), 0.5 * (wz * qw + wx * qy - wy * qx), ax, ay, az]
 
     def _finish(self, y):
-        """Renormalise q, then the end-of-step velocity decay (whole-state schemes)."""
+        """Renormalise q (whole-state schemes; their decay is in :meth:`rhs`)."""
         n = self.xp.sqrt(y[6] * y[6] + y[7] * y[7] + y[8] * y[8] + y[9] * y[9])
         y[6], y[7], y[8], y[9] = y[6] / n, y[7] / n, y[8] / n, y[9] / n
-        return self._decay(y)
-
-    def _decay(self, y):
-        if self.gv != 1.0:
-            y[3], y[4], y[5] = self.gv * y[3], self.gv * y[4], self.gv * y[5]
-        if self.gw != 1.0:
-            y[10], y[11], y[12] = self.gw * y[10], self.gw * y[11], self.gw * y[12]
         return y
 
     def _explicit_euler(self, y):
@@ -312,7 +327,7 @@ class ScalarStepper:
         d = self.rhs(z)
         z[3:6] = [a + half * b for a, b in zip(u[0:3], d[3:6])]
         z[10:13] = [a + half * b for a, b in zip(u[3:6], d[10:13])]
-        return self._decay(z)
+        return z
 
     def _implicit_euler(self, y):
         """Backward Euler. Fixed point ``z ← y + Δt F(z)`` from the explicit Euler predictor: it

@@ -143,6 +143,19 @@ def findings(res) -> list:
         explained.append(Finding("explained", f"{eng} does not converge on {sc}: {_error_ranges(er)}; "
                                               + "; ".join(reasons) + ".", sc, eng))
 
+    # 3b. no claim on this ladder (pre-asymptotic), with the reason (physics, or the errors themselves)
+    pre = [r for r in recs if r["verdict"] == "pre_asymptotic"]
+    for (sc, eng), rs in sorted(_group(pre, lambda r: (r["scenario"], r["engine"])).items(),
+                                key=lambda kv: (scen_order.get(kv[0][0], 99), var_order.get(kv[0][1], 99))):
+        rs.sort(key=lambda r: QUANTITIES.index(r["quantity"]))
+        why = lambda r: r["reason"] if r["expected_verdict"] == "pre_asymptotic" else r["assessment"]  # noqa: E731
+        fitted = ", ".join(f"{LABELS[r['quantity']]} {r['order']:.2f}" for r in rs if r["order"] is not None)
+        text = (f"{eng} on {sc}: no order claimed for {_and(LABELS[r['quantity']] for r in rs)} "
+                f"(fitted {fitted or 'none'}, not judged). {LABELS[rs[0]['quantity']].capitalize()}: {why(rs[0])}")
+        if len(rs) > 1:
+            text += f" (likewise, with its own numbers, for {_and(LABELS[r['quantity']] for r in rs[1:])})"
+        explained.append(Finding("explained", text + ".", sc, eng))
+
     # 4. exact to round-off, and orders above the nominal one (information)
     exact = [r for r in recs if r["verdict"] == "at_roundoff" and varies.get(r["scenario"], {}).get(r["quantity"], True)]
     for (sc, q), rs in sorted(_group(exact, lambda r: (r["scenario"], r["quantity"])).items(),

@@ -16,7 +16,7 @@ from .findings import findings, fmt, fmt_dt
 __all__ = ["environment", "render_pages", "page_name"]
 
 _VERDICT_SHORT = {"converges": "conv.", "does_not_converge": "no conv.", "at_roundoff": "exact",
-                  "diverged": "diverged", "failed": "failed", "insufficient": "n/a"}
+                  "pre_asymptotic": "pre-asympt.", "diverged": "diverged", "failed": "failed", "insufficient": "n/a"}
 _FIG_CAPTIONS = {
     "trajectories": "Position and orientation components against time for every variant at the scenario's "
                     "default Δt; the thick grey line is the reference.",
@@ -62,6 +62,8 @@ def _order_text(rec):
     if rec["order"] is None:
         return _VERDICT_SHORT.get(rec["verdict"], rec["verdict"])
     o = 0.0 if abs(rec["order"]) < 0.005 else rec["order"]
+    if rec["verdict"] == "pre_asymptotic":
+        return f"({o:.2f})"
     return f"{o:.2f}" if rec["verdict"] == "converges" else f"no ({o:.2f})"
 
 
@@ -70,7 +72,7 @@ def _rec_class(rec):
         return "missing"
     if rec["matches_expectation"] is False:
         return "bad"
-    if rec["expected_verdict"] == "does_not_converge":
+    if rec["expected_verdict"] == "does_not_converge" or rec["verdict"] == "pre_asymptotic":
         return "explained"
     return "good"
 
@@ -80,7 +82,7 @@ def _cell_class(recs, rows):
         return "missing"
     if any(r["status"] == "failed" for r in rows) or any(rec["matches_expectation"] is False for rec in recs):
         return "bad"
-    if any(rec["expected_verdict"] == "does_not_converge" for rec in recs):
+    if any(rec["expected_verdict"] == "does_not_converge" or rec["verdict"] == "pre_asymptotic" for rec in recs):
         return "explained"
     return "good"
 

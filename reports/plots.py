@@ -255,6 +255,8 @@ def _order_table(res, sc, mode):
             if r["order"] is None:
                 return {"diverged": "diverged", "failed": "failed"}.get(r["verdict"], "n/a")
             o = 0.0 if abs(r["order"]) < 0.005 else r["order"]
+            if r["verdict"] == "pre_asymptotic":
+                return f"({o:.2f})"
             return f"{o:.2f}" if r["verdict"] == "converges" else "no"
         lines.append((v, " / ".join(one(q) for q in QUANTITIES)))
     return lines
@@ -271,7 +273,7 @@ def fig_ladder(res, sc, styles, path, mode):
     variants = [v for v in res.variants if v in table]
     handles = [Line2D([], [], color=styles[v]["color"], ls=styles[v]["ls"], marker=styles[v]["marker"], ms=4,
                       mfc="white", label=f"{v}\n   {table[v]}") for v in variants]
-    _finish(fig, path, handles, legend_title="fitted order (position /\norientation / velocity /\nangular velocity); no: does\nnot converge; exact: round-off")
+    _finish(fig, path, handles, legend_title="fitted order (position /\norientation / velocity /\nangular velocity); no: does\nnot converge; exact: round-off;\n(…): pre-asymptotic, not judged")
     return True
 
 

@@ -28,11 +28,16 @@ Harness semantics (identical in every built-in adapter):
 * Forces and torques are evaluated by ``scenario.problem.forces.force_torque`` from the state at the
   start of each step and held over the step (zero-order hold) unless the engine can evaluate them at
   every stage (MuJoCo RK4 through its control callback).
-* The course's per-step velocity decay γ has no engine equivalent. The harness applies it BEFORE the
-  step: ``v ← γ v``, ``ω ← γ_ω ω``, and scales that step's applied force by γ and torque by γ_ω. For a
-  semi-implicit (Euler-type) engine this reproduces the reference's ``v ← γ (v + Δt f/m)`` exactly,
-  and the rotation exactly whenever the gyroscopic torque vanishes (spin about a principal axis);
-  otherwise the gyroscopic term sees γ_ω² instead of γ_ω — a difference of order (1 − γ_ω) Δt.
+* Velocity decay (the course's per-step factor γ at the scenario's dt) is exponential damping at the
+  rate ``k = −ln γ / dt``; an engine with step Δt gets the factor ``e^{−kΔt}`` (``decay_factors``,
+  exactly γ at Δt = dt). Euler-type engines (one force evaluation per step) have no equivalent, so
+  the harness applies it BEFORE the step: ``v ← e^{−k_vΔt} v``, ``ω ← e^{−k_ωΔt} ω``, and scales that
+  step's applied force and torque by the same factors. For a semi-implicit engine this reproduces
+  ``v ← e^{−kΔt} (v + Δt f/m)`` — the course's step at Δt = dt — exactly, and the rotation exactly
+  whenever the gyroscopic torque vanishes; otherwise the gyroscopic term sees the factor twice, a
+  difference of order (1 − e^{−kΔt}) Δt that keeps the scheme first order. A multi-stage engine
+  (MuJoCo RK4) instead gets the damping in its right-hand side at every stage
+  (``stage_force_torque``): a force ``−m k_v v`` at the COM and a torque ``−k_ω I_W ω``.
 """
 from __future__ import annotations
 
@@ -44,7 +49,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["EngineAdapter", "Variant", "harness_force_torque", "apply_decay_prestep", "EngineError"]
+__all__ = ["EngineAdapter", "Variant", "harness_force_torque", "stage_force_torque", "apply_decay_prestep",
+           "decay_factors", "EngineError"]
 
 
 class EngineError(RuntimeError):
@@ -59,26 +65,47 @@ def _float_forces(scenario):
     return ScalarStepper(scenario.problem, "course", scenario.dt_s)
 
 
-def harness_force_torque(scenario, y):
-    """World force (N, at the COM) and world torque (N m) to apply for the step starting at ``y`` (13,),
-    decay scaling included (see the module docstring).
+def decay_factors(scenario, dt_s: float):
+    """``(γ_v, γ_ω)``: the per-step decay factors ``e^{−kΔt}`` at step ``dt_s`` (exactly the scenario's
+    own factors at its dt); what an engine that applies decay per step must use at that Δt."""
+    return scenario.problem.forces.decay_factors(float(dt_s))
+
+
+def harness_force_torque(scenario, y, dt_s: float):
+    """World force (N, at the COM) and world torque (N m) to apply for the step of ``dt_s`` starting at
+    ``y`` (13,), scaled by the pre-step decay factors (see the module docstring).
 
     Evaluated with the plain-float kernel of reference_sim.scalar (the same formulas as
     ForceModel.force_torque, tested equal to it): it runs once per engine step, or once per RK4 stage,
     where NumPy's per-call overhead would dominate the engine's own step time.
     """
-    fm = scenario.problem.forces
     fx, fy, fz, tx, ty, tz = _float_forces(scenario).force_torque(y)
-    gv, gw = fm.velocity_decay, fm.angular_velocity_decay
+    gv, gw = decay_factors(scenario, dt_s)
     return np.array([gv * fx, gv * fy, gv * fz]), np.array([gw * tx, gw * ty, gw * tz])
 
 
-def apply_decay_prestep(scenario, y):
-    """The state(s) ``y`` (..., 13) with the pre-step decay applied (a copy)."""
-    fm = scenario.problem.forces
+def stage_force_torque(scenario, y):
+    """World force and torque of the right-hand side at state ``y`` (13,), decay included as the
+    damping force ``−m k_v v`` at the COM and the torque ``−k_ω I_W ω`` (so that ``ω̇`` gets ``−k_ω ω``):
+    what a multi-stage engine must see at every stage."""
+    stepper = _float_forces(scenario)
+    fx, fy, fz, tx, ty, tz = stepper.force_torque(y)
+    kv, kw = stepper.kv, stepper.kw
+    if kv:
+        m = stepper.m
+        fx, fy, fz = fx - m * kv * y[3], fy - m * kv * y[4], fz - m * kv * y[5]
+    if kw:
+        lx, ly, lz = stepper.world_inertia_times(y, y[10], y[11], y[12])
+        tx, ty, tz = tx - kw * lx, ty - kw * ly, tz - kw * lz
+    return np.array([fx, fy, fz]), np.array([tx, ty, tz])
+
+
+def apply_decay_prestep(scenario, y, dt_s: float):
+    """The state(s) ``y`` (..., 13) with the pre-step decay of a step of ``dt_s`` applied (a copy)."""
+    gv, gw = decay_factors(scenario, dt_s)
     y = np.array(y, dtype=float)
-    y[..., 3:6] *= fm.velocity_decay
-    y[..., 10:13] *= fm.angular_velocity_decay
+    y[..., 3:6] *= gv
+    y[..., 10:13] *= gw
     return y
 
 

@@ -12,11 +12,13 @@ State mapping (ENGINE_FACTS.md): ``qpos = [x_W, q_WB (w x y z)]``; ``qvel = [v_W
 Forces (harness semantics of base.py): the world force at the COM and the world torque of
 ``base.harness_force_torque`` minus the weight ``m g`` (MuJoCo applies gravity itself) go into
 ``xfrc_applied``. Every step they are evaluated from the start-of-step state and overwritten (MuJoCo
-never clears them). ``mujoco:rk4`` with state-dependent forces evaluates them at every RK4 stage from
-the stage state through MuJoCo's control callback, so it keeps its 4th order; the callback is
-process-global, so it is installed only for the duration of a run, under a module lock, and the
-previous one is restored. With the course's velocity decay the decay is applied to qvel before the
-step (base.apply_decay_prestep) and the stage forces of rk4 are evaluated from the decayed stage states.
+never clears them). ``mujoco:rk4`` with state-dependent forces or velocity decay evaluates them at
+every RK4 stage from the stage state through MuJoCo's control callback (base.stage_force_torque: the
+decay as the damping force ``−m k_v v`` and torque ``−k_ω I_W ω``), so it keeps its 4th order; the
+callback is process-global, so it is installed only for the duration of a run, under a module lock,
+and the previous one is restored. The Euler-type integrators get the decay ``e^{−kΔt}`` applied to
+qvel before the step, with that step's force and torque scaled alike (base.apply_decay_prestep,
+base.harness_force_torque).
 
 MuJoCo's warnings ("Nan, Inf or huge value in QACC ...") are routed to a handler during a run, so no
 MUJOCO_LOG.TXT is written into the working directory; such a warning counts as divergence at the step
@@ -31,7 +33,8 @@ import numpy as np
 from reference_sim.quaternion import quat_from_matrix, rotate, quat_conj
 from reference_sim.simulate import BLOWUP_LIMIT, Run
 
-from .base import EngineAdapter, EngineError, Variant, apply_decay_prestep, harness_force_torque
+from .base import (EngineAdapter, EngineError, Variant, apply_decay_prestep, decay_factors, harness_force_torque,
+                   stage_force_torque)
 
 try:  # the module imports without mujoco so the registry can report why it is unavailable
     import mujoco
@@ -245,10 +248,17 @@ class _Session:
             raise EngineError(f"force evaluation inside MuJoCo's control callback failed: {exc!r}") from exc
 
 
+def _per_stage(scenario, variant) -> bool:
+    """RK4 with forces that change within a step (state-dependent forces or velocity decay): evaluated
+    at every stage through the control callback."""
+    fm = scenario.problem.forces
+    return variant == "rk4" and (fm.state_dependent or fm.has_decay) and _RK4_STAGE_FORCES
+
+
 def _stage_force_writer(scenario, xfrc, weight):
     """Control callback body: forces from the (stage) state in qpos/qvel into xfrc_applied."""
     def control(_m, d):
-        f, tau = harness_force_torque(scenario, _packed1(d.qpos, d.qvel))
+        f, tau = stage_force_torque(scenario, _packed1(d.qpos, d.qvel))
         xfrc[0:3] = f - weight
         xfrc[3:6] = tau
     return control
@@ -268,12 +278,12 @@ def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
     d.qvel[:] = qvel0
     xfrc = d.xfrc_applied[_BODY]
 
-    decay = forces.has_decay
-    gv, gw = forces.velocity_decay, forces.angular_velocity_decay
-    per_stage = variant == "rk4" and forces.state_dependent and _RK4_STAGE_FORCES
+    per_stage = _per_stage(scenario, variant)
+    decay = forces.has_decay and not per_stage       # pre-step decay (Euler-type integrators)
+    gv, gw = decay_factors(scenario, dt_s)
     per_step = forces.state_dependent and not per_stage
     if not forces.state_dependent:
-        f, tau = harness_force_torque(scenario, y0)    # constant (decay scaling included)
+        f, tau = harness_force_torque(scenario, y0, dt_s)    # constant (decay scaling included)
         xfrc[0:3] = f - weight
         xfrc[3:6] = tau
 
@@ -292,7 +302,7 @@ def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
             stop = min(start + _CHUNK, n_steps + 1)
             for n in range(start, stop):
                 if per_step:
-                    f, tau = harness_force_torque(scenario, _packed1(qpos_out[n - 1], qvel_out[n - 1]))
+                    f, tau = harness_force_torque(scenario, _packed1(qpos_out[n - 1], qvel_out[n - 1]), dt_s)
                     xfrc[0:3] = f - weight
                     xfrc[3:6] = tau
                 if decay:
@@ -363,16 +373,16 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     forces = scenario.problem.forces
     weight = scenario.problem.body.mass_kg * np.asarray(forces.gravity_W, dtype=float)
     xfrc = d.xfrc_applied[_BODY]
-    per_stage = variant == "rk4" and forces.state_dependent and _RK4_STAGE_FORCES
+    per_stage = _per_stage(scenario, variant)
     control = _stage_force_writer(scenario, xfrc, weight) if per_stage else None
-    y_dec = apply_decay_prestep(scenario, y_start)
+    y_dec = y_start if per_stage else apply_decay_prestep(scenario, y_start, dt_s)
     qpos_in, qvel_in = _to_qpos_qvel(y_dec)
     qpos_out = np.empty((len(y_start), 7))
     qvel_out = np.empty((len(y_start), 6))
     with _Session(d, control) as session, np.errstate(all="ignore"):
         for i in range(len(y_start)):
             if not per_stage:
-                f, tau = harness_force_torque(scenario, y_start[i])
+                f, tau = harness_force_torque(scenario, y_start[i], dt_s)
                 xfrc[0:3] = f - weight
                 xfrc[3:6] = tau
             d.time = 0.0

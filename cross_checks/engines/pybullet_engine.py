@@ -18,8 +18,9 @@ WORLD axes; quaternions are (x, y, z, w) in PyBullet and converted at the bounda
 Forces (harness semantics of base.py): PyBullet clears external forces after every
 ``stepSimulation``, so each step applies ``harness_force_torque − m g`` (PyBullet applies gravity
 itself) with ``applyExternalForce`` (WORLD_FRAME, at the COM's world position) and
-``applyExternalTorque`` (WORLD_FRAME), evaluated from the start-of-step state. Velocity decay is
-applied before the step with ``resetBaseVelocity`` (base.apply_decay_prestep).
+``applyExternalTorque`` (WORLD_FRAME), evaluated from the start-of-step state. Velocity decay
+``e^{−kΔt}`` is applied before the step with ``resetBaseVelocity`` (base.apply_decay_prestep), that
+step's force and torque scaled alike.
 
 Maximal-coordinate bodies: ``resetBasePositionAndOrientation`` zeroes their velocity, so the velocity
 is always reset after the pose. ENGINE_FACTS reports a stale world inertia in the first step after a
@@ -37,7 +38,7 @@ import numpy as np
 from reference_sim.quaternion import quat_conj, quat_from_matrix, quat_mul
 from reference_sim.simulate import BLOWUP_LIMIT, Run
 
-from .base import EngineAdapter, EngineError, Variant, apply_decay_prestep, harness_force_torque
+from .base import EngineAdapter, EngineError, Variant, apply_decay_prestep, decay_factors, harness_force_torque
 
 def _import_pybullet_quietly():
     """``import pybullet`` with file descriptor 2 silenced: the extension prints its build time to
@@ -210,10 +211,10 @@ def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
         B.set_state(y0)
         c, b = B.c, B.b
         decay = forces.has_decay
-        gv, gw = forces.velocity_decay, forces.angular_velocity_decay
+        gv, gw = decay_factors(scenario, dt_s)
         per_step = forces.state_dependent or decay
         if not forces.state_dependent:
-            f_const, tau_const = harness_force_torque(scenario, y0)
+            f_const, tau_const = harness_force_torque(scenario, y0, dt_s)
             f_const = f_const - B.weight
         raw = np.empty((n_steps + 1, 13))
         raw[0] = B.read_raw()
@@ -228,7 +229,7 @@ def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
                     if n > 1:
                         y_prev = B.raw_to_packed(row)
                     if forces.state_dependent:
-                        f, tau = harness_force_torque(scenario, y_prev)
+                        f, tau = harness_force_torque(scenario, y_prev, dt_s)
                         f = f - B.weight
                     else:
                         f, tau = f_const, tau_const
@@ -255,14 +256,14 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     """One step of ``dt_s`` from each row of ``y_start`` (T, 13) (state reset per row)."""
     shape = np.shape(y_start)
     y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
-    y_dec = apply_decay_prestep(scenario, y_start)
+    y_dec = apply_decay_prestep(scenario, y_start, dt_s)
     out = np.empty_like(y_start)
     if len(y_start) == 0:
         return out.reshape(shape)
     with _LOCK, np.errstate(all="ignore"):
         B = _Body(scenario, variant, dt_s, y_start[0])
         for i in range(len(y_start)):
-            f, tau = harness_force_torque(scenario, y_start[i])
+            f, tau = harness_force_torque(scenario, y_start[i], dt_s)
             B.set_state(y_dec[i])
             B.apply(f - B.weight, tau, y_start[i, 0:3])
             p.stepSimulation(physicsClientId=B.c)

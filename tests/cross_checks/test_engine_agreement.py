@@ -125,9 +125,14 @@ def test_velocity_decay_harness_reproduces_the_course_decay(scenario):
     a semi-implicit engine, and the rotation exactly when the spin is about a principal axis — also
     with state-dependent forces (drag, spring) and a body torque along the spin axis."""
     sc = DECAY_WITH_FORCES if scenario == "decay_with_forces" else load_scenario(scenario)
-    ref = _run(sc, "reference:expmap_gyro")
+    for dt in (sc.dt_s, 0.5 * sc.dt_s):  # at the course's own step (γ) and at another (e^{−kΔt})
+        _assert_decay_harness_matches(sc, dt)
+
+
+def _assert_decay_harness_matches(sc, dt):
+    ref = _run(sc, "reference:expmap_gyro", dt_s=dt)
     for name in ("mujoco:euler", "pybullet:multibody", "pybullet:maximal"):
-        tr = _run(sc, name)
+        tr = _run(sc, name, dt_s=dt)
         assert np.max(np.abs(tr.y[:, 0:6] - ref.y[:, 0:6])) < SAME_SCHEME, name
         assert np.max(geodesic_angle(ref.y[:, 6:10], tr.y[:, 6:10])) < SAME_SCHEME, name
         assert np.max(np.abs(tr.y[:, 10:13] - ref.y[:, 10:13])) < SAME_SCHEME, name
@@ -199,7 +204,17 @@ def test_harness_forces_equal_the_force_model(name):
     for _ in range(20):
         y = sc.problem.initial_packed() + rng.normal(scale=0.3, size=13)
         y[6:10] = quat_normalize(y[6:10])
-        f, tau = harness_force_torque(sc, y)
         f_ref, tau_ref = fm.force_torque(body, y[0:3], y[3:6], y[6:10])
-        np.testing.assert_allclose(f, f_ref * fm.velocity_decay, rtol=1e-14, atol=1e-14)
-        np.testing.assert_allclose(tau, tau_ref * fm.angular_velocity_decay, rtol=1e-14, atol=1e-14)
+        for dt in (sc.dt_s, 0.5 * sc.dt_s):  # scaled by the per-step decay e^{−kΔt} of that step
+            gv, gw = np.exp(-np.array(fm.decay_rates_per_s()) * dt)
+            f, tau = harness_force_torque(sc, y, dt)
+            np.testing.assert_allclose(f, f_ref * gv, rtol=1e-14, atol=1e-14)
+            np.testing.assert_allclose(tau, tau_ref * gw, rtol=1e-14, atol=1e-14)
+        # the multi-stage engines' right-hand side: the decay as a damping force −m k_v v and torque −k_ω I_W ω
+        from cross_checks.engines.base import stage_force_torque
+        from reference_sim.quaternion import matrix_from_quat
+        k_v, k_w = fm.decay_rates_per_s()
+        R = matrix_from_quat(y[6:10])
+        f, tau = stage_force_torque(sc, y)
+        np.testing.assert_allclose(f, f_ref - body.mass_kg * k_v * y[3:6], rtol=1e-14, atol=1e-14)
+        np.testing.assert_allclose(tau, tau_ref - k_w * body.world_inertia(R) @ y[10:13], rtol=1e-14, atol=1e-14)

@@ -171,3 +171,73 @@ def test_missing_file_and_unknown_name():
 def test_analytic_requested_where_none_exists_is_rejected():
     with pytest.raises(ScenarioError, match="reference"):
         parse_scenario(GOOD.replace('name = "demo"', 'name = "demo"\nreference = "analytic"'), "r.toml")
+
+
+# --- particle bodies: body points are in the particles' own coordinates -------------------------------
+
+FAR_COM = """
+name = "far_com"
+duration = 1.0
+dt = 0.01
+reference = "ground_truth"
+[body]
+# COM at (2, 0.5, 0.25) in the particles' coordinates: 2.1 m from their origin
+particles = [[1.0, 1.0, 0.0, 0.0], [1.0, 3.0, 0.0, 0.0], [1.0, 2.0, 1.0, 0.0], [1.0, 2.0, 1.0, 1.0]]
+[initial]
+position = [0.0, 0.0, 1.0]
+orientation = [0.9238795325112867, 0.0, 0.0, 0.3826834323650898]
+angular_velocity = [0.0, 0.0, 0.5]
+[[forces.spring]]
+anchor = [0.0, 2.0, 1.0]
+attach = [3.0, 0.5, 0.25]
+stiffness = 10.0
+rest_length = 0.5
+[[forces.point]]
+force = [0.0, 0.0, 2.0]
+point = [2.0, 0.5, 1.0]
+[[forces.point]]
+force = [1.0, 0.0, 0.0]
+"""
+
+
+def test_particle_body_points_are_shifted_by_the_com_of_the_particles():
+    sc = parse_scenario(FAR_COM, "far_com.toml")
+    # hand computation: COM = mean of the four unit masses = (8/4, 2/4, 1/4) = (2, 0.5, 0.25)
+    np.testing.assert_allclose(sc.com_offset_B_m, [2.0, 0.5, 0.25], rtol=0, atol=1e-15)
+    fm = sc.problem.forces
+    np.testing.assert_allclose(fm.springs[0].attach_B, [1.0, 0.0, 0.0], rtol=0, atol=1e-15)     # (3, .5, .25) − COM
+    np.testing.assert_allclose(fm.point_forces[0].point_B, [0.0, 0.0, 0.75], rtol=0, atol=1e-15)  # (2, .5, 1) − COM
+    np.testing.assert_array_equal(fm.point_forces[1].point_B, np.zeros(3))  # no point given: at the COM
+
+
+def test_particle_body_spring_force_and_torque_by_hand():
+    # The body is yawed 45° about z: the attach point, 1 m from the COM along body x, is at
+    # x0 + (cos 45°, sin 45°, 0) in the world; the spring pulls it towards the anchor (0, 2, 1).
+    sc = parse_scenario(FAR_COM, "far_com.toml")
+    p = sc.problem
+    c = np.sqrt(0.5)
+    r_W = np.array([c, c, 0.0])
+    d = np.array([0.0, 0.0, 1.0]) + r_W - np.array([0.0, 2.0, 1.0])
+    L = np.linalg.norm(d)
+    f_spring = -10.0 * (L - 0.5) * d / L
+    r_point_W = np.array([0.0, 0.0, 0.75])             # the body point above the COM (z is the yaw axis)
+    f_expected = f_spring + np.array([0.0, 0.0, 2.0]) + np.array([1.0, 0.0, 0.0])
+    tau_expected = np.cross(r_W, f_spring) + np.cross(r_point_W, [0.0, 0.0, 2.0])
+    f, tau = p.forces.force_torque(p.body, p.initial.x_W, p.initial.v_W, p.initial.q_WB)
+    np.testing.assert_allclose(f, f_expected, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(tau, tau_expected, rtol=0, atol=1e-14)
+
+
+def test_particle_body_moves_like_the_same_body_given_by_mass_and_inertia_from_its_com():
+    from cross_checks.engines import run_variant
+    from reference_sim.body import inertia_from_particles
+    sc = parse_scenario(FAR_COM, "far_com.toml")
+    P = np.array(sc.raw["body"]["particles"])
+    m, com, I = inertia_from_particles(P[:, 0], P[:, 1:])
+    same = FAR_COM.split("[body]")[0] + "[body]\nmass = %r\ninertia = %s\n[initial]" % (
+        m, [[float(v) for v in row] for row in I]) + FAR_COM.split("[initial]")[1]
+    same = same.replace("attach = [3.0, 0.5, 0.25]", "attach = [1.0, 0.0, 0.0]").replace(
+        "point = [2.0, 0.5, 1.0]", "point = [0.0, 0.0, 0.75]")
+    a = run_variant(sc, "reference:rk4", duration_s=0.5)
+    b = run_variant(parse_scenario(same, "same.toml"), "reference:rk4", duration_s=0.5)
+    np.testing.assert_allclose(a.y, b.y, rtol=0, atol=1e-13)

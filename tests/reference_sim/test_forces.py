@@ -1,5 +1,6 @@
 """Forces: each yields the force and the torque about the COM, τ = (R r) × f, in world axes."""
 import numpy as np
+import pytest
 
 from reference_sim.body import RigidBody
 from reference_sim.forces import ForceModel, PointForce, Spring, Torque
@@ -82,4 +83,25 @@ def test_classification_flags():
     assert not ForceModel(torques=(Torque(np.ones(3), "world"),)).torque_free
     assert ForceModel(linear_drag_N_s_per_m=1.0).state_dependent
     assert not ForceModel(point_forces=(PointForce(np.ones(3), np.zeros(3), "world"),)).state_dependent
-    assert ForceModel(velocity_decay=0.99).has_decay and not ForceModel(velocity_decay=0.99).conservative
+    fm = ForceModel(velocity_decay=0.99, decay_dt_s=0.01)
+    assert fm.has_decay and not fm.conservative
+
+
+def test_decay_factor_is_the_course_gamma_exactly_at_its_own_step_and_exponential_elsewhere():
+    fm = ForceModel(velocity_decay=0.99, angular_velocity_decay=0.995, decay_dt_s=0.01)
+    assert fm.decay_factors(0.01) == (0.99, 0.995)           # bit for bit: the course's own factors
+    k_v, k_w = fm.decay_rates_per_s()
+    assert k_v == pytest.approx(-np.log(0.99) / 0.01, rel=1e-15) and k_w == pytest.approx(-np.log(0.995) / 0.01, rel=1e-15)
+    for dt in (0.02, 0.005, 0.00125, 0.003):                  # e^{-k dt}: one physical damping rate
+        gv, gw = fm.decay_factors(dt)
+        assert gv == pytest.approx(np.exp(-k_v * dt), rel=1e-14) and gw == pytest.approx(np.exp(-k_w * dt), rel=1e-14)
+    gv, gw = fm.decay_factors(np.array([0.01, 0.005]))         # arrays of steps (batched integrators)
+    np.testing.assert_allclose(gv, [0.99, np.sqrt(0.99)], rtol=1e-15)
+    assert ForceModel().decay_factors(0.3) == (1.0, 1.0) and ForceModel().decay_rates_per_s() == (0.0, 0.0)
+
+
+@pytest.mark.parametrize("kwargs", [dict(velocity_decay=0.99), dict(velocity_decay=0.99, decay_dt_s=0.0),
+                                    dict(velocity_decay=1.5, decay_dt_s=0.01), dict(angular_velocity_decay=0.0, decay_dt_s=0.01)])
+def test_decay_needs_a_factor_in_0_1_and_the_step_it_is_given_at(kwargs):
+    with pytest.raises(ValueError):
+        ForceModel(**kwargs)

@@ -17,7 +17,7 @@ def coupled_problem(decay=(1.0, 1.0)):
     """Every force type at once: springs off the COM, drag, body and world point forces, torques."""
     fm = ForceModel(
         gravity_W=np.array([0.0, 0.0, -9.81]), linear_drag_N_s_per_m=0.3,
-        velocity_decay=decay[0], angular_velocity_decay=decay[1],
+        velocity_decay=decay[0], angular_velocity_decay=decay[1], decay_dt_s=2e-3,
         springs=(Spring(np.array([0.0, 0.0, 1.0]), np.array([0.1, 0.0, 0.05]), 40.0, 0.5),),
         point_forces=(PointForce(np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.1, 0.0]), "world"),
                       PointForce(np.array([0.0, 0.5, 0.0]), np.array([0.0, 0.0, 0.2]), "body")),
@@ -159,3 +159,69 @@ def test_course_does_not_converge_on_tennis_racket_but_gyro_variants_do():
             assert min(errs) > COURSE_NONCONVERGENCE_MIN_RAD, errs
         else:
             assert abs(_orders(errs, sc.dt_ladder_s) - 1.0) < ORDER_TOL, (variant, errs)
+
+
+# --- velocity decay: the course's γ at its own step, a rate k = −ln γ / dt everywhere ---------------
+
+def decay_problem(dt_course=0.01):
+    """Gravity, velocity decay 0.99 and angular decay 0.995 per course step of 0.01 s, spinning about a
+    principal axis: the continuously damped motion has a closed form (drag with c = m k_v; ω e^{−k_ω t})."""
+    fm = ForceModel(gravity_W=np.array([0.0, 0.0, -9.81]), velocity_decay=0.99, angular_velocity_decay=0.995,
+                    decay_dt_s=dt_course)
+    return Problem(RigidBody(2.0, [0.2, 0.3, 0.4]), fm,
+                   State(np.zeros(3), np.array([1.0, 0.5, 3.0]), np.array([1.0, 0, 0, 0]), np.array([0.0, 0.0, 2.0])))
+
+
+def decay_exact(problem, t):
+    from reference_sim.analytic import linear_drag
+    k_v, k_w = problem.forces.decay_rates_per_s()
+    m = problem.body.mass_kg
+    x, v = linear_drag(m, m * k_v, problem.initial.x_W, problem.initial.v_W, problem.forces.gravity_W, np.array([t]))
+    w0 = problem.initial.w_W
+    q = quat_exp(-np.expm1(-k_w * t) / k_w * w0)          # angle ∫ω dt = ω0 (1 − e^{−kt}) / k
+    return np.concatenate([x[0], v[0], q, w0 * np.exp(-k_w * t)])
+
+
+@pytest.mark.parametrize("variant", ["course", "course_gyro", "expmap_gyro"])
+def test_course_variants_at_the_scenarios_own_step_apply_exactly_the_course_gamma(variant):
+    # v ← γ (v + Δt g), ω ← γ_ω ω (spin about a principal axis): the course's step, bit for bit, in the
+    # batched definition and in the plain-float kernel.
+    from reference_sim.scalar import ScalarStepper
+    problem, h = decay_problem(), 0.01
+    y0 = problem.initial_packed()
+    for y1 in (get_step(variant)(problem, y0, h), np.array(ScalarStepper(problem, variant, h).step(y0.tolist()))):
+        assert np.array_equal(y1[3:6], 0.99 * (y0[3:6] + h * problem.forces.gravity_W))
+        assert np.array_equal(y1[10:13], 0.995 * y0[10:13])
+
+
+@pytest.mark.parametrize("variant", list(VARIANTS))
+def test_every_variant_converges_at_its_order_to_the_continuously_damped_motion(variant):
+    problem, T = decay_problem(), 1.0
+    exact = decay_exact(problem, T)
+    p = EXPECTED_ORDER[variant]
+    dts = {1: [4e-2, 2e-2, 1e-2, 5e-3], 2: [4e-2, 2e-2, 1e-2, 5e-3], 4: [1e-1, 5e-2, 2.5e-2, 1.25e-2]}[p]
+    errs = {"v": [], "w": [], "q": []}
+    for dt in dts:
+        y = simulate(problem, variant, dt, int(round(T / dt))).y[-1]
+        errs["v"].append(np.linalg.norm(y[3:6] - exact[3:6]))
+        errs["w"].append(np.linalg.norm(y[10:13] - exact[10:13]))
+        errs["q"].append(float(geodesic_angle(exact[6:10], y[6:10])))
+    course_type = variant in ("course", "course_gyro", "expmap_gyro")
+    for key in ("v", "q") if course_type else ("v", "w", "q"):
+        assert abs(_orders(errs[key], dts) - p) < ORDER_TOL, (key, errs[key])
+    if course_type:  # e^{−k_ω Δt} per step is the exact decay of a torque-free principal-axis spin:
+        # exact up to one rounding of ε|ω0| per step
+        assert max(errs["w"]) <= round(T / dts[-1]) * 2.2e-16 * np.linalg.norm(problem.initial.w_W), errs["w"]
+
+
+def test_decay_applied_twice_or_left_out_does_not_converge():
+    # What the velocity_decay gate catches: the frame-rate independent decay converges, the others do not.
+    problem, T = decay_problem(), 1.0
+    exact = decay_exact(problem, T)
+    double = Problem(problem.body, ForceModel(gravity_W=problem.forces.gravity_W, velocity_decay=0.99 ** 2,
+                                              angular_velocity_decay=0.995 ** 2, decay_dt_s=0.01), problem.initial)
+    none = Problem(problem.body, ForceModel(gravity_W=problem.forces.gravity_W), problem.initial)
+    for wrong in (double, none):
+        errs = [np.linalg.norm(simulate(wrong, "rk4", dt, int(round(T / dt))).y[-1, 3:6] - exact[3:6])
+                for dt in (2e-2, 1e-2, 5e-3)]
+        assert min(errs) > 0.1 * max(errs) and min(errs) > 1e-2, errs

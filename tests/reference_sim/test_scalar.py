@@ -23,6 +23,19 @@ def test_scalar_equals_batched(variant, decay):
     np.testing.assert_allclose(np.array(y_s), y_b[0], rtol=READABLE_VS_BATCHED, atol=READABLE_VS_BATCHED)
 
 
+@pytest.mark.parametrize("variant", list(VARIANTS))
+def test_scalar_equals_batched_at_a_step_other_than_the_decays_own(variant):
+    # decay given per 2e-3 s step, run at 1.5e-3 s: e^{−kΔt} (course types) and −k v in the right-hand side
+    problem = coupled_problem((0.99, 0.995))
+    y_b = problem.initial_packed()[None, :]
+    y_s = problem.initial_packed().tolist()
+    step_b, step_s = get_step(variant), ScalarStepper(problem, variant, 1.5e-3).step
+    for _ in range(200):
+        y_b = step_b(problem, y_b, 1.5e-3)
+        y_s = step_s(y_s)
+    np.testing.assert_allclose(np.array(y_s), y_b[0], rtol=READABLE_VS_BATCHED, atol=READABLE_VS_BATCHED)
+
+
 def test_single_body_simulate_uses_the_scalar_path_and_agrees_with_a_batch_of_one():
     problem = coupled_problem()
     single = simulate(problem, "rk4", 1e-3, 500)
