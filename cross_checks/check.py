@@ -147,7 +147,7 @@ def _local_pose(inp, scenario, y_ref) -> _Local:
     allow = local_allowances(inp, y_hat[:-1], M2, rate)
     per_row = {q: allow.physics[q] + allow.arith[q] for q in QUANTITIES}
     ratios = {r.quantity: ratio(r.series["value"], r.series["allowance"]) for r in rows}
-    return _Local(rows, None, per_row, [], [], (math.nan, None), [], ratios)
+    return _Local(rows, allow, per_row, [], [], (math.nan, None), [], ratios)
 
 
 def _pose_candidates(inp, scenario, growth, per_arith):
@@ -206,13 +206,16 @@ def _engines(inp, scenario, names, growth, per_arith):
 
 
 def _caveat_for(variant, scenario, own_defect):
-    """Why a variant's own step is not the true dynamics here (None when it is)."""
-    if own_defect <= 1.0:
-        return None
+    """Why a variant's own step is not the true dynamics here (None when it is). ``own_defect``: its
+    measured one-step defect ratio (NaN when not measured: then the expectations module says)."""
     exp = expectation(scenario, variant, "angular_velocity")
     why = exp.reason if exp.verdict == "does_not_converge" else "its step departs from the true dynamics here"
-    return (f"{variant}'s own step is not the true dynamics of {scenario.name} at this Δt (its one-step defect "
-            f"reaches {own_defect:.3g}× the allowance of a consistent scheme): {why}")
+    if own_defect > 1.0:
+        return (f"{variant}'s own step is not the true dynamics of {scenario.name} at this Δt (its one-step defect "
+                f"reaches {own_defect:.3g}× the allowance of a consistent scheme): {why}")
+    if math.isnan(own_defect) and exp.verdict == "does_not_converge":
+        return f"{variant} does not converge to the true motion of {scenario.name}: {why}"
+    return None
 
 
 def _failure_words(e: Evidence) -> str:
@@ -239,23 +242,25 @@ def _explain(local, candidates, scenario, inp):
             why = _caveat_for(c.name, scenario, c.own_defect) or ""
             causes.append(f"it matches {c.name} step for step within the allowance ({c.max_ratio:.2g} of it), a step "
                           f"that is wrong here: {why.split(': ', 1)[-1]}")
-    mistakes = diagnose_mistakes(inp, scenario, inp.y[:-1], inp.y[1:], local.allow) if inp.full_state else []
-    for s in mistakes[:5]:
-        kept.append({"mistake": s.name, "max_ratio": s.max_ratio, "p99_ratio": s.p99_ratio})
-    if mistakes:
-        best = mistakes[0]
-        if best.max_ratio <= 1.0 and best.max_ratio * tol.CHECK_MISTAKE_MARGIN <= best_correct:
-            causes.append(f"{best.sentence} — that mistake explains every step within the allowance "
-                          f"({best.max_ratio:.2g} of it; the closest correct scheme needs {best_correct:.3g}×)")
-        elif best.p99_ratio * tol.CHECK_MISTAKE_MARGIN <= best_correct and not causes:
-            causes.append(f"it resembles: {best.sentence} (explains 99 % of the steps within {best.p99_ratio:.2g} of "
-                          "the allowance, not all of them: perhaps combined with another mistake)")
-    if inp.full_state and not causes:
+    mistakes = diagnose_mistakes(inp, scenario, inp.y[:-1], inp.y[1:], local.allow)
+    kept = [{"mistake": s.name, "max_ratio": s.max_ratio, "p99_ratio": s.p99_ratio} for s in mistakes[:5]]
+    best = mistakes[0] if mistakes else None
+    if best is not None and best.max_ratio <= 1.0 and best.max_ratio * tol.CHECK_MISTAKE_MARGIN <= best_correct:
+        causes.append(f"{best.sentence} — that mistake explains every step within the allowance "
+                      f"({best.max_ratio:.2g} of it; the closest correct scheme needs {best_correct:.3g}×)")
+    if not causes:
         s, score = fit_step_scale(inp, scenario, inp.y[:-1], inp.y[1:],
-                                  exact_flow(scenario, inp.y[:-1], inp.span_s, span_steps=inp.span_steps).y_end, local.allow)
+                                  exact_flow(scenario, inp.y[:-1], inp.span_s, span_steps=inp.span_steps).y_end,
+                                  local.allow)
         if score is not None and score.max_ratio <= 1.0:
-            causes.append(f"the simulator advances {s:.4g} × the recorded Δt per row (a Δt mismatch: it steps "
-                          f"{s * inp.span_s[0] / inp.span_steps[0]:.4g} s while the times say {inp.span_s[0] / inp.span_steps[0]:.4g} s)")
+            h = inp.span_s[0] / inp.span_steps[0]
+            causes.append(f"a Δt mismatch: the simulator advances {s:.4g} × the recorded Δt per row (it steps "
+                          f"{s * h:.4g} s while the times say {h:.4g} s) — the true motion over that step explains "
+                          f"every row within the allowance ({score.max_ratio:.2g} of it)")
+    if not causes and best is not None and best.p99_ratio <= tol.CHECK_MISTAKE_RESEMBLES \
+            and best.p99_ratio * tol.CHECK_MISTAKE_MARGIN <= best_correct:
+        causes.append(f"it resembles: {best.sentence} (that mistake explains 99 % of the steps within "
+                      f"{best.p99_ratio:.2g}× the allowance, not all of them: perhaps combined with another mistake)")
     return causes, kept
 
 
@@ -283,8 +288,7 @@ def _check(inp, scenario, compare_with) -> CheckResult:
     local = _local_full(inp, scenario) if inp.full_state else _local_pose(inp, scenario, y_ref)
     cons = conserved_evidence(inp, scenario, local.allow)
     free, growth, _ = free_running_evidence(inp, scenario, y_ref, label, local.per_row)
-    arith = {q: np.concatenate([[0.0], np.cumsum(local.allow.arith[q] if local.allow is not None
-                                                   else np.zeros(inp.n_rows - 1))]) for q in QUANTITIES}
+    arith = {q: np.concatenate([[0.0], np.cumsum(local.allow.arith[q])]) for q in QUANTITIES}
     candidates = local.candidates if inp.full_state else _pose_candidates(inp, scenario, growth, arith)
     engines = _engines(inp, scenario, list(compare_with), growth, arith) if compare_with else []
     off, init_words, slips = _initial_state(inp, scenario)
@@ -345,11 +349,13 @@ def _compose(inp, scenario, label, y_ref, local, evidence, candidates, engines, 
                 caveats.append(cav)
     elif failing:
         reasons += [_failure_words(e) for e in failing]
-        if inp.full_state and local.allow is not None:
+        if inp.full_state:
             more, kept = _explain(local, candidates, scenario, inp)
             causes += more
         if not causes:
-            causes.append("no catalogued mistake explains it (docs/check.md lists the catalog)")
+            causes.append("no catalogued mistake explains it (docs/check.md lists the catalog)" if inp.full_state else
+                          "not diagnosed: the catalog of mistakes is compared step for step from full states, and the "
+                          "file has no velocities")
     passed = not reasons
     verdict = _verdict_line(inp, scenario, passed, reasons, identity, local, closest, candidates)
     series = _series(inp, scenario, y_ref, local, closest_correct)

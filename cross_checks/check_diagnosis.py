@@ -113,13 +113,29 @@ def score_variants(inp, scenario, y0, y_next, flow_end, allow, extra_one_step=()
 
 
 def diagnose_mistakes(inp, scenario, y0, y_next, allow) -> list:
-    """Scores of every applicable catalogued mistake, best first (each on each correct base)."""
+    """Scores of every applicable catalogued mistake that is VISIBLE on these rows, best first.
+
+    Each mistake is made on each correct base (mistakes.BASES); it is visible when its steps differ
+    from its base's by more than the local allowance somewhere (``effect`` > 1) — otherwise the base
+    alone explains the rows as well and the mistake cannot be told from it here."""
+    from .mistakes import BASES
     out = []
     h = inp.span_s / inp.span_steps
+    base_steps = {}
     for mistake in applicable_mistakes(scenario, h):
         for label, knobs in mistake.variants():
             y_c = step_rows(lambda z, hh, k=knobs: course_step(scenario, z, hh, k), y0, inp)
             s = score_candidate(label, y_next, y_c, allow, QUANTITIES)
+            base = next((b for b in BASES if label.endswith(f"({b})")), None)
+            if base is not None:
+                if base not in base_steps:
+                    base_steps[base] = step_rows(lambda z, hh, k=BASES[base]: course_step(scenario, z, hh, k), y0, inp)
+                d = distances(y_c, base_steps[base], QUANTITIES)
+                s.effect = max(float(np.nanmax(ratio(d[q], allow.total[q]))) for q in QUANTITIES)
+            else:
+                s.effect = math.inf
+            if not s.effect > 1.0:
+                continue
             s.sentence = mistake.sentence
             s.mistake = mistake.name
             out.append(s)

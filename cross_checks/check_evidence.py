@@ -97,8 +97,9 @@ def evidence_row(kind, quantity, t_s, value, allowance, source, *, decisive=None
     a = np.asarray(allowance, dtype=float)
     r = ratio(v, a)
     mask = np.ones(len(t), dtype=bool) if decisive is None else np.asarray(decisive, dtype=bool)
+    unit = {"position": "m/s²", "orientation": "rad/s²"}[quantity] if kind == "acceleration" else UNITS.get(quantity, "")
     if len(t) == 0:
-        return Evidence(kind, quantity, UNITS.get(quantity, ""), math.nan, math.nan, math.nan, None, math.nan, source,
+        return Evidence(kind, quantity, unit, math.nan, math.nan, math.nan, None, math.nan, source,
                         -math.inf, note)
     nan_any = bool(np.any(np.isnan(v[mask]))) if mask.any() else False
     vm = v[mask] if mask.any() else v
@@ -120,7 +121,7 @@ def evidence_row(kind, quantity, t_s, value, allowance, source, *, decisive=None
         until = -math.inf
     else:
         until = float(t[np.flatnonzero(mask)[-1]])
-    return Evidence(kind, quantity, UNITS.get(quantity, ""), max_value, max_ratio, float(t[k]), first, float(a[k]),
+    return Evidence(kind, quantity, unit, max_value, max_ratio, float(t[k]), first, float(a[k]),
                     source, until, note, series={"t_s": t, "value": v, "allowance": a}, value_at_worst=float(v[k]))
 
 

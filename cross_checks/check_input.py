@@ -29,8 +29,8 @@ from reference_sim.state import Q, V, W, X
 from . import tolerances as tol
 from .trajectory import QUANTITY_GROUPS
 
-__all__ = ["CheckError", "CheckInput", "prepare_input", "printed_half_quantum", "single_precision_time_bound",
-           "snap_step", "QUANTITY_SLICES", "ROTATION_GROUPS"]
+__all__ = ["CheckError", "CheckInput", "prepare_input", "printed_half_quantum", "written_digits",
+           "single_precision_time_bound", "interval_bound", "snap_step", "QUANTITY_SLICES", "ROTATION_GROUPS"]
 
 #: Slice of the packed state holding each quantity group.
 QUANTITY_SLICES = {"position": X, "velocity": V, "orientation": Q, "angular_velocity": W}
@@ -95,23 +95,24 @@ class CheckInput:
 
 # --- precision -------------------------------------------------------------------------------------
 
-def written_digits(values) -> tuple:
+def _significant_digits(value: float) -> int:
+    """Digits of the shortest decimal that reads back as exactly ``value`` (Python's repr)."""
+    mantissa = repr(abs(value)).partition("e")[0].replace(".", "")
+    return max(1, len(mantissa.lstrip("0").rstrip("0")))
+
+
+def written_digits(values, sample: int = 4000) -> tuple:
     """``(S, D)``: the most significant digits and the most decimals any finite non-zero value of
-    ``values`` needs to be reproduced (the fewest digits s ≤ 14 that give it back; 17 beyond)."""
+    ``values`` needs to be read back exactly (shortest round-trip decimal), over at most ``sample``
+    values spread evenly (a writer's format shows in every value it writes)."""
     v = np.asarray(values, dtype=float).ravel()
-    a = np.abs(v[np.isfinite(v) & (v != 0.0)])
-    if a.size == 0:
+    v = v[np.isfinite(v) & (v != 0.0)]
+    if v.size == 0:
         return 0, -math.inf
-    e = np.floor(np.log10(a))
-    digits = np.full(a.shape, 17)
-    todo = np.ones(a.shape, dtype=bool)
-    for s in range(1, 15):
-        m = a / 10.0 ** (e - s + 1)
-        hit = todo & (np.abs(m - np.round(m)) <= 8.0 * EPS64 * m)
-        digits = np.where(hit, s, digits)
-        todo &= ~hit
-        if not todo.any():
-            break
+    if v.size > sample:
+        v = v[np.linspace(0, v.size - 1, sample).astype(int)]
+    digits = np.fromiter((_significant_digits(x) for x in v.tolist()), dtype=np.int64, count=v.size)
+    e = np.floor(np.log10(np.abs(v)))
     return int(np.max(digits)), float(np.max(digits - 1 - e))
 
 
@@ -142,7 +143,7 @@ def printed_half_quantum(values, digits: tuple | None = None) -> tuple:
 def _precision(y, present):
     """(print floor per quantity (K,), single precision?) of the state columns of the present groups."""
     cols = [c for g in present for c in range(QUANTITY_SLICES[g].start, QUANTITY_SLICES[g].stop)]
-    digits = written_digits(y[:, cols])
+    digits = written_digits(y[:, cols], sample=4000)
     floors = {}
     for g in present:
         sl = QUANTITY_SLICES[g]
@@ -260,6 +261,9 @@ def prepare_input(traj, scenario, source: str, dt_s: float | None = None) -> Che
                          "steps by their intervals and the times n·Δt used")
     if h is None:
         _check_jumps(source, t, np.maximum(np.round(np.diff(t) / np.median(np.diff(t))), 1))
+        if not notes:
+            notes.append("the row intervals are not whole multiples of one Δt: each row interval is taken as one step "
+                         "of its recorded length (variable steps)")
         if abs(t[0]) > 1e-9 * np.median(np.diff(t)) + t_half:
             raise CheckError(f"{source}: line 2: column t: must start at 0 (the scenario's initial state), "
                              f"starts at {t[0]:g} s")

@@ -52,7 +52,7 @@ def check_ladder(results, scenario) -> dict:
     statuses = []
     for r in results:
         short = r.input["t_end_s"] < scenario.duration_s - 0.5 * r.input["dt_s"]
-        statuses.append("diverged" if short else "ok")
+        statuses.append("failed" if short else "ok")
         if short:
             notes.append(f"{r.source} stops at t = {r.input['t_end_s']:g} s: no final error")
     finals = [_final_errors(r) for r in results]
@@ -62,15 +62,16 @@ def check_ladder(results, scenario) -> dict:
         if not all(q in f for f in finals):
             continue
         errs = [f[q] if s == "ok" else math.nan for f, s in zip(finals, statuses)]
-        floors = [M.roundoff_floor(math.pi if q == "orientation" else 1.0, int(round(scenario.duration_s / d)),
-                                   results[0].reference_label) for d in dts]
+        floors = [M.roundoff_floor(M.quantity_scales(r.series["y_ref"])[q], int(round(scenario.duration_s / d)),
+                                   r.reference_label) for r, d in zip(results, dts)]
         fit = M.fit_convergence(dts, errs, floors, statuses)
         variant, exp = _expected(results, scenario, q)
         matches, phrase = M.compare_with_expectation(fit.verdict, fit.order, exp)
         ok &= matches is not False
         records.append({"quantity": q, "order": fit.order, "pairwise_orders": fit.pairwise_orders,
                         "verdict": fit.verdict, "assessment": phrase, "matches_expectation": matches,
-                        "expected": exp.as_dict(), "dt_s": fit.dt_s, "errors": fit.errors, "note": fit.note})
+                        "expected": exp.as_dict(), "dt_s": fit.dt_s, "errors": fit.errors, "floors": fit.floors,
+                        "fitted": fit.fitted, "note": fit.note})
         if fit.note:
             notes.append(f"{q}: {fit.note}")
     files_ok = all(r.passed for r in results)

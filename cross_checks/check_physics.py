@@ -265,7 +265,7 @@ def error_growth(scenario, t_s, scales) -> dict:
     base = Y[:, :1, :]
     idx = np.minimum(np.searchsorted(grid, t_s - 1e-12 * T), n)   # first grid time at or after each t
     with np.errstate(all="ignore"):
-        for pi, p in enumerate(QUANTITIES):
+        for pi, p in enumerate(BLOCKS):          # the order _perturbed_initial_states used
             block = Y[:, 1 + 3 * pi: 4 + 3 * pi, :]
             for q in QUANTITIES:
                 if q == "orientation":

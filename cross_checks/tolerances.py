@@ -142,3 +142,6 @@ CHECK_MISTAKE_MARGIN = 4.0
 #: Step of the runs that measure a scenario's error growth, as L τ (L: the motion's fastest rate): RK4
 #: at L τ = 0.25 errs by ~(0.25)⁵/120 ≈ 1e-5 relative per step, far below what a growth FACTOR needs.
 CHECK_GROWTH_RATE_PER_STEP = 0.25
+#: "Resembles" a mistake (said with that caution) when it explains 99 % of the steps within this many
+#: allowances and CHECK_MISTAKE_MARGIN times better than any correct scheme; beyond, nothing is named.
+CHECK_MISTAKE_RESEMBLES = 3.0
