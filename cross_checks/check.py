@@ -22,12 +22,12 @@ import numpy as np
 
 from . import metrics as M
 from . import tolerances as tol
-from .check_diagnosis import (diagnose_mistakes, fit_step_scale, initial_state_slips, score_candidate,
-                              score_variants, step_rows)
+from .check_diagnosis import diagnose_mistakes, fit_step_scale, initial_state_slips, score_variants
 from .check_evidence import (Evidence, conserved_evidence, evidence_row, free_running_evidence, pose_consistency,
                              ratio, reconstruct_states)
 from .check_input import CheckError, describe_time, prepare_input
-from .check_physics import distances, exact_flow, local_allowances, majorant, flow_rhs, motion_rate, quantity_distance
+from .check_physics import (BLOCKS, distances, exact_flow, flow_rhs, local_allowances, majorant, motion_rate,
+                            quantity_distance)
 from .expectations import QUANTITIES, expectation
 
 __all__ = ["CheckError", "CheckResult", "check_trajectory"]
@@ -82,7 +82,7 @@ def _initial_state(inp, scenario):
     y_init = scenario.problem.initial_packed()
     y0 = inp.y[0]
     tol_q = {q: inp.print_floor[q][0] + tol.CHECK_ROUNDINGS_PER_STEP * inp.unit_roundoff
-             * max(1.0, float(np.linalg.norm(y_init[_sl(q)])))
+             * max(1.0, float(np.linalg.norm(y_init[BLOCKS[q]])))
              for q in inp.present}
     bad = {q: float(quantity_distance(y0, y_init, q)) for q in inp.present}
     off = [q for q in inp.present if not bad[q] <= tol_q[q]]
@@ -92,21 +92,16 @@ def _initial_state(inp, scenario):
     return off, words, initial_state_slips(y0, y_init, tol_q, inp.present)
 
 
-def _sl(q):
-    from .check_physics import BLOCKS
-    return BLOCKS[q]
-
-
 @dataclass
 class _Local:
+    """The local evidence of a file: its rows, the allowances per row interval, scheme scores."""
+
     rows: list
-    allow: object            # Allowances (per row interval) or None
+    allow: object            # check_physics.Allowances per row interval
     per_row: dict            # quantity -> (K−1,) physics + arithmetic allowances
-    candidates: list
-    mistakes: list
-    step_scale: tuple
+    candidates: list         # CandidateScore of every reference variant (full-state files)
     notes: list
-    ratios: dict             # quantity -> (K−1,) defect / allowance (for the plot)
+    ratios: dict             # quantity -> local value / allowance over time (for the plot)
 
 
 def _local_full(inp, scenario) -> _Local:
@@ -133,8 +128,7 @@ def _local_full(inp, scenario) -> _Local:
                          decisive=None if model_ok.all() else model_ok) for q in QUANTITIES]
     cands = score_variants(inp, scenario, y0, y1, flow.y_end, allow)
     per_row = {q: allow.physics[q] + allow.arith[q] for q in QUANTITIES}
-    return _Local(rows, allow, per_row, cands, [], (math.nan, None), notes,
-                  {q: ratio(d[q], allow.total[q]) for q in QUANTITIES})
+    return _Local(rows, allow, per_row, cands, notes, {q: ratio(d[q], allow.total[q]) for q in QUANTITIES})
 
 
 def _local_pose(inp, scenario, y_ref) -> _Local:
@@ -147,7 +141,7 @@ def _local_pose(inp, scenario, y_ref) -> _Local:
     allow = local_allowances(inp, y_hat[:-1], M2, rate)
     per_row = {q: allow.physics[q] + allow.arith[q] for q in QUANTITIES}
     ratios = {r.quantity: ratio(r.series["value"], r.series["allowance"]) for r in rows}
-    return _Local(rows, allow, per_row, [], [], (math.nan, None), [], ratios)
+    return _Local(rows, allow, per_row, [], [], ratios)
 
 
 def _pose_candidates(inp, scenario, growth, per_arith):
@@ -274,10 +268,10 @@ def check_trajectory(traj, scenario, source: str = "TRAJ.csv", *, dt_s: float | 
     ``compare_with``: extra ENGINE:VARIANT names run free at the file's Δt and compared (e.g. user
     engines). Raises CheckError for input that cannot be checked.
     """
-    inp = prepare_input(traj, scenario, source, dt_s)
-    if inp.n_rows < 2:
-        return _no_step_result(inp, scenario)
     with np.errstate(all="ignore"):   # blown-up or NaN states are judged, never warned about
+        inp = prepare_input(traj, scenario, source, dt_s)
+        if inp.n_rows < 2:
+            return _no_step_result(inp, scenario)
         return _check(inp, scenario, compare_with)
 
 

@@ -24,7 +24,6 @@ from reference_sim.integrators import VARIANTS
 from reference_sim.quaternion import quat_conj, quat_log, quat_mul, rotate
 from reference_sim.state import Q, V, W, X
 
-from . import tolerances as tol
 from .check_evidence import ratio
 from .check_physics import distances, exact_flow, quantity_distance
 from .expectations import QUANTITIES

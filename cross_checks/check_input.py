@@ -228,15 +228,34 @@ def _check_jumps(source, t, m):
 def prepare_input(traj, scenario, source: str, dt_s: float | None = None) -> CheckInput:
     """Validate a read Trajectory against ``scenario`` and map its rows to steps (see module doc)."""
     t = np.asarray(traj.t_s, dtype=float)
-    y = np.array(traj.y, dtype=float)
     present = tuple(traj.meta.get("quantities_present", QUANTITY_GROUPS))
     if not any(g in present for g in ("position", "orientation")):
         raise CheckError(f"{source}: header: needs the position (x,y,z) or orientation (qw,qx,qy,qz) columns; "
                          f"found only {', '.join(present)}")
     if len(t) < 2:
         raise CheckError(f"{source}: rows: need at least 2 rows (t = 0 and one step), got {len(t)}")
-    t_half = float(np.max(printed_half_quantum(t)[0]))
     notes = []
+    t_true, n, m, h, bound_end = _time_grid(source, t, scenario, dt_s, notes)
+    span = m * h if h is not None else np.diff(t_true)
+    inp = CheckInput(source=source, t_rec_s=t, t_s=t_true, n_steps=n, span_steps=m, h_s=h, span_s=span,
+                     y=np.array(traj.y, dtype=float), present=present, print_floor={}, single_precision=False,
+                     unit_roundoff=EPS64, time_bound_s=bound_end, notes=notes)
+    _cut_non_finite(inp)
+    _cut_to_duration(inp, scenario)
+    inp.print_floor, inp.single_precision = _precision(inp.y, inp.present)
+    inp.unit_roundoff = EPS32 if inp.single_precision else EPS64
+    inp.decimation = int(np.median(inp.span_steps)) if len(inp.span_steps) else 1
+    steps = np.unique(inp.span_steps)
+    if h is not None and steps.size and (steps.size > 1 or steps[0] > 1):
+        what = (f"every row spans {int(steps[0])} steps of {h:g} s" if steps.size == 1
+                else f"rows span {int(steps.min())}–{int(steps.max())} steps of {h:g} s (rows missing)")
+        notes.append(what + ": each one-step comparison advances that many steps")
+    return inp
+
+
+def _time_grid(source, t, scenario, dt_s, notes):
+    """(true times n h, step index n, steps per interval m, h or None, drift bound at the end)."""
+    t_half = float(np.max(printed_half_quantum(t)[0]))
     h, m = _map_rows(source, t, scenario, dt_s, t_half)
     if h is not None:
         _check_jumps(source, t, m)
@@ -246,50 +265,27 @@ def prepare_input(traj, scenario, source: str, dt_s: float | None = None) -> Che
             raise CheckError(f"{source}: line 2: column t: must start at 0 (the scenario's initial state), "
                              f"starts at {t[0]:g} s")
         off = np.abs(t - n * h)
-        if np.any(off > bound + 1e-9 * h):
-            k = int(np.argmax(off - bound))
-            if dt_s is not None:
-                raise CheckError(f"{source}: line {k + 2}: column t: {t[k]:.9g} s is {off[k]:.3g} s from step "
-                                 f"{int(n[k])} × --dt {h:g} s, beyond the {bound[k]:.2g} s a single-precision "
-                                 "clock can drift")
-            h, m = None, None
-            notes.append(f"the recorded times are not a whole number of steps of one Δt (row {k + 1} is "
-                         f"{off[k]:.3g} s off): each row interval is taken as one step of its recorded length")
-        elif np.max(off) > 16 * EPS64 * max(t[-1], h):
-            notes.append(f"the recorded times drift from n·Δt by up to {np.max(off):.2g} s (single-precision "
-                         f"accumulation allows {bound[int(np.argmax(off))]:.2g} s there): rows were mapped to "
-                         "steps by their intervals and the times n·Δt used")
-    if h is None:
-        _check_jumps(source, t, np.maximum(np.round(np.diff(t) / np.median(np.diff(t))), 1))
-        if not notes:
-            notes.append("the row intervals are not whole multiples of one Δt: each row interval is taken as one step "
-                         "of its recorded length (variable steps)")
-        if abs(t[0]) > 1e-9 * np.median(np.diff(t)) + t_half:
-            raise CheckError(f"{source}: line 2: column t: must start at 0 (the scenario's initial state), "
-                             f"starts at {t[0]:g} s")
-        t_true = t - t[0]
-        n = np.arange(len(t))
-        m = np.ones(len(t) - 1, dtype=np.int64)
-        span = np.diff(t_true)
-        bound_end = 0.0
-    else:
-        t_true = n * h
-        span = m * h
-        bound_end = float(single_precision_time_bound(t[-1], n[-1], t_half))
-    inp = CheckInput(source=source, t_rec_s=t, t_s=t_true, n_steps=np.asarray(n), span_steps=m, h_s=h, span_s=span,
-                     y=y, present=present, print_floor={}, single_precision=False, unit_roundoff=EPS64,
-                     time_bound_s=bound_end, notes=notes)
-    _cut_non_finite(inp)
-    _cut_to_duration(inp, scenario)
-    inp.print_floor, inp.single_precision = _precision(inp.y, inp.present)
-    inp.unit_roundoff = EPS32 if inp.single_precision else EPS64
-    steps = np.unique(inp.span_steps) if len(inp.span_steps) else np.array([1])
-    inp.decimation = int(np.median(inp.span_steps)) if len(inp.span_steps) else 1
-    if h is not None and (steps.size > 1 or steps[0] > 1):
-        what = (f"every row spans {int(steps[0])} steps of {h:g} s" if steps.size == 1
-                else f"rows span {int(steps.min())}–{int(steps.max())} steps of {h:g} s (rows missing)")
-        notes.append(what + ": each one-step comparison advances that many steps")
-    return inp
+        if not np.any(off > bound + 1e-9 * h):
+            if np.max(off) > 16 * EPS64 * max(t[-1], h):
+                notes.append(f"the recorded times drift from n·Δt by up to {np.max(off):.2g} s (single-precision "
+                             f"accumulation allows {bound[int(np.argmax(off))]:.2g} s there): rows were mapped to "
+                             "steps by their intervals and the times n·Δt used")
+            return n * h, n, m, h, float(bound[-1])
+        k = int(np.argmax(off - bound))
+        if dt_s is not None:
+            raise CheckError(f"{source}: line {k + 2}: column t: {t[k]:.9g} s is {off[k]:.3g} s from step "
+                             f"{int(n[k])} × --dt {h:g} s, beyond the {bound[k]:.2g} s a single-precision "
+                             "clock can drift")
+        notes.append(f"the recorded times are not a whole number of steps of one Δt (row {k + 1} is "
+                     f"{off[k]:.3g} s off): each row interval is taken as one step of its recorded length")
+    _check_jumps(source, t, np.maximum(np.round(np.diff(t) / np.median(np.diff(t))), 1))
+    if not notes:
+        notes.append("the row intervals are not whole multiples of one Δt: each row interval is taken as one step "
+                     "of its recorded length (variable steps)")
+    if abs(t[0]) > 1e-9 * np.median(np.diff(t)) + t_half:
+        raise CheckError(f"{source}: line 2: column t: must start at 0 (the scenario's initial state), "
+                         f"starts at {t[0]:g} s")
+    return t - t[0], np.arange(len(t)), np.ones(len(t) - 1, dtype=np.int64), None, 0.0
 
 
 def _zero_quaternion_rows(inp):

@@ -29,7 +29,8 @@ def _num(v, unit=""):
 def _status(e):
     if not e.decisive:
         return "info"
-    return "ok" if e.passed else "OVER"
+    until = "" if e.decisive_until_s is None else f" (decisive to t = {e.decisive_until_s:.3g} s)"
+    return ("ok" if e.passed else "OVER") + until
 
 
 def format_report(res) -> str:
@@ -39,12 +40,13 @@ def format_report(res) -> str:
              f"scenario {res.scenario} ({res.input['duration_s']:g} s); reference: {res.reference_label or '–'}"
              + ("; values look single precision" if res.input.get("single_precision") else "")]
     if res.evidence:
-        lines += ["", f"  {'evidence':<18}{'quantity':<20}{'max':>12}{'max/allowed':>13}{'first over (s)':>16}"
-                      f"{'allowed':>12}  status"]
+        lines += ["", f"  {'evidence':<18}{'quantity':<30}{'max':>11}{'max/allowed':>13}{'first over (s)':>16}"
+                      f"{'allowed':>11}  status"]
         for e in res.evidence:
             first = "–" if e.first_over_s is None else f"{e.first_over_s:.4g}"
-            lines.append(f"  {_KIND_SHORT[e.kind]:<18}{_NAMES.get(e.quantity, e.quantity) + (' (' + e.unit + ')' if e.unit else ''):<20}"
-                         f"{_num(e.max_value):>12}{_num(e.max_ratio):>13}{first:>16}{_num(e.allowance):>12}  {_status(e)}")
+            name = _NAMES.get(e.quantity, e.quantity) + (f" ({e.unit})" if e.unit else "")
+            lines.append(f"  {_KIND_SHORT[e.kind]:<18}{name:<30}{_num(e.max_value):>11}{_num(e.max_ratio):>13}"
+                         f"{first:>16}{_num(e.allowance):>11}  {_status(e)}")
         lines.append("")
         lines.append("  allowances:")
         seen = set()
@@ -56,6 +58,7 @@ def format_report(res) -> str:
         for e in res.evidence:
             if e.note:
                 lines.append(f"    {e.kind} {_NAMES.get(e.quantity, e.quantity)}: {e.note}")
+    lines += _schemes(res)
     lines.append("")
     if res.identity:
         lines.append(f"scheme: IS {', '.join(res.identity)}")
@@ -83,6 +86,20 @@ def format_report(res) -> str:
     for n in res.notes:
         lines.append(f"note: {n}")
     return "\n".join(lines)
+
+
+def _schemes(res) -> list:
+    """Every reference variant stepped from the file's own states: how far its steps are from the
+    file's next rows, and how far from the exact motion (its own defect), both over the allowance."""
+    rows = [c for c in res.candidates if not math.isnan(c.own_defect)]
+    if not rows:
+        return []
+    out = ["", f"  {'scheme (stepped from the file’s states)':<42}{'vs the file':>13}{'vs exact motion':>17}  here",
+           f"  {'':<42}{'(× allowance)':>13}{'(× allowance)':>17}"]
+    for c in rows:
+        tag = "IS the file" if c.same else ("correct" if c.correct else "NOT correct here")
+        out.append(f"  {c.name:<42}{_num(c.max_ratio):>13}{_num(c.own_defect):>17}  {tag}")
+    return out
 
 
 def format_ladder(lad) -> str:

@@ -93,7 +93,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "says which quantity, from when, by how much, and the likely cause); 2: bad input. "
                     "See docs/check.md.")
     c.add_argument("trajectories", nargs="+", metavar="TRAJ.csv", help="trajectory CSV file(s)")
-    c.add_argument("--scenario", required=True, metavar="SCENARIO")
+    c.add_argument("--scenario", required=True, metavar="SCENARIO", help="catalog name or scenario TOML file")
     c.add_argument("--dt", type=_positive_float, metavar="DT",
                    help="the simulator's integration step, s, when rows are written less often than every step "
                         "(default: inferred from the times)")

@@ -80,19 +80,6 @@ SECULAR_TREND_VS_RESIDUAL = 2.0
 #: relative to max(1, |state|): 4e4 steps × ~10 roundings × ε ≈ 1e-10, ×10 for the amplification
 #: near the tennis racket's separatrix.
 SAME_SCHEME_REL = 1e-9
-#: `rbcheck check`: a trajectory "is" a reference variant when every quantity agrees to this relative
-#: to max(1, |state|) — the same reasoning as SAME_SCHEME_REL, plus CSV printing of ≥ 15 digits.
-CHECK_SAME_SCHEME_REL = 1e-9
-#: `rbcheck check`: a trajectory agrees with the physical reference when each final error is within
-#: this factor of a correct first-order scheme's error at the same Δt (reference:expmap_gyro): first-
-#: order schemes differ by their error constants, which stay within a factor of a few on the catalog.
-CHECK_BUDGET_FACTOR = 10.0
-#: `rbcheck check`: times count as a uniform grid when every step is within this fraction of the
-#: median step: a CSV printed with 6 decimals at Δt = 1e-3 s has step errors up to 1e-6 s = 1e-3 Δt.
-CHECK_UNIFORM_DT_REL = 2e-3
-#: `rbcheck check`: the first row counts as the scenario's initial state within this (relative to
-#: max(1, |state|)): 6 printed decimals, as above.
-CHECK_INITIAL_STATE_REL = 1e-5
 
 # --- `rbcheck check` gives a true verdict on any simulator's trajectory (issue 10) -----------------
 

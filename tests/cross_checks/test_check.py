@@ -184,6 +184,8 @@ def test_mujoco_and_pybullet_trajectories_pass(tmp_path, capsys, engine, scen, d
     capsys.readouterr()
     rc, out, _ = check(capsys, traj, "--scenario", sc)
     assert rc == 0, out
+    if engine == "mujoco:euler":   # ENGINE_FACTS: MuJoCo Euler is semi-implicit Euler + explicit gyro + exp map
+        assert out.startswith("PASS: is reference:expmap_gyro")
 
 
 # --- input as people write it ---------------------------------------------------------------------------
@@ -285,6 +287,27 @@ def test_broken_runs_fail_clearly_never_pass(tmp_path, capsys, edit, words):
     assert rc == 1 and out.startswith("FAIL: ") and words in out.splitlines()[0]
 
 
+def test_a_drifting_trajectory_fails_on_position_and_rounded_times_are_fine(tmp_path, capsys):
+    sc = scenario_file(tmp_path, "projectile")
+    traj = Trajectory.read(_run(tmp_path, sc, "reference:rk4", 0.01))
+    traj.t_s = np.round(traj.t_s, 6)
+    traj.write(tmp_path / "rounded.csv")
+    traj.y[:, 2] += 1.0 * traj.t_s                   # drifting upwards at 1 m/s
+    traj.write(tmp_path / "drift.csv")
+    capsys.readouterr()
+    rc, out, _ = check(capsys, tmp_path / "rounded.csv", "--scenario", sc)
+    assert rc == 0 and "reference:rk4" in out.splitlines()[0] and "Δt = 0.01 s" in out
+    rc, out, _ = check(capsys, tmp_path / "drift.csv", "--scenario", sc)
+    assert rc == 1 and out.startswith("FAIL: position one-step defect")
+
+
+def test_a_file_without_the_needed_columns_exits_2(tmp_path, capsys):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("t,x\n0,1\n")
+    rc, _, err = check(capsys, bad, "--scenario", "projectile")
+    assert rc == 2 and "header: position needs all of x,y,z" in err and "Traceback" not in err
+
+
 def test_an_initial_angular_velocity_in_body_axes_is_named(tmp_path, capsys):
     from reference_sim.quaternion import quat_conj, rotate
     sc = scenario_file(tmp_path, "velocity_decay", 0.5)
@@ -306,6 +329,7 @@ def test_verdict_line_first_then_the_table_json_and_plot(tmp_path, capsys):
     header = next(i for i, line in enumerate(lines) if line.strip().startswith("evidence"))
     assert "first over (s)" in lines[header] and "allowed" in lines[header]
     assert any(line.strip().startswith("one-step defect   angular velocity") and line.endswith("OVER") for line in lines)
+    assert any(line.strip().startswith("free-running") and "decisive to t =" in line for line in lines)
     assert "allowances:" in out and "closest scheme:" in out
     data = json.loads((tmp_path / "r.json").read_text())
     assert data["passed"] is False and data["exit_code"] == 1 and data["verdict"] == lines[0]
