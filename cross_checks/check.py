@@ -109,9 +109,9 @@ def _local_full(inp, scenario) -> _Local:
     y0, y1 = inp.y[:-1], inp.y[1:]
 
     def allowance_fn(M2, rate):
-        return local_allowances(inp, y0, M2, rate).total
+        return local_allowances(inp, y0, M2, rate, y_end=y1).total
     flow = exact_flow(scenario, y0, inp.span_s, allowance_fn=allowance_fn, span_steps=inp.span_steps)
-    allow = local_allowances(inp, y0, flow.M2, flow.rate, flow.roundoff)
+    allow = local_allowances(inp, y0, flow.M2, flow.rate, flow.roundoff, y_end=y1)
     d = distances(y1, flow.y_end)
     h = inp.span_s / inp.span_steps
     hl = h * flow.rate
@@ -138,7 +138,7 @@ def _local_pose(inp, scenario, y_ref) -> _Local:
     F = flow_rhs(scenario)
     rate = motion_rate(scenario, y_hat[:-1])
     M2 = majorant(F, y_hat[:-1], rate)
-    allow = local_allowances(inp, y_hat[:-1], M2, rate)
+    allow = local_allowances(inp, y_hat[:-1], M2, rate, y_end=y_hat[1:])
     per_row = {q: allow.physics[q] + allow.arith[q] for q in QUANTITIES}
     ratios = {r.quantity: ratio(r.series["value"], r.series["allowance"]) for r in rows}
     return _Local(rows, allow, per_row, [], [], ratios)
@@ -226,36 +226,56 @@ def _failure_words(e: Evidence) -> str:
 
 
 def _explain(local, candidates, scenario, inp):
-    """Likely causes (sentences) of a failing trajectory, and the mistake scores kept for the JSON."""
-    causes, kept = [], []
-    correct = [c for c in candidates if c.correct and not math.isnan(c.max_ratio)]
-    best_correct = min([c.max_ratio for c in correct], default=math.inf)
-    best_correct = min(best_correct, max(float(np.max(e.max_ratio)) for e in local.rows) if local.rows else math.inf)
+    """Likely causes (sentences) of a failing trajectory, and the mistake scores kept for the JSON.
+
+    Explanations: a reference variant that is wrong here, or a catalogued mistake, that reproduces every
+    step within the allowance and CHECK_MISTAKE_MARGIN times better than any correct scheme (the exact
+    motion included); the best is said in full, the others equally consistent are named. Else a Δt
+    mismatch, else "resembles" (99 % of the steps within CHECK_MISTAKE_RESEMBLES allowances)."""
+    correct = [c.max_ratio for c in candidates if c.correct and not math.isnan(c.max_ratio)]
+    flow_ratio = max((e.max_ratio for e in local.rows), default=math.inf)
+    best_correct = min(correct + ([flow_ratio] if not math.isnan(flow_ratio) else []), default=math.inf)
+
+    def explains(c):
+        return c.max_ratio <= 1.0 and c.max_ratio * tol.CHECK_MISTAKE_MARGIN <= best_correct
+    found = []
     for c in candidates:
-        if not c.correct and c.max_ratio <= 1.0 and c.max_ratio * tol.CHECK_MISTAKE_MARGIN <= best_correct:
-            why = _caveat_for(c.name, scenario, c.own_defect) or ""
-            causes.append(f"it matches {c.name} step for step within the allowance ({c.max_ratio:.2g} of it), a step "
-                          f"that is wrong here: {why.split(': ', 1)[-1]}")
+        if not c.correct and explains(c):
+            why = (_caveat_for(c.name, scenario, c.own_defect) or "").split(": ", 1)[-1]
+            found.append((c.max_ratio, c.name, f"it matches {c.name} step for step within the allowance "
+                                               f"({c.max_ratio:.2g} of it), a step that is wrong here: {why}"))
     mistakes = diagnose_mistakes(inp, scenario, inp.y[:-1], inp.y[1:], local.allow)
-    kept = [{"mistake": s.name, "max_ratio": s.max_ratio, "p99_ratio": s.p99_ratio} for s in mistakes[:5]]
-    best = mistakes[0] if mistakes else None
-    if best is not None and best.max_ratio <= 1.0 and best.max_ratio * tol.CHECK_MISTAKE_MARGIN <= best_correct:
-        causes.append(f"{best.sentence} — that mistake explains every step within the allowance "
-                      f"({best.max_ratio:.2g} of it; the closest correct scheme needs {best_correct:.3g}×)")
+    kept = [{"mistake": m.name, "max_ratio": m.max_ratio, "p99_ratio": m.p99_ratio} for m in mistakes[:5]]
+    for m in mistakes:
+        if explains(m):
+            found.append((m.max_ratio, m.mistake, f"{m.sentence} — that mistake explains every step within the "
+                                                  f"allowance ({m.max_ratio:.2g} of it; the closest correct scheme "
+                                                  f"needs {best_correct:.3g}×)"))
+    found.sort(key=lambda f: f[0])
+    causes = [found[0][2]] if found else []
+    others = list(dict.fromkeys(f[1] for f in found[1:] if f[1] != found[0][1]))
+    if others:
+        causes.append("equally consistent with: " + ", ".join(others[:4]) + (" …" if len(others) > 4 else ""))
     if not causes:
-        s, score = fit_step_scale(inp, scenario, inp.y[:-1], inp.y[1:],
-                                  exact_flow(scenario, inp.y[:-1], inp.span_s, span_steps=inp.span_steps).y_end,
-                                  local.allow)
-        if score is not None and score.max_ratio <= 1.0:
-            h = inp.span_s[0] / inp.span_steps[0]
-            causes.append(f"a Δt mismatch: the simulator advances {s:.4g} × the recorded Δt per row (it steps "
-                          f"{s * h:.4g} s while the times say {h:.4g} s) — the true motion over that step explains "
-                          f"every row within the allowance ({score.max_ratio:.2g} of it)")
+        causes = _dt_mismatch(local, scenario, inp)
+    best = mistakes[0] if mistakes else None
     if not causes and best is not None and best.p99_ratio <= tol.CHECK_MISTAKE_RESEMBLES \
             and best.p99_ratio * tol.CHECK_MISTAKE_MARGIN <= best_correct:
         causes.append(f"it resembles: {best.sentence} (that mistake explains 99 % of the steps within "
                       f"{best.p99_ratio:.2g}× the allowance, not all of them: perhaps combined with another mistake)")
     return causes, kept
+
+
+def _dt_mismatch(local, scenario, inp):
+    """["a Δt mismatch: …"] when the true motion over s × the row interval explains every row."""
+    flow_end = exact_flow(scenario, inp.y[:-1], inp.span_s, span_steps=inp.span_steps).y_end
+    s, score = fit_step_scale(inp, scenario, inp.y[:-1], inp.y[1:], flow_end, local.allow)
+    if score is None or not score.max_ratio <= 1.0:
+        return []
+    h = inp.span_s[0] / inp.span_steps[0]
+    return [f"a Δt mismatch: the simulator advances {s:.4g} × the recorded Δt per row (it steps {s * h:.4g} s while "
+            f"the times say {h:.4g} s) — the true motion over that step explains every row within the allowance "
+            f"({score.max_ratio:.2g} of it)"]
 
 
 # --- the check ---------------------------------------------------------------------------------------

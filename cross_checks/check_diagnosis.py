@@ -77,8 +77,11 @@ def step_rows(step, y0, inp):
     return out
 
 
-def score_candidate(name, y_next, y_cand, allow, quantities, flow_end=None) -> CandidateScore:
-    """Compare a candidate's steps ``y_cand`` with the recorded next rows ``y_next`` (N, 13)."""
+def score_candidate(name, y_next, y_cand, allow, quantities, flow_end=None, solve_tol=None) -> CandidateScore:
+    """Compare a candidate's steps ``y_cand`` with the recorded next rows ``y_next`` (N, 13).
+
+    ``solve_tol`` (quantity -> (N,)): how far an implicit candidate's own solve may stop from its root,
+    added to the rounding of the data when deciding whether the file IS the candidate."""
     d = distances(y_next, y_cand, quantities)
     r = {q: ratio(d[q], allow.total[q]) for q in quantities}
     stack = np.stack([r[q] for q in quantities])
@@ -89,7 +92,7 @@ def score_candidate(name, y_next, y_cand, allow, quantities, flow_end=None) -> C
         mx = float(np.max(stack))
         p99 = float(np.max(np.percentile(stack, 99, axis=1)))
         worst = quantities[int(np.argmax(np.max(stack, axis=1)))]
-    tol_same = {q: allow.arith[q] + allow.print_[q] for q in quantities}
+    tol_same = {q: allow.arith[q] + allow.print_[q] + (0.0 if solve_tol is None else solve_tol[q]) for q in quantities}
     same = bool(not math.isnan(mx) and all(np.all(d[q] <= tol_same[q]) for q in quantities))
     own = math.nan
     if flow_end is not None:
@@ -99,15 +102,28 @@ def score_candidate(name, y_next, y_cand, allow, quantities, flow_end=None) -> C
     return CandidateScore(name, mx, p99, same, own, worst)
 
 
+#: Reference variants with an iterative solve, stopped at IMPLICIT_TOL relative to 1 + |y| per step.
+IMPLICIT_VARIANTS = ("implicit_euler", "leapfrog")
+
+
 def score_variants(inp, scenario, y0, y_next, flow_end, allow, extra_one_step=()):
-    """Scores of every reference variant (and of ``extra_one_step``: (name, step(y, h)) pairs)."""
+    """Scores of every reference variant (and of ``extra_one_step``: (name, step(y, h)) pairs).
+
+    An implicit variant's step is its root only to IMPLICIT_TOL (1 + |y|) per component and step (two
+    evaluations of the same step may stop at different iterates): that is added to its identity test."""
+    from reference_sim.integrators import IMPLICIT_TOL
+    from .check_physics import BLOCKS
     from .engines import get_adapter
     adapter = get_adapter("reference")
+    solve = {q: inp.span_steps * IMPLICIT_TOL * math.sqrt(BLOCKS[q].stop - BLOCKS[q].start)
+             * (1.0 + np.linalg.norm(np.nan_to_num(y_next[:, BLOCKS[q]]), axis=1)) * (2.0 if q == "orientation" else 1.0)
+             for q in QUANTITIES}
     out = []
     cands = [(f"reference:{v}", (lambda v: lambda z, hh: adapter.one_step(scenario, v, hh, z))(v)) for v in VARIANTS]
     for name, step in list(cands) + list(extra_one_step):
         y_c = step_rows(step, y0, inp)
-        out.append(score_candidate(name, y_next, y_c, allow, QUANTITIES, flow_end))
+        implicit = name.split(":", 1)[1] in IMPLICIT_VARIANTS
+        out.append(score_candidate(name, y_next, y_c, allow, QUANTITIES, flow_end, solve if implicit else None))
     return out
 
 

@@ -56,7 +56,8 @@ class CheckInput:
     y : (K, 13) packed states [x_W, v_W, q_WB (w x y z), w_W]; NaN columns for absent groups.
     present : quantity groups the file holds.
     print_floor : quantity -> (K,) rounding of the written values of that quantity in each row (m, m/s,
-        rad, rad/s): the norm of the columns' half quanta (orientation: 2 × the quaternion's, an angle).
+        rad, rad/s): the norm of the columns' half quanta (orientation: 2 × the quaternion's, an angle),
+        plus ½ ulp of single precision for single-precision data.
     single_precision : whether the values look single precision.  unit_roundoff : 2⁻²⁴ or 2⁻⁵³.
     diverged_at_s : time of the first non-finite row (rows from there on are dropped), or None.
     ended_early_s : the last true time when the file stops before the scenario's duration, else None.
@@ -152,6 +153,11 @@ def _precision(y, present):
     fin = y[:, cols][np.isfinite(y[:, cols])]
     all_f32 = bool(np.all(fin.astype(np.float32).astype(np.float64) == fin))
     single = digits[0] <= tol.CHECK_SINGLE_PRECISION_MAX_DIGITS or all_f32
+    if single:   # a single-precision value is ½ ulp from what it stands for, however it is printed
+        for g in present:
+            mag = np.linalg.norm(np.nan_to_num(y[:, QUANTITY_SLICES[g]]), axis=1)
+            rep = EPS32 * (2.0 * np.maximum(mag, 1.0) if g == "orientation" else mag)
+            floors[g] = floors[g] + rep
     return floors, single
 
 

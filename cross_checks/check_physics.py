@@ -194,12 +194,13 @@ class Allowances:
     total: dict
 
 
-def local_allowances(inp, y_start, M2, rate, flow_roundoff=None) -> Allowances:
+def local_allowances(inp, y_start, M2, rate, flow_roundoff=None, y_end=None) -> Allowances:
     """What a consistent scheme of order ≥ 1 may leave over each row interval of ``inp`` (a CheckInput).
 
     Over a row of ``m`` steps of h (Δ = m h): m local defects ``C h² M2`` that the flow carries along,
     ``C h Δ M2 · e^{L(Δ − h)}``, and a velocity defect drifts into position (orientation) by ~(Δ − h)/2.
-    ``arith`` adds the roundings of the user's steps (data precision) and of the exact flow itself.
+    ``arith`` adds the roundings of the user's steps (data precision, relative to the larger of the two
+    rows' magnitudes, ``y_start`` and ``y_end``) and of the exact flow itself.
     """
     span = inp.span_s
     h = span / inp.span_steps
@@ -211,7 +212,8 @@ def local_allowances(inp, y_start, M2, rate, flow_roundoff=None) -> Allowances:
     u = inp.unit_roundoff
     arith, print_ = {}, {}
     for q in BLOCKS:
-        arith[q] = inp.span_steps * tol.CHECK_ROUNDINGS_PER_STEP * u * _magnitude(y_start, q)
+        mag = _magnitude(y_start, q) if y_end is None else np.fmax(_magnitude(y_start, q), _magnitude(y_end, q))
+        arith[q] = inp.span_steps * tol.CHECK_ROUNDINGS_PER_STEP * u * mag
         if flow_roundoff is not None:
             arith[q] = arith[q] + flow_roundoff[q]
         pf = inp.print_floor.get(q)

@@ -118,10 +118,21 @@ def format_ladder(lad) -> str:
 
 
 def to_json_text(obj) -> str:
-    return json.dumps(obj, indent=2, default=_json_default, allow_nan=True) + "\n"
+    """Strict JSON: NaN is written as null and ±inf as the strings "inf" / "-inf"."""
+    return json.dumps(_finite(json.loads(json.dumps(obj, default=_json_default))), indent=2, allow_nan=False) + "\n"
 
 
 def _json_default(o):
     if hasattr(o, "as_dict"):
         return o.as_dict()
     return json_default(o)
+
+
+def _finite(o):
+    if isinstance(o, float):
+        return None if math.isnan(o) else ("inf" if o == math.inf else "-inf" if o == -math.inf else o)
+    if isinstance(o, dict):
+        return {k: _finite(v) for k, v in o.items()}
+    if isinstance(o, list):
+        return [_finite(v) for v in o]
+    return o

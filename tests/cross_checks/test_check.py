@@ -83,6 +83,18 @@ def test_every_planted_mistake_is_caught_and_named(tmp_path, capsys, bug, scen, 
     assert causes and S.BUGS[bug] in causes[0], out
 
 
+@pytest.mark.parametrize("scen, dt, bug", [
+    ("tumbling_box", 0.001, "gyro_sign"),             # the scenario's default Δt: once allowed 3.38 rad
+    ("symmetric_top", 0.01, "gyro_sign"),             # once allowed 11.4 rad ...
+    ("symmetric_top", 0.01, "quat_right"),
+    ("symmetric_top", 0.01, "inertia_body"),
+])
+def test_the_false_passes_reported_in_issue_10_now_fail(tmp_path, capsys, scen, dt, bug):
+    sc = scenario_file(tmp_path, scen, 1.0)
+    rc, out, _ = check(capsys, student_file(tmp_path, sc, dt, bug=bug), "--scenario", sc)
+    assert rc == 1 and S.BUGS[bug] in out
+
+
 def test_a_step_without_the_gyroscopic_term_that_is_not_the_course_scheme_fails_and_says_why(tmp_path, capsys):
     sc = scenario_file(tmp_path, "tumbling_box", 2.0)
     rc, out, _ = check(capsys, student_file(tmp_path, sc, 0.01, bug="no_gyro", scheme="expmap"), "--scenario", sc)
@@ -99,10 +111,12 @@ def test_the_course_scheme_itself_passes_with_its_caveat(tmp_path, capsys):
     assert "caveat:" in out and "gyroscopic" in out
 
 
-def _reference_course_applies_the_per_step_factor(sc, dt):
-    """True on a branch where reference:course multiplies v by γ per step whatever Δt is (the course's
-    frame-rate dependent decay) rather than by e^(−kΔt)."""
+def _reference_course_applies_the_per_step_factor(dt=0.005):
+    """True on a branch where reference:course multiplies v by the course's γ per step whatever Δt is
+    (frame-rate dependent) rather than by e^(−kΔt): probed on velocity_decay (no forces, γ = 0.99 at
+    dt = 0.01, v0 = (1, 0.5, 0))."""
     from cross_checks.engines import get_adapter
+    sc = load_scenario("velocity_decay")
     y0 = sc.problem.initial_packed()[None, :]
     y1 = get_adapter("reference").one_step(sc, "course", dt, y0)
     return math.isclose(float(y1[0, 3] / y0[0, 3]), sc.problem.forces.velocity_decay, rel_tol=1e-12)
@@ -113,7 +127,7 @@ def test_a_per_step_decay_at_another_dt_is_never_a_silent_pass(tmp_path, capsys)
     that it IS that scheme (PASS, with the frame-rate caveat); otherwise it is a caught mistake."""
     sc_path = scenario_file(tmp_path, "velocity_decay", 1.0)
     rc, out, _ = check(capsys, student_file(tmp_path, sc_path, 0.005, bug="decay_per_step"), "--scenario", sc_path)
-    if _reference_course_applies_the_per_step_factor(load_scenario(sc_path), 0.005):
+    if _reference_course_applies_the_per_step_factor(0.005):
         assert rc == 0 and "PASS: is reference:course" in out and "frame-rate dependent" in out
     else:
         assert rc == 1 and "frame-rate dependent" in out
@@ -331,7 +345,7 @@ def test_verdict_line_first_then_the_table_json_and_plot(tmp_path, capsys):
     assert any(line.strip().startswith("one-step defect   angular velocity") and line.endswith("OVER") for line in lines)
     assert any(line.strip().startswith("free-running") and "decisive to t =" in line for line in lines)
     assert "allowances:" in out and "closest scheme:" in out
-    data = json.loads((tmp_path / "r.json").read_text())
+    data = json.loads((tmp_path / "r.json").read_text(), parse_constant=pytest.fail)   # strict JSON: no NaN
     assert data["passed"] is False and data["exit_code"] == 1 and data["verdict"] == lines[0]
     worst = next(e for e in data["evidence"] if e["kind"] == "one-step defect" and e["quantity"] == "angular_velocity")
     assert worst["first_over_s"] == pytest.approx(0.01) and worst["max_ratio"] > 10 and worst["source"]

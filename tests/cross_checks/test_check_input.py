@@ -74,7 +74,9 @@ def test_a_constant_column_takes_the_writers_precision_from_the_others():
     y[:, 3] = -2.0                                  # constant: alone it would look like 1 digit
     y[:, 6] = 1.0
     inp = prepare_input(_traj(np.arange(50) * 0.01, y), SC, "c.csv")
-    assert inp.print_floor["velocity"][0] == pytest.approx(math.sqrt(3) * 5e-7)
+    # 6 decimals on each component, and (≤ 9 digits: single precision) ½ ulp of |v| = 2
+    assert inp.single_precision
+    assert inp.print_floor["velocity"][0] == pytest.approx(math.sqrt(3) * 5e-7 + 2.0 * 2.0 ** -24)
 
 
 def test_nine_significant_digits_read_as_single_precision():
