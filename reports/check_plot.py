@@ -55,7 +55,7 @@ def _ratio_axis(ax, series, title):
         dec = np.ones(len(t), dtype=bool) if decisive is None else np.asarray(decisive, dtype=bool)
         c = QCOLORS.get(q, "black")
         shown = np.where(r > 0, r, LOG_FLOOR)
-        lw = 0.6 if q.endswith("quaternion_norm") else 1.1
+        lw = 0.6 if q.endswith("quaternion_norm") else 0.9
         ax.plot(t, np.where(dec, shown, np.nan), color=c, lw=lw, label=q.replace("_", " "))
         if not dec.all():
             ax.plot(t, np.where(dec, np.nan, shown), color=c, lw=0.8, alpha=0.35, ls="--")
@@ -72,6 +72,19 @@ def _ratio_axis(ax, series, title):
     lo, hi = ax.get_ylim()
     ax.set_ylim(max(lo, 1e-8), max(hi, 10.0))
     ax.legend(fontsize=7.5, loc="lower right", ncol=2, framealpha=0.85)
+
+
+def _free_errors(ax, res):
+    """Free-running error against the reference over time (log), for files without velocities."""
+    ax.set_yscale("log")
+    for e in res.evidence:
+        if e.kind == "free-running" and e.series:
+            v = np.asarray(e.series["value"], dtype=float)
+            ax.plot(e.series["t_s"], np.where(v > 0, v, LOG_FLOOR), color=QCOLORS.get(e.quantity, "black"), lw=1.1,
+                    label=f"{e.quantity.replace('_', ' ')} ({e.unit})")
+    ax.set_title("free-running error vs the reference (no velocity columns)", fontsize=10)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8, loc="lower right")
 
 
 def check_figure(res, scenario, path) -> None:
@@ -114,7 +127,7 @@ def check_figure(res, scenario, path) -> None:
         c_v = (closest[1], closest[2][:, 3:6]) if closest else None
         _components(ax, t, y[:, 3:6], y_ref[:, 3:6], c_v, ("vx", "vy", "vz"), "COM velocity, world", "m/s")
     else:
-        ax.text(0.5, 0.5, "no velocity columns", ha="center", transform=ax.transAxes)
+        _free_errors(ax, res)
     for a in fig.axes:
         a.set_xlabel("time t (s)")
     local = {q: (s["ratios_t_s"], r, None) for q, r in s["ratios"].items()}
