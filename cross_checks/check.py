@@ -102,6 +102,7 @@ class _Local:
     candidates: list         # CandidateScore of every reference variant (full-state files)
     notes: list
     ratios: dict             # quantity -> local value / allowance over time (for the plot)
+    undecided_rows: int = 0  # rows where the one-step error model does not hold (h L > CHECK_MAX_HL)
 
 
 def _local_full(inp, scenario) -> _Local:
@@ -128,7 +129,8 @@ def _local_full(inp, scenario) -> _Local:
                          decisive=None if model_ok.all() else model_ok) for q in QUANTITIES]
     cands = score_variants(inp, scenario, y0, y1, flow.y_end, allow)
     per_row = {q: allow.physics[q] + allow.arith[q] for q in QUANTITIES}
-    return _Local(rows, allow, per_row, cands, notes, {q: ratio(d[q], allow.total[q]) for q in QUANTITIES})
+    return _Local(rows, allow, per_row, cands, notes, {q: ratio(d[q], allow.total[q]) for q in QUANTITIES},
+                  int(np.sum(~model_ok)))
 
 
 def _local_pose(inp, scenario, y_ref) -> _Local:
@@ -391,9 +393,11 @@ def _verdict_line(inp, scenario, passed, reasons, identity, local, closest, cand
     worst = max((e.max_ratio for e in local.rows), default=math.nan)
     kind = "one-step defect" if inp.full_state else "acceleration residual"
     close = f"; closest scheme {closest}" if closest else ""
+    undecided = (f" (on {local.undecided_rows} of {inp.n_rows - 1} rows Δt is too coarse for the one-step error "
+                 f"model: not decisive there)") if local.undecided_rows else ""
     return (f"consistent with the equations of motion of {scenario.name} at {h}: every {kind} within what a "
-            f"consistent scheme of order ≥ 1 leaves (largest {worst:.2g} of its allowance), and the free-running "
-            f"error within its allowance{close}")
+            f"consistent scheme of order ≥ 1 leaves (largest {worst:.2g} of its allowance){undecided}, and the "
+            f"free-running error within its allowance{close}")
 
 
 def _series(inp, scenario, y_ref, local, closest_correct):
