@@ -198,7 +198,7 @@ def test_mujoco_and_pybullet_trajectories_pass(tmp_path, capsys, engine, scen, d
     capsys.readouterr()
     rc, out, _ = check(capsys, traj, "--scenario", sc)
     assert rc == 0, out
-    if engine == "mujoco:euler":   # ENGINE_FACTS: MuJoCo Euler is semi-implicit Euler + explicit gyro + exp map
+    if engine == "mujoco:euler":   # MuJoCo Euler is semi-implicit Euler + explicit gyroscopic term + exp map
         assert out.startswith("PASS: is reference:expmap_gyro")
 
 
@@ -376,6 +376,6 @@ def test_extra_engine_variants_are_compared_free_running(tmp_path):
     traj = Trajectory.read(_run(tmp_path, sc_path, "mujoco:euler", 0.01))
     res = check_trajectory(traj, sc, "m.csv", compare_with=["pybullet:multibody", "reference:rk4"])
     by = {e["engine"]: e for e in res.engines}
-    assert by["pybullet:multibody"]["same_to_roundoff"] is True      # ENGINE_FACTS: 2.3e-14 rad apart
+    assert by["pybullet:multibody"]["same_to_roundoff"] is True      # the same scheme: ~1e-14 rad apart
     assert by["reference:rk4"]["same_to_roundoff"] is False
     assert by["reference:rk4"]["max_difference"]["angular_velocity"] > 1e-5
