@@ -82,25 +82,11 @@ SECULAR_TREND_VS_RESIDUAL = 2.0
 #: relative to max(1, |state|): 4e4 steps × ~10 roundings × ε ≈ 1e-10, ×10 for the amplification
 #: near the tennis racket's separatrix.
 SAME_SCHEME_REL = 1e-9
-#: `rbcheck check`: a trajectory "is" a reference variant when every quantity agrees to this relative
-#: to max(1, |state|) — the same reasoning as SAME_SCHEME_REL, plus CSV printing of ≥ 15 digits.
-CHECK_SAME_SCHEME_REL = 1e-9
-#: `rbcheck check`: a trajectory agrees with the physical reference when each final error is within
-#: this factor of a correct first-order scheme's error at the same Δt (reference:expmap_gyro): first-
-#: order schemes differ by their error constants, which stay within a factor of a few on the catalog.
-CHECK_BUDGET_FACTOR = 10.0
-#: `rbcheck check`: times count as a uniform grid when every step is within this fraction of the
-#: median step: a CSV printed with 6 decimals at Δt = 1e-3 s has step errors up to 1e-6 s = 1e-3 Δt.
-CHECK_UNIFORM_DT_REL = 2e-3
-#: `rbcheck check`: the first row counts as the scenario's initial state within this (relative to
-#: max(1, |state|)): 6 printed decimals, as above.
-CHECK_INITIAL_STATE_REL = 1e-5
-
 # --- Bring your own engine: any simulator in sweeps, baselines, reports and pytest gates ---
 
 #: Engine files: a first row farther than this from the scenario's initial state (relative to
 #: max(1, |state|); rad for the orientation) gets a note in the run's message (the engine may misread
-#: the resolved JSON). 1e-5: a CSV printed with 6 significant digits, as CHECK_INITIAL_STATE_REL.
+#: the resolved JSON). 1e-5: a CSV printed with 6 significant digits differs from the state by up to 5e-6.
 ENGINE_FILE_INITIAL_STATE_REL = 1e-5
 
 # --- hardening: bounded work, honest inputs (issue 13) ----------------------------------------------
@@ -169,3 +155,55 @@ AMPLITUDE_MODEL_ORDER_DEV = 0.15
 #: within AMPLITUDE_MODEL_ORDER_DEV. (Measured: mujoco:rk4 on tumbling_box, ω error 3.2e-10 at 1.7× its
 #: floor, bent the fitted order from 3.9 to 3.4.)
 RESOLVED_ABOVE_FLOOR = 10.0
+
+# --- `rbcheck check` gives a true verdict on any simulator's trajectory (issue 10) -----------------
+
+#: Local (one-step) allowance constant C in ``C · h · Δ · M2`` (M2: block majorant of |y''| along the
+#: exact flow, see cross_checks.check_physics). Every consistent one-step scheme of order ≥ 1 of the
+#: θ-family (explicit, semi-implicit, implicit Euler; mid-point and RK schemes have θ = ½) leaves a
+#: leading defect Σ_b (θ_b − ½) h² J_b F_b, at most ½ h² M2; the O(h³) remainder adds at most
+#: (7/6) h L of that (implicit Euler's Neumann series), ≤ ½ h² M2 while h L ≤ 0.43 (CHECK_MAX_HL).
+CHECK_LOCAL_C = 1.0
+#: The one-step error model above holds while h L ≤ this (L: the fastest rate of the motion).
+CHECK_MAX_HL = 0.43
+#: Roundings of one step, in units of the data's unit roundoff times |y| (per component): a step is
+#: ~10 operations per component (x + h v, a quaternion product and normalisation); 16 covers them.
+CHECK_ROUNDINGS_PER_STEP = 16.0
+#: The exact flow's own error (Richardson estimate |y_S − y_2S| / 15 of RK4 with S and 2S substeps) must
+#: stay below this fraction of the smallest allowance it is compared with: then it moves no ratio by
+#: more than 1 %.
+CHECK_FLOW_ERROR_FRACTION = 1e-2
+#: RK4 substeps of the exact flow start at ``ceil(L Δ / this)``: (0.1)⁵/120 ≈ 1e-7 relative per substep.
+CHECK_FLOW_RATE_PER_SUBSTEP = 0.1
+#: Directional finite-difference step (s) for J F in the majorant, divided by max(1, L): central
+#: differences then err by ~(τL)² ≈ 1e-12 relative and round off by ε/τ ≈ 2e-10 relative.
+CHECK_FD_STEP_S = 1e-6
+#: Data printed with at most this many significant digits (or exactly representable in single
+#: precision) is taken to be single precision: a float32 needs 9 digits to round-trip.
+CHECK_SINGLE_PRECISION_MAX_DIGITS = 9
+#: Row intervals are first matched to whole multiples of the median interval within this fraction of it
+#: (then every time is checked against n·Δt within the derived single-precision bound).
+CHECK_GRID_SLACK = 0.05
+#: A row interval spanning more than this many times the typical number of steps is a jump, not a
+#: gap (a few dropped rows): the file is refused. 10 accepts up to 9 consecutive missing rows.
+CHECK_MAX_GAP_FACTOR = 10.0
+#: A quaternion with norm below this (in a file whose quaternions are unit) is "zero": no rotation.
+CHECK_ZERO_QUATERNION = 1e-6
+#: Rows within this many steps of the scenario's duration count as reaching it (last-step rounding).
+CHECK_DURATION_SLACK_STEPS = 0.5
+#: Perturbation size (relative to each quantity's scale) used to measure the scenario's error growth:
+#: well above the RK4 flow's round-off (1e-16 · growth 1e3), well inside the linear regime.
+CHECK_GROWTH_EPS = 1e-7
+#: Free-running comparison cap, as a fraction of how far each quantity moves along the reference (an
+#: orientation moves at most π: cap 0.31 rad): beyond it an error is a different motion whatever the
+#: error model predicts, so the comparison stops being decisive where the allowance reaches it.
+CHECK_FREE_RUN_CAP_FRACTION = 0.1
+#: A catalogued mistake is named when it explains every step within the local allowance AND at least
+#: this many times better (max ratio) than the closest correct scheme.
+CHECK_MISTAKE_MARGIN = 4.0
+#: Step of the runs that measure a scenario's error growth, as L τ (L: the motion's fastest rate): RK4
+#: at L τ = 0.25 errs by ~(0.25)⁵/120 ≈ 1e-5 relative per step, far below what a growth FACTOR needs.
+CHECK_GROWTH_RATE_PER_STEP = 0.25
+#: "Resembles" a mistake (said with that caution) when it explains 99 % of the steps within this many
+#: allowances and CHECK_MISTAKE_MARGIN times better than any correct scheme; beyond, nothing is named.
+CHECK_MISTAKE_RESEMBLES = 3.0

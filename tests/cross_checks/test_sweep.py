@@ -1,7 +1,7 @@
-"""`rbcheck sweep` and `rbcheck check` end to end on tiny scenarios (short durations, 3-point ladders)."""
+"""`rbcheck sweep` end to end on tiny scenarios (short durations, 3-point ladders); `rbcheck check` is
+tested in test_check.py."""
 import csv
 import json
-import math
 from pathlib import Path
 
 import numpy as np
@@ -10,7 +10,6 @@ import pytest
 from cross_checks import sweep as sweep_mod
 from cross_checks.cli import main
 from cross_checks.sweep import RESULT_COLUMNS, run_sweep
-from cross_checks.trajectory import Trajectory
 
 SPIN = """
 name = "tiny_spin"
@@ -205,74 +204,6 @@ def test_sweep_bad_input_exits_2_with_one_line(tmp_path, args, needle, capsys):
     assert sweep(args, tmp_path / "res") == 2
     err = capsys.readouterr().err
     assert needle in err and "Traceback" not in err
-
-
-# --- rbcheck check --------------------------------------------------------------------------------
-
-def _run(scenario, engine, out, dt=None):
-    args = ["run", scenario, "--engine", engine, "--out", str(out)]
-    if dt:
-        args += ["--dt", str(dt)]
-    assert main(args) == 0
-    return out
-
-
-def test_check_recognises_the_course_scheme(tmp_path, capsys):
-    traj = _run("tennis_racket", "reference:course", tmp_path / "student.csv", dt=0.01)
-    capsys.readouterr()
-    assert main(["check", str(traj), "--scenario", "tennis_racket"]) == 0
-    out = capsys.readouterr().out
-    assert "PASS: is reference:course" in out
-    assert "does not converge" in out and "gyroscopic" in out   # the course's own limitation, as a note
-
-
-def test_check_accepts_a_converging_scheme_and_rejects_a_wrong_one(tmp_path, capsys):
-    traj = _run("projectile", "reference:rk4", tmp_path / "rk4.csv")
-    assert main(["check", str(traj), "--scenario", "projectile"]) == 0
-    assert "agrees with the reference" in capsys.readouterr().out
-    t = Trajectory.read(traj)
-    t.y[:, 2] += 1.0 * t.t_s             # drifting 1 m/s upwards: 20× a first-order scheme's error
-    t.write(tmp_path / "bad.csv")
-    assert main(["check", str(tmp_path / "bad.csv"), "--scenario", "projectile"]) == 1
-    out = capsys.readouterr().out
-    assert "FAIL: disagrees" in out and "position" in out
-
-
-def test_check_infers_dt_from_rounded_times(tmp_path, capsys):
-    traj = Trajectory.read(_run("projectile", "reference:course", tmp_path / "c.csv"))
-    traj.t_s = np.round(traj.t_s, 6)
-    traj.write(tmp_path / "rounded.csv")
-    assert main(["check", str(tmp_path / "rounded.csv"), "--scenario", "projectile"]) == 0
-    assert "Δt = 0.01 s" in capsys.readouterr().out
-
-
-def test_check_bad_trajectory_exits_2(tmp_path, capsys):
-    bad = tmp_path / "bad.csv"
-    bad.write_text("t,x\n0,1\n")
-    assert main(["check", str(bad), "--scenario", "projectile"]) == 2
-    err = capsys.readouterr().err
-    assert "header" in err and "Traceback" not in err
-    traj = Trajectory.read(_run("projectile", "reference:course", tmp_path / "c.csv"))
-    traj.t_s = traj.t_s + 1.0
-    traj.write(tmp_path / "late.csv")
-    assert main(["check", str(tmp_path / "late.csv"), "--scenario", "projectile"]) == 2
-    assert "must start at 0" in capsys.readouterr().err
-
-
-def test_check_flags_a_wrong_initial_state(tmp_path, capsys):
-    traj = Trajectory.read(_run("projectile", "reference:course", tmp_path / "c.csv"))
-    traj.y[:, 0] += 1.0
-    traj.write(tmp_path / "moved.csv")
-    assert main(["check", str(tmp_path / "moved.csv"), "--scenario", "projectile"]) == 1
-    assert "initial state" in capsys.readouterr().out
-
-
-def test_check_reports_non_finite_rows_as_diverged(tmp_path, capsys):
-    traj = Trajectory.read(_run("projectile", "reference:course", tmp_path / "c.csv"))
-    traj.y[50:, 3] = math.nan
-    traj.write(tmp_path / "nan.csv")
-    assert main(["check", str(tmp_path / "nan.csv"), "--scenario", "projectile"]) == 1
-    assert "diverged" in capsys.readouterr().out
 
 
 def test_a_worker_crash_fails_only_its_own_job(tmp_path, scenario_files, monkeypatch):
