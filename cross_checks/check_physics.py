@@ -1,8 +1,8 @@
 """``rbcheck check``, step 2: the physics every verdict is measured against.
 
 * :func:`exact_flow` — the true motion over each row interval, from each recorded state at once
-  (batched RK4 with substeps on ``reference_sim.integrators.rhs`` plus the continuous velocity decay
-  −k v, −k ω of ``references.decay_rates_per_s``), with a Richardson estimate of its own error.
+  (batched RK4 with substeps on ``reference_sim.integrators.rhs``, which includes the continuous velocity
+  decay −k v, −k ω), with a Richardson estimate of its own error.
 * :func:`majorant` — M2, a bound on |y''| per quantity, block by block: ``Σ_b |J_b F_b|`` with J the
   Jacobian of the right-hand side F and b ∈ {x, v, q, ω}. Every consistent one-step scheme of order
   ≥ 1 leaves a local defect ≤ ½ h² M2 + O(h³) (tolerances.CHECK_LOCAL_C), a wrong equation O(h).
@@ -40,18 +40,10 @@ BLOCKS = {"position": X, "velocity": V, "orientation": Q, "angular_velocity": W}
 
 def flow_rhs(scenario):
     """F(y) (..., 13): the full rigid-body equations (gyroscopic term included) with the scenario's
-    velocity decay as the continuous damping −k_v v, −k_ω ω (k = −ln γ / dt)."""
+    velocity decay as the continuous damping −k_v v, −k_ω ω (k = −ln γ / dt) — which
+    ``reference_sim.integrators.rhs`` itself includes (``ForceModel.decay_rates_per_s``)."""
     problem = scenario.problem
-    k_v, k_w = decay_rates_per_s(scenario)
-
-    def F(y):
-        d = rhs(problem, y)
-        if k_v:
-            d[..., V] -= k_v * y[..., V]
-        if k_w:
-            d[..., W] -= k_w * y[..., W]
-        return d
-    return F
+    return lambda y: rhs(problem, y)
 
 
 def rk4_flow(F, y0, span_s, substeps: int, *, mid: bool = False):

@@ -212,18 +212,21 @@ def characteristic_rate_sq(scenario) -> float:
     return max(rates)
 
 
-def expectation(scenario, variant: str, quantity: str, mode: str = "free_running", physics=None) -> Expectation:
+def expectation(scenario, variant: str, quantity: str, mode: str = "free_running", physics=None, *,
+                measure_physics: bool = True) -> Expectation:
     """The expected verdict and order of ``variant`` on ``scenario`` for ``quantity``.
 
     ``mode`` "free_running" gives the global order p; "one_step" gives the local order p + 1 — also
     where the free run is pre-asymptotic (an amplitude drift builds up over a run, not in one step) —
     and no expectation (verdict None) where the variant misses a term: a missing term shows up as an
     O(Δt) local error in some quantities and O(Δt²) in others. ``physics``: the scenario's
-    :class:`~cross_checks.physics.ScenarioPhysics` (measured here when omitted, once per scenario).
+    :class:`~cross_checks.physics.ScenarioPhysics` (measured here when omitted, once per scenario —
+    unless ``measure_physics`` is False: then no pre-asymptotic decision is made, e.g. for a scenario
+    whose reference could not be computed, where every run is a failed row anyway).
     """
     if mode not in ("free_running", "one_step"):
         raise ValueError(f"unknown mode {mode!r}; modes: free_running, one_step")
-    free = _free_running(scenario, variant, quantity, physics)
+    free = _free_running(scenario, variant, quantity, physics, measure_physics)
     if mode == "free_running":
         return free
     if free.verdict == "does_not_converge":
@@ -234,7 +237,7 @@ def expectation(scenario, variant: str, quantity: str, mode: str = "free_running
     return Expectation("converges", p + 1.0, f"one step of an order-{p:g} scheme has an O(Δt^{p + 1:g}) local error")
 
 
-def _free_running(scenario, variant: str, quantity: str, physics) -> Expectation:
+def _free_running(scenario, variant: str, quantity: str, physics, measure_physics: bool = True) -> Expectation:
     if quantity not in QUANTITIES:
         raise ValueError(f"unknown quantity {quantity!r}; quantities: {', '.join(QUANTITIES)}")
     tr = traits(variant)
@@ -249,7 +252,7 @@ def _free_running(scenario, variant: str, quantity: str, physics) -> Expectation
     p = nominal_order(variant)
     if p is None:
         return Expectation("converges", None, f"no nominal order is recorded for {variant}")
-    if p == 1.0:
+    if p == 1.0 and (physics is not None or measure_physics):
         why = _pre_asymptotic_reason(scenario, variant, quantity, tr, physics)
         if why:
             return Expectation("pre_asymptotic", None, why)

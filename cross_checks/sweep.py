@@ -309,7 +309,7 @@ def _convergence_records(scenario, variant, rows, scales, mode, measured=None):
             statuses = ["ok" if r["status"] in ("ok", "diverged") and np.isfinite(r[f"{stem}_local_err"])
                         else "failed" for r in ladder]
         fit = M.fit_convergence(dts, errs, _floors(ladder, q, scales, mode, label, measured), statuses)
-        exp = expectation(scenario, variant, q, mode, physics=phys)
+        exp = expectation(scenario, variant, q, mode, physics=phys, measure_physics=False)
         verdict = fit.verdict
         matches, phrase = M.compare_with_expectation(fit.verdict, fit.order, exp, fit.order_is_lower_bound)
         if exp.verdict == "pre_asymptotic" and verdict in ("converges", "does_not_converge"):

@@ -96,15 +96,18 @@ def test_sweep_passes_the_correct_engines_and_exits_1_naming_the_broken_ones(swe
     assert swept["code"] == 1
     lines = [ln.strip() for ln in swept["stderr"].splitlines()]
     for v in BROKEN:
-        for q in ("orientation", "angular_velocity"):
-            assert any(ln.startswith(f"{v} on byo_tumble: {q} does not converge") and ln.endswith("expected order 1")
-                       for ln in lines), swept["stderr"]
+        # orientation is claimed for any order-1 engine here; angular velocity may be left unclaimed
+        # (pre-asymptotic) for an engine whose traits rbcheck does not know (expectations.DEFAULT_TRAITS)
+        assert any(ln.startswith(f"{v} on byo_tumble: orientation does not converge") and ln.endswith("expected order 1")
+                   for ln in lines), swept["stderr"]
     assert not any(ln.startswith(GOOD) for ln in lines), swept["stderr"]
     recs = {(r["engine"], r["quantity"]): r for r in swept["summary"]["convergence"]}
     for v in GOOD:
         for q in ("position", "orientation", "angular_velocity"):
             r = recs[(v, q)]
-            assert r["matches_expectation"] and r["expected_order"] == 1.0
+            if q == "angular_velocity" and r["expected_verdict"] == "pre_asymptotic":
+                continue  # unknown traits: no claim where a first-order scheme could still be pre-asymptotic
+            assert r["matches_expectation"] and r["expected_order"] == 1.0, (v, q, r)
             assert r["verdict"] == "converges" and abs(r["order"] - 1.0) < 0.1, (v, q, r["order"])
     for v in BROKEN:  # a plateau: the wrong motion, whatever the step
         assert recs[(v, "orientation")]["verdict"] == "does_not_converge"
@@ -206,7 +209,7 @@ def test_assert_engine_raises_with_the_verdict_sentences_for_a_broken_engine(byo
     with pytest.raises(AssertionError) as info:
         assert_engine(variant, [byo["byo_tumble"]], engine_file=byo["broken"])
     text = str(info.value)
-    assert text.startswith(f"assert_engine('{variant}') on byo_tumble: 2 problem(s)")
+    assert text.startswith(f"assert_engine('{variant}') on byo_tumble: ") and "problem(s)" in text.splitlines()[0]
     assert f"{variant} on byo_tumble: orientation does not converge" in text
     assert "expected order 1 — final errors" in text and "rad at Δt = 0.02, 0.01, 0.005, 0.0025 s" in text
 
