@@ -223,3 +223,23 @@ def test_an_installed_entry_point_is_found_by_a_fresh_rbcheck_process(byo, tmp_p
     assert proc.returncode == 0, proc.stderr
     assert "fakesim:euler (2.5): 100 steps" in proc.stdout
     assert Trajectory.read(out).meta["engine"] == "fakesim"
+
+
+def test_check_with_engine_files_identifies_the_user_engine_and_catches_its_broken_copy(byo, tmp_path, capsys):
+    """`check --engine-file`: the engine's variants are run free at the file's Δt and compared, so a file
+    written by the correct engine IS cbody:euler; the broken engine's file fails (gyroscopic sign)."""
+    good, bad = tmp_path / "good.csv", tmp_path / "bad.csv"
+    common = [str(byo["byo_tumble"]), "--dt", "0.01"]
+    assert main(["run", *common, "--engine", "cbody:euler", "--engine-file", str(byo["good"]), "--out", str(good)]) == 0
+    assert main(["run", *common, "--engine", "cbody_broken:euler", "--engine-file", str(byo["broken"]),
+                 "--out", str(bad)]) == 0
+    capsys.readouterr()
+    files = ["--engine-file", str(byo["good"]), "--engine-file", str(byo["broken"])]
+    assert main(["check", str(good), "--scenario", str(byo["byo_tumble"]), *files, "--json", str(tmp_path / "g.json")]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("PASS: ")
+    engines_seen = {e["engine"]: e for e in json.loads((tmp_path / "g.json").read_text())["engines"]}
+    assert engines_seen["cbody:euler"]["same_to_roundoff"] is True
+    assert engines_seen["cbody_broken:euler"]["same_to_roundoff"] is False
+    assert main(["check", str(bad), "--scenario", str(byo["byo_tumble"]), *files]) == 1
+    assert capsys.readouterr().out.startswith("FAIL: ")
