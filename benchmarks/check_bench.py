@@ -29,10 +29,10 @@ def _best(fn, repeats=3):
 
 
 def measure(scenario_name: str, dt: float) -> dict:
-    from cross_checks.check import check_trajectory
+    from cross_checks.gates.check import check_trajectory
     from cross_checks.engines import run_variant
     from cross_checks.scenario import load_scenario
-    from cross_checks.trajectory import Trajectory
+    from cross_checks.core.trajectory import Trajectory
 
     sc = load_scenario(scenario_name)
     mujoco_s, traj = _best(lambda: run_variant(sc, "mujoco:euler", dt))
@@ -47,7 +47,7 @@ def measure(scenario_name: str, dt: float) -> dict:
 
 
 def main(json_path: str | None = None) -> int:
-    import cross_checks.check  # noqa: F401 - imports are not part of the measurement
+    import cross_checks.gates.check  # noqa: F401 - imports are not part of the measurement
     rows = [measure(name, dt) for name, dt in CASES]
     print(f"{'scenario':<16}{'rows':>7}{'MuJoCo run (s)':>16}{'read CSV (s)':>14}{'check (s)':>11}{'check / MuJoCo':>16}")
     for r in rows:

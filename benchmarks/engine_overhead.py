@@ -60,7 +60,7 @@ def _median_time(fn, repeats: int) -> float:
 def measure(steps_list=(100, 1000, 10000, 40000), repeats: int = 15) -> dict:
     from cross_checks.engines import get_adapter
     from cross_checks.engines.external import load_engine_file
-    from cross_checks.resolved import resolved_json
+    from cross_checks.scenario.resolved import resolved_json
     from cross_checks.scenario import load_scenario
 
     sc = load_scenario("tennis_racket")  # torque-free tumble: the engine's own work is the least

@@ -58,8 +58,8 @@ def assert_engine(variant, scenarios, *, engine_file=None) -> dict:
 def run_engine_checks(variant, scenarios, *, engine_file=None, out_dir=None, cache_dir=None, jobs=None) -> dict:
     """:func:`assert_engine` with the plugin's settings: ``out_dir`` keeps the results directory and its
     HTML report there; ``cache_dir`` replaces the user's rbcheck cache; ``jobs`` worker processes."""
-    from .engines import EngineUnavailable, engine_files_registered, get_adapter
-    from .sweep import SweepError, run_sweep
+    from cross_checks.engines import EngineUnavailable, engine_files_registered, get_adapter
+    from cross_checks.sweep import SweepError, run_sweep
 
     with contextlib.ExitStack() as stack:
         stack.enter_context(engine_files_registered(_as_list(engine_file)))
@@ -126,7 +126,7 @@ def _as_list(x) -> list:
 
 
 def _variants(variant) -> list:
-    from .engines import UnknownVariant, engine_variants, split_variant
+    from cross_checks.engines import UnknownVariant, engine_variants, split_variant
     if not isinstance(variant, str) or not variant:
         raise ValueError(f"variant must be 'ENGINE:VARIANT' or an engine name, got {variant!r}")
     try:
@@ -142,7 +142,7 @@ def _variants(variant) -> list:
 
 
 def _scenarios(scenarios) -> list:
-    from .scenario import Scenario, load_scenario
+    from cross_checks.scenario import Scenario, load_scenario
     items = [scenarios] if isinstance(scenarios, (str, os.PathLike, Scenario)) else list(scenarios)
     if not items:
         raise ValueError("scenarios: give at least one scenario (catalog name or TOML path)")

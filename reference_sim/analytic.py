@@ -27,8 +27,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import ellipj, ellipk, ellipkinc, elliprj
 
-from .body import check_inertia
-from .quaternion import quat_conj, quat_exp, quat_from_matrix, quat_mul, quat_normalize, rotate
+from reference_sim.body import check_inertia
+from reference_sim.quaternion import quat_conj, quat_exp, quat_from_matrix, quat_mul, quat_normalize, rotate
 
 __all__ = [
     "projectile",

@@ -141,7 +141,7 @@ class RigidBody:
     def gyroscopic_torque_vanishes(self, q_WB, w_W) -> bool:
         """True when ``ω × (I ω) = 0`` to round-off (relative 1e-12): ω along a principal axis, an
         isotropic inertia, or ω = 0. Then a torque-free body keeps spinning about that axis."""
-        from .quaternion import quat_conj, rotate
+        from reference_sim.quaternion import quat_conj, rotate
         w_B = rotate(quat_conj(q_WB), w_W)
         L_B = self.inertia_B @ w_B
         scale = float(np.linalg.norm(w_B) * np.linalg.norm(L_B))

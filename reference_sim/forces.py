@@ -10,9 +10,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .body import RigidBody
-from .quaternion import matrix_from_quat, rotate
-from .vec import cross3
+from reference_sim.body import RigidBody
+from reference_sim.quaternion import matrix_from_quat, rotate
+from reference_sim.vec import cross3
 
 __all__ = ["Spring", "PointForce", "Torque", "ForceModel"]
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from .integrators import rhs
-from .state import Q, Problem
+from reference_sim.integrators import rhs
+from reference_sim.state import Q, Problem
 
 __all__ = ["ground_truth", "GROUND_TRUTH_RTOL", "GROUND_TRUTH_ATOL"]
 

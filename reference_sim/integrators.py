@@ -36,9 +36,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .quaternion import matrix_from_quat, quat_exp, quat_mul
-from .vec import cross3 as _cross, mat_t_vec3 as _mtv, matvec3 as _mv
-from .state import Q, STATE_SIZE, V, W, X, Problem
+from reference_sim.quaternion import matrix_from_quat, quat_exp, quat_mul
+from reference_sim.vec import cross3 as _cross, mat_t_vec3 as _mtv, matvec3 as _mv
+from reference_sim.state import Q, STATE_SIZE, V, W, X, Problem
 
 __all__ = ["VARIANTS", "DESCRIPTIONS", "get_step", "rhs", "IMPLICIT_TOL", "ImplicitSolveError"]
 

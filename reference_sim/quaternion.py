@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .vec import cross3
+from reference_sim.vec import cross3
 
 __all__ = [
     "quat_mul",

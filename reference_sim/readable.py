@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .forces import ForceModel
-from .body import RigidBody
-from .quaternion import matrix_from_quat, quat_exp, quat_mul
-from .state import Problem
+from reference_sim.forces import ForceModel
+from reference_sim.body import RigidBody
+from reference_sim.quaternion import matrix_from_quat, quat_exp, quat_mul
+from reference_sim.state import Problem
 
 __all__ = ["step_readable", "rhs_readable"]
 

@@ -16,8 +16,8 @@ import math
 
 import numpy as np
 
-from .integrators import IMPLICIT_TOL, ImplicitSolveError, get_step
-from .state import Problem
+from reference_sim.integrators import IMPLICIT_TOL, ImplicitSolveError, get_step
+from reference_sim.state import Problem
 
 __all__ = ["ScalarStepper", "SCALAR_VARIANTS"]
 

@@ -5,8 +5,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .integrators import ImplicitSolveError, get_step
-from .state import Problem
+from reference_sim.integrators import ImplicitSolveError, get_step
+from reference_sim.state import Problem
 
 __all__ = ["Run", "simulate", "BLOWUP_LIMIT", "n_steps_for"]
 
@@ -66,7 +66,7 @@ def simulate(problem: Problem, variant: str, dt_s: float, n_steps: int, y0=None)
 
 def _simulate_single(problem: Problem, variant: str, dt_s: float, n_steps: int, y) -> Run:
     """One body: the plain-float path of reference_sim.scalar (same equations, ~10x less overhead)."""
-    from .scalar import ScalarStepper
+    from reference_sim.scalar import ScalarStepper
 
     step = ScalarStepper(problem, variant, dt_s).step
     rows = [y.tolist()]

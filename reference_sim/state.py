@@ -5,9 +5,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .body import RigidBody
-from .forces import ForceModel
-from .quaternion import quat_normalize
+from reference_sim.body import RigidBody
+from reference_sim.forces import ForceModel
+from reference_sim.quaternion import quat_normalize
 
 __all__ = ["State", "Problem", "pack", "unpack", "STATE_SIZE"]
 

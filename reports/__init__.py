@@ -11,19 +11,19 @@ import os
 import shutil
 from pathlib import Path
 
-from .data import Results, ResultsError, load_results
+from reports.data import Results, ResultsError, load_results
 
 __all__ = ["render", "load_results", "Results", "ResultsError"]
 
 
 def _draw(directory: str, scenario: str, plot_dir: str):
-    from .plots import scenario_figures
+    from reports.plots import scenario_figures
     res = load_results(directory)
     return scenario, scenario_figures(res, scenario, Path(plot_dir))
 
 
 def _quiet_init(parent_pid):
-    from cross_checks.lifecycle import worker_init
+    from cross_checks.sweep.lifecycle import worker_init
     worker_init(parent_pid)
 
 
@@ -38,9 +38,10 @@ def render(directory, *, self_contained: bool = False, jobs: int | None = 1) -> 
     marker lists are ever removed (stale plots and pages); a directory without the marker (written
     before it existed) gets its pages and plots written, and nothing removed.
     """
-    from .html import page_name, render_pages
-    from cross_checks.results_dir import inside, is_owned_stale, listed_files, owned_name, read_marker, write_marker
-    from cross_checks.trajectory import atomic_write_text
+    from reports.html import page_name, render_pages
+    from cross_checks.sweep.results_dir import (inside, is_owned_stale, listed_files, owned_name, read_marker,
+                                                write_marker)
+    from cross_checks.core.files import atomic_write_text
 
     d = Path(directory)
     res = load_results(d)

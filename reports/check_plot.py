@@ -17,7 +17,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 
-from .plots import DPI, LOG_FLOOR, _save_png  # noqa: E402
+from reports.plots import DPI, LOG_FLOOR, _save_png  # noqa: E402
 
 __all__ = ["check_figure", "ladder_figure"]
 

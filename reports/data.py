@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from cross_checks.results_dir import inside, safe_file_stem
-from .schema import STATUSES
+from cross_checks.sweep.results_dir import inside, safe_file_stem
+from cross_checks.sweep.schema import STATUSES
 
 __all__ = ["Results", "ResultsError", "load_results", "read_summary", "QUANTITIES", "UNITS", "COLUMN_STEM", "LABELS"]
 
@@ -145,7 +145,7 @@ def load_results(directory) -> Results:
 
 def read_summary(sj: Path, for_report: bool = False) -> dict:
     """summary.json, checked against reports.schema (ResultsError naming the file and the field)."""
-    from .schema import SchemaError, check_summary
+    from cross_checks.sweep.schema import SchemaError, check_summary
     try:
         summary = json.loads(sj.read_text(encoding="utf-8"))
     except (OSError, ValueError, RecursionError) as exc:

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .data import LABELS, QUANTITIES, UNITS
+from reports.data import LABELS, QUANTITIES, UNITS
 
 __all__ = ["Finding", "findings", "fmt", "fmt_dt"]
 

@@ -10,8 +10,8 @@ import math
 
 from jinja2 import Environment, PackageLoader, StrictUndefined, select_autoescape
 
-from .data import COLUMN_STEM, LABELS, QUANTITIES, UNITS
-from .findings import findings, fmt, fmt_dt
+from reports.data import COLUMN_STEM, LABELS, QUANTITIES, UNITS
+from reports.findings import findings, fmt, fmt_dt
 
 __all__ = ["environment", "render_pages", "page_name"]
 
@@ -43,7 +43,7 @@ def environment() -> Environment:
 
 def page_name(scenario: str) -> str:
     """The page of a scenario; the name read from the data is made a safe file name first."""
-    from cross_checks.results_dir import safe_file_stem
+    from cross_checks.sweep.results_dir import safe_file_stem
     return f"scenario-{safe_file_stem(scenario)}.html"
 
 

@@ -20,7 +20,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 
-from .data import COLUMN_STEM, LABELS, QUANTITIES, UNITS  # noqa: E402
+from reports.data import COLUMN_STEM, LABELS, QUANTITIES, UNITS  # noqa: E402
 
 __all__ = ["KINDS", "scenario_figures", "variant_styles"]
 
@@ -308,7 +308,7 @@ def fig_work(res, sc, styles, path):
 
 def scenario_figures(res, sc, plot_dir) -> list:
     """Draw every figure of scenario ``sc`` into ``plot_dir``; returns ``[(kind, filename)]`` drawn."""
-    from cross_checks.results_dir import inside, safe_file_stem
+    from cross_checks.sweep.results_dir import inside, safe_file_stem
     styles = variant_styles(res.variants)
     out = []
     for kind in KINDS:

@@ -15,8 +15,8 @@ import re
 import time
 from dataclasses import dataclass
 
-from ..trajectory import Trajectory
-from .base import EngineAdapter, EngineError, Variant
+from cross_checks.core.trajectory import Trajectory
+from cross_checks.engines.base import EngineAdapter, EngineError, Variant
 
 __all__ = ["ENTRY_POINT_GROUP", "VariantInfo", "EngineEntry", "all_variants", "available_variants", "get_adapter",
            "split_variant", "run_variant", "engine_entries", "engine_variants", "declared_order", "has_one_step",
@@ -187,7 +187,7 @@ def register_adapter(adapter: EngineAdapter, source: str) -> EngineEntry:
 def load_engine_files(paths) -> list:
     """Register the engine files ``paths`` (validated first, all or none). Raises
     :class:`~cross_checks.engines.external.EngineFileError` (``FILE: FIELD: REASON``)."""
-    from .external import EngineFileError, load_engine_file
+    from cross_checks.engines.external import EngineFileError, load_engine_file
     adapters = [load_engine_file(p) for p in paths or []]
     out = []
     for a in adapters:

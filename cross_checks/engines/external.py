@@ -50,8 +50,8 @@ import numpy as np
 
 from reference_sim.simulate import BLOWUP_LIMIT, Run
 
-from .. import tolerances as tol
-from .base import EngineAdapter, EngineError, Variant
+from cross_checks.core import tolerances as tol
+from cross_checks.engines.base import EngineAdapter, EngineError, Variant
 
 __all__ = ["EngineFileError", "ExternalEngine", "load_engine_file", "PLACEHOLDERS", "DEFAULT_TIMEOUT_S"]
 
@@ -212,7 +212,7 @@ def load_engine_file(path) -> "ExternalEngine":
         raise EngineFileError(path, "", f"is not UTF-8 text: {exc}") from None
     except tomllib.TOMLDecodeError as exc:
         raise EngineFileError(path, "", f"TOML syntax error: {exc}") from None
-    from . import NAME_RE
+    from cross_checks.engines import NAME_RE
     _check_keys(path, raw, _TOP, "")
     name = _string(path, raw, "name", "name")
     if name is None:
@@ -406,7 +406,7 @@ class ExternalEngine(EngineAdapter):
         return ["".join(lit + (values[name] if name else "") for lit, name in arg) for arg in self.commands[variant]]
 
     def simulate(self, scenario, variant: str, dt_s: float, n_steps: int) -> Run:
-        from ..resolved import resolved_json
+        from cross_checks.scenario.resolved import resolved_json
         T = scenario.duration_s if n_steps == scenario.n_steps(dt_s) else n_steps * dt_s
         run_dir = Path(tempfile.mkdtemp(prefix=f"rbcheck-{self.name}-"))
         try:
@@ -448,7 +448,7 @@ def _read_output(out_csv: Path, scenario, dt_s: float, n_steps: int, where: str,
     """The trajectory the command wrote, through the shared reader (columns by name), checked against
     the contract: steps + 1 rows on the Δt grid from t = 0, a finite first row; a later non-finite or
     blown-up row is a divergence."""
-    from ..trajectory import TrajectoryError, read_columns
+    from cross_checks.core.trajectory import TrajectoryError, read_columns
     if not out_csv.is_file():
         raise EngineError(f"{where}: the command exited 0 but wrote no CSV at {{out_csv}}{said}")
     size = out_csv.stat().st_size

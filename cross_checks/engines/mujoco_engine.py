@@ -33,8 +33,8 @@ import numpy as np
 from reference_sim.quaternion import quat_from_matrix, rotate, quat_conj
 from reference_sim.simulate import BLOWUP_LIMIT, Run
 
-from .base import (EngineAdapter, EngineError, Variant, apply_decay_prestep, decay_factors, harness_force_torque,
-                   stage_force_torque)
+from cross_checks.engines.base import (EngineAdapter, EngineError, Variant, apply_decay_prestep, decay_factors,
+                                       harness_force_torque, stage_force_torque)
 
 try:  # the module imports without mujoco so the registry can report why it is unavailable
     import mujoco

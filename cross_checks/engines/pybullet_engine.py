@@ -38,7 +38,8 @@ import numpy as np
 from reference_sim.quaternion import quat_conj, quat_from_matrix, quat_mul
 from reference_sim.simulate import BLOWUP_LIMIT, Run
 
-from .base import EngineAdapter, EngineError, Variant, apply_decay_prestep, decay_factors, harness_force_torque
+from cross_checks.engines.base import (EngineAdapter, EngineError, Variant, apply_decay_prestep, decay_factors,
+                                       harness_force_torque)
 
 def _import_pybullet_quietly():
     """``import pybullet`` with file descriptor 2 silenced: the extension prints its build time to

@@ -7,7 +7,7 @@ import reference_sim
 from reference_sim.integrators import DESCRIPTIONS, EXPECTED_ORDER, ImplicitSolveError, get_step
 from reference_sim.simulate import Run, simulate as _simulate
 
-from .base import EngineAdapter, Variant
+from cross_checks.engines.base import EngineAdapter, Variant
 
 ENGINE = "reference"
 VARIANTS = dict(DESCRIPTIONS)

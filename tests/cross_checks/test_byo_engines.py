@@ -15,11 +15,11 @@ import pytest
 
 from cross_checks import engines
 from cross_checks.cli import main
-from cross_checks.compare import compare_dirs, to_text
+from cross_checks.gates.compare import compare_dirs, to_text
 from cross_checks.scenario import load_scenario
 from cross_checks.sweep import run_sweep
 from cross_checks.testing import assert_engine
-from cross_checks.trajectory import Trajectory
+from cross_checks.core.trajectory import Trajectory
 
 from .byo_helpers import build_cbody, c_compiler, compile_cbody, make_fake_distribution, write_scenarios
 
@@ -80,7 +80,7 @@ def test_python_twin_of_the_c_engine_computes_the_same_trajectory(byo, tmp_path)
     """The no-compiler fallback (examples/c_engine/cbody.py) is the same algorithm as cbody.c."""
     if byo["kind"] != "C":
         pytest.skip("no C compiler: only the Python twin exists here")
-    from cross_checks.resolved import resolved_json
+    from cross_checks.scenario.resolved import resolved_json
     sc = load_scenario(byo["byo_pushed"])
     (tmp_path / "s.json").write_text(resolved_json(sc, 0.01))
     c_csv, py_csv = tmp_path / "c.csv", tmp_path / "py.csv"

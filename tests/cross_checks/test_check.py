@@ -18,7 +18,7 @@ import pytest
 
 from cross_checks.cli import main
 from cross_checks.scenario import catalog_path, load_scenario
-from cross_checks.trajectory import COLUMNS, Trajectory
+from cross_checks.core.trajectory import COLUMNS, Trajectory
 
 from . import student_sim as S
 
@@ -370,7 +370,7 @@ def test_bad_output_paths_exit_2_before_any_work(tmp_path, capsys):
 # --- the API: extra engines compared free-running ------------------------------------------------------------
 
 def test_extra_engine_variants_are_compared_free_running(tmp_path):
-    from cross_checks.check import check_trajectory
+    from cross_checks.gates.check import check_trajectory
     sc_path = scenario_file(tmp_path, "tennis_racket", 1.0)
     sc = load_scenario(sc_path)
     traj = Trajectory.read(_run(tmp_path, sc_path, "mujoco:euler", 0.01))

@@ -8,7 +8,7 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 from cross_checks.cli import main
 from cross_checks.engines import run_variant
 from cross_checks.scenario import load_scenario
-from cross_checks.trajectory import COLUMNS, Trajectory, TrajectoryError
+from cross_checks.core.trajectory import COLUMNS, Trajectory, TrajectoryError
 
 SCENARIO = "projectile"
 GOOD = run_variant(load_scenario(SCENARIO), "reference:course", 0.05).to_csv_text()

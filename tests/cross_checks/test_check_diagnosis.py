@@ -2,7 +2,7 @@
 that advance too far (hand-built states)."""
 import numpy as np
 
-from cross_checks.check_diagnosis import initial_state_slips
+from cross_checks.gates.check.diagnosis import initial_state_slips
 from cross_checks.scenario import load_scenario
 from reference_sim.quaternion import quat_conj, rotate
 

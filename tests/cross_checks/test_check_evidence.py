@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 
-from cross_checks.check_evidence import evidence_row, ratio
+from cross_checks.gates.check.evidence import evidence_row, ratio
 
 
 def test_ratio_of_zero_by_zero_is_zero_and_anything_else_by_zero_is_infinite():

@@ -2,12 +2,12 @@
 import numpy as np
 import pytest
 
-from cross_checks import tolerances as tol
-from cross_checks.check_input import prepare_input
-from cross_checks.check_physics import (distances, error_growth, exact_flow, flow_rhs, local_allowances, majorant,
-                                        motion_rate, rk4_flow)
+from cross_checks.core import tolerances as tol
+from cross_checks.gates.check.input import prepare_input
+from cross_checks.gates.check.flow import (distances, error_growth, exact_flow, flow_rhs, local_allowances,
+                                           majorant, motion_rate, rk4_flow)
 from cross_checks.scenario import load_scenario, parse_scenario
-from cross_checks.trajectory import Trajectory
+from cross_checks.core.trajectory import Trajectory
 from reference_sim import analytic
 from reference_sim.quaternion import quat_exp, quat_normalize
 from reference_sim.state import Q, W

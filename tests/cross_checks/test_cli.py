@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from cross_checks.cli import main
-from cross_checks.trajectory import COLUMNS, Trajectory
+from cross_checks.core.trajectory import COLUMNS, Trajectory
 
 BAD_SCENARIO = """
 name = "bad"

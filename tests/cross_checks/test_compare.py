@@ -4,7 +4,7 @@ import json
 import pandas as pd
 import pytest
 
-from cross_checks.compare import CompareInputError, compare_dirs, to_markdown
+from cross_checks.gates.compare import CompareInputError, compare_dirs, to_markdown
 
 ROWS = [
     dict(scenario="tennis_racket", engine="mujoco:euler", dt=1e-3, steps=10000, wall_s=0.1, pos_err_final=0.0,

@@ -10,8 +10,7 @@ from cross_checks.engines import mujoco_engine as me  # noqa: E402
 from cross_checks.engines import run_variant  # noqa: E402
 from cross_checks.scenario import catalog_path, load_scenario, parse_scenario  # noqa: E402
 from reference_sim.ground_truth import ground_truth  # noqa: E402
-from reference_sim.quaternion import (geodesic_angle, quat_from_axis_angle, quat_from_matrix,  # noqa: E402
-                                      quat_mul)
+from reference_sim.quaternion import geodesic_angle, quat_from_axis_angle, quat_from_matrix, quat_mul
 from reference_sim.simulate import simulate as ref_simulate  # noqa: E402
 
 # --- tolerances (to move into cross_checks/tolerances.py) -------------------------------------------

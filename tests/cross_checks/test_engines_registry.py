@@ -5,7 +5,7 @@ import pytest
 from cross_checks import engines
 from cross_checks.cli import main
 from cross_checks.engines.base import EngineAdapter, Variant
-from cross_checks.expectations import expectation, nominal_order
+from cross_checks.analysis.expectations import expectation, nominal_order
 from cross_checks.scenario import load_scenario
 
 from .byo_helpers import make_fake_distribution

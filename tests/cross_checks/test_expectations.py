@@ -3,8 +3,9 @@ import numpy as np
 import pytest
 
 from cross_checks.engines import all_variants, available_variants, run_variant
-from cross_checks.expectations import (DEFAULT_TRAITS, NOMINAL_ORDER, QUANTITIES, VARIANT_TRAITS, expectation,
-                                       nominal_order, traits)
+from cross_checks.analysis.expectations import (DEFAULT_TRAITS, NOMINAL_ORDER, VARIANT_TRAITS, expectation,
+                                                nominal_order, traits)
+from cross_checks.core.quantities import QUANTITIES
 from cross_checks.scenario import catalog_names, catalog_path, load_scenario, parse_scenario
 
 
@@ -188,7 +189,7 @@ def test_body_frame_steps_keep_the_separatrix_distance_whole_state_steps_do_not(
 
 def test_every_built_in_variant_has_a_nominal_order_equal_to_the_order_its_adapter_declares():
     from cross_checks.engines import BUILTIN_ENGINES, all_variants
-    from cross_checks.expectations import NOMINAL_ORDER
+    from cross_checks.analysis.expectations import NOMINAL_ORDER
     built_in = [v for v in all_variants() if v.engine in BUILTIN_ENGINES]
     assert len(built_in) == 14
     for v in built_in:

@@ -99,7 +99,7 @@ def kill_at_a_random_point(setting, seed, sig):
     assert not [w for w in workers if _alive(w)], "a worker outlived the sweep"
     if not finished and out.exists() and _files(out) != before:
         # killed after the swap (SIGKILL says nothing): then DIR must be the new, complete results
-        from cross_checks.results_dir import read_marker
+        from cross_checks.sweep.results_dir import read_marker
         listed = set(read_marker(out)["files"])
         assert listed == set(_files(out)) - {".rbcheck-results.json"}
         assert _rows(out) == _rows(setting["good"])

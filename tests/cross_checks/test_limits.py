@@ -5,11 +5,11 @@ import time
 import numpy as np
 import pytest
 
-from cross_checks import tolerances as tol
+from cross_checks.core import tolerances as tol
 from cross_checks.cli import main
-from cross_checks.limits import (MAX_STEPS_PER_RUN, TimeLimitExceeded, reference_cost_s, run_memory_bytes,
-                                 time_limit)
-from cross_checks.references import reference_solution
+from cross_checks.scenario.limits import MAX_STEPS_PER_RUN, reference_cost_s, run_memory_bytes
+from cross_checks.sweep.lifecycle import TimeLimitExceeded, time_limit
+from cross_checks.scenario.references import reference_solution
 from cross_checks.scenario import ScenarioError, catalog_names, load_scenario, parse_scenario
 
 BASE = """

@@ -4,9 +4,11 @@ import math
 import numpy as np
 import pytest
 
-from cross_checks import metrics as M
-from cross_checks import tolerances as tol
-from cross_checks.expectations import Expectation, expectation
+from cross_checks.analysis import metrics as M
+from cross_checks.analysis.convergence import compare_with_expectation, fit_convergence, measured_pre_asymptotic, pairwise_orders
+from cross_checks.core.quantities import error_summary, state_errors
+from cross_checks.core import tolerances as tol
+from cross_checks.analysis.expectations import Expectation, expectation
 from cross_checks.scenario import load_scenario, parse_scenario
 from reference_sim.quaternion import quat_from_axis_angle
 
@@ -25,34 +27,34 @@ def test_orientation_error_is_the_rotation_angle_between_the_pair(angle):
     dq = quat_from_axis_angle(np.array([1.0, 2.0, -1.0]), angle)
     from reference_sim.quaternion import quat_mul
     q = quat_mul(q_ref, dq)
-    e = M.state_errors(state(q=q)[None], state(q=q_ref)[None])["orientation"][0]
+    e = state_errors(state(q=q)[None], state(q=q_ref)[None])["orientation"][0]
     assert e == pytest.approx(angle, rel=1e-12, abs=1e-15)
 
 
 def test_orientation_error_is_sign_invariant():
     q = quat_from_axis_angle(np.array([0.0, 0.0, 1.0]), 0.4)
     q_ref = quat_from_axis_angle(np.array([1.0, 0.0, 0.0]), -1.1)
-    e_pos = M.state_errors(state(q=q)[None], state(q=q_ref)[None])["orientation"][0]
-    e_neg = M.state_errors(state(q=-q)[None], state(q=q_ref)[None])["orientation"][0]
+    e_pos = state_errors(state(q=q)[None], state(q=q_ref)[None])["orientation"][0]
+    e_neg = state_errors(state(q=-q)[None], state(q=q_ref)[None])["orientation"][0]
     assert e_pos == e_neg
-    assert M.state_errors(state(q=-q)[None], state(q=q)[None])["orientation"][0] == 0.0
+    assert state_errors(state(q=-q)[None], state(q=q)[None])["orientation"][0] == 0.0
 
 
 def test_orientation_error_normalises_non_unit_quaternions():
     q = quat_from_axis_angle(np.array([0.0, 1.0, 0.0]), 0.5)
-    e = M.state_errors(state(q=1.001 * q)[None], state()[None])["orientation"][0]
+    e = state_errors(state(q=1.001 * q)[None], state()[None])["orientation"][0]
     assert e == pytest.approx(0.5, rel=1e-12)
 
 
 def test_vector_errors_are_euclidean_norms():
     a = state(x=(1, 2, 3), v=(0, 0, 1), w=(0.5, 0, 0))
     b = state(x=(1, 2, 0), v=(3, 4, 1), w=(0, 0, 0))
-    e = M.state_errors(a[None], b[None])
+    e = state_errors(a[None], b[None])
     assert e["position"][0] == 3.0 and e["velocity"][0] == 5.0 and e["angular_velocity"][0] == 0.5
 
 
 def test_error_summary_final_and_max():
-    s = M.error_summary({"position": np.array([0.0, 3.0, 1.0])})
+    s = error_summary({"position": np.array([0.0, 3.0, 1.0])})
     assert s["position"] == {"final": 1.0, "max": 3.0}
 
 
@@ -125,7 +127,7 @@ def test_conserved_quantities_follow_the_forces():
 @pytest.mark.parametrize("p", [1, 2, 4])
 def test_fit_recovers_the_order_of_a_clean_ladder(p):
     e = [3.0 * h ** p for h in LADDER]
-    fit = M.fit_convergence(LADDER, e)
+    fit = fit_convergence(LADDER, e)
     assert fit.verdict == "converges"
     assert fit.order == pytest.approx(p, abs=1e-12)
     assert fit.pairwise_orders == pytest.approx([p] * 4, abs=1e-12)
@@ -133,20 +135,20 @@ def test_fit_recovers_the_order_of_a_clean_ladder(p):
 
 
 def test_pairwise_orders_are_log2_ratios_for_halving():
-    assert M.pairwise_orders([0.2, 0.1], [8.0, 2.0]) == [pytest.approx(2.0)]
-    assert M.pairwise_orders([0.2, 0.1], [8.0, 0.0]) == [None]
+    assert pairwise_orders([0.2, 0.1], [8.0, 2.0]) == [pytest.approx(2.0)]
+    assert pairwise_orders([0.2, 0.1], [8.0, 0.0]) == [None]
 
 
 def test_fit_sorts_the_ladder():
     e = [3.0 * h ** 2 for h in LADDER]
-    fit = M.fit_convergence(LADDER[::-1], e[::-1])
+    fit = fit_convergence(LADDER[::-1], e[::-1])
     assert fit.dt_s == LADDER and fit.order == pytest.approx(2.0)
 
 
 def test_points_at_the_roundoff_floor_are_dropped():
     floor = 1e-11
     e = [max(h ** 4, 5e-12) for h in LADDER]   # 1.6e-7 … 6.3e-10, then 3.9e-11 (4× floor) and round-off
-    fit = M.fit_convergence(LADDER, e, floors=[floor] * 5)
+    fit = fit_convergence(LADDER, e, floors=[floor] * 5)
     assert fit.verdict == "converges"
     assert fit.fitted == [True, True, True, False, False]
     assert fit.order == pytest.approx(4.0, abs=1e-9)
@@ -154,13 +156,13 @@ def test_points_at_the_roundoff_floor_are_dropped():
 
 
 def test_all_points_at_the_floor_is_at_roundoff():
-    fit = M.fit_convergence(LADDER, [1e-15, 3e-16, 0.0, 2e-15, 1e-15], floors=[1e-13] * 5)
+    fit = fit_convergence(LADDER, [1e-15, 3e-16, 0.0, 2e-15, 1e-15], floors=[1e-13] * 5)
     assert fit.verdict == "at_roundoff" and fit.order is None
 
 
 def test_a_plateau_does_not_converge():
     e = [3.0 + 1e-3 * h for h in LADDER]
-    fit = M.fit_convergence(LADDER, e)
+    fit = fit_convergence(LADDER, e)
     assert fit.verdict == "does_not_converge"
     assert abs(fit.order) < 0.01
 
@@ -168,25 +170,25 @@ def test_a_plateau_does_not_converge():
 def test_error_growing_again_below_the_best_step_does_not_converge():
     # frame-rate dependent physics: smallest error at one Δt, larger on both sides
     e = [0.3, 0.01, 0.2, 0.3, 0.35]
-    assert M.fit_convergence(LADDER, e).verdict == "does_not_converge"
+    assert fit_convergence(LADDER, e).verdict == "does_not_converge"
 
 
 def test_pre_asymptotic_coarsest_point_is_dropped():
     e = [3.0 * h ** 2 for h in LADDER]
     e[0] *= 40.0  # the coarsest point is far off the asymptotic line
-    fit = M.fit_convergence(LADDER, e)
+    fit = fit_convergence(LADDER, e)
     assert fit.fitted[0] is False
     assert fit.order == pytest.approx(2.0, abs=1e-12)
 
 
 def test_diverged_points_are_left_out_and_all_diverged_is_diverged():
     e = [math.nan] + [h for h in LADDER[1:]]
-    fit = M.fit_convergence(LADDER, e, statuses=["diverged", "ok", "ok", "ok", "ok"])
+    fit = fit_convergence(LADDER, e, statuses=["diverged", "ok", "ok", "ok", "ok"])
     assert fit.verdict == "converges" and fit.order == pytest.approx(1.0)
     assert "diverged" in fit.note
-    fit = M.fit_convergence(LADDER, [math.nan] * 4 + [1e-3], statuses=["diverged"] * 4 + ["ok"])
+    fit = fit_convergence(LADDER, [math.nan] * 4 + [1e-3], statuses=["diverged"] * 4 + ["ok"])
     assert fit.verdict == "diverged"
-    fit = M.fit_convergence(LADDER, [math.nan] * 5, statuses=["failed"] * 5)
+    fit = fit_convergence(LADDER, [math.nan] * 5, statuses=["failed"] * 5)
     assert fit.verdict == "failed"
 
 
@@ -195,7 +197,7 @@ def test_a_point_less_than_ten_times_above_its_floor_is_not_fitted():
     # it bent the order to 3.4
     e = [5.6e-7, 3.4e-8, 2.4e-9, 3.2e-10, 9.8e-11]
     floors = [7.8e-11, 1.0e-10, 1.4e-10, 1.9e-10, 2.6e-10]
-    fit = M.fit_convergence([0.008, 0.004, 0.002, 0.001, 0.0005], e, floors)
+    fit = fit_convergence([0.008, 0.004, 0.002, 0.001, 0.0005], e, floors)
     assert fit.fitted == [True, True, True, False, False] and fit.order == pytest.approx(3.93, abs=0.01)
 
 
@@ -203,15 +205,15 @@ def test_one_resolved_point_and_one_above_the_floor_give_a_lower_bound():
     # mujoco:rk4 on particle_body (ω): only the coarsest error is 10× above its floor, the next 9×
     e = [7.0e-11, 4.4e-12, 2.8e-13, 2.0e-14, 4.5e-14]
     floors = [3.8e-13, 4.9e-13, 6.4e-13, 8.6e-13, 1.2e-12]
-    fit = M.fit_convergence(LADDER, e, floors)
+    fit = fit_convergence(LADDER, e, floors)
     assert fit.verdict == "converges" and fit.order_is_lower_bound
     assert fit.fitted == [True, True, False, False, False] and fit.order == pytest.approx(3.99, abs=0.01)
     rk4 = Expectation("converges", 4.0, "")
-    assert M.compare_with_expectation("converges", 3.99, rk4, True)[0] is True
-    assert M.compare_with_expectation("converges", 2.0, rk4, True)[0] is None      # inconclusive, not wrong
-    assert M.compare_with_expectation("converges", 2.0, rk4, False)[0] is False
+    assert compare_with_expectation("converges", 3.99, rk4, True)[0] is True
+    assert compare_with_expectation("converges", 2.0, rk4, True)[0] is None      # inconclusive, not wrong
+    assert compare_with_expectation("converges", 2.0, rk4, False)[0] is False
     # with no resolved point at all the errors are round-off, whatever they do
-    assert M.fit_convergence(LADDER, [3e-13, 1e-12, 5e-13, 2e-12, 9e-13], [2e-13] * 5).verdict == "at_roundoff"
+    assert fit_convergence(LADDER, [3e-13, 1e-12, 5e-13, 2e-12, 9e-13], [2e-13] * 5).verdict == "at_roundoff"
 
 
 def test_measured_floor_adds_the_reference_error_and_the_amplified_roundoff_of_the_run():
@@ -226,14 +228,14 @@ def test_measured_floor_adds_the_reference_error_and_the_amplified_roundoff_of_t
 def test_a_low_order_whose_finest_pair_reaches_the_expected_one_is_measured_pre_asymptotic():
     # expmap_gyro on a particle body on a spring: 0.76, 0.49, 0.75, 0.88 … and 0.94, 0.97 on finer steps
     e = [0.7556, 0.4523, 0.3184, 0.1896, 0.1033]
-    fit = M.fit_convergence(LADDER, e)
+    fit = fit_convergence(LADDER, e)
     assert fit.verdict == "converges" and fit.order < 1.0 - tol.SWEEP_ORDER_TOL
-    assert "finest pair" in M.measured_pre_asymptotic(fit, 1.0)
+    assert "finest pair" in measured_pre_asymptotic(fit, 1.0)
     # a scheme of the wrong order shows it on its finest pair too: not excused
-    wrong = M.fit_convergence(LADDER, [h ** 2 for h in LADDER])
-    assert M.measured_pre_asymptotic(wrong, 4.0) == ""
-    stuck = M.fit_convergence(LADDER, [0.76, 0.5, 0.36, 0.26, 0.19])  # pairwise orders ~0.5, not reaching 1
-    assert M.measured_pre_asymptotic(stuck, 1.0) == ""
+    wrong = fit_convergence(LADDER, [h ** 2 for h in LADDER])
+    assert measured_pre_asymptotic(wrong, 4.0) == ""
+    stuck = fit_convergence(LADDER, [0.76, 0.5, 0.36, 0.26, 0.19])  # pairwise orders ~0.5, not reaching 1
+    assert measured_pre_asymptotic(stuck, 1.0) == ""
 
 
 def test_roundoff_floor_grows_with_the_steps_and_the_reference():
@@ -248,29 +250,29 @@ def test_roundoff_floor_grows_with_the_steps_and_the_reference():
 
 def test_comparison_with_expectation():
     conv = expectation(load_scenario("projectile"), "reference:midpoint", "position")
-    assert M.compare_with_expectation("converges", 2.05, conv)[0] is True
-    assert M.compare_with_expectation("converges", 1.0, conv)[0] is False
-    assert M.compare_with_expectation("converges", 3.0, conv) == (True, "order 3.00, above the nominal 2")
-    assert M.compare_with_expectation("at_roundoff", None, conv)[0] is True
-    assert M.compare_with_expectation("does_not_converge", 0.0, conv)[0] is False
-    assert M.compare_with_expectation("diverged", None, conv)[0] is False
+    assert compare_with_expectation("converges", 2.05, conv)[0] is True
+    assert compare_with_expectation("converges", 1.0, conv)[0] is False
+    assert compare_with_expectation("converges", 3.0, conv) == (True, "order 3.00, above the nominal 2")
+    assert compare_with_expectation("at_roundoff", None, conv)[0] is True
+    assert compare_with_expectation("does_not_converge", 0.0, conv)[0] is False
+    assert compare_with_expectation("diverged", None, conv)[0] is False
     nc = expectation(load_scenario("tennis_racket"), "reference:course", "orientation")
-    assert M.compare_with_expectation("does_not_converge", 0.0, nc)[0] is True
-    assert M.compare_with_expectation("converges", 1.0, nc)[0] is False
+    assert compare_with_expectation("does_not_converge", 0.0, nc)[0] is True
+    assert compare_with_expectation("converges", 1.0, nc)[0] is False
 
 
 def test_one_exact_point_inside_a_non_convergent_ladder_is_not_roundoff():
     # a frame-rate dependent decay (the course's γ applied per step at every Δt): at the scenario's own
     # Δt the course matches the reference exactly, nowhere else
     e = [0.26, 6e-17, 0.13, 0.149, 0.1498]
-    fit = M.fit_convergence(LADDER, e, floors=[1e-13] * 5)
+    fit = fit_convergence(LADDER, e, floors=[1e-13] * 5)
     assert fit.verdict == "does_not_converge"
 
 
 def test_error_growing_again_at_round_off_level_is_amplified_roundoff():
     # MuJoCo RK4 on tumbling_box (orientation, rad): order 4 until ~1e-10, then round-off grows
     e = [2.0e-8, 1.3e-9, 1.4e-10, 3.26e-11, 1.49e-10]
-    fit = M.fit_convergence(LADDER[1:] + [LADDER[-1] / 2], e, floors=[1e-12] * 5)
+    fit = fit_convergence(LADDER[1:] + [LADDER[-1] / 2], e, floors=[1e-12] * 5)
     assert fit.verdict == "converges"
     assert fit.fitted == [True, True, False, False, False]
     assert fit.order == pytest.approx(3.94, abs=0.01)
@@ -279,5 +281,5 @@ def test_error_growing_again_at_round_off_level_is_amplified_roundoff():
 
 def test_rising_pairwise_orders_are_called_pre_asymptotic():
     e = [2.35e-1, 1.91e-1, 1.32e-1, 8.0e-2, 4.43e-2]
-    fit = M.fit_convergence(LADDER, e)
+    fit = fit_convergence(LADDER, e)
     assert "pre-asymptotic" in fit.note

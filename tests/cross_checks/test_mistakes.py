@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from cross_checks.engines import get_adapter
-from cross_checks.mistakes import BASES, CATALOG, Knobs, applicable_mistakes, course_step
+from cross_checks.gates.check.mistakes import BASES, CATALOG, Knobs, applicable_mistakes, course_step
 from cross_checks.scenario import load_scenario
 from reference_sim.quaternion import matrix_from_quat, quat_conj, quat_log, quat_mul, quat_normalize
 from reference_sim.state import Q, V, W, X

@@ -6,7 +6,7 @@ import math
 import pytest
 
 from cross_checks.cli import main
-from cross_checks.resolved import resolved_scenario
+from cross_checks.scenario.resolved import resolved_scenario
 from cross_checks.scenario import parse_scenario
 
 H = math.sqrt(0.5)

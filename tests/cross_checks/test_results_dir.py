@@ -9,9 +9,9 @@ import hashlib
 import pytest
 
 from cross_checks.cli import main
-from cross_checks.measure import SCHEMA_VERSION
-from cross_checks.results_dir import (MARKER, ResultsDirError, check_output_dir, inside, owned_name, read_marker,
-                                      remove_stale_siblings, replace_dir, safe_file_stem)
+from cross_checks.sweep.jobs import SCHEMA_VERSION
+from cross_checks.sweep.results_dir import (MARKER, ResultsDirError, check_output_dir, inside, owned_name,
+                                            read_marker, remove_stale_siblings, replace_dir, safe_file_stem)
 
 TINY = """
 name = "tiny"

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from cross_checks.references import analytic_available
+from cross_checks.scenario.references import analytic_available
 from cross_checks.scenario import ScenarioError, catalog_names, load_scenario, parse_scenario
 from reference_sim.quaternion import geodesic_angle, quat_from_euler_zxy, rotate
 

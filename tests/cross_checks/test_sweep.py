@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cross_checks import sweep as sweep_mod
+from cross_checks.sweep import run as sweep_mod
 from cross_checks.cli import main
 from cross_checks.sweep import RESULT_COLUMNS, run_sweep
 
@@ -303,7 +303,7 @@ rest_length = 0.5
 def test_rk4_order_is_fitted_and_checked_wherever_its_errors_are_above_the_measured_floor(tmp_path, monkeypatch):
     # RK4 errors of 1e-9 … 1e-12 on a DOP853 reference: the old blanket floor (1e-10 × scale) called them
     # round-off; the measured floor (the reference against a 10× looser DOP853 solution) is far below.
-    from cross_checks import metrics as M
+    from cross_checks.analysis import metrics as M
     from cross_checks.cli import _gate_failures
     from cross_checks.scenario import parse_scenario
     monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "cache"))

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from cross_checks.trajectory import COLUMNS, Trajectory, TrajectoryError
+from cross_checks.core.trajectory import COLUMNS, Trajectory, TrajectoryError
 
 ROW0 = dict(zip(COLUMNS, [0, 1, 2, 3, 4, 5, 6, 1, 0, 0, 0, 7, 8, 9]))
 ROW1 = dict(ROW0, t=0.5, x=1.5)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from cross_checks.trajectory import COLUMNS, TrajectoryError, read_columns
+from cross_checks.core.trajectory import COLUMNS, TrajectoryError, read_columns
 
 CELLS = st.one_of(
     st.floats(allow_nan=True, allow_infinity=True).map(repr),

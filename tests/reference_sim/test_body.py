@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from cross_checks.tolerances import QUAT_ALGEBRA
+from cross_checks.core.tolerances import QUAT_ALGEBRA
 from reference_sim.body import RigidBody, check_inertia, inertia_from_particles
 from reference_sim.forces import ForceModel
 from reference_sim.quaternion import matrix_from_quat, quat_normalize

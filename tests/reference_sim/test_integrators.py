@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from cross_checks.tolerances import COURSE_NONCONVERGENCE_MIN_RAD, ORDER_TOL, READABLE_VS_BATCHED
+from cross_checks.core.tolerances import COURSE_NONCONVERGENCE_MIN_RAD, ORDER_TOL, READABLE_VS_BATCHED
 from reference_sim.body import RigidBody
 from reference_sim.forces import ForceModel, PointForce, Spring, Torque
 from reference_sim.ground_truth import ground_truth
@@ -146,7 +146,7 @@ def test_euler_local_error_is_second_order(variant):
 
 
 def test_course_does_not_converge_on_tennis_racket_but_gyro_variants_do():
-    from cross_checks.references import reference_solution
+    from cross_checks.scenario.references import reference_solution
     from cross_checks.scenario import load_scenario
     sc = load_scenario("tennis_racket")
     y_ref, _ = reference_solution(sc, np.array([0.0, sc.duration_s]))

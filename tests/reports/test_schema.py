@@ -4,8 +4,8 @@ from pathlib import Path
 
 import pytest
 
-from cross_checks.measure import SCHEMA_VERSION
-from reports.schema import KNOWN_SCHEMA_VERSION, SchemaError, check_summary
+from cross_checks.sweep.jobs import SCHEMA_VERSION
+from cross_checks.sweep.schema import KNOWN_SCHEMA_VERSION, SchemaError, check_summary
 
 BASELINE = json.loads((Path(__file__).resolve().parents[2] / "baselines" / "default" / "summary.json").read_text())
 

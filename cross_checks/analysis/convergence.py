@@ -1,0 +1,219 @@
+"""Convergence orders over a Δt ladder: pairwise orders, the least-squares fit above the measured
+floors, and the comparison of a fitted verdict with an expectation (cross_checks.analysis.expectations).
+
+Orders are global orders of the error at a fixed final time, ``e(Δt) ≈ C Δt^p``; pairwise orders are
+``log(e_i / e_{i+1}) / log(Δt_i / Δt_{i+1})`` (``log2(e(h) / e(h/2))`` for a halving ladder).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from cross_checks.core import tolerances as tol
+
+def pairwise_orders(dt_s, errors) -> list:
+    """``log(e_i / e_{i+1}) / log(Δt_i / Δt_{i+1})`` for consecutive ladder points (dt descending);
+    ``log2(e(h) / e(h/2))`` for a halving ladder. None where an error is zero or not finite."""
+    out = []
+    for i in range(len(dt_s) - 1):
+        e0, e1 = errors[i], errors[i + 1]
+        if e0 is None or e1 is None or not (np.isfinite(e0) and np.isfinite(e1)) or e0 <= 0 or e1 <= 0:
+            out.append(None)
+        else:
+            out.append(float(math.log(e0 / e1) / math.log(dt_s[i] / dt_s[i + 1])))
+    return out
+
+
+@dataclass
+class ConvergenceFit:
+    """Result of :func:`fit_convergence` (ladder sorted by Δt descending).
+
+    order : least-squares slope over the fitted points, or None.
+    pairwise_orders : between consecutive points (None where undefined).
+    fitted : which points the slope used.
+    verdict : "converges", "does_not_converge", "at_roundoff", "diverged", "failed" or "insufficient".
+    note : why points were dropped, in words ("" when none were).
+    order_is_lower_bound : the order came from points fewer than RESOLVED_ABOVE_FLOOR times above their
+        floors (fewer than two were): round-off can only add to the finer errors, so the true order is
+        at least this.
+    """
+
+    dt_s: list
+    errors: list
+    order: float | None
+    pairwise_orders: list
+    fitted: list
+    verdict: str
+    note: str = ""
+    floors: list = field(default_factory=list)
+    order_is_lower_bound: bool = False
+
+
+def _lsq_slope(x, y):
+    x = np.asarray(x, float)
+    y = np.asarray(y, float)
+    xm = x - x.mean()
+    return float(np.sum(xm * (y - y.mean())) / np.sum(xm * xm))
+
+
+def fit_convergence(dt_s, errors, floors=None, statuses=None) -> ConvergenceFit:
+    """Fit the convergence order of final errors over a Δt ladder and give a verdict.
+
+    Parameters
+    ----------
+    dt_s : (K,) steps, s (any order; sorted descending here).
+    errors : (K,) final errors (NaN for runs that produced none).
+    floors : (K,) round-off floor of each point (see :func:`roundoff_floor`); 0 when omitted.
+    statuses : (K,) run status per point ("ok", "diverged", "failed"); "ok" when omitted.
+
+    Verdicts: fewer than two finished runs -> "diverged" (when any diverged) or "failed"/"insufficient";
+    fewer than two points resolved above their floor -> "at_roundoff" (the scheme is exact here); else the
+    least-squares order over the asymptotic points: "converges" when it is ≥ CONVERGES_MIN_ORDER and
+    the error shrinks at every halving, otherwise "does_not_converge".
+    """
+    dt = np.asarray(dt_s, dtype=float)
+    e = np.asarray(errors, dtype=float)
+    fl = np.zeros_like(e) if floors is None else np.asarray(floors, dtype=float)
+    st = np.array(["ok"] * len(dt) if statuses is None else list(statuses), dtype=object)
+    order_idx = np.argsort(-dt, kind="stable")
+    dt, e, fl, st = dt[order_idx], e[order_idx], fl[order_idx], st[order_idx]
+    K = len(dt)
+    pw = pairwise_orders(dt.tolist(), e.tolist())
+    fitted = [False] * K
+    res = dict(dt_s=dt.tolist(), errors=[float(v) for v in e], pairwise_orders=pw, floors=fl.tolist())
+
+    ok = np.array([s == "ok" for s in st]) & np.isfinite(e)
+    notes = []
+    bad = [f"Δt = {dt[i]:g} s {st[i]}" for i in range(K) if not ok[i]]
+    if bad:
+        notes.append("; ".join(bad))
+    if ok.sum() < 2:
+        verdict = "diverged" if any(s == "diverged" for s in st) else ("failed" if any(s == "failed" for s in st)
+                                                                       else "insufficient")
+        return ConvergenceFit(order=None, fitted=fitted, verdict=verdict, note="; ".join(notes), **res)
+
+    idx_ok = [int(i) for i in np.flatnonzero(ok)]
+    # (a) Round-off at the fine end: the first point not resolved above its floor (≤ RESOLVED_ABOVE_FLOOR
+    #     × floor: round-off may be a tenth of it) and every finer one, provided none of the finer ones is
+    #     resolved (else the low point is an accident of the ladder — e.g. the one Δt where frame-rate
+    #     dependent physics happens to match).
+    above = list(idx_ok)
+    for k, i in enumerate(idx_ok):
+        if all(e[j] <= tol.RESOLVED_ABOVE_FLOOR * fl[j] for j in idx_ok[k:]):
+            above = idx_ok[:k]
+            notes.append(f"{len(idx_ok) - k} point(s) within {tol.RESOLVED_ABOVE_FLOOR:g}× the round-off floor "
+                         f"dropped (Δt ≤ {dt[i]:g} s)")
+            break
+    # (b) Round-off amplified by the dynamics: the error grows again at the fine end while still tiny
+    #     (≤ AMPLIFIED_ROUNDOFF_FACTOR × floor); drop the fine points within ROUNDOFF_NOISE_FACTOR of
+    #     the smallest error.
+    if len(above) >= 3 and e[above[-1]] > e[above[-2]]:
+        m = min(e[i] for i in above)
+        i_min = min(above, key=lambda i: e[i])
+        finer = [i for i in above if i > i_min]
+        if m <= tol.AMPLIFIED_ROUNDOFF_FACTOR * fl[i_min] and all(e[i] <= tol.ROUNDOFF_NOISE_FACTOR * m for i in finer):
+            keep = list(above)
+            while keep and e[keep[-1]] <= tol.ROUNDOFF_NOISE_FACTOR * m:
+                keep.pop()
+            notes.append(f"errors stop falling at {m:.2g} (Δt = {dt[i_min]:g} s) and grow again: round-off amplified "
+                         f"by the dynamics; {len(above) - len(keep)} fine point(s) dropped")
+            above = keep
+    lower_bound = False
+    if len(above) < 2:
+        # Fewer than two resolved points: if the coarsest is resolved, fit it with the finer ones above the
+        # floor itself; the order is then a lower bound (what round-off adds to a finer point can only
+        # lower it). With no resolved point at all, the errors are round-off whatever they do.
+        cand = list(idx_ok)
+        while cand and e[cand[-1]] <= fl[cand[-1]]:
+            cand.pop()
+        if len(above) == 0 or len(cand) < 2 or len(cand) <= len(above):
+            return ConvergenceFit(order=None, fitted=fitted, verdict="at_roundoff", note="; ".join(notes), **res)
+        above, lower_bound = cand, True
+        notes.append(f"fewer than two errors {tol.RESOLVED_ABOVE_FLOOR:g}× above their floors: fitted on the "
+                     f"{len(cand)} above it, the order is a lower bound")
+
+    use = list(above)
+    # A pre-asymptotic coarsest point: its pairwise order is far from that of the finer pairs.
+    if len(use) >= 4:
+        pw_use = pairwise_orders(dt[use].tolist(), e[use].tolist())
+        rest = [p for p in pw_use[1:] if p is not None]
+        if pw_use[0] is not None and rest and all(p > 0 for p in rest) \
+                and abs(pw_use[0] - float(np.median(rest))) > tol.PRE_ASYMPTOTIC_ORDER_DEV:
+            notes.append(f"coarsest Δt = {dt[use[0]]:g} s pre-asymptotic (pairwise order {pw_use[0]:.2f}), dropped")
+            use = use[1:]
+    order = _lsq_slope(np.log(dt[use]), np.log(e[use]))
+    for i in use:
+        fitted[i] = True
+    pw_use = pairwise_orders(dt[use].tolist(), e[use].tolist())
+    shrinking = all(p is not None and p > 0 for p in pw_use)
+    verdict = "converges" if order >= tol.CONVERGES_MIN_ORDER and shrinking else "does_not_converge"
+    if (len(pw_use) >= 2 and all(p is not None for p in pw_use) and pw_use[-1] - pw_use[0] >= 0.2
+            and all(b > a - 0.05 for a, b in zip(pw_use, pw_use[1:]))):
+        notes.append(f"pairwise orders still rising towards the finest Δt ({pw_use[0]:.2f} → {pw_use[-1]:.2f}): "
+                     "pre-asymptotic on this ladder")
+    return ConvergenceFit(order=order, fitted=fitted, verdict=verdict, note="; ".join(notes),
+                          order_is_lower_bound=lower_bound, **res)
+
+
+def measured_pre_asymptotic(fit: ConvergenceFit, expected_order) -> str:
+    """Why a converging fit whose order is too LOW is pre-asymptotic on its ladder, from the errors
+    themselves ("" when it is not): the errors shrink at every halving, the finest fitted pair already
+    shows the expected order (within SWEEP_ORDER_TOL) and the coarser pairs approach it. A scheme of
+    the wrong order shows that order on its finest pair too, so it is not excused."""
+    if fit.verdict != "converges" or fit.order_is_lower_bound or expected_order is None or fit.order is None:
+        return ""
+    if fit.order >= expected_order - tol.SWEEP_ORDER_TOL:
+        return ""
+    idx = [i for i, f in enumerate(fit.fitted) if f]
+    pw = pairwise_orders([fit.dt_s[i] for i in idx], [fit.errors[i] for i in idx])
+    if len(pw) < 2 or any(p is None for p in pw):
+        return ""
+    first, last = abs(pw[0] - expected_order), abs(pw[-1] - expected_order)
+    if last <= tol.SWEEP_ORDER_TOL and last < first:
+        return (f"pre-asymptotic (measured): fitted order {fit.order:.2f} over the ladder, but the finest pair "
+                f"already shows {pw[-1]:.2f} (expected {expected_order:g}) and the coarser pairs approach it "
+                f"({', '.join(f'{p:.2f}' for p in pw)}); no claim on this ladder")
+    return ""
+
+
+def compare_with_expectation(verdict: str, order, expected, order_is_lower_bound: bool = False) -> tuple:
+    """``(matches, phrase)``: whether an observed verdict/order agrees with an
+    :class:`~cross_checks.expectations.Expectation`; ``matches`` is None when nothing is expected (or
+    the expectation makes no claim on this ladder, or the order is only a lower bound below it).
+
+    A scheme that is exact to round-off, or converges faster than its nominal order, agrees with
+    "converges"; a lower order (beyond SWEEP_ORDER_TOL), a plateau, a divergence or a failure do not.
+    """
+    ev, eo = expected.verdict, expected.order
+    if ev is None:
+        return None, "no expectation"
+    if ev == "pre_asymptotic":
+        seen = f"{verdict.replace('_', ' ')}" + (f", fitted order {order:.2f}" if order is not None else "")
+        return None, f"no claim on this ladder (pre-asymptotic; {seen})"
+    if verdict == "at_roundoff":
+        return (ev == "converges"), ("exact to round-off" if ev == "converges"
+                                     else "exact to round-off although non-convergence was expected")
+    if verdict == "converges":
+        if ev != "converges":
+            return False, f"converges (order {order:.2f}) although non-convergence was expected"
+        if eo is None:
+            return True, f"converges (order {order:.2f})"
+        if order < eo - tol.SWEEP_ORDER_TOL:
+            if order_is_lower_bound:
+                return None, (f"order ≥ {order:.2f} only (the finer errors are near the round-off floor), "
+                              f"expected {eo:g}: inconclusive")
+            return False, f"order {order:.2f}, expected {eo:g}"
+        if order > eo + tol.SWEEP_ORDER_TOL:
+            return True, f"order {order:.2f}, above the nominal {eo:g}"
+        return True, f"order {order:.2f} as expected ({eo:g})"
+    if verdict == "does_not_converge":
+        if ev == "does_not_converge":
+            return True, "does not converge, as expected"
+        if order_is_lower_bound:
+            return None, "the finer errors are near the round-off floor: inconclusive"
+        return False, ("does not converge" + (f" (fitted order {order:.2f})" if order is not None else "")
+                       + (f", expected order {eo:g}" if eo is not None else ""))
+    return False, verdict.replace("_", " ")
+

@@ -1,0 +1,356 @@
+"""What each engine variant is expected to do on each scenario: the ONE place for expected orders.
+
+A sweep fits a convergence order per (scenario, variant, quantity) and compares it with
+:func:`expectation`, decided from the variant's traits (:func:`traits`, one table keyed by variant,
+with a documented default for a variant it knows nothing about) and the scenario's PHYSICS
+(:mod:`cross_checks.physics`: rates, separatrix proximity and error amplification measured on its
+reference) — never from a scenario's name:
+
+* ``does_not_converge``: the variant lacks a term the motion needs (the course's update has no
+  gyroscopic torque, which matters on an anisotropic body off its principal axes).
+* ``pre_asymptotic`` — no claim on this ladder: a first-order variant that does not preserve
+  amplitudes would show a fitted order more than AMPLITUDE_MODEL_ORDER_DEV away from 1 on this ladder
+  from its amplitude drift alone (:func:`physics.amplitude_model_order`).
+* ``converges`` at the nominal order otherwise.
+
+The reason strings end up, verbatim, in summary.json and in the report's findings, so they are
+written as sentences for users. Orders are global orders of the error at a fixed final time,
+``e(Δt) ≈ C Δt^p``. In the one-step mode (each step restarted from the reference state) the local
+error of an order-p scheme is O(Δt^{p+1}), whatever its amplitude drift does over a run.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from reference_sim.integrators import EXPECTED_ORDER as _REFERENCE_ORDER
+from cross_checks.core.quantities import QUANTITIES
+
+__all__ = ["energy_drift_bound", "characteristic_rate_sq", "QUANTITIES", "NOMINAL_ORDER", "VARIANT_TRAITS",
+           "DEFAULT_TRAITS", "Traits", "traits", "EQUIVALENT_PAIRS", "Expectation", "expectation", "expected_order",
+           "nominal_order", "gyroscopic_term_matters", "rotation_drives_translation", "translation_drives_rotation"]
+
+
+#: Nominal global order per ENGINE:VARIANT, the same for every quantity.
+NOMINAL_ORDER = {
+    # reference:* — reference_sim.integrators.EXPECTED_ORDER is the single source for the NumPy
+    # schemes (its own tests prove them): course / course_gyro / expmap_gyro are symplectic Euler
+    # (one force evaluation, O(Δt²) local error -> 1); explicit and implicit Euler: 1; mid-point and
+    # leapfrog (Störmer–Verlet): 2; classical RK4: 4.
+    **{f"reference:{v}": float(p) for v, p in _REFERENCE_ORDER.items()},
+    # MuJoCo Euler is semi-implicit Euler + exp-map quaternion = reference:expmap_gyro: 1.
+    "mujoco:euler": 1.0,
+    # MuJoCo RK4: classical RK4 on (qpos, qvel); forces re-evaluated at every stage by the adapter: 4.
+    "mujoco:rk4": 4.0,
+    # MuJoCo implicit(fast): velocity-implicit Euler, one linearised solve per step -> 1.
+    "mujoco:implicit": 1.0,
+    "mujoco:implicitfast": 1.0,
+    # PyBullet: semi-implicit Euler in both modes (multibody explicit gyro, maximal implicit gyro): 1.
+    "pybullet:multibody": 1.0,
+    "pybullet:maximal": 1.0,
+}
+
+
+@dataclass(frozen=True)
+class Traits:
+    """What a variant's step does besides its order (the order itself: :func:`nominal_order`).
+
+    gyroscopic_term : whether the rotation update has the gyroscopic torque −ω × (I ω).
+    translation_drift : how a first-order step treats the amplitude of a translational oscillation
+        (a spring): 0 keeps it (symplectic Euler: bounded energy error), +1 grows it (explicit), −1
+        damps it (implicit), None unknown (both are considered).
+    rotation_drift : how a first-order step treats the rotation's energy and momentum:
+        "none" — keeps them (no gyroscopic term: ω is constant without torques);
+        "body" — a body-frame Euler step of Euler's equations (explicit or implicit gyroscopic term)
+          before the attitude update: energy and |L|² drift TOGETHER (measured: equal relative drifts,
+          so the separatrix distance is kept), i.e. ω → (1 + r) ω, a time rescaling of the same motion —
+          a phase error, at the rate of the polhode (the body-frame ω);
+        "whole_state" — one step of the whole state in world axes: energy and momentum drift
+          independently, which moves the body to a neighbouring motion, at the rate at which ω_W
+          turns; that perturbation grows like any other (the measured amplification).
+    rotation_sign : +1 the rotational energy grows (an explicit gyroscopic term), −1 it decays (an
+        implicit one), 0 none, None unknown (both are considered).
+    """
+
+    gyroscopic_term: bool = True
+    translation_drift: int | None = 0
+    rotation_drift: str = "none"
+    rotation_sign: int | None = 0
+
+
+_SYMPLECTIC_EULER_EXPLICIT_GYRO = Traits(rotation_drift="body", rotation_sign=+1)
+_SYMPLECTIC_EULER_IMPLICIT_GYRO = Traits(rotation_drift="body", rotation_sign=-1)
+
+#: Traits per ENGINE:VARIANT, the one table (tests/cross_checks/test_expectations.py pins each sign on
+#: the engines themselves, and that the body-frame steps keep the separatrix distance).
+VARIANT_TRAITS = {
+    "reference:course": Traits(gyroscopic_term=False),
+    "reference:course_gyro": _SYMPLECTIC_EULER_EXPLICIT_GYRO,
+    "reference:expmap_gyro": _SYMPLECTIC_EULER_EXPLICIT_GYRO,
+    # whole-state Euler in world axes: an oscillator's amplitude grows (explicit) / damps (implicit), but
+    # the rotational energy does the opposite (measured on every tumbling body of the catalog: explicit
+    # Euler loses 2E and |L|², implicit gains them — the attitude and ω_W steps are coupled through I_W)
+    "reference:explicit_euler": Traits(translation_drift=+1, rotation_drift="whole_state", rotation_sign=-1),
+    "reference:implicit_euler": Traits(translation_drift=-1, rotation_drift="whole_state", rotation_sign=+1),
+    # order ≥ 2: the amplitude error of mid-point and RK4 is of order p + 1 (|R(iωΔt)|² = 1 + O((ωΔt)^{p+2})),
+    # leapfrog is symplectic: no amplitude rule applies
+    "reference:midpoint": Traits(),
+    "reference:leapfrog": Traits(),
+    "reference:rk4": Traits(),
+    "mujoco:euler": _SYMPLECTIC_EULER_EXPLICIT_GYRO,
+    "mujoco:rk4": Traits(),
+    "mujoco:implicit": _SYMPLECTIC_EULER_IMPLICIT_GYRO,
+    "mujoco:implicitfast": _SYMPLECTIC_EULER_IMPLICIT_GYRO,
+    "pybullet:multibody": _SYMPLECTIC_EULER_EXPLICIT_GYRO,
+    "pybullet:maximal": _SYMPLECTIC_EULER_IMPLICIT_GYRO,
+}
+
+#: A variant this table does not know (e.g. a user engine with only its declared order): assumed to
+#: have the gyroscopic term (a correct engine; if it lacks it, the sweep says so), and, if it is first
+#: order, to drift in either direction in both translation and rotation, whole-state style — the most
+#: cautious choice: no order is claimed wherever any first-order scheme could be pre-asymptotic.
+DEFAULT_TRAITS = Traits(gyroscopic_term=True, translation_drift=None, rotation_drift="whole_state", rotation_sign=None)
+
+
+def traits(variant: str) -> Traits:
+    """The traits of ``ENGINE:VARIANT`` (DEFAULT_TRAITS for one this module does not know)."""
+    return VARIANT_TRAITS.get(variant, DEFAULT_TRAITS)
+
+
+#: Pairs that implement the same arithmetic and must agree to round-off (tolerances.SAME_SCHEME_REL).
+EQUIVALENT_PAIRS = (
+    ("reference:expmap_gyro", "mujoco:euler",
+     "MuJoCo's Euler is semi-implicit Euler with an explicit gyroscopic term and the exp-map "
+     "quaternion update, which is what reference:expmap_gyro implements (ENGINE_FACTS.md)"),
+    ("mujoco:implicit", "mujoco:implicitfast",
+     "for a single free body without joints or contacts the two implicit integrators solve the same "
+     "linear system (ENGINE_FACTS.md: 1e-13 apart)"),
+    ("mujoco:euler", "pybullet:multibody",
+     "PyBullet's multibody mode with damping off integrates a free body exactly like MuJoCo Euler "
+     "(ENGINE_FACTS.md: 2.3e-14 rad apart)"),
+)
+
+_TRANSLATION = ("position", "velocity")
+_ROTATION = ("orientation", "angular_velocity")
+
+
+@dataclass(frozen=True)
+class Expectation:
+    """What a (scenario, variant, quantity) should show.
+
+    verdict : "converges", "does_not_converge", "pre_asymptotic" (no claim on this ladder), or None
+        (no expectation; one-step mode only).
+    order : expected order (float) when it converges, else None.
+    reason : one sentence saying why (for a non-convergence: the physics the variant misses).
+    """
+
+    verdict: str | None
+    order: float | None
+    reason: str
+
+    def as_dict(self) -> dict:
+        return {"expected_verdict": self.verdict, "expected_order": self.order, "reason": self.reason}
+
+
+def nominal_order(variant: str) -> float | None:
+    """The nominal global order of ``ENGINE:VARIANT``: NOMINAL_ORDER, else the order a user engine
+    declares (engine file or entry-point adapter); None for a name nobody declares."""
+    p = NOMINAL_ORDER.get(variant)
+    if p is None:  # user engines declare their own order, which their verdicts then check
+        from cross_checks.engines import declared_order
+        p = declared_order(variant)
+    return p
+
+
+def _isotropic(inertia_B) -> bool:
+    m = np.linalg.eigvalsh(np.asarray(inertia_B, float))
+    return bool(m[-1] - m[0] <= 1e-12 * m[-1])
+
+
+def gyroscopic_term_matters(scenario) -> bool:
+    """True when ω × (I ω) is non-zero somewhere along the true motion.
+
+    It vanishes identically only for an isotropic inertia, or for a torque-free body whose initial
+    ω lies along a principal axis (then ω stays there). Any torque on an anisotropic body moves ω off
+    the principal axes sooner or later.
+    """
+    p = scenario.problem
+    if _isotropic(p.body.inertia_B):
+        return False
+    if not p.forces.torque_free:
+        return True
+    return not p.body.gyroscopic_torque_vanishes(p.initial.q_WB, p.initial.w_W)
+
+
+def rotation_drives_translation(scenario) -> bool:
+    """True when the force on the COM depends on the orientation (a spring attached off the COM, a
+    body-frame force), so an orientation error becomes a position error."""
+    fm = scenario.problem.forces
+    return bool(any(np.any(s.attach_B != 0) for s in fm.springs)
+                or any(pf.frame == "body" for pf in fm.point_forces))
+
+
+def translation_drives_rotation(scenario) -> bool:
+    """True when the torque depends on the position (a spring attached off the COM)."""
+    return bool(any(np.any(s.attach_B != 0) for s in scenario.problem.forces.springs))
+
+
+def characteristic_rate_sq(scenario) -> float:
+    """ω_c² (1/s²): the largest squared angular frequency of the motion — spring k/m (and k|r|²/I_min
+    for a spring attached off the COM), the initial spin |ω0|², drag or decay rates squared (the scale
+    of the energy-drift bound, :func:`energy_drift_bound`)."""
+    p = scenario.problem
+    m, I_min = p.body.mass_kg, float(np.linalg.eigvalsh(p.body.inertia_B)[0])
+    k_v, k_w = p.forces.decay_rates_per_s()
+    rates = [float(np.dot(p.initial.w_W, p.initial.w_W)), (p.forces.linear_drag_N_s_per_m / m) ** 2, k_v ** 2, k_w ** 2]
+    for sp in p.forces.springs:
+        rates.append(sp.stiffness_N_per_m / m)
+        rates.append(sp.stiffness_N_per_m * float(np.dot(sp.attach_B, sp.attach_B)) / I_min)
+    return max(rates)
+
+
+def expectation(scenario, variant: str, quantity: str, mode: str = "free_running", physics=None, *,
+                measure_physics: bool = True) -> Expectation:
+    """The expected verdict and order of ``variant`` on ``scenario`` for ``quantity``.
+
+    ``mode`` "free_running" gives the global order p; "one_step" gives the local order p + 1 — also
+    where the free run is pre-asymptotic (an amplitude drift builds up over a run, not in one step) —
+    and no expectation (verdict None) where the variant misses a term: a missing term shows up as an
+    O(Δt) local error in some quantities and O(Δt²) in others. ``physics``: the scenario's
+    :class:`~cross_checks.physics.ScenarioPhysics` (measured here when omitted, once per scenario —
+    unless ``measure_physics`` is False: then no pre-asymptotic decision is made, e.g. for a scenario
+    whose reference could not be computed, where every run is a failed row anyway).
+    """
+    if mode not in ("free_running", "one_step"):
+        raise ValueError(f"unknown mode {mode!r}; modes: free_running, one_step")
+    free = _free_running(scenario, variant, quantity, physics, measure_physics)
+    if mode == "free_running":
+        return free
+    if free.verdict == "does_not_converge":
+        return Expectation(None, None, free.reason)
+    p = nominal_order(variant)
+    if p is None:
+        return Expectation("converges", None, f"no nominal order is recorded for {variant}")
+    return Expectation("converges", p + 1.0, f"one step of an order-{p:g} scheme has an O(Δt^{p + 1:g}) local error")
+
+
+def _free_running(scenario, variant: str, quantity: str, physics, measure_physics: bool = True) -> Expectation:
+    if quantity not in QUANTITIES:
+        raise ValueError(f"unknown quantity {quantity!r}; quantities: {', '.join(QUANTITIES)}")
+    tr = traits(variant)
+    if not tr.gyroscopic_term and gyroscopic_term_matters(scenario):
+        if quantity in _ROTATION or rotation_drives_translation(scenario):
+            coupled = ("" if quantity in _ROTATION else
+                       "; the spring or body-frame force carries that rotation error into the translation")
+            return Expectation(
+                "does_not_converge", None,
+                "the course update has no gyroscopic term −ω × (I ω), which is not zero on this body "
+                f"(anisotropic inertia, ω off the principal axes){coupled}")
+    p = nominal_order(variant)
+    if p is None:
+        return Expectation("converges", None, f"no nominal order is recorded for {variant}")
+    if p == 1.0 and (physics is not None or measure_physics):
+        why = _pre_asymptotic_reason(scenario, variant, quantity, tr, physics)
+        if why:
+            return Expectation("pre_asymptotic", None, why)
+    return Expectation("converges", p, f"{variant} is an order-{p:g} scheme")
+
+
+def _drift_parts(scenario, tr: Traits, quantity: str, phys):
+    """The amplitude drifts that reach ``quantity``: ``[(what, rate², signs, amplification, saturate)]``."""
+    r = phys.rates
+    both = (1, -1)
+    parts = []
+    translation = quantity in _TRANSLATION or translation_drives_rotation(scenario)
+    rotation = quantity in _ROTATION or rotation_drives_translation(scenario)
+    if translation:
+        osc = r.translation ** 2 if tr.translation_drift != 0 else 0.0
+        signs = (tr.translation_drift,) if tr.translation_drift not in (0, None) else both
+        parts.append(("the translation", osc + r.drag ** 2 + r.decay_v ** 2, signs, 1.0, False))
+    if rotation:
+        kind = tr.rotation_drift
+        signs = (tr.rotation_sign,) if tr.rotation_sign not in (0, None) else both
+        if kind == "whole_state":
+            # the drift perturbs the turning part of ω (a share a of its scale); the motion amplifies it
+            amp = float(phys.amplification.get(quantity, 1.0)) * r.world_rotation_amplitude
+            parts.append(("the rotation (ω_W turning with the body)", r.world_rotation ** 2 + r.decay_w ** 2, signs,
+                          amp, True))
+        elif kind == "body":
+            parts.append(("the rotation (the body-frame ω: the polhode)", r.body_rotation ** 2 + r.decay_w ** 2,
+                          signs, 1.0, False))
+        else:
+            parts.append(("the rotation", r.decay_w ** 2, both, 1.0, False))
+    return parts
+
+
+def _pre_asymptotic_reason(scenario, variant, quantity, tr: Traits, physics) -> str:
+    """The reason a first-order variant makes no claim on this ladder ("" when it does claim order 1)."""
+    from cross_checks.core import tolerances as tol
+    from cross_checks.analysis.physics import amplitude_model_order, amplitude_parameter, scenario_physics
+    phys = physics if physics is not None else scenario_physics(scenario)
+    dts = sorted(scenario.dt_ladder_s, reverse=True)
+    if len(dts) < 2:
+        return ""
+    T = scenario.duration_s
+    for what, rate_sq, signs, amp, saturate in _drift_parts(scenario, tr, quantity, phys):
+        if rate_sq <= 0.0:
+            continue
+        chis = [amplitude_parameter(rate_sq, dt, T) for dt in dts]
+        model = amplitude_model_order(dts, chis, signs, amp, saturate)
+        if abs(model - 1.0) <= tol.AMPLITUDE_MODEL_ORDER_DEV:
+            continue
+        sep = phys.separatrix_proximity
+        near = (f"; the body is near the intermediate-axis separatrix (δ = {sep:.2g})"
+                if sep is not None and abs(sep) < 1e-2 and saturate else "")
+        amp_txt = (f"; the motion amplifies that perturbation {phys.amplification.get(quantity, 1.0):.3g}× by the "
+                   "final time (measured) until it saturates" if saturate else "")
+        how = {1: "grows it by e^(+χ)", -1: "damps it by e^(−χ)"}.get(signs[0]) if len(signs) == 1 else None
+        return (f"pre-asymptotic on this ladder: a first-order step that does not keep the amplitude of {what} "
+                f"{how or 'grows or damps it by e^(±χ)'} over the run, χ = ω_c²ΔtT/2 from {chis[0]:.2g} "
+                f"(coarsest Δt) to {chis[-1]:.2g} (finest), ω_c = {math.sqrt(rate_sq):.3g} rad/s measured on the "
+                f"reference{amp_txt}{near}; that drift alone would fit order {model:.2f} here, beyond "
+                f"1 ± {tol.AMPLITUDE_MODEL_ORDER_DEV:g}")
+    return ""
+
+
+def expected_order(variant: str, quantity: str, scenario=None) -> float | None:
+    """The expected global order of ``variant`` for ``quantity`` (None where it is expected not to
+    converge). ``scenario``: a Scenario, a catalog name, or None (then the nominal order)."""
+    if scenario is None:
+        return nominal_order(variant)
+    if isinstance(scenario, str):
+        from cross_checks.scenario import load_scenario
+        scenario = load_scenario(scenario)
+    return expectation(scenario, variant, quantity).order
+
+
+def energy_drift_bound(scenario, variant: str, dt_s: float) -> float | None:
+    """Upper bound on the maximum relative energy drift of ``variant`` on a conservative scenario.
+
+    An order-p scheme's global error over T at step Δt on a motion of angular frequency ω is
+    ~ C (ωΔt)^p ωT; energy errors are of the same relative size. C ≤ 2 covers every scheme here
+    (explicit Euler's energy grows as e^{2χ} − 1 ≈ ω²ΔtT = (ωΔt)ωT, i.e. C = 1; ENGINE_FACTS: MuJoCo
+    Euler on the tennis racket drifts 4.6e-3 over 20 s at Δt = 1e-3, C = 0.29). Returns None where no
+    bound applies: a non-conservative scenario, a variant without a nominal order, or the course
+    update on a body whose gyroscopic term matters (it does not model the conserved motion at all).
+    """
+    if not scenario.problem.forces.conservative:
+        return None
+    if not traits(variant).gyroscopic_term and gyroscopic_term_matters(scenario):
+        return None
+    p = nominal_order(variant)
+    if p is None:
+        return None
+    w2 = characteristic_rate_sq(scenario)
+    g = float(np.linalg.norm(scenario.problem.forces.gravity_W))
+    if g > 0.0:
+        # Under gravity the energy error of symplectic Euler is m|g|·½|g|tΔt over E = ½m|v0|²: the rate
+        # |g|/|v0| gives exactly C = 1 (|v0| = 0 leaves no finite bound: E(0) has no kinetic scale).
+        v0 = float(np.linalg.norm(scenario.problem.initial.v_W))
+        w2 = max(w2, (g / v0) ** 2 if v0 > 0.0 else math.inf)
+    w = math.sqrt(w2)
+    n_steps = max(1, round(scenario.duration_s / dt_s))
+    # + round-off: N steps of ε each, ×10 for the terms of E (measured 7 N ε on particle_body's RK4).
+    return 2.0 * (w * dt_s) ** p * w * scenario.duration_s + 10.0 * n_steps * 2.2e-16

@@ -1,0 +1,474 @@
+"""``rbcheck`` command line (DESIGN.md contract).
+
+Exit codes: 0 success; 1 a comparison or gate found a regression / disagreement, or a run diverged;
+2 bad input or an output that cannot be written (one line naming the file, the field and the reason,
+no traceback); 130 interrupted (Ctrl-C); 143 terminated (SIGTERM). The README has the table per command.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+from pathlib import Path
+
+__all__ = ["main"]
+
+EXIT_OK, EXIT_FAIL, EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_TERMINATED = 0, 1, 2, 130, 143
+
+
+class BadInput(Exception):
+    """Input the user must fix; the message names the file/option, the field and the reason."""
+
+
+def _positive_float(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number, got {text!r}") from None
+    if not (math.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(f"must be a positive finite number, got {text!r}")
+    return v
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # argparse exits 2 already; keep the one-line style
+        self.print_usage(sys.stderr)
+        sys.stderr.write(f"rbcheck: error: {message}\n")
+        raise SystemExit(EXIT_BAD_INPUT)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(
+        prog="rbcheck",
+        description="Validate rigid-body simulators: a NumPy reference of the GAMES103 course equations, "
+                    "MuJoCo and PyBullet on identical free-body scenarios, against analytic or DOP853 references.",
+        epilog="SCENARIO is a catalog name (see `rbcheck list`) or a path to a scenario TOML file. "
+               "Exit codes: 0 ok; 1 regression/disagreement, a failed or a diverged run; 2 bad input or an "
+               "unwritable output (one line); 130 interrupted (Ctrl-C); 143 terminated (SIGTERM). "
+               "Your own engines: --engine-file (docs/engines.md).",
+    )
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_Parser)
+
+    ls = sub.add_parser("list", help="list catalog scenarios and engine variants (with availability)")
+    _add_engine_file_option(ls)
+
+    sh = sub.add_parser(
+        "show", help="the resolved scenario: body, initial state and forces exactly as every engine receives them",
+        description="Print the scenario with every alternative resolved (inertia 3x3 about the COM in body axes, "
+                    "orientation as a unit quaternion w x y z, angular velocity in WORLD axes, body points from the "
+                    "COM, velocity-decay factors per step at the run's dt). --json prints the exact JSON an "
+                    "engine-file command receives as {scenario_json} (docs/engines.md).")
+    sh.add_argument("scenario", metavar="SCENARIO")
+    sh.add_argument("--json", action="store_true", help="print the resolved scenario JSON instead of the text")
+    sh.add_argument("--dt", type=_positive_float, metavar="DT", help="resolve at this time step, s (default: the scenario's dt)")
+    sh.add_argument("--duration", type=_positive_float, metavar="T", help="simulated time, s (default: the scenario's)")
+
+    r = sub.add_parser("run", help="run one scenario with one engine variant and write the trajectory CSV")
+    r.add_argument("scenario", metavar="SCENARIO")
+    r.add_argument("--engine", required=True, metavar="ENGINE:VARIANT", help="e.g. reference:course, mujoco:rk4")
+    r.add_argument("--dt", type=_positive_float, metavar="DT", help="time step, s (default: the scenario's dt)")
+    r.add_argument("--duration", type=_positive_float, metavar="T", help="simulated time, s (default: the scenario's)")
+    r.add_argument("--out", required=True, metavar="FILE.csv", help="trajectory CSV (sidecar FILE.json beside it)")
+    _add_engine_file_option(r)
+
+    s = sub.add_parser(
+        "sweep", help="run scenarios x engine variants x dt ladders; write results, convergence verdicts and the report",
+        description="Run every scenario (default: the whole catalog) with every engine variant (default: all "
+                    "available) at every dt of its ladder, in parallel; write DIR/results.csv, DIR/summary.json, "
+                    "DIR/series/, DIR/plots/ and the HTML report. DIR is replaced only when the sweep is complete. "
+                    "Exit 1 when a result contradicts the expectations (cross_checks/expectations.py), a run fails, "
+                    "or two schemes that must be identical disagree.")
+    s.add_argument("scenarios", nargs="*", metavar="SCENARIO", help="catalog names or TOML paths (default: the catalog)")
+    s.add_argument("--engines", nargs="+", metavar="ENGINE[:VARIANT]",
+                   help="variants to run, e.g. reference:rk4 mujoco (an engine name means all its variants); "
+                        "default: every available variant")
+    s.add_argument("--jobs", type=_positive_int, metavar="N", help="worker processes (default: all cores)")
+    s.add_argument("--out", required=True, metavar="DIR",
+                   help="results directory, replaced atomically and only when absent, empty or rbcheck's own (its marker)")
+    s.add_argument("--no-cache", action="store_true",
+                   help="recompute every run instead of reusing cached results ($RBCHECK_CACHE_DIR or ~/.cache/rbcheck)")
+    s.add_argument("--self-contained", action="store_true", help="embed the plots in the HTML pages (for CI artifacts)")
+    _add_engine_file_option(s)
+    s.add_argument("--time-limit", type=_positive_float, metavar="S",
+                   help="wall-time limit of each run and of each reference solve, s; one over it is a failed row "
+                        "(default: 900, cross_checks/tolerances.py)")
+    s.add_argument("--dask", metavar="ADDRESS",
+                   help="run the jobs on a Dask cluster (scheduler address, e.g. tcp://host:8786) through "
+                        "distributed's Client.get_executor(); needs the optional extra: pip install 'rbcheck[dask]'. "
+                        "Workers must share this machine's filesystem for DIR's parent and the cache")
+
+    rp = sub.add_parser("report", help="re-render the plots and HTML of a results directory from its saved data")
+    rp.add_argument("dir", metavar="DIR")
+    rp.add_argument("--self-contained", action="store_true", help="embed the plots in the HTML pages")
+    rp.add_argument("--jobs", type=_positive_int, metavar="N", help="processes drawing figures (default: all cores)")
+
+    c = sub.add_parser(
+        "check", help="a true verdict on any simulator's trajectory CSV: correct simulation of the scenario or not, and why",
+        description="Judge TRAJ.csv (trajectory CSV, columns by name; pose-only files too) against SCENARIO: from every "
+                    "recorded state the exact motion over the row's interval is compared with the next row (one-step "
+                    "defect), conserved quantities are checked where the physics conserves them, and the run is "
+                    "compared with the scenario's reference within a capped, derived allowance; every reference "
+                    "variant and a catalog of classic mistakes are compared step for step. Several files of the "
+                    "same scenario at different dt: each is checked and the convergence order is fitted (ladder). "
+                    "Exit 0: it IS a reference scheme or a correct simulation at its dt; 1: it is not (the output "
+                    "says which quantity, from when, by how much, and the likely cause); 2: bad input. "
+                    "See docs/check.md.")
+    c.add_argument("trajectories", nargs="+", metavar="TRAJ.csv", help="trajectory CSV file(s)")
+    c.add_argument("--scenario", required=True, metavar="SCENARIO", help="catalog name or scenario TOML file")
+    c.add_argument("--dt", type=_positive_float, metavar="DT",
+                   help="the simulator's integration step, s, when rows are written less often than every step "
+                        "(default: inferred from the times)")
+    c.add_argument("--json", metavar="FILE", help="also write everything the check found as JSON")
+    c.add_argument("--plot", metavar="FILE.png", help="draw the trajectory, the reference, the closest correct scheme "
+                                                      "and the one-step defect over time")
+    _add_engine_file_option(c)
+
+    cmp_ = sub.add_parser(
+        "compare", help="compare a new results directory with a baseline: regressions, improvements, new/missing rows",
+        description="Match rows of BASELINE_DIR/results.csv and NEW_DIR/results.csv by (scenario, engine, dt). Errors "
+                    "and drifts are better when lower, orders when closer to the expected order; each metric has an "
+                    "absolute + relative tolerance (cross_checks/compare.py). Exit 0: no regression; 1: a regression "
+                    "(or rows missing from NEW_DIR, unless --allow-missing); 2: unusable input.")
+    cmp_.add_argument("baseline", metavar="BASELINE_DIR")
+    cmp_.add_argument("new", metavar="NEW_DIR")
+    cmp_.add_argument("--markdown", metavar="FILE", help="also write the comparison as a markdown table (CI job summary)")
+    cmp_.add_argument("--allow-missing", action="store_true",
+                      help="rows absent from NEW_DIR (e.g. a sweep of a subset) are reported but not a regression")
+
+    b = sub.add_parser("bench", help="throughput of the batched reference vs MuJoCo and PyBullet, measured in one run",
+                       description="Step the same free bodies (gravity + a body torque) in the batched reference, "
+                                   "MuJoCo (N bodies in one model; rollout) and PyBullet, and a single trajectory in "
+                                   "the reference and mj_step; print body-steps/s and the ratios (benchmarks/bench.py).")
+    b.add_argument("--quick", action="store_true", help="fewer bodies and steps (seconds instead of a minute)")
+    b.add_argument("--json", metavar="FILE", help="write the measurements as JSON")
+    return p
+
+
+def _add_engine_file_option(p) -> None:
+    """``--engine-file FILE`` (repeatable): engines main() registers before the command runs."""
+    p.add_argument("--engine-file", action="append", metavar="FILE", default=[],
+                   help="add the engine of this engine file (TOML: name, version, [variants.X] order, description, "
+                        "command; docs/engines.md); repeatable. Its variants are NAME:VARIANT")
+
+
+def _use_engine_files(paths) -> None:
+    from cross_checks.engines import load_engine_files
+    from cross_checks.engines.external import EngineFileError
+    try:
+        load_engine_files(paths)
+    except EngineFileError as exc:
+        raise BadInput(str(exc)) from None
+
+
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a whole number, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {v}")
+    return v
+
+
+def cmd_list(args) -> int:
+    from cross_checks.engines import all_variants
+    from cross_checks.scenario import catalog_names, load_scenario
+
+    print("Scenarios (catalog):")
+    for name in catalog_names():
+        sc = load_scenario(name)
+        print(f"  {name:<18} {sc.description}")
+    print("\nEngine variants:")
+    shown = set()
+    for v in all_variants():
+        if v.engine not in shown and not v.source.endswith("(rbcheck)"):
+            print(f"  {v.engine}: from {v.source}")
+        shown.add(v.engine)
+        state = f"available ({v.engine} {v.version})" if v.available else f"UNAVAILABLE: {v.reason}"
+        print(f"  {v.name:<26} {state}")
+        text = v.description + (f" (order {v.order:g})" if v.order is not None else "")
+        if text:
+            print(f"  {'':<26} {text.strip()}")
+    return EXIT_OK
+
+
+def cmd_show(args) -> int:
+    from cross_checks.scenario.resolved import format_resolved, resolved_json, resolved_scenario
+    from cross_checks.scenario import load_scenario
+
+    sc = load_scenario(args.scenario)
+    dt = args.dt if args.dt is not None else sc.dt_s
+    T = args.duration if args.duration is not None else sc.duration_s
+    if dt > T:
+        raise BadInput(f"--dt {dt:g}: must be <= the duration ({T:g} s)")
+    if args.json:
+        sys.stdout.write(resolved_json(sc, dt, T))
+    else:
+        print(format_resolved(resolved_scenario(sc, dt, T)))
+    return EXIT_OK
+
+
+def _check_out_path(out: str, suffix: str | None = ".csv", option: str = "--out") -> Path:
+    """An output file the user named, checked before any work: the right suffix (when given), a
+    directory that exists and can be written in (tried for real), not itself a directory."""
+    from cross_checks.sweep.results_dir import ResultsDirError, check_writable_dir
+    if not str(out).strip():
+        raise BadInput(f"{option}: empty path; name a file")
+    path = Path(out)
+    if suffix is not None and path.suffix != suffix:
+        raise BadInput(f"{option} {out}: must end in {suffix}")
+    parent = path.parent
+    if not parent.is_dir():
+        what = "is not a directory" if parent.exists() else "does not exist"
+        raise BadInput(f"{option} {out}: directory {parent} {what}")
+    if path.is_dir():
+        raise BadInput(f"{option} {out}: is a directory")
+    try:
+        check_writable_dir(parent, option, out)
+    except ResultsDirError as exc:
+        raise BadInput(str(exc)) from None
+    return path
+
+
+def cmd_run(args) -> int:
+    from cross_checks.engines import EngineError, EngineUnavailable, UnknownVariant, run_variant, split_variant
+    from cross_checks.scenario import load_scenario
+
+    try:
+        split_variant(args.engine)
+    except UnknownVariant as exc:
+        raise BadInput(f"--engine: {exc}") from None
+    out = _check_out_path(args.out)
+    sc = load_scenario(args.scenario)
+    dt = args.dt if args.dt is not None else sc.dt_s
+    T = args.duration if args.duration is not None else sc.duration_s
+    if dt > T:
+        raise BadInput(f"--dt {dt:g}: must be <= the duration ({T:g} s)")
+    from cross_checks.scenario.limits import LimitExceeded, check_run_steps
+    try:
+        check_run_steps(T, dt, "--dt" if args.dt is not None else "--duration")
+    except LimitExceeded as exc:
+        raise BadInput(str(exc)) from None
+    try:
+        traj = run_variant(sc, args.engine, dt, T)
+    except EngineUnavailable as exc:
+        raise BadInput(f"--engine {args.engine}: {exc}") from None
+    except EngineError as exc:  # the engine refused or failed: its own words, nothing written
+        print(f"rbcheck run: {sc.name} with {args.engine} failed: {exc}", file=sys.stderr)
+        return EXIT_FAIL
+    traj.write(out)
+    n = len(traj.t_s) - 1
+    if traj.meta["status"] == "diverged":
+        print(f"{sc.name} with {args.engine}: {traj.meta['message']}; wrote the {n} steps before it to {out}",
+              file=sys.stderr)
+        return EXIT_FAIL
+    print(f"{sc.name} with {args.engine} ({traj.meta['engine_version']}): {n} steps of {dt:g} s "
+          f"in {traj.meta['wall_s']:.3g} s -> {out}")
+    return EXIT_OK
+
+
+def _resolve_engines(specs):
+    """``--engines`` values -> (variants to run, {variant: why skipped}) ; BadInput for unknown or
+    explicitly requested unavailable ones."""
+    from cross_checks.engines import UnknownVariant, all_variants, engine_variants, split_variant
+
+    infos = {v.name: v for v in all_variants()}
+    if not specs:
+        run = [n for n, v in infos.items() if v.available]
+        skipped = {n: v.reason for n, v in infos.items() if not v.available}
+        return run, skipped
+    out = []
+    for spec in (x for s in specs for x in s.split(",") if x):
+        try:
+            names = [f"{spec}:{v}" for v in engine_variants(spec)] if ":" not in spec else [spec]
+        except UnknownVariant as exc:
+            raise BadInput(f"--engines: {exc}") from None
+        if not names:
+            raise BadInput(f"--engines {spec}: {infos[spec + ':*'].reason}")
+        for n in names:
+            try:
+                split_variant(n)
+            except UnknownVariant as exc:
+                raise BadInput(f"--engines: {exc}") from None
+            if not infos[n].available:
+                raise BadInput(f"--engines {n}: {infos[n].reason}")
+            if n not in out:
+                out.append(n)
+    return out, {}
+
+
+def _gate_failures(summary) -> list:
+    """Lines naming what makes a sweep exit 1."""
+    out = []
+    for r in summary.get("convergence", []):
+        if r.get("matches_expectation") is False:
+            out.append(f"{r['engine']} on {r['scenario']}: {r['quantity']} {r['assessment']}")
+    for a in summary.get("agreement", []):
+        if not a.get("agrees"):
+            out.append(f"{a['a']} and {a['b']} differ on {a['scenario']} (should be the same scheme)")
+    n_failed = summary.get("run", {}).get("failed_runs", 0)
+    if n_failed:
+        out.append(f"{n_failed} run(s) failed (status 'failed' in results.csv)")
+    return out
+
+
+def _dask_client(address: str):
+    try:
+        from distributed import Client
+    except ImportError:
+        raise BadInput("--dask: the 'distributed' package is not installed; install the optional extra: "
+                       "pip install -e '.[dask]'") from None
+    try:
+        return Client(address, timeout=10)
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise BadInput(f"--dask {address}: cannot connect to the Dask scheduler: {exc}") from None
+
+
+def _time_limits(seconds) -> dict:
+    return {} if seconds is None else {"run_time_limit_s": seconds, "reference_time_limit_s": seconds}
+
+
+def cmd_sweep(args) -> int:
+    from cross_checks.scenario import catalog_names, load_scenario
+    from cross_checks.sweep import SweepError, SweepInterrupted, run_sweep
+
+    from cross_checks.sweep.results_dir import ResultsDirError, check_output_dir
+    try:
+        check_output_dir(args.out)  # before any work (run_sweep checks again just before it starts)
+    except ResultsDirError as exc:
+        raise BadInput(str(exc)) from None
+    specs = args.scenarios or catalog_names()
+    scenarios = [load_scenario(s) for s in specs]
+    variants, skipped = _resolve_engines(args.engines)
+    if not variants:
+        raise BadInput("--engines: no available engine variant to run")
+    import time
+    client = _dask_client(args.dask) if args.dask else None
+    t0 = time.perf_counter()
+    try:
+        summary = run_sweep(scenarios, variants, args.out, jobs=args.jobs, use_cache=not args.no_cache,
+                            self_contained=args.self_contained, skipped=skipped, **_time_limits(args.time_limit),
+                            executor=client.get_executor() if client is not None else None)
+    except SweepError as exc:
+        raise BadInput(str(exc)) from None
+    except SweepInterrupted as exc:
+        what = (f"after the new results were complete in {args.out}" if exc.replaced
+                else f"{args.out} left as it was")
+        print(f"rbcheck sweep: {'terminated' if exc.terminated else 'interrupted'}; {what}", file=sys.stderr)
+        return EXIT_TERMINATED if exc.terminated else EXIT_INTERRUPTED
+    finally:
+        if client is not None:
+            client.close()
+    run = summary["run"]
+    print(f"rbcheck sweep: {len(scenarios)} scenario(s) x {len(variants)} variant(s): {run['runs']} runs "
+          f"({run['cached_runs']} cached, {run['diverged_runs']} diverged, {run['failed_runs']} failed) "
+          f"in {time.perf_counter() - t0:.1f} s on {run['jobs']} worker(s) (runs and metrics {run['wall_s']:.1f} s, "
+          f"then the report) -> {Path(args.out) / 'index.html'}")
+    fails = _gate_failures(summary)
+    if fails:
+        print(f"rbcheck sweep: {len(fails)} result(s) contradict the expectations:", file=sys.stderr)
+        for line in fails[:20]:
+            print(f"  {line}", file=sys.stderr)
+        if len(fails) > 20:
+            print(f"  ... and {len(fails) - 20} more (see the findings in index.html)", file=sys.stderr)
+        return EXIT_FAIL
+    return EXIT_OK
+
+
+def cmd_report(args) -> int:
+    import os
+
+    import reports
+    from reports import ResultsError
+
+    from cross_checks.sweep.results_dir import ResultsDirError, check_writable_dir
+
+    jobs = args.jobs or (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
+    if not Path(args.dir).is_dir():
+        raise BadInput(f"{args.dir}: no such directory")
+    try:
+        check_writable_dir(Path(args.dir), "DIR", args.dir)
+        written = reports.render(args.dir, self_contained=args.self_contained, jobs=jobs)
+    except (ResultsError, ResultsDirError) as exc:
+        raise BadInput(str(exc)) from None
+    print(f"rbcheck report: wrote {len(written)} page(s) -> {Path(args.dir) / 'index.html'}")
+    return EXIT_OK
+
+
+def cmd_check(args) -> int:
+    from cross_checks.cli.check import run_check
+    if args.json:
+        _check_out_path(args.json, None, "--json")
+    if args.plot:
+        _check_out_path(args.plot, ".png", "--plot")
+    return run_check(args, BadInput)
+
+
+def cmd_compare(args) -> int:
+    from cross_checks.gates.compare import CompareInputError, compare_dirs, to_markdown, to_text
+    from cross_checks.core.files import atomic_write_text
+
+    if args.markdown:
+        _check_out_path(args.markdown, None, "--markdown")
+    try:
+        c = compare_dirs(args.baseline, args.new)
+    except CompareInputError as exc:
+        raise BadInput(str(exc)) from None
+    print(to_text(c, args.allow_missing))
+    if args.markdown:
+        atomic_write_text(args.markdown, to_markdown(c, args.baseline, args.new, args.allow_missing) + "\n")
+    return c.exit_code(args.allow_missing)
+
+
+def cmd_bench(args) -> int:
+    from cross_checks.bench import main as bench_main
+    if args.json:
+        _check_out_path(args.json, None, "--json")
+    return bench_main(args.quick, args.json)
+
+
+COMMANDS = {"list": cmd_list, "show": cmd_show, "run": cmd_run, "sweep": cmd_sweep, "report": cmd_report, "check": cmd_check,
+            "compare": cmd_compare, "bench": cmd_bench}
+
+
+def main(argv=None) -> int:
+    from cross_checks.sweep.lifecycle import Terminated, handle_sigterm
+    from cross_checks.scenario import ScenarioError
+    from cross_checks.core.trajectory import TrajectoryError
+
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as exc:  # usage errors (exit 2) and --help (exit 0) return instead of raising
+        return int(exc.code or 0)
+    handle_sigterm()
+    try:
+        if getattr(args, "engine_file", None):
+            _use_engine_files(args.engine_file)
+        return COMMANDS[args.command](args)
+    except (ScenarioError, TrajectoryError, BadInput) as exc:
+        return _error(args.command, str(exc))
+    except Terminated:
+        print(f"rbcheck {args.command}: terminated", file=sys.stderr)
+        return EXIT_TERMINATED
+    except KeyboardInterrupt:
+        print(f"rbcheck {args.command}: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except OSError as exc:  # a file that could not be read or written: name it, no traceback
+        where = f"{exc.filename}: " if exc.filename else ""
+        return _error(args.command, f"{where}{exc.strerror or exc}")
+    except (MemoryError, RecursionError, Exception) as exc:  # noqa: BLE001 - every error path: one line, exit 2
+        if os.environ.get("RBCHECK_DEBUG"):
+            raise
+        return _error(args.command, f"internal error: {type(exc).__name__}: {exc} "
+                                    "(RBCHECK_DEBUG=1 shows the traceback)")
+
+
+def _error(command: str, message: str) -> int:
+    message = " ".join(str(message).split())  # one line, whatever the message holds
+    print(f"rbcheck {command}: error: {message}", file=sys.stderr)
+    return EXIT_BAD_INPUT
+
+
+if __name__ == "__main__":
+    sys.exit(main())

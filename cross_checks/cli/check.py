@@ -1,0 +1,77 @@
+"""``rbcheck check``: read the files, check each, fit a ladder, print, write --json and --plot."""
+from __future__ import annotations
+
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+__all__ = ["run_check"]
+
+
+def run_check(args, BadInput) -> int:
+    from cross_checks.gates.check import CheckError, check_trajectory
+    from cross_checks.gates.check.ladder import LadderError, check_ladder
+    from cross_checks.gates.check.report import format_ladder, format_report, to_json_text
+    from cross_checks.scenario import load_scenario
+    from cross_checks.core.trajectory import Trajectory
+    from cross_checks.core.files import atomic_write_text
+
+    sc = load_scenario(args.scenario)
+    results = []
+    compare_with = _user_variants()
+    for path in args.trajectories:
+        traj = Trajectory.read(path, require=())
+        try:
+            results.append(check_trajectory(traj, sc, source=path, dt_s=args.dt, compare_with=compare_with))
+        except CheckError as exc:
+            raise BadInput(str(exc)) from None
+    ladder = None
+    if len(results) > 1:
+        try:
+            ladder = check_ladder(results, sc)
+        except LadderError as exc:
+            raise BadInput(str(exc)) from None
+    texts = [format_report(r) for r in results]
+    if ladder is not None:
+        texts.insert(0, format_ladder(ladder))
+    print(("\n\n" + "=" * 100 + "\n\n").join(texts))
+    if args.plot:
+        _write_plot(results, ladder, sc, args.plot)
+    if args.json:
+        obj = results[0].as_dict() if ladder is None else {"ladder": ladder, "files": [r.as_dict() for r in results]}
+        atomic_write_text(args.json, to_json_text(obj))
+    passed = all(r.passed for r in results) and (ladder is None or ladder["passed"])
+    return 0 if passed else 1
+
+
+def _user_variants() -> list:
+    """ENGINE:VARIANT of the engines given with --engine-file (registered by cli.main): each is run free at
+    the file's Δt and compared with it, so the check can say the file IS one of them."""
+    from cross_checks.engines import engine_variants, user_engines
+    return [f"{a.name}:{v}" for a in user_engines() for v in engine_variants(a.name)]
+
+
+def _write_plot(results, ladder, scenario, path):
+    """Draw to a temporary file beside ``path`` and rename: never a half-written PNG."""
+    from reports.check_plot import ladder_figure, check_figure
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".png", dir=path.parent or ".")
+    os.close(fd)
+    try:
+        if ladder is None:
+            check_figure(results[0], scenario, tmp)
+        else:
+            ladder_figure(results, ladder, scenario, tmp)
+        os.chmod(tmp, 0o666 & ~_umask())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    print(f"plot -> {path}", file=sys.stderr)
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask

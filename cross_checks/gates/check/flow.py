@@ -1,0 +1,275 @@
+"""``rbcheck check``, step 2: the physics every verdict is measured against.
+
+* :func:`exact_flow` — the true motion over each row interval, from each recorded state at once
+  (batched RK4 with substeps on ``reference_sim.integrators.rhs``, which includes the continuous velocity
+  decay −k v, −k ω), with a Richardson estimate of its own error.
+* :func:`majorant` — M2, a bound on |y''| per quantity, block by block: ``Σ_b |J_b F_b|`` with J the
+  Jacobian of the right-hand side F and b ∈ {x, v, q, ω}. Every consistent one-step scheme of order
+  ≥ 1 leaves a local defect ≤ ½ h² M2 + O(h³) (tolerances.CHECK_LOCAL_C), a wrong equation O(h).
+* :func:`local_allowances` — what a consistent scheme may leave per row interval (h steps spanning
+  Δ): ``C h Δ M2`` (+ the drift of the velocity defects into position / orientation over Δ), plus the
+  data's precision (printed digits, and the roundings of a step in the data's precision).
+* :func:`error_growth` — how the scenario's dynamics amplify an error made at t = 0 by time t,
+  quantity to quantity (perturbed runs of the same flow from the initial state).
+
+Quantities: position (m), velocity (m/s), orientation (rad: twice the quaternion distance, which for
+unit quaternions is the geodesic angle to first order and also counts a change of |q|), angular
+velocity (rad/s, world).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from reference_sim.integrators import rhs
+from reference_sim.quaternion import geodesic_angle, quat_exp, quat_mul
+from reference_sim.state import Q, V, W, X
+
+from cross_checks.core import tolerances as tol
+from cross_checks.core.quantities import QUANTITIES
+from cross_checks.scenario.references import decay_rates_per_s
+
+__all__ = ["flow_rhs", "rk4_flow", "exact_flow", "FlowResult", "majorant", "motion_rate", "quantity_distance",
+           "distances", "local_allowances", "Allowances", "error_growth", "BLOCKS"]
+
+#: State blocks of the packed state, in the order of QUANTITIES' groups.
+BLOCKS = {"position": X, "velocity": V, "orientation": Q, "angular_velocity": W}
+
+
+def flow_rhs(scenario):
+    """F(y) (..., 13): the full rigid-body equations (gyroscopic term included) with the scenario's
+    velocity decay as the continuous damping −k_v v, −k_ω ω (k = −ln γ / dt) — which
+    ``reference_sim.integrators.rhs`` itself includes (``ForceModel.decay_rates_per_s``)."""
+    problem = scenario.problem
+    return lambda y: rhs(problem, y)
+
+
+def rk4_flow(F, y0, span_s, substeps: int, *, mid: bool = False):
+    """RK4 with ``substeps`` equal substeps over ``span_s`` (scalar or (N,)) from each row of ``y0``.
+
+    Returns the end states (quaternion renormalised to the start's norm), and with ``mid`` also the
+    states after half the substeps (``substeps`` even)."""
+    y = np.array(y0, dtype=float)
+    h = (np.asarray(span_s, dtype=float) / substeps)
+    h = h[..., None] if np.ndim(h) else float(h)
+    n0 = np.linalg.norm(y[..., Q], axis=-1, keepdims=True)
+    y_mid = None
+    with np.errstate(all="ignore"):
+        for s in range(substeps):
+            k1 = F(y)
+            k2 = F(y + 0.5 * h * k1)
+            k3 = F(y + 0.5 * h * k2)
+            k4 = F(y + h * k3)
+            y = y + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+            if mid and s == substeps // 2 - 1:
+                y_mid = y.copy()
+        y[..., Q] *= n0 / np.linalg.norm(y[..., Q], axis=-1, keepdims=True)
+    return (y, y_mid) if mid else y
+
+
+def quantity_distance(a, b, quantity):
+    """Distance between states ``a`` and ``b`` (..., 13) in one quantity (see module doc), shape (...)."""
+    sl = BLOCKS[quantity]
+    if quantity != "orientation":
+        return np.linalg.norm(a[..., sl] - b[..., sl], axis=-1)
+    qa, qb = a[..., Q], b[..., Q]
+    return 2.0 * np.minimum(np.linalg.norm(qa - qb, axis=-1), np.linalg.norm(qa + qb, axis=-1))
+
+
+def distances(a, b, quantities=QUANTITIES) -> dict:
+    return {q: quantity_distance(a, b, q) for q in quantities}
+
+
+def motion_rate(scenario, y) -> np.ndarray:
+    """L (1/s) per row of ``y`` (N, 13): the fastest rate of the motion there — the spin |ω|, spring
+    frequencies √(k/m) and √(k r²/I_min), drag c/m and decay rates."""
+    p = scenario.problem
+    m, I_min = p.body.mass_kg, float(np.linalg.eigvalsh(p.body.inertia_B)[0])
+    fixed = [p.forces.linear_drag_N_s_per_m / m, *decay_rates_per_s(scenario)]
+    for sp in p.forces.springs:
+        fixed += [math.sqrt(sp.stiffness_N_per_m / m),
+                  math.sqrt(sp.stiffness_N_per_m * float(np.dot(sp.attach_B, sp.attach_B)) / I_min)]
+    w = np.linalg.norm(np.nan_to_num(y[..., W]), axis=-1)
+    return np.maximum(w, max(fixed))
+
+
+def majorant(F, y, rate) -> dict:
+    """M2 per quantity (..., ): ``Σ_b |J_b F_b|`` at states ``y`` by central differences along each
+    block of F (step tol.CHECK_FD_STEP_S / max(1, L)). Orientation in angle units (2 × quaternion)."""
+    f = F(y)
+    tau = (tol.CHECK_FD_STEP_S / np.maximum(1.0, np.asarray(rate, dtype=float)))[..., None]
+    out = {q: np.zeros(y.shape[:-1]) for q in QUANTITIES}
+    with np.errstate(all="ignore"):
+        for sl in BLOCKS.values():
+            e = np.zeros_like(y)
+            e[..., sl] = f[..., sl]
+            d = (F(y + tau * e) - F(y - tau * e)) / (2.0 * tau)
+            for q, sq in BLOCKS.items():
+                out[q] += np.linalg.norm(d[..., sq], axis=-1)
+    out["orientation"] *= 2.0
+    return out
+
+
+@dataclass
+class FlowResult:
+    """The exact flow over each row interval.
+
+    y_end : (N, 13) states after each interval.  error : quantity -> (N,) estimate of the flow's own
+    error: the Richardson estimate of its truncation, or its round-off (``roundoff``) when larger.
+    M2 : quantity -> (N,) max of the majorant at the start, middle and end.  rate : (N,) motion rate
+    L at the start.  substeps : RK4 substeps used.  roundoff : quantity -> (N,) the flow's round-off,
+    ``substeps · CHECK_ROUNDINGS_PER_STEP · ε · |y|``.
+    """
+
+    y_end: np.ndarray
+    error: dict
+    M2: dict
+    rate: np.ndarray
+    substeps: int
+    roundoff: dict
+
+
+def _magnitude(y, quantity):
+    """|y| in one quantity (orientation: 2 × max(|q|, 1), an angle scale)."""
+    mag = np.linalg.norm(np.nan_to_num(y[..., BLOCKS[quantity]]), axis=-1)
+    return 2.0 * np.maximum(mag, 1.0) if quantity == "orientation" else mag
+
+
+def exact_flow(scenario, y0, span_s, max_doublings: int = 4, allowance_fn=None, span_steps=1) -> FlowResult:
+    """Advance each row of ``y0`` (N, 13) by the exact flow over ``span_s`` (N,) seconds.
+
+    RK4 with S and 2S substeps (S from tol.CHECK_FLOW_RATE_PER_SUBSTEP); the 2S result is kept and
+    ``|y_S − y_2S| / 15`` estimates its truncation error. Rows whose h L exceeds CHECK_MAX_HL (``h =
+    span / span_steps``) are not decisive, so S resolves L at most up to that. With ``allowance_fn(M2, rate) ->
+    {quantity: (N,)}``, S doubles (at most ``max_doublings`` times) until every estimate is below
+    tol.CHECK_FLOW_ERROR_FRACTION of its allowance or at the flow's own round-off.
+    """
+    F = flow_rhs(scenario)
+    span = np.asarray(span_s, dtype=float)
+    rate = motion_rate(scenario, y0)
+    # rows where h L exceeds CHECK_MAX_HL are not decisive: the start need not resolve faster motion
+    worst = float(np.max(np.minimum(rate * span, tol.CHECK_MAX_HL * np.asarray(span_steps, dtype=float))))
+    S = max(2, int(math.ceil(worst / tol.CHECK_FLOW_RATE_PER_SUBSTEP)))
+    S += S % 2
+    eps = 2.0 ** -53
+    for _ in range(max_doublings + 1):
+        y_S = rk4_flow(F, y0, span, S)
+        y_2S, y_mid = rk4_flow(F, y0, span, 2 * S, mid=True)
+        roundoff = {q: 2 * S * tol.CHECK_ROUNDINGS_PER_STEP * eps * np.maximum(_magnitude(y0, q), _magnitude(y_2S, q))
+                    for q in QUANTITIES}
+        trunc = {q: quantity_distance(y_S, y_2S, q) / 15.0 for q in QUANTITIES}
+        M2 = majorant(F, y0, rate)
+        for y_at in (y_mid, y_2S):
+            m = majorant(F, y_at, rate)
+            M2 = {q: np.fmax(M2[q], m[q]) for q in QUANTITIES}
+        res = FlowResult(y_2S, {q: np.fmax(trunc[q], roundoff[q]) for q in QUANTITIES}, M2, rate, 2 * S, roundoff)
+        if allowance_fn is None:
+            return res
+        allow = allowance_fn(M2, rate)
+        if all(np.all((trunc[q] <= tol.CHECK_FLOW_ERROR_FRACTION * allow[q]) | (trunc[q] <= roundoff[q]))
+               for q in QUANTITIES):
+            return res
+        S *= 2
+    return res
+
+
+@dataclass
+class Allowances:
+    """Per row interval (N,) and quantity: ``physics`` (C h Δ M2 with drift), ``arith`` (roundings of the
+    steps in the data's precision), ``print_`` (written digits of both rows), ``total``."""
+
+    physics: dict
+    arith: dict
+    print_: dict
+    total: dict
+
+
+def local_allowances(inp, y_start, M2, rate, flow_roundoff=None, y_end=None) -> Allowances:
+    """What a consistent scheme of order ≥ 1 may leave over each row interval of ``inp`` (a CheckInput).
+
+    Over a row of ``m`` steps of h (Δ = m h): m local defects ``C h² M2`` that the flow carries along,
+    ``C h Δ M2 · e^{L(Δ − h)}``, and a velocity defect drifts into position (orientation) by ~(Δ − h)/2.
+    ``arith`` adds the roundings of the user's steps (data precision, relative to the larger of the two
+    rows' magnitudes, ``y_start`` and ``y_end``) and of the exact flow itself.
+    """
+    span = inp.span_s
+    h = span / inp.span_steps
+    grow = np.exp(np.minimum(rate * (span - h), 50.0))
+    base = {q: tol.CHECK_LOCAL_C * h * span * M2[q] * grow for q in QUANTITIES}
+    physics = dict(base)
+    physics["position"] = base["position"] + 0.5 * (span - h) * base["velocity"]
+    physics["orientation"] = base["orientation"] + 0.5 * (span - h) * base["angular_velocity"]
+    u = inp.unit_roundoff
+    arith, print_ = {}, {}
+    for q in BLOCKS:
+        mag = _magnitude(y_start, q) if y_end is None else np.fmax(_magnitude(y_start, q), _magnitude(y_end, q))
+        arith[q] = inp.span_steps * tol.CHECK_ROUNDINGS_PER_STEP * u * mag
+        if flow_roundoff is not None:
+            arith[q] = arith[q] + flow_roundoff[q]
+        pf = inp.print_floor.get(q)
+        print_[q] = np.zeros(len(span)) if pf is None else pf[:-1] + pf[1:]
+    total = {q: physics[q] + arith[q] + print_[q] for q in QUANTITIES}
+    return Allowances(physics, arith, print_, total)
+
+
+def _perturbed_initial_states(y0, scales):
+    """13 states: y0 and 12 perturbations, 3 per quantity (each axis), of size CHECK_GROWTH_EPS × scale."""
+    ys, sizes = [y0.copy()], []
+    for q, sl in BLOCKS.items():
+        for i in range(3):
+            y = y0.copy()
+            d = tol.CHECK_GROWTH_EPS * scales[q]
+            if q == "orientation":
+                rv = np.zeros(3)
+                rv[i] = d
+                y[Q] = quat_mul(quat_exp(rv), y0[Q])
+            else:
+                y[sl.start + i] += d
+            ys.append(y)
+            sizes.append(d)
+    return np.array(ys), sizes
+
+
+def error_growth(scenario, t_s, scales) -> dict:
+    """How an error made at t = 0 in quantity p has grown in quantity q by each time of ``t_s``.
+
+    Returns ``{(p, q): (T,)}`` with the running maximum over time of ``max_axis |Δq(t)| / |δp|``
+    (units of q per unit of p; ≥ 1 on the diagonal), from RK4 runs of the flow (12 perturbations of
+    size CHECK_GROWTH_EPS × ``scales[p]`` and the unperturbed run) on a grid of steps ≤
+    CHECK_GROWTH_RATE_PER_STEP / L. The growth is an envelope factor: the RK4 error of a difference of
+    two runs at L τ = 0.25 (~1e-5 relative per step) does not move it visibly.
+    """
+    F = flow_rhs(scenario)
+    y0 = scenario.problem.initial_packed()
+    t_s = np.asarray(t_s, dtype=float)
+    T = float(t_s[-1]) if len(t_s) else 0.0
+    out = {(p, q): np.ones(len(t_s)) if p == q else np.zeros(len(t_s)) for p in QUANTITIES for q in QUANTITIES}
+    if T <= 0.0:
+        return out
+    ys, sizes = _perturbed_initial_states(y0, scales)
+    L = float(motion_rate(scenario, y0[None, :])[0])
+    n = int(min(20000, max(100, math.ceil(T * max(L, 1.0) / tol.CHECK_GROWTH_RATE_PER_STEP))))
+    grid = np.linspace(0.0, T, n + 1)
+    Y = np.empty((n + 1,) + ys.shape)
+    Y[0] = ys
+    for k in range(1, n + 1):
+        Y[k] = rk4_flow(F, Y[k - 1], grid[k] - grid[k - 1], 1)
+    base = Y[:, :1, :]
+    idx = np.minimum(np.searchsorted(grid, t_s - 1e-12 * T), n)   # first grid time at or after each t
+    with np.errstate(all="ignore"):
+        for pi, p in enumerate(BLOCKS):          # the order _perturbed_initial_states used
+            block = Y[:, 1 + 3 * pi: 4 + 3 * pi, :]
+            for q in QUANTITIES:
+                if q == "orientation":
+                    qa = base[..., Q] / np.linalg.norm(base[..., Q], axis=-1, keepdims=True)
+                    qb = block[..., Q] / np.linalg.norm(block[..., Q], axis=-1, keepdims=True)
+                    dq = geodesic_angle(np.broadcast_to(qa, qb.shape), qb)
+                else:
+                    dq = np.linalg.norm(block[..., BLOCKS[q]] - base[..., BLOCKS[q]], axis=-1)
+                env = np.maximum.accumulate(np.nan_to_num(np.max(dq, axis=1) / sizes[3 * pi], nan=np.inf))
+                if p == q:
+                    env = np.maximum(env, 1.0)
+                out[(p, q)] = env[idx]
+    return out

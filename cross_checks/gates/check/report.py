@@ -1,0 +1,138 @@
+"""What ``rbcheck check`` prints and writes: the verdict line first, then the evidence table, the closest
+scheme and the likely cause; the same as JSON (``--json``)."""
+from __future__ import annotations
+
+import json
+import math
+
+from cross_checks.core.files import json_default
+
+__all__ = ["format_report", "format_ladder", "to_json_text"]
+
+_KIND_SHORT = {"one-step defect": "one-step defect", "acceleration": "acceleration", "conserved": "conserved",
+               "free-running": "free-running"}
+_NAMES = {"quaternion_norm": "|q| - 1", "angular_momentum": "angular momentum L", "energy": "energy",
+          "position": "position", "velocity": "velocity", "orientation": "orientation",
+          "angular_velocity": "angular velocity"}
+
+
+def _num(v, unit=""):
+    if v is None:
+        return "–"
+    if isinstance(v, float) and math.isnan(v):
+        return "NaN"
+    if isinstance(v, float) and math.isinf(v):
+        return "inf"
+    return f"{v:.3g}" + (f" {unit}" if unit else "")
+
+
+def _status(e):
+    if not e.decisive:
+        return "info"
+    until = "" if e.decisive_until_s is None else f" (decisive to t = {e.decisive_until_s:.3g} s)"
+    return ("ok" if e.passed else "OVER") + until
+
+
+def format_report(res) -> str:
+    """Human-readable report of one check."""
+    lines = [("PASS: " if res.passed else "FAIL: ") + res.verdict, "",
+             f"{res.source}: {res.input['description']}",
+             f"scenario {res.scenario} ({res.input['duration_s']:g} s); reference: {res.reference_label or '–'}"
+             + ("; values look single precision" if res.input.get("single_precision") else "")]
+    if res.evidence:
+        lines += ["", f"  {'evidence':<18}{'quantity':<30}{'max':>11}{'max/allowed':>13}{'first over (s)':>16}"
+                      f"{'allowed':>11}  status"]
+        for e in res.evidence:
+            first = "–" if e.first_over_s is None else f"{e.first_over_s:.4g}"
+            name = _NAMES.get(e.quantity, e.quantity) + (f" ({e.unit})" if e.unit else "")
+            lines.append(f"  {_KIND_SHORT[e.kind]:<18}{name:<30}{_num(e.max_value):>11}{_num(e.max_ratio):>13}"
+                         f"{first:>16}{_num(e.allowance):>11}  {_status(e)}")
+        lines.append("")
+        lines.append("  allowances:")
+        seen = set()
+        for e in res.evidence:
+            key = (e.kind, e.source)
+            if key not in seen:
+                seen.add(key)
+                lines.append(f"    {e.kind}: {e.source}")
+        for e in res.evidence:
+            if e.note:
+                lines.append(f"    {e.kind} {_NAMES.get(e.quantity, e.quantity)}: {e.note}")
+    lines += _schemes(res)
+    lines.append("")
+    if res.identity:
+        lines.append(f"scheme: IS {', '.join(res.identity)}")
+    elif res.closest:
+        c = next(c for c in res.candidates if c.name == res.closest)
+        how = ("its steps differ from the file's by up to " f"{_num(c.max_ratio)}× the local allowance"
+               if res.input["quantities"] and len(res.input["quantities"]) == 4
+               else f"largest free-running difference {_num(c.max_rel_diff)}")
+        lines.append(f"closest scheme: {res.closest} ({how})"
+                     + (f"; closest correct scheme: {res.closest_correct}"
+                        if res.closest_correct and res.closest_correct != res.closest else ""))
+    for c in res.caveats:
+        lines.append(f"caveat: {c}")
+    for cause in res.likely_causes:
+        lines.append(f"likely cause: {cause}")
+    for e in res.engines:
+        if "error" in e:
+            lines.append(f"engine {e['engine']}: {e['error']}")
+        else:
+            diff = ", ".join(f"{k.replace('_', ' ')} {_num(v)}" for k, v in e["max_difference"].items())
+            lines.append(f"engine {e['engine']}: {'same to round-off' if e['same_to_roundoff'] else 'differs'} "
+                         f"(max difference run free: {diff})")
+    for n in res.cannot_tell:
+        lines.append(f"cannot tell: {n}")
+    for n in res.notes:
+        lines.append(f"note: {n}")
+    return "\n".join(lines)
+
+
+def _schemes(res) -> list:
+    """Every reference variant stepped from the file's own states: how far its steps are from the
+    file's next rows, and how far from the exact motion (its own defect), both over the allowance."""
+    rows = [c for c in res.candidates if not math.isnan(c.own_defect)]
+    if not rows:
+        return []
+    out = ["", f"  {'scheme (stepped from the file’s states)':<42}{'vs the file':>13}{'vs exact motion':>17}  here",
+           f"  {'':<42}{'(× allowance)':>13}{'(× allowance)':>17}"]
+    for c in rows:
+        tag = "IS the file" if c.same else ("correct" if c.correct else "NOT correct here")
+        out.append(f"  {c.name:<42}{_num(c.max_ratio):>13}{_num(c.own_defect):>17}  {tag}")
+    return out
+
+
+def format_ladder(lad) -> str:
+    """The ladder section: fitted orders per quantity and their verdicts."""
+    lines = [("PASS: " if lad["passed"] else "FAIL: ") + lad["verdict"], "",
+             f"ladder of {len(lad['files'])} files (Δt = {', '.join(f'{d:g}' for d in lad['dt_s'])} s), "
+             f"expected: {lad['expected']}",
+             f"  {'quantity':<20}{'order':>8}  {'pairwise orders':<28}verdict"]
+    for r in lad["convergence"]:
+        pw = ", ".join("–" if p is None else f"{p:.2f}" for p in r["pairwise_orders"])
+        order = "–" if r["order"] is None else f"{r['order']:.2f}"
+        lines.append(f"  {r['quantity']:<20}{order:>8}  {pw:<28}{r['assessment']}")
+    for n in lad["notes"]:
+        lines.append(f"note: {n}")
+    return "\n".join(lines)
+
+
+def to_json_text(obj) -> str:
+    """Strict JSON: NaN is written as null and ±inf as the strings "inf" / "-inf"."""
+    return json.dumps(_finite(json.loads(json.dumps(obj, default=_json_default))), indent=2, allow_nan=False) + "\n"
+
+
+def _json_default(o):
+    if hasattr(o, "as_dict"):
+        return o.as_dict()
+    return json_default(o)
+
+
+def _finite(o):
+    if isinstance(o, float):
+        return None if math.isnan(o) else ("inf" if o == math.inf else "-inf" if o == -math.inf else o)
+    if isinstance(o, dict):
+        return {k: _finite(v) for k, v in o.items()}
+    if isinstance(o, list):
+        return [_finite(v) for v in o]
+    return o

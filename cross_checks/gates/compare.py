@@ -1,0 +1,349 @@
+"""``rbcheck compare BASELINE_DIR NEW_DIR``: direction-aware regression check of two results directories.
+
+Rows of ``results.csv`` are matched by (scenario, engine, dt). Each metric has a direction and an
+absolute + relative tolerance (``METRIC_RULES``): errors and drifts are better when lower; a value
+is a regression when ``new > old + abs_tol + rel_tol·|old|``, an improvement when
+``new < old − abs_tol − rel_tol·|old|``. A status change away from ``ok`` is a regression.
+Convergence records of ``summary.json`` are matched by (scenario, engine, quantity): an order that
+moves further from its expected value by more than ``ORDER_TOL`` or a verdict that changes from
+``converges`` is a regression. Engine versions of both provenances are compared and reported.
+
+Both directories are validated in full before anything is compared (required columns, a number in
+every numeric cell, no negative error or drift, known statuses, no duplicate rows, a summary.json of
+a known schema version with well-formed convergence records): damaged input is exit 2 with one line,
+never read as "no regression". A metric column the baseline has and the new results lack, or an
+order that vanished, is a regression.
+
+Exit codes: 0 no regression; 1 regression (or missing rows, unless allowed); 2 unusable input.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pandas as pd
+
+__all__ = ["compare_dirs", "Comparison", "CompareInputError", "METRIC_RULES", "ORDER_TOL", "to_markdown"]
+
+KEY = ["scenario", "engine", "dt"]
+
+#: metric column -> (abs_tol, rel_tol). All are "lower is better".
+#: rel 5 %: the same code on another machine reproduces errors to ~1e-12 relative (libm/BLAS
+#: rounding, amplified by at most ~1e3 on the chaotic tumbling cases), while a real change of
+#: scheme, default or force semantics changes errors by factors; 5 % separates the two with margin.
+#: abs 1e-12: errors at the round-off floor (≤ 1e-12) fluctuate by O(1) factors and mean nothing.
+METRIC_RULES = {
+    "pos_err_final": (1e-12, 0.05),
+    "vel_err_final": (1e-12, 0.05),
+    "orient_err_final": (1e-12, 0.05),
+    "angvel_err_final": (1e-12, 0.05),
+    "pos_err_max": (1e-12, 0.05),
+    "vel_err_max": (1e-12, 0.05),
+    "orient_err_max": (1e-12, 0.05),
+    "angvel_err_max": (1e-12, 0.05),
+    "energy_drift_max": (1e-12, 0.05),
+    "angmom_drift_max": (1e-12, 0.05),
+    "linmom_drift_max": (1e-12, 0.05),
+}
+#: An observed order may move this much (in either direction) before it counts: the fitted order of
+#: a ladder changes by ~0.01 between machines; 0.1 is the tolerance of the order tests (issue 2).
+ORDER_TOL = 0.1
+GOOD_VERDICTS = ("converges", "at_roundoff")
+#: No claim on the ladder: a change to or from it is information, never a regression or improvement.
+NEUTRAL_VERDICTS = ("pre_asymptotic",)
+
+
+class CompareInputError(ValueError):
+    """A results directory that cannot be compared (message names the file and the reason)."""
+
+
+@dataclass
+class Change:
+    kind: str          # regression | improvement | new | missing | changed (informational)
+    scenario: str
+    engine: str
+    what: str          # dt=... metric, or quantity
+    old: str = ""
+    new: str = ""
+    note: str = ""
+
+
+@dataclass
+class Comparison:
+    changes: list = field(default_factory=list)
+    version_diffs: list = field(default_factory=list)  # (package, old, new)
+    matched_rows: int = 0
+
+    def of(self, kind):
+        return [c for c in self.changes if c.kind == kind]
+
+    def exit_code(self, allow_missing: bool = False) -> int:
+        if self.of("regression") or (self.of("missing") and not allow_missing):
+            return 1
+        return 0
+
+
+#: The columns DESIGN.md promises in every results.csv.
+REQUIRED_COLUMNS = ("scenario", "engine", "dt", "steps", "wall_s", "pos_err_final", "vel_err_final", "orient_err_final",
+                    "angvel_err_final", "energy_drift_max", "angmom_drift_max", "status")
+STATUSES = ("ok", "diverged", "failed")
+
+
+def _number(csv, line, col, text, *, nonneg=False, positive=False):
+    """A results.csv cell as a float (empty = NaN); CompareInputError naming line, column and reason."""
+    t = text.strip()
+    if t == "":
+        if positive:
+            raise CompareInputError(f"{csv}: line {line}: {col}: missing")
+        return math.nan
+    try:
+        v = float(t)
+    except ValueError:
+        raise CompareInputError(f"{csv}: line {line}: {col}: not a number: {t[:40]!r}") from None
+    if math.isnan(v):
+        return v
+    if not math.isfinite(v) or (nonneg and v < 0) or (positive and v <= 0):
+        need = "a positive finite number" if positive else "a finite number >= 0 (or empty)" if nonneg else "finite"
+        raise CompareInputError(f"{csv}: line {line}: {col}: must be {need}, got {t[:40]}")
+    return v
+
+
+def _read_csv(csv: Path) -> pd.DataFrame:
+    try:
+        raw = pd.read_csv(csv, dtype=str, keep_default_na=False, na_filter=False)
+    except Exception as exc:  # noqa: BLE001 - pandas raises many kinds; all mean "unusable"
+        raise CompareInputError(f"{csv}: cannot parse: {' '.join(str(exc).split()) or type(exc).__name__}") from None
+    missing = [c for c in REQUIRED_COLUMNS if c not in raw.columns]
+    if missing:
+        raise CompareInputError(f"{csv}: columns {', '.join(missing)} missing")
+    metrics = [m for m in METRIC_RULES if m in raw.columns]
+    out = {c: [] for c in ["scenario", "engine", "dt", "status", *metrics]}
+    for i, r in enumerate(raw.itertuples(index=False), start=2):
+        r = r._asdict() if hasattr(r, "_asdict") else dict(zip(raw.columns, r))
+        for c in ("scenario", "engine"):
+            if not r[c].strip():
+                raise CompareInputError(f"{csv}: line {i}: {c}: empty")
+            out[c].append(r[c])
+        if r["status"] not in STATUSES:
+            raise CompareInputError(f"{csv}: line {i}: status: must be one of {', '.join(STATUSES)}, "
+                                    f"got {r['status'][:40]!r}")
+        out["status"].append(r["status"])
+        out["dt"].append(_number(csv, i, "dt", r["dt"], positive=True))
+        _number(csv, i, "steps", r["steps"], nonneg=True)
+        for m in metrics:
+            out[m].append(_number(csv, i, m, r[m], nonneg=True))
+    df = pd.DataFrame(out)
+    if df.duplicated(KEY).any():
+        dup = df[df.duplicated(KEY)].iloc[0]
+        raise CompareInputError(f"{csv}: duplicate row for {dup['scenario']}, {dup['engine']}, dt={dup['dt']}")
+    return df
+
+
+def _read_summary(sj: Path) -> dict:
+    from cross_checks.sweep.schema import SchemaError, check_summary
+    if not sj.is_file():
+        raise CompareInputError(f"{sj}: missing (every results directory written by `rbcheck sweep` has one)")
+    try:
+        summary = json.loads(sj.read_text(encoding="utf-8"))
+    except (ValueError, RecursionError) as exc:
+        raise CompareInputError(f"{sj}: cannot parse JSON: {str(exc) or type(exc).__name__}") from None
+    try:
+        check_summary(summary)
+    except SchemaError as exc:
+        raise CompareInputError(f"{sj}: {exc}") from None
+    return summary
+
+
+def _read_dir(d: Path):
+    """results.csv and summary.json of a results directory, validated in full (CompareInputError)."""
+    d = Path(d)
+    if not d.is_dir():
+        raise CompareInputError(f"{d}: not a directory")
+    csv = d / "results.csv"
+    if not csv.is_file():
+        raise CompareInputError(f"{csv}: missing (is {d} a results directory written by `rbcheck sweep`?)")
+    try:
+        return _read_csv(csv), _read_summary(d / "summary.json")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CompareInputError(f"{d}: cannot read: {exc}") from None
+
+
+def _fmt(v):
+    if v is None or (isinstance(v, float) and math.isnan(v)):
+        return "—"
+    if isinstance(v, float):
+        return f"{v:.3g}"
+    return str(v)
+
+
+def _expected_order(rec):
+    if rec.get("expected_order") is not None:
+        return float(rec["expected_order"])
+    try:
+        from cross_checks.analysis.expectations import expected_order
+        return expected_order(rec["engine"], rec["quantity"], rec.get("scenario"))
+    except Exception:
+        return None
+
+
+def compare_dirs(baseline_dir, new_dir) -> Comparison:
+    old_df, old_sum = _read_dir(Path(baseline_dir))
+    new_df, new_sum = _read_dir(Path(new_dir))
+    out = Comparison()
+    for metric in METRIC_RULES:  # a metric the baseline has and the new results lack cannot pass
+        if metric in old_df.columns and metric not in new_df.columns:
+            out.changes.append(Change("regression", "(all)", "(all)", f"column {metric}",
+                                      note="metric missing from the new results.csv"))
+        elif metric in new_df.columns and metric not in old_df.columns:
+            out.changes.append(Change("new", "(all)", "(all)", f"column {metric}", note="metric new in these results"))
+    merged = old_df.merge(new_df, on=KEY, how="outer", suffixes=("_old", "_new"), indicator=True)
+    for _, r in merged.iterrows():
+        where = f"dt={r['dt']:g}"
+        if r["_merge"] == "left_only":
+            out.changes.append(Change("missing", r["scenario"], r["engine"], where, note="row absent from the new results"))
+            continue
+        if r["_merge"] == "right_only":
+            out.changes.append(Change("new", r["scenario"], r["engine"], where, new=str(r["status_new"])))
+            continue
+        out.matched_rows += 1
+        so, sn = str(r["status_old"]), str(r["status_new"])
+        if so != sn:
+            kind = "regression" if so == "ok" else ("improvement" if sn == "ok" else "regression")
+            out.changes.append(Change(kind, r["scenario"], r["engine"], f"{where} status", so, sn))
+            continue
+        for metric, (abs_tol, rel_tol) in METRIC_RULES.items():
+            co, cn = f"{metric}_old", f"{metric}_new"
+            if co not in merged.columns or cn not in merged.columns:
+                continue
+            vo, vn = r[co], r[cn]
+            if pd.isna(vo) and pd.isna(vn):
+                continue
+            if pd.isna(vo) or pd.isna(vn):
+                out.changes.append(Change("regression" if pd.isna(vn) else "improvement", r["scenario"], r["engine"],
+                                          f"{where} {metric}", _fmt(vo), _fmt(vn), "value appeared/disappeared"))
+                continue
+            vo, vn = float(vo), float(vn)
+            margin = abs_tol + rel_tol * abs(vo)
+            if vn > vo + margin:
+                out.changes.append(Change("regression", r["scenario"], r["engine"], f"{where} {metric}",
+                                          _fmt(vo), _fmt(vn), f"×{vn / vo:.3g}" if vo else "was 0"))
+            elif vn < vo - margin:
+                out.changes.append(Change("improvement", r["scenario"], r["engine"], f"{where} {metric}",
+                                          _fmt(vo), _fmt(vn), f"×{vn / vo:.3g}" if vo else ""))
+    _compare_convergence(old_sum.get("convergence", []), new_sum.get("convergence", []), out)
+    _compare_versions(old_sum.get("provenance", {}), new_sum.get("provenance", {}), out)
+    return out
+
+
+def _compare_convergence(old_recs, new_recs, out: Comparison):
+    key = lambda rec: (rec["scenario"], rec["engine"], rec["quantity"])  # noqa: E731
+    old = {key(r): r for r in old_recs}
+    new = {key(r): r for r in new_recs}
+    for k in sorted(set(old) | set(new)):
+        scen, eng, qty = k
+        if k not in new:
+            out.changes.append(Change("missing", scen, eng, f"order of {qty}", note="convergence record absent"))
+            continue
+        if k not in old:
+            out.changes.append(Change("new", scen, eng, f"order of {qty}", new=_fmt(new[k].get("order"))))
+            continue
+        ro, rn = old[k], new[k]
+        vo, vn = ro.get("verdict"), rn.get("verdict")
+        if vo != vn:
+            if vo in NEUTRAL_VERDICTS or vn in NEUTRAL_VERDICTS:
+                kind = "changed"  # a claim appears or disappears: information
+            elif vo in GOOD_VERDICTS and vn not in GOOD_VERDICTS:
+                kind = "regression"
+            elif vn in GOOD_VERDICTS and vo not in GOOD_VERDICTS:
+                kind = "improvement"
+            elif vo in GOOD_VERDICTS and vn in GOOD_VERDICTS:
+                kind = "changed"  # e.g. converges <-> at_roundoff: both say the scheme is right
+            else:
+                kind = "regression" if vn in ("diverged", "failed") else "improvement" if vo in ("diverged", "failed") else "regression"
+            out.changes.append(Change(kind, scen, eng, f"verdict of {qty}", str(vo), str(vn)))
+            continue
+        oo, on = ro.get("order"), rn.get("order")
+        if oo is None and on is None:
+            continue
+        if oo is None or on is None:  # an order that appeared or vanished under the same verdict
+            out.changes.append(Change("regression" if on is None else "changed", scen, eng, f"order of {qty}",
+                                      _fmt(oo), _fmt(on), "no order fitted" if on is None else "order now fitted"))
+            continue
+        exp = _expected_order(rn)
+        if exp is None:  # no expected order: a converging order that moves beyond the tolerance is a
+            # regression (nothing says which way is better); the order of a record that does not converge
+            # measures no scheme and is not compared
+            if vn in GOOD_VERDICTS and abs(float(on) - float(oo)) > ORDER_TOL:
+                out.changes.append(Change("regression", scen, eng, f"order of {qty}", _fmt(float(oo)),
+                                          _fmt(float(on)), "no expected order to judge the change by"))
+            continue
+        do, dn = abs(float(oo) - exp), abs(float(on) - exp)
+        if dn > do + ORDER_TOL:
+            out.changes.append(Change("regression", scen, eng, f"order of {qty}", _fmt(float(oo)), _fmt(float(on)),
+                                      f"expected {exp:g}"))
+        elif dn < do - ORDER_TOL:
+            out.changes.append(Change("improvement", scen, eng, f"order of {qty}", _fmt(float(oo)), _fmt(float(on)),
+                                      f"expected {exp:g}"))
+
+
+def _versions(prov):
+    v = prov.get("versions", prov)
+    out = {k: str(val) for k, val in v.items() if k in ("rbcheck", "numpy", "scipy", "mujoco", "pybullet", "python")}
+    for name, e in (prov.get("engines") or {}).items():  # user engines: version, and an engine file's hash
+        if name not in out and isinstance(e, dict):
+            sha = e.get("engine_file_sha256")
+            progs = "".join(sorted((e.get("programs_sha256") or {}).values()))
+            progs = hashlib.sha256(progs.encode()).hexdigest()[:12] if progs else ""
+            out[f"engine {name}"] = (str(e.get("version", "")) + (f" (engine file {sha[:12]}" if sha else "")
+                                     + (f", programs {progs}" if progs else "") + (")" if sha else ""))
+    return out
+
+
+def _compare_versions(po, pn, out: Comparison):
+    vo, vn = _versions(po), _versions(pn)
+    for k in sorted(set(vo) | set(vn)):
+        if vo.get(k) != vn.get(k):
+            out.version_diffs.append((k, vo.get(k, "—"), vn.get(k, "—")))
+
+
+def to_text(c: Comparison, allow_missing=False) -> str:
+    lines = [f"compared {c.matched_rows} matching rows: {len(c.of('regression'))} regressions, "
+             f"{len(c.of('improvement'))} improvements, {len(c.of('new'))} new, {len(c.of('missing'))} missing"]
+    for pkg, a, b in c.version_diffs:
+        lines.append(f"  version of {pkg}: {a} -> {b}")
+    for kind in ("regression", "missing", "improvement", "new", "changed"):
+        for ch in c.of(kind):
+            lines.append(f"  {kind.upper():<11} {ch.scenario} {ch.engine} {ch.what}: {ch.old} -> {ch.new} {ch.note}".rstrip())
+    verdict = {0: "OK: no regression", 1: "REGRESSION"}[c.exit_code(allow_missing)]
+    lines.append(verdict)
+    return "\n".join(lines)
+
+
+def _md_escape(s: str) -> str:
+    return str(s).replace("|", "\\|").replace("\n", " ").replace("<", "&lt;").replace(">", "&gt;")
+
+
+def to_markdown(c: Comparison, baseline_dir, new_dir, allow_missing=False) -> str:
+    code = c.exit_code(allow_missing)
+    head = "✅ no regression" if code == 0 else "❌ regression"
+    md = [f"## rbcheck compare: {head}", "",
+          f"Baseline `{_md_escape(baseline_dir)}` vs new `{_md_escape(new_dir)}`: {c.matched_rows} matching rows, "
+          f"**{len(c.of('regression'))} regressions**, {len(c.of('improvement'))} improvements, "
+          f"{len(c.of('new'))} new, {len(c.of('missing'))} missing.", ""]
+    if c.version_diffs:
+        md += ["### Version differences", "", "| package | baseline | new |", "|---|---|---|"]
+        md += [f"| {_md_escape(p)} | {_md_escape(a)} | {_md_escape(b)} |" for p, a, b in c.version_diffs]
+        md.append("")
+    for kind, title in (("regression", "Regressions"), ("missing", "Missing rows"), ("improvement", "Improvements"),
+                        ("new", "New rows"), ("changed", "Other changes (not regressions)")):
+        rows = c.of(kind)
+        if not rows:
+            continue
+        md += [f"### {title}", "", "| scenario | engine | what | baseline | new | note |", "|---|---|---|---|---|---|"]
+        md += [f"| {_md_escape(r.scenario)} | {_md_escape(r.engine)} | {_md_escape(r.what)} | {_md_escape(r.old)} | "
+               f"{_md_escape(r.new)} | {_md_escape(r.note)} |" for r in rows]
+        md.append("")
+    return "\n".join(md)

@@ -1,0 +1,135 @@
+"""Resource limits of a scenario, decided up front from the scenario alone (before any run starts).
+
+A run records every step, so its memory grows with ``duration / Δt``; the DOP853 reference costs CPU
+in proportion to ``duration × (the fastest rate of the dynamics)``. Both are estimated from the
+scenario and refused with a :class:`~cross_checks.scenario.ScenarioError` naming the field, the
+estimate and the limit, instead of a MemoryError or an hour-long solve. The numbers (and where each
+comes from) are in :mod:`cross_checks.tolerances` under "hardening".
+
+The time limits that hold while the work runs (per reference solve, per run) are enforced by
+:func:`time_limit`, a SIGALRM timer in the process doing the work: the interrupted run becomes a
+``failed`` row saying which limit it hit.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from cross_checks.core import tolerances as tol
+
+__all__ = ["LimitExceeded", "check_scenario_limits", "check_run_steps", "run_memory_bytes",
+           "reference_cost_s", "fastest_rate", "MAX_STEPS_PER_RUN"]
+
+#: Steps one run may record: the memory a job may use at the measured cost per recorded step.
+MAX_STEPS_PER_RUN = int(tol.JOB_MEMORY_LIMIT_BYTES // tol.BYTES_PER_RECORDED_STEP)
+
+
+class LimitExceeded(ValueError):
+    """A scenario whose work would exceed a limit: ``field`` and ``reason`` as in ScenarioError."""
+
+    def __init__(self, field_: str, reason: str):
+        self.field, self.reason = field_, reason
+        super().__init__(f"{field_}: {reason}")
+
+
+def _gib(n_bytes: float) -> str:
+    return f"{n_bytes / 2 ** 30:.3g} GiB"
+
+
+def check_run_steps(duration_s: float, dt_s: float, field_: str) -> int:
+    """Steps of one run of ``duration_s`` at ``dt_s``; LimitExceeded (naming ``field_``) beyond the limit.
+
+    Works for any positive finite inputs, including Δt = 1e-320 (the ratio overflows to inf)."""
+    with np.errstate(over="ignore"):
+        n = float(np.float64(duration_s) / np.float64(dt_s))
+    if not math.isfinite(n) or n > MAX_STEPS_PER_RUN:
+        shown = "more than 1e308" if not math.isfinite(n) else f"{n:.3g}"
+        raise LimitExceeded(field_, f"{dt_s:g} s makes {shown} steps over the duration {duration_s:g} s; the limit "
+                                    f"is {MAX_STEPS_PER_RUN:.3g} steps per run ({_gib(tol.JOB_MEMORY_LIMIT_BYTES)} of "
+                                    f"memory at ~{tol.BYTES_PER_RECORDED_STEP} bytes per recorded step)")
+    return int(round(n))
+
+
+def _ladder_fields(scenario):
+    """``(field, Δt)`` of every run a sweep makes of the scenario."""
+    if "dt_ladder" not in scenario.raw:
+        return [("dt", scenario.dt_s)]
+    given = list(scenario.raw["dt_ladder"])
+    out = [(f"dt_ladder[{given.index(d)}]", d) for d in scenario.dt_ladder_s]
+    if not any(d == scenario.dt_s for d in scenario.dt_ladder_s):
+        out.append(("dt", scenario.dt_s))
+    return out
+
+
+def run_memory_bytes(scenario) -> float:
+    """Peak memory estimate of the scenario's largest sweep job: its own recorded steps plus the
+    reference on the union of the scenario's time grids. BYTES_PER_RECORDED_STEP was measured for a
+    run and its reference on the same grid (about half each), so each point counts half of it."""
+    steps = [scenario.n_steps(d) for _, d in _ladder_fields(scenario)]
+    union = sum(n + 1 for n in steps)  # upper bound; exact when no grid point is shared
+    if union * tol.BYTES_PER_RECORDED_STEP > tol.JOB_MEMORY_LIMIT_BYTES:
+        grids = [d * np.arange(n + 1) for (_, d), n in zip(_ladder_fields(scenario), steps)]
+        union = np.unique(np.concatenate(grids)).size
+    return float((max(steps) + 1 + union) * tol.BYTES_PER_RECORDED_STEP / 2)
+
+
+def fastest_rate(scenario) -> tuple:
+    """``(rate in 1/s, field)``: the fastest rate of the dynamics and the scenario field that sets it.
+
+    Rates: spring frequencies (translation ``sqrt(Σk/m)``, rotation ``sqrt(Σ k r (r + reach) / I_min)``
+    with r the attachment radius and reach how far the anchor can pull it), the spin rate (initial
+    ``|ω|`` plus what the torques and off-COM forces can add over the duration), and the damping rates
+    (drag ``c/m``, the course's decay ``−ln γ / dt``). DOP853 needs a fixed number of steps per unit of
+    the fastest rate (measured, tolerances.DOP853_EVALS_PER_RAD)."""
+    p = scenario.problem
+    fm, m = p.forces, p.body.mass_kg
+    i_min = float(np.linalg.eigvalsh(p.body.inertia_B)[0])
+    rates = []
+    if fm.springs:
+        k_sum = sum(s.stiffness_N_per_m for s in fm.springs)
+        rot = 0.0
+        for s in fm.springs:
+            r = float(np.linalg.norm(s.attach_B))
+            reach = float(np.linalg.norm(np.asarray(s.anchor_W) - np.asarray(p.initial.x_W))) + r + s.rest_length_m
+            rot += s.stiffness_N_per_m * r * (r + reach)
+        stiffest = max(range(len(fm.springs)), key=lambda i: fm.springs[i].stiffness_N_per_m)
+        rates.append((math.sqrt(k_sum / m + rot / i_min), f"forces.spring[{stiffest}].stiffness"))
+    torque = sum(float(np.linalg.norm(t.torque)) for t in fm.torques)
+    torque += sum(float(np.linalg.norm(pf.force) * np.linalg.norm(pf.point_B)) for pf in fm.point_forces)
+    spin = float(np.linalg.norm(p.initial.w_W)) + torque * scenario.duration_s / i_min
+    rates.append((spin, "initial.angular_velocity" if torque == 0 else "forces.torque"))
+    rates.append((fm.linear_drag_N_s_per_m / m, "forces.linear_drag"))
+    for key, g in (("velocity_decay", fm.velocity_decay), ("angular_velocity_decay", fm.angular_velocity_decay)):
+        rates.append((-math.log(g) / scenario.dt_s, f"forces.{key}"))
+    return max(rates, key=lambda r: r[0])
+
+
+def reference_cost_s(scenario) -> float:
+    """Estimated CPU seconds of the scenario's DOP853 reference (0 when a closed form covers it)."""
+    from cross_checks.scenario.references import analytic_available
+    if scenario.reference != "ground_truth" and analytic_available(scenario)[0]:
+        return 0.0
+    rate, _ = fastest_rate(scenario)
+    evals = tol.DOP853_EVALS_PER_RAD * max(rate, 1.0 / scenario.duration_s) * scenario.duration_s
+    return evals * tol.DOP853_S_PER_EVAL
+
+
+def check_scenario_limits(scenario) -> None:
+    """LimitExceeded (field, estimate, limit) when any run of a sweep of ``scenario``, or its reference,
+    would exceed a limit. Cheap: no simulation."""
+    for fld, d in _ladder_fields(scenario):
+        check_run_steps(scenario.duration_s, d, fld)
+    mem = run_memory_bytes(scenario)
+    if mem > tol.JOB_MEMORY_LIMIT_BYTES:
+        raise LimitExceeded("dt_ladder", f"the finest run and the reference on the union of the time grids need "
+                                         f"~{_gib(mem)} of memory; the limit is {_gib(tol.JOB_MEMORY_LIMIT_BYTES)} "
+                                         "per job (use fewer or coarser rungs, or a shorter duration)")
+    cost = reference_cost_s(scenario)
+    if cost > tol.REFERENCE_COST_LIMIT_S:
+        rate, fld = fastest_rate(scenario)
+        raise LimitExceeded(fld, f"the dynamics run at {rate:.3g} 1/s, so the DOP853 reference over the duration "
+                                 f"{scenario.duration_s:g} s would take ~{cost:.3g} s of CPU; the limit is "
+                                 f"{tol.REFERENCE_COST_LIMIT_S:g} s (shorten the duration or soften the dynamics)")
+
+

@@ -1,0 +1,160 @@
+"""The resolved scenario: what every engine receives (``rbcheck show SCENARIO [--json]``).
+
+:func:`resolved_scenario` turns a validated :class:`~cross_checks.scenario.Scenario` into a plain
+dict in the scenario TOML's own key names, every alternative resolved, at the Δt of one run:
+
+* ``name``, ``description``, ``duration`` (s), ``dt`` (s, the run's Δt), ``steps`` (at that Δt);
+* ``body.mass`` (kg), ``body.inertia`` — 3×3 (kg m²) about the COM, in body axes (particles resolved);
+* ``initial.position`` (COM, world, m), ``initial.velocity`` (COM, world, m/s),
+  ``initial.orientation`` (body→world unit quaternion, w x y z; Unity ``euler_zxy_deg`` resolved),
+  ``initial.angular_velocity`` (WORLD axes, rad/s; ``angular_velocity_body`` resolved);
+* ``forces.gravity`` (m/s²), ``forces.linear_drag`` (N s/m), ``forces.velocity_decay`` and
+  ``forces.angular_velocity_decay`` — per-step factors AT THE RUN'S Δt: the scenario's γ is defined at
+  its own dt as the decay rate k = −ln γ / dt, so the factor for a step Δt is e^(−kΔt) = γ^(Δt/dt);
+* ``forces.spring[]`` (``anchor`` world m, ``attach`` body m from the COM, ``stiffness`` N/m,
+  ``rest_length`` m), ``forces.point[]`` (``force`` N, ``point`` body m from the COM, ``frame``),
+  ``forces.torque[]`` (``torque`` N m, ``frame``).
+
+Extra keys (informative; the keys above never change): ``scenario_dt`` and ``dt_ladder`` (s),
+``content_hash``, ``rbcheck_version``, ``csv_columns`` (the trajectory CSV header),
+``body.principal_moments`` (kg m², ascending), ``initial.angular_velocity_body`` (body axes, rad/s),
+``forces.velocity_decay_rate`` and ``forces.angular_velocity_decay_rate`` (k, 1/s).
+"""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from reference_sim.quaternion import euler_zxy_from_quat, quat_conj, rotate
+from reference_sim.state import Q, V, W, X
+
+__all__ = ["resolved_scenario", "resolved_json", "format_resolved"]
+
+
+def _vec(a) -> list:
+    return [float(v) for v in np.asarray(a, dtype=float).ravel()]
+
+
+def resolved_scenario(scenario, dt_s: float | None = None, duration_s: float | None = None) -> dict:
+    """The resolved scenario (module docstring) for a run of step ``dt_s`` (default: the scenario's dt)
+    over ``duration_s`` (default: the scenario's duration)."""
+    import reference_sim
+    from cross_checks.core.trajectory import COLUMNS
+
+    p = scenario.problem
+    dt = scenario.dt_s if dt_s is None else float(dt_s)
+    T = scenario.duration_s if duration_s is None else float(duration_s)
+    y0 = p.initial_packed()
+    q0 = y0[Q]
+    fm = p.forces
+    gv, gw = fm.decay_factors(dt)     # e^(−kΔt) = γ^(Δt/dt), what the reference variants apply
+    kv, kw = fm.decay_rates_per_s()
+    return {
+        "name": scenario.name,
+        "description": scenario.description,
+        "duration": T,
+        "dt": dt,
+        "steps": scenario.n_steps(dt, T),
+        "scenario_dt": scenario.dt_s,
+        "dt_ladder": list(scenario.dt_ladder_s),
+        "content_hash": scenario.content_hash,
+        "rbcheck_version": reference_sim.__version__,
+        "csv_columns": list(COLUMNS),
+        "body": {
+            "mass": float(p.body.mass_kg),
+            "inertia": [_vec(row) for row in p.body.inertia_B],
+            "principal_moments": _vec(np.linalg.eigvalsh(p.body.inertia_B)),
+        },
+        "initial": {
+            "position": _vec(y0[X]),
+            "velocity": _vec(y0[V]),
+            "orientation": _vec(q0),
+            "angular_velocity": _vec(y0[W]),
+            "angular_velocity_body": _vec(rotate(quat_conj(q0), y0[W])),
+        },
+        "forces": {
+            "gravity": _vec(fm.gravity_W),
+            "linear_drag": float(fm.linear_drag_N_s_per_m),
+            "velocity_decay": float(gv),
+            "angular_velocity_decay": float(gw),
+            "velocity_decay_rate": float(kv),
+            "angular_velocity_decay_rate": float(kw),
+            "spring": [{"anchor": _vec(s.anchor_W), "attach": _vec(s.attach_B), "stiffness": float(s.stiffness_N_per_m),
+                        "rest_length": float(s.rest_length_m)} for s in fm.springs],
+            "point": [{"force": _vec(f.force), "point": _vec(f.point_B), "frame": f.frame} for f in fm.point_forces],
+            "torque": [{"torque": _vec(t.torque), "frame": t.frame} for t in fm.torques],
+        },
+    }
+
+
+def resolved_json(scenario, dt_s: float | None = None, duration_s: float | None = None) -> str:
+    """:func:`resolved_scenario` as JSON text: floats printed to round-trip exactly, each vector (and
+    each row of the inertia) on one line."""
+    return _dumps(resolved_scenario(scenario, dt_s, duration_s), "") + "\n"
+
+
+def _dumps(o, pad: str) -> str:
+    inner = pad + "  "
+    if isinstance(o, dict):
+        if not o:
+            return "{}"
+        items = [f"{inner}{json.dumps(k)}: {_dumps(v, inner)}" for k, v in o.items()]
+        return "{\n" + ",\n".join(items) + "\n" + pad + "}"
+    if isinstance(o, list) and o and all(isinstance(v, (dict, list)) for v in o) and not all(
+            isinstance(v, list) and all(not isinstance(x, (dict, list)) for x in v) for v in o):
+        return "[\n" + ",\n".join(inner + _dumps(v, inner) for v in o) + "\n" + pad + "]"
+    return json.dumps(o, allow_nan=False)
+
+
+def _num(v) -> str:
+    """12 significant digits (round-off such as 0.5000000000000001 hidden; --json has every digit)."""
+    return f"{float(v) + 0.0:.12g}"
+
+
+def _triple(v) -> str:
+    """A vector for reading: components below 1e-12 of its largest are round-off, shown as 0."""
+    big = max((abs(float(x)) for x in v), default=0.0)
+    return "[" + ", ".join(_num(0.0 if abs(float(x)) < 1e-12 * big else x) for x in v) + "]"
+
+
+def format_resolved(r: dict) -> str:
+    """The resolved scenario for a person setting up their own simulator (units and frames spelled out)."""
+    b, i, f = r["body"], r["initial"], r["forces"]
+    euler, locked = euler_zxy_from_quat(np.array(i["orientation"]))
+    euler = np.round(euler, 12) + 0.0  # no "-0.0"
+    lines = [f"{r['name']}: {r['description']}".rstrip(": "),
+             f"  time      dt = {_num(r['dt'])} s, {r['steps']} steps (t = 0 … {r['steps'] * r['dt']:.10g} s; scenario "
+             f"duration {_num(r['duration'])} s, default dt {_num(r['scenario_dt'])} s)",
+             f"            dt ladder {', '.join(_num(d) for d in r['dt_ladder'])} s",
+             "body (origin at the centre of mass)",
+             f"  mass      {_num(b['mass'])} kg",
+             "  inertia   kg m², about the COM, body axes:"]
+    lines += [f"            {_triple(row)}" for row in b["inertia"]]
+    lines += [f"  principal moments {_triple(b['principal_moments'])} kg m²",
+              "initial state",
+              f"  position          {_triple(i['position'])} m (COM, world)",
+              f"  velocity          {_triple(i['velocity'])} m/s (COM, world)",
+              f"  orientation       {_triple(i['orientation'])} (body→world quaternion w, x, y, z)",
+              f"                    = Unity Euler angles (x, y, z) {_triple(euler)}° (rotation order Z, X, Y)"
+              + (" — gimbal lock: z set to 0" if bool(locked) else ""),
+              f"  angular velocity  {_triple(i['angular_velocity'])} rad/s (WORLD axes)",
+              f"                    {_triple(i['angular_velocity_body'])} rad/s (body axes)",
+              "forces",
+              f"  gravity           {_triple(f['gravity'])} m/s²",
+              f"  linear drag       {_num(f['linear_drag'])} N s/m (f = −c v at the COM)"]
+    for key, what in (("velocity_decay", "v"), ("angular_velocity_decay", "ω")):
+        if f[key] != 1.0:
+            lines.append(f"  {key.replace('_', ' '):<17} {what} ← {_num(f[key])} {what} after each velocity update (per step "
+                         f"of {_num(r['dt'])} s; rate k = {f[key + '_rate']:.10g} 1/s)")
+    for s in f["spring"]:
+        lines.append(f"  spring            anchor {_triple(s['anchor'])} m (world), attached at {_triple(s['attach'])} m "
+                     f"(body, from the COM), k = {_num(s['stiffness'])} N/m, rest length {_num(s['rest_length'])} m")
+    for p in f["point"]:
+        lines.append(f"  point force       {_triple(p['force'])} N ({p['frame']} axes) at {_triple(p['point'])} m "
+                     "(body, from the COM)")
+    for t in f["torque"]:
+        lines.append(f"  torque            {_triple(t['torque'])} N m ({t['frame']} axes)")
+    lines.append(f"trajectory CSV columns: {','.join(r['csv_columns'])}")
+    lines.append("(numbers rounded to 12 significant digits; `rbcheck show --json` gives every digit)")
+    return "\n".join(lines)

@@ -1,0 +1,103 @@
+"""Self-verifying cache entries: an entry is trusted only when it proves it is the entry asked for.
+
+An entry is an ``.npz`` of plain arrays (no pickles) plus two more: ``__key__``, the cache key it was
+stored under, and ``__mac__``, an HMAC-SHA256 of the key and of every array (name, dtype, shape,
+bytes) under a random secret kept in the cache directory (``.secret``, mode 0600). :func:`load`
+returns None — so the caller recomputes and :func:`store` replaces the entry — for anything that does
+not verify: a missing, truncated, bit-flipped or empty file, an entry copied under another key, or
+numbers edited by hand (without the secret a forger cannot make a valid MAC). It never raises.
+
+:func:`environment` is the part of every cache key that says which versions computed the numbers:
+rbcheck, numpy, scipy, Python and the machine architecture (engine versions and a fingerprint of
+rbcheck's own source are added by :mod:`cross_checks.measure`).
+"""
+from __future__ import annotations
+
+import hashlib
+import hmac
+import os
+import platform
+import secrets
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["load", "store", "environment", "mac"]
+
+_SECRETS: dict = {}
+
+
+def environment() -> list:
+    """Versions that change a number: rbcheck, numpy, scipy, Python, machine architecture."""
+    import scipy
+
+    import reference_sim
+    return [reference_sim.__version__, np.__version__, scipy.__version__, platform.python_version(),
+            platform.machine()]
+
+
+def _secret(root: Path) -> bytes:
+    """The cache's HMAC secret (created on first use, readable by the owner only)."""
+    root = Path(root)
+    if str(root) in _SECRETS:
+        return _SECRETS[str(root)]
+    path = root / ".secret"
+    try:
+        data = path.read_bytes()
+    except OSError:
+        data = b""
+    if len(data) != 32:
+        root.mkdir(parents=True, exist_ok=True)
+        data = secrets.token_bytes(32)
+        tmp = root / f".secret.{os.getpid()}.{secrets.token_hex(4)}"
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+        try:
+            os.link(tmp, path)  # first writer wins; the others read its secret
+        except FileExistsError:
+            data = path.read_bytes()
+        finally:
+            tmp.unlink(missing_ok=True)
+    _SECRETS[str(root)] = data
+    return data
+
+
+def mac(root: Path, key: str, arrays: dict) -> str:
+    """HMAC-SHA256 (hex) of ``key`` and every array of ``arrays`` (by sorted name)."""
+    h = hmac.new(_secret(root), key.encode(), hashlib.sha256)
+    for name in sorted(arrays):
+        a = np.ascontiguousarray(arrays[name])
+        h.update(f"\0{name}\0{a.dtype.str}\0{a.shape}\0".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def store(root: Path, path: Path, key: str, arrays: dict) -> None:
+    """Write an entry (atomically); a read-only or full cache never breaks a sweep."""
+    from cross_checks.core.files import save_npz_atomic
+    try:
+        save_npz_atomic(Path(path), {**arrays, "__key__": np.array(key), "__mac__": np.array(mac(root, key, arrays))})
+    except OSError:
+        pass
+
+
+def load(root: Path, path: Path, key: str) -> dict | None:
+    """The arrays of the entry at ``path`` when it verifies as the entry of ``key``; else None (and
+    the bad file is removed, so it is replaced by the recomputed entry)."""
+    path = Path(path)
+    if not path.is_file():
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {k: data[k] for k in data.files}
+        stored_key, stored_mac = str(arrays.pop("__key__")), str(arrays.pop("__mac__"))
+        if stored_key == key and hmac.compare_digest(stored_mac, mac(root, key, arrays)):
+            return arrays
+    except Exception:  # noqa: BLE001 - a damaged entry in any way is simply not an entry
+        pass
+    try:
+        path.unlink()
+    except OSError:
+        pass
+    return None

@@ -1,0 +1,80 @@
+"""How rbcheck's processes end: SIGTERM is handled like Ctrl-C (the same clean-up runs: staging
+directories removed, workers stopped, exit 143 instead of 130), and worker processes die with the
+process that started them, even when it is killed with SIGKILL (Linux PR_SET_PDEATHSIG)."""
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import os
+import signal
+import sys
+import threading
+
+__all__ = ["Terminated", "handle_sigterm", "worker_init", "EXIT_TERMINATED", "TimeLimitExceeded", "time_limit"]
+
+#: 128 + SIGTERM, what a shell reports for a process ended by SIGTERM.
+EXIT_TERMINATED = 128 + signal.SIGTERM
+_PR_SET_PDEATHSIG = 1
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM arrived; a KeyboardInterrupt so that every Ctrl-C clean-up path runs for it too."""
+
+
+def _on_sigterm(signum, frame):
+    raise Terminated()
+
+
+def handle_sigterm() -> None:
+    """Make SIGTERM raise Terminated in the main thread (no-op elsewhere)."""
+    try:
+        signal.signal(signal.SIGTERM, _on_sigterm)
+    except ValueError:  # not the main thread
+        pass
+
+
+def _die_with_parent(parent_pid: int) -> None:
+    if not sys.platform.startswith("linux"):
+        return
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    except (OSError, AttributeError):
+        return
+    if os.getppid() != parent_pid:  # the parent died before prctl took effect
+        os._exit(1)
+
+
+def worker_init(parent_pid: int | None = None) -> None:
+    """Initializer of rbcheck's pool workers: Ctrl-C and SIGTERM are the parent's to handle (it then
+    stops the workers by their ids); a worker must not print its own traceback, and it is killed
+    when its parent dies without stopping it (kill -9)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    _die_with_parent(parent_pid if parent_pid is not None else os.getppid())
+
+
+class TimeLimitExceeded(Exception):
+    """Raised inside a reference solve or a run that took longer than its time limit."""
+
+
+@contextlib.contextmanager
+def time_limit(seconds: float | None, what: str):
+    """Raise TimeLimitExceeded("<what> took longer than the time limit of N s") in the body after
+    ``seconds`` of wall time. A SIGALRM timer: only in a process's main thread (pool workers and
+    ``--jobs 1``); elsewhere (e.g. a Dask worker thread) the body runs without a limit."""
+    if not seconds or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def on_alarm(signum, frame):
+        raise TimeLimitExceeded(f"{what} took longer than the time limit of {seconds:g} s")
+
+    previous = signal.signal(signal.SIGALRM, on_alarm)
+    signal.setitimer(signal.ITIMER_REAL, float(seconds))
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0.0)
+        signal.signal(signal.SIGALRM, previous)
+
