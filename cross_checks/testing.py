@@ -77,7 +77,8 @@ def run_engine_checks(variant, scenarios, *, engine_file=None, out_dir=None, cac
         if cache_dir is not None:
             stack.enter_context(_cache_env(cache_dir))
         try:
-            summary = run_sweep(scs, variants, out, jobs=jobs, progress=False, render=out_dir is not None)
+            summary = run_sweep(scs, variants, out, jobs=jobs, progress=False,
+                                finish=_render if out_dir is not None else None)
         except SweepError as exc:
             raise ValueError(str(exc)) from None
         rows = _read_rows(out / "results.csv")
@@ -172,3 +173,9 @@ def _read_rows(path: Path) -> list:
     import csv
     with open(path, newline="", encoding="utf-8") as fh:
         return list(csv.DictReader(fh))
+
+
+def _render(results_dir) -> None:
+    """The HTML/PNG report of a kept results directory (``--rbcheck-keep-reports``)."""
+    import reports
+    reports.render(results_dir)

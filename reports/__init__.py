@@ -11,6 +11,7 @@ import os
 import shutil
 from pathlib import Path
 
+from cross_checks.core.files import umask
 from reports.data import Results, ResultsError, load_results
 
 __all__ = ["render", "load_results", "Results", "ResultsError"]
@@ -38,10 +39,10 @@ def render(directory, *, self_contained: bool = False, jobs: int | None = 1) -> 
     marker lists are ever removed (stale plots and pages); a directory without the marker (written
     before it existed) gets its pages and plots written, and nothing removed.
     """
-    from reports.html import page_name, render_pages
-    from cross_checks.sweep.results_dir import (inside, is_owned_stale, listed_files, owned_name, read_marker,
-                                                write_marker)
+    from reports.html import render_pages
     from cross_checks.core.files import atomic_write_text
+    from cross_checks.sweep.results_dir import (fix_permissions, inside, is_owned_stale, listed_files, owned_name,
+                                                read_marker, write_marker)
 
     d = Path(directory)
     res = load_results(d)
@@ -100,21 +101,6 @@ def _move_plots(src: Path, plots: Path) -> list:
     plots.mkdir(exist_ok=True)
     names = sorted(p.name for p in src.glob("*.png"))
     for n in names:
-        os.chmod(src / n, 0o666 & ~_umask())
+        os.chmod(src / n, 0o666 & ~umask())
         os.replace(src / n, plots / n)
     return names
-
-
-def _umask() -> int:
-    m = os.umask(0)
-    os.umask(m)
-    return m
-
-
-def fix_permissions(directory) -> None:
-    """Give files written through temporary files (mode 0600) the usual modes under the umask."""
-    m = _umask()
-    for root, dirs, files in os.walk(directory):
-        os.chmod(root, 0o777 & ~m)
-        for f in files:
-            os.chmod(os.path.join(root, f), 0o666 & ~m)

@@ -32,7 +32,7 @@ def _sweep(tmp_path_factory, names, tag):
     os.environ["RBCHECK_CACHE_DIR"] = str(tmp_path_factory.mktemp(f"{tag}-cache"))
     try:
         run_sweep([load_scenario(n) for n in names], available_variants(), out, jobs=2, use_cache=False,
-                  progress=False, render=False)
+                  progress=False)
     finally:
         if old is None:
             os.environ.pop("RBCHECK_CACHE_DIR", None)

@@ -12,6 +12,8 @@ import os
 import sys
 from pathlib import Path
 
+from cross_checks.core.files import usable_cores
+
 __all__ = ["main"]
 
 EXIT_OK, EXIT_FAIL, EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_TERMINATED = 0, 1, 2, 130, 143
@@ -347,8 +349,11 @@ def cmd_sweep(args) -> int:
     client = _dask_client(args.dask) if args.dask else None
     t0 = time.perf_counter()
     try:
-        summary = run_sweep(scenarios, variants, args.out, jobs=args.jobs, use_cache=not args.no_cache,
-                            self_contained=args.self_contained, skipped=skipped, **_time_limits(args.time_limit),
+        import reports
+        jobs = args.jobs or usable_cores()
+        summary = run_sweep(scenarios, variants, args.out, jobs=jobs, use_cache=not args.no_cache,
+                            finish=lambda d: reports.render(d, self_contained=args.self_contained, jobs=jobs),
+                            skipped=skipped, **_time_limits(args.time_limit),
                             executor=client.get_executor() if client is not None else None)
     except SweepError as exc:
         raise BadInput(str(exc)) from None
@@ -377,14 +382,12 @@ def cmd_sweep(args) -> int:
 
 
 def cmd_report(args) -> int:
-    import os
-
     import reports
     from reports import ResultsError
 
     from cross_checks.sweep.results_dir import ResultsDirError, check_writable_dir
 
-    jobs = args.jobs or (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
+    jobs = args.jobs or usable_cores()
     if not Path(args.dir).is_dir():
         raise BadInput(f"{args.dir}: no such directory")
     try:

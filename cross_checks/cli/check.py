@@ -1,10 +1,7 @@
 """``rbcheck check``: read the files, check each, fit a ladder, print, write --json and --plot."""
 from __future__ import annotations
 
-import os
 import sys
-import tempfile
-from pathlib import Path
 
 __all__ = ["run_check"]
 
@@ -53,25 +50,11 @@ def _user_variants() -> list:
 
 
 def _write_plot(results, ladder, scenario, path):
-    """Draw to a temporary file beside ``path`` and rename: never a half-written PNG."""
-    from reports.check_plot import ladder_figure, check_figure
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".png", dir=path.parent or ".")
-    os.close(fd)
-    try:
-        if ladder is None:
-            check_figure(results[0], scenario, tmp)
-        else:
-            ladder_figure(results, ladder, scenario, tmp)
-        os.chmod(tmp, 0o666 & ~_umask())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    """Draw the check's figure into ``path`` atomically (never a half-written PNG)."""
+    from cross_checks.core.files import atomic_write
+    from reports.check_plot import check_figure, ladder_figure
+    if ladder is None:
+        atomic_write(path, lambda tmp: check_figure(results[0], scenario, tmp), suffix=".png")
+    else:
+        atomic_write(path, lambda tmp: ladder_figure(results, ladder, scenario, tmp), suffix=".png")
     print(f"plot -> {path}", file=sys.stderr)
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask

@@ -8,25 +8,39 @@ from pathlib import Path
 
 import numpy as np
 
-def _umask() -> int:
+
+def usable_cores() -> int:
+    """Cores this process may run on (its CPU affinity where the OS reports it): the default number of
+    worker processes of a sweep and of report drawing."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+def umask() -> int:
+    """The process's umask (read without changing it)."""
     mask = os.umask(0)
     os.umask(mask)
     return mask
 
 
-def atomic_write_text(path, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file in the same directory and a rename, so a
-    reader never sees a half-written file and an interrupted write leaves the old one intact."""
+def atomic_write(path, write, *, suffix: str = "") -> None:
+    """Call ``write(tmp)`` on a temporary file beside ``path``, give it the user's usual mode (mkstemp
+    creates 0600) and rename it onto ``path``: a reader never sees a half-written file and an interrupted
+    write leaves the old one intact."""
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent or ".")
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent or ".")
+    os.close(fd)
     try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
-            fh.write(text)
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp creates 0600; give the file the user's usual mode
+        write(tmp)
+        os.chmod(tmp, 0o666 & ~umask())
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def atomic_write_text(path, text: str) -> None:
+    """Write ``text`` (UTF-8, newlines as given) to ``path`` atomically (:func:`atomic_write`)."""
+    atomic_write(path, lambda tmp: Path(tmp).write_text(text, encoding="utf-8", newline=""))
 
 
 def json_default(o):
@@ -39,13 +53,7 @@ def json_default(o):
 
 
 def save_npz_atomic(path: Path, arrays: dict) -> None:
+    """Write ``arrays`` as a compressed npz at ``path`` atomically (its folder is created)."""
+    path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".npz", dir=path.parent)
-    os.close(fd)
-    try:
-        np.savez_compressed(tmp, **arrays)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
+    atomic_write(path, lambda tmp: np.savez_compressed(tmp, **arrays), suffix=".npz")

@@ -29,7 +29,9 @@ import sys
 import tempfile
 from pathlib import Path
 
-__all__ = ["MARKER", "MARKER_FORMAT", "ResultsDirError", "read_marker", "write_marker", "listed_files",
+from cross_checks.core.files import umask
+
+__all__ = ["fix_permissions", "MARKER", "MARKER_FORMAT", "ResultsDirError", "read_marker", "write_marker", "listed_files",
            "check_output_dir", "check_writable_dir", "foreign_entries", "staging_dir", "replace_dir",
            "remove_stale_siblings", "owned_name", "is_owned_stale", "is_temp_leftover", "safe_file_stem", "inside"]
 
@@ -311,3 +313,12 @@ def inside(base, *parts) -> Path:
     if "\x00" in str(p) or not p.resolve().is_relative_to(base_r) or p.resolve() == base_r:
         raise ResultsDirError(f"{Path(base) / Path(*parts)}: a file name taken from the data leaves {base}; refused")
     return p
+
+
+def fix_permissions(directory) -> None:
+    """Give files written through temporary files (mode 0600) the usual modes under the umask."""
+    m = umask()
+    for root, dirs, files in os.walk(directory):
+        os.chmod(root, 0o777 & ~m)
+        for f in files:
+            os.chmod(os.path.join(root, f), 0o666 & ~m)

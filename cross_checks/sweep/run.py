@@ -22,7 +22,7 @@ Results directory::
     summary.json           provenance, scenarios, variants, convergence (+ local_convergence),
                            agreement of equivalent schemes, run statistics
     series/<scenario>.npz  decimated time series at the scenario's default Δt (float32)
-    plots/*.png, index.html, scenario-<name>.html   (written by reports.render)
+    plots/*.png, index.html, scenario-<name>.html   (written by the caller's ``finish``: reports.render)
 """
 from __future__ import annotations
 
@@ -50,9 +50,9 @@ from cross_checks.core import tolerances as tol
 from cross_checks.analysis.expectations import EQUIVALENT_PAIRS, expectation
 from cross_checks.core.quantities import QUANTITIES
 from cross_checks.sweep.lifecycle import Terminated, worker_init
-from cross_checks.sweep.results_dir import (ResultsDirError, check_output_dir, remove_stale_siblings, replace_dir,
-                                            staging_dir, write_marker)
-from cross_checks.core.files import atomic_write_text, json_default
+from cross_checks.sweep.results_dir import (ResultsDirError, check_output_dir, fix_permissions, remove_stale_siblings,
+                                            replace_dir, staging_dir, write_marker)
+from cross_checks.core.files import atomic_write_text, json_default, usable_cores
 from cross_checks.core.quantities import COLUMN_STEM
 from cross_checks.sweep.jobs import (LOCAL_SAMPLES, MAX_SERIES_POINTS, RESULT_COLUMNS, SCHEMA_VERSION, Job,
                                      cache_dir, code_fingerprint, failed_record, job_dts, load_reference,
@@ -475,7 +475,7 @@ def write_json(path, obj) -> None:
 # --- the sweep --------------------------------------------------------------------------------------
 
 def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cache: bool = True,
-              self_contained: bool = False, progress: bool | None = None, skipped=None, render=True,
+              progress: bool | None = None, skipped=None, finish=None,
               executor=None, run_time_limit_s: float | None = tol.RUN_TIME_LIMIT_S,
               reference_time_limit_s: float | None = tol.REFERENCE_TIME_LIMIT_S) -> dict:
     """Run the sweep and write the results directory ``out_dir`` (atomically).
@@ -488,6 +488,8 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
     use_cache : read cached job results (they are always written).
     skipped : ``{variant: reason}`` of variants left out (recorded in summary.json).
     progress : show a progress bar (default: when stderr is a terminal).
+    finish : ``finish(staging_dir)``, called on the complete results before they replace ``out_dir``
+        (e.g. ``reports.render``: the report is then part of the atomic replacement). None: no report.
     run_time_limit_s, reference_time_limit_s : wall-time limits of one run and of one reference solve
         (None: none); a run or reference over its limit is a ``failed`` row saying so.
     executor : any ``concurrent.futures.Executor`` to run the jobs on instead of the local process
@@ -510,7 +512,7 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
         dup = sorted({n for n in names if names.count(n) > 1})
         raise SweepError(f"scenario name(s) given twice: {', '.join(dup)}")
     if not jobs:
-        jobs = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+        jobs = usable_cores()
     jobs = max(1, int(jobs))
     started = datetime.now(timezone.utc).replace(microsecond=0).isoformat()
     t_start = time.perf_counter()
@@ -637,12 +639,11 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
         summary["run"]["wall_s"] = round(time.perf_counter() - t_start, 3)
         write_json(staging / "summary.json", summary)
 
-        # 4. report (from the saved files only)
-        import reports
-        if render:
-            reports.render(staging, self_contained=self_contained, jobs=jobs)
+        # 4. whatever the caller adds to the complete results (the report, drawn from the saved files only)
+        if finish is not None:
+            finish(staging)
         write_marker(staging)
-        reports.fix_permissions(staging)
+        fix_permissions(staging)
         replace_dir(staging, out)
         staging = None
         return summary

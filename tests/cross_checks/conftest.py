@@ -28,8 +28,9 @@ def tiny_results(tmp_path_factory):
     old = os.environ.get("RBCHECK_CACHE_DIR")
     os.environ["RBCHECK_CACHE_DIR"] = str(tmp / "cache")
     try:
+        import reports
         run_sweep([parse_scenario(TINY_RESULTS_SCENARIO, "tiny.toml")], ["reference:course", "reference:rk4"],
-                  tmp / "res", jobs=1, progress=False)
+                  tmp / "res", jobs=1, progress=False, finish=lambda d: reports.render(d, jobs=1))
     finally:
         os.environ.pop("RBCHECK_CACHE_DIR") if old is None else os.environ.__setitem__("RBCHECK_CACHE_DIR", old)
     return tmp / "res"

@@ -153,7 +153,7 @@ def test_compare_catches_a_regressed_build_and_passes_an_unchanged_one(swept, by
     sc = load_scenario(byo["byo_tumble"])
     same = byo["tmp"] / "same"
     with engines.engine_files_registered([byo["good"]]):
-        run_sweep([sc], list(GOOD), same, jobs=2, progress=False, render=False)
+        run_sweep([sc], list(GOOD), same, jobs=2, progress=False)
     ok = compare_dirs(swept["dir"], same)
     assert ok.exit_code(allow_missing=True) == 0, to_text(ok, True)
     assert ok.matched_rows == 8
@@ -170,7 +170,7 @@ def test_compare_catches_a_regressed_build_and_passes_an_unchanged_one(swept, by
     monkeypatch.setenv("RBCHECK_CACHE_DIR", str(byo["tmp"] / "regressed-cache"))
     new = byo["tmp"] / "regressed"
     with engines.engine_files_registered([rebuilt / "cbody.toml"]):
-        summary = run_sweep([sc], list(GOOD), new, jobs=2, progress=False, render=False)
+        summary = run_sweep([sc], list(GOOD), new, jobs=2, progress=False)
     assert summary["run"]["failed_runs"] == 0
     c = compare_dirs(swept["dir"], new)
     assert c.exit_code(allow_missing=True) == 1
@@ -187,13 +187,13 @@ def test_a_rebuilt_engine_program_is_never_served_from_the_cache(byo, tmp_path):
     folder = tmp_path / "engine"
     shutil.copytree(byo["good"].parent, folder)
     with engines.engine_files_registered([folder / "cbody.toml"]):
-        first = run_sweep([sc], ["cbody:euler"], tmp_path / "a", jobs=1, progress=False, render=False)
-        again = run_sweep([sc], ["cbody:euler"], tmp_path / "b", jobs=1, progress=False, render=False)
+        first = run_sweep([sc], ["cbody:euler"], tmp_path / "a", jobs=1, progress=False)
+        again = run_sweep([sc], ["cbody:euler"], tmp_path / "b", jobs=1, progress=False)
     assert first["run"]["cached_runs"] == 0 < again["run"]["cached_runs"] == again["run"]["runs"]
     prog = folder / ("cbody" if byo["kind"] == "C" else "cbody.py")
     prog.write_bytes(prog.read_bytes() + b"\n")  # same behaviour, new content: a rebuild
     with engines.engine_files_registered([folder / "cbody.toml"]):
-        rebuilt = run_sweep([sc], ["cbody:euler"], tmp_path / "c", jobs=1, progress=False, render=False)
+        rebuilt = run_sweep([sc], ["cbody:euler"], tmp_path / "c", jobs=1, progress=False)
     assert rebuilt["run"]["cached_runs"] == 0
 
 

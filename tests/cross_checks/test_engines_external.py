@@ -186,7 +186,7 @@ def test_failed_runs_are_rows_with_the_words_and_make_the_sweep_exit_1(tmp_path,
     monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "cache"))
     path = _engine_file(tmp_path / "eng", modes=["ok", "exit3"])
     with engines.engine_files_registered([path]):
-        summary = run_sweep([TINY], ["fake:ok", "fake:exit3"], tmp_path / "r", jobs=2, progress=False, render=False)
+        summary = run_sweep([TINY], ["fake:ok", "fake:exit3"], tmp_path / "r", jobs=2, progress=False)
     assert "2 run(s) failed (status 'failed' in results.csv)" in _gate_failures(summary)
     import csv
     rows = list(csv.DictReader(open(tmp_path / "r" / "results.csv")))
@@ -214,7 +214,7 @@ def test_sweep_records_the_engine_file_run_in_parallel_jobs(tmp_path, monkeypatc
         shipped = engines.user_engines()
     assert "fake" not in [e.name for e in engines.engine_entries()]
     engines.adopt_user_engines(shipped)  # what _run_job_item does in such a worker
-    summary = run_sweep([TINY], ["fake:ok"], tmp_path / "r", jobs=2, progress=False, render=False)
+    summary = run_sweep([TINY], ["fake:ok"], tmp_path / "r", jobs=2, progress=False)
     assert summary["run"]["runs"] == 2 and summary["run"]["failed_runs"] == 0
 
 

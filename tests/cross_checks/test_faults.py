@@ -111,7 +111,7 @@ def test_reruns_are_bit_identical_across_engines(tmp_path, monkeypatch):
     texts = []
     for k in range(2):
         out = tmp_path / f"r{k}"
-        run_sweep([sc], available_variants(), out, jobs=2, use_cache=False, progress=False, render=False)
+        run_sweep([sc], available_variants(), out, jobs=2, use_cache=False, progress=False)
         with open(out / "results.csv", newline="") as fh:
             rows = [{c: v for c, v in r.items() if c not in ("wall_s", "cached")} for r in csv.DictReader(fh)]
         texts.append(rows)
@@ -137,6 +137,6 @@ inertia = [1.0, 2.0, 3.0]
 angular_velocity = [0.1, 20.0, 0.1]
 """, "fast.toml")
     summary = run_sweep([sc], ["reference:expmap_gyro", "mujoco:euler"], tmp_path / "r", jobs=1, use_cache=False,
-                        progress=False, render=False)
+                        progress=False)
     [rec] = summary["agreement"]
     assert rec["agrees"] and rec["note"].startswith("both diverged, at t = 8.6")

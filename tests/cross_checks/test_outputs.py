@@ -88,7 +88,7 @@ angular_velocity = [0.3, 1.0, 0.2]
                            .replace('name = "spring_pendulum"', 'name = "stiff"'), "stiff.toml")
     t0 = time.perf_counter()
     summary = run_sweep([slow_run, stiff], ["reference:implicit_euler"], tmp_path / "res", jobs=1, use_cache=False,
-                        progress=False, render=False, run_time_limit_s=0.3, reference_time_limit_s=0.3)
+                        progress=False, run_time_limit_s=0.3, reference_time_limit_s=0.3)
     assert time.perf_counter() - t0 < 20
     import pandas as pd
     df = pd.read_csv(tmp_path / "res" / "results.csv")

@@ -121,14 +121,14 @@ def test_parallel_and_cached_sweeps_give_the_same_results(tmp_path, scenario_fil
     from cross_checks.scenario import load_scenario
     scs = [load_scenario(f) for f in scenario_files]
     a, b, c = tmp_path / "a", tmp_path / "b", tmp_path / "c"
-    ja = run_sweep(scs, VARIANTS, a, jobs=1, use_cache=False, render=False)
-    jb = run_sweep(scs, VARIANTS, b, jobs=2, use_cache=False, render=False)
+    ja = run_sweep(scs, VARIANTS, a, jobs=1, use_cache=False)
+    jb = run_sweep(scs, VARIANTS, b, jobs=2, use_cache=False)
     assert comparable(read_rows(a)) == comparable(read_rows(b))
     assert ja["convergence"] == jb["convergence"] and ja["agreement"] == jb["agreement"]
     with np.load(a / "series" / "tiny_spin.npz") as sa, np.load(b / "series" / "tiny_spin.npz") as sb:
         assert sorted(sa.files) == sorted(sb.files)
         assert all(np.array_equal(sa[k], sb[k], equal_nan=True) for k in sa.files)
-    jc = run_sweep(scs, VARIANTS, c, jobs=2, render=False)
+    jc = run_sweep(scs, VARIANTS, c, jobs=2)
     assert jc["run"]["cached_runs"] == jc["run"]["runs"]
     assert comparable(read_rows(c)) == comparable(read_rows(a))
     assert jc["convergence"] == ja["convergence"]
@@ -218,7 +218,7 @@ def test_a_worker_crash_fails_only_its_own_job(tmp_path, scenario_files, monkeyp
     monkeypatch.setattr(sweep_mod, "run_job", crashing)   # inherited by the forked workers
     from cross_checks.scenario import load_scenario
     out = tmp_path / "res"
-    summary = run_sweep([load_scenario(scenario_files[1])], VARIANTS, out, jobs=2, use_cache=False, render=False)
+    summary = run_sweep([load_scenario(scenario_files[1])], VARIANTS, out, jobs=2, use_cache=False)
     rows = read_rows(out)
     failed = [r for r in rows if r["status"] == "failed"]
     assert [(r["engine"], r["dt"]) for r in failed] == [("reference:midpoint", "0.01")]
@@ -244,7 +244,7 @@ def test_tumbling_box_whole_state_euler_is_pre_asymptotic_not_non_convergent(tmp
     from cross_checks.scenario import load_scenario
     monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "cache"))
     s = run_sweep([load_scenario("tumbling_box")], ["reference:explicit_euler"], tmp_path / "out", jobs=1,
-                  use_cache=False, progress=False, render=False)
+                  use_cache=False, progress=False)
     v = {r["quantity"]: r for r in s["convergence"]}
     assert v["orientation"]["verdict"] == "pre_asymptotic" and v["orientation"]["fit_verdict"] == "does_not_converge"
     assert v["orientation"]["matches_expectation"] is None and "separatrix" in v["orientation"]["reason"]
@@ -269,7 +269,7 @@ def test_a_gentle_file_named_tumbling_box_converges_at_order_1_through_the_sweep
     sc = load_scenario(str(gentle))
     assert sc.name == "tumbling_box"
     s = run_sweep([sc], ["reference:explicit_euler", "reference:implicit_euler"], tmp_path / "out", jobs=1,
-                  use_cache=False, progress=False, render=False)
+                  use_cache=False, progress=False)
     assert _gate_failures(s) == []
     for r in s["convergence"]:
         if r["quantity"] in ("orientation", "angular_velocity"):
@@ -308,7 +308,7 @@ def test_rk4_order_is_fitted_and_checked_wherever_its_errors_are_above_the_measu
     from cross_checks.scenario import parse_scenario
     monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "cache"))
     sc = parse_scenario(PARTICLE_SPRING, "particle_spring.toml")
-    s = run_sweep([sc], ["reference:rk4"], tmp_path / "out", jobs=1, use_cache=False, progress=False, render=False)
+    s = run_sweep([sc], ["reference:rk4"], tmp_path / "out", jobs=1, use_cache=False, progress=False)
     assert _gate_failures(s) == []
     ref_err = s["scenarios"][0]["reference_error"]
     for r in s["convergence"]:

@@ -35,10 +35,10 @@ def test_dask_executor_gives_the_local_results(tmp_path, monkeypatch):
     pytest.importorskip("mujoco")
     monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "cache"))
     sc = parse_scenario(SPIN, "spin.toml")
-    run_sweep([sc], VARIANTS, tmp_path / "local", jobs=1, use_cache=False, progress=False, render=False)
+    run_sweep([sc], VARIANTS, tmp_path / "local", jobs=1, use_cache=False, progress=False)
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
                                   dashboard_address=None) as cluster, distributed.Client(cluster) as client:
-        summary = run_sweep([sc], VARIANTS, tmp_path / "dask", use_cache=False, progress=False, render=False,
+        summary = run_sweep([sc], VARIANTS, tmp_path / "dask", use_cache=False, progress=False,
                             executor=client.get_executor())
     assert summary["run"]["runs"] == 9
     assert _rows(tmp_path / "dask") == _rows(tmp_path / "local")

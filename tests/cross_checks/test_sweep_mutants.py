@@ -24,7 +24,7 @@ def _gate_failures_of_sweep(tmp_path, monkeypatch, scenarios, variant, jobs=1):
     # a private cache: a mutant's runs must neither be served from nor stored into a shared cache
     monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "cache"))
     summary = run_sweep([load_scenario(s) for s in scenarios], [variant], tmp_path / "out", jobs=jobs,
-                        use_cache=False, progress=False, render=False)
+                        use_cache=False, progress=False)
     return _gate_failures(summary)
 
 

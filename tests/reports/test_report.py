@@ -76,7 +76,9 @@ def results(tmp_path_factory):
     os.environ["RBCHECK_CACHE_DIR"] = str(tmp / "cache")
     try:
         sc = parse_scenario(SCENARIO, source="hostile.toml")
-        run_sweep([sc], ["reference:course", "reference:rk4"], tmp / "res", jobs=1)
+        import reports
+        run_sweep([sc], ["reference:course", "reference:rk4"], tmp / "res", jobs=1,
+                  finish=lambda d: reports.render(d, jobs=1))
     finally:
         if old is None:
             os.environ.pop("RBCHECK_CACHE_DIR")

@@ -1,0 +1,98 @@
+"""The layering of README's "Layout" section, enforced on every import (module level and inside
+functions): a module may import only from its own sub-package or from a layer below it; sub-packages
+of the same layer do not import each other. No exception list."""
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+#: (rank, package prefixes) — higher ranks may import lower ones, never the reverse.
+LAYERS = [
+    (0, ["reference_sim"]),
+    (1, ["cross_checks.core"]),
+    (2, ["cross_checks.scenario"]),
+    (3, ["cross_checks.engines"]),
+    (4, ["cross_checks.analysis"]),
+    (5, ["cross_checks.sweep"]),
+    (6, ["cross_checks.gates", "reports", "cross_checks.bench"]),
+    (7, ["cross_checks.cli", "cross_checks.testing"]),
+    (8, ["cross_checks.pytest_plugin"]),
+]
+
+
+def _unit(module: str):
+    """(rank, unit) of a module: the unit is the layer's package prefix the module belongs to."""
+    best = None
+    for rank, prefixes in LAYERS:
+        for p in prefixes:
+            if (module == p or module.startswith(p + ".")) and (best is None or len(p) > len(best[1])):
+                best = (rank, p)
+    return best
+
+
+def _module_name(path: Path) -> str:
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts = parts[:-1]
+    return ".".join(parts)
+
+
+def _imports(path: Path):
+    """Every (line, imported module) of a file, relative imports resolved, function-level ones included."""
+    mod = _module_name(path)
+    package = mod if path.name == "__init__.py" else mod.rsplit(".", 1)[0]
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            for a in node.names:
+                yield node.lineno, a.name
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")
+                base = base[: len(base) - (node.level - 1)]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            for a in node.names:  # `from pkg import submodule` imports pkg.submodule
+                yield node.lineno, f"{target}.{a.name}" if _unit(f"{target}.{a.name}") != _unit(target) else target
+
+
+SOURCES = sorted(p for pkg in ("reference_sim", "cross_checks", "reports") for p in (ROOT / pkg).rglob("*.py"))
+
+
+def test_every_package_module_belongs_to_a_layer():
+    orphans = [str(p.relative_to(ROOT)) for p in SOURCES if _module_name(p) != "cross_checks" and _unit(_module_name(p)) is None]
+    assert not orphans, f"modules outside every layer (add them to LAYERS and README's Layout): {orphans}"
+
+
+@pytest.mark.parametrize("path", SOURCES, ids=lambda p: str(p.relative_to(ROOT)))
+def test_imports_point_down_the_layers(path):
+    me = _unit(_module_name(path))
+    if me is None:
+        return
+    bad = []
+    for line, target in _imports(path):
+        other = _unit(target)
+        if other is None or other == me:
+            continue
+        if other[0] >= me[0]:
+            bad.append(f"line {line}: {me[1]} (layer {me[0]}) imports {target} ({other[1]}, layer {other[0]})")
+    assert not bad, "\n".join(bad)
+
+
+def test_function_level_imports_are_seen():
+    """cli imports reports inside its command functions only: the checker must see those imports."""
+    targets = {t for _, t in _imports(ROOT / "cross_checks" / "cli" / "__init__.py")}
+    assert "reports" in targets and any(t.startswith("cross_checks.sweep") for t in targets)
+
+
+def test_a_backward_import_is_reported(tmp_path, monkeypatch):
+    """A planted function-level import of a higher layer (engines importing the sweep) is flagged."""
+    planted = ROOT / "cross_checks" / "engines" / "_planted_for_test.py"
+    planted.write_text("def f():\n    from cross_checks.sweep import run_sweep\n    return run_sweep\n")
+    try:
+        with pytest.raises(AssertionError, match="cross_checks.engines \\(layer 3\\) imports cross_checks.sweep"):
+            test_imports_point_down_the_layers(planted)
+    finally:
+        planted.unlink()
