@@ -3,7 +3,7 @@
 These are the analytic references the suite measures simulators against. Every function takes a
 time array ``t_s`` of shape ``(T,)`` (s; a scalar counts as ``(1,)``) and returns arrays whose
 leading axis is ``T``. Conventions are those of :mod:`reference_sim.quaternion` and
-COURSE_EQUATIONS.md:
+docs/course_equations.md:
 
 * quaternions are scalar first, ``(w, x, y, z)``; ``q_WB`` maps body to world, ``p_W = R(q_WB) p_B``;
 * the angular velocity ``w_W`` is in WORLD axes; ``q̇ = ½ [0, ω_W] q`` (left multiplication);
@@ -692,7 +692,7 @@ def symplectic_euler_gravity_error(g_W, t_s, dt_s):
 
     The course's ``v ← v + Δt g; x ← x + Δt v`` gives ``x_n = x0 + n Δt v0 + g Δt² n(n+1)/2``; the
     parabola is ``x0 + n Δt v0 + g (n Δt)²/2``, so ``x_n − x(t_n) = g Δt² n/2`` and
-    ``|error| = ½ |g| t Δt`` exactly (no higher-order terms; derived from COURSE_EQUATIONS.md).
+    ``|error| = ½ |g| t Δt`` exactly (no higher-order terms; derived from docs/course_equations.md).
 
     Parameters
     ----------

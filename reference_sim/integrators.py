@@ -9,7 +9,7 @@ The continuous equations (world ω, course convention; Euler's equations in worl
 
     ẋ = v,   v̇ = f / m,   q̇ = ½ [0, ω] q,   I_W ω̇ = τ − ω × (I_W ω),   I_W = R I_B Rᵀ
 
-Variants (names fixed by DESIGN.md):
+Variants (names fixed by docs/engines.md and the README):
 
 ``course``        the course's step exactly: v += Δt f/m; x += Δt v; ω += Δt I_W⁻¹ τ;
                   q += [0, Δt/2 ω] q; q /= |q|. No gyroscopic term.
@@ -128,7 +128,7 @@ def _course_type(problem: Problem, y, dt, *, gyro: bool, expmap: bool):
 
 
 def step_course(problem, y, dt):
-    """The course's simulator step exactly (COURSE_EQUATIONS.md), no gyroscopic term."""
+    """The course's simulator step exactly (docs/course_equations.md), no gyroscopic term."""
     return _course_type(problem, y, dt, gyro=False, expmap=False)
 
 
@@ -263,7 +263,7 @@ DESCRIPTIONS = {
     "rk4": "classical Runge-Kutta 4 on the whole state",
 }
 
-#: Expected global order of each variant on problems it models (DESIGN.md, COURSE_EQUATIONS.md).
+#: Expected global order of each variant on problems it models (docs/course_equations.md).
 EXPECTED_ORDER = {
     "course": 1, "course_gyro": 1, "expmap_gyro": 1, "explicit_euler": 1, "implicit_euler": 1,
     "midpoint": 2, "leapfrog": 2, "rk4": 4,

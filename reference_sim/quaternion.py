@@ -4,7 +4,7 @@ Every function here takes arrays whose LAST axis holds the 4 quaternion componen
 ``(w, x, y, z)`` (or the 3 vector components), so any leading batch shape ``(...)`` works.
 This is the only quaternion order used inside rbcheck; engine adapters convert at their boundary.
 
-Conventions (course notes, COURSE_EQUATIONS.md):
+Conventions (docs/course_equations.md):
 
 * ``q_WB`` maps body coordinates to world coordinates: ``p_W = R(q_WB) @ p_B``.
 * Product ``q1 q2 = [s1 s2 - v1.v2, s1 v2 + s2 v1 + v1 x v2]``.
@@ -96,7 +96,7 @@ def axis_angle_from_quat(q):
 def matrix_from_quat(q):
     """Rotation matrix ``R`` ``(..., 3, 3)`` of unit quaternions ``(..., 4)`` (w, x, y, z).
 
-    Uses the course's formula (COURSE_EQUATIONS.md); ``p_W = R @ p_B`` for ``q = q_WB``.
+    Uses the course's formula (docs/course_equations.md); ``p_W = R @ p_B`` for ``q = q_WB``.
     """
     q = np.asarray(q, dtype=float)
     w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
@@ -195,7 +195,7 @@ def quat_canonical(q):
 def geodesic_angle(q_ref, q):
     """Geodesic angle (rad, in [0, π]) between unit quaternions: ``2 atan2(|vec(q_ref⁻¹ q)|, |scalar|)``.
 
-    Sign-invariant (``q`` and ``-q`` give the same angle), as DESIGN.md defines the orientation error.
+    Sign-invariant (``q`` and ``-q`` give the same angle), as docs/results.md defines the orientation error.
     """
     d = quat_mul(quat_conj(q_ref), q)
     return 2.0 * np.arctan2(np.linalg.norm(d[..., 1:], axis=-1), np.abs(d[..., 0]))

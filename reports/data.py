@@ -1,4 +1,4 @@
-"""Reading a results directory (DESIGN.md): results.csv, summary.json and series/*.npz.
+"""Reading a results directory (docs/results.md): results.csv, summary.json and series/*.npz.
 
 This is all the report knows about a sweep: it never runs a simulation nor imports an engine.
 """

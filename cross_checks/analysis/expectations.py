@@ -123,13 +123,13 @@ def traits(variant: str) -> Traits:
 EQUIVALENT_PAIRS = (
     ("reference:expmap_gyro", "mujoco:euler",
      "MuJoCo's Euler is semi-implicit Euler with an explicit gyroscopic term and the exp-map "
-     "quaternion update, which is what reference:expmap_gyro implements (ENGINE_FACTS.md)"),
+     "quaternion update, which is what reference:expmap_gyro implements (docs/engine_conventions.md)"),
     ("mujoco:implicit", "mujoco:implicitfast",
      "for a single free body without joints or contacts the two implicit integrators solve the same "
-     "linear system (ENGINE_FACTS.md: 1e-13 apart)"),
+     "linear system (docs/engine_conventions.md: 1e-13 apart)"),
     ("mujoco:euler", "pybullet:multibody",
      "PyBullet's multibody mode with damping off integrates a free body exactly like MuJoCo Euler "
-     "(ENGINE_FACTS.md: 2.3e-14 rad apart)"),
+     "(docs/engine_conventions.md: 2.3e-14 rad apart)"),
 )
 
 _TRANSLATION = ("position", "velocity")

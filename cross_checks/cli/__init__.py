@@ -1,4 +1,4 @@
-"""``rbcheck`` command line (DESIGN.md contract).
+"""``rbcheck`` command line (README: the tour and the exit-code table; docs/ for every format).
 
 Exit codes: 0 success; 1 a comparison or gate found a regression / disagreement, or a run diverged;
 2 bad input or an output that cannot be written (one line naming the file, the field and the reason,

@@ -15,7 +15,7 @@ import numpy as np
 from reference_sim.quaternion import geodesic_angle
 from reference_sim.state import Q, V, W, X
 
-#: The quantities a convergence verdict is given for (DESIGN.md).
+#: The quantities a convergence verdict is given for (docs/results.md).
 QUANTITIES = ("position", "orientation", "velocity", "angular_velocity")
 
 

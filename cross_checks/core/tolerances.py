@@ -24,18 +24,19 @@ def euler_round_trip_tol(cos_pitch: float, locked: bool = False) -> float:
 #: @, vectorised cross): per-step difference ~ ε|y|, accumulated over ≤ 1000 steps of a bounded
 #: problem: 1000 · 10 ε ≈ 2e-12 relative.
 READABLE_VS_BATCHED = 1e-11
-#: Closed-form discretisation-error predictions matched to 6 significant digits (issue 2).
+#: Closed-form discretisation-error predictions matched to 6 significant digits (tests/reference_sim/test_analytic.py).
 CLOSED_FORM_PREDICTION_REL = 1e-6
-#: Fitted convergence order vs expected (issue 2: ±0.1).
+#: Fitted convergence order vs expected in the dedicated order studies (tests/reference_sim): ±0.1, a
+#: tenth of the gap between neighbouring integer orders.
 ORDER_TOL = 0.1
-#: Closed forms vs DOP853 ground truth (rtol 1e-13, reference_sim.ground_truth) over 10 s: issue 2 asks ≤ 1e-10.
+#: Closed forms vs DOP853 ground truth (rtol 1e-13, reference_sim.ground_truth) over 10 s: ≤ 1e-10, two orders below the smallest error any verdict resolves.
 CLOSED_FORM_VS_GROUND_TRUTH = 1e-10
 #: tumbling_box: 10 s of a fast (5 rad/s) tumble near the intermediate axis, ~10 flips; the ground
 #: truth's error grows through each flip: measured 1.4e-8 at DOP853 rtol 1e-13 and 2.8e-9 at 3e-14,
 #: shrinking towards the closed form, so the closed form is the accurate side. 3e-8 = 2x measured.
 CLOSED_FORM_VS_GROUND_TRUTH_TUMBLING_BOX = 3e-8
-#: reference:course on tennis_racket: its final orientation error must stay above this at every dt
-#: (issue 2): the physical body has flipped (≈ π away); 1 rad is far from any discretisation error.
+#: reference:course on tennis_racket: its final orientation error must stay above this at every dt:
+#: the physical body has flipped (≈ π away); 1 rad is far from any discretisation error.
 COURSE_NONCONVERGENCE_MIN_RAD = 1.0
 #: Implicit-solve residual (reference_sim.integrators.IMPLICIT_TOL) is 1e-13 relative.
 IMPLICIT_SOLVE = 1e-13
@@ -68,7 +69,7 @@ REFERENCE_ACCURACY_REL = {"analytic": 1e-12, "ground_truth": 1e-10}
 CONVERGES_MIN_ORDER = 0.5
 #: Observed vs expected order in a sweep verdict. Expected orders are the integers 1, 2 and 4; ±0.3
 #: separates neighbours with margin and absorbs the curvature left in a 16× ladder once the coarsest
-#: pre-asymptotic point is dropped (ORDER_TOL = 0.1 is for the dedicated order studies of issue 2).
+#: pre-asymptotic point is dropped (ORDER_TOL = 0.1 is for the dedicated order studies of tests/reference_sim).
 SWEEP_ORDER_TOL = 0.3
 #: The coarsest ladder point is pre-asymptotic (dropped from the fit when ≥ 3 points remain) when
 #: its pairwise order differs from the median of the finer pairs by more than this: half an order
@@ -89,7 +90,7 @@ SAME_SCHEME_REL = 1e-9
 #: the resolved JSON). 1e-5: a CSV printed with 6 significant digits differs from the state by up to 5e-6.
 ENGINE_FILE_INITIAL_STATE_REL = 1e-5
 
-# --- hardening: bounded work, honest inputs (issue 13) ----------------------------------------------
+# --- bounded work, honest inputs (docs/hardening.md) ----------------------------------------------
 
 #: Peak memory of one sweep job per recorded step (its run plus the reference on the same grid),
 #: measured as the growth of the worker's max RSS: 1090 B/step at 2e5 steps, 890 at 1e6
@@ -127,7 +128,7 @@ MIN_LADDER_RATIO = 1.2
 #: series/<name>.npz) that must fit the 255-byte limit of common filesystems with room to spare.
 MAX_NAME_CHARS = 100
 
-# --- Sweep verdicts: true orders, and expectations decided by physics (issue 11) ----------------------
+# --- sweep verdicts: measured floors, expectations decided by physics (docs/verdicts.md) ----------------------
 
 #: Relative size of the initial-state perturbations that measure the error amplification: far above
 #: the references' accuracy (closed forms ~1e-13; DOP853 at AMPLIFICATION_RTOL, whose batched members
@@ -156,7 +157,7 @@ AMPLITUDE_MODEL_ORDER_DEV = 0.15
 #: floor, bent the fitted order from 3.9 to 3.4.)
 RESOLVED_ABOVE_FLOOR = 10.0
 
-# --- `rbcheck check` gives a true verdict on any simulator's trajectory (issue 10) -----------------
+# --- `rbcheck check`: a true verdict on any simulator's trajectory (docs/check.md) -----------------
 
 #: Local (one-step) allowance constant C in ``C · h · Δ · M2`` (M2: block majorant of |y''| along the
 #: exact flow, see cross_checks.check_physics). Every consistent one-step scheme of order ≥ 1 of the

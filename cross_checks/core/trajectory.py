@@ -1,4 +1,4 @@
-"""Trajectories: the CSV + sidecar JSON contract of DESIGN.md.
+"""Trajectories: the CSV + sidecar JSON of docs/trajectory.md.
 
 CSV columns (written in this order, read by name in any order): ``t,x,y,z,vx,vy,vz,qw,qx,qy,qz,wx,wy,wz`` — time (s); COM position (m, world);
 COM velocity (m/s, world); orientation body→world (w, x, y, z); angular velocity (rad/s, WORLD).
@@ -137,7 +137,7 @@ def read_columns(csv_path, *, require: tuple = QUANTITY_GROUPS, _fast: bool = Tr
     """Parse a trajectory CSV by column NAME.
 
     The header is required; names are matched case-sensitively after stripping spaces; columns may
-    come in any order and unknown columns are ignored (DESIGN.md: ``qw,qx,qy,qz`` name the quaternion
+    come in any order and unknown columns are ignored (docs/trajectory.md: ``qw,qx,qy,qz`` name the quaternion
     whatever their order). ``t`` is required, and every group of ``require``; a group is present only
     with all its columns. Times must be finite and strictly increasing (they may carry single-precision
     rounding: interpreting them is the caller's business). State values may be non-finite (a diverged

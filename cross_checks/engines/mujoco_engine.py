@@ -5,7 +5,7 @@ full inertia tensor is given as its principal moments plus ``iquat`` = the princ
 coordinates, so the BODY frame stays the scenario's body frame and ``qpos[3:7]`` is ``q_WB``), no
 geoms, gravity and timestep from the scenario, ``autoreset`` disabled so divergence is seen.
 
-State mapping (ENGINE_FACTS.md): ``qpos = [x_W, q_WB (w x y z)]``; ``qvel = [v_W (COM, world),
+State mapping (docs/engine_conventions.md): ``qpos = [x_W, q_WB (w x y z)]``; ``qvel = [v_W (COM, world),
 ω_B (BODY axes)]``, so ``ω_W = R(q) ω_B``. The state is read from qpos/qvel, never from xpos/xquat
 (those are one step stale after ``mj_step``).
 

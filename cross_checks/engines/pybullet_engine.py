@@ -7,7 +7,7 @@ and creates one body with ``createMultiBody`` (no collision shape, ``useMaximalC
 with damping zeroed (multibody defaults to 0.04 linear + quadratic), ``maxJointVelocity`` raised
 (multibody clamps every velocity component to ±100 by default) and sleeping disabled.
 
-Body frames (ENGINE_FACTS.md): PyBullet takes only a diagonal inertia, and what it reports as the
+Body frames (docs/engine_conventions.md): PyBullet takes only a diagonal inertia, and what it reports as the
 base pose is the inertial (principal) frame P. The adapter therefore gives PyBullet the principal
 frame as the body (``baseInertialFrameOrientation`` identity) and rotates at the boundary:
 ``q_WP = q_WB ⊗ q_BP`` in, ``q_WB = q_WP ⊗ q_BP⁻¹`` out, with ``R_BP`` from

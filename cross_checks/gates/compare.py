@@ -49,7 +49,7 @@ METRIC_RULES = {
     "linmom_drift_max": (1e-12, 0.05),
 }
 #: An observed order may move this much (in either direction) before it counts: the fitted order of
-#: a ladder changes by ~0.01 between machines; 0.1 is the tolerance of the order tests (issue 2).
+#: a ladder changes by ~0.01 between machines; 0.1 is the tolerance of the order tests (tests/reference_sim).
 ORDER_TOL = 0.1
 GOOD_VERDICTS = ("converges", "at_roundoff")
 #: No claim on the ladder: a change to or from it is information, never a regression or improvement.
@@ -86,7 +86,7 @@ class Comparison:
         return 0
 
 
-#: The columns DESIGN.md promises in every results.csv.
+#: The columns docs/results.md promises in every results.csv.
 REQUIRED_COLUMNS = ("scenario", "engine", "dt", "steps", "wall_s", "pos_err_final", "vel_err_final", "orient_err_final",
                     "angvel_err_final", "energy_drift_max", "angmom_drift_max", "status")
 STATUSES = ("ok", "diverged", "failed")

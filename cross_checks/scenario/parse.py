@@ -1,4 +1,4 @@
-"""Scenario files (TOML, DESIGN.md contract): load, validate, and turn into a reference_sim Problem.
+"""Scenario files (TOML, docs/scenario.md): load, validate, and turn into a reference_sim Problem.
 
 Every validation error is a :class:`ScenarioError` whose message names the file, the field and the
 reason, e.g. ``my.toml: body.mass: must be > 0, got -1``.

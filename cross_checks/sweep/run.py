@@ -1,5 +1,5 @@
 """``rbcheck sweep``: every (scenario, engine variant, Δt) run, its metrics, convergence verdicts, and
-the results directory of DESIGN.md, written atomically.
+the results directory of docs/results.md, written atomically.
 
 Data flow (one way): scenario → engine adapter (:func:`cross_checks.engines.run_variant`) →
 Trajectory → :mod:`cross_checks.metrics` → results files → :mod:`reports` (HTML and PNG).

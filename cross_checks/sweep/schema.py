@@ -4,7 +4,7 @@ line naming the file, the field and the reason (exit 2) instead of a traceback w
 
 A spec is a type (``str``, ``NUM`` = int or float, ``bool``, ``int``), ``[spec]`` (a list of spec),
 a dict ``{key: spec}`` (keys ending in ``?`` are optional), or ``Nullable(spec)`` (null allowed).
-Extra keys are allowed everywhere (DESIGN.md: keys may be added, never renamed).
+Extra keys are allowed everywhere (docs/results.md: keys may be added, never renamed).
 """
 from __future__ import annotations
 

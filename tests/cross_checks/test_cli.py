@@ -99,7 +99,7 @@ def test_diverged_run_is_reported_with_its_time(tmp_path, capsys):
     assert "diverged at t = " in err
     traj = Trajectory.read(out)
     assert traj.meta["status"] == "diverged"
-    # ENGINE_FACTS.md: MuJoCo Euler (the same scheme) diverges on this case at t = 8.65 s.
+    # docs/engine_conventions.md: MuJoCo Euler (the same scheme) diverges on this case at t = 8.65 s.
     assert traj.meta["diverged_at_s"] == pytest.approx(8.65, abs=0.02)
     assert np.all(np.isfinite(traj.y))  # the steps before the blow-up, never NaN rows
 

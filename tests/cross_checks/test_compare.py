@@ -119,7 +119,7 @@ def test_cli_compare_exit_codes_and_markdown(tmp_path, capsys):
     assert "nope: not a directory" in capsys.readouterr().err
 
 
-# --- damaged input is exit 2, never "no regression" (issue 13) ---------------------------------------
+# --- damaged input is exit 2, never "no regression" (docs/hardening.md) ---------------------------------------
 
 def _cli(capsys, a, b):
     from cross_checks.cli import main

@@ -24,7 +24,7 @@ angular_velocity = [0.3, 1.0, 0.2]
 """
 
 #: Mass and inertia below MuJoCo's mjMINVAL (1e-15): valid physics for rbcheck's loader, rejected
-#: by MuJoCo's compiler (ENGINE_FACTS.md).
+#: by MuJoCo's compiler (docs/engine_conventions.md).
 FEATHER = """
 name = "feather"
 description = "a body lighter than MuJoCo accepts"
@@ -124,7 +124,7 @@ def test_same_scheme_pairs_that_both_diverge_agree_on_the_time(tmp_path, monkeyp
     from cross_checks.scenario import parse_scenario
     from cross_checks.sweep import run_sweep
     monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "cache"))
-    # ENGINE_FACTS.md: MuJoCo Euler diverges on this fast spin at t = 8.65 s; expmap_gyro is the same scheme.
+    # docs/engine_conventions.md: MuJoCo Euler diverges on this fast spin at t = 8.65 s; expmap_gyro is the same scheme.
     sc = parse_scenario("""
 name = "fast_spin"
 duration = 10.0

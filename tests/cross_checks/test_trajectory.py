@@ -1,4 +1,4 @@
-"""The trajectory CSV reader: columns by name (DESIGN.md), what it accepts and what it refuses."""
+"""The trajectory CSV reader: columns by name (docs/trajectory.md), what it accepts and what it refuses."""
 import numpy as np
 import pytest
 
