@@ -25,7 +25,7 @@ from reference_sim.quaternion import quat_conj, quat_log, quat_mul, rotate
 from reference_sim.state import Q, V, W, X
 
 from cross_checks.gates.check.evidence import ratio
-from cross_checks.gates.check.flow import distances, exact_flow, quantity_distance
+from cross_checks.analysis.flow import distances, exact_flow, quantity_distance
 from cross_checks.core.quantities import QUANTITIES
 from cross_checks.gates.check.mistakes import applicable_mistakes, course_step
 
@@ -112,7 +112,7 @@ def score_variants(inp, scenario, y0, y_next, flow_end, allow, extra_one_step=()
     An implicit variant's step is its root only to IMPLICIT_TOL (1 + |y|) per component and step (two
     evaluations of the same step may stop at different iterates): that is added to its identity test."""
     from reference_sim.integrators import IMPLICIT_TOL
-    from cross_checks.gates.check.flow import BLOCKS
+    from cross_checks.analysis.flow import BLOCKS
     from cross_checks.engines import get_adapter
     adapter = get_adapter("reference")
     solve = {q: inp.span_steps * IMPLICIT_TOL * math.sqrt(BLOCKS[q].stop - BLOCKS[q].start)

@@ -27,7 +27,7 @@ from cross_checks.gates.check.diagnosis import (diagnose_mistakes, fit_step_scal
 from cross_checks.gates.check.evidence import (Evidence, conserved_evidence, evidence_row, free_running_evidence,
                                                pose_consistency, ratio, reconstruct_states)
 from cross_checks.gates.check.input import CheckError, describe_time, prepare_input
-from cross_checks.gates.check.flow import (BLOCKS, distances, exact_flow, flow_rhs, local_allowances, majorant,
+from cross_checks.analysis.flow import (BLOCKS, distances, exact_flow, flow_rhs, local_allowances, majorant,
                                            motion_rate, quantity_distance)
 from cross_checks.core.quantities import QUANTITIES
 from cross_checks.analysis.expectations import expectation

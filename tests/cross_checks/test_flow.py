@@ -4,7 +4,7 @@ import pytest
 
 from cross_checks.core import tolerances as tol
 from cross_checks.gates.check.input import prepare_input
-from cross_checks.gates.check.flow import (distances, error_growth, exact_flow, flow_rhs, local_allowances,
+from cross_checks.analysis.flow import (distances, error_growth, exact_flow, flow_rhs, local_allowances,
                                            majorant, motion_rate, rk4_flow)
 from cross_checks.scenario import load_scenario, parse_scenario
 from cross_checks.core.trajectory import Trajectory
