@@ -208,3 +208,12 @@ CHECK_GROWTH_RATE_PER_STEP = 0.25
 #: "Resembles" a mistake (said with that caution) when it explains 99 % of the steps within this many
 #: allowances and CHECK_MISTAKE_MARGIN times better than any correct scheme; beyond, nothing is named.
 CHECK_MISTAKE_RESEMBLES = 3.0
+# --- compare: a new results directory against the baseline (docs/results.md) ---
+#: Relative change of an error or drift that counts as a regression (or improvement): the same code on
+#: another machine reproduces errors to ~1e-12 relative (libm/BLAS rounding, amplified by at most ~1e3
+#: on the chaotic tumbling cases), while a real change of scheme, default or force semantics changes
+#: errors by factors; 5 % separates the two with margin.
+COMPARE_REL_TOL = 0.05
+#: Absolute change below which an error or drift has not changed: values at the round-off floor
+#: (≤ 1e-12) fluctuate by O(1) factors between machines and mean nothing.
+COMPARE_ABS_TOL = 1e-12
