@@ -8,7 +8,7 @@ import numpy as np
 from reference_sim.integrators import ImplicitSolveError, get_step
 from reference_sim.state import Problem
 
-__all__ = ["Run", "simulate", "BLOWUP_LIMIT", "n_steps_for"]
+__all__ = ["Run", "simulate", "BLOWUP_LIMIT"]
 
 #: A state component beyond this magnitude (m, m/s, rad/s) counts as a blow-up. Free-body scenarios
 #: of the catalog stay below 1e3 in every quantity; 1e8 is far outside any physical run yet well
@@ -31,11 +31,6 @@ class Run:
     y: np.ndarray
     diverged_at_s: float | None = None
     message: str = ""
-
-
-def n_steps_for(duration_s: float, dt_s: float) -> int:
-    """Number of steps of size dt covering the duration (rounded to the nearest whole step)."""
-    return int(round(duration_s / dt_s))
 
 
 def simulate(problem: Problem, variant: str, dt_s: float, n_steps: int, y0=None) -> Run:

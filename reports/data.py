@@ -144,7 +144,7 @@ def load_results(directory) -> Results:
 
 
 def read_summary(sj: Path, for_report: bool = False) -> dict:
-    """summary.json, checked against reports.schema (ResultsError naming the file and the field)."""
+    """summary.json, checked against cross_checks.sweep.schema (ResultsError naming the file and the field)."""
     from cross_checks.sweep.schema import SchemaError, check_summary
     try:
         summary = json.loads(sj.read_text(encoding="utf-8"))

@@ -3,7 +3,7 @@
 A sweep fits a convergence order per (scenario, variant, quantity) and compares it with
 :func:`expectation`, decided from the variant's traits (:func:`traits`, one table keyed by variant,
 with a documented default for a variant it knows nothing about) and the scenario's PHYSICS
-(:mod:`cross_checks.physics`: rates, separatrix proximity and error amplification measured on its
+(:mod:`cross_checks.analysis.physics`: rates, separatrix proximity and error amplification measured on its
 reference) — never from a scenario's name:
 
 * ``does_not_converge``: the variant lacks a term the motion needs (the course's update has no
@@ -219,7 +219,7 @@ def expectation(scenario, variant: str, quantity: str, mode: str = "free_running
     where the free run is pre-asymptotic (an amplitude drift builds up over a run, not in one step) —
     and no expectation (verdict None) where the variant misses a term: a missing term shows up as an
     O(Δt) local error in some quantities and O(Δt²) in others. ``physics``: the scenario's
-    :class:`~cross_checks.physics.ScenarioPhysics` (measured here when omitted, once per scenario —
+    :class:`~cross_checks.analysis.physics.ScenarioPhysics` (measured here when omitted, once per scenario —
     unless ``measure_physics`` is False: then no pre-asymptotic decision is made, e.g. for a scenario
     whose reference could not be computed, where every run is a failed row anyway).
     """
@@ -331,8 +331,8 @@ def energy_drift_bound(scenario, variant: str, dt_s: float) -> float | None:
 
     An order-p scheme's global error over T at step Δt on a motion of angular frequency ω is
     ~ C (ωΔt)^p ωT; energy errors are of the same relative size. C ≤ 2 covers every scheme here
-    (explicit Euler's energy grows as e^{2χ} − 1 ≈ ω²ΔtT = (ωΔt)ωT, i.e. C = 1; ENGINE_FACTS: MuJoCo
-    Euler on the tennis racket drifts 4.6e-3 over 20 s at Δt = 1e-3, C = 0.29). Returns None where no
+    (explicit Euler's energy grows as e^{2χ} − 1 ≈ ω²ΔtT = (ωΔt)ωT, i.e. C = 1; docs/engine_conventions.md:
+    MuJoCo Euler on the tennis racket drifts 4.6e-3 over 20 s at Δt = 1e-3, C = 0.29). Returns None where no
     bound applies: a non-conservative scenario, a variant without a nominal order, or the course
     update on a body whose gyroscopic term matters (it does not model the conserved motion at all).
     """

@@ -12,7 +12,7 @@ An engine file is TOML (docs/engines.md)::
     command = ["./mysim", "{scenario_json}", "{dt}", "{out_csv}"]
 
 Placeholders (anywhere inside an argument; ``{{``/``}}`` are literal braces): ``{scenario_json}`` the
-resolved scenario JSON of this run (:mod:`cross_checks.resolved`, Δt-specific), ``{dt}`` (s),
+resolved scenario JSON of this run (:mod:`cross_checks.scenario.resolved`, Δt-specific), ``{dt}`` (s),
 ``{steps}``, ``{duration}`` (s) and ``{out_csv}``, where the command writes the trajectory CSV (one
 row per step from t = 0, columns by name: ``t,x,y,z,vx,vy,vz,qw,qx,qy,qz,wx,wy,wz``). The command must
 name both ``{scenario_json}`` and ``{out_csv}``; its program (first element) is named literally: a

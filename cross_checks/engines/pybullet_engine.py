@@ -23,7 +23,7 @@ itself) with ``applyExternalForce`` (WORLD_FRAME, at the COM's world position) a
 step's force and torque scaled alike.
 
 Maximal-coordinate bodies: ``resetBasePositionAndOrientation`` zeroes their velocity, so the velocity
-is always reset after the pose. ENGINE_FACTS reports a stale world inertia in the first step after a
+is always reset after the pose. PyBullet is reported to use a stale world inertia in the first step after a
 pose reset or ``changeDynamics``; every pose reset is primed with one zero-velocity step at that pose,
 then reset again. (With this adapter's call order no effect of the priming was measurable in 3.2.7 —
 primed and unprimed runs agree bit for bit — it is kept as cheap insurance.)

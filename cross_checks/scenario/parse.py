@@ -27,7 +27,8 @@ __all__ = ["Scenario", "ScenarioError", "load_scenario", "parse_scenario", "cata
 
 NAME_RE = re.compile(r"^[a-z0-9_]+$")
 #: How a scenario's reference solution is obtained: "analytic" (a closed form of reference_sim.analytic
-#: must exist for it), "ground_truth" (DOP853, rtol 1e-12), or "auto" (analytic when one exists).
+#: must exist for it), "ground_truth" (DOP853 at reference_sim.ground_truth.GROUND_TRUTH_RTOL), or "auto"
+#: (analytic when one exists).
 REFERENCE_KINDS = ("auto", "analytic", "ground_truth")
 FRAMES = ("world", "body")
 

@@ -170,7 +170,7 @@ def error_amplification(scenario, scales: dict | None = None) -> dict:
     """How much the dynamics amplify an initial error by the final time, per quantity (values ≥ 1):
     ``max_k |Δq(T)| / scale_q / ε`` over perturbations of relative size ε = AMPLIFICATION_EPS along each
     of the 12 directions of the initial state (:func:`perturbed_initial_states`; ``scales`` as in
-    metrics.quantity_scales). The closed form where there is one, else a batched DOP853 solve at
+    quantities.quantity_scales). The closed form where there is one, else a batched DOP853 solve at
     AMPLIFICATION_RTOL. Near an unstable rotation this is ~1e2–1e3 (tumbling_box flips ~8 times in
     10 s): round-off grows by as much.
     """

@@ -7,7 +7,7 @@ the next recorded row (so chaos cannot blur the comparison):
   ``one_step``): the trajectory IS a variant when every step reproduces it within the rounding of the
   data (written digits + the roundings of a step); each variant is also checked against the exact flow
   (is it a correct scheme for this scenario at this Δt?);
-* every catalogued mistake (:mod:`cross_checks.mistakes`) on a correct base: named when it explains
+* every catalogued mistake (:mod:`cross_checks.gates.check.mistakes`) on a correct base: named when it explains
   every step within the local allowance and CHECK_MISTAKE_MARGIN times better than any correct scheme;
 * a Δt mismatch: the scale s of the step that best fits the rows (the exact flow over s Δ);
 * the initial state: which usual slip (ω in body axes, quaternion in (x, y, z, w) order, ...) turns the

@@ -1,7 +1,7 @@
 """``rbcheck check``, step 3: the evidence rows of a verdict, each measured against a derived allowance.
 
 * one-step defect (full-state files): from each recorded state, the exact flow over the row interval
-  against the next row (:mod:`cross_checks.check_physics`);
+  against the next row (:mod:`cross_checks.analysis.flow`);
 * acceleration consistency (pose-only files): second differences of the poses against the equations
   of motion at the reconstructed state;
 * conserved quantities where the physics conserves them: energy and world angular momentum (drift

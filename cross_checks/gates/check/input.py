@@ -1,6 +1,6 @@
 """``rbcheck check``, step 1: what a trajectory file says, as people write it.
 
-Turns the rows of a trajectory CSV (read by column name, :func:`cross_checks.trajectory.read_columns`)
+Turns the rows of a trajectory CSV (read by column name, :func:`cross_checks.core.trajectory.read_columns`)
 into a :class:`CheckInput`: the simulator's step ``h``, how many steps each row interval spans, the
 true time of every row (``n_k h``: recorded times are trusted only to their precision), the precision
 the values were written (and probably computed) in, which quantities the file holds, and what had to
@@ -30,11 +30,10 @@ from cross_checks.core import tolerances as tol
 from cross_checks.core.trajectory import QUANTITY_GROUPS
 
 __all__ = ["CheckError", "CheckInput", "prepare_input", "printed_half_quantum", "written_digits",
-           "single_precision_time_bound", "interval_bound", "snap_step", "QUANTITY_SLICES", "ROTATION_GROUPS"]
+           "single_precision_time_bound", "interval_bound", "snap_step", "QUANTITY_SLICES"]
 
 #: Slice of the packed state holding each quantity group.
 QUANTITY_SLICES = {"position": X, "velocity": V, "orientation": Q, "angular_velocity": W}
-ROTATION_GROUPS = ("orientation", "angular_velocity")
 
 #: Unit roundoff of double and single precision.
 EPS64 = 2.0 ** -53
@@ -350,10 +349,6 @@ def _cut_to_duration(inp, scenario):
         inp.ended_early_s = float(inp.t_s[-1])
 
 
-def rows_needed(scenario, h) -> int:
-    return int(round(scenario.duration_s / h)) + 1 if h else 0
-
-
 def describe_time(inp) -> str:
     """One phrase: rows, time span, step."""
     if inp.h_s is None:
@@ -361,11 +356,3 @@ def describe_time(inp) -> str:
     d = inp.decimation
     per = f"one row per step of Δt = {inp.h_s:g} s" if d == 1 else f"one row every {d} steps of Δt = {inp.h_s:g} s"
     return f"{inp.n_rows} rows, t = 0 … {inp.t_s[-1]:.6g} s, {per}"
-
-
-def finite_max(values) -> float:
-    """max of an array where any NaN makes the result NaN (a NaN never vanishes in a max)."""
-    a = np.asarray(values, dtype=float)
-    if a.size == 0:
-        return math.nan
-    return float(np.max(a)) if not np.any(np.isnan(a)) else math.nan

@@ -4,7 +4,7 @@ Each :class:`Mistake` is the course's semi-implicit step (``v += Δt f/m; x += �
 q += ½Δt [0, ω] q; q /= |q|``, with or without the gyroscopic torque −ω × (I ω), velocity decay as
 ``e^{−kΔt}``) with ONE thing done wrong, written from the equations (not from the reference
 integrators): the checker compares a user's step with each of them from the user's own states, and
-names the mistake whose steps explain the trajectory (see cross_checks.check). Batched over rows: states
+names the mistake whose steps explain the trajectory (see cross_checks.gates.check). Batched over rows: states
 ``y`` (N, 13) packed [x_W, v_W, q_WB (w x y z), w_W]; ``h`` (s) a scalar or (N,).
 """
 from __future__ import annotations

@@ -10,8 +10,8 @@ The evidence (docs/check.md): the one-step defect from every recorded state agai
 (chaos-independent), conserved quantities, and the free-running error against the reference within
 its capped, growth-carried allowance; for files without velocities, the consistency of the poses'
 second differences with the equations of motion. Every allowance is derived in
-:mod:`cross_checks.check_physics` / :mod:`cross_checks.check_evidence`, its constants in
-``cross_checks/tolerances.py``.
+:mod:`cross_checks.analysis.flow` / :mod:`cross_checks.gates.check.evidence`, its constants in
+``cross_checks/core/tolerances.py``.
 """
 from __future__ import annotations
 
@@ -99,7 +99,7 @@ class _Local:
     """The local evidence of a file: its rows, the allowances per row interval, scheme scores."""
 
     rows: list
-    allow: object            # check_physics.Allowances per row interval
+    allow: object            # analysis.flow.Allowances per row interval
     per_row: dict            # quantity -> (K−1,) physics + arithmetic allowances
     candidates: list         # CandidateScore of every reference variant (full-state files)
     notes: list
