@@ -25,32 +25,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from reference_sim.integrators import EXPECTED_ORDER as _REFERENCE_ORDER
 from cross_checks.core.quantities import QUANTITIES
+from cross_checks.engines import declared_order
 
-__all__ = ["energy_drift_bound", "characteristic_rate_sq", "QUANTITIES", "NOMINAL_ORDER", "VARIANT_TRAITS",
+__all__ = ["energy_drift_bound", "characteristic_rate_sq", "QUANTITIES", "VARIANT_TRAITS",
            "DEFAULT_TRAITS", "Traits", "traits", "EQUIVALENT_PAIRS", "Expectation", "expectation", "expected_order",
            "nominal_order", "gyroscopic_term_matters", "rotation_drives_translation", "translation_drives_rotation"]
-
-
-#: Nominal global order per ENGINE:VARIANT, the same for every quantity.
-NOMINAL_ORDER = {
-    # reference:* — reference_sim.integrators.EXPECTED_ORDER is the single source for the NumPy
-    # schemes (its own tests prove them): course / course_gyro / expmap_gyro are symplectic Euler
-    # (one force evaluation, O(Δt²) local error -> 1); explicit and implicit Euler: 1; mid-point and
-    # leapfrog (Störmer–Verlet): 2; classical RK4: 4.
-    **{f"reference:{v}": float(p) for v, p in _REFERENCE_ORDER.items()},
-    # MuJoCo Euler is semi-implicit Euler + exp-map quaternion = reference:expmap_gyro: 1.
-    "mujoco:euler": 1.0,
-    # MuJoCo RK4: classical RK4 on (qpos, qvel); forces re-evaluated at every stage by the adapter: 4.
-    "mujoco:rk4": 4.0,
-    # MuJoCo implicit(fast): velocity-implicit Euler, one linearised solve per step -> 1.
-    "mujoco:implicit": 1.0,
-    "mujoco:implicitfast": 1.0,
-    # PyBullet: semi-implicit Euler in both modes (multibody explicit gyro, maximal implicit gyro): 1.
-    "pybullet:multibody": 1.0,
-    "pybullet:maximal": 1.0,
-}
 
 
 @dataclass(frozen=True)
@@ -155,13 +135,10 @@ class Expectation:
 
 
 def nominal_order(variant: str) -> float | None:
-    """The nominal global order of ``ENGINE:VARIANT``: NOMINAL_ORDER, else the order a user engine
-    declares (engine file or entry-point adapter); None for a name nobody declares."""
-    p = NOMINAL_ORDER.get(variant)
-    if p is None:  # user engines declare their own order, which their verdicts then check
-        from cross_checks.engines import declared_order
-        p = declared_order(variant)
-    return p
+    """The nominal global order of ``ENGINE:VARIANT``, the same for every quantity: the order its adapter
+    declares (rbcheck's own adapters and a user's engine file or entry point alike; verdicts then check
+    it); None for a name nobody declares."""
+    return declared_order(variant)
 
 
 def _isotropic(inertia_B) -> bool:

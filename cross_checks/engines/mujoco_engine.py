@@ -47,11 +47,15 @@ else:
 __all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate", "one_step", "build_model"]
 
 ENGINE = "mujoco"
+#: The variants, named after MuJoCo's integrators (``mjtIntegrator.mjINT_<NAME>``), with their declared
+#: global orders: Euler is semi-implicit Euler + exp-map quaternion (1); RK4 is classical RK4 with the
+#: forces evaluated at every stage (4); implicit(fast) is velocity-implicit Euler, one linearised solve
+#: per step (1).
 VARIANTS = {
-    "euler": "MuJoCo Euler: semi-implicit Euler, explicit gyroscopic term, quaternion by the exponential map",
-    "rk4": "MuJoCo RK4: classical 4th-order Runge-Kutta; state-dependent forces evaluated at every stage",
-    "implicit": "MuJoCo implicit: velocity-implicit Euler (gyroscopic/velocity derivatives in the step)",
-    "implicitfast": "MuJoCo implicitfast: implicit Euler without the Coriolis/centrifugal derivatives",
+    "euler": Variant(1, "MuJoCo Euler: semi-implicit Euler, explicit gyroscopic term, quaternion by the exponential map"),
+    "rk4": Variant(4, "MuJoCo RK4: classical 4th-order Runge-Kutta; state-dependent forces evaluated at every stage"),
+    "implicit": Variant(1, "MuJoCo implicit: velocity-implicit Euler (gyroscopic/velocity derivatives in the step)"),
+    "implicitfast": Variant(1, "MuJoCo implicitfast: implicit Euler without the Coriolis/centrifugal derivatives"),
 }
 
 #: Steps between divergence checks of a free-running simulation (checked vectorised per chunk).
@@ -82,15 +86,9 @@ def version() -> str:
 
 def _integrator(variant):
     _require()
-    table = {
-        "euler": mujoco.mjtIntegrator.mjINT_EULER,
-        "rk4": mujoco.mjtIntegrator.mjINT_RK4,
-        "implicit": mujoco.mjtIntegrator.mjINT_IMPLICIT,
-        "implicitfast": mujoco.mjtIntegrator.mjINT_IMPLICITFAST,
-    }
-    if variant not in table:
+    if variant not in VARIANTS:
         raise ValueError(f"unknown mujoco variant {variant!r}; variants: {', '.join(VARIANTS)}")
-    return table[variant]
+    return getattr(mujoco.mjtIntegrator, f"mjINT_{variant.upper()}")
 
 
 def build_model(scenario, variant: str, dt_s: float):
@@ -397,26 +395,11 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
         return _to_packed(qpos_out, qvel_out).reshape(shape)
 
 
-#: Declared global order of each variant (see MujocoAdapter).
-_ORDERS = {"euler": 1, "rk4": 4, "implicit": 1, "implicitfast": 1}
-
-
 class MujocoAdapter(EngineAdapter):
-    """``mujoco:VARIANT`` — registered under the entry-point group ``rbcheck.engines``.
-
-    Declared orders: Euler is semi-implicit Euler + exp-map quaternion (order 1); RK4 is classical
-    RK4 with the forces evaluated at every stage (order 4); implicit(fast) is velocity-implicit Euler,
-    one linearised solve per step (order 1).
-    """
+    """``mujoco:VARIANT`` — registered under the entry-point group ``rbcheck.engines``."""
 
     name = ENGINE
-    variants = {v: Variant(float(_ORDERS[v]), d) for v, d in VARIANTS.items()}
-
-    def version(self) -> str:
-        return version()
-
-    def simulate(self, scenario, variant: str, dt_s: float, n_steps: int) -> Run:
-        return simulate(scenario, variant, dt_s, n_steps)
-
-    def one_step(self, scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
-        return one_step(scenario, variant, dt_s, y_start)
+    variants = VARIANTS
+    version = staticmethod(version)
+    simulate = staticmethod(simulate)
+    one_step = staticmethod(one_step)

@@ -73,9 +73,11 @@ else:
 __all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate", "one_step", "DYNAMICS_SETTINGS"]
 
 ENGINE = "pybullet"
+#: The variants with their declared global orders: both modes are semi-implicit Euler (explicit
+#: gyroscopic term in multibody, implicit in maximal coordinates): 1.
 VARIANTS = {
-    "multibody": "PyBullet Featherstone multibody (default): semi-implicit Euler, explicit gyroscopic term",
-    "maximal": "PyBullet maximal coordinates (btRigidBody): semi-implicit Euler, implicit gyroscopic term",
+    "multibody": Variant(1, "PyBullet Featherstone multibody (default): semi-implicit Euler, explicit gyroscopic term"),
+    "maximal": Variant(1, "PyBullet maximal coordinates (btRigidBody): semi-implicit Euler, implicit gyroscopic term"),
 }
 
 #: changeDynamics settings every body gets (besides mass and inertia); see the module docstring.
@@ -272,25 +274,11 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
         return B.raw_to_packed(out).reshape(shape)
 
 
-#: Declared global order of each variant (see PybulletAdapter).
-_ORDERS = {"multibody": 1, "maximal": 1}
-
-
 class PybulletAdapter(EngineAdapter):
-    """``pybullet:VARIANT`` — registered under the entry-point group ``rbcheck.engines``.
-
-    Declared orders: both modes are semi-implicit Euler (explicit gyroscopic term in multibody,
-    implicit in maximal coordinates): order 1.
-    """
+    """``pybullet:VARIANT`` — registered under the entry-point group ``rbcheck.engines``."""
 
     name = ENGINE
-    variants = {v: Variant(float(_ORDERS[v]), d) for v, d in VARIANTS.items()}
-
-    def version(self) -> str:
-        return version()
-
-    def simulate(self, scenario, variant: str, dt_s: float, n_steps: int) -> Run:
-        return simulate(scenario, variant, dt_s, n_steps)
-
-    def one_step(self, scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
-        return one_step(scenario, variant, dt_s, y_start)
+    variants = VARIANTS
+    version = staticmethod(version)
+    simulate = staticmethod(simulate)
+    one_step = staticmethod(one_step)

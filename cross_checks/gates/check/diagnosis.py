@@ -102,14 +102,10 @@ def score_candidate(name, y_next, y_cand, allow, quantities, flow_end=None, solv
     return CandidateScore(name, mx, p99, same, own, worst)
 
 
-#: Reference variants with an iterative solve, stopped at IMPLICIT_TOL relative to 1 + |y| per step.
-IMPLICIT_VARIANTS = ("implicit_euler", "leapfrog")
+def score_variants(inp, scenario, y0, y_next, flow_end, allow):
+    """Scores of every reference variant, each stepped by the reference adapter's ``one_step``.
 
-
-def score_variants(inp, scenario, y0, y_next, flow_end, allow, extra_one_step=()):
-    """Scores of every reference variant (and of ``extra_one_step``: (name, step(y, h)) pairs).
-
-    An implicit variant's step is its root only to IMPLICIT_TOL (1 + |y|) per component and step (two
+    An iterative variant's step is its root only to IMPLICIT_TOL (1 + |y|) per component and step (two
     evaluations of the same step may stop at different iterates): that is added to its identity test."""
     from reference_sim.integrators import IMPLICIT_TOL
     from cross_checks.analysis.flow import BLOCKS
@@ -119,11 +115,10 @@ def score_variants(inp, scenario, y0, y_next, flow_end, allow, extra_one_step=()
              * (1.0 + np.linalg.norm(np.nan_to_num(y_next[:, BLOCKS[q]]), axis=1)) * (2.0 if q == "orientation" else 1.0)
              for q in QUANTITIES}
     out = []
-    cands = [(f"reference:{v}", (lambda v: lambda z, hh: adapter.one_step(scenario, v, hh, z))(v)) for v in VARIANTS]
-    for name, step in list(cands) + list(extra_one_step):
-        y_c = step_rows(step, y0, inp)
-        implicit = name.split(":", 1)[1] in IMPLICIT_VARIANTS
-        out.append(score_candidate(name, y_next, y_c, allow, QUANTITIES, flow_end, solve if implicit else None))
+    for v, scheme in VARIANTS.items():
+        y_c = step_rows(lambda z, hh, v=v: adapter.one_step(scenario, v, hh, z), y0, inp)
+        out.append(score_candidate(f"reference:{v}", y_next, y_c, allow, QUANTITIES, flow_end,
+                                   solve if scheme.iterative else None))
     return out
 
 
