@@ -15,11 +15,9 @@ import numpy as np
 from cross_checks.sweep.results_dir import inside, safe_file_stem
 from cross_checks.sweep.schema import STATUSES
 
-__all__ = ["Results", "ResultsError", "load_results", "read_summary", "QUANTITIES", "UNITS", "COLUMN_STEM", "LABELS"]
+__all__ = ["Results", "ResultsError", "load_results", "read_summary", "LABELS"]
 
-QUANTITIES = ("position", "orientation", "velocity", "angular_velocity")
-UNITS = {"position": "m", "velocity": "m/s", "orientation": "rad", "angular_velocity": "rad/s"}
-COLUMN_STEM = {"position": "pos", "velocity": "vel", "orientation": "orient", "angular_velocity": "angvel"}
+#: How the report names each quantity (cross_checks.core.quantities.QUANTITIES) in its sentences.
 LABELS = {"position": "position", "velocity": "velocity", "orientation": "orientation",
           "angular_velocity": "angular velocity"}
 

@@ -20,7 +20,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 
-from reports.data import COLUMN_STEM, LABELS, QUANTITIES, UNITS  # noqa: E402
+from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, UNITS  # noqa: E402
+from reports.data import LABELS  # noqa: E402
 
 __all__ = ["KINDS", "scenario_figures", "variant_styles"]
 

@@ -25,6 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from reference_sim.analytic import EQUAL_MOMENTS_REL_TOL
+
 from cross_checks.core.quantities import QUANTITIES
 from cross_checks.engines import declared_order
 
@@ -143,7 +145,7 @@ def nominal_order(variant: str) -> float | None:
 
 def _isotropic(inertia_B) -> bool:
     m = np.linalg.eigvalsh(np.asarray(inertia_B, float))
-    return bool(m[-1] - m[0] <= 1e-12 * m[-1])
+    return bool(m[-1] - m[0] <= EQUAL_MOMENTS_REL_TOL * m[-1])
 
 
 def gyroscopic_term_matters(scenario) -> bool:

@@ -36,39 +36,12 @@ import threading
 import numpy as np
 
 from reference_sim.quaternion import quat_conj, quat_from_matrix, quat_mul
-from reference_sim.simulate import BLOWUP_LIMIT, Run
+from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
 
 from cross_checks.engines.base import (EngineAdapter, EngineError, Variant, apply_decay_prestep, decay_factors,
-                                       harness_force_torque)
+                                       harness_force_torque, optional_import, require)
 
-def _import_pybullet_quietly():
-    """``import pybullet`` with file descriptor 2 silenced: the extension prints its build time to
-    stderr at import, which would land in every CLI run's error output."""
-    import sys
-    try:
-        sys.stderr.flush()
-        saved = os.dup(2)
-    except (OSError, ValueError, AttributeError):
-        import pybullet
-        return pybullet
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(devnull, 2)
-        import pybullet
-    finally:
-        os.dup2(saved, 2)
-        os.close(saved)
-        os.close(devnull)
-    return pybullet
-
-
-try:  # the module imports without pybullet so the registry can report why it is unavailable
-    p = _import_pybullet_quietly()
-except ImportError as _exc:  # pragma: no cover - exercised only where pybullet is missing
-    p = None
-    _IMPORT_ERROR = _exc
-else:
-    _IMPORT_ERROR = None
+p, _IMPORT_ERROR = optional_import("pybullet", quiet_stderr=True)   # it prints its build time at import
 
 __all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate", "one_step", "DYNAMICS_SETTINGS"]
 
@@ -96,8 +69,7 @@ _client_pid: int | None = None
 
 
 def _require():
-    if p is None:
-        raise ImportError(f"pybullet is not installed: {_IMPORT_ERROR}")
+    require(p, _IMPORT_ERROR, "pybullet")
 
 
 def version() -> str:
@@ -200,11 +172,6 @@ class _Body:
             p.applyExternalTorque(b, -1, tau_W.tolist(), p.WORLD_FRAME, physicsClientId=c)
 
 
-def _bad_rows(y):
-    with np.errstate(invalid="ignore"):
-        return ~np.all(np.isfinite(y), axis=-1) | (np.max(np.abs(y), axis=-1) > BLOWUP_LIMIT)
-
-
 def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
     """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded."""
     forces = scenario.problem.forces
@@ -244,13 +211,10 @@ def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
                     B.apply(f_const, tau_const, row[0:3])
                 step(physicsClientId=c)
                 raw[n] = read()
-            bad = _bad_rows(raw[start:stop])
+            bad = bad_rows(raw[start:stop])
             if bad.any():
                 n_bad = start + int(np.argmax(bad))
-                what = ("non-finite state" if not np.all(np.isfinite(raw[n_bad]))
-                        else f"state beyond {BLOWUP_LIMIT:g}")
-                return Run(dt_s * np.arange(n_bad), B.raw_to_packed(raw[:n_bad]), n_bad * dt_s,
-                           f"diverged at t = {n_bad * dt_s:.6g} s ({what})")
+                return diverged(B.raw_to_packed(raw[:n_bad]), dt_s, f" ({blowup_words(raw[n_bad])})")
             start = stop
         return Run(dt_s * np.arange(n_steps + 1), B.raw_to_packed(raw))
 

@@ -11,8 +11,7 @@ import math
 
 from cross_checks.analysis import metrics as M
 from cross_checks.analysis.convergence import compare_with_expectation, fit_convergence
-from cross_checks.core.quantities import quantity_scales
-from cross_checks.core.quantities import QUANTITIES
+from cross_checks.core.quantities import QUANTITIES, quantity_scales
 from cross_checks.analysis.expectations import Expectation, expectation
 
 __all__ = ["LadderError", "check_ladder"]

@@ -19,8 +19,6 @@ from reference_sim.quaternion import matrix_from_quat, quat_mul
 from reference_sim.state import Q, V, W, X
 from reference_sim.vec import cross3
 
-from cross_checks.scenario.references import decay_rates_per_s
-
 __all__ = ["Knobs", "Mistake", "CATALOG", "applicable_mistakes", "course_step", "BASES"]
 
 
@@ -121,7 +119,7 @@ def _decay_factors(scenario, knobs, h):
     fm = scenario.problem.forces
     if knobs.decay_per_step:
         return fm.velocity_decay ** knobs.decay_power, fm.angular_velocity_decay ** knobs.decay_power
-    k_v, k_w = decay_rates_per_s(scenario)
+    k_v, k_w = scenario.problem.forces.decay_rates_per_s()
     return np.exp(-knobs.decay_power * k_v * h), np.exp(-knobs.decay_power * k_w * h)
 
 

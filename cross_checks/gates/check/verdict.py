@@ -20,16 +20,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from cross_checks.core.quantities import UNITS
 from cross_checks.core import tolerances as tol
 from cross_checks.gates.check.diagnosis import (diagnose_mistakes, fit_step_scale, initial_state_slips,
                                                 score_variants)
 from cross_checks.gates.check.evidence import (Evidence, conserved_evidence, evidence_row, free_running_evidence,
                                                pose_consistency, ratio, reconstruct_states)
 from cross_checks.gates.check.input import CheckError, describe_time, prepare_input
-from cross_checks.analysis.flow import (BLOCKS, distances, exact_flow, flow_rhs, local_allowances, majorant,
+from cross_checks.analysis.flow import (distances, exact_flow, flow_rhs, local_allowances, majorant,
                                            motion_rate, quantity_distance)
-from cross_checks.core.quantities import QUANTITIES
+from cross_checks.core.quantities import BLOCKS, QUANTITIES, UNITS
 from cross_checks.analysis.expectations import expectation
 
 __all__ = ["CheckError", "CheckResult", "check_trajectory"]
