@@ -10,7 +10,6 @@ sweep goes on.
 from __future__ import annotations
 
 import os
-import sys
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
@@ -160,10 +159,14 @@ class _ReferenceTask:
         return reference_job(self.scenarios[i], self.path(i), self.cache_root, self.use_cache, self.time_limit_s)
 
 
-def run_references(runner: Runner, scenarios, work_dir, cache_root, use_cache, time_limit_s) -> list:
+def run_references(runner: Runner, scenarios, work_dir, cache_root, use_cache, time_limit_s,
+                   show_progress: bool = False) -> list:
     """The :class:`ScenarioReference` of every scenario, in the order of ``scenarios``."""
+    from cross_checks.core.progress import Progress
     task = _ReferenceTask(scenarios, str(work_dir), cache_root, use_cache, time_limit_s)
-    results = dict(runner.map_unordered(task, range(len(scenarios))))
+    with Progress("rbcheck sweep", "references", len(scenarios), enabled=show_progress) as bar:
+        results = dict(runner.map_unordered(task, range(len(scenarios)),
+                                            lambda i, _r: bar.update(1, scenarios[i].name)))
     return [ScenarioReference(task.path(i), *results[i]) for i in range(len(scenarios))]
 
 
@@ -203,8 +206,7 @@ def run_jobs(runner: Runner, jobs, scenarios, references, work_dir, cache_root, 
              show_progress: bool) -> dict:
     """``{Job: record}`` of every job (:func:`cross_checks.sweep.jobs.run_job`), run in the order given;
     a job whose scenario has no reference is a failed row carrying the reason."""
-    from tqdm import tqdm
-
+    from cross_checks.core.progress import Progress
     from cross_checks.engines import user_engines
     records = {j: failed_record(j, scenarios[j.scenario_index], references[j.scenario_index].error)
                for j in jobs if references[j.scenario_index].error}
@@ -214,12 +216,10 @@ def run_jobs(runner: Runner, jobs, scenarios, references, work_dir, cache_root, 
     extra_engines = user_engines()
     items = [(j, scenarios[j.scenario_index], references[j.scenario_index].path, cache_root, use_cache,
               extra_engines, time_limit_s, str(inflight / str(k))) for k, j in enumerate(todo)]
-    with tqdm(total=len(todo), disable=not show_progress, unit="run", desc="rbcheck sweep", file=sys.stderr,
-              dynamic_ncols=True) as bar:
+    with Progress("rbcheck sweep", "runs", len(todo), enabled=show_progress) as bar:
         def done(item, rec):
             records[item[0]] = rec
-            bar.update(1)
-            bar.set_postfix_str(f"{item[0].scenario} {item[0].variant}", refresh=False)
+            bar.update(1, f"{item[0].scenario} {item[0].variant} dt={item[0].dt_s:g}")
 
         runner.map_unordered(_run_job_item, items, done, on_crash=_crashed, in_flight=_in_flight)
     return records

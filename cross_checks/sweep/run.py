@@ -29,6 +29,7 @@ from datetime import datetime, timezone
 
 from cross_checks.core import tolerances as tol
 from cross_checks.core.files import atomic_write_text, save_npz_atomic, usable_cores
+from cross_checks.core.progress import stage
 from cross_checks.sweep import assemble
 from cross_checks.sweep.cache import cache_dir
 from cross_checks.sweep.execute import Runner, run_jobs, run_references
@@ -86,7 +87,8 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
     jobs : worker processes (default: all cores); 1 runs everything in this process.
     use_cache : read cached job results (they are always written).
     skipped : ``{variant: reason}`` of variants left out (recorded in summary.json).
-    progress : show a progress bar (default: when stderr is a terminal).
+    progress : report progress on stderr (:mod:`cross_checks.core.progress`: a bar in a terminal, a line
+        every few seconds elsewhere); default: only when stderr is a terminal.
     finish : ``finish(staging_dir)``, called on the complete results before they replace ``out_dir``
         (e.g. ``reports.render``: the report is then part of the atomic replacement). None: no report.
     run_time_limit_s, reference_time_limit_s : wall-time limits of one run and of one reference solve
@@ -111,12 +113,13 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
     runner = None
     try:
         runner = Runner(jobs, executor)
-        refs = run_references(runner, scenarios, work, cache_root, use_cache, reference_time_limit_s)
         show = sys.stderr.isatty() if progress is None else progress
+        refs = run_references(runner, scenarios, work, cache_root, use_cache, reference_time_limit_s, show)
         records = run_jobs(runner, plan_jobs(scenarios, variants), scenarios, refs, work, cache_root, use_cache,
                            run_time_limit_s, show)
         runner.close()
         runner = None
+        stage("rbcheck sweep", "writing results.csv, summary.json and series/", enabled=show)
         summary = _write_results(staging, scenarios, variants, refs, records, started=started, skipped=skipped,
                                  jobs=jobs, t_start=t_start)
         if finish is not None:  # e.g. the report, drawn from the saved files only

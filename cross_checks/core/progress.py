@@ -1,0 +1,108 @@
+"""Progress of a long command that reaches the user in a terminal AND in a CI log.
+
+In a terminal (the stream is a TTY) a tqdm bar; anywhere else (a CI log, a pipe, a file) one plain line
+every ``LINE_INTERVAL_S`` seconds, flushed at once, plus a last line when the stage ends::
+
+    rbcheck sweep: runs 120/455 (26%) in 14 s, ~40 s left; last: tennis_racket mujoco:rk4
+
+Every stage of ``rbcheck sweep`` (the references, the runs, the results files, the report) goes through
+:func:`stage` (one line: a stage starts) and :class:`Progress` (a counted stage), so a log shows no
+silent stretch longer than the interval. ``enabled=False`` prints nothing (library calls: tests, the
+pytest plugin).
+"""
+from __future__ import annotations
+
+import sys
+import time
+
+__all__ = ["LINE_INTERVAL_S", "Progress", "stage"]
+
+#: Seconds between two progress lines without a terminal: often enough that a CI log never looks hung
+#: (GitHub Actions streams lines as they come), rarely enough that a 1000-run sweep prints ~20 lines.
+LINE_INTERVAL_S = 5.0
+
+
+def _is_tty(stream) -> bool:
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError):
+        return False
+
+
+def _seconds(s: float) -> str:
+    return f"{s:.0f} s" if s < 120 else f"{s / 60:.1f} min"
+
+
+def stage(prefix: str, message: str, *, enabled: bool = True, stream=None) -> None:
+    """One line ``"<prefix>: <message>"`` on stderr (or ``stream``), flushed: a stage begins."""
+    if enabled:
+        stream = sys.stderr if stream is None else stream
+        print(f"{prefix}: {message}", file=stream, flush=True)
+
+
+class Progress:
+    """Counted progress of one stage (a context manager): ``update(n=1, last="what just finished")``.
+
+    ``prefix`` names the command (``rbcheck sweep``), ``what`` the items (``runs``). ``enabled``:
+    print anything at all; ``tty``: force the bar (True) or the lines (False), default: whether the
+    stream is a terminal. ``interval_s`` and ``clock`` exist for the tests.
+    """
+
+    def __init__(self, prefix: str, what: str, total: int, *, enabled: bool = True, stream=None,
+                 tty: bool | None = None, interval_s: float = LINE_INTERVAL_S, clock=time.monotonic):
+        self.prefix, self.what, self.total, self.enabled = prefix, what, int(total), enabled
+        self.stream = sys.stderr if stream is None else stream
+        self.interval_s, self.clock = interval_s, clock
+        self.done, self.last = 0, ""
+        self.t0 = self._last_line = clock()
+        self.bar = None
+        if enabled and (_is_tty(self.stream) if tty is None else tty):
+            from tqdm import tqdm
+            self.bar = tqdm(total=self.total, unit=what.rstrip("s") or what, desc=f"{prefix}: {what}",
+                            file=self.stream, dynamic_ncols=True)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close(finished=exc[0] is None)
+        return False
+
+    def update(self, n: int = 1, last: str = "") -> None:
+        self.done += n
+        self.last = last or self.last
+        if not self.enabled:
+            return
+        if self.bar is not None:
+            self.bar.update(n)
+            if last:
+                self.bar.set_postfix_str(last, refresh=False)
+            return
+        now = self.clock()
+        if now - self._last_line >= self.interval_s and self.done < self.total:
+            self._last_line = now
+            self._line(now)
+
+    def _line(self, now: float, final: str = "") -> None:
+        """A progress line; ``final`` ("done", "stopped") ends the stage's lines."""
+        elapsed = now - self.t0
+        pct = f" ({100 * self.done / self.total:.0f}%)" if self.total else ""
+        tail = f", {final}" if final else ""
+        if not final and 0 < self.done < self.total:
+            tail = f", ~{_seconds(elapsed * (self.total - self.done) / self.done)} left"
+        if self.last and not final:
+            tail += f"; last: {self.last}"
+        print(f"{self.prefix}: {self.what} {self.done}/{self.total}{pct} in {_seconds(elapsed)}{tail}",
+              file=self.stream, flush=True)
+
+    def close(self, finished: bool = True) -> None:
+        """End the stage: the bar closes; without a terminal a last line says how far it got."""
+        if not self.enabled:
+            return
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
+            return
+        if self._last_line is not None:
+            self._line(self.clock(), "done" if finished else "stopped")
+            self._last_line = None

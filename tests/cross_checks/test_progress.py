@@ -1,0 +1,84 @@
+"""Progress that reaches a CI log: a plain line every few seconds without a terminal, a bar in one."""
+import io
+import os
+import re
+import subprocess
+import sys
+
+from cross_checks.core.progress import LINE_INTERVAL_S, Progress, stage
+
+
+class Clock:
+    def __init__(self):
+        self.t = 100.0
+
+    def __call__(self):
+        return self.t
+
+
+class Flushed(io.StringIO):
+    """A stream that records what had been flushed when each line arrived (a CI log sees only that)."""
+
+    def __init__(self):
+        super().__init__()
+        self.flushed = ""
+
+    def flush(self):
+        self.flushed = self.getvalue()
+
+
+def test_without_a_terminal_a_line_every_interval_and_a_last_one():
+    clock, out = Clock(), Flushed()
+    with Progress("rbcheck sweep", "runs", 100, stream=out, tty=False, clock=clock) as p:
+        for i in range(100):
+            clock.t += 0.5  # 50 s in all: a line at most every LINE_INTERVAL_S
+            p.update(1, f"job {i}")
+    lines = out.getvalue().splitlines()
+    assert len(lines) == int(50 / LINE_INTERVAL_S) - 1 + 1  # every interval before the end, plus the last line
+    assert lines[0] == "rbcheck sweep: runs 10/100 (10%) in 5 s, ~45 s left; last: job 9"
+    assert lines[-1] == "rbcheck sweep: runs 100/100 (100%) in 50 s, done"
+    assert out.flushed == out.getvalue()  # each line flushed as written
+
+
+def test_nothing_is_printed_between_intervals_and_a_stopped_stage_says_so():
+    clock, out = Clock(), Flushed()
+    try:
+        with Progress("rbcheck sweep", "runs", 10, stream=out, tty=False, clock=clock) as p:
+            clock.t += LINE_INTERVAL_S / 2
+            p.update(3)
+            raise KeyboardInterrupt
+    except KeyboardInterrupt:
+        pass
+    assert out.getvalue() == "rbcheck sweep: runs 3/10 (30%) in 2 s, stopped\n"
+
+
+def test_in_a_terminal_a_bar_and_no_log_lines():
+    out = io.StringIO()
+    with Progress("rbcheck sweep", "runs", 3, stream=out, tty=True) as p:
+        for _ in range(3):
+            p.update(1, "x")
+    text = out.getvalue()
+    assert "\r" in text and "3/3" in text and "in 0 s" not in text
+
+
+def test_disabled_prints_nothing():
+    out = io.StringIO()
+    with Progress("rbcheck sweep", "runs", 3, stream=out, enabled=False) as p:
+        p.update(3)
+    stage("rbcheck sweep", "writing", enabled=False, stream=out)
+    assert out.getvalue() == ""
+
+
+def test_a_sweep_piped_to_a_log_reports_every_stage(tmp_path):
+    """`rbcheck sweep` with stderr a pipe (a CI job): the references, the runs and the results files each
+    leave a line; no terminal control characters."""
+    env = {**os.environ, "RBCHECK_CACHE_DIR": str(tmp_path / "cache"), "MPLBACKEND": "Agg"}
+    p = subprocess.run([sys.executable, "-m", "cross_checks.cli", "sweep", "projectile", "--engines",
+                        "reference:course", "--out", str(tmp_path / "r"), "--jobs", "1"],
+                       capture_output=True, text=True, env=env, timeout=300)
+    assert p.returncode == 0, p.stderr
+    err = p.stderr
+    assert "rbcheck sweep: references 1/1 (100%) in" in err and "done" in err
+    assert re.search(r"^rbcheck sweep: runs (\d+)/\1 \(100%\) in \d+ s, done$", err, re.M)
+    assert "rbcheck sweep: writing results.csv" in err
+    assert "\r" not in err and "\x1b" not in err
