@@ -16,6 +16,12 @@ version with well-formed convergence records): damaged input is exit 2 with one 
 "no regression". A metric column the baseline has and the new results lack, or an order that
 vanished, is a regression.
 
+A sweep of a subset (its summary.json lists the scenarios and variants it ran) is compared on what it
+ran: baseline rows and records of a scenario or variant it did not run are counted as NOT COMPARED and
+named in one line, not reported row by row as missing. A variant the new sweep left out because it was
+unavailable there (its ``skipped_variants``) is still missing: its rows are what the gate must see.
+Rows of a scenario and variant the new sweep ran are compared one by one; one absent there is missing.
+
 Exit codes: 0 no regression; 1 regression (or missing rows, unless allowed); 2 unusable input.
 """
 from __future__ import annotations
@@ -32,7 +38,7 @@ from cross_checks.core.tolerances import COMPARE_ABS_TOL, COMPARE_REL_TOL, ORDER
 from cross_checks.sweep.schema import STATUSES
 
 __all__ = ["compare_dirs", "read_results_dir", "Comparison", "CompareInputError", "METRIC_RULES", "ORDER_TOL",
-           "REQUIRED_COLUMNS", "to_markdown", "to_text"]
+           "REQUIRED_COLUMNS", "Scope", "not_compared", "verdict_line", "to_markdown", "to_text"]
 
 KEY = ["scenario", "engine", "dt"]
 
@@ -63,10 +69,41 @@ class Change:
 
 
 @dataclass
+class Scope:
+    """What the new results ran (None: everything, e.g. a summary that does not list it): the
+    baseline rows and records outside it are not compared, only counted."""
+
+    scenarios: frozenset | None = None
+    variants: frozenset | None = None
+    unavailable: dict = field(default_factory=dict)  # variant -> why the new sweep skipped it
+    skipped_rows: int = 0
+    skipped_records: int = 0
+    skipped_scenarios: set = field(default_factory=set)
+    skipped_variants: set = field(default_factory=set)
+
+    def ran(self, scenario: str, engine: str) -> bool:
+        """Whether the new results ran this (scenario, variant), or were meant to (an unavailable variant)."""
+        if self.scenarios is not None and scenario not in self.scenarios:
+            return False
+        return self.variants is None or engine in self.variants or engine in self.unavailable
+
+    def skip(self, scenario: str, engine: str, record: bool = False) -> None:
+        if record:
+            self.skipped_records += 1
+        else:
+            self.skipped_rows += 1
+        if self.scenarios is not None and scenario not in self.scenarios:
+            self.skipped_scenarios.add(scenario)
+        else:
+            self.skipped_variants.add(engine)
+
+
+@dataclass
 class Comparison:
     changes: list = field(default_factory=list)
     version_diffs: list = field(default_factory=list)  # (package, old, new)
     matched_rows: int = 0
+    scope: Scope = field(default_factory=Scope)
 
     def of(self, kind):
         return [c for c in self.changes if c.kind == kind]
@@ -187,12 +224,20 @@ def compare_dirs(baseline_dir, new_dir) -> Comparison:
     """Every difference between two results directories (or compact baselines), each judged."""
     old_df, old_sum = read_results_dir(Path(baseline_dir))
     new_df, new_sum = read_results_dir(Path(new_dir))
-    out = Comparison()
+    out = Comparison(scope=_scope(new_sum))
     _compare_columns(old_df, new_df, out)
     _compare_rows(old_df.merge(new_df, on=KEY, how="outer", suffixes=("_old", "_new"), indicator=True), out)
     _compare_convergence(old_sum.get("convergence", []), new_sum.get("convergence", []), out)
     _compare_versions(old_sum.get("provenance", {}), new_sum.get("provenance", {}), out)
     return out
+
+
+def _scope(summary: dict) -> Scope:
+    """What a results directory's sweep ran, from its summary.json (everything when it does not say)."""
+    if not isinstance(summary.get("scenarios"), list) or not isinstance(summary.get("variants"), list):
+        return Scope()
+    return Scope(frozenset(s["name"] for s in summary["scenarios"]), frozenset(v["name"] for v in summary["variants"]),
+                 {v["name"]: v["reason"] for v in summary.get("skipped_variants") or []})
 
 
 def _compare_columns(old_df, new_df, out: Comparison):
@@ -209,7 +254,12 @@ def _compare_rows(merged, out: Comparison):
     for _, r in merged.iterrows():
         where = f"dt={r['dt']:g}"
         if r["_merge"] == "left_only":
-            out.changes.append(Change("missing", r["scenario"], r["engine"], where, note="row absent from the new results"))
+            if not out.scope.ran(r["scenario"], r["engine"]):
+                out.scope.skip(r["scenario"], r["engine"])
+                continue
+            why = out.scope.unavailable.get(r["engine"])
+            note = f"variant unavailable in the new sweep: {why}" if why else "row absent from the new results"
+            out.changes.append(Change("missing", r["scenario"], r["engine"], where, note=note))
             continue
         if r["_merge"] == "right_only":
             out.changes.append(Change("new", r["scenario"], r["engine"], where, new=str(r["status_new"])))
@@ -268,6 +318,9 @@ def _compare_convergence(old_recs, new_recs, out: Comparison):
     for k in sorted(set(old) | set(new)):
         scen, eng, qty = k
         if k not in new:
+            if not out.scope.ran(scen, eng):
+                out.scope.skip(scen, eng, record=True)
+                continue
             out.changes.append(Change("missing", scen, eng, f"order of {qty}", note="convergence record absent"))
         elif k not in old:
             out.changes.append(Change("new", scen, eng, f"order of {qty}", new=_fmt(new[k].get("order"))))
@@ -324,16 +377,49 @@ def _compare_versions(po, pn, out: Comparison):
             out.version_diffs.append((k, vo.get(k, "—"), vn.get(k, "—")))
 
 
+def _names(items, at_most: int = 8) -> str:
+    items = sorted(items)
+    more = f" and {len(items) - at_most} more" if len(items) > at_most else ""
+    return ", ".join(items[:at_most]) + more
+
+
+def not_compared(c: Comparison) -> str:
+    """One sentence on the baseline rows and records of scenarios/variants the new results did not run
+    ("" when there are none)."""
+    sc = c.scope
+    if not (sc.skipped_rows or sc.skipped_records):
+        return ""
+    what = []
+    if sc.skipped_scenarios:
+        what.append(f"{len(sc.skipped_scenarios)} scenario(s) ({_names(sc.skipped_scenarios)})")
+    if sc.skipped_variants:
+        what.append(f"{len(sc.skipped_variants)} variant(s) ({_names(sc.skipped_variants)})")
+    return (f"not compared: {sc.skipped_rows} baseline row(s) and {sc.skipped_records} convergence record(s) of "
+            f"{' and '.join(what)} the new results did not run")
+
+
+def verdict_line(c: Comparison, allow_missing=False) -> str:
+    """What the exit code means, in words that agree with the counts."""
+    n_reg, n_miss = len(c.of("regression")), len(c.of("missing"))
+    if n_reg:
+        return f"REGRESSION: {n_reg} regression(s)" + (f", {n_miss} missing" if n_miss else "")
+    if n_miss and not allow_missing:
+        return (f"MISSING: {n_miss} row(s) or record(s) of what the new results ran are absent from them "
+                "(--allow-missing accepts that)")
+    return "OK: no regression"
+
+
 def to_text(c: Comparison, allow_missing=False) -> str:
     lines = [f"compared {c.matched_rows} matching rows: {len(c.of('regression'))} regressions, "
              f"{len(c.of('improvement'))} improvements, {len(c.of('new'))} new, {len(c.of('missing'))} missing"]
+    if not_compared(c):
+        lines.append(not_compared(c))
     for pkg, a, b in c.version_diffs:
         lines.append(f"  version of {pkg}: {a} -> {b}")
     for kind in ("regression", "missing", "improvement", "new", "changed"):
         for ch in c.of(kind):
             lines.append(f"  {kind.upper():<11} {ch.scenario} {ch.engine} {ch.what}: {ch.old} -> {ch.new} {ch.note}".rstrip())
-    verdict = {0: "OK: no regression", 1: "REGRESSION"}[c.exit_code(allow_missing)]
-    lines.append(verdict)
+    lines.append(verdict_line(c, allow_missing))
     return "\n".join(lines)
 
 
@@ -343,11 +429,14 @@ def _md_escape(s: str) -> str:
 
 def to_markdown(c: Comparison, baseline_dir, new_dir, allow_missing=False) -> str:
     code = c.exit_code(allow_missing)
-    head = "✅ no regression" if code == 0 else "❌ regression"
+    head = ("✅ no regression" if code == 0 else "❌ regression" if c.of("regression")
+            else "❌ rows missing from the new results")
     md = [f"## rbcheck compare: {head}", "",
           f"Baseline `{_md_escape(baseline_dir)}` vs new `{_md_escape(new_dir)}`: {c.matched_rows} matching rows, "
           f"**{len(c.of('regression'))} regressions**, {len(c.of('improvement'))} improvements, "
           f"{len(c.of('new'))} new, {len(c.of('missing'))} missing.", ""]
+    if not_compared(c):
+        md += [_md_escape(not_compared(c)[0].upper() + not_compared(c)[1:]) + ".", ""]
     if c.version_diffs:
         md += ["### Version differences", "", "| package | baseline | new |", "|---|---|---|"]
         md += [f"| {_md_escape(p)} | {_md_escape(a)} | {_md_escape(b)} |" for p, a, b in c.version_diffs]

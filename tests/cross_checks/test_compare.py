@@ -190,3 +190,71 @@ def test_the_committed_baseline_without_a_marker_is_still_valid_input():
     base = Path(__file__).resolve().parents[2] / "baselines" / "default"
     c = compare_dirs(base, base)
     assert c.exit_code() == 0 and c.matched_rows > 100 and not c.changes
+
+
+# --- a sweep of a subset against the full baseline (README tour) -------------------------------------------
+
+def _scenario(name):
+    return {"name": name, "content_hash": "0" * 16, "reference": "analytic", "duration_s": 1.0, "dt_s": 1e-3,
+            "dt_ladder_s": [1e-3]}
+
+
+def _write_scoped(d, rows, conv=CONV, skipped=()):
+    """A results directory whose summary lists what its sweep ran, as every rbcheck sweep's does."""
+    write(d, rows, conv)
+    summary = json.loads((d / "summary.json").read_text())
+    summary["form"] = "compact baseline"  # the compact records: what compare reads of a scenario
+    summary["scenarios"] = [_scenario(n) for n in sorted({r["scenario"] for r in rows})]
+    summary["variants"] = [{"name": n} for n in sorted({r["engine"] for r in rows})]
+    summary["skipped_variants"] = [{"name": n, "reason": "not installed"} for n in skipped]
+    (d / "summary.json").write_text(json.dumps(summary))
+    return d
+
+
+def test_a_subset_is_compared_on_what_it_ran_and_the_rest_is_counted_not_missing(tmp_path, capsys):
+    from cross_checks.cli import main
+    subset = _write_scoped(tmp_path / "b", ROWS[:1])  # tennis_racket x mujoco:euler only
+    c = compare_dirs(write(tmp_path / "a"), subset)
+    assert c.exit_code() == 0 and c.matched_rows == 1 and not c.of("missing")
+    assert (c.scope.skipped_rows, c.scope.skipped_scenarios, c.scope.skipped_variants) == (
+        2, {"projectile"}, {"reference:course"})
+    assert main(["compare", str(tmp_path / "a"), str(subset)]) == 0
+    out = capsys.readouterr().out
+    assert "not compared: 2 baseline row(s)" in out and "OK: no regression" in out
+    assert "MISSING" not in out
+
+
+def test_a_regression_inside_the_subset_is_still_caught(tmp_path):
+    rows = [dict(ROWS[0], orient_err_final=ROWS[0]["orient_err_final"] * 3)]
+    c = compare_dirs(write(tmp_path / "a"), _write_scoped(tmp_path / "b", rows))
+    assert c.exit_code() == 1 and [ch.what for ch in c.of("regression")] == ["dt=0.001 orient_err_final"]
+
+
+def test_a_row_of_a_scenario_and_variant_the_subset_ran_is_still_missing(tmp_path):
+    """The subset ran tennis_racket x mujoco:euler; the baseline's row at another dt of that pair is absent."""
+    base = write(tmp_path / "a", ROWS + [dict(ROWS[0], dt=5e-4, steps=20000)])
+    c = compare_dirs(base, _write_scoped(tmp_path / "b", ROWS[:1]))
+    assert [ch.what for ch in c.of("missing")] == ["dt=0.0005"] and c.exit_code() == 1
+
+
+def test_a_variant_unavailable_in_the_new_sweep_is_missing_not_skipped(tmp_path, capsys):
+    """A default sweep where PyBullet/MuJoCo could not be imported must not pass the gate by skipping."""
+    from cross_checks.cli import main
+    new = _write_scoped(tmp_path / "b", ROWS[1:2], conv=[], skipped=["mujoco:euler", "mujoco:rk4"])
+    summary = json.loads((new / "summary.json").read_text())
+    summary["scenarios"] = [_scenario("tennis_racket"), _scenario("projectile")]
+    (new / "summary.json").write_text(json.dumps(summary))
+    c = compare_dirs(write(tmp_path / "a"), new)
+    assert len(c.of("missing")) == 3 and all("unavailable" in ch.note for ch in c.of("missing")[:2])
+    assert main(["compare", str(tmp_path / "a"), str(new)]) == 1
+    out = capsys.readouterr().out
+    assert "MISSING: 3" in out and "0 regressions" in out and "REGRESSION" not in out
+
+
+def test_the_markdown_heading_agrees_with_the_counts(tmp_path):
+    c = compare_dirs(write(tmp_path / "a"), write(tmp_path / "b", ROWS[:2]))  # no scope: one row missing
+    md = to_markdown(c, "a", "b")
+    assert "❌ rows missing" in md and "**0 regressions**" in md
+    ok = compare_dirs(write(tmp_path / "a"), _write_scoped(tmp_path / "c", ROWS[:2]))
+    md = to_markdown(ok, "a", "c")
+    assert "✅ no regression" in md and "Not compared: 1 baseline row(s)" in md
