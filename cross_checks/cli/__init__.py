@@ -41,6 +41,28 @@ class _Parser(argparse.ArgumentParser):
         raise SystemExit(EXIT_BAD_INPUT)
 
 
+def _version_text() -> str:
+    """``rbcheck X.Y.Z`` and, on the next line, the versions every result records (no engine imported)."""
+    from importlib import metadata
+
+    import reference_sim
+    parts = [f"Python {sys.version.split()[0]}"]
+    for dist in ("numpy", "scipy", "mujoco", "pybullet"):
+        try:
+            parts.append(f"{dist} {metadata.version(dist)}")
+        except metadata.PackageNotFoundError:
+            parts.append(f"{dist} not installed")
+    return f"rbcheck {reference_sim.__version__}\n" + ", ".join(parts)
+
+
+class _VersionAction(argparse.Action):
+    """``--version``: the two lines of :func:`_version_text` as they are (argparse's own action re-wraps them)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        print(_version_text())
+        raise SystemExit(EXIT_OK)
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(
         prog="rbcheck",
@@ -51,6 +73,8 @@ def build_parser() -> argparse.ArgumentParser:
                "unwritable output (one line); 130 interrupted (Ctrl-C); 143 terminated (SIGTERM). "
                "Your own engines: --engine-file (docs/engines.md).",
     )
+    p.add_argument("--version", action=_VersionAction, nargs=0,
+                   help="print rbcheck's version and those of the engines and libraries it runs, then exit")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_Parser)
     # One declaration per command, in the order `rbcheck --help` lists them (alike in shape only: each
     # says its own command's arguments).
@@ -62,12 +86,17 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _add_list(sub) -> None:
     ls = sub.add_parser("list", help="list catalog scenarios and engine variants (with availability)")
+    ls.add_argument("--json", action="store_true",
+                    help="print the list as JSON: scenarios (name, description, reference, duration_s, dt_s, "
+                         "dt_ladder_s) and variants (name, engine, variant, available, reason, version, "
+                         "declared_order, description, source, default)")
     _add_engine_file_option(ls)
 
 
 def _add_show(sub) -> None:
     sh = sub.add_parser(
-        "show", help="the resolved scenario: body, initial state and forces exactly as every engine receives them",
+        "show", help="a scenario's body, initial conditions and forces, exactly as every engine receives them "
+                     "(what you need to set it up in your own simulator)",
         description="Print the scenario with every alternative resolved (inertia 3x3 about the COM in body axes, "
                     "orientation as a unit quaternion w x y z, angular velocity in WORLD axes, body points from the "
                     "COM, velocity-decay factors per step at the run's dt). --json prints the exact JSON an "
@@ -81,7 +110,9 @@ def _add_show(sub) -> None:
 def _add_run(sub) -> None:
     r = sub.add_parser("run", help="run one scenario with one engine variant and write the trajectory CSV")
     r.add_argument("scenario", metavar="SCENARIO")
-    r.add_argument("--engine", required=True, metavar="ENGINE:VARIANT", help="e.g. reference:course, mujoco:rk4")
+    r.add_argument("--engine", required=True, metavar="ENGINE[:VARIANT]",
+                   help="e.g. reference:course, mujoco:rk4; an engine name alone runs its default variant "
+                        "(the first `rbcheck list` shows: reference:course, mujoco:euler, pybullet:multibody)")
     r.add_argument("--dt", type=_positive_float, metavar="DT", help="time step, s (default: the scenario's dt)")
     r.add_argument("--duration", type=_positive_float, metavar="T", help="simulated time, s (default: the scenario's)")
     r.add_argument("--out", required=True, metavar="FILE.csv", help="trajectory CSV (sidecar FILE.json beside it)")
@@ -152,13 +183,16 @@ def _add_compare(sub) -> None:
         description="Match rows of BASELINE_DIR/results.csv and NEW_DIR/results.csv by (scenario, engine, dt). Errors "
                     "and drifts are better when lower, orders when closer to the expected order; each metric has an "
                     "absolute + relative tolerance (cross_checks/core/tolerances.py). Either directory may be a full "
-                    "results directory or a compact baseline (rbcheck baseline). Exit 0: no regression; 1: a "
-                    "regression (or rows missing from NEW_DIR, unless --allow-missing); 2: unusable input.")
+                    "results directory or a compact baseline (rbcheck baseline). NEW_DIR of a subset sweep is "
+                    "compared on the scenarios and variants it ran (its summary.json lists them); the baseline's other "
+                    "rows are counted in one line, not compared. Exit 0: no regression; 1: a regression (or rows of "
+                    "what NEW_DIR ran missing from it, unless --allow-missing; a variant NEW_DIR's sweep skipped as "
+                    "unavailable counts as missing); 2: unusable input.")
     cmp_.add_argument("baseline", metavar="BASELINE_DIR")
     cmp_.add_argument("new", metavar="NEW_DIR")
     cmp_.add_argument("--markdown", metavar="FILE", help="also write the comparison as a markdown table (CI job summary)")
     cmp_.add_argument("--allow-missing", action="store_true",
-                      help="rows absent from NEW_DIR (e.g. a sweep of a subset) are reported but not a regression")
+                      help="rows absent from NEW_DIR (e.g. a variant unavailable there) are reported but not a regression")
 
 
 def _add_baseline(sub) -> None:
@@ -210,21 +244,60 @@ def _positive_int(text: str) -> int:
     return v
 
 
+def _default_or_none(engine: str):
+    """The default ``ENGINE:VARIANT`` of an engine, None for one that cannot be loaded."""
+    from cross_checks.engines import UnknownVariant, default_variant
+    try:
+        return default_variant(engine)
+    except UnknownVariant:
+        return None
+
+
+def _list_json() -> str:
+    """``rbcheck list --json``: the catalog and every variant, machine-readable."""
+    import json
+
+    from cross_checks.engines import all_variants
+    from cross_checks.scenario import catalog_names, load_scenario
+
+    scenarios = []
+    for name in catalog_names():
+        sc = load_scenario(name)
+        scenarios.append({"name": sc.name, "description": sc.description, "reference": sc.reference,
+                          "duration_s": sc.duration_s, "dt_s": sc.dt_s, "dt_ladder_s": list(sc.dt_ladder_s)})
+    defaults = {}
+    variants = []
+    for v in all_variants():
+        if v.engine not in defaults:
+            defaults[v.engine] = _default_or_none(v.engine)
+        variants.append({"name": v.name, "engine": v.engine, "variant": v.variant, "available": v.available,
+                         "reason": v.reason, "version": v.version, "declared_order": v.order,
+                         "description": v.description, "source": v.source, "default": v.name == defaults[v.engine]})
+    return json.dumps({"scenarios": scenarios, "variants": variants}, indent=1)
+
+
 def cmd_list(args) -> int:
     from cross_checks.engines import all_variants
     from cross_checks.scenario import catalog_names, load_scenario
 
+    if args.json:
+        print(_list_json())
+        return EXIT_OK
     print("Scenarios (catalog):")
     for name in catalog_names():
         sc = load_scenario(name)
         print(f"  {name:<18} {sc.description}")
     print("\nEngine variants:")
-    shown = set()
+    shown, defaults = set(), {}
     for v in all_variants():
         if v.engine not in shown and not v.source.endswith("(rbcheck)"):
             print(f"  {v.engine}: from {v.source}")
         shown.add(v.engine)
         state = f"available ({v.engine} {v.version})" if v.available else f"UNAVAILABLE: {v.reason}"
+        if v.engine not in defaults:
+            defaults[v.engine] = _default_or_none(v.engine)
+        if v.name == defaults[v.engine]:
+            state += f"; the default: run --engine {v.engine}"
         print(f"  {v.name:<26} {state}")
         text = v.description + (f" (order {v.order:g})" if v.order is not None else "")
         if text:
@@ -270,14 +343,26 @@ def _check_out_path(out: str, suffix: str | None = ".csv", option: str = "--out"
     return path
 
 
+def _did_you_mean(name: str) -> str:
+    """For a bare name that is no engine but some engine's variant (``course``): the full names."""
+    if ":" in name:
+        return ""
+    from cross_checks.engines import all_variants
+    hits = [v.name for v in all_variants() if v.variant == name]
+    return f"; did you mean {' or '.join(hits)}? (ENGINE:VARIANT)" if hits else ""
+
+
 def cmd_run(args) -> int:
-    from cross_checks.engines import EngineError, EngineUnavailable, UnknownVariant, run_variant, split_variant
+    from cross_checks.engines import (EngineError, EngineUnavailable, UnknownVariant, default_variant, run_variant,
+                                      split_variant)
     from cross_checks.scenario import load_scenario
 
     try:
+        if ":" not in args.engine:  # an engine name alone: its default variant
+            args.engine = default_variant(args.engine)
         split_variant(args.engine)
     except UnknownVariant as exc:
-        raise BadInput(f"--engine: {exc}") from None
+        raise BadInput(f"--engine: {exc}{_did_you_mean(args.engine)}") from None
     out = _check_out_path(args.out)
     sc = load_scenario(args.scenario)
     dt = args.dt if args.dt is not None else sc.dt_s
@@ -402,7 +487,7 @@ def _run_sweep(args, scenarios, variants, skipped) -> dict:
     client = _dask_client(args.dask) if args.dask else None
     jobs = args.jobs or usable_cores()
     try:
-        return run_sweep(scenarios, variants, args.out, jobs=jobs, use_cache=not args.no_cache,
+        return run_sweep(scenarios, variants, args.out, jobs=jobs, use_cache=not args.no_cache, progress=True,
                          finish=lambda d: reports.render(d, self_contained=args.self_contained, jobs=jobs),
                          skipped=skipped, **_time_limits(args.time_limit),
                          executor=client.get_executor() if client is not None else None)

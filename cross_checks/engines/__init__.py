@@ -19,7 +19,7 @@ from cross_checks.core.trajectory import Trajectory
 from cross_checks.engines.base import EngineAdapter, EngineError, Variant
 
 __all__ = ["ENTRY_POINT_GROUP", "VariantInfo", "EngineEntry", "all_variants", "available_variants", "get_adapter",
-           "split_variant", "run_variant", "engine_entries", "engine_variants", "declared_order", "has_one_step",
+           "split_variant", "default_variant", "run_variant", "engine_entries", "engine_variants", "declared_order", "has_one_step",
            "load_engine_files", "engine_files_registered", "register_adapter", "user_engines", "adopt_user_engines", "engine_provenance",
            "reset_registry", "EngineUnavailable", "UnknownVariant", "EngineAdapter", "EngineError", "Variant"]
 
@@ -246,6 +246,18 @@ def engine_variants(engine: str) -> list:
     """Variant names an engine offers ([] when its adapter cannot be loaded)."""
     e = _entry(engine)
     return list(e.adapter.variants) if e.adapter is not None else []
+
+
+def default_variant(engine: str) -> str:
+    """``ENGINE:VARIANT`` of the variant an engine name alone means in ``rbcheck run``: the first variant
+    its adapter declares (each built-in adapter declares the engine's own default first: the course's
+    step, MuJoCo's Euler, PyBullet's multibody). UnknownVariant for an unknown or unloadable engine."""
+    e = _entry(engine)
+    if e.adapter is None:
+        raise UnknownVariant(f"engine {engine} cannot be loaded: {e.load_error}")
+    if not e.adapter.variants:
+        raise UnknownVariant(f"engine {engine} declares no variant")
+    return f"{engine}:{next(iter(e.adapter.variants))}"
 
 
 def split_variant(name: str):

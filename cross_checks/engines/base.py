@@ -10,7 +10,8 @@ An adapter provides:
 
 ``name``              the engine name used in ``ENGINE:VARIANT`` (the entry point's name).
 ``variants``          dict variant -> :class:`Variant` (declared global order, one-line description);
-                      verdicts check the declared order.
+                      verdicts check the declared order. The first is the engine's default
+                      (``rbcheck run --engine ENGINE``).
 ``version()``         the engine's version string; raises ImportError (or any exception) when the
                       engine cannot run here: the engine is then listed as unavailable with that reason.
 ``simulate(scenario, variant, dt_s, n_steps) -> reference_sim.simulate.Run``

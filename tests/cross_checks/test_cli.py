@@ -58,7 +58,7 @@ def test_run_dt_and_duration_override(tmp_path):
 @pytest.mark.parametrize("argv, words", [
     (["run", "projectile", "--engine", "reference:nope", "--out", "{tmp}/a.csv"], "unknown variant"),
     (["run", "projectile", "--engine", "nope:x", "--out", "{tmp}/a.csv"], "unknown engine"),
-    (["run", "projectile", "--engine", "course", "--out", "{tmp}/a.csv"], "ENGINE:VARIANT"),
+    (["run", "projectile", "--engine", "course", "--out", "{tmp}/a.csv"], "did you mean reference:course?"),
     (["run", "projectile", "--engine", "reference:course", "--out", "{tmp}/missing/a.csv"], "does not exist"),
     (["run", "projectile", "--engine", "reference:course", "--out", "{tmp}/a.txt"], "must end in .csv"),
     (["run", "projectile", "--engine", "reference:course", "--dt", "-1", "--out", "{tmp}/a.csv"], "--dt"),
