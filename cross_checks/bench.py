@@ -1,12 +1,23 @@
-"""``rbcheck bench``: throughput of the batched reference vs MuJoCo and PyBullet, measured in one run.
+"""``rbcheck bench``: throughput of the batched reference vs MuJoCo and PyBullet, and the cold sweep
+against its floor, measured in one run.
 
-Every engine steps the same free bodies: I = diag(1, 2, 3) kg m², m = 1 kg, gravity (0, 0, −9.81),
-a constant body-axes torque (0, 0, 0.2) N m, random initial ω, h = 1e-3 s. Results are ratios
-against the engines measured in the same process, never absolute thresholds.
+Every engine steps the same free bodies — the SAME number N of them in every row of the table —:
+I = diag(1, 2, 3) kg m², m = 1 kg, gravity (0, 0, −9.81), a constant body-axes torque (0, 0, 0.2) N m,
+random initial ω, h = 1e-3 s. Every measurement is repeated (``repeats``) and reported as its median
+and spread (min, max). Results are ratios against the engines measured in the same process, never
+absolute thresholds.
 
-Keys written by ``--json`` (fixed): reference_batched_body_steps_per_s, mujoco_best_body_steps_per_s,
-pybullet_body_steps_per_s, reference_single_us_per_step, mujoco_single_us_per_step, plus the
-individual measurements.
+**The sweep against its floor.** A cold sweep (``--no-cache``: every run, reference and report computed)
+of the catalog (``quick``: QUICK_SCENARIOS) with every reference, MuJoCo and PyBullet variant, in a
+temporary directory with its own cache, on all usable cores. Its floor is what the same physics costs
+in the fastest engine: ``total engine steps × one bare mj_step of a free body (measured here) ÷ cores``.
+The run stage (references, runs, metrics, results files) and the report stage are timed separately;
+``sweep_floor_ratio`` = (run + report) / floor, ``sweep_run_floor_ratio`` = run / floor.
+
+Keys written by ``--json`` (fixed; medians): reference_batched_body_steps_per_s,
+mujoco_best_body_steps_per_s, pybullet_body_steps_per_s, reference_single_us_per_step,
+mujoco_single_us_per_step, mujoco_bare_step_us, sweep_floor_ratio, sweep_run_floor_ratio, plus the
+individual measurements and ``measurements`` {name: {median, min, max, repeats}}.
 """
 from __future__ import annotations
 
@@ -23,13 +34,30 @@ G = np.array([0.0, 0.0, -9.81])
 H = 1e-3
 
 
-def _best_of(fn, repeats):
-    best = float("inf")
+def _times(fn, repeats) -> list:
+    """Wall seconds of ``repeats`` calls of ``fn`` (after one untimed warm-up call)."""
+    fn()
+    out = []
     for _ in range(repeats):
         t0 = time.perf_counter()
         fn()
-        best = min(best, time.perf_counter() - t0)
-    return best
+        out.append(time.perf_counter() - t0)
+    return out
+
+
+def stats(values) -> dict:
+    """Median and spread of repeated measurements."""
+    v = np.asarray(values, dtype=float)
+    return {"median": float(np.median(v)), "min": float(v.min()), "max": float(v.max()), "repeats": int(v.size)}
+
+
+def _rates(work, fn, repeats) -> dict:
+    """Stats of ``work / seconds`` over the repeats (e.g. body-steps/s)."""
+    return stats([work / t for t in _times(fn, repeats)])
+
+
+def _per_step_us(n_steps, fn, repeats) -> dict:
+    return stats([1e6 * t / n_steps for t in _times(fn, repeats)])
 
 
 def _initial_w(n, seed=0):
@@ -53,7 +81,7 @@ def reference_batched(n_bodies, n_steps, variant, repeats):
         y = [np.ascontiguousarray(c) for c in y0]
         for _ in range(n_steps):
             y = step(y)
-    return n_bodies * n_steps / _best_of(run, repeats)
+    return _rates(n_bodies * n_steps, run, repeats)
 
 
 def reference_single_us(n_steps, repeats, variant="expmap_gyro"):
@@ -63,7 +91,7 @@ def reference_single_us(n_steps, repeats, variant="expmap_gyro"):
     from reference_sim.state import Problem, State
     problem = Problem(RigidBody(1.0, MOMENTS), ForceModel(gravity_W=G, torques=(Torque(TORQUE_B, "body"),)),
                       State(np.zeros(3), np.zeros(3), np.array([1.0, 0, 0, 0]), _initial_w(1)[0]))
-    return 1e6 * _best_of(lambda: simulate(problem, variant, H, n_steps), repeats) / n_steps
+    return _per_step_us(n_steps, lambda: simulate(problem, variant, H, n_steps), repeats)
 
 
 def _mujoco_model(n_bodies):
@@ -87,7 +115,7 @@ def mujoco_multibody(n_bodies, n_steps, repeats):
         d.qvel.reshape(n_bodies, 6)[:, 3:6] = w
         d.qfrc_applied.reshape(n_bodies, 6)[:, 3:6] = TORQUE_B  # body-axes torque, persists
         mujoco.mj_step(m, d, nstep=n_steps)
-    return n_bodies * n_steps / _best_of(run, repeats)
+    return _rates(n_bodies * n_steps, run, repeats)
 
 
 def mujoco_rollout(n_bodies, n_steps, repeats):
@@ -104,7 +132,7 @@ def mujoco_rollout(n_bodies, n_steps, repeats):
         mujoco.mj_getState(m, d, states[i], spec)
     control = np.tile(np.concatenate([np.zeros(3), TORQUE_B]), (n_bodies, 1, 1))
     kw = dict(control_spec=mujoco.mjtState.mjSTATE_QFRC_APPLIED, nstep=n_steps)
-    return n_bodies * n_steps / _best_of(lambda: rollout.rollout(m, datas, states, control, **kw), repeats)
+    return _rates(n_bodies * n_steps, lambda: rollout.rollout(m, datas, states, control, **kw), repeats)
 
 
 def mujoco_single_us(n_steps, repeats):
@@ -118,7 +146,21 @@ def mujoco_single_us(n_steps, repeats):
         for _ in range(n_steps):
             d.qfrc_applied[3:6] = TORQUE_B  # re-applied per step, as a harness with forces must
             mujoco.mj_step(m, d)
-    return 1e6 * _best_of(run, repeats) / n_steps
+    return _per_step_us(n_steps, run, repeats)
+
+
+def mujoco_bare_step_us(n_steps, repeats):
+    """One bare ``mj_step`` of a free body (gravity, no applied force, no Python between steps): the
+    per-step cost the sweep's floor is made of."""
+    import mujoco
+    m = _mujoco_model(1)
+    d = mujoco.MjData(m)
+
+    def run():
+        mujoco.mj_resetData(m, d)
+        d.qvel[3:6] = _initial_w(1)[0]
+        mujoco.mj_step(m, d, nstep=n_steps)
+    return _per_step_us(n_steps, run, repeats)
 
 
 def pybullet_bodies(n_bodies, n_steps, repeats):
@@ -147,33 +189,101 @@ def pybullet_bodies(n_bodies, n_steps, repeats):
                 for b in ids:  # read every state back, as a recorder must
                     p.getBasePositionAndOrientation(b, physicsClientId=cid)
                     p.getBaseVelocity(b, physicsClientId=cid)
-        return n_bodies * n_steps / _best_of(run, repeats)
+        return _rates(n_bodies * n_steps, run, repeats)
     finally:
         p.disconnect(cid)
 
 
-def run_bench(quick: bool = False) -> dict:
-    """All measurements of one run (see the module docstring); ``quick`` uses fewer bodies and steps."""
+#: The quick bench's sweep: a light scenario and two of the heaviest (long, fine ladders; a DOP853 reference).
+QUICK_SCENARIOS = ("projectile", "tennis_racket", "spring_pendulum")
+#: The engines of "the default sweep" the floor ratio is defined on (issue 15): every variant of these.
+SWEEP_ENGINES = ("reference", "mujoco", "pybullet")
+
+
+def _sweep_once(scenarios, variants, jobs, render) -> dict:
+    """One cold sweep in a temporary directory (its own cache, ``use_cache=False``); the run stage and
+    ``render(staging_dir)`` (the report) timed apart. Returns seconds and the total engine steps."""
+    import tempfile
+
+    import pandas as pd
+
+    from cross_checks.sweep import run_sweep
+    t = {}
+    with tempfile.TemporaryDirectory(prefix="rbcheck-bench-") as tmp:
+        old = os.environ.get("RBCHECK_CACHE_DIR")
+        os.environ["RBCHECK_CACHE_DIR"] = os.path.join(tmp, "cache")  # a cold cache; the user's stays untouched
+
+        def finish(staging):
+            t["run"] = time.perf_counter() - t0
+            t["steps"] = int(pd.read_csv(os.path.join(staging, "results.csv"), usecols=["steps"])["steps"].sum())
+            if render is not None:
+                r0 = time.perf_counter()
+                render(staging)
+                t["report"] = time.perf_counter() - r0
+        try:
+            t0 = time.perf_counter()
+            summary = run_sweep(scenarios, variants, os.path.join(tmp, "out"), jobs=jobs, use_cache=False,
+                                progress=False, finish=finish)
+        finally:
+            if old is None:
+                os.environ.pop("RBCHECK_CACHE_DIR", None)
+            else:
+                os.environ["RBCHECK_CACHE_DIR"] = old
+    return {"run_s": t["run"], "report_s": t.get("report", 0.0), "steps": t["steps"],
+            "runs": summary["run"]["runs"], "s_in_simulate": summary["run"]["cpu_s_in_runs"]}
+
+
+def sweep_floor(quick: bool, repeats: int, render=None, bare_step_us: float | None = None) -> dict:
+    """The cold sweep (catalog, or QUICK_SCENARIOS) against its floor; see the module docstring.
+    ``render(results_dir)`` draws the report (the CLI passes ``reports.render``; None: no report)."""
+    from cross_checks.core.files import usable_cores
+    from cross_checks.engines import all_variants
+    from cross_checks.scenario import catalog_names, load_scenario
+    names = [n for n in catalog_names() if not quick or n in QUICK_SCENARIOS]
+    scenarios = [load_scenario(n) for n in names]
+    variants = [v.name for v in all_variants() if v.available and v.engine in SWEEP_ENGINES]
+    cores = usable_cores()
+    runs = [_sweep_once(scenarios, variants, cores, render) for _ in range(repeats)]
+    bare = bare_step_us if bare_step_us is not None else mujoco_bare_step_us(100_000, 5)["median"]
+    floor_s = runs[0]["steps"] * bare * 1e-6 / cores
+    return {
+        "scenarios": names, "variants": variants, "cores": cores, "engine_steps": runs[0]["steps"],
+        "runs": runs[0]["runs"], "bare_mj_step_us": bare, "floor_s": floor_s,
+        "run_s": stats([r["run_s"] for r in runs]), "report_s": stats([r["report_s"] for r in runs]),
+        "total_s": stats([r["run_s"] + r["report_s"] for r in runs]),
+        "s_in_simulate": stats([r["s_in_simulate"] for r in runs]),
+        "report_included": render is not None,
+    }
+
+
+def run_bench(quick: bool = False, repeats: int = 3, render=None, sweep: bool = True) -> dict:
+    """All measurements of one run (see the module docstring); ``quick`` uses fewer bodies and steps and
+    a smaller sweep. ``render`` draws the sweep's report (timed as its own stage); ``sweep=False`` skips
+    the sweep."""
     import mujoco
     from cross_checks.engines import pybullet_engine  # imports pybullet with its stderr banner silenced
-    # MuJoCo's multi-body model is measured at N = 1000, its best: 10,000 free bodies in one model take
-    # 35 s to compile and step slower per body (2.2-2.8e6 body-steps/s measured), so comparing there
-    # would flatter the reference. Its rollout runs N = 10,000 single-body trajectories.
-    n_ref, n_mj, n_roll, n_pb = (2000, 1000, 1000, 100) if quick else (10_000, 1000, 10_000, 1000)
-    steps, rep = (20, 2) if quick else (100, 3)
+    # One N for every row: MuJoCo's multi-body model is at its best around N = 1000 (10,000 free bodies
+    # in one model take 35 s to compile and step slower per body), so every engine steps N = 1000
+    # bodies (quick: 200) — a row compares engines on the same work.
+    n = 200 if quick else 1000
+    steps = 20 if quick else 100
+    m = {
+        "reference_course_body_steps_per_s": reference_batched(n, steps, "course", repeats),
+        "reference_expmap_gyro_body_steps_per_s": reference_batched(n, steps, "expmap_gyro", repeats),
+        "mujoco_multibody_body_steps_per_s": mujoco_multibody(n, steps, repeats),
+        "mujoco_rollout_body_steps_per_s": mujoco_rollout(n, steps, repeats),
+        "pybullet_body_steps_per_s": pybullet_bodies(n, max(steps // 4, 5), repeats),
+        "reference_single_us_per_step": reference_single_us(500 if quick else 2000, repeats),
+        "mujoco_single_us_per_step": mujoco_single_us(5000 if quick else 20000, repeats),
+        "mujoco_bare_step_us": mujoco_bare_step_us(20_000 if quick else 100_000, max(repeats, 5)),
+    }
     r = {
-        "quick": quick,
-        "n_bodies": {"reference": n_ref, "mujoco": n_mj, "mujoco_rollout": n_roll, "pybullet": n_pb},
+        "quick": quick, "repeats": repeats, "n_bodies": n,
         "versions": {"mujoco": mujoco.__version__, "pybullet": pybullet_engine.version(),
                      "numpy": np.__version__, "python": platform.python_version()},
-        "cpu_count": os.cpu_count(),
-        "reference_course_body_steps_per_s": reference_batched(n_ref, steps, "course", rep),
-        "reference_expmap_gyro_body_steps_per_s": reference_batched(n_ref, steps, "expmap_gyro", rep),
-        "mujoco_multibody_body_steps_per_s": mujoco_multibody(n_mj, steps, rep),
-        "mujoco_rollout_body_steps_per_s": mujoco_rollout(n_roll, steps, rep),
-        "pybullet_body_steps_per_s": pybullet_bodies(n_pb, max(steps // 4, 5), rep),
-        "reference_single_us_per_step": reference_single_us(2000 if not quick else 500, rep),
-        "mujoco_single_us_per_step": mujoco_single_us(20000 if not quick else 5000, rep),
+        "cpu_count": os.cpu_count(), "load_average": list(os.getloadavg()) if hasattr(os, "getloadavg") else None,
+        "measurements": m,
+        **{k: v["median"] for k, v in m.items()},
     }
     r["reference_batched_body_steps_per_s"] = max(r["reference_course_body_steps_per_s"],
                                                   r["reference_expmap_gyro_body_steps_per_s"])
@@ -184,35 +294,70 @@ def run_bench(quick: bool = False) -> dict:
         "reference_batched >= 3x mujoco_best": r["ratio_reference_batched_vs_mujoco_best"] >= 3.0,
         "reference_single <= 5x mj_step": r["ratio_reference_single_vs_mj_step"] <= 5.0,
     }
+    if sweep:
+        sw = sweep_floor(quick, repeats, render, r["mujoco_bare_step_us"])
+        r["sweep"] = sw
+        r["sweep_floor_ratio"] = sw["total_s"]["median"] / sw["floor_s"]
+        r["sweep_run_floor_ratio"] = sw["run_s"]["median"] / sw["floor_s"]
+        r["targets"]["sweep (run + report) <= 8x its floor"] = r["sweep_floor_ratio"] <= 8.0
     return r
 
 
+def _spread(st: dict, fmt: str = ".3g") -> str:
+    return f"[{st['min']:{fmt}}, {st['max']:{fmt}}]"
+
+
 def format_table(r: dict) -> str:
+    m, n = r["measurements"], r["n_bodies"]
     rows = [
-        ("reference batched, course", r["reference_course_body_steps_per_s"], r["n_bodies"]["reference"]),
-        ("reference batched, expmap_gyro", r["reference_expmap_gyro_body_steps_per_s"], r["n_bodies"]["reference"]),
-        ("MuJoCo, N bodies in one model (mj_step)", r["mujoco_multibody_body_steps_per_s"], r["n_bodies"]["mujoco"]),
-        ("MuJoCo, rollout of N single bodies", r["mujoco_rollout_body_steps_per_s"], r["n_bodies"]["mujoco_rollout"]),
-        ("PyBullet, N bodies incl. state read-back", r["pybullet_body_steps_per_s"], r["n_bodies"]["pybullet"]),
+        ("reference batched, course", "reference_course_body_steps_per_s"),
+        ("reference batched, expmap_gyro", "reference_expmap_gyro_body_steps_per_s"),
+        ("MuJoCo, N bodies in one model (mj_step)", "mujoco_multibody_body_steps_per_s"),
+        ("MuJoCo, rollout of N single bodies", "mujoco_rollout_body_steps_per_s"),
+        ("PyBullet, N bodies incl. state read-back", "pybullet_body_steps_per_s"),
     ]
     best = r["mujoco_best_body_steps_per_s"]
-    out = [f"{'measurement':<44} {'N':>6} {'body-steps/s':>14} {'vs MuJoCo best':>15}"]
-    out += [f"{name:<44} {n:>6} {v:>14.3e} {v / best:>14.2f}x" for name, v, n in rows]
+    out = [f"every row: N = {n} bodies; median of {r['repeats']} repeats, [min, max] beside it"
+           + (f"; load average {r['load_average'][0]:.1f} on {r['cpu_count']} cores" if r.get("load_average") else ""),
+           f"{'measurement':<42} {'body-steps/s':>12} {'[min, max]':>22} {'vs MuJoCo best':>15}"]
+    out += [f"{name:<42} {m[k]['median']:>12.3e} {_spread(m[k]):>22} {m[k]['median'] / best:>14.2f}x"
+            for name, k in rows]
     out.append("")
-    out.append(f"single trajectory: reference:expmap_gyro {r['reference_single_us_per_step']:.2f} us/step, "
-               f"mj_step {r['mujoco_single_us_per_step']:.2f} us/step "
-               f"(ratio {r['ratio_reference_single_vs_mj_step']:.1f}x)")
+    out.append(f"single trajectory: reference:expmap_gyro {r['reference_single_us_per_step']:.2f} us/step "
+               f"{_spread(m['reference_single_us_per_step'])}, mj_step with a force "
+               f"{r['mujoco_single_us_per_step']:.2f} us/step {_spread(m['mujoco_single_us_per_step'])} "
+               f"(ratio {r['ratio_reference_single_vs_mj_step']:.1f}x); bare mj_step "
+               f"{r['mujoco_bare_step_us']:.3f} us {_spread(m['mujoco_bare_step_us'])}")
+    if "sweep" in r:
+        out += ["", *_sweep_lines(r)]
     for name, ok in r["targets"].items():
         out.append(f"target {name}: {'met' if ok else 'NOT met'}")
     return "\n".join(out)
 
 
-def main(quick: bool = False, json_path: str | None = None) -> int:
+def _sweep_lines(r: dict) -> list:
+    sw = r["sweep"]
+    what = "the catalog" if len(sw["scenarios"]) > len(QUICK_SCENARIOS) else ", ".join(sw["scenarios"])
+    rep = "report" if sw["report_included"] else "no report drawn"
+    return [
+        f"cold sweep of {what} x {len(sw['variants'])} variants ({sw['runs']} runs, {sw['engine_steps']:,} engine "
+        f"steps) on {sw['cores']} cores, median of {sw['run_s']['repeats']}:",
+        f"  floor = steps x bare mj_step / cores = {sw['engine_steps']:,} x {sw['bare_mj_step_us']:.3f} us / "
+        f"{sw['cores']} = {sw['floor_s']:.2f} s",
+        f"  run stage (references, runs, metrics, results files) {sw['run_s']['median']:.1f} s "
+        f"{_spread(sw['run_s'], '.1f')}; inside the engines' simulate {sw['s_in_simulate']['median']:.1f} s "
+        f"summed over workers",
+        f"  {rep} {sw['report_s']['median']:.1f} s {_spread(sw['report_s'], '.1f')}",
+        f"  sweep / floor = {r['sweep_floor_ratio']:.1f}x (run stage alone {r['sweep_run_floor_ratio']:.1f}x)",
+    ]
+
+
+def main(quick: bool = False, json_path: str | None = None, *, repeats: int = 3, render=None,
+         sweep: bool = True) -> int:
     """``rbcheck bench``: measure, print the table, write ``json_path`` (checked writable by the CLI first)."""
-    r = run_bench(quick)
+    r = run_bench(quick, repeats, render, sweep)
     print(format_table(r))
     if json_path:
         from cross_checks.core.files import atomic_write_text
         atomic_write_text(json_path, json.dumps(r, indent=2, sort_keys=True) + "\n")
     return 0
-

@@ -210,11 +210,19 @@ def _add_baseline(sub) -> None:
 
 
 def _add_bench(sub) -> None:
-    b = sub.add_parser("bench", help="throughput of the batched reference vs MuJoCo and PyBullet, measured in one run",
-                       description="Step the same free bodies (gravity + a body torque) in the batched reference, "
-                                   "MuJoCo (N bodies in one model; rollout) and PyBullet, and a single trajectory in "
-                                   "the reference and mj_step; print body-steps/s and the ratios (cross_checks/bench.py).")
-    b.add_argument("--quick", action="store_true", help="fewer bodies and steps (seconds instead of a minute)")
+    b = sub.add_parser("bench", help="throughput of the reference vs MuJoCo and PyBullet, and the cold sweep against "
+                                     "its floor, measured in one run",
+                       description="Step the same N free bodies (gravity + a body torque; the same N in every row) "
+                                   "in the batched reference, MuJoCo (N bodies in one model; rollout) and PyBullet, "
+                                   "and a single trajectory in the reference and mj_step; then time a cold sweep "
+                                   "(--no-cache: the catalog with every reference, MuJoCo and PyBullet variant, its "
+                                   "run stage and its report apart) against its floor: total engine steps x one bare "
+                                   "mj_step measured here / cores. Every measurement is repeated: median and "
+                                   "[min, max] (cross_checks/bench.py).")
+    b.add_argument("--quick", action="store_true",
+                   help="fewer bodies and steps, and a sweep of 3 scenarios (about a minute instead of several)")
+    b.add_argument("--repeats", type=_positive_int, default=3, metavar="N", help="repeats of every measurement (default 3)")
+    b.add_argument("--no-sweep", action="store_true", help="leave out the sweep against its floor")
     b.add_argument("--json", metavar="FILE", help="write the measurements as JSON")
 
 
@@ -576,7 +584,10 @@ def cmd_bench(args) -> int:
     from cross_checks.bench import main as bench_main
     if args.json:
         _check_out_path(args.json, None, "--json")
-    return bench_main(args.quick, args.json)
+    import reports
+    jobs = usable_cores()
+    return bench_main(args.quick, args.json, repeats=args.repeats, sweep=not args.no_sweep,
+                      render=lambda d: reports.render(d, jobs=jobs))
 
 
 COMMANDS = {"list": cmd_list, "show": cmd_show, "run": cmd_run, "sweep": cmd_sweep, "report": cmd_report, "check": cmd_check,

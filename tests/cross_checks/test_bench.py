@@ -1,0 +1,58 @@
+"""`rbcheck bench`: repeated measurements (median, spread), one N per table, and the sweep's floor counted
+from the scenarios themselves (no timing is asserted: speed lives in the benchmark's output)."""
+import math
+
+import pytest
+
+from cross_checks import bench
+
+
+def test_stats_are_the_median_and_the_range():
+    assert bench.stats([3.0, 1.0, 2.0, 10.0, 2.5]) == {"median": 2.5, "min": 1.0, "max": 10.0, "repeats": 5}
+
+
+def test_every_repeat_is_timed_after_a_warm_up():
+    calls = []
+    times = bench._times(lambda: calls.append(1), 4)
+    assert len(calls) == 5 and len(times) == 4 and all(t >= 0 for t in times)
+
+
+def test_the_sweep_floor_counts_every_engine_step_of_the_sweep(monkeypatch):
+    """engine steps = Σ over variants and Δt of the scenario's steps (from its file, not from rbcheck's
+    rows); floor = steps × bare step ÷ cores; the report stage is timed apart from the run stage."""
+    from cross_checks.core.files import usable_cores
+    from cross_checks.engines import all_variants
+    from cross_checks.scenario import load_scenario
+    monkeypatch.setattr(bench, "QUICK_SCENARIOS", ("projectile",))
+    rendered = []
+    sw = bench.sweep_floor(quick=True, repeats=2, render=lambda d: rendered.append(d), bare_step_us=2.0)
+    sc = load_scenario("projectile")
+    dts = set(sc.dt_ladder_s) | {sc.dt_s}
+    variants = [v.name for v in all_variants() if v.available and v.engine in bench.SWEEP_ENGINES]
+    steps = len(variants) * sum(round(sc.duration_s / dt) for dt in dts)
+    assert sw["variants"] == variants and sw["scenarios"] == ["projectile"]
+    assert sw["engine_steps"] == steps
+    assert sw["floor_s"] == pytest.approx(steps * 2e-6 / usable_cores())
+    assert len(rendered) == 2 and sw["report_s"]["repeats"] == 2 and sw["report_included"]
+    for k in ("run_s", "report_s", "total_s"):
+        assert 0 <= sw[k]["min"] <= sw[k]["median"] <= sw[k]["max"]
+    assert sw["total_s"]["min"] >= sw["run_s"]["min"] + sw["report_s"]["min"] - 1e-9
+
+
+def test_the_table_says_one_n_for_every_row_and_prints_the_ratio():
+    m = {k: {"median": 2.0, "min": 1.0, "max": 3.0, "repeats": 3} for k in (
+        "reference_course_body_steps_per_s", "reference_expmap_gyro_body_steps_per_s",
+        "mujoco_multibody_body_steps_per_s", "mujoco_rollout_body_steps_per_s", "pybullet_body_steps_per_s",
+        "reference_single_us_per_step", "mujoco_single_us_per_step", "mujoco_bare_step_us")}
+    sw = {"scenarios": ["projectile"], "variants": ["reference:course"], "cores": 2, "engine_steps": 1000,
+          "runs": 5, "bare_mj_step_us": 1.0, "floor_s": 5e-4, "report_included": True,
+          **{k: {"median": 0.004, "min": 0.003, "max": 0.005, "repeats": 3} for k in ("run_s", "report_s", "total_s",
+                                                                                       "s_in_simulate")}}
+    r = {"measurements": m, "n_bodies": 200, "repeats": 3, "cpu_count": 2, "load_average": [0.5, 0, 0],
+         **{k: v["median"] for k, v in m.items()}, "sweep": sw, "targets": {},
+         "mujoco_best_body_steps_per_s": 2.0, "ratio_reference_single_vs_mj_step": 1.0,
+         "sweep_floor_ratio": 0.004 / 5e-4, "sweep_run_floor_ratio": 8.0}
+    text = bench.format_table(r)
+    assert "every row: N = 200 bodies; median of 3 repeats" in text
+    assert "floor = steps x bare mj_step / cores = 1,000 x 1.000 us / 2 = 0.00 s" in text
+    assert "sweep / floor = 8.0x" in text and math.isclose(r["sweep_floor_ratio"], 8.0)
