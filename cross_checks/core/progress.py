@@ -41,7 +41,9 @@ def stage(prefix: str, message: str, *, enabled: bool = True, stream=None) -> No
 
 
 class Progress:
-    """Counted progress of one stage (a context manager): ``update(n=1, last="what just finished")``.
+    """Counted progress of one stage (a context manager): ``update(n=1, last="what just finished")``;
+    with ``total_work``, ``update(..., work=w)`` says how much of it each item was (the time left then
+    follows the work, not the count).
 
     ``prefix`` names the command (``rbcheck sweep``), ``what`` the items (``runs``). ``enabled``:
     print anything at all; ``tty``: force the bar (True) or the lines (False), default: whether the
@@ -49,8 +51,12 @@ class Progress:
     """
 
     def __init__(self, prefix: str, what: str, total: int, *, enabled: bool = True, stream=None,
-                 tty: bool | None = None, interval_s: float = LINE_INTERVAL_S, clock=time.monotonic):
+                 tty: bool | None = None, interval_s: float = LINE_INTERVAL_S, clock=time.monotonic,
+                 total_work: float | None = None):
         self.prefix, self.what, self.total, self.enabled = prefix, what, int(total), enabled
+        # items of unequal size (a sweep's runs, longest first): the time left is estimated from the
+        # work done (``update(work=...)``), not from the count
+        self.total_work, self.work_done = total_work, 0.0
         self.stream = sys.stderr if stream is None else stream
         self.interval_s, self.clock = interval_s, clock
         self.done, self.last = 0, ""
@@ -68,8 +74,9 @@ class Progress:
         self.close(finished=exc[0] is None)
         return False
 
-    def update(self, n: int = 1, last: str = "") -> None:
+    def update(self, n: int = 1, last: str = "", work: float = 0.0) -> None:
         self.done += n
+        self.work_done += work
         self.last = last or self.last
         if not self.enabled:
             return
@@ -89,7 +96,11 @@ class Progress:
         pct = f" ({100 * self.done / self.total:.0f}%)" if self.total else ""
         tail = f", {final}" if final else ""
         if not final and 0 < self.done < self.total:
-            tail = f", ~{_seconds(elapsed * (self.total - self.done) / self.done)} left"
+            if self.total_work and self.work_done > 0:
+                left = elapsed * max(self.total_work - self.work_done, 0.0) / self.work_done
+            else:
+                left = elapsed * (self.total - self.done) / self.done
+            tail = f", ~{_seconds(left)} left"
         if self.last and not final:
             tail += f"; last: {self.last}"
         print(f"{self.prefix}: {self.what} {self.done}/{self.total}{pct} in {_seconds(elapsed)}{tail}",

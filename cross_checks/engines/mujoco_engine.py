@@ -34,7 +34,8 @@ from reference_sim.quaternion import quat_from_matrix, rotate, quat_conj
 from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
 
 from cross_checks.engines.base import (EngineAdapter, EngineError, Variant, apply_decay_prestep, decay_factors,
-                                       harness_force_torque, optional_import, require, stage_force_torque)
+                                       harness_force_torque, harness_force_torque_floats, optional_import, require,
+                                       stage_force_torque_floats)
 
 mujoco, _IMPORT_ERROR = optional_import("mujoco")
 
@@ -146,17 +147,18 @@ def _to_packed(qpos, qvel):
     return np.concatenate([qpos[..., 0:3], qvel[..., 0:3], q, rotate(q, qvel[..., 3:6])], axis=-1)
 
 
-def _packed1(qpos, qvel):
-    """One state: qpos (7,), qvel (6,) -> packed (13,) with ω in WORLD axes (scalar code: this runs
-    inside the per-step loop and the RK4 stage callback, where NumPy's small-array overhead dominates)."""
+def _packed1(qpos, qvel) -> list:
+    """One state: qpos (7,), qvel (6,) -> packed, 13 floats (a list) with ω in WORLD axes (scalar code:
+    this runs inside the per-step loop and the RK4 stage callback, where NumPy's small-array overhead
+    dominates)."""
     x0, x1, x2, s, a, b, c = qpos.tolist()
     v0, v1, v2, p0, p1, p2 = qvel.tolist()
     # ω_W = R(q) ω_B = ω + s t + u × t with t = 2 u × ω, u = (a, b, c)
     t0, t1, t2 = 2.0 * (b * p2 - c * p1), 2.0 * (c * p0 - a * p2), 2.0 * (a * p1 - b * p0)
-    return np.array([x0, x1, x2, v0, v1, v2, s, a, b, c,
-                     p0 + s * t0 + (b * t2 - c * t1),
-                     p1 + s * t1 + (c * t0 - a * t2),
-                     p2 + s * t2 + (a * t1 - b * t0)])
+    return [x0, x1, x2, v0, v1, v2, s, a, b, c,
+            p0 + s * t0 + (b * t2 - c * t1),
+            p1 + s * t1 + (c * t0 - a * t2),
+            p2 + s * t2 + (a * t1 - b * t0)]
 
 
 # --- the global-state guard -----------------------------------------------------------------------
@@ -247,10 +249,20 @@ def _apply(xfrc, f, tau, weight):
     xfrc[3:6] = tau
 
 
+def _apply_floats(xfrc, ft, weight):
+    """:func:`_apply` for the 6 floats ``ft`` = (fx, fy, fz, tx, ty, tz) and ``weight`` 3 floats: the same
+    numbers written without building arrays (it runs once per step or per RK4 stage)."""
+    fx, fy, fz, tx, ty, tz = ft
+    xfrc[0:3] = (fx - weight[0], fy - weight[1], fz - weight[2])
+    xfrc[3:6] = (tx, ty, tz)
+
+
 def _stage_force_writer(scenario, xfrc, weight):
     """Control callback body: forces from the (stage) state in qpos/qvel into xfrc_applied."""
+    w = [float(c) for c in weight]
+
     def control(_m, d):
-        _apply(xfrc, *stage_force_torque(scenario, _packed1(d.qpos, d.qvel)), weight)
+        _apply_floats(xfrc, stage_force_torque_floats(scenario, _packed1(d.qpos, d.qvel)), w)
     return control
 
 
@@ -307,13 +319,14 @@ def _simulate_loop(scenario, m, d, dt_s, n_steps, control, per_step, decay, xfrc
     qvel_out = np.empty((n_steps + 1, 6))
     qpos_out[0], qvel_out[0] = d.qpos, d.qvel
     step = mujoco.mj_step
+    w = [float(c) for c in weight]
     with _Session(d, control) as session, np.errstate(all="ignore"):
         for start in range(1, n_steps + 1, _CHUNK):
             stop = min(start + _CHUNK, n_steps + 1)
             for n in range(start, stop):
                 if per_step:
-                    _apply(xfrc, *harness_force_torque(scenario, _packed1(qpos_out[n - 1], qvel_out[n - 1]), dt_s),
-                           weight)
+                    _apply_floats(xfrc, harness_force_torque_floats(scenario, _packed1(qpos_out[n - 1],
+                                                                                       qvel_out[n - 1]), dt_s), w)
                 if decay:
                     d.qvel[0:3] *= gv
                     d.qvel[3:6] *= gw

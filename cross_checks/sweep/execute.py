@@ -216,10 +216,11 @@ def run_jobs(runner: Runner, jobs, scenarios, references, work_dir, cache_root, 
     extra_engines = user_engines()
     items = [(j, scenarios[j.scenario_index], references[j.scenario_index].path, cache_root, use_cache,
               extra_engines, time_limit_s, str(inflight / str(k))) for k, j in enumerate(todo)]
-    with Progress("rbcheck sweep", "runs", len(todo), enabled=show_progress) as bar:
+    with Progress("rbcheck sweep", "runs", len(todo), enabled=show_progress,
+                  total_work=sum(j.cost for j in todo)) as bar:
         def done(item, rec):
             records[item[0]] = rec
-            bar.update(1, f"{item[0].scenario} {item[0].variant} dt={item[0].dt_s:g}")
+            bar.update(1, f"{item[0].scenario} {item[0].variant} dt={item[0].dt_s:g}", work=item[0].cost)
 
         runner.map_unordered(_run_job_item, items, done, on_crash=_crashed, in_flight=_in_flight)
     return records

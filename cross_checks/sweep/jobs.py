@@ -260,15 +260,22 @@ def _measured_of(arrays: dict):
 
 
 _REF_MEMO: dict = {}
+#: References a worker keeps in memory: the jobs run longest first, which interleaves the scenarios, so a
+#: memo of one would reread a reference file for almost every job; the catalog's largest reference is
+#: 1.7 MB (16,001 times x 13), so a sweep's references fit many times over.
+REFERENCE_MEMO_SIZE = 32
 
 
 def load_reference(path: str):
-    """``(t_s, y, label)`` of a reference file written by :func:`reference_job` (the last one read is
-    kept: a worker runs the jobs of one scenario after another)."""
-    if path not in _REF_MEMO:
-        _REF_MEMO.clear()  # one scenario's reference in memory at a time per worker
-        with np.load(path, allow_pickle=False) as d:
-            _REF_MEMO[path] = (d["t_s"], d["y"], str(d["label"]))
+    """``(t_s, y, label)`` of a reference file written by :func:`reference_job` (up to
+    REFERENCE_MEMO_SIZE are kept, the least recently used dropped first)."""
+    if path in _REF_MEMO:
+        _REF_MEMO[path] = _REF_MEMO.pop(path)  # most recently used last
+        return _REF_MEMO[path]
+    while len(_REF_MEMO) >= REFERENCE_MEMO_SIZE:
+        _REF_MEMO.pop(next(iter(_REF_MEMO)))
+    with np.load(path, allow_pickle=False) as d:
+        _REF_MEMO[path] = (d["t_s"], d["y"], str(d["label"]))
     return _REF_MEMO[path]
 
 

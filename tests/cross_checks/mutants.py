@@ -210,13 +210,14 @@ def _mujoco_rk4_forces_held_over_the_step(mp):
 
 def _mujoco_rk4_decay_twice(mp):
     from cross_checks.engines import mujoco_engine as me
-    orig = me.stage_force_torque
+    orig = me.stage_force_torque_floats
 
     def stage(scenario, y):
-        f, tau = orig(scenario, y)
+        fx, fy, fz, tx, ty, tz = orig(scenario, y)
         k_v, _ = scenario.problem.forces.decay_rates_per_s()
-        return f - scenario.problem.body.mass_kg * k_v * np.asarray(y[3:6]), tau   # BUG: damping counted twice
-    mp.setattr(me, "stage_force_torque", stage)
+        mk = scenario.problem.body.mass_kg * k_v   # BUG: damping counted twice
+        return fx - mk * y[3], fy - mk * y[4], fz - mk * y[5], tx, ty, tz
+    mp.setattr(me, "stage_force_torque_floats", stage)
 
 
 def _pybullet_principal_axes_dropped(mp):

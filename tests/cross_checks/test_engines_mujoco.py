@@ -213,7 +213,7 @@ def test_exception_inside_the_stage_callback_is_reported_and_cleaned_up(monkeypa
     def boom(scenario, y):
         raise ZeroDivisionError("boom")
 
-    monkeypatch.setattr(me, "stage_force_torque", boom)
+    monkeypatch.setattr(me, "stage_force_torque_floats", boom)
     with pytest.raises(me.EngineError, match="boom"):
         me.simulate(load_scenario("spring_pendulum"), "rk4", 0.01, 5)
     assert mujoco.get_mjcb_control() is None

@@ -52,6 +52,15 @@ def test_nothing_is_printed_between_intervals_and_a_stopped_stage_says_so():
     assert out.getvalue() == "rbcheck sweep: runs 3/10 (30%) in 2 s, stopped\n"
 
 
+def test_the_time_left_follows_the_work_done_not_the_count():
+    """Longest first: after the first of 10 items, 90 % of the work is done (counting would say 10 %)."""
+    clock, out = Clock(), Flushed()
+    with Progress("rbcheck sweep", "runs", 10, stream=out, tty=False, clock=clock, total_work=100.0) as p:
+        clock.t += 9.0
+        p.update(1, "the longest", work=90.0)
+    assert out.getvalue().splitlines()[0] == "rbcheck sweep: runs 1/10 (10%) in 9 s, ~1 s left; last: the longest"
+
+
 def test_in_a_terminal_a_bar_and_no_log_lines():
     out = io.StringIO()
     with Progress("rbcheck sweep", "runs", 3, stream=out, tty=True) as p:
