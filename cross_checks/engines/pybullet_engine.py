@@ -193,32 +193,37 @@ def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
         y_prev = y0
         step, read = p.stepSimulation, B.read_raw
         start = 1
-        while start <= n_steps:
+        while start <= n_steps:  # per step: state-dependent forces and/or the pre-step decay
             stop = min(start + _CHUNK, n_steps + 1)
             for n in range(start, stop):
                 row = raw[n - 1]
-                if per_step:
-                    if n > 1:
-                        y_prev = B.raw_to_packed(row)
-                    if forces.state_dependent:
-                        f, tau = harness_force_torque(scenario, y_prev, dt_s)
-                        f = f - B.weight
-                    else:
-                        f, tau = f_const, tau_const
-                    if decay:
-                        p.resetBaseVelocity(b, (row[3:6] * gv).tolist(), (row[10:13] * gw).tolist(),
-                                            physicsClientId=c)
-                    B.apply(f, tau, row[0:3])
+                if n > 1:
+                    y_prev = B.raw_to_packed(row)
+                if forces.state_dependent:
+                    f, tau = harness_force_torque(scenario, y_prev, dt_s)
+                    f = f - B.weight
                 else:
-                    B.apply(f_const, tau_const, row[0:3])
+                    f, tau = f_const, tau_const
+                if decay:
+                    p.resetBaseVelocity(b, (row[3:6] * gv).tolist(), (row[10:13] * gw).tolist(),
+                                        physicsClientId=c)
+                B.apply(f, tau, row[0:3])
                 step(physicsClientId=c)
                 raw[n] = read()
-            bad = bad_rows(raw[start:stop])
-            if bad.any():
-                n_bad = start + int(np.argmax(bad))
-                return diverged(B.raw_to_packed(raw[:n_bad]), dt_s, f" ({blowup_words(raw[n_bad])})")
+            blown = _diverged_in(B, raw, start, stop, dt_s)
+            if blown is not None:
+                return blown
             start = stop
         return Run(dt_s * np.arange(n_steps + 1), B.raw_to_packed(raw))
+
+
+def _diverged_in(B, raw, start: int, stop: int, dt_s: float):
+    """The diverged Run when a recorded state of steps ``start..stop-1`` blew up, else None."""
+    bad = bad_rows(raw[start:stop])
+    if not bad.any():
+        return None
+    n_bad = start + int(np.argmax(bad))
+    return diverged(B.raw_to_packed(raw[:n_bad]), dt_s, f" ({blowup_words(raw[n_bad])})")
 
 
 def _run_constant(B, raw, f_W, tau_W, dt_s: float, n_steps: int) -> Run:
@@ -241,10 +246,9 @@ def _run_constant(B, raw, f_W, tau_W, dt_s: float, n_steps: int) -> Run:
             lin, ang = vel(b, physicsClientId=c)
             rows.append(pos + lin + orn + ang)
         raw[start:stop] = rows
-        bad = bad_rows(raw[start:stop])
-        if bad.any():
-            n_bad = start + int(np.argmax(bad))
-            return diverged(B.raw_to_packed(raw[:n_bad]), dt_s, f" ({blowup_words(raw[n_bad])})")
+        blown = _diverged_in(B, raw, start, stop, dt_s)
+        if blown is not None:
+            return blown
         start = stop
     return Run(dt_s * np.arange(n_steps + 1), B.raw_to_packed(raw))
 
