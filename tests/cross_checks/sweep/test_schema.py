@@ -1,13 +1,13 @@
 """summary.json's schema: what sweeps write (and the committed baseline) passes; each damaged field is named."""
 import json
-from pathlib import Path
 
 import pytest
 
 from cross_checks.sweep.jobs import SCHEMA_VERSION
 from cross_checks.sweep.schema import KNOWN_SCHEMA_VERSION, SchemaError, check_summary
+from tests.helpers.repo import BASELINE as BASELINE_DIR
 
-BASELINE = json.loads((Path(__file__).resolve().parents[2] / "baselines" / "default" / "summary.json").read_text())
+BASELINE = json.loads((BASELINE_DIR / "summary.json").read_text())
 
 
 def test_the_schema_version_read_is_the_one_written():

@@ -59,7 +59,7 @@ def test_a_sweep_writes_the_marker_listing_every_file_it_wrote(tiny, tmp_path, m
     assert m["schema_version"] == SCHEMA_VERSION and m["format"] == "rbcheck results directory"
     on_disk = {p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file()} - {MARKER}
     assert set(m["files"]) == on_disk and "results.csv" in on_disk and "index.html" in on_disk
-    check_output_dir(str(out))  # its own directory may be replaced (test_kill.py replaces one for real)
+    check_output_dir(str(out))  # its own directory may be replaced (test_lifecycle.py replaces one for real)
 
 
 def test_out_dot_in_a_folder_with_a_paper_is_refused_and_the_paper_stays(tiny, tmp_path, monkeypatch, capsys):

@@ -6,6 +6,7 @@ import pytest
 
 from cross_checks.cli import main
 from cross_checks.scenario import catalog_path, parse_scenario
+from tests.helpers.repo import BASELINE
 
 
 @pytest.fixture
@@ -42,8 +43,7 @@ def test_bench_json_fails_at_once_not_after_the_benchmark(regular_file, capsys, 
     (["report", "{f}"], "report"),
 ])
 def test_unwritable_outputs_exit_2_in_one_line(regular_file, capsys, argv, command):
-    from pathlib import Path
-    base = str(Path(__file__).resolve().parents[2] / "baselines" / "default")
+    base = str(BASELINE)
     assert main([a.format(f=regular_file, base=base) for a in argv]) == 2
     _one_line(capsys, command)
 

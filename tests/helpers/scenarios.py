@@ -22,3 +22,8 @@ reference = "ground_truth"
 [forces]
 {forces}
 """)
+
+
+def state(x=(0, 0, 0), v=(0, 0, 0), q=(1, 0, 0, 0), w=(0, 0, 0)):
+    """A packed state (13,) from its parts: x_W (m), v_W (m/s), q_WB (w, x, y, z), w_W (rad/s)."""
+    return np.concatenate([x, v, q, w]).astype(float)

@@ -1,5 +1,5 @@
 """`rbcheck sweep` end to end on tiny scenarios (short durations, 3-point ladders); `rbcheck check` is
-tested in test_check.py."""
+tested in tests/cross_checks/gates/check/."""
 import csv
 import json
 from pathlib import Path

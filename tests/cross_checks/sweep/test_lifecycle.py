@@ -1,5 +1,6 @@
-"""A sweep killed at a random point (SIGTERM or SIGKILL, several seeds) keeps the previous results
-intact, leaves no worker alive, and the next run removes every leftover and writes correct results."""
+"""The sweep's lifecycle (cross_checks.sweep.lifecycle): a sweep killed at a random point (SIGTERM or
+SIGKILL, several seeds) keeps the previous results intact, leaves no worker alive, and the next run
+removes every leftover and writes correct results; a time limit interrupts the work and names it."""
 import csv
 import os
 import random
@@ -10,6 +11,8 @@ import time
 from pathlib import Path
 
 import pytest
+
+from cross_checks.sweep.lifecycle import TimeLimitExceeded, time_limit
 
 TWO_SCENARIOS = ["""
 name = "spin_{i}"
@@ -124,3 +127,15 @@ def test_a_sweep_killed_at_a_random_point_keeps_the_previous_results(setting, se
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL], ids=["SIGTERM", "SIGKILL"])
 def test_many_random_kills_keep_the_previous_results(setting, seed, sig):
     kill_at_a_random_point(setting, seed, sig)
+
+
+def test_time_limit_interrupts_the_work_and_names_it():
+    t0 = time.perf_counter()
+    with pytest.raises(TimeLimitExceeded, match="the spin took longer than the time limit of 0.2 s"):
+        with time_limit(0.2, "the spin"):
+            while True:
+                pass
+    assert time.perf_counter() - t0 < 2.0
+    with time_limit(5.0, "quick"):  # the timer is cancelled when the body ends in time
+        pass
+    time.sleep(0.01)

@@ -1,5 +1,5 @@
 """Mutation tests: a sweep's gates catch every bug planted in a copy of a scheme or an adapter
-(tests/cross_checks/mutants.py), and pass the correct variants on the same scenarios.
+(tests/mutants.py), and pass the correct variants on the same scenarios.
 
 The default run plants a few bugs, each swept on the scenario that exposes it; ``-m slow`` sweeps the
 whole catalog for every mutant and reports the mutation score.
