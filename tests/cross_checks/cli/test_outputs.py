@@ -71,9 +71,8 @@ def test_an_unexpected_error_is_one_line_too(monkeypatch, capsys):
     assert "internal error: RuntimeError: something rbcheck did not foresee second line" in _one_line(capsys, "list")
 
 
-def test_runs_and_references_over_their_time_limit_are_failed_rows(tmp_path, monkeypatch):
+def test_runs_and_references_over_their_time_limit_are_failed_rows(tmp_path, isolated_cache):
     from cross_checks.sweep import run_sweep
-    monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "cache"))
     slow_run = parse_scenario("""
 name = "slow_run"
 duration = 40.0

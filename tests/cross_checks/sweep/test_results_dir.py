@@ -12,23 +12,12 @@ from cross_checks.cli import main
 from cross_checks.sweep.jobs import SCHEMA_VERSION
 from cross_checks.sweep.results_dir import (MARKER, ResultsDirError, check_output_dir, inside, owned_name,
                                             read_marker, remove_stale_siblings, replace_dir, safe_file_stem)
-
-TINY = """
-name = "tiny"
-duration = 0.2
-dt = 0.01
-dt_ladder = [0.02, 0.01]
-[body]
-mass = 1.0
-inertia = [1.0, 2.0, 3.0]
-[initial]
-angular_velocity = [0.3, 1.0, 0.2]
-"""
+from tests.helpers.scenarios import TINY
+from tests.helpers.sweeps import file_tree as tree
 
 
 @pytest.fixture
-def tiny(tmp_path, monkeypatch):
-    monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "cache"))
+def tiny(tmp_path, isolated_cache):
     f = tmp_path / "tiny.toml"
     f.write_text(TINY)
     return str(f)
@@ -47,10 +36,6 @@ def copy_of(made, tmp_path):
 
 def sweep(tiny, out, *extra):
     return main(["sweep", tiny, "--engines", "reference:course", "--jobs", "1", "--out", str(out), *extra])
-
-
-def tree(d):
-    return {p.relative_to(d).as_posix(): p.read_bytes() for p in sorted(d.rglob("*")) if p.is_file()}
 
 
 def test_a_sweep_writes_the_marker_listing_every_file_it_wrote(tiny, tmp_path, made):
