@@ -99,6 +99,30 @@ def test_fresh_sweep_matches_the_committed_baseline(fast):
     assert c.exit_code(allow_missing=True) == 0, to_text(c, allow_missing=True)
 
 
+def test_fresh_sweep_is_bit_identical_to_the_baseline_where_it_was_made(fast, tmp_path):
+    """Results are reproduced exactly, not only within compare's tolerance, on the versions and machine
+    the baseline was made with: every cell of every row (timing aside) and every verdict record."""
+    import csv
+
+    from cross_checks.gates.baseline import write_baseline
+    made = json.loads((BASELINE / "summary.json").read_text())
+    fresh = write_baseline(fast[0], tmp_path / "fresh").summary
+    keys = ("rbcheck", "numpy", "scipy", "mujoco", "pybullet", "python", "platform", "machine")
+    env_made, env_here = ({k: s["provenance"].get(k) for k in keys} for s in (made, fresh))
+    if env_made != env_here:
+        pytest.skip(f"baseline made with {env_made}, here {env_here}: exactness is claimed on the same versions "
+                    "and machine only (the tolerant comparison runs everywhere)")
+
+    def rows(path):
+        with open(path, newline="", encoding="utf-8") as fh:
+            return {(r["scenario"], r["engine"], r["dt"]): r for r in csv.DictReader(fh)}
+    old, new = rows(BASELINE / "results.csv"), rows(tmp_path / "fresh" / "results.csv")
+    assert len(new) == len(fast[1]) and [k for k in new if old.get(k) != new[k]] == []
+    for key in ("convergence", "local_convergence", "agreement"):
+        in_subset = [r for r in made[key] if r["scenario"] in FAST_SUBSET]
+        assert sorted(map(json.dumps, fresh[key])) == sorted(map(json.dumps, in_subset)), key
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("scenario", catalog_names())
 def test_full_catalog_matches_expectations_and_bounds(full, scenario):

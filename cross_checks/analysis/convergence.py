@@ -180,7 +180,7 @@ def measured_pre_asymptotic(fit: ConvergenceFit, expected_order) -> str:
 
 def compare_with_expectation(verdict: str, order, expected, order_is_lower_bound: bool = False) -> tuple:
     """``(matches, phrase)``: whether an observed verdict/order agrees with an
-    :class:`~cross_checks.expectations.Expectation`; ``matches`` is None when nothing is expected (or
+    :class:`~cross_checks.analysis.expectations.Expectation`; ``matches`` is None when nothing is expected (or
     the expectation makes no claim on this ladder, or the order is only a lower bound below it).
 
     A scheme that is exact to round-off, or converges faster than its nominal order, agrees with

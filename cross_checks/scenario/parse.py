@@ -8,7 +8,6 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import re
 import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
@@ -17,19 +16,19 @@ from pathlib import Path
 import numpy as np
 
 from reference_sim.body import RigidBody, check_inertia
-from reference_sim.forces import PointForce, Spring, Torque, ForceModel
+from reference_sim.forces import FRAMES, PointForce, Spring, Torque, ForceModel
 from reference_sim.quaternion import quat_from_euler_zxy, rotate
 from reference_sim.state import Problem, State
+from cross_checks.core.names import NAME_RE, unknown_key_reason
 from cross_checks.core.tolerances import MAX_NAME_CHARS, MIN_LADDER_RATIO
 
 __all__ = ["Scenario", "ScenarioError", "load_scenario", "parse_scenario", "catalog_names", "catalog_path",
            "REFERENCE_KINDS"]
 
-NAME_RE = re.compile(r"^[a-z0-9_]+$")
 #: How a scenario's reference solution is obtained: "analytic" (a closed form of reference_sim.analytic
-#: must exist for it), "ground_truth" (DOP853, rtol 1e-12), or "auto" (analytic when one exists).
+#: must exist for it), "ground_truth" (DOP853 at reference_sim.ground_truth.GROUND_TRUTH_RTOL), or "auto"
+#: (analytic when one exists).
 REFERENCE_KINDS = ("auto", "analytic", "ground_truth")
-FRAMES = ("world", "body")
 
 
 class ScenarioError(ValueError):
@@ -135,10 +134,7 @@ class _Reader:
     def check_keys(self, d, allowed, where):
         for k in d:
             if k not in allowed:
-                hint = _closest(k, allowed)
-                raise self.err(f"{where}.{k}" if where else k,
-                               "unknown key" + (f" (did you mean {hint!r}?)" if hint else "")
-                               + f"; allowed: {', '.join(sorted(allowed))}")
+                raise self.err(f"{where}.{k}" if where else k, unknown_key_reason(k, allowed))
 
     def number(self, d, key, fld, *, default=None, positive=False, nonneg=False, required=False):
         if key not in d:
@@ -198,12 +194,6 @@ class _Reader:
 def _show(v):
     s = repr(v)
     return s if len(s) <= 40 else s[:37] + "..."
-
-
-def _closest(k, allowed):
-    import difflib
-    m = difflib.get_close_matches(k, list(allowed), n=1, cutoff=0.6)
-    return m[0] if m else None
 
 
 _TOP = {"name", "description", "duration", "dt", "dt_ladder", "reference", "body", "initial", "forces"}

@@ -3,8 +3,7 @@ import numpy as np
 import pytest
 
 from cross_checks.engines import all_variants, available_variants, run_variant
-from cross_checks.analysis.expectations import (DEFAULT_TRAITS, NOMINAL_ORDER, VARIANT_TRAITS, expectation,
-                                                nominal_order, traits)
+from cross_checks.analysis.expectations import DEFAULT_TRAITS, VARIANT_TRAITS, expectation, nominal_order, traits
 from cross_checks.core.quantities import QUANTITIES
 from cross_checks.scenario import catalog_names, catalog_path, load_scenario, parse_scenario
 
@@ -13,7 +12,7 @@ def test_every_built_in_variant_has_a_nominal_order_and_traits():
     built_in = [v.name for v in all_variants() if v.engine in ("reference", "mujoco", "pybullet")]
     assert len(built_in) == 14
     for v in built_in:
-        assert NOMINAL_ORDER[v] in (1.0, 2.0, 4.0) and v in VARIANT_TRAITS
+        assert nominal_order(v) in (1.0, 2.0, 4.0) and v in VARIANT_TRAITS
 
 
 def test_an_unknown_variant_gets_the_documented_default():
@@ -46,16 +45,16 @@ def test_course_position_fails_when_rotation_drives_translation():
 def test_every_variant_is_expected_to_converge_under_velocity_decay():
     # Decay is the rate k = −ln γ / dt in every variant: each converges at its order to the damped motion.
     sc = load_scenario("velocity_decay")
-    for v in NOMINAL_ORDER:
+    for v in VARIANT_TRAITS:
         for q in QUANTITIES:
             e = expectation(sc, v, q)
-            assert e.verdict == "converges" and e.order == NOMINAL_ORDER[v], (v, q, e)
+            assert e.verdict == "converges" and e.order == nominal_order(v), (v, q, e)
 
 
 @pytest.mark.parametrize("name", catalog_names())
 def test_every_catalog_scenario_has_an_expectation_for_every_variant(name):
     sc = load_scenario(name)
-    for v in NOMINAL_ORDER:
+    for v in VARIANT_TRAITS:
         for q in QUANTITIES:
             e = expectation(sc, v, q)
             assert e.verdict in ("converges", "does_not_converge", "pre_asymptotic"), (v, q, e)
@@ -78,7 +77,7 @@ def _renamed(name, new_name, **replace):
 def test_no_rule_names_a_scenario(name):
     # The same physics under another name: the same expectations, word for word.
     a, b = load_scenario(name), _renamed(name, "my_own_body")
-    for v in NOMINAL_ORDER:
+    for v in VARIANT_TRAITS:
         for q in QUANTITIES:
             assert expectation(a, v, q) == expectation(b, v, q), (v, q)
 
@@ -144,7 +143,7 @@ def test_an_oscillator_is_claimed_where_the_amplitude_model_allows_it():
 
 # --- the traits, pinned on the engines themselves -------------------------------------------------------
 
-FIRST_ORDER_WITH_GYRO = [v for v, p in NOMINAL_ORDER.items() if p == 1.0 and VARIANT_TRAITS[v].gyroscopic_term]
+FIRST_ORDER_WITH_GYRO = [v for v, tr in VARIANT_TRAITS.items() if nominal_order(v) == 1.0 and tr.gyroscopic_term]
 
 
 def _invariants(sc, y):
@@ -185,13 +184,3 @@ def test_body_frame_steps_keep_the_separatrix_distance_whole_state_steps_do_not(
     else:
         assert VARIANT_TRAITS[variant].rotation_drift == "whole_state"
         assert moved > 100 * abs(delta[0]), moved
-
-
-def test_every_built_in_variant_has_a_nominal_order_equal_to_the_order_its_adapter_declares():
-    from cross_checks.engines import BUILTIN_ENGINES, all_variants
-    from cross_checks.analysis.expectations import NOMINAL_ORDER
-    built_in = [v for v in all_variants() if v.engine in BUILTIN_ENGINES]
-    assert len(built_in) == 14
-    for v in built_in:
-        assert NOMINAL_ORDER[v.name] in (1.0, 2.0, 4.0)
-        assert v.order == NOMINAL_ORDER[v.name], v.name

@@ -22,7 +22,7 @@ SPIN_100_STEPS = 1e-13
 #: one_step from a recorded state vs the recorded next state: the same MuJoCo step from the same
 #: doubles, except ω goes body -> world -> body through two roundings (a few ε of |ω|).
 ONE_STEP_REPLAY = 1e-14
-#: mujoco:rk4 vs DOP853 (rtol 1e-12) on tennis_racket at dt = 1e-3: the issue's bound.
+#: mujoco:rk4 vs DOP853 (GROUND_TRUTH_RTOL) on tennis_racket at dt = 1e-3: the issue's bound.
 RK4_VS_GROUND_TRUTH = 1e-8
 #: Observed convergence order of mujoco:rk4 with per-stage forces vs 4 (measured 3.99-4.03 on these
 #: ladders, whose errors stay 3+ decades above round-off); ORDER_TOL of the suite is 0.1.

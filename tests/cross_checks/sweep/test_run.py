@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cross_checks.sweep import run as sweep_mod
+from cross_checks.sweep import execute as sweep_mod
 from cross_checks.cli import main
 from cross_checks.sweep import RESULT_COLUMNS, run_sweep
 from tests.helpers.scenarios import GRAVITY, scenario_toml, write_scenarios
