@@ -1,14 +1,14 @@
 """summary.json's schema: what sweeps write passes, the committed compact baseline passes for compare and
 is refused for the report; each damaged field is named."""
 import json
-from pathlib import Path
 
 import pytest
 
 from cross_checks.sweep.jobs import SCHEMA_VERSION
 from cross_checks.sweep.schema import KNOWN_SCHEMA_VERSION, SchemaError, check_summary
+from tests.helpers.repo import BASELINE as BASELINE_DIR
 
-BASELINE = json.loads((Path(__file__).resolve().parents[2] / "baselines" / "default" / "summary.json").read_text())
+BASELINE = json.loads((BASELINE_DIR / "summary.json").read_text())
 
 
 @pytest.fixture(scope="module")

@@ -181,9 +181,8 @@ def test_a_program_deleted_after_loading_is_a_failed_run(tmp_path):
         eng.simulate(TINY, "v", 0.01, 10)
 
 
-def test_failed_runs_are_rows_with_the_words_and_make_the_sweep_exit_1(tmp_path, monkeypatch):
+def test_failed_runs_are_rows_with_the_words_and_make_the_sweep_exit_1(tmp_path, isolated_cache):
     from cross_checks.cli import _gate_failures
-    monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "cache"))
     path = _engine_file(tmp_path / "eng", modes=["ok", "exit3"])
     with engines.engine_files_registered([path]):
         summary = run_sweep([TINY], ["fake:ok", "fake:exit3"], tmp_path / "r", jobs=2, progress=False)
@@ -205,10 +204,9 @@ def test_run_of_a_failing_engine_exits_1_with_its_words_and_writes_nothing(tmp_p
     assert not out.exists() and not out.with_suffix(".json").exists()
 
 
-def test_sweep_records_the_engine_file_run_in_parallel_jobs(tmp_path, monkeypatch):
+def test_sweep_records_the_engine_file_run_in_parallel_jobs(tmp_path, isolated_cache):
     """Runs of an engine file are ordinary jobs of the pool: workers that were not forked from the
     parent (e.g. Dask) receive the engine with the job and register it themselves."""
-    monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "cache"))
     path = _engine_file(tmp_path / "eng", modes=["ok"])
     with engines.engine_files_registered([path]):
         shipped = engines.user_engines()

@@ -1,5 +1,5 @@
 """Mutation tests: a sweep's gates catch every bug planted in a copy of a scheme or an adapter
-(tests/cross_checks/mutants.py), and pass the correct variants on the same scenarios.
+(tests/mutants.py), and pass the correct variants on the same scenarios.
 
 The default run plants a few bugs, each swept on the scenario that exposes it; ``-m slow`` sweeps the
 whole catalog for every mutant and reports the mutation score.
@@ -13,6 +13,9 @@ from cross_checks.sweep import run_sweep
 
 from .mutants import MUTANTS
 
+#: a private cache for every test: a mutant's runs must neither be served from nor stored into a shared cache
+pytestmark = pytest.mark.usefixtures("isolated_cache")
+
 BY_NAME = {m.name: m for m in MUTANTS}
 #: The default run: one bug per kind (a stage weight, the gyroscopic sign, decay twice, a frame mix-up in
 #: each engine adapter), each on the one scenario that exposes it.
@@ -20,9 +23,7 @@ QUICK = ["rk4_wrong_stage_weight", "gyroscopic_sign_flipped", "course_decay_twic
          "pybullet_principal_axes_dropped"]
 
 
-def _gate_failures_of_sweep(tmp_path, monkeypatch, scenarios, variant, jobs=1):
-    # a private cache: a mutant's runs must neither be served from nor stored into a shared cache
-    monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "cache"))
+def _gate_failures_of_sweep(tmp_path, scenarios, variant, jobs=1):
     summary = run_sweep([load_scenario(s) for s in scenarios], [variant], tmp_path / "out", jobs=jobs,
                         use_cache=False, progress=False)
     return _gate_failures(summary)
@@ -46,7 +47,7 @@ def test_the_gates_catch_a_planted_bug(name, tmp_path, monkeypatch):
     m = BY_NAME[name]
     _need(m.variant)
     m.apply(monkeypatch)
-    fails = _gate_failures_of_sweep(tmp_path, monkeypatch, m.exposed_by, m.variant)
+    fails = _gate_failures_of_sweep(tmp_path, m.exposed_by, m.variant)
     assert fails, f"{m.name} ({m.bug}) was not caught on {m.exposed_by}"
 
 
@@ -55,7 +56,7 @@ def test_the_gates_catch_a_planted_bug(name, tmp_path, monkeypatch):
 def test_the_correct_variants_pass_where_the_mutants_are_exposed(variant, tmp_path, monkeypatch):
     _need(variant)
     scenarios = sorted({s for m in MUTANTS if m.variant == variant for s in m.exposed_by})
-    assert _gate_failures_of_sweep(tmp_path, monkeypatch, scenarios, variant, jobs=2) == []
+    assert _gate_failures_of_sweep(tmp_path, scenarios, variant, jobs=2) == []
 
 
 @pytest.mark.slow
@@ -64,5 +65,5 @@ def test_every_planted_bug_is_caught_by_a_catalog_sweep(name, tmp_path, monkeypa
     m = BY_NAME[name]
     _need(m.variant)
     m.apply(monkeypatch)
-    fails = _gate_failures_of_sweep(tmp_path, monkeypatch, catalog_names(), m.variant, jobs=2)
+    fails = _gate_failures_of_sweep(tmp_path, catalog_names(), m.variant, jobs=2)
     assert fails, f"{m.name} ({m.bug}) was not caught by a sweep of the catalog"

@@ -9,18 +9,9 @@ import pytest
 from cross_checks.sweep import cache
 from cross_checks.sweep.jobs import Job, _cache_file, _job_key, reference_job, run_job
 from cross_checks.scenario import parse_scenario
+from tests.helpers.scenarios import TINY
+from tests.helpers.sweeps import RUN_DEPENDENT_COLUMNS
 
-TINY = """
-name = "tiny"
-duration = 0.2
-dt = 0.01
-dt_ladder = [0.02, 0.01]
-[body]
-mass = 1.0
-inertia = [1.0, 2.0, 3.0]
-[initial]
-angular_velocity = [0.3, 1.0, 0.2]
-"""
 SC = parse_scenario(TINY, "tiny.toml")
 JOB = Job(0, "tiny", "reference:rk4", 0.01, True, True, 1.0)
 OTHER = Job(0, "tiny", "reference:course", 0.01, True, True, 1.0)
@@ -29,7 +20,7 @@ OTHER = Job(0, "tiny", "reference:course", 0.01, True, True, 1.0)
 def _numbers(rec):
     """The record's row without timing, NaN made comparable (NaN != NaN)."""
     return {k: ("nan" if isinstance(v, float) and v != v else v) for k, v in rec["row"].items()
-            if k not in ("wall_s", "cached")}
+            if k not in RUN_DEPENDENT_COLUMNS}
 
 
 @pytest.fixture

@@ -1,11 +1,11 @@
 """`rbcheck check`: every planted mistake is caught (exit 1) and named, every correct scheme passes.
 
-The broken simulators are tests/cross_checks/student_sim.py — a per-body plain-Python loop written
+The broken simulators are student_sim.py (beside this file) — a per-body plain-Python loop written
 from the course equations with one bug flag each, independent of the checker's own catalog
-(cross_checks/mistakes.py). Correct schemes: the student's own correct variants, every reference
-variant, MuJoCo and PyBullet trajectories written by `rbcheck run`; on catalog scenarios (shortened
-to keep the default run fast) and on the three scenarios in tests/cross_checks/check_scenarios/
-that the catalog does not have, with Δt from 1e-3 to 1e-2. The full grid runs under ``-m slow``
+(cross_checks/gates/check/mistakes.py). Correct schemes: the student's own correct variants, every
+reference variant, MuJoCo and PyBullet trajectories written by `rbcheck run`; on catalog scenarios
+(shortened to keep the default run fast) and on the three scenarios in check_scenarios/ that the
+catalog does not have, with Δt from 1e-3 to 1e-2. The full grid runs under ``-m slow``
 (test_check_grid.py).
 """
 import json

@@ -3,7 +3,7 @@
 Each :class:`Mutant` patches (with pytest's ``monkeypatch``) one function or method of the code a sweep
 runs for ``variant`` — the plain-float kernel (reference_sim.scalar) for single-body reference runs,
 the MuJoCo and PyBullet adapters for theirs — so the variant keeps its name and therefore exactly the
-expectations of the correct scheme. tests/cross_checks/test_sweep_mutants.py asserts that the sweep's
+expectations of the correct scheme. tests/test_gates_mutants.py asserts that the sweep's
 gates (``cli._gate_failures``) catch every one. ``exposed_by`` names the catalog scenarios whose
 physics exercises the bug (used by the quick default-run subset; the slow test sweeps the catalog).
 """

@@ -1,6 +1,6 @@
-"""A sweep killed at a random point (SIGTERM or SIGKILL, several seeds) keeps the previous results
-intact, leaves no worker alive, and the next run removes every leftover and writes correct results."""
-import csv
+"""The sweep's lifecycle (cross_checks.sweep.lifecycle): a sweep killed at a random point (SIGTERM or
+SIGKILL, several seeds) keeps the previous results intact, leaves no worker alive, and the next run
+removes every leftover and writes correct results; a time limit interrupts the work and names it."""
 import os
 import random
 import signal
@@ -11,26 +11,14 @@ from pathlib import Path
 
 import pytest
 
-TWO_SCENARIOS = ["""
-name = "spin_{i}"
-duration = 0.5
-dt = 0.005
-dt_ladder = [0.02, 0.01, 0.005]
-[body]
-mass = 1.0
-inertia = [1.0, 2.0, 3.0]
-[initial]
-angular_velocity = [0.3, 1.0, 0.2]
-""".format(i=i) for i in range(2)]
+from cross_checks.sweep.lifecycle import TimeLimitExceeded, time_limit
+from tests.helpers.scenarios import scenario_toml, write_scenarios
+from tests.helpers.sweeps import built_once, file_tree as _files, result_rows as _rows
 
-
-def _files(d):
-    return {p.relative_to(d).as_posix(): p.read_bytes() for p in sorted(Path(d).rglob("*")) if p.is_file()}
-
-
-def _rows(d):
-    with open(Path(d) / "results.csv", newline="") as fh:
-        return [{k: v for k, v in r.items() if k not in ("wall_s", "cached")} for r in csv.DictReader(fh)]
+#: One short tumble, 2 variants x 3 steps: every phase of a sweep (start-up, runs in the worker pool,
+#: metrics, report, swap) for a random kill to land in. A second scenario only made each sweep twice as
+#: long (the report of each scenario is most of it) without adding a phase.
+SPIN = scenario_toml("spin", 0.5, 0.005, (0.02, 0.01, 0.005))
 
 
 def _descendants(pid):
@@ -56,22 +44,29 @@ def _alive(pid):
     return stat.rsplit(")", 1)[1].split()[0] != "Z"
 
 
-@pytest.fixture(scope="module")
-def setting(tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("kill")
-    files = []
-    for i, text in enumerate(TWO_SCENARIOS):
-        f = tmp / f"spin_{i}.toml"
-        f.write_text(text)
-        files.append(str(f))
+def _sweep_command(tmp):
     env = {**os.environ, "RBCHECK_CACHE_DIR": str(tmp / "cache"), "MPLBACKEND": "Agg"}
-    cmd = [sys.executable, "-m", "cross_checks.cli", "sweep", *files, "--jobs", "2", "--no-cache",
+    cmd = [sys.executable, "-m", "cross_checks.cli", "sweep", str(tmp / "spin.toml"), "--jobs", "2", "--no-cache",
            "--engines", "reference:course", "reference:rk4", "--out"]
-    good = tmp / "good"
+    return env, cmd
+
+
+def _good_results(tmp):
+    """The uninterrupted sweep, and how long it took (the range of the random kill times)."""
+    write_scenarios(tmp, SPIN)
+    env, cmd = _sweep_command(tmp)
     t0 = time.perf_counter()
-    first = subprocess.run(cmd + [str(good)], env=env, capture_output=True, text=True, timeout=300)
+    first = subprocess.run(cmd + [str(tmp / "good")], env=env, capture_output=True, text=True, timeout=300)
     assert first.returncode == 0, first.stderr
-    return {"tmp": tmp, "env": env, "cmd": cmd, "good": good, "full_s": time.perf_counter() - t0}
+    (tmp / "full_s").write_text(repr(time.perf_counter() - t0))
+
+
+@pytest.fixture(scope="session")
+def setting(tmp_path_factory):
+    """Built once per test run (shared by the xdist workers); each case works in a folder of its own."""
+    tmp = built_once(tmp_path_factory, "kill", _good_results)
+    env, cmd = _sweep_command(tmp)
+    return {"tmp": tmp, "env": env, "cmd": cmd, "good": tmp / "good", "full_s": float((tmp / "full_s").read_text())}
 
 
 def kill_at_a_random_point(setting, seed, sig):
@@ -124,3 +119,15 @@ def test_a_sweep_killed_at_a_random_point_keeps_the_previous_results(setting, se
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL], ids=["SIGTERM", "SIGKILL"])
 def test_many_random_kills_keep_the_previous_results(setting, seed, sig):
     kill_at_a_random_point(setting, seed, sig)
+
+
+def test_time_limit_interrupts_the_work_and_names_it():
+    t0 = time.perf_counter()
+    with pytest.raises(TimeLimitExceeded, match="the spin took longer than the time limit of 0.2 s"):
+        with time_limit(0.2, "the spin"):
+            while True:
+                pass
+    assert time.perf_counter() - t0 < 2.0
+    with time_limit(5.0, "quick"):  # the timer is cancelled when the body ends in time
+        pass
+    time.sleep(0.01)

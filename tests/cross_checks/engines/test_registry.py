@@ -8,7 +8,7 @@ from cross_checks.engines.base import EngineAdapter, Variant
 from cross_checks.analysis.expectations import expectation, nominal_order
 from cross_checks.scenario import load_scenario
 
-from .byo_helpers import make_fake_distribution
+from tests.helpers.byo import make_fake_distribution
 
 
 @pytest.fixture(autouse=True)

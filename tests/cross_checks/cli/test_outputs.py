@@ -1,11 +1,15 @@
 """Every output path of every command is checked before any work; an output that cannot be written,
 and every other error path, is exit 2 with one line (no traceback); time limits make failed rows."""
+import json
+import subprocess
+import sys
 import time
 
 import pytest
 
 from cross_checks.cli import main
 from cross_checks.scenario import catalog_path, parse_scenario
+from tests.helpers.repo import BASELINE
 
 
 @pytest.fixture
@@ -42,8 +46,7 @@ def test_bench_json_fails_at_once_not_after_the_benchmark(regular_file, capsys, 
     (["report", "{f}"], "report"),
 ])
 def test_unwritable_outputs_exit_2_in_one_line(regular_file, capsys, argv, command):
-    from pathlib import Path
-    base = str(Path(__file__).resolve().parents[2] / "baselines" / "default")
+    base = str(BASELINE)
     assert main([a.format(f=regular_file, base=base) for a in argv]) == 2
     _one_line(capsys, command)
 
@@ -71,10 +74,8 @@ def test_an_unexpected_error_is_one_line_too(monkeypatch, capsys):
     assert "internal error: RuntimeError: something rbcheck did not foresee second line" in _one_line(capsys, "list")
 
 
-def test_runs_and_references_over_their_time_limit_are_failed_rows(tmp_path, monkeypatch):
-    from cross_checks.sweep import run_sweep
-    monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "cache"))
-    slow_run = parse_scenario("""
+def test_runs_and_references_over_their_time_limit_are_failed_rows(tmp_path, isolated_cache):
+    slow_text = """
 name = "slow_run"
 duration = 40.0
 dt = 0.001
@@ -83,16 +84,27 @@ mass = 1.0
 inertia = [1.0, 2.0, 3.0]
 [initial]
 angular_velocity = [0.3, 1.0, 0.2]
-""", "slow.toml")  # implicit Euler: ~110 us/step x 40000 steps ≈ 4 s ≫ 0.3 s
-    stiff = parse_scenario(catalog_path("spring_pendulum").read_text().replace("stiffness = 40.0", "stiffness = 4e5")
-                           .replace('name = "spring_pendulum"', 'name = "stiff"'), "stiff.toml")
+"""  # implicit Euler: ~110 us/step x 40000 steps ≈ 4 s ≫ 0.3 s
+    stiff_text = (catalog_path("spring_pendulum").read_text().replace("stiffness = 40.0", "stiffness = 4e5")
+                  .replace('name = "spring_pendulum"', 'name = "stiff"'))
     # Two sweeps, so that each limit is the only one that can trip: slow_run's own reference (DOP853 over
-    # 40 s) may take longer than 0.3 s on a loaded machine, which is not what this test is about.
+    # 40 s) may take longer than 0.3 s on a loaded machine, which is not what this test is about. Each in a
+    # fresh interpreter: the limit is a SIGALRM timer of the main thread, and a test worker's state (after
+    # hundreds of other tests) is not what a sweep process starts with.
     t0 = time.perf_counter()
-    summary = run_sweep([slow_run], ["reference:implicit_euler"], tmp_path / "res", jobs=1, use_cache=False,
-                        progress=False, run_time_limit_s=0.3, reference_time_limit_s=600.0)
-    summary_ref = run_sweep([stiff], ["reference:implicit_euler"], tmp_path / "res_ref", jobs=1, use_cache=False,
-                            progress=False, run_time_limit_s=600.0, reference_time_limit_s=0.3)
+    code = ("import json, sys\nfrom cross_checks.scenario import load_scenario\nfrom cross_checks.sweep import run_sweep\n"
+            "s = run_sweep([load_scenario(sys.argv[1])], ['reference:implicit_euler'], sys.argv[2], jobs=1, "
+            "use_cache=False, progress=False, run_time_limit_s=float(sys.argv[3]), reference_time_limit_s=float(sys.argv[4]))\n"
+            "print(json.dumps(s['run']['failed_runs']))")
+    failed = {}
+    for text, out, run_limit, ref_limit in ((slow_text, "res", 0.3, 600.0), (stiff_text, "res_ref", 600.0, 0.3)):
+        parse_scenario(text, f"{out}.toml")  # valid, so that a failure below is about the limits
+        toml = tmp_path / f"{out}.toml"
+        toml.write_text(text)
+        proc = subprocess.run([sys.executable, "-c", code, str(toml), str(tmp_path / out), str(run_limit), str(ref_limit)],
+                              capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        failed[out] = json.loads(proc.stdout.strip().splitlines()[-1])
     assert time.perf_counter() - t0 < 60
     import pandas as pd
     run_rows = pd.read_csv(tmp_path / "res" / "results.csv")
@@ -101,5 +113,4 @@ angular_velocity = [0.3, 1.0, 0.2]
     assert run_rows.message.str.contains("the run took longer than the time limit of 0.3 s").all()
     assert set(ref_rows.status) == {"failed"}
     assert ref_rows.message.str.contains("the reference solution took longer than the time limit of 0.3 s").all()
-    assert summary["run"]["failed_runs"] == len(run_rows)
-    assert summary_ref["run"]["failed_runs"] == len(ref_rows)
+    assert failed == {"res": len(run_rows), "res_ref": len(ref_rows)}

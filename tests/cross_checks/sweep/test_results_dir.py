@@ -12,23 +12,12 @@ from cross_checks.cli import main
 from cross_checks.sweep.jobs import SCHEMA_VERSION
 from cross_checks.sweep.results_dir import (MARKER, ResultsDirError, check_output_dir, inside, owned_name,
                                             read_marker, remove_stale_siblings, replace_dir, safe_file_stem)
-
-TINY = """
-name = "tiny"
-duration = 0.2
-dt = 0.01
-dt_ladder = [0.02, 0.01]
-[body]
-mass = 1.0
-inertia = [1.0, 2.0, 3.0]
-[initial]
-angular_velocity = [0.3, 1.0, 0.2]
-"""
+from tests.helpers.scenarios import TINY
+from tests.helpers.sweeps import file_tree as tree
 
 
 @pytest.fixture
-def tiny(tmp_path, monkeypatch):
-    monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "cache"))
+def tiny(tmp_path, isolated_cache):
     f = tmp_path / "tiny.toml"
     f.write_text(TINY)
     return str(f)
@@ -49,17 +38,13 @@ def sweep(tiny, out, *extra):
     return main(["sweep", tiny, "--engines", "reference:course", "--jobs", "1", "--out", str(out), *extra])
 
 
-def tree(d):
-    return {p.relative_to(d).as_posix(): p.read_bytes() for p in sorted(d.rglob("*")) if p.is_file()}
-
-
 def test_a_sweep_writes_the_marker_listing_every_file_it_wrote(tiny, tmp_path, made):
     out = copy_of(made, tmp_path)
     m = read_marker(out)
     assert m["schema_version"] == SCHEMA_VERSION and m["format"] == "rbcheck results directory"
     on_disk = {p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file()} - {MARKER}
     assert set(m["files"]) == on_disk and "results.csv" in on_disk and "index.html" in on_disk
-    check_output_dir(str(out))  # its own directory may be replaced (test_kill.py replaces one for real)
+    check_output_dir(str(out))  # its own directory may be replaced (test_lifecycle.py replaces one for real)
 
 
 def test_out_dot_in_a_folder_with_a_paper_is_refused_and_the_paper_stays(tiny, tmp_path, monkeypatch, capsys):

@@ -12,7 +12,7 @@ from reference_sim import analytic
 from reference_sim.quaternion import quat_exp, quat_normalize
 from reference_sim.state import Q, W
 
-from .engine_helpers import scenario_from_parts
+from tests.helpers.scenarios import scenario_from_parts
 
 QUANTITIES = ("position", "velocity", "orientation", "angular_velocity")
 

@@ -26,7 +26,7 @@ DEFAULT_DAMPING_MIN_ERROR = 1e-2
 ONE_STEP_REPLAY = 1e-14
 
 
-from .engine_helpers import SQ, YAW90, scenario_from_parts as _scenario  # noqa: E402,F401
+from tests.helpers.scenarios import SQ, YAW90, scenario_from_parts as _scenario  # noqa: E402,F401
 
 
 def test_version_and_engine_error():

@@ -8,7 +8,6 @@ import json
 import shutil
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,7 +20,7 @@ from cross_checks.sweep import run_sweep
 from cross_checks.testing import assert_engine
 from cross_checks.core.trajectory import Trajectory
 
-from .byo_helpers import build_cbody, c_compiler, compile_cbody, make_fake_distribution, write_scenarios
+from tests.helpers.byo import EXAMPLE, build_cbody, c_compiler, compile_cbody, make_fake_distribution, write_scenarios
 
 GOOD, BROKEN = ("cbody:euler", "fakesim:euler"), ("cbody_broken:euler", "fakesim:broken")
 
@@ -85,7 +84,7 @@ def test_python_twin_of_the_c_engine_computes_the_same_trajectory(byo, tmp_path)
     (tmp_path / "s.json").write_text(resolved_json(sc, 0.01))
     c_csv, py_csv = tmp_path / "c.csv", tmp_path / "py.csv"
     subprocess.run([str(byo["good"].parent / "cbody"), str(tmp_path / "s.json"), str(c_csv)], check=True)
-    subprocess.run([sys.executable, str(Path(__file__).resolve().parents[2] / "examples" / "c_engine" / "cbody.py"),
+    subprocess.run([sys.executable, str(EXAMPLE / "cbody.py"),
                     str(tmp_path / "s.json"), str(py_csv)], check=True)
     a, b = Trajectory.read(c_csv), Trajectory.read(py_csv)
     assert len(a.t_s) == 101

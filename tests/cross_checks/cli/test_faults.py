@@ -98,7 +98,7 @@ def test_written_files_have_the_users_usual_permissions(tmp_path):
     assert (out.with_suffix(".json").stat().st_mode & 0o777) == (0o666 & ~mask)
 
 
-def test_reruns_are_bit_identical_across_engines(tmp_path, monkeypatch):
+def test_reruns_are_bit_identical_across_engines(tmp_path, isolated_cache):
     pytest.importorskip("mujoco")
     pytest.importorskip("pybullet")
     import csv
@@ -106,7 +106,6 @@ def test_reruns_are_bit_identical_across_engines(tmp_path, monkeypatch):
     from cross_checks.engines import available_variants
     from cross_checks.scenario import parse_scenario
     from cross_checks.sweep import run_sweep
-    monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "cache"))
     sc = parse_scenario(TINY.format(name="spin").replace("duration = 4.0", "duration = 0.5"), "spin.toml")
     texts = []
     for k in range(2):
@@ -119,11 +118,10 @@ def test_reruns_are_bit_identical_across_engines(tmp_path, monkeypatch):
     assert {r["engine"].split(":")[0] for r in texts[0]} == {"reference", "mujoco", "pybullet"}
 
 
-def test_same_scheme_pairs_that_both_diverge_agree_on_the_time(tmp_path, monkeypatch):
+def test_same_scheme_pairs_that_both_diverge_agree_on_the_time(tmp_path, isolated_cache):
     pytest.importorskip("mujoco")
     from cross_checks.scenario import parse_scenario
     from cross_checks.sweep import run_sweep
-    monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "cache"))
     # docs/engine_conventions.md: MuJoCo Euler diverges on this fast spin at t = 8.65 s; expmap_gyro is the same scheme.
     sc = parse_scenario("""
 name = "fast_spin"

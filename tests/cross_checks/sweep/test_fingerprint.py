@@ -15,7 +15,7 @@ from cross_checks.scenario import load_scenario
 from cross_checks.sweep import fingerprint
 from cross_checks.sweep.jobs import _job_key, _reference_key
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 #: The packages whose numbers a job computes, listed here by hand (not read from production code).
 PACKAGES = ["reference_sim", "cross_checks/core", "cross_checks/scenario", "cross_checks/engines",
             "cross_checks/analysis", "cross_checks/sweep"]

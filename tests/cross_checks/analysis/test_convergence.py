@@ -1,125 +1,15 @@
-"""Metric definitions on hand-made cases, convergence fitting on synthetic ladders, expectations."""
+"""Convergence fitting on synthetic ladders and the comparison with an expectation
+(cross_checks.analysis.convergence)."""
 import math
 
-import numpy as np
 import pytest
 
-from cross_checks.analysis import metrics as M
 from cross_checks.analysis.convergence import compare_with_expectation, fit_convergence, measured_pre_asymptotic, pairwise_orders
-from cross_checks.core.quantities import error_summary, state_errors
 from cross_checks.core import tolerances as tol
 from cross_checks.analysis.expectations import Expectation, expectation
-from cross_checks.scenario import load_scenario, parse_scenario
-from reference_sim.quaternion import quat_from_axis_angle
+from cross_checks.scenario import load_scenario
 
 LADDER = [0.02 / 2 ** k for k in range(5)]
-
-
-def state(x=(0, 0, 0), v=(0, 0, 0), q=(1, 0, 0, 0), w=(0, 0, 0)):
-    return np.concatenate([x, v, q, w]).astype(float)
-
-
-# --- errors --------------------------------------------------------------------------------------
-
-@pytest.mark.parametrize("angle", [1e-6, 0.3, 2.5, math.pi - 1e-3])
-def test_orientation_error_is_the_rotation_angle_between_the_pair(angle):
-    q_ref = quat_from_axis_angle(np.array([0.3, -0.5, 0.8]), 0.7)
-    dq = quat_from_axis_angle(np.array([1.0, 2.0, -1.0]), angle)
-    from reference_sim.quaternion import quat_mul
-    q = quat_mul(q_ref, dq)
-    e = state_errors(state(q=q)[None], state(q=q_ref)[None])["orientation"][0]
-    assert e == pytest.approx(angle, rel=1e-12, abs=1e-15)
-
-
-def test_orientation_error_is_sign_invariant():
-    q = quat_from_axis_angle(np.array([0.0, 0.0, 1.0]), 0.4)
-    q_ref = quat_from_axis_angle(np.array([1.0, 0.0, 0.0]), -1.1)
-    e_pos = state_errors(state(q=q)[None], state(q=q_ref)[None])["orientation"][0]
-    e_neg = state_errors(state(q=-q)[None], state(q=q_ref)[None])["orientation"][0]
-    assert e_pos == e_neg
-    assert state_errors(state(q=-q)[None], state(q=q)[None])["orientation"][0] == 0.0
-
-
-def test_orientation_error_normalises_non_unit_quaternions():
-    q = quat_from_axis_angle(np.array([0.0, 1.0, 0.0]), 0.5)
-    e = state_errors(state(q=1.001 * q)[None], state()[None])["orientation"][0]
-    assert e == pytest.approx(0.5, rel=1e-12)
-
-
-def test_vector_errors_are_euclidean_norms():
-    a = state(x=(1, 2, 3), v=(0, 0, 1), w=(0.5, 0, 0))
-    b = state(x=(1, 2, 0), v=(3, 4, 1), w=(0, 0, 0))
-    e = state_errors(a[None], b[None])
-    assert e["position"][0] == 3.0 and e["velocity"][0] == 5.0 and e["angular_velocity"][0] == 0.5
-
-
-def test_error_summary_final_and_max():
-    s = error_summary({"position": np.array([0.0, 3.0, 1.0])})
-    assert s["position"] == {"final": 1.0, "max": 3.0}
-
-
-# --- conservation ------------------------------------------------------------------------------------
-
-def _scenario(forces="", inertia="[1.0, 2.0, 3.0]", mass=2.0):
-    return parse_scenario(f"""
-name = "hand"
-duration = 1.0
-dt = 0.01
-[body]
-mass = {mass}
-inertia = {inertia}
-[initial]
-[forces]
-{forces}
-""")
-
-
-def test_energy_sums_translation_rotation_gravity_and_spring():
-    sc = _scenario('gravity = [0.0, 0.0, -10.0]\n[[forces.spring]]\nanchor = [0.0, 0.0, 1.0]\n'
-                   'stiffness = 4.0\nrest_length = 0.5')
-    y = state(x=(0, 0, 3), v=(1, 2, 2), w=(0, 0, 2))  # identity orientation: I_W = diag(1, 2, 3)
-    kinetic = 0.5 * 2.0 * 9.0 + 0.5 * 3.0 * 4.0        # 9 + 6
-    gravity = 2.0 * 10.0 * 3.0                          # m g z
-    spring = 0.5 * 4.0 * (2.0 - 0.5) ** 2               # ½ k (L − L0)², L = 2
-    assert M.energy_J(sc.problem, y) == pytest.approx(kinetic + gravity + spring, rel=1e-15)
-
-
-def test_relative_energy_drift_of_a_known_change():
-    sc = _scenario()
-    y = np.array([state(v=(3, 0, 0)), state(v=(math.sqrt(9.9), 0, 0))])  # E: 9 J -> 9.9 J
-    d = M.relative_drift(M.energy_J(sc.problem, y))
-    assert d[0] == 0.0
-    assert d[1] == pytest.approx(0.1, rel=1e-12)
-
-
-def test_angular_momentum_drift_is_relative_vector_change():
-    sc = _scenario()
-    y = np.array([state(w=(1, 0, 0)), state(w=(0, 0.5, 0))])  # L: (1,0,0) -> (0,1,0): |ΔL| = √2
-    d = M.relative_drift(M.angular_momentum_W(sc.problem, y))
-    assert d[1] == pytest.approx(math.sqrt(2.0), rel=1e-15)
-
-
-def test_drift_from_an_exactly_zero_initial_value_is_absolute():
-    assert M.relative_drift(np.array([0.0, 1e-3]))[1] == 1e-3
-
-
-def test_drift_kind_separates_secular_bounded_and_roundoff():
-    t = np.linspace(0.0, 10.0, 2001)
-    assert M.drift_kind(t, 1e-4 * t, 1e-12) == "secular"
-    assert M.drift_kind(t, 1e-4 * np.sin(5.0 * t), 1e-12) == "bounded"
-    assert M.drift_kind(t, 1e-4 * (1.0 - np.cos(3.0 * t)), 1e-12) == "bounded"
-    assert M.drift_kind(t, 1e-4 * np.sin(5.0 * t) + 1e-3 * t, 1e-12) == "secular"
-    assert M.drift_kind(t, 1e-16 * np.sin(5.0 * t), 1e-12) == "roundoff"
-
-
-def test_conserved_quantities_follow_the_forces():
-    c = M.conserved(load_scenario("tennis_racket").problem.forces)
-    assert c["energy"][0] and c["angular_momentum"][0] and c["linear_momentum"][0]
-    c = M.conserved(load_scenario("projectile").problem.forces)
-    assert c["energy"][0] and c["angular_momentum"][0] and not c["linear_momentum"][0]
-    c = M.conserved(load_scenario("velocity_decay").problem.forces)
-    assert not any(v[0] for v in c.values())
-    assert "velocity decay" in c["energy"][1]
 
 
 # --- convergence fitting ---------------------------------------------------------------------------
@@ -216,15 +106,6 @@ def test_one_resolved_point_and_one_above_the_floor_give_a_lower_bound():
     assert fit_convergence(LADDER, [3e-13, 1e-12, 5e-13, 2e-12, 9e-13], [2e-13] * 5).verdict == "at_roundoff"
 
 
-def test_measured_floor_adds_the_reference_error_and_the_amplified_roundoff_of_the_run():
-    eps = tol.ROUNDOFF_PER_STEP_REL
-    # position: biased roundings add up linearly, the rest as a random walk grown by the amplification
-    assert M.roundoff_floor(2.0, 10_000, reference_error=3e-13, amplification=5.0, quantity="position") == \
-        pytest.approx(3e-13 + eps * 2.0 * (10_000 + 100 * 5.0), rel=1e-12)
-    assert M.roundoff_floor(np.pi, 10_000, reference_error=1e-13, amplification=0.5, quantity="orientation") == \
-        pytest.approx(1e-13 + eps * np.pi * 100, rel=1e-12)
-
-
 def test_a_low_order_whose_finest_pair_reaches_the_expected_one_is_measured_pre_asymptotic():
     # expmap_gyro on a particle body on a spring: 0.76, 0.49, 0.75, 0.88 … and 0.94, 0.97 on finer steps
     e = [0.7556, 0.4523, 0.3184, 0.1896, 0.1033]
@@ -236,14 +117,6 @@ def test_a_low_order_whose_finest_pair_reaches_the_expected_one_is_measured_pre_
     assert measured_pre_asymptotic(wrong, 4.0) == ""
     stuck = fit_convergence(LADDER, [0.76, 0.5, 0.36, 0.26, 0.19])  # pairwise orders ~0.5, not reaching 1
     assert measured_pre_asymptotic(stuck, 1.0) == ""
-
-
-def test_roundoff_floor_grows_with_the_steps_and_the_reference():
-    a = M.roundoff_floor(1.0, 100, "analytic")
-    b = M.roundoff_floor(1.0, 1_000_000, "analytic")
-    assert a == tol.REFERENCE_ACCURACY_REL["analytic"]
-    assert b == pytest.approx(tol.ROUNDOFF_PER_STEP_REL * 1e6)
-    assert M.roundoff_floor(1.0, 100, "ground_truth (DOP853, rtol 1e-12)") == tol.REFERENCE_ACCURACY_REL["ground_truth"]
 
 
 # --- comparison with an expectation (the expectations themselves: test_expectations.py) ----------

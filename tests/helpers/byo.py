@@ -8,7 +8,8 @@ import sys
 import warnings
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]
+from tests.helpers.repo import ROOT
+
 EXAMPLE = ROOT / "examples" / "c_engine"
 
 #: The gyroscopic term matters (anisotropic body, ω off its principal axes): a wrong sign shows.

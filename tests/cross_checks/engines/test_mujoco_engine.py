@@ -32,7 +32,7 @@ RK4_ORDER_TOL = 0.1
 HELD_ORDER_TOL = 0.1
 
 
-from .engine_helpers import SQ, YAW90, scenario_from_parts as _scenario  # noqa: E402,F401
+from tests.helpers.scenarios import SQ, YAW90, scenario_from_parts as _scenario  # noqa: E402,F401
 
 
 # --- model ----------------------------------------------------------------------------------------

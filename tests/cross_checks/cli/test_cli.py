@@ -111,7 +111,7 @@ def test_list_shows_scenarios_and_variants(capsys):
         assert word in out
 
 
-from .test_scenario import BAD, GOOD  # noqa: E402  (the loader's table of bad inputs)
+from tests.cross_checks.scenario.test_parse import BAD, GOOD  # noqa: E402  (the loader's table of bad inputs)
 
 
 @pytest.mark.parametrize("old, new, field, reason", BAD, ids=[f"{b[2] or 'syntax'}-{i}" for i, b in enumerate(BAD)])

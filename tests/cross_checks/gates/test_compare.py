@@ -5,6 +5,7 @@ import pandas as pd
 import pytest
 
 from cross_checks.gates.compare import CompareInputError, compare_dirs, to_markdown
+from tests.helpers.repo import BASELINE
 
 ROWS = [
     dict(scenario="tennis_racket", engine="mujoco:euler", dt=1e-3, steps=10000, wall_s=0.1, pos_err_final=0.0,
@@ -186,7 +187,6 @@ def test_a_converging_order_without_expectation_that_moves_is_a_regression(tmp_p
 
 
 def test_the_committed_baseline_without_a_marker_is_still_valid_input():
-    from pathlib import Path
-    base = Path(__file__).resolve().parents[2] / "baselines" / "default"
+    base = BASELINE
     c = compare_dirs(base, base)
     assert c.exit_code() == 0 and c.matched_rows > 100 and not c.changes

@@ -1,7 +1,8 @@
 """`rbcheck sweep` end to end on tiny scenarios (short durations, 3-point ladders); `rbcheck check` is
-tested in test_check.py."""
+tested in tests/cross_checks/gates/check/."""
 import csv
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -10,35 +11,14 @@ import pytest
 from cross_checks.sweep import execute as sweep_mod
 from cross_checks.cli import main
 from cross_checks.sweep import RESULT_COLUMNS, run_sweep
+from tests.helpers.scenarios import GRAVITY, scenario_toml, write_scenarios
+from tests.helpers.sweeps import file_tree, result_rows
 
-SPIN = """
-name = "tiny_spin"
-description = "Torque-free spin near the intermediate axis, short"
-duration = 0.5
-dt = 0.01
-dt_ladder = [0.02, 0.01, 0.005]
-[body]
-mass = 1.0
-inertia = [1.0, 2.0, 3.0]
-[initial]
-angular_velocity = [0.3, 2.0, 0.2]
-"""
-
-DROP = """
-name = "tiny_drop"
-description = "Projectile with linear drag, short"
-duration = 0.4
-dt = 0.01
-dt_ladder = [0.02, 0.01, 0.005]
-[body]
-mass = 2.0
-inertia = [0.2, 0.2, 0.2]
-[initial]
-velocity = [1.0, 0.0, 3.0]
-[forces]
-gravity = [0.0, 0.0, -9.81]
-linear_drag = 0.5
-"""
+SPIN = scenario_toml("tiny_spin", 0.5, 0.01, (0.02, 0.01, 0.005), initial="angular_velocity = [0.3, 2.0, 0.2]",
+                     description="Torque-free spin near the intermediate axis, short")
+DROP = scenario_toml("tiny_drop", 0.4, 0.01, (0.02, 0.01, 0.005), description="Projectile with linear drag, short",
+                     body="mass = 2.0\ninertia = [0.2, 0.2, 0.2]", initial="velocity = [1.0, 0.0, 3.0]",
+                     forces=GRAVITY + "\nlinear_drag = 0.5")
 
 STIFF = """
 name = "tiny_stiff"
@@ -58,31 +38,17 @@ stiffness = 10000.0
 
 VARIANTS = ["reference:course", "reference:midpoint", "reference:rk4"]
 
-
-@pytest.fixture(autouse=True)
-def _cache(tmp_path, monkeypatch):
-    monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "cache"))
+pytestmark = pytest.mark.usefixtures("isolated_cache")
 
 
 @pytest.fixture
 def scenario_files(tmp_path):
-    out = []
-    for text in (SPIN, DROP):
-        name = text.split('"')[1]
-        p = tmp_path / f"{name}.toml"
-        p.write_text(text)
-        out.append(str(p))
-    return out
+    return [str(p) for p in write_scenarios(tmp_path, SPIN, DROP).values()]
 
 
 def read_rows(d):
     with open(Path(d) / "results.csv", newline="") as fh:
         return list(csv.DictReader(fh))
-
-
-def comparable(rows):
-    """Rows without the columns that legitimately differ between runs (timing, cache use)."""
-    return [{k: v for k, v in r.items() if k not in ("wall_s", "cached")} for r in rows]
 
 
 def sweep(args, out):
@@ -123,14 +89,14 @@ def test_parallel_and_cached_sweeps_give_the_same_results(tmp_path, scenario_fil
     a, b, c = tmp_path / "a", tmp_path / "b", tmp_path / "c"
     ja = run_sweep(scs, VARIANTS, a, jobs=1, use_cache=False)
     jb = run_sweep(scs, VARIANTS, b, jobs=2, use_cache=False)
-    assert comparable(read_rows(a)) == comparable(read_rows(b))
+    assert result_rows(a) == result_rows(b)
     assert ja["convergence"] == jb["convergence"] and ja["agreement"] == jb["agreement"]
     with np.load(a / "series" / "tiny_spin.npz") as sa, np.load(b / "series" / "tiny_spin.npz") as sb:
         assert sorted(sa.files) == sorted(sb.files)
         assert all(np.array_equal(sa[k], sb[k], equal_nan=True) for k in sa.files)
     jc = run_sweep(scs, VARIANTS, c, jobs=2)
     assert jc["run"]["cached_runs"] == jc["run"]["runs"]
-    assert comparable(read_rows(c)) == comparable(read_rows(a))
+    assert result_rows(c) == result_rows(a)
     assert jc["convergence"] == ja["convergence"]
     # the reference's measurements (its error, the amplification, the physics) are cached with it
     assert jc["scenarios"] == ja["scenarios"] and ja["scenarios"][0]["reference_error"]
@@ -168,10 +134,10 @@ def test_an_engine_exception_is_a_failed_row(tmp_path, scenario_files, monkeypat
     assert "engine exploded" in (out / "index.html").read_text()
 
 
-def test_interrupted_sweep_leaves_the_previous_results(tmp_path, scenario_files, monkeypatch, capsys):
+def test_interrupted_sweep_leaves_the_previous_results(tmp_path, scenario_files, monkeypatch, capsys, tiny_results):
     out = tmp_path / "res"
-    assert sweep([scenario_files[1], "--engines", "reference:course", "--jobs", "1"], out) == 0
-    before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    shutil.copytree(tiny_results, out)  # the previous results: a real sweep's directory
+    before = file_tree(out)
 
     def interrupt(*a, **k):
         raise KeyboardInterrupt
@@ -180,8 +146,7 @@ def test_interrupted_sweep_leaves_the_previous_results(tmp_path, scenario_files,
     assert sweep([*scenario_files, "--engines", *VARIANTS, "--jobs", "1", "--no-cache"], out) == 130
     err = capsys.readouterr().err
     assert "interrupted" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
-    after = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
-    assert after == before
+    assert file_tree(out) == before
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
 
 
@@ -237,12 +202,11 @@ def _catalog_text_renamed(name, **replace):
     return text
 
 
-def test_tumbling_box_whole_state_euler_is_pre_asymptotic_not_non_convergent(tmp_path, monkeypatch):
+def test_tumbling_box_whole_state_euler_is_pre_asymptotic_not_non_convergent(tmp_path):
     # ~8 flips in 10 s near the intermediate-axis separatrix: no order is claimed for the rotation, the
     # record says so (verdict pre_asymptotic, the fitted order kept), and nothing contradicts.
     from cross_checks.cli import _gate_failures
     from cross_checks.scenario import load_scenario
-    monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "cache"))
     s = run_sweep([load_scenario("tumbling_box")], ["reference:explicit_euler"], tmp_path / "out", jobs=1,
                   use_cache=False, progress=False)
     v = {r["quantity"]: r for r in s["convergence"]}
@@ -258,13 +222,12 @@ def test_tumbling_box_whole_state_euler_is_pre_asymptotic_not_non_convergent(tmp
     assert any("reference:explicit_euler on tumbling_box: no order claimed for orientation" in t for t in texts), texts
 
 
-def test_a_gentle_file_named_tumbling_box_converges_at_order_1_through_the_sweep(tmp_path, monkeypatch):
+def test_a_gentle_file_named_tumbling_box_converges_at_order_1_through_the_sweep(tmp_path):
     from cross_checks.cli import _gate_failures
     gentle = tmp_path / "tumbling_box.toml"
     gentle.write_text(_catalog_text_renamed("tumbling_box", **{
         "angular_velocity_body = [0.1, 5.0, 0.1]": "angular_velocity_body = [0.3, 0.5, 0.2]",
         "duration = 10.0": "duration = 1.0"}))
-    monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "cache"))
     from cross_checks.scenario import load_scenario
     sc = load_scenario(str(gentle))
     assert sc.name == "tumbling_box"
@@ -300,13 +263,12 @@ rest_length = 0.5
 """
 
 
-def test_rk4_order_is_fitted_and_checked_wherever_its_errors_are_above_the_measured_floor(tmp_path, monkeypatch):
+def test_rk4_order_is_fitted_and_checked_wherever_its_errors_are_above_the_measured_floor(tmp_path):
     # RK4 errors of 1e-9 … 1e-12 on a DOP853 reference: the old blanket floor (1e-10 × scale) called them
     # round-off; the measured floor (the reference against a 10× looser DOP853 solution) is far below.
     from cross_checks.analysis import metrics as M
     from cross_checks.cli import _gate_failures
     from cross_checks.scenario import parse_scenario
-    monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "cache"))
     sc = parse_scenario(PARTICLE_SPRING, "particle_spring.toml")
     s = run_sweep([sc], ["reference:rk4"], tmp_path / "out", jobs=1, use_cache=False, progress=False)
     assert _gate_failures(s) == []
