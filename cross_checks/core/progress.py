@@ -91,7 +91,7 @@ class Progress:
             self._line(now)
 
     def _line(self, now: float, final: str = "") -> None:
-        """A progress line; ``final`` ("done", "stopped") ends the stage's lines."""
+        """A progress line; ``final`` ("done") ends the stage's lines."""
         elapsed = now - self.t0
         pct = f" ({100 * self.done / self.total:.0f}%)" if self.total else ""
         tail = f", {final}" if final else ""
@@ -107,13 +107,14 @@ class Progress:
               file=self.stream, flush=True)
 
     def close(self, finished: bool = True) -> None:
-        """End the stage: the bar closes; without a terminal a last line says how far it got."""
+        """End the stage: the bar closes; without a terminal a last line says it is done. A stage
+        stopped by an error or Ctrl-C prints nothing more: the command's own one-line message says why."""
         if not self.enabled:
             return
         if self.bar is not None:
             self.bar.close()
             self.bar = None
             return
-        if self._last_line is not None:
-            self._line(self.clock(), "done" if finished else "stopped")
-            self._last_line = None
+        if self._last_line is not None and finished:
+            self._line(self.clock(), "done")
+        self._last_line = None
