@@ -159,14 +159,23 @@ class _ReferenceTask:
         return reference_job(self.scenarios[i], self.path(i), self.cache_root, self.use_cache, self.time_limit_s)
 
 
+def _reference_cost(scenario):
+    """Sort key, most expensive first: a DOP853 reference (many solves: the reference, its check, the
+    amplification, the one-step starts) before a closed form, then the longer union grid. In a pool the
+    slowest solve then starts at once instead of last, and the others share the remaining workers."""
+    from cross_checks.scenario.references import analytic_available
+    dop853 = scenario.reference == "ground_truth" or not analytic_available(scenario)[0]
+    return (not dop853, -scenario.duration_s / min(scenario.dt_ladder_s + (scenario.dt_s,)))
+
+
 def run_references(runner: Runner, scenarios, work_dir, cache_root, use_cache, time_limit_s,
                    show_progress: bool = False) -> list:
     """The :class:`ScenarioReference` of every scenario, in the order of ``scenarios``."""
     from cross_checks.core.progress import Progress
     task = _ReferenceTask(scenarios, str(work_dir), cache_root, use_cache, time_limit_s)
     with Progress("rbcheck sweep", "references", len(scenarios), enabled=show_progress) as bar:
-        results = dict(runner.map_unordered(task, range(len(scenarios)),
-                                            lambda i, _r: bar.update(1, scenarios[i].name)))
+        order = sorted(range(len(scenarios)), key=lambda i: _reference_cost(scenarios[i]))
+        results = dict(runner.map_unordered(task, order, lambda i, _r: bar.update(1, scenarios[i].name)))
     return [ScenarioReference(task.path(i), *results[i]) for i in range(len(scenarios))]
 
 
