@@ -1,7 +1,8 @@
 """Progress of a long command that reaches the user in a terminal AND in a CI log.
 
-In a terminal (the stream is a TTY) a tqdm bar; anywhere else (a CI log, a pipe, a file) one plain line
-every ``LINE_INTERVAL_S`` seconds, flushed at once, plus a last line when the stage ends::
+In a terminal (stderr is a TTY) a tqdm bar on stderr; anywhere else (a CI log, a pipe, a file) one plain
+line on STDOUT every ``LINE_INTERVAL_S`` seconds, flushed at once, plus a last line when the stage ends
+(stderr stays the channel of errors: an error or an interruption is still one line there)::
 
     rbcheck sweep: runs 120/455 (26%) in 14 s, ~40 s left; last: tennis_racket mujoco:rk4
 
@@ -34,9 +35,9 @@ def _seconds(s: float) -> str:
 
 
 def stage(prefix: str, message: str, *, enabled: bool = True, stream=None) -> None:
-    """One line ``"<prefix>: <message>"`` on stderr (or ``stream``), flushed: a stage begins."""
+    """One line ``"<prefix>: <message>"`` on stdout (or ``stream``), flushed: a stage begins."""
     if enabled:
-        stream = sys.stderr if stream is None else stream
+        stream = sys.stdout if stream is None else stream
         print(f"{prefix}: {message}", file=stream, flush=True)
 
 
@@ -46,8 +47,8 @@ class Progress:
     follows the work, not the count).
 
     ``prefix`` names the command (``rbcheck sweep``), ``what`` the items (``runs``). ``enabled``:
-    print anything at all; ``tty``: force the bar (True) or the lines (False), default: whether the
-    stream is a terminal. ``interval_s`` and ``clock`` exist for the tests.
+    print anything at all; ``tty``: force the bar (True) or the lines (False), default: whether stderr
+    (or the given ``stream``) is a terminal. ``interval_s`` and ``clock`` exist for the tests.
     """
 
     def __init__(self, prefix: str, what: str, total: int, *, enabled: bool = True, stream=None,
@@ -57,12 +58,13 @@ class Progress:
         # items of unequal size (a sweep's runs, longest first): the time left is estimated from the
         # work done (``update(work=...)``), not from the count
         self.total_work, self.work_done = total_work, 0.0
-        self.stream = sys.stderr if stream is None else stream
+        bar = _is_tty(sys.stderr if stream is None else stream) if tty is None else tty
+        self.stream = stream if stream is not None else (sys.stderr if bar else sys.stdout)
         self.interval_s, self.clock = interval_s, clock
         self.done, self.last = 0, ""
         self.t0 = self._last_line = clock()
         self.bar = None
-        if enabled and (_is_tty(self.stream) if tty is None else tty):
+        if enabled and bar:
             from tqdm import tqdm
             self.bar = tqdm(total=self.total, unit=what.rstrip("s") or what, desc=f"{prefix}: {what}",
                             file=self.stream, dynamic_ncols=True)
