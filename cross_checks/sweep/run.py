@@ -47,7 +47,7 @@ from cross_checks.analysis import metrics as M
 from cross_checks.core.quantities import UNITS, decimation_indices, state_errors
 from cross_checks.analysis.convergence import compare_with_expectation, fit_convergence, measured_pre_asymptotic
 from cross_checks.core import tolerances as tol
-from cross_checks.analysis.expectations import EQUIVALENT_PAIRS, expectation
+from cross_checks.analysis.expectations import EQUIVALENT_PAIRS, expectation, pair_is_same_arithmetic
 from cross_checks.core.quantities import QUANTITIES
 from cross_checks.sweep.lifecycle import Terminated, worker_init
 from cross_checks.sweep.results_dir import (ResultsDirError, check_output_dir, fix_permissions, remove_stale_siblings,
@@ -342,7 +342,7 @@ def _agreement_records(scenarios, records_by_key):
         for sc in scenarios:
             ra = records_by_key.get((sc.name, a, sc.dt_s))
             rb = records_by_key.get((sc.name, b, sc.dt_s))
-            if ra is None or rb is None:
+            if ra is None or rb is None or not pair_is_same_arithmetic(sc, a, b):
                 continue
             ta, tb = ra["row"].get("diverged_at_s"), rb["row"].get("diverged_at_s")
             if ra["row"]["status"] == "diverged" == rb["row"]["status"] and ta is not None and tb is not None:
