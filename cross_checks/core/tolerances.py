@@ -248,3 +248,17 @@ FUZZ_BOUND_SLACK = 1.25
 #: a failed row), and a lamina (any three particles) sits exactly on the edge, where round-off (~1e-16
 #: relative) decides; 1e-6 keeps ten orders of magnitude between the two while a body stays visibly flat.
 FUZZ_TRIANGLE_MARGIN = 1e-6
+#: Bullet's btMatrix3x3::solve33 inverts det only when |det| > SIMD_EPSILON = DBL_EPSILON (2.22e-16, Bullet
+#: built in double precision as PyBullet is): below it PyBullet maximal's implicit gyroscopic step is wrong.
+#: Measured (tests/cross_checks/fuzz/test_known.py): moments (1, 2, 2.5)·1e-6 kg m² fail, ·1e-5 do not.
+BULLET_SOLVE33_DET_EPS = 2.220446049250313e-16
+#: Roundings in a lever arm measured from the world origin (fuzz.properties.lever_roundoff): the COM and the
+#: frame origin each rounded (2), the cross product r × F two products and a difference (2 more): 4.
+FUZZ_LEVER_ROUNDINGS = 4.0
+#: A free-running ladder is "two-term consistent" (fuzz.properties.two_term_consistent) when the third
+#: difference of e/h^p is within this fraction of its size: an order-p error with its next term gives 0
+#: (plus the third term, ~0.4 (c₃/c₁) h² ≪ 0.25 in the asymptotic range); an order deficit of 0.5 gives 0.38,
+#: of 1 gives 0.75.
+FUZZ_TWO_TERM_TOL = 0.25
+#: ... and each of its errors at least this many times its round-off floor (else round-off shapes u).
+FUZZ_RESOLVED = 100.0

@@ -3,9 +3,10 @@
 Every member ``i`` (a case, a perturbed copy of one, or a one-step start state) is integrated over its
 own span ``T_i`` in normalised time ``s = t / T_i`` ∈ [0, 1]: ``dy/ds = T_i F_i(y)``, with ``F_i`` the full
 rigid-body equations of its own scenario (gyroscopic term and the continuous velocity decay −k v, −k ω
-included: ``reference_sim.scalar.ScalarStepper.rhs``, stacked by :class:`~cross_checks.fuzz.kernel.CaseKernel`).
-All members then share the output grid in ``s``, and SciPy's DOP853 advances the stacked system — the
-right-hand side of N cases costs about what one costs, since it is N-wide NumPy arithmetic.
+included): ``reference_sim.integrators.rhs``, the batched NumPy definition — deliberately NOT the kernel
+the schemes under test step with (``reference_sim.scalar``), so that a bug there cannot hide in the
+reference too. Members of one scenario are evaluated together; all members share the output grid in
+``s``, and SciPy's DOP853 advances the stacked system.
 
 What a case's verdicts take from it, each MEASURED, as the sweep measures them
 (``cross_checks.sweep.jobs.measure_reference``):
@@ -27,11 +28,11 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from reference_sim.ground_truth import GROUND_TRUTH_ATOL, GROUND_TRUTH_RTOL
+from reference_sim.integrators import rhs
 from reference_sim.state import Q
 
 from cross_checks.core import tolerances as tol
 from cross_checks.core.quantities import QUANTITIES, state_errors
-from cross_checks.fuzz.kernel import CaseKernel
 
 __all__ = ["solve_members", "reference", "amplification", "step_flows", "ExactError"]
 
@@ -40,21 +41,52 @@ class ExactError(RuntimeError):
     """The batched solve failed (DOP853's own message)."""
 
 
-def solve_members(problems, spans_s, s_eval, *, rtol: float, atol: float = GROUND_TRUTH_ATOL, y0=None) -> np.ndarray:
+def solve_members(problems, spans_s, s_eval, *, rtol: float, atol: float = GROUND_TRUTH_ATOL, y0=None,
+                  fast: bool = False) -> np.ndarray:
     """States of every member at the normalised times ``s_eval`` (K,) in [0, 1]: ``(K, M, 13)``.
 
     problems : M single-body Problems (their right-hand sides); spans_s : (M,) spans T_i (s);
     y0 : (M, 13) start states (default: each problem's initial state). Quaternions renormalised.
+    fast : evaluate the right-hand side with the N-case kernel (``reference_sim.scalar``, one NumPy-wide
+        call for every member) instead of ``reference_sim.integrators.rhs`` per scenario — only for
+        magnitudes (the pilot's rates, the amplification), never for what a verdict compares against.
     """
     M = len(problems)
     spans = np.asarray(spans_s, dtype=float).reshape(M)
+    if fast:
+        return _solve_fast(problems, spans, s_eval, rtol, atol, y0)
+    groups: dict = {}
+    for j, p in enumerate(problems):
+        groups.setdefault(id(p), (p, []))[1].append(j)
+    groups = [(p, np.array(idx)) for p, idx in groups.values()]
+    Y0 = np.array([p.initial_packed() for p in problems]) if y0 is None else np.asarray(y0, dtype=float)
+
+    def f(_s, flat):
+        Y = flat.reshape(13, M).T
+        out = np.empty_like(Y)
+        with np.errstate(all="ignore"):
+            for p, idx in groups:
+                out[idx] = rhs(p, Y[idx])
+        return (out * spans[:, None]).T.ravel()
+
+    s_eval = np.asarray(s_eval, dtype=float)
+    sol = solve_ivp(f, (0.0, float(s_eval[-1])), Y0.T.ravel(), method="DOP853", t_eval=s_eval, rtol=rtol, atol=atol)
+    if not sol.success:
+        raise ExactError(f"DOP853 failed on the batch: {sol.message}")
+    y = np.moveaxis(sol.y.reshape(13, M, len(s_eval)), (0, 1, 2), (2, 1, 0)).copy()
+    y[..., Q] /= np.linalg.norm(y[..., Q], axis=-1, keepdims=True)
+    return y
+
+
+def _solve_fast(problems, spans, s_eval, rtol, atol, y0):
+    from cross_checks.fuzz.kernel import CaseKernel
+    M = len(problems)
     kern = CaseKernel.stack(problems, "rk4", spans)
     Y0 = np.array([p.initial_packed() for p in problems]) if y0 is None else np.asarray(y0, dtype=float)
 
     def f(_s, flat):
-        cols = flat.reshape(13, M)
         with np.errstate(all="ignore"):
-            return (np.stack(kern.rhs(list(cols))) * spans).ravel()
+            return (np.stack(kern.rhs(list(flat.reshape(13, M)))) * spans).ravel()
 
     s_eval = np.asarray(s_eval, dtype=float)
     sol = solve_ivp(f, (0.0, float(s_eval[-1])), Y0.T.ravel(), method="DOP853", t_eval=s_eval, rtol=rtol, atol=atol)
@@ -94,7 +126,7 @@ def amplification(scenarios, scales, n_samples: int = 33, rtol: float = tol.AMPL
     y0 = np.concatenate([perturbed_initial_states(sc, eps, sc_scales) for sc, sc_scales in zip(scenarios, scales)])
     problems = [sc.problem for sc in scenarios for _ in range(13)]
     spans = np.repeat([sc.duration_s for sc in scenarios], 13)
-    y = solve_members(problems, spans, np.linspace(0.0, 1.0, n_samples), rtol=rtol, y0=y0)
+    y = solve_members(problems, spans, np.linspace(0.0, 1.0, n_samples), rtol=rtol, y0=y0, fast=True)
     M = len(scenarios)
     y = y.reshape(n_samples, M, 13, 13)
     base = np.broadcast_to(y[:, :, :1, :], y.shape)

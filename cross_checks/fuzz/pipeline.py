@@ -86,7 +86,7 @@ def prepare(draws, n0: int) -> list:
         first.append((d, spec, scenario_of(spec)))
     scs = [s for _, _, s in first]
     y_pilot = exact.solve_members([sc.problem for sc in scs], [sc.duration_s for sc in scs],
-                                  np.linspace(0.0, 1.0, 33), rtol=tol.FUZZ_PILOT_RTOL)
+                                  np.linspace(0.0, 1.0, 33), rtol=tol.FUZZ_PILOT_RTOL, fast=True)
     scales = [quantity_scales(y_pilot[:, i]) for i in range(len(scs))]
     amp = exact.amplification(scs, scales, rtol=tol.FUZZ_PILOT_RTOL)
     out = []
@@ -168,7 +168,7 @@ def measure(cases) -> tuple:
         allowance = (flow.conservation_allowance(sc, y_ref[:, i], sc.dt_s, sc.duration_s)
                      if cons["energy"][0] or cons["angular_momentum"][0] else {})
         contexts.append(P.Context(sc, c.n0, y_ref[:, i], {q: float(ref_err[q][i]) for q in QUANTITIES}, amp_i,
-                                  scales[i], phys, step_h, step_err, allowance))
+                                  scales[i], phys, step_h, step_err, allowance, P.lever_roundoff(sc, y_ref[:, i])))
     return contexts, members, y_end
 
 

@@ -37,10 +37,11 @@ _DIGITS = (1, 2, 3, 4, 6)
 
 
 def signature(violation: dict) -> tuple:
-    """(property, variants, outcome): what makes two failures the same finding."""
+    """(property, variants, quantity, outcome): what makes two failures the same finding (a shrunk case
+    must keep all four, so that shrinking cannot wander from one failure to another)."""
     verdict = violation.get("verdict")
     outcome = verdict if verdict in ("failed", "diverged") else ""
-    return violation["property"], tuple(violation["variants"]), outcome
+    return violation["property"], tuple(violation["variants"]), violation.get("quantity") or "", outcome
 
 
 def _has(outcome, sig) -> bool:
