@@ -35,6 +35,7 @@ BAD = {
     "check": ["check", "{tmp}/missing.csv", "--scenario", "projectile"],
     "compare": ["compare", "{tmp}/missing", "{tmp}/missing"],
     "bench": ["bench", "--json", "{tmp}/no/such/dir/b.json"],
+    "fuzz": ["fuzz", "--engines", "reference:nope", "--out", "{tmp}/fz"],
 }
 
 

@@ -162,7 +162,8 @@ def build_parser() -> argparse.ArgumentParser:
     b = sub.add_parser("bench", help="throughput of the batched reference vs MuJoCo and PyBullet, measured in one run",
                        description="Step the same free bodies (gravity + a body torque) in the batched reference, "
                                    "MuJoCo (N bodies in one model; rollout) and PyBullet, and a single trajectory in "
-                                   "the reference and mj_step; print body-steps/s and the ratios (benchmarks/bench.py).")
+                                   "the reference and mj_step; print body-steps/s and the ratios (benchmarks/bench.py); "
+                                   "and rbcheck fuzz's cases/s per engine (docs/fuzz.md).")
     b.add_argument("--quick", action="store_true", help="fewer bodies and steps (seconds instead of a minute)")
     b.add_argument("--json", metavar="FILE", help="write the measurements as JSON")
     return p
@@ -459,7 +460,8 @@ def cmd_bench(args) -> int:
     from cross_checks.bench import main as bench_main
     if args.json:
         _check_out_path(args.json, None, "--json")
-    return bench_main(args.quick, args.json)
+    from cross_checks.fuzz.throughput import format_fuzz, fuzz_throughput
+    return bench_main(args.quick, args.json, extra={"fuzz": (fuzz_throughput, format_fuzz)})
 
 
 def cmd_fuzz(args) -> int:
