@@ -58,7 +58,7 @@ def _context(s: dict) -> dict:
     prov += [(f"engine {e}", info.get("version", "")) for e, info in p["engines"].items()]
     return {"title": f"rbcheck fuzz — seed {p['seed']}", "nav": [], "provenance": prov, "verdict_text": verdict,
             "counterexamples": s["counterexamples"], "not_shrunk": s.get("not_shrunk", []), "rows": rows,
-            "properties": props, "numbers": numbers, "kinds": kinds}
+            "properties": props, "numbers": numbers, "kinds": kinds, "batch_errors": s.get("batch_errors", [])}
 
 
 def render_fuzz(directory) -> Path:

@@ -53,6 +53,9 @@ def run_fuzz(args, BadInput, resolve_engines, dask_client) -> int:
         if client is not None:
             client.close()
     _print_result(summary, args.out, t0)
+    for e in summary["batch_errors"]:
+        print(f"rbcheck fuzz: warning: batch {e['batch']} could not be judged ({e['error']}); its cases are not "
+              "counted", file=sys.stderr)
     found = summary["counterexamples"] + summary["not_shrunk"]
     if not found:
         print("rbcheck fuzz: no property violated")

@@ -117,7 +117,13 @@ def run_batch(item) -> dict:
                 res = json.loads(str(hit["outcome"]))
                 res["cached"] = True
                 return res
-    res = _compute_batch(seed, batch, variants)
+    try:
+        res = _compute_batch(seed, batch, variants)
+    except (KeyboardInterrupt, SystemExit):
+        raise
+    except Exception as exc:  # noqa: BLE001 - one batch rbcheck could not judge never stops the campaign
+        return {"seed": seed, "batch": batch, "n0": N0_CYCLE[batch % len(N0_CYCLE)], "cases": [], "seconds": {},
+                "cached": False, "error": f"{type(exc).__name__}: {exc}"}
     if path is not None:
         cache.store(Path(cache_root), path, key, {"outcome": np.array(json.dumps(res))})
     res["cached"] = False
@@ -418,4 +424,5 @@ def _summary(results, variants, seed, budget_s, jobs, started, search_s, wall_s,
         "violations": sum(len(c["violations"]) for r in results for c in r["cases"]),
         "cases_with_violations": sum(1 for r in results for c in r["cases"] if c["violations"]),
         "counterexamples": cx_out, "not_shrunk": unshrunk,
+        "batch_errors": [{"batch": r["batch"], "error": r["error"]} for r in results if r.get("error")],
     })

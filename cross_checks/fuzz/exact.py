@@ -53,13 +53,24 @@ def solve_members(problems, spans_s, s_eval, *, rtol: float, atol: float = GROUN
     """
     M = len(problems)
     spans = np.asarray(spans_s, dtype=float).reshape(M)
-    if fast:
-        return _solve_fast(problems, spans, s_eval, rtol, atol, y0)
+    Y0 = np.array([p.initial_packed() for p in problems]) if y0 is None else np.asarray(y0, dtype=float)
+    f = _kernel_rhs(problems, spans) if fast else _definition_rhs(problems, spans)
+    s_eval = np.asarray(s_eval, dtype=float)
+    sol = solve_ivp(f, (0.0, float(s_eval[-1])), Y0.T.ravel(), method="DOP853", t_eval=s_eval, rtol=rtol, atol=atol)
+    if not sol.success:
+        raise ExactError(f"DOP853 failed on the batch: {sol.message}")
+    y = np.moveaxis(sol.y.reshape(13, M, len(s_eval)), (0, 1, 2), (2, 1, 0)).copy()
+    y[..., Q] /= np.linalg.norm(y[..., Q], axis=-1, keepdims=True)
+    return y
+
+
+def _definition_rhs(problems, spans):
+    """d(flat state)/ds from reference_sim.integrators.rhs, members of one scenario evaluated together."""
+    M = len(problems)
     groups: dict = {}
     for j, p in enumerate(problems):
         groups.setdefault(id(p), (p, []))[1].append(j)
     groups = [(p, np.array(idx)) for p, idx in groups.values()]
-    Y0 = np.array([p.initial_packed() for p in problems]) if y0 is None else np.asarray(y0, dtype=float)
 
     def f(_s, flat):
         Y = flat.reshape(13, M).T
@@ -68,33 +79,19 @@ def solve_members(problems, spans_s, s_eval, *, rtol: float, atol: float = GROUN
             for p, idx in groups:
                 out[idx] = rhs(p, Y[idx])
         return (out * spans[:, None]).T.ravel()
-
-    s_eval = np.asarray(s_eval, dtype=float)
-    sol = solve_ivp(f, (0.0, float(s_eval[-1])), Y0.T.ravel(), method="DOP853", t_eval=s_eval, rtol=rtol, atol=atol)
-    if not sol.success:
-        raise ExactError(f"DOP853 failed on the batch: {sol.message}")
-    y = np.moveaxis(sol.y.reshape(13, M, len(s_eval)), (0, 1, 2), (2, 1, 0)).copy()
-    y[..., Q] /= np.linalg.norm(y[..., Q], axis=-1, keepdims=True)
-    return y
+    return f
 
 
-def _solve_fast(problems, spans, s_eval, rtol, atol, y0):
+def _kernel_rhs(problems, spans):
+    """The same from the N-case kernel: one NumPy-wide evaluation for every member (magnitudes only)."""
     from cross_checks.fuzz.kernel import CaseKernel
     M = len(problems)
     kern = CaseKernel.stack(problems, "rk4", spans)
-    Y0 = np.array([p.initial_packed() for p in problems]) if y0 is None else np.asarray(y0, dtype=float)
 
     def f(_s, flat):
         with np.errstate(all="ignore"):
             return (np.stack(kern.rhs(list(flat.reshape(13, M)))) * spans).ravel()
-
-    s_eval = np.asarray(s_eval, dtype=float)
-    sol = solve_ivp(f, (0.0, float(s_eval[-1])), Y0.T.ravel(), method="DOP853", t_eval=s_eval, rtol=rtol, atol=atol)
-    if not sol.success:
-        raise ExactError(f"DOP853 failed on the batch: {sol.message}")
-    y = np.moveaxis(sol.y.reshape(13, M, len(s_eval)), (0, 1, 2), (2, 1, 0)).copy()
-    y[..., Q] /= np.linalg.norm(y[..., Q], axis=-1, keepdims=True)
-    return y
+    return f
 
 
 def _max_difference(a, b) -> dict:

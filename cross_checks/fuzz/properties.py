@@ -70,10 +70,13 @@ class Context:
 def lever_roundoff(scenario, y_ref) -> dict:
     """An engine's round-off from lever arms measured from the world origin (MuJoCo's and Featherstone's
     spatial algebra: the COM of a subtree recomputed as Σ m x / Σ m, torques as r × F with r known to
-    ε |x| only): ``{"acc_rad_s2": a, "velocity_m_s": u}`` with a = K ε |x|max (|m g| + |F|max) / I_min the
-    angular acceleration it may add and u = K ε |x|max |ω|max the velocity error of a spatial transform
-    v − ω × x (K = FUZZ_LEVER_ROUNDINGS). Measured on MuJoCo (docs/fuzz.md): a falling tensor body at rest,
-    0.7 m from the origin, picks up 5.7e-13 rad/s² — an O(Δt) one-step defect of ~1e-14 rad/s."""
+    ε |x| only, momenta about the origin): ``{"acc_rad_s2": a, "velocity_m_s": u, "omega_rad_s": w}`` with
+    a = K ε |x|max (|m g| + |F|max) / I_min the angular acceleration it may add, u = K ε |x|max |ω|max the
+    velocity error of a spatial transform v − ω × x, and w = K ε m |x|max |v|max / I_min the angular
+    velocity error of recovering ω from a momentum about the origin that holds m x × v
+    (K = FUZZ_LEVER_ROUNDINGS). Measured on MuJoCo (docs/fuzz.md): a falling tensor body at rest, 0.7 m
+    from the origin, picks up 5.7e-13 rad/s² (an O(Δt) one-step defect of ~1e-14 rad/s); a free tensor
+    body at rest moving at 18 m/s 2 m from the origin, ω = 1.5e-14 rad/s from MuJoCo RK4's first step on."""
     from reference_sim.quaternion import matrix_from_quat
     p = scenario.problem
     q = y_ref[:, 6:10] / np.linalg.norm(y_ref[:, 6:10], axis=1, keepdims=True)
@@ -82,19 +85,22 @@ def lever_roundoff(scenario, y_ref) -> dict:
     F = weight + float(np.max(np.linalg.norm(f, axis=1)))
     x = float(np.max(np.linalg.norm(y_ref[:, 0:3], axis=1)))
     w = float(np.max(np.linalg.norm(y_ref[:, 10:13], axis=1)))
+    v = float(np.max(np.linalg.norm(y_ref[:, 3:6], axis=1)))
     I_min = float(np.linalg.eigvalsh(p.body.inertia_B)[0])
     k = tol.FUZZ_LEVER_ROUNDINGS * _EPS
-    return {"acc_rad_s2": k * x * F / I_min, "velocity_m_s": k * x * w}
+    return {"acc_rad_s2": k * x * F / I_min, "velocity_m_s": k * x * w,
+            "omega_rad_s": k * p.body.mass_kg * x * v / I_min}
 
 
 def _lever_floor(ctx, q, h, t, n, amp=1.0) -> float:
     """The lever-arm round-off (``lever_roundoff``) in quantity ``q`` after ``n`` steps of ``h`` (t = n h)."""
     lv = ctx.lever or {}
-    a, u = lv.get("acc_rad_s2", 0.0), lv.get("velocity_m_s", 0.0)
+    a, u, w = lv.get("acc_rad_s2", 0.0), lv.get("velocity_m_s", 0.0), lv.get("omega_rad_s", 0.0)
+    walk = 1.0 + math.sqrt(n)   # the ω representation error: re-made every step, adding like a random walk
     if q == "angular_velocity":
-        return a * t * amp
+        return (a * t + w * walk) * amp
     if q == "orientation":
-        return 0.5 * a * t * t * amp
+        return (0.5 * a * t * t + w * t * walk) * amp
     if q == "velocity":
         return u * n * amp
     return u * n * h * amp
@@ -243,7 +249,8 @@ def conservation(ctx: Context, variant: str, i: int, ladder) -> tuple:
                 size = max(float(np.max(np.linalg.norm(L, axis=1))), momentum_scale)
                 unit = "kg m²/s"
             allowed = (ctx.allowance[kind] * float(runs.h_s[i]) / h0
-                       + n * tol.CHECK_ROUNDINGS_PER_STEP * _EPS * size)
+                       + n * tol.CHECK_ROUNDINGS_PER_STEP * _EPS * size
+                       + _lever_conservation(ctx, kind, I_max, float(runs.h_s[i]) * n, n))
             ratio = drift / allowed if allowed > 0 else (math.inf if drift > 0 else 0.0)
             if worst is None or ratio > worst[0]:
                 worst = (ratio, drift, allowed, float(runs.h_s[i]), unit)
@@ -259,6 +266,17 @@ def conservation(ctx: Context, variant: str, i: int, ladder) -> tuple:
                                      f"{ratio:.3g}× the {allowed:.3g} {unit} a consistent scheme may accumulate "
                                      "over the run (its local defects weighted by the sensitivity, + round-off)")})
     return out, tally
+
+
+def _lever_conservation(ctx, kind, I_max, t, n) -> float:
+    """What the lever-arm round-off (``lever_roundoff``) may move world angular momentum (I_max × the ω it
+    adds) or energy (that ω error against I_max |ω|max, and the spurious torque's work) by over time ``t``."""
+    lv = ctx.lever or {}
+    dw = lv.get("acc_rad_s2", 0.0) * t + lv.get("omega_rad_s", 0.0) * (1.0 + math.sqrt(n))
+    if kind == "angular_momentum":
+        return I_max * dw
+    w_max = float(np.max(np.linalg.norm(ctx.y_ref[:, 10:13], axis=1)))
+    return I_max * dw * (w_max + dw)
 
 
 def equivalent_pairs(variants) -> list:
