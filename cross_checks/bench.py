@@ -208,9 +208,9 @@ def format_table(r: dict) -> str:
 
 
 def main(quick: bool = False, json_path: str | None = None, extra=None) -> int:
-    """Run and print the benchmark. ``extra``: {key: (measure(quick) -> dict, format(dict) -> str)} of
-    measurements from layers bench may not import (e.g. the fuzz's cases/s, passed in by the cli);
-    each is run in this same process and written under its key."""
+    """``rbcheck bench``: measure, print the table, write ``json_path`` (checked writable by the CLI first).
+    ``extra``: {key: (measure(quick) -> dict, format(dict) -> str)} of measurements from layers bench may
+    not import (the fuzz's cases/s, passed in by the cli), run in this same process and written under key."""
     r = run_bench(quick)
     print(format_table(r))
     for key, (measure, fmt) in (extra or {}).items():
@@ -222,17 +222,3 @@ def main(quick: bool = False, json_path: str | None = None, extra=None) -> int:
         atomic_write_text(json_path, json.dumps(r, indent=2, sort_keys=True) + "\n")
     return 0
 
-
-if __name__ == "__main__":
-    import argparse
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--json")
-    a = ap.parse_args()
-    if a.json:  # fail at once, not after the benchmark
-        from cross_checks.sweep.results_dir import ResultsDirError, check_writable_dir
-        try:
-            check_writable_dir(os.path.dirname(os.path.abspath(a.json)), "--json", a.json)
-        except ResultsDirError as exc:
-            ap.error(str(exc))
-    raise SystemExit(main(a.quick, a.json))

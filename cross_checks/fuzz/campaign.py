@@ -73,8 +73,7 @@ def _clean(o):
 
 def _cache_key(seed, batch, variants) -> str:
     from cross_checks.engines import engine_provenance
-    from cross_checks.sweep.cache import environment
-    from cross_checks.sweep.jobs import code_fingerprint
+    from cross_checks.sweep.fingerprint import code_fingerprint, environment
     engines = sorted({v.split(":", 1)[0] for v in variants})
     parts = {"fuzz": [int(seed), int(batch), BATCH, N0_CYCLE], "variants": list(variants),
              "engines": {e: [engine_provenance(e), code_fingerprint(e)] for e in engines},
@@ -337,7 +336,7 @@ def run_campaign(variants, out_dir, *, budget_s: float, seed: int = 0, jobs: int
     """Search, shrink, confirm, and write DIR (``fuzz.json``, ``counterexamples/*.toml``; the caller adds the
     HTML page through ``finish(staging_dir)``, inside the atomic replacement). Returns the summary. Raises
     FuzzError on an unusable DIR."""
-    from cross_checks.sweep.jobs import cache_dir
+    from cross_checks.sweep.cache import cache_dir
     from cross_checks.sweep.results_dir import (ResultsDirError, check_output_dir, replace_dir, staging_dir,
                                                 write_marker)
     log = log or (lambda s: print(s, file=sys.stderr))

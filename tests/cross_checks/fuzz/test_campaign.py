@@ -10,7 +10,8 @@ from cross_checks.fuzz import campaign
 from cross_checks.fuzz.generate import to_toml
 from cross_checks.scenario import load_scenario
 
-from ..mutants import MUTANTS
+from tests.helpers.byo import build_cbody
+from tests.mutants import MUTANTS
 
 MUT = {m.name: m for m in MUTANTS}
 
@@ -74,7 +75,6 @@ def test_planted_bugs_are_found_within_two_minutes_and_reproduced(name, tmp_path
 
 @pytest.mark.slow
 def test_the_broken_c_engine_is_found_through_its_engine_file(tmp_path, cache, capsys):
-    from ..byo_helpers import build_cbody
     eng = build_cbody(tmp_path / "eng")
     out = tmp_path / "fz"
     rc = main(["fuzz", "--engine-file", str(eng["broken"]), "--engines", "cbody_broken:euler", "--budget", "60",
