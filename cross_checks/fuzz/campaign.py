@@ -265,7 +265,7 @@ def _magnitude(v) -> str:
     if v.get("ratio") is not None:
         return f"{v['ratio']:.3g}× its allowance"
     if v.get("order_deficit") is not None:
-        return f"order {v['order']:.3g} where {v['expected_order']:g} is expected"
+        return f"order {v['order']:.2f} where {v['expected_order']:g} is expected"
     return v.get("verdict") or v["property"]
 
 
