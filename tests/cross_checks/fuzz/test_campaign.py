@@ -73,8 +73,17 @@ def test_planted_bugs_are_found_within_two_minutes_and_reproduced(name, tmp_path
     _reproduces(s, MUT[name], tmp_path, monkeypatch)
 
 
+@pytest.fixture
+def clean_registry():
+    """Engine files registered by a test are forgotten after it (the registry is per process)."""
+    from cross_checks import engines
+    engines.reset_registry()
+    yield
+    engines.reset_registry()
+
+
 @pytest.mark.slow
-def test_the_broken_c_engine_is_found_through_its_engine_file(tmp_path, cache, capsys):
+def test_the_broken_c_engine_is_found_through_its_engine_file(tmp_path, cache, capsys, clean_registry):
     eng = build_cbody(tmp_path / "eng")
     out = tmp_path / "fz"
     rc = main(["fuzz", "--engine-file", str(eng["broken"]), "--engines", "cbody_broken:euler", "--budget", "60",
@@ -89,7 +98,7 @@ def test_the_broken_c_engine_is_found_through_its_engine_file(tmp_path, cache, c
 
 
 @pytest.mark.slow
-def test_the_shipped_engines_raise_no_false_alarm_in_a_short_campaign(tmp_path, cache):
+def test_the_shipped_engines_raise_no_false_alarm_in_a_short_campaign(tmp_path, cache, clean_registry):
     rc = main(["fuzz", "--budget", "120", "--seed", "3", "--jobs", "2", "--out", str(tmp_path / "fz")])
     s = json.loads((tmp_path / "fz" / "fuzz.json").read_text())
     unexplained = [c for c in s["counterexamples"] if not c["explanation"]]
