@@ -1,8 +1,8 @@
-"""Regression gates: a fresh sweep judged by cross_checks/expectations.py and against the committed baseline.
+"""Regression gates: a fresh sweep judged by cross_checks/analysis/expectations.py and against the committed baseline.
 
 The default run sweeps FAST_SUBSET (every available variant, each scenario's full dt ladder); the
-whole catalog runs under ``-m slow``. Every number comes from cross_checks.expectations /
-cross_checks.tolerances, each with its derivation there.
+whole catalog runs under ``-m slow``. Every number comes from cross_checks.analysis.expectations /
+cross_checks.core.tolerances, each with its derivation there.
 """
 import json
 from pathlib import Path

@@ -1,4 +1,4 @@
-"""cross_checks.check_physics against closed forms and hand-derived numbers (not against itself)."""
+"""cross_checks.analysis.flow against closed forms and hand-derived numbers (not against itself)."""
 import numpy as np
 import pytest
 

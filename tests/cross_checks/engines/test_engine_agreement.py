@@ -7,36 +7,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from cross_checks.core import tolerances as tol
+
 from cross_checks.engines import run_variant
 from cross_checks.scenario import catalog_names, load_scenario, parse_scenario
 from reference_sim.quaternion import geodesic_angle, quat_conj, rotate
-
-# --- tolerances (to move into cross_checks/tolerances.py) -------------------------------------------
-#: Projectile closed forms (semi-implicit x_n = x0 + n h v0 + g h² n(n+1)/2 and the exact parabola):
-#: 100 steps of sums of ≤ 3 m quantities, ~100 ε · 3 ≈ 7e-14; the issue's bound is 1e-12.
-PROJECTILE = 1e-12
-#: The same scheme (symplectic Euler, explicit gyroscopic term, exponential map) in NumPy, MuJoCo
-#: Euler and PyBullet multibody over ≥ 2000 steps: round-off only (measured ≤ 1e-13); the issue's
-#: bound is 1e-10 in position, orientation and angular velocity.
-SAME_SCHEME = 1e-10
-#: mujoco:implicitfast vs pybullet:maximal, torque-free tennis racket, 2 s at 1e-3: both take the same
-#: linearised implicit gyroscopic step (Bullet's body-frame Newton step == MuJoCo's implicit
-#: derivative for a lone free body), so only round-off separates them: measured 3.2e-14 rad (7.8e-13
-#: over the full 10 s, where the unstable intermediate axis amplifies it); 1e-11 leaves 300x margin.
-IMPLICIT_PAIR_TORQUE_FREE = 1e-11
-#: With an applied torque they differ at first order (Bullet adds h I⁻¹τ outside the implicit solve,
-#: MuJoCo solves (I + h D) Δω = h (τ − ω×Iω)): the 2-s difference must halve with h (ratio 2 ± 0.2).
-FIRST_ORDER_RATIO = (1.8, 2.2)
-#: MuJoCo implicit vs implicitfast for a lone free body (ENGINE_FACTS: 1e-13): measured 8e-18.
-IMPLICIT_VS_IMPLICITFAST = 1e-13
-#: The body has flipped when its y axis points against world y (R[:, 1]·e_y < 0): measured −0.9996 for
-#: every gyroscopic scheme; the course update never gets below +0.9999. Thresholds far from both.
-FLIP_BELOW = -0.5
-NO_FLIP_ABOVE = 0.5
-
-#: The recorded t = 0 row vs the scenario's initial state: ω goes world -> body -> world (MuJoCo) or the
-#: quaternion through x,y,z,w and the principal frame (PyBullet): a few ε of |ω| ≤ 5 rad/s.
-INITIAL_ROW = 1e-14
 
 ENGINE_VARIANTS = ["mujoco:euler", "mujoco:rk4", "mujoco:implicit", "mujoco:implicitfast",
                    "pybullet:multibody", "pybullet:maximal"]
@@ -65,8 +40,8 @@ def test_projectile_semi_implicit_closed_form(name):
     h, x0, v0, g = sc.dt_s, sc.problem.initial.x_W, sc.problem.initial.v_W, sc.problem.forces.gravity_W
     n = np.arange(len(tr.t_s))[:, None]
     assert len(tr.t_s) == 101
-    np.testing.assert_allclose(tr.y[:, 0:3], x0 + n * h * v0 + g * h * h * n * (n + 1) / 2, rtol=0, atol=PROJECTILE)
-    np.testing.assert_allclose(tr.y[:, 3:6], v0 + n * h * g, rtol=0, atol=PROJECTILE)
+    np.testing.assert_allclose(tr.y[:, 0:3], x0 + n * h * v0 + g * h * h * n * (n + 1) / 2, rtol=0, atol=tol.AGREE_PROJECTILE)
+    np.testing.assert_allclose(tr.y[:, 3:6], v0 + n * h * g, rtol=0, atol=tol.AGREE_PROJECTILE)
 
 
 def test_projectile_mujoco_rk4_exact_parabola():
@@ -74,8 +49,8 @@ def test_projectile_mujoco_rk4_exact_parabola():
     tr = _run(sc, "mujoco:rk4")
     t = tr.t_s[:, None]
     x0, v0, g = sc.problem.initial.x_W, sc.problem.initial.v_W, sc.problem.forces.gravity_W
-    np.testing.assert_allclose(tr.y[:, 0:3], x0 + v0 * t + 0.5 * g * t * t, rtol=0, atol=PROJECTILE)
-    np.testing.assert_allclose(tr.y[:, 3:6], v0 + g * t, rtol=0, atol=PROJECTILE)
+    np.testing.assert_allclose(tr.y[:, 0:3], x0 + v0 * t + 0.5 * g * t * t, rtol=0, atol=tol.AGREE_PROJECTILE)
+    np.testing.assert_allclose(tr.y[:, 3:6], v0 + g * t, rtol=0, atol=tol.AGREE_PROJECTILE)
 
 
 # --- the same scheme in three codes ---------------------------------------------------------------------
@@ -88,9 +63,9 @@ def test_expmap_gyro_mujoco_euler_pybullet_multibody_agree(scenario, n_steps):
     assert len(ref.t_s) == n_steps + 1
     for name in ("mujoco:euler", "pybullet:multibody"):
         tr = _run(sc, name, duration_s=T)
-        assert np.max(np.abs(tr.y[:, 0:3] - ref.y[:, 0:3])) < SAME_SCHEME, name
-        assert np.max(geodesic_angle(ref.y[:, 6:10], tr.y[:, 6:10])) < SAME_SCHEME, name
-        assert np.max(np.abs(tr.y[:, 10:13] - ref.y[:, 10:13])) < SAME_SCHEME, name
+        assert np.max(np.abs(tr.y[:, 0:3] - ref.y[:, 0:3])) < tol.AGREE_SAME_SCHEME, name
+        assert np.max(geodesic_angle(ref.y[:, 6:10], tr.y[:, 6:10])) < tol.AGREE_SAME_SCHEME, name
+        assert np.max(np.abs(tr.y[:, 10:13] - ref.y[:, 10:13])) < tol.AGREE_SAME_SCHEME, name
 
 
 DECAY_WITH_FORCES = parse_scenario("""
@@ -133,9 +108,9 @@ def _assert_decay_harness_matches(sc, dt):
     ref = _run(sc, "reference:expmap_gyro", dt_s=dt)
     for name in ("mujoco:euler", "pybullet:multibody", "pybullet:maximal"):
         tr = _run(sc, name, dt_s=dt)
-        assert np.max(np.abs(tr.y[:, 0:6] - ref.y[:, 0:6])) < SAME_SCHEME, name
-        assert np.max(geodesic_angle(ref.y[:, 6:10], tr.y[:, 6:10])) < SAME_SCHEME, name
-        assert np.max(np.abs(tr.y[:, 10:13] - ref.y[:, 10:13])) < SAME_SCHEME, name
+        assert np.max(np.abs(tr.y[:, 0:6] - ref.y[:, 0:6])) < tol.AGREE_SAME_SCHEME, name
+        assert np.max(geodesic_angle(ref.y[:, 6:10], tr.y[:, 6:10])) < tol.AGREE_SAME_SCHEME, name
+        assert np.max(np.abs(tr.y[:, 10:13] - ref.y[:, 10:13])) < tol.AGREE_SAME_SCHEME, name
 
 
 # --- tennis racket ---------------------------------------------------------------------------------------
@@ -147,10 +122,10 @@ def _y_axis_along_world_y(tr):
 def test_every_engine_variant_flips_the_tennis_racket_the_course_does_not():
     sc = load_scenario("tennis_racket")
     course = _run(sc, "reference:course")
-    assert np.min(_y_axis_along_world_y(course)) > NO_FLIP_ABOVE
+    assert np.min(_y_axis_along_world_y(course)) > tol.AGREE_NO_FLIP_ABOVE
     for name in ENGINE_VARIANTS:
         tr = _run(sc, name)
-        assert np.min(_y_axis_along_world_y(tr)) < FLIP_BELOW, name
+        assert np.min(_y_axis_along_world_y(tr)) < tol.AGREE_FLIP_BELOW, name
         # seen from the body, the spin component along its y axis reverses (world ω_y does not: ω stays
         # close to the fixed angular momentum)
         w_B = rotate(quat_conj(tr.y[:, 6:10]), tr.y[:, 10:13])
@@ -164,9 +139,9 @@ def test_mujoco_implicitfast_vs_pybullet_maximal():
     a = _run(sc, "mujoco:implicitfast", duration_s=2.0)
     b = _run(sc, "pybullet:maximal", duration_s=2.0)
     c = _run(sc, "mujoco:implicit", duration_s=2.0)
-    assert np.max(geodesic_angle(a.y[:, 6:10], b.y[:, 6:10])) < IMPLICIT_PAIR_TORQUE_FREE
-    assert np.max(np.abs(a.y[:, 10:13] - b.y[:, 10:13])) < IMPLICIT_PAIR_TORQUE_FREE
-    assert np.max(geodesic_angle(a.y[:, 6:10], c.y[:, 6:10])) < IMPLICIT_VS_IMPLICITFAST
+    assert np.max(geodesic_angle(a.y[:, 6:10], b.y[:, 6:10])) < tol.AGREE_IMPLICIT_PAIR_TORQUE_FREE
+    assert np.max(np.abs(a.y[:, 10:13] - b.y[:, 10:13])) < tol.AGREE_IMPLICIT_PAIR_TORQUE_FREE
+    assert np.max(geodesic_angle(a.y[:, 6:10], c.y[:, 6:10])) < tol.AGREE_IMPLICIT_VS_IMPLICITFAST
     # with an applied torque the two implicit schemes part at first order in h
     at = load_scenario("applied_torque")
     diff = []
@@ -174,7 +149,7 @@ def test_mujoco_implicitfast_vs_pybullet_maximal():
         a = _run(at, "mujoco:implicitfast", dt_s=h)
         b = _run(at, "pybullet:maximal", dt_s=h)
         diff.append(np.max(geodesic_angle(a.y[:, 6:10], b.y[:, 6:10])))
-    assert FIRST_ORDER_RATIO[0] < diff[0] / diff[1] < FIRST_ORDER_RATIO[1], diff
+    assert tol.AGREE_FIRST_ORDER_RATIO[0] < diff[0] / diff[1] < tol.AGREE_FIRST_ORDER_RATIO[1], diff
 
 
 # --- the whole catalog in every engine variant ---------------------------------------------------------------
@@ -188,7 +163,7 @@ def test_every_catalog_scenario_runs(name):
         assert len(tr.t_s) == sc.n_steps(sc.dt_s, T) + 1 and tr.y.shape == (len(tr.t_s), 13)
         assert np.all(np.isfinite(tr.y))
         np.testing.assert_allclose(np.linalg.norm(tr.y[:, 6:10], axis=1), 1.0, atol=1e-12)
-        np.testing.assert_allclose(tr.y[0], sc.problem.initial_packed(), rtol=0, atol=INITIAL_ROW)
+        np.testing.assert_allclose(tr.y[0], sc.problem.initial_packed(), rtol=0, atol=tol.AGREE_INITIAL_ROW)
         assert tr.meta["engine_version"]
 
 

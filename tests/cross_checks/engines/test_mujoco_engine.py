@@ -4,6 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from cross_checks.core import tolerances as tol
+
 mujoco = pytest.importorskip("mujoco", reason="mujoco is not installed")
 
 from cross_checks.engines import mujoco_engine as me  # noqa: E402
@@ -12,25 +14,6 @@ from cross_checks.scenario import catalog_path, load_scenario, parse_scenario  #
 from reference_sim.ground_truth import ground_truth  # noqa: E402
 from reference_sim.quaternion import geodesic_angle, quat_from_axis_angle, quat_from_matrix, quat_mul
 from reference_sim.simulate import simulate as ref_simulate  # noqa: E402
-
-# --- tolerances (to move into cross_checks/tolerances.py) -------------------------------------------
-#: Same-arithmetic conversions (qpos/qvel <-> packed state, one rotation of a unit vector): a few ε.
-ROUND_TRIP = 1e-15
-#: Exact exponential-map spin about a principal axis over 100 steps: each step rounds the quaternion
-#: product (~ε) and MuJoCo renormalises; 100 · a few ε.
-SPIN_100_STEPS = 1e-13
-#: one_step from a recorded state vs the recorded next state: the same MuJoCo step from the same
-#: doubles, except ω goes body -> world -> body through two roundings (a few ε of |ω|).
-ONE_STEP_REPLAY = 1e-14
-#: mujoco:rk4 vs DOP853 (GROUND_TRUTH_RTOL) on tennis_racket at dt = 1e-3: the issue's bound.
-RK4_VS_GROUND_TRUTH = 1e-8
-#: Observed convergence order of mujoco:rk4 with per-stage forces vs 4 (measured 3.99-4.03 on these
-#: ladders, whose errors stay 3+ decades above round-off); ORDER_TOL of the suite is 0.1.
-RK4_ORDER_TOL = 0.1
-#: The same with forces held over the step (xfrc_applied fixed over the 4 stages): first order;
-#: measured 0.96-1.01.
-HELD_ORDER_TOL = 0.1
-
 
 from tests.helpers.scenarios import SQ, YAW90, scenario_from_parts as _scenario  # noqa: E402,F401
 
@@ -86,16 +69,16 @@ def test_state_round_trip_and_quaternion_order():
     y[:, 6:10] /= np.linalg.norm(y[:, 6:10], axis=1, keepdims=True)
     qpos, qvel = me._to_qpos_qvel(y)
     np.testing.assert_array_equal(qpos[:, 3:7], y[:, 6:10])          # (w, x, y, z) in both
-    np.testing.assert_allclose(me._to_packed(qpos, qvel), y, atol=ROUND_TRIP * 10)
+    np.testing.assert_allclose(me._to_packed(qpos, qvel), y, atol=tol.MJ_ROUND_TRIP * 10)
     for i in range(3):
-        np.testing.assert_allclose(me._packed1(qpos[i], qvel[i]), me._to_packed(qpos[i], qvel[i]), atol=ROUND_TRIP)
+        np.testing.assert_allclose(me._packed1(qpos[i], qvel[i]), me._to_packed(qpos[i], qvel[i]), atol=tol.MJ_ROUND_TRIP)
     # MuJoCo itself reads qpos[3:7] as (w, x, y, z): its body pose after mj_forward is that rotation
     sc = _scenario(initial=YAW90)
     m = me.build_model(sc, "euler", 0.01)
     d = mujoco.MjData(m)
     d.qpos[:], d.qvel[:] = me._to_qpos_qvel(sc.problem.initial_packed())
     mujoco.mj_forward(m, d)
-    np.testing.assert_allclose(d.xmat[1].reshape(3, 3), [[0, -1, 0], [1, 0, 0], [0, 0, 1]], atol=ROUND_TRIP)
+    np.testing.assert_allclose(d.xmat[1].reshape(3, 3), [[0, -1, 0], [1, 0, 0], [0, 0, 1]], atol=tol.MJ_ROUND_TRIP)
 
 
 def test_yawed_body_spinning_about_body_x_reads_world_y():
@@ -103,13 +86,13 @@ def test_yawed_body_spinning_about_body_x_reads_world_y():
     the body-axes (1, 0, 0), and MuJoCo turns the body about world y."""
     sc = _scenario(initial=YAW90 + "\nangular_velocity_body = [1.0, 0.0, 0.0]")
     y0 = sc.problem.initial_packed()
-    np.testing.assert_allclose(y0[10:13], [0.0, 1.0, 0.0], atol=ROUND_TRIP)
+    np.testing.assert_allclose(y0[10:13], [0.0, 1.0, 0.0], atol=tol.MJ_ROUND_TRIP)
     _, qvel = me._to_qpos_qvel(y0)
-    np.testing.assert_allclose(qvel[3:6], [1.0, 0.0, 0.0], atol=ROUND_TRIP)
+    np.testing.assert_allclose(qvel[3:6], [1.0, 0.0, 0.0], atol=tol.MJ_ROUND_TRIP)
     run = me.simulate(sc, "euler", 0.01, 100)                       # principal-axis spin: exact
-    np.testing.assert_allclose(run.y[:, 10:13], np.tile([0.0, 1.0, 0.0], (101, 1)), atol=SPIN_100_STEPS)
+    np.testing.assert_allclose(run.y[:, 10:13], np.tile([0.0, 1.0, 0.0], (101, 1)), atol=tol.MJ_SPIN_100_STEPS)
     expected = quat_mul(quat_from_axis_angle(np.array([0.0, 1.0, 0.0]), run.t_s), y0[6:10])
-    assert np.max(geodesic_angle(expected, run.y[:, 6:10])) < SPIN_100_STEPS
+    assert np.max(geodesic_angle(expected, run.y[:, 6:10])) < tol.MJ_SPIN_100_STEPS
 
 
 def test_linear_velocity_and_position_are_the_coms():
@@ -121,7 +104,7 @@ def test_linear_velocity_and_position_are_the_coms():
     run = me.simulate(sc, "euler", 0.01, 100)
     n = np.arange(101)[:, None]
     np.testing.assert_allclose(run.y[:, 0:3], 0.01 * n * np.array([0.5, -0.2, 4.0]), atol=1e-13)
-    np.testing.assert_allclose(run.y[:, 3:6], np.tile([0.5, -0.2, 4.0], (101, 1)), rtol=0, atol=ROUND_TRIP * 4)
+    np.testing.assert_allclose(run.y[:, 3:6], np.tile([0.5, -0.2, 4.0], (101, 1)), rtol=0, atol=tol.MJ_ROUND_TRIP * 4)
 
 
 @pytest.mark.parametrize("variant", sorted(me.VARIANTS))
@@ -130,7 +113,7 @@ def test_one_step_replays_the_run(variant):
         sc = load_scenario(name)
         run = me.simulate(sc, variant, sc.dt_s, 30)
         y1 = me.one_step(sc, variant, sc.dt_s, run.y[:-1])
-        np.testing.assert_allclose(y1, run.y[1:], rtol=0, atol=ONE_STEP_REPLAY * 10)
+        np.testing.assert_allclose(y1, run.y[1:], rtol=0, atol=tol.MJ_ONE_STEP_REPLAY * 10)
 
 
 # --- forces and RK4 ---------------------------------------------------------------------------------
@@ -140,8 +123,8 @@ def test_tennis_racket_rk4_matches_ground_truth():
     run = me.simulate(sc, "rk4", 1e-3, sc.n_steps(1e-3))
     gt = ground_truth(sc.problem, run.t_s)
     assert run.diverged_at_s is None
-    assert np.max(geodesic_angle(gt[:, 6:10], run.y[:, 6:10])) < RK4_VS_GROUND_TRUTH
-    assert np.max(np.abs(gt[:, 10:13] - run.y[:, 10:13])) < RK4_VS_GROUND_TRUTH
+    assert np.max(geodesic_angle(gt[:, 6:10], run.y[:, 6:10])) < tol.MJ_RK4_VS_GROUND_TRUTH
+    assert np.max(np.abs(gt[:, 10:13] - run.y[:, 10:13])) < tol.MJ_RK4_VS_GROUND_TRUTH
 
 
 def _final_errors(sc, ladder, T):
@@ -166,10 +149,10 @@ SP_LADDER = [0.004, 0.002, 0.001]
 
 def test_rk4_keeps_fourth_order_with_state_dependent_forces():
     _, ori = _final_errors(load_scenario("applied_torque"), AT_LADDER, 1.0)
-    assert abs(_order(AT_LADDER, ori) - 4.0) < RK4_ORDER_TOL, ori
+    assert abs(_order(AT_LADDER, ori) - 4.0) < tol.MJ_RK4_ORDER_TOL, ori
     pos, ori = _final_errors(load_scenario("spring_pendulum"), SP_LADDER, 1.0)
-    assert abs(_order(SP_LADDER, pos) - 4.0) < RK4_ORDER_TOL, pos
-    assert abs(_order(SP_LADDER, ori) - 4.0) < RK4_ORDER_TOL, ori
+    assert abs(_order(SP_LADDER, pos) - 4.0) < tol.MJ_RK4_ORDER_TOL, pos
+    assert abs(_order(SP_LADDER, ori) - 4.0) < tol.MJ_RK4_ORDER_TOL, ori
 
 
 def test_rk4_with_forces_held_over_the_step_is_first_order(monkeypatch):
@@ -177,7 +160,7 @@ def test_rk4_with_forces_held_over_the_step_is_first_order(monkeypatch):
     the 4 stages, and a state-dependent force or body torque then costs RK4 its order."""
     monkeypatch.setattr(me, "_RK4_STAGE_FORCES", False)
     _, ori = _final_errors(load_scenario("applied_torque"), AT_LADDER, 1.0)
-    assert abs(_order(AT_LADDER, ori) - 1.0) < HELD_ORDER_TOL, ori
+    assert abs(_order(AT_LADDER, ori) - 1.0) < tol.MJ_HELD_ORDER_TOL, ori
 
 
 def test_global_callbacks_are_cleared_during_runs_and_restored():

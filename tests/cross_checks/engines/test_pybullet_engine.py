@@ -4,27 +4,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from cross_checks.core import tolerances as tol
+
 p = pytest.importorskip("pybullet", reason="pybullet is not installed")
 
 from cross_checks.engines import pybullet_engine as pe  # noqa: E402
 from cross_checks.engines import run_variant  # noqa: E402
 from cross_checks.scenario import catalog_path, load_scenario, parse_scenario  # noqa: E402
 from reference_sim.quaternion import geodesic_angle, quat_from_axis_angle, quat_mul  # noqa: E402
-
-# --- tolerances (to move into cross_checks/tolerances.py) -------------------------------------------
-#: Same-arithmetic conversions (quaternion order, principal-frame rotation at the boundary): a few ε.
-ROUND_TRIP = 1e-15
-#: Exact exponential-map spin about a principal axis over 100 steps: ~ε per step.
-SPIN_100_STEPS = 1e-13
-#: Semi-implicit closed form of a projectile (h = 0.01, 1 s): sums of 100 terms of size ≤ 3 m: 100 ε · 3.
-PROJECTILE_EXACT = 1e-12
-#: PyBullet's default multibody damping must visibly fail the projectile: ENGINE_FACTS measured 0.15 m
-#: after 1 s; anything above 1 cm is far outside discretisation (which is exactly zero here).
-DEFAULT_DAMPING_MIN_ERROR = 1e-2
-#: one_step from a recorded state vs the recorded next state: the same PyBullet step from the same
-#: doubles up to the boundary rotation (full tensors) and the x,y,z,w conversion: a few ε.
-ONE_STEP_REPLAY = 1e-14
-
 
 from tests.helpers.scenarios import SQ, YAW90, scenario_from_parts as _scenario  # noqa: E402,F401
 
@@ -62,13 +49,13 @@ def test_yawed_body_spinning_about_body_x_reads_world_y(variant):
     sc = _scenario(body="mass = 1.0\ninertia = [1.0, 1.0, 1.0]",
                    initial=YAW90 + "\nangular_velocity_body = [1.0, 0.0, 0.0]")
     run = pe.simulate(sc, variant, 0.01, 100)
-    np.testing.assert_allclose(run.y[:, 10:13], np.tile([0.0, 1.0, 0.0], (101, 1)), atol=SPIN_100_STEPS)
+    np.testing.assert_allclose(run.y[:, 10:13], np.tile([0.0, 1.0, 0.0], (101, 1)), atol=tol.PYB_SPIN_100_STEPS)
     expected = quat_mul(quat_from_axis_angle(np.array([0.0, 1.0, 0.0]), run.t_s), run.y[0, 6:10])
-    assert np.max(geodesic_angle(expected, run.y[:, 6:10])) < SPIN_100_STEPS
+    assert np.max(geodesic_angle(expected, run.y[:, 6:10])) < tol.PYB_SPIN_100_STEPS
     # PyBullet's own angular velocity is in world axes (getBaseVelocity), no conversion involved
     raw = pe._Body(sc, variant, 0.01, sc.problem.initial_packed())
     raw.set_state(sc.problem.initial_packed())
-    np.testing.assert_allclose(p.getBaseVelocity(raw.b, physicsClientId=raw.c)[1], [0.0, 1.0, 0.0], atol=ROUND_TRIP)
+    np.testing.assert_allclose(p.getBaseVelocity(raw.b, physicsClientId=raw.c)[1], [0.0, 1.0, 0.0], atol=tol.PYB_ROUND_TRIP)
 
 
 def test_quaternion_order_at_the_boundary():
@@ -76,10 +63,10 @@ def test_quaternion_order_at_the_boundary():
     B = pe._Body(sc, "multibody", 0.01, sc.problem.initial_packed())
     B.set_state(sc.problem.initial_packed())
     orn = p.getBasePositionAndOrientation(B.b, physicsClientId=B.c)[1]
-    np.testing.assert_allclose(orn, [0.0, 0.0, SQ, SQ], atol=ROUND_TRIP)            # (x, y, z, w)
+    np.testing.assert_allclose(orn, [0.0, 0.0, SQ, SQ], atol=tol.PYB_ROUND_TRIP)            # (x, y, z, w)
     R = np.array(p.getMatrixFromQuaternion(orn)).reshape(3, 3)
-    np.testing.assert_allclose(R, [[0, -1, 0], [1, 0, 0], [0, 0, 1]], atol=ROUND_TRIP)
-    np.testing.assert_allclose(B.raw_to_packed(B.read_raw()), sc.problem.initial_packed(), atol=ROUND_TRIP)
+    np.testing.assert_allclose(R, [[0, -1, 0], [1, 0, 0], [0, 0, 1]], atol=tol.PYB_ROUND_TRIP)
+    np.testing.assert_allclose(B.raw_to_packed(B.read_raw()), sc.problem.initial_packed(), atol=tol.PYB_ROUND_TRIP)
 
 
 @pytest.mark.parametrize("variant", sorted(pe.VARIANTS))
@@ -90,10 +77,10 @@ def test_full_tensor_reports_the_scenario_body_frame(variant):
     B = pe._Body(sc, variant, 0.001, y0)
     B.set_state(y0)
     q_WP = np.roll(p.getBasePositionAndOrientation(B.b, physicsClientId=B.c)[1], 1)
-    assert geodesic_angle(q_WP, quat_mul(y0[6:10], B.q_BP)) < ROUND_TRIP * 10
+    assert geodesic_angle(q_WP, quat_mul(y0[6:10], B.q_BP)) < tol.PYB_ROUND_TRIP * 10
     assert geodesic_angle(q_WP, y0[6:10]) > 0.1                # P really differs from B here
     run = pe.simulate(sc, variant, 0.001, 10)
-    assert geodesic_angle(run.y[0, 6:10], y0[6:10]) < ROUND_TRIP * 10
+    assert geodesic_angle(run.y[0, 6:10], y0[6:10]) < tol.PYB_ROUND_TRIP * 10
 
 
 def test_linear_velocity_and_position_are_the_coms():
@@ -104,7 +91,7 @@ def test_linear_velocity_and_position_are_the_coms():
         run = pe.simulate(sc, variant, 0.01, 100)
         n = np.arange(101)[:, None]
         np.testing.assert_allclose(run.y[:, 0:3], 0.01 * n * np.array([0.5, -0.2, 4.0]), atol=1e-13)
-        np.testing.assert_allclose(run.y[:, 3:6], np.tile([0.5, -0.2, 4.0], (101, 1)), rtol=0, atol=ROUND_TRIP * 4)
+        np.testing.assert_allclose(run.y[:, 3:6], np.tile([0.5, -0.2, 4.0], (101, 1)), rtol=0, atol=tol.PYB_ROUND_TRIP * 4)
 
 
 # --- PyBullet's traps the adapter works around ------------------------------------------------------------
@@ -118,12 +105,12 @@ def _projectile_error(run, h):
 
 def test_default_multibody_damping_fails_projectile_and_adapter_settings_pass(monkeypatch):
     sc = load_scenario("projectile")
-    assert _projectile_error(pe.simulate(sc, "multibody", 0.01, 100), 0.01) < PROJECTILE_EXACT
+    assert _projectile_error(pe.simulate(sc, "multibody", 0.01, 100), 0.01) < tol.PYB_PROJECTILE_EXACT
     monkeypatch.setattr(pe, "DYNAMICS_SETTINGS", {})      # PyBullet's defaults (damping 0.04, clamp 100)
     err = _projectile_error(pe.simulate(sc, "multibody", 0.01, 100), 0.01)
-    assert err > DEFAULT_DAMPING_MIN_ERROR
+    assert err > tol.PYB_DEFAULT_DAMPING_MIN_ERROR
     # maximal-coordinate bodies have no default damping
-    assert _projectile_error(pe.simulate(sc, "maximal", 0.01, 100), 0.01) < PROJECTILE_EXACT
+    assert _projectile_error(pe.simulate(sc, "maximal", 0.01, 100), 0.01) < tol.PYB_PROJECTILE_EXACT
 
 
 def test_default_multibody_velocity_clamp_is_lifted(monkeypatch):
@@ -161,7 +148,7 @@ def test_external_force_is_cleared_after_each_step(variant):
     np.testing.assert_allclose(v1[3], 0.01, rtol=1e-14)          # one step of 1 N on 1 kg
     np.testing.assert_allclose(v1[12], 0.01, rtol=1e-14)         # one step of 3 N m about I_zz = 3
     assert v2[3] == v1[3]                                        # nothing applied in the second step
-    np.testing.assert_allclose(v2[12], v1[12], rtol=ROUND_TRIP * 4)   # (maximal: implicit gyro round-off)
+    np.testing.assert_allclose(v2[12], v1[12], rtol=tol.PYB_ROUND_TRIP * 4)   # (maximal: implicit gyro round-off)
 
 
 @pytest.mark.parametrize("variant", sorted(pe.VARIANTS))
@@ -170,7 +157,7 @@ def test_one_step_replays_the_run(variant):
         sc = load_scenario(name)
         run = pe.simulate(sc, variant, sc.dt_s, 30)
         y1 = pe.one_step(sc, variant, sc.dt_s, run.y[:-1])
-        np.testing.assert_allclose(y1, run.y[1:], rtol=0, atol=ONE_STEP_REPLAY * 10)
+        np.testing.assert_allclose(y1, run.y[1:], rtol=0, atol=tol.PYB_ONE_STEP_REPLAY * 10)
 
 
 # --- divergence ---------------------------------------------------------------------------------------

@@ -80,6 +80,9 @@ class _NoVersion(EngineAdapter):
     def version(self):
         raise ImportError("No module named 'somesim'")
 
+    def simulate(self, scenario, variant, dt_s, n_steps):
+        raise AssertionError("never reached: version() already says the engine cannot run")
+
 
 def test_an_engine_whose_package_is_missing_is_unavailable_not_fatal():
     engines.register_adapter(_NoVersion(), "test")

@@ -1,4 +1,4 @@
-"""cross_checks.check_diagnosis: the slips named for a wrong first row, and the Δt scale fitted to rows
+"""cross_checks.gates.check.diagnosis: the slips named for a wrong first row, and the Δt scale fitted to rows
 that advance too far (hand-built states)."""
 import numpy as np
 

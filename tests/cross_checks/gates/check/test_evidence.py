@@ -1,4 +1,4 @@
-"""cross_checks.check_evidence: how a row of evidence is judged — a NaN never passes, only the decisive
+"""cross_checks.gates.check.evidence: how a row of evidence is judged — a NaN never passes, only the decisive
 window counts, and the numbers reported are those at the worst time."""
 import math
 

@@ -1,4 +1,4 @@
-"""cross_checks.check_input: rows mapped to steps, written precision, and what a file cannot be."""
+"""cross_checks.gates.check.input: rows mapped to steps, written precision, and what a file cannot be."""
 import math
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""cross_checks.check_ladder: several files of one scenario at different Δt — each checked, the order
+"""cross_checks.gates.check.ladder: several files of one scenario at different Δt — each checked, the order
 fitted with the sweep's machinery and judged against the scheme the files are."""
 import json
 

@@ -1,4 +1,4 @@
-"""cross_checks.mistakes: the correct bases are the reference's course steps; each mistake changes the
+"""cross_checks.gates.check.mistakes: the correct bases are the reference's course steps; each mistake changes the
 step exactly as its sentence says (effects derived by hand here)."""
 import dataclasses
 import math
