@@ -13,7 +13,8 @@ def cache(tmp_path, monkeypatch):
     return tmp_path / "cache"
 
 
-def test_a_clean_campaign_exits_0_with_its_summary_and_page(tmp_path, cache, capsys):
+def test_a_clean_campaign_exits_0_with_its_summary_and_page(tmp_path, cache, capsys, monkeypatch):
+    monkeypatch.setattr(campaign, "BATCH", 4)
     out = tmp_path / "fz"
     assert main(["fuzz", "--engines", "reference:midpoint", "--budget", "0.5", "--jobs", "1", "--out", str(out)]) == 0
     s = json.loads((out / "fuzz.json").read_text())

@@ -57,6 +57,7 @@ def load_toml_spec(path):
 
 
 def test_a_wrong_rk4_stage_weight_is_found_shrunk_and_reproduced(tmp_path, monkeypatch, cache):
+    monkeypatch.setattr(campaign, "BATCH", 4)   # a small batch: the default run's time budget
     s = _found(MUT["rk4_wrong_stage_weight"], tmp_path, monkeypatch, budget_s=1.0, shrink_s=4.0)
     cx = s["counterexamples"][0]
     assert cx["shrink_steps"], "the case was not made any smaller"
@@ -106,7 +107,8 @@ def test_the_shipped_engines_raise_no_false_alarm_in_a_short_campaign(tmp_path, 
     assert rc == (1 if s["counterexamples"] else 0)
 
 
-def test_the_same_seed_gives_the_same_verdicts_and_the_cache_returns_them(tmp_path, cache):
+def test_the_same_seed_gives_the_same_verdicts_and_the_cache_returns_them(tmp_path, cache, monkeypatch):
+    monkeypatch.setattr(campaign, "BATCH", 4)
     item = (5, 1, ["reference:course"], {}, str(cache), True)
     first, second = campaign.run_batch(item), campaign.run_batch(item)
     assert not first["cached"] and second["cached"]
