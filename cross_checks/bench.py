@@ -352,11 +352,18 @@ def _sweep_lines(r: dict) -> list:
     ]
 
 
-def main(quick: bool = False, json_path: str | None = None, *, repeats: int = 3, render=None,
+def main(quick: bool = False, json_path: str | None = None, extra=None, *, repeats: int = 3, render=None,
          sweep: bool = True) -> int:
-    """``rbcheck bench``: measure, print the table, write ``json_path`` (checked writable by the CLI first)."""
+    """``rbcheck bench``: measure, print the table, write ``json_path`` (checked writable by the CLI first).
+    ``extra``: {key: (measure(quick) -> dict, format(dict) -> str)} of measurements from layers bench may
+    not import (the fuzz's cases/s, passed in by the cli), run in this same process and written under key.
+    ``render(results_dir)``: the report of the sweep against its floor (also passed in by the cli)."""
     r = run_bench(quick, repeats, render, sweep)
     print(format_table(r))
+    for key, (measure, fmt) in (extra or {}).items():
+        r[key] = measure(quick)
+        print()
+        print(fmt(r[key]))
     if json_path:
         from cross_checks.core.files import atomic_write_text
         atomic_write_text(json_path, json.dumps(r, indent=2, sort_keys=True) + "\n")
