@@ -208,3 +208,13 @@ CHECK_GROWTH_RATE_PER_STEP = 0.25
 #: "Resembles" a mistake (said with that caution) when it explains 99 % of the steps within this many
 #: allowances and CHECK_MISTAKE_MARGIN times better than any correct scheme; beyond, nothing is named.
 CHECK_MISTAKE_RESEMBLES = 3.0
+
+# --- the second reference: Drake's error-controlled integration (docs/engine_conventions.md) ---
+#: Drake runge_kutta5's target accuracy for the second reference: measured on the catalog 6.9e-10 rad
+#: from the closed form on tennis_racket, 3.9e-7 rad on tumbling_box (δ = 2e-5 from the separatrix),
+#: ≤ 1.2e-10 rad elsewhere; 1e-14 costs 1.5–2× the time for one more decade.
+SECOND_REFERENCE_TARGET_ACCURACY = 1e-13
+#: Drake's accuracy is MEASURED as its distance from a second Drake solution at this many times looser
+#: target accuracy (an upper bound of its own error: measured 8–13× smaller per decade of target
+#: accuracy on the catalog's tumbling and spring scenarios, like REFERENCE_CHECK_RTOL_FACTOR for DOP853).
+SECOND_REFERENCE_CHECK_FACTOR = 10.0

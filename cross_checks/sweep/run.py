@@ -588,6 +588,7 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
             scenario_info[-1]["error_amplification"] = meas.get("amplification", {})
             scenario_info[-1]["reference_error"] = meas.get("reference_error")
             scenario_info[-1]["physics"] = meas.get("physics")
+            scenario_info[-1]["second_reference"] = meas.get("second_reference")
             scenario_info[-1]["varies"] = ref_varies[i]
             for v in variants:
                 vrows = [r for r in rows if r["scenario"] == sc.name and r["engine"] == v]

@@ -144,7 +144,7 @@ def test_an_oscillator_is_claimed_where_the_amplitude_model_allows_it():
 
 # --- the traits, pinned on the engines themselves -------------------------------------------------------
 
-FIRST_ORDER_WITH_GYRO = [v for v, p in NOMINAL_ORDER.items() if p == 1.0 and VARIANT_TRAITS[v].gyroscopic_term]
+FIRST_ORDER_WITH_GYRO = [v for v, t in VARIANT_TRAITS.items() if nominal_order(v) == 1.0 and t.gyroscopic_term]
 
 
 def _invariants(sc, y):
@@ -191,7 +191,7 @@ def test_every_built_in_variant_has_a_nominal_order_equal_to_the_order_its_adapt
     from cross_checks.engines import BUILTIN_ENGINES, all_variants
     from cross_checks.analysis.expectations import NOMINAL_ORDER
     built_in = [v for v in all_variants() if v.engine in BUILTIN_ENGINES]
-    assert len(built_in) == 14
+    assert len(built_in) == 18
     for v in built_in:
-        assert NOMINAL_ORDER[v.name] in (1.0, 2.0, 4.0)
-        assert v.order == NOMINAL_ORDER[v.name], v.name
+        assert nominal_order(v.name) in (1.0, 2.0, 3.0, 4.0) and v.name in VARIANT_TRAITS
+        assert v.order == nominal_order(v.name), v.name
