@@ -214,6 +214,21 @@ def _model(scenario, variant: str, dt_s: float) -> DrakeModel:
     return model
 
 
+def _first_bad(x_out, start: int, stop: int):
+    """``(step, reason)`` of the first recorded row in ``[start, stop)`` that is non-finite or beyond
+    BLOWUP_LIMIT, else None."""
+    bad = _bad_rows(from_drake_state(x_out[start:stop]))
+    if not bad.any():
+        return None
+    n = start + int(np.argmax(bad))
+    return n, (f"state beyond {BLOWUP_LIMIT:g}" if np.all(np.isfinite(x_out[n])) else "non-finite state")
+
+
+def _diverged(x_out, dt_s: float, n_bad: int, what: str) -> Run:
+    return Run(dt_s * np.arange(n_bad), from_drake_state(x_out[:n_bad]), n_bad * dt_s,
+               f"diverged at t = {n_bad * dt_s:.6g} s ({what})")
+
+
 def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
     """Free run of ``n_steps`` fixed steps of ``dt_s`` from the scenario's initial state, every step recorded."""
     model = _model(scenario, variant, dt_s)
@@ -229,18 +244,16 @@ def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
             for n in range(start, stop):
                 try:
                     advance(n * dt_s)
-                except RuntimeError as exc:   # Drake refuses to go on (e.g. Newton failed): divergence
-                    y = from_drake_state(x_out[:n])
-                    msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-                    return Run(dt_s * np.arange(n), y, n * dt_s, f"diverged at t = {n * dt_s:.6g} s (Drake: {msg})")
+                except RuntimeError as exc:   # Drake refuses to go on (NaN detected, Newton failed): divergence
+                    first = _first_bad(x_out, start, n)
+                    if first is not None:     # the state had already blown up: that is the time
+                        return _diverged(x_out, dt_s, *first)
+                    words = str(exc).strip().splitlines()
+                    return _diverged(x_out, dt_s, n, f"Drake: {words[0] if words else type(exc).__name__}")
                 x_out[n] = get()
-            y_chunk = from_drake_state(x_out[start:stop])
-            bad = _bad_rows(y_chunk)
-            if bad.any():
-                n_bad = start + int(np.argmax(bad))
-                what = f"state beyond {BLOWUP_LIMIT:g}" if np.all(np.isfinite(x_out[n_bad])) else "non-finite state"
-                return Run(dt_s * np.arange(n_bad), from_drake_state(x_out[:n_bad]), n_bad * dt_s,
-                           f"diverged at t = {n_bad * dt_s:.6g} s ({what})")
+            first = _first_bad(x_out, start, stop)
+            if first is not None:
+                return _diverged(x_out, dt_s, *first)
             start = stop
     return Run(dt_s * np.arange(n_steps + 1), from_drake_state(x_out))
 
