@@ -121,15 +121,17 @@ def _force_system_class():
             super().__init__()
             self._scenario = scenario
             p = scenario.problem
-            self._weight = p.body.mass_kg * np.asarray(p.forces.gravity_W, dtype=float)
+            self._weight = (p.body.mass_kg * np.asarray(p.forces.gravity_W, dtype=float)).tolist()
             self._x = self.DeclareVectorInputPort("state", 13)
             self.DeclareVectorOutputPort("generalized_force", 6, self._calc)
 
         def _calc(self, context, output):
-            x = self._x.Eval(context)
-            y = np.array([x[4], x[5], x[6], x[10], x[11], x[12], x[0], x[1], x[2], x[3], x[7], x[8], x[9]])
+            # plain floats: this runs at every derivative evaluation (a Newton iteration's Jacobian too)
+            x = self._x.Eval(context).tolist()
+            y = [x[4], x[5], x[6], x[10], x[11], x[12], x[0], x[1], x[2], x[3], x[7], x[8], x[9]]
             f, tau = stage_force_torque(self._scenario, y)
-            output.SetFromVector(np.concatenate([tau, f - self._weight]))
+            w = self._weight
+            output.SetFromVector(np.array([tau[0], tau[1], tau[2], f[0] - w[0], f[1] - w[1], f[2] - w[2]]))
 
     return StageForces
 
