@@ -152,3 +152,14 @@ def test_a_drake_failure_is_reported_not_raised(monkeypatch):
     t, y, label = _primary(sc)
     rec = SR.second_reference(sc, t, y, label, {}, None, True)
     assert rec["agrees"] is None and rec["error"] == "RuntimeError: Simulator stopped"
+
+
+def test_a_sweep_whose_references_disagree_exits_1_saying_so():
+    from cross_checks.cli import _gate_failures
+    rec = {"label": "drake X", "agrees": False, "disagreeing": ["orientation"]}
+    summary = {"scenarios": [{"name": "tennis_racket", "reference": "analytic", "second_reference": rec},
+                             {"name": "projectile", "reference": "analytic", "second_reference": None}]}
+    assert _gate_failures(summary) == ["the references of tennis_racket disagree: analytic and drake X differ in "
+                                       "orientation beyond their measured accuracies"]
+    rec["agrees"] = None     # Drake failed: not a disagreement (the record says why)
+    assert _gate_failures(summary) == []
