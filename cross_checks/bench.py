@@ -280,6 +280,7 @@ def format_table(r: dict) -> str:
 
 
 def main(quick: bool = False, json_path: str | None = None) -> int:
+    """``rbcheck bench``: measure, print the table, write ``json_path`` (checked writable by the CLI first)."""
     r = run_bench(quick)
     print(format_table(r))
     if json_path:
@@ -287,17 +288,3 @@ def main(quick: bool = False, json_path: str | None = None) -> int:
         atomic_write_text(json_path, json.dumps(r, indent=2, sort_keys=True) + "\n")
     return 0
 
-
-if __name__ == "__main__":
-    import argparse
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--json")
-    a = ap.parse_args()
-    if a.json:  # fail at once, not after the benchmark
-        from cross_checks.sweep.results_dir import ResultsDirError, check_writable_dir
-        try:
-            check_writable_dir(os.path.dirname(os.path.abspath(a.json)), "--json", a.json)
-        except ResultsDirError as exc:
-            ap.error(str(exc))
-    raise SystemExit(main(a.quick, a.json))

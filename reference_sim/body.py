@@ -150,7 +150,3 @@ class RigidBody:
     def world_inertia(self, R_WB):
         """World-frame inertia ``R I_B Rᵀ`` (kg m²) for rotations ``R_WB`` (..., 3, 3)."""
         return R_WB @ self.inertia_B @ np.swapaxes(R_WB, -1, -2)
-
-    def world_inertia_inv(self, R_WB):
-        """``R I_B⁻¹ Rᵀ`` (1/(kg m²)) for rotations ``R_WB`` (..., 3, 3)."""
-        return R_WB @ self.inertia_inv_B @ np.swapaxes(R_WB, -1, -2)

@@ -14,8 +14,9 @@ from reference_sim.body import RigidBody
 from reference_sim.quaternion import matrix_from_quat, rotate
 from reference_sim.vec import cross3
 
-__all__ = ["Spring", "PointForce", "Torque", "ForceModel"]
+__all__ = ["Spring", "PointForce", "Torque", "ForceModel", "FRAMES"]
 
+#: The axes a point force or torque may be given in.
 FRAMES = ("world", "body")
 
 

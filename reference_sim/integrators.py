@@ -34,13 +34,16 @@ each converges at its order to the continuously damped motion.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Callable
+
 import numpy as np
 
 from reference_sim.quaternion import matrix_from_quat, quat_exp, quat_mul
 from reference_sim.vec import cross3 as _cross, mat_t_vec3 as _mtv, matvec3 as _mv
 from reference_sim.state import Q, STATE_SIZE, V, W, X, Problem
 
-__all__ = ["VARIANTS", "DESCRIPTIONS", "get_step", "rhs", "IMPLICIT_TOL", "ImplicitSolveError"]
+__all__ = ["VARIANTS", "Scheme", "get_step", "rhs", "IMPLICIT_TOL", "ImplicitSolveError"]
 
 #: Convergence tolerance of the implicit solves (implicit Euler's Newton iteration and leapfrog's
 #: implicit half kick): max-norm of the update, relative to 1 + |y|. Two orders above double
@@ -241,38 +244,40 @@ def step_leapfrog(problem, y, dt):
     return z
 
 
+@dataclass(frozen=True)
+class Scheme:
+    """One reference variant: its step function, its global order on the problems it models (proven by
+    tests/reference_sim/test_integrators.py; docs/course_equations.md), a one-line description, and
+    whether its step ends an iterative solve (stopped at IMPLICIT_TOL, not at the exact root)."""
+
+    step: Callable
+    order: int
+    description: str
+    iterative: bool = False
+
+
+#: The reference variants: the one registry every other list of them (the scalar kernels, the adapter's
+#: declared variants and orders, the checker's candidates) derives from.
 VARIANTS = {
-    "course": step_course,
-    "course_gyro": step_course_gyro,
-    "expmap_gyro": step_expmap_gyro,
-    "explicit_euler": step_explicit_euler,
-    "implicit_euler": step_implicit_euler,
-    "midpoint": step_midpoint,
-    "leapfrog": step_leapfrog,
-    "rk4": step_rk4,
-}
-
-DESCRIPTIONS = {
-    "course": "the course's step exactly: symplectic Euler, q += [0, dt/2 w] q, normalise; NO gyroscopic term",
-    "course_gyro": "the course's step plus the explicit gyroscopic torque -w x (I w)",
-    "expmap_gyro": "symplectic Euler, explicit gyroscopic term, exact exp-map quaternion update (= MuJoCo Euler)",
-    "explicit_euler": "explicit (forward) Euler on the whole state, gyroscopic term included",
-    "implicit_euler": "implicit (backward) Euler on the whole state, Newton solve to 1e-13",
-    "midpoint": "explicit mid-point (RK2) on the whole state",
-    "leapfrog": "Stormer-Verlet kick-drift-kick, exp-map drift; velocities at integer steps",
-    "rk4": "classical Runge-Kutta 4 on the whole state",
-}
-
-#: Expected global order of each variant on problems it models (docs/course_equations.md).
-EXPECTED_ORDER = {
-    "course": 1, "course_gyro": 1, "expmap_gyro": 1, "explicit_euler": 1, "implicit_euler": 1,
-    "midpoint": 2, "leapfrog": 2, "rk4": 4,
+    "course": Scheme(step_course, 1, "the course's step exactly: symplectic Euler, q += [0, dt/2 w] q, normalise; "
+                                     "NO gyroscopic term"),
+    "course_gyro": Scheme(step_course_gyro, 1, "the course's step plus the explicit gyroscopic torque -w x (I w)"),
+    "expmap_gyro": Scheme(step_expmap_gyro, 1, "symplectic Euler, explicit gyroscopic term, exact exp-map quaternion "
+                                               "update (= MuJoCo Euler)"),
+    "explicit_euler": Scheme(step_explicit_euler, 1, "explicit (forward) Euler on the whole state, gyroscopic term "
+                                                     "included"),
+    "implicit_euler": Scheme(step_implicit_euler, 1, "implicit (backward) Euler on the whole state, Newton solve to "
+                                                     f"{IMPLICIT_TOL:g}", iterative=True),
+    "midpoint": Scheme(step_midpoint, 2, "explicit mid-point (RK2) on the whole state"),
+    "leapfrog": Scheme(step_leapfrog, 2, "Stormer-Verlet kick-drift-kick, exp-map drift; velocities at integer steps",
+                       iterative=True),
+    "rk4": Scheme(step_rk4, 4, "classical Runge-Kutta 4 on the whole state"),
 }
 
 
 def get_step(variant: str):
     """The step function of a variant name (without the ``reference:`` prefix)."""
     try:
-        return VARIANTS[variant]
+        return VARIANTS[variant].step
     except KeyError:
         raise KeyError(f"unknown reference variant {variant!r}; choose from {', '.join(VARIANTS)}") from None

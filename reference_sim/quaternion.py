@@ -27,17 +27,12 @@ __all__ = [
     "quat_from_matrix",
     "quat_exp",
     "quat_log",
-    "skew",
     "rotate",
     "geodesic_angle",
     "quat_canonical",
     "euler_zxy_from_quat",
     "quat_from_euler_zxy",
-    "IDENTITY",
 ]
-
-IDENTITY = np.array([1.0, 0.0, 0.0, 0.0])
-
 
 def quat_mul(q1, q2):
     """Hamilton product ``q1 q2`` of quaternions ``(..., 4)`` in (w, x, y, z) order."""
@@ -158,19 +153,6 @@ def quat_log(q):
     """Rotation vector ``θ u`` (rad, ``(..., 3)``) of unit quaternions; θ in [0, π] (q and −q alike)."""
     axis, angle = axis_angle_from_quat(q)
     return axis * angle[..., None]
-
-
-def skew(w):
-    """Skew matrix ``[w]×`` ``(..., 3, 3)`` with ``[w]× a = w × a``."""
-    w = np.asarray(w, dtype=float)
-    S = np.zeros(w.shape[:-1] + (3, 3))
-    S[..., 0, 1] = -w[..., 2]
-    S[..., 0, 2] = w[..., 1]
-    S[..., 1, 0] = w[..., 2]
-    S[..., 1, 2] = -w[..., 0]
-    S[..., 2, 0] = -w[..., 1]
-    S[..., 2, 1] = w[..., 0]
-    return S
 
 
 def rotate(q, v):

@@ -19,11 +19,9 @@ import numpy as np
 from reference_sim.integrators import IMPLICIT_TOL, ImplicitSolveError, get_step
 from reference_sim.state import Problem
 
-__all__ = ["ScalarStepper", "SCALAR_VARIANTS"]
+__all__ = ["ScalarStepper"]
 
 _MAX_ITER = 50
-SCALAR_VARIANTS = ("course", "course_gyro", "expmap_gyro", "explicit_euler", "midpoint", "leapfrog", "rk4",
-                   "implicit_euler")
 
 
 class _FloatBackend:

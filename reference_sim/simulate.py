@@ -8,7 +8,7 @@ import numpy as np
 from reference_sim.integrators import ImplicitSolveError, get_step
 from reference_sim.state import Problem
 
-__all__ = ["Run", "simulate", "BLOWUP_LIMIT", "n_steps_for"]
+__all__ = ["Run", "simulate", "BLOWUP_LIMIT", "bad_rows", "blowup_words", "diverged"]
 
 #: A state component beyond this magnitude (m, m/s, rad/s) counts as a blow-up. Free-body scenarios
 #: of the catalog stay below 1e3 in every quantity; 1e8 is far outside any physical run yet well
@@ -33,9 +33,23 @@ class Run:
     message: str = ""
 
 
-def n_steps_for(duration_s: float, dt_s: float) -> int:
-    """Number of steps of size dt covering the duration (rounded to the nearest whole step)."""
-    return int(round(duration_s / dt_s))
+def bad_rows(y):
+    """True for each state of ``y`` (..., 13) that is non-finite or has a component beyond BLOWUP_LIMIT:
+    the one divergence test of every engine's run (shape (...))."""
+    with np.errstate(invalid="ignore"):
+        return ~np.all(np.isfinite(y), axis=-1) | (np.max(np.abs(y), axis=-1) > BLOWUP_LIMIT)
+
+
+def blowup_words(y) -> str:
+    """What is wrong with a state that :func:`bad_rows` flags: "non-finite state" or "state beyond 1e+08"."""
+    return "non-finite state" if not np.all(np.isfinite(y)) else f"state beyond {BLOWUP_LIMIT:g}"
+
+
+def diverged(y_good, dt_s: float, why: str) -> Run:
+    """A run that diverged in its step n = len(y_good): the states before it, ``diverged_at_s`` = n Δt and
+    the message ``diverged at t = … s`` followed by ``why`` (e.g. " (non-finite state)")."""
+    n = len(y_good)
+    return Run(dt_s * np.arange(n), y_good, n * dt_s, f"diverged at t = {n * dt_s:.6g} s{why}")
 
 
 def simulate(problem: Problem, variant: str, dt_s: float, n_steps: int, y0=None) -> Run:
@@ -56,10 +70,9 @@ def simulate(problem: Problem, variant: str, dt_s: float, n_steps: int, y0=None)
             with np.errstate(all="ignore"):
                 y = step(problem, y, dt_s)
         except (ImplicitSolveError, np.linalg.LinAlgError) as exc:
-            return Run(dt_s * np.arange(n), out[:n], n * dt_s, f"diverged at t = {n * dt_s:.6g} s: {exc}")
-        if not np.all(np.isfinite(y)) or np.max(np.abs(y)) > BLOWUP_LIMIT:
-            what = "non-finite state" if not np.all(np.isfinite(y)) else f"state beyond {BLOWUP_LIMIT:g}"
-            return Run(dt_s * np.arange(n), out[:n], n * dt_s, f"diverged at t = {n * dt_s:.6g} s ({what})")
+            return diverged(out[:n], dt_s, f": {exc}")
+        if np.any(bad_rows(y)):
+            return diverged(out[:n], dt_s, f" ({blowup_words(y)})")
         out[n] = y
     return Run(dt_s * np.arange(n_steps + 1), out)
 
@@ -76,11 +89,10 @@ def _simulate_single(problem: Problem, variant: str, dt_s: float, n_steps: int, 
         try:
             cur = step(cur)
         except (ImplicitSolveError, np.linalg.LinAlgError, OverflowError, ZeroDivisionError, ValueError) as exc:
-            return Run(dt_s * np.arange(n), np.array(rows), n * dt_s,
-                       f"diverged at t = {n * dt_s:.6g} s: {type(exc).__name__}: {exc}")
-        big = max(map(abs, cur))
-        if not big <= limit:  # also catches NaN
-            what = "non-finite state" if big != big or big == float("inf") else f"state beyond {limit:g}"
-            return Run(dt_s * np.arange(n), np.array(rows), n * dt_s, f"diverged at t = {n * dt_s:.6g} s ({what})")
+            return diverged(np.array(rows), dt_s, f": {type(exc).__name__}: {exc}")
+        # bad_rows in plain floats (it runs every step): max() skips a NaN that is not first, the sum does not
+        total = sum(cur)
+        if not max(map(abs, cur)) <= limit or total != total:
+            return diverged(np.array(rows), dt_s, f" ({blowup_words(cur)})")
         rows.append(cur)
     return Run(dt_s * np.arange(n_steps + 1), np.array(rows))

@@ -9,7 +9,7 @@ from reference_sim.body import RigidBody
 from reference_sim.forces import ForceModel
 from reference_sim.quaternion import quat_normalize
 
-__all__ = ["State", "Problem", "pack", "unpack", "STATE_SIZE"]
+__all__ = ["State", "Problem", "pack", "STATE_SIZE"]
 
 #: Packed state layout along the last axis: x_W (0:3), v_W (3:6), q_WB (6:10, w x y z), w_W (10:13).
 STATE_SIZE = 13
@@ -34,10 +34,6 @@ class State:
     def packed(self) -> np.ndarray:
         return pack(self.x_W, self.v_W, self.q_WB, self.w_W)
 
-    @classmethod
-    def from_packed(cls, y) -> "State":
-        return cls(*unpack(y))
-
 
 def pack(x_W, v_W, q_WB, w_W) -> np.ndarray:
     """Concatenate a state into ``(..., 13)`` = [x_W, v_W, q_WB (w x y z), w_W]."""
@@ -45,11 +41,6 @@ def pack(x_W, v_W, q_WB, w_W) -> np.ndarray:
     lead = arrs[0].shape[:-1]
     return np.concatenate([np.broadcast_to(np.asarray(a, dtype=float), lead + (np.shape(a)[-1],))
                            for a in (x_W, v_W, q_WB, w_W)], axis=-1)
-
-
-def unpack(y):
-    """Split ``(..., 13)`` into views ``x_W, v_W, q_WB, w_W``."""
-    return y[..., X], y[..., V], y[..., Q], y[..., W]
 
 
 @dataclass(frozen=True, eq=False)

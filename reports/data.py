@@ -15,11 +15,9 @@ import numpy as np
 from cross_checks.sweep.results_dir import inside, safe_file_stem
 from cross_checks.sweep.schema import STATUSES
 
-__all__ = ["Results", "ResultsError", "load_results", "read_summary", "QUANTITIES", "UNITS", "COLUMN_STEM", "LABELS"]
+__all__ = ["Results", "ResultsError", "load_results", "read_summary", "LABELS"]
 
-QUANTITIES = ("position", "orientation", "velocity", "angular_velocity")
-UNITS = {"position": "m", "velocity": "m/s", "orientation": "rad", "angular_velocity": "rad/s"}
-COLUMN_STEM = {"position": "pos", "velocity": "vel", "orientation": "orient", "angular_velocity": "angvel"}
+#: How the report names each quantity (cross_checks.core.quantities.QUANTITIES) in its sentences.
 LABELS = {"position": "position", "velocity": "velocity", "orientation": "orientation",
           "angular_velocity": "angular velocity"}
 
@@ -144,7 +142,7 @@ def load_results(directory) -> Results:
 
 
 def read_summary(sj: Path, for_report: bool = False) -> dict:
-    """summary.json, checked against reports.schema (ResultsError naming the file and the field)."""
+    """summary.json, checked against cross_checks.sweep.schema (ResultsError naming the file and the field)."""
     from cross_checks.sweep.schema import SchemaError, check_summary
     try:
         summary = json.loads(sj.read_text(encoding="utf-8"))

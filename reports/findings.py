@@ -12,7 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from reports.data import LABELS, QUANTITIES, UNITS
+from cross_checks.core import tolerances as tol
+from cross_checks.core.quantities import QUANTITIES, UNITS
+from reports.data import LABELS
 
 __all__ = ["Finding", "findings", "fmt", "fmt_dt"]
 
@@ -164,7 +166,7 @@ def findings(res) -> list:
         info.append(Finding("info", f"On {sc}, {LABELS[q]} is exact to round-off at every Δt with "
                                     f"{_and(engines)}: the scheme integrates this motion exactly.", sc, None))
     above = [r for r in recs if r["verdict"] == "converges" and r["matches_expectation"] and r["order"] is not None
-             and r["expected_order"] is not None and r["order"] > r["expected_order"] + 0.3]
+             and r["expected_order"] is not None and r["order"] > r["expected_order"] + tol.SWEEP_ORDER_TOL]
     for (sc, q), rs in sorted(_group(above, lambda r: (r["scenario"], r["quantity"])).items(),
                               key=lambda kv: (scen_order.get(kv[0][0], 99), QUANTITIES.index(kv[0][1]))):
         rs.sort(key=lambda r: var_order.get(r["engine"], 99))
@@ -210,7 +212,7 @@ def findings(res) -> list:
             parts = _and(f"{r['scenario']} ({fmt(r['max_rel'])})" if r["max_rel"] is not None
                          else f"{r['scenario']} ({r['note']})" for r in badr)
             bad.append(Finding("bad", f"{a} and {b} should be the same scheme ({rs[0]['reason']}) but their final "
-                                      f"states differ beyond {fmt(rs[0].get('tolerance', 1e-9))} (relative) on {parts}.",
+                                      f"states differ beyond {fmt(rs[0].get('tolerance', tol.SAME_SCHEME_REL))} (relative) on {parts}.",
                                None, b))
         if good:
             worst = max(r["max_rel"] for r in good)

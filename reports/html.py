@@ -10,7 +10,8 @@ import math
 
 from jinja2 import Environment, PackageLoader, StrictUndefined, select_autoescape
 
-from reports.data import COLUMN_STEM, LABELS, QUANTITIES, UNITS
+from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, UNITS
+from reports.data import LABELS
 from reports.findings import findings, fmt, fmt_dt
 
 __all__ = ["environment", "render_pages", "page_name"]

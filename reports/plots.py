@@ -20,7 +20,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 
-from reports.data import COLUMN_STEM, LABELS, QUANTITIES, UNITS  # noqa: E402
+from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, UNITS  # noqa: E402
+from reports.data import LABELS  # noqa: E402
 
 __all__ = ["KINDS", "scenario_figures", "variant_styles"]
 
@@ -263,7 +264,6 @@ def _order_table(res, sc, mode):
 
 
 def fig_ladder(res, sc, styles, path, mode):
-    info = res.scenario(sc)
     what = "final error vs Δt" if mode == "free_running" else "one-step (local) error vs Δt"
     fig, axes = _figure(2, 2, f"{sc}: {what}; filled markers: points used for the fitted order; grey band: "
                               "round-off floor; triangles: slopes 1, 2, 4", height=8.5)
@@ -278,7 +278,6 @@ def fig_ladder(res, sc, styles, path, mode):
 
 
 def fig_work(res, sc, styles, path):
-    info = res.scenario(sc)
     qs = ("position", "orientation")
     fig, axes = _figure(1, 2, f"{sc}: work-precision — final error vs wall time of the run "
                               f"(every Δt of the ladder; zero drawn at {LOG_FLOOR:g})", height=5.5)

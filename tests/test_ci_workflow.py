@@ -24,7 +24,11 @@ def test_workflow_parses_and_uses_the_readme_commands():
     compare = [r for r in runs if "rbcheck compare baselines/" in r]
     assert compare and "--markdown" in compare[0]
     assert any("GITHUB_STEP_SUMMARY" in r for r in runs)
-    assert any(s.get("uses", "").startswith("actions/upload-artifact") for s in steps)
+    # the full results (report and summary.json) and their compact baseline are uploaded as artifacts
+    out = re.search(r"rbcheck sweep .*--out (\S+)", main_cmd)[1]
+    uploaded = [s["with"]["path"] for s in steps if s.get("uses", "").startswith("actions/upload-artifact")]
+    baseline = [r.split() for r in runs if "rbcheck baseline" in r]
+    assert out in uploaded and baseline and baseline[0][-2] == out and baseline[0][-1] in uploaded
 
 
 def test_ci_run_runs_the_readme_test_command():

@@ -1,11 +1,10 @@
-"""Regression gates: a fresh sweep judged by cross_checks/expectations.py and against the committed baseline.
+"""Regression gates: a fresh sweep judged by cross_checks/analysis/expectations.py and against the committed baseline.
 
 The default run sweeps FAST_SUBSET (every available variant, each scenario's full dt ladder); the
-whole catalog runs under ``-m slow``. Every number comes from cross_checks.expectations /
-cross_checks.tolerances, each with its derivation there.
+whole catalog runs under ``-m slow``. Every number comes from cross_checks.analysis.expectations /
+cross_checks.core.tolerances, each with its derivation there.
 """
 import json
-import os
 from pathlib import Path
 
 import pandas as pd
@@ -17,6 +16,7 @@ from cross_checks.analysis.expectations import EQUIVALENT_PAIRS, energy_drift_bo
 from cross_checks.scenario import catalog_names, load_scenario
 from cross_checks.sweep import run_sweep
 from cross_checks.core.tolerances import SAME_SCHEME_REL
+from tests.helpers.sweeps import built_once, private_cache
 
 ROOT = Path(__file__).resolve().parents[1]
 BASELINE = ROOT / "baselines" / "default"
@@ -27,26 +27,21 @@ ASYMMETRIC_TUMBLING = ["tennis_racket", "particle_body", "tumbling_box"]
 
 
 def _sweep(tmp_path_factory, names, tag):
-    out = tmp_path_factory.mktemp(tag) / "results"
-    old = os.environ.get("RBCHECK_CACHE_DIR")
-    os.environ["RBCHECK_CACHE_DIR"] = str(tmp_path_factory.mktemp(f"{tag}-cache"))
-    try:
-        run_sweep([load_scenario(n) for n in names], available_variants(), out, jobs=2, use_cache=False,
-                  progress=False)
-    finally:
-        if old is None:
-            os.environ.pop("RBCHECK_CACHE_DIR", None)
-        else:
-            os.environ["RBCHECK_CACHE_DIR"] = old
+    """One sweep of ``names`` with every available variant per test run (the xdist workers share it)."""
+    def build(folder):
+        with private_cache(folder / "cache"):
+            run_sweep([load_scenario(n) for n in names], available_variants(), folder / "results", jobs=2,
+                      use_cache=False, progress=False)
+    out = built_once(tmp_path_factory, f"gates-{tag}", build) / "results"
     return out, pd.read_csv(out / "results.csv"), json.loads((out / "summary.json").read_text())
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def fast(tmp_path_factory):
     return _sweep(tmp_path_factory, FAST_SUBSET, "fast")
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def full(tmp_path_factory):
     return _sweep(tmp_path_factory, catalog_names(), "full")
 
@@ -102,6 +97,30 @@ def test_fresh_sweep_matches_the_committed_baseline(fast):
     c = compare_dirs(BASELINE, fast[0])
     assert c.matched_rows == len(fast[1]), "every row of the fresh subset must exist in the baseline"
     assert c.exit_code(allow_missing=True) == 0, to_text(c, allow_missing=True)
+
+
+def test_fresh_sweep_is_bit_identical_to_the_baseline_where_it_was_made(fast, tmp_path):
+    """Results are reproduced exactly, not only within compare's tolerance, on the versions and machine
+    the baseline was made with: every cell of every row (timing aside) and every verdict record."""
+    import csv
+
+    from cross_checks.gates.baseline import write_baseline
+    made = json.loads((BASELINE / "summary.json").read_text())
+    fresh = write_baseline(fast[0], tmp_path / "fresh").summary
+    keys = ("rbcheck", "numpy", "scipy", "mujoco", "pybullet", "python", "platform", "machine")
+    env_made, env_here = ({k: s["provenance"].get(k) for k in keys} for s in (made, fresh))
+    if env_made != env_here:
+        pytest.skip(f"baseline made with {env_made}, here {env_here}: exactness is claimed on the same versions "
+                    "and machine only (the tolerant comparison runs everywhere)")
+
+    def rows(path):
+        with open(path, newline="", encoding="utf-8") as fh:
+            return {(r["scenario"], r["engine"], r["dt"]): r for r in csv.DictReader(fh)}
+    old, new = rows(BASELINE / "results.csv"), rows(tmp_path / "fresh" / "results.csv")
+    assert len(new) == len(fast[1]) and [k for k in new if old.get(k) != new[k]] == []
+    for key in ("convergence", "local_convergence", "agreement"):
+        in_subset = [r for r in made[key] if r["scenario"] in FAST_SUBSET]
+        assert sorted(map(json.dumps, fresh[key])) == sorted(map(json.dumps, in_subset)), key
 
 
 @pytest.mark.slow

@@ -34,6 +34,7 @@ BAD = {
     "report": ["report", "{tmp}/missing"],
     "check": ["check", "{tmp}/missing.csv", "--scenario", "projectile"],
     "compare": ["compare", "{tmp}/missing", "{tmp}/missing"],
+    "baseline": ["baseline", "{tmp}/missing", "{tmp}/out"],
     "bench": ["bench", "--json", "{tmp}/no/such/dir/b.json"],
 }
 

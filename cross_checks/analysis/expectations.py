@@ -3,7 +3,7 @@
 A sweep fits a convergence order per (scenario, variant, quantity) and compares it with
 :func:`expectation`, decided from the variant's traits (:func:`traits`, one table keyed by variant,
 with a documented default for a variant it knows nothing about) and the scenario's PHYSICS
-(:mod:`cross_checks.physics`: rates, separatrix proximity and error amplification measured on its
+(:mod:`cross_checks.analysis.physics`: rates, separatrix proximity and error amplification measured on its
 reference) — never from a scenario's name:
 
 * ``does_not_converge``: the variant lacks a term the motion needs (the course's update has no
@@ -25,32 +25,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from reference_sim.integrators import EXPECTED_ORDER as _REFERENCE_ORDER
-from cross_checks.core.quantities import QUANTITIES
+from reference_sim.analytic import EQUAL_MOMENTS_REL_TOL
 
-__all__ = ["energy_drift_bound", "characteristic_rate_sq", "QUANTITIES", "NOMINAL_ORDER", "VARIANT_TRAITS",
+from cross_checks.core.quantities import QUANTITIES
+from cross_checks.engines import declared_order
+
+__all__ = ["energy_drift_bound", "characteristic_rate_sq", "QUANTITIES", "VARIANT_TRAITS",
            "DEFAULT_TRAITS", "Traits", "traits", "EQUIVALENT_PAIRS", "Expectation", "expectation", "expected_order",
            "nominal_order", "gyroscopic_term_matters", "rotation_drives_translation", "translation_drives_rotation"]
-
-
-#: Nominal global order per ENGINE:VARIANT, the same for every quantity.
-NOMINAL_ORDER = {
-    # reference:* — reference_sim.integrators.EXPECTED_ORDER is the single source for the NumPy
-    # schemes (its own tests prove them): course / course_gyro / expmap_gyro are symplectic Euler
-    # (one force evaluation, O(Δt²) local error -> 1); explicit and implicit Euler: 1; mid-point and
-    # leapfrog (Störmer–Verlet): 2; classical RK4: 4.
-    **{f"reference:{v}": float(p) for v, p in _REFERENCE_ORDER.items()},
-    # MuJoCo Euler is semi-implicit Euler + exp-map quaternion = reference:expmap_gyro: 1.
-    "mujoco:euler": 1.0,
-    # MuJoCo RK4: classical RK4 on (qpos, qvel); forces re-evaluated at every stage by the adapter: 4.
-    "mujoco:rk4": 4.0,
-    # MuJoCo implicit(fast): velocity-implicit Euler, one linearised solve per step -> 1.
-    "mujoco:implicit": 1.0,
-    "mujoco:implicitfast": 1.0,
-    # PyBullet: semi-implicit Euler in both modes (multibody explicit gyro, maximal implicit gyro): 1.
-    "pybullet:multibody": 1.0,
-    "pybullet:maximal": 1.0,
-}
 
 
 @dataclass(frozen=True)
@@ -83,8 +65,8 @@ class Traits:
 _SYMPLECTIC_EULER_EXPLICIT_GYRO = Traits(rotation_drift="body", rotation_sign=+1)
 _SYMPLECTIC_EULER_IMPLICIT_GYRO = Traits(rotation_drift="body", rotation_sign=-1)
 
-#: Traits per ENGINE:VARIANT, the one table (tests/cross_checks/test_expectations.py pins each sign on
-#: the engines themselves, and that the body-frame steps keep the separatrix distance).
+#: Traits per ENGINE:VARIANT, the one table (tests/cross_checks/analysis/test_expectations.py pins each
+#: sign on the engines themselves, and that the body-frame steps keep the separatrix distance).
 VARIANT_TRAITS = {
     "reference:course": Traits(gyroscopic_term=False),
     "reference:course_gyro": _SYMPLECTIC_EULER_EXPLICIT_GYRO,
@@ -163,18 +145,15 @@ class Expectation:
 
 
 def nominal_order(variant: str) -> float | None:
-    """The nominal global order of ``ENGINE:VARIANT``: NOMINAL_ORDER, else the order a user engine
-    declares (engine file or entry-point adapter); None for a name nobody declares."""
-    p = NOMINAL_ORDER.get(variant)
-    if p is None:  # user engines declare their own order, which their verdicts then check
-        from cross_checks.engines import declared_order
-        p = declared_order(variant)
-    return p
+    """The nominal global order of ``ENGINE:VARIANT``, the same for every quantity: the order its adapter
+    declares (rbcheck's own adapters and a user's engine file or entry point alike; verdicts then check
+    it); None for a name nobody declares."""
+    return declared_order(variant)
 
 
 def _isotropic(inertia_B) -> bool:
     m = np.linalg.eigvalsh(np.asarray(inertia_B, float))
-    return bool(m[-1] - m[0] <= 1e-12 * m[-1])
+    return bool(m[-1] - m[0] <= EQUAL_MOMENTS_REL_TOL * m[-1])
 
 
 def gyroscopic_term_matters(scenario) -> bool:
@@ -227,7 +206,7 @@ def expectation(scenario, variant: str, quantity: str, mode: str = "free_running
     where the free run is pre-asymptotic (an amplitude drift builds up over a run, not in one step) —
     and no expectation (verdict None) where the variant misses a term: a missing term shows up as an
     O(Δt) local error in some quantities and O(Δt²) in others. ``physics``: the scenario's
-    :class:`~cross_checks.physics.ScenarioPhysics` (measured here when omitted, once per scenario —
+    :class:`~cross_checks.analysis.physics.ScenarioPhysics` (measured here when omitted, once per scenario —
     unless ``measure_physics`` is False: then no pre-asymptotic decision is made, e.g. for a scenario
     whose reference could not be computed, where every run is a failed row anyway).
     """
@@ -339,8 +318,8 @@ def energy_drift_bound(scenario, variant: str, dt_s: float) -> float | None:
 
     An order-p scheme's global error over T at step Δt on a motion of angular frequency ω is
     ~ C (ωΔt)^p ωT; energy errors are of the same relative size. C ≤ 2 covers every scheme here
-    (explicit Euler's energy grows as e^{2χ} − 1 ≈ ω²ΔtT = (ωΔt)ωT, i.e. C = 1; ENGINE_FACTS: MuJoCo
-    Euler on the tennis racket drifts 4.6e-3 over 20 s at Δt = 1e-3, C = 0.29). Returns None where no
+    (explicit Euler's energy grows as e^{2χ} − 1 ≈ ω²ΔtT = (ωΔt)ωT, i.e. C = 1; docs/engine_conventions.md:
+    MuJoCo Euler on the tennis racket drifts 4.6e-3 over 20 s at Δt = 1e-3, C = 0.29). Returns None where no
     bound applies: a non-conservative scenario, a variant without a nominal order, or the course
     update on a body whose gyroscopic term matters (it does not model the conserved motion at all).
     """

@@ -25,17 +25,13 @@ import numpy as np
 
 from reference_sim.integrators import rhs
 from reference_sim.quaternion import geodesic_angle, quat_exp, quat_mul
-from reference_sim.state import Q, V, W, X
+from reference_sim.state import Q, W
 
 from cross_checks.core import tolerances as tol
-from cross_checks.core.quantities import QUANTITIES
-from cross_checks.scenario.references import decay_rates_per_s
+from cross_checks.core.quantities import BLOCKS, QUANTITIES
 
 __all__ = ["flow_rhs", "rk4_flow", "exact_flow", "FlowResult", "majorant", "motion_rate", "quantity_distance",
-           "distances", "local_allowances", "Allowances", "error_growth", "BLOCKS"]
-
-#: State blocks of the packed state, in the order of QUANTITIES' groups.
-BLOCKS = {"position": X, "velocity": V, "orientation": Q, "angular_velocity": W}
+           "distances", "local_allowances", "Allowances", "error_growth"]
 
 
 def flow_rhs(scenario):
@@ -87,7 +83,7 @@ def motion_rate(scenario, y) -> np.ndarray:
     frequencies √(k/m) and √(k r²/I_min), drag c/m and decay rates."""
     p = scenario.problem
     m, I_min = p.body.mass_kg, float(np.linalg.eigvalsh(p.body.inertia_B)[0])
-    fixed = [p.forces.linear_drag_N_s_per_m / m, *decay_rates_per_s(scenario)]
+    fixed = [p.forces.linear_drag_N_s_per_m / m, *p.forces.decay_rates_per_s()]
     for sp in p.forces.springs:
         fixed += [math.sqrt(sp.stiffness_N_per_m / m),
                   math.sqrt(sp.stiffness_N_per_m * float(np.dot(sp.attach_B, sp.attach_B)) / I_min)]

@@ -27,9 +27,6 @@ __all__ = ["energy_J", "angular_momentum_W", "linear_momentum_W", "conserved", "
            "drift_kind", "roundoff_floor", "drift_floor"]
 
 
-# --- errors against a reference ------------------------------------------------------------------
-
-
 # --- conserved quantities --------------------------------------------------------------------------
 
 def energy_J(problem, y, *, with_scale: bool = False):
@@ -165,10 +162,3 @@ def drift_floor(n_steps: int, amplification: float = 1.0) -> float:
     ``n_steps · ROUNDOFF_PER_STEP_REL · amplification``, where ``amplification`` (≥ 1) is the size of
     the terms summed into the quantity relative to its initial value (see :func:`energy_J`)."""
     return max(n_steps, 1) * tol.ROUNDOFF_PER_STEP_REL * max(1.0, float(amplification))
-
-
-# --- convergence -----------------------------------------------------------------------------------
-
-
-# --- series helpers ---------------------------------------------------------------------------------
-

@@ -1,5 +1,5 @@
 """What a scenario's motion is like, measured on its reference solution: the physics the expectations
-of :mod:`cross_checks.expectations` are decided from (never the scenario's name).
+of :mod:`cross_checks.analysis.expectations` are decided from (never the scenario's name).
 
 * **Characteristic rates** (rad/s or 1/s) of the parts of the motion a scheme may integrate without
   preserving amplitudes: for a signal ``s(t)`` of the true motion, ``rms|ṡ| / rms|s − s̄|`` — exactly
@@ -56,7 +56,7 @@ class MotionRates:
 
 @dataclass(frozen=True)
 class ScenarioPhysics:
-    """Everything :mod:`cross_checks.expectations` decides from, for one scenario.
+    """Everything :mod:`cross_checks.analysis.expectations` decides from, for one scenario.
 
     rates : MotionRates.
     separatrix_proximity : δ (None unless torque-free with three distinct moments and ω ≠ 0).

@@ -10,6 +10,7 @@ import argparse
 import math
 import os
 import sys
+import time
 from pathlib import Path
 
 from cross_checks.core.files import usable_cores
@@ -51,10 +52,20 @@ def build_parser() -> argparse.ArgumentParser:
                "Your own engines: --engine-file (docs/engines.md).",
     )
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_Parser)
+    # One declaration per command, in the order `rbcheck --help` lists them (alike in shape only: each
+    # says its own command's arguments).
+    for add in (_add_list, _add_show, _add_run, _add_sweep, _add_report, _add_check, _add_compare, _add_baseline,
+                _add_bench):
+        add(sub)
+    return p
 
+
+def _add_list(sub) -> None:
     ls = sub.add_parser("list", help="list catalog scenarios and engine variants (with availability)")
     _add_engine_file_option(ls)
 
+
+def _add_show(sub) -> None:
     sh = sub.add_parser(
         "show", help="the resolved scenario: body, initial state and forces exactly as every engine receives them",
         description="Print the scenario with every alternative resolved (inertia 3x3 about the COM in body axes, "
@@ -66,6 +77,8 @@ def build_parser() -> argparse.ArgumentParser:
     sh.add_argument("--dt", type=_positive_float, metavar="DT", help="resolve at this time step, s (default: the scenario's dt)")
     sh.add_argument("--duration", type=_positive_float, metavar="T", help="simulated time, s (default: the scenario's)")
 
+
+def _add_run(sub) -> None:
     r = sub.add_parser("run", help="run one scenario with one engine variant and write the trajectory CSV")
     r.add_argument("scenario", metavar="SCENARIO")
     r.add_argument("--engine", required=True, metavar="ENGINE:VARIANT", help="e.g. reference:course, mujoco:rk4")
@@ -74,14 +87,17 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--out", required=True, metavar="FILE.csv", help="trajectory CSV (sidecar FILE.json beside it)")
     _add_engine_file_option(r)
 
+
+def _add_sweep(sub) -> None:
     s = sub.add_parser(
         "sweep", help="run scenarios x engine variants x dt ladders; write results, convergence verdicts and the report",
         description="Run every scenario (default: the whole catalog) with every engine variant (default: all "
                     "available) at every dt of its ladder, in parallel; write DIR/results.csv, DIR/summary.json, "
                     "DIR/series/, DIR/plots/ and the HTML report. DIR is replaced only when the sweep is complete. "
-                    "Exit 1 when a result contradicts the expectations (cross_checks/expectations.py), a run fails, "
-                    "two schemes that must be identical disagree, or a scenario's two references (its closed form "
-                    "or DOP853, and Drake's, when Drake is installed) disagree beyond their measured accuracies.")
+                    "Exit 1 when a result contradicts the expectations (cross_checks/analysis/expectations.py), a "
+                    "run fails, two schemes that must be identical disagree, or a scenario's two references (its "
+                    "closed form or DOP853, and Drake's, when Drake is installed) disagree beyond their measured "
+                    "accuracies.")
     s.add_argument("scenarios", nargs="*", metavar="SCENARIO", help="catalog names or TOML paths (default: the catalog)")
     s.add_argument("--engines", nargs="+", metavar="ENGINE[:VARIANT]",
                    help="variants to run, e.g. reference:rk4 mujoco (an engine name means all its variants); "
@@ -95,17 +111,21 @@ def build_parser() -> argparse.ArgumentParser:
     _add_engine_file_option(s)
     s.add_argument("--time-limit", type=_positive_float, metavar="S",
                    help="wall-time limit of each run and of each reference solve, s; one over it is a failed row "
-                        "(default: 900, cross_checks/tolerances.py)")
+                        "(default: 900, cross_checks/core/tolerances.py)")
     s.add_argument("--dask", metavar="ADDRESS",
                    help="run the jobs on a Dask cluster (scheduler address, e.g. tcp://host:8786) through "
                         "distributed's Client.get_executor(); needs the optional extra: pip install 'rbcheck[dask]'. "
                         "Workers must share this machine's filesystem for DIR's parent and the cache")
 
+
+def _add_report(sub) -> None:
     rp = sub.add_parser("report", help="re-render the plots and HTML of a results directory from its saved data")
     rp.add_argument("dir", metavar="DIR")
     rp.add_argument("--self-contained", action="store_true", help="embed the plots in the HTML pages")
     rp.add_argument("--jobs", type=_positive_int, metavar="N", help="processes drawing figures (default: all cores)")
 
+
+def _add_check(sub) -> None:
     c = sub.add_parser(
         "check", help="a true verdict on any simulator's trajectory CSV: correct simulation of the scenario or not, and why",
         description="Judge TRAJ.csv (trajectory CSV, columns by name; pose-only files too) against SCENARIO: from every "
@@ -127,25 +147,43 @@ def build_parser() -> argparse.ArgumentParser:
                                                       "and the one-step defect over time")
     _add_engine_file_option(c)
 
+
+def _add_compare(sub) -> None:
     cmp_ = sub.add_parser(
         "compare", help="compare a new results directory with a baseline: regressions, improvements, new/missing rows",
         description="Match rows of BASELINE_DIR/results.csv and NEW_DIR/results.csv by (scenario, engine, dt). Errors "
                     "and drifts are better when lower, orders when closer to the expected order; each metric has an "
-                    "absolute + relative tolerance (cross_checks/compare.py). Exit 0: no regression; 1: a regression "
-                    "(or rows missing from NEW_DIR, unless --allow-missing); 2: unusable input.")
+                    "absolute + relative tolerance (cross_checks/core/tolerances.py). Either directory may be a full "
+                    "results directory or a compact baseline (rbcheck baseline). Exit 0: no regression; 1: a "
+                    "regression (or rows missing from NEW_DIR, unless --allow-missing); 2: unusable input.")
     cmp_.add_argument("baseline", metavar="BASELINE_DIR")
     cmp_.add_argument("new", metavar="NEW_DIR")
     cmp_.add_argument("--markdown", metavar="FILE", help="also write the comparison as a markdown table (CI job summary)")
     cmp_.add_argument("--allow-missing", action="store_true",
                       help="rows absent from NEW_DIR (e.g. a sweep of a subset) are reported but not a regression")
 
+
+def _add_baseline(sub) -> None:
+    bl = sub.add_parser(
+        "baseline", help="write the compact, reviewable baseline of a results directory (what baselines/default holds)",
+        description="Write OUT_DIR/results.csv (RESULTS_DIR's rows without the timing columns wall_s and cached, "
+                    "cells copied exactly) and OUT_DIR/summary.json (provenance and one line per scenario, variant, "
+                    "convergence, local-convergence and agreement record, reduced to what compare reads and a "
+                    "reviewer needs to see a verdict change). rbcheck compare reads it like a results directory. "
+                    "OUT_DIR is replaced as a whole, and only when absent, empty or holding nothing but those two "
+                    "files. Exit 0: written; 2: RESULTS_DIR damaged or not a results directory, OUT_DIR refused or "
+                    "not writable. See docs/results.md.")
+    bl.add_argument("results", metavar="RESULTS_DIR", help="a results directory written by rbcheck sweep")
+    bl.add_argument("out", metavar="OUT_DIR", help="the baseline directory to write, e.g. baselines/default")
+
+
+def _add_bench(sub) -> None:
     b = sub.add_parser("bench", help="throughput of the batched reference vs MuJoCo and PyBullet, measured in one run",
                        description="Step the same free bodies (gravity + a body torque) in the batched reference, "
                                    "MuJoCo (N bodies in one model; rollout) and PyBullet, and a single trajectory in "
-                                   "the reference and mj_step; print body-steps/s and the ratios (benchmarks/bench.py).")
+                                   "the reference and mj_step; print body-steps/s and the ratios (cross_checks/bench.py).")
     b.add_argument("--quick", action="store_true", help="fewer bodies and steps (seconds instead of a minute)")
     b.add_argument("--json", metavar="FILE", help="write the measurements as JSON")
-    return p
 
 
 def _add_engine_file_option(p) -> None:
@@ -339,28 +377,20 @@ def _time_limits(seconds) -> dict:
 
 def cmd_sweep(args) -> int:
     from cross_checks.scenario import catalog_names, load_scenario
-    from cross_checks.sweep import SweepError, SweepInterrupted, run_sweep
-
+    from cross_checks.sweep import SweepError, SweepInterrupted
     from cross_checks.sweep.results_dir import ResultsDirError, check_output_dir
+
     try:
         check_output_dir(args.out)  # before any work (run_sweep checks again just before it starts)
     except ResultsDirError as exc:
         raise BadInput(str(exc)) from None
-    specs = args.scenarios or catalog_names()
-    scenarios = [load_scenario(s) for s in specs]
+    scenarios = [load_scenario(s) for s in args.scenarios or catalog_names()]
     variants, skipped = _resolve_engines(args.engines)
     if not variants:
         raise BadInput("--engines: no available engine variant to run")
-    import time
-    client = _dask_client(args.dask) if args.dask else None
     t0 = time.perf_counter()
     try:
-        import reports
-        jobs = args.jobs or usable_cores()
-        summary = run_sweep(scenarios, variants, args.out, jobs=jobs, use_cache=not args.no_cache,
-                            finish=lambda d: reports.render(d, self_contained=args.self_contained, jobs=jobs),
-                            skipped=skipped, **_time_limits(args.time_limit),
-                            executor=client.get_executor() if client is not None else None)
+        summary = _run_sweep(args, scenarios, variants, skipped)
     except SweepError as exc:
         raise BadInput(str(exc)) from None
     except SweepInterrupted as exc:
@@ -368,23 +398,42 @@ def cmd_sweep(args) -> int:
                 else f"{args.out} left as it was")
         print(f"rbcheck sweep: {'terminated' if exc.terminated else 'interrupted'}; {what}", file=sys.stderr)
         return EXIT_TERMINATED if exc.terminated else EXIT_INTERRUPTED
+    return _sweep_outcome(summary, args.out, len(scenarios), len(variants), time.perf_counter() - t0)
+
+
+def _run_sweep(args, scenarios, variants, skipped) -> dict:
+    """run_sweep with the command's options; the report is drawn inside the atomic replacement."""
+    import reports
+    from cross_checks.sweep import run_sweep
+
+    client = _dask_client(args.dask) if args.dask else None
+    jobs = args.jobs or usable_cores()
+    try:
+        return run_sweep(scenarios, variants, args.out, jobs=jobs, use_cache=not args.no_cache,
+                         finish=lambda d: reports.render(d, self_contained=args.self_contained, jobs=jobs),
+                         skipped=skipped, **_time_limits(args.time_limit),
+                         executor=client.get_executor() if client is not None else None)
     finally:
         if client is not None:
             client.close()
+
+
+def _sweep_outcome(summary, out, n_scenarios, n_variants, elapsed_s) -> int:
+    """Print what the sweep did and every result that contradicts the expectations (then exit 1)."""
     run = summary["run"]
-    print(f"rbcheck sweep: {len(scenarios)} scenario(s) x {len(variants)} variant(s): {run['runs']} runs "
+    print(f"rbcheck sweep: {n_scenarios} scenario(s) x {n_variants} variant(s): {run['runs']} runs "
           f"({run['cached_runs']} cached, {run['diverged_runs']} diverged, {run['failed_runs']} failed) "
-          f"in {time.perf_counter() - t0:.1f} s on {run['jobs']} worker(s) (runs and metrics {run['wall_s']:.1f} s, "
-          f"then the report) -> {Path(args.out) / 'index.html'}")
+          f"in {elapsed_s:.1f} s on {run['jobs']} worker(s) (runs and metrics {run['wall_s']:.1f} s, "
+          f"then the report) -> {Path(out) / 'index.html'}")
     fails = _gate_failures(summary)
-    if fails:
-        print(f"rbcheck sweep: {len(fails)} result(s) contradict the expectations:", file=sys.stderr)
-        for line in fails[:20]:
-            print(f"  {line}", file=sys.stderr)
-        if len(fails) > 20:
-            print(f"  ... and {len(fails) - 20} more (see the findings in index.html)", file=sys.stderr)
-        return EXIT_FAIL
-    return EXIT_OK
+    if not fails:
+        return EXIT_OK
+    print(f"rbcheck sweep: {len(fails)} result(s) contradict the expectations:", file=sys.stderr)
+    for line in fails[:20]:
+        print(f"  {line}", file=sys.stderr)
+    if len(fails) > 20:
+        print(f"  ... and {len(fails) - 20} more (see the findings in index.html)", file=sys.stderr)
+    return EXIT_FAIL
 
 
 def cmd_report(args) -> int:
@@ -430,6 +479,21 @@ def cmd_compare(args) -> int:
     return c.exit_code(args.allow_missing)
 
 
+def cmd_baseline(args) -> int:
+    from cross_checks.gates.baseline import BaselineError, write_baseline
+    from cross_checks.gates.compare import CompareInputError
+
+    try:
+        written = write_baseline(args.results, args.out)
+    except (BaselineError, CompareInputError) as exc:
+        raise BadInput(str(exc)) from None
+    counts = ", ".join(f"{len(written.summary.get(k, []))} {k.replace('_', ' ')} records"
+                       for k in ("convergence", "local_convergence", "agreement"))
+    print(f"rbcheck baseline: {written.rows} rows, {counts} -> {Path(args.out) / 'results.csv'}, "
+          f"{Path(args.out) / 'summary.json'}")
+    return EXIT_OK
+
+
 def cmd_bench(args) -> int:
     from cross_checks.bench import main as bench_main
     if args.json:
@@ -438,7 +502,7 @@ def cmd_bench(args) -> int:
 
 
 COMMANDS = {"list": cmd_list, "show": cmd_show, "run": cmd_run, "sweep": cmd_sweep, "report": cmd_report, "check": cmd_check,
-            "compare": cmd_compare, "bench": cmd_bench}
+            "compare": cmd_compare, "baseline": cmd_baseline, "bench": cmd_bench}
 
 
 def main(argv=None) -> int:

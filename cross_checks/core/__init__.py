@@ -1,3 +1,3 @@
 """The bottom layer: every tolerance (``tolerances``), the four quantities and their error metrics
-(``quantities``), the trajectory CSV contract (``trajectory``) and atomic file writes (``files``).
-Imports nothing of rbcheck but ``reference_sim``."""
+(``quantities``), the trajectory CSV contract (``trajectory``), atomic file writes (``files``) and the
+rule of names and keys users write (``names``). Imports nothing of rbcheck but ``reference_sim``."""

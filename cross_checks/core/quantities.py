@@ -18,6 +18,9 @@ from reference_sim.state import Q, V, W, X
 #: The quantities a convergence verdict is given for (docs/results.md).
 QUANTITIES = ("position", "orientation", "velocity", "angular_velocity")
 
+#: The block of the packed state holding each quantity, in the state's order.
+BLOCKS = {"position": X, "velocity": V, "orientation": Q, "angular_velocity": W}
+
 
 #: quantity -> column stem in results.csv
 COLUMN_STEM = {"position": "pos", "velocity": "vel", "orientation": "orient", "angular_velocity": "angvel"}

@@ -38,10 +38,8 @@ CLOSED_FORM_VS_GROUND_TRUTH_TUMBLING_BOX = 3e-8
 #: reference:course on tennis_racket: its final orientation error must stay above this at every dt:
 #: the physical body has flipped (≈ π away); 1 rad is far from any discretisation error.
 COURSE_NONCONVERGENCE_MIN_RAD = 1.0
-#: Implicit-solve residual (reference_sim.integrators.IMPLICIT_TOL) is 1e-13 relative.
-IMPLICIT_SOLVE = 1e-13
 
-# --- sweeps, metrics and verdicts (cross_checks.metrics, cross_checks.sweep, `rbcheck check`) -------
+# --- sweeps, metrics and verdicts (cross_checks.analysis, cross_checks.sweep, `rbcheck check`) ------
 
 #: Round-off of a run, relative to a quantity's scale, per step: each step rounds every component
 #: by ~ε|y|, and when the increments keep their sign (a falling body) the roundings add up linearly:
@@ -151,7 +149,7 @@ CLOSED_FORM_INPUT_ULPS = 16
 #: the scheme's error constants, other error terms and the fit. (The model is exact for a linear
 #: oscillator: spring_oscillator's explicit/implicit Euler fit 1.14/0.88, predicted 1.14/0.87.)
 AMPLITUDE_MODEL_ORDER_DEV = 0.15
-#: An error is used in an order fit only above this multiple of its floor (metrics.fit_convergence):
+#: An error is used in an order fit only above this multiple of its floor (convergence.fit_convergence):
 #: round-off then makes at most a tenth of it, which moves a pairwise order by ≤ log2(1.1) = 0.14 —
 #: within AMPLITUDE_MODEL_ORDER_DEV. (Measured: mujoco:rk4 on tumbling_box, ω error 3.2e-10 at 1.7× its
 #: floor, bent the fitted order from 3.9 to 3.4.)
@@ -160,7 +158,7 @@ RESOLVED_ABOVE_FLOOR = 10.0
 # --- `rbcheck check`: a true verdict on any simulator's trajectory (docs/check.md) -----------------
 
 #: Local (one-step) allowance constant C in ``C · h · Δ · M2`` (M2: block majorant of |y''| along the
-#: exact flow, see cross_checks.check_physics). Every consistent one-step scheme of order ≥ 1 of the
+#: exact flow, see cross_checks.analysis.flow). Every consistent one-step scheme of order ≥ 1 of the
 #: θ-family (explicit, semi-implicit, implicit Euler; mid-point and RK schemes have θ = ½) leaves a
 #: leading defect Σ_b (θ_b − ½) h² J_b F_b, at most ½ h² M2; the O(h³) remainder adds at most
 #: (7/6) h L of that (implicit Euler's Neumann series), ≤ ½ h² M2 while h L ≤ 0.43 (CHECK_MAX_HL).
@@ -208,6 +206,73 @@ CHECK_GROWTH_RATE_PER_STEP = 0.25
 #: "Resembles" a mistake (said with that caution) when it explains 99 % of the steps within this many
 #: allowances and CHECK_MISTAKE_MARGIN times better than any correct scheme; beyond, nothing is named.
 CHECK_MISTAKE_RESEMBLES = 3.0
+# --- compare: a new results directory against the baseline (docs/results.md) ---
+#: Relative change of an error or drift that counts as a regression (or improvement): the same code on
+#: another machine reproduces errors to ~1e-12 relative (libm/BLAS rounding, amplified by at most ~1e3
+#: on the chaotic tumbling cases), while a real change of scheme, default or force semantics changes
+#: errors by factors; 5 % separates the two with margin.
+COMPARE_REL_TOL = 0.05
+#: Absolute change below which an error or drift has not changed: values at the round-off floor
+#: (≤ 1e-12) fluctuate by O(1) factors between machines and mean nothing.
+COMPARE_ABS_TOL = 1e-12
+
+# --- agreement of engines and closed forms (tests/cross_checks/engines/test_engine_agreement.py) ---
+#: Projectile closed forms (semi-implicit x_n = x0 + n h v0 + g h² n(n+1)/2 and the exact parabola):
+#: 100 steps of sums of ≤ 3 m quantities, ~100 ε · 3 ≈ 7e-14; the required bound is 1e-12.
+AGREE_PROJECTILE = 1e-12
+#: The same scheme (symplectic Euler, explicit gyroscopic term, exponential map) in NumPy, MuJoCo
+#: Euler and PyBullet multibody over ≥ 2000 steps: round-off only (measured ≤ 1e-13); the required
+#: bound is 1e-10 in position, orientation and angular velocity.
+AGREE_SAME_SCHEME = 1e-10
+#: mujoco:implicitfast vs pybullet:maximal, torque-free tennis racket, 2 s at 1e-3: both take the same
+#: linearised implicit gyroscopic step (Bullet's body-frame Newton step == MuJoCo's implicit
+#: derivative for a lone free body), so only round-off separates them: measured 3.2e-14 rad (7.8e-13
+#: over the full 10 s, where the unstable intermediate axis amplifies it); 1e-11 leaves 300x margin.
+AGREE_IMPLICIT_PAIR_TORQUE_FREE = 1e-11
+#: With an applied torque they differ at first order (Bullet adds h I⁻¹τ outside the implicit solve,
+#: MuJoCo solves (I + h D) Δω = h (τ − ω×Iω)): the 2-s difference must halve with h (ratio 2 ± 0.2).
+AGREE_FIRST_ORDER_RATIO = (1.8, 2.2)
+#: MuJoCo implicit vs implicitfast for a lone free body (docs/engine_conventions.md: 1e-13): measured 8e-18.
+AGREE_IMPLICIT_VS_IMPLICITFAST = 1e-13
+#: The body has flipped when its y axis points against world y (R[:, 1]·e_y < 0): measured −0.9996 for
+#: every gyroscopic scheme; the course update never gets below +0.9999. Thresholds far from both.
+AGREE_FLIP_BELOW = -0.5
+AGREE_NO_FLIP_ABOVE = 0.5
+#: The recorded t = 0 row vs the scenario's initial state: ω goes world -> body -> world (MuJoCo) or the
+#: quaternion through x,y,z,w and the principal frame (PyBullet): a few ε of |ω| ≤ 5 rad/s.
+AGREE_INITIAL_ROW = 1e-14
+
+# --- the PyBullet adapter's conventions (tests/cross_checks/engines/test_pybullet_engine.py) ---
+#: Same-arithmetic conversions (quaternion order, principal-frame rotation at the boundary): a few ε.
+PYB_ROUND_TRIP = 1e-15
+#: Exact exponential-map spin about a principal axis over 100 steps: ~ε per step.
+PYB_SPIN_100_STEPS = 1e-13
+#: Semi-implicit closed form of a projectile (h = 0.01, 1 s): sums of 100 terms of size ≤ 3 m: 100 ε · 3.
+PYB_PROJECTILE_EXACT = 1e-12
+#: PyBullet's default multibody damping must visibly fail the projectile: docs/engine_conventions.md measured 0.15 m
+#: after 1 s; anything above 1 cm is far outside discretisation (which is exactly zero here).
+PYB_DEFAULT_DAMPING_MIN_ERROR = 1e-2
+#: one_step from a recorded state vs the recorded next state: the same PyBullet step from the same
+#: doubles up to the boundary rotation (full tensors) and the x,y,z,w conversion: a few ε.
+PYB_ONE_STEP_REPLAY = 1e-14
+
+# --- the MuJoCo adapter's conventions (tests/cross_checks/engines/test_mujoco_engine.py) ---
+#: Same-arithmetic conversions (qpos/qvel <-> packed state, one rotation of a unit vector): a few ε.
+MJ_ROUND_TRIP = 1e-15
+#: Exact exponential-map spin about a principal axis over 100 steps: each step rounds the quaternion
+#: product (~ε) and MuJoCo renormalises; 100 · a few ε.
+MJ_SPIN_100_STEPS = 1e-13
+#: one_step from a recorded state vs the recorded next state: the same MuJoCo step from the same
+#: doubles, except ω goes body -> world -> body through two roundings (a few ε of |ω|).
+MJ_ONE_STEP_REPLAY = 1e-14
+#: mujoco:rk4 vs DOP853 (GROUND_TRUTH_RTOL) on tennis_racket at dt = 1e-3: the required bound.
+MJ_RK4_VS_GROUND_TRUTH = 1e-8
+#: Observed convergence order of mujoco:rk4 with per-stage forces vs 4 (measured 3.99-4.03 on these
+#: ladders, whose errors stay 3+ decades above round-off); ORDER_TOL of the suite is 0.1.
+MJ_RK4_ORDER_TOL = 0.1
+#: The same with forces held over the step (xfrc_applied fixed over the 4 stages): first order;
+#: measured 0.96-1.01.
+MJ_HELD_ORDER_TOL = 0.1
 
 # --- the second reference: Drake's error-controlled integration (docs/engine_conventions.md) ---
 #: Drake runge_kutta5's target accuracy for the second reference: measured on the catalog 6.9e-10 rad
@@ -218,3 +283,21 @@ SECOND_REFERENCE_TARGET_ACCURACY = 1e-13
 #: target accuracy (an upper bound of its own error: measured 8–13× smaller per decade of target
 #: accuracy on the catalog's tumbling and spring scenarios, like REFERENCE_CHECK_RTOL_FACTOR for DOP853).
 SECOND_REFERENCE_CHECK_FACTOR = 10.0
+
+# --- the Drake adapter's conventions (tests/cross_checks/engines/test_drake_engine.py) ---
+#: Fitted order of Drake's RK2/RK3 on spring_pendulum's 1 s ladder (4e-3 … 1e-3): measured 1.97–3.01;
+#: with forces held over the step RK3 measures ~1.0. 0.15 separates every pair by far.
+DRAKE_ORDER_TOL = 0.15
+#: Drake's derivatives vs the hand-derived ω̇_W = I_W⁻¹(τ − ω × I_W ω), a = f/m + g: a 3×3 solve, a few ε.
+DRAKE_DERIVATIVE_REL = 1e-13
+#: A principal-axis spin through 50 RK3 steps at ωΔt = 0.02: local error ~(ωΔt)⁴/24 per step, ~1e-7 rad.
+DRAKE_SPIN_RK3 = 1e-6
+#: |q| − 1 of Drake's (unnormalised) quaternion after 200 semi-explicit Euler steps of 0.01 s on the
+#: tennis racket: ~Σ (|ω|Δt)²/8 ≈ 200 · 5e-5 = 1e-2 (measured 1.2e-2); 1e-3 says "it drifts".
+DRAKE_QUATERNION_DRIFT_MIN = 1e-3
+#: One step restarted from a recorded state vs the free run's next row: the step from (k−1)Δt to kΔt is
+#: Δt only up to a rounding of kΔt, so ~ε; the implicit Euler's Newton stops at its tolerance (1e-6).
+DRAKE_REPLAY_REL = 1e-13
+DRAKE_REPLAY_IMPLICIT_REL = 1e-6
+#: drake:runge_kutta3 at Δt = 1e-3 on the tennis racket over 10 s: ~C (ωΔt)³ ωT ≈ 1e-7 rad.
+DRAKE_RK3_TENNIS_RAD = 1e-6

@@ -11,10 +11,10 @@ installed), is listed as unavailable with the reason; it never stops rbcheck.
 from __future__ import annotations
 
 import contextlib
-import re
 import time
 from dataclasses import dataclass
 
+from cross_checks.core.names import NAME_RE
 from cross_checks.core.trajectory import Trajectory
 from cross_checks.engines.base import EngineAdapter, EngineError, Variant
 
@@ -26,7 +26,6 @@ __all__ = ["ENTRY_POINT_GROUP", "VariantInfo", "EngineEntry", "all_variants", "a
 ENTRY_POINT_GROUP = "rbcheck.engines"
 #: rbcheck's own engines, in the order of `rbcheck list`; other engines follow by name.
 BUILTIN_ENGINES = ("reference", "mujoco", "pybullet", "drake")
-NAME_RE = re.compile(r"^[a-z0-9_]+$")
 
 
 class EngineUnavailable(RuntimeError):

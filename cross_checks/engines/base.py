@@ -41,6 +41,7 @@ Harness semantics (identical in every built-in adapter):
 """
 from __future__ import annotations
 
+import abc
 import functools
 import inspect
 import math
@@ -50,12 +51,47 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["EngineAdapter", "Variant", "harness_force_torque", "stage_force_torque", "apply_decay_prestep",
-           "decay_factors", "EngineError"]
+           "decay_factors", "EngineError", "optional_import", "require"]
 
 
 class EngineError(RuntimeError):
     """The engine rejected the model or failed during a run; the message carries the engine's own words.
     A sweep records the run as `failed` with this message and goes on."""
+
+
+def optional_import(name: str, *, quiet_stderr: bool = False):
+    """``(module, None)``, or ``(None, the ImportError)`` when ``name`` cannot be imported: an adapter
+    module imports without its engine so that the registry can say why the engine is unavailable.
+    ``quiet_stderr`` silences file descriptor 2 during the import (PyBullet prints its build time there,
+    which would land in every CLI run's error output)."""
+    import importlib
+    import os
+    import sys
+    saved = None
+    if quiet_stderr:
+        try:
+            sys.stderr.flush()
+            saved = os.dup(2)
+        except (OSError, ValueError, AttributeError):
+            saved = None
+    devnull = os.open(os.devnull, os.O_WRONLY) if saved is not None else None
+    try:
+        if saved is not None:
+            os.dup2(devnull, 2)
+        return importlib.import_module(name), None
+    except ImportError as exc:  # pragma: no cover - exercised only where the engine is missing
+        return None, exc
+    finally:
+        if saved is not None:
+            os.dup2(saved, 2)
+            os.close(saved)
+            os.close(devnull)
+
+
+def require(module, import_error, name: str) -> None:
+    """ImportError naming the engine package when :func:`optional_import` could not import it."""
+    if module is None:
+        raise ImportError(f"{name} is not installed: {import_error}")
 
 
 @functools.lru_cache(maxsize=64)
@@ -126,7 +162,7 @@ class Variant:
         object.__setattr__(self, "order", float(o))
 
 
-class EngineAdapter:
+class EngineAdapter(abc.ABC):
     """Base class of every engine adapter (see the module docstring for the contract).
 
     Subclass it, set ``name`` and ``variants``, implement ``version`` and ``simulate`` (and
@@ -146,17 +182,18 @@ class EngineAdapter:
     #: variant name -> Variant(order, description).
     variants: dict = {}
 
+    @abc.abstractmethod
     def version(self) -> str:
         """The engine's version; raise ImportError (or any exception) when it cannot run here."""
-        raise NotImplementedError(f"{type(self).__name__}.version() is not implemented")
 
+    @abc.abstractmethod
     def simulate(self, scenario, variant: str, dt_s: float, n_steps: int):
         """``n_steps`` steps of ``dt_s`` from the scenario's initial state -> reference_sim.simulate.Run."""
-        raise NotImplementedError(f"{type(self).__name__}.simulate() is not implemented")
 
     def one_step(self, scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
-        """One step from each row of ``y_start`` (T, 13) -> (T, 13). Optional (see :attr:`has_one_step`)."""
-        raise NotImplementedError(f"{type(self).__name__} has no one-step mode")
+        """One step from each row of ``y_start`` (T, 13) -> (T, 13). Optional (see :attr:`has_one_step`):
+        an adapter that cannot restart its engine from an arbitrary state leaves this one, which refuses."""
+        raise EngineError(f"{self.name or type(self).__name__} has no one-step mode")
 
     @property
     def has_one_step(self) -> bool:

@@ -12,7 +12,7 @@ An engine file is TOML (docs/engines.md)::
     command = ["./mysim", "{scenario_json}", "{dt}", "{out_csv}"]
 
 Placeholders (anywhere inside an argument; ``{{``/``}}`` are literal braces): ``{scenario_json}`` the
-resolved scenario JSON of this run (:mod:`cross_checks.resolved`, Δt-specific), ``{dt}`` (s),
+resolved scenario JSON of this run (:mod:`cross_checks.scenario.resolved`, Δt-specific), ``{dt}`` (s),
 ``{steps}``, ``{duration}`` (s) and ``{out_csv}``, where the command writes the trajectory CSV (one
 row per step from t = 0, columns by name: ``t,x,y,z,vx,vy,vz,qw,qx,qy,qz,wx,wy,wz``). The command must
 name both ``{scenario_json}`` and ``{out_csv}``; its program (first element) is named literally: a
@@ -48,9 +48,10 @@ from pathlib import Path
 
 import numpy as np
 
-from reference_sim.simulate import BLOWUP_LIMIT, Run
+from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
 
 from cross_checks.core import tolerances as tol
+from cross_checks.core.names import NAME_RE, unknown_key_reason
 from cross_checks.engines.base import EngineAdapter, EngineError, Variant
 
 __all__ = ["EngineFileError", "ExternalEngine", "load_engine_file", "PLACEHOLDERS", "DEFAULT_TIMEOUT_S"]
@@ -80,17 +81,10 @@ class EngineFileError(ValueError):
 
 # --- loading and validation -------------------------------------------------------------------------
 
-def _closest(key, allowed):
-    import difflib
-    m = difflib.get_close_matches(key, list(allowed), n=1, cutoff=0.6)
-    return f" (did you mean {m[0]!r}?)" if m else ""
-
-
 def _check_keys(path, table: dict, allowed, where: str):
     for k in table:
         if k not in allowed:
-            raise EngineFileError(path, f"{where}{k}", f"unknown key{_closest(k, allowed)}; allowed: "
-                                                       f"{', '.join(sorted(allowed))}")
+            raise EngineFileError(path, f"{where}{k}", unknown_key_reason(k, allowed))
 
 
 def _parse_argument(path, fld: str, arg) -> list:
@@ -212,7 +206,6 @@ def load_engine_file(path) -> "ExternalEngine":
         raise EngineFileError(path, "", f"is not UTF-8 text: {exc}") from None
     except tomllib.TOMLDecodeError as exc:
         raise EngineFileError(path, "", f"TOML syntax error: {exc}") from None
-    from cross_checks.engines import NAME_RE
     _check_keys(path, raw, _TOP, "")
     name = _string(path, raw, "name", "name")
     if name is None:
@@ -461,7 +454,8 @@ def _read_output(out_csv: Path, scenario, dt_s: float, n_steps: int, where: str,
         msg = str(exc).replace(str(out_csv), "{out_csv}")
         raise EngineError(f"{where}: the CSV is not a trajectory: {msg}{said}") from None
     n_rows = len(t)
-    if n_rows < n_steps + 1 and not np.any(np.max(np.where(np.isfinite(y), np.abs(y), np.inf), axis=1) > BLOWUP_LIMIT):
+    bad = bad_rows(y)
+    if n_rows < n_steps + 1 and not np.any(bad):
         raise EngineError(f"{where}: the CSV has {n_rows} rows, expected {n_steps + 1} (t = 0 and each of the "
                           f"{n_steps} steps){said}")
     if n_rows > n_steps + 1:
@@ -473,15 +467,12 @@ def _read_output(out_csv: Path, scenario, dt_s: float, n_steps: int, where: str,
         k = int(np.argmax(off))
         raise EngineError(f"{where}: row {k} (line {k + 2}) has t = {float(t[k])!r}, expected {float(grid[k])!r} (one row per step "
                           f"of {dt_s:g} s from t = 0)")
-    bad = np.max(np.where(np.isfinite(y), np.abs(y), np.inf), axis=1) > BLOWUP_LIMIT  # non-finite or blown up
     if bad[0]:
         raise EngineError(f"{where}: the first row (t = 0) is not a finite state{said}")
     note = _initial_state_note(y[0], scenario)
     if np.any(bad):
         k = int(np.argmax(bad))
-        what = "non-finite state" if not np.all(np.isfinite(y[k])) else f"state beyond {BLOWUP_LIMIT:g}"
-        msg = f"diverged at t = {k * dt_s:.6g} s ({what}, written by the engine)"
-        return Run(dt_s * np.arange(k), y[:k], k * dt_s, msg + (f"; {note}" if note else ""))
+        return diverged(y[:k], dt_s, f" ({blowup_words(y[k])}, written by the engine)" + (f"; {note}" if note else ""))
     return Run(dt_s * np.arange(n_steps + 1), y, None, note)
 
 

@@ -31,33 +31,31 @@ import threading
 import numpy as np
 
 from reference_sim.quaternion import quat_from_matrix, rotate, quat_conj
-from reference_sim.simulate import BLOWUP_LIMIT, Run
+from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
 
 from cross_checks.engines.base import (EngineAdapter, EngineError, Variant, apply_decay_prestep, decay_factors,
-                                       harness_force_torque, stage_force_torque)
+                                       harness_force_torque, optional_import, require, stage_force_torque)
 
-try:  # the module imports without mujoco so the registry can report why it is unavailable
-    import mujoco
-except ImportError as _exc:  # pragma: no cover - exercised only where mujoco is missing
-    mujoco = None
-    _IMPORT_ERROR = _exc
-else:
-    _IMPORT_ERROR = None
+mujoco, _IMPORT_ERROR = optional_import("mujoco")
 
 __all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate", "one_step", "build_model"]
 
 ENGINE = "mujoco"
+#: The variants, named after MuJoCo's integrators (``mjtIntegrator.mjINT_<NAME>``), with their declared
+#: global orders: Euler is semi-implicit Euler + exp-map quaternion (1); RK4 is classical RK4 with the
+#: forces evaluated at every stage (4); implicit(fast) is velocity-implicit Euler, one linearised solve
+#: per step (1).
 VARIANTS = {
-    "euler": "MuJoCo Euler: semi-implicit Euler, explicit gyroscopic term, quaternion by the exponential map",
-    "rk4": "MuJoCo RK4: classical 4th-order Runge-Kutta; state-dependent forces evaluated at every stage",
-    "implicit": "MuJoCo implicit: velocity-implicit Euler (gyroscopic/velocity derivatives in the step)",
-    "implicitfast": "MuJoCo implicitfast: implicit Euler without the Coriolis/centrifugal derivatives",
+    "euler": Variant(1, "MuJoCo Euler: semi-implicit Euler, explicit gyroscopic term, quaternion by the exponential map"),
+    "rk4": Variant(4, "MuJoCo RK4: classical 4th-order Runge-Kutta; state-dependent forces evaluated at every stage"),
+    "implicit": Variant(1, "MuJoCo implicit: velocity-implicit Euler (gyroscopic/velocity derivatives in the step)"),
+    "implicitfast": Variant(1, "MuJoCo implicitfast: implicit Euler without the Coriolis/centrifugal derivatives"),
 }
 
 #: Steps between divergence checks of a free-running simulation (checked vectorised per chunk).
 _CHUNK = 256
 #: Constant forces and no decay: record the run with mujoco.rollout instead of a Python loop of mj_step
-#: (same numbers bit for bit: tests/cross_checks/test_engines_mujoco.py).
+#: (same numbers bit for bit: tests/cross_checks/engines/test_mujoco_engine.py).
 USE_ROLLOUT = True
 _BODY = 1  # body id of the free body (0 is the world)
 
@@ -71,8 +69,7 @@ _RK4_STAGE_FORCES = True
 
 
 def _require():
-    if mujoco is None:
-        raise ImportError(f"mujoco is not installed: {_IMPORT_ERROR}")
+    require(mujoco, _IMPORT_ERROR, "mujoco")
 
 
 def version() -> str:
@@ -82,15 +79,9 @@ def version() -> str:
 
 def _integrator(variant):
     _require()
-    table = {
-        "euler": mujoco.mjtIntegrator.mjINT_EULER,
-        "rk4": mujoco.mjtIntegrator.mjINT_RK4,
-        "implicit": mujoco.mjtIntegrator.mjINT_IMPLICIT,
-        "implicitfast": mujoco.mjtIntegrator.mjINT_IMPLICITFAST,
-    }
-    if variant not in table:
+    if variant not in VARIANTS:
         raise ValueError(f"unknown mujoco variant {variant!r}; variants: {', '.join(VARIANTS)}")
-    return table[variant]
+    return getattr(mujoco.mjtIntegrator, f"mjINT_{variant.upper()}")
 
 
 def build_model(scenario, variant: str, dt_s: float):
@@ -166,12 +157,6 @@ def _packed1(qpos, qvel):
                      p0 + s * t0 + (b * t2 - c * t1),
                      p1 + s * t1 + (c * t0 - a * t2),
                      p2 + s * t2 + (a * t1 - b * t0)])
-
-
-def _bad_rows(y):
-    """Boolean (T,) rows that are non-finite or beyond BLOWUP_LIMIT."""
-    with np.errstate(invalid="ignore"):
-        return ~np.all(np.isfinite(y), axis=-1) | (np.max(np.abs(y), axis=-1) > BLOWUP_LIMIT)
 
 
 # --- the global-state guard -----------------------------------------------------------------------
@@ -255,56 +240,80 @@ def _per_stage(scenario, variant) -> bool:
     return variant == "rk4" and (fm.state_dependent or fm.has_decay) and _RK4_STAGE_FORCES
 
 
+def _apply(xfrc, f, tau, weight):
+    """World force ``f`` at the COM minus the weight (MuJoCo applies gravity itself) and world torque
+    ``tau`` into the body's row of xfrc_applied (MuJoCo never clears it)."""
+    xfrc[0:3] = f - weight
+    xfrc[3:6] = tau
+
+
 def _stage_force_writer(scenario, xfrc, weight):
     """Control callback body: forces from the (stage) state in qpos/qvel into xfrc_applied."""
     def control(_m, d):
-        f, tau = stage_force_torque(scenario, _packed1(d.qpos, d.qvel))
-        xfrc[0:3] = f - weight
-        xfrc[3:6] = tau
+        _apply(xfrc, *stage_force_torque(scenario, _packed1(d.qpos, d.qvel)), weight)
     return control
+
+
+def _divergence(y_rows, first: int, warn_steps: tuple, session, dt_s: float):
+    """``(step, words)`` of the first divergence among recorded states ``y_rows`` (step ``first`` onwards):
+    a bad row (:func:`reference_sim.simulate.bad_rows`) or a MuJoCo warning, which counts in the step
+    begun when it was raised (clamped to ``warn_steps`` = (first, last) step of the chunk); None if none."""
+    candidates = []
+    bad = bad_rows(y_rows)
+    if bad.any():
+        k = int(np.argmax(bad))
+        candidates.append((first + k, blowup_words(y_rows[k])))
+    if session.warnings:
+        t_warn, msg = session.warnings[0]
+        lo, hi = warn_steps
+        candidates.append((min(max(int(round(t_warn / dt_s)) + 1, lo), hi), f"MuJoCo: {msg}"))
+    if not candidates:
+        return None
+    return min(c[0] for c in candidates), "; ".join(c[1] for c in sorted(candidates))
+
+
+def _model_and_data(scenario, variant, dt_s):
+    """``(MjModel, MjData, its xfrc_applied row, weight m g)`` of one run of the scenario's body."""
+    m = build_model(scenario, variant, dt_s)
+    d = mujoco.MjData(m)
+    weight = scenario.problem.body.mass_kg * np.asarray(scenario.problem.forces.gravity_W, dtype=float)
+    return m, d, d.xfrc_applied[_BODY], weight
 
 
 # --- adapter entry points ----------------------------------------------------------------------------
 
 def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
     """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded."""
-    m = build_model(scenario, variant, dt_s)
-    d = mujoco.MjData(m)
+    m, d, xfrc, weight = _model_and_data(scenario, variant, dt_s)
     forces = scenario.problem.forces
-    weight = scenario.problem.body.mass_kg * np.asarray(forces.gravity_W, dtype=float)
     y0 = scenario.problem.initial_packed()
-    qpos0, qvel0 = _to_qpos_qvel(y0)
-    d.qpos[:] = qpos0
-    d.qvel[:] = qvel0
-    xfrc = d.xfrc_applied[_BODY]
-
+    d.qpos[:], d.qvel[:] = _to_qpos_qvel(y0)
     per_stage = _per_stage(scenario, variant)
     decay = forces.has_decay and not per_stage       # pre-step decay (Euler-type integrators)
-    gv, gw = decay_factors(scenario, dt_s)
     per_step = forces.state_dependent and not per_stage
     if not forces.state_dependent:
-        f, tau = harness_force_torque(scenario, y0, dt_s)    # constant (decay scaling included)
-        xfrc[0:3] = f - weight
-        xfrc[3:6] = tau
-
+        _apply(xfrc, *harness_force_torque(scenario, y0, dt_s), weight)   # constant (decay scaling included)
     if USE_ROLLOUT and not (per_step or per_stage or decay):
         return _simulate_rollout(m, d, dt_s, n_steps)
+    control = _stage_force_writer(scenario, xfrc, weight) if per_stage else None
+    return _simulate_loop(scenario, m, d, dt_s, n_steps, control, per_step, decay, xfrc, weight)
 
+
+def _simulate_loop(scenario, m, d, dt_s, n_steps, control, per_step, decay, xfrc, weight) -> Run:
+    """The run as a Python loop of mj_step: forces written before each step (``per_step``), the pre-step
+    decay applied to qvel (``decay``), the RK4 stage callback (``control``); divergence checked per chunk."""
+    gv, gw = decay_factors(scenario, dt_s)
     qpos_out = np.empty((n_steps + 1, 7))
     qvel_out = np.empty((n_steps + 1, 6))
-    qpos_out[0] = qpos0
-    qvel_out[0] = qvel0
-    control = _stage_force_writer(scenario, xfrc, weight) if per_stage else None
+    qpos_out[0], qvel_out[0] = d.qpos, d.qvel
     step = mujoco.mj_step
     with _Session(d, control) as session, np.errstate(all="ignore"):
-        start = 1
-        while start <= n_steps:
+        for start in range(1, n_steps + 1, _CHUNK):
             stop = min(start + _CHUNK, n_steps + 1)
             for n in range(start, stop):
                 if per_step:
-                    f, tau = harness_force_torque(scenario, _packed1(qpos_out[n - 1], qvel_out[n - 1]), dt_s)
-                    xfrc[0:3] = f - weight
-                    xfrc[3:6] = tau
+                    _apply(xfrc, *harness_force_torque(scenario, _packed1(qpos_out[n - 1], qvel_out[n - 1]), dt_s),
+                           weight)
                 if decay:
                     d.qvel[0:3] *= gv
                     d.qvel[3:6] *= gw
@@ -312,24 +321,11 @@ def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
                 session.raise_callback_error()
                 qpos_out[n] = d.qpos
                 qvel_out[n] = d.qvel
-            y_chunk = _to_packed(qpos_out[start:stop], qvel_out[start:stop])
-            bad = _bad_rows(y_chunk)
-            candidates = []                     # (step index, reason)
-            if bad.any():
-                k = int(np.argmax(bad))
-                finite = bool(np.all(np.isfinite(y_chunk[k])))
-                candidates.append((start + k, f"state beyond {BLOWUP_LIMIT:g}" if finite else "non-finite state"))
-            if session.warnings:
-                t_warn, msg = session.warnings[0]
-                n_warn = min(max(int(round(t_warn / dt_s)) + 1, start), stop - 1)  # the step begun at t_warn
-                candidates.append((n_warn, f"MuJoCo: {msg}"))
-            if candidates:
-                n_bad = min(c[0] for c in candidates)
-                what = "; ".join(c[1] for c in sorted(candidates))
-                y = _to_packed(qpos_out[:n_bad], qvel_out[:n_bad])
-                return Run(dt_s * np.arange(n_bad), y, n_bad * dt_s,
-                           f"diverged at t = {n_bad * dt_s:.6g} s ({what})")
-            start = stop
+            bad = _divergence(_to_packed(qpos_out[start:stop], qvel_out[start:stop]), start, (start, stop - 1),
+                              session, dt_s)
+            if bad is not None:
+                n_bad, what = bad
+                return diverged(_to_packed(qpos_out[:n_bad], qvel_out[:n_bad]), dt_s, f" ({what})")
     return Run(dt_s * np.arange(n_steps + 1), _to_packed(qpos_out, qvel_out))
 
 
@@ -348,18 +344,10 @@ def _simulate_rollout(m, d, dt_s: float, n_steps: int) -> Run:
     qpos = np.concatenate([state0[None, 1:8], states[0, :, 1:8]])
     qvel = np.concatenate([state0[None, 8:14], states[0, :, 8:14]])
     y = _to_packed(qpos, qvel)
-    candidates = []
-    bad = _bad_rows(y)
-    if bad.any():
-        k = int(np.argmax(bad))
-        candidates.append((k, f"state beyond {BLOWUP_LIMIT:g}" if np.all(np.isfinite(y[k])) else "non-finite state"))
-    if session.warnings:
-        t_warn, msg = session.warnings[0]
-        candidates.append((min(max(int(round(t_warn / dt_s)) + 1, 1), n_steps), f"MuJoCo: {msg}"))
-    if candidates:
-        n_bad = min(c[0] for c in candidates)
-        what = "; ".join(c[1] for c in sorted(candidates))
-        return Run(dt_s * np.arange(n_bad), y[:n_bad], n_bad * dt_s, f"diverged at t = {n_bad * dt_s:.6g} s ({what})")
+    bad = _divergence(y, 0, (1, n_steps), session, dt_s)
+    if bad is not None:
+        n_bad, what = bad
+        return diverged(y[:n_bad], dt_s, f" ({what})")
     return Run(dt_s * np.arange(n_steps + 1), y)
 
 
@@ -368,11 +356,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     whatever MuJoCo produced (possibly non-finite)."""
     shape = np.shape(y_start)
     y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
-    m = build_model(scenario, variant, dt_s)
-    d = mujoco.MjData(m)
-    forces = scenario.problem.forces
-    weight = scenario.problem.body.mass_kg * np.asarray(forces.gravity_W, dtype=float)
-    xfrc = d.xfrc_applied[_BODY]
+    m, d, xfrc, weight = _model_and_data(scenario, variant, dt_s)
     per_stage = _per_stage(scenario, variant)
     control = _stage_force_writer(scenario, xfrc, weight) if per_stage else None
     y_dec = y_start if per_stage else apply_decay_prestep(scenario, y_start, dt_s)
@@ -382,9 +366,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     with _Session(d, control) as session, np.errstate(all="ignore"):
         for i in range(len(y_start)):
             if not per_stage:
-                f, tau = harness_force_torque(scenario, y_start[i], dt_s)
-                xfrc[0:3] = f - weight
-                xfrc[3:6] = tau
+                _apply(xfrc, *harness_force_torque(scenario, y_start[i], dt_s), weight)
             d.time = 0.0
             d.qpos[:] = qpos_in[i]
             d.qvel[:] = qvel_in[i]
@@ -397,26 +379,11 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
         return _to_packed(qpos_out, qvel_out).reshape(shape)
 
 
-#: Declared global order of each variant (see MujocoAdapter).
-_ORDERS = {"euler": 1, "rk4": 4, "implicit": 1, "implicitfast": 1}
-
-
 class MujocoAdapter(EngineAdapter):
-    """``mujoco:VARIANT`` — registered under the entry-point group ``rbcheck.engines``.
-
-    Declared orders: Euler is semi-implicit Euler + exp-map quaternion (order 1); RK4 is classical
-    RK4 with the forces evaluated at every stage (order 4); implicit(fast) is velocity-implicit Euler,
-    one linearised solve per step (order 1).
-    """
+    """``mujoco:VARIANT`` — registered under the entry-point group ``rbcheck.engines``."""
 
     name = ENGINE
-    variants = {v: Variant(float(_ORDERS[v]), d) for v, d in VARIANTS.items()}
-
-    def version(self) -> str:
-        return version()
-
-    def simulate(self, scenario, variant: str, dt_s: float, n_steps: int) -> Run:
-        return simulate(scenario, variant, dt_s, n_steps)
-
-    def one_step(self, scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
-        return one_step(scenario, variant, dt_s, y_start)
+    variants = VARIANTS
+    version = staticmethod(version)
+    simulate = staticmethod(simulate)
+    one_step = staticmethod(one_step)

@@ -23,7 +23,7 @@ itself) with ``applyExternalForce`` (WORLD_FRAME, at the COM's world position) a
 step's force and torque scaled alike.
 
 Maximal-coordinate bodies: ``resetBasePositionAndOrientation`` zeroes their velocity, so the velocity
-is always reset after the pose. ENGINE_FACTS reports a stale world inertia in the first step after a
+is always reset after the pose. PyBullet is reported to use a stale world inertia in the first step after a
 pose reset or ``changeDynamics``; every pose reset is primed with one zero-velocity step at that pose,
 then reset again. (With this adapter's call order no effect of the priming was measurable in 3.2.7 —
 primed and unprimed runs agree bit for bit — it is kept as cheap insurance.)
@@ -36,46 +36,21 @@ import threading
 import numpy as np
 
 from reference_sim.quaternion import quat_conj, quat_from_matrix, quat_mul
-from reference_sim.simulate import BLOWUP_LIMIT, Run
+from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
 
 from cross_checks.engines.base import (EngineAdapter, EngineError, Variant, apply_decay_prestep, decay_factors,
-                                       harness_force_torque)
+                                       harness_force_torque, optional_import, require)
 
-def _import_pybullet_quietly():
-    """``import pybullet`` with file descriptor 2 silenced: the extension prints its build time to
-    stderr at import, which would land in every CLI run's error output."""
-    import sys
-    try:
-        sys.stderr.flush()
-        saved = os.dup(2)
-    except (OSError, ValueError, AttributeError):
-        import pybullet
-        return pybullet
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(devnull, 2)
-        import pybullet
-    finally:
-        os.dup2(saved, 2)
-        os.close(saved)
-        os.close(devnull)
-    return pybullet
-
-
-try:  # the module imports without pybullet so the registry can report why it is unavailable
-    p = _import_pybullet_quietly()
-except ImportError as _exc:  # pragma: no cover - exercised only where pybullet is missing
-    p = None
-    _IMPORT_ERROR = _exc
-else:
-    _IMPORT_ERROR = None
+p, _IMPORT_ERROR = optional_import("pybullet", quiet_stderr=True)   # it prints its build time at import
 
 __all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate", "one_step", "DYNAMICS_SETTINGS"]
 
 ENGINE = "pybullet"
+#: The variants with their declared global orders: both modes are semi-implicit Euler (explicit
+#: gyroscopic term in multibody, implicit in maximal coordinates): 1.
 VARIANTS = {
-    "multibody": "PyBullet Featherstone multibody (default): semi-implicit Euler, explicit gyroscopic term",
-    "maximal": "PyBullet maximal coordinates (btRigidBody): semi-implicit Euler, implicit gyroscopic term",
+    "multibody": Variant(1, "PyBullet Featherstone multibody (default): semi-implicit Euler, explicit gyroscopic term"),
+    "maximal": Variant(1, "PyBullet maximal coordinates (btRigidBody): semi-implicit Euler, implicit gyroscopic term"),
 }
 
 #: changeDynamics settings every body gets (besides mass and inertia); see the module docstring.
@@ -94,8 +69,7 @@ _client_pid: int | None = None
 
 
 def _require():
-    if p is None:
-        raise ImportError(f"pybullet is not installed: {_IMPORT_ERROR}")
+    require(p, _IMPORT_ERROR, "pybullet")
 
 
 def version() -> str:
@@ -198,11 +172,6 @@ class _Body:
             p.applyExternalTorque(b, -1, tau_W.tolist(), p.WORLD_FRAME, physicsClientId=c)
 
 
-def _bad_rows(y):
-    with np.errstate(invalid="ignore"):
-        return ~np.all(np.isfinite(y), axis=-1) | (np.max(np.abs(y), axis=-1) > BLOWUP_LIMIT)
-
-
 def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
     """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded."""
     forces = scenario.problem.forces
@@ -242,13 +211,10 @@ def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
                     B.apply(f_const, tau_const, row[0:3])
                 step(physicsClientId=c)
                 raw[n] = read()
-            bad = _bad_rows(raw[start:stop])
+            bad = bad_rows(raw[start:stop])
             if bad.any():
                 n_bad = start + int(np.argmax(bad))
-                what = ("non-finite state" if not np.all(np.isfinite(raw[n_bad]))
-                        else f"state beyond {BLOWUP_LIMIT:g}")
-                return Run(dt_s * np.arange(n_bad), B.raw_to_packed(raw[:n_bad]), n_bad * dt_s,
-                           f"diverged at t = {n_bad * dt_s:.6g} s ({what})")
+                return diverged(B.raw_to_packed(raw[:n_bad]), dt_s, f" ({blowup_words(raw[n_bad])})")
             start = stop
         return Run(dt_s * np.arange(n_steps + 1), B.raw_to_packed(raw))
 
@@ -272,25 +238,11 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
         return B.raw_to_packed(out).reshape(shape)
 
 
-#: Declared global order of each variant (see PybulletAdapter).
-_ORDERS = {"multibody": 1, "maximal": 1}
-
-
 class PybulletAdapter(EngineAdapter):
-    """``pybullet:VARIANT`` — registered under the entry-point group ``rbcheck.engines``.
-
-    Declared orders: both modes are semi-implicit Euler (explicit gyroscopic term in multibody,
-    implicit in maximal coordinates): order 1.
-    """
+    """``pybullet:VARIANT`` — registered under the entry-point group ``rbcheck.engines``."""
 
     name = ENGINE
-    variants = {v: Variant(float(_ORDERS[v]), d) for v, d in VARIANTS.items()}
-
-    def version(self) -> str:
-        return version()
-
-    def simulate(self, scenario, variant: str, dt_s: float, n_steps: int) -> Run:
-        return simulate(scenario, variant, dt_s, n_steps)
-
-    def one_step(self, scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
-        return one_step(scenario, variant, dt_s, y_start)
+    variants = VARIANTS
+    version = staticmethod(version)
+    simulate = staticmethod(simulate)
+    one_step = staticmethod(one_step)

@@ -8,11 +8,13 @@ Convergence records of ``summary.json`` are matched by (scenario, engine, quanti
 moves further from its expected value by more than ``ORDER_TOL`` or a verdict that changes from
 ``converges`` is a regression. Engine versions of both provenances are compared and reported.
 
-Both directories are validated in full before anything is compared (required columns, a number in
-every numeric cell, no negative error or drift, known statuses, no duplicate rows, a summary.json of
-a known schema version with well-formed convergence records): damaged input is exit 2 with one line,
-never read as "no regression". A metric column the baseline has and the new results lack, or an
-order that vanished, is a regression.
+Either directory may be a full results directory (``rbcheck sweep``) or a compact baseline
+(``rbcheck baseline``, :mod:`cross_checks.gates.baseline`): compare reads only what both hold. Both are
+validated in full before anything is compared (the columns compare reads, a number in every numeric
+cell, no negative error or drift, known statuses, no duplicate rows, a summary.json of a known schema
+version with well-formed convergence records): damaged input is exit 2 with one line, never read as
+"no regression". A metric column the baseline has and the new results lack, or an order that
+vanished, is a regression.
 
 Exit codes: 0 no regression; 1 regression (or missing rows, unless allowed); 2 unusable input.
 """
@@ -26,31 +28,20 @@ from pathlib import Path
 
 import pandas as pd
 
-__all__ = ["compare_dirs", "Comparison", "CompareInputError", "METRIC_RULES", "ORDER_TOL", "to_markdown"]
+from cross_checks.core.tolerances import COMPARE_ABS_TOL, COMPARE_REL_TOL, ORDER_TOL
+from cross_checks.sweep.schema import STATUSES
+
+__all__ = ["compare_dirs", "read_results_dir", "Comparison", "CompareInputError", "METRIC_RULES", "ORDER_TOL",
+           "REQUIRED_COLUMNS", "to_markdown", "to_text"]
 
 KEY = ["scenario", "engine", "dt"]
 
-#: metric column -> (abs_tol, rel_tol). All are "lower is better".
-#: rel 5 %: the same code on another machine reproduces errors to ~1e-12 relative (libm/BLAS
-#: rounding, amplified by at most ~1e3 on the chaotic tumbling cases), while a real change of
-#: scheme, default or force semantics changes errors by factors; 5 % separates the two with margin.
-#: abs 1e-12: errors at the round-off floor (≤ 1e-12) fluctuate by O(1) factors and mean nothing.
-METRIC_RULES = {
-    "pos_err_final": (1e-12, 0.05),
-    "vel_err_final": (1e-12, 0.05),
-    "orient_err_final": (1e-12, 0.05),
-    "angvel_err_final": (1e-12, 0.05),
-    "pos_err_max": (1e-12, 0.05),
-    "vel_err_max": (1e-12, 0.05),
-    "orient_err_max": (1e-12, 0.05),
-    "angvel_err_max": (1e-12, 0.05),
-    "energy_drift_max": (1e-12, 0.05),
-    "angmom_drift_max": (1e-12, 0.05),
-    "linmom_drift_max": (1e-12, 0.05),
-}
-#: An observed order may move this much (in either direction) before it counts: the fitted order of
-#: a ladder changes by ~0.01 between machines; 0.1 is the tolerance of the order tests (tests/reference_sim).
-ORDER_TOL = 0.1
+#: metric column -> (abs_tol, rel_tol), from cross_checks/core/tolerances.py (their derivation is
+#: there). All are "lower is better". An order is compared within ORDER_TOL (the order studies' tolerance).
+METRIC_RULES = {m: (COMPARE_ABS_TOL, COMPARE_REL_TOL) for m in (
+    "pos_err_final", "vel_err_final", "orient_err_final", "angvel_err_final",
+    "pos_err_max", "vel_err_max", "orient_err_max", "angvel_err_max",
+    "energy_drift_max", "angmom_drift_max", "linmom_drift_max")}
 GOOD_VERDICTS = ("converges", "at_roundoff")
 #: No claim on the ladder: a change to or from it is information, never a regression or improvement.
 NEUTRAL_VERDICTS = ("pre_asymptotic",)
@@ -86,10 +77,10 @@ class Comparison:
         return 0
 
 
-#: The columns docs/results.md promises in every results.csv.
-REQUIRED_COLUMNS = ("scenario", "engine", "dt", "steps", "wall_s", "pos_err_final", "vel_err_final", "orient_err_final",
+#: The columns every results.csv compare reads must have: those of docs/results.md that both a results
+#: directory and a compact baseline (no timing columns) hold and compare reads or validates.
+REQUIRED_COLUMNS = ("scenario", "engine", "dt", "steps", "pos_err_final", "vel_err_final", "orient_err_final",
                     "angvel_err_final", "energy_drift_max", "angmom_drift_max", "status")
-STATUSES = ("ok", "diverged", "failed")
 
 
 def _number(csv, line, col, text, *, nonneg=False, positive=False):
@@ -157,8 +148,9 @@ def _read_summary(sj: Path) -> dict:
     return summary
 
 
-def _read_dir(d: Path):
-    """results.csv and summary.json of a results directory, validated in full (CompareInputError)."""
+def read_results_dir(d: Path):
+    """``(results.csv as a DataFrame of the columns compare reads, summary.json)`` of a results directory
+    or a compact baseline, validated in full (CompareInputError naming the file, the field and the reason)."""
     d = Path(d)
     if not d.is_dir():
         raise CompareInputError(f"{d}: not a directory")
@@ -180,26 +172,40 @@ def _fmt(v):
 
 
 def _expected_order(rec):
+    """The order a record should show: its own ``expected_order``, else what the expectations say of
+    its variant (None for a variant they do not know, e.g. an engine file no longer registered)."""
     if rec.get("expected_order") is not None:
         return float(rec["expected_order"])
     try:
         from cross_checks.analysis.expectations import expected_order
         return expected_order(rec["engine"], rec["quantity"], rec.get("scenario"))
-    except Exception:
+    except Exception:  # noqa: BLE001 - an unknown variant has no expected order
         return None
 
 
 def compare_dirs(baseline_dir, new_dir) -> Comparison:
-    old_df, old_sum = _read_dir(Path(baseline_dir))
-    new_df, new_sum = _read_dir(Path(new_dir))
+    """Every difference between two results directories (or compact baselines), each judged."""
+    old_df, old_sum = read_results_dir(Path(baseline_dir))
+    new_df, new_sum = read_results_dir(Path(new_dir))
     out = Comparison()
+    _compare_columns(old_df, new_df, out)
+    _compare_rows(old_df.merge(new_df, on=KEY, how="outer", suffixes=("_old", "_new"), indicator=True), out)
+    _compare_convergence(old_sum.get("convergence", []), new_sum.get("convergence", []), out)
+    _compare_versions(old_sum.get("provenance", {}), new_sum.get("provenance", {}), out)
+    return out
+
+
+def _compare_columns(old_df, new_df, out: Comparison):
     for metric in METRIC_RULES:  # a metric the baseline has and the new results lack cannot pass
         if metric in old_df.columns and metric not in new_df.columns:
             out.changes.append(Change("regression", "(all)", "(all)", f"column {metric}",
                                       note="metric missing from the new results.csv"))
         elif metric in new_df.columns and metric not in old_df.columns:
             out.changes.append(Change("new", "(all)", "(all)", f"column {metric}", note="metric new in these results"))
-    merged = old_df.merge(new_df, on=KEY, how="outer", suffixes=("_old", "_new"), indicator=True)
+
+
+def _compare_rows(merged, out: Comparison):
+    """Rows matched by (scenario, engine, dt): missing, new, a status change, or each metric judged."""
     for _, r in merged.iterrows():
         where = f"dt={r['dt']:g}"
         if r["_merge"] == "left_only":
@@ -216,29 +222,46 @@ def compare_dirs(baseline_dir, new_dir) -> Comparison:
             continue
         for metric, (abs_tol, rel_tol) in METRIC_RULES.items():
             co, cn = f"{metric}_old", f"{metric}_new"
-            if co not in merged.columns or cn not in merged.columns:
-                continue
-            vo, vn = r[co], r[cn]
-            if pd.isna(vo) and pd.isna(vn):
-                continue
-            if pd.isna(vo) or pd.isna(vn):
-                out.changes.append(Change("regression" if pd.isna(vn) else "improvement", r["scenario"], r["engine"],
-                                          f"{where} {metric}", _fmt(vo), _fmt(vn), "value appeared/disappeared"))
-                continue
-            vo, vn = float(vo), float(vn)
-            margin = abs_tol + rel_tol * abs(vo)
-            if vn > vo + margin:
-                out.changes.append(Change("regression", r["scenario"], r["engine"], f"{where} {metric}",
-                                          _fmt(vo), _fmt(vn), f"×{vn / vo:.3g}" if vo else "was 0"))
-            elif vn < vo - margin:
-                out.changes.append(Change("improvement", r["scenario"], r["engine"], f"{where} {metric}",
-                                          _fmt(vo), _fmt(vn), f"×{vn / vo:.3g}" if vo else ""))
-    _compare_convergence(old_sum.get("convergence", []), new_sum.get("convergence", []), out)
-    _compare_versions(old_sum.get("provenance", {}), new_sum.get("provenance", {}), out)
-    return out
+            if co in merged.columns and cn in merged.columns:
+                change = _metric_change(r[co], r[cn], abs_tol, rel_tol)
+                if change is not None:
+                    kind, old, new, note = change
+                    out.changes.append(Change(kind, r["scenario"], r["engine"], f"{where} {metric}", old, new, note))
+
+
+def _metric_change(vo, vn, abs_tol, rel_tol):
+    """``(kind, old, new, note)`` when a lower-is-better metric moved beyond its tolerance, else None."""
+    if pd.isna(vo) and pd.isna(vn):
+        return None
+    if pd.isna(vo) or pd.isna(vn):
+        return ("regression" if pd.isna(vn) else "improvement"), _fmt(vo), _fmt(vn), "value appeared/disappeared"
+    vo, vn = float(vo), float(vn)
+    margin = abs_tol + rel_tol * abs(vo)
+    if vn > vo + margin:
+        return "regression", _fmt(vo), _fmt(vn), f"×{vn / vo:.3g}" if vo else "was 0"
+    if vn < vo - margin:
+        return "improvement", _fmt(vo), _fmt(vn), f"×{vn / vo:.3g}" if vo else ""
+    return None
+
+
+def _verdict_change_kind(vo, vn) -> str:
+    """How a change of convergence verdict from ``vo`` to ``vn`` counts."""
+    if vo in NEUTRAL_VERDICTS or vn in NEUTRAL_VERDICTS:
+        return "changed"  # a claim appears or disappears: information
+    if vo in GOOD_VERDICTS and vn not in GOOD_VERDICTS:
+        return "regression"
+    if vn in GOOD_VERDICTS and vo not in GOOD_VERDICTS:
+        return "improvement"
+    if vo in GOOD_VERDICTS and vn in GOOD_VERDICTS:
+        return "changed"  # e.g. converges <-> at_roundoff: both say the scheme is right
+    if vn in ("diverged", "failed"):
+        return "regression"
+    return "improvement" if vo in ("diverged", "failed") else "regression"
 
 
 def _compare_convergence(old_recs, new_recs, out: Comparison):
+    """Convergence records matched by (scenario, engine, quantity): missing, new, a verdict change, or
+    the order judged (:func:`_order_change`)."""
     key = lambda rec: (rec["scenario"], rec["engine"], rec["quantity"])  # noqa: E731
     old = {key(r): r for r in old_recs}
     new = {key(r): r for r in new_recs}
@@ -246,47 +269,39 @@ def _compare_convergence(old_recs, new_recs, out: Comparison):
         scen, eng, qty = k
         if k not in new:
             out.changes.append(Change("missing", scen, eng, f"order of {qty}", note="convergence record absent"))
-            continue
-        if k not in old:
+        elif k not in old:
             out.changes.append(Change("new", scen, eng, f"order of {qty}", new=_fmt(new[k].get("order"))))
-            continue
-        ro, rn = old[k], new[k]
-        vo, vn = ro.get("verdict"), rn.get("verdict")
-        if vo != vn:
-            if vo in NEUTRAL_VERDICTS or vn in NEUTRAL_VERDICTS:
-                kind = "changed"  # a claim appears or disappears: information
-            elif vo in GOOD_VERDICTS and vn not in GOOD_VERDICTS:
-                kind = "regression"
-            elif vn in GOOD_VERDICTS and vo not in GOOD_VERDICTS:
-                kind = "improvement"
-            elif vo in GOOD_VERDICTS and vn in GOOD_VERDICTS:
-                kind = "changed"  # e.g. converges <-> at_roundoff: both say the scheme is right
-            else:
-                kind = "regression" if vn in ("diverged", "failed") else "improvement" if vo in ("diverged", "failed") else "regression"
-            out.changes.append(Change(kind, scen, eng, f"verdict of {qty}", str(vo), str(vn)))
-            continue
-        oo, on = ro.get("order"), rn.get("order")
-        if oo is None and on is None:
-            continue
-        if oo is None or on is None:  # an order that appeared or vanished under the same verdict
-            out.changes.append(Change("regression" if on is None else "changed", scen, eng, f"order of {qty}",
-                                      _fmt(oo), _fmt(on), "no order fitted" if on is None else "order now fitted"))
-            continue
-        exp = _expected_order(rn)
-        if exp is None:  # no expected order: a converging order that moves beyond the tolerance is a
-            # regression (nothing says which way is better); the order of a record that does not converge
-            # measures no scheme and is not compared
-            if vn in GOOD_VERDICTS and abs(float(on) - float(oo)) > ORDER_TOL:
-                out.changes.append(Change("regression", scen, eng, f"order of {qty}", _fmt(float(oo)),
-                                          _fmt(float(on)), "no expected order to judge the change by"))
-            continue
-        do, dn = abs(float(oo) - exp), abs(float(on) - exp)
-        if dn > do + ORDER_TOL:
-            out.changes.append(Change("regression", scen, eng, f"order of {qty}", _fmt(float(oo)), _fmt(float(on)),
-                                      f"expected {exp:g}"))
-        elif dn < do - ORDER_TOL:
-            out.changes.append(Change("improvement", scen, eng, f"order of {qty}", _fmt(float(oo)), _fmt(float(on)),
-                                      f"expected {exp:g}"))
+        elif old[k].get("verdict") != new[k].get("verdict"):
+            vo, vn = old[k].get("verdict"), new[k].get("verdict")
+            out.changes.append(Change(_verdict_change_kind(vo, vn), scen, eng, f"verdict of {qty}", str(vo), str(vn)))
+        else:
+            change = _order_change(old[k], new[k])
+            if change is not None:
+                kind, old_order, new_order, note = change
+                out.changes.append(Change(kind, scen, eng, f"order of {qty}", old_order, new_order, note))
+
+
+def _order_change(ro, rn):
+    """``(kind, old, new, note)`` when the order of a record whose verdict did not change moved, else None."""
+    oo, on = ro.get("order"), rn.get("order")
+    if oo is None and on is None:
+        return None
+    if oo is None or on is None:  # an order that appeared or vanished under the same verdict
+        note = "no order fitted" if on is None else "order now fitted"
+        return ("regression" if on is None else "changed"), _fmt(oo), _fmt(on), note
+    exp = _expected_order(rn)
+    if exp is None:  # no expected order: a converging order that moves beyond the tolerance is a
+        # regression (nothing says which way is better); the order of a record that does not converge
+        # measures no scheme and is not compared
+        if rn.get("verdict") in GOOD_VERDICTS and abs(float(on) - float(oo)) > ORDER_TOL:
+            return "regression", _fmt(float(oo)), _fmt(float(on)), "no expected order to judge the change by"
+        return None
+    do, dn = abs(float(oo) - exp), abs(float(on) - exp)
+    if dn > do + ORDER_TOL:
+        return "regression", _fmt(float(oo)), _fmt(float(on)), f"expected {exp:g}"
+    if dn < do - ORDER_TOL:
+        return "improvement", _fmt(float(oo)), _fmt(float(on)), f"expected {exp:g}"
+    return None
 
 
 def _versions(prov):

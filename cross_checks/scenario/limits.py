@@ -4,7 +4,7 @@ A run records every step, so its memory grows with ``duration / Δt``; the DOP85
 in proportion to ``duration × (the fastest rate of the dynamics)``. Both are estimated from the
 scenario and refused with a :class:`~cross_checks.scenario.ScenarioError` naming the field, the
 estimate and the limit, instead of a MemoryError or an hour-long solve. The numbers (and where each
-comes from) are in :mod:`cross_checks.tolerances` under "hardening".
+comes from) are in :mod:`cross_checks.core.tolerances` under "hardening".
 
 The time limits that hold while the work runs (per reference solve, per run) are enforced by
 :func:`time_limit`, a SIGALRM timer in the process doing the work: the interrupted run becomes a

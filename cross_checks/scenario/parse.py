@@ -8,7 +8,6 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import re
 import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
@@ -17,19 +16,19 @@ from pathlib import Path
 import numpy as np
 
 from reference_sim.body import RigidBody, check_inertia
-from reference_sim.forces import PointForce, Spring, Torque, ForceModel
+from reference_sim.forces import FRAMES, PointForce, Spring, Torque, ForceModel
 from reference_sim.quaternion import quat_from_euler_zxy, rotate
 from reference_sim.state import Problem, State
+from cross_checks.core.names import NAME_RE, unknown_key_reason
 from cross_checks.core.tolerances import MAX_NAME_CHARS, MIN_LADDER_RATIO
 
 __all__ = ["Scenario", "ScenarioError", "load_scenario", "parse_scenario", "catalog_names", "catalog_path",
            "REFERENCE_KINDS"]
 
-NAME_RE = re.compile(r"^[a-z0-9_]+$")
 #: How a scenario's reference solution is obtained: "analytic" (a closed form of reference_sim.analytic
-#: must exist for it), "ground_truth" (DOP853, rtol 1e-12), or "auto" (analytic when one exists).
+#: must exist for it), "ground_truth" (DOP853 at reference_sim.ground_truth.GROUND_TRUTH_RTOL), or "auto"
+#: (analytic when one exists).
 REFERENCE_KINDS = ("auto", "analytic", "ground_truth")
-FRAMES = ("world", "body")
 
 
 class ScenarioError(ValueError):
@@ -135,10 +134,7 @@ class _Reader:
     def check_keys(self, d, allowed, where):
         for k in d:
             if k not in allowed:
-                hint = _closest(k, allowed)
-                raise self.err(f"{where}.{k}" if where else k,
-                               "unknown key" + (f" (did you mean {hint!r}?)" if hint else "")
-                               + f"; allowed: {', '.join(sorted(allowed))}")
+                raise self.err(f"{where}.{k}" if where else k, unknown_key_reason(k, allowed))
 
     def number(self, d, key, fld, *, default=None, positive=False, nonneg=False, required=False):
         if key not in d:
@@ -200,12 +196,6 @@ def _show(v):
     return s if len(s) <= 40 else s[:37] + "..."
 
 
-def _closest(k, allowed):
-    import difflib
-    m = difflib.get_close_matches(k, list(allowed), n=1, cutoff=0.6)
-    return m[0] if m else None
-
-
 _TOP = {"name", "description", "duration", "dt", "dt_ladder", "reference", "body", "initial", "forces"}
 _BODY = {"mass", "inertia", "particles"}
 _INITIAL = {"position", "velocity", "orientation", "euler_zxy_deg", "angular_velocity", "angular_velocity_body"}
@@ -218,16 +208,30 @@ _TORQUE = {"torque", "frame"}
 def parse_scenario(text: str, source: str = "<string>") -> Scenario:
     """Parse and validate scenario TOML text. ``source`` names the file in error messages."""
     r = _Reader(source)
+    raw = _load_toml(text, source)
+    r.check_keys(raw, _TOP, "")
+    name, description, duration, dt, ladder, reference = _parse_timing(r, raw)
+    body, com_offset = _parse_body(r, raw)
+    problem = Problem(body, _parse_forces(r, raw, dt, com_offset), _parse_initial(r, raw))
+    sc = Scenario(name=name, description=description, duration_s=duration, dt_s=dt, dt_ladder_s=ladder,
+                  reference=reference, problem=problem, source=source, raw=raw, com_offset_B_m=com_offset)
+    _check_scenario(r, sc)
+    return sc
+
+
+def _load_toml(text: str, source: str) -> dict:
+    """The TOML document as a dict; a syntax error or absurd nesting is a ScenarioError."""
     try:
-        raw = tomllib.loads(text)
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(source, "", f"TOML syntax error: {exc}") from None
     except RecursionError:
         raise ScenarioError(source, "", "TOML nested too deeply (arrays or tables inside each other "
                                         "hundreds of levels deep); a scenario needs at most 3 levels") from None
-    r.check_keys(raw, _TOP, "")
 
-    # identity and timing
+
+def _parse_timing(r, raw):
+    """name, description, duration (s), dt (s), the Δt ladder (s, decreasing) and the reference kind."""
     if "name" not in raw:
         raise r.err("name", "missing (required)")
     name = r.string(raw, "name", "name")
@@ -257,7 +261,12 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
         _check_ladder_spacing(r, vals, ladder)
     reference = r.string(raw, "reference", "reference", default="auto", choices=REFERENCE_KINDS)
 
-    # body
+    return name, description, duration, dt, ladder, reference
+
+
+def _parse_body(r, raw):
+    """The rigid body (mass, inertia in body axes about the COM) and, for a particle body, the COM in the
+    particles' coordinates (m; None for a body given by mass and inertia)."""
     b = r.table(raw, "body")
     r.check_keys(b, _BODY, "body")
     com_offset = None
@@ -296,7 +305,11 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
             raise r.err("body.inertia", str(exc)) from None
         body = RigidBody(mass, inertia)
 
-    # initial state
+    return body, com_offset
+
+
+def _parse_initial(r, raw) -> State:
+    """The initial state: x (m, world), v (m/s, world), q (w, x, y, z; body to world), ω (rad/s, world)."""
     ini = r.table(raw, "initial")
     r.check_keys(ini, _INITIAL, "initial")
     x0 = r.vector(ini, "position", "initial.position", 3, default=[0.0, 0.0, 0.0])
@@ -319,7 +332,11 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
     else:
         w0 = r.vector(ini, "angular_velocity", "initial.angular_velocity", 3, default=[0.0, 0.0, 0.0])
 
-    # forces
+    return State(x0, v0, q0, w0)
+
+
+def _parse_forces(r, raw, dt, com_offset) -> ForceModel:
+    """The [forces] table; body points are taken from the COM (particle bodies: shifted by ``com_offset``)."""
     fr = r.table(raw, "forces", required=False)
     r.check_keys(fr, _FORCES, "forces")
     gravity = r.vector(fr, "gravity", "forces.gravity", 3, default=[0.0, 0.0, 0.0])
@@ -366,13 +383,14 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
             torque=r.vector(t, "torque", f"{where}.torque", 3, required=True),
             frame=r.string(t, "frame", f"{where}.frame", default="world", choices=FRAMES),
         ))
-    forces = ForceModel(gravity_W=gravity, linear_drag_N_s_per_m=drag, velocity_decay=decays[0],
-                        angular_velocity_decay=decays[1], decay_dt_s=dt, springs=tuple(springs),
-                        point_forces=tuple(points), torques=tuple(torques))
-    problem = Problem(body, forces, State(x0, v0, q0, w0))
-    sc = Scenario(name=name, description=description, duration_s=duration, dt_s=dt, dt_ladder_s=ladder,
-                  reference=reference, problem=problem, source=source, raw=raw, com_offset_B_m=com_offset)
-    if reference == "analytic":
+    return ForceModel(gravity_W=gravity, linear_drag_N_s_per_m=drag, velocity_decay=decays[0],
+                      angular_velocity_decay=decays[1], decay_dt_s=dt, springs=tuple(springs),
+                      point_forces=tuple(points), torques=tuple(torques))
+
+
+def _check_scenario(r, sc) -> None:
+    """What needs the whole scenario: a requested closed form exists; the run stays within the limits."""
+    if sc.reference == "analytic":
         from cross_checks.scenario.references import analytic_available
         ok, why = analytic_available(sc)
         if not ok:
@@ -382,7 +400,6 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
         check_scenario_limits(sc)
     except LimitExceeded as exc:
         raise r.err(exc.field, exc.reason) from None
-    return sc
 
 
 def _check_ladder_spacing(r, vals, ladder):

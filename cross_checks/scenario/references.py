@@ -24,13 +24,8 @@ from reference_sim.ground_truth import GROUND_TRUTH_RTOL, ground_truth
 from reference_sim.quaternion import quat_exp, quat_mul
 from reference_sim.state import Q, V, W, X
 
-__all__ = ["reference_solution", "analytic_available", "decay_rates_per_s", "error_amplification", "reference_error",
-           "final_states", "perturbed_initial_states"]
-
-
-def decay_rates_per_s(scenario):
-    """Continuous rates (k_v, k_ω), 1/s, equal to the per-step decay factors at the scenario's dt."""
-    return scenario.problem.forces.decay_rates_per_s()
+__all__ = ["reference_solution", "analytic_available", "error_amplification", "reference_error", "final_states",
+           "perturbed_initial_states"]
 
 
 def _translation_kind(scenario):
@@ -89,7 +84,7 @@ def _translation(scenario, t_s):
     if kind == "projectile":
         return analytic.projectile(p.initial.x_W, p.initial.v_W, g_eff, t_s)
     if kind == "drag":
-        c = fm.linear_drag_N_s_per_m + m * decay_rates_per_s(scenario)[0]
+        c = fm.linear_drag_N_s_per_m + m * fm.decay_rates_per_s()[0]
         return analytic.linear_drag(m, c, p.initial.x_W, p.initial.v_W, g_eff, t_s)
     s = fm.springs[0]
     return analytic.harmonic_oscillator(m, s.stiffness_N_per_m, s.rest_length_m, s.anchor_W,
@@ -102,7 +97,7 @@ def _rotation(scenario, t_s):
     if kind == "torque_free":
         return analytic.torque_free(p.body.inertia_B, p.initial.q_WB, p.initial.w_W, t_s)
     # Spin about a fixed principal axis with ω(t) = ω0 e^{−kt}: angle ∫ω = ω0 (1 − e^{−kt}) / k.
-    k = decay_rates_per_s(scenario)[1]
+    k = p.forces.decay_rates_per_s()[1]
     w0 = np.asarray(p.initial.w_W, float)
     frac = -np.expm1(-k * t_s) / k  # (1 − e^{−kt}) / k, s
     q = quat_mul(quat_exp(frac[:, None] * w0), p.initial.q_WB)
@@ -170,7 +165,7 @@ def error_amplification(scenario, scales: dict | None = None) -> dict:
     """How much the dynamics amplify an initial error by the final time, per quantity (values ≥ 1):
     ``max_k |Δq(T)| / scale_q / ε`` over perturbations of relative size ε = AMPLIFICATION_EPS along each
     of the 12 directions of the initial state (:func:`perturbed_initial_states`; ``scales`` as in
-    metrics.quantity_scales). The closed form where there is one, else a batched DOP853 solve at
+    quantities.quantity_scales). The closed form where there is one, else a batched DOP853 solve at
     AMPLIFICATION_RTOL. Near an unstable rotation this is ~1e2–1e3 (tumbling_box flips ~8 times in
     10 s): round-off grows by as much.
     """

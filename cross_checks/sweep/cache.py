@@ -7,33 +7,31 @@ returns None â€” so the caller recomputes and :func:`store` replaces the entry â
 not verify: a missing, truncated, bit-flipped or empty file, an entry copied under another key, or
 numbers edited by hand (without the secret a forger cannot make a valid MAC). It never raises.
 
-:func:`environment` is the part of every cache key that says which versions computed the numbers:
-rbcheck, numpy, scipy, Python and the machine architecture (engine versions and a fingerprint of
-rbcheck's own source are added by :mod:`cross_checks.measure`).
+Entries live in the user's cache directory (:func:`cache_dir`), never inside a results directory;
+what their keys are made of is :mod:`cross_checks.sweep.jobs`'s and :mod:`cross_checks.sweep.fingerprint`'s.
 """
 from __future__ import annotations
 
 import hashlib
 import hmac
 import os
-import platform
 import secrets
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["load", "store", "environment", "mac"]
+__all__ = ["load", "store", "mac", "cache_dir"]
 
 _SECRETS: dict = {}
 
 
-def environment() -> list:
-    """Versions that change a number: rbcheck, numpy, scipy, Python, machine architecture."""
-    import scipy
-
-    import reference_sim
-    return [reference_sim.__version__, np.__version__, scipy.__version__, platform.python_version(),
-            platform.machine()]
+def cache_dir() -> Path:
+    """The user's rbcheck cache directory: ``$RBCHECK_CACHE_DIR``, else ``$XDG_CACHE_HOME/rbcheck``, else
+    ``~/.cache/rbcheck`` (never inside a results directory)."""
+    if os.environ.get("RBCHECK_CACHE_DIR"):
+        return Path(os.environ["RBCHECK_CACHE_DIR"])
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "rbcheck"
 
 
 def _secret(root: Path) -> bytes:

@@ -7,37 +7,32 @@ from ``LOCAL_SAMPLES`` reference states, and returns small summaries — plus, a
 Δt only, series decimated to ``MAX_SERIES_POINTS`` points for the plots. Full trajectories never leave
 the worker.
 
-Results are cached per job under the user's cache directory (``$RBCHECK_CACHE_DIR``, else
-``$XDG_CACHE_HOME/rbcheck``, else ``~/.cache/rbcheck``; never inside a results directory), keyed by
-the scenario's content hash, the variant, Δt, the engine version and a fingerprint of the source
-files that determine a job's result (reference_sim, the engine adapter, this module, metrics,
-references, scenario parsing, tolerances) — orchestration and report changes keep the cache.
+Results are cached per job in the user's cache directory (:func:`cross_checks.sweep.cache.cache_dir`),
+keyed by the scenario's content hash, the variant, Δt, the engine version, the code that computes the
+numbers and the versions that run it (:mod:`cross_checks.sweep.fingerprint`).
 """
 from __future__ import annotations
 
 import hashlib
 import json
 import math
-import os
 from dataclasses import dataclass
+from typing import NamedTuple
 from pathlib import Path
 
 import numpy as np
 
 from reference_sim.state import Q
-from cross_checks.sweep import cache
 from cross_checks.analysis import metrics as M
-from cross_checks.core.quantities import decimation_indices, error_summary, quantity_scales, state_errors
 from cross_checks.core import tolerances as tol
+from cross_checks.core.files import json_default, save_npz_atomic
+from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, decimation_indices, error_summary, quantity_scales, state_errors
+from cross_checks.sweep import cache, fingerprint
 from cross_checks.sweep.lifecycle import TimeLimitExceeded, time_limit
-from cross_checks.core.quantities import QUANTITIES
-from cross_checks.core.files import json_default
-from cross_checks.core.files import save_npz_atomic
-from cross_checks.core.quantities import COLUMN_STEM
 
-__all__ = ["SCHEMA_VERSION", "MAX_SERIES_POINTS", "LOCAL_SAMPLES", "RESULT_COLUMNS", "Job", "job_dts",
-           "run_job", "reference_job", "measure_reference", "load_reference", "failed_record", "cache_dir",
-           "code_fingerprint", "varies"]
+__all__ = ["SCHEMA_VERSION", "MAX_SERIES_POINTS", "LOCAL_SAMPLES", "RESULT_COLUMNS", "TIMING_COLUMNS", "Job",
+           "job_dts", "run_job", "reference_job", "ReferenceResult", "measure_reference", "load_reference",
+           "clear_reference_memo", "failed_record", "varies"]
 
 #: Version of the results-directory layout and of the cached job records.
 SCHEMA_VERSION = 1
@@ -56,6 +51,9 @@ RESULT_COLUMNS = (
     "status", "diverged_at_s", "message",
     "default_dt", "in_ladder", "reference", "engine_version", "cached",
 )
+#: Columns that differ between two runs of the same code (wall time, whether the cache served the
+#: row): everything else in a row is a result, reproduced bit for bit by the same code and versions.
+TIMING_COLUMNS = ("wall_s", "cached")
 
 
 @dataclass(frozen=True)
@@ -81,59 +79,11 @@ def job_dts(scenario):
 
 # --- cache -----------------------------------------------------------------------------------------
 
-def cache_dir() -> Path:
-    """The user's rbcheck cache directory (never inside a results directory)."""
-    if os.environ.get("RBCHECK_CACHE_DIR"):
-        return Path(os.environ["RBCHECK_CACHE_DIR"])
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "rbcheck"
-
-
-_FINGERPRINTS: dict = {}
-_BASE_FINGERPRINT: list = []
-
-
-def _base_fingerprint() -> bytes:
-    """SHA-256 of rbcheck's own files that determine a job's result (computed once per process)."""
-    if not _BASE_FINGERPRINT:
-        import reference_sim
-        here = Path(__file__).resolve().parent
-        files = sorted(Path(reference_sim.__file__).resolve().parent.glob("*.py"))
-        files += [here / n for n in ("measure.py", "references.py", "metrics.py", "scenario.py", "tolerances.py",
-                                     "expectations.py", "physics.py", "trajectory.py", "resolved.py")]
-        files += [here / "engines" / "__init__.py", here / "engines" / "base.py"]
-        h = hashlib.sha256()
-        for f in files:
-            h.update(f.name.encode())
-            try:
-                h.update(f.read_bytes())
-            except OSError:
-                h.update(b"<missing>")
-        _BASE_FINGERPRINT.append(h.digest())
-    return _BASE_FINGERPRINT[0]
-
-
-def code_fingerprint(engine: str) -> str:
-    """SHA-256 (16 hex digits) of what determines a job's result for ``engine`` besides its inputs:
-    reference_sim, this module, references, metrics, scenario parsing, the resolved scenario, tolerances,
-    expectations (QUANTITIES), trajectories, the engine registry, and the adapter's own
-    ``cache_token()`` (its module; for an engine file, the file and the programs it names, as loaded).
-    Memoised per adapter instance, so an engine file re-registered under the same name (a rebuilt
-    program) gets its own fingerprint."""
-    from cross_checks.engines import get_adapter
-    adapter = get_adapter(engine)
-    key = (engine, id(adapter))
-    if key not in _FINGERPRINTS:
-        h = hashlib.sha256(_base_fingerprint())
-        h.update(str(adapter.cache_token()).encode())
-        _FINGERPRINTS[key] = (adapter, h.hexdigest()[:16])  # the adapter is kept so its id stays unique
-    return _FINGERPRINTS[key][1]
-
-
 def _job_key(scenario, variant, dt, engine_version):
     engine = variant.split(":", 1)[0]
     blob = json.dumps([SCHEMA_VERSION, scenario.content_hash, variant, repr(float(dt)), repr(scenario.duration_s),
-                       engine_version, code_fingerprint(engine), LOCAL_SAMPLES, MAX_SERIES_POINTS, cache.environment()])
+                       engine_version, fingerprint.code_fingerprint(engine), LOCAL_SAMPLES, MAX_SERIES_POINTS,
+                       fingerprint.environment()])
     return hashlib.sha256(blob.encode()).hexdigest()
 
 
@@ -189,24 +139,35 @@ def _time_grids(scenario):
     return {dt: dt * np.arange(scenario.n_steps(dt) + 1) for dt in job_dts(scenario)}
 
 
+class ReferenceResult(NamedTuple):
+    """A scenario's reference as the sweep uses it: ``label`` (``analytic`` or the DOP853 label),
+    ``error`` (why it failed; "" when it did not), ``scales`` and ``varies`` per quantity, and
+    ``measured`` (:func:`measure_reference`: what the convergence floors and the expectations are
+    decided from — the reference's measured error, the error amplification and the physics)."""
+
+    label: str
+    error: str
+    scales: dict
+    varies: dict
+    measured: dict
+
+
 def reference_job(scenario, out_path: str, cache_root: str | None, use_cache: bool,
-                  time_limit_s: float | None = tol.REFERENCE_TIME_LIMIT_S):
-    """Compute (or load) the reference on the union of the scenario's time grids; save it to
-    ``out_path`` (npz: t_s, y, label). Returns ``(label, error message or "", scales, varies, measured)``
-    — ``measured`` (:func:`measure_reference`) holds what the convergence floors and the expectations
-    are decided from: the reference's measured error, the error amplification and the physics."""
+                  time_limit_s: float | None = tol.REFERENCE_TIME_LIMIT_S) -> ReferenceResult:
+    """Compute (or load) the reference on the union of the scenario's time grids and save it to
+    ``out_path`` (npz: t_s, y, label)."""
     label, err, measured = _reference_solution_file(scenario, out_path, cache_root, use_cache, time_limit_s)
     if err:
         ones = {q: 1.0 for q in QUANTITIES}
-        return label, err, ones, {}, {"amplification": ones, "reference_error": None, "local_reference_error": {},
-                                      "physics": None}
+        return ReferenceResult(label, err, ones, {}, {"amplification": ones, "reference_error": None,
+                                                       "local_reference_error": {}, "physics": None})
     with np.load(out_path, allow_pickle=False) as d:
         y, t_s = d["y"], d["t_s"]
     from cross_checks.sweep.second_reference import second_reference  # Drake's, beside it (None without Drake)
     with time_limit(time_limit_s, "the second reference (Drake)"):
         measured = {**measured, "second_reference": second_reference(scenario, t_s, y, label, measured, cache_root,
                                                                      use_cache)}
-    return label, "", quantity_scales(y), varies(y), measured
+    return ReferenceResult(label, "", quantity_scales(y), varies(y), measured)
 
 
 def measure_reference(scenario, t_s, y, label) -> dict:
@@ -243,25 +204,36 @@ def _local_reference_errors(scenario, t_s, y) -> dict:
     return out
 
 
+def _reference_key(scenario, t_union) -> str:
+    return hashlib.sha256(json.dumps([SCHEMA_VERSION, scenario.content_hash, fingerprint.code_fingerprint("reference"),
+                                      t_union.size, repr(float(t_union[-1])),
+                                      fingerprint.environment()]).encode()).hexdigest()
+
+
+def _cached_reference(cache_root, cpath, key, t_union):
+    """The verified cache entry of this reference (arrays and measurements), or None."""
+    arrays = cache.load(cache_root, cpath, key)
+    measured = _measured_of(arrays) if arrays is not None and _reference_is_for(arrays, t_union) else None
+    return None if measured is None else (arrays, measured)
+
+
 def _reference_solution_file(scenario, out_path, cache_root, use_cache, time_limit_s):
+    """``(label, error message or "", measured)``; the reference saved to ``out_path`` when it exists."""
     from cross_checks.scenario.references import reference_solution
-    grids = _time_grids(scenario)
-    t_union = np.unique(np.concatenate(list(grids.values())))
-    key = hashlib.sha256(json.dumps([SCHEMA_VERSION, scenario.content_hash, code_fingerprint("reference"),
-                                     t_union.size, repr(float(t_union[-1])), cache.environment()]).encode()).hexdigest()
+    t_union = np.unique(np.concatenate(list(_time_grids(scenario).values())))
+    key = _reference_key(scenario, t_union)
     cpath = _cache_file(Path(cache_root), "reference", key) if cache_root else None
-    if cpath is not None and use_cache:
-        arrays = cache.load(cache_root, cpath, key)
-        measured = _measured_of(arrays) if arrays is not None and _reference_is_for(arrays, t_union) else None
-        if measured is not None:
-            save_npz_atomic(Path(out_path), {k: arrays[k] for k in ("t_s", "y", "label")})
-            return str(arrays["label"]), "", measured
+    hit = _cached_reference(cache_root, cpath, key, t_union) if cpath is not None and use_cache else None
+    if hit is not None:
+        arrays, measured = hit
+        save_npz_atomic(Path(out_path), {k: arrays[k] for k in ("t_s", "y", "label")})
+        return str(arrays["label"]), "", measured
     try:
         with time_limit(time_limit_s, "the reference solution"):
             y, label = reference_solution(scenario, t_union)
             measured = measure_reference(scenario, t_union, y, label)
     except TimeLimitExceeded as exc:
-        return "", f"reference solution failed: {exc} (cross_checks/tolerances.py)", None
+        return "", f"reference solution failed: {exc} (cross_checks/core/tolerances.py)", None
     except Exception as exc:  # noqa: BLE001 - reported per scenario, the sweep goes on
         return "", f"reference solution failed: {type(exc).__name__}: {exc}", None
     save_npz_atomic(Path(out_path), {"t_s": t_union, "y": y, "label": np.array(label)})
@@ -295,6 +267,8 @@ _REF_MEMO: dict = {}
 
 
 def load_reference(path: str):
+    """``(t_s, y, label)`` of a reference file written by :func:`reference_job` (the last one read is
+    kept: a worker runs the jobs of one scenario after another)."""
     if path not in _REF_MEMO:
         _REF_MEMO.clear()  # one scenario's reference in memory at a time per worker
         with np.load(path, allow_pickle=False) as d:
@@ -303,6 +277,7 @@ def load_reference(path: str):
 
 
 def clear_reference_memo() -> None:
+    """Forget the reference :func:`load_reference` keeps in memory."""
     _REF_MEMO.clear()
 
 
@@ -317,8 +292,8 @@ def _nan_row(job, scenario, status, message, label, version):
     return row
 
 
-class _NoOneStep(Exception):
-    """The engine has no one-step mode (EngineAdapter.has_one_step is False)."""
+def _record(row, y_final=None, series=None) -> dict:
+    return {"row": row, "y_final": y_final, "series": series}
 
 
 def _canonical_to(q, q_ref):
@@ -330,69 +305,87 @@ def _canonical_to(q, q_ref):
 
 def run_job(job: Job, scenario, ref_path: str, cache_root: str | None = None, use_cache: bool = True,
             time_limit_s: float | None = tol.RUN_TIME_LIMIT_S) -> dict:
-    """Run one job and measure it. Returns a record: ``row`` (results.csv columns), ``y_final``
-    (13 numbers or None), ``series`` (dict of float32 arrays for the default Δt, else None),
-    ``scales`` (per quantity)."""
-    from cross_checks.engines import get_adapter, run_variant, split_variant
+    """Run one job and measure it (or take its verified cache entry). Returns a record: ``row``
+    (results.csv columns), ``y_final`` (13 numbers or None), ``series`` (dict of float32 arrays for the
+    default Δt, else None). A run that finished (ok or diverged) is cached; a failed one is not."""
+    from cross_checks.engines import get_adapter, split_variant
     engine, variant = split_variant(job.variant)
     try:
         adapter = get_adapter(engine)
         version = adapter.version()
-    except Exception as exc:  # noqa: BLE001
-        return {"row": _nan_row(job, scenario, "failed", str(exc), "", ""), "y_final": None, "series": None}
+    except Exception as exc:  # noqa: BLE001 - an engine that cannot run here is a failed row
+        return _record(_nan_row(job, scenario, "failed", str(exc), "", ""))
+    ckey = _job_key(scenario, job.variant, job.dt_s, version) if cache_root else None
+    cpath = _cache_file(Path(cache_root), "job", ckey) if cache_root else None
+    if cpath is not None and use_cache:
+        rec = _cache_load(cache_root, cpath, ckey, job)
+        if rec is not None:
+            rec["row"].update(default_dt=job.default_dt, in_ladder=job.in_ladder, cached=True)
+            return rec
+    rec = _measure(job, scenario, adapter, variant, version, ref_path, time_limit_s)
+    if cpath is not None and rec["row"]["status"] in ("ok", "diverged"):
+        _cache_store(cache_root, cpath, ckey, rec)
+    return rec
 
-    cpath = None
-    if cache_root:
-        ckey = _job_key(scenario, job.variant, job.dt_s, version)
-        cpath = _cache_file(Path(cache_root), "job", ckey)
-        if use_cache:
-            rec = _cache_load(cache_root, cpath, ckey, job)
-            if rec is not None:
-                rec["row"].update(default_dt=job.default_dt, in_ladder=job.in_ladder, cached=True)
-                return rec
 
+def _measure(job, scenario, adapter, variant, version, ref_path, time_limit_s) -> dict:
+    """Run the job and measure the run against the reference of ``ref_path``: errors, conservation
+    drifts, one-step errors and (at the default Δt) the plotted series."""
     t_ref_all, y_ref_all, label = load_reference(ref_path)
-    try:
-        with time_limit(time_limit_s, "the run"):
-            traj = run_variant(scenario, job.variant, job.dt_s)
-    except KeyboardInterrupt:
-        raise
-    except Exception as exc:  # noqa: BLE001 - an engine failure is a row, not a crash
-        msg = (f"{exc} (cross_checks/tolerances.py)" if isinstance(exc, TimeLimitExceeded)
-               else f"{type(exc).__name__}: {exc}".strip())
-        return {"row": _nan_row(job, scenario, "failed", msg, label, version), "y_final": None, "series": None}
-
-    meta = traj.meta
-    t, y = traj.t_s, traj.y
-    idx = np.searchsorted(t_ref_all, t)
-    idx = np.minimum(idx, len(t_ref_all) - 1)
-    if np.array_equal(t_ref_all[idx], t):
-        y_ref = y_ref_all[idx]
-    else:  # an adapter with its own time grid: evaluate the reference there
-        from cross_checks.scenario.references import reference_solution
-        y_ref, label = reference_solution(scenario, t)
-
+    traj, failure = _run(job, scenario, time_limit_s)
+    if traj is None:
+        return _record(_nan_row(job, scenario, "failed", failure, label, version))
+    meta, t, y = traj.meta, traj.t_s, traj.y
+    y_ref, label = _reference_on(t, t_ref_all, y_ref_all, scenario, label)
     status = meta.get("status", "ok")
     errs = state_errors(y, y_ref)
-    summ = error_summary(errs)
     row = _nan_row(job, scenario, status, meta.get("message", "") or "", label, version)
     row.update(steps=len(t) - 1, wall_s=float(meta.get("wall_s", math.nan)))
     if status == "diverged":
         row["diverged_at_s"] = float(meta.get("diverged_at_s"))
+    summ = error_summary(errs)
     for q in QUANTITIES:
         stem = COLUMN_STEM[q]
         row[f"{stem}_err_final"] = summ[q]["final"] if status == "ok" else math.nan
         row[f"{stem}_err_max"] = summ[q]["max"]
+    drifts = _conservation_columns(row, scenario.problem, t, y)
+    _local_error_columns(row, adapter, scenario, variant, job.dt_s, t_ref_all, y_ref_all)
+    series = _series(t, y, y_ref, errs, drifts) if job.default_dt else None
+    return _record(row, y[-1].tolist() if status == "ok" else None, series)
 
-    # Conservation drifts (only where the physics conserves the quantity).
-    problem = scenario.problem
+
+def _run(job, scenario, time_limit_s):
+    """``(trajectory, "")``, or ``(None, the failure's message)``: an engine failure (or a run over its
+    time limit) is a row, not a crash."""
+    from cross_checks.engines import run_variant
+    try:
+        with time_limit(time_limit_s, "the run"):
+            return run_variant(scenario, job.variant, job.dt_s), ""
+    except TimeLimitExceeded as exc:
+        return None, f"{exc} (cross_checks/core/tolerances.py)"
+    except Exception as exc:  # noqa: BLE001
+        return None, f"{type(exc).__name__}: {exc}".strip()
+
+
+def _reference_on(t, t_ref_all, y_ref_all, scenario, label):
+    """The reference at the run's times ``t``: rows of the union grid, or (an adapter with its own time
+    grid) the reference evaluated there. Returns ``(y_ref, label)``."""
+    idx = np.minimum(np.searchsorted(t_ref_all, t), len(t_ref_all) - 1)
+    if np.array_equal(t_ref_all[idx], t):
+        return y_ref_all[idx], label
+    from cross_checks.scenario.references import reference_solution
+    return reference_solution(scenario, t)
+
+
+def _conservation_columns(row, problem, t, y) -> dict:
+    """Fill the drift columns of ``row`` where the physics conserves the quantity; returns the drift
+    series {quantity: relative drift per step}."""
     cons = M.conserved(problem.forces)
     drifts = {}
     with np.errstate(all="ignore"):
         if cons["energy"][0]:
             E, E_terms = M.energy_J(problem, y, with_scale=True)
-            drifts["energy"] = M.relative_drift(E)
-            d = drifts["energy"]
+            drifts["energy"] = d = M.relative_drift(E)
             amp = float(np.max(E_terms) / abs(E[0])) if E[0] != 0 else 1.0
             row["energy_drift_max"] = float(np.max(np.abs(d)))
             row["energy_drift_final"] = float(d[-1])
@@ -403,41 +396,39 @@ def run_job(job: Job, scenario, ref_path: str, cache_root: str | None = None, us
         if cons["linear_momentum"][0]:
             drifts["linear_momentum"] = M.relative_drift(M.linear_momentum_W(problem, y))
             row["linmom_drift_max"] = float(np.max(drifts["linear_momentum"]))
+    return drifts
 
-    # One-step (local) errors from reference states on this run's own grid.
-    grid_idx = np.searchsorted(t_ref_all, job.dt_s * np.arange(scenario.n_steps(job.dt_s) + 1))
+
+def _local_error_columns(row, adapter, scenario, variant, dt_s, t_ref_all, y_ref_all) -> None:
+    """One-step (local) errors from LOCAL_SAMPLES reference states on the run's own grid. They stay
+    empty for an engine without a one-step mode (an engine file: whole runs only); a one-step mode that
+    fails leaves them empty and says so in the row's message."""
+    if not adapter.has_one_step:
+        return
+    grid_idx = np.searchsorted(t_ref_all, dt_s * np.arange(scenario.n_steps(dt_s) + 1))
     starts = decimation_indices(len(grid_idx) - 1, LOCAL_SAMPLES)
-    y0 = y_ref_all[grid_idx[starts]]
-    y1_ref = y_ref_all[grid_idx[starts + 1]]
+    y0, y1_ref = y_ref_all[grid_idx[starts]], y_ref_all[grid_idx[starts + 1]]
     try:
-        if not adapter.has_one_step:  # e.g. an engine file: whole runs only; the local errors stay empty
-            raise _NoOneStep
         with np.errstate(all="ignore"):
-            y1 = np.asarray(adapter.one_step(scenario, variant, job.dt_s, y0), dtype=float)
+            y1 = np.asarray(adapter.one_step(scenario, variant, dt_s, y0), dtype=float)
         lerr = state_errors(y1, y1_ref)
-        for q in QUANTITIES:
-            e = lerr[q]
-            row[f"{COLUMN_STEM[q]}_local_err"] = float(np.max(e)) if np.all(np.isfinite(e)) else math.nan
-    except KeyboardInterrupt:
-        raise
-    except _NoOneStep:
-        pass
-    except Exception as exc:  # noqa: BLE001 - no one-step mode: leave the local errors empty
+    except Exception as exc:  # noqa: BLE001
         row["message"] = (row["message"] + "; " if row["message"] else "") + f"one-step mode failed: {exc}"
+        return
+    for q in QUANTITIES:
+        e = lerr[q]
+        row[f"{COLUMN_STEM[q]}_local_err"] = float(np.max(e)) if np.all(np.isfinite(e)) else math.nan
 
-    series = None
-    if job.default_dt:
-        k = decimation_indices(len(t), MAX_SERIES_POINTS)
-        series = {"t_s": t[k], "x_W": y[k, 0:3], "q_WB": _canonical_to(y[k][:, Q], y_ref[k][:, Q])}
-        for q in QUANTITIES:
-            series[f"err_{q}"] = errs[q][k]
-        for name, d in drifts.items():
-            series[f"drift_{name}"] = d[k]
-        series = {key: np.asarray(a, dtype=np.float32) for key, a in series.items()}
-    rec = {"row": row, "y_final": y[-1].tolist() if status == "ok" else None, "series": series}
-    if cpath is not None and status in ("ok", "diverged"):
-        _cache_store(cache_root, cpath, ckey, rec)
-    return rec
+
+def _series(t, y, y_ref, errs, drifts) -> dict:
+    """The plotted series of a run at its scenario's default Δt: decimated to MAX_SERIES_POINTS, float32."""
+    k = decimation_indices(len(t), MAX_SERIES_POINTS)
+    series = {"t_s": t[k], "x_W": y[k, 0:3], "q_WB": _canonical_to(y[k][:, Q], y_ref[k][:, Q])}
+    for q in QUANTITIES:
+        series[f"err_{q}"] = errs[q][k]
+    for name, d in drifts.items():
+        series[f"drift_{name}"] = d[k]
+    return {key: np.asarray(a, dtype=np.float32) for key, a in series.items()}
 
 
 def varies(y_ref) -> dict:
@@ -447,6 +438,7 @@ def varies(y_ref) -> dict:
 
 
 def failed_record(job, scenario, message):
-    return {"row": _nan_row(job, scenario, "failed", message, "", ""), "y_final": None, "series": None}
+    """The record of a job that could not run (its reference failed, its worker died): a failed row."""
+    return _record(_nan_row(job, scenario, "failed", message, "", ""))
 
 

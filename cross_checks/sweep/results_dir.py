@@ -5,9 +5,9 @@ siblings of a killed run cleaned up by the next one.
 * ``.rbcheck-results.json`` (the marker) says ``format``, ``schema_version`` and lists every file
   rbcheck wrote in the directory (relative POSIX paths). ``rbcheck sweep --out DIR`` replaces DIR
   only when DIR is absent, empty, or marked and holding nothing but the files its marker lists;
-  anything else is refused before any work starts (exit 2). Directories written before the marker
-  existed (e.g. ``baselines/default``: results.csv + summary.json) stay readable by ``report`` and
-  ``compare``; they are just never replaced.
+  anything else is refused before any work starts (exit 2). Directories without the marker (written
+  before it existed, or a compact baseline such as ``baselines/default``) stay readable by ``compare``
+  (and, when full, by ``report``); a sweep never replaces them.
 * A sweep builds the new directory in a sibling ``.<DIR>.rbcheck-staging-<host>-<pid>-<start>-<rand>``
   and swaps it in by two renames; the previous directory, renamed to ``.<DIR>.rbcheck-old-...``, is
   removed afterwards, file by listed file: anything unlisted (a file the user dropped in during the
@@ -225,10 +225,11 @@ def staging_dir(out: Path) -> Path:
     return p
 
 
-def _dispose_old(old: Path, out: Path) -> None:
-    """Remove the previous results directory ``old`` (renamed aside) file by listed file. Anything its
-    marker does not list is moved into ``out``; on a name clash ``old`` is kept, renamed visibly."""
-    listed = listed_files(old)
+def _dispose_old(old: Path, out: Path, owned=None) -> None:
+    """Remove the previous results directory ``old`` (renamed aside) file by listed file (``owned``, by
+    default what its marker lists). Anything else is moved into ``out``; on a name clash ``old`` is
+    kept, renamed visibly."""
+    listed = listed_files(old) if owned is None else set(owned)
     clash = []
     for rel in foreign_entries(old, listed):
         src, dst = old / rel, out / rel
@@ -246,10 +247,11 @@ def _dispose_old(old: Path, out: Path) -> None:
     shutil.rmtree(old, ignore_errors=True)
 
 
-def replace_dir(staging: Path, out: Path) -> None:
+def replace_dir(staging: Path, out: Path, owned=None) -> None:
     """Put ``staging`` in place of ``out`` with renames only: at every instant ``out`` is the old
     complete directory or the new one (between the two renames, briefly, absent — and the next run
-    puts the old one back if this process dies right there)."""
+    puts the old one back if this process dies right there). ``owned``: the files of ``out`` that may
+    be removed (default: those its marker lists); any other is moved into the new ``out``."""
     if not out.exists():
         os.replace(staging, out)
         return
@@ -260,7 +262,7 @@ def replace_dir(staging: Path, out: Path) -> None:
     except BaseException:
         os.replace(old, out)
         raise
-    _dispose_old(old, out)
+    _dispose_old(old, out, owned)
 
 
 def remove_stale_siblings(out: Path) -> list:

@@ -5,6 +5,10 @@ line naming the file, the field and the reason (exit 2) instead of a traceback w
 A spec is a type (``str``, ``NUM`` = int or float, ``bool``, ``int``), ``[spec]`` (a list of spec),
 a dict ``{key: spec}`` (keys ending in ``?`` are optional), or ``Nullable(spec)`` (null allowed).
 Extra keys are allowed everywhere (docs/results.md: keys may be added, never renamed).
+
+A compact baseline (``rbcheck baseline``, docs/results.md "The baseline") says ``"form": "compact
+baseline"`` and keeps, of each record, the fields of the ``COMPACT_*`` specs (in their order): what
+``compare`` reads plus what a reviewer needs to see a verdict change. It has no report data.
 """
 from __future__ import annotations
 
@@ -12,12 +16,12 @@ import math
 import numbers
 
 __all__ = ["SchemaError", "check", "SUMMARY", "CONVERGENCE_RECORD", "QUANTITIES", "VERDICTS", "STATUSES",
-           "KNOWN_SCHEMA_VERSION", "check_summary"]
+           "KNOWN_SCHEMA_VERSION", "check_summary", "COMPACT_FORM", "COMPACT_SUMMARY", "COMPACT_LISTS"]
 
 QUANTITIES = ("position", "orientation", "velocity", "angular_velocity")
 VERDICTS = ("converges", "does_not_converge", "at_roundoff", "diverged", "failed", "insufficient")
 STATUSES = ("ok", "diverged", "failed")
-#: The results schema this code reads (cross_checks.measure.SCHEMA_VERSION; kept equal by a test).
+#: The results schema this code reads (cross_checks.sweep.jobs.SCHEMA_VERSION; kept equal by a test).
 KNOWN_SCHEMA_VERSION = 1
 
 
@@ -122,6 +126,29 @@ SUMMARY = {
 }
 
 
+#: summary.json's ``form`` in a compact baseline (a full results directory has no ``form``).
+COMPACT_FORM = "compact baseline"
+COMPACT_CONVERGENCE = {
+    "scenario": str, "engine": str, "quantity": QUANTITIES, "verdict": str, "order": Nullable(NUM),
+    "fit_verdict?": str, "expected_verdict?": Nullable(str), "expected_order?": Nullable(NUM),
+    "matches_expectation?": Nullable(bool), "assessment?": str,
+}
+#: The lists a compact baseline keeps, each record reduced to its spec's fields.
+COMPACT_LISTS = {
+    "scenarios": {"name": str, "content_hash": str, "reference": str, "duration_s": NUM, "dt_s": NUM,
+                  "dt_ladder_s": [NUM]},
+    "variants": {"name": str, "version?": Nullable(str), "declared_order?": Nullable(NUM)},
+    "skipped_variants": {"name": str, "reason": str},
+    "convergence": COMPACT_CONVERGENCE,
+    "local_convergence": COMPACT_CONVERGENCE,
+    "agreement": {"a": str, "b": str, "scenario": str, "dt_s": NUM, "agrees": bool, "max_rel": Nullable(NUM),
+                  "note?": str},
+}
+COMPACT_SUMMARY = {"schema_version": int, "form": (COMPACT_FORM,), "provenance": SUMMARY["provenance"],
+                   "convergence": [COMPACT_CONVERGENCE],
+                   **{f"{k}?": [spec] for k, spec in COMPACT_LISTS.items() if k != "convergence"}}
+
+
 def _unique(items, key, where, what):
     seen = set()
     for i, it in enumerate(items):
@@ -133,8 +160,13 @@ def _unique(items, key, where, what):
 
 
 def check_summary(summary, for_report: bool = False) -> None:
-    """SchemaError (FIELD: REASON) unless ``summary`` is a summary.json this code can use."""
-    check(summary, SUMMARY, "summary")
+    """SchemaError (FIELD: REASON) unless ``summary`` is a summary.json this code can use: a full one,
+    or (not ``for_report``) a compact baseline's."""
+    compact = isinstance(summary, dict) and "form" in summary
+    if compact and for_report and summary["form"] == COMPACT_FORM:
+        raise SchemaError("summary.form: a compact baseline (written by `rbcheck baseline`) holds no report data; "
+                          "render the results directory it was made from")
+    check(summary, COMPACT_SUMMARY if compact else SUMMARY, "summary")
     v = summary["schema_version"]
     if not 1 <= v <= KNOWN_SCHEMA_VERSION:
         newer = "; written by a newer rbcheck?" if v > KNOWN_SCHEMA_VERSION else ""

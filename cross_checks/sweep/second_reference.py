@@ -71,15 +71,15 @@ def compare_references(y_primary, y_second, y_check, *, primary_error: dict, amp
 
 
 def _cache_key(scenario, t_s) -> str:
+    """What the Drake solutions depend on: the scenario, Drake's version, the code (code_fingerprint covers
+    every module of the engines and sweep layers), the accuracies, the times and the environment."""
     from cross_checks.engines import drake_reference
-    from cross_checks.sweep.jobs import SCHEMA_VERSION, code_fingerprint
-    h = hashlib.sha256()
-    for f in (drake_reference.__file__, __file__):
-        h.update(Path(f).read_bytes())
+    from cross_checks.sweep.fingerprint import code_fingerprint, environment
+    from cross_checks.sweep.jobs import SCHEMA_VERSION
     return hashlib.sha256(json.dumps([SCHEMA_VERSION, "second_reference", scenario.content_hash,
-                                      drake_reference.version(), code_fingerprint("drake"), h.hexdigest(),
+                                      drake_reference.version(), code_fingerprint("drake"),
                                       tol.SECOND_REFERENCE_TARGET_ACCURACY, tol.SECOND_REFERENCE_CHECK_FACTOR,
-                                      t_s.tolist(), cache.environment()]).encode()).hexdigest()
+                                      t_s.tolist(), environment()]).encode()).hexdigest()
 
 
 def _drake_solutions(scenario, t_s, cache_root, use_cache):

@@ -8,8 +8,7 @@ from scipy.spatial.transform import Rotation
 from cross_checks.core.tolerances import QUAT_ALGEBRA, QUAT_ROUND_TRIP, euler_round_trip_tol
 from reference_sim.quaternion import (axis_angle_from_quat, euler_zxy_from_quat, geodesic_angle, matrix_from_quat,
                                       quat_conj, quat_exp, quat_from_axis_angle, quat_from_euler_zxy,
-                                      quat_from_matrix, quat_log, quat_mul, quat_norm, quat_normalize, rotate,
-                                      skew)
+                                      quat_from_matrix, quat_log, quat_mul, quat_norm, quat_normalize, rotate)
 
 finite = st.floats(-10, 10, allow_nan=False, allow_infinity=False)
 quats = arrays(float, 4, elements=finite).filter(lambda q: np.linalg.norm(q) > 1e-3).map(quat_normalize)
@@ -69,11 +68,6 @@ def test_axis_angle_round_trip(rng):
     np.testing.assert_allclose(a, angle, atol=QUAT_ROUND_TRIP)
     np.testing.assert_allclose(u, axis / np.linalg.norm(axis, axis=1, keepdims=True), atol=1e-9)
     np.testing.assert_allclose(quat_log(quat_exp(0.5 * axis)), 0.5 * axis, atol=QUAT_ROUND_TRIP)
-
-
-def test_skew_is_cross_product(rng):
-    a, b = rng.normal(size=(50, 3)), rng.normal(size=(50, 3))
-    np.testing.assert_allclose(np.einsum("nij,nj->ni", skew(a), b), np.cross(a, b), atol=QUAT_ALGEBRA)
 
 
 def test_conjugate_inverts(rng):

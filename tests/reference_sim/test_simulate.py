@@ -33,3 +33,24 @@ def test_stiff_spring_explicit_euler_diverges_implicit_does_not():
     assert simulate(p, "explicit_euler", 0.01, 200).diverged_at_s is not None
     run = simulate(p, "implicit_euler", 0.01, 200)
     assert run.diverged_at_s is None and np.abs(run.y[-1, 0]) < 0.1
+
+
+def test_a_nan_in_any_component_of_the_fast_path_is_a_divergence_at_its_step(monkeypatch):
+    # max() over plain floats skips a NaN that is not the first element: the single-body path must not
+    import reference_sim.scalar as scalar
+
+    class NanAtStep3:
+        def __init__(self, problem, variant, dt_s):
+            self.n = 0
+
+        def step(self, y):
+            self.n += 1
+            out = [v + 1e-3 for v in y]
+            if self.n == 3:
+                out[11] = float("nan")   # ω_y only, after larger finite components
+            return out
+
+    monkeypatch.setattr(scalar, "ScalarStepper", NanAtStep3)
+    run = simulate(_problem([0.1, 1.0, 0.1]), "rk4", 0.01, 10)
+    assert run.diverged_at_s == 0.03 and "non-finite state" in run.message
+    assert len(run.y) == 3 and np.all(np.isfinite(run.y))

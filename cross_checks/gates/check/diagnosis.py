@@ -7,7 +7,7 @@ the next recorded row (so chaos cannot blur the comparison):
   ``one_step``): the trajectory IS a variant when every step reproduces it within the rounding of the
   data (written digits + the roundings of a step); each variant is also checked against the exact flow
   (is it a correct scheme for this scenario at this Δt?);
-* every catalogued mistake (:mod:`cross_checks.mistakes`) on a correct base: named when it explains
+* every catalogued mistake (:mod:`cross_checks.gates.check.mistakes`) on a correct base: named when it explains
   every step within the local allowance and CHECK_MISTAKE_MARGIN times better than any correct scheme;
 * a Δt mismatch: the scale s of the step that best fits the rows (the exact flow over s Δ);
 * the initial state: which usual slip (ω in body axes, quaternion in (x, y, z, w) order, ...) turns the
@@ -26,7 +26,7 @@ from reference_sim.state import Q, V, W, X
 
 from cross_checks.gates.check.evidence import ratio
 from cross_checks.analysis.flow import distances, exact_flow, quantity_distance
-from cross_checks.core.quantities import QUANTITIES
+from cross_checks.core.quantities import BLOCKS, QUANTITIES
 from cross_checks.gates.check.mistakes import applicable_mistakes, course_step
 
 __all__ = ["CandidateScore", "step_rows", "score_candidate", "score_variants", "diagnose_mistakes", "fit_step_scale",
@@ -102,28 +102,22 @@ def score_candidate(name, y_next, y_cand, allow, quantities, flow_end=None, solv
     return CandidateScore(name, mx, p99, same, own, worst)
 
 
-#: Reference variants with an iterative solve, stopped at IMPLICIT_TOL relative to 1 + |y| per step.
-IMPLICIT_VARIANTS = ("implicit_euler", "leapfrog")
+def score_variants(inp, scenario, y0, y_next, flow_end, allow):
+    """Scores of every reference variant, each stepped by the reference adapter's ``one_step``.
 
-
-def score_variants(inp, scenario, y0, y_next, flow_end, allow, extra_one_step=()):
-    """Scores of every reference variant (and of ``extra_one_step``: (name, step(y, h)) pairs).
-
-    An implicit variant's step is its root only to IMPLICIT_TOL (1 + |y|) per component and step (two
+    An iterative variant's step is its root only to IMPLICIT_TOL (1 + |y|) per component and step (two
     evaluations of the same step may stop at different iterates): that is added to its identity test."""
     from reference_sim.integrators import IMPLICIT_TOL
-    from cross_checks.analysis.flow import BLOCKS
     from cross_checks.engines import get_adapter
     adapter = get_adapter("reference")
     solve = {q: inp.span_steps * IMPLICIT_TOL * math.sqrt(BLOCKS[q].stop - BLOCKS[q].start)
              * (1.0 + np.linalg.norm(np.nan_to_num(y_next[:, BLOCKS[q]]), axis=1)) * (2.0 if q == "orientation" else 1.0)
              for q in QUANTITIES}
     out = []
-    cands = [(f"reference:{v}", (lambda v: lambda z, hh: adapter.one_step(scenario, v, hh, z))(v)) for v in VARIANTS]
-    for name, step in list(cands) + list(extra_one_step):
-        y_c = step_rows(step, y0, inp)
-        implicit = name.split(":", 1)[1] in IMPLICIT_VARIANTS
-        out.append(score_candidate(name, y_next, y_c, allow, QUANTITIES, flow_end, solve if implicit else None))
+    for v, scheme in VARIANTS.items():
+        y_c = step_rows(lambda z, hh, v=v: adapter.one_step(scenario, v, hh, z), y0, inp)
+        out.append(score_candidate(f"reference:{v}", y_next, y_c, allow, QUANTITIES, flow_end,
+                                   solve if scheme.iterative else None))
     return out
 
 

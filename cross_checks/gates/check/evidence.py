@@ -1,7 +1,7 @@
 """``rbcheck check``, step 3: the evidence rows of a verdict, each measured against a derived allowance.
 
 * one-step defect (full-state files): from each recorded state, the exact flow over the row interval
-  against the next row (:mod:`cross_checks.check_physics`);
+  against the next row (:mod:`cross_checks.analysis.flow`);
 * acceleration consistency (pose-only files): second differences of the poses against the equations
   of motion at the reconstructed state;
 * conserved quantities where the physics conserves them: energy and world angular momentum (drift
@@ -24,10 +24,9 @@ from reference_sim.quaternion import matrix_from_quat, quat_conj, quat_log, quat
 from reference_sim.state import Q, V, W, X
 
 from cross_checks.analysis import metrics as M
-from cross_checks.core.quantities import UNITS, quantity_scales, state_errors
+from cross_checks.core.quantities import BLOCKS, QUANTITIES, UNITS, quantity_scales, state_errors
 from cross_checks.core import tolerances as tol
-from cross_checks.analysis.flow import BLOCKS, error_growth, majorant, flow_rhs, motion_rate
-from cross_checks.core.quantities import QUANTITIES
+from cross_checks.analysis.flow import error_growth, majorant, flow_rhs, motion_rate
 
 __all__ = ["Evidence", "evidence_row", "reconstruct_states", "pose_consistency", "conserved_evidence", "free_running_evidence",
            "ratio"]

@@ -1,6 +1,6 @@
 """``rbcheck check``, step 1: what a trajectory file says, as people write it.
 
-Turns the rows of a trajectory CSV (read by column name, :func:`cross_checks.trajectory.read_columns`)
+Turns the rows of a trajectory CSV (read by column name, :func:`cross_checks.core.trajectory.read_columns`)
 into a :class:`CheckInput`: the simulator's step ``h``, how many steps each row interval spans, the
 true time of every row (``n_k h``: recorded times are trusted only to their precision), the precision
 the values were written (and probably computed) in, which quantities the file holds, and what had to
@@ -24,17 +24,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from reference_sim.state import Q, V, W, X
+from reference_sim.state import Q
 
 from cross_checks.core import tolerances as tol
+from cross_checks.core.quantities import BLOCKS
 from cross_checks.core.trajectory import QUANTITY_GROUPS
 
 __all__ = ["CheckError", "CheckInput", "prepare_input", "printed_half_quantum", "written_digits",
-           "single_precision_time_bound", "interval_bound", "snap_step", "QUANTITY_SLICES", "ROTATION_GROUPS"]
+           "single_precision_time_bound", "interval_bound", "snap_step"]
 
-#: Slice of the packed state holding each quantity group.
-QUANTITY_SLICES = {"position": X, "velocity": V, "orientation": Q, "angular_velocity": W}
-ROTATION_GROUPS = ("orientation", "angular_velocity")
 
 #: Unit roundoff of double and single precision.
 EPS64 = 2.0 ** -53
@@ -143,11 +141,11 @@ def printed_half_quantum(values, digits: tuple | None = None) -> tuple:
 
 def _precision(y, present):
     """(print floor per quantity (K,), single precision?) of the state columns of the present groups."""
-    cols = [c for g in present for c in range(QUANTITY_SLICES[g].start, QUANTITY_SLICES[g].stop)]
+    cols = [c for g in present for c in range(BLOCKS[g].start, BLOCKS[g].stop)]
     digits = written_digits(y[:, cols], sample=4000)
     floors = {}
     for g in present:
-        sl = QUANTITY_SLICES[g]
+        sl = BLOCKS[g]
         halves = np.array([printed_half_quantum(y[:, c], digits)[0] for c in range(sl.start, sl.stop)])
         floors[g] = np.linalg.norm(halves, axis=0) * (2.0 if g == "orientation" else 1.0)
     fin = y[:, cols][np.isfinite(y[:, cols])]
@@ -155,7 +153,7 @@ def _precision(y, present):
     single = digits[0] <= tol.CHECK_SINGLE_PRECISION_MAX_DIGITS or all_f32
     if single:   # a single-precision value is ½ ulp from what it stands for, however it is printed
         for g in present:
-            mag = np.linalg.norm(np.nan_to_num(y[:, QUANTITY_SLICES[g]]), axis=1)
+            mag = np.linalg.norm(np.nan_to_num(y[:, BLOCKS[g]]), axis=1)
             rep = EPS32 * (2.0 * np.maximum(mag, 1.0) if g == "orientation" else mag)
             floors[g] = floors[g] + rep
     return floors, single
@@ -305,10 +303,9 @@ def _cut_non_finite(inp):
     """Drop rows from the first non-finite or blown-up state (or lost orientation) on; record when.
 
     A component beyond reference_sim.simulate.BLOWUP_LIMIT counts as a blow-up, as in every run."""
-    from reference_sim.simulate import BLOWUP_LIMIT
-    cols = np.concatenate([np.arange(QUANTITY_SLICES[g].start, QUANTITY_SLICES[g].stop) for g in inp.present])
-    with np.errstate(invalid="ignore"):
-        finite = np.all(np.abs(inp.y[:, cols]) <= BLOWUP_LIMIT, axis=1)
+    from reference_sim.simulate import BLOWUP_LIMIT, bad_rows
+    cols = np.concatenate([np.arange(BLOCKS[g].start, BLOCKS[g].stop) for g in inp.present])
+    finite = ~bad_rows(inp.y[:, cols])
     zero_q = _zero_quaternion_rows(inp)
     if zero_q[0] and finite[0]:
         raise CheckError(f"{inp.source}: line 2: columns qw,qx,qy,qz: the quaternion is zero, not an orientation "
@@ -350,10 +347,6 @@ def _cut_to_duration(inp, scenario):
         inp.ended_early_s = float(inp.t_s[-1])
 
 
-def rows_needed(scenario, h) -> int:
-    return int(round(scenario.duration_s / h)) + 1 if h else 0
-
-
 def describe_time(inp) -> str:
     """One phrase: rows, time span, step."""
     if inp.h_s is None:
@@ -361,11 +354,3 @@ def describe_time(inp) -> str:
     d = inp.decimation
     per = f"one row per step of Δt = {inp.h_s:g} s" if d == 1 else f"one row every {d} steps of Δt = {inp.h_s:g} s"
     return f"{inp.n_rows} rows, t = 0 … {inp.t_s[-1]:.6g} s, {per}"
-
-
-def finite_max(values) -> float:
-    """max of an array where any NaN makes the result NaN (a NaN never vanishes in a max)."""
-    a = np.asarray(values, dtype=float)
-    if a.size == 0:
-        return math.nan
-    return float(np.max(a)) if not np.any(np.isnan(a)) else math.nan

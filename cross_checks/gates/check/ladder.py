@@ -1,8 +1,8 @@
 """``rbcheck check A.csv B.csv C.csv --scenario S``: several runs of one scenario at different Δt.
 
 Each file gets its own check; then the final errors against the reference are fitted over Δt with the
-sweep's own machinery (:func:`cross_checks.metrics.fit_convergence`, round-off floors included) and
-judged with :func:`cross_checks.metrics.compare_with_expectation`. The expectation: the reference
+sweep's own machinery (:func:`cross_checks.analysis.convergence.fit_convergence`, round-off floors included) and
+judged with :func:`cross_checks.analysis.convergence.compare_with_expectation`. The expectation: the reference
 variant the files ARE (all the same one), else a consistent scheme (converges, order not claimed).
 """
 from __future__ import annotations
@@ -11,8 +11,7 @@ import math
 
 from cross_checks.analysis import metrics as M
 from cross_checks.analysis.convergence import compare_with_expectation, fit_convergence
-from cross_checks.core.quantities import quantity_scales
-from cross_checks.core.quantities import QUANTITIES
+from cross_checks.core.quantities import QUANTITIES, quantity_scales
 from cross_checks.analysis.expectations import Expectation, expectation
 
 __all__ = ["LadderError", "check_ladder"]

@@ -4,7 +4,7 @@ Each :class:`Mistake` is the course's semi-implicit step (``v += Δt f/m; x += �
 q += ½Δt [0, ω] q; q /= |q|``, with or without the gyroscopic torque −ω × (I ω), velocity decay as
 ``e^{−kΔt}``) with ONE thing done wrong, written from the equations (not from the reference
 integrators): the checker compares a user's step with each of them from the user's own states, and
-names the mistake whose steps explain the trajectory (see cross_checks.check). Batched over rows: states
+names the mistake whose steps explain the trajectory (see cross_checks.gates.check). Batched over rows: states
 ``y`` (N, 13) packed [x_W, v_W, q_WB (w x y z), w_W]; ``h`` (s) a scalar or (N,).
 """
 from __future__ import annotations
@@ -18,8 +18,6 @@ import numpy as np
 from reference_sim.quaternion import matrix_from_quat, quat_mul
 from reference_sim.state import Q, V, W, X
 from reference_sim.vec import cross3
-
-from cross_checks.scenario.references import decay_rates_per_s
 
 __all__ = ["Knobs", "Mistake", "CATALOG", "applicable_mistakes", "course_step", "BASES"]
 
@@ -121,7 +119,7 @@ def _decay_factors(scenario, knobs, h):
     fm = scenario.problem.forces
     if knobs.decay_per_step:
         return fm.velocity_decay ** knobs.decay_power, fm.angular_velocity_decay ** knobs.decay_power
-    k_v, k_w = decay_rates_per_s(scenario)
+    k_v, k_w = scenario.problem.forces.decay_rates_per_s()
     return np.exp(-knobs.decay_power * k_v * h), np.exp(-knobs.decay_power * k_w * h)
 
 

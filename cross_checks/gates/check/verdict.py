@@ -10,8 +10,8 @@ The evidence (docs/check.md): the one-step defect from every recorded state agai
 (chaos-independent), conserved quantities, and the free-running error against the reference within
 its capped, growth-carried allowance; for files without velocities, the consistency of the poses'
 second differences with the equations of motion. Every allowance is derived in
-:mod:`cross_checks.check_physics` / :mod:`cross_checks.check_evidence`, its constants in
-``cross_checks/tolerances.py``.
+:mod:`cross_checks.analysis.flow` / :mod:`cross_checks.gates.check.evidence`, its constants in
+``cross_checks/core/tolerances.py``.
 """
 from __future__ import annotations
 
@@ -20,16 +20,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from cross_checks.core.quantities import UNITS
 from cross_checks.core import tolerances as tol
 from cross_checks.gates.check.diagnosis import (diagnose_mistakes, fit_step_scale, initial_state_slips,
                                                 score_variants)
 from cross_checks.gates.check.evidence import (Evidence, conserved_evidence, evidence_row, free_running_evidence,
                                                pose_consistency, ratio, reconstruct_states)
 from cross_checks.gates.check.input import CheckError, describe_time, prepare_input
-from cross_checks.analysis.flow import (BLOCKS, distances, exact_flow, flow_rhs, local_allowances, majorant,
+from cross_checks.analysis.flow import (distances, exact_flow, flow_rhs, local_allowances, majorant,
                                            motion_rate, quantity_distance)
-from cross_checks.core.quantities import QUANTITIES
+from cross_checks.core.quantities import BLOCKS, QUANTITIES, UNITS
 from cross_checks.analysis.expectations import expectation
 
 __all__ = ["CheckError", "CheckResult", "check_trajectory"]
@@ -99,7 +98,7 @@ class _Local:
     """The local evidence of a file: its rows, the allowances per row interval, scheme scores."""
 
     rows: list
-    allow: object            # check_physics.Allowances per row interval
+    allow: object            # analysis.flow.Allowances per row interval
     per_row: dict            # quantity -> (K−1,) physics + arithmetic allowances
     candidates: list         # CandidateScore of every reference variant (full-state files)
     notes: list

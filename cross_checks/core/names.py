@@ -1,0 +1,18 @@
+"""Names and keys users write: the rule every scenario, engine and variant name follows (names become
+file names and ``ENGINE:VARIANT`` cells), and the reason an unknown key is refused with."""
+from __future__ import annotations
+
+import difflib
+import re
+
+__all__ = ["NAME_RE", "unknown_key_reason"]
+
+#: Scenario, engine and variant names: lower-case letters, digits and underscores.
+NAME_RE = re.compile(r"^[a-z0-9_]+$")
+
+
+def unknown_key_reason(key: str, allowed) -> str:
+    """``unknown key (did you mean 'x'?); allowed: a, b, c`` — the hint only for a close match."""
+    close = difflib.get_close_matches(key, list(allowed), n=1, cutoff=0.6)
+    hint = f" (did you mean {close[0]!r}?)" if close else ""
+    return f"unknown key{hint}; allowed: {', '.join(sorted(allowed))}"

@@ -1,0 +1,252 @@
+"""Assembling a sweep's results from its job records: the rows of results.csv, the convergence records
+(fits against measured floors, judged against the expectations), the agreement of variants that
+implement the same scheme, the scenario records, the plotted series, and summary.json — every file of
+docs/results.md except the report. Pure functions of the records: nothing here runs a simulation."""
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+
+import numpy as np
+
+from reference_sim.state import Q
+from cross_checks.analysis import metrics as M
+from cross_checks.analysis.convergence import compare_with_expectation, fit_convergence, measured_pre_asymptotic
+from cross_checks.analysis.expectations import EQUIVALENT_PAIRS, expectation
+from cross_checks.core import tolerances as tol
+from cross_checks.core.files import atomic_write_text, json_default
+from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, UNITS, decimation_indices, state_errors
+from cross_checks.sweep.jobs import MAX_SERIES_POINTS, RESULT_COLUMNS, SCHEMA_VERSION, load_reference
+
+__all__ = ["result_rows", "results_csv_text", "convergence_records", "agreement_records", "scenario_record",
+           "series_arrays", "build_summary", "write_json"]
+
+
+# --- results.csv ------------------------------------------------------------------------------------
+
+def result_rows(records, scenario_names, variants) -> list:
+    """The rows of the job ``records`` in results.csv's order: scenario, variant (as given), Δt descending."""
+    order_v = {v: i for i, v in enumerate(variants)}
+    return sorted((rec["row"] for rec in records.values()),
+                  key=lambda r: (scenario_names.index(r["scenario"]), order_v.get(r["engine"], 1e9), -r["dt"]))
+
+
+def _fmt(v):
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (float, np.floating)):
+        v = float(v)
+        return "" if math.isnan(v) else repr(v)
+    if isinstance(v, (int, np.integer)):
+        return str(int(v))
+    return "" if v is None else str(v)
+
+
+def results_csv_text(rows, columns=RESULT_COLUMNS) -> str:
+    """results.csv of ``rows`` (dicts): ``columns`` in order, floats as their shortest exact repr, NaN empty."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(columns)
+    for r in rows:
+        w.writerow([_fmt(r.get(c)) for c in columns])
+    return buf.getvalue()
+
+
+# --- convergence ------------------------------------------------------------------------------------
+
+def _floors(ladder, q, scales, mode, label, measured):
+    """Round-off floor of each ladder point for quantity ``q`` (metrics.roundoff_floor): the reference's
+    MEASURED error (at the final time, or of one step in the one-step mode) plus the run's own
+    round-off, amplified by the scenario's measured error amplification."""
+    scale = scales.get(q, 1.0)
+    if mode == "free_running":
+        ref = (measured.get("reference_error") or {}).get(q)
+        amp = measured.get("amplification", {}).get(q, 1.0)
+        return [M.roundoff_floor(scale, max(int(r["steps"]), 1), label, reference_error=ref, amplification=amp,
+                                 quantity=q) for r in ladder]
+    local = measured.get("local_reference_error") or {}
+    return [M.roundoff_floor(scale, 1, label, reference_error=(local.get(repr(float(r["dt"]))) or {}).get(q),
+                             quantity=q) for r in ladder]
+
+
+def _ladder_errors(ladder, q, mode):
+    """``(errors, statuses)`` of quantity ``q`` over the ladder: the final errors of the free runs, or
+    the one-step errors (a point counts when its one-step error was measured)."""
+    stem = COLUMN_STEM[q]
+    if mode == "free_running":
+        return [r[f"{stem}_err_final"] for r in ladder], [r["status"] for r in ladder]
+    errs = [r[f"{stem}_local_err"] for r in ladder]
+    statuses = ["ok" if r["status"] in ("ok", "diverged") and np.isfinite(e) else "failed" for r, e in zip(ladder, errs)]
+    return errs, statuses
+
+
+def _judged(fit, exp):
+    """``(verdict, matches_expectation, assessment)`` of a fit against its expectation. Where the
+    expectation makes no claim on this ladder (pre-asymptotic), a fitted converges / does_not_converge
+    becomes ``pre_asymptotic``; so does a converging scheme whose low order the ladder itself shows to be
+    pre-asymptotic (convergence.measured_pre_asymptotic)."""
+    verdict = fit.verdict
+    matches, phrase = compare_with_expectation(fit.verdict, fit.order, exp, fit.order_is_lower_bound)
+    if exp.verdict == "pre_asymptotic" and verdict in ("converges", "does_not_converge"):
+        verdict = "pre_asymptotic"
+    elif matches is False and exp.verdict == "converges":
+        why = measured_pre_asymptotic(fit, exp.order)
+        if why:
+            verdict, matches, phrase = "pre_asymptotic", None, why
+    return verdict, matches, phrase
+
+
+def convergence_records(scenario, variant, rows, scales, mode, measured=None) -> list:
+    """Convergence records of one (scenario, variant), one per quantity: the fit over the ladder against
+    floors from measurement (:func:`_floors`) and the expectation decided from the scenario's measured
+    physics (:func:`_judged`; the fit's own verdict is kept in ``fit_verdict``). ``mode`` is
+    ``free_running`` (final errors) or ``one_step`` (local errors)."""
+    from cross_checks.analysis.physics import physics_from_dict
+    measured = measured or {}
+    phys = physics_from_dict(measured["physics"]) if measured.get("physics") else None
+    ladder = sorted([r for r in rows if r["in_ladder"]], key=lambda r: -r["dt"])
+    if len(ladder) < 2:
+        return []
+    dts = [r["dt"] for r in ladder]
+    label = next((r["reference"] for r in ladder if r["reference"]), "analytic")
+    out = []
+    for q in QUANTITIES:
+        errs, statuses = _ladder_errors(ladder, q, mode)
+        fit = fit_convergence(dts, errs, _floors(ladder, q, scales, mode, label, measured), statuses)
+        exp = expectation(scenario, variant, q, mode, physics=phys, measure_physics=False)
+        verdict, matches, phrase = _judged(fit, exp)
+        out.append({
+            "scenario": scenario.name, "engine": variant, "quantity": q, "mode": mode,
+            "order": fit.order, "pairwise_orders": fit.pairwise_orders, "verdict": verdict,
+            "fit_verdict": fit.verdict,
+            "dt_s": fit.dt_s, "errors": [None if not np.isfinite(e) else e for e in fit.errors],
+            "floors": fit.floors, "fitted": fit.fitted, "order_is_lower_bound": fit.order_is_lower_bound,
+            "note": fit.note, "unit": UNITS[q],
+            **exp.as_dict(), "matches_expectation": matches, "assessment": phrase,
+        })
+    return out
+
+
+# --- agreement of same-scheme variants --------------------------------------------------------------
+
+def _final_state_agreement(ya, yb) -> tuple:
+    """``(differences per quantity, largest relative difference)`` of two final states (13 numbers each):
+    positions, velocities and angular velocities relative to their size at ``yb`` (at least 1)."""
+    ya, yb = np.array([ya]), np.array([yb])
+    d = {q: float(v[0]) for q, v in state_errors(ya, yb).items()}
+    scale = {"position": max(1.0, float(np.linalg.norm(yb[0, 0:3]))),
+             "velocity": max(1.0, float(np.linalg.norm(yb[0, 3:6]))),
+             "orientation": 1.0,
+             "angular_velocity": max(1.0, float(np.linalg.norm(yb[0, 10:13])))}
+    return d, max(d[q] / scale[q] for q in QUANTITIES)
+
+
+def _agreement(a, b, reason, sc, ra, rb) -> dict:
+    """The agreement record of variants ``a`` and ``b`` (records ``ra``, ``rb``) on scenario ``sc``."""
+    rec = {"a": a, "b": b, "scenario": sc.name, "dt_s": sc.dt_s, "differences": None, "max_rel": None}
+    ta, tb = ra["row"].get("diverged_at_s"), rb["row"].get("diverged_at_s")
+    if ra["row"]["status"] == "diverged" == rb["row"]["status"] and ta is not None and tb is not None:
+        # The same scheme blows up at the same step; detection may differ by a step (MuJoCo flags
+        # its instability warning during the step that starts the blow-up): allow 2 steps.
+        agrees = abs(float(ta) - float(tb)) <= 2.0 * sc.dt_s + 1e-12
+        return {**rec, "agrees": bool(agrees), "reason": reason,
+                "note": f"both diverged, at t = {float(ta):.6g} s and {float(tb):.6g} s"}
+    if ra["y_final"] is None or rb["y_final"] is None:
+        return {**rec, "agrees": False, "reason": reason, "note": "one of the runs did not finish"}
+    d, mx = _final_state_agreement(ra["y_final"], rb["y_final"])
+    return {**rec, "differences": d, "max_rel": mx, "agrees": bool(mx <= tol.SAME_SCHEME_REL), "reason": reason,
+            "tolerance": tol.SAME_SCHEME_REL, "note": ""}
+
+
+def agreement_records(scenarios, records_by_key) -> list:
+    """Final-state differences of the pairs that implement the same scheme, at each default Δt."""
+    out = []
+    for a, b, reason in EQUIVALENT_PAIRS:
+        for sc in scenarios:
+            ra = records_by_key.get((sc.name, a, sc.dt_s))
+            rb = records_by_key.get((sc.name, b, sc.dt_s))
+            if ra is not None and rb is not None:
+                out.append(_agreement(a, b, reason, sc, ra, rb))
+    return out
+
+
+# --- scenarios and series ---------------------------------------------------------------------------
+
+def scenario_record(sc, ref) -> dict:
+    """summary.json's record of a scenario and its reference (a :class:`execute.ScenarioReference`)."""
+    cons = M.conserved(sc.problem.forces)
+    meas = ref.measured or {}
+    return {"name": sc.name, "description": sc.description, "source": sc.source, "content_hash": sc.content_hash,
+            "duration_s": sc.duration_s, "dt_s": sc.dt_s, "dt_ladder_s": list(sc.dt_ladder_s),
+            "reference": ref.label, "scales": ref.scales,
+            "conserved": {k: {"conserved": v[0], "why_not": v[1]} for k, v in cons.items()},
+            "error_amplification": meas.get("amplification", {}), "reference_error": meas.get("reference_error"),
+            "physics": meas.get("physics"), "varies": ref.varies,
+            "second_reference": meas.get("second_reference")}
+
+
+def series_arrays(sc, ref, records_by_key, variants) -> dict:
+    """series/<scenario>.npz: the reference (unless it failed) and every variant's series at the
+    scenario's default Δt, as ``<owner>::<field>`` float32 arrays."""
+    arrays = {}
+    if not ref.error:
+        t_ref, y_ref, _ = load_reference(ref.path)
+        grid = np.searchsorted(t_ref, sc.dt_s * np.arange(sc.n_steps() + 1))
+        k = grid[decimation_indices(len(grid), MAX_SERIES_POINTS)]
+        arrays["reference::t_s"] = t_ref[k].astype(np.float32)
+        arrays["reference::x_W"] = y_ref[k, 0:3].astype(np.float32)
+        arrays["reference::q_WB"] = y_ref[k][:, Q].astype(np.float32)
+    for v in variants:
+        rec = records_by_key.get((sc.name, v, sc.dt_s))
+        for key, a in ((rec or {}).get("series") or {}).items():
+            arrays[f"{v}::{key}"] = np.asarray(a, dtype=np.float32)
+    return arrays
+
+
+# --- summary.json -----------------------------------------------------------------------------------
+
+def _run_statistics(jobs, rows, wall_s) -> dict:
+    return {"jobs": jobs, "runs": len(rows), "cached_runs": sum(1 for r in rows if r.get("cached")),
+            "diverged_runs": sum(1 for r in rows if r["status"] == "diverged"),
+            "failed_runs": sum(1 for r in rows if r["status"] == "failed"),
+            "wall_s": round(wall_s, 3),
+            "cpu_s_in_runs": round(float(np.nansum([r["wall_s"] for r in rows if not r.get("cached")] or [0.0])), 3),
+            "tolerances": {"same_scheme_rel": tol.SAME_SCHEME_REL, "order_tol": tol.SWEEP_ORDER_TOL,
+                           "converges_min_order": tol.CONVERGES_MIN_ORDER}}
+
+
+def build_summary(*, provenance, scenarios, variants, skipped, convergence, local, agreement, rows, jobs,
+                  wall_s) -> dict:
+    """summary.json (docs/results.md): ``scenarios`` are scenario records, ``variants`` variant records."""
+    return {
+        "schema_version": SCHEMA_VERSION,
+        "provenance": provenance,
+        "scenarios": scenarios,
+        "variants": variants,
+        "skipped_variants": [{"name": k, "reason": r} for k, r in (skipped or {}).items()],
+        "convergence": convergence,
+        "local_convergence": local,
+        "agreement": agreement,
+        "run": _run_statistics(jobs, rows, wall_s),
+        "files": {"results": "results.csv", "series": "series/<scenario>.npz: keys '<ENGINE:VARIANT>::<field>' "
+                  "(t_s, x_W, q_WB, err_<quantity>, drift_<quantity>) and 'reference::<field>', float32, "
+                  "at the scenario's default dt, decimated to <= %d points" % MAX_SERIES_POINTS},
+    }
+
+
+def _nan_to_none(o):
+    if isinstance(o, float) and not math.isfinite(o):
+        return None
+    if isinstance(o, dict):
+        return {k: _nan_to_none(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_nan_to_none(v) for v in o]
+    return o
+
+
+def write_json(path, obj) -> None:
+    """``obj`` as JSON (indent 1; NaN and infinities as null), written atomically."""
+    atomic_write_text(path, json.dumps(_nan_to_none(obj), indent=1, sort_keys=False, default=json_default,
+                                       allow_nan=False) + "\n")

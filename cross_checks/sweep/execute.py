@@ -1,0 +1,225 @@
+"""Executing a sweep's work: the references (one per scenario, before the runs), then the jobs.
+
+Work runs in this process (``jobs == 1``), in a ``concurrent.futures.ProcessPoolExecutor`` whose workers
+die with the sweep (:func:`cross_checks.sweep.lifecycle.worker_init`), or on any executor the caller
+gives (e.g. a Dask cluster's ``Client.get_executor()``). Jobs exchange reference solutions as files in
+the sweep's work directory. A diverged run is a row with status ``diverged``; an engine exception, a
+harness error, or a worker process that dies is a row with status ``failed`` and the message — the
+sweep goes on.
+"""
+from __future__ import annotations
+
+import os
+import sys
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass
+from pathlib import Path
+
+from cross_checks.sweep.jobs import failed_record, reference_job, run_job
+from cross_checks.sweep.lifecycle import worker_init
+
+__all__ = ["Runner", "ScenarioReference", "run_references", "run_jobs"]
+
+
+class Runner:
+    """Runs callables here (jobs == 1), in a process pool, or on any ``concurrent.futures.Executor``
+    given by the caller (e.g. a Dask cluster's ``Client.get_executor()``), yielding results as they
+    finish. An external executor is used as it is: never shut down or replaced here."""
+
+    def __init__(self, jobs: int, executor=None):
+        self.jobs = jobs
+        self.external = executor is not None
+        self.submitted = []
+        self.pool = executor if self.external else (self._new_pool() if jobs > 1 else None)
+
+    def _new_pool(self):
+        import multiprocessing as mp
+        ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else None
+        return ProcessPoolExecutor(max_workers=self.jobs, mp_context=ctx, initializer=worker_init,
+                                   initargs=(os.getpid(),))
+
+    def map_unordered(self, fn, items, on_done=None, on_crash=None, in_flight=None):
+        """``fn(item)`` for each item; returns ``[(item, result)]`` in completion order.
+
+        A worker that dies (e.g. a crash inside an engine) breaks the pool, and every unfinished item
+        fails with BrokenProcessPool. ``in_flight(item)`` says whether an item was running at that
+        moment: those are re-run one at a time in a fresh pool, so a crash names its own item, whose
+        result is then ``on_crash(item)``; the others are simply resubmitted.
+        """
+        out = []
+
+        def record(it, r):
+            out.append((it, r))
+            if on_done:
+                on_done(it, r)
+
+        if self.pool is None:
+            for it in items:
+                record(it, fn(it))
+            return out
+        todo, isolate = list(items), []
+        while todo or isolate:
+            for it in isolate:
+                record(it, self._run_alone(fn, it, on_crash))
+            todo, isolate = self._round(fn, todo, record, in_flight)
+        return out
+
+    def _run_alone(self, fn, item, on_crash):
+        """``fn(item)`` with nothing else in the pool, so a crash is this item's: ``on_crash(item)``."""
+        try:
+            return self.pool.submit(fn, item).result()
+        except BrokenProcessPool:
+            self._renew()
+            if on_crash is None:
+                raise
+            return on_crash(item)
+
+    def _round(self, fn, items, record, in_flight):
+        """Submit every item and record the results; returns ``(to resubmit, to run alone)``: the items
+        a broken pool did not finish, split by whether they were running when it broke."""
+        futs = {self.pool.submit(fn, it): it for it in items}
+        if self.external:
+            self.submitted.extend(futs)
+        todo, isolate = [], []
+        pending = set(futs)
+        broken = False
+        while pending:
+            done, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for f in done:
+                it = futs[f]
+                try:
+                    r = f.result()
+                except BrokenProcessPool:
+                    broken = True
+                    (isolate if in_flight is not None and in_flight(it) else todo).append(it)
+                    continue
+                record(it, r)
+        if broken:
+            if not isolate and in_flight is None:
+                raise BrokenProcessPool("a worker process died")
+            self._renew()
+        return todo, isolate
+
+    def _renew(self):
+        if self.external:
+            raise BrokenProcessPool("a worker of the external executor died")
+        self.pool.shutdown(wait=True, cancel_futures=True)
+        self.pool = self._new_pool()
+
+    def close(self, kill=False):
+        if self.pool is None:
+            return
+        if self.external:
+            if kill:
+                for f in self.submitted:
+                    f.cancel()
+            self.pool = None
+            return
+        if kill:
+            # Stop the workers this sweep started (they ignore SIGINT): by their own process ids.
+            procs = list(getattr(self.pool, "_processes", {}).values())
+            self.pool.shutdown(wait=False, cancel_futures=True)
+            for p in procs:
+                if p.is_alive():
+                    p.terminate()
+            for p in procs:
+                p.join(timeout=5)
+        else:
+            self.pool.shutdown(wait=True)
+        self.pool = None
+
+
+# --- the references ---------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class ScenarioReference:
+    """The reference of one scenario in a sweep: its file (npz: t_s, y, label, in the work directory)
+    and what :func:`cross_checks.sweep.jobs.reference_job` returned for it (``error`` "" unless the
+    solve failed, in which case every job of the scenario is a failed row saying why)."""
+
+    path: str
+    label: str
+    error: str
+    scales: dict
+    varies: dict
+    measured: dict
+
+
+class _ReferenceTask:
+    """One scenario's reference solve, by index (a small pickle for the workers)."""
+
+    def __init__(self, scenarios, work_dir, cache_root, use_cache, time_limit_s):
+        self.scenarios, self.work_dir, self.cache_root, self.use_cache = scenarios, work_dir, cache_root, use_cache
+        self.time_limit_s = time_limit_s
+
+    def path(self, i):
+        return str(Path(self.work_dir) / f"ref_{i}.npz")
+
+    def __call__(self, i):
+        return reference_job(self.scenarios[i], self.path(i), self.cache_root, self.use_cache, self.time_limit_s)
+
+
+def run_references(runner: Runner, scenarios, work_dir, cache_root, use_cache, time_limit_s) -> list:
+    """The :class:`ScenarioReference` of every scenario, in the order of ``scenarios``."""
+    task = _ReferenceTask(scenarios, str(work_dir), cache_root, use_cache, time_limit_s)
+    results = dict(runner.map_unordered(task, range(len(scenarios))))
+    return [ScenarioReference(task.path(i), *results[i]) for i in range(len(scenarios))]
+
+
+# --- the jobs ---------------------------------------------------------------------------------------
+
+def _run_job_item(item):
+    """``item`` = (job, scenario, ref_path, cache_root, use_cache, user_engines, time_limit_s, marker): one
+    small pickle per job.
+
+    ``user_engines`` are the parent's engine-file adapters (a worker that was not forked from the
+    parent, e.g. on Dask, registers them here). ``marker`` (a file path) exists while the job runs,
+    so after a worker crash the parent knows which jobs were in flight. Any error of the harness
+    itself becomes a failed row, so one bad job never stops the sweep.
+    """
+    job, scenario, ref_path, cache_root, use_cache, user_engines, time_limit_s, marker = item
+    Path(marker).touch()
+    try:
+        from cross_checks.engines import adopt_user_engines
+        adopt_user_engines(user_engines)
+        return run_job(job, scenario, ref_path, cache_root, use_cache, time_limit_s)
+    except Exception as exc:  # noqa: BLE001
+        return failed_record(job, scenario, f"internal error while measuring the run: {type(exc).__name__}: {exc}")
+    finally:
+        Path(marker).unlink(missing_ok=True)
+
+
+def _in_flight(item) -> bool:
+    return Path(item[-1]).exists()
+
+
+def _crashed(item) -> dict:
+    Path(item[-1]).unlink(missing_ok=True)
+    return failed_record(item[0], item[1], "the worker process died running this job, alone (a crash inside the engine?)")
+
+
+def run_jobs(runner: Runner, jobs, scenarios, references, work_dir, cache_root, use_cache, time_limit_s,
+             show_progress: bool) -> dict:
+    """``{Job: record}`` of every job (:func:`cross_checks.sweep.jobs.run_job`), run in the order given;
+    a job whose scenario has no reference is a failed row carrying the reason."""
+    from tqdm import tqdm
+
+    from cross_checks.engines import user_engines
+    records = {j: failed_record(j, scenarios[j.scenario_index], references[j.scenario_index].error)
+               for j in jobs if references[j.scenario_index].error}
+    todo = [j for j in jobs if j not in records]
+    inflight = Path(work_dir) / "inflight"
+    inflight.mkdir()
+    extra_engines = user_engines()
+    items = [(j, scenarios[j.scenario_index], references[j.scenario_index].path, cache_root, use_cache,
+              extra_engines, time_limit_s, str(inflight / str(k))) for k, j in enumerate(todo)]
+    with tqdm(total=len(todo), disable=not show_progress, unit="run", desc="rbcheck sweep", file=sys.stderr,
+              dynamic_ncols=True) as bar:
+        def done(item, rec):
+            records[item[0]] = rec
+            bar.update(1)
+            bar.set_postfix_str(f"{item[0].scenario} {item[0].variant}", refresh=False)
+
+        runner.map_unordered(_run_job_item, items, done, on_crash=_crashed, in_flight=_in_flight)
+    return records
