@@ -136,7 +136,7 @@ COMPACT_CONVERGENCE = {
 #: The lists a compact baseline keeps, each record reduced to its spec's fields.
 COMPACT_LISTS = {
     "scenarios": {"name": str, "content_hash": str, "reference": str, "duration_s": NUM, "dt_s": NUM,
-                  "dt_ladder_s": [NUM]},
+                  "dt_ladder_s": [NUM], "second_reference?": SCENARIO["second_reference?"]},
     "variants": {"name": str, "version?": Nullable(str), "declared_order?": Nullable(NUM)},
     "skipped_variants": {"name": str, "reason": str},
     "convergence": COMPACT_CONVERGENCE,
