@@ -158,6 +158,18 @@ def _finding_sections(fs):
             for sev, title in _SECTIONS if any(f.severity == sev for f in fs)]
 
 
+def _second_reference_text(rec) -> str:
+    """One line for summary.json's ``second_reference`` (docs/results.md); "" when there is none."""
+    if not rec:
+        return ""
+    if rec.get("error"):
+        return f"{rec['label']}: failed ({rec['error']})"
+    dist = "; ".join(f"{LABELS[q]} {fmt(rec['distance'][q], UNITS[q])} (together they claim "
+                     f"{fmt(rec['stated_accuracy'][q], UNITS[q])})" for q in QUANTITIES)
+    verdict = "agrees with the reference" if rec["agrees"] else "DISAGREES with the reference"
+    return f"{rec['label']}: {verdict} within their measured accuracies — largest distance over the run: {dist}"
+
+
 def _scenario_view(res, s, figs, all_findings, self_contained):
     sc = s["name"]
     cons = []
@@ -204,6 +216,7 @@ def _scenario_view(res, s, figs, all_findings, self_contained):
         "name": sc, "description": s["description"], "source": s["source"], "hash": s["content_hash"],
         "duration": fmt_dt(s["duration_s"]), "dt": fmt_dt(s["dt_s"]),
         "ladder": ", ".join(fmt_dt(d) for d in s["dt_ladder_s"]), "reference": s["reference"],
+        "second_reference": _second_reference_text(s.get("second_reference")),
         "conserved": cons,
         "findings": _finding_views([f for f in all_findings if f.scenario == sc]),
         "quantities": [f"{LABELS[q]} ({UNITS[q]})" for q in QUANTITIES],

@@ -1,5 +1,6 @@
-"""`rbcheck bench`: repeated measurements (median, spread), one N per table, and the sweep's floor counted
-from the scenarios themselves (no timing is asserted: speed lives in the benchmark's output)."""
+"""`rbcheck bench`: repeated measurements (median, spread), one N per table, the sweep's floor counted from
+the scenarios themselves (no timing is asserted: speed lives in the benchmark's output), and Drake's
+single-trajectory cost beside MuJoCo's through the same adapter interface (None when Drake is absent)."""
 import math
 
 import pytest
@@ -39,7 +40,7 @@ def test_the_sweep_floor_counts_every_engine_step_of_the_sweep(monkeypatch):
     assert sw["total_s"]["min"] >= sw["run_s"]["min"] + sw["report_s"]["min"] - 1e-9
 
 
-def test_the_table_says_one_n_for_every_row_and_prints_the_ratio():
+def _table_input():
     m = {k: {"median": 2.0, "min": 1.0, "max": 3.0, "repeats": 3} for k in (
         "reference_course_body_steps_per_s", "reference_expmap_gyro_body_steps_per_s",
         "mujoco_multibody_body_steps_per_s", "mujoco_rollout_body_steps_per_s", "pybullet_body_steps_per_s",
@@ -51,8 +52,31 @@ def test_the_table_says_one_n_for_every_row_and_prints_the_ratio():
     r = {"measurements": m, "n_bodies": 200, "repeats": 3, "cpu_count": 2, "load_average": [0.5, 0, 0],
          **{k: v["median"] for k, v in m.items()}, "sweep": sw, "targets": {},
          "mujoco_best_body_steps_per_s": 2.0, "ratio_reference_single_vs_mj_step": 1.0,
-         "sweep_floor_ratio": 0.004 / 5e-4, "sweep_run_floor_ratio": 8.0}
+         "sweep_floor_ratio": 0.004 / 5e-4, "sweep_run_floor_ratio": 8.0, "mujoco_adapter_single_us_per_step": 2.0,
+         "drake_single_us_per_step": 4.0, "drake_constant_force_us_per_step": 3.0}
+    return r
+
+
+def test_the_table_says_one_n_for_every_row_and_prints_the_ratio():
+    r = _table_input()
     text = bench.format_table(r)
     assert "every row: N = 200 bodies; median of 3 repeats" in text
     assert "floor = steps x bare mj_step / cores = 1,000 x 1.000 us / 2 = 0.00 s" in text
     assert "sweep / floor = 8.0x" in text and math.isclose(r["sweep_floor_ratio"], 8.0)
+
+
+def test_drake_is_measured_beside_mujoco_through_the_adapters():
+    pytest.importorskip("pydrake")
+    through_adapter, constant_force = bench.drake_single_us(200, 1)
+    from cross_checks.engines import mujoco_engine
+    assert through_adapter["median"] > 0 and constant_force["median"] > 0
+    assert bench.adapter_single_us(mujoco_engine, "euler", 200, 1)["median"] > 0
+
+
+def test_without_drake_the_keys_are_none_and_the_table_says_why(monkeypatch):
+    from cross_checks.engines import drake_engine
+    monkeypatch.setattr(drake_engine, "pydrake", None)
+    assert bench.drake_single_us(10, 1) == (None, None)
+    r = _table_input()
+    r.update(drake_single_us_per_step=None, drake_constant_force_us_per_step=None)
+    assert "Drake not installed (pip install 'rbcheck[drake]')" in bench.format_table(r)
