@@ -1,0 +1,222 @@
+"""The report in a real browser (headless Chromium through the DevTools protocol, tests/reports/chromium.py):
+every page loads with no console error, no broken image or link, fits 1024 px; tables sort and keep
+their headers; the first screen says what is wrong and whether it is expected; scenario pages link the
+scenario's TOML, its rows and its series; the plots leave out what carries no information.
+
+Where no Chromium is found the browser tests are skipped with the reason (`.ci/run` installs it).
+"""
+import csv
+import io
+import json
+import os
+import shutil
+from pathlib import Path
+
+import pytest
+
+import reports
+from cross_checks.scenario import parse_scenario
+from cross_checks.sweep import run_sweep
+
+from .chromium import Browser
+
+# position never moves (only a spin): its panels must be replaced by a note
+SPIN = """
+name = "spin_only"
+description = "Free asymmetric body spinning in place: position constant"
+duration = 0.5
+dt = 0.01
+dt_ladder = [0.04, 0.02, 0.01]
+[body]
+mass = 1.0
+inertia = [1.0, 2.0, 3.0]
+[initial]
+angular_velocity = [0.3, 2.0, 0.2]
+"""
+# one Δt only: no convergence, local or work-precision plot
+DROP = """
+name = "drop_once"
+description = "Projectile, one time step only"
+duration = 0.5
+dt = 0.01
+[body]
+mass = 1.0
+inertia = [1.0, 1.0, 1.0]
+[initial]
+velocity = [1.0, 0.0, 2.0]
+[forces]
+gravity = [0.0, 0.0, -9.81]
+"""
+# omega*dt = 1.5 at every step: explicit Euler grows by sqrt(1 + 1.5^2) per step and diverges (1e8) in
+# ~45 of its 50 steps; the symplectic schemes and RK4 (stable below 2.78) do not
+STIFF = """
+name = "stiff_spring"
+description = "Stiff spring (omega = 50 rad/s): explicit Euler diverges at every step of the ladder"
+duration = 1.5
+dt = 0.03
+dt_ladder = [0.03, 0.015]
+[body]
+mass = 1.0
+inertia = [0.05, 0.05, 0.05]
+[initial]
+position = [0.1, 0.0, 0.0]
+[[forces.spring]]
+anchor = [0.0, 0.0, 0.0]
+attach = [0.0, 0.0, 0.0]
+stiffness = 2500.0
+rest_length = 0.0
+"""
+VARIANTS = ["reference:course", "reference:rk4", "reference:explicit_euler", "mujoco:euler"]
+PAGES = ["index.html", "scenario-spin_only.html", "scenario-drop_once.html", "scenario-stiff_spring.html"]
+
+
+@pytest.fixture(scope="module")
+def results(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("browser")
+    old = os.environ.get("RBCHECK_CACHE_DIR")
+    os.environ["RBCHECK_CACHE_DIR"] = str(tmp / "cache")
+    src = tmp / "scenarios"
+    src.mkdir()
+    scs = []
+    for text in (SPIN, DROP, STIFF):
+        name = text.split('"')[1]
+        (src / f"{name}.toml").write_text(text, encoding="utf-8")
+        scs.append(parse_scenario(text, source=str(src / f"{name}.toml")))
+    try:
+        run_sweep(scs, VARIANTS, tmp / "res", jobs=2, finish=lambda d: reports.render(d, jobs=2, progress=False))
+    finally:
+        if old is None:
+            os.environ.pop("RBCHECK_CACHE_DIR")
+        else:
+            os.environ["RBCHECK_CACHE_DIR"] = old
+    return tmp / "res"
+
+
+@pytest.fixture(scope="module")
+def browser():
+    if not Browser.find():
+        pytest.skip("no Chromium found (chromium, chromium-browser, google-chrome or $RBCHECK_CHROMIUM): "
+                    "install the Debian package 'chromium' (.ci/run does) to run the browser tests")
+    with Browser() as b:
+        yield b
+
+
+def _url(d, page):
+    return (Path(d) / page).resolve().as_uri()
+
+
+@pytest.mark.parametrize("width", [1024, 1400])
+def test_every_page_loads_without_console_error_broken_image_or_link_and_fits(results, browser, width):
+    for page in PAGES:
+        r = browser.load(_url(results, page), width=width)
+        assert r["errors"] == [], (page, r["errors"])
+        assert r["broken"] == [], (page, r["broken"])
+        assert r["overflow_px"] <= 0, f"{page} is {r['overflow_px']} px wider than {width} px"
+
+
+def _column(browser, table_sel, col):
+    return browser.evaluate(f"""[...document.querySelector({json.dumps(table_sel)}).tBodies].map(tb =>
+        [...tb.rows].map(r => r.classList.contains('group') ? 'GROUP' :
+        (r.cells[{col}].getAttribute('data-sort') ?? r.cells[{col}].textContent.trim())))""")
+
+
+def _click(browser, selector):
+    browser.evaluate(f"document.querySelector({json.dumps(selector)}).click()")
+
+
+def test_headers_sort_rows_both_ways_and_family_headings_stay_on_top(results, browser):
+    browser.load(_url(results, "index.html"), width=1024)
+    _click(browser, "table.matrix th[data-col='3']")       # stiff_spring: explicit Euler's red/purple first
+    first = _column(browser, "table.matrix", 3)
+    assert all(tb[0] == "GROUP" for tb in first)
+    ref = [float(x) for x in first[0][1:]]
+    assert ref == sorted(ref) and len(ref) == 3
+    _click(browser, "table.matrix th[data-col='3']")
+    again = [float(x) for x in _column(browser, "table.matrix", 3)[0][1:]]
+    assert again == sorted(ref, reverse=True)
+    browser.load(_url(results, "scenario-spin_only.html"), width=1024)
+    _click(browser, "table.runs th[data-col='1']")         # Δt: numbers, not text ("0.04" after "0.01")
+    dts = [float(x) for x in _column(browser, "table.runs", 1)[0]]
+    assert dts == sorted(dts) and len(set(dts)) == 3
+
+
+def test_table_headers_stay_visible_while_scrolling(results, browser):
+    browser.load(_url(results, "scenario-spin_only.html"), width=1024, height=500)
+    top = browser.evaluate("""(() => { const t = document.querySelector('table.results');
+        window.scrollTo(0, t.getBoundingClientRect().top + window.scrollY + 40);
+        return [t.tHead.getBoundingClientRect().top, t.getBoundingClientRect().top]; })()""")
+    assert abs(top[0]) < 1.0 and top[1] < -30      # the table scrolled under, its header did not
+
+
+def test_first_screen_names_the_divergence_and_the_matrix_does_not_paint_it_green(results, browser):
+    browser.load(_url(results, "index.html"), width=1024, height=768)
+    box = browser.evaluate("(() => { const b = document.querySelector('#verdict').getBoundingClientRect();"
+                           " return [b.top, document.querySelector('#verdict').innerText]; })()")
+    assert box[0] < 200
+    assert "reference:explicit_euler" in box[1] and "diverged" in box[1].lower()
+    cls = browser.evaluate("""[...document.querySelectorAll('table.matrix tbody tr')]
+        .filter(r => r.cells[0].title === 'reference:explicit_euler').map(r => r.cells[3].className)""")
+    assert cls == ["diverged"]
+    marks = browser.evaluate("document.querySelector('table.matrix tbody tr:nth-child(2) .marks').innerText")
+    assert all(m in marks for m in "xvθω")             # every quantity's verdict without hovering
+
+
+def test_scenario_pages_link_their_toml_rows_and_series(results, browser):
+    for name, text in (("spin_only", SPIN), ("stiff_spring", STIFF)):
+        browser.load(_url(results, f"scenario-{name}.html"))
+        hrefs = browser.evaluate("[...document.querySelectorAll('p.files a')].map(a => a.getAttribute('href'))")
+        assert hrefs == [f"scenarios/{name}.toml", f"rows/{name}.csv", f"series/{name}.npz", "#runs"]
+        assert (results / f"scenarios/{name}.toml").read_text(encoding="utf-8") == text
+        with (results / "results.csv").open(newline="") as fh:
+            want = [r for r in csv.reader(fh) if r[0] in ("scenario", name)]
+        assert list(csv.reader(io.StringIO((results / f"rows/{name}.csv").read_text()))) == want
+        marker = json.loads((results / ".rbcheck-results.json").read_text())
+        assert {f"scenarios/{name}.toml", f"rows/{name}.csv"} <= set(marker["files"])
+
+
+def test_plots_leave_out_what_carries_no_information(results):
+    plots = {p.name for p in (results / "plots").glob("*.png")}
+    for kind in ("convergence", "local", "work"):          # one Δt: no ladder, no such plot
+        assert f"drop_once__{kind}.png" not in plots
+        assert f"spin_only__{kind}.png" in plots
+    page = (results / "scenario-drop_once.html").read_text()
+    assert "no Δt ladder" in page
+    spin = (results / "scenario-spin_only.html").read_text()
+    assert "constant along the reference, not drawn: x = 0, y = 0, z = 0" in spin
+
+
+def test_a_planted_contradiction_and_a_disagreeing_second_reference_reach_the_first_screen(results, tmp_path,
+                                                                                            browser):
+    d = tmp_path / "res"
+    shutil.copytree(results, d)
+    s = json.loads((d / "summary.json").read_text())
+    rec = next(r for r in s["convergence"] if r["engine"] == "reference:rk4" and r["scenario"] == "spin_only"
+               and r["quantity"] == "orientation")
+    rec.update(matches_expectation=False, assessment="does not converge (planted), expected order 4")
+    s["scenarios"][0]["second_reference"] = {"label": "drake:rk3", "target_accuracy": 1e-10,
+                                             "distance": {"position": 0.0, "orientation": 3e-6},
+                                             "stated_accuracy": {"position": 1e-9, "orientation": 1e-9},
+                                             "agrees": False}
+    (d / "summary.json").write_text(json.dumps(s))
+    reports.render(d, jobs=1, progress=False)
+    browser.load(_url(d, "index.html"), width=1024)
+    text = browser.evaluate("document.querySelector('#verdict').innerText")
+    assert "reference:rk4 on spin_only: orientation does not converge (planted)" in text
+    assert "second reference (drake:rk3) disagrees" in text
+    cls = browser.evaluate("""[...document.querySelectorAll('table.matrix tbody tr')]
+        .filter(r => r.cells[0].title === 'reference:rk4').map(r => r.cells[1].className)""")
+    assert cls == ["bad"]
+    browser.load(_url(d, "scenario-spin_only.html"))
+    page = browser.evaluate("document.body.innerText")
+    assert "disagrees with the reference" in page and "3.0e-6" in page
+    # absent: the pages say nothing about a second reference
+    assert "second reference" not in (results / "index.html").read_text().lower()
+
+
+def test_report_rendering_prints_progress_lines(results, tmp_path, capfd):
+    d = tmp_path / "res"
+    shutil.copytree(results, d)
+    reports.render(d, jobs=1)
+    err = capfd.readouterr().err.splitlines()
+    assert err and all(line.startswith("rbcheck report: ") for line in err)
+    assert err[-1].startswith("rbcheck report: 4 pages") and "plots written in" in err[-1]
