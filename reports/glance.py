@@ -134,8 +134,13 @@ def _scen_list(names, most=4) -> str:
     return ", ".join(names[:most]) + (f" and {len(names) - most} more" if len(names) > most else "")
 
 
-def _first_sentence(text: str) -> str:
-    return text.split("; ")[0].split(". ")[0].rstrip(".")
+def _first_sentence(text: str, limit: int = 120) -> str:
+    """The first clause of a reason, at most about ``limit`` characters (cut at a comma or bracket, "…")."""
+    s = text.split("; ")[0].split(". ")[0].rstrip(".")
+    if len(s) <= limit:
+        return s
+    cut = max(s.rfind(", ", 0, limit), s.rfind(" (", 0, limit))
+    return (s[:cut] if cut > 40 else s[:limit]).rstrip(" ,") + " …"
 
 
 def verdict_box(res) -> dict:
@@ -188,12 +193,15 @@ def verdict_box(res) -> dict:
 
     pre = [r for r in recs if r["verdict"] == "pre_asymptotic"]
     lines = []
-    for (v, sc), rs in sorted(_group(pre, lambda r: (r["engine"], r["scenario"])).items(),
-                              key=lambda kv: (kv[0][0], order.get(kv[0][1], 99))):
-        r0 = rs[0]
-        why = r0["reason"] if r0["expected_verdict"] == "pre_asymptotic" else r0["assessment"]
-        lines.append(f"{v} on {sc} ({', '.join(LABELS[r['quantity']] for r in rs)}): {_first_sentence(why)}")
-    groups.append({"title": "Pre-asymptotic on this ladder: no order claimed", "cls": "pre", "lines": lines})
+
+    def why(r):
+        return _first_sentence(r["reason"] if r["expected_verdict"] == "pre_asymptotic" else r["assessment"])
+    for (v, reason), rs in _group(pre, lambda r: (r["engine"], why(r))).items():
+        per = _group(rs, lambda r: r["scenario"])
+        lines.append(f"{v} on " + _scen_list([f"{sc} ({', '.join(LABELS[r['quantity']] for r in x)})"
+                                              for sc, x in sorted(per.items(), key=lambda kv: order.get(kv[0], 99))], 5)
+                     + f" — {reason}")
+    groups.append({"title": "Pre-asymptotic on this ladder: no order claimed (why)", "cls": "pre", "lines": lines})
 
     headline = [(len(groups[0]["lines"]), "contradiction(s)", "bad"), (len(failed), "failed run(s)", "bad"),
                 (len(div), "diverged run(s)", "diverged"),

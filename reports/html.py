@@ -251,6 +251,7 @@ def _scenario_view(res, s, figs, all_findings, self_contained):
         "ladder": ", ".join(fmt_dt(d) for d in s["dt_ladder_s"]), "reference": s["reference"],
         "conserved": cons, "files": _files(res, s), "second": _second_reference(s),
         "findings": _finding_views([f for f in mine if f.severity != "info"]),
+        "any_bad": any(f.severity == "bad" for f in mine),
         "observations": _finding_views([f for f in mine if f.severity == "info"]),
         "quantities": [f"{LABELS[q]} ({UNITS[q]})" for q in QUANTITIES],
         "quantity_names": [LABELS[q] for q in QUANTITIES],

@@ -38,7 +38,8 @@ from reports.glance import families  # noqa: E402
 __all__ = ["KINDS", "scenario_figures", "figure_tasks", "draw", "families", "variant_styles", "NOTES"]
 
 KINDS = ("trajectories", "errors", "conservation", "convergence", "local", "work")
-DPI = 90
+DPI = 100            # rbcheck check --plot (reports.check_plot)
+REPORT_DPI = 90      # the report's figures: up to 13 in wide, 1170 px, fits a 1400 px page without scaling
 #: Errors of exactly zero cannot be drawn on a log axis; they are drawn at this value (and said so).
 LOG_FLOOR = 1e-17
 _MARKERS = "osD^vP*Xh<>p"
@@ -62,7 +63,7 @@ def _short(v):
 
 def _grid(nrows, ncols, title, sharey="row", panel_h=2.1):
     width = min(13.0, 2.2 + 3.6 * ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(width, 0.9 + panel_h * nrows), dpi=DPI, squeeze=False,
+    fig, axes = plt.subplots(nrows, ncols, figsize=(width, 0.9 + panel_h * nrows), dpi=REPORT_DPI, squeeze=False,
                              sharex=True, sharey=sharey)
     fig.suptitle(title, fontsize=11, x=0.01, ha="left")
     return fig, axes
@@ -72,6 +73,7 @@ def _finish(fig, path):
     h = fig.get_size_inches()[1]
     fig.subplots_adjust(left=0.09 if fig.get_size_inches()[0] > 8 else 0.14, right=0.98, top=1.0 - 0.55 / h,
                         bottom=0.5 / h, hspace=0.35, wspace=0.08)
+    _plain_log_ticks(fig)
     _save_png(fig, path)
     plt.close(fig)
 
@@ -80,13 +82,17 @@ def _plain_log_ticks(fig):
     """Log axes labelled "1e-06" instead of mathtext 10⁻⁶ and without minor ticks: parsing mathtext and
     building ~300 minor tick objects per figure were most of its drawing time (cProfile: pyparsing,
     Axis._get_tick); decades alone read as well. Explicit tick labels (Δt ladders) stay."""
-    from matplotlib.ticker import FixedLocator, LogFormatter, LogLocator, NullLocator
+    from matplotlib.ticker import FixedLocator, LogFormatter, LogLocator, MaxNLocator, NullLocator
     for ax in fig.axes:
         for axis, scale in ((ax.xaxis, ax.get_xscale()), (ax.yaxis, ax.get_yscale())):
-            if scale == "log" and not isinstance(axis.get_major_locator(), FixedLocator):
-                axis.set_major_locator(LogLocator(base=10.0, numticks=8))
+            if isinstance(axis.get_major_locator(), FixedLocator):
+                continue
+            if scale == "log":
+                axis.set_major_locator(LogLocator(base=10.0, numticks=6))
                 axis.set_major_formatter(LogFormatter(labelOnlyBase=True))
                 axis.set_minor_locator(NullLocator())
+            else:   # fewer tick objects: each costs as much as a line of data to draw
+                axis.set_major_locator(MaxNLocator(nbins=4))
 
 
 def _save_png(fig, path):
@@ -95,13 +101,21 @@ def _save_png(fig, path):
     import io
 
     from PIL import Image
-    _plain_log_ticks(fig)
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=DPI, metadata={"Software": None})
+    fig.savefig(buf, format="png", dpi=fig.dpi, metadata={"Software": None})
     buf.seek(0)
     with Image.open(buf) as im:
         q = im.convert("RGB").quantize(colors=256, method=Image.Quantize.FASTOCTREE, dither=Image.Dither.NONE)
         q.save(path, format="PNG", compress_level=6)
+
+
+def _loglog(ax):
+    """Log scales set once per axes (loglog() on every line re-scales the axes each time: a third of
+    a ladder figure's drawing time)."""
+    if ax.get_xscale() != "log":
+        ax.set_xscale("log")
+    if ax.get_yscale() != "log":
+        ax.set_yscale("log")
 
 
 def _positive(a):
@@ -152,6 +166,8 @@ def _time_panels(fig, axes, res, sc, fams, styles, rows, log):
         keep = []
         for j, (fam, vs) in enumerate(fams.items()):
             ax = axes[i, j]
+            if log:
+                _loglog(ax)
             ref = ser.get("reference")
             if not log and ref is not None and get(ref) is not None:
                 ax.plot(ref["t_s"], get(ref), color="black", lw=3.2, alpha=0.28)
@@ -174,9 +190,6 @@ def _time_panels(fig, axes, res, sc, fams, styles, rows, log):
                 else:
                     keep.append(y[ok])
             ax.grid(alpha=0.3, which="both")
-            if log:
-                ax.set_yscale("log")
-                ax.set_xscale("log")
             if i == 0:
                 ax.set_title(fam, fontsize=10, loc="left")
         lim = _robust_limits(keep, log)
@@ -219,7 +232,7 @@ def fig_trajectories(res, sc, styles, path):
                                             f"reference, {info['reference']})", panel_h=1.5)
     _time_panels(fig, axes, res, sc, fams, styles, rows, log=False)
     _family_legends(axes[0], fams, styles)
-    NOTES[(sc, "trajectories")] = ("constant along the reference, not drawn: " + ", ".join(still)) if still else ""
+    NOTES[(sc, "trajectories")] = ("Not drawn, constant along the reference: " + ", ".join(still) + ".") if still else ""
     _finish(fig, path)
     return True
 
@@ -241,7 +254,7 @@ def fig_errors(res, sc, styles, path):
     _time_panels(fig, axes, res, sc, fams, styles, rows, log=True)
     _family_legends(axes[0], fams, styles)
     left = [LABELS[q] for q in QUANTITIES if q not in shown]
-    NOTES[(sc, "errors")] = ("not drawn: " + ", ".join(left) + " (does not move, or zero error for every variant)"
+    NOTES[(sc, "errors")] = ("Not drawn: " + ", ".join(left) + " (does not move, or zero error for every variant)."
                              if left else "")
     _finish(fig, path)
     return True
@@ -261,7 +274,7 @@ def fig_conservation(res, sc, styles, path):
     moving = [k for k in kinds if any(np.any(np.abs(np.asarray(ser[v].get(f"drift_{k}", [0.0]))) > 0)
                                       for vs in fams.values() for v in vs)]
     exact = [k.replace("_", " ") for k in kinds if k not in moving]
-    NOTES[(sc, "conservation")] = (", ".join(exact) + ": conserved exactly by every variant, not drawn") if exact else ""
+    NOTES[(sc, "conservation")] = ("Not drawn: " + ", ".join(exact) + " (conserved exactly by every variant).") if exact else ""
     if not fams or not moving:
         if not kinds:
             NOTES[(sc, "conservation")] = "the physics of this scenario conserves nothing"
@@ -308,6 +321,7 @@ def _ladder_cell(ax, res, sc, q, vs, styles, mode):
     col = f"{COLUMN_STEM[q]}_err_final" if mode == "free_running" else f"{COLUMN_STEM[q]}_local_err"
     recs = {r["engine"]: r for r in res.records(sc, quantity=q, mode=mode)}
     dts, vals = [], []
+    _loglog(ax)
     for v in vs:
         rows = sorted([r for r in res.rows_for(sc, v) if r["in_ladder"]], key=lambda r: -r["dt"])
         dt = np.array([r["dt"] for r in rows])
@@ -316,18 +330,18 @@ def _ladder_cell(ax, res, sc, q, vs, styles, mode):
         if not ok.any():
             continue
         st = styles[v]
-        ax.loglog(dt[ok], _positive(e[ok]), color=st["color"], ls=st["ls"], lw=1.0, marker=st["marker"], ms=4,
+        ax.plot(dt[ok], _positive(e[ok]), color=st["color"], ls=st["ls"], lw=1.0, marker=st["marker"], ms=4,
                   mfc="white")
         rec = recs.get(v)
         if rec is not None and rec["order"] is not None:
             fitted = np.array(rec["fitted"], dtype=bool)
-            ax.loglog(np.array(rec["dt_s"])[fitted], _positive(np.array(rec["errors"], dtype=float)[fitted]),
+            ax.plot(np.array(rec["dt_s"])[fitted], _positive(np.array(rec["errors"], dtype=float)[fitted]),
                       ls="none", marker=st["marker"], ms=4, color=st["color"])
         dts += dt[ok].tolist()
         vals.append(_positive(e[ok]))
     if recs:
         r0 = next(iter(recs.values()))
-        ax.loglog(r0["dt_s"], _positive(r0["floors"]), color="0.5", lw=4, alpha=0.22, solid_capstyle="butt")
+        ax.plot(r0["dt_s"], _positive(r0["floors"]), color="0.5", lw=4, alpha=0.22, solid_capstyle="butt")
     return dts, vals
 
 
@@ -338,7 +352,7 @@ def fig_ladder(res, sc, styles, path, mode):
     kind = "convergence" if mode == "free_running" else "local"
     vs_all = [v for v in res.variants if res.records(sc, v, mode=mode)]
     if len(ladder) < 2 or not vs_all:
-        NOTES[(sc, kind)] = "no Δt ladder: no convergence plot" if len(ladder) < 2 else ""
+        NOTES[(sc, kind)] = "no Δt ladder (one Δt only), so no order to show" if len(ladder) < 2 else ""
         return False
     fams = families(vs_all)
     qs = [q for q in QUANTITIES if info.get("varies", {}).get(q, True)]
@@ -370,7 +384,7 @@ def fig_ladder(res, sc, styles, path, mode):
     for ax, fam in zip(axes[0], fams):
         ax.set_title(fam, fontsize=10, loc="left")
     left = [LABELS[q] for q in QUANTITIES if q not in qs]
-    NOTES[(sc, kind)] = (("not drawn: " + ", ".join(left) + " (does not move). ") if left else "") + \
+    NOTES[(sc, kind)] = (("Not drawn: " + ", ".join(left) + " (does not move). ") if left else "") + \
         "Orders in the legends: " + " / ".join(LABELS[q] for q in qs) + "."
     _finish(fig, path)
     return True
@@ -380,15 +394,16 @@ def fig_work(res, sc, styles, path):
     """Work-precision across every engine on one axis (the comparison an engine choice needs)."""
     ladder = {r["dt"] for r in res.rows_for(sc) if r["in_ladder"]}
     if len(ladder) < 2:
-        NOTES[(sc, "work")] = "no Δt ladder"
+        NOTES[(sc, "work")] = "no Δt ladder (one Δt only)"
         return False
     qs = [q for q in ("position", "orientation") if res.scenario(sc).get("varies", {}).get(q, True)]
-    fig, axes = plt.subplots(1, len(qs), figsize=(13.0 if len(qs) > 1 else 8.0, 4.6), dpi=DPI, squeeze=False)
+    fig, axes = plt.subplots(1, len(qs), figsize=(13.0 if len(qs) > 1 else 8.0, 4.6), dpi=REPORT_DPI, squeeze=False)
     fig.suptitle(f"{sc}: work-precision — final error vs wall time of each run of the ladder", fontsize=11,
                  x=0.01, ha="left")
     handles = {}
     for ax, q in zip(axes[0], qs):
         col = f"{COLUMN_STEM[q]}_err_final"
+        _loglog(ax)
         for v in res.variants:
             rows = sorted([r for r in res.rows_for(sc, v) if r["in_ladder"] and r["status"] == "ok"],
                           key=lambda r: -r["dt"])
@@ -400,7 +415,7 @@ def fig_work(res, sc, styles, path):
             fam = v.split(":", 1)[0]
             color = plt.get_cmap("tab10")(list(families(res.variants)).index(fam) % 10)
             mk = styles[v]["marker"]
-            ax.loglog(w[ok], _positive(e[ok]), color=color, marker=mk, ms=4, lw=0.9, alpha=0.85)
+            ax.plot(w[ok], _positive(e[ok]), color=color, marker=mk, ms=4, lw=0.9, alpha=0.85)
             handles[v] = Line2D([], [], color=color, marker=mk, ms=4, lw=0.9, label=v)
         ax.set_title(LABELS[q], fontsize=10, loc="left")
         ax.set_xlabel("wall time of the run (s)", fontsize=8)
@@ -410,6 +425,7 @@ def fig_work(res, sc, styles, path):
         fig.legend(handles=list(handles.values()), loc="center right", fontsize=7, frameon=False,
                    title="colour: engine family", title_fontsize=8)
     fig.subplots_adjust(left=0.07, right=0.8, top=0.88, bottom=0.13, wspace=0.25)
+    _plain_log_ticks(fig)
     _save_png(fig, path)
     plt.close(fig)
     NOTES[(sc, "work")] = ""

@@ -148,17 +148,38 @@ def test_table_headers_stay_visible_while_scrolling(results, browser):
     assert abs(top[0]) < 1.0 and top[1] < -30      # the table scrolled under, its header did not
 
 
+def _matrix_class(browser, variant, col):
+    return browser.evaluate(f"""[...document.querySelectorAll('table.matrix tbody tr')]
+        .filter(r => r.cells[0].title === {json.dumps(variant)}).map(r => [r.cells[{col}].className,
+                                                                           r.cells[{col}].innerText])""")
+
+
 def test_first_screen_names_the_divergence_and_the_matrix_does_not_paint_it_green(results, browser):
     browser.load(_url(results, "index.html"), width=1024, height=768)
     box = browser.evaluate("(() => { const b = document.querySelector('#verdict').getBoundingClientRect();"
                            " return [b.top, document.querySelector('#verdict').innerText]; })()")
-    assert box[0] < 200
-    assert "reference:explicit_euler" in box[1] and "diverged" in box[1].lower()
-    cls = browser.evaluate("""[...document.querySelectorAll('table.matrix tbody tr')]
-        .filter(r => r.cells[0].title === 'reference:explicit_euler').map(r => r.cells[3].className)""")
-    assert cls == ["diverged"]
-    marks = browser.evaluate("document.querySelector('table.matrix tbody tr:nth-child(2) .marks').innerText")
-    assert all(m in marks for m in "xvθω")             # every quantity's verdict without hovering
+    assert box[0] < 200                                 # the verdict box is the first thing on the page
+    assert "reference:explicit_euler: 2 run(s) — stiff_spring" in box[1]
+    [(cls, text)] = _matrix_class(browser, "reference:explicit_euler", 3)
+    assert cls == "bad" and text.startswith("† t=") and "x†" in text    # diverging where it should converge
+    [(cls, text)] = _matrix_class(browser, "reference:rk4", 2)          # drop_once: exact, no ladder
+    assert cls == "acc1" and all(m in text for m in "xθvω")            # every quantity's mark, no hovering
+
+
+def test_an_expected_divergence_is_its_own_colour_not_green(results, tmp_path, browser):
+    d = tmp_path / "res"
+    shutil.copytree(results, d)
+    s = json.loads((d / "summary.json").read_text())
+    for r in s["convergence"]:
+        if r["engine"] == "reference:explicit_euler" and r["scenario"] == "stiff_spring":
+            r.update(expected_verdict="diverged", matches_expectation=True, assessment="diverged, as expected")
+    (d / "summary.json").write_text(json.dumps(s))
+    reports.render(d, jobs=1, progress=False)
+    browser.load(_url(d, "index.html"), width=1024)
+    [(cls, _)] = _matrix_class(browser, "reference:explicit_euler", 3)
+    assert cls == "diverged"
+    assert "every verdict of these scenarios is still as expected" in browser.evaluate(
+        "document.querySelector('#verdict').innerText")
 
 
 def test_scenario_pages_link_their_toml_rows_and_series(results, browser):
@@ -180,9 +201,9 @@ def test_plots_leave_out_what_carries_no_information(results):
         assert f"drop_once__{kind}.png" not in plots
         assert f"spin_only__{kind}.png" in plots
     page = (results / "scenario-drop_once.html").read_text()
-    assert "no Δt ladder" in page
+    assert "no Δt ladder (one Δt only)" in page
     spin = (results / "scenario-spin_only.html").read_text()
-    assert "constant along the reference, not drawn: x = 0, y = 0, z = 0" in spin
+    assert "Not drawn, constant along the reference: x = 0, y = 0, z = 0." in spin
 
 
 def test_a_planted_contradiction_and_a_disagreeing_second_reference_reach_the_first_screen(results, tmp_path,
@@ -203,9 +224,8 @@ def test_a_planted_contradiction_and_a_disagreeing_second_reference_reach_the_fi
     text = browser.evaluate("document.querySelector('#verdict').innerText")
     assert "reference:rk4 on spin_only: orientation does not converge (planted)" in text
     assert "second reference (drake:rk3) disagrees" in text
-    cls = browser.evaluate("""[...document.querySelectorAll('table.matrix tbody tr')]
-        .filter(r => r.cells[0].title === 'reference:rk4').map(r => r.cells[1].className)""")
-    assert cls == ["bad"]
+    [(cls, _)] = _matrix_class(browser, "reference:rk4", 1)    # spin_only
+    assert cls == "bad"
     browser.load(_url(d, "scenario-spin_only.html"))
     page = browser.evaluate("document.body.innerText")
     assert "disagrees with the reference" in page and "3.0e-6" in page
