@@ -35,12 +35,23 @@ def _quiet_init(parent_pid):
     worker_init(parent_pid)
 
 
+def _is_tty(stream) -> bool:
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError):
+        return False
+
+
 def _say(line: str) -> None:
     """A progress line on stderr, flushed (reaches a CI log without a terminal)."""
     print(f"rbcheck report: {line}", file=sys.stderr, flush=True)
 
 
-def render(directory, *, self_contained: bool = False, jobs: int | None = 1, progress: bool = True) -> list:
+#: Seconds between two progress lines while drawing (as the sweep's: a CI log never looks hung).
+LINE_INTERVAL_S = 5.0
+
+
+def render(directory, *, self_contained: bool = False, jobs: int | None = 1, progress: bool | None = None) -> list:
     """(Re)render the report of a results directory; returns the written page paths (HTML; the row
     extracts ``rows/<scenario>.csv`` are written beside them).
 
@@ -48,7 +59,8 @@ def render(directory, *, self_contained: bool = False, jobs: int | None = 1, pro
         the PNG files are kept beside them as well.
     jobs : processes drawing figures (one figure each, the loaded results inherited, not re-read);
         1 draws here.
-    progress : a line on stderr every few seconds while drawing, and one when the pages are written.
+    progress : a line on stderr every LINE_INTERVAL_S while drawing, and one when the pages are written
+        (flushed: it reaches a CI log); default: only when stderr is a terminal (library calls stay quiet).
     Raises ResultsError when the directory is not a readable results directory. Every file name comes
     from a sanitised name and is checked to stay inside the directory. Only files the directory's
     marker lists are ever removed (stale plots, pages and row extracts); a directory without the marker
@@ -57,6 +69,7 @@ def render(directory, *, self_contained: bool = False, jobs: int | None = 1, pro
     from cross_checks.sweep.results_dir import is_owned_stale, listed_files, owned_name, read_marker
 
     t0 = time.perf_counter()
+    progress = _is_tty(sys.stderr) if progress is None else progress
     d = Path(directory)
     res = load_results(d)
     names = [s["name"] for s in res.scenarios]
@@ -76,7 +89,7 @@ def render(directory, *, self_contained: bool = False, jobs: int | None = 1, pro
     _tidy(d, written, drawn, listed, marked)
     pages = [p for p in written if p.suffix == ".html"]
     if progress:
-        _say(f"{len(pages)} pages and {len(drawn)} plots written in {time.perf_counter() - t0:.1f} s")
+        _say(f"{len(pages)} pages and {len(drawn)} figures written in {time.perf_counter() - t0:.1f} s")
     return pages
 
 
@@ -125,8 +138,9 @@ def _draw_all(res, names, plot_dir: Path, jobs, progress, t0) -> dict:
         sc, kind, fname, note = item
         out[sc][kind] = (kind, fname, note)
         now = time.perf_counter()
-        if progress and (now - last >= 3.0 or i == len(tasks)):
-            _say(f"figures {i}/{len(tasks)} ({now - t0:.0f} s)")
+        if progress and (now - last >= LINE_INTERVAL_S or i == len(tasks)):
+            _say(f"figures {i}/{len(tasks)} ({100 * i / len(tasks):.0f}%) in {now - t0:.0f} s"
+                 + (f", ~{(now - t0) * (len(tasks) - i) / i:.0f} s left" if i < len(tasks) else ""))
             last = now
 
     try:

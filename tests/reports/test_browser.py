@@ -233,10 +233,14 @@ def test_a_planted_contradiction_and_a_disagreeing_second_reference_reach_the_fi
     assert "second reference" not in (results / "index.html").read_text().lower()
 
 
-def test_report_rendering_prints_progress_lines(results, tmp_path, capfd):
+def test_report_rendering_prints_progress_lines_while_drawing(results, tmp_path, capfd, monkeypatch):
     d = tmp_path / "res"
     shutil.copytree(results, d)
-    reports.render(d, jobs=1)
+    monkeypatch.setattr(reports, "LINE_INTERVAL_S", 0.0)          # a line after every figure
+    reports.render(d, jobs=2, progress=True)
     err = capfd.readouterr().err.splitlines()
-    assert err and all(line.startswith("rbcheck report: ") for line in err)
-    assert err[-1].startswith("rbcheck report: 4 pages") and "plots written in" in err[-1]
+    assert [line.split(" (")[0] for line in err[:-1]] == [f"rbcheck report: figures {i}/18" for i in range(1, 19)]
+    assert "left" in err[0] and err[-2].startswith("rbcheck report: figures 18/18 (100%) in ")
+    assert err[-1].startswith("rbcheck report: 4 pages and ") and "figures written in" in err[-1]
+    reports.render(d, jobs=1)                            # a library call without a terminal: quiet
+    assert capfd.readouterr().err == ""
