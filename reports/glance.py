@@ -168,9 +168,12 @@ def verdict_box(res) -> dict:
     groups.append({"title": "Contradicts the expectations", "cls": "bad", "lines": lines})
 
     failed = [r for r in res.rows if r["status"] == "failed"]
-    groups.append({"title": "Failed runs", "cls": "bad", "lines": [
-        f"{v}: {len(rs)} run(s) on {_scen_list(r['scenario'] for r in rs)} — {_first_sentence(rs[0]['message'])}"
-        for v, rs in _group(failed, lambda r: r["engine"]).items()]})
+    lines = [f"{v}: {len(rs)} run(s) on {_scen_list(r['scenario'] for r in rs)} — {_first_sentence(rs[0]['message'])}"
+             for v, rs in _group(failed, lambda r: r["engine"]).items()]
+    lines += [f"{s['name']}: the second reference ({s['second_reference'].get('label', '?')}) failed: "
+              f"{_first_sentence(str(s['second_reference']['error']))}" for s in res.scenarios
+              if isinstance(s.get("second_reference"), dict) and s["second_reference"].get("error")]
+    groups.append({"title": "Failures", "cls": "bad", "lines": lines})
 
     div = [r for r in res.rows if r["status"] == "diverged"]
     lines = []
@@ -203,9 +206,9 @@ def verdict_box(res) -> dict:
                      + f" — {reason}")
     groups.append({"title": "Pre-asymptotic on this ladder: no order claimed (why)", "cls": "pre", "lines": lines})
 
-    headline = [(len(groups[0]["lines"]), "contradiction(s)", "bad"), (len(failed), "failed run(s)", "bad"),
+    headline = [(len(groups[0]["lines"]), "contradiction(s)", "bad"), (len(groups[1]["lines"]), "failure(s)", "bad"),
                 (len(div), "diverged run(s)", "diverged"),
                 (len({(r['engine'], r['scenario']) for r in noconv}), "expected non-convergence(s)", "noconv"),
                 (len({(r['engine'], r['scenario']) for r in pre}), "pre-asymptotic", "pre")]
     return {"headline": headline, "groups": [g for g in groups if g["lines"]],
-            "all_clear": not groups[0]["lines"] and not failed}
+            "all_clear": not groups[0]["lines"] and not groups[1]["lines"]}

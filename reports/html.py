@@ -115,9 +115,10 @@ def _matrix(res):
     header = []
     for i, s in enumerate(res.scenarios, start=1):
         sr = s.get("second_reference")
-        second = "" if not isinstance(sr, dict) else ("2nd ref. agrees" if sr.get("agrees") else "2nd ref. DISAGREES")
+        second = "" if not isinstance(sr, dict) else ("2nd ref. failed" if sr.get("error") else "2nd ref. agrees"
+                                                      if sr.get("agrees") else "2nd ref. DISAGREES")
         header.append({"name": s["name"], "href": page_name(s["name"]), "col": i, "second": second,
-                       "second_cls": "" if not second else ("acc1" if sr.get("agrees") else "bad"),
+                       "second_cls": "" if not second else ("acc1" if second.endswith("agrees") else "bad"),
                        "title": f"{s['name']}: Δt = {fmt_dt(s['dt_s'])} s over {fmt_dt(s['duration_s'])} s, "
                                 f"reference {s['reference']}" + (f"; {second}" if second else "")})
     groups = []
@@ -217,7 +218,21 @@ def _files(res, s):
     return out
 
 
+def _second_reference_text(rec) -> str:
+    """One line for summary.json's ``second_reference`` (docs/results.md); "" when there is none."""
+    if not rec:
+        return ""
+    if rec.get("error"):
+        return f"{rec['label']}: failed ({rec['error']})"
+    dist = "; ".join(f"{LABELS[q]} {fmt(rec['distance'][q], UNITS[q])} (together they claim "
+                     f"{fmt(rec['stated_accuracy'][q], UNITS[q])})" for q in QUANTITIES
+                     if q in (rec.get("distance") or {}) and q in (rec.get("stated_accuracy") or {}))
+    verdict = "agrees with the reference" if rec["agrees"] else "DISAGREES with the reference"
+    return f"{rec['label']}: {verdict} within their measured accuracies — largest distance over the run: {dist}"
+
+
 def _second_reference(s):
+    """The scenario page's second-reference section (None when the record is absent)."""
     sr = s.get("second_reference")
     if not isinstance(sr, dict):
         return None
@@ -230,7 +245,8 @@ def _second_reference(s):
                      "cls": "missing" if within is None else ("acc1" if within else "bad"),
                      "within": "–" if within is None else ("yes" if within else "NO")})
     return {"label": str(sr.get("label", "?")), "target": fmt(sr.get("target_accuracy")),
-            "agrees": sr.get("agrees"), "rows": rows}
+            "agrees": None if sr.get("error") else sr.get("agrees"), "error": str(sr.get("error") or ""),
+            "rows": rows, "line": _second_reference_text(sr)}
 
 
 def _scenario_view(res, s, figs, all_findings, self_contained):
