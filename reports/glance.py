@@ -21,7 +21,7 @@ from reports.data import LABELS
 from reports.findings import fmt, fmt_dt
 
 __all__ = ["CELL_CLASSES", "ACCURACY_TIERS", "GLYPHS", "glyph", "cell", "verdict_box", "relative_error",
-           "family_of", "families"]
+           "family_of", "families", "order_text"]
 
 CELL_CLASSES = ("bad", "diverged", "noconv", "pre", "acc1", "acc2", "acc3", "missing")
 #: Relative-error tiers of the green cells (display only, not a verdict): 1e-6 is well inside every
@@ -45,6 +45,25 @@ def families(variants) -> dict:
     for v in variants:
         out.setdefault(family_of(v), []).append(v)
     return out
+
+
+_VERDICT_SHORT = {"converges": "conv.", "does_not_converge": "no conv.", "at_roundoff": "exact",
+                  "pre_asymptotic": "pre-asympt.", "diverged": "diverged", "failed": "failed", "insufficient": "n/a"}
+
+
+def order_text(rec) -> str:
+    """A fitted order as a table or legend shows it: "2.01", "exact", "no (0.12)", "(0.85)" when
+    pre-asymptotic (not judged), the verdict's short name when no order was fitted, "–" without a record."""
+    if rec is None:
+        return "–"
+    if rec["verdict"] == "at_roundoff":
+        return "exact"
+    if rec["order"] is None:
+        return _VERDICT_SHORT.get(rec["verdict"], rec["verdict"])
+    o = 0.0 if abs(rec["order"]) < 0.005 else rec["order"]
+    if rec["verdict"] == "pre_asymptotic":
+        return f"({o:.2f})"
+    return f"{o:.2f}" if rec["verdict"] == "converges" else f"no ({o:.2f})"
 
 
 def glyph(rec) -> str:

@@ -13,12 +13,10 @@ from jinja2 import Environment, PackageLoader, StrictUndefined, select_autoescap
 from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, UNITS
 from reports.data import LABELS
 from reports.findings import findings, fmt, fmt_dt
-from reports.glance import ACCURACY_TIERS, GLYPHS, cell, families, glyph, verdict_box
+from reports.glance import ACCURACY_TIERS, GLYPHS, cell, families, glyph, order_text, verdict_box
 
 __all__ = ["environment", "render_pages", "page_name", "rows_extracts"]
 
-_VERDICT_SHORT = {"converges": "conv.", "does_not_converge": "no conv.", "at_roundoff": "exact",
-                  "pre_asymptotic": "pre-asympt.", "diverged": "diverged", "failed": "failed", "insufficient": "n/a"}
 _FAMILIES = ("One column per engine family, each variant in its own colour; a row shares its y axis. A run that "
              "diverged is drawn up to its divergence (×) and the axes follow the runs that did not.")
 _FIG_CAPTIONS = {
@@ -60,19 +58,6 @@ def _img_src(res, fname, self_contained):
     return "data:image/png;base64," + base64.b64encode(data).decode("ascii")
 
 
-def _order_text(rec):
-    if rec is None:
-        return "–"
-    if rec["verdict"] == "at_roundoff":
-        return "exact"
-    if rec["order"] is None:
-        return _VERDICT_SHORT.get(rec["verdict"], rec["verdict"])
-    o = 0.0 if abs(rec["order"]) < 0.005 else rec["order"]
-    if rec["verdict"] == "pre_asymptotic":
-        return f"({o:.2f})"
-    return f"{o:.2f}" if rec["verdict"] == "converges" else f"no ({o:.2f})"
-
-
 #: Background of an order cell by its verdict (reports.glance.glyph): the matrix's colours.
 _GLYPH_BG = {"good": "acc1", "exact": "acc1", "noconv": "noconv", "pre": "pre", "diverged": "diverged", "bad": "bad",
              "missing": "missing"}
@@ -85,7 +70,7 @@ def _order_cell(rec, local=False):
     title = rec["assessment"] + (f" — {rec['note']}" if rec.get("note") else "")
     if not local and rec.get("reason"):
         title += f" — expected: {rec['reason']}"
-    return {"text": _order_text(rec), "cls": _GLYPH_BG[g], "title": title, "mark": GLYPHS[g][0], "glyph": g}
+    return {"text": order_text(rec), "cls": _GLYPH_BG[g], "title": title, "mark": GLYPHS[g][0], "glyph": g}
 
 
 def _provenance(res):

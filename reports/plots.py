@@ -33,7 +33,7 @@ from matplotlib.lines import Line2D  # noqa: E402
 
 from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, UNITS  # noqa: E402
 from reports.data import LABELS  # noqa: E402
-from reports.glance import families  # noqa: E402
+from reports.glance import families, order_text  # noqa: E402
 
 __all__ = ["KINDS", "scenario_figures", "figure_tasks", "draw", "families", "variant_styles", "NOTES"]
 
@@ -303,19 +303,6 @@ def _slope_triangles(ax, dts, orders=(1, 2, 4)):
         ax.text(x0 / 10 ** (0.01 * span_x), y0, f"{p}", fontsize=7, color="0.3", va="bottom", ha="right")
 
 
-def _order_text(rec):
-    if rec is None:
-        return "—"
-    if rec["verdict"] == "at_roundoff":
-        return "exact"
-    if rec["order"] is None:
-        return {"diverged": "div.", "failed": "failed"}.get(rec["verdict"], "n/a")
-    o = 0.0 if abs(rec["order"]) < 0.005 else rec["order"]
-    if rec["verdict"] == "pre_asymptotic":
-        return f"({o:.1f})"
-    return f"{o:.2f}" if rec["verdict"] == "converges" else "no"
-
-
 def _ladder_cell(ax, res, sc, q, vs, styles, mode):
     """One family's variants on one quantity; returns the Δt drawn and the finite errors drawn."""
     col = f"{COLUMN_STEM[q]}_err_final" if mode == "free_running" else f"{COLUMN_STEM[q]}_local_err"
@@ -378,7 +365,7 @@ def fig_ladder(res, sc, styles, path, mode):
         ax.xaxis.set_minor_locator(NullLocator())
         ax.set_xticklabels([f"{d:g}" for d in ladder], fontsize=7)
         ax.set_xlabel("time step Δt (s)", fontsize=8)
-    orders = {v: "p " + " / ".join(_order_text(next((r for r in res.records(sc, v, q, mode=mode)), None)) for q in qs)
+    orders = {v: "p " + " / ".join(order_text(next((r for r in res.records(sc, v, q, mode=mode)), None)) for q in qs)
               for v in vs_all}
     _family_legends(axes[0], fams, styles, orders, markers=True)
     for ax, fam in zip(axes[0], fams):
