@@ -248,3 +248,26 @@ def test_report_rendering_prints_progress_lines_while_drawing(results, tmp_path,
     assert [line.split(" (")[0] for line in err[:-1]] == [f"rbcheck report: figures {i}/18" for i in range(1, 19)]
     assert "left" in err[0] and err[-2].startswith("rbcheck report: figures 18/18 (100%) in ")
     assert err[-1].startswith("rbcheck report: 4 pages and ") and "figures written in" in err[-1]
+
+
+def test_a_diverged_run_does_not_flatten_the_others(results, tmp_path, monkeypatch):
+    """Explicit Euler blows up to 1e8 on stiff_spring; the error axes still span the other runs' errors
+    (read from the series file, not from the plot), and its curve ends at its divergence."""
+    import numpy as np
+
+    from reports import plots
+    from reports.data import load_results
+    drawn = {}
+    monkeypatch.setattr(plots, "_save_png", lambda fig, path: drawn.setdefault("fig", fig))
+    monkeypatch.setattr(plots.plt, "close", lambda fig: None)
+    res = load_results(results)
+    assert plots.draw(res, "stiff_spring", "errors", tmp_path)[1] is not None
+    ax = drawn["fig"].axes[0]                                   # position error, reference family
+    with np.load(results / "series" / "stiff_spring.npz") as z:
+        others = np.concatenate([z[f"{v}::err_position"][1:] for v in ("reference:course", "reference:rk4")])
+        blown = z["reference:explicit_euler::err_position"]
+    lo, hi = ax.get_ylim()
+    assert blown.max() > 1e3 * others.max()                     # the planted blow-up is real
+    assert others.max() <= hi <= 10 * others.max() * 1.01 and lo <= others[others > 0].min()
+    euler = [ln for ln in ax.get_lines() if ln.get_marker() == "x"]
+    assert len(euler) == 1                                      # one divergence mark, on explicit Euler
