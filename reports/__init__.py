@@ -126,7 +126,7 @@ def _tidy(d, written, drawn, listed, marked) -> None:
 def _draw_all(res, names, plot_dir: Path, jobs, progress, t0) -> dict:
     """Draw every figure (in ``jobs`` processes); returns ``{scenario: [(kind, file or None, note)]}``
     in the order of plots.KINDS."""
-    from reports.plots import KINDS, figure_tasks
+    from reports.plots import KINDS, figure_tasks   # imported here: forked workers inherit matplotlib
     tasks = [(sc, kind, str(plot_dir)) for sc in names for _, kind in figure_tasks(res, sc)]
     _SHARED.clear()
     _SHARED.update(res=res, directory=str(res.directory))

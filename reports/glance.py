@@ -217,7 +217,8 @@ def verdict_box(res) -> dict:
     lines = []
 
     def why(r):
-        return _first_sentence(r["reason"] if r["expected_verdict"] == "pre_asymptotic" else r["assessment"])
+        text = r["reason"] if r["expected_verdict"] == "pre_asymptotic" else r["assessment"]
+        return _first_sentence(text.removeprefix("pre-asymptotic on this ladder: "), 140)
     for (v, reason), rs in _group(pre, lambda r: (r["engine"], why(r))).items():
         per = _group(rs, lambda r: r["scenario"])
         lines.append(f"{v} on " + _scen_list([f"{sc} ({', '.join(LABELS[r['quantity']] for r in x)})"
