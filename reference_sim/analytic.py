@@ -276,6 +276,13 @@ def harmonic_oscillator(mass_kg, k_N_per_m, rest_length_m, anchor_W, x0_W, v0_W,
         v_W = v0 * c - (w0 * dx0) * s
         return x_W, v_W
 
+    return _oscillator_on_line(m, k, L0, anchor, x0, v0, g, t, w0, c, s)
+
+
+def _oscillator_on_line(m, k, L0, anchor, x0, v0, g, t, w0, c, s):
+    """:func:`harmonic_oscillator` with a rest length ``L0 > 0``: the 1-D oscillator along the line
+    ``u = (x0 − anchor)/|x0 − anchor|``, after checking that the motion stays on it and off the anchor.
+    ``c, s``: (T, 1) cos and sin of ω0 t."""
     d0 = x0 - anchor
     s0 = float(np.linalg.norm(d0))
     if s0 == 0.0:

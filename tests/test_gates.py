@@ -1,11 +1,10 @@
-"""Regression gates: a fresh sweep judged by cross_checks/expectations.py and against the committed baseline.
+"""Regression gates: a fresh sweep judged by cross_checks/analysis/expectations.py and against the committed baseline.
 
 The default run sweeps FAST_SUBSET (every available variant, each scenario's full dt ladder); the
-whole catalog runs under ``-m slow``. Every number comes from cross_checks.expectations /
-cross_checks.tolerances, each with its derivation there.
+whole catalog runs under ``-m slow``. Every number comes from cross_checks.analysis.expectations /
+cross_checks.core.tolerances, each with its derivation there.
 """
 import json
-import os
 from pathlib import Path
 
 import pandas as pd
@@ -17,6 +16,7 @@ from cross_checks.analysis.expectations import EQUIVALENT_PAIRS, energy_drift_bo
 from cross_checks.scenario import catalog_names, load_scenario
 from cross_checks.sweep import run_sweep
 from cross_checks.core.tolerances import SAME_SCHEME_REL
+from tests.helpers.sweeps import built_once, private_cache
 
 ROOT = Path(__file__).resolve().parents[1]
 BASELINE = ROOT / "baselines" / "default"
@@ -27,26 +27,21 @@ ASYMMETRIC_TUMBLING = ["tennis_racket", "particle_body", "tumbling_box"]
 
 
 def _sweep(tmp_path_factory, names, tag):
-    out = tmp_path_factory.mktemp(tag) / "results"
-    old = os.environ.get("RBCHECK_CACHE_DIR")
-    os.environ["RBCHECK_CACHE_DIR"] = str(tmp_path_factory.mktemp(f"{tag}-cache"))
-    try:
-        run_sweep([load_scenario(n) for n in names], available_variants(), out, jobs=2, use_cache=False,
-                  progress=False)
-    finally:
-        if old is None:
-            os.environ.pop("RBCHECK_CACHE_DIR", None)
-        else:
-            os.environ["RBCHECK_CACHE_DIR"] = old
+    """One sweep of ``names`` with every available variant per test run (the xdist workers share it)."""
+    def build(folder):
+        with private_cache(folder / "cache"):
+            run_sweep([load_scenario(n) for n in names], available_variants(), folder / "results", jobs=2,
+                      use_cache=False, progress=False)
+    out = built_once(tmp_path_factory, f"gates-{tag}", build) / "results"
     return out, pd.read_csv(out / "results.csv"), json.loads((out / "summary.json").read_text())
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def fast(tmp_path_factory):
     return _sweep(tmp_path_factory, FAST_SUBSET, "fast")
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def full(tmp_path_factory):
     return _sweep(tmp_path_factory, catalog_names(), "full")
 

@@ -95,54 +95,16 @@ def fit_convergence(dt_s, errors, floors=None, statuses=None) -> ConvergenceFit:
         return ConvergenceFit(order=None, fitted=fitted, verdict=verdict, note="; ".join(notes), **res)
 
     idx_ok = [int(i) for i in np.flatnonzero(ok)]
-    # (a) Round-off at the fine end: the first point not resolved above its floor (≤ RESOLVED_ABOVE_FLOOR
-    #     × floor: round-off may be a tenth of it) and every finer one, provided none of the finer ones is
-    #     resolved (else the low point is an accident of the ladder — e.g. the one Δt where frame-rate
-    #     dependent physics happens to match).
-    above = list(idx_ok)
-    for k, i in enumerate(idx_ok):
-        if all(e[j] <= tol.RESOLVED_ABOVE_FLOOR * fl[j] for j in idx_ok[k:]):
-            above = idx_ok[:k]
-            notes.append(f"{len(idx_ok) - k} point(s) within {tol.RESOLVED_ABOVE_FLOOR:g}× the round-off floor "
-                         f"dropped (Δt ≤ {dt[i]:g} s)")
-            break
-    # (b) Round-off amplified by the dynamics: the error grows again at the fine end while still tiny
-    #     (≤ AMPLIFIED_ROUNDOFF_FACTOR × floor); drop the fine points within ROUNDOFF_NOISE_FACTOR of
-    #     the smallest error.
-    if len(above) >= 3 and e[above[-1]] > e[above[-2]]:
-        m = min(e[i] for i in above)
-        i_min = min(above, key=lambda i: e[i])
-        finer = [i for i in above if i > i_min]
-        if m <= tol.AMPLIFIED_ROUNDOFF_FACTOR * fl[i_min] and all(e[i] <= tol.ROUNDOFF_NOISE_FACTOR * m for i in finer):
-            keep = list(above)
-            while keep and e[keep[-1]] <= tol.ROUNDOFF_NOISE_FACTOR * m:
-                keep.pop()
-            notes.append(f"errors stop falling at {m:.2g} (Δt = {dt[i_min]:g} s) and grow again: round-off amplified "
-                         f"by the dynamics; {len(above) - len(keep)} fine point(s) dropped")
-            above = keep
+    above = _drop_amplified_roundoff(dt, e, fl, _drop_roundoff_tail(dt, e, fl, idx_ok, notes), notes)
     lower_bound = False
     if len(above) < 2:
-        # Fewer than two resolved points: if the coarsest is resolved, fit it with the finer ones above the
-        # floor itself; the order is then a lower bound (what round-off adds to a finer point can only
-        # lower it). With no resolved point at all, the errors are round-off whatever they do.
-        cand = list(idx_ok)
-        while cand and e[cand[-1]] <= fl[cand[-1]]:
-            cand.pop()
-        if len(above) == 0 or len(cand) < 2 or len(cand) <= len(above):
+        above = _lower_bound_points(e, fl, idx_ok, above)
+        if above is None:
             return ConvergenceFit(order=None, fitted=fitted, verdict="at_roundoff", note="; ".join(notes), **res)
-        above, lower_bound = cand, True
+        lower_bound = True
         notes.append(f"fewer than two errors {tol.RESOLVED_ABOVE_FLOOR:g}× above their floors: fitted on the "
-                     f"{len(cand)} above it, the order is a lower bound")
-
-    use = list(above)
-    # A pre-asymptotic coarsest point: its pairwise order is far from that of the finer pairs.
-    if len(use) >= 4:
-        pw_use = pairwise_orders(dt[use].tolist(), e[use].tolist())
-        rest = [p for p in pw_use[1:] if p is not None]
-        if pw_use[0] is not None and rest and all(p > 0 for p in rest) \
-                and abs(pw_use[0] - float(np.median(rest))) > tol.PRE_ASYMPTOTIC_ORDER_DEV:
-            notes.append(f"coarsest Δt = {dt[use[0]]:g} s pre-asymptotic (pairwise order {pw_use[0]:.2f}), dropped")
-            use = use[1:]
+                     f"{len(above)} above it, the order is a lower bound")
+    use = _drop_pre_asymptotic_coarsest(dt, e, above, notes)
     order = _lsq_slope(np.log(dt[use]), np.log(e[use]))
     for i in use:
         fitted[i] = True
@@ -155,6 +117,66 @@ def fit_convergence(dt_s, errors, floors=None, statuses=None) -> ConvergenceFit:
                      "pre-asymptotic on this ladder")
     return ConvergenceFit(order=order, fitted=fitted, verdict=verdict, note="; ".join(notes),
                           order_is_lower_bound=lower_bound, **res)
+
+
+def _drop_roundoff_tail(dt, e, fl, idx_ok, notes) -> list:
+    """(a) Round-off at the fine end: the first point not resolved above its floor (≤ RESOLVED_ABOVE_FLOOR
+    × floor: round-off may be a tenth of it) and every finer one are dropped, provided none of the finer
+    ones is resolved (else the low point is an accident of the ladder — e.g. the one Δt where frame-rate
+    dependent physics happens to match). Returns the indices kept (coarse to fine)."""
+    for k, i in enumerate(idx_ok):
+        if all(e[j] <= tol.RESOLVED_ABOVE_FLOOR * fl[j] for j in idx_ok[k:]):
+            notes.append(f"{len(idx_ok) - k} point(s) within {tol.RESOLVED_ABOVE_FLOOR:g}× the round-off floor "
+                         f"dropped (Δt ≤ {dt[i]:g} s)")
+            return idx_ok[:k]
+    return list(idx_ok)
+
+
+def _drop_amplified_roundoff(dt, e, fl, above, notes) -> list:
+    """(b) Round-off amplified by the dynamics: the error grows again at the fine end while still tiny
+    (≤ AMPLIFIED_ROUNDOFF_FACTOR × floor); the fine points within ROUNDOFF_NOISE_FACTOR of the smallest
+    error are dropped."""
+    if len(above) < 3 or not e[above[-1]] > e[above[-2]]:
+        return above
+    m = min(e[i] for i in above)
+    i_min = min(above, key=lambda i: e[i])
+    finer = [i for i in above if i > i_min]
+    if not (m <= tol.AMPLIFIED_ROUNDOFF_FACTOR * fl[i_min] and all(e[i] <= tol.ROUNDOFF_NOISE_FACTOR * m for i in finer)):
+        return above
+    keep = list(above)
+    while keep and e[keep[-1]] <= tol.ROUNDOFF_NOISE_FACTOR * m:
+        keep.pop()
+    notes.append(f"errors stop falling at {m:.2g} (Δt = {dt[i_min]:g} s) and grow again: round-off amplified "
+                 f"by the dynamics; {len(above) - len(keep)} fine point(s) dropped")
+    return keep
+
+
+def _lower_bound_points(e, fl, idx_ok, above):
+    """Fewer than two resolved points: if the coarsest is resolved, the points above the floor itself
+    (the order fitted on them is a lower bound: what round-off adds to a finer point can only lower it);
+    None when there is no such pair (with no resolved point at all, the errors are round-off whatever
+    they do)."""
+    cand = list(idx_ok)
+    while cand and e[cand[-1]] <= fl[cand[-1]]:
+        cand.pop()
+    if len(above) == 0 or len(cand) < 2 or len(cand) <= len(above):
+        return None
+    return cand
+
+
+def _drop_pre_asymptotic_coarsest(dt, e, above, notes) -> list:
+    """A pre-asymptotic coarsest point (of four or more): its pairwise order is far from the median of
+    the finer pairs (PRE_ASYMPTOTIC_ORDER_DEV); dropped from the fit."""
+    use = list(above)
+    if len(use) < 4:
+        return use
+    pw_use = pairwise_orders(dt[use].tolist(), e[use].tolist())
+    rest = [p for p in pw_use[1:] if p is not None]
+    if pw_use[0] is not None and rest and all(p > 0 for p in rest) \
+            and abs(pw_use[0] - float(np.median(rest))) > tol.PRE_ASYMPTOTIC_ORDER_DEV:
+        notes.append(f"coarsest Δt = {dt[use[0]]:g} s pre-asymptotic (pairwise order {pw_use[0]:.2f}), dropped")
+        return use[1:]
+    return use
 
 
 def measured_pre_asymptotic(fit: ConvergenceFit, expected_order) -> str:

@@ -65,8 +65,8 @@ class Traits:
 _SYMPLECTIC_EULER_EXPLICIT_GYRO = Traits(rotation_drift="body", rotation_sign=+1)
 _SYMPLECTIC_EULER_IMPLICIT_GYRO = Traits(rotation_drift="body", rotation_sign=-1)
 
-#: Traits per ENGINE:VARIANT, the one table (tests/cross_checks/test_expectations.py pins each sign on
-#: the engines themselves, and that the body-frame steps keep the separatrix distance).
+#: Traits per ENGINE:VARIANT, the one table (tests/cross_checks/analysis/test_expectations.py pins each
+#: sign on the engines themselves, and that the body-frame steps keep the separatrix distance).
 VARIANT_TRAITS = {
     "reference:course": Traits(gyroscopic_term=False),
     "reference:course_gyro": _SYMPLECTIC_EULER_EXPLICIT_GYRO,

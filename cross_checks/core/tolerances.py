@@ -215,3 +215,61 @@ COMPARE_REL_TOL = 0.05
 #: Absolute change below which an error or drift has not changed: values at the round-off floor
 #: (≤ 1e-12) fluctuate by O(1) factors between machines and mean nothing.
 COMPARE_ABS_TOL = 1e-12
+
+# --- agreement of engines and closed forms (tests/cross_checks/engines/test_engine_agreement.py) ---
+#: Projectile closed forms (semi-implicit x_n = x0 + n h v0 + g h² n(n+1)/2 and the exact parabola):
+#: 100 steps of sums of ≤ 3 m quantities, ~100 ε · 3 ≈ 7e-14; the required bound is 1e-12.
+AGREE_PROJECTILE = 1e-12
+#: The same scheme (symplectic Euler, explicit gyroscopic term, exponential map) in NumPy, MuJoCo
+#: Euler and PyBullet multibody over ≥ 2000 steps: round-off only (measured ≤ 1e-13); the required
+#: bound is 1e-10 in position, orientation and angular velocity.
+AGREE_SAME_SCHEME = 1e-10
+#: mujoco:implicitfast vs pybullet:maximal, torque-free tennis racket, 2 s at 1e-3: both take the same
+#: linearised implicit gyroscopic step (Bullet's body-frame Newton step == MuJoCo's implicit
+#: derivative for a lone free body), so only round-off separates them: measured 3.2e-14 rad (7.8e-13
+#: over the full 10 s, where the unstable intermediate axis amplifies it); 1e-11 leaves 300x margin.
+AGREE_IMPLICIT_PAIR_TORQUE_FREE = 1e-11
+#: With an applied torque they differ at first order (Bullet adds h I⁻¹τ outside the implicit solve,
+#: MuJoCo solves (I + h D) Δω = h (τ − ω×Iω)): the 2-s difference must halve with h (ratio 2 ± 0.2).
+AGREE_FIRST_ORDER_RATIO = (1.8, 2.2)
+#: MuJoCo implicit vs implicitfast for a lone free body (docs/engine_conventions.md: 1e-13): measured 8e-18.
+AGREE_IMPLICIT_VS_IMPLICITFAST = 1e-13
+#: The body has flipped when its y axis points against world y (R[:, 1]·e_y < 0): measured −0.9996 for
+#: every gyroscopic scheme; the course update never gets below +0.9999. Thresholds far from both.
+AGREE_FLIP_BELOW = -0.5
+AGREE_NO_FLIP_ABOVE = 0.5
+#: The recorded t = 0 row vs the scenario's initial state: ω goes world -> body -> world (MuJoCo) or the
+#: quaternion through x,y,z,w and the principal frame (PyBullet): a few ε of |ω| ≤ 5 rad/s.
+AGREE_INITIAL_ROW = 1e-14
+
+# --- the PyBullet adapter's conventions (tests/cross_checks/engines/test_pybullet_engine.py) ---
+#: Same-arithmetic conversions (quaternion order, principal-frame rotation at the boundary): a few ε.
+PYB_ROUND_TRIP = 1e-15
+#: Exact exponential-map spin about a principal axis over 100 steps: ~ε per step.
+PYB_SPIN_100_STEPS = 1e-13
+#: Semi-implicit closed form of a projectile (h = 0.01, 1 s): sums of 100 terms of size ≤ 3 m: 100 ε · 3.
+PYB_PROJECTILE_EXACT = 1e-12
+#: PyBullet's default multibody damping must visibly fail the projectile: docs/engine_conventions.md measured 0.15 m
+#: after 1 s; anything above 1 cm is far outside discretisation (which is exactly zero here).
+PYB_DEFAULT_DAMPING_MIN_ERROR = 1e-2
+#: one_step from a recorded state vs the recorded next state: the same PyBullet step from the same
+#: doubles up to the boundary rotation (full tensors) and the x,y,z,w conversion: a few ε.
+PYB_ONE_STEP_REPLAY = 1e-14
+
+# --- the MuJoCo adapter's conventions (tests/cross_checks/engines/test_mujoco_engine.py) ---
+#: Same-arithmetic conversions (qpos/qvel <-> packed state, one rotation of a unit vector): a few ε.
+MJ_ROUND_TRIP = 1e-15
+#: Exact exponential-map spin about a principal axis over 100 steps: each step rounds the quaternion
+#: product (~ε) and MuJoCo renormalises; 100 · a few ε.
+MJ_SPIN_100_STEPS = 1e-13
+#: one_step from a recorded state vs the recorded next state: the same MuJoCo step from the same
+#: doubles, except ω goes body -> world -> body through two roundings (a few ε of |ω|).
+MJ_ONE_STEP_REPLAY = 1e-14
+#: mujoco:rk4 vs DOP853 (GROUND_TRUTH_RTOL) on tennis_racket at dt = 1e-3: the required bound.
+MJ_RK4_VS_GROUND_TRUTH = 1e-8
+#: Observed convergence order of mujoco:rk4 with per-stage forces vs 4 (measured 3.99-4.03 on these
+#: ladders, whose errors stay 3+ decades above round-off); ORDER_TOL of the suite is 0.1.
+MJ_RK4_ORDER_TOL = 0.1
+#: The same with forces held over the step (xfrc_applied fixed over the 4 stages): first order;
+#: measured 0.96-1.01.
+MJ_HELD_ORDER_TOL = 0.1

@@ -147,25 +147,45 @@ def read_columns(csv_path, *, require: tuple = QUANTITY_GROUPS, _fast: bool = Tr
     in the columns of absent groups; ``present`` is the tuple of groups found, in QUANTITY_GROUPS order.
     Raises TrajectoryError naming the file, the line or column, and the reason.
     """
-    import csv
-    import io
-
     name = str(csv_path)
     try:
         text = Path(csv_path).read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as exc:
         raise TrajectoryError(f"{name}: cannot read: {exc}") from None
     fast = _fast_table(text) if _fast else None  # (header cells, (N, ncol) floats) of a plain numeric CSV
+    rows = [fast[0]] if fast is not None else _csv_rows(name, text)
+    header = [h.strip() for h in rows[0]]
+    index = _header_index(name, header)
+    present = _present_groups(name, index, require)
+    wanted = [("t", index["t"])] + [(c, index[c]) for g in present for c in _GROUP_COLUMNS[g]]
+    pos = {c: COLUMNS.index(c) for c in COLUMNS}
     if fast is not None:
-        rows = [fast[0]]
+        data = np.full((len(fast[1]), len(COLUMNS)), np.nan)
+        for c, i in wanted:
+            data[:, pos[c]] = fast[1][:, i]
     else:
-        try:
-            rows = [r for r in csv.reader(io.StringIO(text)) if any(c.strip() for c in r)]
-        except csv.Error as exc:
-            raise TrajectoryError(f"{name}: cannot parse as CSV: {exc}") from None
+        data = _parse_rows(name, rows[1:], len(header), wanted, pos)
+    if len(data) == 0:
+        raise TrajectoryError(f"{name}: rows: no data rows")
+    _check_times(name, data[:, 0])
+    return data[:, 0], data[:, 1:], tuple(present)
+
+
+def _csv_rows(name: str, text: str) -> list:
+    """The non-blank rows of a CSV text (the readable path, for files the fast parser does not take)."""
+    import csv
+    import io
+    try:
+        rows = [r for r in csv.reader(io.StringIO(text)) if any(c.strip() for c in r)]
+    except csv.Error as exc:
+        raise TrajectoryError(f"{name}: cannot parse as CSV: {exc}") from None
     if not rows:
         raise TrajectoryError(f"{name}: header: file is empty")
-    header = [h.strip() for h in rows[0]]
+    return rows
+
+
+def _header_index(name: str, header: list) -> dict:
+    """Column name → its first index; a contract column twice, or no ``t``, is an error."""
     index = {}
     for i, h in enumerate(header):
         if h in index and h in COLUMNS:
@@ -174,6 +194,12 @@ def read_columns(csv_path, *, require: tuple = QUANTITY_GROUPS, _fast: bool = Tr
     if "t" not in index:
         raise TrajectoryError(f"{name}: header: no column 't' (expected the columns {','.join(COLUMNS)}, "
                               f"by name, any order; got {','.join(header)[:120]})")
+    return index
+
+
+def _present_groups(name: str, index: dict, require) -> list:
+    """The quantity groups whose columns are all in the header (in QUANTITY_GROUPS order); a partial group,
+    a missing required one, or none at all is an error."""
     present = []
     for g in QUANTITY_GROUPS:
         cols = _GROUP_COLUMNS[g]
@@ -188,16 +214,14 @@ def read_columns(csv_path, *, require: tuple = QUANTITY_GROUPS, _fast: bool = Tr
                                   f"(expected {','.join(COLUMNS)}, by name, any order)")
     if not present:
         raise TrajectoryError(f"{name}: header: no state columns (expected {','.join(COLUMNS)}, by name, any order)")
-    wanted = [("t", index["t"])] + [(c, index[c]) for g in present for c in _GROUP_COLUMNS[g]]
-    ncol = len(header)
-    pos = {c: COLUMNS.index(c) for c in COLUMNS}
-    if fast is not None:
-        data = np.full((len(fast[1]), len(COLUMNS)), np.nan)
-        for c, i in wanted:
-            data[:, pos[c]] = fast[1][:, i]
-    else:
-        data = np.full((len(rows) - 1, len(COLUMNS)), np.nan)
-    for k, row in enumerate(rows[1:] if fast is None else ()):
+    return present
+
+
+def _parse_rows(name: str, rows: list, ncol: int, wanted: list, pos: dict):
+    """(N, len(COLUMNS)) floats of the ``wanted`` (column, index) cells, NaN elsewhere; line numbers in
+    errors count the header as line 1."""
+    data = np.full((len(rows), len(COLUMNS)), np.nan)
+    for k, row in enumerate(rows):
         line = k + 2
         if len(row) != ncol:
             raise TrajectoryError(f"{name}: line {line}: expected {ncol} values (as in the header), got {len(row)}")
@@ -207,9 +231,11 @@ def read_columns(csv_path, *, require: tuple = QUANTITY_GROUPS, _fast: bool = Tr
                 data[k, pos[c]] = float(cell)
             except ValueError:
                 raise TrajectoryError(f"{name}: line {line}: column {c}: not a number: {cell[:40]!r}") from None
-    if len(data) == 0:
-        raise TrajectoryError(f"{name}: rows: no data rows")
-    t = data[:, 0]
+    return data
+
+
+def _check_times(name: str, t) -> None:
+    """Times finite and strictly increasing."""
     if not np.all(np.isfinite(t)):
         k = int(np.argmin(np.isfinite(t)))
         raise TrajectoryError(f"{name}: line {k + 2}: column t: time must be finite, got {t[k]}")
@@ -218,6 +244,5 @@ def read_columns(csv_path, *, require: tuple = QUANTITY_GROUPS, _fast: bool = Tr
         k = int(np.argmax(steps <= 0)) + 1
         raise TrajectoryError(f"{name}: line {k + 2}: column t: times must strictly increase "
                               f"({float(t[k - 1])!r} then {float(t[k])!r})")
-    return t, data[:, 1:], tuple(present)
 
 

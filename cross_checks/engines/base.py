@@ -41,6 +41,7 @@ Harness semantics (identical in every built-in adapter):
 """
 from __future__ import annotations
 
+import abc
 import functools
 import inspect
 import math
@@ -161,7 +162,7 @@ class Variant:
         object.__setattr__(self, "order", float(o))
 
 
-class EngineAdapter:
+class EngineAdapter(abc.ABC):
     """Base class of every engine adapter (see the module docstring for the contract).
 
     Subclass it, set ``name`` and ``variants``, implement ``version`` and ``simulate`` (and
@@ -181,17 +182,18 @@ class EngineAdapter:
     #: variant name -> Variant(order, description).
     variants: dict = {}
 
+    @abc.abstractmethod
     def version(self) -> str:
         """The engine's version; raise ImportError (or any exception) when it cannot run here."""
-        raise NotImplementedError(f"{type(self).__name__}.version() is not implemented")
 
+    @abc.abstractmethod
     def simulate(self, scenario, variant: str, dt_s: float, n_steps: int):
         """``n_steps`` steps of ``dt_s`` from the scenario's initial state -> reference_sim.simulate.Run."""
-        raise NotImplementedError(f"{type(self).__name__}.simulate() is not implemented")
 
     def one_step(self, scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
-        """One step from each row of ``y_start`` (T, 13) -> (T, 13). Optional (see :attr:`has_one_step`)."""
-        raise NotImplementedError(f"{type(self).__name__} has no one-step mode")
+        """One step from each row of ``y_start`` (T, 13) -> (T, 13). Optional (see :attr:`has_one_step`):
+        an adapter that cannot restart its engine from an arbitrary state leaves this one, which refuses."""
+        raise EngineError(f"{self.name or type(self).__name__} has no one-step mode")
 
     @property
     def has_one_step(self) -> bool:

@@ -55,7 +55,7 @@ VARIANTS = {
 #: Steps between divergence checks of a free-running simulation (checked vectorised per chunk).
 _CHUNK = 256
 #: Constant forces and no decay: record the run with mujoco.rollout instead of a Python loop of mj_step
-#: (same numbers bit for bit: tests/cross_checks/test_engines_mujoco.py).
+#: (same numbers bit for bit: tests/cross_checks/engines/test_mujoco_engine.py).
 USE_ROLLOUT = True
 _BODY = 1  # body id of the free body (0 is the world)
 

@@ -208,16 +208,30 @@ _TORQUE = {"torque", "frame"}
 def parse_scenario(text: str, source: str = "<string>") -> Scenario:
     """Parse and validate scenario TOML text. ``source`` names the file in error messages."""
     r = _Reader(source)
+    raw = _load_toml(text, source)
+    r.check_keys(raw, _TOP, "")
+    name, description, duration, dt, ladder, reference = _parse_timing(r, raw)
+    body, com_offset = _parse_body(r, raw)
+    problem = Problem(body, _parse_forces(r, raw, dt, com_offset), _parse_initial(r, raw))
+    sc = Scenario(name=name, description=description, duration_s=duration, dt_s=dt, dt_ladder_s=ladder,
+                  reference=reference, problem=problem, source=source, raw=raw, com_offset_B_m=com_offset)
+    _check_scenario(r, sc)
+    return sc
+
+
+def _load_toml(text: str, source: str) -> dict:
+    """The TOML document as a dict; a syntax error or absurd nesting is a ScenarioError."""
     try:
-        raw = tomllib.loads(text)
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(source, "", f"TOML syntax error: {exc}") from None
     except RecursionError:
         raise ScenarioError(source, "", "TOML nested too deeply (arrays or tables inside each other "
                                         "hundreds of levels deep); a scenario needs at most 3 levels") from None
-    r.check_keys(raw, _TOP, "")
 
-    # identity and timing
+
+def _parse_timing(r, raw):
+    """name, description, duration (s), dt (s), the Δt ladder (s, decreasing) and the reference kind."""
     if "name" not in raw:
         raise r.err("name", "missing (required)")
     name = r.string(raw, "name", "name")
@@ -247,7 +261,12 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
         _check_ladder_spacing(r, vals, ladder)
     reference = r.string(raw, "reference", "reference", default="auto", choices=REFERENCE_KINDS)
 
-    # body
+    return name, description, duration, dt, ladder, reference
+
+
+def _parse_body(r, raw):
+    """The rigid body (mass, inertia in body axes about the COM) and, for a particle body, the COM in the
+    particles' coordinates (m; None for a body given by mass and inertia)."""
     b = r.table(raw, "body")
     r.check_keys(b, _BODY, "body")
     com_offset = None
@@ -286,7 +305,11 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
             raise r.err("body.inertia", str(exc)) from None
         body = RigidBody(mass, inertia)
 
-    # initial state
+    return body, com_offset
+
+
+def _parse_initial(r, raw) -> State:
+    """The initial state: x (m, world), v (m/s, world), q (w, x, y, z; body to world), ω (rad/s, world)."""
     ini = r.table(raw, "initial")
     r.check_keys(ini, _INITIAL, "initial")
     x0 = r.vector(ini, "position", "initial.position", 3, default=[0.0, 0.0, 0.0])
@@ -309,7 +332,11 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
     else:
         w0 = r.vector(ini, "angular_velocity", "initial.angular_velocity", 3, default=[0.0, 0.0, 0.0])
 
-    # forces
+    return State(x0, v0, q0, w0)
+
+
+def _parse_forces(r, raw, dt, com_offset) -> ForceModel:
+    """The [forces] table; body points are taken from the COM (particle bodies: shifted by ``com_offset``)."""
     fr = r.table(raw, "forces", required=False)
     r.check_keys(fr, _FORCES, "forces")
     gravity = r.vector(fr, "gravity", "forces.gravity", 3, default=[0.0, 0.0, 0.0])
@@ -356,13 +383,14 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
             torque=r.vector(t, "torque", f"{where}.torque", 3, required=True),
             frame=r.string(t, "frame", f"{where}.frame", default="world", choices=FRAMES),
         ))
-    forces = ForceModel(gravity_W=gravity, linear_drag_N_s_per_m=drag, velocity_decay=decays[0],
-                        angular_velocity_decay=decays[1], decay_dt_s=dt, springs=tuple(springs),
-                        point_forces=tuple(points), torques=tuple(torques))
-    problem = Problem(body, forces, State(x0, v0, q0, w0))
-    sc = Scenario(name=name, description=description, duration_s=duration, dt_s=dt, dt_ladder_s=ladder,
-                  reference=reference, problem=problem, source=source, raw=raw, com_offset_B_m=com_offset)
-    if reference == "analytic":
+    return ForceModel(gravity_W=gravity, linear_drag_N_s_per_m=drag, velocity_decay=decays[0],
+                      angular_velocity_decay=decays[1], decay_dt_s=dt, springs=tuple(springs),
+                      point_forces=tuple(points), torques=tuple(torques))
+
+
+def _check_scenario(r, sc) -> None:
+    """What needs the whole scenario: a requested closed form exists; the run stays within the limits."""
+    if sc.reference == "analytic":
         from cross_checks.scenario.references import analytic_available
         ok, why = analytic_available(sc)
         if not ok:
@@ -372,7 +400,6 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
         check_scenario_limits(sc)
     except LimitExceeded as exc:
         raise r.err(exc.field, exc.reason) from None
-    return sc
 
 
 def _check_ladder_spacing(r, vals, ladder):

@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from .byo_helpers import ROOT, build_cbody, write_scenarios
+from tests.helpers.byo import ROOT, build_cbody, write_scenarios
 
 
 def readme_test_file() -> str:

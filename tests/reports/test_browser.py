@@ -1,4 +1,4 @@
-"""The report in a real browser (headless Chromium through the DevTools protocol, tests/reports/chromium.py):
+"""The report in a real browser (headless Chromium through the DevTools protocol, tests/helpers/chromium.py):
 every page loads with no console error, no broken image or link, fits 1024 px; tables sort and keep
 their headers; the first screen says what is wrong and whether it is expected; scenario pages link the
 scenario's TOML, its rows and its series; the plots leave out what carries no information.
@@ -8,7 +8,6 @@ Where no Chromium is found the browser tests are skipped with the reason (`.ci/r
 import csv
 import io
 import json
-import os
 import shutil
 from pathlib import Path
 
@@ -17,8 +16,9 @@ import pytest
 import reports
 from cross_checks.scenario import parse_scenario
 from cross_checks.sweep import run_sweep
+from tests.helpers.sweeps import built_once, private_cache
 
-from .chromium import Browser
+from tests.helpers.chromium import Browser
 
 # position never moves (only a spin): its panels must be replaced by a note
 SPIN = """
@@ -73,26 +73,22 @@ VARIANTS = ["reference:course", "reference:rk4", "reference:explicit_euler", "mu
 PAGES = ["index.html", "scenario-spin_only.html", "scenario-drop_once.html", "scenario-stiff_spring.html"]
 
 
-@pytest.fixture(scope="module")
-def results(tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("browser")
-    old = os.environ.get("RBCHECK_CACHE_DIR")
-    os.environ["RBCHECK_CACHE_DIR"] = str(tmp / "cache")
-    src = tmp / "scenarios"
+def _browser_sweep(folder):
+    src = folder / "scenarios"
     src.mkdir()
     scs = []
     for text in (SPIN, DROP, STIFF):
         name = text.split('"')[1]
         (src / f"{name}.toml").write_text(text, encoding="utf-8")
         scs.append(parse_scenario(text, source=str(src / f"{name}.toml")))
-    try:
-        run_sweep(scs, VARIANTS, tmp / "res", jobs=2, finish=lambda d: reports.render(d, jobs=2, progress=False))
-    finally:
-        if old is None:
-            os.environ.pop("RBCHECK_CACHE_DIR")
-        else:
-            os.environ["RBCHECK_CACHE_DIR"] = old
-    return tmp / "res"
+    with private_cache(folder / "cache"):
+        run_sweep(scs, VARIANTS, folder / "res", jobs=2, finish=lambda d: reports.render(d, jobs=2, progress=False))
+
+
+@pytest.fixture(scope="session")
+def results(tmp_path_factory):
+    """A real sweep's report, built once per test run and shared (copy it before changing anything)."""
+    return built_once(tmp_path_factory, "browser_report", _browser_sweep) / "res"
 
 
 @pytest.fixture(scope="module")

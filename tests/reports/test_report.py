@@ -10,6 +10,7 @@ import reports
 from cross_checks.cli import main
 from cross_checks.scenario import parse_scenario
 from cross_checks.sweep import run_sweep
+from tests.helpers.sweeps import built_once, private_cache
 
 HOSTILE = '<script>alert("pwned")</script> & <b>bold</b>'
 SCENARIO = f"""
@@ -68,23 +69,17 @@ def parse(html):
     return p
 
 
-@pytest.fixture(scope="module")
+def _hostile_sweep(folder):
+    with private_cache(folder / "cache"):
+        run_sweep([parse_scenario(SCENARIO, source="hostile.toml")], ["reference:course", "reference:rk4"],
+                  folder / "res", jobs=1, finish=lambda d: reports.render(d, jobs=1))
+
+
+@pytest.fixture(scope="session")
 def results(tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("report")
-    import os
-    old = os.environ.get("RBCHECK_CACHE_DIR")
-    os.environ["RBCHECK_CACHE_DIR"] = str(tmp / "cache")
-    try:
-        sc = parse_scenario(SCENARIO, source="hostile.toml")
-        import reports
-        run_sweep([sc], ["reference:course", "reference:rk4"], tmp / "res", jobs=1,
-                  finish=lambda d: reports.render(d, jobs=1))
-    finally:
-        if old is None:
-            os.environ.pop("RBCHECK_CACHE_DIR")
-        else:
-            os.environ["RBCHECK_CACHE_DIR"] = old
-    return tmp / "res"
+    """The report of a real sweep, built once per test run (shared by the xdist workers: copy it before
+    changing anything)."""
+    return built_once(tmp_path_factory, "hostile_report", _hostile_sweep) / "res"
 
 
 def pages(d):
@@ -128,13 +123,15 @@ def test_findings_are_sentences_from_the_data(results):
     assert summary["provenance"]["started_at"] in text
 
 
-def test_rerendering_from_saved_data_gives_the_same_html(results, capfd):
-    before = pages(results)
-    pngs = sorted(p.name for p in (results / "plots").glob("*.png"))
-    reports.render(results, jobs=1)
+def test_rerendering_from_saved_data_gives_the_same_html(results, tmp_path, capfd):
+    import shutil
+    again = tmp_path / "again"
+    shutil.copytree(results, again)
+    reports.render(again, jobs=1)
     assert capfd.readouterr().err == ""      # a library call without a terminal prints no progress
-    assert pages(results) == before
-    assert sorted(p.name for p in (results / "plots").glob("*.png")) == pngs
+    assert pages(again) == pages(results)
+    pngs = [sorted(p.name for p in (d / "plots").glob("*.png")) for d in (results, again)]
+    assert pngs[0] == pngs[1]
 
 
 def test_self_contained_pages_embed_every_image(results, tmp_path):

@@ -1,0 +1,140 @@
+"""Faults a user meets: a real Ctrl-C mid-sweep, an engine that rejects a model, file permissions."""
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from cross_checks.cli import main
+
+TINY = """
+name = "{name}"
+description = "torque-free asymmetric spin"
+duration = 4.0
+dt = 0.001
+dt_ladder = [0.004, 0.002, 0.001, 0.0005, 0.00025]
+[body]
+mass = 1.0
+inertia = [1.0, 2.0, 3.0]
+[initial]
+angular_velocity = [0.3, 1.0, 0.2]
+"""
+
+#: Mass and inertia below MuJoCo's mjMINVAL (1e-15): valid physics for rbcheck's loader, rejected
+#: by MuJoCo's compiler (docs/engine_conventions.md).
+FEATHER = """
+name = "feather"
+description = "a body lighter than MuJoCo accepts"
+duration = 0.05
+dt = 0.01
+dt_ladder = [0.01, 0.005]
+[body]
+mass = 1e-20
+inertia = [1e-20, 1e-20, 1e-20]
+[initial]
+velocity = [1.0, 0.0, 0.0]
+"""
+
+
+def test_real_sigint_keeps_previous_results_and_the_rerun_reuses_finished_runs(tmp_path):
+    files = []
+    for i in range(3):
+        f = tmp_path / f"spin_{i}.toml"
+        f.write_text(TINY.format(name=f"spin_{i}"))
+        files.append(str(f))
+    out, cache = tmp_path / "res", tmp_path / "cache"
+    env = {**os.environ, "RBCHECK_CACHE_DIR": str(cache), "MPLBACKEND": "Agg"}
+    base = [sys.executable, "-m", "cross_checks.cli", "sweep", "--jobs", "2", "--out", str(out)]
+    cmd = base + files + ["--engines", "reference"]  # --engines takes several values: keep it last
+    first = subprocess.run(base + [files[0], "--engines", "reference:course"], env=env, capture_output=True,
+                           text=True, timeout=300)
+    assert first.returncode == 0, first.stderr
+    before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+
+    proc = subprocess.Popen(base + ["--no-cache"] + files + ["--engines", "reference"], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True)
+    deadline = time.time() + 120
+    while time.time() < deadline and len(list(cache.rglob("*.npz"))) < 8:  # some runs finished and cached
+        time.sleep(0.1)
+    os.killpg(proc.pid, signal.SIGINT)  # what Ctrl-C in a terminal does: the whole process group
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert len(err.strip().splitlines()) == 1 and "interrupted" in err and "Traceback" not in err
+    after = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    assert after == before  # previous results and report intact
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".res")]  # no staging directory left
+
+    rerun = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
+    assert rerun.returncode in (0, 1), rerun.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["run"]["cached_runs"] >= 1  # whatever finished before the interrupt is reused
+
+
+def test_a_model_mujoco_rejects_is_a_failed_row_with_mujocos_words(tmp_path, capsys):
+    pytest.importorskip("mujoco")
+    f = tmp_path / "feather.toml"
+    f.write_text(FEATHER)
+    out = tmp_path / "res"
+    rc = main(["sweep", str(f), "--engines", "mujoco:euler", "reference:course", "--jobs", "1", "--no-cache",
+               "--out", str(out)])
+    assert rc == 1  # a failed run is reported as a failure of the sweep, after writing everything
+    import pandas as pd
+    df = pd.read_csv(out / "results.csv")
+    mj = df[df["engine"] == "mujoco:euler"]
+    assert set(mj["status"]) == {"failed"} and mj["message"].str.contains("mjMINVAL").all()
+    assert set(df[df["engine"] == "reference:course"]["status"]) == {"ok"}  # the sweep went on
+    assert "mjMINVAL" in (out / "index.html").read_text()
+
+
+def test_written_files_have_the_users_usual_permissions(tmp_path):
+    out = tmp_path / "t.csv"
+    assert main(["run", "projectile", "--engine", "reference:course", "--out", str(out)]) == 0
+    mask = os.umask(0)
+    os.umask(mask)
+    assert (out.stat().st_mode & 0o777) == (0o666 & ~mask)
+    assert (out.with_suffix(".json").stat().st_mode & 0o777) == (0o666 & ~mask)
+
+
+def test_reruns_are_bit_identical_across_engines(tmp_path, isolated_cache):
+    pytest.importorskip("mujoco")
+    pytest.importorskip("pybullet")
+    import csv
+
+    from cross_checks.engines import available_variants
+    from cross_checks.scenario import parse_scenario
+    from cross_checks.sweep import run_sweep
+    sc = parse_scenario(TINY.format(name="spin").replace("duration = 4.0", "duration = 0.5"), "spin.toml")
+    texts = []
+    for k in range(2):
+        out = tmp_path / f"r{k}"
+        run_sweep([sc], available_variants(), out, jobs=2, use_cache=False, progress=False)
+        with open(out / "results.csv", newline="") as fh:
+            rows = [{c: v for c, v in r.items() if c not in ("wall_s", "cached")} for r in csv.DictReader(fh)]
+        texts.append(rows)
+    assert texts[0] == texts[1]  # every digit of every metric, all 14 variants
+    assert {r["engine"].split(":")[0] for r in texts[0]} == {"reference", "mujoco", "pybullet"}
+
+
+def test_same_scheme_pairs_that_both_diverge_agree_on_the_time(tmp_path, isolated_cache):
+    pytest.importorskip("mujoco")
+    from cross_checks.scenario import parse_scenario
+    from cross_checks.sweep import run_sweep
+    # docs/engine_conventions.md: MuJoCo Euler diverges on this fast spin at t = 8.65 s; expmap_gyro is the same scheme.
+    sc = parse_scenario("""
+name = "fast_spin"
+duration = 10.0
+dt = 0.01
+dt_ladder = [0.01, 0.005]
+[body]
+mass = 1.0
+inertia = [1.0, 2.0, 3.0]
+[initial]
+angular_velocity = [0.1, 20.0, 0.1]
+""", "fast.toml")
+    summary = run_sweep([sc], ["reference:expmap_gyro", "mujoco:euler"], tmp_path / "r", jobs=1, use_cache=False,
+                        progress=False)
+    [rec] = summary["agreement"]
+    assert rec["agrees"] and rec["note"].startswith("both diverged, at t = 8.6")

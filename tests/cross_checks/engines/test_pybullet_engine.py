@@ -1,0 +1,174 @@
+"""The PyBullet adapter (cross_checks.engines.pybullet_engine): settings, conventions, forces, divergence."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cross_checks.core import tolerances as tol
+
+p = pytest.importorskip("pybullet", reason="pybullet is not installed")
+
+from cross_checks.engines import pybullet_engine as pe  # noqa: E402
+from cross_checks.engines import run_variant  # noqa: E402
+from cross_checks.scenario import catalog_path, load_scenario, parse_scenario  # noqa: E402
+from reference_sim.quaternion import geodesic_angle, quat_from_axis_angle, quat_mul  # noqa: E402
+
+from tests.helpers.scenarios import SQ, YAW90, scenario_from_parts as _scenario  # noqa: E402,F401
+
+
+def test_version_and_engine_error():
+    assert pe.version().startswith("3.2.7")
+    assert issubclass(pe.EngineError, RuntimeError)
+
+
+def test_one_client_per_process_and_a_clean_world_per_run():
+    c1 = pe._connect()
+    pe.simulate(load_scenario("projectile"), "multibody", 0.01, 3)
+    pe.simulate(load_scenario("projectile"), "maximal", 0.01, 3)
+    assert pe._connect() == c1
+    assert p.getNumBodies(physicsClientId=c1) == 1
+    params = p.getPhysicsEngineParameters(physicsClientId=c1)
+    assert params["fixedTimeStep"] == 0.01 and params["numSubSteps"] == 0
+    assert params["gravityAccelerationZ"] == -9.81
+
+
+@pytest.mark.parametrize("variant", sorted(pe.VARIANTS))
+def test_body_settings(variant):
+    sc = load_scenario("tumbling_box")
+    B = pe._Body(sc, variant, 0.001, sc.problem.initial_packed())
+    info = p.getDynamicsInfo(B.b, -1, physicsClientId=B.c)
+    assert info[0] == 10.0                                                   # mass
+    np.testing.assert_array_equal(info[2], np.diag(sc.problem.body.inertia_B))   # local inertia diagonal
+    # (getDynamicsInfo does not report linear/angular damping; the projectile test below proves it is 0)
+
+
+# --- conventions ------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("variant", sorted(pe.VARIANTS))
+def test_yawed_body_spinning_about_body_x_reads_world_y(variant):
+    sc = _scenario(body="mass = 1.0\ninertia = [1.0, 1.0, 1.0]",
+                   initial=YAW90 + "\nangular_velocity_body = [1.0, 0.0, 0.0]")
+    run = pe.simulate(sc, variant, 0.01, 100)
+    np.testing.assert_allclose(run.y[:, 10:13], np.tile([0.0, 1.0, 0.0], (101, 1)), atol=tol.PYB_SPIN_100_STEPS)
+    expected = quat_mul(quat_from_axis_angle(np.array([0.0, 1.0, 0.0]), run.t_s), run.y[0, 6:10])
+    assert np.max(geodesic_angle(expected, run.y[:, 6:10])) < tol.PYB_SPIN_100_STEPS
+    # PyBullet's own angular velocity is in world axes (getBaseVelocity), no conversion involved
+    raw = pe._Body(sc, variant, 0.01, sc.problem.initial_packed())
+    raw.set_state(sc.problem.initial_packed())
+    np.testing.assert_allclose(p.getBaseVelocity(raw.b, physicsClientId=raw.c)[1], [0.0, 1.0, 0.0], atol=tol.PYB_ROUND_TRIP)
+
+
+def test_quaternion_order_at_the_boundary():
+    sc = _scenario(initial=YAW90)
+    B = pe._Body(sc, "multibody", 0.01, sc.problem.initial_packed())
+    B.set_state(sc.problem.initial_packed())
+    orn = p.getBasePositionAndOrientation(B.b, physicsClientId=B.c)[1]
+    np.testing.assert_allclose(orn, [0.0, 0.0, SQ, SQ], atol=tol.PYB_ROUND_TRIP)            # (x, y, z, w)
+    R = np.array(p.getMatrixFromQuaternion(orn)).reshape(3, 3)
+    np.testing.assert_allclose(R, [[0, -1, 0], [1, 0, 0], [0, 0, 1]], atol=tol.PYB_ROUND_TRIP)
+    np.testing.assert_allclose(B.raw_to_packed(B.read_raw()), sc.problem.initial_packed(), atol=tol.PYB_ROUND_TRIP)
+
+
+@pytest.mark.parametrize("variant", sorted(pe.VARIANTS))
+def test_full_tensor_reports_the_scenario_body_frame(variant):
+    """PyBullet holds the principal frame P; the adapter reports q_WB = q_WP q_BP⁻¹."""
+    sc = load_scenario("particle_body")
+    y0 = sc.problem.initial_packed()
+    B = pe._Body(sc, variant, 0.001, y0)
+    B.set_state(y0)
+    q_WP = np.roll(p.getBasePositionAndOrientation(B.b, physicsClientId=B.c)[1], 1)
+    assert geodesic_angle(q_WP, quat_mul(y0[6:10], B.q_BP)) < tol.PYB_ROUND_TRIP * 10
+    assert geodesic_angle(q_WP, y0[6:10]) > 0.1                # P really differs from B here
+    run = pe.simulate(sc, variant, 0.001, 10)
+    assert geodesic_angle(run.y[0, 6:10], y0[6:10]) < tol.PYB_ROUND_TRIP * 10
+
+
+def test_linear_velocity_and_position_are_the_coms():
+    sc = load_scenario("particle_body")
+    sc = _scenario(body="particles = " + str(sc.raw["body"]["particles"]),
+                   initial="velocity = [0.5, -0.2, 4.0]\nangular_velocity = [1.0, 2.0, -0.5]")
+    for variant in pe.VARIANTS:
+        run = pe.simulate(sc, variant, 0.01, 100)
+        n = np.arange(101)[:, None]
+        np.testing.assert_allclose(run.y[:, 0:3], 0.01 * n * np.array([0.5, -0.2, 4.0]), atol=1e-13)
+        np.testing.assert_allclose(run.y[:, 3:6], np.tile([0.5, -0.2, 4.0], (101, 1)), rtol=0, atol=tol.PYB_ROUND_TRIP * 4)
+
+
+# --- PyBullet's traps the adapter works around ------------------------------------------------------------
+
+def _projectile_error(run, h):
+    sc = load_scenario("projectile")
+    n = np.arange(len(run.t_s))[:, None]
+    x = sc.problem.initial.x_W + n * h * sc.problem.initial.v_W + np.array([0, 0, -9.81]) * h * h * n * (n + 1) / 2
+    return float(np.max(np.abs(run.y[:, 0:3] - x)))
+
+
+def test_default_multibody_damping_fails_projectile_and_adapter_settings_pass(monkeypatch):
+    sc = load_scenario("projectile")
+    assert _projectile_error(pe.simulate(sc, "multibody", 0.01, 100), 0.01) < tol.PYB_PROJECTILE_EXACT
+    monkeypatch.setattr(pe, "DYNAMICS_SETTINGS", {})      # PyBullet's defaults (damping 0.04, clamp 100)
+    err = _projectile_error(pe.simulate(sc, "multibody", 0.01, 100), 0.01)
+    assert err > tol.PYB_DEFAULT_DAMPING_MIN_ERROR
+    # maximal-coordinate bodies have no default damping
+    assert _projectile_error(pe.simulate(sc, "maximal", 0.01, 100), 0.01) < tol.PYB_PROJECTILE_EXACT
+
+
+def test_default_multibody_velocity_clamp_is_lifted(monkeypatch):
+    sc = _scenario(body="mass = 1.0\ninertia = [1.0, 1.0, 1.0]",
+                   initial="velocity = [150.0, 0.0, 0.0]\nangular_velocity = [0.0, 0.0, 150.0]")
+    run = pe.simulate(sc, "multibody", 0.01, 2)
+    np.testing.assert_array_equal(run.y[-1, [3, 12]], [150.0, 150.0])
+    monkeypatch.setattr(pe, "DYNAMICS_SETTINGS", {"linearDamping": 0.0, "angularDamping": 0.0})
+    run = pe.simulate(sc, "multibody", 0.01, 2)
+    np.testing.assert_allclose(run.y[-1, [3, 12]], [100.0, 100.0])   # clamped by PyBullet
+
+
+def test_maximal_pose_reset_zeroes_velocity_so_velocity_is_reset_last():
+    sc = _scenario()
+    B = pe._Body(sc, "maximal", 0.01, sc.problem.initial_packed())
+    p.resetBaseVelocity(B.b, [1.0, 0.0, 0.0], [0.0, 0.0, 1.0], physicsClientId=B.c)
+    p.resetBasePositionAndOrientation(B.b, [0, 0, 0], [0, 0, 0, 1], physicsClientId=B.c)
+    assert np.all(np.array(p.getBaseVelocity(B.b, physicsClientId=B.c)) == 0.0)
+    y = sc.problem.initial_packed()
+    y[3:6], y[10:13] = [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]
+    B.set_state(y)
+    np.testing.assert_array_equal(p.getBaseVelocity(B.b, physicsClientId=B.c), ([1.0, 0.0, 0.0], [0.0, 0.0, 1.0]))
+
+
+@pytest.mark.parametrize("variant", sorted(pe.VARIANTS))
+def test_external_force_is_cleared_after_each_step(variant):
+    sc = _scenario()
+    B = pe._Body(sc, variant, 0.01, sc.problem.initial_packed())
+    B.set_state(sc.problem.initial_packed())
+    B.apply(np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.0, 3.0]), [0.0, 0.0, 0.0])
+    p.stepSimulation(physicsClientId=B.c)
+    v1 = B.read_raw()
+    p.stepSimulation(physicsClientId=B.c)
+    v2 = B.read_raw()
+    np.testing.assert_allclose(v1[3], 0.01, rtol=1e-14)          # one step of 1 N on 1 kg
+    np.testing.assert_allclose(v1[12], 0.01, rtol=1e-14)         # one step of 3 N m about I_zz = 3
+    assert v2[3] == v1[3]                                        # nothing applied in the second step
+    np.testing.assert_allclose(v2[12], v1[12], rtol=tol.PYB_ROUND_TRIP * 4)   # (maximal: implicit gyro round-off)
+
+
+@pytest.mark.parametrize("variant", sorted(pe.VARIANTS))
+def test_one_step_replays_the_run(variant):
+    for name in ("applied_torque", "particle_body", "velocity_decay", "spring_pendulum"):
+        sc = load_scenario(name)
+        run = pe.simulate(sc, variant, sc.dt_s, 30)
+        y1 = pe.one_step(sc, variant, sc.dt_s, run.y[:-1])
+        np.testing.assert_allclose(y1, run.y[1:], rtol=0, atol=tol.PYB_ONE_STEP_REPLAY * 10)
+
+
+# --- divergence ---------------------------------------------------------------------------------------
+
+def test_fast_spin_multibody_diverges_maximal_does_not():
+    text = catalog_path("tennis_racket").read_text().replace(
+        "angular_velocity = [0.01, 2.0, 0.01]", "angular_velocity = [0.1, 20.0, 0.1]")
+    sc = parse_scenario(text)
+    traj = run_variant(sc, "pybullet:multibody", dt_s=1e-2, duration_s=10.0)
+    assert traj.meta["status"] == "diverged"
+    assert 8.5 < traj.meta["diverged_at_s"] < 8.8        # explicit gyroscopic term, like MuJoCo Euler (8.66 s)
+    assert traj.meta["message"].startswith("diverged at t = ")
+    assert np.all(np.isfinite(traj.y)) and np.max(np.abs(traj.y)) <= 1e8
+    assert run_variant(sc, "pybullet:maximal", dt_s=1e-2, duration_s=10.0).meta["status"] == "ok"

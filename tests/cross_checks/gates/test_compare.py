@@ -1,0 +1,192 @@
+"""`rbcheck compare`: direction-aware, names the regressed row, exit 0/1/2."""
+import json
+
+import pandas as pd
+import pytest
+
+from cross_checks.gates.compare import CompareInputError, compare_dirs, to_markdown
+from tests.helpers.repo import BASELINE
+
+ROWS = [
+    dict(scenario="tennis_racket", engine="mujoco:euler", dt=1e-3, steps=10000, wall_s=0.1, pos_err_final=0.0,
+         vel_err_final=0.0, orient_err_final=0.0125, angvel_err_final=0.02, energy_drift_max=4.6e-3,
+         angmom_drift_max=2.4e-3, status="ok"),
+    dict(scenario="tennis_racket", engine="reference:course", dt=1e-3, steps=10000, wall_s=1.2, pos_err_final=0.0,
+         vel_err_final=0.0, orient_err_final=3.05, angvel_err_final=2.9, energy_drift_max=0.0,
+         angmom_drift_max=0.5, status="ok"),
+    dict(scenario="projectile", engine="mujoco:rk4", dt=1e-2, steps=100, wall_s=0.01, pos_err_final=1e-15,
+         vel_err_final=1e-15, orient_err_final=0.0, angvel_err_final=0.0, energy_drift_max=1e-15,
+         angmom_drift_max=0.0, status="ok"),
+]
+CONV = [dict(scenario="tennis_racket", engine="mujoco:euler", quantity="orientation", order=1.01,
+             pairwise_orders=[1.0, 1.01], verdict="converges", expected_order=1)]
+PROV = {"versions": {"rbcheck": "0.1.0", "mujoco": "4.0.0", "pybullet": "3.2.7", "numpy": "2.4.6"}}
+
+
+def write(d, rows=ROWS, conv=CONV, prov=PROV):
+    d.mkdir(parents=True, exist_ok=True)
+    pd.DataFrame(rows).to_csv(d / "results.csv", index=False)
+    (d / "summary.json").write_text(json.dumps({"schema_version": 1, "provenance": prov, "convergence": conv}))
+    return d
+
+
+def test_identical_results_pass(tmp_path):
+    c = compare_dirs(write(tmp_path / "a"), write(tmp_path / "b"))
+    assert c.exit_code() == 0 and c.matched_rows == 3 and not c.changes
+
+
+def test_planted_regression_fails_and_is_named_in_markdown(tmp_path):
+    rows = [dict(r) for r in ROWS]
+    rows[0]["orient_err_final"] *= 1.5
+    c = compare_dirs(write(tmp_path / "a"), write(tmp_path / "b", rows))
+    assert c.exit_code() == 1
+    [reg] = c.of("regression")
+    assert (reg.scenario, reg.engine) == ("tennis_racket", "mujoco:euler") and "orient_err_final" in reg.what
+    md = to_markdown(c, "a", "b")
+    assert "| tennis_racket | mujoco:euler | dt=0.001 orient_err_final |" in md
+
+
+def test_lower_error_is_an_improvement_not_a_regression(tmp_path):
+    rows = [dict(r) for r in ROWS]
+    rows[1]["orient_err_final"] = 1e-3
+    c = compare_dirs(write(tmp_path / "a"), write(tmp_path / "b", rows))
+    assert c.exit_code() == 0 and len(c.of("improvement")) == 1
+
+
+def test_roundoff_noise_is_not_a_change(tmp_path):
+    rows = [dict(r) for r in ROWS]
+    rows[2]["pos_err_final"] = 9e-13  # was 1e-15: both at the round-off floor
+    rows[0]["energy_drift_max"] *= 1.01  # 1 % < the 5 % relative tolerance
+    assert not compare_dirs(write(tmp_path / "a"), write(tmp_path / "b", rows)).changes
+
+
+def test_status_change_to_diverged_is_a_regression(tmp_path):
+    rows = [dict(r) for r in ROWS]
+    rows[2]["status"] = "diverged"
+    c = compare_dirs(write(tmp_path / "a"), write(tmp_path / "b", rows))
+    assert c.exit_code() == 1 and "status" in c.of("regression")[0].what
+
+
+def test_order_further_from_expected_is_a_regression(tmp_path):
+    conv = [dict(CONV[0], order=0.5)]
+    c = compare_dirs(write(tmp_path / "a"), write(tmp_path / "b", conv=conv))
+    assert c.exit_code() == 1 and "order of orientation" in c.of("regression")[0].what
+
+
+def test_verdict_change_is_a_regression(tmp_path):
+    conv = [dict(CONV[0], verdict="does_not_converge")]
+    assert compare_dirs(write(tmp_path / "a"), write(tmp_path / "b", conv=conv)).exit_code() == 1
+
+
+def test_missing_and_new_rows_and_versions_reported(tmp_path):
+    rows = ROWS[:2] + [dict(ROWS[2], scenario="linear_drag")]
+    c = compare_dirs(write(tmp_path / "a"), write(tmp_path / "b", rows, prov={"versions": {**PROV["versions"],
+                                                                                           "mujoco": "4.1.0"}}))
+    assert len(c.of("missing")) == 1 and len(c.of("new")) == 1
+    assert c.exit_code() == 1 and c.exit_code(allow_missing=True) == 0
+    assert ("mujoco", "4.0.0", "4.1.0") in c.version_diffs
+
+
+@pytest.mark.parametrize("setup, words", [
+    (lambda d: None, "not a directory"),
+    (lambda d: d.mkdir(), "results.csv: missing"),
+    (lambda d: (d.mkdir(), (d / "results.csv").write_text("a,b\n1,2\n")), "columns"),
+    (lambda d: (write(d), (d / "summary.json").write_text("{")), "cannot parse JSON"),
+])
+def test_unusable_input_is_an_input_error(tmp_path, setup, words):
+    bad = tmp_path / "bad"
+    setup(bad)
+    with pytest.raises(CompareInputError, match=words):
+        compare_dirs(write(tmp_path / "a"), bad)
+
+
+def test_change_between_two_good_verdicts_is_not_a_regression(tmp_path):
+    conv = [dict(CONV[0], verdict="at_roundoff", order=None)]
+    c = compare_dirs(write(tmp_path / "a"), write(tmp_path / "b", conv=conv))
+    assert c.exit_code() == 0 and len(c.of("changed")) == 1
+
+
+def test_cli_compare_exit_codes_and_markdown(tmp_path, capsys):
+    from cross_checks.cli import main
+    a, b = write(tmp_path / "a"), write(tmp_path / "b")
+    assert main(["compare", str(a), str(b)]) == 0
+    rows = [dict(r) for r in ROWS]
+    rows[1]["angvel_err_final"] *= 2
+    write(tmp_path / "c", rows)
+    md = tmp_path / "diff.md"
+    assert main(["compare", str(a), str(tmp_path / "c"), "--markdown", str(md)]) == 1
+    assert "| tennis_racket | reference:course | dt=0.001 angvel_err_final |" in md.read_text()
+    assert main(["compare", str(a), str(tmp_path / "nope")]) == 2
+    assert "nope: not a directory" in capsys.readouterr().err
+
+
+# --- damaged input is exit 2, never "no regression" (docs/hardening.md) ---------------------------------------
+
+def _cli(capsys, a, b):
+    from cross_checks.cli import main
+    rc = main(["compare", str(a), str(b)])
+    return rc, capsys.readouterr()
+
+
+def test_a_metric_missing_from_the_new_results_is_a_failure(tmp_path):
+    with_metric = [dict(r, orient_err_max=r["orient_err_final"]) for r in ROWS]
+    c = compare_dirs(write(tmp_path / "a", with_metric), write(tmp_path / "b"))  # b lacks orient_err_max
+    [reg] = c.of("regression")
+    assert reg.what == "column orient_err_max" and c.exit_code() == 1
+
+
+@pytest.mark.parametrize("edit, words", [
+    (lambda r: r[0].update(orient_err_final="oops"), "line 2: orient_err_final: not a number: 'oops'"),
+    (lambda r: r[1].update(pos_err_final=-0.5), "line 3: pos_err_final: must be a finite number >= 0"),
+    (lambda r: r[2].update(energy_drift_max=float("inf")), "line 4: energy_drift_max: must be a finite number >= 0"),
+    (lambda r: r[0].update(status="great"), "line 2: status: must be one of ok, diverged, failed"),
+    (lambda r: r[0].update(dt=0.0), "line 2: dt: must be a positive finite number"),
+    (lambda r: r.append(dict(r[0])), "duplicate row for tennis_racket, mujoco:euler"),
+])
+def test_damaged_rows_are_unusable_input_not_a_pass(tmp_path, capsys, edit, words):
+    rows = [dict(r) for r in ROWS]
+    edit(rows)
+    rc, out = _cli(capsys, write(tmp_path / "a"), write(tmp_path / "b", rows))
+    assert rc == 2 and words in out.err and out.err.count("\n") == 1 and "Traceback" not in out.err
+
+
+@pytest.mark.parametrize("summary, words", [
+    ("[1, 2]", "summary: must be an object"),
+    ('{"schema_version": 1, "provenance": {}}', "summary.convergence: missing"),
+    ('{"schema_version": 99, "provenance": {}, "convergence": []}', "schema_version: 99"),
+    ('{"schema_version": 1, "provenance": {}, "convergence": [{"scenario": "x"}]}', "convergence[0].engine: missing"),
+    ('{"schema_version": 1, "provenance": {}, "convergence": [{"scenario": "x", "engine": "e", "quantity": "position", '
+     '"order": "fast", "verdict": "converges"}]}', "convergence[0].order: must be a number"),
+    ("[" * 100000 + "]" * 100000, "cannot parse JSON"),
+])
+def test_a_malformed_summary_is_unusable_input(tmp_path, capsys, summary, words):
+    b = write(tmp_path / "b")
+    (b / "summary.json").write_text(summary)
+    rc, out = _cli(capsys, write(tmp_path / "a"), b)
+    assert rc == 2 and words in out.err and out.err.count("\n") == 1 and "Traceback" not in out.err
+
+
+def test_a_summary_is_required(tmp_path, capsys):
+    b = write(tmp_path / "b")
+    (b / "summary.json").unlink()
+    rc, out = _cli(capsys, write(tmp_path / "a"), b)
+    assert rc == 2 and "summary.json: missing" in out.err
+
+
+def test_an_order_that_vanished_is_a_regression_not_ignored(tmp_path):
+    conv = [dict(CONV[0], order=None)]
+    c = compare_dirs(write(tmp_path / "a"), write(tmp_path / "b", conv=conv))
+    assert c.exit_code() == 1 and c.of("regression")[0].note == "no order fitted"
+
+
+def test_a_converging_order_without_expectation_that_moves_is_a_regression(tmp_path):
+    old = [dict(CONV[0], expected_order=None, scenario="mystery", engine="user:x")]
+    new = [dict(old[0], order=0.6)]
+    c = compare_dirs(write(tmp_path / "a", conv=old), write(tmp_path / "b", conv=new))
+    assert c.exit_code() == 1
+
+
+def test_the_committed_baseline_without_a_marker_is_still_valid_input():
+    base = BASELINE
+    c = compare_dirs(base, base)
+    assert c.exit_code() == 0 and c.matched_rows > 100 and not c.changes

@@ -1,0 +1,133 @@
+"""The sweep's lifecycle (cross_checks.sweep.lifecycle): a sweep killed at a random point (SIGTERM or
+SIGKILL, several seeds) keeps the previous results intact, leaves no worker alive, and the next run
+removes every leftover and writes correct results; a time limit interrupts the work and names it."""
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from cross_checks.sweep.lifecycle import TimeLimitExceeded, time_limit
+from tests.helpers.scenarios import scenario_toml, write_scenarios
+from tests.helpers.sweeps import built_once, file_tree as _files, result_rows as _rows
+
+#: One short tumble, 2 variants x 3 steps: every phase of a sweep (start-up, runs in the worker pool,
+#: metrics, report, swap) for a random kill to land in. A second scenario only made each sweep twice as
+#: long (the report of each scenario is most of it) without adding a phase.
+SPIN = scenario_toml("spin", 0.5, 0.005, (0.02, 0.01, 0.005))
+
+
+def _descendants(pid):
+    """Every process under ``pid`` (from /proc), so a test can check none outlives the kill."""
+    out, todo = [], [pid]
+    while todo:
+        p = todo.pop()
+        for task in Path(f"/proc/{p}/task").glob("*"):
+            try:
+                kids = [int(k) for k in (task / "children").read_text().split()]
+            except OSError:
+                kids = []
+            out += kids
+            todo += kids
+    return out
+
+
+def _alive(pid):
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return stat.rsplit(")", 1)[1].split()[0] != "Z"
+
+
+def _sweep_command(tmp):
+    env = {**os.environ, "RBCHECK_CACHE_DIR": str(tmp / "cache"), "MPLBACKEND": "Agg"}
+    cmd = [sys.executable, "-m", "cross_checks.cli", "sweep", str(tmp / "spin.toml"), "--jobs", "2", "--no-cache",
+           "--engines", "reference:course", "reference:rk4", "--out"]
+    return env, cmd
+
+
+def _good_results(tmp):
+    """The uninterrupted sweep, and how long it took (the range of the random kill times)."""
+    write_scenarios(tmp, SPIN)
+    env, cmd = _sweep_command(tmp)
+    t0 = time.perf_counter()
+    first = subprocess.run(cmd + [str(tmp / "good")], env=env, capture_output=True, text=True, timeout=300)
+    assert first.returncode == 0, first.stderr
+    (tmp / "full_s").write_text(repr(time.perf_counter() - t0))
+
+
+@pytest.fixture(scope="session")
+def setting(tmp_path_factory):
+    """Built once per test run (shared by the xdist workers); each case works in a folder of its own."""
+    tmp = built_once(tmp_path_factory, "kill", _good_results)
+    env, cmd = _sweep_command(tmp)
+    return {"tmp": tmp, "env": env, "cmd": cmd, "good": tmp / "good", "full_s": float((tmp / "full_s").read_text())}
+
+
+def kill_at_a_random_point(setting, seed, sig):
+    tmp, env, cmd = setting["tmp"], setting["env"], setting["cmd"]
+    case = tmp / f"case-{seed}-{sig.name}"
+    case.mkdir()
+    out = case / "res"
+    subprocess.run(["cp", "-a", str(setting["good"]), str(out)], check=True)
+    before = _files(out)
+    delay = random.Random(seed).uniform(0.0, setting["full_s"])
+    proc = subprocess.Popen(cmd + [str(out)], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(delay)
+    workers = _descendants(proc.pid)
+    proc.send_signal(sig)  # to the sweep's own process only: its workers must not outlive it
+    _, err = proc.communicate(timeout=120)
+    assert "Traceback" not in err, err
+    finished = proc.returncode == 0 or "after the new results were complete" in err
+    if sig == signal.SIGTERM and not finished:
+        # handled like Ctrl-C (exit 143, one line); before Python set the handler up, SIGTERM's default
+        assert proc.returncode in (143, -signal.SIGTERM), (proc.returncode, err)
+        assert proc.returncode != 143 or (err.count("\n") == 1 and "terminated" in err), err
+    deadline = time.time() + 10
+    while time.time() < deadline and any(_alive(w) for w in workers):
+        time.sleep(0.05)
+    assert not [w for w in workers if _alive(w)], "a worker outlived the sweep"
+    if not finished and out.exists() and _files(out) != before:
+        # killed after the swap (SIGKILL says nothing): then DIR must be the new, complete results
+        from cross_checks.sweep.results_dir import read_marker
+        listed = set(read_marker(out)["files"])
+        assert listed == set(_files(out)) - {".rbcheck-results.json"}
+        assert _rows(out) == _rows(setting["good"])
+    elif not finished and out.exists():
+        assert _files(out) == before  # the previous results, byte for byte
+    # the next run: no leftovers beside or inside, results as an uninterrupted run gives
+    rerun = subprocess.run(cmd + [str(out)], env=env, capture_output=True, text=True, timeout=300)
+    assert rerun.returncode == 0, rerun.stderr
+    assert sorted(p.name for p in case.iterdir()) == ["res"]
+    assert _rows(out) == _rows(setting["good"])
+    assert not [p for p in out.rglob(".*") if p.name != ".rbcheck-results.json"]
+    return delay
+
+
+@pytest.mark.parametrize("seed, sig", [(0, signal.SIGTERM), (1, signal.SIGKILL)])
+def test_a_sweep_killed_at_a_random_point_keeps_the_previous_results(setting, seed, sig):
+    kill_at_a_random_point(setting, seed, sig)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", range(2, 14))
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL], ids=["SIGTERM", "SIGKILL"])
+def test_many_random_kills_keep_the_previous_results(setting, seed, sig):
+    kill_at_a_random_point(setting, seed, sig)
+
+
+def test_time_limit_interrupts_the_work_and_names_it():
+    t0 = time.perf_counter()
+    with pytest.raises(TimeLimitExceeded, match="the spin took longer than the time limit of 0.2 s"):
+        with time_limit(0.2, "the spin"):
+            while True:
+                pass
+    assert time.perf_counter() - t0 < 2.0
+    with time_limit(5.0, "quick"):  # the timer is cancelled when the body ends in time
+        pass
+    time.sleep(0.01)

@@ -1,0 +1,67 @@
+"""Scenarios for tests: the text of a scenario file from its parts, the few bodies many tests share, and
+files written from texts. The format is docs/scenario.md; every builder here writes plain TOML that
+``cross_checks.scenario.parse_scenario`` reads like any user's file."""
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from cross_checks.scenario import parse_scenario
+
+SQ = float(np.sqrt(0.5))
+#: 90° about world z (w, x, y, z).
+YAW90 = f"orientation = [{SQ!r}, 0.0, 0.0, {SQ!r}]"
+
+#: The body most tests spin: 1 kg, principal moments 1, 2, 3 kg m² (asymmetric: a real tumble).
+SPINNING_BODY = "mass = 1.0\ninertia = [1.0, 2.0, 3.0]"
+#: ω off every principal axis (rad/s, world): torque-free tumbling that has a closed form.
+OFF_AXIS_SPIN = "angular_velocity = [0.3, 1.0, 0.2]"
+#: The same body spun 10× faster: at Δt = 0.01 s the exponential-map Euler step (reference:expmap_gyro,
+#: MuJoCo Euler) blows up at t = 8.65 s (docs/engine_conventions.md).
+FAST_SPIN = "angular_velocity = [0.1, 20.0, 0.1]"
+GRAVITY = "gravity = [0.0, 0.0, -9.81]"
+
+
+def scenario_toml(name, duration, dt, dt_ladder=None, *, description=None, reference=None,
+                  body=SPINNING_BODY, initial=OFF_AXIS_SPIN, forces="") -> str:
+    """The text of a scenario file: the top-level keys, then [body], [initial] and [forces] from the TOML
+    lines given for each (``forces`` may hold ``[[forces.spring]]`` tables too). Durations and steps in s."""
+    lines = [f'name = "{name}"']
+    if description is not None:
+        lines.append(f'description = "{description}"')
+    lines += [f"duration = {float(duration)!r}", f"dt = {float(dt)!r}"]
+    if dt_ladder is not None:
+        lines.append(f"dt_ladder = [{', '.join(repr(float(h)) for h in dt_ladder)}]")
+    if reference is not None:
+        lines.append(f'reference = "{reference}"')
+    lines += ["[body]", body, "[initial]", initial]
+    if forces:
+        lines += ["[forces]", forces]
+    return "\n".join(lines) + "\n"
+
+
+#: A tiny torque-free tumble (0.2 s, two-step ladder): the cheapest scenario with real rotation.
+TINY = scenario_toml("tiny", 0.2, 0.01, (0.02, 0.01))
+
+
+def write_scenarios(folder: Path, *texts: str) -> dict:
+    """Each scenario text written to ``folder/<its name>.toml``; ``{name: path}`` in the order given."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    out = {}
+    for text in texts:
+        name = tomllib.loads(text)["name"]
+        out[name] = folder / f"{name}.toml"
+        out[name].write_text(text)
+    return out
+
+
+def scenario_from_parts(body=SPINNING_BODY, initial="", forces="", dt=0.01, duration=1.0):
+    """A ground-truth scenario from the text of its [body], [initial] and [forces] tables."""
+    return parse_scenario(scenario_toml("t", duration, dt, reference="ground_truth", body=body, initial=initial,
+                                        forces=forces))
+
+
+def state(x=(0, 0, 0), v=(0, 0, 0), q=(1, 0, 0, 0), w=(0, 0, 0)):
+    """A packed state (13,) from its parts: x_W (m), v_W (m/s), q_WB (w, x, y, z), w_W (rad/s)."""
+    return np.concatenate([x, v, q, w]).astype(float)
