@@ -165,22 +165,6 @@ def test_first_screen_names_the_divergence_and_the_matrix_does_not_paint_it_gree
     assert cls == "acc1" and all(m in text for m in "xθvω")            # every quantity's mark, no hovering
 
 
-def test_an_expected_divergence_is_its_own_colour_not_green(results, tmp_path, browser):
-    d = tmp_path / "res"
-    shutil.copytree(results, d)
-    s = json.loads((d / "summary.json").read_text())
-    for r in s["convergence"]:
-        if r["engine"] == "reference:explicit_euler" and r["scenario"] == "stiff_spring":
-            r.update(expected_verdict="diverged", matches_expectation=True, assessment="diverged, as expected")
-    (d / "summary.json").write_text(json.dumps(s))
-    reports.render(d, jobs=1, progress=False)
-    browser.load(_url(d, "index.html"), width=1024)
-    [(cls, _)] = _matrix_class(browser, "reference:explicit_euler", 3)
-    assert cls == "diverged"
-    assert "every verdict of these scenarios is still as expected" in browser.evaluate(
-        "document.querySelector('#verdict').innerText")
-
-
 def test_scenario_pages_link_their_toml_rows_and_series(results, browser):
     for name, text in (("spin_only", SPIN), ("stiff_spring", STIFF)):
         browser.load(_url(results, f"scenario-{name}.html"))
@@ -205,11 +189,15 @@ def test_plots_leave_out_what_carries_no_information(results):
     assert "Not drawn, constant along the reference: x = 0, y = 0, z = 0." in spin
 
 
-def test_a_planted_contradiction_and_a_disagreeing_second_reference_reach_the_first_screen(results, tmp_path,
-                                                                                            browser):
+def test_planted_contradiction_divergence_and_second_references_reach_the_first_screen(results, tmp_path, browser):
+    """One re-render of planted records: a contradiction, an expected divergence (its own colour, not
+    green), a second reference that disagrees and one that failed."""
     d = tmp_path / "res"
     shutil.copytree(results, d)
     s = json.loads((d / "summary.json").read_text())
+    for r in s["convergence"]:
+        if r["engine"] == "reference:explicit_euler" and r["scenario"] == "stiff_spring":
+            r.update(expected_verdict="diverged", matches_expectation=True, assessment="diverged, as expected")
     rec = next(r for r in s["convergence"] if r["engine"] == "reference:rk4" and r["scenario"] == "spin_only"
                and r["quantity"] == "orientation")
     rec.update(matches_expectation=False, assessment="does not converge (planted), expected order 4")
@@ -228,6 +216,8 @@ def test_a_planted_contradiction_and_a_disagreeing_second_reference_reach_the_fi
     assert "stiff_spring: the second reference (drake:rk3) failed: RuntimeError: step size underflow" in text
     [(cls, _)] = _matrix_class(browser, "reference:rk4", 1)    # spin_only
     assert cls == "bad"
+    [(cls, _)] = _matrix_class(browser, "reference:explicit_euler", 3)
+    assert cls == "diverged" and "every verdict of these scenarios is still as expected" in text
     browser.load(_url(d, "scenario-spin_only.html"))
     page = browser.evaluate("document.body.innerText")
     assert "disagrees with the reference" in page and "3.0e-6" in page
