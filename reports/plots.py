@@ -63,7 +63,7 @@ def _short(v):
 
 def _grid(nrows, ncols, title, sharey="row", panel_h=2.1):
     width = min(13.0, 2.2 + 3.6 * ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(width, 0.9 + panel_h * nrows), dpi=REPORT_DPI, squeeze=False,
+    fig, axes = plt.subplots(nrows, ncols, figsize=(width, 1.1 + panel_h * nrows), dpi=REPORT_DPI, squeeze=False,
                              sharex=True, sharey=sharey)
     fig.suptitle(title, fontsize=11, x=0.01, ha="left")
     return fig, axes
@@ -71,7 +71,7 @@ def _grid(nrows, ncols, title, sharey="row", panel_h=2.1):
 
 def _finish(fig, path):
     h = fig.get_size_inches()[1]
-    fig.subplots_adjust(left=0.09 if fig.get_size_inches()[0] > 8 else 0.14, right=0.98, top=1.0 - 0.55 / h,
+    fig.subplots_adjust(left=0.09 if fig.get_size_inches()[0] > 8 else 0.14, right=0.98, top=1.0 - 0.75 / h,
                         bottom=0.5 / h, hspace=0.35, wspace=0.08)
     _plain_log_ticks(fig)
     _save_png(fig, path)
