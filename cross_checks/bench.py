@@ -207,10 +207,16 @@ def format_table(r: dict) -> str:
     return "\n".join(out)
 
 
-def main(quick: bool = False, json_path: str | None = None) -> int:
-    """``rbcheck bench``: measure, print the table, write ``json_path`` (checked writable by the CLI first)."""
+def main(quick: bool = False, json_path: str | None = None, extra=None) -> int:
+    """``rbcheck bench``: measure, print the table, write ``json_path`` (checked writable by the CLI first).
+    ``extra``: {key: (measure(quick) -> dict, format(dict) -> str)} of measurements from layers bench may
+    not import (the fuzz's cases/s, passed in by the cli), run in this same process and written under key."""
     r = run_bench(quick)
     print(format_table(r))
+    for key, (measure, fmt) in (extra or {}).items():
+        r[key] = measure(quick)
+        print()
+        print(fmt(r[key]))
     if json_path:
         from cross_checks.core.files import atomic_write_text
         atomic_write_text(json_path, json.dumps(r, indent=2, sort_keys=True) + "\n")

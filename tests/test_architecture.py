@@ -16,7 +16,7 @@ LAYERS = [
     (3, ["cross_checks.engines"]),
     (4, ["cross_checks.analysis"]),
     (5, ["cross_checks.sweep"]),
-    (6, ["cross_checks.gates", "reports", "cross_checks.bench"]),
+    (6, ["cross_checks.gates", "reports", "cross_checks.bench", "cross_checks.fuzz"]),
     (7, ["cross_checks.cli", "cross_checks.testing"]),
     (8, ["cross_checks.pytest_plugin"]),
 ]

@@ -36,6 +36,7 @@ BAD = {
     "compare": ["compare", "{tmp}/missing", "{tmp}/missing"],
     "baseline": ["baseline", "{tmp}/missing", "{tmp}/out"],
     "bench": ["bench", "--json", "{tmp}/no/such/dir/b.json"],
+    "fuzz": ["fuzz", "--engines", "reference:nope", "--out", "{tmp}/fz"],
 }
 
 

@@ -31,7 +31,7 @@ from cross_checks.core import tolerances as tol
 from cross_checks.core.quantities import BLOCKS, QUANTITIES
 
 __all__ = ["flow_rhs", "rk4_flow", "exact_flow", "FlowResult", "majorant", "motion_rate", "quantity_distance",
-           "distances", "local_allowances", "Allowances", "error_growth"]
+           "distances", "local_allowances", "Allowances", "error_growth", "conservation_allowance"]
 
 
 def flow_rhs(scenario):
@@ -269,3 +269,36 @@ def error_growth(scenario, t_s, scales) -> dict:
                     env = np.maximum(env, 1.0)
                 out[(p, q)] = env[idx]
     return out
+
+
+def conservation_allowance(scenario, y, h_s: float, duration_s: float) -> dict:
+    """How far a consistent scheme of order ≥ 1 with step ``h_s`` may move each conserved quantity over
+    ``duration_s``, from the motion sampled at states ``y`` (K, 13) along it.
+
+    Each step's defect is at most ``C h² M2`` per quantity (:func:`local_allowances`' physics part, C =
+    tol.CHECK_LOCAL_C); a defect d moves a conserved quantity Q by at most ``Σ_b |∂Q/∂y_b| d_b``, so over
+    ``T / h`` steps Q moves by at most ``C h T max_t Σ_b |∂Q/∂y_b| M2_b`` (the largest over the samples
+    stands for every step). Sensitivities as ``rbcheck check`` uses them: energy ``|f|``, ``m|v|``,
+    ``|τ| + |ω × L|``, ``|L|``; world angular momentum ``|∂L/∂ω| ≤ I_max``, ``|∂L/∂θ| ≤ |L| + I_max |ω|``.
+
+    Returns ``{"energy": J, "angular_momentum": kg m²/s}`` (absolute, not relative).
+    """
+    from reference_sim.quaternion import matrix_from_quat
+    p = scenario.problem
+    y = np.asarray(y, dtype=float)
+    rate = motion_rate(scenario, y)
+    M2 = majorant(flow_rhs(scenario), y, rate)
+    q = y[:, Q] / np.linalg.norm(y[:, Q], axis=1, keepdims=True)
+    R = matrix_from_quat(q)
+    w = y[:, W]
+    L = np.einsum("kij,kj->ki", p.body.world_inertia(R), w)
+    f, tau = p.forces.force_torque(p.body, y[:, BLOCKS["position"]], y[:, BLOCKS["velocity"]], q, R)
+    I_max = float(np.linalg.eigvalsh(p.body.inertia_B)[-1])
+    e_rate = (np.linalg.norm(f, axis=1) * M2["position"]
+              + p.body.mass_kg * np.linalg.norm(y[:, BLOCKS["velocity"]], axis=1) * M2["velocity"]
+              + (np.linalg.norm(tau, axis=1) + np.linalg.norm(np.cross(w, L), axis=1)) * M2["orientation"]
+              + np.linalg.norm(L, axis=1) * M2["angular_velocity"])
+    l_rate = (I_max * M2["angular_velocity"]
+              + (np.linalg.norm(L, axis=1) + I_max * np.linalg.norm(w, axis=1)) * M2["orientation"])
+    scale = tol.CHECK_LOCAL_C * float(h_s) * float(duration_s)
+    return {"energy": scale * float(np.max(e_rate)), "angular_momentum": scale * float(np.max(l_rate))}

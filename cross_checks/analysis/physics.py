@@ -156,6 +156,8 @@ def _log_model_errors(chis, sign: int, amplification: float, saturate: bool):
     """ln of the model errors (in logs, so that any χ is fine): ln|e^{sχ} − 1| + ln A, saturated as
     ln(u / (1 + u))."""
     out = []
+    if amplification <= 0.0:   # no share of the motion carries this drift (e.g. ω_W does not turn): no model
+        return None
     for chi in chis:
         if chi <= 0.0:
             return None

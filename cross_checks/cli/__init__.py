@@ -55,7 +55,7 @@ def build_parser() -> argparse.ArgumentParser:
     # One declaration per command, in the order `rbcheck --help` lists them (alike in shape only: each
     # says its own command's arguments).
     for add in (_add_list, _add_show, _add_run, _add_sweep, _add_report, _add_check, _add_compare, _add_baseline,
-                _add_bench):
+                _add_bench, _add_fuzz):
         add(sub)
     return p
 
@@ -179,9 +179,33 @@ def _add_bench(sub) -> None:
     b = sub.add_parser("bench", help="throughput of the batched reference vs MuJoCo and PyBullet, measured in one run",
                        description="Step the same free bodies (gravity + a body torque) in the batched reference, "
                                    "MuJoCo (N bodies in one model; rollout) and PyBullet, and a single trajectory in "
-                                   "the reference and mj_step; print body-steps/s and the ratios (cross_checks/bench.py).")
+                                   "the reference and mj_step; print body-steps/s and the ratios (cross_checks/bench.py); "
+                                   "and rbcheck fuzz's cases/s per engine (docs/fuzz.md).")
     b.add_argument("--quick", action="store_true", help="fewer bodies and steps (seconds instead of a minute)")
     b.add_argument("--json", metavar="FILE", help="write the measurements as JSON")
+
+
+def _add_fuzz(sub) -> None:
+    fz = sub.add_parser(
+        "fuzz", help="search random valid scenarios for engine disagreements; shrink each failure to a scenario file",
+        description="Draw random valid scenarios (every body, initial-state and force kind) with the dimensionless "
+                    "numbers under control so that a correct engine of its declared order must pass, and check on "
+                    "each: same-scheme pairs agree to round-off, each variant's one-step defect and free-running error "
+                    "have its declared order, conserved quantities drift no more than the scheme allows. Each distinct "
+                    "failure is shrunk to a minimal scenario, DIR/counterexamples/*.toml, which `rbcheck sweep` with "
+                    "the same engines confirms (exit 1). DIR/fuzz.json and DIR/index.html summarise. Deterministic for "
+                    "a seed. Exit 0: nothing found; 1: counterexamples; 2: bad input. See docs/fuzz.md.")
+    fz.add_argument("--engines", nargs="+", metavar="ENGINE[:VARIANT]",
+                    help="variants to check (an engine name means all its variants); default: every available variant")
+    fz.add_argument("--budget", type=_positive_float, default=60.0, metavar="SECONDS",
+                    help="seconds of searching (default 60); shrinking the failures found comes after it")
+    fz.add_argument("--seed", type=_nonnegative_int, default=0, metavar="N", help="campaign seed (default 0)")
+    fz.add_argument("--jobs", type=_positive_int, metavar="N", help="worker processes (default: all cores)")
+    fz.add_argument("--no-cache", action="store_true", help="recompute every batch instead of reusing cached outcomes")
+    fz.add_argument("--dask", metavar="ADDRESS", help="run the batches on a Dask cluster (as rbcheck sweep --dask)")
+    fz.add_argument("--out", required=True, metavar="DIR",
+                    help="output directory, replaced atomically and only when absent, empty or rbcheck's own")
+    _add_engine_file_option(fz)
 
 
 def _add_engine_file_option(p) -> None:
@@ -207,6 +231,16 @@ def _positive_int(text: str) -> int:
         raise argparse.ArgumentTypeError(f"must be a whole number, got {text!r}") from None
     if v < 1:
         raise argparse.ArgumentTypeError(f"must be >= 1, got {v}")
+    return v
+
+
+def _nonnegative_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a whole number, got {text!r}") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {v}")
     return v
 
 
@@ -491,11 +525,17 @@ def cmd_bench(args) -> int:
     from cross_checks.bench import main as bench_main
     if args.json:
         _check_out_path(args.json, None, "--json")
-    return bench_main(args.quick, args.json)
+    from cross_checks.fuzz.throughput import format_fuzz, fuzz_throughput
+    return bench_main(args.quick, args.json, extra={"fuzz": (fuzz_throughput, format_fuzz)})
+
+
+def cmd_fuzz(args) -> int:
+    from cross_checks.cli.fuzz import run_fuzz
+    return run_fuzz(args, BadInput, _resolve_engines, _dask_client)
 
 
 COMMANDS = {"list": cmd_list, "show": cmd_show, "run": cmd_run, "sweep": cmd_sweep, "report": cmd_report, "check": cmd_check,
-            "compare": cmd_compare, "baseline": cmd_baseline, "bench": cmd_bench}
+            "compare": cmd_compare, "baseline": cmd_baseline, "bench": cmd_bench, "fuzz": cmd_fuzz}
 
 
 def main(argv=None) -> int:

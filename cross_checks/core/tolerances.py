@@ -206,6 +206,7 @@ CHECK_GROWTH_RATE_PER_STEP = 0.25
 #: "Resembles" a mistake (said with that caution) when it explains 99 % of the steps within this many
 #: allowances and CHECK_MISTAKE_MARGIN times better than any correct scheme; beyond, nothing is named.
 CHECK_MISTAKE_RESEMBLES = 3.0
+
 # --- compare: a new results directory against the baseline (docs/results.md) ---
 #: Relative change of an error or drift that counts as a regression (or improvement): the same code on
 #: another machine reproduces errors to ~1e-12 relative (libm/BLAS rounding, amplified by at most ~1e3
@@ -273,3 +274,57 @@ MJ_RK4_ORDER_TOL = 0.1
 #: The same with forces held over the step (xfrc_applied fixed over the 4 stages): first order;
 #: measured 0.96-1.01.
 MJ_HELD_ORDER_TOL = 0.1
+# --- rbcheck fuzz: hard but fair random cases and their verdicts (docs/fuzz.md) ---------------------------
+
+#: Largest h·L at a case's coarsest step (L: the fastest rate of the motion, measured along the run).
+#: A scheme of order p has e(h) = C h^p (1 + c hL + …); over the ladder [h, h/2, h/4] the fitted order
+#: moves by ≈ c hL / (2 ln 2). With |c| ≤ 1 (the next term of every scheme here, relative) and half the
+#: match tolerance SWEEP_ORDER_TOL (0.3 / 2 = 0.15) for it: hL ≤ 0.15 · 2 ln 2 ≈ 0.2 (a larger c is excused
+#: by the two-term rule, FUZZ_TWO_TERM_TOL).
+FUZZ_HL_MAX = 0.2
+#: Smallest h·L drawn: below it even a first-order scheme's error over a few radians of motion, ~hL·LT,
+#: stays a thousand times above the round-off floor; smaller steps only make runs longer.
+FUZZ_HL_MIN = 0.005
+#: χ = ½ L² h T, the amplitude drift of a first-order step over the run (docs/verdicts.md), drawn
+#: log-uniformly in [FUZZ_CHI_MIN, FUZZ_CHI_MAX]. The drift bends a first-order fit to 1 ± χ/2 (its
+#: model, physics.amplitude_model_order); at χ = 0.25 that is 0.12, inside AMPLITUDE_MODEL_ORDER_DEV
+#: (0.15): the hardest case a first-order scheme must still be claimed on.
+FUZZ_CHI_MAX = 0.25
+FUZZ_CHI_MIN = 1e-3
+#: A χ, the first-order error grown by the measured amplification A, kept ≤ this: the error model is
+#: linear in the perturbation, its second-order part ~(A χ)² relative to the first stays below 5 %
+#: (an orientation error of ~0.05 rad), so the fitted order is the scheme's and not the motion's.
+FUZZ_LINEAR_MAX = 0.05
+#: Smallest principal moment over the largest drawn for particle bodies: at 1e-3 the inverse inertia
+#: keeps 13 significant digits and the fastest body-frame rate stays within the triangle inequality's
+#: |ω̇| ≤ |ω|² (torque-free); thinner bodies are redrawn.
+FUZZ_MIN_INERTIA_RATIO = 1e-3
+#: Roundings per step of a same-scheme pair's arithmetic (a quaternion product and normalisation, the
+#: force sums): 10, as in SAME_SCHEME_REL's derivation; the pair's allowance over N steps, grown by the
+#: case's measured amplification A, is max(SAME_SCHEME_REL, 10 N ε A).
+FUZZ_ROUNDINGS_PER_STEP = 10.0
+#: A case is measured after its step is chosen; a pilot solve at this tolerance (loose: only rates and
+#: the amplification's order of magnitude are needed from it) decides the step.
+FUZZ_PILOT_RTOL = 1e-6
+#: A case whose MEASURED h·L or A·χ exceeds its bound by more than this factor (the pilot solve misjudged
+#: it) is not judged — it is counted as skipped, never as a finding.
+FUZZ_BOUND_SLACK = 1.25
+#: Smallest relative margin of the triangle inequality I1 + I2 ≥ I3 (1 + margin) of a drawn body. MuJoCo
+#: refuses a model whose moments violate A + B ≥ C after its own eigen-decomposition (docs/engine_conventions.md:
+#: a failed row), and a lamina (any three particles) sits exactly on the edge, where round-off (~1e-16
+#: relative) decides; 1e-6 keeps ten orders of magnitude between the two while a body stays visibly flat.
+FUZZ_TRIANGLE_MARGIN = 1e-6
+#: Bullet's btMatrix3x3::solve33 inverts det only when |det| > SIMD_EPSILON = DBL_EPSILON (2.22e-16, Bullet
+#: built in double precision as PyBullet is): below it PyBullet maximal's implicit gyroscopic step is wrong.
+#: Measured (tests/cross_checks/fuzz/test_known.py): moments (1, 2, 2.5)·1e-6 kg m² fail, ·1e-5 do not.
+BULLET_SOLVE33_DET_EPS = 2.220446049250313e-16
+#: Roundings in a lever arm measured from the world origin (fuzz.properties.lever_roundoff): the COM and the
+#: frame origin each rounded (2), the cross product r × F two products and a difference (2 more): 4.
+FUZZ_LEVER_ROUNDINGS = 4.0
+#: A free-running ladder is "two-term consistent" (fuzz.properties.two_term_consistent) when the third
+#: difference of e/h^p is within this fraction of its size: an order-p error with its next term gives 0
+#: (plus the third term, ~0.4 (c₃/c₁) h² ≪ 0.25 in the asymptotic range); an order deficit of 0.5 gives 0.38,
+#: of 1 gives 0.75.
+FUZZ_TWO_TERM_TOL = 0.25
+#: ... and each of its errors at least this many times its round-off floor (else round-off shapes u).
+FUZZ_RESOLVED = 100.0

@@ -15,7 +15,7 @@ import numpy as np
 from reference_sim.state import Q
 from cross_checks.analysis import metrics as M
 from cross_checks.analysis.convergence import compare_with_expectation, fit_convergence, measured_pre_asymptotic
-from cross_checks.analysis.expectations import EQUIVALENT_PAIRS, expectation
+from cross_checks.analysis.expectations import EQUIVALENT_PAIRS, expectation, pair_is_same_arithmetic
 from cross_checks.core import tolerances as tol
 from cross_checks.core.files import atomic_write_text, json_default
 from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, UNITS, decimation_indices, state_errors
@@ -168,7 +168,7 @@ def agreement_records(scenarios, records_by_key) -> list:
         for sc in scenarios:
             ra = records_by_key.get((sc.name, a, sc.dt_s))
             rb = records_by_key.get((sc.name, b, sc.dt_s))
-            if ra is not None and rb is not None:
+            if ra is not None and rb is not None and pair_is_same_arithmetic(sc, a, b):
                 out.append(_agreement(a, b, reason, sc, ra, rb))
     return out
 

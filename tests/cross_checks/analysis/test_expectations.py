@@ -184,3 +184,46 @@ def test_body_frame_steps_keep_the_separatrix_distance_whole_state_steps_do_not(
     else:
         assert VARIANT_TRAITS[variant].rotation_drift == "whole_state"
         assert moved > 100 * abs(delta[0]), moved
+
+
+# --- same-scheme pairs and the engines' decay harness (found by rbcheck fuzz, docs/fuzz.md) ------------------
+
+def _decaying_spin(decay: bool, inertia=(0.2, 0.3, 0.4)):
+    text = f"""
+name = "decay_pair"
+duration = 0.5
+dt = 0.01
+[body]
+mass = 1.0
+inertia = {list(inertia)}
+[initial]
+angular_velocity_body = [0.3, 2.0, 0.5]
+[forces]
+angular_velocity_decay = {0.98 if decay else 1.0}
+"""
+    return parse_scenario(text, source="<test>")
+
+
+def _expmap_vs_mujoco_euler(sc, h):
+    from cross_checks.engines import get_adapter
+    n = int(round(0.5 / h))
+    a = np.asarray(get_adapter("reference").simulate(sc, "expmap_gyro", h, n).y)
+    b = np.asarray(get_adapter("mujoco").simulate(sc, "euler", h, n).y)
+    return float(np.max(np.abs(a[:, 10:13] - b[:, 10:13])))
+
+
+def test_pre_step_decay_breaks_the_expmap_gyro_mujoco_euler_pair_only_with_a_gyroscopic_term():
+    """The engines' harness applies γ before the step, the course after: with angular decay on a tumbling
+    asymmetric body the gyroscopic term sees γ twice — a first-order difference (halves with Δt)."""
+    from cross_checks.analysis.expectations import pair_is_same_arithmetic
+    sc = _decaying_spin(decay=True)
+    d1, d2 = _expmap_vs_mujoco_euler(sc, 0.01), _expmap_vs_mujoco_euler(sc, 0.005)
+    assert d1 > 1e-6 and 1.6 < d1 / d2 < 2.4
+    assert not pair_is_same_arithmetic(sc, "reference:expmap_gyro", "mujoco:euler")
+    assert pair_is_same_arithmetic(sc, "mujoco:euler", "pybullet:multibody")
+    plain = _decaying_spin(decay=False)
+    assert _expmap_vs_mujoco_euler(plain, 0.01) < 1e-12
+    assert pair_is_same_arithmetic(plain, "reference:expmap_gyro", "mujoco:euler")
+    sym = _decaying_spin(decay=True, inertia=(0.3, 0.3, 0.3))   # no gyroscopic torque: exact again
+    assert _expmap_vs_mujoco_euler(sym, 0.01) < 1e-12
+    assert pair_is_same_arithmetic(sym, "reference:expmap_gyro", "mujoco:euler")

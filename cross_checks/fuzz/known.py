@@ -1,0 +1,41 @@
+"""Engine behaviours a counterexample may show that are documented, measured facts of the engine
+(docs/engine_conventions.md): each explainer says, for one violation on one scenario, whether that
+behaviour accounts for it. An explained counterexample is still a counterexample (the engine computes
+something else than the equations); the explanation tells the user it is the engine, not rbcheck.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from cross_checks.core import tolerances as tol
+
+__all__ = ["explain"]
+
+
+def _bullet_solve33_singular(scenario, violation) -> str:
+    """PyBullet maximal coordinates: btRigidBody's implicit gyroscopic step solves J Δω = f with
+    btMatrix3x3::solve33, which treats |det J| ≤ SIMD_EPSILON (2.2e-16 in double precision) as singular —
+    an ABSOLUTE threshold in kg³ m⁶ — and then multiplies by det J instead of dividing. With J ≈ I (the
+    body's inertia, Δt small) a body with I1 I2 I3 ≤ 2.2e-16 kg³ m⁶ (moments below ~6e-6 kg m²) gets a
+    wrong angular velocity every step."""
+    if "pybullet:maximal" not in violation.get("variants", []):
+        return ""
+    det = float(np.prod(np.linalg.eigvalsh(scenario.problem.body.inertia_B)))
+    if det > tol.BULLET_SOLVE33_DET_EPS:
+        return ""
+    return (f"PyBullet maximal coordinates solve the implicit gyroscopic step with btMatrix3x3::solve33, which "
+            f"treats |det J| ≤ {tol.BULLET_SOLVE33_DET_EPS:.3g} kg³m⁶ (an absolute threshold) as singular and then "
+            f"scales by det J instead of dividing; this body's I1·I2·I3 = {det:.3g} kg³m⁶ is below it, so every step's "
+            "angular velocity is wrong (docs/engine_conventions.md, PyBullet)")
+
+
+_EXPLAINERS = (_bullet_solve33_singular,)
+
+
+def explain(scenario, violation) -> str:
+    """The documented engine behaviour that accounts for ``violation`` on ``scenario`` ("" if none)."""
+    for f in _EXPLAINERS:
+        why = f(scenario, violation)
+        if why:
+            return why
+    return ""

@@ -1,0 +1,328 @@
+"""The four properties checked on every case, each with an allowance derived as the sweep derives its own.
+
+For a case (its measured :class:`Context`) and a variant's runs:
+
+* ``free_running_order`` — the largest error over the run at h, h/2, h/4, per quantity, fitted over the
+  ladder above its measured floor (the reference's measured error plus the run's round-off grown by the
+  measured amplification: ``analysis.metrics.roundoff_floor``) and compared with what the variant's
+  traits and the case's measured physics expect (``analysis.expectations.expectation``,
+  ``analysis.convergence.compare_with_expectation``, ``measured_pre_asymptotic``) — the sweep's verdict,
+  on the largest error over the run rather than the final one, which a crossing through zero at the
+  final time cannot fool;
+* ``one_step_order`` — the one-step defect against the exact flow from reference states, at h … h/8,
+  fitted the same way against the local order p + 1 (``expectation(..., "one_step")``);
+* ``conservation`` — where the physics conserves energy or world angular momentum and the variant
+  models that physics: the largest drift over the run within ``analysis.flow.conservation_allowance``
+  (a consistent scheme's local defects, weighted by the quantity's sensitivity, summed over the run)
+  plus the run's round-off;
+* ``agreement`` — the pairs of ``analysis.expectations.EQUIVALENT_PAIRS`` agree to round-off over the
+  run: ``max(SAME_SCHEME_REL, FUZZ_ROUNDINGS_PER_STEP · N ε · A)`` relative to each quantity's scale.
+
+Each function returns ``(violations, tally)``: violation records (with a sentence saying which property
+failed and by how much) and ``{property: [checked, no_claim]}`` counts.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from cross_checks.analysis import metrics as M
+from cross_checks.analysis.convergence import compare_with_expectation, fit_convergence, measured_pre_asymptotic
+from cross_checks.analysis.expectations import (EQUIVALENT_PAIRS, expectation, gyroscopic_term_matters,
+                                                pair_is_same_arithmetic, traits)
+from cross_checks.core import tolerances as tol
+from cross_checks.core.quantities import QUANTITIES, UNITS, state_errors
+
+__all__ = ["Context", "free_running_order", "one_step_order", "conservation", "agreement", "PROPERTIES",
+           "equivalent_pairs"]
+
+PROPERTIES = ("free_running_order", "one_step_order", "conservation", "agreement")
+_EPS = 2.0 ** -52
+
+
+@dataclass
+class Context:
+    """What one case's verdicts are measured against (all measured, see :mod:`cross_checks.fuzz.exact`).
+
+    scenario : the parsed case. n0 : steps at the coarsest rung h0 = scenario.dt_s. y_ref : (4 n0 + 1, 13)
+    the reference on the finest rung's grid. ref_err, amp, scales : {quantity: value} — the reference's
+    measured error over the run, the measured error amplification, each quantity's scale. physics :
+    analysis.physics.ScenarioPhysics. step_h : (S,) one-step rungs (s). step_err : {quantity: (S,)} the
+    exact one-step flow's measured error at each rung. allowance : {"energy", "angular_momentum"} of a
+    consistent scheme at h0 (analysis.flow.conservation_allowance); scales like h.
+    """
+
+    scenario: object
+    n0: int
+    y_ref: np.ndarray
+    ref_err: dict
+    amp: dict
+    scales: dict
+    physics: object
+    step_h: np.ndarray
+    step_err: dict
+    allowance: dict
+    lever: dict = None
+
+
+def lever_roundoff(scenario, y_ref) -> dict:
+    """An engine's round-off from lever arms measured from the world origin (MuJoCo's and Featherstone's
+    spatial algebra: the COM of a subtree recomputed as Σ m x / Σ m, torques as r × F with r known to
+    ε |x| only, momenta about the origin): ``{"acc_rad_s2": a, "velocity_m_s": u, "omega_rad_s": w}`` with
+    a = K ε |x|max (|m g| + |F|max) / I_min the angular acceleration it may add, u = K ε |x|max |ω|max the
+    velocity error of a spatial transform v − ω × x, and w = K ε m |x|max |v|max / I_min the angular
+    velocity error of recovering ω from a momentum about the origin that holds m x × v
+    (K = FUZZ_LEVER_ROUNDINGS). Measured on MuJoCo (docs/fuzz.md): a falling tensor body at rest, 0.7 m
+    from the origin, picks up 5.7e-13 rad/s² (an O(Δt) one-step defect of ~1e-14 rad/s); a free tensor
+    body at rest moving at 18 m/s 2 m from the origin, ω = 1.5e-14 rad/s from MuJoCo RK4's first step on."""
+    from reference_sim.quaternion import matrix_from_quat
+    p = scenario.problem
+    q = y_ref[:, 6:10] / np.linalg.norm(y_ref[:, 6:10], axis=1, keepdims=True)
+    f, _ = p.forces.force_torque(p.body, y_ref[:, 0:3], y_ref[:, 3:6], q, matrix_from_quat(q))
+    weight = p.body.mass_kg * float(np.linalg.norm(p.forces.gravity_W))
+    F = weight + float(np.max(np.linalg.norm(f, axis=1)))
+    x = float(np.max(np.linalg.norm(y_ref[:, 0:3], axis=1)))
+    w = float(np.max(np.linalg.norm(y_ref[:, 10:13], axis=1)))
+    v = float(np.max(np.linalg.norm(y_ref[:, 3:6], axis=1)))
+    I_min = float(np.linalg.eigvalsh(p.body.inertia_B)[0])
+    k = tol.FUZZ_LEVER_ROUNDINGS * _EPS
+    return {"acc_rad_s2": k * x * F / I_min, "velocity_m_s": k * x * w,
+            "omega_rad_s": k * p.body.mass_kg * x * v / I_min}
+
+
+def _lever_floor(ctx, q, h, t, n, amp=1.0) -> float:
+    """The lever-arm round-off (``lever_roundoff``) in quantity ``q`` after ``n`` steps of ``h`` (t = n h)."""
+    lv = ctx.lever or {}
+    a, u, w = lv.get("acc_rad_s2", 0.0), lv.get("velocity_m_s", 0.0), lv.get("omega_rad_s", 0.0)
+    walk = 1.0 + math.sqrt(n)   # the ω representation error: re-made every step, adding like a random walk
+    if q == "angular_velocity":
+        return (a * t + w * walk) * amp
+    if q == "orientation":
+        return (0.5 * a * t * t + w * t * walk) * amp
+    if q == "velocity":
+        return u * n * amp
+    return u * n * h * amp
+
+
+def _tally():
+    return {p: [0, 0] for p in PROPERTIES}
+
+
+def _fmt_list(values):
+    return ", ".join("nan" if v is None or not np.isfinite(v) else f"{v:.3g}" for v in values)
+
+
+def two_term_consistent(dts, errors, floors, order) -> bool:
+    """Whether three rungs h, h/2, h/4 (every error resolved above FUZZ_RESOLVED × its floor) fit
+    e(h) = a h^p + b h^(p+1): the leading term of an order-p scheme plus the next one, of any sign.
+
+    Then u = e / h^p is affine in h, so u0 − 3 u1 + 2 u2 = 0 (rungs halving). A leading coefficient a
+    that happens to be small (two first-order contributions nearly cancelling) makes b h dominate at the
+    coarse rungs and the fitted order meaningless, although the scheme has order p — found by the fuzz on
+    a weakly decayed spring released from rest. An order q < p instead gives u ∝ h^(q−p), whose residual is
+    ≥ 0.38 of max |u| for q ≤ p − 0.5 (0.75 for q = p − 1): above FUZZ_TWO_TERM_TOL."""
+    h = np.asarray(dts, dtype=float)
+    e = np.asarray(errors, dtype=float)
+    fl = np.asarray(floors, dtype=float)
+    if len(h) != 3 or not np.all(np.isfinite(e)) or np.any(e <= tol.FUZZ_RESOLVED * fl):
+        return False
+    if not np.allclose(h[1:] / h[:-1], 0.5, rtol=1e-9):
+        return False
+    u = e / h ** float(order)
+    return bool(abs(u[0] - 3.0 * u[1] + 2.0 * u[2]) <= tol.FUZZ_TWO_TERM_TOL * float(np.max(np.abs(u))))
+
+
+def _fit_record(ctx, variant, quantity, dts, errors, floors, statuses, exp, prop):
+    """(violation or None, claimed) from a fit over a ladder and an Expectation."""
+    fit = fit_convergence(dts, errors, floors, statuses)
+    claimed = exp.verdict == "converges"
+    if not claimed:   # no claim: pre-asymptotic here, or the variant does not model this motion (see docs/fuzz.md)
+        return None, False
+    matches, phrase = compare_with_expectation(fit.verdict, fit.order, exp, fit.order_is_lower_bound)
+    if matches is False and measured_pre_asymptotic(fit, exp.order):
+        matches = None
+    if matches is False and exp.order is not None and two_term_consistent(dts, errors, floors, exp.order):
+        return None, False   # the next term of the error series, not the order: no claim (docs/fuzz.md)
+    if matches is not False:
+        return None, claimed
+    what = "free-running error (largest over the run)" if prop == "free_running_order" else "one-step defect"
+    exp_txt = (f"order {exp.order:g}" if exp.order is not None else exp.verdict.replace("_", " "))
+    errs = fit.errors
+    sentence = (f"{variant}: {quantity} {what} {phrase} — errors {_fmt_list(errs)} {UNITS[quantity]} at "
+                f"Δt = {_fmt_list(fit.dt_s)} s, floors {_fmt_list(fit.floors)}; expected {exp_txt} ({exp.reason})")
+    deficit = None if fit.order is None or exp.order is None else exp.order - fit.order
+    return {"property": prop, "variants": [variant], "quantity": quantity, "verdict": fit.verdict,
+            "order": fit.order, "expected_order": exp.order, "expected_verdict": exp.verdict,
+            "order_deficit": deficit, "dt_s": fit.dt_s, "errors": errs, "floors": fit.floors,
+            "note": fit.note, "sentence": sentence}, claimed
+
+
+def free_running_order(ctx: Context, variant: str, i: int, ladder) -> tuple:
+    """The free-running order property of case ``i`` (runs ``ladder``: [drivers.Runs] × rungs)."""
+    sc = ctx.scenario
+    tally, out = _tally(), []
+    dts, errs, floors, statuses = [], {q: [] for q in QUANTITIES}, {q: [] for q in QUANTITIES}, []
+    n_fine = len(ctx.y_ref) - 1
+    for runs in ladder:
+        n = len(runs.y) - 1
+        stride = n_fine // n
+        e = state_errors(runs.y[:, i], ctx.y_ref[::stride])
+        dts.append(float(runs.h_s[i]))
+        statuses.append(runs.status[i])
+        for q in QUANTITIES:
+            v = e[q]
+            errs[q].append(float(np.max(v)) if runs.status[i] == "ok" and np.all(np.isfinite(v)) else math.nan)
+            floors[q].append(M.roundoff_floor(ctx.scales[q], n, reference_error=ctx.ref_err[q],
+                                              amplification=ctx.amp[q], quantity=q)
+                             + _lever_floor(ctx, q, float(runs.h_s[i]), float(runs.h_s[i]) * n, n, ctx.amp[q]))
+    for q in QUANTITIES:
+        exp = expectation(sc, variant, q, "free_running", physics=ctx.physics, measure_physics=False)
+        rec, claimed = _fit_record(ctx, variant, q, dts, errs[q], floors[q], statuses, exp, "free_running_order")
+        tally["free_running_order"][0 if claimed else 1] += 1
+        if rec is not None:
+            out.append(rec)
+    return out, tally
+
+
+def one_step_order(ctx: Context, variant: str, i: int, defects) -> tuple:
+    """The one-step order property of case ``i``; ``defects`` {quantity: (S,)} the largest defect per
+    one-step rung (NaN where the engine failed), or None for an engine without a one-step mode."""
+    tally, out = _tally(), []
+    if defects is None:    # an engine without a one-step mode (an engine file)
+        return out, tally
+    dts = [float(h) for h in ctx.step_h]
+    for q in QUANTITIES:
+        floors = [M.roundoff_floor(ctx.scales[q], 1, reference_error=float(ctx.step_err[q][k]), quantity=q)
+                  + _lever_floor(ctx, q, dts[k], dts[k], 1) for k in range(len(dts))]
+        errs = [float(v) for v in defects[q]]
+        statuses = ["ok" if np.isfinite(v) else "failed" for v in errs]
+        exp = expectation(ctx.scenario, variant, q, "one_step", physics=ctx.physics, measure_physics=False)
+        rec, claimed = _fit_record(ctx, variant, q, dts, errs, floors, statuses, exp, "one_step_order")
+        tally["one_step_order"][0 if claimed else 1] += 1
+        if rec is not None:
+            out.append(rec)
+    return out, tally
+
+
+def _models_physics(sc, variant) -> bool:
+    """The variant models the conserved motion (not the course update where the gyroscopic term matters)."""
+    return traits(variant).gyroscopic_term or not gyroscopic_term_matters(sc)
+
+
+def conservation(ctx: Context, variant: str, i: int, ladder) -> tuple:
+    """Energy and world angular momentum drift of case ``i``'s runs, where the physics conserves them."""
+    sc = ctx.scenario
+    p = sc.problem
+    tally, out = _tally(), []
+    cons = M.conserved(p.forces)
+    kinds = [k for k in ("energy", "angular_momentum") if cons[k][0]]
+    if not kinds:
+        return out, tally
+    if not _models_physics(sc, variant):
+        tally["conservation"][1] += len(kinds)
+        return out, tally
+    h0 = sc.dt_s
+    # round-off is relative to the quantities' scales (at least 1 in SI units, as every floor of a sweep),
+    # not to E or L themselves, which may be 0 (a body at rest) while their terms round at ε × scale
+    I_max = float(np.linalg.eigvalsh(p.body.inertia_B)[-1])
+    momentum_scale = I_max * ctx.scales["angular_velocity"]
+    energy_scale = (p.body.mass_kg * ctx.scales["velocity"] ** 2 + I_max * ctx.scales["angular_velocity"] ** 2
+                    + p.body.mass_kg * float(np.linalg.norm(p.forces.gravity_W)) * ctx.scales["position"]
+                    + sum(s.stiffness_N_per_m * ctx.scales["position"] ** 2 for s in p.forces.springs))
+    for kind in kinds:
+        worst = None
+        for runs in ladder:
+            if runs.status[i] != "ok":
+                continue    # a run that did not finish has its verdict in the order property
+            y = runs.y[:, i]
+            n = len(y) - 1
+            if kind == "energy":
+                E, terms = M.energy_J(p, y, with_scale=True)
+                drift = float(np.max(np.abs(E - E[0])))
+                size = max(float(np.max(terms)), energy_scale)
+                unit = "J"
+            else:
+                L = M.angular_momentum_W(p, y)
+                drift = float(np.max(np.linalg.norm(L - L[0], axis=1)))
+                size = max(float(np.max(np.linalg.norm(L, axis=1))), momentum_scale)
+                unit = "kg m²/s"
+            allowed = (ctx.allowance[kind] * float(runs.h_s[i]) / h0
+                       + n * tol.CHECK_ROUNDINGS_PER_STEP * _EPS * size
+                       + _lever_conservation(ctx, kind, I_max, float(runs.h_s[i]) * n, n))
+            ratio = drift / allowed if allowed > 0 else (math.inf if drift > 0 else 0.0)
+            if worst is None or ratio > worst[0]:
+                worst = (ratio, drift, allowed, float(runs.h_s[i]), unit)
+        if worst is None:
+            continue
+        tally["conservation"][0] += 1
+        ratio, drift, allowed, h, unit = worst
+        if not ratio <= 1.0:
+            what = "energy" if kind == "energy" else "world angular momentum"
+            out.append({"property": "conservation", "variants": [variant], "quantity": kind, "value": drift,
+                        "allowance": allowed, "ratio": ratio, "dt_s": h,
+                        "sentence": (f"{variant}: {what} drifts by {drift:.3g} {unit} at Δt = {h:.3g} s, "
+                                     f"{ratio:.3g}× the {allowed:.3g} {unit} a consistent scheme may accumulate "
+                                     "over the run (its local defects weighted by the sensitivity, + round-off)")})
+    return out, tally
+
+
+def _lever_conservation(ctx, kind, I_max, t, n) -> float:
+    """What the lever-arm round-off (``lever_roundoff``) may move world angular momentum (I_max × the ω it
+    adds) or energy (that ω error against I_max |ω|max, and the spurious torque's work) by over time ``t``."""
+    lv = ctx.lever or {}
+    dw = lv.get("acc_rad_s2", 0.0) * t + lv.get("omega_rad_s", 0.0) * (1.0 + math.sqrt(n))
+    if kind == "angular_momentum":
+        return I_max * dw
+    w_max = float(np.max(np.linalg.norm(ctx.y_ref[:, 10:13], axis=1)))
+    return I_max * dw * (w_max + dw)
+
+
+def equivalent_pairs(variants) -> list:
+    """The EQUIVALENT_PAIRS whose two variants are both among ``variants``: [(a, b, reason)]."""
+    have = set(variants)
+    return [(a, b, why) for a, b, why in EQUIVALENT_PAIRS if a in have and b in have]
+
+
+def agreement(ctx: Context, pair, i: int, ladder_a, ladder_b) -> tuple:
+    """Two variants that implement the same arithmetic agree to round-off on case ``i``, at every rung."""
+    a, b, reason = pair
+    tally, out = _tally(), []
+    if not pair_is_same_arithmetic(ctx.scenario, a, b):   # documented: not the same numbers on this case
+        tally["agreement"][1] += 1
+        return out, tally
+    amp = max(ctx.amp.values())
+    worst = None
+    for ra, rb in zip(ladder_a, ladder_b):
+        n = len(ra.y) - 1
+        h = float(ra.h_s[i])
+        allowed = max(tol.SAME_SCHEME_REL, tol.FUZZ_ROUNDINGS_PER_STEP * n * _EPS * amp)
+        sa, sb = ra.status[i], rb.status[i]
+        if sa == "failed" or sb == "failed":
+            continue    # a failed run is its own finding (the order property)
+        if sa == "diverged" or sb == "diverged":
+            ta, tb = ra.diverged_at_s[i], rb.diverged_at_s[i]
+            same = sa == sb and abs(ta - tb) <= 2.0 * h + 1e-12
+            rel = 0.0 if same else math.inf
+            why = f"{a} {sa}" + (f" at t = {ta:.6g} s" if sa == "diverged" else "") + f", {b} {sb}" + (
+                f" at t = {tb:.6g} s" if sb == "diverged" else "")
+        else:
+            d = state_errors(ra.y[:, i], rb.y[:, i])
+            rel_q = {q: float(np.max(d[q])) / (1.0 if q == "orientation" else ctx.scales[q]) for q in QUANTITIES}
+            q_worst = max(rel_q, key=rel_q.get)
+            rel = rel_q[q_worst]
+            why = f"largest in {q_worst}"
+        if worst is None or rel / allowed > worst[0]:
+            worst = (rel / allowed, rel, allowed, h, why)
+    if worst is None:
+        return out, tally
+    tally["agreement"][0] += 1
+    ratio, rel, allowed, h, why = worst
+    if not ratio <= 1.0:
+        out.append({"property": "agreement", "variants": [a, b], "quantity": None, "value": rel, "allowance": allowed,
+                    "ratio": ratio, "dt_s": h,
+                    "sentence": (f"{a} and {b} should implement the same arithmetic ({reason}) but differ by "
+                                 f"{rel:.3g} relative at Δt = {h:.3g} s ({why}), {ratio:.3g}× the round-off "
+                                 f"allowance {allowed:.3g}")})
+    return out, tally

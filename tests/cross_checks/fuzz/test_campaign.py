@@ -1,0 +1,126 @@
+"""rbcheck fuzz end to end: planted bugs are found, shrunk and reproduced by rbcheck sweep; correct engines
+pass; bad input is one line and exit 2; a campaign is deterministic per seed."""
+import json
+from pathlib import Path
+
+import pytest
+
+from cross_checks.cli import main
+from cross_checks.fuzz import campaign
+from cross_checks.fuzz.generate import to_toml
+from cross_checks.scenario import load_scenario
+
+from tests.helpers.byo import build_cbody
+from tests.mutants import MUTANTS
+
+MUT = {m.name: m for m in MUTANTS}
+
+
+@pytest.fixture
+def cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "cache"))
+    return tmp_path / "cache"
+
+
+def _sweep(path, variants, out, extra=()):
+    return main(["sweep", str(path), "--engines", *variants, "--jobs", "1", "--no-cache", "--out", str(out), *extra])
+
+
+def _found(mutant, tmp_path, monkeypatch, budget_s, shrink_s):
+    monkeypatch.setattr(campaign, "SHRINK_S", shrink_s)
+    mutant.apply(monkeypatch)
+    s = campaign.run_campaign([mutant.variant], tmp_path / "fz", budget_s=budget_s, seed=0, jobs=1,
+                              use_cache=False, log=lambda _: None)
+    assert s["counterexamples"], f"{mutant.name} not found in {s['cases']['judged']} cases"
+    assert s["cases"]["search_s"] <= 120.0
+    return s
+
+
+def _reproduces(s, mutant, tmp_path, monkeypatch):
+    """The first counterexample is a scenario file on which rbcheck sweep exits 1 with the bug, 0 without."""
+    cx = s["counterexamples"][0]
+    assert cx["confirmed_by_sweep"] and cx["sweep_gated"]
+    path = tmp_path / "fz" / cx["file"]
+    text = path.read_text()
+    assert cx["property"] in text and "reproduce (exit 1): rbcheck sweep" in text
+    load_scenario(str(path))   # a valid scenario file as it stands
+    assert _sweep(path, [mutant.variant], tmp_path / "sweep_bug") == 1
+    monkeypatch.undo()
+    monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "cache2"))
+    from cross_checks.fuzz.shrink import confirm   # the same sweep's gates, without drawing its report
+    assert confirm(load_toml_spec(path), [mutant.variant]) == []
+
+
+def load_toml_spec(path):
+    import tomllib
+    return tomllib.loads(Path(path).read_text())
+
+
+def test_a_wrong_rk4_stage_weight_is_found_shrunk_and_reproduced(tmp_path, monkeypatch, cache):
+    monkeypatch.setattr(campaign, "BATCH", 4)   # a small batch: the default run's time budget
+    s = _found(MUT["rk4_wrong_stage_weight"], tmp_path, monkeypatch, budget_s=1.0, shrink_s=4.0)
+    cx = s["counterexamples"][0]
+    assert cx["shrink_steps"], "the case was not made any smaller"
+    assert "expected 4" in cx["sentence"]
+    _reproduces(s, MUT["rk4_wrong_stage_weight"], tmp_path, monkeypatch)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["gyroscopic_sign_flipped", "body_torque_in_world_axes", "rk4_third_stage_from_k1",
+                                  "midpoint_stage_at_full_step", "mujoco_world_omega_as_body", "course_decay_twice",
+                                  "lever_arms_not_rotated"])
+def test_planted_bugs_are_found_within_two_minutes_and_reproduced(name, tmp_path, monkeypatch, cache):
+    s = _found(MUT[name], tmp_path, monkeypatch, budget_s=30.0, shrink_s=40.0)
+    _reproduces(s, MUT[name], tmp_path, monkeypatch)
+
+
+@pytest.fixture
+def clean_registry():
+    """Engine files registered by a test are forgotten after it (the registry is per process)."""
+    from cross_checks import engines
+    engines.reset_registry()
+    yield
+    engines.reset_registry()
+
+
+@pytest.mark.slow
+def test_the_broken_c_engine_is_found_through_its_engine_file(tmp_path, cache, capsys, clean_registry):
+    eng = build_cbody(tmp_path / "eng")
+    out = tmp_path / "fz"
+    rc = main(["fuzz", "--engine-file", str(eng["broken"]), "--engines", "cbody_broken:euler", "--budget", "60",
+               "--jobs", "2", "--out", str(out)])
+    assert rc == 1
+    s = json.loads((out / "fuzz.json").read_text())
+    cx = s["counterexamples"][0]
+    assert cx["confirmed_by_sweep"] and cx["property"] in ("free_running_order", "agreement")
+    path = out / cx["file"]
+    assert _sweep(path, ["cbody_broken:euler"], tmp_path / "s1", ["--engine-file", str(eng["broken"])]) == 1
+    assert _sweep(path, ["cbody:euler"], tmp_path / "s2", ["--engine-file", str(eng["good"])]) == 0
+
+
+@pytest.mark.slow
+def test_the_shipped_engines_raise_no_false_alarm_in_a_short_campaign(tmp_path, cache, clean_registry):
+    rc = main(["fuzz", "--budget", "120", "--seed", "3", "--jobs", "2", "--out", str(tmp_path / "fz")])
+    s = json.loads((tmp_path / "fz" / "fuzz.json").read_text())
+    unexplained = [c for c in s["counterexamples"] if not c["explanation"]]
+    assert not unexplained and not s["not_shrunk"], [c["sentence"] for c in unexplained]
+    assert rc == (1 if s["counterexamples"] else 0)
+
+
+def test_the_same_seed_gives_the_same_verdicts_and_the_cache_returns_them(tmp_path, cache, monkeypatch):
+    monkeypatch.setattr(campaign, "BATCH", 4)
+    item = (5, 1, ["reference:course"], {}, str(cache), True)
+    first, second = campaign.run_batch(item), campaign.run_batch(item)
+    assert not first["cached"] and second["cached"]
+    assert first["cases"] == second["cases"]
+    again = campaign.run_batch((5, 1, ["reference:course"], {}, None, False))   # computed anew
+    assert again["cases"] == first["cases"]
+
+
+def test_a_counterexample_file_is_exact_toml(tmp_path):
+    from cross_checks.fuzz import generate
+    spec = generate.draw(4, 2).spec(0.0123456789, 8)
+    path = tmp_path / "c.toml"
+    path.write_text(to_toml(spec, header="a header\nsecond line"))
+    sc = load_scenario(str(path))
+    assert sc.dt_s == 0.0123456789 and sc.name == spec["name"]
