@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 
+from cross_checks.core import tolerances as tol
 from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES
 from reports.data import LABELS
 from reports.findings import fmt, fmt_dt
@@ -24,9 +25,8 @@ __all__ = ["CELL_CLASSES", "ACCURACY_TIERS", "GLYPHS", "glyph", "cell", "verdict
            "family_of", "families", "order_text"]
 
 CELL_CLASSES = ("bad", "diverged", "noconv", "pre", "acc1", "acc2", "acc3", "missing")
-#: Relative-error tiers of the green cells (display only, not a verdict): 1e-6 is well inside every
-#: scheme's reach at its default Δt on the catalog, 1e-3 is the size a plot starts to show.
-ACCURACY_TIERS = (1e-6, 1e-3)
+#: Relative-error tiers of the green cells (display only, not a verdict; cross_checks/core/tolerances.py).
+ACCURACY_TIERS = tol.REPORT_ACCURACY_TIERS
 #: One mark per quantity verdict, shown in every cell (the legend explains them).
 GLYPHS = {"good": ("✓", "converges with the expected order"), "exact": ("=", "exact to round-off at every Δt"),
           "noconv": ("~", "does not converge, as expected"), "pre": ("?", "pre-asymptotic: no order claimed"),
