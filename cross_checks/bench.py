@@ -5,8 +5,11 @@ a constant body-axes torque (0, 0, 0.2) N m, random initial ω, h = 1e-3 s. Resu
 against the engines measured in the same process, never absolute thresholds.
 
 Keys written by ``--json`` (fixed): reference_batched_body_steps_per_s, mujoco_best_body_steps_per_s,
-pybullet_body_steps_per_s, reference_single_us_per_step, mujoco_single_us_per_step, plus the
-individual measurements.
+pybullet_body_steps_per_s, reference_single_us_per_step, mujoco_single_us_per_step,
+drake_single_us_per_step (None without Drake), plus the individual measurements.
+
+Drake (``drake_*``) is measured on one trajectory only, beside MuJoCo on the same trajectory through
+the same adapter interface (``mujoco_adapter_single_us_per_step``): the per-step cost a sweep pays.
 """
 from __future__ import annotations
 
@@ -121,6 +124,56 @@ def mujoco_single_us(n_steps, repeats):
     return 1e6 * _best_of(run, repeats) / n_steps
 
 
+def _bench_scenario():
+    """The benchmark's body as a scenario (for the engine adapters): one trajectory, ω0 = _initial_w(1)."""
+    from cross_checks.scenario import parse_scenario
+    w = ", ".join(repr(float(c)) for c in _initial_w(1)[0])
+    return parse_scenario(f"""name = "bench"
+duration = 1.0
+dt = {H!r}
+[body]
+mass = 1.0
+inertia = [{', '.join(repr(float(m)) for m in MOMENTS)}]
+[initial]
+angular_velocity = [{w}]
+[forces]
+gravity = [{', '.join(repr(float(g)) for g in G)}]
+[[forces.torque]]
+torque = [{', '.join(repr(float(t)) for t in TORQUE_B)}]
+frame = "body"
+""", "<bench>")
+
+
+def adapter_single_us(engine_module, variant, n_steps, repeats):
+    """µs per step of one trajectory through an engine's rbcheck adapter (``simulate``: the model
+    built, the forces applied as the adapter applies them, every step recorded): what a sweep pays."""
+    sc = _bench_scenario()
+    return 1e6 * _best_of(lambda: engine_module.simulate(sc, variant, H, n_steps), repeats) / n_steps
+
+
+def drake_single_us(n_steps, repeats):
+    """Drake's single trajectory, µs per step, through its adapter (semi-explicit Euler; the body
+    torque turns with the body, so a LeafSystem evaluates it at every derivative) and, as Drake's
+    own floor, with a constant applied force (no Python in the step); ``(None, None)`` without Drake."""
+    try:
+        from cross_checks.engines import drake_engine
+        drake_engine.version()
+    except ImportError:
+        return None, None
+    through_adapter = adapter_single_us(drake_engine, "semi_explicit_euler", n_steps, repeats)
+    model = drake_engine.DrakeModel(_bench_scenario(), "semi_explicit_euler")
+    model.fixed_step(H)
+    model.plant.get_applied_generalized_force_input_port().FixValue(model.context, np.r_[TORQUE_B, 0.0, 0.0, 0.0])
+    y0 = _bench_scenario().problem.initial_packed()
+
+    def run():
+        model.set_state(y0)
+        for k in range(1, n_steps + 1):
+            model.simulator.AdvanceTo(k * H)
+            model.drake_state()
+    return through_adapter, 1e6 * _best_of(run, repeats) / n_steps
+
+
 def pybullet_bodies(n_bodies, n_steps, repeats):
     from cross_checks.engines import pybullet_engine  # noqa: F401  (silences pybullet's banner)
     import pybullet as p
@@ -175,6 +228,11 @@ def run_bench(quick: bool = False) -> dict:
         "reference_single_us_per_step": reference_single_us(2000 if not quick else 500, rep),
         "mujoco_single_us_per_step": mujoco_single_us(20000 if not quick else 5000, rep),
     }
+    from cross_checks.engines import mujoco_engine
+    # 5000 steps in both modes: a run's set-up (model compile, simulator) is part of its cost per step
+    r["mujoco_adapter_single_us_per_step"] = adapter_single_us(mujoco_engine, "euler", 5000, rep)
+    r["drake_single_us_per_step"], r["drake_constant_force_us_per_step"] = drake_single_us(5000, rep)
+    r["versions"]["drake"] = _drake_version()
     r["reference_batched_body_steps_per_s"] = max(r["reference_course_body_steps_per_s"],
                                                   r["reference_expmap_gyro_body_steps_per_s"])
     r["mujoco_best_body_steps_per_s"] = max(r["mujoco_multibody_body_steps_per_s"], r["mujoco_rollout_body_steps_per_s"])
@@ -185,6 +243,14 @@ def run_bench(quick: bool = False) -> dict:
         "reference_single <= 5x mj_step": r["ratio_reference_single_vs_mj_step"] <= 5.0,
     }
     return r
+
+
+def _drake_version():
+    try:
+        from cross_checks.engines.drake_engine import version
+        return version()
+    except ImportError:
+        return None
 
 
 def format_table(r: dict) -> str:
@@ -202,6 +268,12 @@ def format_table(r: dict) -> str:
     out.append(f"single trajectory: reference:expmap_gyro {r['reference_single_us_per_step']:.2f} us/step, "
                f"mj_step {r['mujoco_single_us_per_step']:.2f} us/step "
                f"(ratio {r['ratio_reference_single_vs_mj_step']:.1f}x)")
+    d = r.get("drake_single_us_per_step")
+    out.append(f"single trajectory through the adapters (every step recorded, body torque applied as each adapter "
+               f"does): mujoco:euler {r['mujoco_adapter_single_us_per_step']:.2f} us/step, "
+               + (f"drake:semi_explicit_euler {d:.2f} us/step ({d / r['mujoco_adapter_single_us_per_step']:.1f}x); "
+                  f"Drake with a constant applied force {r['drake_constant_force_us_per_step']:.2f} us/step"
+                  if d is not None else "Drake not installed (pip install 'rbcheck[drake]')"))
     for name, ok in r["targets"].items():
         out.append(f"target {name}: {'met' if ok else 'NOT met'}")
     return "\n".join(out)

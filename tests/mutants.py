@@ -2,7 +2,7 @@
 
 Each :class:`Mutant` patches (with pytest's ``monkeypatch``) one function or method of the code a sweep
 runs for ``variant`` — the plain-float kernel (reference_sim.scalar) for single-body reference runs,
-the MuJoCo and PyBullet adapters for theirs — so the variant keeps its name and therefore exactly the
+the MuJoCo, PyBullet and Drake adapters for theirs — so the variant keeps its name and therefore exactly the
 expectations of the correct scheme. tests/test_gates_mutants.py asserts that the sweep's
 gates (``cli._gate_failures``) catch every one. ``exposed_by`` names the catalog scenarios whose
 physics exercises the bug (used by the quick default-run subset; the slow test sweeps the catalog).
@@ -251,6 +251,48 @@ def _pybullet_torque_in_link_frame(mp):
     mp.setattr(pe._Body, "apply", apply)
 
 
+def _drake_omega_in_body_axes(mp):
+    from cross_checks.engines import drake_engine as de
+    from reference_sim.quaternion import quat_conj, rotate
+
+    def to_drake_state(y):
+        y = np.asarray(y, dtype=float)
+        w_B = rotate(quat_conj(y[..., 6:10]), y[..., 10:13])   # BUG: ω in body axes where Drake wants ω_W
+        return np.concatenate([y[..., 6:10], y[..., 0:3], w_B, y[..., 3:6]], axis=-1)
+    mp.setattr(de, "to_drake_state", to_drake_state)
+
+
+def _drake_quaternion_order(mp):
+    from cross_checks.engines import drake_engine as de
+
+    def to_drake_state(y):
+        y = np.asarray(y, dtype=float)
+        q = y[..., [7, 8, 9, 6]]                                 # BUG: (x, y, z, w) given as (w, x, y, z)
+        return np.concatenate([q, y[..., 0:3], y[..., 10:13], y[..., 3:6]], axis=-1)
+    mp.setattr(de, "to_drake_state", to_drake_state)
+
+
+def _drake_decay_twice(mp):
+    from cross_checks.engines import drake_engine as de
+    orig = de.stage_force_torque
+
+    def stage(scenario, y):
+        f, tau = orig(scenario, y)
+        k_v, _ = scenario.problem.forces.decay_rates_per_s()
+        return f - scenario.problem.body.mass_kg * k_v * np.asarray(y[3:6]), tau   # BUG: damping counted twice
+    mp.setattr(de, "stage_force_torque", stage)
+
+
+def _drake_gravity_twice(mp):
+    from cross_checks.engines import drake_engine as de
+    orig = de.stage_force_torque
+
+    def stage(scenario, y):
+        f, tau = orig(scenario, y)   # BUG: the weight added again, and Drake's gravity field applies it too
+        return f + scenario.problem.body.mass_kg * np.asarray(scenario.problem.forces.gravity_W), tau
+    mp.setattr(de, "stage_force_torque", stage)
+
+
 MUTANTS = [
     Mutant("rk4_wrong_stage_weight", "reference:rk4", "RK4 stage weights (1, 3, 1, 1)/6: order 2",
            ("applied_torque",), _rk4_wrong_stage_weight),
@@ -298,4 +340,12 @@ MUTANTS = [
            ("velocity_decay",), _pybullet_decay_left_out),
     Mutant("pybullet_torque_in_link_frame", "pybullet:maximal", "a world torque applied in the link frame",
            ("applied_torque",), _pybullet_torque_in_link_frame),
+    Mutant("drake_omega_in_body_axes", "drake:semi_explicit_euler", "ω_B given where Drake's state has ω_W",
+           ("constant_spin",), _drake_omega_in_body_axes),
+    Mutant("drake_quaternion_order", "drake:runge_kutta3", "(x, y, z, w) given where Drake's state has (w, x, y, z)",
+           ("constant_spin",), _drake_quaternion_order),
+    Mutant("drake_decay_twice", "drake:runge_kutta2", "the decay force counted twice in the stage forces",
+           ("velocity_decay",), _drake_decay_twice),
+    Mutant("drake_gravity_twice", "drake:implicit_euler", "the weight left in the applied force",
+           ("applied_torque",), _drake_gravity_twice),
 ]

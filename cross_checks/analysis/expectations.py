@@ -88,6 +88,14 @@ VARIANT_TRAITS = {
     "mujoco:implicitfast": _SYMPLECTIC_EULER_IMPLICIT_GYRO,
     "pybullet:multibody": _SYMPLECTIC_EULER_EXPLICIT_GYRO,
     "pybullet:maximal": _SYMPLECTIC_EULER_IMPLICIT_GYRO,
+    # Drake semi-explicit Euler: ω_W += Δt I_W⁻¹(τ − ω_W × I_W ω_W) at the start-of-step attitude — the
+    # body-frame explicit Euler step of Euler's equations seen in world axes — then q from the new ω
+    # (and x from the new v: symplectic in translation)
+    "drake:semi_explicit_euler": _SYMPLECTIC_EULER_EXPLICIT_GYRO,
+    # Drake implicit Euler: one implicit step of the whole state (q, ω_W, x, v_W), like reference:implicit_euler
+    "drake:implicit_euler": Traits(translation_drift=-1, rotation_drift="whole_state", rotation_sign=+1),
+    "drake:runge_kutta2": Traits(),
+    "drake:runge_kutta3": Traits(),
 }
 
 #: A variant this table does not know (e.g. a user engine with only its declared order): assumed to

@@ -95,7 +95,9 @@ def _add_sweep(sub) -> None:
                     "available) at every dt of its ladder, in parallel; write DIR/results.csv, DIR/summary.json, "
                     "DIR/series/, DIR/plots/ and the HTML report. DIR is replaced only when the sweep is complete. "
                     "Exit 1 when a result contradicts the expectations (cross_checks/analysis/expectations.py), a "
-                    "run fails, or two schemes that must be identical disagree.")
+                    "run fails, two schemes that must be identical disagree, or a scenario's two references (its "
+                    "closed form or DOP853, and Drake's, when Drake is installed) disagree beyond their measured "
+                    "accuracies.")
     s.add_argument("scenarios", nargs="*", metavar="SCENARIO", help="catalog names or TOML paths (default: the catalog)")
     s.add_argument("--engines", nargs="+", metavar="ENGINE[:VARIANT]",
                    help="variants to run, e.g. reference:rk4 mujoco (an engine name means all its variants); "
@@ -380,6 +382,11 @@ def _gate_failures(summary) -> list:
     for a in summary.get("agreement", []):
         if not a.get("agrees"):
             out.append(f"{a['a']} and {a['b']} differ on {a['scenario']} (should be the same scheme)")
+    for sc in summary.get("scenarios", []):   # every verdict rests on the reference: two that disagree fail
+        sr = sc.get("second_reference") or {}
+        if sr.get("agrees") is False:
+            out.append(f"the references of {sc['name']} disagree: {sc['reference']} and {sr['label']} differ in "
+                       f"{', '.join(sr.get('disagreeing', []))} beyond their measured accuracies")
     n_failed = summary.get("run", {}).get("failed_runs", 0)
     if n_failed:
         out.append(f"{n_failed} run(s) failed (status 'failed' in results.csv)")

@@ -274,6 +274,35 @@ MJ_RK4_ORDER_TOL = 0.1
 #: The same with forces held over the step (xfrc_applied fixed over the 4 stages): first order;
 #: measured 0.96-1.01.
 MJ_HELD_ORDER_TOL = 0.1
+
+# --- the second reference: Drake's error-controlled integration (docs/engine_conventions.md) ---
+#: Drake runge_kutta5's target accuracy for the second reference: measured on the catalog 6.9e-10 rad
+#: from the closed form on tennis_racket, 3.9e-7 rad on tumbling_box (δ = 2e-5 from the separatrix),
+#: ≤ 1.2e-10 rad elsewhere; 1e-14 costs 1.5–2× the time for one more decade.
+SECOND_REFERENCE_TARGET_ACCURACY = 1e-13
+#: Drake's accuracy is MEASURED as its distance from a second Drake solution at this many times looser
+#: target accuracy (an upper bound of its own error: measured 8–13× smaller per decade of target
+#: accuracy on the catalog's tumbling and spring scenarios, like REFERENCE_CHECK_RTOL_FACTOR for DOP853).
+SECOND_REFERENCE_CHECK_FACTOR = 10.0
+
+# --- the Drake adapter's conventions (tests/cross_checks/engines/test_drake_engine.py) ---
+#: Fitted order of Drake's RK2/RK3 on spring_pendulum's 1 s ladder (4e-3 … 1e-3): measured 1.97–3.01;
+#: with forces held over the step RK3 measures ~1.0. 0.15 separates every pair by far.
+DRAKE_ORDER_TOL = 0.15
+#: Drake's derivatives vs the hand-derived ω̇_W = I_W⁻¹(τ − ω × I_W ω), a = f/m + g: a 3×3 solve, a few ε.
+DRAKE_DERIVATIVE_REL = 1e-13
+#: A principal-axis spin through 50 RK3 steps at ωΔt = 0.02: local error ~(ωΔt)⁴/24 per step, ~1e-7 rad.
+DRAKE_SPIN_RK3 = 1e-6
+#: |q| − 1 of Drake's (unnormalised) quaternion after 200 semi-explicit Euler steps of 0.01 s on the
+#: tennis racket: ~Σ (|ω|Δt)²/8 ≈ 200 · 5e-5 = 1e-2 (measured 1.2e-2); 1e-3 says "it drifts".
+DRAKE_QUATERNION_DRIFT_MIN = 1e-3
+#: One step restarted from a recorded state vs the free run's next row: the step from (k−1)Δt to kΔt is
+#: Δt only up to a rounding of kΔt, so ~ε; the implicit Euler's Newton stops at its tolerance (1e-6).
+DRAKE_REPLAY_REL = 1e-13
+DRAKE_REPLAY_IMPLICIT_REL = 1e-6
+#: drake:runge_kutta3 at Δt = 1e-3 on the tennis racket over 10 s: ~C (ωΔt)³ ωT ≈ 1e-7 rad.
+DRAKE_RK3_TENNIS_RAD = 1e-6
+
 # --- rbcheck fuzz: hard but fair random cases and their verdicts (docs/fuzz.md) ---------------------------
 
 #: Largest h·L at a case's coarsest step (L: the fastest rate of the motion, measured along the run).

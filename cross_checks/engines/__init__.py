@@ -25,7 +25,7 @@ __all__ = ["ENTRY_POINT_GROUP", "VariantInfo", "EngineEntry", "all_variants", "a
 
 ENTRY_POINT_GROUP = "rbcheck.engines"
 #: rbcheck's own engines, in the order of `rbcheck list`; other engines follow by name.
-BUILTIN_ENGINES = ("reference", "mujoco", "pybullet")
+BUILTIN_ENGINES = ("reference", "mujoco", "pybullet", "drake")
 
 
 class EngineUnavailable(RuntimeError):

@@ -184,7 +184,8 @@ def scenario_record(sc, ref) -> dict:
             "reference": ref.label, "scales": ref.scales,
             "conserved": {k: {"conserved": v[0], "why_not": v[1]} for k, v in cons.items()},
             "error_amplification": meas.get("amplification", {}), "reference_error": meas.get("reference_error"),
-            "physics": meas.get("physics"), "varies": ref.varies}
+            "physics": meas.get("physics"), "varies": ref.varies,
+            "second_reference": meas.get("second_reference")}
 
 
 def series_arrays(sc, ref, records_by_key, variants) -> dict:

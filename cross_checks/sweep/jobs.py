@@ -162,8 +162,12 @@ def reference_job(scenario, out_path: str, cache_root: str | None, use_cache: bo
         return ReferenceResult(label, err, ones, {}, {"amplification": ones, "reference_error": None,
                                                        "local_reference_error": {}, "physics": None})
     with np.load(out_path, allow_pickle=False) as d:
-        y = d["y"]
-        return ReferenceResult(label, "", quantity_scales(y), varies(y), measured)
+        y, t_s = d["y"], d["t_s"]
+    from cross_checks.sweep.second_reference import second_reference  # Drake's, beside it (None without Drake)
+    with time_limit(time_limit_s, "the second reference (Drake)"):
+        measured = {**measured, "second_reference": second_reference(scenario, t_s, y, label, measured, cache_root,
+                                                                     use_cache)}
+    return ReferenceResult(label, "", quantity_scales(y), varies(y), measured)
 
 
 def measure_reference(scenario, t_s, y, label) -> dict:

@@ -60,7 +60,7 @@ def provenance(started_at: str, variants=()) -> dict:
         engines.setdefault(v.engine, v.version if v.available else f"unavailable ({v.reason})")
     return {
         "rbcheck": reference_sim.__version__, "numpy": numpy.__version__, "scipy": scipy.__version__,
-        "mujoco": engines.get("mujoco", ""), "pybullet": engines.get("pybullet", ""),
+        "mujoco": engines.get("mujoco", ""), "pybullet": engines.get("pybullet", ""), "drake": engines.get("drake", ""),
         "python": platform.python_version(), "platform": platform.platform(),
         "machine": f"{platform.machine()}, {os.cpu_count()} CPUs, {cpu_model()}",
         "git_commit": git_commit(), "started_at": started_at,

@@ -94,6 +94,10 @@ SCENARIO = {
     "dt_ladder_s": [NUM], "reference": str,
     "conserved": {"energy": _CONSERVED, "angular_momentum": _CONSERVED, "linear_momentum": _CONSERVED},
     "varies?": {q + "?": bool for q in QUANTITIES},
+    # Drake's error-controlled solution beside the primary reference (None without Drake; docs/results.md)
+    "second_reference?": Nullable({"label": str, "target_accuracy": NUM, "agrees": Nullable(bool),
+                                   "distance?": {q: NUM for q in QUANTITIES},
+                                   "stated_accuracy?": {q: NUM for q in QUANTITIES}, "error?": str}),
 }
 CONVERGENCE_RECORD = {
     "scenario": str, "engine": str, "quantity": QUANTITIES, "order": Nullable(NUM), "verdict": str,
@@ -109,7 +113,7 @@ AGREEMENT = {"a": str, "b": str, "scenario": str, "dt_s": NUM, "agrees": bool, "
              "reason": str, "note?": str}
 SUMMARY = {
     "schema_version": int,
-    "provenance": {k + "?": Nullable(str) for k in ("rbcheck", "numpy", "scipy", "mujoco", "pybullet", "python",
+    "provenance": {k + "?": Nullable(str) for k in ("rbcheck", "numpy", "scipy", "mujoco", "pybullet", "drake", "python",
                                                     "platform", "machine", "git_commit", "started_at", "command")},
     "convergence": [CONVERGENCE_RECORD],
     "scenarios?": [SCENARIO],
@@ -132,7 +136,7 @@ COMPACT_CONVERGENCE = {
 #: The lists a compact baseline keeps, each record reduced to its spec's fields.
 COMPACT_LISTS = {
     "scenarios": {"name": str, "content_hash": str, "reference": str, "duration_s": NUM, "dt_s": NUM,
-                  "dt_ladder_s": [NUM]},
+                  "dt_ladder_s": [NUM], "second_reference?": SCENARIO["second_reference?"]},
     "variants": {"name": str, "version?": Nullable(str), "declared_order?": Nullable(NUM)},
     "skipped_variants": {"name": str, "reason": str},
     "convergence": COMPACT_CONVERGENCE,

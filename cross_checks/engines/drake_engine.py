@@ -1,0 +1,299 @@
+"""Drake as an engine adapter (``drake:VARIANT``); the interface is cross_checks.engines.base.
+
+Model: a continuous-time ``MultibodyPlant`` (``time_step = 0``) with one free rigid body and nothing
+else (no geometry, no contact). Its spatial inertia is taken about the body origin, which is the COM
+(``SpatialInertia.MakeFromCentralInertia`` with ``p_BoBcm = 0``); a full inertia tensor is given as
+its principal moments re-expressed in body axes through the principal frame (``R_BP``), so the body
+frame stays the scenario's body frame. Gravity is the plant's own uniform gravity field.
+
+State mapping (docs/engine_conventions.md, pinned by tests/cross_checks/engines/test_drake_engine.py):
+``q = [q_WB (w x y z), x_W]`` (7), ``v = [ω_W, v_W]`` (6): angular velocity FIRST, both in WORLD
+axes; generalized forces ``τ = [torque about the COM, force at the COM]`` in world axes. Drake
+integrates the quaternion as four numbers (``q̇ = ½ [0, ω_W] ⊗ q``) and does not renormalise it, so
+its norm drifts (by O(Δt) per unit time for the Euler schemes); the recorded orientation is ``q/|q|``.
+
+Forces: every force of the scenario schema besides gravity goes through the plant's applied
+generalized-force input port. Constant ones (world forces at the COM, world torques) are a fixed
+value; state-dependent ones (springs, drag, forces at body points or in body axes, body torques) and
+the velocity decay come from a LeafSystem that evaluates ``base.stage_force_torque`` on the state it
+is given, so every stage of a multi-stage scheme sees the forces of its own stage state. The decay
+is in the right-hand side for EVERY Drake variant — ``−m k_v v`` at the COM and ``−k_ω I_W ω``
+(k = −ln γ / dt, docs/semantics.md): Drake's integrators integrate one ODE and none applies a factor
+per step, so no variant gets ``e^{−kΔt}`` per step.
+
+Fixed-step runs: one ``Simulator.AdvanceTo(k Δt)`` per step in fixed-step mode (the maximum step is
+``Δt (1 + FIXED_STEP_SLACK)`` so that a target one rounding away from ``Δt`` is one step, never a
+step and a sliver). An exception Drake raises while stepping (e.g. the implicit Euler's Newton
+iteration failing to converge), a non-finite state or a component beyond BLOWUP_LIMIT is reported as
+``diverged at t = …``.
+"""
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+from reference_sim.simulate import BLOWUP_LIMIT, Run
+
+from cross_checks.engines.base import EngineAdapter, EngineError, Variant, stage_force_torque
+
+try:  # the module imports without pydrake so the registry can report why it is unavailable
+    import pydrake  # noqa: F401
+    from pydrake.multibody.plant import MultibodyPlant
+    from pydrake.multibody.tree import RotationalInertia, SpatialInertia
+    from pydrake.math import RotationMatrix
+    from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
+    from pydrake.systems.framework import DiagramBuilder, LeafSystem
+except ImportError as _exc:
+    pydrake = None
+    _IMPORT_ERROR = _exc
+else:
+    _IMPORT_ERROR = None
+
+__all__ = ["ENGINE", "VARIANTS", "version", "simulate", "one_step", "DrakeModel", "DrakeAdapter",
+           "to_drake_state", "from_drake_state"]
+
+ENGINE = "drake"
+#: variant -> (Drake's integrator name, declared global order, description)
+VARIANTS = {
+    "semi_explicit_euler": ("semi_explicit_euler", 1,
+                            "Drake semi-explicit Euler: v from the start-of-step forces (explicit gyroscopic "
+                            "term), then q from the new v; quaternion integrated linearly, not renormalised"),
+    "runge_kutta2": ("runge_kutta2", 2, "Drake RK2 (explicit trapezoid / Heun), forces at both stages"),
+    "runge_kutta3": ("runge_kutta3", 3, "Drake RK3 (Kutta's third-order scheme), forces at every stage"),
+    "implicit_euler": ("implicit_euler", 1,
+                       "Drake implicit Euler on the whole state (Newton iteration, finite-difference Jacobian)"),
+}
+
+#: Steps between divergence checks of a free run.
+_CHUNK = 256
+#: The fixed step's maximum is Δt (1 + FIXED_STEP_SLACK): AdvanceTo(k Δt) from (k − 1) Δt is then one
+#: step even where k Δt − (k − 1) Δt exceeds Δt by a rounding (measured: 8992 steps for 8000 targets
+#: at Δt = 1e-3 with the maximum exactly Δt).
+FIXED_STEP_SLACK = 1e-9
+#: Accuracy asked of the implicit Euler's Newton iteration (Drake uses the target accuracy to stop it
+#: in fixed-step mode too): far below the scheme's own O(Δt²) local error at every Δt of the catalog.
+NEWTON_ACCURACY = 1e-6
+#: Drake's integrators that iterate (and so take a target accuracy in fixed-step mode).
+_IMPLICIT = ("implicit_euler",)
+
+
+def _require():
+    if pydrake is None:
+        raise ImportError(f"drake is not installed (pip install 'rbcheck[drake]'): {_IMPORT_ERROR}")
+
+
+def version() -> str:
+    _require()
+    from importlib.metadata import PackageNotFoundError, version as dist_version
+    try:
+        return dist_version("drake")
+    except PackageNotFoundError:  # a pydrake built from source
+        return getattr(pydrake, "__version__", "unknown")
+
+
+# --- state conversion --------------------------------------------------------------------------------
+
+def to_drake_state(y):
+    """Packed states (..., 13) ``[x_W, v_W, q_WB, ω_W]`` -> Drake's ``[q_WB, x_W, ω_W, v_W]`` (..., 13)."""
+    y = np.asarray(y, dtype=float)
+    return np.concatenate([y[..., 6:10], y[..., 0:3], y[..., 10:13], y[..., 3:6]], axis=-1)
+
+
+def from_drake_state(x):
+    """Drake's states (..., 13) -> packed (..., 13), the quaternion normalised (Drake's is not unit)."""
+    x = np.asarray(x, dtype=float)
+    q = x[..., 0:4]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    return np.concatenate([x[..., 4:7], x[..., 10:13], q, x[..., 7:10]], axis=-1)
+
+
+@functools.lru_cache(maxsize=1)
+def _force_system_class():
+    """The LeafSystem class (defined on first use: pydrake may be absent when this module is imported)."""
+
+    class StageForces(LeafSystem):
+        """Input: the plant's state (13); output: the generalized force ``[τ_W, f_W − m g]`` (6) of the
+        scenario's forces and decay at that state (gravity is the plant's own)."""
+
+        def __init__(self, scenario):
+            super().__init__()
+            self._scenario = scenario
+            p = scenario.problem
+            self._weight = (p.body.mass_kg * np.asarray(p.forces.gravity_W, dtype=float)).tolist()
+            self._x = self.DeclareVectorInputPort("state", 13)
+            self.DeclareVectorOutputPort("generalized_force", 6, self._calc)
+
+        def _calc(self, context, output):
+            # plain floats: this runs at every derivative evaluation (a Newton iteration's Jacobian too)
+            x = self._x.Eval(context).tolist()
+            y = [x[4], x[5], x[6], x[10], x[11], x[12], x[0], x[1], x[2], x[3], x[7], x[8], x[9]]
+            f, tau = stage_force_torque(self._scenario, y)
+            w = self._weight
+            output.SetFromVector(np.array([tau[0], tau[1], tau[2], f[0] - w[0], f[1] - w[1], f[2] - w[2]]))
+
+    return StageForces
+
+
+def _spatial_inertia(body):
+    """The body's spatial inertia about its origin = COM, in body axes (principal moments rotated by
+    R_BP for a full tensor)."""
+    if body.is_diagonal():
+        I = RotationalInertia(*np.diag(body.inertia_B))
+    else:
+        moments, R_BP = body.principal_axes()
+        I = RotationalInertia(*moments).ReExpress(RotationMatrix(R_BP))
+    return SpatialInertia.MakeFromCentralInertia(float(body.mass_kg), np.zeros(3), I)
+
+
+class DrakeModel:
+    """A scenario's free body in Drake, with a simulator whose integrator is ``integrator`` (a Drake
+    integrator name); ``set_state``/``state`` in the packed layout."""
+
+    def __init__(self, scenario, integrator: str):
+        _require()
+        p = scenario.problem
+        forces = p.forces
+        plant = MultibodyPlant(0.0)
+        try:
+            self.body = plant.AddRigidBody("body", _spatial_inertia(p.body))
+        except RuntimeError as exc:  # Drake's validity checks of the inertia
+            raise EngineError(f"Drake {version()} rejected the inertia of scenario {scenario.name!r}: {exc}") from None
+        plant.mutable_gravity_field().set_gravity_vector(np.asarray(forces.gravity_W, dtype=float))
+        plant.Finalize()
+        self.plant = plant
+        self.per_stage = bool(forces.state_dependent or forces.has_decay)
+        if self.per_stage:
+            builder = DiagramBuilder()
+            builder.AddSystem(plant)
+            fs = builder.AddSystem(_force_system_class()(scenario))
+            builder.Connect(plant.get_state_output_port(), fs.get_input_port(0))
+            builder.Connect(fs.get_output_port(0), plant.get_applied_generalized_force_input_port())
+            system = builder.Build()
+        else:
+            system = plant
+        self.simulator = Simulator(system)
+        root = self.simulator.get_mutable_context()
+        self.context = plant.GetMyMutableContextFromRoot(root)
+        if not self.per_stage and (forces.point_forces or forces.torques):
+            y0 = p.initial_packed()
+            f, tau = stage_force_torque(scenario, y0)     # constant: any state gives the same
+            weight = p.body.mass_kg * np.asarray(forces.gravity_W, dtype=float)
+            plant.get_applied_generalized_force_input_port().FixValue(self.context, np.concatenate([tau, f - weight]))
+        self.integrator_name = integrator
+        self.integrator = ResetIntegratorFromFlags(self.simulator, integrator, 1.0)
+
+    def fixed_step(self, dt_s: float) -> None:
+        """Fixed-step mode at ``dt_s`` (see FIXED_STEP_SLACK)."""
+        self.integrator.set_maximum_step_size(float(dt_s) * (1.0 + FIXED_STEP_SLACK))
+        self.integrator.set_fixed_step_mode(True)
+        if self.integrator_name in _IMPLICIT:  # its Newton tolerance (explicit ones refuse any accuracy)
+            self.integrator.set_target_accuracy(NEWTON_ACCURACY)
+
+    def set_state(self, y, t_s: float = 0.0) -> None:
+        self.simulator.get_mutable_context().SetTime(float(t_s))
+        self.plant.SetPositionsAndVelocities(self.context, to_drake_state(y))
+        self.simulator.Initialize()
+
+    def drake_state(self) -> np.ndarray:
+        return self.plant.GetPositionsAndVelocities(self.context)
+
+    def state(self) -> np.ndarray:
+        return from_drake_state(self.drake_state())
+
+
+def _bad_rows(y):
+    with np.errstate(invalid="ignore"):
+        return ~np.all(np.isfinite(y), axis=-1) | (np.max(np.abs(y), axis=-1) > BLOWUP_LIMIT)
+
+
+def _model(scenario, variant: str, dt_s: float) -> DrakeModel:
+    if variant not in VARIANTS:
+        raise ValueError(f"unknown drake variant {variant!r}; variants: {', '.join(VARIANTS)}")
+    model = DrakeModel(scenario, VARIANTS[variant][0])
+    model.fixed_step(dt_s)
+    return model
+
+
+def _first_bad(x_out, start: int, stop: int):
+    """``(step, reason)`` of the first recorded row in ``[start, stop)`` that is non-finite or beyond
+    BLOWUP_LIMIT, else None."""
+    bad = _bad_rows(from_drake_state(x_out[start:stop]))
+    if not bad.any():
+        return None
+    n = start + int(np.argmax(bad))
+    return n, (f"state beyond {BLOWUP_LIMIT:g}" if np.all(np.isfinite(x_out[n])) else "non-finite state")
+
+
+def _diverged(x_out, dt_s: float, n_bad: int, what: str) -> Run:
+    return Run(dt_s * np.arange(n_bad), from_drake_state(x_out[:n_bad]), n_bad * dt_s,
+               f"diverged at t = {n_bad * dt_s:.6g} s ({what})")
+
+
+def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
+    """Free run of ``n_steps`` fixed steps of ``dt_s`` from the scenario's initial state, every step recorded."""
+    model = _model(scenario, variant, dt_s)
+    y0 = scenario.problem.initial_packed()
+    model.set_state(y0)
+    x_out = np.empty((n_steps + 1, 13))
+    x_out[0] = to_drake_state(y0)
+    advance, get = model.simulator.AdvanceTo, model.drake_state
+    start = 1
+    with np.errstate(all="ignore"):
+        while start <= n_steps:
+            stop = min(start + _CHUNK, n_steps + 1)
+            for n in range(start, stop):
+                try:
+                    advance(n * dt_s)
+                except RuntimeError as exc:   # Drake refuses to go on (NaN detected, Newton failed): divergence
+                    first = _first_bad(x_out, start, n)
+                    if first is not None:     # the state had already blown up: that is the time
+                        return _diverged(x_out, dt_s, *first)
+                    words = str(exc).strip().splitlines()
+                    return _diverged(x_out, dt_s, n, f"Drake: {words[0] if words else type(exc).__name__}")
+                x_out[n] = get()
+            first = _first_bad(x_out, start, stop)
+            if first is not None:
+                return _diverged(x_out, dt_s, *first)
+            start = stop
+    return Run(dt_s * np.arange(n_steps + 1), from_drake_state(x_out))
+
+
+def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
+    """One fixed step of ``dt_s`` from each row of ``y_start`` (T, 13), the simulator re-initialised
+    from exactly that state (Drake's integrators keep no history between steps except the implicit
+    Euler's Jacobian, which re-initialising drops). A row Drake refuses comes back non-finite."""
+    shape = np.shape(y_start)
+    y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
+    model = _model(scenario, variant, dt_s)
+    out = np.full_like(y_start, np.nan)
+    with np.errstate(all="ignore"):
+        for i, y in enumerate(y_start):
+            try:
+                model.set_state(y)
+                model.simulator.AdvanceTo(dt_s)
+            except RuntimeError:
+                continue
+            out[i] = model.state()
+    return out.reshape(shape)
+
+
+class DrakeAdapter(EngineAdapter):
+    """``drake:VARIANT`` — registered under the entry-point group ``rbcheck.engines``.
+
+    Declared orders: semi-explicit Euler and implicit Euler are first order; Drake's RK2 and RK3 are
+    second and third order, with the forces (and the decay) evaluated at every stage.
+    """
+
+    name = ENGINE
+    variants = {v: Variant(float(order), desc) for v, (_, order, desc) in VARIANTS.items()}
+
+    def version(self) -> str:
+        return version()
+
+    def simulate(self, scenario, variant: str, dt_s: float, n_steps: int) -> Run:
+        return simulate(scenario, variant, dt_s, n_steps)
+
+    def one_step(self, scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
+        return one_step(scenario, variant, dt_s, y_start)
