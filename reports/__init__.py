@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import os
 import shutil
+import sys
+import time
 from pathlib import Path
 
 from cross_checks.core.files import umask
@@ -17,10 +19,15 @@ from reports.data import Results, ResultsError, load_results
 __all__ = ["render", "load_results", "Results", "ResultsError"]
 
 
-def _draw(directory: str, scenario: str, plot_dir: str):
-    from reports.plots import scenario_figures
-    res = load_results(directory)
-    return scenario, scenario_figures(res, scenario, Path(plot_dir))
+_SHARED: dict = {}   # the loaded results, inherited by forked drawing processes (not reloaded per figure)
+
+
+def _draw(task):
+    from reports.plots import draw
+    sc, kind, plot_dir = task
+    res = _SHARED.get("res") or load_results(_SHARED["directory"])
+    _SHARED["res"] = res
+    return (sc, *draw(res, sc, kind, Path(plot_dir)))
 
 
 def _quiet_init(parent_pid):
@@ -28,22 +35,41 @@ def _quiet_init(parent_pid):
     worker_init(parent_pid)
 
 
-def render(directory, *, self_contained: bool = False, jobs: int | None = 1) -> list:
-    """(Re)render the report of a results directory; returns the written page paths.
+def _is_tty(stream) -> bool:
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError):
+        return False
+
+
+def _say(line: str) -> None:
+    """A progress line on stderr, flushed (reaches a CI log without a terminal)."""
+    print(f"rbcheck report: {line}", file=sys.stderr, flush=True)
+
+
+#: Seconds between two progress lines while drawing (as the sweep's: a CI log never looks hung).
+LINE_INTERVAL_S = 5.0
+
+
+def render(directory, *, self_contained: bool = False, jobs: int | None = 1, progress: bool | None = None) -> list:
+    """(Re)render the report of a results directory; returns the written page paths (HTML; the row
+    extracts ``rows/<scenario>.csv`` are written beside them).
 
     self_contained : embed the PNGs in the pages (data: URIs) so each page stands alone (CI artifacts);
         the PNG files are kept beside them as well.
-    jobs : processes drawing figures (one scenario each); 1 draws here.
+    jobs : processes drawing figures (one figure each, the loaded results inherited, not re-read);
+        1 draws here.
+    progress : a line on stderr every LINE_INTERVAL_S while drawing, and one when the pages are written
+        (flushed: it reaches a CI log); default: only when stderr is a terminal (library calls stay quiet).
     Raises ResultsError when the directory is not a readable results directory. Every file name comes
     from a sanitised name and is checked to stay inside the directory. Only files the directory's
-    marker lists are ever removed (stale plots and pages); a directory without the marker (written
-    before it existed) gets its pages and plots written, and nothing removed.
+    marker lists are ever removed (stale plots, pages and row extracts); a directory without the marker
+    (written before it existed) gets its pages and plots written, and nothing removed.
     """
-    from reports.html import render_pages
-    from cross_checks.core.files import atomic_write_text
-    from cross_checks.sweep.results_dir import (fix_permissions, inside, is_owned_stale, listed_files, owned_name,
-                                                read_marker, write_marker)
+    from cross_checks.sweep.results_dir import is_owned_stale, listed_files, owned_name, read_marker
 
+    t0 = time.perf_counter()
+    progress = _is_tty(sys.stderr) if progress is None else progress
     d = Path(directory)
     res = load_results(d)
     names = [s["name"] for s in res.scenarios]
@@ -55,42 +81,85 @@ def render(directory, *, self_contained: bool = False, jobs: int | None = 1) -> 
     new_plots = d / owned_name(".", "plots")
     new_plots.mkdir()
     try:
-        figures = _draw_all(d, names, new_plots, jobs)
+        figures = _draw_all(res, names, new_plots, jobs, progress, t0)
         drawn = _move_plots(new_plots, d / "plots")
     finally:
         shutil.rmtree(new_plots, ignore_errors=True)
-    pages = render_pages(res, figures, self_contained=self_contained)
+    written = _write_pages(res, figures, self_contained)
+    _tidy(d, written, drawn, listed, marked)
+    pages = [p for p in written if p.suffix == ".html"]
+    if progress:
+        _say(f"{len(pages)} pages and {len(drawn)} figures written in {time.perf_counter() - t0:.1f} s")
+    return pages
+
+
+def _write_pages(res, figures, self_contained) -> list:
+    from cross_checks.core.files import atomic_write_text
+    from cross_checks.sweep.results_dir import inside
+    from reports.html import render_pages, rows_extracts
+    d = res.directory
     written = []
-    for name, html in pages.items():
-        atomic_write_text(inside(d, name), html)
+    for name, text in {**rows_extracts(res), **render_pages(res, figures, self_contained=self_contained)}.items():
+        target = inside(d, *name.split("/"))
+        target.parent.mkdir(exist_ok=True)
+        atomic_write_text(target, text)
         written.append(d / name)
-    # plots and pages rbcheck wrote before that the data no longer has (listed in the marker only)
-    keep = {p.name for p in written} | {f"plots/{n}" for n in drawn}
+    return written
+
+
+def _tidy(d, written, drawn, listed, marked) -> None:
+    """Remove the plots, pages and extracts rbcheck wrote before that the data no longer has (listed in
+    the marker only); list the new ones in the marker."""
+    from cross_checks.sweep.results_dir import fix_permissions, write_marker
+    keep = {p.relative_to(d).as_posix() for p in written} | {f"plots/{n}" for n in drawn}
     for rel in sorted(listed):
-        stale_page = rel.startswith("scenario-") and rel.endswith(".html") and rel not in keep
-        stale_plot = rel.startswith("plots/") and rel.endswith(".png") and rel not in keep
-        if stale_page or stale_plot:
+        stale_page = rel.startswith("scenario-") and rel.endswith(".html")
+        stale_plot = rel.startswith("plots/") and rel.endswith(".png")
+        stale_rows = rel.startswith("rows/") and rel.endswith(".csv")
+        if (stale_page or stale_plot or stale_rows) and rel not in keep:
             (d / rel).unlink(missing_ok=True)
     if marked:
         write_marker(d, [f for f in listed | keep if (d / f).is_file()])
     fix_permissions(d)
-    return written
 
 
-def _draw_all(d: Path, names, plot_dir: Path, jobs) -> dict:
-    figures = {}
-    if jobs and jobs > 1 and len(names) > 1:
-        import multiprocessing as mp
-        from concurrent.futures import ProcessPoolExecutor
-        ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else None
-        with ProcessPoolExecutor(max_workers=min(jobs, len(names)), mp_context=ctx,
-                                 initializer=_quiet_init, initargs=(os.getpid(),)) as pool:
-            for sc, figs in pool.map(_draw, [str(d)] * len(names), names, [str(plot_dir)] * len(names)):
-                figures[sc] = figs
-    else:
-        for sc in names:
-            figures[sc] = _draw(str(d), sc, str(plot_dir))[1]
-    return figures
+def _draw_all(res, names, plot_dir: Path, jobs, progress, t0) -> dict:
+    """Draw every figure (in ``jobs`` processes); returns ``{scenario: [(kind, file or None, note)]}``
+    in the order of plots.KINDS."""
+    from reports.plots import KINDS, figure_tasks   # imported here: forked workers inherit matplotlib
+    tasks = [(sc, kind, str(plot_dir)) for sc in names for _, kind in figure_tasks(res, sc)]
+    _SHARED.clear()
+    _SHARED.update(res=res, directory=str(res.directory))
+    out = {sc: {} for sc in names}
+    last = time.perf_counter()
+
+    def done(i, item):
+        nonlocal last
+        sc, kind, fname, note = item
+        out[sc][kind] = (kind, fname, note)
+        now = time.perf_counter()
+        if progress and (now - last >= LINE_INTERVAL_S or i == len(tasks)):
+            _say(f"figures {i}/{len(tasks)} ({100 * i / len(tasks):.0f}%) in {now - t0:.0f} s"
+                 + (f", ~{(now - t0) * (len(tasks) - i) / i:.0f} s left" if i < len(tasks) else ""))
+            last = now
+
+    try:
+        if jobs and jobs > 1 and len(tasks) > 1:
+            import multiprocessing as mp
+            from concurrent.futures import ProcessPoolExecutor
+            ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else None
+            if ctx is None:
+                _SHARED.pop("res")   # spawned workers load the directory once each
+            with ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), mp_context=ctx,
+                                     initializer=_quiet_init, initargs=(os.getpid(),)) as pool:
+                for i, item in enumerate(pool.map(_draw, tasks, chunksize=1), start=1):
+                    done(i, item)
+        else:
+            for i, t in enumerate(tasks, start=1):
+                done(i, _draw(t))
+    finally:
+        _SHARED.clear()
+    return {sc: [figs[k] for k in KINDS if k in figs] for sc, figs in out.items()}
 
 
 def _move_plots(src: Path, plots: Path) -> list:

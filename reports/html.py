@@ -13,22 +13,25 @@ from jinja2 import Environment, PackageLoader, StrictUndefined, select_autoescap
 from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, UNITS
 from reports.data import LABELS
 from reports.findings import findings, fmt, fmt_dt
+from reports.glance import ACCURACY_TIERS, GLYPHS, cell, families, glyph, order_text, verdict_box
 
-__all__ = ["environment", "render_pages", "page_name"]
+__all__ = ["environment", "render_pages", "page_name", "rows_extracts"]
 
-_VERDICT_SHORT = {"converges": "conv.", "does_not_converge": "no conv.", "at_roundoff": "exact",
-                  "pre_asymptotic": "pre-asympt.", "diverged": "diverged", "failed": "failed", "insufficient": "n/a"}
+_FAMILIES = ("One column per engine family, each variant in its own colour; a row shares its y axis. A run that "
+             "diverged is drawn up to its divergence (×) and the axes follow the runs that did not.")
 _FIG_CAPTIONS = {
-    "trajectories": "Position and orientation components against time for every variant at the scenario's "
-                    "default Δt; the thick grey line is the reference.",
-    "errors": "Error against the reference over time at the default Δt (log scale).",
-    "conservation": "Relative drift of the quantities the physics conserves, at the default Δt (log scale).",
-    "convergence": "Final error against Δt (log-log) over the scenario's Δt ladder. Filled markers are the "
-                   "points of the least-squares order fit; the grey band is the round-off floor; the "
-                   "triangles show slopes 1, 2 and 4. The legend lists the fitted orders.",
+    "trajectories": "The moving position and orientation components against time at the scenario's default Δt; the "
+                    "thick grey line is the reference. " + _FAMILIES,
+    "errors": "Error against the reference over time at the default Δt (log–log: a power of t is a straight "
+              "line). " + _FAMILIES,
+    "conservation": "Relative drift of the quantities the physics conserves, at the default Δt (log–log). " + _FAMILIES,
+    "convergence": "Final error against Δt (log–log) over the scenario's Δt ladder, one column per engine family. "
+                   "Filled markers are the points of the least-squares order fit; the grey band is the round-off "
+                   "floor; the triangles show slopes 1, 2 and 4. The legends list the fitted orders.",
     "local": "One-step (local) error against Δt: every step restarted from the reference state; an "
              "order-p scheme shows slope p + 1.",
-    "work": "Work-precision: final error against the wall time of each run of the ladder.",
+    "work": "Work-precision: final error against the wall time of each run of the ladder, every variant on one "
+            "axis (colour: engine family).",
 }
 _NO_ONE_STEP = "no one-step mode: an engine file runs whole trajectories only, so local errors are not measured"
 _FIG_TITLES = {"trajectories": "Trajectories", "errors": "Error vs time", "conservation": "Conservation",
@@ -55,37 +58,19 @@ def _img_src(res, fname, self_contained):
     return "data:image/png;base64," + base64.b64encode(data).decode("ascii")
 
 
-def _order_text(rec):
+#: Background of an order cell by its verdict (reports.glance.glyph): the matrix's colours.
+_GLYPH_BG = {"good": "acc1", "exact": "acc1", "noconv": "noconv", "pre": "pre", "diverged": "diverged", "bad": "bad",
+             "missing": "missing"}
+
+
+def _order_cell(rec, local=False):
+    g = glyph(rec)
     if rec is None:
-        return "–"
-    if rec["verdict"] == "at_roundoff":
-        return "exact"
-    if rec["order"] is None:
-        return _VERDICT_SHORT.get(rec["verdict"], rec["verdict"])
-    o = 0.0 if abs(rec["order"]) < 0.005 else rec["order"]
-    if rec["verdict"] == "pre_asymptotic":
-        return f"({o:.2f})"
-    return f"{o:.2f}" if rec["verdict"] == "converges" else f"no ({o:.2f})"
-
-
-def _rec_class(rec):
-    if rec is None:
-        return "missing"
-    if rec["matches_expectation"] is False:
-        return "bad"
-    if rec["expected_verdict"] == "does_not_converge" or rec["verdict"] == "pre_asymptotic":
-        return "explained"
-    return "good"
-
-
-def _cell_class(recs, rows):
-    if not rows:
-        return "missing"
-    if any(r["status"] == "failed" for r in rows) or any(rec["matches_expectation"] is False for rec in recs):
-        return "bad"
-    if any(rec["expected_verdict"] == "does_not_converge" or rec["verdict"] == "pre_asymptotic" for rec in recs):
-        return "explained"
-    return "good"
+        return {"text": "–", "cls": "missing", "title": "", "mark": ""}
+    title = rec["assessment"] + (f" — {rec['note']}" if rec.get("note") else "")
+    if not local and rec.get("reason"):
+        title += f" — expected: {rec['reason']}"
+    return {"text": order_text(rec), "cls": _GLYPH_BG[g], "title": title, "mark": GLYPHS[g][0], "glyph": g}
 
 
 def _provenance(res):
@@ -110,38 +95,36 @@ def _provenance(res):
 
 
 def _matrix(res):
-    """Engine variants (rows) × scenarios (columns), each cell at the scenario's default Δt."""
-    header = [{"name": s["name"], "href": page_name(s["name"]), "dt": fmt_dt(s["dt_s"]),
-               "reference": "DOP853" if s["reference"].startswith("ground_truth") else s["reference"]}
-              for s in res.scenarios]
-    rows = []
-    for v in res.variants:
-        cells = []
-        for s in res.scenarios:
-            sc = s["name"]
-            recs = res.records(sc, v)
-            rws = res.rows_for(sc, v)
-            d = res.default_row(sc, v)
-            by_q = {r["quantity"]: r for r in recs}
-            lines = []
-            if d is None:
-                lines = ["not run"]
-            elif d["status"] != "ok":
-                lines = [d["status"] + (f" at t = {fmt(d['diverged_at_s'], 's', 3)}"
-                                        if d["status"] == "diverged" else "")]
-            else:
-                lines.append(f"x {fmt(d['pos_err_final'], 'm')}")
-                lines.append(f"θ {fmt(d['orient_err_final'], 'rad')}")
-            if by_q:
-                lines.append("p " + " / ".join(_order_text(by_q.get(q)) for q in ("position", "orientation")))
-            if d is not None and not math.isnan(d["energy_drift_max"]):
-                lines.append(f"E {fmt(d['energy_drift_max'])} {d['energy_drift_kind']}")
-            title = f"{v} on {sc}\n" + "\n".join(
-                f"{LABELS[q]}: {by_q[q]['verdict'].replace('_', ' ')} — {by_q[q]['assessment']}"
-                for q in QUANTITIES if q in by_q)
-            cells.append({"cls": _cell_class(recs, rws), "lines": lines, "title": title})
-        rows.append({"name": v, "cells": cells})
-    return {"header": header, "rows": rows}
+    """Engine variants (rows, grouped by family: one tbody each) × scenarios (columns), each cell at the
+    scenario's default Δt (reports.glance.cell)."""
+    header = []
+    for i, s in enumerate(res.scenarios, start=1):
+        sr = s.get("second_reference")
+        second = "" if not isinstance(sr, dict) else ("2nd ref. failed" if sr.get("error") else "2nd ref. agrees"
+                                                      if sr.get("agrees") else "2nd ref. DISAGREES")
+        header.append({"name": s["name"], "href": page_name(s["name"]), "col": i, "second": second,
+                       "second_cls": "" if not second else ("acc1" if second.endswith("agrees") else "bad"),
+                       "title": f"{s['name']}: Δt = {fmt_dt(s['dt_s'])} s over {fmt_dt(s['duration_s'])} s, "
+                                f"reference {s['reference']}" + (f"; {second}" if second else "")})
+    groups = []
+    for fam, vs in families(res.variants).items():
+        rows = [{"name": v, "short": v.split(":", 1)[-1], "cells": [cell(res, s, v) for s in res.scenarios]}
+                for v in vs]
+        groups.append({"family": fam, "rows": rows})
+    return {"header": header, "groups": groups, "ncols": len(header) + 1}
+
+
+def _legend():
+    tiers = ACCURACY_TIERS
+    return {"cells": [("bad", "contradicts the expectation, or failed"),
+                      ("diverged", "diverged at the default Δt"),
+                      ("noconv", "does not converge — expected (reason above)"),
+                      ("pre", "pre-asymptotic: no order claimed on this ladder"),
+                      ("acc1", f"as expected; error ≤ {fmt(tiers[0])} of scale"),
+                      ("acc2", f"as expected; error ≤ {fmt(tiers[1])}"),
+                      ("acc3", f"as expected; error > {fmt(tiers[1])}"),
+                      ("missing", "not run")],
+            "marks": [(mark, g, text) for g, (mark, text) in GLYPHS.items()]}
 
 
 def _finding_views(fs):
@@ -158,6 +141,68 @@ def _finding_sections(fs):
             for sev, title in _SECTIONS if any(f.severity == sev for f in fs)]
 
 
+def _scenario_table(res, sc):
+    """The results at the default Δt: one row per variant (family in its own column, for sorting)."""
+    table = []
+    for v in res.variants:
+        d = res.default_row(sc, v)
+        if d is None:
+            continue
+        recs = {r["quantity"]: r for r in res.records(sc, v)}
+        lrecs = {r["quantity"]: r for r in res.records(sc, v, mode="one_step")}
+        status = d["status"] + (f" at t = {fmt(d['diverged_at_s'], 's', 3)}" if d["status"] == "diverged" else "")
+        table.append({
+            "variant": v, "status": status, "status_cls": {"ok": "", "diverged": "diverged"}.get(d["status"], "bad"),
+            "steps": str(d["steps"]), "wall": fmt(d["wall_s"], "s"),
+            "errors": [{"text": fmt(d[f"{COLUMN_STEM[q]}_err_final"]), "sort": _num(d[f"{COLUMN_STEM[q]}_err_final"])}
+                       for q in QUANTITIES],
+            "energy": fmt(d["energy_drift_max"]),
+            "energy_kind": d["energy_drift_kind"] if not math.isnan(d["energy_drift_max"]) else "",
+            "energy_sort": _num(d["energy_drift_max"]),
+            "angmom": fmt(d["angmom_drift_max"]), "angmom_sort": _num(d["angmom_drift_max"]),
+            "orders": [_order_cell(recs.get(q)) for q in QUANTITIES],
+            "local_orders": [_order_cell(lrecs.get(q), local=True) for q in QUANTITIES] if res.has_one_step(v)
+            else [{"text": "n/a", "cls": "missing", "title": _NO_ONE_STEP, "mark": ""} for _ in QUANTITIES],
+        })
+    return table
+
+
+def _num(v) -> str:
+    """A sort key the page's script reads (empty: no value, sorted last)."""
+    return "" if v is None or not math.isfinite(v) else repr(float(v))
+
+
+def _ladder_rows(res, sc):
+    out = []
+    for r in sorted(res.rows_for(sc), key=lambda r: (res.variants.index(r["engine"]) if r["engine"] in res.variants
+                                                      else 99, -r["dt"])):
+        out.append({"variant": r["engine"], "dt": fmt_dt(r["dt"]), "dt_sort": _num(r["dt"]), "status": r["status"],
+                    "status_cls": {"ok": "", "diverged": "diverged"}.get(r["status"], "bad"),
+                    "flags": ", ".join(x for x, on in (("default Δt", r["default_dt"]), ("ladder", r["in_ladder"]),
+                                                       ("cached", r["cached"])) if on),
+                    "errors": [{"text": fmt(r[f"{COLUMN_STEM[q]}_err_final"]),
+                                "sort": _num(r[f"{COLUMN_STEM[q]}_err_final"])} for q in QUANTITIES],
+                    "local": [{"text": fmt(r[f"{COLUMN_STEM[q]}_local_err"]), "sort": _num(r[f"{COLUMN_STEM[q]}_local_err"])}
+                              for q in QUANTITIES],
+                    "wall": fmt(r["wall_s"], "s"), "wall_sort": _num(r["wall_s"]), "message": r["message"]})
+    return out
+
+
+def _files(res, s):
+    """Links to the scenario's own files (each only when it exists) and what is missing."""
+    from cross_checks.sweep.results_dir import safe_file_stem
+    stem = safe_file_stem(s["name"])
+    out = []
+    for rel, label, what in ((f"scenarios/{stem}.toml", "scenario file (TOML)", "the file that ran"),
+                             (f"rows/{stem}.csv", "results rows (CSV)", "this scenario's rows of results.csv"),
+                             (f"series/{stem}.npz", "series data (NPZ)", "the time series behind the plots")):
+        exists = (res.directory / rel).is_file() or rel.startswith("rows/")   # rows/ is written with the pages
+        out.append({"href": rel if exists else "", "label": label, "what": what if exists else
+                    "not in this results directory" + (" (the file could not be read back unchanged when the sweep "
+                                                       "finished)" if rel.startswith("scenarios/") else "")})
+    return out
+
+
 def _second_reference_text(rec) -> str:
     """One line for summary.json's ``second_reference`` (docs/results.md); "" when there is none."""
     if not rec:
@@ -165,9 +210,28 @@ def _second_reference_text(rec) -> str:
     if rec.get("error"):
         return f"{rec['label']}: failed ({rec['error']})"
     dist = "; ".join(f"{LABELS[q]} {fmt(rec['distance'][q], UNITS[q])} (together they claim "
-                     f"{fmt(rec['stated_accuracy'][q], UNITS[q])})" for q in QUANTITIES)
+                     f"{fmt(rec['stated_accuracy'][q], UNITS[q])})" for q in QUANTITIES
+                     if q in (rec.get("distance") or {}) and q in (rec.get("stated_accuracy") or {}))
     verdict = "agrees with the reference" if rec["agrees"] else "DISAGREES with the reference"
     return f"{rec['label']}: {verdict} within their measured accuracies — largest distance over the run: {dist}"
+
+
+def _second_reference(s):
+    """The scenario page's second-reference section (None when the record is absent)."""
+    sr = s.get("second_reference")
+    if not isinstance(sr, dict):
+        return None
+    dist, stated = sr.get("distance") or {}, sr.get("stated_accuracy") or {}
+    rows = []
+    for q in list(dict.fromkeys([*dist, *stated])):
+        dv, sv = dist.get(q), stated.get(q)
+        within = None if dv is None or sv is None else dv <= sv
+        rows.append({"q": LABELS.get(q, q), "distance": fmt(dv, UNITS.get(q, "")), "stated": fmt(sv, UNITS.get(q, "")),
+                     "cls": "missing" if within is None else ("acc1" if within else "bad"),
+                     "within": "–" if within is None else ("yes" if within else "NO")})
+    return {"label": str(sr.get("label", "?")), "target": fmt(sr.get("target_accuracy")),
+            "agrees": None if sr.get("error") else sr.get("agrees"), "error": str(sr.get("error") or ""),
+            "rows": rows, "line": _second_reference_text(sr)}
 
 
 def _scenario_view(res, s, figs, all_findings, self_contained):
@@ -177,71 +241,72 @@ def _scenario_view(res, s, figs, all_findings, self_contained):
                      ("linear_momentum", "linear momentum")):
         c = s["conserved"][k]
         cons.append(f"{label}: " + ("conserved" if c["conserved"] else c["why_not"]))
-    table = []
-    for v in res.variants:
-        d = res.default_row(sc, v)
-        if d is None:
-            continue
-        recs = {r["quantity"]: r for r in res.records(sc, v)}
-        lrecs = {r["quantity"]: r for r in res.records(sc, v, mode="one_step")}
-        table.append({
-            "variant": v, "status": d["status"], "steps": str(d["steps"]), "wall": fmt(d["wall_s"], "s"),
-            "errors": [fmt(d[f"{COLUMN_STEM[q]}_err_final"]) for q in QUANTITIES],
-            "energy": (f"{fmt(d['energy_drift_max'])} ({d['energy_drift_kind']})"
-                       if not math.isnan(d["energy_drift_max"]) else "–"),
-            "angmom": fmt(d["angmom_drift_max"]),
-            "orders": [{"text": _order_text(recs.get(q)), "cls": _rec_class(recs.get(q)),
-                        "title": (recs[q]["assessment"] + (f" — {recs[q]['note']}" if recs[q]["note"] else "")
-                                  + (f" — expected: {recs[q]['reason']}" if recs[q]["reason"] else ""))
-                        if q in recs else ""} for q in QUANTITIES],
-            "local_orders": [{"text": _order_text(lrecs.get(q)),
-                              "cls": "good" if lrecs.get(q) and lrecs[q]["matches_expectation"] else
-                              ("bad" if lrecs.get(q) and lrecs[q]["matches_expectation"] is False else "missing"),
-                              "title": lrecs[q]["assessment"] if q in lrecs else ""} for q in QUANTITIES]
-            if res.has_one_step(v) else [{"text": "n/a", "cls": "missing", "title": _NO_ONE_STEP} for _ in QUANTITIES],
-        })
-    ladder = []
-    for r in res.rows_for(sc):
-        ladder.append({"variant": r["engine"], "dt": fmt_dt(r["dt"]), "status": r["status"],
-                       "flags": ", ".join(x for x, on in (("default Δt", r["default_dt"]), ("ladder", r["in_ladder"]),
-                                                          ("cached", r["cached"])) if on),
-                       "errors": [fmt(r[f"{COLUMN_STEM[q]}_err_final"]) for q in QUANTITIES],
-                       "local": [fmt(r[f"{COLUMN_STEM[q]}_local_err"]) for q in QUANTITIES],
-                       "wall": fmt(r["wall_s"], "s"), "message": r["message"]})
     no_local = [v for v in res.variants if not res.has_one_step(v)]
     captions = dict(_FIG_CAPTIONS)
     if no_local:
         captions["local"] += f" Not shown ({_NO_ONE_STEP}): {', '.join(no_local)}."
+    mine = [f for f in all_findings if f.scenario == sc]
     return {
         "name": sc, "description": s["description"], "source": s["source"], "hash": s["content_hash"],
         "duration": fmt_dt(s["duration_s"]), "dt": fmt_dt(s["dt_s"]),
         "ladder": ", ".join(fmt_dt(d) for d in s["dt_ladder_s"]), "reference": s["reference"],
-        "second_reference": _second_reference_text(s.get("second_reference")),
-        "conserved": cons,
-        "findings": _finding_views([f for f in all_findings if f.scenario == sc]),
+        "conserved": cons, "files": _files(res, s), "second": _second_reference(s),
+        "findings": _finding_views([f for f in mine if f.severity != "info"]),
+        "any_bad": any(f.severity == "bad" for f in mine),
+        "observations": _finding_views([f for f in mine if f.severity == "info"]),
         "quantities": [f"{LABELS[q]} ({UNITS[q]})" for q in QUANTITIES],
         "quantity_names": [LABELS[q] for q in QUANTITIES],
-        "table": table, "ladder_rows": ladder,
+        "table": _scenario_table(res, sc), "ladder_rows": _ladder_rows(res, sc),
         "figures": [{"src": _img_src(res, fname, self_contained), "title": _FIG_TITLES[kind],
-                     "caption": captions[kind], "alt": f"{sc}: {_FIG_TITLES[kind]}"} for kind, fname in figs],
+                     "caption": captions[kind] + (f" {note}" if note else ""), "alt": f"{sc}: {_FIG_TITLES[kind]}"}
+                    for kind, fname, note in figs if fname],
+        "not_drawn": [f"{_FIG_TITLES[kind]}: {note}" for kind, fname, note in figs if not fname and note],
     }
 
 
+def rows_extracts(res) -> dict:
+    """``{"rows/<scenario>.csv": text}``: each scenario's rows of results.csv, cells as written there."""
+    import csv
+    import io
+
+    from cross_checks.sweep.results_dir import safe_file_stem
+    with (res.directory / "results.csv").open(encoding="utf-8", newline="") as fh:
+        table = list(csv.reader(fh))
+    col = table[0].index("scenario")
+    out = {}
+    for s in res.scenarios:
+        buf = io.StringIO()
+        w = csv.writer(buf, lineterminator="\n")
+        w.writerow(table[0])
+        w.writerows(r for r in table[1:] if r and r[col] == s["name"])
+        out[f"rows/{safe_file_stem(s['name'])}.csv"] = buf.getvalue()
+    return out
+
+
 def render_pages(res, figures: dict, self_contained: bool = False) -> dict:
-    """``{filename: html}`` of every page. ``figures``: ``{scenario: [(kind, png filename)]}``."""
+    """``{filename: html}`` of every page. ``figures``: ``{scenario: [(kind, png filename or None, note)]}``."""
     env = environment()
     all_f = findings(res)
     nav = [{"name": s["name"], "href": page_name(s["name"])} for s in res.scenarios]
     common = {"nav": nav, "provenance": _provenance(res)}
     pages = {}
+    sections = _finding_sections([f for f in all_f if f.severity != "info"])
     pages["index.html"] = env.get_template("index.html").render(
-        title="rbcheck results", matrix=_matrix(res), sections=_finding_sections(all_f),
-        skipped=res.summary.get("skipped_variants", []),
-        counts={"bad": sum(f.severity == "bad" for f in all_f),
-                "explained": sum(f.severity == "explained" for f in all_f)},
-        **common)
+        title="rbcheck results", matrix=_matrix(res), legend=_legend(), box=verdict_box(res), sections=sections,
+        observations=_finding_views([f for f in all_f if f.severity == "info"]),
+        skipped=res.summary.get("skipped_variants", []), second=_second_summary(res), **common)
     for s in res.scenarios:
         view = _scenario_view(res, s, figures.get(s["name"], []), all_f, self_contained)
         pages[page_name(s["name"])] = env.get_template("scenario.html").render(
-            title=f"rbcheck: {s['name']}", s=view, **common)
+            title=f"rbcheck: {s['name']}", s=view, legend=_legend(), **common)
     return pages
+
+
+def _second_summary(res) -> str:
+    srs = [s.get("second_reference") for s in res.scenarios if isinstance(s.get("second_reference"), dict)]
+    if not srs:
+        return ""
+    ok = sum(bool(sr.get("agrees")) for sr in srs)
+    labels = sorted({str(sr.get("label", "?")) for sr in srs})
+    return (f"Second reference ({', '.join(labels)}): agrees with the reference within their stated accuracy on "
+            f"{ok} of {len(srs)} scenario(s).")

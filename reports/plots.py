@@ -1,13 +1,24 @@
 """PNG figures of one scenario, drawn from the saved results only (one idea per figure).
 
+Every figure with time series or Δt ladders is a grid of small multiples: one column per engine family
+(``reference``, ``mujoco``, ``pybullet``, any other engine's name — the part of ``ENGINE:VARIANT`` before
+the colon), one row per quantity, a row sharing its y axis so the families compare at a glance; each
+panel holds only its family's variants, each in its own colour. A run that diverged is drawn up to its
+divergence and marked there (×); the y limits come from the runs that did not diverge, so a blow-up does
+not flatten the others. Panels of a quantity that does not move, or that every variant reproduces
+exactly, are left out and said in a note; a figure with nothing to show is not drawn.
+
 Figures (``plots/<scenario>__<kind>.png``):
 
-``trajectories``   position and orientation components vs time, every variant and the reference
-``errors``         error vs time (log scale), four quantities, every variant, at the default Δt
-``conservation``   |relative drift| of energy / angular momentum / linear momentum vs time
-``convergence``    final error vs Δt (log-log) with the fitted slopes and reference slope triangles
-``local``          one-step (local) error vs Δt (log-log), same layout
-``work``           work-precision: final error vs wall time (log-log)
+``trajectories``   the moving position / orientation components vs time, with the reference
+``errors``         error vs time (log–log), every moving quantity, at the default Δt
+``conservation``   |relative drift| of energy / angular momentum / linear momentum vs time (log–log)
+``convergence``    final error vs Δt (log-log) with the fitted points and slope triangles (ladders only)
+``local``          one-step (local) error vs Δt (log-log), same layout (ladders only)
+``work``           work-precision: final error vs wall time, every variant on one axis (ladders only)
+
+``figure_tasks(res, sc)`` lists the figures a scenario has (so they can be drawn in parallel);
+``draw(res, sc, kind, path)`` draws one and returns whether it carried anything.
 """
 from __future__ import annotations
 
@@ -22,59 +33,66 @@ from matplotlib.lines import Line2D  # noqa: E402
 
 from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, UNITS  # noqa: E402
 from reports.data import LABELS  # noqa: E402
+from reports.glance import families, order_text  # noqa: E402
 
-__all__ = ["KINDS", "scenario_figures", "variant_styles"]
+__all__ = ["KINDS", "scenario_figures", "figure_tasks", "draw", "families", "variant_styles", "NOTES"]
 
 KINDS = ("trajectories", "errors", "conservation", "convergence", "local", "work")
-DPI = 100
+DPI = 100            # rbcheck check --plot (reports.check_plot)
+REPORT_DPI = 90      # the report's figures: up to 13 in wide, 1170 px, fits a 1400 px page without scaling
 #: Errors of exactly zero cannot be drawn on a log axis; they are drawn at this value (and said so).
 LOG_FLOOR = 1e-17
-
-_ENGINE_STYLE = {"reference": "-", "mujoco": "--", "pybullet": ":"}
-_MARKERS = {"reference": "o", "mujoco": "s", "pybullet": "^"}
+_MARKERS = "osD^vP*Xh<>p"
+#: What a figure left out, by (scenario, kind): filled while drawing, read by the page's caption.
+NOTES: dict = {}
 
 
 def variant_styles(variants) -> dict:
-    """A fixed colour / line style / marker per variant (same in every figure of a report)."""
-    cmap = plt.get_cmap("tab20")
-    # tab20 pairs a dark and a light shade; take the dark ones first so neighbours differ most.
-    order = list(range(0, 20, 2)) + list(range(1, 20, 2))
+    """A colour and marker per variant, distinct within its family (families are drawn apart)."""
+    cmap = plt.get_cmap("tab10")
     out = {}
-    for i, v in enumerate(variants):
-        eng = v.split(":", 1)[0]
-        out[v] = {"color": cmap(order[i % 20]), "ls": _ENGINE_STYLE.get(eng, "-."),
-                  "marker": _MARKERS.get(eng, "D")}
+    for fam, vs in families(variants).items():
+        for i, v in enumerate(vs):
+            out[v] = {"color": cmap(i % 10), "ls": "-" if i < 10 else "--", "marker": _MARKERS[i % len(_MARKERS)]}
     return out
 
 
-def _legend_handles(variants, styles, with_reference=False, markers=False):
-    h = [Line2D([], [], color=styles[v]["color"], ls=styles[v]["ls"], marker=styles[v]["marker"] if markers else None,
-                ms=4, lw=1.5, label=v) for v in variants]
-    if with_reference:
-        h.insert(0, Line2D([], [], color="black", lw=3, alpha=0.35, label="reference"))
-    return h
+def _short(v):
+    return v.split(":", 1)[1] if ":" in v else v
 
 
-def _figure(nrows, ncols, title, width=13.0, height=7.5):
-    fig, axes = plt.subplots(nrows, ncols, figsize=(width, height), dpi=DPI, squeeze=False)
-    fig.suptitle(title, fontsize=13, x=0.02, ha="left")
+def _grid(nrows, ncols, title, sharey="row", panel_h=2.1):
+    width = min(13.0, 2.2 + 3.6 * ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(width, 1.1 + panel_h * nrows), dpi=REPORT_DPI, squeeze=False,
+                             sharex=True, sharey=sharey)
+    fig.suptitle(title, fontsize=11, x=0.01, ha="left")
     return fig, axes
 
 
-def _finish(fig, path, handles=None, legend_title=None):
-    h_in = fig.get_size_inches()[1]
-    top = 1.0 - 0.75 / h_in          # room for the title: 0.75 inch whatever the height
-    bottom = 0.6 / h_in              # room for the x label
-    right = 0.97
-    if handles:
-        leg = fig.legend(handles=handles, loc="center right", fontsize=8.5, frameon=False, title=legend_title,
-                         title_fontsize=9)
-        # leave exactly the legend's width (plus a margin) to the right of the axes
-        width = leg.get_window_extent(fig.canvas.get_renderer()).width / fig.bbox.width
-        right = min(0.97, 0.985 - width)
-    fig.subplots_adjust(left=0.07, right=right, top=top, bottom=bottom, hspace=0.45, wspace=0.3)
+def _finish(fig, path):
+    h = fig.get_size_inches()[1]
+    fig.subplots_adjust(left=0.09 if fig.get_size_inches()[0] > 8 else 0.14, right=0.98, top=1.0 - 0.75 / h,
+                        bottom=0.5 / h, hspace=0.35, wspace=0.08)
+    _plain_log_ticks(fig)
     _save_png(fig, path)
     plt.close(fig)
+
+
+def _plain_log_ticks(fig):
+    """Log axes labelled "1e-06" instead of mathtext 10⁻⁶ and without minor ticks: parsing mathtext and
+    building ~300 minor tick objects per figure were most of its drawing time (cProfile: pyparsing,
+    Axis._get_tick); decades alone read as well. Explicit tick labels (Δt ladders) stay."""
+    from matplotlib.ticker import FixedLocator, LogFormatter, LogLocator, MaxNLocator, NullLocator
+    for ax in fig.axes:
+        for axis, scale in ((ax.xaxis, ax.get_xscale()), (ax.yaxis, ax.get_yscale())):
+            if isinstance(axis.get_major_locator(), FixedLocator):
+                continue
+            if scale == "log":
+                axis.set_major_locator(LogLocator(base=10.0, numticks=6))
+                axis.set_major_formatter(LogFormatter(labelOnlyBase=True))
+                axis.set_minor_locator(NullLocator())
+            else:   # fewer tick objects: each costs as much as a line of data to draw
+                axis.set_major_locator(MaxNLocator(nbins=4))
 
 
 def _save_png(fig, path):
@@ -84,11 +102,26 @@ def _save_png(fig, path):
 
     from PIL import Image
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=DPI, metadata={"Software": None})
+    fig.savefig(buf, format="png", dpi=fig.dpi, metadata={"Software": None})
     buf.seek(0)
     with Image.open(buf) as im:
         q = im.convert("RGB").quantize(colors=256, method=Image.Quantize.FASTOCTREE, dither=Image.Dither.NONE)
-        q.save(path, format="PNG", compress_level=9)
+        q.save(path, format="PNG", compress_level=6)
+
+
+def _panel_title(ax, text):
+    """A panel's title as plain text above it: Axes.set_title re-measures the tick labels of every
+    titled axes to place it (a quarter of a grid figure's drawing time, cProfile)."""
+    ax.text(0.0, 1.03, text, transform=ax.transAxes, fontsize=10, ha="left", va="bottom")
+
+
+def _loglog(ax):
+    """Log scales set once per axes (loglog() on every line re-scales the axes each time: a third of
+    a ladder figure's drawing time)."""
+    if ax.get_xscale() != "log":
+        ax.set_xscale("log")
+    if ax.get_yscale() != "log":
+        ax.set_yscale("log")
 
 
 def _positive(a):
@@ -96,194 +129,274 @@ def _positive(a):
     return np.where(a > 0, a, LOG_FLOOR)
 
 
-# --- figures -------------------------------------------------------------------------------------------
+def _diverged(res, sc, v):
+    """The time a run at the default Δt diverged (s), or None."""
+    d = res.default_row(sc, v)
+    if d is None or d["status"] != "diverged":
+        return None
+    t = d.get("diverged_at_s", math.nan)
+    return t if isinstance(t, float) and math.isfinite(t) else math.inf
+
+
+def _family_legends(axes_top, fams, styles, extra=None, markers=False):
+    """One legend per family column, in its top panel: the family's variants (and their text)."""
+    for ax, (fam, vs) in zip(axes_top, fams.items()):
+        hs = [Line2D([], [], color=styles[v]["color"], ls=styles[v]["ls"],
+                     marker=styles[v]["marker"] if markers else None, ms=4, lw=1.4,
+                     label=_short(v) + (f"  {extra[v]}" if extra and extra.get(v) else "")) for v in vs]
+        ax.legend(handles=hs, fontsize=7, loc="best", frameon=True, framealpha=0.85, title=fam, title_fontsize=8,
+                  handlelength=1.8)
+
+
+def _robust_limits(curves, log):
+    """y limits from the finite values of the runs that did not diverge (None when there are none)."""
+    vals = [np.asarray(c, dtype=float) for c in curves]
+    vals = [c[np.isfinite(c)] for c in vals]
+    vals = [c[c > 0] if log else c for c in vals]
+    vals = [c for c in vals if c.size]
+    if not vals:
+        return None
+    lo, hi = min(float(c.min()) for c in vals), max(float(c.max()) for c in vals)
+    if log:
+        return lo / 3.0, hi * 10.0
+    pad = 0.08 * (hi - lo) if hi > lo else 0.05 * max(1.0, abs(hi))
+    return lo - pad, hi + pad
+
+
+def _time_panels(fig, axes, res, sc, fams, styles, rows, log):
+    """Draw ``rows`` = [(label, fn(series) -> y or None)] × family columns; diverged runs truncated and
+    marked; returns the variants drawn."""
+    ser = res.series(sc)
+    drawn = set()
+    for i, (label, get) in enumerate(rows):
+        keep = []
+        for j, (fam, vs) in enumerate(fams.items()):
+            ax = axes[i, j]
+            if log:
+                _loglog(ax)
+            ref = ser.get("reference")
+            if not log and ref is not None and get(ref) is not None:
+                ax.plot(ref["t_s"], get(ref), color="black", lw=3.2, alpha=0.28)
+                keep.append(get(ref))
+            for v in vs:
+                if v not in ser or get(ser[v]) is None:
+                    continue
+                t, y = ser[v]["t_s"], np.asarray(get(ser[v]), dtype=float)
+                tdiv = _diverged(res, sc, v)
+                ok = np.isfinite(y) & np.isfinite(t) & ((t > 0) if log else True)   # log t: no t = 0
+                if tdiv is not None:
+                    ok &= t <= tdiv
+                y_draw = _positive(y) if log else y
+                st = styles[v]
+                ax.plot(t[ok], y_draw[ok], color=st["color"], ls=st["ls"], lw=1.1)
+                drawn.add(v)
+                if tdiv is not None and ok.any():
+                    k = np.flatnonzero(ok)[-1]
+                    ax.plot([t[k]], [y_draw[k]], marker="x", ms=9, mew=2, color=st["color"], clip_on=True)
+                else:
+                    keep.append(y[ok])
+            ax.grid(alpha=0.3, which="both")
+            if i == 0:
+                _panel_title(ax, fam)
+        lim = _robust_limits(keep, log)
+        if lim is not None:
+            axes[i, 0].set_ylim(*lim)
+        axes[i, 0].set_ylabel(label, fontsize=8)
+    for ax in axes[-1]:
+        ax.set_xlabel("time t (s)", fontsize=8)
+    return drawn
+
+
+def _moving_components(ser):
+    """[(label, field, index)] of the components that move along the reference (or, without one,
+    along any series); the rest is named in the returned note."""
+    comps = [(f"{c} (m)", "x_W", i) for i, c in enumerate("xyz")] + [(f"q{c}", "q_WB", i) for i, c in enumerate("wxyz")]
+    src = [ser["reference"]] if "reference" in ser else list(ser.values())
+    moving, still = [], []
+    for label, fld, i in comps:
+        vals = np.concatenate([np.asarray(s[fld][:, i], dtype=float) for s in src if fld in s]) if src else np.zeros(1)
+        vals = vals[np.isfinite(vals)]
+        span = float(vals.max() - vals.min()) if vals.size else 0.0
+        if span > 1e-9 * max(1.0, float(np.abs(vals).max()) if vals.size else 1.0):
+            moving.append((label, fld, i))
+        else:
+            still.append(f"{label.split()[0]} = {float(vals[0]) if vals.size else 0.0:.3g}")
+    return moving, still
+
 
 def fig_trajectories(res, sc, styles, path):
     info = res.scenario(sc)
     ser = res.series(sc)
-    variants = [v for v in res.variants if v in ser]
-    fig, axes = _figure(4, 2, f"{sc}: trajectories at Δt = {info['dt_s']:g} s (reference: {info['reference']})",
-                        height=9.0)
-    comps = [("x_W", i, f"{c} (m)") for i, c in enumerate("xyz")]
-    qcomps = [("q_WB", i, f"q{c}") for i, c in enumerate("wxyz")]
-    slots = [axes[0, 0], axes[1, 0], axes[2, 0], axes[0, 1], axes[1, 1], axes[2, 1], axes[3, 1]]
-    for ax, (fld, i, label) in zip(slots, comps + qcomps):
-        ref = ser.get("reference")
-        if ref is not None:
-            ax.plot(ref["t_s"], ref[fld][:, i], color="black", lw=3.5, alpha=0.3)
-        for v in variants:
-            s = ser[v]
-            ax.plot(s["t_s"], s[fld][:, i], color=styles[v]["color"], ls=styles[v]["ls"], lw=1.2)
-        ax.set_ylabel(label)
-        ax.grid(alpha=0.3)
-        lo, hi = ax.get_ylim()
-        if hi - lo < 1e-9 * max(1.0, abs(lo), abs(hi)):   # constant up to round-off: no 1e-18 axis
-            mid = 0.5 * (lo + hi)
-            ax.set_ylim(mid - 0.05 * max(1.0, abs(mid)), mid + 0.05 * max(1.0, abs(mid)))
-            ax.ticklabel_format(axis="y", useOffset=False)
-    axes[0, 0].set_title("COM position, world axes")
-    axes[0, 1].set_title("orientation q_WB (w, x, y, z; sign matched to the reference)")
-    axes[3, 0].axis("off")
-    for ax in (axes[2, 0], axes[3, 1]):
-        ax.set_xlabel("time t (s)")
-    _finish(fig, path, _legend_handles(variants, styles, with_reference=True))
+    fams = {f: [v for v in vs if v in ser] for f, vs in families(res.variants).items()}
+    fams = {f: vs for f, vs in fams.items() if vs}
+    moving, still = _moving_components(ser)
+    if not fams or not moving:
+        NOTES[(sc, "trajectories")] = "nothing moves" if not moving else "no series"
+        return False
+    rows = [(label, (lambda s, fld=fld, i=i: s[fld][:, i] if fld in s else None)) for label, fld, i in moving]
+    fig, axes = _grid(len(rows), len(fams), f"{sc}: trajectories at Δt = {info['dt_s']:g} s (thick grey: "
+                                            f"reference, {info['reference']})", panel_h=1.5)
+    _time_panels(fig, axes, res, sc, fams, styles, rows, log=False)
+    _family_legends(axes[0], fams, styles)
+    NOTES[(sc, "trajectories")] = ("Not drawn, constant along the reference: " + ", ".join(still) + ".") if still else ""
+    _finish(fig, path)
+    return True
 
 
 def fig_errors(res, sc, styles, path):
     info = res.scenario(sc)
     ser = res.series(sc)
-    variants = [v for v in res.variants if v in ser]
-    fig, axes = _figure(2, 2, f"{sc}: error against the reference vs time at Δt = {info['dt_s']:g} s "
-                              f"(reference: {info['reference']}; zero drawn at {LOG_FLOOR:g})")
-    for ax, q in zip(axes.flat, QUANTITIES):
-        for v in variants:
-            e = ser[v].get(f"err_{q}")
-            if e is not None:
-                ax.semilogy(ser[v]["t_s"], _positive(e), color=styles[v]["color"], ls=styles[v]["ls"], lw=1.2)
-        ax.set_title(f"{LABELS[q]} error")
-        ax.set_ylabel(f"{LABELS[q]} error ({UNITS[q]})")
-        ax.set_xlabel("time t (s)")
-        ax.grid(alpha=0.3, which="both")
-    _finish(fig, path, _legend_handles(variants, styles))
+    fams = {f: [v for v in vs if v in ser] for f, vs in families(res.variants).items()}
+    fams = {f: vs for f, vs in fams.items() if vs}
+    moving = [q for q in QUANTITIES if info.get("varies", {}).get(q, True)]
+    shown = [q for q in moving if any(np.any(np.asarray(ser[v].get(f"err_{q}", [0.0])) > 0)
+                                      for vs in fams.values() for v in vs)]
+    if not fams or not shown:
+        NOTES[(sc, "errors")] = "every error is zero"
+        return False
+    rows = [(f"{LABELS[q]} error ({UNITS[q]})", (lambda s, q=q: s.get(f"err_{q}"))) for q in shown]
+    fig, axes = _grid(len(rows), len(fams), f"{sc}: error against the reference vs time at Δt = {info['dt_s']:g} s "
+                                            f"(log scales; zero drawn at {LOG_FLOOR:g}; × marks a divergence)")
+    _time_panels(fig, axes, res, sc, fams, styles, rows, log=True)
+    _family_legends(axes[0], fams, styles)
+    left = [LABELS[q] for q in QUANTITIES if q not in shown]
+    NOTES[(sc, "errors")] = ("Not drawn: " + ", ".join(left) + " (does not move, or zero error for every variant)."
+                             if left else "")
+    _finish(fig, path)
+    return True
 
 
-_DRIFT_LABEL = {"energy": ("energy", "|E(t) − E(0)| / |E(0)|"),
-                "angular_momentum": ("world angular momentum about the COM", "|L(t) − L(0)| / |L(0)|"),
-                "linear_momentum": ("linear momentum", "|p(t) − p(0)| / |p(0)|")}
+_DRIFT_LABEL = {"energy": "energy drift |ΔE|/|E₀|", "angular_momentum": "ang. momentum drift |ΔL|/|L₀|",
+                "linear_momentum": "lin. momentum drift |Δp|/|p₀|"}
 
 
 def fig_conservation(res, sc, styles, path):
-    """Returns False (and draws nothing) when the physics of the scenario conserves nothing."""
+    """Drift of the quantities the physics conserves; False when none is conserved or none drifts."""
     info = res.scenario(sc)
     ser = res.series(sc)
-    variants = [v for v in res.variants if v in ser]
+    fams = {f: [v for v in vs if v in ser] for f, vs in families(res.variants).items()}
+    fams = {f: vs for f, vs in fams.items() if vs}
     kinds = [k for k in ("energy", "angular_momentum", "linear_momentum") if info["conserved"][k]["conserved"]]
-    if not kinds or not variants:
+    moving = [k for k in kinds if any(np.any(np.abs(np.asarray(ser[v].get(f"drift_{k}", [0.0]))) > 0)
+                                      for vs in fams.values() for v in vs)]
+    exact = [k.replace("_", " ") for k in kinds if k not in moving]
+    NOTES[(sc, "conservation")] = ("Not drawn: " + ", ".join(exact) + " (conserved exactly by every variant).") if exact else ""
+    if not fams or not moving:
+        if not kinds:
+            NOTES[(sc, "conservation")] = "the physics of this scenario conserves nothing"
         return False
-    fig, axes = _figure(1, len(kinds), f"{sc}: drift of conserved quantities at Δt = {info['dt_s']:g} s "
-                                       f"(zero drawn at {LOG_FLOOR:g})", width=13.0, height=5.0)
-    for ax, k in zip(axes[0], kinds):
-        for v in variants:
-            d = ser[v].get(f"drift_{k}")
-            if d is not None:
-                ax.semilogy(ser[v]["t_s"], _positive(np.abs(d)), color=styles[v]["color"], ls=styles[v]["ls"], lw=1.2)
-        title, ylab = _DRIFT_LABEL[k]
-        ax.set_title(title)
-        ax.set_ylabel(f"{ylab} (relative)")
-        ax.set_xlabel("time t (s)")
-        ax.grid(alpha=0.3, which="both")
-    _finish(fig, path, _legend_handles(variants, styles))
+    rows = [(_DRIFT_LABEL[k], (lambda s, k=k: None if f"drift_{k}" not in s else np.abs(s[f"drift_{k}"])))
+            for k in moving]
+    fig, axes = _grid(len(rows), len(fams), f"{sc}: relative drift of conserved quantities at Δt = {info['dt_s']:g} s "
+                                            f"(log scales; zero drawn at {LOG_FLOOR:g}; × marks a divergence)")
+    _time_panels(fig, axes, res, sc, fams, styles, rows, log=True)
+    _family_legends(axes[0], fams, styles)
+    _finish(fig, path)
     return True
 
 
 def _slope_triangles(ax, dts, orders=(1, 2, 4)):
-    """Reference slope triangles in the lower right of a log-log axis."""
+    """Reference slope triangles at the lower right of a log-log axis, a third of the Δt range wide."""
     lo, hi = ax.get_ylim()
-    x1 = max(dts)
-    x0 = x1 / 2.0
+    span_x = math.log10(max(dts) / min(dts)) or 1.0
+    x1 = max(dts) / 10 ** (0.04 * span_x)
+    x0 = x1 / 10 ** (0.3 * span_x)
     span = math.log10(hi) - math.log10(lo)
     for k, p in enumerate(orders):
-        y0 = 10 ** (math.log10(lo) + span * (0.06 + 0.16 * k))
+        y0 = 10 ** (math.log10(lo) + span * (0.04 + 0.09 * k))
         y1 = y0 * (x1 / x0) ** p
-        ax.plot([x0, x1, x1, x0], [y0, y0, y1, y0], color="0.35", lw=0.9)
-        ax.text(x1 * 1.05, math.sqrt(y0 * y1), f"{p}", fontsize=8, color="0.25", va="center")
+        ax.plot([x0, x1, x1, x0], [y0, y0, y1, y0], color="0.45", lw=0.8)
+        ax.text(x0 / 10 ** (0.01 * span_x), y0, f"{p}", fontsize=7, color="0.3", va="bottom", ha="right")
 
 
-def _log_x_ticks(ax):
-    """Major decade labels only: the minor '2×10⁻³ 3×10⁻³ …' labels of a short log axis overlap."""
-    from matplotlib.ticker import NullFormatter
-    ax.xaxis.set_minor_formatter(NullFormatter())
-
-
-def _ladder_panel(ax, res, sc, q, styles, mode):
-    stem = COLUMN_STEM[q]
-    col = f"{stem}_err_final" if mode == "free_running" else f"{stem}_local_err"
+def _ladder_cell(ax, res, sc, q, vs, styles, mode):
+    """One family's variants on one quantity; returns the Δt drawn and the finite errors drawn."""
+    col = f"{COLUMN_STEM[q]}_err_final" if mode == "free_running" else f"{COLUMN_STEM[q]}_local_err"
     recs = {r["engine"]: r for r in res.records(sc, quantity=q, mode=mode)}
-    all_dt = []
-    drawn = False
-    for v in res.variants:
+    dts, vals = [], []
+    _loglog(ax)
+    for v in vs:
         rows = sorted([r for r in res.rows_for(sc, v) if r["in_ladder"]], key=lambda r: -r["dt"])
-        if not rows:
-            continue
         dt = np.array([r["dt"] for r in rows])
         e = np.array([r[col] for r in rows], dtype=float)
-        ok = np.isfinite(e)
+        ok = np.isfinite(e) & np.array([r["status"] == "ok" for r in rows], dtype=bool) if rows else np.zeros(0, bool)
         if not ok.any():
             continue
-        all_dt += dt.tolist()
         st = styles[v]
-        ax.loglog(dt[ok], _positive(e[ok]), color=st["color"], ls=st["ls"], lw=1.0, marker=st["marker"], ms=4,
+        ax.plot(dt[ok], _positive(e[ok]), color=st["color"], ls=st["ls"], lw=1.0, marker=st["marker"], ms=4,
                   mfc="white")
         rec = recs.get(v)
         if rec is not None and rec["order"] is not None:
             fitted = np.array(rec["fitted"], dtype=bool)
-            fdt = np.array(rec["dt_s"])[fitted]
-            fe = np.array(rec["errors"], dtype=float)[fitted]
-            ax.loglog(fdt, fe, ls="none", marker=st["marker"], ms=4, color=st["color"])
-        drawn = True
+            ax.plot(np.array(rec["dt_s"])[fitted], _positive(np.array(rec["errors"], dtype=float)[fitted]),
+                      ls="none", marker=st["marker"], ms=4, color=st["color"])
+        dts += dt[ok].tolist()
+        vals.append(_positive(e[ok]))
     if recs:
-        floors = next(iter(recs.values()))["floors"]
-        fdt = next(iter(recs.values()))["dt_s"]
-        ax.loglog(fdt, floors, color="0.5", lw=4, alpha=0.25, solid_capstyle="butt")
-    if drawn:
-        _slope_triangles(ax, all_dt)
-    ax.set_title(f"{LABELS[q]}")
-    if all_dt:
-        from matplotlib.ticker import FixedLocator, NullLocator
-        ticks = sorted(set(all_dt))
-        ax.xaxis.set_major_locator(FixedLocator(ticks))
-        ax.xaxis.set_minor_locator(NullLocator())
-        ax.set_xticklabels([f"{d:g}" for d in ticks], fontsize=8)
-    ax.set_xlabel("time step Δt (s)")
-    what = "final" if mode == "free_running" else "one-step (local)"
-    ax.set_ylabel(f"{what} {LABELS[q]} error ({UNITS[q]})")
-    ax.grid(alpha=0.3, which="both")
-
-
-def _order_table(res, sc, mode):
-    """Legend lines "variant  p_x / p_θ / p_v / p_ω" (— where no order was fitted)."""
-    lines = []
-    for v in res.variants:
-        recs = {r["quantity"]: r for r in res.records(sc, v, mode=mode)}
-        if not recs:
-            continue
-        def one(q):
-            r = recs.get(q)
-            if r is None:
-                return "—"
-            if r["verdict"] == "at_roundoff":
-                return "exact"
-            if r["order"] is None:
-                return {"diverged": "diverged", "failed": "failed"}.get(r["verdict"], "n/a")
-            o = 0.0 if abs(r["order"]) < 0.005 else r["order"]
-            if r["verdict"] == "pre_asymptotic":
-                return f"({o:.2f})"
-            return f"{o:.2f}" if r["verdict"] == "converges" else "no"
-        lines.append((v, " / ".join(one(q) for q in QUANTITIES)))
-    return lines
+        r0 = next(iter(recs.values()))
+        ax.plot(r0["dt_s"], _positive(r0["floors"]), color="0.5", lw=4, alpha=0.22, solid_capstyle="butt")
+    return dts, vals
 
 
 def fig_ladder(res, sc, styles, path, mode):
-    what = "final error vs Δt" if mode == "free_running" else "one-step (local) error vs Δt"
-    fig, axes = _figure(2, 2, f"{sc}: {what}; filled markers: points used for the fitted order; grey band: "
-                              "round-off floor; triangles: slopes 1, 2, 4", height=8.5)
-    for ax, q in zip(axes.flat, QUANTITIES):
-        _ladder_panel(ax, res, sc, q, styles, mode)
-    table = dict(_order_table(res, sc, mode))
-    variants = [v for v in res.variants if v in table]
-    handles = [Line2D([], [], color=styles[v]["color"], ls=styles[v]["ls"], marker=styles[v]["marker"], ms=4,
-                      mfc="white", label=f"{v}\n   {table[v]}") for v in variants]
-    _finish(fig, path, handles, legend_title="fitted order (position /\norientation / velocity /\nangular velocity); no: does\nnot converge; exact: round-off;\n(…): pre-asymptotic, not judged")
+    """Final (or one-step) error against Δt, families in columns; False without a ladder."""
+    info = res.scenario(sc)
+    ladder = sorted({r["dt"] for r in res.rows_for(sc) if r["in_ladder"]})
+    kind = "convergence" if mode == "free_running" else "local"
+    vs_all = [v for v in res.variants if res.records(sc, v, mode=mode)]
+    if len(ladder) < 2 or not vs_all:
+        NOTES[(sc, kind)] = "no Δt ladder (one Δt only), so no order to show" if len(ladder) < 2 else ""
+        return False
+    fams = families(vs_all)
+    qs = [q for q in QUANTITIES if info.get("varies", {}).get(q, True)]
+    what = "final error" if mode == "free_running" else "one-step (local) error"
+    fig, axes = _grid(len(qs), len(fams), f"{sc}: {what} vs Δt (filled: points of the fitted order; grey band: "
+                                          "round-off floor; triangles: slopes 1, 2, 4)")
+    for i, q in enumerate(qs):
+        all_dt, vals = [], []
+        for j, vs in enumerate(fams.values()):
+            d, v = _ladder_cell(axes[i, j], res, sc, q, vs, styles, mode)
+            all_dt += d
+            vals += v
+            axes[i, j].grid(alpha=0.3, which="both")
+        lim = _robust_limits(vals, log=True)
+        if lim is not None:
+            axes[i, 0].set_ylim(lim[0] / 10, lim[1])
+            for ax in axes[i]:
+                _slope_triangles(ax, ladder)
+        axes[i, 0].set_ylabel(f"{LABELS[q]} ({UNITS[q]})", fontsize=8)
+    from matplotlib.ticker import FixedLocator, NullLocator
+    for ax in axes[-1]:
+        ax.xaxis.set_major_locator(FixedLocator(ladder))
+        ax.xaxis.set_minor_locator(NullLocator())
+        ax.set_xticklabels([f"{d:g}" for d in ladder], fontsize=7)
+        ax.set_xlabel("time step Δt (s)", fontsize=8)
+    orders = {v: "p " + " / ".join(order_text(next((r for r in res.records(sc, v, q, mode=mode)), None)) for q in qs)
+              for v in vs_all}
+    _family_legends(axes[0], fams, styles, orders, markers=True)
+    for ax, fam in zip(axes[0], fams):
+        _panel_title(ax, fam)
+    left = [LABELS[q] for q in QUANTITIES if q not in qs]
+    NOTES[(sc, kind)] = (("Not drawn: " + ", ".join(left) + " (does not move). ") if left else "") + \
+        "Orders in the legends: " + " / ".join(LABELS[q] for q in qs) + "."
+    _finish(fig, path)
     return True
 
 
 def fig_work(res, sc, styles, path):
-    qs = ("position", "orientation")
-    fig, axes = _figure(1, 2, f"{sc}: work-precision — final error vs wall time of the run "
-                              f"(every Δt of the ladder; zero drawn at {LOG_FLOOR:g})", height=5.5)
-    variants = []
+    """Work-precision across every engine on one axis (the comparison an engine choice needs)."""
+    ladder = {r["dt"] for r in res.rows_for(sc) if r["in_ladder"]}
+    if len(ladder) < 2:
+        NOTES[(sc, "work")] = "no Δt ladder (one Δt only)"
+        return False
+    qs = [q for q in ("position", "orientation") if res.scenario(sc).get("varies", {}).get(q, True)]
+    fig, axes = plt.subplots(1, len(qs), figsize=(13.0 if len(qs) > 1 else 8.0, 4.6), dpi=REPORT_DPI, squeeze=False)
+    fig.suptitle(f"{sc}: work-precision — final error vs wall time of each run of the ladder", fontsize=11,
+                 x=0.01, ha="left")
+    handles = {}
     for ax, q in zip(axes[0], qs):
         col = f"{COLUMN_STEM[q]}_err_final"
+        _loglog(ax)
         for v in res.variants:
             rows = sorted([r for r in res.rows_for(sc, v) if r["in_ladder"] and r["status"] == "ok"],
                           key=lambda r: -r["dt"])
@@ -292,43 +405,49 @@ def fig_work(res, sc, styles, path):
             ok = np.isfinite(w) & np.isfinite(e) & (w > 0)
             if not ok.any():
                 continue
-            if v not in variants:
-                variants.append(v)
-            st = styles[v]
-            ax.loglog(w[ok], _positive(e[ok]), color=st["color"], ls=st["ls"], marker=st["marker"], ms=4, lw=1.0)
-        ax.set_title(f"{LABELS[q]}")
-        _log_x_ticks(ax)
-        ax.set_xlabel("wall time of the run (s)")
-        ax.set_ylabel(f"final {LABELS[q]} error ({UNITS[q]})")
+            fam = v.split(":", 1)[0]
+            color = plt.get_cmap("tab10")(list(families(res.variants)).index(fam) % 10)
+            mk = styles[v]["marker"]
+            ax.plot(w[ok], _positive(e[ok]), color=color, marker=mk, ms=4, lw=0.9, alpha=0.85)
+            handles[v] = Line2D([], [], color=color, marker=mk, ms=4, lw=0.9, label=v)
+        _panel_title(ax, LABELS[q])
+        ax.set_xlabel("wall time of the run (s)", fontsize=8)
+        ax.set_ylabel(f"final {LABELS[q]} error ({UNITS[q]})", fontsize=8)
         ax.grid(alpha=0.3, which="both")
-    _finish(fig, path, _legend_handles(variants, styles, markers=True))
+    if handles:
+        fig.legend(handles=list(handles.values()), loc="center right", fontsize=7, frameon=False,
+                   title="colour: engine family", title_fontsize=8)
+    fig.subplots_adjust(left=0.07, right=0.8, top=0.88, bottom=0.13, wspace=0.25)
+    _plain_log_ticks(fig)
+    _save_png(fig, path)
+    plt.close(fig)
+    NOTES[(sc, "work")] = ""
     return True
 
 
+_DRAW = {"trajectories": fig_trajectories, "errors": fig_errors, "conservation": fig_conservation,
+         "convergence": lambda r, s, st, p: fig_ladder(r, s, st, p, "free_running"),
+         "local": lambda r, s, st, p: fig_ladder(r, s, st, p, "one_step"), "work": fig_work}
+
+
+def figure_name(sc, kind) -> str:
+    from cross_checks.sweep.results_dir import safe_file_stem
+    return f"{safe_file_stem(sc)}__{kind}.png"
+
+
+def figure_tasks(res, sc) -> list:
+    """The figures scenario ``sc`` may have (each decides when drawn whether it carries anything)."""
+    return [(sc, k) for k in KINDS]
+
+
+def draw(res, sc, kind, plot_dir) -> tuple:
+    """Draw one figure into ``plot_dir``; returns ``(kind, filename or None, note)``."""
+    from cross_checks.sweep.results_dir import inside
+    name = figure_name(sc, kind)
+    ok = _DRAW[kind](res, sc, variant_styles(res.variants), inside(plot_dir, name))
+    return kind, (name if ok else None), NOTES.pop((sc, kind), "")
+
+
 def scenario_figures(res, sc, plot_dir) -> list:
-    """Draw every figure of scenario ``sc`` into ``plot_dir``; returns ``[(kind, filename)]`` drawn."""
-    from cross_checks.sweep.results_dir import inside, safe_file_stem
-    styles = variant_styles(res.variants)
-    out = []
-    for kind in KINDS:
-        name = f"{safe_file_stem(sc)}__{kind}.png"
-        path = inside(plot_dir, name)
-        if kind == "trajectories":
-            ok = bool(res.series(sc).get("reference")) or any(v in res.series(sc) for v in res.variants)
-            if ok:
-                fig_trajectories(res, sc, styles, path)
-        elif kind == "errors":
-            ok = any(v in res.series(sc) for v in res.variants)
-            if ok:
-                fig_errors(res, sc, styles, path)
-        elif kind == "conservation":
-            ok = fig_conservation(res, sc, styles, path)
-        elif kind == "convergence":
-            ok = fig_ladder(res, sc, styles, path, "free_running")
-        elif kind == "local":
-            ok = fig_ladder(res, sc, styles, path, "one_step")
-        else:
-            ok = fig_work(res, sc, styles, path)
-        if ok:
-            out.append((kind, name))
-    return out
+    """Draw every figure of scenario ``sc``; returns ``[(kind, filename or None, note)]``."""
+    return [draw(res, sc, kind, plot_dir) for _, kind in figure_tasks(res, sc)]

@@ -574,7 +574,7 @@ def cmd_report(args) -> int:
         raise BadInput(f"{args.dir}: no such directory")
     try:
         check_writable_dir(Path(args.dir), "DIR", args.dir)
-        written = reports.render(args.dir, self_contained=args.self_contained, jobs=jobs)
+        written = reports.render(args.dir, self_contained=args.self_contained, jobs=jobs, progress=True)
     except (ResultsError, ResultsDirError) as exc:
         raise BadInput(str(exc)) from None
     print(f"rbcheck report: wrote {len(written)} page(s) -> {Path(args.dir) / 'index.html'}")

@@ -357,3 +357,9 @@ FUZZ_LEVER_ROUNDINGS = 4.0
 FUZZ_TWO_TERM_TOL = 0.25
 #: ... and each of its errors at least this many times its round-off floor (else round-off shapes u).
 FUZZ_RESOLVED = 100.0
+
+# --- report display tiers (docs/results.md "The report") ---
+#: The summary matrix's three greens (display only, never a verdict): the largest final error relative to
+#: the scenario's scale at its default Δt below 1e-6 (a tight scheme's reach on the catalog), below 1e-3
+#: (the size a plot starts to show), or above.
+REPORT_ACCURACY_TIERS = (1e-6, 1e-3)

@@ -8,6 +8,7 @@ import csv
 import io
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 
@@ -21,7 +22,7 @@ from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, UNITS, decimat
 from cross_checks.sweep.jobs import MAX_SERIES_POINTS, RESULT_COLUMNS, SCHEMA_VERSION, load_reference
 
 __all__ = ["result_rows", "results_csv_text", "convergence_records", "agreement_records", "scenario_record",
-           "series_arrays", "build_summary", "write_json"]
+           "series_arrays", "build_summary", "write_json", "write_scenario_files", "SCENARIO_FILES"]
 
 
 # --- results.csv ------------------------------------------------------------------------------------
@@ -203,6 +204,35 @@ def series_arrays(sc, ref, records_by_key, variants) -> dict:
         for key, a in ((rec or {}).get("series") or {}).items():
             arrays[f"{v}::{key}"] = np.asarray(a, dtype=np.float32)
     return arrays
+
+
+#: Where the results directory keeps each scenario's TOML (docs/results.md): ``scenarios/<name>.toml``.
+SCENARIO_FILES = "scenarios"
+
+
+def _source_text(sc):
+    """The text of the file ``sc`` was parsed from, or None when it is gone or no longer parses to the
+    same scenario (edited since: the copy must be the file that ran)."""
+    from cross_checks.scenario import ScenarioError, catalog_path, parse_scenario
+    src = sc.source
+    try:
+        text = (catalog_path(src[len("catalog:"):]) if src.startswith("catalog:") else Path(src)).read_text(
+            encoding="utf-8")
+        same = parse_scenario(text, source=src).content_hash == sc.content_hash
+    except (OSError, UnicodeDecodeError, ValueError, ScenarioError):
+        return None
+    return text if same else None
+
+
+def write_scenario_files(directory, scenarios) -> None:
+    """Copy each scenario's TOML into ``directory/scenarios/<name>.toml`` (the report links it); a
+    scenario whose file cannot be read back unchanged gets no copy (its page says so)."""
+    out = Path(directory) / SCENARIO_FILES
+    out.mkdir(exist_ok=True)
+    for sc in scenarios:
+        text = _source_text(sc)
+        if text is not None:
+            atomic_write_text(out / f"{sc.name}.toml", text)
 
 
 # --- summary.json -----------------------------------------------------------------------------------

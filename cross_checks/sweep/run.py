@@ -144,6 +144,7 @@ def _write_results(staging, scenarios, variants, refs, records, *, started, skip
     from cross_checks.engines import all_variants, has_one_step
     rows = assemble.result_rows(records, [s.name for s in scenarios], variants)
     atomic_write_text(staging / "results.csv", assemble.results_csv_text(rows))
+    assemble.write_scenario_files(staging, scenarios)
     by_key = {(j.scenario, j.variant, j.dt_s): rec for j, rec in records.items()}
     convergence, local, scenario_records = [], [], []
     (staging / "series").mkdir()

@@ -5,6 +5,7 @@ each of them, and the correct ones pass."""
 import contextlib
 import io
 import json
+import re
 import shutil
 import subprocess
 import sys
@@ -138,7 +139,8 @@ def test_report_shows_user_engines_like_built_in_ones(swept):
         assert f'<li class="bad">{v} on byo_tumble: orientation does not converge' in index
     for v in GOOD:
         assert f'<li class="bad">{v}' not in index
-        assert f"<tr><th>{v}</th>" in index
+        assert f'<tr><th title="{v}" data-sort="{v}">' in index      # a matrix row, under its family
+        assert re.search(rf'<tr class="group"><th colspan="\d+">{v.split(":")[0]}</th></tr>', index)  # its family
     assert "cbody:euler and cbody_broken:euler have no one-step mode" in index
     assert "<dt>engine cbody</dt>" in index and "SHA-256" in index
     assert 'title="no one-step mode' in page
