@@ -3,12 +3,14 @@ directories removed, workers stopped, exit 143 instead of 130), and worker proce
 process that started them, even when it is killed with SIGKILL (Linux PR_SET_PDEATHSIG)."""
 from __future__ import annotations
 
+import _thread
 import contextlib
 import ctypes
 import os
 import signal
 import sys
 import threading
+import time
 
 __all__ = ["Terminated", "handle_sigterm", "worker_init", "EXIT_TERMINATED", "TimeLimitExceeded", "time_limit"]
 
@@ -25,12 +27,35 @@ def _on_sigterm(signum, frame):
     raise Terminated()
 
 
+def _redeliver_swallowed_sigterm(unraisable, _previous=None) -> None:
+    """``sys.unraisablehook``: a SIGTERM whose Terminated was raised inside a ``__del__`` or a weakref
+    callback (where Python prints "Exception ignored" and carries on) is sent again, so that it lands in
+    the main flow instead of being lost; anything else goes to the previous hook. It is sent from a bare
+    thread 10 ms later: ``os.kill`` here, or anything that waits here (``Thread.start``), would run the
+    handler at once, inside the hook."""
+    if isinstance(unraisable.exc_value, Terminated):
+        _thread.start_new_thread(_send_sigterm_later, (0.01,))
+        return
+    (_previous or sys.__unraisablehook__)(unraisable)
+
+
+def _send_sigterm_later(delay_s: float) -> None:
+    time.sleep(delay_s)
+    os.kill(os.getpid(), signal.SIGTERM)
+
+
 def handle_sigterm() -> None:
-    """Make SIGTERM raise Terminated in the main thread (no-op elsewhere)."""
+    """Make SIGTERM raise Terminated in the main thread (no-op elsewhere), also when it arrives while
+    Python runs a finaliser or weakref callback (see :func:`_redeliver_swallowed_sigterm`)."""
     try:
         signal.signal(signal.SIGTERM, _on_sigterm)
     except ValueError:  # not the main thread
-        pass
+        return
+    previous = sys.unraisablehook
+    if getattr(previous, "__name__", "") != "_hook":
+        def _hook(unraisable):
+            _redeliver_swallowed_sigterm(unraisable, previous)
+        sys.unraisablehook = _hook
 
 
 def _die_with_parent(parent_pid: int) -> None:

@@ -6,6 +6,7 @@ import random
 import signal
 import subprocess
 import sys
+import textwrap
 import time
 from pathlib import Path
 
@@ -131,3 +132,26 @@ def test_time_limit_interrupts_the_work_and_names_it():
     with time_limit(5.0, "quick"):  # the timer is cancelled when the body ends in time
         pass
     time.sleep(0.01)
+
+
+def test_a_sigterm_raised_inside_a_weakref_callback_still_ends_the_process():
+    """Python swallows an exception raised in a weakref callback or __del__ ("Exception ignored"): a
+    SIGTERM landing there must still end the work (exit 143 path), not be lost. Planted
+    deterministically: the callback calls the handler itself, as the signal would."""
+    code = textwrap.dedent("""
+        import sys, time, weakref
+        from cross_checks.sweep import lifecycle
+        lifecycle.handle_sigterm()
+        class Body: pass
+        b = Body()
+        r = weakref.ref(b, lambda _: lifecycle._on_sigterm(15, None))
+        try:
+            del b
+            time.sleep(20)  # the re-sent signal interrupts the sleep
+            print("lost")
+        except lifecycle.Terminated:
+            print("terminated")
+    """)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert proc.stdout.strip() == "terminated"
+    assert "Exception ignored" not in proc.stderr
