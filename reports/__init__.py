@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 
 from cross_checks.core.files import umask
+from cross_checks.core.progress import stage
 from reports.data import Results, ResultsError, load_results
 
 __all__ = ["render", "load_results", "Results", "ResultsError"]
@@ -43,8 +44,9 @@ def _is_tty(stream) -> bool:
 
 
 def _say(line: str) -> None:
-    """A progress line on stderr, flushed (reaches a CI log without a terminal)."""
-    print(f"rbcheck report: {line}", file=sys.stderr, flush=True)
+    """A progress line, flushed (reaches a CI log without a terminal), on stdout like the sweep's
+    (cross_checks.core.progress): stderr stays the channel of errors, one line each."""
+    stage("rbcheck report", line)
 
 
 #: Seconds between two progress lines while drawing (as the sweep's: a CI log never looks hung).

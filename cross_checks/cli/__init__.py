@@ -537,7 +537,8 @@ def _run_sweep(args, scenarios, variants, skipped) -> dict:
     jobs = args.jobs or usable_cores()
     try:
         return run_sweep(scenarios, variants, args.out, jobs=jobs, use_cache=not args.no_cache, progress=True,
-                         finish=lambda d: reports.render(d, self_contained=args.self_contained, jobs=jobs),
+                         finish=lambda d: reports.render(d, self_contained=args.self_contained, jobs=jobs,
+                                                        progress=True),
                          skipped=skipped, **_time_limits(args.time_limit),
                          executor=client.get_executor() if client is not None else None)
     finally:

@@ -238,7 +238,7 @@ def test_report_rendering_prints_progress_lines_while_drawing(results, tmp_path,
     shutil.copytree(results, d)
     monkeypatch.setattr(reports, "LINE_INTERVAL_S", 0.0)          # a line after every figure
     reports.render(d, jobs=2, progress=True)
-    err = capfd.readouterr().err.splitlines()
+    err = capfd.readouterr().out.splitlines()   # stdout: stderr is for errors only
     assert [line.split(" (")[0] for line in err[:-1]] == [f"rbcheck report: figures {i}/18" for i in range(1, 19)]
     assert "left" in err[0] and err[-2].startswith("rbcheck report: figures 18/18 (100%) in ")
     assert err[-1].startswith("rbcheck report: 4 pages and ") and "figures written in" in err[-1]
