@@ -77,7 +77,7 @@ def _provenance(res):
     p = res.summary.get("provenance", {})
     run = res.summary.get("run", {})
     keys = [("rbcheck", "rbcheck"), ("numpy", "numpy"), ("scipy", "scipy"), ("mujoco", "MuJoCo"),
-            ("pybullet", "PyBullet"), ("python", "Python"), ("platform", "platform"), ("machine", "machine"),
+            ("pybullet", "PyBullet"), ("drake", "Drake"), ("python", "Python"), ("platform", "platform"), ("machine", "machine"),
             ("git_commit", "commit"), ("started_at", "started (UTC)"), ("command", "command")]
     out = [(label, str(p.get(k, "")) or "–") for k, label in keys]
     for name, e in (p.get("engines") or {}).items():  # engines from outside rbcheck: where from, which file

@@ -1,6 +1,7 @@
 """The HTML report: parses, every image resolves, user text is escaped, re-rendering is reproducible."""
 import base64
 import json
+import re
 from html.parser import HTMLParser
 from pathlib import Path
 
@@ -121,6 +122,15 @@ def test_findings_are_sentences_from_the_data(results):
     assert "gyroscopic term" in text
     summary = json.loads((results / "summary.json").read_text())
     assert summary["provenance"]["started_at"] in text
+
+
+def test_the_provenance_shows_every_engine_version_the_results_record(results):
+    """Each engine version summary.json records (Drake's included when installed) is on the page."""
+    text = " ".join("".join(parse(pages(results)["index.html"]).text).split())
+    prov = json.loads((results / "summary.json").read_text())["provenance"]
+    for key, label in (("mujoco", "MuJoCo"), ("pybullet", "PyBullet"), ("drake", "Drake")):
+        if prov.get(key):
+            assert re.search(re.escape(label) + r"\s*" + re.escape(prov[key]), text), key
 
 
 def test_rerendering_from_saved_data_gives_the_same_html(results, tmp_path, capfd):
