@@ -18,7 +18,8 @@ def test_a_clean_campaign_exits_0_with_its_summary_and_page(tmp_path, cache, cap
     out = tmp_path / "fz"
     assert main(["fuzz", "--engines", "reference:midpoint", "--budget", "0.5", "--jobs", "1", "--out", str(out)]) == 0
     s = json.loads((out / "fuzz.json").read_text())
-    assert s["format"] == campaign.FORMAT and s["cases"]["judged"] == campaign.BATCH
+    # batches until the budget: one on a loaded machine, more on an idle one (0.5 s)
+    assert s["format"] == campaign.FORMAT and s["cases"]["judged"] >= 1
     assert s["per_variant"]["reference:midpoint"]["properties"]["one_step_order"][0] > 0
     html = (out / "index.html").read_text()
     assert "rbcheck fuzz" in html and "reference:midpoint" in html and "no property violated" in html
