@@ -85,18 +85,37 @@ def _group(records, key):
     return out
 
 
-def findings(res) -> list:
-    """All findings of a results directory, most important first."""
-    bad, explained, info = [], [], []
-    recs = res.summary.get("convergence", [])
-    scen_order = {s["name"]: i for i, s in enumerate(res.scenarios)}
-    var_order = {v: i for i, v in enumerate(res.variants)}
-    varies = {s["name"]: s.get("varies", {}) for s in res.scenarios}
+class _Orders:
+    """What every rule needs to sort and filter: the convergence records, the order of scenarios and
+    variants in the results, and which quantities move in each scenario."""
 
+    def __init__(self, res):
+        self.recs = res.summary.get("convergence", [])
+        self.scen_order = {s["name"]: i for i, s in enumerate(res.scenarios)}
+        self.var_order = {v: i for i, v in enumerate(res.variants)}
+        self.varies = {s["name"]: s.get("varies", {}) for s in res.scenarios}
+
+
+def findings(res) -> list:
+    """All findings of a results directory, most important first: what contradicts the expectations or
+    failed, then what is explained (expected non-convergence, pre-asymptotic ladders), then information.
+    Each numbered rule is one function below."""
+    c = _Orders(res)
+    failed, diverged = _failed_and_diverged(res, c)
+    bad = _contradictions(res, c) + failed
+    explained = _expected_non_convergence(res, c) + _pre_asymptotic(res, c)
+    info = diverged + _exact_and_faster(res, c) + _conservation(res, c)
+    disagree, agree = _same_schemes(res, c)
+    return bad + disagree + explained + info + agree + _not_measured(res, c)
+
+
+def _contradictions(res, c) -> list:
+    """1. Results that contradict the expectations, per scenario and variant."""
+    bad = []
     # 1. results that contradict the expectations
-    for (sc, eng), rs in sorted(_group([r for r in recs if r["matches_expectation"] is False],
+    for (sc, eng), rs in sorted(_group([r for r in c.recs if r["matches_expectation"] is False],
                                        lambda r: (r["scenario"], r["engine"])).items(),
-                                key=lambda kv: (scen_order.get(kv[0][0], 99), var_order.get(kv[0][1], 99))):
+                                key=lambda kv: (c.scen_order.get(kv[0][0], 99), c.var_order.get(kv[0][1], 99))):
         parts = [f"{LABELS[r['quantity']]} {r['assessment']}" for r in rs]
         why = {r["reason"] for r in rs if r["expected_verdict"] == "does_not_converge"}
         notes = {r["note"] for r in rs if r.get("note")}
@@ -107,6 +126,13 @@ def findings(res) -> list:
             text += " (" + "; ".join(sorted(notes)) + ")"
         bad.append(Finding("bad", text, sc, eng))
 
+    return bad
+
+
+def _failed_and_diverged(res, c) -> tuple:
+    """2. Failed runs (bad) and diverged runs (information: left out of the order fits)."""
+    bad = []
+    info = []
     # 2. failed and diverged runs
     for (sc, eng), rows in _group([r for r in res.rows if r["status"] == "failed"],
                                   lambda r: (r["scenario"], r["engine"])).items():
@@ -119,14 +145,20 @@ def findings(res) -> list:
         info.append(Finding("info", f"{eng} diverged on {sc} at {where}; those runs are left out of the order fits.",
                             sc, eng))
 
+    return bad, info
+
+
+def _expected_non_convergence(res, c) -> list:
+    """3. Expected non-convergence, with the reason (one line when most variants share it)."""
+    explained = []
     # 3. expected non-convergence, with the reason
-    exp_rs = [r for r in recs if r["expected_verdict"] == "does_not_converge" and r["matches_expectation"]]
+    exp_rs = [r for r in c.recs if r["expected_verdict"] == "does_not_converge" and r["matches_expectation"]]
     per_engine = {}
     for (sc, reason), rs in sorted(_group(exp_rs, lambda r: (r["scenario"], r["reason"])).items(),
-                                   key=lambda kv: scen_order.get(kv[0][0], 99)):
-        engines = sorted({r["engine"] for r in rs}, key=lambda e: var_order.get(e, 99))
+                                   key=lambda kv: c.scen_order.get(kv[0][0], 99)):
+        engines = sorted({r["engine"] for r in rs}, key=lambda e: c.var_order.get(e, 99))
         if len(engines) > 2:
-            n_run = len({r["engine"] for r in recs if r["scenario"] == sc})
+            n_run = len({r["engine"] for r in c.recs if r["scenario"] == sc})
             qs = sorted({r["quantity"] for r in rs}, key=QUANTITIES.index)
             sample = [r for r in rs if r["engine"] == engines[0]]
             shown = [r for r in sample if r["quantity"] in ("position", "orientation")] or sample[:1]
@@ -145,10 +177,16 @@ def findings(res) -> list:
         explained.append(Finding("explained", f"{eng} does not converge on {sc}: {_error_ranges(er)}; "
                                               + "; ".join(reasons) + ".", sc, eng))
 
+    return explained
+
+
+def _pre_asymptotic(res, c) -> list:
+    """3b. No claim on this ladder (pre-asymptotic), with the reason (physics, or the errors themselves)."""
+    explained = []
     # 3b. no claim on this ladder (pre-asymptotic), with the reason (physics, or the errors themselves)
-    pre = [r for r in recs if r["verdict"] == "pre_asymptotic"]
+    pre = [r for r in c.recs if r["verdict"] == "pre_asymptotic"]
     for (sc, eng), rs in sorted(_group(pre, lambda r: (r["scenario"], r["engine"])).items(),
-                                key=lambda kv: (scen_order.get(kv[0][0], 99), var_order.get(kv[0][1], 99))):
+                                key=lambda kv: (c.scen_order.get(kv[0][0], 99), c.var_order.get(kv[0][1], 99))):
         rs.sort(key=lambda r: QUANTITIES.index(r["quantity"]))
         why = lambda r: r["reason"] if r["expected_verdict"] == "pre_asymptotic" else r["assessment"]  # noqa: E731
         fitted = ", ".join(f"{LABELS[r['quantity']]} {r['order']:.2f}" for r in rs if r["order"] is not None)
@@ -158,24 +196,36 @@ def findings(res) -> list:
             text += f" (likewise, with its own numbers, for {_and(LABELS[r['quantity']] for r in rs[1:])})"
         explained.append(Finding("explained", text + ".", sc, eng))
 
+    return explained
+
+
+def _exact_and_faster(res, c) -> list:
+    """4. Exact to round-off, and orders above the nominal one (information)."""
+    info = []
     # 4. exact to round-off, and orders above the nominal one (information)
-    exact = [r for r in recs if r["verdict"] == "at_roundoff" and varies.get(r["scenario"], {}).get(r["quantity"], True)]
+    exact = [r for r in c.recs if r["verdict"] == "at_roundoff" and c.varies.get(r["scenario"], {}).get(r["quantity"], True)]
     for (sc, q), rs in sorted(_group(exact, lambda r: (r["scenario"], r["quantity"])).items(),
-                              key=lambda kv: (scen_order.get(kv[0][0], 99), QUANTITIES.index(kv[0][1]))):
-        engines = sorted({r["engine"] for r in rs}, key=lambda e: var_order.get(e, 99))
+                              key=lambda kv: (c.scen_order.get(kv[0][0], 99), QUANTITIES.index(kv[0][1]))):
+        engines = sorted({r["engine"] for r in rs}, key=lambda e: c.var_order.get(e, 99))
         info.append(Finding("info", f"On {sc}, {LABELS[q]} is exact to round-off at every Δt with "
                                     f"{_and(engines)}: the scheme integrates this motion exactly.", sc, None))
-    above = [r for r in recs if r["verdict"] == "converges" and r["matches_expectation"] and r["order"] is not None
+    above = [r for r in c.recs if r["verdict"] == "converges" and r["matches_expectation"] and r["order"] is not None
              and r["expected_order"] is not None and r["order"] > r["expected_order"] + tol.SWEEP_ORDER_TOL]
     for (sc, q), rs in sorted(_group(above, lambda r: (r["scenario"], r["quantity"])).items(),
-                              key=lambda kv: (scen_order.get(kv[0][0], 99), QUANTITIES.index(kv[0][1]))):
-        rs.sort(key=lambda r: var_order.get(r["engine"], 99))
+                              key=lambda kv: (c.scen_order.get(kv[0][0], 99), QUANTITIES.index(kv[0][1]))):
+        rs.sort(key=lambda r: c.var_order.get(r["engine"], 99))
         lo, hi = min(r["order"] for r in rs), max(r["order"] for r in rs)
         orders = f"{lo:.2f}" if hi - lo < 0.05 else f"{lo:.2f} … {hi:.2f}"
         info.append(Finding("info", f"On {sc}, {LABELS[q]} converges faster than the nominal order (order {orders}) "
                                     f"with " + _and(f"{r['engine']} (nominal {r['expected_order']:g})" for r in rs)
                                     + ".", sc, None))
 
+    return info
+
+
+def _conservation(res, c) -> list:
+    """5. Conservation at the default Δt (information)."""
+    info = []
     # 5. conservation at the default Δt
     for s in res.scenarios:
         sc = s["name"]
@@ -204,6 +254,13 @@ def findings(res) -> list:
                                     + (f" (and {len(worst) - 4} more)" if len(worst) > 4 else "")
                                     + f" at Δt = {fmt_dt(s['dt_s'])} s.", sc, None))
 
+    return info
+
+
+def _same_schemes(res, c) -> tuple:
+    """6. Schemes that must be identical: disagreements (bad) and agreements (information)."""
+    bad = []
+    info = []
     # 6. schemes that must be identical
     for (a, b), rs in _group(res.summary.get("agreement", []), lambda r: (r["a"], r["b"])).items():
         good = [r for r in rs if r["agrees"]]
@@ -220,6 +277,12 @@ def findings(res) -> list:
                                         f"relative final-state difference at the default Δt): {rs[0]['reason']}.",
                                 None, b))
 
+    return bad, info
+
+
+def _not_measured(res, c) -> list:
+    """7–8. Variants without a one-step mode, and variants not run (information)."""
+    info = []
     # 7. variants without a one-step mode (engine-file engines run whole trajectories only)
     whole_runs_only = [v for v in res.variants if not res.has_one_step(v)]
     if whole_runs_only:
@@ -231,4 +294,4 @@ def findings(res) -> list:
     # 8. variants not run
     for s in res.summary.get("skipped_variants", []):
         info.append(Finding("info", f"{s['name']} was not run: {s['reason']}.", None, s["name"]))
-    return bad + explained + info
+    return info
