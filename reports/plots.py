@@ -70,9 +70,16 @@ def _grid(nrows, ncols, title, sharey="row", panel_h=2.1):
 
 
 def _finish(fig, path):
-    h = fig.get_size_inches()[1]
-    fig.subplots_adjust(left=0.09 if fig.get_size_inches()[0] > 8 else 0.14, right=0.98, top=1.0 - 0.75 / h,
-                        bottom=0.5 / h, hspace=0.35, wspace=0.08)
+    legends = getattr(fig, "_rb_legends", [])
+    strip_in = (LEGEND_LINE_IN * (1 + max(len(hs) for _, hs, _ in legends)) + 0.55) if legends else 0.0
+    w, h = fig.get_size_inches()
+    if strip_in:
+        h += strip_in
+        fig.set_size_inches(w, h)
+    fig.subplots_adjust(left=0.09 if w > 8 else 0.14, right=0.98, top=1.0 - 0.75 / h,
+                        bottom=(0.5 + strip_in) / h, hspace=0.35, wspace=0.08)
+    if legends:
+        _place_legends(fig, legends, below_in=0.5)
     _plain_log_ticks(fig)
     _save_png(fig, path)
     plt.close(fig)
@@ -138,14 +145,32 @@ def _diverged(res, sc, v):
     return t if isinstance(t, float) and math.isfinite(t) else math.inf
 
 
-def _family_legends(axes_top, fams, styles, extra=None, markers=False):
-    """One legend per family column, in its top panel: the family's variants (and their text)."""
-    for ax, (fam, vs) in zip(axes_top, fams.items()):
+#: Height of one legend line (7 pt text and its spacing), inches; the legends' strip below the panels is
+#: sized from the longest family legend so that no legend covers a curve.
+LEGEND_LINE_IN = 0.15
+
+
+def _family_legends(axes_bottom, fams, styles, extra=None, markers=False):
+    """One legend per family column, BELOW its bottom panel (inside a panel it covered curves): the
+    family's variants (and their text). Placed by :func:`_finish`, which makes room for them."""
+    fig = axes_bottom[0].figure
+    fig._rb_legends = []
+    for ax, (fam, vs) in zip(axes_bottom, fams.items()):
         hs = [Line2D([], [], color=styles[v]["color"], ls=styles[v]["ls"],
                      marker=styles[v]["marker"] if markers else None, ms=4, lw=1.4,
                      label=_short(v) + (f"  {extra[v]}" if extra and extra.get(v) else "")) for v in vs]
-        ax.legend(handles=hs, fontsize=7, loc="best", frameon=True, framealpha=0.85, title=fam, title_fontsize=8,
-                  handlelength=1.8)
+        fig._rb_legends.append((ax, hs, fam))
+
+
+def _place_legends(fig, legends, below_in: float) -> None:
+    """Each family's legend under its column, its top ``below_in`` inches under the panel (clear of the
+    tick labels and the x label)."""
+    H = fig.get_size_inches()[1]
+    for ax, hs, fam in legends:
+        ax_h_in = ax.get_position().height * H
+        ax.legend(handles=hs, fontsize=7, loc="upper left", bbox_to_anchor=(0.0, -below_in / ax_h_in),
+                  frameon=False, title=fam, title_fontsize=8, handlelength=1.8, alignment="left",
+                  borderaxespad=0.0)
 
 
 def _robust_limits(curves, log):
@@ -237,7 +262,7 @@ def fig_trajectories(res, sc, styles, path):
     fig, axes = _grid(len(rows), len(fams), f"{sc}: trajectories at Δt = {info['dt_s']:g} s (thick grey: "
                                             f"reference, {info['reference']})", panel_h=1.5)
     _time_panels(fig, axes, res, sc, fams, styles, rows, log=False)
-    _family_legends(axes[0], fams, styles)
+    _family_legends(axes[-1], fams, styles)
     NOTES[(sc, "trajectories")] = ("Not drawn, constant along the reference: " + ", ".join(still) + ".") if still else ""
     _finish(fig, path)
     return True
@@ -258,7 +283,7 @@ def fig_errors(res, sc, styles, path):
     fig, axes = _grid(len(rows), len(fams), f"{sc}: error against the reference vs time at Δt = {info['dt_s']:g} s "
                                             f"(log scales; zero drawn at {LOG_FLOOR:g}; × marks a divergence)")
     _time_panels(fig, axes, res, sc, fams, styles, rows, log=True)
-    _family_legends(axes[0], fams, styles)
+    _family_legends(axes[-1], fams, styles)
     left = [LABELS[q] for q in QUANTITIES if q not in shown]
     NOTES[(sc, "errors")] = ("Not drawn: " + ", ".join(left) + " (does not move, or zero error for every variant)."
                              if left else "")
@@ -290,7 +315,7 @@ def fig_conservation(res, sc, styles, path):
     fig, axes = _grid(len(rows), len(fams), f"{sc}: relative drift of conserved quantities at Δt = {info['dt_s']:g} s "
                                             f"(log scales; zero drawn at {LOG_FLOOR:g}; × marks a divergence)")
     _time_panels(fig, axes, res, sc, fams, styles, rows, log=True)
-    _family_legends(axes[0], fams, styles)
+    _family_legends(axes[-1], fams, styles)
     _finish(fig, path)
     return True
 
@@ -373,7 +398,7 @@ def fig_ladder(res, sc, styles, path, mode):
         ax.set_xlabel("time step Δt (s)", fontsize=8)
     orders = {v: "p " + " / ".join(order_text(next((r for r in res.records(sc, v, q, mode=mode)), None)) for q in qs)
               for v in vs_all}
-    _family_legends(axes[0], fams, styles, orders, markers=True)
+    _family_legends(axes[-1], fams, styles, orders, markers=True)
     for ax, fam in zip(axes[0], fams):
         _panel_title(ax, fam)
     left = [LABELS[q] for q in QUANTITIES if q not in qs]
