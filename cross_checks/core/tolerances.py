@@ -243,29 +243,26 @@ AGREE_NO_FLIP_ABOVE = 0.5
 #: quaternion through x,y,z,w and the principal frame (PyBullet): a few ε of |ω| ≤ 5 rad/s.
 AGREE_INITIAL_ROW = 1e-14
 
-# --- the PyBullet adapter's conventions (tests/cross_checks/engines/test_pybullet_engine.py) ---
-#: Same-arithmetic conversions (quaternion order, principal-frame rotation at the boundary): a few ε.
-PYB_ROUND_TRIP = 1e-15
-#: Exact exponential-map spin about a principal axis over 100 steps: ~ε per step.
-PYB_SPIN_100_STEPS = 1e-13
+# --- the engine adapters' conventions (the MuJoCo and PyBullet adapter tests in tests/cross_checks/engines/) ---
+#: Same-arithmetic conversions at an adapter's boundary (MuJoCo: qpos/qvel <-> packed state, one rotation
+#: of a unit vector; PyBullet: quaternion order, principal-frame rotation): a few ε.
+ADAPTER_ROUND_TRIP = 1e-15
+#: Exact exponential-map spin about a principal axis over 100 steps: each step rounds the quaternion
+#: product (~ε; MuJoCo also renormalises): 100 · a few ε.
+ADAPTER_SPIN_100_STEPS = 1e-13
+#: one_step from a recorded state vs the recorded next state: the same engine step from the same doubles,
+#: up to the boundary conversions (MuJoCo: ω body -> world -> body, two roundings of |ω|; PyBullet: the
+#: principal-frame rotation of full tensors and the x,y,z,w order): a few ε.
+ADAPTER_ONE_STEP_REPLAY = 1e-14
+
+# --- the PyBullet adapter (tests/cross_checks/engines/test_pybullet_engine.py) ---
 #: Semi-implicit closed form of a projectile (h = 0.01, 1 s): sums of 100 terms of size ≤ 3 m: 100 ε · 3.
 PYB_PROJECTILE_EXACT = 1e-12
 #: PyBullet's default multibody damping must visibly fail the projectile: docs/engine_conventions.md measured 0.15 m
 #: after 1 s; anything above 1 cm is far outside discretisation (which is exactly zero here).
 PYB_DEFAULT_DAMPING_MIN_ERROR = 1e-2
-#: one_step from a recorded state vs the recorded next state: the same PyBullet step from the same
-#: doubles up to the boundary rotation (full tensors) and the x,y,z,w conversion: a few ε.
-PYB_ONE_STEP_REPLAY = 1e-14
 
-# --- the MuJoCo adapter's conventions (tests/cross_checks/engines/test_mujoco_engine.py) ---
-#: Same-arithmetic conversions (qpos/qvel <-> packed state, one rotation of a unit vector): a few ε.
-MJ_ROUND_TRIP = 1e-15
-#: Exact exponential-map spin about a principal axis over 100 steps: each step rounds the quaternion
-#: product (~ε) and MuJoCo renormalises; 100 · a few ε.
-MJ_SPIN_100_STEPS = 1e-13
-#: one_step from a recorded state vs the recorded next state: the same MuJoCo step from the same
-#: doubles, except ω goes body -> world -> body through two roundings (a few ε of |ω|).
-MJ_ONE_STEP_REPLAY = 1e-14
+# --- the MuJoCo adapter (tests/cross_checks/engines/test_mujoco_engine.py) ---
 #: mujoco:rk4 vs DOP853 (GROUND_TRUTH_RTOL) on tennis_racket at dt = 1e-3: the required bound.
 MJ_RK4_VS_GROUND_TRUTH = 1e-8
 #: Observed convergence order of mujoco:rk4 with per-stage forces vs 4 (measured 3.99-4.03 on these

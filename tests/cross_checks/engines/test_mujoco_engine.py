@@ -69,16 +69,16 @@ def test_state_round_trip_and_quaternion_order():
     y[:, 6:10] /= np.linalg.norm(y[:, 6:10], axis=1, keepdims=True)
     qpos, qvel = me._to_qpos_qvel(y)
     np.testing.assert_array_equal(qpos[:, 3:7], y[:, 6:10])          # (w, x, y, z) in both
-    np.testing.assert_allclose(me._to_packed(qpos, qvel), y, atol=tol.MJ_ROUND_TRIP * 10)
+    np.testing.assert_allclose(me._to_packed(qpos, qvel), y, atol=tol.ADAPTER_ROUND_TRIP * 10)
     for i in range(3):
-        np.testing.assert_allclose(me._packed1(qpos[i], qvel[i]), me._to_packed(qpos[i], qvel[i]), atol=tol.MJ_ROUND_TRIP)
+        np.testing.assert_allclose(me._packed1(qpos[i], qvel[i]), me._to_packed(qpos[i], qvel[i]), atol=tol.ADAPTER_ROUND_TRIP)
     # MuJoCo itself reads qpos[3:7] as (w, x, y, z): its body pose after mj_forward is that rotation
     sc = _scenario(initial=YAW90)
     m = me.build_model(sc, "euler", 0.01)
     d = mujoco.MjData(m)
     d.qpos[:], d.qvel[:] = me._to_qpos_qvel(sc.problem.initial_packed())
     mujoco.mj_forward(m, d)
-    np.testing.assert_allclose(d.xmat[1].reshape(3, 3), [[0, -1, 0], [1, 0, 0], [0, 0, 1]], atol=tol.MJ_ROUND_TRIP)
+    np.testing.assert_allclose(d.xmat[1].reshape(3, 3), [[0, -1, 0], [1, 0, 0], [0, 0, 1]], atol=tol.ADAPTER_ROUND_TRIP)
 
 
 def test_yawed_body_spinning_about_body_x_reads_world_y():
@@ -86,13 +86,13 @@ def test_yawed_body_spinning_about_body_x_reads_world_y():
     the body-axes (1, 0, 0), and MuJoCo turns the body about world y."""
     sc = _scenario(initial=YAW90 + "\nangular_velocity_body = [1.0, 0.0, 0.0]")
     y0 = sc.problem.initial_packed()
-    np.testing.assert_allclose(y0[10:13], [0.0, 1.0, 0.0], atol=tol.MJ_ROUND_TRIP)
+    np.testing.assert_allclose(y0[10:13], [0.0, 1.0, 0.0], atol=tol.ADAPTER_ROUND_TRIP)
     _, qvel = me._to_qpos_qvel(y0)
-    np.testing.assert_allclose(qvel[3:6], [1.0, 0.0, 0.0], atol=tol.MJ_ROUND_TRIP)
+    np.testing.assert_allclose(qvel[3:6], [1.0, 0.0, 0.0], atol=tol.ADAPTER_ROUND_TRIP)
     run = me.simulate(sc, "euler", 0.01, 100)                       # principal-axis spin: exact
-    np.testing.assert_allclose(run.y[:, 10:13], np.tile([0.0, 1.0, 0.0], (101, 1)), atol=tol.MJ_SPIN_100_STEPS)
+    np.testing.assert_allclose(run.y[:, 10:13], np.tile([0.0, 1.0, 0.0], (101, 1)), atol=tol.ADAPTER_SPIN_100_STEPS)
     expected = quat_mul(quat_from_axis_angle(np.array([0.0, 1.0, 0.0]), run.t_s), y0[6:10])
-    assert np.max(geodesic_angle(expected, run.y[:, 6:10])) < tol.MJ_SPIN_100_STEPS
+    assert np.max(geodesic_angle(expected, run.y[:, 6:10])) < tol.ADAPTER_SPIN_100_STEPS
 
 
 def test_linear_velocity_and_position_are_the_coms():
@@ -104,7 +104,7 @@ def test_linear_velocity_and_position_are_the_coms():
     run = me.simulate(sc, "euler", 0.01, 100)
     n = np.arange(101)[:, None]
     np.testing.assert_allclose(run.y[:, 0:3], 0.01 * n * np.array([0.5, -0.2, 4.0]), atol=1e-13)
-    np.testing.assert_allclose(run.y[:, 3:6], np.tile([0.5, -0.2, 4.0], (101, 1)), rtol=0, atol=tol.MJ_ROUND_TRIP * 4)
+    np.testing.assert_allclose(run.y[:, 3:6], np.tile([0.5, -0.2, 4.0], (101, 1)), rtol=0, atol=tol.ADAPTER_ROUND_TRIP * 4)
 
 
 @pytest.mark.parametrize("variant", sorted(me.VARIANTS))
@@ -113,7 +113,7 @@ def test_one_step_replays_the_run(variant):
         sc = load_scenario(name)
         run = me.simulate(sc, variant, sc.dt_s, 30)
         y1 = me.one_step(sc, variant, sc.dt_s, run.y[:-1])
-        np.testing.assert_allclose(y1, run.y[1:], rtol=0, atol=tol.MJ_ONE_STEP_REPLAY * 10)
+        np.testing.assert_allclose(y1, run.y[1:], rtol=0, atol=tol.ADAPTER_ONE_STEP_REPLAY * 10)
 
 
 # --- forces and RK4 ---------------------------------------------------------------------------------

@@ -49,13 +49,13 @@ def test_yawed_body_spinning_about_body_x_reads_world_y(variant):
     sc = _scenario(body="mass = 1.0\ninertia = [1.0, 1.0, 1.0]",
                    initial=YAW90 + "\nangular_velocity_body = [1.0, 0.0, 0.0]")
     run = pe.simulate(sc, variant, 0.01, 100)
-    np.testing.assert_allclose(run.y[:, 10:13], np.tile([0.0, 1.0, 0.0], (101, 1)), atol=tol.PYB_SPIN_100_STEPS)
+    np.testing.assert_allclose(run.y[:, 10:13], np.tile([0.0, 1.0, 0.0], (101, 1)), atol=tol.ADAPTER_SPIN_100_STEPS)
     expected = quat_mul(quat_from_axis_angle(np.array([0.0, 1.0, 0.0]), run.t_s), run.y[0, 6:10])
-    assert np.max(geodesic_angle(expected, run.y[:, 6:10])) < tol.PYB_SPIN_100_STEPS
+    assert np.max(geodesic_angle(expected, run.y[:, 6:10])) < tol.ADAPTER_SPIN_100_STEPS
     # PyBullet's own angular velocity is in world axes (getBaseVelocity), no conversion involved
     raw = pe._Body(sc, variant, 0.01, sc.problem.initial_packed())
     raw.set_state(sc.problem.initial_packed())
-    np.testing.assert_allclose(p.getBaseVelocity(raw.b, physicsClientId=raw.c)[1], [0.0, 1.0, 0.0], atol=tol.PYB_ROUND_TRIP)
+    np.testing.assert_allclose(p.getBaseVelocity(raw.b, physicsClientId=raw.c)[1], [0.0, 1.0, 0.0], atol=tol.ADAPTER_ROUND_TRIP)
 
 
 def test_quaternion_order_at_the_boundary():
@@ -63,10 +63,10 @@ def test_quaternion_order_at_the_boundary():
     B = pe._Body(sc, "multibody", 0.01, sc.problem.initial_packed())
     B.set_state(sc.problem.initial_packed())
     orn = p.getBasePositionAndOrientation(B.b, physicsClientId=B.c)[1]
-    np.testing.assert_allclose(orn, [0.0, 0.0, SQ, SQ], atol=tol.PYB_ROUND_TRIP)            # (x, y, z, w)
+    np.testing.assert_allclose(orn, [0.0, 0.0, SQ, SQ], atol=tol.ADAPTER_ROUND_TRIP)            # (x, y, z, w)
     R = np.array(p.getMatrixFromQuaternion(orn)).reshape(3, 3)
-    np.testing.assert_allclose(R, [[0, -1, 0], [1, 0, 0], [0, 0, 1]], atol=tol.PYB_ROUND_TRIP)
-    np.testing.assert_allclose(B.raw_to_packed(B.read_raw()), sc.problem.initial_packed(), atol=tol.PYB_ROUND_TRIP)
+    np.testing.assert_allclose(R, [[0, -1, 0], [1, 0, 0], [0, 0, 1]], atol=tol.ADAPTER_ROUND_TRIP)
+    np.testing.assert_allclose(B.raw_to_packed(B.read_raw()), sc.problem.initial_packed(), atol=tol.ADAPTER_ROUND_TRIP)
 
 
 @pytest.mark.parametrize("variant", sorted(pe.VARIANTS))
@@ -77,10 +77,10 @@ def test_full_tensor_reports_the_scenario_body_frame(variant):
     B = pe._Body(sc, variant, 0.001, y0)
     B.set_state(y0)
     q_WP = np.roll(p.getBasePositionAndOrientation(B.b, physicsClientId=B.c)[1], 1)
-    assert geodesic_angle(q_WP, quat_mul(y0[6:10], B.q_BP)) < tol.PYB_ROUND_TRIP * 10
+    assert geodesic_angle(q_WP, quat_mul(y0[6:10], B.q_BP)) < tol.ADAPTER_ROUND_TRIP * 10
     assert geodesic_angle(q_WP, y0[6:10]) > 0.1                # P really differs from B here
     run = pe.simulate(sc, variant, 0.001, 10)
-    assert geodesic_angle(run.y[0, 6:10], y0[6:10]) < tol.PYB_ROUND_TRIP * 10
+    assert geodesic_angle(run.y[0, 6:10], y0[6:10]) < tol.ADAPTER_ROUND_TRIP * 10
 
 
 def test_linear_velocity_and_position_are_the_coms():
@@ -91,7 +91,7 @@ def test_linear_velocity_and_position_are_the_coms():
         run = pe.simulate(sc, variant, 0.01, 100)
         n = np.arange(101)[:, None]
         np.testing.assert_allclose(run.y[:, 0:3], 0.01 * n * np.array([0.5, -0.2, 4.0]), atol=1e-13)
-        np.testing.assert_allclose(run.y[:, 3:6], np.tile([0.5, -0.2, 4.0], (101, 1)), rtol=0, atol=tol.PYB_ROUND_TRIP * 4)
+        np.testing.assert_allclose(run.y[:, 3:6], np.tile([0.5, -0.2, 4.0], (101, 1)), rtol=0, atol=tol.ADAPTER_ROUND_TRIP * 4)
 
 
 # --- PyBullet's traps the adapter works around ------------------------------------------------------------
@@ -148,7 +148,7 @@ def test_external_force_is_cleared_after_each_step(variant):
     np.testing.assert_allclose(v1[3], 0.01, rtol=1e-14)          # one step of 1 N on 1 kg
     np.testing.assert_allclose(v1[12], 0.01, rtol=1e-14)         # one step of 3 N m about I_zz = 3
     assert v2[3] == v1[3]                                        # nothing applied in the second step
-    np.testing.assert_allclose(v2[12], v1[12], rtol=tol.PYB_ROUND_TRIP * 4)   # (maximal: implicit gyro round-off)
+    np.testing.assert_allclose(v2[12], v1[12], rtol=tol.ADAPTER_ROUND_TRIP * 4)   # (maximal: implicit gyro round-off)
 
 
 @pytest.mark.parametrize("variant", sorted(pe.VARIANTS))
@@ -157,7 +157,7 @@ def test_one_step_replays_the_run(variant):
         sc = load_scenario(name)
         run = pe.simulate(sc, variant, sc.dt_s, 30)
         y1 = pe.one_step(sc, variant, sc.dt_s, run.y[:-1])
-        np.testing.assert_allclose(y1, run.y[1:], rtol=0, atol=tol.PYB_ONE_STEP_REPLAY * 10)
+        np.testing.assert_allclose(y1, run.y[1:], rtol=0, atol=tol.ADAPTER_ONE_STEP_REPLAY * 10)
 
 
 # --- divergence ---------------------------------------------------------------------------------------
