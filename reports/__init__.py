@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 
 from cross_checks.core.files import umask
-from cross_checks.core.progress import stage
+from cross_checks.core.progress import is_tty, stage
 from reports.data import Results, ResultsError, load_results
 
 __all__ = ["render", "load_results", "Results", "ResultsError"]
@@ -34,13 +34,6 @@ def _draw(task):
 def _quiet_init(parent_pid):
     from cross_checks.sweep.lifecycle import worker_init
     worker_init(parent_pid)
-
-
-def _is_tty(stream) -> bool:
-    try:
-        return bool(stream.isatty())
-    except (AttributeError, ValueError):
-        return False
 
 
 def _say(line: str) -> None:
@@ -71,7 +64,7 @@ def render(directory, *, self_contained: bool = False, jobs: int | None = 1, pro
     from cross_checks.sweep.results_dir import is_owned_stale, listed_files, owned_name, read_marker
 
     t0 = time.perf_counter()
-    progress = _is_tty(sys.stderr) if progress is None else progress
+    progress = is_tty(sys.stderr) if progress is None else progress
     d = Path(directory)
     res = load_results(d)
     names = [s["name"] for s in res.scenarios]

@@ -16,14 +16,15 @@ from __future__ import annotations
 import sys
 import time
 
-__all__ = ["LINE_INTERVAL_S", "Progress", "stage"]
+__all__ = ["LINE_INTERVAL_S", "Progress", "stage", "is_tty"]
 
 #: Seconds between two progress lines without a terminal: often enough that a CI log never looks hung
 #: (GitHub Actions streams lines as they come), rarely enough that a 1000-run sweep prints ~20 lines.
 LINE_INTERVAL_S = 5.0
 
 
-def _is_tty(stream) -> bool:
+def is_tty(stream) -> bool:
+    """Whether ``stream`` is a terminal (False for a closed or stream-less object)."""
     try:
         return bool(stream.isatty())
     except (AttributeError, ValueError):
@@ -58,7 +59,7 @@ class Progress:
         # items of unequal size (a sweep's runs, longest first): the time left is estimated from the
         # work done (``update(work=...)``), not from the count
         self.total_work, self.work_done = total_work, 0.0
-        bar = _is_tty(sys.stderr if stream is None else stream) if tty is None else tty
+        bar = is_tty(sys.stderr if stream is None else stream) if tty is None else tty
         self.stream = stream if stream is not None else (sys.stderr if bar else sys.stdout)
         self.interval_s, self.clock = interval_s, clock
         self.done, self.last = 0, ""
