@@ -78,7 +78,7 @@ def _checked_output(out_dir, scenarios):
 def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cache: bool = True,
               progress: bool | None = None, skipped=None, finish=None,
               executor=None, run_time_limit_s: float | None = tol.RUN_TIME_LIMIT_S,
-              reference_time_limit_s: float | None = tol.REFERENCE_TIME_LIMIT_S) -> dict:
+              reference_time_limit_s: float | None = tol.REFERENCE_TIME_LIMIT_S, second_reference: bool = True) -> dict:
     """Run the sweep and write the results directory ``out_dir`` (atomically).
 
     Parameters
@@ -94,6 +94,8 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
         (e.g. ``reports.render``: the report is then part of the atomic replacement). None: no report.
     run_time_limit_s, reference_time_limit_s : wall-time limits of one run and of one reference solve
         (None: none); a run or reference over its limit is a ``failed`` row saying so.
+    second_reference : compute Drake's second reference of every scenario when Drake is installed (False:
+        its records are None, as without Drake; `rbcheck bench` measures the sweep of issue 15 this way).
     executor : any ``concurrent.futures.Executor`` to run the jobs on instead of the local process
         pool (e.g. ``distributed.Client(address).get_executor()``); its workers must see the parent
         directory of ``out_dir`` and the cache directory (jobs exchange reference solutions as files).
@@ -116,7 +118,7 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
         runner = Runner(jobs, executor)
         show = sys.stderr.isatty() if progress is None else progress
         refs = run_references(runner, scenarios, work, cache_root, use_cache, reference_time_limit_s, show)
-        second = second_reference_jobs(scenarios, refs)
+        second = second_reference_jobs(scenarios, refs) if second_reference else []
         records = run_jobs(runner, plan_jobs(scenarios, variants), scenarios, refs, work, cache_root, use_cache,
                            run_time_limit_s, show, second=second, second_time_limit_s=reference_time_limit_s)
         refs = _with_second_references(refs, {s.scenario_index: records.pop(s) for s in second})
