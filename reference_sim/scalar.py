@@ -168,10 +168,11 @@ class ScalarStepper:
     def force_torque(self, y):
         """World force at the COM and world torque about it (6 floats) at state ``y`` (13 numbers),
         the rotation taken from q/|q| — ForceModel.force_torque in plain floats."""
-        qw, qx, qy, qz = (float(c) for c in y[6:10])
+        if type(y) is not list:  # the adapters' loops pass lists of floats already (no conversion per call)
+            y = [float(c) for c in y]
+        qw, qx, qy, qz = y[6:10]
         n = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
-        x, v = [float(c) for c in y[0:3]], [float(c) for c in y[3:6]]
-        return self._force_torque(x, v, self._rot(qw / n, qx / n, qy / n, qz / n))
+        return self._force_torque(y[0:3], y[3:6], self._rot(qw / n, qx / n, qy / n, qz / n))
 
     def world_inertia_times(self, y, ax, ay, az):
         """``I_W a = R I_B Rᵀ a`` (world axes) for the orientation of state ``y`` (rotation of q/|q|)."""
