@@ -66,7 +66,9 @@ class CaseKernel(ScalarStepper):
     def stack(cls, problems, variant: str, h_s) -> "CaseKernel":
         """The kernel of ``variant`` for members ``problems[i]`` at steps ``h_s[i]`` (s)."""
         h_s = [float(h) for h in np.broadcast_to(np.asarray(h_s, dtype=float), (len(problems),))]
-        steppers = [ScalarStepper(p, variant, h) for p, h in zip(problems, h_s)]
+        built: dict = {}   # members of one problem at one step (one-step starts) share their stepper
+        steppers = [built[(id(p), h)] if (id(p), h) in built else built.setdefault((id(p), h), ScalarStepper(p, variant, h))
+                    for p, h in zip(problems, h_s)]
         return cls._from_steppers(steppers, list(problems), variant, h_s)
 
     @classmethod
