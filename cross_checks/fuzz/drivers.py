@@ -11,7 +11,10 @@ Three paths, each giving what the engine's own adapter gives, case by case:
   ``MujocoAdapter.simulate`` (tested); ``mujoco:rk4`` with forces that change within a step needs its
   per-stage control callback and runs through the adapter, case by case. A run that blows up is re-run
   through the adapter, so its "diverged at t = …" is the adapter's own;
-* every other engine (PyBullet, engine files, Python adapters) — its adapter, case by case.
+* ``pybullet:*`` — :mod:`~cross_checks.fuzz.pybullet_batch`: the adapter's runs, case by case, in a world of
+  the process's own (a body removed and created per run instead of a world reset; bit-identical, tested);
+  a run that blows up or is rejected goes through the adapter;
+* every other engine (engine files, Python adapters) — its adapter, case by case.
 
 Runs are recorded whole (``(n + 1, B, 13)``, NaN after a divergence or for a failed run); the batch is
 small enough (tens of cases, a few hundred steps) that measuring afterwards beats measuring on the fly.
@@ -339,9 +342,26 @@ def run_ladder(variant: str, scenarios, h0s, n0: int, *, threads: int = 1) -> li
         h = np.asarray(h0s) / 2 ** r
         runs = _empty_runs(h, n0 * 2 ** r)
         for i, sc in enumerate(scenarios):
-            _adapter_run(variant, sc, h[i], n0 * 2 ** r, runs, i)
+            if engine != "pybullet" or not _pybullet_run(var, sc, h[i], n0 * 2 ** r, runs, i):
+                _adapter_run(variant, sc, h[i], n0 * 2 ** r, runs, i)
         out.append(runs)
     return out
+
+
+def _pybullet_run(var, scenario, h, n, runs, i) -> bool:
+    """Case ``i`` through :mod:`~cross_checks.fuzz.pybullet_batch` (the adapter's run, cheaper); False when
+    the run must go through the adapter instead (it blew up, or PyBullet rejected the body)."""
+    from cross_checks.fuzz import pybullet_batch
+    try:
+        y = pybullet_batch.simulate(scenario, var, float(h), int(n))
+    except KeyboardInterrupt:
+        raise
+    except Exception:  # noqa: BLE001 - the adapter reproduces the failure with its own message
+        return False
+    if y is None:
+        return False
+    runs.y[:, i] = y
+    return True
 
 
 def _mujoco_one_step(var, scenarios, hs, y_start, threads):
@@ -398,6 +418,9 @@ def one_step(variant: str, scenarios, hs, y_start, *, threads: int = 1):
         if plain:
             out[plain] = _mujoco_one_step(var, [scenarios[j] for j in plain], hs[plain], y_start[plain], threads)
     adapter = get_adapter(engine)
+    if engine == "pybullet":   # the adapter's one_step in this process's own world (pybullet_batch)
+        from cross_checks.fuzz import pybullet_batch
+        adapter = SimpleNamespace(one_step=pybullet_batch.one_step)
     groups: dict = {}
     for j in rest:
         groups.setdefault((id(scenarios[j]), float(hs[j])), []).append(j)

@@ -136,10 +136,10 @@ def two_term_consistent(dts, errors, floors, order) -> bool:
 
 def _fit_record(ctx, variant, quantity, dts, errors, floors, statuses, exp, prop):
     """(violation or None, claimed) from a fit over a ladder and an Expectation."""
+    if exp.verdict != "converges":   # no claim: pre-asymptotic here, or the variant does not model this motion
+        return None, False            # (see docs/fuzz.md) — nothing to fit
     fit = fit_convergence(dts, errors, floors, statuses)
-    claimed = exp.verdict == "converges"
-    if not claimed:   # no claim: pre-asymptotic here, or the variant does not model this motion (see docs/fuzz.md)
-        return None, False
+    claimed = True
     matches, phrase = compare_with_expectation(fit.verdict, fit.order, exp, fit.order_is_lower_bound)
     if matches is False and measured_pre_asymptotic(fit, exp.order):
         matches = None
