@@ -150,7 +150,8 @@ def _reference_ladder(var, scenarios, h0s, n0):
 _NO_DATA = SimpleNamespace(time=math.nan)
 
 #: Compiled models of the batch's scenarios, one per (scenario, variant): {(id, variant): (scenario, model or
-#: the adapter's EngineError message)}. The scenario is kept so that its id cannot be reused while cached.
+#: the adapter's EngineError message, {step: model})}. The scenario is kept so that its id cannot be reused
+#: while cached.
 _MODELS: dict = {}
 _MODELS_MAX = 2048
 
@@ -168,15 +169,17 @@ def _model(sc, var, h):
         if len(_MODELS) >= _MODELS_MAX:
             _MODELS.clear()
         try:
-            hit = (sc, me.build_model(sc, var, h))
+            hit = (sc, me.build_model(sc, var, h), {})
         except EngineError as exc:
-            hit = (sc, str(exc))
+            hit = (sc, str(exc), {})
         _MODELS[key] = hit
     if isinstance(hit[1], str):
         raise EngineError(hit[1])
-    m = copy.copy(hit[1])
-    m.opt.timestep = float(h)
-    return m
+    at = hit[2].get(float(h))   # one model per step: the ladder's rungs and the one-step rungs share them
+    if at is None:
+        at = hit[2][float(h)] = copy.copy(hit[1])
+        at.opt.timestep = float(h)
+    return at
 
 
 def _mujoco_state(me, y):

@@ -211,12 +211,12 @@ def _defects(e, rows):
     return out
 
 
-def _judge(ctx, variant, k, ladder, defects, tally) -> list:
+def _judge(ctx, variant, k, ladder, defects, tally, errors=None) -> list:
     """The violations of one variant on one case. rbcheck's own verdict code failing on a valid scenario
     is a finding too (``rbcheck sweep`` would stop with an internal error there): property "internal_error"."""
     found = []
     try:
-        for recs, t in (P.free_running_order(ctx, variant, k, ladder), P.conservation(ctx, variant, k, ladder),
+        for recs, t in (P.free_running_order(ctx, variant, k, ladder, errors), P.conservation(ctx, variant, k, ladder),
                         P.one_step_order(ctx, variant, k, defects)):
             found += recs
             _add(tally, variant, t)
@@ -241,6 +241,7 @@ def evaluate(cases, contexts, members, y_end, variants, *, threads: int = 1) -> 
     n0 = cases[0].n0
     m_sel = [j for j, m in enumerate(members) if contexts[m[3]] is not None]
     rows = _rung_rows([members[j] for j in m_sel], judged)
+    y_refs = np.stack([contexts[i].y_ref for i in judged], axis=1)
     ladders = {}
     for v in variants:
         t0 = time.perf_counter()
@@ -248,9 +249,11 @@ def evaluate(cases, contexts, members, y_end, variants, *, threads: int = 1) -> 
         y1 = drivers.one_step(v, [members[j][0] for j in m_sel], [members[j][1] for j in m_sel],
                               np.array([members[j][2] for j in m_sel]), threads=threads)
         e = None if y1 is None else state_errors(y1, y_end[m_sel])
+        e_ladder = P.ladder_errors(ladder, y_refs, slice(None))
         for k, i in enumerate(judged):
             d = None if e is None else _defects(e, rows[i])
-            outcomes[i].violations += _judge(contexts[i], v, k, ladder, d, outcomes[i].tally)
+            e_case = [{q: er[q][:, k] for q in QUANTITIES} for er in e_ladder]
+            outcomes[i].violations += _judge(contexts[i], v, k, ladder, d, outcomes[i].tally, e_case)
         ladders[v] = ladder
         seconds[v] = time.perf_counter() - t0
     for pair in P.equivalent_pairs(variants):
