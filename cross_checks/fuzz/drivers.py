@@ -153,7 +153,7 @@ _NO_DATA = SimpleNamespace(time=math.nan)
 #: the adapter's EngineError message, {step: model})}. The scenario is kept so that its id cannot be reused
 #: while cached.
 _MODELS: dict = {}
-_MODELS_MAX = 2048
+_MODELS_MAX = 512   # a batch holds 64 cases x 4 variants
 
 
 def _model(sc, var, h):
