@@ -11,7 +11,8 @@ evaluator of a run is built once. Everything else is the adapter's own code: its
 (``harness_force_torque_floats``: start-of-step state, pre-step decay, the weight left to PyBullet).
 Runs are bit-identical to the adapter's (tested, every force kind, both variants); a run that blows up or
 that PyBullet rejects is re-run through the adapter by the caller, so its "diverged at t = …" and its
-message are the adapter's.
+message are the adapter's. The body is created by :func:`_body` with the adapter's calls, not by
+``_Body.__init__`` (which resets the world): a change made there alone does not reach these runs.
 """
 from __future__ import annotations
 
