@@ -87,6 +87,7 @@ class ScalarStepper:
             tgt = self.tau_B if t.frame == "body" else self.tau_W
             for i in range(3):
                 tgt[i] += float(t.torque[i])
+        self._refresh_flags()  # tau_B was filled in place
         self.step = {
             "course": lambda y: self._course(y, gyro=False, expmap=False),
             "course_gyro": lambda y: self._course(y, gyro=True, expmap=False),
@@ -98,24 +99,26 @@ class ScalarStepper:
             "implicit_euler": self._implicit_euler,
         }[variant]
 
-    # -- what the step tests with ``if``: read live from the parameters (a setting changed after __init__
-    # counts); the N-case kernel, whose parameters are (N,) arrays, overrides them per batch ------------
-    @property
-    def has_drag(self) -> bool:
-        return bool(self.c)
+    # -- what the step tests with ``if``: flags kept equal to the parameters they test, recomputed whenever
+    # one of those is assigned (a planted bug that changes a setting after __init__ counts); plain
+    # attributes, read at the cost of a dict lookup on the hot path (a property cost ~1 µs per RHS). The
+    # N-case kernel, whose parameters are (N,) arrays, sets them per batch -----------------------------------
+    _FLAG_SOURCES = frozenset(("c", "kv", "kw", "tau_B"))
 
-    @property
-    def has_body_torque(self) -> bool:
-        b = self.tau_B
-        return bool(b[0] or b[1] or b[2])
+    def __setattr__(self, name, value):
+        object.__setattr__(self, name, value)
+        if name in ScalarStepper._FLAG_SOURCES:
+            self._refresh_flags()
 
-    @property
-    def has_velocity_decay(self) -> bool:
-        return bool(self.kv)
-
-    @property
-    def has_angular_decay(self) -> bool:
-        return bool(self.kw)
+    def _refresh_flags(self) -> None:
+        # getattr, not self.__dict__: touching __dict__ materialises it and slows every attribute read
+        c, kv, kw, b = (getattr(self, k, None) for k in ("c", "kv", "kw", "tau_B"))
+        if b is None or c is None or kv is None or kw is None or any(isinstance(v, np.ndarray) for v in (c, kv, kw)):
+            return  # not all set yet, or the kernel's (N,) parameters (it sets the flags itself)
+        object.__setattr__(self, "has_drag", bool(c))
+        object.__setattr__(self, "has_body_torque", bool(b[0] or b[1] or b[2]))
+        object.__setattr__(self, "has_velocity_decay", bool(kv))
+        object.__setattr__(self, "has_angular_decay", bool(kw))
 
     # -- pieces ---------------------------------------------------------------------------------------
     @staticmethod

@@ -70,3 +70,22 @@ def test_numpy_soa_backend_equals_batched(variant):
         y = step_b(problem, y, 2e-3)
         cols = stepper.step(cols)
     np.testing.assert_allclose(np.stack(cols, axis=-1), y, rtol=READABLE_VS_BATCHED, atol=READABLE_VS_BATCHED)
+
+
+def test_the_if_flags_follow_every_setting_including_one_changed_after_construction():
+    # the flags only skip contributions that are zero; a stale False would silently drop a planted bug's
+    # drag, decay or body torque (tests/mutants.py changes them after __init__)
+    from reference_sim.body import RigidBody
+    from reference_sim.forces import ForceModel, Torque
+    from reference_sim.state import Problem, State
+    p = Problem(RigidBody(1.0, [1.0, 2.0, 3.0]), ForceModel(torques=(Torque(np.array([0.0, 0.0, 0.5]), "body"),)),
+                State(np.zeros(3), np.ones(3), np.array([1.0, 0, 0, 0]), np.array([0.1, 0.2, 0.3])))
+    s = ScalarStepper(p, "rk4", 0.01)
+    assert s.has_body_torque and not s.has_drag and not s.has_velocity_decay and not s.has_angular_decay
+    y = p.initial_packed().tolist()
+    plain = s.rhs(y)
+    s.c, s.kv, s.kw, s.tau_B = 0.3, 0.2, 0.1, [0.0, 0.0, 0.0]
+    assert s.has_drag and s.has_velocity_decay and s.has_angular_decay and not s.has_body_torque
+    changed = s.rhs(y)
+    assert changed[3] == pytest.approx(plain[3] - 0.3 * 1.0 - 0.2 * 1.0)   # drag −c v and decay −k v on v_x
+    assert changed[10] != plain[10]
