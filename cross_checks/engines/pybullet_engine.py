@@ -102,10 +102,12 @@ def _xyzw(q):
 class _Body:
     """One scenario body in the (reset) PyBullet world, with the boundary conversions."""
 
-    def __init__(self, scenario, variant: str, dt_s: float, y0):
+    def __init__(self, scenario, variant: str, dt_s: float, y0, client: int | None = None):
+        """The body in the adapter's world, reset first; or, with ``client``, in that client's world, which
+        must hold no other body (the fuzz keeps a world of its own and removes its previous body)."""
         if variant not in VARIANTS:
             raise ValueError(f"unknown pybullet variant {variant!r}; variants: {', '.join(VARIANTS)}")
-        self.c = c = _connect()
+        self.c = c = _connect() if client is None else client
         self.maximal = variant == "maximal"
         body = scenario.problem.body
         forces = scenario.problem.forces
@@ -116,7 +118,8 @@ class _Body:
             self.q_BP = quat_from_matrix(R_BP)
         self.weight = body.mass_kg * np.asarray(forces.gravity_W, dtype=float)
         try:
-            p.resetSimulation(physicsClientId=c)
+            if client is None:
+                p.resetSimulation(physicsClientId=c)
             p.setGravity(*[float(g) for g in forces.gravity_W], physicsClientId=c)
             p.setPhysicsEngineParameter(fixedTimeStep=float(dt_s), numSubSteps=0, physicsClientId=c)
             x0, q0 = self._pose_in(y0)

@@ -11,8 +11,8 @@ evaluator of a run is built once. Everything else is the adapter's own code: its
 (``harness_force_torque_floats``: start-of-step state, pre-step decay, the weight left to PyBullet).
 Runs are bit-identical to the adapter's (tested, every force kind, both variants); a run that blows up or
 that PyBullet rejects is re-run through the adapter by the caller, so its "diverged at t = …" and its
-message are the adapter's. The body is created by :func:`_body` with the adapter's calls, not by
-``_Body.__init__`` (which resets the world): a change made there alone does not reach these runs.
+message are the adapter's. The body is built by the adapter's own ``_Body.__init__`` (in this world, with
+no reset): a bug planted there reaches these runs too.
 """
 from __future__ import annotations
 
@@ -20,7 +20,6 @@ import os
 
 import numpy as np
 
-from reference_sim.quaternion import quat_from_matrix
 from reference_sim.simulate import bad_rows
 
 __all__ = ["simulate", "one_step", "Rejected"]
@@ -46,37 +45,18 @@ def _world() -> int:
 
 
 def _body(scenario, variant: str, dt_s: float, y0):
-    """A ``pybullet_engine._Body`` of the scenario in this process's world (the previous body removed)."""
+    """A ``pybullet_engine._Body`` of the scenario in this process's world (the previous body removed), built
+    by the adapter's own ``_Body.__init__``."""
     from cross_checks.engines import pybullet_engine as pe
-    p = pe.p
     c = _world()
-    B = object.__new__(pe._Body)
-    B.c, B.maximal = c, variant == "maximal"
-    body, forces = scenario.problem.body, scenario.problem.forces
-    if body.is_diagonal():
-        moments, B.q_BP = np.diag(body.inertia_B).copy(), None
-    else:
-        moments, R_BP = body.principal_axes()
-        B.q_BP = quat_from_matrix(R_BP)
-    B.weight = body.mass_kg * np.asarray(forces.gravity_W, dtype=float)
     try:
         if _WORLD["b"] is not None:
-            p.removeBody(_WORLD["b"], physicsClientId=c)
+            pe.p.removeBody(_WORLD["b"], physicsClientId=c)
             _WORLD["b"] = None
-        p.setGravity(*[float(g) for g in forces.gravity_W], physicsClientId=c)
-        p.setPhysicsEngineParameter(fixedTimeStep=float(dt_s), numSubSteps=0, physicsClientId=c)
-        x0, q0 = B._pose_in(y0)
-        B.b = p.createMultiBody(baseMass=float(body.mass_kg), baseCollisionShapeIndex=-1, baseVisualShapeIndex=-1,
-                                basePosition=x0, baseOrientation=q0, useMaximalCoordinates=B.maximal,
-                                physicsClientId=c)
-        if B.b < 0:
-            raise Rejected("createMultiBody failed")
-        _WORLD["b"] = B.b
-        p.changeDynamics(B.b, -1, mass=float(body.mass_kg), localInertiaDiagonal=[float(v) for v in moments],
-                         activationState=p.ACTIVATION_STATE_DISABLE_SLEEPING, physicsClientId=c,
-                         **pe.DYNAMICS_SETTINGS)
-    except p.error as exc:
+        B = pe._Body(scenario, variant, dt_s, y0, client=c)
+    except (pe.EngineError, pe.p.error) as exc:
         raise Rejected(str(exc)) from None
+    _WORLD["b"] = B.b
     return B
 
 
