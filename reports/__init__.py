@@ -121,8 +121,10 @@ def _tidy(d, written, drawn, listed, marked) -> None:
 def _draw_all(res, names, plot_dir: Path, jobs, progress, t0) -> dict:
     """Draw every figure (in ``jobs`` processes); returns ``{scenario: [(kind, file or None, note)]}``
     in the order of plots.KINDS."""
-    from reports.plots import KINDS, figure_tasks   # imported here: forked workers inherit matplotlib
+    from reports.plots import KINDS, figure_tasks, relative_cost   # imported here: forked workers inherit matplotlib
     tasks = [(sc, kind, str(plot_dir)) for sc in names for _, kind in figure_tasks(res, sc)]
+    # the costliest figures first, so that no process is left drawing a large one while the other idles
+    tasks.sort(key=lambda t: -relative_cost(res, t[0], t[1]))
     _SHARED.clear()
     _SHARED.update(res=res, directory=str(res.directory))
     out = {sc: {} for sc in names}
