@@ -29,7 +29,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-from matplotlib.lines import Line2D  # noqa: E402
+from matplotlib.collections import LineCollection  # noqa: E402
 
 from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, UNITS  # noqa: E402
 from reports.canvas import (legend_at, legend_below, legend_height_in, pad_limits, panels,  # noqa: E402
@@ -175,6 +175,7 @@ def _time_panels(fig, axes, res, sc, fams, styles, rows, log):
         keep, every = [], []
         for j, (fam, vs) in enumerate(fams.items()):
             ax = axes[i, j]
+            curves = []   # (xy, style): the panel's variants, drawn as one collection (one artist)
             ref = ser.get("reference")
             if not log and ref is not None and get(ref) is not None:
                 ax.plot(ref["t_s"], get(ref), color="black", lw=3.2, alpha=0.28)
@@ -190,15 +191,19 @@ def _time_panels(fig, axes, res, sc, fams, styles, rows, log):
                     ok &= t <= tdiv
                 y_draw = _positive(y) if log else y
                 st = styles[v]
-                ax.plot(t[ok], y_draw[ok], color=st["color"], ls=st["ls"], lw=1.1)
+                curves.append((np.column_stack([t[ok], y_draw[ok]]), st))
                 drawn.add(v)
                 _widen(t_span, t[ok])
                 every.append(y_draw[ok])
                 if tdiv is not None and ok.any():
                     k = np.flatnonzero(ok)[-1]
-                    ax.plot([t[k]], [y_draw[k]], marker="x", ms=9, mew=2, color=st["color"], clip_on=True)
+                    ax.plot([t[k]], [y_draw[k]], marker="x", ms=9, mew=2, color=st["color"], clip_on=True, zorder=3)
                 else:
                     keep.append(y[ok])
+            if curves:
+                ax.add_collection(LineCollection([xy for xy, _ in curves], colors=[st["color"] for _, st in curves],
+                                                 linestyles=[st["ls"] for _, st in curves], linewidths=1.1),
+                                  autolim=False)
             if i == 0:
                 _panel_title(ax, fam)
         lim = _robust_limits(keep, log) or _robust_limits(every, log)
