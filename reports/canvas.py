@@ -14,7 +14,7 @@ creating axes and their tick objects, ~20 % in matplotlib's Legend (offset boxes
   label again to place them.
 * :func:`legend_below` draws a legend as one short line (and marker) and one text per entry, placed in
   inches under its panel, without offset boxes.
-* Horizontal text is rasterized a whole string at a time (:class:`_StringRenderer`): matplotlib 3.11
+* Text (horizontal or turned a quarter) is rasterized a whole string at a time (:class:`_StringRenderer`): matplotlib 3.11
   renders and places every glyph from Python, ~3 ms per label, the largest single cost left (half of
   the drawing time; the same labels drawn as one bitmap each take a third of that, same pixels).
 * :func:`save_png` draws once and quantizes the canvas's own pixels into an 8-bit palette PNG (no RGBA
@@ -45,24 +45,30 @@ YLABEL_OFFSET_PT = 5 * 0.6 * TICK_LABEL_PT + 3.5 + 3.5 + 4.0
 XLABEL_OFFSET_PT = 3.5 + 3.5 + 1.2 * TICK_LABEL_PT + 3.0
 
 class _StringRenderer(RendererAgg):
-    """Agg renderer that rasterizes a horizontal plain-text string in one FreeType call
-    (FT2Font.set_text + draw_glyphs_to_bitmap, placed as matplotlib 3.10 placed it) instead of glyph by
-    glyph. Rotated text and mathtext are left to matplotlib. Any failure of the string path (a
+    """Agg renderer that rasterizes a plain-text string in one FreeType call (FT2Font.set_text +
+    draw_glyphs_to_bitmap, placed as matplotlib 3.10 placed it) instead of glyph by glyph; a string
+    turned a quarter (y labels) is the same bitmap turned. Other angles and mathtext are left to
+    matplotlib. Any failure of the string path (a
     matplotlib whose internals differ) falls back to matplotlib's own drawing for good; the test
     tests/reports/test_canvas.py compares the two renderings pixel by pixel."""
 
     string_path = True
 
     def draw_text(self, gc, x, y, s, prop, angle, ismath=False, mtext=None):
-        if ismath or angle or not _StringRenderer.string_path:
+        if ismath or angle not in (0, 90) or not _StringRenderer.string_path:
             return super().draw_text(gc, x, y, s, prop, angle, ismath=ismath, mtext=mtext)
         try:
             font = self._prepare_font(prop)
             font.set_text(s, 0, flags=get_hinting_flag())
             font.draw_glyphs_to_bitmap(antialiased=gc.get_antialiased())
             xo, yo = font.get_bitmap_offset()
-            x, y = round(x + xo / 64.0), round(y + yo / 64.0 + font.get_descent() / 64.0)
-            self._renderer.draw_text_image(np.asarray(font.get_image()), x, y + 1, 0, gc)
+            img = np.asarray(font.get_image())
+            # the horizontal bitmap's left and bottom (y downwards) relative to the pen origin (x, y)
+            left, bottom = xo / 64.0, yo / 64.0 + font.get_descent() / 64.0 + 1
+            if angle == 90:   # turned a quarter anticlockwise about the pen origin: (u, v) -> (v, -u)
+                img = np.ascontiguousarray(np.rot90(img))
+                left, bottom = bottom - img.shape[1], -left
+            self._renderer.draw_text_image(img, round(x + left), round(y + bottom), 0, gc)
         except (AttributeError, TypeError, ValueError):   # not the FreeType/Agg interface of matplotlib 3.11
             _StringRenderer.string_path = False
             return super().draw_text(gc, x, y, s, prop, angle, ismath=ismath, mtext=mtext)
