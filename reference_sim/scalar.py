@@ -33,7 +33,7 @@ class _FloatBackend:
 
     @staticmethod
     def maxabs(values):
-        return max(abs(v) for v in values)
+        return max(map(abs, values))
 
 
 class _NumpyBackend:
@@ -168,10 +168,11 @@ class ScalarStepper:
     def force_torque(self, y):
         """World force at the COM and world torque about it (6 floats) at state ``y`` (13 numbers),
         the rotation taken from q/|q| — ForceModel.force_torque in plain floats."""
-        qw, qx, qy, qz = (float(c) for c in y[6:10])
+        if type(y) is not list:  # the adapters' loops pass lists of floats already (no conversion per call)
+            y = [float(c) for c in y]
+        qw, qx, qy, qz = y[6:10]
         n = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
-        x, v = [float(c) for c in y[0:3]], [float(c) for c in y[3:6]]
-        return self._force_torque(x, v, self._rot(qw / n, qx / n, qy / n, qz / n))
+        return self._force_torque(y[0:3], y[3:6], self._rot(qw / n, qx / n, qy / n, qz / n))
 
     def world_inertia_times(self, y, ax, ay, az):
         """``I_W a = R I_B Rᵀ a`` (world axes) for the orientation of state ``y`` (rotation of q/|q|)."""
@@ -338,7 +339,7 @@ class ScalarStepper:
             prev = float("inf")
             for _ in range(_MAX_ITER):
                 z_new = [a + h * b for a, b in zip(y, self.rhs(z))]
-                d = max(abs(a - b) / (1.0 + abs(a)) for a, b in zip(z_new, z))
+                d = max([abs(a - b) / (1.0 + abs(a)) for a, b in zip(z_new, z)])  # a list: ~2x a generator
                 z = z_new
                 if d <= IMPLICIT_TOL:
                     return self._finish(z)

@@ -15,10 +15,10 @@ from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
 
-from cross_checks.sweep.jobs import failed_record, reference_job, run_job
+from cross_checks.sweep.jobs import failed_record, reference_job, run_job, second_reference_job
 from cross_checks.sweep.lifecycle import worker_init
 
-__all__ = ["Runner", "ScenarioReference", "run_references", "run_jobs"]
+__all__ = ["Runner", "ScenarioReference", "SecondReference", "run_references", "run_jobs", "second_reference_jobs"]
 
 
 class Runner:
@@ -181,9 +181,20 @@ def run_references(runner: Runner, scenarios, work_dir, cache_root, use_cache, t
 
 # --- the jobs ---------------------------------------------------------------------------------------
 
+@dataclass(frozen=True, eq=False)  # hashed by identity: the parent keys its records by its own items
+class SecondReference:
+    """The job of a scenario's second reference (Drake's; :func:`cross_checks.sweep.jobs.second_reference_job`),
+    run among the runs, longest first: nothing waits for it but the summary."""
+
+    scenario_index: int
+    scenario: str
+    measured: dict
+    cost: float = 0.0  # not counted in the runs' progress
+
+
 def _run_job_item(item):
     """``item`` = (job, scenario, ref_path, cache_root, use_cache, user_engines, time_limit_s, marker): one
-    small pickle per job.
+    small pickle per job (``job`` a :class:`SecondReference`: that scenario's second reference).
 
     ``user_engines`` are the parent's engine-file adapters (a worker that was not forked from the
     parent, e.g. on Dask, registers them here). ``marker`` (a file path) exists while the job runs,
@@ -192,6 +203,14 @@ def _run_job_item(item):
     """
     job, scenario, ref_path, cache_root, use_cache, user_engines, time_limit_s, marker = item
     Path(marker).touch()
+    if isinstance(job, SecondReference):
+        try:
+            return second_reference_job(scenario, ref_path, job.measured, cache_root, use_cache, time_limit_s)
+        except Exception as exc:  # noqa: BLE001 - said in the scenario's record, the sweep goes on
+            return {"label": "drake", "target_accuracy": None, "agrees": None,
+                    "error": f"internal error: {type(exc).__name__}: {exc}"}
+        finally:
+            Path(marker).unlink(missing_ok=True)
     try:
         from cross_checks.engines import adopt_user_engines
         adopt_user_engines(user_engines)
@@ -208,28 +227,47 @@ def _in_flight(item) -> bool:
 
 def _crashed(item) -> dict:
     Path(item[-1]).unlink(missing_ok=True)
+    if isinstance(item[0], SecondReference):
+        return {"label": "drake", "target_accuracy": None, "agrees": None,
+                "error": "the worker process died computing it (a crash inside Drake?)"}
     return failed_record(item[0], item[1], "the worker process died running this job, alone (a crash inside the engine?)")
 
 
+def second_reference_jobs(scenarios, references) -> list:
+    """A :class:`SecondReference` per scenario whose reference exists, when Drake is installed (else none:
+    the records stay None)."""
+    try:
+        import cross_checks.engines.drake_reference  # noqa: F401
+    except ImportError:
+        return []
+    return [SecondReference(i, sc.name, ref.measured) for i, (sc, ref) in enumerate(zip(scenarios, references))
+            if not ref.error]
+
+
 def run_jobs(runner: Runner, jobs, scenarios, references, work_dir, cache_root, use_cache, time_limit_s,
-             show_progress: bool) -> dict:
-    """``{Job: record}`` of every job (:func:`cross_checks.sweep.jobs.run_job`), run in the order given;
+             show_progress: bool, second=(), second_time_limit_s=None) -> dict:
+    """``{Job: record}`` of every job (:func:`cross_checks.sweep.jobs.run_job`), run in the order given,
+    after the :class:`SecondReference` jobs ``second`` (their records: the summary's ``second_reference``);
     a job whose scenario has no reference is a failed row carrying the reason."""
     from cross_checks.core.progress import Progress
     from cross_checks.engines import user_engines
     records = {j: failed_record(j, scenarios[j.scenario_index], references[j.scenario_index].error)
                for j in jobs if references[j.scenario_index].error}
-    todo = [j for j in jobs if j not in records]
+    todo = list(second) + [j for j in jobs if j not in records]
     inflight = Path(work_dir) / "inflight"
     inflight.mkdir()
     extra_engines = user_engines()
     items = [(j, scenarios[j.scenario_index], references[j.scenario_index].path, cache_root, use_cache,
-              extra_engines, time_limit_s, str(inflight / str(k))) for k, j in enumerate(todo)]
+              extra_engines, second_time_limit_s if isinstance(j, SecondReference) else time_limit_s,
+              str(inflight / str(k))) for k, j in enumerate(todo)]
     with Progress("rbcheck sweep", "runs", len(todo), enabled=show_progress,
                   total_work=sum(j.cost for j in todo)) as bar:
         def done(item, rec):
-            records[item[0]] = rec
-            bar.update(1, f"{item[0].scenario} {item[0].variant} dt={item[0].dt_s:g}", work=item[0].cost)
+            j = item[0]
+            records[j] = rec
+            what = f"{j.scenario} second reference" if isinstance(j, SecondReference) else \
+                f"{j.scenario} {j.variant} dt={j.dt_s:g}"
+            bar.update(1, what, work=j.cost)
 
         runner.map_unordered(_run_job_item, items, done, on_crash=_crashed, in_flight=_in_flight)
     return records

@@ -5,26 +5,27 @@ from cross_checks.sweep.jobs import Job, job_dts
 
 __all__ = ["plan_jobs", "job_cost_s"]
 
-#: Rough cost per step (µs) of each variant, measured on the catalog (2 vCPU), only to order the
-#: jobs longest first. MuJoCo/PyBullet cost ~5 µs/step unless the adapter evaluates the forces in
-#: Python every step (state-dependent forces): then ~75 µs (~270 µs for MuJoCo RK4's four stages).
-_COST_US = {"reference:course": 7, "reference:course_gyro": 7, "reference:expmap_gyro": 7,
-            "reference:explicit_euler": 7, "reference:implicit_euler": 800, "reference:midpoint": 12,
-            "reference:leapfrog": 40, "reference:rk4": 22}
-_COST_ENGINE_STATE_DEPENDENT = {"mujoco:rk4": 270}
-_COST_ENGINE_DEFAULT_US = (5, 75)  # (forces constant, forces state-dependent)
+#: Rough cost per step (µs) of each variant, (forces constant, forces state-dependent), measured on the
+#: catalog (wall_s / steps of results.csv, a --no-cache default sweep on 2 vCPU with 2 workers, Drake
+#: included; implicit Euler and leapfrog after this stop's ~1.5x cut of their float iterations). Used to
+#: run the longest jobs first and to estimate the time left; an engine not listed (e.g. an engine file)
+#: counts _COST_DEFAULT_US.
+_COST_US = {
+    "reference:course": (11, 13), "reference:course_gyro": (12, 15), "reference:expmap_gyro": (13, 16),
+    "reference:explicit_euler": (13, 16), "reference:midpoint": (22, 29), "reference:rk4": (34, 44),
+    "reference:leapfrog": (35, 37), "reference:implicit_euler": (36, 44),
+    "mujoco:euler": (5, 18), "mujoco:implicitfast": (6, 18), "mujoco:implicit": (7, 20), "mujoco:rk4": (14, 58),
+    "pybullet:maximal": (12, 42), "pybullet:multibody": (12, 44),
+    "drake:semi_explicit_euler": (21, 62), "drake:runge_kutta2": (29, 91), "drake:runge_kutta3": (37, 127),
+    "drake:implicit_euler": (126, 382),
+}
+_COST_DEFAULT_US = (5, 75)
 
 
 def job_cost_s(scenario, variant: str, dt: float) -> float:
     """Estimated wall time (s) of one run: its steps times the variant's measured cost per step."""
-    n = scenario.n_steps(dt)
-    if variant in _COST_US:
-        us = _COST_US[variant]
-    elif scenario.problem.forces.state_dependent:
-        us = _COST_ENGINE_STATE_DEPENDENT.get(variant, _COST_ENGINE_DEFAULT_US[1])
-    else:
-        us = _COST_ENGINE_DEFAULT_US[0]
-    return n * us * 1e-6
+    us = _COST_US.get(variant, _COST_DEFAULT_US)[1 if scenario.problem.forces.state_dependent else 0]
+    return scenario.n_steps(dt) * us * 1e-6
 
 
 def plan_jobs(scenarios, variants) -> list:

@@ -22,6 +22,7 @@ Results directory::
 """
 from __future__ import annotations
 
+import dataclasses
 import shutil
 import sys
 import time
@@ -32,7 +33,7 @@ from cross_checks.core.files import atomic_write_text, save_npz_atomic, usable_c
 from cross_checks.core.progress import stage
 from cross_checks.sweep import assemble
 from cross_checks.sweep.cache import cache_dir
-from cross_checks.sweep.execute import Runner, run_jobs, run_references
+from cross_checks.sweep.execute import Runner, run_jobs, run_references, second_reference_jobs
 from cross_checks.sweep.fingerprint import code_fingerprint
 from cross_checks.sweep.jobs import (LOCAL_SAMPLES, MAX_SERIES_POINTS, RESULT_COLUMNS, SCHEMA_VERSION, Job,
                                      clear_reference_memo)
@@ -77,7 +78,7 @@ def _checked_output(out_dir, scenarios):
 def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cache: bool = True,
               progress: bool | None = None, skipped=None, finish=None,
               executor=None, run_time_limit_s: float | None = tol.RUN_TIME_LIMIT_S,
-              reference_time_limit_s: float | None = tol.REFERENCE_TIME_LIMIT_S) -> dict:
+              reference_time_limit_s: float | None = tol.REFERENCE_TIME_LIMIT_S, second_reference: bool = True) -> dict:
     """Run the sweep and write the results directory ``out_dir`` (atomically).
 
     Parameters
@@ -93,6 +94,8 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
         (e.g. ``reports.render``: the report is then part of the atomic replacement). None: no report.
     run_time_limit_s, reference_time_limit_s : wall-time limits of one run and of one reference solve
         (None: none); a run or reference over its limit is a ``failed`` row saying so.
+    second_reference : compute Drake's second reference of every scenario when Drake is installed (False:
+        its records are None, as without Drake; `rbcheck bench` measures the sweep of issue 15 this way).
     executor : any ``concurrent.futures.Executor`` to run the jobs on instead of the local process
         pool (e.g. ``distributed.Client(address).get_executor()``); its workers must see the parent
         directory of ``out_dir`` and the cache directory (jobs exchange reference solutions as files).
@@ -115,8 +118,10 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
         runner = Runner(jobs, executor)
         show = sys.stderr.isatty() if progress is None else progress
         refs = run_references(runner, scenarios, work, cache_root, use_cache, reference_time_limit_s, show)
+        second = second_reference_jobs(scenarios, refs) if second_reference else []
         records = run_jobs(runner, plan_jobs(scenarios, variants), scenarios, refs, work, cache_root, use_cache,
-                           run_time_limit_s, show)
+                           run_time_limit_s, show, second=second, second_time_limit_s=reference_time_limit_s)
+        refs = _with_second_references(refs, {s.scenario_index: records.pop(s) for s in second})
         runner.close()
         runner = None
         stage("rbcheck sweep", "writing results.csv, summary.json and series/", enabled=show)
@@ -136,6 +141,13 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
             runner.close(kill=True)
         if staging is not None:
             shutil.rmtree(staging, ignore_errors=True)
+
+
+def _with_second_references(refs, second: dict) -> list:
+    """Each scenario's reference with ``measured["second_reference"]``: its record from ``second``
+    {scenario index: record}, None when it has none (Drake not installed, or no reference)."""
+    return [dataclasses.replace(r, measured={**(r.measured or {}), "second_reference": second.get(i)})
+            for i, r in enumerate(refs)]
 
 
 def _write_results(staging, scenarios, variants, refs, records, *, started, skipped, jobs, t_start) -> dict:

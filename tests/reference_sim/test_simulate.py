@@ -54,3 +54,40 @@ def test_a_nan_in_any_component_of_the_fast_path_is_a_divergence_at_its_step(mon
     run = simulate(_problem([0.1, 1.0, 0.1]), "rk4", 0.01, 10)
     assert run.diverged_at_s == 0.03 and "non-finite state" in run.message
     assert len(run.y) == 3 and np.all(np.isfinite(run.y))
+
+
+def test_block_divergence_test_cuts_the_run_where_a_per_step_test_would(monkeypatch):
+    # The fast path tests states in blocks of CHECK_EVERY: its run must equal the one that tests every
+    # step (CHECK_EVERY = 1), for blow-ups landing at different places inside a block.
+    import reference_sim.simulate as S
+    cases = [([0.1, 20.0, 0.1], "expmap_gyro"), ([0.1, 25.0, 0.1], "expmap_gyro"), ([0.1, 25.0, 0.1], "course_gyro"),
+             ([0.1, 40.0, 0.1], "course_gyro")]
+    blocked = [simulate(_problem(w), v, 0.01, 3000) for w, v in cases]
+    monkeypatch.setattr(S, "CHECK_EVERY", 1)
+    for (w, v), one in zip(cases, blocked):
+        each = simulate(_problem(w), v, 0.01, 3000)
+        assert one.diverged_at_s is not None and one.diverged_at_s == each.diverged_at_s, v
+        assert one.message == each.message
+        np.testing.assert_array_equal(one.y, each.y)
+    assert len({round(r.diverged_at_s / 0.01) % 64 for r in blocked}) > 1  # not all at one place in a block
+
+
+def test_an_exception_after_an_unnoticed_bad_state_reports_the_bad_state(monkeypatch):
+    import reference_sim.scalar as scalar
+
+    class InfThenRaise:
+        def __init__(self, problem, variant, dt_s):
+            self.n = 0
+
+        def step(self, y):
+            self.n += 1
+            if self.n == 6:
+                raise ValueError("math domain error")
+            out = [v + 1e-3 for v in y]
+            if self.n == 4:
+                out[0] = float("inf")
+            return out
+
+    monkeypatch.setattr(scalar, "ScalarStepper", InfThenRaise)
+    run = simulate(_problem([0.1, 1.0, 0.1]), "rk4", 0.01, 100)
+    assert run.diverged_at_s == 0.04 and "non-finite state" in run.message and len(run.y) == 4
