@@ -121,6 +121,7 @@ def _tidy(d, written, drawn, listed, marked) -> None:
 def _draw_all(res, names, plot_dir: Path, jobs, progress, t0) -> dict:
     """Draw every figure (in ``jobs`` processes); returns ``{scenario: [(kind, file or None, note)]}``
     in the order of plots.KINDS."""
+    from reports.canvas import release
     from reports.plots import KINDS, figure_tasks, layout_group, relative_cost   # here: forked workers inherit matplotlib
     tasks = [(sc, kind, str(plot_dir)) for sc in names for _, kind in figure_tasks(res, sc)]
     # the costliest figures first, so that no process is left drawing a large one while the other idles
@@ -156,6 +157,7 @@ def _draw_all(res, names, plot_dir: Path, jobs, progress, t0) -> dict:
                 done(i, _draw(t))
     finally:
         _SHARED.clear()
+        release()
     return {sc: [figs[k] for k in KINDS if k in figs] for sc, figs in out.items()}
 
 

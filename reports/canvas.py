@@ -29,7 +29,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.transforms import offset_copy
 
-__all__ = ["panels", "legend_below", "legend_at", "legend_height_in", "save_png", "pad_limits", "LEGEND_LINE_IN",
+__all__ = ["panels", "release", "legend_below", "legend_at", "legend_height_in", "save_png", "pad_limits", "LEGEND_LINE_IN",
            "TICK_LABEL_PT"]
 
 #: Height of one legend line (7 pt text and its spacing), inches; the legends' strip below the panels is
@@ -107,6 +107,12 @@ def panels(key, nrows: int, ncols: int, size_in, dpi: float, log: bool, outer_la
     _empty(fig, axes)
     fig.set_size_inches(*size_in)
     return fig, axes
+
+
+def release() -> None:
+    """Drop the pooled figures (and their pixel buffers, ~6 MB each) of this process: a caller that drew
+    in its own process (``jobs=1``) does not keep them after the report."""
+    _POOL.clear()
 
 
 def _new_panel(ax, log, bottom, left) -> None:

@@ -126,3 +126,11 @@ def test_pad_limits_widen_like_matplotlib_autoscaling():
     assert canvas.pad_limits(1e-3, 1e1, log=True) == pytest.approx((10 ** -3.2, 10 ** 1.2))
     lo, hi = canvas.pad_limits(2.0, 2.0, log=False)
     assert lo < 2.0 < hi
+
+
+def test_a_report_drawn_in_this_process_keeps_no_figure(browser_results, tmp_path):
+    import reports
+    d = tmp_path / "res"
+    shutil.copytree(browser_results, d)
+    reports.render(d, jobs=1, progress=False)
+    assert canvas._POOL == {}
