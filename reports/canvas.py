@@ -54,24 +54,52 @@ class _StringRenderer(RendererAgg):
 
     string_path = True
 
+    def get_text_width_height_descent(self, s, prop, ismath):
+        """matplotlib's measure, kept for the process (its own cache is per renderer, and a renderer
+        per figure size: the same tick labels and legends were shaped again for every figure)."""
+        if ismath:
+            return super().get_text_width_height_descent(s, prop, ismath)
+        key = (s, hash(prop), self.dpi, get_hinting_flag())    # FontProperties compare by their hash
+        if key not in _METRICS:
+            if len(_METRICS) > _CACHE_MAX:
+                _METRICS.clear()
+            _METRICS[key] = super().get_text_width_height_descent(s, prop, ismath)
+        return _METRICS[key]
+
     def draw_text(self, gc, x, y, s, prop, angle, ismath=False, mtext=None):
         if ismath or angle not in (0, 90) or not _StringRenderer.string_path:
             return super().draw_text(gc, x, y, s, prop, angle, ismath=ismath, mtext=mtext)
         try:
-            font = self._prepare_font(prop)
-            font.set_text(s, 0, flags=get_hinting_flag())
-            font.draw_glyphs_to_bitmap(antialiased=gc.get_antialiased())
-            xo, yo = font.get_bitmap_offset()
-            img = np.asarray(font.get_image())
-            # the horizontal bitmap's left and bottom (y downwards) relative to the pen origin (x, y)
-            left, bottom = xo / 64.0, yo / 64.0 + font.get_descent() / 64.0 + 1
-            if angle == 90:   # turned a quarter anticlockwise about the pen origin: (u, v) -> (v, -u)
-                img = np.ascontiguousarray(np.rot90(img))
-                left, bottom = bottom - img.shape[1], -left
+            img, left, bottom = self._bitmap(s, prop, angle, gc.get_antialiased())
             self._renderer.draw_text_image(img, round(x + left), round(y + bottom), 0, gc)
         except (AttributeError, TypeError, ValueError):   # not the FreeType/Agg interface of matplotlib 3.11
             _StringRenderer.string_path = False
             return super().draw_text(gc, x, y, s, prop, angle, ismath=ismath, mtext=mtext)
+
+    def _bitmap(self, s, prop, angle, antialiased):
+        """The string's coverage bitmap and its left and bottom (pixels, y downwards) relative to the pen
+        origin; the same for every position, so kept for the process (labels repeat across figures)."""
+        key = (s, hash(prop), self.dpi, get_hinting_flag(), angle, bool(antialiased))
+        if key not in _BITMAPS:
+            font = self._prepare_font(prop)
+            font.set_text(s, 0, flags=get_hinting_flag())
+            font.draw_glyphs_to_bitmap(antialiased=antialiased)
+            xo, yo = font.get_bitmap_offset()
+            img = np.array(font.get_image())
+            left, bottom = xo / 64.0, yo / 64.0 + font.get_descent() / 64.0 + 1
+            if angle == 90:   # turned a quarter anticlockwise about the pen origin: (u, v) -> (v, -u)
+                img = np.ascontiguousarray(np.rot90(img))
+                left, bottom = bottom - img.shape[1], -left
+            if len(_BITMAPS) > _CACHE_MAX:
+                _BITMAPS.clear()
+            _BITMAPS[key] = (img, left, bottom)
+        return _BITMAPS[key]
+
+
+#: Strings measured / rasterized, kept per process (a report has a few thousand distinct ones).
+_METRICS: dict = {}
+_BITMAPS: dict = {}
+_CACHE_MAX = 20000
 
 
 class _Canvas(FigureCanvasAgg):
