@@ -7,7 +7,7 @@ __all__ = ["plan_jobs", "job_cost_s"]
 
 #: Rough cost per step (µs) of each variant, (forces constant, forces state-dependent), measured on the
 #: catalog (wall_s / steps of results.csv, a --no-cache default sweep on 2 vCPU with 2 workers, Drake
-#: included; implicit Euler and leapfrog after this stop's ~1.5x cut of their float iterations). Used to
+#: included; implicit Euler and leapfrog as measured on their own, ~35–45 µs/step). Used to
 #: run the longest jobs first and to estimate the time left; an engine not listed (e.g. an engine file)
 #: counts _COST_DEFAULT_US.
 _COST_US = {
