@@ -33,17 +33,11 @@ def ground_truth(problem: Problem, t_s, y0=None, rtol: float = GROUND_TRUTH_RTOL
     t_s = np.asarray(t_s, dtype=float)
     y0 = problem.initial_packed() if y0 is None else np.asarray(y0, dtype=float)
     shape = y0.shape
-    if y0.ndim == 1:
-        # One state: the same right-hand side on Python floats (reference_sim.scalar, tested against
-        # ``rhs`` to round-off), ~20x cheaper per call than NumPy on 13 numbers.
-        from reference_sim.scalar import ScalarStepper
-        scalar_rhs = ScalarStepper(problem, "explicit_euler", 1.0).rhs
+    # Deliberately the batched NumPy definition (integrators.rhs), not the plain-float kernel the schemes
+    # step with (reference_sim.scalar): a bug there must not move the reference the runs are judged against.
 
-        def f(_t, y):
-            return np.array(scalar_rhs(y.tolist()))
-    else:
-        def f(_t, y):
-            return rhs(problem, y.reshape(shape)).reshape(-1)
+    def f(_t, y):
+        return rhs(problem, y.reshape(shape)).reshape(-1)
 
     sol = solve_ivp(f, (t_s[0], t_s[-1]), y0.reshape(-1), method="DOP853", t_eval=t_s, rtol=rtol, atol=atol)
     if not sol.success:

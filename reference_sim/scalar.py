@@ -98,6 +98,25 @@ class ScalarStepper:
             "implicit_euler": self._implicit_euler,
         }[variant]
 
+    # -- what the step tests with ``if``: read live from the parameters (a setting changed after __init__
+    # counts); the N-case kernel, whose parameters are (N,) arrays, overrides them per batch ------------
+    @property
+    def has_drag(self) -> bool:
+        return bool(self.c)
+
+    @property
+    def has_body_torque(self) -> bool:
+        b = self.tau_B
+        return bool(b[0] or b[1] or b[2])
+
+    @property
+    def has_velocity_decay(self) -> bool:
+        return bool(self.kv)
+
+    @property
+    def has_angular_decay(self) -> bool:
+        return bool(self.kw)
+
     # -- pieces ---------------------------------------------------------------------------------------
     @staticmethod
     def _rot(qw, qx, qy, qz):
@@ -109,14 +128,18 @@ class ScalarStepper:
                 (2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy)))
 
     def _force_torque(self, x, v, R):
-        """World force at the COM and world torque about it (N, N m), as ForceModel.force_torque."""
+        """World force at the COM and world torque about it (N, N m), as ForceModel.force_torque.
+
+        Written without augmented assignments and with ``if`` only on the ``has_*`` flags, so that the
+        N-case kernel (cross_checks.fuzz.kernel) can hold the parameters as plain (N,) arrays: ``tx += …``
+        on a name bound to ``self.tau_W[0]`` would write into that array."""
         (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R
         fx, fy, fz = self.mg[0] + self.fixed_f[0], self.mg[1] + self.fixed_f[1], self.mg[2] + self.fixed_f[2]
         tx, ty, tz = self.tau_W
-        if self.c:
-            fx -= self.c * v[0]
-            fy -= self.c * v[1]
-            fz -= self.c * v[2]
+        if self.has_drag:
+            fx = fx - self.c * v[0]
+            fy = fy - self.c * v[1]
+            fz = fz - self.c * v[2]
         for anchor, a, k, L0 in self.springs:
             rx = r00 * a[0] + r01 * a[1] + r02 * a[2]
             ry = r10 * a[0] + r11 * a[1] + r12 * a[2]
@@ -129,22 +152,22 @@ class ScalarStepper:
                 with np.errstate(divide="ignore", invalid="ignore"):
                     s = np.where(L > 0.0, -k * (L - L0) / L, 0.0)
             sx, sy, sz = s * dx, s * dy, s * dz
-            fx += sx
-            fy += sy
-            fz += sz
-            tx += ry * sz - rz * sy
-            ty += rz * sx - rx * sz
-            tz += rx * sy - ry * sx
+            fx = fx + sx
+            fy = fy + sy
+            fz = fz + sz
+            tx = tx + (ry * sz - rz * sy)
+            ty = ty + (rz * sx - rx * sz)
+            tz = tz + (rx * sy - ry * sx)
         for f, r in self.world_point:
             rx = r00 * r[0] + r01 * r[1] + r02 * r[2]
             ry = r10 * r[0] + r11 * r[1] + r12 * r[2]
             rz = r20 * r[0] + r21 * r[1] + r22 * r[2]
-            fx += f[0]
-            fy += f[1]
-            fz += f[2]
-            tx += ry * f[2] - rz * f[1]
-            ty += rz * f[0] - rx * f[2]
-            tz += rx * f[1] - ry * f[0]
+            fx = fx + f[0]
+            fy = fy + f[1]
+            fz = fz + f[2]
+            tx = tx + (ry * f[2] - rz * f[1])
+            ty = ty + (rz * f[0] - rx * f[2])
+            tz = tz + (rx * f[1] - ry * f[0])
         for f, r in self.body_point:
             gx = r00 * f[0] + r01 * f[1] + r02 * f[2]
             gy = r10 * f[0] + r11 * f[1] + r12 * f[2]
@@ -152,17 +175,17 @@ class ScalarStepper:
             rx = r00 * r[0] + r01 * r[1] + r02 * r[2]
             ry = r10 * r[0] + r11 * r[1] + r12 * r[2]
             rz = r20 * r[0] + r21 * r[1] + r22 * r[2]
-            fx += gx
-            fy += gy
-            fz += gz
-            tx += ry * gz - rz * gy
-            ty += rz * gx - rx * gz
-            tz += rx * gy - ry * gx
+            fx = fx + gx
+            fy = fy + gy
+            fz = fz + gz
+            tx = tx + (ry * gz - rz * gy)
+            ty = ty + (rz * gx - rx * gz)
+            tz = tz + (rx * gy - ry * gx)
         b = self.tau_B
-        if b[0] or b[1] or b[2]:
-            tx += r00 * b[0] + r01 * b[1] + r02 * b[2]
-            ty += r10 * b[0] + r11 * b[1] + r12 * b[2]
-            tz += r20 * b[0] + r21 * b[1] + r22 * b[2]
+        if self.has_body_torque:
+            tx = tx + (r00 * b[0] + r01 * b[1] + r02 * b[2])
+            ty = ty + (r10 * b[0] + r11 * b[1] + r12 * b[2])
+            tz = tz + (r20 * b[0] + r21 * b[1] + r22 * b[2])
         return fx, fy, fz, tx, ty, tz
 
     def force_torque(self, y):
@@ -262,9 +285,9 @@ class ScalarStepper:
         ax, ay, az = self._ang_acc(R, wx, wy, wz, tx, ty, tz, True)
         m = self.m
         dvx, dvy, dvz = fx / m, fy / m, fz / m
-        if self.kv:  # continuous decay −k v, −k ω (ForceModel.decay_rates_per_s)
+        if self.has_velocity_decay:  # continuous decay −k v, −k ω (ForceModel.decay_rates_per_s)
             dvx, dvy, dvz = dvx - self.kv * y[3], dvy - self.kv * y[4], dvz - self.kv * y[5]
-        if self.kw:
+        if self.has_angular_decay:
             ax, ay, az = ax - self.kw * wx, ay - self.kw * wy, az - self.kw * wz
         return [y[3], y[4], y[5], dvx, dvy, dvz,
                 0.5 * (-wx * qx - wy * qy - wz * qz), 0.5 * (wx * qw + wy * qz - wz * qy),

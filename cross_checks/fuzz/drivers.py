@@ -11,7 +11,10 @@ Three paths, each giving what the engine's own adapter gives, case by case:
   ``MujocoAdapter.simulate`` (tested); ``mujoco:rk4`` with forces that change within a step needs its
   per-stage control callback and runs through the adapter, case by case. A run that blows up is re-run
   through the adapter, so its "diverged at t = …" is the adapter's own;
-* every other engine (PyBullet, engine files, Python adapters) — its adapter, case by case.
+* ``pybullet:*`` — :mod:`~cross_checks.fuzz.pybullet_batch`: the adapter's runs, case by case, in a world of
+  the process's own (a body removed and created per run instead of a world reset; bit-identical, tested);
+  a run that blows up or is rejected goes through the adapter;
+* every other engine (engine files, Python adapters) — its adapter, case by case.
 
 Runs are recorded whole (``(n + 1, B, 13)``, NaN after a divergence or for a failed run); the batch is
 small enough (tens of cases, a few hundred steps) that measuring afterwards beats measuring on the fly.
@@ -146,6 +149,39 @@ def _reference_ladder(var, scenarios, h0s, n0):
 #: warning's time is not kept (a run that warned is re-run through the adapter, which keeps it).
 _NO_DATA = SimpleNamespace(time=math.nan)
 
+#: Compiled models of the batch's scenarios, one per (scenario, variant): {(id, variant): (scenario, model or
+#: the adapter's EngineError message, {step: model})}. The scenario is kept so that its id cannot be reused
+#: while cached.
+_MODELS: dict = {}
+_MODELS_MAX = 512   # a batch holds 64 cases x 4 variants
+
+
+def _model(sc, var, h):
+    """``build_model(sc, var, h)``: compiled once per (scenario, variant), other steps as copies with
+    ``opt.timestep`` set — the only thing the step changes in a compiled model (runs bit-identical to the
+    adapter's, tested). Raises the adapter's EngineError for a model MuJoCo rejects."""
+    import copy
+    from cross_checks.engines import mujoco_engine as me
+    from cross_checks.engines.base import EngineError
+    key = (id(sc), var)
+    hit = _MODELS.get(key)
+    if hit is None or hit[0] is not sc:
+        if len(_MODELS) >= _MODELS_MAX:
+            _MODELS.clear()
+        try:
+            hit = (sc, me.build_model(sc, var, h), {})
+        except EngineError as exc:
+            hit = (sc, str(exc), {})
+        _MODELS[key] = hit
+    if isinstance(hit[1], str):
+        raise EngineError(hit[1])
+    at = hit[2].get(float(h))   # one model per step: the ladder's rungs and the one-step rungs share them
+    if at is None:
+        at = hit[2][float(h)] = copy.copy(hit[1])
+        at.opt.timestep = float(h)
+    return at
+
+
 def _mujoco_state(me, y):
     """Packed states (M, 13) -> MuJoCo full-physics states (M, 14): [time 0, qpos, qvel (ω in BODY axes)]."""
     qpos, qvel = me._to_qpos_qvel(y)
@@ -246,7 +282,7 @@ def _mujoco_group(var, scenarios, hs, ns, threads):
     models, built = [], []
     for sc, h in zip(scenarios, hs):
         try:
-            models.append(me.build_model(sc, var, h))
+            models.append(_model(sc, var, h))
             built.append("")
         except EngineError as exc:
             models.append(None)
@@ -309,9 +345,26 @@ def run_ladder(variant: str, scenarios, h0s, n0: int, *, threads: int = 1) -> li
         h = np.asarray(h0s) / 2 ** r
         runs = _empty_runs(h, n0 * 2 ** r)
         for i, sc in enumerate(scenarios):
-            _adapter_run(variant, sc, h[i], n0 * 2 ** r, runs, i)
+            if engine != "pybullet" or not _pybullet_run(var, sc, h[i], n0 * 2 ** r, runs, i):
+                _adapter_run(variant, sc, h[i], n0 * 2 ** r, runs, i)
         out.append(runs)
     return out
+
+
+def _pybullet_run(var, scenario, h, n, runs, i) -> bool:
+    """Case ``i`` through :mod:`~cross_checks.fuzz.pybullet_batch` (the adapter's run, cheaper); False when
+    the run must go through the adapter instead (it blew up, or PyBullet rejected the body)."""
+    from cross_checks.fuzz import pybullet_batch
+    try:
+        y = pybullet_batch.simulate(scenario, var, float(h), int(n))
+    except KeyboardInterrupt:
+        raise
+    except Exception:  # noqa: BLE001 - the adapter reproduces the failure with its own message
+        return False
+    if y is None:
+        return False
+    runs.y[:, i] = y
+    return True
 
 
 def _mujoco_one_step(var, scenarios, hs, y_start, threads):
@@ -328,7 +381,7 @@ def _mujoco_one_step(var, scenarios, hs, y_start, threads):
         key = (id(sc), float(h))
         if key not in cache:
             try:
-                cache[key] = me.build_model(sc, var, h)
+                cache[key] = _model(sc, var, h)
             except EngineError:
                 cache[key] = None
         models.append(cache[key])
@@ -368,6 +421,9 @@ def one_step(variant: str, scenarios, hs, y_start, *, threads: int = 1):
         if plain:
             out[plain] = _mujoco_one_step(var, [scenarios[j] for j in plain], hs[plain], y_start[plain], threads)
     adapter = get_adapter(engine)
+    if engine == "pybullet":   # the adapter's one_step in this process's own world (pybullet_batch)
+        from cross_checks.fuzz import pybullet_batch
+        adapter = SimpleNamespace(one_step=pybullet_batch.one_step)
     groups: dict = {}
     for j in rest:
         groups.setdefault((id(scenarios[j]), float(hs[j])), []).append(j)

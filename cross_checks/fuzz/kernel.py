@@ -31,39 +31,8 @@ __all__ = ["CaseKernel", "columns", "rows"]
 _MAX_ITER = 50
 
 
-class _Param(np.ndarray):
-    """A parameter column: arithmetic returns plain arrays, and an augmented assignment on a local name
-    bound to it (``tx += ...`` where ``tx, ty, tz = self.tau_W``) rebinds that name, as it does for the
-    float stepper's numbers, instead of writing into the parameter."""
-
-    def __array_ufunc__(self, ufunc, method, *inputs, **kwargs):
-        plain = tuple(i.view(np.ndarray) if isinstance(i, _Param) else i for i in inputs)
-        return getattr(ufunc, method)(*plain, **kwargs)
-
-    def __iadd__(self, other):
-        return np.add(self, other)
-
-    def __isub__(self, other):
-        return np.subtract(self, other)
-
-    def __imul__(self, other):
-        return np.multiply(self, other)
-
-    def __itruediv__(self, other):
-        return np.divide(self, other)
-
-
-class _Flagged(_Param):
-    """A parameter column the stepper also tests with ``if``: true when ANY member's entry is non-zero
-    (the members whose entry is zero then add an exact 0.0)."""
-
-    def __bool__(self):
-        return bool(np.any(self.view(np.ndarray)))
-
-
-def _col(values, kind=None) -> np.ndarray:
-    a = np.ascontiguousarray(np.asarray(values, dtype=float))
-    return a if kind is None else a.view(kind)
+def _col(values) -> np.ndarray:
+    return np.ascontiguousarray(np.asarray(values, dtype=float))
 
 
 def columns(y) -> list:
@@ -87,13 +56,19 @@ class CaseKernel(ScalarStepper):
 
     Build with :meth:`stack`; ``step(cols) -> cols`` and ``rhs(cols)`` act on 13 (N,) columns.
     ``problems`` and ``h_s`` keep what each member was built from (``take`` selects members).
+    Parameters are plain (N,) arrays, so each operation of the step is one NumPy call on the batch.
     """
+
+    # ScalarStepper's ``if`` flags, set per batch by _from_steppers (plain attributes over its properties)
+    has_drag = has_body_torque = has_velocity_decay = has_angular_decay = False
 
     @classmethod
     def stack(cls, problems, variant: str, h_s) -> "CaseKernel":
         """The kernel of ``variant`` for members ``problems[i]`` at steps ``h_s[i]`` (s)."""
         h_s = [float(h) for h in np.broadcast_to(np.asarray(h_s, dtype=float), (len(problems),))]
-        steppers = [ScalarStepper(p, variant, h) for p, h in zip(problems, h_s)]
+        built: dict = {}   # members of one problem at one step (one-step starts) share their stepper
+        steppers = [built[(id(p), h)] if (id(p), h) in built else built.setdefault((id(p), h), ScalarStepper(p, variant, h))
+                    for p, h in zip(problems, h_s)]
         return cls._from_steppers(steppers, list(problems), variant, h_s)
 
     @classmethod
@@ -110,9 +85,9 @@ class CaseKernel(ScalarStepper):
         k.I = [[_col([t.I[i][j] for t in s]) for j in range(3)] for i in range(3)]
         k.Iinv = [[_col([t.Iinv[i][j] for t in s]) for j in range(3)] for i in range(3)]
         k.mg = [_col([t.mg[i] for t in s]) for i in range(3)]
-        k.c = _col([t.c for t in s], _Flagged)
+        k.c = _col([t.c for t in s])
         k.gv, k.gw = _col([t.gv for t in s]), _col([t.gw for t in s])
-        k.kv, k.kw = _col([t.kv for t in s], _Flagged), _col([t.kw for t in s], _Flagged)
+        k.kv, k.kw = _col([t.kv for t in s]), _col([t.kw for t in s])
         zero3 = [0.0, 0.0, 0.0]
         springs = _padded([t.springs for t in s], max(len(t.springs) for t in s), (zero3, zero3, 0.0, 0.0))
         k.springs = [([_col([m[j][0][i] for m in springs]) for i in range(3)],
@@ -125,8 +100,12 @@ class CaseKernel(ScalarStepper):
             setattr(k, name, [([_col([m[j][0][i] for m in lists]) for i in range(3)],
                                [_col([m[j][1][i] for m in lists]) for i in range(3)])
                               for j in range(len(lists[0]) if lists else 0)])
-        k.tau_W = [_col([t.tau_W[i] for t in s], _Param) for i in range(3)]
-        k.tau_B = [_col([t.tau_B[i] for t in s], _Flagged) for i in range(3)]
+        k.tau_W = [_col([t.tau_W[i] for t in s]) for i in range(3)]
+        k.tau_B = [_col([t.tau_B[i] for t in s]) for i in range(3)]
+        # the ``if`` tests of the step: true when ANY member's entry is non-zero (the others add an exact 0.0)
+        k.has_drag = bool(np.any(k.c))
+        k.has_body_torque = bool(any(np.any(c) for c in k.tau_B))
+        k.has_velocity_decay, k.has_angular_decay = bool(np.any(k.kv)), bool(np.any(k.kw))
         k._steppers = steppers
         k.step = {
             "course": lambda y: k._course(y, gyro=False, expmap=False),

@@ -149,6 +149,7 @@ def measure(cases) -> tuple:
     y_end, flow_err = exact.step_flows([m[0].problem for m in members], [m[1] for m in members],
                                        np.array([m[2] for m in members]))
     contexts = []
+    rows = _rung_rows(members, range(len(cases)))
     for i, c in enumerate(cases):
         amp_i = {q: float(amp[q][i]) for q in QUANTITIES}
         c.numbers = _numbers(c, y_ref[:, i], amp_i)
@@ -157,10 +158,8 @@ def measure(cases) -> tuple:
             c.numbers["skipped"] = why
             contexts.append(None)
             continue
-        sel = [j for j, m in enumerate(members) if m[3] == i]
         step_h = np.array([c.scenario.dt_s / 2 ** r for r in range(ONE_STEP_RUNGS)])
-        step_err = {q: np.array([max(float(flow_err[q][j]) for j in sel if members[j][4] == r)
-                                 for r in range(ONE_STEP_RUNGS)]) for q in QUANTITIES}
+        step_err = {q: np.array([float(np.max(flow_err[q][rr])) for rr in rows[i]]) for q in QUANTITIES}
         sc = c.scenario
         phys = ScenarioPhysics(motion_rates(sc.problem, y_ref[:, i]), separatrix_proximity(sc.problem), amp_i,
                                sc.duration_s)
@@ -190,26 +189,34 @@ def _add(tally, variant, t):
         into[k][1] += b
 
 
-def _defects(y1, members, y_end, i):
-    """{quantity: (ONE_STEP_RUNGS,)} the largest one-step defect of case ``i`` at each rung."""
-    sel = [j for j, m in enumerate(members) if m[3] == i]
-    e = state_errors(y1[sel], y_end[sel])
+def _rung_rows(members, cases_idx) -> dict:
+    """{case: [rows of its one-step members at rung r for r in 0..ONE_STEP_RUNGS-1]} over ``members``."""
+    out = {i: [[] for _ in range(ONE_STEP_RUNGS)] for i in cases_idx}
+    for j, m in enumerate(members):
+        if m[3] in out:
+            out[m[3]][m[4]].append(j)
+    return {i: [np.array(r, dtype=int) for r in rr] for i, rr in out.items()}
+
+
+def _defects(e, rows):
+    """{quantity: (ONE_STEP_RUNGS,)} the largest one-step defect of a case at each rung, from the errors
+    ``e`` ({quantity: (M,)}, every member of the variant's one-step run) and the case's rows per rung."""
     out = {}
     for q in QUANTITIES:
         v = []
-        for r in range(ONE_STEP_RUNGS):
-            vals = [e[q][k] for k, j in enumerate(sel) if members[j][4] == r]
+        for r in rows:
+            vals = e[q][r]
             v.append(float(np.max(vals)) if np.all(np.isfinite(vals)) else math.nan)
         out[q] = np.array(v)
     return out
 
 
-def _judge(ctx, variant, k, ladder, defects, tally) -> list:
+def _judge(ctx, variant, k, ladder, defects, tally, errors=None) -> list:
     """The violations of one variant on one case. rbcheck's own verdict code failing on a valid scenario
     is a finding too (``rbcheck sweep`` would stop with an internal error there): property "internal_error"."""
     found = []
     try:
-        for recs, t in (P.free_running_order(ctx, variant, k, ladder), P.conservation(ctx, variant, k, ladder),
+        for recs, t in (P.free_running_order(ctx, variant, k, ladder, errors), P.conservation(ctx, variant, k, ladder),
                         P.one_step_order(ctx, variant, k, defects)):
             found += recs
             _add(tally, variant, t)
@@ -233,15 +240,20 @@ def evaluate(cases, contexts, members, y_end, variants, *, threads: int = 1) -> 
     h0s = [sc.dt_s for sc in scs]
     n0 = cases[0].n0
     m_sel = [j for j, m in enumerate(members) if contexts[m[3]] is not None]
+    rows = _rung_rows([members[j] for j in m_sel], judged)
+    y_refs = np.stack([contexts[i].y_ref for i in judged], axis=1)
     ladders = {}
     for v in variants:
         t0 = time.perf_counter()
         ladder = drivers.run_ladder(v, scs, h0s, n0, threads=threads)
         y1 = drivers.one_step(v, [members[j][0] for j in m_sel], [members[j][1] for j in m_sel],
                               np.array([members[j][2] for j in m_sel]), threads=threads)
+        e = None if y1 is None else state_errors(y1, y_end[m_sel])
+        e_ladder = P.ladder_errors(ladder, y_refs, slice(None))
         for k, i in enumerate(judged):
-            d = None if y1 is None else _defects(y1, [members[j] for j in m_sel], y_end[m_sel], i)
-            outcomes[i].violations += _judge(contexts[i], v, k, ladder, d, outcomes[i].tally)
+            d = None if e is None else _defects(e, rows[i])
+            e_case = [{q: er[q][:, k] for q in QUANTITIES} for er in e_ladder]
+            outcomes[i].violations += _judge(contexts[i], v, k, ladder, d, outcomes[i].tally, e_case)
         ladders[v] = ladder
         seconds[v] = time.perf_counter() - t0
     for pair in P.equivalent_pairs(variants):

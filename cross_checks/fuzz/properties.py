@@ -35,7 +35,7 @@ from cross_checks.analysis.expectations import (EQUIVALENT_PAIRS, expectation, g
 from cross_checks.core import tolerances as tol
 from cross_checks.core.quantities import QUANTITIES, UNITS, state_errors
 
-__all__ = ["Context", "free_running_order", "one_step_order", "conservation", "agreement", "PROPERTIES",
+__all__ = ["Context", "ladder_errors", "free_running_order", "one_step_order", "conservation", "agreement", "PROPERTIES",
            "equivalent_pairs"]
 
 PROPERTIES = ("free_running_order", "one_step_order", "conservation", "agreement")
@@ -136,10 +136,10 @@ def two_term_consistent(dts, errors, floors, order) -> bool:
 
 def _fit_record(ctx, variant, quantity, dts, errors, floors, statuses, exp, prop):
     """(violation or None, claimed) from a fit over a ladder and an Expectation."""
+    if exp.verdict != "converges":   # no claim: pre-asymptotic here, or the variant does not model this motion
+        return None, False            # (see docs/fuzz.md) — nothing to fit
     fit = fit_convergence(dts, errors, floors, statuses)
-    claimed = exp.verdict == "converges"
-    if not claimed:   # no claim: pre-asymptotic here, or the variant does not model this motion (see docs/fuzz.md)
-        return None, False
+    claimed = True
     matches, phrase = compare_with_expectation(fit.verdict, fit.order, exp, fit.order_is_lower_bound)
     if matches is False and measured_pre_asymptotic(fit, exp.order):
         matches = None
@@ -159,16 +159,26 @@ def _fit_record(ctx, variant, quantity, dts, errors, floors, statuses, exp, prop
             "note": fit.note, "sentence": sentence}, claimed
 
 
-def free_running_order(ctx: Context, variant: str, i: int, ladder) -> tuple:
-    """The free-running order property of case ``i`` (runs ``ladder``: [drivers.Runs] × rungs)."""
+def ladder_errors(ladder, y_ref, cols) -> list:
+    """Per rung, {quantity: (n + 1, B)} the errors of the runs of cases ``cols`` (columns of the ladder's
+    runs) against their references ``y_ref`` ((n_fine + 1, B, 13), the same cases in the same order):
+    what :func:`free_running_order` measures case by case, for a whole batch in one call per rung."""
+    n_fine = len(y_ref) - 1
+    return [state_errors(runs.y[:, cols], y_ref[::n_fine // (len(runs.y) - 1)]) for runs in ladder]
+
+
+def free_running_order(ctx: Context, variant: str, i: int, ladder, errors=None) -> tuple:
+    """The free-running order property of case ``i`` (runs ``ladder``: [drivers.Runs] × rungs).
+    ``errors``: case ``i``'s rows of :func:`ladder_errors` ([{quantity: (n + 1,)}] per rung), when
+    measured for the batch at once; measured here otherwise."""
     sc = ctx.scenario
     tally, out = _tally(), []
     dts, errs, floors, statuses = [], {q: [] for q in QUANTITIES}, {q: [] for q in QUANTITIES}, []
     n_fine = len(ctx.y_ref) - 1
-    for runs in ladder:
+    for r, runs in enumerate(ladder):
         n = len(runs.y) - 1
         stride = n_fine // n
-        e = state_errors(runs.y[:, i], ctx.y_ref[::stride])
+        e = state_errors(runs.y[:, i], ctx.y_ref[::stride]) if errors is None else errors[r]
         dts.append(float(runs.h_s[i]))
         statuses.append(runs.status[i])
         for q in QUANTITIES:
