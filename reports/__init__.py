@@ -121,8 +121,11 @@ def _tidy(d, written, drawn, listed, marked) -> None:
 def _draw_all(res, names, plot_dir: Path, jobs, progress, t0) -> dict:
     """Draw every figure (in ``jobs`` processes); returns ``{scenario: [(kind, file or None, note)]}``
     in the order of plots.KINDS."""
-    from reports.plots import KINDS, figure_tasks   # imported here: forked workers inherit matplotlib
+    from reports.canvas import release
+    from reports.plots import KINDS, figure_tasks, layout_group, relative_cost   # here: forked workers inherit matplotlib
     tasks = [(sc, kind, str(plot_dir)) for sc in names for _, kind in figure_tasks(res, sc)]
+    # the costliest figures first, so that no process is left drawing a large one while the other idles
+    tasks.sort(key=lambda t: -relative_cost(res, t[0], t[1]))
     _SHARED.clear()
     _SHARED.update(res=res, directory=str(res.directory))
     out = {sc: {} for sc in names}
@@ -141,19 +144,20 @@ def _draw_all(res, names, plot_dir: Path, jobs, progress, t0) -> dict:
     try:
         if jobs and jobs > 1 and len(tasks) > 1:
             import multiprocessing as mp
-            from concurrent.futures import ProcessPoolExecutor
+
+            from reports.schedule import draw_in_processes, split
             ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else None
             if ctx is None:
                 _SHARED.pop("res")   # spawned workers load the directory once each
-            with ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), mp_context=ctx,
-                                     initializer=_quiet_init, initargs=(os.getpid(),)) as pool:
-                for i, item in enumerate(pool.map(_draw, tasks, chunksize=1), start=1):
-                    done(i, item)
+            lists = split(tasks, min(jobs, len(tasks)), group=lambda t: layout_group(res, t[0], t[1]),
+                          cost=lambda t: relative_cost(res, t[0], t[1]))
+            draw_in_processes(_draw, lists, done, ctx=ctx, worker_init=_quiet_init)
         else:
             for i, t in enumerate(tasks, start=1):
                 done(i, _draw(t))
     finally:
         _SHARED.clear()
+        release()
     return {sc: [figs[k] for k in KINDS if k in figs] for sc, figs in out.items()}
 
 

@@ -29,9 +29,11 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-from matplotlib.lines import Line2D  # noqa: E402
+from matplotlib.collections import LineCollection  # noqa: E402
 
 from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, UNITS  # noqa: E402
+from reports.canvas import (legend_at, legend_below, legend_height_in, pad_limits, panels,  # noqa: E402
+                            save_png)
 from reports.data import LABELS  # noqa: E402
 from reports.glance import families, order_text  # noqa: E402
 
@@ -61,28 +63,28 @@ def _short(v):
     return v.split(":", 1)[1] if ":" in v else v
 
 
-def _grid(nrows, ncols, title, sharey="row", panel_h=2.1):
+def _grid(nrows, ncols, title, panel_h=2.1, log=False, key="time"):
+    """A grid of panels (reports.canvas.panels: reused within this process): the callers give a row
+    one y range and the grid one x range, as shared axes would."""
     width = min(13.0, 2.2 + 3.6 * ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(width, 1.1 + panel_h * nrows), dpi=REPORT_DPI, squeeze=False,
-                             sharex=True, sharey=sharey)
+    fig, axes = panels((key, panel_h), nrows, ncols, (width, 1.1 + panel_h * nrows), REPORT_DPI, log)
     fig.suptitle(title, fontsize=11, x=0.01, ha="left")
     return fig, axes
 
 
 def _finish(fig, path):
     legends = getattr(fig, "_rb_legends", [])
-    strip_in = (LEGEND_LINE_IN * (1 + max(len(hs) for _, hs, _ in legends)) + 0.55) if legends else 0.0
+    strip_in = (legend_height_in(max(len(es) for _, es, _ in legends)) + 0.1) if legends else 0.0
     w, h = fig.get_size_inches()
     if strip_in:
         h += strip_in
         fig.set_size_inches(w, h)
     fig.subplots_adjust(left=0.09 if w > 8 else 0.14, right=0.98, top=1.0 - 0.75 / h,
                         bottom=(0.5 + strip_in) / h, hspace=0.35, wspace=0.08)
-    if legends:
-        _place_legends(fig, legends, below_in=0.5)
+    for ax, entries, fam in legends:
+        legend_below(fig, ax, fam, entries, below_in=0.5)
     _plain_log_ticks(fig)
     _save_png(fig, path)
-    plt.close(fig)
 
 
 def _plain_log_ticks(fig):
@@ -102,18 +104,7 @@ def _plain_log_ticks(fig):
                 axis.set_major_locator(MaxNLocator(nbins=4))
 
 
-def _save_png(fig, path):
-    """Save as an 8-bit palette PNG: the figures use a few dozen colours, and a palette makes the
-    files ~3× smaller than RGBA at no visible cost (no dithering). Deterministic for equal input."""
-    import io
-
-    from PIL import Image
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=fig.dpi, metadata={"Software": None})
-    buf.seek(0)
-    with Image.open(buf) as im:
-        q = im.convert("RGB").quantize(colors=256, method=Image.Quantize.FASTOCTREE, dither=Image.Dither.NONE)
-        q.save(path, format="PNG", compress_level=6)
+_save_png = save_png   # rbcheck check --plot (reports.check_plot) saves its figures alike
 
 
 def _panel_title(ax, text):
@@ -145,32 +136,17 @@ def _diverged(res, sc, v):
     return t if isinstance(t, float) and math.isfinite(t) else math.inf
 
 
-#: Height of one legend line (7 pt text and its spacing), inches; the legends' strip below the panels is
-#: sized from the longest family legend so that no legend covers a curve.
-LEGEND_LINE_IN = 0.15
-
-
 def _family_legends(axes_bottom, fams, styles, extra=None, markers=False):
     """One legend per family column, BELOW its bottom panel (inside a panel it covered curves): the
-    family's variants (and their text). Placed by :func:`_finish`, which makes room for them."""
+    family's variants (and their text). Drawn by :func:`_finish` (reports.canvas.legend_below), which
+    makes room for them."""
     fig = axes_bottom[0].figure
     fig._rb_legends = []
     for ax, (fam, vs) in zip(axes_bottom, fams.items()):
-        hs = [Line2D([], [], color=styles[v]["color"], ls=styles[v]["ls"],
-                     marker=styles[v]["marker"] if markers else None, ms=4, lw=1.4,
-                     label=_short(v) + (f"  {extra[v]}" if extra and extra.get(v) else "")) for v in vs]
-        fig._rb_legends.append((ax, hs, fam))
-
-
-def _place_legends(fig, legends, below_in: float) -> None:
-    """Each family's legend under its column, its top ``below_in`` inches under the panel (clear of the
-    tick labels and the x label)."""
-    H = fig.get_size_inches()[1]
-    for ax, hs, fam in legends:
-        ax_h_in = ax.get_position().height * H
-        ax.legend(handles=hs, fontsize=7, loc="upper left", bbox_to_anchor=(0.0, -below_in / ax_h_in),
-                  frameon=False, title=fam, title_fontsize=8, handlelength=1.8, alignment="left",
-                  borderaxespad=0.0)
+        es = [(_short(v) + (f"  {extra[v]}" if extra and extra.get(v) else ""),
+               {"color": styles[v]["color"], "ls": styles[v]["ls"], "marker": styles[v]["marker"] if markers else None})
+              for v in vs]
+        fig._rb_legends.append((ax, es, fam))
 
 
 def _robust_limits(curves, log):
@@ -190,19 +166,21 @@ def _robust_limits(curves, log):
 
 def _time_panels(fig, axes, res, sc, fams, styles, rows, log):
     """Draw ``rows`` = [(label, fn(series) -> y or None)] × family columns; diverged runs truncated and
-    marked; returns the variants drawn."""
+    marked; a row's panels get one y range (from the runs that did not diverge), the grid one time
+    range. Returns the variants drawn."""
     ser = res.series(sc)
     drawn = set()
+    t_span = [math.inf, -math.inf]
     for i, (label, get) in enumerate(rows):
-        keep = []
+        keep, every = [], []
         for j, (fam, vs) in enumerate(fams.items()):
             ax = axes[i, j]
-            if log:
-                _loglog(ax)
+            curves = []   # (xy, style): the panel's variants, drawn as one collection (one artist)
             ref = ser.get("reference")
             if not log and ref is not None and get(ref) is not None:
                 ax.plot(ref["t_s"], get(ref), color="black", lw=3.2, alpha=0.28)
                 keep.append(get(ref))
+                _widen(t_span, ref["t_s"])
             for v in vs:
                 if v not in ser or get(ser[v]) is None:
                     continue
@@ -213,23 +191,40 @@ def _time_panels(fig, axes, res, sc, fams, styles, rows, log):
                     ok &= t <= tdiv
                 y_draw = _positive(y) if log else y
                 st = styles[v]
-                ax.plot(t[ok], y_draw[ok], color=st["color"], ls=st["ls"], lw=1.1)
+                curves.append((np.column_stack([t[ok], y_draw[ok]]), st))
                 drawn.add(v)
+                _widen(t_span, t[ok])
+                every.append(y_draw[ok])
                 if tdiv is not None and ok.any():
                     k = np.flatnonzero(ok)[-1]
-                    ax.plot([t[k]], [y_draw[k]], marker="x", ms=9, mew=2, color=st["color"], clip_on=True)
+                    ax.plot([t[k]], [y_draw[k]], marker="x", ms=9, mew=2, color=st["color"], clip_on=True, zorder=3)
                 else:
                     keep.append(y[ok])
-            ax.grid(alpha=0.3, which="both")
+            if curves:
+                ax.add_collection(LineCollection([xy for xy, _ in curves], colors=[st["color"] for _, st in curves],
+                                                 linestyles=[st["ls"] for _, st in curves], linewidths=1.1),
+                                  autolim=False)
             if i == 0:
                 _panel_title(ax, fam)
-        lim = _robust_limits(keep, log)
-        if lim is not None:
-            axes[i, 0].set_ylim(*lim)
+        lim = _robust_limits(keep, log) or _robust_limits(every, log)
+        for ax in axes[i]:
+            if lim is not None:
+                ax.set_ylim(*lim)
         axes[i, 0].set_ylabel(label, fontsize=8)
+    if t_span[0] <= t_span[1]:
+        for ax in axes.flat:
+            ax.set_xlim(*pad_limits(*t_span, log))
     for ax in axes[-1]:
         ax.set_xlabel("time t (s)", fontsize=8)
     return drawn
+
+
+def _widen(span, values):
+    """Grow ``span`` = [lo, hi] to the finite ``values`` (positive ones only when lo must stay > 0)."""
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]
+    if v.size:
+        span[0], span[1] = min(span[0], float(v.min())), max(span[1], float(v.max()))
 
 
 def _moving_components(ser):
@@ -274,21 +269,54 @@ def fig_errors(res, sc, styles, path):
     fams = {f: [v for v in vs if v in ser] for f, vs in families(res.variants).items()}
     fams = {f: vs for f, vs in fams.items() if vs}
     moving = [q for q in QUANTITIES if info.get("varies", {}).get(q, True)]
-    shown = [q for q in moving if any(np.any(np.asarray(ser[v].get(f"err_{q}", [0.0])) > 0)
-                                      for vs in fams.values() for v in vs)]
+    nonzero = [q for q in moving if any(np.any(np.asarray(ser[v].get(f"err_{q}", [0.0])) > 0)
+                                        for vs in fams.values() for v in vs)]
+    exact = [q for q in nonzero if _series_at_roundoff(res, sc, q, [v for vs in fams.values() for v in vs])]
+    shown = [q for q in nonzero if q not in exact]
+    exact_note = (" Not drawn, every variant's error at or below its run's round-off floor all along (exact "
+                  "to within what can be measured): " + ", ".join(LABELS[q] for q in exact) + ".") if exact else ""
     if not fams or not shown:
-        NOTES[(sc, "errors")] = "every error is zero"
+        NOTES[(sc, "errors")] = ("every error is zero" if not exact else exact_note.strip())
         return False
     rows = [(f"{LABELS[q]} error ({UNITS[q]})", (lambda s, q=q: s.get(f"err_{q}"))) for q in shown]
     fig, axes = _grid(len(rows), len(fams), f"{sc}: error against the reference vs time at Δt = {info['dt_s']:g} s "
-                                            f"(log scales; zero drawn at {LOG_FLOOR:g}; × marks a divergence)")
+                                            f"(log scales; zero drawn at {LOG_FLOOR:g}; × marks a divergence)", log=True)
     _time_panels(fig, axes, res, sc, fams, styles, rows, log=True)
     _family_legends(axes[-1], fams, styles)
-    left = [LABELS[q] for q in QUANTITIES if q not in shown]
-    NOTES[(sc, "errors")] = ("Not drawn: " + ", ".join(left) + " (does not move, or zero error for every variant)."
-                             if left else "")
+    left = [LABELS[q] for q in QUANTITIES if q not in nonzero]
+    NOTES[(sc, "errors")] = (("Not drawn: " + ", ".join(left) + " (does not move, or zero error for every variant)."
+                              if left else "") + exact_note).strip()
     _finish(fig, path)
     return True
+
+
+def _series_at_roundoff(res, sc, q, variants) -> bool:
+    """Whether every variant's error in ``q`` stays at or below its run's round-off floor at the default
+    Δt (the floor of its free-running convergence record, cross_checks.analysis.metrics.roundoff_floor)
+    for the whole run: a panel of such errors shows only round-off."""
+    dt = res.scenario(sc)["dt_s"]
+    ser = res.series(sc)
+    for v in variants:
+        rec = next(iter(res.records(sc, v, q)), None)
+        if rec is None or dt not in rec["dt_s"] or f"err_{q}" not in ser.get(v, {}):
+            return False
+        e = np.asarray(ser[v][f"err_{q}"], dtype=float)
+        if not (np.all(np.isfinite(e)) and float(e.max(initial=0.0)) <= rec["floors"][rec["dt_s"].index(dt)]):
+            return False
+    return bool(variants)
+
+
+def _ladder_at_roundoff(res, sc, q, variants, mode) -> bool:
+    """Whether every variant's error in ``q`` is at or below its round-off floor at every Δt of the
+    ladder (its convergence record's errors and floors): a row of such errors shows only round-off."""
+    for v in variants:
+        rec = next(iter(res.records(sc, v, q, mode=mode)), None)
+        if rec is None:
+            return False
+        e, fl = np.asarray(rec["errors"], dtype=float), np.asarray(rec["floors"], dtype=float)
+        if not (e.size and np.all(np.isfinite(e)) and np.all(e <= fl)):
+            return False
+    return bool(variants)
 
 
 _DRIFT_LABEL = {"energy": "energy drift |ΔE|/|E₀|", "angular_momentum": "ang. momentum drift |ΔL|/|L₀|",
@@ -313,7 +341,7 @@ def fig_conservation(res, sc, styles, path):
     rows = [(_DRIFT_LABEL[k], (lambda s, k=k: None if f"drift_{k}" not in s else np.abs(s[f"drift_{k}"])))
             for k in moving]
     fig, axes = _grid(len(rows), len(fams), f"{sc}: relative drift of conserved quantities at Δt = {info['dt_s']:g} s "
-                                            f"(log scales; zero drawn at {LOG_FLOOR:g}; × marks a divergence)")
+                                            f"(log scales; zero drawn at {LOG_FLOOR:g}; × marks a divergence)", log=True)
     _time_panels(fig, axes, res, sc, fams, styles, rows, log=True)
     _family_legends(axes[-1], fams, styles)
     _finish(fig, path)
@@ -327,11 +355,14 @@ def _slope_triangles(ax, dts, orders=(1, 2, 4)):
     x1 = max(dts) / 10 ** (0.04 * span_x)
     x0 = x1 / 10 ** (0.3 * span_x)
     span = math.log10(hi) - math.log10(lo)
+    xs, ys = [], []
     for k, p in enumerate(orders):
         y0 = 10 ** (math.log10(lo) + span * (0.04 + 0.09 * k))
         y1 = y0 * (x1 / x0) ** p
-        ax.plot([x0, x1, x1, x0], [y0, y0, y1, y0], color="0.45", lw=0.8)
+        xs += [x0, x1, x1, x0, np.nan]
+        ys += [y0, y0, y1, y0, np.nan]
         ax.text(x0 / 10 ** (0.01 * span_x), y0, f"{p}", fontsize=7, color="0.3", va="bottom", ha="right")
+    ax.plot(xs, ys, color="0.45", lw=0.8)   # one line for the three triangles (one artist to draw)
 
 
 def _ladder_cell(ax, res, sc, q, vs, styles, mode):
@@ -373,37 +404,44 @@ def fig_ladder(res, sc, styles, path, mode):
         NOTES[(sc, kind)] = "no Δt ladder (one Δt only), so no order to show" if len(ladder) < 2 else ""
         return False
     fams = families(vs_all)
-    qs = [q for q in QUANTITIES if info.get("varies", {}).get(q, True)]
+    moving = [q for q in QUANTITIES if info.get("varies", {}).get(q, True)]
+    exact = [q for q in moving if _ladder_at_roundoff(res, sc, q, vs_all, mode)]
+    qs = [q for q in moving if q not in exact]
+    exact_note = (" Not drawn, every variant's error at or below its round-off floor at every Δt (exact to within "
+                  "what can be measured; order \"exact\"): " + ", ".join(LABELS[q] for q in exact) + ".") if exact else ""
+    if not qs:
+        NOTES[(sc, kind)] = exact_note.strip()
+        return False
     what = "final error" if mode == "free_running" else "one-step (local) error"
     fig, axes = _grid(len(qs), len(fams), f"{sc}: {what} vs Δt (filled: points of the fitted order; grey band: "
-                                          "round-off floor; triangles: slopes 1, 2, 4)")
+                                          "round-off floor; triangles: slopes 1, 2, 4)", log=True, key="ladder")
     for i, q in enumerate(qs):
-        all_dt, vals = [], []
+        vals = []
         for j, vs in enumerate(fams.values()):
-            d, v = _ladder_cell(axes[i, j], res, sc, q, vs, styles, mode)
-            all_dt += d
-            vals += v
-            axes[i, j].grid(alpha=0.3, which="both")
+            vals += _ladder_cell(axes[i, j], res, sc, q, vs, styles, mode)[1]
         lim = _robust_limits(vals, log=True)
         if lim is not None:
-            axes[i, 0].set_ylim(lim[0] / 10, lim[1])
             for ax in axes[i]:
+                ax.set_ylim(lim[0] / 10, lim[1])
                 _slope_triangles(ax, ladder)
         axes[i, 0].set_ylabel(f"{LABELS[q]} ({UNITS[q]})", fontsize=8)
-    from matplotlib.ticker import FixedLocator, NullLocator
-    for ax in axes[-1]:
+    from matplotlib.ticker import FixedFormatter, FixedLocator, NullLocator
+    for ax in axes.flat:   # every row: the same Δt grid lines; labels on the bottom row only
+        ax.set_xlim(*pad_limits(min(ladder), max(ladder), log=True))
         ax.xaxis.set_major_locator(FixedLocator(ladder))
         ax.xaxis.set_minor_locator(NullLocator())
-        ax.set_xticklabels([f"{d:g}" for d in ladder], fontsize=7)
+        ax.xaxis.set_major_formatter(FixedFormatter([f"{d:g}" for d in ladder]))
+    for ax in axes[-1]:
+        ax.tick_params(axis="x", labelsize=7)
         ax.set_xlabel("time step Δt (s)", fontsize=8)
     orders = {v: "p " + " / ".join(order_text(next((r for r in res.records(sc, v, q, mode=mode)), None)) for q in qs)
               for v in vs_all}
     _family_legends(axes[-1], fams, styles, orders, markers=True)
     for ax, fam in zip(axes[0], fams):
         _panel_title(ax, fam)
-    left = [LABELS[q] for q in QUANTITIES if q not in qs]
+    left = [LABELS[q] for q in QUANTITIES if q not in moving]
     NOTES[(sc, kind)] = (("Not drawn: " + ", ".join(left) + " (does not move). ") if left else "") + \
-        "Orders in the legends: " + " / ".join(LABELS[q] for q in qs) + "."
+        "Orders in the legends: " + " / ".join(LABELS[q] for q in qs) + "." + exact_note
     _finish(fig, path)
     return True
 
@@ -415,13 +453,13 @@ def fig_work(res, sc, styles, path):
         NOTES[(sc, "work")] = "no Δt ladder (one Δt only)"
         return False
     qs = [q for q in ("position", "orientation") if res.scenario(sc).get("varies", {}).get(q, True)]
-    fig, axes = plt.subplots(1, len(qs), figsize=(13.0 if len(qs) > 1 else 8.0, 4.6), dpi=REPORT_DPI, squeeze=False)
+    fig, axes = panels(("work",), 1, len(qs), (13.0 if len(qs) > 1 else 8.0, 4.6), REPORT_DPI, log=True,
+                       outer_labels=False)
     fig.suptitle(f"{sc}: work-precision — final error vs wall time of each run of the ladder", fontsize=11,
                  x=0.01, ha="left")
     handles = {}
     for ax, q in zip(axes[0], qs):
         col = f"{COLUMN_STEM[q]}_err_final"
-        _loglog(ax)
         for v in res.variants:
             rows = sorted([r for r in res.rows_for(sc, v) if r["in_ladder"] and r["status"] == "ok"],
                           key=lambda r: -r["dt"])
@@ -434,18 +472,17 @@ def fig_work(res, sc, styles, path):
             color = plt.get_cmap("tab10")(list(families(res.variants)).index(fam) % 10)
             mk = styles[v]["marker"]
             ax.plot(w[ok], _positive(e[ok]), color=color, marker=mk, ms=4, lw=0.9, alpha=0.85)
-            handles[v] = Line2D([], [], color=color, marker=mk, ms=4, lw=0.9, label=v)
+            handles[v] = {"color": color, "marker": mk, "lw": 0.9}
         _panel_title(ax, LABELS[q])
         ax.set_xlabel("wall time of the run (s)", fontsize=8)
         ax.set_ylabel(f"final {LABELS[q]} error ({UNITS[q]})", fontsize=8)
-        ax.grid(alpha=0.3, which="both")
-    if handles:
-        fig.legend(handles=list(handles.values()), loc="center right", fontsize=7, frameon=False,
-                   title="colour: engine family", title_fontsize=8)
     fig.subplots_adjust(left=0.07, right=0.8, top=0.88, bottom=0.13, wspace=0.25)
+    if handles:   # at the right, centred on the height
+        W, H = fig.get_size_inches()
+        legend_at(fig, 0.81 * W, (H + legend_height_in(len(handles))) / 2, "colour: engine family",
+                  list(handles.items()))
     _plain_log_ticks(fig)
     _save_png(fig, path)
-    plt.close(fig)
     NOTES[(sc, "work")] = ""
     return True
 
@@ -463,6 +500,34 @@ def figure_name(sc, kind) -> str:
 def figure_tasks(res, sc) -> list:
     """The figures scenario ``sc`` may have (each decides when drawn whether it carries anything)."""
     return [(sc, k) for k in KINDS]
+
+
+#: Relative drawing cost of one panel of each kind (CPU time per panel measured on the default sweep's
+#: report: ladders carry markers, triangles and Δt labels; trajectories the thick reference line).
+_PANEL_COST = {"convergence": 1.3, "local": 1.3, "trajectories": 1.0, "errors": 1.0, "conservation": 1.0, "work": 3.0}
+
+
+def layout_group(res, sc, kind) -> tuple:
+    """The grid layout figure ``kind`` of ``sc`` is likely drawn in (figures of one layout reuse one
+    grid in a drawing process): its kind of panels and its estimated number of rows."""
+    info = res.scenario(sc)
+    varies = {q: info.get("varies", {}).get(q, True) for q in QUANTITIES}
+    panels_of = {"trajectories": "time", "errors": "time-log", "conservation": "time-log", "convergence": "ladder",
+                 "local": "ladder", "work": "work"}[kind]
+    rows = 3 * varies["position"] + 4 * varies["orientation"] if kind == "trajectories" else sum(varies.values())
+    return panels_of, rows if kind != "work" else 1
+
+
+def relative_cost(res, sc, kind) -> float:
+    """A cheap estimate of the time figure ``kind`` of ``sc`` takes to draw (panels × cost per panel),
+    to hand out the largest figures first."""
+    info = res.scenario(sc)
+    varies = {q: info.get("varies", {}).get(q, True) for q in QUANTITIES}
+    n_fam = len(families(res.variants))
+    rows = {"trajectories": 3 * varies["position"] + 4 * varies["orientation"], "work": 2 / max(n_fam, 1),
+            "conservation": sum(bool(c.get("conserved")) for c in info.get("conserved", {}).values())
+            }.get(kind, sum(varies.values()))
+    return _PANEL_COST[kind] * max(rows, 1) * n_fam * (1 + 0.1 * len(res.variants))
 
 
 def draw(res, sc, kind, plot_dir) -> tuple:

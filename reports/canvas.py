@@ -1,0 +1,237 @@
+"""Figures for the report, drawn cheaply: grids of panels reused within a drawing process, legends laid
+out by hand, PNGs encoded once.
+
+Why (docs/speed.md, "The report"): cProfile of a default sweep's report put ~40 % of the drawing time in
+creating axes and their tick objects, ~20 % in matplotlib's Legend (offset boxes measured twice) and
+~10 % in re-measuring tick labels to place the axis labels. So:
+
+* :func:`panels` keeps one figure per layout (kind, rows, columns) in each drawing process and hands
+  it back emptied of its data (lines, texts, legends), its axes and their ticks intact. The panels
+  share nothing (sharex/sharey would tie the pooled axes together): the callers set every limit
+  explicitly, identical along a row or over the grid, which is what sharing gave. Drawing a figure in a
+  reused grid gives the same pixels as in a fresh one (tests/reports/test_canvas.py).
+* Axis labels sit at fixed offsets from their axes (points), so matplotlib does not measure every tick
+  label again to place them.
+* :func:`legend_below` draws a legend as one short line (and marker) and one text per entry, placed in
+  inches under its panel, without offset boxes.
+* Text (horizontal or turned a quarter) is rasterized a whole string at a time (:class:`_StringRenderer`): matplotlib 3.11
+  renders and places every glyph from Python, ~3 ms per label, the largest single cost left (half of
+  the drawing time; the same labels drawn as one bitmap each take a third of that, same pixels).
+* :func:`save_png` draws once and quantizes the canvas's own pixels into an 8-bit palette PNG (no RGBA
+  PNG encoded and decoded on the way).
+"""
+from __future__ import annotations
+
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg, RendererAgg, get_hinting_flag
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.transforms import offset_copy
+
+__all__ = ["panels", "release", "legend_below", "legend_at", "legend_height_in", "save_png", "pad_limits", "LEGEND_LINE_IN",
+           "TICK_LABEL_PT"]
+
+#: Height of one legend line (7 pt text and its spacing), inches; the legends' strip below the panels is
+#: sized from the longest legend so that no legend covers a curve.
+LEGEND_LINE_IN = 0.15
+#: Tick labels' font size (pt; matplotlib's default, "medium"); the axis labels' fixed offsets below are
+#: derived from it.
+TICK_LABEL_PT = 10.0
+#: y label's distance left of its axes (pt): the widest tick label drawn ("1e-15", "−0.25": 5 characters
+#: of ~0.6 em) plus the tick (3.5 pt) and its pad (3.5 pt) plus 4 pt of label pad.
+YLABEL_OFFSET_PT = 5 * 0.6 * TICK_LABEL_PT + 3.5 + 3.5 + 4.0
+#: x label's distance under its axes (pt): tick, pad, one line of tick labels, 3 pt of label pad.
+XLABEL_OFFSET_PT = 3.5 + 3.5 + 1.2 * TICK_LABEL_PT + 3.0
+
+class _StringRenderer(RendererAgg):
+    """Agg renderer that rasterizes a plain-text string in one FreeType call (FT2Font.set_text +
+    draw_glyphs_to_bitmap, placed as matplotlib 3.10 placed it) instead of glyph by glyph; a string
+    turned a quarter (y labels) is the same bitmap turned. Other angles and mathtext are left to
+    matplotlib. Any failure of the string path (a
+    matplotlib whose internals differ) falls back to matplotlib's own drawing for good; the test
+    tests/reports/test_canvas.py compares the two renderings pixel by pixel."""
+
+    string_path = True
+
+    def get_text_width_height_descent(self, s, prop, ismath):
+        """matplotlib's measure, kept for the process (its own cache is per renderer, and a renderer
+        per figure size: the same tick labels and legends were shaped again for every figure)."""
+        if ismath:
+            return super().get_text_width_height_descent(s, prop, ismath)
+        key = (s, hash(prop), self.dpi, get_hinting_flag())    # FontProperties compare by their hash
+        if key not in _METRICS:
+            if len(_METRICS) > _CACHE_MAX:
+                _METRICS.clear()
+            _METRICS[key] = super().get_text_width_height_descent(s, prop, ismath)
+        return _METRICS[key]
+
+    def draw_text(self, gc, x, y, s, prop, angle, ismath=False, mtext=None):
+        if ismath or angle not in (0, 90) or not _StringRenderer.string_path:
+            return super().draw_text(gc, x, y, s, prop, angle, ismath=ismath, mtext=mtext)
+        try:
+            img, left, bottom = self._bitmap(s, prop, angle, gc.get_antialiased())
+            self._renderer.draw_text_image(img, round(x + left), round(y + bottom), 0, gc)
+        except (AttributeError, TypeError, ValueError):   # not the FreeType/Agg interface of matplotlib 3.11
+            _StringRenderer.string_path = False
+            return super().draw_text(gc, x, y, s, prop, angle, ismath=ismath, mtext=mtext)
+
+    def _bitmap(self, s, prop, angle, antialiased):
+        """The string's coverage bitmap and its left and bottom (pixels, y downwards) relative to the pen
+        origin; the same for every position, so kept for the process (labels repeat across figures)."""
+        key = (s, hash(prop), self.dpi, get_hinting_flag(), angle, bool(antialiased))
+        if key not in _BITMAPS:
+            font = self._prepare_font(prop)
+            font.set_text(s, 0, flags=get_hinting_flag())
+            font.draw_glyphs_to_bitmap(antialiased=antialiased)
+            xo, yo = font.get_bitmap_offset()
+            img = np.array(font.get_image())
+            left, bottom = xo / 64.0, yo / 64.0 + font.get_descent() / 64.0 + 1
+            if angle == 90:   # turned a quarter anticlockwise about the pen origin: (u, v) -> (v, -u)
+                img = np.ascontiguousarray(np.rot90(img))
+                left, bottom = bottom - img.shape[1], -left
+            if len(_BITMAPS) > _CACHE_MAX:
+                _BITMAPS.clear()
+            _BITMAPS[key] = (img, left, bottom)
+        return _BITMAPS[key]
+
+
+#: Strings measured / rasterized, kept per process (a report has a few thousand distinct ones).
+_METRICS: dict = {}
+_BITMAPS: dict = {}
+_CACHE_MAX = 20000
+
+
+class _Canvas(FigureCanvasAgg):
+    """The Agg canvas, drawing with :class:`_StringRenderer`."""
+
+    def get_renderer(self):
+        w, h = self.get_width_height(physical=True)
+        key = w, h, self.figure.dpi
+        if getattr(self, "_lastKey", None) != key or not isinstance(getattr(self, "renderer", None), _StringRenderer):
+            self.renderer = _StringRenderer(w, h, self.figure.dpi)
+            self._lastKey = key
+        return self.renderer
+
+
+_POOL: dict = {}    # (layout key) -> (fig, axes): per process (forked drawing workers each have theirs)
+
+
+def panels(key, nrows: int, ncols: int, size_in, dpi: float, log: bool, outer_labels: bool = True):
+    """A figure of ``nrows`` × ``ncols`` unshared panels for layout ``key``, emptied of any previous
+    drawing and resized to ``size_in`` (w, h inches). Log panels have log x and y scales. With
+    ``outer_labels`` only the bottom row shows x tick labels and only the first column y tick labels
+    (the callers then give a row the same y limits and the grid the same x limits)."""
+    k = (key, nrows, ncols, bool(log), outer_labels)
+    if k not in _POOL:
+        fig = Figure(figsize=size_in, dpi=dpi)
+        _Canvas(fig)
+        axes = fig.subplots(nrows, ncols, squeeze=False)
+        for (i, j), ax in np.ndenumerate(axes):
+            _new_panel(ax, log, bottom=i == nrows - 1 or not outer_labels, left=j == 0 or not outer_labels)
+        fig._rb_extra = []
+        _POOL[k] = (fig, axes)
+    fig, axes = _POOL[k]
+    _empty(fig, axes)
+    fig.set_size_inches(*size_in)
+    return fig, axes
+
+
+def release() -> None:
+    """Drop the pooled figures (and their pixel buffers, ~6 MB each) of this process: a caller that drew
+    in its own process (``jobs=1``) does not keep them after the report."""
+    _POOL.clear()
+
+
+def _new_panel(ax, log, bottom, left) -> None:
+    if log:
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+    ax.grid(alpha=0.3, which="both")
+    ax.tick_params(labelsize=TICK_LABEL_PT, labelbottom=bottom, labelleft=left)
+    fig = ax.figure
+    ax.yaxis.set_label_coords(0.0, 0.5, transform=offset_copy(ax.transAxes, fig=fig, x=-YLABEL_OFFSET_PT,
+                                                              units="points"))
+    ax.yaxis.label.set_verticalalignment("bottom")
+    ax.xaxis.set_label_coords(0.5, 0.0, transform=offset_copy(ax.transAxes, fig=fig, y=-XLABEL_OFFSET_PT,
+                                                              units="points"))
+    ax.xaxis.label.set_verticalalignment("top")
+
+
+def _empty(fig, axes) -> None:
+    """Remove what the previous figure drew; axes, ticks and scales stay."""
+    for ax in axes.flat:
+        for art in (*ax.lines, *ax.texts, *ax.collections, *ax.patches):
+            art.remove()
+        if ax.legend_ is not None:
+            ax.legend_.remove()
+        ax.set_xlabel("")
+        ax.set_ylabel("")
+        ax.relim()
+        ax.set_autoscale_on(True)
+    for lg in list(fig.legends):
+        lg.remove()
+    for art in fig._rb_extra:
+        art.remove()
+    fig._rb_extra = []
+    fig._rb_legends = []
+
+
+def pad_limits(lo: float, hi: float, log: bool, margin: float = 0.05):
+    """(lo, hi) widened by ``margin`` of the span on each side (in log space on a log axis), as
+    matplotlib's autoscaling does; a zero span gets a small symmetric one."""
+    if log:
+        a, b = np.log10(lo), np.log10(hi)
+        pad = margin * (b - a) if b > a else 0.5
+        return 10.0 ** (a - pad), 10.0 ** (b + pad)
+    pad = margin * (hi - lo) if hi > lo else 0.05 * max(1.0, abs(hi))
+    return lo - pad, hi + pad
+
+
+def legend_below(fig, ax, title: str, entries, below_in: float) -> None:
+    """A legend under ``ax``, its top ``below_in`` inches under the panel (:func:`legend_at`)."""
+    W, H = fig.get_size_inches()
+    pos = ax.get_position()
+    legend_at(fig, pos.x0 * W, pos.y0 * H - below_in, title, entries)
+
+
+def legend_height_in(n_entries: int) -> float:
+    """Height of a legend of ``n_entries`` drawn by :func:`legend_at` (inches)."""
+    return 0.2 + LEGEND_LINE_IN * n_entries
+
+
+def legend_at(fig, x0: float, top: float, title: str, entries) -> None:
+    """A legend whose top left corner is at (x0, top) inches from the figure's lower left: the title,
+    then one entry per line: ``(label, line style dict)`` with keys color, ls, lw, and optionally
+    marker (drawn filled in the middle of a 1.8 em handle). Entries are LEGEND_LINE_IN apart. Removed
+    with the rest of the drawing when :func:`panels` hands the figure out again."""
+    inch = fig.dpi_scale_trans
+    em = 7.0 / 72.0
+    art = [fig.text(x0, top, title, transform=inch, fontsize=8, va="top", ha="left")]
+    y = top - 0.2
+    for label, st in entries:
+        xs = [x0 + 0.05, x0 + 0.05 + 1.8 * em]
+        line = Line2D(xs, [y, y], transform=inch, color=st["color"], ls=st.get("ls", "-"), lw=st.get("lw", 1.4))
+        art.append(line)
+        if st.get("marker"):
+            art.append(Line2D([sum(xs) / 2], [y], transform=inch, color=st["color"], marker=st["marker"], ms=4,
+                              ls="none"))
+        art.append(fig.text(xs[1] + 0.8 * em, y, label, transform=inch, fontsize=7, va="center", ha="left"))
+        y -= LEGEND_LINE_IN
+    for a in art:
+        if isinstance(a, Line2D):
+            fig.add_artist(a)
+    fig._rb_extra = getattr(fig, "_rb_extra", []) + art
+
+
+def save_png(fig, path) -> None:
+    """Save as an 8-bit palette PNG: the figures use a few dozen colours, and a palette makes the
+    files ~3× smaller than RGBA at no visible cost (no dithering). Deterministic for equal input. The
+    canvas is drawn once and its pixels quantized directly."""
+    from PIL import Image
+    canvas = fig.canvas if isinstance(fig.canvas, FigureCanvasAgg) else FigureCanvasAgg(fig)
+    canvas.draw()
+    w, h = canvas.get_width_height(physical=True)
+    im = Image.frombuffer("RGBA", (w, h), canvas.buffer_rgba(), "raw", "RGBA", 0, 1).convert("RGB")
+    q = im.quantize(colors=256, method=Image.Quantize.FASTOCTREE, dither=Image.Dither.NONE)
+    q.save(path, format="PNG", compress_level=6)

@@ -1,0 +1,136 @@
+"""reports.canvas: what makes the report cheap to draw must not change what it shows.
+
+A grid reused within a drawing process draws the same pixels as a fresh one, whatever the previous
+figure left in it; labels rasterized a string at a time land on matplotlib's own pixels; a row of errors
+that are all at round-off is said in the caption instead of drawn, and a row with one error above its
+floor is drawn.
+"""
+import io
+import json
+import shutil
+
+import numpy as np
+import pytest
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from PIL import Image
+
+from reports import canvas, plots
+from reports.data import load_results
+from tests.helpers.sweeps import built_once
+from tests.reports.test_browser import _browser_sweep
+from tests.reports.test_report import _hostile_sweep
+
+
+@pytest.fixture(scope="module")
+def browser_results(tmp_path_factory):
+    """The browser tests' sweep (built once per run, shared): a divergence, a spin, one Δt only."""
+    return built_once(tmp_path_factory, "browser_report", _browser_sweep) / "res"
+
+
+@pytest.fixture(scope="module")
+def hostile_results(tmp_path_factory):
+    """test_report's sweep: a projectile that spins, velocity exact under gravity for every scheme."""
+    return built_once(tmp_path_factory, "hostile_report", _hostile_sweep) / "res"
+
+
+def _pixels(path):
+    with Image.open(path) as im:
+        return np.asarray(im.convert("RGB"), dtype=np.int16)
+
+
+def _litter(rng):
+    """Leave in every pooled grid what a previous figure could: other data, limits, texts, legends."""
+    for fig, axes in canvas._POOL.values():
+        for ax in axes.flat:
+            ax.plot(rng.uniform(1e-9, 1e3, 50), rng.uniform(1e-9, 1e3, 50), color="red", lw=3)
+            ax.set_ylim(1e-3, 1e2)
+            ax.set_xlabel("junk x")
+            ax.set_ylabel("junk y")
+            ax.text(0.5, 0.5, "junk", transform=ax.transAxes)
+        canvas.legend_at(fig, 1.0, 2.0, "junk legend", [("junk", {"color": "red", "marker": "o"})])
+        fig.legend(handles=axes.flat[0].lines[:1], loc="center")
+        fig.set_size_inches(3.0, 2.0)
+
+
+@pytest.mark.parametrize("sc, kind", [("stiff_spring", "errors"), ("stiff_spring", "convergence"),
+                                      ("spin_only", "trajectories"), ("spin_only", "work")])
+def test_a_figure_drawn_in_a_reused_grid_has_the_pixels_of_a_fresh_one(browser_results, tmp_path, sc, kind):
+    res = load_results(browser_results)
+    canvas._POOL.clear()
+    fresh, again = tmp_path / "fresh", tmp_path / "again"
+    fresh.mkdir()
+    again.mkdir()
+    name = plots.draw(res, sc, kind, fresh)[1]
+    assert name is not None
+    _litter(np.random.default_rng(0))
+    assert plots.draw(res, sc, kind, again)[1] == name
+    a, b = _pixels(fresh / name), _pixels(again / name)
+    assert a.shape == b.shape and np.array_equal(a, b)
+
+
+def _render_texts(canvas_class):
+    fig = Figure(figsize=(5.0, 2.5), dpi=90)
+    canvas_class(fig)
+    for k, (size, ha, va) in enumerate([(7, "left", "center"), (8, "left", "top"), (10, "right", "baseline"),
+                                        (11, "center", "bottom"), (7, "left", "bottom")]):
+        fig.text(0.1 + 0.4 * (k % 2), 0.15 + 0.17 * k, f"gyp 1e-03 Δt {k} (s) — µ", fontsize=size, ha=ha, va=va)
+    fig.text(0.9, 0.5, "a y label, turned a quarter", rotation=90, fontsize=8)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90)
+    buf.seek(0)
+    return _pixels(buf)
+
+
+def _mismatch(ours, theirs):
+    """(rows, columns): the ink profiles' L1 distance over the ink, down the rows and across the columns
+    (columns smoothed over 3 px). Sub-pixel glyph placement moves a label by under half a pixel; a whole
+    pixel moves these by ~0.4."""
+    a, b = 255.0 - ours.mean(axis=2), 255.0 - theirs.mean(axis=2)
+    rows = np.abs(a.sum(axis=1) - b.sum(axis=1)).sum() / b.sum()
+    k = np.ones(3) / 3.0
+    cols = np.abs(np.convolve(a.sum(axis=0), k, "same") - np.convolve(b.sum(axis=0), k, "same")).sum() / b.sum()
+    return rows, cols
+
+
+def test_labels_rasterized_a_string_at_a_time_land_on_matplotlibs_own_pixels():
+    canvas._StringRenderer.string_path = True
+    ours, theirs = _render_texts(canvas._Canvas), _render_texts(FigureCanvasAgg)
+    assert canvas._StringRenderer.string_path, "the string path fell back to matplotlib's: nothing was measured"
+    assert abs((255.0 - ours).sum() / (255.0 - theirs).sum() - 1.0) < 0.01   # the same ink: no glyph lost or doubled
+    for part in (np.s_[:, :380], np.s_[:, 380:]):               # horizontal labels; the turned one
+        rows, cols = _mismatch(ours[part], theirs[part])
+        assert rows < 0.15 and cols < 0.15, (part, rows, cols)
+        for shift in ((1, 0), (0, 1)):                           # a label one pixel off is caught
+            assert max(_mismatch(np.roll(ours, shift, axis=(0, 1))[part], theirs[part])) > 0.3, (part, shift)
+
+
+def test_a_ladder_row_at_round_off_is_said_and_a_row_above_its_floor_is_drawn(hostile_results, tmp_path):
+    res = load_results(hostile_results)
+    kind, fname, note = plots.draw(res, "hostile_spin", "convergence", tmp_path)
+    assert fname is not None and "at or below its round-off floor at every Δt" in note and "velocity." in note
+    assert "Orders in the legends: position / orientation / angular velocity." in note
+    # planted: one variant's coarsest velocity error ten times its floor -> the row is drawn again
+    d = tmp_path / "planted"
+    shutil.copytree(hostile_results, d)
+    s = json.loads((d / "summary.json").read_text())
+    rec = next(r for r in s["convergence"] if r["quantity"] == "velocity" and r["engine"] == "reference:rk4")
+    rec["errors"][0] = 10 * rec["floors"][0]
+    (d / "summary.json").write_text(json.dumps(s))
+    note = plots.draw(load_results(d), "hostile_spin", "convergence", tmp_path)[2]
+    assert "round-off" not in note and "position / orientation / velocity / angular velocity" in note
+
+
+def test_pad_limits_widen_like_matplotlib_autoscaling():
+    assert canvas.pad_limits(0.0, 10.0, log=False) == pytest.approx((-0.5, 10.5))
+    assert canvas.pad_limits(1e-3, 1e1, log=True) == pytest.approx((10 ** -3.2, 10 ** 1.2))
+    lo, hi = canvas.pad_limits(2.0, 2.0, log=False)
+    assert lo < 2.0 < hi
+
+
+def test_a_report_drawn_in_this_process_keeps_no_figure(browser_results, tmp_path):
+    import reports
+    d = tmp_path / "res"
+    shutil.copytree(browser_results, d)
+    reports.render(d, jobs=1, progress=False)
+    assert canvas._POOL == {}
