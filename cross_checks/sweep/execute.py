@@ -15,7 +15,8 @@ from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
 
-from cross_checks.sweep.jobs import failed_record, reference_job, run_job, second_reference_job
+from cross_checks.sweep.jobs import (failed_record, failed_second_reference, reference_job, run_job,
+                                     second_reference_job)
 from cross_checks.sweep.lifecycle import worker_init
 
 __all__ = ["Runner", "ScenarioReference", "SecondReference", "run_references", "run_jobs", "second_reference_jobs"]
@@ -207,8 +208,7 @@ def _run_job_item(item):
         try:
             return second_reference_job(scenario, ref_path, job.measured, cache_root, use_cache, time_limit_s)
         except Exception as exc:  # noqa: BLE001 - said in the scenario's record, the sweep goes on
-            return {"label": "drake", "target_accuracy": None, "agrees": None,
-                    "error": f"internal error: {type(exc).__name__}: {exc}"}
+            return failed_second_reference(f"internal error: {type(exc).__name__}: {exc}")
         finally:
             Path(marker).unlink(missing_ok=True)
     try:
@@ -228,8 +228,7 @@ def _in_flight(item) -> bool:
 def _crashed(item) -> dict:
     Path(item[-1]).unlink(missing_ok=True)
     if isinstance(item[0], SecondReference):
-        return {"label": "drake", "target_accuracy": None, "agrees": None,
-                "error": "the worker process died computing it (a crash inside Drake?)"}
+        return failed_second_reference("the worker process died computing it (a crash inside Drake?)")
     return failed_record(item[0], item[1], "the worker process died running this job, alone (a crash inside the engine?)")
 
 

@@ -31,7 +31,8 @@ from cross_checks.sweep import cache, fingerprint
 from cross_checks.sweep.lifecycle import TimeLimitExceeded, time_limit
 
 __all__ = ["SCHEMA_VERSION", "MAX_SERIES_POINTS", "LOCAL_SAMPLES", "RESULT_COLUMNS", "TIMING_COLUMNS", "Job",
-           "job_dts", "run_job", "reference_job", "second_reference_job", "ReferenceResult", "measure_reference", "load_reference",
+           "job_dts", "run_job", "reference_job", "second_reference_job", "failed_second_reference",
+           "ReferenceResult", "measure_reference", "load_reference",
            "clear_reference_memo", "failed_record", "varies"]
 
 #: Version of the results-directory layout and of the cached job records.
@@ -178,9 +179,12 @@ def second_reference_job(scenario, ref_path: str, measured: dict, cache_root: st
         with time_limit(time_limit_s, "the second reference (Drake)"):
             return second_reference(scenario, t_s, y, label, measured, cache_root, use_cache)
     except TimeLimitExceeded as exc:
-        from cross_checks.engines.drake_reference import drake_label
-        return {"label": drake_label(tol.SECOND_REFERENCE_TARGET_ACCURACY), "target_accuracy": tol.SECOND_REFERENCE_TARGET_ACCURACY, "agrees": None,
-                "error": f"{exc} (cross_checks/core/tolerances.py)"}
+        return failed_second_reference(f"{exc} (cross_checks/core/tolerances.py)")
+
+
+def failed_second_reference(why: str) -> dict:
+    """The ``second_reference`` record of a second reference that could not be computed: ``why``."""
+    return {"label": "drake", "target_accuracy": tol.SECOND_REFERENCE_TARGET_ACCURACY, "agrees": None, "error": why}
 
 
 def measure_reference(scenario, t_s, y, label) -> dict:
