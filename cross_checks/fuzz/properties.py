@@ -92,8 +92,22 @@ def lever_roundoff(scenario, y_ref) -> dict:
             "omega_rad_s": k * p.body.mass_kg * x * v / I_min}
 
 
-def _lever_floor(ctx, q, h, t, n, amp=1.0) -> float:
-    """The lever-arm round-off (``lever_roundoff``) in quantity ``q`` after ``n`` steps of ``h`` (t = n h)."""
+def pays_lever_roundoff(variant: str) -> bool:
+    """Whether ``variant``'s arithmetic may hold lever arms from the world origin (``lever_roundoff``).
+    rbcheck's own schemes do not: they take torques r × F with r = R r_B from the COM and step ω itself,
+    never recovering it from a momentum about the origin (reference_sim/scalar.py) — their round-off is
+    the ε-per-step of ``roundoff_floor``. Every other engine, an engine file included, is assumed to (its
+    algebra is not known here). Giving rbcheck's schemes this floor made the fuzz call reference:rk4's
+    one-step order 4.70: a body 0.6 m from the origin moving at 3 m/s, I_min = 1.2e-4 kg m², gave them an
+    8.1e-12 rad/s floor, which left one resolved pair, the coarsest, bent by the next term."""
+    return not variant.startswith("reference:")
+
+
+def _lever_floor(ctx, q, h, t, n, amp=1.0, variant: str = "") -> float:
+    """The lever-arm round-off (``lever_roundoff``) in quantity ``q`` after ``n`` steps of ``h`` (t = n h),
+    for a ``variant`` that pays it (:func:`pays_lever_roundoff`)."""
+    if not pays_lever_roundoff(variant):
+        return 0.0
     lv = ctx.lever or {}
     a, u, w = lv.get("acc_rad_s2", 0.0), lv.get("velocity_m_s", 0.0), lv.get("omega_rad_s", 0.0)
     walk = 1.0 + math.sqrt(n)   # the ω representation error: re-made every step, adding like a random walk
@@ -186,7 +200,7 @@ def free_running_order(ctx: Context, variant: str, i: int, ladder, errors=None) 
             errs[q].append(float(np.max(v)) if runs.status[i] == "ok" and np.all(np.isfinite(v)) else math.nan)
             floors[q].append(M.roundoff_floor(ctx.scales[q], n, reference_error=ctx.ref_err[q],
                                               amplification=ctx.amp[q], quantity=q)
-                             + _lever_floor(ctx, q, float(runs.h_s[i]), float(runs.h_s[i]) * n, n, ctx.amp[q]))
+                             + _lever_floor(ctx, q, float(runs.h_s[i]), float(runs.h_s[i]) * n, n, ctx.amp[q], variant))
     for q in QUANTITIES:
         exp = expectation(sc, variant, q, "free_running", physics=ctx.physics, measure_physics=False)
         rec, claimed = _fit_record(ctx, variant, q, dts, errs[q], floors[q], statuses, exp, "free_running_order")
@@ -205,7 +219,7 @@ def one_step_order(ctx: Context, variant: str, i: int, defects) -> tuple:
     dts = [float(h) for h in ctx.step_h]
     for q in QUANTITIES:
         floors = [M.roundoff_floor(ctx.scales[q], 1, reference_error=float(ctx.step_err[q][k]), quantity=q)
-                  + _lever_floor(ctx, q, dts[k], dts[k], 1) for k in range(len(dts))]
+                  + _lever_floor(ctx, q, dts[k], dts[k], 1, variant=variant) for k in range(len(dts))]
         errs = [float(v) for v in defects[q]]
         statuses = ["ok" if np.isfinite(v) else "failed" for v in errs]
         exp = expectation(ctx.scenario, variant, q, "one_step", physics=ctx.physics, measure_physics=False)
@@ -260,7 +274,7 @@ def conservation(ctx: Context, variant: str, i: int, ladder) -> tuple:
                 unit = "kg m²/s"
             allowed = (ctx.allowance[kind] * float(runs.h_s[i]) / h0
                        + n * tol.CHECK_ROUNDINGS_PER_STEP * _EPS * size
-                       + _lever_conservation(ctx, kind, I_max, float(runs.h_s[i]) * n, n))
+                       + _lever_conservation(ctx, kind, I_max, float(runs.h_s[i]) * n, n, variant))
             ratio = drift / allowed if allowed > 0 else (math.inf if drift > 0 else 0.0)
             if worst is None or ratio > worst[0]:
                 worst = (ratio, drift, allowed, float(runs.h_s[i]), unit)
@@ -278,9 +292,12 @@ def conservation(ctx: Context, variant: str, i: int, ladder) -> tuple:
     return out, tally
 
 
-def _lever_conservation(ctx, kind, I_max, t, n) -> float:
+def _lever_conservation(ctx, kind, I_max, t, n, variant: str = "") -> float:
     """What the lever-arm round-off (``lever_roundoff``) may move world angular momentum (I_max × the ω it
-    adds) or energy (that ω error against I_max |ω|max, and the spurious torque's work) by over time ``t``."""
+    adds) or energy (that ω error against I_max |ω|max, and the spurious torque's work) by over time ``t``,
+    for a ``variant`` that pays it (:func:`pays_lever_roundoff`)."""
+    if not pays_lever_roundoff(variant):
+        return 0.0
     lv = ctx.lever or {}
     dw = lv.get("acc_rad_s2", 0.0) * t + lv.get("omega_rad_s", 0.0) * (1.0 + math.sqrt(n))
     if kind == "angular_momentum":

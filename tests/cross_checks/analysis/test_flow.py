@@ -5,7 +5,7 @@ import pytest
 from cross_checks.core import tolerances as tol
 from cross_checks.gates.check.input import prepare_input
 from cross_checks.analysis.flow import (distances, error_growth, exact_flow, flow_rhs, local_allowances,
-                                           majorant, motion_rate, rk4_flow)
+                                           majorant, motion_rate, rk4_flow, spring_turn_rate)
 from cross_checks.scenario import load_scenario, parse_scenario
 from cross_checks.core.trajectory import Trajectory
 from reference_sim import analytic
@@ -177,3 +177,21 @@ def test_parse_scenario_helper_is_what_the_physics_tests_use():
     # guard: the isotropic-spin scenario above has no forces at all
     sc = parse_scenario('name = "s"\nduration = 1.0\ndt = 0.1\n[body]\nmass = 1.0\ninertia = [1.0, 1.0, 1.0]\n[initial]\n')
     assert not sc.problem.forces.springs and np.all(sc.problem.forces.gravity_W == 0)
+
+
+def test_a_spring_with_a_rest_length_turns_at_the_speed_across_it_over_its_length():
+    # attachment at the COM, anchor at the origin: d = x. x = (0.5, 0, 0) m, v = (0, 2, 0) m/s: |v⊥|/|d| = 4 /s;
+    # moving along d instead turns it not at all; a body spinning at 3 rad/s with the attachment 0.1 m off
+    # its COM along x, at rest, moves the attachment at 0.3 m/s across d: 0.3 / 0.6 = 0.5 /s
+    spring = "[[forces.spring]]\nanchor = [0.0, 0.0, 0.0]\nattach = [{a}, 0.0, 0.0]\nstiffness = 0.01\nrest_length = {L0}"
+    sc = scenario_from_parts(initial="", forces=spring.format(a=0.0, L0=0.2))
+    y = np.array([[0.5, 0, 0, 0, 2.0, 0, 1, 0, 0, 0, 0, 0, 0],
+                  [0.5, 0, 0, 2.0, 0, 0, 1, 0, 0, 0, 0, 0, 0],
+                  [0.0, 0, 0, 0, 2.0, 0, 1, 0, 0, 0, 0, 0, 0]])    # d = 0: no direction, the spring exerts nothing
+    assert spring_turn_rate(sc.problem, y) == pytest.approx([4.0, 0.0, 0.0], abs=1e-15)
+    assert motion_rate(sc, y)[0] == pytest.approx(4.0)   # above √(k/m) = 0.1 /s and |ω| = 0
+    off = scenario_from_parts(initial="", forces=spring.format(a=0.1, L0=0.2))
+    spin = np.array([[0.5, 0, 0, 0, 0, 0, 1, 0, 0, 0, 0, 0, 3.0]])
+    assert spring_turn_rate(off.problem, spin)[0] == pytest.approx(0.3 / 0.6)
+    zero_length = scenario_from_parts(initial="", forces=spring.format(a=0.0, L0=0.0))   # −k d: linear in d
+    assert spring_turn_rate(zero_length.problem, y)[0] == 0.0

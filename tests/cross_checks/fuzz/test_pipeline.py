@@ -90,3 +90,71 @@ def test_a_wrong_order_stays_a_violation_on_the_refined_ladder(monkeypatch):
     low = [v for v in judged.violations if v["property"] == "free_running_order"]
     assert calls, "the refinement was not consulted"
     assert low and all(v["order"] < 3.0 for v in low), judged.violations
+
+
+# The 600 s campaign of seed 2026, case 2135 (shrunk): reference:rk4's angular velocity one-step defects
+# 3.81e-9, 1.47e-10, 5.08e-12, 1.71e-13 rad/s at dt … dt/8 had floors of 8.1e-12 rad/s, the lever-arm
+# round-off of an engine that recovers ω from a momentum about the origin (0.6 m away, 3 m/s, I_min =
+# 1.2e-4 kg m²) — which rbcheck's own schemes do not. Only the coarsest pair stood above 10× those
+# floors: order 4.70 where 5 is claimed.
+FAR_SMALL_BODY = tomllib.loads('''
+name = "fuzz_2026_2135"
+description = "a small body 0.6 m from the origin pushed off its COM in body axes, 8 steps"
+duration = 0.004968
+dt = 0.000621
+dt_ladder = [0.000621, 0.0003105, 0.00015525]
+[body]
+mass = 0.3
+inertia = [0.0001388, 0.0001478, 0.0001242]
+[initial]
+position = [-0.1, 0.3, 0.5]
+velocity = [-3.0, -1.0, -0.2]
+angular_velocity = [7.75, -4.423, 9.643]
+[[forces.point]]
+force = [-3.217, 4.857, 4.005]
+point = [-0.1459, 0.175, -0.03627]
+frame = "body"
+''')
+
+
+def test_rbcheck_s_own_schemes_are_not_given_an_engine_s_lever_arm_round_off(monkeypatch):
+    import cross_checks.fuzz.properties as P
+    assert not P.pays_lever_roundoff("reference:rk4") and P.pays_lever_roundoff("mujoco:rk4")
+    (judged,) = evaluate_specs([FAR_SMALL_BODY], ["reference:rk4"])
+    assert judged.violations == []
+    monkeypatch.setattr(P, "pays_lever_roundoff", lambda variant: True)   # the floor as it was
+    (before,) = evaluate_specs([FAR_SMALL_BODY], ["reference:rk4"])
+    assert [(v["property"], v["quantity"]) for v in before.violations] == [("one_step_order", "angular_velocity")]
+
+
+# A 120 s campaign of seed 3 (case 203, shrunk): a body falling past the anchor of a spring with a rest
+# length — the attachment comes within 5 cm of it at 2.3 m/s, so the spring turns at up to 44 /s while
+# √(k/m), √(k r²/I) and |ω| say 1.6 /s. Chosen from those, dt = 0.037 s was h·L = 1.6, and
+# drake:runge_kutta3's one-step defects had order 3.29 where 4 is claimed (pairwise 4.05, 2.90, 3.68, then
+# 3.91, 3.97, 3.99 on dt/16 … dt/64: the next term of the series, not the order).
+SPRING_PASSED_BY = tomllib.loads('''
+name = "fuzz_3_203"
+description = "a heavy body falling past a soft spring's anchor"
+duration = 0.296
+dt = 0.037
+dt_ladder = [0.037, 0.0185, 0.00925]
+[body]
+mass = 20.0
+inertia = [0.05, 0.05, 0.1]
+[initial]
+position = [0.6, 0.33, -0.45]
+velocity = [-0.22, 0.07, -0.15]
+[forces]
+gravity = [0.0, 0.0, -12.0]
+[[forces.spring]]
+anchor = [0.7, 0.16, -0.55]
+attach = [0.095, -0.21, 0.13]
+stiffness = 1.8
+rest_length = 0.22
+''')
+
+
+def test_a_case_whose_spring_turns_faster_than_its_step_resolves_is_not_judged():
+    (judged,) = evaluate_specs([SPRING_PASSED_BY], ["reference:rk4"])
+    assert judged.violations == [] and judged.tally == {}
+    assert judged.numbers["hL"] > 1.0 and judged.numbers["skipped"].startswith("measured h·L")
