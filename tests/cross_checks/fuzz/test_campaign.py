@@ -99,10 +99,6 @@ def test_the_broken_c_engine_is_found_through_its_engine_file(tmp_path, cache, c
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
-    "open (docs/fuzz.md §5): seed 3's case 190 gives drake:runge_kutta3 an orientation order of 2.66 from the "
-    "one pair resolved above 10x its round-off floor; the next pairs (2.84, 2.91) approach 3 but use points "
-    "within 10x of the floor, which the fit may not use, and the refined ladder adds no resolved point"))
 def test_the_shipped_engines_raise_no_false_alarm_in_a_short_campaign(tmp_path, cache, clean_registry):
     rc = main(["fuzz", "--budget", "120", "--seed", "3", "--jobs", "2", "--out", str(tmp_path / "fz")])
     s = json.loads((tmp_path / "fz" / "fuzz.json").read_text())
