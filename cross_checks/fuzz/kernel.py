@@ -26,7 +26,7 @@ import numpy as np
 from reference_sim.integrators import IMPLICIT_TOL, ImplicitSolveError, get_step
 from reference_sim.scalar import ScalarStepper
 
-__all__ = ["CaseKernel", "columns", "rows"]
+__all__ = ["CaseKernel", "columns", "rows", "clear_cache"]
 
 _MAX_ITER = 50
 
@@ -44,6 +44,32 @@ def columns(y) -> list:
 def rows(cols) -> np.ndarray:
     """13 (N,) columns -> (N, 13) states."""
     return np.stack([np.asarray(c, dtype=float) for c in cols], axis=-1)
+
+
+#: Float steppers of the batch's (problem, step) members, shared by every variant: a stepper's parameters
+#: (mass, inertia, forces, decay factors at its step) do not depend on the scheme, which the kernel takes
+#: from its own ``variant``. {(id(problem), h, ScalarStepper.__init__): (problem, stepper)}; the problem is
+#: kept so that its id cannot be reused while cached, and ``__init__`` is in the key so that a stepper built
+#: before a bug was planted there (tests/mutants.py) is never served after.
+_STEPPERS: dict = {}
+_STEPPERS_MAX = 4096   # a batch: 64 cases x (3 free-running + 4 one-step rungs), and the drivers' harness
+
+
+def _stepper(problem, h: float) -> ScalarStepper:
+    """The float stepper of ``problem`` at step ``h`` (s), built once by ``ScalarStepper.__init__`` (with a
+    fixed scheme name: its parameters are the same for every scheme) and shared by the batch's kernels."""
+    key = (id(problem), h, ScalarStepper.__init__)
+    hit = _STEPPERS.get(key)
+    if hit is None or hit[0] is not problem:
+        if len(_STEPPERS) >= _STEPPERS_MAX:
+            _STEPPERS.clear()
+        hit = _STEPPERS[key] = (problem, ScalarStepper(problem, "course", h))
+    return hit[1]
+
+
+def clear_cache() -> None:
+    """Forget the shared steppers (the end of a batch)."""
+    _STEPPERS.clear()
 
 
 def _padded(lists, width, empty):
@@ -66,9 +92,8 @@ class CaseKernel(ScalarStepper):
     def stack(cls, problems, variant: str, h_s) -> "CaseKernel":
         """The kernel of ``variant`` for members ``problems[i]`` at steps ``h_s[i]`` (s)."""
         h_s = [float(h) for h in np.broadcast_to(np.asarray(h_s, dtype=float), (len(problems),))]
-        built: dict = {}   # members of one problem at one step (one-step starts) share their stepper
-        steppers = [built[(id(p), h)] if (id(p), h) in built else built.setdefault((id(p), h), ScalarStepper(p, variant, h))
-                    for p, h in zip(problems, h_s)]
+        get_step(variant)  # validates the name (the shared steppers may have been built for another)
+        steppers = [_stepper(p, h) for p, h in zip(problems, h_s)]
         return cls._from_steppers(steppers, list(problems), variant, h_s)
 
     @classmethod
@@ -143,10 +168,11 @@ class CaseKernel(ScalarStepper):
             return self._per_member(y)
 
     def _per_member(self, y):
+        """Leapfrog, each member on its own float stepper (its stopping rule)."""
         out = [np.empty(self.n) for _ in range(13)]
         for i, st in enumerate(self._steppers):
             try:
-                yi = st.step([float(c[i]) for c in y])
+                yi = st._leapfrog([float(c[i]) for c in y])   # the shared stepper's own step is not this scheme's
             except (ImplicitSolveError, np.linalg.LinAlgError, ArithmeticError, ValueError):
                 yi = [math.nan] * 13
             for c, v in zip(out, yi):

@@ -40,3 +40,41 @@ def test_leapfrog_members_agree_to_round_off():
         y = kern.step(y)
         ys = [s.step(v) for s, v in zip(singles, ys)]
     assert np.allclose(rows(y), np.array(ys), rtol=1e-12, atol=1e-12)
+
+
+def _steps_like_float_steppers(problems, hs, variant):
+    kern = CaseKernel.stack(problems, variant, hs)
+    y = columns([p.initial_packed() for p in problems])
+    singles = [ScalarStepper(p, variant, float(h)) for p, h in zip(problems, hs)]
+    ys = [[float(v) for v in p.initial_packed()] for p in problems]
+    with np.errstate(all="ignore"):
+        for _ in range(5):
+            y = kern.step(y)
+            ys = [s.step(v) for s, v in zip(singles, ys)]
+    return np.array_equal(rows(y), np.array(ys))
+
+
+def test_kernels_of_every_scheme_on_the_same_problems_share_steppers_and_stay_bit_identical():
+    """The steppers are built once per (problem, step) and shared by every scheme's kernel (their parameters
+    do not depend on the scheme): each kernel still steps its own scheme, member for member."""
+    problems, hs = _problems()
+    first = CaseKernel.stack(problems, "rk4", hs)
+    for variant in ("course", "explicit_euler", "midpoint", "implicit_euler", "rk4"):
+        assert CaseKernel.stack(problems, variant, hs)._steppers[0] is first._steppers[0]
+        assert _steps_like_float_steppers(problems, hs, variant), variant
+
+
+def test_a_bug_planted_in_the_stepper_init_reaches_kernels_of_problems_stacked_before(monkeypatch):
+    """A shared stepper built before a bug was planted in ScalarStepper.__init__ (tests/mutants.py plants
+    them there) is never served after: the kernel computes what the patched float stepper computes."""
+    problems, hs = _problems()
+    clean = rows(CaseKernel.stack(problems, "course_gyro", hs).step(columns([p.initial_packed() for p in problems])))
+    orig = ScalarStepper.__init__
+
+    def init(self, *a, **kw):
+        orig(self, *a, **kw)
+        self.mg = [2.0 * v for v in self.mg]   # a planted bug: gravity twice
+    monkeypatch.setattr(ScalarStepper, "__init__", init)
+    assert _steps_like_float_steppers(problems, hs, "course_gyro")
+    bugged = rows(CaseKernel.stack(problems, "course_gyro", hs).step(columns([p.initial_packed() for p in problems])))
+    assert not np.array_equal(bugged, clean)
