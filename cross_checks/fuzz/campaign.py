@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from cross_checks.core.files import atomic_write_text
-from cross_checks.fuzz import generate, known, pipeline, properties as P, shrink as S
+from cross_checks.fuzz import drivers, generate, known, pipeline, properties as P, shrink as S
 
 __all__ = ["BATCH", "N0_CYCLE", "SHRINK_S", "MAX_SHRUNK", "FuzzError", "run_batch", "run_campaign",
            "SUMMARY", "FORMAT"]
@@ -91,9 +91,12 @@ def _cache_path(cache_root, key):
 def _compute_batch(seed, batch, variants) -> dict:
     n0 = N0_CYCLE[batch % len(N0_CYCLE)]
     draws = [generate.draw(seed, batch * BATCH + k) for k in range(BATCH)]
-    cases = pipeline.prepare(draws, n0)
-    contexts, members, y_end = pipeline.measure(cases)
-    outcomes, seconds = pipeline.evaluate(cases, contexts, members, y_end, variants)
+    try:
+        cases = pipeline.prepare(draws, n0)
+        contexts, members, y_end = pipeline.measure(cases)
+        outcomes, seconds = pipeline.evaluate(cases, contexts, members, y_end, variants)
+    finally:
+        drivers.clear_cache()   # the batch's compiled models and steppers: not needed by the next batch
     out = []
     for c, o in zip(cases, outcomes):
         out.append({"index": c.index, "numbers": o.numbers, "violations": o.violations, "tally": o.tally,

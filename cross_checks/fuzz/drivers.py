@@ -149,37 +149,50 @@ def _reference_ladder(var, scenarios, h0s, n0):
 #: warning's time is not kept (a run that warned is re-run through the adapter, which keeps it).
 _NO_DATA = SimpleNamespace(time=math.nan)
 
-#: Compiled models of the batch's scenarios, one per (scenario, variant): {(id, variant): (scenario, model or
-#: the adapter's EngineError message, {step: model})}. The scenario is kept so that its id cannot be reused
-#: while cached.
+#: Compiled models of the batch's scenarios, ONE per scenario whatever the variant and step:
+#: {(id(scenario), build_model): (scenario, model or the adapter's EngineError message)}. The scenario is
+#: kept so that its id cannot be reused while cached; ``build_model`` is in the key so that a model built
+#: before it was patched is never served after.
 _MODELS: dict = {}
-_MODELS_MAX = 512   # a batch holds 64 cases x 4 variants
+_MODELS_MAX = 512   # a batch holds 64 cases
 
 
 def _model(sc, var, h):
-    """``build_model(sc, var, h)``: compiled once per (scenario, variant), other steps as copies with
-    ``opt.timestep`` set — the only thing the step changes in a compiled model (runs bit-identical to the
-    adapter's, tested). Raises the adapter's EngineError for a model MuJoCo rejects."""
-    import copy
+    """``build_model(sc, var, h)``: compiled once per scenario, then set to ``var``'s integrator and step
+    ``h`` in place (``opt.integrator`` and ``opt.timestep`` are all a variant and a step change in a
+    compiled model: runs bit-identical to the adapter's, tested for every variant on the same models).
+    The model is shared: a rollout call must hold each scenario at one (variant, step) only, and set it
+    right before the call (:func:`_set`). Raises the adapter's EngineError for a model MuJoCo rejects."""
     from cross_checks.engines import mujoco_engine as me
     from cross_checks.engines.base import EngineError
-    key = (id(sc), var)
+    key = (id(sc), me.build_model)
     hit = _MODELS.get(key)
     if hit is None or hit[0] is not sc:
         if len(_MODELS) >= _MODELS_MAX:
             _MODELS.clear()
         try:
-            hit = (sc, me.build_model(sc, var, h), {})
+            hit = (sc, me.build_model(sc, var, h))
         except EngineError as exc:
-            hit = (sc, str(exc), {})
+            hit = (sc, str(exc))
         _MODELS[key] = hit
     if isinstance(hit[1], str):
         raise EngineError(hit[1])
-    at = hit[2].get(float(h))   # one model per step: the ladder's rungs and the one-step rungs share them
-    if at is None:
-        at = hit[2][float(h)] = copy.copy(hit[1])
-        at.opt.timestep = float(h)
-    return at
+    return _set(hit[1], var, h)
+
+
+def _set(model, var, h):
+    """``model`` set to ``var``'s integrator and step ``h`` (in place)."""
+    from cross_checks.engines import mujoco_engine as me
+    model.opt.integrator = me._integrator(var)
+    model.opt.timestep = float(h)
+    return model
+
+
+def clear_cache() -> None:
+    """Forget the batch's compiled models and shared steppers (the end of a batch)."""
+    from cross_checks.fuzz import kernel
+    _MODELS.clear()
+    kernel.clear_cache()
 
 
 def _mujoco_state(me, y):
@@ -367,36 +380,55 @@ def _pybullet_run(var, scenario, h, n, runs, i) -> bool:
     return True
 
 
+def _rounds(scenarios, hs) -> list:
+    """Member indices in rounds that hold each scenario at one step only (the models are shared per
+    scenario, :func:`_model`): round k holds every scenario's k-th distinct step."""
+    seen: dict = {}
+    rounds: list = []
+    for j, (sc, h) in enumerate(zip(scenarios, hs)):
+        steps = seen.setdefault(id(sc), [])
+        if float(h) not in steps:
+            steps.append(float(h))
+        k = steps.index(float(h))
+        while len(rounds) <= k:
+            rounds.append([])
+        rounds[k].append(j)
+    return rounds
+
+
 def _mujoco_one_step(var, scenarios, hs, y_start, threads):
     """One step per member through rollout (nstep 1): the adapter's one_step, member by member (NaN for a
     member whose model MuJoCo rejects)."""
-    import mujoco
-    from mujoco import rollout
     from cross_checks.engines import mujoco_engine as me
-    from cross_checks.engines.base import EngineError, apply_decay_prestep
+    from cross_checks.engines.base import EngineError
     M = len(scenarios)
     out = np.full((M, 13), np.nan)
-    cache, models = {}, []
-    for sc, h in zip(scenarios, hs):
-        key = (id(sc), float(h))
-        if key not in cache:
+    for rnd in _rounds(scenarios, hs):
+        models = [None] * M
+        for j in rnd:
             try:
-                cache[key] = _model(sc, var, h)
+                models[j] = _model(scenarios[j], var, hs[j])
             except EngineError:
-                cache[key] = None
-        models.append(cache[key])
-    for grp in _by_structure(models, [j for j in range(M) if models[j] is not None]):
-        sub = [scenarios[j] for j in grp]
-        harness = _Harness(sub, hs[grp])
-        xfrc = harness.xfrc(columns(y_start[grp]))
-        y_dec = np.array([apply_decay_prestep(sc, y_start[j], hs[j]) for sc, j in zip(sub, grp)])
-        mods = [models[j] for j in grp]
-        datas = [mujoco.MjData(mods[0]) for _ in range(max(1, threads))]
-        with me._Session(_NO_DATA), np.errstate(all="ignore"):
-            res, _ = rollout.rollout(mods, datas, _mujoco_state(me, y_dec), xfrc[:, None, :],
-                                     control_spec=mujoco.mjtState.mjSTATE_XFRC_APPLIED, nstep=1)
-        out[grp] = me._to_packed(res[:, 0, 1:8], res[:, 0, 8:14])
+                pass
+        for grp in _by_structure(models, [j for j in rnd if models[j] is not None]):
+            out[grp] = _mujoco_one_step_group(me, [scenarios[j] for j in grp], [models[j] for j in grp], hs[grp],
+                                              y_start[grp], threads)
     return out
+
+
+def _mujoco_one_step_group(me, sub, mods, hs, y_start, threads):
+    """One step of members sharing one model structure, each scenario at one step: (M, 13)."""
+    import mujoco
+    from mujoco import rollout
+    from cross_checks.engines.base import apply_decay_prestep
+    harness = _Harness(sub, hs)
+    xfrc = harness.xfrc(columns(y_start))
+    y_dec = np.array([apply_decay_prestep(sc, y, h) for sc, y, h in zip(sub, y_start, hs)])
+    datas = [mujoco.MjData(mods[0]) for _ in range(max(1, threads))]
+    with me._Session(_NO_DATA), np.errstate(all="ignore"):
+        res, _ = rollout.rollout(mods, datas, _mujoco_state(me, y_dec), xfrc[:, None, :],
+                                 control_spec=mujoco.mjtState.mjSTATE_XFRC_APPLIED, nstep=1)
+    return me._to_packed(res[:, 0, 1:8], res[:, 0, 8:14])
 
 
 def one_step(variant: str, scenarios, hs, y_start, *, threads: int = 1):

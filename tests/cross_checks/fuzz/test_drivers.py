@@ -36,3 +36,28 @@ def test_batched_one_step_equals_the_adapter():
             assert np.allclose(got, want, rtol=1e-12, atol=1e-13), variant
         else:
             assert np.array_equal(got, want), variant
+
+
+def test_every_mujoco_variant_on_the_same_compiled_models_equals_the_adapter():
+    """One compiled model per scenario, switched between integrators and steps in place (drivers._model):
+    every variant's ladder and its one-step runs at four steps of each case (one rollout round per step)
+    are still the adapter's, bit for bit, whichever variant compiled the model."""
+    scs = _cases(4)
+    h0s = [sc.dt_s for sc in scs]
+    ys = np.array([sc.problem.initial_packed() for sc in scs])
+    members = [(i, r) for i in range(len(scs)) for r in range(4)]
+    m_scs = [scs[i] for i, _ in members]
+    m_hs = np.array([h0s[i] / 2 ** r for i, r in members])
+    m_ys = np.array([ys[i] for i, _ in members])
+    for variant in ("mujoco:implicit", "mujoco:rk4", "mujoco:euler", "mujoco:implicitfast", "mujoco:implicit"):
+        var = variant.split(":")[1]
+        ladder = drivers.run_ladder(variant, scs, h0s, 8)
+        for r, runs in enumerate(ladder):
+            for i, sc in enumerate(scs):
+                run = get_adapter("mujoco").simulate(sc, var, h0s[i] / 2 ** r, 8 * 2 ** r)
+                assert np.array_equal(runs.y[:, i], np.asarray(run.y)), (variant, r, i)
+        got = drivers.one_step(variant, m_scs, m_hs, m_ys)
+        want = np.array([get_adapter("mujoco").one_step(sc, var, h, y[None, :])[0]
+                         for sc, h, y in zip(m_scs, m_hs, m_ys)])
+        assert np.array_equal(got, want), variant
+    drivers.clear_cache()
