@@ -21,6 +21,7 @@ error of an order-p scheme is O(Δt^{p+1}), whatever its amplitude drift does ov
 from __future__ import annotations
 
 import math
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
@@ -33,7 +34,8 @@ from cross_checks.engines import declared_order
 __all__ = ["energy_drift_bound", "characteristic_rate_sq", "QUANTITIES", "VARIANT_TRAITS",
            "DEFAULT_TRAITS", "Traits", "traits", "EQUIVALENT_PAIRS", "pair_is_same_arithmetic", "Expectation",
            "expectation", "expected_order",
-           "nominal_order", "gyroscopic_term_matters", "rotation_drives_translation", "translation_drives_rotation"]
+           "nominal_order", "gyroscopic_term_matters", "rotation_drives_translation", "translation_drives_rotation",
+           "memoized"]
 
 
 @dataclass(frozen=True)
@@ -177,6 +179,40 @@ def _isotropic(inertia_B) -> bool:
     return bool(m[-1] - m[0] <= EQUAL_MOMENTS_REL_TOL * m[-1])
 
 
+#: While :func:`memoized` is active: what the expectations decided, {key: (the objects it was decided for,
+#: value)} — the objects are kept so that their ids cannot be reused while memoized.
+_MEMO: dict | None = None
+
+
+@contextmanager
+def memoized():
+    """Within this block, decisions that depend only on a scenario (and its measured physics) are made once
+    per scenario object and reused: ``gyroscopic_term_matters``, the free-running expectation of a
+    (variant, quantity) — which the one-step mode asks for again — and the pre-asymptotic reason of a
+    (traits, quantity), the same for every variant with those traits. For a fuzz batch (thousands of
+    expectations of 64 scenarios), whose scenarios are not changed while it runs; results are the ones
+    computed without it."""
+    global _MEMO
+    outer = _MEMO
+    if outer is None:
+        _MEMO = {}
+    try:
+        yield
+    finally:
+        if outer is None:
+            _MEMO = None
+
+
+def _memo(key, objs, compute):
+    """``compute()``, memoized under ``key`` (holding ``objs``) while :func:`memoized` is active."""
+    if _MEMO is None:
+        return compute()
+    hit = _MEMO.get(key)
+    if hit is None or any(a is not b for a, b in zip(hit[0], objs)):
+        hit = _MEMO[key] = (objs, compute())
+    return hit[1]
+
+
 def gyroscopic_term_matters(scenario) -> bool:
     """True when ω × (I ω) is non-zero somewhere along the true motion.
 
@@ -184,6 +220,10 @@ def gyroscopic_term_matters(scenario) -> bool:
     ω lies along a principal axis (then ω stays there). Any torque on an anisotropic body moves ω off
     the principal axes sooner or later.
     """
+    return _memo(("gyroscopic_term_matters", id(scenario)), (scenario,), lambda: _gyroscopic_term_matters(scenario))
+
+
+def _gyroscopic_term_matters(scenario) -> bool:
     p = scenario.problem
     if _isotropic(p.body.inertia_B):
         return False
@@ -233,7 +273,8 @@ def expectation(scenario, variant: str, quantity: str, mode: str = "free_running
     """
     if mode not in ("free_running", "one_step"):
         raise ValueError(f"unknown mode {mode!r}; modes: free_running, one_step")
-    free = _free_running(scenario, variant, quantity, physics, measure_physics)
+    free = _memo(("free_running", id(scenario), variant, quantity, id(physics), measure_physics), (scenario, physics),
+                 lambda: _free_running(scenario, variant, quantity, physics, measure_physics))
     if mode == "free_running":
         return free
     if free.verdict == "does_not_converge":
@@ -260,7 +301,8 @@ def _free_running(scenario, variant: str, quantity: str, physics, measure_physic
     if p is None:
         return Expectation("converges", None, f"no nominal order is recorded for {variant}")
     if p == 1.0 and (physics is not None or measure_physics):
-        why = _pre_asymptotic_reason(scenario, variant, quantity, tr, physics)
+        why = _memo(("pre_asymptotic", id(scenario), tr, quantity, id(physics)), (scenario, physics),
+                    lambda: _pre_asymptotic_reason(scenario, variant, quantity, tr, physics))
         if why:
             return Expectation("pre_asymptotic", None, why)
     return Expectation("converges", p, f"{variant} is an order-{p:g} scheme")

@@ -91,10 +91,12 @@ def _cache_path(cache_root, key):
 def _compute_batch(seed, batch, variants) -> dict:
     n0 = N0_CYCLE[batch % len(N0_CYCLE)]
     draws = [generate.draw(seed, batch * BATCH + k) for k in range(BATCH)]
+    from cross_checks.analysis.expectations import memoized
     try:
-        cases = pipeline.prepare(draws, n0)
-        contexts, members, y_end = pipeline.measure(cases)
-        outcomes, seconds = pipeline.evaluate(cases, contexts, members, y_end, variants)
+        with memoized():   # thousands of expectations of the batch's 64 scenarios, each decided once
+            cases = pipeline.prepare(draws, n0)
+            contexts, members, y_end = pipeline.measure(cases)
+            outcomes, seconds = pipeline.evaluate(cases, contexts, members, y_end, variants)
     finally:
         drivers.clear_cache()   # the batch's compiled models and steppers: not needed by the next batch
     out = []

@@ -227,3 +227,21 @@ def test_pre_step_decay_breaks_the_expmap_gyro_mujoco_euler_pair_only_with_a_gyr
     sym = _decaying_spin(decay=True, inertia=(0.3, 0.3, 0.3))   # no gyroscopic torque: exact again
     assert _expmap_vs_mujoco_euler(sym, 0.01) < 1e-12
     assert pair_is_same_arithmetic(sym, "reference:expmap_gyro", "mujoco:euler")
+
+
+def test_memoized_expectations_are_the_ones_computed_without_memo():
+    """``memoized()`` (a fuzz batch) reuses per-scenario decisions across variants, quantities and modes:
+    every expectation, reason included, equals the one computed without it, on every catalog scenario."""
+    from cross_checks.analysis.expectations import memoized
+    from cross_checks.analysis.physics import scenario_physics
+    variants = ["reference:course", "reference:course_gyro", "mujoco:euler", "pybullet:multibody", "reference:rk4",
+                "reference:explicit_euler", "reference:implicit_euler", "mujoco:implicit", "nobody:knows"]
+    for name in sorted(set(catalog_names()) - {"spring_pendulum", "applied_torque"}):
+        sc = load_scenario(name)
+        phys = scenario_physics(sc)
+        plain = {(v, q, m): expectation(sc, v, q, m, physics=phys, measure_physics=False)
+                 for v in variants for q in QUANTITIES for m in ("free_running", "one_step")}
+        with memoized():
+            for _ in range(2):
+                for (v, q, m), want in plain.items():
+                    assert expectation(sc, v, q, m, physics=phys, measure_physics=False) == want, (name, v, q, m)
