@@ -27,6 +27,7 @@ it was raised in, as does a non-finite state or a component beyond BLOWUP_LIMIT.
 from __future__ import annotations
 
 import threading
+from contextlib import contextmanager
 
 import numpy as np
 
@@ -284,9 +285,27 @@ def _divergence(y_rows, first: int, warn_steps: tuple, session, dt_s: float):
     return min(c[0] for c in candidates), "; ".join(c[1] for c in sorted(candidates))
 
 
+#: Where a run takes its compiled model: ``build_model`` unless a caller lends models it compiled already
+#: (:func:`models_from`).
+_MODEL_SOURCE = None
+
+
+@contextmanager
+def models_from(source):
+    """Within this block, runs take their model from ``source(scenario, variant, dt_s)`` instead of compiling
+    one: a model ``build_model`` compiled, with ``variant``'s integrator and step ``dt_s`` set (the fuzz
+    compiles each case once for all its variants and steps, cross_checks/fuzz/drivers.py)."""
+    global _MODEL_SOURCE
+    outer, _MODEL_SOURCE = _MODEL_SOURCE, source
+    try:
+        yield
+    finally:
+        _MODEL_SOURCE = outer
+
+
 def _model_and_data(scenario, variant, dt_s):
     """``(MjModel, MjData, its xfrc_applied row, weight m g)`` of one run of the scenario's body."""
-    m = build_model(scenario, variant, dt_s)
+    m = (build_model if _MODEL_SOURCE is None else _MODEL_SOURCE)(scenario, variant, dt_s)
     d = mujoco.MjData(m)
     weight = scenario.problem.body.mass_kg * np.asarray(scenario.problem.forces.gravity_W, dtype=float)
     return m, d, d.xfrc_applied[_BODY], weight

@@ -21,6 +21,7 @@ small enough (tens of cases, a few hundred steps) that measuring afterwards beat
 """
 from __future__ import annotations
 
+import contextlib
 import math
 from dataclasses import dataclass
 from types import SimpleNamespace
@@ -338,8 +339,9 @@ def _mujoco_ladder(var, scenarios, h0s, n0, threads):
                     staged.append(i)   # the adapter's own divergence time and message
                 else:
                     runs.y[:, i] = Y[:, j]
-        for i in staged:
-            _adapter_run(f"mujoco:{var}", scenarios[i], h[i], n, runs, i)
+        with me.models_from(_model):   # the adapter's runs on the batch's compiled models
+            for i in staged:
+                _adapter_run(f"mujoco:{var}", scenarios[i], h[i], n, runs, i)
         out.append(runs)
     return out
 
@@ -459,13 +461,22 @@ def one_step(variant: str, scenarios, hs, y_start, *, threads: int = 1):
     groups: dict = {}
     for j in rest:
         groups.setdefault((id(scenarios[j]), float(hs[j])), []).append(j)
-    for idx in groups.values():
-        try:
-            with np.errstate(all="ignore"):
-                out[idx] = np.asarray(adapter.one_step(scenarios[idx[0]], var, float(hs[idx[0]]), y_start[idx]),
-                                      dtype=float)
-        except KeyboardInterrupt:
-            raise
-        except Exception:  # noqa: BLE001 - a failed one-step run leaves NaN: the property says so
-            pass
+    with _models_lent(engine):
+        for idx in groups.values():
+            try:
+                with np.errstate(all="ignore"):
+                    out[idx] = np.asarray(adapter.one_step(scenarios[idx[0]], var, float(hs[idx[0]]), y_start[idx]),
+                                          dtype=float)
+            except KeyboardInterrupt:
+                raise
+            except Exception:  # noqa: BLE001 - a failed one-step run leaves NaN: the property says so
+                pass
     return out
+
+
+def _models_lent(engine):
+    """MuJoCo's adapter running on the batch's compiled models (:func:`_model`); nothing for other engines."""
+    if engine != "mujoco":
+        return contextlib.nullcontext()
+    from cross_checks.engines import mujoco_engine as me
+    return me.models_from(_model)
