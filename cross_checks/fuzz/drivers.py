@@ -114,7 +114,7 @@ def _reference_ladder(var, scenarios, h0s, n0):
     hs = [h0s[i] / 2 ** r for r, i in members]
     out = [_empty_runs(np.asarray(h0s) / 2 ** r, n0 * 2 ** r) for r in range(RUNGS)]
     kern = CaseKernel.stack([scenarios[i].problem for _, i in members], var, hs)
-    y0 = np.array([scenarios[i].problem.initial_packed() for _, i in members])
+    y0 = np.array([_initial(scenarios[i].problem) for _, i in members])
     for r in range(RUNGS):
         out[r].y[0] = y0[r * B:(r + 1) * B]
     y = columns(y0)
@@ -189,10 +189,27 @@ def _set(model, var, h):
     return model
 
 
+#: Initial states of the batch's problems: {id(problem): (problem, packed (13,))}, read-only.
+_INITIAL: dict = {}
+
+
+def _initial(problem) -> np.ndarray:
+    """``problem.initial_packed()``, once per problem (every variant's runs start there; not to be written
+    into)."""
+    hit = _INITIAL.get(id(problem))
+    if hit is None or hit[0] is not problem:
+        if len(_INITIAL) >= _MODELS_MAX:
+            _INITIAL.clear()
+        hit = _INITIAL[id(problem)] = (problem, problem.initial_packed())
+        hit[1].flags.writeable = False
+    return hit[1]
+
+
 def clear_cache() -> None:
-    """Forget the batch's compiled models and shared steppers (the end of a batch)."""
+    """Forget the batch's compiled models, initial states and shared steppers (the end of a batch)."""
     from cross_checks.fuzz import kernel
     _MODELS.clear()
+    _INITIAL.clear()
     kernel.clear_cache()
 
 
@@ -306,7 +323,7 @@ def _mujoco_group(var, scenarios, hs, ns, threads):
     warned = False
     for grp in _by_structure(models, [j for j in range(M) if models[j] is not None]):
         sub = [scenarios[j] for j in grp]
-        y0 = np.array([sc.problem.initial_packed() for sc in sub])
+        y0 = np.array([_initial(sc.problem) for sc in sub])
         harness = _Harness(sub, [hs[j] for j in grp])
         xfrc = harness.xfrc(columns(y0))
         per_step = np.array([sc.problem.forces.state_dependent for sc in sub])

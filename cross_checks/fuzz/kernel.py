@@ -20,6 +20,7 @@ State layout as everywhere: 13 (N,) columns [x_W (3), v_W (3), q_WB (w, x, y, z)
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -67,9 +68,58 @@ def _stepper(problem, h: float) -> ScalarStepper:
     return hit[1]
 
 
+#: Parameter columns per list of steppers (:func:`_parameters`): {ids: (steppers, [(attribute, value)])}.
+_PARAMETERS: dict = {}
+_PARAMETERS_MAX = 256
+
+
+def _parameters(steppers) -> list:
+    """The kernel's (N,) parameter columns and ``if`` flags of ``steppers``: [(attribute, value)], computed once
+    per list of steppers (every scheme's kernel of a batch stacks the same ones; the columns are never written
+    into: reference_sim/scalar.py has no augmented assignment on a parameter)."""
+    key = tuple(map(id, steppers))
+    hit = _PARAMETERS.get(key)
+    if hit is not None and all(a is b for a, b in zip(hit[0], steppers)):
+        return hit[1]
+    if len(_PARAMETERS) >= _PARAMETERS_MAX:
+        _PARAMETERS.clear()
+    k = SimpleNamespace()
+    s = steppers
+    k.h = _col([t.h for t in s])
+    k.m = _col([t.m for t in s])
+    k.I = [[_col([t.I[i][j] for t in s]) for j in range(3)] for i in range(3)]
+    k.Iinv = [[_col([t.Iinv[i][j] for t in s]) for j in range(3)] for i in range(3)]
+    k.mg = [_col([t.mg[i] for t in s]) for i in range(3)]
+    k.c = _col([t.c for t in s])
+    k.gv, k.gw = _col([t.gv for t in s]), _col([t.gw for t in s])
+    k.kv, k.kw = _col([t.kv for t in s]), _col([t.kw for t in s])
+    zero3 = [0.0, 0.0, 0.0]
+    springs = _padded([t.springs for t in s], max(len(t.springs) for t in s), (zero3, zero3, 0.0, 0.0))
+    k.springs = [([_col([m[j][0][i] for m in springs]) for i in range(3)],
+                  [_col([m[j][1][i] for m in springs]) for i in range(3)],
+                  _col([m[j][2] for m in springs]), _col([m[j][3] for m in springs]))
+                 for j in range(len(springs[0]) if springs else 0)]
+    k.fixed_f = [_col([t.fixed_f[i] for t in s]) for i in range(3)]
+    for name in ("world_point", "body_point"):
+        lists = _padded([getattr(t, name) for t in s], max(len(getattr(t, name)) for t in s), (zero3, zero3))
+        setattr(k, name, [([_col([m[j][0][i] for m in lists]) for i in range(3)],
+                           [_col([m[j][1][i] for m in lists]) for i in range(3)])
+                          for j in range(len(lists[0]) if lists else 0)])
+    k.tau_W = [_col([t.tau_W[i] for t in s]) for i in range(3)]
+    k.tau_B = [_col([t.tau_B[i] for t in s]) for i in range(3)]
+    # the ``if`` tests of the step: true when ANY member's entry is non-zero (the others add an exact 0.0)
+    k.has_drag = bool(np.any(k.c))
+    k.has_body_torque = bool(any(np.any(c) for c in k.tau_B))
+    k.has_velocity_decay, k.has_angular_decay = bool(np.any(k.kv)), bool(np.any(k.kw))
+    out = list(vars(k).items())
+    _PARAMETERS[key] = (list(steppers), out)
+    return out
+
+
 def clear_cache() -> None:
-    """Forget the shared steppers (the end of a batch)."""
+    """Forget the shared steppers and parameter columns (the end of a batch)."""
     _STEPPERS.clear()
+    _PARAMETERS.clear()
 
 
 def _padded(lists, width, empty):
@@ -104,33 +154,8 @@ class CaseKernel(ScalarStepper):
         k.xp = ScalarStepper(problems[0], variant, h_s[0], backend="numpy").xp
         k.backend = "numpy"
         k.n = len(steppers)
-        s = steppers
-        k.h = _col([t.h for t in s])
-        k.m = _col([t.m for t in s])
-        k.I = [[_col([t.I[i][j] for t in s]) for j in range(3)] for i in range(3)]
-        k.Iinv = [[_col([t.Iinv[i][j] for t in s]) for j in range(3)] for i in range(3)]
-        k.mg = [_col([t.mg[i] for t in s]) for i in range(3)]
-        k.c = _col([t.c for t in s])
-        k.gv, k.gw = _col([t.gv for t in s]), _col([t.gw for t in s])
-        k.kv, k.kw = _col([t.kv for t in s]), _col([t.kw for t in s])
-        zero3 = [0.0, 0.0, 0.0]
-        springs = _padded([t.springs for t in s], max(len(t.springs) for t in s), (zero3, zero3, 0.0, 0.0))
-        k.springs = [([_col([m[j][0][i] for m in springs]) for i in range(3)],
-                      [_col([m[j][1][i] for m in springs]) for i in range(3)],
-                      _col([m[j][2] for m in springs]), _col([m[j][3] for m in springs]))
-                     for j in range(len(springs[0]) if springs else 0)]
-        k.fixed_f = [_col([t.fixed_f[i] for t in s]) for i in range(3)]
-        for name in ("world_point", "body_point"):
-            lists = _padded([getattr(t, name) for t in s], max(len(getattr(t, name)) for t in s), (zero3, zero3))
-            setattr(k, name, [([_col([m[j][0][i] for m in lists]) for i in range(3)],
-                               [_col([m[j][1][i] for m in lists]) for i in range(3)])
-                              for j in range(len(lists[0]) if lists else 0)])
-        k.tau_W = [_col([t.tau_W[i] for t in s]) for i in range(3)]
-        k.tau_B = [_col([t.tau_B[i] for t in s]) for i in range(3)]
-        # the ``if`` tests of the step: true when ANY member's entry is non-zero (the others add an exact 0.0)
-        k.has_drag = bool(np.any(k.c))
-        k.has_body_torque = bool(any(np.any(c) for c in k.tau_B))
-        k.has_velocity_decay, k.has_angular_decay = bool(np.any(k.kv)), bool(np.any(k.kw))
+        for name, value in _parameters(steppers):
+            setattr(k, name, value)
         k._steppers = steppers
         k.step = {
             "course": lambda y: k._course(y, gyro=False, expmap=False),
