@@ -206,11 +206,15 @@ def _initial(problem) -> np.ndarray:
 
 
 def clear_cache() -> None:
-    """Forget the batch's compiled models, initial states and shared steppers (the end of a batch)."""
+    """Forget the batch's compiled models, initial states and shared steppers, and remove the PyBullet world's
+    body (the end of a batch)."""
+    import sys
     from cross_checks.fuzz import kernel
     _MODELS.clear()
     _INITIAL.clear()
     kernel.clear_cache()
+    if "cross_checks.fuzz.pybullet_batch" in sys.modules:
+        sys.modules["cross_checks.fuzz.pybullet_batch"].release()
 
 
 def _mujoco_state(me, y):
@@ -372,14 +376,12 @@ def run_ladder(variant: str, scenarios, h0s, n0: int, *, threads: int = 1) -> li
         return _reference_ladder(var, scenarios, h0s, n0)
     if engine == "mujoco":
         return _mujoco_ladder(var, scenarios, h0s, n0, threads)
-    out = []
-    for r in range(RUNGS):
-        h = np.asarray(h0s) / 2 ** r
-        runs = _empty_runs(h, n0 * 2 ** r)
-        for i, sc in enumerate(scenarios):
-            if engine != "pybullet" or not _pybullet_run(var, sc, h[i], n0 * 2 ** r, runs, i):
-                _adapter_run(variant, sc, h[i], n0 * 2 ** r, runs, i)
-        out.append(runs)
+    out = [_empty_runs(np.asarray(h0s) / 2 ** r, n0 * 2 ** r) for r in range(RUNGS)]
+    for i, sc in enumerate(scenarios):   # case by case: PyBullet keeps a case's body for its rungs
+        for r, runs in enumerate(out):
+            h, n = float(runs.h_s[i]), n0 * 2 ** r
+            if engine != "pybullet" or not _pybullet_run(var, sc, h, n, runs, i):
+                _adapter_run(variant, sc, h, n, runs, i)
     return out
 
 

@@ -5,7 +5,9 @@ The adapter starts every run with ``resetSimulation`` (0.9 ms, more than a 50-st
 forces that depend on the state, builds a plain-float force evaluator every step. Here each process keeps
 ONE world of its own (its own DIRECT client, so the adapter's world is never touched); a run removes the
 previous body and creates its own with the adapter's settings (gravity, ``fixedTimeStep``,
-``numSubSteps = 0``, ``createMultiBody``, ``changeDynamics(**DYNAMICS_SETTINGS)``), and the force
+``numSubSteps = 0``, ``createMultiBody``, ``changeDynamics(**DYNAMICS_SETTINGS)``) — or, when the previous
+run was of the same case and variant (the rungs of a ladder, the one-step rungs), keeps that body and sets
+the step and gravity again (a body costs ~1 ms to create, more than a short run) — and the force
 evaluator of a run is built once. Everything else is the adapter's own code: its ``_Body`` conversions
 (pose in, state out, priming of maximal bodies), ``apply``, ``decay_factors``, the harness formulas
 (``harness_force_torque_floats``: start-of-step state, pre-step decay, the weight left to PyBullet).
@@ -29,7 +31,7 @@ class Rejected(RuntimeError):
     """PyBullet rejected the body here: the caller runs the case through the adapter (its message)."""
 
 
-_WORLD = {"pid": None, "c": None, "b": None}
+_WORLD = {"pid": None, "c": None, "b": None, "body": None, "key": None, "scenario": None}
 
 
 def _world() -> int:
@@ -40,24 +42,44 @@ def _world() -> int:
         c = p.connect(p.DIRECT)
         if c < 0:
             raise Rejected("pybullet.connect(DIRECT) failed")
-        _WORLD.update(pid=os.getpid(), c=c, b=None)
+        _WORLD.update(pid=os.getpid(), c=c, b=None, body=None, key=None, scenario=None)
     return _WORLD["c"]
 
 
 def _body(scenario, variant: str, dt_s: float, y0):
-    """A ``pybullet_engine._Body`` of the scenario in this process's world (the previous body removed), built
-    by the adapter's own ``_Body.__init__``."""
+    """A ``pybullet_engine._Body`` of the scenario in this process's world, built by the adapter's own
+    ``_Body.__init__``. The world holds one body: the previous run's when it was built for the same
+    scenario and variant (by the same ``__init__``) — its step set to ``dt_s`` and the adapter's gravity
+    set again; the caller puts it at its start state, as the adapter does with a new body (bit-identical,
+    tested: consecutive runs of one case at other steps) — or else a new one, the previous body removed."""
     from cross_checks.engines import pybullet_engine as pe
     c = _world()
+    key = (id(scenario), variant, pe._Body.__init__)
     try:
+        if _WORLD["b"] is not None and _WORLD["key"] == key and _WORLD["scenario"] is scenario:
+            B = _WORLD["body"]
+            pe.p.setGravity(*[float(g) for g in scenario.problem.forces.gravity_W], physicsClientId=c)
+            pe.p.setPhysicsEngineParameter(fixedTimeStep=float(dt_s), numSubSteps=0, physicsClientId=c)
+            return B
         if _WORLD["b"] is not None:
             pe.p.removeBody(_WORLD["b"], physicsClientId=c)
-            _WORLD["b"] = None
+            _WORLD.update(b=None, body=None, key=None, scenario=None)
         B = pe._Body(scenario, variant, dt_s, y0, client=c)
     except (pe.EngineError, pe.p.error) as exc:
         raise Rejected(str(exc)) from None
-    _WORLD["b"] = B.b
+    _WORLD.update(b=B.b, body=B, key=key, scenario=scenario)
     return B
+
+
+def release() -> None:
+    """Remove the world's body (the end of a batch): the next run builds its own."""
+    from cross_checks.engines import pybullet_engine as pe
+    if _WORLD["b"] is not None and _WORLD["pid"] == os.getpid() and _WORLD["c"] is not None:
+        try:
+            pe.p.removeBody(_WORLD["b"], physicsClientId=_WORLD["c"])
+        except pe.p.error:
+            pass
+    _WORLD.update(b=None, body=None, key=None, scenario=None)
 
 
 def _forces(scenario, dt_s):
