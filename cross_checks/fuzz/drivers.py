@@ -118,29 +118,34 @@ def _reference_ladder(var, scenarios, h0s, n0):
     for r in range(RUNGS):
         out[r].y[0] = y0[r * B:(r + 1) * B]
     y = columns(y0)
+    rung = np.array([r for r, _ in members], dtype=int)
+    case = np.array([i for _, i in members], dtype=int)
+    last = n0 * 2 ** rung                    # each member's final step
     alive = np.ones(len(members), dtype=bool)
-    active = list(range(len(members)))       # member numbers currently in the kernel
+    active = np.arange(len(members))         # member numbers currently in the kernel
     with np.errstate(all="ignore"):
         for k in range(1, n0 * 2 ** (RUNGS - 1) + 1):
             y = kern.step(y)
             Y = rows(y)
             bad = ~np.all(np.isfinite(Y), axis=1) | (np.max(np.abs(Y), axis=1) > BLOWUP_LIMIT)
-            for j, mnum in enumerate(active):
-                r, i = members[mnum]
-                if alive[mnum]:
-                    if bad[j]:
-                        alive[mnum] = False
-                        _mark_divergence(out[r], i, k, hs[mnum])
-                    else:
-                        out[r].y[k, i] = Y[j]
-            ended = [j for j, mnum in enumerate(active) if members[mnum][0] < RUNGS and k == n0 * 2 ** members[mnum][0]]
-            if ended:
-                keep = [j for j in range(len(active)) if j not in set(ended)]
-                if not keep:
+            live = alive[active]
+            for j in np.flatnonzero(live & bad):
+                mnum = int(active[j])
+                alive[mnum] = False
+                _mark_divergence(out[rung[mnum]], int(case[mnum]), k, hs[mnum])
+            ok = live & ~bad
+            for r in range(RUNGS):
+                sel = ok & (rung[active] == r)
+                if sel.any():
+                    out[r].y[k, case[active[sel]]] = Y[sel]
+            ended = last[active] == k
+            if ended.any():
+                keep = np.flatnonzero(~ended)
+                if not len(keep):
                     break
                 kern = kern.take(keep)
                 y = [c[keep] for c in y]
-                active = [active[j] for j in keep]
+                active = active[keep]
     return out
 
 

@@ -61,3 +61,31 @@ def test_every_mujoco_variant_on_the_same_compiled_models_equals_the_adapter():
                          for sc, h, y in zip(m_scs, m_hs, m_ys)])
         assert np.array_equal(got, want), variant
     drivers.clear_cache()
+
+
+def test_reference_members_that_blow_up_diverge_where_the_adapter_says_and_leave_the_others_alone():
+    """Members of the batched reference ladder that blow up mid-run (at different steps) are marked
+    "diverged" at the adapter's time with the adapter's states up to there; the other members of the same
+    kernel are the adapter's runs."""
+    scs = _cases(4)
+    fast = []
+    for j, speed in enumerate((1e9, 3e7)):
+        spec = generate.draw(31, j).spec(0.004, 8)
+        spec["initial"]["velocity"] = [speed, 0.0, 0.0]
+        fast.append(scenario_of(spec))
+    scs = scs[:2] + fast + scs[2:]
+    h0s = [sc.dt_s for sc in scs]
+    blown_at = set()
+    for variant in ("reference:explicit_euler", "reference:rk4"):
+        ladder = drivers.run_ladder(variant, scs, h0s, 8)
+        for r, runs in enumerate(ladder):
+            for i, sc in enumerate(scs):
+                run = get_adapter("reference").simulate(sc, variant.split(":")[1], h0s[i] / 2 ** r, 8 * 2 ** r)
+                k = len(run.y)
+                assert np.array_equal(runs.y[:k, i], np.asarray(run.y)) and np.all(np.isnan(runs.y[k:, i]))
+                if sc in fast:
+                    assert runs.status[i] == "diverged" and runs.diverged_at_s[i] == run.diverged_at_s
+                    blown_at.add(k)
+                else:
+                    assert runs.status[i] == "ok" and run.diverged_at_s is None
+    assert len(blown_at) >= 3   # at the first step and at several later ones
