@@ -156,3 +156,15 @@ def test_rising_pairwise_orders_are_called_pre_asymptotic():
     e = [2.35e-1, 1.91e-1, 1.32e-1, 8.0e-2, 4.43e-2]
     fit = fit_convergence(LADDER, e)
     assert "pre-asymptotic" in fit.note
+
+
+def test_the_median_of_the_pre_asymptotic_rule_is_numpys():
+    """convergence._median (a few pairwise orders) equals np.median exactly, odd and even counts."""
+    import numpy as np
+
+    from cross_checks.analysis.convergence import _median
+    rng = np.random.default_rng(11)
+    for n in range(1, 9):
+        for _ in range(500):
+            v = (rng.standard_normal(n) * 10.0 ** rng.uniform(-3, 3, n)).tolist()
+            assert _median(v) == float(np.median(v))
