@@ -112,13 +112,14 @@ def simulate(scenario, variant: str, dt_s: float, n_steps: int):
         fx, fy, fz, tx, ty, tz = ft(y0)
         f = np.array([fx - wx, fy - wy, fz - wz])
         tau = np.array([tx, ty, tz])
-        applies = decay or forces.state_dependent or bool(np.any(f != 0.0) or np.any(tau != 0.0))
+        state_dependent = forces.state_dependent   # a property that walks the force lists: read once
+        applies = decay or state_dependent or bool(np.any(f != 0.0) or np.any(tau != 0.0))
         raw = np.empty((n_steps + 1, 13))
         raw[0] = B.read_raw()
         step, pose, vel = p.stepSimulation, p.getBasePositionAndOrientation, p.getBaseVelocity
         for n in range(1, n_steps + 1):
             row = raw[n - 1]
-            if forces.state_dependent and n > 1:
+            if state_dependent and n > 1:
                 fx, fy, fz, tx, ty, tz = ft(B.raw_to_packed(row))
                 f = np.array([fx - wx, fy - wy, fz - wz])
                 tau = np.array([tx, ty, tz])
