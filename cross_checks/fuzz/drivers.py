@@ -4,15 +4,18 @@ Three paths, each giving what the engine's own adapter gives, case by case:
 
 * ``reference:*`` — :class:`~cross_checks.fuzz.kernel.CaseKernel`: every case and rung of the batch in one
   NumPy-backend stepper (bit-identical to ``reference_sim.simulate``'s single-body path, tested);
-* ``mujoco:*`` — ``mujoco.rollout`` over one model per (case, rung), each built by the adapter's own
-  ``build_model``: constant forces in one call per rung, state-dependent forces and the velocity decay
+* ``mujoco:*`` — ``mujoco.rollout`` over one model per case, built once by the adapter's own
+  ``build_model`` and set to each variant's integrator and each rung's step in place (:func:`_model`):
+  constant forces in one call per rung, state-dependent forces and the velocity decay
   one step per call with the adapter's harness (forces from the start-of-step state, decay before the
   step, the weight left to MuJoCo) evaluated for all cases at once. Bit-identical to
   ``MujocoAdapter.simulate`` (tested); ``mujoco:rk4`` with forces that change within a step needs its
-  per-stage control callback and runs through the adapter, case by case. A run that blows up is re-run
-  through the adapter, so its "diverged at t = …" is the adapter's own;
+  per-stage control callback and runs through the adapter, case by case (on the case's compiled model,
+  ``mujoco_engine.models_from``). A run that blows up is re-run through the adapter, so its
+  "diverged at t = …" is the adapter's own;
 * ``pybullet:*`` — :mod:`~cross_checks.fuzz.pybullet_batch`: the adapter's runs, case by case, in a world of
-  the process's own (a body removed and created per run instead of a world reset; bit-identical, tested);
+  the process's own (a body per case and variant, kept for its runs, instead of a world reset per run;
+  bit-identical, tested);
   a run that blows up or is rejected goes through the adapter;
 * every other engine (engine files, Python adapters) — its adapter, case by case.
 
