@@ -253,7 +253,10 @@ def _too_low_free_running_order(rec) -> bool:
         return False
     if rec["verdict"] == "converges":
         return rec.get("order_deficit") is not None and rec["order_deficit"] > 0
-    return errs[-1] < 0.5 * errs[0]   # shrank by at least a first-order halving over the ladder as a whole
+    # shrank at every halving, or over the ladder as a whole by at least a first-order halving. (Shrinking by
+    # less than that overall and not at every halving is a plateau in noise: not re-judged.) The refined
+    # ladder is judged by the same rules, so re-judging can only excuse a scheme that shows its order there.
+    return errs[0] > errs[1] > errs[2] or errs[-1] < 0.5 * errs[0]
 
 
 def _judge(ctx, variant, k, ladder, defects, tally, errors=None) -> list:
