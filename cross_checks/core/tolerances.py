@@ -354,11 +354,12 @@ FUZZ_LEVER_ROUNDINGS = 4.0
 FUZZ_TWO_TERM_TOL = 0.25
 #: ... and each of its errors at least this many times its round-off floor (else round-off shapes u).
 FUZZ_RESOLVED = 100.0
-#: Extra halvings (h/8 … h/32) a too-low free-running order on (h, h/2, h/4) is re-judged on before it counts:
+#: Extra halvings a too-low free-running order is re-judged on before it counts (the fuzz: h/8 … h/32 after (h, h/2, h/4);
+#: the sweep: three halvings below its file's finest Δt; analysis.refinement):
 #: the 600 s campaign of seed 2026 found correct first-order variants at order 0.52 on (h, h/2, h/4) whose
 #: pairwise orders went 0.51, 0.54, 0.80, 0.91, 0.95 down to h/32 (docs/fuzz.md §5); three more pairs let
 #: the finest one reach the order within SWEEP_ORDER_TOL there, while a wrong order stays wrong on all of them.
-FUZZ_REFINE_HALVINGS = 3
+REFINE_HALVINGS = 3
 
 # --- report display tiers (docs/results.md "The report") ---
 #: The summary matrix's three greens (display only, never a verdict): the largest final error relative to

@@ -92,13 +92,26 @@ def time_limit(seconds: float | None, what: str):
         yield
         return
 
+    message = f"{what} took longer than the time limit of {seconds:g} s"
+    fired = []
+
     def on_alarm(signum, frame):
-        raise TimeLimitExceeded(f"{what} took longer than the time limit of {seconds:g} s")
+        fired.append(True)
+        raise TimeLimitExceeded(message)
 
     previous = signal.signal(signal.SIGALRM, on_alarm)
     signal.setitimer(signal.ITIMER_REAL, float(seconds))
     try:
         yield
+    except TimeLimitExceeded:
+        raise
+    except Exception as exc:
+        # The alarm's exception raised inside C code may come out as another one (NumPy, interrupted while
+        # parsing its arguments, reported "TypeError: 'axis' must be an integer" on a loaded machine): once
+        # the alarm has fired, whatever ends the body is the time limit.
+        if fired:
+            raise TimeLimitExceeded(message) from exc
+        raise
     finally:
         signal.setitimer(signal.ITIMER_REAL, 0.0)
         signal.signal(signal.SIGALRM, previous)

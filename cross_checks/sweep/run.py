@@ -31,7 +31,7 @@ from datetime import datetime, timezone
 from cross_checks.core import tolerances as tol
 from cross_checks.core.files import atomic_write_text, save_npz_atomic, usable_cores
 from cross_checks.core.progress import stage
-from cross_checks.sweep import assemble
+from cross_checks.sweep import assemble, refine
 from cross_checks.sweep.cache import cache_dir
 from cross_checks.sweep.execute import Runner, run_jobs, run_references, second_reference_jobs
 from cross_checks.sweep.fingerprint import code_fingerprint
@@ -164,7 +164,8 @@ def _write_results(staging, scenarios, variants, refs, records, *, started, skip
         scenario_records.append(assemble.scenario_record(sc, ref))
         for v in variants:
             vrows = [r for r in rows if r["scenario"] == sc.name and r["engine"] == v]
-            convergence += assemble.convergence_records(sc, v, vrows, ref.scales, "free_running", ref.measured)
+            convergence += refine.rejudge(sc, v, vrows, ref, assemble.convergence_records(
+                sc, v, vrows, ref.scales, "free_running", ref.measured))
             if has_one_step(v):  # engines without a one-step mode have no local errors to fit
                 local += assemble.convergence_records(sc, v, vrows, ref.scales, "one_step", ref.measured)
         save_npz_atomic(staging / "series" / f"{sc.name}.npz", assemble.series_arrays(sc, ref, by_key, variants))

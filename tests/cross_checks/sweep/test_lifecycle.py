@@ -155,3 +155,18 @@ def test_a_sigterm_raised_inside_a_weakref_callback_still_ends_the_process():
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert proc.stdout.strip() == "terminated"
     assert "Exception ignored" not in proc.stderr
+
+
+def test_an_exception_that_replaces_the_alarm_s_inside_c_code_is_still_the_time_limit():
+    # NumPy interrupted by the alarm while parsing its arguments raised "TypeError: 'axis' must be an
+    # integer" in place of TimeLimitExceeded (a sweep on a loaded machine): stood in for by a body that does so
+    with pytest.raises(TimeLimitExceeded, match="the solve took longer than the time limit of 0.05 s"):
+        with time_limit(0.05, "the solve"):
+            try:
+                while True:
+                    pass
+            except TimeLimitExceeded:
+                raise TypeError("'axis' must be an integer") from None
+    with pytest.raises(TypeError, match="axis"):   # before the alarm, an error is the error
+        with time_limit(5.0, "the solve"):
+            raise TypeError("'axis' must be an integer")

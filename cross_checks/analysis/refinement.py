@@ -1,0 +1,44 @@
+"""A free-running order that came out too low, judged again on the ladder continued to finer steps.
+
+An order claim is about the asymptotic regime. On a short ladder a correct scheme can still be
+pre-asymptotic: its error series e(h) = h^p A(t) + h^(p+1) B(t) + … with A small where the error is
+measured, so the next term bends the fitted order at the coarse rungs (the fuzz found first-order schemes
+at order 0.5 on (h, h/2, h/4) whose pairwise orders went 0.77, 0.89, 0.96 down to h/32 — docs/fuzz.md §5).
+A scheme of the wrong order has that order on the finer rungs too. So a too-low order whose errors do
+shrink is judged again on the ladder's finest rung and ``tol.SWEEP_REFINE_HALVINGS`` halvings below it, by
+the same fit (:func:`convergence.fit_convergence`), and it is excused only by a POSITIVE result there: a
+converging fit on points resolved above their floors (not a lower bound, not round-off) whose order matches
+the claim. Errors that sink into round-off on the finer rungs show nothing, and the verdict stands.
+
+Used by the sweep (``cross_checks.sweep.refine``) and the fuzz (``cross_checks.fuzz.pipeline``).
+"""
+from __future__ import annotations
+
+import math
+
+from cross_checks.analysis.convergence import compare_with_expectation, fit_convergence, measured_pre_asymptotic
+
+__all__ = ["errors_shrink", "refined_ladder_shows_the_order"]
+
+
+def errors_shrink(errors) -> bool:
+    """Whether a ladder's errors (coarse to fine, all finite) shrink: at every halving however slowly, or
+    over the ladder as a whole by at least a first-order halving (not at every halving: a velocity error
+    crossing zero at one rung). A plateau in noise, a growth or a failed point does not qualify."""
+    errs = list(errors)
+    if len(errs) < 2 or any(e is None or not math.isfinite(e) for e in errs):
+        return False
+    return all(a > b for a, b in zip(errs, errs[1:])) or errs[-1] < 0.5 * errs[0]
+
+
+def refined_ladder_shows_the_order(dts, errors, floors, statuses, exp) -> tuple:
+    """``(shows, fit)``: whether the continued ladder (finest original rung first, then the finer ones)
+    shows the order the expectation ``exp`` claims — a converging fit on resolved points matching it,
+    or one whose finest pair already shows it while the coarser approach it (``measured_pre_asymptotic``)."""
+    fit = fit_convergence(dts, errors, floors, statuses)
+    if exp.verdict != "converges" or exp.order is None:
+        return False, fit
+    if fit.verdict != "converges" or fit.order is None or fit.order_is_lower_bound:
+        return False, fit
+    matches, _ = compare_with_expectation(fit.verdict, fit.order, exp, fit.order_is_lower_bound)
+    return bool(matches is True or (matches is False and measured_pre_asymptotic(fit, exp.order))), fit

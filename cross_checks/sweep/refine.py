@@ -1,0 +1,99 @@
+"""A sweep's too-low free-running orders, judged again on the scenario's ladder continued to finer steps.
+
+A scenario file's Δt ladder may stop before its errors are asymptotic: a correct scheme then shows a low
+order, or errors that shrink but not at every halving, and the sweep would fail it (the fuzz's shrunk
+counterexamples of a correct scheme did: docs/fuzz.md §5). Where a free-running record does not match its
+claimed order and its errors do shrink (``analysis.refinement.errors_shrink``), the variant is run again
+at the file's finest Δt halved ``tol.REFINE_HALVINGS`` times, its final errors measured against the same
+reference (its final state: the runs end at the scenario's duration whatever their step), with floors
+computed as for the file's rungs (``assemble._floors``). Only a positive result on those rungs
+(``analysis.refinement.refined_ladder_shows_the_order``) turns the record into ``pre_asymptotic`` with no
+claim, its assessment naming the continued ladder; a scheme of the wrong order, a plateau, or errors that
+sink into round-off keep the verdict. The extra runs are not rows of results.csv (the file's ladder is
+what the results describe); they run in the sweep's own process, after the runs, only for such records.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from cross_checks.analysis.expectations import expectation
+from cross_checks.analysis.physics import physics_from_dict
+from cross_checks.analysis.refinement import errors_shrink, refined_ladder_shows_the_order
+from cross_checks.core import tolerances as tol
+from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, state_errors
+from cross_checks.sweep.jobs import load_reference
+from cross_checks.sweep.lifecycle import TimeLimitExceeded, time_limit
+
+__all__ = ["rejudge", "qualifies"]
+
+
+def qualifies(rec) -> bool:
+    """A free-running record whose claimed order was not met while its errors shrink."""
+    if rec["mode"] != "free_running" or rec["matches_expectation"] is not False or rec["expected_verdict"] != "converges":
+        return False
+    if rec["fit_verdict"] not in ("converges", "does_not_converge") or len(rec["errors"]) < 2:
+        return False
+    return errors_shrink([math.nan if e is None else e for e in rec["errors"]])
+
+
+def _refined_runs(scenario, variant, dt_min, n_min, y_end_ref, time_limit_s):
+    """[(dt, steps, status, {quantity: final error})] at dt_min/2 … dt_min/2^REFINE_HALVINGS."""
+    from cross_checks.engines import run_variant
+    out = []
+    for k in range(1, tol.REFINE_HALVINGS + 1):
+        dt = dt_min / 2 ** k
+        try:
+            with time_limit(time_limit_s, "the run"):
+                traj = run_variant(scenario, variant, dt)
+        except TimeLimitExceeded:
+            break
+        except Exception:  # noqa: BLE001 - a finer run that cannot finish shows nothing: the verdict stands
+            break
+        ok = traj.meta.get("status", "ok") == "ok" and len(traj.t_s) - 1 == n_min * 2 ** k
+        err = state_errors(traj.y[-1:], y_end_ref[None, :]) if ok else None
+        out.append((dt, n_min * 2 ** k, "ok" if ok else "failed",
+                    {q: float(err[q][0]) if ok else math.nan for q in QUANTITIES}))
+    return out
+
+
+def rejudge(scenario, variant, rows, ref, records, *, time_limit_s=tol.RUN_TIME_LIMIT_S) -> list:
+    """``records`` (convergence records of one scenario and variant) with each qualifying free-running
+    record judged again on the continued ladder (module docstring)."""
+    from cross_checks.sweep.assemble import _floors
+    todo = [i for i, r in enumerate(records) if qualifies(r)]
+    if not todo or not ref.path:
+        return records
+    ladder = sorted([r for r in rows if r["in_ladder"] and r["status"] == "ok"], key=lambda r: -r["dt"])
+    t_ref, y_ref, _ = load_reference(ref.path)
+    if not ladder or not np.isclose(t_ref[-1], scenario.duration_s):
+        return records
+    finest = ladder[-1]
+    fine = _refined_runs(scenario, variant, float(finest["dt"]), int(finest["steps"]), y_ref[-1], time_limit_s)
+    if not fine:
+        return records
+    phys = physics_from_dict(ref.measured["physics"]) if (ref.measured or {}).get("physics") else None
+    pseudo = [{"dt": dt, "steps": n} for dt, n, _, _ in fine]
+    out = list(records)
+    for i in todo:
+        rec = records[i]
+        q = rec["quantity"]
+        dts = [float(finest["dt"])] + [p["dt"] for p in pseudo]
+        errs = [float(finest[f"{COLUMN_STEM[q]}_err_final"])] + [e[q] for _, _, _, e in fine]
+        statuses = ["ok"] + [s for _, _, s, _ in fine]
+        floors = _floors([finest] + pseudo, q, ref.scales, "free_running", finest["reference"] or "analytic",
+                         ref.measured or {})
+        exp = expectation(scenario, variant, q, "free_running", physics=phys, measure_physics=False)
+        shows, fit = refined_ladder_shows_the_order(dts, errs, floors, statuses, exp)
+        if shows:
+            out[i] = {**rec, "verdict": "pre_asymptotic", "matches_expectation": None,
+                      "assessment": _assessment(rec, fit, exp)}
+    return out
+
+
+def _assessment(rec, fit, exp) -> str:
+    pw = ", ".join("–" if p is None else f"{p:.2f}" for p in fit.pairwise_orders)
+    seen = f"order {rec['order']:.2f}" if rec.get("order") is not None else rec["fit_verdict"].replace("_", " ")
+    return (f"pre-asymptotic on this ladder (measured): {seen} on the file's Δt, but the ladder continued to "
+            f"Δt = {fit.dt_s[-1]:.3g} s shows order {fit.order:.2f} (pairwise {pw}; expected {exp.order:g}); no claim")
