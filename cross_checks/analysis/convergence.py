@@ -199,6 +199,12 @@ def _drop_pre_asymptotic_coarsest(dt, e, above, notes) -> list:
     return use
 
 
+def fmt_order(order: float) -> str:
+    """An order to two decimals, a flat fit's tiny negative slope shown as 0.00 (not "-0.00")."""
+    text = f"{order:.2f}"
+    return "0.00" if text == "-0.00" else text
+
+
 def measured_pre_asymptotic(fit: ConvergenceFit, expected_order) -> str:
     """Why a converging fit whose order is too LOW is pre-asymptotic on its ladder, from the errors
     themselves ("" when it is not): the errors shrink at every halving, the finest fitted pair already
@@ -232,7 +238,7 @@ def compare_with_expectation(verdict: str, order, expected, order_is_lower_bound
     if ev is None:
         return None, "no expectation"
     if ev == "pre_asymptotic":
-        seen = f"{verdict.replace('_', ' ')}" + (f", fitted order {order:.2f}" if order is not None else "")
+        seen = f"{verdict.replace('_', ' ')}" + (f", fitted order {fmt_order(order)}" if order is not None else "")
         return None, f"no claim on this ladder (pre-asymptotic; {seen})"
     if verdict == "at_roundoff":
         return (ev == "converges"), ("exact to round-off" if ev == "converges"
@@ -255,7 +261,7 @@ def compare_with_expectation(verdict: str, order, expected, order_is_lower_bound
             return True, "does not converge, as expected"
         if order_is_lower_bound:
             return None, "the finer errors are near the round-off floor: inconclusive"
-        return False, ("does not converge" + (f" (fitted order {order:.2f})" if order is not None else "")
+        return False, ("does not converge" + (f" (fitted order {fmt_order(order)})" if order is not None else "")
                        + (f", expected order {eo:g}" if eo is not None else ""))
     return False, verdict.replace("_", " ")
 

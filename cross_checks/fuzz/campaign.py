@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cross_checks.analysis.convergence import fmt_order
 from cross_checks.core.files import atomic_write_text
 from cross_checks.fuzz import drivers, generate, known, pipeline, properties as P, shrink as S
 
@@ -272,7 +273,7 @@ def _magnitude(v) -> str:
     if v.get("ratio") is not None:
         return f"{v['ratio']:.3g}× its allowance"
     if v.get("order_deficit") is not None:
-        return f"order {v['order']:.2f} where {v['expected_order']:g} is expected"
+        return f"order {fmt_order(v['order'])} where {v['expected_order']:g} is expected"
     return v.get("verdict") or v["property"]
 
 

@@ -168,3 +168,11 @@ def test_the_median_of_the_pre_asymptotic_rule_is_numpys():
         for _ in range(500):
             v = (rng.standard_normal(n) * 10.0 ** rng.uniform(-3, 3, n)).tolist()
             assert _median(v) == float(np.median(v))
+
+
+def test_a_flat_fit_s_tiny_negative_order_is_written_as_zero():
+    from cross_checks.analysis.convergence import fmt_order
+    assert fmt_order(-0.0004) == "0.00" and fmt_order(-0.006) == "-0.01" and fmt_order(0.987) == "0.99"
+    fit = fit_convergence([0.06, 0.03, 0.015], [9.16e-4, 9.16e-4 * (1 + 1e-6), 9.16e-4 * (1 + 2e-6)], [2.5e-13] * 3)
+    assert fit.order < 0 and "(fitted order 0.00)" in compare_with_expectation(
+        fit.verdict, fit.order, Expectation("converges", 1.0, "an order-1 scheme"))[1]
