@@ -7,29 +7,10 @@ import pytest
 
 import cross_checks.fuzz.pipeline as PL
 from cross_checks.fuzz.pipeline import evaluate_specs
+from tests.helpers.scenarios import PRE_ASYMPTOTIC_ON_ITS_LADDER
 from tests.mutants import MUTANTS
 
-# Shrunk by the 600 s campaign of seed 2026 (docs/fuzz.md §5): every first-order variant showed velocity
-# errors 4.98e-6, 3.5e-6, 2.41e-6 m/s at dt = 0.02, 0.01, 0.005 s (order 0.52); the pairwise orders then
-# go 0.80, 0.91, 0.95 down to dt/32 (measured with `rbcheck sweep` on the same file with that ladder).
-PRE_ASYMPTOTIC = tomllib.loads('''
-name = "fuzz_2026_80"
-description = "a body released near rest, strong gravity, a weak spring off the COM"
-duration = 0.32
-dt = 0.02
-dt_ladder = [0.02, 0.01, 0.005]
-[body]
-mass = 6.0
-inertia = [0.03, 0.06, 0.08]
-[initial]
-velocity = [-0.03, 0.05, -0.01]
-[forces]
-gravity = [2.0, -9.0, -0.4]
-[[forces.spring]]
-anchor = [-0.4, -0.09, 0.04]
-attach = [0.05, 0.06, 0.01]
-stiffness = 0.4
-''')
+PRE_ASYMPTOTIC = tomllib.loads(PRE_ASYMPTOTIC_ON_ITS_LADDER)   # velocity order 0.52 on (h, h/2, h/4)
 FIRST_ORDER = ["reference:course_gyro", "mujoco:euler", "pybullet:maximal"]
 # The next 600 s campaign (seed 2026, case 2818, shrunk): velocity errors 2.7e-7, 9.8e-9, 2.9e-8 m/s at
 # dt = 4e-4, 2e-4, 1e-4 s ("does not converge": smaller at dt/2 than at dt/4) for mujoco:implicit and

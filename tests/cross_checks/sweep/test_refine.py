@@ -11,30 +11,12 @@ from cross_checks.cli import _gate_failures
 from cross_checks.fuzz.generate import to_toml
 from cross_checks.scenario import parse_scenario
 from cross_checks.sweep import refine, run_sweep
+from tests.helpers.scenarios import PRE_ASYMPTOTIC_ON_ITS_LADDER
 from tests.mutants import MUTANTS
 
 pytestmark = pytest.mark.usefixtures("isolated_cache")
 
-# Shrunk by the fuzz (seed 2026, docs/fuzz.md §5): velocity errors of every first-order variant 4.98e-6,
-# 3.5e-6, 2.41e-6 m/s at dt = 0.02, 0.01, 0.005 s (order 0.52); pairwise 0.80, 0.91, 0.95 down to dt/32.
-PRE_ASYMPTOTIC = '''
-name = "released_near_rest"
-description = "a body released near rest, strong gravity, a weak spring off the COM"
-duration = 0.32
-dt = 0.02
-dt_ladder = [0.02, 0.01, 0.005]
-[body]
-mass = 6.0
-inertia = [0.03, 0.06, 0.08]
-[initial]
-velocity = [-0.03, 0.05, -0.01]
-[forces]
-gravity = [2.0, -9.0, -0.4]
-[[forces.spring]]
-anchor = [-0.4, -0.09, 0.04]
-attach = [0.05, 0.06, 0.01]
-stiffness = 0.4
-'''
+PRE_ASYMPTOTIC = PRE_ASYMPTOTIC_ON_ITS_LADDER   # velocity order 0.52 on its file's ladder, 0.80 → 0.95 below
 
 
 def _sweep(tmp_path, text, variant):
