@@ -21,7 +21,7 @@ from cross_checks.core.files import atomic_write_text, json_default
 from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, UNITS, decimation_indices, state_errors
 from cross_checks.sweep.jobs import MAX_SERIES_POINTS, RESULT_COLUMNS, SCHEMA_VERSION, load_reference
 
-__all__ = ["result_rows", "results_csv_text", "convergence_records", "agreement_records", "scenario_record",
+__all__ = ["result_rows", "results_csv_text", "convergence_records", "ladder_floors", "agreement_records", "scenario_record",
            "series_arrays", "build_summary", "write_json", "write_scenario_files", "SCENARIO_FILES"]
 
 
@@ -57,7 +57,7 @@ def results_csv_text(rows, columns=RESULT_COLUMNS) -> str:
 
 # --- convergence ------------------------------------------------------------------------------------
 
-def _floors(ladder, q, scales, mode, label, measured):
+def ladder_floors(ladder, q, scales, mode, label, measured):
     """Round-off floor of each ladder point for quantity ``q`` (metrics.roundoff_floor): the reference's
     MEASURED error (at the final time, or of one step in the one-step mode) plus the run's own
     round-off, amplified by the scenario's measured error amplification."""
@@ -101,7 +101,7 @@ def _judged(fit, exp):
 
 def convergence_records(scenario, variant, rows, scales, mode, measured=None) -> list:
     """Convergence records of one (scenario, variant), one per quantity: the fit over the ladder against
-    floors from measurement (:func:`_floors`) and the expectation decided from the scenario's measured
+    floors from measurement (:func:`ladder_floors`) and the expectation decided from the scenario's measured
     physics (:func:`_judged`; the fit's own verdict is kept in ``fit_verdict``). ``mode`` is
     ``free_running`` (final errors) or ``one_step`` (local errors)."""
     from cross_checks.analysis.physics import physics_from_dict
@@ -115,7 +115,7 @@ def convergence_records(scenario, variant, rows, scales, mode, measured=None) ->
     out = []
     for q in QUANTITIES:
         errs, statuses = _ladder_errors(ladder, q, mode)
-        fit = fit_convergence(dts, errs, _floors(ladder, q, scales, mode, label, measured), statuses)
+        fit = fit_convergence(dts, errs, ladder_floors(ladder, q, scales, mode, label, measured), statuses)
         exp = expectation(scenario, variant, q, mode, physics=phys, measure_physics=False)
         verdict, matches, phrase = _judged(fit, exp)
         out.append({

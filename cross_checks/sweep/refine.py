@@ -6,7 +6,7 @@ counterexamples of a correct scheme did: docs/fuzz.md §5). Where a free-running
 claimed order and its errors do shrink (``analysis.refinement.errors_shrink``), the variant is run again
 at the file's finest Δt halved ``tol.REFINE_HALVINGS`` times, its final errors measured against the same
 reference (its final state: the runs end at the scenario's duration whatever their step), with floors
-computed as for the file's rungs (``assemble._floors``). Only a positive result on those rungs
+computed as for the file's rungs (``assemble.ladder_floors``). Only a positive result on those rungs
 (``analysis.refinement.refined_ladder_shows_the_order``) turns the record into ``pre_asymptotic`` with no
 claim, its assessment naming the continued ladder; a scheme of the wrong order, a plateau, or errors that
 sink into round-off keep the verdict. The extra runs are not rows of results.csv (the file's ladder is
@@ -23,6 +23,7 @@ from cross_checks.analysis.physics import physics_from_dict
 from cross_checks.analysis.refinement import errors_shrink, refined_ladder_shows_the_order
 from cross_checks.core import tolerances as tol
 from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, state_errors
+from cross_checks.sweep.assemble import ladder_floors
 from cross_checks.sweep.jobs import load_reference
 from cross_checks.sweep.lifecycle import TimeLimitExceeded, time_limit
 
@@ -61,7 +62,6 @@ def _refined_runs(scenario, variant, dt_min, n_min, y_end_ref, time_limit_s):
 def rejudge(scenario, variant, rows, ref, records, *, time_limit_s=tol.RUN_TIME_LIMIT_S) -> list:
     """``records`` (convergence records of one scenario and variant) with each qualifying free-running
     record judged again on the continued ladder (module docstring)."""
-    from cross_checks.sweep.assemble import _floors
     todo = [i for i, r in enumerate(records) if qualifies(r)]
     if not todo or not ref.path:
         return records
@@ -82,7 +82,7 @@ def rejudge(scenario, variant, rows, ref, records, *, time_limit_s=tol.RUN_TIME_
         dts = [float(finest["dt"])] + [p["dt"] for p in pseudo]
         errs = [float(finest[f"{COLUMN_STEM[q]}_err_final"])] + [e[q] for _, _, _, e in fine]
         statuses = ["ok"] + [s for _, _, s, _ in fine]
-        floors = _floors([finest] + pseudo, q, ref.scales, "free_running", finest["reference"] or "analytic",
+        floors = ladder_floors([finest] + pseudo, q, ref.scales, "free_running", finest["reference"] or "analytic",
                          ref.measured or {})
         exp = expectation(scenario, variant, q, "free_running", physics=phys, measure_physics=False)
         shows, fit = refined_ladder_shows_the_order(dts, errs, floors, statuses, exp)
