@@ -29,6 +29,8 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.transforms import offset_copy
 
+from reports.ticks import decorate
+
 __all__ = ["panels", "release", "legend_below", "legend_at", "legend_height_in", "save_png", "pad_limits", "LEGEND_LINE_IN",
            "TICK_LABEL_PT"]
 
@@ -156,6 +158,7 @@ def _new_panel(ax, log, bottom, left) -> None:
     ax.xaxis.set_label_coords(0.5, 0.0, transform=offset_copy(ax.transAxes, fig=fig, y=-XLABEL_OFFSET_PT,
                                                               units="points"))
     ax.xaxis.label.set_verticalalignment("top")
+    decorate(ax)
 
 
 def _empty(fig, axes) -> None:
