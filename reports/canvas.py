@@ -5,11 +5,14 @@ Why (docs/speed.md, "The report"): cProfile of a default sweep's report put ~40 
 creating axes and their tick objects, ~20 % in matplotlib's Legend (offset boxes measured twice) and
 ~10 % in re-measuring tick labels to place the axis labels. So:
 
-* :func:`panels` keeps one figure per layout (kind, rows, columns) in each drawing process and hands
-  it back emptied of its data (lines, texts, legends), its axes and their ticks intact. The panels
+* :func:`panels` keeps one figure per layout (kind, columns) in each drawing process and hands
+  it back emptied of its data (lines, texts, legends), its axes and their ticks intact, as many rows
+  laid out as the figure has (the others hidden; rows are added when a figure has more). The panels
   share nothing (sharex/sharey would tie the pooled axes together): the callers set every limit
   explicitly, identical along a row or over the grid, which is what sharing gave. Drawing a figure in a
   reused grid gives the same pixels as in a fresh one (tests/reports/test_canvas.py).
+* each axes' ticks, grid lines and tick labels are drawn by one artist (reports.ticks), not one Tick
+  object of five artists per tick.
 * Axis labels sit at fixed offsets from their axes (points), so matplotlib does not measure every tick
   label again to place them.
 * :func:`legend_below` draws a legend as one short line (and marker) and one text per entry, placed in
@@ -26,6 +29,7 @@ from __future__ import annotations
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg, RendererAgg, get_hinting_flag
 from matplotlib.figure import Figure
+from matplotlib.gridspec import GridSpec
 from matplotlib.lines import Line2D
 from matplotlib.transforms import offset_copy
 
@@ -116,27 +120,50 @@ class _Canvas(FigureCanvasAgg):
         return self.renderer
 
 
-_POOL: dict = {}    # (layout key) -> (fig, axes): per process (forked drawing workers each have theirs)
+_POOL: dict = {}    # (layout key) -> (fig, axes of every row made): per process (forked drawing workers each have theirs)
 
 
 def panels(key, nrows: int, ncols: int, size_in, dpi: float, log: bool, outer_labels: bool = True):
     """A figure of ``nrows`` × ``ncols`` unshared panels for layout ``key``, emptied of any previous
     drawing and resized to ``size_in`` (w, h inches). Log panels have log x and y scales. With
     ``outer_labels`` only the bottom row shows x tick labels and only the first column y tick labels
-    (the callers then give a row the same y limits and the grid the same x limits)."""
-    k = (key, nrows, ncols, bool(log), outer_labels)
+    (the callers then give a row the same y limits and the grid the same x limits).
+
+    The rows are pooled by layout whatever their number (creating an axes is the costliest part of a
+    figure drawn for the first time): a figure of fewer rows than the pool has lays its rows out on
+    its own grid (the positions ``fig.subplots(nrows, ncols)`` gives) and hides the others."""
+    k = (key, ncols, bool(log), outer_labels)
     if k not in _POOL:
         fig = Figure(figsize=size_in, dpi=dpi)
         _Canvas(fig)
-        axes = fig.subplots(nrows, ncols, squeeze=False)
-        for (i, j), ax in np.ndenumerate(axes):
-            _new_panel(ax, log, bottom=i == nrows - 1 or not outer_labels, left=j == 0 or not outer_labels)
         fig._rb_extra = []
-        _POOL[k] = (fig, axes)
-    fig, axes = _POOL[k]
+        _POOL[k] = (fig, np.empty((0, ncols), dtype=object))
+    fig, pool = _POOL[k]
+    while len(pool) < nrows:
+        row = np.empty((1, ncols), dtype=object)
+        for j in range(ncols):
+            row[0, j] = fig.add_subplot(len(pool) + 1, ncols, j + 1)
+            _new_panel(row[0, j], log, bottom=True, left=j == 0 or not outer_labels)
+            row[0, j]._rb_labelbottom = True
+        pool = np.vstack([pool, row])
+        _POOL[k] = (fig, pool)
+    grid = GridSpec(nrows, ncols, figure=fig)
+    for (i, j), ax in np.ndenumerate(pool):
+        ax.set_visible(i < nrows)
+        if i < nrows:
+            ax.set_subplotspec(grid[i, j])
+            _show_x_labels(ax, i == nrows - 1 or not outer_labels)
+    axes = pool[:nrows]
     _empty(fig, axes)
     fig.set_size_inches(*size_in)
     return fig, axes
+
+
+def _show_x_labels(ax, show: bool) -> None:
+    """x tick labels on or off (tick_params only when it changes: it restyles every tick)."""
+    if getattr(ax, "_rb_labelbottom", None) != show:
+        ax.tick_params(labelbottom=show)
+        ax._rb_labelbottom = show
 
 
 def release() -> None:

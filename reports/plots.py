@@ -519,14 +519,10 @@ _PANEL_COST = {"convergence": 1.3, "local": 1.3, "trajectories": 1.0, "errors": 
 
 
 def layout_group(res, sc, kind) -> tuple:
-    """The grid layout figure ``kind`` of ``sc`` is likely drawn in (figures of one layout reuse one
-    grid in a drawing process): its kind of panels and its estimated number of rows."""
-    info = res.scenario(sc)
-    varies = {q: info.get("varies", {}).get(q, True) for q in QUANTITIES}
-    panels_of = {"trajectories": "time", "errors": "time-log", "conservation": "time-log", "convergence": "ladder",
-                 "local": "ladder", "work": "work"}[kind]
-    rows = 3 * varies["position"] + 4 * varies["orientation"] if kind == "trajectories" else sum(varies.values())
-    return panels_of, rows if kind != "work" else 1
+    """The grid layout figure ``kind`` of ``sc`` is drawn in (figures of one layout reuse one grid's
+    panels in a drawing process, whatever their number of rows: reports.canvas.panels)."""
+    return ({"trajectories": "time", "errors": "time-log", "conservation": "time-log", "convergence": "ladder",
+             "local": "ladder", "work": "work"}[kind],)
 
 
 def relative_cost(res, sc, kind) -> float:

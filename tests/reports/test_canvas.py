@@ -69,6 +69,32 @@ def test_a_figure_drawn_in_a_reused_grid_has_the_pixels_of_a_fresh_one(browser_r
     assert a.shape == b.shape and np.array_equal(a, b)
 
 
+@pytest.mark.parametrize("first, then", [(("spin_only", "trajectories"), ("stiff_spring", "trajectories")),
+                                         (("stiff_spring", "trajectories"), ("spin_only", "trajectories")),
+                                         (("spin_only", "errors"), ("drop_once", "conservation"))])
+def test_a_figure_drawn_after_one_of_more_or_fewer_rows_has_the_pixels_of_a_fresh_one(browser_results, tmp_path,
+                                                                                     first, then):
+    """A layout's rows are pooled whatever their number: a figure of 1 row drawn after one of 4 (rows
+    hidden, its grid laid out anew, the bottom row's x labels moved) and one of 4 after one of 1 (rows
+    added) draw what they draw in a fresh grid."""
+    res = load_results(browser_results)
+    canvas._POOL.clear()
+    fresh, again = tmp_path / "fresh", tmp_path / "again"
+    fresh.mkdir()
+    again.mkdir()
+    name = plots.draw(res, *then, fresh)[1]
+    canvas._POOL.clear()
+    assert plots.draw(res, *first, again)[1] is not None
+    _litter(np.random.default_rng(1))
+    assert plots.draw(res, *then, again)[1] == name
+    a, b = _pixels(fresh / name), _pixels(again / name)
+    assert a.shape == b.shape and np.array_equal(a, b)
+    (fig, pool), = [v for v in canvas._POOL.values() if v[1][0, 0].get_visible()]
+    shown = [row for row in pool if row[0].get_visible()]
+    assert [[ax.xaxis.majorTicks[0].label1.get_visible() for ax in row] for row in shown] == \
+        [[False] * pool.shape[1]] * (len(shown) - 1) + [[True] * pool.shape[1]]   # x labels under the bottom row only
+
+
 def _render_texts(canvas_class):
     fig = Figure(figsize=(5.0, 2.5), dpi=90)
     canvas_class(fig)
