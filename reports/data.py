@@ -50,6 +50,8 @@ class Results:
     rows: list
     summary: dict
     _series: dict = field(default_factory=dict, repr=False)
+    _index: dict | None = field(default=None, repr=False)
+    _records: dict = field(default_factory=dict, repr=False)
 
     @property
     def scenarios(self) -> list:
@@ -68,7 +70,14 @@ class Results:
         return next(s for s in self.scenarios if s["name"] == name)
 
     def rows_for(self, scenario, engine=None) -> list:
-        return [r for r in self.rows if r["scenario"] == scenario and (engine is None or r["engine"] == engine)]
+        """The rows of ``scenario`` (of one ``engine`` variant), in file order (indexed once: the figures
+        ask ~2,300 times, and a scan of every row each time was a twentieth of their drawing time)."""
+        if self._index is None:
+            self._index = {}
+            for r in self.rows:
+                self._index.setdefault((r["scenario"], None), []).append(r)
+                self._index.setdefault((r["scenario"], r["engine"]), []).append(r)
+        return list(self._index.get((scenario, engine), ()))
 
     def default_row(self, scenario, engine):
         dt = self.scenario(scenario)["dt_s"]
@@ -76,9 +85,11 @@ class Results:
 
     def records(self, scenario=None, engine=None, quantity=None, mode="free_running") -> list:
         key = "convergence" if mode == "free_running" else "local_convergence"
-        return [r for r in self.summary.get(key, [])
-                if (scenario is None or r["scenario"] == scenario) and (engine is None or r["engine"] == engine)
-                and (quantity is None or r["quantity"] == quantity)]
+        if (key, scenario) not in self._records:   # indexed by scenario once (asked ~1,500 times per report)
+            self._records[(key, scenario)] = [r for r in self.summary.get(key, [])
+                                              if scenario is None or r["scenario"] == scenario]
+        return [r for r in self._records[(key, scenario)]
+                if (engine is None or r["engine"] == engine) and (quantity is None or r["quantity"] == quantity)]
 
     def series(self, scenario) -> dict:
         """``{variant: {field: array}}`` plus ``"reference"``, from series/<scenario>.npz (empty when absent)."""

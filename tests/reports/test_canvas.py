@@ -131,6 +131,24 @@ def test_labels_rasterized_a_string_at_a_time_land_on_matplotlibs_own_pixels():
             assert max(_mismatch(np.roll(ours, shift, axis=(0, 1))[part], theirs[part])) > 0.3, (part, shift)
 
 
+def test_texts_are_laid_out_where_matplotlib_lays_them_out():
+    """The report's renderer answers matplotlib's font height question from a per-process cache: every
+    text's box (single and multi-line, sizes and turns of the report) is matplotlib's own, to the bit."""
+    canvas._HEIGHTS.clear()
+    boxes = []
+    for canvas_class in (canvas._Canvas, FigureCanvasAgg):
+        fig = Figure(figsize=(5.0, 2.5), dpi=90)
+        canvas_class(fig)
+        texts = [fig.text(0.1, 0.2 + 0.1 * k, s, fontsize=size, rotation=rot, va=va)
+                 for k, (s, size, rot, va) in enumerate([("1e-06", 10, 0, "baseline"), ("gyp Δt", 7, 0, "top"),
+                                                        ("two\nlines", 8, 0, "center"), ("qw", 8, 90, "bottom"),
+                                                        ("tumbling_box: x", 11, 0, "center_baseline")])]
+        renderer = fig.canvas.get_renderer()
+        boxes.append([t.get_window_extent(renderer).bounds for t in texts])
+    assert boxes[0] == boxes[1]
+    assert canvas._HEIGHTS and all(None not in v for v in canvas._HEIGHTS.values())   # the cache was asked
+
+
 def test_a_ladder_row_at_round_off_is_said_and_a_row_above_its_floor_is_drawn(hostile_results, tmp_path):
     res = load_results(hostile_results)
     kind, fname, note = plots.draw(res, "hostile_spin", "convergence", tmp_path)
