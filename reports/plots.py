@@ -513,9 +513,10 @@ def figure_tasks(res, sc) -> list:
     return [(sc, k) for k in KINDS]
 
 
-#: Relative drawing cost of one panel of each kind (CPU time per panel measured on the default sweep's
-#: report: ladders carry markers, triangles and Δt labels; trajectories the thick reference line).
-_PANEL_COST = {"convergence": 1.3, "local": 1.3, "trajectories": 1.0, "errors": 1.0, "conservation": 1.0, "work": 3.0}
+#: Relative drawing cost of one panel of each kind (CPU time per panel of a warm grid, measured on the
+#: default sweep's report after the axes were drawn by reports.ticks: ladders ~1.9x a time panel, they
+#: carry a line and markers per variant, triangles and Δt labels; a work panel's ~1.8x holds every variant).
+_PANEL_COST = {"convergence": 1.9, "local": 1.9, "trajectories": 1.0, "errors": 1.0, "conservation": 1.0, "work": 1.8}
 
 
 def layout_group(res, sc, kind) -> tuple:
