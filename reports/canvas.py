@@ -30,7 +30,9 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg, RendererAgg, get_hinting_flag
 from matplotlib.figure import Figure
 from matplotlib.gridspec import GridSpec
+from matplotlib.collections import LineCollection
 from matplotlib.lines import Line2D
+from matplotlib.text import Text
 from matplotlib.transforms import offset_copy
 
 from reports.ticks import decorate
@@ -268,18 +270,26 @@ def legend_at(fig, x0: float, top: float, title: str, entries) -> None:
     inch = fig.dpi_scale_trans
     em = 7.0 / 72.0
     art = [fig.text(x0, top, title, transform=inch, fontsize=8, va="top", ha="left")]
+    solid = []    # (segment, colour, width) of the solid handles: one collection for the legend
     y = top - 0.2
     for label, st in entries:
         xs = [x0 + 0.05, x0 + 0.05 + 1.8 * em]
-        line = Line2D(xs, [y, y], transform=inch, color=st["color"], ls=st.get("ls", "-"), lw=st.get("lw", 1.4))
-        art.append(line)
+        ls, lw = st.get("ls", "-"), st.get("lw", 1.4)
+        if ls in ("-", "solid"):
+            solid.append((list(zip(xs, [y, y])), st["color"], lw))
+        else:
+            art.append(Line2D(xs, [y, y], transform=inch, color=st["color"], ls=ls, lw=lw))
         if st.get("marker"):
             art.append(Line2D([sum(xs) / 2], [y], transform=inch, color=st["color"], marker=st["marker"], ms=4,
                               ls="none"))
         art.append(fig.text(xs[1] + 0.8 * em, y, label, transform=inch, fontsize=7, va="center", ha="left"))
         y -= LEGEND_LINE_IN
+    if solid:   # drawn as Line2D draws a solid line (projecting caps), below the markers (z order 2, first)
+        art.insert(0, LineCollection([seg for seg, _, _ in solid], colors=[c for _, c, _ in solid],
+                                     linewidths=[w for _, _, w in solid], capstyle="projecting", transform=inch,
+                                     zorder=2))
     for a in art:
-        if isinstance(a, Line2D):
+        if not isinstance(a, Text):
             fig.add_artist(a)
     fig._rb_extra = getattr(fig, "_rb_extra", []) + art
 

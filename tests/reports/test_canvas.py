@@ -149,6 +149,37 @@ def test_texts_are_laid_out_where_matplotlib_lays_them_out():
     assert canvas._HEIGHTS and all(None not in v for v in canvas._HEIGHTS.values())   # the cache was asked
 
 
+def test_a_legend_draws_the_pixels_of_one_line_per_entry():
+    """legend_at draws its solid handles as one collection: the same pixels as one Line2D per entry (the
+    drawing it replaced), with dashed handles and markers among them."""
+    entries = [("course", {"color": "C0"}), ("rk4  p 4.00", {"color": "C1", "marker": "o"}),
+               ("dashed", {"color": "C2", "ls": "--", "marker": "s"}), ("thin", {"color": "C3", "lw": 0.9})]
+
+    def draw(own):
+        fig = Figure(figsize=(3.0, 1.5), dpi=90)
+        canvas._Canvas(fig)
+        if own:
+            canvas.legend_at(fig, 0.2, 1.3, "reference", entries)
+        else:
+            from matplotlib.lines import Line2D
+            inch, em, y = fig.dpi_scale_trans, 7.0 / 72.0, 1.1
+            fig.text(0.2, 1.3, "reference", transform=inch, fontsize=8, va="top", ha="left")
+            for label, st in entries:
+                xs = [0.25, 0.25 + 1.8 * em]
+                fig.add_artist(Line2D(xs, [y, y], transform=inch, color=st["color"], ls=st.get("ls", "-"),
+                                      lw=st.get("lw", 1.4)))
+                if st.get("marker"):
+                    fig.add_artist(Line2D([sum(xs) / 2], [y], transform=inch, color=st["color"], marker=st["marker"],
+                                          ms=4, ls="none"))
+                fig.text(xs[1] + 0.8 * em, y, label, transform=inch, fontsize=7, va="center", ha="left")
+                y -= canvas.LEGEND_LINE_IN
+        fig.canvas.draw()
+        return np.asarray(fig.canvas.buffer_rgba()).copy()
+
+    ours, theirs = draw(True), draw(False)
+    assert (255 - theirs[..., :3]).sum() > 0 and np.array_equal(ours, theirs)
+
+
 def test_a_ladder_row_at_round_off_is_said_and_a_row_above_its_floor_is_drawn(hostile_results, tmp_path):
     res = load_results(hostile_results)
     kind, fname, note = plots.draw(res, "hostile_spin", "convergence", tmp_path)
