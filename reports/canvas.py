@@ -64,14 +64,20 @@ class _StringRenderer(RendererAgg):
 
     def get_text_width_height_descent(self, s, prop, ismath):
         """matplotlib's measure, kept for the process (its own cache is per renderer, and a renderer
-        per figure size: the same tick labels and legends were shaped again for every figure)."""
+        per figure size: the same tick labels and legends were shaped again for every figure). The
+        string is shaped once: its bitmap is kept from the same shaping (:meth:`_bitmap`)."""
         if ismath:
             return super().get_text_width_height_descent(s, prop, ismath)
         key = (s, hash(prop), self.dpi, get_hinting_flag())    # FontProperties compare by their hash
         if key not in _METRICS:
             if len(_METRICS) > _CACHE_MAX:
                 _METRICS.clear()
-            _METRICS[key] = super().get_text_width_height_descent(s, prop, ismath)
+            font = self._prepare_font(prop)      # RendererAgg.get_text_width_height_descent, shaped here
+            font.set_text(s, 0.0, flags=get_hinting_flag())
+            w, h = font.get_width_height()
+            _METRICS[key] = (w / 64.0, h / 64.0, font.get_descent() / 64.0)
+            if _StringRenderer.string_path:
+                _keep_bitmap(font, (*key, 0, True), antialiased=True)
         return _METRICS[key]
 
     def _get_font_height_metrics(self, prop):
@@ -98,21 +104,29 @@ class _StringRenderer(RendererAgg):
     def _bitmap(self, s, prop, angle, antialiased):
         """The string's coverage bitmap and its left and bottom (pixels, y downwards) relative to the pen
         origin; the same for every position, so kept for the process (labels repeat across figures)."""
-        key = (s, hash(prop), self.dpi, get_hinting_flag(), angle, bool(antialiased))
-        if key not in _BITMAPS:
+        flat = (s, hash(prop), self.dpi, get_hinting_flag(), 0, bool(antialiased))
+        if flat not in _BITMAPS:
             font = self._prepare_font(prop)
             font.set_text(s, 0, flags=get_hinting_flag())
-            font.draw_glyphs_to_bitmap(antialiased=antialiased)
-            xo, yo = font.get_bitmap_offset()
-            img = np.array(font.get_image())
-            left, bottom = xo / 64.0, yo / 64.0 + font.get_descent() / 64.0 + 1
-            if angle == 90:   # turned a quarter anticlockwise about the pen origin: (u, v) -> (v, -u)
-                img = np.ascontiguousarray(np.rot90(img))
-                left, bottom = bottom - img.shape[1], -left
-            if len(_BITMAPS) > _CACHE_MAX:
-                _BITMAPS.clear()
-            _BITMAPS[key] = (img, left, bottom)
-        return _BITMAPS[key]
+            _keep_bitmap(font, flat, antialiased)
+        if angle != 90:
+            return _BITMAPS[flat]
+        turned = flat[:4] + (90, flat[5])
+        if turned not in _BITMAPS:   # turned a quarter anticlockwise about the pen origin: (u, v) -> (v, -u)
+            img, left, bottom = _BITMAPS[flat]
+            img = np.ascontiguousarray(np.rot90(img))
+            _BITMAPS[turned] = (img, bottom - img.shape[1], -left)
+        return _BITMAPS[turned]
+
+
+def _keep_bitmap(font, key, antialiased) -> None:
+    """Rasterize the string ``font`` was just shaped with (FT2Font.set_text) and keep its bitmap and
+    offsets (as matplotlib 3.10 placed them) under ``key``."""
+    font.draw_glyphs_to_bitmap(antialiased=antialiased)
+    xo, yo = font.get_bitmap_offset()
+    if len(_BITMAPS) > _CACHE_MAX:
+        _BITMAPS.clear()
+    _BITMAPS[key] = (np.array(font.get_image()), xo / 64.0, yo / 64.0 + font.get_descent() / 64.0 + 1)
 
 
 def _font_height_metrics(prop, dpi):
