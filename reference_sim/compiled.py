@@ -51,12 +51,13 @@ _KERNEL: list = []
 
 
 def _kernel():
-    """The compiled run loop, or None where numba cannot be imported (then every run steps in Python).
+    """The compiled run loop, or None where numba cannot be imported or cannot cache (then every run steps
+    in Python).
     numba is imported, and the kernels compiled or loaded from numba's cache, once per process."""
     if not _KERNEL:
         try:
             from reference_sim import _compiled_kernels
-        except ImportError:
+        except (ImportError, RuntimeError, OSError):   # no numba, or nowhere numba may write its cache
             _KERNEL.append(None)
         else:
             _KERNEL.append(_compiled_kernels.run)

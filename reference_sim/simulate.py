@@ -92,9 +92,16 @@ def _simulate_single(problem: Problem, variant: str, dt_s: float, n_steps: int, 
     from reference_sim.scalar import ScalarStepper
 
     stepper = ScalarStepper(problem, variant, dt_s)
-    if compiled.usable(stepper):
-        return _simulate_compiled(stepper, dt_s, n_steps, y)
-    step = stepper.step
+    # a step that blows up inside NumPy (implicit Euler's Newton solve) is a divergence, reported as such,
+    # not a stream of overflow warnings — as in the batched path
+    with np.errstate(all="ignore"):
+        if compiled.usable(stepper):
+            return _simulate_compiled(stepper, dt_s, n_steps, y)
+        return _python_loop(stepper.step, dt_s, n_steps, y)
+
+
+def _python_loop(step, dt_s: float, n_steps: int, y) -> Run:
+    """The Python float path's loop (:func:`_simulate_single`)."""
     rows = [y.tolist()]
     cur = rows[0]
     checked = 1  # rows[:checked] are known good
