@@ -33,11 +33,13 @@ VARIANT_CODES = {"course": 0, "course_gyro": 1, "expmap_gyro": 2, "explicit_eule
                  "rk4": 5, "leapfrog": 6, "implicit_euler": 7}
 
 
-def usable(stepper) -> bool:
+def usable(stepper, variant: str | None = None) -> bool:
     """Whether a run of ``stepper`` may step compiled: a float-backend ``ScalarStepper`` (not a subclass)
-    whose step methods are the shipped ones, and a variant the compiled loop knows."""
+    whose step methods are the shipped ones, and a variant the compiled loop knows (``variant``, default the
+    stepper's own: a stepper's parameters do not depend on its scheme, so one stepper serves every scheme)."""
     from reference_sim.scalar import SHIPPED_CLASS, SHIPPED_METHODS
-    if type(stepper) is not SHIPPED_CLASS or stepper.backend != "float" or stepper.variant not in VARIANT_CODES:
+    variant = stepper.variant if variant is None else variant
+    if type(stepper) is not SHIPPED_CLASS or stepper.backend != "float" or variant not in VARIANT_CODES:
         return False
     d = SHIPPED_CLASS.__dict__
     if any(d.get(name) is not fn for name, fn in SHIPPED_METHODS.items()):
@@ -79,14 +81,16 @@ def parameters(stepper) -> tuple:
             np.array(stepper.tau_B, dtype=f), springs, world, body)
 
 
-def run_until_exceptional(stepper, rows: np.ndarray, start: int, n_steps: int, limit: float) -> int:
+def run_until_exceptional(stepper, rows: np.ndarray, start: int, n_steps: int, limit: float,
+                          variant: str | None = None) -> int:
     """Step ``rows[start]`` compiled, writing ``rows[start + 1]``, … (``rows`` (n_steps + 1, 13), C order),
     until ``n_steps`` is reached or the next step is not routine (module doc; a state with a component beyond
-    ``limit`` is not). Returns the index of the last
+    ``limit`` is not), with the scheme ``variant`` (default: the stepper's). Returns the index of the last
     state written: ``n_steps``, or k < n_steps when step k + 1 must be taken in Python."""
     if rows.dtype != np.float64 or not rows.flags.c_contiguous or rows.shape[1] != 13:
         raise ValueError("rows must be a C-contiguous float64 (n, 13) array")
     from reference_sim.scalar import IMPLICIT_TOL, _MAX_ITER
-    return int(_kernel()(VARIANT_CODES[stepper.variant], rows, int(start), int(n_steps), float(limit),
-                         float(IMPLICIT_TOL), int(_MAX_ITER), *parameters(stepper)))
+    code = VARIANT_CODES[stepper.variant if variant is None else variant]
+    return int(_kernel()(code, rows, int(start), int(n_steps), float(limit), float(IMPLICIT_TOL), int(_MAX_ITER),
+                         *parameters(stepper)))
 
