@@ -94,3 +94,22 @@ def run_until_exceptional(stepper, rows: np.ndarray, start: int, n_steps: int, l
     return int(_kernel()(code, rows, int(start), int(n_steps), float(limit), float(IMPLICIT_TOL), int(_MAX_ITER),
                          *parameters(stepper)))
 
+
+
+def warm() -> bool:
+    """Load (or, the first time on a machine, compile) the compiled loop in this process — before a process
+    pool forks, so that every forked worker inherits it instead of loading or compiling it again. True when
+    the compiled path is available."""
+    run = _kernel()
+    if run is None:
+        return False
+    from reference_sim.body import RigidBody
+    from reference_sim.forces import ForceModel
+    from reference_sim.scalar import ScalarStepper
+    from reference_sim.state import Problem, State
+    problem = Problem(RigidBody(1.0, [1.0, 1.0, 1.0]), ForceModel(),
+                      State(np.zeros(3), np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0]), np.zeros(3)))
+    rows = np.zeros((2, 13))
+    rows[0, 6] = 1.0
+    run_until_exceptional(ScalarStepper(problem, "rk4", 0.01), rows, 0, 1, 1e8)   # one signature: all compiled
+    return True

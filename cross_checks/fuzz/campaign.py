@@ -151,6 +151,8 @@ def _pool(jobs, executor):
         return None, False
     import multiprocessing as mp
     from cross_checks.sweep.lifecycle import worker_init
+    from reference_sim import compiled
+    compiled.warm()   # the compiled reference steps, loaded once here: the forked workers inherit them
     ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else None
     return ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=worker_init,
                                initargs=(os.getpid(),)), True

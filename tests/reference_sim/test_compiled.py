@@ -185,3 +185,19 @@ def test_without_numba_every_run_steps_in_python(monkeypatch):
     monkeypatch.setattr(compiled, "_KERNEL", [None])
     assert not compiled.usable(ScalarStepper(problem, "leapfrog", 1e-3))
     _assert_same_run(S.simulate(problem, "leapfrog", 1e-3, 50), with_numba)
+
+
+def _kernel_already_loaded(_):
+    return bool(compiled._KERNEL) and compiled._KERNEL[0] is not None
+
+
+def test_warm_loads_the_kernel_that_forked_workers_inherit():
+    # the sweep and the fuzz call warm() before their process pools fork: a worker then finds the compiled loop
+    # loaded, instead of loading (or compiling) it once more per worker
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+    if "fork" not in mp.get_all_start_methods():
+        pytest.skip("no fork start method here")
+    assert compiled.warm()
+    with ProcessPoolExecutor(1, mp_context=mp.get_context("fork")) as pool:
+        assert pool.submit(_kernel_already_loaded, None).result()
