@@ -27,7 +27,6 @@ import math
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.collections import LineCollection  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
@@ -52,7 +51,7 @@ NOTES: dict = {}
 
 def variant_styles(variants) -> dict:
     """A colour and marker per variant, distinct within its family (families are drawn apart)."""
-    cmap = plt.get_cmap("tab10")
+    cmap = matplotlib.colormaps["tab10"]
     out = {}
     for fam, vs in families(variants).items():
         for i, v in enumerate(vs):
@@ -480,7 +479,7 @@ def fig_work(res, sc, styles, path):
             if not ok.any():
                 continue
             fam = v.split(":", 1)[0]
-            color = plt.get_cmap("tab10")(list(families(res.variants)).index(fam) % 10)
+            color = matplotlib.colormaps["tab10"](list(families(res.variants)).index(fam) % 10)
             mk = styles[v]["marker"]
             _line(ax, w[ok], _positive(e[ok]), color=color, marker=mk, ms=4, lw=0.9, alpha=0.85)
             handles[v] = {"color": color, "marker": mk, "lw": 0.9}
