@@ -138,8 +138,8 @@ class _Body:
 
     # -- boundary conversions ------------------------------------------------------------------
     def _pose_in(self, y):
-        q_WB = np.asarray(y[6:10], dtype=float)
-        q_WP = q_WB if self.q_BP is None else quat_mul(q_WB, self.q_BP)
+        q_WB = [float(v) for v in y[6:10]]
+        q_WP = q_WB if self.q_BP is None else quat_mul_floats(q_WB, self.q_BP.tolist())
         return [float(v) for v in y[0:3]], _xyzw(q_WP)
 
     def set_state(self, y):

@@ -298,17 +298,25 @@ def _rollout_free(mods, state0, xfrc, harness, per_step, n_max, threads, session
         qpos[1:], qvel[1:] = np.moveaxis(out[:, :, 1:8], 1, 0), np.moveaxis(out[:, :, 8:14], 1, 0)
         return qpos, qvel
     runner = rollout.Rollout(nthread=threads if threads > 1 else 0)
-    state = state0
+    # one step per call: the arrays rollout's wrapper would check and allocate every call, given once (in
+    # the shapes and dtype it makes them: (M, nstate) start states, (M, 1, ·) controls, states, sensordata)
+    state = np.ascontiguousarray(state0, dtype=float)
+    ctrl = np.empty((M, 1, xfrc.shape[1]))
+    out = np.empty((M, 1, state.shape[1]))
+    sensors = np.empty((M, 1, mods[0].nsensordata))
+    per_step_any = bool(per_step.any())
     try:
         for n in range(1, n_max + 1):
-            if per_step.any():
+            if per_step_any:
                 fresh = harness.xfrc(_packed1_cols(qpos[n - 1], qvel[n - 1]))
                 xfrc[per_step] = fresh[per_step]
             st = state.copy()
             st[:, 8:11] *= harness.gv[:, None]
             st[:, 11:14] *= harness.gw[:, None]
-            out, _ = runner.rollout(mods, datas, st, xfrc[:, None, :], control_spec=spec, nstep=1)
-            state = out[:, 0, :]
+            ctrl[:, 0, :] = xfrc
+            runner.rollout(mods, datas, st, ctrl, control_spec=spec, nstep=1, state=out, sensordata=sensors,
+                           skip_checks=True)
+            state = out[:, 0, :].copy()
             qpos[n], qvel[n] = state[:, 1:8], state[:, 8:14]
     finally:
         runner.close()
