@@ -319,9 +319,7 @@ _LENT_DATA: dict = {}
 
 
 def _data_for(m):
-    """A fresh MjData of ``m``, or (a lent model) the reused one of its layout, reset for ``m``."""
-    if _MODEL_SOURCE is None:
-        return mujoco.MjData(m)
+    """The MjData of lent model ``m``: the reused one of its layout, reset for ``m`` (new the first time)."""
     key = (threading.get_ident(), int(m.nbuffer), int(m.narena), tuple(int(v) for v in m.body_simple),
            tuple(int(v) for v in m.dof_simplenum))
     d = _LENT_DATA.get(key)
@@ -332,10 +330,32 @@ def _data_for(m):
     return d
 
 
+#: Each thread's last compiled model and its MjData: ``(scenario, variant, dt_s, build_model, model, data)``.
+#: A sweep's job runs the same scenario, variant and step twice (its free run, then its one-step batch):
+#: the second takes the model compiled for the first (~1 ms, and a new MjData ~0.4 ms), its MjData reset.
+_LAST = threading.local()
+
+
+def _compiled(scenario, variant, dt_s):
+    """``build_model(scenario, variant, dt_s)`` and a fresh (or reset) MjData of it."""
+    last = getattr(_LAST, "run", None)
+    if (last is not None and last[0] is scenario and last[1] == variant and last[2] == float(dt_s)
+            and last[3] is build_model):
+        mujoco.mj_resetData(last[4], last[5])
+        return last[4], last[5]
+    m = build_model(scenario, variant, dt_s)
+    d = mujoco.MjData(m)
+    _LAST.run = (scenario, variant, float(dt_s), build_model, m, d)
+    return m, d
+
+
 def _model_and_data(scenario, variant, dt_s):
     """``(MjModel, MjData, its xfrc_applied row, weight m g)`` of one run of the scenario's body."""
-    m = (build_model if _MODEL_SOURCE is None else _MODEL_SOURCE)(scenario, variant, dt_s)
-    d = _data_for(m)
+    if _MODEL_SOURCE is None:
+        m, d = _compiled(scenario, variant, dt_s)
+    else:
+        m = _MODEL_SOURCE(scenario, variant, dt_s)
+        d = _data_for(m)
     weight = scenario.problem.body.mass_kg * np.asarray(scenario.problem.forces.gravity_W, dtype=float)
     return m, d, d.xfrc_applied[_BODY], weight
 

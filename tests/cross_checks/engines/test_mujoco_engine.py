@@ -279,3 +279,19 @@ def test_runs_on_lent_models_reuse_one_mjdata_per_layout_with_a_fresh_ones_numbe
                     assert np.array_equal(me.simulate(sc, variant, sc.dt_s, 12).y, y), (variant, sc.name)
                     assert np.array_equal(me.one_step(sc, variant, sc.dt_s, sc.problem.initial_packed()[None]), y1)
         assert len(me._LENT_DATA) == 2
+
+
+def test_a_one_step_batch_after_the_run_on_the_same_model_is_the_one_on_a_new_model():
+    """A job's one-step batch after its free run (same scenario, variant, step) reuses the compiled model and
+    its reset MjData: the numbers of a new model, bit for bit; another scenario, variant or step compiles."""
+    sc, other = load_scenario("spring_pendulum"), load_scenario("tumbling_box")
+    ys = me.simulate(sc, "rk4", 0.004, 40).y[::5]
+    for variant in ("rk4", "euler"):
+        me.simulate(other, variant, 0.004, 5)
+        fresh = me.one_step(sc, variant, 0.004, ys)             # after another scenario's run: compiled anew
+        me.simulate(sc, variant, 0.004, 40)
+        model = me._LAST.run[4]
+        assert np.array_equal(me.one_step(sc, variant, 0.004, ys), fresh)
+        assert me._LAST.run[4] is model                            # the run's model, reused
+        me.one_step(sc, variant, 0.002, ys)
+        assert me._LAST.run[4] is not model                        # another step: compiled
