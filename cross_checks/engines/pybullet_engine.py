@@ -231,19 +231,18 @@ def _run_per_step(B, scenario, y0, raw, dt_s: float, n_steps: int) -> Run:
     resetBaseVelocity, the forces applied. Per step in plain floats (the states as PyBullet's tuples, the
     harness through step_floats): the numbers of the NumPy formulas, bit for bit (tested)."""
     forces = scenario.problem.forces
-    c, b = B.c, B.b
     state_dependent, decay = forces.state_dependent, forces.has_decay   # properties: read once
     gv, gw = (float(g) for g in decay_factors(scenario, dt_s))
     harness = harness_fn(scenario, dt_s)
     packed = B.packer()
     wx, wy, wz = B.weight.tolist()
     fx, fy, fz, tx, ty, tz = harness([float(v) for v in y0])
-    f, tau = (fx - wx, fy - wy, fz - wz), (tx, ty, tz)
-    step, pose, vel, reset_vel = p.stepSimulation, p.getBasePositionAndOrientation, p.getBaseVelocity, p.resetBaseVelocity
-    prev = raw[0].tolist()
-    start = 1
-    while start <= n_steps:
-        stop = min(start + _CHUNK, n_steps + 1)
+    now = {"f": (fx - wx, fy - wy, fz - wz), "tau": (tx, ty, tz), "prev": raw[0].tolist()}
+
+    def steps(start, stop):
+        c, b, apply = B.c, B.b, B.apply
+        step, pose, vel, reset_vel = p.stepSimulation, p.getBasePositionAndOrientation, p.getBaseVelocity, p.resetBaseVelocity
+        f, tau, prev = now["f"], now["tau"], now["prev"]
         rows = []
         for n in range(start, stop):
             if state_dependent and n > 1:
@@ -252,13 +251,45 @@ def _run_per_step(B, scenario, y0, raw, dt_s: float, n_steps: int) -> Run:
             if decay:
                 reset_vel(b, (prev[3] * gv, prev[4] * gv, prev[5] * gv), (prev[10] * gw, prev[11] * gw, prev[12] * gw),
                           physicsClientId=c)
-            B.apply(f, tau, prev[0:3])
+            apply(f, tau, prev[0:3])
             step(physicsClientId=c)
             ps, orn = pose(b, physicsClientId=c)
             lin, ang = vel(b, physicsClientId=c)
             prev = ps + lin + orn + ang
             rows.append(prev)
-        raw[start:stop] = rows
+        now.update(f=f, tau=tau, prev=prev)
+        return rows
+    return _recorded(B, raw, dt_s, n_steps, steps)
+
+
+def _run_constant(B, raw, f_W, tau_W, dt_s: float, n_steps: int) -> Run:
+    """The free run when the applied force ``f_W`` (weight removed) and torque ``tau_W`` (3 floats each)
+    are constant and there is no decay (most of the catalog): the per-step Python cut to the engine calls,
+    nothing applied when force and torque are zero."""
+    applies = any(v != 0.0 for v in f_W) or any(v != 0.0 for v in tau_W)
+
+    def steps(start, stop):
+        c, b = B.c, B.b
+        step, pose, vel = p.stepSimulation, p.getBasePositionAndOrientation, p.getBaseVelocity
+        rows = []
+        for n in range(start, stop):
+            if applies:
+                B.apply(f_W, tau_W, rows[-1][0:3] if rows else raw[n - 1, 0:3].tolist())
+            step(physicsClientId=c)
+            pos, orn = pose(b, physicsClientId=c)
+            lin, ang = vel(b, physicsClientId=c)
+            rows.append(pos + lin + orn + ang)
+        return rows
+    return _recorded(B, raw, dt_s, n_steps, steps)
+
+
+def _recorded(B, raw, dt_s: float, n_steps: int, steps) -> Run:
+    """The run whose steps ``start..stop-1`` ``steps(start, stop)`` takes, chunk by chunk, returning their
+    raw states (tuples of 13 floats, stored in one assignment per chunk); divergence checked per chunk."""
+    start = 1
+    while start <= n_steps:
+        stop = min(start + _CHUNK, n_steps + 1)
+        raw[start:stop] = steps(start, stop)
         blown = _diverged_in(B, raw, start, stop, dt_s)
         if blown is not None:
             return blown
@@ -273,33 +304,6 @@ def _diverged_in(B, raw, start: int, stop: int, dt_s: float):
         return None
     n_bad = start + int(np.argmax(bad))
     return diverged(B.raw_to_packed(raw[:n_bad]), dt_s, f" ({blowup_words(raw[n_bad])})")
-
-
-def _run_constant(B, raw, f_W, tau_W, dt_s: float, n_steps: int) -> Run:
-    """The free run when the applied force ``f_W`` (weight removed) and torque ``tau_W`` (3 floats each)
-    are constant and there is no decay (most of the catalog): the per-step Python cut to the engine calls,
-    nothing applied when force and torque are zero, each chunk's states collected as tuples and stored in
-    one assignment (the same floats, bit for bit)."""
-    c, b = B.c, B.b
-    step, pose, vel = p.stepSimulation, p.getBasePositionAndOrientation, p.getBaseVelocity
-    applies = any(v != 0.0 for v in f_W) or any(v != 0.0 for v in tau_W)
-    start = 1
-    while start <= n_steps:
-        stop = min(start + _CHUNK, n_steps + 1)
-        rows = []
-        for n in range(start, stop):
-            if applies:
-                B.apply(f_W, tau_W, rows[-1][0:3] if rows else raw[n - 1, 0:3].tolist())
-            step(physicsClientId=c)
-            pos, orn = pose(b, physicsClientId=c)
-            lin, ang = vel(b, physicsClientId=c)
-            rows.append(pos + lin + orn + ang)
-        raw[start:stop] = rows
-        blown = _diverged_in(B, raw, start, stop, dt_s)
-        if blown is not None:
-            return blown
-        start = stop
-    return Run(dt_s * np.arange(n_steps + 1), B.raw_to_packed(raw))
 
 
 def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
