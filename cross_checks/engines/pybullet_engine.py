@@ -33,6 +33,7 @@ from __future__ import annotations
 import functools
 import os
 import threading
+from pathlib import Path
 
 import numpy as np
 
@@ -342,3 +343,8 @@ class PybulletAdapter(EngineAdapter):
     version = staticmethod(version)
     simulate = staticmethod(simulate)
     one_step = staticmethod(one_step)
+
+    def source_files(self) -> list:
+        """This module and the plain-float per-step code its loops run (hashed into the cache key)."""
+        from cross_checks.engines import step_floats
+        return [*super().source_files(), Path(step_floats.__file__)]
