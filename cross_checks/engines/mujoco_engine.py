@@ -392,6 +392,9 @@ def _simulate_loop(scenario, m, d, dt_s, n_steps, control, per_step, decay, xfrc
     qpos_out = np.empty((n_steps + 1, 7))
     qvel_out = np.empty((n_steps + 1, 6))
     qpos_out[0], qvel_out[0] = qpos, qvel
+    y = np.empty((n_steps + 1, 13))
+    with np.errstate(all="ignore"):
+        y[0:1] = _to_packed(qpos_out[0:1], qvel_out[0:1])
     step = mujoco.mj_step
     reads = per_step or decay
     with _Session(d, control) as session, np.errstate(all="ignore"):
@@ -410,12 +413,12 @@ def _simulate_loop(scenario, m, d, dt_s, n_steps, control, per_step, decay, xfrc
                     session.raise_callback_error()
                 qpos_out[n] = qpos
                 qvel_out[n] = qvel
-            bad = _divergence(_to_packed(qpos_out[start:stop], qvel_out[start:stop]), start, (start, stop - 1),
-                              session, dt_s)
+            y[start:stop] = _to_packed(qpos_out[start:stop], qvel_out[start:stop])   # row by row: each chunk once
+            bad = _divergence(y[start:stop], start, (start, stop - 1), session, dt_s)
             if bad is not None:
                 n_bad, what = bad
-                return diverged(_to_packed(qpos_out[:n_bad], qvel_out[:n_bad]), dt_s, f" ({what})")
-    return Run(dt_s * np.arange(n_steps + 1), _to_packed(qpos_out, qvel_out))
+                return diverged(y[:n_bad].copy(), dt_s, f" ({what})")
+    return Run(dt_s * np.arange(n_steps + 1), y)
 
 
 def _simulate_rollout(m, d, dt_s: float, n_steps: int) -> Run:
@@ -452,17 +455,18 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     qpos_in, qvel_in = _to_qpos_qvel(y_dec)
     qpos_out = np.empty((len(y_start), 7))
     qvel_out = np.empty((len(y_start), 6))
+    qpos, qvel, step = d.qpos, d.qvel, mujoco.mj_step   # views of d's arrays, bound once
     with _Session(d, control) as session, np.errstate(all="ignore"):
         for i in range(len(y_start)):
             if not per_stage:
                 _apply(xfrc, *harness_force_torque(scenario, y_start[i], dt_s), weight)
             d.time = 0.0
-            d.qpos[:] = qpos_in[i]
-            d.qvel[:] = qvel_in[i]
-            mujoco.mj_step(m, d)
+            qpos[:] = qpos_in[i]
+            qvel[:] = qvel_in[i]
+            step(m, d)
             session.raise_callback_error()
-            qpos_out[i] = d.qpos
-            qvel_out[i] = d.qvel
+            qpos_out[i] = qpos
+            qvel_out[i] = qvel
             session.warnings.clear()
     with np.errstate(all="ignore"):
         return _to_packed(qpos_out, qvel_out).reshape(shape)
