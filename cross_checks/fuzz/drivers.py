@@ -220,6 +220,7 @@ def clear_cache() -> None:
     from cross_checks.fuzz import kernel
     _MODELS.clear()
     _INITIAL.clear()
+    _STRUCTURES.clear()
     kernel.clear_cache()
     if "cross_checks.fuzz.pybullet_batch" in sys.modules:
         sys.modules["cross_checks.fuzz.pybullet_batch"].release()
@@ -272,8 +273,19 @@ def _structure(model) -> tuple:
     """What an MjData built for ``model`` depends on besides sizes: a free body whose inertial frame is the
     body frame is "simple" (diagonal mass-matrix storage, nC = 6), a rotated one is not (nC = 21). One
     MjData serves every model of the same structure; across structures rollout silently produces
-    garbage (measured: the non-simple models blow up in their first step)."""
-    return (tuple(int(v) for v in model.body_simple), tuple(int(v) for v in model.dof_simplenum))
+    garbage (measured: the non-simple models blow up in their first step). Read once per model (a batch
+    groups its models by structure at every rung and one-step round)."""
+    hit = _STRUCTURES.get(id(model))
+    if hit is None or hit[0] is not model:
+        if len(_STRUCTURES) >= _MODELS_MAX:
+            _STRUCTURES.clear()
+        hit = _STRUCTURES[id(model)] = (model, (tuple(int(v) for v in model.body_simple),
+                                                tuple(int(v) for v in model.dof_simplenum)))
+    return hit[1]
+
+
+#: {id(model): (model, its _structure)}: the model kept so that its id cannot be reused while cached.
+_STRUCTURES: dict = {}
 
 
 def _by_structure(models, idx):
