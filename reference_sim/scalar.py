@@ -375,3 +375,12 @@ class ScalarStepper:
         # Newton with a Jacobian needs linear algebra: delegate to the batched (NumPy) definition.
         out = get_step("implicit_euler")(self.problem, np.stack(y, axis=-1).astype(float), self.h)
         return list(out) if self.backend == "float" else [np.ascontiguousarray(c) for c in out.T]
+
+
+#: The class and its step methods as shipped, recorded when this module is first imported (before a test
+#: can patch one): reference_sim.compiled, their compiled transcription, is used only for an instance of this
+#: class while every one of these methods is still in place.
+SHIPPED_CLASS = ScalarStepper
+SHIPPED_METHODS = {name: ScalarStepper.__dict__[name] for name in (
+    "_rot", "_force_torque", "_ang_acc", "_exp", "_course", "rhs", "_finish", "_explicit_euler", "_midpoint",
+    "_rk4", "_leapfrog", "_implicit_euler")}

@@ -5,6 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from reference_sim import compiled
 from reference_sim.integrators import ImplicitSolveError, get_step
 from reference_sim.state import Problem
 
@@ -90,14 +91,24 @@ def _simulate_single(problem: Problem, variant: str, dt_s: float, n_steps: int, 
     result is the same as testing every step."""
     from reference_sim.scalar import ScalarStepper
 
-    step = ScalarStepper(problem, variant, dt_s).step
+    stepper = ScalarStepper(problem, variant, dt_s)
+    # a step that blows up inside NumPy (implicit Euler's Newton solve) is a divergence, reported as such,
+    # not a stream of overflow warnings — as in the batched path
+    with np.errstate(all="ignore"):
+        if compiled.usable(stepper):
+            return _simulate_compiled(stepper, dt_s, n_steps, y)
+        return _python_loop(stepper.step, dt_s, n_steps, y)
+
+
+def _python_loop(step, dt_s: float, n_steps: int, y) -> Run:
+    """The Python float path's loop (:func:`_simulate_single`)."""
     rows = [y.tolist()]
     cur = rows[0]
     checked = 1  # rows[:checked] are known good
     for n in range(1, n_steps + 1):
         try:
             cur = step(cur)
-        except (ImplicitSolveError, np.linalg.LinAlgError, OverflowError, ZeroDivisionError, ValueError) as exc:
+        except _STEP_ERRORS as exc:
             return _first_bad(rows, checked, dt_s) or diverged(np.array(rows), dt_s, f": {type(exc).__name__}: {exc}")
         rows.append(cur)
         if n % CHECK_EVERY == 0 or n == n_steps:
@@ -106,6 +117,32 @@ def _simulate_single(problem: Problem, variant: str, dt_s: float, n_steps: int, 
                 return bad
             checked = len(rows)
     return Run(dt_s * np.arange(n_steps + 1), np.array(rows))
+
+
+_STEP_ERRORS = (ImplicitSolveError, np.linalg.LinAlgError, OverflowError, ZeroDivisionError, ValueError)
+
+
+def _simulate_compiled(stepper, dt_s: float, n_steps: int, y) -> Run:
+    """:func:`_simulate_single` with the steps compiled (reference_sim.compiled): the compiled loop runs
+    until a step is not routine; that one step is taken in Python, exactly as the Python path takes it
+    (it raises, gives a bad state, or solves a stalled implicit step), and the loop resumes after it.
+    States, divergence time and message are those of the Python path."""
+    rows = np.empty((n_steps + 1, 13))
+    rows[0] = y
+    n = 0
+    while True:
+        n = compiled.run_until_exceptional(stepper, rows, n, n_steps, BLOWUP_LIMIT)
+        if n == n_steps:
+            return Run(dt_s * np.arange(n_steps + 1), rows)
+        try:
+            nxt = stepper.step(rows[n].tolist())
+        except _STEP_ERRORS as exc:
+            return diverged(rows[:n + 1].copy(), dt_s, f": {type(exc).__name__}: {exc}")
+        nxt = np.array(nxt, dtype=float)
+        if bad_rows(nxt):
+            return diverged(rows[:n + 1].copy(), dt_s, f" ({blowup_words(nxt)})")
+        rows[n + 1] = nxt
+        n += 1
 
 
 def _first_bad(rows, start, dt_s):

@@ -52,8 +52,11 @@ def json_default(o):
     raise TypeError(f"not JSON serialisable: {type(o).__name__}")
 
 
-def save_npz_atomic(path: Path, arrays: dict) -> None:
-    """Write ``arrays`` as a compressed npz at ``path`` atomically (its folder is created)."""
+def save_npz_atomic(path: Path, arrays: dict, *, compress: bool = True) -> None:
+    """Write ``arrays`` as an npz at ``path`` atomically (its folder is created). ``compress=False`` for
+    files only rbcheck reads back (cache entries, a sweep's working files): states in float64 compress to
+    ~70 % of their size at ~20× the time of writing them (measured: 12 ms against 0.7 ms for 2000 × 13)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write(path, lambda tmp: np.savez_compressed(tmp, **arrays), suffix=".npz")
+    save = np.savez_compressed if compress else np.savez
+    atomic_write(path, lambda tmp: save(tmp, **arrays), suffix=".npz")

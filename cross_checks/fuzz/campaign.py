@@ -92,9 +92,14 @@ def _cache_path(cache_root, key):
 def _compute_batch(seed, batch, variants) -> dict:
     n0 = N0_CYCLE[batch % len(N0_CYCLE)]
     draws = [generate.draw(seed, batch * BATCH + k) for k in range(BATCH)]
+    from threadpoolctl import threadpool_limits
+
     from cross_checks.analysis.expectations import memoized
     try:
-        with memoized():   # thousands of expectations of the batch's 64 scenarios, each decided once
+        # one BLAS thread: the large stacked DOP853 solves give the same last bits whatever the machine's core
+        # count (a batch is a function of its seed alone, as the cache key assumes), and two workers on two
+        # cores no longer fight over four BLAS threads (docs/fuzz.md §4)
+        with threadpool_limits(limits=1, user_api="blas"), memoized():
             cases = pipeline.prepare(draws, n0)
             contexts, members, y_end = pipeline.measure(cases)
             outcomes, seconds = pipeline.evaluate(cases, contexts, members, y_end, variants)
@@ -146,6 +151,8 @@ def _pool(jobs, executor):
         return None, False
     import multiprocessing as mp
     from cross_checks.sweep.lifecycle import worker_init
+    from reference_sim import compiled
+    compiled.warm()   # the compiled reference steps, loaded once here: the forked workers inherit them
     ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else None
     return ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=worker_init,
                                initargs=(os.getpid(),)), True

@@ -25,6 +25,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from reference_sim.integrators import IMPLICIT_TOL, ImplicitSolveError, get_step
+from reference_sim.simulate import BLOWUP_LIMIT
 from reference_sim.scalar import ScalarStepper
 
 __all__ = ["CaseKernel", "columns", "rows", "clear_cache"]
@@ -234,3 +235,43 @@ class CaseKernel(ScalarStepper):
             for c, v in zip(out, yi):
                 c[i] = v
         return out
+
+
+def runs_compiled(variant: str, problems, h_s, y0, n_steps):
+    """Each member's free run of ``variant``, stepped compiled (reference_sim.compiled) member by member:
+    ``[(y (n_steps[i] + 1, 13), k)]`` with ``k`` the step at which the member diverged (its states from ``k``
+    on are not meaningful) or None; or None when the compiled path is not usable (a planted bug in a step
+    method, or no numba) — then the caller steps the NumPy-wide kernel.
+
+    Each member is bit-identical to ``ScalarStepper(problems[i], variant, h_s[i])``'s own steps (the kernel's
+    leapfrog, which iterates until every member has converged, is not; see the module doc). A step the compiled
+    loop does not take (a blow-up, a solve it does not finish) is taken by that float stepper: it raises or
+    gives a bad state (the member diverged at that step) or solves it, and the loop resumes."""
+    from reference_sim import compiled
+    steppers = [_stepper(p, float(h)) for p, h in zip(problems, h_s)]
+    if not steppers or not compiled.usable(steppers[0], variant):
+        return None
+    out = []
+    for p, h, st, y, n in zip(problems, h_s, steppers, y0, n_steps):
+        rows = np.empty((int(n) + 1, 13))
+        rows[0] = y
+        out.append((rows, _run_member(compiled, variant, p, float(h), st, rows, int(n))))
+    return out
+
+
+def _run_member(compiled, variant, problem, h, stepper, rows, n):
+    """Fill ``rows`` (n + 1, 13) from ``rows[0]``; the step at which the run diverged, or None."""
+    k = 0
+    with np.errstate(all="ignore"):
+        while True:
+            k = compiled.run_until_exceptional(stepper, rows, k, n, BLOWUP_LIMIT, variant)
+            if k == n:
+                return None
+            try:
+                nxt = np.array(ScalarStepper(problem, variant, h).step(rows[k].tolist()), dtype=float)
+            except (ImplicitSolveError, np.linalg.LinAlgError, ArithmeticError, ValueError):
+                return k + 1
+            if not np.all(np.isfinite(nxt)) or np.max(np.abs(nxt)) > BLOWUP_LIMIT:
+                return k + 1
+            rows[k + 1] = nxt
+            k += 1

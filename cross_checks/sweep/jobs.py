@@ -243,7 +243,7 @@ def _reference_solution_file(scenario, out_path, cache_root, use_cache, time_lim
     hit = _cached_reference(cache_root, cpath, key, t_union) if cpath is not None and use_cache else None
     if hit is not None:
         arrays, measured = hit
-        save_npz_atomic(Path(out_path), {k: arrays[k] for k in ("t_s", "y", "label")})
+        save_npz_atomic(Path(out_path), {k: arrays[k] for k in ("t_s", "y", "label")}, compress=False)
         return str(arrays["label"]), "", measured
     try:
         with time_limit(time_limit_s, "the reference solution"):
@@ -253,7 +253,7 @@ def _reference_solution_file(scenario, out_path, cache_root, use_cache, time_lim
         return "", f"reference solution failed: {exc} (cross_checks/core/tolerances.py)", None
     except Exception as exc:  # noqa: BLE001 - reported per scenario, the sweep goes on
         return "", f"reference solution failed: {type(exc).__name__}: {exc}", None
-    save_npz_atomic(Path(out_path), {"t_s": t_union, "y": y, "label": np.array(label)})
+    save_npz_atomic(Path(out_path), {"t_s": t_union, "y": y, "label": np.array(label)}, compress=False)
     if cpath is not None:
         cache.store(cache_root, cpath, key, {"t_s": t_union, "y": y, "label": np.array(label),
                                              "measured": np.array(json.dumps(measured, default=json_default))})

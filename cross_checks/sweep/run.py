@@ -110,6 +110,9 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
     cache_root = str(cache_dir())
     for engine in dict.fromkeys(["reference", *(v.split(":", 1)[0] for v in variants)]):
         code_fingerprint(engine)  # once, here: forked workers inherit it
+    if any(v.startswith("reference:") for v in variants):
+        from reference_sim import compiled
+        compiled.warm()   # the compiled reference steps, loaded once here: forked workers inherit them
     staging = staging_dir(out)
     work = staging / "_work"
     work.mkdir()

@@ -57,9 +57,12 @@ def test_a_nan_in_any_component_of_the_fast_path_is_a_divergence_at_its_step(mon
 
 
 def test_block_divergence_test_cuts_the_run_where_a_per_step_test_would(monkeypatch):
-    # The fast path tests states in blocks of CHECK_EVERY: its run must equal the one that tests every
-    # step (CHECK_EVERY = 1), for blow-ups landing at different places inside a block.
+    # The Python float path tests states in blocks of CHECK_EVERY: its run must equal the one that tests
+    # every step (CHECK_EVERY = 1), for blow-ups landing at different places inside a block. (The compiled
+    # path tests every step; tests/reference_sim/test_compiled.py compares it with this one.)
     import reference_sim.simulate as S
+    from reference_sim import compiled
+    monkeypatch.setattr(compiled, "usable", lambda stepper: False)
     cases = [([0.1, 20.0, 0.1], "expmap_gyro"), ([0.1, 25.0, 0.1], "expmap_gyro"), ([0.1, 25.0, 0.1], "course_gyro"),
              ([0.1, 40.0, 0.1], "course_gyro")]
     blocked = [simulate(_problem(w), v, 0.01, 3000) for w, v in cases]

@@ -124,3 +124,21 @@ def test_a_counterexample_file_is_exact_toml(tmp_path):
     path.write_text(to_toml(spec, header="a header\nsecond line"))
     sc = load_scenario(str(path))
     assert sc.dt_s == 0.0123456789 and sc.name == spec["name"]
+
+
+@pytest.mark.slow
+def test_a_batch_is_the_same_to_the_last_bit_whatever_the_blas_thread_count(tmp_path):
+    # A batch runs with one BLAS thread (campaign._compute_batch), so the process's own OpenBLAS setting, which
+    # moved the last bits of the stacked DOP853 solves before, changes nothing: the cache key may ignore it.
+    import os
+    import subprocess
+    import sys
+    code = ("import json, sys; from cross_checks.fuzz.campaign import _compute_batch; "
+            "r = _compute_batch(2026, 2, ['reference:rk4', 'reference:course', 'mujoco:euler']); "
+            "r.pop('seconds'); json.dump(r, sys.stdout, sort_keys=True)")
+    outs = []
+    for threads in ("1", "2"):
+        env = {**os.environ, "OPENBLAS_NUM_THREADS": threads, "MPLBACKEND": "Agg"}
+        outs.append(subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                                   check=True, cwd=Path(__file__).resolve().parents[3]).stdout)
+    assert outs[0] == outs[1] and len(outs[0]) > 1000

@@ -71,3 +71,34 @@ def test_a_bug_planted_in_the_stepper_init_reaches_kernels_of_problems_stacked_b
     assert _steps_like_float_steppers(problems, hs, "course_gyro")
     bugged = rows(CaseKernel.stack(problems, "course_gyro", hs).step(columns([p.initial_packed() for p in problems])))
     assert not np.array_equal(bugged, clean)
+
+
+@pytest.mark.parametrize("variant", ["course", "expmap_gyro", "explicit_euler", "midpoint", "rk4", "leapfrog",
+                                     "implicit_euler"])
+def test_compiled_member_runs_are_each_members_own_float_stepper_run(monkeypatch, variant):
+    # a free run per member, stepped compiled: bit for bit what the member's own float stepper computes (the
+    # Python float path of reference_sim.simulate), a blown-up member included (cut where that path cuts it)
+    from reference_sim import compiled
+    from reference_sim import simulate as S
+    from cross_checks.fuzz.kernel import runs_compiled
+    problems, hs = _problems(6)
+    n = [40, 80, 120, 40, 80, 120]
+    y0 = [p.initial_packed() for p in problems]
+    y0[2] = y0[2].copy()
+    y0[2][10:13] = [3e3, 2e4, 3e3]   # a spin that most schemes blow up at these steps
+    each = runs_compiled(variant, problems, hs, y0, n)
+    assert each is not None and (variant == "course" or each[2][1] is not None)   # (course: no gyroscopic term)
+    monkeypatch.setattr(compiled, "usable", lambda *a: False)
+    for p, h, y, k_n, (y_fast, k) in zip(problems, hs, y0, n, each):
+        slow = S.simulate(p, variant, float(h), k_n, y0=y)
+        if slow.diverged_at_s is None:
+            assert k is None and np.array_equal(y_fast, slow.y)
+        else:
+            assert k == len(slow.y) and np.array_equal(y_fast[:k], slow.y)
+
+
+def test_a_planted_bug_in_a_step_method_sends_the_members_to_the_numpy_kernel(monkeypatch):
+    from cross_checks.fuzz.kernel import runs_compiled
+    problems, hs = _problems(2)
+    monkeypatch.setattr(ScalarStepper, "_midpoint", lambda self, y: y)
+    assert runs_compiled("midpoint", problems, hs, [p.initial_packed() for p in problems], [5, 5]) is None
