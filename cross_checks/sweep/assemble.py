@@ -14,7 +14,8 @@ import numpy as np
 
 from reference_sim.state import Q
 from cross_checks.analysis import metrics as M
-from cross_checks.analysis.convergence import compare_with_expectation, fit_convergence, measured_pre_asymptotic
+from cross_checks.analysis.convergence import (compare_with_expectation, fit_convergence, fmt_order,
+                                               measured_pre_asymptotic, order_within_floors)
 from cross_checks.analysis.expectations import EQUIVALENT_PAIRS, expectation, pair_is_same_arithmetic
 from cross_checks.core import tolerances as tol
 from cross_checks.core.files import atomic_write_text, json_default
@@ -87,7 +88,8 @@ def _judged(fit, exp):
     """``(verdict, matches_expectation, assessment)`` of a fit against its expectation. Where the
     expectation makes no claim on this ladder (pre-asymptotic), a fitted converges / does_not_converge
     becomes ``pre_asymptotic``; so does a converging scheme whose low order the ladder itself shows to be
-    pre-asymptotic (convergence.measured_pre_asymptotic)."""
+    pre-asymptotic (convergence.measured_pre_asymptotic). A too-low order that the errors, each allowed its
+    round-off floor, do not refute (convergence.order_within_floors) makes no claim either."""
     verdict = fit.verdict
     matches, phrase = compare_with_expectation(fit.verdict, fit.order, exp, fit.order_is_lower_bound)
     if exp.verdict == "pre_asymptotic" and verdict in ("converges", "does_not_converge"):
@@ -96,6 +98,12 @@ def _judged(fit, exp):
         why = measured_pre_asymptotic(fit, exp.order)
         if why:
             verdict, matches, phrase = "pre_asymptotic", None, why
+        elif fit.verdict == "converges" and exp.order is not None:
+            best = order_within_floors(fit)
+            if best is not None and best >= exp.order - tol.SWEEP_ORDER_TOL:
+                matches = None
+                phrase = (f"order {fmt_order(fit.order)}, but the errors allow order {fmt_order(best)} within their "
+                          f"round-off floors (expected {exp.order:g}): no claim on this ladder")
     return verdict, matches, phrase
 
 

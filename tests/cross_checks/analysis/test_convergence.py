@@ -4,7 +4,8 @@ import math
 
 import pytest
 
-from cross_checks.analysis.convergence import compare_with_expectation, fit_convergence, measured_pre_asymptotic, pairwise_orders
+from cross_checks.analysis.convergence import (compare_with_expectation, fit_convergence, measured_pre_asymptotic,
+                                               order_within_floors, pairwise_orders)
 from cross_checks.core import tolerances as tol
 from cross_checks.analysis.expectations import Expectation, expectation
 from cross_checks.scenario import load_scenario
@@ -176,3 +177,33 @@ def test_a_flat_fit_s_tiny_negative_order_is_written_as_zero():
     fit = fit_convergence([0.06, 0.03, 0.015], [9.16e-4, 9.16e-4 * (1 + 1e-6), 9.16e-4 * (1 + 2e-6)], [2.5e-13] * 3)
     assert fit.order < 0 and "(fitted order 0.00)" in compare_with_expectation(
         fit.verdict, fit.order, Expectation("converges", 1.0, "an order-1 scheme"))[1]
+
+
+# Drake runge_kutta3 in the fuzz (seed 3, case 190): the finest error within 10x a generous lever-arm floor
+DRAKE_DT = [0.024343227673126657, 0.012171613836563329, 0.006085806918281664]
+DRAKE_E = [8.619677552088268e-11, 1.3597802417763613e-11, 1.8910664527449406e-12]
+DRAKE_FL = [1.762448012359544e-13, 2.307381268013016e-13, 3.078033268746281e-13]
+
+
+def test_order_within_floors_raises_the_coarse_errors_and_lowers_the_fine_ones_by_their_floors():
+    fit = fit_convergence(DRAKE_DT, DRAKE_E, DRAKE_FL)
+    assert fit.fitted == [True, True, False] and fit.order == pytest.approx(2.664, abs=1e-3)
+    # three halvings: the middle point sits at the mean log Δt, so the slope is that of the two ends
+    by_hand = math.log2((DRAKE_E[0] + DRAKE_FL[0]) / (DRAKE_E[2] - DRAKE_FL[2])) / 2.0
+    assert order_within_floors(fit) == pytest.approx(by_hand, rel=1e-12) and by_hand == pytest.approx(2.885, abs=1e-3)
+
+
+def test_order_within_floors_leaves_a_resolved_wrong_order_wrong():
+    # order 2 where 3 is claimed, errors 100x and more above their floors: no room for order 3
+    dts = [0.02, 0.01, 0.005]
+    e = [4e-9 * (h / 0.02) ** 2 for h in dts]
+    fit = fit_convergence(dts, e, [x / 100.0 for x in e])
+    assert fit.order == pytest.approx(2.0, abs=1e-9)
+    assert order_within_floors(fit) < 3.0 - tol.SWEEP_ORDER_TOL
+    assert order_within_floors(fit) == pytest.approx(math.log2(1.01 / 0.99) / 2.0 + 2.0, rel=1e-12)
+
+
+def test_order_within_floors_ignores_points_at_or_below_their_floor():
+    fit = fit_convergence([0.02, 0.01, 0.005], [1e-9, 2.5e-10, 1e-13], [1e-14, 1e-14, 1e-13])
+    assert fit.fitted == [True, True, False]
+    assert order_within_floors(fit) == pytest.approx(math.log2((1e-9 + 1e-14) / (2.5e-10 - 1e-14)), rel=1e-12)

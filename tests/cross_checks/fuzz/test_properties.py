@@ -51,3 +51,21 @@ def test_the_lever_arm_floor_covers_mujocos_measured_round_off():
     lv = lever_roundoff(sc, y_ref)
     assert w_err > 10 * 2.0 ** -52           # above any ε |ω| (|ω| = 0 here): it is the lever arms
     assert w_err <= lv["acc_rad_s2"] * sc.duration_s
+
+
+def test_a_too_low_order_that_the_measured_round_off_leaves_room_for_is_no_claim():
+    # the fuzz (seed 3, case 190) called drake:runge_kutta3 order 2.66: its lever-arm floor dropped the finest
+    # rung, leaving the coarsest pair, bent by the next term; within the floors the order can be 2.89
+    from cross_checks.analysis.expectations import Expectation
+    from cross_checks.fuzz.properties import _fit_record
+    exp = Expectation("converges", 3.0, "an order-3 scheme")
+    dts = [0.024343227673126657, 0.012171613836563329, 0.006085806918281664]
+    e = [8.619677552088268e-11, 1.3597802417763613e-11, 1.8910664527449406e-12]
+    fl = [1.762448012359544e-13, 2.307381268013016e-13, 3.078033268746281e-13]
+    assert _fit_record(None, "drake:runge_kutta3", "orientation", dts, e, fl, None, exp,
+                       "free_running_order") == (None, False)
+    # the same ladder with an order-2 scheme's finest error (resolved 11x above its floor): still a violation
+    e_wrong = e[:2] + [e[1] / 4.0]
+    rec, claimed = _fit_record(None, "drake:runge_kutta3", "orientation", dts, e_wrong, fl, None, exp,
+                               "free_running_order")
+    assert claimed and rec is not None and rec["order"] < 2.7
