@@ -38,8 +38,10 @@ def usable(stepper, variant: str | None = None) -> bool:
     whose step methods are the shipped ones, and a variant the compiled loop knows (``variant``, default the
     stepper's own: a stepper's parameters do not depend on its scheme, so one stepper serves every scheme)."""
     from reference_sim.scalar import SHIPPED_CLASS, SHIPPED_METHODS
+    if type(stepper) is not SHIPPED_CLASS:
+        return False
     variant = stepper.variant if variant is None else variant
-    if type(stepper) is not SHIPPED_CLASS or stepper.backend != "float" or variant not in VARIANT_CODES:
+    if stepper.backend != "float" or variant not in VARIANT_CODES:
         return False
     d = SHIPPED_CLASS.__dict__
     if any(d.get(name) is not fn for name, fn in SHIPPED_METHODS.items()):
@@ -82,17 +84,21 @@ def parameters(stepper) -> tuple:
 
 
 def run_until_exceptional(stepper, rows: np.ndarray, start: int, n_steps: int, limit: float,
-                          variant: str | None = None) -> int:
+                          variant: str | None = None, params: tuple | None = None) -> int:
     """Step ``rows[start]`` compiled, writing ``rows[start + 1]``, … (``rows`` (n_steps + 1, 13), C order),
     until ``n_steps`` is reached or the next step is not routine (module doc; a state with a component beyond
-    ``limit`` is not), with the scheme ``variant`` (default: the stepper's). Returns the index of the last
-    state written: ``n_steps``, or k < n_steps when step k + 1 must be taken in Python."""
-    if rows.dtype != np.float64 or not rows.flags.c_contiguous or rows.shape[1] != 13:
+    ``limit`` is not), with the scheme ``variant`` (default: the stepper's) and the stepper's
+    :func:`parameters` (``params``: computed once by a caller that calls again). ``rows`` may be longer than
+    ``n_steps + 1`` (a run taken in chunks). Returns the index of the last state written: ``n_steps``, or
+    k < n_steps when step k + 1 must be taken in Python."""
+    if rows.dtype != np.float64 or not rows.flags.c_contiguous or rows.ndim != 2 or rows.shape[1] != 13:
         raise ValueError("rows must be a C-contiguous float64 (n, 13) array")
+    if not 0 <= start <= n_steps < rows.shape[0]:   # the compiled loop does not check its indices
+        raise ValueError(f"steps {start}..{n_steps} do not fit rows of {rows.shape[0]} states")
     from reference_sim.scalar import IMPLICIT_TOL, _MAX_ITER
     code = VARIANT_CODES[stepper.variant if variant is None else variant]
     return int(_kernel()(code, rows, int(start), int(n_steps), float(limit), float(IMPLICIT_TOL), int(_MAX_ITER),
-                         *parameters(stepper)))
+                         *(parameters(stepper) if params is None else params)))
 
 
 

@@ -119,6 +119,11 @@ def _python_loop(step, dt_s: float, n_steps: int, y) -> Run:
     return Run(dt_s * np.arange(n_steps + 1), np.array(rows))
 
 
+#: Steps of one call into the compiled loop (0.05–0.3 s): between calls Python runs, so a run's time limit
+#: (a SIGALRM handler, cross_checks.sweep.lifecycle) stops it within that long — inside compiled code a
+#: signal handler waits until the call returns.
+COMPILED_CHUNK = 65536
+
 _STEP_ERRORS = (ImplicitSolveError, np.linalg.LinAlgError, OverflowError, ZeroDivisionError, ValueError)
 
 
@@ -130,10 +135,14 @@ def _simulate_compiled(stepper, dt_s: float, n_steps: int, y) -> Run:
     rows = np.empty((n_steps + 1, 13))
     rows[0] = y
     n = 0
+    params = compiled.parameters(stepper)
     while True:
-        n = compiled.run_until_exceptional(stepper, rows, n, n_steps, BLOWUP_LIMIT)
+        stop = min(n + COMPILED_CHUNK, n_steps)
+        n = compiled.run_until_exceptional(stepper, rows, n, stop, BLOWUP_LIMIT, params=params)
         if n == n_steps:
             return Run(dt_s * np.arange(n_steps + 1), rows)
+        if n == stop:
+            continue   # back in Python between chunks: a time limit (SIGALRM) can stop the run here
         try:
             nxt = stepper.step(rows[n].tolist())
         except _STEP_ERRORS as exc:

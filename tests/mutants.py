@@ -243,12 +243,12 @@ def _pybullet_decay_left_out(mp):
 def _pybullet_torque_in_link_frame(mp):
     from cross_checks.engines import pybullet_engine as pe
 
-    def apply(self, f_W, tau_W, x_W):
+    def apply(self, f_W, tau_W, x_W):   # 3 floats each, as _Body.apply
         p = pe.p
-        if np.any(f_W != 0.0):
-            p.applyExternalForce(self.b, -1, f_W.tolist(), list(x_W), p.WORLD_FRAME, physicsClientId=self.c)
-        if np.any(tau_W != 0.0):   # BUG: a world torque given in the link (body) frame
-            p.applyExternalTorque(self.b, -1, tau_W.tolist(), p.LINK_FRAME, physicsClientId=self.c)
+        if any(v != 0.0 for v in f_W):
+            p.applyExternalForce(self.b, -1, list(f_W), list(x_W), p.WORLD_FRAME, physicsClientId=self.c)
+        if any(v != 0.0 for v in tau_W):   # BUG: a world torque given in the link (body) frame
+            p.applyExternalTorque(self.b, -1, list(tau_W), p.LINK_FRAME, physicsClientId=self.c)
     mp.setattr(pe._Body, "apply", apply)
 
 

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import threading
 from contextlib import contextmanager
+from pathlib import Path
 
 import numpy as np
 
@@ -35,8 +36,8 @@ from reference_sim.quaternion import quat_from_matrix, rotate, quat_conj
 from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
 
 from cross_checks.engines.base import (EngineAdapter, EngineError, Variant, apply_decay_prestep, decay_factors,
-                                       harness_force_torque, harness_force_torque_floats, optional_import, require,
-                                       stage_force_torque_floats)
+                                       harness_force_torque, optional_import, require, stage_force_torque_floats)
+from cross_checks.engines.step_floats import harness_fn
 
 mujoco, _IMPORT_ERROR = optional_import("mujoco")
 
@@ -152,8 +153,13 @@ def _packed1(qpos, qvel) -> list:
     """One state: qpos (7,), qvel (6,) -> packed, 13 floats (a list) with ω in WORLD axes (scalar code:
     this runs inside the per-step loop and the RK4 stage callback, where NumPy's small-array overhead
     dominates)."""
-    x0, x1, x2, s, a, b, c = qpos.tolist()
-    v0, v1, v2, p0, p1, p2 = qvel.tolist()
+    return _packed_lists(qpos.tolist(), qvel.tolist())
+
+
+def _packed_lists(qpos, qvel) -> list:
+    """:func:`_packed1` of qpos and qvel given as lists of 7 and 6 floats."""
+    x0, x1, x2, s, a, b, c = qpos
+    v0, v1, v2, p0, p1, p2 = qvel
     # ω_W = R(q) ω_B = ω + s t + u × t with t = 2 u × ω, u = (a, b, c)
     t0, t1, t2 = 2.0 * (b * p2 - c * p1), 2.0 * (c * p0 - a * p2), 2.0 * (a * p1 - b * p0)
     return [x0, x1, x2, v0, v1, v2, s, a, b, c,
@@ -201,13 +207,19 @@ class _Session:
     def _on_warning(self, msg):
         self.warnings.append((float(self.data.time), str(msg)))
 
-    def _on_control(self, m, d):
-        if d is not self.data or self.callback_error is not None:
-            return
-        try:
-            self.control(m, d)
-        except BaseException as exc:  # noqa: BLE001 - re-raised after the step
-            self.callback_error = exc
+    def _control_hook(self):
+        """The function installed as MuJoCo's control callback: ``control`` for this run's MjData only,
+        skipped after a failure (a closure: it runs at every RK4 stage)."""
+        data, control = self.data, self.control
+
+        def on_control(m, d):
+            if d is not data or self.callback_error is not None:
+                return
+            try:
+                control(m, d)
+            except BaseException as exc:  # noqa: BLE001 - re-raised after the step
+                self.callback_error = exc
+        return on_control
 
     def __enter__(self):
         _LOCK.acquire()
@@ -216,7 +228,7 @@ class _Session:
             self._prev_warn = mujoco.get_mju_user_warning()
             mujoco.set_mju_user_warning(self._on_warning)
             if self.control is not None:
-                mujoco.set_mjcb_control(self._on_control)
+                mujoco.set_mjcb_control(self._control_hook())
         except BaseException:
             _LOCK.release()
             raise
@@ -250,20 +262,16 @@ def _apply(xfrc, f, tau, weight):
     xfrc[3:6] = tau
 
 
-def _apply_floats(xfrc, ft, weight):
-    """:func:`_apply` for the 6 floats ``ft`` = (fx, fy, fz, tx, ty, tz) and ``weight`` 3 floats: the same
-    numbers written without building arrays (it runs once per step or per RK4 stage)."""
-    fx, fy, fz, tx, ty, tz = ft
-    xfrc[0:3] = (fx - weight[0], fy - weight[1], fz - weight[2])
-    xfrc[3:6] = (tx, ty, tz)
+def _stage_force_writer(scenario, d, xfrc, weight):
+    """Control callback body for MjData ``d`` (the only one _Session passes it): forces from the (stage)
+    state in its qpos/qvel into xfrc_applied, as :func:`_apply` writes them, in plain floats (it runs at
+    every RK4 stage)."""
+    w0, w1, w2 = (float(c) for c in weight)
+    qpos, qvel = d.qpos, d.qvel   # views of d's arrays, bound once
 
-
-def _stage_force_writer(scenario, xfrc, weight):
-    """Control callback body: forces from the (stage) state in qpos/qvel into xfrc_applied."""
-    w = [float(c) for c in weight]
-
-    def control(_m, d):
-        _apply_floats(xfrc, stage_force_torque_floats(scenario, _packed1(d.qpos, d.qvel)), w)
+    def control(_m, _d):
+        fx, fy, fz, tx, ty, tz = stage_force_torque_floats(scenario, _packed1(qpos, qvel))
+        xfrc[:] = (fx - w0, fy - w1, fz - w2, tx, ty, tz)
     return control
 
 
@@ -303,10 +311,52 @@ def models_from(source):
         _MODEL_SOURCE = outer
 
 
+#: MjData reused by the runs on lent models (:func:`models_from`): one per thread and model layout, reset
+#: with mj_resetData before each run (the numbers of a fresh MjData, tested). A new MjData zeroes its whole
+#: arena (13.6 MB for this one-body model, ~0.4 ms: more than a short fuzz run); the layout (buffer and
+#: arena sizes, "simple" body and dofs: cross_checks/fuzz/drivers.py::_structure) is what an MjData of
+#: another model must share to serve it.
+_LENT_DATA: dict = {}
+
+
+def _data_for(m):
+    """The MjData of lent model ``m``: the reused one of its layout, reset for ``m`` (new the first time)."""
+    key = (threading.get_ident(), int(m.nbuffer), int(m.narena), tuple(int(v) for v in m.body_simple),
+           tuple(int(v) for v in m.dof_simplenum))
+    d = _LENT_DATA.get(key)
+    if d is None:
+        d = _LENT_DATA[key] = mujoco.MjData(m)
+    else:
+        mujoco.mj_resetData(m, d)
+    return d
+
+
+#: Each thread's last compiled model and its MjData: ``(scenario, variant, dt_s, build_model, model, data)``.
+#: A sweep's job runs the same scenario, variant and step twice (its free run, then its one-step batch):
+#: the second takes the model compiled for the first (~1 ms, and a new MjData ~0.4 ms), its MjData reset.
+_LAST = threading.local()
+
+
+def _compiled(scenario, variant, dt_s):
+    """``build_model(scenario, variant, dt_s)`` and a fresh (or reset) MjData of it."""
+    last = getattr(_LAST, "run", None)
+    if (last is not None and last[0] is scenario and last[1] == variant and last[2] == float(dt_s)
+            and last[3] is build_model):
+        mujoco.mj_resetData(last[4], last[5])
+        return last[4], last[5]
+    m = build_model(scenario, variant, dt_s)
+    d = mujoco.MjData(m)
+    _LAST.run = (scenario, variant, float(dt_s), build_model, m, d)
+    return m, d
+
+
 def _model_and_data(scenario, variant, dt_s):
     """``(MjModel, MjData, its xfrc_applied row, weight m g)`` of one run of the scenario's body."""
-    m = (build_model if _MODEL_SOURCE is None else _MODEL_SOURCE)(scenario, variant, dt_s)
-    d = mujoco.MjData(m)
+    if _MODEL_SOURCE is None:
+        m, d = _compiled(scenario, variant, dt_s)
+    else:
+        m = _MODEL_SOURCE(scenario, variant, dt_s)
+        d = _data_for(m)
     weight = scenario.problem.body.mass_kg * np.asarray(scenario.problem.forces.gravity_W, dtype=float)
     return m, d, d.xfrc_applied[_BODY], weight
 
@@ -326,39 +376,49 @@ def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
         _apply(xfrc, *harness_force_torque(scenario, y0, dt_s), weight)   # constant (decay scaling included)
     if USE_ROLLOUT and not (per_step or per_stage or decay):
         return _simulate_rollout(m, d, dt_s, n_steps)
-    control = _stage_force_writer(scenario, xfrc, weight) if per_stage else None
+    control = _stage_force_writer(scenario, d, xfrc, weight) if per_stage else None
     return _simulate_loop(scenario, m, d, dt_s, n_steps, control, per_step, decay, xfrc, weight)
 
 
 def _simulate_loop(scenario, m, d, dt_s, n_steps, control, per_step, decay, xfrc, weight) -> Run:
     """The run as a Python loop of mj_step: forces written before each step (``per_step``), the pre-step
-    decay applied to qvel (``decay``), the RK4 stage callback (``control``); divergence checked per chunk."""
-    gv, gw = decay_factors(scenario, dt_s)
+    decay applied to qvel (``decay``), the RK4 stage callback (``control``); divergence checked per chunk.
+    Per step in plain floats (one read of qpos/qvel, one write of xfrc_applied and of qvel): the numbers of
+    :func:`_apply` and ``base.harness_force_torque``, bit for bit (tested)."""
+    gv, gw = (float(g) for g in decay_factors(scenario, dt_s))
+    harness = harness_fn(scenario, dt_s) if per_step else None
+    w0, w1, w2 = (float(c) for c in weight)
+    qpos, qvel = d.qpos, d.qvel   # views of d's arrays, bound once
     qpos_out = np.empty((n_steps + 1, 7))
     qvel_out = np.empty((n_steps + 1, 6))
-    qpos_out[0], qvel_out[0] = d.qpos, d.qvel
+    qpos_out[0], qvel_out[0] = qpos, qvel
+    y = np.empty((n_steps + 1, 13))
+    with np.errstate(all="ignore"):
+        y[0:1] = _to_packed(qpos_out[0:1], qvel_out[0:1])
     step = mujoco.mj_step
-    w = [float(c) for c in weight]
+    reads = per_step or decay
     with _Session(d, control) as session, np.errstate(all="ignore"):
         for start in range(1, n_steps + 1, _CHUNK):
             stop = min(start + _CHUNK, n_steps + 1)
             for n in range(start, stop):
-                if per_step:
-                    _apply_floats(xfrc, harness_force_torque_floats(scenario, _packed1(qpos_out[n - 1],
-                                                                                       qvel_out[n - 1]), dt_s), w)
-                if decay:
-                    d.qvel[0:3] *= gv
-                    d.qvel[3:6] *= gw
+                if reads:
+                    qp, qv = qpos.tolist(), qvel.tolist()
+                    if per_step:
+                        fx, fy, fz, tx, ty, tz = harness(_packed_lists(qp, qv))
+                        xfrc[:] = (fx - w0, fy - w1, fz - w2, tx, ty, tz)
+                    if decay:
+                        qvel[:] = (qv[0] * gv, qv[1] * gv, qv[2] * gv, qv[3] * gw, qv[4] * gw, qv[5] * gw)
                 step(m, d)
-                session.raise_callback_error()
-                qpos_out[n] = d.qpos
-                qvel_out[n] = d.qvel
-            bad = _divergence(_to_packed(qpos_out[start:stop], qvel_out[start:stop]), start, (start, stop - 1),
-                              session, dt_s)
+                if session.callback_error is not None:
+                    session.raise_callback_error()
+                qpos_out[n] = qpos
+                qvel_out[n] = qvel
+            y[start:stop] = _to_packed(qpos_out[start:stop], qvel_out[start:stop])   # row by row: each chunk once
+            bad = _divergence(y[start:stop], start, (start, stop - 1), session, dt_s)
             if bad is not None:
                 n_bad, what = bad
-                return diverged(_to_packed(qpos_out[:n_bad], qvel_out[:n_bad]), dt_s, f" ({what})")
-    return Run(dt_s * np.arange(n_steps + 1), _to_packed(qpos_out, qvel_out))
+                return diverged(y[:n_bad].copy(), dt_s, f" ({what})")
+    return Run(dt_s * np.arange(n_steps + 1), y)
 
 
 def _simulate_rollout(m, d, dt_s: float, n_steps: int) -> Run:
@@ -390,22 +450,23 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
     m, d, xfrc, weight = _model_and_data(scenario, variant, dt_s)
     per_stage = _per_stage(scenario, variant)
-    control = _stage_force_writer(scenario, xfrc, weight) if per_stage else None
+    control = _stage_force_writer(scenario, d, xfrc, weight) if per_stage else None
     y_dec = y_start if per_stage else apply_decay_prestep(scenario, y_start, dt_s)
     qpos_in, qvel_in = _to_qpos_qvel(y_dec)
     qpos_out = np.empty((len(y_start), 7))
     qvel_out = np.empty((len(y_start), 6))
+    qpos, qvel, step = d.qpos, d.qvel, mujoco.mj_step   # views of d's arrays, bound once
     with _Session(d, control) as session, np.errstate(all="ignore"):
         for i in range(len(y_start)):
             if not per_stage:
                 _apply(xfrc, *harness_force_torque(scenario, y_start[i], dt_s), weight)
             d.time = 0.0
-            d.qpos[:] = qpos_in[i]
-            d.qvel[:] = qvel_in[i]
-            mujoco.mj_step(m, d)
+            qpos[:] = qpos_in[i]
+            qvel[:] = qvel_in[i]
+            step(m, d)
             session.raise_callback_error()
-            qpos_out[i] = d.qpos
-            qvel_out[i] = d.qvel
+            qpos_out[i] = qpos
+            qvel_out[i] = qvel
             session.warnings.clear()
     with np.errstate(all="ignore"):
         return _to_packed(qpos_out, qvel_out).reshape(shape)
@@ -419,3 +480,8 @@ class MujocoAdapter(EngineAdapter):
     version = staticmethod(version)
     simulate = staticmethod(simulate)
     one_step = staticmethod(one_step)
+
+    def source_files(self) -> list:
+        """This module and the plain-float per-step code its loops run (hashed into the cache key)."""
+        from cross_checks.engines import step_floats
+        return [*super().source_files(), Path(step_floats.__file__)]

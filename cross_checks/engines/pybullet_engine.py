@@ -30,8 +30,10 @@ primed and unprimed runs agree bit for bit — it is kept as cheap insurance.)
 """
 from __future__ import annotations
 
+import functools
 import os
 import threading
+from pathlib import Path
 
 import numpy as np
 
@@ -40,6 +42,7 @@ from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
 
 from cross_checks.engines.base import (EngineAdapter, EngineError, Variant, apply_decay_prestep, decay_factors,
                                        harness_force_torque, optional_import, require)
+from cross_checks.engines.step_floats import harness_fn, quat_mul_floats
 
 p, _IMPORT_ERROR = optional_import("pybullet", quiet_stderr=True)   # it prints its build time at import
 
@@ -58,8 +61,10 @@ VARIANTS = {
 #: and hide the divergence from the harness.
 DYNAMICS_SETTINGS = {"linearDamping": 0.0, "angularDamping": 0.0, "maxJointVelocity": 1e12}
 
-#: Steps between divergence checks of a free-running simulation (checked vectorised per chunk).
-_CHUNK = 128
+#: Steps between divergence checks of a free-running simulation (checked vectorised per chunk; a run that
+#: blows up stops at the end of its chunk, its recorded states end before the first bad one whatever the
+#: chunk).
+_CHUNK = 1024
 
 _LOCK = threading.RLock()
 _client: int | None = None
@@ -73,13 +78,19 @@ def _require():
 
 
 def version() -> str:
+    """The installed pybullet distribution's version (read from its metadata once per process: a lookup
+    costs ~1 ms, and every run records it)."""
     _require()
+    return _dist_version()
+
+
+@functools.lru_cache(maxsize=1)
+def _dist_version() -> str:
     from importlib.metadata import PackageNotFoundError, version as dist_version
     try:
-        v = dist_version("pybullet")
+        return dist_version("pybullet")
     except PackageNotFoundError:  # pragma: no cover - a source build without metadata
-        v = "unknown"
-    return v
+        return "unknown"
 
 
 def _connect() -> int:
@@ -137,8 +148,8 @@ class _Body:
 
     # -- boundary conversions ------------------------------------------------------------------
     def _pose_in(self, y):
-        q_WB = np.asarray(y[6:10], dtype=float)
-        q_WP = q_WB if self.q_BP is None else quat_mul(q_WB, self.q_BP)
+        q_WB = [float(v) for v in y[6:10]]
+        q_WP = q_WB if self.q_BP is None else quat_mul_floats(q_WB, self.q_BP.tolist())
         return [float(v) for v in y[0:3]], _xyzw(q_WP)
 
     def set_state(self, y):
@@ -166,58 +177,125 @@ class _Body:
         y[..., 6:10] = q_WP if self.q_BP is None else quat_mul(q_WP, quat_conj(self.q_BP))
         return y
 
+    def packer(self):
+        """A function: one raw row (13 floats, :meth:`read_raw`'s order) -> the packed state of the SCENARIO
+        body frame, 13 floats: :meth:`raw_to_packed` of that row bit for bit (the quaternion product in
+        step_floats.quat_mul_floats), for the loops that evaluate the forces every step."""
+        if self.q_BP is None:
+            def packed(raw):
+                x0, x1, x2, v0, v1, v2, qx, qy, qz, qw, w0, w1, w2 = raw
+                return [x0, x1, x2, v0, v1, v2, qw, qx, qy, qz, w0, w1, w2]
+            return packed
+        q_PB = [float(v) for v in quat_conj(self.q_BP)]
+
+        def packed_rotated(raw):
+            x0, x1, x2, v0, v1, v2, qx, qy, qz, qw, w0, w1, w2 = raw
+            return [x0, x1, x2, v0, v1, v2, *quat_mul_floats((qw, qx, qy, qz), q_PB), w0, w1, w2]
+        return packed_rotated
+
     def apply(self, f_W, tau_W, x_W):
-        """External world force at the COM (``x_W``) and world torque, for the next step only."""
+        """External world force ``f_W`` at the COM (at ``x_W``) and world torque ``tau_W`` (3 floats each, any
+        sequence), for the next step only. A zero force or torque is not applied (PyBullet clears them after
+        every step: the same step)."""
         c, b = self.c, self.b
         if f_W[0] != 0.0 or f_W[1] != 0.0 or f_W[2] != 0.0:
-            p.applyExternalForce(b, -1, f_W.tolist(), list(x_W), p.WORLD_FRAME, physicsClientId=c)
+            p.applyExternalForce(b, -1, f_W, x_W, p.WORLD_FRAME, physicsClientId=c)
         if tau_W[0] != 0.0 or tau_W[1] != 0.0 or tau_W[2] != 0.0:
-            p.applyExternalTorque(b, -1, tau_W.tolist(), p.WORLD_FRAME, physicsClientId=c)
+            p.applyExternalTorque(b, -1, tau_W, p.WORLD_FRAME, physicsClientId=c)
 
 
 def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
     """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded."""
-    forces = scenario.problem.forces
     y0 = scenario.problem.initial_packed()
     with _LOCK, np.errstate(all="ignore"):
         B = _Body(scenario, variant, dt_s, y0)
-        B.set_state(y0)
+        return free_run(B, scenario, y0, dt_s, n_steps)
+
+
+def free_run(B, scenario, y0, dt_s: float, n_steps: int) -> Run:
+    """The free run of body ``B`` (a fresh ``_Body`` of ``scenario``, or one kept from a run of the same
+    scenario and variant with its step set to ``dt_s``) from ``y0``: put at ``y0``, then stepped
+    ``n_steps`` times with the harness's forces. The caller holds ``_LOCK``."""
+    forces = scenario.problem.forces
+    B.set_state(y0)
+    raw = np.empty((n_steps + 1, 13))
+    raw[0] = B.read_raw()
+    if forces.state_dependent or forces.has_decay:
+        return _run_per_step(B, scenario, y0, raw, dt_s, n_steps)
+    f, tau = harness_force_torque(scenario, y0, dt_s)
+    return _run_constant(B, raw, (f - B.weight).tolist(), tau.tolist(), dt_s, n_steps)
+
+
+def _run_per_step(B, scenario, y0, raw, dt_s: float, n_steps: int) -> Run:
+    """The free run with state-dependent forces and/or the pre-step velocity decay: every step the forces
+    from the start-of-step state (the first from ``y0`` itself), the decayed velocity set with
+    resetBaseVelocity, the forces applied. Per step in plain floats (the states as PyBullet's tuples, the
+    harness through step_floats): the numbers of the NumPy formulas, bit for bit (tested)."""
+    forces = scenario.problem.forces
+    state_dependent, decay = forces.state_dependent, forces.has_decay   # properties: read once
+    gv, gw = (float(g) for g in decay_factors(scenario, dt_s))
+    harness = harness_fn(scenario, dt_s)
+    packed = B.packer()
+    wx, wy, wz = B.weight.tolist()
+    fx, fy, fz, tx, ty, tz = harness([float(v) for v in y0])
+    now = {"f": (fx - wx, fy - wy, fz - wz), "tau": (tx, ty, tz), "prev": raw[0].tolist()}
+
+    def steps(start, stop):
+        c, b, apply = B.c, B.b, B.apply
+        step, pose, vel, reset_vel = p.stepSimulation, p.getBasePositionAndOrientation, p.getBaseVelocity, p.resetBaseVelocity
+        f, tau, prev = now["f"], now["tau"], now["prev"]
+        rows = []
+        for n in range(start, stop):
+            if state_dependent and n > 1:
+                fx, fy, fz, tx, ty, tz = harness(packed(prev))
+                f, tau = (fx - wx, fy - wy, fz - wz), (tx, ty, tz)
+            if decay:
+                reset_vel(b, (prev[3] * gv, prev[4] * gv, prev[5] * gv), (prev[10] * gw, prev[11] * gw, prev[12] * gw),
+                          physicsClientId=c)
+            apply(f, tau, prev[0:3])
+            step(physicsClientId=c)
+            ps, orn = pose(b, physicsClientId=c)
+            lin, ang = vel(b, physicsClientId=c)
+            prev = ps + lin + orn + ang
+            rows.append(prev)
+        now.update(f=f, tau=tau, prev=prev)
+        return rows
+    return _recorded(B, raw, dt_s, n_steps, steps)
+
+
+def _run_constant(B, raw, f_W, tau_W, dt_s: float, n_steps: int) -> Run:
+    """The free run when the applied force ``f_W`` (weight removed) and torque ``tau_W`` (3 floats each)
+    are constant and there is no decay (most of the catalog): the per-step Python cut to the engine calls,
+    nothing applied when force and torque are zero."""
+    applies = any(v != 0.0 for v in f_W) or any(v != 0.0 for v in tau_W)
+
+    def steps(start, stop):
         c, b = B.c, B.b
-        decay = forces.has_decay
-        gv, gw = decay_factors(scenario, dt_s)
-        per_step = forces.state_dependent or decay
-        if not forces.state_dependent:
-            f_const, tau_const = harness_force_torque(scenario, y0, dt_s)
-            f_const = f_const - B.weight
-        raw = np.empty((n_steps + 1, 13))
-        raw[0] = B.read_raw()
-        if not per_step:
-            return _run_constant(B, raw, f_const, tau_const, dt_s, n_steps)
-        y_prev = y0
-        step, read = p.stepSimulation, B.read_raw
-        start = 1
-        while start <= n_steps:  # per step: state-dependent forces and/or the pre-step decay
-            stop = min(start + _CHUNK, n_steps + 1)
-            for n in range(start, stop):
-                row = raw[n - 1]
-                if n > 1:
-                    y_prev = B.raw_to_packed(row)
-                if forces.state_dependent:
-                    f, tau = harness_force_torque(scenario, y_prev, dt_s)
-                    f = f - B.weight
-                else:
-                    f, tau = f_const, tau_const
-                if decay:
-                    p.resetBaseVelocity(b, (row[3:6] * gv).tolist(), (row[10:13] * gw).tolist(),
-                                        physicsClientId=c)
-                B.apply(f, tau, row[0:3])
-                step(physicsClientId=c)
-                raw[n] = read()
-            blown = _diverged_in(B, raw, start, stop, dt_s)
-            if blown is not None:
-                return blown
-            start = stop
-        return Run(dt_s * np.arange(n_steps + 1), B.raw_to_packed(raw))
+        step, pose, vel = p.stepSimulation, p.getBasePositionAndOrientation, p.getBaseVelocity
+        rows = []
+        for n in range(start, stop):
+            if applies:
+                B.apply(f_W, tau_W, rows[-1][0:3] if rows else raw[n - 1, 0:3].tolist())
+            step(physicsClientId=c)
+            pos, orn = pose(b, physicsClientId=c)
+            lin, ang = vel(b, physicsClientId=c)
+            rows.append(pos + lin + orn + ang)
+        return rows
+    return _recorded(B, raw, dt_s, n_steps, steps)
+
+
+def _recorded(B, raw, dt_s: float, n_steps: int, steps) -> Run:
+    """The run whose steps ``start..stop-1`` ``steps(start, stop)`` takes, chunk by chunk, returning their
+    raw states (tuples of 13 floats, stored in one assignment per chunk); divergence checked per chunk."""
+    start = 1
+    while start <= n_steps:
+        stop = min(start + _CHUNK, n_steps + 1)
+        raw[start:stop] = steps(start, stop)
+        blown = _diverged_in(B, raw, start, stop, dt_s)
+        if blown is not None:
+            return blown
+        start = stop
+    return Run(dt_s * np.arange(n_steps + 1), B.raw_to_packed(raw))
 
 
 def _diverged_in(B, raw, start: int, stop: int, dt_s: float):
@@ -229,50 +307,32 @@ def _diverged_in(B, raw, start: int, stop: int, dt_s: float):
     return diverged(B.raw_to_packed(raw[:n_bad]), dt_s, f" ({blowup_words(raw[n_bad])})")
 
 
-def _run_constant(B, raw, f_W, tau_W, dt_s: float, n_steps: int) -> Run:
-    """The free run when the applied force and torque are constant and there is no decay (most of the
-    catalog): the same calls as the general loop, with the per-step Python cut to the engine calls —
-    nothing applied when force and torque are zero (PyBullet clears them after every step), and each
-    chunk's states collected as tuples and stored in one assignment (the same floats, bit for bit)."""
-    c, b = B.c, B.b
-    step, pose, vel = p.stepSimulation, p.getBasePositionAndOrientation, p.getBaseVelocity
-    applies = bool(np.any(f_W != 0.0) or np.any(tau_W != 0.0))
-    start = 1
-    while start <= n_steps:
-        stop = min(start + _CHUNK, n_steps + 1)
-        rows = []
-        for n in range(start, stop):
-            if applies:
-                B.apply(f_W, tau_W, rows[-1][0:3] if rows else raw[n - 1, 0:3])
-            step(physicsClientId=c)
-            pos, orn = pose(b, physicsClientId=c)
-            lin, ang = vel(b, physicsClientId=c)
-            rows.append(pos + lin + orn + ang)
-        raw[start:stop] = rows
-        blown = _diverged_in(B, raw, start, stop, dt_s)
-        if blown is not None:
-            return blown
-        start = stop
-    return Run(dt_s * np.arange(n_steps + 1), B.raw_to_packed(raw))
-
-
 def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     """One step of ``dt_s`` from each row of ``y_start`` (T, 13) (state reset per row)."""
     shape = np.shape(y_start)
     y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
-    y_dec = apply_decay_prestep(scenario, y_start, dt_s)
-    out = np.empty_like(y_start)
     if len(y_start) == 0:
-        return out.reshape(shape)
+        return np.empty_like(y_start).reshape(shape)
     with _LOCK, np.errstate(all="ignore"):
         B = _Body(scenario, variant, dt_s, y_start[0])
-        for i in range(len(y_start)):
-            f, tau = harness_force_torque(scenario, y_start[i], dt_s)
-            B.set_state(y_dec[i])
-            B.apply(f - B.weight, tau, y_start[i, 0:3])
-            p.stepSimulation(physicsClientId=B.c)
-            out[i] = B.read_raw()
-        return B.raw_to_packed(out).reshape(shape)
+        return one_steps(B, scenario, dt_s, y_start).reshape(shape)
+
+
+def one_steps(B, scenario, dt_s: float, y_start) -> np.ndarray:
+    """One step of ``dt_s`` of body ``B`` (built as for :func:`free_run`) from each row of ``y_start``
+    (T, 13): the forces from the row, the pre-step decay, the state reset per row. The caller holds
+    ``_LOCK``."""
+    y_dec = apply_decay_prestep(scenario, y_start, dt_s)
+    harness = harness_fn(scenario, dt_s)
+    wx, wy, wz = B.weight.tolist()
+    out = np.empty_like(y_start)
+    for i, y in enumerate(y_start.tolist()):
+        fx, fy, fz, tx, ty, tz = harness(y)
+        B.set_state(y_dec[i])
+        B.apply((fx - wx, fy - wy, fz - wz), (tx, ty, tz), y[0:3])
+        p.stepSimulation(physicsClientId=B.c)
+        out[i] = B.read_raw()
+    return B.raw_to_packed(out)
 
 
 class PybulletAdapter(EngineAdapter):
@@ -283,3 +343,8 @@ class PybulletAdapter(EngineAdapter):
     version = staticmethod(version)
     simulate = staticmethod(simulate)
     one_step = staticmethod(one_step)
+
+    def source_files(self) -> list:
+        """This module and the plain-float per-step code its loops run (hashed into the cache key)."""
+        from cross_checks.engines import step_floats
+        return [*super().source_files(), Path(step_floats.__file__)]

@@ -228,6 +228,7 @@ def clear_cache() -> None:
     from cross_checks.fuzz import kernel
     _MODELS.clear()
     _INITIAL.clear()
+    _STRUCTURES.clear()
     kernel.clear_cache()
     if "cross_checks.fuzz.pybullet_batch" in sys.modules:
         sys.modules["cross_checks.fuzz.pybullet_batch"].release()
@@ -280,8 +281,19 @@ def _structure(model) -> tuple:
     """What an MjData built for ``model`` depends on besides sizes: a free body whose inertial frame is the
     body frame is "simple" (diagonal mass-matrix storage, nC = 6), a rotated one is not (nC = 21). One
     MjData serves every model of the same structure; across structures rollout silently produces
-    garbage (measured: the non-simple models blow up in their first step)."""
-    return (tuple(int(v) for v in model.body_simple), tuple(int(v) for v in model.dof_simplenum))
+    garbage (measured: the non-simple models blow up in their first step). Read once per model (a batch
+    groups its models by structure at every rung and one-step round)."""
+    hit = _STRUCTURES.get(id(model))
+    if hit is None or hit[0] is not model:
+        if len(_STRUCTURES) >= _MODELS_MAX:
+            _STRUCTURES.clear()
+        hit = _STRUCTURES[id(model)] = (model, (tuple(int(v) for v in model.body_simple),
+                                                tuple(int(v) for v in model.dof_simplenum)))
+    return hit[1]
+
+
+#: {id(model): (model, its _structure)}: the model kept so that its id cannot be reused while cached.
+_STRUCTURES: dict = {}
 
 
 def _by_structure(models, idx):
@@ -306,17 +318,25 @@ def _rollout_free(mods, state0, xfrc, harness, per_step, n_max, threads, session
         qpos[1:], qvel[1:] = np.moveaxis(out[:, :, 1:8], 1, 0), np.moveaxis(out[:, :, 8:14], 1, 0)
         return qpos, qvel
     runner = rollout.Rollout(nthread=threads if threads > 1 else 0)
-    state = state0
+    # one step per call: the arrays rollout's wrapper would check and allocate every call, given once (in
+    # the shapes and dtype it makes them: (M, nstate) start states, (M, 1, ·) controls, states, sensordata)
+    state = np.ascontiguousarray(state0, dtype=float)
+    ctrl = np.empty((M, 1, xfrc.shape[1]))
+    out = np.empty((M, 1, state.shape[1]))
+    sensors = np.empty((M, 1, mods[0].nsensordata))
+    per_step_any = bool(per_step.any())
     try:
         for n in range(1, n_max + 1):
-            if per_step.any():
+            if per_step_any:
                 fresh = harness.xfrc(_packed1_cols(qpos[n - 1], qvel[n - 1]))
                 xfrc[per_step] = fresh[per_step]
             st = state.copy()
             st[:, 8:11] *= harness.gv[:, None]
             st[:, 11:14] *= harness.gw[:, None]
-            out, _ = runner.rollout(mods, datas, st, xfrc[:, None, :], control_spec=spec, nstep=1)
-            state = out[:, 0, :]
+            ctrl[:, 0, :] = xfrc
+            runner.rollout(mods, datas, st, ctrl, control_spec=spec, nstep=1, state=out, sensordata=sensors,
+                           skip_checks=True)
+            state = out[:, 0, :].copy()
             qpos[n], qvel[n] = state[:, 1:8], state[:, 8:14]
     finally:
         runner.close()

@@ -40,9 +40,9 @@ def _used_compiled(monkeypatch, problem, variant, dt, n):
     calls = []
     real = compiled.run_until_exceptional
 
-    def counting(*args):
+    def counting(*args, **kw):
         calls.append(args[2])
-        return real(*args)
+        return real(*args, **kw)
 
     with monkeypatch.context() as m:
         m.setattr(compiled, "run_until_exceptional", counting)
@@ -201,3 +201,32 @@ def test_warm_loads_the_kernel_that_forked_workers_inherit():
     assert compiled.warm()
     with ProcessPoolExecutor(1, mp_context=mp.get_context("fork")) as pool:
         assert pool.submit(_kernel_already_loaded, None).result()
+
+
+def test_a_run_in_chunks_is_the_run_in_one_call(monkeypatch):
+    problem = coupled_problem((0.99, 0.995))
+    whole = S.simulate(problem, "rk4", 1e-3, 1000)
+    monkeypatch.setattr(S, "COMPILED_CHUNK", 64)
+    chunked, calls = _used_compiled(monkeypatch, problem, "rk4", 1e-3, 1000)
+    assert len(calls) == 16   # ceil(1000 / 64) calls, each starting where the previous one stopped
+    assert calls == list(range(0, 1000, 64))
+    _assert_same_run(chunked, whole)
+
+
+def test_a_time_limit_stops_a_long_compiled_run_between_chunks():
+    # inside compiled code a SIGALRM handler waits for the call to return: the chunks bound that wait
+    import time
+    from cross_checks.sweep.lifecycle import TimeLimitExceeded, time_limit
+    problem = coupled_problem()
+    n = 4_000_000   # implicit Euler, ~1-5 µs a step: seconds of work
+    t0 = time.perf_counter()
+    with pytest.raises(TimeLimitExceeded):
+        with time_limit(0.3, "the run"):
+            S.simulate(problem, "implicit_euler", 1e-4, n)
+    assert time.perf_counter() - t0 < 0.3 + 2.0   # one chunk (65,536 steps) at most after the alarm
+
+
+def test_the_compiled_loop_refuses_steps_its_rows_cannot_hold():
+    stepper = ScalarStepper(coupled_problem(), "rk4", 1e-3)
+    with pytest.raises(ValueError, match="do not fit"):
+        compiled.run_until_exceptional(stepper, np.zeros((10, 13)), 0, 10, 1e8)

@@ -77,14 +77,14 @@ def test_an_unexpected_error_is_one_line_too(monkeypatch, capsys):
 def test_runs_and_references_over_their_time_limit_are_failed_rows(tmp_path, isolated_cache):
     slow_text = """
 name = "slow_run"
-duration = 40.0
+duration = 1000.0
 dt = 0.001
 [body]
 mass = 1.0
 inertia = [1.0, 2.0, 3.0]
 [initial]
 angular_velocity = [0.3, 1.0, 0.2]
-"""  # implicit Euler: ~110 us/step x 40000 steps ≈ 4 s ≫ 0.3 s
+"""  # implicit Euler, compiled: ~2-5 us/step x 1e6 steps ≈ 2-5 s ≫ 0.3 s (the limit acts between chunks)
     stiff_text = (catalog_path("spring_pendulum").read_text().replace("stiffness = 40.0", "stiffness = 4e5")
                   .replace('name = "spring_pendulum"', 'name = "stiff"'))
     # Two sweeps, so that each limit is the only one that can trip: slow_run's own reference (DOP853 over

@@ -252,3 +252,46 @@ inertia = [1.0, 2.0, 3.0]
 [initial]
 angular_velocity = [0.1, 20.0, 0.1]
 """
+
+
+def test_runs_on_lent_models_reuse_one_mjdata_per_layout_with_a_fresh_ones_numbers():
+    """models_from: the runs reuse one MjData per model layout (reset with mj_resetData) instead of allocating
+    one per run; every run and one-step batch is still the one on a new model and a new MjData, bit for bit,
+    whichever body (diagonal or rotated inertia, any force kind) the reused MjData served before."""
+    from cross_checks.fuzz import generate
+    from cross_checks.fuzz.pipeline import scenario_of
+    scs = [scenario_of(generate.draw(47, i).spec(0.004, 8)) for i in range(10)]
+    assert {sc.problem.body.is_diagonal() for sc in scs} == {True, False}
+    models = {}
+
+    def lend(sc, variant, h):
+        key = (id(sc), variant, h)
+        if key not in models:
+            models[key] = me.build_model(sc, variant, h)
+        return models[key]
+    for variant in sorted(me.VARIANTS):
+        want = [(me.simulate(sc, variant, sc.dt_s, 12).y,
+                 me.one_step(sc, variant, sc.dt_s, sc.problem.initial_packed()[None])) for sc in scs]
+        me._LENT_DATA.clear()
+        with me.models_from(lend):
+            for _ in range(2):
+                for sc, (y, y1) in zip(scs[::-1], want[::-1]):
+                    assert np.array_equal(me.simulate(sc, variant, sc.dt_s, 12).y, y), (variant, sc.name)
+                    assert np.array_equal(me.one_step(sc, variant, sc.dt_s, sc.problem.initial_packed()[None]), y1)
+        assert len(me._LENT_DATA) == 2
+
+
+def test_a_one_step_batch_after_the_run_on_the_same_model_is_the_one_on_a_new_model():
+    """A job's one-step batch after its free run (same scenario, variant, step) reuses the compiled model and
+    its reset MjData: the numbers of a new model, bit for bit; another scenario, variant or step compiles."""
+    sc, other = load_scenario("spring_pendulum"), load_scenario("tumbling_box")
+    ys = me.simulate(sc, "rk4", 0.004, 40).y[::5]
+    for variant in ("rk4", "euler"):
+        me.simulate(other, variant, 0.004, 5)
+        fresh = me.one_step(sc, variant, 0.004, ys)             # after another scenario's run: compiled anew
+        me.simulate(sc, variant, 0.004, 40)
+        model = me._LAST.run[4]
+        assert np.array_equal(me.one_step(sc, variant, 0.004, ys), fresh)
+        assert me._LAST.run[4] is model                            # the run's model, reused
+        me.one_step(sc, variant, 0.002, ys)
+        assert me._LAST.run[4] is not model                        # another step: compiled

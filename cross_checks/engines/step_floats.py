@@ -1,0 +1,39 @@
+"""Plain-float pieces of the engine adapters' per-step loops (MuJoCo, PyBullet): the same numbers, bit for
+bit, as the NumPy functions they stand for, without building tiny arrays every step.
+
+A step of a free body costs MuJoCo or PyBullet 1–4 µs; a NumPy call on a 3- or 4-vector costs ~1 µs, so an
+adapter whose loop builds a handful of small arrays per step spends most of its time in NumPy. These
+functions take and return Python floats; each says which function it reproduces and in which order it
+does the arithmetic (IEEE 754 results depend on it), and tests/cross_checks/engines/test_step_floats.py
+compares them with that function bit for bit.
+"""
+from __future__ import annotations
+
+from cross_checks.engines import base
+
+__all__ = ["harness_fn", "quat_mul_floats"]
+
+
+def harness_fn(scenario, dt_s: float):
+    """``y -> base.harness_force_torque_floats(scenario, y, dt_s)`` (6 floats: world force at the COM, N,
+    and world torque, N m, scaled by the pre-step decay factors), with the float force evaluator and the
+    factors looked up once instead of every step. ``y``: the packed state (13 floats, a list preferred)."""
+    ft = base._float_forces(scenario).force_torque
+    gv, gw = (float(g) for g in base.decay_factors(scenario, dt_s))
+
+    def harness(y):
+        fx, fy, fz, tx, ty, tz = ft(y)
+        return gv * fx, gv * fy, gv * fz, gw * tx, gw * ty, gw * tz
+    return harness
+
+
+def quat_mul_floats(a, b) -> list:
+    """``reference_sim.quaternion.quat_mul(a, b)`` for two quaternions (w, x, y, z) of 4 floats each, with
+    NumPy's order of operations: the dot product summed left to right (``np.sum`` of 3 terms), then
+    ``s1 v2 + s2 v1`` plus the cross product ``v1 × v2`` (reference_sim.vec.cross3)."""
+    s1, x1, y1, z1 = a
+    s2, x2, y2, z2 = b
+    return [s1 * s2 - (x1 * x2 + y1 * y2 + z1 * z2),
+            s1 * x2 + s2 * x1 + (y1 * z2 - z1 * y2),
+            s1 * y2 + s2 * y1 + (z1 * x2 - x1 * z2),
+            s1 * z2 + s2 * z1 + (x1 * y2 - y1 * x2)]

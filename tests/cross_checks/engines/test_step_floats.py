@@ -1,0 +1,148 @@
+"""The adapters' plain-float per-step code (cross_checks.engines.step_floats and the loops built on it) gives
+the numbers of the NumPy formulas it stands for, bit for bit: the same trajectories as the straightforward
+NumPy loops written out here (start-of-step forces from ``base.harness_force_torque``, states converted by
+the adapters' array functions), on fuzz-drawn cases of every force kind with full inertia tensors."""
+import numpy as np
+import pytest
+
+from cross_checks.engines import base
+from cross_checks.engines.step_floats import harness_fn, quat_mul_floats
+from cross_checks.fuzz import generate
+from cross_checks.fuzz.pipeline import scenario_of
+from reference_sim.quaternion import quat_mul
+
+
+def _cases(n=12, seed=47):
+    scs = [scenario_of(generate.draw(seed, i).spec(0.004 * (1 + i % 3), 8)) for i in range(n)]
+    kinds = {f for i in range(n) for f in generate.draw(seed, i).kinds["forces"]}
+    assert len(kinds) >= 7 and any(not sc.problem.body.is_diagonal() for sc in scs)
+    assert any(sc.problem.forces.has_decay for sc in scs) and any(sc.problem.forces.state_dependent for sc in scs)
+    return scs
+
+
+def _states(sc, rng, k=8):
+    y = sc.problem.initial_packed() + 0.3 * rng.standard_normal((k, 13))
+    y[:, 6:10] *= rng.uniform(0.5, 2.0, (k, 1))   # not unit: the force kernels normalise q themselves
+    return y
+
+
+def test_quaternion_product_is_numpys_bit_for_bit():
+    rng = np.random.default_rng(0)
+    a = rng.standard_normal((20000, 4)) * 10.0 ** rng.integers(-6, 6, (20000, 4))
+    b = rng.standard_normal((20000, 4)) * 10.0 ** rng.integers(-6, 6, (20000, 4))
+    a[::7, 1] = 0.0
+    b[::5, 2] = -0.0
+    want = quat_mul(a, b)
+    got = np.array([quat_mul_floats(p.tolist(), q.tolist()) for p, q in zip(a, b)])
+    assert np.array_equal(np.signbit(got), np.signbit(want)) and np.array_equal(got, want)
+
+
+def test_harness_is_the_base_harness_bit_for_bit_at_any_step():
+    rng = np.random.default_rng(1)
+    for sc in _cases():
+        for h in (sc.dt_s, sc.dt_s / 3):   # the scenario's own step, and one where the decay factors are powers
+            f = harness_fn(sc, h)
+            for y in _states(sc, rng):
+                assert f(y.tolist()) == tuple(float(v) for v in base.harness_force_torque_floats(sc, y, h))
+
+
+# --- PyBullet -------------------------------------------------------------------------------------------
+
+pe = pytest.importorskip("cross_checks.engines.pybullet_engine")
+
+
+def _pybullet_numpy_loop(sc, variant, h, n):
+    """The PyBullet run as the adapter's NumPy formulas give it, step by step."""
+    y0 = sc.problem.initial_packed()
+    B = pe._Body(sc, variant, h, y0)
+    B.set_state(y0)
+    gv, gw = pe.decay_factors(sc, h)
+    raw = np.empty((n + 1, 13))
+    raw[0] = B.read_raw()
+    y = y0
+    for k in range(1, n + 1):
+        row = raw[k - 1]
+        if k > 1:
+            y = B.raw_to_packed(row)
+        f, tau = base.harness_force_torque(sc, y if sc.problem.forces.state_dependent else y0, h)
+        if sc.problem.forces.has_decay:
+            pe.p.resetBaseVelocity(B.b, (row[3:6] * gv).tolist(), (row[10:13] * gw).tolist(), physicsClientId=B.c)
+        B.apply((f - B.weight).tolist(), tau.tolist(), row[0:3].tolist())
+        pe.p.stepSimulation(physicsClientId=B.c)
+        raw[k] = B.read_raw()
+    return B.raw_to_packed(raw)
+
+
+def test_pybullet_state_conversion_is_raw_to_packed_bit_for_bit():
+    rng = np.random.default_rng(2)
+    for sc in _cases():
+        B = pe._Body(sc, "multibody", sc.dt_s, sc.problem.initial_packed())
+        raw = rng.standard_normal((50, 13))
+        assert np.array_equal(np.array([B.packer()(r.tolist()) for r in raw]), B.raw_to_packed(raw))
+
+
+@pytest.mark.parametrize("variant", ["multibody", "maximal"])
+def test_pybullet_runs_are_the_numpy_loop_bit_for_bit(variant):
+    for sc in _cases():
+        want = _pybullet_numpy_loop(sc, variant, sc.dt_s / 2, 16)
+        run = pe.simulate(sc, variant, sc.dt_s / 2, 16)
+        assert run.diverged_at_s is None and np.array_equal(run.y, want), sc.name
+
+
+# --- MuJoCo ---------------------------------------------------------------------------------------------
+
+me = pytest.importorskip("cross_checks.engines.mujoco_engine")
+
+
+def _mujoco_numpy_loop(sc, variant, h, n):
+    """The MuJoCo run as the adapter's NumPy formulas give it: forces from the start-of-step state (or at
+    every RK4 stage through the control callback), the decay applied to qvel before the step."""
+    import mujoco
+    m = me.build_model(sc, variant, h)
+    d = mujoco.MjData(m)
+    xfrc = d.xfrc_applied[1]
+    weight = sc.problem.body.mass_kg * np.asarray(sc.problem.forces.gravity_W, dtype=float)
+    d.qpos[:], d.qvel[:] = me._to_qpos_qvel(sc.problem.initial_packed())
+    per_stage = me._per_stage(sc, variant)
+    gv, gw = base.decay_factors(sc, h)
+
+    def control(_m, dd):
+        me._apply(xfrc, *base.stage_force_torque(sc, me._to_packed(dd.qpos.copy(), dd.qvel.copy())), weight)
+    qpos, qvel = [d.qpos.copy()], [d.qvel.copy()]
+    prev = me._clear_force_callbacks()
+    mujoco.set_mjcb_control(control if per_stage else None)
+    try:
+        for _ in range(n):
+            if not per_stage:
+                me._apply(xfrc, *base.harness_force_torque(sc, me._to_packed(d.qpos, d.qvel), h), weight)
+                d.qvel[0:3] *= gv
+                d.qvel[3:6] *= gw
+            mujoco.mj_step(m, d)
+            qpos.append(d.qpos.copy())
+            qvel.append(d.qvel.copy())
+    finally:
+        me._restore_force_callbacks(prev)
+    return me._to_packed(np.array(qpos), np.array(qvel))
+
+
+@pytest.mark.parametrize("variant", sorted(me.VARIANTS))
+def test_mujoco_runs_are_the_numpy_loop_bit_for_bit(variant):
+    looped = 0
+    for sc in _cases():
+        fm = sc.problem.forces
+        if not (fm.state_dependent or fm.has_decay):
+            continue   # the rollout path: tests/cross_checks/engines/test_mujoco_engine.py
+        looped += 1
+        want = _mujoco_numpy_loop(sc, variant, sc.dt_s / 2, 16)
+        run = me.simulate(sc, variant, sc.dt_s / 2, 16)
+        assert run.diverged_at_s is None and np.array_equal(run.y, want), sc.name
+    assert looped >= 4
+
+
+@pytest.mark.parametrize("module", [me, pe])
+def test_the_plain_float_code_is_part_of_the_adapters_cache_key(module):
+    import cross_checks.engines.step_floats as sf
+    from pathlib import Path
+    adapter = next(v for v in vars(module).values() if isinstance(v, type) and v.__module__ == module.__name__
+                   and issubclass(v, base.EngineAdapter))()
+    assert Path(sf.__file__) in adapter.source_files() and Path(module.__file__) in adapter.source_files()
