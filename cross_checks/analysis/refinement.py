@@ -22,13 +22,16 @@ __all__ = ["errors_shrink", "refined_ladder_shows_the_order"]
 
 
 def errors_shrink(errors) -> bool:
-    """Whether a ladder's errors (coarse to fine, all finite) shrink: at every halving however slowly, or
-    over the ladder as a whole by at least a first-order halving (not at every halving: a velocity error
-    crossing zero at one rung). A plateau in noise, a growth or a failed point does not qualify."""
+    """Whether a ladder's errors (coarse to fine, all finite) shrink over the ladder: the finest below the
+    coarsest, however slowly and whether or not at every halving (a velocity error crossing zero at one
+    rung; the largest error over a short run moving in time: 6.38e-7, 6.88e-7, 5.24e-7 m/s for the
+    first-order schemes on the fuzz's seed 2026 case 9698, order 0.77 → 0.95 on the ladder continued). A flat
+    plateau, a growth or a failed point does not qualify. Only the ladder continued decides: a plateau that
+    happens to dip at the finest rung stays a plateau there (refined_ladder_shows_the_order)."""
     errs = list(errors)
     if len(errs) < 2 or any(e is None or not math.isfinite(e) for e in errs):
         return False
-    return all(a > b for a, b in zip(errs, errs[1:])) or errs[-1] < 0.5 * errs[0]
+    return errs[-1] < errs[0]
 
 
 def refined_ladder_shows_the_order(dts, errors, floors, statuses, exp) -> tuple:
