@@ -228,10 +228,11 @@ def measured_pre_asymptotic(fit: ConvergenceFit, expected_order) -> str:
 
 def order_within_floors(fit: ConvergenceFit):
     """The largest least-squares order the measured errors allow when each may be off by up to its round-off
-    floor — over the fitted points and the finer ones the fit dropped as round-off but that are still above
-    their floor: the errors at Δt above the ladder's mean log Δt raised by their floors, those below it
-    lowered (the slope grows with the first and falls with the second). None when fewer than two such points
-    (or the fit has no order).
+    floor — over the fitted points, and over those with the finer ones the fit dropped as round-off but that
+    are still above their floor (the larger of the two): the errors at Δt above the ladder's mean log Δt raised by their floors, those below it
+    lowered (the slope grows with the first and falls with the second). Where two or more dropped finer
+    rungs are flat (within a factor 2) above the floor estimate, their level is each rung's floor instead:
+    round-off, measured. None when fewer than two points stand above their floors (or the fit has no order).
 
     A claim that the order is too low holds only if this order is too low as well: a floor generous enough to
     drop the finest rung (an engine's lever-arm round-off bound, fuzz.properties) otherwise left the order to
@@ -244,16 +245,28 @@ def order_within_floors(fit: ConvergenceFit):
     if not idx:
         return None
     finest = min(fit.dt_s[i] for i in idx)
-    idx += [i for i in range(len(fit.dt_s)) if not fit.fitted[i] and fit.dt_s[i] < finest
-            and math.isfinite(fit.errors[i]) and fit.errors[i] > fit.floors[i]]
-    idx = [i for i in idx if math.isfinite(fit.errors[i]) and fit.errors[i] > fit.floors[i]]
-    if len(idx) < 2:
-        return None
-    x = [math.log(fit.dt_s[i]) for i in idx]
-    mean = sum(x) / len(x)
-    y = [math.log(fit.errors[i] + (fit.floors[i] if xi > mean else -fit.floors[i] if xi < mean else 0.0))
-         for i, xi in zip(idx, x)]
-    return _lsq_slope(np.array(x), np.array(y))
+    tail = [i for i in range(len(fit.dt_s)) if not fit.fitted[i] and fit.dt_s[i] < finest
+            and math.isfinite(fit.errors[i]) and fit.errors[i] > 0.0]
+    # a flat tail of dropped rungs (two or more within a factor 2: the error no longer shrinks with Δt) is
+    # round-off, measured: where it stands above the floor estimate (MuJoCo's one-step defects flat at
+    # 3.4e-15 rad/s over floors of 1.3–1.8e-15), its level bounds the round-off in every rung instead
+    te = [fit.errors[i] for i in tail]
+    level = max(te) if len(te) >= 2 and max(te) <= 2.0 * min(te) else 0.0
+    floor = [max(f, level) for f in fit.floors]
+    # the fitted points alone, and with the dropped ones that still stand above their floor: the claim must
+    # fail on both (the tail can only widen the room it leaves, never narrow it below the fit's own points)
+    best = None
+    for points in (idx, idx + tail):
+        use = [i for i in points if math.isfinite(fit.errors[i]) and fit.errors[i] > floor[i]]
+        if len(use) < 2:
+            continue
+        x = [math.log(fit.dt_s[i]) for i in use]
+        mean = sum(x) / len(x)
+        y = [math.log(fit.errors[i] + (floor[i] if xi > mean else -floor[i] if xi < mean else 0.0))
+             for i, xi in zip(use, x)]
+        slope = _lsq_slope(np.array(x), np.array(y))
+        best = slope if best is None else max(best, slope)
+    return best
 
 
 def compare_with_expectation(verdict: str, order, expected, order_is_lower_bound: bool = False) -> tuple:

@@ -207,3 +207,28 @@ def test_order_within_floors_ignores_points_at_or_below_their_floor():
     fit = fit_convergence([0.02, 0.01, 0.005], [1e-9, 2.5e-10, 1e-13], [1e-14, 1e-14, 1e-13])
     assert fit.fitted == [True, True, False]
     assert order_within_floors(fit) == pytest.approx(math.log2((1e-9 + 1e-14) / (2.5e-10 - 1e-14)), rel=1e-12)
+
+
+# MuJoCo rk4's one-step angular velocity defects (fuzz seed 2026, case 5622): two rungs flat at 3.4e-15 rad/s,
+# above floor estimates of 1.3-1.8e-15 — round-off, measured
+MJ_DT = [0.00215, 0.001075, 0.0005375, 0.00026875]
+MJ_FL = [1.37e-15, 9.81e-16, 1.76e-15, 1.32e-15]
+
+
+def test_a_flat_round_off_tail_is_the_floor_of_every_rung():
+    e = [2.44e-13, 1.04e-14, 3.37e-15, 3.38e-15]
+    fit = fit_convergence(MJ_DT, e, MJ_FL)
+    assert fit.fitted == [True, True, False, False] and fit.order == pytest.approx(4.55, abs=0.01)
+    by_hand = math.log2((2.44e-13 + 3.38e-15) / (1.04e-14 - 3.38e-15))
+    assert order_within_floors(fit) == pytest.approx(by_hand, rel=1e-12) and by_hand > 5.0 - tol.SWEEP_ORDER_TOL
+
+
+def test_a_flat_tail_leaves_room_for_round_off_not_for_a_wrong_order():
+    e = [2.44e-13, 2.44e-13 / 16.0, 3.4e-15, 3.4e-15]   # order 4 where one step of RK4 has 5
+    fit = fit_convergence(MJ_DT, e, MJ_FL)
+    assert order_within_floors(fit) < 5.0 - tol.SWEEP_ORDER_TOL
+    # a tail that still shrinks (two rungs more than 2x apart) is not taken for round-off: the fitted pair with
+    # its own floors (the tail point above its floor only lowers the three-point slope)
+    fit = fit_convergence(MJ_DT, [2.44e-13, 1.04e-14, 3.37e-15, 1.2e-15], MJ_FL)
+    assert order_within_floors(fit) == pytest.approx(math.log2((2.44e-13 + 1.37e-15) / (1.04e-14 - 9.81e-16)),
+                                                     rel=1e-12)
