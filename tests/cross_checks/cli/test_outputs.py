@@ -77,18 +77,18 @@ def test_an_unexpected_error_is_one_line_too(monkeypatch, capsys):
 def test_runs_and_references_over_their_time_limit_are_failed_rows(tmp_path, isolated_cache):
     slow_text = """
 name = "slow_run"
-duration = 1000.0
+duration = 200.0
 dt = 0.001
 [body]
 mass = 1.0
 inertia = [1.0, 2.0, 3.0]
 [initial]
 angular_velocity = [0.3, 1.0, 0.2]
-"""  # implicit Euler, compiled: ~2-5 us/step x 1e6 steps ≈ 2-5 s ≫ 0.3 s (the limit acts between chunks)
+"""  # implicit Euler, compiled: ~0.5-5 us/step x 2e5 steps ≈ 0.1-1 s ≫ 0.05 s (the limit acts between chunks)
     stiff_text = (catalog_path("spring_pendulum").read_text().replace("stiffness = 40.0", "stiffness = 4e5")
                   .replace('name = "spring_pendulum"', 'name = "stiff"'))
     # Two sweeps, so that each limit is the only one that can trip: slow_run's own reference (DOP853 over
-    # 40 s) may take longer than 0.3 s on a loaded machine, which is not what this test is about. Each in a
+    # 200 s) may take longer than 0.05 s on a loaded machine, which is not what this test is about. Each in a
     # fresh interpreter: the limit is a SIGALRM timer of the main thread, and a test worker's state (after
     # hundreds of other tests) is not what a sweep process starts with.
     t0 = time.perf_counter()
@@ -97,7 +97,7 @@ angular_velocity = [0.3, 1.0, 0.2]
             "use_cache=False, progress=False, run_time_limit_s=float(sys.argv[3]), reference_time_limit_s=float(sys.argv[4]))\n"
             "print(json.dumps(s['run']['failed_runs']))")
     failed = {}
-    for text, out, run_limit, ref_limit in ((slow_text, "res", 0.3, 600.0), (stiff_text, "res_ref", 600.0, 0.3)):
+    for text, out, run_limit, ref_limit in ((slow_text, "res", 0.05, 600.0), (stiff_text, "res_ref", 600.0, 0.3)):
         parse_scenario(text, f"{out}.toml")  # valid, so that a failure below is about the limits
         toml = tmp_path / f"{out}.toml"
         toml.write_text(text)
@@ -110,7 +110,7 @@ angular_velocity = [0.3, 1.0, 0.2]
     run_rows = pd.read_csv(tmp_path / "res" / "results.csv")
     ref_rows = pd.read_csv(tmp_path / "res_ref" / "results.csv")
     assert set(run_rows.status) == {"failed"}
-    assert run_rows.message.str.contains("the run took longer than the time limit of 0.3 s").all()
+    assert run_rows.message.str.contains("the run took longer than the time limit of 0.05 s").all()
     assert set(ref_rows.status) == {"failed"}
     assert ref_rows.message.str.contains("the reference solution took longer than the time limit of 0.3 s").all()
     assert failed == {"res": len(run_rows), "res_ref": len(ref_rows)}
