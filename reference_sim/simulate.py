@@ -128,28 +128,39 @@ _STEP_ERRORS = (ImplicitSolveError, np.linalg.LinAlgError, OverflowError, ZeroDi
 
 
 def _simulate_compiled(stepper, dt_s: float, n_steps: int, y) -> Run:
-    """:func:`_simulate_single` with the steps compiled (reference_sim.compiled): the compiled loop runs
-    until a step is not routine; that one step is taken in Python, exactly as the Python path takes it
-    (it raises, gives a bad state, or solves a stalled implicit step), and the loop resumes after it.
-    States, divergence time and message are those of the Python path."""
+    """:func:`_simulate_single` with the steps compiled (:func:`steps_compiled`). States, divergence time and
+    message are those of the Python path."""
     rows = np.empty((n_steps + 1, 13))
     rows[0] = y
+    k, why = steps_compiled(stepper, rows, n_steps, stepper.step)
+    if k is None:
+        return Run(dt_s * np.arange(n_steps + 1), rows)
+    return diverged(rows[:k].copy(), dt_s, why)
+
+
+def steps_compiled(stepper, rows, n_steps: int, python_step, variant: str | None = None):
+    """Fill ``rows`` (n_steps + 1, 13) from ``rows[0]`` with the compiled loop of ``stepper``'s scheme (or
+    ``variant``'s), in chunks of COMPILED_CHUNK steps; a step the loop does not take (not routine:
+    reference_sim.compiled) is taken by ``python_step`` — which raises, gives a bad state, or solves a stalled
+    implicit step exactly as the Python path does — and the loop resumes after it.
+
+    Returns ``(None, "")``, or ``(k, why)`` when step k diverged: ``rows[:k]`` are the good states and ``why``
+    the Python path's words (": <error>" or " (<what is wrong with the state>)")."""
     n = 0
     params = compiled.parameters(stepper)
     while True:
         stop = min(n + COMPILED_CHUNK, n_steps)
-        n = compiled.run_until_exceptional(stepper, rows, n, stop, BLOWUP_LIMIT, params=params)
+        n = compiled.run_until_exceptional(stepper, rows, n, stop, BLOWUP_LIMIT, variant, params)
         if n == n_steps:
-            return Run(dt_s * np.arange(n_steps + 1), rows)
+            return None, ""
         if n == stop:
             continue   # back in Python between chunks: a time limit (SIGALRM) can stop the run here
         try:
-            nxt = stepper.step(rows[n].tolist())
+            nxt = np.array(python_step(rows[n].tolist()), dtype=float)
         except _STEP_ERRORS as exc:
-            return diverged(rows[:n + 1].copy(), dt_s, f": {type(exc).__name__}: {exc}")
-        nxt = np.array(nxt, dtype=float)
+            return n + 1, f": {type(exc).__name__}: {exc}"
         if bad_rows(nxt):
-            return diverged(rows[:n + 1].copy(), dt_s, f" ({blowup_words(nxt)})")
+            return n + 1, f" ({blowup_words(nxt)})"
         rows[n + 1] = nxt
         n += 1
 

@@ -25,7 +25,6 @@ from types import SimpleNamespace
 import numpy as np
 
 from reference_sim.integrators import IMPLICIT_TOL, ImplicitSolveError, get_step
-from reference_sim.simulate import BLOWUP_LIMIT
 from reference_sim.scalar import ScalarStepper
 
 __all__ = ["CaseKernel", "columns", "rows", "clear_cache"]
@@ -251,27 +250,14 @@ def runs_compiled(variant: str, problems, h_s, y0, n_steps):
     steppers = [_stepper(p, float(h)) for p, h in zip(problems, h_s)]
     if not steppers or not compiled.usable(steppers[0], variant):
         return None
+    from reference_sim.simulate import steps_compiled
     out = []
-    for p, h, st, y, n in zip(problems, h_s, steppers, y0, n_steps):
-        rows = np.empty((int(n) + 1, 13))
-        rows[0] = y
-        out.append((rows, _run_member(compiled, variant, p, float(h), st, rows, int(n))))
-    return out
-
-
-def _run_member(compiled, variant, problem, h, stepper, rows, n):
-    """Fill ``rows`` (n + 1, 13) from ``rows[0]``; the step at which the run diverged, or None."""
-    k = 0
     with np.errstate(all="ignore"):
-        while True:
-            k = compiled.run_until_exceptional(stepper, rows, k, n, BLOWUP_LIMIT, variant)
-            if k == n:
-                return None
-            try:
-                nxt = np.array(ScalarStepper(problem, variant, h).step(rows[k].tolist()), dtype=float)
-            except (ImplicitSolveError, np.linalg.LinAlgError, ArithmeticError, ValueError):
-                return k + 1
-            if not np.all(np.isfinite(nxt)) or np.max(np.abs(nxt)) > BLOWUP_LIMIT:
-                return k + 1
-            rows[k + 1] = nxt
-            k += 1
+        for p, h, st, y, n in zip(problems, h_s, steppers, y0, n_steps):
+            rows = np.empty((int(n) + 1, 13))
+            rows[0] = y
+            # the float stepper of the scheme itself, built only for a step the compiled loop hands over
+            python_step = (lambda row, p=p, h=float(h): ScalarStepper(p, variant, h).step(row))
+            k, _ = steps_compiled(st, rows, int(n), python_step, variant)
+            out.append((rows, k))
+    return out
