@@ -350,10 +350,8 @@ FUZZ_LEVER_ROUNDINGS = 4.0
 #: A free-running ladder is "two-term consistent" (fuzz.properties.two_term_consistent) when the third
 #: difference of e/h^p is within this fraction of its size: an order-p error with its next term gives 0
 #: (plus the third term, ~0.4 (c₃/c₁) h² ≪ 0.25 in the asymptotic range); an order deficit of 0.5 gives 0.38,
-#: of 1 gives 0.75.
+#: of 1 gives 0.75. Each error is allowed its round-off floor (it bounds the round-off in it).
 FUZZ_TWO_TERM_TOL = 0.25
-#: ... and each of its errors at least this many times its round-off floor (else round-off shapes u).
-FUZZ_RESOLVED = 100.0
 #: Extra halvings a too-low free-running order is re-judged on before it counts (the fuzz: h/8 … h/32 after (h, h/2, h/4);
 #: the sweep: three halvings below its file's finest Δt; analysis.refinement):
 #: the 600 s campaign of seed 2026 found correct first-order variants at order 0.52 on (h, h/2, h/4) whose

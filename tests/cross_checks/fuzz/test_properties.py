@@ -26,10 +26,37 @@ def test_a_wrong_order_is_not_two_term_consistent(order, errors):
     assert not two_term_consistent(H, errors, [0.0] * 3, order)
 
 
-def test_errors_near_their_floor_are_never_excused():
+def test_floors_small_beside_the_errors_leave_a_wrong_order_wrong():
+    # each error allowed 2 % of round-off: a wrong order stays far from a two-term fit
+    for order, e in [(4.0, 2.0 * H ** 2), (2.0, 5.0 * H), (1.0, 0.3 * H ** 0.5), (1.0, 0.3 + 0 * H)]:
+        assert not two_term_consistent(H, e, e / 50.0, order)
+    # and an order-p error with a large next term stays consistent, its floors or not
     a, b = 0.0128, -0.25
     e = a * H + b * H ** 2
-    assert not two_term_consistent(H, e, e / 50.0, 1.0)
+    assert two_term_consistent(H, e, e / 50.0, 1.0)
+
+
+def test_an_order_3_rk4_with_three_resolved_rungs_is_not_excused():
+    # a pure third-order error where a fourth is expected: u = e/h⁴ ∝ 1, 2, 4 → third difference 1 − 6 + 8
+    # = 3 of max 4 (0.75 > 0.25), with floors a thousand times below the finest error
+    e = 1.35e-12 * (H / H[0]) ** 3
+    assert not two_term_consistent(H, e, [e[-1] / 1000.0] * 3, 4.0)
+
+
+def test_a_finest_rung_within_its_floor_leaves_the_order_undecided():
+    """The fuzz's reference:rk4 at seed 2026 case 10975 (a short torque-free spin, 8–32 steps): angular
+    velocity errors measured 1.35e-12, 1.25e-13, 1.08e-14 rad/s over floors 0.91, 1.22, 1.64e-14. The same
+    scheme in 80-bit extended precision (no round-off at this level), against itself at h/256, has truncation
+    errors 1.3528e-12, 1.2495e-13, 1.0318e-14, 7.32e-16, 4.86e-17: pairwise orders 3.44, 3.60, 3.82, 3.91 —
+    order 4 approached from below (the next term cancels part of the leading one), not order 3.44."""
+    dts = [0.0012141872302859603, 0.0006070936151429801, 0.00030354680757149006]
+    assert two_term_consistent(dts, [1.3526506e-12, 1.2498094e-13, 1.0807438e-14],
+                               [9.147727e-15, 1.2150679e-14, 1.6397493e-14], 4.0)
+    # the extended-precision errors themselves are consistent as measured
+    assert two_term_consistent(dts, [1.3528e-12, 1.2495e-13, 1.0318e-14], [0.0] * 3, 4.0)
+    # on two resolved rungs a third order cannot be told from it either: no claim either way
+    e3 = 1.3526506e-12 * (np.array(dts) / dts[0]) ** 3     # 1.35e-12, 1.69e-13, 2.11e-14
+    assert two_term_consistent(dts, e3, [9.147727e-15, 1.2150679e-14, 1.6397493e-14], 4.0)
 
 
 def test_the_lever_arm_floor_covers_mujocos_measured_round_off():
@@ -69,3 +96,51 @@ def test_a_too_low_order_that_the_measured_round_off_leaves_room_for_is_no_claim
     rec, claimed = _fit_record(None, "drake:runge_kutta3", "orientation", dts, e_wrong, fl, None, exp,
                                "free_running_order")
     assert claimed and rec is not None and rec["order"] < 2.7
+
+
+CASE_10975 = """
+name = "fuzz_2026_10975"
+duration = 0.009713497842287682
+dt = 0.0012141872302859603
+dt_ladder = [0.0012141872302859603, 0.0006070936151429801, 0.00030354680757149006]
+[body]
+mass = 13.418062692405062
+inertia = [[0.18299685192331938, 0.012506586646448558, -0.03611584042238686], [0.012506586646448558, 0.16803213718941734, -0.02047636314681324], [-0.03611584042238686, -0.02047636314681324, 0.22006208861208057]]
+[initial]
+position = [0.4965547274889938, 0.6139767823447239, -0.7076226550168009]
+orientation = [-0.1591930139186066, -0.2238851904636564, -0.46458784947700604, -0.8418379511098875]
+angular_velocity_body = [-10.70141067940838, 0.29551993426424517, 4.560257992746166]
+[forces]
+gravity = [4.012002558059458, 0.5542993988183263, -2.274065873677227]
+"""
+
+
+def test_case_10975_is_order_4_approached_from_below_in_extended_precision(tmp_path):
+    """The numbers of test_a_finest_rung_within_its_floor_leaves_the_order_undecided, measured: the
+    reference's RK4 stepped in 80-bit long double (round-off ~1e-19 relative, far below these errors), its
+    angular velocity against the same scheme at h/256 (error ~(1/256)⁴ of the coarsest, 3e-22 rad/s)."""
+    from cross_checks.scenario.parse import load_scenario
+    from reference_sim.scalar import ScalarStepper
+    if np.finfo(np.longdouble).eps > 1e-18:
+        pytest.skip("no extended precision on this platform")
+    path = tmp_path / "case.toml"
+    path.write_text(CASE_10975)
+    sc = load_scenario(path)
+    T, n0 = np.longdouble(sc.duration_s), round(sc.duration_s / sc.dt_ladder_s[0])
+
+    def omega_rows(n):
+        st = ScalarStepper(sc.problem, "rk4", sc.duration_s / n, backend="numpy")
+        st.h = T / n
+        y = [np.array([c], dtype=np.longdouble) for c in sc.problem.initial_packed()]
+        rows = [np.array([c[0] for c in y[10:13]])]
+        for _ in range(n):
+            y = st._rk4(y)
+            rows.append(np.array([c[0] for c in y[10:13]]))
+        return np.array(rows)
+
+    fine = omega_rows(n0 * 256)
+    errs = [float(np.max(np.linalg.norm((omega_rows(n0 * k) - fine[::256 // k]).astype(float), axis=1)))
+            for k in (1, 2, 4, 8)]
+    pairs = [np.log2(a / b) for a, b in zip(errs, errs[1:])]
+    assert 3.3 < pairs[0] < pairs[1] < pairs[2] < 4.0, pairs          # rising towards 4, from 3.44
+    assert abs(errs[0] - 1.3526506e-12) < 0.01 * errs[0]              # the float64 run's error at h
