@@ -68,5 +68,6 @@ def run_fuzz(args, BadInput, resolve_engines, dask_client) -> int:
             print(f"    explained: {cx['explanation']}", file=sys.stderr)
         print(f"    reproduce: {cx['reproduce']}", file=sys.stderr)
     for f in summary["not_shrunk"]:
-        print(f"  (not shrunk) {f['property']} of {' / '.join(f['variants'])}: {f['cases']} case(s)", file=sys.stderr)
+        why = " (a documented engine behaviour explains each)" if f.get("explained") else ""
+        print(f"  (not shrunk) {f['property']} of {' / '.join(f['variants'])}: {f['cases']} case(s){why}", file=sys.stderr)
     return 1

@@ -255,16 +255,23 @@ _SWEEP_GATED = ("agreement", "free_running_order")
 
 
 def _failures(results) -> dict:
-    """{variants: {"hits": [(seed, index, violation, spec)], "also": {property: cases}}}: one distinct
-    failure per variant set (per pair for agreement), in campaign order. ``hits`` are the violations of
-    the property to shrink — the first sweep-gated property that failed, else the first that failed."""
+    """{(variants, explained): {"variants", "explained", "hits": [(seed, index, violation, spec)],
+    "also": {property: cases}}}: one distinct failure per variant set (per pair for agreement) and per
+    whether a documented engine behaviour (``known.explain``, judged on each case as drawn) accounts for
+    it, in campaign order — so an unexplained failure of a variant is never listed under the explained
+    counterexample of the same variant. ``hits`` are the violations of the property to shrink — the
+    first sweep-gated property that failed, else the first that failed."""
     by: dict = {}
     for r in results:
         for c in r["cases"]:
+            if not c["violations"]:
+                continue
+            scenario = pipeline.scenario_of(c["spec"])
             for v in c["violations"]:
-                by.setdefault(tuple(v["variants"]), []).append((r["seed"], c["index"], v, c["spec"]))
+                key = (tuple(v["variants"]), bool(known.explain(scenario, v)))
+                by.setdefault(key, []).append((r["seed"], c["index"], v, c["spec"]))
     out = {}
-    for vs, hits in by.items():
+    for key, hits in by.items():
         gated = [h for h in hits if h[2]["property"] in _SWEEP_GATED]
         prop = (gated or hits)[0][2]["property"]
         chosen = [h for h in hits if h[2]["property"] == prop]
@@ -272,8 +279,20 @@ def _failures(results) -> dict:
         for h in hits:
             if h[2]["property"] != prop:
                 also.setdefault(h[2]["property"], set()).add(h[1])
-        out[vs] = {"hits": chosen, "also": {p: len(i) for p, i in also.items()}}
+        out[key] = {"variants": key[0], "explained": key[1], "hits": chosen,
+                    "cases": len({(h[0], h[1]) for h in chosen}), "also": {p: len(i) for p, i in also.items()}}
     return out
+
+
+def _same_finding(sig, explained: bool):
+    """``keep(spec, outcome)`` for the shrinker: the case still shows ``sig`` with a violation that a
+    documented engine behaviour explains (``explained``) or does not — shrinking must not wander from an
+    unexplained failure into an explained one of the same variant (or back)."""
+    def keep(spec, outcome) -> bool:
+        scenario = pipeline.scenario_of(spec)
+        return any(S.signature(v) == sig and bool(known.explain(scenario, v)) == explained
+                   for v in outcome.violations)
+    return keep
 
 
 def _magnitude(v) -> str:
@@ -296,7 +315,8 @@ def _counterexample(failure, engine_files, deadline, log) -> dict:
     sig = S.signature(violation)
     variants = list(sig[1])
     t0 = time.monotonic()
-    small, steps = S.shrink(spec, sig, variants, deadline=min(deadline, t0 + SHRINK_S))
+    small, steps = S.shrink(spec, sig, variants, deadline=min(deadline, t0 + SHRINK_S),
+                            keep=_same_finding(sig, failure["explained"]))
     chain = [small] if small is spec else [small, spec]
     confirmed, gate, final = False, [], small
     for cand in chain:
@@ -305,13 +325,15 @@ def _counterexample(failure, engine_files, deadline, log) -> dict:
             confirmed, final = True, cand
             break
     outcome = pipeline.evaluate_specs([final], variants)[0]
-    found = [v for v in (outcome.violations if outcome else []) if S.signature(v) == sig]
+    final_scenario = pipeline.scenario_of(final)
+    found = [v for v in (outcome.violations if outcome else []) if S.signature(v) == sig
+             and bool(known.explain(final_scenario, v)) == failure["explained"]]
     v_final = found[0] if found else violation
-    why = known.explain(pipeline.scenario_of(final), v_final)
+    why = known.explain(final_scenario, v_final)
     log(f"  {sig[0]} of {' / '.join(variants)}: case {index}, shrunk in {len(steps)} step(s) "
         f"({time.monotonic() - t0:.0f} s), {'confirmed by rbcheck sweep' if confirmed else 'NOT confirmed by rbcheck sweep'}")
     return {"property": sig[0], "variants": variants, "quantity": sig[2], "outcome": sig[3], "seed": seed, "index": index,
-            "cases_with_this_failure": len(hits), "sentence": v_final["sentence"], "magnitude": _magnitude(v_final),
+            "cases_with_this_failure": failure["cases"], "sentence": v_final["sentence"], "magnitude": _magnitude(v_final),
             "first_sentence": violation["sentence"], "shrink_steps": steps, "spec": final,
             "confirmed_by_sweep": confirmed, "sweep_failures": gate, "explanation": why,
             "engine_files": list(engine_files), "also_failed": failure["also"],
@@ -377,10 +399,11 @@ def run_campaign(variants, out_dir, *, budget_s: float, seed: int = 0, jobs: int
     shrink_deadline = time.monotonic() + SHRINK_S * MAX_SHRUNK
     for failure in list(failures.values())[:MAX_SHRUNK]:
         counterexamples.append(_counterexample(failure, engine_files, shrink_deadline, log))
-    unshrunk = [{"property": f["hits"][0][2]["property"], "variants": list(vs), "cases": len(f["hits"]),
+    unshrunk = [{"property": f["hits"][0][2]["property"], "variants": list(f["variants"]), "cases": f["cases"],
+                 "explained": f["explained"],
                  "also_failed": f["also"],
                  "first": {"seed": f["hits"][0][0], "index": f["hits"][0][1], "sentence": f["hits"][0][2]["sentence"]}}
-                for vs, f in list(failures.items())[MAX_SHRUNK:]]
+                for f in list(failures.values())[MAX_SHRUNK:]]
     summary = _summary(results, variants, seed, budget_s, jobs, started, search_s, time.monotonic() - t0,
                        counterexamples, unshrunk)
     staging = staging_dir(out)

@@ -148,11 +148,12 @@ def candidates(spec: dict) -> list:
 # --- shrinking ---------------------------------------------------------------------------------------------
 
 def shrink(spec: dict, sig: tuple, variants, *, threads: int = 1, deadline: float | None = None,
-           max_rounds: int = 60) -> tuple:
+           max_rounds: int = 60, keep=None) -> tuple:
     """The smallest scenario dict reachable from ``spec`` that still shows ``sig``: (spec, [steps taken]).
 
     ``variants``: what to run (the signature's variants suffice). ``deadline``: a time.monotonic() after
-    which shrinking stops where it is (the case then is simply less small)."""
+    which shrinking stops where it is (the case then is simply less small). ``keep(spec, outcome)``: a
+    further condition a smaller case must meet (campaign: the same explained-or-not finding)."""
     steps = []
     current = spec
     for _ in range(max_rounds):
@@ -164,7 +165,7 @@ def shrink(spec: dict, sig: tuple, variants, *, threads: int = 1, deadline: floa
             chunk = cands[k:k + CHUNK]
             outcomes = evaluate_specs([c for _, c in chunk], variants, threads=threads)
             for (what, cand), o in zip(chunk, outcomes):
-                if _has(o, sig):
+                if _has(o, sig) and (keep is None or keep(cand, o)):
                     accepted = (what, cand)
                     break
             if accepted:
