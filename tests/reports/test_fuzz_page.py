@@ -25,8 +25,11 @@ SUMMARY = {
                          "cases_with_this_failure": 3, "confirmed_by_sweep": True,
                          "sentence": "pybullet:maximal: angular_velocity does not converge <b>",
                          "explanation": "btMatrix3x3::solve33 threshold", "shrink_steps": ["duration halved"],
+                         "also_failed": {"one_step_order": 4},
                          "reproduce": "rbcheck sweep counterexamples/01_x.toml --engines pybullet:maximal"}],
-    "not_shrunk": [], "batch_errors": [{"batch": 3, "error": "ExactError: DOP853 failed"}],
+    "not_shrunk": [{"property": "conservation", "variants": ["mujoco:rk4"], "cases": 2, "explained": False,
+                    "also_failed": {}, "first": {"seed": 7, "index": 9, "sentence": "energy drift 3× its allowance"}}],
+    "batch_errors": [{"batch": 3, "error": "ExactError: DOP853 failed"}],
 }
 
 
@@ -34,7 +37,8 @@ def test_the_page_shows_every_counterexample_and_engine_row(tmp_path):
     (tmp_path / "fuzz.json").write_text(json.dumps(SUMMARY))
     html = render_fuzz(tmp_path).read_text()
     for text in ("seed 7", "counterexamples/01_x.toml", "solve33", "pybullet:maximal", "100 / 24", "duration halved",
-                 "rbcheck sweep counterexamples/01_x.toml", "ExactError", "h·L", "tensor 20", "1 distinct failure"):
+                 "rbcheck sweep counterexamples/01_x.toml", "ExactError", "h·L", "tensor 20", "2 distinct failure",
+                 "also failed: one_step_order on 4 case(s)", "mujoco:rk4: 2 case(s); first: case 9: energy drift"):
         assert text in html, text
     assert "converge &lt;b&gt;" in html and "converge <b>" not in html      # data is escaped
 
