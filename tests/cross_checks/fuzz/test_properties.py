@@ -3,6 +3,7 @@ import numpy as np
 import pytest
 
 from cross_checks.fuzz.properties import two_term_consistent
+from tests.helpers.scenarios import RK4_PRE_ASYMPTOTIC_FROM_BELOW
 
 H = np.array([0.0377, 0.01885, 0.009425])
 
@@ -98,23 +99,6 @@ def test_a_too_low_order_that_the_measured_round_off_leaves_room_for_is_no_claim
     assert claimed and rec is not None and rec["order"] < 2.7
 
 
-CASE_10975 = """
-name = "fuzz_2026_10975"
-duration = 0.009713497842287682
-dt = 0.0012141872302859603
-dt_ladder = [0.0012141872302859603, 0.0006070936151429801, 0.00030354680757149006]
-[body]
-mass = 13.418062692405062
-inertia = [[0.18299685192331938, 0.012506586646448558, -0.03611584042238686], [0.012506586646448558, 0.16803213718941734, -0.02047636314681324], [-0.03611584042238686, -0.02047636314681324, 0.22006208861208057]]
-[initial]
-position = [0.4965547274889938, 0.6139767823447239, -0.7076226550168009]
-orientation = [-0.1591930139186066, -0.2238851904636564, -0.46458784947700604, -0.8418379511098875]
-angular_velocity_body = [-10.70141067940838, 0.29551993426424517, 4.560257992746166]
-[forces]
-gravity = [4.012002558059458, 0.5542993988183263, -2.274065873677227]
-"""
-
-
 def test_case_10975_is_order_4_approached_from_below_in_extended_precision(tmp_path):
     """The numbers of test_a_finest_rung_within_its_floor_leaves_the_order_undecided, measured: the
     reference's RK4 stepped in 80-bit long double (round-off ~1e-19 relative, far below these errors), its
@@ -124,7 +108,7 @@ def test_case_10975_is_order_4_approached_from_below_in_extended_precision(tmp_p
     if np.finfo(np.longdouble).eps > 1e-18:
         pytest.skip("no extended precision on this platform")
     path = tmp_path / "case.toml"
-    path.write_text(CASE_10975)
+    path.write_text(RK4_PRE_ASYMPTOTIC_FROM_BELOW)
     sc = load_scenario(path)
     T, n0 = np.longdouble(sc.duration_s), round(sc.duration_s / sc.dt_ladder_s[0])
 
