@@ -61,6 +61,9 @@ def run_engine_checks(variant, scenarios, *, engine_file=None, out_dir=None, cac
     from cross_checks.engines import EngineUnavailable, engine_files_registered, get_adapter
     from cross_checks.sweep import SweepError, run_sweep
 
+    if out_dir is not None:
+        from reports.install import check_templates
+        check_templates()  # the kept report's templates, before the runs
     with contextlib.ExitStack() as stack:
         stack.enter_context(engine_files_registered(_as_list(engine_file)))
         variants = _variants(variant)

@@ -16,8 +16,15 @@ from pathlib import Path
 from cross_checks.core.files import umask
 from cross_checks.core.progress import is_tty, stage
 from reports.data import Results, ResultsError, load_results
+from reports.install import IncompleteInstallation, check_templates
 
-__all__ = ["render", "load_results", "Results", "ResultsError"]
+__all__ = ["render", "load_results", "Results", "ResultsError", "check_installation", "IncompleteInstallation"]
+
+
+def check_installation() -> None:
+    """IncompleteInstallation (naming the file) when a template the pages need is not installed: the
+    commands that end in a report call this before any work."""
+    check_templates()
 
 
 _SHARED: dict = {}   # the loaded results, inherited by forked drawing processes (not reloaded per figure)

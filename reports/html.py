@@ -8,11 +8,12 @@ from __future__ import annotations
 import base64
 import math
 
-from jinja2 import Environment, PackageLoader, StrictUndefined, select_autoescape
+from jinja2 import Environment, PackageLoader, StrictUndefined, TemplateNotFound, select_autoescape
 
 from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, UNITS
 from reports.data import LABELS
 from reports.findings import findings, fmt, fmt_dt
+from reports.install import incomplete
 from reports.glance import ACCURACY_TIERS, GLYPHS, cell, families, glyph, order_text, verdict_box
 
 __all__ = ["environment", "render_pages", "page_name", "rows_extracts"]
@@ -39,8 +40,18 @@ _FIG_TITLES = {"trajectories": "Trajectories", "errors": "Error vs time", "conse
                "work": "Work-precision"}
 
 
+class _Loader(PackageLoader):
+    """The package's templates; one that is missing is an incomplete installation, said with its path."""
+
+    def get_source(self, environment, template):
+        try:
+            return super().get_source(environment, template)
+        except TemplateNotFound:
+            raise incomplete(template) from None
+
+
 def environment() -> Environment:
-    return Environment(loader=PackageLoader("reports", "templates"),
+    return Environment(loader=_Loader("reports", "templates"),
                        autoescape=select_autoescape(["html", "htm", "xml"], default_for_string=True, default=True),
                        undefined=StrictUndefined, trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True)
 

@@ -507,6 +507,8 @@ def cmd_sweep(args) -> int:
     from cross_checks.sweep import SweepError, SweepInterrupted
     from cross_checks.sweep.results_dir import ResultsDirError, check_output_dir
 
+    import reports
+    reports.check_installation()  # the report's templates, before minutes of runs
     try:
         check_output_dir(args.out)  # before any work (run_sweep checks again just before it starts)
     except ResultsDirError as exc:
@@ -571,6 +573,7 @@ def cmd_report(args) -> int:
     from cross_checks.sweep.results_dir import ResultsDirError, check_writable_dir
 
     jobs = args.jobs or usable_cores()
+    reports.check_installation()
     if not Path(args.dir).is_dir():
         raise BadInput(f"{args.dir}: no such directory")
     try:
@@ -646,6 +649,7 @@ def main(argv=None) -> int:
     from cross_checks.sweep.lifecycle import Terminated, handle_sigterm
     from cross_checks.scenario import ScenarioError
     from cross_checks.core.trajectory import TrajectoryError
+    from reports.install import IncompleteInstallation
 
     try:
         args = build_parser().parse_args(argv)
@@ -656,7 +660,7 @@ def main(argv=None) -> int:
         if getattr(args, "engine_file", None):
             _use_engine_files(args.engine_file)
         return COMMANDS[args.command](args)
-    except (ScenarioError, TrajectoryError, BadInput) as exc:
+    except (ScenarioError, TrajectoryError, BadInput, IncompleteInstallation) as exc:
         return _error(args.command, str(exc))
     except Terminated:
         print(f"rbcheck {args.command}: terminated", file=sys.stderr)

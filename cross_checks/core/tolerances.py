@@ -102,15 +102,15 @@ JOB_MEMORY_LIMIT_BYTES = 2 * 2 ** 30
 #: DOP853 (rtol 1e-13) right-hand-side evaluations per radian of the fastest rate of the dynamics:
 #: measured 90–93 for springs from k = 40 to 1e6 N/m and 64 for spins of 50–500 rad/s; 100 covers both.
 DOP853_EVALS_PER_RAD = 100
-#: CPU seconds per right-hand-side evaluation inside solve_ivp (reference_sim.integrators.rhs on one
-#: body plus DOP853's own work): measured 211–246 µs on this 2-core machine; 250 µs.
-DOP853_S_PER_EVAL = 250e-6
-#: A scenario whose DOP853 reference is estimated above this is refused up front: 300 s, while the
-#: catalog's two DOP853 references take < 1 s (applied_torque, spring_pendulum); a stiff spring
-#: (k = 1e9 N/m, ~620 s of CPU per simulated second) is refused at once instead of running for hours.
-REFERENCE_COST_LIMIT_S = 300.0
-#: Wall-time limit of one reference solve while it runs: 3x the up-front limit, so only an estimate
-#: that is 3x too low (a much slower machine) meets it; the solve then is a `failed` scenario.
+#: Right-hand-side evaluations a scenario's DOP853 reference may need, refused up front beyond it:
+#: 1.2e6 is 300 s of CPU at the slowest cost per evaluation measured here (250 µs: the NumPy rhs of one
+#: body plus DOP853's own work; 40-60 µs on a faster machine), while the catalog's two DOP853
+#: references need < 3e4; a stiff spring (k = 1e9 N/m, ~2.5e6 evaluations per simulated second) is
+#: refused at once instead of running for hours. A count, not a time, so every machine refuses alike.
+REFERENCE_EVALS_LIMIT = 1.2e6
+#: Wall-time limit of one reference solve while it runs: 3x what REFERENCE_EVALS_LIMIT costs at the
+#: slowest measured evaluation, so only an estimate that is far too low (or a much slower machine)
+#: meets it; the solve then is a `failed` scenario.
 REFERENCE_TIME_LIMIT_S = 900.0
 #: Wall-time limit of one run while it runs: the largest run allowed (~1.9e6 steps) at the slowest
 #: measured per-step cost (MuJoCo RK4 evaluating forces in Python at its 4 stages, 270 µs) takes

@@ -1,7 +1,8 @@
 """Resource limits of a scenario, decided up front from the scenario alone (before any run starts).
 
 A run records every step, so its memory grows with ``duration / Δt``; the DOP853 reference costs CPU
-in proportion to ``duration × (the fastest rate of the dynamics)``. Both are estimated from the
+in proportion to ``duration × (the fastest rate of the dynamics)``, counted in right-hand-side
+evaluations (never in seconds: the limits are the same on every machine). Both are estimated from the
 scenario and refused with a :class:`~cross_checks.scenario.ScenarioError` naming the field, the
 estimate and the limit, instead of a MemoryError or an hour-long solve. The numbers (and where each
 comes from) are in :mod:`cross_checks.core.tolerances` under "hardening".
@@ -19,7 +20,7 @@ import numpy as np
 from cross_checks.core import tolerances as tol
 
 __all__ = ["LimitExceeded", "check_scenario_limits", "check_run_steps", "run_memory_bytes",
-           "reference_cost_s", "fastest_rate", "MAX_STEPS_PER_RUN"]
+           "reference_evals", "fastest_rate", "MAX_STEPS_PER_RUN"]
 
 #: Steps one run may record: the memory a job may use at the measured cost per recorded step.
 MAX_STEPS_PER_RUN = int(tol.JOB_MEMORY_LIMIT_BYTES // tol.BYTES_PER_RECORDED_STEP)
@@ -105,14 +106,15 @@ def fastest_rate(scenario) -> tuple:
     return max(rates, key=lambda r: r[0])
 
 
-def reference_cost_s(scenario) -> float:
-    """Estimated CPU seconds of the scenario's DOP853 reference (0 when a closed form covers it)."""
+def reference_evals(scenario) -> float:
+    """Estimated right-hand-side evaluations of the scenario's DOP853 reference solve (0 when a closed
+    form covers it): DOP853_EVALS_PER_RAD per radian of the fastest rate over the duration. A count of
+    operations, the same on every machine; what it costs in seconds depends on the machine."""
     from cross_checks.scenario.references import analytic_available
     if scenario.reference != "ground_truth" and analytic_available(scenario)[0]:
         return 0.0
     rate, _ = fastest_rate(scenario)
-    evals = tol.DOP853_EVALS_PER_RAD * max(rate, 1.0 / scenario.duration_s) * scenario.duration_s
-    return evals * tol.DOP853_S_PER_EVAL
+    return tol.DOP853_EVALS_PER_RAD * max(rate, 1.0 / scenario.duration_s) * scenario.duration_s
 
 
 def check_scenario_limits(scenario) -> None:
@@ -125,11 +127,12 @@ def check_scenario_limits(scenario) -> None:
         raise LimitExceeded("dt_ladder", f"the finest run and the reference on the union of the time grids need "
                                          f"~{_gib(mem)} of memory; the limit is {_gib(tol.JOB_MEMORY_LIMIT_BYTES)} "
                                          "per job (use fewer or coarser rungs, or a shorter duration)")
-    cost = reference_cost_s(scenario)
-    if cost > tol.REFERENCE_COST_LIMIT_S:
+    evals = reference_evals(scenario)
+    if evals > tol.REFERENCE_EVALS_LIMIT:
         rate, fld = fastest_rate(scenario)
         raise LimitExceeded(fld, f"the dynamics run at {rate:.3g} 1/s, so the DOP853 reference over the duration "
-                                 f"{scenario.duration_s:g} s would take ~{cost:.3g} s of CPU; the limit is "
-                                 f"{tol.REFERENCE_COST_LIMIT_S:g} s (shorten the duration or soften the dynamics)")
+                                 f"{scenario.duration_s:g} s would need ~{evals:.3g} right-hand-side evaluations; "
+                                 f"the limit is {tol.REFERENCE_EVALS_LIMIT:.3g} (minutes of CPU on any machine; "
+                                 "shorten the duration or soften the dynamics)")
 
 

@@ -3,7 +3,6 @@ and every other error path, is exit 2 with one line (no traceback); time limits 
 import json
 import subprocess
 import sys
-import time
 
 import pytest
 
@@ -26,11 +25,14 @@ def _one_line(capsys, command):
 
 
 @pytest.mark.parametrize("where", ["under_file", "proc"])
-def test_bench_json_fails_at_once_not_after_the_benchmark(regular_file, capsys, where):
+def test_bench_json_fails_at_once_not_after_the_benchmark(regular_file, capsys, monkeypatch, where):
+    import cross_checks.bench
+
+    def measured(*a, **k):
+        raise AssertionError("the benchmark ran before its --json output was checked")
+    monkeypatch.setattr(cross_checks.bench, "main", measured)
     target = str(regular_file / "b.json") if where == "under_file" else "/proc/rbcheck-bench.json"
-    t0 = time.perf_counter()
     assert main(["bench", "--quick", "--json", target]) == 2
-    assert time.perf_counter() - t0 < 2.0  # the quick benchmark alone takes ~10 s
     _one_line(capsys, "bench")
 
 
@@ -91,7 +93,6 @@ angular_velocity = [0.3, 1.0, 0.2]
     # 200 s) may take longer than 0.05 s on a loaded machine, which is not what this test is about. Each in a
     # fresh interpreter: the limit is a SIGALRM timer of the main thread, and a test worker's state (after
     # hundreds of other tests) is not what a sweep process starts with.
-    t0 = time.perf_counter()
     code = ("import json, sys\nfrom cross_checks.scenario import load_scenario\nfrom cross_checks.sweep import run_sweep\n"
             "s = run_sweep([load_scenario(sys.argv[1])], ['reference:implicit_euler'], sys.argv[2], jobs=1, "
             "use_cache=False, progress=False, run_time_limit_s=float(sys.argv[3]), reference_time_limit_s=float(sys.argv[4]))\n"
@@ -105,7 +106,6 @@ angular_velocity = [0.3, 1.0, 0.2]
                               capture_output=True, text=True, timeout=120)
         assert proc.returncode == 0, proc.stderr[-2000:]
         failed[out] = json.loads(proc.stdout.strip().splitlines()[-1])
-    assert time.perf_counter() - t0 < 60
     import pandas as pd
     run_rows = pd.read_csv(tmp_path / "res" / "results.csv")
     ref_rows = pd.read_csv(tmp_path / "res_ref" / "results.csv")
