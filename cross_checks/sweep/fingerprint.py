@@ -18,7 +18,7 @@ import platform
 from pathlib import Path
 
 __all__ = ["FINGERPRINTED_PACKAGES", "fingerprinted_files", "source_fingerprint", "code_fingerprint",
-           "environment", "cpu_model"]
+           "environment", "cpu_model", "numerical_stack"]
 
 #: The packages whose source determines a job's numbers: the course in NumPy and every cross_checks
 #: layer a job runs through (README "Layout": core → scenario → engines → analysis → sweep). The
@@ -118,3 +118,41 @@ def environment() -> list:
                              platform.python_version(), platform.machine(), cpu_model(), _blas(numpy),
                              _blas(scipy)])
     return list(_ENVIRONMENT)
+
+
+def _owner(library: str) -> str:
+    """The package a loaded library ships with (``.../numpy.libs/libscipy_openblas64_-x.so`` -> numpy)."""
+    folder = Path(library).parent.name
+    return folder[:-len(".libs")] if folder.endswith(".libs") else Path(library).name
+
+
+def _blas_kernels() -> dict:
+    """``{package: "BLAS version (kernel architecture)"}`` of the BLAS libraries loaded (threadpoolctl):
+    OpenBLAS picks its kernels per CPU (e.g. Haswell, SkylakeX, or what OPENBLAS_CORETYPE forces)."""
+    try:
+        import scipy.linalg  # noqa: F401 - loads SciPy's BLAS beside NumPy's
+        from threadpoolctl import threadpool_info
+        return {_owner(i["filepath"]): f"{i.get('internal_api', '')} {i.get('version', '')} "
+                f"({i.get('architecture', '?')} kernels)" for i in threadpool_info() if i.get("user_api") == "blas"}
+    except Exception:  # noqa: BLE001 - no threadpoolctl or an unusual build: the BLAS versions still say much
+        return {}
+
+
+def _compiled_target() -> str:
+    """The CPU numba compiles the reference's fast path for ("" without numba): the instructions it may use
+    (fused multiply-add, vector width) change last bits."""
+    try:
+        import llvmlite.binding as llvm
+        return llvm.get_host_cpu_name()
+    except Exception:  # noqa: BLE001 - no numba here: the Python steps run, nothing compiled
+        return ""
+
+
+def numerical_stack() -> str:
+    """One line naming what decides a result's last bits beyond the versions of the libraries: the CPU
+    architecture, the BLAS builds and the kernels they chose for this CPU, and the CPU numba compiles for.
+    Two machines with equal versions and an equal numerical stack give bit-identical results (what the
+    exact baseline test relies on); the kernel build or the machine's name do not enter."""
+    kernels = "; ".join(f"{pkg} BLAS {what}" for pkg, what in sorted(_blas_kernels().items()))
+    target = _compiled_target()
+    return "; ".join(x for x in (platform.machine(), kernels, f"numba code for {target}" if target else "") if x)

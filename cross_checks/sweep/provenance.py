@@ -7,7 +7,7 @@ import platform
 import sys
 from pathlib import Path
 
-from cross_checks.sweep.fingerprint import cpu_model
+from cross_checks.sweep.fingerprint import cpu_model, numerical_stack
 
 __all__ = ["provenance", "variant_record", "git_commit"]
 
@@ -49,7 +49,9 @@ def git_commit() -> str:
 
 def provenance(started_at: str, variants=()) -> dict:
     """summary.json's ``provenance``: rbcheck, numpy, scipy, MuJoCo and PyBullet versions, Python,
-    platform, machine, git commit, start time, command, and each engine the sweep ran."""
+    platform, machine, the numerical stack (architecture, BLAS kernels, compiled target:
+    :func:`~cross_checks.sweep.fingerprint.numerical_stack`), git commit, start time, command, and each
+    engine the sweep ran."""
     import numpy
     import scipy
 
@@ -62,7 +64,7 @@ def provenance(started_at: str, variants=()) -> dict:
         "rbcheck": reference_sim.__version__, "numpy": numpy.__version__, "scipy": scipy.__version__,
         "mujoco": engines.get("mujoco", ""), "pybullet": engines.get("pybullet", ""), "drake": engines.get("drake", ""),
         "python": platform.python_version(), "platform": platform.platform(),
-        "machine": f"{platform.machine()}, {os.cpu_count()} CPUs, {cpu_model()}",
+        "machine": f"{platform.machine()}, {os.cpu_count()} CPUs, {cpu_model()}", "numerics": numerical_stack(),
         "git_commit": git_commit(), "started_at": started_at,
         "command": "rbcheck " + " ".join(sys.argv[1:]) if sys.argv and sys.argv[0].endswith("rbcheck") else "",
         "engines": _engines_provenance(variants),

@@ -114,7 +114,8 @@ AGREEMENT = {"a": str, "b": str, "scenario": str, "dt_s": NUM, "agrees": bool, "
 SUMMARY = {
     "schema_version": int,
     "provenance": {k + "?": Nullable(str) for k in ("rbcheck", "numpy", "scipy", "mujoco", "pybullet", "drake", "python",
-                                                    "platform", "machine", "git_commit", "started_at", "command")},
+                                                    "platform", "machine", "numerics", "git_commit", "started_at",
+                                                    "command")},
     "convergence": [CONVERGENCE_RECORD],
     "scenarios?": [SCENARIO],
     "variants?": [{"name": str, "description?": Nullable(str), "version?": Nullable(str)}],
