@@ -187,14 +187,19 @@ def _add_compare(sub) -> None:
                     "absolute + relative tolerance (cross_checks/core/tolerances.py). Either directory may be a full "
                     "results directory or a compact baseline (rbcheck baseline). NEW_DIR of a subset sweep is "
                     "compared on the scenarios and variants it ran (its summary.json lists them); the baseline's other "
-                    "rows are counted in one line, not compared. Exit 0: no regression; 1: a regression (or rows of "
-                    "what NEW_DIR ran missing from it, unless --allow-missing; a variant NEW_DIR's sweep skipped as "
-                    "unavailable counts as missing); 2: unusable input.")
+                    "rows are counted in one line, not compared; so are, one line per engine, the rows of an optional "
+                    "engine (drake) that was not installed where NEW_DIR was made, unless --require names it. Exit 0: "
+                    "no regression; 1: a regression (or rows of what NEW_DIR ran missing from it, unless "
+                    "--allow-missing; a variant NEW_DIR's sweep skipped because its engine is installed but broken "
+                    "counts as missing); 2: unusable input.")
     cmp_.add_argument("baseline", metavar="BASELINE_DIR")
     cmp_.add_argument("new", metavar="NEW_DIR")
     cmp_.add_argument("--markdown", metavar="FILE", help="also write the comparison as a markdown table (CI job summary)")
     cmp_.add_argument("--allow-missing", action="store_true",
                       help="rows absent from NEW_DIR (e.g. a variant unavailable there) are reported but not a regression")
+    cmp_.add_argument("--require", action="append", default=[], metavar="ENGINE",
+                      help="an engine NEW_DIR must have run (repeatable): an optional engine (e.g. drake) that was "
+                           "not installed there is then a failure instead of one line of rows not compared")
 
 
 def _add_baseline(sub) -> None:
@@ -346,6 +351,10 @@ def cmd_list(args) -> int:
         text = v.description + (f" (order {v.order:g})" if v.order is not None else "")
         if text:
             print(f"  {'':<26} {text.strip()}")
+    from cross_checks.engines import unusable_required_engines
+    for engine, why in unusable_required_engines().items():
+        print(f"rbcheck list: warning: {engine} is required by rbcheck and cannot run here ({why}): sweep and fuzz "
+              "exit 2 until it is reinstalled", file=sys.stderr)
     return EXIT_OK
 
 
@@ -441,6 +450,7 @@ def _resolve_engines(specs):
     explicitly requested unavailable ones."""
     from cross_checks.engines import UnknownVariant, all_variants, engine_variants, split_variant
 
+    _refuse_unusable_required_engines()
     infos = {v.name: v for v in all_variants()}
     if not specs:
         run = [n for n, v in infos.items() if v.available]
@@ -464,6 +474,18 @@ def _resolve_engines(specs):
             if n not in out:
                 out.append(n)
     return out, {}
+
+
+def _refuse_unusable_required_engines() -> None:
+    """BadInput when an engine rbcheck depends on (MuJoCo, PyBullet) cannot run here: a broken installation
+    is repaired, never reported as "not installed" nor swept around."""
+    from cross_checks.engines import unusable_required_engines
+    broken = unusable_required_engines()
+    if broken:
+        engine, why = next(iter(broken.items()))
+        raise BadInput(f"{engine} is required by rbcheck and cannot run here: {why}; reinstall it "
+                       "(pip install --force-reinstall rbcheck, or pip install -e . in a clone, installs the tested "
+                       "versions)")
 
 
 def _gate_failures(summary) -> list:
@@ -601,7 +623,7 @@ def cmd_compare(args) -> int:
     if args.markdown:
         _check_out_path(args.markdown, None, "--markdown")
     try:
-        c = compare_dirs(args.baseline, args.new)
+        c = compare_dirs(args.baseline, args.new, require=args.require)
     except CompareInputError as exc:
         raise BadInput(str(exc)) from None
     print(to_text(c, args.allow_missing))

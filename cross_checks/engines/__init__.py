@@ -16,16 +16,20 @@ from dataclasses import dataclass
 
 from cross_checks.core.names import NAME_RE
 from cross_checks.core.trajectory import Trajectory
-from cross_checks.engines.base import EngineAdapter, EngineError, Variant
+from cross_checks.engines.base import EngineAdapter, EngineError, EngineNotInstalled, Variant
 
 __all__ = ["ENTRY_POINT_GROUP", "VariantInfo", "EngineEntry", "all_variants", "available_variants", "get_adapter",
            "split_variant", "default_variant", "run_variant", "engine_entries", "engine_variants", "declared_order", "has_one_step",
            "load_engine_files", "engine_files_registered", "register_adapter", "user_engines", "adopt_user_engines", "engine_provenance",
-           "reset_registry", "EngineUnavailable", "UnknownVariant", "EngineAdapter", "EngineError", "Variant"]
+           "reset_registry", "EngineUnavailable", "UnknownVariant", "EngineAdapter", "EngineError", "Variant",
+           "REQUIRED_ENGINES", "unusable_required_engines"]
 
 ENTRY_POINT_GROUP = "rbcheck.engines"
 #: rbcheck's own engines, in the order of `rbcheck list`; other engines follow by name.
 BUILTIN_ENGINES = ("reference", "mujoco", "pybullet", "drake")
+#: The engines rbcheck depends on (pyproject.toml pins them): one that cannot run here is an error of the
+#: installation, never a variant quietly skipped. The others (Drake, engines to come) are optional extras.
+REQUIRED_ENGINES = ("reference", "mujoco", "pybullet")
 
 
 class EngineUnavailable(RuntimeError):
@@ -47,6 +51,8 @@ class VariantInfo:
     version: str
     order: float | None = None   # declared global order
     source: str = ""             # where the engine comes from (entry point or engine file)
+    installed: bool = True       # False: the engine's package is not installed at all (vs. failing to import)
+    required: bool = False       # one of REQUIRED_ENGINES (rbcheck's own dependencies)
 
 
 @dataclass
@@ -64,6 +70,7 @@ _entries: dict | None = None      # name -> EngineEntry (entry points), built on
 _user: dict = {}                   # name -> EngineEntry (engine files / register_adapter), in order
 _versions: dict = {}               # name -> version string (available engines)
 _failures: dict = {}               # name -> why unavailable
+_absent: set = set()               # names whose package is not installed at all (a subset of _failures)
 
 
 def _validate_adapter(adapter, name: str) -> str:
@@ -162,6 +169,7 @@ def reset_registry() -> None:
     _user.clear()
     _versions.clear()
     _failures.clear()
+    _absent.clear()
 
 
 def register_adapter(adapter: EngineAdapter, source: str) -> EngineEntry:
@@ -233,8 +241,13 @@ def get_adapter(engine: str) -> EngineAdapter:
     if engine not in _versions:
         try:
             _versions[engine] = str(e.adapter.version())
+        except EngineNotInstalled as exc:   # rbcheck's adapters say "X is not installed (how to install)"
+            _failures[engine] = str(exc)
+            _absent.add(engine)
+            raise EngineUnavailable(_failures[engine]) from None
         except ImportError as exc:
-            _failures[engine] = f"{engine} cannot be imported: {exc}"
+            text = str(exc)
+            _failures[engine] = text if "cannot be imported" in text else f"{engine} cannot be imported: {text}"
             raise EngineUnavailable(_failures[engine]) from None
         except Exception as exc:  # noqa: BLE001 - a plug-in's version() may fail in any way
             _failures[engine] = f"{engine}: version() failed: {type(exc).__name__}: {exc}"
@@ -298,9 +311,10 @@ def all_variants() -> list[VariantInfo]:
     """Every ENGINE:VARIANT with availability, declared order and a one-line description."""
     out = []
     for e in engine_entries():
+        required = e.builtin and e.name in REQUIRED_ENGINES
         if e.adapter is None:
             out.append(VariantInfo(f"{e.name}:*", e.name, "*", False, f"{e.name}: {e.load_error}", "", "",
-                                   None, e.source))
+                                   None, e.source, True, required))
             continue
         try:
             get_adapter(e.name)
@@ -308,8 +322,15 @@ def all_variants() -> list[VariantInfo]:
         except EngineUnavailable as exc:
             ok, reason, ver = False, str(exc), ""
         for v, spec in e.adapter.variants.items():
-            out.append(VariantInfo(f"{e.name}:{v}", e.name, v, ok, reason, spec.description, ver, spec.order, e.source))
+            out.append(VariantInfo(f"{e.name}:{v}", e.name, v, ok, reason, spec.description, ver, spec.order, e.source,
+                                   e.name not in _absent, required))
     return out
+
+
+def unusable_required_engines() -> dict:
+    """``{engine: why}`` of the required engines (REQUIRED_ENGINES) that cannot run here: an installation
+    to repair (exit 2 in the commands), never variants to skip."""
+    return {v.engine: v.reason for v in all_variants() if v.required and not v.available}
 
 
 def available_variants() -> list[str]:

@@ -53,7 +53,7 @@ import numpy as np
 
 __all__ = ["EngineAdapter", "Variant", "harness_force_torque", "stage_force_torque", "harness_force_torque_floats",
            "stage_force_torque_floats", "apply_decay_prestep",
-           "decay_factors", "EngineError", "optional_import", "require"]
+           "decay_factors", "EngineError", "optional_import", "require", "EngineNotInstalled", "installed_version"]
 
 
 class EngineError(RuntimeError):
@@ -90,10 +90,31 @@ def optional_import(name: str, *, quiet_stderr: bool = False):
             os.close(devnull)
 
 
-def require(module, import_error, name: str) -> None:
-    """ImportError naming the engine package when :func:`optional_import` could not import it."""
-    if module is None:
-        raise ImportError(f"{name} is not installed: {import_error}")
+class EngineNotInstalled(ImportError):
+    """The engine's distribution is not installed at all (as opposed to installed and failing to import)."""
+
+
+def installed_version(dist: str) -> str | None:
+    """The installed version of distribution ``dist`` from its metadata (None when it is not installed)."""
+    from importlib.metadata import PackageNotFoundError, version as dist_version
+    try:
+        return dist_version(dist)
+    except PackageNotFoundError:
+        return None
+
+
+def require(module, import_error, name: str, dist: str | None = None, hint: str = "") -> None:
+    """When :func:`optional_import` could not import the engine's module: :class:`EngineNotInstalled`
+    if its distribution ``dist`` (default ``name``) is not installed, else an ImportError saying that it
+    IS installed (with its version) and how the import failed: a broken install (e.g. a wheel built for
+    another NumPy) must never read as an absent one. ``hint`` says how to install it."""
+    if module is not None:
+        return
+    ver = installed_version(dist or name)
+    if ver is None:
+        raise EngineNotInstalled(f"{name} is not installed{f' ({hint})' if hint else ''}")
+    why = " ".join(f"{type(import_error).__name__}: {import_error}".split())
+    raise ImportError(f"{name} {ver} is installed but cannot be imported: {why}")
 
 
 @functools.lru_cache(maxsize=64)

@@ -35,7 +35,7 @@ import numpy as np
 
 from reference_sim.simulate import BLOWUP_LIMIT, Run
 
-from cross_checks.engines.base import EngineAdapter, EngineError, Variant, stage_force_torque
+from cross_checks.engines.base import EngineAdapter, EngineError, Variant, require, stage_force_torque
 
 try:  # the module imports without pydrake so the registry can report why it is unavailable
     import pydrake  # noqa: F401
@@ -79,8 +79,7 @@ _IMPLICIT = ("implicit_euler",)
 
 
 def _require():
-    if pydrake is None:
-        raise ImportError(f"drake is not installed (pip install 'rbcheck[drake]'): {_IMPORT_ERROR}")
+    require(pydrake, _IMPORT_ERROR, "drake", hint="pip install 'rbcheck[drake]'")
 
 
 def version() -> str:

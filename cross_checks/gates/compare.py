@@ -38,7 +38,7 @@ from cross_checks.core.tolerances import COMPARE_ABS_TOL, COMPARE_REL_TOL, ORDER
 from cross_checks.sweep.schema import STATUSES
 
 __all__ = ["compare_dirs", "read_results_dir", "Comparison", "CompareInputError", "METRIC_RULES", "ORDER_TOL",
-           "REQUIRED_COLUMNS", "Scope", "not_compared", "verdict_line", "to_markdown", "to_text"]
+           "REQUIRED_COLUMNS", "Scope", "not_compared", "not_installed_lines", "verdict_line", "to_markdown", "to_text"]
 
 KEY = ["scenario", "engine", "dt"]
 
@@ -71,23 +71,43 @@ class Change:
 @dataclass
 class Scope:
     """What the new results ran (None: everything, e.g. a summary that does not list it): the
-    baseline rows and records outside it are not compared, only counted."""
+    baseline rows and records outside it are not compared, only counted. A variant of an OPTIONAL engine
+    that is simply not installed where the new results were made (``not_installed``) is outside it too,
+    counted per engine, unless that engine is ``required`` (``--require``)."""
 
     scenarios: frozenset | None = None
     variants: frozenset | None = None
-    unavailable: dict = field(default_factory=dict)  # variant -> why the new sweep skipped it
+    unavailable: dict = field(default_factory=dict)  # variant -> why the new sweep skipped it (rows missing)
+    not_installed: dict = field(default_factory=dict)  # variant of an optional engine not installed -> why
+    required: frozenset = frozenset()                   # engines whose absence is a failure (--require)
     skipped_rows: int = 0
     skipped_records: int = 0
     skipped_scenarios: set = field(default_factory=set)
     skipped_variants: set = field(default_factory=set)
+    absent_rows: dict = field(default_factory=dict)     # engine not installed -> baseline rows not compared
+    absent_records: dict = field(default_factory=dict)  # engine not installed -> records not compared
+
+    def absent(self, engine: str) -> bool:
+        """Whether ``engine`` (a variant) belongs to an optional engine not installed in the new results,
+        and no --require insists on it."""
+        return engine in self.not_installed and engine.split(":", 1)[0] not in self.required
 
     def ran(self, scenario: str, engine: str) -> bool:
-        """Whether the new results ran this (scenario, variant), or were meant to (an unavailable variant)."""
+        """Whether the new results ran this (scenario, variant), or were meant to (an unavailable variant,
+        or one of an engine --require names)."""
         if self.scenarios is not None and scenario not in self.scenarios:
             return False
-        return self.variants is None or engine in self.variants or engine in self.unavailable
+        if self.absent(engine):
+            return False
+        return (self.variants is None or engine in self.variants or engine in self.unavailable
+                or engine in self.not_installed)
 
     def skip(self, scenario: str, engine: str, record: bool = False) -> None:
+        if self.absent(engine) and (self.scenarios is None or scenario in self.scenarios):
+            counts = self.absent_records if record else self.absent_rows
+            name = engine.split(":", 1)[0]
+            counts[name] = counts.get(name, 0) + 1
+            return
         if record:
             self.skipped_records += 1
         else:
@@ -220,11 +240,14 @@ def _expected_order(rec):
         return None
 
 
-def compare_dirs(baseline_dir, new_dir) -> Comparison:
-    """Every difference between two results directories (or compact baselines), each judged."""
+def compare_dirs(baseline_dir, new_dir, require=()) -> Comparison:
+    """Every difference between two results directories (or compact baselines), each judged. ``require``:
+    engines that must have run in ``new_dir`` (an optional engine absent there is then a failure, not
+    rows left uncompared)."""
     old_df, old_sum = read_results_dir(Path(baseline_dir))
     new_df, new_sum = read_results_dir(Path(new_dir))
-    out = Comparison(scope=_scope(new_sum))
+    out = Comparison(scope=_scope(new_sum, frozenset(require)))
+    _check_required(new_sum, out)
     _compare_columns(old_df, new_df, out)
     _compare_rows(old_df.merge(new_df, on=KEY, how="outer", suffixes=("_old", "_new"), indicator=True), out)
     _compare_convergence(old_sum.get("convergence", []), new_sum.get("convergence", []), out)
@@ -232,12 +255,25 @@ def compare_dirs(baseline_dir, new_dir) -> Comparison:
     return out
 
 
-def _scope(summary: dict) -> Scope:
+def _scope(summary: dict, required: frozenset = frozenset()) -> Scope:
     """What a results directory's sweep ran, from its summary.json (everything when it does not say)."""
+    skipped = summary.get("skipped_variants") or []
+    optional_absent = {v["name"]: v["reason"] for v in skipped
+                       if v.get("installed") is False and v.get("required") is False}
+    broken = {v["name"]: v["reason"] for v in skipped if v["name"] not in optional_absent}
     if not isinstance(summary.get("scenarios"), list) or not isinstance(summary.get("variants"), list):
-        return Scope()
+        return Scope(unavailable=broken, not_installed=optional_absent, required=required)
     return Scope(frozenset(s["name"] for s in summary["scenarios"]), frozenset(v["name"] for v in summary["variants"]),
-                 {v["name"]: v["reason"] for v in summary.get("skipped_variants") or []})
+                 broken, optional_absent, required)
+
+
+def _check_required(new_sum: dict, out: Comparison) -> None:
+    """A --require'd engine none of whose variants the new results ran or skipped is a failure on its own."""
+    known = [v["name"] for v in (new_sum.get("variants") or []) + (new_sum.get("skipped_variants") or [])]
+    for engine in sorted(out.scope.required):
+        if not any(n.split(":", 1)[0] == engine for n in known):
+            out.changes.append(Change("missing", "(all)", f"{engine}:*", "engine",
+                                      note=f"--require {engine}: the new results ran none of its variants"))
 
 
 def _compare_columns(old_df, new_df, out: Comparison):
@@ -257,7 +293,7 @@ def _compare_rows(merged, out: Comparison):
             if not out.scope.ran(r["scenario"], r["engine"]):
                 out.scope.skip(r["scenario"], r["engine"])
                 continue
-            why = out.scope.unavailable.get(r["engine"])
+            why = out.scope.unavailable.get(r["engine"]) or out.scope.not_installed.get(r["engine"])
             note = f"variant unavailable in the new sweep: {why}" if why else "row absent from the new results"
             out.changes.append(Change("missing", r["scenario"], r["engine"], where, note=note))
             continue
@@ -383,6 +419,18 @@ def _names(items, at_most: int = 8) -> str:
     return ", ".join(items[:at_most]) + more
 
 
+def not_installed_lines(c: Comparison) -> list:
+    """One sentence per optional engine that is not installed where the new results were made: how many
+    baseline rows and records of it were not compared, and how to insist on it."""
+    sc = c.scope
+    out = []
+    for engine in sorted(set(sc.absent_rows) | set(sc.absent_records)):
+        out.append(f"{engine} not installed: {sc.absent_rows.get(engine, 0)} baseline rows and "
+                   f"{sc.absent_records.get(engine, 0)} convergence records not compared (an optional engine; "
+                   f"--require {engine} makes its absence a failure)")
+    return out
+
+
 def not_compared(c: Comparison) -> str:
     """One sentence on the baseline rows and records of scenarios/variants the new results did not run
     ("" when there are none)."""
@@ -414,6 +462,7 @@ def to_text(c: Comparison, allow_missing=False) -> str:
              f"{len(c.of('improvement'))} improvements, {len(c.of('new'))} new, {len(c.of('missing'))} missing"]
     if not_compared(c):
         lines.append(not_compared(c))
+    lines += not_installed_lines(c)
     for pkg, a, b in c.version_diffs:
         lines.append(f"  version of {pkg}: {a} -> {b}")
     for kind in ("regression", "missing", "improvement", "new", "changed"):
@@ -437,6 +486,7 @@ def to_markdown(c: Comparison, baseline_dir, new_dir, allow_missing=False) -> st
           f"{len(c.of('new'))} new, {len(c.of('missing'))} missing.", ""]
     if not_compared(c):
         md += [_md_escape(not_compared(c)[0].upper() + not_compared(c)[1:]) + ".", ""]
+    md += [_md_escape(line) + ".\n" for line in not_installed_lines(c)]
     if c.version_diffs:
         md += ["### Version differences", "", "| package | baseline | new |", "|---|---|---|"]
         md += [f"| {_md_escape(p)} | {_md_escape(a)} | {_md_escape(b)} |" for p, a, b in c.version_diffs]

@@ -255,6 +255,16 @@ def _run_statistics(jobs, rows, wall_s) -> dict:
                            "converges_min_order": tol.CONVERGES_MIN_ORDER}}
 
 
+def _skipped_record(name: str, reason: str) -> dict:
+    """A variant the sweep left out: why, and whether its engine is an optional one that is simply not
+    installed (``installed`` false, ``required`` false: compare counts its baseline rows as not
+    compared) or one that is installed and broken (its rows are missing)."""
+    from cross_checks.engines import all_variants
+    info = next((v for v in all_variants() if v.name == name), None)
+    return {"name": name, "reason": reason, "installed": info.installed if info else True,
+            "required": info.required if info else False}
+
+
 def build_summary(*, provenance, scenarios, variants, skipped, convergence, local, agreement, rows, jobs,
                   wall_s) -> dict:
     """summary.json (docs/results.md): ``scenarios`` are scenario records, ``variants`` variant records."""
@@ -263,7 +273,7 @@ def build_summary(*, provenance, scenarios, variants, skipped, convergence, loca
         "provenance": provenance,
         "scenarios": scenarios,
         "variants": variants,
-        "skipped_variants": [{"name": k, "reason": r} for k, r in (skipped or {}).items()],
+        "skipped_variants": [_skipped_record(k, r) for k, r in (skipped or {}).items()],
         "convergence": convergence,
         "local_convergence": local,
         "agreement": agreement,

@@ -258,3 +258,60 @@ def test_the_markdown_heading_agrees_with_the_counts(tmp_path):
     ok = compare_dirs(write(tmp_path / "a"), _write_scoped(tmp_path / "c", ROWS[:2]))
     md = to_markdown(ok, "a", "c")
     assert "✅ no regression" in md and "Not compared: 1 baseline row(s)" in md
+
+
+# --- an optional engine not installed where the new results were made (the README's main command) --------
+
+def _baseline_without(tmp_path, engine, installed=False, required=False):
+    """The committed baseline as a sweep on a machine without ``engine`` would write it: its rows and records
+    gone, its variants listed as skipped with the registry's flags."""
+    import shutil
+    new = tmp_path / f"without-{engine}"
+    shutil.copytree(BASELINE, new)
+    df = pd.read_csv(new / "results.csv", dtype=str, keep_default_na=False)
+    df[~df["engine"].str.startswith(f"{engine}:")].to_csv(new / "results.csv", index=False)
+    s = json.loads((new / "summary.json").read_text())
+    gone = [v["name"] for v in s["variants"] if v["name"].startswith(f"{engine}:")]
+    assert gone, f"the baseline has no {engine} variant"
+    s["variants"] = [v for v in s["variants"] if v["name"] not in gone]
+    for key in ("convergence", "local_convergence"):
+        s[key] = [r for r in s[key] if r["engine"] not in gone]
+    s["agreement"] = [a for a in s["agreement"] if a["a"] not in gone and a["b"] not in gone]
+    why = f"{engine} is not installed" if not installed else f"{engine} 1.0 is installed but cannot be imported: X"
+    s["skipped_variants"] = [{"name": n, "reason": why, "installed": installed, "required": required} for n in gone]
+    (new / "summary.json").write_text(json.dumps(s))
+    n_rows = int(pd.read_csv(BASELINE / "results.csv")["engine"].str.startswith(f"{engine}:").sum())
+    return new, n_rows
+
+
+def test_an_optional_engine_not_installed_is_one_line_not_a_failure(tmp_path, capsys):
+    from cross_checks.cli import main
+    new, n_rows = _baseline_without(tmp_path, "drake")
+    assert main(["compare", str(BASELINE), str(new), "--markdown", str(tmp_path / "c.md")]) == 0
+    out = capsys.readouterr().out
+    lines = [ln for ln in out.splitlines() if "drake" in ln]
+    assert len(lines) == 1 and lines[0].startswith(f"drake not installed: {n_rows} baseline rows and ")
+    assert "--require drake makes its absence a failure" in lines[0] and "OK: no regression" in out
+    assert "MISSING" not in out
+    assert f"drake not installed: {n_rows} baseline rows" in (tmp_path / "c.md").read_text()
+
+
+def test_require_makes_an_absent_optional_engine_a_failure(tmp_path, capsys):
+    from cross_checks.cli import main
+    new, n_rows = _baseline_without(tmp_path, "drake")
+    assert main(["compare", str(BASELINE), str(new), "--require", "drake"]) == 1
+    c = compare_dirs(BASELINE, new, require=["drake"])
+    assert len([m for m in c.of("missing") if m.engine.startswith("drake:") and m.what.startswith("dt=")]) == n_rows
+    assert "drake is not installed" in c.of("missing")[0].note
+
+
+def test_require_of_an_engine_the_new_results_never_mentioned_fails(tmp_path):
+    c = compare_dirs(BASELINE, BASELINE, require=["rapier"])
+    assert c.exit_code() == 1 and c.of("missing")[0].note == "--require rapier: the new results ran none of its variants"
+
+
+def test_a_required_or_broken_engine_is_still_missing(tmp_path):
+    broken, _ = _baseline_without(tmp_path, "drake", installed=True)
+    assert compare_dirs(BASELINE, broken).exit_code() == 1
+    required, _ = _baseline_without(tmp_path / "r", "pybullet", required=True)
+    assert compare_dirs(BASELINE, required).exit_code() == 1
