@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 
 from cross_checks.core.files import umask
-from cross_checks.core.progress import is_tty, stage
+from cross_checks.core.progress import Progress, is_tty, stage
 from reports.data import Results, ResultsError, load_results
 from reports.install import IncompleteInstallation, check_templates
 
@@ -83,7 +83,7 @@ def render(directory, *, self_contained: bool = False, jobs: int | None = 1, pro
     new_plots = d / owned_name(".", "plots")
     new_plots.mkdir()
     try:
-        figures = _draw_all(res, names, new_plots, jobs, progress, t0)
+        figures = _draw_all(res, names, new_plots, jobs, progress)
         drawn = _move_plots(new_plots, d / "plots")
     finally:
         shutil.rmtree(new_plots, ignore_errors=True)
@@ -91,7 +91,10 @@ def render(directory, *, self_contained: bool = False, jobs: int | None = 1, pro
     _tidy(d, written, drawn, listed, marked)
     pages = [p for p in written if p.suffix == ".html"]
     if progress:
-        _say(f"{len(pages)} pages and {len(drawn)} figures written in {time.perf_counter() - t0:.1f} s")
+        n_figures = sum(len(kinds) for kinds in figures.values())
+        noted = n_figures - len(drawn)
+        _say(f"{len(pages)} pages and {n_figures} figures written in {time.perf_counter() - t0:.1f} s"
+             + (f" ({len(drawn)} drawn, {noted} a note instead: a quantity that does not move)" if noted else ""))
     return pages
 
 
@@ -125,7 +128,7 @@ def _tidy(d, written, drawn, listed, marked) -> None:
     fix_permissions(d)
 
 
-def _draw_all(res, names, plot_dir: Path, jobs, progress, t0) -> dict:
+def _draw_all(res, names, plot_dir: Path, jobs, progress) -> dict:
     """Draw every figure (in ``jobs`` processes); returns ``{scenario: [(kind, file or None, note)]}``
     in the order of plots.KINDS."""
     from reports.canvas import release
@@ -136,17 +139,13 @@ def _draw_all(res, names, plot_dir: Path, jobs, progress, t0) -> dict:
     _SHARED.clear()
     _SHARED.update(res=res, directory=str(res.directory))
     out = {sc: {} for sc in names}
-    last = time.perf_counter()
+    bar = Progress("rbcheck report", "figures", len(tasks), enabled=progress, interval_s=LINE_INTERVAL_S,
+                   total_work=sum(relative_cost(res, t[0], t[1]) for t in tasks))   # time left follows the cost
 
     def done(i, item):
-        nonlocal last
         sc, kind, fname, note = item
         out[sc][kind] = (kind, fname, note)
-        now = time.perf_counter()
-        if progress and (now - last >= LINE_INTERVAL_S or i == len(tasks)):
-            _say(f"figures {i}/{len(tasks)} ({100 * i / len(tasks):.0f}%) in {now - t0:.0f} s"
-                 + (f", ~{(now - t0) * (len(tasks) - i) / i:.0f} s left" if i < len(tasks) else ""))
-            last = now
+        bar.update(1, f"{sc} {kind}", work=relative_cost(res, sc, kind))
 
     try:
         if jobs and jobs > 1 and len(tasks) > 1:
@@ -162,7 +161,9 @@ def _draw_all(res, names, plot_dir: Path, jobs, progress, t0) -> dict:
         else:
             for i, t in enumerate(tasks, start=1):
                 done(i, _draw(t))
+        bar.close()
     finally:
+        bar.close(finished=False)   # after an error: the bar ends, no "done" line (a no-op after close())
         _SHARED.clear()
         release()
     return {sc: [figs[k] for k in KINDS if k in figs] for sc, figs in out.items()}

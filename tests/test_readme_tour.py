@@ -61,6 +61,7 @@ def test_the_readme_tour_runs_as_written_in_a_fresh_clone(tmp_path):
     clone = tmp_path / "rbcheck"
     _fresh_copy(clone)
     (clone / ".venv").symlink_to(venv, target_is_directory=True)
+    before = {p for p in clone.rglob("*") if p.is_file()}
     env = {**os.environ, "PATH": _path_without_rbcheck(), "RBCHECK_CACHE_DIR": str(tmp_path / "cache"),
            "MPLBACKEND": "Agg"}
     env.pop("VIRTUAL_ENV", None)
@@ -74,7 +75,13 @@ def test_the_readme_tour_runs_as_written_in_a_fresh_clone(tmp_path):
     assert "OK: no regression" in out and "not compared:" in out, "compare of the subset"
     for f in ("t.csv", "t.json", "m.csv", "b.csv", "results/index.html", "results/summary.json", "diff.md",
               "my-baseline/summary.json"):
-        assert (clone / f).is_file(), f"the tour should have written {f}"
+        assert (clone / "tour" / f).is_file(), f"the tour should have written tour/{f}"
+    # everything the tour wrote is in its git-ignored scratch folder: the clone stays clean
+    stray = sorted(str(p.relative_to(clone)) for p in clone.rglob("*") if p.is_file() and p not in before
+                   and p.relative_to(clone).parts[0] not in ("tour", ".venv") and "__pycache__" not in p.parts
+                   and p.name != "MUJOCO_LOG.TXT")
+    assert not stray, f"the tour left files outside tour/: {stray}"
+    assert "tour/" in (ROOT / ".gitignore").read_text().splitlines()
 
 
 def test_the_tour_has_no_line_that_needs_what_a_fresh_clone_lacks():
@@ -87,3 +94,4 @@ def test_the_tour_has_no_line_that_needs_what_a_fresh_clone_lacks():
                 assert (ROOT / a).is_file() or a in written, f"tour line reads {a}, which nothing provides: {ln}"
         if "--out" in args:
             written.add(args[args.index("--out") + 1])
+            assert args[args.index("--out") + 1].startswith("tour/"), f"the tour writes into tour/: {ln}"

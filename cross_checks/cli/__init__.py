@@ -42,21 +42,27 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _version_text() -> str:
-    """``rbcheck X.Y.Z`` and, on the next line, the versions every result records (no engine imported)."""
+    """``rbcheck X.Y.Z``; the libraries every result records; then every registered engine: its version
+    where it imports, else why not (each engine is imported to tell)."""
     from importlib import metadata
 
     import reference_sim
+    from cross_checks.engines import all_variants
     parts = [f"Python {sys.version.split()[0]}"]
-    for dist in ("numpy", "scipy", "mujoco", "pybullet"):
+    for dist in ("numpy", "scipy"):
         try:
             parts.append(f"{dist} {metadata.version(dist)}")
         except metadata.PackageNotFoundError:
             parts.append(f"{dist} not installed")
-    return f"rbcheck {reference_sim.__version__}\n" + ", ".join(parts)
+    engines = {}
+    for v in all_variants():
+        engines.setdefault(v.engine, f"{v.engine} {v.version}" if v.available else f"{v.engine}: {v.reason}")
+    return (f"rbcheck {reference_sim.__version__}\n" + ", ".join(parts) + "\nengines: "
+            + "; ".join(engines.values()))
 
 
 class _VersionAction(argparse.Action):
-    """``--version``: the two lines of :func:`_version_text` as they are (argparse's own action re-wraps them)."""
+    """``--version``: the lines of :func:`_version_text` as they are (argparse's own action re-wraps them)."""
 
     def __call__(self, parser, namespace, values, option_string=None):
         print(_version_text())
@@ -74,7 +80,7 @@ def build_parser() -> argparse.ArgumentParser:
                "Your own engines: --engine-file (docs/engines.md).",
     )
     p.add_argument("--version", action=_VersionAction, nargs=0,
-                   help="print rbcheck's version and those of the engines and libraries it runs, then exit")
+                   help="print rbcheck's version, those of Python, NumPy and SciPy, and every engine's (or why it cannot run), then exit")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_Parser)
     # One declaration per command, in the order `rbcheck --help` lists them (alike in shape only: each
     # says its own command's arguments).
@@ -570,22 +576,48 @@ def _run_sweep(args, scenarios, variants, skipped) -> dict:
             client.close()
 
 
+def verdict_count(summary) -> tuple:
+    """``(verdicts, not as expected)``: every convergence verdict, same-scheme agreement and agreement of a
+    scenario's two references the sweep judged, and how many of them contradict what is expected."""
+    conv = [r for r in summary.get("convergence", []) if r.get("matches_expectation") is not None]
+    agree = summary.get("agreement", [])
+    refs = [sc["second_reference"] for sc in summary.get("scenarios", []) if (sc.get("second_reference") or {})
+            .get("agrees") is not None]
+    total = len(conv) + len(agree) + len(refs)
+    wrong = (sum(r["matches_expectation"] is False for r in conv) + sum(not a.get("agrees") for a in agree)
+             + sum(r["agrees"] is False for r in refs))
+    return total, wrong
+
+
 def _sweep_outcome(summary, out, n_scenarios, n_variants, elapsed_s) -> int:
-    """Print what the sweep did and every result that contradicts the expectations (then exit 1)."""
+    """Print what the sweep did and every result that contradicts the expectations (then exit 1); the last
+    line says whether every verdict was as expected."""
     run = summary["run"]
     print(f"rbcheck sweep: {n_scenarios} scenario(s) x {n_variants} variant(s): {run['runs']} runs "
           f"({run['cached_runs']} cached, {run['diverged_runs']} diverged, {run['failed_runs']} failed) "
           f"in {elapsed_s:.1f} s on {run['jobs']} worker(s) (runs and metrics {run['wall_s']:.1f} s, "
           f"then the report) -> {Path(out) / 'index.html'}")
+    skipped = summary.get("skipped_variants") or []
+    if skipped:
+        engines = dict.fromkeys(v["name"].split(":", 1)[0] for v in skipped)
+        print(f"rbcheck sweep: skipped {len(skipped)} variant(s) of {', '.join(engines)}: "
+              f"{next(v['reason'] for v in skipped)}")
     fails = _gate_failures(summary)
-    if not fails:
-        return EXIT_OK
-    print(f"rbcheck sweep: {len(fails)} result(s) contradict the expectations:", file=sys.stderr)
-    for line in fails[:20]:
-        print(f"  {line}", file=sys.stderr)
-    if len(fails) > 20:
-        print(f"  ... and {len(fails) - 20} more (see the findings in index.html)", file=sys.stderr)
-    return EXIT_FAIL
+    total, wrong = verdict_count(summary)
+    failed = run.get("failed_runs", 0)
+    if fails:
+        print(f"rbcheck sweep: {len(fails)} result(s) contradict the expectations:", file=sys.stderr)
+        for line in fails[:20]:
+            print(f"  {line}", file=sys.stderr)
+        if len(fails) > 20:
+            print(f"  ... and {len(fails) - 20} more (see the findings in index.html)", file=sys.stderr)
+        sys.stderr.flush()
+    if not wrong and not failed:
+        print(f"rbcheck sweep: all {total} verdicts as expected")
+    else:
+        print(f"rbcheck sweep: {wrong} of {total} verdicts not as expected"
+              + (f", {failed} run(s) failed" if failed else "") + f" (see {Path(out) / 'index.html'})")
+    return EXIT_FAIL if fails else EXIT_OK
 
 
 def cmd_report(args) -> int:

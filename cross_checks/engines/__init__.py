@@ -14,7 +14,7 @@ import contextlib
 import time
 from dataclasses import dataclass
 
-from cross_checks.core.names import NAME_RE
+from cross_checks.core.names import NAME_RE, did_you_mean
 from cross_checks.core.trajectory import Trajectory
 from cross_checks.engines.base import EngineAdapter, EngineError, EngineNotInstalled, Variant
 
@@ -157,8 +157,8 @@ def _entry(engine: str) -> EngineEntry:
     reg = _registry()
     if engine in reg:
         return reg[engine]
-    names = [e.name for e in engine_entries()]
-    raise UnknownVariant(f"unknown engine {engine!r}; engines: {', '.join(dict.fromkeys(names))}"
+    names = list(dict.fromkeys(e.name for e in engine_entries()))
+    raise UnknownVariant(f"unknown engine {engine!r}{did_you_mean(engine, names)}; engines: {', '.join(names)}"
                          + ("" if _user else " (add your own with --engine-file FILE)"))
 
 
@@ -282,7 +282,7 @@ def split_variant(name: str):
     if e.adapter is None:
         raise UnknownVariant(f"engine {engine} cannot be loaded: {e.load_error}")
     if variant not in e.adapter.variants:
-        raise UnknownVariant(f"unknown variant {variant!r} of {engine}; variants: "
+        raise UnknownVariant(f"unknown variant {variant!r} of {engine}{did_you_mean(variant, e.adapter.variants)}; variants: "
                              + ", ".join(f"{engine}:{v}" for v in e.adapter.variants))
     return engine, variant
 

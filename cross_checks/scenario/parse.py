@@ -19,7 +19,7 @@ from reference_sim.body import RigidBody, check_inertia
 from reference_sim.forces import FRAMES, PointForce, Spring, Torque, ForceModel
 from reference_sim.quaternion import quat_from_euler_zxy, rotate
 from reference_sim.state import Problem, State
-from cross_checks.core.names import NAME_RE, unknown_key_reason
+from cross_checks.core.names import NAME_RE, did_you_mean, unknown_key_reason
 from cross_checks.core.tolerances import MAX_NAME_CHARS, MIN_LADDER_RATIO
 
 __all__ = ["Scenario", "ScenarioError", "load_scenario", "parse_scenario", "catalog_names", "catalog_path",
@@ -98,8 +98,8 @@ def load_scenario(spec: str | Path) -> Scenario:
     spec_s = str(spec)
     if NAME_RE.match(spec_s) and not spec_s.endswith(".toml") and not Path(spec_s).exists():
         if spec_s not in catalog_names():
-            raise ScenarioError(spec_s, "", f"no catalog scenario of that name and no such file "
-                                            f"(catalog: {', '.join(catalog_names())})")
+            raise ScenarioError(spec_s, "", f"no catalog scenario of that name{did_you_mean(spec_s, catalog_names())} "
+                                            f"and no such file (catalog: {', '.join(catalog_names())})")
         text = catalog_path(spec_s).read_text(encoding="utf-8")
         return parse_scenario(text, source=f"catalog:{spec_s}")
     path = Path(spec_s)

@@ -259,14 +259,16 @@ def run_jobs(runner: Runner, jobs, scenarios, references, work_dir, cache_root, 
     items = [(j, scenarios[j.scenario_index], references[j.scenario_index].path, cache_root, use_cache,
               extra_engines, second_time_limit_s if isinstance(j, SecondReference) else time_limit_s,
               str(inflight / str(k))) for k, j in enumerate(todo)]
-    with Progress("rbcheck sweep", "runs", len(todo), enabled=show_progress,
+    n_runs = sum(1 for j in todo if not isinstance(j, SecondReference))  # what the summary's run count counts
+    with Progress("rbcheck sweep", "runs", n_runs, enabled=show_progress,
                   total_work=sum(j.cost for j in todo)) as bar:
         def done(item, rec):
             j = item[0]
             records[j] = rec
-            what = f"{j.scenario} second reference" if isinstance(j, SecondReference) else \
-                f"{j.scenario} {j.variant} dt={j.dt_s:g}"
-            bar.update(1, what, work=j.cost)
+            if isinstance(j, SecondReference):   # among the runs, not one of them
+                bar.update(0, f"{j.scenario} second reference")
+            else:
+                bar.update(1, f"{j.scenario} {j.variant} dt={j.dt_s:g}", work=j.cost)
 
         runner.map_unordered(_run_job_item, items, done, on_crash=_crashed, in_flight=_in_flight)
     return records

@@ -17,11 +17,18 @@ def test_version_names_rbcheck_and_the_engines_it_runs(capsys):
     import pybullet  # noqa: F401
 
     import reference_sim
+    from importlib.metadata import PackageNotFoundError, version
     assert main(["--version"]) == 0
-    first, second = capsys.readouterr().out.splitlines()
+    first, second, third = capsys.readouterr().out.splitlines()
     assert first == f"rbcheck {reference_sim.__version__}"
-    assert f"mujoco {mujoco.__version__}" in second and f"numpy {numpy.__version__}" in second
-    assert "pybullet 3.2.7" in second  # pybullet has no __version__; the pinned release (pyproject.toml)
+    assert f"numpy {numpy.__version__}" in second
+    assert f"mujoco {mujoco.__version__}" in third
+    assert "pybullet 3.2.7" in third  # pybullet has no __version__; the pinned release (pyproject.toml)
+    try:   # every engine that imports is listed with its version (Drake when its extra is installed)
+        import pydrake  # noqa: F401
+        assert f"drake {version('drake')}" in third
+    except (ImportError, PackageNotFoundError):
+        assert "drake: drake is not installed" in third
 
 
 def test_an_engine_name_alone_runs_the_engines_own_default(tmp_path, capsys):
