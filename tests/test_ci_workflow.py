@@ -14,21 +14,38 @@ def readme_commands():
     return main_cmd, test_cmd
 
 
+def _runs(job):
+    return [s.get("run", "") for s in job["steps"]]
+
+
 def test_workflow_parses_and_uses_the_readme_commands():
     wf = yaml.safe_load((ROOT / ".github/workflows/crosscheck.yml").read_text())
-    steps = wf["jobs"]["crosscheck"]["steps"]
-    runs = [s.get("run", "") for s in steps]
     main_cmd, test_cmd = readme_commands()
-    assert test_cmd in runs and main_cmd in runs
-    assert runs.index(test_cmd) < runs.index(main_cmd)
-    compare = [r for r in runs if "rbcheck compare baselines/" in r]
-    assert compare and "--markdown" in compare[0]
+    assert test_cmd in _runs(wf["jobs"]["tests"])
+    steps = wf["jobs"]["crosscheck"]["steps"]
+    runs = _runs(wf["jobs"]["crosscheck"])
+    assert runs[0] == "" and main_cmd in runs   # on a fresh runner: the README's main command as a newcomer runs it
+    out = re.search(r"rbcheck sweep .*--out (\S+)", main_cmd)[1]
+    # the main command's results are compared as they are (Drake absent: one line, exit 0) ...
+    assert f".venv/bin/rbcheck compare baselines/default {out}" in runs
+    # ... and the baseline's Drake rows are gated by a sweep with Drake, compared with --require drake
+    full = [r for r in runs if 'pip install -q -e ".[drake]"' in r and "rbcheck sweep" in r]
+    assert full, "no sweep with Drake"
+    full_out = re.search(r"rbcheck sweep .*--out (\S+)", full[0])[1]
+    compare = [r for r in runs if f"rbcheck compare baselines/default {full_out}" in r]
+    assert compare and "--require drake" in compare[0] and "--markdown" in compare[0]
     assert any("GITHUB_STEP_SUMMARY" in r for r in runs)
     # the full results (report and summary.json) and their compact baseline are uploaded as artifacts
-    out = re.search(r"rbcheck sweep .*--out (\S+)", main_cmd)[1]
     uploaded = [s["with"]["path"] for s in steps if s.get("uses", "").startswith("actions/upload-artifact")]
     baseline = [r.split() for r in runs if "rbcheck baseline" in r]
-    assert out in uploaded and baseline and baseline[0][-2] == out and baseline[0][-1] in uploaded
+    assert full_out in uploaded and baseline and baseline[0][-2] == full_out and baseline[0][-1] in uploaded
+
+
+def test_the_baseline_holds_the_engines_ci_requires():
+    import json
+    made = json.loads((ROOT / "baselines" / "default" / "summary.json").read_text())
+    engines = {v["name"].split(":", 1)[0] for v in made["variants"]}
+    assert {"reference", "mujoco", "pybullet", "drake"} <= engines
 
 
 def test_ci_run_runs_the_readme_test_command():
