@@ -94,6 +94,7 @@ def check_figure(res, scenario, path) -> None:
     gs = fig.add_gridspec(2, 3, height_ratios=[1.0, 1.0], hspace=0.45, wspace=0.28,
                           left=0.06, right=0.985, top=0.83, bottom=0.07)
     head = (("PASS: " + res.verdict) if res.passed else ("FAIL: " + res.reasons[0] if res.reasons else res.verdict))
+    head = head.split(" (`--scheme")[0]   # the option is said in the terminal; the figure keeps the cause
     lines = textwrap.wrap(f"{res.source} on {res.scenario} — {head}", 140)[:2]
     if res.likely_causes:
         lines += textwrap.wrap("likely cause: " + res.likely_causes[0].split(" — ")[0], 140)[:1]

@@ -171,14 +171,21 @@ def _add_check(sub) -> None:
                     "compared with the scenario's reference within a capped, derived allowance; every reference "
                     "variant and a catalog of classic mistakes are compared step for step. Several files of the "
                     "same scenario at different dt: each is checked and the convergence order is fitted (ladder). "
-                    "Exit 0: it IS a reference scheme or a correct simulation at its dt; 1: it is not (the output "
-                    "says which quantity, from when, by how much, and the likely cause); 2: bad input. "
+                    "Exit 0: it is a correct simulation of the scenario's physics at its dt (or, with --scheme, "
+                    "exactly that scheme); 1: it is not (the output says which quantity, from when, by how much, "
+                    "and the likely cause: a trajectory that is exactly the course's step where that step is wrong "
+                    "fails); 2: bad input. "
                     "See docs/check.md.")
     c.add_argument("trajectories", nargs="+", metavar="TRAJ.csv", help="trajectory CSV file(s)")
     c.add_argument("--scenario", required=True, metavar="SCENARIO", help="catalog name or scenario TOML file")
     c.add_argument("--dt", type=_positive_float, metavar="DT",
                    help="the simulator's integration step, s, when rows are written less often than every step "
                         "(default: inferred from the times)")
+    c.add_argument("--scheme", metavar="ENGINE:VARIANT",
+                   help="ask a different question: is this trajectory exactly that scheme (e.g. reference:course, "
+                        "for a student checking a faithful implementation of the course)? PASS says what the scheme "
+                        "gets wrong on this scenario, if anything. Without it: is it a correct simulation of the "
+                        "scenario's physics?")
     c.add_argument("--json", metavar="FILE", help="also write everything the check found as JSON")
     c.add_argument("--plot", metavar="FILE.png", help="draw the trajectory, the reference, the closest correct scheme "
                                                       "and the one-step defect over time")

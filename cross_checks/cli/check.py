@@ -17,16 +17,23 @@ def run_check(args, BadInput) -> int:
     sc = load_scenario(args.scenario)
     results = []
     compare_with = _user_variants()
+    if args.scheme is not None:
+        from cross_checks.engines import UnknownVariant, split_variant
+        try:
+            split_variant(args.scheme)
+        except UnknownVariant as exc:
+            raise BadInput(f"--scheme: {exc}") from None
     for path in args.trajectories:
         traj = Trajectory.read(path, require=())
         try:
-            results.append(check_trajectory(traj, sc, source=path, dt_s=args.dt, compare_with=compare_with))
+            results.append(check_trajectory(traj, sc, source=path, dt_s=args.dt, compare_with=compare_with,
+                                            scheme=args.scheme))
         except CheckError as exc:
             raise BadInput(str(exc)) from None
     ladder = None
     if len(results) > 1:
         try:
-            ladder = check_ladder(results, sc)
+            ladder = check_ladder(results, sc, scheme=args.scheme)
         except LadderError as exc:
             raise BadInput(str(exc)) from None
     texts = [format_report(r) for r in results]

@@ -159,7 +159,10 @@ def _increments(y0, y1):
 
 def fit_step_scale(inp, scenario, y0, y_next, flow_end, allow):
     """The scale s that best makes ``y_next ≈ flow(y0, s Δ)`` (least squares on the increments, each
-    quantity weighted by 1 / its allowance), and the score of the flow over s Δ. Returns (s, score)."""
+    quantity weighted by 1 / its allowance), and the score of the flow over s Δ. Returns (s, score);
+    ``(nan, None)`` where a state or the exact flow is not finite (a run blowing up: no scale to fit)."""
+    if not (np.all(np.isfinite(flow_end)) and np.all(np.isfinite(y_next)) and np.all(np.isfinite(y0))):
+        return math.nan, None
     du = _increments(y0, y_next)
     df = _increments(y0, flow_end)
     wts = np.concatenate([np.repeat(1.0 / np.maximum(allow.total[q], 1e-300)[:, None], 3, axis=1)

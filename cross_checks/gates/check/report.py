@@ -33,31 +33,47 @@ def _status(e):
     return ("ok" if e.passed else "OVER") + until
 
 
-def format_report(res) -> str:
-    """Human-readable report of one check."""
-    lines = [("PASS: " if res.passed else "FAIL: ") + res.verdict, "",
-             f"{res.source}: {res.input['description']}",
-             f"scenario {res.scenario} ({res.input['duration_s']:g} s); reference: {res.reference_label or '–'}"
-             + ("; values look single precision" if res.input.get("single_precision") else "")]
-    if res.evidence:
-        lines += ["", f"  {'evidence':<18}{'quantity':<30}{'max':>11}{'max/allowed':>13}{'first over (s)':>16}"
-                      f"{'allowed':>11}  status"]
-        for e in res.evidence:
+def _still(e) -> bool:
+    """A row of a quantity that does not move (value and allowance both zero): one line, not a table row."""
+    return e.max_value == 0.0 and e.allowance == 0.0 and e.max_ratio == 0.0
+
+
+def _evidence_table(res) -> list:
+    """One row per measured quantity: the worst ratio with the value and the allowance AT THAT TIME, when it
+    happened and when the allowance was first exceeded; quantities that do not move in one line."""
+    rows = [e for e in res.evidence if not _still(e)]
+    still = list(dict.fromkeys(_NAMES.get(e.quantity, e.quantity) for e in res.evidence if _still(e)))
+    out = []
+    if rows:
+        out += ["", f"  {'evidence':<17}{'quantity':<29}{'worst ×allowed':>15}{'value':>11}{'allowed':>11}"
+                    f"{'at t (s)':>10}{'first over':>12}  status"]
+        for e in sorted(rows, key=lambda e: (e.passed or not e.decisive, -_key(e.max_ratio))):
             first = "–" if e.first_over_s is None else f"{e.first_over_s:.4g}"
             name = _NAMES.get(e.quantity, e.quantity) + (f" ({e.unit})" if e.unit else "")
-            lines.append(f"  {_KIND_SHORT[e.kind]:<18}{name:<30}{_num(e.max_value):>11}{_num(e.max_ratio):>13}"
-                         f"{first:>16}{_num(e.allowance):>11}  {_status(e)}")
-        lines.append("")
-        lines.append("  allowances:")
-        seen = set()
-        for e in res.evidence:
-            key = (e.kind, e.source)
-            if key not in seen:
-                seen.add(key)
-                lines.append(f"    {e.kind}: {e.source}")
-        for e in res.evidence:
-            if e.note:
-                lines.append(f"    {e.kind} {_NAMES.get(e.quantity, e.quantity)}: {e.note}")
+            worst = e.value_at_worst if not math.isnan(e.value_at_worst) else e.max_value
+            out.append(f"  {_KIND_SHORT[e.kind]:<17}{name:<29}{_num(e.max_ratio):>15}{_num(worst):>11}"
+                       f"{_num(e.allowance):>11}{_num(e.t_worst_s):>10}{first:>12}  {_status(e)}")
+    if still:
+        out.append(f"  not moving in this scenario (nothing to judge): {', '.join(still)}")
+    return out
+
+
+def _key(v) -> float:
+    return -1.0 if v is None or (isinstance(v, float) and math.isnan(v)) else float(v)
+
+
+def format_report(res) -> str:
+    """Human-readable report of one check: the verdict and its cause first, then the likely mistake, the
+    evidence table, the schemes, and where each allowance comes from last."""
+    lines = [("PASS: " if res.passed else "FAIL: ") + res.verdict]
+    for cause in res.likely_causes:
+        lines.append(f"likely cause: {cause}")
+    for c in res.caveats:
+        lines.append(f"caveat: {c}")
+    lines += ["", f"{res.source}: {res.input['description']}",
+              f"scenario {res.scenario} ({res.input['duration_s']:g} s); reference: {res.reference_label or '–'}"
+              + ("; values look single precision" if res.input.get("single_precision") else "")]
+    lines += _evidence_table(res)
     lines += _schemes(res)
     lines.append("")
     if res.identity:
@@ -70,10 +86,6 @@ def format_report(res) -> str:
         lines.append(f"closest scheme: {res.closest} ({how})"
                      + (f"; closest correct scheme: {res.closest_correct}"
                         if res.closest_correct and res.closest_correct != res.closest else ""))
-    for c in res.caveats:
-        lines.append(f"caveat: {c}")
-    for cause in res.likely_causes:
-        lines.append(f"likely cause: {cause}")
     for e in res.engines:
         if "error" in e:
             lines.append(f"engine {e['engine']}: {e['error']}")
@@ -85,6 +97,16 @@ def format_report(res) -> str:
         lines.append(f"cannot tell: {n}")
     for n in res.notes:
         lines.append(f"note: {n}")
+    if res.evidence:
+        lines += ["", "allowances (where each comes from):"]
+        seen = set()
+        for e in res.evidence:
+            if (e.kind, e.source) not in seen and not _still(e):
+                seen.add((e.kind, e.source))
+                lines.append(f"  {e.kind}: {e.source}")
+        for e in res.evidence:
+            if e.note and not _still(e):
+                lines.append(f"  {e.kind} {_NAMES.get(e.quantity, e.quantity)}: {e.note}")
     return "\n".join(lines)
 
 

@@ -1,10 +1,14 @@
 """``rbcheck check TRAJ.csv --scenario SCENARIO``: a true verdict on any simulator's trajectory.
 
-PASS (exit 0) when the trajectory IS a reference variant step for step (said with that variant's
-caveats where its own step is not the true dynamics, e.g. the course's missing gyroscopic term), or
-when it is consistent with the scenario's equations of motion within what a consistent scheme of
-order ≥ 1 leaves at its Δt. FAIL (exit 1) otherwise, or when the run diverged, ended early or did not
-start at the scenario's initial state. Bad input is a :class:`CheckError` (exit 2).
+Two questions, never mixed. By default: is this a correct simulation of the scenario's physics? PASS
+(exit 0) when the trajectory is consistent with the scenario's equations of motion within what a
+consistent scheme of order ≥ 1 leaves at its Δt, or IS a reference variant step for step whose own step
+is right on this scenario. A trajectory that is exactly a scheme whose step is wrong here (the course's
+update, which omits the gyroscopic term, on a tumbling asymmetric body) FAILS, and the verdict says so
+in one sentence. ``scheme="ENGINE:VARIANT"`` asks instead: is this exactly that scheme? PASS when it
+reproduces that scheme step for step (said with what the scheme gets wrong here, if anything), FAIL
+otherwise. Either way FAIL when the run diverged, ended early or did not start at the scenario's
+initial state. Bad input is a :class:`CheckError` (exit 2).
 
 The evidence (docs/check.md): the one-step defect from every recorded state against the exact flow
 (chaos-independent), conserved quantities, and the free-running error against the reference within
@@ -284,21 +288,25 @@ def _dt_mismatch(local, scenario, inp):
 # --- the check ---------------------------------------------------------------------------------------
 
 def check_trajectory(traj, scenario, source: str = "TRAJ.csv", *, dt_s: float | None = None,
-                     compare_with=()) -> CheckResult:
+                     compare_with=(), scheme: str | None = None) -> CheckResult:
     """Check ``traj`` (a Trajectory read by name, possibly pose-only) against ``scenario``.
 
     ``dt_s``: the simulator's integration step when the rows are written less often than every step.
     ``compare_with``: extra ENGINE:VARIANT names run free at the file's Δt and compared (e.g. user
-    engines). Raises CheckError for input that cannot be checked.
+    engines). ``scheme``: ask "is this exactly ENGINE:VARIANT?" instead of "is this a correct
+    simulation?" (a reference variant is compared step for step, any other engine run free and compared).
+    Raises CheckError for input that cannot be checked.
     """
+    if scheme is not None and not scheme.startswith("reference:") and scheme not in compare_with:
+        compare_with = [*compare_with, scheme]
     with np.errstate(all="ignore"):   # blown-up or NaN states are judged, never warned about
         inp = prepare_input(traj, scenario, source, dt_s)
         if inp.n_rows < 2:
             return _no_step_result(inp, scenario)
-        return _check(inp, scenario, compare_with)
+        return _check(inp, scenario, compare_with, scheme)
 
 
-def _check(inp, scenario, compare_with) -> CheckResult:
+def _check(inp, scenario, compare_with, scheme=None) -> CheckResult:
     from cross_checks.scenario.references import reference_solution
 
     y_ref, label = reference_solution(scenario, inp.t_s)
@@ -310,7 +318,8 @@ def _check(inp, scenario, compare_with) -> CheckResult:
     engines = _engines(inp, scenario, list(compare_with), growth, arith) if compare_with else []
     off, init_words, slips = _initial_state(inp, scenario)
     evidence = local.rows + cons + free
-    return _compose(inp, scenario, label, y_ref, local, evidence, candidates, engines, off, init_words, slips)
+    return _compose(inp, scenario, label, y_ref, local, evidence, candidates, engines, off, init_words, slips,
+                    scheme)
 
 
 def _no_step_result(inp, scenario):
@@ -339,7 +348,59 @@ def _cannot_tell(inp, scenario):
     return out
 
 
-def _compose(inp, scenario, label, y_ref, local, evidence, candidates, engines, off, init_words, slips):
+def _wrong_here(variant, scenario, candidates) -> str:
+    """Why ``variant``'s own step is not the true dynamics of ``scenario`` ("" when it is)."""
+    c = next((c for c in candidates if c.name == variant), None)
+    return _caveat_for(variant, scenario, c.own_defect if c is not None else math.nan) or ""
+
+
+def _physics_reason(variant, scenario) -> str:
+    """The one-sentence physics a variant misses on ``scenario`` (from the expectations), or ""."""
+    exp = expectation(scenario, variant, "angular_velocity", measure_physics=False)
+    return exp.reason if exp.verdict == "does_not_converge" else ""
+
+
+def _reproduces_wrong_scheme(variant, scenario, why) -> str:
+    """The verdict sentence of a file that is exactly ``variant``, a step that is wrong on this scenario."""
+    missing = _physics_reason(variant, scenario)
+    ask = f"(`--scheme {variant}` asks whether it is exactly that scheme)"
+    if variant == "reference:course" and missing:
+        return ("it reproduces the course's update exactly; the course omits the gyroscopic term −ω × (I ω), "
+                f"{missing.split(', ', 1)[1] if ', ' in missing else 'which matters here'}, so on this body the "
+                f"motion is wrong {ask}")
+    if missing:
+        return f"it reproduces {variant} exactly; {missing}, so on this body the motion is wrong {ask}"
+    return f"it reproduces {variant} exactly, whose step is wrong here: {why.split(': ', 1)[0]} {ask}"
+
+
+def _likely_mistake(variant, why) -> str:
+    """The cause line of a file that is exactly a scheme that is wrong here: what to change."""
+    if variant == "reference:course":
+        return ("the rotational update has no gyroscopic torque: Euler's equations need dω/dt = I⁻¹(τ − ω × (I ω)); "
+                "add the −ω × (I ω) term (reference:course_gyro is the course's step with it)")
+    return f"it matches {variant} step for step, a step that is wrong here: {why.split(': ', 1)[-1]}"
+
+
+def _scheme_outcome(scheme, identity, candidates, engines):
+    """``(is it that scheme, how far from it in words)`` for ``--scheme``."""
+    if scheme in identity:
+        return True, ""
+    c = next((c for c in candidates if c.name == scheme), None)
+    if c is not None:
+        return False, (f"it is not {scheme}: stepped from the file's own states, that scheme lands up to "
+                       f"{c.max_ratio:.3g}× the one-step allowance away from the next rows")
+    e = next((e for e in engines if e.get("engine") == scheme), None)
+    if e is not None and e.get("same_to_roundoff"):
+        return True, ""
+    if e is not None and "error" in e:
+        return False, f"{scheme} could not be run at the file's Δt: {e['error']}"
+    if e is not None:
+        worst = max(e["max_difference"].items(), key=lambda kv: kv[1] if not math.isnan(kv[1]) else -1.0)
+        return False, f"it is not {scheme}: run free at the file's Δt, it differs by {worst[1]:.3g} in {worst[0]}"
+    return False, f"{scheme} cannot be compared with this file"
+
+
+def _compose(inp, scenario, label, y_ref, local, evidence, candidates, engines, off, init_words, slips, scheme=None):
     reasons, caveats, causes, kept = [], [], [], []
     if inp.diverged_at_s is not None:
         reasons.append(f"diverged at t = {inp.diverged_at_s:.6g} s (non-finite values from there; the rows before "
@@ -360,13 +421,21 @@ def _compose(inp, scenario, label, y_ref, local, evidence, candidates, engines, 
                                      else _caveat_for(c.name, scenario, math.nan) is None)]
     closest_correct = correct[0].name if correct else None
     identity = [c.name for c in candidates if c.same]
+    wrong = {v: _wrong_here(v, scenario, candidates) for v in identity}
     failing = [e for e in evidence if not e.passed]
-    if identity:
-        for v in identity:
-            c = next(c for c in candidates if c.name == v)
-            cav = _caveat_for(v, scenario, c.own_defect)
-            if cav:
-                caveats.append(cav)
+    if scheme is not None:   # the question "is this exactly SCHEME?"
+        is_it, words = _scheme_outcome(scheme, identity, candidates, engines)
+        if is_it:
+            if wrong.get(scheme):
+                caveats.append(wrong[scheme])
+        else:
+            reasons.append(words)
+    elif identity and not all(wrong.values()):   # exactly a scheme whose step is right here
+        caveats += [w for w in wrong.values() if w]
+    elif identity:   # exactly a scheme (or several) whose step is wrong here: not the scenario's physics
+        first = identity[0]
+        reasons.append(_reproduces_wrong_scheme(first, scenario, wrong[first]))
+        causes.append(_likely_mistake(first, wrong[first]))
     elif failing:
         reasons += [_failure_words(e) for e in failing]
         if inp.full_state:
@@ -377,17 +446,20 @@ def _compose(inp, scenario, label, y_ref, local, evidence, candidates, engines, 
                           "not diagnosed: the catalog of mistakes is compared step for step from full states, and the "
                           "file has no velocities")
     passed = not reasons
-    verdict = _verdict_line(inp, scenario, passed, reasons, identity, local, closest, candidates)
+    verdict = _verdict_line(inp, scenario, passed, reasons, identity, local, closest, candidates, scheme)
     series = _series(inp, scenario, y_ref, local, closest_correct)
     return CheckResult(inp.source, scenario.name, label, _input_dict(inp, scenario), passed, verdict, reasons, evidence,
                        identity, closest, closest_correct, candidates, causes, kept, caveats, list(inp.notes) + local.notes,
                        _cannot_tell(inp, scenario), engines, series)
 
 
-def _verdict_line(inp, scenario, passed, reasons, identity, local, closest, candidates):
+def _verdict_line(inp, scenario, passed, reasons, identity, local, closest, candidates, scheme=None):
     h = f"Δt = {inp.h_s:g} s" if inp.h_s is not None else "its steps"
     if not passed:
         return "; ".join(reasons[:3]) + (f"; and {len(reasons) - 3} more" if len(reasons) > 3 else "")
+    if scheme is not None:
+        return (f"is {scheme}: it reproduces that scheme at {h} within the rounding of the data"
+                + ("" if scheme in identity else " (compared free-running)"))
     if identity:
         also = f" (indistinguishable here from {', '.join(identity[1:])})" if len(identity) > 1 else ""
         return (f"is {identity[0]}{also}: it reproduces that scheme's every step at {h} within the rounding of the data")

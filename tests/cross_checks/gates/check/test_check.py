@@ -103,12 +103,83 @@ def test_a_step_without_the_gyroscopic_term_that_is_not_the_course_scheme_fails_
     assert "reference:course" in cause and "gyroscopic" in cause
 
 
-def test_the_course_scheme_itself_passes_with_its_caveat(tmp_path, capsys):
-    """DESIGN: a trajectory that IS reference:course passes, said with the course's caveat."""
+def test_the_course_scheme_fails_by_default_where_its_step_is_wrong_and_passes_when_asked_for(tmp_path, capsys):
+    """Two questions: "a correct simulation?" (default) FAILS a faithful course implementation on a tumbling
+    asymmetric body, in one sentence; "is it exactly reference:course?" (--scheme) PASSES, saying what the
+    course gets wrong there."""
     sc = scenario_file(tmp_path, "tennis_racket", 2.0)
-    rc, out, _ = check(capsys, student_file(tmp_path, sc, 0.01, bug="no_gyro"), "--scenario", sc)
+    path = student_file(tmp_path, sc, 0.01, bug="no_gyro")
+    rc, out, _ = check(capsys, path, "--scenario", sc)
+    first, second = out.splitlines()[:2]
+    assert rc == 1 and first.startswith("FAIL: it reproduces the course's update exactly; the course omits the "
+                                        "gyroscopic term −ω × (I ω)") and "so on this body the motion is wrong" in first
+    assert second.startswith("likely cause: the rotational update has no gyroscopic torque")
+    rc, out, _ = check(capsys, path, "--scenario", sc, "--scheme", "reference:course")
     assert rc == 0 and out.startswith("PASS: is reference:course")
     assert "caveat:" in out and "gyroscopic" in out
+    rc, out, _ = check(capsys, path, "--scenario", sc, "--scheme", "reference:course_gyro")
+    assert rc == 1 and out.startswith("FAIL: it is not reference:course_gyro")
+
+
+ISOTROPIC_TUMBLE = """
+name = "isotropic_tumble"
+duration = 0.5
+dt = 0.01
+[body]
+mass = 2.0
+inertia = [0.3, 0.3, 0.3]
+[initial]
+angular_velocity = [1.0, -2.0, 3.0]
+[[forces.torque]]
+torque = [0.1, 0.2, -0.05]
+frame = "body"
+"""
+
+
+@pytest.mark.parametrize("scen", ["isotropic_tumble", "constant_spin", "projectile"])
+def test_where_the_course_step_is_right_it_passes_both_questions(tmp_path, capsys, scen):
+    """An isotropic body tumbling under a torque (ω × Iω = 0 always), a spin about a principal axis, no rotation:
+    the course's step is physically right there."""
+    if scen == "isotropic_tumble":
+        sc = tmp_path / "isotropic_tumble.toml"
+        sc.write_text(ISOTROPIC_TUMBLE)
+    else:
+        sc = scenario_file(tmp_path, scen, 0.5)
+    path = student_file(tmp_path, sc, 0.01, bug="no_gyro")
+    for extra in ([], ["--scheme", "reference:course"]):
+        rc, out, _ = check(capsys, path, "--scenario", sc, *extra)
+        assert rc == 0 and out.startswith("PASS: is reference:course"), out[:400]
+        assert "caveat:" not in out
+
+
+def test_a_ladder_of_the_course_on_a_tumbling_body_fails_by_default_and_passes_as_the_scheme(tmp_path, capsys):
+    sc = scenario_file(tmp_path, "tennis_racket", 1.0)
+    files = [student_file(tmp_path, sc, dt, bug="no_gyro", name=f"c{i}.csv") for i, dt in enumerate((0.01, 0.005))]
+    rc, out, _ = check(capsys, *files, "--scenario", sc)
+    assert rc == 1 and out.startswith("FAIL: 2 of 2 files fail their own check")
+    rc, out, _ = check(capsys, *files, "--scenario", sc, "--scheme", "reference:course")
+    assert rc == 0 and out.startswith("PASS: every file passes")
+
+
+def test_a_trajectory_that_blows_up_is_a_fail_never_an_internal_error(tmp_path, capsys):
+    """ω growing to 1e7 rad/s (the attitude following it) and then non-finite: FAIL "diverged at t = …"."""
+    from reference_sim.quaternion import quat_mul
+    sc = scenario_file(tmp_path, "tennis_racket", 1.0)
+    traj = Trajectory.read(_run(tmp_path, sc, "reference:course", 0.01))
+    n = len(traj.t_s)
+    traj.y[:, 10:13] *= np.exp(np.linspace(0.0, math.log(1e7), n))[:, None]
+    for i in range(n - 1):   # the attitude turned by the huge ω, as the simulator would
+        w = traj.y[i, 10:13]
+        th = float(np.linalg.norm(w)) * 0.01
+        dq = np.r_[math.cos(th / 2), math.sin(th / 2) * w / np.linalg.norm(w)]
+        traj.y[i + 1, 6:10] = quat_mul(dq, traj.y[i, 6:10])
+    traj.y[-5:, 10:13] = np.inf
+    path = tmp_path / "blow.csv"
+    traj.write(path)
+    capsys.readouterr()
+    rc, out, err = check(capsys, path, "--scenario", sc)
+    assert rc == 1 and out.startswith(f"FAIL: diverged at t = {traj.t_s[-5]:.6g} s"), (out[:300], err)
+    assert "internal error" not in err
 
 
 def _reference_course_applies_the_per_step_factor(dt=0.005):
@@ -340,11 +411,17 @@ def test_verdict_line_first_then_the_table_json_and_plot(tmp_path, capsys):
     rc, out, err = check(capsys, path, "--scenario", sc, "--json", tmp_path / "r.json", "--plot", tmp_path / "r.png")
     lines = out.splitlines()
     assert rc == 1 and lines[0].startswith("FAIL: angular velocity one-step defect over its allowance from t = 0.01 s")
+    assert lines[1].startswith("likely cause: ") and "gyroscopic term has the wrong sign" in lines[1]
     header = next(i for i, line in enumerate(lines) if line.strip().startswith("evidence"))
-    assert "first over (s)" in lines[header] and "allowed" in lines[header]
-    assert any(line.strip().startswith("one-step defect   angular velocity") and line.endswith("OVER") for line in lines)
+    assert "first over" in lines[header] and "allowed" in lines[header] and "value" in lines[header]
+    over = [line for line in lines[header + 1:] if line.endswith("OVER") or "OVER (" in line]
+    assert over and over[0].strip().startswith("one-step defect  angular velocity")   # the worst failure first
+    # each row: the worst ratio with the value and the allowance at the same time
+    ratio_s, value_s, allowed_s = over[0].split(")")[1].split()[:3]
+    assert float(value_s) / float(allowed_s) == pytest.approx(float(ratio_s), rel=0.01)
     assert any(line.strip().startswith("free-running") and "decisive to t =" in line for line in lines)
-    assert "allowances:" in out and "closest scheme:" in out
+    assert "allowances (where each comes from):" in out and "closest scheme:" in out
+    assert out.index("closest scheme:") < out.index("allowances (where each comes from):")
     data = json.loads((tmp_path / "r.json").read_text(), parse_constant=pytest.fail)   # strict JSON: no NaN
     assert data["passed"] is False and data["exit_code"] == 1 and data["verdict"] == lines[0]
     worst = next(e for e in data["evidence"] if e["kind"] == "one-step defect" and e["quantity"] == "angular_velocity")
