@@ -54,6 +54,7 @@ def assert_engine(request, rbcheck_cache_dir):
     calls = []
 
     def check(variant, scenarios, *, engine_file=None):
+        __tracebackhide__ = True   # the user sees the verdict sentences, not rbcheck's frames
         from cross_checks.testing import _as_list, run_engine_checks
         calls.append(variant)
         out = None

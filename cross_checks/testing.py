@@ -17,6 +17,7 @@ from __future__ import annotations
 import contextlib
 import math
 import os
+import re
 import tempfile
 from pathlib import Path
 
@@ -52,12 +53,14 @@ def assert_engine(variant, scenarios, *, engine_file=None) -> dict:
         Bad input: an unknown variant or scenario, a bad engine file (``FILE: FIELD: REASON``), a
         scenario without a Δt ladder.
     """
+    __tracebackhide__ = True   # pytest shows the verdict, not rbcheck's own frames
     return run_engine_checks(variant, scenarios, engine_file=engine_file)
 
 
 def run_engine_checks(variant, scenarios, *, engine_file=None, out_dir=None, cache_dir=None, jobs=None) -> dict:
     """:func:`assert_engine` with the plugin's settings: ``out_dir`` keeps the results directory and its
     HTML report there; ``cache_dir`` replaces the user's rbcheck cache; ``jobs`` worker processes."""
+    __tracebackhide__ = True
     from cross_checks.engines import EngineUnavailable, engine_files_registered, get_adapter
     from cross_checks.sweep import SweepError, run_sweep
 
@@ -85,40 +88,88 @@ def run_engine_checks(variant, scenarios, *, engine_file=None, out_dir=None, cac
         except SweepError as exc:
             raise ValueError(str(exc)) from None
         rows = _read_rows(out / "results.csv")
-    problems = verdict_problems(summary, rows)
+        problems = verdict_problems(summary, rows)
+        failed = {(r["scenario"], r["engine"]) for r in rows if r["status"] in ("failed", "diverged")}
+        wrong = dict.fromkeys((r["scenario"], r["engine"]) for r in summary.get("convergence", [])
+                              if r.get("matches_expectation") is False and (r["scenario"], r["engine"]) not in failed)
+        causes = likely_causes({s.name: s for s in scs}, wrong) if problems else {}   # its engines still registered
     if problems:
-        where = f" (results and report: {out})" if out_dir is not None else ""
+        lines = [f"  {p}" for p in problems]
+        lines += [f"  likely cause ({v} on {sc}): {c}" for (sc, v), c in causes.items()]
+        where = f"\n  results and report kept in {out}" if out_dir is not None else ""
         raise AssertionError(f"assert_engine({variant!r}) on {', '.join(s.name for s in scs)}: {len(problems)} "
-                             f"problem(s){where}:\n" + "\n".join(f"  {p}" for p in problems))
+                             f"problem(s):\n" + "\n".join(lines) + where)
     return summary
 
 
 def verdict_problems(summary: dict, rows: list) -> list:
-    """The sentences :func:`assert_engine` raises with: failed and diverged runs, then every convergence
-    verdict that contradicts its expectation (the declared order)."""
+    """The sentences :func:`assert_engine` raises with, one per DISTINCT failure: runs that failed with the
+    same words are one sentence naming every run they hit; then diverged runs; then every convergence verdict
+    that contradicts its expectation (the declared order) — except of a (scenario, variant) whose runs failed
+    (the failure is the cause, said once)."""
     out = []
-    for r in rows:
-        if r["status"] == "failed":
-            out.append(f"{r['engine']} on {r['scenario']} at Δt = {float(r['dt']):g} s failed: {r['message']}")
-        elif r["status"] == "diverged":
-            out.append(f"{r['engine']} on {r['scenario']} at Δt = {float(r['dt']):g} s diverged: {r['message']}")
+    failed_pairs = set()
+    for status in ("failed", "diverged"):
+        groups: dict = {}
+        for r in rows:
+            if r["status"] == status:
+                message = " ".join(str(r.get("message") or "no message").split())
+                # the run's own name and Δt are said once in the list of runs: the engine's words group
+                message = re.sub(r"^(?:\w+Error: )?\S+ at Δt = [0-9.eE+-]+ s: ", "", message)
+                groups.setdefault((r["engine"], message), []).append(r)
+                failed_pairs.add((r["scenario"], r["engine"]))
+        for (engine, message), hit in groups.items():
+            out.append(f"{engine} {status} on {_runs_hit(hit)}: {message}")
     for rec in summary.get("convergence", []):
-        if rec.get("matches_expectation") is False:
+        if rec.get("matches_expectation") is False and (rec["scenario"], rec["engine"]) not in failed_pairs:
             out.append(_verdict_sentence(rec))
     return out
 
 
+def _runs_hit(rows) -> str:
+    """``tennis_racket at Δt = 0.01, 0.005 s; projectile at Δt = 0.02 s`` (the runs one failure hit)."""
+    by = {}
+    for r in rows:
+        by.setdefault(r["scenario"], []).append(f"{float(r['dt']):g}")
+    n = len(rows)
+    return (f"{n} run{'s' if n > 1 else ''} (" + "; ".join(f"{sc} at Δt = {', '.join(d)} s" for sc, d in by.items())
+            + ")")
+
+
 def _verdict_sentence(rec: dict) -> str:
     pts = [(d, e) for d, e in zip(rec["dt_s"], rec["errors"]) if e is not None and math.isfinite(e)]
-    errs = ", ".join(f"{e:.3g}" for _, e in pts)
-    dts = ", ".join(f"{d:g}" for d, _ in pts)
-    text = (f"{rec['engine']} on {rec['scenario']}: {rec['quantity'].replace('_', ' ')} {rec['assessment']}"
-            f" — final errors {errs} {rec.get('unit', '')} at Δt = {dts} s").rstrip()
+    what = f"{rec['engine']} on {rec['scenario']}: {rec['quantity'].replace('_', ' ')} {rec['assessment']}"
+    if pts:
+        errs = ", ".join(f"{e:.3g}" for _, e in pts)
+        dts = ", ".join(f"{d:g}" for d, _ in pts)
+        text = f"{what} — final errors {errs} {rec.get('unit', '')}".rstrip() + f" at Δt = {dts} s"
+    else:
+        text = f"{what} — no run of the ladder gave a final error"
     if rec.get("expected_verdict") == "does_not_converge" and rec.get("reason"):
         text += f"; expected not to converge: {rec['reason']}"
     if rec.get("note"):
         text += f" ({rec['note']})"
     return text
+
+
+def likely_causes(scenarios: dict, problems_of) -> dict:
+    """``{(scenario name, variant): likely cause}`` for the failing verdicts (``scenarios``: name -> Scenario),
+    from the same catalog of mistakes
+    ``rbcheck check`` uses: the variant's run at the scenario's coarsest ladder Δt, checked step for step
+    (a cause is said only where one explains every step)."""
+    from cross_checks.engines import run_variant
+    from cross_checks.gates.check import check_trajectory
+    out = {}
+    for sc_name, variant in problems_of:
+        try:
+            sc = scenarios[sc_name]
+            traj = run_variant(sc, variant, max(sc.dt_ladder_s))
+            res = check_trajectory(traj, sc, f"{variant} on {sc_name}")
+        except Exception:  # noqa: BLE001 - a cause is a courtesy: an engine that cannot run again has its failure said
+            continue
+        if res.likely_causes and not res.likely_causes[0].startswith("no catalogued mistake"):
+            out[(sc_name, variant)] = res.likely_causes[0]
+    return out
 
 
 def _as_list(x) -> list:

@@ -16,7 +16,8 @@ from __future__ import annotations
 
 import math
 
-from cross_checks.analysis.convergence import compare_with_expectation, fit_convergence, measured_pre_asymptotic
+from cross_checks.analysis.convergence import fit_convergence
+from cross_checks.analysis.judge import judge_fit
 
 __all__ = ["errors_shrink", "refined_ladder_shows_the_order"]
 
@@ -43,5 +44,5 @@ def refined_ladder_shows_the_order(dts, errors, floors, statuses, exp) -> tuple:
         return False, fit
     if fit.verdict != "converges" or fit.order is None or fit.order_is_lower_bound:
         return False, fit
-    matches, _ = compare_with_expectation(fit.verdict, fit.order, exp, fit.order_is_lower_bound)
-    return bool(matches is True or (matches is False and measured_pre_asymptotic(fit, exp.order))), fit
+    j = judge_fit(fit, exp)   # the one judge: a match, or the order measured on the finest pair (a claim)
+    return bool(j.matches is True or (j.verdict == "pre_asymptotic" and j.claimed)), fit

@@ -14,8 +14,7 @@ import numpy as np
 
 from reference_sim.state import Q
 from cross_checks.analysis import metrics as M
-from cross_checks.analysis.convergence import (compare_with_expectation, fit_convergence, fmt_order,
-                                               measured_pre_asymptotic, order_within_floors)
+from cross_checks.analysis.judge import judge_ladder
 from cross_checks.analysis.expectations import EQUIVALENT_PAIRS, expectation, pair_is_same_arithmetic
 from cross_checks.core import tolerances as tol
 from cross_checks.core.files import atomic_write_text, json_default
@@ -84,33 +83,11 @@ def _ladder_errors(ladder, q, mode):
     return errs, statuses
 
 
-def _judged(fit, exp):
-    """``(verdict, matches_expectation, assessment)`` of a fit against its expectation. Where the
-    expectation makes no claim on this ladder (pre-asymptotic), a fitted converges / does_not_converge
-    becomes ``pre_asymptotic``; so does a converging scheme whose low order the ladder itself shows to be
-    pre-asymptotic (convergence.measured_pre_asymptotic). A too-low order that the errors, each allowed its
-    round-off floor, do not refute (convergence.order_within_floors) makes no claim either."""
-    verdict = fit.verdict
-    matches, phrase = compare_with_expectation(fit.verdict, fit.order, exp, fit.order_is_lower_bound)
-    if exp.verdict == "pre_asymptotic" and verdict in ("converges", "does_not_converge"):
-        verdict = "pre_asymptotic"
-    elif matches is False and exp.verdict == "converges":
-        why = measured_pre_asymptotic(fit, exp.order)
-        if why:
-            verdict, matches, phrase = "pre_asymptotic", None, why
-        elif fit.verdict == "converges" and exp.order is not None:
-            best = order_within_floors(fit)
-            if best is not None and best >= exp.order - tol.SWEEP_ORDER_TOL:
-                matches = None
-                phrase = (f"order {fmt_order(fit.order)}, but the errors allow order {fmt_order(best)} within their "
-                          f"round-off floors (expected {exp.order:g}): no claim on this ladder")
-    return verdict, matches, phrase
-
-
 def convergence_records(scenario, variant, rows, scales, mode, measured=None) -> list:
     """Convergence records of one (scenario, variant), one per quantity: the fit over the ladder against
     floors from measurement (:func:`ladder_floors`) and the expectation decided from the scenario's measured
-    physics (:func:`_judged`; the fit's own verdict is kept in ``fit_verdict``). ``mode`` is
+    physics (:func:`cross_checks.analysis.judge.judge_ladder`, the one judge; the fit's own verdict is kept in
+    ``fit_verdict``). ``mode`` is
     ``free_running`` (final errors) or ``one_step`` (local errors)."""
     from cross_checks.analysis.physics import physics_from_dict
     measured = measured or {}
@@ -123,9 +100,9 @@ def convergence_records(scenario, variant, rows, scales, mode, measured=None) ->
     out = []
     for q in QUANTITIES:
         errs, statuses = _ladder_errors(ladder, q, mode)
-        fit = fit_convergence(dts, errs, ladder_floors(ladder, q, scales, mode, label, measured), statuses)
         exp = expectation(scenario, variant, q, mode, physics=phys, measure_physics=False)
-        verdict, matches, phrase = _judged(fit, exp)
+        j = judge_ladder(dts, errs, ladder_floors(ladder, q, scales, mode, label, measured), statuses, exp)
+        fit, verdict, matches, phrase = j.fit, j.verdict, j.matches, j.assessment
         out.append({
             "scenario": scenario.name, "engine": variant, "quantity": q, "mode": mode,
             "order": fit.order, "pairwise_orders": fit.pairwise_orders, "verdict": verdict,

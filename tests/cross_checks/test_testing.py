@@ -48,6 +48,32 @@ def test_readme_test_file_is_five_lines_and_passes_a_correct_engine_and_fails_a_
     assert "FAILED broken/test_cbody.py::test_cbody_is_first_order" in out
     assert "cbody:euler on applied_torque: orientation does not converge" in out
     assert "expected order 1 — final errors" in out
+    # the likely cause from check's catalog of mistakes; the user sees the verdict, not rbcheck's frames
+    assert "likely cause (cbody:euler on applied_torque): the gyroscopic term has the wrong sign" in out
+    assert "cross_checks/testing.py" not in out and "run_engine_checks" not in out
+
+
+def test_identical_failures_are_one_complete_sentence_naming_every_run(tmp_path):
+    """An engine whose script raises a KeyError on every run: one problem, with the runs it hit and the script's
+    own words, no sentence with empty fields (no final errors to quote)."""
+    folder = tmp_path / "e"
+    folder.mkdir()
+    (folder / "eng.py").write_text("import json, sys\nd = json.load(open(sys.argv[1]))\nprint(d['no_such_key'])\n")
+    (folder / "eng.toml").write_text(f'name = "keyerr"\nversion = "1"\n[variants.euler]\norder = 1\n'
+                                     f'command = ["{sys.executable}", "eng.py", "{{scenario_json}}", "{{out_csv}}"]\n')
+    (folder / "test_mine.py").write_text(
+        "from pathlib import Path\nENGINE = Path(__file__).parent / 'eng.toml'\n\n"
+        "def test_it(assert_engine):\n    assert_engine('keyerr:euler', ['projectile', 'constant_spin'], "
+        "engine_file=ENGINE)\n")
+    proc = _pytest(["test_mine.py", "--rbcheck-keep-reports", str(tmp_path / "kept")], cwd=folder)
+    out = proc.stdout
+    assert proc.returncode == 1 and "1 problem(s):" in out, out[-3000:]
+    assert ("keyerr:euler failed on 10 runs (projectile at Δt = 0.02, 0.01, 0.005, 0.0025, 0.00125 s; constant_spin "
+            "at Δt = 0.02, 0.01, 0.005, 0.0025, 0.00125 s): the command exited with status 1") in out
+    assert out.count("KeyError: 'no_such_key'") <= 2          # the message once (and pytest's one-line summary)
+    assert "final errors  " not in out and "at Δt =  s" not in out
+    assert f"results and report kept in {tmp_path / 'kept'}" in out
+    assert "cross_checks/testing.py" not in out
 
 
 PLUGIN_TESTS = '''

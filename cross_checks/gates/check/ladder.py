@@ -1,8 +1,8 @@
 """``rbcheck check A.csv B.csv C.csv --scenario S``: several runs of one scenario at different Δt.
 
 Each file gets its own check; then the final errors against the reference are fitted over Δt with the
-sweep's own machinery (:func:`cross_checks.analysis.convergence.fit_convergence`, round-off floors included) and
-judged with :func:`cross_checks.analysis.convergence.compare_with_expectation`. The expectation: the reference
+sweep's own machinery and judged by the one judge every entry point uses
+(:func:`cross_checks.analysis.judge.judge_ladder`, round-off floors included). The expectation: the reference
 variant the files ARE (all the same one), else a consistent scheme (converges, order not claimed).
 """
 from __future__ import annotations
@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 
 from cross_checks.analysis import metrics as M
-from cross_checks.analysis.convergence import compare_with_expectation, fit_convergence
+from cross_checks.analysis.judge import judge_ladder
 from cross_checks.core.quantities import QUANTITIES, quantity_scales
 from cross_checks.analysis.expectations import Expectation, expectation
 
@@ -69,12 +69,12 @@ def check_ladder(results, scenario, scheme=None) -> dict:
         errs = [f[q] if s == "ok" else math.nan for f, s in zip(finals, statuses)]
         floors = [M.roundoff_floor(quantity_scales(r.series["y_ref"])[q], int(round(scenario.duration_s / d)),
                                    r.reference_label) for r, d in zip(results, dts)]
-        fit = fit_convergence(dts, errs, floors, statuses)
         variant, exp = _expected(results, scenario, q, scheme)
-        matches, phrase = compare_with_expectation(fit.verdict, fit.order, exp)
+        j = judge_ladder(dts, errs, floors, statuses, exp)
+        fit, matches, phrase = j.fit, j.matches, j.assessment
         ok &= matches is not False
         records.append({"quantity": q, "order": fit.order, "pairwise_orders": fit.pairwise_orders,
-                        "verdict": fit.verdict, "assessment": phrase, "matches_expectation": matches,
+                        "verdict": j.verdict, "assessment": phrase, "matches_expectation": matches,
                         "expected": exp.as_dict(), "dt_s": fit.dt_s, "errors": fit.errors, "floors": fit.floors,
                         "fitted": fit.fitted, "note": fit.note})
         if fit.note:

@@ -106,7 +106,8 @@ def test_rbcheck_s_own_schemes_are_not_given_an_engine_s_lever_arm_round_off(mon
     monkeypatch.setattr(P, "pays_lever_roundoff", lambda variant: True)   # the floor as it was
     (with_floor,) = evaluate_specs([FAR_SMALL_BODY], ["reference:rk4"])
     assert with_floor.violations == []   # ... and order_within_floors alone leaves room for order 5 there too
-    monkeypatch.setattr(P, "order_within_floors", lambda fit: None)       # the rules as they were
+    import cross_checks.analysis.judge as J
+    monkeypatch.setattr(J, "order_within_floors", lambda fit: None)       # the rules as they were
     (before,) = evaluate_specs([FAR_SMALL_BODY], ["reference:rk4"])
     assert [(v["property"], v["quantity"]) for v in before.violations] == [("one_step_order", "angular_velocity")]
 

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from cross_checks.fuzz.properties import two_term_consistent
+from cross_checks.analysis.judge import two_term_consistent
 from tests.helpers.scenarios import RK4_PRE_ASYMPTOTIC_FROM_BELOW
 
 H = np.array([0.0377, 0.01885, 0.009425])

@@ -1,9 +1,14 @@
-"""How the sweep judges a convergence fit against its expectation (cross_checks/sweep/assemble.py)."""
+"""How a convergence fit is judged against its expectation (cross_checks/analysis/judge.py, the one judge)."""
 import pytest
 
 from cross_checks.analysis.convergence import fit_convergence
 from cross_checks.analysis.expectations import Expectation
-from cross_checks.sweep.assemble import _judged
+from cross_checks.analysis.judge import judge_fit
+
+
+def _judged(fit, exp):
+    j = judge_fit(fit, exp)
+    return j.verdict, j.matches, j.assessment
 
 DTS = [0.024343227673126657, 0.012171613836563329, 0.006085806918281664]
 ERRS = [8.619677552088268e-11, 1.3597802417763613e-11, 1.8910664527449406e-12]

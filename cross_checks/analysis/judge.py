@@ -1,0 +1,126 @@
+"""The one judge of a convergence ladder: from the errors over a Δt ladder, their round-off floors and what
+the variant is expected to do (its declared order and traits against the scenario's measured physics:
+:mod:`cross_checks.analysis.expectations`) to a verdict, whether it matches, and the sentence saying why.
+
+Every entry point decides a ladder's verdict here and nowhere else: the sweep's convergence records
+(:mod:`cross_checks.sweep.assemble`, and through it ``assert_engine``), the fuzz's order properties
+(:mod:`cross_checks.fuzz.properties`) and ``rbcheck check``'s ladder mode (:mod:`cross_checks.gates.check.ladder`).
+tests/cross_checks/analysis/test_judge.py draws ladders and asserts that all of them say the same.
+
+The rules, in order (each a measured reason, never a tolerance widened):
+
+1. The fit (:func:`~cross_checks.analysis.convergence.fit_convergence`) over the points resolved above their
+   floors, compared with the expectation (:func:`~cross_checks.analysis.convergence.compare_with_expectation`).
+2. An expectation that makes no claim on this ladder (``pre_asymptotic``: the variant's amplitude drift
+   would bend a first-order fit) turns a fitted converges / does_not_converge into ``pre_asymptotic``.
+3. A too-low order whose finest pair already shows the expected order while the coarser pairs approach it is
+   pre-asymptotic, measured (:func:`~cross_checks.analysis.convergence.measured_pre_asymptotic`).
+4. A too-low order that the errors, each allowed its round-off floor, do not refute
+   (:func:`~cross_checks.analysis.convergence.order_within_floors`) — no claim.
+5. Three halving rungs that fit ``a hᵖ + b hᵖ⁺¹`` within their floors (:func:`two_term_consistent`): the
+   next term of the error series, not the order — no claim.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from cross_checks.analysis.convergence import (ConvergenceFit, compare_with_expectation, fit_convergence, fmt_order,
+                                               measured_pre_asymptotic, order_within_floors)
+from cross_checks.core import tolerances as tol
+
+__all__ = ["Judgement", "judge_ladder", "judge_fit", "two_term_consistent"]
+
+
+@dataclass(frozen=True)
+class Judgement:
+    """What the judge decided of one ladder.
+
+    fit : the fit it judged.  verdict : the record's verdict (the fit's, or ``pre_asymptotic`` where no claim
+    is made).  matches : True / False against the expectation, None where no claim is made.  assessment : the
+    sentence.  claimed : whether an order claim was tested on this ladder (the fuzz counts claims).
+    """
+
+    fit: ConvergenceFit
+    verdict: str
+    matches: bool | None
+    assessment: str
+    claimed: bool
+
+
+def judge_ladder(dts, errors, floors, statuses, exp) -> Judgement:
+    """Fit the ladder (Δt coarse to fine, errors, floors, statuses "ok"/...) and judge it against ``exp``
+    (an :class:`~cross_checks.analysis.expectations.Expectation`)."""
+    return judge_fit(fit_convergence(dts, errors, floors, statuses), exp)
+
+
+def judge_fit(fit: ConvergenceFit, exp) -> Judgement:
+    """Judge a fit against the expectation ``exp`` (the module's rules, in order)."""
+    verdict = fit.verdict
+    matches, phrase = compare_with_expectation(fit.verdict, fit.order, exp, fit.order_is_lower_bound)
+    if exp.verdict == "pre_asymptotic":
+        if verdict in ("converges", "does_not_converge"):
+            verdict = "pre_asymptotic"
+        return Judgement(fit, verdict, None, phrase, False)
+    if exp.verdict != "converges":
+        return Judgement(fit, verdict, matches, phrase, exp.verdict is not None)
+    if matches is not False or exp.order is None:
+        return Judgement(fit, verdict, matches, phrase, True)
+    why = measured_pre_asymptotic(fit, exp.order)
+    if why:
+        return Judgement(fit, "pre_asymptotic", None, why, True)
+    if fit.verdict == "converges":
+        best = order_within_floors(fit)
+        if best is not None and best >= exp.order - tol.SWEEP_ORDER_TOL:
+            return Judgement(fit, verdict, None,
+                             f"order {fmt_order(fit.order)}, but the errors allow order {fmt_order(best)} within their "
+                             f"round-off floors (expected {exp.order:g}): no claim on this ladder", False)
+    if two_term_consistent(fit.dt_s, fit.errors, fit.floors, exp.order):
+        return Judgement(fit, verdict, None,
+                         f"{phrase}, but the three rungs fit a hᵖ + b hᵖ⁺¹ (p = {exp.order:g}) within their "
+                         "round-off floors: the next term of the error series, no claim on this ladder", False)
+    return Judgement(fit, verdict, False, phrase, True)
+
+
+def two_term_consistent(dts, errors, floors, order) -> bool:
+    """Whether three rungs h, h/2, h/4, each error allowed its round-off floor, fit
+    e(h) = a h^p + b h^(p+1): the leading term of an order-p scheme plus the next one, of any sign.
+
+    Then u = e / h^p is affine in h, so u0 − 3 u1 + 2 u2 = 0 (rungs halving). A leading coefficient a
+    that happens to be small (two first-order contributions nearly cancelling) makes b h dominate at the
+    coarse rungs and the fitted order meaningless, although the scheme has order p — found by the fuzz on
+    a weakly decayed spring released from rest. An order q < p instead gives u ∝ h^(q−p), whose residual is
+    ≥ 0.38 of max |u| for q ≤ p − 0.5 (0.75 for q = p − 1): above FUZZ_TWO_TERM_TOL.
+
+    Each measured error is the truncation error plus round-off and the reference's error, which its floor
+    bounds: the ladder is consistent when SOME truncation errors e'_i ∈ [max(0, e_i − f_i), e_i + f_i] give
+    |u'0 − 3 u'1 + 2 u'2| ≤ FUZZ_TWO_TERM_TOL · max u' (a linear program per candidate maximum, SciPy's
+    HiGHS). Errors far above their floors are judged as measured; a rung within its floor leaves two
+    resolved rungs, on which a next term that cancels the leading one cannot be told from a lower order
+    (reference:rk4 at 1.35e-12, 1.25e-13, 1.08e-14 rad/s over floors up to 1.6e-14: pairwise orders 3.44,
+    then 3.60, 3.82, 3.91 on finer steps in extended precision), so no claim either way. Only ladders of
+    exactly three halving rungs qualify (the fuzz's); longer ladders are judged by the other rules."""
+    from scipy.optimize import linprog
+    h = np.asarray(dts, dtype=float)
+    e = np.asarray(errors, dtype=float)
+    fl = np.asarray(floors, dtype=float)
+    if len(h) != 3 or not np.all(np.isfinite(e)) or not np.all(np.isfinite(fl)):
+        return False
+    if not np.allclose(h[1:] / h[:-1], 0.5, rtol=1e-9):
+        return False
+    scale = 1.0 / h ** float(order)                  # u = scale · e
+    scale = scale / scale[0]                          # (a common factor: the test is homogeneous in u)
+    third = np.array([1.0, -3.0, 2.0]) * scale        # u0 − 3 u1 + 2 u2 as a linear form in e'
+    lo, hi = np.maximum(0.0, e - np.maximum(fl, 0.0)), e + np.maximum(fl, 0.0)
+    if np.all(hi <= 0.0):
+        return False
+    for j in range(3):      # max u' = u'_j: |third · e'| ≤ TOL u'_j, and u'_j ≥ u'_k for every k
+        unit = np.eye(3)[j] * scale[j]
+        rows = [third - tol.FUZZ_TWO_TERM_TOL * unit, -third - tol.FUZZ_TWO_TERM_TOL * unit]
+        rows += [np.eye(3)[k] * scale[k] - unit for k in range(3) if k != j]
+        res = linprog(np.zeros(3), A_ub=np.array(rows), b_ub=np.zeros(len(rows)),
+                      bounds=list(zip(lo / hi.max(), hi / hi.max())), method="highs")
+        if res.status == 0:
+            return True
+    return False
