@@ -23,7 +23,8 @@ LABELS = {"position": "position", "velocity": "velocity", "orientation": "orient
 
 _INT = {"steps"}
 _BOOL = {"default_dt", "in_ladder", "cached"}
-_STR = {"scenario", "engine", "status", "message", "reference", "engine_version", "energy_drift_kind"}
+_STR = {"scenario", "engine", "status", "message", "reference", "engine_version", "energy_drift_kind",
+        "step_defect_quantity"}
 _REQUIRED = ("scenario", "engine", "dt", "steps", "wall_s", "pos_err_final", "vel_err_final", "orient_err_final",
              "angvel_err_final", "energy_drift_max", "angmom_drift_max", "status")
 

@@ -19,7 +19,7 @@ velocity (rad/s, world).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -301,34 +301,98 @@ def error_growth(scenario, t_s, scales) -> dict:
     return out
 
 
-def conservation_allowance(scenario, y, h_s: float, duration_s: float) -> dict:
-    """How far a consistent scheme of order ≥ 1 with step ``h_s`` may move each conserved quantity over
-    ``duration_s``, from the motion sampled at states ``y`` (K, 13) along it.
-
-    Each step's defect is at most ``C h² M2`` per quantity (:func:`local_allowances`' physics part, C =
-    tol.CHECK_LOCAL_C); a defect d moves a conserved quantity Q by at most ``Σ_b |∂Q/∂y_b| d_b``, so over
-    ``T / h`` steps Q moves by at most ``C h T max_t Σ_b |∂Q/∂y_b| M2_b`` (the largest over the samples
-    stands for every step). Sensitivities as ``rbcheck check`` uses them: energy ``|f|``, ``m|v|``,
-    ``|τ| + |ω × L|``, ``|L|``; world angular momentum ``|∂L/∂ω| ≤ I_max``, ``|∂L/∂θ| ≤ |L| + I_max |ω|``.
-
-    Returns ``{"energy": J, "angular_momentum": kg m²/s}`` (absolute, not relative).
-    """
+def conservation_sensitivities(scenario, y) -> dict:
+    """How much a unit defect in each quantity moves each conserved quantity, at states ``y`` (K, 13):
+    ``{"energy": {quantity: (K,)}, "angular_momentum": {quantity: (K,)}}`` — bounds of ``|∂Q/∂y_b|``:
+    energy ``|f|`` (position), ``m|v|`` (velocity), ``|τ| + |ω × L|`` (orientation), ``|L|`` (angular
+    velocity); world angular momentum L = I_W ω: ``|∂L/∂θ| ≤ |L| + I_max |ω|``, ``|∂L/∂ω| ≤ I_max``, 0 for
+    the translation. The one definition ``rbcheck check`` (its conserved evidence) and the fuzz
+    (:func:`conservation_allowance`) weight local defects by."""
     from reference_sim.quaternion import matrix_from_quat
     p = scenario.problem
     y = np.asarray(y, dtype=float)
-    rate = motion_rate(scenario, y)
-    M2 = majorant(flow_rhs(scenario), y, rate)
     q = y[:, Q] / np.linalg.norm(y[:, Q], axis=1, keepdims=True)
     R = matrix_from_quat(q)
     w = y[:, W]
     L = np.einsum("kij,kj->ki", p.body.world_inertia(R), w)
     f, tau = p.forces.force_torque(p.body, y[:, BLOCKS["position"]], y[:, BLOCKS["velocity"]], q, R)
     I_max = float(np.linalg.eigvalsh(p.body.inertia_B)[-1])
-    e_rate = (np.linalg.norm(f, axis=1) * M2["position"]
-              + p.body.mass_kg * np.linalg.norm(y[:, BLOCKS["velocity"]], axis=1) * M2["velocity"]
-              + (np.linalg.norm(tau, axis=1) + np.linalg.norm(np.cross(w, L), axis=1)) * M2["orientation"]
-              + np.linalg.norm(L, axis=1) * M2["angular_velocity"])
-    l_rate = (I_max * M2["angular_velocity"]
-              + (np.linalg.norm(L, axis=1) + I_max * np.linalg.norm(w, axis=1)) * M2["orientation"])
+    l_mag, w_mag = np.linalg.norm(L, axis=1), np.linalg.norm(w, axis=1)
+    zero = np.zeros(len(y))
+    return {"energy": {"position": np.linalg.norm(f, axis=1),
+                       "velocity": p.body.mass_kg * np.linalg.norm(y[:, BLOCKS["velocity"]], axis=1),
+                       "orientation": np.linalg.norm(tau, axis=1) + np.linalg.norm(np.cross(w, L), axis=1),
+                       "angular_velocity": l_mag},
+            "angular_momentum": {"position": zero, "velocity": zero, "orientation": l_mag + I_max * w_mag,
+                                 "angular_velocity": np.full(len(y), I_max)}}
+
+
+def conservation_allowance(scenario, y, h_s: float, duration_s: float) -> dict:
+    """How far a consistent scheme of order ≥ 1 with step ``h_s`` may move each conserved quantity over
+    ``duration_s``, from the motion sampled at states ``y`` (K, 13) along it.
+
+    Each step's defect is at most ``C h² M2`` per quantity (:func:`local_allowances`' physics part, C =
+    tol.CHECK_LOCAL_C); a defect d moves a conserved quantity Q by at most ``Σ_b |∂Q/∂y_b| d_b``
+    (:func:`conservation_sensitivities`), so over ``T / h`` steps Q moves by at most
+    ``C h T max_t Σ_b |∂Q/∂y_b| M2_b`` (the largest over the samples stands for every step).
+
+    Returns ``{"energy": J, "angular_momentum": kg m²/s}`` (absolute, not relative).
+    """
+    y = np.asarray(y, dtype=float)
+    M2 = majorant(flow_rhs(scenario), y, motion_rate(scenario, y))
+    sens = conservation_sensitivities(scenario, y)
     scale = tol.CHECK_LOCAL_C * float(h_s) * float(duration_s)
-    return {"energy": scale * float(np.max(e_rate)), "angular_momentum": scale * float(np.max(l_rate))}
+    return {k: scale * float(np.max(sum(sens[k][b] * M2[b] for b in QUANTITIES))) for k in sens}
+
+
+@dataclass(frozen=True)
+class _RunRows:
+    """The row intervals of a run recorded at every step of Δt, in the form :func:`local_allowances` reads
+    (a CheckInput's time fields): float64 arithmetic, no written-digit floor."""
+
+    span_s: np.ndarray
+    span_steps: np.ndarray
+    unit_roundoff: float = 2.0 ** -53
+    print_floor: dict = field(default_factory=dict)
+
+
+def run_local_defect(scenario, y, dt_s: float, max_rows: int | None = None) -> tuple:
+    """The one-step defect of a run recorded at every step (``y`` (N + 1, 13), float64): from each recorded
+    state the exact flow over Δt is compared with the next row, over what a consistent scheme of order ≥ 1
+    may leave there (:func:`local_allowances`) — ``rbcheck check``'s local evidence, for a sweep's own runs.
+
+    Returns ``(ratio, quantity, t_s)``: the largest defect / allowance over the decisive rows (h L ≤
+    CHECK_MAX_HL, finite states) and where; ``(nan, "", nan)`` when no row is decisive. A wrong equation
+    leaves an O(Δt) defect (ratio ∝ 1/Δt), a consistent scheme at most its allowance (ratio ≤ 1).
+    ``max_rows``: judge that many rows, evenly spread over the run (each row's defect stands on its own)."""
+    y = np.asarray(y, dtype=float)
+    n = len(y) - 1
+    if n < 1:
+        return math.nan, "", math.nan
+    idx = np.arange(n)
+    if max_rows is not None and n > max_rows:
+        idx = np.unique(np.linspace(0, n - 1, max_rows).round().astype(int))
+    y0, y1 = y[idx], y[idx + 1]
+    good = np.all(np.isfinite(y0), axis=1) & np.all(np.isfinite(y1), axis=1)
+    if not np.any(good):
+        return math.nan, "", math.nan
+    idx, y0, y1 = idx[good], y0[good], y1[good]
+    rows = _RunRows(np.full(len(idx), float(dt_s)), np.ones(len(idx)))
+
+    def allowance_fn(M2, rate):
+        return local_allowances(rows, y0, M2, rate, y_end=y1).total
+    flow = exact_flow(scenario, y0, rows.span_s, allowance_fn=allowance_fn)
+    allow = local_allowances(rows, y0, flow.M2, flow.rate, flow.roundoff, y_end=y1)
+    d = distances(y1, flow.y_end)
+    decisive = dt_s * flow.rate <= tol.CHECK_MAX_HL
+    best = (math.nan, "", math.nan)
+    for q in QUANTITIES:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            r = np.where(allow.total[q] > 0.0, d[q] / allow.total[q], np.where(d[q] > 0.0, np.inf, 0.0))
+        r = np.where(decisive, r, np.nan)
+        if np.all(np.isnan(r)):
+            continue
+        k = int(np.nanargmax(r))
+        if math.isnan(best[0]) or r[k] > best[0]:
+            best = (float(r[k]), q, float((idx[k] + 1) * dt_s))
+    return best

@@ -19,6 +19,15 @@ The rules, in order (each a measured reason, never a tolerance widened):
    (:func:`~cross_checks.analysis.convergence.order_within_floors`) — no claim.
 5. Three halving rungs that fit ``a hᵖ + b hᵖ⁺¹`` within their floors (:func:`two_term_consistent`): the
    next term of the error series, not the order — no claim.
+
+No excuse (rules 2 and 3) is given to runs whose own steps are not the scenario's equations: ``local`` is
+the worst one-step defect of the ladder's runs measured on their recorded states
+(:func:`cross_checks.analysis.flow.run_local_defect`, what ``rbcheck check`` measures of a file). Above its
+allowance (what any consistent scheme of order ≥ 1 leaves, ratio > 1) a pre-asymptotic excuse would hide a
+wrong equation — a user engine that ignores a spring's rest length, or swaps I and I⁻¹, whose errors stay
+flat over the ladder — so the verdict is judged as fitted and the sentence says why the excuse was refused.
+An expected non-convergence (the course's step on a tumbling body) is not an excuse but a known, named
+missing term: its local defect is what the expectation predicts.
 """
 from __future__ import annotations
 
@@ -30,7 +39,28 @@ from cross_checks.analysis.convergence import (ConvergenceFit, compare_with_expe
                                                measured_pre_asymptotic, order_within_floors)
 from cross_checks.core import tolerances as tol
 
-__all__ = ["Judgement", "judge_ladder", "judge_fit", "two_term_consistent"]
+__all__ = ["Judgement", "LocalEvidence", "judge_ladder", "judge_fit", "two_term_consistent"]
+
+
+@dataclass(frozen=True)
+class LocalEvidence:
+    """The worst one-step defect over a ladder's runs: ``ratio`` (defect / what a consistent scheme leaves),
+    in ``quantity``, at Δt ``dt_s``; ``declared_order``: the order the variant's engine declares (None:
+    unknown)."""
+
+    ratio: float
+    quantity: str
+    dt_s: float
+    declared_order: float | None = None
+
+    @property
+    def wrong_equations(self) -> bool:
+        return self.ratio > 1.0   # above the allowance of every consistent scheme (analysis.flow)
+
+    def sentence(self) -> str:
+        return (f"its own steps are not the scenario's equations: from its recorded states, one step leaves "
+                f"{self.ratio:.3g}× what a consistent scheme of order ≥ 1 leaves in {self.quantity.replace('_', ' ')} "
+                f"(Δt = {self.dt_s:g} s)")
 
 
 @dataclass(frozen=True)
@@ -49,14 +79,27 @@ class Judgement:
     claimed: bool
 
 
-def judge_ladder(dts, errors, floors, statuses, exp) -> Judgement:
+def judge_ladder(dts, errors, floors, statuses, exp, local: LocalEvidence | None = None) -> Judgement:
     """Fit the ladder (Δt coarse to fine, errors, floors, statuses "ok"/...) and judge it against ``exp``
-    (an :class:`~cross_checks.analysis.expectations.Expectation`)."""
-    return judge_fit(fit_convergence(dts, errors, floors, statuses), exp)
+    (an :class:`~cross_checks.analysis.expectations.Expectation`); ``local``: the runs' own one-step defect."""
+    return judge_fit(fit_convergence(dts, errors, floors, statuses), exp, local)
 
 
-def judge_fit(fit: ConvergenceFit, exp) -> Judgement:
-    """Judge a fit against the expectation ``exp`` (the module's rules, in order)."""
+def judge_fit(fit: ConvergenceFit, exp, local: LocalEvidence | None = None) -> Judgement:
+    """Judge a fit against the expectation ``exp`` (the module's rules, in order); no excuse where ``local``
+    says the runs' equations are wrong."""
+    j = _judge(fit, exp)
+    if local is None or not local.wrong_equations or j.verdict != "pre_asymptotic":
+        return j
+    p = local.declared_order
+    if fit.verdict == "converges" and p is not None and fit.order is not None and fit.order >= p - tol.SWEEP_ORDER_TOL:
+        return j   # this quantity shows the declared order: nothing here needed an excuse
+    fitted = f"fitted order {fmt_order(fit.order)}" if fit.order is not None else fit.verdict.replace("_", " ")
+    return Judgement(fit, fit.verdict, False, f"no pre-asymptotic excuse ({fitted}"
+                     + (f", declared order {p:g}" if p is not None else "") + f"): {local.sentence()}", True)
+
+
+def _judge(fit: ConvergenceFit, exp) -> Judgement:
     verdict = fit.verdict
     matches, phrase = compare_with_expectation(fit.verdict, fit.order, exp, fit.order_is_lower_bound)
     if exp.verdict == "pre_asymptotic":

@@ -14,7 +14,7 @@ import numpy as np
 
 from reference_sim.state import Q
 from cross_checks.analysis import metrics as M
-from cross_checks.analysis.judge import judge_ladder
+from cross_checks.analysis.judge import LocalEvidence, judge_ladder
 from cross_checks.analysis.expectations import EQUIVALENT_PAIRS, expectation, pair_is_same_arithmetic
 from cross_checks.core import tolerances as tol
 from cross_checks.core.files import atomic_write_text, json_default
@@ -22,7 +22,7 @@ from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, UNITS, decimat
 from cross_checks.sweep.jobs import MAX_SERIES_POINTS, RESULT_COLUMNS, SCHEMA_VERSION, load_reference
 
 __all__ = ["result_rows", "results_csv_text", "convergence_records", "ladder_floors", "agreement_records", "scenario_record",
-           "series_arrays", "build_summary", "write_json", "write_scenario_files", "SCENARIO_FILES"]
+           "series_arrays", "build_summary", "write_json", "write_scenario_files", "SCENARIO_FILES", "local_evidence"]
 
 
 # --- results.csv ------------------------------------------------------------------------------------
@@ -83,6 +83,17 @@ def _ladder_errors(ladder, q, mode):
     return errs, statuses
 
 
+def local_evidence(rows, variant: str = "") -> LocalEvidence | None:
+    """The worst one-step defect of the runs ``rows`` of one (scenario, ``variant``), measured on their own
+    recorded states (results.csv's ``step_defect_*``), or None when no run has it."""
+    from cross_checks.analysis.expectations import nominal_order
+    have = [r for r in rows if isinstance(r.get("step_defect_ratio"), float) and math.isfinite(r["step_defect_ratio"])]
+    if not have:
+        return None
+    worst = max(have, key=lambda r: r["step_defect_ratio"])
+    return LocalEvidence(worst["step_defect_ratio"], worst["step_defect_quantity"], worst["dt"], nominal_order(variant))
+
+
 def convergence_records(scenario, variant, rows, scales, mode, measured=None) -> list:
     """Convergence records of one (scenario, variant), one per quantity: the fit over the ladder against
     floors from measurement (:func:`ladder_floors`) and the expectation decided from the scenario's measured
@@ -97,11 +108,12 @@ def convergence_records(scenario, variant, rows, scales, mode, measured=None) ->
         return []
     dts = [r["dt"] for r in ladder]
     label = next((r["reference"] for r in ladder if r["reference"]), "analytic")
+    local = local_evidence(rows, variant)
     out = []
     for q in QUANTITIES:
         errs, statuses = _ladder_errors(ladder, q, mode)
         exp = expectation(scenario, variant, q, mode, physics=phys, measure_physics=False)
-        j = judge_ladder(dts, errs, ladder_floors(ladder, q, scales, mode, label, measured), statuses, exp)
+        j = judge_ladder(dts, errs, ladder_floors(ladder, q, scales, mode, label, measured), statuses, exp, local)
         fit, verdict, matches, phrase = j.fit, j.verdict, j.matches, j.assessment
         out.append({
             "scenario": scenario.name, "engine": variant, "quantity": q, "mode": mode,

@@ -49,6 +49,7 @@ RESULT_COLUMNS = (
     "energy_drift_max", "energy_drift_final", "energy_drift_kind",
     "angmom_drift_max", "linmom_drift_max",
     "pos_local_err", "vel_local_err", "orient_local_err", "angvel_local_err",
+    "step_defect_ratio", "step_defect_quantity", "step_defect_t_s",
     "status", "diverged_at_s", "message",
     "default_dt", "in_ladder", "reference", "engine_version", "cached",
 )
@@ -310,7 +311,7 @@ def clear_reference_memo() -> None:
 def _nan_row(job, scenario, status, message, label, version):
     row = {c: math.nan for c in RESULT_COLUMNS}
     row.update(scenario=job.scenario, engine=job.variant, dt=job.dt_s, steps=0, wall_s=math.nan,
-               energy_drift_kind="n/a", status=status, diverged_at_s=math.nan, message=message,
+               energy_drift_kind="n/a", step_defect_quantity="", status=status, diverged_at_s=math.nan, message=message,
                default_dt=job.default_dt, in_ladder=job.in_ladder, reference=label, engine_version=version,
                cached=False)
     return row
@@ -374,8 +375,20 @@ def _measure(job, scenario, adapter, variant, version, ref_path, time_limit_s) -
         row[f"{stem}_err_max"] = summ[q]["max"]
     drifts = _conservation_columns(row, scenario.problem, t, y)
     _local_error_columns(row, adapter, scenario, variant, job.dt_s, t_ref_all, y_ref_all)
+    _step_defect_columns(row, scenario, y, job.dt_s)
     series = _series(t, y, y_ref, errs, drifts) if job.default_dt else None
     return _record(row, y[-1].tolist() if status == "ok" else None, series)
+
+
+def _step_defect_columns(row, scenario, y, dt_s) -> None:
+    """The run judged on its own recorded states, as ``rbcheck check`` judges a file: from each of
+    tol.STEP_DEFECT_ROWS recorded states spread over the run, the exact flow over Δt against the next
+    row, over what a consistent scheme of order ≥ 1 leaves there (``analysis.flow.run_local_defect``).
+    A ratio above 1 says the run's equations are not the scenario's (the judge then grants no
+    pre-asymptotic excuse); every engine, engine files included, has it."""
+    from cross_checks.analysis.flow import run_local_defect
+    ratio, quantity, t_s = run_local_defect(scenario, y, dt_s, max_rows=tol.STEP_DEFECT_ROWS)
+    row.update(step_defect_ratio=ratio, step_defect_quantity=quantity, step_defect_t_s=t_s)
 
 
 def _run(job, scenario, time_limit_s):

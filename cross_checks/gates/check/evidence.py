@@ -26,7 +26,7 @@ from reference_sim.state import Q, V, W, X
 from cross_checks.analysis import metrics as M
 from cross_checks.core.quantities import BLOCKS, QUANTITIES, UNITS, quantity_scales, state_errors
 from cross_checks.core import tolerances as tol
-from cross_checks.analysis.flow import error_growth, majorant, flow_rhs, motion_rate
+from cross_checks.analysis.flow import conservation_sensitivities, error_growth, majorant, flow_rhs, motion_rate
 
 __all__ = ["Evidence", "evidence_row", "reconstruct_states", "pose_consistency", "conserved_evidence", "free_running_evidence",
            "ratio"]
@@ -222,17 +222,9 @@ def conserved_evidence(inp, scenario, allow) -> list:
     p = scenario.problem
     cons = M.conserved(p.forces)
     per = {q: allow.physics[q] + allow.arith[q] for q in QUANTITIES}
-    R = matrix_from_quat(y[:, Q] / np.linalg.norm(y[:, Q], axis=1, keepdims=True))
-    I_W = p.body.world_inertia(R)
-    L = np.einsum("kij,kj->ki", I_W, y[:, W])
-    Lmag = np.linalg.norm(L, axis=1)
-    wmag = np.linalg.norm(y[:, W], axis=1)
-    I_max = float(np.linalg.eigvalsh(p.body.inertia_B)[-1])
+    sens = conservation_sensitivities(scenario, y)
     if cons["energy"][0]:
-        f, tau = p.forces.force_torque(p.body, y[:, X], y[:, V], y[:, Q] / np.linalg.norm(y[:, Q], axis=1, keepdims=True), R)
-        grad = {"position": np.linalg.norm(f, axis=1), "velocity": p.body.mass_kg * np.linalg.norm(y[:, V], axis=1),
-                "orientation": np.linalg.norm(tau, axis=1) + np.linalg.norm(np.cross(y[:, W], L), axis=1),
-                "angular_velocity": Lmag}
+        grad = sens["energy"]
         E, E_terms = M.energy_J(p, y, with_scale=True)
         drift = np.abs(E - E[0])
         bound = _cumulative(sum(grad[q][:-1] * per[q] for q in QUANTITIES))
@@ -242,12 +234,14 @@ def conserved_evidence(inp, scenario, allow) -> list:
                                  "the local allowances summed along the run, weighted by |∂E/∂y| (a consistent scheme's "
                                  "drift), + written precision"))
     if cons["angular_momentum"][0]:
+        R = matrix_from_quat(y[:, Q] / np.linalg.norm(y[:, Q], axis=1, keepdims=True))
+        L = np.einsum("kij,kj->ki", p.body.world_inertia(R), y[:, W])
+        Lmag = np.linalg.norm(L, axis=1)
         drift = np.linalg.norm(L - L[0], axis=1)
-        sens_w = np.full(len(t), I_max)
-        sens_th = Lmag + I_max * wmag
-        bound = _cumulative(sens_w[:-1] * per["angular_velocity"] + sens_th[:-1] * per["orientation"])
-        bound += (sens_w * inp.print_floor["angular_velocity"] + sens_th * inp.print_floor["orientation"]
-                  + sens_w[0] * inp.print_floor["angular_velocity"][0] + sens_th[0] * inp.print_floor["orientation"][0])
+        grad = sens["angular_momentum"]
+        bound = _cumulative(sum(grad[q][:-1] * per[q] for q in ("angular_velocity", "orientation")))
+        bound += sum(grad[q] * inp.print_floor[q] + grad[q][0] * inp.print_floor[q][0]
+                     for q in ("angular_velocity", "orientation"))
         bound += 4.0 * inp.unit_roundoff * (Lmag + Lmag[0])
         rows.append(evidence_row("conserved", "angular_momentum", t, drift, bound,
                                  "the local allowances summed along the run, weighted by |∂L/∂y| (world L = I_W ω), "

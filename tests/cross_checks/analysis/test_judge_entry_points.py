@@ -21,8 +21,8 @@ def spy(monkeypatch):
     seen = []
     real = J.judge_ladder
 
-    def judge_ladder(dts, errors, floors, statuses, exp):
-        j = real(dts, errors, floors, statuses, exp)
+    def judge_ladder(dts, errors, floors, statuses, exp, local=None):
+        j = real(dts, errors, floors, statuses, exp, local)
         seen.append(j)
         return j
     for module in ("cross_checks.sweep.assemble", "cross_checks.fuzz.properties", "cross_checks.gates.check.ladder"):
