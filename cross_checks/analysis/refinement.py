@@ -19,7 +19,7 @@ import math
 from cross_checks.analysis.convergence import fit_convergence
 from cross_checks.analysis.judge import judge_fit
 
-__all__ = ["errors_shrink", "refined_ladder_shows_the_order"]
+__all__ = ["errors_shrink", "worth_refining", "refined_ladder_shows_the_order"]
 
 
 def errors_shrink(errors) -> bool:
@@ -33,6 +33,19 @@ def errors_shrink(errors) -> bool:
     if len(errs) < 2 or any(e is None or not math.isfinite(e) for e in errs):
         return False
     return errs[-1] < errs[0]
+
+
+def worth_refining(fit_verdict: str, errors) -> bool:
+    """Whether a ladder that contradicted its claimed order is judged again on finer steps: the one rule of
+    the sweep and the fuzz. Its fit converged (too slowly: the order was below the claim) or did not converge
+    while its errors still shrink (finest below coarsest: not at every halving); every error finite. A
+    plateau, a growth, a failed or a diverged ladder shows no order to continue."""
+    errs = [math.nan if e is None else e for e in errors]
+    if fit_verdict not in ("converges", "does_not_converge") or len(errs) < 2:
+        return False
+    if any(not math.isfinite(e) for e in errs):
+        return False
+    return fit_verdict == "converges" or errors_shrink(errs)
 
 
 def refined_ladder_shows_the_order(dts, errors, floors, statuses, exp) -> tuple:

@@ -24,7 +24,7 @@ from numpy.linalg import LinAlgError
 from cross_checks.analysis import flow
 from cross_checks.analysis import metrics as M
 from cross_checks.analysis.physics import ScenarioPhysics, motion_rates, separatrix_proximity
-from cross_checks.analysis.refinement import errors_shrink, refined_ladder_shows_the_order
+from cross_checks.analysis.refinement import refined_ladder_shows_the_order, worth_refining
 from cross_checks.core import tolerances as tol
 from cross_checks.core.quantities import QUANTITIES, quantity_scales, state_errors
 from cross_checks.fuzz import drivers, exact, properties as P
@@ -248,14 +248,9 @@ def _too_low_free_running_order(rec) -> bool:
     """A free-running order violation whose errors do shrink from the coarsest rung to the finest, only
     slower than claimed or not at every halving (a plateau, a growth or a wrong motion does not qualify);
     three finite errors (h, h/2, h/4), as :func:`_refined_ladder_shows_the_order` needs."""
-    if rec.get("property") != "free_running_order" or rec.get("verdict") not in ("converges", "does_not_converge"):
+    if rec.get("property") != "free_running_order" or len(rec.get("errors") or []) != 3:
         return False
-    errs = rec.get("errors") or []
-    if len(errs) != 3 or any(e is None or not np.isfinite(e) for e in errs):
-        return False
-    if rec["verdict"] == "converges":
-        return rec.get("order_deficit") is not None and rec["order_deficit"] > 0
-    return errors_shrink(errs)
+    return worth_refining(rec.get("verdict", ""), rec["errors"])
 
 
 def _judge(ctx, variant, k, ladder, defects, tally, errors=None) -> list:

@@ -3,7 +3,7 @@
 A scenario file's Δt ladder may stop before its errors are asymptotic: a correct scheme then shows a low
 order, or errors that shrink but not at every halving, and the sweep would fail it (the fuzz's shrunk
 counterexamples of a correct scheme did: docs/fuzz.md §5). Where a free-running record does not match its
-claimed order and its errors do shrink (``analysis.refinement.errors_shrink``), the variant is run again
+claimed order and its errors do shrink (``analysis.refinement.worth_refining``), the variant is run again
 at the file's finest Δt halved ``tol.REFINE_HALVINGS`` times, its final errors measured against the same
 reference (its final state: the runs end at the scenario's duration whatever their step), with floors
 computed as for the file's rungs (``assemble.ladder_floors``). Only a positive result on those rungs
@@ -20,7 +20,7 @@ import numpy as np
 
 from cross_checks.analysis.expectations import expectation
 from cross_checks.analysis.physics import physics_from_dict
-from cross_checks.analysis.refinement import errors_shrink, refined_ladder_shows_the_order
+from cross_checks.analysis.refinement import refined_ladder_shows_the_order, worth_refining
 from cross_checks.core import tolerances as tol
 from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, state_errors
 from cross_checks.sweep.assemble import ladder_floors
@@ -34,9 +34,7 @@ def qualifies(rec) -> bool:
     """A free-running record whose claimed order was not met while its errors shrink."""
     if rec["mode"] != "free_running" or rec["matches_expectation"] is not False or rec["expected_verdict"] != "converges":
         return False
-    if rec["fit_verdict"] not in ("converges", "does_not_converge") or len(rec["errors"]) < 2:
-        return False
-    return errors_shrink([math.nan if e is None else e for e in rec["errors"]])
+    return worth_refining(rec["fit_verdict"], rec["errors"])
 
 
 def _refined_runs(scenario, variant, dt_min, n_min, y_end_ref, time_limit_s):

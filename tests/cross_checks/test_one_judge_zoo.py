@@ -73,3 +73,40 @@ def test_the_runs_own_defect_separates_every_correct_variant_from_the_wrong_buil
             assert r[coarse] > 5.0 and r[fine] / r[coarse] > 0.5 * coarse / fine, (v, r)
         else:
             assert max(r.values()) <= 1.0, (v, r)
+
+
+# --- the four entry points on the example engine file: correct and broken (gyroscopic sign) ---------------
+
+@pytest.fixture(scope="module")
+def cbody(tmp_path_factory):
+    from tests.helpers.byo import build_cbody, write_scenarios
+    folder = tmp_path_factory.mktemp("cbody")
+    built = build_cbody(folder / "build")
+    return built, write_scenarios(folder / "scen")["byo_tumble"]
+
+
+@pytest.mark.parametrize("which", ["good", "broken"])
+def test_check_sweep_assert_engine_and_fuzz_agree_on_an_engine_file(cbody, tmp_path, capsys, which):
+    """The same engine file through `rbcheck check` (a CSV of its run), `rbcheck sweep`, `assert_engine` and
+    `rbcheck fuzz`: the correct build passes all four, the broken one fails all four."""
+    from cross_checks.cli import main
+    from cross_checks.testing import assert_engine
+    built, scen = cbody
+    name = "cbody" if which == "good" else "cbody_broken"
+    ef, variant, correct = str(built[which]), f"{name}:euler", which == "good"
+    outcomes = {}
+    # check: the engine's own run at the scenario's Δt
+    assert main(["run", str(scen), "--engine", variant, "--engine-file", ef, "--out", str(tmp_path / "r.csv")]) == 0
+    outcomes["check"] = main(["check", str(tmp_path / "r.csv"), "--scenario", str(scen)])
+    outcomes["sweep"] = main(["sweep", str(scen), "--engines", variant, "--engine-file", ef, "--jobs", "1",
+                              "--no-cache", "--out", str(tmp_path / "sweep")])
+    try:
+        assert_engine(variant, [scen], engine_file=ef)
+        outcomes["assert_engine"] = 0
+    except AssertionError:
+        outcomes["assert_engine"] = 1
+    outcomes["fuzz"] = main(["fuzz", "--engines", variant, "--engine-file", ef, "--budget", "3", "--seed", "0",
+                             "--jobs", "1", "--no-cache", "--out", str(tmp_path / "fuzz")])
+    engines.reset_registry()   # the engine files main() registered stay out of the next test
+    capsys.readouterr()
+    assert outcomes == {k: (0 if correct else 1) for k in outcomes}, outcomes
