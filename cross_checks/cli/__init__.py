@@ -24,6 +24,20 @@ class BadInput(Exception):
     """Input the user must fix; the message names the file/option, the field and the reason."""
 
 
+#: The largest time an option takes (--time-limit, --budget): 1e6 s, 11.6 days; beyond it timers overflow.
+MAX_OPTION_SECONDS = 1e6
+#: The most worker processes an option may ask for (--jobs): far more than any machine's cores; workers are
+#: also capped by the runs to do.
+MAX_OPTION_JOBS = 1024
+
+
+def _seconds_option(text: str) -> float:
+    v = _positive_float(text)
+    if v > MAX_OPTION_SECONDS:
+        raise argparse.ArgumentTypeError(f"must be at most {MAX_OPTION_SECONDS:g} s (11.6 days), got {text!r}")
+    return v
+
+
 def _positive_float(text: str) -> float:
     try:
         v = float(text)
@@ -139,14 +153,14 @@ def _add_sweep(sub) -> None:
     s.add_argument("--engines", nargs="+", metavar="ENGINE[:VARIANT]",
                    help="variants to run, e.g. reference:rk4 mujoco (an engine name means all its variants); "
                         "default: every available variant")
-    s.add_argument("--jobs", type=_positive_int, metavar="N", help="worker processes (default: all cores)")
+    s.add_argument("--jobs", type=_jobs_option, metavar="N", help="worker processes (default: all cores)")
     s.add_argument("--out", required=True, metavar="DIR",
                    help="results directory, replaced atomically and only when absent, empty or rbcheck's own (its marker)")
     s.add_argument("--no-cache", action="store_true",
                    help="recompute every run instead of reusing cached results ($RBCHECK_CACHE_DIR or ~/.cache/rbcheck)")
     s.add_argument("--self-contained", action="store_true", help="embed the plots in the HTML pages (for CI artifacts)")
     _add_engine_file_option(s)
-    s.add_argument("--time-limit", type=_positive_float, metavar="S",
+    s.add_argument("--time-limit", type=_seconds_option, metavar="S",
                    help="wall-time limit of each run and of each reference solve, s; one over it is a failed row "
                         "(default: 900, cross_checks/core/tolerances.py)")
     s.add_argument("--dask", metavar="ADDRESS",
@@ -159,7 +173,7 @@ def _add_report(sub) -> None:
     rp = sub.add_parser("report", help="re-render the plots and HTML of a results directory from its saved data")
     rp.add_argument("dir", metavar="DIR")
     rp.add_argument("--self-contained", action="store_true", help="embed the plots in the HTML pages")
-    rp.add_argument("--jobs", type=_positive_int, metavar="N", help="processes drawing figures (default: all cores)")
+    rp.add_argument("--jobs", type=_jobs_option, metavar="N", help="processes drawing figures (default: all cores)")
 
 
 def _add_check(sub) -> None:
@@ -259,10 +273,10 @@ def _add_fuzz(sub) -> None:
                     "a seed. Exit 0: nothing found; 1: counterexamples; 2: bad input. See docs/fuzz.md.")
     fz.add_argument("--engines", nargs="+", metavar="ENGINE[:VARIANT]",
                     help="variants to check (an engine name means all its variants); default: every available variant")
-    fz.add_argument("--budget", type=_positive_float, default=60.0, metavar="SECONDS",
+    fz.add_argument("--budget", type=_seconds_option, default=60.0, metavar="SECONDS",
                     help="seconds of searching (default 60); shrinking the failures found comes after it")
     fz.add_argument("--seed", type=_nonnegative_int, default=0, metavar="N", help="campaign seed (default 0)")
-    fz.add_argument("--jobs", type=_positive_int, metavar="N", help="worker processes (default: all cores)")
+    fz.add_argument("--jobs", type=_jobs_option, metavar="N", help="worker processes (default: all cores)")
     fz.add_argument("--no-cache", action="store_true", help="recompute every batch instead of reusing cached outcomes")
     fz.add_argument("--dask", metavar="ADDRESS", help="run the batches on a Dask cluster (as rbcheck sweep --dask)")
     fz.add_argument("--out", required=True, metavar="DIR",
@@ -275,6 +289,11 @@ def _add_engine_file_option(p) -> None:
     p.add_argument("--engine-file", action="append", metavar="FILE", default=[],
                    help="add the engine of this engine file (TOML: name, version, [variants.X] order, description, "
                         "command; docs/engines.md); repeatable. Its variants are NAME:VARIANT")
+
+
+def _engine_file_inputs(args) -> list:
+    """The --engine-file files a command reads (its outputs may not replace them)."""
+    return [("engine file", f, False) for f in getattr(args, "engine_file", None) or []]
 
 
 def _use_engine_files(paths) -> None:
@@ -293,6 +312,13 @@ def _positive_int(text: str) -> int:
         raise argparse.ArgumentTypeError(f"must be a whole number, got {text!r}") from None
     if v < 1:
         raise argparse.ArgumentTypeError(f"must be >= 1, got {v}")
+    return v
+
+
+def _jobs_option(text: str) -> int:
+    v = _positive_int(text)
+    if v > MAX_OPTION_JOBS:
+        raise argparse.ArgumentTypeError(f"must be at most {MAX_OPTION_JOBS}, got {v}")
     return v
 
 
@@ -380,6 +406,11 @@ def cmd_show(args) -> int:
     T = args.duration if args.duration is not None else sc.duration_s
     if dt > T:
         raise BadInput(f"--dt {dt:g}: must be <= the duration ({T:g} s)")
+    from cross_checks.scenario.limits import LimitExceeded, check_run_steps
+    try:
+        check_run_steps(T, dt, "--dt" if args.dt is not None else "--duration")
+    except LimitExceeded as exc:
+        raise BadInput(str(exc)) from None
     if args.json:
         sys.stdout.write(resolved_json(sc, dt, T))
     else:
@@ -409,6 +440,49 @@ def _check_out_path(out: str, suffix: str | None = ".csv", option: str = "--out"
     return path
 
 
+def _resolved(path) -> Path:
+    try:
+        return Path(path).expanduser().resolve()
+    except (OSError, RuntimeError):
+        return Path(os.path.abspath(path))
+
+
+def _is_within(path: Path, folder: Path) -> bool:
+    return path == folder or folder in path.parents
+
+
+def refuse_inputs_as_outputs(outputs, inputs) -> None:
+    """BadInput, before any work, when an output would replace or land inside what the command reads.
+
+    ``outputs``: ``[(option, path, is_dir)]``; ``inputs``: ``[(what, path, is_dir)]``. An output file may not
+    be an input file (the same file after resolving links) nor lie inside an input directory (a results
+    directory or baseline the command reads); an output directory may not hold an input."""
+    ins = [(what, _resolved(p), is_dir, p) for what, p, is_dir in inputs if p is not None and str(p).strip()]
+    for option, out, out_is_dir in outputs:
+        if out is None or not str(out).strip():
+            continue
+        o = _resolved(out)
+        for what, i, in_is_dir, given in ins:
+            same = o == i or (o.exists() and i.exists() and _samefile(o, i))
+            inside = (not out_is_dir and in_is_dir and _is_within(o, i)) or (out_is_dir and _is_within(i, o))
+            if same or inside:
+                how = "is" if same else ("lies inside" if not out_is_dir else "holds")
+                raise BadInput(f"{option} {out}: {how} the {what} {given} this command reads; writing there would "
+                               "destroy its input — choose another path")
+
+
+def _samefile(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def _scenario_inputs(specs) -> list:
+    """``[("scenario file", path, False)]`` of the SCENARIO arguments that are files (catalog names are not)."""
+    return [("scenario file", s, False) for s in specs if s and Path(s).exists()]
+
+
 def _did_you_mean(name: str) -> str:
     """For a bare name that is no engine but some engine's variant (``course``): the full names."""
     if ":" in name:
@@ -430,6 +504,9 @@ def cmd_run(args) -> int:
     except UnknownVariant as exc:
         raise BadInput(f"--engine: {exc}{_did_you_mean(args.engine)}") from None
     out = _check_out_path(args.out)
+    from cross_checks.core.trajectory import sidecar_path
+    refuse_inputs_as_outputs([("--out", args.out, False), ("--out (its sidecar)", sidecar_path(args.out), False)],
+                             _scenario_inputs([args.scenario]) + _engine_file_inputs(args))
     sc = load_scenario(args.scenario)
     dt = args.dt if args.dt is not None else sc.dt_s
     T = args.duration if args.duration is not None else sc.duration_s
@@ -548,6 +625,7 @@ def cmd_sweep(args) -> int:
         check_output_dir(args.out)  # before any work (run_sweep checks again just before it starts)
     except ResultsDirError as exc:
         raise BadInput(str(exc)) from None
+    refuse_inputs_as_outputs([("--out", args.out, True)], _scenario_inputs(args.scenarios) + _engine_file_inputs(args))
     scenarios = [load_scenario(s) for s in args.scenarios or catalog_names()]
     variants, skipped = _resolve_engines(args.engines)
     if not variants:
@@ -599,31 +677,31 @@ def verdict_count(summary) -> tuple:
 def _sweep_outcome(summary, out, n_scenarios, n_variants, elapsed_s) -> int:
     """Print what the sweep did and every result that contradicts the expectations (then exit 1); the last
     line says whether every verdict was as expected."""
+    from cross_checks.core.progress import say
     run = summary["run"]
-    print(f"rbcheck sweep: {n_scenarios} scenario(s) x {n_variants} variant(s): {run['runs']} runs "
+    say(f"rbcheck sweep: {n_scenarios} scenario(s) x {n_variants} variant(s): {run['runs']} runs "
           f"({run['cached_runs']} cached, {run['diverged_runs']} diverged, {run['failed_runs']} failed) "
           f"in {elapsed_s:.1f} s on {run['jobs']} worker(s) (runs and metrics {run['wall_s']:.1f} s, "
           f"then the report) -> {Path(out) / 'index.html'}")
     skipped = summary.get("skipped_variants") or []
     if skipped:
         engines = dict.fromkeys(v["name"].split(":", 1)[0] for v in skipped)
-        print(f"rbcheck sweep: skipped {len(skipped)} variant(s) of {', '.join(engines)}: "
-              f"{next(v['reason'] for v in skipped)}")
+        say(f"rbcheck sweep: skipped {len(skipped)} variant(s) of {', '.join(engines)}: "
+            f"{next(v['reason'] for v in skipped)}")
     fails = _gate_failures(summary)
     total, wrong = verdict_count(summary)
     failed = run.get("failed_runs", 0)
     if fails:
-        print(f"rbcheck sweep: {len(fails)} result(s) contradict the expectations:", file=sys.stderr)
+        say(f"rbcheck sweep: {len(fails)} result(s) contradict the expectations:", sys.stderr)
         for line in fails[:20]:
-            print(f"  {line}", file=sys.stderr)
+            say(f"  {line}", sys.stderr)
         if len(fails) > 20:
-            print(f"  ... and {len(fails) - 20} more (see the findings in index.html)", file=sys.stderr)
-        sys.stderr.flush()
+            say(f"  ... and {len(fails) - 20} more (see the findings in index.html)", sys.stderr)
     if not wrong and not failed:
-        print(f"rbcheck sweep: all {total} verdicts as expected")
+        say(f"rbcheck sweep: all {total} verdicts as expected")
     else:
-        print(f"rbcheck sweep: {wrong} of {total} verdicts not as expected"
-              + (f", {failed} run(s) failed" if failed else "") + f" (see {Path(out) / 'index.html'})")
+        say(f"rbcheck sweep: {wrong} of {total} verdicts not as expected"
+            + (f", {failed} run(s) failed" if failed else "") + f" (see {Path(out) / 'index.html'})")
     return EXIT_FAIL if fails else EXIT_OK
 
 
@@ -648,6 +726,10 @@ def cmd_report(args) -> int:
 
 def cmd_check(args) -> int:
     from cross_checks.cli.check import run_check
+    refuse_inputs_as_outputs([("--json", args.json, False), ("--plot", args.plot, False)],
+                             [("trajectory", t, False) for t in args.trajectories]
+                             + [("sidecar", Path(t).with_suffix(".json"), False) for t in args.trajectories]
+                             + _scenario_inputs([args.scenario]) + _engine_file_inputs(args))
     if args.json:
         _check_out_path(args.json, None, "--json")
     if args.plot:
@@ -659,6 +741,8 @@ def cmd_compare(args) -> int:
     from cross_checks.gates.compare import CompareInputError, compare_dirs, to_markdown, to_text
     from cross_checks.core.files import atomic_write_text
 
+    refuse_inputs_as_outputs([("--markdown", args.markdown, False)],
+                             [("baseline directory", args.baseline, True), ("results directory", args.new, True)])
     if args.markdown:
         _check_out_path(args.markdown, None, "--markdown")
     try:
@@ -675,6 +759,7 @@ def cmd_baseline(args) -> int:
     from cross_checks.gates.baseline import BaselineError, write_baseline
     from cross_checks.gates.compare import CompareInputError
 
+    refuse_inputs_as_outputs([("OUT_DIR", args.out, True)], [("results directory", args.results, True)])
     try:
         written = write_baseline(args.results, args.out)
     except (BaselineError, CompareInputError) as exc:
@@ -699,6 +784,7 @@ def cmd_bench(args) -> int:
 
 def cmd_fuzz(args) -> int:
     from cross_checks.cli.fuzz import run_fuzz
+    refuse_inputs_as_outputs([("--out", args.out, True)], _engine_file_inputs(args))
     return run_fuzz(args, BadInput, _resolve_engines, _dask_client)
 
 
@@ -712,6 +798,8 @@ def main(argv=None) -> int:
     from cross_checks.core.trajectory import TrajectoryError
     from reports.install import IncompleteInstallation
 
+    from cross_checks.core.progress import degrade_unencodable
+    degrade_unencodable(sys.stdout, sys.stderr)   # Δt -> dt where the locale cannot write it
     try:
         args = build_parser().parse_args(argv)
     except SystemExit as exc:  # usage errors (exit 2) and --help (exit 0) return instead of raising

@@ -16,7 +16,7 @@ from __future__ import annotations
 import sys
 import time
 
-__all__ = ["LINE_INTERVAL_S", "Progress", "stage", "is_tty"]
+__all__ = ["LINE_INTERVAL_S", "Progress", "stage", "is_tty", "say", "degrade_unencodable"]
 
 #: Seconds between two progress lines without a terminal: often enough that a CI log never looks hung
 #: (GitHub Actions streams lines as they come), rarely enough that a 1000-run sweep prints ~20 lines.
@@ -31,6 +31,73 @@ def is_tty(stream) -> bool:
         return False
 
 
+def say(text: str, stream=None) -> None:
+    """Print a line and flush it; a reader that went away (``rbcheck sweep | head -1``: a closed pipe) never
+    stops the work: the stream is pointed at /dev/null and the command goes on writing its results."""
+    stream = sys.stdout if stream is None else stream
+    try:
+        print(text, file=stream, flush=True)
+    except (BrokenPipeError, ValueError):   # (ValueError: the stream was closed)
+        _discard(stream)
+    except OSError as exc:
+        if exc.errno in (32, 9):   # EPIPE, EBADF: nobody reads any more
+            _discard(stream)
+        else:
+            raise
+
+
+def _discard(stream) -> None:
+    """From now on, what goes to ``stream`` goes nowhere (and Python's flush at exit does not fail)."""
+    import os
+    try:
+        fd = stream.fileno()
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, fd)
+        os.close(devnull)
+    except (OSError, ValueError, AttributeError):
+        pass
+
+
+#: How characters a stream cannot encode (PYTHONIOENCODING=ascii, a C locale) are written instead.
+_ASCII = {"Δ": "d", "δ": "delta", "ω": "w", "χ": "chi", "θ": "theta", "τ": "tau", "—": "-", "–": "-", "−": "-",
+          "…": "...", "×": "x", "≤": "<=", "≥": ">=", "≈": "~", "±": "+/-", "²": "^2", "³": "^3", "⁻": "^-",
+          "¹": "1", "ᵖ": "^p", "⁺": "+", "→": "->", "·": "*", "√": "sqrt", "✓": "v", "✗": "x", "†": "+", "π": "pi",
+          "µ": "u", "μ": "u", "’": "'", "‘": "'", "“": '"', "”": '"', "⟂": "_|_", "▼": "v", "≪": "<<", "≫": ">>"}
+
+
+def _degrade(exc):
+    import unicodedata
+    out = []
+    for ch in exc.object[exc.start:exc.end]:
+        rep = _ASCII.get(ch)
+        if rep is None:
+            rep = unicodedata.normalize("NFKD", ch).encode("ascii", "ignore").decode("ascii") or "?"
+        out.append(rep)
+    return "".join(out), exc.end
+
+
+def degrade_unencodable(*streams) -> None:
+    """Make ``streams`` write what their encoding cannot hold as ASCII look-alikes (Δt -> dt, ω -> w,
+    — -> -) instead of failing: rbcheck's words are full of Greek letters and dashes, and a CI runner's
+    locale may be ASCII."""
+    import codecs
+    try:
+        codecs.lookup_error("rbcheck-ascii")
+    except LookupError:
+        codecs.register_error("rbcheck-ascii", _degrade)
+    for stream in streams:
+        enc = getattr(stream, "encoding", None)
+        if not enc or not hasattr(stream, "reconfigure"):
+            continue
+        try:
+            "Δω—…×≤".encode(enc)
+        except (UnicodeEncodeError, LookupError):
+            try:
+                stream.reconfigure(errors="rbcheck-ascii")
+            except (ValueError, OSError):
+                pass
+
+
 def _seconds(s: float) -> str:
     return f"{s:.0f} s" if s < 120 else f"{s / 60:.1f} min"
 
@@ -39,7 +106,7 @@ def stage(prefix: str, message: str, *, enabled: bool = True, stream=None) -> No
     """One line ``"<prefix>: <message>"`` on stdout (or ``stream``), flushed: a stage begins."""
     if enabled:
         stream = sys.stdout if stream is None else stream
-        print(f"{prefix}: {message}", file=stream, flush=True)
+        say(f"{prefix}: {message}", stream)
 
 
 class Progress:
@@ -106,8 +173,7 @@ class Progress:
             tail = f", ~{_seconds(left)} left"
         if self.last and not final:
             tail += f"; last: {self.last}"
-        print(f"{self.prefix}: {self.what} {self.done}/{self.total}{pct} in {_seconds(elapsed)}{tail}",
-              file=self.stream, flush=True)
+        say(f"{self.prefix}: {self.what} {self.done}/{self.total}{pct} in {_seconds(elapsed)}{tail}", self.stream)
 
     def close(self, finished: bool = True) -> None:
         """End the stage: the bar closes; without a terminal a last line says it is done. A stage

@@ -99,9 +99,32 @@ BYTES_PER_RECORDED_STEP = 1100
 #: keeps half its memory. At BYTES_PER_RECORDED_STEP this allows ~1.9e6 steps per run; the catalog's
 #: largest run has 2e4 (100x inside), a user's 60 s at Δt = 1e-4 has 6e5.
 JOB_MEMORY_LIMIT_BYTES = 2 * 2 ** 30
+#: The longest line a trajectory CSV may have: the 14 contract columns at full precision take ~350 bytes;
+#: 64 KiB leaves room for a thousand extra columns and refuses /dev/zero or a binary file at once.
+CSV_MAX_LINE_BYTES = 64 * 1024
+#: The largest trajectory CSV read: ~1.9e6 rows (the steps one run may record) of the 14 columns at full
+#: precision are ~700 MB; 1 GiB bounds what reading one costs, whatever the file holds.
+CSV_MAX_BYTES = 2 ** 30
 #: DOP853 (rtol 1e-13) right-hand-side evaluations per radian of the fastest rate of the dynamics:
 #: measured 90–93 for springs from k = 40 to 1e6 N/m and 64 for spins of 50–500 rad/s; 100 covers both.
 DOP853_EVALS_PER_RAD = 100
+#: Physical ranges rbcheck judges (scenario.limits.check_physical_ranges), refused outside like an inertia that
+#: violates the triangle inequality. Masses from 1 mg to 1e6 kg and moments from 1e-12 to 1e9 kg m² (a 1 mm bead
+#: to a ship): MuJoCo refuses masses and moments below its mjMINVAL (1e-15) — a mass of 1e-300 made both its
+#: implicit variants fail — and nine decades either side of 1 keep every term of the equations far from
+#: float64's range. A moment ratio up to 1e6 (a rod of 1000:1; the fuzz draws up to 1e3): beyond it the
+#: gyroscopic products lose every digit of the small moment's axis. Initial spin up to 1e4 rad/s (a dental
+#: drill, ~1e5 rpm), speed up to 1e4 m/s (above orbital speed), positions within 1e6 m, accelerations (gravity,
+#: |f|/m) up to 1e6 m/s² and angular accelerations |τ|/I_min up to 1e8 rad/s²: with the duration and the step
+#: limits these keep every state below ~1e12, where round-off is the floors' ε |y|, not an overflow.
+PHYSICAL_MASS_KG = (1e-6, 1e6)
+PHYSICAL_INERTIA_KG_M2 = (1e-12, 1e9)
+PHYSICAL_MAX_INERTIA_RATIO = 1e6
+PHYSICAL_MAX_SPIN_RAD_S = 1e4
+PHYSICAL_MAX_SPEED_M_S = 1e4
+PHYSICAL_MAX_DISTANCE_M = 1e6
+PHYSICAL_MAX_ACCELERATION_M_S2 = 1e6
+PHYSICAL_MAX_ANGULAR_ACCELERATION = 1e8
 #: Right-hand-side evaluations a scenario's DOP853 reference may need, refused up front beyond it:
 #: 1.2e6 is 300 s of CPU at the slowest cost per evaluation measured here (250 µs: the NumPy rhs of one
 #: body plus DOP853's own work; 40-60 µs on a faster machine), while the catalog's two DOP853

@@ -34,6 +34,44 @@ class TrajectoryError(ValueError):
     """A trajectory file that does not follow the contract; message names file, field and reason."""
 
 
+def _limits():
+    from cross_checks.core import tolerances as tol
+    max_rows = int(tol.JOB_MEMORY_LIMIT_BYTES // tol.BYTES_PER_RECORDED_STEP) + 1
+    return max_rows, tol.CSV_MAX_LINE_BYTES, tol.CSV_MAX_BYTES
+
+
+def _read_bounded(name: str, path, max_rows: int, max_line: int, max_bytes: int) -> bytes:
+    """The file's bytes, read in chunks and refused as soon as it cannot be a trajectory: a line longer than
+    ``max_line`` bytes (``/dev/zero``, a binary file), more than ``max_rows`` data rows (no run of the limits
+    records more steps), or more than ``max_bytes`` in all. Memory stays bounded by what a valid file holds."""
+    chunks, size, lines, carry = [], 0, 0, 0   # carry: bytes of the line still open at the chunk's start
+    try:
+        with open(path, "rb") as fh:
+            while True:
+                chunk = fh.read(1 << 20)
+                if not chunk:
+                    break
+                size += len(chunk)
+                if size > max_bytes:
+                    raise TrajectoryError(f"{name}: larger than {max_bytes / 2 ** 30:.3g} GiB: no trajectory within "
+                                          "rbcheck's limits is (docs/hardening.md)")
+                parts = chunk.split(b"\n")
+                lengths = [carry + len(parts[0])] + [len(p) for p in parts[1:]]
+                worst = max(range(len(lengths)), key=lengths.__getitem__)
+                if lengths[worst] > max_line:
+                    raise TrajectoryError(f"{name}: line {lines + worst + 1}: longer than {max_line} bytes: not a "
+                                          "trajectory CSV")
+                carry = lengths[-1]
+                lines += len(parts) - 1
+                if lines > max_rows + 1:
+                    raise TrajectoryError(f"{name}: rows: more than {max_rows} rows; no run within rbcheck's limits "
+                                          f"records more steps ({max_rows - 1} per run, docs/hardening.md)")
+                chunks.append(chunk)
+    except OSError as exc:
+        raise TrajectoryError(f"{name}: cannot read: {exc.strerror or exc}") from None
+    return b"".join(chunks)
+
+
 def sidecar_path(csv_path) -> Path:
     p = Path(csv_path)
     return p.with_suffix(".json")
@@ -108,6 +146,11 @@ class Trajectory:
         return cls(t, y, meta)
 
 
+#: Rows parsed at a time by the fast path: the Python strings and floats of a block (~1 KB a row) are
+#: the parse's peak memory beyond the text and the array, instead of those of the whole file.
+_FAST_BLOCK_ROWS = 65536
+
+
 def _fast_table(text: str):
     """``(header cells, (N, ncol) float array)`` when the CSV is plain — no quotes or NULs, every
     non-blank line with the header's number of fields, every field a number for ``float()`` — else
@@ -126,11 +169,15 @@ def _fast_table(text: str):
     counts = list(map(str.count, body, [","] * len(body)))
     if min(counts) != ncol - 1 or max(counts) != ncol - 1:
         return None
-    try:
-        values = np.array(list(map(float, ",".join(body).split(","))), dtype=float)
-    except ValueError:
-        return None
-    return lines[0].split(","), values.reshape(len(body), ncol)
+    values = np.empty((len(body), ncol))
+    for i in range(0, len(body), _FAST_BLOCK_ROWS):   # in blocks: the Python strings of one block at a time
+        block = body[i:i + _FAST_BLOCK_ROWS]
+        try:
+            values[i:i + len(block)] = np.array(list(map(float, ",".join(block).split(","))),
+                                                dtype=float).reshape(len(block), ncol)
+        except ValueError:
+            return None
+    return lines[0].split(","), values
 
 
 def read_columns(csv_path, *, require: tuple = QUANTITY_GROUPS, _fast: bool = True):
@@ -148,10 +195,12 @@ def read_columns(csv_path, *, require: tuple = QUANTITY_GROUPS, _fast: bool = Tr
     Raises TrajectoryError naming the file, the line or column, and the reason.
     """
     name = str(csv_path)
+    raw = _read_bounded(name, csv_path, *_limits())
     try:
-        text = Path(csv_path).read_text(encoding="utf-8-sig")
-    except (OSError, UnicodeDecodeError) as exc:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
         raise TrajectoryError(f"{name}: cannot read: {exc}") from None
+    del raw
     fast = _fast_table(text) if _fast else None  # (header cells, (N, ncol) floats) of a plain numeric CSV
     rows = [fast[0]] if fast is not None else _csv_rows(name, text)
     header = [h.strip() for h in rows[0]]

@@ -20,7 +20,7 @@ import numpy as np
 from cross_checks.core import tolerances as tol
 
 __all__ = ["LimitExceeded", "check_scenario_limits", "check_run_steps", "run_memory_bytes",
-           "reference_evals", "fastest_rate", "MAX_STEPS_PER_RUN"]
+           "reference_evals", "fastest_rate", "MAX_STEPS_PER_RUN", "check_physical_ranges"]
 
 #: Steps one run may record: the memory a job may use at the measured cost per recorded step.
 MAX_STEPS_PER_RUN = int(tol.JOB_MEMORY_LIMIT_BYTES // tol.BYTES_PER_RECORDED_STEP)
@@ -115,6 +115,50 @@ def reference_evals(scenario) -> float:
         return 0.0
     rate, _ = fastest_rate(scenario)
     return tol.DOP853_EVALS_PER_RAD * max(rate, 1.0 / scenario.duration_s) * scenario.duration_s
+
+
+def _in_range(value: float, lo: float, hi: float, field_: str, what: str, unit: str) -> None:
+    if not (lo <= value <= hi):
+        raise LimitExceeded(field_, f"{what} {value:.3g} {unit} is outside the range rbcheck judges, "
+                                    f"[{lo:g}, {hi:g}] {unit} (docs/hardening.md)".replace(" ]", "]"))
+
+
+def check_physical_ranges(scenario) -> None:
+    """LimitExceeded (field, reason) when a physical number of the scenario lies outside the ranges of
+    :mod:`cross_checks.core.tolerances` ("physical ranges"): a mass, a principal moment, the ratio of the
+    largest to the smallest moment, an initial speed, spin, position, or a force's size. Beyond them the
+    engines refuse the body (MuJoCo below its mjMINVAL) or float64 round-off, not the scheme, makes the
+    errors, and a verdict would not be about the simulator."""
+    with np.errstate(over="ignore", invalid="ignore"):   # |ω| = 1e300 squares to inf: outside, said so
+        _check_physical_ranges(scenario)
+
+
+def _check_physical_ranges(scenario) -> None:
+    p = scenario.problem
+    src = "body.particles" if scenario.com_offset_B_m is not None else "body.mass"
+    _in_range(p.body.mass_kg, *tol.PHYSICAL_MASS_KG, src, "the mass", "kg")
+    moments = np.linalg.eigvalsh(p.body.inertia_B)
+    where = "body.particles" if scenario.com_offset_B_m is not None else "body.inertia"
+    _in_range(float(moments[0]), *tol.PHYSICAL_INERTIA_KG_M2, where, "the smallest principal moment", "kg m²")
+    _in_range(float(moments[-1]), *tol.PHYSICAL_INERTIA_KG_M2, where, "the largest principal moment", "kg m²")
+    _in_range(float(moments[-1] / moments[0]), 1.0, tol.PHYSICAL_MAX_INERTIA_RATIO, where,
+              "the ratio of the largest to the smallest principal moment", "")
+    init = p.initial
+    _in_range(float(np.linalg.norm(init.w_W)), 0.0, tol.PHYSICAL_MAX_SPIN_RAD_S, "initial.angular_velocity",
+              "the initial spin |ω|", "rad/s")
+    _in_range(float(np.linalg.norm(init.v_W)), 0.0, tol.PHYSICAL_MAX_SPEED_M_S, "initial.velocity",
+              "the initial speed |v|", "m/s")
+    _in_range(float(np.linalg.norm(init.x_W)), 0.0, tol.PHYSICAL_MAX_DISTANCE_M, "initial.position",
+              "the distance from the origin |x|", "m")
+    fm = p.forces
+    _in_range(float(np.linalg.norm(fm.gravity_W)), 0.0, tol.PHYSICAL_MAX_ACCELERATION_M_S2, "forces.gravity",
+              "the gravity |g|", "m/s²")
+    for i, pf in enumerate(fm.point_forces):
+        _in_range(float(np.linalg.norm(pf.force)) / p.body.mass_kg, 0.0, tol.PHYSICAL_MAX_ACCELERATION_M_S2,
+                  f"forces.point[{i}].force", "the acceleration |f|/m it gives", "m/s²")
+    for i, t in enumerate(fm.torques):
+        _in_range(float(np.linalg.norm(t.torque)) / float(moments[0]), 0.0, tol.PHYSICAL_MAX_ANGULAR_ACCELERATION,
+                  f"forces.torque[{i}].torque", "the angular acceleration |τ|/I_min it gives", "rad/s²")
 
 
 def check_scenario_limits(scenario) -> None:

@@ -389,7 +389,13 @@ def _parse_forces(r, raw, dt, com_offset) -> ForceModel:
 
 
 def _check_scenario(r, sc) -> None:
-    """What needs the whole scenario: a requested closed form exists; the run stays within the limits."""
+    """What needs the whole scenario: its physical numbers within the ranges rbcheck judges; a requested
+    closed form exists; the run stays within the limits."""
+    from cross_checks.scenario.limits import LimitExceeded, check_physical_ranges
+    try:
+        check_physical_ranges(sc)
+    except LimitExceeded as exc:
+        raise r.err(exc.field, exc.reason) from None
     if sc.reference == "analytic":
         from cross_checks.scenario.references import analytic_available
         ok, why = analytic_available(sc)

@@ -159,13 +159,17 @@ def _agreement(a, b, reason, sc, ra, rb) -> dict:
 
 
 def agreement_records(scenarios, records_by_key) -> list:
-    """Final-state differences of the pairs that implement the same scheme, at each default Δt."""
+    """Final-state differences of the pairs that implement the same scheme, at each default Δt — only
+    between runs that both ran to the end (two failed runs, or one, make no claim either way: their
+    failures are rows of their own)."""
     out = []
     for a, b, reason in EQUIVALENT_PAIRS:
         for sc in scenarios:
             ra = records_by_key.get((sc.name, a, sc.dt_s))
             rb = records_by_key.get((sc.name, b, sc.dt_s))
-            if ra is not None and rb is not None and pair_is_same_arithmetic(sc, a, b):
+            if ra is None or rb is None or "failed" in (ra["row"]["status"], rb["row"]["status"]):
+                continue
+            if pair_is_same_arithmetic(sc, a, b):
                 out.append(_agreement(a, b, reason, sc, ra, rb))
     return out
 

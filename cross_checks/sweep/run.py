@@ -105,6 +105,8 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
     """
     out = _checked_output(out_dir, scenarios)
     jobs = max(1, int(jobs or usable_cores()))
+    if executor is None:   # local processes: never more than the runs to do, nor than 4 per core
+        jobs = min(jobs, max(1, len(plan_jobs(scenarios, variants)) + len(scenarios)), 4 * usable_cores())
     started = datetime.now(timezone.utc).replace(microsecond=0).isoformat()
     t_start = time.perf_counter()
     cache_root = str(cache_dir())

@@ -108,3 +108,23 @@ def scenario_from_parts(body=SPINNING_BODY, initial="", forces="", dt=0.01, dura
 def state(x=(0, 0, 0), v=(0, 0, 0), q=(1, 0, 0, 0), w=(0, 0, 0)):
     """A packed state (13,) from its parts: x_W (m), v_W (m/s), q_WB (w, x, y, z), w_W (rad/s)."""
     return np.concatenate([x, v, q, w]).astype(float)
+
+
+def with_body(scenario, mass_kg: float, moment_kg_m2: float):
+    """``scenario`` with its body replaced by an isotropic one of this mass and principal moment, past the
+    parser's physical ranges (scenario.limits.check_physical_ranges): what an engine adapter may be handed
+    through the Python API, to test how it reports a body it refuses."""
+    import dataclasses
+
+    from reference_sim.body import RigidBody
+    body = RigidBody(mass_kg, moment_kg_m2 * np.eye(3))
+    return dataclasses.replace(scenario, problem=dataclasses.replace(scenario.problem, body=body))
+
+
+def with_initial(scenario, **state):
+    """``scenario`` with fields of its initial state replaced (``v_W=[1e9, 0, 0]``), past the parser's
+    physical ranges: a run that blows up at once, to test how divergence is handled."""
+    import dataclasses
+    init = dataclasses.replace(scenario.problem.initial,
+                               **{k: np.asarray(v, dtype=float) for k, v in state.items()})
+    return dataclasses.replace(scenario, problem=dataclasses.replace(scenario.problem, initial=init))

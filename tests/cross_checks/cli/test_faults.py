@@ -8,6 +8,8 @@ import time
 
 import pytest
 
+from cross_checks.scenario import load_scenario
+
 from cross_checks.cli import main
 
 TINY = """
@@ -73,14 +75,30 @@ def test_real_sigint_keeps_previous_results_and_the_rerun_reuses_finished_runs(t
     assert summary["run"]["cached_runs"] >= 1  # whatever finished before the interrupt is reused
 
 
-def test_a_model_mujoco_rejects_is_a_failed_row_with_mujocos_words(tmp_path, capsys):
-    pytest.importorskip("mujoco")
+def test_a_body_outside_the_physical_ranges_is_refused_before_any_run(tmp_path, capsys):
     f = tmp_path / "feather.toml"
     f.write_text(FEATHER)
+    assert main(["sweep", str(f), "--engines", "mujoco:euler", "--out", str(tmp_path / "res")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "feather.toml: body.mass: the mass 1e-20 kg is outside the range" in err
+    assert not (tmp_path / "res").exists()
+
+
+def test_a_model_mujoco_rejects_is_a_failed_row_with_mujocos_words(tmp_path, capsys):
+    """Handed a body below MuJoCo's mjMINVAL (through the Python API: the parser refuses such a file), the
+    MuJoCo runs are failed rows with MuJoCo's own words, the sweep goes on and the report says it."""
+    pytest.importorskip("mujoco")
+    import reports
+    from cross_checks.cli import _gate_failures
+    from cross_checks.sweep import run_sweep
+    from tests.helpers.scenarios import with_body
+    f = tmp_path / "feather.toml"
+    f.write_text(FEATHER.replace("1e-20", "1.0"))
+    sc = with_body(load_scenario(f), 1e-20, 1e-20)
     out = tmp_path / "res"
-    rc = main(["sweep", str(f), "--engines", "mujoco:euler", "reference:course", "--jobs", "1", "--no-cache",
-               "--out", str(out)])
-    assert rc == 1  # a failed run is reported as a failure of the sweep, after writing everything
+    summary = run_sweep([sc], ["mujoco:euler", "reference:course"], out, jobs=1, use_cache=False, progress=False,
+                        finish=reports.render)
+    assert _gate_failures(summary)  # a failed run is reported as a failure of the sweep, after writing everything
     import pandas as pd
     df = pd.read_csv(out / "results.csv")
     mj = df[df["engine"] == "mujoco:euler"]

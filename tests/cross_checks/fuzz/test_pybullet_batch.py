@@ -39,9 +39,9 @@ def test_one_steps_are_the_adapters_bit_for_bit(variant):
 
 
 def test_a_run_that_blows_up_is_left_to_the_adapter_and_its_message():
-    spec = generate.draw(47, 0).spec(0.004, 8)
-    spec["initial"]["velocity"] = [1e9, 0.0, 0.0]   # beyond BLOWUP_LIMIT after one step
-    sc = scenario_of(spec)
+    from tests.helpers.scenarios import with_initial
+    # beyond BLOWUP_LIMIT after one step (past the parser's physical ranges: set on the parsed case)
+    sc = with_initial(scenario_of(generate.draw(47, 0).spec(0.004, 8)), v_W=[1e9, 0.0, 0.0])
     assert pybullet_batch.simulate(sc, "multibody", sc.dt_s, 8) is None
     ladder = drivers.run_ladder("pybullet:multibody", [sc], [sc.dt_s], 8)
     assert ladder[0].status[0] == "diverged" and ladder[0].message[0].startswith("diverged at t = ")
