@@ -524,10 +524,16 @@ def cmd_run(args) -> int:
     except EngineError as exc:  # the engine refused or failed: its own words, nothing written
         print(f"rbcheck run: {sc.name} with {args.engine} failed: {exc}", file=sys.stderr)
         return EXIT_FAIL
+    rows = len(traj.t_s)
+    if traj.meta["status"] == "diverged" and rows == 0:
+        print(f"{sc.name} with {args.engine}: {traj.meta['message']}; no state before it, nothing written",
+              file=sys.stderr)
+        return EXIT_FAIL
     traj.write(out)
-    n = len(traj.t_s) - 1
+    n = rows - 1
     if traj.meta["status"] == "diverged":
-        print(f"{sc.name} with {args.engine}: {traj.meta['message']}; wrote the {n} steps before it to {out}",
+        what = "the initial state" if n == 0 else f"the initial state and the {n} step(s)"
+        print(f"{sc.name} with {args.engine}: {traj.meta['message']}; wrote {what} before it to {out}",
               file=sys.stderr)
         return EXIT_FAIL
     print(f"{sc.name} with {args.engine} ({traj.meta['engine_version']}): {n} steps of {dt:g} s "

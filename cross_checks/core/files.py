@@ -27,15 +27,29 @@ def atomic_write(path, write, *, suffix: str = "") -> None:
     creates 0600) and rename it onto ``path``: a reader never sees a half-written file and an interrupted
     write leaves the old one intact."""
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent or ".")
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent or ".")
+    except OSError as exc:
+        raise _naming(exc, path) from None
     os.close(fd)
     try:
         write(tmp)
         os.chmod(tmp, 0o666 & ~umask())
         os.replace(tmp, path)
+    except OSError as exc:   # a full disk, a quota, an I/O error: said with the file rbcheck was writing
+        Path(tmp).unlink(missing_ok=True)
+        raise _naming(exc, path) from None
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def _naming(exc: OSError, path: Path) -> OSError:
+    """``exc`` with the file it concerns (the target, not the temporary beside it): "No space left on
+    device" alone does not say what could not be written."""
+    if exc.filename and not Path(str(exc.filename)).name.startswith(f".{path.name}."):
+        return exc
+    return type(exc)(exc.errno, exc.strerror or str(exc), str(path))
 
 
 def atomic_write_text(path, text: str) -> None:

@@ -53,7 +53,8 @@ import numpy as np
 
 __all__ = ["EngineAdapter", "Variant", "harness_force_torque", "stage_force_torque", "harness_force_torque_floats",
            "stage_force_torque_floats", "apply_decay_prestep",
-           "decay_factors", "EngineError", "optional_import", "require", "EngineNotInstalled", "installed_version"]
+           "decay_factors", "EngineError", "optional_import", "require", "EngineNotInstalled", "installed_version",
+           "library_files"]
 
 
 class EngineError(RuntimeError):
@@ -101,6 +102,20 @@ def installed_version(dist: str) -> str | None:
         return dist_version(dist)
     except PackageNotFoundError:
         return None
+
+
+def library_files(module) -> list:
+    """The compiled files behind an engine's Python module, which its results depend on beyond a version
+    string: the module itself when it is an extension (pybullet), else the shared libraries in its package
+    folder and its ``lib/`` folder (libmujoco.so.X, pydrake/lib/libdrake.so). [] without the module."""
+    if module is None or not getattr(module, "__file__", None):
+        return []
+    f = Path(module.__file__)
+    if f.suffix == ".so" or ".so." in f.name:
+        return [f]
+    folder = f.parent
+    return sorted(p for d in (folder, folder / "lib") if d.is_dir() for p in d.iterdir()
+                  if p.is_file() and (p.suffix == ".so" or ".so." in p.name))
 
 
 def require(module, import_error, name: str, dist: str | None = None, hint: str = "") -> None:
@@ -238,13 +253,16 @@ class EngineAdapter(abc.ABC):
 
     def cache_token(self) -> str:
         """What identifies this adapter's code for the result cache: by default a SHA-256 of the
-        contents of :meth:`source_files`."""
+        contents of :meth:`source_files` (a file over 32 MiB, such as libdrake.so, by its size and
+        modification time: a reinstall changes them, and reading it on every sweep would cost seconds)."""
         import hashlib
         h = hashlib.sha256()
         for f in self.source_files():
             h.update(str(f).encode())
             try:
-                h.update(Path(f).read_bytes())
+                st = Path(f).stat()
+                h.update(f"{st.st_size}:{st.st_mtime_ns}".encode() if st.st_size > 32 * 2 ** 20
+                         else Path(f).read_bytes())
             except OSError:
                 h.update(b"<missing>")
         return h.hexdigest()

@@ -35,7 +35,7 @@ import numpy as np
 
 from reference_sim.simulate import BLOWUP_LIMIT, Run
 
-from cross_checks.engines.base import EngineAdapter, EngineError, Variant, require, stage_force_torque
+from cross_checks.engines.base import EngineAdapter, EngineError, Variant, library_files, require, stage_force_torque
 
 try:  # the module imports without pydrake so the registry can report why it is unavailable
     import pydrake  # noqa: F401
@@ -290,6 +290,10 @@ class DrakeAdapter(EngineAdapter):
 
     def version(self) -> str:
         return version()
+
+    def source_files(self) -> list:
+        """This module and Drake's shared libraries (a rebuilt or reinstalled libdrake.so is a new engine)."""
+        return [*super().source_files(), *library_files(pydrake)]
 
     def simulate(self, scenario, variant: str, dt_s: float, n_steps: int) -> Run:
         return simulate(scenario, variant, dt_s, n_steps)

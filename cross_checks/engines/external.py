@@ -13,21 +13,29 @@ An engine file is TOML (docs/engines.md)::
 
 Placeholders (anywhere inside an argument; ``{{``/``}}`` are literal braces): ``{scenario_json}`` the
 resolved scenario JSON of this run (:mod:`cross_checks.scenario.resolved`, Δt-specific), ``{dt}`` (s),
-``{steps}``, ``{duration}`` (s) and ``{out_csv}``, where the command writes the trajectory CSV (one
-row per step from t = 0, columns by name: ``t,x,y,z,vx,vy,vz,qw,qx,qy,qz,wx,wy,wz``). The command must
-name both ``{scenario_json}`` and ``{out_csv}``; its program (first element) is named literally: a
-path (relative to the engine file's folder) or a program on PATH.
+``{steps}``, ``{duration}`` (s), ``{out_csv}``, where the command writes the trajectory CSV (one row
+per step from t = 0, columns by name: ``t,x,y,z,vx,vy,vz,qw,qx,qy,qz,wx,wy,wz``), and ``{engine_dir}``,
+the engine file's folder (absolute). Every path placeholder is absolute. The command must name both
+``{scenario_json}`` and ``{out_csv}``; an argument that names a file of the engine file's folder
+literally (the program, a script: ``./cbody``, ``cbody.py``) is that file, given to the command as an
+absolute path; a bare program name is looked up on PATH.
 
-Each run gets a private temporary directory holding the JSON and ``{out_csv}`` (the command may use
-it as scratch space); it is removed afterwards. The command runs in the engine file's folder, in its
-own process group, with stdin closed, under the time limit; on time-out the whole group is killed.
-A run is ``failed`` (its message carries the command's own words: the tail of its stderr, else
-stdout) when the program cannot be started, times out, exits non-zero or by a signal, writes no CSV,
-a CSV the shared trajectory reader rejects, a CSV with more or fewer rows than steps + 1 or times
-off the Δt grid, a first row that is not finite, or files written directly into the engine file's
-folder (outside its output path; only the files of that folder itself are watched). A row that becomes
-non-finite or exceeds BLOWUP_LIMIT after t = 0 is a divergence, reported as "diverged at t = …" with
-the rows before it, as for every other engine.
+Each run gets a private temporary directory that rbcheck creates and removes: the JSON, ``{out_csv}``
+and the command's working directory (its scratch space) are in it, so what the command writes there is
+its own and nothing another process writes elsewhere (a log, an editor's swap file, a build) is blamed
+on it. The command runs with stdin closed, in its own process group, under the time limit; when it
+ends, or on time-out, its whole process tree is killed — the group, and any process it started in a new
+session (rbcheck is their subreaper, Linux ``PR_SET_CHILD_SUBREAPER``). Its stdout and stderr are read
+as they come and only their last OUTPUT_TAIL_BYTES kept. A run is ``failed`` (its message carries the
+command's own words: the tail of its stderr, else stdout) when the program cannot be started, times
+out, exits non-zero or by a signal, writes no CSV, a CSV the shared trajectory reader rejects, a CSV
+with more or fewer rows than steps + 1 or times off the Δt grid, or a first row that is not finite. A
+row that becomes non-finite or exceeds BLOWUP_LIMIT after t = 0 is a divergence, reported as "diverged
+at t = …" with the rows before it, as for every other engine.
+
+The cache key of an engine file's results covers the engine file and every file under its folder
+(:func:`folder_fingerprint`: a script's module beside it, a rebuilt program), not only the files its
+commands name.
 """
 from __future__ import annotations
 
@@ -56,7 +64,7 @@ from cross_checks.engines.base import EngineAdapter, EngineError, Variant
 
 __all__ = ["EngineFileError", "ExternalEngine", "load_engine_file", "PLACEHOLDERS", "DEFAULT_TIMEOUT_S"]
 
-PLACEHOLDERS = ("scenario_json", "dt", "steps", "duration", "out_csv")
+PLACEHOLDERS = ("scenario_json", "dt", "steps", "duration", "out_csv", "engine_dir")
 #: Time limit of one run when the engine file sets none: generous for any compiled engine on the
 #: catalog (40 000 steps at 1 ms/step is 40 s), short enough that a hung command is noticed.
 DEFAULT_TIMEOUT_S = 300.0
@@ -66,6 +74,13 @@ MAX_TIMEOUT_S = 86400.0
 MAX_CSV_BYTES_PER_ROW = 1024
 #: Characters of the command's stderr/stdout kept in a failed row's message.
 OUTPUT_TAIL_CHARS = 600
+#: Bytes of each of the command's output streams kept while it runs (the rest is read and dropped: a
+#: command that prints without end neither fills a disk nor holds memory).
+OUTPUT_TAIL_BYTES = 4 * OUTPUT_TAIL_CHARS
+#: The folder fingerprint hashes the content of at most this many files (then their sizes and times), and
+#: skips hidden folders, __pycache__ and rbcheck's own results directories.
+FOLDER_MAX_FILES = 5000
+FOLDER_CONTENT_MAX_BYTES = 64 * 2 ** 20
 
 _TOP = {"name", "version", "description", "timeout", "variants"}
 _VARIANT = {"order", "description", "command"}
@@ -189,6 +204,37 @@ def _program_files(folder: Path, commands: dict) -> dict:
     return out
 
 
+def folder_fingerprint(folder: Path) -> str:
+    """SHA-256 of what under ``folder`` a run may depend on: every file's relative path and content (past
+    FOLDER_MAX_FILES files or FOLDER_CONTENT_MAX_BYTES of content, its size and modification time), in a
+    stable order. Hidden folders, ``__pycache__`` and rbcheck's results directories (their marker) are left
+    out: they change with every sweep, not with the engine."""
+    h = hashlib.sha256()
+    files, content = 0, 0
+    for root, dirs, names in os.walk(folder):
+        dirs[:] = sorted(d for d in dirs if not d.startswith(".") and d != "__pycache__"
+                         and not (Path(root) / d / ".rbcheck-results.json").exists())
+        for name in sorted(names):
+            p = Path(root) / name
+            if name.startswith(".") or not p.is_file():
+                continue
+            try:
+                st = p.stat()
+            except OSError:
+                continue
+            files += 1
+            h.update(str(p.relative_to(folder)).encode())
+            if files <= FOLDER_MAX_FILES and content + st.st_size <= FOLDER_CONTENT_MAX_BYTES:
+                content += st.st_size
+                try:
+                    h.update(_hash_file(p).encode())
+                except OSError:
+                    h.update(b"<unreadable>")
+            else:
+                h.update(f"{st.st_size}:{st.st_mtime_ns}".encode())
+    return h.hexdigest()
+
+
 def load_engine_file(path) -> "ExternalEngine":
     """Read and validate an engine file. Raises EngineFileError (``FILE: FIELD: REASON``)."""
     path = Path(path)
@@ -241,29 +287,10 @@ def load_engine_file(path) -> "ExternalEngine":
         variants[vname] = Variant(order, desc)
     sha = hashlib.sha256(data).hexdigest()
     return ExternalEngine(path.resolve(), name, version, description, timeout, variants, commands, sha,
-                          _program_files(folder, commands))
+                          _program_files(folder, commands), folder_fingerprint(folder))
 
 
 # --- running ----------------------------------------------------------------------------------------
-
-def _folder_snapshot(folder: Path) -> dict:
-    """The files directly in a folder, by (mtime, size). Directories are not watched: rbcheck itself may
-    create one there while a command runs (a results directory being staged, a cache)."""
-    out = {}
-    try:
-        with os.scandir(folder) as it:
-            for e in it:
-                try:
-                    if e.is_dir(follow_symlinks=False):
-                        continue
-                    st = e.stat(follow_symlinks=False)
-                except OSError:
-                    continue
-                out[e.name] = (st.st_mtime_ns, st.st_size)
-    except OSError:
-        pass
-    return out
-
 
 def _kill_group(proc) -> None:
     """SIGKILL the command's process group (the command and anything it started), then reap it."""
@@ -296,35 +323,118 @@ class _TermKillsGroup:
         return False
 
 
-def _tail(fh) -> str:
-    fh.seek(0, os.SEEK_END)
-    size = fh.tell()
-    fh.seek(max(0, size - 4 * OUTPUT_TAIL_CHARS))
-    text = fh.read().decode("utf-8", errors="replace")
-    lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
-    text = " | ".join(lines)
-    return text if len(text) <= OUTPUT_TAIL_CHARS else "…" + text[-OUTPUT_TAIL_CHARS:]
+class _Tail(threading.Thread):
+    """Reads one of the command's output pipes to its end, keeping only the last OUTPUT_TAIL_BYTES."""
+
+    def __init__(self, pipe):
+        super().__init__(daemon=True)
+        self.pipe, self.kept = pipe, b""
+
+    def run(self):
+        try:
+            for chunk in iter(lambda: self.pipe.read1(65536), b""):
+                self.kept = (self.kept + chunk)[-OUTPUT_TAIL_BYTES:]
+        except (OSError, ValueError):
+            pass
+
+    def words(self) -> str:
+        text = self.kept.decode("utf-8", errors="replace")
+        lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
+        text = " | ".join(lines)
+        return text if len(text) <= OUTPUT_TAIL_CHARS else "…" + text[-OUTPUT_TAIL_CHARS:]
+
+
+def _become_subreaper() -> bool:
+    """Make this process the reaper of its orphaned descendants (Linux ``PR_SET_CHILD_SUBREAPER``): a
+    child the command starts in a new session (``setsid cmd &``) is then still ours to find and kill."""
+    try:
+        import ctypes
+        libc = ctypes.CDLL(None, use_errno=True)
+        return libc.prctl(36, 1, 0, 0, 0) == 0   # PR_SET_CHILD_SUBREAPER = 36
+    except (OSError, AttributeError):
+        return False
+
+
+def _children(pid: int) -> set:
+    """The direct children of ``pid`` (Linux /proc; empty elsewhere)."""
+    out = set()
+    try:
+        for task in os.listdir(f"/proc/{pid}/task"):
+            with contextlib.suppress(OSError, ValueError):
+                out.update(int(c) for c in Path(f"/proc/{pid}/task/{task}/children").read_text().split())
+    except OSError:
+        pass
+    return out
+
+
+def _descendants(pid: int) -> set:
+    seen, todo = set(), [pid]
+    while todo:
+        for c in _children(todo.pop()):
+            if c not in seen:
+                seen.add(c)
+                todo.append(c)
+    return seen
+
+
+#: The commands running now in this process (other threads' runs), never taken for a run's strays.
+_LIVE: set = set()
+_LIVE_LOCK = threading.Lock()
+
+
+def _kill_strays(before: set) -> None:
+    """SIGKILL and reap every descendant of this process that was not there before the command started:
+    what the command left running, in its group or in a session of its own (reparented to us) — but
+    not a command another thread runs now, nor what it started."""
+    me = os.getpid()
+    for _ in range(3):   # a dying process may have started another in the meantime
+        with _LIVE_LOCK:
+            others = set(_LIVE)
+        busy = others | {d for pid in others for d in _descendants(pid)}
+        strays = _descendants(me) - before - busy
+        if not strays:
+            return
+        for pid in strays:
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.kill(pid, signal.SIGKILL)
+        for pid in strays:
+            with contextlib.suppress(ChildProcessError, OSError):
+                os.waitpid(pid, 0)   # ours once reparented (subreaper); others are reaped by their parent
 
 
 def _run_command(argv: list, cwd: Path, timeout_s: float):
     """Run ``argv`` in ``cwd`` in a new process group under a time limit.
 
     Returns ``(returncode, timed_out, output_tail)``; raises EngineError when it cannot be started.
-    The wait is a blocking ``waitpid`` (no polling latency); a timer thread kills the group at the limit.
+    The wait is a pidfd poll or ``waitpid`` (no polling latency); at the end the command's whole process
+    tree is killed. Its output is read as it comes, only the tail kept.
     """
-    with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
-        try:
-            proc = subprocess.Popen(argv, cwd=cwd, stdin=subprocess.DEVNULL, stdout=out, stderr=err,
-                                    start_new_session=True)
-        except OSError as exc:
-            raise EngineError(f"cannot start {argv[0]!r}: {exc.strerror or exc}") from None
-        try:
-            with _TermKillsGroup(proc):
-                timed_out = _wait(proc, timeout_s)
-        finally:
-            _kill_group(proc)  # on time-out, Ctrl-C, or stray children of a finished command
-        words = _tail(err) or _tail(out)
-    return proc.returncode, timed_out, words
+    _become_subreaper()
+    before = _descendants(os.getpid())
+    try:
+        proc = subprocess.Popen(argv, cwd=cwd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, start_new_session=True)
+    except OSError as exc:
+        raise EngineError(f"cannot start {argv[0]!r}: {exc.strerror or exc}") from None
+    with _LIVE_LOCK:
+        _LIVE.add(proc.pid)
+    out, err = _Tail(proc.stdout), _Tail(proc.stderr)
+    out.start()
+    err.start()
+    try:
+        with _TermKillsGroup(proc):
+            timed_out = _wait(proc, timeout_s)
+    finally:
+        _kill_group(proc)  # on time-out, Ctrl-C, or stray children of a finished command
+        with _LIVE_LOCK:
+            _LIVE.discard(proc.pid)
+        _kill_strays(before)
+        for t in (out, err):
+            t.join(timeout=5.0)
+        for pipe in (proc.stdout, proc.stderr):
+            with contextlib.suppress(OSError):
+                pipe.close()
+    return proc.returncode, timed_out, err.words() or out.words()
 
 
 def _wait(proc, timeout_s: float) -> bool:
@@ -364,10 +474,10 @@ class ExternalEngine(EngineAdapter):
     """An engine file as an adapter (picklable: plain data, so sweep workers receive it)."""
 
     def __init__(self, path: Path, name: str, version: str, description: str, timeout_s: float,
-                 variants: dict, commands: dict, sha256: str, program_hashes: dict):
+                 variants: dict, commands: dict, sha256: str, program_hashes: dict, folder_sha256: str = ""):
         self.path, self.name, self._version, self.description = Path(path), name, version, description
         self.timeout_s, self.variants, self.commands = timeout_s, variants, commands
-        self.sha256, self.program_hashes = sha256, program_hashes
+        self.sha256, self.program_hashes, self.folder_sha256 = sha256, program_hashes, folder_sha256
 
     @property
     def folder(self) -> Path:
@@ -384,32 +494,47 @@ class ExternalEngine(EngineAdapter):
         return [self.path] + [Path(p) for p in sorted(self.program_hashes)]
 
     def cache_token(self) -> str:
-        """The engine file and the programs it names, as hashed when the file was loaded."""
-        return self.sha256 + "".join(f"|{k}={v}" for k, v in sorted(self.program_hashes.items()))
+        """The engine file, the programs it names and every file under its folder, as hashed when the
+        file was loaded."""
+        return (self.sha256 + "".join(f"|{k}={v}" for k, v in sorted(self.program_hashes.items()))
+                + f"|folder={self.folder_sha256}")
 
     def provenance(self) -> dict:
         return {"engine_file": str(self.path), "engine_file_sha256": self.sha256,
-                "programs_sha256": dict(self.program_hashes), "timeout_s": self.timeout_s}
+                "programs_sha256": dict(self.program_hashes), "folder_sha256": self.folder_sha256,
+                "timeout_s": self.timeout_s}
 
     def same_as(self, other) -> bool:
         return isinstance(other, ExternalEngine) and (other.path, other.sha256) == (self.path, self.sha256)
 
     def argv(self, variant: str, values: dict) -> list:
-        """The command of ``variant`` with its placeholders replaced by ``values`` (strings)."""
-        return ["".join(lit + (values[name] if name else "") for lit, name in arg) for arg in self.commands[variant]]
+        """The command of ``variant`` with its placeholders replaced by ``values`` (strings); an argument that
+        is literally a file of the engine file's folder (the program, a script) as its absolute path, since
+        the command runs in a private working directory."""
+        out = []
+        for arg in self.commands[variant]:
+            text = "".join(lit + (values[name] if name else "") for lit, name in arg)
+            if len(arg) == 1 and arg[0][1] is None and text and not os.path.isabs(text):
+                local = self.folder / text
+                if ("/" in text or local.is_file()) and local.exists():
+                    text = str(local.resolve())
+            out.append(text)
+        return out
 
     def simulate(self, scenario, variant: str, dt_s: float, n_steps: int) -> Run:
         from cross_checks.scenario.resolved import resolved_json
         T = scenario.duration_s if n_steps == scenario.n_steps(dt_s) else n_steps * dt_s
         run_dir = Path(tempfile.mkdtemp(prefix=f"rbcheck-{self.name}-"))
         try:
-            json_path, out_csv = run_dir / "scenario.json", run_dir / "trajectory.csv"
+            work, out_dir = run_dir / "work", run_dir / "out"   # the command's working directory; its output
+            work.mkdir()
+            out_dir.mkdir()
+            json_path, out_csv = run_dir / "scenario.json", out_dir / "trajectory.csv"
             json_path.write_text(resolved_json(scenario, dt_s, T), encoding="utf-8")
             argv = self.argv(variant, {"scenario_json": str(json_path), "dt": repr(float(dt_s)), "steps": str(n_steps),
-                                       "duration": repr(float(T)), "out_csv": str(out_csv)})
-            before = _folder_snapshot(self.folder)
-            rc, timed_out, words = _run_command(argv, self.folder, self.timeout_s)
-            after = _folder_snapshot(self.folder)
+                                       "duration": repr(float(T)), "out_csv": str(out_csv),
+                                       "engine_dir": str(self.folder.resolve())})
+            rc, timed_out, words = _run_command(argv, work, self.timeout_s)
             where = f"{self.name}:{variant} at Δt = {dt_s:g} s"
             said = f" — it said: {words}" if words else " (it printed nothing)"
             if timed_out:
@@ -417,11 +542,12 @@ class ExternalEngine(EngineAdapter):
                                   f"in {self.path.name}); the command was killed{said}")
             if rc != 0:
                 raise EngineError(f"{where}: the command {_exit_words(rc)}{said}")
-            outside = sorted(k for k in set(before) | set(after) if before.get(k, "-") != after.get(k, "-"))
-            if outside:
-                raise EngineError(f"{where}: the command wrote outside its output path: {', '.join(outside[:5])} in "
-                                  f"{self.folder} (write the trajectory to {{out_csv}}, a private directory rbcheck "
-                                  f"removes after the run){said}")
+            if not out_csv.is_file():
+                elsewhere = sorted(p.name for p in work.glob("*.csv"))
+                if elsewhere:
+                    raise EngineError(f"{where}: the command wrote no CSV at {{out_csv}} but {', '.join(elsewhere[:3])} "
+                                      f"in its working directory (write the trajectory to the path {{out_csv}} "
+                                      f"gives){said}")
             run = _read_output(out_csv, scenario, dt_s, n_steps, where, said)
             return run
         finally:

@@ -36,7 +36,8 @@ from reference_sim.quaternion import quat_from_matrix, rotate, quat_conj
 from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
 
 from cross_checks.engines.base import (EngineAdapter, EngineError, Variant, apply_decay_prestep, decay_factors,
-                                       harness_force_torque, optional_import, require, stage_force_torque_floats)
+                                       harness_force_torque, library_files, optional_import, require,
+                                       stage_force_torque_floats)
 from cross_checks.engines.step_floats import harness_fn
 
 mujoco, _IMPORT_ERROR = optional_import("mujoco")
@@ -484,4 +485,4 @@ class MujocoAdapter(EngineAdapter):
     def source_files(self) -> list:
         """This module and the plain-float per-step code its loops run (hashed into the cache key)."""
         from cross_checks.engines import step_floats
-        return [*super().source_files(), Path(step_floats.__file__)]
+        return [*super().source_files(), Path(step_floats.__file__), *library_files(mujoco)]

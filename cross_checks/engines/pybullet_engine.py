@@ -41,7 +41,7 @@ from reference_sim.quaternion import quat_conj, quat_from_matrix, quat_mul
 from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
 
 from cross_checks.engines.base import (EngineAdapter, EngineError, Variant, apply_decay_prestep, decay_factors,
-                                       harness_force_torque, optional_import, require)
+                                       harness_force_torque, library_files, optional_import, require)
 from cross_checks.engines.step_floats import harness_fn, quat_mul_floats
 
 p, _IMPORT_ERROR = optional_import("pybullet", quiet_stderr=True)   # it prints its build time at import
@@ -347,4 +347,4 @@ class PybulletAdapter(EngineAdapter):
     def source_files(self) -> list:
         """This module and the plain-float per-step code its loops run (hashed into the cache key)."""
         from cross_checks.engines import step_floats
-        return [*super().source_files(), Path(step_floats.__file__)]
+        return [*super().source_files(), Path(step_floats.__file__), *library_files(p)]

@@ -167,3 +167,63 @@ def test_two_failed_runs_are_never_said_to_differ(tmp_path):
                   progress=False)
     assert s["run"]["failed_runs"] == 10 and s["agreement"] == []
     assert not [f for f in _gate_failures(s) if "differ" in f]
+
+
+# --- the cache key covers what a run depends on --------------------------------------------------------
+
+def test_a_built_in_engine_s_cache_key_covers_its_loaded_library():
+    """MuJoCo's key was its version string only: now its shared library (and PyBullet's extension, Drake's
+    libdrake.so where installed) is in the files the key hashes."""
+    from cross_checks.engines import get_adapter
+    names = {e: [p.name for p in get_adapter(e).source_files()] for e in ("mujoco", "pybullet")}
+    assert any(n.startswith("libmujoco.so") for n in names["mujoco"]), names
+    assert any(n.startswith("pybullet") and ".so" in n for n in names["pybullet"]), names
+
+
+def test_a_changed_source_file_changes_an_adapter_s_key(tmp_path):
+    from cross_checks.engines.base import EngineAdapter
+    lib = tmp_path / "libsim.so"
+    lib.write_bytes(b"version one")
+
+    class Sim(EngineAdapter):
+        name = "sim"
+
+        def version(self):
+            return "1"
+
+        def simulate(self, scenario, variant, dt_s, n_steps):
+            raise NotImplementedError   # (the key alone is tested)
+
+        def source_files(self):
+            return [lib]
+    key = Sim().cache_token()
+    lib.write_bytes(b"version two")   # same size, another build
+    assert Sim().cache_token() != key
+
+
+# --- errors name the file --------------------------------------------------------------------------------
+
+def test_a_full_disk_names_the_file_that_could_not_be_written(tmp_path):
+    import errno
+
+    from cross_checks.core.files import atomic_write
+
+    def full(tmp):
+        raise OSError(errno.ENOSPC, "No space left on device")
+    target = tmp_path / "summary.json"
+    with pytest.raises(OSError) as info:
+        atomic_write(target, full)
+    assert info.value.filename == str(target) and info.value.errno == errno.ENOSPC
+    assert list(tmp_path.iterdir()) == []   # the temporary beside it is gone
+
+
+def test_a_run_that_diverges_says_what_it_wrote(tmp_path, capsys):
+    from cross_checks.scenario import catalog_path
+    stiff = tmp_path / "stiff.toml"
+    stiff.write_text(catalog_path("spring_oscillator").read_text().replace('name = "spring_oscillator"', 'name = "stiff"')
+                     .replace("stiffness = ", "stiffness = 1e4 #"))
+    out = tmp_path / "t.csv"
+    assert main(["run", str(stiff), "--engine", "reference:explicit_euler", "--dt", "0.05", "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "diverged at t = " in err and "wrote the initial state and the " in err and "-1" not in err
+    assert out.is_file()

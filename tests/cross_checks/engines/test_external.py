@@ -58,6 +58,15 @@ elif mode == "nan_mid":
     for r in rows[6:]: r[1] = float("nan")
     write(rows)
 elif mode == "blowup_mid": rows[4][5] = 3e9; write(rows)
+elif mode == "escape":   # a child in a session of its own, left running after the command exits 0
+    child = subprocess.Popen(["setsid", sys.executable, "-c", "import time; time.sleep(60)"])
+    time.sleep(0.3)
+    open(sys.argv[4], "w").write(" ".join(str(p) for p in (os.getpid(), child.pid)))
+    write(rows)
+elif mode == "chatty":   # prints without end until the time limit
+    line = "x" * 1000 + "\n"
+    while True: sys.stdout.write(line)
+elif mode == "scratch": write(rows); open("scratch.tmp", "w").write("the engine's own scratch")
 elif mode == "huge": open(out, "w").write(HEADER + "\n" + "1," * 2_000_000)
 elif mode == "outside": write(rows); open("stray.csv", "w").write("oops")
 elif mode == "elsewhere": write(rows, path="trajectory.csv")
@@ -70,7 +79,7 @@ elif mode == "hang":
 '''
 
 MODES = ["ok", "exit3", "segv", "nothing", "garbage", "binary", "no_quaternion", "short", "long", "offgrid",
-         "nan_first", "nan_mid", "blowup_mid", "huge", "outside", "elsewhere", "wrong_start"]
+         "nan_first", "nan_mid", "blowup_mid", "huge", "outside", "elsewhere", "wrong_start", "scratch"]
 
 
 def _engine_file(folder: Path, modes=MODES, name="fake", timeout=20, extra="") -> Path:
@@ -110,8 +119,7 @@ def _fresh_registry():
     ("offgrid", ["row 1 (line 3) has t = 0.02, expected 0.01"]),
     ("nan_first", ["the first row (t = 0) is not a finite state"]),
     ("huge", ["bytes, more than 1024 bytes per row for 11 rows"]),
-    ("outside", ["wrote outside its output path: stray.csv"]),
-    ("elsewhere", ["wrote outside its output path: trajectory.csv"]),
+    ("elsewhere", ["wrote no CSV at {out_csv} but trajectory.csv in its working directory"]),
 ])
 def test_a_misbehaving_command_fails_with_its_own_words(fake, mode, words):
     with pytest.raises(EngineError) as info:
@@ -120,7 +128,7 @@ def test_a_misbehaving_command_fails_with_its_own_words(fake, mode, words):
     assert msg.startswith(f"fake:{mode} at Δt = 0.01 s: ")
     for w in words:
         assert w in msg, msg
-    assert not list(fake.folder.glob("stray.csv")) or mode == "outside"
+    assert not list(fake.folder.glob("*.csv"))   # a private working directory: nothing in the engine's folder
     for p in fake.folder.glob("*.csv"):
         p.unlink()  # what a misbehaving engine left behind must not fail the next test
 
@@ -374,3 +382,75 @@ def test_no_engine_file_gives_a_traceback_only_exit_2_or_a_failed_run(tmp_path, 
     for stray in folder.glob("*.csv"):
         stray.unlink()
 
+
+
+# --- runs contained and attributed truly (hardening, third round) --------------------------------------
+
+def test_the_command_runs_in_a_private_directory_its_scratch_is_its_own(fake):
+    """What the command writes in its working directory (a stray CSV, a scratch file) is its own and removed
+    with the run; the engine's folder is left as it was and the run passes."""
+    before = sorted(p.name for p in fake.folder.iterdir())
+    for mode in ("outside", "scratch"):
+        run = fake.simulate(TINY, mode, 0.01, 10)
+        assert run.diverged_at_s is None and len(run.t_s) == 11
+    assert sorted(p.name for p in fake.folder.iterdir()) == before
+
+
+def test_a_file_another_process_writes_into_the_engine_folder_is_not_blamed_on_it(tmp_path):
+    """The worked example swept from the engine's own folder with the sweep's log written there (the shell
+    writes sweep.log while every run goes on): a correct engine passes."""
+    import os
+    import subprocess
+
+    from tests.helpers.byo import build_cbody
+    built = build_cbody(tmp_path / "c_engine")
+    env = {**os.environ, "MPLBACKEND": "Agg", "RBCHECK_CACHE_DIR": str(tmp_path / "cache")}
+    cmd = (f"{sys.executable} -m cross_checks.cli sweep tennis_racket applied_torque tumbling_box --engines cbody "
+           f"--engine-file cbody.toml --out ../res > sweep.log")
+    proc = subprocess.run(["bash", "-c", cmd], cwd=built["good"].parent, env=env, capture_output=True, text=True,
+                          timeout=600)
+    log = (built["good"].parent / "sweep.log").read_text()
+    assert proc.returncode == 0, log[-1500:] + proc.stderr[-1500:]
+    assert "all " in log.splitlines()[-1] and "verdicts as expected" in log.splitlines()[-1]
+
+
+def test_a_child_in_a_session_of_its_own_is_killed_with_the_run(tmp_path):
+    import time
+    pids = tmp_path / "pids"
+    path = _engine_file(tmp_path / "esc", modes=[])
+    path.write_text(path.read_text() + f'[variants.escape]\norder = 1\ncommand = ["{sys.executable}", "engine.py", '
+                                       f'"escape", "{{scenario_json}}", "{{out_csv}}", "{pids}"]\n')
+    run = load_engine_file(path).simulate(TINY, "escape", 0.01, 10)
+    assert len(run.t_s) == 11
+    child = int(pids.read_text().split()[1])
+    deadline = time.monotonic() + 5.0   # SIGKILL is delivered asynchronously
+    while _alive(child) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not _alive(child), "the child the command started with setsid outlived the run"
+
+
+def test_a_command_that_prints_without_end_keeps_only_a_tail(tmp_path):
+    path = _engine_file(tmp_path / "chatty", modes=["chatty"], timeout=2)
+    with pytest.raises(EngineError) as info:
+        load_engine_file(path).simulate(TINY, "chatty", 0.01, 10)
+    msg = str(info.value)
+    assert "no result within the time limit of 2 s" in msg and "it said: " in msg
+    assert len(msg) < 1200   # the tail only (OUTPUT_TAIL_CHARS), however much it printed
+
+
+def test_the_cache_key_covers_every_file_of_the_engine_folder(tmp_path):
+    """A command that runs driver.py, which imports simcore.py beside it: editing simcore.py changes the key."""
+    folder = tmp_path / "drv"
+    path = _engine_file(folder, modes=["ok"])
+    (folder / "simcore.py").write_text("GYRO_SIGN = -1\n")
+    key = load_engine_file(path).cache_token()
+    assert load_engine_file(path).cache_token() == key            # stable
+    (folder / "simcore.py").write_text("GYRO_SIGN = +1\n")
+    assert load_engine_file(path).cache_token() != key            # a broken helper module is a new engine
+    (folder / "results").mkdir()
+    (folder / "results" / ".rbcheck-results.json").write_text("{}")
+    (folder / "results" / "results.csv").write_text("x")
+    (folder / ".swp").write_text("editor")
+    key2 = load_engine_file(path).cache_token()
+    (folder / "results" / "results.csv").write_text("y")         # rbcheck's own results dir: not the engine
+    assert load_engine_file(path).cache_token() == key2
