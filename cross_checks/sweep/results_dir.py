@@ -136,7 +136,7 @@ def is_owned_stale(name: str, prefix: str, kind: str | None = None) -> bool:
 
 _TEMP = re.compile(r"^\.(?P<base>.+)\.[A-Za-z0-9_]{8}(\.npz)?$")
 _OUTPUT = re.compile(r"^(index\.html|results\.csv|summary\.json|\.rbcheck-results\.json|scenario-.+\.html"
-                     r"|.+\.png|.+\.npz)$")
+                     r"|.+\.png|.+\.npz|.+\.csv|.+\.toml)$")
 
 
 def is_temp_leftover(name: str) -> bool:
@@ -163,7 +163,9 @@ def foreign_entries(d: Path, listed: set) -> list:
     for root, dirs, files in os.walk(d):
         rel_root = Path(root).relative_to(d)
         for name in list(dirs):
-            if is_owned_stale(name, ".", None):
+            # rbcheck's own working folders, of a live process (a report drawing into DIR right now) or a
+            # dead one: never the user's files
+            if name.startswith(".") and _OWNED.match(name[1:]) and _OWNED.match(name[1:])["host"] == _host():
                 dirs.remove(name)
         for f in files:
             rel = (rel_root / f).as_posix()

@@ -227,3 +227,19 @@ def test_a_run_that_diverges_says_what_it_wrote(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "diverged at t = " in err and "wrote the initial state and the " in err and "-1" not in err
     assert out.is_file()
+
+
+def test_a_report_drawing_in_a_directory_does_not_make_a_sweep_call_its_files_foreign(tmp_path):
+    """While `rbcheck report DIR` draws, DIR holds its live staging folder and atomic temporaries; a sweep
+    asked to replace DIR at that moment sees rbcheck's own files, not "files rbcheck did not write"."""
+    from cross_checks.scenario import load_scenario
+    from cross_checks.sweep import run_sweep
+    from cross_checks.sweep.results_dir import check_output_dir, owned_name
+    out = tmp_path / "res"
+    run_sweep([load_scenario("projectile")], ["reference:course"], out, jobs=1, use_cache=False, progress=False)
+    live = out / owned_name(".", "plots")   # this (live) process's drawing folder, as reports.render makes it
+    live.mkdir()
+    (live / "scenario-projectile-errors.png").write_bytes(b"png")
+    (out / "rows").mkdir(exist_ok=True)
+    (out / "rows" / ".projectile.csv.a1b2c3d4").write_text("temp")   # an atomic write in flight
+    assert check_output_dir(str(out)) == out.resolve()
