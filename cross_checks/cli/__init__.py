@@ -256,7 +256,8 @@ def _add_bench(sub) -> None:
                                    "(docs/fuzz.md).")
     b.add_argument("--quick", action="store_true",
                    help="fewer bodies and steps, and a sweep of 3 scenarios (about a minute instead of several)")
-    b.add_argument("--repeats", type=_positive_int, default=3, metavar="N", help="repeats of every measurement (default 3)")
+    b.add_argument("--repeats", type=_repeats_option, default=3, metavar="N",
+                   help="repeats of every measurement (default 3, at most 100)")
     b.add_argument("--no-sweep", action="store_true", help="leave out the sweep against its floor")
     b.add_argument("--json", metavar="FILE", help="write the measurements as JSON")
 
@@ -319,6 +320,13 @@ def _jobs_option(text: str) -> int:
     v = _positive_int(text)
     if v > MAX_OPTION_JOBS:
         raise argparse.ArgumentTypeError(f"must be at most {MAX_OPTION_JOBS}, got {v}")
+    return v
+
+
+def _repeats_option(text: str) -> int:
+    v = _positive_int(text)
+    if v > 100:
+        raise argparse.ArgumentTypeError(f"must be at most 100, got {v}")
     return v
 
 

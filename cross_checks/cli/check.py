@@ -15,6 +15,12 @@ def run_check(args, BadInput) -> int:
     from cross_checks.core.files import atomic_write_text
 
     sc = load_scenario(args.scenario)
+    if args.dt is not None:   # a step the limits allow over the scenario's duration (1e-300 s is not one)
+        from cross_checks.scenario.limits import LimitExceeded, check_run_steps
+        try:
+            check_run_steps(sc.duration_s, args.dt, "--dt")
+        except LimitExceeded as exc:
+            raise BadInput(str(exc)) from None
     results = []
     compare_with = _user_variants()
     if args.scheme is not None:

@@ -243,3 +243,8 @@ def test_a_report_drawing_in_a_directory_does_not_make_a_sweep_call_its_files_fo
     (out / "rows").mkdir(exist_ok=True)
     (out / "rows" / ".projectile.csv.a1b2c3d4").write_text("temp")   # an atomic write in flight
     assert check_output_dir(str(out)) == out.resolve()
+
+
+def test_check_refuses_a_step_beyond_the_limit(trajectory, capsys):
+    assert main(["check", str(trajectory), "--scenario", "projectile", "--dt", "1e-300"]) == 2
+    assert "--dt: 1e-300 s makes 1e+300 steps" in _one_line(capsys, "check")
