@@ -215,15 +215,21 @@ def _add_compare(sub) -> None:
                     "results directory or a compact baseline (rbcheck baseline). NEW_DIR of a subset sweep is "
                     "compared on the scenarios and variants it ran (its summary.json lists them); the baseline's other "
                     "rows are counted in one line, not compared; so are, one line per engine, the rows of an optional "
-                    "engine (drake) that was not installed where NEW_DIR was made, unless --require names it. Exit 0: "
-                    "no regression; 1: a regression (or rows of what NEW_DIR ran missing from it, unless "
+                    "engine (drake) that was not installed where NEW_DIR was made, unless --require names it. Each variant is "
+                    "judged as a whole — regression, improvement, scheme changed (orders kept, errors both ways "
+                    "within x4) — with its causes first (orders, one-step orders, agreements, energy-drift kind); "
+                    "every row follows (folded in --markdown). Exit 0: no regression (a stale baseline is said in "
+                    "one line); 1: a regression (or rows of what NEW_DIR ran missing from it, unless "
                     "--allow-missing; a variant NEW_DIR's sweep skipped because its engine is installed but broken "
-                    "counts as missing); 2: unusable input.")
+                    "counts as missing; with --fail-on-change any change); 2: unusable input. See docs/results.md.")
     cmp_.add_argument("baseline", metavar="BASELINE_DIR")
     cmp_.add_argument("new", metavar="NEW_DIR")
     cmp_.add_argument("--markdown", metavar="FILE", help="also write the comparison as a markdown table (CI job summary)")
     cmp_.add_argument("--allow-missing", action="store_true",
                       help="rows absent from NEW_DIR (e.g. a variant unavailable there) are reported but not a regression")
+    cmp_.add_argument("--fail-on-change", action="store_true",
+                      help="exit 1 on any change, improvements and changed schemes included (a CI job that insists "
+                           "the committed baseline be regenerated); without it a stale baseline is said in one line")
     cmp_.add_argument("--require", action="append", default=[], metavar="ENGINE",
                       help="an engine NEW_DIR must have run (repeatable): an optional engine (e.g. drake) that was "
                            "not installed there is then a failure instead of one line of rows not compared")
@@ -763,10 +769,21 @@ def cmd_compare(args) -> int:
         c = compare_dirs(args.baseline, args.new, require=args.require)
     except CompareInputError as exc:
         raise BadInput(str(exc)) from None
-    print(to_text(c, args.allow_missing))
+    ran = _variants_ran(args.new)
+    print(to_text(c, args.allow_missing, ran, args.fail_on_change))
     if args.markdown:
-        atomic_write_text(args.markdown, to_markdown(c, args.baseline, args.new, args.allow_missing) + "\n")
-    return c.exit_code(args.allow_missing)
+        atomic_write_text(args.markdown, to_markdown(c, args.baseline, args.new, args.allow_missing, ran,
+                                                     args.fail_on_change) + "\n")
+    return c.exit_code(args.allow_missing, args.fail_on_change)
+
+
+def _variants_ran(new_dir) -> list:
+    """The variants NEW_DIR's summary lists (to name the ones that did not change)."""
+    import json
+    try:
+        return [v["name"] for v in json.loads((Path(new_dir) / "summary.json").read_text()).get("variants", [])]
+    except (OSError, ValueError, KeyError, TypeError):
+        return []
 
 
 def cmd_baseline(args) -> int:

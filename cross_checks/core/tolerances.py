@@ -245,6 +245,11 @@ COMPARE_REL_TOL = 0.05
 #: Absolute change below which an error or drift has not changed: values at the round-off floor
 #: (≤ 1e-12) fluctuate by O(1) factors between machines and mean nothing.
 COMPARE_ABS_TOL = 1e-12
+#: A variant whose errors moved both ways at unchanged orders is a "scheme changed" (another scheme of the
+#: same order: its error constants reorder by O(1) factors — MuJoCo 3.3.7 -> 4.0.0 RK4 moved them x0.69 to
+#: x1.91), not a regression, unless one error grew more than this factor: a loss of accuracy a user calls a
+#: regression whatever improved elsewhere.
+COMPARE_SCHEME_CHANGE_MAX_RATIO = 4.0
 
 # --- agreement of engines and closed forms (tests/cross_checks/engines/test_engine_agreement.py) ---
 #: Projectile closed forms (semi-implicit x_n = x0 + n h v0 + g h² n(n+1)/2 and the exact parabola):

@@ -34,10 +34,12 @@ from pathlib import Path
 
 import pandas as pd
 
-from cross_checks.core.tolerances import COMPARE_ABS_TOL, COMPARE_REL_TOL, ORDER_TOL
+from cross_checks.core.tolerances import (COMPARE_ABS_TOL, COMPARE_REL_TOL, COMPARE_SCHEME_CHANGE_MAX_RATIO,
+                                          ORDER_TOL)
 from cross_checks.sweep.schema import STATUSES
 
 __all__ = ["compare_dirs", "read_results_dir", "Comparison", "CompareInputError", "METRIC_RULES", "ORDER_TOL",
+           "VariantChange", "variant_changes",
            "REQUIRED_COLUMNS", "Scope", "not_compared", "not_installed_lines", "verdict_line", "to_markdown", "to_text"]
 
 KEY = ["scenario", "engine", "dt"]
@@ -66,6 +68,29 @@ class Change:
     old: str = ""
     new: str = ""
     note: str = ""
+    area: str = "row"  # row (a metric or status) | order | local order | agreement | energy kind | engine
+    ratio: float | None = None   # new / old of a metric that moved
+
+
+@dataclass
+class VariantChange:
+    """What changed for one engine variant, judged as a whole (:func:`variant_changes`).
+
+    category : "regression" (a verdict or order lost, a run that stopped finishing, errors only worse or one
+        worse beyond COMPARE_SCHEME_CHANGE_MAX_RATIO), "improvement" (gained, or errors only better),
+        "scheme changed" (orders kept, errors moved both ways within that ratio), "changed" (information
+        only: a verdict that makes no claim, an energy-drift kind), "missing".
+    causes : the explaining facts first — verdicts and fitted orders, one-step orders, agreement with the
+        same-scheme variant, energy-drift kind — one sentence each, at most a few.
+    ratio_range : (lowest, highest) new/old over the metric changes; rows, scenarios : how many moved.
+    """
+
+    variant: str
+    category: str
+    causes: list
+    ratio_range: tuple | None
+    rows: int
+    scenarios: list
 
 
 @dataclass
@@ -128,8 +153,14 @@ class Comparison:
     def of(self, kind):
         return [c for c in self.changes if c.kind == kind]
 
-    def exit_code(self, allow_missing: bool = False) -> int:
-        if self.of("regression") or (self.of("missing") and not allow_missing):
+    def exit_code(self, allow_missing: bool = False, fail_on_change: bool = False) -> int:
+        """1 on a regression of any variant (and on rows missing, unless allowed); with ``fail_on_change``
+        on any change at all, improvements and changed schemes included (a stale baseline); else 0."""
+        cats = {v.category for v in variant_changes(self)}
+        overall = any(ch.engine == "(all)" for ch in self.of("regression"))   # a metric column gone
+        if "regression" in cats or overall or (self.of("missing") and not allow_missing):
+            return 1
+        if fail_on_change and (self.changes or self.version_diffs):
             return 1
         return 0
 
@@ -168,7 +199,8 @@ def _read_csv(csv: Path) -> pd.DataFrame:
     if missing:
         raise CompareInputError(f"{csv}: columns {', '.join(missing)} missing")
     metrics = [m for m in METRIC_RULES if m in raw.columns]
-    out = {c: [] for c in ["scenario", "engine", "dt", "status", *metrics]}
+    kinds = ["energy_drift_kind"] if "energy_drift_kind" in raw.columns else []
+    out = {c: [] for c in ["scenario", "engine", "dt", "status", *metrics, *kinds]}
     for i, r in enumerate(raw.itertuples(index=False), start=2):
         r = r._asdict() if hasattr(r, "_asdict") else dict(zip(raw.columns, r))
         for c in ("scenario", "engine"):
@@ -183,6 +215,8 @@ def _read_csv(csv: Path) -> pd.DataFrame:
         _number(csv, i, "steps", r["steps"], nonneg=True)
         for m in metrics:
             out[m].append(_number(csv, i, m, r[m], nonneg=True))
+        for k in kinds:
+            out[k].append(r[k].strip())
     df = pd.DataFrame(out)
     if df.duplicated(KEY).any():
         dup = df[df.duplicated(KEY)].iloc[0]
@@ -251,6 +285,9 @@ def compare_dirs(baseline_dir, new_dir, require=()) -> Comparison:
     _compare_columns(old_df, new_df, out)
     _compare_rows(old_df.merge(new_df, on=KEY, how="outer", suffixes=("_old", "_new"), indicator=True), out)
     _compare_convergence(old_sum.get("convergence", []), new_sum.get("convergence", []), out)
+    _compare_convergence(old_sum.get("local_convergence", []), new_sum.get("local_convergence", []), out,
+                         local=True)
+    _compare_agreement(old_sum.get("agreement", []), new_sum.get("agreement", []), out)
     _compare_versions(old_sum.get("provenance", {}), new_sum.get("provenance", {}), out)
     return out
 
@@ -312,7 +349,14 @@ def _compare_rows(merged, out: Comparison):
                 change = _metric_change(r[co], r[cn], abs_tol, rel_tol)
                 if change is not None:
                     kind, old, new, note = change
-                    out.changes.append(Change(kind, r["scenario"], r["engine"], f"{where} {metric}", old, new, note))
+                    ratio = (float(r[cn]) / float(r[co]) if not pd.isna(r[co]) and not pd.isna(r[cn])
+                             and float(r[co]) > 0 else None)
+                    out.changes.append(Change(kind, r["scenario"], r["engine"], f"{where} {metric}", old, new, note,
+                                              ratio=ratio))
+        ko, kn = r.get("energy_drift_kind_old"), r.get("energy_drift_kind_new")
+        if isinstance(ko, str) and isinstance(kn, str) and ko and kn and ko != kn:
+            out.changes.append(Change("changed", r["scenario"], r["engine"], f"{where} energy_drift_kind", ko, kn,
+                                      area="energy kind"))
 
 
 def _metric_change(vo, vn, abs_tol, rel_tol):
@@ -345,29 +389,50 @@ def _verdict_change_kind(vo, vn) -> str:
     return "improvement" if vo in ("diverged", "failed") else "regression"
 
 
-def _compare_convergence(old_recs, new_recs, out: Comparison):
-    """Convergence records matched by (scenario, engine, quantity): missing, new, a verdict change, or
-    the order judged (:func:`_order_change`)."""
+def _compare_convergence(old_recs, new_recs, out: Comparison, local: bool = False):
+    """Convergence records (``local``: the one-step ones) matched by (scenario, engine, quantity): missing,
+    new, a verdict change, or the order judged (:func:`_order_change`)."""
     key = lambda rec: (rec["scenario"], rec["engine"], rec["quantity"])  # noqa: E731
     old = {key(r): r for r in old_recs}
     new = {key(r): r for r in new_recs}
+    area, what = ("local order", "one-step order") if local else ("order", "order")
     for k in sorted(set(old) | set(new)):
         scen, eng, qty = k
         if k not in new:
             if not out.scope.ran(scen, eng):
-                out.scope.skip(scen, eng, record=True)
+                if not local:
+                    out.scope.skip(scen, eng, record=True)
                 continue
+            if local:
+                continue   # a one-step record absent: its engine lost its one-step mode; the rows say the rest
             out.changes.append(Change("missing", scen, eng, f"order of {qty}", note="convergence record absent"))
         elif k not in old:
-            out.changes.append(Change("new", scen, eng, f"order of {qty}", new=_fmt(new[k].get("order"))))
+            out.changes.append(Change("new", scen, eng, f"{what} of {qty}", new=_fmt(new[k].get("order")), area=area))
         elif old[k].get("verdict") != new[k].get("verdict"):
             vo, vn = old[k].get("verdict"), new[k].get("verdict")
-            out.changes.append(Change(_verdict_change_kind(vo, vn), scen, eng, f"verdict of {qty}", str(vo), str(vn)))
+            out.changes.append(Change(_verdict_change_kind(vo, vn), scen, eng, f"{'one-step ' if local else ''}verdict "
+                                      f"of {qty}", str(vo), str(vn), area=area))
         else:
             change = _order_change(old[k], new[k])
             if change is not None:
                 kind, old_order, new_order, note = change
-                out.changes.append(Change(kind, scen, eng, f"order of {qty}", old_order, new_order, note))
+                out.changes.append(Change(kind, scen, eng, f"{what} of {qty}", old_order, new_order, note, area=area))
+
+
+def _compare_agreement(old_recs, new_recs, out: Comparison):
+    """Agreement of same-scheme variant pairs, matched by (a, b, scenario): a pair that agreed and no longer
+    does is a regression of both; the reverse an improvement."""
+    key = lambda rec: (rec["a"], rec["b"], rec["scenario"])  # noqa: E731
+    old = {key(r): r for r in old_recs}
+    new = {key(r): r for r in new_recs}
+    for k in sorted(set(old) & set(new)):
+        ao, an = bool(old[k].get("agrees")), bool(new[k].get("agrees"))
+        if ao == an:
+            continue
+        kind = "regression" if ao else "improvement"
+        for eng, other in ((k[0], k[1]), (k[1], k[0])):
+            out.changes.append(Change(kind, k[2], eng, f"agreement with {other}", "agrees" if ao else "differs",
+                                      "agrees" if an else "differs", area="agreement"))
 
 
 def _order_change(ro, rn):
@@ -409,8 +474,106 @@ def _versions(prov):
 def _compare_versions(po, pn, out: Comparison):
     vo, vn = _versions(po), _versions(pn)
     for k in sorted(set(vo) | set(vn)):
+        if k.startswith("engine ") and (k not in vo or k not in vn):
+            continue   # an engine only one side ran: its rows are new or not compared, not a version change
         if vo.get(k) != vn.get(k):
             out.version_diffs.append((k, vo.get(k, "—"), vn.get(k, "—")))
+
+
+_CAUSE_AREAS = ("order", "local order", "agreement", "energy kind")
+
+
+def variant_changes(c: Comparison) -> list:
+    """Every variant that changed, judged as a whole (:class:`VariantChange`), regressions first."""
+    by = {}
+    for ch in c.changes:
+        if ch.engine.endswith(":*") or ch.engine == "(all)":
+            continue
+        by.setdefault(ch.engine, []).append(ch)
+    out = [_variant_change(v, chs) for v, chs in by.items()]
+    rank = {"regression": 0, "missing": 1, "scheme changed": 2, "improvement": 3, "changed": 4}
+    return sorted(out, key=lambda v: (rank[v.category], v.variant))
+
+
+def _variant_change(variant: str, chs: list) -> VariantChange:
+    rows = [ch for ch in chs if ch.area == "row" and ch.kind in ("regression", "improvement")]
+    ratios = [ch.ratio for ch in rows if ch.ratio is not None and ch.ratio > 0]
+    explained = [ch for ch in chs if ch.area in _CAUSE_AREAS or (ch.area == "row" and "status" in ch.what)]
+    kinds = {ch.kind for ch in explained if ch.kind != "changed"}
+    worse, better = [ch for ch in rows if ch.kind == "regression"], [ch for ch in rows if ch.kind == "improvement"]
+    if any(ch.kind == "missing" for ch in chs):
+        category = "missing"
+    elif "regression" in kinds:
+        category = "regression"
+    elif "improvement" in kinds:
+        category = "improvement"
+    elif worse and better:
+        too_much = any(ch.ratio is None or ch.ratio > COMPARE_SCHEME_CHANGE_MAX_RATIO for ch in worse)
+        category = "regression" if too_much else "scheme changed"
+    elif worse:
+        category = "regression"
+    elif better:
+        category = "improvement"
+    else:
+        category = "changed"
+    causes = _causes(explained)
+    return VariantChange(variant, category, causes, (min(ratios), max(ratios)) if ratios else None, len(rows),
+                         sorted({ch.scenario for ch in rows}))
+
+
+def _causes(explained) -> list:
+    """The facts that explain a variant's change, one sentence per (area, quantity), with the scenarios they
+    hold on: "orientation order 3.95–4.03 -> 2.00 on 5 scenarios (applied_torque, …; expected 4)"."""
+    merged = {}
+    for ch in explained:
+        merged.setdefault((ch.area, ch.what), []).append(ch)
+    out = []
+    order = {a: i for i, a in enumerate(("row",) + _CAUSE_AREAS)}
+    for (area, what), chs in sorted(merged.items(), key=lambda kv: (order.get(kv[0][0], 9), kv[0][1])):
+        scen = sorted({ch.scenario for ch in chs})
+        where = f"{scen[0]}" if len(scen) == 1 else f"{len(scen)} scenarios ({_names(scen, 3)})"
+        if area == "energy kind":
+            where += f" ({len(chs)} row(s))"
+        notes = sorted({ch.note for ch in chs if ch.note})
+        label = _cause_label(area, what)
+        text = f"{label} {_span([ch.old for ch in chs])} -> {_span([ch.new for ch in chs])} on {where}"
+        out.append(" ".join(text.split()) + (f" ({'; '.join(notes)})" if notes else ""))
+    return out
+
+
+def _cause_label(area: str, what: str) -> str:
+    """``orientation one-step order``, ``angular velocity verdict``, ``agreement with mujoco:euler``."""
+    if " of " in what and area in ("order", "local order"):
+        head, qty = what.rsplit(" of ", 1)
+        return f"{qty.replace('_', ' ')} {head}"
+    if area == "energy kind":
+        return "energy-drift kind"
+    return what.replace("_", " ")
+
+
+def _span(values) -> str:
+    """``3.95–4.03`` for numbers, the distinct words otherwise (``converges/does_not_converge``)."""
+    nums = []
+    for v in values:
+        try:
+            nums.append(float(v))
+        except (TypeError, ValueError):
+            return "/".join(dict.fromkeys(str(v) for v in values))
+    lo, hi = min(nums), max(nums)
+    return f"{lo:.2f}" if hi - lo < 0.005 else f"{lo:.2f}–{hi:.2f}"
+
+
+def _ratio_text(v: VariantChange) -> str:
+    if v.ratio_range is None:
+        return "—"
+    lo, hi = v.ratio_range
+    span = f"×{lo:.3g}" if abs(hi - lo) <= 1e-12 * max(hi, 1.0) else f"×{lo:.3g} … ×{hi:.3g}"
+    return f"{span} over {v.rows} row metric(s), {len(v.scenarios)} scenario(s)"
+
+
+def _unchanged_variants(c: Comparison, new_variants) -> list:
+    moved = {ch.engine for ch in c.changes}
+    return sorted(v for v in new_variants if v not in moved)
 
 
 def _names(items, at_most: int = 8) -> str:
@@ -446,29 +609,60 @@ def not_compared(c: Comparison) -> str:
             f"{' and '.join(what)} the new results did not run")
 
 
-def verdict_line(c: Comparison, allow_missing=False) -> str:
+def verdict_line(c: Comparison, allow_missing=False, fail_on_change=False) -> str:
     """What the exit code means, in words that agree with the counts."""
-    n_reg, n_miss = len(c.of("regression")), len(c.of("missing"))
-    if n_reg:
-        return f"REGRESSION: {n_reg} regression(s)" + (f", {n_miss} missing" if n_miss else "")
+    vcs = variant_changes(c)
+    reg = [v.variant for v in vcs if v.category == "regression"]
+    reg += ["every variant"] * any(ch.engine == "(all)" for ch in c.of("regression"))
+    n_miss = len(c.of("missing"))
+    if reg:
+        return (f"REGRESSION: {len(reg)} variant(s) regressed ({_names(reg, 4)}); {len(c.of('regression'))} "
+                "regression(s) in all" + (f", {n_miss} missing" if n_miss else ""))
     if n_miss and not allow_missing:
         return (f"MISSING: {n_miss} row(s) or record(s) of what the new results ran are absent from them "
                 "(--allow-missing accepts that)")
+    changed = [v for v in vcs if v.category in ("improvement", "scheme changed")]
+    if changed or c.version_diffs:
+        what = ", ".join(f"{v.variant} {v.category}" for v in changed[:4]) or "engine versions"
+        stale = (f"OK: no regression, but the baseline is stale ({what}): regenerate it (baselines/README.md)"
+                 if not fail_on_change else f"CHANGED: {what} (--fail-on-change)")
+        return stale
     return "OK: no regression"
 
 
-def to_text(c: Comparison, allow_missing=False) -> str:
+def summary_lines(c: Comparison, new_variants=(), allow_missing=False, fail_on_change=False) -> list:
+    """The first screen: the verdict, the engine versions that changed, one line per changed variant (its
+    category, its cause, its errors' ratio range), the variants that did not change."""
+    lines = [verdict_line(c, allow_missing, fail_on_change)]
+    if c.version_diffs:
+        lines.append("versions changed: " + ", ".join(f"{p} {a} -> {b}" for p, a, b in c.version_diffs))
+    for v in variant_changes(c):
+        cause = "; ".join(v.causes[:3]) + (f"; and {len(v.causes) - 3} more" if len(v.causes) > 3 else "")
+        lines.append(f"  {v.variant}: {v.category.upper()} — {cause or 'errors only'}; errors {_ratio_text(v)}")
+    unchanged = _unchanged_variants(c, new_variants)
+    if unchanged:
+        lines.append(f"unchanged: {len(unchanged)} variant(s) ({_names(unchanged, 12)})")
+    return lines
+
+
+def to_text(c: Comparison, allow_missing=False, new_variants=(), fail_on_change=False) -> str:
+    if not c.changes and not c.version_diffs:   # a rerun of the same code: one line (and what was left out)
+        quiet = [f"OK: no regression: {c.matched_rows} matching rows compared, nothing changed"]
+        return "\n".join(quiet + ([not_compared(c)] if not_compared(c) else []) + not_installed_lines(c))
     lines = [f"compared {c.matched_rows} matching rows: {len(c.of('regression'))} regressions, "
              f"{len(c.of('improvement'))} improvements, {len(c.of('new'))} new, {len(c.of('missing'))} missing"]
+    lines += summary_lines(c, new_variants, allow_missing, fail_on_change)[1:]
     if not_compared(c):
         lines.append(not_compared(c))
     lines += not_installed_lines(c)
     for pkg, a, b in c.version_diffs:
         lines.append(f"  version of {pkg}: {a} -> {b}")
-    for kind in ("regression", "missing", "improvement", "new", "changed"):
-        for ch in c.of(kind):
-            lines.append(f"  {kind.upper():<11} {ch.scenario} {ch.engine} {ch.what}: {ch.old} -> {ch.new} {ch.note}".rstrip())
-    lines.append(verdict_line(c, allow_missing))
+    detail = [f"  {kind.upper():<11} {ch.scenario} {ch.engine} {ch.what}: {ch.old} -> {ch.new} {ch.note}".rstrip()
+              for kind in ("regression", "missing", "improvement", "new", "changed") for ch in c.of(kind)]
+    if len(detail) > 40:   # the grouped lines above say it; the markdown (--markdown) keeps every row
+        detail = detail[:40] + [f"  ... and {len(detail) - 40} more row(s) (--markdown FILE lists them all)"]
+    lines += detail
+    lines.append(verdict_line(c, allow_missing, fail_on_change))
     return "\n".join(lines)
 
 
@@ -476,21 +670,39 @@ def _md_escape(s: str) -> str:
     return str(s).replace("|", "\\|").replace("\n", " ").replace("<", "&lt;").replace(">", "&gt;")
 
 
-def to_markdown(c: Comparison, baseline_dir, new_dir, allow_missing=False) -> str:
-    code = c.exit_code(allow_missing)
-    head = ("✅ no regression" if code == 0 else "❌ regression" if c.of("regression")
-            else "❌ rows missing from the new results")
+def to_markdown(c: Comparison, baseline_dir, new_dir, allow_missing=False, new_variants=(),
+                fail_on_change=False) -> str:
+    """The comparison for a CI job summary: the verdict and, per changed variant, its category, cause and error
+    ratios on the first screen; every row and record below, folded."""
+    code = c.exit_code(allow_missing, fail_on_change)
+    regressed = (any(v.category == "regression" for v in variant_changes(c))
+                 or any(ch.engine == "(all)" for ch in c.of("regression")))
+    head = ("✅ no regression" if code == 0 else "❌ regression" if regressed
+            else "❌ rows missing from the new results" if c.of("missing") else "❌ changed (--fail-on-change)")
     md = [f"## rbcheck compare: {head}", "",
           f"Baseline `{_md_escape(baseline_dir)}` vs new `{_md_escape(new_dir)}`: {c.matched_rows} matching rows, "
           f"**{len(c.of('regression'))} regressions**, {len(c.of('improvement'))} improvements, "
           f"{len(c.of('new'))} new, {len(c.of('missing'))} missing.", ""]
+    first = summary_lines(c, new_variants, allow_missing, fail_on_change)
+    md += [f"**{_md_escape(first[0])}**", ""]
+    vcs = variant_changes(c)
+    if c.version_diffs:
+        md += ["Versions changed: " + ", ".join(f"{_md_escape(p)} {_md_escape(a)} → {_md_escape(b)}"
+                                               for p, a, b in c.version_diffs) + ".", ""]
+    if vcs:
+        md += ["| variant | change | cause | errors (new / old) |", "|---|---|---|---|"]
+        md += [f"| {_md_escape(v.variant)} | {v.category} | "
+               f"{_md_escape('; '.join(v.causes[:4]) or 'errors only').replace(' -&gt; ', ' → ')} | "
+               f"{_md_escape(_ratio_text(v))} |" for v in vcs]
+        md.append("")
+    unchanged = _unchanged_variants(c, new_variants)
+    if unchanged:
+        md += [f"Unchanged: {len(unchanged)} variant(s) ({_md_escape(_names(unchanged, 12))}).", ""]
     if not_compared(c):
         md += [_md_escape(not_compared(c)[0].upper() + not_compared(c)[1:]) + ".", ""]
     md += [_md_escape(line) + ".\n" for line in not_installed_lines(c)]
-    if c.version_diffs:
-        md += ["### Version differences", "", "| package | baseline | new |", "|---|---|---|"]
-        md += [f"| {_md_escape(p)} | {_md_escape(a)} | {_md_escape(b)} |" for p, a, b in c.version_diffs]
-        md.append("")
+    if c.changes:
+        md += ["<details><summary>Every changed row and record</summary>", ""]
     for kind, title in (("regression", "Regressions"), ("missing", "Missing rows"), ("improvement", "Improvements"),
                         ("new", "New rows"), ("changed", "Other changes (not regressions)")):
         rows = c.of(kind)
@@ -500,4 +712,6 @@ def to_markdown(c: Comparison, baseline_dir, new_dir, allow_missing=False) -> st
         md += [f"| {_md_escape(r.scenario)} | {_md_escape(r.engine)} | {_md_escape(r.what)} | {_md_escape(r.old)} | "
                f"{_md_escape(r.new)} | {_md_escape(r.note)} |" for r in rows]
         md.append("")
+    if c.changes:
+        md += ["</details>", ""]
     return "\n".join(md)

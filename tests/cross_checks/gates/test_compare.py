@@ -315,3 +315,68 @@ def test_a_required_or_broken_engine_is_still_missing(tmp_path):
     assert compare_dirs(BASELINE, broken).exit_code() == 1
     required, _ = _baseline_without(tmp_path / "r", "pybullet", required=True)
     assert compare_dirs(BASELINE, required).exit_code() == 1
+
+
+# --- changes grouped by variant and judged as a whole (an engine change explained) -----------------------
+
+def _with_rows(tmp_path, name, edit, conv=CONV, summary_extra=None):
+    rows = [dict(r) for r in ROWS]
+    edit(rows)
+    d = write(tmp_path / name, rows, conv)
+    if summary_extra:
+        s = json.loads((d / "summary.json").read_text())
+        s.update(summary_extra)
+        (d / "summary.json").write_text(json.dumps(s))
+    return d
+
+
+def test_errors_moved_both_ways_at_the_same_order_are_a_changed_scheme_not_a_regression(tmp_path):
+    from cross_checks.gates.compare import variant_changes, verdict_line
+    more = ROWS + [dict(ROWS[0], scenario="tumbling_box")]
+    a = write(tmp_path / "a", more)
+    rows = [dict(r) for r in more]
+    rows[0]["orient_err_final"] *= 1.9      # worse on one scenario ...
+    rows[3]["orient_err_final"] *= 0.69     # ... better on another: another scheme of the same order
+    c = compare_dirs(a, write(tmp_path / "b", rows))
+    [v] = variant_changes(c)
+    assert (v.variant, v.category) == ("mujoco:euler", "scheme changed") and c.exit_code() == 0
+    assert v.ratio_range == pytest.approx((0.69, 1.9))
+    assert "baseline is stale" in verdict_line(c) and c.exit_code(fail_on_change=True) == 1
+    rows[0]["orient_err_final"] *= 10.0     # one error 19x worse: a regression, whatever improved elsewhere
+    c = compare_dirs(a, write(tmp_path / "c", rows))
+    assert variant_changes(c)[0].category == "regression" and c.exit_code() == 1
+
+
+def test_a_one_step_order_and_an_agreement_are_causes_and_judged(tmp_path):
+    from cross_checks.gates.compare import variant_changes
+    local = [dict(scenario="tennis_racket", engine="mujoco:euler", quantity="orientation", order=2.0,
+                  verdict="converges", expected_order=2)]
+    agree = [dict(a="mujoco:euler", b="pybullet:multibody", scenario="tennis_racket", dt_s=1e-3, agrees=True,
+                  max_rel=1e-14, reason="the same scheme")]
+    a = _with_rows(tmp_path, "a", lambda r: None, summary_extra={"local_convergence": local, "agreement": agree})
+    b = _with_rows(tmp_path, "b", lambda r: None, summary_extra={
+        "local_convergence": [dict(local[0], order=1.0)], "agreement": [dict(agree[0], agrees=False, max_rel=0.2)]})
+    c = compare_dirs(a, b)
+    by = {v.variant: v for v in variant_changes(c)}
+    assert by["mujoco:euler"].category == "regression" and c.exit_code() == 1
+    causes = " ".join(by["mujoco:euler"].causes)
+    assert "orientation one-step order 2.00 -> 1.00 on tennis_racket" in causes
+    assert "agreement with pybullet:multibody agrees -> differs" in causes
+    assert by["pybullet:multibody"].category == "regression"
+
+
+def test_an_energy_drift_kind_change_is_information(tmp_path):
+    from cross_checks.gates.compare import variant_changes
+    a = _with_rows(tmp_path, "a", lambda rows: [r.update(energy_drift_kind="bounded") for r in rows])
+    b = _with_rows(tmp_path, "b", lambda rows: [r.update(energy_drift_kind="bounded") for r in rows]
+                   + [rows[0].update(energy_drift_kind="secular")])
+    c = compare_dirs(a, b)
+    [v] = variant_changes(c)
+    assert v.category == "changed" and "energy-drift kind bounded -> secular" in v.causes[0] and c.exit_code() == 0
+
+
+def test_a_rerun_that_changed_nothing_is_one_line(tmp_path, capsys):
+    from cross_checks.cli import main
+    assert main(["compare", str(write(tmp_path / "a")), str(write(tmp_path / "b"))]) == 0
+    out = capsys.readouterr().out
+    assert out == "OK: no regression: 3 matching rows compared, nothing changed\n"
