@@ -35,7 +35,7 @@ each converges at its order to the continuously damped motion.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 

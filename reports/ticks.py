@@ -29,7 +29,7 @@ __all__ = ["AxisDecor", "decorate"]
 _RTOL = 1e-10
 
 
-def decorate(ax) -> "AxisDecor":
+def decorate(ax) -> AxisDecor:
     """Hide ``ax``'s own x and y axes and draw them with one :class:`AxisDecor` (kept in the axes: it is
     not data, so reports.canvas does not remove it between figures)."""
     decor = AxisDecor(ax)

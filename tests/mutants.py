@@ -10,7 +10,7 @@ physics exercises the bug (used by the quick default-run subset; the slow test s
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 

@@ -122,7 +122,7 @@ class Trajectory:
         atomic_write_text(sidecar_path(csv_path), json.dumps(self.meta, indent=2, sort_keys=True, default=json_default) + "\n")
 
     @classmethod
-    def read(cls, csv_path, *, require: tuple = QUANTITY_GROUPS) -> "Trajectory":
+    def read(cls, csv_path, *, require: tuple = QUANTITY_GROUPS) -> Trajectory:
         """Read a trajectory CSV (and its sidecar JSON when present). Raises TrajectoryError.
 
         Columns are read by NAME (:func:`read_columns`): any order, extra columns ignored. ``require``

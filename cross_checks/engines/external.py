@@ -235,7 +235,7 @@ def folder_fingerprint(folder: Path) -> str:
     return h.hexdigest()
 
 
-def load_engine_file(path) -> "ExternalEngine":
+def load_engine_file(path) -> ExternalEngine:
     """Read and validate an engine file. Raises EngineFileError (``FILE: FIELD: REASON``)."""
     path = Path(path)
     try:

@@ -24,7 +24,7 @@ import os
 import sys
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-from datetime import datetime, timezone
+from datetime import datetime, UTC
 from pathlib import Path
 
 import numpy as np
@@ -381,7 +381,7 @@ def run_campaign(variants, out_dir, *, budget_s: float, seed: int = 0, jobs: int
         out = check_output_dir(str(out_dir))
     except ResultsDirError as exc:
         raise FuzzError(str(exc)) from None
-    started = datetime.now(timezone.utc).replace(microsecond=0).isoformat()
+    started = datetime.now(UTC).replace(microsecond=0).isoformat()
     t0 = time.monotonic()
     seen = {"cases": 0, "bad": 0}
 

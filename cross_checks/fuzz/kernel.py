@@ -139,7 +139,7 @@ class CaseKernel(ScalarStepper):
     has_drag = has_body_torque = has_velocity_decay = has_angular_decay = False
 
     @classmethod
-    def stack(cls, problems, variant: str, h_s) -> "CaseKernel":
+    def stack(cls, problems, variant: str, h_s) -> CaseKernel:
         """The kernel of ``variant`` for members ``problems[i]`` at steps ``h_s[i]`` (s)."""
         h_s = [float(h) for h in np.broadcast_to(np.asarray(h_s, dtype=float), (len(problems),))]
         get_step(variant)  # validates the name (the shared steppers may have been built for another)
@@ -147,7 +147,7 @@ class CaseKernel(ScalarStepper):
         return cls._from_steppers(steppers, list(problems), variant, h_s)
 
     @classmethod
-    def _from_steppers(cls, steppers, problems, variant, h_s) -> "CaseKernel":
+    def _from_steppers(cls, steppers, problems, variant, h_s) -> CaseKernel:
         k = object.__new__(cls)
         k.problems, k.h_s, k.variant = problems, h_s, variant
         k.problem = problems[0]
@@ -169,7 +169,7 @@ class CaseKernel(ScalarStepper):
         }[variant]
         return k
 
-    def take(self, idx) -> "CaseKernel":
+    def take(self, idx) -> CaseKernel:
         """The kernel of the members ``idx`` only (same steppers, same arithmetic)."""
         idx = [int(i) for i in np.atleast_1d(idx)]
         return self._from_steppers([self._steppers[i] for i in idx], [self.problems[i] for i in idx], self.variant,

@@ -26,7 +26,7 @@ import dataclasses
 import shutil
 import sys
 import time
-from datetime import datetime, timezone
+from datetime import datetime, UTC
 
 from cross_checks.core import tolerances as tol
 from cross_checks.core.files import atomic_write_text, save_npz_atomic, usable_cores
@@ -107,7 +107,7 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
     jobs = max(1, int(jobs or usable_cores()))
     if executor is None:   # local processes: never more than the runs to do, nor than 4 per core
         jobs = min(jobs, max(1, len(plan_jobs(scenarios, variants)) + len(scenarios)), 4 * usable_cores())
-    started = datetime.now(timezone.utc).replace(microsecond=0).isoformat()
+    started = datetime.now(UTC).replace(microsecond=0).isoformat()
     t_start = time.perf_counter()
     cache_root = str(cache_dir())
     for engine in dict.fromkeys(["reference", *(v.split(":", 1)[0] for v in variants)]):

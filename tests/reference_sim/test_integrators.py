@@ -7,7 +7,7 @@ from reference_sim.body import RigidBody
 from reference_sim.forces import ForceModel, PointForce, Spring, Torque
 from reference_sim.ground_truth import ground_truth
 from reference_sim.integrators import VARIANTS, get_step
-from reference_sim.quaternion import geodesic_angle, quat_exp, quat_mul, quat_normalize
+from reference_sim.quaternion import geodesic_angle, quat_exp, quat_normalize
 from reference_sim.simulate import simulate
 from reference_sim.state import Problem, State
 

@@ -323,7 +323,7 @@ def _check(inp, scenario, compare_with, scheme=None) -> CheckResult:
 
 
 def _no_step_result(inp, scenario):
-    why = ("diverged at t = {:g} s: non-finite values from the first step on".format(inp.diverged_at_s)
+    why = (f"diverged at t = {inp.diverged_at_s:g} s: non-finite values from the first step on"
            if inp.diverged_at_s is not None else "the quaternion is zero from the first step on")
     return CheckResult(inp.source, scenario.name, "", _input_dict(inp, scenario), False, why, [why], [], [], None, None,
                        [], [], [], [], list(inp.notes), [], [])

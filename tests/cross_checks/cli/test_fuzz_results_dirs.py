@@ -3,7 +3,6 @@ outcomes are exit 0/1 (report: 0) or exit 2 with one line — never a traceback 
 written outside the directory (hostile scenario names such as ../../x or /tmp/x included)."""
 import json
 import os
-import random
 import shutil
 import tempfile
 from pathlib import Path

@@ -1,6 +1,5 @@
 """Documented engine behaviours a counterexample may show (fuzz.known), pinned against the engine."""
 import numpy as np
-import pytest
 
 from cross_checks.engines import get_adapter
 from cross_checks.fuzz.known import explain

@@ -34,7 +34,7 @@ def _record(sc, primary=None, cache_root=None):
     return SR.second_reference(sc, t, y, label, measured, cache_root, use_cache=True)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _catalog_record(name):
     return _record(load_scenario(name))
 
@@ -88,7 +88,6 @@ def test_a_dop853_primary_of_slightly_wrong_gravity_is_caught():
 
 def test_a_second_reference_of_a_slightly_wrong_body_is_caught(monkeypatch):
     from cross_checks.engines import drake_engine
-    real = drake_engine._spatial_inertia
 
     def wrong(body):    # every moment 1e-6 too large (applied_torque's inertia is diagonal)
         from pydrake.multibody.tree import RotationalInertia, SpatialInertia

@@ -1,0 +1,35 @@
+"""The lint gate: ruff (its rules in pyproject.toml, [tool.ruff]) passes on the whole tree, run by the
+README's test command. A planted unused import is caught, so the gate can fail."""
+import shutil
+import subprocess
+import sys
+
+import pytest
+
+from tests.helpers.repo import ROOT
+
+
+def _ruff():
+    exe = shutil.which("ruff") or str(ROOT / ".venv" / "bin" / "ruff")
+    candidates = [[sys.executable, "-m", "ruff"], [exe]]
+    for cmd in candidates:
+        try:
+            if subprocess.run(cmd + ["--version"], capture_output=True).returncode == 0:
+                return cmd
+        except OSError:
+            continue
+    pytest.skip("ruff is not installed (it comes with the test extra: pip install -e '.[test]')")
+
+
+def test_ruff_passes_on_the_whole_tree():
+    proc = subprocess.run(_ruff() + ["check", "--output-format", "concise", "."], cwd=ROOT, capture_output=True,
+                          text=True)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-1000:]
+
+
+def test_the_gate_catches_a_planted_unused_import(tmp_path):
+    (tmp_path / "pyproject.toml").write_text((ROOT / "pyproject.toml").read_text())
+    (tmp_path / "bad.py").write_text("import os\n")
+    proc = subprocess.run(_ruff() + ["check", "--output-format", "concise", "."], cwd=tmp_path, capture_output=True,
+                          text=True)
+    assert proc.returncode == 1 and "F401" in proc.stdout
