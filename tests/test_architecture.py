@@ -96,3 +96,63 @@ def test_a_backward_import_is_reported(tmp_path, monkeypatch):
             test_imports_point_down_the_layers(planted)
     finally:
         planted.unlink()
+
+
+def _module_graph(paths) -> dict:
+    """module -> the package modules it imports (module level and inside functions), itself left out."""
+    names = {_module_name(p) for p in paths}
+    graph = {}
+    for p in paths:
+        me = _module_name(p)
+        deps = set()
+        for _, target in _imports(p):
+            parts = target.split(".")   # `from a.b import c` may name a function: take the longest module
+            for k in range(len(parts), 0, -1):
+                cand = ".".join(parts[:k])
+                if cand in names:
+                    deps.add(cand)
+                    break
+        deps.discard(me)
+        graph[me] = deps - {me.rsplit(".", 1)[0]}   # a module importing its own package's __init__ is no circle
+    return graph
+
+
+def _cycles(graph) -> list:
+    """Every strongly connected set of two or more modules (Tarjan)."""
+    index, low, stack, on, out, counter = {}, {}, [], set(), [], [0]
+
+    def visit(v):
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on.add(v)
+        for w in graph.get(v, ()):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_no_module_imports_itself_round_a_circle():
+    """Function-level imports included: two modules that import each other are one module in two files."""
+    assert _cycles(_module_graph(SOURCES)) == []
+
+
+def test_a_planted_circle_is_found():
+    graph = {"a.x": {"a.y"}, "a.y": {"a.z"}, "a.z": {"a.x"}, "a.w": {"a.x"}}
+    assert _cycles(graph) == [["a.x", "a.y", "a.z"]]

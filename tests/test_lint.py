@@ -1,5 +1,6 @@
-"""The lint gate: ruff (its rules in pyproject.toml, [tool.ruff]) passes on the whole tree, run by the
-README's test command. A planted unused import is caught, so the gate can fail."""
+"""The lint and type gates: ruff (its rules in pyproject.toml, [tool.ruff]) passes on the whole tree and mypy
+([tool.mypy]) on the layers every result rests on, run by the README's test command. A planted unused import
+and a planted type error are caught, so the gates can fail."""
 import shutil
 import subprocess
 import sys
@@ -33,3 +34,24 @@ def test_the_gate_catches_a_planted_unused_import(tmp_path):
     proc = subprocess.run(_ruff() + ["check", "--output-format", "concise", "."], cwd=tmp_path, capture_output=True,
                           text=True)
     assert proc.returncode == 1 and "F401" in proc.stdout
+
+
+def _mypy():
+    try:
+        import mypy  # noqa: F401
+    except ImportError:
+        pytest.skip("mypy is not installed (it comes with the test extra: pip install -e '.[test]')")
+    return [sys.executable, "-m", "mypy"]
+
+
+def test_mypy_passes_on_core_scenario_and_analysis(tmp_path):
+    proc = subprocess.run(_mypy() + ["--cache-dir", str(tmp_path / "cache")], cwd=ROOT, capture_output=True,
+                          text=True)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-1000:]
+
+
+def test_the_type_gate_catches_a_planted_type_error(tmp_path):
+    (tmp_path / "bad.py").write_text("def f(x: int) -> int:\n    return x\n\nf('one')\n")
+    proc = subprocess.run(_mypy() + ["--cache-dir", str(tmp_path / "cache"), "bad.py"], cwd=tmp_path,
+                          capture_output=True, text=True)
+    assert proc.returncode == 1 and "arg-type" in proc.stdout

@@ -16,7 +16,7 @@ from cross_checks.core import tolerances as tol
 def pairwise_orders(dt_s, errors) -> list:
     """``log(e_i / e_{i+1}) / log(Δt_i / Δt_{i+1})`` for consecutive ladder points (dt descending);
     ``log2(e(h) / e(h/2))`` for a halving ladder. None where an error is zero or not finite."""
-    out = []
+    out: list[float | None] = []
     for i in range(len(dt_s) - 1):
         e0, e1 = errors[i], errors[i + 1]
         if e0 is None or e1 is None or not (math.isfinite(e0) and math.isfinite(e1)) or e0 <= 0 or e1 <= 0:
@@ -93,7 +93,7 @@ def fit_convergence(dt_s, errors, floors=None, statuses=None) -> ConvergenceFit:
     dt, e, fl, st = ([v[i] for i in order_idx] for v in (dt0, e0, fl0, st0))
     pw = pairwise_orders(dt, e)
     fitted = [False] * K
-    res = dict(dt_s=dt, errors=list(e), pairwise_orders=pw, floors=fl)
+    res: dict = dict(dt_s=dt, errors=list(e), pairwise_orders=pw, floors=fl)
 
     ok = [s == "ok" and math.isfinite(v) for s, v in zip(st, e)]
     notes = []

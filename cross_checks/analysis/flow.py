@@ -48,8 +48,8 @@ def rk4_flow(F, y0, span_s, substeps: int, *, mid: bool = False):
     Returns the end states (quaternion renormalised to the start's norm), and with ``mid`` also the
     states after half the substeps (``substeps`` even)."""
     y = np.array(y0, dtype=float)
-    h = (np.asarray(span_s, dtype=float) / substeps)
-    h = h[..., None] if np.ndim(h) else float(h)
+    h_span = np.asarray(span_s, dtype=float) / substeps
+    h = h_span[..., None] if np.ndim(h_span) else float(h_span)
     n0 = np.linalg.norm(y[..., Q], axis=-1, keepdims=True)
     y_mid = None
     with np.errstate(all="ignore"):

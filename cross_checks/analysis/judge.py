@@ -113,7 +113,7 @@ def _judge(fit: ConvergenceFit, exp) -> Judgement:
     why = measured_pre_asymptotic(fit, exp.order)
     if why:
         return Judgement(fit, "pre_asymptotic", None, why, True)
-    if fit.verdict == "converges":
+    if fit.verdict == "converges" and fit.order is not None:
         best = order_within_floors(fit)
         if best is not None and best >= exp.order - tol.SWEEP_ORDER_TOL:
             return Judgement(fit, verdict, None,

@@ -235,7 +235,7 @@ def _csv_rows(name: str, text: str) -> list:
 
 def _header_index(name: str, header: list) -> dict:
     """Column name → its first index; a contract column twice, or no ``t``, is an error."""
-    index = {}
+    index: dict[str, int] = {}
     for i, h in enumerate(header):
         if h in index and h in COLUMNS:
             raise TrajectoryError(f"{name}: header: column {h!r} appears twice")

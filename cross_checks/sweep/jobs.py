@@ -29,14 +29,13 @@ from cross_checks.core.files import json_default, save_npz_atomic
 from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, decimation_indices, error_summary, quantity_scales, state_errors
 from cross_checks.sweep import cache, fingerprint
 from cross_checks.sweep.lifecycle import TimeLimitExceeded, time_limit
+from cross_checks.sweep.schema import SCHEMA_VERSION
 
 __all__ = ["SCHEMA_VERSION", "MAX_SERIES_POINTS", "LOCAL_SAMPLES", "RESULT_COLUMNS", "TIMING_COLUMNS", "Job",
            "job_dts", "run_job", "reference_job", "second_reference_job", "failed_second_reference",
            "ReferenceResult", "measure_reference", "load_reference",
            "clear_reference_memo", "failed_record", "varies"]
 
-#: Version of the results-directory layout and of the cached job records.
-SCHEMA_VERSION = 1
 #: Points kept per plotted series: enough for a smooth curve at ~1000 px, small on disk.
 MAX_SERIES_POINTS = 500
 #: Reference states each one-step (local error) measurement starts from, spread over the run.

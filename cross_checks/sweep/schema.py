@@ -21,8 +21,10 @@ __all__ = ["SchemaError", "check", "SUMMARY", "CONVERGENCE_RECORD", "QUANTITIES"
 QUANTITIES = ("position", "orientation", "velocity", "angular_velocity")
 VERDICTS = ("converges", "does_not_converge", "at_roundoff", "diverged", "failed", "insufficient")
 STATUSES = ("ok", "diverged", "failed")
-#: The results schema this code reads (cross_checks.sweep.jobs.SCHEMA_VERSION; kept equal by a test).
-KNOWN_SCHEMA_VERSION = 1
+#: Version of the results-directory layout and of the cached job records this code writes.
+SCHEMA_VERSION = 1
+#: The results schema this code reads (the one it writes; kept equal by a test).
+KNOWN_SCHEMA_VERSION = SCHEMA_VERSION
 
 
 class SchemaError(ValueError):

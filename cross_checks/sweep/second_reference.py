@@ -74,7 +74,7 @@ def _cache_key(scenario, t_s) -> str:
     every module of the engines and sweep layers), the accuracies, the times and the environment."""
     from cross_checks.engines import drake_reference
     from cross_checks.sweep.fingerprint import code_fingerprint, environment
-    from cross_checks.sweep.jobs import SCHEMA_VERSION
+    from cross_checks.sweep.schema import SCHEMA_VERSION
     return hashlib.sha256(json.dumps([SCHEMA_VERSION, "second_reference", scenario.content_hash,
                                       drake_reference.version(), code_fingerprint("drake"),
                                       tol.SECOND_REFERENCE_TARGET_ACCURACY, tol.SECOND_REFERENCE_CHECK_FACTOR,

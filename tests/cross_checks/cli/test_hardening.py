@@ -225,7 +225,8 @@ def test_a_run_that_diverges_says_what_it_wrote(tmp_path, capsys):
     out = tmp_path / "t.csv"
     assert main(["run", str(stiff), "--engine", "reference:explicit_euler", "--dt", "0.05", "--out", str(out)]) == 1
     err = capsys.readouterr().err
-    assert "diverged at t = " in err and "wrote the initial state and the " in err and "-1" not in err
+    import re
+    assert "diverged at t = " in err and re.search(r"wrote the initial state and the \d+ step\(s\) before it", err)
     assert out.is_file()
 
 
