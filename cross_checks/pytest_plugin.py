@@ -55,13 +55,13 @@ def assert_engine(request, rbcheck_cache_dir):
 
     def check(variant, scenarios, *, engine_file=None):
         __tracebackhide__ = True   # the user sees the verdict sentences, not rbcheck's frames
-        from cross_checks.testing import _as_list, run_engine_checks
+        from cross_checks.testing import as_list, run_engine_checks
         calls.append(variant)
         out = None
         if keep:
             out = Path(keep) / _safe(request.node.nodeid) / f"{len(calls)}-{_safe(str(variant))}"
             out.parent.mkdir(parents=True, exist_ok=True)
-        return run_engine_checks(variant, scenarios, engine_file=session_files + _as_list(engine_file),
+        return run_engine_checks(variant, scenarios, engine_file=session_files + as_list(engine_file),
                                  out_dir=out, cache_dir=rbcheck_cache_dir, jobs=jobs)
 
     return check

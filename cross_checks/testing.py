@@ -68,7 +68,7 @@ def run_engine_checks(variant, scenarios, *, engine_file=None, out_dir=None, cac
         from reports.install import check_templates
         check_templates()  # the kept report's templates, before the runs
     with contextlib.ExitStack() as stack:
-        stack.enter_context(engine_files_registered(_as_list(engine_file)))
+        stack.enter_context(engine_files_registered(as_list(engine_file)))
         variants = _variants(variant)
         for engine in dict.fromkeys(v.split(":", 1)[0] for v in variants):
             try:
@@ -172,7 +172,7 @@ def likely_causes(scenarios: dict, problems_of) -> dict:
     return out
 
 
-def _as_list(x) -> list:
+def as_list(x) -> list:
     if x is None:
         return []
     if isinstance(x, (str, os.PathLike)):

@@ -95,9 +95,9 @@ def run_until_exceptional(stepper, rows: np.ndarray, start: int, n_steps: int, l
         raise ValueError("rows must be a C-contiguous float64 (n, 13) array")
     if not 0 <= start <= n_steps < rows.shape[0]:   # the compiled loop does not check its indices
         raise ValueError(f"steps {start}..{n_steps} do not fit rows of {rows.shape[0]} states")
-    from reference_sim.scalar import IMPLICIT_TOL, _MAX_ITER
+    from reference_sim.scalar import IMPLICIT_TOL, MAX_ITER
     code = VARIANT_CODES[stepper.variant if variant is None else variant]
-    return int(_kernel()(code, rows, int(start), int(n_steps), float(limit), float(IMPLICIT_TOL), int(_MAX_ITER),
+    return int(_kernel()(code, rows, int(start), int(n_steps), float(limit), float(IMPLICIT_TOL), int(MAX_ITER),
                          *(parameters(stepper) if params is None else params)))
 
 

@@ -21,7 +21,7 @@ from reference_sim.state import Problem
 
 __all__ = ["ScalarStepper"]
 
-_MAX_ITER = 50
+MAX_ITER = 50
 
 
 class _FloatBackend:
@@ -328,7 +328,7 @@ class ScalarStepper:
         z = list(y)
         d = self.rhs(y)
         u = [a + half * b for a, b in zip(u0, d[3:6] + d[10:13])]
-        for _ in range(_MAX_ITER):
+        for _ in range(MAX_ITER):
             z[3:6], z[10:13] = u[0:3], u[3:6]
             d = self.rhs(z)
             u_new = [a + half * b for a, b in zip(u0, d[3:6] + d[10:13])]
@@ -337,7 +337,7 @@ class ScalarStepper:
             if done:
                 break
         else:
-            raise ImplicitSolveError(f"leapfrog: implicit half kick did not converge in {_MAX_ITER} iterations")
+            raise ImplicitSolveError(f"leapfrog: implicit half kick did not converge in {MAX_ITER} iterations")
         z[3:6], z[10:13] = u[0:3], u[3:6]
         z[0], z[1], z[2] = y[0] + h * u[0], y[1] + h * u[1], y[2] + h * u[2]
         wx, wy, wz = u[3:6]
@@ -363,7 +363,7 @@ class ScalarStepper:
         if self.backend == "float":
             z = [a + h * b for a, b in zip(y, self.rhs(y))]
             prev = float("inf")
-            for _ in range(_MAX_ITER):
+            for _ in range(MAX_ITER):
                 z_new = [a + h * b for a, b in zip(y, self.rhs(z))]
                 d = max([abs(a - b) / (1.0 + abs(a)) for a, b in zip(z_new, z)])  # a list: ~2x a generator
                 z = z_new

@@ -17,7 +17,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 
-from reports.plots import DPI, LOG_FLOOR, _save_png  # noqa: E402
+from reports.canvas import save_png  # noqa: E402
+from reports.plots import DPI, LOG_FLOOR  # noqa: E402
 
 __all__ = ["check_figure", "ladder_figure"]
 
@@ -149,7 +150,7 @@ def check_figure(res, scenario, path) -> None:
     if label_closest:
         handles.append(Line2D([], [], color="gray", lw=1.2, ls="--", label=f"{label_closest} run free (closest correct)"))
     fig.legend(handles=handles, loc="upper right", bbox_to_anchor=(0.985, 0.895), ncol=3, fontsize=9, frameon=False)
-    _save_png(fig, path)
+    save_png(fig, path)
     plt.close(fig)
 
 
@@ -180,5 +181,5 @@ def ladder_figure(results, ladder, scenario, path) -> None:
         ax.set_ylabel("final error")
         ax.grid(alpha=0.3, which="both")
     fig.subplots_adjust(left=0.07, right=0.98, top=0.72, bottom=0.14, wspace=0.35)
-    _save_png(fig, path)
+    save_png(fig, path)
     plt.close(fig)

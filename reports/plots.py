@@ -104,7 +104,7 @@ def _plain_log_ticks(fig):
                 axis.set_major_locator(MaxNLocator(nbins=4))
 
 
-_save_png = save_png   # rbcheck check --plot (reports.check_plot) saves its figures alike
+_save_png = save_png   # the one place the report saves a figure (a test swaps it to keep the figure)
 
 
 def _line(ax, x, y, **style):

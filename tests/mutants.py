@@ -177,20 +177,20 @@ def _drag_sign_flipped(mp):
 def _mujoco_world_omega_as_body(mp):
     from cross_checks.engines import mujoco_engine as me
 
-    def _to_qpos_qvel(y):
+    def to_qpos_qvel(y):
         y = np.asarray(y, dtype=float)
         qpos = np.concatenate([y[..., 0:3], y[..., 6:10]], axis=-1)
         qvel = np.concatenate([y[..., 3:6], y[..., 10:13]], axis=-1)   # BUG: ω_W written where ω_B belongs
         return qpos, qvel
-    mp.setattr(me, "_to_qpos_qvel", _to_qpos_qvel)
+    mp.setattr(me, "to_qpos_qvel", to_qpos_qvel)
 
 
 def _mujoco_body_omega_read_as_world(mp):
     from cross_checks.engines import mujoco_engine as me
 
-    def _to_packed(qpos, qvel):
+    def to_packed(qpos, qvel):
         return np.concatenate([qpos[..., 0:3], qvel[..., 0:3], qpos[..., 3:7], qvel[..., 3:6]], axis=-1)  # BUG
-    mp.setattr(me, "_to_packed", _to_packed)
+    mp.setattr(me, "to_packed", to_packed)
 
 
 def _mujoco_gravity_twice(mp):
@@ -222,12 +222,12 @@ def _mujoco_rk4_decay_twice(mp):
 
 def _pybullet_principal_axes_dropped(mp):
     from cross_checks.engines import pybullet_engine as pe
-    orig = pe._Body.__init__
+    orig = pe.BulletBody.__init__
 
     def init(self, *a, **kw):
         orig(self, *a, **kw)
         self.q_BP = None   # BUG: the principal frame taken as the body frame
-    mp.setattr(pe._Body, "__init__", init)
+    mp.setattr(pe.BulletBody, "__init__", init)
 
 
 def _pybullet_quaternion_order(mp):
@@ -243,13 +243,13 @@ def _pybullet_decay_left_out(mp):
 def _pybullet_torque_in_link_frame(mp):
     from cross_checks.engines import pybullet_engine as pe
 
-    def apply(self, f_W, tau_W, x_W):   # 3 floats each, as _Body.apply
+    def apply(self, f_W, tau_W, x_W):   # 3 floats each, as BulletBody.apply
         p = pe.p
         if any(v != 0.0 for v in f_W):
             p.applyExternalForce(self.b, -1, list(f_W), list(x_W), p.WORLD_FRAME, physicsClientId=self.c)
         if any(v != 0.0 for v in tau_W):   # BUG: a world torque given in the link (body) frame
             p.applyExternalTorque(self.b, -1, list(tau_W), p.LINK_FRAME, physicsClientId=self.c)
-    mp.setattr(pe._Body, "apply", apply)
+    mp.setattr(pe.BulletBody, "apply", apply)
 
 
 def _drake_omega_in_body_axes(mp):

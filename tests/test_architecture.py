@@ -156,3 +156,48 @@ def test_no_module_imports_itself_round_a_circle():
 def test_a_planted_circle_is_found():
     graph = {"a.x": {"a.y"}, "a.y": {"a.z"}, "a.z": {"a.x"}, "a.w": {"a.x"}}
     assert _cycles(graph) == [["a.x", "a.y", "a.z"]]
+
+
+def _private_accesses(path: Path, names: set) -> list:
+    """``(line, "module._name")`` of every use in ``path`` of another package module's private name (one
+    underscore): ``alias._name`` of an imported module, or ``from module import _name``."""
+    me = _module_name(path)
+    tree = ast.parse(path.read_text())
+    aliases, out = {}, []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for a in node.names:
+                if a.name in names:
+                    aliases[a.asname or a.name] = a.name
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            for a in node.names:
+                full = f"{node.module}.{a.name}"
+                if full in names:
+                    aliases[a.asname or a.name] = full
+                elif a.name.startswith("_") and not a.name.startswith("__") and node.module in names \
+                        and node.module != me:
+                    out.append((node.lineno, f"{node.module}.{a.name}"))
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id in aliases:
+            target = aliases[node.value.id]
+            if node.attr.startswith("_") and not node.attr.startswith("__") and target != me:
+                out.append((node.lineno, f"{target}.{node.attr}"))
+    return out
+
+
+def test_no_package_module_reaches_into_another_s_private_names():
+    """What one module uses of another is that module's interface (no underscore), so it can be changed
+    knowingly: the fuzz used to reach into the MuJoCo and PyBullet adapters' private sessions and locks."""
+    names = {_module_name(p) for p in SOURCES}
+    bad = [f"{p.relative_to(ROOT)}:{line}: {what}" for p in SOURCES for line, what in _private_accesses(p, names)]
+    assert not bad, "\n".join(bad)
+
+
+def test_a_planted_private_access_is_found(tmp_path):
+    planted = ROOT / "cross_checks" / "fuzz" / "_planted_private_for_test.py"
+    planted.write_text("from cross_checks.engines import mujoco_engine as me\n\n\ndef f():\n    return me._LOCK\n")
+    try:
+        names = {_module_name(p) for p in SOURCES} | {"cross_checks.engines.mujoco_engine"}
+        assert _private_accesses(planted, names) == [(5, "cross_checks.engines.mujoco_engine._LOCK")]
+    finally:
+        planted.unlink()

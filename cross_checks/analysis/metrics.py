@@ -21,7 +21,7 @@ from reference_sim.quaternion import matrix_from_quat
 from reference_sim.state import Q, V, W, X
 
 from cross_checks.core import tolerances as tol
-from cross_checks.core.quantities import _unit_q
+from cross_checks.core.quantities import unit_q
 
 __all__ = ["energy_J", "angular_momentum_W", "linear_momentum_W", "conserved", "relative_drift",
            "drift_kind", "roundoff_floor", "drift_floor"]
@@ -38,7 +38,7 @@ def energy_J(problem, y, *, with_scale: bool = False):
     """
     y = np.asarray(y, dtype=float)
     body, fm = problem.body, problem.forces
-    q = _unit_q(y[..., Q])
+    q = unit_q(y[..., Q])
     R = matrix_from_quat(q)
     w = y[..., W]
     L = np.einsum("...ij,...j->...i", body.world_inertia(R), w)
@@ -52,7 +52,7 @@ def energy_J(problem, y, *, with_scale: bool = False):
 def angular_momentum_W(problem, y):
     """World angular momentum about the COM, ``I_W ω`` (kg m²/s), shape (..., 3)."""
     y = np.asarray(y, dtype=float)
-    R = matrix_from_quat(_unit_q(y[..., Q]))
+    R = matrix_from_quat(unit_q(y[..., Q]))
     return np.einsum("...ij,...j->...i", problem.body.world_inertia(R), y[..., W])
 
 

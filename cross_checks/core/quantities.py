@@ -29,7 +29,7 @@ COLUMN_STEM = {"position": "pos", "velocity": "vel", "orientation": "orient", "a
 UNITS = {"position": "m", "velocity": "m/s", "orientation": "rad", "angular_velocity": "rad/s"}
 
 
-def _unit_q(q):
+def unit_q(q):
     return q / np.linalg.norm(q, axis=-1, keepdims=True)
 
 
@@ -45,7 +45,7 @@ def state_errors(y, y_ref) -> dict:
         return {
             "position": np.linalg.norm(y[..., X] - y_ref[..., X], axis=-1),
             "velocity": np.linalg.norm(y[..., V] - y_ref[..., V], axis=-1),
-            "orientation": geodesic_angle(_unit_q(y_ref[..., Q]), _unit_q(y[..., Q])),
+            "orientation": geodesic_angle(unit_q(y_ref[..., Q]), unit_q(y[..., Q])),
             "angular_velocity": np.linalg.norm(y[..., W] - y_ref[..., W], axis=-1),
         }
 

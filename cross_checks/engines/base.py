@@ -133,7 +133,7 @@ def require(module, import_error, name: str, dist: str | None = None, hint: str 
 
 
 @functools.lru_cache(maxsize=64)
-def _float_forces(scenario):
+def float_forces(scenario):
     """The plain-float force evaluator of reference_sim.scalar for this scenario (built once)."""
     from reference_sim.scalar import ScalarStepper
     return ScalarStepper(scenario.problem, "course", scenario.dt_s)
@@ -160,7 +160,7 @@ def harness_force_torque(scenario, y, dt_s: float):
 def harness_force_torque_floats(scenario, y, dt_s: float) -> tuple:
     """:func:`harness_force_torque` as 6 plain floats (fx, fy, fz, tx, ty, tz): the same numbers, for an
     adapter's per-step loop, where building two small arrays per step costs more than the engine's step."""
-    fx, fy, fz, tx, ty, tz = _float_forces(scenario).force_torque(y)
+    fx, fy, fz, tx, ty, tz = float_forces(scenario).force_torque(y)
     gv, gw = decay_factors(scenario, dt_s)
     return gv * fx, gv * fy, gv * fz, gw * tx, gw * ty, gw * tz
 
@@ -175,7 +175,7 @@ def stage_force_torque(scenario, y):
 
 def stage_force_torque_floats(scenario, y) -> tuple:
     """:func:`stage_force_torque` as 6 plain floats (for the per-stage callback)."""
-    stepper = _float_forces(scenario)
+    stepper = float_forces(scenario)
     fx, fy, fz, tx, ty, tz = stepper.force_torque(y)
     kv, kw = stepper.kv, stepper.kw
     if kv:

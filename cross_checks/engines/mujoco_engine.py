@@ -81,7 +81,7 @@ def version() -> str:
     return mujoco.__version__
 
 
-def _integrator(variant):
+def integrator_of(variant):
     _require()
     if variant not in VARIANTS:
         raise ValueError(f"unknown mujoco variant {variant!r}; variants: {', '.join(VARIANTS)}")
@@ -94,7 +94,7 @@ def build_model(scenario, variant: str, dt_s: float):
     Raises EngineError with MuJoCo's message when the compiler rejects the model (e.g. principal
     moments violating MuJoCo's own ``A + B >= C`` check).
     """
-    integrator = _integrator(variant)
+    integrator = integrator_of(variant)
     body = scenario.problem.body
     forces = scenario.problem.forces
     spec = mujoco.MjSpec()
@@ -135,7 +135,7 @@ def build_model(scenario, variant: str, dt_s: float):
 
 # --- state conversion --------------------------------------------------------------------------------
 
-def _to_qpos_qvel(y):
+def to_qpos_qvel(y):
     """Packed states (..., 13) -> qpos (..., 7), qvel (..., 6) with ω in BODY axes."""
     y = np.asarray(y, dtype=float)
     q = y[..., 6:10]
@@ -144,7 +144,7 @@ def _to_qpos_qvel(y):
     return qpos, qvel
 
 
-def _to_packed(qpos, qvel):
+def to_packed(qpos, qvel):
     """qpos (..., 7), qvel (..., 6) -> packed states (..., 13) with ω in WORLD axes."""
     q = qpos[..., 3:7]
     return np.concatenate([qpos[..., 0:3], qvel[..., 0:3], q, rotate(q, qvel[..., 3:6])], axis=-1)
@@ -189,7 +189,7 @@ def _restore_force_callbacks(prev):
     mujoco.set_mjcb_passive(prev[1])
 
 
-class _Session:
+class Session:
     """Installs the warning handler (and, when given, the control callback) for one run.
 
     MuJoCo's callbacks and warning handler are process-global: the session holds a module lock,
@@ -249,7 +249,7 @@ class _Session:
             raise EngineError(f"force evaluation inside MuJoCo's control callback failed: {exc!r}") from exc
 
 
-def _per_stage(scenario, variant) -> bool:
+def forces_per_stage(scenario, variant) -> bool:
     """RK4 with forces that change within a step (state-dependent forces or velocity decay): evaluated
     at every stage through the control callback."""
     fm = scenario.problem.forces
@@ -264,7 +264,7 @@ def _apply(xfrc, f, tau, weight):
 
 
 def _stage_force_writer(scenario, d, xfrc, weight):
-    """Control callback body for MjData ``d`` (the only one _Session passes it): forces from the (stage)
+    """Control callback body for MjData ``d`` (the only one Session passes it): forces from the (stage)
     state in its qpos/qvel into xfrc_applied, as :func:`_apply` writes them, in plain floats (it runs at
     every RK4 stage)."""
     w0, w1, w2 = (float(c) for c in weight)
@@ -369,8 +369,8 @@ def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
     m, d, xfrc, weight = _model_and_data(scenario, variant, dt_s)
     forces = scenario.problem.forces
     y0 = scenario.problem.initial_packed()
-    d.qpos[:], d.qvel[:] = _to_qpos_qvel(y0)
-    per_stage = _per_stage(scenario, variant)
+    d.qpos[:], d.qvel[:] = to_qpos_qvel(y0)
+    per_stage = forces_per_stage(scenario, variant)
     decay = forces.has_decay and not per_stage       # pre-step decay (Euler-type integrators)
     per_step = forces.state_dependent and not per_stage
     if not forces.state_dependent:
@@ -395,10 +395,10 @@ def _simulate_loop(scenario, m, d, dt_s, n_steps, control, per_step, decay, xfrc
     qpos_out[0], qvel_out[0] = qpos, qvel
     y = np.empty((n_steps + 1, 13))
     with np.errstate(all="ignore"):
-        y[0:1] = _to_packed(qpos_out[0:1], qvel_out[0:1])
+        y[0:1] = to_packed(qpos_out[0:1], qvel_out[0:1])
     step = mujoco.mj_step
     reads = per_step or decay
-    with _Session(d, control) as session, np.errstate(all="ignore"):
+    with Session(d, control) as session, np.errstate(all="ignore"):
         for start in range(1, n_steps + 1, _CHUNK):
             stop = min(start + _CHUNK, n_steps + 1)
             for n in range(start, stop):
@@ -414,7 +414,7 @@ def _simulate_loop(scenario, m, d, dt_s, n_steps, control, per_step, decay, xfrc
                     session.raise_callback_error()
                 qpos_out[n] = qpos
                 qvel_out[n] = qvel
-            y[start:stop] = _to_packed(qpos_out[start:stop], qvel_out[start:stop])   # row by row: each chunk once
+            y[start:stop] = to_packed(qpos_out[start:stop], qvel_out[start:stop])   # row by row: each chunk once
             bad = _divergence(y[start:stop], start, (start, stop - 1), session, dt_s)
             if bad is not None:
                 n_bad, what = bad
@@ -432,11 +432,11 @@ def _simulate_rollout(m, d, dt_s: float, n_steps: int) -> Run:
     ctrl_spec = mujoco.mjtState.mjSTATE_XFRC_APPLIED
     control = np.empty((1, 1, mujoco.mj_stateSize(m, ctrl_spec)))
     mujoco.mj_getState(m, d, control[0, 0], ctrl_spec)
-    with _Session(d) as session, np.errstate(all="ignore"):
+    with Session(d) as session, np.errstate(all="ignore"):
         states, _ = rollout.rollout(m, d, state0[None], control, control_spec=ctrl_spec, nstep=n_steps)
     qpos = np.concatenate([state0[None, 1:8], states[0, :, 1:8]])
     qvel = np.concatenate([state0[None, 8:14], states[0, :, 8:14]])
-    y = _to_packed(qpos, qvel)
+    y = to_packed(qpos, qvel)
     bad = _divergence(y, 0, (1, n_steps), session, dt_s)
     if bad is not None:
         n_bad, what = bad
@@ -450,14 +450,14 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     shape = np.shape(y_start)
     y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
     m, d, xfrc, weight = _model_and_data(scenario, variant, dt_s)
-    per_stage = _per_stage(scenario, variant)
+    per_stage = forces_per_stage(scenario, variant)
     control = _stage_force_writer(scenario, d, xfrc, weight) if per_stage else None
     y_dec = y_start if per_stage else apply_decay_prestep(scenario, y_start, dt_s)
-    qpos_in, qvel_in = _to_qpos_qvel(y_dec)
+    qpos_in, qvel_in = to_qpos_qvel(y_dec)
     qpos_out = np.empty((len(y_start), 7))
     qvel_out = np.empty((len(y_start), 6))
     qpos, qvel, step = d.qpos, d.qvel, mujoco.mj_step   # views of d's arrays, bound once
-    with _Session(d, control) as session, np.errstate(all="ignore"):
+    with Session(d, control) as session, np.errstate(all="ignore"):
         for i in range(len(y_start)):
             if not per_stage:
                 _apply(xfrc, *harness_force_torque(scenario, y_start[i], dt_s), weight)
@@ -470,7 +470,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
             qvel_out[i] = qvel
             session.warnings.clear()
     with np.errstate(all="ignore"):
-        return _to_packed(qpos_out, qvel_out).reshape(shape)
+        return to_packed(qpos_out, qvel_out).reshape(shape)
 
 
 class MujocoAdapter(EngineAdapter):

@@ -66,7 +66,7 @@ DYNAMICS_SETTINGS = {"linearDamping": 0.0, "angularDamping": 0.0, "maxJointVeloc
 #: chunk).
 _CHUNK = 1024
 
-_LOCK = threading.RLock()
+LOCK = threading.RLock()
 _client: int | None = None
 _client_pid: int | None = None
 
@@ -110,7 +110,7 @@ def _xyzw(q):
     return [float(q[1]), float(q[2]), float(q[3]), float(q[0])]
 
 
-class _Body:
+class BulletBody:
     """One scenario body in the (reset) PyBullet world, with the boundary conversions."""
 
     def __init__(self, scenario, variant: str, dt_s: float, y0, client: int | None = None):
@@ -207,15 +207,15 @@ class _Body:
 def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
     """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded."""
     y0 = scenario.problem.initial_packed()
-    with _LOCK, np.errstate(all="ignore"):
-        B = _Body(scenario, variant, dt_s, y0)
+    with LOCK, np.errstate(all="ignore"):
+        B = BulletBody(scenario, variant, dt_s, y0)
         return free_run(B, scenario, y0, dt_s, n_steps)
 
 
 def free_run(B, scenario, y0, dt_s: float, n_steps: int) -> Run:
-    """The free run of body ``B`` (a fresh ``_Body`` of ``scenario``, or one kept from a run of the same
+    """The free run of body ``B`` (a fresh ``BulletBody`` of ``scenario``, or one kept from a run of the same
     scenario and variant with its step set to ``dt_s``) from ``y0``: put at ``y0``, then stepped
-    ``n_steps`` times with the harness's forces. The caller holds ``_LOCK``."""
+    ``n_steps`` times with the harness's forces. The caller holds ``LOCK``."""
     forces = scenario.problem.forces
     B.set_state(y0)
     raw = np.empty((n_steps + 1, 13))
@@ -313,15 +313,15 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
     if len(y_start) == 0:
         return np.empty_like(y_start).reshape(shape)
-    with _LOCK, np.errstate(all="ignore"):
-        B = _Body(scenario, variant, dt_s, y_start[0])
+    with LOCK, np.errstate(all="ignore"):
+        B = BulletBody(scenario, variant, dt_s, y_start[0])
         return one_steps(B, scenario, dt_s, y_start).reshape(shape)
 
 
 def one_steps(B, scenario, dt_s: float, y_start) -> np.ndarray:
     """One step of ``dt_s`` of body ``B`` (built as for :func:`free_run`) from each row of ``y_start``
     (T, 13): the forces from the row, the pre-step decay, the state reset per row. The caller holds
-    ``_LOCK``."""
+    ``LOCK``."""
     y_dec = apply_decay_prestep(scenario, y_start, dt_s)
     harness = harness_fn(scenario, dt_s)
     wx, wy, wz = B.weight.tolist()

@@ -18,7 +18,7 @@ def harness_fn(scenario, dt_s: float):
     """``y -> base.harness_force_torque_floats(scenario, y, dt_s)`` (6 floats: world force at the COM, N,
     and world torque, N m, scaled by the pre-step decay factors), with the float force evaluator and the
     factors looked up once instead of every step. ``y``: the packed state (13 floats, a list preferred)."""
-    ft = base._float_forces(scenario).force_torque
+    ft = base.float_forces(scenario).force_torque
     gv, gw = (float(g) for g in base.decay_factors(scenario, dt_s))
 
     def harness(y):

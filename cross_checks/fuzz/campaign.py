@@ -89,7 +89,7 @@ def _cache_path(cache_root, key):
     return Path(cache_root) / "fuzz" / f"{hashlib.sha256(key.encode()).hexdigest()}.npz"
 
 
-def _compute_batch(seed, batch, variants) -> dict:
+def compute_batch(seed, batch, variants) -> dict:
     n0 = N0_CYCLE[batch % len(N0_CYCLE)]
     draws = [generate.draw(seed, batch * BATCH + k) for k in range(BATCH)]
     from threadpoolctl import threadpool_limits
@@ -130,7 +130,7 @@ def run_batch(item) -> dict:
                 res["cached"] = True
                 return res
     try:
-        res = _compute_batch(seed, batch, variants)
+        res = compute_batch(seed, batch, variants)
     except (KeyboardInterrupt, SystemExit):
         raise
     except Exception as exc:  # noqa: BLE001 - one batch rbcheck could not judge never stops the campaign

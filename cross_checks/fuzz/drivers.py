@@ -162,7 +162,7 @@ def _reference_ladder(var, scenarios, h0s, n0):
 
 # --- MuJoCo: rollout over one model per (case, rung) ---------------------------------------------------
 
-#: The adapter's _Session records the time of a warning from its MjData; rollouts have many, so a
+#: The adapter's Session records the time of a warning from its MjData; rollouts have many, so a
 #: warning's time is not kept (a run that warned is re-run through the adapter, which keeps it).
 _NO_DATA = SimpleNamespace(time=math.nan)
 
@@ -200,7 +200,7 @@ def _model(sc, var, h):
 def _set(model, var, h):
     """``model`` set to ``var``'s integrator and step ``h`` (in place)."""
     from cross_checks.engines import mujoco_engine as me
-    model.opt.integrator = me._integrator(var)
+    model.opt.integrator = me.integrator_of(var)
     model.opt.timestep = float(h)
     return model
 
@@ -236,7 +236,7 @@ def clear_cache() -> None:
 
 def _mujoco_state(me, y):
     """Packed states (M, 13) -> MuJoCo full-physics states (M, 14): [time 0, qpos, qvel (ω in BODY axes)]."""
-    qpos, qvel = me._to_qpos_qvel(y)
+    qpos, qvel = me.to_qpos_qvel(y)
     return np.concatenate([np.zeros((len(y), 1)), qpos, qvel], axis=1)
 
 
@@ -367,11 +367,11 @@ def _mujoco_group(var, scenarios, hs, ns, threads):
         harness = _Harness(sub, [hs[j] for j in grp])
         xfrc = harness.xfrc(columns(y0))
         per_step = np.array([sc.problem.forces.state_dependent for sc in sub])
-        with me._Session(_NO_DATA) as session, np.errstate(all="ignore"):
+        with me.Session(_NO_DATA) as session, np.errstate(all="ignore"):
             qpos, qvel = _rollout_free([models[j] for j in grp], _mujoco_state(me, y0), xfrc, harness, per_step,
                                        n_max, threads, session)
             warned = warned or bool(session.warnings)
-        Y[:, grp] = me._to_packed(qpos, qvel)
+        Y[:, grp] = me.to_packed(qpos, qvel)
     return Y, built, warned
 
 
@@ -383,8 +383,8 @@ def _mujoco_ladder(var, scenarios, h0s, n0, threads):
         h = np.asarray(h0s) / 2 ** r
         n = n0 * 2 ** r
         runs = _empty_runs(h, n)
-        batched = [i for i in range(B) if not me._per_stage(scenarios[i], var)]
-        staged = [i for i in range(B) if me._per_stage(scenarios[i], var)]
+        batched = [i for i in range(B) if not me.forces_per_stage(scenarios[i], var)]
+        staged = [i for i in range(B) if me.forces_per_stage(scenarios[i], var)]
         if batched:
             Y, built, warned = _mujoco_group(var, [scenarios[i] for i in batched], [h[i] for i in batched],
                                              [n] * len(batched), threads)
@@ -482,10 +482,10 @@ def _mujoco_one_step_group(me, sub, mods, hs, y_start, threads):
     xfrc = harness.xfrc(columns(y_start))
     y_dec = np.array([apply_decay_prestep(sc, y, h) for sc, y, h in zip(sub, y_start, hs)])
     datas = [mujoco.MjData(mods[0]) for _ in range(max(1, threads))]
-    with me._Session(_NO_DATA), np.errstate(all="ignore"):
+    with me.Session(_NO_DATA), np.errstate(all="ignore"):
         res, _ = rollout.rollout(mods, datas, _mujoco_state(me, y_dec), xfrc[:, None, :],
                                  control_spec=mujoco.mjtState.mjSTATE_XFRC_APPLIED, nstep=1)
-    return me._to_packed(res[:, 0, 1:8], res[:, 0, 8:14])
+    return me.to_packed(res[:, 0, 1:8], res[:, 0, 8:14])
 
 
 def one_step(variant: str, scenarios, hs, y_start, *, threads: int = 1):
@@ -505,8 +505,8 @@ def one_step(variant: str, scenarios, hs, y_start, *, threads: int = 1):
     rest = list(range(len(scenarios)))
     if engine == "mujoco":
         from cross_checks.engines import mujoco_engine as me
-        plain = [j for j in rest if not me._per_stage(scenarios[j], var)]
-        rest = [j for j in rest if me._per_stage(scenarios[j], var)]
+        plain = [j for j in rest if not me.forces_per_stage(scenarios[j], var)]
+        rest = [j for j in rest if me.forces_per_stage(scenarios[j], var)]
         if plain:
             out[plain] = _mujoco_one_step(var, [scenarios[j] for j in plain], hs[plain], y_start[plain], threads)
     adapter = get_adapter(engine)

@@ -103,7 +103,7 @@ def pays_lever_roundoff(variant: str) -> bool:
     return not variant.startswith("reference:")
 
 
-def _lever_floor(ctx, q, h, t, n, amp=1.0, variant: str = "") -> float:
+def lever_floor(ctx, q, h, t, n, amp=1.0, variant: str = "") -> float:
     """The lever-arm round-off (``lever_roundoff``) in quantity ``q`` after ``n`` steps of ``h`` (t = n h),
     for a ``variant`` that pays it (:func:`pays_lever_roundoff`)."""
     if not pays_lever_roundoff(variant):
@@ -177,7 +177,7 @@ def free_running_order(ctx: Context, variant: str, i: int, ladder, errors=None) 
             errs[q].append(float(np.max(v)) if runs.status[i] == "ok" and np.all(np.isfinite(v)) else math.nan)
             floors[q].append(M.roundoff_floor(ctx.scales[q], n, reference_error=ctx.ref_err[q],
                                               amplification=ctx.amp[q], quantity=q)
-                             + _lever_floor(ctx, q, float(runs.h_s[i]), float(runs.h_s[i]) * n, n, ctx.amp[q], variant))
+                             + lever_floor(ctx, q, float(runs.h_s[i]), float(runs.h_s[i]) * n, n, ctx.amp[q], variant))
     for q in QUANTITIES:
         exp = expectation(sc, variant, q, "free_running", physics=ctx.physics, measure_physics=False)
         rec, claimed = _fit_record(ctx, variant, q, dts, errs[q], floors[q], statuses, exp, "free_running_order")
@@ -196,7 +196,7 @@ def one_step_order(ctx: Context, variant: str, i: int, defects) -> tuple:
     dts = [float(h) for h in ctx.step_h]
     for q in QUANTITIES:
         floors = [M.roundoff_floor(ctx.scales[q], 1, reference_error=float(ctx.step_err[q][k]), quantity=q)
-                  + _lever_floor(ctx, q, dts[k], dts[k], 1, variant=variant) for k in range(len(dts))]
+                  + lever_floor(ctx, q, dts[k], dts[k], 1, variant=variant) for k in range(len(dts))]
         errs = [float(v) for v in defects[q]]
         statuses = ["ok" if np.isfinite(v) else "failed" for v in errs]
         exp = expectation(ctx.scenario, variant, q, "one_step", physics=ctx.physics, measure_physics=False)

@@ -7,11 +7,11 @@ removes the previous body and creates its own with the adapter's settings (gravi
 ``numSubSteps = 0``, ``createMultiBody``, ``changeDynamics(**DYNAMICS_SETTINGS)``) — or, when the previous
 run was of the same case and variant (the rungs of a ladder, the one-step rungs), keeps that body and sets
 the step and gravity again (a body costs ~1 ms to create, more than a short run). The runs themselves are
-the adapter's own code on that body (``pybullet_engine.free_run`` and ``one_steps``: its ``_Body``
+the adapter's own code on that body (``pybullet_engine.free_run`` and ``one_steps``: its ``BulletBody``
 conversions, ``apply``, ``decay_factors``, the harness), so they are bit-identical to the adapter's (tested,
 every force kind, both variants); a run that blows up or that PyBullet rejects is re-run through the
 adapter by the caller, so its "diverged at t = …" and its message are the adapter's. The body is built by
-the adapter's own ``_Body.__init__`` (in this world, with no reset): a bug planted there reaches these runs
+the adapter's own ``BulletBody.__init__`` (in this world, with no reset): a bug planted there reaches these runs
 too.
 """
 from __future__ import annotations
@@ -43,14 +43,14 @@ def _world() -> int:
 
 
 def _body(scenario, variant: str, dt_s: float, y0):
-    """A ``pybullet_engine._Body`` of the scenario in this process's world, built by the adapter's own
-    ``_Body.__init__``. The world holds one body: the previous run's when it was built for the same
+    """A ``pybullet_engine.BulletBody`` of the scenario in this process's world, built by the adapter's own
+    ``BulletBody.__init__``. The world holds one body: the previous run's when it was built for the same
     scenario and variant (by the same ``__init__``) — its step set to ``dt_s`` and the adapter's gravity
     set again; the caller puts it at its start state, as the adapter does with a new body (bit-identical,
     tested: consecutive runs of one case at other steps) — or else a new one, the previous body removed."""
     from cross_checks.engines import pybullet_engine as pe
     c = _world()
-    key = (id(scenario), variant, pe._Body.__init__)
+    key = (id(scenario), variant, pe.BulletBody.__init__)
     try:
         if _WORLD["b"] is not None and _WORLD["key"] == key and _WORLD["scenario"] is scenario:
             B = _WORLD["body"]
@@ -60,7 +60,7 @@ def _body(scenario, variant: str, dt_s: float, y0):
         if _WORLD["b"] is not None:
             pe.p.removeBody(_WORLD["b"], physicsClientId=c)
             _WORLD.update(b=None, body=None, key=None, scenario=None)
-        B = pe._Body(scenario, variant, dt_s, y0, client=c)
+        B = pe.BulletBody(scenario, variant, dt_s, y0, client=c)
     except (pe.EngineError, pe.p.error) as exc:
         raise Rejected(str(exc)) from None
     _WORLD.update(b=B.b, body=B, key=key, scenario=scenario)
@@ -84,7 +84,7 @@ def simulate(scenario, variant: str, dt_s: float, n_steps: int):
     when PyBullet rejects the body."""
     from cross_checks.engines import pybullet_engine as pe
     y0 = scenario.problem.initial_packed()
-    with pe._LOCK, np.errstate(all="ignore"):
+    with pe.LOCK, np.errstate(all="ignore"):
         run = pe.free_run(_body(scenario, variant, dt_s, y0), scenario, y0, dt_s, n_steps)
     return None if run.diverged_at_s is not None else run.y
 
@@ -93,5 +93,5 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     """``pybullet_engine.one_step``: one step of ``dt_s`` from each row of ``y_start`` (T, 13)."""
     from cross_checks.engines import pybullet_engine as pe
     y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
-    with pe._LOCK, np.errstate(all="ignore"):
+    with pe.LOCK, np.errstate(all="ignore"):
         return pe.one_steps(_body(scenario, variant, dt_s, y_start[0]), scenario, dt_s, y_start)

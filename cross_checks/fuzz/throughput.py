@@ -18,15 +18,15 @@ __all__ = ["fuzz_throughput", "format_fuzz"]
 
 def fuzz_throughput(quick: bool = False) -> dict:
     from cross_checks.engines import available_variants
-    from cross_checks.fuzz.campaign import BATCH, N0_CYCLE, _compute_batch
+    from cross_checks.fuzz.campaign import BATCH, N0_CYCLE, compute_batch
     variants = [v for v in available_variants() if v.split(":")[0] in ("reference", "mujoco", "pybullet")]
     batches = [1] if quick else list(range(len(N0_CYCLE)))
     seconds = {v: 0.0 for v in variants}
     judged, wall, cpu = 0, 0.0, 0.0
-    _compute_batch(0, 0, variants[:1])   # imports, engine connections: once per worker, not per batch
+    compute_batch(0, 0, variants[:1])   # imports, engine connections: once per worker, not per batch
     for b in batches:
         t0, c0 = time.perf_counter(), time.process_time()
-        r = _compute_batch(0, b, variants)
+        r = compute_batch(0, b, variants)
         wall += time.perf_counter() - t0
         cpu += time.process_time() - c0
         judged += sum(1 for c in r["cases"] if "skipped" not in c["numbers"])

@@ -67,16 +67,16 @@ def test_state_round_trip_and_quaternion_order():
     rng = np.random.default_rng(1)
     y = rng.normal(size=(20, 13))
     y[:, 6:10] /= np.linalg.norm(y[:, 6:10], axis=1, keepdims=True)
-    qpos, qvel = me._to_qpos_qvel(y)
+    qpos, qvel = me.to_qpos_qvel(y)
     np.testing.assert_array_equal(qpos[:, 3:7], y[:, 6:10])          # (w, x, y, z) in both
-    np.testing.assert_allclose(me._to_packed(qpos, qvel), y, atol=tol.ADAPTER_ROUND_TRIP * 10)
+    np.testing.assert_allclose(me.to_packed(qpos, qvel), y, atol=tol.ADAPTER_ROUND_TRIP * 10)
     for i in range(3):
-        np.testing.assert_allclose(me._packed1(qpos[i], qvel[i]), me._to_packed(qpos[i], qvel[i]), atol=tol.ADAPTER_ROUND_TRIP)
+        np.testing.assert_allclose(me._packed1(qpos[i], qvel[i]), me.to_packed(qpos[i], qvel[i]), atol=tol.ADAPTER_ROUND_TRIP)
     # MuJoCo itself reads qpos[3:7] as (w, x, y, z): its body pose after mj_forward is that rotation
     sc = _scenario(initial=YAW90)
     m = me.build_model(sc, "euler", 0.01)
     d = mujoco.MjData(m)
-    d.qpos[:], d.qvel[:] = me._to_qpos_qvel(sc.problem.initial_packed())
+    d.qpos[:], d.qvel[:] = me.to_qpos_qvel(sc.problem.initial_packed())
     mujoco.mj_forward(m, d)
     np.testing.assert_allclose(d.xmat[1].reshape(3, 3), [[0, -1, 0], [1, 0, 0], [0, 0, 1]], atol=tol.ADAPTER_ROUND_TRIP)
 
@@ -87,7 +87,7 @@ def test_yawed_body_spinning_about_body_x_reads_world_y():
     sc = _scenario(initial=YAW90 + "\nangular_velocity_body = [1.0, 0.0, 0.0]")
     y0 = sc.problem.initial_packed()
     np.testing.assert_allclose(y0[10:13], [0.0, 1.0, 0.0], atol=tol.ADAPTER_ROUND_TRIP)
-    _, qvel = me._to_qpos_qvel(y0)
+    _, qvel = me.to_qpos_qvel(y0)
     np.testing.assert_allclose(qvel[3:6], [1.0, 0.0, 0.0], atol=tol.ADAPTER_ROUND_TRIP)
     run = me.simulate(sc, "euler", 0.01, 100)                       # principal-axis spin: exact
     np.testing.assert_allclose(run.y[:, 10:13], np.tile([0.0, 1.0, 0.0], (101, 1)), atol=tol.ADAPTER_SPIN_100_STEPS)

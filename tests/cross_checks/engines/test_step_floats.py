@@ -54,7 +54,7 @@ pe = pytest.importorskip("cross_checks.engines.pybullet_engine")
 def _pybullet_numpy_loop(sc, variant, h, n):
     """The PyBullet run as the adapter's NumPy formulas give it, step by step."""
     y0 = sc.problem.initial_packed()
-    B = pe._Body(sc, variant, h, y0)
+    B = pe.BulletBody(sc, variant, h, y0)
     B.set_state(y0)
     gv, gw = pe.decay_factors(sc, h)
     raw = np.empty((n + 1, 13))
@@ -76,7 +76,7 @@ def _pybullet_numpy_loop(sc, variant, h, n):
 def test_pybullet_state_conversion_is_raw_to_packed_bit_for_bit():
     rng = np.random.default_rng(2)
     for sc in _cases():
-        B = pe._Body(sc, "multibody", sc.dt_s, sc.problem.initial_packed())
+        B = pe.BulletBody(sc, "multibody", sc.dt_s, sc.problem.initial_packed())
         raw = rng.standard_normal((50, 13))
         assert np.array_equal(np.array([B.packer()(r.tolist()) for r in raw]), B.raw_to_packed(raw))
 
@@ -102,19 +102,19 @@ def _mujoco_numpy_loop(sc, variant, h, n):
     d = mujoco.MjData(m)
     xfrc = d.xfrc_applied[1]
     weight = sc.problem.body.mass_kg * np.asarray(sc.problem.forces.gravity_W, dtype=float)
-    d.qpos[:], d.qvel[:] = me._to_qpos_qvel(sc.problem.initial_packed())
-    per_stage = me._per_stage(sc, variant)
+    d.qpos[:], d.qvel[:] = me.to_qpos_qvel(sc.problem.initial_packed())
+    per_stage = me.forces_per_stage(sc, variant)
     gv, gw = base.decay_factors(sc, h)
 
     def control(_m, dd):
-        me._apply(xfrc, *base.stage_force_torque(sc, me._to_packed(dd.qpos.copy(), dd.qvel.copy())), weight)
+        me._apply(xfrc, *base.stage_force_torque(sc, me.to_packed(dd.qpos.copy(), dd.qvel.copy())), weight)
     qpos, qvel = [d.qpos.copy()], [d.qvel.copy()]
     prev = me._clear_force_callbacks()
     mujoco.set_mjcb_control(control if per_stage else None)
     try:
         for _ in range(n):
             if not per_stage:
-                me._apply(xfrc, *base.harness_force_torque(sc, me._to_packed(d.qpos, d.qvel), h), weight)
+                me._apply(xfrc, *base.harness_force_torque(sc, me.to_packed(d.qpos, d.qvel), h), weight)
                 d.qvel[0:3] *= gv
                 d.qvel[3:6] *= gw
             mujoco.mj_step(m, d)
@@ -122,7 +122,7 @@ def _mujoco_numpy_loop(sc, variant, h, n):
             qvel.append(d.qvel.copy())
     finally:
         me._restore_force_callbacks(prev)
-    return me._to_packed(np.array(qpos), np.array(qvel))
+    return me.to_packed(np.array(qpos), np.array(qvel))
 
 
 @pytest.mark.parametrize("variant", sorted(me.VARIANTS))

@@ -170,13 +170,13 @@ def test_a_counterexample_file_is_exact_toml(tmp_path):
 
 @pytest.mark.slow
 def test_a_batch_is_the_same_to_the_last_bit_whatever_the_blas_thread_count(tmp_path):
-    # A batch runs with one BLAS thread (campaign._compute_batch), so the process's own OpenBLAS setting, which
+    # A batch runs with one BLAS thread (campaign.compute_batch), so the process's own OpenBLAS setting, which
     # moved the last bits of the stacked DOP853 solves before, changes nothing: the cache key may ignore it.
     import os
     import subprocess
     import sys
-    code = ("import json, sys; from cross_checks.fuzz.campaign import _compute_batch; "
-            "r = _compute_batch(2026, 2, ['reference:rk4', 'reference:course', 'mujoco:euler']); "
+    code = ("import json, sys; from cross_checks.fuzz.campaign import compute_batch; "
+            "r = compute_batch(2026, 2, ['reference:rk4', 'reference:course', 'mujoco:euler']); "
             "r.pop('seconds'); json.dump(r, sys.stdout, sort_keys=True)")
     outs = []
     for threads in ("1", "2"):
