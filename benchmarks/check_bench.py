@@ -29,10 +29,10 @@ def _best(fn, repeats=3):
 
 
 def measure(scenario_name: str, dt: float) -> dict:
-    from cross_checks.gates.check import check_trajectory
-    from cross_checks.engines import run_variant
-    from cross_checks.scenario import load_scenario
     from cross_checks.core.trajectory import Trajectory
+    from cross_checks.engines import run_variant
+    from cross_checks.gates.check import check_trajectory
+    from cross_checks.scenario import load_scenario
 
     sc = load_scenario(scenario_name)
     mujoco_s, traj = _best(lambda: run_variant(sc, "mujoco:euler", dt))

@@ -60,8 +60,8 @@ def _median_time(fn, repeats: int) -> float:
 def measure(steps_list=(100, 1000, 10000, 40000), repeats: int = 15) -> dict:
     from cross_checks.engines import get_adapter
     from cross_checks.engines.external import load_engine_file
-    from cross_checks.scenario.resolved import resolved_json
     from cross_checks.scenario import load_scenario
+    from cross_checks.scenario.resolved import resolved_json
 
     sc = load_scenario("tennis_racket")  # torque-free tumble: the engine's own work is the least
     mujoco = get_adapter("mujoco")
@@ -76,9 +76,9 @@ def measure(steps_list=(100, 1000, 10000, 40000), repeats: int = 15) -> dict:
             (tmp / "s.json").write_text(resolved_json(sc, dt))
             argv = engine.argv("euler", {"scenario_json": str(tmp / "s.json"), "out_csv": str(tmp / "o.csv"),
                                          "dt": repr(dt), "steps": str(n), "duration": repr(sc.duration_s)})
-            direct = _median_time(lambda: subprocess.run(argv, cwd=engine.folder, check=True), repeats)
-            through = _median_time(lambda: engine.simulate(sc, "euler", dt, n), repeats)
-            mj = _median_time(lambda: mujoco.simulate(sc, "euler", dt, n), repeats)
+            direct = _median_time(lambda argv=argv: subprocess.run(argv, cwd=engine.folder, check=True), repeats)
+            through = _median_time(lambda dt=dt, n=n: engine.simulate(sc, "euler", dt, n), repeats)
+            mj = _median_time(lambda dt=dt, n=n: mujoco.simulate(sc, "euler", dt, n), repeats)
             out["rows"].append({"steps": n, "direct_s": direct, "rbcheck_s": through, "overhead_s": through - direct,
                                 "mujoco_euler_s": mj, "overhead_over_mujoco": (through - direct) / mj,
                                 "rbcheck_over_direct": through / direct})

@@ -218,8 +218,9 @@ def drake_single_us(n_steps, repeats):
 
 
 def pybullet_bodies(n_bodies, n_steps, repeats):
-    from cross_checks.engines import pybullet_engine  # noqa: F401  (silences pybullet's banner)
     import pybullet as p
+
+    from cross_checks.engines import pybullet_engine  # noqa: F401  (silences pybullet's banner)
     cid = p.connect(p.DIRECT)
     try:
         p.setGravity(*G, physicsClientId=cid)
@@ -317,6 +318,7 @@ def run_bench(quick: bool = False, repeats: int = 3, render=None, sweep: bool = 
     a smaller sweep. ``render`` draws the sweep's report (timed as its own stage); ``sweep=False`` skips
     the sweep."""
     import mujoco
+
     from cross_checks.engines import pybullet_engine  # imports pybullet with its stderr banner silenced
     # One N for every row: MuJoCo's multi-body model is at its best around N = 1000 (10,000 free bodies
     # in one model take 35 s to compile and step slower per body), so every engine steps N = 1000

@@ -5,7 +5,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from reference_sim.integrators import rhs
-from reference_sim.state import Q, Problem
+from reference_sim.state import Problem, Q
 
 __all__ = ["ground_truth", "GROUND_TRUTH_RTOL", "GROUND_TRUTH_ATOL"]
 

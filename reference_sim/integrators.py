@@ -34,14 +34,16 @@ each converges at its order to the continuously damped motion.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
 from reference_sim.quaternion import matrix_from_quat, quat_exp, quat_mul
-from reference_sim.vec import cross3 as _cross, mat_t_vec3 as _mtv, matvec3 as _mv
-from reference_sim.state import Q, STATE_SIZE, V, W, X, Problem
+from reference_sim.state import STATE_SIZE, Problem, Q, V, W, X
+from reference_sim.vec import cross3 as _cross
+from reference_sim.vec import mat_t_vec3 as _mtv
+from reference_sim.vec import matvec3 as _mv
 
 __all__ = ["VARIANTS", "Scheme", "get_step", "rhs", "IMPLICIT_TOL", "ImplicitSolveError"]
 

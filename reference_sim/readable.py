@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from reference_sim.forces import ForceModel
 from reference_sim.body import RigidBody
+from reference_sim.forces import ForceModel
 from reference_sim.quaternion import matrix_from_quat, quat_exp, quat_mul
 from reference_sim.state import Problem
 

@@ -132,7 +132,12 @@ def _draw_all(res, names, plot_dir: Path, jobs, progress) -> dict:
     """Draw every figure (in ``jobs`` processes); returns ``{scenario: [(kind, file or None, note)]}``
     in the order of plots.KINDS."""
     from reports.canvas import release
-    from reports.plots import KINDS, figure_tasks, layout_group, relative_cost   # here: forked workers inherit matplotlib
+    from reports.plots import (  # here: forked workers inherit matplotlib
+        KINDS,
+        figure_tasks,
+        layout_group,
+        relative_cost,
+    )
     tasks = [(sc, kind, str(plot_dir)) for sc in names for _, kind in figure_tasks(res, sc)]
     # the costliest figures first, so that no process is left drawing a large one while the other idles
     tasks.sort(key=lambda t: -relative_cost(res, t[0], t[1]))

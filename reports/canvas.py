@@ -25,7 +25,6 @@ creating axes and their tick objects, ~20 % in matplotlib's Legend (offset boxes
 """
 from __future__ import annotations
 
-
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg, RendererAgg, get_hinting_flag
 from matplotlib.collections import LineCollection

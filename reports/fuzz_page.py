@@ -63,8 +63,8 @@ def _context(s: dict) -> dict:
 
 def render_fuzz(directory) -> Path:
     """Write ``DIR/index.html`` from ``DIR/fuzz.json``; ResultsError when that is not a fuzz summary."""
-    from reports.html import environment
     from cross_checks.core.files import atomic_write_text
+    from reports.html import environment
     d = Path(directory)
     html = environment().get_template("fuzz.html").render(**_context(_load(d)))
     out = d / "index.html"

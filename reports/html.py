@@ -13,8 +13,8 @@ from jinja2 import Environment, PackageLoader, StrictUndefined, TemplateNotFound
 from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, UNITS
 from reports.data import LABELS
 from reports.findings import findings, fmt, fmt_dt
-from reports.install import incomplete
 from reports.glance import ACCURACY_TIERS, GLYPHS, cell, families, glyph, order_text, verdict_box
+from reports.install import incomplete
 
 __all__ = ["environment", "render_pages", "page_name", "rows_extracts"]
 

@@ -32,8 +32,7 @@ from matplotlib.collections import LineCollection  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 
 from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, UNITS  # noqa: E402
-from reports.canvas import (legend_at, legend_below, legend_height_in, pad_limits, panels,  # noqa: E402
-                            save_png)
+from reports.canvas import legend_at, legend_below, legend_height_in, pad_limits, panels, save_png  # noqa: E402
 from reports.data import LABELS  # noqa: E402
 from reports.glance import families, order_text  # noqa: E402
 
@@ -53,7 +52,7 @@ def variant_styles(variants) -> dict:
     """A colour and marker per variant, distinct within its family (families are drawn apart)."""
     cmap = matplotlib.colormaps["tab10"]
     out = {}
-    for fam, vs in families(variants).items():
+    for vs in families(variants).values():
         for i, v in enumerate(vs):
             out[v] = {"color": cmap(i % 10), "ls": "-" if i < 10 else "--", "marker": _MARKERS[i % len(_MARKERS)]}
     return out

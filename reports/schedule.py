@@ -75,7 +75,7 @@ def draw_in_processes(draw, lists, done, ctx=None, worker_init=None) -> None:
             except queue.Empty:
                 for f in futures:
                     if f.done() and f.exception() is not None:
-                        raise f.exception()
+                        raise f.exception() from None   # the drawing's own error, not the empty queue
                 continue
             i += 1
             done(i, item)

@@ -9,8 +9,8 @@ physics exercises the bug (used by the quick default-run subset; the slow test s
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 

@@ -10,12 +10,12 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from cross_checks.gates.compare import compare_dirs, to_text
-from cross_checks.engines import available_variants
 from cross_checks.analysis.expectations import EQUIVALENT_PAIRS, energy_drift_bound
+from cross_checks.core.tolerances import SAME_SCHEME_REL
+from cross_checks.engines import available_variants
+from cross_checks.gates.compare import compare_dirs, to_text
 from cross_checks.scenario import catalog_names, load_scenario
 from cross_checks.sweep import run_sweep
-from cross_checks.core.tolerances import SAME_SCHEME_REL
 from tests.helpers.sweeps import built_once, private_cache
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -13,6 +13,7 @@ import numpy as np
 
 from cross_checks.core import tolerances as tol
 
+
 def pairwise_orders(dt_s, errors) -> list:
     """``log(e_i / e_{i+1}) / log(Δt_i / Δt_{i+1})`` for consecutive ladder points (dt descending);
     ``log2(e(h) / e(h/2))`` for a halving ladder. None where an error is zero or not finite."""

@@ -26,10 +26,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from reference_sim.analytic import EQUAL_MOMENTS_REL_TOL
-
 from cross_checks.core.quantities import QUANTITIES
 from cross_checks.engines import declared_order
+from reference_sim.analytic import EQUAL_MOMENTS_REL_TOL
 
 __all__ = ["energy_drift_bound", "characteristic_rate_sq", "QUANTITIES", "VARIANT_TRAITS",
            "DEFAULT_TRAITS", "Traits", "traits", "EQUIVALENT_PAIRS", "pair_is_same_arithmetic", "Expectation",
@@ -337,8 +336,8 @@ def _drift_parts(scenario, tr: Traits, quantity: str, phys):
 
 def _pre_asymptotic_reason(scenario, variant, quantity, tr: Traits, physics) -> str:
     """The reason a first-order variant makes no claim on this ladder ("" when it does claim order 1)."""
-    from cross_checks.core import tolerances as tol
     from cross_checks.analysis.physics import amplitude_model_order, amplitude_parameter, scenario_physics
+    from cross_checks.core import tolerances as tol
     phys = physics if physics is not None else scenario_physics(scenario)
     dts = sorted(scenario.dt_ladder_s, reverse=True)
     if len(dts) < 2:

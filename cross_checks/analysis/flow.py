@@ -23,12 +23,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from cross_checks.core import tolerances as tol
+from cross_checks.core.quantities import BLOCKS, QUANTITIES
 from reference_sim.integrators import rhs
 from reference_sim.quaternion import geodesic_angle, quat_exp, quat_mul
 from reference_sim.state import Q, W
-
-from cross_checks.core import tolerances as tol
-from cross_checks.core.quantities import BLOCKS, QUANTITIES
 
 __all__ = ["flow_rhs", "rk4_flow", "exact_flow", "FlowResult", "majorant", "motion_rate", "spring_turn_rate", "quantity_distance",
            "distances", "local_allowances", "Allowances", "error_growth", "conservation_allowance"]

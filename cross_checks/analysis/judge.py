@@ -35,8 +35,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cross_checks.analysis.convergence import (ConvergenceFit, compare_with_expectation, fit_convergence, fmt_order,
-                                               measured_pre_asymptotic, order_within_floors)
+from cross_checks.analysis.convergence import (
+    ConvergenceFit,
+    compare_with_expectation,
+    fit_convergence,
+    fmt_order,
+    measured_pre_asymptotic,
+    order_within_floors,
+)
 from cross_checks.core import tolerances as tol
 
 __all__ = ["Judgement", "LocalEvidence", "judge_ladder", "judge_fit", "two_term_consistent"]

@@ -17,11 +17,10 @@ import math
 
 import numpy as np
 
-from reference_sim.quaternion import matrix_from_quat
-from reference_sim.state import Q, V, W, X
-
 from cross_checks.core import tolerances as tol
 from cross_checks.core.quantities import unit_q
+from reference_sim.quaternion import matrix_from_quat
+from reference_sim.state import Q, V, W, X
 
 __all__ = ["energy_J", "angular_momentum_W", "linear_momentum_W", "conserved", "relative_drift",
            "drift_kind", "roundoff_floor", "drift_floor"]

@@ -412,8 +412,8 @@ def cmd_list(args) -> int:
 
 
 def cmd_show(args) -> int:
-    from cross_checks.scenario.resolved import format_resolved, resolved_json, resolved_scenario
     from cross_checks.scenario import load_scenario
+    from cross_checks.scenario.resolved import format_resolved, resolved_json, resolved_scenario
 
     sc = load_scenario(args.scenario)
     dt = args.dt if args.dt is not None else sc.dt_s
@@ -507,8 +507,14 @@ def _did_you_mean(name: str) -> str:
 
 
 def cmd_run(args) -> int:
-    from cross_checks.engines import (EngineError, EngineUnavailable, UnknownVariant, default_variant, run_variant,
-                                      split_variant)
+    from cross_checks.engines import (
+        EngineError,
+        EngineUnavailable,
+        UnknownVariant,
+        default_variant,
+        run_variant,
+        split_variant,
+    )
     from cross_checks.scenario import load_scenario
 
     try:
@@ -635,11 +641,10 @@ def _time_limits(seconds) -> dict:
 
 
 def cmd_sweep(args) -> int:
+    import reports
     from cross_checks.scenario import catalog_names, load_scenario
     from cross_checks.sweep import SweepError, SweepInterrupted
     from cross_checks.sweep.results_dir import ResultsDirError, check_output_dir
-
-    import reports
     reports.check_installation()  # the report's templates, before minutes of runs
     try:
         check_output_dir(args.out)  # before any work (run_sweep checks again just before it starts)
@@ -727,9 +732,8 @@ def _sweep_outcome(summary, out, n_scenarios, n_variants, elapsed_s) -> int:
 
 def cmd_report(args) -> int:
     import reports
-    from reports import ResultsError
-
     from cross_checks.sweep.results_dir import ResultsDirError, check_writable_dir
+    from reports import ResultsError
 
     jobs = args.jobs or usable_cores()
     reports.check_installation()
@@ -758,8 +762,8 @@ def cmd_check(args) -> int:
 
 
 def cmd_compare(args) -> int:
-    from cross_checks.gates.compare import CompareInputError, compare_dirs, to_markdown, to_text
     from cross_checks.core.files import atomic_write_text
+    from cross_checks.gates.compare import CompareInputError, compare_dirs, to_markdown, to_text
 
     refuse_inputs_as_outputs([("--markdown", args.markdown, False)],
                              [("baseline directory", args.baseline, True), ("results directory", args.new, True)])
@@ -824,12 +828,11 @@ COMMANDS = {"list": cmd_list, "show": cmd_show, "run": cmd_run, "sweep": cmd_swe
 
 
 def main(argv=None) -> int:
-    from cross_checks.sweep.lifecycle import Terminated, handle_sigterm
-    from cross_checks.scenario import ScenarioError
-    from cross_checks.core.trajectory import TrajectoryError
-    from reports.install import IncompleteInstallation
-
     from cross_checks.core.progress import degrade_unencodable
+    from cross_checks.core.trajectory import TrajectoryError
+    from cross_checks.scenario import ScenarioError
+    from cross_checks.sweep.lifecycle import Terminated, handle_sigterm
+    from reports.install import IncompleteInstallation
     degrade_unencodable(sys.stdout, sys.stderr)   # Δt -> dt where the locale cannot write it
     try:
         args = build_parser().parse_args(argv)

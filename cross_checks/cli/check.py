@@ -7,12 +7,12 @@ __all__ = ["run_check"]
 
 
 def run_check(args, BadInput) -> int:
+    from cross_checks.core.files import atomic_write_text
+    from cross_checks.core.trajectory import Trajectory
     from cross_checks.gates.check import CheckError, check_trajectory
     from cross_checks.gates.check.ladder import LadderError, check_ladder
     from cross_checks.gates.check.report import format_ladder, format_report, to_json_text
     from cross_checks.scenario import load_scenario
-    from cross_checks.core.trajectory import Trajectory
-    from cross_checks.core.files import atomic_write_text
 
     sc = load_scenario(args.scenario)
     if args.dt is not None:   # a step the limits allow over the scenario's duration (1e-300 s is not one)

@@ -30,9 +30,9 @@ def _print_result(summary, out, t0) -> None:
 
 
 def run_fuzz(args, BadInput, resolve_engines, dask_client) -> int:
+    import reports.fuzz_page as page
     from cross_checks.fuzz.campaign import FuzzError, run_campaign
     from cross_checks.sweep.results_dir import ResultsDirError, check_output_dir
-    import reports.fuzz_page as page
     from reports.install import check_templates
     check_templates()  # the summary page's templates, before the campaign
     try:

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from reference_sim.state import Q, V, W, X
 from cross_checks.core.files import atomic_write_text, json_default
+from reference_sim.state import Q, V, W, X
 
 __all__ = ["Trajectory", "COLUMNS", "QUANTITY_GROUPS", "TrajectoryError", "read_columns", "sidecar_path"]
 

@@ -97,7 +97,8 @@ class EngineNotInstalled(ImportError):
 
 def installed_version(dist: str) -> str | None:
     """The installed version of distribution ``dist`` from its metadata (None when it is not installed)."""
-    from importlib.metadata import PackageNotFoundError, version as dist_version
+    from importlib.metadata import PackageNotFoundError
+    from importlib.metadata import version as dist_version
     try:
         return dist_version(dist)
     except PackageNotFoundError:

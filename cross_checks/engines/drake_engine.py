@@ -33,15 +33,14 @@ import functools
 
 import numpy as np
 
-from reference_sim.simulate import BLOWUP_LIMIT, Run
-
 from cross_checks.engines.base import EngineAdapter, EngineError, Variant, library_files, require, stage_force_torque
+from reference_sim.simulate import BLOWUP_LIMIT, Run
 
 try:  # the module imports without pydrake so the registry can report why it is unavailable
     import pydrake  # noqa: F401
+    from pydrake.math import RotationMatrix
     from pydrake.multibody.plant import MultibodyPlant
     from pydrake.multibody.tree import RotationalInertia, SpatialInertia
-    from pydrake.math import RotationMatrix
     from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
     from pydrake.systems.framework import DiagramBuilder, LeafSystem
 except ImportError as _exc:
@@ -84,7 +83,8 @@ def _require():
 
 def version() -> str:
     _require()
-    from importlib.metadata import PackageNotFoundError, version as dist_version
+    from importlib.metadata import PackageNotFoundError
+    from importlib.metadata import version as dist_version
     try:
         return dist_version("drake")
     except PackageNotFoundError:  # a pydrake built from source

@@ -56,11 +56,10 @@ from pathlib import Path
 
 import numpy as np
 
-from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
-
 from cross_checks.core import tolerances as tol
 from cross_checks.core.names import NAME_RE, unknown_key_reason
 from cross_checks.engines.base import EngineAdapter, EngineError, Variant
+from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
 
 __all__ = ["EngineFileError", "ExternalEngine", "load_engine_file", "PLACEHOLDERS", "DEFAULT_TIMEOUT_S"]
 

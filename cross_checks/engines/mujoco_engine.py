@@ -32,13 +32,21 @@ from pathlib import Path
 
 import numpy as np
 
-from reference_sim.quaternion import quat_from_matrix, rotate, quat_conj
-from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
-
-from cross_checks.engines.base import (EngineAdapter, EngineError, Variant, apply_decay_prestep, decay_factors,
-                                       harness_force_torque, library_files, optional_import, require,
-                                       stage_force_torque_floats)
+from cross_checks.engines.base import (
+    EngineAdapter,
+    EngineError,
+    Variant,
+    apply_decay_prestep,
+    decay_factors,
+    harness_force_torque,
+    library_files,
+    optional_import,
+    require,
+    stage_force_torque_floats,
+)
 from cross_checks.engines.step_floats import harness_fn
+from reference_sim.quaternion import quat_conj, quat_from_matrix, rotate
+from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
 
 mujoco, _IMPORT_ERROR = optional_import("mujoco")
 

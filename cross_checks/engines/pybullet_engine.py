@@ -37,12 +37,20 @@ from pathlib import Path
 
 import numpy as np
 
+from cross_checks.engines.base import (
+    EngineAdapter,
+    EngineError,
+    Variant,
+    apply_decay_prestep,
+    decay_factors,
+    harness_force_torque,
+    library_files,
+    optional_import,
+    require,
+)
+from cross_checks.engines.step_floats import harness_fn, quat_mul_floats
 from reference_sim.quaternion import quat_conj, quat_from_matrix, quat_mul
 from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
-
-from cross_checks.engines.base import (EngineAdapter, EngineError, Variant, apply_decay_prestep, decay_factors,
-                                       harness_force_torque, library_files, optional_import, require)
-from cross_checks.engines.step_floats import harness_fn, quat_mul_floats
 
 p, _IMPORT_ERROR = optional_import("pybullet", quiet_stderr=True)   # it prints its build time at import
 
@@ -86,7 +94,8 @@ def version() -> str:
 
 @functools.lru_cache(maxsize=1)
 def _dist_version() -> str:
-    from importlib.metadata import PackageNotFoundError, version as dist_version
+    from importlib.metadata import PackageNotFoundError
+    from importlib.metadata import version as dist_version
     try:
         return dist_version("pybullet")
     except PackageNotFoundError:  # pragma: no cover - a source build without metadata

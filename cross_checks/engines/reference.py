@@ -4,10 +4,11 @@ from __future__ import annotations
 import numpy as np
 
 import reference_sim
-from reference_sim.integrators import VARIANTS as SCHEMES, ImplicitSolveError, get_step
-from reference_sim.simulate import Run, simulate as _simulate
-
 from cross_checks.engines.base import EngineAdapter, Variant
+from reference_sim.integrators import VARIANTS as SCHEMES
+from reference_sim.integrators import ImplicitSolveError, get_step
+from reference_sim.simulate import Run
+from reference_sim.simulate import simulate as _simulate
 
 ENGINE = "reference"
 #: Declared variants: reference_sim.integrators.VARIANTS, the one registry (orders proven by its own tests).

@@ -24,14 +24,16 @@ import os
 import sys
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-from datetime import datetime, UTC
+from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
 
 from cross_checks.analysis.convergence import fmt_order
 from cross_checks.core.files import atomic_write_text
-from cross_checks.fuzz import drivers, generate, known, pipeline, properties as P, shrink as S
+from cross_checks.fuzz import drivers, generate, known, pipeline
+from cross_checks.fuzz import properties as P
+from cross_checks.fuzz import shrink as S
 
 __all__ = ["BATCH", "N0_CYCLE", "SHRINK_S", "MAX_SHRUNK", "FuzzError", "run_batch", "run_campaign",
            "SUMMARY", "FORMAT"]
@@ -150,6 +152,7 @@ def _pool(jobs, executor):
     if jobs <= 1:
         return None, False
     import multiprocessing as mp
+
     from cross_checks.sweep.lifecycle import worker_init
     from reference_sim import compiled
     compiled.warm()   # the compiled reference steps, loaded once here: the forked workers inherit them
@@ -217,7 +220,7 @@ def _tallies(results, variants) -> dict:
                 for p, (a, n) in t.items():
                     into[p][0] += a
                     into[p][1] += n
-    for v, d in per.items():
+    for d in per.values():
         d["cases_per_s"] = d["cases"] / d["seconds"] if d["seconds"] > 0 else None
     return {"per_variant": per, "pairs": pairs}
 
@@ -374,8 +377,7 @@ def run_campaign(variants, out_dir, *, budget_s: float, seed: int = 0, jobs: int
     HTML page through ``finish(staging_dir)``, inside the atomic replacement). Returns the summary. Raises
     FuzzError on an unusable DIR."""
     from cross_checks.sweep.cache import cache_dir
-    from cross_checks.sweep.results_dir import (ResultsDirError, check_output_dir, replace_dir, staging_dir,
-                                                write_marker)
+    from cross_checks.sweep.results_dir import ResultsDirError, check_output_dir, replace_dir, staging_dir, write_marker
     log = log or (lambda s: print(s, file=sys.stderr))
     try:
         out = check_output_dir(str(out_dir))

@@ -31,10 +31,9 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from reference_sim.simulate import BLOWUP_LIMIT
-
 from cross_checks.core import tolerances as tol
 from cross_checks.fuzz.kernel import CaseKernel, columns, rows, runs_compiled
+from reference_sim.simulate import BLOWUP_LIMIT
 
 __all__ = ["Runs", "RUNGS", "run_ladder", "one_step"]
 
@@ -225,6 +224,7 @@ def clear_cache() -> None:
     """Forget the batch's compiled models, initial states and shared steppers, and remove the PyBullet world's
     body (the end of a batch)."""
     import sys
+
     from cross_checks.fuzz import kernel
     _MODELS.clear()
     _INITIAL.clear()
@@ -477,6 +477,7 @@ def _mujoco_one_step_group(me, sub, mods, hs, y_start, threads):
     """One step of members sharing one model structure, each scenario at one step: (M, 13)."""
     import mujoco
     from mujoco import rollout
+
     from cross_checks.engines.base import apply_decay_prestep
     harness = _Harness(sub, hs)
     xfrc = harness.xfrc(columns(y_start))

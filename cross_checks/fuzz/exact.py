@@ -27,13 +27,12 @@ from __future__ import annotations
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from cross_checks.core import tolerances as tol
+from cross_checks.core.quantities import QUANTITIES, state_errors
 from reference_sim.ground_truth import GROUND_TRUTH_ATOL, GROUND_TRUTH_RTOL
 from reference_sim.quaternion import matrix_from_quat, quat_mul
 from reference_sim.state import Q, V, W, X
 from reference_sim.vec import cross3, mat_t_vec3, matvec3
-
-from cross_checks.core import tolerances as tol
-from cross_checks.core.quantities import QUANTITIES, state_errors
 
 __all__ = ["StackedRHS", "solve_members", "reference", "amplification", "step_flows", "ExactError"]
 

@@ -31,9 +31,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from reference_sim.quaternion import matrix_from_quat, quat_normalize
-
 from cross_checks.core import tolerances as tol
+from reference_sim.quaternion import matrix_from_quat, quat_normalize
 
 __all__ = ["CaseDraw", "draw", "to_toml", "case_rng", "SHAPES", "SPIN_KINDS"]
 

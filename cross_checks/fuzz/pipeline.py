@@ -27,7 +27,8 @@ from cross_checks.analysis.physics import ScenarioPhysics, motion_rates, separat
 from cross_checks.analysis.refinement import refined_ladder_shows_the_order, worth_refining
 from cross_checks.core import tolerances as tol
 from cross_checks.core.quantities import QUANTITIES, quantity_scales, state_errors
-from cross_checks.fuzz import drivers, exact, properties as P
+from cross_checks.fuzz import drivers, exact
+from cross_checks.fuzz import properties as P
 from cross_checks.fuzz.generate import to_toml
 
 __all__ = ["ONE_STEP_RUNGS", "ONE_STEP_STARTS", "Case", "prepare", "measure", "evaluate", "CaseOutcome",
@@ -328,7 +329,7 @@ def evaluate_specs(specs, variants, *, threads: int = 1) -> list:
             continue
         n0 = steps_of(spec)
         groups.setdefault(n0, []).append((j, Case(None, spec, sc, n0, index=j)))
-    for n0, members in groups.items():
+    for members in groups.values():
         cases = [c for _, c in members]
         contexts, one_step_members, y_end = measure(cases)
         outcomes, _ = evaluate(cases, contexts, one_step_members, y_end, variants, threads=threads)

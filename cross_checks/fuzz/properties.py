@@ -29,9 +29,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from cross_checks.analysis import metrics as M
+from cross_checks.analysis.expectations import (
+    EQUIVALENT_PAIRS,
+    expectation,
+    gyroscopic_term_matters,
+    pair_is_same_arithmetic,
+    traits,
+)
 from cross_checks.analysis.judge import judge_ladder, two_term_consistent  # noqa: F401 - the name the fuzz docs cite
-from cross_checks.analysis.expectations import (EQUIVALENT_PAIRS, expectation, gyroscopic_term_matters,
-                                                pair_is_same_arithmetic, traits)
 from cross_checks.core import tolerances as tol
 from cross_checks.core.quantities import QUANTITIES, UNITS, state_errors
 

@@ -24,10 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
-from reference_sim.quaternion import quat_from_euler_zxy, quat_from_matrix, quat_mul
-
 from cross_checks.fuzz.generate import to_toml
 from cross_checks.fuzz.pipeline import evaluate_specs, steps_of
+from reference_sim.quaternion import quat_from_euler_zxy, quat_from_matrix, quat_mul
 
 __all__ = ["signature", "candidates", "shrink", "confirm", "sweep_gate_failures", "CHUNK"]
 

@@ -27,8 +27,14 @@ from typing import NamedTuple
 from cross_checks.core.files import atomic_write_text
 from cross_checks.gates.compare import read_results_dir
 from cross_checks.sweep.jobs import RESULT_COLUMNS, TIMING_COLUMNS
-from cross_checks.sweep.results_dir import (ResultsDirError, check_writable_dir, fix_permissions, remove_stale_siblings,
-                                            replace_dir, staging_dir)
+from cross_checks.sweep.results_dir import (
+    ResultsDirError,
+    check_writable_dir,
+    fix_permissions,
+    remove_stale_siblings,
+    replace_dir,
+    staging_dir,
+)
 from cross_checks.sweep.schema import COMPACT_FORM, COMPACT_LISTS
 
 __all__ = ["BASELINE_COLUMNS", "BASELINE_FILES", "Baseline", "BaselineError", "compact_summary", "compact_summary_text",

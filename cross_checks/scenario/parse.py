@@ -15,12 +15,12 @@ from pathlib import Path
 
 import numpy as np
 
-from reference_sim.body import RigidBody, check_inertia
-from reference_sim.forces import FRAMES, PointForce, Spring, Torque, ForceModel
-from reference_sim.quaternion import quat_from_euler_zxy, rotate
-from reference_sim.state import Problem, State
 from cross_checks.core.names import NAME_RE, did_you_mean, unknown_key_reason
 from cross_checks.core.tolerances import MAX_NAME_CHARS, MIN_LADDER_RATIO
+from reference_sim.body import RigidBody, check_inertia
+from reference_sim.forces import FRAMES, ForceModel, PointForce, Spring, Torque
+from reference_sim.quaternion import quat_from_euler_zxy, rotate
+from reference_sim.state import Problem, State
 
 __all__ = ["Scenario", "ScenarioError", "load_scenario", "parse_scenario", "catalog_names", "catalog_path",
            "REFERENCE_KINDS"]

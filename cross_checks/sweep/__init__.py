@@ -3,8 +3,18 @@ and jobs here, in a pool or on an executor (``execute``), one job and its measur
 assembling rows, records and summary (``assemble``, ``provenance``); the verified cache (``cache``) and
 what its keys hold (``fingerprint``); workers, signals and time limits (``lifecycle``); the results
 directory and its marker (``results_dir``, ``schema``)."""
-from cross_checks.sweep.run import (LOCAL_SAMPLES, MAX_SERIES_POINTS, RESULT_COLUMNS, SCHEMA_VERSION, Job,
-                                    SweepError, SweepInterrupted, cache_dir, plan_jobs, run_sweep)
+from cross_checks.sweep.run import (
+                                    LOCAL_SAMPLES,
+                                    MAX_SERIES_POINTS,
+                                    RESULT_COLUMNS,
+                                    SCHEMA_VERSION,
+                                    Job,
+                                    SweepError,
+                                    SweepInterrupted,
+                                    cache_dir,
+                                    plan_jobs,
+                                    run_sweep,
+)
 
 __all__ = ["RESULT_COLUMNS", "SweepError", "SweepInterrupted", "Job", "plan_jobs", "run_sweep", "cache_dir",
            "MAX_SERIES_POINTS", "LOCAL_SAMPLES", "SCHEMA_VERSION"]

@@ -12,14 +12,14 @@ from pathlib import Path
 
 import numpy as np
 
-from reference_sim.state import Q
 from cross_checks.analysis import metrics as M
-from cross_checks.analysis.judge import LocalEvidence, judge_ladder
 from cross_checks.analysis.expectations import EQUIVALENT_PAIRS, expectation, pair_is_same_arithmetic
+from cross_checks.analysis.judge import LocalEvidence, judge_ladder
 from cross_checks.core import tolerances as tol
 from cross_checks.core.files import atomic_write_text, json_default
 from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, UNITS, decimation_indices, state_errors
 from cross_checks.sweep.jobs import MAX_SERIES_POINTS, RESULT_COLUMNS, SCHEMA_VERSION, load_reference
+from reference_sim.state import Q
 
 __all__ = ["result_rows", "results_csv_text", "convergence_records", "ladder_floors", "agreement_records", "scenario_record",
            "series_arrays", "build_summary", "write_json", "write_scenario_files", "SCENARIO_FILES", "local_evidence"]

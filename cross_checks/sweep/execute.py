@@ -15,8 +15,7 @@ from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
 
-from cross_checks.sweep.jobs import (failed_record, failed_second_reference, reference_job, run_job,
-                                     second_reference_job)
+from cross_checks.sweep.jobs import failed_record, failed_second_reference, reference_job, run_job, second_reference_job
 from cross_checks.sweep.lifecycle import worker_init
 
 __all__ = ["Runner", "ScenarioReference", "SecondReference", "run_references", "run_jobs", "second_reference_jobs"]

@@ -17,19 +17,26 @@ import hashlib
 import json
 import math
 from dataclasses import dataclass
-from typing import NamedTuple
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
-from reference_sim.state import Q
 from cross_checks.analysis import metrics as M
 from cross_checks.core import tolerances as tol
 from cross_checks.core.files import json_default, save_npz_atomic
-from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, decimation_indices, error_summary, quantity_scales, state_errors
+from cross_checks.core.quantities import (
+    COLUMN_STEM,
+    QUANTITIES,
+    decimation_indices,
+    error_summary,
+    quantity_scales,
+    state_errors,
+)
 from cross_checks.sweep import cache, fingerprint
 from cross_checks.sweep.lifecycle import TimeLimitExceeded, time_limit
 from cross_checks.sweep.schema import SCHEMA_VERSION
+from reference_sim.state import Q
 
 __all__ = ["SCHEMA_VERSION", "MAX_SERIES_POINTS", "LOCAL_SAMPLES", "RESULT_COLUMNS", "TIMING_COLUMNS", "Job",
            "job_dts", "run_job", "reference_job", "second_reference_job", "failed_second_reference",

@@ -322,7 +322,7 @@ def inside(base, *parts) -> Path:
 def fix_permissions(directory) -> None:
     """Give files written through temporary files (mode 0600) the usual modes under the umask."""
     m = umask()
-    for root, dirs, files in os.walk(directory):
+    for root, _dirs, files in os.walk(directory):
         os.chmod(root, 0o777 & ~m)
         for f in files:
             os.chmod(os.path.join(root, f), 0o666 & ~m)

@@ -26,7 +26,7 @@ import dataclasses
 import shutil
 import sys
 import time
-from datetime import datetime, UTC
+from datetime import UTC, datetime
 
 from cross_checks.core import tolerances as tol
 from cross_checks.core.files import atomic_write_text, save_npz_atomic, usable_cores
@@ -35,13 +35,26 @@ from cross_checks.sweep import assemble, refine
 from cross_checks.sweep.cache import cache_dir
 from cross_checks.sweep.execute import Runner, run_jobs, run_references, second_reference_jobs
 from cross_checks.sweep.fingerprint import code_fingerprint
-from cross_checks.sweep.jobs import (LOCAL_SAMPLES, MAX_SERIES_POINTS, RESULT_COLUMNS, SCHEMA_VERSION, Job,
-                                     clear_reference_memo)
+from cross_checks.sweep.jobs import (
+    LOCAL_SAMPLES,
+    MAX_SERIES_POINTS,
+    RESULT_COLUMNS,
+    SCHEMA_VERSION,
+    Job,
+    clear_reference_memo,
+)
 from cross_checks.sweep.lifecycle import Terminated
 from cross_checks.sweep.plan import plan_jobs
 from cross_checks.sweep.provenance import provenance, variant_record
-from cross_checks.sweep.results_dir import (ResultsDirError, check_output_dir, fix_permissions, remove_stale_siblings,
-                                            replace_dir, staging_dir, write_marker)
+from cross_checks.sweep.results_dir import (
+    ResultsDirError,
+    check_output_dir,
+    fix_permissions,
+    remove_stale_siblings,
+    replace_dir,
+    staging_dir,
+    write_marker,
+)
 
 __all__ = ["RESULT_COLUMNS", "SweepError", "SweepInterrupted", "Job", "plan_jobs", "run_sweep", "cache_dir",
            "MAX_SERIES_POINTS", "LOCAL_SAMPLES", "SCHEMA_VERSION"]

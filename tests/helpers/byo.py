@@ -113,7 +113,7 @@ def build_cbody(folder: Path) -> dict:
         kind = "C"
     else:
         warnings.warn("no C compiler on this machine: the example engine runs as the stand-alone Python "
-                      "script examples/c_engine/cbody.py (same algorithm, standard library only)")
+                      "script examples/c_engine/cbody.py (same algorithm, standard library only)", stacklevel=2)
         shutil.copy(EXAMPLE / "cbody.py", folder / "cbody.py")
         _python_engine_file(folder, "cbody.toml", broken=False)
         _python_engine_file(folder, "cbody_broken.toml", broken=True)

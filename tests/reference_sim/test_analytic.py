@@ -16,10 +16,19 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from cross_checks.core.tolerances import CLOSED_FORM_PREDICTION_REL
-from reference_sim.analytic import (axisymmetric_top, constant_spin, course_spin_phase_lag,
-                                    course_spin_phase_lag_exact, harmonic_oscillator, jacobi_body_rates,
-                                    linear_drag, projectile, symplectic_euler_gravity_error, torque_free,
-                                    torque_free_asymmetric)
+from reference_sim.analytic import (
+    axisymmetric_top,
+    constant_spin,
+    course_spin_phase_lag,
+    course_spin_phase_lag_exact,
+    harmonic_oscillator,
+    jacobi_body_rates,
+    linear_drag,
+    projectile,
+    symplectic_euler_gravity_error,
+    torque_free,
+    torque_free_asymmetric,
+)
 from reference_sim.body import RigidBody
 from reference_sim.forces import ForceModel
 from reference_sim.quaternion import geodesic_angle, matrix_from_quat, quat_conj, quat_mul, quat_normalize, rotate

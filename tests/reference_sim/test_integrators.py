@@ -129,8 +129,8 @@ def test_euler_local_error_is_second_order(variant):
 
 
 def test_course_does_not_converge_on_tennis_racket_but_gyro_variants_do():
-    from cross_checks.scenario.references import reference_solution
     from cross_checks.scenario import load_scenario
+    from cross_checks.scenario.references import reference_solution
     sc = load_scenario("tennis_racket")
     y_ref, _ = reference_solution(sc, np.array([0.0, sc.duration_s]))
     for variant in ["course", "course_gyro", "expmap_gyro"]:

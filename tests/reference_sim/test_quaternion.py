@@ -1,14 +1,28 @@
 """Quaternion algebra against scipy.spatial.transform.Rotation (scalar_first=True) and its properties."""
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from scipy.spatial.transform import Rotation
 
 from cross_checks.core.tolerances import QUAT_ALGEBRA, QUAT_ROUND_TRIP, euler_round_trip_tol
-from reference_sim.quaternion import (axis_angle_from_quat, euler_zxy_from_quat, geodesic_angle, matrix_from_quat,
-                                      quat_conj, quat_exp, quat_from_axis_angle, quat_from_euler_zxy,
-                                      quat_from_matrix, quat_log, quat_mul, quat_norm, quat_normalize, rotate)
+from reference_sim.quaternion import (
+    axis_angle_from_quat,
+    euler_zxy_from_quat,
+    geodesic_angle,
+    matrix_from_quat,
+    quat_conj,
+    quat_exp,
+    quat_from_axis_angle,
+    quat_from_euler_zxy,
+    quat_from_matrix,
+    quat_log,
+    quat_mul,
+    quat_norm,
+    quat_normalize,
+    rotate,
+)
 
 finite = st.floats(-10, 10, allow_nan=False, allow_infinity=False)
 quats = arrays(float, 4, elements=finite).filter(lambda q: np.linalg.norm(q) > 1e-3).map(quat_normalize)

@@ -16,9 +16,8 @@ import pytest
 import reports
 from cross_checks.scenario import parse_scenario
 from cross_checks.sweep import run_sweep
-from tests.helpers.sweeps import built_once, private_cache
-
 from tests.helpers.chromium import Browser
+from tests.helpers.sweeps import built_once, private_cache
 
 # position never moves (only a spin): its panels must be replaced by a note
 SPIN = """

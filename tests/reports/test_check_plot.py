@@ -5,11 +5,11 @@ import dataclasses
 import numpy as np
 from PIL import Image
 
+from cross_checks.core.trajectory import Trajectory
+from cross_checks.engines import run_variant
 from cross_checks.gates.check import check_trajectory
 from cross_checks.gates.check.ladder import check_ladder
-from cross_checks.engines import run_variant
 from cross_checks.scenario import load_scenario
-from cross_checks.core.trajectory import Trajectory
 from reports.check_plot import check_figure, ladder_figure
 
 SC = dataclasses.replace(load_scenario("particle_body"), duration_s=1.0)

@@ -91,7 +91,7 @@ def test_pages_parse_and_every_image_resolves(results):
     ps = pages(results)
     assert set(ps) == {"index.html", "scenario-hostile_spin.html"}
     n_img = 0
-    for name, html in ps.items():
+    for html in ps.values():
         p = parse(html)
         assert p.tags.count("html") == 1 and "title" in p.tags
         for src in p.imgs:
@@ -149,7 +149,7 @@ def test_self_contained_pages_embed_every_image(results, tmp_path):
     d = tmp_path / "copy"
     shutil.copytree(results, d)
     assert main(["report", str(d), "--self-contained", "--jobs", "1"]) == 0
-    for name, html in pages(d).items():
+    for html in pages(d).values():
         for src in parse(html).imgs:
             assert src.startswith("data:image/png;base64,")
             assert base64.b64decode(src.split(",", 1)[1])[:4] == b"\x89PNG"

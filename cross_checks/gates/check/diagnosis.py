@@ -20,14 +20,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cross_checks.analysis.flow import distances, exact_flow, quantity_distance
+from cross_checks.core.quantities import BLOCKS, QUANTITIES
+from cross_checks.gates.check.evidence import ratio
+from cross_checks.gates.check.mistakes import applicable_mistakes, course_step
 from reference_sim.integrators import VARIANTS
 from reference_sim.quaternion import quat_conj, quat_log, quat_mul, rotate
 from reference_sim.state import Q, V, W, X
-
-from cross_checks.gates.check.evidence import ratio
-from cross_checks.analysis.flow import distances, exact_flow, quantity_distance
-from cross_checks.core.quantities import BLOCKS, QUANTITIES
-from cross_checks.gates.check.mistakes import applicable_mistakes, course_step
 
 __all__ = ["CandidateScore", "step_rows", "score_candidate", "score_variants", "diagnose_mistakes", "fit_step_scale",
            "initial_state_slips"]
@@ -107,8 +106,8 @@ def score_variants(inp, scenario, y0, y_next, flow_end, allow):
 
     An iterative variant's step is its root only to IMPLICIT_TOL (1 + |y|) per component and step (two
     evaluations of the same step may stop at different iterates): that is added to its identity test."""
-    from reference_sim.integrators import IMPLICIT_TOL
     from cross_checks.engines import get_adapter
+    from reference_sim.integrators import IMPLICIT_TOL
     adapter = get_adapter("reference")
     solve = {q: inp.span_steps * IMPLICIT_TOL * math.sqrt(BLOCKS[q].stop - BLOCKS[q].start)
              * (1.0 + np.linalg.norm(np.nan_to_num(y_next[:, BLOCKS[q]]), axis=1)) * (2.0 if q == "orientation" else 1.0)

@@ -20,13 +20,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from cross_checks.analysis import metrics as M
+from cross_checks.analysis.flow import conservation_sensitivities, error_growth, flow_rhs, majorant, motion_rate
+from cross_checks.core import tolerances as tol
+from cross_checks.core.quantities import BLOCKS, QUANTITIES, UNITS, quantity_scales, state_errors
 from reference_sim.quaternion import matrix_from_quat, quat_conj, quat_log, quat_mul
 from reference_sim.state import Q, V, W, X
-
-from cross_checks.analysis import metrics as M
-from cross_checks.core.quantities import BLOCKS, QUANTITIES, UNITS, quantity_scales, state_errors
-from cross_checks.core import tolerances as tol
-from cross_checks.analysis.flow import conservation_sensitivities, error_growth, majorant, flow_rhs, motion_rate
 
 __all__ = ["Evidence", "evidence_row", "reconstruct_states", "pose_consistency", "conserved_evidence", "free_running_evidence",
            "ratio"]

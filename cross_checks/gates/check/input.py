@@ -24,11 +24,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from reference_sim.state import Q
-
 from cross_checks.core import tolerances as tol
 from cross_checks.core.quantities import BLOCKS
 from cross_checks.core.trajectory import QUANTITY_GROUPS
+from reference_sim.state import Q
 
 __all__ = ["CheckError", "CheckInput", "prepare_input", "printed_half_quantum", "written_digits",
            "single_precision_time_bound", "interval_bound", "snap_step"]

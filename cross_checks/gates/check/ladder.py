@@ -10,9 +10,9 @@ from __future__ import annotations
 import math
 
 from cross_checks.analysis import metrics as M
+from cross_checks.analysis.expectations import Expectation, expectation
 from cross_checks.analysis.judge import judge_ladder
 from cross_checks.core.quantities import QUANTITIES, quantity_scales
-from cross_checks.analysis.expectations import Expectation, expectation
 
 __all__ = ["LadderError", "check_ladder"]
 

@@ -24,16 +24,29 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from cross_checks.core import tolerances as tol
-from cross_checks.gates.check.diagnosis import (diagnose_mistakes, fit_step_scale, initial_state_slips,
-                                                score_variants)
-from cross_checks.gates.check.evidence import (Evidence, conserved_evidence, evidence_row, free_running_evidence,
-                                               pose_consistency, ratio, reconstruct_states)
-from cross_checks.gates.check.input import CheckError, describe_time, prepare_input
-from cross_checks.analysis.flow import (distances, exact_flow, flow_rhs, local_allowances, majorant,
-                                           motion_rate, quantity_distance)
-from cross_checks.core.quantities import BLOCKS, QUANTITIES, UNITS
 from cross_checks.analysis.expectations import expectation
+from cross_checks.analysis.flow import (
+    distances,
+    exact_flow,
+    flow_rhs,
+    local_allowances,
+    majorant,
+    motion_rate,
+    quantity_distance,
+)
+from cross_checks.core import tolerances as tol
+from cross_checks.core.quantities import BLOCKS, QUANTITIES, UNITS
+from cross_checks.gates.check.diagnosis import diagnose_mistakes, fit_step_scale, initial_state_slips, score_variants
+from cross_checks.gates.check.evidence import (
+    Evidence,
+    conserved_evidence,
+    evidence_row,
+    free_running_evidence,
+    pose_consistency,
+    ratio,
+    reconstruct_states,
+)
+from cross_checks.gates.check.input import CheckError, describe_time, prepare_input
 
 __all__ = ["CheckError", "CheckResult", "check_trajectory"]
 
@@ -153,8 +166,8 @@ def _local_pose(inp, scenario, y_ref) -> _Local:
 
 def _pose_candidates(inp, scenario, growth, per_arith):
     """Free-running comparison of a pose-only file with every reference variant from the initial state."""
-    from reference_sim.integrators import VARIANTS
     from cross_checks.engines import run_variant
+    from reference_sim.integrators import VARIANTS
     if inp.h_s is None:
         return []
     out = []

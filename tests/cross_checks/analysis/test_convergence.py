@@ -4,10 +4,15 @@ import math
 
 import pytest
 
-from cross_checks.analysis.convergence import (compare_with_expectation, fit_convergence, measured_pre_asymptotic,
-                                               order_within_floors, pairwise_orders)
-from cross_checks.core import tolerances as tol
+from cross_checks.analysis.convergence import (
+    compare_with_expectation,
+    fit_convergence,
+    measured_pre_asymptotic,
+    order_within_floors,
+    pairwise_orders,
+)
 from cross_checks.analysis.expectations import Expectation, expectation
+from cross_checks.core import tolerances as tol
 from cross_checks.scenario import load_scenario
 
 LADDER = [0.02 / 2 ** k for k in range(5)]

@@ -2,9 +2,9 @@
 import numpy as np
 import pytest
 
-from cross_checks.engines import all_variants, available_variants, run_variant
 from cross_checks.analysis.expectations import DEFAULT_TRAITS, VARIANT_TRAITS, expectation, nominal_order, traits
 from cross_checks.core.quantities import QUANTITIES
+from cross_checks.engines import all_variants, available_variants, run_variant
 from cross_checks.scenario import catalog_names, catalog_path, load_scenario, parse_scenario
 
 

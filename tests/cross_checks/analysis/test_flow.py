@@ -2,16 +2,24 @@
 import numpy as np
 import pytest
 
+from cross_checks.analysis.flow import (
+    distances,
+    error_growth,
+    exact_flow,
+    flow_rhs,
+    local_allowances,
+    majorant,
+    motion_rate,
+    rk4_flow,
+    spring_turn_rate,
+)
 from cross_checks.core import tolerances as tol
-from cross_checks.gates.check.input import prepare_input
-from cross_checks.analysis.flow import (distances, error_growth, exact_flow, flow_rhs, local_allowances,
-                                           majorant, motion_rate, rk4_flow, spring_turn_rate)
-from cross_checks.scenario import load_scenario, parse_scenario
 from cross_checks.core.trajectory import Trajectory
+from cross_checks.gates.check.input import prepare_input
+from cross_checks.scenario import load_scenario, parse_scenario
 from reference_sim import analytic
 from reference_sim.quaternion import quat_exp, quat_normalize
 from reference_sim.state import Q, W
-
 from tests.helpers.scenarios import scenario_from_parts
 
 QUANTITIES = ("position", "velocity", "orientation", "angular_velocity")

@@ -8,7 +8,8 @@ been judged. A hypothesis test draws ladders of errors and floors and asserts th
 import math
 
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import cross_checks.analysis.judge as J
 from cross_checks.analysis.expectations import Expectation

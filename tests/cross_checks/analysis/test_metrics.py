@@ -9,7 +9,6 @@ from cross_checks.core import tolerances as tol
 from cross_checks.scenario import load_scenario, parse_scenario
 from tests.helpers.scenarios import state
 
-
 # --- conservation ------------------------------------------------------------------------------------
 
 def _scenario(forces="", inertia="[1.0, 2.0, 3.0]", mass=2.0):

@@ -7,8 +7,8 @@ import pytest
 
 from cross_checks.analysis import physics as P
 from cross_checks.core.quantities import quantity_scales, state_errors
-from cross_checks.scenario.references import error_amplification, reference_error, reference_solution
 from cross_checks.scenario import load_scenario
+from cross_checks.scenario.references import error_amplification, reference_error, reference_solution
 from reference_sim.ground_truth import GROUND_TRUTH_RTOL, ground_truth
 
 

@@ -3,12 +3,13 @@ non-finite data; exit 2 is one line on stderr naming the file."""
 import os
 
 import numpy as np
-from hypothesis import HealthCheck, given, settings, strategies as st
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from cross_checks.cli import main
+from cross_checks.core.trajectory import COLUMNS, Trajectory, TrajectoryError
 from cross_checks.engines import run_variant
 from cross_checks.scenario import load_scenario
-from cross_checks.core.trajectory import COLUMNS, Trajectory, TrajectoryError
 
 SCENARIO = "projectile"
 GOOD = run_variant(load_scenario(SCENARIO), "reference:course", 0.05).to_csv_text()

@@ -8,9 +8,8 @@ import time
 
 import pytest
 
-from cross_checks.scenario import load_scenario
-
 from cross_checks.cli import main
+from cross_checks.scenario import load_scenario
 
 TINY = """
 name = "{name}"

@@ -12,12 +12,13 @@ CATALOG = Path(cross_checks.__file__).parent / "scenario" / "catalog"
 
 
 def test_version_names_rbcheck_and_the_engines_it_runs(capsys):
+    from importlib.metadata import PackageNotFoundError, version
+
     import mujoco
     import numpy
     import pybullet  # noqa: F401
 
     import reference_sim
-    from importlib.metadata import PackageNotFoundError, version
     assert main(["--version"]) == 0
     first, second, third = capsys.readouterr().out.splitlines()
     assert first == f"rbcheck {reference_sim.__version__}"

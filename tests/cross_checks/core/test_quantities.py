@@ -8,7 +8,6 @@ from cross_checks.core.quantities import error_summary, state_errors
 from reference_sim.quaternion import quat_from_axis_angle
 from tests.helpers.scenarios import state
 
-
 # --- errors --------------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("angle", [1e-6, 0.3, 2.5, math.pi - 1e-3])

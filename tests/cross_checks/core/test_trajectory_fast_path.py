@@ -2,7 +2,8 @@
 the general csv.reader path gives — the same numbers, or the same error message — on any text."""
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings, strategies as st
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from cross_checks.core.trajectory import COLUMNS, TrajectoryError, read_columns
 

@@ -10,13 +10,12 @@ from cross_checks.core import tolerances as tol
 
 pytest.importorskip("pydrake", reason="drake is not installed (pip install -e '.[drake]')")
 
-from cross_checks.engines import drake_engine as de                      # noqa: E402
-from cross_checks.engines.base import stage_force_torque                  # noqa: E402
-from cross_checks.scenario import load_scenario                           # noqa: E402
-from reference_sim.ground_truth import ground_truth                      # noqa: E402
+from cross_checks.engines import drake_engine as de  # noqa: E402
+from cross_checks.engines.base import stage_force_torque  # noqa: E402
+from cross_checks.scenario import load_scenario  # noqa: E402
+from reference_sim.ground_truth import ground_truth  # noqa: E402
 from reference_sim.quaternion import geodesic_angle, matrix_from_quat, quat_exp, quat_mul  # noqa: E402
-
-from tests.helpers.scenarios import scenario_from_parts                  # noqa: E402
+from tests.helpers.scenarios import scenario_from_parts  # noqa: E402
 
 Q_TILT = np.array([0.9, 0.1, 0.3, -0.2]) / np.linalg.norm([0.9, 0.1, 0.3, -0.2])
 FULL_INERTIA = "mass = 2.0\ninertia = [[2.0, 0.1, 0.05], [0.1, 3.0, -0.2], [0.05, -0.2, 4.0]]"

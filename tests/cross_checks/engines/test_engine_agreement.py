@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 from cross_checks.core import tolerances as tol
-
 from cross_checks.engines import run_variant
 from cross_checks.scenario import catalog_names, load_scenario, parse_scenario
 from reference_sim.quaternion import geodesic_angle, quat_conj, rotate
@@ -171,6 +170,7 @@ def test_every_catalog_scenario_runs(name):
 def test_harness_forces_equal_the_force_model(name):
     # The engines' per-step forces come from the plain-float kernel; ForceModel.force_torque is the definition.
     import numpy as np
+
     from cross_checks.engines.base import harness_force_torque
     from reference_sim.quaternion import quat_normalize
     sc = load_scenario(name)

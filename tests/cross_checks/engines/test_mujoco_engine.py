@@ -13,9 +13,8 @@ from cross_checks.engines import run_variant  # noqa: E402
 from cross_checks.scenario import catalog_path, load_scenario, parse_scenario  # noqa: E402
 from reference_sim.ground_truth import ground_truth  # noqa: E402
 from reference_sim.quaternion import geodesic_angle, quat_from_axis_angle, quat_from_matrix, quat_mul
-
-from tests.helpers.scenarios import SQ, YAW90, scenario_from_parts as _scenario  # noqa: E402,F401
-
+from tests.helpers.scenarios import SQ, YAW90  # noqa: E402,F401
+from tests.helpers.scenarios import scenario_from_parts as _scenario
 
 # --- model ----------------------------------------------------------------------------------------
 

@@ -3,11 +3,10 @@ declared orders reaching the verdicts, and plug-ins that cannot load listed with
 import pytest
 
 from cross_checks import engines
+from cross_checks.analysis.expectations import expectation, nominal_order
 from cross_checks.cli import main
 from cross_checks.engines.base import EngineAdapter, Variant
-from cross_checks.analysis.expectations import expectation, nominal_order
 from cross_checks.scenario import load_scenario
-
 from tests.helpers.byo import make_fake_distribution
 
 

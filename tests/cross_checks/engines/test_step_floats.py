@@ -141,8 +141,9 @@ def test_mujoco_runs_are_the_numpy_loop_bit_for_bit(variant):
 
 @pytest.mark.parametrize("module", [me, pe])
 def test_the_plain_float_code_is_part_of_the_adapters_cache_key(module):
-    import cross_checks.engines.step_floats as sf
     from pathlib import Path
+
+    import cross_checks.engines.step_floats as sf
     adapter = next(v for v in vars(module).values() if isinstance(v, type) and v.__module__ == module.__name__
                    and issubclass(v, base.EngineAdapter))()
     assert Path(sf.__file__) in adapter.source_files() and Path(module.__file__) in adapter.source_files()

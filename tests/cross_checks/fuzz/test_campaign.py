@@ -9,7 +9,6 @@ from cross_checks.cli import main
 from cross_checks.fuzz import campaign
 from cross_checks.fuzz.generate import to_toml
 from cross_checks.scenario import load_scenario
-
 from tests.helpers.byo import build_cbody
 from tests.mutants import MUTANTS
 
@@ -47,7 +46,7 @@ def _reproduces(s, mutant, tmp_path, monkeypatch):
     assert _sweep(path, [mutant.variant], tmp_path / "sweep_bug") == 1
     monkeypatch.undo()
     monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "cache2"))
-    from cross_checks.fuzz.shrink import confirm   # the same sweep's gates, without drawing its report
+    from cross_checks.fuzz.shrink import confirm  # the same sweep's gates, without drawing its report
     assert confirm(load_toml_spec(path), [mutant.variant]) == []
 
 
@@ -148,6 +147,7 @@ def test_an_unexplained_failure_is_never_listed_under_an_explained_one_of_the_sa
 
 def test_the_shrinker_keeps_a_failure_explained_or_not_as_it_was_found():
     from types import SimpleNamespace
+
     from cross_checks.fuzz.shrink import signature
     v = _maximal_violation()
     sig = signature(v)

@@ -2,14 +2,13 @@
 (reference_sim.integrators.rhs) of its own problem, and the batched solve reproduces a closed form."""
 import numpy as np
 
+from cross_checks.fuzz import generate
+from cross_checks.fuzz.exact import StackedRHS, solve_members
+from cross_checks.fuzz.pipeline import scenario_of
 from reference_sim.body import RigidBody
 from reference_sim.forces import ForceModel
 from reference_sim.integrators import rhs
 from reference_sim.state import Problem, State
-
-from cross_checks.fuzz import generate
-from cross_checks.fuzz.exact import StackedRHS, solve_members
-from cross_checks.fuzz.pipeline import scenario_of
 
 
 def _problems(n=40):

@@ -2,11 +2,10 @@
 import numpy as np
 import pytest
 
-from reference_sim.scalar import ScalarStepper
-
 from cross_checks.fuzz import generate
 from cross_checks.fuzz.kernel import CaseKernel, columns, rows
 from cross_checks.fuzz.pipeline import scenario_of
+from reference_sim.scalar import ScalarStepper
 
 
 def _problems(n=8):
@@ -78,9 +77,9 @@ def test_a_bug_planted_in_the_stepper_init_reaches_kernels_of_problems_stacked_b
 def test_compiled_member_runs_are_each_members_own_float_stepper_run(monkeypatch, variant):
     # a free run per member, stepped compiled: bit for bit what the member's own float stepper computes (the
     # Python float path of reference_sim.simulate), a blown-up member included (cut where that path cuts it)
+    from cross_checks.fuzz.kernel import runs_compiled
     from reference_sim import compiled
     from reference_sim import simulate as S
-    from cross_checks.fuzz.kernel import runs_compiled
     problems, hs = _problems(6)
     n = [40, 80, 120, 40, 80, 120]
     y0 = [p.initial_packed() for p in problems]

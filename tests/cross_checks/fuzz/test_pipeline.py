@@ -3,7 +3,6 @@ stays too low on the refined ladder (to h/32) — a correct scheme that is merel
 a scheme of the wrong order is still caught."""
 import tomllib
 
-
 import cross_checks.fuzz.pipeline as PL
 from cross_checks.fuzz.pipeline import evaluate_specs
 from tests.helpers.scenarios import PRE_ASYMPTOTIC_ON_ITS_LADDER

@@ -4,11 +4,11 @@ tests/cross_checks/sweep/test_lifecycle.py.)"""
 import numpy as np
 import pytest
 
-from cross_checks.core import tolerances as tol
 from cross_checks.cli import main
+from cross_checks.core import tolerances as tol
+from cross_checks.scenario import ScenarioError, catalog_names, load_scenario, parse_scenario
 from cross_checks.scenario.limits import MAX_STEPS_PER_RUN, reference_evals, run_memory_bytes
 from cross_checks.scenario.references import reference_solution
-from cross_checks.scenario import ScenarioError, catalog_names, load_scenario, parse_scenario
 
 BASE = """
 name = "{name}"

@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from cross_checks.scenario.references import analytic_available
 from cross_checks.scenario import ScenarioError, catalog_names, load_scenario, parse_scenario
+from cross_checks.scenario.references import analytic_available
 from reference_sim.quaternion import geodesic_angle, quat_from_euler_zxy, rotate
 
 GOOD = """

@@ -2,7 +2,8 @@
 import os
 import re
 
-from hypothesis import HealthCheck, given, settings, strategies as st
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from cross_checks.cli import main
 from cross_checks.scenario import ScenarioError, catalog_names, catalog_path, parse_scenario

@@ -6,8 +6,8 @@ import math
 import pytest
 
 from cross_checks.cli import main
-from cross_checks.scenario.resolved import resolved_scenario
 from cross_checks.scenario import parse_scenario
+from cross_checks.scenario.resolved import resolved_scenario
 
 H = math.sqrt(0.5)
 

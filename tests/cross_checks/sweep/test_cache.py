@@ -6,9 +6,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cross_checks.scenario import parse_scenario
 from cross_checks.sweep import cache
 from cross_checks.sweep.jobs import Job, _cache_file, _job_key, reference_job, run_job
-from cross_checks.scenario import parse_scenario
 from tests.helpers.scenarios import TINY
 from tests.helpers.sweeps import RUN_DEPENDENT_COLUMNS
 

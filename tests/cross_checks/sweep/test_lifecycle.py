@@ -14,7 +14,9 @@ import pytest
 
 from cross_checks.sweep.lifecycle import TimeLimitExceeded, time_limit
 from tests.helpers.scenarios import scenario_toml, write_scenarios
-from tests.helpers.sweeps import built_once, file_tree as _files, result_rows as _rows
+from tests.helpers.sweeps import built_once
+from tests.helpers.sweeps import file_tree as _files
+from tests.helpers.sweeps import result_rows as _rows
 
 #: One short tumble, 2 variants x 3 steps: every phase of a sweep (start-up, runs in the worker pool,
 #: metrics, report, swap) for a random kill to land in. A second scenario only made each sweep twice as

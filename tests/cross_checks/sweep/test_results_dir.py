@@ -1,17 +1,26 @@
 """The results directory: recognised by rbcheck's marker only; nothing the user put anywhere is ever
 deleted; replacing keeps the previous results until the new ones are complete; what a killed run
 leaves beside it is removed (or put back) by the next run, and only when provably rbcheck's and stale."""
+import hashlib
 import json
 import os
 import socket
-import hashlib
 
 import pytest
 
 from cross_checks.cli import main
 from cross_checks.sweep.jobs import SCHEMA_VERSION
-from cross_checks.sweep.results_dir import (MARKER, ResultsDirError, check_output_dir, inside, owned_name,
-                                            read_marker, remove_stale_siblings, replace_dir, safe_file_stem)
+from cross_checks.sweep.results_dir import (
+    MARKER,
+    ResultsDirError,
+    check_output_dir,
+    inside,
+    owned_name,
+    read_marker,
+    remove_stale_siblings,
+    replace_dir,
+    safe_file_stem,
+)
 from tests.helpers.scenarios import TINY
 from tests.helpers.sweeps import file_tree as tree
 

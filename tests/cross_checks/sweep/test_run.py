@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cross_checks.sweep import execute as sweep_mod
 from cross_checks.cli import main
 from cross_checks.sweep import RESULT_COLUMNS, run_sweep
+from cross_checks.sweep import execute as sweep_mod
 from tests.helpers.scenarios import GRAVITY, scenario_toml, write_scenarios
 from tests.helpers.sweeps import file_tree, result_rows
 

@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 from cross_checks.cli import main
-from cross_checks.scenario import catalog_path, load_scenario
 from cross_checks.core.trajectory import COLUMNS, Trajectory
+from cross_checks.scenario import catalog_path, load_scenario
 
 from . import student_sim as S
 

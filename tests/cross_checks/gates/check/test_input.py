@@ -4,10 +4,16 @@ import math
 import numpy as np
 import pytest
 
-from cross_checks.gates.check.input import (CheckError, prepare_input, printed_half_quantum,
-                                            single_precision_time_bound, snap_step, written_digits)
-from cross_checks.scenario import load_scenario
 from cross_checks.core.trajectory import QUANTITY_GROUPS, Trajectory
+from cross_checks.gates.check.input import (
+    CheckError,
+    prepare_input,
+    printed_half_quantum,
+    single_precision_time_bound,
+    snap_step,
+    written_digits,
+)
+from cross_checks.scenario import load_scenario
 
 SC = load_scenario("projectile")        # dt = 0.01, duration 1 s
 
