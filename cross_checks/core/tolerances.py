@@ -4,8 +4,6 @@ Machine epsilon ε = 2.2e-16. "Same arithmetic" comparisons allow a few ε times
 comparisons are derived from the error model of the scheme involved.
 """
 
-#: Quaternion algebra vs scipy Rotation: products of unit-norm inputs, a few roundings each: 10 ε.
-QUAT_ALGEBRA = 1e-14
 #: Round trips through matrices / axis-angle / Euler angles: each conversion loses ~10 ε, and the
 #: acos/atan2 near 0 or π amplify it by ~1/sin; 1e-12 rad covers the test sets (measured ≤ 4e-15).
 QUAT_ROUND_TRIP = 1e-12
@@ -20,24 +18,11 @@ def euler_round_trip_tol(cos_pitch: float, locked: bool = False) -> float:
     return QUAT_ROUND_TRIP + 10 * 2.2e-16 / max(abs(cos_pitch), 1e-300)
 
 
-#: Readable single-body path vs batched path: same formulas, different evaluation order (einsum vs
-#: @, vectorised cross): per-step difference ~ ε|y|, accumulated over ≤ 1000 steps of a bounded
-#: problem: 1000 · 10 ε ≈ 2e-12 relative.
-READABLE_VS_BATCHED = 1e-11
-#: Closed-form discretisation-error predictions matched to 6 significant digits (tests/reference_sim/test_analytic.py).
-CLOSED_FORM_PREDICTION_REL = 1e-6
 #: Fitted convergence order vs expected in the dedicated order studies (tests/reference_sim): ±0.1, a
 #: tenth of the gap between neighbouring integer orders.
 ORDER_TOL = 0.1
 #: Closed forms vs DOP853 ground truth (rtol 1e-13, reference_sim.ground_truth) over 10 s: ≤ 1e-10, two orders below the smallest error any verdict resolves.
 CLOSED_FORM_VS_GROUND_TRUTH = 1e-10
-#: tumbling_box: 10 s of a fast (5 rad/s) tumble near the intermediate axis, ~10 flips; the ground
-#: truth's error grows through each flip: measured 1.4e-8 at DOP853 rtol 1e-13 and 2.8e-9 at 3e-14,
-#: shrinking towards the closed form, so the closed form is the accurate side. 3e-8 = 2x measured.
-CLOSED_FORM_VS_GROUND_TRUTH_TUMBLING_BOX = 3e-8
-#: reference:course on tennis_racket: its final orientation error must stay above this at every dt:
-#: the physical body has flipped (≈ π away); 1 rad is far from any discretisation error.
-COURSE_NONCONVERGENCE_MIN_RAD = 1.0
 
 # --- sweeps, metrics and verdicts (cross_checks.analysis, cross_checks.sweep, `rbcheck check`) ------
 
@@ -252,59 +237,12 @@ COMPARE_ABS_TOL = 1e-12
 COMPARE_SCHEME_CHANGE_MAX_RATIO = 4.0
 
 # --- agreement of engines and closed forms (tests/cross_checks/engines/test_engine_agreement.py) ---
-#: Projectile closed forms (semi-implicit x_n = x0 + n h v0 + g h² n(n+1)/2 and the exact parabola):
-#: 100 steps of sums of ≤ 3 m quantities, ~100 ε · 3 ≈ 7e-14; the required bound is 1e-12.
-AGREE_PROJECTILE = 1e-12
-#: The same scheme (symplectic Euler, explicit gyroscopic term, exponential map) in NumPy, MuJoCo
-#: Euler and PyBullet multibody over ≥ 2000 steps: round-off only (measured ≤ 1e-13); the required
-#: bound is 1e-10 in position, orientation and angular velocity.
-AGREE_SAME_SCHEME = 1e-10
-#: mujoco:implicitfast vs pybullet:maximal, torque-free tennis racket, 2 s at 1e-3: both take the same
-#: linearised implicit gyroscopic step (Bullet's body-frame Newton step == MuJoCo's implicit
-#: derivative for a lone free body), so only round-off separates them: measured 3.2e-14 rad (7.8e-13
-#: over the full 10 s, where the unstable intermediate axis amplifies it); 1e-11 leaves 300x margin.
-AGREE_IMPLICIT_PAIR_TORQUE_FREE = 1e-11
-#: With an applied torque they differ at first order (Bullet adds h I⁻¹τ outside the implicit solve,
-#: MuJoCo solves (I + h D) Δω = h (τ − ω×Iω)): the 2-s difference must halve with h (ratio 2 ± 0.2).
-AGREE_FIRST_ORDER_RATIO = (1.8, 2.2)
-#: MuJoCo implicit vs implicitfast for a lone free body (docs/engine_conventions.md: 1e-13): measured 8e-18.
-AGREE_IMPLICIT_VS_IMPLICITFAST = 1e-13
-#: The body has flipped when its y axis points against world y (R[:, 1]·e_y < 0): measured −0.9996 for
-#: every gyroscopic scheme; the course update never gets below +0.9999. Thresholds far from both.
-AGREE_FLIP_BELOW = -0.5
-AGREE_NO_FLIP_ABOVE = 0.5
-#: The recorded t = 0 row vs the scenario's initial state: ω goes world -> body -> world (MuJoCo) or the
-#: quaternion through x,y,z,w and the principal frame (PyBullet): a few ε of |ω| ≤ 5 rad/s.
-AGREE_INITIAL_ROW = 1e-14
 
 # --- the engine adapters' conventions (the MuJoCo and PyBullet adapter tests in tests/cross_checks/engines/) ---
-#: Same-arithmetic conversions at an adapter's boundary (MuJoCo: qpos/qvel <-> packed state, one rotation
-#: of a unit vector; PyBullet: quaternion order, principal-frame rotation): a few ε.
-ADAPTER_ROUND_TRIP = 1e-15
-#: Exact exponential-map spin about a principal axis over 100 steps: each step rounds the quaternion
-#: product (~ε; MuJoCo also renormalises): 100 · a few ε.
-ADAPTER_SPIN_100_STEPS = 1e-13
-#: one_step from a recorded state vs the recorded next state: the same engine step from the same doubles,
-#: up to the boundary conversions (MuJoCo: ω body -> world -> body, two roundings of |ω|; PyBullet: the
-#: principal-frame rotation of full tensors and the x,y,z,w order): a few ε.
-ADAPTER_ONE_STEP_REPLAY = 1e-14
 
 # --- the PyBullet adapter (tests/cross_checks/engines/test_pybullet_engine.py) ---
-#: Semi-implicit closed form of a projectile (h = 0.01, 1 s): sums of 100 terms of size ≤ 3 m: 100 ε · 3.
-PYB_PROJECTILE_EXACT = 1e-12
-#: PyBullet's default multibody damping must visibly fail the projectile: docs/engine_conventions.md measured 0.15 m
-#: after 1 s; anything above 1 cm is far outside discretisation (which is exactly zero here).
-PYB_DEFAULT_DAMPING_MIN_ERROR = 1e-2
 
 # --- the MuJoCo adapter (tests/cross_checks/engines/test_mujoco_engine.py) ---
-#: mujoco:rk4 vs DOP853 (GROUND_TRUTH_RTOL) on tennis_racket at dt = 1e-3: the required bound.
-MJ_RK4_VS_GROUND_TRUTH = 1e-8
-#: Observed convergence order of mujoco:rk4 with per-stage forces vs 4 (measured 3.99-4.03 on these
-#: ladders, whose errors stay 3+ decades above round-off); ORDER_TOL of the suite is 0.1.
-MJ_RK4_ORDER_TOL = 0.1
-#: The same with forces held over the step (xfrc_applied fixed over the 4 stages): first order;
-#: measured 0.96-1.01.
-MJ_HELD_ORDER_TOL = 0.1
 
 # --- the second reference: Drake's error-controlled integration (docs/engine_conventions.md) ---
 #: Drake runge_kutta5's target accuracy for the second reference: measured on the catalog 6.9e-10 rad
@@ -317,22 +255,6 @@ SECOND_REFERENCE_TARGET_ACCURACY = 1e-13
 SECOND_REFERENCE_CHECK_FACTOR = 10.0
 
 # --- the Drake adapter's conventions (tests/cross_checks/engines/test_drake_engine.py) ---
-#: Fitted order of Drake's RK2/RK3 on spring_pendulum's 1 s ladder (4e-3 … 1e-3): measured 1.97–3.01;
-#: with forces held over the step RK3 measures ~1.0. 0.15 separates every pair by far.
-DRAKE_ORDER_TOL = 0.15
-#: Drake's derivatives vs the hand-derived ω̇_W = I_W⁻¹(τ − ω × I_W ω), a = f/m + g: a 3×3 solve, a few ε.
-DRAKE_DERIVATIVE_REL = 1e-13
-#: A principal-axis spin through 50 RK3 steps at ωΔt = 0.02: local error ~(ωΔt)⁴/24 per step, ~1e-7 rad.
-DRAKE_SPIN_RK3 = 1e-6
-#: |q| − 1 of Drake's (unnormalised) quaternion after 200 semi-explicit Euler steps of 0.01 s on the
-#: tennis racket: ~Σ (|ω|Δt)²/8 ≈ 200 · 5e-5 = 1e-2 (measured 1.2e-2); 1e-3 says "it drifts".
-DRAKE_QUATERNION_DRIFT_MIN = 1e-3
-#: One step restarted from a recorded state vs the free run's next row: the step from (k−1)Δt to kΔt is
-#: Δt only up to a rounding of kΔt, so ~ε; the implicit Euler's Newton stops at its tolerance (1e-6).
-DRAKE_REPLAY_REL = 1e-13
-DRAKE_REPLAY_IMPLICIT_REL = 1e-6
-#: drake:runge_kutta3 at Δt = 1e-3 on the tennis racket over 10 s: ~C (ωΔt)³ ωT ≈ 1e-7 rad.
-DRAKE_RK3_TENNIS_RAD = 1e-6
 
 # --- rbcheck fuzz: hard but fair random cases and their verdicts (docs/fuzz.md) ---------------------------
 

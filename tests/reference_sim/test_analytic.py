@@ -15,7 +15,6 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from cross_checks.core.tolerances import CLOSED_FORM_PREDICTION_REL
 from reference_sim.analytic import (
     axisymmetric_top,
     constant_spin,
@@ -34,6 +33,7 @@ from reference_sim.forces import ForceModel
 from reference_sim.quaternion import geodesic_angle, matrix_from_quat, quat_conj, quat_mul, quat_normalize, rotate
 from reference_sim.simulate import simulate
 from reference_sim.state import Problem, State
+from tests.helpers.tolerances import CLOSED_FORM_PREDICTION_REL
 
 ODE_RTOL, ODE_ATOL = 1e-13, 1e-14
 # Closed form vs ODE, rotation over 10 s: ODE error ≤ ~2e-11 (see module docstring) + closed-form

@@ -2,10 +2,10 @@
 import numpy as np
 import pytest
 
-from cross_checks.core.tolerances import QUAT_ALGEBRA
 from reference_sim.body import RigidBody, check_inertia, inertia_from_particles
 from reference_sim.forces import ForceModel
 from reference_sim.quaternion import matrix_from_quat, quat_normalize
+from tests.helpers.tolerances import QUAT_ALGEBRA
 
 PARTICLES = np.array([[1.0, 0.3, 0.0, 0.1], [2.0, -0.2, 0.4, 0.0], [1.5, 0.0, -0.3, 0.5], [0.5, 0.1, 0.2, -0.4]])
 

@@ -2,7 +2,6 @@
 import numpy as np
 import pytest
 
-from cross_checks.core.tolerances import COURSE_NONCONVERGENCE_MIN_RAD, ORDER_TOL
 from reference_sim.body import RigidBody
 from reference_sim.forces import ForceModel, PointForce, Spring, Torque
 from reference_sim.ground_truth import ground_truth
@@ -10,6 +9,7 @@ from reference_sim.integrators import VARIANTS, get_step
 from reference_sim.quaternion import geodesic_angle, quat_exp, quat_normalize
 from reference_sim.simulate import simulate
 from reference_sim.state import Problem, State
+from tests.helpers.tolerances import COURSE_NONCONVERGENCE_MIN_RAD, ORDER_TOL
 
 
 def coupled_problem(decay=(1.0, 1.0)):

@@ -6,7 +6,6 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from scipy.spatial.transform import Rotation
 
-from cross_checks.core.tolerances import QUAT_ALGEBRA, QUAT_ROUND_TRIP, euler_round_trip_tol
 from reference_sim.quaternion import (
     axis_angle_from_quat,
     euler_zxy_from_quat,
@@ -23,6 +22,7 @@ from reference_sim.quaternion import (
     quat_normalize,
     rotate,
 )
+from tests.helpers.tolerances import QUAT_ALGEBRA, QUAT_ROUND_TRIP, euler_round_trip_tol
 
 finite = st.floats(-10, 10, allow_nan=False, allow_infinity=False)
 quats = arrays(float, 4, elements=finite).filter(lambda q: np.linalg.norm(q) > 1e-3).map(quat_normalize)

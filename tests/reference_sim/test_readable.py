@@ -3,9 +3,9 @@ steps, to round-off, for every variant with every force type at once."""
 import numpy as np
 import pytest
 
-from cross_checks.core.tolerances import READABLE_VS_BATCHED
 from reference_sim.integrators import VARIANTS, get_step
 from reference_sim.readable import step_readable
+from tests.helpers.tolerances import READABLE_VS_BATCHED
 
 from .test_integrators import coupled_problem
 

@@ -2,10 +2,10 @@
 import numpy as np
 import pytest
 
-from cross_checks.core.tolerances import READABLE_VS_BATCHED
 from reference_sim.integrators import VARIANTS, get_step
 from reference_sim.scalar import ScalarStepper
 from reference_sim.simulate import simulate
+from tests.helpers.tolerances import READABLE_VS_BATCHED
 
 from .test_integrators import coupled_problem
 

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from cross_checks.core import tolerances as tol
+from tests.helpers import tolerances as tol
 
 pytest.importorskip("pydrake", reason="drake is not installed (pip install -e '.[drake]')")
 

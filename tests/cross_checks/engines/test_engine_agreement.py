@@ -7,10 +7,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cross_checks.core import tolerances as tol
 from cross_checks.engines import run_variant
 from cross_checks.scenario import catalog_names, load_scenario, parse_scenario
 from reference_sim.quaternion import geodesic_angle, quat_conj, rotate
+from tests.helpers import tolerances as tol
 
 ENGINE_VARIANTS = ["mujoco:euler", "mujoco:rk4", "mujoco:implicit", "mujoco:implicitfast",
                    "pybullet:multibody", "pybullet:maximal"]

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cross_checks.core import tolerances as tol
+from tests.helpers import tolerances as tol
 
 p = pytest.importorskip("pybullet", reason="pybullet is not installed")
 

@@ -2,11 +2,11 @@
 import numpy as np
 import pytest
 
-from cross_checks.core.tolerances import CLOSED_FORM_VS_GROUND_TRUTH, CLOSED_FORM_VS_GROUND_TRUTH_TUMBLING_BOX
 from cross_checks.scenario import catalog_names, load_scenario
 from cross_checks.scenario.references import analytic_available, reference_solution
 from reference_sim.ground_truth import ground_truth
 from reference_sim.quaternion import geodesic_angle
+from tests.helpers.tolerances import CLOSED_FORM_VS_GROUND_TRUTH, CLOSED_FORM_VS_GROUND_TRUTH_TUMBLING_BOX
 
 ANALYTIC = [n for n in catalog_names() if analytic_available(load_scenario(n))[0]]
 
