@@ -251,7 +251,8 @@ def pybullet_bodies(n_bodies, n_steps, repeats):
 
 #: The quick bench's sweep: a light scenario and two of the heaviest (long, fine ladders; a DOP853 reference).
 QUICK_SCENARIOS = ("projectile", "tennis_racket", "spring_pendulum")
-#: The engines of "the default sweep" the floor ratio is defined on (issue 15): every variant of these.
+#: The engines of "the default sweep" the floor ratio is defined on (what the README's main command runs, which
+#: installs no Drake): every variant of these.
 SWEEP_ENGINES = ("reference", "mujoco", "pybullet")
 
 
@@ -278,7 +279,7 @@ def _sweep_once(scenarios, variants, jobs, render) -> dict:
         try:
             t0 = time.perf_counter()
             # Drake's second reference is a cross-check of the references, not engine steps of this sweep
-            # (issue 15's sweep: references, MuJoCo and PyBullet; the README's main command has no Drake).
+            # (the default sweep: references, MuJoCo and PyBullet; the README's main command has no Drake).
             summary = run_sweep(scenarios, variants, os.path.join(tmp, "out"), jobs=jobs, use_cache=False,
                                 progress=False, finish=finish, second_reference=False)
         finally:

