@@ -411,20 +411,27 @@ def cmd_list(args) -> int:
     return EXIT_OK
 
 
+def _step_and_duration(args, sc) -> tuple:
+    """``(Δt, duration)`` of ``run``/``show``: the options or the scenario's, Δt within the duration and the
+    steps within the limit (BadInput naming the option otherwise)."""
+    from cross_checks.scenario.limits import LimitExceeded, check_run_steps
+    dt = args.dt if args.dt is not None else sc.dt_s
+    T = args.duration if args.duration is not None else sc.duration_s
+    if dt > T:
+        raise BadInput(f"--dt {dt:g}: must be <= the duration ({T:g} s)")
+    try:
+        check_run_steps(T, dt, "--dt" if args.dt is not None else "--duration")
+    except LimitExceeded as exc:
+        raise BadInput(str(exc)) from None
+    return dt, T
+
+
 def cmd_show(args) -> int:
     from cross_checks.scenario import load_scenario
     from cross_checks.scenario.resolved import format_resolved, resolved_json, resolved_scenario
 
     sc = load_scenario(args.scenario)
-    dt = args.dt if args.dt is not None else sc.dt_s
-    T = args.duration if args.duration is not None else sc.duration_s
-    if dt > T:
-        raise BadInput(f"--dt {dt:g}: must be <= the duration ({T:g} s)")
-    from cross_checks.scenario.limits import LimitExceeded, check_run_steps
-    try:
-        check_run_steps(T, dt, "--dt" if args.dt is not None else "--duration")
-    except LimitExceeded as exc:
-        raise BadInput(str(exc)) from None
+    dt, T = _step_and_duration(args, sc)
     if args.json:
         sys.stdout.write(resolved_json(sc, dt, T))
     else:
@@ -528,15 +535,7 @@ def cmd_run(args) -> int:
     refuse_inputs_as_outputs([("--out", args.out, False), ("--out (its sidecar)", sidecar_path(args.out), False)],
                              _scenario_inputs([args.scenario]) + _engine_file_inputs(args))
     sc = load_scenario(args.scenario)
-    dt = args.dt if args.dt is not None else sc.dt_s
-    T = args.duration if args.duration is not None else sc.duration_s
-    if dt > T:
-        raise BadInput(f"--dt {dt:g}: must be <= the duration ({T:g} s)")
-    from cross_checks.scenario.limits import LimitExceeded, check_run_steps
-    try:
-        check_run_steps(T, dt, "--dt" if args.dt is not None else "--duration")
-    except LimitExceeded as exc:
-        raise BadInput(str(exc)) from None
+    dt, T = _step_and_duration(args, sc)
     try:
         traj = run_variant(sc, args.engine, dt, T)
     except EngineUnavailable as exc:
