@@ -31,11 +31,14 @@ MAX_OPTION_SECONDS = 1e6
 MAX_OPTION_JOBS = 1024
 
 
-def _seconds_option(text: str) -> float:
-    v = _positive_float(text)
-    if v > MAX_OPTION_SECONDS:
-        raise argparse.ArgumentTypeError(f"must be at most {MAX_OPTION_SECONDS:g} s (11.6 days), got {text!r}")
-    return v
+def _at_most(parse, limit, unit: str = ""):
+    """An option type: ``parse(text)``, then refused above ``limit`` (said with its unit)."""
+    def option(text: str):
+        v = parse(text)
+        if v > limit:
+            raise argparse.ArgumentTypeError(f"must be at most {limit:g}{unit}, got {text!r}")
+        return v
+    return option
 
 
 def _positive_float(text: str) -> float:
@@ -322,18 +325,9 @@ def _positive_int(text: str) -> int:
     return v
 
 
-def _jobs_option(text: str) -> int:
-    v = _positive_int(text)
-    if v > MAX_OPTION_JOBS:
-        raise argparse.ArgumentTypeError(f"must be at most {MAX_OPTION_JOBS}, got {v}")
-    return v
-
-
-def _repeats_option(text: str) -> int:
-    v = _positive_int(text)
-    if v > 100:
-        raise argparse.ArgumentTypeError(f"must be at most 100, got {v}")
-    return v
+_seconds_option = _at_most(_positive_float, MAX_OPTION_SECONDS, " s (11.6 days)")
+_jobs_option = _at_most(_positive_int, MAX_OPTION_JOBS)
+_repeats_option = _at_most(_positive_int, 100)
 
 
 def _nonnegative_int(text: str) -> int:
