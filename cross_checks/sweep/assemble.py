@@ -248,12 +248,18 @@ def _run_statistics(jobs, rows, wall_s) -> dict:
                            "converges_min_order": tol.CONVERGES_MIN_ORDER}}
 
 
-def _skipped_record(name: str, reason: str) -> dict:
-    """A variant the sweep left out: why, and whether its engine is an optional one that is simply not
-    installed (``installed`` false, ``required`` false: compare counts its baseline rows as not
+def _skipped_records(skipped: dict) -> list:
+    """The variants the sweep left out: why, and whether each one's engine is an optional one that is simply
+    not installed (``installed`` false, ``required`` false: compare counts its baseline rows as not
     compared) or one that is installed and broken (its rows are missing)."""
+    if not skipped:
+        return []
     from cross_checks.engines import all_variants
-    info = next((v for v in all_variants() if v.name == name), None)
+    infos = {v.name: v for v in all_variants()}
+    return [_skipped_record(name, reason, infos.get(name)) for name, reason in skipped.items()]
+
+
+def _skipped_record(name: str, reason: str, info) -> dict:
     return {"name": name, "reason": reason, "installed": info.installed if info else True,
             "required": info.required if info else False}
 
@@ -266,7 +272,7 @@ def build_summary(*, provenance, scenarios, variants, skipped, convergence, loca
         "provenance": provenance,
         "scenarios": scenarios,
         "variants": variants,
-        "skipped_variants": [_skipped_record(k, r) for k, r in (skipped or {}).items()],
+        "skipped_variants": _skipped_records(skipped),
         "convergence": convergence,
         "local_convergence": local,
         "agreement": agreement,

@@ -118,8 +118,9 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
     """
     out = _checked_output(out_dir, scenarios)
     jobs = max(1, int(jobs or usable_cores()))
+    planned = plan_jobs(scenarios, variants)
     if executor is None:   # local processes: never more than the runs to do, nor than 4 per core
-        jobs = min(jobs, max(1, len(plan_jobs(scenarios, variants)) + len(scenarios)), 4 * usable_cores())
+        jobs = min(jobs, max(1, len(planned) + len(scenarios)), 4 * usable_cores())
     started = datetime.now(UTC).replace(microsecond=0).isoformat()
     t_start = time.perf_counter()
     cache_root = str(cache_dir())
@@ -137,7 +138,7 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
         show = sys.stderr.isatty() if progress is None else progress
         refs = run_references(runner, scenarios, work, cache_root, use_cache, reference_time_limit_s, show)
         second = second_reference_jobs(scenarios, refs) if second_reference else []
-        records = run_jobs(runner, plan_jobs(scenarios, variants), scenarios, refs, work, cache_root, use_cache,
+        records = run_jobs(runner, planned, scenarios, refs, work, cache_root, use_cache,
                            run_time_limit_s, show, second=second, second_time_limit_s=reference_time_limit_s)
         refs = _with_second_references(refs, {s.scenario_index: records.pop(s) for s in second})
         runner.close()
