@@ -19,6 +19,12 @@ An adapter provides:
                       (``Run.y``: (n+1, 13) packed [x_W, v_W, q_WB (w x y z), w_W]); a blow-up stops the
                       run with ``diverged_at_s`` set, never an exception. :class:`EngineError` says the
                       engine refused or failed (a ``failed`` row with its message).
+``simulate_many(variant, requests) -> list``   (optional)
+                      the runs of many :class:`RunRequest` (scenario, Δt, steps) in one call: each
+                      element a ``Run`` equal to ``simulate``'s for that request, or the
+                      :class:`EngineError` it raised. The default calls ``simulate`` once per request;
+                      an engine that batches (MuJoCo's rollout, a reused PyBullet world, the reference's
+                      columns) overrides it. The sweep and the fuzz run through it.
 ``one_step(scenario, variant, dt_s, y_start) -> y_next``   (optional)
                       for each row of ``y_start`` (T, 13), one step of ``dt_s`` from exactly that
                       state (the local error mode of the metrics). Without it the local-error columns
@@ -54,7 +60,7 @@ import numpy as np
 __all__ = ["EngineAdapter", "Variant", "harness_force_torque", "stage_force_torque", "harness_force_torque_floats",
            "stage_force_torque_floats", "apply_decay_prestep",
            "decay_factors", "EngineError", "optional_import", "require", "EngineNotInstalled", "installed_version",
-           "library_files"]
+           "library_files", "RunRequest"]
 
 
 class EngineError(RuntimeError):
@@ -198,6 +204,16 @@ def apply_decay_prestep(scenario, y, dt_s: float):
 
 
 @dataclass(frozen=True)
+class RunRequest:
+    """One free run asked of :meth:`EngineAdapter.simulate_many`: ``n_steps`` steps of ``dt_s`` (s) from
+    ``scenario``'s initial state."""
+
+    scenario: object
+    dt_s: float
+    n_steps: int
+
+
+@dataclass(frozen=True)
 class Variant:
     """A variant an engine offers: its declared global order (the error at a fixed final time shrinks
     like Δt^order; verdicts check it) and a one-line description for ``rbcheck list`` and the report."""
@@ -241,6 +257,18 @@ class EngineAdapter(abc.ABC):
     @abc.abstractmethod
     def simulate(self, scenario, variant: str, dt_s: float, n_steps: int):
         """``n_steps`` steps of ``dt_s`` from the scenario's initial state -> reference_sim.simulate.Run."""
+
+    def simulate_many(self, variant: str, requests) -> list:
+        """The runs of ``requests`` (a sequence of :class:`RunRequest`) with ``variant``, in order: each a
+        Run as :meth:`simulate` gives it, or the :class:`EngineError` that run raised (one failing run
+        does not fail the others). Engines that batch override this; the default runs them one by one."""
+        out: list = []
+        for r in requests:
+            try:
+                out.append(self.simulate(r.scenario, variant, r.dt_s, r.n_steps))
+            except EngineError as exc:
+                out.append(exc)
+        return out
 
     def one_step(self, scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
         """One step from each row of ``y_start`` (T, 13) -> (T, 13). Optional (see :attr:`has_one_step`):
