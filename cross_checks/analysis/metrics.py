@@ -64,36 +64,20 @@ def conserved(forces) -> dict:
     """Which quantities the physics conserves: ``{name: (bool, reason when not)}`` for
     "energy", "angular_momentum", "linear_momentum"."""
     fm = forces
-    why_e = []
-    if fm.linear_drag_N_s_per_m:
-        why_e.append("linear drag")
-    if fm.has_decay:
-        why_e.append("velocity decay")
-    if fm.point_forces:
-        why_e.append("applied point forces")
-    if fm.torques:
-        why_e.append("applied torques")
-    why_l = []
-    if not fm.torque_free:
-        why_l.append("torques act about the COM")
-    if fm.angular_velocity_decay != 1.0:
-        why_l.append("angular velocity decay")
-    why_p = []
-    if np.any(np.asarray(fm.gravity_W) != 0):
-        why_p.append("gravity")
-    if fm.springs:
-        why_p.append("springs")
-    if fm.linear_drag_N_s_per_m:
-        why_p.append("linear drag")
-    if fm.point_forces:
-        why_p.append("applied forces")
-    if fm.velocity_decay != 1.0:
-        why_p.append("velocity decay")
-    return {
-        "energy": (not why_e, "not conserved: " + ", ".join(why_e) if why_e else ""),
-        "angular_momentum": (not why_l, "not conserved: " + ", ".join(why_l) if why_l else ""),
-        "linear_momentum": (not why_p, "not conserved: " + ", ".join(why_p) if why_p else ""),
+    gravity, drag = bool(np.any(np.asarray(fm.gravity_W) != 0)), bool(fm.linear_drag_N_s_per_m)
+    causes = {
+        "energy": [(drag, "linear drag"), (fm.has_decay, "velocity decay"),
+                   (bool(fm.point_forces), "applied point forces"), (bool(fm.torques), "applied torques")],
+        "angular_momentum": [(not fm.torque_free, "torques act about the COM"),
+                             (fm.angular_velocity_decay != 1.0, "angular velocity decay")],
+        "linear_momentum": [(gravity, "gravity"), (bool(fm.springs), "springs"), (drag, "linear drag"),
+                            (bool(fm.point_forces), "applied forces"), (fm.velocity_decay != 1.0, "velocity decay")],
     }
+    out = {}
+    for name, found in causes.items():
+        why = [text for present, text in found if present]
+        out[name] = (not why, "not conserved: " + ", ".join(why) if why else "")
+    return out
 
 
 def relative_drift(values):

@@ -356,36 +356,30 @@ def _parse_forces(r, raw, dt, com_offset) -> ForceModel:
         p = r.vector(d, key, fld, 3)
         return p if com_offset is None else p - com_offset
 
-    springs = []
-    for i, s in enumerate(r.array_of_tables(fr, "spring", "forces.spring")):
-        where = f"forces.spring[{i}]"
-        r.check_keys(s, _SPRING, where)
-        springs.append(Spring(
-            anchor_W=r.vector(s, "anchor", f"{where}.anchor", 3, required=True),
-            attach_B=body_point(s, "attach", f"{where}.attach"),
-            stiffness_N_per_m=r.number(s, "stiffness", f"{where}.stiffness", required=True, nonneg=True),
-            rest_length_m=r.number(s, "rest_length", f"{where}.rest_length", default=0.0, nonneg=True),
-        ))
-    points = []
-    for i, p in enumerate(r.array_of_tables(fr, "point", "forces.point")):
-        where = f"forces.point[{i}]"
-        r.check_keys(p, _POINT, where)
-        points.append(PointForce(
-            force=r.vector(p, "force", f"{where}.force", 3, required=True),
-            point_B=body_point(p, "point", f"{where}.point"),
-            frame=r.string(p, "frame", f"{where}.frame", default="world", choices=FRAMES),
-        ))
-    torques = []
-    for i, t in enumerate(r.array_of_tables(fr, "torque", "forces.torque")):
-        where = f"forces.torque[{i}]"
-        r.check_keys(t, _TORQUE, where)
-        torques.append(Torque(
-            torque=r.vector(t, "torque", f"{where}.torque", 3, required=True),
-            frame=r.string(t, "frame", f"{where}.frame", default="world", choices=FRAMES),
-        ))
+    def each(table, keys, build):
+        """Every ``[[forces.TABLE]]`` entry, its keys checked, built by ``build(entry, where)``."""
+        out = []
+        for i, d in enumerate(r.array_of_tables(fr, table, f"forces.{table}")):
+            where = f"forces.{table}[{i}]"
+            r.check_keys(d, keys, where)
+            out.append(build(d, where))
+        return tuple(out)
+
+    springs = each("spring", _SPRING, lambda s, where: Spring(
+        anchor_W=r.vector(s, "anchor", f"{where}.anchor", 3, required=True),
+        attach_B=body_point(s, "attach", f"{where}.attach"),
+        stiffness_N_per_m=r.number(s, "stiffness", f"{where}.stiffness", required=True, nonneg=True),
+        rest_length_m=r.number(s, "rest_length", f"{where}.rest_length", default=0.0, nonneg=True)))
+    points = each("point", _POINT, lambda p, where: PointForce(
+        force=r.vector(p, "force", f"{where}.force", 3, required=True),
+        point_B=body_point(p, "point", f"{where}.point"),
+        frame=r.string(p, "frame", f"{where}.frame", default="world", choices=FRAMES)))
+    torques = each("torque", _TORQUE, lambda t, where: Torque(
+        torque=r.vector(t, "torque", f"{where}.torque", 3, required=True),
+        frame=r.string(t, "frame", f"{where}.frame", default="world", choices=FRAMES)))
     return ForceModel(gravity_W=gravity, linear_drag_N_s_per_m=drag, velocity_decay=decays[0],
-                      angular_velocity_decay=decays[1], decay_dt_s=dt, springs=tuple(springs),
-                      point_forces=tuple(points), torques=tuple(torques))
+                      angular_velocity_decay=decays[1], decay_dt_s=dt, springs=springs,
+                      point_forces=points, torques=torques)
 
 
 def _check_scenario(r, sc) -> None:
