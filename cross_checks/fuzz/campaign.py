@@ -31,7 +31,7 @@ import numpy as np
 
 from cross_checks.analysis.convergence import fmt_order
 from cross_checks.core.files import atomic_write_text
-from cross_checks.fuzz import drivers, generate, known, pipeline
+from cross_checks.fuzz import generate, known, pipeline
 from cross_checks.fuzz import properties as P
 from cross_checks.fuzz import shrink as S
 
@@ -97,16 +97,13 @@ def compute_batch(seed, batch, variants) -> dict:
     from threadpoolctl import threadpool_limits
 
     from cross_checks.analysis.expectations import memoized
-    try:
-        # one BLAS thread: the large stacked DOP853 solves give the same last bits whatever the machine's core
-        # count (a batch is a function of its seed alone, as the cache key assumes), and two workers on two
-        # cores no longer fight over four BLAS threads (docs/fuzz.md §4)
-        with threadpool_limits(limits=1, user_api="blas"), memoized():
-            cases = pipeline.prepare(draws, n0)
-            contexts, members, y_end = pipeline.measure(cases)
-            outcomes, seconds = pipeline.evaluate(cases, contexts, members, y_end, variants)
-    finally:
-        drivers.clear_cache()   # the batch's compiled models and steppers: not needed by the next batch
+    # one BLAS thread: the large stacked DOP853 solves give the same last bits whatever the machine's core
+    # count (a batch is a function of its seed alone, as the cache key assumes), and two workers on two
+    # cores no longer fight over four BLAS threads (docs/fuzz.md §4)
+    with threadpool_limits(limits=1, user_api="blas"), memoized():
+        cases = pipeline.prepare(draws, n0)
+        contexts, members, y_end = pipeline.measure(cases)
+        outcomes, seconds = pipeline.evaluate(cases, contexts, members, y_end, variants)
     out = []
     for c, o in zip(cases, outcomes):
         out.append({"index": c.index, "numbers": o.numbers, "violations": o.violations, "tally": o.tally,
