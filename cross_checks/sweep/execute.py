@@ -15,7 +15,13 @@ from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
 
-from cross_checks.sweep.jobs import failed_record, failed_second_reference, reference_job, run_job, second_reference_job
+from cross_checks.sweep.jobs import (
+    failed_record,
+    failed_second_reference,
+    reference_job,
+    run_job_group,
+    second_reference_job,
+)
 from cross_checks.sweep.lifecycle import worker_init
 
 __all__ = ["Runner", "ScenarioReference", "SecondReference", "run_references", "run_jobs", "second_reference_jobs"]
@@ -193,19 +199,21 @@ class SecondReference:
 
 
 def _run_job_item(item):
-    """``item`` = (job, scenario, ref_path, cache_root, use_cache, user_engines, time_limit_s, marker): one
-    small pickle per job (``job`` a :class:`SecondReference`: that scenario's second reference).
+    """``item`` = (jobs, scenario, ref_path, cache_root, use_cache, user_engines, time_limit_s, marker): one
+    small pickle per group of jobs — the jobs of one scenario and variant, whose records are returned in
+    order (:func:`cross_checks.sweep.jobs.run_job_group`: their runs in one ``simulate_many`` call) — or
+    per :class:`SecondReference` (``jobs``: that scenario's second reference, its record returned).
 
     ``user_engines`` are the parent's engine-file adapters (a worker that was not forked from the
-    parent, e.g. on Dask, registers them here). ``marker`` (a file path) exists while the job runs,
-    so after a worker crash the parent knows which jobs were in flight. Any error of the harness
-    itself becomes a failed row, so one bad job never stops the sweep.
+    parent, e.g. on Dask, registers them here). ``marker`` (a file path) exists while the item runs,
+    so after a worker crash the parent knows which items were in flight. Any error of the harness
+    itself becomes failed rows, so one bad job never stops the sweep.
     """
-    job, scenario, ref_path, cache_root, use_cache, user_engines, time_limit_s, marker = item
+    jobs, scenario, ref_path, cache_root, use_cache, user_engines, time_limit_s, marker = item
     Path(marker).touch()
-    if isinstance(job, SecondReference):
+    if isinstance(jobs, SecondReference):
         try:
-            return second_reference_job(scenario, ref_path, job.measured, cache_root, use_cache, time_limit_s)
+            return second_reference_job(scenario, ref_path, jobs.measured, cache_root, use_cache, time_limit_s)
         except Exception as exc:  # noqa: BLE001 - said in the scenario's record, the sweep goes on
             return failed_second_reference(f"internal error: {type(exc).__name__}: {exc}")
         finally:
@@ -213,9 +221,10 @@ def _run_job_item(item):
     try:
         from cross_checks.engines import adopt_user_engines
         adopt_user_engines(user_engines)
-        return run_job(job, scenario, ref_path, cache_root, use_cache, time_limit_s)
+        return run_job_group(list(jobs), scenario, ref_path, cache_root, use_cache, time_limit_s)
     except Exception as exc:  # noqa: BLE001
-        return failed_record(job, scenario, f"internal error while measuring the run: {type(exc).__name__}: {exc}")
+        why = f"internal error while measuring the run: {type(exc).__name__}: {exc}"
+        return [failed_record(job, scenario, why) for job in jobs]
     finally:
         Path(marker).unlink(missing_ok=True)
 
@@ -224,11 +233,16 @@ def _in_flight(item) -> bool:
     return Path(item[-1]).exists()
 
 
-def _crashed(item) -> dict:
+def _crashed(item):
+    """The result of an item whose worker died with nothing else running: the second reference's record,
+    the job's failed record (a group of one), or None for a group of several (its jobs then run one by
+    one, so that the crash is one job's)."""
     Path(item[-1]).unlink(missing_ok=True)
     if isinstance(item[0], SecondReference):
         return failed_second_reference("the worker process died computing it (a crash inside Drake?)")
-    return failed_record(item[0], item[1], "the worker process died running this job, alone (a crash inside the engine?)")
+    if len(item[0]) > 1:
+        return None
+    return [failed_record(item[0][0], item[1], "the worker process died running this job, alone (a crash inside the engine?)")]
 
 
 def second_reference_jobs(scenarios, references) -> list:
@@ -242,32 +256,57 @@ def second_reference_jobs(scenarios, references) -> list:
             if not ref.error]
 
 
+def _groups(jobs) -> list:
+    """The jobs in groups of one scenario and variant (its Δt ladder: one ``simulate_many`` call), the
+    longest group first."""
+    groups: dict = {}
+    for j in jobs:
+        groups.setdefault((j.scenario_index, j.variant), []).append(j)
+    return sorted((tuple(g) for g in groups.values()), key=lambda g: -sum(j.cost for j in g))
+
+
 def run_jobs(runner: Runner, jobs, scenarios, references, work_dir, cache_root, use_cache, time_limit_s,
              show_progress: bool, second=(), second_time_limit_s=None) -> dict:
-    """``{Job: record}`` of every job (:func:`cross_checks.sweep.jobs.run_job`), run in the order given,
-    after the :class:`SecondReference` jobs ``second`` (their records: the summary's ``second_reference``);
-    a job whose scenario has no reference is a failed row carrying the reason."""
+    """``{Job: record}`` of every job (:func:`cross_checks.sweep.jobs.run_job_group`, by group of one scenario
+    and variant), after the :class:`SecondReference` jobs ``second`` (their records: the summary's
+    ``second_reference``); a job whose scenario has no reference is a failed row carrying the reason."""
     from cross_checks.core.progress import Progress
     from cross_checks.engines import user_engines
     records = {j: failed_record(j, scenarios[j.scenario_index], references[j.scenario_index].error)
                for j in jobs if references[j.scenario_index].error}
-    todo = list(second) + [j for j in jobs if j not in records]
     inflight = Path(work_dir) / "inflight"
     inflight.mkdir()
     extra_engines = user_engines()
-    items = [(j, scenarios[j.scenario_index], references[j.scenario_index].path, cache_root, use_cache,
-              extra_engines, second_time_limit_s if isinstance(j, SecondReference) else time_limit_s,
-              str(inflight / str(k))) for k, j in enumerate(todo)]
-    n_runs = sum(1 for j in todo if not isinstance(j, SecondReference))  # what the summary's run count counts
+    made = [0]
+
+    def items(todo):
+        out = []
+        for g in todo:
+            i = g.scenario_index if isinstance(g, SecondReference) else g[0].scenario_index
+            limit = second_time_limit_s if isinstance(g, SecondReference) else time_limit_s
+            out.append((g, scenarios[i], references[i].path, cache_root, use_cache, extra_engines, limit,
+                        str(inflight / str(made[0] + len(out)))))
+        made[0] += len(out)
+        return out
+
+    todo = list(second) + _groups([j for j in jobs if j not in records])
+    crashed: list = []
+    n_runs = sum(len(g) for g in todo if not isinstance(g, SecondReference))  # what the summary's run count counts
     with Progress("rbcheck sweep", "runs", n_runs, enabled=show_progress,
-                  total_work=sum(j.cost for j in todo)) as bar:
-        def done(item, rec):
-            j = item[0]
-            records[j] = rec
-            if isinstance(j, SecondReference):   # among the runs, not one of them
-                bar.update(0, f"{j.scenario} second reference")
-            else:
+                  total_work=sum(j.cost for g in todo if not isinstance(g, SecondReference) for j in g)) as bar:
+        def done(item, recs):
+            if isinstance(item[0], SecondReference):   # among the runs, not one of them
+                records[item[0]] = recs
+                bar.update(0, f"{item[0].scenario} second reference")
+                return
+            if recs is None:
+                crashed.extend((j,) for j in item[0])
+                return
+            for j, rec in zip(item[0], recs):
+                records[j] = rec
                 bar.update(1, f"{j.scenario} {j.variant} dt={j.dt_s:g}", work=j.cost)
 
-        runner.map_unordered(_run_job_item, items, done, on_crash=_crashed, in_flight=_in_flight)
+        runner.map_unordered(_run_job_item, items(todo), done, on_crash=_crashed, in_flight=_in_flight)
+        if crashed:
+            runner.map_unordered(_run_job_item, items(crashed), done, on_crash=_crashed, in_flight=_in_flight)
     return records
