@@ -9,6 +9,7 @@ sweep goes on.
 """
 from __future__ import annotations
 
+import itertools
 import os
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
@@ -25,6 +26,9 @@ from cross_checks.sweep.jobs import (
 from cross_checks.sweep.lifecycle import worker_init
 
 __all__ = ["Runner", "ScenarioReference", "SecondReference", "run_references", "run_jobs", "second_reference_jobs"]
+
+#: The end of an iterable of items (``next(items, _END)``).
+_END = object()
 
 
 class Runner:
@@ -44,13 +48,15 @@ class Runner:
         return ProcessPoolExecutor(max_workers=self.jobs, mp_context=ctx, initializer=worker_init,
                                    initargs=(os.getpid(),))
 
-    def map_unordered(self, fn, items, on_done=None, on_crash=None, in_flight=None):
+    def map_unordered(self, fn, items, on_done=None, on_crash=None, in_flight=None, window=None):
         """``fn(item)`` for each item; returns ``[(item, result)]`` in completion order.
 
-        A worker that dies (e.g. a crash inside an engine) breaks the pool, and every unfinished item
-        fails with BrokenProcessPool. ``in_flight(item)`` says whether an item was running at that
-        moment: those are re-run one at a time in a fresh pool, so a crash names its own item, whose
-        result is then ``on_crash(item)``; the others are simply resubmitted.
+        ``items`` may be any iterable: it is read as work is submitted, at most ``window`` items in
+        flight (None: all of them at once), so a generator can decide whether to yield more (e.g. while a
+        time budget lasts). A worker that dies (e.g. a crash inside an engine) breaks the pool, and every
+        unfinished item fails with BrokenProcessPool. ``in_flight(item)`` says whether an item was running
+        at that moment: those are re-run one at a time in a fresh pool, so a crash names its own item,
+        whose result is then ``on_crash(item)``; the others are simply resubmitted.
         """
         out = []
 
@@ -59,16 +65,19 @@ class Runner:
             if on_done:
                 on_done(it, r)
 
+        items = iter(items)
         if self.pool is None:
             for it in items:
                 record(it, fn(it))
             return out
-        todo, isolate = list(items), []
-        while todo or isolate:
+        todo: list = []
+        isolate: list = []
+        while True:
             for it in isolate:
                 record(it, self._run_alone(fn, it, on_crash))
-            todo, isolate = self._round(fn, todo, record, in_flight)
-        return out
+            todo, isolate = self._round(fn, itertools.chain(todo, items), record, in_flight, window)
+            if not todo and not isolate:
+                return out
 
     def _run_alone(self, fn, item, on_crash):
         """``fn(item)`` with nothing else in the pool, so a crash is this item's: ``on_crash(item)``."""
@@ -80,19 +89,33 @@ class Runner:
                 raise
             return on_crash(item)
 
-    def _round(self, fn, items, record, in_flight):
-        """Submit every item and record the results; returns ``(to resubmit, to run alone)``: the items
-        a broken pool did not finish, split by whether they were running when it broke."""
-        futs = {self.pool.submit(fn, it): it for it in items}
-        if self.external:
-            self.submitted.extend(futs)
-        todo, isolate = [], []
-        pending = set(futs)
+    def _round(self, fn, items, record, in_flight, window):
+        """Submit the items (at most ``window`` in flight) and record the results until the items run out or
+        the pool breaks; returns ``(to resubmit, to run alone)``: the items a broken pool did not finish,
+        split by whether they were running when it broke."""
+        futs: dict = {}
+        todo: list = []
+        isolate: list = []
         broken = False
-        while pending:
-            done, pending = wait(pending, return_when=FIRST_COMPLETED)
+        while True:
+            while not broken and (window is None or len(futs) < window):
+                it = next(items, _END)
+                if it is _END:
+                    break
+                try:
+                    f = self.pool.submit(fn, it)
+                except BrokenProcessPool:
+                    broken = True
+                    todo.append(it)
+                    break
+                futs[f] = it
+                if self.external:
+                    self.submitted.append(f)
+            if not futs:
+                break
+            done, _ = wait(set(futs), return_when=FIRST_COMPLETED)
             for f in done:
-                it = futs[f]
+                it = futs.pop(f)
                 try:
                     r = f.result()
                 except BrokenProcessPool:
