@@ -65,9 +65,6 @@ VARIANTS = {
 
 #: Steps between divergence checks of a free-running simulation (checked vectorised per chunk).
 _CHUNK = 256
-#: Constant forces and no decay: record the run with mujoco.rollout instead of a Python loop of mj_step
-#: (same numbers bit for bit: tests/cross_checks/engines/test_mujoco_engine.py).
-USE_ROLLOUT = True
 _BODY = 1  # body id of the free body (0 is the world)
 
 _LOCK = threading.RLock()
@@ -339,7 +336,8 @@ def _model_and_data(scenario, variant, dt_s):
 # --- adapter entry points ----------------------------------------------------------------------------
 
 def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
-    """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded."""
+    """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded: a
+    loop of ``mj_step`` (:func:`simulate_many` records runs with ``mujoco.rollout``, the same numbers)."""
     m, d, xfrc, weight = _model_and_data(scenario, variant, dt_s)
     forces = scenario.problem.forces
     y0 = scenario.problem.initial_packed()
@@ -349,8 +347,6 @@ def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
     per_step = forces.state_dependent and not per_stage
     if not forces.state_dependent:
         _apply(xfrc, *harness_force_torque(scenario, y0, dt_s), weight)   # constant (decay scaling included)
-    if USE_ROLLOUT and not (per_step or per_stage or decay):
-        return _simulate_rollout(m, d, dt_s, n_steps)
     control = _stage_force_writer(scenario, d, xfrc, weight) if per_stage else None
     return _simulate_loop(scenario, m, d, dt_s, n_steps, control, per_step, decay, xfrc, weight)
 
@@ -393,28 +389,6 @@ def _simulate_loop(scenario, m, d, dt_s, n_steps, control, per_step, decay, xfrc
             if bad is not None:
                 n_bad, what = bad
                 return diverged(y[:n_bad].copy(), dt_s, f" ({what})")
-    return Run(dt_s * np.arange(n_steps + 1), y)
-
-
-def _simulate_rollout(m, d, dt_s: float, n_steps: int) -> Run:
-    """Constant applied forces (already in ``d.xfrc_applied``), no decay: ``mujoco.rollout`` steps and
-    records all ``n_steps`` without per-step Python (bit-identical to a loop of mj_step, tested)."""
-    from mujoco import rollout
-    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS  # [time, qpos (7), qvel (6), ...]
-    state0 = np.empty(mujoco.mj_stateSize(m, spec))
-    mujoco.mj_getState(m, d, state0, spec)
-    ctrl_spec = mujoco.mjtState.mjSTATE_XFRC_APPLIED
-    control = np.empty((1, 1, mujoco.mj_stateSize(m, ctrl_spec)))
-    mujoco.mj_getState(m, d, control[0, 0], ctrl_spec)
-    with Session(d) as session, np.errstate(all="ignore"):
-        states, _ = rollout.rollout(m, d, state0[None], control, control_spec=ctrl_spec, nstep=n_steps)
-    qpos = np.concatenate([state0[None, 1:8], states[0, :, 1:8]])
-    qvel = np.concatenate([state0[None, 8:14], states[0, :, 8:14]])
-    y = to_packed(qpos, qvel)
-    bad = _divergence(y, 0, (1, n_steps), session, dt_s)
-    if bad is not None:
-        n_bad, what = bad
-        return diverged(y[:n_bad], dt_s, f" ({what})")
     return Run(dt_s * np.arange(n_steps + 1), y)
 
 

@@ -223,34 +223,13 @@ def test_fast_spin_diverges_and_is_reported_without_log_file(tmp_path, monkeypat
 
 @pytest.mark.parametrize("variant", ["euler", "rk4", "implicit", "implicitfast"])
 @pytest.mark.parametrize("name", ["tennis_racket", "particle_body", "projectile"])
-def test_rollout_path_is_bit_identical_to_the_mj_step_loop(monkeypatch, name, variant):
+def test_rollout_runs_are_bit_identical_to_the_mj_step_loop(name, variant):
+    from cross_checks.engines.base import RunRequest
     sc = load_scenario(name)
     n = min(sc.n_steps(), 3000)
-    fast = me.simulate(sc, variant, sc.dt_s, n)
-    monkeypatch.setattr(me, "USE_ROLLOUT", False)
+    fast = me.MujocoAdapter().simulate_many(variant, [RunRequest(sc, sc.dt_s, n)])[0]
     loop = me.simulate(sc, variant, sc.dt_s, n)
     assert np.array_equal(fast.y, loop.y) and np.array_equal(fast.t_s, loop.t_s)
-
-
-def test_rollout_path_reports_divergence_like_the_loop(monkeypatch):
-    sc = parse_scenario(FAST_SPIN_FOR_ROLLOUT, "fast.toml")
-    fast = me.simulate(sc, "euler", 0.01, 2000)
-    monkeypatch.setattr(me, "USE_ROLLOUT", False)
-    loop = me.simulate(sc, "euler", 0.01, 2000)
-    assert fast.diverged_at_s == loop.diverged_at_s and fast.diverged_at_s is not None
-    assert np.array_equal(fast.y, loop.y)
-
-
-FAST_SPIN_FOR_ROLLOUT = """
-name = "fast_spin"
-duration = 20.0
-dt = 0.01
-[body]
-mass = 1.0
-inertia = [1.0, 2.0, 3.0]
-[initial]
-angular_velocity = [0.1, 20.0, 0.1]
-"""
 
 
 def test_runs_of_one_scenario_in_a_row_take_its_model_with_a_new_models_numbers():
