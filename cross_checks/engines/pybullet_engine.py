@@ -43,7 +43,6 @@ from cross_checks.engines.base import (
     Variant,
     apply_decay_prestep,
     decay_factors,
-    harness_force_torque,
     library_files,
     optional_import,
     require,
@@ -268,21 +267,17 @@ def _free_run(B, scenario, y0, dt_s: float, n_steps: int) -> Run:
     """The free run of body ``B`` (a new ``BulletBody`` of ``scenario``, or one kept from a run of the same
     scenario and variant with its step set to ``dt_s``) from ``y0``: put at ``y0``, then stepped
     ``n_steps`` times with the harness's forces. The caller holds ``LOCK``."""
-    forces = scenario.problem.forces
     B.set_state(y0)
     raw = np.empty((n_steps + 1, 13))
     raw[0] = B.read_raw()
-    if forces.state_dependent or forces.has_decay:
-        return _run_per_step(B, scenario, y0, raw, dt_s, n_steps)
-    f, tau = harness_force_torque(scenario, y0, dt_s)
-    return _run_constant(B, raw, (f - B.weight).tolist(), tau.tolist(), dt_s, n_steps)
+    return _run_steps(B, scenario, y0, raw, dt_s, n_steps)
 
 
-def _run_per_step(B, scenario, y0, raw, dt_s: float, n_steps: int) -> Run:
-    """The free run with state-dependent forces and/or the pre-step velocity decay: every step the forces
-    from the start-of-step state (the first from ``y0`` itself), the decayed velocity set with
-    resetBaseVelocity, the forces applied. Per step in plain floats (the states as PyBullet's tuples, the
-    harness through step_floats): the numbers of the NumPy formulas, bit for bit (tested)."""
+def _run_steps(B, scenario, y0, raw, dt_s: float, n_steps: int) -> Run:
+    """The free run's steps: the forces from ``y0`` (constant ones kept, state-dependent ones from every
+    start-of-step state), the decayed velocity set with resetBaseVelocity when there is decay, the forces
+    applied (none when zero: ``BulletBody.apply``). Per step in plain floats (the states as PyBullet's
+    tuples, the harness through step_floats): the numbers of the NumPy formulas, bit for bit (tested)."""
     forces = scenario.problem.forces
     state_dependent, decay = forces.state_dependent, forces.has_decay   # properties: read once
     gv, gw = (float(g) for g in decay_factors(scenario, dt_s))
@@ -311,27 +306,6 @@ def _run_per_step(B, scenario, y0, raw, dt_s: float, n_steps: int) -> Run:
             prev = ps + lin + orn + ang
             rows.append(prev)
         now.update(f=f, tau=tau, prev=prev)
-        return rows
-    return _recorded(B, raw, dt_s, n_steps, steps)
-
-
-def _run_constant(B, raw, f_W, tau_W, dt_s: float, n_steps: int) -> Run:
-    """The free run when the applied force ``f_W`` (weight removed) and torque ``tau_W`` (3 floats each)
-    are constant and there is no decay (most of the catalog): the per-step Python cut to the engine calls,
-    nothing applied when force and torque are zero."""
-    applies = any(v != 0.0 for v in f_W) or any(v != 0.0 for v in tau_W)
-
-    def steps(start, stop):
-        c, b = B.c, B.b
-        step, pose, vel = p.stepSimulation, p.getBasePositionAndOrientation, p.getBaseVelocity
-        rows = []
-        for n in range(start, stop):
-            if applies:
-                B.apply(f_W, tau_W, rows[-1][0:3] if rows else raw[n - 1, 0:3].tolist())
-            step(physicsClientId=c)
-            pos, orn = pose(b, physicsClientId=c)
-            lin, ang = vel(b, physicsClientId=c)
-            rows.append(pos + lin + orn + ang)
         return rows
     return _recorded(B, raw, dt_s, n_steps, steps)
 
