@@ -15,7 +15,7 @@ import numpy as np
 from cross_checks.core import tolerances as tol
 from cross_checks.engines import get_adapter, has_one_step, split_variant
 from cross_checks.engines.base import EngineError, RunRequest
-from cross_checks.sweep.lifecycle import time_limit
+from cross_checks.sweep.lifecycle import each_within_limits
 
 __all__ = ["Runs", "RUNGS", "run_ladder", "one_step"]
 
@@ -64,19 +64,11 @@ def _store(runs, i, run, n):
 
 
 def _simulated(adapter, var, requests) -> list:
-    """``adapter.simulate_many(var, requests)``, each failure as its message, within a run's time limit (as
-    a sweep's run). When the call fails as a whole (over the limit, an error of the engine's own), each
-    request runs alone, so that every run is judged or failed on its own."""
-    try:
-        with time_limit(tol.RUN_TIME_LIMIT_S, "the run"):
-            got = adapter.simulate_many(var, requests)
-    except KeyboardInterrupt:
-        raise
-    except Exception as exc:  # noqa: BLE001 - an engine failure is a failed run, as in a sweep
-        if len(requests) == 1:
-            return [f"{type(exc).__name__}: {exc}".strip()]
-        return [r for req in requests for r in _simulated(adapter, var, [req])]
-    return [f"EngineError: {r}" if isinstance(r, EngineError) else r for r in got]
+    """``adapter.simulate_many(var, requests)``, each failure as its message, each run within a run's time
+    limit as in a sweep (``lifecycle.each_within_limits``)."""
+    runs = each_within_limits(lambda reqs: adapter.simulate_many(var, reqs), requests, tol.RUN_TIME_LIMIT_S,
+                              "the run")
+    return [f"EngineError: {r}" if isinstance(r, EngineError) else r for r in runs]
 
 
 def run_ladder(variant: str, scenarios, h0s, n0: int) -> list:

@@ -35,7 +35,7 @@ from cross_checks.core.quantities import (
     state_errors,
 )
 from cross_checks.sweep import cache, fingerprint
-from cross_checks.sweep.lifecycle import TimeLimitExceeded, time_limit
+from cross_checks.sweep.lifecycle import TimeLimitExceeded, each_within_limits, time_limit
 from cross_checks.sweep.schema import SCHEMA_VERSION
 from reference_sim.state import Q
 
@@ -408,22 +408,15 @@ def _step_defect_columns(row, scenario, y, dt_s) -> None:
 
 def _runs(jobs, scenario, time_limit_s) -> list:
     """Per job ``(trajectory, "")``, or ``(None, the failure's message)``: the jobs' runs in one call
-    (``engines.run_variants``) within the runs' time limits added up. An engine failure (or a run over its
-    time limit) is a row, not a crash; when the call fails as a whole, each job runs alone, within its own
-    limit, so that every failure is its own run's."""
+    (``engines.run_variants``), each within its time limit (``lifecycle.each_within_limits``). An engine
+    failure (or a run over its time limit) is a row, not a crash."""
     from cross_checks.engines import EngineError, run_variants
     if not jobs:
         return []
-    try:
-        with time_limit(time_limit_s and time_limit_s * len(jobs), "the run" if len(jobs) == 1 else "the runs"):
-            runs = run_variants(scenario, jobs[0].variant, [job.dt_s for job in jobs])
-    except Exception as exc:  # noqa: BLE001
-        if len(jobs) > 1:
-            return [r for job in jobs for r in _runs([job], scenario, time_limit_s)]
-        if isinstance(exc, TimeLimitExceeded):
-            return [(None, f"{exc} (cross_checks/core/tolerances.py)")]
-        return [(None, f"{type(exc).__name__}: {exc}".strip())]
-    return [(None, f"{type(r).__name__}: {r}".strip()) if isinstance(r, EngineError) else (r, "") for r in runs]
+    runs = each_within_limits(lambda js: run_variants(scenario, js[0].variant, [j.dt_s for j in js]), jobs,
+                              time_limit_s, "the run")
+    return [(None, r) if isinstance(r, str) else (None, f"{type(r).__name__}: {r}".strip())
+            if isinstance(r, EngineError) else (r, "") for r in runs]
 
 
 def _reference_on(t, t_ref_all, y_ref_all, scenario, label):
