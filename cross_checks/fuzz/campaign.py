@@ -37,10 +37,10 @@ from cross_checks.fuzz import shrink as S
 __all__ = ["BATCH", "N0_CYCLE", "SHRINK_S", "MAX_SHRUNK", "FuzzError", "run_batch", "run_campaign",
            "SUMMARY", "FORMAT"]
 
-#: Cases per batch: the reference kernel, the stacked exact solves and MuJoCo's rollouts cost per call
-#: nearly what they cost for one case up to ~200 members (3 rungs x 64 cases), so a batch's fixed costs
-#: are shared by 64 cases; few enough that a batch takes ~10 s on one core (the budget is checked
-#: between batches).
+#: Cases per batch: the stacked exact solves and the batched engine runs (``simulate_many``: MuJoCo's
+#: rollouts) cost per call nearly what they cost for one case up to ~200 members (3 rungs x 64 cases), so
+#: a batch's fixed costs are shared by 64 cases; few enough that a batch takes ~10 s on one core (a batch
+#: started is finished: the budget decides which start).
 BATCH = 64
 #: Steps at a batch's coarsest rung, cycled over the batches (short and long runs: a long run lets an
 #: error grow, a short one reaches the coarsest fair step).
