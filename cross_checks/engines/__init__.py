@@ -19,7 +19,7 @@ from cross_checks.core.trajectory import Trajectory
 from cross_checks.engines.base import EngineAdapter, EngineError, EngineNotInstalled, Variant
 
 __all__ = ["ENTRY_POINT_GROUP", "VariantInfo", "EngineEntry", "all_variants", "available_variants", "get_adapter",
-           "split_variant", "default_variant", "run_variant", "engine_entries", "engine_variants", "declared_order", "has_one_step",
+           "split_variant", "default_variant", "run_variant", "run_variants", "engine_entries", "engine_variants", "declared_order", "has_one_step",
            "load_engine_files", "engine_files_registered", "register_adapter", "user_engines", "adopt_user_engines", "engine_provenance",
            "reset_registry", "EngineUnavailable", "UnknownVariant", "EngineAdapter", "EngineError", "Variant",
            "REQUIRED_ENGINES", "unusable_required_engines"]
@@ -348,32 +348,51 @@ def engine_provenance(engine: str) -> dict:
     return info
 
 
-def run_variant(scenario, name: str, dt_s: float | None = None, duration_s: float | None = None) -> Trajectory:
-    """Run ``scenario`` with engine variant ``name``; the Trajectory's meta records engine, version,
-    variant, dt, scenario hash, status (``ok``/``diverged``) and ``diverged_at_s``."""
+def run_variants(scenario, name: str, dts, duration_s: float | None = None) -> list:
+    """Run ``scenario`` with engine variant ``name`` at each Δt of ``dts`` (s) in one
+    ``EngineAdapter.simulate_many`` call: per Δt a Trajectory (see :func:`run_variant`), or the
+    EngineError its run raised. Each run's ``wall_s`` is the call's wall time shared in proportion to the
+    runs' steps (an engine that batches has no time of its own per run)."""
+    from cross_checks.engines.base import RunRequest
     engine, variant = split_variant(name)
     adapter = get_adapter(engine)
-    dt = scenario.dt_s if dt_s is None else float(dt_s)
     T = scenario.duration_s if duration_s is None else float(duration_s)
-    n = scenario.n_steps(dt, T)
+    requests = [RunRequest(scenario, float(dt), scenario.n_steps(float(dt), T)) for dt in dts]
     t0 = time.perf_counter()
-    run = adapter.simulate(scenario, variant, dt, n)
+    runs = adapter.simulate_many(variant, requests)
     wall = time.perf_counter() - t0
+    steps = sum(r.n_steps for r in requests) or 1
     import reference_sim
-    meta = {
-        "engine": engine,
-        "engine_version": adapter.version(),
-        "variant": name,
-        "dt_s": dt,
-        "duration_s": T,
-        "n_steps": n,
-        "scenario": scenario.name,
-        "scenario_hash": scenario.content_hash,
-        "scenario_source": scenario.source,
-        "status": "diverged" if run.diverged_at_s is not None else "ok",
-        "diverged_at_s": run.diverged_at_s,
-        "message": run.message,
-        "wall_s": wall,
-        "rbcheck_version": reference_sim.__version__,
-    }
-    return Trajectory(run.t_s, run.y, meta)
+    out = []
+    for r, run in zip(requests, runs):
+        if isinstance(run, EngineError):
+            out.append(run)
+            continue
+        meta = {
+            "engine": engine,
+            "engine_version": adapter.version(),
+            "variant": name,
+            "dt_s": r.dt_s,
+            "duration_s": T,
+            "n_steps": r.n_steps,
+            "scenario": scenario.name,
+            "scenario_hash": scenario.content_hash,
+            "scenario_source": scenario.source,
+            "status": "diverged" if run.diverged_at_s is not None else "ok",
+            "diverged_at_s": run.diverged_at_s,
+            "message": run.message,
+            "wall_s": wall * (r.n_steps / steps),
+            "rbcheck_version": reference_sim.__version__,
+        }
+        out.append(Trajectory(run.t_s, run.y, meta))
+    return out
+
+
+def run_variant(scenario, name: str, dt_s: float | None = None, duration_s: float | None = None) -> Trajectory:
+    """Run ``scenario`` with engine variant ``name``; the Trajectory's meta records engine, version,
+    variant, dt, scenario hash, status (``ok``/``diverged``) and ``diverged_at_s``. Raises the engine's
+    EngineError."""
+    traj = run_variants(scenario, name, [scenario.dt_s if dt_s is None else float(dt_s)], duration_s)[0]
+    if isinstance(traj, EngineError):
+        raise traj
+    return traj

@@ -27,7 +27,6 @@ it was raised in, as does a non-finite state or a component beyond BLOWUP_LIMIT.
 from __future__ import annotations
 
 import threading
-from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -50,7 +49,7 @@ from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
 
 mujoco, _IMPORT_ERROR = optional_import("mujoco")
 
-__all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate", "one_step", "build_model"]
+__all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate", "simulate_many", "one_step", "build_model"]
 
 ENGINE = "mujoco"
 #: The variants, named after MuJoCo's integrators (``mjtIntegrator.mjINT_<NAME>``), with their declared
@@ -66,9 +65,6 @@ VARIANTS = {
 
 #: Steps between divergence checks of a free-running simulation (checked vectorised per chunk).
 _CHUNK = 256
-#: Constant forces and no decay: record the run with mujoco.rollout instead of a Python loop of mj_step
-#: (same numbers bit for bit: tests/cross_checks/engines/test_mujoco_engine.py).
-USE_ROLLOUT = True
 _BODY = 1  # body id of the free body (0 is the world)
 
 _LOCK = threading.RLock()
@@ -302,70 +298,37 @@ def _divergence(y_rows, first: int, warn_steps: tuple, session, dt_s: float):
     return min(c[0] for c in candidates), "; ".join(c[1] for c in sorted(candidates))
 
 
-#: Where a run takes its compiled model: ``build_model`` unless a caller lends models it compiled already
-#: (:func:`models_from`).
-_MODEL_SOURCE = None
-
-
-@contextmanager
-def models_from(source):
-    """Within this block, runs take their model from ``source(scenario, variant, dt_s)`` instead of compiling
-    one: a model ``build_model`` compiled, with ``variant``'s integrator and step ``dt_s`` set (the fuzz
-    compiles each case once for all its variants and steps, cross_checks/fuzz/drivers.py)."""
-    global _MODEL_SOURCE
-    outer, _MODEL_SOURCE = _MODEL_SOURCE, source
-    try:
-        yield
-    finally:
-        _MODEL_SOURCE = outer
-
-
-#: MjData reused by the runs on lent models (:func:`models_from`): one per thread and model layout, reset
-#: with mj_resetData before each run (the numbers of a fresh MjData, tested). A new MjData zeroes its whole
-#: arena (13.6 MB for this one-body model, ~0.4 ms: more than a short fuzz run); the layout (buffer and
-#: arena sizes, "simple" body and dofs: cross_checks/fuzz/drivers.py::_structure) is what an MjData of
-#: another model must share to serve it.
-_LENT_DATA: dict = {}
-
-
-def _data_for(m):
-    """The MjData of lent model ``m``: the reused one of its layout, reset for ``m`` (new the first time)."""
-    key = (threading.get_ident(), int(m.nbuffer), int(m.narena), tuple(int(v) for v in m.body_simple),
-           tuple(int(v) for v in m.dof_simplenum))
-    d = _LENT_DATA.get(key)
-    if d is None:
-        d = _LENT_DATA[key] = mujoco.MjData(m)
-    else:
-        mujoco.mj_resetData(m, d)
-    return d
-
-
-#: Each thread's last compiled model and its MjData: ``(scenario, variant, dt_s, build_model, model, data)``.
-#: A sweep's job runs the same scenario, variant and step twice (its free run, then its one-step batch):
-#: the second takes the model compiled for the first (~1 ms, and a new MjData ~0.4 ms), its MjData reset.
+#: Each thread's last compiled model and its MjData: ``(scenario, build_model, model, data)`` (the scenario
+#: held, so it is matched by identity). A sweep's job runs a scenario twice (its free run, then its one-step
+#: batch), the fuzz runs a scenario's rungs and one-step rungs in a row: the next run of the same scenario
+#: takes that model (~1 ms to compile) with its integrator and step set in place and its MjData reset
+#: (``opt.integrator`` and ``opt.timestep`` are all a variant and a step change in a compiled model: the
+#: same numbers as a fresh compile, tested for every variant).
 _LAST = threading.local()
+
+
+def _set_variant(m, variant, dt_s):
+    """Compiled model ``m`` set to ``variant``'s integrator and step ``dt_s`` (in place)."""
+    m.opt.integrator = integrator_of(variant)
+    m.opt.timestep = float(dt_s)
+    return m
 
 
 def _compiled(scenario, variant, dt_s):
     """``build_model(scenario, variant, dt_s)`` and a fresh (or reset) MjData of it."""
     last = getattr(_LAST, "run", None)
-    if (last is not None and last[0] is scenario and last[1] == variant and last[2] == float(dt_s)
-            and last[3] is build_model):
-        mujoco.mj_resetData(last[4], last[5])
-        return last[4], last[5]
+    if last is not None and last[0] is scenario and last[1] is build_model:
+        mujoco.mj_resetData(last[2], last[3])
+        return _set_variant(last[2], variant, dt_s), last[3]
     m = build_model(scenario, variant, dt_s)
     d = mujoco.MjData(m)
-    _LAST.run = (scenario, variant, float(dt_s), build_model, m, d)
+    _LAST.run = (scenario, build_model, m, d)
     return m, d
 
 
 def _model_and_data(scenario, variant, dt_s):
     """``(MjModel, MjData, its xfrc_applied row, weight m g)`` of one run of the scenario's body."""
-    if _MODEL_SOURCE is None:
-        m, d = _compiled(scenario, variant, dt_s)
-    else:
-        m = _MODEL_SOURCE(scenario, variant, dt_s)
-        d = _data_for(m)
+    m, d = _compiled(scenario, variant, dt_s)
     weight = scenario.problem.body.mass_kg * np.asarray(scenario.problem.forces.gravity_W, dtype=float)
     return m, d, d.xfrc_applied[_BODY], weight
 
@@ -373,7 +336,8 @@ def _model_and_data(scenario, variant, dt_s):
 # --- adapter entry points ----------------------------------------------------------------------------
 
 def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
-    """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded."""
+    """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded: a
+    loop of ``mj_step`` (:func:`simulate_many` records runs with ``mujoco.rollout``, the same numbers)."""
     m, d, xfrc, weight = _model_and_data(scenario, variant, dt_s)
     forces = scenario.problem.forces
     y0 = scenario.problem.initial_packed()
@@ -383,8 +347,6 @@ def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
     per_step = forces.state_dependent and not per_stage
     if not forces.state_dependent:
         _apply(xfrc, *harness_force_torque(scenario, y0, dt_s), weight)   # constant (decay scaling included)
-    if USE_ROLLOUT and not (per_step or per_stage or decay):
-        return _simulate_rollout(m, d, dt_s, n_steps)
     control = _stage_force_writer(scenario, d, xfrc, weight) if per_stage else None
     return _simulate_loop(scenario, m, d, dt_s, n_steps, control, per_step, decay, xfrc, weight)
 
@@ -430,28 +392,6 @@ def _simulate_loop(scenario, m, d, dt_s, n_steps, control, per_step, decay, xfrc
     return Run(dt_s * np.arange(n_steps + 1), y)
 
 
-def _simulate_rollout(m, d, dt_s: float, n_steps: int) -> Run:
-    """Constant applied forces (already in ``d.xfrc_applied``), no decay: ``mujoco.rollout`` steps and
-    records all ``n_steps`` without per-step Python (bit-identical to a loop of mj_step, tested)."""
-    from mujoco import rollout
-    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS  # [time, qpos (7), qvel (6), ...]
-    state0 = np.empty(mujoco.mj_stateSize(m, spec))
-    mujoco.mj_getState(m, d, state0, spec)
-    ctrl_spec = mujoco.mjtState.mjSTATE_XFRC_APPLIED
-    control = np.empty((1, 1, mujoco.mj_stateSize(m, ctrl_spec)))
-    mujoco.mj_getState(m, d, control[0, 0], ctrl_spec)
-    with Session(d) as session, np.errstate(all="ignore"):
-        states, _ = rollout.rollout(m, d, state0[None], control, control_spec=ctrl_spec, nstep=n_steps)
-    qpos = np.concatenate([state0[None, 1:8], states[0, :, 1:8]])
-    qvel = np.concatenate([state0[None, 8:14], states[0, :, 8:14]])
-    y = to_packed(qpos, qvel)
-    bad = _divergence(y, 0, (1, n_steps), session, dt_s)
-    if bad is not None:
-        n_bad, what = bad
-        return diverged(y[:n_bad], dt_s, f" ({what})")
-    return Run(dt_s * np.arange(n_steps + 1), y)
-
-
 def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     """One step of ``dt_s`` from each row of ``y_start`` (T, 13); rows the engine blows up come back as
     whatever MuJoCo produced (possibly non-finite)."""
@@ -481,6 +421,153 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
         return to_packed(qpos_out, qvel_out).reshape(shape)
 
 
+# --- many runs in one call: mujoco.rollout, one compiled model per scenario -----------------------------
+
+class _NoData:
+    """The MjData stand-in of a rollout's Session: the time of a warning is not kept (a member of a rollout
+    that warned is run again through :func:`simulate`, which keeps it)."""
+
+    time = float("nan")
+
+
+def simulate_many(variant: str, requests) -> list:
+    """The runs of ``requests`` (``base.RunRequest``) through ``mujoco.rollout``: each element
+    :func:`simulate`'s Run bit for bit (tested), or its EngineError.
+
+    One model is compiled per scenario and set to each request's step in place (:func:`_set_variant`),
+    so a scenario's requests at different steps run in successive rounds; members of a round are grouped
+    by model structure (:func:`_structure`). The harness is :func:`simulate`'s: constant forces evaluated
+    once from the initial state (``harness_force_torque``), state-dependent ones in plain floats from
+    every start-of-step state (``step_floats.harness_fn``), the pre-step decay applied to the velocities
+    between one-step rollouts. RK4 with forces that change within a step (the per-stage callback), and
+    every member of a group that blew up or made MuJoCo warn, run through :func:`simulate` itself (its
+    divergence time and message)."""
+    out: list = [None] * len(requests)
+    models: dict = {}   # id(scenario) -> its compiled model or EngineError (the requests hold the scenarios)
+    alone = []
+    for j, r in enumerate(requests):
+        if forces_per_stage(r.scenario, variant):
+            alone.append(j)
+            continue
+        if id(r.scenario) not in models:
+            try:
+                models[id(r.scenario)] = build_model(r.scenario, variant, r.dt_s)
+            except EngineError as exc:
+                models[id(r.scenario)] = exc
+        if isinstance(models[id(r.scenario)], EngineError):
+            out[j] = models[id(r.scenario)]
+    batched = [j for j in range(len(requests)) if out[j] is None and j not in set(alone)]
+    for rnd in _rounds(requests, batched):
+        groups: dict = {}
+        for j in rnd:
+            m = _set_variant(models[id(requests[j].scenario)], variant, requests[j].dt_s)
+            groups.setdefault(_structure(m), []).append(j)
+        for grp in groups.values():
+            reqs = [requests[j] for j in grp]
+            y, warned = _rollout_group(reqs, [models[id(r.scenario)] for r in reqs])
+            for k, (j, r) in enumerate(zip(grp, reqs)):
+                yj = y[:r.n_steps + 1, k]
+                if warned or bad_rows(yj).any():
+                    alone.append(j)
+                else:
+                    out[j] = Run(r.dt_s * np.arange(r.n_steps + 1), yj.copy())
+    first = {}   # a scenario's runs one after the other: each takes the model compiled for the previous
+    for j in alone:
+        first.setdefault(id(requests[j].scenario), j)
+    for j in sorted(alone, key=lambda j: (first[id(requests[j].scenario)], j)):
+        r = requests[j]
+        try:
+            out[j] = simulate(r.scenario, variant, r.dt_s, r.n_steps)
+        except EngineError as exc:
+            out[j] = exc
+    return out
+
+
+def _rounds(requests, idx) -> list:
+    """The request numbers ``idx`` in rounds that hold each scenario at one step only (its compiled model is
+    shared): round k holds every scenario's k-th distinct step."""
+    steps: dict = {}
+    rounds: list = []
+    for j in idx:
+        seen = steps.setdefault(id(requests[j].scenario), [])
+        h = float(requests[j].dt_s)
+        if h not in seen:
+            seen.append(h)
+        k = seen.index(h)
+        while len(rounds) <= k:
+            rounds.append([])
+        rounds[k].append(j)
+    return rounds
+
+
+def _structure(m) -> tuple:
+    """What one MjData needs of the models it serves in a rollout besides their sizes: a free body whose
+    inertial frame is the body frame is "simple" (diagonal mass-matrix storage), a rotated one is not.
+    Across structures rollout silently produces garbage (measured: the non-simple models blow up in their
+    first step)."""
+    return tuple(int(v) for v in m.body_simple), tuple(int(v) for v in m.dof_simplenum)
+
+
+def _rollout_group(reqs, mods):
+    """Packed states (n_max + 1, M, 13) of requests whose models share one structure, each set to its
+    request's variant and step, and whether MuJoCo warned during the rollouts."""
+    from mujoco import rollout
+    M, n_max = len(reqs), max(r.n_steps for r in reqs)
+    y0 = np.array([r.scenario.problem.initial_packed() for r in reqs])
+    qpos0, qvel0 = to_qpos_qvel(y0)
+    state = np.concatenate([np.zeros((M, 1)), qpos0, qvel0], axis=1)   # [time, qpos, qvel]
+    xfrc = np.zeros((M, 1, 12))   # xfrc_applied rows: the world body's (zeros), the free body's
+    weights = [r.scenario.problem.body.mass_kg * np.asarray(r.scenario.problem.forces.gravity_W, dtype=float)
+               for r in reqs]
+    per_step = [k for k, r in enumerate(reqs) if r.scenario.problem.forces.state_dependent]
+    for k, r in enumerate(reqs):
+        if k not in per_step:
+            _apply(xfrc[k, 0, 6:12], *harness_force_torque(r.scenario, y0[k], r.dt_s), weights[k])
+    g = np.array([[float(v) for v in decay_factors(r.scenario, r.dt_s)] for r in reqs])
+    decay = any(r.scenario.problem.forces.has_decay for r in reqs)
+    qpos = np.empty((n_max + 1, M, 7))
+    qvel = np.empty((n_max + 1, M, 6))
+    qpos[0], qvel[0] = qpos0, qvel0
+    datas = [mujoco.MjData(mods[0])]
+    spec = mujoco.mjtState.mjSTATE_XFRC_APPLIED
+    with Session(_NoData()) as session, np.errstate(all="ignore"):
+        if n_max and not per_step and not decay:
+            states, _ = rollout.rollout(mods, datas, state, xfrc, control_spec=spec, nstep=n_max)
+            qpos[1:], qvel[1:] = np.moveaxis(states[:, :, 1:8], 1, 0), np.moveaxis(states[:, :, 8:14], 1, 0)
+        elif n_max:
+            _rollout_steps(reqs, mods, datas, state, xfrc, per_step, g, weights, qpos, qvel)
+        warned = bool(session.warnings)
+    with np.errstate(all="ignore"):
+        return to_packed(qpos, qvel), warned
+
+
+def _rollout_steps(reqs, mods, datas, state, xfrc, per_step, g, weights, qpos, qvel) -> None:
+    """The rollout one step per call (into ``qpos``, ``qvel``): state-dependent forces of members
+    ``per_step`` from each start-of-step state, the pre-step decay factors ``g`` (M, 2) on the velocities.
+    The arrays rollout's wrapper would check and allocate every call are given once, in its shapes."""
+    from mujoco import rollout
+    harness = {k: harness_fn(reqs[k].scenario, reqs[k].dt_s) for k in per_step}
+    M = len(reqs)
+    out = np.empty((M, 1, state.shape[1]))
+    sensors = np.empty((M, 1, mods[0].nsensordata))
+    runner = rollout.Rollout(nthread=0)
+    try:
+        for n in range(1, len(qpos)):
+            for k in per_step:
+                fx, fy, fz, tx, ty, tz = harness[k](_packed_lists(qpos[n - 1, k].tolist(), qvel[n - 1, k].tolist()))
+                w0, w1, w2 = (float(c) for c in weights[k])
+                xfrc[k, 0, 6:12] = (fx - w0, fy - w1, fz - w2, tx, ty, tz)
+            st = state.copy()
+            st[:, 8:11] *= g[:, 0:1]
+            st[:, 11:14] *= g[:, 1:2]
+            runner.rollout(mods, datas, st, xfrc, control_spec=mujoco.mjtState.mjSTATE_XFRC_APPLIED, nstep=1,
+                           state=out, sensordata=sensors, skip_checks=True)
+            state = out[:, 0, :].copy()
+            qpos[n], qvel[n] = state[:, 1:8], state[:, 8:14]
+    finally:
+        runner.close()
+
+
 class MujocoAdapter(EngineAdapter):
     """``mujoco:VARIANT`` — registered under the entry-point group ``rbcheck.engines``."""
 
@@ -489,6 +576,10 @@ class MujocoAdapter(EngineAdapter):
     version = staticmethod(version)
     simulate = staticmethod(simulate)
     one_step = staticmethod(one_step)
+
+    def simulate_many(self, variant: str, requests) -> list:
+        """:func:`simulate_many`: the requests' runs through ``mujoco.rollout``."""
+        return simulate_many(variant, requests)
 
     def source_files(self) -> list:
         """This module and the plain-float per-step code its loops run (hashed into the cache key)."""

@@ -43,7 +43,6 @@ from cross_checks.engines.base import (
     Variant,
     apply_decay_prestep,
     decay_factors,
-    harness_force_torque,
     library_files,
     optional_import,
     require,
@@ -54,7 +53,7 @@ from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
 
 p, _IMPORT_ERROR = optional_import("pybullet", quiet_stderr=True)   # it prints its build time at import
 
-__all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate", "one_step", "DYNAMICS_SETTINGS"]
+__all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate", "simulate_many", "one_step", "DYNAMICS_SETTINGS"]
 
 ENGINE = "pybullet"
 #: The variants with their declared global orders: both modes are semi-implicit Euler (explicit
@@ -122,12 +121,11 @@ def _xyzw(q):
 class BulletBody:
     """One scenario body in the (reset) PyBullet world, with the boundary conversions."""
 
-    def __init__(self, scenario, variant: str, dt_s: float, y0, client: int | None = None):
-        """The body in the adapter's world, reset first; or, with ``client``, in that client's world, which
-        must hold no other body (the fuzz keeps a world of its own and removes its previous body)."""
+    def __init__(self, scenario, variant: str, dt_s: float, y0):
+        """The body in the adapter's world, reset first."""
         if variant not in VARIANTS:
             raise ValueError(f"unknown pybullet variant {variant!r}; variants: {', '.join(VARIANTS)}")
-        self.c = c = _connect() if client is None else client
+        self.c = c = _connect()
         self.maximal = variant == "maximal"
         body = scenario.problem.body
         forces = scenario.problem.forces
@@ -137,9 +135,9 @@ class BulletBody:
             moments, R_BP = body.principal_axes()
             self.q_BP = quat_from_matrix(R_BP)
         self.weight = body.mass_kg * np.asarray(forces.gravity_W, dtype=float)
+        _KEPT.clear()   # the reset removes the kept body
         try:
-            if client is None:
-                p.resetSimulation(physicsClientId=c)
+            p.resetSimulation(physicsClientId=c)
             p.setGravity(*[float(g) for g in forces.gravity_W], physicsClientId=c)
             p.setPhysicsEngineParameter(fixedTimeStep=float(dt_s), numSubSteps=0, physicsClientId=c)
             x0, q0 = self._pose_in(y0)
@@ -217,29 +215,69 @@ def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
     """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded."""
     y0 = scenario.problem.initial_packed()
     with LOCK, np.errstate(all="ignore"):
-        B = BulletBody(scenario, variant, dt_s, y0)
-        return free_run(B, scenario, y0, dt_s, n_steps)
+        return _free_run(BulletBody(scenario, variant, dt_s, y0), scenario, y0, dt_s, n_steps)
 
 
-def free_run(B, scenario, y0, dt_s: float, n_steps: int) -> Run:
-    """The free run of body ``B`` (a fresh ``BulletBody`` of ``scenario``, or one kept from a run of the same
+#: The body :func:`simulate_many` and :func:`one_step` last built in this process's world:
+#: ``(pid, scenario, variant, BulletBody.__init__, body)``, the scenario held and matched by identity.
+#: Resetting the world and building a body costs ~1 ms, more than a short run: the next run of the same
+#: scenario and variant keeps that body, its step and gravity set again, and puts it at its start state
+#: (the numbers of a new body in a reset world, tested: runs and one steps of a case at other steps, in
+#: any order).
+_KEPT: list = []
+
+
+def _kept_body(scenario, variant: str, dt_s: float, y0):
+    """The kept body when it was built for ``scenario`` and ``variant`` in this process's world, its step set
+    to ``dt_s``; else a new one (reset world), kept. The caller holds ``LOCK``."""
+    k = _KEPT[0] if _KEPT else None
+    if (k is not None and k[0] == os.getpid() and k[1] is scenario and k[2] == variant
+            and k[3] is BulletBody.__init__ and k[4].c == _client):
+        c = k[4].c
+        p.setGravity(*[float(g) for g in scenario.problem.forces.gravity_W], physicsClientId=c)
+        p.setPhysicsEngineParameter(fixedTimeStep=float(dt_s), numSubSteps=0, physicsClientId=c)
+        return k[4]
+    _KEPT.clear()
+    B = BulletBody(scenario, variant, dt_s, y0)
+    _KEPT.append((os.getpid(), scenario, variant, BulletBody.__init__, B))
+    return B
+
+
+def simulate_many(variant: str, requests) -> list:
+    """The runs of ``requests`` (``base.RunRequest``), a scenario's runs one after the other on its kept body
+    (:func:`_kept_body`): each element :func:`simulate`'s Run bit for bit (tested), or its EngineError. A
+    run that blows up is run again through :func:`simulate` (a new body: its divergence time and message)."""
+    out: list = [None] * len(requests)
+    first: dict = {}
+    for j, r in enumerate(requests):
+        first.setdefault(id(r.scenario), j)
+    for j in sorted(range(len(requests)), key=lambda j: (first[id(requests[j].scenario)], j)):
+        sc, h, n = requests[j].scenario, float(requests[j].dt_s), int(requests[j].n_steps)
+        try:
+            y0 = sc.problem.initial_packed()
+            with LOCK, np.errstate(all="ignore"):
+                run = _free_run(_kept_body(sc, variant, h, y0), sc, y0, h, n)
+            out[j] = run if run.diverged_at_s is None else simulate(sc, variant, h, n)
+        except EngineError as exc:
+            out[j] = exc
+    return out
+
+
+def _free_run(B, scenario, y0, dt_s: float, n_steps: int) -> Run:
+    """The free run of body ``B`` (a new ``BulletBody`` of ``scenario``, or one kept from a run of the same
     scenario and variant with its step set to ``dt_s``) from ``y0``: put at ``y0``, then stepped
     ``n_steps`` times with the harness's forces. The caller holds ``LOCK``."""
-    forces = scenario.problem.forces
     B.set_state(y0)
     raw = np.empty((n_steps + 1, 13))
     raw[0] = B.read_raw()
-    if forces.state_dependent or forces.has_decay:
-        return _run_per_step(B, scenario, y0, raw, dt_s, n_steps)
-    f, tau = harness_force_torque(scenario, y0, dt_s)
-    return _run_constant(B, raw, (f - B.weight).tolist(), tau.tolist(), dt_s, n_steps)
+    return _run_steps(B, scenario, y0, raw, dt_s, n_steps)
 
 
-def _run_per_step(B, scenario, y0, raw, dt_s: float, n_steps: int) -> Run:
-    """The free run with state-dependent forces and/or the pre-step velocity decay: every step the forces
-    from the start-of-step state (the first from ``y0`` itself), the decayed velocity set with
-    resetBaseVelocity, the forces applied. Per step in plain floats (the states as PyBullet's tuples, the
-    harness through step_floats): the numbers of the NumPy formulas, bit for bit (tested)."""
+def _run_steps(B, scenario, y0, raw, dt_s: float, n_steps: int) -> Run:
+    """The free run's steps: the forces from ``y0`` (constant ones kept, state-dependent ones from every
+    start-of-step state), the decayed velocity set with resetBaseVelocity when there is decay, the forces
+    applied (none when zero: ``BulletBody.apply``). Per step in plain floats (the states as PyBullet's
+    tuples, the harness through step_floats): the numbers of the NumPy formulas, bit for bit (tested)."""
     forces = scenario.problem.forces
     state_dependent, decay = forces.state_dependent, forces.has_decay   # properties: read once
     gv, gw = (float(g) for g in decay_factors(scenario, dt_s))
@@ -268,27 +306,6 @@ def _run_per_step(B, scenario, y0, raw, dt_s: float, n_steps: int) -> Run:
             prev = ps + lin + orn + ang
             rows.append(prev)
         now.update(f=f, tau=tau, prev=prev)
-        return rows
-    return _recorded(B, raw, dt_s, n_steps, steps)
-
-
-def _run_constant(B, raw, f_W, tau_W, dt_s: float, n_steps: int) -> Run:
-    """The free run when the applied force ``f_W`` (weight removed) and torque ``tau_W`` (3 floats each)
-    are constant and there is no decay (most of the catalog): the per-step Python cut to the engine calls,
-    nothing applied when force and torque are zero."""
-    applies = any(v != 0.0 for v in f_W) or any(v != 0.0 for v in tau_W)
-
-    def steps(start, stop):
-        c, b = B.c, B.b
-        step, pose, vel = p.stepSimulation, p.getBasePositionAndOrientation, p.getBaseVelocity
-        rows = []
-        for n in range(start, stop):
-            if applies:
-                B.apply(f_W, tau_W, rows[-1][0:3] if rows else raw[n - 1, 0:3].tolist())
-            step(physicsClientId=c)
-            pos, orn = pose(b, physicsClientId=c)
-            lin, ang = vel(b, physicsClientId=c)
-            rows.append(pos + lin + orn + ang)
         return rows
     return _recorded(B, raw, dt_s, n_steps, steps)
 
@@ -323,14 +340,12 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     if len(y_start) == 0:
         return np.empty_like(y_start).reshape(shape)
     with LOCK, np.errstate(all="ignore"):
-        B = BulletBody(scenario, variant, dt_s, y_start[0])
-        return one_steps(B, scenario, dt_s, y_start).reshape(shape)
+        return _one_steps(_kept_body(scenario, variant, dt_s, y_start[0]), scenario, dt_s, y_start).reshape(shape)
 
 
-def one_steps(B, scenario, dt_s: float, y_start) -> np.ndarray:
-    """One step of ``dt_s`` of body ``B`` (built as for :func:`free_run`) from each row of ``y_start``
-    (T, 13): the forces from the row, the pre-step decay, the state reset per row. The caller holds
-    ``LOCK``."""
+def _one_steps(B, scenario, dt_s: float, y_start) -> np.ndarray:
+    """One step of ``dt_s`` of body ``B`` (as for :func:`_free_run`) from each row of ``y_start`` (T, 13):
+    the forces from the row, the pre-step decay, the state reset per row. The caller holds ``LOCK``."""
     y_dec = apply_decay_prestep(scenario, y_start, dt_s)
     harness = harness_fn(scenario, dt_s)
     wx, wy, wz = B.weight.tolist()
@@ -352,6 +367,10 @@ class PybulletAdapter(EngineAdapter):
     version = staticmethod(version)
     simulate = staticmethod(simulate)
     one_step = staticmethod(one_step)
+
+    def simulate_many(self, variant: str, requests) -> list:
+        """:func:`simulate_many`: the requests' runs on kept bodies."""
+        return simulate_many(variant, requests)
 
     def source_files(self) -> list:
         """This module and the plain-float per-step code its loops run (hashed into the cache key)."""

@@ -5,8 +5,9 @@ to a minimal scenario file that ``rbcheck sweep`` confirms.
   (each drawn from its own generator, :func:`~cross_checks.fuzz.generate.case_rng`) at n0 = N0_CYCLE[b mod 3]
   steps per coarsest rung. Whatever worker runs a batch, and whatever ran before, it gives the same
   verdicts: a campaign is deterministic per seed; the budget only decides how many batches it reaches.
-* Batches run here (``jobs`` 1), in a process pool, or on any ``concurrent.futures.Executor`` (Dask);
-  a batch's outcome is cached (``sweep.cache``: self-verifying entries) under a key holding the seed,
+* Batches run on the sweep's :class:`~cross_checks.sweep.execute.Runner`: here (``jobs`` 1), in its process
+  pool (a batch whose worker dies is a batch error saying so), or on any ``concurrent.futures.Executor``
+  (Dask); a batch's outcome is cached (``sweep.cache``: self-verifying entries) under a key holding the seed,
   the batch, the variants, the engine versions, the versions of the numerical stack and a fingerprint of
   rbcheck's source, so a rerun with the same seed reuses it (``use_cache=False`` recomputes).
 * Every violation has a signature (property, variants, outcome); the first case of each signature is
@@ -20,10 +21,8 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import sys
 import time
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -31,17 +30,17 @@ import numpy as np
 
 from cross_checks.analysis.convergence import fmt_order
 from cross_checks.core.files import atomic_write_text
-from cross_checks.fuzz import drivers, generate, known, pipeline
+from cross_checks.fuzz import generate, known, pipeline
 from cross_checks.fuzz import properties as P
 from cross_checks.fuzz import shrink as S
 
 __all__ = ["BATCH", "N0_CYCLE", "SHRINK_S", "MAX_SHRUNK", "FuzzError", "run_batch", "run_campaign",
            "SUMMARY", "FORMAT"]
 
-#: Cases per batch: the reference kernel, the stacked exact solves and MuJoCo's rollouts cost per call
-#: nearly what they cost for one case up to ~200 members (3 rungs x 64 cases), so a batch's fixed costs
-#: are shared by 64 cases; few enough that a batch takes ~10 s on one core (the budget is checked
-#: between batches).
+#: Cases per batch: the stacked exact solves and the batched engine runs (``simulate_many``: MuJoCo's
+#: rollouts) cost per call nearly what they cost for one case up to ~200 members (3 rungs x 64 cases), so
+#: a batch's fixed costs are shared by 64 cases; few enough that a batch takes ~10 s on one core (a batch
+#: started is finished: the budget decides which start).
 BATCH = 64
 #: Steps at a batch's coarsest rung, cycled over the batches (short and long runs: a long run lets an
 #: error grow, a short one reaches the coarsest fair step).
@@ -97,16 +96,13 @@ def compute_batch(seed, batch, variants) -> dict:
     from threadpoolctl import threadpool_limits
 
     from cross_checks.analysis.expectations import memoized
-    try:
-        # one BLAS thread: the large stacked DOP853 solves give the same last bits whatever the machine's core
-        # count (a batch is a function of its seed alone, as the cache key assumes), and two workers on two
-        # cores no longer fight over four BLAS threads (docs/fuzz.md §4)
-        with threadpool_limits(limits=1, user_api="blas"), memoized():
-            cases = pipeline.prepare(draws, n0)
-            contexts, members, y_end = pipeline.measure(cases)
-            outcomes, seconds = pipeline.evaluate(cases, contexts, members, y_end, variants)
-    finally:
-        drivers.clear_cache()   # the batch's compiled models and steppers: not needed by the next batch
+    # one BLAS thread: the large stacked DOP853 solves give the same last bits whatever the machine's core
+    # count (a batch is a function of its seed alone, as the cache key assumes), and two workers on two
+    # cores no longer fight over four BLAS threads (docs/fuzz.md §4)
+    with threadpool_limits(limits=1, user_api="blas"), memoized():
+        cases = pipeline.prepare(draws, n0)
+        contexts, members, y_end = pipeline.measure(cases)
+        outcomes, seconds = pipeline.evaluate(cases, contexts, members, y_end, variants)
     out = []
     for c, o in zip(cases, outcomes):
         out.append({"index": c.index, "numbers": o.numbers, "violations": o.violations, "tally": o.tally,
@@ -115,9 +111,27 @@ def compute_batch(seed, batch, variants) -> dict:
 
 
 def run_batch(item) -> dict:
-    """``item`` = (seed, batch, variants, user_engines, cache_root, use_cache): the batch's outcome as
-    JSON-ready data (cached). Runs in a worker: one small pickle in, one out."""
-    seed, batch, variants, user_engines, cache_root, use_cache = item
+    """``item`` = (seed, batch, variants, user_engines, cache_root, use_cache, marker): the batch's outcome
+    as JSON-ready data (cached). Runs in a worker: one small pickle in, one out. ``marker`` (a file path,
+    or None) exists while the batch runs, so after a worker crash the parent knows which batches were in
+    flight."""
+    seed, batch, variants, user_engines, cache_root, use_cache, marker = item
+    if marker is not None:
+        Path(marker).touch()
+    try:
+        return _batch_outcome(seed, batch, variants, user_engines, cache_root, use_cache)
+    finally:
+        if marker is not None:
+            Path(marker).unlink(missing_ok=True)
+
+
+def _batch_failed(seed, batch, why) -> dict:
+    """The outcome of a batch rbcheck could not judge: no cases, the reason (summary: ``batch_errors``)."""
+    return {"seed": seed, "batch": batch, "n0": N0_CYCLE[batch % len(N0_CYCLE)], "cases": [], "seconds": {},
+            "cached": False, "error": why}
+
+
+def _batch_outcome(seed, batch, variants, user_engines, cache_root, use_cache) -> dict:
     from cross_checks.engines import adopt_user_engines
     from cross_checks.sweep import cache
     adopt_user_engines(user_engines)
@@ -136,8 +150,7 @@ def run_batch(item) -> dict:
     except (KeyboardInterrupt, SystemExit):
         raise
     except Exception as exc:  # noqa: BLE001 - one batch rbcheck could not judge never stops the campaign
-        return {"seed": seed, "batch": batch, "n0": N0_CYCLE[batch % len(N0_CYCLE)], "cases": [], "seconds": {},
-                "cached": False, "error": f"{type(exc).__name__}: {exc}"}
+        return _batch_failed(seed, batch, f"{type(exc).__name__}: {exc}")
     if path is not None:
         cache.store(Path(cache_root), path, key, {"outcome": np.array(json.dumps(res))})
     res["cached"] = False
@@ -146,60 +159,50 @@ def run_batch(item) -> dict:
 
 # --- the search ----------------------------------------------------------------------------------------
 
-def _pool(jobs, executor):
-    if executor is not None:
-        return executor, False
-    if jobs <= 1:
-        return None, False
-    import multiprocessing as mp
-
-    from cross_checks.sweep.lifecycle import worker_init
-    from reference_sim import compiled
-    compiled.warm()   # the compiled reference steps, loaded once here: the forked workers inherit them
-    ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else None
-    return ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=worker_init,
-                               initargs=(os.getpid(),)), True
-
-
 def search(seed, variants, budget_s, *, jobs=1, executor=None, cache_root=None, use_cache=True,
            on_batch=None) -> list:
-    """Batches 0, 1, … until ``budget_s`` seconds have passed (a batch started is finished): [batch result]
-    in batch order. ``on_batch(result)`` is called as each finishes."""
+    """Batches 0, 1, … until ``budget_s`` seconds have passed (a batch started is finished; batch 0 always
+    runs): [batch result] in batch order. They run on the sweep's :class:`~cross_checks.sweep.execute.Runner`
+    — here (``jobs`` 1), in its process pool (``jobs`` batches at a time; a batch whose worker dies is
+    rerun alone and, dying again, is a result with an ``error`` saying so) or on ``executor`` (Dask).
+    ``on_batch(result)`` is called as each finishes."""
+    import tempfile
+
     from cross_checks.engines import user_engines
+    from cross_checks.sweep.execute import Runner
     extra = user_engines()
     deadline = time.monotonic() + float(budget_s)
-    pool, own = _pool(jobs, executor)
+    if jobs > 1 and executor is None:
+        from reference_sim import compiled
+        compiled.warm()   # the compiled reference steps, loaded once here: the forked workers inherit them
+    runner = Runner(max(1, int(jobs)), executor)
     results = []
-
-    def item(b):
-        return (seed, b, list(variants), extra, cache_root, use_cache)
-
-    def done(r):
-        results.append(r)
-        if on_batch:
-            on_batch(r)
-
-    try:
-        b = 0
-        if pool is None:
+    with tempfile.TemporaryDirectory(prefix="rbcheck-fuzz-") as inflight:
+        def batches():
+            b = 0
             while b == 0 or time.monotonic() < deadline:
-                done(run_batch(item(b)))
+                marker = None if executor is not None else str(Path(inflight) / str(b))
+                yield (seed, b, list(variants), extra, cache_root, use_cache, marker)
                 b += 1
-        else:
-            width = max(1, int(jobs))
-            pending = {}
-            while b == 0 or (time.monotonic() < deadline) or pending:
-                while time.monotonic() < deadline and len(pending) < width or b == 0:
-                    pending[pool.submit(run_batch, item(b))] = b
-                    b += 1
-                fin, _ = wait(set(pending), timeout=max(0.1, deadline - time.monotonic()),
-                              return_when=FIRST_COMPLETED)
-                for f in fin:
-                    pending.pop(f)
-                    done(f.result())
-    finally:
-        if own:
-            pool.shutdown(wait=False, cancel_futures=True)
+
+        def done(_item, r):
+            results.append(r)
+            if on_batch:
+                on_batch(r)
+
+        def crashed(item):
+            if item[-1] is not None:
+                Path(item[-1]).unlink(missing_ok=True)
+            return _batch_failed(seed, item[1], "the worker process died running this batch, alone (a crash "
+                                                "inside an engine?)")
+        try:
+            runner.map_unordered(run_batch, batches(), done, on_crash=crashed,
+                                 in_flight=lambda item: item[-1] is not None and Path(item[-1]).exists(),
+                                 window=max(1, int(jobs)))
+        except BaseException:
+            runner.close(kill=True)
+            raise
+        runner.close()
     return sorted(results, key=lambda r: r["batch"])
 
 

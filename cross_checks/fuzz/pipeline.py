@@ -273,7 +273,7 @@ def _judge(ctx, variant, k, ladder, defects, tally, errors=None) -> list:
     return found
 
 
-def evaluate(cases, contexts, members, y_end, variants, *, threads: int = 1) -> tuple:
+def evaluate(cases, contexts, members, y_end, variants) -> tuple:
     """Run every variant on the judged cases and check the properties: ([CaseOutcome], {variant: seconds})."""
     judged = [i for i, ctx in enumerate(contexts) if ctx is not None]
     outcomes = {i: CaseOutcome(cases[i].index, cases[i].numbers, [], {}) for i in range(len(cases))}
@@ -289,9 +289,9 @@ def evaluate(cases, contexts, members, y_end, variants, *, threads: int = 1) -> 
     ladders = {}
     for v in variants:
         t0 = time.perf_counter()
-        ladder = drivers.run_ladder(v, scs, h0s, n0, threads=threads)
+        ladder = drivers.run_ladder(v, scs, h0s, n0)
         y1 = drivers.one_step(v, [members[j][0] for j in m_sel], [members[j][1] for j in m_sel],
-                              np.array([members[j][2] for j in m_sel]), threads=threads)
+                              np.array([members[j][2] for j in m_sel]))
         e = None if y1 is None else state_errors(y1, y_end[m_sel])
         e_ladder = P.ladder_errors(ladder, y_refs, slice(None))
         for k, i in enumerate(judged):
@@ -316,7 +316,7 @@ def steps_of(spec: dict) -> int:
     return int(round(spec["duration"] / spec["dt"]))
 
 
-def evaluate_specs(specs, variants, *, threads: int = 1) -> list:
+def evaluate_specs(specs, variants) -> list:
     """Judge scenario dicts as they are (their own dt, ladder [dt, dt/2, dt/4] and duration): one
     CaseOutcome each, in order; None for a dict that is not a valid scenario (its ScenarioError)."""
     from cross_checks.scenario import ScenarioError
@@ -332,7 +332,7 @@ def evaluate_specs(specs, variants, *, threads: int = 1) -> list:
     for members in groups.values():
         cases = [c for _, c in members]
         contexts, one_step_members, y_end = measure(cases)
-        outcomes, _ = evaluate(cases, contexts, one_step_members, y_end, variants, threads=threads)
+        outcomes, _ = evaluate(cases, contexts, one_step_members, y_end, variants)
         for (j, _), o in zip(members, outcomes):
             out[j] = o
     return out

@@ -146,7 +146,7 @@ def candidates(spec: dict) -> list:
 
 # --- shrinking ---------------------------------------------------------------------------------------------
 
-def shrink(spec: dict, sig: tuple, variants, *, threads: int = 1, deadline: float | None = None,
+def shrink(spec: dict, sig: tuple, variants, *, deadline: float | None = None,
            max_rounds: int = 60, keep=None) -> tuple:
     """The smallest scenario dict reachable from ``spec`` that still shows ``sig``: (spec, [steps taken]).
 
@@ -162,7 +162,7 @@ def shrink(spec: dict, sig: tuple, variants, *, threads: int = 1, deadline: floa
             if deadline is not None and time.monotonic() > deadline:
                 return current, steps
             chunk = cands[k:k + CHUNK]
-            outcomes = evaluate_specs([c for _, c in chunk], variants, threads=threads)
+            outcomes = evaluate_specs([c for _, c in chunk], variants)
             for (what, cand), o in zip(chunk, outcomes):
                 if _has(o, sig) and (keep is None or keep(cand, o)):
                     accepted = (what, cand)

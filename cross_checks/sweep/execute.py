@@ -9,16 +9,26 @@ sweep goes on.
 """
 from __future__ import annotations
 
+import itertools
 import os
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
 
-from cross_checks.sweep.jobs import failed_record, failed_second_reference, reference_job, run_job, second_reference_job
+from cross_checks.sweep.jobs import (
+    failed_record,
+    failed_second_reference,
+    reference_job,
+    run_job_group,
+    second_reference_job,
+)
 from cross_checks.sweep.lifecycle import worker_init
 
 __all__ = ["Runner", "ScenarioReference", "SecondReference", "run_references", "run_jobs", "second_reference_jobs"]
+
+#: The end of an iterable of items (``next(items, _END)``).
+_END = object()
 
 
 class Runner:
@@ -38,13 +48,15 @@ class Runner:
         return ProcessPoolExecutor(max_workers=self.jobs, mp_context=ctx, initializer=worker_init,
                                    initargs=(os.getpid(),))
 
-    def map_unordered(self, fn, items, on_done=None, on_crash=None, in_flight=None):
+    def map_unordered(self, fn, items, on_done=None, on_crash=None, in_flight=None, window=None):
         """``fn(item)`` for each item; returns ``[(item, result)]`` in completion order.
 
-        A worker that dies (e.g. a crash inside an engine) breaks the pool, and every unfinished item
-        fails with BrokenProcessPool. ``in_flight(item)`` says whether an item was running at that
-        moment: those are re-run one at a time in a fresh pool, so a crash names its own item, whose
-        result is then ``on_crash(item)``; the others are simply resubmitted.
+        ``items`` may be any iterable: it is read as work is submitted, at most ``window`` items in
+        flight (None: all of them at once), so a generator can decide whether to yield more (e.g. while a
+        time budget lasts). A worker that dies (e.g. a crash inside an engine) breaks the pool, and every
+        unfinished item fails with BrokenProcessPool. ``in_flight(item)`` says whether an item was running
+        at that moment: those are re-run one at a time in a fresh pool, so a crash names its own item,
+        whose result is then ``on_crash(item)``; the others are simply resubmitted.
         """
         out = []
 
@@ -53,16 +65,19 @@ class Runner:
             if on_done:
                 on_done(it, r)
 
+        items = iter(items)
         if self.pool is None:
             for it in items:
                 record(it, fn(it))
             return out
-        todo, isolate = list(items), []
-        while todo or isolate:
+        todo: list = []
+        isolate: list = []
+        while True:
             for it in isolate:
                 record(it, self._run_alone(fn, it, on_crash))
-            todo, isolate = self._round(fn, todo, record, in_flight)
-        return out
+            todo, isolate = self._round(fn, itertools.chain(todo, items), record, in_flight, window)
+            if not todo and not isolate:
+                return out
 
     def _run_alone(self, fn, item, on_crash):
         """``fn(item)`` with nothing else in the pool, so a crash is this item's: ``on_crash(item)``."""
@@ -74,19 +89,33 @@ class Runner:
                 raise
             return on_crash(item)
 
-    def _round(self, fn, items, record, in_flight):
-        """Submit every item and record the results; returns ``(to resubmit, to run alone)``: the items
-        a broken pool did not finish, split by whether they were running when it broke."""
-        futs = {self.pool.submit(fn, it): it for it in items}
-        if self.external:
-            self.submitted.extend(futs)
-        todo, isolate = [], []
-        pending = set(futs)
+    def _round(self, fn, items, record, in_flight, window):
+        """Submit the items (at most ``window`` in flight) and record the results until the items run out or
+        the pool breaks; returns ``(to resubmit, to run alone)``: the items a broken pool did not finish,
+        split by whether they were running when it broke."""
+        futs: dict = {}
+        todo: list = []
+        isolate: list = []
         broken = False
-        while pending:
-            done, pending = wait(pending, return_when=FIRST_COMPLETED)
+        while True:
+            while not broken and (window is None or len(futs) < window):
+                it = next(items, _END)
+                if it is _END:
+                    break
+                try:
+                    f = self.pool.submit(fn, it)
+                except BrokenProcessPool:
+                    broken = True
+                    todo.append(it)
+                    break
+                futs[f] = it
+                if self.external:
+                    self.submitted.append(f)
+            if not futs:
+                break
+            done, _ = wait(set(futs), return_when=FIRST_COMPLETED)
             for f in done:
-                it = futs[f]
+                it = futs.pop(f)
                 try:
                     r = f.result()
                 except BrokenProcessPool:
@@ -193,19 +222,21 @@ class SecondReference:
 
 
 def _run_job_item(item):
-    """``item`` = (job, scenario, ref_path, cache_root, use_cache, user_engines, time_limit_s, marker): one
-    small pickle per job (``job`` a :class:`SecondReference`: that scenario's second reference).
+    """``item`` = (jobs, scenario, ref_path, cache_root, use_cache, user_engines, time_limit_s, marker): one
+    small pickle per group of jobs — the jobs of one scenario and variant, whose records are returned in
+    order (:func:`cross_checks.sweep.jobs.run_job_group`: their runs in one ``simulate_many`` call) — or
+    per :class:`SecondReference` (``jobs``: that scenario's second reference, its record returned).
 
     ``user_engines`` are the parent's engine-file adapters (a worker that was not forked from the
-    parent, e.g. on Dask, registers them here). ``marker`` (a file path) exists while the job runs,
-    so after a worker crash the parent knows which jobs were in flight. Any error of the harness
-    itself becomes a failed row, so one bad job never stops the sweep.
+    parent, e.g. on Dask, registers them here). ``marker`` (a file path) exists while the item runs,
+    so after a worker crash the parent knows which items were in flight. Any error of the harness
+    itself becomes failed rows, so one bad job never stops the sweep.
     """
-    job, scenario, ref_path, cache_root, use_cache, user_engines, time_limit_s, marker = item
+    jobs, scenario, ref_path, cache_root, use_cache, user_engines, time_limit_s, marker = item
     Path(marker).touch()
-    if isinstance(job, SecondReference):
+    if isinstance(jobs, SecondReference):
         try:
-            return second_reference_job(scenario, ref_path, job.measured, cache_root, use_cache, time_limit_s)
+            return second_reference_job(scenario, ref_path, jobs.measured, cache_root, use_cache, time_limit_s)
         except Exception as exc:  # noqa: BLE001 - said in the scenario's record, the sweep goes on
             return failed_second_reference(f"internal error: {type(exc).__name__}: {exc}")
         finally:
@@ -213,9 +244,10 @@ def _run_job_item(item):
     try:
         from cross_checks.engines import adopt_user_engines
         adopt_user_engines(user_engines)
-        return run_job(job, scenario, ref_path, cache_root, use_cache, time_limit_s)
+        return run_job_group(list(jobs), scenario, ref_path, cache_root, use_cache, time_limit_s)
     except Exception as exc:  # noqa: BLE001
-        return failed_record(job, scenario, f"internal error while measuring the run: {type(exc).__name__}: {exc}")
+        why = f"internal error while measuring the run: {type(exc).__name__}: {exc}"
+        return [failed_record(job, scenario, why) for job in jobs]
     finally:
         Path(marker).unlink(missing_ok=True)
 
@@ -224,11 +256,16 @@ def _in_flight(item) -> bool:
     return Path(item[-1]).exists()
 
 
-def _crashed(item) -> dict:
+def _crashed(item):
+    """The result of an item whose worker died with nothing else running: the second reference's record,
+    the job's failed record (a group of one), or None for a group of several (its jobs then run one by
+    one, so that the crash is one job's)."""
     Path(item[-1]).unlink(missing_ok=True)
     if isinstance(item[0], SecondReference):
         return failed_second_reference("the worker process died computing it (a crash inside Drake?)")
-    return failed_record(item[0], item[1], "the worker process died running this job, alone (a crash inside the engine?)")
+    if len(item[0]) > 1:
+        return None
+    return [failed_record(item[0][0], item[1], "the worker process died running this job, alone (a crash inside the engine?)")]
 
 
 def second_reference_jobs(scenarios, references) -> list:
@@ -242,32 +279,57 @@ def second_reference_jobs(scenarios, references) -> list:
             if not ref.error]
 
 
+def _groups(jobs) -> list:
+    """The jobs in groups of one scenario and variant (its Δt ladder: one ``simulate_many`` call), the
+    longest group first."""
+    groups: dict = {}
+    for j in jobs:
+        groups.setdefault((j.scenario_index, j.variant), []).append(j)
+    return sorted((tuple(g) for g in groups.values()), key=lambda g: -sum(j.cost for j in g))
+
+
 def run_jobs(runner: Runner, jobs, scenarios, references, work_dir, cache_root, use_cache, time_limit_s,
              show_progress: bool, second=(), second_time_limit_s=None) -> dict:
-    """``{Job: record}`` of every job (:func:`cross_checks.sweep.jobs.run_job`), run in the order given,
-    after the :class:`SecondReference` jobs ``second`` (their records: the summary's ``second_reference``);
-    a job whose scenario has no reference is a failed row carrying the reason."""
+    """``{Job: record}`` of every job (:func:`cross_checks.sweep.jobs.run_job_group`, by group of one scenario
+    and variant), after the :class:`SecondReference` jobs ``second`` (their records: the summary's
+    ``second_reference``); a job whose scenario has no reference is a failed row carrying the reason."""
     from cross_checks.core.progress import Progress
     from cross_checks.engines import user_engines
     records = {j: failed_record(j, scenarios[j.scenario_index], references[j.scenario_index].error)
                for j in jobs if references[j.scenario_index].error}
-    todo = list(second) + [j for j in jobs if j not in records]
     inflight = Path(work_dir) / "inflight"
     inflight.mkdir()
     extra_engines = user_engines()
-    items = [(j, scenarios[j.scenario_index], references[j.scenario_index].path, cache_root, use_cache,
-              extra_engines, second_time_limit_s if isinstance(j, SecondReference) else time_limit_s,
-              str(inflight / str(k))) for k, j in enumerate(todo)]
-    n_runs = sum(1 for j in todo if not isinstance(j, SecondReference))  # what the summary's run count counts
+    made = [0]
+
+    def items(todo):
+        out = []
+        for g in todo:
+            i = g.scenario_index if isinstance(g, SecondReference) else g[0].scenario_index
+            limit = second_time_limit_s if isinstance(g, SecondReference) else time_limit_s
+            out.append((g, scenarios[i], references[i].path, cache_root, use_cache, extra_engines, limit,
+                        str(inflight / str(made[0] + len(out)))))
+        made[0] += len(out)
+        return out
+
+    todo = list(second) + _groups([j for j in jobs if j not in records])
+    crashed: list = []
+    n_runs = sum(len(g) for g in todo if not isinstance(g, SecondReference))  # what the summary's run count counts
     with Progress("rbcheck sweep", "runs", n_runs, enabled=show_progress,
-                  total_work=sum(j.cost for j in todo)) as bar:
-        def done(item, rec):
-            j = item[0]
-            records[j] = rec
-            if isinstance(j, SecondReference):   # among the runs, not one of them
-                bar.update(0, f"{j.scenario} second reference")
-            else:
+                  total_work=sum(j.cost for g in todo if not isinstance(g, SecondReference) for j in g)) as bar:
+        def done(item, recs):
+            if isinstance(item[0], SecondReference):   # among the runs, not one of them
+                records[item[0]] = recs
+                bar.update(0, f"{item[0].scenario} second reference")
+                return
+            if recs is None:
+                crashed.extend((j,) for j in item[0])
+                return
+            for j, rec in zip(item[0], recs):
+                records[j] = rec
                 bar.update(1, f"{j.scenario} {j.variant} dt={j.dt_s:g}", work=j.cost)
 
-        runner.map_unordered(_run_job_item, items, done, on_crash=_crashed, in_flight=_in_flight)
+        runner.map_unordered(_run_job_item, items(todo), done, on_crash=_crashed, in_flight=_in_flight)
+        if crashed:
+            runner.map_unordered(_run_job_item, items(crashed), done, on_crash=_crashed, in_flight=_in_flight)
     return records

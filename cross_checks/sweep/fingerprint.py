@@ -71,16 +71,17 @@ def _base_fingerprint() -> bytes:
 def code_fingerprint(engine: str) -> str:
     """SHA-256 (16 hex digits) of the code that determines a job's result for ``engine``: the
     fingerprinted packages and the adapter's own ``cache_token()`` (its module; for an engine file,
-    the file and the programs it names, as loaded). Memoised per adapter instance, so an engine file
-    re-registered under the same name (a rebuilt program) gets its own fingerprint."""
+    the file and the programs it names, as loaded). Memoised per engine name and adapter instance (held,
+    matched by identity), so an engine file re-registered under the same name (a rebuilt program) gets
+    its own fingerprint."""
     from cross_checks.engines import get_adapter
     adapter = get_adapter(engine)
-    key = (engine, id(adapter))
-    if key not in _FINGERPRINTS:
+    hit = _FINGERPRINTS.get(engine)
+    if hit is None or hit[0] is not adapter:
         h = hashlib.sha256(_base_fingerprint())
         h.update(str(adapter.cache_token()).encode())
-        _FINGERPRINTS[key] = (adapter, h.hexdigest()[:16])  # the adapter is kept so its id stays unique
-    return _FINGERPRINTS[key][1]
+        hit = _FINGERPRINTS[engine] = (adapter, h.hexdigest()[:16])
+    return hit[1]
 
 
 def cpu_model() -> str:

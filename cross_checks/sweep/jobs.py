@@ -1,6 +1,7 @@
 """One sweep job — a (scenario, engine variant, Δt) run — and its measurement; the job cache.
 
-A worker process calls :func:`run_job`: it runs the variant through the engine registry, compares
+A worker process calls :func:`run_job_group` with the jobs of one scenario and variant: it runs them
+through the engine registry in one call (the adapter's ``simulate_many``), compares
 every step with the scenario's reference (computed once per scenario by :func:`reference_job` on the
 union of the scenario's time grids), measures conservation drifts, takes the one-step (local) errors
 from ``LOCAL_SAMPLES`` reference states, and returns small summaries — plus, at the scenario's default
@@ -34,12 +35,12 @@ from cross_checks.core.quantities import (
     state_errors,
 )
 from cross_checks.sweep import cache, fingerprint
-from cross_checks.sweep.lifecycle import TimeLimitExceeded, time_limit
+from cross_checks.sweep.lifecycle import TimeLimitExceeded, each_within_limits, time_limit
 from cross_checks.sweep.schema import SCHEMA_VERSION
 from reference_sim.state import Q
 
 __all__ = ["SCHEMA_VERSION", "MAX_SERIES_POINTS", "LOCAL_SAMPLES", "RESULT_COLUMNS", "TIMING_COLUMNS", "Job",
-           "job_dts", "run_job", "reference_job", "second_reference_job", "failed_second_reference",
+           "job_dts", "run_job_group", "reference_job", "second_reference_job", "failed_second_reference",
            "ReferenceResult", "measure_reference", "load_reference",
            "clear_reference_memo", "failed_record", "varies"]
 
@@ -334,36 +335,44 @@ def _canonical_to(q, q_ref):
     return q * s
 
 
-def run_job(job: Job, scenario, ref_path: str, cache_root: str | None = None, use_cache: bool = True,
-            time_limit_s: float | None = tol.RUN_TIME_LIMIT_S) -> dict:
-    """Run one job and measure it (or take its verified cache entry). Returns a record: ``row``
-    (results.csv columns), ``y_final`` (13 numbers or None), ``series`` (dict of float32 arrays for the
-    default Δt, else None). A run that finished (ok or diverged) is cached; a failed one is not."""
+def run_job_group(jobs, scenario, ref_path: str, cache_root: str | None = None, use_cache: bool = True,
+                  time_limit_s: float | None = tol.RUN_TIME_LIMIT_S) -> list:
+    """Run jobs of one scenario and one variant (e.g. its Δt ladder) and measure each, or take its verified
+    cache entry: a record per job, in order — ``row`` (results.csv columns), ``y_final`` (13 numbers or
+    None), ``series`` (dict of float32 arrays for the default Δt, else None). The runs not cached are asked
+    of the engine in one call (:func:`_runs`). A run that finished (ok or diverged) is cached; a failed one
+    is not."""
     from cross_checks.engines import get_adapter, split_variant
-    engine, variant = split_variant(job.variant)
+    engine, variant = split_variant(jobs[0].variant)
     try:
         adapter = get_adapter(engine)
         version = adapter.version()
     except Exception as exc:  # noqa: BLE001 - an engine that cannot run here is a failed row
-        return _record(_nan_row(job, scenario, "failed", str(exc), "", ""))
-    ckey = _job_key(scenario, job.variant, job.dt_s, version) if cache_root else None
-    cpath = _cache_file(Path(cache_root), "job", ckey) if cache_root else None
-    if cpath is not None and use_cache:
-        rec = _cache_load(cache_root, cpath, ckey, job)
-        if rec is not None:
-            rec["row"].update(default_dt=job.default_dt, in_ladder=job.in_ladder, cached=True)
-            return rec
-    rec = _measure(job, scenario, adapter, variant, version, ref_path, time_limit_s)
-    if cpath is not None and rec["row"]["status"] in ("ok", "diverged"):
-        _cache_store(cache_root, cpath, ckey, rec)
-    return rec
+        return [_record(_nan_row(job, scenario, "failed", str(exc), "", "")) for job in jobs]
+    out: list = [None] * len(jobs)
+    keys = {}
+    for k, job in enumerate(jobs):
+        if cache_root:
+            ckey = _job_key(scenario, job.variant, job.dt_s, version)
+            keys[k] = (ckey, _cache_file(Path(cache_root), "job", ckey))
+            rec = _cache_load(cache_root, keys[k][1], ckey, job) if use_cache else None
+            if rec is not None:
+                rec["row"].update(default_dt=job.default_dt, in_ladder=job.in_ladder, cached=True)
+                out[k] = rec
+    todo = [k for k in range(len(jobs)) if out[k] is None]
+    t_ref_all, y_ref_all, label = load_reference(ref_path) if todo else (None, None, "")
+    for k, run in zip(todo, _runs([jobs[k] for k in todo], scenario, time_limit_s)):
+        out[k] = rec = _measure(jobs[k], scenario, adapter, variant, version, run, t_ref_all, y_ref_all, label)
+        if k in keys and rec["row"]["status"] in ("ok", "diverged"):
+            _cache_store(cache_root, keys[k][1], keys[k][0], rec)
+    return out
 
 
-def _measure(job, scenario, adapter, variant, version, ref_path, time_limit_s) -> dict:
-    """Run the job and measure the run against the reference of ``ref_path``: errors, conservation
-    drifts, one-step errors and (at the default Δt) the plotted series."""
-    t_ref_all, y_ref_all, label = load_reference(ref_path)
-    traj, failure = _run(job, scenario, time_limit_s)
+def _measure(job, scenario, adapter, variant, version, run, t_ref_all, y_ref_all, label) -> dict:
+    """Measure the job's run ``run`` (``(trajectory, "")`` or ``(None, why it failed)``) against the
+    reference ``y_ref_all`` on ``t_ref_all``: errors, conservation drifts, one-step errors and (at the
+    default Δt) the plotted series."""
+    traj, failure = run
     if traj is None:
         return _record(_nan_row(job, scenario, "failed", failure, label, version))
     meta, t, y = traj.meta, traj.t_s, traj.y
@@ -397,17 +406,17 @@ def _step_defect_columns(row, scenario, y, dt_s) -> None:
     row.update(step_defect_ratio=ratio, step_defect_quantity=quantity, step_defect_t_s=t_s)
 
 
-def _run(job, scenario, time_limit_s):
-    """``(trajectory, "")``, or ``(None, the failure's message)``: an engine failure (or a run over its
-    time limit) is a row, not a crash."""
-    from cross_checks.engines import run_variant
-    try:
-        with time_limit(time_limit_s, "the run"):
-            return run_variant(scenario, job.variant, job.dt_s), ""
-    except TimeLimitExceeded as exc:
-        return None, f"{exc} (cross_checks/core/tolerances.py)"
-    except Exception as exc:  # noqa: BLE001
-        return None, f"{type(exc).__name__}: {exc}".strip()
+def _runs(jobs, scenario, time_limit_s) -> list:
+    """Per job ``(trajectory, "")``, or ``(None, the failure's message)``: the jobs' runs in one call
+    (``engines.run_variants``), each within its time limit (``lifecycle.each_within_limits``). An engine
+    failure (or a run over its time limit) is a row, not a crash."""
+    from cross_checks.engines import EngineError, run_variants
+    if not jobs:
+        return []
+    runs = each_within_limits(lambda js: run_variants(scenario, js[0].variant, [j.dt_s for j in js]), jobs,
+                              time_limit_s, "the run")
+    return [(None, r) if isinstance(r, str) else (None, f"{type(r).__name__}: {r}".strip())
+            if isinstance(r, EngineError) else (r, "") for r in runs]
 
 
 def _reference_on(t, t_ref_all, y_ref_all, scenario, label):

@@ -12,7 +12,8 @@ import sys
 import threading
 import time
 
-__all__ = ["Terminated", "handle_sigterm", "worker_init", "EXIT_TERMINATED", "TimeLimitExceeded", "time_limit"]
+__all__ = ["Terminated", "handle_sigterm", "worker_init", "EXIT_TERMINATED", "TimeLimitExceeded", "time_limit",
+           "each_within_limits"]
 
 #: 128 + SIGTERM, what a shell reports for a process ended by SIGTERM.
 EXIT_TERMINATED = 128 + signal.SIGTERM
@@ -116,3 +117,19 @@ def time_limit(seconds: float | None, what: str):
         signal.setitimer(signal.ITIMER_REAL, 0.0)
         signal.signal(signal.SIGALRM, previous)
 
+
+
+def each_within_limits(call, items: list, time_limit_s: float | None, what: str) -> list:
+    """``call(items)`` (one result per item) within the items' time limits added up; when it fails as a
+    whole (over that limit, an error of its own), ``call([item])`` for each item alone within its own
+    limit, so that every failure is its own item's: a result per item, or the message of its failure (a
+    time limit's naming cross_checks/core/tolerances.py, where the limits are set)."""
+    try:
+        with time_limit(time_limit_s and time_limit_s * len(items), what):
+            return list(call(items))
+    except Exception as exc:  # noqa: BLE001 - a failure is the item's result
+        if len(items) > 1:
+            return [r for it in items for r in each_within_limits(call, [it], time_limit_s, what)]
+        if isinstance(exc, TimeLimitExceeded):
+            return [f"{exc} (cross_checks/core/tolerances.py)"]
+        return [f"{type(exc).__name__}: {exc}".strip()]

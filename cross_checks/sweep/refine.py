@@ -25,7 +25,7 @@ from cross_checks.core import tolerances as tol
 from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, state_errors
 from cross_checks.sweep.assemble import ladder_floors
 from cross_checks.sweep.jobs import load_reference
-from cross_checks.sweep.lifecycle import TimeLimitExceeded, time_limit
+from cross_checks.sweep.lifecycle import each_within_limits
 
 __all__ = ["rejudge", "qualifies"]
 
@@ -38,17 +38,15 @@ def qualifies(rec) -> bool:
 
 
 def _refined_runs(scenario, variant, dt_min, n_min, y_end_ref, time_limit_s):
-    """[(dt, steps, status, {quantity: final error})] at dt_min/2 … dt_min/2^REFINE_HALVINGS."""
-    from cross_checks.engines import run_variant
+    """[(dt, steps, status, {quantity: final error})] at dt_min/2 … dt_min/2^REFINE_HALVINGS (in one
+    ``engines.run_variants`` call), up to the first run that cannot finish: a finer run that cannot shows
+    nothing, the verdict stands."""
+    from cross_checks.engines import EngineError, run_variants
+    dts = [dt_min / 2 ** k for k in range(1, tol.REFINE_HALVINGS + 1)]
+    trajs = each_within_limits(lambda d: run_variants(scenario, variant, d), dts, time_limit_s, "the run")
     out = []
-    for k in range(1, tol.REFINE_HALVINGS + 1):
-        dt = dt_min / 2 ** k
-        try:
-            with time_limit(time_limit_s, "the run"):
-                traj = run_variant(scenario, variant, dt)
-        except TimeLimitExceeded:
-            break
-        except Exception:  # noqa: BLE001 - a finer run that cannot finish shows nothing: the verdict stands
+    for k, (dt, traj) in enumerate(zip(dts, trajs), start=1):
+        if isinstance(traj, (str, EngineError)):
             break
         ok = traj.meta.get("status", "ok") == "ok" and len(traj.t_s) - 1 == n_min * 2 ** k
         err = state_errors(traj.y[-1:], y_end_ref[None, :]) if ok else None

@@ -3,8 +3,8 @@ the results directory of docs/results.md, written atomically. :func:`run_sweep` 
 
 1. plan (:mod:`.plan`): every job, longest first;
 2. execute (:mod:`.execute`): each scenario's reference, then the jobs — here, in a process pool or on
-   a given executor; each job measured by :func:`.jobs.run_job` (cached: :mod:`.cache`,
-   :mod:`.fingerprint`);
+   a given executor; a scenario's runs of one variant in one call, each job measured by
+   :func:`.jobs.run_job_group` (cached: :mod:`.cache`, :mod:`.fingerprint`);
 3. assemble (:mod:`.assemble`): rows, convergence and agreement records, scenario records, series,
    provenance (:mod:`.provenance`), summary;
 4. write: everything into a staging sibling of DIR, then the caller's ``finish`` (the report), the

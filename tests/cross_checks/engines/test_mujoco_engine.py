@@ -223,74 +223,95 @@ def test_fast_spin_diverges_and_is_reported_without_log_file(tmp_path, monkeypat
 
 @pytest.mark.parametrize("variant", ["euler", "rk4", "implicit", "implicitfast"])
 @pytest.mark.parametrize("name", ["tennis_racket", "particle_body", "projectile"])
-def test_rollout_path_is_bit_identical_to_the_mj_step_loop(monkeypatch, name, variant):
+def test_rollout_runs_are_bit_identical_to_the_mj_step_loop(name, variant):
+    from cross_checks.engines.base import RunRequest
     sc = load_scenario(name)
     n = min(sc.n_steps(), 3000)
-    fast = me.simulate(sc, variant, sc.dt_s, n)
-    monkeypatch.setattr(me, "USE_ROLLOUT", False)
+    fast = me.MujocoAdapter().simulate_many(variant, [RunRequest(sc, sc.dt_s, n)])[0]
     loop = me.simulate(sc, variant, sc.dt_s, n)
     assert np.array_equal(fast.y, loop.y) and np.array_equal(fast.t_s, loop.t_s)
 
 
-def test_rollout_path_reports_divergence_like_the_loop(monkeypatch):
-    sc = parse_scenario(FAST_SPIN_FOR_ROLLOUT, "fast.toml")
-    fast = me.simulate(sc, "euler", 0.01, 2000)
-    monkeypatch.setattr(me, "USE_ROLLOUT", False)
-    loop = me.simulate(sc, "euler", 0.01, 2000)
-    assert fast.diverged_at_s == loop.diverged_at_s and fast.diverged_at_s is not None
-    assert np.array_equal(fast.y, loop.y)
-
-
-FAST_SPIN_FOR_ROLLOUT = """
-name = "fast_spin"
-duration = 20.0
-dt = 0.01
-[body]
-mass = 1.0
-inertia = [1.0, 2.0, 3.0]
-[initial]
-angular_velocity = [0.1, 20.0, 0.1]
-"""
-
-
-def test_runs_on_lent_models_reuse_one_mjdata_per_layout_with_a_fresh_ones_numbers():
-    """models_from: the runs reuse one MjData per model layout (reset with mj_resetData) instead of allocating
-    one per run; every run and one-step batch is still the one on a new model and a new MjData, bit for bit,
-    whichever body (diagonal or rotated inertia, any force kind) the reused MjData served before."""
-    from cross_checks.fuzz import generate
-    from cross_checks.fuzz.pipeline import scenario_of
-    scs = [scenario_of(generate.draw(47, i).spec(0.004, 8)) for i in range(10)]
-    assert {sc.problem.body.is_diagonal() for sc in scs} == {True, False}
-    models = {}
-
-    def lend(sc, variant, h):
-        key = (id(sc), variant, h)
-        if key not in models:
-            models[key] = me.build_model(sc, variant, h)
-        return models[key]
-    for variant in sorted(me.VARIANTS):
-        want = [(me.simulate(sc, variant, sc.dt_s, 12).y,
-                 me.one_step(sc, variant, sc.dt_s, sc.problem.initial_packed()[None])) for sc in scs]
-        me._LENT_DATA.clear()
-        with me.models_from(lend):
-            for _ in range(2):
-                for sc, (y, y1) in zip(scs[::-1], want[::-1]):
-                    assert np.array_equal(me.simulate(sc, variant, sc.dt_s, 12).y, y), (variant, sc.name)
-                    assert np.array_equal(me.one_step(sc, variant, sc.dt_s, sc.problem.initial_packed()[None]), y1)
-        assert len(me._LENT_DATA) == 2
-
-
-def test_a_one_step_batch_after_the_run_on_the_same_model_is_the_one_on_a_new_model():
-    """A job's one-step batch after its free run (same scenario, variant, step) reuses the compiled model and
-    its reset MjData: the numbers of a new model, bit for bit; another scenario, variant or step compiles."""
+def test_runs_of_one_scenario_in_a_row_take_its_model_with_a_new_models_numbers():
+    """A scenario's next run (a job's one-step batch after its free run, a fuzz case's rungs) takes the model
+    compiled for its previous run, set to its own integrator and step, with the MjData reset: the numbers of
+    a new model, bit for bit; another scenario compiles."""
     sc, other = load_scenario("spring_pendulum"), load_scenario("tumbling_box")
     ys = me.simulate(sc, "rk4", 0.004, 40).y[::5]
     for variant in ("rk4", "euler"):
         me.simulate(other, variant, 0.004, 5)
         fresh = me.one_step(sc, variant, 0.004, ys)             # after another scenario's run: compiled anew
-        me.simulate(sc, variant, 0.004, 40)
-        model = me._LAST.run[4]
+        model = me._LAST.run[2]
+        me.simulate(sc, "implicit", 0.002, 40)
         assert np.array_equal(me.one_step(sc, variant, 0.004, ys), fresh)
-        assert me._LAST.run[4] is model                            # the run's model, reused
-        me.one_step(sc, variant, 0.002, ys)
-        assert me._LAST.run[4] is not model                        # another step: compiled
+        assert me._LAST.run[2] is model                            # the scenario's model, reused
+        me.simulate(other, variant, 0.004, 5)
+        assert me._LAST.run[2] is not model                        # another scenario: compiled
+
+
+# --- many runs in one call (simulate_many) ------------------------------------------------------------
+
+def _fuzz_cases(n=6):
+    from cross_checks.fuzz import generate
+    from cross_checks.fuzz.pipeline import scenario_of
+    return [scenario_of(generate.draw(31, i).spec(0.005 * (1 + i % 2), 8)) for i in range(n)]
+
+
+def _ladder_requests(scs, rungs=3):
+    from cross_checks.engines.base import RunRequest
+    return [RunRequest(sc, sc.dt_s / 2 ** r, 8 * 2 ** r) for r in range(rungs) for sc in scs]
+
+
+def test_many_runs_in_one_call_are_the_adapters_runs_bit_for_bit_whatever_ran_before():
+    """One compiled model per scenario, switched between integrators and steps in place: every variant's
+    runs (three steps of each case, several rollout rounds) and its one steps at four steps of each case are
+    simulate's and one_step's on a freshly compiled model, bit for bit, whichever variant ran before."""
+    import copy
+    scs = _fuzz_cases(4)
+    assert any(sc.problem.forces.state_dependent for sc in scs) and any(sc.problem.forces.has_decay for sc in scs)
+    assert any(not sc.problem.body.is_diagonal() for sc in scs)
+    adapter = me.MujocoAdapter()
+    for variant in ("implicit", "rk4", "euler", "implicitfast", "implicit"):
+        requests = _ladder_requests(scs)
+        got = adapter.simulate_many(variant, requests)
+        for r, run in zip(requests, got):
+            want = me.simulate(copy.deepcopy(r.scenario), variant, r.dt_s, r.n_steps)
+            assert run.diverged_at_s is None and np.array_equal(run.t_s, want.t_s), (variant, r)
+            assert np.array_equal(run.y, want.y), (variant, r)
+        for sc in scs:
+            for k in range(4):
+                y = sc.problem.initial_packed()[None, :]
+                assert np.array_equal(adapter.one_step(sc, variant, sc.dt_s / 2 ** k, y),
+                                      me.one_step(copy.deepcopy(sc), variant, sc.dt_s / 2 ** k, y)), (variant, k)
+
+
+def test_members_that_blow_up_diverge_where_simulate_says_and_leave_the_others_alone():
+    from cross_checks.engines.base import RunRequest
+    from tests.helpers.scenarios import with_initial
+    scs = _fuzz_cases(3)
+    fast = with_initial(scs[0], v_W=[1e9, 0.0, 0.0])   # beyond BLOWUP_LIMIT after one step
+    requests = [RunRequest(sc, sc.dt_s, 8) for sc in (scs[1], fast, scs[2])]
+    got = me.MujocoAdapter().simulate_many("euler", requests)
+    want = [me.simulate(r.scenario, "euler", r.dt_s, r.n_steps) for r in requests]
+    assert got[1].diverged_at_s == want[1].diverged_at_s is not None and got[1].message == want[1].message
+    for g, w in zip(got, want):
+        assert np.array_equal(g.y, w.y)
+
+
+def test_a_model_mujoco_rejects_is_that_members_engine_error(monkeypatch):
+    from cross_checks.engines.base import EngineError
+    scs = _fuzz_cases(3)
+    build = me.build_model
+
+    def rejecting(scenario, variant, dt_s):
+        if scenario is scs[1]:
+            raise EngineError("rejected here")
+        return build(scenario, variant, dt_s)
+    monkeypatch.setattr(me, "build_model", rejecting)
+    requests = _ladder_requests(scs, rungs=2)
+    got = me.MujocoAdapter().simulate_many("euler", requests)
+    for r, run in zip(requests, got):
+        if r.scenario is scs[1]:
+            assert isinstance(run, EngineError) and "rejected here" in str(run)
+        else:
+            assert np.array_equal(run.y, me.simulate(r.scenario, "euler", r.dt_s, r.n_steps).y)

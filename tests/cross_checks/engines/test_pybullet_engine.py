@@ -172,3 +172,66 @@ def test_fast_spin_multibody_diverges_maximal_does_not():
     assert traj.meta["message"].startswith("diverged at t = ")
     assert np.all(np.isfinite(traj.y)) and np.max(np.abs(traj.y)) <= 1e8
     assert run_variant(sc, "pybullet:maximal", dt_s=1e-2, duration_s=10.0).meta["status"] == "ok"
+
+
+# --- many runs in one call (simulate_many) and the kept body -------------------------------------------
+
+def _fuzz_cases(n=12):
+    from cross_checks.fuzz import generate
+    from cross_checks.fuzz.pipeline import scenario_of
+    scs = [scenario_of(generate.draw(47, i).spec(0.004 * (1 + i % 3), 8)) for i in range(n)]
+    kinds = {f for i in range(n) for f in generate.draw(47, i).kinds["forces"]}
+    assert len(kinds) >= 7 and any(not sc.problem.body.is_diagonal() for sc in scs)
+    return scs
+
+
+@pytest.mark.parametrize("variant", ["multibody", "maximal"])
+def test_many_runs_in_one_call_are_the_adapters_runs_bit_for_bit_whatever_ran_before(variant):
+    from cross_checks.engines.base import RunRequest
+    scs = _fuzz_cases()
+    # each scenario's runs on its kept body, after a different previous body in the same world
+    requests = [RunRequest(sc, h, n) for sc in scs + scs[::-1] for h, n in ((sc.dt_s, 8), (sc.dt_s / 4, 32))]
+    got = pe.PybulletAdapter().simulate_many(variant, requests)
+    for r, run in zip(requests, got):
+        want = pe.simulate(r.scenario, variant, r.dt_s, r.n_steps)
+        assert want.diverged_at_s is None and np.array_equal(run.y, want.y), r.scenario.name
+
+
+@pytest.mark.parametrize("variant", ["multibody", "maximal"])
+def test_a_body_kept_for_the_runs_of_its_case_gives_the_runs_of_a_new_body(variant):
+    """Free runs and one steps of a case at other steps, in any order, interleaved, on the body kept from
+    the case's previous run, are those of a new body in a reset world (a copy of the scenario is another
+    scenario: it never takes the kept body), bit for bit."""
+    import copy
+
+    from cross_checks.engines.base import RunRequest
+    scs = _fuzz_cases()
+    rng = np.random.default_rng(5)
+    adapter = pe.PybulletAdapter()
+    for sc in scs:
+        for kind, h in (("run", sc.dt_s), ("step", sc.dt_s / 8), ("run", sc.dt_s / 2), ("step", sc.dt_s),
+                        ("run", sc.dt_s / 4), ("run", sc.dt_s)):
+            if kind == "run":
+                n = int(round(8 * sc.dt_s / h))
+                got = adapter.simulate_many(variant, [RunRequest(sc, h, n)])[0].y
+                want = pe.simulate(copy.deepcopy(sc), variant, h, n).y
+                adapter.one_step(sc, variant, h, sc.problem.initial_packed()[None, :])   # keeps sc's body again
+            else:
+                y = sc.problem.initial_packed() + 0.05 * rng.standard_normal((3, 13))
+                y[:, 6:10] /= np.linalg.norm(y[:, 6:10], axis=1, keepdims=True)
+                got = adapter.one_step(sc, variant, h, y)
+                want = adapter.one_step(copy.deepcopy(sc), variant, h, y)
+                adapter.one_step(sc, variant, h, y[:1])   # sc's body kept again for the next one
+            assert np.array_equal(got, want), (sc.name, kind, h)
+
+
+def test_a_run_that_blows_up_among_many_is_simulates_divergence():
+    from cross_checks.engines.base import RunRequest
+    from tests.helpers.scenarios import with_initial
+    sc = _fuzz_cases()[0]
+    fast = with_initial(sc, v_W=[1e9, 0.0, 0.0])   # beyond BLOWUP_LIMIT after one step
+    got = pe.PybulletAdapter().simulate_many("multibody", [RunRequest(fast, sc.dt_s, 8), RunRequest(sc, sc.dt_s, 8)])
+    want = pe.simulate(fast, "multibody", sc.dt_s, 8)
+    assert got[0].diverged_at_s == want.diverged_at_s is not None and got[0].message == want.message
+    assert np.array_equal(got[0].y, want.y)
+    assert np.array_equal(got[1].y, pe.simulate(sc, "multibody", sc.dt_s, 8).y)

@@ -1,11 +1,14 @@
 """rbcheck fuzz end to end: planted bugs are found, shrunk and reproduced by rbcheck sweep; correct engines
 pass; bad input is one line and exit 2; a campaign is deterministic per seed."""
 import json
+import os
 from pathlib import Path
 
 import pytest
 
 from cross_checks.cli import main
+from cross_checks.engines import get_adapter
+from cross_checks.engines.base import EngineAdapter, Variant
 from cross_checks.fuzz import campaign
 from cross_checks.fuzz.generate import to_toml
 from cross_checks.scenario import load_scenario
@@ -108,11 +111,11 @@ def test_the_shipped_engines_raise_no_false_alarm_in_a_short_campaign(tmp_path, 
 
 def test_the_same_seed_gives_the_same_verdicts_and_the_cache_returns_them(tmp_path, cache, monkeypatch):
     monkeypatch.setattr(campaign, "BATCH", 4)
-    item = (5, 1, ["reference:course"], {}, str(cache), True)
+    item = (5, 1, ["reference:course"], {}, str(cache), True, None)
     first, second = campaign.run_batch(item), campaign.run_batch(item)
     assert not first["cached"] and second["cached"]
     assert first["cases"] == second["cases"]
-    again = campaign.run_batch((5, 1, ["reference:course"], {}, None, False))   # computed anew
+    again = campaign.run_batch((5, 1, ["reference:course"], {}, None, False, None))   # computed anew
     assert again["cases"] == first["cases"]
 
 
@@ -184,3 +187,44 @@ def test_a_batch_is_the_same_to_the_last_bit_whatever_the_blas_thread_count(tmp_
         outs.append(subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
                                    check=True, cwd=Path(__file__).resolve().parents[3]).stdout)
     assert outs[0] == outs[1] and len(outs[0]) > 1000
+
+
+class _CrashingEngine(EngineAdapter):
+    """A test engine: the reference's course step, except that the process dies (as in a segfault inside an
+    engine) on the cases of batch 1."""
+
+    name = "crashing"
+    variants = {"course": Variant(1, "the reference's course step; the process dies on batch 1")}
+
+    def version(self):
+        return "1"
+
+    def simulate(self, scenario, variant, dt_s, n_steps):
+        index = int(scenario.name.rsplit("_", 1)[1])
+        if index // campaign.BATCH == 1:
+            os._exit(3)
+        return get_adapter("reference").simulate(scenario, "course", dt_s, n_steps)
+
+
+def test_a_batch_whose_worker_dies_is_reported_as_such_and_the_others_are_judged(tmp_path, cache, monkeypatch,
+                                                                                  clean_registry):
+    from cross_checks import engines
+    monkeypatch.setattr(campaign, "BATCH", 2)   # set before the pool forks: the workers inherit it
+    engines.register_adapter(_CrashingEngine(), "tests/cross_checks/fuzz/test_campaign.py")
+    results = campaign.search(0, ["crashing:course"], budget_s=2.0, jobs=2, cache_root=str(cache), use_cache=False)
+    assert [r["batch"] for r in results][:2] == [0, 1]   # both started at once (a window of 2 workers)
+    for r in results:
+        if r["batch"] == 1:
+            assert r["cases"] == [] and "worker process died running this batch" in r["error"]
+        else:
+            assert "error" not in r and len(r["cases"]) == 2
+
+
+def test_batches_run_on_a_given_executor_give_the_verdicts_of_a_local_run(tmp_path, cache, monkeypatch):
+    from concurrent.futures import ThreadPoolExecutor
+    monkeypatch.setattr(campaign, "BATCH", 3)
+    local = campaign.search(4, ["reference:course", "mujoco:euler"], budget_s=0.0, jobs=1, use_cache=False)
+    with ThreadPoolExecutor(max_workers=1) as pool:   # as a Dask client's get_executor() is used
+        remote = campaign.search(4, ["reference:course", "mujoco:euler"], budget_s=0.0, jobs=2, executor=pool,
+                                 use_cache=False)
+    assert [r["batch"] for r in remote] == [0] and remote[0]["cases"] == local[0]["cases"]

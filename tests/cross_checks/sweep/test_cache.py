@@ -8,13 +8,17 @@ import pytest
 
 from cross_checks.scenario import parse_scenario
 from cross_checks.sweep import cache
-from cross_checks.sweep.jobs import Job, _cache_file, _job_key, reference_job, run_job
+from cross_checks.sweep.jobs import Job, _cache_file, _job_key, reference_job, run_job_group
 from tests.helpers.scenarios import TINY
 from tests.helpers.sweeps import RUN_DEPENDENT_COLUMNS
 
 SC = parse_scenario(TINY, "tiny.toml")
 JOB = Job(0, "tiny", "reference:rk4", 0.01, True, True, 1.0)
 OTHER = Job(0, "tiny", "reference:course", 0.01, True, True, 1.0)
+
+
+def run_job(job, *args):
+    return run_job_group([job], *args)[0]
 
 
 def _numbers(rec):

@@ -22,3 +22,25 @@ def test_references_come_back_in_the_order_of_the_scenarios(tmp_path):
     refs = run_references(Runner(1), scenarios, tmp_path, None, False, None)
     assert [r.label.split(" ")[0] for r in refs] == ["analytic", "ground_truth", "analytic"]
     assert all(Path(r.path).is_file() and not r.error for r in refs)
+
+
+def _square(x):
+    return x * x
+
+
+def test_items_are_read_as_work_is_submitted_at_most_a_window_in_flight():
+    """A generator of items is asked for the next one only when a slot frees up, so it can stop on what it
+    has seen (the fuzz's time budget): with one item in flight, it is asked exactly once per result."""
+    done = []
+
+    def items():
+        i = 0
+        while len(done) < 3:
+            yield i
+            i += 1
+    runner = Runner(2)
+    try:
+        got = runner.map_unordered(_square, items(), lambda it, r: done.append(r), window=1)
+    finally:
+        runner.close()
+    assert got == [(0, 0), (1, 1), (2, 4)]

@@ -170,3 +170,18 @@ def test_an_exception_that_replaces_the_alarm_s_inside_c_code_is_still_the_time_
     with pytest.raises(TypeError, match="axis"):   # before the alarm, an error is the error
         with time_limit(5.0, "the solve"):
             raise TypeError("'axis' must be an integer")
+
+
+def test_a_call_over_its_items_limits_runs_item_by_item_and_only_the_slow_item_fails():
+    from cross_checks.sweep.lifecycle import each_within_limits
+
+    def call(items):
+        if 2 in items:
+            time.sleep(2.0)   # interrupted by the time limit
+        if 4 in items:
+            raise ValueError("item 4 is bad")
+        return [10 * i for i in items]
+    got = each_within_limits(call, [1, 2, 3, 4], 0.2, "the run")
+    assert got == [10, "the run took longer than the time limit of 0.2 s (cross_checks/core/tolerances.py)", 30,
+                   "ValueError: item 4 is bad"]
+    assert each_within_limits(call, [1, 3], 0.2, "the run") == [10, 30]

@@ -119,14 +119,14 @@ def test_a_diverged_run_is_a_row_and_the_sweep_goes_on(tmp_path):
 
 def test_an_engine_exception_is_a_failed_row(tmp_path, scenario_files, monkeypatch):
     import cross_checks.engines as engines
-    real = engines.run_variant
+    real = engines.run_variants
 
-    def flaky(scenario, name, dt_s=None, duration_s=None):
+    def flaky(scenario, name, dts, duration_s=None):
         if name == "reference:midpoint":
             raise RuntimeError("engine exploded")
-        return real(scenario, name, dt_s, duration_s)
+        return real(scenario, name, dts, duration_s)
 
-    monkeypatch.setattr(engines, "run_variant", flaky)
+    monkeypatch.setattr(engines, "run_variants", flaky)
     out = tmp_path / "res"
     assert sweep([scenario_files[0], "--engines", *VARIANTS, "--jobs", "1", "--no-cache"], out) == 1
     failed = [r for r in read_rows(out) if r["status"] == "failed"]
@@ -142,7 +142,7 @@ def test_interrupted_sweep_leaves_the_previous_results(tmp_path, scenario_files,
     def interrupt(*a, **k):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(sweep_mod, "run_job", interrupt)
+    monkeypatch.setattr(sweep_mod, "run_job_group", interrupt)
     assert sweep([*scenario_files, "--engines", *VARIANTS, "--jobs", "1", "--no-cache"], out) == 130
     err = capsys.readouterr().err
     assert "interrupted" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
@@ -173,14 +173,14 @@ def test_sweep_bad_input_exits_2_with_one_line(tmp_path, args, needle, capsys):
 
 def test_a_worker_crash_fails_only_its_own_job(tmp_path, scenario_files, monkeypatch):
     import os
-    real = sweep_mod.run_job
+    real = sweep_mod.run_job_group
 
-    def crashing(job, *args):
-        if job.variant == "reference:midpoint" and job.dt_s == 0.01:
+    def crashing(jobs, *args):   # the runs of a scenario's ladder go in one call: each job's crashes it
+        if any(job.variant == "reference:midpoint" and job.dt_s == 0.01 for job in jobs):
             os._exit(3)  # a segfault in an engine looks like this to the pool
-        return real(job, *args)
+        return real(jobs, *args)
 
-    monkeypatch.setattr(sweep_mod, "run_job", crashing)   # inherited by the forked workers
+    monkeypatch.setattr(sweep_mod, "run_job_group", crashing)   # inherited by the forked workers
     from cross_checks.scenario import load_scenario
     out = tmp_path / "res"
     summary = run_sweep([load_scenario(scenario_files[1])], VARIANTS, out, jobs=2, use_cache=False)
