@@ -259,6 +259,19 @@ def test_decay_is_applied_before_the_step_with_that_steps_force_scaled():
     np.testing.assert_allclose(run.y[1], y1, rtol=0, atol=tol.DART_ROUND_TRIP)
 
 
+def test_dart_refuses_only_a_non_positive_mass_or_moment_and_the_adapter_says_so():
+    from types import SimpleNamespace
+
+    from cross_checks.engines.base import EngineError
+    indefinite = np.array([[1.0, 2.0, 0.0], [2.0, 1.0, 0.0], [0.0, 0.0, 1.0]])        # eigenvalue −1
+    assert dart.dynamics.Inertia(1.0, np.zeros(3), indefinite).verify()               # DART does not check it
+    sc = scenario_from_parts()
+    bad = SimpleNamespace(name="massless", problem=SimpleNamespace(
+        body=SimpleNamespace(mass_kg=0.0, inertia_B=np.eye(3)), forces=sc.problem.forces))
+    with pytest.raises(EngineError, match="DART 6.20.0 rejects the inertia of scenario 'massless'"):
+        de.DartBody(bad, 0.01)
+
+
 # --- defaults ----------------------------------------------------------------------------------------
 
 def test_darts_own_defaults():
