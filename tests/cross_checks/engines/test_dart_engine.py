@@ -394,6 +394,15 @@ def test_the_fast_spin_diverges_where_the_reference_of_the_same_scheme_does():
     assert a.message == f"diverged at t = {a.diverged_at_s:.6g} s (state beyond 1e+08)"
 
 
+def test_the_wheel_ships_a_top_level_tests_package_that_pytest_keeps_apart_from_rbcheck_s():
+    from importlib.metadata import files
+    from pathlib import Path
+
+    import tests.helpers.scenarios
+    assert "tests/__init__.py" in {str(f) for f in files("dartpy")}      # shadows `import tests` outside pytest
+    assert Path(tests.helpers.scenarios.__file__).resolve().parents[2] == Path(__file__).resolve().parents[3]
+
+
 def test_version_and_list_name_dart():
     from cross_checks.cli import _version_text
     from cross_checks.engines import all_variants
