@@ -399,7 +399,7 @@ def test_the_wheel_ships_a_top_level_tests_package_that_pytest_keeps_apart_from_
     from pathlib import Path
 
     import tests.helpers.scenarios
-    assert "tests/__init__.py" in {str(f) for f in files("dartpy")}      # shadows `import tests` outside pytest
+    assert ("tests", "__init__.py") in {f.parts for f in files("dartpy")}   # shadows `import tests` outside pytest
     assert Path(tests.helpers.scenarios.__file__).resolve().parents[2] == Path(__file__).resolve().parents[3]
 
 
