@@ -97,6 +97,9 @@ VARIANT_TRAITS = {
     "drake:implicit_euler": Traits(translation_drift=-1, rotation_drift="whole_state", rotation_sign=+1),
     "drake:runge_kutta2": Traits(),
     "drake:runge_kutta3": Traits(),
+    # DART World::step: ω_W += Δt I_W⁻¹(τ − ω × I_W ω) (explicit gyroscopic term), then R ← exp(ω_W Δt) R and
+    # x += Δt v with the new velocities (dart/dynamics/FreeJoint.cpp) — MuJoCo Euler's scheme
+    "dart:semi_implicit_euler": _SYMPLECTIC_EULER_EXPLICIT_GYRO,
 }
 
 #: A variant this table does not know (e.g. a user engine with only its declared order): assumed to

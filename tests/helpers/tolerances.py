@@ -83,3 +83,21 @@ DRAKE_REPLAY_REL = 1e-13
 DRAKE_REPLAY_IMPLICIT_REL = 1e-6
 #: drake:runge_kutta3 at Δt = 1e-3 on the tennis racket over 10 s: ~C (ωΔt)³ ωT ≈ 1e-7 rad.
 DRAKE_RK3_TENNIS_RAD = 1e-6
+#: DART state round trips at the boundary (quaternion -> rotation vector -> DART's expMapRot / AngleAxis and
+#: back): a handful of roundings of unit-size numbers, measured ≤ 4e-16; a few ε.
+DART_ROUND_TRIP = 1e-15
+#: One DART step vs the hand-derived semi-implicit Euler step from the same doubles: a 3×3 solve, a
+#: Rodrigues matrix and DART's log map, measured ≤ 3.4e-16 in R and exactly 0 in ω and v: 10 ε.
+DART_HAND_STEP = 2e-15
+#: DART's rotation update below |ω|Δt = 1e-3 rad is I + S + S²/2 (dart/math/Geometry.cpp expMapRot): its
+#: angle exceeds the exact one by θ³/6 (+ O(θ⁵)); the measured excess must be that within 1 %.
+DART_TAYLOR_EXCESS_REL = 1e-2
+#: Same scheme as MuJoCo Euler where every step turns by more than 1e-3 rad (tennis racket, 2 s at 1e-3 s,
+#: |ω|Δt ≈ 2e-3): measured 7e-13 rad over 10 s; the required bound.
+DART_SAME_AS_MUJOCO_EULER = 1e-10
+#: spring_pendulum (ω passes through 0, so many steps turn by < 1e-3 rad): DART vs MuJoCo Euler measured
+#: 1.8e-8 rad/s over 5 s at its dt, 5 decades above that pair's round-off; "differs" means beyond 1e-10.
+DART_TAYLOR_BRANCH_MIN_DIFF = 1e-10
+#: one_step from a recorded state vs the free run's next row: the same DART step from the state through the
+#: boundary conversion (rotation vector -> quaternion -> rotation vector): a few ε of unit-size numbers.
+DART_REPLAY_REL = 1e-13

@@ -132,8 +132,8 @@ def test_reruns_are_bit_identical_across_engines(tmp_path, isolated_cache):
             rows = [{c: v for c, v in r.items() if c not in ("wall_s", "cached")} for r in csv.DictReader(fh)]
         texts.append(rows)
     assert texts[0] == texts[1]  # every digit of every metric, all 14 variants (18 with Drake)
-    engines = {"reference", "mujoco", "pybullet"} | ({"drake"} if any(v.startswith("drake:") for v in available_variants())
-                                                     else set())
+    engines = {"reference", "mujoco", "pybullet"} | {e for e in ("drake", "dart")   # the optional ones installed here
+                                                     if any(v.startswith(e + ":") for v in available_variants())}
     assert {r["engine"].split(":")[0] for r in texts[0]} == engines
 
 

@@ -1,0 +1,310 @@
+"""DART (``dartpy``) as an engine adapter (``dart:VARIANT``); the interface is cross_checks.engines.base.
+
+Model: one ``dart.simulation.World`` per run holding one ``Skeleton`` made of a single
+``FreeJoint``/``BodyNode`` pair (``Skeleton.createFreeJointAndBodyNodePair``), the body's inertia
+``dart.dynamics.Inertia(m, com_B = 0, I_B)`` — the moment of inertia about the COM in body axes, a full
+tensor taken as it is, so the body frame is the scenario's and body origin = COM — no shape node (nothing
+to collide with), gravity and time step from the scenario (DART's defaults: (0, 0, −9.81) m/s² and 1 ms).
+
+State mapping (docs/engine_conventions.md "DART 6.x", pinned by tests/cross_checks/engines/test_dart_engine.py):
+the FreeJoint's positions are ``[r, x_W]`` with ``r`` the ROTATION VECTOR of R_WB (DART's
+``FreeJoint::convertToPositions``: ``logMap(R)``, |r| ≤ π) and ``x_W`` the body origin; its velocities are
+``[ω_W, v_W]``, BOTH IN WORLD AXES (the relative Jacobian of a FreeJoint whose parent is the world is
+``diag(R_WBᵀ, R_WBᵀ)``, ``FreeJoint::updateRelativeJacobian``; ``BodyNode.getSpatialVelocity()`` gives the
+same motion in body axes). The quaternion (w, x, y, z) is converted to and from the rotation vector at the
+boundary only (``quat_log``/``quat_exp``); the recorded quaternion is kept sign-continuous from the scenario's
+initial one (the rotation vector's quaternion has w ≥ 0 and flips sign where |r| passes π).
+
+The step (DART's ``World::step``, dart/simulation/World.cpp): ``Skeleton::computeForwardDynamics`` (the
+articulated-body algorithm: ``ω̇_W = I_W⁻¹(τ − ω × I_W ω)``, the gyroscopic term DART's own) and
+``integrateVelocities`` (v += Δt v̇ in the generalized coordinates above), then the constraint solver
+(nothing to do: no contact, no joint limit), then ``integratePositions`` (``FreeJoint::integratePositions``:
+``R ← R expMapRot(R_WBᵀ ω_W Δt) = exp(ω_W Δt) R``, ``x += Δt v_W``, with the NEW velocity), then the external
+forces are cleared. That is semi-implicit Euler with an explicit gyroscopic term and an exponential-map
+rotation update — the scheme of ``mujoco:euler`` and ``reference:expmap_gyro``. DART's ``World`` has no other
+integrator (``dart.integration``'s classes are not used by ``World::step`` nor bound in dartpy), so there is
+one variant.
+
+Forces (harness semantics of base.py): DART clears the external wrench after every ``World.step``, so every
+step applies ``harness_force_torque − m g`` (DART applies gravity itself) with
+``BodyNode.setExtForce(f_W, 0, isForceLocal=False, isOffsetLocal=True)`` — a world force at the body origin =
+COM — THEN ``BodyNode.setExtTorque(τ_W, isLocal=False)``: ``setExtForce`` replaces the whole external wrench,
+torque included, so the other order would drop the torque. Forces are evaluated from the start-of-step state.
+Velocity decay ``e^{−kΔt}`` is applied to the joint velocities before the step (base.apply_decay_prestep),
+that step's force and torque scaled alike.
+
+Defaults that are not the scenario's physics, each neutralised explicitly (JOINT_SETTINGS, and the world's
+deactivation): joint damping, spring stiffness and rest positions, Coulomb friction, position limits and
+their enforcement, velocity, acceleration and force limits; the world's deactivation ("sleeping", on by
+default in 6.20); collision (no shape node, the body not collidable). DART 6.20's joints have no armature.
+
+Divergence: DART replaces non-finite accelerations by zero and a non-finite transform by the identity (with a
+warning) instead of stopping, so the state is checked after every step: the first state that is non-finite
+or has a component beyond BLOWUP_LIMIT ends the run as ``diverged at t = …``.
+"""
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+
+from cross_checks.engines.base import (
+    EngineAdapter,
+    EngineError,
+    Variant,
+    apply_decay_prestep,
+    decay_factors,
+    installed_version,
+    library_files,
+    optional_import,
+    require,
+)
+from cross_checks.engines.step_floats import harness_fn
+from reference_sim.quaternion import quat_exp, quat_log
+from reference_sim.simulate import BLOWUP_LIMIT, Run, blowup_words, diverged
+
+dart, _IMPORT_ERROR = optional_import("dartpy")
+
+__all__ = ["ENGINE", "VARIANTS", "JOINT_SETTINGS", "EngineError", "version", "simulate", "one_step", "DartBody",
+           "DartAdapter", "neutralise", "to_dart_state", "from_dart_state", "continuous_quaternions"]
+
+ENGINE = "dart"
+#: DART's one integrator (``World::step``; dart::integration::SemiImplicitEulerIntegrator names the scheme):
+#: semi-implicit Euler, first order.
+VARIANTS = {
+    "semi_implicit_euler": Variant(1, "DART World::step: semi-implicit Euler, explicit gyroscopic term (its own "
+                                      "articulated-body dynamics), exponential-map rotation update with the new ω"),
+}
+
+#: FreeJoint settings every body gets, each DART 6.20's default today (pinned) and set explicitly so that
+#: another release's default cannot change the physics: (dartpy Joint setter, value for each of the 6 DOFs).
+JOINT_SETTINGS = (
+    ("setDampingCoefficient", 0.0),
+    ("setSpringStiffness", 0.0),
+    ("setRestPosition", 0.0),
+    ("setCoulombFriction", 0.0),
+    ("setPositionLowerLimit", -math.inf), ("setPositionUpperLimit", math.inf),
+    ("setVelocityLowerLimit", -math.inf), ("setVelocityUpperLimit", math.inf),
+    ("setAccelerationLowerLimit", -math.inf), ("setAccelerationUpperLimit", math.inf),
+    ("setForceLowerLimit", -math.inf), ("setForceUpperLimit", math.inf),
+)
+
+_ZERO3 = np.zeros(3)
+
+
+def _require():
+    require(dart, _IMPORT_ERROR, "dartpy", hint="pip install 'rbcheck[dart]'")
+
+
+def version() -> str:
+    """The installed dartpy distribution's version (EngineNotInstalled when it is absent)."""
+    _require()
+    return _dist_version()
+
+
+@functools.lru_cache(maxsize=1)
+def _dist_version() -> str:
+    return installed_version("dartpy") or "unknown"
+
+
+# --- state conversion (the boundary) --------------------------------------------------------------------
+
+def to_dart_state(y):
+    """Packed states (..., 13) ``[x_W, v_W, q_WB (w x y z), ω_W]`` -> DART's FreeJoint ``[r, x_W, ω_W, v_W]``
+    (..., 12), ``r`` the rotation vector of q_WB (rad)."""
+    y = np.asarray(y, dtype=float)
+    return np.concatenate([quat_log(y[..., 6:10]), y[..., 0:3], y[..., 10:13], y[..., 3:6]], axis=-1)
+
+
+def from_dart_state(s):
+    """DART's FreeJoint states (..., 12) ``[r, x_W, ω_W, v_W]`` -> packed (..., 13); the quaternion is
+    ``quat_exp(r)`` (w ≥ 0: see :func:`continuous_quaternions`)."""
+    s = np.asarray(s, dtype=float)
+    return np.concatenate([s[..., 3:6], s[..., 9:12], quat_exp(s[..., 0:3]), s[..., 6:9]], axis=-1)
+
+
+def continuous_quaternions(q, q0):
+    """Quaternion rows ``q`` (n, 4) with signs flipped so that each has a non-negative dot product with the
+    one before, the first with ``q0``: the same rotations, as one continuous curve from ``q0``."""
+    q = np.array(q, dtype=float)
+    if len(q) == 0:
+        return q
+    prev = np.concatenate([np.asarray(q0, dtype=float)[None], q[:-1]])
+    flips = np.where(np.einsum("ij,ij->i", q, prev) < 0.0, -1.0, 1.0)
+    return q * np.cumprod(flips)[:, None]
+
+
+def neutralise(world, joint, node) -> None:
+    """Set every default of DART that is not the scenario's physics to its neutral value, whatever it was:
+    each of JOINT_SETTINGS on the 6 DOFs of ``joint``, its limit enforcement off, ``node`` not collidable,
+    and the ``world``'s deactivation (sleeping) off."""
+    for setter, value in JOINT_SETTINGS:
+        for i in range(6):
+            getattr(joint, setter)(i, value)
+    joint.setLimitEnforcement(False)
+    node.setCollidable(False)
+    sleep = world.getDeactivationOptions()
+    sleep.mEnabled = False
+    world.setDeactivationOptions(sleep)
+
+
+def _packed_floats(row) -> list:
+    """One DART state (12 floats ``[r, x_W, ω_W, v_W]``) -> the packed state (13 floats) for the force
+    evaluation of the next step: :func:`from_dart_state` in plain floats (the quaternion's sign does not
+    matter to a force)."""
+    r0, r1, r2, x0, x1, x2, w0, w1, w2, v0, v1, v2 = row
+    theta = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+    if theta < 1e-4:     # sin(θ/2)/θ by its series, as reference_sim.quaternion.quat_exp
+        t2 = theta * theta
+        s = 0.5 - t2 / 48.0 + t2 * t2 / 3840.0
+    else:
+        s = math.sin(0.5 * theta) / theta
+    return [x0, x1, x2, v0, v1, v2, math.cos(0.5 * theta), s * r0, s * r1, s * r2, w0, w1, w2]
+
+
+def _bad(row) -> bool:
+    """Whether a DART state (12 floats) is non-finite or has a component beyond BLOWUP_LIMIT — the same
+    verdict as reference_sim.simulate.bad_rows on its packed state (|r| ≤ π and |q| = 1 never exceed it)."""
+    total = sum(row)
+    return total != total or max(row) > BLOWUP_LIMIT or min(row) < -BLOWUP_LIMIT
+
+
+class DartBody:
+    """A scenario's free body alone in a DART world stepping at ``dt_s``; ``set_state``/``read`` at the
+    boundary."""
+
+    def __init__(self, scenario, dt_s: float):
+        _require()
+        p = scenario.problem
+        body = p.body
+        world = dart.simulation.World()
+        skeleton = dart.dynamics.Skeleton("body")
+        joint, node = skeleton.createFreeJointAndBodyNodePair()
+        inertia = dart.dynamics.Inertia(float(body.mass_kg), _ZERO3, np.asarray(body.inertia_B, dtype=float))
+        if not inertia.verify():
+            raise EngineError(f"DART {version()} rejects the inertia of scenario {scenario.name!r} "
+                              "(dart::dynamics::Inertia::verify is false: a mass or moment that is not positive)")
+        node.setInertia(inertia)
+        world.addSkeleton(skeleton)
+        world.setGravity(np.asarray(p.forces.gravity_W, dtype=float))   # the world's gravity reaches its skeletons
+        world.setTimeStep(float(dt_s))
+        neutralise(world, joint, node)
+        self.world, self.skeleton, self.joint, self.node = world, skeleton, joint, node
+        self.weight = (body.mass_kg * np.asarray(p.forces.gravity_W, dtype=float)).tolist()
+
+    def set_state(self, y) -> None:
+        """Put the body at the packed state ``y`` (13,)."""
+        s = to_dart_state(y)
+        self.skeleton.setPositions(s[0:6])
+        self.skeleton.setVelocities(s[6:12])
+
+    def read(self) -> list:
+        """DART's state ``[r, x_W, ω_W, v_W]`` as 12 floats."""
+        return self.skeleton.getPositions().tolist() + self.skeleton.getVelocities().tolist()
+
+    def apply(self, f_W, tau_W) -> None:
+        """World force ``f_W`` (N) at the COM and world torque ``tau_W`` (N m), for the next step only (DART
+        clears them after it). ``setExtForce`` first: it replaces the whole external wrench."""
+        self.node.setExtForce(f_W, _ZERO3, False, True)
+        self.node.setExtTorque(tau_W, False)
+
+
+def _model(scenario, variant: str, dt_s: float) -> DartBody:
+    if variant not in VARIANTS:
+        raise ValueError(f"unknown dart variant {variant!r}; variants: {', '.join(VARIANTS)}")
+    return DartBody(scenario, dt_s)
+
+
+def _recorded(rows, y0, dt_s: float, why: str = "") -> Run:
+    """The Run of DART states ``rows`` (steps 1..n, 12 floats each) after the initial packed state ``y0``:
+    the quaternions continuous from y0's; ``why`` non-empty: the run diverged in step n + 1."""
+    y = np.empty((len(rows) + 1, 13))
+    y[0] = y0
+    if rows:
+        y[1:] = from_dart_state(np.array(rows))
+        y[1:, 6:10] = continuous_quaternions(y[1:, 6:10], y0[6:10])
+    if why:
+        return diverged(y, dt_s, why)
+    return Run(dt_s * np.arange(len(y)), y)
+
+
+def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
+    """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded."""
+    B = _model(scenario, variant, dt_s)
+    y0 = scenario.problem.initial_packed()
+    B.set_state(y0)
+    forces = scenario.problem.forces
+    state_dependent, decay = forces.state_dependent, forces.has_decay
+    harness = harness_fn(scenario, dt_s)
+    gv, gw = (float(g) for g in decay_factors(scenario, dt_s))
+    wx, wy, wz = B.weight
+    fx, fy, fz, tx, ty, tz = harness([float(v) for v in y0])
+    f, tau = np.array([fx - wx, fy - wy, fz - wz]), np.array([tx, ty, tz])
+    applies = bool(np.any(f != 0.0) or np.any(tau != 0.0)) or state_dependent
+    step, positions, velocities = B.world.step, B.skeleton.getPositions, B.skeleton.getVelocities
+    set_velocities, apply = B.skeleton.setVelocities, B.apply
+    rows: list = []
+    prev = B.read()
+    for _ in range(n_steps):
+        if state_dependent and rows:
+            fx, fy, fz, tx, ty, tz = harness(_packed_floats(prev))
+            f, tau = np.array([fx - wx, fy - wy, fz - wz]), np.array([tx, ty, tz])
+        if decay:
+            set_velocities(np.array(prev[6:12]) * (gw, gw, gw, gv, gv, gv))
+        if applies:
+            apply(f, tau)
+        step()
+        prev = positions().tolist() + velocities().tolist()
+        if _bad(prev):
+            return _recorded(rows, y0, dt_s, f" ({blowup_words(prev)})")
+        rows.append(prev)
+    return _recorded(rows, y0, dt_s)
+
+
+def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
+    """One step of ``dt_s`` from each row of ``y_start`` (T, 13): the forces from the row, the pre-step
+    decay, the state set per row. A row whose step blows up comes back as DART left it."""
+    shape = np.shape(y_start)
+    y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
+    B = _model(scenario, variant, dt_s)
+    y_dec = apply_decay_prestep(scenario, y_start, dt_s)
+    harness = harness_fn(scenario, dt_s)
+    wx, wy, wz = B.weight
+    out = np.empty((len(y_start), 12))
+    for i, y in enumerate(y_start.tolist()):
+        fx, fy, fz, tx, ty, tz = harness(y)
+        B.set_state(y_dec[i])
+        B.apply(np.array([fx - wx, fy - wy, fz - wz]), np.array([tx, ty, tz]))
+        B.world.step()
+        out[i] = B.read()
+    y = from_dart_state(out)
+    # each quaternion on the side of its start state's (one step turns it by less than π)
+    sign = np.where(np.einsum("ij,ij->i", y[:, 6:10], y_start[:, 6:10]) < 0.0, -1.0, 1.0)
+    y[:, 6:10] *= sign[:, None]
+    return y.reshape(shape)
+
+
+class DartAdapter(EngineAdapter):
+    """``dart:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
+    (``pip install 'rbcheck[dart]'``). Declared order: DART's semi-implicit Euler is first order."""
+
+    name = ENGINE
+    variants = VARIANTS
+
+    def version(self) -> str:
+        return version()
+
+    def source_files(self) -> list:
+        """This module, the plain-float harness its loop runs, and dartpy's compiled module (a rebuilt or
+        reinstalled dartpy is a new engine)."""
+        from pathlib import Path
+
+        from cross_checks.engines import step_floats
+        return [*super().source_files(), Path(step_floats.__file__), *library_files(dart)]
+
+    def simulate(self, scenario, variant: str, dt_s: float, n_steps: int) -> Run:
+        return simulate(scenario, variant, dt_s, n_steps)
+
+    def one_step(self, scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
+        return one_step(scenario, variant, dt_s, y_start)
