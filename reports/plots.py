@@ -113,7 +113,7 @@ def _panels(layout, nrows, ncols, size_in, log, outer=True):
             ax.set_title("", loc="left")
             ax.relim()
             ax.set_autoscale_on(True)
-    for art in (*fig.artists, *fig.texts):   # legends
+    for art in (*fig.images, *fig.texts):   # legends
         art.remove()
     fig.set_size_inches(*size_in)
     return fig, np.array(rows[:nrows], dtype=object)
@@ -123,7 +123,6 @@ def _style(ax, log, left) -> None:
     """Plain decade labels ("1e-06", not mathtext) and no minor ticks on log axes, at most 5 ticks on
     linear ones (decades read as well, and labels are most of what a figure costs to draw); axis labels
     at fixed distances from the axes."""
-    ax.grid(alpha=0.3)
     ax.patch.set_visible(False)   # white on the figure's white
     ax.tick_params(labelsize=_TICK_PT, labelleft=left, bottom=False, left=False)
     if log:
@@ -146,6 +145,7 @@ def _style(ax, log, left) -> None:
 
 def _same_limits(axes, which) -> None:
     """One range (the union of the panels' own) over ``axes``, as shared axes would have."""
+    axes = list(axes)
     lims = [ax.get_xlim() if which == "x" else ax.get_ylim() for ax in axes]
     lo, hi = min(lo for lo, _ in lims), max(hi for _, hi in lims)
     for ax in axes:
@@ -158,8 +158,10 @@ def _title(ax, text) -> None:
 
 
 def release() -> None:
-    """Drop the figures this process keeps (a caller that drew in its own process does not keep them)."""
+    """Drop the figures and legends this process keeps (a caller that drew in its own process does not
+    keep them)."""
     _FIGURES.clear()
+    _LEGENDS.clear()
 
 
 def _grid(nrows, ncols, title, panel_h=2.1, log=False, layout="time", legend_rows=0):
@@ -172,6 +174,18 @@ def _grid(nrows, ncols, title, panel_h=2.1, log=False, layout="time", legend_row
     fig.subplots_adjust(left=0.09 if w > 8 else 0.14, right=0.98, top=1.0 - 0.75 / h, bottom=(0.5 + strip) / h,
                         hspace=0.35, wspace=0.08)
     return fig, axes
+
+
+def _finish(fig, path) -> None:
+    """Grid lines at the major ticks of every panel shown, drawn as one collection per axis (a grid of
+    matplotlib's draws a line per tick: a fifth of a figure's drawing time), then the PNG."""
+    for ax in fig.axes:
+        if ax.get_visible():
+            ax.set(xlim=ax.get_xlim(), ylim=ax.get_ylim())   # the limits as drawn: the grid does not widen them
+            style = {"colors": "#b0b0b0", "linewidths": 0.8, "alpha": 0.3, "zorder": 0.5}
+            ax.vlines(ax.get_xticks(), 0, 1, transform=ax.get_xaxis_transform(), **style)
+            ax.hlines(ax.get_yticks(), 0, 1, transform=ax.get_yaxis_transform(), **style)
+    save_png(fig, path)
 
 
 def save_png(fig, path) -> None:
@@ -203,16 +217,32 @@ def _family_legends(axes_bottom, fams, styles, extra=None, markers=False):
                                                   for v in vs])
 
 
-def _legend(ax, x0, top, title, entries) -> None:
+def _legend(ax, x0, top, title, entries, width_in=3.2) -> None:
     """A legend of ``entries`` = [(label, style with color, ls, marker)] whose top left corner is
-    (x0, top) inches from ``ax``'s lower left corner: its title, then a short line (and marker) and a
-    text per entry, _LEGEND_LINE_IN apart. Drawn as texts and lines of the figure (matplotlib's Legend
-    lays out boxes of boxes, measuring every text twice: a fifth of a figure's drawing time)."""
+    (x0, top) inches from ``ax``'s lower left corner, at most ``width_in`` wide: its title, then a short
+    line (and marker) and a text per entry, _LEGEND_LINE_IN apart. The same legend comes back in many
+    figures (every time figure of a report has its families' legends): it is drawn once per process
+    and its pixels placed as a figure image (FigureImage) in the others."""
     fig = ax.figure
-    at = fig.dpi_scale_trans + ScaledTranslation(0.0, 0.0, ax.transAxes)   # inches from the axes' corner
-    fig.text(x0, top, title, transform=at, fontsize=8, va="top")
-    ys = top - 0.2 - _LEGEND_LINE_IN * np.arange(len(entries))
-    xs = (x0 + 0.05, x0 + 0.225)
+    key = (fig.dpi, width_in, title, tuple((label, st["color"], st["ls"], st.get("marker")) for label, st in entries))
+    if key not in _LEGENDS:
+        _LEGENDS[key] = _legend_pixels(fig.dpi, width_in, title, entries)
+    x, y = (fig.dpi_scale_trans + ScaledTranslation(0.0, 0.0, ax.transAxes)).transform((x0, top))
+    fig.figimage(_LEGENDS[key], xo=round(x), yo=round(y) - _LEGENDS[key].shape[0], origin="upper")
+
+
+_LEGENDS: dict = {}   # legend -> its RGBA pixels (straight alpha, transparent background), per process
+
+
+def _legend_pixels(dpi, width_in, title, entries) -> np.ndarray:
+    """The pixels of a legend (:func:`_legend`) drawn alone on a transparent figure."""
+    height = 0.3 + _LEGEND_LINE_IN * len(entries)
+    fig = Figure(figsize=(width_in, height), dpi=dpi, facecolor="none")
+    FigureCanvasAgg(fig)
+    at = fig.dpi_scale_trans
+    fig.text(0.0, height, title, transform=at, fontsize=8, va="top")
+    ys = height - 0.2 - _LEGEND_LINE_IN * np.arange(len(entries))
+    xs = (0.05, 0.225)
     fig.add_artist(LineCollection([[(xs[0], y), (xs[1], y)] for y in ys], colors=[st["color"] for _, st in entries],
                                   linestyles=[st["ls"] for _, st in entries], linewidths=1.4, transform=at))
     for y, (label, st) in zip(ys, entries):
@@ -220,6 +250,9 @@ def _legend(ax, x0, top, title, entries) -> None:
             fig.add_artist(Line2D([sum(xs) / 2], [y], color=st["color"], marker=st["marker"], ms=4, ls="none",
                                   transform=at))
         fig.text(xs[1] + 0.075, y, label, transform=at, fontsize=7, va="center")
+    with matplotlib.rc_context({"text.hinting": "no_hinting"}):
+        fig.canvas.draw()
+    return np.asarray(fig.canvas.buffer_rgba()).copy()
 
 
 def _legend_rows(fams) -> int:
@@ -333,7 +366,7 @@ def fig_trajectories(res, sc, styles, path):
     _time_panels(axes, res, sc, fams, styles, rows, log=False)
     _family_legends(axes[-1], fams, styles)
     NOTES[(sc, "trajectories")] = ("Not drawn, constant along the reference: " + ", ".join(still) + ".") if still else ""
-    save_png(fig, path)
+    _finish(fig, path)
     return True
 
 
@@ -361,7 +394,7 @@ def fig_errors(res, sc, styles, path):
     left = [LABELS[q] for q in QUANTITIES if q not in nonzero]
     NOTES[(sc, "errors")] = (("Not drawn: " + ", ".join(left) + " (does not move, or zero error for every variant)."
                               if left else "") + exact_note).strip()
-    save_png(fig, path)
+    _finish(fig, path)
     return True
 
 
@@ -420,7 +453,7 @@ def fig_conservation(res, sc, styles, path):
                       layout="time-log", legend_rows=_legend_rows(fams))
     _time_panels(axes, res, sc, fams, styles, rows, log=True)
     _family_legends(axes[-1], fams, styles)
-    save_png(fig, path)
+    _finish(fig, path)
     return True
 
 
@@ -522,7 +555,7 @@ def fig_ladder(res, sc, styles, path, mode):
     left = [LABELS[q] for q in QUANTITIES if q not in moving]
     NOTES[(sc, kind)] = (("Not drawn: " + ", ".join(left) + " (does not move). ") if left else "") + \
         "Orders in the legends: " + " / ".join(LABELS[q] for q in qs) + "." + exact_note
-    save_png(fig, path)
+    _finish(fig, path)
     return True
 
 
@@ -560,9 +593,9 @@ def fig_work(res, sc, styles, path):
     fig.subplots_adjust(left=0.7 / width, right=1.0 - 2.3 / width, top=0.88, bottom=0.13, wspace=0.25)
     if handles:   # at the right, centred on the height
         pos = axes[0, -1].get_position()
-        _legend(axes[0, -1], pos.width * width + 0.15, (pos.height * 4.6 + 0.2 + _LEGEND_LINE_IN * len(handles)) / 2,
-                "colour: engine family", list(handles.items()))
-    save_png(fig, path)
+        _legend(axes[0, -1], pos.width * width + 0.15, (pos.height * 4.6 + 0.3 + _LEGEND_LINE_IN * len(handles)) / 2,
+                "colour: engine family", list(handles.items()), width_in=2.1)
+    _finish(fig, path)
     NOTES[(sc, "work")] = ""
     return True
 
