@@ -20,10 +20,11 @@ Figures (``plots/<scenario>__<kind>.png``):
 ``figure_tasks(res, sc)`` lists the figures a scenario has (so they can be drawn in parallel);
 ``draw(res, sc, kind, path)`` draws one and returns whether it carried anything.
 
-Drawn with matplotlib's public API on the Agg canvas, laid out by its constrained layout. A drawing
-process keeps one figure per layout (kind of grid, rows, columns) and empties it of its data for the
-next figure of that layout (creating axes and their ticks is the costliest part of a figure drawn for
-the first time): a figure drawn in a reused grid has the pixels of a fresh one
+Drawn with matplotlib's public API on the Agg canvas, margins in inches (matplotlib's constrained
+layout measures every text of a figure again on each draw: it doubled a figure's cost). A drawing
+process keeps one figure per layout (kind of grid, columns) and empties it of its data for the next
+figure of that layout, whatever its number of rows (creating axes and their ticks is the costliest
+part of a figure drawn for the first time): a figure drawn in a kept grid has the pixels of a fresh one
 (tests/reports/test_plots.py).
 """
 from __future__ import annotations
@@ -43,7 +44,7 @@ from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, UNITS
 from reports.data import LABELS
 from reports.glance import families, order_text
 
-__all__ = ["KINDS", "scenario_figures", "figure_tasks", "draw", "families", "variant_styles", "NOTES", "save_png",
+__all__ = ["KINDS", "figure_tasks", "draw", "families", "variant_styles", "NOTES", "save_png",
            "release"]
 
 KINDS = ("trajectories", "errors", "conservation", "convergence", "local", "work")
@@ -74,7 +75,7 @@ def _short(v):
     return v.split(":", 1)[1] if ":" in v else v
 
 
-_FIGURES: dict = {}   # (layout, rows, columns) -> (figure, axes): kept per drawing process
+_FIGURES: dict = {}   # (layout, columns, log, outer) -> (figure, rows of axes): kept per drawing process
 #: Tick labels' size (pt) and the axis labels' fixed distances from their axes (pt), so that matplotlib
 #: need not measure every tick label to place them: y label left of the widest tick label drawn ("1e-15",
 #: "−0.25": 5 characters of ~0.6 em) plus tick (3.5 pt), pad (3.5 pt) and 4 pt; x label under the tick,
@@ -143,10 +144,13 @@ def _style(ax, log, left) -> None:
     ax.xaxis.label.set_verticalalignment("top")
 
 
-def _same_limits(axes, which) -> None:
-    """One range (the union of the panels' own) over ``axes``, as shared axes would have."""
+def _same_limits(axes, which, lim=None) -> None:
+    """One range over ``axes``, as shared axes would have: ``lim``, or the union of the panels' own."""
     axes = list(axes)
-    lims = [ax.get_xlim() if which == "x" else ax.get_ylim() for ax in axes]
+    lims = [lim] if lim is not None else [ax.get_xlim() if which == "x" else ax.get_ylim() for ax in axes
+                                          if ax.has_data()]
+    if not lims:
+        return
     lo, hi = min(lo for lo, _ in lims), max(hi for _, hi in lims)
     for ax in axes:
         ax.set_xlim(lo, hi) if which == "x" else ax.set_ylim(lo, hi)
@@ -311,7 +315,8 @@ def _time_panels(axes, res, sc, fams, styles, rows, log):
                     ok &= t <= tdiv
                 y_draw = _positive(y) if log else y
                 st = styles[v]
-                curves.append((np.column_stack([t[ok], y_draw[ok]]), st))
+                if ok.any():
+                    curves.append((np.column_stack([t[ok], y_draw[ok]]), st))
                 every.append(y_draw[ok])
                 if tdiv is not None and ok.any():
                     k = np.flatnonzero(ok)[-1]
@@ -323,15 +328,19 @@ def _time_panels(axes, res, sc, fams, styles, rows, log):
                                                  linestyles=[st["ls"] for _, st in curves], linewidths=1.1))
             if i == 0:
                 _title(ax, fam)
-            ax.autoscale_view()
-        lim = _robust_limits(keep, log) or _robust_limits(every, log)
-        if lim is not None:
-            axes[i, 0].set_ylim(*lim)
-        _same_limits(axes[i], "y")
+            if ax.has_data():
+                ax.autoscale_view()
+        _same_limits(axes[i], "y", _robust_limits(keep, log) or _robust_limits(every, log))
         axes[i, 0].set_ylabel(label, fontsize=8)
     _same_limits(axes.flat, "x")
     for ax in axes[-1]:
         ax.set_xlabel("time t (s)", fontsize=8)
+
+
+def _families_with_series(res, ser) -> dict:
+    """``{family: [variants]}`` of the variants that have saved series, families without any left out."""
+    fams = {f: [v for v in vs if v in ser] for f, vs in families(res.variants).items()}
+    return {f: vs for f, vs in fams.items() if vs}
 
 
 def _moving_components(ser):
@@ -354,8 +363,7 @@ def _moving_components(ser):
 def fig_trajectories(res, sc, styles, path):
     info = res.scenario(sc)
     ser = res.series(sc)
-    fams = {f: [v for v in vs if v in ser] for f, vs in families(res.variants).items()}
-    fams = {f: vs for f, vs in fams.items() if vs}
+    fams = _families_with_series(res, ser)
     moving, still = _moving_components(ser)
     if not fams or not moving:
         NOTES[(sc, "trajectories")] = "nothing moves" if not moving else "no series"
@@ -373,8 +381,7 @@ def fig_trajectories(res, sc, styles, path):
 def fig_errors(res, sc, styles, path):
     info = res.scenario(sc)
     ser = res.series(sc)
-    fams = {f: [v for v in vs if v in ser] for f, vs in families(res.variants).items()}
-    fams = {f: vs for f, vs in fams.items() if vs}
+    fams = _families_with_series(res, ser)
     moving = [q for q in QUANTITIES if info.get("varies", {}).get(q, True)]
     nonzero = [q for q in moving if any(np.any(np.asarray(ser[v].get(f"err_{q}", [0.0])) > 0)
                                         for vs in fams.values() for v in vs)]
@@ -435,8 +442,7 @@ def fig_conservation(res, sc, styles, path):
     """Drift of the quantities the physics conserves; False when none is conserved or none drifts."""
     info = res.scenario(sc)
     ser = res.series(sc)
-    fams = {f: [v for v in vs if v in ser] for f, vs in families(res.variants).items()}
-    fams = {f: vs for f, vs in fams.items() if vs}
+    fams = _families_with_series(res, ser)
     kinds = [k for k in ("energy", "angular_momentum", "linear_momentum") if info["conserved"][k]["conserved"]]
     moving = [k for k in kinds if any(np.any(np.abs(np.asarray(ser[v].get(f"drift_{k}", [0.0]))) > 0)
                                       for vs in fams.values() for v in vs)]
@@ -531,11 +537,10 @@ def fig_ladder(res, sc, styles, path, mode):
         vals = []
         for j, vs in enumerate(fams.values()):
             vals += _ladder_cell(axes[i, j], res, sc, q, vs, styles, mode)[1]
-            axes[i, j].autoscale_view()
+            if axes[i, j].has_data():
+                axes[i, j].autoscale_view()
         lim = _robust_limits(vals, log=True)
-        if lim is not None:
-            axes[i, 0].set_ylim(lim[0] / 10, lim[1])
-        _same_limits(axes[i], "y")
+        _same_limits(axes[i], "y", None if lim is None else (lim[0] / 10, lim[1]))
         for j, ax in enumerate(axes[i]):
             if lim is not None:
                 _slope_triangles(ax, ladder, labels=j == 0)
@@ -586,7 +591,8 @@ def fig_work(res, sc, styles, path):
             mk = styles[v]["marker"]
             _line(ax, w[ok], _positive(e[ok]), color=color, marker=mk, ms=4, lw=0.9, alpha=0.85)
             handles[v] = {"color": color, "marker": mk, "ls": "-"}
-        ax.autoscale_view()
+        if ax.has_data():
+            ax.autoscale_view()
         _title(ax, LABELS[q])
         ax.set_xlabel("wall time of the run (s)", fontsize=8)
         ax.set_ylabel(f"final {LABELS[q]} error ({UNITS[q]})", fontsize=8)
@@ -639,8 +645,3 @@ def draw(res, sc, kind, plot_dir) -> tuple:
     name = figure_name(sc, kind)
     ok = _DRAW[kind](res, sc, variant_styles(res.variants), inside(plot_dir, name))
     return kind, (name if ok else None), NOTES.pop((sc, kind), "")
-
-
-def scenario_figures(res, sc, plot_dir) -> list:
-    """Draw every figure of scenario ``sc``; returns ``[(kind, filename or None, note)]``."""
-    return [draw(res, sc, kind, plot_dir) for _, kind in figure_tasks(res, sc)]
