@@ -38,9 +38,10 @@ def _draw(task):
     return (sc, *draw(res, sc, kind, Path(plot_dir)))
 
 
-def _quiet_init(parent_pid):
+def _quiet_init(parent_pid, directory):
     from cross_checks.sweep.lifecycle import worker_init
     worker_init(parent_pid)
+    _SHARED.setdefault("directory", directory)   # a spawned process loads the results once
 
 
 def _say(line: str) -> None:
@@ -129,15 +130,9 @@ def _tidy(d, written, drawn, listed, marked) -> None:
 
 
 def _draw_all(res, names, plot_dir: Path, jobs, progress) -> dict:
-    """Draw every figure (in ``jobs`` processes); returns ``{scenario: [(kind, file or None, note)]}``
-    in the order of plots.KINDS."""
-    from reports.canvas import release
-    from reports.plots import (  # here: forked workers inherit matplotlib
-        KINDS,
-        figure_tasks,
-        layout_group,
-        relative_cost,
-    )
+    """Draw every figure (in ``jobs`` processes, costliest first, each reported as it is done); returns
+    ``{scenario: [(kind, file or None, note)]}`` in the order of plots.KINDS."""
+    from reports.plots import KINDS, figure_tasks, relative_cost, release  # here: forked workers inherit matplotlib
     tasks = [(sc, kind, str(plot_dir)) for sc in names for _, kind in figure_tasks(res, sc)]
     # the costliest figures first, so that no process is left drawing a large one while the other idles
     tasks.sort(key=lambda t: -relative_cost(res, t[0], t[1]))
@@ -147,31 +142,41 @@ def _draw_all(res, names, plot_dir: Path, jobs, progress) -> dict:
     bar = Progress("rbcheck report", "figures", len(tasks), enabled=progress, interval_s=LINE_INTERVAL_S,
                    total_work=sum(relative_cost(res, t[0], t[1]) for t in tasks))   # time left follows the cost
 
-    def done(i, item):
+    def done(item):
         sc, kind, fname, note = item
         out[sc][kind] = (kind, fname, note)
         bar.update(1, f"{sc} {kind}", work=relative_cost(res, sc, kind))
 
     try:
         if jobs and jobs > 1 and len(tasks) > 1:
-            import multiprocessing as mp
-
-            from reports.schedule import draw_in_processes, split
-            ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else None
-            if ctx is None:
-                _SHARED.pop("res")   # spawned workers load the directory once each
-            lists = split(tasks, min(jobs, len(tasks)), group=lambda t: layout_group(res, t[0], t[1]),
-                          cost=lambda t: relative_cost(res, t[0], t[1]))
-            draw_in_processes(_draw, lists, done, ctx=ctx, worker_init=_quiet_init)
+            _draw_in_processes(tasks, min(jobs, len(tasks)), done)
         else:
-            for i, t in enumerate(tasks, start=1):
-                done(i, _draw(t))
+            for t in tasks:
+                done(_draw(t))
         bar.close()
     finally:
         bar.close(finished=False)   # after an error: the bar ends, no "done" line (a no-op after close())
         _SHARED.clear()
         release()
     return {sc: [figs[k] for k in KINDS if k in figs] for sc, figs in out.items()}
+
+
+def _draw_in_processes(tasks, jobs, done) -> None:
+    """``done(_draw(task))`` for every task, drawn in ``jobs`` processes in the order given; forked
+    processes inherit the loaded results (spawned ones load the directory once each). A drawing
+    process's exception is raised here."""
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else None
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_quiet_init,
+                             initargs=(os.getpid(), _SHARED["directory"])) as pool:
+        futures = [pool.submit(_draw, t) for t in tasks]
+        try:
+            for f in as_completed(futures):
+                done(f.result())
+        finally:
+            pool.shutdown(cancel_futures=True)   # after an error: the figures not begun are not drawn
 
 
 def _move_plots(src: Path, plots: Path) -> list:

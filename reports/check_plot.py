@@ -10,15 +10,13 @@ from __future__ import annotations
 
 import textwrap
 
-import matplotlib
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.ticker import NullFormatter
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.lines import Line2D  # noqa: E402
-
-from reports.canvas import save_png  # noqa: E402
-from reports.plots import DPI, LOG_FLOOR  # noqa: E402
+from reports.plots import DPI, LOG_FLOOR, save_png
 
 __all__ = ["check_figure", "ladder_figure"]
 
@@ -91,7 +89,8 @@ def _free_errors(ax, res):
 def check_figure(res, scenario, path) -> None:
     """Draw the figure of one CheckResult to ``path`` (PNG)."""
     s = res.series
-    fig = plt.figure(figsize=(14.0, 8.8), dpi=DPI)
+    fig = Figure(figsize=(14.0, 8.8), dpi=DPI)
+    FigureCanvasAgg(fig)
     gs = fig.add_gridspec(2, 3, height_ratios=[1.0, 1.0], hspace=0.45, wspace=0.28,
                           left=0.06, right=0.985, top=0.83, bottom=0.07)
     head = (("PASS: " + res.verdict) if res.passed else ("FAIL: " + res.reasons[0] if res.reasons else res.verdict))
@@ -151,16 +150,16 @@ def check_figure(res, scenario, path) -> None:
         handles.append(Line2D([], [], color="gray", lw=1.2, ls="--", label=f"{label_closest} run free (closest correct)"))
     fig.legend(handles=handles, loc="upper right", bbox_to_anchor=(0.985, 0.895), ncol=3, fontsize=9, frameon=False)
     save_png(fig, path)
-    plt.close(fig)
 
 
 def ladder_figure(results, ladder, scenario, path) -> None:
     """Final error against Δt (log-log) per quantity, with the fitted order."""
     recs = ladder["convergence"]
-    fig, axes = plt.subplots(1, max(1, len(recs)), figsize=(4.0 * max(1, len(recs)), 4.6), dpi=DPI, squeeze=False)
+    fig = Figure(figsize=(4.0 * max(1, len(recs)), 4.6), dpi=DPI)
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(1, max(1, len(recs)), squeeze=False)
     fig.suptitle(("PASS: " if ladder["passed"] else "FAIL: ") + "\n".join(textwrap.wrap(ladder["verdict"], 140)[:2]),
                  x=0.01, ha="left", fontsize=10, color="darkgreen" if ladder["passed"] else "darkred")
-    from matplotlib.ticker import NullFormatter
     for ax, r in zip(axes[0], recs):
         dt = np.asarray(r["dt_s"], dtype=float)
         e = np.asarray(r["errors"], dtype=float)
@@ -182,4 +181,3 @@ def ladder_figure(results, ladder, scenario, path) -> None:
         ax.grid(alpha=0.3, which="both")
     fig.subplots_adjust(left=0.07, right=0.98, top=0.72, bottom=0.14, wspace=0.35)
     save_png(fig, path)
-    plt.close(fig)

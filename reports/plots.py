@@ -19,24 +19,33 @@ Figures (``plots/<scenario>__<kind>.png``):
 
 ``figure_tasks(res, sc)`` lists the figures a scenario has (so they can be drawn in parallel);
 ``draw(res, sc, kind, path)`` draws one and returns whether it carried anything.
+
+Drawn with matplotlib's public API on the Agg canvas, margins in inches (matplotlib's constrained
+layout measures every text of a figure again on each draw: it doubled a figure's cost). A drawing
+process keeps one figure per layout (kind of grid, columns) and empties it of its data for the next
+figure of that layout, whatever its number of rows (creating axes and their ticks is the costliest
+part of a figure drawn for the first time): a figure drawn in a kept grid has the pixels of a fresh one
+(tests/reports/test_plots.py).
 """
 from __future__ import annotations
 
 import math
 
 import matplotlib
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.collections import LineCollection
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.ticker import FixedFormatter, FixedLocator, LogFormatter, LogLocator, MaxNLocator, NullLocator
+from matplotlib.transforms import ScaledTranslation, offset_copy
 
-matplotlib.use("Agg")
-import numpy as np  # noqa: E402
-from matplotlib.collections import LineCollection  # noqa: E402
-from matplotlib.lines import Line2D  # noqa: E402
+from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, UNITS
+from reports.data import LABELS
+from reports.glance import families, order_text
 
-from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, UNITS  # noqa: E402
-from reports.canvas import legend_at, legend_below, legend_height_in, pad_limits, panels, save_png  # noqa: E402
-from reports.data import LABELS  # noqa: E402
-from reports.glance import families, order_text  # noqa: E402
-
-__all__ = ["KINDS", "scenario_figures", "figure_tasks", "draw", "families", "variant_styles", "NOTES"]
+__all__ = ["KINDS", "figure_tasks", "draw", "families", "variant_styles", "NOTES", "save_png",
+           "release"]
 
 KINDS = ("trajectories", "errors", "conservation", "convergence", "local", "work")
 DPI = 100            # rbcheck check --plot (reports.check_plot)
@@ -46,6 +55,10 @@ LOG_FLOOR = 1e-17
 _MARKERS = "osD^vP*Xh<>p"
 #: What a figure left out, by (scenario, kind): filled while drawing, read by the page's caption.
 NOTES: dict = {}
+#: Height of one legend entry at 7 pt (inches), to size the strip under the panels that holds the legends.
+_LEGEND_LINE_IN = 0.16
+#: The legends' top under their panel's bottom (inches): below the tick labels and the x label.
+_LEGEND_DROP_IN = 0.5
 
 
 def variant_styles(variants) -> dict:
@@ -62,73 +75,192 @@ def _short(v):
     return v.split(":", 1)[1] if ":" in v else v
 
 
-def _grid(nrows, ncols, title, panel_h=2.1, log=False, key="time"):
-    """A grid of panels (reports.canvas.panels: reused within this process): the callers give a row
-    one y range and the grid one x range, as shared axes would."""
-    width = min(13.0, 2.2 + 3.6 * ncols)
-    fig, axes = panels((key, panel_h), nrows, ncols, (width, 1.1 + panel_h * nrows), REPORT_DPI, log)
+_FIGURES: dict = {}   # (layout, columns, log, outer) -> (figure, rows of axes): kept per drawing process
+#: Tick labels' size (pt) and the axis labels' fixed distances from their axes (pt), so that matplotlib
+#: need not measure every tick label to place them: y label left of the widest tick label drawn ("1e-15",
+#: "−0.25": 5 characters of ~0.6 em) plus tick (3.5 pt), pad (3.5 pt) and 4 pt; x label under the tick,
+#: pad, one line of tick labels (1.2 em) and 3 pt.
+_TICK_PT = 10.0
+_YLABEL_PT = 5 * 0.6 * _TICK_PT + 3.5 + 3.5 + 4.0
+_XLABEL_PT = 3.5 + 3.5 + 1.2 * _TICK_PT + 3.0
+
+
+def _panels(layout, nrows, ncols, size_in, log, outer=True):
+    """A figure of ``nrows`` × ``ncols`` panels (log x and y scales when ``log``), emptied of any previous
+    drawing and resized to ``size_in`` (w, h inches). With ``outer`` only the bottom row has x tick
+    labels and the first column y tick labels (the callers then give a row one y range and the grid one
+    x range: :func:`_same_limits`). The panels are kept by layout whatever the number of rows: a figure
+    of fewer rows lays its rows out on a grid of its own and hides the others."""
+    key = (layout, ncols, log, outer)
+    fig, rows = _FIGURES.setdefault(key, (Figure(dpi=REPORT_DPI), []))
+    if not isinstance(fig.canvas, FigureCanvasAgg):
+        FigureCanvasAgg(fig)
+    grid = fig.add_gridspec(nrows, ncols)
+    while len(rows) < nrows:
+        rows.append([fig.add_subplot(grid[len(rows), j]) for j in range(ncols)])
+        for j, ax in enumerate(rows[-1]):
+            _style(ax, log, left=j == 0 or not outer)
+    for i, row in enumerate(rows):
+        for j, ax in enumerate(row):
+            ax.set_visible(i < nrows)
+            if i < nrows:
+                ax.set_subplotspec(grid[i, j])
+            bottom = i == nrows - 1 or not outer
+            if ax.xaxis.get_tick_params().get("labelbottom") != bottom:   # tick_params restyles every tick
+                ax.tick_params(axis="x", labelbottom=bottom)
+            for art in (*ax.lines, *ax.collections, *ax.texts):
+                art.remove()
+            ax.set(xlabel="", ylabel="")
+            ax.set_title("", loc="left")
+            ax.relim()
+            ax.set_autoscale_on(True)
+    for art in (*fig.images, *fig.texts):   # legends
+        art.remove()
+    fig.set_size_inches(*size_in)
+    return fig, np.array(rows[:nrows], dtype=object)
+
+
+def _style(ax, log, left) -> None:
+    """Plain decade labels ("1e-06", not mathtext) and no minor ticks on log axes, at most 5 ticks on
+    linear ones (decades read as well, and labels are most of what a figure costs to draw); axis labels
+    at fixed distances from the axes."""
+    ax.patch.set_visible(False)   # white on the figure's white
+    ax.tick_params(labelsize=_TICK_PT, labelleft=left, bottom=False, left=False)
+    if log:
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+    for axis in (ax.xaxis, ax.yaxis):
+        if log:
+            axis.set_major_locator(LogLocator(base=10.0, numticks=6))
+            axis.set_major_formatter(LogFormatter(labelOnlyBase=True))
+            axis.set_minor_locator(NullLocator())
+        else:
+            axis.set_major_locator(MaxNLocator(nbins=4))
+    ax.yaxis.set_label_coords(0.0, 0.5, transform=offset_copy(ax.transAxes, x=-_YLABEL_PT, units="points",
+                                                               fig=ax.figure))
+    ax.yaxis.label.set_verticalalignment("bottom")
+    ax.xaxis.set_label_coords(0.5, 0.0, transform=offset_copy(ax.transAxes, y=-_XLABEL_PT, units="points",
+                                                               fig=ax.figure))
+    ax.xaxis.label.set_verticalalignment("top")
+
+
+def _same_limits(axes, which, lim=None) -> None:
+    """One range over ``axes``, as shared axes would have: ``lim``, or the union of the panels' own."""
+    axes = list(axes)
+    lims = [lim] if lim is not None else [ax.get_xlim() if which == "x" else ax.get_ylim() for ax in axes
+                                          if ax.has_data()]
+    if not lims:
+        return
+    lo, hi = min(lo for lo, _ in lims), max(hi for _, hi in lims)
+    for ax in axes:
+        ax.set_xlim(lo, hi) if which == "x" else ax.set_ylim(lo, hi)
+
+
+def _title(ax, text) -> None:
+    """A panel's title at the left, at a fixed height (an automatic one measures the tick labels)."""
+    ax.set_title(text, loc="left", fontsize=10, y=1.0, pad=4.0)
+
+
+def release() -> None:
+    """Drop the figures and legends this process keeps (a caller that drew in its own process does not
+    keep them)."""
+    _FIGURES.clear()
+    _LEGENDS.clear()
+
+
+def _grid(nrows, ncols, title, panel_h=2.1, log=False, layout="time", legend_rows=0):
+    """A grid of panels under a title, with a strip under it for legends of up to ``legend_rows``
+    entries; margins in inches."""
+    strip = 0.35 + _LEGEND_LINE_IN * legend_rows if legend_rows else 0.0
+    w, h = min(13.0, 2.2 + 3.6 * ncols), 1.1 + panel_h * nrows + strip
+    fig, axes = _panels(layout, nrows, ncols, (w, h), log)
     fig.suptitle(title, fontsize=11, x=0.01, ha="left")
+    fig.subplots_adjust(left=0.09 if w > 8 else 0.14, right=0.98, top=1.0 - 0.75 / h, bottom=(0.5 + strip) / h,
+                        hspace=0.35, wspace=0.08)
     return fig, axes
 
 
-def _finish(fig, path):
-    legends = getattr(fig, "_rb_legends", [])
-    strip_in = (legend_height_in(max(len(es) for _, es, _ in legends)) + 0.1) if legends else 0.0
-    w, h = fig.get_size_inches()
-    if strip_in:
-        h += strip_in
-        fig.set_size_inches(w, h)
-    fig.subplots_adjust(left=0.09 if w > 8 else 0.14, right=0.98, top=1.0 - 0.75 / h,
-                        bottom=(0.5 + strip_in) / h, hspace=0.35, wspace=0.08)
-    for ax, entries, fam in legends:
-        legend_below(fig, ax, fam, entries, below_in=0.5)
-    _plain_log_ticks(fig)
-    _save_png(fig, path)
-
-
-def _plain_log_ticks(fig):
-    """Log axes labelled "1e-06" instead of mathtext 10⁻⁶ and without minor ticks: parsing mathtext and
-    building ~300 minor tick objects per figure were most of its drawing time (cProfile: pyparsing,
-    Axis._get_tick); decades alone read as well. Explicit tick labels (Δt ladders) stay."""
-    from matplotlib.ticker import FixedLocator, LogFormatter, LogLocator, MaxNLocator, NullLocator
+def _finish(fig, path) -> None:
+    """Grid lines at the major ticks of every panel shown, drawn as one collection per axis (a grid of
+    matplotlib's draws a line per tick: a fifth of a figure's drawing time), then the PNG."""
     for ax in fig.axes:
-        for axis, scale in ((ax.xaxis, ax.get_xscale()), (ax.yaxis, ax.get_yscale())):
-            if isinstance(axis.get_major_locator(), FixedLocator):
-                continue
-            if scale == "log":
-                axis.set_major_locator(LogLocator(base=10.0, numticks=6))
-                axis.set_major_formatter(LogFormatter(labelOnlyBase=True))
-                axis.set_minor_locator(NullLocator())
-            else:   # fewer tick objects: each costs as much as a line of data to draw
-                axis.set_major_locator(MaxNLocator(nbins=4))
+        if ax.get_visible():
+            for locs, along, trans in ((ax.get_xticks(), lambda x: [(x, 0), (x, 1)], ax.get_xaxis_transform()),
+                                       (ax.get_yticks(), lambda y: [(0, y), (1, y)], ax.get_yaxis_transform())):
+                ax.add_collection(LineCollection([along(v) for v in locs], colors="#b0b0b0", linewidths=0.8,
+                                                 alpha=0.3, zorder=0.5, transform=trans), autolim=False)
+    save_png(fig, path)
 
 
-_save_png = save_png   # the one place the report saves a figure (a test swaps it to keep the figure)
+def save_png(fig, path) -> None:
+    """Save as an 8-bit palette PNG: the figures use a few dozen colours, and a palette makes the
+    files ~3× smaller than RGBA at no visible cost (no dithering). Deterministic for equal input. The
+    canvas is drawn once and its pixels quantized directly."""
+    from PIL import Image
+    canvas = fig.canvas if isinstance(fig.canvas, FigureCanvasAgg) else FigureCanvasAgg(fig)
+    with matplotlib.rc_context({"text.hinting": "no_hinting"}):   # the same glyphs, unhinted: a third cheaper
+        canvas.draw()
+    w, h = canvas.get_width_height(physical=True)
+    im = Image.frombuffer("RGBA", (w, h), canvas.buffer_rgba(), "raw", "RGBA", 0, 1).convert("RGB")
+    q = im.quantize(colors=256, method=Image.Quantize.FASTOCTREE, dither=Image.Dither.NONE)
+    q.save(path, format="PNG", compress_level=6)
 
 
 def _line(ax, x, y, **style):
-    """ax.plot(x, y, **style) for one line with its colour given, without plot's argument parsing
-    (a third of its cost; ~2,000 lines in the report's ladders): the same Line2D, added the same way,
-    the axes' limits marked for autoscaling as plot marks them (work-precision panels are autoscaled)."""
-    line = ax.add_line(Line2D(np.asarray(x, dtype=float), np.asarray(y, dtype=float), **style))
-    request = getattr(ax, "_request_autoscale_view", None)   # matplotlib's lazy request, as plot() makes
-    request() if request is not None else ax.autoscale_view()
-    return line
+    """One line of the given style (a Line2D added as it is: ``plot``'s argument parsing is a third of
+    its cost, and the ladders have ~2,000 lines); the axes are autoscaled when the panel is done."""
+    return ax.add_line(Line2D(np.asarray(x, dtype=float), np.asarray(y, dtype=float), **style))
 
 
-def _panel_title(ax, text):
-    """A panel's title as plain text above it: Axes.set_title re-measures the tick labels of every
-    titled axes to place it (a quarter of a grid figure's drawing time, cProfile)."""
-    ax.text(0.0, 1.03, text, transform=ax.transAxes, fontsize=10, ha="left", va="bottom")
+def _family_legends(axes_bottom, fams, styles, extra=None, markers=False):
+    """One legend per family column, under its bottom panel (inside a panel it covered curves): the
+    family's variants (and their text)."""
+    for ax, (fam, vs) in zip(axes_bottom, fams.items()):
+        _legend(ax, 0.0, -_LEGEND_DROP_IN, fam, [(_short(v) + (f"  {extra[v]}" if extra and extra.get(v) else ""),
+                                                   {**styles[v], "marker": styles[v]["marker"] if markers else None})
+                                                  for v in vs])
 
 
-def _loglog(ax):
-    """Log scales set once per axes (loglog() on every line re-scales the axes each time: a third of
-    a ladder figure's drawing time)."""
-    if ax.get_xscale() != "log":
-        ax.set_xscale("log")
-    if ax.get_yscale() != "log":
-        ax.set_yscale("log")
+def _legend(ax, x0, top, title, entries, width_in=3.2) -> None:
+    """A legend of ``entries`` = [(label, style with color, ls, marker)] whose top left corner is
+    (x0, top) inches from ``ax``'s lower left corner, at most ``width_in`` wide: its title, then a short
+    line (and marker) and a text per entry, _LEGEND_LINE_IN apart. The same legend comes back in many
+    figures (every time figure of a report has its families' legends): it is drawn once per process
+    and its pixels placed as a figure image (FigureImage) in the others."""
+    fig = ax.figure
+    key = (fig.dpi, width_in, title, tuple((label, st["color"], st["ls"], st.get("marker")) for label, st in entries))
+    if key not in _LEGENDS:
+        _LEGENDS[key] = _legend_pixels(fig.dpi, width_in, title, entries)
+    x, y = (fig.dpi_scale_trans + ScaledTranslation(0.0, 0.0, ax.transAxes)).transform((x0, top))
+    fig.figimage(_LEGENDS[key], xo=round(x), yo=round(y) - _LEGENDS[key].shape[0], origin="upper")
+
+
+_LEGENDS: dict = {}   # legend -> its RGBA pixels (straight alpha, transparent background), per process
+
+
+def _legend_pixels(dpi, width_in, title, entries) -> np.ndarray:
+    """The pixels of a legend (:func:`_legend`) drawn alone on a transparent figure."""
+    height = 0.3 + _LEGEND_LINE_IN * len(entries)
+    fig = Figure(figsize=(width_in, height), dpi=dpi, facecolor="none")
+    FigureCanvasAgg(fig)
+    at = fig.dpi_scale_trans
+    fig.text(0.0, height, title, transform=at, fontsize=8, va="top")
+    ys = height - 0.2 - _LEGEND_LINE_IN * np.arange(len(entries))
+    xs = (0.05, 0.225)
+    fig.add_artist(LineCollection([[(xs[0], y), (xs[1], y)] for y in ys], colors=[st["color"] for _, st in entries],
+                                  linestyles=[st["ls"] for _, st in entries], linewidths=1.4, transform=at))
+    for y, (label, st) in zip(ys, entries):
+        if st.get("marker"):
+            fig.add_artist(Line2D([sum(xs) / 2], [y], color=st["color"], marker=st["marker"], ms=4, ls="none",
+                                  transform=at))
+        fig.text(xs[1] + 0.075, y, label, transform=at, fontsize=7, va="center")
+    with matplotlib.rc_context({"text.hinting": "no_hinting"}):
+        fig.canvas.draw()
+    return np.asarray(fig.canvas.buffer_rgba()).copy()
+
+
+def _legend_rows(fams) -> int:
+    return max((len(vs) for vs in fams.values()), default=0)
 
 
 def _positive(a):
@@ -143,19 +275,6 @@ def _diverged(res, sc, v):
         return None
     t = d.get("diverged_at_s", math.nan)
     return t if isinstance(t, float) and math.isfinite(t) else math.inf
-
-
-def _family_legends(axes_bottom, fams, styles, extra=None, markers=False):
-    """One legend per family column, BELOW its bottom panel (inside a panel it covered curves): the
-    family's variants (and their text). Drawn by :func:`_finish` (reports.canvas.legend_below), which
-    makes room for them."""
-    fig = axes_bottom[0].figure
-    fig._rb_legends = []
-    for ax, (fam, vs) in zip(axes_bottom, fams.items()):
-        es = [(_short(v) + (f"  {extra[v]}" if extra and extra.get(v) else ""),
-               {"color": styles[v]["color"], "ls": styles[v]["ls"], "marker": styles[v]["marker"] if markers else None})
-              for v in vs]
-        fig._rb_legends.append((ax, es, fam))
 
 
 def _robust_limits(curves, log):
@@ -173,13 +292,10 @@ def _robust_limits(curves, log):
     return lo - pad, hi + pad
 
 
-def _time_panels(fig, axes, res, sc, fams, styles, rows, log):
+def _time_panels(axes, res, sc, fams, styles, rows, log):
     """Draw ``rows`` = [(label, fn(series) -> y or None)] × family columns; diverged runs truncated and
-    marked; a row's panels get one y range (from the runs that did not diverge), the grid one time
-    range. Returns the variants drawn."""
+    marked; a row's panels get one y range (from the runs that did not diverge)."""
     ser = res.series(sc)
-    drawn = set()
-    t_span = [math.inf, -math.inf]
     for i, (label, get) in enumerate(rows):
         keep, every = [], []
         for j, (fam, vs) in enumerate(fams.items()):
@@ -189,7 +305,6 @@ def _time_panels(fig, axes, res, sc, fams, styles, rows, log):
             if not log and ref is not None and get(ref) is not None:
                 _line(ax, ref["t_s"], get(ref), color="black", lw=3.2, alpha=0.28)
                 keep.append(get(ref))
-                _widen(t_span, ref["t_s"])
             for v in vs:
                 if v not in ser or get(ser[v]) is None:
                     continue
@@ -200,40 +315,32 @@ def _time_panels(fig, axes, res, sc, fams, styles, rows, log):
                     ok &= t <= tdiv
                 y_draw = _positive(y) if log else y
                 st = styles[v]
-                curves.append((np.column_stack([t[ok], y_draw[ok]]), st))
-                drawn.add(v)
-                _widen(t_span, t[ok])
+                if ok.any():
+                    curves.append((np.column_stack([t[ok], y_draw[ok]]), st))
                 every.append(y_draw[ok])
                 if tdiv is not None and ok.any():
                     k = np.flatnonzero(ok)[-1]
-                    _line(ax, [t[k]], [y_draw[k]], marker="x", ms=9, mew=2, color=st["color"], clip_on=True, zorder=3)
+                    _line(ax, [t[k]], [y_draw[k]], marker="x", ms=9, mew=2, color=st["color"], zorder=3)
                 else:
                     keep.append(y[ok])
             if curves:
                 ax.add_collection(LineCollection([xy for xy, _ in curves], colors=[st["color"] for _, st in curves],
-                                                 linestyles=[st["ls"] for _, st in curves], linewidths=1.1),
-                                  autolim=False)
+                                                 linestyles=[st["ls"] for _, st in curves], linewidths=1.1))
             if i == 0:
-                _panel_title(ax, fam)
-        lim = _robust_limits(keep, log) or _robust_limits(every, log)
-        for ax in axes[i]:
-            if lim is not None:
-                ax.set_ylim(*lim)
+                _title(ax, fam)
+            if ax.has_data():
+                ax.autoscale_view()
+        _same_limits(axes[i], "y", _robust_limits(keep, log) or _robust_limits(every, log))
         axes[i, 0].set_ylabel(label, fontsize=8)
-    if t_span[0] <= t_span[1]:
-        for ax in axes.flat:
-            ax.set_xlim(*pad_limits(*t_span, log))
+    _same_limits(axes.flat, "x")
     for ax in axes[-1]:
         ax.set_xlabel("time t (s)", fontsize=8)
-    return drawn
 
 
-def _widen(span, values):
-    """Grow ``span`` = [lo, hi] to the finite ``values`` (positive ones only when lo must stay > 0)."""
-    v = np.asarray(values, dtype=float)
-    v = v[np.isfinite(v)]
-    if v.size:
-        span[0], span[1] = min(span[0], float(v.min())), max(span[1], float(v.max()))
+def _families_with_series(res, ser) -> dict:
+    """``{family: [variants]}`` of the variants that have saved series, families without any left out."""
+    fams = {f: [v for v in vs if v in ser] for f, vs in families(res.variants).items()}
+    return {f: vs for f, vs in fams.items() if vs}
 
 
 def _moving_components(ser):
@@ -256,16 +363,15 @@ def _moving_components(ser):
 def fig_trajectories(res, sc, styles, path):
     info = res.scenario(sc)
     ser = res.series(sc)
-    fams = {f: [v for v in vs if v in ser] for f, vs in families(res.variants).items()}
-    fams = {f: vs for f, vs in fams.items() if vs}
+    fams = _families_with_series(res, ser)
     moving, still = _moving_components(ser)
     if not fams or not moving:
         NOTES[(sc, "trajectories")] = "nothing moves" if not moving else "no series"
         return False
     rows = [(label, (lambda s, fld=fld, i=i: s[fld][:, i] if fld in s else None)) for label, fld, i in moving]
     fig, axes = _grid(len(rows), len(fams), f"{sc}: trajectories at Δt = {info['dt_s']:g} s (thick grey: "
-                                            f"reference, {info['reference']})", panel_h=1.5)
-    _time_panels(fig, axes, res, sc, fams, styles, rows, log=False)
+                                            f"reference, {info['reference']})", panel_h=1.5, legend_rows=_legend_rows(fams))
+    _time_panels(axes, res, sc, fams, styles, rows, log=False)
     _family_legends(axes[-1], fams, styles)
     NOTES[(sc, "trajectories")] = ("Not drawn, constant along the reference: " + ", ".join(still) + ".") if still else ""
     _finish(fig, path)
@@ -275,8 +381,7 @@ def fig_trajectories(res, sc, styles, path):
 def fig_errors(res, sc, styles, path):
     info = res.scenario(sc)
     ser = res.series(sc)
-    fams = {f: [v for v in vs if v in ser] for f, vs in families(res.variants).items()}
-    fams = {f: vs for f, vs in fams.items() if vs}
+    fams = _families_with_series(res, ser)
     moving = [q for q in QUANTITIES if info.get("varies", {}).get(q, True)]
     nonzero = [q for q in moving if any(np.any(np.asarray(ser[v].get(f"err_{q}", [0.0])) > 0)
                                         for vs in fams.values() for v in vs)]
@@ -289,8 +394,9 @@ def fig_errors(res, sc, styles, path):
         return False
     rows = [(f"{LABELS[q]} error ({UNITS[q]})", (lambda s, q=q: s.get(f"err_{q}"))) for q in shown]
     fig, axes = _grid(len(rows), len(fams), f"{sc}: error against the reference vs time at Δt = {info['dt_s']:g} s "
-                                            f"(log scales; zero drawn at {LOG_FLOOR:g}; × marks a divergence)", log=True)
-    _time_panels(fig, axes, res, sc, fams, styles, rows, log=True)
+                                            f"(log scales; zero drawn at {LOG_FLOOR:g}; × marks a divergence)", log=True,
+                      layout="time-log", legend_rows=_legend_rows(fams))
+    _time_panels(axes, res, sc, fams, styles, rows, log=True)
     _family_legends(axes[-1], fams, styles)
     left = [LABELS[q] for q in QUANTITIES if q not in nonzero]
     NOTES[(sc, "errors")] = (("Not drawn: " + ", ".join(left) + " (does not move, or zero error for every variant)."
@@ -336,8 +442,7 @@ def fig_conservation(res, sc, styles, path):
     """Drift of the quantities the physics conserves; False when none is conserved or none drifts."""
     info = res.scenario(sc)
     ser = res.series(sc)
-    fams = {f: [v for v in vs if v in ser] for f, vs in families(res.variants).items()}
-    fams = {f: vs for f, vs in fams.items() if vs}
+    fams = _families_with_series(res, ser)
     kinds = [k for k in ("energy", "angular_momentum", "linear_momentum") if info["conserved"][k]["conserved"]]
     moving = [k for k in kinds if any(np.any(np.abs(np.asarray(ser[v].get(f"drift_{k}", [0.0]))) > 0)
                                       for vs in fams.values() for v in vs)]
@@ -350,15 +455,18 @@ def fig_conservation(res, sc, styles, path):
     rows = [(_DRIFT_LABEL[k], (lambda s, k=k: None if f"drift_{k}" not in s else np.abs(s[f"drift_{k}"])))
             for k in moving]
     fig, axes = _grid(len(rows), len(fams), f"{sc}: relative drift of conserved quantities at Δt = {info['dt_s']:g} s "
-                                            f"(log scales; zero drawn at {LOG_FLOOR:g}; × marks a divergence)", log=True)
-    _time_panels(fig, axes, res, sc, fams, styles, rows, log=True)
+                                            f"(log scales; zero drawn at {LOG_FLOOR:g}; × marks a divergence)", log=True,
+                      layout="time-log", legend_rows=_legend_rows(fams))
+    _time_panels(axes, res, sc, fams, styles, rows, log=True)
     _family_legends(axes[-1], fams, styles)
     _finish(fig, path)
     return True
 
 
-def _slope_triangles(ax, dts, orders=(1, 2, 4)):
-    """Reference slope triangles at the lower right of a log-log axis, a third of the Δt range wide."""
+def _slope_triangles(ax, dts, labels, orders=(1, 2, 4)):
+    """Reference slope triangles at the lower right of a log-log axis, a third of the Δt range wide,
+    with their orders written beside them when ``labels`` (the first panel of a row: the others of the
+    row have the same triangles at the same place)."""
     lo, hi = ax.get_ylim()
     span_x = math.log10(max(dts) / min(dts)) or 1.0
     x1 = max(dts) / 10 ** (0.04 * span_x)
@@ -370,7 +478,8 @@ def _slope_triangles(ax, dts, orders=(1, 2, 4)):
         y1 = y0 * (x1 / x0) ** p
         xs += [x0, x1, x1, x0, np.nan]
         ys += [y0, y0, y1, y0, np.nan]
-        ax.text(x0 / 10 ** (0.01 * span_x), y0, f"{p}", fontsize=7, color="0.3", va="bottom", ha="right")
+        if labels:
+            ax.text(x0 / 10 ** (0.01 * span_x), y0, f"{p}", fontsize=7, color="0.3", va="bottom", ha="right")
     _line(ax, xs, ys, color="0.45", lw=0.8)   # one line for the three triangles (one artist to draw)
 
 
@@ -379,7 +488,6 @@ def _ladder_cell(ax, res, sc, q, vs, styles, mode):
     col = f"{COLUMN_STEM[q]}_err_final" if mode == "free_running" else f"{COLUMN_STEM[q]}_local_err"
     recs = {r["engine"]: r for r in res.records(sc, quantity=q, mode=mode)}
     dts, vals = [], []
-    _loglog(ax)
     for v in vs:
         rows = sorted([r for r in res.rows_for(sc, v) if r["in_ladder"]], key=lambda r: -r["dt"])
         dt = np.array([r["dt"] for r in rows])
@@ -423,22 +531,23 @@ def fig_ladder(res, sc, styles, path, mode):
         return False
     what = "final error" if mode == "free_running" else "one-step (local) error"
     fig, axes = _grid(len(qs), len(fams), f"{sc}: {what} vs Δt (filled: points of the fitted order; grey band: "
-                                          "round-off floor; triangles: slopes 1, 2, 4)", log=True, key="ladder")
+                                          "round-off floor; triangles: slopes 1, 2, 4)", log=True, layout="ladder",
+                      legend_rows=_legend_rows(fams))
     for i, q in enumerate(qs):
         vals = []
         for j, vs in enumerate(fams.values()):
             vals += _ladder_cell(axes[i, j], res, sc, q, vs, styles, mode)[1]
+            if axes[i, j].has_data():
+                axes[i, j].autoscale_view()
         lim = _robust_limits(vals, log=True)
-        if lim is not None:
-            for ax in axes[i]:
-                ax.set_ylim(lim[0] / 10, lim[1])
-                _slope_triangles(ax, ladder)
+        _same_limits(axes[i], "y", None if lim is None else (lim[0] / 10, lim[1]))
+        for j, ax in enumerate(axes[i]):
+            if lim is not None:
+                _slope_triangles(ax, ladder, labels=j == 0)
         axes[i, 0].set_ylabel(f"{LABELS[q]} ({UNITS[q]})", fontsize=8)
-    from matplotlib.ticker import FixedFormatter, FixedLocator, NullLocator
+    _same_limits(axes.flat, "x")
     for ax in axes.flat:   # every row: the same Δt grid lines; labels on the bottom row only
-        ax.set_xlim(*pad_limits(min(ladder), max(ladder), log=True))
         ax.xaxis.set_major_locator(FixedLocator(ladder))
-        ax.xaxis.set_minor_locator(NullLocator())
         ax.xaxis.set_major_formatter(FixedFormatter([f"{d:g}" for d in ladder]))
     for ax in axes[-1]:
         ax.tick_params(axis="x", labelsize=7)
@@ -447,7 +556,7 @@ def fig_ladder(res, sc, styles, path, mode):
               for v in vs_all}
     _family_legends(axes[-1], fams, styles, orders, markers=True)
     for ax, fam in zip(axes[0], fams):
-        _panel_title(ax, fam)
+        _title(ax, fam)
     left = [LABELS[q] for q in QUANTITIES if q not in moving]
     NOTES[(sc, kind)] = (("Not drawn: " + ", ".join(left) + " (does not move). ") if left else "") + \
         "Orders in the legends: " + " / ".join(LABELS[q] for q in qs) + "." + exact_note
@@ -462,8 +571,8 @@ def fig_work(res, sc, styles, path):
         NOTES[(sc, "work")] = "no Δt ladder (one Δt only)"
         return False
     qs = [q for q in ("position", "orientation") if res.scenario(sc).get("varies", {}).get(q, True)]
-    fig, axes = panels(("work",), 1, len(qs), (13.0 if len(qs) > 1 else 8.0, 4.6), REPORT_DPI, log=True,
-                       outer_labels=False)
+    width = 13.0 if len(qs) > 1 else 8.0
+    fig, axes = _panels("work", 1, len(qs), (width, 4.6), log=True, outer=False)
     fig.suptitle(f"{sc}: work-precision — final error vs wall time of each run of the ladder", fontsize=11,
                  x=0.01, ha="left")
     handles = {}
@@ -481,17 +590,18 @@ def fig_work(res, sc, styles, path):
             color = matplotlib.colormaps["tab10"](list(families(res.variants)).index(fam) % 10)
             mk = styles[v]["marker"]
             _line(ax, w[ok], _positive(e[ok]), color=color, marker=mk, ms=4, lw=0.9, alpha=0.85)
-            handles[v] = {"color": color, "marker": mk, "lw": 0.9}
-        _panel_title(ax, LABELS[q])
+            handles[v] = {"color": color, "marker": mk, "ls": "-"}
+        if ax.has_data():
+            ax.autoscale_view()
+        _title(ax, LABELS[q])
         ax.set_xlabel("wall time of the run (s)", fontsize=8)
         ax.set_ylabel(f"final {LABELS[q]} error ({UNITS[q]})", fontsize=8)
-    fig.subplots_adjust(left=0.07, right=0.8, top=0.88, bottom=0.13, wspace=0.25)
+    fig.subplots_adjust(left=0.7 / width, right=1.0 - 2.3 / width, top=0.88, bottom=0.13, wspace=0.25)
     if handles:   # at the right, centred on the height
-        W, H = fig.get_size_inches()
-        legend_at(fig, 0.81 * W, (H + legend_height_in(len(handles))) / 2, "colour: engine family",
-                  list(handles.items()))
-    _plain_log_ticks(fig)
-    _save_png(fig, path)
+        pos = axes[0, -1].get_position()
+        _legend(axes[0, -1], pos.width * width + 0.15, (pos.height * 4.6 + 0.3 + _LEGEND_LINE_IN * len(handles)) / 2,
+                "colour: engine family", list(handles.items()), width_in=2.1)
+    _finish(fig, path)
     NOTES[(sc, "work")] = ""
     return True
 
@@ -511,17 +621,10 @@ def figure_tasks(res, sc) -> list:
     return [(sc, k) for k in KINDS]
 
 
-#: Relative drawing cost of one panel of each kind (CPU time per panel of a warm grid, measured on the
-#: default sweep's report after the axes were drawn by reports.ticks: ladders ~1.9x a time panel, they
-#: carry a line and markers per variant, triangles and Δt labels; a work panel's ~1.8x holds every variant).
+#: Relative drawing cost of one panel of each kind (CPU time per panel, measured on the default sweep's
+#: report: a ladder panel carries a line and markers per variant, triangles and Δt labels; a work panel
+#: holds every variant).
 _PANEL_COST = {"convergence": 1.9, "local": 1.9, "trajectories": 1.0, "errors": 1.0, "conservation": 1.0, "work": 1.8}
-
-
-def layout_group(res, sc, kind) -> tuple:
-    """The grid layout figure ``kind`` of ``sc`` is drawn in (figures of one layout reuse one grid's
-    panels in a drawing process, whatever their number of rows: reports.canvas.panels)."""
-    return ({"trajectories": "time", "errors": "time-log", "conservation": "time-log", "convergence": "ladder",
-             "local": "ladder", "work": "work"}[kind],)
 
 
 def relative_cost(res, sc, kind) -> float:
@@ -542,8 +645,3 @@ def draw(res, sc, kind, plot_dir) -> tuple:
     name = figure_name(sc, kind)
     ok = _DRAW[kind](res, sc, variant_styles(res.variants), inside(plot_dir, name))
     return kind, (name if ok else None), NOTES.pop((sc, kind), "")
-
-
-def scenario_figures(res, sc, plot_dir) -> list:
-    """Draw every figure of scenario ``sc``; returns ``[(kind, filename or None, note)]``."""
-    return [draw(res, sc, kind, plot_dir) for _, kind in figure_tasks(res, sc)]

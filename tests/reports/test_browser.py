@@ -251,7 +251,7 @@ def test_a_diverged_run_does_not_flatten_the_others(results, tmp_path, monkeypat
     from reports import plots
     from reports.data import load_results
     drawn = {}
-    monkeypatch.setattr(plots, "_save_png", lambda fig, path: drawn.setdefault("fig", fig))
+    monkeypatch.setattr(plots, "save_png", lambda fig, path: drawn.setdefault("fig", fig))
     res = load_results(results)
     assert plots.draw(res, "stiff_spring", "errors", tmp_path)[1] is not None
     ax = drawn["fig"].axes[0]                                   # position error, reference family
