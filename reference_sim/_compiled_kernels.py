@@ -4,7 +4,8 @@ Each function is the definition's function of the same name, written on the floa
 the operations in the definition's order (``a + b + c`` is ``(a + b) + c`` in NumPy and here) and
 ``fastmath`` off (no reassociation, no fused multiply-add), so that a state it writes equals the
 definition's (tests/reference_sim/test_compiled.py). ``P`` is the tuple of reference_sim.compiled.parameters:
-(sc (N, 7) [h, m, c, γ_v, γ_ω, k_v, k_ω], I_B, I_B⁻¹ (N, 3, 3), m g_W, τ_W, τ_B (N, 3), springs (N, S, 8)
+(sc (N, 7) [h, m, c, γ_v, γ_ω, k_v, k_ω], I_B, I_B⁻¹ (N, 3, 3), m g_W, f_W at the COM, τ_W, τ_B (N, 3),
+springs (N, S, 8)
 [anchor_W, attach_B, k, L0], world point forces (N, P, 6) [f_W, r_B], body point forces (N, B, 6) [f_B, r_B]).
 """
 from __future__ import annotations
@@ -39,8 +40,8 @@ def _mtv(R, a0, a1, a2):
 @njit(**_JIT)
 def _force_torque(i, y, R, P):
     """Members.force_torque of member i."""
-    sc, mg, tW, tB, springs, wp, bp = P[0], P[3], P[4], P[5], P[6], P[7], P[8]
-    fx, fy, fz = mg[i, 0], mg[i, 1], mg[i, 2]
+    sc, mg, fW, tW, tB, springs, wp, bp = P[0], P[3], P[4], P[5], P[6], P[7], P[8], P[9]
+    fx, fy, fz = mg[i, 0] + fW[i, 0], mg[i, 1] + fW[i, 1], mg[i, 2] + fW[i, 2]
     tx, ty, tz = tW[i, 0], tW[i, 1], tW[i, 2]
     c = sc[i, 2]
     if c != 0.0:
@@ -92,8 +93,8 @@ def _angular_acceleration(i, R, wx, wy, wz, tx, ty, tz, gyro, P):
 @njit(**_JIT)
 def _omega_times(wx, wy, wz, qw, qx, qy, qz):
     """[0, ω] ⊗ q (integrators.omega_times)."""
-    dot = wx * qx + wy * qy + wz * qz
-    return (-dot, qw * wx + (wy * qz - wz * qy), qw * wy + (wz * qx - wx * qz), qw * wz + (wx * qy - wy * qx))
+    return (-(wx * qx + wy * qy + wz * qz), wx * qw + wy * qz - wz * qy, wy * qw + wz * qx - wx * qz,
+            wz * qw + wx * qy - wy * qx)
 
 
 @njit(**_JIT)
@@ -103,9 +104,8 @@ def _exp_map_times(h, wx, wy, wz, qw, qx, qy, qz):
     t2 = th * th
     s = h * (0.5 - t2 / 48.0 + t2 * t2 / 3840.0) if th < 1e-4 else h * (math.sin(0.5 * th) / th)
     ew, ex, ey, ez = math.cos(0.5 * th), s * wx, s * wy, s * wz
-    dot = ex * qx + ey * qy + ez * qz
-    return (ew * qw - dot, ew * qx + qw * ex + (ey * qz - ez * qy), ew * qy + qw * ey + (ez * qx - ex * qz),
-            ew * qz + qw * ez + (ex * qy - ey * qx))
+    return (ew * qw - ex * qx - ey * qy - ez * qz, ew * qx + ex * qw + ey * qz - ez * qy,
+            ew * qy + ey * qw + ez * qx - ex * qz, ew * qz + ez * qw + ex * qy - ey * qx)
 
 
 @njit(**_JIT)
@@ -263,11 +263,11 @@ def _implicit_euler(i, y, out, d, z, tol, max_iter, P):
 
 
 @njit(**_JIT)
-def run(code, rows, offsets, pos, stop, limit, tol, max_iter, sc, I, J, mg, tW, tB, springs, wp, bp):
+def run(code, rows, offsets, pos, stop, limit, tol, max_iter, sc, I, J, mg, fW, tW, tB, springs, wp, bp):
     """For each member i: step ``rows[offsets[i] + pos[i]]`` on, writing the next rows, until ``pos[i]`` is
     ``stop[i]`` or the next step is not routine (a solve this loop does not finish, or a new state with a
     component that is non-finite or beyond ``limit``). ``pos`` is updated in place."""
-    P = (sc, I, J, mg, tW, tB, springs, wp, bp)
+    P = (sc, I, J, mg, fW, tW, tB, springs, wp, bp)
     k1, k2, k3, k4, tmp = np.empty(13), np.empty(13), np.empty(13), np.empty(13), np.empty(13)
     u, u_new = np.empty(6), np.empty(6)
     for i in range(offsets.shape[0]):
@@ -295,12 +295,12 @@ def run(code, rows, offsets, pos, stop, limit, tol, max_iter, sc, I, J, mg, tW, 
 
 
 @njit(**_JIT)
-def force_torque_at(y, stage, sc, I, J, mg, tW, tB, springs, wp, bp):
+def force_torque_at(y, stage, sc, I, J, mg, fW, tW, tB, springs, wp, bp):
     """Members.force_torque of member 0 at state ``y`` (13,), the rotation from q/|q|: 6 floats. With
     ``stage``, the decay as forces too: ``−m k_v v`` and ``−k_ω I_W ω`` (``I_W ω = R I_B Rᵀ ω``)."""
     n = math.sqrt(y[6] * y[6] + y[7] * y[7] + y[8] * y[8] + y[9] * y[9])
     R = _rot(y[6] / n, y[7] / n, y[8] / n, y[9] / n)
-    fx, fy, fz, tx, ty, tz = _force_torque(0, y, R, (sc, I, J, mg, tW, tB, springs, wp, bp))
+    fx, fy, fz, tx, ty, tz = _force_torque(0, y, R, (sc, I, J, mg, fW, tW, tB, springs, wp, bp))
     kv, kw, m = sc[0, 5], sc[0, 6], sc[0, 1]
     if stage and kv != 0.0:
         fx, fy, fz = fx - m * kv * y[3], fy - m * kv * y[4], fz - m * kv * y[5]

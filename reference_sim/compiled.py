@@ -50,10 +50,10 @@ def kernel():
 def parameters(p: Members, h_s) -> tuple:
     """The kernel's per-member arguments after the state arrays, for members ``p`` at steps ``h_s`` (N,) s."""
     h = np.asarray(h_s, dtype=float).reshape(-1)
-    gv, gw = p.decay_factors(h)
+    gv, gw = (np.broadcast_to(g, (len(h), 1)) for g in p.decay_factors(h))
     sc = np.ascontiguousarray(np.column_stack([h, p.mass_kg[:, 0], p.drag[:, 0], gv[:, 0], gw[:, 0],
                                                p.decay_rates[:, 0], p.decay_rates[:, 1]]))
-    arrays = (p.inertia_B, p.inertia_inv_B, p.weight_W, p.torque_W, p.torque_B, p.springs, p.world_points,
+    arrays = (p.inertia_B, p.inertia_inv_B, p.weight_W, p.force_W, p.torque_W, p.torque_B, p.springs, p.world_points,
               p.body_points)
     return (sc, *(np.ascontiguousarray(a, dtype=np.float64) for a in arrays))
 

@@ -46,9 +46,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from reference_sim.forces import Members
-from reference_sim.quaternion import matrix_from_quat
+from reference_sim.quaternion import matrix_from_quat, quat_mul
 from reference_sim.state import STATE_SIZE, Q, V, W, X
-from reference_sim.vec import cross3, floating
+from reference_sim.vec import floating, mat_t_vec3
 
 __all__ = ["VARIANTS", "Scheme", "get_step", "rhs", "members", "IMPLICIT_TOL", "MAX_ITER", "ImplicitSolveError",
            "exp_map_times", "omega_times"]
@@ -93,22 +93,28 @@ def _norm(q):
 
 def omega_times(w, q):
     """``[0, ω] ⊗ q`` (..., 4) for vectors ω (..., 3) and quaternions q (w, x, y, z)."""
-    qw, qv = q[..., 0:1], q[..., 1:4]
-    dot = w[..., 0:1] * qv[..., 0:1] + w[..., 1:2] * qv[..., 1:2] + w[..., 2:3] * qv[..., 2:3]
-    return np.concatenate([-dot, qw * w + cross3(w, qv)], axis=-1)
+    return _times(w[..., 0:1], w[..., 1:2], w[..., 2:3], q)
+
+
+def _times(ax, ay, az, q, aw=None):
+    """``a ⊗ q`` for ``a = (aw, ax, ay, az)`` (``aw`` None: 0), each sum taken left to right."""
+    qw, qx, qy, qz = q[..., 0:1], q[..., 1:2], q[..., 2:3], q[..., 3:4]
+    if aw is None:
+        return np.concatenate([-(ax * qx + ay * qy + az * qz), ax * qw + ay * qz - az * qy,
+                               ay * qw + az * qx - ax * qz, az * qw + ax * qy - ay * qx], axis=-1)
+    return np.concatenate([aw * qw - ax * qx - ay * qy - az * qz, aw * qx + ax * qw + ay * qz - az * qy,
+                           aw * qy + ay * qw + az * qx - ax * qz, aw * qz + az * qw + ax * qy - ay * qx], axis=-1)
 
 
 def exp_map_times(h, w, q):
     """``exp(h ω) ⊗ q`` (..., 4): the rotation by the angle ``θ = h |ω|`` about ω, then q; ``sin(θ/2)/θ`` from
     its series ``1/2 − θ²/48 + θ⁴/3840`` below θ = 1e-4 (error < 1e-21 there)."""
-    th = h * np.sqrt(w[..., 0:1] * w[..., 0:1] + w[..., 1:2] * w[..., 1:2] + w[..., 2:3] * w[..., 2:3])
+    wx, wy, wz = w[..., 0:1], w[..., 1:2], w[..., 2:3]
+    th = h * np.sqrt(wx * wx + wy * wy + wz * wz)
     t2 = th * th
     with np.errstate(invalid="ignore", divide="ignore"):
         s = h * np.where(th < 1e-4, 0.5 - t2 / 48.0 + t2 * t2 / 3840.0, np.sin(0.5 * th) / th)
-    ew, ev = np.cos(0.5 * th), s * w
-    qw, qv = q[..., 0:1], q[..., 1:4]
-    dot = ev[..., 0:1] * qv[..., 0:1] + ev[..., 1:2] * qv[..., 1:2] + ev[..., 2:3] * qv[..., 2:3]
-    return np.concatenate([ew * qw - dot, ew * qv + qw * ev + cross3(ev, qv)], axis=-1)
+    return _times(s * wx, s * wy, s * wz, q, np.cos(0.5 * th))
 
 
 @_one_state_too
@@ -145,21 +151,35 @@ def _normalized(y):
 # --- course-type (semi-implicit) schemes --------------------------------------------------------
 
 @_one_state_too
-def course_type(problem, y, dt, *, gyro: bool, expmap: bool):
+def course_type(problem, y, dt, *, gyro: bool, expmap: bool, quat: str = "left", quat_half: float = 0.5,
+                normalise: bool = True, inertia: str = "world", **force_knobs):
     """The course-type step (module doc): velocities from the start-of-step forces, decay ``e^{−kΔt}``
-    after the velocity update, x and q from the new velocities, q renormalised."""
+    after the velocity update, x and q from the new velocities, q renormalised.
+
+    The keywords compute a piece wrongly, for the catalog of classic mistakes
+    (cross_checks.gates.check.mistakes): ``quat`` "right" (``q ⊗ [0, ω]``) or "left_body" (``[0, Rᵀω] ⊗ q``)
+    instead of "left" (``[0, ω] ⊗ q``); ``quat_half`` the factor of Δt in that update (½); ``normalise``
+    (without it, ``R(q)`` of a q that is not unit is no rotation: I_W is formed and solved in world axes);
+    ``inertia`` "body" (``I_B`` with world vectors) or "transposed" (``Rᵀ I_B R``) instead of "world"
+    (``R I_B Rᵀ``); ``force_knobs`` those of Members.force_torque."""
     p = members(problem)
     h = _dt(dt)
     x, v, q, w = y[..., X], y[..., V], y[..., Q], y[..., W]
     R = matrix_from_quat(q)
     # All forces and torques from the start-of-step state (course: f_i ← Force_i(x, v); τ uses R(q)).
-    f, tau = p.force_torque(x, v, R)
+    f, tau = p.force_torque(x, v, R, **force_knobs)
     g_v, g_w = p.decay_factors(dt)
     v1 = g_v * (v + h * (f / p.mass_kg))
     x1 = x + h * v1
-    w1 = g_w * (w + h * p.angular_acceleration(R, w, tau, gyro=gyro))
-    q1 = exp_map_times(h, w1, q) if expmap else q + omega_times((0.5 * h) * w1, q)
-    return np.concatenate([x1, v1, q1 / _norm(q1), w1], axis=-1)
+    R_I = {"world": R, "body": np.broadcast_to(np.eye(3), R.shape), "transposed": np.swapaxes(R, -1, -2)}[inertia]
+    w1 = g_w * (w + h * p.angular_acceleration(R_I, w, tau, gyro=gyro, world_solve=not normalise))
+    if expmap:
+        q1 = exp_map_times(h, w1, q)
+    else:
+        hw = (quat_half * h) * (mat_t_vec3(R, w1) if quat == "left_body" else w1)
+        right = quat == "right"
+        q1 = q + (quat_mul(q, np.concatenate([0.0 * hw[..., :1], hw], axis=-1)) if right else omega_times(hw, q))
+    return np.concatenate([x1, v1, q1 / _norm(q1) if normalise else q1, w1], axis=-1)
 
 
 @_one_state_too

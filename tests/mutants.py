@@ -182,9 +182,17 @@ class MutantAdapter(EngineAdapter):
                 return np.full(np.shape(y_start), np.nan)
 
 
+def _planter(adapter):
+    """``apply(monkeypatch)`` of a reference mutant: register its adapter until the monkeypatch is undone (the
+    registry's table of registered engines is replaced by a copy that the undo puts back)."""
+    def apply(mp):
+        mp.setattr(engines, "_user", dict(engines._user))
+        engines.register_adapter(adapter, "tests/mutants.py")
+    return apply
+
+
 def _reference(name, variant, bug, exposed_by, members=None, step=None) -> Mutant:
-    adapter = MutantAdapter(name, variant, bug, members, step)
-    return Mutant(name, variant, bug, exposed_by, lambda mp: engines.register_adapter(adapter, "tests/mutants.py"))
+    return Mutant(name, variant, bug, exposed_by, _planter(MutantAdapter(name, variant, bug, members, step)))
 
 
 # --- the engine adapters --------------------------------------------------------------------------------
