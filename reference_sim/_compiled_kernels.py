@@ -17,6 +17,7 @@ from numba import njit
 
 # fastmath stays off: no reassociation, no contraction into fused multiply-adds
 _JIT = dict(cache=True, nogil=True, error_model="numpy")
+_INLINE = dict(_JIT, inline="always")   # the pieces of a step: inlined into it (no call per piece)
 
 
 @njit(**_JIT)
@@ -37,7 +38,7 @@ def _mtv(R, a0, a1, a2):
     return (R[0] * a0 + R[3] * a1 + R[6] * a2, R[1] * a0 + R[4] * a1 + R[7] * a2, R[2] * a0 + R[5] * a1 + R[8] * a2)
 
 
-@njit(**_JIT)
+@njit(**_INLINE)
 def _force_torque(i, y, R, P):
     """Members.force_torque of member i."""
     sc, mg, fW, tW, tB, springs, wp, bp = P[0], P[3], P[4], P[5], P[6], P[7], P[8], P[9]
@@ -73,7 +74,7 @@ def _force_torque(i, y, R, P):
     return fx, fy, fz, tx, ty, tz
 
 
-@njit(**_JIT)
+@njit(**_INLINE)
 def _angular_acceleration(i, R, wx, wy, wz, tx, ty, tz, gyro, P):
     """Members.angular_acceleration of member i."""
     I, J = P[1][i], P[2][i]
@@ -114,7 +115,7 @@ def _normalize(y):
     y[6], y[7], y[8], y[9] = y[6] / n, y[7] / n, y[8] / n, y[9] / n
 
 
-@njit(**_JIT)
+@njit(**_INLINE)
 def _rhs(i, y, out, P):
     """integrators.rhs of member i."""
     sc = P[0]
@@ -135,7 +136,7 @@ def _rhs(i, y, out, P):
     out[10], out[11], out[12] = ax, ay, az
 
 
-@njit(**_JIT)
+@njit(**_INLINE)
 def _course_type(i, y, out, gyro, expmap, P):
     """integrators.course_type of member i."""
     sc = P[0]
@@ -165,7 +166,7 @@ def _axpy(y, a, k, out):
         out[j] = y[j] + a * k[j]
 
 
-@njit(**_JIT)
+@njit(**_INLINE)
 def _rk(i, y, out, order, k1, k2, k3, k4, tmp, P):
     """integrators.step_explicit_euler (order 1), step_midpoint (2), step_rk4 (4) of member i."""
     h = P[0][i, 0]
@@ -202,7 +203,7 @@ def _change(new, old, lo, hi):
     return worst
 
 
-@njit(**_JIT)
+@njit(**_INLINE)
 def _leapfrog(i, y, out, d, u, u_new, tol, max_iter, P):
     """integrators.step_leapfrog of member i; False when the half kick does not converge (not routine)."""
     h = P[0][i, 0]
@@ -239,7 +240,7 @@ def _leapfrog(i, y, out, d, u, u_new, tol, max_iter, P):
     return True
 
 
-@njit(**_JIT)
+@njit(**_INLINE)
 def _implicit_euler(i, y, out, d, z, tol, max_iter, P):
     """integrators.step_implicit_euler's fixed point for member i; False when it stops contracting or runs
     out of iterations (not routine: the definition then solves the step with Newton's method)."""

@@ -81,11 +81,24 @@ class ForceEvaluator:
         self.params = parameters(self.members, [1.0])   # the step does not enter the forces
         k = _kernels()
         self._at = None if k is None else k.force_torque_at
+        # forces that do not depend on the state (ForceModel.state_dependent), and a stage without decay
+        # forces: the same 6 numbers at every state, evaluated once
+        fm = problem.forces
+        self._constant = {False: not fm.state_dependent, True: not fm.state_dependent and not fm.has_decay}
+        self._known: dict = {}
 
     def force_torque(self, y, stage: bool = False) -> tuple:
         """World force at the COM (N) and world torque about it (N m), 6 floats, at state ``y`` (13 numbers),
         the rotation taken from q/|q|. ``stage``: the decay included as the force ``−m k_v v`` and the torque
         ``−k_ω I_W ω`` (so that v̇ gets −k_v v and ω̇ gets −k_ω ω)."""
+        if self._constant[stage]:
+            known = self._known.get(stage)
+            if known is None:
+                known = self._known[stage] = self._evaluate(y, stage)
+            return known
+        return self._evaluate(y, stage)
+
+    def _evaluate(self, y, stage: bool) -> tuple:
         if self._at is not None:
             return self._at(np.asarray(y, dtype=np.float64), stage, *self.params)
         from reference_sim.quaternion import matrix_from_quat

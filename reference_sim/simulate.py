@@ -107,11 +107,12 @@ def run_members(members: Members, variant, dt_s, n_steps, y0) -> list:
     rows[offsets] = y0
     pos = np.zeros(N, dtype=np.int64)
     why: dict = {}
+    failed = np.zeros(N, dtype=bool)
     step = variant if callable(variant) else get_step(variant)
     params = compiled.parameters(members, h) if isinstance(variant, str) and compiled.kernel() is not None else None
     with np.errstate(all="ignore"):
         while True:
-            todo = np.array([i for i in range(N) if pos[i] < n[i] and i not in why], dtype=np.int64)
+            todo = np.flatnonzero((pos < n) & ~failed)
             if todo.size == 0:
                 break
             stop = pos.copy()
@@ -122,8 +123,11 @@ def run_members(members: Members, variant, dt_s, n_steps, y0) -> list:
                 _advance_defined(members, step, h, rows, offsets, pos, stop)
             for i in todo[pos[todo] < stop[todo]]:   # the next step is not routine: the definition, alone
                 _one_step(members.take([i]), step, h[i], rows, offsets[i], pos, i, why)
-    return [diverged(rows[o:o + pos[i] + 1], h[i], why[i]) if i in why else Run(h[i] * np.arange(n[i] + 1),
-            rows[o:o + n[i] + 1]) for i, o in enumerate(offsets)]
+                failed[i] = i in why
+    times: dict = {}   # one time axis per (step, length)
+    return [diverged(rows[o:o + pos[i] + 1], h[i], why[i]) if i in why else
+            Run(times.setdefault((h[i], n[i]), h[i] * np.arange(n[i] + 1)), rows[o:o + n[i] + 1])
+            for i, o in enumerate(offsets.tolist())]
 
 
 def _advance_defined(members: Members, step, h, rows, offsets, pos, stop) -> None:
