@@ -69,23 +69,19 @@ def _initial_w(n, seed=0):
 
 
 def reference_batched(n_bodies, n_steps, variant, repeats):
-    """The batched reference: N bodies as 13 contiguous (N,) arrays (reference_sim.scalar, NumPy backend)."""
+    """The batched reference: N bodies as N members of one compiled run (reference_sim.simulate.run_members),
+    every state recorded."""
     from reference_sim.body import RigidBody
     from reference_sim.forces import ForceModel, Torque
-    from reference_sim.scalar import ScalarStepper
+    from reference_sim.simulate import run_members
     from reference_sim.state import Problem, State
     problem = Problem(RigidBody(1.0, MOMENTS), ForceModel(gravity_W=G, torques=(Torque(TORQUE_B, "body"),)),
                       State(np.zeros(3), np.zeros(3), np.array([1.0, 0, 0, 0]), np.zeros(3)))
-    y0 = np.zeros((13, n_bodies))
-    y0[6] = 1.0
-    y0[10:13] = _initial_w(n_bodies).T
-    step = ScalarStepper(problem, variant, H, backend="numpy").step
-
-    def run():
-        y = [np.ascontiguousarray(c) for c in y0]
-        for _ in range(n_steps):
-            y = step(y)
-    return _rates(n_bodies * n_steps, run, repeats)
+    members = problem.members.take(np.zeros(n_bodies, dtype=int))
+    y0 = np.zeros((n_bodies, 13))
+    y0[:, 6] = 1.0
+    y0[:, 10:13] = _initial_w(n_bodies)
+    return _rates(n_bodies * n_steps, lambda: run_members(members, variant, H, n_steps, y0), repeats)
 
 
 def reference_single_us(n_steps, repeats, variant="expmap_gyro"):

@@ -130,14 +130,6 @@ class RigidBody:
         off = self.inertia_B - np.diag(np.diag(self.inertia_B))
         return bool(np.all(off == 0.0))
 
-    def inertia_times_B(self, w_B):
-        """``I_B @ w_B`` for body-axes vectors (..., 3) (kg m² × the vector's unit)."""
-        return np.asarray(w_B, dtype=float) @ self.inertia_B.T
-
-    def inertia_solve_B(self, tau_B):
-        """``I_B⁻¹ @ tau_B`` for body-axes vectors (..., 3)."""
-        return np.asarray(tau_B, dtype=float) @ self.inertia_inv_B.T
-
     def gyroscopic_torque_vanishes(self, q_WB, w_W) -> bool:
         """True when ``ω × (I ω) = 0`` to round-off (relative 1e-12): ω along a principal axis, an
         isotropic inertia, or ω = 0. Then a torque-free body keeps spinning about that axis."""

@@ -1,121 +1,130 @@
-"""The compiled fast path of a single-body reference run: :mod:`reference_sim.scalar`'s steps, compiled.
+"""The compiled fast path: N members (each its own body, forces, decay and step) advanced by numba.
 
-A reference run of one body steps the plain-float kernel (:class:`reference_sim.scalar.ScalarStepper`) in
-Python: 5–30 µs a step, which made the reference schemes two thirds of a default sweep's run stage. This
-module is the same arithmetic, operation for operation and in the same order, compiled by numba
-(``fastmath`` off, so no reassociation or fused multiply-add): every state it writes is bit-identical to
-the one the Python step writes (tests/reference_sim/test_compiled.py, on the catalog and on random
-problems, every variant). ``ScalarStepper`` stays the readable definition of the fast path, and the code
-the planted-bug zoo (tests/mutants.py) patches:
+The kernels (``_compiled_kernels``) transcribe the definition, :mod:`reference_sim.integrators`, on the
+floats of one member, operation for operation and in the definition's order, compiled with ``fastmath``
+off: the states they write are those of the definition (tests/reference_sim/test_compiled.py).
 
-* the parameters (mass, inertia, forces, decay factors and rates, flags) are read from a stepper built by
-  ``ScalarStepper.__init__`` — a bug planted there reaches the compiled run too;
-* the arithmetic is used only while ``ScalarStepper``'s step methods are the ones this module transcribes
-  (:func:`usable`): a patched method makes the run step in Python, through the patch.
+The compiled loop stops at the first step that is not routine — a state that is non-finite or beyond the
+blow-up limit, a leapfrog half kick or an implicit Euler fixed point that does not converge — and returns;
+the caller (reference_sim.simulate) takes that one step with the definition (which raises, gives the bad
+state, or solves the step with Newton's method) and resumes compiled.
 
-The compiled loop stops at the first step that is not routine — a state that is non-finite or beyond
-``BLOWUP_LIMIT``, a leapfrog half kick that does not converge, an implicit Euler fixed point that stalls
-(the Python step then hands it to Newton's method) — and returns. The caller takes that one step in Python
-(which raises, flags the bad state, or solves it exactly as a Python-only run would) and resumes compiled.
-So a run, a divergence and its message are the ones of the Python path, only faster.
-
-numba is imported on first use (~0.5 s), and the kernels are compiled once per machine (``cache=True``).
+numba is imported on first use (~0.5 s), and the kernels are compiled once per machine (``cache=True``);
+where numba cannot be imported, :func:`kernel` is None and runs step with the definition.
 State layout as everywhere: [x_W (3) m, v_W (3) m/s, q_WB (w, x, y, z), w_W (3) rad/s].
 """
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["VARIANT_CODES", "usable", "parameters", "run_until_exceptional"]
+from reference_sim.forces import Members
+from reference_sim.integrators import IMPLICIT_TOL, MAX_ITER
 
-#: The variants the compiled loop knows, by code (the ``variant`` argument of the kernels).
+__all__ = ["VARIANT_CODES", "kernel", "parameters", "advance", "warm", "ForceEvaluator"]
+
+#: The variants the compiled loop knows, by code (the ``code`` argument of the kernel).
 VARIANT_CODES = {"course": 0, "course_gyro": 1, "expmap_gyro": 2, "explicit_euler": 3, "midpoint": 4,
                  "rk4": 5, "leapfrog": 6, "implicit_euler": 7}
 
-
-def usable(stepper, variant: str | None = None) -> bool:
-    """Whether a run of ``stepper`` may step compiled: a float-backend ``ScalarStepper`` (not a subclass)
-    whose step methods are the shipped ones, and a variant the compiled loop knows (``variant``, default the
-    stepper's own: a stepper's parameters do not depend on its scheme, so one stepper serves every scheme)."""
-    from reference_sim.scalar import SHIPPED_CLASS, SHIPPED_METHODS
-    if type(stepper) is not SHIPPED_CLASS:
-        return False
-    variant = stepper.variant if variant is None else variant
-    if stepper.backend != "float" or variant not in VARIANT_CODES:
-        return False
-    d = SHIPPED_CLASS.__dict__
-    if any(d.get(name) is not fn for name, fn in SHIPPED_METHODS.items()):
-        return False
-    if any(name in vars(stepper) for name in SHIPPED_METHODS):   # nor replaced on the instance
-        return False
-    return _kernel() is not None
+_KERNELS: list = []
 
 
-_KERNEL: list = []
-
-
-def _kernel():
-    """The compiled run loop, or None where numba cannot be imported or cannot cache (then every run steps
-    in Python).
-    numba is imported, and the kernels compiled or loaded from numba's cache, once per process."""
-    if not _KERNEL:
+def _kernels():
+    """The kernels module, or None where numba cannot be imported or cannot cache. Loaded once per process."""
+    if not _KERNELS:
         try:
             from reference_sim import _compiled_kernels
         except (ImportError, RuntimeError, OSError):   # no numba, or nowhere numba may write its cache
-            _KERNEL.append(None)
+            _KERNELS.append(None)
         else:
-            _KERNEL.append(_compiled_kernels.run)
-    return _KERNEL[0]
+            _KERNELS.append(_compiled_kernels)
+    return _KERNELS[0]
 
 
-def parameters(stepper) -> tuple:
-    """The compiled kernels' arguments after ``variant`` and the state arrays, read from ``stepper``'s
-    attributes (what ``ScalarStepper.__init__`` set, planted bugs included)."""
-    f = np.float64
-    scalars = np.array([stepper.h, stepper.m, stepper.c, stepper.gv, stepper.gw, stepper.kv, stepper.kw], dtype=f)
-    flags = np.array([stepper.has_drag, stepper.has_body_torque, stepper.has_velocity_decay,
-                      stepper.has_angular_decay], dtype=np.bool_)
-    springs = np.array([[*a, *r, k, L0] for a, r, k, L0 in stepper.springs], dtype=f).reshape(-1, 8)
-    world = np.array([[*fv, *r] for fv, r in stepper.world_point], dtype=f).reshape(-1, 6)
-    body = np.array([[*fv, *r] for fv, r in stepper.body_point], dtype=f).reshape(-1, 6)
-    return (scalars, flags, np.array(stepper.I, dtype=f), np.array(stepper.Iinv, dtype=f),
-            np.array(stepper.mg, dtype=f), np.array(stepper.fixed_f, dtype=f), np.array(stepper.tau_W, dtype=f),
-            np.array(stepper.tau_B, dtype=f), springs, world, body)
+def kernel():
+    """The compiled run loop (``_compiled_kernels.run``), or None without numba."""
+    k = _kernels()
+    return None if k is None else k.run
 
 
-def run_until_exceptional(stepper, rows: np.ndarray, start: int, n_steps: int, limit: float,
-                          variant: str | None = None, params: tuple | None = None) -> int:
-    """Step ``rows[start]`` compiled, writing ``rows[start + 1]``, … (``rows`` (n_steps + 1, 13), C order),
-    until ``n_steps`` is reached or the next step is not routine (module doc; a state with a component beyond
-    ``limit`` is not), with the scheme ``variant`` (default: the stepper's) and the stepper's
-    :func:`parameters` (``params``: computed once by a caller that calls again). ``rows`` may be longer than
-    ``n_steps + 1`` (a run taken in chunks). Returns the index of the last state written: ``n_steps``, or
-    k < n_steps when step k + 1 must be taken in Python."""
+def parameters(p: Members, h_s) -> tuple:
+    """The kernel's per-member arguments after the state arrays, for members ``p`` at steps ``h_s`` (N,) s."""
+    h = np.asarray(h_s, dtype=float).reshape(-1)
+    gv, gw = (np.broadcast_to(g, (len(h), 1)) for g in p.decay_factors(h))
+    sc = np.ascontiguousarray(np.column_stack([h, p.mass_kg[:, 0], p.drag[:, 0], gv[:, 0], gw[:, 0],
+                                               p.decay_rates[:, 0], p.decay_rates[:, 1]]))
+    arrays = (p.inertia_B, p.inertia_inv_B, p.weight_W, p.force_W, p.torque_W, p.torque_B, p.springs, p.world_points,
+              p.body_points)
+    return (sc, *(np.ascontiguousarray(a, dtype=np.float64) for a in arrays))
+
+
+def advance(variant: str, rows: np.ndarray, offsets, pos, stop, limit: float, params: tuple) -> None:
+    """Advance each member i from state ``rows[offsets[i] + pos[i]]`` to ``pos[i] = stop[i]``, or to the step
+    before one that is not routine (module doc); ``pos`` (N,) int64 is updated in place. ``rows``: a
+    C-contiguous float64 (M, 13) array holding every member's rows from its offset on."""
     if rows.dtype != np.float64 or not rows.flags.c_contiguous or rows.ndim != 2 or rows.shape[1] != 13:
-        raise ValueError("rows must be a C-contiguous float64 (n, 13) array")
-    if not 0 <= start <= n_steps < rows.shape[0]:   # the compiled loop does not check its indices
-        raise ValueError(f"steps {start}..{n_steps} do not fit rows of {rows.shape[0]} states")
-    from reference_sim.scalar import IMPLICIT_TOL, MAX_ITER
-    code = VARIANT_CODES[stepper.variant if variant is None else variant]
-    return int(_kernel()(code, rows, int(start), int(n_steps), float(limit), float(IMPLICIT_TOL), int(MAX_ITER),
-                         *(parameters(stepper) if params is None else params)))
+        raise ValueError("rows must be a C-contiguous float64 (M, 13) array")
+    offsets, stop = np.asarray(offsets, dtype=np.int64), np.asarray(stop, dtype=np.int64)
+    if np.any(offsets + stop >= rows.shape[0]) or np.any(pos < 0):   # the compiled loop does not check indices
+        raise ValueError(f"steps up to {stop.tolist()} do not fit rows of {rows.shape[0]} states")
+    kernel()(VARIANT_CODES[variant], rows, offsets, pos, stop, float(limit), float(IMPLICIT_TOL), int(MAX_ITER),
+             *params)
 
+
+class ForceEvaluator:
+    """One body's forces at a single state, as plain floats, for an engine's per-step loop (where a NumPy call
+    costs more than the engine's step): the compiled ``Members.force_torque`` of the definition (about 1 µs a
+    call), or the definition itself without numba."""
+
+    def __init__(self, problem):
+        self.members = problem.members
+        self.params = parameters(self.members, [1.0])   # the step does not enter the forces
+        k = _kernels()
+        self._at = None if k is None else k.force_torque_at
+        # forces that do not depend on the state (ForceModel.state_dependent), and a stage without decay
+        # forces: the same 6 numbers at every state, evaluated once
+        fm = problem.forces
+        self._constant = {False: not fm.state_dependent, True: not fm.state_dependent and not fm.has_decay}
+        self._known: dict = {}
+
+    def force_torque(self, y, stage: bool = False) -> tuple:
+        """World force at the COM (N) and world torque about it (N m), 6 floats, at state ``y`` (13 numbers),
+        the rotation taken from q/|q|. ``stage``: the decay included as the force ``−m k_v v`` and the torque
+        ``−k_ω I_W ω`` (so that v̇ gets −k_v v and ω̇ gets −k_ω ω)."""
+        if self._constant[stage]:
+            known = self._known.get(stage)
+            if known is None:
+                known = self._known[stage] = self._evaluate(y, stage)
+            return known
+        return self._evaluate(y, stage)
+
+    def _evaluate(self, y, stage: bool) -> tuple:
+        if self._at is not None:
+            return self._at(np.asarray(y, dtype=np.float64), stage, *self.params)
+        from reference_sim.quaternion import matrix_from_quat
+        from reference_sim.vec import mat_t_vec3, matvec3
+        p, y = self.members, np.asarray(y, dtype=float)[None]
+        q = y[:, 6:10]
+        R = matrix_from_quat(q / np.sqrt(q[:, 0:1] * q[:, 0:1] + q[:, 1:2] * q[:, 1:2] + q[:, 2:3] * q[:, 2:3]
+                                          + q[:, 3:4] * q[:, 3:4]))
+        f, tau = p.force_torque(y[:, 0:3], y[:, 3:6], R)
+        if stage:
+            f = f - p.mass_kg * p.decay_rates[:, 0:1] * y[:, 3:6]
+            tau = tau - p.decay_rates[:, 1:2] * matvec3(R, matvec3(p.inertia_B, mat_t_vec3(R, y[:, 10:13])))
+        return tuple(float(c) for c in (*f[0], *tau[0]))
 
 
 def warm() -> bool:
     """Load (or, the first time on a machine, compile) the compiled loop in this process — before a process
-    pool forks, so that every forked worker inherits it instead of loading or compiling it again. True when
-    the compiled path is available."""
-    run = _kernel()
+    pool forks, so that every forked worker inherits it. True when the compiled path is available."""
+    run = kernel()
     if run is None:
         return False
     from reference_sim.body import RigidBody
     from reference_sim.forces import ForceModel
-    from reference_sim.scalar import ScalarStepper
-    from reference_sim.state import Problem, State
-    problem = Problem(RigidBody(1.0, [1.0, 1.0, 1.0]), ForceModel(),
-                      State(np.zeros(3), np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0]), np.zeros(3)))
+    p = Members.stack([(RigidBody(1.0, [1.0, 1.0, 1.0]), ForceModel())])
     rows = np.zeros((2, 13))
     rows[0, 6] = 1.0
-    run_until_exceptional(ScalarStepper(problem, "rk4", 0.01), rows, 0, 1, 1e8)   # one signature: all compiled
+    advance("rk4", rows, [0], np.zeros(1, dtype=np.int64), [1], 1e8, parameters(p, [0.01]))  # one signature
+    _kernels().force_torque_at(rows[0], True, *parameters(p, [0.01]))
     return True

@@ -33,8 +33,8 @@ def ground_truth(problem: Problem, t_s, y0=None, rtol: float = GROUND_TRUTH_RTOL
     t_s = np.asarray(t_s, dtype=float)
     y0 = problem.initial_packed() if y0 is None else np.asarray(y0, dtype=float)
     shape = y0.shape
-    # Deliberately the batched NumPy definition (integrators.rhs), not the plain-float kernel the schemes
-    # step with (reference_sim.scalar): a bug there must not move the reference the runs are judged against.
+    # The definition (integrators.rhs), never the compiled path the schemes run on: a fault there cannot
+    # move the reference the runs are judged against.
 
     def f(_t, y):
         return rhs(problem, y.reshape(shape)).reshape(-1)

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from reference_sim.vec import cross3
+from reference_sim.vec import cross3, floating
 
 __all__ = [
     "quat_mul",
@@ -93,9 +93,9 @@ def matrix_from_quat(q):
 
     Uses the course's formula (docs/course_equations.md); ``p_W = R @ p_B`` for ``q = q_WB``.
     """
-    q = np.asarray(q, dtype=float)
+    q = floating(q)
     w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    R = np.empty(q.shape[:-1] + (3, 3))
+    R = np.empty(q.shape[:-1] + (3, 3), dtype=q.dtype)
     R[..., 0, 0] = 1.0 - 2.0 * (y * y + z * z)
     R[..., 0, 1] = 2.0 * (x * y - w * z)
     R[..., 0, 2] = 2.0 * (x * z + w * y)

@@ -6,10 +6,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from reference_sim import compiled
+from reference_sim.forces import Members
 from reference_sim.integrators import ImplicitSolveError, get_step
 from reference_sim.state import Problem
 
-__all__ = ["Run", "simulate", "BLOWUP_LIMIT", "bad_rows", "blowup_words", "diverged"]
+__all__ = ["Run", "simulate", "run_members", "BLOWUP_LIMIT", "COMPILED_CHUNK", "bad_rows", "blowup_words", "diverged"]
 
 #: A state component beyond this magnitude (m, m/s, rad/s) counts as a blow-up. Free-body scenarios
 #: of the catalog stay below 1e3 in every quantity; 1e8 is far outside any physical run yet well
@@ -56,21 +57,22 @@ def diverged(y_good, dt_s: float, why: str) -> Run:
 def simulate(problem: Problem, variant: str, dt_s: float, n_steps: int, y0=None) -> Run:
     """Advance ``problem`` ``n_steps`` steps of ``dt_s`` with a reference variant, recording each state.
 
-    Batched: ``y0`` (default: the problem's initial state) may have any leading shape. A run that
-    produces a non-finite state, a component above ``BLOWUP_LIMIT``, or an implicit solve that fails
-    stops there and reports ``diverged_at_s``.
+    One state (``y0`` (13,), default: the problem's initial state) runs through :func:`run_members` (the
+    compiled path). Batched: ``y0`` (B, 13) (or any leading shape) advances with the definition, all rows
+    at once. A run that produces a non-finite state, a component above ``BLOWUP_LIMIT``, or an implicit
+    solve that fails stops there and reports ``diverged_at_s``.
     """
     step = get_step(variant)
     y = problem.initial_packed() if y0 is None else np.array(y0, dtype=float)
     if y.ndim == 1:
-        return _simulate_single(problem, variant, dt_s, n_steps, y)
+        return run_members(problem.members, variant, [dt_s], [n_steps], y[None])[0]
     out = np.empty((n_steps + 1,) + y.shape)
     out[0] = y
     for n in range(1, n_steps + 1):
         try:
             with np.errstate(all="ignore"):
                 y = step(problem, y, dt_s)
-        except (ImplicitSolveError, np.linalg.LinAlgError) as exc:
+        except _STEP_ERRORS as exc:
             return diverged(out[:n], dt_s, f": {exc}")
         if np.any(bad_rows(y)):
             return diverged(out[:n], dt_s, f" ({blowup_words(y)})")
@@ -78,100 +80,81 @@ def simulate(problem: Problem, variant: str, dt_s: float, n_steps: int, y0=None)
     return Run(dt_s * np.arange(n_steps + 1), out)
 
 
-#: Steps between two divergence tests of the plain-float path: a blown-up state is found (and the run cut
-#: at its first bad state) at most this many steps later, at 1/CHECK_EVERY of the per-step test's cost.
-CHECK_EVERY = 64
-
-
-def _simulate_single(problem: Problem, variant: str, dt_s: float, n_steps: int, y) -> Run:
-    """One body: the plain-float path of reference_sim.scalar (same equations, ~10x less overhead).
-
-    States are tested for divergence (:func:`bad_rows`) in blocks of CHECK_EVERY steps; the run stops at
-    the FIRST bad state of a block (or, when a step raises, at the first bad state before it), so the
-    result is the same as testing every step."""
-    from reference_sim.scalar import ScalarStepper
-
-    stepper = ScalarStepper(problem, variant, dt_s)
-    # a step that blows up inside NumPy (implicit Euler's Newton solve) is a divergence, reported as such,
-    # not a stream of overflow warnings — as in the batched path
-    with np.errstate(all="ignore"):
-        if compiled.usable(stepper):
-            return _simulate_compiled(stepper, dt_s, n_steps, y)
-        return _python_loop(stepper.step, dt_s, n_steps, y)
-
-
-def _python_loop(step, dt_s: float, n_steps: int, y) -> Run:
-    """The Python float path's loop (:func:`_simulate_single`)."""
-    rows = [y.tolist()]
-    cur = rows[0]
-    checked = 1  # rows[:checked] are known good
-    for n in range(1, n_steps + 1):
-        try:
-            cur = step(cur)
-        except _STEP_ERRORS as exc:
-            return _first_bad(rows, checked, dt_s) or diverged(np.array(rows), dt_s, f": {type(exc).__name__}: {exc}")
-        rows.append(cur)
-        if n % CHECK_EVERY == 0 or n == n_steps:
-            bad = _first_bad(rows, checked, dt_s)
-            if bad is not None:
-                return bad
-            checked = len(rows)
-    return Run(dt_s * np.arange(n_steps + 1), np.array(rows))
-
-
-#: Steps of one call into the compiled loop (0.05–0.3 s): between calls Python runs, so a run's time limit
-#: (a SIGALRM handler, cross_checks.sweep.lifecycle) stops it within that long — inside compiled code a
-#: signal handler waits until the call returns.
+#: Steps of one call into the compiled loop per member (0.05–0.3 s): between calls Python runs, so a run's
+#: time limit (a SIGALRM handler, cross_checks.sweep.lifecycle) stops it within that long — inside compiled
+#: code a signal handler waits until the call returns.
 COMPILED_CHUNK = 65536
 
 _STEP_ERRORS = (ImplicitSolveError, np.linalg.LinAlgError, OverflowError, ZeroDivisionError, ValueError)
 
 
-def _simulate_compiled(stepper, dt_s: float, n_steps: int, y) -> Run:
-    """:func:`_simulate_single` with the steps compiled (:func:`steps_compiled`). States, divergence time and
-    message are those of the Python path."""
-    rows = np.empty((n_steps + 1, 13))
-    rows[0] = y
-    k, why = steps_compiled(stepper, rows, n_steps, stepper.step)
-    if k is None:
-        return Run(dt_s * np.arange(n_steps + 1), rows)
-    return diverged(rows[:k].copy(), dt_s, why)
+def run_members(members: Members, variant, dt_s, n_steps, y0) -> list:
+    """The free runs of N members together: member i (``members.take([i])``) advances ``n_steps[i]`` steps
+    of ``dt_s[i]`` (s) from ``y0[i]`` (13,) with ``variant`` (a variant name, or a step function
+    ``step(members, y, dt)`` of the definition's signature, which always steps uncompiled); returns N
+    :class:`Run`, each equal to that member's run alone (every row of the definition advances on its own).
+
+    The steps are compiled (reference_sim.compiled) in chunks of COMPILED_CHUNK steps per member, or, without
+    numba, taken by the definition for all members at once. A step the compiled loop does not take, or one
+    whose batched result is not good, is taken by the definition for that member alone: it raises (the
+    member diverged: ``": <error type>: <message>"``), gives a bad state (``" (<what is wrong>)"``), or
+    solves it, and the member goes on. A member that diverges stops alone."""
+    N = len(members)
+    h = np.broadcast_to(np.asarray(dt_s, dtype=float), (N,)).copy()
+    n = np.broadcast_to(np.asarray(n_steps, dtype=np.int64), (N,)).copy()
+    offsets = np.concatenate([[0], np.cumsum(n + 1)[:-1]]).astype(np.int64)
+    rows = np.empty((int(np.sum(n + 1)), 13))
+    rows[offsets] = y0
+    pos = np.zeros(N, dtype=np.int64)
+    why: dict = {}
+    failed = np.zeros(N, dtype=bool)
+    step = variant if callable(variant) else get_step(variant)
+    params = compiled.parameters(members, h) if isinstance(variant, str) and compiled.kernel() is not None else None
+    with np.errstate(all="ignore"):
+        while True:
+            todo = np.flatnonzero((pos < n) & ~failed)
+            if todo.size == 0:
+                break
+            stop = pos.copy()
+            stop[todo] = np.minimum(pos[todo] + COMPILED_CHUNK, n[todo])
+            if params is not None:
+                compiled.advance(variant, rows, offsets, pos, stop, BLOWUP_LIMIT, params)
+            else:
+                _advance_defined(members, step, h, rows, offsets, pos, stop)
+            for i in todo[pos[todo] < stop[todo]]:   # the next step is not routine: the definition, alone
+                _one_step(members.take([i]), step, h[i], rows, offsets[i], pos, i, why)
+                failed[i] = i in why
+    times: dict = {}   # one time axis per (step, length)
+    return [diverged(rows[o:o + pos[i] + 1], h[i], why[i]) if i in why else
+            Run(times.setdefault((h[i], n[i]), h[i] * np.arange(n[i] + 1)), rows[o:o + n[i] + 1])
+            for i, o in enumerate(offsets.tolist())]
 
 
-def steps_compiled(stepper, rows, n_steps: int, python_step, variant: str | None = None):
-    """Fill ``rows`` (n_steps + 1, 13) from ``rows[0]`` with the compiled loop of ``stepper``'s scheme (or
-    ``variant``'s), in chunks of COMPILED_CHUNK steps; a step the loop does not take (not routine:
-    reference_sim.compiled) is taken by ``python_step`` — which raises, gives a bad state, or solves a stalled
-    implicit step exactly as the Python path does — and the loop resumes after it.
-
-    Returns ``(None, "")``, or ``(k, why)`` when step k diverged: ``rows[:k]`` are the good states and ``why``
-    the Python path's words (": <error>" or " (<what is wrong with the state>)")."""
-    n = 0
-    params = compiled.parameters(stepper)
-    while True:
-        stop = min(n + COMPILED_CHUNK, n_steps)
-        n = compiled.run_until_exceptional(stepper, rows, n, stop, BLOWUP_LIMIT, variant, params)
-        if n == n_steps:
-            return None, ""
-        if n == stop:
-            continue   # back in Python between chunks: a time limit (SIGALRM) can stop the run here
+def _advance_defined(members: Members, step, h, rows, offsets, pos, stop) -> None:
+    """:func:`compiled.advance` with the definition's ``step``: every member short of its ``stop`` steps at
+    once; a member whose new state is bad, or every member when the batched step raises, stops where it is."""
+    live = np.flatnonzero(pos < stop)
+    while live.size:
         try:
-            nxt = np.array(python_step(rows[n].tolist()), dtype=float)
-        except _STEP_ERRORS as exc:
-            return n + 1, f": {type(exc).__name__}: {exc}"
-        if bad_rows(nxt):
-            return n + 1, f" ({blowup_words(nxt)})"
-        rows[n + 1] = nxt
-        n += 1
+            nxt = step(members.take(live), rows[offsets[live] + pos[live]], h[live])
+        except _STEP_ERRORS:
+            return
+        good = ~bad_rows(nxt)
+        rows[offsets[live[good]] + pos[live[good]] + 1] = nxt[good]
+        pos[live[good]] += 1
+        live = live[good][pos[live[good]] < stop[live[good]]]
 
 
-def _first_bad(rows, start, dt_s):
-    """The diverged Run cut at the first bad state among ``rows[start:]``, or None when they are all good."""
-    block = np.array(rows[start:])
-    if block.size == 0:
-        return None
-    bad = bad_rows(block)
-    if not bad.any():
-        return None
-    k = start + int(np.argmax(bad))
-    return diverged(np.array(rows[:k]), dt_s, f" ({blowup_words(np.array(rows[k]))})")
+def _one_step(member: Members, step, h: float, rows, offset: int, pos, i: int, why: dict) -> None:
+    """Step member ``i`` once with the definition's ``step`` from ``rows[offset + pos[i]]``; record why it
+    diverged."""
+    try:
+        nxt = step(member, rows[offset + pos[i]][None], h)[0]
+    except _STEP_ERRORS as exc:
+        why[i] = f": {type(exc).__name__}: {exc}"
+        return
+    if bad_rows(nxt):
+        why[i] = f" ({blowup_words(nxt)})"
+        return
+    rows[offset + pos[i] + 1] = nxt
+    pos[i] += 1

@@ -2,11 +2,12 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
 from reference_sim.body import RigidBody
-from reference_sim.forces import ForceModel
+from reference_sim.forces import ForceModel, Members
 from reference_sim.quaternion import quat_normalize
 
 __all__ = ["State", "Problem", "pack", "STATE_SIZE"]
@@ -50,6 +51,11 @@ class Problem:
     body: RigidBody
     forces: ForceModel
     initial: State
+
+    @cached_property
+    def members(self) -> Members:
+        """This problem's parameters as one member (reference_sim.forces.Members), built once."""
+        return Members.stack([(self.body, self.forces)])
 
     def initial_packed(self) -> np.ndarray:
         y = self.initial.packed()

@@ -1,175 +1,198 @@
 """Planted bugs: copies of the schemes and adapters, each with one bug a real implementation could have.
 
-Each :class:`Mutant` patches (with pytest's ``monkeypatch``) one function or method of the code a sweep
-runs for ``variant`` — the plain-float kernel (reference_sim.scalar) for single-body reference runs,
-the MuJoCo, PyBullet and Drake adapters for theirs — so the variant keeps its name and therefore exactly the
-expectations of the correct scheme. tests/test_gates_mutants.py asserts that the sweep's
+A reference mutant is an engine adapter (``mutant_NAME``, registered by ``apply``) that steps the one
+definition of the equations with one bug and declares the reference scheme it imitates, so that it gets
+exactly that scheme's expectations; an engine mutant patches (with pytest's ``monkeypatch``) one function
+of the MuJoCo, PyBullet or Drake adapter, so the variant keeps its name and its expectations. A sweep of
+``Mutant.swept`` meets the bug. tests/test_gates_mutants.py asserts that the sweep's
 gates (``cli._gate_failures``) catch every one. ``exposed_by`` names the catalog scenarios whose
 physics exercises the bug (used by the quick default-run subset; the slow test sweeps the catalog).
 """
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-from reference_sim.scalar import ScalarStepper
+from cross_checks import engines
+from cross_checks.engines.base import EngineAdapter, Variant
+from cross_checks.engines.reference import ReferenceAdapter
+from reference_sim.forces import Members
+from reference_sim.integrators import ImplicitSolveError, course_type, exp_map_times, get_step, rhs
+from reference_sim.quaternion import quat_mul
+from reference_sim.simulate import run_members
 
 
 @dataclass(frozen=True)
 class Mutant:
+    """A planted bug. ``variant`` is the correct ENGINE:VARIANT the bug is planted in (its expectations are
+    the mutant's); ``swept`` is what a sweep runs to meet the bug (see :meth:`apply`)."""
+
     name: str
     variant: str
     bug: str
     exposed_by: tuple
     apply: Callable  # apply(monkeypatch)
 
-
-def _after_init(monkeypatch, change):
-    """Run ``change(stepper)`` after every ScalarStepper.__init__ (a setting the step then uses)."""
-    orig = ScalarStepper.__init__
-
-    def init(self, *a, **kw):
-        orig(self, *a, **kw)
-        change(self)
-
-    monkeypatch.setattr(ScalarStepper, "__init__", init)
+    @property
+    def swept(self) -> str:
+        return f"mutant_{self.name}:{self.variant.split(':', 1)[1]}" if self.variant.startswith("reference:") \
+            else self.variant
 
 
-# --- the reference schemes (plain-float kernel: what a single-body reference run executes) -------------
+# --- the reference schemes: engine adapters stepping the definition with one bug -------------------------
+#
+# Each reference mutant is an engine ``mutant_NAME`` whose one variant declares the order of the reference
+# scheme it imitates and ``imitates`` that scheme (Variant.imitates): it gets exactly that scheme's
+# expectations. It steps with the one definition (reference_sim.integrators) plus its bug: either a knob on
+# the members' parameters (then the run is the compiled path's) or a broken step written here.
 
-def _rk4_wrong_stage_weight(mp):
-    def _rk4(self, y):
-        h = self.h
-        k1 = self.rhs(y)
-        k2 = self.rhs([a + (0.5 * h) * b for a, b in zip(y, k1)])
-        k3 = self.rhs([a + (0.5 * h) * b for a, b in zip(y, k2)])
-        k4 = self.rhs([a + h * b for a, b in zip(y, k3)])
-        h6 = h / 6.0   # BUG: weights (1, 3, 1, 1)/6 instead of (1, 2, 2, 1)/6 — consistent, but order 2
-        return self._finish([a + h6 * (b1 + 3.0 * b2 + b3 + b4) for a, b1, b2, b3, b4 in zip(y, k1, k2, k3, k4)])
-    mp.setattr(ScalarStepper, "_rk4", _rk4)
+def _normalized(y):
+    return np.concatenate([y[..., :6], y[..., 6:10] / np.linalg.norm(y[..., 6:10], axis=-1, keepdims=True),
+                           y[..., 10:]], axis=-1)
 
 
-def _rk4_third_stage_from_k1(mp):
-    def _rk4(self, y):
-        h = self.h
-        k1 = self.rhs(y)
-        k2 = self.rhs([a + (0.5 * h) * b for a, b in zip(y, k1)])
-        k3 = self.rhs([a + (0.5 * h) * b for a, b in zip(y, k1)])   # BUG: y + h/2 k1 where y + h/2 k2 belongs
-        k4 = self.rhs([a + h * b for a, b in zip(y, k3)])
-        h6 = h / 6.0
-        return self._finish([a + h6 * (b1 + 2.0 * b2 + 2.0 * b3 + b4) for a, b1, b2, b3, b4 in zip(y, k1, k2, k3, k4)])
-    mp.setattr(ScalarStepper, "_rk4", _rk4)
+def _h(dt):
+    return np.asarray(dt, dtype=float).reshape(-1, 1) if np.ndim(dt) else float(dt)
 
 
-def _midpoint_stage_at_full_step(mp):
-    def _midpoint(self, y):
-        h = self.h
-        k1 = self.rhs(y)
-        k2 = self.rhs([a + h * b for a, b in zip(y, k1)])   # BUG: stage at y + h k1, not y + h/2 k1
-        return self._finish([a + h * b for a, b in zip(y, k2)])
-    mp.setattr(ScalarStepper, "_midpoint", _midpoint)
+def _rk4_wrong_stage_weight(p, y, dt):
+    h = _h(dt)
+    k1 = rhs(p, y)
+    k2 = rhs(p, y + (0.5 * h) * k1)
+    k3 = rhs(p, y + (0.5 * h) * k2)
+    k4 = rhs(p, y + h * k3)
+    return _normalized(y + (h / 6.0) * (k1 + 3.0 * k2 + k3 + k4))   # BUG: weights (1, 3, 1, 1)/6: order 2
 
 
-def _gyroscopic_sign_flipped(mp):
-    orig = ScalarStepper._ang_acc
-
-    def _ang_acc(self, R, wx, wy, wz, tx, ty, tz, gyro):
-        if not gyro:
-            return orig(self, R, wx, wy, wz, tx, ty, tz, gyro)
-        a0 = orig(self, R, wx, wy, wz, tx, ty, tz, False)
-        a1 = orig(self, R, wx, wy, wz, tx, ty, tz, True)
-        return tuple(2.0 * p - q for p, q in zip(a0, a1))   # BUG: I⁻¹(τ + ω × Iω)
-    mp.setattr(ScalarStepper, "_ang_acc", _ang_acc)
+def _rk4_third_stage_from_k1(p, y, dt):
+    h = _h(dt)
+    k1 = rhs(p, y)
+    k2 = rhs(p, y + (0.5 * h) * k1)
+    k3 = rhs(p, y + (0.5 * h) * k1)   # BUG: y + h/2 k1 where y + h/2 k2 belongs
+    k4 = rhs(p, y + h * k3)
+    return _normalized(y + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4))
 
 
-def _gyroscopic_term_dropped(mp):
-    orig = ScalarStepper._ang_acc
-    mp.setattr(ScalarStepper, "_ang_acc",
-               lambda self, R, wx, wy, wz, tx, ty, tz, gyro: orig(self, R, wx, wy, wz, tx, ty, tz, False))
+def _midpoint_stage_at_full_step(p, y, dt):
+    h = _h(dt)
+    return _normalized(y + h * rhs(p, y + h * rhs(p, y)))   # BUG: stage at y + h k1, not y + h/2 k1
 
 
-def _course_decay_twice(mp):
-    def change(s):
-        s.gv, s.gw = s.gv * s.gv, s.gw * s.gw   # BUG: e^{−kΔt} applied twice per step
-    _after_init(mp, change)
+def _course_quaternion_multiplied_on_the_right(p, y, dt):
+    out = course_type(p, y, dt, gyro=False, expmap=False)
+    w = (0.5 * _h(dt)) * out[..., 10:13]
+    wq = np.concatenate([np.zeros(w.shape[:-1] + (1,)), w], axis=-1)
+    q = y[..., 6:10] + quat_mul(y[..., 6:10], wq)   # BUG: q + q [0, Δt/2 ω]: world ω used as body ω
+    out[..., 6:10] = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    return out
 
 
-def _whole_state_decay_left_out(mp):
-    def change(s):
-        s.kv = s.kw = 0.0   # BUG: no −k v, −k ω in the right-hand side
-    _after_init(mp, change)
+def _leapfrog_explicit_half_kick(p, y, dt):
+    h = _h(dt)
+    d = rhs(p, y)
+    z = y.copy()
+    z[..., 3:6], z[..., 10:13] = y[..., 3:6] + 0.5 * h * d[..., 3:6], y[..., 10:13] + 0.5 * h * d[..., 10:13]  # BUG
+    z[..., 0:3] = y[..., 0:3] + h * z[..., 3:6]
+    q = exp_map_times(h, z[..., 10:13], y[..., 6:10])
+    z[..., 6:10] = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    d = rhs(p, z)
+    z[..., 3:6], z[..., 10:13] = z[..., 3:6] + 0.5 * h * d[..., 3:6], z[..., 10:13] + 0.5 * h * d[..., 10:13]
+    return z
 
 
-def _course_quaternion_multiplied_on_the_right(mp):
-    orig = ScalarStepper._course
+@dataclass(frozen=True, eq=False)
+class _LeversUnrotated(Members):
+    """BUG: body points (spring attachments, force points) and body vectors used in body axes as world ones."""
 
-    def _course(self, y, gyro, expmap):
-        out = orig(self, y, gyro, expmap)
-        # BUG: q + q [0, Δt/2 ω] (world ω used as if it were body ω): redo the attitude update that way
-        h = self.h
-        qw, qx, qy, qz = y[6:10]
-        wx, wy, wz = out[10:13]
-        hx, hy, hz = 0.5 * h * wx, 0.5 * h * wy, 0.5 * h * wz
-        nw = qw - (qx * hx + qy * hy + qz * hz)
-        nx = qx + (qw * hx + qy * hz - qz * hy)
-        ny = qy + (qw * hy + qz * hx - qx * hz)
-        nz = qz + (qw * hz + qx * hy - qy * hx)
-        n = (nw * nw + nx * nx + ny * ny + nz * nz) ** 0.5
-        out[6:10] = [nw / n, nx / n, ny / n, nz / n]
-        return out
-    mp.setattr(ScalarStepper, "_course", _course)
+    def force_torque(self, x_W, v_W, R_WB):
+        return super().force_torque(x_W, v_W, np.broadcast_to(np.eye(3), np.shape(R_WB)))
 
 
-def _leapfrog_explicit_half_kick(mp):
-    def _leapfrog(self, y):
-        h = self.h
-        half = 0.5 * h
-        d = self.rhs(y)
-        u = [a + half * b for a, b in zip(y[3:6] + y[10:13], d[3:6] + d[10:13])]  # BUG: not iterated
-        z = list(y)
-        z[3:6], z[10:13] = u[0:3], u[3:6]
-        z[0], z[1], z[2] = y[0] + h * u[0], y[1] + h * u[1], y[2] + h * u[2]
-        ew, ex, ey, ez = self._exp(*u[3:6])
-        qw, qx, qy, qz = y[6:10]
-        nw = ew * qw - ex * qx - ey * qy - ez * qz
-        nx = ew * qx + ex * qw + ey * qz - ez * qy
-        ny = ew * qy + ey * qw + ez * qx - ex * qz
-        nz = ew * qz + ez * qw + ex * qy - ey * qx
-        n = (nw * nw + nx * nx + ny * ny + nz * nz) ** 0.5
-        z[6], z[7], z[8], z[9] = nw / n, nx / n, ny / n, nz / n
-        d = self.rhs(z)
-        z[3:6] = [a + half * b for a, b in zip(u[0:3], d[3:6])]
-        z[10:13] = [a + half * b for a, b in zip(u[3:6], d[10:13])]
-        return z
-    mp.setattr(ScalarStepper, "_leapfrog", _leapfrog)
+def _lever_arms_not_rotated(m):
+    return _LeversUnrotated(*(getattr(m, f.name) for f in dataclasses.fields(m)))
 
 
-def _lever_arms_not_rotated(mp):
-    orig = ScalarStepper._force_torque
-    eye = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
-    # BUG: body points (spring attach, force point) used in body axes as if they were world vectors
-    mp.setattr(ScalarStepper, "_force_torque", lambda self, x, v, R: orig(self, x, v, eye))
+def _gyroscopic_sign_flipped(m):
+    return dataclasses.replace(m, inertia_B=-m.inertia_B)   # BUG: I⁻¹(τ + ω × Iω)
 
 
-def _body_torque_applied_in_world_axes(mp):
-    def change(s):
-        s.tau_W = [a + b for a, b in zip(s.tau_W, s.tau_B)]   # BUG: body-frame torque not rotated
-        s.tau_B = [0.0, 0.0, 0.0]
-    _after_init(mp, change)
+def _gyroscopic_term_dropped(m):
+    return dataclasses.replace(m, inertia_B=0.0 * m.inertia_B)   # BUG: no ω × Iω
 
 
-def _torque_cross_product_reversed(mp):
-    def change(s):
-        s.world_point = [(f, [-c for c in r]) for f, r in s.world_point]   # BUG: f × r instead of r × f
-    _after_init(mp, change)
+def _course_decay_twice(m):
+    return dataclasses.replace(m, decay_gamma=m.decay_gamma ** 2)   # BUG: e^{−kΔt} applied twice per step
 
 
-def _drag_sign_flipped(mp):
-    def change(s):
-        s.c = -s.c   # BUG: f = +c v
-    _after_init(mp, change)
+def _whole_state_decay_left_out(m):
+    return dataclasses.replace(m, decay_rates=0.0 * m.decay_rates)   # BUG: no −k v, −k ω in the right-hand side
+
+
+def _body_torque_applied_in_world_axes(m):
+    return dataclasses.replace(m, torque_W=m.torque_W + m.torque_B, torque_B=0.0 * m.torque_B)   # BUG: not rotated
+
+
+def _torque_cross_product_reversed(m):
+    wp = m.world_points.copy()
+    wp[..., 3:6] *= -1.0   # BUG: f × r instead of r × f
+    return dataclasses.replace(m, world_points=wp)
+
+
+def _drag_sign_flipped(m):
+    return dataclasses.replace(m, drag=-m.drag)   # BUG: f = +c v
+
+
+def _unchanged(m):
+    return m
+
+
+class MutantAdapter(EngineAdapter):
+    """``mutant_NAME:VARIANT``: the reference scheme VARIANT with one bug (``members``: a knob on the
+    parameters; ``step``: a broken step of the definition's signature), declared as imitating it."""
+
+    def __init__(self, name: str, variant: str, bug: str, members=None, step=None):
+        self.name, self.mutant, self.scheme = f"mutant_{name}", name, variant.split(":", 1)[1]
+        spec = ReferenceAdapter.variants[self.scheme]
+        self.variants = {self.scheme: Variant(spec.order, f"{spec.description} WITH A PLANTED BUG: {bug}",
+                                              imitates=variant)}
+        self.knob, self.step = members or _unchanged, step
+
+    def version(self) -> str:
+        return "planted"
+
+    def same_as(self, other) -> bool:
+        return isinstance(other, MutantAdapter) and other.name == self.name
+
+    def source_files(self) -> list:
+        return [__file__]
+
+    def simulate(self, scenario, variant: str, dt_s: float, n_steps: int):
+        p = scenario.problem
+        return run_members(self.knob(p.members), self.step or variant, [dt_s], [n_steps], p.initial_packed()[None])[0]
+
+    def one_step(self, scenario, variant: str, dt_s: float, y_start):
+        step = self.step or get_step(variant)
+        with np.errstate(all="ignore"):
+            try:
+                return step(self.knob(scenario.problem.members), np.asarray(y_start, dtype=float), dt_s)
+            except ImplicitSolveError:
+                return np.full(np.shape(y_start), np.nan)
+
+
+def _planter(adapter):
+    """``apply(monkeypatch)`` of a reference mutant: register its adapter until the monkeypatch is undone (the
+    registry's table of registered engines is replaced by a copy that the undo puts back)."""
+    def apply(mp):
+        mp.setattr(engines, "_user", dict(engines._user))
+        engines.register_adapter(adapter, "tests/mutants.py")
+    return apply
+
+
+def _reference(name, variant, bug, exposed_by, members=None, step=None) -> Mutant:
+    return Mutant(name, variant, bug, exposed_by, _planter(MutantAdapter(name, variant, bug, members, step)))
 
 
 # --- the engine adapters --------------------------------------------------------------------------------
@@ -295,34 +318,34 @@ def _drake_gravity_twice(mp):
 
 
 MUTANTS = [
-    Mutant("rk4_wrong_stage_weight", "reference:rk4", "RK4 stage weights (1, 3, 1, 1)/6: order 2",
-           ("applied_torque",), _rk4_wrong_stage_weight),
-    Mutant("rk4_third_stage_from_k1", "reference:rk4", "RK4's third stage from k1 instead of k2 (a typo)",
-           ("particle_body",), _rk4_third_stage_from_k1),
-    Mutant("midpoint_stage_at_full_step", "reference:midpoint", "mid-point stage at y + Δt k1: order 1",
-           ("projectile",), _midpoint_stage_at_full_step),
-    Mutant("gyroscopic_sign_flipped", "reference:expmap_gyro", "+ω × Iω instead of −ω × Iω",
-           ("tennis_racket",), _gyroscopic_sign_flipped),
-    Mutant("gyroscopic_sign_flipped_rk4", "reference:rk4", "+ω × Iω in the whole-state right-hand side",
-           ("particle_body",), _gyroscopic_sign_flipped),
-    Mutant("gyroscopic_term_dropped", "reference:course_gyro", "the gyroscopic torque left out",
-           ("tennis_racket",), _gyroscopic_term_dropped),
-    Mutant("course_decay_twice", "reference:course", "velocity decay applied twice per step",
-           ("velocity_decay",), _course_decay_twice),
-    Mutant("rk4_decay_left_out", "reference:rk4", "no decay in the right-hand side",
-           ("velocity_decay",), _whole_state_decay_left_out),
-    Mutant("course_quaternion_on_the_right", "reference:course", "q + q [0, Δt/2 ω]: world ω used as body ω",
-           ("constant_spin",), _course_quaternion_multiplied_on_the_right),
-    Mutant("leapfrog_explicit_half_kick", "reference:leapfrog", "first half kick not solved: explicit",
-           ("tennis_racket",), _leapfrog_explicit_half_kick),
-    Mutant("lever_arms_not_rotated", "reference:rk4", "body points used in body axes as world vectors",
-           ("applied_torque",), _lever_arms_not_rotated),
-    Mutant("body_torque_in_world_axes", "reference:expmap_gyro", "a body-frame torque applied unrotated",
-           ("applied_torque",), _body_torque_applied_in_world_axes),
-    Mutant("torque_cross_product_reversed", "reference:midpoint", "τ = f × r instead of r × f",
-           ("applied_torque",), _torque_cross_product_reversed),
-    Mutant("drag_sign_flipped", "reference:course", "drag f = +c v",
-           ("linear_drag",), _drag_sign_flipped),
+    _reference("rk4_wrong_stage_weight", "reference:rk4", "RK4 stage weights (1, 3, 1, 1)/6: order 2",
+               ("applied_torque",), step=_rk4_wrong_stage_weight),
+    _reference("rk4_third_stage_from_k1", "reference:rk4", "RK4's third stage from k1 instead of k2 (a typo)",
+               ("particle_body",), step=_rk4_third_stage_from_k1),
+    _reference("midpoint_stage_at_full_step", "reference:midpoint", "mid-point stage at y + Δt k1: order 1",
+               ("projectile",), step=_midpoint_stage_at_full_step),
+    _reference("gyroscopic_sign_flipped", "reference:expmap_gyro", "+ω × Iω instead of −ω × Iω",
+               ("tennis_racket",), members=_gyroscopic_sign_flipped),
+    _reference("gyroscopic_sign_flipped_rk4", "reference:rk4", "+ω × Iω in the whole-state right-hand side",
+               ("particle_body",), members=_gyroscopic_sign_flipped),
+    _reference("gyroscopic_term_dropped", "reference:course_gyro", "the gyroscopic torque left out",
+               ("tennis_racket",), members=_gyroscopic_term_dropped),
+    _reference("course_decay_twice", "reference:course", "velocity decay applied twice per step",
+               ("velocity_decay",), members=_course_decay_twice),
+    _reference("rk4_decay_left_out", "reference:rk4", "no decay in the right-hand side",
+               ("velocity_decay",), members=_whole_state_decay_left_out),
+    _reference("course_quaternion_on_the_right", "reference:course", "q + q [0, Δt/2 ω]: world ω used as body ω",
+               ("constant_spin",), step=_course_quaternion_multiplied_on_the_right),
+    _reference("leapfrog_explicit_half_kick", "reference:leapfrog", "first half kick not solved: explicit",
+               ("tennis_racket",), step=_leapfrog_explicit_half_kick),
+    _reference("lever_arms_not_rotated", "reference:rk4", "body points used in body axes as world vectors",
+               ("applied_torque",), members=_lever_arms_not_rotated, step=get_step("rk4")),
+    _reference("body_torque_in_world_axes", "reference:expmap_gyro", "a body-frame torque applied unrotated",
+               ("applied_torque",), members=_body_torque_applied_in_world_axes),
+    _reference("torque_cross_product_reversed", "reference:midpoint", "τ = f × r instead of r × f",
+               ("applied_torque",), members=_torque_cross_product_reversed),
+    _reference("drag_sign_flipped", "reference:course", "drag f = +c v",
+               ("linear_drag",), members=_drag_sign_flipped),
     Mutant("mujoco_world_omega_as_body", "mujoco:euler", "ω_W written into qvel[3:6] (body axes)",
            ("constant_spin",), _mujoco_world_omega_as_body),
     Mutant("mujoco_body_omega_read_as_world", "mujoco:rk4", "qvel[3:6] (body axes) read as ω_W",

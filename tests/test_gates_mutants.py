@@ -47,7 +47,8 @@ def test_the_gates_catch_a_planted_bug(name, tmp_path, monkeypatch):
     m = BY_NAME[name]
     _need(m.variant)
     m.apply(monkeypatch)
-    fails = _gate_failures_of_sweep(tmp_path, m.exposed_by, m.variant)
+    _need(m.swept)
+    fails = _gate_failures_of_sweep(tmp_path, m.exposed_by, m.swept)
     assert fails, f"{m.name} ({m.bug}) was not caught on {m.exposed_by}"
 
 
@@ -65,5 +66,6 @@ def test_every_planted_bug_is_caught_by_a_catalog_sweep(name, tmp_path, monkeypa
     m = BY_NAME[name]
     _need(m.variant)
     m.apply(monkeypatch)
-    fails = _gate_failures_of_sweep(tmp_path, catalog_names(), m.variant, jobs=2)
+    _need(m.swept)
+    fails = _gate_failures_of_sweep(tmp_path, catalog_names(), m.swept, jobs=2)
     assert fails, f"{m.name} ({m.bug}) was not caught by a sweep of the catalog"

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cross_checks.core.quantities import QUANTITIES
-from cross_checks.engines import declared_order
+from cross_checks.engines import declared_imitation, declared_order
 from reference_sim.analytic import EQUAL_MOMENTS_REL_TOL
 
 __all__ = ["energy_drift_bound", "characteristic_rate_sq", "QUANTITIES", "VARIANT_TRAITS",
@@ -110,7 +110,10 @@ DEFAULT_TRAITS = Traits(gyroscopic_term=True, translation_drift=None, rotation_d
 
 
 def traits(variant: str) -> Traits:
-    """The traits of ``ENGINE:VARIANT`` (DEFAULT_TRAITS for one this module does not know)."""
+    """The traits of ``ENGINE:VARIANT``, or of the variant it declares it imitates (Variant.imitates);
+    DEFAULT_TRAITS for one this module does not know."""
+    if variant not in VARIANT_TRAITS:
+        variant = declared_imitation(variant) or variant
     return VARIANT_TRAITS.get(variant, DEFAULT_TRAITS)
 
 

@@ -19,7 +19,8 @@ from cross_checks.core.trajectory import Trajectory
 from cross_checks.engines.base import EngineAdapter, EngineError, EngineNotInstalled, Variant
 
 __all__ = ["ENTRY_POINT_GROUP", "VariantInfo", "EngineEntry", "all_variants", "available_variants", "get_adapter",
-           "split_variant", "default_variant", "run_variant", "run_variants", "engine_entries", "engine_variants", "declared_order", "has_one_step",
+           "split_variant", "default_variant", "run_variant", "run_variants", "engine_entries", "engine_variants",
+           "declared_order", "declared_imitation", "has_one_step",
            "load_engine_files", "engine_files_registered", "register_adapter", "user_engines", "adopt_user_engines", "engine_provenance",
            "reset_registry", "EngineUnavailable", "UnknownVariant", "EngineAdapter", "EngineError", "Variant",
            "REQUIRED_ENGINES", "unusable_required_engines"]
@@ -296,6 +297,17 @@ def declared_order(name: str) -> float | None:
         return None
     spec = e.adapter.variants.get(variant) if e.adapter is not None else None
     return spec.order if spec is not None else None
+
+
+def declared_imitation(name: str) -> str:
+    """The ``ENGINE:VARIANT`` whose scheme ``name`` declares it imitates (Variant.imitates; "" when none)."""
+    engine, _, variant = name.partition(":")
+    try:
+        e = _entry(engine)
+    except (UnknownVariant, EngineUnavailable):
+        return ""
+    spec = e.adapter.variants.get(variant) if e.adapter is not None else None
+    return getattr(spec, "imitates", "") if spec is not None else ""
 
 
 def has_one_step(name: str) -> bool:

@@ -141,9 +141,10 @@ def require(module, import_error, name: str, dist: str | None = None, hint: str 
 
 @functools.lru_cache(maxsize=64)
 def float_forces(scenario):
-    """The plain-float force evaluator of reference_sim.scalar for this scenario (built once)."""
-    from reference_sim.scalar import ScalarStepper
-    return ScalarStepper(scenario.problem, "course", scenario.dt_s)
+    """The single-state force evaluator of this scenario (reference_sim.compiled.ForceEvaluator: the
+    definition's force model, compiled), built once: ``.force_torque(y)`` -> 6 floats."""
+    from reference_sim.compiled import ForceEvaluator
+    return ForceEvaluator(scenario.problem)
 
 
 def decay_factors(scenario, dt_s: float):
@@ -156,9 +157,8 @@ def harness_force_torque(scenario, y, dt_s: float):
     """World force (N, at the COM) and world torque (N m) to apply for the step of ``dt_s`` starting at
     ``y`` (13,), scaled by the pre-step decay factors (see the module docstring).
 
-    Evaluated with the plain-float kernel of reference_sim.scalar (the same formulas as
-    ForceModel.force_torque, tested equal to it): it runs once per engine step, or once per RK4 stage,
-    where NumPy's per-call overhead would dominate the engine's own step time.
+    Evaluated by :func:`float_forces` (the definition's ForceModel formulas, compiled): it runs once per
+    engine step, or once per RK4 stage, where NumPy's per-call overhead would dominate the engine's step.
     """
     fx, fy, fz, tx, ty, tz = harness_force_torque_floats(scenario, y, dt_s)
     return np.array([fx, fy, fz]), np.array([tx, ty, tz])
@@ -182,16 +182,7 @@ def stage_force_torque(scenario, y):
 
 def stage_force_torque_floats(scenario, y) -> tuple:
     """:func:`stage_force_torque` as 6 plain floats (for the per-stage callback)."""
-    stepper = float_forces(scenario)
-    fx, fy, fz, tx, ty, tz = stepper.force_torque(y)
-    kv, kw = stepper.kv, stepper.kw
-    if kv:
-        m = stepper.m
-        fx, fy, fz = fx - m * kv * y[3], fy - m * kv * y[4], fz - m * kv * y[5]
-    if kw:
-        lx, ly, lz = stepper.world_inertia_times(y, y[10], y[11], y[12])
-        tx, ty, tz = tx - kw * lx, ty - kw * ly, tz - kw * lz
-    return fx, fy, fz, tx, ty, tz
+    return float_forces(scenario).force_torque(y, stage=True)
 
 
 def apply_decay_prestep(scenario, y, dt_s: float):
@@ -216,10 +207,13 @@ class RunRequest:
 @dataclass(frozen=True)
 class Variant:
     """A variant an engine offers: its declared global order (the error at a fixed final time shrinks
-    like Δt^order; verdicts check it) and a one-line description for ``rbcheck list`` and the report."""
+    like Δt^order; verdicts check it), a one-line description for ``rbcheck list`` and the report, and
+    ``imitates``: the ``ENGINE:VARIANT`` whose scheme this one claims to compute ("" for none), whose traits
+    (cross_checks.analysis.expectations) it then gets — so that it is judged exactly as that scheme."""
 
     order: float
     description: str = ""
+    imitates: str = ""
 
     def __post_init__(self):
         o = self.order
@@ -227,6 +221,8 @@ class Variant:
             raise ValueError(f"order must be a number in (0, 20], got {o!r}")
         if not isinstance(self.description, str):
             raise ValueError(f"description must be a string, got {self.description!r}")
+        if not isinstance(self.imitates, str):
+            raise ValueError(f"imitates must be a string (ENGINE:VARIANT or empty), got {self.imitates!r}")
         object.__setattr__(self, "order", float(o))
 
 

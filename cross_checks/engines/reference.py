@@ -5,9 +5,10 @@ import numpy as np
 
 import reference_sim
 from cross_checks.engines.base import EngineAdapter, Variant
+from reference_sim.forces import Members
 from reference_sim.integrators import VARIANTS as SCHEMES
 from reference_sim.integrators import ImplicitSolveError, get_step
-from reference_sim.simulate import Run
+from reference_sim.simulate import Run, run_members
 from reference_sim.simulate import simulate as _simulate
 
 ENGINE = "reference"
@@ -21,6 +22,18 @@ def version() -> str:
 
 def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
     return _simulate(scenario.problem, variant, dt_s, n_steps)
+
+
+def simulate_many(variant: str, requests) -> list:
+    """The runs of ``requests`` (base.RunRequest) with ``variant``, all advanced together as the members of
+    one compiled run (reference_sim.simulate.run_members): each equal to :func:`simulate` of that request,
+    each stopping at its own ``n_steps`` or at its own divergence."""
+    requests = list(requests)
+    if not requests:
+        return []
+    problems = [r.scenario.problem for r in requests]
+    return run_members(Members.stack(problems), variant, [r.dt_s for r in requests], [r.n_steps for r in requests],
+                       np.array([p.initial_packed() for p in problems]))
 
 
 def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
@@ -41,3 +54,6 @@ class ReferenceAdapter(EngineAdapter):
     version = staticmethod(version)
     simulate = staticmethod(simulate)
     one_step = staticmethod(one_step)
+
+    def simulate_many(self, variant: str, requests) -> list:
+        return simulate_many(variant, requests)

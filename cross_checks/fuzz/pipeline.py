@@ -88,7 +88,7 @@ def prepare(draws, n0: int) -> list:
         first.append((d, spec, scenario_of(spec)))
     scs = [s for _, _, s in first]
     y_pilot = exact.solve_members([sc.problem for sc in scs], [sc.duration_s for sc in scs],
-                                  np.linspace(0.0, 1.0, 33), rtol=tol.FUZZ_PILOT_RTOL, fast=True)
+                                  np.linspace(0.0, 1.0, 33), rtol=tol.FUZZ_PILOT_RTOL)
     scales = [quantity_scales(y_pilot[:, i]) for i in range(len(scs))]
     amp = exact.amplification(scs, scales, rtol=tol.FUZZ_PILOT_RTOL)
     out = []

@@ -100,7 +100,7 @@ def lever_roundoff(scenario, y_ref) -> dict:
 def pays_lever_roundoff(variant: str) -> bool:
     """Whether ``variant``'s arithmetic may hold lever arms from the world origin (``lever_roundoff``).
     rbcheck's own schemes do not: they take torques r × F with r = R r_B from the COM and step ω itself,
-    never recovering it from a momentum about the origin (reference_sim/scalar.py) — their round-off is
+    never recovering it from a momentum about the origin (reference_sim/integrators.py) — their round-off is
     the ε-per-step of ``roundoff_floor``. Every other engine, an engine file included, is assumed to (its
     algebra is not known here). Giving rbcheck's schemes this floor made the fuzz call reference:rk4's
     one-step order 4.70: a body 0.6 m from the origin moving at 3 m/s, I_min = 1.2e-4 kg m², gave them an

@@ -1,7 +1,8 @@
-"""The compiled single-body path is the Python float path, bit for bit, and steps aside for a planted bug.
+"""The compiled path is the definition, bit for bit: every run through reference_sim.compiled equals the run
+stepped by reference_sim.integrators alone (its divergence time, message and states included).
 
-Every comparison is exact (``np.array_equal``): the compiled kernels transcribe ScalarStepper's arithmetic
-operation for operation with fastmath off, so there is no round-off to allow for.
+Every comparison is exact (``np.array_equal``): the compiled kernels transcribe the definition's arithmetic
+operation for operation, in its order, with fastmath off, so there is no round-off to allow for.
 """
 import numpy as np
 import pytest
@@ -9,23 +10,25 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import reference_sim.simulate as S
+from cross_checks.engines.base import RunRequest
+from cross_checks.engines.reference import ReferenceAdapter
 from cross_checks.scenario import catalog_names, load_scenario
 from reference_sim import compiled
 from reference_sim.body import RigidBody
 from reference_sim.forces import ForceModel, PointForce, Spring, Torque
 from reference_sim.integrators import VARIANTS
 from reference_sim.quaternion import matrix_from_quat, quat_normalize
-from reference_sim.scalar import ScalarStepper
 from reference_sim.state import Problem, State
 
 from .test_integrators import coupled_problem
 
-pytestmark = pytest.mark.skipif(compiled._kernel() is None, reason="numba is not importable here")
+pytestmark = pytest.mark.skipif(compiled.kernel() is None, reason="numba is not importable here")
 
 
 def _python_run(monkeypatch, problem, variant, dt, n):
+    """The run stepped by the definition only (what a machine without numba runs)."""
     with monkeypatch.context() as m:
-        m.setattr(compiled, "usable", lambda stepper: False)
+        m.setattr(compiled, "kernel", lambda: None)
         return S.simulate(problem, variant, dt, n)
 
 
@@ -36,16 +39,16 @@ def _assert_same_run(a, b):
 
 
 def _used_compiled(monkeypatch, problem, variant, dt, n):
-    """The run, asserting that it went through the compiled loop."""
+    """The run, asserting that it went through the compiled loop; and the step each call started from."""
     calls = []
-    real = compiled.run_until_exceptional
+    real = compiled.advance
 
-    def counting(*args, **kw):
-        calls.append(args[2])
-        return real(*args, **kw)
+    def counting(variant, rows, offsets, pos, *args):
+        calls.append(int(pos[0]))
+        return real(variant, rows, offsets, pos, *args)
 
     with monkeypatch.context() as m:
-        m.setattr(compiled, "run_until_exceptional", counting)
+        m.setattr(compiled, "advance", counting)
         run = S.simulate(problem, variant, dt, n)
     assert calls, "the run did not step compiled"
     return run, calls
@@ -53,10 +56,13 @@ def _used_compiled(monkeypatch, problem, variant, dt, n):
 
 @pytest.mark.parametrize("variant", list(VARIANTS))
 @pytest.mark.parametrize("decay", [(1.0, 1.0), (0.99, 0.995)])
-def test_compiled_run_is_bit_identical_to_the_python_run_with_every_force_kind(monkeypatch, variant, decay):
+def test_compiled_run_is_bit_identical_to_the_definition_with_every_force_kind(monkeypatch, variant, decay):
     problem = coupled_problem(decay)
     fast, _ = _used_compiled(monkeypatch, problem, variant, 1.5e-3, 400)
     _assert_same_run(fast, _python_run(monkeypatch, problem, variant, 1.5e-3, 400))
+    # and each step is the definition's step from the run's previous state, one body or a batch of four
+    step = VARIANTS[variant].step
+    assert np.array_equal(step(problem, fast.y[:-1], 1.5e-3), fast.y[1:])
 
 
 @pytest.mark.parametrize("name", catalog_names())
@@ -106,7 +112,7 @@ def _problems(draw):
 
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(problem=_problems(), variant=st.sampled_from(list(VARIANTS)), dt=st.sampled_from([1e-3, 1e-2, 0.05]))
-def test_compiled_equals_python_on_random_problems(monkeypatch, problem, variant, dt):
+def test_compiled_equals_the_definition_on_random_problems(monkeypatch, problem, variant, dt):
     fast = S.simulate(problem, variant, dt, 120)
     _assert_same_run(fast, _python_run(monkeypatch, problem, variant, dt, 120))
 
@@ -117,13 +123,13 @@ def _stiff(k=1e6):
 
 
 @pytest.mark.parametrize("variant", ["explicit_euler", "course", "midpoint", "rk4"])
-def test_a_blow_up_is_the_python_paths_divergence_time_message_and_states(monkeypatch, variant):
+def test_a_blow_up_is_the_definitions_divergence_time_message_and_states(monkeypatch, variant):
     fast, _ = _used_compiled(monkeypatch, _stiff(), variant, 0.01, 400)
     assert fast.diverged_at_s is not None
     _assert_same_run(fast, _python_run(monkeypatch, _stiff(), variant, 0.01, 400))
 
 
-def test_a_spin_that_blows_up_is_cut_where_the_python_path_cuts_it(monkeypatch):
+def test_a_spin_that_blows_up_is_cut_where_the_definition_cuts_it(monkeypatch):
     p = Problem(RigidBody(1.0, [1.0, 2.0, 3.0]), ForceModel(),
                 State(np.zeros(3), np.zeros(3), np.array([1.0, 0, 0, 0]), np.array([0.1, 20.0, 0.1])))
     fast, _ = _used_compiled(monkeypatch, p, "expmap_gyro", 0.01, 2000)
@@ -131,15 +137,15 @@ def test_a_spin_that_blows_up_is_cut_where_the_python_path_cuts_it(monkeypatch):
     _assert_same_run(fast, _python_run(monkeypatch, p, "expmap_gyro", 0.01, 2000))
 
 
-def test_stalled_implicit_euler_steps_are_solved_in_python_and_the_loop_resumes(monkeypatch):
-    # ω Δt = 10: the fixed point diverges, so the steps go to Newton (through the Python step) until the body
+def test_stalled_implicit_euler_steps_are_solved_by_the_definition_and_the_loop_resumes(monkeypatch):
+    # ω Δt = 10: the fixed point diverges, so the steps go to Newton (the definition's step) until the body
     # has come to rest at the anchor, where the iteration has nothing left to do
     fast, calls = _used_compiled(monkeypatch, _stiff(), "implicit_euler", 0.01, 50)
-    assert fast.diverged_at_s is None and len(calls) > 20   # resumed after each Python step
+    assert fast.diverged_at_s is None and len(calls) > 20   # resumed after each step of the definition
     _assert_same_run(fast, _python_run(monkeypatch, _stiff(), "implicit_euler", 0.01, 50))
 
 
-def test_a_leapfrog_half_kick_that_does_not_converge_is_the_python_paths_error(monkeypatch):
+def test_a_leapfrog_half_kick_that_does_not_converge_is_the_definitions_error(monkeypatch):
     # linear drag c Δt / (2 m) = 2.5 > 1: the fixed point of the implicit half kick diverges
     p = Problem(RigidBody(1.0, [1.0, 1.0, 1.0]), ForceModel(linear_drag_N_s_per_m=50.0),
                 State(np.zeros(3), np.array([1.0, 0, 0]), np.array([1.0, 0, 0, 0]), np.zeros(3)))
@@ -148,47 +154,43 @@ def test_a_leapfrog_half_kick_that_does_not_converge_is_the_python_paths_error(m
     _assert_same_run(fast, _python_run(monkeypatch, p, "leapfrog", 0.1, 20))
 
 
-def test_a_patched_step_method_turns_the_compiled_path_off_and_runs_the_patch(monkeypatch):
-    problem = coupled_problem()
-    assert compiled.usable(ScalarStepper(problem, "rk4", 1e-3))
-    shipped = ScalarStepper._rk4
-    monkeypatch.setattr(ScalarStepper, "_rk4", lambda self, y: shipped(self, y)[:6] + [1.0, 0, 0, 0] + y[10:13])
-    assert not compiled.usable(ScalarStepper(problem, "rk4", 1e-3))
-    run = S.simulate(problem, "rk4", 1e-3, 5)
-    assert np.array_equal(run.y[-1, 6:10], [1.0, 0, 0, 0])   # the patch ran
-    # a method replaced on one instance only, too
-    monkeypatch.undo()
-    s = ScalarStepper(problem, "rk4", 1e-3)
-    s._ang_acc = lambda *a: (0.0, 0.0, 0.0)
-    assert not compiled.usable(s)
+def _requests():
+    """Members of different scenarios and steps, with different lengths; one blows up (a fast spin)."""
+    scs = [load_scenario(n) for n in ("tennis_racket", "spring_oscillator", "velocity_decay", "applied_torque")]
+    reqs = [RunRequest(sc, dt, n) for sc, dt, n in zip(scs, (0.01, 0.004, 0.02, 0.005), (300, 120, 90, 400))]
+    fast_spin = Problem(RigidBody(1.0, [1.0, 2.0, 3.0]), ForceModel(),
+                        State(np.zeros(3), np.zeros(3), np.array([1.0, 0, 0, 0]), np.array([0.1, 20.0, 0.1])))
+    return reqs + [RunRequest(type("Sc", (), {"problem": fast_spin})(), 0.01, 2000)]
 
 
-def test_a_setting_planted_in_init_reaches_the_compiled_run(monkeypatch):
-    # tests/mutants.py changes settings after ScalarStepper.__init__: the compiled kernel reads them too
-    problem = coupled_problem((0.99, 0.995))
-    clean = S.simulate(problem, "course", 1e-3, 200)
-    orig = ScalarStepper.__init__
+@pytest.mark.parametrize("variant", list(VARIANTS))
+def test_simulate_many_is_simulate_member_by_member(monkeypatch, variant):
+    reqs = _requests()
+    many = ReferenceAdapter().simulate_many(variant, reqs)
+    assert len(many) == len(reqs)
+    for r, run in zip(reqs, many):
+        _assert_same_run(run, S.simulate(r.scenario.problem, variant, r.dt_s, r.n_steps))
+    if variant in ("course_gyro", "expmap_gyro"):
+        assert many[-1].diverged_at_s is not None and all(run.diverged_at_s is None for run in many[:-1])
+    with monkeypatch.context() as m:   # without numba: the definition steps every member at once
+        m.setattr(compiled, "kernel", lambda: None)
+        for a, b in zip(ReferenceAdapter().simulate_many(variant, reqs), many):
+            _assert_same_run(a, b)
 
-    def init(self, *a, **kw):
-        orig(self, *a, **kw)
-        self.gv, self.gw = self.gv * self.gv, self.gw * self.gw
 
-    monkeypatch.setattr(ScalarStepper, "__init__", init)
-    fast, _ = _used_compiled(monkeypatch, problem, "course", 1e-3, 200)
-    assert not np.array_equal(fast.y, clean.y)
-    _assert_same_run(fast, _python_run(monkeypatch, problem, "course", 1e-3, 200))
-
-
-def test_without_numba_every_run_steps_in_python(monkeypatch):
+def test_without_numba_every_run_steps_the_definition(monkeypatch):
     problem = coupled_problem()
     with_numba = S.simulate(problem, "leapfrog", 1e-3, 50)
-    monkeypatch.setattr(compiled, "_KERNEL", [None])
-    assert not compiled.usable(ScalarStepper(problem, "leapfrog", 1e-3))
+    calls = []
+    monkeypatch.setattr(compiled, "kernel", lambda: None)
+    monkeypatch.setattr(compiled, "advance", lambda *a: calls.append(a))
     _assert_same_run(S.simulate(problem, "leapfrog", 1e-3, 50), with_numba)
+    assert not calls
 
 
 def _kernel_already_loaded(_):
-    return bool(compiled._KERNEL) and compiled._KERNEL[0] is not None
+    return compiled.kernel() is not None and compiled.ForceEvaluator(coupled_problem()).force_torque(
+        coupled_problem().initial_packed()) is not None
 
 
 def test_warm_loads_the_kernel_that_forked_workers_inherit():
@@ -208,8 +210,7 @@ def test_a_run_in_chunks_is_the_run_in_one_call(monkeypatch):
     whole = S.simulate(problem, "rk4", 1e-3, 1000)
     monkeypatch.setattr(S, "COMPILED_CHUNK", 64)
     chunked, calls = _used_compiled(monkeypatch, problem, "rk4", 1e-3, 1000)
-    assert len(calls) == 16   # ceil(1000 / 64) calls, each starting where the previous one stopped
-    assert calls == list(range(0, 1000, 64))
+    assert calls == list(range(0, 1000, 64))   # ceil(1000 / 64) calls, each starting where the previous stopped
     _assert_same_run(chunked, whole)
 
 
@@ -224,15 +225,15 @@ def test_a_time_limit_stops_a_long_compiled_run_between_chunks(monkeypatch):
     problem = coupled_problem()
     n = 4_000_000   # 62 chunks of 65,536 steps
     calls = []
-    real = compiled.run_until_exceptional
+    real = compiled.advance
 
-    def alarm_in_the_third_chunk(*args, **kw):
-        out = real(*args, **kw)
-        calls.append(args[2])
+    def alarm_in_the_third_chunk(variant, rows, offsets, pos, *args):
+        calls.append(int(pos[0]))
+        out = real(variant, rows, offsets, pos, *args)
         if len(calls) == 3:
             os.kill(os.getpid(), signal.SIGALRM)
         return out
-    monkeypatch.setattr(compiled, "run_until_exceptional", alarm_in_the_third_chunk)
+    monkeypatch.setattr(compiled, "advance", alarm_in_the_third_chunk)
     with pytest.raises(TimeLimitExceeded, match="the run took longer than the time limit"):
         with time_limit(3600.0, "the run"):
             S.simulate(problem, "implicit_euler", 1e-4, n)
@@ -240,6 +241,18 @@ def test_a_time_limit_stops_a_long_compiled_run_between_chunks(monkeypatch):
 
 
 def test_the_compiled_loop_refuses_steps_its_rows_cannot_hold():
-    stepper = ScalarStepper(coupled_problem(), "rk4", 1e-3)
+    p = coupled_problem()
     with pytest.raises(ValueError, match="do not fit"):
-        compiled.run_until_exceptional(stepper, np.zeros((10, 13)), 0, 10, 1e8)
+        compiled.advance("rk4", np.zeros((10, 13)), [0], np.zeros(1, dtype=np.int64), [10], 1e8,
+                         compiled.parameters(p.members, [1e-3]))
+
+
+def test_the_compiled_forces_are_the_definitions(monkeypatch):
+    problem = coupled_problem((0.99, 0.995))
+    y = S.simulate(problem, "rk4", 1e-2, 50).y
+    fast = compiled.ForceEvaluator(problem)
+    monkeypatch.setattr(compiled, "_KERNELS", [None])
+    slow = compiled.ForceEvaluator(problem)
+    for row in y:
+        for stage in (False, True):
+            assert fast.force_torque(row, stage) == slow.force_torque(row, stage)

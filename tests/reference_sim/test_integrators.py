@@ -168,11 +168,10 @@ def decay_exact(problem, t):
 @pytest.mark.parametrize("variant", ["course", "course_gyro", "expmap_gyro"])
 def test_course_variants_at_the_scenarios_own_step_apply_exactly_the_course_gamma(variant):
     # v ← γ (v + Δt g), ω ← γ_ω ω (spin about a principal axis): the course's step, bit for bit, in the
-    # batched definition and in the plain-float kernel.
-    from reference_sim.scalar import ScalarStepper
+    # definition and in the compiled run.
     problem, h = decay_problem(), 0.01
     y0 = problem.initial_packed()
-    for y1 in (get_step(variant)(problem, y0, h), np.array(ScalarStepper(problem, variant, h).step(y0.tolist()))):
+    for y1 in (get_step(variant)(problem, y0, h), simulate(problem, variant, h, 1).y[1]):
         assert np.array_equal(y1[3:6], 0.99 * (y0[3:6] + h * problem.forces.gravity_W))
         assert np.array_equal(y1[10:13], 0.995 * y0[10:13])
 

@@ -1,10 +1,10 @@
-"""The readable per-step oracle (reference_sim.readable) and the batched integrators compute the same
+"""The readable per-step oracle (tests/helpers/oracle.py) and the batched integrators compute the same
 steps, to round-off, for every variant with every force type at once."""
 import numpy as np
 import pytest
 
 from reference_sim.integrators import VARIANTS, get_step
-from reference_sim.readable import step_readable
+from tests.helpers.oracle import step_readable
 from tests.helpers.tolerances import READABLE_VS_BATCHED
 
 from .test_integrators import coupled_problem

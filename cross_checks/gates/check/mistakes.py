@@ -2,8 +2,8 @@
 
 Each :class:`Mistake` is the course's semi-implicit step (``v += Δt f/m; x += Δt v; ω += Δt α;
 q += ½Δt [0, ω] q; q /= |q|``, with or without the gyroscopic torque −ω × (I ω), velocity decay as
-``e^{−kΔt}``) with ONE thing done wrong, written from the equations (not from the reference
-integrators): the checker compares a user's step with each of them from the user's own states, and
+``e^{−kΔt}``) with ONE thing done wrong: the definition's course-type step
+(reference_sim.integrators.course_type) with its knobs, or its parameters changed. The checker compares a user's step with each of them from the user's own states, and
 names the mistake whose steps explain the trajectory (see cross_checks.gates.check). Batched over rows: states
 ``y`` (N, 13) packed [x_W, v_W, q_WB (w x y z), w_W]; ``h`` (s) a scalar or (N,).
 """
@@ -15,9 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from reference_sim.quaternion import matrix_from_quat, quat_mul
-from reference_sim.state import Q, V, W, X
-from reference_sim.vec import cross3
+from reference_sim.integrators import course_type
 
 __all__ = ["Knobs", "Mistake", "CATALOG", "applicable_mistakes", "course_step", "BASES"]
 
@@ -63,90 +61,42 @@ class Knobs:
 BASES = {"with the gyroscopic term": Knobs(), "without the gyroscopic term (the course's step)": Knobs(gyro=0.0)}
 
 
-def _frame_vec(R, vec, frame, knobs):
-    body = (frame == "body") != knobs.frames_swapped
-    return np.einsum("...ij,j->...i", R, vec) if body else np.broadcast_to(np.asarray(vec, float), R.shape[:-1])
-
-
-def _lever(R, r_B, knobs):
-    return np.einsum("...ij,j->...i", R, r_B) if knobs.lever_rotated else np.broadcast_to(r_B, R.shape[:-1])
-
-
-def _gravity(g, knobs):
-    g = np.asarray(g, dtype=float)
-    return g[[0, 2, 1]] if knobs.gravity_axis == "swap_yz" else g
-
-
-def forces(scenario, knobs: Knobs, x, v, R):
-    """World force (N) at the COM and world torque (N m) about it, with the knobs' mistakes."""
-    p = scenario.problem
-    fm, m = p.forces, p.body.mass_kg
-    f = np.broadcast_to(m * _gravity(fm.gravity_W, knobs), x.shape).copy()
-    tau = np.zeros_like(f)
-    if fm.linear_drag_N_s_per_m:
-        f -= knobs.drag_sign * fm.linear_drag_N_s_per_m * v
-    for s in fm.springs:
-        attach = np.einsum("...ij,j->...i", R, s.attach_B) if knobs.attach_rotated else s.attach_B
-        d = x + attach - s.anchor_W
-        L = np.linalg.norm(d, axis=-1, keepdims=True)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            fs = np.where(L > 0.0, -s.stiffness_N_per_m * (L - s.rest_length_m) * d / L, 0.0)
-        f += fs
-        if knobs.point_torque and np.any(s.attach_B != 0):
-            tau += knobs.torque_sign * cross3(_lever(R, s.attach_B, knobs), fs)
-    for pf in fm.point_forces:
-        fp = _frame_vec(R, pf.force, pf.frame, knobs)
-        f += fp
-        if knobs.point_torque and np.any(pf.point_B != 0):
-            tau += knobs.torque_sign * cross3(_lever(R, pf.point_B, knobs), fp)
-    for t in fm.torques:
-        tau += _frame_vec(R, t.torque, t.frame, knobs)
-    return f, tau
-
-
-def _inertia(body, R, knobs):
-    """(I, I⁻¹) as the knobs compute them, (..., 3, 3); I⁻¹ by inversion, as a student's code does (R
-    need not be orthogonal when q is not normalised)."""
-    I_B = body.inertia_B
-    Rt = np.swapaxes(R, -1, -2)
-    if knobs.inertia == "body":
-        return np.broadcast_to(I_B, R.shape), np.broadcast_to(body.inertia_inv_B, R.shape)
-    I = Rt @ I_B @ R if knobs.inertia == "transposed" else R @ I_B @ Rt
-    return I, np.linalg.inv(I)
-
-
-def _decay_factors(scenario, knobs, h):
-    fm = scenario.problem.forces
-    if knobs.decay_per_step:
-        return fm.velocity_decay ** knobs.decay_power, fm.angular_velocity_decay ** knobs.decay_power
-    k_v, k_w = scenario.problem.forces.decay_rates_per_s()
-    return np.exp(-knobs.decay_power * k_v * h), np.exp(-knobs.decay_power * k_w * h)
+def _members(problem, knobs: Knobs, h, n_rows: int):
+    """The problem's parameters with the knobs' parameter mistakes: gravity's axes, the drag's sign, body and
+    world frames swapped, the decay factor's power and (per step) its step."""
+    m = problem.members
+    change: dict = {}
+    if knobs.gravity_axis == "swap_yz":
+        change["weight_W"] = m.weight_W[:, [0, 2, 1]]
+    if knobs.drag_sign != 1.0:
+        change["drag"] = knobs.drag_sign * m.drag
+    if knobs.frames_swapped:
+        at_com = np.concatenate([m.force_W[:, None, :], np.zeros((len(m), 1, 3))], axis=-1)   # r_B = 0
+        change.update(world_points=m.body_points, body_points=np.concatenate([at_com, m.world_points], axis=1),
+                      force_W=0.0 * m.force_W, torque_W=m.torque_B, torque_B=m.torque_W)
+    if knobs.gyro == 1.0:   # only the gyroscopic term ω × I ω uses I_B itself (with q renormalised)
+        if not knobs.normalise:
+            raise ValueError("the gyroscopic sign is flipped through I_B, which a world-axes solve does not allow")
+        change["inertia_B"] = -m.inertia_B
+    if knobs.decay_power != 1.0:
+        change["decay_gamma"] = m.decay_gamma ** knobs.decay_power
+    m = dataclasses.replace(m, **change) if change else m
+    if knobs.decay_per_step:   # γ whatever the step: the factors' own step is each row's step
+        m = m.take(np.zeros(n_rows, dtype=int)) if np.ndim(h) else m
+        m = dataclasses.replace(m, decay_dt_s=np.broadcast_to(np.asarray(h, dtype=float).reshape(-1, 1),
+                                                              m.decay_dt_s.shape).copy())
+    return m
 
 
 def course_step(scenario, y, h, knobs: Knobs = Knobs()):
-    """One course-style step of ``h`` from each row of ``y`` (N, 13), computed as ``knobs`` say."""
-    body = scenario.problem.body
-    hh = np.asarray(h, dtype=float)[..., None] if np.ndim(h) else float(h)
-    x, v, q, w = y[..., X], y[..., V], y[..., Q], y[..., W]
-    # a step that never normalises also builds R from the stored, non-unit q (the course formula)
-    R = matrix_from_quat(q / np.linalg.norm(q, axis=-1, keepdims=True) if knobs.normalise else q)
-    f, tau = forces(scenario, knobs, x, v, R)
-    gv, gw = _decay_factors(scenario, knobs, hh)
-    v1 = gv * (v + hh * f / body.mass_kg)
-    x1 = x + hh * v1
-    I, I_inv = _inertia(body, R, knobs)
-    L = np.einsum("...ij,...j->...i", I, w)
-    alpha = np.einsum("...ij,...j->...i", I_inv, tau + knobs.gyro * cross3(w, L))
-    w1 = gw * (w + hh * alpha)
-    if knobs.quat == "left_body":
-        w_used = np.einsum("...ji,...j->...i", R, w1)
-    else:
-        w_used = w1
-    omega = np.concatenate([np.zeros(w1.shape[:-1] + (1,)), knobs.quat_half * hh * w_used], axis=-1)
-    q1 = q + (quat_mul(q, omega) if knobs.quat == "right_world" else quat_mul(omega, q))
-    if knobs.normalise:
-        q1 = q1 / np.linalg.norm(q1, axis=-1, keepdims=True)
-    return np.concatenate([x1, v1, q1, w1], axis=-1)
+    """One course-style step of ``h`` from each row of ``y`` (N, 13), computed as ``knobs`` say: the
+    definition's course-type step (reference_sim.integrators.course_type) with its knobs set."""
+    quat = {"left_world": "left", "right_world": "right", "left_body": "left_body"}[knobs.quat]
+    return course_type(_members(scenario.problem, knobs, h, len(y)), np.asarray(y, dtype=float), h,
+                       gyro=knobs.gyro != 0.0, expmap=False, quat=quat, quat_half=knobs.quat_half,
+                       normalise=knobs.normalise, inertia=knobs.inertia, lever_rotated=knobs.lever_rotated,
+                       attach_rotated=knobs.attach_rotated,
+                       torque_sign=knobs.torque_sign if knobs.point_torque else 0.0)
 
 
 # --- the catalog ------------------------------------------------------------------------------------

@@ -31,7 +31,7 @@ def _sweep(path, variants, out, extra=()):
 def _found(mutant, tmp_path, monkeypatch, budget_s, shrink_s):
     monkeypatch.setattr(campaign, "SHRINK_S", shrink_s)
     mutant.apply(monkeypatch)
-    s = campaign.run_campaign([mutant.variant], tmp_path / "fz", budget_s=budget_s, seed=0, jobs=1,
+    s = campaign.run_campaign([mutant.swept], tmp_path / "fz", budget_s=budget_s, seed=0, jobs=1,
                               use_cache=False, log=lambda _: None)
     assert s["counterexamples"], f"{mutant.name} not found in {s['cases']['judged']} cases"
     assert s["cases"]["search_s"] <= 120.0
@@ -46,7 +46,7 @@ def _reproduces(s, mutant, tmp_path, monkeypatch):
     text = path.read_text()
     assert cx["property"] in text and "reproduce (exit 1): rbcheck sweep" in text
     load_scenario(str(path))   # a valid scenario file as it stands
-    assert _sweep(path, [mutant.variant], tmp_path / "sweep_bug") == 1
+    assert _sweep(path, [mutant.swept], tmp_path / "sweep_bug") == 1
     monkeypatch.undo()
     monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "cache2"))
     from cross_checks.fuzz.shrink import confirm  # the same sweep's gates, without drawing its report

@@ -65,7 +65,7 @@ def test_a_wrong_order_stays_a_violation_on_the_refined_ladder(monkeypatch):
     spec = dict(PRE_ASYMPTOTIC, duration=0.2, dt=0.01, dt_ladder=[0.01, 0.005, 0.0025])
     spec["initial"] = {"angular_velocity": [0.3, 1.0, 0.2]}
     spec["forces"] = {"gravity": [0.0, 0.0, -9.81], "torque": [{"torque": [0.0, 0.2, 0.05], "frame": "body"}]}
-    (judged,) = evaluate_specs([spec], ["reference:rk4"])
+    (judged,) = evaluate_specs([spec], [mutant.swept])
     low = [v for v in judged.violations if v["property"] == "free_running_order"]
     assert calls, "the refinement was not consulted"
     assert low and all(v["order"] < 3.0 for v in low), judged.violations

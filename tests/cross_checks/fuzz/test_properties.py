@@ -104,7 +104,7 @@ def test_case_10975_is_order_4_approached_from_below_in_extended_precision(tmp_p
     reference's RK4 stepped in 80-bit long double (round-off ~1e-19 relative, far below these errors), its
     angular velocity against the same scheme at h/256 (error ~(1/256)⁴ of the coarsest, 3e-22 rad/s)."""
     from cross_checks.scenario.parse import load_scenario
-    from reference_sim.scalar import ScalarStepper
+    from reference_sim.integrators import get_step
     if np.finfo(np.longdouble).eps > 1e-18:
         pytest.skip("no extended precision on this platform")
     path = tmp_path / "case.toml"
@@ -113,13 +113,12 @@ def test_case_10975_is_order_4_approached_from_below_in_extended_precision(tmp_p
     T, n0 = np.longdouble(sc.duration_s), round(sc.duration_s / sc.dt_ladder_s[0])
 
     def omega_rows(n):
-        st = ScalarStepper(sc.problem, "rk4", sc.duration_s / n, backend="numpy")
-        st.h = T / n
-        y = [np.array([c], dtype=np.longdouble) for c in sc.problem.initial_packed()]
-        rows = [np.array([c[0] for c in y[10:13]])]
+        step, h = get_step("rk4"), T / n   # the definition keeps the precision of its states and step
+        y = sc.problem.initial_packed().astype(np.longdouble)[None]
+        rows = [y[0, 10:13]]
         for _ in range(n):
-            y = st._rk4(y)
-            rows.append(np.array([c[0] for c in y[10:13]]))
+            y = step(sc.problem, y, h)
+            rows.append(y[0, 10:13])
         return np.array(rows)
 
     fine = omega_rows(n0 * 256)

@@ -44,12 +44,13 @@ def test_a_scheme_of_the_wrong_order_still_fails_on_the_continued_ladder(tmp_pat
     calls = []
     real = refine.refined_ladder_shows_the_order
     monkeypatch.setattr(refine, "refined_ladder_shows_the_order", lambda *a: calls.append(a) or real(*a))
-    next(m for m in MUTANTS if m.name == "rk4_wrong_stage_weight").apply(monkeypatch)   # order 2 where 4
+    mutant = next(m for m in MUTANTS if m.name == "rk4_wrong_stage_weight")   # order 2 where 4
+    mutant.apply(monkeypatch)
     spec = tomllib.loads(PRE_ASYMPTOTIC)
     spec.update(duration=0.2, dt=0.01, dt_ladder=[0.01, 0.005, 0.0025])
     spec["initial"] = {"angular_velocity": [0.3, 1.0, 0.2]}
     spec["forces"] = {"gravity": [0.0, 0.0, -9.81], "torque": [{"torque": [0.0, 0.2, 0.05], "frame": "body"}]}
-    summary, fails = _sweep(tmp_path, to_toml(spec), "reference:rk4")
+    summary, fails = _sweep(tmp_path, to_toml(spec), mutant.swept)
     assert calls and fails
     assert any(r["matches_expectation"] is False and r["order"] < 3.0 for r in summary["convergence"])
 

@@ -1,7 +1,8 @@
 """The readable path: one body, one step, written line by line as the course writes it.
 
-This module exists to be checked by eye against docs/course_equations.md and to test the batched
-integrators in :mod:`reference_sim.integrators` against it (``test_batched_equals_readable`` in tests/reference_sim/test_integrators.py).
+This module exists to be checked by eye against docs/course_equations.md and to test the definition,
+:mod:`reference_sim.integrators`, against it (``test_batched_equals_readable`` in
+tests/reference_sim/test_readable.py), as MuJoCo keeps its Python rollout in its tests.
 Every quantity is a plain 3-vector or 3×3 matrix of ONE body; nothing here is vectorised.
 """
 from __future__ import annotations
