@@ -87,6 +87,7 @@ VARIANT_TRAITS = {
     "mujoco:rk4": Traits(),
     "mujoco:implicit": _SYMPLECTIC_EULER_IMPLICIT_GYRO,
     "mujoco:implicitfast": _SYMPLECTIC_EULER_IMPLICIT_GYRO,
+    "mujoco:discrete": _SYMPLECTIC_EULER_IMPLICIT_GYRO,
     "pybullet:multibody": _SYMPLECTIC_EULER_EXPLICIT_GYRO,
     "pybullet:maximal": _SYMPLECTIC_EULER_IMPLICIT_GYRO,
     # Drake semi-explicit Euler: ω_W += Δt I_W⁻¹(τ − ω_W × I_W ω_W) at the start-of-step attitude — the
@@ -125,6 +126,10 @@ EQUIVALENT_PAIRS = (
     ("mujoco:implicit", "mujoco:implicitfast",
      "for a single free body without joints or contacts the two implicit integrators solve the same "
      "linear system (docs/engine_conventions.md: 1e-13 apart)"),
+    ("mujoco:implicitfast", "mujoco:discrete",
+     "without joints, constraints, damping or stiffness, MuJoCo's discrete integrator (the constraint solve and "
+     "the implicit velocity update in the metric M + hD + h²K) takes implicitfast's step "
+     "(docs/engine_conventions.md: bit-identical on the catalog)"),
     ("mujoco:euler", "pybullet:multibody",
      "PyBullet's multibody mode with damping off integrates a free body exactly like MuJoCo Euler "
      "(docs/engine_conventions.md: 2.3e-14 rad apart)"),

@@ -61,6 +61,8 @@ VARIANTS = {
     "rk4": Variant(4, "MuJoCo RK4: classical 4th-order Runge-Kutta; state-dependent forces evaluated at every stage"),
     "implicit": Variant(1, "MuJoCo implicit: velocity-implicit Euler (gyroscopic/velocity derivatives in the step)"),
     "implicitfast": Variant(1, "MuJoCo implicitfast: implicit Euler without the Coriolis/centrifugal derivatives"),
+    "discrete": Variant(1, "MuJoCo discrete: constraint solve and implicit velocity update in one, in the metric "
+                           "M + hD + h²K (for a lone free body: implicitfast's step)"),
 }
 
 #: Steps between divergence checks of a free-running simulation (checked vectorised per chunk).

@@ -10,7 +10,7 @@ from cross_checks.scenario import catalog_names, catalog_path, load_scenario, pa
 
 def test_every_built_in_variant_has_a_nominal_order_and_traits():
     built_in = [v.name for v in all_variants() if v.engine in ("reference", "mujoco", "pybullet")]
-    assert len(built_in) == 14
+    assert len(built_in) == 15
     for v in built_in:
         assert nominal_order(v) in (1.0, 2.0, 4.0) and v in VARIANT_TRAITS
 
