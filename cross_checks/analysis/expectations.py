@@ -27,83 +27,18 @@ from dataclasses import dataclass
 import numpy as np
 
 from cross_checks.core.quantities import QUANTITIES
-from cross_checks.engines import declared_imitation, declared_order
+from cross_checks.engines import declared_imitation, declared_order, declared_traits
+from cross_checks.engines.base import Traits
 from reference_sim.analytic import EQUAL_MOMENTS_REL_TOL
 
-__all__ = ["energy_drift_bound", "characteristic_rate_sq", "QUANTITIES", "VARIANT_TRAITS",
+__all__ = ["energy_drift_bound", "characteristic_rate_sq", "QUANTITIES",
            "DEFAULT_TRAITS", "Traits", "traits", "EQUIVALENT_PAIRS", "pair_is_same_arithmetic", "Expectation",
            "expectation", "expected_order",
            "nominal_order", "gyroscopic_term_matters", "rotation_drives_translation", "translation_drives_rotation",
            "memoized"]
 
 
-@dataclass(frozen=True)
-class Traits:
-    """What a variant's step does besides its order (the order itself: :func:`nominal_order`).
-
-    gyroscopic_term : whether the rotation update has the gyroscopic torque −ω × (I ω).
-    translation_drift : how a first-order step treats the amplitude of a translational oscillation
-        (a spring): 0 keeps it (symplectic Euler: bounded energy error), +1 grows it (explicit), −1
-        damps it (implicit), None unknown (both are considered).
-    rotation_drift : how a first-order step treats the rotation's energy and momentum:
-        "none" — keeps them (no gyroscopic term: ω is constant without torques);
-        "body" — a body-frame Euler step of Euler's equations (explicit or implicit gyroscopic term)
-          before the attitude update: energy and |L|² drift TOGETHER (measured: equal relative drifts,
-          so the separatrix distance is kept), i.e. ω → (1 + r) ω, a time rescaling of the same motion —
-          a phase error, at the rate of the polhode (the body-frame ω);
-        "whole_state" — one step of the whole state in world axes: energy and momentum drift
-          independently, which moves the body to a neighbouring motion, at the rate at which ω_W
-          turns; that perturbation grows like any other (the measured amplification).
-    rotation_sign : +1 the rotational energy grows (an explicit gyroscopic term), −1 it decays (an
-        implicit one), 0 none, None unknown (both are considered).
-    """
-
-    gyroscopic_term: bool = True
-    translation_drift: int | None = 0
-    rotation_drift: str = "none"
-    rotation_sign: int | None = 0
-
-
-_SYMPLECTIC_EULER_EXPLICIT_GYRO = Traits(rotation_drift="body", rotation_sign=+1)
-_SYMPLECTIC_EULER_IMPLICIT_GYRO = Traits(rotation_drift="body", rotation_sign=-1)
-
-#: Traits per ENGINE:VARIANT, the one table (tests/cross_checks/analysis/test_expectations.py pins each
-#: sign on the engines themselves, and that the body-frame steps keep the separatrix distance).
-VARIANT_TRAITS = {
-    "reference:course": Traits(gyroscopic_term=False),
-    "reference:course_gyro": _SYMPLECTIC_EULER_EXPLICIT_GYRO,
-    "reference:expmap_gyro": _SYMPLECTIC_EULER_EXPLICIT_GYRO,
-    # whole-state Euler in world axes: an oscillator's amplitude grows (explicit) / damps (implicit), but
-    # the rotational energy does the opposite (measured on every tumbling body of the catalog: explicit
-    # Euler loses 2E and |L|², implicit gains them — the attitude and ω_W steps are coupled through I_W)
-    "reference:explicit_euler": Traits(translation_drift=+1, rotation_drift="whole_state", rotation_sign=-1),
-    "reference:implicit_euler": Traits(translation_drift=-1, rotation_drift="whole_state", rotation_sign=+1),
-    # order ≥ 2: the amplitude error of mid-point and RK4 is of order p + 1 (|R(iωΔt)|² = 1 + O((ωΔt)^{p+2})),
-    # leapfrog is symplectic: no amplitude rule applies
-    "reference:midpoint": Traits(),
-    "reference:leapfrog": Traits(),
-    "reference:rk4": Traits(),
-    "mujoco:euler": _SYMPLECTIC_EULER_EXPLICIT_GYRO,
-    "mujoco:rk4": Traits(),
-    "mujoco:implicit": _SYMPLECTIC_EULER_IMPLICIT_GYRO,
-    "mujoco:implicitfast": _SYMPLECTIC_EULER_IMPLICIT_GYRO,
-    "mujoco:discrete": _SYMPLECTIC_EULER_IMPLICIT_GYRO,
-    "pybullet:multibody": _SYMPLECTIC_EULER_EXPLICIT_GYRO,
-    "pybullet:maximal": _SYMPLECTIC_EULER_IMPLICIT_GYRO,
-    # Drake semi-explicit Euler: ω_W += Δt I_W⁻¹(τ − ω_W × I_W ω_W) at the start-of-step attitude — the
-    # body-frame explicit Euler step of Euler's equations seen in world axes — then q from the new ω
-    # (and x from the new v: symplectic in translation)
-    "drake:semi_explicit_euler": _SYMPLECTIC_EULER_EXPLICIT_GYRO,
-    # Drake implicit Euler: one implicit step of the whole state (q, ω_W, x, v_W), like reference:implicit_euler
-    "drake:implicit_euler": Traits(translation_drift=-1, rotation_drift="whole_state", rotation_sign=+1),
-    "drake:runge_kutta2": Traits(),
-    "drake:runge_kutta3": Traits(),
-    # DART World::step: ω_W += Δt I_W⁻¹(τ − ω × I_W ω) (explicit gyroscopic term), then R ← exp(ω_W Δt) R and
-    # x += Δt v with the new velocities (dart/dynamics/FreeJoint.cpp) — MuJoCo Euler's scheme
-    "dart:semi_implicit_euler": _SYMPLECTIC_EULER_EXPLICIT_GYRO,
-}
-
-#: A variant this table does not know (e.g. a user engine with only its declared order): assumed to
+#: A variant that declares no traits (e.g. a user engine with only its declared order): assumed to
 #: have the gyroscopic term (a correct engine; if it lacks it, the sweep says so), and, if it is first
 #: order, to drift in either direction in both translation and rotation, whole-state style — the most
 #: cautious choice: no order is claimed wherever any first-order scheme could be pre-asymptotic.
@@ -111,11 +46,10 @@ DEFAULT_TRAITS = Traits(gyroscopic_term=True, translation_drift=None, rotation_d
 
 
 def traits(variant: str) -> Traits:
-    """The traits of ``ENGINE:VARIANT``, or of the variant it declares it imitates (Variant.imitates);
+    """The traits ``ENGINE:VARIANT`` declares (Variant.traits), or those of the variant it declares it imitates
+    (Variant.imitates);
     DEFAULT_TRAITS for one this module does not know."""
-    if variant not in VARIANT_TRAITS:
-        variant = declared_imitation(variant) or variant
-    return VARIANT_TRAITS.get(variant, DEFAULT_TRAITS)
+    return declared_traits(variant) or declared_traits(declared_imitation(variant)) or DEFAULT_TRAITS
 
 
 #: Pairs that implement the same arithmetic and must agree to round-off (tolerances.SAME_SCHEME_REL).

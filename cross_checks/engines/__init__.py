@@ -20,7 +20,7 @@ from cross_checks.engines.base import EngineAdapter, EngineError, EngineNotInsta
 
 __all__ = ["ENTRY_POINT_GROUP", "VariantInfo", "EngineEntry", "all_variants", "available_variants", "get_adapter",
            "split_variant", "default_variant", "run_variant", "run_variants", "engine_entries", "engine_variants",
-           "declared_order", "declared_imitation", "has_one_step",
+           "declared_order", "declared_imitation", "declared_traits", "has_one_step",
            "load_engine_files", "engine_files_registered", "register_adapter", "user_engines", "adopt_user_engines", "engine_provenance",
            "reset_registry", "EngineUnavailable", "UnknownVariant", "EngineAdapter", "EngineError", "Variant",
            "REQUIRED_ENGINES", "unusable_required_engines"]
@@ -297,6 +297,17 @@ def declared_order(name: str) -> float | None:
         return None
     spec = e.adapter.variants.get(variant) if e.adapter is not None else None
     return spec.order if spec is not None else None
+
+
+def declared_traits(name: str):
+    """The Traits ``name`` (``ENGINE:VARIANT``) declares (Variant.traits), or None."""
+    engine, _, variant = name.partition(":")
+    try:
+        e = _entry(engine)
+    except (UnknownVariant, EngineUnavailable):
+        return None
+    spec = e.adapter.variants.get(variant) if e.adapter is not None else None
+    return getattr(spec, "traits", None) if spec is not None else None
 
 
 def declared_imitation(name: str) -> str:

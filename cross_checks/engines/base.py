@@ -60,7 +60,9 @@ import numpy as np
 __all__ = ["EngineAdapter", "Variant", "harness_force_torque", "stage_force_torque", "harness_force_torque_floats",
            "stage_force_torque_floats", "apply_decay_prestep",
            "decay_factors", "EngineError", "optional_import", "require", "EngineNotInstalled", "installed_version",
-           "library_files", "RunRequest"]
+           "library_files", "RunRequest", "Traits",
+           "SYMPLECTIC_EULER_EXPLICIT_GYRO", "SYMPLECTIC_EULER_IMPLICIT_GYRO", "WHOLE_STATE_EXPLICIT_EULER",
+           "WHOLE_STATE_IMPLICIT_EULER", "HIGHER_ORDER"]
 
 
 class EngineError(RuntimeError):
@@ -205,15 +207,58 @@ class RunRequest:
 
 
 @dataclass(frozen=True)
+class Traits:
+    """What a variant's step does besides its order (the order itself: :attr:`Variant.order`); the sweep derives
+    a variant's expectations from them (cross_checks.analysis.expectations).
+
+    gyroscopic_term : whether the rotation update has the gyroscopic torque −ω × (I ω).
+    translation_drift : how a first-order step treats the amplitude of a translational oscillation
+        (a spring): 0 keeps it (symplectic Euler: bounded energy error), +1 grows it (explicit), −1
+        damps it (implicit), None unknown (both are considered).
+    rotation_drift : how a first-order step treats the rotation's energy and momentum:
+        "none" — keeps them (no gyroscopic term: ω is constant without torques);
+        "body" — a body-frame Euler step of Euler's equations (explicit or implicit gyroscopic term)
+          before the attitude update: energy and |L|² drift TOGETHER (measured: equal relative drifts,
+          so the separatrix distance is kept), i.e. ω → (1 + r) ω, a time rescaling of the same motion —
+          a phase error, at the rate of the polhode (the body-frame ω);
+        "whole_state" — one step of the whole state in world axes: energy and momentum drift
+          independently, which moves the body to a neighbouring motion, at the rate at which ω_W
+          turns; that perturbation grows like any other (the measured amplification).
+    rotation_sign : +1 the rotational energy grows (an explicit gyroscopic term), −1 it decays (an
+        implicit one), 0 none, None unknown (both are considered).
+    """
+
+    gyroscopic_term: bool = True
+    translation_drift: int | None = 0
+    rotation_drift: str = "none"
+    rotation_sign: int | None = 0
+
+#: A body-frame step of Euler's equations with an explicit gyroscopic term, then the attitude (MuJoCo Euler).
+SYMPLECTIC_EULER_EXPLICIT_GYRO = Traits(rotation_drift="body", rotation_sign=+1)
+#: The same with an implicit gyroscopic term (MuJoCo implicit, PyBullet maximal).
+SYMPLECTIC_EULER_IMPLICIT_GYRO = Traits(rotation_drift="body", rotation_sign=-1)
+#: Whole-state Euler in world axes: an oscillator's amplitude grows (explicit) or damps (implicit), the rotational
+#: energy does the opposite (measured on every tumbling body of the catalog: explicit Euler loses 2E and |L|²,
+#: implicit gains them; the attitude and ω_W steps are coupled through I_W).
+WHOLE_STATE_EXPLICIT_EULER = Traits(translation_drift=+1, rotation_drift="whole_state", rotation_sign=-1)
+WHOLE_STATE_IMPLICIT_EULER = Traits(translation_drift=-1, rotation_drift="whole_state", rotation_sign=+1)
+#: Order ≥ 2: the amplitude error of an order-p scheme is of order p + 1 (|R(iωΔt)|² = 1 + O((ωΔt)^{p+2})); a
+#: symplectic scheme keeps it: no amplitude rule applies.
+HIGHER_ORDER = Traits()
+
+
+@dataclass(frozen=True)
 class Variant:
     """A variant an engine offers: its declared global order (the error at a fixed final time shrinks
     like Δt^order; verdicts check it), a one-line description for ``rbcheck list`` and the report, and
-    ``imitates``: the ``ENGINE:VARIANT`` whose scheme this one claims to compute ("" for none), whose traits
-    (cross_checks.analysis.expectations) it then gets — so that it is judged exactly as that scheme."""
+    ``traits``: what the step does besides its order (:class:`Traits`; None: the cautious default of
+    cross_checks.analysis.expectations), and ``imitates``: the ``ENGINE:VARIANT`` whose scheme this one claims to
+    compute ("" for none), whose traits it then gets — so that it is judged exactly as that scheme."""
 
     order: float
     description: str = ""
     imitates: str = ""
+    traits: Traits | None = None
 
     def __post_init__(self):
         o = self.order
@@ -221,6 +266,8 @@ class Variant:
             raise ValueError(f"order must be a number in (0, 20], got {o!r}")
         if not isinstance(self.description, str):
             raise ValueError(f"description must be a string, got {self.description!r}")
+        if self.traits is not None and not isinstance(self.traits, Traits):
+            raise ValueError(f"traits must be a Traits or None, got {self.traits!r}")
         if not isinstance(self.imitates, str):
             raise ValueError(f"imitates must be a string (ENGINE:VARIANT or empty), got {self.imitates!r}")
         object.__setattr__(self, "order", float(o))

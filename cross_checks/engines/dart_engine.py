@@ -50,6 +50,7 @@ import math
 import numpy as np
 
 from cross_checks.engines.base import (
+    SYMPLECTIC_EULER_EXPLICIT_GYRO,
     EngineAdapter,
     EngineError,
     Variant,
@@ -73,8 +74,11 @@ ENGINE = "dart"
 #: DART's one integrator (``World::step``; dart::integration::SemiImplicitEulerIntegrator names the scheme):
 #: semi-implicit Euler, first order.
 VARIANTS = {
+    # ω_W += Δt I_W⁻¹(τ − ω × I_W ω) (explicit gyroscopic term), then R ← exp(ω_W Δt) R and x += Δt v with the new
+    # velocities (dart/dynamics/FreeJoint.cpp): MuJoCo Euler's scheme
     "semi_implicit_euler": Variant(1, "DART World::step: semi-implicit Euler, explicit gyroscopic term (its own "
-                                      "articulated-body dynamics), exponential-map rotation update with the new ω"),
+                                      "articulated-body dynamics), exponential-map rotation update with the new ω",
+                                   traits=SYMPLECTIC_EULER_EXPLICIT_GYRO),
 }
 
 #: FreeJoint settings every body gets, each DART 6.20's default today (pinned) and set explicitly so that

@@ -33,7 +33,17 @@ import functools
 
 import numpy as np
 
-from cross_checks.engines.base import EngineAdapter, EngineError, Variant, library_files, require, stage_force_torque
+from cross_checks.engines.base import (
+    HIGHER_ORDER,
+    SYMPLECTIC_EULER_EXPLICIT_GYRO,
+    WHOLE_STATE_IMPLICIT_EULER,
+    EngineAdapter,
+    EngineError,
+    Variant,
+    library_files,
+    require,
+    stage_force_torque,
+)
 from reference_sim.simulate import BLOWUP_LIMIT, Run
 
 try:  # the module imports without pydrake so the registry can report why it is unavailable
@@ -63,6 +73,14 @@ VARIANTS = {
     "implicit_euler": ("implicit_euler", 1,
                        "Drake implicit Euler on the whole state (Newton iteration, finite-difference Jacobian)"),
 }
+
+#: What each step does besides its order (cross_checks.engines.base.Traits). Semi-explicit Euler:
+#: ω_W += Δt I_W⁻¹(τ − ω_W × I_W ω_W) at the start-of-step attitude — the body-frame explicit Euler step of
+#: Euler's equations seen in world axes — then q from the new ω (and x from the new v: symplectic in
+#: translation). Implicit Euler: one implicit step of the whole state (q, ω_W, x, v_W), like
+#: reference:implicit_euler.
+TRAITS = {"semi_explicit_euler": SYMPLECTIC_EULER_EXPLICIT_GYRO, "implicit_euler": WHOLE_STATE_IMPLICIT_EULER,
+          "runge_kutta2": HIGHER_ORDER, "runge_kutta3": HIGHER_ORDER}
 
 #: Steps between divergence checks of a free run.
 _CHUNK = 256
@@ -286,7 +304,7 @@ class DrakeAdapter(EngineAdapter):
     """
 
     name = ENGINE
-    variants = {v: Variant(float(order), desc) for v, (_, order, desc) in VARIANTS.items()}
+    variants = {v: Variant(float(order), desc, traits=TRAITS[v]) for v, (_, order, desc) in VARIANTS.items()}
 
     def version(self) -> str:
         return version()

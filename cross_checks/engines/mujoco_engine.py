@@ -32,6 +32,9 @@ from pathlib import Path
 import numpy as np
 
 from cross_checks.engines.base import (
+    HIGHER_ORDER,
+    SYMPLECTIC_EULER_EXPLICIT_GYRO,
+    SYMPLECTIC_EULER_IMPLICIT_GYRO,
     EngineAdapter,
     EngineError,
     Variant,
@@ -57,12 +60,17 @@ ENGINE = "mujoco"
 #: forces evaluated at every stage (4); implicit(fast) is velocity-implicit Euler, one linearised solve
 #: per step (1).
 VARIANTS = {
-    "euler": Variant(1, "MuJoCo Euler: semi-implicit Euler, explicit gyroscopic term, quaternion by the exponential map"),
-    "rk4": Variant(4, "MuJoCo RK4: classical 4th-order Runge-Kutta; state-dependent forces evaluated at every stage"),
-    "implicit": Variant(1, "MuJoCo implicit: velocity-implicit Euler (gyroscopic/velocity derivatives in the step)"),
-    "implicitfast": Variant(1, "MuJoCo implicitfast: implicit Euler without the Coriolis/centrifugal derivatives"),
+    "euler": Variant(1, "MuJoCo Euler: semi-implicit Euler, explicit gyroscopic term, quaternion by the exponential map",
+                     traits=SYMPLECTIC_EULER_EXPLICIT_GYRO),
+    "rk4": Variant(4, "MuJoCo RK4: classical 4th-order Runge-Kutta; state-dependent forces evaluated at every stage",
+                   traits=HIGHER_ORDER),
+    "implicit": Variant(1, "MuJoCo implicit: velocity-implicit Euler (gyroscopic/velocity derivatives in the step)",
+                        traits=SYMPLECTIC_EULER_IMPLICIT_GYRO),
+    "implicitfast": Variant(1, "MuJoCo implicitfast: implicit Euler without the Coriolis/centrifugal derivatives",
+                            traits=SYMPLECTIC_EULER_IMPLICIT_GYRO),
     "discrete": Variant(1, "MuJoCo discrete: constraint solve and implicit velocity update in one, in the metric "
-                           "M + hD + h²K (for a lone free body: implicitfast's step)"),
+                           "M + hD + h²K (for a lone free body: implicitfast's step)",
+                        traits=SYMPLECTIC_EULER_IMPLICIT_GYRO),
 }
 
 #: Steps between divergence checks of a free-running simulation (checked vectorised per chunk).

@@ -38,6 +38,8 @@ from pathlib import Path
 import numpy as np
 
 from cross_checks.engines.base import (
+    SYMPLECTIC_EULER_EXPLICIT_GYRO,
+    SYMPLECTIC_EULER_IMPLICIT_GYRO,
     EngineAdapter,
     EngineError,
     Variant,
@@ -59,8 +61,10 @@ ENGINE = "pybullet"
 #: The variants with their declared global orders: both modes are semi-implicit Euler (explicit
 #: gyroscopic term in multibody, implicit in maximal coordinates): 1.
 VARIANTS = {
-    "multibody": Variant(1, "PyBullet Featherstone multibody (default): semi-implicit Euler, explicit gyroscopic term"),
-    "maximal": Variant(1, "PyBullet maximal coordinates (btRigidBody): semi-implicit Euler, implicit gyroscopic term"),
+    "multibody": Variant(1, "PyBullet Featherstone multibody (default): semi-implicit Euler, explicit gyroscopic term",
+                         traits=SYMPLECTIC_EULER_EXPLICIT_GYRO),
+    "maximal": Variant(1, "PyBullet maximal coordinates (btRigidBody): semi-implicit Euler, implicit gyroscopic term",
+                       traits=SYMPLECTIC_EULER_IMPLICIT_GYRO),
 }
 
 #: changeDynamics settings every body gets (besides mass and inertia); see the module docstring.

@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 import reference_sim
+from cross_checks.engines import base as B
 from cross_checks.engines.base import EngineAdapter, Variant
 from reference_sim.forces import Members
 from reference_sim.integrators import VARIANTS as SCHEMES
@@ -12,8 +13,18 @@ from reference_sim.simulate import Run, run_members
 from reference_sim.simulate import simulate as _simulate
 
 ENGINE = "reference"
+#: What each scheme's step does besides its order (cross_checks.engines.base.Traits; tests/cross_checks/analysis/
+#: test_expectations.py pins each sign on the schemes themselves): the course's update has no gyroscopic term;
+#: the course-type schemes with it are body-frame symplectic Euler steps; explicit and implicit Euler step the
+#: whole state in world axes.
+TRAITS = {
+    "course": B.Traits(gyroscopic_term=False),
+    "course_gyro": B.SYMPLECTIC_EULER_EXPLICIT_GYRO, "expmap_gyro": B.SYMPLECTIC_EULER_EXPLICIT_GYRO,
+    "explicit_euler": B.WHOLE_STATE_EXPLICIT_EULER, "implicit_euler": B.WHOLE_STATE_IMPLICIT_EULER,
+    "midpoint": B.HIGHER_ORDER, "leapfrog": B.HIGHER_ORDER, "rk4": B.HIGHER_ORDER,
+}
 #: Declared variants: reference_sim.integrators.VARIANTS, the one registry (orders proven by its own tests).
-VARIANTS = {v: Variant(float(s.order), s.description) for v, s in SCHEMES.items()}
+VARIANTS = {v: Variant(float(s.order), s.description, traits=TRAITS[v]) for v, s in SCHEMES.items()}
 
 
 def version() -> str:
