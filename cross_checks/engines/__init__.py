@@ -20,7 +20,7 @@ from cross_checks.engines.base import EngineAdapter, EngineError, EngineNotInsta
 
 __all__ = ["ENTRY_POINT_GROUP", "VariantInfo", "EngineEntry", "all_variants", "available_variants", "get_adapter",
            "split_variant", "default_variant", "run_variant", "run_variants", "engine_entries", "engine_variants",
-           "declared_order", "declared_imitation", "declared_traits", "has_one_step",
+           "declared_variant", "declared_order", "declared_imitation", "declared_traits", "has_one_step",
            "load_engine_files", "engine_files_registered", "register_adapter", "user_engines", "adopt_user_engines", "engine_provenance",
            "reset_registry", "EngineUnavailable", "UnknownVariant", "EngineAdapter", "EngineError", "Variant",
            "REQUIRED_ENGINES", "unusable_required_engines"]
@@ -288,37 +288,31 @@ def split_variant(name: str):
     return engine, variant
 
 
-def declared_order(name: str) -> float | None:
-    """The order an engine declares for ``ENGINE:VARIANT`` (None when unknown)."""
+def declared_variant(name: str):
+    """The :class:`Variant` an engine declares for ``ENGINE:VARIANT`` (None when the engine or variant is
+    unknown or unavailable here): its order, traits and imitation are read from it."""
     engine, _, variant = name.partition(":")
     try:
         e = _entry(engine)
     except (UnknownVariant, EngineUnavailable):
         return None
-    spec = e.adapter.variants.get(variant) if e.adapter is not None else None
+    return e.adapter.variants.get(variant) if e.adapter is not None else None
+
+
+def declared_order(name: str) -> float | None:
+    """The order an engine declares for ``ENGINE:VARIANT`` (None when unknown)."""
+    spec = declared_variant(name)
     return spec.order if spec is not None else None
 
 
 def declared_traits(name: str):
     """The Traits ``name`` (``ENGINE:VARIANT``) declares (Variant.traits), or None."""
-    engine, _, variant = name.partition(":")
-    try:
-        e = _entry(engine)
-    except (UnknownVariant, EngineUnavailable):
-        return None
-    spec = e.adapter.variants.get(variant) if e.adapter is not None else None
-    return getattr(spec, "traits", None) if spec is not None else None
+    return getattr(declared_variant(name), "traits", None)
 
 
 def declared_imitation(name: str) -> str:
     """The ``ENGINE:VARIANT`` whose scheme ``name`` declares it imitates (Variant.imitates; "" when none)."""
-    engine, _, variant = name.partition(":")
-    try:
-        e = _entry(engine)
-    except (UnknownVariant, EngineUnavailable):
-        return ""
-    spec = e.adapter.variants.get(variant) if e.adapter is not None else None
-    return getattr(spec, "imitates", "") if spec is not None else ""
+    return getattr(declared_variant(name), "imitates", "") or ""
 
 
 def has_one_step(name: str) -> bool:
