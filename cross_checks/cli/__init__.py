@@ -703,9 +703,9 @@ def _sweep_outcome(summary, out, n_scenarios, n_variants, elapsed_s) -> int:
           f"then the report) -> {Path(out) / 'index.html'}")
     skipped = summary.get("skipped_variants") or []
     if skipped:
+        reasons = dict.fromkeys(v["reason"] for v in skipped)   # one per engine, in the order skipped
         engines = dict.fromkeys(v["name"].split(":", 1)[0] for v in skipped)
-        say(f"rbcheck sweep: skipped {len(skipped)} variant(s) of {', '.join(engines)}: "
-            f"{next(v['reason'] for v in skipped)}")
+        say(f"rbcheck sweep: skipped {len(skipped)} variant(s) of {', '.join(engines)}: {'; '.join(reasons)}")
     fails = _gate_failures(summary)
     total, wrong = verdict_count(summary)
     failed = run.get("failed_runs", 0)

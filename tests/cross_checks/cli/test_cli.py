@@ -123,3 +123,17 @@ def test_every_bad_scenario_exits_2_through_the_cli(tmp_path, capsys, old, new, 
     err = capsys.readouterr().err
     assert err.startswith(f"rbcheck run: error: {bad}: {field + ': ' if field else ''}") and reason in err, err
     assert err.count("\n") == 1 and not out.exists()
+
+
+def test_the_skipped_line_gives_every_skipped_engines_reason(capsys):
+    # two optional engines missing: the one line names both engines and both reasons, not the first only
+    from cross_checks.cli import _sweep_outcome
+    summary = {"run": {"runs": 0, "cached_runs": 0, "diverged_runs": 0, "failed_runs": 0, "jobs": 1, "wall_s": 0.0},
+               "skipped_variants": [{"name": "drake:a", "reason": "drake is not installed"},
+                                    {"name": "drake:b", "reason": "drake is not installed"},
+                                    {"name": "dart:c", "reason": "dartpy is not installed"}],
+               "convergence": [], "local_convergence": [], "agreement": [], "references": []}
+    _sweep_outcome(summary, "out", 0, 0, 0.0)
+    line = next(ln for ln in capsys.readouterr().out.splitlines() if "skipped" in ln)
+    assert line == ("rbcheck sweep: skipped 3 variant(s) of drake, dart: drake is not installed; "
+                    "dartpy is not installed")
