@@ -33,7 +33,7 @@ from reference_sim.analytic import EQUAL_MOMENTS_REL_TOL
 
 __all__ = ["energy_drift_bound", "characteristic_rate_sq", "QUANTITIES",
            "DEFAULT_TRAITS", "Traits", "traits", "EQUIVALENT_PAIRS", "pair_is_same_arithmetic", "Expectation",
-           "expectation", "expected_order",
+           "expectation", "expected_order", "forces_change_within_step",
            "nominal_order", "gyroscopic_term_matters", "rotation_drives_translation", "translation_drives_rotation",
            "memoized"]
 
@@ -226,7 +226,21 @@ def expectation(scenario, variant: str, quantity: str, mode: str = "free_running
     p = nominal_order(variant)
     if p is None:
         return Expectation("converges", None, f"no nominal order is recorded for {variant}")
+    if free.order == 1.0 and p > 1.0:
+        return Expectation("converges", 2.0, free.reason + ": one step has an O(Δt²) local error")
     return Expectation("converges", p + 1.0, f"one step of an order-{p:g} scheme has an O(Δt^{p + 1:g}) local error")
+
+
+_HELD_FORCES_REASON = ("{variant} is an order-{p:g} scheme, but its engine holds the applied force and torque over "
+                       "the stages of a step; here they change within a step (they depend on the state, or the "
+                       "velocities decay), and that zero-order hold makes the step first order")
+
+
+def forces_change_within_step(scenario, tr: Traits) -> bool:
+    """Whether a variant with traits ``tr`` holds forces that change within a step on ``scenario``
+    (Traits.forces_held): its multi-stage scheme is then first order there."""
+    fm = scenario.problem.forces
+    return tr.forces_held and (fm.state_dependent or fm.has_decay)
 
 
 def _free_running(scenario, variant: str, quantity: str, physics, measure_physics: bool = True) -> Expectation:
@@ -244,6 +258,8 @@ def _free_running(scenario, variant: str, quantity: str, physics, measure_physic
     p = nominal_order(variant)
     if p is None:
         return Expectation("converges", None, f"no nominal order is recorded for {variant}")
+    if p > 1.0 and forces_change_within_step(scenario, tr):
+        return Expectation("converges", 1.0, _HELD_FORCES_REASON.format(variant=variant, p=p))
     if p == 1.0 and (physics is not None or measure_physics):
         why = _memo(("pre_asymptotic", id(scenario), tr, quantity, id(physics)), (scenario, physics),
                     lambda: _pre_asymptotic_reason(scenario, variant, quantity, tr, physics))
@@ -337,6 +353,8 @@ def energy_drift_bound(scenario, variant: str, dt_s: float) -> float | None:
     p = nominal_order(variant)
     if p is None:
         return None
+    if forces_change_within_step(scenario, traits(variant)):
+        p = min(p, 1.0)
     w2 = characteristic_rate_sq(scenario)
     g = float(np.linalg.norm(scenario.problem.forces.gravity_W))
     if g > 0.0:

@@ -226,12 +226,17 @@ class Traits:
           turns; that perturbation grows like any other (the measured amplification).
     rotation_sign : +1 the rotational energy grows (an explicit gyroscopic term), −1 it decays (an
         implicit one), 0 none, None unknown (both are considered).
+    forces_held : the engine holds the applied force and torque it was given over all the stages of a
+        step (it cannot evaluate them per stage). On a scenario whose forces change within a step
+        (state-dependent forces, velocity decay) a multi-stage scheme is then first order: the held force
+        is a zero-order hold, an O(Δt) local error in the acceleration per step.
     """
 
     gyroscopic_term: bool = True
     translation_drift: int | None = 0
     rotation_drift: str = "none"
     rotation_sign: int | None = 0
+    forces_held: bool = False
 
 #: A body-frame step of Euler's equations with an explicit gyroscopic term, then the attitude (MuJoCo Euler).
 SYMPLECTIC_EULER_EXPLICIT_GYRO = Traits(rotation_drift="body", rotation_sign=+1)

@@ -2,9 +2,11 @@
 import numpy as np
 import pytest
 
+from cross_checks import engines
 from cross_checks.analysis.expectations import DEFAULT_TRAITS, expectation, nominal_order, traits
 from cross_checks.core.quantities import QUANTITIES
 from cross_checks.engines import all_variants, available_variants, declared_traits, run_variant
+from cross_checks.engines.base import EngineAdapter, Traits, Variant
 from cross_checks.scenario import catalog_names, catalog_path, load_scenario, parse_scenario
 
 #: Every variant that declares its traits (Variant.traits): the built-in engines' variants, installed here.
@@ -248,3 +250,41 @@ def test_memoized_expectations_are_the_ones_computed_without_memo():
             for _ in range(2):
                 for (v, q, m), want in plain.items():
                     assert expectation(sc, v, q, m, physics=phys, measure_physics=False) == want, (name, v, q, m)
+
+
+class _HeldForcesRK4(EngineAdapter):
+    """An order-4 engine that holds the applied force over its stages (Traits.forces_held), as MuJoCo's RK4 does
+    with xfrc_applied when nothing evaluates the forces per stage."""
+    name = "heldrk4"
+    variants = {"rk4": Variant(4, "RK4, applied forces held over the stages", traits=Traits(forces_held=True))}
+
+    def version(self):
+        return "test"
+
+    def simulate(self, scenario, variant, dt_s, n_steps):
+        raise NotImplementedError
+
+
+@pytest.fixture
+def held_rk4(monkeypatch):
+    monkeypatch.setattr(engines, "_user", dict(engines._user))
+    engines.register_adapter(_HeldForcesRK4(), "test_expectations.py")
+    return "heldrk4:rk4"
+
+
+@pytest.mark.parametrize("name", ["applied_torque", "spring_pendulum", "velocity_decay", "linear_drag"])
+def test_held_forces_make_a_multi_stage_scheme_first_order_where_they_change_within_a_step(held_rk4, name):
+    sc = load_scenario(name)
+    assert sc.problem.forces.state_dependent or sc.problem.forces.has_decay
+    for q in QUANTITIES:
+        free, local = expectation(sc, held_rk4, q), expectation(sc, held_rk4, q, "one_step")
+        assert (free.verdict, free.order, local.order) == ("converges", 1.0, 2.0), (q, free, local)
+        assert "holds the applied force" in free.reason
+        assert expectation(sc, "mujoco:rk4", q).order == 4.0   # MuJoCo's adapter evaluates them per stage
+
+
+@pytest.mark.parametrize("name", ["constant_spin", "projectile", "tennis_racket"])
+def test_held_forces_cost_nothing_where_the_forces_are_constant(held_rk4, name):
+    sc = load_scenario(name)
+    assert not (sc.problem.forces.state_dependent or sc.problem.forces.has_decay)
+    assert {expectation(sc, held_rk4, q).order for q in QUANTITIES} == {4.0}
