@@ -35,6 +35,7 @@ class Mutant:
     bug: str
     exposed_by: tuple
     apply: Callable  # apply(monkeypatch)
+    adapter: object = None   # a reference mutant's MutantAdapter (its knob and step; tests/helpers/float32.py)
 
     @property
     def swept(self) -> str:
@@ -192,7 +193,8 @@ def _planter(adapter):
 
 
 def _reference(name, variant, bug, exposed_by, members=None, step=None) -> Mutant:
-    return Mutant(name, variant, bug, exposed_by, _planter(MutantAdapter(name, variant, bug, members, step)))
+    adapter = MutantAdapter(name, variant, bug, members, step)
+    return Mutant(name, variant, bug, exposed_by, _planter(adapter), adapter)
 
 
 # --- the engine adapters --------------------------------------------------------------------------------

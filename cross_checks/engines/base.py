@@ -226,6 +226,9 @@ class Traits:
           turns; that perturbation grows like any other (the measured amplification).
     rotation_sign : +1 the rotational energy grows (an explicit gyroscopic term), −1 it decays (an
         implicit one), 0 none, None unknown (both are considered).
+    precision : the floating-point format the engine's step computes in, "float64" or "float32"
+        (core.tolerances.MACHINE_EPSILON): every round-off floor of the variant's verdicts scales with its ε,
+        and a float32 variant is judged on a ladder that reaches coarser steps (docs/verdicts.md, "Precision").
     forces_held : the engine holds the applied force and torque it was given over all the stages of a
         step (it cannot evaluate them per stage). On a scenario whose forces change within a step
         (state-dependent forces, velocity decay) a multi-stage scheme is then first order: the held force
@@ -237,6 +240,11 @@ class Traits:
     rotation_drift: str = "none"
     rotation_sign: int | None = 0
     forces_held: bool = False
+    precision: str = "float64"
+
+    def __post_init__(self):
+        if self.precision not in ("float64", "float32"):
+            raise ValueError(f"precision must be 'float64' or 'float32', not {self.precision!r}")
 
 #: A body-frame step of Euler's equations with an explicit gyroscopic term, then the attitude (MuJoCo Euler).
 SYMPLECTIC_EULER_EXPLICIT_GYRO = Traits(rotation_drift="body", rotation_sign=+1)

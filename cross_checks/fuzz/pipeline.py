@@ -23,6 +23,7 @@ from numpy.linalg import LinAlgError
 
 from cross_checks.analysis import flow
 from cross_checks.analysis import metrics as M
+from cross_checks.analysis.expectations import machine_epsilon
 from cross_checks.analysis.physics import ScenarioPhysics, motion_rates, separatrix_proximity
 from cross_checks.analysis.refinement import refined_ladder_shows_the_order, worth_refining
 from cross_checks.core import tolerances as tol
@@ -235,7 +236,8 @@ def _refined_ladder_shows_the_order(ctx, variant: str, k: int, rec) -> bool:
         dts.append(h)
         errs.append(float(np.max(e)))
         floors.append(M.roundoff_floor(ctx.scales[q], n, reference_error=ctx.ref_err[q], amplification=ctx.amp[q],
-                                       quantity=q) + P.lever_floor(ctx, q, h, h * n, n, ctx.amp[q], variant))
+                                       quantity=q, eps=machine_epsilon(variant))
+                      + P.lever_floor(ctx, q, h, h * n, n, ctx.amp[q], variant))
     # judged on the finest original rung and the refined ones: the asymptotic regime the claim is about
     # (the coarse rungs are the ones in doubt; a wrong order is just as wrong down there). Only a positive
     # result excuses: errors that sink into round-off there show nothing (analysis.refinement)

@@ -33,6 +33,7 @@ from cross_checks.analysis.expectations import (
     EQUIVALENT_PAIRS,
     expectation,
     gyroscopic_term_matters,
+    machine_epsilon,
     pair_is_same_arithmetic,
     traits,
 )
@@ -181,7 +182,7 @@ def free_running_order(ctx: Context, variant: str, i: int, ladder, errors=None) 
             v = e[q]
             errs[q].append(float(np.max(v)) if runs.status[i] == "ok" and np.all(np.isfinite(v)) else math.nan)
             floors[q].append(M.roundoff_floor(ctx.scales[q], n, reference_error=ctx.ref_err[q],
-                                              amplification=ctx.amp[q], quantity=q)
+                                              amplification=ctx.amp[q], quantity=q, eps=machine_epsilon(variant))
                              + lever_floor(ctx, q, float(runs.h_s[i]), float(runs.h_s[i]) * n, n, ctx.amp[q], variant))
     for q in QUANTITIES:
         exp = expectation(sc, variant, q, "free_running", physics=ctx.physics, measure_physics=False)
@@ -200,7 +201,8 @@ def one_step_order(ctx: Context, variant: str, i: int, defects) -> tuple:
         return out, tally
     dts = [float(h) for h in ctx.step_h]
     for q in QUANTITIES:
-        floors = [M.roundoff_floor(ctx.scales[q], 1, reference_error=float(ctx.step_err[q][k]), quantity=q)
+        floors = [M.roundoff_floor(ctx.scales[q], 1, reference_error=float(ctx.step_err[q][k]), quantity=q,
+                                   eps=machine_epsilon(variant))
                   + lever_floor(ctx, q, dts[k], dts[k], 1, variant=variant) for k in range(len(dts))]
         errs = [float(v) for v in defects[q]]
         statuses = ["ok" if np.isfinite(v) else "failed" for v in errs]

@@ -13,7 +13,12 @@ from pathlib import Path
 import numpy as np
 
 from cross_checks.analysis import metrics as M
-from cross_checks.analysis.expectations import EQUIVALENT_PAIRS, expectation, pair_is_same_arithmetic
+from cross_checks.analysis.expectations import (
+    EQUIVALENT_PAIRS,
+    expectation,
+    machine_epsilon,
+    pair_is_same_arithmetic,
+)
 from cross_checks.analysis.judge import LocalEvidence, judge_ladder
 from cross_checks.core import tolerances as tol
 from cross_checks.core.files import atomic_write_text, json_default
@@ -57,19 +62,20 @@ def results_csv_text(rows, columns=RESULT_COLUMNS) -> str:
 
 # --- convergence ------------------------------------------------------------------------------------
 
-def ladder_floors(ladder, q, scales, mode, label, measured):
+def ladder_floors(ladder, q, scales, mode, label, measured, eps=tol.ROUNDOFF_PER_STEP_REL):
     """Round-off floor of each ladder point for quantity ``q`` (metrics.roundoff_floor): the reference's
     MEASURED error (at the final time, or of one step in the one-step mode) plus the run's own
-    round-off, amplified by the scenario's measured error amplification."""
+    round-off in its precision (``eps``: expectations.machine_epsilon of the variant), amplified by the
+    scenario's measured error amplification."""
     scale = scales.get(q, 1.0)
     if mode == "free_running":
         ref = (measured.get("reference_error") or {}).get(q)
         amp = measured.get("amplification", {}).get(q, 1.0)
         return [M.roundoff_floor(scale, max(int(r["steps"]), 1), label, reference_error=ref, amplification=amp,
-                                 quantity=q) for r in ladder]
+                                 quantity=q, eps=eps) for r in ladder]
     local = measured.get("local_reference_error") or {}
     return [M.roundoff_floor(scale, 1, label, reference_error=(local.get(repr(float(r["dt"]))) or {}).get(q),
-                             quantity=q) for r in ladder]
+                             quantity=q, eps=eps) for r in ladder]
 
 
 def _ladder_errors(ladder, q, mode):
@@ -113,7 +119,8 @@ def convergence_records(scenario, variant, rows, scales, mode, measured=None) ->
     for q in QUANTITIES:
         errs, statuses = _ladder_errors(ladder, q, mode)
         exp = expectation(scenario, variant, q, mode, physics=phys, measure_physics=False)
-        j = judge_ladder(dts, errs, ladder_floors(ladder, q, scales, mode, label, measured), statuses, exp, local)
+        floors = ladder_floors(ladder, q, scales, mode, label, measured, machine_epsilon(variant))
+        j = judge_ladder(dts, errs, floors, statuses, exp, local, q)
         fit, verdict, matches, phrase = j.fit, j.verdict, j.matches, j.assessment
         out.append({
             "scenario": scenario.name, "engine": variant, "quantity": q, "mode": mode,

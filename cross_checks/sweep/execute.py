@@ -177,15 +177,16 @@ class ScenarioReference:
 class _ReferenceTask:
     """One scenario's reference solve, by index (a small pickle for the workers)."""
 
-    def __init__(self, scenarios, work_dir, cache_root, use_cache, time_limit_s):
+    def __init__(self, scenarios, work_dir, cache_root, use_cache, time_limit_s, variants=()):
         self.scenarios, self.work_dir, self.cache_root, self.use_cache = scenarios, work_dir, cache_root, use_cache
-        self.time_limit_s = time_limit_s
+        self.time_limit_s, self.variants = time_limit_s, tuple(variants)
 
     def path(self, i):
         return str(Path(self.work_dir) / f"ref_{i}.npz")
 
     def __call__(self, i):
-        return reference_job(self.scenarios[i], self.path(i), self.cache_root, self.use_cache, self.time_limit_s)
+        return reference_job(self.scenarios[i], self.path(i), self.cache_root, self.use_cache, self.time_limit_s,
+                             self.variants)
 
 
 def _reference_cost(scenario):
@@ -198,10 +199,11 @@ def _reference_cost(scenario):
 
 
 def run_references(runner: Runner, scenarios, work_dir, cache_root, use_cache, time_limit_s,
-                   show_progress: bool = False) -> list:
-    """The :class:`ScenarioReference` of every scenario, in the order of ``scenarios``."""
+                   show_progress: bool = False, variants=()) -> list:
+    """The :class:`ScenarioReference` of every scenario, in the order of ``scenarios``, on the time grids of
+    every Δt the ``variants`` run."""
     from cross_checks.core.progress import Progress
-    task = _ReferenceTask(scenarios, str(work_dir), cache_root, use_cache, time_limit_s)
+    task = _ReferenceTask(scenarios, str(work_dir), cache_root, use_cache, time_limit_s, variants)
     with Progress("rbcheck sweep", "references", len(scenarios), enabled=show_progress) as bar:
         order = sorted(range(len(scenarios)), key=lambda i: _reference_cost(scenarios[i]))
         results = dict(runner.map_unordered(task, order, lambda i, _r: bar.update(1, scenarios[i].name)))

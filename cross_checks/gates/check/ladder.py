@@ -12,6 +12,7 @@ import math
 from cross_checks.analysis import metrics as M
 from cross_checks.analysis.expectations import Expectation, expectation
 from cross_checks.analysis.judge import judge_ladder
+from cross_checks.core import tolerances as tol
 from cross_checks.core.quantities import QUANTITIES, quantity_scales
 
 __all__ = ["LadderError", "check_ladder"]
@@ -61,6 +62,7 @@ def check_ladder(results, scenario, scheme=None) -> dict:
         if short:
             notes.append(f"{r.source} stops at t = {r.input['t_end_s']:g} s: no final error")
     finals = [_final_errors(r) for r in results]
+    prec = "float32" if any(r.input.get("single_precision") for r in results) else "float64"
     records, ok = [], True
     variant = None
     for q in QUANTITIES:
@@ -68,8 +70,10 @@ def check_ladder(results, scenario, scheme=None) -> dict:
             continue
         errs = [f[q] if s == "ok" else math.nan for f, s in zip(finals, statuses)]
         floors = [M.roundoff_floor(quantity_scales(r.series["y_ref"])[q], int(round(scenario.duration_s / d)),
-                                   r.reference_label) for r, d in zip(results, dts)]
+                                   r.reference_label, eps=tol.MACHINE_EPSILON[prec]) for r, d in zip(results, dts)]
         variant, exp = _expected(results, scenario, q, scheme)
+        if exp.precision != prec:    # the files' precision, as read from their digits, sets the floors
+            exp = Expectation(exp.verdict, exp.order, exp.reason, prec)
         j = judge_ladder(dts, errs, floors, statuses, exp)
         fit, matches, phrase = j.fit, j.matches, j.assessment
         ok &= matches is not False
