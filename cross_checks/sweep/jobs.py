@@ -94,9 +94,9 @@ def job_dts(scenario, variants=()):
 
 def _job_key(scenario, variant, dt, engine_version):
     engine = variant.split(":", 1)[0]
-    blob = json.dumps([SCHEMA_VERSION, scenario.content_hash, variant, repr(float(dt)), repr(scenario.duration_s),
-                       engine_version, fingerprint.code_fingerprint(engine), LOCAL_SAMPLES, MAX_SERIES_POINTS,
-                       fingerprint.environment()])
+    blob = json.dumps([SCHEMA_VERSION, scenario.content_hash, variant, repr(float(dt)),
+                       repr(scenario.duration_s), engine_version, fingerprint.code_fingerprint(engine),
+                       LOCAL_SAMPLES, MAX_SERIES_POINTS, fingerprint.environment()])
     return hashlib.sha256(blob.encode()).hexdigest()
 
 
@@ -197,7 +197,8 @@ def second_reference_job(scenario, ref_path: str, measured: dict, cache_root: st
 
 def failed_second_reference(why: str) -> dict:
     """The ``second_reference`` record of a second reference that could not be computed: ``why``."""
-    return {"label": "drake", "target_accuracy": tol.SECOND_REFERENCE_TARGET_ACCURACY, "agrees": None, "error": why}
+    return {"label": "drake", "target_accuracy": tol.SECOND_REFERENCE_TARGET_ACCURACY,
+            "agrees": None, "error": why}
 
 
 def measure_reference(scenario, t_s, y, label, ladder_dts=None) -> dict:
@@ -235,8 +236,9 @@ def _local_reference_errors(scenario, t_s, y, ladder_dts=None) -> dict:
 
 
 def _reference_key(scenario, t_union) -> str:
-    return hashlib.sha256(json.dumps([SCHEMA_VERSION, scenario.content_hash, fingerprint.code_fingerprint("reference"),
-                                      t_union.size, repr(float(t_union[-1])),
+    return hashlib.sha256(json.dumps([SCHEMA_VERSION, scenario.content_hash,
+                                      fingerprint.code_fingerprint("reference"), t_union.size,
+                                      repr(float(t_union[-1])),
                                       fingerprint.environment()]).encode()).hexdigest()
 
 
@@ -270,8 +272,9 @@ def _reference_solution_file(scenario, out_path, cache_root, use_cache, time_lim
         return "", f"reference solution failed: {type(exc).__name__}: {exc}", None
     save_npz_atomic(Path(out_path), {"t_s": t_union, "y": y, "label": np.array(label)}, compress=False)
     if cpath is not None:
-        cache.store(cache_root, cpath, key, {"t_s": t_union, "y": y, "label": np.array(label),
-                                             "measured": np.array(json.dumps(measured, default=json_default))})
+        cache.store(cache_root, cpath, key,
+                    {"t_s": t_union, "y": y, "label": np.array(label),
+                     "measured": np.array(json.dumps(measured, default=json_default))})
     return label, "", measured
 
 
@@ -325,9 +328,9 @@ def clear_reference_memo() -> None:
 def _nan_row(job, scenario, status, message, label, version):
     row = {c: math.nan for c in RESULT_COLUMNS}
     row.update(scenario=job.scenario, engine=job.variant, dt=job.dt_s, steps=0, wall_s=math.nan,
-               energy_drift_kind="n/a", step_defect_quantity="", status=status, diverged_at_s=math.nan, message=message,
-               default_dt=job.default_dt, in_ladder=job.in_ladder, reference=label, engine_version=version,
-               cached=False)
+               energy_drift_kind="n/a", step_defect_quantity="", status=status, diverged_at_s=math.nan,
+               message=message, default_dt=job.default_dt, in_ladder=job.in_ladder, reference=label,
+               engine_version=version, cached=False)
     return row
 
 
@@ -369,7 +372,8 @@ def run_job_group(jobs, scenario, ref_path: str, cache_root: str | None = None, 
     todo = [k for k in range(len(jobs)) if out[k] is None]
     t_ref_all, y_ref_all, label = load_reference(ref_path) if todo else (None, None, "")
     for k, run in zip(todo, _runs([jobs[k] for k in todo], scenario, time_limit_s)):
-        out[k] = rec = _measure(jobs[k], scenario, adapter, variant, version, run, t_ref_all, y_ref_all, label)
+        out[k] = rec = _measure(jobs[k], scenario, adapter, variant,
+                                version, run, t_ref_all, y_ref_all, label)
         if k in keys and rec["row"]["status"] in ("ok", "diverged"):
             _cache_store(cache_root, keys[k][1], keys[k][0], rec)
     return out

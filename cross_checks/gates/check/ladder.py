@@ -51,8 +51,8 @@ def check_ladder(results, scenario, scheme=None) -> dict:
         if r.input["dt_s"] is None:
             raise LadderError(f"{r.source}: t: variable steps: a ladder needs one Δt per file")
         if any(math.isclose(r.input["dt_s"], d, rel_tol=1e-9) for d in dts):
-            raise LadderError(f"{r.source}: t: Δt = {r.input['dt_s']:g} s appears in two files; a ladder needs "
-                              "distinct steps")
+            raise LadderError(f"{r.source}: t: Δt = {r.input['dt_s']:g} s appears "
+                              "in two files; a ladder needs distinct steps")
         dts.append(r.input["dt_s"])
     notes = []
     statuses = []
@@ -79,8 +79,8 @@ def check_ladder(results, scenario, scheme=None) -> dict:
         ok &= matches is not False
         records.append({"quantity": q, "order": fit.order, "pairwise_orders": fit.pairwise_orders,
                         "verdict": j.verdict, "assessment": phrase, "matches_expectation": matches,
-                        "expected": exp.as_dict(), "dt_s": fit.dt_s, "errors": fit.errors, "floors": fit.floors,
-                        "fitted": fit.fitted, "note": fit.note})
+                        "expected": exp.as_dict(), "dt_s": fit.dt_s, "errors": fit.errors,
+                        "floors": fit.floors, "fitted": fit.fitted, "note": fit.note})
         if fit.note:
             notes.append(f"{q}: {fit.note}")
     files_ok = all(r.passed for r in results)
@@ -88,13 +88,14 @@ def check_ladder(results, scenario, scheme=None) -> dict:
     failed_files = [r.source for r in results if not r.passed]
     parts = []
     if failed_files:
-        parts.append(f"{len(failed_files)} of {len(results)} files fail their own check ({', '.join(failed_files)})")
+        parts.append(f"{len(failed_files)} of {len(results)} files fail "
+                     f"their own check ({', '.join(failed_files)})")
     if bad:
         parts.append("convergence: " + "; ".join(bad))
     orders = ", ".join(f"{r['quantity']} {r['order']:.2f}" for r in records if r["order"] is not None)
     verdict = "; ".join(parts) if parts else (f"every file passes and the errors converge as expected "
                                               f"(fitted orders: {orders or 'at round-off'})")
-    expected = (f"{variant}'s orders" if variant else "convergence of a consistent scheme (order ≥ 1 not claimed "
-                "from the files alone)")
+    expected = (f"{variant}'s orders" if variant else "convergence of a consistent scheme "
+                "(order ≥ 1 not claimed from the files alone)")
     return {"files": [r.source for r in results], "dt_s": sorted(dts, reverse=True), "convergence": records,
             "passed": bool(files_ok and ok), "verdict": verdict, "expected": expected, "notes": notes}
