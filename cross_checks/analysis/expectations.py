@@ -28,7 +28,7 @@ import numpy as np
 
 from cross_checks.core.quantities import QUANTITIES
 from cross_checks.engines import declared_imitation, declared_order, declared_traits
-from cross_checks.engines.base import Traits
+from cross_checks.engines.base import DEFAULT_TRAITS, Traits
 from reference_sim.analytic import EQUAL_MOMENTS_REL_TOL
 
 __all__ = ["energy_drift_bound", "characteristic_rate_sq", "QUANTITIES",
@@ -39,11 +39,7 @@ __all__ = ["energy_drift_bound", "characteristic_rate_sq", "QUANTITIES",
            "memoized"]
 
 
-#: A variant that declares no traits (e.g. a user engine with only its declared order): assumed to
-#: have the gyroscopic term (a correct engine; if it lacks it, the sweep says so), and, if it is first
-#: order, to drift in either direction in both translation and rotation, whole-state style — the most
-#: cautious choice: no order is claimed wherever any first-order scheme could be pre-asymptotic.
-DEFAULT_TRAITS = Traits(gyroscopic_term=True, translation_drift=None, rotation_drift="whole_state", rotation_sign=None)
+#: A variant that declares no traits: engines.base.DEFAULT_TRAITS (the most cautious choice).
 
 
 def traits(variant: str) -> Traits:

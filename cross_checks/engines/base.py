@@ -62,7 +62,7 @@ __all__ = ["EngineAdapter", "Variant", "harness_force_torque", "stage_force_torq
            "decay_factors", "EngineError", "optional_import", "require", "EngineNotInstalled", "installed_version",
            "library_files", "RunRequest", "Traits",
            "SYMPLECTIC_EULER_EXPLICIT_GYRO", "SYMPLECTIC_EULER_IMPLICIT_GYRO", "WHOLE_STATE_EXPLICIT_EULER",
-           "WHOLE_STATE_IMPLICIT_EULER", "HIGHER_ORDER"]
+           "WHOLE_STATE_IMPLICIT_EULER", "HIGHER_ORDER", "DEFAULT_TRAITS"]
 
 
 class EngineError(RuntimeError):
@@ -255,6 +255,12 @@ SYMPLECTIC_EULER_IMPLICIT_GYRO = Traits(rotation_drift="body", rotation_sign=-1)
 #: implicit gains them; the attitude and ω_W steps are coupled through I_W).
 WHOLE_STATE_EXPLICIT_EULER = Traits(translation_drift=+1, rotation_drift="whole_state", rotation_sign=-1)
 WHOLE_STATE_IMPLICIT_EULER = Traits(translation_drift=-1, rotation_drift="whole_state", rotation_sign=+1)
+#: A variant that declares no traits (e.g. a user engine with only its declared order): assumed to
+#: have the gyroscopic term (a correct engine; if it lacks it, the sweep says so), and, if it is first
+#: order, to drift in either direction in both translation and rotation, whole-state style — the most
+#: cautious choice: no order is claimed wherever any first-order scheme could be pre-asymptotic.
+DEFAULT_TRAITS = Traits(gyroscopic_term=True, translation_drift=None, rotation_drift="whole_state",
+                        rotation_sign=None)
 #: Order ≥ 2: the amplitude error of an order-p scheme is of order p + 1 (|R(iωΔt)|² = 1 + O((ωΔt)^{p+2})); a
 #: symplectic scheme keeps it: no amplitude rule applies.
 HIGHER_ORDER = Traits()

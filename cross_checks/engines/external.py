@@ -8,6 +8,7 @@ An engine file is TOML (docs/engines.md)::
     timeout = 300                  # optional: seconds one run may take (default DEFAULT_TIMEOUT_S)
     [variants.euler]
     order = 1                      # the global order its author claims; verdicts check it
+    precision = "float32"          # optional: the format its steps compute in (default "float64")
     description = "semi-implicit Euler, exp-map rotation"
     command = ["./mysim", "{scenario_json}", "{dt}", "{out_csv}"]
 
@@ -40,6 +41,7 @@ commands name.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import hashlib
 import math
 import os
@@ -58,7 +60,7 @@ import numpy as np
 
 from cross_checks.core import tolerances as tol
 from cross_checks.core.names import NAME_RE, unknown_key_reason
-from cross_checks.engines.base import EngineAdapter, EngineError, Variant
+from cross_checks.engines.base import DEFAULT_TRAITS, EngineAdapter, EngineError, Variant
 from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
 
 __all__ = ["EngineFileError", "ExternalEngine", "load_engine_file", "PLACEHOLDERS", "DEFAULT_TIMEOUT_S"]
@@ -82,7 +84,7 @@ FOLDER_MAX_FILES = 5000
 FOLDER_CONTENT_MAX_BYTES = 64 * 2 ** 20
 
 _TOP = {"name", "version", "description", "timeout", "variants"}
-_VARIANT = {"order", "description", "command"}
+_VARIANT = {"order", "description", "command", "precision"}
 
 
 class EngineFileError(ValueError):
@@ -291,7 +293,13 @@ def load_engine_file(path) -> ExternalEngine:
             raise EngineFileError(path, f"{where}.command",
                                   "missing (required): the command that runs one simulation")
         commands[vname] = _parse_command(path, folder, f"{where}.command", spec["command"])
-        variants[vname] = Variant(order, desc)
+        precision = _string(path, spec, "precision", f"{where}.precision", default="float64")
+        if precision not in tol.MACHINE_EPSILON:
+            raise EngineFileError(path, f"{where}.precision",
+                                  f"must be one of {', '.join(tol.MACHINE_EPSILON)} (the format its steps "
+                                  f"compute in), got {precision!r}")
+        traits = None if precision == "float64" else dataclasses.replace(DEFAULT_TRAITS, precision=precision)
+        variants[vname] = Variant(order, desc, traits=traits)
     sha = hashlib.sha256(data).hexdigest()
     return ExternalEngine(path.resolve(), name, version, description, timeout, variants, commands, sha,
                           _program_files(folder, commands), folder_fingerprint(folder))

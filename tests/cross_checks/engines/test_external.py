@@ -3,6 +3,7 @@ nothing written; every misbehaving command is a failed row carrying its own word
 a blow-up written by the engine is "diverged at t = …"; a hung command and everything it started are
 killed at the time limit."""
 import contextlib
+import dataclasses
 import io
 import sys
 from pathlib import Path
@@ -14,7 +15,7 @@ from hypothesis import strategies as st
 from cross_checks import engines
 from cross_checks.cli import main
 from cross_checks.engines.base import EngineError
-from cross_checks.engines.external import load_engine_file
+from cross_checks.engines.external import EngineFileError, load_engine_file
 from cross_checks.scenario import parse_scenario
 from cross_checks.sweep import run_sweep
 
@@ -473,3 +474,19 @@ def test_the_cache_key_covers_every_file_of_the_engine_folder(tmp_path):
     key2 = load_engine_file(path).cache_token()
     (folder / "results" / "results.csv").write_text("y")         # rbcheck's own results dir: not the engine
     assert load_engine_file(path).cache_token() == key2
+
+
+def test_a_variant_declares_the_precision_its_steps_compute_in(tmp_path):
+    """``precision = "float32"`` gives the variant float32's floors and ladder (docs/verdicts.md, "Precision"),
+    and otherwise the cautious traits of a variant that declares none; float64 is the default; anything else is
+    refused naming the field."""
+    from cross_checks.engines.base import DEFAULT_TRAITS
+    path = _engine_file(tmp_path / "a", modes=["ok"])
+    text = path.read_text().replace('order = 1\n', 'order = 1\nprecision = "float32"\n')
+    path.write_text(text)
+    eng = load_engine_file(path)
+    assert eng.variants["ok"].traits == dataclasses.replace(DEFAULT_TRAITS, precision="float32")
+    assert load_engine_file(_engine_file(tmp_path / "b", modes=["ok"])).variants["ok"].traits is None
+    path.write_text(text.replace('"float32"', '"float16"'))
+    with pytest.raises(EngineFileError, match=r"variants\.ok\.precision: must be one of float64, float32"):
+        load_engine_file(path)
