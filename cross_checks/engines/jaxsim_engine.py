@@ -1,4 +1,4 @@
-"""jaxsim (JAX, float64) as an engine adapter (``jaxsim:VARIANT``); the interface is cross_checks.engines.base.
+"""jaxsim (JAX, float64) as an engine adapter (``jaxsim:VARIANT``); the interface: cross_checks.engines.base.
 
 Model: one ``JaxSimModel`` per scenario built from an SDF string
 (``JaxSimModel.build_from_model_description(sdf, is_urdf=False, gravity=…, integrator=…)``; a URDF would need
@@ -25,16 +25,20 @@ inertial representation ONCE, at the start state, then
   representation (gravity added as the inertial acceleration [0, 0, −g, 0, 0, 0]; ω̇_W = I_W⁻¹(τ − ω × I_W ω),
   the explicit gyroscopic term), ``ν_in += Δt ν̇_in``, then ``x += Δt (v_in⁺ + ω⁺ × x)`` and
   ``q += Δt · ½ [0, ω⁺] ⊗ q`` (``Quaternion.derivative``, Baumgarte K = 0.1 on |q| − 1 = 0), normalised:
-  symplectic Euler with an explicit gyroscopic term and the course's quaternion update — reference:course_gyro's
-  rotation exactly. Its translation is that of the INERTIAL velocity: where the body spins (ω ≠ 0) away from
-  the world origin it differs from the course's ``v += Δt f/m`` by O(Δt) terms in ω × ẋ (first order still;
-  measured in the docs: a larger error constant than MuJoCo Euler's on a spinning projectile).
-* ``rk4`` (``rk4_integration``): classical RK4 on (x, q, v_in, ω) with ``system_dynamics`` (q̇ with Baumgarte
-  K = 1 on the unnormalised stage quaternions), the start quaternion normalised; 4th order. Its four stages
-  take the SAME link forces (``link_forces`` is an argument of the integrator, converted once per step):
-  jaxsim has no per-stage force hook (no control callback; the contact model is the only per-stage force and
-  needs collision points), so the applied force and torque are held over the step
-  (Traits.forces_held): first order where they change within a step (state-dependent forces, velocity decay).
+  symplectic Euler with an explicit gyroscopic term and the course's quaternion update, the rotation of
+  reference:course_gyro exactly. Its translation is that of the INERTIAL velocity: where the body spins
+  (ω ≠ 0) away from the world origin it differs from the course's ``v += Δt f/m`` by O(Δt) terms in ω × ẋ
+  (first order still; tumbling_box at 1e-3 s: 35 m of position error against MuJoCo Euler's 0.05 m).
+* ``rk4`` (``rk4_integration``): classical RK4 on (x, q, v_in, ω) with ``system_dynamics``, each stage's
+  quaternion normalised (``data.replace``); 4th order. Its four stages take the SAME link forces
+  (``link_forces`` is an argument of the integrator, converted once per step): jaxsim has no per-stage force
+  hook (no control callback; the contact model is the only per-stage force and needs collision points), so
+  the applied force and torque are held over the step (Traits.forces_held): first order where they change
+  within a step (state-dependent forces, velocity decay). The held wrench is the INERTIAL one (the force and
+  its moment about the world origin): the force keeps its line of action in space over the stages, so even a
+  constant force at the COM gives a moving body a spurious torque (x0 − x_stage) × f — first order in
+  rotation (pinned; no catalog scenario has such a force besides gravity, which jaxsim applies as an
+  acceleration).
 * ``RungeKutta4Fast`` is not offered: with no collidable point its ``rk4fast_integration`` reads
   ``W_f_L_terrain`` before assigning it (UnboundLocalError in jaxsim 0.9.0, pinned by a test).
 
@@ -61,17 +65,22 @@ Compilation: two functions per (variant, force path, jaxsim gravity value) — a
 (``lax.fori_loop``) and one step of ROW_BLOCK·k rows (``jax.vmap``) — compiled ahead of time once per process
 (the model, Δt, forces and states are arguments), timed apart from stepping (:func:`timings`,
 ``JaxsimAdapter.compile_seconds``). The XLA persistent compilation cache is kept in rbcheck's cache directory
-(``$RBCHECK_CACHE_DIR/jaxsim-xla``, else ``$XDG_CACHE_HOME`` or ``~/.cache`` ``/rbcheck/jaxsim-xla``).
+(``$RBCHECK_CACHE_DIR/jaxsim-xla``, else ``$XDG_CACHE_HOME`` or ``~/.cache`` ``/rbcheck/jaxsim-xla``); JAX
+does not persist an executable holding a host callback, so the state-dependent path compiles in every
+process.
 
 Fork safety: importing jaxsim initialises a JAX backend (it calls ``jax.devices()``), after which a fork can
 deadlock; the sweep forks its workers. So this module never imports JAX at module level, and ``version()``
 reads the distribution's metadata and checks that jaxsim is importable with ``importlib.util.find_spec``
-(no import): a parent process that only lists or schedules never starts JAX.
+(no import): a parent process that only lists or schedules never starts JAX. (A sweep that refines a
+pre-asymptotic record runs the variant in its own process, after the workers, and then forks for the report:
+JAX warns that the fork may deadlock; measured harmless, said in the docs.)
 
 Divergence: JAX never stops on a non-finite value, so every chunk of states is checked
 (reference_sim.simulate.bad_rows): the first state that is non-finite or beyond BLOWUP_LIMIT ends the run as
 ``diverged at t = …``.
 """
+
 from __future__ import annotations
 
 import functools
@@ -99,9 +108,24 @@ from cross_checks.engines.base import (
 from cross_checks.engines.step_floats import harness_fn
 from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
 
-__all__ = ["ENGINE", "VARIANTS", "INTEGRATORS", "CHUNK", "ROW_BLOCK", "EngineError", "version", "simulate",
-           "simulate_many", "one_step", "build_model", "model_sdf", "engine_gravity", "timings", "xla_cache_dir",
-           "JaxsimAdapter"]
+__all__ = [
+    "ENGINE",
+    "VARIANTS",
+    "INTEGRATORS",
+    "CHUNK",
+    "ROW_BLOCK",
+    "EngineError",
+    "version",
+    "simulate",
+    "simulate_many",
+    "one_step",
+    "build_model",
+    "model_sdf",
+    "engine_gravity",
+    "timings",
+    "xla_cache_dir",
+    "JaxsimAdapter",
+]
 
 ENGINE = "jaxsim"
 HINT = "pip install 'rbcheck[jaxsim]'"
@@ -109,15 +133,22 @@ HINT = "pip install 'rbcheck[jaxsim]'"
 INTEGRATORS = {"semi_implicit_euler": "SemiImplicitEuler", "rk4": "RungeKutta4"}
 VARIANTS = {
     # jaxsim/api/integrators.py semi_implicit_euler_integration: ω_W += Δt I_W⁻¹(τ − ω × I_W ω), then
-    # q += Δt ½ [0, ω⁺] ⊗ q, normalised, and x with the new velocity: a body-frame symplectic Euler step with an
-    # explicit gyroscopic term (MuJoCo Euler's and reference:course_gyro's velocity update)
-    "semi_implicit_euler": Variant(1, "jaxsim SemiImplicitEuler: symplectic Euler in the inertial representation, "
-                                      "explicit gyroscopic term, q += Δt q̇ then normalised",
-                                   traits=SYMPLECTIC_EULER_EXPLICIT_GYRO),
-    # jaxsim/api/integrators.py rk4_integration: classical RK4, the link forces of the step held over its 4 stages
-    "rk4": Variant(4, "jaxsim RungeKutta4: classical 4th-order Runge-Kutta; the applied force and torque held over "
-                      "the step (first order where they change within it)",
-                   traits=Traits(**{**HIGHER_ORDER.__dict__, "forces_held": True})),
+    # q += Δt ½ [0, ω⁺] ⊗ q, normalised, and x with the new velocity: a body-frame symplectic Euler step
+    # with an explicit gyroscopic term (MuJoCo Euler's and reference:course_gyro's velocity update)
+    "semi_implicit_euler": Variant(
+        1,
+        "jaxsim SemiImplicitEuler: symplectic Euler in the inertial representation, "
+        "explicit gyroscopic term, q += Δt q̇ then normalised",
+        traits=SYMPLECTIC_EULER_EXPLICIT_GYRO,
+    ),
+    # jaxsim/api/integrators.py rk4_integration: classical RK4, the step's link forces (an inertial wrench)
+    # held over its 4 stages
+    "rk4": Variant(
+        4,
+        "jaxsim RungeKutta4: classical 4th-order Runge-Kutta; the applied force and torque held over "
+        "the step (first order where they change within it)",
+        traits=Traits(**{**HIGHER_ORDER.__dict__, "forces_held": True}),
+    ),
 }
 
 #: Steps of one compiled run call (``lax.fori_loop`` with a traced count: a shorter last call costs no more).
@@ -128,16 +159,18 @@ MODEL_NAME = "rbcheck_body"
 
 _LOCK = threading.RLock()
 _TIMES = {"compile_seconds": 0.0, "compiles": 0, "run_seconds": 0.0, "steps": 0}
-_CONTEXTS: dict = {}           # callback key -> (harness, weight floats): the forces of one run / one_step call
+_CONTEXTS: dict = {}  # callback key -> (harness, weight floats): the forces of one run / one_step call
 _KEYS = itertools.count(1)
 
 
 # --- availability without importing JAX (fork safety) --------------------------------------------------
 
+
 def version() -> str:
     """The installed jaxsim distribution's version, from its metadata: no import (see the module docstring).
     EngineNotInstalled when it is absent; ImportError when it is installed but not importable."""
     import importlib.util
+
     ver = installed_version("jaxsim")
     if ver is None:
         raise EngineNotInstalled(f"jaxsim is not installed ({HINT})")
@@ -158,14 +191,18 @@ def xla_cache_dir() -> Path:
     if os.environ.get("RBCHECK_CACHE_DIR"):
         root = Path(os.environ["RBCHECK_CACHE_DIR"])
     else:
-        root = Path(os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")) / "rbcheck"
+        root = (
+            Path(os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"))
+            / "rbcheck"
+        )
     return root / "jaxsim-xla"
 
 
 @functools.lru_cache(maxsize=1)
 def _jax():
     """(jax, jax.numpy, jaxsim.api): imported on first use (never in a process that only lists engines),
-    float64 switched on before jaxsim's import and checked after, the persistent cache in rbcheck's directory."""
+    float64 switched on before jaxsim's import and checked after, the persistent cache in rbcheck's
+    directory."""
     jax, err = optional_import("jax")
     require(jax, err, "jax", hint=HINT)
     jax.config.update("jax_enable_x64", True)
@@ -174,12 +211,13 @@ def _jax():
         path.mkdir(parents=True, exist_ok=True)
         jax.config.update("jax_compilation_cache_dir", str(path))
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
-    except OSError:      # no writable cache directory: compile every time
+    except OSError:  # no writable cache directory: compile every time
         pass
     jaxsim, err = optional_import("jaxsim")
     require(jaxsim, err, "jaxsim", hint=HINT)
     import jax.numpy as jnp
     import jaxsim.api as js
+
     if not jax.config.jax_enable_x64:
         raise EngineError("jaxsim: jax_enable_x64 is off after importing jaxsim; rbcheck needs float64")
     return jax, jnp, js
@@ -193,6 +231,7 @@ def timings() -> dict:
 
 
 # --- the model -----------------------------------------------------------------------------------------
+
 
 def engine_gravity(scenario) -> float:
     """The scalar gravity (m/s², along −z) given to jaxsim: g for a scenario gravity (0, 0, −g), else 0 (the
@@ -208,9 +247,11 @@ def model_sdf(mass_kg: float, inertia_B) -> str:
     inertia = np.asarray(inertia_B, dtype=float)
     names = (("ixx", 0, 0), ("ixy", 0, 1), ("ixz", 0, 2), ("iyy", 1, 1), ("iyz", 1, 2), ("izz", 2, 2))
     moments = "".join(f"<{n}>{float(inertia[i, j])!r}</{n}>" for n, i, j in names)
-    return ('<?xml version="1.0"?>\n<sdf version="1.7"><model name="' + MODEL_NAME + '"><link name="body">'
-            f'<inertial><pose>0 0 0 0 0 0</pose><mass>{float(mass_kg)!r}</mass><inertia>{moments}</inertia>'
-            '</inertial></link></model></sdf>')
+    return (
+        '<?xml version="1.0"?>\n<sdf version="1.7"><model name="' + MODEL_NAME + '"><link name="body">'
+        f"<inertial><pose>0 0 0 0 0 0</pose><mass>{float(mass_kg)!r}</mass><inertia>{moments}</inertia>"
+        "</inertial></link></model></sdf>"
+    )
 
 
 def build_model(scenario, variant: str):
@@ -226,16 +267,24 @@ def build_model(scenario, variant: str):
 def _model(mass_kg: float, inertia: tuple, gravity: float, variant: str):
     jax, jnp, js = _jax()
     import dataclasses
+
     sdf = model_sdf(mass_kg, np.reshape(inertia, (3, 3)))
     try:
         model = js.model.JaxSimModel.build_from_model_description(
-            sdf, model_name=MODEL_NAME, is_urdf=False, time_step=0.001, gravity=gravity,
-            integrator=getattr(js.model.IntegratorType, INTEGRATORS[variant]))
+            sdf,
+            model_name=MODEL_NAME,
+            is_urdf=False,
+            time_step=0.001,
+            gravity=gravity,
+            integrator=getattr(js.model.IntegratorType, INTEGRATORS[variant]),
+        )
     except Exception as exc:  # noqa: BLE001 - jaxsim's parser and builder raise many types
         raise EngineError(f"jaxsim refused the model: {type(exc).__name__}: {exc}") from None
     if not model.floating_base() or model.number_of_links() != 1 or model.dofs() != 0:
-        raise EngineError("jaxsim did not build one free link from the SDF "
-                          f"(floating base {model.floating_base()}, {model.number_of_links()} links)")
+        raise EngineError(
+            "jaxsim did not build one free link from the SDF "
+            f"(floating base {model.floating_base()}, {model.number_of_links()} links)"
+        )
     if len(model.kin_dyn_parameters.contact_parameters.body):
         raise EngineError("jaxsim gave the link collidable points; rbcheck's free body must have none")
     M = np.asarray(js.model.link_spatial_inertia_matrices(model))[0]
@@ -243,14 +292,17 @@ def _model(mass_kg: float, inertia: tuple, gravity: float, variant: str):
     want[:3, :3] = mass_kg * np.eye(3)
     want[3:, 3:] = np.reshape(inertia, (3, 3))
     if not np.array_equal(M, want):
-        raise EngineError(f"jaxsim's spatial inertia of the link is not the scenario's mass and inertia tensor "
-                          f"about the link origin: {M.tolist()}")
+        raise EngineError(
+            f"jaxsim's spatial inertia of the link is not the scenario's mass and inertia tensor "
+            f"about the link origin: {M.tolist()}"
+        )
     # the SDF text (a static field) would make every scenario's model a new pytree structure: one compilation
     # per scenario; the model's numbers are all in its arrays
     return dataclasses.replace(model, built_from=MODEL_NAME)
 
 
 # --- the compiled functions ----------------------------------------------------------------------------
+
 
 def _host_forces(key, y):
     """The link forces (..., 6) [f_W − m g_jaxsim, τ_W] of the states ``y`` (..., 13) of the call ``key``:
@@ -274,20 +326,28 @@ def _step_fn(callback: bool):
 
     def step(model, y, f6, scale, key):
         if callback:
-            f6 = jax.pure_callback(_host_forces, jax.ShapeDtypeStruct((6,), jnp.float64), key, y,
-                                   vmap_method="broadcast_all")
+            f6 = jax.pure_callback(
+                _host_forces, jax.ShapeDtypeStruct((6,), jnp.float64), key, y, vmap_method="broadcast_all"
+            )
         y = y * scale
         data = js.data.JaxSimModelData.build(
-            model=model, base_position=y[0:3], base_quaternion=y[6:10], base_linear_velocity=y[3:6],
-            base_angular_velocity=y[10:13], velocity_representation=VelRepr.Mixed)
+            model=model,
+            base_position=y[0:3],
+            base_quaternion=y[6:10],
+            base_linear_velocity=y[3:6],
+            base_angular_velocity=y[10:13],
+            velocity_representation=VelRepr.Mixed,
+        )
         data = js.model.step(model, data, link_forces=f6[None, :])
         v = data.base_velocity
         return jnp.concatenate([data.base_position, v[0:3], data.base_quaternion, v[3:6]])
+
     return step
 
 
 def _with_dt(model, dt):
     import dataclasses
+
     return dataclasses.replace(model, time_step=dt)
 
 
@@ -302,7 +362,9 @@ def _run_fn(callback: bool):
             y, rows = carry
             y = step(model, y, f6, scale, key)
             return y, rows.at[i].set(y)
+
         return jax.lax.fori_loop(0, count, body, (y0, jnp.zeros((CHUNK, 13))))
+
     return run
 
 
@@ -313,6 +375,7 @@ def _one_fn(callback: bool):
     def one(model, dt, ys, f6, scale, key):
         model = _with_dt(model, dt)
         return jax.vmap(lambda y: step(model, y, f6, scale, key))(ys)
+
     return one
 
 
@@ -320,7 +383,8 @@ _COMPILED: dict = {}
 
 
 def _compiled(kind: str, callback: bool, model, *args):
-    """The ahead-of-time compiled ``kind`` ("run" or "one") function for these arguments' shapes and the model's
+    """The ahead-of-time compiled ``kind`` ("run" or "one") function for these arguments' shapes and the
+    model's
     static fields (jaxsim's gravity and integrator); compiled once per process, the time counted."""
     jax, jnp, js = _jax()
     key = (kind, callback, model.integrator, model.gravity, tuple(np.shape(a) for a in args))
@@ -332,7 +396,9 @@ def _compiled(kind: str, callback: bool, model, *args):
             try:
                 fn = jax.jit(make(callback)).lower(model, *args).compile()
             except Exception as exc:  # noqa: BLE001 - jaxsim or XLA refusing the computation
-                raise EngineError(f"jaxsim/XLA could not compile the step: {type(exc).__name__}: {exc}") from None
+                raise EngineError(
+                    f"jaxsim/XLA could not compile the step: {type(exc).__name__}: {exc}"
+                ) from None
             _TIMES["compile_seconds"] += time.perf_counter() - t0
             _TIMES["compiles"] += 1
             _COMPILED[key] = fn
@@ -395,7 +461,9 @@ def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
             bad = bad_rows(chunk)
             if bad.any():
                 k = int(np.argmax(bad))
-                return diverged(np.concatenate(rows + [chunk[:k]]), float(dt_s), f" ({blowup_words(chunk[k])})")
+                return diverged(
+                    np.concatenate(rows + [chunk[:k]]), float(dt_s), f" ({blowup_words(chunk[k])})"
+                )
             rows.append(chunk)
             done += count
     return Run(float(dt_s) * np.arange(n_steps + 1), np.concatenate(rows))
@@ -461,6 +529,7 @@ class JaxsimAdapter(EngineAdapter):
         import importlib.util
 
         from cross_checks.engines import step_floats
+
         files = [*super().source_files(), Path(step_floats.__file__)]
         try:
             spec = importlib.util.find_spec("jaxsim")
@@ -479,4 +548,3 @@ class JaxsimAdapter(EngineAdapter):
 
     def one_step(self, scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
         return one_step(scenario, variant, dt_s, y_start)
-
