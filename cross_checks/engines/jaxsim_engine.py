@@ -83,6 +83,7 @@ Divergence: JAX never stops on a non-finite value, so every chunk of states is c
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import itertools
 import os
@@ -98,7 +99,6 @@ from cross_checks.engines.base import (
     EngineAdapter,
     EngineError,
     EngineNotInstalled,
-    Traits,
     Variant,
     decay_factors,
     installed_version,
@@ -147,7 +147,7 @@ VARIANTS = {
         4,
         "jaxsim RungeKutta4: classical 4th-order Runge-Kutta; the applied force and torque held over "
         "the step (first order where they change within it)",
-        traits=Traits(**{**HIGHER_ORDER.__dict__, "forces_held": True}),
+        traits=dataclasses.replace(HIGHER_ORDER, forces_held=True),
     ),
 }
 
@@ -266,7 +266,6 @@ def build_model(scenario, variant: str):
 @functools.lru_cache(maxsize=64)
 def _model(mass_kg: float, inertia: tuple, gravity: float, variant: str):
     jax, jnp, js = _jax()
-    import dataclasses
 
     sdf = model_sdf(mass_kg, np.reshape(inertia, (3, 3)))
     try:
@@ -346,7 +345,6 @@ def _step_fn(callback: bool):
 
 
 def _with_dt(model, dt):
-    import dataclasses
 
     return dataclasses.replace(model, time_step=dt)
 
