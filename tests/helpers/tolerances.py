@@ -116,3 +116,6 @@ JAXSIM_REPLAY_REL = 1e-13
 #: Fitted orders of jaxsim's variants on the short catalog ladders used by its tests (measured: see the
 #: "jaxsim 0.9" section of docs/engine_conventions.md); ORDER_TOL of the suite is 0.1, ladders this short 0.15.
 JAXSIM_ORDER_TOL = 0.15
+#: jaxsim:semi_implicit_euler vs reference:course_gyro (the same rotation update) over the first second of a fast
+#: spin (|ω|Δt = 0.2 rad per step): measured 4.3e-13 rad/s of 20 rad/s.
+JAXSIM_SAME_ROTATION = 1e-11
