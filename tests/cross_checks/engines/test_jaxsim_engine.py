@@ -4,6 +4,7 @@ hand-derived step of each scheme, its orders on catalog scenarios, divergence, b
 forked sweep."""
 
 import dataclasses
+import importlib.util
 import os
 import subprocess
 import sys
@@ -13,7 +14,11 @@ import pytest
 
 from tests.helpers import tolerances as tol
 
-pytest.importorskip("jaxsim", reason="jaxsim is not installed (pip install -e '.[jaxsim]')")
+# never `importorskip("jaxsim")`: importing jaxsim starts JAX's threads at COLLECTION, and every test of this
+# process that forks a sweep afterwards (test_byo_engines, test_external, ...) would risk a deadlock; JAX
+# starts in the tests below that need it
+if importlib.util.find_spec("jaxsim") is None:
+    pytest.skip("jaxsim is not installed (pip install -e '.[jaxsim]')", allow_module_level=True)
 
 from cross_checks.engines import jaxsim_engine as je  # noqa: E402
 from cross_checks.engines.base import RunRequest  # noqa: E402
@@ -427,8 +432,8 @@ def test_runs_longer_than_a_chunk_continue_exactly():
 
 
 def test_the_fast_spin_diverges_where_the_reference_of_the_same_rotation_scheme_does():
-    # reference:course_gyro has jaxsim's rotation update (explicit gyroscopic term, q += Δt q̇ normalised): the
-    # two agree to round-off over the first second, then the runaway amplifies round-off, and both blow up
+    # reference:course_gyro has jaxsim's rotation update (explicit gyroscopic term, q += Δt q̇ normalised):
+    # the two agree to round-off over the first second, then the runaway amplifies round-off, and both blow up
     # within a few steps of each other (measured 8.66 s and 8.68 s)
     from reference_sim.simulate import simulate as reference_simulate
 
