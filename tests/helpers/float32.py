@@ -24,6 +24,10 @@ def to_float32(y):
     return np.asarray(y, dtype=np.float64).astype(np.float32).astype(np.float64)
 
 
+def _unchanged(members):
+    return members
+
+
 class Float32Adapter(EngineAdapter):
     """``f32_NAME:VARIANT``: reference scheme VARIANT, its state rounded to float32 after every step; with a
     mutant (tests/mutants.py), that mutant's knob and broken step."""
@@ -36,7 +40,7 @@ class Float32Adapter(EngineAdapter):
         self.variants = {self.scheme: Variant(spec.order, f"{spec.description}, state in float32{bug}",
                                               imitates=variant, traits=traits)}
         ad = mutant.adapter if mutant is not None else None
-        self.knob = ad.knob if ad is not None else (lambda m: m)
+        self.knob = ad.knob if ad is not None else _unchanged
         self.step = (ad.step if ad is not None else None) or get_step(self.scheme)
 
     def version(self) -> str:
