@@ -221,17 +221,20 @@ def _quiet_stderr():
 
 # --- the model -----------------------------------------------------------------------------------------------
 
-def mjcf_text(scenario) -> str:
+def mjcf_text(scenario, dt_s: float = 0.01) -> str:
     """The scenario's body as an MJCF document: a free joint and an explicit inertial at the body origin, the full
     tensor in body axes (``fullinertia`` = Ixx Iyy Izz Ixy Ixz Iyz, kg m²), the mass (kg); the compiler told to
     keep the body frame and the inertia exactly as given (no free-joint alignment, no inertia from geoms, no
-    balancing, no bounds)."""
+    balancing, no bounds). The joint's limit time constant (MuJoCo's default 0.02 s; no limit acts: the joint is
+    free and limits are off) is raised to 2Δt where Genesis would raise it itself, with a warning, at Δt > 0.01 s."""
     b = scenario.problem.body
     inertia = np.asarray(b.inertia_B, dtype=float)
     full = " ".join(repr(float(v)) for v in (inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1],
                                              inertia[0, 2], inertia[1, 2]))
+    timeconst = max(0.02, 2.0 * float(dt_s))
     return ('<mujoco model="rbcheck"><compiler alignfree="false" inertiafromgeom="false" balanceinertia="false" '
-            'boundmass="0" boundinertia="0"/><worldbody><body name="body"><freejoint name="free"/>'
+            f'boundmass="0" boundinertia="0"/><default><joint solreflimit="{timeconst!r} 1"/></default>'
+            '<worldbody><body name="body"><joint type="free" name="free"/>'
             f'<inertial pos="0 0 0" mass="{float(b.mass_kg)!r}" fullinertia="{full}"/></body></worldbody></mujoco>')
 
 
@@ -241,7 +244,7 @@ def scene_options(variant: str, dt_s: float, gravity_W):
     gs = genesis()
     sim = gs.options.SimOptions(dt=float(dt_s), substeps=1, gravity=tuple(float(g) for g in gravity_W))
     rigid = gs.options.RigidOptions(integrator=getattr(gs.integrator, _INTEGRATORS[variant]), enable_collision=False,
-                                    enable_joint_limit=False, use_hibernation=False)
+                                    enable_joint_limit=False, use_hibernation=False, disable_constraint=True)
     return sim, rigid
 
 
@@ -358,7 +361,7 @@ def body(scenario, variant: str, dt_s: float, n_envs: int = 0) -> GenesisBody:
     """The scene of ``scenario``'s body for ``variant`` at ``dt_s`` with ``n_envs`` environments: built once per
     process and reused (the :data:`_SCENES_KEPT` most recent), its state and wrench set by every run."""
     _check_variant(variant)
-    xml = mjcf_text(scenario)
+    xml = mjcf_text(scenario, dt_s)
     g = tuple(float(v) for v in scenario.problem.forces.gravity_W)
     key = (variant, float(dt_s), xml, g, int(n_envs))
     hit = _SCENES.get(key)
@@ -465,7 +468,7 @@ def _simulate_batch(scenarios, variant: str, dt_s: float, n_steps: int) -> list:
 
 def _batch_key(r) -> tuple:
     p = r.scenario.problem
-    return (mjcf_text(r.scenario), tuple(float(v) for v in p.forces.gravity_W), float(r.dt_s), int(r.n_steps))
+    return (mjcf_text(r.scenario, r.dt_s), tuple(float(v) for v in p.forces.gravity_W), float(r.dt_s), int(r.n_steps))
 
 
 def simulate_many(variant: str, requests) -> list:
