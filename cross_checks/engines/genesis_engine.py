@@ -443,18 +443,17 @@ def _simulate_batch(scenarios, variant: str, dt_s: float, n_steps: int) -> list:
                     B.apply_fast(f, tau)
                 why = B.step()
                 if why:
-                    for i in range(n):
-                        if stop[i] is None:
-                            stop[i] = (k, f" ({why})")
                     end = k
                     break
                 qpos_out[k], vel_out[k] = B.read()
             y[start:end] = to_packed(qpos_out[start:end], vel_out[start:end])
-            for i in range(n):
+            for i in range(n):       # the first bad state, else the step Genesis refused
                 bad = bad_rows(y[start:end, i])
                 if stop[i] is None and bad.any():
                     j = int(np.argmax(bad))
                     stop[i] = (start + j, f" ({blowup_words(y[start + j, i])})")
+                elif stop[i] is None and why:
+                    stop[i] = (end, f" ({why})")
             if all(s is not None for s in stop) or end < min(start + _CHUNK, n_steps + 1):
                 break
     out = []
