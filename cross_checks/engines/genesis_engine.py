@@ -91,10 +91,14 @@ DIST = "genesis-world"
 #: an oscillator's amplitude); forces held over the step (one stage).
 _MIDPOINT_ROTATION = Traits(translation_drift=0, rotation_drift="none", rotation_sign=0)
 
-#: The variants, named after ``gs.integrator``; orders from Genesis's RigidOptions documentation ("'Euler' and
+#: The variants, named after ``gs.integrator``, Genesis's default (RigidOptions.integrator) first; orders from Genesis's RigidOptions documentation ("'Euler' and
 #: 'implicitfast' are consistent with their Mujoco counterpart") and its step (genesis/engine/solvers/rigid/abd/
 #: forward_dynamics.py ``func_integrate``), read for 1.4.5: every one is first order in the translation.
 VARIANTS = {
+    # the same free-body path (the approximation concerns the mass-matrix solve with damping, zero here)
+    "approximate_implicitfast": Variant(1, "Genesis approximate_implicitfast (its default): on a lone free body "
+                                           "implicitfast's midpoint rotation and semi-implicit Euler translation",
+                                        traits=_MIDPOINT_ROTATION),
     # vel += Δt M⁻¹(f − bias) (explicit gyroscopic term), then x += Δt v_new, q ← q ⊗ exp(Δt ω_B,new): MuJoCo Euler
     "euler": Variant(1, "Genesis Euler: semi-implicit Euler, explicit gyroscopic term, quaternion by the "
                         "exponential map (MuJoCo Euler's scheme)", traits=SYMPLECTIC_EULER_EXPLICIT_GYRO),
@@ -102,10 +106,6 @@ VARIANTS = {
     "implicitfast": Variant(1, "Genesis implicitfast: on a lone free body the rotation by the implicit midpoint "
                                "rule (2nd order, energy-keeping), the translation by semi-implicit Euler",
                             traits=_MIDPOINT_ROTATION),
-    # the same free-body path (the approximation concerns the mass-matrix solve with damping, zero here)
-    "approximate_implicitfast": Variant(1, "Genesis approximate_implicitfast (its default): on a lone free body "
-                                           "implicitfast's midpoint rotation and semi-implicit Euler translation",
-                                        traits=_MIDPOINT_ROTATION),
 }
 
 #: The ``gs.integrator`` member of each variant.
