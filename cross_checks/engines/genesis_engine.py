@@ -109,17 +109,14 @@ ENGINE = "genesis"
 DIST = "genesis-world"
 
 #: The implicit variants on a lone free body: the rotation by the implicit midpoint rule (keeps the kinetic
-#: energy
-#: and |L|² of torque-free tumbling: no rotation drift, second order), the translation by semi-implicit Euler
-#: (keeps
-#: an oscillator's amplitude); forces held over the step (one stage).
+#: energy and |L|² of torque-free tumbling: no rotation drift, second order), the translation by semi-implicit
+#: Euler (keeps an oscillator's amplitude); forces held over the step (one stage).
 _MIDPOINT_ROTATION = Traits(translation_drift=0, rotation_drift="none", rotation_sign=0)
 
 #: The variants, named after ``gs.integrator``, Genesis's default (RigidOptions.integrator) first; orders from
-#: Genesis's RigidOptions documentation ("'Euler' and
-#: 'implicitfast' are consistent with their Mujoco counterpart") and its step
-#: (genesis/engine/solvers/rigid/abd/
-#: forward_dynamics.py ``func_integrate``), read for 1.4.5: every one is first order in the translation.
+#: Genesis's RigidOptions documentation ("'Euler' and 'implicitfast' are consistent with their Mujoco
+#: counterpart") and its step (genesis/engine/solvers/rigid/abd/forward_dynamics.py ``func_integrate``), read
+#: for 1.4.5: every one is first order in the translation.
 VARIANTS = {
     # the same free-body path (the approximation concerns the mass-matrix solve with damping, zero here)
     "approximate_implicitfast": Variant(

@@ -112,9 +112,9 @@ def test_genesis_s_own_defaults_that_the_adapter_overrides(tilted):
 
 def test_unneutralised_genesis_moves_the_body_frame_and_gives_hinges_armature(tilted):
     # Genesis's defaults on the adapter's XML plus a hinged body: the free body's frame moves onto its
-    # principal axes
-    # (align), the hinge gets the default armature 0.1, the free joint none (1.4.5 gives it to revolute and
-    # prismatic joints only: the adapter's default_armature=0 is then belt and braces, pinned here)
+    # principal axes (align), the hinge gets the default armature 0.1, the free joint none (1.4.5 gives it to
+    # revolute and prismatic joints only: the adapter's default_armature=0 is then belt and braces, pinned
+    # here)
     gs = ge.genesis()
     xml = ge.mjcf_text(tilted[0], 0.01).replace(
         "</worldbody>",
@@ -348,8 +348,7 @@ def test_implicit_variants_take_the_implicit_midpoint_rotation_and_the_semi_impl
     tilted, variant
 ):
     # func_midpoint_free_body: I_B (ω1 − ω0)/h = τ_B − ω̄ × I_B ω̄ (body axes), ω̄ = (ω0 + ω1)/2; q1 = q0 ⊗
-    # exp(h ω̄_B);
-    # the COM at the joint origin keeps v1 = v0 + h a, x1 = x0 + h v1
+    # exp(h ω̄_B); the COM at the joint origin keeps v1 = v0 + h a, x1 = x0 + h v1
     sc, _ = tilted
     h, y0 = 0.01, sc.problem.initial_packed()
     y1 = ge.one_step(sc, variant, h, y0[None])[0]
@@ -498,8 +497,7 @@ def test_implicitfast_rotation_is_second_order_above_its_declared_first(tmp_path
 @pytest.mark.slow
 def test_a_real_sweep_forks_its_workers_before_genesis_is_initialised(tmp_path):
     # `rbcheck sweep --jobs 2` in a fresh process: the parent lists and versions the engine without
-    # initialising it,
-    # each forked worker initialises its own Genesis
+    # initialising it, each forked worker initialises its own Genesis
     from tests.helpers.scenarios import TINY
 
     f = tmp_path / "tiny.toml"
