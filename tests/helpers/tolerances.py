@@ -119,3 +119,27 @@ JAXSIM_ORDER_TOL = 0.15
 #: jaxsim:semi_implicit_euler vs reference:course_gyro (the same rotation update) over the first second of a fast
 #: spin (|ω|Δt = 0.2 rad per step): measured 4.3e-13 rad/s of 20 rad/s.
 JAXSIM_SAME_ROTATION = 1e-11
+#: Genesis (genesis-world 1.4.5, float64, fast-math kernels) state round trips at the boundary (quaternion,
+#: ω_W <-> ω_B through the rotation, Genesis's forward pass): a few roundings of unit-size numbers; measured ≤ 4e-16.
+GENESIS_ROUND_TRIP = 2e-15
+#: Genesis's joint-space mass matrix of the free body vs diag(m 1, I_B): assembled from the tensor rotated by the
+#: principal-axes quaternion MuJoCo's compiler computed and back: measured ≤ 1e-15 on unit-size moments.
+GENESIS_MASS_MATRIX = 1e-14
+#: A force and torque read back from one step of 1 ms from rest (m Δv/Δt, I_W Δω/Δt): Δv/Δt divides round-off of
+#: 1e-3-size velocities by 1e-3: ~1e-13.
+GENESIS_WRENCH = 1e-11
+#: One Genesis step vs the hand-derived step of its scheme from the same doubles (a 3×3 solve, a quaternion
+#: exponential): measured ≤ 5e-16; 10 ε.
+GENESIS_HAND_STEP = 2e-15
+#: The implicit midpoint equation's residual I (ω1 − ω0)/Δt − (τ − ω̄ × I ω̄) (N m) after Genesis's Newton iteration,
+#: which stops at 1e-13 relative to the momentum scale (func_midpoint_free_body): 2/Δt |I ω| ~ 1e3 here, so 1e-10.
+GENESIS_MIDPOINT_RESIDUAL = 1e-9
+#: Kinetic energy drift of a torque-free full-tensor tumble over 200 midpoint steps: the Newton tolerance per step
+#: (1e-13) summed: measured ~1e-14; the required bound.
+GENESIS_MIDPOINT_ENERGY_REL = 1e-11
+#: genesis:euler vs mujoco:euler on applied_torque, 200 steps of 0.01 s: the same scheme; Genesis's fast-math
+#: kernels reorder a few roundings: measured 2.3e-15.
+GENESIS_SAME_AS_MUJOCO_EULER = 1e-12
+#: one_step from a recorded state vs the free run's next row: the same step through the boundary conversion
+#: (ω_W -> ω_B -> ω_W): measured ≤ 9e-16.
+GENESIS_REPLAY_REL = 1e-13
