@@ -17,9 +17,9 @@ The run stage (references, runs, metrics, results files) and the report stage ar
 Keys written by ``--json`` (fixed; medians): reference_batched_body_steps_per_s,
 mujoco_best_body_steps_per_s, pybullet_body_steps_per_s, reference_single_us_per_step,
 mujoco_single_us_per_step, mujoco_bare_step_us, drake_single_us_per_step (None without Drake),
-sweep_floor_ratio, sweep_run_floor_ratio, ``batched_adapters`` {ENGINE:VARIANT: body-steps/s through the adapter's
-``simulate_many``} (mujoco:euler and every installed engine that batches), plus the individual measurements and
-``measurements`` {name: {median, min, max, repeats}}.
+sweep_floor_ratio, sweep_run_floor_ratio, ``batched_adapters`` {ENGINE:VARIANT: body-steps/s through the
+adapter's ``simulate_many``} (mujoco:euler and every installed engine that batches), plus the individual
+measurements and ``measurements`` {name: {median, min, max, repeats}}.
 
 Drake (``drake_*``) is measured on one trajectory only, beside MuJoCo on the same trajectory through
 the same adapter interface (``mujoco_adapter_single_us_per_step``): the per-step cost a sweep pays.
@@ -53,7 +53,8 @@ def _times(fn, repeats) -> list:
 def stats(values) -> dict:
     """Median and spread of repeated measurements."""
     v = np.asarray(values, dtype=float)
-    return {"median": float(np.median(v)), "min": float(v.min()), "max": float(v.max()), "repeats": int(v.size)}
+    return {"median": float(np.median(v)), "min": float(v.min()),
+            "max": float(v.max()), "repeats": int(v.size)}
 
 
 def _rates(work, fn, repeats) -> dict:
@@ -246,7 +247,8 @@ def drake_single_us(n_steps, repeats):
     through_adapter = adapter_single_us(drake_engine, "semi_explicit_euler", n_steps, repeats)
     model = drake_engine.DrakeModel(_bench_scenario(), "semi_explicit_euler")
     model.fixed_step(H)
-    model.plant.get_applied_generalized_force_input_port().FixValue(model.context, np.r_[TORQUE_B, 0.0, 0.0, 0.0])
+    model.plant.get_applied_generalized_force_input_port().FixValue(
+        model.context, np.r_[TORQUE_B, 0.0, 0.0, 0.0])
     y0 = _bench_scenario().problem.initial_packed()
 
     def run():
@@ -291,8 +293,8 @@ def pybullet_bodies(n_bodies, n_steps, repeats):
 
 #: The quick bench's sweep: a light scenario and two of the heaviest (long, fine ladders; a DOP853 reference).
 QUICK_SCENARIOS = ("projectile", "tennis_racket", "spring_pendulum")
-#: The engines of "the default sweep" the floor ratio is defined on (what the README's main command runs, which
-#: installs no Drake): every variant of these.
+#: The engines of "the default sweep" the floor ratio is defined on (what the README's main command runs,
+#: which installs no Drake): every variant of these.
 SWEEP_ENGINES = ("reference", "mujoco", "pybullet")
 
 
@@ -307,11 +309,13 @@ def _sweep_once(scenarios, variants, jobs, render) -> dict:
     t = {}
     with tempfile.TemporaryDirectory(prefix="rbcheck-bench-") as tmp:
         old = os.environ.get("RBCHECK_CACHE_DIR")
-        os.environ["RBCHECK_CACHE_DIR"] = os.path.join(tmp, "cache")  # a cold cache; the user's stays untouched
+        # a cold cache; the user's stays untouched
+        os.environ["RBCHECK_CACHE_DIR"] = os.path.join(tmp, "cache")
 
         def finish(staging):
             t["run"] = time.perf_counter() - t0
-            t["steps"] = int(pd.read_csv(os.path.join(staging, "results.csv"), usecols=["steps"])["steps"].sum())
+            t["steps"] = int(pd.read_csv(os.path.join(staging, "results.csv"),
+                                         usecols=["steps"])["steps"].sum())
             if render is not None:
                 r0 = time.perf_counter()
                 render(staging)
@@ -380,7 +384,8 @@ def run_bench(quick: bool = False, repeats: int = 3, render=None, sweep: bool = 
         "quick": quick, "repeats": repeats, "n_bodies": n,
         "versions": {"mujoco": mujoco.__version__, "pybullet": pybullet_engine.version(),
                      "numpy": np.__version__, "python": platform.python_version()},
-        "cpu_count": os.cpu_count(), "load_average": list(os.getloadavg()) if hasattr(os, "getloadavg") else None,
+        "cpu_count": os.cpu_count(),
+        "load_average": list(os.getloadavg()) if hasattr(os, "getloadavg") else None,
         "measurements": m,
         **{k: v["median"] for k, v in m.items()},
     }
@@ -393,8 +398,8 @@ def run_bench(quick: bool = False, repeats: int = 3, render=None, sweep: bool = 
             m[k] = st
         r[k] = None if st is None else st["median"]
     r["mujoco_adapter_single_us_per_step"] = m["mujoco_adapter_single_us_per_step"]["median"]
-    # the engines that batch, through their adapter's simulate_many at the same N (MuJoCo's rollout through its
-    # adapter beside them, the same path measured the same way)
+    # the engines that batch, through their adapter's simulate_many at the same N (MuJoCo's rollout through
+    # its adapter beside them, the same path measured the same way)
     r["batched_adapters"] = {}
     for v in ["mujoco:euler", *batching_variants()]:
         st = adapter_batched(v, n, steps, repeats)
@@ -403,9 +408,12 @@ def run_bench(quick: bool = False, repeats: int = 3, render=None, sweep: bool = 
     r["versions"]["drake"] = _drake_version()
     r["reference_batched_body_steps_per_s"] = max(r["reference_course_body_steps_per_s"],
                                                   r["reference_expmap_gyro_body_steps_per_s"])
-    r["mujoco_best_body_steps_per_s"] = max(r["mujoco_multibody_body_steps_per_s"], r["mujoco_rollout_body_steps_per_s"])
-    r["ratio_reference_batched_vs_mujoco_best"] = r["reference_batched_body_steps_per_s"] / r["mujoco_best_body_steps_per_s"]
-    r["ratio_reference_single_vs_mj_step"] = r["reference_single_us_per_step"] / r["mujoco_single_us_per_step"]
+    r["mujoco_best_body_steps_per_s"] = max(r["mujoco_multibody_body_steps_per_s"],
+                                            r["mujoco_rollout_body_steps_per_s"])
+    r["ratio_reference_batched_vs_mujoco_best"] = (r["reference_batched_body_steps_per_s"]
+                                                   / r["mujoco_best_body_steps_per_s"])
+    r["ratio_reference_single_vs_mj_step"] = (r["reference_single_us_per_step"]
+                                              / r["mujoco_single_us_per_step"])
     r["targets"] = {
         "reference_batched >= 3x mujoco_best": r["ratio_reference_batched_vs_mujoco_best"] >= 3.0,
         "reference_single <= 5x mj_step": r["ratio_reference_single_vs_mj_step"] <= 5.0,
@@ -442,7 +450,8 @@ def format_table(r: dict) -> str:
     ]
     best = r["mujoco_best_body_steps_per_s"]
     out = [f"every row: N = {n} bodies; median of {r['repeats']} repeats, [min, max] beside it"
-           + (f"; load average {r['load_average'][0]:.1f} on {r['cpu_count']} cores" if r.get("load_average") else ""),
+           + (f"; load average {r['load_average'][0]:.1f} on {r['cpu_count']} cores"
+              if r.get("load_average") else ""),
            f"{'measurement':<42} {'body-steps/s':>12} {'[min, max]':>22} {'vs MuJoCo best':>15}"]
     out += [f"{name:<42} {m[k]['median']:>12.3e} {_spread(m[k]):>22} {m[k]['median'] / best:>14.2f}x"
             for name, k in rows]
@@ -456,10 +465,11 @@ def format_table(r: dict) -> str:
                f"(ratio {r['ratio_reference_single_vs_mj_step']:.1f}x); bare mj_step "
                f"{r['mujoco_bare_step_us']:.3f} us {_spread(m['mujoco_bare_step_us'])}")
     d = r.get("drake_single_us_per_step")
-    out.append(f"single trajectory through the adapters (every step recorded, body torque applied as each adapter "
-               f"does): mujoco:euler {r['mujoco_adapter_single_us_per_step']:.2f} us/step, "
-               + (f"drake:semi_explicit_euler {d:.2f} us/step ({d / r['mujoco_adapter_single_us_per_step']:.1f}x); "
-                  f"Drake with a constant applied force {r['drake_constant_force_us_per_step']:.2f} us/step"
+    out.append("single trajectory through the adapters (every step recorded, body torque applied as "
+               f"each adapter does): mujoco:euler {r['mujoco_adapter_single_us_per_step']:.2f} us/step, "
+               + (f"drake:semi_explicit_euler {d:.2f} us/step "
+                  f"({d / r['mujoco_adapter_single_us_per_step']:.1f}x); Drake with a constant applied "
+                  f"force {r['drake_constant_force_us_per_step']:.2f} us/step"
                   if d is not None else "Drake not installed (pip install 'rbcheck[drake]')"))
     if "sweep" in r:
         out += ["", *_sweep_lines(r)]
@@ -473,15 +483,16 @@ def _sweep_lines(r: dict) -> list:
     what = "the catalog" if len(sw["scenarios"]) > len(QUICK_SCENARIOS) else ", ".join(sw["scenarios"])
     rep = "report" if sw["report_included"] else "no report drawn"
     return [
-        f"cold sweep of {what} x {len(sw['variants'])} variants ({sw['runs']} runs, {sw['engine_steps']:,} engine "
-        f"steps) on {sw['cores']} cores, median of {sw['run_s']['repeats']}:",
+        f"cold sweep of {what} x {len(sw['variants'])} variants ({sw['runs']} runs, {sw['engine_steps']:,} "
+        f"engine steps) on {sw['cores']} cores, median of {sw['run_s']['repeats']}:",
         f"  floor = steps x bare mj_step / cores = {sw['engine_steps']:,} x {sw['bare_mj_step_us']:.3f} us / "
         f"{sw['cores']} = {sw['floor_s']:.2f} s",
-        f"  run stage (references without Drake's second one, runs, metrics, results files) {sw['run_s']['median']:.1f} s "
-        f"{_spread(sw['run_s'], '.1f')}; inside the engines' simulate {sw['s_in_simulate']['median']:.1f} s "
-        f"summed over workers",
+        "  run stage (references without Drake's second one, runs, metrics, results "
+        f"files) {sw['run_s']['median']:.1f} s {_spread(sw['run_s'], '.1f')}; inside the "
+        f"engines' simulate {sw['s_in_simulate']['median']:.1f} s summed over workers",
         f"  {rep} {sw['report_s']['median']:.1f} s {_spread(sw['report_s'], '.1f')}",
-        f"  sweep / floor = {r['sweep_floor_ratio']:.1f}x (run stage alone {r['sweep_run_floor_ratio']:.1f}x)",
+        f"  sweep / floor = {r['sweep_floor_ratio']:.1f}x "
+        f"(run stage alone {r['sweep_run_floor_ratio']:.1f}x)",
     ]
 
 

@@ -35,7 +35,7 @@ class Mutant:
     bug: str
     exposed_by: tuple
     apply: Callable  # apply(monkeypatch)
-    adapter: object = None   # a reference mutant's MutantAdapter (its knob and step; tests/helpers/float32.py)
+    adapter: object = None  # a reference mutant's MutantAdapter (its knob and step; tests/helpers/float32.py)
 
     @property
     def swept(self) -> str:

@@ -90,7 +90,7 @@ def fit_convergence(dt_s, errors, floors=None, statuses=None) -> ConvergenceFit:
     if any(math.isnan(h) for h in dt0):
         order_idx = np.argsort(-np.asarray(dt0), kind="stable").tolist()   # NaN last, as NumPy sorts it
     else:
-        order_idx = sorted(range(K), key=lambda i: -dt0[i])                 # stable, like argsort(kind="stable")
+        order_idx = sorted(range(K), key=lambda i: -dt0[i])   # stable, like argsort(kind="stable")
     dt, e, fl, st = ([v[i] for i in order_idx] for v in (dt0, e0, fl0, st0))
     pw = pairwise_orders(dt, e)
     fitted = [False] * K
@@ -102,8 +102,8 @@ def fit_convergence(dt_s, errors, floors=None, statuses=None) -> ConvergenceFit:
     if bad:
         notes.append("; ".join(bad))
     if sum(ok) < 2:
-        verdict = "diverged" if any(s == "diverged" for s in st) else ("failed" if any(s == "failed" for s in st)
-                                                                       else "insufficient")
+        verdict = ("diverged" if any(s == "diverged" for s in st)
+                   else ("failed" if any(s == "failed" for s in st) else "insufficient"))
         return ConvergenceFit(order=None, fitted=fitted, verdict=verdict, note="; ".join(notes), **res)
 
     idx_ok = [i for i in range(K) if ok[i]]
@@ -112,7 +112,8 @@ def fit_convergence(dt_s, errors, floors=None, statuses=None) -> ConvergenceFit:
     if len(above) < 2:
         above = _lower_bound_points(e, fl, idx_ok, above)
         if above is None:
-            return ConvergenceFit(order=None, fitted=fitted, verdict="at_roundoff", note="; ".join(notes), **res)
+            return ConvergenceFit(order=None, fitted=fitted, verdict="at_roundoff",
+                                  note="; ".join(notes), **res)
         lower_bound = True
         notes.append(f"fewer than two errors {tol.RESOLVED_ABOVE_FLOOR:g}× above their floors: fitted on the "
                      f"{len(above)} above it, the order is a lower bound")
@@ -126,8 +127,8 @@ def fit_convergence(dt_s, errors, floors=None, statuses=None) -> ConvergenceFit:
     verdict = "converges" if order >= tol.CONVERGES_MIN_ORDER and shrinking else "does_not_converge"
     if (len(pw_use) >= 2 and all(p is not None for p in pw_use) and pw_use[-1] - pw_use[0] >= 0.2
             and all(b > a - 0.05 for a, b in zip(pw_use, pw_use[1:]))):
-        notes.append(f"pairwise orders still rising towards the finest Δt ({pw_use[0]:.2f} → {pw_use[-1]:.2f}): "
-                     "pre-asymptotic on this ladder")
+        notes.append("pairwise orders still rising towards the finest Δt "
+                     f"({pw_use[0]:.2f} → {pw_use[-1]:.2f}): pre-asymptotic on this ladder")
     return ConvergenceFit(order=order, fitted=fitted, verdict=verdict, note="; ".join(notes),
                           order_is_lower_bound=lower_bound, **res)
 
@@ -139,8 +140,8 @@ def _drop_roundoff_tail(dt, e, fl, idx_ok, notes) -> list:
     dependent physics happens to match). Returns the indices kept (coarse to fine)."""
     for k, i in enumerate(idx_ok):
         if all(e[j] <= tol.RESOLVED_ABOVE_FLOOR * fl[j] for j in idx_ok[k:]):
-            notes.append(f"{len(idx_ok) - k} point(s) within {tol.RESOLVED_ABOVE_FLOOR:g}× the round-off floor "
-                         f"dropped (Δt ≤ {dt[i]:g} s)")
+            notes.append(f"{len(idx_ok) - k} point(s) within {tol.RESOLVED_ABOVE_FLOOR:g}× "
+                         f"the round-off floor dropped (Δt ≤ {dt[i]:g} s)")
             return idx_ok[:k]
     return list(idx_ok)
 
@@ -154,7 +155,8 @@ def _drop_amplified_roundoff(dt, e, fl, above, notes) -> list:
     m = min(e[i] for i in above)
     i_min = min(above, key=lambda i: e[i])
     finer = [i for i in above if i > i_min]
-    if not (m <= tol.AMPLIFIED_ROUNDOFF_FACTOR * fl[i_min] and all(e[i] <= tol.ROUNDOFF_NOISE_FACTOR * m for i in finer)):
+    if not (m <= tol.AMPLIFIED_ROUNDOFF_FACTOR * fl[i_min]
+            and all(e[i] <= tol.ROUNDOFF_NOISE_FACTOR * m for i in finer)):
         return above
     keep = list(above)
     while keep and e[keep[-1]] <= tol.ROUNDOFF_NOISE_FACTOR * m:
@@ -195,7 +197,8 @@ def _drop_pre_asymptotic_coarsest(dt, e, above, notes) -> list:
     rest = [p for p in pw_use[1:] if p is not None]
     if pw_use[0] is not None and rest and all(p > 0 for p in rest) \
             and abs(pw_use[0] - _median(rest)) > tol.PRE_ASYMPTOTIC_ORDER_DEV:
-        notes.append(f"coarsest Δt = {dt[use[0]]:g} s pre-asymptotic (pairwise order {pw_use[0]:.2f}), dropped")
+        notes.append(f"coarsest Δt = {dt[use[0]]:g} s pre-asymptotic "
+                     f"(pairwise order {pw_use[0]:.2f}), dropped")
         return use[1:]
     return use
 
@@ -221,19 +224,20 @@ def measured_pre_asymptotic(fit: ConvergenceFit, expected_order) -> str:
         return ""
     first, last = abs(pw[0] - expected_order), abs(pw[-1] - expected_order)
     if last <= tol.SWEEP_ORDER_TOL and last < first:
-        return (f"pre-asymptotic (measured): fitted order {fit.order:.2f} over the ladder, but the finest pair "
-                f"already shows {pw[-1]:.2f} (expected {expected_order:g}) and the coarser pairs approach it "
-                f"({', '.join(f'{p:.2f}' for p in pw)}); no claim on this ladder")
+        return (f"pre-asymptotic (measured): fitted order {fit.order:.2f} over the ladder, but the "
+                f"finest pair already shows {pw[-1]:.2f} (expected {expected_order:g}) and the coarser "
+                f"pairs approach it ({', '.join(f'{p:.2f}' for p in pw)}); no claim on this ladder")
     return ""
 
 
 def order_within_floors(fit: ConvergenceFit):
     """The largest least-squares order the measured errors allow when each may be off by up to its round-off
     floor — over the fitted points, and over those with the finer ones the fit dropped as round-off but that
-    are still above their floor (the larger of the two): the errors at Δt above the ladder's mean log Δt raised by their floors, those below it
-    lowered (the slope grows with the first and falls with the second). Where two or more dropped finer
-    rungs are flat (within a factor 2) above the floor estimate, their level is each rung's floor instead:
-    round-off, measured. None when fewer than two points stand above their floors (or the fit has no order).
+    are still above their floor (the larger of the two): the errors at Δt above the ladder's mean log Δt
+    raised by their floors, those below it lowered (the slope grows with the first and falls with the second).
+    Where two or more dropped finer rungs are flat (within a factor 2) above the floor estimate, their level
+    is each rung's floor instead: round-off, measured. None when fewer than two points stand above their
+    floors (or the fit has no order).
 
     A claim that the order is too low holds only if this order is too low as well: a floor generous enough to
     drop the finest rung (an engine's lever-arm round-off bound, fuzz.properties) otherwise left the order to
@@ -282,12 +286,14 @@ def compare_with_expectation(verdict: str, order, expected, order_is_lower_bound
     if ev is None:
         return None, "no expectation"
     if ev == "pre_asymptotic":
-        seen = f"{verdict.replace('_', ' ')}" + (f", fitted order {fmt_order(order)}" if order is not None else "")
+        seen = f"{verdict.replace('_', ' ')}" + (f", fitted order {fmt_order(order)}"
+                                                 if order is not None else "")
         return None, f"no claim on this ladder (pre-asymptotic; {seen})"
     if verdict == "at_roundoff":
         prec = getattr(expected, "precision", "float64")
         exact = "exact to round-off" if prec == "float64" else f"within {prec} round-off on every rung"
-        return (ev == "converges"), (exact if ev == "converges" else f"{exact} although non-convergence was expected")
+        return (ev == "converges"), (exact if ev == "converges"
+                                     else f"{exact} although non-convergence was expected")
     if verdict == "converges":
         if ev != "converges":
             return False, f"converges (order {order:.2f}) although non-convergence was expected"
@@ -306,7 +312,8 @@ def compare_with_expectation(verdict: str, order, expected, order_is_lower_bound
             return True, "does not converge, as expected"
         if order_is_lower_bound:
             return None, "the finer errors are near the round-off floor: inconclusive"
-        return False, ("does not converge" + (f" (fitted order {fmt_order(order)})" if order is not None else "")
+        return False, ("does not converge"
+                       + (f" (fitted order {fmt_order(order)})" if order is not None else "")
                        + (f", expected order {eo:g}" if eo is not None else ""))
     return False, verdict.replace("_", " ")
 

@@ -35,17 +35,16 @@ __all__ = ["energy_drift_bound", "characteristic_rate_sq", "QUANTITIES",
            "DEFAULT_TRAITS", "Traits", "traits", "EQUIVALENT_PAIRS", "pair_is_same_arithmetic", "Expectation",
            "expectation", "expected_order", "forces_change_within_step", "precision", "machine_epsilon",
            "judged_ladder_s",
-           "nominal_order", "gyroscopic_term_matters", "rotation_drives_translation", "translation_drives_rotation",
-           "memoized"]
+           "nominal_order", "gyroscopic_term_matters", "rotation_drives_translation",
+           "translation_drives_rotation", "memoized"]
 
 
 #: A variant that declares no traits: engines.base.DEFAULT_TRAITS (the most cautious choice).
 
 
 def traits(variant: str) -> Traits:
-    """The traits ``ENGINE:VARIANT`` declares (Variant.traits), or those of the variant it declares it imitates
-    (Variant.imitates);
-    DEFAULT_TRAITS for one this module does not know."""
+    """The traits ``ENGINE:VARIANT`` declares (Variant.traits), or those of the variant it declares it
+    imitates (Variant.imitates); DEFAULT_TRAITS for one this module does not know."""
     return declared_traits(variant) or declared_traits(declared_imitation(variant)) or DEFAULT_TRAITS
 
 
@@ -58,9 +57,9 @@ EQUIVALENT_PAIRS = (
      "for a single free body without joints or contacts the two implicit integrators solve the same "
      "linear system (docs/engine_conventions.md: 1e-13 apart)"),
     ("mujoco:implicitfast", "mujoco:discrete",
-     "without joints, constraints, damping or stiffness, MuJoCo's discrete integrator (the constraint solve and "
-     "the implicit velocity update in the metric M + hD + h²K) takes implicitfast's step "
-     "(docs/engine_conventions.md: bit-identical on the catalog)"),
+     "without joints, constraints, damping or stiffness, MuJoCo's discrete integrator (the "
+     "constraint solve and the implicit velocity update in the metric M + hD + h²K) takes "
+     "implicitfast's step (docs/engine_conventions.md: bit-identical on the catalog)"),
     ("mujoco:euler", "pybullet:multibody",
      "PyBullet's multibody mode with damping off integrates a free body exactly like MuJoCo Euler "
      "(docs/engine_conventions.md: 2.3e-14 rad apart)"),
@@ -115,7 +114,8 @@ def precision(variant: str) -> str:
 
 
 def machine_epsilon(variant: str) -> float:
-    """ε of ``variant``'s precision (tolerances.MACHINE_EPSILON): the unit of every round-off floor of its runs."""
+    """ε of ``variant``'s precision (tolerances.MACHINE_EPSILON): the unit of every round-off floor of its
+    runs."""
     from cross_checks.core import tolerances as tol
     return tol.MACHINE_EPSILON[precision(variant)]
 
@@ -146,14 +146,16 @@ def judged_ladder_s(scenario, variant: str) -> tuple:
 
     def resolved(h):
         n = T / h
-        return (w * h) ** p * w * T / math.factorial(round(p) + 1) >= tol.RESOLVED_ABOVE_FLOOR * eps * (n + math.sqrt(n))
+        return ((w * h) ** p * w * T / math.factorial(round(p) + 1)
+                >= tol.RESOLVED_ABOVE_FLOOR * eps * (n + math.sqrt(n)))
 
     for _ in range(tol.PRECISION_LADDER_MAX_EXTRA):
         if sum(resolved(h) for h in dts) >= tol.PRECISION_LADDER_MIN_RESOLVED:
             break
         n = round(T / dts[0]) // 2
         h = T / n if n else math.inf
-        if w * h > (p + 1.0) * tol.PRECISION_LADDER_STEP_ANGLE_PER_ORDER_RAD or n < tol.PRECISION_LADDER_MIN_STEPS:
+        if (w * h > (p + 1.0) * tol.PRECISION_LADDER_STEP_ANGLE_PER_ORDER_RAD
+                or n < tol.PRECISION_LADDER_MIN_STEPS):
             break
         dts.insert(0, h)
     return tuple(dts)
@@ -212,7 +214,8 @@ def gyroscopic_term_matters(scenario) -> bool:
     ω lies along a principal axis (then ω stays there). Any torque on an anisotropic body moves ω off
     the principal axes sooner or later.
     """
-    return _memo(("gyroscopic_term_matters", id(scenario)), (scenario,), lambda: _gyroscopic_term_matters(scenario))
+    return _memo(("gyroscopic_term_matters", id(scenario)), (scenario,),
+                 lambda: _gyroscopic_term_matters(scenario))
 
 
 def _gyroscopic_term_matters(scenario) -> bool:
@@ -244,7 +247,8 @@ def characteristic_rate_sq(scenario) -> float:
     p = scenario.problem
     m, I_min = p.body.mass_kg, float(np.linalg.eigvalsh(p.body.inertia_B)[0])
     k_v, k_w = p.forces.decay_rates_per_s()
-    rates = [float(np.dot(p.initial.w_W, p.initial.w_W)), (p.forces.linear_drag_N_s_per_m / m) ** 2, k_v ** 2, k_w ** 2]
+    rates = [float(np.dot(p.initial.w_W, p.initial.w_W)),
+             (p.forces.linear_drag_N_s_per_m / m) ** 2, k_v ** 2, k_w ** 2]
     for sp in p.forces.springs:
         rates.append(sp.stiffness_N_per_m / m)
         rates.append(sp.stiffness_N_per_m * float(np.dot(sp.attach_B, sp.attach_B)) / I_min)
@@ -271,7 +275,8 @@ def expectation(scenario, variant: str, quantity: str, mode: str = "free_running
 def _expectation(scenario, variant, quantity, mode, physics, measure_physics) -> Expectation:
     if mode not in ("free_running", "one_step"):
         raise ValueError(f"unknown mode {mode!r}; modes: free_running, one_step")
-    free = _memo(("free_running", id(scenario), variant, quantity, id(physics), measure_physics), (scenario, physics),
+    free = _memo(("free_running", id(scenario), variant, quantity, id(physics), measure_physics),
+                 (scenario, physics),
                  lambda: _free_running(scenario, variant, quantity, physics, measure_physics))
     if mode == "free_running":
         return free
@@ -282,12 +287,13 @@ def _expectation(scenario, variant, quantity, mode, physics, measure_physics) ->
         return Expectation("converges", None, f"no nominal order is recorded for {variant}")
     if free.order == 1.0 and p > 1.0:
         return Expectation("converges", 2.0, free.reason + ": one step has an O(Δt²) local error")
-    return Expectation("converges", p + 1.0, f"one step of an order-{p:g} scheme has an O(Δt^{p + 1:g}) local error")
+    return Expectation("converges", p + 1.0,
+                       f"one step of an order-{p:g} scheme has an O(Δt^{p + 1:g}) local error")
 
 
-_HELD_FORCES_REASON = ("{variant} is an order-{p:g} scheme, but its engine holds the applied force and torque over "
-                       "the stages of a step; here they change within a step (they depend on the state, or the "
-                       "velocities decay), and that zero-order hold makes the step first order")
+_HELD_FORCES_REASON = ("{variant} is an order-{p:g} scheme, but its engine holds the applied force and "
+                       "torque over the stages of a step; here they change within a step (they depend on the "
+                       "state, or the velocities decay), and that zero-order hold makes the step first order")
 
 
 def forces_change_within_step(scenario, tr: Traits) -> bool:
@@ -297,7 +303,8 @@ def forces_change_within_step(scenario, tr: Traits) -> bool:
     return tr.forces_held and (fm.state_dependent or fm.has_decay)
 
 
-def _free_running(scenario, variant: str, quantity: str, physics, measure_physics: bool = True) -> Expectation:
+def _free_running(scenario, variant: str, quantity: str, physics,
+                  measure_physics: bool = True) -> Expectation:
     if quantity not in QUANTITIES:
         raise ValueError(f"unknown quantity {quantity!r}; quantities: {', '.join(QUANTITIES)}")
     tr = traits(variant)
@@ -339,11 +346,11 @@ def _drift_parts(scenario, tr: Traits, quantity: str, phys):
         if kind == "whole_state":
             # the drift perturbs the turning part of ω (a share a of its scale); the motion amplifies it
             amp = float(phys.amplification.get(quantity, 1.0)) * r.world_rotation_amplitude
-            parts.append(("the rotation (ω_W turning with the body)", r.world_rotation ** 2 + r.decay_w ** 2, signs,
-                          amp, True))
+            parts.append(("the rotation (ω_W turning with the body)", r.world_rotation ** 2 + r.decay_w ** 2,
+                          signs, amp, True))
         elif kind == "body":
-            parts.append(("the rotation (the body-frame ω: the polhode)", r.body_rotation ** 2 + r.decay_w ** 2,
-                          signs, 1.0, False))
+            parts.append(("the rotation (the body-frame ω: the polhode)",
+                          r.body_rotation ** 2 + r.decay_w ** 2, signs, 1.0, False))
         else:
             parts.append(("the rotation", r.decay_w ** 2, both, 1.0, False))
     return parts
@@ -368,14 +375,14 @@ def _pre_asymptotic_reason(scenario, variant, quantity, tr: Traits, physics) -> 
         sep = phys.separatrix_proximity
         near = (f"; the body is near the intermediate-axis separatrix (δ = {sep:.2g})"
                 if sep is not None and abs(sep) < 1e-2 and saturate else "")
-        amp_txt = (f"; the motion amplifies that perturbation {phys.amplification.get(quantity, 1.0):.3g}× by the "
-                   "final time (measured) until it saturates" if saturate else "")
+        amp_txt = (f"; the motion amplifies that perturbation {phys.amplification.get(quantity, 1.0):.3g}× "
+                   "by the final time (measured) until it saturates" if saturate else "")
         how = {1: "grows it by e^(+χ)", -1: "damps it by e^(−χ)"}.get(signs[0]) if len(signs) == 1 else None
-        return (f"pre-asymptotic on this ladder: a first-order step that does not keep the amplitude of {what} "
-                f"{how or 'grows or damps it by e^(±χ)'} over the run, χ = ω_c²ΔtT/2 from {chis[0]:.2g} "
-                f"(coarsest Δt) to {chis[-1]:.2g} (finest), ω_c = {math.sqrt(rate_sq):.3g} rad/s measured on the "
-                f"reference{amp_txt}{near}; that drift alone would fit order {model:.2f} here, beyond "
-                f"1 ± {tol.AMPLITUDE_MODEL_ORDER_DEV:g}")
+        return ("pre-asymptotic on this ladder: a first-order step that does not keep the amplitude of "
+                f"{what} {how or 'grows or damps it by e^(±χ)'} over the run, χ = ω_c²ΔtT/2 from "
+                f"{chis[0]:.2g} (coarsest Δt) to {chis[-1]:.2g} (finest), ω_c = {math.sqrt(rate_sq):.3g} "
+                f"rad/s measured on the reference{amp_txt}{near}; that drift alone would fit order "
+                f"{model:.2f} here, beyond 1 ± {tol.AMPLITUDE_MODEL_ORDER_DEV:g}")
     return ""
 
 

@@ -29,8 +29,9 @@ from reference_sim.integrators import rhs
 from reference_sim.quaternion import geodesic_angle, quat_exp, quat_mul
 from reference_sim.state import Q, W
 
-__all__ = ["flow_rhs", "rk4_flow", "exact_flow", "FlowResult", "majorant", "motion_rate", "spring_turn_rate", "quantity_distance",
-           "distances", "local_allowances", "Allowances", "error_growth", "conservation_allowance"]
+__all__ = ["flow_rhs", "rk4_flow", "exact_flow", "FlowResult", "majorant", "motion_rate", "spring_turn_rate",
+           "quantity_distance", "distances", "local_allowances", "Allowances", "error_growth",
+           "conservation_allowance"]
 
 
 def flow_rhs(scenario):
@@ -108,7 +109,8 @@ def spring_turn_rate(problem, y) -> np.ndarray:
         return out
     q = y[..., Q]
     n = np.linalg.norm(q, axis=-1, keepdims=True)
-    R_WB = matrix_from_quat(np.divide(q, n, out=np.tile([1.0, 0.0, 0.0, 0.0], q.shape[:-1] + (1,)), where=n > 0))
+    R_WB = matrix_from_quat(np.divide(q, n, out=np.tile([1.0, 0.0, 0.0, 0.0], q.shape[:-1] + (1,)),
+                                      where=n > 0))
     for sp in springs:
         r_W = np.einsum("...ij,j->...i", R_WB, np.asarray(sp.attach_B, dtype=float))
         d_W = y[..., 0:3] + r_W - np.asarray(sp.anchor_W, dtype=float)
@@ -166,10 +168,10 @@ def exact_flow(scenario, y0, span_s, max_doublings: int = 4, allowance_fn=None, 
     """Advance each row of ``y0`` (N, 13) by the exact flow over ``span_s`` (N,) seconds.
 
     RK4 with S and 2S substeps (S from tol.CHECK_FLOW_RATE_PER_SUBSTEP); the 2S result is kept and
-    ``|y_S − y_2S| / 15`` estimates its truncation error. Rows whose h L exceeds CHECK_MAX_HL (``h =
-    span / span_steps``) are not decisive, so S resolves L at most up to that. With ``allowance_fn(M2, rate) ->
-    {quantity: (N,)}``, S doubles (at most ``max_doublings`` times) until every estimate is below
-    tol.CHECK_FLOW_ERROR_FRACTION of its allowance or at the flow's own round-off.
+    ``|y_S − y_2S| / 15`` estimates its truncation error. Rows whose h L exceeds CHECK_MAX_HL
+    (``h = span / span_steps``) are not decisive, so S resolves L at most up to that. With
+    ``allowance_fn(M2, rate) -> {quantity: (N,)}``, S doubles (at most ``max_doublings`` times) until every
+    estimate is below tol.CHECK_FLOW_ERROR_FRACTION of its allowance or at the flow's own round-off.
     """
     F = flow_rhs(scenario)
     span = np.asarray(span_s, dtype=float)
@@ -182,14 +184,16 @@ def exact_flow(scenario, y0, span_s, max_doublings: int = 4, allowance_fn=None, 
     for _ in range(max_doublings + 1):
         y_S = rk4_flow(F, y0, span, S)
         y_2S, y_mid = rk4_flow(F, y0, span, 2 * S, mid=True)
-        roundoff = {q: 2 * S * tol.CHECK_ROUNDINGS_PER_STEP * eps * np.maximum(_magnitude(y0, q), _magnitude(y_2S, q))
+        roundoff = {q: 2 * S * tol.CHECK_ROUNDINGS_PER_STEP * eps
+                       * np.maximum(_magnitude(y0, q), _magnitude(y_2S, q))
                     for q in QUANTITIES}
         trunc = {q: quantity_distance(y_S, y_2S, q) / 15.0 for q in QUANTITIES}
         M2 = majorant(F, y0, rate)
         for y_at in (y_mid, y_2S):
             m = majorant(F, y_at, rate)
             M2 = {q: np.fmax(M2[q], m[q]) for q in QUANTITIES}
-        res = FlowResult(y_2S, {q: np.fmax(trunc[q], roundoff[q]) for q in QUANTITIES}, M2, rate, 2 * S, roundoff)
+        res = FlowResult(y_2S, {q: np.fmax(trunc[q], roundoff[q]) for q in QUANTITIES},
+                         M2, rate, 2 * S, roundoff)
         if allowance_fn is None:
             return res
         allow = allowance_fn(M2, rate)
@@ -229,7 +233,8 @@ def local_allowances(inp, y_start, M2, rate, flow_roundoff=None, y_end=None) -> 
     u = inp.unit_roundoff
     arith, print_ = {}, {}
     for q in BLOCKS:
-        mag = _magnitude(y_start, q) if y_end is None else np.fmax(_magnitude(y_start, q), _magnitude(y_end, q))
+        mag = (_magnitude(y_start, q) if y_end is None
+               else np.fmax(_magnitude(y_start, q), _magnitude(y_end, q)))
         arith[q] = inp.span_steps * tol.CHECK_ROUNDINGS_PER_STEP * u * mag
         if flow_roundoff is not None:
             arith[q] = arith[q] + flow_roundoff[q]
@@ -270,7 +275,8 @@ def error_growth(scenario, t_s, scales) -> dict:
     y0 = scenario.problem.initial_packed()
     t_s = np.asarray(t_s, dtype=float)
     T = float(t_s[-1]) if len(t_s) else 0.0
-    out = {(p, q): np.ones(len(t_s)) if p == q else np.zeros(len(t_s)) for p in QUANTITIES for q in QUANTITIES}
+    out = {(p, q): np.ones(len(t_s)) if p == q else np.zeros(len(t_s))
+           for p in QUANTITIES for q in QUANTITIES}
     if T <= 0.0:
         return out
     ys, sizes = _perturbed_initial_states(y0, scales)
@@ -355,7 +361,8 @@ class _RunRows:
     print_floor: dict = field(default_factory=dict)
 
 
-def run_local_defect(scenario, y, dt_s: float, max_rows: int | None = None, unit_roundoff: float = 2.0 ** -53) -> tuple:
+def run_local_defect(scenario, y, dt_s: float, max_rows: int | None = None,
+                     unit_roundoff: float = 2.0 ** -53) -> tuple:
     """The one-step defect of a run recorded at every step (``y`` (N + 1, 13), float64): from each recorded
     state the exact flow over Δt is compared with the next row, over what a consistent scheme of order ≥ 1
     may leave there (:func:`local_allowances`) — ``rbcheck check``'s local evidence, for a sweep's own runs.

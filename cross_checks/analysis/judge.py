@@ -4,13 +4,15 @@ the variant is expected to do (its declared order and traits against the scenari
 
 Every entry point decides a ladder's verdict here and nowhere else: the sweep's convergence records
 (:mod:`cross_checks.sweep.assemble`, and through it ``assert_engine``), the fuzz's order properties
-(:mod:`cross_checks.fuzz.properties`) and ``rbcheck check``'s ladder mode (:mod:`cross_checks.gates.check.ladder`).
-tests/cross_checks/analysis/test_judge.py draws ladders and asserts that all of them say the same.
+(:mod:`cross_checks.fuzz.properties`) and ``rbcheck check``'s ladder mode
+(:mod:`cross_checks.gates.check.ladder`). tests/cross_checks/analysis/test_judge.py draws ladders and asserts
+that all of them say the same.
 
 The rules, in order (each a measured reason, never a tolerance widened):
 
-1. The fit (:func:`~cross_checks.analysis.convergence.fit_convergence`) over the points resolved above their
-   floors, compared with the expectation (:func:`~cross_checks.analysis.convergence.compare_with_expectation`).
+1. The fit (:func:`~cross_checks.analysis.convergence.fit_convergence`) over the points resolved above
+   their floors, compared with the expectation
+   (:func:`~cross_checks.analysis.convergence.compare_with_expectation`).
 2. An expectation that makes no claim on this ladder (``pre_asymptotic``: the variant's amplitude drift
    would bend a first-order fit) turns a fitted converges / does_not_converge into ``pre_asymptotic``.
 3. A too-low order whose finest pair already shows the expected order while the coarser pairs approach it is
@@ -68,9 +70,9 @@ class LocalEvidence:
         return self.ratio > 1.0   # above the allowance of every consistent scheme (analysis.flow)
 
     def sentence(self) -> str:
-        return (f"its own steps are not the scenario's equations: from its recorded states, one step leaves "
-                f"{self.ratio:.3g}× what a consistent scheme of order ≥ 1 leaves in {self.quantity.replace('_', ' ')} "
-                f"(Δt = {self.dt_s:g} s)")
+        return ("its own steps are not the scenario's equations: from its recorded states, "
+                f"one step leaves {self.ratio:.3g}× what a consistent scheme of order ≥ 1 "
+                f"leaves in {self.quantity.replace('_', ' ')} (Δt = {self.dt_s:g} s)")
 
 
 @dataclass(frozen=True)
@@ -97,7 +99,8 @@ def judge_ladder(dts, errors, floors, statuses, exp, local: LocalEvidence | None
     return judge_fit(fit_convergence(dts, errors, floors, statuses), exp, local, quantity)
 
 
-def judge_fit(fit: ConvergenceFit, exp, local: LocalEvidence | None = None, quantity: str | None = None) -> Judgement:
+def judge_fit(fit: ConvergenceFit, exp, local: LocalEvidence | None = None,
+              quantity: str | None = None) -> Judgement:
     """Judge a fit against the expectation ``exp`` (the module's rules, in order); no excuse where ``local``
     says the runs' equations are wrong. A variant of a precision other than float64 says which rungs were
     judged above its round-off floors."""
@@ -122,9 +125,11 @@ def _judged(fit: ConvergenceFit, exp, local: LocalEvidence | None, quantity: str
         return Judgement(fit, fit.verdict, False, f"no round-off excuse (every rung within its floor): "
                          f"{local.sentence()}", True)
     p = local.declared_order
-    if fit.verdict == "converges" and p is not None and fit.order is not None and fit.order >= p - tol.SWEEP_ORDER_TOL:
+    if (fit.verdict == "converges" and p is not None and fit.order is not None
+            and fit.order >= p - tol.SWEEP_ORDER_TOL):
         return j   # this quantity shows the declared order: nothing here needed an excuse
-    fitted = f"fitted order {fmt_order(fit.order)}" if fit.order is not None else fit.verdict.replace("_", " ")
+    fitted = (f"fitted order {fmt_order(fit.order)}" if fit.order is not None
+              else fit.verdict.replace("_", " "))
     return Judgement(fit, fit.verdict, False, f"no pre-asymptotic excuse ({fitted}"
                      + (f", declared order {p:g}" if p is not None else "") + f"): {local.sentence()}", True)
 
@@ -147,12 +152,14 @@ def _judge(fit: ConvergenceFit, exp) -> Judgement:
         best = order_within_floors(fit)
         if best is not None and best >= exp.order - tol.SWEEP_ORDER_TOL:
             return Judgement(fit, verdict, None,
-                             f"order {fmt_order(fit.order)}, but the errors allow order {fmt_order(best)} within their "
-                             f"round-off floors (expected {exp.order:g}): no claim on this ladder", False)
+                             f"order {fmt_order(fit.order)}, but the errors allow order "
+                             f"{fmt_order(best)} within their round-off floors (expected {exp.order:g}): "
+                             "no claim on this ladder", False)
     if two_term_consistent(fit.dt_s, fit.errors, fit.floors, exp.order):
         return Judgement(fit, verdict, None,
                          f"{phrase}, but the three rungs fit a hᵖ + b hᵖ⁺¹ (p = {exp.order:g}) within their "
-                         "round-off floors: the next term of the error series, no claim on this ladder", False)
+                         "round-off floors: the next term of the error series, no claim on this ladder",
+                         False)
     return Judgement(fit, verdict, False, phrase, True)
 
 

@@ -71,7 +71,8 @@ def conserved(forces) -> dict:
         "angular_momentum": [(not fm.torque_free, "torques act about the COM"),
                              (fm.angular_velocity_decay != 1.0, "angular velocity decay")],
         "linear_momentum": [(gravity, "gravity"), (bool(fm.springs), "springs"), (drag, "linear drag"),
-                            (bool(fm.point_forces), "applied forces"), (fm.velocity_decay != 1.0, "velocity decay")],
+                            (bool(fm.point_forces), "applied forces"),
+                            (fm.velocity_decay != 1.0, "velocity decay")],
     }
     out = {}
     for name, found in causes.items():

@@ -106,7 +106,8 @@ def motion_rates(problem, y) -> MotionRates:
     return MotionRates(translation=_rate(y[:, 3:6], d[:, 3:6]), body_rotation=_rate(w_B, dw_B),
                        world_rotation=_rate(w_W, d[:, 10:13]),
                        drag=fm.linear_drag_N_s_per_m / problem.body.mass_kg, decay_v=k_v, decay_w=k_w,
-                       world_rotation_amplitude=math.sqrt(float(np.mean(np.sum(dev * dev, axis=-1)))) / scale_w)
+                       world_rotation_amplitude=(math.sqrt(float(np.mean(np.sum(dev * dev, axis=-1))))
+                                                 / scale_w))
 
 
 def separatrix_proximity(problem) -> float | None:
@@ -170,7 +171,8 @@ def _log_model_errors(chis, sign: int, amplification: float, saturate: bool):
     return out
 
 
-def amplitude_model_order(dts, chis, signs=(1, -1), amplification: float = 1.0, saturate: bool = False) -> float:
+def amplitude_model_order(dts, chis, signs=(1, -1), amplification: float = 1.0,
+                          saturate: bool = False) -> float:
     """The order a least-squares fit over the ladder ``dts`` would find if the errors were the amplitude
     drift alone: ``|e^{sχ} − 1|`` — or, for a drift that moves the body to a neighbouring motion,
     ``u = amplification·|e^{sχ} − 1|`` (the relative perturbation, grown as the motion grows any

@@ -21,7 +21,8 @@ def euler_round_trip_tol(cos_pitch: float, locked: bool = False) -> float:
 #: Fitted convergence order vs expected in the dedicated order studies (tests/reference_sim): ±0.1, a
 #: tenth of the gap between neighbouring integer orders.
 ORDER_TOL = 0.1
-#: Closed forms vs DOP853 ground truth (rtol 1e-13, reference_sim.ground_truth) over 10 s: ≤ 1e-10, two orders below the smallest error any verdict resolves.
+#: Closed forms vs DOP853 ground truth (rtol 1e-13, reference_sim.ground_truth) over 10 s: ≤ 1e-10, two orders
+#: below the smallest error any verdict resolves.
 CLOSED_FORM_VS_GROUND_TRUTH = 1e-10
 
 # --- sweeps, metrics and verdicts (cross_checks.analysis, cross_checks.sweep, `rbcheck check`) ------
@@ -32,12 +33,12 @@ CLOSED_FORM_VS_GROUND_TRUTH = 1e-10
 #: i.e. 0.34 N ε |x|; RK4 orientation on tennis_racket flattens at 1e-13 rad after 16000 steps.
 ROUNDOFF_PER_STEP_REL = 2.2e-16
 #: Machine epsilon of each precision a variant may declare (engines.base.Traits.precision): the spacing of
-#: floating-point numbers at 1 (IEEE 754 binary64 and binary32, numpy.finfo(dtype).eps): 2⁻⁵², written 2.2e-16 as
-#: ROUNDOFF_PER_STEP_REL, and 2⁻²³. Every round-off floor of a variant scales with its precision's ε
-#: (metrics.roundoff_floor).
+#: floating-point numbers at 1 (IEEE 754 binary64 and binary32, numpy.finfo(dtype).eps): 2⁻⁵², written
+#: 2.2e-16 as ROUNDOFF_PER_STEP_REL, and 2⁻²³. Every round-off floor of a variant scales with its precision's
+#: ε (metrics.roundoff_floor).
 MACHINE_EPSILON = {"float64": ROUNDOFF_PER_STEP_REL, "float32": 2.0 ** -23}
-#: Unit roundoff of each precision (half its ε: the largest relative error of one rounding to nearest): what one
-#: step's arithmetic may leave in the one-step defect allowance (analysis.flow.local_allowances).
+#: Unit roundoff of each precision (half its ε: the largest relative error of one rounding to nearest): what
+#: one step's arithmetic may leave in the one-step defect allowance (analysis.flow.local_allowances).
 UNIT_ROUNDOFF = {"float64": 2.0 ** -53, "float32": 2.0 ** -24}
 #: A float32 variant's ladder reaches coarser steps where its truncation error shows above float32's round-off
 #: (expectations.judged_ladder_s): coarser rungs (half the steps each) are added until this many rungs are
@@ -45,10 +46,11 @@ UNIT_ROUNDOFF = {"float64": 2.0 ** -53, "float32": 2.0 ** -24}
 PRECISION_LADDER_MIN_RESOLVED = 3
 #: ... at most this many (the catalog needs at most 4 at float32: docs/verdicts.md) ...
 PRECISION_LADDER_MAX_EXTRA = 6
-#: ... while a step turns the fastest motion by at most (p + 1) × this angle ω_c Δt (rad) for an order-p variant:
-#: the next term of its error series stays ~(ω_c Δt)/(p + 1) ≤ 15 % of the leading one (the asymptotic regime
-#: the fit measures), and every scheme of the catalog stays stable (explicit Euler's oscillator grows by
-#: ω²Δt² = 0.09 per step at 0.3 rad; RK4's stability interval reaches 2.8 rad, beyond its 0.75) ...
+#: ... while a step turns the fastest motion by at most (p + 1) × this angle ω_c Δt (rad) for an
+#: order-p variant: the next term of its error series stays ~(ω_c Δt)/(p + 1) ≤ 15 % of the leading
+#: one (the asymptotic regime the fit measures), and every scheme of the catalog stays stable
+#: (explicit Euler's oscillator grows by ω²Δt² = 0.09 per step at 0.3 rad; RK4's stability interval
+#: reaches 2.8 rad, beyond its 0.75) ...
 PRECISION_LADDER_STEP_ANGLE_PER_ORDER_RAD = 0.15
 #: ... and a run keeps at least this many steps (a ladder point of fewer steps is the initial transient).
 PRECISION_LADDER_MIN_STEPS = 16
@@ -71,9 +73,9 @@ REFERENCE_ACCURACY_REL = {"analytic": 1e-12, "ground_truth": 1e-10}
 #: A fitted order below this means "does not converge": a consistent scheme has order ≥ 1, an error
 #: plateau (missing physics) has order ≈ 0; 0.5 is halfway.
 CONVERGES_MIN_ORDER = 0.5
-#: Observed vs expected order in a sweep verdict. Expected orders are the integers 1, 2 and 4; ±0.3
-#: separates neighbours with margin and absorbs the curvature left in a 16× ladder once the coarsest
-#: pre-asymptotic point is dropped (ORDER_TOL = 0.1 is for the dedicated order studies of tests/reference_sim).
+#: Observed vs expected order in a sweep verdict. Expected orders are the integers 1, 2 and 4; ±0.3 separates
+#: neighbours with margin and absorbs the curvature left in a 16× ladder once the coarsest pre-asymptotic
+#: point is dropped (ORDER_TOL = 0.1 is for the dedicated order studies of tests/reference_sim).
 SWEEP_ORDER_TOL = 0.3
 #: The coarsest ladder point is pre-asymptotic (dropped from the fit when ≥ 3 points remain) when
 #: its pairwise order differs from the median of the finer pairs by more than this: half an order
@@ -114,15 +116,15 @@ CSV_MAX_BYTES = 2 ** 30
 #: DOP853 (rtol 1e-13) right-hand-side evaluations per radian of the fastest rate of the dynamics:
 #: measured 90–93 for springs from k = 40 to 1e6 N/m and 64 for spins of 50–500 rad/s; 100 covers both.
 DOP853_EVALS_PER_RAD = 100
-#: Physical ranges rbcheck judges (scenario.limits.check_physical_ranges), refused outside like an inertia that
-#: violates the triangle inequality. Masses from 1 mg to 1e6 kg and moments from 1e-12 to 1e9 kg m² (a 1 mm bead
-#: to a ship): MuJoCo refuses masses and moments below its mjMINVAL (1e-15) — a mass of 1e-300 made both its
-#: implicit variants fail — and nine decades either side of 1 keep every term of the equations far from
-#: float64's range. A moment ratio up to 1e6 (a rod of 1000:1; the fuzz draws up to 1e3): beyond it the
+#: Physical ranges rbcheck judges (scenario.limits.check_physical_ranges), refused outside like an inertia
+#: that violates the triangle inequality. Masses from 1 mg to 1e6 kg and moments from 1e-12 to 1e9 kg m² (a
+#: 1 mm bead to a ship): MuJoCo refuses masses and moments below its mjMINVAL (1e-15) — a mass of 1e-300 made
+#: both its implicit variants fail — and nine decades either side of 1 keep every term of the equations far
+#: from float64's range. A moment ratio up to 1e6 (a rod of 1000:1; the fuzz draws up to 1e3): beyond it the
 #: gyroscopic products lose every digit of the small moment's axis. Initial spin up to 1e4 rad/s (a dental
-#: drill, ~1e5 rpm), speed up to 1e4 m/s (above orbital speed), positions within 1e6 m, accelerations (gravity,
-#: |f|/m) up to 1e6 m/s² and angular accelerations |τ|/I_min up to 1e8 rad/s²: with the duration and the step
-#: limits these keep every state below ~1e12, where round-off is the floors' ε |y|, not an overflow.
+#: drill, ~1e5 rpm), speed up to 1e4 m/s (above orbital speed), positions within 1e6 m, accelerations
+#: (gravity, |f|/m) up to 1e6 m/s² and angular accelerations |τ|/I_min up to 1e8 rad/s²: with the duration and
+#: the step limits these keep every state below ~1e12, where round-off is the floors' ε |y|, not an overflow.
 PHYSICAL_MASS_KG = (1e-6, 1e6)
 PHYSICAL_INERTIA_KG_M2 = (1e-12, 1e9)
 PHYSICAL_MAX_INERTIA_RATIO = 1e6
@@ -155,7 +157,7 @@ MIN_LADDER_RATIO = 1.2
 #: series/<name>.npz) that must fit the 255-byte limit of common filesystems with room to spare.
 MAX_NAME_CHARS = 100
 
-# --- sweep verdicts: measured floors, expectations decided by physics (docs/verdicts.md) ----------------------
+# --- sweep verdicts: measured floors, expectations decided by physics (docs/verdicts.md) --------------------
 
 #: Relative size of the initial-state perturbations that measure the error amplification: far above
 #: the references' accuracy (closed forms ~1e-13; DOP853 at AMPLIFICATION_RTOL, whose batched members
@@ -259,7 +261,8 @@ COMPARE_SCHEME_CHANGE_MAX_RATIO = 4.0
 
 # --- agreement of engines and closed forms (tests/cross_checks/engines/test_engine_agreement.py) ---
 
-# --- the engine adapters' conventions (the MuJoCo and PyBullet adapter tests in tests/cross_checks/engines/) ---
+# --- the engine adapters' conventions (the MuJoCo and PyBullet adapter tests in
+# tests/cross_checks/engines/) ---
 
 # --- the PyBullet adapter (tests/cross_checks/engines/test_pybullet_engine.py) ---
 
@@ -313,9 +316,10 @@ FUZZ_PILOT_RTOL = 1e-6
 #: it) is not judged — it is counted as skipped, never as a finding.
 FUZZ_BOUND_SLACK = 1.25
 #: Smallest relative margin of the triangle inequality I1 + I2 ≥ I3 (1 + margin) of a drawn body. MuJoCo
-#: refuses a model whose moments violate A + B ≥ C after its own eigen-decomposition (docs/engine_conventions.md:
-#: a failed row), and a lamina (any three particles) sits exactly on the edge, where round-off (~1e-16
-#: relative) decides; 1e-6 keeps ten orders of magnitude between the two while a body stays visibly flat.
+#: refuses a model whose moments violate A + B ≥ C after its own eigen-decomposition
+#: (docs/engine_conventions.md: a failed row), and a lamina (any three particles) sits exactly on the
+#: edge, where round-off (~1e-16 relative) decides; 1e-6 keeps ten orders of magnitude between the two
+#: while a body stays visibly flat.
 FUZZ_TRIANGLE_MARGIN = 1e-6
 #: Bullet's btMatrix3x3::solve33 inverts det only when |det| > SIMD_EPSILON = DBL_EPSILON (2.22e-16, Bullet
 #: built in double precision as PyBullet is): below it PyBullet maximal's implicit gyroscopic step is wrong.
@@ -329,11 +333,11 @@ FUZZ_LEVER_ROUNDINGS = 4.0
 #: (plus the third term, ~0.4 (c₃/c₁) h² ≪ 0.25 in the asymptotic range); an order deficit of 0.5 gives 0.38,
 #: of 1 gives 0.75. Each error is allowed its round-off floor (it bounds the round-off in it).
 FUZZ_TWO_TERM_TOL = 0.25
-#: Extra halvings a too-low free-running order is re-judged on before it counts (the fuzz: h/8 … h/32 after (h, h/2, h/4);
-#: the sweep: three halvings below its file's finest Δt; analysis.refinement):
-#: the 600 s campaign of seed 2026 found correct first-order variants at order 0.52 on (h, h/2, h/4) whose
-#: pairwise orders went 0.51, 0.54, 0.80, 0.91, 0.95 down to h/32 (docs/fuzz.md §5); three more pairs let
-#: the finest one reach the order within SWEEP_ORDER_TOL there, while a wrong order stays wrong on all of them.
+#: Extra halvings a too-low free-running order is re-judged on before it counts (the fuzz: h/8 … h/32 after
+#: (h, h/2, h/4); the sweep: three halvings below its file's finest Δt; analysis.refinement): the 600 s
+#: campaign of seed 2026 found correct first-order variants at order 0.52 on (h, h/2, h/4) whose pairwise
+#: orders went 0.51, 0.54, 0.80, 0.91, 0.95 down to h/32 (docs/fuzz.md §5); three more pairs let the finest
+#: one reach the order within SWEEP_ORDER_TOL there, while a wrong order stays wrong on all of them.
 REFINE_HALVINGS = 3
 
 # --- report display tiers (docs/results.md "The report") ---

@@ -186,8 +186,10 @@ def free_running_order(ctx: Context, variant: str, i: int, ladder, errors=None) 
             errs[q].append(float(np.max(v))
                            if runs.status[i] == "ok" and np.all(np.isfinite(v)) else math.nan)
             floors[q].append(M.roundoff_floor(ctx.scales[q], n, reference_error=ctx.ref_err[q],
-                                              amplification=ctx.amp[q], quantity=q, eps=machine_epsilon(variant))
-                             + lever_floor(ctx, q, float(runs.h_s[i]), float(runs.h_s[i]) * n, n, ctx.amp[q], variant))
+                                              amplification=ctx.amp[q], quantity=q,
+                                              eps=machine_epsilon(variant))
+                             + lever_floor(ctx, q, float(runs.h_s[i]),
+                                           float(runs.h_s[i]) * n, n, ctx.amp[q], variant))
     for q in QUANTITIES:
         exp = expectation(sc, variant, q, "free_running", physics=ctx.physics, measure_physics=False)
         rec, claimed = _fit_record(ctx, variant, q, dts, errs[q], floors[q],

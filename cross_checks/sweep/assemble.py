@@ -74,8 +74,8 @@ def ladder_floors(ladder, q, scales, mode, label, measured, eps=tol.ROUNDOFF_PER
     if mode == "free_running":
         ref = (measured.get("reference_error") or {}).get(q)
         amp = measured.get("amplification", {}).get(q, 1.0)
-        return [M.roundoff_floor(scale, max(int(r["steps"]), 1), label, reference_error=ref, amplification=amp,
-                                 quantity=q, eps=eps) for r in ladder]
+        return [M.roundoff_floor(scale, max(int(r["steps"]), 1), label, reference_error=ref,
+                                 amplification=amp, quantity=q, eps=eps) for r in ladder]
     local = measured.get("local_reference_error") or {}
     return [M.roundoff_floor(scale, 1, label, reference_error=(local.get(repr(float(r["dt"]))) or {}).get(q),
                              quantity=q, eps=eps) for r in ladder]

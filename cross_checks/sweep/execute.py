@@ -194,15 +194,16 @@ class _ReferenceTask:
     """One scenario's reference solve, by index (a small pickle for the workers)."""
 
     def __init__(self, scenarios, work_dir, cache_root, use_cache, time_limit_s, variants=()):
-        self.scenarios, self.work_dir, self.cache_root, self.use_cache = scenarios, work_dir, cache_root, use_cache
+        self.scenarios, self.work_dir, self.cache_root, self.use_cache = (scenarios, work_dir,
+                                                                          cache_root, use_cache)
         self.time_limit_s, self.variants = time_limit_s, tuple(variants)
 
     def path(self, i):
         return str(Path(self.work_dir) / f"ref_{i}.npz")
 
     def __call__(self, i):
-        return reference_job(self.scenarios[i], self.path(i), self.cache_root, self.use_cache, self.time_limit_s,
-                             self.variants)
+        return reference_job(self.scenarios[i], self.path(i), self.cache_root, self.use_cache,
+                             self.time_limit_s, self.variants)
 
 
 def _reference_cost(scenario):

@@ -37,6 +37,7 @@ def plan_jobs(scenarios, variants) -> list:
         for v in variants:
             ladder = judged_ladder_s(sc, v)
             for dt in job_dts(sc, (v,)):
-                jobs.append(Job(i, sc.name, v, dt, any(d == dt for d in ladder), dt == sc.dt_s, job_cost_s(sc, v, dt)))
+                jobs.append(Job(i, sc.name, v, dt, any(d == dt for d in ladder),
+                                dt == sc.dt_s, job_cost_s(sc, v, dt)))
     jobs.sort(key=lambda j: -j.cost)
     return jobs

@@ -137,7 +137,8 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
     try:
         runner = Runner(jobs, executor)
         show = sys.stderr.isatty() if progress is None else progress
-        refs = run_references(runner, scenarios, work, cache_root, use_cache, reference_time_limit_s, show, variants)
+        refs = run_references(runner, scenarios, work, cache_root, use_cache,
+                              reference_time_limit_s, show, variants)
         second = second_reference_jobs(scenarios, refs) if second_reference else []
         records = run_jobs(runner, planned, scenarios, refs, work, cache_root, use_cache,
                            run_time_limit_s, show, second=second, second_time_limit_s=reference_time_limit_s)

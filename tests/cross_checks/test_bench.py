@@ -50,13 +50,14 @@ def _table_input():
         "reference_single_us_per_step", "mujoco_single_us_per_step", "mujoco_bare_step_us")}
     sw = {"scenarios": ["projectile"], "variants": ["reference:course"], "cores": 2, "engine_steps": 1000,
           "runs": 5, "bare_mj_step_us": 1.0, "floor_s": 5e-4, "report_included": True,
-          **{k: {"median": 0.004, "min": 0.003, "max": 0.005, "repeats": 3} for k in ("run_s", "report_s", "total_s",
-                                                                                       "s_in_simulate")}}
+          **{k: {"median": 0.004, "min": 0.003, "max": 0.005, "repeats": 3}
+             for k in ("run_s", "report_s", "total_s", "s_in_simulate")}}
     r = {"measurements": m, "n_bodies": 200, "repeats": 3, "cpu_count": 2, "load_average": [0.5, 0, 0],
          **{k: v["median"] for k, v in m.items()}, "sweep": sw, "targets": {},
          "mujoco_best_body_steps_per_s": 2.0, "ratio_reference_single_vs_mj_step": 1.0,
-         "sweep_floor_ratio": 0.004 / 5e-4, "sweep_run_floor_ratio": 8.0, "mujoco_adapter_single_us_per_step": 2.0,
-         "drake_single_us_per_step": 4.0, "drake_constant_force_us_per_step": 3.0}
+         "sweep_floor_ratio": 0.004 / 5e-4, "sweep_run_floor_ratio": 8.0,
+         "mujoco_adapter_single_us_per_step": 2.0, "drake_single_us_per_step": 4.0,
+         "drake_constant_force_us_per_step": 3.0}
     return r
 
 

@@ -2,9 +2,10 @@
 float32 after every step — what a float32 engine keeps between steps (each component rounded to the nearest of
 24 significant bits, IEEE 754 binary32) — correct or with one of the planted bugs of tests/mutants.py.
 
-Each is an engine adapter ``f32_NAME:VARIANT`` declaring the traits of the reference scheme it imitates with
-``precision="float32"`` (or a precision given, to show what a wrong declaration does): the sweep, the fuzz and
-``check`` then judge it with float32 round-off floors and the float32 ladder (docs/verdicts.md, "Precision")."""
+Each is an engine adapter ``f32_NAME:VARIANT`` declaring the traits of the reference scheme it imitates
+with ``precision="float32"`` (or a precision given, to show what a wrong declaration does): the sweep,
+the fuzz and ``check`` then judge it with float32 round-off floors and the float32 ladder
+(docs/verdicts.md, "Precision")."""
 from __future__ import annotations
 
 import dataclasses

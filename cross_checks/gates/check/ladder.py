@@ -70,7 +70,8 @@ def check_ladder(results, scenario, scheme=None) -> dict:
             continue
         errs = [f[q] if s == "ok" else math.nan for f, s in zip(finals, statuses)]
         floors = [M.roundoff_floor(quantity_scales(r.series["y_ref"])[q], int(round(scenario.duration_s / d)),
-                                   r.reference_label, eps=tol.MACHINE_EPSILON[prec]) for r, d in zip(results, dts)]
+                                   r.reference_label, eps=tol.MACHINE_EPSILON[prec])
+                  for r, d in zip(results, dts)]
         variant, exp = _expected(results, scenario, q, scheme)
         if exp.precision != prec:    # the files' precision, as read from their digits, sets the floors
             exp = Expectation(exp.verdict, exp.order, exp.reason, prec)

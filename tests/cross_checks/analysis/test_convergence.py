@@ -179,7 +179,8 @@ def test_the_median_of_the_pre_asymptotic_rule_is_numpys():
 def test_a_flat_fit_s_tiny_negative_order_is_written_as_zero():
     from cross_checks.analysis.convergence import fmt_order
     assert fmt_order(-0.0004) == "0.00" and fmt_order(-0.006) == "-0.01" and fmt_order(0.987) == "0.99"
-    fit = fit_convergence([0.06, 0.03, 0.015], [9.16e-4, 9.16e-4 * (1 + 1e-6), 9.16e-4 * (1 + 2e-6)], [2.5e-13] * 3)
+    fit = fit_convergence([0.06, 0.03, 0.015],
+                          [9.16e-4, 9.16e-4 * (1 + 1e-6), 9.16e-4 * (1 + 2e-6)], [2.5e-13] * 3)
     assert fit.order < 0 and "(fitted order 0.00)" in compare_with_expectation(
         fit.verdict, fit.order, Expectation("converges", 1.0, "an order-1 scheme"))[1]
 
@@ -195,7 +196,8 @@ def test_order_within_floors_raises_the_coarse_errors_and_lowers_the_fine_ones_b
     assert fit.fitted == [True, True, False] and fit.order == pytest.approx(2.664, abs=1e-3)
     # three halvings: the middle point sits at the mean log Δt, so the slope is that of the two ends
     by_hand = math.log2((DRAKE_E[0] + DRAKE_FL[0]) / (DRAKE_E[2] - DRAKE_FL[2])) / 2.0
-    assert order_within_floors(fit) == pytest.approx(by_hand, rel=1e-12) and by_hand == pytest.approx(2.885, abs=1e-3)
+    assert (order_within_floors(fit) == pytest.approx(by_hand, rel=1e-12)
+            and by_hand == pytest.approx(2.885, abs=1e-3))
 
 
 def test_order_within_floors_leaves_a_resolved_wrong_order_wrong():
@@ -225,15 +227,16 @@ def test_a_flat_round_off_tail_is_the_floor_of_every_rung():
     fit = fit_convergence(MJ_DT, e, MJ_FL)
     assert fit.fitted == [True, True, False, False] and fit.order == pytest.approx(4.55, abs=0.01)
     by_hand = math.log2((2.44e-13 + 3.38e-15) / (1.04e-14 - 3.38e-15))
-    assert order_within_floors(fit) == pytest.approx(by_hand, rel=1e-12) and by_hand > 5.0 - tol.SWEEP_ORDER_TOL
+    assert (order_within_floors(fit) == pytest.approx(by_hand, rel=1e-12)
+            and by_hand > 5.0 - tol.SWEEP_ORDER_TOL)
 
 
 def test_a_flat_tail_leaves_room_for_round_off_not_for_a_wrong_order():
     e = [2.44e-13, 2.44e-13 / 16.0, 3.4e-15, 3.4e-15]   # order 4 where one step of RK4 has 5
     fit = fit_convergence(MJ_DT, e, MJ_FL)
     assert order_within_floors(fit) < 5.0 - tol.SWEEP_ORDER_TOL
-    # a tail that still shrinks (two rungs more than 2x apart) is not taken for round-off: the fitted pair with
-    # its own floors (the tail point above its floor only lowers the three-point slope)
+    # a tail that still shrinks (two rungs more than 2x apart) is not taken for round-off: the fitted pair
+    # with its own floors (the tail point above its floor only lowers the three-point slope)
     fit = fit_convergence(MJ_DT, [2.44e-13, 1.04e-14, 3.37e-15, 1.2e-15], MJ_FL)
     assert order_within_floors(fit) == pytest.approx(math.log2((2.44e-13 + 1.37e-15) / (1.04e-14 - 9.81e-16)),
                                                      rel=1e-12)

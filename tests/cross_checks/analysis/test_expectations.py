@@ -10,14 +10,16 @@ from cross_checks.engines.base import EngineAdapter, Traits, Variant
 from cross_checks.scenario import catalog_names, catalog_path, load_scenario, parse_scenario
 
 #: Every variant that declares its traits (Variant.traits): the built-in engines' variants, installed here.
-VARIANT_TRAITS = {v.name: declared_traits(v.name) for v in all_variants() if declared_traits(v.name) is not None}
+VARIANT_TRAITS = {v.name: declared_traits(v.name)
+                  for v in all_variants() if declared_traits(v.name) is not None}
 
 
 def test_every_built_in_variant_has_a_nominal_order_and_traits():
     built_in = [v.name for v in all_variants() if v.engine in ("reference", "mujoco", "pybullet")]
     assert len(built_in) == 15
     for v in built_in:
-        assert nominal_order(v) in (1.0, 2.0, 4.0) and declared_traits(v) is not None and traits(v) == declared_traits(v)
+        assert (nominal_order(v) in (1.0, 2.0, 4.0) and declared_traits(v) is not None
+                and traits(v) == declared_traits(v))
 
 
 def test_an_unknown_variant_gets_the_documented_default():
@@ -43,7 +45,8 @@ def test_course_converges_where_the_gyroscopic_term_vanishes():
 
 
 def test_course_position_fails_when_rotation_drives_translation():
-    assert expectation(load_scenario("spring_pendulum"), "reference:course", "position").verdict == "does_not_converge"
+    assert (expectation(load_scenario("spring_pendulum"), "reference:course", "position").verdict
+            == "does_not_converge")
     assert expectation(load_scenario("applied_torque"), "reference:course", "position").verdict == "converges"
 
 
@@ -100,7 +103,7 @@ def test_a_gentle_file_named_tumbling_box_gets_the_verdicts_its_physics_implies(
     assert e.verdict == "pre_asymptotic" and "separatrix" in e.reason and "amplifies" in e.reason
     # the body-frame Euler step keeps the separatrix distance (see test_engine_traits): its order is claimed
     assert expectation(wild, "reference:expmap_gyro", "orientation").order == 1.0
-    assert expectation(wild, "reference:explicit_euler", "position").order == 1.0   # translation: a projectile
+    assert expectation(wild, "reference:explicit_euler", "position").order == 1.0  # translation: a projectile
 
 
 def test_a_pure_spin_gives_no_amplitude_drift_however_fast():
@@ -148,7 +151,8 @@ def test_an_oscillator_is_claimed_where_the_amplitude_model_allows_it():
 
 # --- the traits, pinned on the engines themselves -------------------------------------------------------
 
-FIRST_ORDER_WITH_GYRO = [v for v, tr in VARIANT_TRAITS.items() if nominal_order(v) == 1.0 and tr.gyroscopic_term]
+FIRST_ORDER_WITH_GYRO = [v for v, tr in VARIANT_TRAITS.items()
+                         if nominal_order(v) == 1.0 and tr.gyroscopic_term]
 
 
 def _invariants(sc, y):
@@ -191,7 +195,7 @@ def test_body_frame_steps_keep_the_separatrix_distance_whole_state_steps_do_not(
         assert moved > 100 * abs(delta[0]), moved
 
 
-# --- same-scheme pairs and the engines' decay harness (found by rbcheck fuzz, docs/fuzz.md) ------------------
+# --- same-scheme pairs and the engines' decay harness (found by rbcheck fuzz, docs/fuzz.md) -----------------
 
 def _decaying_spin(decay: bool, inertia=(0.2, 0.3, 0.4)):
     text = f"""
@@ -239,8 +243,9 @@ def test_memoized_expectations_are_the_ones_computed_without_memo():
     every expectation, reason included, equals the one computed without it, on every catalog scenario."""
     from cross_checks.analysis.expectations import memoized
     from cross_checks.analysis.physics import scenario_physics
-    variants = ["reference:course", "reference:course_gyro", "mujoco:euler", "pybullet:multibody", "reference:rk4",
-                "reference:explicit_euler", "reference:implicit_euler", "mujoco:implicit", "nobody:knows"]
+    variants = ["reference:course", "reference:course_gyro", "mujoco:euler", "pybullet:multibody",
+                "reference:rk4", "reference:explicit_euler", "reference:implicit_euler", "mujoco:implicit",
+                "nobody:knows"]
     for name in sorted(set(catalog_names()) - {"spring_pendulum", "applied_torque"}):
         sc = load_scenario(name)
         phys = scenario_physics(sc)
@@ -249,14 +254,16 @@ def test_memoized_expectations_are_the_ones_computed_without_memo():
         with memoized():
             for _ in range(2):
                 for (v, q, m), want in plain.items():
-                    assert expectation(sc, v, q, m, physics=phys, measure_physics=False) == want, (name, v, q, m)
+                    assert expectation(sc, v, q, m, physics=phys,
+                                       measure_physics=False) == want, (name, v, q, m)
 
 
 class _HeldForcesRK4(EngineAdapter):
-    """An order-4 engine that holds the applied force over its stages (Traits.forces_held), as MuJoCo's RK4 does
-    with xfrc_applied when nothing evaluates the forces per stage."""
+    """An order-4 engine that holds the applied force over its stages (Traits.forces_held), as MuJoCo's RK4
+    does with xfrc_applied when nothing evaluates the forces per stage."""
     name = "heldrk4"
-    variants = {"rk4": Variant(4, "RK4, applied forces held over the stages", traits=Traits(forces_held=True))}
+    variants = {"rk4": Variant(4, "RK4, applied forces held over the stages",
+                               traits=Traits(forces_held=True))}
 
     def version(self):
         return "test"

@@ -45,7 +45,8 @@ def test_the_exact_flow_matches_the_jacobi_closed_form_from_arbitrary_states():
         d = distances(fl.y_end[k:k + 1], ref[None, :], ("orientation", "angular_velocity"))
         # the flow is as accurate as it says (closed form good to ~1e-12), and far below any allowance
         assert d["orientation"][0] <= 10 * fl.error["orientation"][k] + 1e-12
-        assert d["angular_velocity"][0] <= 10 * fl.error["angular_velocity"][k] + 1e-12 * np.linalg.norm(y0[k, W])
+        assert (d["angular_velocity"][0]
+                <= 10 * fl.error["angular_velocity"][k] + 1e-12 * np.linalg.norm(y0[k, W]))
         assert d["angular_velocity"][0] <= 1e-3 * tol.CHECK_LOCAL_C * 0.01 ** 2 * fl.M2["angular_velocity"][k]
 
 
@@ -140,7 +141,8 @@ def test_error_growth_of_free_flight_is_the_elapsed_time():
     sc = load_scenario("projectile")
     t = np.linspace(0, 1, 11)
     g = error_growth(sc, t, {q: 1.0 for q in QUANTITIES})
-    assert np.all(g[("velocity", "position")] >= t * (1 - 1e-6)) and np.all(g[("velocity", "position")] <= t + 0.01)
+    assert (np.all(g[("velocity", "position")] >= t * (1 - 1e-6))
+            and np.all(g[("velocity", "position")] <= t + 0.01))
     np.testing.assert_allclose(g[("position", "position")], 1.0, rtol=1e-6)
     np.testing.assert_allclose(g[("velocity", "velocity")], 1.0, rtol=1e-6)
     assert np.all(g[("position", "velocity")] == 0.0)
@@ -148,8 +150,8 @@ def test_error_growth_of_free_flight_is_the_elapsed_time():
 
 def test_error_growth_of_an_isotropic_spin_is_the_elapsed_time():
     """A sphere spins at constant ω: an error δω turns the body by |δω| t more."""
-    sc = scenario_from_parts(body="mass = 1.0\ninertia = [2.0, 2.0, 2.0]", initial="angular_velocity = [0.0, 0.0, 3.0]",
-                             duration=2.0)
+    sc = scenario_from_parts(body="mass = 1.0\ninertia = [2.0, 2.0, 2.0]",
+                             initial="angular_velocity = [0.0, 0.0, 3.0]", duration=2.0)
     t = np.linspace(0, 2, 9)
     g = error_growth(sc, t, {"position": 1.0, "velocity": 1.0, "orientation": 1.0, "angular_velocity": 3.0})
     G = g[("angular_velocity", "orientation")]
@@ -183,19 +185,23 @@ def test_a_sphere_turns_by_exp_of_its_spin_within_the_flows_own_error_estimate()
 
 def test_parse_scenario_helper_is_what_the_physics_tests_use():
     # guard: the isotropic-spin scenario above has no forces at all
-    sc = parse_scenario('name = "s"\nduration = 1.0\ndt = 0.1\n[body]\nmass = 1.0\ninertia = [1.0, 1.0, 1.0]\n[initial]\n')
+    sc = parse_scenario('name = "s"\nduration = 1.0\ndt = 0.1\n[body]\nmass = 1.0\n'
+                        'inertia = [1.0, 1.0, 1.0]\n[initial]\n')
     assert not sc.problem.forces.springs and np.all(sc.problem.forces.gravity_W == 0)
 
 
 def test_a_spring_with_a_rest_length_turns_at_the_speed_across_it_over_its_length():
-    # attachment at the COM, anchor at the origin: d = x. x = (0.5, 0, 0) m, v = (0, 2, 0) m/s: |v⊥|/|d| = 4 /s;
-    # moving along d instead turns it not at all; a body spinning at 3 rad/s with the attachment 0.1 m off
-    # its COM along x, at rest, moves the attachment at 0.3 m/s across d: 0.3 / 0.6 = 0.5 /s
-    spring = "[[forces.spring]]\nanchor = [0.0, 0.0, 0.0]\nattach = [{a}, 0.0, 0.0]\nstiffness = 0.01\nrest_length = {L0}"
+    # attachment at the COM, anchor at the origin: d = x. x = (0.5, 0, 0) m, v = (0, 2, 0) m/s:
+    # |v⊥|/|d| = 4 /s; moving along d instead turns it not at all; a body spinning at 3 rad/s with the
+    # attachment 0.1 m off its COM along x, at rest, moves the attachment at 0.3 m/s across d:
+    # 0.3 / 0.6 = 0.5 /s
+    spring = ("[[forces.spring]]\nanchor = [0.0, 0.0, 0.0]\nattach = [{a}, 0.0, 0.0]\nstiffness = 0.01\n"
+              "rest_length = {L0}")
     sc = scenario_from_parts(initial="", forces=spring.format(a=0.0, L0=0.2))
     y = np.array([[0.5, 0, 0, 0, 2.0, 0, 1, 0, 0, 0, 0, 0, 0],
                   [0.5, 0, 0, 2.0, 0, 0, 1, 0, 0, 0, 0, 0, 0],
-                  [0.0, 0, 0, 0, 2.0, 0, 1, 0, 0, 0, 0, 0, 0]])    # d = 0: no direction, the spring exerts nothing
+                  # d = 0: no direction, the spring exerts nothing
+                  [0.0, 0, 0, 0, 2.0, 0, 1, 0, 0, 0, 0, 0, 0]])
     assert spring_turn_rate(sc.problem, y) == pytest.approx([4.0, 0.0, 0.0], abs=1e-15)
     assert motion_rate(sc, y)[0] == pytest.approx(4.0)   # above √(k/m) = 0.1 /s and |ω| = 0
     off = scenario_from_parts(initial="", forces=spring.format(a=0.1, L0=0.2))

@@ -38,8 +38,8 @@ def test_an_order_two_ladder_still_contradicts_order_three():
 
 def test_every_rung_within_its_floor_is_no_agreement_where_the_steps_are_wrong_in_that_quantity():
     """Errors all within their floors (here a flat 0.05 under amplified float32 floors of 0.1) agree with
-    "converges" — unless the runs' own one-step defect says their equations are wrong in that quantity; another
-    quantity's defect (the course's missing term in ω) leaves an exact position exact."""
+    "converges" — unless the runs' own one-step defect says their equations are wrong in that quantity;
+    another quantity's defect (the course's missing term in ω) leaves an exact position exact."""
     from cross_checks.analysis.judge import LocalEvidence
     dts, errs, floors = [0.01, 0.005, 0.0025], [0.05, 0.05, 0.05], [0.1, 0.1, 0.1]
     exp = Expectation("converges", 1.0, "an order-1 scheme", "float32")
@@ -50,6 +50,8 @@ def test_every_rung_within_its_floor_is_no_agreement_where_the_steps_are_wrong_i
     refused = judge_fit(fit, exp, wrong, "angular_velocity")
     assert refused.matches is False and "no round-off excuse" in refused.assessment and refused.claimed
     assert judge_fit(fit, exp, wrong, "position").matches is True
-    assert judge_fit(fit, exp, LocalEvidence(0.5, "angular_velocity", 0.01, 1.0), "angular_velocity").matches is True
+    assert judge_fit(fit, exp, LocalEvidence(0.5, "angular_velocity", 0.01, 1.0),
+                     "angular_velocity").matches is True
     # a float32 verdict names its precision and the rungs it judged
-    assert "float32" in judge_fit(fit, exp).assessment and "no two rungs resolved of 3" in judge_fit(fit, exp).assessment
+    assert ("float32" in judge_fit(fit, exp).assessment
+            and "no two rungs resolved of 3" in judge_fit(fit, exp).assessment)

@@ -26,7 +26,8 @@ def spy(monkeypatch):
         j = real(dts, errors, floors, statuses, exp, local)
         seen.append(j)
         return j
-    for module in ("cross_checks.sweep.assemble", "cross_checks.fuzz.properties", "cross_checks.gates.check.ladder"):
+    for module in ("cross_checks.sweep.assemble", "cross_checks.fuzz.properties",
+                   "cross_checks.gates.check.ladder"):
         monkeypatch.setattr(f"{module}.judge_ladder", judge_ladder)
     return seen
 
@@ -37,14 +38,17 @@ def _key(values) -> tuple:
 
 def test_the_sweep_reports_the_judges_verdicts(spy, tmp_path):
     from cross_checks.sweep import run_sweep
-    s = run_sweep([load_scenario("tennis_racket")], ["reference:course", "reference:explicit_euler", "mujoco:rk4"],
+    s = run_sweep([load_scenario("tennis_racket")],
+                  ["reference:course", "reference:explicit_euler", "mujoco:rk4"],
                   tmp_path / "r", jobs=1, use_cache=False, progress=False, second_reference=False)
     recs = s["convergence"] + s["local_convergence"]
     assert len(recs) == 24 and len(spy) >= len(recs)
     for r in recs:
-        judged = [j for j in spy if _key(j.fit.errors) == _key(r["errors"]) and _key(j.fit.dt_s) == _key(r["dt_s"])]
+        judged = [j for j in spy
+                  if _key(j.fit.errors) == _key(r["errors"]) and _key(j.fit.dt_s) == _key(r["dt_s"])]
         assert judged, f"not judged by the judge: {r['engine']} {r['quantity']}"
-        assert any((j.verdict, j.matches, j.assessment) == (r["verdict"], r["matches_expectation"], r["assessment"])
+        assert any((j.verdict, j.matches, j.assessment)
+                   == (r["verdict"], r["matches_expectation"], r["assessment"])
                    for j in judged), r
     verdicts = {(r["engine"], r["quantity"]): r["verdict"] for r in s["convergence"]}
     assert verdicts[("reference:course", "orientation")] == "does_not_converge"        # judged, as expected
@@ -64,11 +68,13 @@ def test_check_ladder_reports_the_judges_verdicts(spy, tmp_path):
     from cross_checks.gates.check import check_trajectory
     from cross_checks.gates.check.ladder import check_ladder
     sc = load_scenario("projectile")
-    results = [check_trajectory(run_variant(sc, "reference:course_gyro", dt), sc, f"f{dt}.csv") for dt in (0.02, 0.01)]
+    results = [check_trajectory(run_variant(sc, "reference:course_gyro", dt), sc, f"f{dt}.csv")
+               for dt in (0.02, 0.01)]
     lad = check_ladder(results, sc)
     assert lad["convergence"] and len(spy) == len(lad["convergence"])
     for r, j in zip(lad["convergence"], spy):
-        assert (r["verdict"], r["matches_expectation"], r["assessment"]) == (j.verdict, j.matches, j.assessment)
+        assert ((r["verdict"], r["matches_expectation"], r["assessment"])
+                == (j.verdict, j.matches, j.assessment))
     assert isinstance(results[0], object) and Trajectory   # (the files are the engine's own runs)
 
 
@@ -91,7 +97,8 @@ def ladders(draw):
 
 
 @settings(max_examples=300, deadline=None)
-@given(ladder=ladders(), order=ORDER, kind=st.sampled_from(["converges", "pre_asymptotic", "does_not_converge"]))
+@given(ladder=ladders(), order=ORDER,
+       kind=st.sampled_from(["converges", "pre_asymptotic", "does_not_converge"]))
 def test_the_fuzz_and_the_judge_agree_on_any_ladder(ladder, order, kind):
     from cross_checks.fuzz.properties import _fit_record
     dts, errors, floors = ladder
@@ -99,7 +106,7 @@ def test_the_fuzz_and_the_judge_agree_on_any_ladder(ladder, order, kind):
     j = J.judge_ladder(dts, errors, floors, None, exp)
     rec, claimed = _fit_record(None, "any:variant", "orientation", dts, errors, floors, None, exp,
                                "free_running_order")
-    if kind != "converges":          # the fuzz tests order claims only; the judge makes none that can fail here
+    if kind != "converges":   # the fuzz tests order claims only; the judge makes none that can fail here
         assert rec is None and not claimed and j.matches is not False or kind == "does_not_converge"
         return
     assert (rec is not None) == (j.matches is False)

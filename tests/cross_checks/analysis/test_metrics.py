@@ -80,7 +80,8 @@ def test_measured_floor_adds_the_reference_error_and_the_amplified_roundoff_of_t
     # position: biased roundings add up linearly, the rest as a random walk grown by the amplification
     assert M.roundoff_floor(2.0, 10_000, reference_error=3e-13, amplification=5.0, quantity="position") == \
         pytest.approx(3e-13 + eps * 2.0 * (10_000 + 100 * 5.0), rel=1e-12)
-    assert M.roundoff_floor(np.pi, 10_000, reference_error=1e-13, amplification=0.5, quantity="orientation") == \
+    assert M.roundoff_floor(np.pi, 10_000, reference_error=1e-13, amplification=0.5,
+                            quantity="orientation") == \
         pytest.approx(1e-13 + eps * np.pi * 100, rel=1e-12)
 
 
@@ -89,4 +90,5 @@ def test_roundoff_floor_grows_with_the_steps_and_the_reference():
     b = M.roundoff_floor(1.0, 1_000_000, "analytic")
     assert a == tol.REFERENCE_ACCURACY_REL["analytic"]
     assert b == pytest.approx(tol.ROUNDOFF_PER_STEP_REL * 1e6)
-    assert M.roundoff_floor(1.0, 100, "ground_truth (DOP853, rtol 1e-12)") == tol.REFERENCE_ACCURACY_REL["ground_truth"]
+    assert (M.roundoff_floor(1.0, 100, "ground_truth (DOP853, rtol 1e-12)")
+            == tol.REFERENCE_ACCURACY_REL["ground_truth"])

@@ -28,13 +28,16 @@ def test_rates_of_an_oscillator_a_symmetric_top_and_a_pure_spin_by_hand():
 
 def test_decay_and_drag_rates_come_from_the_force_model():
     r = P.scenario_physics(load_scenario("velocity_decay")).rates
-    assert r.decay_v == pytest.approx(-math.log(0.99) / 0.01) and r.decay_w == pytest.approx(-math.log(0.995) / 0.01)
+    assert (r.decay_v == pytest.approx(-math.log(0.99) / 0.01)
+            and r.decay_w == pytest.approx(-math.log(0.995) / 0.01))
     assert P.scenario_physics(load_scenario("linear_drag")).rates.drag == pytest.approx(0.8 / 2.0)
 
 
 def test_separatrix_proximity_by_hand():
-    # tennis_racket: I = (1, 2, 3), ω = (0.01, 2, 0.01): 2E = 8.0004, |L|² = 16.001 -> δ = (2·8.0004 − 16.001)/16.001
-    assert P.separatrix_proximity(load_scenario("tennis_racket").problem) == pytest.approx(-0.0002 / 16.001, rel=1e-9)
+    # tennis_racket: I = (1, 2, 3), ω = (0.01, 2, 0.01):
+    # 2E = 8.0004, |L|² = 16.001 -> δ = (2·8.0004 − 16.001)/16.001
+    assert (P.separatrix_proximity(load_scenario("tennis_racket").problem)
+            == pytest.approx(-0.0002 / 16.001, rel=1e-9))
     assert P.separatrix_proximity(load_scenario("symmetric_top").problem) is None   # two equal moments
     assert P.separatrix_proximity(load_scenario("applied_torque").problem) is None  # torques act
 
@@ -57,7 +60,8 @@ def test_amplitude_model_predicts_explicit_euler_on_an_oscillator():
     sc = load_scenario("spring_oscillator")
     yT, _ = reference_solution(sc, np.array([0.0, sc.duration_s]))
     dts = sc.dt_ladder_s
-    errs = [np.linalg.norm(simulate(sc.problem, "explicit_euler", dt, sc.n_steps(dt)).y[-1, 0:3] - yT[-1, 0:3])
+    errs = [np.linalg.norm(simulate(sc.problem, "explicit_euler", dt, sc.n_steps(dt)).y[-1, 0:3]
+                           - yT[-1, 0:3])
             for dt in dts]
     fitted = np.polyfit(np.log(dts), np.log(errs), 1)[0]
     chis = [P.amplitude_parameter(40.0, dt, sc.duration_s) for dt in dts]

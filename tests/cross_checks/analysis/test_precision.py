@@ -1,8 +1,9 @@
-"""The precision model (docs/verdicts.md, "Precision"): a variant declares the floating-point format it computes
-in (Traits.precision); its round-off floors scale with that format's ε and a float32 variant is judged on a
-ladder that reaches coarser steps. Shown on float32 schemes (tests/helpers/float32.py: the reference's schemes
-with their state stored in float32): the correct ones pass the sweep's gates, the same schemes judged with
-float64 floors would not, and float32 schemes with a planted bug (tests/mutants.py) are still caught."""
+"""The precision model (docs/verdicts.md, "Precision"): a variant declares the floating-point format it
+computes in (Traits.precision); its round-off floors scale with that format's ε and a float32 variant is
+judged on a ladder that reaches coarser steps. Shown on float32 schemes (tests/helpers/float32.py: the
+reference's schemes with their state stored in float32): the correct ones pass the sweep's gates, the
+same schemes judged with float64 floors would not, and float32 schemes with a planted bug
+(tests/mutants.py) are still caught."""
 import math
 import re
 
@@ -77,10 +78,12 @@ def test_every_shipped_variant_is_float64_and_keeps_its_scenarios_ladder():
 def test_the_floors_scale_with_the_precisions_epsilon():
     for n, amp in ((1, 1.0), (1000, 1.0), (20000, 50.0)):
         f64 = M.roundoff_floor(2.0, n, reference_error=0.0, amplification=amp)
-        f32 = M.roundoff_floor(2.0, n, reference_error=0.0, amplification=amp, eps=tol.MACHINE_EPSILON["float32"])
+        f32 = M.roundoff_floor(2.0, n, reference_error=0.0, amplification=amp,
+                               eps=tol.MACHINE_EPSILON["float32"])
         assert f32 == pytest.approx(f64 * tol.MACHINE_EPSILON["float32"] / tol.MACHINE_EPSILON["float64"])
         # the reference's own (float64) error is added as measured, whatever the run's precision
-        assert M.roundoff_floor(2.0, n, reference_error=1e-9, eps=1e-7) == pytest.approx(1e-9 + 1e-7 * 2 * (n + n ** .5))
+        assert (M.roundoff_floor(2.0, n, reference_error=1e-9, eps=1e-7)
+                == pytest.approx(1e-9 + 1e-7 * 2 * (n + n ** .5)))
 
 
 @pytest.mark.parametrize("scheme", SCHEMES)
@@ -117,7 +120,8 @@ def test_the_correct_float32_schemes_pass_the_sweeps_gates(tmp_path, monkeypatch
                                                               r["assessment"]]
     # every scheme shows its order somewhere (float32 leaves orders measurable, not only "at round-off")
     for v in vs:
-        shown = [r for r in recs if r["engine"] == v and r["mode"] == "free_running" and r["verdict"] == "converges"
+        shown = [r for r in recs
+                 if r["engine"] == v and r["mode"] == "free_running" and r["verdict"] == "converges"
                  and r["matches_expectation"] is True]
         assert shown, v
 
