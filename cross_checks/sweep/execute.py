@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import itertools
 import os
-import sys
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
@@ -33,18 +32,6 @@ __all__ = ["Runner", "ScenarioReference", "SecondReference",
 _END = object()
 
 
-def start_context():
-    """How pool workers start: forked (they inherit the loaded engines, the compiled reference steps and the
-    registered adapters) — unless JAX has been imported in this process. JAX runs threads once it has
-    computed anything, and a forked child that then uses JAX (a JAX engine's runs) can deadlock; workers then
-    start from a fork server forked before any of it, and each registers the parent's engines from its task
-    (``user_engines``, as on Dask). None where fork does not exist (the platform's default)."""
-    import multiprocessing as mp
-    if "fork" not in mp.get_all_start_methods():
-        return None
-    return mp.get_context("forkserver" if "jax" in sys.modules else "fork")
-
-
 class Runner:
     """Runs callables here (jobs == 1), in a process pool, or on any ``concurrent.futures.Executor``
     given by the caller (e.g. a Dask cluster's ``Client.get_executor()``), yielding results as they
@@ -57,12 +44,10 @@ class Runner:
         self.pool = executor if self.external else (self._new_pool() if jobs > 1 else None)
 
     def _new_pool(self):
-        ctx = start_context()
-        # a forked worker dies with this process; a fork server's worker with the fork server, which ends
-        # when this process does
-        parent = os.getpid() if ctx is None or ctx.get_start_method() == "fork" else None
+        import multiprocessing as mp
+        ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else None
         return ProcessPoolExecutor(max_workers=self.jobs, mp_context=ctx, initializer=worker_init,
-                                   initargs=(parent,))
+                                   initargs=(os.getpid(),))
 
     def map_unordered(self, fn, items, on_done=None, on_crash=None, in_flight=None, window=None):
         """``fn(item)`` for each item; returns ``[(item, result)]`` in completion order.

@@ -22,8 +22,8 @@ def spy(monkeypatch):
     seen = []
     real = J.judge_ladder
 
-    def judge_ladder(dts, errors, floors, statuses, exp, local=None):
-        j = real(dts, errors, floors, statuses, exp, local)
+    def judge_ladder(dts, errors, floors, statuses, exp, local=None, quantity=None):
+        j = real(dts, errors, floors, statuses, exp, local, quantity)
         seen.append(j)
         return j
     for module in ("cross_checks.sweep.assemble", "cross_checks.fuzz.properties",

@@ -2,8 +2,6 @@
 import tomllib
 from pathlib import Path
 
-import pytest
-
 import cross_checks
 from cross_checks.scenario import load_scenario
 from cross_checks.sweep.execute import Runner, _reference_cost, run_references
@@ -47,41 +45,3 @@ def test_items_are_read_as_work_is_submitted_at_most_a_window_in_flight():
         runner.close()
     assert got == [(0, 0), (1, 1), (2, 4)]
 
-
-def test_workers_start_from_a_fork_server_once_jax_is_in_the_process(monkeypatch):
-    """A forked child of a process that has run JAX may deadlock when it uses JAX itself (a JAX engine's runs):
-    pool workers are then started by a fork server."""
-    import multiprocessing as mp
-    import sys
-    import types
-
-    from cross_checks.sweep.execute import start_context
-    if "fork" not in mp.get_all_start_methods():
-        pytest.skip("no fork on this platform")
-    monkeypatch.delitem(sys.modules, "jax", raising=False)
-    assert start_context().get_start_method() == "fork"
-    monkeypatch.setitem(sys.modules, "jax", types.ModuleType("jax"))
-    assert start_context().get_start_method() == "forkserver"
-
-
-def test_a_sweep_through_fork_server_workers_gives_the_forked_sweeps_results(tmp_path, monkeypatch):
-    """Workers that did not fork from the sweep register its test-registered engines from their tasks and give
-    the same results.csv, bit for bit."""
-    import sys
-    import types
-
-    from cross_checks.scenario import load_scenario
-    from cross_checks.sweep import run_sweep
-    from tests.helpers.float32 import Float32Adapter, register
-    v = register(monkeypatch, Float32Adapter("fs", "reference:expmap_gyro"))
-    sc = [load_scenario("projectile")]
-    texts = []
-    for i, jax_loaded in enumerate((False, True)):
-        if jax_loaded:
-            monkeypatch.setitem(sys.modules, "jax", types.ModuleType("jax"))
-        run_sweep(sc, ["reference:course", v], tmp_path / f"out{i}", jobs=2, use_cache=False, progress=False,
-                  second_reference=False)
-        text = (tmp_path / f"out{i}" / "results.csv").read_text()
-        texts.append("\n".join(",".join(c for k, c in enumerate(row.split(",")) if k != 4)   # wall_s differs
-                               for row in text.splitlines()))
-    assert texts[0] == texts[1] and v in texts[0]
