@@ -441,7 +441,6 @@ def _run_group(scenario, variant: str, requests) -> list:
     """The runs of ``requests`` (all of ``scenario``), batched over their Δt: one vmapped scan per chunk."""
     lib = _lib()
     jp = lib["jp"]
-    P = lib["pipelines"][variant]
     sys = _system_of(scenario, variant)
     y0 = scenario.problem.initial_packed()
     modes = [_mode_and_consts(scenario, variant, r.dt_s) for r in requests]
