@@ -96,7 +96,7 @@ from cross_checks.engines.base import (
 from reference_sim.quaternion import quat_conj, rotate
 from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
 
-__all__ = ["ENGINE", "VARIANTS", "NEUTRAL_SYSTEM", "NEUTRAL_DOF", "CHUNK", "EngineError", "version", "mjcf_text",
+__all__ = ["ENGINE", "VARIANTS", "NEUTRAL_SYSTEM", "NEUTRAL_DOF", "CHUNK", "ONE_STEP_MIN_BATCH", "EngineError", "version", "mjcf_text",
            "build_system", "simulate", "simulate_many", "one_step", "compile_seconds", "BraxAdapter", "expressible"]
 
 ENGINE = "brax"
@@ -127,6 +127,9 @@ NEUTRAL_SYSTEM = (("vel_damping", 0.0), ("ang_damping", 0.0), ("spring_mass_scal
 NEUTRAL_DOF = (("damping", 0.0), ("armature", 0.0))
 #: Steps per compiled scan chunk: a run of n steps runs ceil(n / CHUNK) chunks (the steps past n are dropped).
 CHUNK = 512
+#: one_step batches are padded to at least this many rows (a power of two): one step of 64 bodies costs about what
+#: one costs, and every small batch shares one executable.
+ONE_STEP_MIN_BATCH = 64
 
 _LOCK = threading.RLock()
 _COMPILED: dict = {}         # key -> compiled executable
@@ -315,19 +318,18 @@ def _host_forces(token, y, dt):
 
 
 def _step_fn(variant: str, mode: str):
-    """One step of one body: ``(sys, state, dt, consts, token) -> state``. ``mode``: "none" (no applied force),
-    "const" (consts = [f_W − m g, τ_W, γ_v, γ_ω]), "callback" (consts = [−m g, 0, γ_v, γ_ω]; forces from the host);
-    decay (γ ≠ 1) re-initialises the state from the decayed ``q, qd``."""
+    """One step of one body: ``(sys, state, consts, token) -> state``. ``mode``: "none" (no applied force),
+    "const" (consts = [f_W − m g, τ_W, γ_v, γ_ω, decay]), "callback" (consts = [−m g, 0, γ_v, γ_ω, decay]; forces
+    from the host). With decay (consts[8] = 1) the state is re-initialised from the decayed ``q, qd`` (a
+    ``lax.cond``: one executable serves runs with and without decay, and without it the state is carried as is)."""
     lib = _lib()
     jax, jp = lib["jax"], lib["jp"]
     P = lib["pipelines"][variant]
     from brax import math as bmath
 
-    def step(sys, state, consts, token, decay):
-        gv, gw = consts[6], consts[7]
-        if decay:
-            qd = state.qd * jp.concatenate([jp.full(3, gv), jp.full(3, gw)])
-            state = P.init(sys, state.q, qd)
+    def step(sys, state, consts, token):
+        factors = jp.concatenate([jp.full(3, consts[6]), jp.full(3, consts[7])])
+        state = jax.lax.cond(consts[8] > 0.0, lambda s: P.init(sys, s.q, s.qd * factors), lambda s: s, state)
         if mode == "none":
             act = jp.zeros(sys.act_size())
         else:
@@ -343,11 +345,11 @@ def _step_fn(variant: str, mode: str):
     return step
 
 
-def _compiled(kind: str, variant: str, mode: str, decay: bool, batch: int, args):
+def _compiled(kind: str, variant: str, mode: str, batch: int, args):
     """The ahead-of-time compiled executable for these arguments (cached; compile time recorded)."""
     lib = _lib()
     jax = lib["jax"]
-    key = (kind, variant, mode, decay, batch, jax.tree_util.tree_structure(args))
+    key = (kind, variant, mode, batch, jax.tree_util.tree_structure(args))
     with _LOCK:
         hit = _COMPILED.get(key)
     if hit is not None:
@@ -363,21 +365,21 @@ def _compiled(kind: str, variant: str, mode: str, decay: bool, batch: int, args)
             s = with_dt(sys, dt)
 
             def body(st, _):
-                st = step(s, st, consts, token, decay)
+                st = step(s, st, consts, token)
                 return st, _packed(st)
             return jax.lax.scan(body, state, None, length=CHUNK)
         fn = jax.vmap(one, in_axes=(None, 0, 0, 0, None))
     else:
         def one(sys, q, qd, dt, consts, token):
             s = with_dt(sys, dt)
-            return _packed(step(s, P.init(s, q, qd), consts, token, decay))
+            return _packed(step(s, P.init(s, q, qd), consts, token))
         fn = jax.vmap(one, in_axes=(None, 0, 0, 0, 0, None))
     t0 = time.perf_counter()
     exe = jax.jit(fn).lower(*args).compile()
     seconds = time.perf_counter() - t0
     with _LOCK:
         _COMPILED[key] = exe
-        name = f"{kind}:{variant}:{mode}{':decay' if decay else ''}:{batch}"
+        name = f"{kind}:{variant}:{mode}:{batch}"
         _COMPILE_S[name] = _COMPILE_S.get(name, 0.0) + seconds
     return exe
 
@@ -388,7 +390,7 @@ def _padded(n: int) -> int:
 
 
 def _mode_and_consts(scenario, variant: str, dt_s: float):
-    """``(mode, consts (8,), decay)`` of the scenario's forces at step ``dt_s`` (see :func:`_step_fn`)."""
+    """``(mode, consts (9,))`` of the scenario's forces at step ``dt_s`` (see :func:`_step_fn`)."""
     why = expressible(scenario, variant, dt_s)
     if why:
         raise EngineError(why)
@@ -396,12 +398,13 @@ def _mode_and_consts(scenario, variant: str, dt_s: float):
     fm = p.forces
     weight = p.body.mass_kg * np.asarray(fm.gravity_W, dtype=float)
     gv, gw = (float(g) for g in decay_factors(scenario, dt_s))
+    decay = 1.0 if fm.has_decay else 0.0
     if variant != "generalized":
-        return "none", np.r_[np.zeros(6), gv, gw], fm.has_decay
+        return "none", np.r_[np.zeros(6), gv, gw, decay]
     if fm.state_dependent:
-        return "callback", np.r_[-weight, np.zeros(3), gv, gw], fm.has_decay
+        return "callback", np.r_[-weight, np.zeros(3), gv, gw, decay]
     f, tau = harness_force_torque(scenario, p.initial_packed(), dt_s)
-    return "const", np.r_[f - weight, tau, gv, gw], fm.has_decay
+    return "const", np.r_[f - weight, tau, gv, gw, decay]
 
 
 @functools.lru_cache(maxsize=64)
@@ -444,7 +447,7 @@ def _run_group(scenario, variant: str, requests) -> list:
     sys = _system_of(scenario, variant)
     y0 = scenario.problem.initial_packed()
     modes = [_mode_and_consts(scenario, variant, r.dt_s) for r in requests]
-    mode, decay = modes[0][0], modes[0][2]
+    mode = modes[0][0]
     n = len(requests)
     B = _padded(n)
     dts = np.array([r.dt_s for r in requests] + [requests[0].dt_s] * (B - n), dtype=float)
@@ -458,7 +461,7 @@ def _run_group(scenario, variant: str, requests) -> list:
     first_bad = np.full(B, -1)
     with _Token(scenario) as token:
         args = (sys, state, jp.asarray(dts), jp.asarray(consts), token)
-        exe = _compiled("run", variant, mode, decay, B, args)
+        exe = _compiled("run", variant, mode, B, args)
         k = 0
         while k < n_max and not done[:n].all():
             state, ys = exe(sys, state, args[2], args[3], token)
@@ -476,7 +479,7 @@ def _run_group(scenario, variant: str, requests) -> list:
     for i, r in enumerate(requests):
         if 0 <= first_bad[i] <= r.n_steps:
             j = int(first_bad[i])
-            out.append(diverged(rows[i, :j + 1].copy(), r.dt_s, f" ({blowup_words(rows[i, j])})"))
+            out.append(diverged(rows[i, :j].copy(), r.dt_s, f" ({blowup_words(rows[i, j])})"))
         else:
             y = rows[i, :r.n_steps + 1].copy()
             out.append(Run(r.dt_s * np.arange(len(y)), y))
@@ -514,15 +517,15 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     shape = np.shape(y_start)
     y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
     sys = _system_of(scenario, variant)
-    mode, consts, decay = _mode_and_consts(scenario, variant, dt_s)
+    mode, consts = _mode_and_consts(scenario, variant, dt_s)
     T = len(y_start)
-    B = _padded(max(T, 1))
+    B = _padded(max(T, ONE_STEP_MIN_BATCH))
     pad = np.concatenate([y_start, np.broadcast_to(scenario.problem.initial_packed(), (B - T, 13))])
     q, qd = to_q_qd(pad)
     with _Token(scenario) as token:
         args = (sys, jp.asarray(q), jp.asarray(qd), jp.full(B, float(dt_s)), jp.asarray(np.tile(consts, (B, 1))),
                 token)
-        exe = _compiled("one_step", variant, mode, decay, B, args)
+        exe = _compiled("one_step", variant, mode, B, args)
         y = np.array(exe(*args))[:T]
     return y.reshape(shape)
 
