@@ -182,8 +182,28 @@ def _lib():
             from brax.spring import pipeline as spring
     except ImportError as exc:
         raise ImportError(f"brax {installed_version('brax')} is installed but cannot be imported: {exc}") from exc
+    os.register_at_fork(after_in_child=_after_fork_in_child)
     return {"jax": jax, "jp": jp, "mjcf": mjcf, "Actuator": Actuator,
             "pipelines": {"generalized": generalized, "positional": positional, "spring": spring}}
+
+
+#: True in a process forked after JAX's backend had started in its parent: JAX hangs there (its thread pools do
+#: not survive a fork; measured: a jitted call in such a child never returns, clear_backends() does not help).
+_FORKED_AFTER_JAX = [False]
+
+
+def _after_fork_in_child():
+    from jax._src import xla_bridge
+    _FORKED_AFTER_JAX[0] = bool(xla_bridge.backends_are_initialized())
+
+
+def _usable():
+    """The brax/jax modules, or EngineError in a process forked after its parent had run JAX (instead of a hang)."""
+    lib = _lib()
+    if _FORKED_AFTER_JAX[0]:
+        raise EngineError("JAX cannot run in this process: it was forked after JAX had started in its parent "
+                          "(run brax in a fresh process, e.g. the rbcheck CLI, or with one job)")
+    return lib
 
 
 def compile_seconds() -> dict:
@@ -442,7 +462,7 @@ class _Token:
 
 def _run_group(scenario, variant: str, requests) -> list:
     """The runs of ``requests`` (all of ``scenario``), batched over their Δt: one vmapped scan per chunk."""
-    lib = _lib()
+    lib = _usable()
     jp = lib["jp"]
     sys = _system_of(scenario, variant)
     y0 = scenario.problem.initial_packed()
@@ -512,7 +532,7 @@ def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
 def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     """One step of ``dt_s`` from each row of ``y_start`` (T, 13), batched (vmap): the forces from the row, the
     pre-step decay, brax's state built from the row by ``pipeline.init``."""
-    lib = _lib()
+    lib = _usable()
     jp = lib["jp"]
     shape = np.shape(y_start)
     y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
