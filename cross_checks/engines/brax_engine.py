@@ -90,9 +90,9 @@ from cross_checks.engines.base import (
     Variant,
     decay_factors,
     harness_force_torque,
-    harness_force_torque_floats,
     installed_version,
 )
+from cross_checks.engines.step_floats import harness_fn
 from reference_sim.quaternion import quat_conj, rotate
 from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
 
@@ -326,30 +326,35 @@ def _packed(state):
 
 def _host_forces(token, y, dt):
     """The force callback (host): base.harness_force_torque_floats of each row of ``y`` (B, 13) at its step
-    ``dt`` (B,), for the scenario registered under ``token``."""
+    ``dt`` (B,) — through step_floats.harness_fn, the evaluator and decay factors looked up once per run and Δt —
+    for the scenario registered under ``token``."""
     token = np.asarray(token).reshape(-1)
     y = np.asarray(y, dtype=float).reshape(-1, 13)
-    dt = np.broadcast_to(np.asarray(dt, dtype=float).reshape(-1), (len(y),))
-    scenario = _CALLBACK_SCENARIOS[int(token[0])]
+    dt = np.broadcast_to(np.asarray(dt, dtype=float).reshape(-1), (len(y),)).tolist()
+    scenario, fns = _CALLBACK_SCENARIOS[int(token[0])]
     out = np.empty((len(y), 6))
     for i, row in enumerate(y.tolist()):
-        out[i] = harness_force_torque_floats(scenario, row, float(dt[i]))
+        h = fns.get(dt[i])
+        if h is None:
+            h = fns[dt[i]] = harness_fn(scenario, dt[i])
+        out[i] = h(row)
     return out
 
 
 def _step_fn(variant: str, mode: str):
     """One step of one body: ``(sys, state, consts, token) -> state``. ``mode``: "none" (no applied force),
     "const" (consts = [f_W − m g, τ_W, γ_v, γ_ω, decay]), "callback" (consts = [−m g, 0, γ_v, γ_ω, decay]; forces
-    from the host). With decay (consts[8] = 1) the state is re-initialised from the decayed ``q, qd`` (a
+    from the host). With decay (consts[8] = 1, passed unbatched as ``decay``: under vmap a batched predicate would
+    turn the cond into a select that runs both branches) the state is re-initialised from the decayed ``q, qd`` (a
     ``lax.cond``: one executable serves runs with and without decay, and without it the state is carried as is)."""
     lib = _lib()
     jax, jp = lib["jax"], lib["jp"]
     P = lib["pipelines"][variant]
     from brax import math as bmath
 
-    def step(sys, state, consts, token):
+    def step(sys, state, consts, token, decay):
         factors = jp.concatenate([jp.full(3, consts[6]), jp.full(3, consts[7])])
-        state = jax.lax.cond(consts[8] > 0.0, lambda s: P.init(sys, s.q, s.qd * factors), lambda s: s, state)
+        state = jax.lax.cond(decay > 0.0, lambda s: P.init(sys, s.q, s.qd * factors), lambda s: s, state)
         if mode == "none":
             act = jp.zeros(sys.act_size())
         else:
@@ -381,19 +386,19 @@ def _compiled(kind: str, variant: str, mode: str, batch: int, args):
         return sys.replace(opt=sys.opt.replace(timestep=dt))
 
     if kind == "run":
-        def one(sys, state, dt, consts, token):
+        def one(sys, state, dt, consts, token, decay):
             s = with_dt(sys, dt)
 
             def body(st, _):
-                st = step(s, st, consts, token)
+                st = step(s, st, consts, token, decay)
                 return st, _packed(st)
             return jax.lax.scan(body, state, None, length=CHUNK)
-        fn = jax.vmap(one, in_axes=(None, 0, 0, 0, None))
+        fn = jax.vmap(one, in_axes=(None, 0, 0, 0, None, None))
     else:
-        def one(sys, q, qd, dt, consts, token):
+        def one(sys, q, qd, dt, consts, token, decay):
             s = with_dt(sys, dt)
-            return _packed(step(s, P.init(s, q, qd), consts, token))
-        fn = jax.vmap(one, in_axes=(None, 0, 0, 0, 0, None))
+            return _packed(step(s, P.init(s, q, qd), consts, token, decay))
+        fn = jax.vmap(one, in_axes=(None, 0, 0, 0, 0, None, None))
     t0 = time.perf_counter()
     exe = jax.jit(fn).lower(*args).compile()
     seconds = time.perf_counter() - t0
@@ -449,7 +454,7 @@ class _Token:
         with _LOCK:
             _Token._next += 1
             self.token = _Token._next
-            _CALLBACK_SCENARIOS[self.token] = scenario
+            _CALLBACK_SCENARIOS[self.token] = (scenario, {})
 
     def __enter__(self):
         return np.int64(self.token)
@@ -480,11 +485,11 @@ def _run_group(scenario, variant: str, requests) -> list:
     done = np.zeros(B, dtype=bool)
     first_bad = np.full(B, -1)
     with _Token(scenario) as token:
-        args = (sys, state, jp.asarray(dts), jp.asarray(consts), token)
+        args = (sys, state, jp.asarray(dts), jp.asarray(consts), token, jp.asarray(consts[0, 8]))
         exe = _compiled("run", variant, mode, B, args)
         k = 0
         while k < n_max and not done[:n].all():
-            state, ys = exe(sys, state, args[2], args[3], token)
+            state, ys = exe(sys, state, *args[2:])
             ys = np.asarray(ys)
             m = min(CHUNK, n_max - k)
             rows[:, k + 1:k + 1 + m] = ys[:, :m]
@@ -544,7 +549,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     q, qd = to_q_qd(pad)
     with _Token(scenario) as token:
         args = (sys, jp.asarray(q), jp.asarray(qd), jp.full(B, float(dt_s)), jp.asarray(np.tile(consts, (B, 1))),
-                token)
+                token, jp.asarray(consts[8]))
         exe = _compiled("one_step", variant, mode, B, args)
         y = np.array(exe(*args))[:T]
     return y.reshape(shape)
