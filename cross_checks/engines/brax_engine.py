@@ -1,68 +1,72 @@
 """Brax (JAX) as an engine adapter (``brax:VARIANT``); the interface is cross_checks.engines.base.
 
-Brax says it is no longer actively maintained (a UserWarning of ``brax.io.mjcf.load_model`` points to MJX); the
-adapter pins brax 0.14.2 on jax 0.10.2 and computes in float64 (``jax_enable_x64`` set before any model is built).
+Brax says it is no longer actively maintained (a UserWarning of ``brax.io.mjcf.load_model`` points to MJX);
+the adapter pins brax 0.14.2 on jax 0.10.2 and computes in float64 (``jax_enable_x64`` set before any model is
+built).
 
-Model: an MJCF string loaded by ``brax.io.mjcf.loads`` (MuJoCo's compiler, then brax's ``System``): one body with
-a ``<freejoint>``, an explicit ``<inertial pos="0 0 0" mass=… fullinertia=…>`` — the moment of inertia about the
-COM in the scenario's body axes, a full tensor taken as it is (MuJoCo diagonalises it into principal moments and
-``iquat``; brax keeps both in ``link.inertia``), so body origin = COM and the body frame is the scenario's — and
-one geom brax needs to build a system, with ``contype = conaffinity = 0`` (it never collides) and ``mass = 0``
-under ``inertiafromgeom="false"`` (it changes neither mass nor inertia: pinned). ``alignfree="false"`` keeps the
-joint on the body frame. Gravity and ``option.timestep`` from the scenario. A model MuJoCo's compiler rejects
-(e.g. moments violating ``A + B ≥ C``) is an EngineError with its words.
+Model: an MJCF string loaded by ``brax.io.mjcf.loads`` (MuJoCo's compiler, then brax's ``System``): one body
+with a ``<freejoint>``, an explicit ``<inertial pos="0 0 0" mass=… fullinertia=…>`` — the moment of inertia
+about the COM in the scenario's body axes, a full tensor taken as it is (MuJoCo diagonalises it into principal
+moments and ``iquat``; brax keeps both in ``link.inertia``), so body origin = COM and the body frame is the
+scenario's — and one geom brax needs to build a system, with ``contype = conaffinity = 0`` (it never collides)
+and ``mass = 0`` under ``inertiafromgeom="false"`` (it changes neither mass nor inertia: pinned).
+``alignfree="false"`` keeps the joint on the body frame. Gravity and ``option.timestep`` from the scenario. A
+model MuJoCo's compiler rejects (e.g. moments violating ``A + B ≥ C``) is an EngineError with its words.
 
-State mapping (docs/engine_conventions.md "Brax 0.14", pinned by tests/cross_checks/engines/test_brax_engine.py):
-``pipeline.init(sys, q, qd)`` with ``q = [x_W, q_WB (w x y z)]`` and ``qd = [v_W, ω_B]`` (ω in BODY axes); the
-state is read from ``state.x.pos`` (body origin = COM, world), ``state.x.rot`` (w, x, y, z) and ``state.xd.vel``,
-``state.xd.ang`` (both WORLD axes). The conversion ω_W ↔ ω_B happens at the boundary only.
+State mapping (docs/engine_conventions.md "Brax 0.14", pinned by
+tests/cross_checks/engines/test_brax_engine.py): ``pipeline.init(sys, q, qd)`` with ``q = [x_W, q_WB (w x y
+z)]`` and ``qd = [v_W, ω_B]`` (ω in BODY axes); the state is read from ``state.x.pos`` (body origin = COM,
+world), ``state.x.rot`` (w, x, y, z) and ``state.xd.vel``, ``state.xd.ang`` (both WORLD axes). The conversion
+ω_W ↔ ω_B happens at the boundary only.
 
-The three pipelines, each one variant (declared from brax's source, brax/<pipeline>/pipeline.py and integrator.py):
+The three pipelines, each one variant (declared from brax's source, brax/<pipeline>/pipeline.py and
+integrator.py):
 
 * ``generalized`` — ``generalized.pipeline.step``: ``qf_smooth = τ − C(q, q̇)`` (``dynamics.forward``: the
   recursive Newton-Euler bias force, which contains ω_B × I ω_B, evaluated at the start of the step), then
-  ``integrator.integrate``: ``q̇ += Δt M⁻¹ qf``, ``x += Δt v`` and ``q_WB ← normalize(q_WB ⊗ quat_rot_axis(ω̂, Δt|ω|))``
-  with the NEW velocities (ω̂ = ω_B/(|ω_B| + 1e-8), angle Δt(|ω_B| + 1e-8): a 1e-8 rad/s bias). That is
-  semi-implicit Euler with an explicit gyroscopic term in body axes and an exponential-map rotation update — the
-  scheme of mujoco:euler: first order, SYMPLECTIC_EULER_EXPLICIT_GYRO.
+  ``integrator.integrate``: ``q̇ += Δt M⁻¹ qf``, ``x += Δt v`` and ``q_WB ← normalize(q_WB ⊗ quat_rot_axis(ω̂,
+  Δt|ω|))`` with the NEW velocities (ω̂ = ω_B/(|ω_B| + 1e-8), angle Δt(|ω_B| + 1e-8): a 1e-8 rad/s bias). That
+  is semi-implicit Euler with an explicit gyroscopic term in body axes and an exponential-map rotation update
+  — the scheme of mujoco:euler: first order, SYMPLECTIC_EULER_EXPLICIT_GYRO.
 * ``spring`` — ``spring.pipeline.step``: ``ω_W += Δt I_W⁻¹ τ_W`` (com.inv_inertia; NO gyroscopic term: ω_W is
-  constant without a torque), ``v += Δt (g + f/m)``, then ``spring.integrator.integrate``:
-  ``q ← normalize(q + ½Δt (0, ω_W) ⊗ q)``, ``x += Δt v`` with the new velocities. First order, no gyroscopic term.
-* ``positional`` — ``positional.pipeline.step``: the same velocity update (no gyroscopic term) and position update
-  (``integrate_xdd``), then the position-based-dynamics projection ``project_xd``: v = Δx/Δt, and
-  ω_W = 2 vec(q_new ⊗ q_old⁻¹)/Δt, which is ω_W/√(1 + (|ω|Δt/2)²): every step shrinks |ω| by |ω|²Δt²/8 — a
+  constant without a torque), ``v += Δt (g + f/m)``, then ``spring.integrator.integrate``: ``q ← normalize(q +
+  ½Δt (0, ω_W) ⊗ q)``, ``x += Δt v`` with the new velocities. First order, no gyroscopic term.
+* ``positional`` — ``positional.pipeline.step``: the same velocity update (no gyroscopic term) and position
+  update (``integrate_xdd``), then the position-based-dynamics projection ``project_xd``: v = Δx/Δt, and ω_W =
+  2 vec(q_new ⊗ q_old⁻¹)/Δt, which is ω_W/√(1 + (|ω|Δt/2)²): every step shrinks |ω| by |ω|²Δt²/8 — a
   rotational energy loss of first order in Δt. First order, no gyroscopic term, rotational energy decays.
 
-Forces (harness semantics of base.py): brax has no external-wrench input (no ``xfrc_applied``); its one applied
-force input is ``act`` through ``sys.actuator`` (brax/actuator.py ``to_tau``: ``τ[qd_id] += gear (gain act)``).
-MJCF motors on a free joint reach only the joint's FIRST DOF in brax (io/mjcf.py takes ``jnt_dofadr`` and
-``gear[:, 0]``), so the generalized model gets six MJCF motors whose brax actuator is then set to DOFs 0..5
-with gear 1, gain 1, no bias and no limits (``System.replace``; ACTUATOR). The generalized force of a free joint is
-``[f_W at the body origin, τ_B in body axes]`` (pinned), so ``act = [f − m g, R_WBᵀ τ_W]`` with ``f, τ`` from
-``base.harness_force_torque`` (brax applies gravity itself), evaluated from the start-of-step state — constants
-computed once when the scenario's forces do not depend on the state, else a ``jax.pure_callback`` to the package's
-force model (base.harness_force_torque_floats) every step. The pipelines are single-stage: no force is held over
-stages (``forces_held`` does not arise). The positional and spring pipelines give a free joint NO actuator force
-(positional/joints.py and spring/joints.py ``_free``/``_free_joint`` return zero) and have no other force input:
-they express only gravity (and the velocity decay, below); any other force or torque is an EngineError naming
-the scenario (brax cannot take it). Velocity decay ``e^{−kΔt}`` is applied to ``qd`` before every step (a new
-``pipeline.init`` from the decayed ``q, qd``: every derived quantity recomputed), that step's force scaled alike.
+Forces (harness semantics of base.py): brax has no external-wrench input (no ``xfrc_applied``); its one
+applied force input is ``act`` through ``sys.actuator`` (brax/actuator.py ``to_tau``: ``τ[qd_id] += gear (gain
+act)``). MJCF motors on a free joint reach only the joint's FIRST DOF in brax (io/mjcf.py takes ``jnt_dofadr``
+and ``gear[:, 0]``), so the generalized model gets six MJCF motors whose brax actuator is then set to DOFs
+0..5 with gear 1, gain 1, no bias and no limits (``System.replace``; ACTUATOR). The generalized force of a
+free joint is ``[f_W at the body origin, τ_B in body axes]`` (pinned), so ``act = [f − m g, R_WBᵀ τ_W]`` with
+``f, τ`` from ``base.harness_force_torque`` (brax applies gravity itself), evaluated from the start-of-step
+state — constants computed once when the scenario's forces do not depend on the state, else a
+``jax.pure_callback`` to the package's force model (base.harness_force_torque_floats) every step. The
+pipelines are single-stage: no force is held over stages (``forces_held`` does not arise). The positional and
+spring pipelines give a free joint NO actuator force (positional/joints.py and spring/joints.py
+``_free``/``_free_joint`` return zero) and have no other force input: they express only gravity (and the
+velocity decay, below); any other force or torque is an EngineError naming the scenario (brax cannot take it).
+Velocity decay ``e^{−kΔt}`` is applied to ``qd`` before every step (a new ``pipeline.init`` from the decayed
+``q, qd``: every derived quantity recomputed), that step's force scaled alike.
 
-Defaults that are not the scenario's physics, each set explicitly (NEUTRAL_SYSTEM, NEUTRAL_DOF): ``vel_damping``
-and ``ang_damping`` (brax's exponential velocity damping in the positional and spring integrators),
-``spring_mass_scale`` and ``spring_inertia_scale`` (they rescale mass and inertia as ``m^(1−s)``), the DOF
-damping and armature (in the generalized mass matrix), ``matrix_inv_iterations`` (0: an exact solve of M⁻¹
-instead of brax's default 10 Newton-Schulz iterations from the previous inverse), fluid forces off (viscosity and
-density 0), collisions off (the geom's contype/conaffinity 0). There are no substeps: ``pipeline.step`` is one
-step (``n_frames`` belongs to brax.envs, which the adapter does not use).
+Defaults that are not the scenario's physics, each set explicitly (NEUTRAL_SYSTEM, NEUTRAL_DOF):
+``vel_damping`` and ``ang_damping`` (brax's exponential velocity damping in the positional and spring
+integrators), ``spring_mass_scale`` and ``spring_inertia_scale`` (they rescale mass and inertia as
+``m^(1−s)``), the DOF damping and armature (in the generalized mass matrix), ``matrix_inv_iterations`` (0: an
+exact solve of M⁻¹ instead of brax's default 10 Newton-Schulz iterations from the previous inverse), fluid
+forces off (viscosity and density 0), collisions off (the geom's contype/conaffinity 0). There are no
+substeps: ``pipeline.step`` is one step (``n_frames`` belongs to brax.envs, which the adapter does not use).
 
-Stepping: inside ``jax.lax.scan`` chunks of CHUNK steps compiled ahead of time (``jit(...).lower().compile()``,
-timed apart from stepping: :func:`compile_seconds`), batched with ``jax.vmap`` — over the Δt rungs of one
-scenario (simulate_many) and over the start states of one_step. The compiled code takes the system and Δt as
-arguments, so it is reused across scenarios and steps. JAX's persistent compilation cache lives in
-``$RBCHECK_CACHE_DIR/jax`` (else ``$XDG_CACHE_HOME/rbcheck/jax``, ``~/.cache/rbcheck/jax``). Nothing here runs a
-JAX computation before a run: ``version()`` reads package metadata, so a sweep's parent process never starts a
-JAX backend before it forks its workers.
+Stepping: inside ``jax.lax.scan`` chunks of CHUNK steps compiled ahead of time
+(``jit(...).lower().compile()``, timed apart from stepping: :func:`compile_seconds`), batched with
+``jax.vmap`` — over the Δt rungs of one scenario (simulate_many) and over the start states of one_step. The
+compiled code takes the system and Δt as arguments, so it is reused across scenarios and steps. JAX's
+persistent compilation cache lives in ``$RBCHECK_CACHE_DIR/jax`` (else ``$XDG_CACHE_HOME/rbcheck/jax``,
+``~/.cache/rbcheck/jax``). Nothing here runs a JAX computation before a run: ``version()`` reads package
+metadata, so a sweep's parent process never starts a JAX backend before it forks its workers.
 
 Divergence: brax never stops; each chunk's states are checked, and the first state that is non-finite or has a
 component beyond BLOWUP_LIMIT ends the run as ``diverged at t = …``.
@@ -96,28 +100,31 @@ from cross_checks.engines.step_floats import harness_fn
 from reference_sim.quaternion import quat_conj, rotate
 from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
 
-__all__ = ["ENGINE", "VARIANTS", "NEUTRAL_SYSTEM", "NEUTRAL_DOF", "CHUNK", "ONE_STEP_MIN_BATCH", "EngineError", "version", "mjcf_text",
-           "build_system", "simulate", "simulate_many", "one_step", "compile_seconds", "BraxAdapter", "expressible"]
+__all__ = ["ENGINE", "VARIANTS", "NEUTRAL_SYSTEM", "NEUTRAL_DOF", "CHUNK", "ONE_STEP_MIN_BATCH",
+           "EngineError", "version", "mjcf_text", "build_system", "simulate", "simulate_many", "one_step",
+           "compile_seconds", "BraxAdapter", "expressible"]
 
 ENGINE = "brax"
 #: The pipelines' integrators (read in brax 0.14.2's source; see the module docstring): all first order.
 VARIANTS = {
     # generalized/integrator.py: q̇ += Δt M⁻¹(τ − C) (C has ω_B × I ω_B), then q with the new q̇ (exp map)
-    "generalized": Variant(1, "brax generalized pipeline: semi-implicit Euler in generalized coordinates, explicit "
-                              "gyroscopic term (body axes), exponential-map rotation update with the new ω",
+    "generalized": Variant(1, "brax generalized pipeline: semi-implicit Euler in generalized coordinates, "
+                              "explicit gyroscopic term (body axes), exponential-map rotation update with "
+                              "the new ω",
                            traits=SYMPLECTIC_EULER_EXPLICIT_GYRO),
     # spring/pipeline.py + spring/integrator.py: ω_W += Δt I_W⁻¹ τ (no gyroscopic term), q += ½Δt ω_W ⊗ q
-    "spring": Variant(1, "brax spring pipeline: semi-implicit Euler in maximal coordinates, NO gyroscopic term, "
-                         "quaternion q += ½Δt ω ⊗ q renormalised; forces: gravity only",
+    "spring": Variant(1, "brax spring pipeline: semi-implicit Euler in maximal coordinates, NO gyroscopic "
+                         "term, quaternion q += ½Δt ω ⊗ q renormalised; forces: gravity only",
                       traits=Traits(gyroscopic_term=False, translation_drift=0, rotation_drift="none",
                                     rotation_sign=0)),
     # positional/pipeline.py + integrator.py: as spring, then ω_W = 2 vec(Δq)/Δt (project_xd): |ω| shrinks
-    "positional": Variant(1, "brax positional pipeline: the spring pipeline's step, then velocities projected from "
-                             "the position change (ω shrinks by |ω|²Δt²/8 a step), NO gyroscopic term; "
-                             "forces: gravity only",
+    "positional": Variant(1, "brax positional pipeline: the spring pipeline's step, then velocities "
+                             "projected from the position change (ω shrinks by |ω|²Δt²/8 a step), NO "
+                             "gyroscopic term; forces: gravity only",
                           traits=Traits(gyroscopic_term=False, translation_drift=0, rotation_drift="none",
                                         rotation_sign=-1)),
 }
+
 
 #: System fields set on every model (``System.replace``), each brax 0.14.2's MJCF default except
 #: matrix_inv_iterations (default 10: an approximate inverse), set so that no default can change the physics.
@@ -127,8 +134,8 @@ NEUTRAL_SYSTEM = (("vel_damping", 0.0), ("ang_damping", 0.0), ("spring_mass_scal
 NEUTRAL_DOF = (("damping", 0.0), ("armature", 0.0))
 #: Steps per compiled scan chunk: a run of n steps runs ceil(n / CHUNK) chunks (the steps past n are dropped).
 CHUNK = 512
-#: one_step batches are padded to at least this many rows (a power of two): one step of 64 bodies costs about what
-#: one costs, and every small batch shares one executable.
+#: one_step batches are padded to at least this many rows (a power of two): one step of 64 bodies costs about
+#: what one costs, and every small batch shares one executable.
 ONE_STEP_MIN_BATCH = 64
 
 _LOCK = threading.RLock()
@@ -138,7 +145,8 @@ _CALLBACK_SCENARIOS: dict = {}   # token -> scenario (the host force callback's 
 
 
 def _cache_root() -> Path:
-    """rbcheck's cache directory (as cross_checks.sweep.cache.cache_dir, which the engines layer may not import)."""
+    """rbcheck's cache directory (as cross_checks.sweep.cache.cache_dir, which the engines layer may not
+    import)."""
     if os.environ.get("RBCHECK_CACHE_DIR"):
         return Path(os.environ["RBCHECK_CACHE_DIR"])
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
@@ -181,14 +189,16 @@ def _lib():
             from brax.positional import pipeline as positional
             from brax.spring import pipeline as spring
     except ImportError as exc:
-        raise ImportError(f"brax {installed_version('brax')} is installed but cannot be imported: {exc}") from exc
+        raise ImportError(f"brax {installed_version('brax')} is installed but cannot be imported: "
+                          f"{exc}") from exc
     os.register_at_fork(after_in_child=_after_fork_in_child)
     return {"jax": jax, "jp": jp, "mjcf": mjcf, "Actuator": Actuator,
             "pipelines": {"generalized": generalized, "positional": positional, "spring": spring}}
 
 
-#: True in a process forked after JAX's backend had started in its parent: JAX hangs there (its thread pools do
-#: not survive a fork; measured: a jitted call in such a child never returns, clear_backends() does not help).
+#: True in a process forked after JAX's backend had started in its parent: JAX hangs there (its thread pools
+#: do not survive a fork; measured: a jitted call in such a child never returns, clear_backends() does not
+#: help).
 _FORKED_AFTER_JAX = [False]
 
 
@@ -198,7 +208,8 @@ def _after_fork_in_child():
 
 
 def _usable():
-    """The brax/jax modules, or EngineError in a process forked after its parent had run JAX (instead of a hang)."""
+    """The brax/jax modules, or EngineError in a process forked after its parent had run JAX (instead of a
+    hang)."""
     lib = _lib()
     if _FORKED_AFTER_JAX[0]:
         raise EngineError("JAX cannot run in this process: it was forked after JAX had started in its parent "
@@ -208,7 +219,8 @@ def _usable():
 
 def compile_seconds() -> dict:
     """Seconds spent compiling (lowering + XLA compile) each executable this process built, by
-    ``"kind:variant:mode:batch"`` (kind ``run`` = a CHUNK-step scan, ``one_step``); apart from stepping time."""
+    ``"kind:variant:mode:batch"`` (kind ``run`` = a CHUNK-step scan, ``one_step``); apart from stepping
+    time."""
     with _LOCK:
         return dict(_COMPILE_S)
 
@@ -228,10 +240,10 @@ def mjcf_text(scenario, dt_s: float, *, actuators: bool) -> str:
     motors = ""
     if actuators:
         gears = ["1 0 0 0 0 0", "0 1 0 0 0 0", "0 0 1 0 0 0", "0 0 0 1 0 0", "0 0 0 0 1 0", "0 0 0 0 0 1"]
-        motors = "<actuator>" + "".join(f'<motor joint="free" gear="{gr}" ctrllimited="false"/>' for gr in gears) + \
-            "</actuator>"
-    return (f'<mujoco model="rbcheck"><compiler alignfree="false" inertiafromgeom="false" balanceinertia="false" '
-            f'boundmass="0" boundinertia="0"/>'
+        motors = "".join(f'<motor joint="free" gear="{gr}" ctrllimited="false"/>' for gr in gears)
+        motors = f"<actuator>{motors}</actuator>"
+    return (f'<mujoco model="rbcheck"><compiler alignfree="false" inertiafromgeom="false" '
+            f'balanceinertia="false" boundmass="0" boundinertia="0"/>'
             f'<option timestep="{_num(dt_s)}" gravity="{g}" viscosity="0" density="0" integrator="Euler"/>'
             f'<worldbody><body name="body"><freejoint name="free"/>'
             f'<inertial pos="0 0 0" mass="{_num(p.body.mass_kg)}" fullinertia="{full}"/>'
@@ -250,8 +262,8 @@ def neutralise(sys):
 
 
 def six_dof_actuator(sys):
-    """``sys`` with its actuator set to one motor per DOF of the free joint (DOFs 0..5), gear 1, gain 1, no bias,
-    no control or force limit: ``act`` is then the generalized force ``[f_W, τ_B]``."""
+    """``sys`` with its actuator set to one motor per DOF of the free joint (DOFs 0..5), gear 1, gain 1, no
+    bias, no control or force limit: ``act`` is then the generalized force ``[f_W, τ_B]``."""
     lib = _lib()
     jp = lib["jp"]
     inf = jp.full((6, 2), jp.inf) * jp.array([-1.0, 1.0])
@@ -261,13 +273,14 @@ def six_dof_actuator(sys):
 
 
 def expressible(scenario, variant: str, dt_s: float) -> str:
-    """"" when ``variant`` can take the scenario's forces, else why not (positional and spring: gravity only)."""
+    """"" when ``variant`` can take the scenario's forces, else why not (positional and spring: gravity
+    only)."""
     if variant == "generalized":
         return ""
     fm = scenario.problem.forces
-    why = (f"brax's {variant} pipeline cannot apply scenario {scenario.name!r}'s forces: a free joint takes no "
-           f"actuator force there ({variant}/joints.py gives it zero) and the pipeline has no other force input, "
-           "so it expresses gravity only")
+    why = (f"brax's {variant} pipeline cannot apply scenario {scenario.name!r}'s forces: a free joint takes "
+           f"no actuator force there ({variant}/joints.py gives it zero) and the pipeline has no other force "
+           "input, so it expresses gravity only")
     if fm.state_dependent:
         return why + " (these forces depend on the state)"
     f, tau = harness_force_torque(scenario, scenario.problem.initial_packed(), dt_s)
@@ -287,12 +300,12 @@ def _system_of(scenario, variant: str):
     gen = variant == "generalized"
     try:
         with warnings.catch_warnings():
-            warnings.simplefilter("ignore")     # brax's "not actively being maintained" warning, on every load
+            warnings.simplefilter("ignore")     # brax's "not actively being maintained", on every load
             sys = lib["mjcf"].loads(mjcf_text(scenario, 0.01, actuators=gen))
         lib["mjcf"].validate_model(sys.mj_model)
     except (ValueError, NotImplementedError, RuntimeError) as exc:
-        raise EngineError(f"brax {installed_version('brax')} (MuJoCo's compiler) rejected the model of scenario "
-                          f"{scenario.name!r}: {' '.join(str(exc).split())}") from None
+        raise EngineError(f"brax {installed_version('brax')} (MuJoCo's compiler) rejected the model of "
+                          f"scenario {scenario.name!r}: {' '.join(str(exc).split())}") from None
     sys = neutralise(sys)
     if gen:
         sys = six_dof_actuator(sys)
@@ -309,7 +322,8 @@ def build_system(scenario, variant: str, dt_s: float):
 # --- state conversion (the boundary) ----------------------------------------------------------------------
 
 def to_q_qd(y):
-    """Packed states (..., 13) -> brax ``q = [x_W, q_WB (w x y z)]`` (..., 7), ``qd = [v_W, ω_B]`` (..., 6)."""
+    """Packed states (..., 13) -> brax ``q = [x_W, q_WB (w x y z)]`` (..., 7), ``qd = [v_W, ω_B]``
+    (..., 6)."""
     y = np.asarray(y, dtype=float)
     q = y[..., 6:10]
     return (np.concatenate([y[..., 0:3], q], axis=-1),
@@ -326,8 +340,8 @@ def _packed(state):
 
 def _host_forces(token, y, dt):
     """The force callback (host): base.harness_force_torque_floats of each row of ``y`` (B, 13) at its step
-    ``dt`` (B,) — through step_floats.harness_fn, the evaluator and decay factors looked up once per run and Δt —
-    for the scenario registered under ``token``."""
+    ``dt`` (B,) — through step_floats.harness_fn, the evaluator and decay factors looked up once per run and
+    Δt — for the scenario registered under ``token``."""
     token = np.asarray(token).reshape(-1)
     y = np.asarray(y, dtype=float).reshape(-1, 13)
     dt = np.broadcast_to(np.asarray(dt, dtype=float).reshape(-1), (len(y),)).tolist()
@@ -342,11 +356,12 @@ def _host_forces(token, y, dt):
 
 
 def _step_fn(variant: str, mode: str):
-    """One step of one body: ``(sys, state, consts, token) -> state``. ``mode``: "none" (no applied force),
-    "const" (consts = [f_W − m g, τ_W, γ_v, γ_ω, decay]), "callback" (consts = [−m g, 0, γ_v, γ_ω, decay]; forces
-    from the host). With decay (consts[8] = 1, passed unbatched as ``decay``: under vmap a batched predicate would
-    turn the cond into a select that runs both branches) the state is re-initialised from the decayed ``q, qd`` (a
-    ``lax.cond``: one executable serves runs with and without decay, and without it the state is carried as is)."""
+    """One step of one body: ``(sys, state, consts, token, decay) -> state``. ``mode``: "none" (no applied
+    force), "const" (consts = [f_W − m g, τ_W, γ_v, γ_ω, decay]), "callback" (consts = [−m g, 0, γ_v, γ_ω,
+    decay]; forces from the host). With decay (1, passed unbatched: under vmap a batched predicate would turn
+    the cond into a select that runs both branches) the state is re-initialised from the decayed ``q, qd`` (a
+    ``lax.cond``: one executable serves runs with and without decay; without it the state is carried as
+    is)."""
     lib = _lib()
     jax, jp = lib["jax"], lib["jp"]
     P = lib["pipelines"][variant]
@@ -512,7 +527,8 @@ def _run_group(scenario, variant: str, requests) -> list:
 
 
 def simulate_many(variant: str, requests) -> list:
-    """The runs of ``requests`` (RunRequest), in order: grouped by scenario, each group one batch over its Δt."""
+    """The runs of ``requests`` (RunRequest), in order: grouped by scenario, each group one batch over its
+    Δt."""
     requests = list(requests)
     out: list = [None] * len(requests)
     groups: dict = {}
@@ -548,8 +564,8 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     pad = np.concatenate([y_start, np.broadcast_to(scenario.problem.initial_packed(), (B - T, 13))])
     q, qd = to_q_qd(pad)
     with _Token(scenario) as token:
-        args = (sys, jp.asarray(q), jp.asarray(qd), jp.full(B, float(dt_s)), jp.asarray(np.tile(consts, (B, 1))),
-                token, jp.asarray(consts[8]))
+        args = (sys, jp.asarray(q), jp.asarray(qd), jp.full(B, float(dt_s)),
+                jp.asarray(np.tile(consts, (B, 1))), token, jp.asarray(consts[8]))
         exe = _compiled("one_step", variant, mode, B, args)
         y = np.array(exe(*args))[:T]
     return y.reshape(shape)
@@ -557,7 +573,8 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
 
 class BraxAdapter(EngineAdapter):
     """``brax:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
-    (``pip install 'rbcheck[brax]'``). Declared orders: each pipeline is a semi-implicit Euler step, first order."""
+    (``pip install 'rbcheck[brax]'``). Declared orders: each pipeline is a semi-implicit Euler step, first
+    order."""
 
     name = ENGINE
     variants = VARIANTS

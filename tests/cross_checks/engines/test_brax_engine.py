@@ -1,8 +1,8 @@
 """The Brax adapter (cross_checks.engines.brax_engine): every convention it relies on, pinned on brax itself
 (docs/engine_conventions.md, "Brax 0.14"), every default it neutralises, one step of each pipeline against its
 hand-derived step, the forces brax can and cannot take, divergence, batching, the compile time it reports, and
-the declared order on catalog scenarios. JAX compiles each executable once per process (and keeps it in rbcheck's
-persistent cache), so the tests share batch sizes (one_step pads to 64 rows, runs to 1)."""
+the declared order on catalog scenarios. JAX compiles each executable once per process (and keeps it in
+rbcheck's persistent cache), so the tests share batch sizes (one_step pads to 64 rows, runs to 1)."""
 import math
 import os
 import subprocess
@@ -113,9 +113,11 @@ def test_mjcf_motors_on_a_free_joint_reach_only_its_first_dof_so_the_adapter_set
 
 
 def test_mujocos_refusal_is_an_engine_error_in_its_words(monkeypatch):
-    # rbcheck's own body check refuses such moments first; a model MuJoCo's compiler rejects still reads as its words
+    # rbcheck's own body check refuses such moments first; a model MuJoCo's compiler rejects still reads as
+    # its words
     real = be.mjcf_text
-    monkeypatch.setattr(be, "mjcf_text", lambda *a, **k: real(*a, **k).replace('fullinertia="', 'fullinertia="9 '))
+    monkeypatch.setattr(be, "mjcf_text",
+                        lambda *a, **k: real(*a, **k).replace('fullinertia="', 'fullinertia="9 '))
     sc = _tilted(velocity="[0.0, 0.0, 1.0]")           # a scenario object of its own: nothing cached for it
     with pytest.raises(be.EngineError, match="rejected the model of scenario 't'.*fullinertia"):
         be.simulate(sc, "generalized", 0.01, 2)
@@ -155,11 +157,12 @@ def test_neutralise_sets_every_default_whatever_it_was():
     ("vel_damping", -1.0, "spring"), ("ang_damping", -1.0, "spring"),
     ("vel_damping", -1.0, "positional"), ("ang_damping", -1.0, "positional")])
 def test_each_neutralised_damping_would_change_the_physics(field, value, variant):
-    # a tumbling, falling body: each hostile value changes one step, so neutralising it matters (spring_mass_scale
-    # and spring_inertia_scale scale only the forces and torques that reach a body: none but gravity here, so they
-    # are set to 0 without a measurable effect on the catalog)
+    # a tumbling, falling body: each hostile value changes one step, so neutralising it matters
+    # (spring_mass_scale and spring_inertia_scale scale only the forces and torques that reach a body: none
+    # but gravity here, so they are set to 0 without a measurable effect on the catalog)
     jax = _lib()["jax"]
-    sc = _tilted(forces="gravity = [0.0, 0.0, -9.81]", velocity="[0.3, 0.1, 0.2]", angular_velocity="[0.4, 1.5, -0.7]")
+    sc = _tilted(forces="gravity = [0.0, 0.0, -9.81]", velocity="[0.3, 0.1, 0.2]",
+                 angular_velocity="[0.4, 1.5, -0.7]")
     P = _lib()["pipelines"][variant]
     s = be.build_system(sc, variant, 0.01)
     st = _init(sc, variant, sc.problem.initial_packed())
@@ -209,7 +212,8 @@ def test_the_generalized_force_of_the_free_joint_is_the_world_force_then_the_bod
     st = _init(sc, "generalized", sc.problem.initial_packed())
     step = jax.jit(_lib()["pipelines"]["generalized"].step)
     a = np.asarray(be._packed(step(s, st, jp.array([1.0, 2.0, 3.0, 0.0, 0.0, 0.0]))))
-    np.testing.assert_allclose(a[3:6], 0.01 * np.array([1.0, 2.0, 3.0]) / 2.0, rtol=0, atol=tol.BRAX_HAND_STEP)
+    np.testing.assert_allclose(a[3:6], 0.01 * np.array([1.0, 2.0, 3.0]) / 2.0, rtol=0,
+                               atol=tol.BRAX_HAND_STEP)
     b = np.asarray(be._packed(step(s, st, jp.array([0.0, 0.0, 0.0, 0.3, -0.2, 0.5]))))
     R, I_B = matrix_from_quat(Q_TILT), sc.problem.body.inertia_B
     np.testing.assert_allclose(b[10:13], 0.01 * R @ np.linalg.solve(I_B, [0.3, -0.2, 0.5]), rtol=0,
@@ -232,7 +236,8 @@ def test_positional_and_spring_give_a_free_joint_no_actuator_force(variant):
 @pytest.mark.parametrize("name", ["applied_torque", "linear_drag", "spring_oscillator", "spring_pendulum"])
 def test_positional_and_spring_refuse_every_force_but_gravity(variant, name):
     sc = load_scenario(name)
-    with pytest.raises(be.EngineError, match=f"brax's {variant} pipeline cannot apply scenario '{name}''s forces"):
+    words = f"brax's {variant} pipeline cannot apply scenario '{name}''s forces"
+    with pytest.raises(be.EngineError, match=words):
         be.simulate(sc, variant, sc.dt_s, 2)
     assert be.expressible(load_scenario("velocity_decay"), variant, 0.01) == ""
     assert be.expressible(load_scenario("projectile"), variant, 0.01) == ""
@@ -294,7 +299,8 @@ def test_state_dependent_forces_are_evaluated_every_step_from_the_start_state():
     c, m, g = 0.8, 2.0, np.array([0.0, 0.0, -9.81])
     for k in range(5):
         v0 = run.y[k, 3:6]
-        np.testing.assert_allclose(run.y[k + 1, 3:6], v0 + 0.01 * (g - c * v0 / m), rtol=0, atol=tol.BRAX_HAND_STEP)
+        np.testing.assert_allclose(run.y[k + 1, 3:6], v0 + 0.01 * (g - c * v0 / m), rtol=0,
+                                   atol=tol.BRAX_HAND_STEP)
 
 
 @pytest.mark.parametrize("variant", list(be.VARIANTS))
@@ -311,7 +317,8 @@ def test_decay_is_applied_before_the_step(variant):
 
 # --- runs -------------------------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("variant, name", [("generalized", "spring_pendulum"), ("generalized", "velocity_decay"),
+@pytest.mark.parametrize("variant, name", [("generalized", "spring_pendulum"),
+                                           ("generalized", "velocity_decay"),
                                            ("generalized", "applied_torque"), ("spring", "velocity_decay"),
                                            ("positional", "tumbling_box")])
 def test_one_step_replays_the_run(variant, name):
@@ -335,7 +342,8 @@ def test_simulate_many_is_simulate_and_keeps_the_order():
 
 
 def test_simulate_many_returns_a_refusal_in_place():
-    reqs = [RunRequest(load_scenario("projectile"), 0.01, 10), RunRequest(load_scenario("linear_drag"), 0.01, 10)]
+    reqs = [RunRequest(load_scenario("projectile"), 0.01, 10),
+            RunRequest(load_scenario("linear_drag"), 0.01, 10)]
     ok, refused = be.simulate_many("spring", reqs)
     assert ok.y.shape == (11, 13) and isinstance(refused, be.EngineError)
 
@@ -375,8 +383,9 @@ def test_version_and_list_name_brax():
 
 
 def _checks(variant, scenarios, tmp_path):
-    """cross_checks.testing.run_engine_checks in THIS process (jobs = 1): this process has run JAX, and a sweep
-    worker forked from it could not (test_a_process_forked_after_jax_started_refuses_instead_of_hanging)."""
+    """cross_checks.testing.run_engine_checks in THIS process (jobs = 1): this process has run JAX, and a
+    sweep worker forked from it could not (see
+    test_a_process_forked_after_jax_started_refuses_instead_of_hanging)."""
     from cross_checks.testing import run_engine_checks
     return run_engine_checks(variant, scenarios, cache_dir=tmp_path / "cache", jobs=1)
 
@@ -400,7 +409,8 @@ def _run_in_child():
 @pytest.mark.slow
 def test_first_order_on_catalog_scenarios(tmp_path):
     summary = _checks("brax:generalized", ["projectile", "applied_torque"], tmp_path)
-    fitted = {(c["scenario"], c["quantity"]): c["order"] for c in summary["convergence"] if c["verdict"] == "converges"}
+    fitted = {(c["scenario"], c["quantity"]): c["order"] for c in summary["convergence"]
+              if c["verdict"] == "converges"}
     assert fitted[("applied_torque", "orientation")] == pytest.approx(1.0, abs=tol.DRAKE_ORDER_TOL)
 
 

@@ -1,6 +1,7 @@
-"""Brax is optional: without brax (its absence simulated), the adapter says "not installed" (EngineNotInstalled),
-`rbcheck list` and `--version` say so, a default sweep skips its variants with that reason, and asking for it is bad
-input; brax without jax is told apart from an absent brax. The adapter module itself never imports brax or jax."""
+"""Brax is optional: without brax (its absence simulated), the adapter says "not installed"
+(EngineNotInstalled), `rbcheck list` and `--version` say so, a default sweep skips its variants with that
+reason, and asking for it is bad input; brax without jax is told apart from an absent brax. The adapter module
+itself never imports brax or jax."""
 import pytest
 
 from cross_checks import engines
@@ -20,7 +21,8 @@ def no_brax(monkeypatch):
 
 
 def test_version_raises_engine_not_installed_with_the_extra_to_install(no_brax):
-    with pytest.raises(base.EngineNotInstalled, match=r"brax is not installed \(pip install 'rbcheck\[brax\]'\)"):
+    words = r"brax is not installed \(pip install 'rbcheck\[brax\]'\)"
+    with pytest.raises(base.EngineNotInstalled, match=words):
         brax_engine.version()
 
 
@@ -36,7 +38,8 @@ def test_list_and_version_say_brax_is_not_installed(no_brax, capsys):
     out = capsys.readouterr().out
     assert "brax:generalized" in out and "brax is not installed (pip install 'rbcheck[brax]')" in out
     infos = [v for v in engines.all_variants() if v.engine == "brax"]
-    assert len(infos) == len(brax_engine.VARIANTS) and not any(v.available or v.installed or v.required for v in infos)
+    assert len(infos) == len(brax_engine.VARIANTS)
+    assert not any(v.available or v.installed or v.required for v in infos)
     assert "brax: brax is not installed" in _version_text()
 
 
