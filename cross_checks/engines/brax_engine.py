@@ -13,7 +13,7 @@ and ``mass = 0`` under ``inertiafromgeom="false"`` (it changes neither mass nor 
 ``alignfree="false"`` keeps the joint on the body frame. Gravity and ``option.timestep`` from the scenario. A
 model MuJoCo's compiler rejects (e.g. moments violating ``A + B ≥ C``) is an EngineError with its words.
 
-State mapping (docs/engine_conventions.md "Brax 0.14", pinned by
+State mapping (docs/engine_conventions.md "Brax 0.14.2", pinned by
 tests/cross_checks/engines/test_brax_engine.py): ``pipeline.init(sys, q, qd)`` with ``q = [x_W, q_WB (w x y
 z)]`` and ``qd = [v_W, ω_B]`` (ω in BODY axes); the state is read from ``state.x.pos`` (body origin = COM,
 world), ``state.x.rot`` (w, x, y, z) and ``state.xd.vel``, ``state.xd.ang`` (both WORLD axes). The conversion
