@@ -1,7 +1,7 @@
 """The Brax adapter (cross_checks.engines.brax_engine): every convention it relies on, pinned on brax itself
-(docs/engine_conventions.md, "Brax 0.14.2"), every default it neutralises, one step of each pipeline against its
-hand-derived step, the forces brax can and cannot take, divergence, batching, the compile time it reports, and
-the declared order on catalog scenarios. JAX compiles each executable once per process (and keeps it in
+(docs/engine_conventions.md, "Brax 0.14.2"), every default it neutralises, one step of each pipeline against
+its hand-derived step, the forces brax can and cannot take, divergence, batching, the compile time it reports,
+and the declared order on catalog scenarios. JAX compiles each executable once per process (and keeps it in
 rbcheck's persistent cache), so the tests share batch sizes (one_step pads to 64 rows, runs to 1)."""
 import math
 import os
