@@ -143,3 +143,23 @@ GENESIS_SAME_AS_MUJOCO_EULER = 1e-12
 #: one_step from a recorded state vs the free run's next row: the same step through the boundary conversion
 #: (ω_W -> ω_B -> ω_W): measured ≤ 9e-16.
 GENESIS_REPLAY_REL = 1e-13
+#: Brax (cross_checks.engines.brax_engine), float64. State round trips at the boundary (quaternion rotations of
+#: ω between body and world axes, brax's kinematics.forward): a few roundings of unit-size numbers, measured ≤ 5e-16.
+BRAX_ROUND_TRIP = 1e-15
+#: MuJoCo's compiler diagonalises the full tensor (principal moments + iquat, its iterative eigensolver) and the
+#: test rebuilds R diag(I) Rᵀ: measured 4e-14 on moments of 2–4 kg m²; 1e-13.
+BRAX_INERTIA_ROUND_TRIP = 1e-13
+#: One brax step vs the hand-derived step from the same doubles (a 6×6 solve, quaternion products): a few ε.
+BRAX_HAND_STEP = 1e-14
+#: The generalized rotation update turns by Δt(|ω| + 1e-8) about ω/(|ω| + 1e-8) (brax's guard against |ω| = 0):
+#: 1e-10 rad in a step of 0.01 s, above round-off; the hand step's exact exp map is that close.
+BRAX_ROTATION_BIAS = 1e-9
+#: The positional pipeline's velocity is (x₁ − x₀)/Δt (project_xd): the round-off of positions of size ~2 m over
+#: Δt = 0.01 s, ε·2/0.01 ≈ 4e-14; 1e-12 leaves room (the sweep measures it growing like 1/Δt).
+BRAX_POSITIONAL_VELOCITY = 1e-12
+#: one_step from a recorded state vs the free run's next row: pipeline.init rebuilds the state from q and q̇
+#: (and the positional velocity projection divides round-off by Δt): measured ≤ 5e-14 relative.
+BRAX_REPLAY_REL = 1e-12
+#: A run batched with other Δt (vmap) vs alone: XLA may vectorise the batch differently, a few ε per step
+#: compounding over up to 700 steps of a tumble; measured 0.
+BRAX_BATCH = 1e-10

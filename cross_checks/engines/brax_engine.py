@@ -1,0 +1,608 @@
+"""Brax (JAX) as an engine adapter (``brax:VARIANT``); the interface is cross_checks.engines.base.
+
+Brax says it is no longer actively maintained (a UserWarning of ``brax.io.mjcf.load_model`` points to MJX);
+the adapter pins brax 0.14.2 on jax 0.10.2 and computes in float64 (``jax_enable_x64`` set before any model is
+built).
+
+Model: an MJCF string loaded by ``brax.io.mjcf.loads`` (MuJoCo's compiler, then brax's ``System``): one body
+with a ``<freejoint>``, an explicit ``<inertial pos="0 0 0" mass=… fullinertia=…>`` — the moment of inertia
+about the COM in the scenario's body axes, a full tensor taken as it is (MuJoCo diagonalises it into principal
+moments and ``iquat``; brax keeps both in ``link.inertia``), so body origin = COM and the body frame is the
+scenario's — and one geom brax needs to build a system, with ``contype = conaffinity = 0`` (it never collides)
+and ``mass = 0`` under ``inertiafromgeom="false"`` (it changes neither mass nor inertia: pinned).
+``alignfree="false"`` keeps the joint on the body frame. Gravity and ``option.timestep`` from the scenario. A
+model MuJoCo's compiler rejects (e.g. moments violating ``A + B ≥ C``) is an EngineError with its words.
+
+State mapping (docs/engine_conventions.md "Brax 0.14.2", pinned by
+tests/cross_checks/engines/test_brax_engine.py): ``pipeline.init(sys, q, qd)`` with ``q = [x_W, q_WB (w x y
+z)]`` and ``qd = [v_W, ω_B]`` (ω in BODY axes); the state is read from ``state.x.pos`` (body origin = COM,
+world), ``state.x.rot`` (w, x, y, z) and ``state.xd.vel``, ``state.xd.ang`` (both WORLD axes). The conversion
+ω_W ↔ ω_B happens at the boundary only.
+
+The three pipelines, each one variant (declared from brax's source, brax/<pipeline>/pipeline.py and
+integrator.py):
+
+* ``generalized`` — ``generalized.pipeline.step``: ``qf_smooth = τ − C(q, q̇)`` (``dynamics.forward``: the
+  recursive Newton-Euler bias force, which contains ω_B × I ω_B, evaluated at the start of the step), then
+  ``integrator.integrate``: ``q̇ += Δt M⁻¹ qf``, ``x += Δt v`` and ``q_WB ← normalize(q_WB ⊗ quat_rot_axis(ω̂,
+  Δt|ω|))`` with the NEW velocities (ω̂ = ω_B/(|ω_B| + 1e-8), angle Δt(|ω_B| + 1e-8): a 1e-8 rad/s bias). That
+  is semi-implicit Euler with an explicit gyroscopic term in body axes and an exponential-map rotation update
+  — the scheme of mujoco:euler: first order, SYMPLECTIC_EULER_EXPLICIT_GYRO.
+* ``spring`` — ``spring.pipeline.step``: ``ω_W += Δt I_W⁻¹ τ_W`` (com.inv_inertia; NO gyroscopic term: ω_W is
+  constant without a torque), ``v += Δt (g + f/m)``, then ``spring.integrator.integrate``: ``q ← normalize(q +
+  ½Δt (0, ω_W) ⊗ q)``, ``x += Δt v`` with the new velocities. First order, no gyroscopic term.
+* ``positional`` — ``positional.pipeline.step``: the same velocity update (no gyroscopic term) and position
+  update (``integrate_xdd``), then the position-based-dynamics projection ``project_xd``: v = Δx/Δt, and ω_W =
+  2 vec(q_new ⊗ q_old⁻¹)/Δt, which is ω_W/√(1 + (|ω|Δt/2)²): every step shrinks |ω| by |ω|²Δt²/8 — a
+  rotational energy loss of first order in Δt. First order, no gyroscopic term, rotational energy decays.
+
+Forces (harness semantics of base.py): brax has no external-wrench input (no ``xfrc_applied``); its one
+applied force input is ``act`` through ``sys.actuator`` (brax/actuator.py ``to_tau``: ``τ[qd_id] += gear (gain
+act)``). MJCF motors on a free joint reach only the joint's FIRST DOF in brax (io/mjcf.py takes ``jnt_dofadr``
+and ``gear[:, 0]``), so the generalized model gets six MJCF motors whose brax actuator is then set to DOFs
+0..5 with gear 1, gain 1, no bias and no limits (``System.replace``; ACTUATOR). The generalized force of a
+free joint is ``[f_W at the body origin, τ_B in body axes]`` (pinned), so ``act = [f − m g, R_WBᵀ τ_W]`` with
+``f, τ`` from ``base.harness_force_torque`` (brax applies gravity itself), evaluated from the start-of-step
+state — constants computed once when the scenario's forces do not depend on the state, else a
+``jax.pure_callback`` to the package's force model (base.harness_force_torque_floats) every step. The
+pipelines are single-stage: no force is held over stages (``forces_held`` does not arise). The positional and
+spring pipelines give a free joint NO actuator force (positional/joints.py and spring/joints.py
+``_free``/``_free_joint`` return zero) and have no other force input: they express only gravity (and the
+velocity decay, below); any other force or torque is an EngineError naming the scenario (brax cannot take it).
+Velocity decay ``e^{−kΔt}`` is applied to ``qd`` before every step (a new ``pipeline.init`` from the decayed
+``q, qd``: every derived quantity recomputed), that step's force scaled alike.
+
+Defaults that are not the scenario's physics, each set explicitly (NEUTRAL_SYSTEM, NEUTRAL_DOF):
+``vel_damping`` and ``ang_damping`` (brax's exponential velocity damping in the positional and spring
+integrators), ``spring_mass_scale`` and ``spring_inertia_scale`` (they rescale mass and inertia as
+``m^(1−s)``), the DOF damping and armature (in the generalized mass matrix), ``matrix_inv_iterations`` (0: an
+exact solve of M⁻¹ instead of brax's default 10 Newton-Schulz iterations from the previous inverse), fluid
+forces off (viscosity and density 0), collisions off (the geom's contype/conaffinity 0). There are no
+substeps: ``pipeline.step`` is one step (``n_frames`` belongs to brax.envs, which the adapter does not use).
+
+Stepping: inside ``jax.lax.scan`` chunks of CHUNK steps compiled ahead of time
+(``jit(...).lower().compile()``, timed apart from stepping: :func:`compile_seconds`), batched with
+``jax.vmap`` — over the Δt rungs of one scenario (simulate_many) and over the start states of one_step. The
+compiled code takes the system and Δt as arguments, so it is reused across scenarios and steps. JAX's
+persistent compilation cache lives in ``$RBCHECK_CACHE_DIR/jax`` (else ``$XDG_CACHE_HOME/rbcheck/jax``,
+``~/.cache/rbcheck/jax``). Nothing here runs a JAX computation before a run: ``version()`` reads package
+metadata, so a sweep's parent process never starts a JAX backend before it forks its workers.
+
+Divergence: brax never stops; each chunk's states are checked, and the first state that is non-finite or has a
+component beyond BLOWUP_LIMIT ends the run as ``diverged at t = …``.
+"""
+from __future__ import annotations
+
+import contextlib
+import functools
+import io
+import os
+import threading
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from cross_checks.engines.base import (
+    SYMPLECTIC_EULER_EXPLICIT_GYRO,
+    EngineAdapter,
+    EngineError,
+    EngineNotInstalled,
+    RunRequest,
+    Traits,
+    Variant,
+    decay_factors,
+    harness_force_torque,
+    installed_version,
+)
+from cross_checks.engines.step_floats import harness_fn
+from reference_sim.quaternion import quat_conj, rotate
+from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
+
+__all__ = ["ENGINE", "VARIANTS", "NEUTRAL_SYSTEM", "NEUTRAL_DOF", "CHUNK", "ONE_STEP_MIN_BATCH",
+           "EngineError", "version", "mjcf_text", "build_system", "simulate", "simulate_many", "one_step",
+           "compile_seconds", "BraxAdapter", "expressible"]
+
+ENGINE = "brax"
+#: The pipelines' integrators (read in brax 0.14.2's source; see the module docstring): all first order.
+VARIANTS = {
+    # generalized/integrator.py: q̇ += Δt M⁻¹(τ − C) (C has ω_B × I ω_B), then q with the new q̇ (exp map)
+    "generalized": Variant(1, "brax generalized pipeline: semi-implicit Euler in generalized coordinates, "
+                              "explicit gyroscopic term (body axes), exponential-map rotation update with "
+                              "the new ω",
+                           traits=SYMPLECTIC_EULER_EXPLICIT_GYRO),
+    # spring/pipeline.py + spring/integrator.py: ω_W += Δt I_W⁻¹ τ (no gyroscopic term), q += ½Δt ω_W ⊗ q
+    "spring": Variant(1, "brax spring pipeline: semi-implicit Euler in maximal coordinates, NO gyroscopic "
+                         "term, quaternion q += ½Δt ω ⊗ q renormalised; forces: gravity only",
+                      traits=Traits(gyroscopic_term=False, translation_drift=0, rotation_drift="none",
+                                    rotation_sign=0)),
+    # positional/pipeline.py + integrator.py: as spring, then ω_W = 2 vec(Δq)/Δt (project_xd): |ω| shrinks
+    "positional": Variant(1, "brax positional pipeline: the spring pipeline's step, then velocities "
+                             "projected from the position change (ω shrinks by |ω|²Δt²/8 a step), NO "
+                             "gyroscopic term; forces: gravity only",
+                          traits=Traits(gyroscopic_term=False, translation_drift=0, rotation_drift="none",
+                                        rotation_sign=-1)),
+}
+
+
+#: System fields set on every model (``System.replace``), each brax 0.14.2's MJCF default except
+#: matrix_inv_iterations (default 10: an approximate inverse), set so that no default can change the physics.
+NEUTRAL_SYSTEM = (("vel_damping", 0.0), ("ang_damping", 0.0), ("spring_mass_scale", 0.0),
+                  ("spring_inertia_scale", 0.0), ("matrix_inv_iterations", 0))
+#: DoF fields (per DOF of the free joint): joint damping and armature, both 0 by default.
+NEUTRAL_DOF = (("damping", 0.0), ("armature", 0.0))
+#: Steps per compiled scan chunk: a run of n steps runs ceil(n / CHUNK) chunks (the steps past n are dropped).
+CHUNK = 512
+#: one_step batches are padded to at least this many rows (a power of two): one step of 64 bodies costs about
+#: what one costs, and every small batch shares one executable.
+ONE_STEP_MIN_BATCH = 64
+
+_LOCK = threading.RLock()
+_COMPILED: dict = {}         # key -> compiled executable
+_COMPILE_S: dict = {}        # key -> seconds spent compiling it (lower + compile)
+_CALLBACK_SCENARIOS: dict = {}   # token -> scenario (the host force callback's lookup)
+
+
+def _cache_root() -> Path:
+    """rbcheck's cache directory (as cross_checks.sweep.cache.cache_dir, which the engines layer may not
+    import)."""
+    if os.environ.get("RBCHECK_CACHE_DIR"):
+        return Path(os.environ["RBCHECK_CACHE_DIR"])
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "rbcheck"
+
+
+def version() -> str:
+    """brax's version and the jax it runs on, from package metadata (no import: a sweep's parent must not
+    start JAX before forking). EngineNotInstalled without brax; ImportError without jax/jaxlib."""
+    ver = installed_version("brax")
+    if ver is None:
+        raise EngineNotInstalled("brax is not installed (pip install 'rbcheck[brax]')")
+    jax_ver, jaxlib_ver = installed_version("jax"), installed_version("jaxlib")
+    if jax_ver is None or jaxlib_ver is None:
+        raise ImportError(f"brax {ver} is installed but jax or jaxlib is not (pip install 'rbcheck[brax]')")
+    return f"{ver} (jax {jax_ver})"
+
+
+@functools.lru_cache(maxsize=1)
+def _lib():
+    """brax and jax, imported on first use with float64 on and the persistent compilation cache in rbcheck's
+    cache directory (mujoco.mjx prints "Failed to import warp" on stdout: silenced)."""
+    version()
+    try:
+        with contextlib.redirect_stdout(io.StringIO()), warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            import jax
+            jax.config.update("jax_enable_x64", True)
+            try:
+                folder = _cache_root() / "jax"
+                folder.mkdir(parents=True, exist_ok=True)
+                jax.config.update("jax_compilation_cache_dir", str(folder))
+                jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+            except OSError:
+                pass
+            import jax.numpy as jp
+            from brax.base import Actuator
+            from brax.generalized import pipeline as generalized
+            from brax.io import mjcf
+            from brax.positional import pipeline as positional
+            from brax.spring import pipeline as spring
+    except ImportError as exc:
+        raise ImportError(f"brax {installed_version('brax')} is installed but cannot be imported: "
+                          f"{exc}") from exc
+    os.register_at_fork(after_in_child=_after_fork_in_child)
+    return {"jax": jax, "jp": jp, "mjcf": mjcf, "Actuator": Actuator,
+            "pipelines": {"generalized": generalized, "positional": positional, "spring": spring}}
+
+
+#: True in a process forked after JAX's backend had started in its parent: JAX hangs there (its thread pools
+#: do not survive a fork; measured: a jitted call in such a child never returns, clear_backends() does not
+#: help).
+_FORKED_AFTER_JAX = [False]
+
+
+def _after_fork_in_child():
+    from jax._src import xla_bridge
+    _FORKED_AFTER_JAX[0] = bool(xla_bridge.backends_are_initialized())
+
+
+def _usable():
+    """The brax/jax modules, or EngineError in a process forked after its parent had run JAX (instead of a
+    hang)."""
+    lib = _lib()
+    if _FORKED_AFTER_JAX[0]:
+        raise EngineError("JAX cannot run in this process: it was forked after JAX had started in its parent "
+                          "(run brax in a fresh process, e.g. the rbcheck CLI, or with one job)")
+    return lib
+
+
+def compile_seconds() -> dict:
+    """Seconds spent compiling (lowering + XLA compile) each executable this process built, by
+    ``"kind:variant:mode:batch"`` (kind ``run`` = a CHUNK-step scan, ``one_step``); apart from stepping
+    time."""
+    with _LOCK:
+        return dict(_COMPILE_S)
+
+
+# --- the model --------------------------------------------------------------------------------------------
+
+def _num(v) -> str:
+    return repr(float(v))
+
+
+def mjcf_text(scenario, dt_s: float, *, actuators: bool) -> str:
+    """The scenario's free body as MJCF for ``brax.io.mjcf.loads`` (full-precision numbers)."""
+    p = scenario.problem
+    I = np.asarray(p.body.inertia_B, dtype=float)
+    full = " ".join(_num(v) for v in (I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]))
+    g = " ".join(_num(v) for v in p.forces.gravity_W)
+    motors = ""
+    if actuators:
+        gears = ["1 0 0 0 0 0", "0 1 0 0 0 0", "0 0 1 0 0 0", "0 0 0 1 0 0", "0 0 0 0 1 0", "0 0 0 0 0 1"]
+        motors = "".join(f'<motor joint="free" gear="{gr}" ctrllimited="false"/>' for gr in gears)
+        motors = f"<actuator>{motors}</actuator>"
+    return (f'<mujoco model="rbcheck"><compiler alignfree="false" inertiafromgeom="false" '
+            f'balanceinertia="false" boundmass="0" boundinertia="0"/>'
+            f'<option timestep="{_num(dt_s)}" gravity="{g}" viscosity="0" density="0" integrator="Euler"/>'
+            f'<worldbody><body name="body"><freejoint name="free"/>'
+            f'<inertial pos="0 0 0" mass="{_num(p.body.mass_kg)}" fullinertia="{full}"/>'
+            f'<geom type="sphere" size="0.01" contype="0" conaffinity="0" mass="0"/>'
+            f'</body></worldbody>{motors}</mujoco>')
+
+
+def neutralise(sys):
+    """``sys`` with every NEUTRAL_SYSTEM and NEUTRAL_DOF field set (whatever it was)."""
+    lib = _lib()
+    jp = lib["jp"]
+    dof = sys.dof
+    for field, value in NEUTRAL_DOF:
+        dof = dof.replace(**{field: jp.full_like(getattr(dof, field), value)})
+    return sys.replace(dof=dof, **{k: v for k, v in NEUTRAL_SYSTEM})
+
+
+def six_dof_actuator(sys):
+    """``sys`` with its actuator set to one motor per DOF of the free joint (DOFs 0..5), gear 1, gain 1, no
+    bias, no control or force limit: ``act`` is then the generalized force ``[f_W, τ_B]``."""
+    lib = _lib()
+    jp = lib["jp"]
+    inf = jp.full((6, 2), jp.inf) * jp.array([-1.0, 1.0])
+    act = lib["Actuator"](q_id=jp.arange(6), qd_id=jp.arange(6), ctrl_range=inf, force_range=inf,
+                          gain=jp.ones(6), gear=jp.ones(6), bias_q=jp.zeros(6), bias_qd=jp.zeros(6))
+    return sys.replace(actuator=act)
+
+
+def expressible(scenario, variant: str, dt_s: float) -> str:
+    """"" when ``variant`` can take the scenario's forces, else why not (positional and spring: gravity
+    only)."""
+    if variant == "generalized":
+        return ""
+    fm = scenario.problem.forces
+    why = (f"brax's {variant} pipeline cannot apply scenario {scenario.name!r}'s forces: a free joint takes "
+           f"no actuator force there ({variant}/joints.py gives it zero) and the pipeline has no other force "
+           "input, so it expresses gravity only")
+    if fm.state_dependent:
+        return why + " (these forces depend on the state)"
+    f, tau = harness_force_torque(scenario, scenario.problem.initial_packed(), dt_s)
+    weight = scenario.problem.body.mass_kg * np.asarray(fm.gravity_W, dtype=float)
+    if np.any(tau != 0.0) or not np.allclose(f, weight, rtol=1e-15, atol=0.0):
+        return why + f" (force {np.round(f - weight, 6).tolist()} N besides the weight, torque " \
+                     f"{np.round(tau, 6).tolist()} N m)"
+    return ""
+
+
+@functools.lru_cache(maxsize=32)
+def _system_of(scenario, variant: str):
+    """The neutralised brax System of the scenario's body for ``variant`` (Δt is set per run)."""
+    lib = _lib()
+    if variant not in VARIANTS:
+        raise ValueError(f"unknown brax variant {variant!r}; variants: {', '.join(VARIANTS)}")
+    gen = variant == "generalized"
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")     # brax's "not actively being maintained", on every load
+            sys = lib["mjcf"].loads(mjcf_text(scenario, 0.01, actuators=gen))
+        lib["mjcf"].validate_model(sys.mj_model)
+    except (ValueError, NotImplementedError, RuntimeError) as exc:
+        raise EngineError(f"brax {installed_version('brax')} (MuJoCo's compiler) rejected the model of "
+                          f"scenario {scenario.name!r}: {' '.join(str(exc).split())}") from None
+    sys = neutralise(sys)
+    if gen:
+        sys = six_dof_actuator(sys)
+    # mj_model is a static field: left in, every scenario would compile its own executable (validated above)
+    return sys.replace(mj_model=None)
+
+
+def build_system(scenario, variant: str, dt_s: float):
+    """The brax System the adapter steps: the scenario's body, neutralised, at step ``dt_s``."""
+    sys = _system_of(scenario, variant)
+    return sys.replace(opt=sys.opt.replace(timestep=_lib()["jp"].asarray(float(dt_s))))
+
+
+# --- state conversion (the boundary) ----------------------------------------------------------------------
+
+def to_q_qd(y):
+    """Packed states (..., 13) -> brax ``q = [x_W, q_WB (w x y z)]`` (..., 7), ``qd = [v_W, ω_B]``
+    (..., 6)."""
+    y = np.asarray(y, dtype=float)
+    q = y[..., 6:10]
+    return (np.concatenate([y[..., 0:3], q], axis=-1),
+            np.concatenate([y[..., 3:6], rotate(quat_conj(q), y[..., 10:13])], axis=-1))
+
+
+def _packed(state):
+    """A brax state (one body) -> packed (13,): x.pos, xd.vel, x.rot (w x y z), xd.ang — all world axes."""
+    jp = _lib()["jp"]
+    return jp.concatenate([state.x.pos[0], state.xd.vel[0], state.x.rot[0], state.xd.ang[0]])
+
+
+# --- the compiled step ------------------------------------------------------------------------------------
+
+def _host_forces(token, y, dt):
+    """The force callback (host): base.harness_force_torque_floats of each row of ``y`` (B, 13) at its step
+    ``dt`` (B,) — through step_floats.harness_fn, the evaluator and decay factors looked up once per run and
+    Δt — for the scenario registered under ``token``."""
+    token = np.asarray(token).reshape(-1)
+    y = np.asarray(y, dtype=float).reshape(-1, 13)
+    dt = np.broadcast_to(np.asarray(dt, dtype=float).reshape(-1), (len(y),)).tolist()
+    scenario, fns = _CALLBACK_SCENARIOS[int(token[0])]
+    out = np.empty((len(y), 6))
+    for i, row in enumerate(y.tolist()):
+        h = fns.get(dt[i])
+        if h is None:
+            h = fns[dt[i]] = harness_fn(scenario, dt[i])
+        out[i] = h(row)
+    return out
+
+
+def _step_fn(variant: str, mode: str):
+    """One step of one body: ``(sys, state, consts, token, decay) -> state``. ``mode``: "none" (no applied
+    force), "const" (consts = [f_W − m g, τ_W, γ_v, γ_ω, decay]), "callback" (consts = [−m g, 0, γ_v, γ_ω,
+    decay]; forces from the host). With decay (1, passed unbatched: under vmap a batched predicate would turn
+    the cond into a select that runs both branches) the state is re-initialised from the decayed ``q, qd`` (a
+    ``lax.cond``: one executable serves runs with and without decay; without it the state is carried as
+    is)."""
+    lib = _lib()
+    jax, jp = lib["jax"], lib["jp"]
+    P = lib["pipelines"][variant]
+    from brax import math as bmath
+
+    def step(sys, state, consts, token, decay):
+        factors = jp.concatenate([jp.full(3, consts[6]), jp.full(3, consts[7])])
+        state = jax.lax.cond(decay > 0.0, lambda s: P.init(sys, s.q, s.qd * factors), lambda s: s, state)
+        if mode == "none":
+            act = jp.zeros(sys.act_size())
+        else:
+            rot = state.x.rot[0]
+            if mode == "const":
+                f, tau = consts[0:3], consts[3:6]
+            else:
+                ft = jax.pure_callback(_host_forces, jax.ShapeDtypeStruct((6,), jp.float64), token,
+                                       _packed(state), sys.opt.timestep, vmap_method="broadcast_all")
+                f, tau = ft[0:3] + consts[0:3], ft[3:6]
+            act = jp.concatenate([f, bmath.inv_rotate(tau, rot)])
+        return P.step(sys, state, act)
+    return step
+
+
+def _compiled(kind: str, variant: str, mode: str, batch: int, args):
+    """The ahead-of-time compiled executable for these arguments (cached; compile time recorded)."""
+    lib = _lib()
+    jax = lib["jax"]
+    key = (kind, variant, mode, batch, jax.tree_util.tree_structure(args))
+    with _LOCK:
+        hit = _COMPILED.get(key)
+    if hit is not None:
+        return hit
+    step = _step_fn(variant, mode)
+    P = lib["pipelines"][variant]
+
+    def with_dt(sys, dt):
+        return sys.replace(opt=sys.opt.replace(timestep=dt))
+
+    if kind == "run":
+        def one(sys, state, dt, consts, token, decay):
+            s = with_dt(sys, dt)
+
+            def body(st, _):
+                st = step(s, st, consts, token, decay)
+                return st, _packed(st)
+            return jax.lax.scan(body, state, None, length=CHUNK)
+        fn = jax.vmap(one, in_axes=(None, 0, 0, 0, None, None))
+    else:
+        def one(sys, q, qd, dt, consts, token, decay):
+            s = with_dt(sys, dt)
+            return _packed(step(s, P.init(s, q, qd), consts, token, decay))
+        fn = jax.vmap(one, in_axes=(None, 0, 0, 0, 0, None, None))
+    t0 = time.perf_counter()
+    exe = jax.jit(fn).lower(*args).compile()
+    seconds = time.perf_counter() - t0
+    with _LOCK:
+        _COMPILED[key] = exe
+        name = f"{kind}:{variant}:{mode}:{batch}"
+        _COMPILE_S[name] = _COMPILE_S.get(name, 0.0) + seconds
+    return exe
+
+
+def _padded(n: int) -> int:
+    """Batch sizes are padded to a power of two (a handful of executables serve every batch)."""
+    return 1 << max(0, (n - 1).bit_length())
+
+
+def _mode_and_consts(scenario, variant: str, dt_s: float):
+    """``(mode, consts (9,))`` of the scenario's forces at step ``dt_s`` (see :func:`_step_fn`)."""
+    why = expressible(scenario, variant, dt_s)
+    if why:
+        raise EngineError(why)
+    p = scenario.problem
+    fm = p.forces
+    weight = p.body.mass_kg * np.asarray(fm.gravity_W, dtype=float)
+    gv, gw = (float(g) for g in decay_factors(scenario, dt_s))
+    decay = 1.0 if fm.has_decay else 0.0
+    if variant != "generalized":
+        return "none", np.r_[np.zeros(6), gv, gw, decay]
+    if fm.state_dependent:
+        return "callback", np.r_[-weight, np.zeros(3), gv, gw, decay]
+    f, tau = harness_force_torque(scenario, p.initial_packed(), dt_s)
+    return "const", np.r_[f - weight, tau, gv, gw, decay]
+
+
+@functools.lru_cache(maxsize=64)
+def _initial(variant: str, batch: int):
+    """``(sys, q, qd) -> state``: ``pipeline.init`` broadcast to ``batch`` members, jitted (eagerly it costs
+    ~0.2 s of small operations per run)."""
+    lib = _lib()
+    jax, jp = lib["jax"], lib["jp"]
+    P = lib["pipelines"][variant]
+
+    def init(sys, q, qd):
+        return jax.tree.map(lambda a: jp.broadcast_to(a, (batch, *jp.shape(a))), P.init(sys, q, qd))
+    return jax.jit(init)
+
+
+class _Token:
+    """Registers a scenario for the host force callback for the duration of a run."""
+
+    _next = 0
+
+    def __init__(self, scenario):
+        with _LOCK:
+            _Token._next += 1
+            self.token = _Token._next
+            _CALLBACK_SCENARIOS[self.token] = (scenario, {})
+
+    def __enter__(self):
+        return np.int64(self.token)
+
+    def __exit__(self, *exc):
+        with _LOCK:
+            _CALLBACK_SCENARIOS.pop(self.token, None)
+        return False
+
+
+def _run_group(scenario, variant: str, requests) -> list:
+    """The runs of ``requests`` (all of ``scenario``), batched over their Δt: one vmapped scan per chunk."""
+    lib = _usable()
+    jp = lib["jp"]
+    sys = _system_of(scenario, variant)
+    y0 = scenario.problem.initial_packed()
+    modes = [_mode_and_consts(scenario, variant, r.dt_s) for r in requests]
+    mode = modes[0][0]
+    n = len(requests)
+    B = _padded(n)
+    dts = np.array([r.dt_s for r in requests] + [requests[0].dt_s] * (B - n), dtype=float)
+    consts = np.stack([m[1] for m in modes] + [modes[0][1]] * (B - n))
+    q0, qd0 = to_q_qd(y0)
+    state = _initial(variant, B)(sys, jp.asarray(q0), jp.asarray(qd0))
+    n_max = max(r.n_steps for r in requests)
+    rows = np.empty((B, n_max + 1, 13))
+    rows[:, 0] = y0
+    done = np.zeros(B, dtype=bool)
+    first_bad = np.full(B, -1)
+    with _Token(scenario) as token:
+        args = (sys, state, jp.asarray(dts), jp.asarray(consts), token, jp.asarray(consts[0, 8]))
+        exe = _compiled("run", variant, mode, B, args)
+        k = 0
+        while k < n_max and not done[:n].all():
+            state, ys = exe(sys, state, *args[2:])
+            ys = np.asarray(ys)
+            m = min(CHUNK, n_max - k)
+            rows[:, k + 1:k + 1 + m] = ys[:, :m]
+            bad = bad_rows(ys[:, :m])
+            for i in range(n):
+                if first_bad[i] < 0 and bad[i].any():
+                    first_bad[i] = k + 1 + int(np.argmax(bad[i]))
+                if first_bad[i] >= 0 or k + m >= requests[i].n_steps:
+                    done[i] = True
+            k += m
+    out: list = []
+    for i, r in enumerate(requests):
+        if 0 <= first_bad[i] <= r.n_steps:
+            j = int(first_bad[i])
+            out.append(diverged(rows[i, :j].copy(), r.dt_s, f" ({blowup_words(rows[i, j])})"))
+        else:
+            y = rows[i, :r.n_steps + 1].copy()
+            out.append(Run(r.dt_s * np.arange(len(y)), y))
+    return out
+
+
+def simulate_many(variant: str, requests) -> list:
+    """The runs of ``requests`` (RunRequest), in order: grouped by scenario, each group one batch over its
+    Δt."""
+    requests = list(requests)
+    out: list = [None] * len(requests)
+    groups: dict = {}
+    for i, r in enumerate(requests):
+        groups.setdefault(id(r.scenario), []).append(i)
+    for idx in groups.values():
+        sc = requests[idx[0]].scenario
+        try:
+            runs = _run_group(sc, variant, [requests[i] for i in idx])
+        except EngineError as exc:
+            runs = [exc] * len(idx)
+        for i, run in zip(idx, runs):
+            out[i] = run
+    return out
+
+
+def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
+    """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded."""
+    return _run_group(scenario, variant, [RunRequest(scenario, float(dt_s), int(n_steps))])[0]
+
+
+def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
+    """One step of ``dt_s`` from each row of ``y_start`` (T, 13), batched (vmap): the forces from the row, the
+    pre-step decay, brax's state built from the row by ``pipeline.init``."""
+    lib = _usable()
+    jp = lib["jp"]
+    shape = np.shape(y_start)
+    y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
+    sys = _system_of(scenario, variant)
+    mode, consts = _mode_and_consts(scenario, variant, dt_s)
+    T = len(y_start)
+    B = _padded(max(T, ONE_STEP_MIN_BATCH))
+    pad = np.concatenate([y_start, np.broadcast_to(scenario.problem.initial_packed(), (B - T, 13))])
+    q, qd = to_q_qd(pad)
+    with _Token(scenario) as token:
+        args = (sys, jp.asarray(q), jp.asarray(qd), jp.full(B, float(dt_s)),
+                jp.asarray(np.tile(consts, (B, 1))), token, jp.asarray(consts[8]))
+        exe = _compiled("one_step", variant, mode, B, args)
+        y = np.array(exe(*args))[:T]
+    return y.reshape(shape)
+
+
+class BraxAdapter(EngineAdapter):
+    """``brax:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
+    (``pip install 'rbcheck[brax]'``). Declared orders: each pipeline is a semi-implicit Euler step, first
+    order."""
+
+    name = ENGINE
+    variants = VARIANTS
+
+    def version(self) -> str:
+        return version()
+
+    def source_files(self) -> list:
+        """This module and brax's pipeline sources (found without importing brax)."""
+        import importlib.util
+        files = list(super().source_files())
+        spec = importlib.util.find_spec("brax")
+        if spec is not None and spec.origin:
+            root = Path(spec.origin).parent
+            files += [root / d / f for d in ("generalized", "positional", "spring")
+                      for f in ("pipeline.py", "integrator.py")]
+        return files
+
+    @property
+    def compile_seconds(self) -> dict:
+        """Seconds spent compiling each executable in this process (see :func:`compile_seconds`)."""
+        return compile_seconds()
+
+    def simulate(self, scenario, variant: str, dt_s: float, n_steps: int) -> Run:
+        return simulate(scenario, variant, dt_s, n_steps)
+
+    def simulate_many(self, variant: str, requests) -> list:
+        return simulate_many(variant, requests)
+
+    def one_step(self, scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
+        return one_step(scenario, variant, dt_s, y_start)
