@@ -362,7 +362,7 @@ class _RunRows:
 
 
 def run_local_defect(scenario, y, dt_s: float, max_rows: int | None = None,
-                     unit_roundoff: float = 2.0 ** -53) -> tuple:
+                     unit_roundoff: float = 2.0 ** -53, velocity_from_positions: bool = False) -> tuple:
     """The one-step defect of a run recorded at every step (``y`` (N + 1, 13), float64): from each recorded
     state the exact flow over Δt is compared with the next row, over what a consistent scheme of order ≥ 1
     may leave there (:func:`local_allowances`) — ``rbcheck check``'s local evidence, for a sweep's own runs.
@@ -371,7 +371,9 @@ def run_local_defect(scenario, y, dt_s: float, max_rows: int | None = None,
     CHECK_MAX_HL, finite states) and where; ``(nan, "", nan)`` when no row is decisive. A wrong equation
     leaves an O(Δt) defect (ratio ∝ 1/Δt), a consistent scheme at most its allowance (ratio ≤ 1).
     ``max_rows``: judge that many rows, evenly spread over the run (each row's defect stands on its own).
-    ``unit_roundoff``: of the precision the run's steps compute in (tolerances.UNIT_ROUNDOFF)."""
+    ``unit_roundoff``: of the precision the run's steps compute in (tolerances.UNIT_ROUNDOFF).
+    ``velocity_from_positions``: the steps recompute v as Δx/Δt (engines.base.Traits), so the velocity may
+    also carry the two positions' roundings over Δt, ``2 u (|x₀| + |x₁|)/Δt``."""
     y = np.asarray(y, dtype=float)
     n = len(y) - 1
     if n < 1:
@@ -392,11 +394,19 @@ def run_local_defect(scenario, y, dt_s: float, max_rows: int | None = None,
     allow = local_allowances(rows, y0, flow.M2, flow.rate, flow.roundoff, y_end=y1)
     d = distances(y1, flow.y_end)
     decisive = dt_s * flow.rate <= tol.CHECK_MAX_HL
+    total = dict(allow.total)
+    if velocity_from_positions:
+        total["velocity"] = total["velocity"] + 2.0 * unit_roundoff * (
+            _magnitude(y0, "position") + _magnitude(y1, "position")) / dt_s
     best = (math.nan, "", math.nan)
     for q in QUANTITIES:
         with np.errstate(divide="ignore", invalid="ignore"):
-            r = np.where(allow.total[q] > 0.0, d[q] / allow.total[q], np.where(d[q] > 0.0, np.inf, 0.0))
-        r = np.where(decisive, r, np.nan)
+            r = np.where(total[q] > 0.0, d[q] / total[q], np.where(d[q] > 0.0, np.inf, 0.0))
+        # a quantity exactly zero at both ends of the exact step (a body that never turns) has nothing to
+        # measure: what an engine leaves there is the round-off of the other quantities' terms (MJX leaves
+        # 6e-16 rad/s in the ω of a body that never turns), and a gross error shows in the free runs
+        moving = (_magnitude(y0, q) > 0.0) | (_magnitude(flow.y_end, q) > 0.0)
+        r = np.where(decisive & moving, r, np.nan)
         if np.all(np.isnan(r)):
             continue
         k = int(np.nanargmax(r))

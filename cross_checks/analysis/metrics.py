@@ -143,6 +143,16 @@ def roundoff_floor(scale: float, n_steps: int, reference_label: str = "analytic"
     return float(reference_error) + eps * scale * (biased + math.sqrt(n) * max(1.0, float(amplification)))
 
 
+def differencing_floor(position_scale: float, n_steps: int, dt_s: float, eps: float = tol.ROUNDOFF_PER_STEP_REL,
+                       amplification: float = 1.0) -> float:
+    """Round-off of a velocity recomputed as the change of position over Δt (engines.base.Traits.
+    velocity_from_positions), m/s: the positions' round-off after ``n_steps`` steps (``ε·|x|·(N + √N·A)``, as
+    :func:`roundoff_floor`'s run round-off of the position) divided by Δt — one step's ``ε|x|/Δt`` for N = 1.
+    It grows as Δt shrinks (as Δt⁻² over a run of fixed duration)."""
+    n = max(n_steps, 1)
+    return eps * position_scale * (n + math.sqrt(n) * max(1.0, float(amplification))) / dt_s
+
+
 def drift_floor(n_steps: int, amplification: float = 1.0, eps: float = tol.ROUNDOFF_PER_STEP_REL) -> float:
     """Round-off level of a relative drift after ``n_steps`` steps:
     ``n_steps · ROUNDOFF_PER_STEP_REL · amplification``, where ``amplification`` (≥ 1) is the size of

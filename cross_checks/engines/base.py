@@ -226,6 +226,9 @@ class Traits:
           turns; that perturbation grows like any other (the measured amplification).
     rotation_sign : +1 the rotational energy grows (an explicit gyroscopic term), −1 it decays (an
         implicit one), 0 none, None unknown (both are considered).
+    velocity_from_positions : the step recomputes the velocity as the change of position over Δt (a
+        position-based pipeline): the velocity then carries the positions' round-off divided by Δt, which grows
+        as Δt shrinks (metrics.differencing_floor).
     precision : the floating-point format the engine's step computes in, "float64" or "float32"
         (core.tolerances.MACHINE_EPSILON): every round-off floor of the variant's verdicts scales with its ε,
         and a float32 variant is judged on a ladder that reaches coarser steps (docs/verdicts.md, "Precision").
@@ -241,6 +244,7 @@ class Traits:
     rotation_sign: int | None = 0
     forces_held: bool = False
     precision: str = "float64"
+    velocity_from_positions: bool = False
 
     def __post_init__(self):
         if self.precision not in ("float64", "float32"):

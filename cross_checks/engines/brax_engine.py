@@ -122,7 +122,7 @@ VARIANTS = {
                              "projected from the position change (ω shrinks by |ω|²Δt²/8 a step), NO "
                              "gyroscopic term; forces: gravity only",
                           traits=Traits(gyroscopic_term=False, translation_drift=0, rotation_drift="none",
-                                        rotation_sign=-1)),
+                                        rotation_sign=-1, velocity_from_positions=True)),
 }
 
 

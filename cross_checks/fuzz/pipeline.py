@@ -23,7 +23,6 @@ from numpy.linalg import LinAlgError
 
 from cross_checks.analysis import flow
 from cross_checks.analysis import metrics as M
-from cross_checks.analysis.expectations import machine_epsilon
 from cross_checks.analysis.physics import ScenarioPhysics, motion_rates, separatrix_proximity
 from cross_checks.analysis.refinement import refined_ladder_shows_the_order, worth_refining
 from cross_checks.core import tolerances as tol
@@ -237,8 +236,7 @@ def _refined_ladder_shows_the_order(ctx, variant: str, k: int, rec) -> bool:
         h = float(runs.h_s[0])
         dts.append(h)
         errs.append(float(np.max(e)))
-        floors.append(M.roundoff_floor(ctx.scales[q], n, reference_error=ctx.ref_err[q],
-                                       amplification=ctx.amp[q], quantity=q, eps=machine_epsilon(variant))
+        floors.append(P.run_floor(ctx, variant, q, n, h, ctx.ref_err[q], ctx.amp[q])
                       + P.lever_floor(ctx, q, h, h * n, n, ctx.amp[q], variant))
     # judged on the finest original rung and the refined ones: the asymptotic regime the claim is about
     # (the coarse rungs are the ones in doubt; a wrong order is just as wrong down there). Only a positive

@@ -43,7 +43,7 @@ from cross_checks.analysis.judge import judge_ladder, two_term_consistent  # noq
 from cross_checks.core import tolerances as tol
 from cross_checks.core.quantities import QUANTITIES, UNITS, state_errors
 
-__all__ = ["Context", "ladder_errors", "free_running_order", "one_step_order", "conservation", "agreement",
+__all__ = ["Context", "ladder_errors", "free_running_order", "run_floor", "one_step_order", "conservation", "agreement",
            "PROPERTIES", "equivalent_pairs"]
 
 PROPERTIES = ("free_running_order", "one_step_order", "conservation", "agreement")
@@ -185,9 +185,7 @@ def free_running_order(ctx: Context, variant: str, i: int, ladder, errors=None) 
             v = e[q]
             errs[q].append(float(np.max(v))
                            if runs.status[i] == "ok" and np.all(np.isfinite(v)) else math.nan)
-            floors[q].append(M.roundoff_floor(ctx.scales[q], n, reference_error=ctx.ref_err[q],
-                                              amplification=ctx.amp[q], quantity=q,
-                                              eps=machine_epsilon(variant))
+            floors[q].append(run_floor(ctx, variant, q, n, float(runs.h_s[i]), ctx.ref_err[q], ctx.amp[q])
                              + lever_floor(ctx, q, float(runs.h_s[i]),
                                            float(runs.h_s[i]) * n, n, ctx.amp[q], variant))
     for q in QUANTITIES:
@@ -200,6 +198,18 @@ def free_running_order(ctx: Context, variant: str, i: int, ladder, errors=None) 
     return out, tally
 
 
+def run_floor(ctx, variant: str, q: str, n: int, h_s: float, reference_error, amplification: float = 1.0) -> float:
+    """The round-off floor of a run of ``n`` steps of ``h_s`` for quantity ``q`` (metrics.roundoff_floor in the
+    variant's precision; plus metrics.differencing_floor for the velocity of a variant that recomputes it from
+    positions), as the sweep's convergence records have it (sweep.assemble.ladder_floors)."""
+    eps = machine_epsilon(variant)
+    f = M.roundoff_floor(ctx.scales[q], n, reference_error=reference_error, amplification=amplification, quantity=q,
+                         eps=eps)
+    if q == "velocity" and traits(variant).velocity_from_positions:
+        f += M.differencing_floor(ctx.scales["position"], n, h_s, eps, amplification)
+    return f
+
+
 def one_step_order(ctx: Context, variant: str, i: int, defects) -> tuple:
     """The one-step order property of case ``i``; ``defects`` {quantity: (S,)} the largest defect per
     one-step rung (NaN where the engine failed), or None for an engine without a one-step mode."""
@@ -208,8 +218,7 @@ def one_step_order(ctx: Context, variant: str, i: int, defects) -> tuple:
         return out, tally
     dts = [float(h) for h in ctx.step_h]
     for q in QUANTITIES:
-        floors = [M.roundoff_floor(ctx.scales[q], 1, reference_error=float(ctx.step_err[q][k]), quantity=q,
-                                   eps=machine_epsilon(variant))
+        floors = [run_floor(ctx, variant, q, 1, dts[k], float(ctx.step_err[q][k]))
                   + lever_floor(ctx, q, dts[k], dts[k], 1, variant=variant) for k in range(len(dts))]
         errs = [float(v) for v in defects[q]]
         statuses = ["ok" if np.isfinite(v) else "failed" for v in errs]

@@ -18,6 +18,7 @@ from cross_checks.analysis.expectations import (
     expectation,
     machine_epsilon,
     pair_is_same_arithmetic,
+    traits,
 )
 from cross_checks.analysis.judge import LocalEvidence, judge_ladder
 from cross_checks.core import tolerances as tol
@@ -65,20 +66,30 @@ def results_csv_text(rows, columns=RESULT_COLUMNS) -> str:
 
 # --- convergence ------------------------------------------------------------------------------------
 
-def ladder_floors(ladder, q, scales, mode, label, measured, eps=tol.ROUNDOFF_PER_STEP_REL):
+def ladder_floors(ladder, q, scales, mode, label, measured, eps=tol.ROUNDOFF_PER_STEP_REL,
+                  differenced: bool = False):
     """Round-off floor of each ladder point for quantity ``q`` (metrics.roundoff_floor): the reference's
     MEASURED error (at the final time, or of one step in the one-step mode) plus the run's own
     round-off in its precision (``eps``: expectations.machine_epsilon of the variant), amplified by the
-    scenario's measured error amplification."""
+    scenario's measured error amplification; for a velocity the variant recomputes from positions
+    (``differenced``: Traits.velocity_from_positions), the positions' round-off over Δt
+    (metrics.differencing_floor)."""
     scale = scales.get(q, 1.0)
-    if mode == "free_running":
+    free = mode == "free_running"
+    amp = measured.get("amplification", {}).get(q, 1.0) if free else 1.0
+    if free:
         ref = (measured.get("reference_error") or {}).get(q)
-        amp = measured.get("amplification", {}).get(q, 1.0)
-        return [M.roundoff_floor(scale, max(int(r["steps"]), 1), label, reference_error=ref,
-                                 amplification=amp, quantity=q, eps=eps) for r in ladder]
-    local = measured.get("local_reference_error") or {}
-    return [M.roundoff_floor(scale, 1, label, reference_error=(local.get(repr(float(r["dt"]))) or {}).get(q),
-                             quantity=q, eps=eps) for r in ladder]
+        floors = [M.roundoff_floor(scale, max(int(r["steps"]), 1), label, reference_error=ref,
+                                   amplification=amp, quantity=q, eps=eps) for r in ladder]
+    else:
+        local = measured.get("local_reference_error") or {}
+        floors = [M.roundoff_floor(scale, 1, label, reference_error=(local.get(repr(float(r["dt"]))) or {}).get(q),
+                                   quantity=q, eps=eps) for r in ladder]
+    if differenced and q == "velocity":
+        x_scale = scales.get("position", 1.0)
+        floors = [f + M.differencing_floor(x_scale, max(int(r["steps"]), 1) if free else 1, float(r["dt"]), eps, amp)
+                  for f, r in zip(floors, ladder)]
+    return floors
 
 
 def _ladder_errors(ladder, q, mode):
@@ -125,7 +136,8 @@ def convergence_records(scenario, variant, rows, scales, mode, measured=None) ->
     for q in QUANTITIES:
         errs, statuses = _ladder_errors(ladder, q, mode)
         exp = expectation(scenario, variant, q, mode, physics=phys, measure_physics=False)
-        floors = ladder_floors(ladder, q, scales, mode, label, measured, machine_epsilon(variant))
+        floors = ladder_floors(ladder, q, scales, mode, label, measured, machine_epsilon(variant),
+                               traits(variant).velocity_from_positions)
         j = judge_ladder(dts, errs, floors, statuses, exp, local, q)
         fit, verdict, matches, phrase = j.fit, j.verdict, j.matches, j.assessment
         out.append({
