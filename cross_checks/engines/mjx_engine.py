@@ -1,12 +1,13 @@
-"""MuJoCo XLA (``mujoco-mjx``, MuJoCo's physics in JAX) as an engine adapter (``mjx:VARIANT``); the interface is
-cross_checks.engines.base.
+"""MuJoCo XLA (``mujoco-mjx``, MuJoCo's physics in JAX) as an engine adapter (``mjx:VARIANT``); the interface
+is cross_checks.engines.base.
 
-Model: the MuJoCo model of ``cross_checks.engines.mujoco_engine.build_model`` (one free body, explicit inertial
-at the body origin = COM, a full tensor as principal moments + ``iquat`` so the body frame stays the scenario's,
-no geoms, gravity and time step from the scenario, the variant's integrator), put on the device with
-``mjx.put_model``; each run's initial state goes into ``mjx.put_data``'s Data. Nothing of MuJoCo's defaults is
-left to chance beyond what build_model sets (no damping, stiffness or armature, no geom hence no contact, no
-actuator, no velocity clamp, no sleeping in MJX, one integration per step): each is pinned by a test.
+Model: the MuJoCo model of ``cross_checks.engines.mujoco_engine.build_model`` (one free body, explicit
+inertial at the body origin = COM, a full tensor as principal moments + ``iquat`` so the body frame stays the
+scenario's, no geoms, gravity and time step from the scenario, the variant's integrator), put on the device
+with ``mjx.put_model``; each run's initial state goes into ``mjx.put_data``'s Data. Nothing of MuJoCo's
+defaults is left to chance beyond what build_model sets (no damping, stiffness or armature, no geom hence no
+contact, no actuator, no velocity clamp, no sleeping in MJX, one integration per step): each is pinned by a
+test.
 
 Precision: float64. The adapter turns on ``jax_enable_x64`` when it first imports JAX — a PROCESS-GLOBAL JAX
 setting (every JAX computation of the process is then float64 by default); MJX without it computes in float32.
@@ -84,19 +85,22 @@ from cross_checks.engines.step_floats import harness_fn
 from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
 
 __all__ = ["ENGINE", "VARIANTS", "CHUNK", "ONE_STEP_BATCH", "MAX_BATCH", "EngineError", "version", "simulate",
-           "simulate_many", "one_step", "compile_stats", "reset_compiled", "jax_cache_dir", "MjxAdapter"]
+           "simulate_many", "one_step", "device_model", "compile_stats", "reset_compiled", "jax_cache_dir",
+           "MjxAdapter"]
 
 ENGINE = "mjx"
-#: MJX's integrators (``mujoco.mjx._src.types.IntegratorType``: EULER, RK4, IMPLICITFAST), their declared orders
-#: from MuJoCo's documentation (Euler and implicitfast first order, RK4 fourth) and the traits read from
-#: mujoco/mjx/_src/forward.py (``euler``, ``rungekutta4``, ``implicit``) and derivative.py (module docstring).
+#: MJX's integrators (``mujoco.mjx._src.types.IntegratorType``: EULER, RK4, IMPLICITFAST), their declared
+#: orders from MuJoCo's documentation (Euler and implicitfast first order, RK4 fourth) and the traits read
+#: from mujoco/mjx/_src/forward.py (``euler``, ``rungekutta4``, ``implicit``) and derivative.py (see the
+#: module docstring).
 VARIANTS = {
-    "euler": Variant(1, "MJX Euler: semi-implicit Euler, explicit gyroscopic term, quaternion by the exponential "
-                        "map (mujoco:euler's scheme, in JAX)", traits=SYMPLECTIC_EULER_EXPLICIT_GYRO),
-    "rk4": Variant(4, "MJX RK4: classical 4th-order Runge-Kutta; the applied force and torque held over the four "
-                      "stages (no per-stage hook in MJX)", traits=Traits(forces_held=True)),
-    "implicitfast": Variant(1, "MJX implicitfast: velocity-implicit in the actuator and damping derivatives only "
-                               "(no RNE derivative in MJX): Euler's step on a lone free body",
+    "euler": Variant(1, "MJX Euler: semi-implicit Euler, explicit gyroscopic term, quaternion by the "
+                        "exponential map (mujoco:euler's scheme, in JAX)",
+                     traits=SYMPLECTIC_EULER_EXPLICIT_GYRO),
+    "rk4": Variant(4, "MJX RK4: classical 4th-order Runge-Kutta; the applied force and torque held over the "
+                      "four stages (no per-stage hook in MJX)", traits=Traits(forces_held=True)),
+    "implicitfast": Variant(1, "MJX implicitfast: velocity-implicit in the actuator and damping derivatives "
+                               "only (no RNE derivative in MJX): Euler's step on a lone free body",
                             traits=SYMPLECTIC_EULER_EXPLICIT_GYRO),
 }
 
@@ -175,10 +179,34 @@ def _engine():
 
 
 def _engine_or_error():
+    """:func:`_engine`, an import failure as EngineError; EngineError too in a process forked from one whose
+    JAX was already running (see :func:`_after_fork_in_child`)."""
+    if _FORK["inherited_jax"]:
+        raise EngineError("MJX cannot run in a process forked after JAX started in its parent (a running "
+                          "JAX backend does not survive fork: its threads are gone and it would hang); run "
+                          "the sweep with --jobs 1 from there, or from a process that has not run MJX")
     try:
+        _FORK["started"] = True
         return _engine()
     except ImportError as exc:
         raise EngineError(str(exc)) from None
+
+
+#: ``started``: this process has used JAX through this adapter (its backend is running from then on);
+#: ``inherited_jax``: this process was forked from one in which it had (set in the child at fork).
+_FORK = {"started": False, "inherited_jax": False}
+
+
+def _after_fork_in_child() -> None:
+    """In a child of ``os.fork``: if the parent had started JAX, the child must not use it (a forked JAX
+    hangs on its first computation: measured with the sweep's process pool under pytest), so
+    :func:`_engine_or_error` refuses with an EngineError — a failed row that says why, instead of a sweep that
+    never ends."""
+    if _FORK["started"]:
+        _FORK["inherited_jax"] = True
+
+
+os.register_at_fork(after_in_child=_after_fork_in_child)
 
 
 # --- compile bookkeeping ----------------------------------------------------------------------------------
@@ -242,7 +270,7 @@ def _meta_key(obj, prefix="") -> tuple:
 _TEMPLATES: dict = {}   # structure key -> (template MJX Model, its MjModel)
 
 
-def _device_model(scenario, variant: str, dt_s: float):
+def device_model(scenario, variant: str, dt_s: float):
     """``(structure key, MJX Model)`` of the scenario's body for ``variant`` at ``dt_s``: mujoco_engine's
     ``build_model``, then ``mjx.put_model``; the name tables replaced by those of the first model of the same
     structure (so that its executables serve it). EngineError with MuJoCo's or MJX's words."""
@@ -371,11 +399,15 @@ def simulate_many(variant: str, requests) -> list:
     if variant not in VARIANTS:
         raise ValueError(f"unknown mjx variant {variant!r}; variants: {', '.join(VARIANTS)}")
     out: list = [None] * len(requests)
+    try:
+        _engine_or_error()
+    except EngineError as exc:
+        return [exc] * len(requests)
     groups: dict = {}
     with _LOCK:
         for j, r in enumerate(requests):
             try:
-                key, xm = _device_model(r.scenario, variant, r.dt_s)
+                key, xm = device_model(r.scenario, variant, r.dt_s)
             except EngineError as exc:
                 out[j] = exc
                 continue
@@ -450,7 +482,8 @@ def _run_batch(key, callback: bool, reqs, models) -> list:
 
 def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     """One step of ``dt_s`` from each row of ``y_start`` (T, 13), all rows vmapped (ONE_STEP_BATCH per call):
-    the forces from the row (host), the pre-step decay. Rows the engine blows up come back as MJX left them."""
+    the forces from the row (host), the pre-step decay. Rows the engine blows up come back as MJX left
+    them."""
     from cross_checks.engines.mujoco_engine import to_packed, to_qpos_qvel
     if variant not in VARIANTS:
         raise ValueError(f"unknown mjx variant {variant!r}; variants: {', '.join(VARIANTS)}")
@@ -459,7 +492,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
     T = len(y_start)
     with _LOCK:
-        key, xm = _device_model(scenario, variant, dt_s)
+        key, xm = device_model(scenario, variant, dt_s)
         weight = _weight(scenario)
         harness = harness_fn(scenario, dt_s)
         xfrc = np.empty((T, 6))
