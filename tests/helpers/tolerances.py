@@ -105,23 +105,24 @@ DART_REPLAY_REL = 1e-13
 #: measured 2.1e-12 m/s of drift across (≈ ε × 1e4); the bound 1e-10 (a clamp or a sleep would be O(1)).
 MJX_FAST_BODY = 1e-10
 #: MJX (mujoco-mjx 3.17.0, float64) vs MuJoCo C Euler, the same arithmetic in another order of sums: measured
-#: ≤ 6e-14 relative (max(1, |state|)) over the catalog scenarios' own Δt and duration; 2e-12 on tumbling_box's
-#: ladder (10 s near a separatrix); float32 would be ~1e-7. The bound: 1e-11.
+#: ≤ 1.7e-13 relative (max(1, |state|)) on tennis_racket, applied_torque and spring_pendulum at their own Δt and
+#: duration, 1.8e-12 on tumbling_box's ladder (10 s near a separatrix); float32 would be ~1e-7. The bound: 1e-11.
 MJX_SAME_AS_MUJOCO_EULER_REL = 1e-11
 #: One MJX Euler step vs the hand-derived semi-implicit step from the same doubles (MJX's RNE, a Cholesky solve,
-#: its quaternion exp map vs NumPy's): measured ≤ 4.5e-16; 10 ε.
+#: its quaternion exp map vs NumPy's): measured ≤ 3.6e-16 (RK4's hand step: ≤ 6e-17); 10 ε.
 MJX_HAND_STEP = 2e-15
 #: one_step from a recorded state vs the free run's next row: the same step through the body/world ω conversion
-#: at the boundary (and the force model called on the host from the compiled loop or before it): measured ≤ 2e-16.
+#: at the boundary (and the force model called on the host from the compiled loop or before it): measured
+#: ≤ 5.2e-16 relative.
 MJX_REPLAY_REL = 1e-14
 #: simulate_many (vmapped, batch of 4) vs simulate (batch of 1): the same executable's arithmetic per member,
-#: measured 0 (bit for bit); a few ε allowed for XLA vectorising a batch differently.
+#: measured 2.0e-15 on symmetric_top (XLA vectorises a batch of 4 differently from one member); 5× that.
 MJX_BATCH_VS_SINGLE = 1e-14
 #: mjx:implicitfast vs mjx:euler on the tennis racket (300 steps of 0.01 s): Cholesky vs LDLᵀ of the same M,
-#: measured 2e-15; round-off.
+#: measured 0 (bit for bit; 0 on the whole catalog in the sweep's agreement check too).
 MJX_IMPLICITFAST_VS_EULER = 1e-12
-#: MuJoCo C's implicitfast (implicit gyroscopic term) vs MJX's (none) on the same run: measured 0.1 rad/s; "differs"
-#: means 6 decades above round-off.
+#: MuJoCo C's implicitfast (implicit gyroscopic term) vs MJX's (none) on the same run: measured 2.4e-3 rad/s;
+#: "differs" means beyond 1e-6, 7 decades above MJX vs MuJoCo Euler's round-off.
 MJX_IMPLICITFAST_VS_C_MIN_DIFF = 1e-6
 #: An error ratio at h and h/2 against 2^p for order p: asymptotic only up to the next term, ±15 % (as
 #: DRAKE_ORDER_TOL for fitted orders).
