@@ -7,6 +7,7 @@ importing the adapter nor asking its version starts JAX (the sweep forks its wor
 Compilation dominates this module's time (each executable 3-15 s on one core): the tests share executables
 (Euler, the diagonal-tensor structure, one run per call) wherever they can; the RK4 ladders are
 slow-marked."""
+import os
 import subprocess
 import sys
 
@@ -89,6 +90,21 @@ def test_the_model_is_mujocos_with_every_default_that_is_not_the_physics_neutral
     # density and viscosity 0: no fluid forces; wind 0
     assert float(xm.opt.density) == 0.0 and float(xm.opt.viscosity) == 0.0
     np.testing.assert_array_equal(np.asarray(xm.opt.wind), np.zeros(3))
+
+
+def test_a_scenarios_model_at_another_step_is_a_fresh_put_of_it():
+    # device_model keeps a scenario's model and changes opt.timestep for its other steps: the same leaves as
+    # mjx.put_model of the model compiled at that step
+    import jax
+    from mujoco import mjx
+    sc = _tilted()
+    xe.device_model(sc, "euler", 0.01)
+    _, again = xe.device_model(sc, "euler", 0.005)
+    fresh = mjx.put_model(me.build_model(sc, "euler", 0.005))
+    a, b = jax.tree_util.tree_leaves_with_path(again), jax.tree_util.tree_leaves_with_path(fresh)
+    assert [p for p, _ in a] == [p for p, _ in b]
+    for (path, x), (_, y) in zip(a, b):
+        np.testing.assert_array_equal(np.asarray(x), np.asarray(y), err_msg=jax.tree_util.keystr(path))
 
 
 def test_mjx_has_no_velocity_clamp_sleep_or_substep_a_fast_body_keeps_its_speed():
@@ -338,16 +354,17 @@ def test_rk4_holds_the_forces_over_its_stages_first_order_where_they_change_with
 
 
 @pytest.mark.slow
-def test_rk4_is_fourth_order_with_constant_forces_where_the_rotation_axis_is_fixed():
-    # a world force and a world torque along the principal axis z of a body spinning about it: the attitude
-    # turns about a fixed axis (ω_B ∥ z at every stage), the translation is a polynomial — RK4's own order
-    # shows
+def test_rk4_with_constant_forces_is_exact_where_the_rotation_axis_is_fixed():
+    # a world force and a world torque along the principal axis z of a body spinning about it: the stages'
+    # body-axes velocities are parallel, the motion polynomial — RK4 (with the forces held, they are constant) is
+    # exact to round-off at both steps; with constant forces MJX's RK4 is either this or second order (the tumble
+    # below): its declared fourth order shows nowhere in the catalog (docs/engine_conventions.md, "MJX 3.17.0")
     sc = scenario_from_parts(body="mass = 2.0\ninertia = [1.0, 2.0, 3.0]",
                              initial="angular_velocity = [0.0, 0.0, 2.0]\nvelocity = [0.5, 0.0, 0.0]",
                              forces='gravity = [0.0, 0.0, -9.81]\n[[forces.torque]]\n'
                                     'torque = [0.0, 0.0, 1.5]\nframe = "world"', duration=2.0)
-    errs, ratio = _error_ratio(sc, "rk4", 0.05, 2.0)
-    assert max(errs) < 1e-10 or ratio == pytest.approx(16.0, rel=tol.MJX_ORDER_RATIO_REL)
+    errs, _ = _error_ratio(sc, "rk4", 0.05, 2.0)
+    assert max(errs) < tol.MJX_RK4_EXACT
 
 
 @pytest.mark.slow
@@ -369,9 +386,24 @@ def test_first_order_on_catalog_scenarios():
     assert fitted[("applied_torque", "orientation")] == pytest.approx(1.0, abs=tol.DRAKE_ORDER_TOL)
 
 
+@pytest.mark.slow
+def test_a_real_sweep_forks_two_workers_that_run_mjx(tmp_path):
+    # `rbcheck sweep --jobs 2` in a fresh process: its parent never starts JAX, each forked worker does (a
+    # parent with JAX running would hang them); every run ok, as expected
+    import json
+    env = {**os.environ, "RBCHECK_CACHE_DIR": str(tmp_path / "cache"), "MPLBACKEND": "Agg"}
+    out = tmp_path / "sweep"
+    done = subprocess.run([sys.executable, "-m", "cross_checks.cli", "sweep", "projectile", "--engines",
+                           "mjx:euler", "--jobs", "2", "--no-cache", "--out", str(out)],
+                          capture_output=True, text=True, env=env, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    summary = json.loads((out / "summary.json").read_text())
+    assert all(r["matches_expectation"] is not False for r in summary["convergence"])
+    assert "Failed to import warp" not in done.stdout + done.stderr
+
+
 @pytest.mark.filterwarnings("ignore:os.fork:RuntimeWarning")
 def test_a_process_forked_after_jax_started_refuses_with_an_engine_error_instead_of_hanging():
-    import os
     xe.simulate(load_scenario("projectile"), "euler", 0.01, 3)         # JAX is running in this process now
     r, w = os.pipe()
     pid = os.fork()
