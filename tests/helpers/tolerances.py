@@ -127,3 +127,7 @@ MJX_IMPLICITFAST_VS_C_MIN_DIFF = 1e-6
 #: An error ratio at h and h/2 against 2^p for order p: asymptotic only up to the next term, ±15 % (as
 #: DRAKE_ORDER_TOL for fitted orders).
 MJX_ORDER_RATIO_REL = 0.15
+#: mjx:rk4 where RK4 is exact (a spin about a fixed principal axis, constant world force and torque along it: a
+#: polynomial motion): final-state errors measured 7.1e-13 and 7.3e-13 at Δt = 0.05 and 0.025 s over 2 s — the
+#: round-off of the MuJoCo C RK4 reference at Δt/64; a fourth-order error at these steps would be ~1e-6.
+MJX_RK4_EXACT = 1e-11
