@@ -157,7 +157,8 @@ def _dist_version() -> str:
 @functools.lru_cache(maxsize=1)
 def _engine():
     """``(jax, jax.numpy, mujoco.mjx)``, imported on first use, with float64 on (process-global) and the
-    persistent compilation cache in :func:`jax_cache_dir`. EngineError when the import fails."""
+    persistent compilation cache in :func:`jax_cache_dir`. ImportError (with JAX's or MJX's words) when the
+    import fails."""
     _check_installed()
     try:
         # mujoco.mjx prints "Failed to import warp: ..." on stdout when the optional Warp backend is absent
