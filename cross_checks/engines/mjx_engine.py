@@ -272,8 +272,8 @@ _TEMPLATES: dict = {}   # structure key -> (template MJX Model, its MjModel)
 
 
 #: The last models put on the device: ``(id(scenario), variant) -> (scenario, key, MJX Model)`` (the scenario
-#: held, so that its id stays its own); a scenario's other steps reuse its model with ``opt.timestep`` replaced
-#: (``mjx.put_model`` costs ~40 ms, the step is all a Δt changes: tested against a fresh put).
+#: held, so that its id stays its own); a scenario's other steps reuse its model with ``opt.timestep``
+#: replaced (``mjx.put_model`` costs ~40 ms, the step is all a Δt changes: tested against a fresh put).
 _PUT: dict = {}
 _PUT_MAX = 256
 

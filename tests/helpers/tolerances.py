@@ -106,7 +106,8 @@ DART_REPLAY_REL = 1e-13
 MJX_FAST_BODY = 1e-10
 #: MJX (mujoco-mjx 3.17.0, float64) vs MuJoCo C Euler, the same arithmetic in another order of sums: measured
 #: ≤ 1.7e-13 relative (max(1, |state|)) on tennis_racket, applied_torque and spring_pendulum at their own Δt and
-#: duration, 1.8e-12 on tumbling_box's ladder (10 s near a separatrix); float32 would be ~1e-7. The bound: 1e-11.
+#: duration; float32 would be ~1e-7. The bound: 1e-11. (tumbling_box, 10 s near a separatrix that amplifies
+#: round-off ~1e3: 1.8e-12 on its ladder, 8.6e-11 at its Δt of 1 ms — held to the sweep's SAME_SCHEME_REL.)
 MJX_SAME_AS_MUJOCO_EULER_REL = 1e-11
 #: One MJX Euler step vs the hand-derived semi-implicit step from the same doubles (MJX's RNE, a Cholesky solve,
 #: its quaternion exp map vs NumPy's): measured ≤ 3.6e-16 (RK4's hand step: ≤ 6e-17); 10 ε.
