@@ -49,14 +49,16 @@ def measure(scenario_name: str, dt: float) -> dict:
 def main(json_path: str | None = None) -> int:
     import cross_checks.gates.check  # noqa: F401 - imports are not part of the measurement
     rows = [measure(name, dt) for name, dt in CASES]
-    print(f"{'scenario':<16}{'rows':>7}{'MuJoCo run (s)':>16}{'read CSV (s)':>14}{'check (s)':>11}{'check / MuJoCo':>16}")
+    print(f"{'scenario':<16}{'rows':>7}{'MuJoCo run (s)':>16}{'read CSV (s)':>14}{'check (s)':>11}"
+          f"{'check / MuJoCo':>16}")
     for r in rows:
-        print(f"{r['scenario']:<16}{r['rows']:>7}{r['mujoco_run_s']:>16.3f}{r['read_csv_s']:>14.3f}{r['check_s']:>11.2f}"
-              f"{r['check_over_mujoco']:>16.1f}")
+        print(f"{r['scenario']:<16}{r['rows']:>7}{r['mujoco_run_s']:>16.3f}{r['read_csv_s']:>14.3f}"
+              f"{r['check_s']:>11.2f}{r['check_over_mujoco']:>16.1f}")
         print(f"  {r['verdict'][:110]}")
     if json_path:
         with open(json_path, "w", encoding="utf-8") as fh:
-            json.dump({"python": platform.python_version(), "machine": platform.machine(), "cases": rows}, fh, indent=2)
+            json.dump({"python": platform.python_version(), "machine": platform.machine(), "cases": rows},
+                      fh, indent=2)
     return 0
 
 

@@ -39,7 +39,8 @@ def _build(folder: Path) -> tuple:
     cc = shutil.which("cc") or shutil.which("gcc") or shutil.which("clang")
     toml = folder / "cbody.toml"
     if cc:
-        subprocess.run([cc, "-O2", "-std=c99", "-o", str(folder / "cbody"), str(EXAMPLE / "cbody.c"), "-lm"], check=True)
+        subprocess.run([cc, "-O2", "-std=c99", "-o", str(folder / "cbody"), str(EXAMPLE / "cbody.c"), "-lm"],
+                       check=True)
         shutil.copy(EXAMPLE / "cbody.toml", toml)
         return toml, "C"
     shutil.copy(EXAMPLE / "cbody.py", folder / "cbody.py")
@@ -76,11 +77,13 @@ def measure(steps_list=(100, 1000, 10000, 40000), repeats: int = 15) -> dict:
             (tmp / "s.json").write_text(resolved_json(sc, dt))
             argv = engine.argv("euler", {"scenario_json": str(tmp / "s.json"), "out_csv": str(tmp / "o.csv"),
                                          "dt": repr(dt), "steps": str(n), "duration": repr(sc.duration_s)})
-            direct = _median_time(lambda argv=argv: subprocess.run(argv, cwd=engine.folder, check=True), repeats)
+            direct = _median_time(lambda argv=argv: subprocess.run(argv, cwd=engine.folder, check=True),
+                                  repeats)
             through = _median_time(lambda dt=dt, n=n: engine.simulate(sc, "euler", dt, n), repeats)
             mj = _median_time(lambda dt=dt, n=n: mujoco.simulate(sc, "euler", dt, n), repeats)
-            out["rows"].append({"steps": n, "direct_s": direct, "rbcheck_s": through, "overhead_s": through - direct,
-                                "mujoco_euler_s": mj, "overhead_over_mujoco": (through - direct) / mj,
+            out["rows"].append({"steps": n, "direct_s": direct, "rbcheck_s": through,
+                                "overhead_s": through - direct, "mujoco_euler_s": mj,
+                                "overhead_over_mujoco": (through - direct) / mj,
                                 "rbcheck_over_direct": through / direct})
     import numpy as np
     n = np.array([r["steps"] + 1 for r in out["rows"]], dtype=float)
@@ -100,14 +103,16 @@ def report(res: dict) -> str:
         lines.append(f"{r['steps']:>7} {r['direct_s'] * 1e3:>8.2f}ms {r['rbcheck_s'] * 1e3:>8.2f}ms "
                      f"{r['overhead_s'] * 1e3:>8.2f}ms {r['mujoco_euler_s'] * 1e3:>11.2f}ms "
                      f"{r['overhead_over_mujoco']:>16.2f} {r['rbcheck_over_direct']:>15.2f}")
-    lines.append(f"fixed overhead per run (the {res['rows'][0]['steps']}-step run): {res['fixed_overhead_s'] * 1e3:.2f} ms "
-                 f"(target < {res['target_s'] * 1e3:.0f} ms); per CSV row (reading and checking the trajectory, "
-                 f"least squares over all runs): {res['overhead_per_row_s'] * 1e6:.2f} µs")
+    lines.append(f"fixed overhead per run (the {res['rows'][0]['steps']}-step run): "
+                 f"{res['fixed_overhead_s'] * 1e3:.2f} ms (target < {res['target_s'] * 1e3:.0f} ms); "
+                 "per CSV row (reading and checking the trajectory, least squares over all runs): "
+                 f"{res['overhead_per_row_s'] * 1e6:.2f} µs")
     return "\n".join(lines)
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m benchmarks.engine_overhead", description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(prog="python -m benchmarks.engine_overhead",
+                                 description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="fewer step counts and repeats")
     ap.add_argument("--json", metavar="FILE", help="write the measurements as JSON")
     args = ap.parse_args(argv)

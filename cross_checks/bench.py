@@ -17,8 +17,9 @@ The run stage (references, runs, metrics, results files) and the report stage ar
 Keys written by ``--json`` (fixed; medians): reference_batched_body_steps_per_s,
 mujoco_best_body_steps_per_s, pybullet_body_steps_per_s, reference_single_us_per_step,
 mujoco_single_us_per_step, mujoco_bare_step_us, drake_single_us_per_step (None without Drake),
-sweep_floor_ratio, sweep_run_floor_ratio, plus the individual measurements and ``measurements``
-{name: {median, min, max, repeats}}.
+sweep_floor_ratio, sweep_run_floor_ratio, ``batched_adapters`` {ENGINE:VARIANT: body-steps/s through the adapter's
+``simulate_many``} (mujoco:euler and every installed engine that batches), plus the individual measurements and
+``measurements`` {name: {median, min, max, repeats}}.
 
 Drake (``drake_*``) is measured on one trajectory only, beside MuJoCo on the same trajectory through
 the same adapter interface (``mujoco_adapter_single_us_per_step``): the per-step cost a sweep pays.
@@ -190,6 +191,49 @@ def adapter_single_us(engine_module, variant, n_steps, repeats):
     return _per_step_us(n_steps, lambda: engine_module.simulate(sc, variant, H, n_steps), repeats)
 
 
+def _bench_scenarios(n_bodies) -> list:
+    """The benchmark's body as N scenarios, body i starting with ω0 = _initial_w(N)[i] (the rows' bodies)."""
+    import dataclasses
+    base = _bench_scenario()
+    p = base.problem
+    out = []
+    for w in _initial_w(n_bodies):
+        initial = dataclasses.replace(p.initial, w_W=np.array(w, dtype=float))
+        out.append(dataclasses.replace(base, problem=dataclasses.replace(p, initial=initial)))
+    return out
+
+
+def batching_variants(engines=None) -> list:
+    """The available ``ENGINE:VARIANT`` whose adapter batches (overrides ``EngineAdapter.simulate_many``), the
+    engines of their own rows (reference, MuJoCo, PyBullet) excepted; ``engines`` narrows them."""
+    from cross_checks.engines import all_variants, get_adapter
+    from cross_checks.engines.base import EngineAdapter
+    out = []
+    for v in all_variants():
+        if not v.available or v.engine in SWEEP_ENGINES or (engines is not None and v.engine not in engines):
+            continue
+        if type(get_adapter(v.engine)).simulate_many is not EngineAdapter.simulate_many:
+            out.append(v.name)
+    return out
+
+
+def adapter_batched(variant, n_bodies, n_steps, repeats) -> dict:
+    """Body-steps/s of N trajectories (the rows' bodies) in ONE ``simulate_many`` call of an engine's adapter,
+    every state recorded — what a sweep or a fuzz batch pays. The untimed warm-up call takes any compilation
+    (JIT) out of the figure; an engine reports its compile time apart (docs/engine_conventions.md)."""
+    from cross_checks.engines import get_adapter
+    from cross_checks.engines.base import RunRequest
+    engine, name = variant.split(":", 1)
+    adapter = get_adapter(engine)
+    requests = [RunRequest(sc, H, n_steps) for sc in _bench_scenarios(n_bodies)]
+
+    def run():
+        for res in adapter.simulate_many(name, requests):
+            if isinstance(res, Exception):
+                raise res
+    return _rates(n_bodies * n_steps, run, repeats)
+
+
 def drake_single_us(n_steps, repeats):
     """Drake's single trajectory, µs per step, through its adapter (semi-explicit Euler; the body
     torque turns with the body, so a LeafSystem evaluates it at every derivative) and, as Drake's
@@ -349,6 +393,13 @@ def run_bench(quick: bool = False, repeats: int = 3, render=None, sweep: bool = 
             m[k] = st
         r[k] = None if st is None else st["median"]
     r["mujoco_adapter_single_us_per_step"] = m["mujoco_adapter_single_us_per_step"]["median"]
+    # the engines that batch, through their adapter's simulate_many at the same N (MuJoCo's rollout through its
+    # adapter beside them, the same path measured the same way)
+    r["batched_adapters"] = {}
+    for v in ["mujoco:euler", *batching_variants()]:
+        st = adapter_batched(v, n, steps, repeats)
+        m[f"adapter_batched[{v}]"] = st
+        r["batched_adapters"][v] = st["median"]
     r["versions"]["drake"] = _drake_version()
     r["reference_batched_body_steps_per_s"] = max(r["reference_course_body_steps_per_s"],
                                                   r["reference_expmap_gyro_body_steps_per_s"])
@@ -395,6 +446,9 @@ def format_table(r: dict) -> str:
            f"{'measurement':<42} {'body-steps/s':>12} {'[min, max]':>22} {'vs MuJoCo best':>15}"]
     out += [f"{name:<42} {m[k]['median']:>12.3e} {_spread(m[k]):>22} {m[k]['median'] / best:>14.2f}x"
             for name, k in rows]
+    out += [f"{'through the adapter, simulate_many: ' + v:<42} {m[f'adapter_batched[{v}]']['median']:>12.3e} "
+            f"{_spread(m[f'adapter_batched[{v}]']):>22} {m[f'adapter_batched[{v}]']['median'] / best:>14.2f}x"
+            for v in r.get("batched_adapters", {})]
     out.append("")
     out.append(f"single trajectory: reference:expmap_gyro {r['reference_single_us_per_step']:.2f} us/step "
                f"{_spread(m['reference_single_us_per_step'])}, mj_step with a force "

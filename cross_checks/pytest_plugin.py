@@ -22,9 +22,11 @@ import pytest
 
 
 def pytest_addoption(parser):
-    group = parser.getgroup("rbcheck", "rbcheck: check a rigid-body simulator's declared order (assert_engine)")
+    group = parser.getgroup("rbcheck",
+                            "rbcheck: check a rigid-body simulator's declared order (assert_engine)")
     group.addoption("--rbcheck-keep-reports", metavar="DIR", default=None,
-                    help="keep each assert_engine sweep's results directory and HTML report under DIR/<test>/")
+                    help="keep each assert_engine sweep's results directory and HTML "
+                         "report under DIR/<test>/")
     group.addoption("--rbcheck-engine-file", metavar="FILE", action="append", default=[],
                     help="register this engine file for every assert_engine call (repeatable)")
     group.addoption("--rbcheck-cache-dir", metavar="DIR", default=None,

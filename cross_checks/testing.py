@@ -57,7 +57,8 @@ def assert_engine(variant, scenarios, *, engine_file=None) -> dict:
     return run_engine_checks(variant, scenarios, engine_file=engine_file)
 
 
-def run_engine_checks(variant, scenarios, *, engine_file=None, out_dir=None, cache_dir=None, jobs=None) -> dict:
+def run_engine_checks(variant, scenarios, *, engine_file=None,
+                      out_dir=None, cache_dir=None, jobs=None) -> dict:
     """:func:`assert_engine` with the plugin's settings: ``out_dir`` keeps the results directory and its
     HTML report there; ``cache_dir`` replaces the user's rbcheck cache; ``jobs`` worker processes."""
     __tracebackhide__ = True
@@ -74,7 +75,8 @@ def run_engine_checks(variant, scenarios, *, engine_file=None, out_dir=None, cac
             try:
                 get_adapter(engine)
             except EngineUnavailable as exc:
-                raise AssertionError(f"assert_engine({variant!r}): the engine is unavailable here: {exc}") from None
+                raise AssertionError(
+                    f"assert_engine({variant!r}): the engine is unavailable here: {exc}") from None
         scs = _scenarios(scenarios)
         if out_dir is None:
             out = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="rbcheck-assert-"))) / "results"
@@ -91,14 +93,16 @@ def run_engine_checks(variant, scenarios, *, engine_file=None, out_dir=None, cac
         problems = verdict_problems(summary, rows)
         failed = {(r["scenario"], r["engine"]) for r in rows if r["status"] in ("failed", "diverged")}
         wrong = dict.fromkeys((r["scenario"], r["engine"]) for r in summary.get("convergence", [])
-                              if r.get("matches_expectation") is False and (r["scenario"], r["engine"]) not in failed)
-        causes = likely_causes({s.name: s for s in scs}, wrong) if problems else {}   # its engines still registered
+                              if r.get("matches_expectation") is False
+                              and (r["scenario"], r["engine"]) not in failed)
+        # its engines still registered
+        causes = likely_causes({s.name: s for s in scs}, wrong) if problems else {}
     if problems:
         lines = [f"  {p}" for p in problems]
         lines += [f"  likely cause ({v} on {sc}): {c}" for (sc, v), c in causes.items()]
         where = f"\n  results and report kept in {out}" if out_dir is not None else ""
-        raise AssertionError(f"assert_engine({variant!r}) on {', '.join(s.name for s in scs)}: {len(problems)} "
-                             f"problem(s):\n" + "\n".join(lines) + where)
+        raise AssertionError(f"assert_engine({variant!r}) on {', '.join(s.name for s in scs)}: "
+                             f"{len(problems)} problem(s):\n" + "\n".join(lines) + where)
     return summary
 
 
@@ -132,7 +136,8 @@ def _runs_hit(rows) -> str:
     for r in rows:
         by.setdefault(r["scenario"], []).append(f"{float(r['dt']):g}")
     n = len(rows)
-    return (f"{n} run{'s' if n > 1 else ''} (" + "; ".join(f"{sc} at Δt = {', '.join(d)} s" for sc, d in by.items())
+    return (f"{n} run{'s' if n > 1 else ''} ("
+            + "; ".join(f"{sc} at Δt = {', '.join(d)} s" for sc, d in by.items())
             + ")")
 
 
@@ -153,10 +158,10 @@ def _verdict_sentence(rec: dict) -> str:
 
 
 def likely_causes(scenarios: dict, problems_of) -> dict:
-    """``{(scenario name, variant): likely cause}`` for the failing verdicts (``scenarios``: name -> Scenario),
-    from the same catalog of mistakes
-    ``rbcheck check`` uses: the variant's run at the scenario's coarsest ladder Δt, checked step for step
-    (a cause is said only where one explains every step)."""
+    """``{(scenario name, variant): likely cause}`` for the failing verdicts (``scenarios``:
+    name -> Scenario), from the same catalog of mistakes ``rbcheck check`` uses: the variant's
+    run at the scenario's coarsest ladder Δt, checked step for step (a cause is said only
+    where one explains every step)."""
     from cross_checks.engines import run_variant
     from cross_checks.gates.check import check_trajectory
     out = {}
@@ -165,7 +170,8 @@ def likely_causes(scenarios: dict, problems_of) -> dict:
             sc = scenarios[sc_name]
             traj = run_variant(sc, variant, max(sc.dt_ladder_s))
             res = check_trajectory(traj, sc, f"{variant} on {sc_name}")
-        except Exception:  # noqa: BLE001 - a cause is a courtesy: an engine that cannot run again has its failure said
+        except Exception:  # noqa: BLE001
+            # a cause is a courtesy: an engine that cannot run again has its failure said
             continue
         if res.likely_causes and not res.likely_causes[0].startswith("no catalogued mistake"):
             out[(sc_name, variant)] = res.likely_causes[0]

@@ -30,12 +30,14 @@ def _rot(qw, qx, qy, qz):
 
 @njit(**_JIT)
 def _mv(R, a0, a1, a2):
-    return (R[0] * a0 + R[1] * a1 + R[2] * a2, R[3] * a0 + R[4] * a1 + R[5] * a2, R[6] * a0 + R[7] * a1 + R[8] * a2)
+    return (R[0] * a0 + R[1] * a1 + R[2] * a2, R[3] * a0 + R[4] * a1 + R[5] * a2,
+            R[6] * a0 + R[7] * a1 + R[8] * a2)
 
 
 @njit(**_JIT)
 def _mtv(R, a0, a1, a2):
-    return (R[0] * a0 + R[3] * a1 + R[6] * a2, R[1] * a0 + R[4] * a1 + R[7] * a2, R[2] * a0 + R[5] * a1 + R[8] * a2)
+    return (R[0] * a0 + R[3] * a1 + R[6] * a2, R[1] * a0 + R[4] * a1 + R[7] * a2,
+            R[2] * a0 + R[5] * a1 + R[8] * a2)
 
 
 @njit(**_INLINE)
@@ -287,7 +289,7 @@ def run(code, rows, offsets, pos, stop, limit, tol, max_iter, sc, I, J, mg, fW, 
             if not ok:
                 break
             for j in range(13):
-                if not abs(out[j]) <= limit:   # non-finite (NaN compares false) or blown up: simulate.bad_rows
+                if not abs(out[j]) <= limit:  # non-finite (NaN compares false) or blown up: simulate.bad_rows
                     ok = False
             if not ok:
                 break
@@ -308,7 +310,8 @@ def force_torque_at(y, stage, sc, I, J, mg, fW, tW, tB, springs, wp, bp):
     if stage and kw != 0.0:
         ox, oy, oz = _mtv(R, y[10], y[11], y[12])
         Ib = I[0]
-        lx, ly, lz = _mv(R, Ib[0, 0] * ox + Ib[0, 1] * oy + Ib[0, 2] * oz, Ib[1, 0] * ox + Ib[1, 1] * oy + Ib[1, 2] * oz,
+        lx, ly, lz = _mv(R, Ib[0, 0] * ox + Ib[0, 1] * oy + Ib[0, 2] * oz,
+                         Ib[1, 0] * ox + Ib[1, 1] * oy + Ib[1, 2] * oz,
                          Ib[2, 0] * ox + Ib[2, 1] * oy + Ib[2, 2] * oz)
         tx, ty, tz = tx - kw * lx, ty - kw * ly, tz - kw * lz
     return fx, fy, fz, tx, ty, tz

@@ -35,16 +35,17 @@ def check_inertia(inertia_B) -> np.ndarray:
     if scale == 0.0:
         raise ValueError("is zero; must be positive definite")
     if scale > _INERTIA_MAX:
-        raise ValueError(f"has an entry of magnitude {scale:g} kg m^2, beyond {_INERTIA_MAX:g} (overflow range)")
+        raise ValueError(f"has an entry of magnitude {scale:g} kg m^2, "
+                         f"beyond {_INERTIA_MAX:g} (overflow range)")
     if np.max(np.abs(I - I.T)) > _INERTIA_REL_TOL * scale:
         raise ValueError("is not symmetric")
     moments = np.linalg.eigvalsh(0.5 * (I + I.T))
     if moments[0] <= 0.0:
         raise ValueError(f"is not positive definite (principal moments {moments.tolist()})")
     if moments[0] < _INERTIA_MIN_RATIO * moments[-1] or moments[0] < 1.0 / _INERTIA_MAX:
-        raise ValueError(f"is ill-conditioned: smallest principal moment {moments[0]:g} is below "
-                         f"{_INERTIA_MIN_RATIO:g} x the largest {moments[-1]:g} (or below {1.0 / _INERTIA_MAX:g}); "
-                         "its inverse would lose all digits")
+        raise ValueError(f"is ill-conditioned: smallest principal moment {moments[0]:g} is "
+                         f"below {_INERTIA_MIN_RATIO:g} x the largest {moments[-1]:g} (or "
+                         f"below {1.0 / _INERTIA_MAX:g}); its inverse would lose all digits")
     a, b, c = np.sort(moments)
     if a + b < c * (1.0 - _INERTIA_REL_TOL):
         raise ValueError(
@@ -74,7 +75,8 @@ def inertia_from_particles(masses_kg, points_B_m):
     mass = float(np.sum(m))
     com = (m[:, None] * p).sum(axis=0) / mass
     r = p - com
-    I = np.einsum("k,kij->ij", m, np.einsum("ki,ki->k", r, r)[:, None, None] * np.eye(3) - r[:, :, None] * r[:, None, :])
+    I = np.einsum("k,kij->ij", m,
+                  np.einsum("ki,ki->k", r, r)[:, None, None] * np.eye(3) - r[:, :, None] * r[:, None, :])
     return mass, com, I
 
 

@@ -53,8 +53,8 @@ def parameters(p: Members, h_s) -> tuple:
     gv, gw = (np.broadcast_to(g, (len(h), 1)) for g in p.decay_factors(h))
     sc = np.ascontiguousarray(np.column_stack([h, p.mass_kg[:, 0], p.drag[:, 0], gv[:, 0], gw[:, 0],
                                                p.decay_rates[:, 0], p.decay_rates[:, 1]]))
-    arrays = (p.inertia_B, p.inertia_inv_B, p.weight_W, p.force_W, p.torque_W, p.torque_B, p.springs, p.world_points,
-              p.body_points)
+    arrays = (p.inertia_B, p.inertia_inv_B, p.weight_W, p.force_W, p.torque_W, p.torque_B, p.springs,
+              p.world_points, p.body_points)
     return (sc, *(np.ascontiguousarray(a, dtype=np.float64) for a in arrays))
 
 
@@ -65,10 +65,10 @@ def advance(variant: str, rows: np.ndarray, offsets, pos, stop, limit: float, pa
     if rows.dtype != np.float64 or not rows.flags.c_contiguous or rows.ndim != 2 or rows.shape[1] != 13:
         raise ValueError("rows must be a C-contiguous float64 (M, 13) array")
     offsets, stop = np.asarray(offsets, dtype=np.int64), np.asarray(stop, dtype=np.int64)
-    if np.any(offsets + stop >= rows.shape[0]) or np.any(pos < 0):   # the compiled loop does not check indices
+    if np.any(offsets + stop >= rows.shape[0]) or np.any(pos < 0):  # the compiled loop does not check indices
         raise ValueError(f"steps up to {stop.tolist()} do not fit rows of {rows.shape[0]} states")
-    kernel()(VARIANT_CODES[variant], rows, offsets, pos, stop, float(limit), float(IMPLICIT_TOL), int(MAX_ITER),
-             *params)
+    kernel()(VARIANT_CODES[variant], rows, offsets, pos, stop, float(limit), float(IMPLICIT_TOL),
+             int(MAX_ITER), *params)
 
 
 class ForceEvaluator:

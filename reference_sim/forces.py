@@ -166,7 +166,8 @@ class ForceModel:
     @property
     def conservative(self) -> bool:
         """True when total energy (kinetic + gravity + springs) is a conserved quantity of the ODE."""
-        return self.linear_drag_N_s_per_m == 0.0 and not self.has_decay and not self.point_forces and not self.torques
+        return (self.linear_drag_N_s_per_m == 0.0 and not self.has_decay
+                and not self.point_forces and not self.torques)
 
 
 def _entries(lists, width: int) -> np.ndarray:
@@ -189,9 +190,10 @@ class Members:
     (N, 3) the sum of the world point forces applied at the COM, N;
     drag (N, 1) c, N s/m; decay_rates (N, 2) (k_v, k_ω), 1/s; decay_gamma (N, 2) the per-step factors γ
     given at decay_dt_s (N, 1) s; springs (N, S, 8) [anchor_W (m), attach_B (m), k (N/m), L0 (m)];
-    world_points (N, P, 6) [f_W (N), r_B (m)] (the others); body_points (N, B, 6) [f_B (N), r_B (m)]; torque_W, torque_B
-    (N, 3) N m, the sums of the world- and body-axes torques. Shorter lists are padded with zero entries.
-    With N = 1 every array broadcasts against states of any leading shape (one problem, many states).
+    world_points (N, P, 6) [f_W (N), r_B (m)] (the others); body_points (N, B, 6) [f_B (N), r_B (m)];
+    torque_W, torque_B (N, 3) N m, the sums of the world- and body-axes torques. Shorter lists are padded
+    with zero entries. With N = 1 every array broadcasts against states of any leading shape (one problem,
+    many states).
     """
 
     mass_kg: np.ndarray
@@ -219,15 +221,18 @@ class Members:
                     for f in fms] for fr in FRAMES]
         return cls(
             col([b.mass_kg for b in bodies]),
-            np.array([b.inertia_B for b in bodies], dtype=float), np.array([b.inertia_inv_B for b in bodies], dtype=float),
+            np.array([b.inertia_B for b in bodies], dtype=float),
+            np.array([b.inertia_inv_B for b in bodies], dtype=float),
             col([b.mass_kg * np.asarray(f.gravity_W, dtype=float) for b, f in pairs]),
             col([np.sum([p.force for p in f.point_forces if p.frame == "world" and not np.any(p.point_B)]
                         or [np.zeros(3)], axis=0) for f in fms]),
             col([f.linear_drag_N_s_per_m for f in fms]), col([f.decay_rates_per_s() for f in fms]),
             col([(f.velocity_decay, f.angular_velocity_decay) for f in fms]),
             col([f.decay_dt_s if f.has_decay else 1.0 for f in fms]),
-            _entries([[(s.anchor_W, s.attach_B, s.stiffness_N_per_m, s.rest_length_m) for s in f.springs] for f in fms], 8),
-            _entries([[(p.force, p.point_B) for p in f.point_forces if p.frame == "world" and np.any(p.point_B)]
+            _entries([[(s.anchor_W, s.attach_B, s.stiffness_N_per_m, s.rest_length_m) for s in f.springs]
+                      for f in fms], 8),
+            _entries([[(p.force, p.point_B)
+                       for p in f.point_forces if p.frame == "world" and np.any(p.point_B)]
                       for f in fms], 6),
             _entries([[(p.force, p.point_B) for p in f.point_forces if p.frame == "body"] for f in fms], 6),
             col(torques[0]), col(torques[1]))
@@ -252,20 +257,23 @@ class Members:
                    np.broadcast_to(self.decay_dt_s[:, 0], (n,)).tolist())
         # row by row in Python floats (libm's pow): NumPy's vectorised power may round differently with the
         # array's length, and a member's factors must not depend on the batch it is in
-        g = np.array([[1.0 if c == 1.0 else c if hi == d else c ** (hi / d) for c in gamma] for gamma, hi, d in rows])
+        g = np.array([[1.0 if c == 1.0 else c if hi == d else c ** (hi / d) for c in gamma]
+                      for gamma, hi, d in rows])
         return g[:, 0:1], g[:, 1:2]
 
     def force_torque(self, x_W, v_W, R_WB, *, lever_rotated: bool = True, attach_rotated: bool = True,
                      torque_sign: float = 1.0):
-        """World force (N) at the COM and world torque (N m) about it, each (N, 3) or (..., 3), at positions
-        ``x_W``, velocities ``v_W`` and rotations ``R_WB`` (..., 3, 3). Sums, in this order: the weight plus
-        the world forces at the COM, the drag ``−c v``, each spring ``f = −k (L − L0) d / L`` (``d = x + R r_B − anchor``, zero when ``L = 0``)
-        with torque ``(R r_B) × f``, each world point force, each body point force ``R f_B`` (torque
+        """World force (N) at the COM and world torque (N m) about it, each (N, 3) or (..., 3), at
+        positions ``x_W``, velocities ``v_W`` and rotations ``R_WB`` (..., 3, 3). Sums, in this order:
+        the weight plus the world forces at the COM, the drag ``−c v``, each spring
+        ``f = −k (L − L0) d / L`` (``d = x + R r_B − anchor``, zero when ``L = 0``) with torque
+        ``(R r_B) × f``, each world point force, each body point force ``R f_B`` (torque
         ``(R r_B) × f``), then the world torque and the body torque ``R τ_B``.
 
         The keywords compute a piece wrongly, for the catalog of classic mistakes
-        (cross_checks.gates.check.mistakes): the lever arms ``r_B`` unrotated, the spring attachment at
-        ``x + r_B``, the torques of springs and point forces times ``torque_sign`` (−1: ``f × r``, 0: none)."""
+        (cross_checks.gates.check.mistakes): the lever arms ``r_B`` unrotated, the spring
+        attachment at ``x + r_B``, the torques of springs and point forces times
+        ``torque_sign`` (−1: ``f × r``, 0: none)."""
         shape = np.broadcast_shapes(self.weight_W.shape, np.shape(x_W), np.shape(R_WB)[:-1])
         f = np.broadcast_to(self.weight_W + self.force_W, shape)
         tau = np.broadcast_to(self.torque_W, shape)

@@ -17,7 +17,8 @@ GROUND_TRUTH_RTOL = 1e-13
 GROUND_TRUTH_ATOL = 1e-14
 
 
-def ground_truth(problem: Problem, t_s, y0=None, rtol: float = GROUND_TRUTH_RTOL, atol: float = GROUND_TRUTH_ATOL):
+def ground_truth(problem: Problem, t_s, y0=None, rtol: float = GROUND_TRUTH_RTOL,
+                 atol: float = GROUND_TRUTH_ATOL):
     """Solve ``ẏ = F(y)`` (reference_sim.integrators.rhs: gyroscopic term and the continuous velocity
     decay ``−k v``, ``−k ω`` included) with DOP853.
 

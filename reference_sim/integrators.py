@@ -50,8 +50,8 @@ from reference_sim.quaternion import matrix_from_quat, quat_mul
 from reference_sim.state import STATE_SIZE, Q, V, W, X
 from reference_sim.vec import floating, mat_t_vec3
 
-__all__ = ["VARIANTS", "Scheme", "get_step", "rhs", "members", "IMPLICIT_TOL", "MAX_ITER", "ImplicitSolveError",
-           "exp_map_times", "omega_times"]
+__all__ = ["VARIANTS", "Scheme", "get_step", "rhs", "members", "IMPLICIT_TOL", "MAX_ITER",
+           "ImplicitSolveError", "exp_map_times", "omega_times"]
 
 #: Convergence tolerance of the implicit solves (implicit Euler's iteration and leapfrog's implicit half
 #: kick): max-norm of the update, relative to 1 + |y|. Two orders above double round-off, so the
@@ -103,7 +103,8 @@ def _times(ax, ay, az, q, aw=None):
         return np.concatenate([-(ax * qx + ay * qy + az * qz), ax * qw + ay * qz - az * qy,
                                ay * qw + az * qx - ax * qz, az * qw + ax * qy - ay * qx], axis=-1)
     return np.concatenate([aw * qw - ax * qx - ay * qy - az * qz, aw * qx + ax * qw + ay * qz - az * qy,
-                           aw * qy + ay * qw + az * qx - ax * qz, aw * qz + az * qw + ax * qy - ay * qx], axis=-1)
+                           aw * qy + ay * qw + az * qx - ax * qz, aw * qz + az * qw + ax * qy - ay * qx],
+                          axis=-1)
 
 
 def exp_map_times(h, w, q):
@@ -171,14 +172,16 @@ def course_type(problem, y, dt, *, gyro: bool, expmap: bool, quat: str = "left",
     g_v, g_w = p.decay_factors(dt)
     v1 = g_v * (v + h * (f / p.mass_kg))
     x1 = x + h * v1
-    R_I = {"world": R, "body": np.broadcast_to(np.eye(3), R.shape), "transposed": np.swapaxes(R, -1, -2)}[inertia]
+    R_I = {"world": R, "body": np.broadcast_to(np.eye(3), R.shape),
+           "transposed": np.swapaxes(R, -1, -2)}[inertia]
     w1 = g_w * (w + h * p.angular_acceleration(R_I, w, tau, gyro=gyro, world_solve=not normalise))
     if expmap:
         q1 = exp_map_times(h, w1, q)
     else:
         hw = (quat_half * h) * (mat_t_vec3(R, w1) if quat == "left_body" else w1)
         right = quat == "right"
-        q1 = q + (quat_mul(q, np.concatenate([0.0 * hw[..., :1], hw], axis=-1)) if right else omega_times(hw, q))
+        q1 = q + (quat_mul(q, np.concatenate([0.0 * hw[..., :1], hw], axis=-1))
+                  if right else omega_times(hw, q))
     return np.concatenate([x1, v1, q1 / _norm(q1) if normalise else q1, w1], axis=-1)
 
 
@@ -318,7 +321,8 @@ def step_leapfrog(problem, y, dt):
         if not running.any():
             break
     else:
-        raise ImplicitSolveError(f"leapfrog: implicit half kick did not converge in {MAX_ITER} iterations (dt={dt})")
+        raise ImplicitSolveError("leapfrog: implicit half kick did not "
+                                 f"converge in {MAX_ITER} iterations (dt={dt})")
     z[..., V], z[..., W] = u[..., :3], u[..., 3:]
     z[..., X] = y[..., X] + h * u[..., :3]
     q1 = exp_map_times(h, u[..., 3:], y[..., Q])
@@ -343,17 +347,22 @@ class Scheme:
 #: The reference variants: the one registry every other list of them (the compiled kernels, the adapter's
 #: declared variants and orders, the checker's candidates) derives from.
 VARIANTS = {
-    "course": Scheme(step_course, 1, "the course's step exactly: symplectic Euler, q += [0, dt/2 w] q, normalise; "
-                                     "NO gyroscopic term"),
-    "course_gyro": Scheme(step_course_gyro, 1, "the course's step plus the explicit gyroscopic torque -w x (I w)"),
-    "expmap_gyro": Scheme(step_expmap_gyro, 1, "symplectic Euler, explicit gyroscopic term, exact exp-map quaternion "
-                                               "update (= MuJoCo Euler)"),
-    "explicit_euler": Scheme(step_explicit_euler, 1, "explicit (forward) Euler on the whole state, gyroscopic term "
-                                                     "included"),
-    "implicit_euler": Scheme(step_implicit_euler, 1, "implicit (backward) Euler on the whole state, solved to "
-                                                     f"{IMPLICIT_TOL:g}", iterative=True),
+    "course": Scheme(step_course, 1,
+                     "the course's step exactly: symplectic Euler, "
+                     "q += [0, dt/2 w] q, normalise; NO gyroscopic term"),
+    "course_gyro": Scheme(step_course_gyro, 1,
+                          "the course's step plus the explicit gyroscopic torque -w x (I w)"),
+    "expmap_gyro": Scheme(step_expmap_gyro, 1,
+                          "symplectic Euler, explicit gyroscopic term, exact "
+                          "exp-map quaternion update (= MuJoCo Euler)"),
+    "explicit_euler": Scheme(step_explicit_euler, 1,
+                             "explicit (forward) Euler on the whole state, gyroscopic term included"),
+    "implicit_euler": Scheme(step_implicit_euler, 1,
+                             f"implicit (backward) Euler on the whole state, solved to {IMPLICIT_TOL:g}",
+                             iterative=True),
     "midpoint": Scheme(step_midpoint, 2, "explicit mid-point (RK2) on the whole state"),
-    "leapfrog": Scheme(step_leapfrog, 2, "Stormer-Verlet kick-drift-kick, exp-map drift; velocities at integer steps",
+    "leapfrog": Scheme(step_leapfrog, 2,
+                       "Stormer-Verlet kick-drift-kick, exp-map drift; velocities at integer steps",
                        iterative=True),
     "rk4": Scheme(step_rk4, 4, "classical Runge-Kutta 4 on the whole state"),
 }

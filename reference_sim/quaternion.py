@@ -202,10 +202,10 @@ def quat_from_euler_zxy(angles_deg):
 def euler_zxy_from_quat(q, *, gimbal_tol=1e-9):
     """Unity Euler angles (x, y, z) in DEGREES of unit quaternions (w, x, y, z), and a gimbal-lock flag.
 
-    Returns ``(angles_deg (..., 3), locked (...) bool)``. With ``R = R_y R_x R_z``:
-    ``R[1, 2] = -sin x`` and ``hypot(R[0,2], R[2,2]) = cos x``, so x is in [-90°, 90°]. When ``|cos x| < gimbal_tol``
-    (pitch ±90°) the y and z rotations act about the same axis; then z is set to 0, y absorbs the
-    whole remaining rotation, and ``locked`` is True.
+    Returns ``(angles_deg (..., 3), locked (...) bool)``. With ``R = R_y R_x R_z``: ``R[1, 2] = -sin x`` and
+    ``hypot(R[0,2], R[2,2]) = cos x``, so x is in [-90°, 90°]. When ``|cos x| < gimbal_tol`` (pitch ±90°)
+    the y and z rotations act about the same axis; then z is set to 0, y absorbs the whole remaining
+    rotation, and ``locked`` is True.
     """
     R = matrix_from_quat(quat_normalize(q))
     # cos x from the row that carries it (hypot stays accurate near ±90°, where asin would not).

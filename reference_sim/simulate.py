@@ -10,7 +10,8 @@ from reference_sim.forces import Members
 from reference_sim.integrators import ImplicitSolveError, get_step
 from reference_sim.state import Problem
 
-__all__ = ["Run", "simulate", "run_members", "BLOWUP_LIMIT", "COMPILED_CHUNK", "bad_rows", "blowup_words", "diverged"]
+__all__ = ["Run", "simulate", "run_members", "BLOWUP_LIMIT",
+           "COMPILED_CHUNK", "bad_rows", "blowup_words", "diverged"]
 
 #: A state component beyond this magnitude (m, m/s, rad/s) counts as a blow-up. Free-body scenarios
 #: of the catalog stay below 1e3 in every quantity; 1e8 is far outside any physical run yet well
@@ -109,7 +110,8 @@ def run_members(members: Members, variant, dt_s, n_steps, y0) -> list:
     why: dict = {}
     failed = np.zeros(N, dtype=bool)
     step = variant if callable(variant) else get_step(variant)
-    params = compiled.parameters(members, h) if isinstance(variant, str) and compiled.kernel() is not None else None
+    params = (compiled.parameters(members, h)
+              if isinstance(variant, str) and compiled.kernel() is not None else None)
     with np.errstate(all="ignore"):
         while True:
             todo = np.flatnonzero((pos < n) & ~failed)

@@ -18,7 +18,8 @@ from cross_checks.core.progress import Progress, is_tty, stage
 from reports.data import Results, ResultsError, load_results
 from reports.install import IncompleteInstallation, check_templates
 
-__all__ = ["render", "load_results", "Results", "ResultsError", "check_installation", "IncompleteInstallation"]
+__all__ = ["render", "load_results", "Results", "ResultsError",
+           "check_installation", "IncompleteInstallation"]
 
 
 def check_installation() -> None:
@@ -54,7 +55,8 @@ def _say(line: str) -> None:
 LINE_INTERVAL_S = 5.0
 
 
-def render(directory, *, self_contained: bool = False, jobs: int | None = 1, progress: bool | None = None) -> list:
+def render(directory, *, self_contained: bool = False,
+           jobs: int | None = 1, progress: bool | None = None) -> list:
     """(Re)render the report of a results directory; returns the written page paths (HTML; the row
     extracts ``rows/<scenario>.csv`` are written beside them).
 
@@ -95,7 +97,8 @@ def render(directory, *, self_contained: bool = False, jobs: int | None = 1, pro
         n_figures = sum(len(kinds) for kinds in figures.values())
         noted = n_figures - len(drawn)
         _say(f"{len(pages)} pages and {n_figures} figures written in {time.perf_counter() - t0:.1f} s"
-             + (f" ({len(drawn)} drawn, {noted} a note instead: a quantity that does not move)" if noted else ""))
+             + (f" ({len(drawn)} drawn, {noted} a note instead: a quantity that does not move)"
+                if noted else ""))
     return pages
 
 
@@ -105,7 +108,8 @@ def _write_pages(res, figures, self_contained) -> list:
     from reports.html import render_pages, rows_extracts
     d = res.directory
     written = []
-    for name, text in {**rows_extracts(res), **render_pages(res, figures, self_contained=self_contained)}.items():
+    for name, text in {**rows_extracts(res),
+                       **render_pages(res, figures, self_contained=self_contained)}.items():
         target = inside(d, *name.split("/"))
         target.parent.mkdir(exist_ok=True)
         atomic_write_text(target, text)
@@ -132,7 +136,8 @@ def _tidy(d, written, drawn, listed, marked) -> None:
 def _draw_all(res, names, plot_dir: Path, jobs, progress) -> dict:
     """Draw every figure (in ``jobs`` processes, costliest first, each reported as it is done); returns
     ``{scenario: [(kind, file or None, note)]}`` in the order of plots.KINDS."""
-    from reports.plots import KINDS, figure_tasks, relative_cost, release  # here: forked workers inherit matplotlib
+    # here: forked workers inherit matplotlib
+    from reports.plots import KINDS, figure_tasks, relative_cost, release
     tasks = [(sc, kind, str(plot_dir)) for sc in names for _, kind in figure_tasks(res, sc)]
     # the costliest figures first, so that no process is left drawing a large one while the other idles
     tasks.sort(key=lambda t: -relative_cost(res, t[0], t[1]))
@@ -140,7 +145,8 @@ def _draw_all(res, names, plot_dir: Path, jobs, progress) -> dict:
     _SHARED.update(res=res, directory=str(res.directory))
     out = {sc: {} for sc in names}
     bar = Progress("rbcheck report", "figures", len(tasks), enabled=progress, interval_s=LINE_INTERVAL_S,
-                   total_work=sum(relative_cost(res, t[0], t[1]) for t in tasks))   # time left follows the cost
+                   # time left follows the cost
+                   total_work=sum(relative_cost(res, t[0], t[1]) for t in tasks))
 
     def done(item):
         sc, kind, fname, note = item

@@ -20,9 +20,9 @@ from reports.plots import DPI, LOG_FLOOR, save_png
 
 __all__ = ["check_figure", "ladder_figure"]
 
-QCOLORS = {"position": "tab:blue", "velocity": "tab:green", "orientation": "tab:red", "angular_velocity": "tab:purple",
-           "conserved energy": "tab:orange", "conserved angular_momentum": "tab:brown",
-           "conserved quaternion_norm": "tab:gray"}
+QCOLORS = {"position": "tab:blue", "velocity": "tab:green", "orientation": "tab:red",
+           "angular_velocity": "tab:purple", "conserved energy": "tab:orange",
+           "conserved angular_momentum": "tab:brown", "conserved quaternion_norm": "tab:gray"}
 COMP_COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:red")
 
 
@@ -79,8 +79,8 @@ def _free_errors(ax, res):
     for e in res.evidence:
         if e.kind == "free-running" and e.series:
             v = np.asarray(e.series["value"], dtype=float)
-            ax.plot(e.series["t_s"], np.where(v > 0, v, LOG_FLOOR), color=QCOLORS.get(e.quantity, "black"), lw=1.1,
-                    label=f"{e.quantity.replace('_', ' ')} ({e.unit})")
+            ax.plot(e.series["t_s"], np.where(v > 0, v, LOG_FLOOR), color=QCOLORS.get(e.quantity, "black"),
+                    lw=1.1, label=f"{e.quantity.replace('_', ' ')} ({e.unit})")
     ax.set_title("free-running error vs the reference (no velocity columns)", fontsize=10)
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8, loc="lower right")
@@ -93,7 +93,8 @@ def check_figure(res, scenario, path) -> None:
     FigureCanvasAgg(fig)
     gs = fig.add_gridspec(2, 3, height_ratios=[1.0, 1.0], hspace=0.45, wspace=0.28,
                           left=0.06, right=0.985, top=0.83, bottom=0.07)
-    head = (("PASS: " + res.verdict) if res.passed else ("FAIL: " + res.reasons[0] if res.reasons else res.verdict))
+    head = (("PASS: " + res.verdict) if res.passed
+            else ("FAIL: " + res.reasons[0] if res.reasons else res.verdict))
     head = head.split(" (`--scheme")[0]   # the option is said in the terminal; the figure keeps the cause
     lines = textwrap.wrap(f"{res.source} on {res.scenario} — {head}", 140)[:2]
     if res.likely_causes:
@@ -117,13 +118,15 @@ def check_figure(res, scenario, path) -> None:
         if closest:
             ref_at = y_ref[np.searchsorted(t, closest[1]).clip(0, len(t) - 1), 6:10]
             c_q = (closest[1], _hemisphere(closest[2][:, 6:10], ref_at))
-        _components(ax, t, q, y_ref[:, 6:10], c_q, ("qw", "qx", "qy", "qz"), "orientation q_WB (sign as the reference)", "")
+        _components(ax, t, q, y_ref[:, 6:10], c_q, ("qw", "qx", "qy", "qz"),
+                    "orientation q_WB (sign as the reference)", "")
     else:
         ax.text(0.5, 0.5, "no orientation columns", ha="center", transform=ax.transAxes)
     ax = fig.add_subplot(gs[0, 2])
     if "angular_velocity" in present:
         c_w = (closest[1], closest[2][:, 10:13]) if closest else None
-        _components(ax, t, y[:, 10:13], y_ref[:, 10:13], c_w, ("ωx", "ωy", "ωz"), "angular velocity, world", "rad/s")
+        _components(ax, t, y[:, 10:13], y_ref[:, 10:13], c_w,
+                    ("ωx", "ωy", "ωz"), "angular velocity, world", "rad/s")
     elif "velocity" in present:
         c_v = (closest[1], closest[2][:, 3:6]) if closest else None
         _components(ax, t, y[:, 3:6], y_ref[:, 3:6], c_v, ("vx", "vy", "vz"), "COM velocity, world", "m/s")
@@ -143,12 +146,16 @@ def check_figure(res, scenario, path) -> None:
             if e.kind == "conserved":   # drifts drawn as their running maximum (round-off flickers otherwise)
                 r = np.fmax.accumulate(r)
             free[("conserved " if e.kind == "conserved" else "") + e.quantity] = (t_e, r, dec)
-    _ratio_axis(fig.add_subplot(gs[1, 2]), free, "free-running error, conserved drift / allowance\n(drifts: running max; dashed: past the cap)")
+    _ratio_axis(fig.add_subplot(gs[1, 2]), free,
+                "free-running error, conserved drift / allowance\n"
+                "(drifts: running max; dashed: past the cap)")
     handles = [Line2D([], [], color="gray", lw=1.2, label=f"{res.source} (the file)"),
                Line2D([], [], color="gray", lw=4, alpha=0.3, label=f"reference ({res.reference_label})")]
     if label_closest:
-        handles.append(Line2D([], [], color="gray", lw=1.2, ls="--", label=f"{label_closest} run free (closest correct)"))
-    fig.legend(handles=handles, loc="upper right", bbox_to_anchor=(0.985, 0.895), ncol=3, fontsize=9, frameon=False)
+        handles.append(Line2D([], [], color="gray", lw=1.2, ls="--",
+                              label=f"{label_closest} run free (closest correct)"))
+    fig.legend(handles=handles, loc="upper right",
+               bbox_to_anchor=(0.985, 0.895), ncol=3, fontsize=9, frameon=False)
     save_png(fig, path)
 
 
@@ -158,8 +165,9 @@ def ladder_figure(results, ladder, scenario, path) -> None:
     fig = Figure(figsize=(4.0 * max(1, len(recs)), 4.6), dpi=DPI)
     FigureCanvasAgg(fig)
     axes = fig.subplots(1, max(1, len(recs)), squeeze=False)
-    fig.suptitle(("PASS: " if ladder["passed"] else "FAIL: ") + "\n".join(textwrap.wrap(ladder["verdict"], 140)[:2]),
-                 x=0.01, ha="left", fontsize=10, color="darkgreen" if ladder["passed"] else "darkred")
+    fig.suptitle(("PASS: " if ladder["passed"] else "FAIL: ")
+                 + "\n".join(textwrap.wrap(ladder["verdict"], 140)[:2]), x=0.01, ha="left", fontsize=10,
+                 color="darkgreen" if ladder["passed"] else "darkred")
     for ax, r in zip(axes[0], recs):
         dt = np.asarray(r["dt_s"], dtype=float)
         e = np.asarray(r["errors"], dtype=float)
@@ -167,7 +175,8 @@ def ladder_figure(results, ladder, scenario, path) -> None:
         c = QCOLORS[r["quantity"]]
         ax.loglog(dt, np.where(e > 0, e, LOG_FLOOR), "-", color=c, lw=1.2)
         ax.loglog(dt[fitted], np.where(e > 0, e, LOG_FLOOR)[fitted], "o", color=c, label="fitted")
-        ax.loglog(dt[~fitted], np.where(e > 0, e, LOG_FLOOR)[~fitted], "o", mfc="white", color=c, label="not fitted")
+        ax.loglog(dt[~fitted], np.where(e > 0, e, LOG_FLOOR)[~fitted],
+                  "o", mfc="white", color=c, label="not fitted")
         if r.get("floors"):
             ax.loglog(dt, np.asarray(r["floors"], dtype=float), ":", color="gray", label="round-off floor")
         ax.set_xticks(dt)

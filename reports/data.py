@@ -25,8 +25,8 @@ _INT = {"steps"}
 _BOOL = {"default_dt", "in_ladder", "cached"}
 _STR = {"scenario", "engine", "status", "message", "reference", "engine_version", "energy_drift_kind",
         "step_defect_quantity"}
-_REQUIRED = ("scenario", "engine", "dt", "steps", "wall_s", "pos_err_final", "vel_err_final", "orient_err_final",
-             "angvel_err_final", "energy_drift_max", "angmom_drift_max", "status")
+_REQUIRED = ("scenario", "engine", "dt", "steps", "wall_s", "pos_err_final", "vel_err_final",
+             "orient_err_final", "angvel_err_final", "energy_drift_max", "angmom_drift_max", "status")
 
 
 class ResultsError(ValueError):
@@ -65,7 +65,8 @@ class Results:
     def has_one_step(self, variant) -> bool:
         """Whether the variant's engine has a one-step mode (summary.json ``variants[].one_step``;
         results written before that key existed: True)."""
-        return next((v.get("one_step", True) for v in self.summary.get("variants", []) if v["name"] == variant), True)
+        return next((v.get("one_step", True)
+                     for v in self.summary.get("variants", []) if v["name"] == variant), True)
 
     def scenario(self, name) -> dict:
         return next(s for s in self.scenarios if s["name"] == name)
@@ -90,10 +91,12 @@ class Results:
             self._records[(key, scenario)] = [r for r in self.summary.get(key, [])
                                               if scenario is None or r["scenario"] == scenario]
         return [r for r in self._records[(key, scenario)]
-                if (engine is None or r["engine"] == engine) and (quantity is None or r["quantity"] == quantity)]
+                if (engine is None or r["engine"] == engine)
+                and (quantity is None or r["quantity"] == quantity)]
 
     def series(self, scenario) -> dict:
-        """``{variant: {field: array}}`` plus ``"reference"``, from series/<scenario>.npz (empty when absent)."""
+        """``{variant: {field: array}}`` plus ``"reference"``, from
+        series/<scenario>.npz (empty when absent)."""
         if scenario not in self._series:
             path = inside(self.directory, "series", f"{safe_file_stem(scenario)}.npz")
             out = {}
@@ -154,7 +157,8 @@ def load_results(directory) -> Results:
 
 
 def read_summary(sj: Path, for_report: bool = False) -> dict:
-    """summary.json, checked against cross_checks.sweep.schema (ResultsError naming the file and the field)."""
+    """summary.json, checked against cross_checks.sweep.schema (ResultsError
+    naming the file and the field)."""
     from cross_checks.sweep.schema import SchemaError, check_summary
     try:
         summary = json.loads(sj.read_text(encoding="utf-8"))
@@ -177,7 +181,8 @@ def _parse_row(rc, line, raw) -> dict:
         except ValueError:
             raise ResultsError(f"{rc}: line {line}: {k}: not a number: {v[:40]!r}") from None
     if row["status"] not in STATUSES:
-        raise ResultsError(f"{rc}: line {line}: status: must be one of {', '.join(STATUSES)}, got {row['status'][:40]!r}")
+        raise ResultsError(f"{rc}: line {line}: status: must be one of "
+                           f"{', '.join(STATUSES)}, got {row['status'][:40]!r}")
     if not (row["dt"] > 0 and math.isfinite(row["dt"])):
         raise ResultsError(f"{rc}: line {line}: dt: must be a positive finite number, got {row['dt']}")
     return row

@@ -115,7 +115,8 @@ def _contradictions(res, c) -> list:
     # 1. results that contradict the expectations
     for (sc, eng), rs in sorted(_group([r for r in c.recs if r["matches_expectation"] is False],
                                        lambda r: (r["scenario"], r["engine"])).items(),
-                                key=lambda kv: (c.scen_order.get(kv[0][0], 99), c.var_order.get(kv[0][1], 99))):
+                                key=lambda kv: (c.scen_order.get(kv[0][0], 99),
+                                                c.var_order.get(kv[0][1], 99))):
         parts = [f"{LABELS[r['quantity']]} {r['assessment']}" for r in rs]
         why = {r["reason"] for r in rs if r["expected_verdict"] == "does_not_converge"}
         notes = {r["note"] for r in rs if r.get("note")}
@@ -141,8 +142,10 @@ def _failed_and_diverged(res, c) -> tuple:
         bad.append(Finding("bad", f"{eng} failed on {sc} at Δt = {dts} s: {'; '.join(msgs)}", sc, eng))
     for (sc, eng), rows in _group([r for r in res.rows if r["status"] == "diverged"],
                                   lambda r: (r["scenario"], r["engine"])).items():
-        where = ", ".join(f"Δt = {fmt_dt(r['dt'])} s (at t = {fmt(r['diverged_at_s'], 's', 3)})" for r in rows)
-        info.append(Finding("info", f"{eng} diverged on {sc} at {where}; those runs are left out of the order fits.",
+        where = ", ".join(f"Δt = {fmt_dt(r['dt'])} s (at t = {fmt(r['diverged_at_s'], 's', 3)})"
+                          for r in rows)
+        info.append(Finding("info",
+                            f"{eng} diverged on {sc} at {where}; those runs are left out of the order fits.",
                             sc, eng))
 
     return bad, info
@@ -186,12 +189,14 @@ def _pre_asymptotic(res, c) -> list:
     # 3b. no claim on this ladder (pre-asymptotic), with the reason (physics, or the errors themselves)
     pre = [r for r in c.recs if r["verdict"] == "pre_asymptotic"]
     for (sc, eng), rs in sorted(_group(pre, lambda r: (r["scenario"], r["engine"])).items(),
-                                key=lambda kv: (c.scen_order.get(kv[0][0], 99), c.var_order.get(kv[0][1], 99))):
+                                key=lambda kv: (c.scen_order.get(kv[0][0], 99),
+                                                c.var_order.get(kv[0][1], 99))):
         rs.sort(key=lambda r: QUANTITIES.index(r["quantity"]))
-        why = lambda r: r["reason"] if r["expected_verdict"] == "pre_asymptotic" else r["assessment"]  # noqa: E731
+        why = lambda r: (r["reason"] if r["expected_verdict"] == "pre_asymptotic"  # noqa: E731
+                         else r["assessment"])
         fitted = ", ".join(f"{LABELS[r['quantity']]} {r['order']:.2f}" for r in rs if r["order"] is not None)
-        text = (f"{eng} on {sc}: no order claimed for {_and(LABELS[r['quantity']] for r in rs)} "
-                f"(fitted {fitted or 'none'}, not judged). {LABELS[rs[0]['quantity']].capitalize()}: {why(rs[0])}")
+        text = (f"{eng} on {sc}: no order claimed for {_and(LABELS[r['quantity']] for r in rs)} (fitted "
+                f"{fitted or 'none'}, not judged). {LABELS[rs[0]['quantity']].capitalize()}: {why(rs[0])}")
         if len(rs) > 1:
             text += f" (likewise, with its own numbers, for {_and(LABELS[r['quantity']] for r in rs[1:])})"
         explained.append(Finding("explained", text + ".", sc, eng))
@@ -203,22 +208,26 @@ def _exact_and_faster(res, c) -> list:
     """4. Exact to round-off, and orders above the nominal one (information)."""
     info = []
     # 4. exact to round-off, and orders above the nominal one (information)
-    exact = [r for r in c.recs if r["verdict"] == "at_roundoff" and c.varies.get(r["scenario"], {}).get(r["quantity"], True)]
+    exact = [r for r in c.recs
+             if r["verdict"] == "at_roundoff" and c.varies.get(r["scenario"], {}).get(r["quantity"], True)]
     for (sc, q), rs in sorted(_group(exact, lambda r: (r["scenario"], r["quantity"])).items(),
                               key=lambda kv: (c.scen_order.get(kv[0][0], 99), QUANTITIES.index(kv[0][1]))):
         engines = sorted({r["engine"] for r in rs}, key=lambda e: c.var_order.get(e, 99))
         info.append(Finding("info", f"On {sc}, {LABELS[q]} is exact to round-off at every Δt with "
                                     f"{_and(engines)}: the scheme integrates this motion exactly.", sc, None))
-    above = [r for r in c.recs if r["verdict"] == "converges" and r["matches_expectation"] and r["order"] is not None
+    above = [r for r in c.recs
+             if r["verdict"] == "converges" and r["matches_expectation"] and r["order"] is not None
              and r["expected_order"] is not None and r["order"] > r["expected_order"] + tol.SWEEP_ORDER_TOL]
     for (sc, q), rs in sorted(_group(above, lambda r: (r["scenario"], r["quantity"])).items(),
                               key=lambda kv: (c.scen_order.get(kv[0][0], 99), QUANTITIES.index(kv[0][1]))):
         rs.sort(key=lambda r: c.var_order.get(r["engine"], 99))
         lo, hi = min(r["order"] for r in rs), max(r["order"] for r in rs)
         orders = f"{lo:.2f}" if hi - lo < 0.05 else f"{lo:.2f} … {hi:.2f}"
-        info.append(Finding("info", f"On {sc}, {LABELS[q]} converges faster than the nominal order (order {orders}) "
-                                    f"with " + _and(f"{r['engine']} (nominal {r['expected_order']:g})" for r in rs)
-                                    + ".", sc, None))
+        info.append(Finding("info",
+                            f"On {sc}, {LABELS[q]} converges faster than the nominal order "
+                            f"(order {orders}) with "
+                            + _and(f"{r['engine']} (nominal {r['expected_order']:g})" for r in rs) + ".",
+                            sc, None))
 
     return info
 
@@ -237,20 +246,26 @@ def _conservation(res, c) -> list:
             parts = []
             if sec:
                 sec.sort(key=lambda r: -abs(r["energy_drift_final"]))
-                parts.append("secular with " + _and(f"{r['engine']} ({fmt(r['energy_drift_final'])})" for r in sec))
+                parts.append("secular with "
+                             + _and(f"{r['engine']} ({fmt(r['energy_drift_final'])})" for r in sec))
             if bnd:
-                parts.append(f"bounded with {len(bnd)} variant(s) (at most {fmt(max(r['energy_drift_max'] for r in bnd))})")
+                parts.append(f"bounded with {len(bnd)} variant(s) (at most "
+                             f"{fmt(max(r['energy_drift_max'] for r in bnd))})")
             if rnd:
                 parts.append(f"conserved to round-off with {_and(r['engine'] for r in rnd)}")
-            info.append(Finding("info", f"Energy on {sc} at Δt = {fmt_dt(s['dt_s'])} s over {fmt_dt(s['duration_s'])} s "
-                                        f"(relative drift): " + "; ".join(parts) + ".", sc, None))
+            info.append(Finding("info",
+                                f"Energy on {sc} at Δt = {fmt_dt(s['dt_s'])} s over "
+                                f"{fmt_dt(s['duration_s'])} s (relative drift): " + "; ".join(parts) + ".",
+                                sc, None))
         if s["conserved"]["angular_momentum"]["conserved"] and rows:
-            worst = sorted([r for r in rows if np.isfinite(r["angmom_drift_max"]) and r["angmom_drift_max"] > 1e-6],
+            worst = sorted([r for r in rows
+                            if np.isfinite(r["angmom_drift_max"]) and r["angmom_drift_max"] > 1e-6],
                            key=lambda r: -r["angmom_drift_max"])
             if worst:
-                info.append(Finding("info", f"World angular momentum on {sc} (conserved by the physics) drifts by "
-                                            "up to " + _and(f"{fmt(r['angmom_drift_max'])} with {r['engine']}"
-                                                            for r in worst[:4])
+                info.append(Finding("info",
+                                    f"World angular momentum on {sc} (conserved by the physics) drifts by "
+                                    "up to " + _and(f"{fmt(r['angmom_drift_max'])} with {r['engine']}"
+                                                    for r in worst[:4])
                                     + (f" (and {len(worst) - 4} more)" if len(worst) > 4 else "")
                                     + f" at Δt = {fmt_dt(s['dt_s'])} s.", sc, None))
 
@@ -268,13 +283,16 @@ def _same_schemes(res, c) -> tuple:
         if badr:
             parts = _and(f"{r['scenario']} ({fmt(r['max_rel'])})" if r["max_rel"] is not None
                          else f"{r['scenario']} ({r['note']})" for r in badr)
-            bad.append(Finding("bad", f"{a} and {b} should be the same scheme ({rs[0]['reason']}) but their final "
-                                      f"states differ beyond {fmt(rs[0].get('tolerance', tol.SAME_SCHEME_REL))} (relative) on {parts}.",
+            bad.append(Finding("bad",
+                               f"{a} and {b} should be the same scheme ({rs[0]['reason']}) but their final "
+                               f"states differ beyond {fmt(rs[0].get('tolerance', tol.SAME_SCHEME_REL))} "
+                               f"(relative) on {parts}.",
                                None, b))
         if good:
             worst = max(r["max_rel"] for r in good)
-            info.append(Finding("info", f"{b} reproduces {a} on {len(good)} scenario(s) to {fmt(worst)} (largest "
-                                        f"relative final-state difference at the default Δt): {rs[0]['reason']}.",
+            info.append(Finding("info",
+                                f"{b} reproduces {a} on {len(good)} scenario(s) to {fmt(worst)} (largest "
+                                f"relative final-state difference at the default Δt): {rs[0]['reason']}.",
                                 None, b))
 
     return bad, info
@@ -286,10 +304,11 @@ def _not_measured(res, c) -> list:
     # 7. variants without a one-step mode (engine-file engines run whole trajectories only)
     whole_runs_only = [v for v in res.variants if not res.has_one_step(v)]
     if whole_runs_only:
-        info.append(Finding("info", f"{_and(whole_runs_only)} {'has' if len(whole_runs_only) == 1 else 'have'} no "
-                                    "one-step mode (an engine file runs whole trajectories only): local (one-step) "
-                                    "errors are not measured for them; their verdicts come from the free-running "
-                                    "errors alone.", None, None))
+        info.append(Finding("info",
+                            f"{_and(whole_runs_only)} {'has' if len(whole_runs_only) == 1 else 'have'} no "
+                            "one-step mode (an engine file runs whole trajectories only): local (one-step) "
+                            "errors are not measured for them; their verdicts come from the free-running "
+                            "errors alone.", None, None))
 
     # 8. variants not run
     for s in res.summary.get("skipped_variants", []):

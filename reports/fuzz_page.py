@@ -37,12 +37,14 @@ def _load(d: Path) -> dict:
 
 def _context(s: dict) -> dict:
     props = list(s["properties"])
-    rows = [{"name": v, "cases": d["cases"], "seconds": _g(d["seconds"], "{:.1f}"), "rate": _g(d["cases_per_s"], "{:.1f}"),
+    rows = [{"name": v, "cases": d["cases"], "seconds": _g(d["seconds"], "{:.1f}"),
+             "rate": _g(d["cases_per_s"], "{:.1f}"),
              "props": [f"{d['properties'][p][0]} / {d['properties'][p][1]}" for p in props]}
             for v, d in s["per_variant"].items()]
     rows += [{"name": pair, "cases": "", "seconds": "", "rate": "",
               "props": [f"{t[p][0]} / {t[p][1]}" for p in props]} for pair, t in s.get("pairs", {}).items()]
-    numbers = [{"name": _NUMBERS.get(k, k), "min": _g(v["min"]), "median": _g(v["median"]), "max": _g(v["max"])}
+    numbers = [{"name": _NUMBERS.get(k, k), "min": _g(v["min"]),
+                "median": _g(v["median"]), "max": _g(v["max"])}
                for k, v in s["numbers"].items() if k != "kinds"]
     kinds = [{"name": k, "text": ", ".join(f"{n} {c}" for n, c in sorted(v.items(), key=lambda kv: -kv[1]))}
              for k, v in s["numbers"].get("kinds", {}).items()]
@@ -53,12 +55,16 @@ def _context(s: dict) -> dict:
                f"{c['search_s']:.0f} s ({_g(c['cases_per_s'], '{:.2f}')} cases/s): "
                + (f"{n_cx} distinct failure(s) — exit 1." if n_cx else "no property violated — exit 0."))
     p = s["provenance"]
-    prov = [("seed", p["seed"]), ("budget", f"{p['budget_s']} s"), ("jobs", p["jobs"]), ("started", p["started"]),
-            ("batches", f"{c['batches']} of {p['batch']} cases ({c['cached_batches']} from the cache), n0 cycle {p['n0_cycle']}")]
+    prov = [("seed", p["seed"]), ("budget", f"{p['budget_s']} s"),
+            ("jobs", p["jobs"]), ("started", p["started"]),
+            ("batches",
+             f"{c['batches']} of {p['batch']} cases ({c['cached_batches']} "
+             f"from the cache), n0 cycle {p['n0_cycle']}")]
     prov += [(f"engine {e}", info.get("version", "")) for e, info in p["engines"].items()]
-    return {"title": f"rbcheck fuzz — seed {p['seed']}", "nav": [], "provenance": prov, "verdict_text": verdict,
-            "counterexamples": s["counterexamples"], "not_shrunk": s.get("not_shrunk", []), "rows": rows,
-            "properties": props, "numbers": numbers, "kinds": kinds, "batch_errors": s.get("batch_errors", [])}
+    return {"title": f"rbcheck fuzz — seed {p['seed']}", "nav": [], "provenance": prov,
+            "verdict_text": verdict, "counterexamples": s["counterexamples"],
+            "not_shrunk": s.get("not_shrunk", []), "rows": rows, "properties": props, "numbers": numbers,
+            "kinds": kinds, "batch_errors": s.get("batch_errors", [])}
 
 
 def render_fuzz(directory) -> Path:

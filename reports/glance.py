@@ -28,10 +28,10 @@ CELL_CLASSES = ("bad", "diverged", "noconv", "pre", "acc1", "acc2", "acc3", "mis
 #: Relative-error tiers of the green cells (display only, not a verdict; cross_checks/core/tolerances.py).
 ACCURACY_TIERS = tol.REPORT_ACCURACY_TIERS
 #: One mark per quantity verdict, shown in every cell (the legend explains them).
-GLYPHS = {"good": ("✓", "converges with the expected order"), "exact": ("=", "exact to round-off at every Δt"),
-          "noconv": ("~", "does not converge, as expected"), "pre": ("?", "pre-asymptotic: no order claimed"),
-          "diverged": ("†", "diverged"), "bad": ("✗", "contradicts the expectation"),
-          "missing": ("·", "no verdict (too few points)")}
+GLYPHS = {"good": ("✓", "converges with the expected order"),
+          "exact": ("=", "exact to round-off at every Δt"), "noconv": ("~", "does not converge, as expected"),
+          "pre": ("?", "pre-asymptotic: no order claimed"), "diverged": ("†", "diverged"),
+          "bad": ("✗", "contradicts the expectation"), "missing": ("·", "no verdict (too few points)")}
 QUANTITY_MARK = {"position": "x", "velocity": "v", "orientation": "θ", "angular_velocity": "ω"}
 
 
@@ -48,7 +48,8 @@ def families(variants) -> dict:
 
 
 _VERDICT_SHORT = {"converges": "conv.", "does_not_converge": "no conv.", "at_roundoff": "exact",
-                  "pre_asymptotic": "pre-asympt.", "diverged": "diverged", "failed": "failed", "insufficient": "n/a"}
+                  "pre_asymptotic": "pre-asympt.", "diverged": "diverged", "failed": "failed",
+                  "insufficient": "n/a"}
 
 
 def order_text(rec) -> str:
@@ -177,17 +178,19 @@ def verdict_box(res) -> dict:
         lines.append(f"{v} on {sc}: " + "; ".join(f"{LABELS[r['quantity']]} {r['assessment']}" for r in rs))
     for a in res.summary.get("agreement", []):
         if not a["agrees"]:
-            lines.append(f"{a['b']} should reproduce {a['a']} on {a['scenario']} ({a['reason']}) but differs by "
+            lines.append(f"{a['b']} should reproduce {a['a']} on "
+                         f"{a['scenario']} ({a['reason']}) but differs by "
                          + (fmt(a["max_rel"]) if a.get("max_rel") is not None else a.get("note", "?")))
     for s in res.scenarios:
         if _second_ref_bad(s):
             sr = s["second_reference"]
-            lines.append(f"{s['name']}: the second reference ({sr.get('label', '?')}) disagrees with the reference "
-                         "beyond their stated accuracy")
+            lines.append(f"{s['name']}: the second reference ({sr.get('label', '?')}) "
+                         "disagrees with the reference beyond their stated accuracy")
     groups.append({"title": "Contradicts the expectations", "cls": "bad", "lines": lines})
 
     failed = [r for r in res.rows if r["status"] == "failed"]
-    lines = [f"{v}: {len(rs)} run(s) on {_scen_list(r['scenario'] for r in rs)} — {_first_sentence(rs[0]['message'])}"
+    lines = [f"{v}: {len(rs)} run(s) on {_scen_list(r['scenario'] for r in rs)} "
+             f"— {_first_sentence(rs[0]['message'])}"
              for v, rs in _group(failed, lambda r: r["engine"]).items()]
     lines += [f"{s['name']}: the second reference ({s['second_reference'].get('label', '?')}) failed: "
               f"{_first_sentence(str(s['second_reference']['error']))}" for s in res.scenarios
@@ -221,14 +224,17 @@ def verdict_box(res) -> dict:
         return _first_sentence(text.removeprefix("pre-asymptotic on this ladder: "), 140)
     for (v, reason), rs in _group(pre, lambda r: (r["engine"], why(r))).items():
         per = _group(rs, lambda r: r["scenario"])
-        lines.append(f"{v} on " + _scen_list([f"{sc} ({', '.join(LABELS[r['quantity']] for r in x)})"
-                                              for sc, x in sorted(per.items(), key=lambda kv: order.get(kv[0], 99))], 5)
+        lines.append(f"{v} on "
+                     + _scen_list([f"{sc} ({', '.join(LABELS[r['quantity']] for r in x)})"
+                                   for sc, x in sorted(per.items(), key=lambda kv: order.get(kv[0], 99))], 5)
                      + f" — {reason}")
-    groups.append({"title": "Pre-asymptotic on this ladder: no order claimed (why)", "cls": "pre", "lines": lines})
+    groups.append({"title": "Pre-asymptotic on this ladder: no order claimed (why)",
+                   "cls": "pre", "lines": lines})
 
-    headline = [(len(groups[0]["lines"]), "contradiction(s)", "bad"), (len(groups[1]["lines"]), "failure(s)", "bad"),
-                (len(div), "diverged run(s)", "diverged"),
-                (len({(r['engine'], r['scenario']) for r in noconv}), "expected non-convergence(s)", "noconv"),
+    headline = [(len(groups[0]["lines"]), "contradiction(s)", "bad"),
+                (len(groups[1]["lines"]), "failure(s)", "bad"), (len(div), "diverged run(s)", "diverged"),
+                (len({(r['engine'], r['scenario']) for r in noconv}),
+                 "expected non-convergence(s)", "noconv"),
                 (len({(r['engine'], r['scenario']) for r in pre}), "pre-asymptotic", "pre")]
     return {"headline": headline, "groups": [g for g in groups if g["lines"]],
             "all_clear": not groups[0]["lines"] and not groups[1]["lines"]}

@@ -18,23 +18,26 @@ from reports.install import incomplete
 
 __all__ = ["environment", "render_pages", "page_name", "rows_extracts"]
 
-_FAMILIES = ("One column per engine family, each variant in its own colour; a row shares its y axis. A run that "
-             "diverged is drawn up to its divergence (×) and the axes follow the runs that did not.")
+_FAMILIES = ("One column per engine family, each variant in its own colour; a row shares its y axis. A run "
+             "that diverged is drawn up to its divergence (×) and the axes follow the runs that did not.")
 _FIG_CAPTIONS = {
-    "trajectories": "The moving position and orientation components against time at the scenario's default Δt; the "
-                    "thick grey line is the reference. " + _FAMILIES,
+    "trajectories": "The moving position and orientation components against time at the scenario's "
+                    "default Δt; the thick grey line is the reference. " + _FAMILIES,
     "errors": "Error against the reference over time at the default Δt (log–log: a power of t is a straight "
               "line). " + _FAMILIES,
-    "conservation": "Relative drift of the quantities the physics conserves, at the default Δt (log–log). " + _FAMILIES,
-    "convergence": "Final error against Δt (log–log) over the scenario's Δt ladder, one column per engine family. "
-                   "Filled markers are the points of the least-squares order fit; the grey band is the round-off "
-                   "floor; the triangles show slopes 1, 2 and 4. The legends list the fitted orders.",
+    "conservation": "Relative drift of the quantities the physics conserves, at the default Δt "
+                    "(log–log). " + _FAMILIES,
+    "convergence": "Final error against Δt (log–log) over the scenario's Δt ladder, one "
+                   "column per engine family. Filled markers are the points of the "
+                   "least-squares order fit; the grey band is the round-off floor; the "
+                   "triangles show slopes 1, 2 and 4. The legends list the fitted orders.",
     "local": "One-step (local) error against Δt: every step restarted from the reference state; an "
              "order-p scheme shows slope p + 1.",
-    "work": "Work-precision: final error against the wall time of each run of the ladder, every variant on one "
-            "axis (colour: engine family).",
+    "work": "Work-precision: final error against the wall time of each run of "
+            "the ladder, every variant on one axis (colour: engine family).",
 }
-_NO_ONE_STEP = "no one-step mode: an engine file runs whole trajectories only, so local errors are not measured"
+_NO_ONE_STEP = ("no one-step mode: an engine file runs whole trajectories only, "
+                "so local errors are not measured")
 _FIG_TITLES = {"trajectories": "Trajectories", "errors": "Error vs time", "conservation": "Conservation",
                "convergence": "Convergence (free-running)", "local": "Local error (one-step mode)",
                "work": "Work-precision"}
@@ -52,8 +55,10 @@ class _Loader(PackageLoader):
 
 def environment() -> Environment:
     return Environment(loader=_Loader("reports", "templates"),
-                       autoescape=select_autoescape(["html", "htm", "xml"], default_for_string=True, default=True),
-                       undefined=StrictUndefined, trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True)
+                       autoescape=select_autoescape(["html", "htm", "xml"],
+                                                    default_for_string=True, default=True),
+                       undefined=StrictUndefined, trim_blocks=True, lstrip_blocks=True,
+                       keep_trailing_newline=True)
 
 
 def page_name(scenario: str) -> str:
@@ -70,8 +75,8 @@ def _img_src(res, fname, self_contained):
 
 
 #: Background of an order cell by its verdict (reports.glance.glyph): the matrix's colours.
-_GLYPH_BG = {"good": "acc1", "exact": "acc1", "noconv": "noconv", "pre": "pre", "diverged": "diverged", "bad": "bad",
-             "missing": "missing"}
+_GLYPH_BG = {"good": "acc1", "exact": "acc1", "noconv": "noconv", "pre": "pre", "diverged": "diverged",
+             "bad": "bad", "missing": "missing"}
 
 
 def _order_cell(rec, local=False):
@@ -88,8 +93,9 @@ def _provenance(res):
     p = res.summary.get("provenance", {})
     run = res.summary.get("run", {})
     keys = [("rbcheck", "rbcheck"), ("numpy", "numpy"), ("scipy", "scipy"), ("mujoco", "MuJoCo"),
-            ("pybullet", "PyBullet"), ("drake", "Drake"), ("python", "Python"), ("platform", "platform"), ("machine", "machine"),
-            ("git_commit", "commit"), ("started_at", "started (UTC)"), ("command", "command")]
+            ("pybullet", "PyBullet"), ("drake", "Drake"), ("python", "Python"), ("platform", "platform"),
+            ("machine", "machine"), ("git_commit", "commit"), ("started_at", "started (UTC)"),
+            ("command", "command")]
     out = [(label, str(p.get(k, "")) or "–") for k, label in keys]
     for name, e in (p.get("engines") or {}).items():  # engines from outside rbcheck: where from, which file
         if e.get("source", "").endswith("(rbcheck)"):
@@ -97,11 +103,12 @@ def _provenance(res):
         sha = f", SHA-256 {e['engine_file_sha256'][:16]}…" if e.get("engine_file_sha256") else ""
         out.append((f"engine {name}", f"{e.get('version') or '–'} — {e.get('source', '')}{sha}"))
     if run:
-        out.append(("runs", f"{run.get('runs')} ({run.get('cached_runs')} from cache, {run.get('diverged_runs')} "
-                            f"diverged, {run.get('failed_runs')} failed) on {run.get('jobs')} worker(s)"))
-        out.append(("sweep wall time", f"{run.get('wall_s')} s for the runs and metrics, report excluded (the "
-                                       f"runs' own wall times add up to {run.get('cpu_s_in_runs')} s, cached runs "
-                                       "excluded)"))
+        out.append(("runs",
+                    f"{run.get('runs')} ({run.get('cached_runs')} from cache, {run.get('diverged_runs')} "
+                    f"diverged, {run.get('failed_runs')} failed) on {run.get('jobs')} worker(s)"))
+        out.append(("sweep wall time",
+                    f"{run.get('wall_s')} s for the runs and metrics, report excluded (the runs' "
+                    f"own wall times add up to {run.get('cpu_s_in_runs')} s, cached runs excluded)"))
     return out
 
 
@@ -111,8 +118,9 @@ def _matrix(res):
     header = []
     for i, s in enumerate(res.scenarios, start=1):
         sr = s.get("second_reference")
-        second = "" if not isinstance(sr, dict) else ("2nd ref. failed" if sr.get("error") else "2nd ref. agrees"
-                                                      if sr.get("agrees") else "2nd ref. DISAGREES")
+        second = "" if not isinstance(sr, dict) else ("2nd ref. failed" if sr.get("error")
+                                                      else "2nd ref. agrees" if sr.get("agrees")
+                                                      else "2nd ref. DISAGREES")
         header.append({"name": s["name"], "href": page_name(s["name"]), "col": i, "second": second,
                        "second_cls": "" if not second else ("acc1" if second.endswith("agrees") else "bad"),
                        "title": f"{s['name']}: Δt = {fmt_dt(s['dt_s'])} s over {fmt_dt(s['duration_s'])} s, "
@@ -161,11 +169,14 @@ def _scenario_table(res, sc):
             continue
         recs = {r["quantity"]: r for r in res.records(sc, v)}
         lrecs = {r["quantity"]: r for r in res.records(sc, v, mode="one_step")}
-        status = d["status"] + (f" at t = {fmt(d['diverged_at_s'], 's', 3)}" if d["status"] == "diverged" else "")
+        status = d["status"] + (f" at t = {fmt(d['diverged_at_s'], 's', 3)}"
+                                if d["status"] == "diverged" else "")
         table.append({
-            "variant": v, "status": status, "status_cls": {"ok": "", "diverged": "diverged"}.get(d["status"], "bad"),
+            "variant": v, "status": status,
+            "status_cls": {"ok": "", "diverged": "diverged"}.get(d["status"], "bad"),
             "steps": str(d["steps"]), "wall": fmt(d["wall_s"], "s"),
-            "errors": [{"text": fmt(d[f"{COLUMN_STEM[q]}_err_final"]), "sort": _num(d[f"{COLUMN_STEM[q]}_err_final"])}
+            "errors": [{"text": fmt(d[f"{COLUMN_STEM[q]}_err_final"]),
+                        "sort": _num(d[f"{COLUMN_STEM[q]}_err_final"])}
                        for q in QUANTITIES],
             "energy": fmt(d["energy_drift_max"]),
             "energy_kind": d["energy_drift_kind"] if not math.isnan(d["energy_drift_max"]) else "",
@@ -185,15 +196,19 @@ def _num(v) -> str:
 
 def _ladder_rows(res, sc):
     out = []
-    for r in sorted(res.rows_for(sc), key=lambda r: (res.variants.index(r["engine"]) if r["engine"] in res.variants
+    for r in sorted(res.rows_for(sc),
+                    key=lambda r: (res.variants.index(r["engine"]) if r["engine"] in res.variants
                                                       else 99, -r["dt"])):
-        out.append({"variant": r["engine"], "dt": fmt_dt(r["dt"]), "dt_sort": _num(r["dt"]), "status": r["status"],
+        out.append({"variant": r["engine"], "dt": fmt_dt(r["dt"]), "dt_sort": _num(r["dt"]),
+                    "status": r["status"],
                     "status_cls": {"ok": "", "diverged": "diverged"}.get(r["status"], "bad"),
-                    "flags": ", ".join(x for x, on in (("default Δt", r["default_dt"]), ("ladder", r["in_ladder"]),
+                    "flags": ", ".join(x for x, on in (("default Δt", r["default_dt"]),
+                                                       ("ladder", r["in_ladder"]),
                                                        ("cached", r["cached"])) if on),
                     "errors": [{"text": fmt(r[f"{COLUMN_STEM[q]}_err_final"]),
                                 "sort": _num(r[f"{COLUMN_STEM[q]}_err_final"])} for q in QUANTITIES],
-                    "local": [{"text": fmt(r[f"{COLUMN_STEM[q]}_local_err"]), "sort": _num(r[f"{COLUMN_STEM[q]}_local_err"])}
+                    "local": [{"text": fmt(r[f"{COLUMN_STEM[q]}_local_err"]),
+                               "sort": _num(r[f"{COLUMN_STEM[q]}_local_err"])}
                               for q in QUANTITIES],
                     "wall": fmt(r["wall_s"], "s"), "wall_sort": _num(r["wall_s"]), "message": r["message"]})
     return out
@@ -205,12 +220,14 @@ def _files(res, s):
     stem = safe_file_stem(s["name"])
     out = []
     for rel, label, what in ((f"scenarios/{stem}.toml", "scenario file (TOML)", "the file that ran"),
-                             (f"rows/{stem}.csv", "results rows (CSV)", "this scenario's rows of results.csv"),
+                             (f"rows/{stem}.csv", "results rows (CSV)",
+                              "this scenario's rows of results.csv"),
                              (f"series/{stem}.npz", "series data (NPZ)", "the time series behind the plots")):
-        exists = (res.directory / rel).is_file() or rel.startswith("rows/")   # rows/ is written with the pages
+        exists = (res.directory / rel).is_file() or rel.startswith("rows/")  # rows/ is written with the pages
         out.append({"href": rel if exists else "", "label": label, "what": what if exists else
-                    "not in this results directory" + (" (the file could not be read back unchanged when the sweep "
-                                                       "finished)" if rel.startswith("scenarios/") else "")})
+                    "not in this results directory"
+                    + (" (the file could not be read back unchanged when the sweep finished)"
+                       if rel.startswith("scenarios/") else "")})
     return out
 
 
@@ -224,7 +241,8 @@ def _second_reference_text(rec) -> str:
                      f"{fmt(rec['stated_accuracy'][q], UNITS[q])})" for q in QUANTITIES
                      if q in (rec.get("distance") or {}) and q in (rec.get("stated_accuracy") or {}))
     verdict = "agrees with the reference" if rec["agrees"] else "DISAGREES with the reference"
-    return f"{rec['label']}: {verdict} within their measured accuracies — largest distance over the run: {dist}"
+    return (f"{rec['label']}: {verdict} within their measured accuracies — "
+            f"largest distance over the run: {dist}")
 
 
 def _second_reference(s):
@@ -237,7 +255,8 @@ def _second_reference(s):
     for q in list(dict.fromkeys([*dist, *stated])):
         dv, sv = dist.get(q), stated.get(q)
         within = None if dv is None or sv is None else dv <= sv
-        rows.append({"q": LABELS.get(q, q), "distance": fmt(dv, UNITS.get(q, "")), "stated": fmt(sv, UNITS.get(q, "")),
+        rows.append({"q": LABELS.get(q, q), "distance": fmt(dv, UNITS.get(q, "")),
+                     "stated": fmt(sv, UNITS.get(q, "")),
                      "cls": "missing" if within is None else ("acc1" if within else "bad"),
                      "within": "–" if within is None else ("yes" if within else "NO")})
     return {"label": str(sr.get("label", "?")), "target": fmt(sr.get("target_accuracy")),
@@ -269,7 +288,8 @@ def _scenario_view(res, s, figs, all_findings, self_contained):
         "quantity_names": [LABELS[q] for q in QUANTITIES],
         "table": _scenario_table(res, sc), "ladder_rows": _ladder_rows(res, sc),
         "figures": [{"src": _img_src(res, fname, self_contained), "title": _FIG_TITLES[kind],
-                     "caption": captions[kind] + (f" {note}" if note else ""), "alt": f"{sc}: {_FIG_TITLES[kind]}"}
+                     "caption": captions[kind] + (f" {note}" if note else ""),
+                     "alt": f"{sc}: {_FIG_TITLES[kind]}"}
                     for kind, fname, note in figs if fname],
         "not_drawn": [f"{_FIG_TITLES[kind]}: {note}" for kind, fname, note in figs if not fname and note],
     }
@@ -295,7 +315,8 @@ def rows_extracts(res) -> dict:
 
 
 def render_pages(res, figures: dict, self_contained: bool = False) -> dict:
-    """``{filename: html}`` of every page. ``figures``: ``{scenario: [(kind, png filename or None, note)]}``."""
+    """``{filename: html}`` of every page. ``figures``:
+    ``{scenario: [(kind, png filename or None, note)]}``."""
     env = environment()
     all_f = findings(res)
     nav = [{"name": s["name"], "href": page_name(s["name"])} for s in res.scenarios]
@@ -303,8 +324,8 @@ def render_pages(res, figures: dict, self_contained: bool = False) -> dict:
     pages = {}
     sections = _finding_sections([f for f in all_f if f.severity != "info"])
     pages["index.html"] = env.get_template("index.html").render(
-        title="rbcheck results", matrix=_matrix(res), legend=_legend(), box=verdict_box(res), sections=sections,
-        observations=_finding_views([f for f in all_f if f.severity == "info"]),
+        title="rbcheck results", matrix=_matrix(res), legend=_legend(), box=verdict_box(res),
+        sections=sections, observations=_finding_views([f for f in all_f if f.severity == "info"]),
         skipped=res.summary.get("skipped_variants", []), second=_second_summary(res), **common)
     for s in res.scenarios:
         view = _scenario_view(res, s, figures.get(s["name"], []), all_f, self_contained)
@@ -319,5 +340,5 @@ def _second_summary(res) -> str:
         return ""
     ok = sum(bool(sr.get("agrees")) for sr in srs)
     labels = sorted({str(sr.get("label", "?")) for sr in srs})
-    return (f"Second reference ({', '.join(labels)}): agrees with the reference within their stated accuracy on "
-            f"{ok} of {len(srs)} scenario(s).")
+    return (f"Second reference ({', '.join(labels)}): agrees with the reference "
+            f"within their stated accuracy on {ok} of {len(srs)} scenario(s).")

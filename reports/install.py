@@ -22,9 +22,9 @@ class IncompleteInstallation(RuntimeError):
 def incomplete(template: str) -> IncompleteInstallation:
     """The error for ``template`` (a file name under reports/templates/), naming its installed path."""
     return IncompleteInstallation(
-        f"{files('reports') / 'templates' / template}: missing from this installation of rbcheck: the installation "
-        "is incomplete (a package data file was left out); reinstall rbcheck (pip install --force-reinstall, or "
-        "pip install -e . in a clone)")
+        f"{files('reports') / 'templates' / template}: missing from this installation of "
+        "rbcheck: the installation is incomplete (a package data file was left out); "
+        "reinstall rbcheck (pip install --force-reinstall, or pip install -e . in a clone)")
 
 
 def check_templates() -> None:

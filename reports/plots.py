@@ -67,7 +67,8 @@ def variant_styles(variants) -> dict:
     out = {}
     for vs in families(variants).values():
         for i, v in enumerate(vs):
-            out[v] = {"color": cmap(i % 10), "ls": "-" if i < 10 else "--", "marker": _MARKERS[i % len(_MARKERS)]}
+            out[v] = {"color": cmap(i % 10), "ls": "-" if i < 10 else "--",
+                      "marker": _MARKERS[i % len(_MARKERS)]}
     return out
 
 
@@ -175,8 +176,8 @@ def _grid(nrows, ncols, title, panel_h=2.1, log=False, layout="time", legend_row
     w, h = min(13.0, 2.2 + 3.6 * ncols), 1.1 + panel_h * nrows + strip
     fig, axes = _panels(layout, nrows, ncols, (w, h), log)
     fig.suptitle(title, fontsize=11, x=0.01, ha="left")
-    fig.subplots_adjust(left=0.09 if w > 8 else 0.14, right=0.98, top=1.0 - 0.75 / h, bottom=(0.5 + strip) / h,
-                        hspace=0.35, wspace=0.08)
+    fig.subplots_adjust(left=0.09 if w > 8 else 0.14, right=0.98, top=1.0 - 0.75 / h,
+                        bottom=(0.5 + strip) / h, hspace=0.35, wspace=0.08)
     return fig, axes
 
 
@@ -185,8 +186,10 @@ def _finish(fig, path) -> None:
     matplotlib's draws a line per tick: a fifth of a figure's drawing time), then the PNG."""
     for ax in fig.axes:
         if ax.get_visible():
-            for locs, along, trans in ((ax.get_xticks(), lambda x: [(x, 0), (x, 1)], ax.get_xaxis_transform()),
-                                       (ax.get_yticks(), lambda y: [(0, y), (1, y)], ax.get_yaxis_transform())):
+            for locs, along, trans in ((ax.get_xticks(), lambda x: [(x, 0), (x, 1)],
+                                        ax.get_xaxis_transform()),
+                                       (ax.get_yticks(), lambda y: [(0, y), (1, y)],
+                                        ax.get_yaxis_transform())):
                 ax.add_collection(LineCollection([along(v) for v in locs], colors="#b0b0b0", linewidths=0.8,
                                                  alpha=0.3, zorder=0.5, transform=trans), autolim=False)
     save_png(fig, path)
@@ -216,9 +219,10 @@ def _family_legends(axes_bottom, fams, styles, extra=None, markers=False):
     """One legend per family column, under its bottom panel (inside a panel it covered curves): the
     family's variants (and their text)."""
     for ax, (fam, vs) in zip(axes_bottom, fams.items()):
-        _legend(ax, 0.0, -_LEGEND_DROP_IN, fam, [(_short(v) + (f"  {extra[v]}" if extra and extra.get(v) else ""),
-                                                   {**styles[v], "marker": styles[v]["marker"] if markers else None})
-                                                  for v in vs])
+        _legend(ax, 0.0, -_LEGEND_DROP_IN, fam,
+                [(_short(v) + (f"  {extra[v]}" if extra and extra.get(v) else ""),
+                  {**styles[v], "marker": styles[v]["marker"] if markers else None})
+                 for v in vs])
 
 
 def _legend(ax, x0, top, title, entries, width_in=3.2) -> None:
@@ -228,7 +232,8 @@ def _legend(ax, x0, top, title, entries, width_in=3.2) -> None:
     figures (every time figure of a report has its families' legends): it is drawn once per process
     and its pixels placed as a figure image (FigureImage) in the others."""
     fig = ax.figure
-    key = (fig.dpi, width_in, title, tuple((label, st["color"], st["ls"], st.get("marker")) for label, st in entries))
+    key = (fig.dpi, width_in, title,
+           tuple((label, st["color"], st["ls"], st.get("marker")) for label, st in entries))
     if key not in _LEGENDS:
         _LEGENDS[key] = _legend_pixels(fig.dpi, width_in, title, entries)
     x, y = (fig.dpi_scale_trans + ScaledTranslation(0.0, 0.0, ax.transAxes)).transform((x0, top))
@@ -247,7 +252,8 @@ def _legend_pixels(dpi, width_in, title, entries) -> np.ndarray:
     fig.text(0.0, height, title, transform=at, fontsize=8, va="top")
     ys = height - 0.2 - _LEGEND_LINE_IN * np.arange(len(entries))
     xs = (0.05, 0.225)
-    fig.add_artist(LineCollection([[(xs[0], y), (xs[1], y)] for y in ys], colors=[st["color"] for _, st in entries],
+    fig.add_artist(LineCollection([[(xs[0], y), (xs[1], y)] for y in ys],
+                                  colors=[st["color"] for _, st in entries],
                                   linestyles=[st["ls"] for _, st in entries], linewidths=1.4, transform=at))
     for y, (label, st) in zip(ys, entries):
         if st.get("marker"):
@@ -324,7 +330,8 @@ def _time_panels(axes, res, sc, fams, styles, rows, log):
                 else:
                     keep.append(y[ok])
             if curves:
-                ax.add_collection(LineCollection([xy for xy, _ in curves], colors=[st["color"] for _, st in curves],
+                ax.add_collection(LineCollection([xy for xy, _ in curves],
+                                                 colors=[st["color"] for _, st in curves],
                                                  linestyles=[st["ls"] for _, st in curves], linewidths=1.1))
             if i == 0:
                 _title(ax, fam)
@@ -346,11 +353,13 @@ def _families_with_series(res, ser) -> dict:
 def _moving_components(ser):
     """[(label, field, index)] of the components that move along the reference (or, without one,
     along any series); the rest is named in the returned note."""
-    comps = [(f"{c} (m)", "x_W", i) for i, c in enumerate("xyz")] + [(f"q{c}", "q_WB", i) for i, c in enumerate("wxyz")]
+    comps = ([(f"{c} (m)", "x_W", i) for i, c in enumerate("xyz")]
+             + [(f"q{c}", "q_WB", i) for i, c in enumerate("wxyz")])
     src = [ser["reference"]] if "reference" in ser else list(ser.values())
     moving, still = [], []
     for label, fld, i in comps:
-        vals = np.concatenate([np.asarray(s[fld][:, i], dtype=float) for s in src if fld in s]) if src else np.zeros(1)
+        vals = (np.concatenate([np.asarray(s[fld][:, i], dtype=float) for s in src if fld in s])
+                if src else np.zeros(1))
         vals = vals[np.isfinite(vals)]
         span = float(vals.max() - vals.min()) if vals.size else 0.0
         if span > 1e-9 * max(1.0, float(np.abs(vals).max()) if vals.size else 1.0):
@@ -369,11 +378,14 @@ def fig_trajectories(res, sc, styles, path):
         NOTES[(sc, "trajectories")] = "nothing moves" if not moving else "no series"
         return False
     rows = [(label, (lambda s, fld=fld, i=i: s[fld][:, i] if fld in s else None)) for label, fld, i in moving]
-    fig, axes = _grid(len(rows), len(fams), f"{sc}: trajectories at Δt = {info['dt_s']:g} s (thick grey: "
-                                            f"reference, {info['reference']})", panel_h=1.5, legend_rows=_legend_rows(fams))
+    fig, axes = _grid(len(rows), len(fams),
+                      f"{sc}: trajectories at Δt = {info['dt_s']:g} s (thick grey: "
+                      f"reference, {info['reference']})", panel_h=1.5,
+                      legend_rows=_legend_rows(fams))
     _time_panels(axes, res, sc, fams, styles, rows, log=False)
     _family_legends(axes[-1], fams, styles)
-    NOTES[(sc, "trajectories")] = ("Not drawn, constant along the reference: " + ", ".join(still) + ".") if still else ""
+    NOTES[(sc, "trajectories")] = ("Not drawn, constant along the reference: "
+                                   + ", ".join(still) + ".") if still else ""
     _finish(fig, path)
     return True
 
@@ -388,18 +400,21 @@ def fig_errors(res, sc, styles, path):
     exact = [q for q in nonzero if _series_at_roundoff(res, sc, q, [v for vs in fams.values() for v in vs])]
     shown = [q for q in nonzero if q not in exact]
     exact_note = (" Not drawn, every variant's error at or below its run's round-off floor all along (exact "
-                  "to within what can be measured): " + ", ".join(LABELS[q] for q in exact) + ".") if exact else ""
+                  "to within what can be measured): " + ", ".join(LABELS[q] for q in exact)
+                  + ".") if exact else ""
     if not fams or not shown:
         NOTES[(sc, "errors")] = ("every error is zero" if not exact else exact_note.strip())
         return False
     rows = [(f"{LABELS[q]} error ({UNITS[q]})", (lambda s, q=q: s.get(f"err_{q}"))) for q in shown]
-    fig, axes = _grid(len(rows), len(fams), f"{sc}: error against the reference vs time at Δt = {info['dt_s']:g} s "
-                                            f"(log scales; zero drawn at {LOG_FLOOR:g}; × marks a divergence)", log=True,
+    fig, axes = _grid(len(rows), len(fams),
+                      f"{sc}: error against the reference vs time at Δt = {info['dt_s']:g} s "
+                      f"(log scales; zero drawn at {LOG_FLOOR:g}; × marks a divergence)", log=True,
                       layout="time-log", legend_rows=_legend_rows(fams))
     _time_panels(axes, res, sc, fams, styles, rows, log=True)
     _family_legends(axes[-1], fams, styles)
     left = [LABELS[q] for q in QUANTITIES if q not in nonzero]
-    NOTES[(sc, "errors")] = (("Not drawn: " + ", ".join(left) + " (does not move, or zero error for every variant)."
+    NOTES[(sc, "errors")] = (("Not drawn: " + ", ".join(left)
+                              + " (does not move, or zero error for every variant)."
                               if left else "") + exact_note).strip()
     _finish(fig, path)
     return True
@@ -443,19 +458,22 @@ def fig_conservation(res, sc, styles, path):
     info = res.scenario(sc)
     ser = res.series(sc)
     fams = _families_with_series(res, ser)
-    kinds = [k for k in ("energy", "angular_momentum", "linear_momentum") if info["conserved"][k]["conserved"]]
+    kinds = [k for k in ("energy", "angular_momentum", "linear_momentum")
+             if info["conserved"][k]["conserved"]]
     moving = [k for k in kinds if any(np.any(np.abs(np.asarray(ser[v].get(f"drift_{k}", [0.0]))) > 0)
                                       for vs in fams.values() for v in vs)]
     exact = [k.replace("_", " ") for k in kinds if k not in moving]
-    NOTES[(sc, "conservation")] = ("Not drawn: " + ", ".join(exact) + " (conserved exactly by every variant).") if exact else ""
+    NOTES[(sc, "conservation")] = ("Not drawn: " + ", ".join(exact)
+                                   + " (conserved exactly by every variant).") if exact else ""
     if not fams or not moving:
         if not kinds:
             NOTES[(sc, "conservation")] = "the physics of this scenario conserves nothing"
         return False
     rows = [(_DRIFT_LABEL[k], (lambda s, k=k: None if f"drift_{k}" not in s else np.abs(s[f"drift_{k}"])))
             for k in moving]
-    fig, axes = _grid(len(rows), len(fams), f"{sc}: relative drift of conserved quantities at Δt = {info['dt_s']:g} s "
-                                            f"(log scales; zero drawn at {LOG_FLOOR:g}; × marks a divergence)", log=True,
+    fig, axes = _grid(len(rows), len(fams),
+                      f"{sc}: relative drift of conserved quantities at Δt = {info['dt_s']:g} s "
+                      f"(log scales; zero drawn at {LOG_FLOOR:g}; × marks a divergence)", log=True,
                       layout="time-log", legend_rows=_legend_rows(fams))
     _time_panels(axes, res, sc, fams, styles, rows, log=True)
     _family_legends(axes[-1], fams, styles)
@@ -492,7 +510,8 @@ def _ladder_cell(ax, res, sc, q, vs, styles, mode):
         rows = sorted([r for r in res.rows_for(sc, v) if r["in_ladder"]], key=lambda r: -r["dt"])
         dt = np.array([r["dt"] for r in rows])
         e = np.array([r[col] for r in rows], dtype=float)
-        ok = np.isfinite(e) & np.array([r["status"] == "ok" for r in rows], dtype=bool) if rows else np.zeros(0, bool)
+        ok = (np.isfinite(e) & np.array([r["status"] == "ok" for r in rows], dtype=bool)
+              if rows else np.zeros(0, bool))
         if not ok.any():
             continue
         st = styles[v]
@@ -524,15 +543,17 @@ def fig_ladder(res, sc, styles, path, mode):
     moving = [q for q in QUANTITIES if info.get("varies", {}).get(q, True)]
     exact = [q for q in moving if _ladder_at_roundoff(res, sc, q, vs_all, mode)]
     qs = [q for q in moving if q not in exact]
-    exact_note = (" Not drawn, every variant's error at or below its round-off floor at every Δt (exact to within "
-                  "what can be measured; order \"exact\"): " + ", ".join(LABELS[q] for q in exact) + ".") if exact else ""
+    exact_note = (" Not drawn, every variant's error at or below its round-off floor at every Δt (exact to "
+                  "within what can be measured; order \"exact\"): " + ", ".join(LABELS[q] for q in exact)
+                  + ".") if exact else ""
     if not qs:
         NOTES[(sc, kind)] = exact_note.strip()
         return False
     what = "final error" if mode == "free_running" else "one-step (local) error"
-    fig, axes = _grid(len(qs), len(fams), f"{sc}: {what} vs Δt (filled: points of the fitted order; grey band: "
-                                          "round-off floor; triangles: slopes 1, 2, 4)", log=True, layout="ladder",
-                      legend_rows=_legend_rows(fams))
+    fig, axes = _grid(len(qs), len(fams),
+                      f"{sc}: {what} vs Δt (filled: points of the fitted order; grey band: "
+                      "round-off floor; triangles: slopes 1, 2, 4)", log=True,
+                      layout="ladder", legend_rows=_legend_rows(fams))
     for i, q in enumerate(qs):
         vals = []
         for j, vs in enumerate(fams.values()):
@@ -552,7 +573,8 @@ def fig_ladder(res, sc, styles, path, mode):
     for ax in axes[-1]:
         ax.tick_params(axis="x", labelsize=7)
         ax.set_xlabel("time step Δt (s)", fontsize=8)
-    orders = {v: "p " + " / ".join(order_text(next((r for r in res.records(sc, v, q, mode=mode)), None)) for q in qs)
+    orders = {v: "p " + " / ".join(order_text(next((r for r in res.records(sc, v, q, mode=mode)), None))
+                                   for q in qs)
               for v in vs_all}
     _family_legends(axes[-1], fams, styles, orders, markers=True)
     for ax, fam in zip(axes[0], fams):
@@ -599,8 +621,9 @@ def fig_work(res, sc, styles, path):
     fig.subplots_adjust(left=0.7 / width, right=1.0 - 2.3 / width, top=0.88, bottom=0.13, wspace=0.25)
     if handles:   # at the right, centred on the height
         pos = axes[0, -1].get_position()
-        _legend(axes[0, -1], pos.width * width + 0.15, (pos.height * 4.6 + 0.3 + _LEGEND_LINE_IN * len(handles)) / 2,
-                "colour: engine family", list(handles.items()), width_in=2.1)
+        _legend(axes[0, -1], pos.width * width + 0.15,
+                (pos.height * 4.6 + 0.3 + _LEGEND_LINE_IN * len(handles)) / 2, "colour: engine family",
+                list(handles.items()), width_in=2.1)
     _finish(fig, path)
     NOTES[(sc, "work")] = ""
     return True
@@ -624,7 +647,8 @@ def figure_tasks(res, sc) -> list:
 #: Relative drawing cost of one panel of each kind (CPU time per panel, measured on the default sweep's
 #: report: a ladder panel carries a line and markers per variant, triangles and Δt labels; a work panel
 #: holds every variant).
-_PANEL_COST = {"convergence": 1.9, "local": 1.9, "trajectories": 1.0, "errors": 1.0, "conservation": 1.0, "work": 1.8}
+_PANEL_COST = {"convergence": 1.9, "local": 1.9, "trajectories": 1.0,
+               "errors": 1.0, "conservation": 1.0, "work": 1.8}
 
 
 def relative_cost(res, sc, kind) -> float:

@@ -21,7 +21,8 @@ def isolated_cache(tmp_path, monkeypatch):
 
 #: The scenario of ``tiny_results``: a short tumble under gravity (translation and rotation both move).
 TINY_RESULTS_SCENARIO = scenario_toml("tiny", 0.2, 0.01, (0.02, 0.01), forces=GRAVITY,
-                                      initial="velocity = [0.0, 0.0, 1.0]\nangular_velocity = [0.3, 1.0, 0.2]")
+                                      initial="velocity = [0.0, 0.0, 1.0]\n"
+                                              "angular_velocity = [0.3, 1.0, 0.2]")
 
 
 def _tiny_sweep(folder):

@@ -35,11 +35,12 @@ class Mutant:
     bug: str
     exposed_by: tuple
     apply: Callable  # apply(monkeypatch)
+    adapter: object = None   # a reference mutant's MutantAdapter (its knob and step; tests/helpers/float32.py)
 
     @property
     def swept(self) -> str:
-        return f"mutant_{self.name}:{self.variant.split(':', 1)[1]}" if self.variant.startswith("reference:") \
-            else self.variant
+        return (f"mutant_{self.name}:{self.variant.split(':', 1)[1]}" if self.variant.startswith("reference:")
+                else self.variant)
 
 
 # --- the reference schemes: engine adapters stepping the definition with one bug -------------------------
@@ -94,7 +95,8 @@ def _leapfrog_explicit_half_kick(p, y, dt):
     h = _h(dt)
     d = rhs(p, y)
     z = y.copy()
-    z[..., 3:6], z[..., 10:13] = y[..., 3:6] + 0.5 * h * d[..., 3:6], y[..., 10:13] + 0.5 * h * d[..., 10:13]  # BUG
+    # BUG
+    z[..., 3:6], z[..., 10:13] = y[..., 3:6] + 0.5 * h * d[..., 3:6], y[..., 10:13] + 0.5 * h * d[..., 10:13]
     z[..., 0:3] = y[..., 0:3] + h * z[..., 3:6]
     q = exp_map_times(h, z[..., 10:13], y[..., 6:10])
     z[..., 6:10] = q / np.linalg.norm(q, axis=-1, keepdims=True)
@@ -105,7 +107,8 @@ def _leapfrog_explicit_half_kick(p, y, dt):
 
 @dataclass(frozen=True, eq=False)
 class _LeversUnrotated(Members):
-    """BUG: body points (spring attachments, force points) and body vectors used in body axes as world ones."""
+    """BUG: body points (spring attachments, force points) and body vectors used
+    in body axes as world ones."""
 
     def force_torque(self, x_W, v_W, R_WB):
         return super().force_torque(x_W, v_W, np.broadcast_to(np.eye(3), np.shape(R_WB)))
@@ -128,11 +131,13 @@ def _course_decay_twice(m):
 
 
 def _whole_state_decay_left_out(m):
-    return dataclasses.replace(m, decay_rates=0.0 * m.decay_rates)   # BUG: no −k v, −k ω in the right-hand side
+    # BUG: no −k v, −k ω in the right-hand side
+    return dataclasses.replace(m, decay_rates=0.0 * m.decay_rates)
 
 
 def _body_torque_applied_in_world_axes(m):
-    return dataclasses.replace(m, torque_W=m.torque_W + m.torque_B, torque_B=0.0 * m.torque_B)   # BUG: not rotated
+    # BUG: not rotated
+    return dataclasses.replace(m, torque_W=m.torque_W + m.torque_B, torque_B=0.0 * m.torque_B)
 
 
 def _torque_cross_product_reversed(m):
@@ -171,7 +176,8 @@ class MutantAdapter(EngineAdapter):
 
     def simulate(self, scenario, variant: str, dt_s: float, n_steps: int):
         p = scenario.problem
-        return run_members(self.knob(p.members), self.step or variant, [dt_s], [n_steps], p.initial_packed()[None])[0]
+        return run_members(self.knob(p.members), self.step or variant,
+                           [dt_s], [n_steps], p.initial_packed()[None])[0]
 
     def one_step(self, scenario, variant: str, dt_s: float, y_start):
         step = self.step or get_step(variant)
@@ -192,7 +198,8 @@ def _planter(adapter):
 
 
 def _reference(name, variant, bug, exposed_by, members=None, step=None) -> Mutant:
-    return Mutant(name, variant, bug, exposed_by, _planter(MutantAdapter(name, variant, bug, members, step)))
+    adapter = MutantAdapter(name, variant, bug, members, step)
+    return Mutant(name, variant, bug, exposed_by, _planter(adapter), adapter)
 
 
 # --- the engine adapters --------------------------------------------------------------------------------
@@ -212,7 +219,8 @@ def _mujoco_body_omega_read_as_world(mp):
     from cross_checks.engines import mujoco_engine as me
 
     def to_packed(qpos, qvel):
-        return np.concatenate([qpos[..., 0:3], qvel[..., 0:3], qpos[..., 3:7], qvel[..., 3:6]], axis=-1)  # BUG
+        # BUG
+        return np.concatenate([qpos[..., 0:3], qvel[..., 0:3], qpos[..., 3:7], qvel[..., 3:6]], axis=-1)
     mp.setattr(me, "to_packed", to_packed)
 
 
@@ -255,7 +263,8 @@ def _pybullet_principal_axes_dropped(mp):
 
 def _pybullet_quaternion_order(mp):
     from cross_checks.engines import pybullet_engine as pe
-    mp.setattr(pe, "_xyzw", lambda q: [float(q[0]), float(q[1]), float(q[2]), float(q[3])])   # BUG: wxyz passed
+    # BUG: wxyz passed
+    mp.setattr(pe, "_xyzw", lambda q: [float(q[0]), float(q[1]), float(q[2]), float(q[3])])
 
 
 def _pybullet_decay_left_out(mp):
@@ -303,7 +312,7 @@ def _drake_decay_twice(mp):
     def stage(scenario, y):
         f, tau = orig(scenario, y)
         k_v, _ = scenario.problem.forces.decay_rates_per_s()
-        return f - scenario.problem.body.mass_kg * k_v * np.asarray(y[3:6]), tau   # BUG: damping counted twice
+        return f - scenario.problem.body.mass_kg * k_v * np.asarray(y[3:6]), tau  # BUG: damping counted twice
     mp.setattr(de, "stage_force_torque", stage)
 
 
@@ -334,8 +343,9 @@ MUTANTS = [
                ("velocity_decay",), members=_course_decay_twice),
     _reference("rk4_decay_left_out", "reference:rk4", "no decay in the right-hand side",
                ("velocity_decay",), members=_whole_state_decay_left_out),
-    _reference("course_quaternion_on_the_right", "reference:course", "q + q [0, Δt/2 ω]: world ω used as body ω",
-               ("constant_spin",), step=_course_quaternion_multiplied_on_the_right),
+    _reference("course_quaternion_on_the_right", "reference:course",
+               "q + q [0, Δt/2 ω]: world ω used as body ω", ("constant_spin",),
+               step=_course_quaternion_multiplied_on_the_right),
     _reference("leapfrog_explicit_half_kick", "reference:leapfrog", "first half kick not solved: explicit",
                ("tennis_racket",), step=_leapfrog_explicit_half_kick),
     _reference("lever_arms_not_rotated", "reference:rk4", "body points used in body axes as world vectors",
@@ -358,16 +368,18 @@ MUTANTS = [
            ("velocity_decay",), _mujoco_rk4_decay_twice),
     Mutant("pybullet_principal_axes_dropped", "pybullet:multibody", "the inertia's principal frame ignored",
            ("particle_body",), _pybullet_principal_axes_dropped),
-    Mutant("pybullet_quaternion_order", "pybullet:maximal", "(w, x, y, z) passed where (x, y, z, w) is expected",
-           ("constant_spin",), _pybullet_quaternion_order),
+    Mutant("pybullet_quaternion_order", "pybullet:maximal",
+           "(w, x, y, z) passed where (x, y, z, w) is expected", ("constant_spin",),
+           _pybullet_quaternion_order),
     Mutant("pybullet_decay_left_out", "pybullet:multibody", "no velocity decay",
            ("velocity_decay",), _pybullet_decay_left_out),
     Mutant("pybullet_torque_in_link_frame", "pybullet:maximal", "a world torque applied in the link frame",
            ("applied_torque",), _pybullet_torque_in_link_frame),
     Mutant("drake_omega_in_body_axes", "drake:semi_explicit_euler", "ω_B given where Drake's state has ω_W",
            ("constant_spin",), _drake_omega_in_body_axes),
-    Mutant("drake_quaternion_order", "drake:runge_kutta3", "(x, y, z, w) given where Drake's state has (w, x, y, z)",
-           ("constant_spin",), _drake_quaternion_order),
+    Mutant("drake_quaternion_order", "drake:runge_kutta3",
+           "(x, y, z, w) given where Drake's state has (w, x, y, z)", ("constant_spin",),
+           _drake_quaternion_order),
     Mutant("drake_decay_twice", "drake:runge_kutta2", "the decay force counted twice in the stage forces",
            ("velocity_decay",), _drake_decay_twice),
     Mutant("drake_gravity_twice", "drake:implicit_euler", "the weight left in the applied force",

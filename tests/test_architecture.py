@@ -55,14 +55,17 @@ def _imports(path: Path):
             else:
                 target = node.module or ""
             for a in node.names:  # `from pkg import submodule` imports pkg.submodule
-                yield node.lineno, f"{target}.{a.name}" if _unit(f"{target}.{a.name}") != _unit(target) else target
+                yield node.lineno, (f"{target}.{a.name}" if _unit(f"{target}.{a.name}") != _unit(target)
+                                    else target)
 
 
-SOURCES = sorted(p for pkg in ("reference_sim", "cross_checks", "reports") for p in (ROOT / pkg).rglob("*.py"))
+SOURCES = sorted(p for pkg in ("reference_sim", "cross_checks", "reports")
+                 for p in (ROOT / pkg).rglob("*.py"))
 
 
 def test_every_package_module_belongs_to_a_layer():
-    orphans = [str(p.relative_to(ROOT)) for p in SOURCES if _module_name(p) != "cross_checks" and _unit(_module_name(p)) is None]
+    orphans = [str(p.relative_to(ROOT))
+               for p in SOURCES if _module_name(p) != "cross_checks" and _unit(_module_name(p)) is None]
     assert not orphans, f"modules outside every layer (add them to LAYERS and README's Layout): {orphans}"
 
 
@@ -77,7 +80,8 @@ def test_imports_point_down_the_layers(path):
         if other is None or other == me:
             continue
         if other[0] >= me[0]:
-            bad.append(f"line {line}: {me[1]} (layer {me[0]}) imports {target} ({other[1]}, layer {other[0]})")
+            bad.append(
+                f"line {line}: {me[1]} (layer {me[0]}) imports {target} ({other[1]}, layer {other[0]})")
     assert not bad, "\n".join(bad)
 
 
@@ -92,7 +96,8 @@ def test_a_backward_import_is_reported(tmp_path, monkeypatch):
     planted = ROOT / "cross_checks" / "engines" / "_planted_for_test.py"
     planted.write_text("def f():\n    from cross_checks.sweep import run_sweep\n    return run_sweep\n")
     try:
-        with pytest.raises(AssertionError, match="cross_checks.engines \\(layer 3\\) imports cross_checks.sweep"):
+        with pytest.raises(AssertionError,
+                           match="cross_checks.engines \\(layer 3\\) imports cross_checks.sweep"):
             test_imports_point_down_the_layers(planted)
     finally:
         planted.unlink()
@@ -113,7 +118,8 @@ def _module_graph(paths) -> dict:
                     deps.add(cand)
                     break
         deps.discard(me)
-        graph[me] = deps - {me.rsplit(".", 1)[0]}   # a module importing its own package's __init__ is no circle
+        # a module importing its own package's __init__ is no circle
+        graph[me] = deps - {me.rsplit(".", 1)[0]}
     return graph
 
 
@@ -189,13 +195,15 @@ def test_no_package_module_reaches_into_another_s_private_names():
     """What one module uses of another is that module's interface (no underscore), so it can be changed
     knowingly: the fuzz used to reach into the MuJoCo and PyBullet adapters' private sessions and locks."""
     names = {_module_name(p) for p in SOURCES}
-    bad = [f"{p.relative_to(ROOT)}:{line}: {what}" for p in SOURCES for line, what in _private_accesses(p, names)]
+    bad = [f"{p.relative_to(ROOT)}:{line}: {what}" for p in SOURCES
+           for line, what in _private_accesses(p, names)]
     assert not bad, "\n".join(bad)
 
 
 def test_a_planted_private_access_is_found(tmp_path):
     planted = ROOT / "cross_checks" / "fuzz" / "_planted_private_for_test.py"
-    planted.write_text("from cross_checks.engines import mujoco_engine as me\n\n\ndef f():\n    return me._LOCK\n")
+    planted.write_text("from cross_checks.engines import mujoco_engine as "
+                       "me\n\n\ndef f():\n    return me._LOCK\n")
     try:
         names = {_module_name(p) for p in SOURCES} | {"cross_checks.engines.mujoco_engine"}
         assert _private_accesses(planted, names) == [(5, "cross_checks.engines.mujoco_engine._LOCK")]

@@ -24,7 +24,8 @@ def test_workflow_parses_and_uses_the_readme_commands():
     assert test_cmd in _runs(wf["jobs"]["tests"])
     steps = wf["jobs"]["crosscheck"]["steps"]
     runs = _runs(wf["jobs"]["crosscheck"])
-    assert runs[0] == "" and main_cmd in runs   # on a fresh runner: the README's main command as a newcomer runs it
+    # on a fresh runner: the README's main command as a newcomer runs it
+    assert runs[0] == "" and main_cmd in runs
     out = re.search(r"rbcheck sweep .*--out (\S+)", main_cmd)[1]
     # the main command's results are compared as they are (Drake absent: one line, exit 0) ...
     assert f".venv/bin/rbcheck compare baselines/default {out}" in runs

@@ -18,7 +18,8 @@ def _files():
     """The repository's text files (not this one: it plants stale citations on purpose)."""
     out = []
     for folder, dirs, names in os.walk(ROOT):
-        dirs[:] = [d for d in dirs if d not in SKIP_DIRS and not d.endswith(".egg-info") and not d.startswith(".")]
+        dirs[:] = [d for d in dirs
+                   if d not in SKIP_DIRS and not d.endswith(".egg-info") and not d.startswith(".")]
         out += [Path(folder) / n for n in names if n.endswith(SUFFIXES)]
     return [p for p in out if p != Path(__file__).resolve()]
 
@@ -61,9 +62,9 @@ def test_every_cited_path_and_module_exists():
 
 def test_a_stale_citation_is_found(tmp_path):
     planted = tmp_path / "planted.md"
-    planted.write_text("see `cross_checks/tolerances.py` and cross_checks.metrics.fit_convergence, "
-                       "not cross_checks.analysis.convergence.fit_nothing; cross_checks/core/tolerances.py and "
-                       "cross_checks.analysis.convergence.fit_convergence exist")
+    planted.write_text("see `cross_checks/tolerances.py` and cross_checks.metrics.fit_convergence, not "
+                       "cross_checks.analysis.convergence.fit_nothing; cross_checks/core/tolerances.py "
+                       "and cross_checks.analysis.convergence.fit_convergence exist")
     assert [cited for _, cited in stale_citations([planted])] == [
         "cross_checks.analysis.convergence.fit_nothing", "cross_checks.metrics.fit_convergence",
         "cross_checks/tolerances.py"]

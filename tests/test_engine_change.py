@@ -19,7 +19,8 @@ import pytest
 from tests.helpers.repo import BASELINE, ROOT
 
 OLD = "3.17.0"
-ROTATING = ["tennis_racket", "tumbling_box", "symmetric_top", "applied_torque", "particle_body", "constant_spin"]
+ROTATING = ["tennis_racket", "tumbling_box", "symmetric_top",
+            "applied_torque", "particle_body", "constant_spin"]
 
 
 @pytest.fixture(scope="module")
@@ -27,7 +28,8 @@ def old_mujoco(tmp_path_factory):
     env_dir = tmp_path_factory.mktemp("mujoco-old") / "venv"
     venv.EnvBuilder(with_pip=True).create(env_dir)
     py = env_dir / "bin" / "python"
-    pip = subprocess.run([str(py), "-m", "pip", "install", "-q", "--no-deps", f"mujoco=={OLD}", "typing_extensions"],
+    pip = subprocess.run([str(py), "-m", "pip", "install", "-q", "--no-deps",
+                          f"mujoco=={OLD}", "typing_extensions"],
                          capture_output=True, text=True, timeout=900)
     if pip.returncode != 0:
         pytest.skip(f"mujoco {OLD} cannot be installed here: {pip.stderr.strip()[-200:]}")
@@ -51,7 +53,8 @@ def test_compare_names_mujoco_rk4s_order_as_the_cause_of_the_change(old_mujoco, 
     version = subprocess.run([str(old_mujoco), "-c", "import mujoco; print(mujoco.__version__)"],
                              capture_output=True, text=True, check=True).stdout.strip()
     assert version == OLD
-    old = _rbcheck(old_mujoco, "sweep", *ROTATING, "--engines", "reference", "mujoco", "--out", "old", cwd=tmp_path)
+    old = _rbcheck(old_mujoco, "sweep", *ROTATING,
+                   "--engines", "reference", "mujoco", "--out", "old", cwd=tmp_path)
     assert old.returncode == 1, old.stderr[-2000:]   # its RK4 contradicts the declared order 4
     md = tmp_path / "compare.md"
     cmp_ = _rbcheck(sys.executable, "compare", str(BASELINE), "old", "--markdown", str(md), cwd=tmp_path)
@@ -70,5 +73,6 @@ def test_compare_names_mujoco_rk4s_order_as_the_cause_of_the_change(old_mujoco, 
                    cwd=tmp_path)
     assert new.returncode == 0, new.stderr[-2000:]
     up = _rbcheck(sys.executable, "compare", "old", "new", cwd=tmp_path)
-    assert up.returncode == 0 and "mujoco:rk4: IMPROVEMENT — " in up.stdout and "baseline is stale" in up.stdout
+    assert (up.returncode == 0 and "mujoco:rk4: IMPROVEMENT — " in up.stdout
+            and "baseline is stale" in up.stdout)
     assert _rbcheck(sys.executable, "compare", "old", "new", "--fail-on-change", cwd=tmp_path).returncode == 1

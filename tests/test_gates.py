@@ -1,4 +1,5 @@
-"""Regression gates: a fresh sweep judged by cross_checks/analysis/expectations.py and against the committed baseline.
+"""Regression gates: a fresh sweep judged by cross_checks/analysis/expectations.py and
+against the committed baseline.
 
 The default run sweeps FAST_SUBSET (every available variant, each scenario's full dt ladder); the
 whole catalog runs under ``-m slow``. Every number comes from cross_checks.analysis.expectations /
@@ -22,7 +23,8 @@ ROOT = Path(__file__).resolve().parents[1]
 BASELINE = ROOT / "baselines" / "default"
 #: Scenarios of the default gate: every force type (gravity, drag-free decay, spring, body torque,
 #: off-COM force), a full inertia tensor, and the two asymmetric tumbling bodies the course gets wrong.
-FAST_SUBSET = ["projectile", "velocity_decay", "spring_oscillator", "applied_torque", "particle_body", "tennis_racket"]
+FAST_SUBSET = ["projectile", "velocity_decay", "spring_oscillator",
+               "applied_torque", "particle_body", "tennis_racket"]
 ASYMMETRIC_TUMBLING = ["tennis_racket", "particle_body", "tumbling_box"]
 
 
@@ -86,14 +88,16 @@ def test_same_scheme_pairs_agree_on_every_scenario(fast, a, b):
 
 @pytest.mark.parametrize("scenario", [s for s in ASYMMETRIC_TUMBLING if s in FAST_SUBSET])
 def test_course_does_not_converge_on_asymmetric_tumbling_bodies(fast, scenario):
-    verdict = {(r["engine"], r["quantity"]): r["verdict"] for r in fast[2]["convergence"] if r["scenario"] == scenario}
+    verdict = {(r["engine"], r["quantity"]): r["verdict"]
+               for r in fast[2]["convergence"] if r["scenario"] == scenario}
     assert verdict[("reference:course", "orientation")] == "does_not_converge"
     assert verdict[("reference:course_gyro", "orientation")] == "converges"
     assert verdict[("reference:expmap_gyro", "orientation")] == "converges"
 
 
 def test_fresh_sweep_matches_the_committed_baseline(fast):
-    assert (BASELINE / "results.csv").is_file(), f"{BASELINE} missing: see baselines/README.md to regenerate it"
+    assert (BASELINE / "results.csv").is_file(), (
+        f"{BASELINE} missing: see baselines/README.md to regenerate it")
     c = compare_dirs(BASELINE, fast[0])
     assert c.matched_rows == len(fast[1]), "every row of the fresh subset must exist in the baseline"
     assert c.exit_code(allow_missing=True) == 0, to_text(c, allow_missing=True)
@@ -109,15 +113,18 @@ def exactness_mismatch(made: dict, here: dict) -> str:
     one line saying what differs."""
     if not made.get("numerics"):
         return "the baseline records no numerical stack (made before rbcheck recorded it): regenerate it"
-    diff = [f"{k} {made.get(k) or '-'} (here {here.get(k) or '-'})" for k in EXACT_KEYS if made.get(k) != here.get(k)]
+    diff = [f"{k} {made.get(k) or '-'} (here {here.get(k) or '-'})"
+            for k in EXACT_KEYS if made.get(k) != here.get(k)]
     return "numerical stack differs from the baseline's: " + "; ".join(diff) if diff else ""
 
 
 def test_exactness_is_claimed_on_the_numerical_stack_not_the_machine_name():
-    made = {k: f"v-{k}" for k in EXACT_KEYS} | {"platform": "Linux-6.18.44-fc-v595", "machine": "x86_64, EPYC"}
+    made = {k: f"v-{k}" for k in EXACT_KEYS} | {"platform": "Linux-6.18.44-fc-v595",
+                                                "machine": "x86_64, EPYC"}
     assert exactness_mismatch(made, made | {"platform": "Linux-6.18.44-fc-v669", "machine": "other"}) == ""
     assert "numpy v-numpy (here 2.5)" in exactness_mismatch(made, made | {"numpy": "2.5"})
-    assert exactness_mismatch({k: v for k, v in made.items() if k != "numerics"}, made).startswith("the baseline")
+    assert exactness_mismatch({k: v for k, v in made.items() if k != "numerics"},
+                              made).startswith("the baseline")
 
 
 def test_fresh_sweep_is_bit_identical_to_the_baseline_where_it_was_made(fast, tmp_path):
@@ -163,7 +170,8 @@ def test_planted_regression_in_the_baseline_is_caught_and_named(tmp_path):
     shutil.copytree(BASELINE, new)
     assert main(["compare", str(BASELINE), str(new)]) == 0  # identical results
     df = pd.read_csv(new / "results.csv")
-    i = df.index[(df["scenario"] == "tennis_racket") & (df["engine"] == "mujoco:euler") & (df["dt"] == 0.00125)][0]
+    i = df.index[(df["scenario"] == "tennis_racket") & (df["engine"] == "mujoco:euler")
+                 & (df["dt"] == 0.00125)][0]
     df.loc[i, "orient_err_final"] *= 1.5
     df.to_csv(new / "results.csv", index=False)
     md = tmp_path / "summary.md"

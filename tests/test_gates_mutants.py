@@ -19,8 +19,8 @@ pytestmark = pytest.mark.usefixtures("isolated_cache")
 BY_NAME = {m.name: m for m in MUTANTS}
 #: The default run: one bug per kind (a stage weight, the gyroscopic sign, decay twice, a frame mix-up in
 #: each engine adapter), each on the one scenario that exposes it.
-QUICK = ["rk4_wrong_stage_weight", "gyroscopic_sign_flipped", "course_decay_twice", "mujoco_world_omega_as_body",
-         "pybullet_principal_axes_dropped", "drake_omega_in_body_axes"]
+QUICK = ["rk4_wrong_stage_weight", "gyroscopic_sign_flipped", "course_decay_twice",
+         "mujoco_world_omega_as_body", "pybullet_principal_axes_dropped", "drake_omega_in_body_axes"]
 
 
 def _gate_failures_of_sweep(tmp_path, scenarios, variant, jobs=1):

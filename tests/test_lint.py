@@ -23,16 +23,16 @@ def _ruff():
 
 
 def test_ruff_passes_on_the_whole_tree():
-    proc = subprocess.run(_ruff() + ["check", "--output-format", "concise", "."], cwd=ROOT, capture_output=True,
-                          text=True)
+    proc = subprocess.run(_ruff() + ["check", "--output-format", "concise", "."], cwd=ROOT,
+                          capture_output=True, text=True)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-1000:]
 
 
 def test_the_gate_catches_a_planted_unused_import(tmp_path):
     (tmp_path / "pyproject.toml").write_text((ROOT / "pyproject.toml").read_text())
     (tmp_path / "bad.py").write_text("import os\n")
-    proc = subprocess.run(_ruff() + ["check", "--output-format", "concise", "."], cwd=tmp_path, capture_output=True,
-                          text=True)
+    proc = subprocess.run(_ruff() + ["check", "--output-format", "concise", "."], cwd=tmp_path,
+                          capture_output=True, text=True)
     assert proc.returncode == 1 and "F401" in proc.stdout
 
 

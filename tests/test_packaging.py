@@ -32,8 +32,8 @@ PACKAGES = ("reference_sim", "cross_checks", "reports")
 
 def _tracked() -> list:
     try:
-        out = subprocess.run(["git", "ls-files", "-z", "--cached", "--others", "--exclude-standard"], cwd=ROOT,
-                             capture_output=True, check=True).stdout.decode()
+        out = subprocess.run(["git", "ls-files", "-z", "--cached", "--others", "--exclude-standard"],
+                             cwd=ROOT, capture_output=True, check=True).stdout.decode()
     except (OSError, subprocess.CalledProcessError):
         pytest.skip("not a git checkout: cannot tell a clone's files from local ones")
     return [p for p in out.split("\0") if p and (ROOT / p).is_file()]
@@ -44,9 +44,10 @@ def _build_wheel(folder: Path) -> None:
     for rel in _tracked():
         (src / rel).parent.mkdir(parents=True, exist_ok=True)
         (src / rel).write_bytes((ROOT / rel).read_bytes())
-    built = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(folder / "dist"),
-                            str(src)], capture_output=True, text=True)
-    if built.returncode != 0 and ("No matching distribution" in built.stderr or "Could not find" in built.stderr):
+    built = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w",
+                            str(folder / "dist"), str(src)], capture_output=True, text=True)
+    if built.returncode != 0 and ("No matching distribution" in built.stderr
+                                  or "Could not find" in built.stderr):
         pytest.skip(f"pip cannot fetch the build backend here: {built.stderr.strip()[-200:]}")
     assert built.returncode == 0, built.stderr[-2000:]
 
@@ -73,7 +74,8 @@ def installed(tmp_path_factory, wheel) -> Path:
         env_dir = folder / "venv"
         venv.EnvBuilder(with_pip=True).create(env_dir)
         py = env_dir / "bin" / "python"
-        site = Path(subprocess.run([str(py), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+        site = Path(subprocess.run([str(py), "-c",
+                                    "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
                                    capture_output=True, text=True, check=True).stdout.strip())
         # the dependencies of the interpreter running the tests (appended after the environment's own
         # site-packages, whose rbcheck comes first; .pth files of the added folders are not run, so the
@@ -91,11 +93,13 @@ def _run(env_dir: Path, cwd: Path, *argv, timeout=600):
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV")}
     env.update(PATH=f"{env_dir / 'bin'}{os.pathsep}{env.get('PATH', '')}", MPLBACKEND="Agg",
                RBCHECK_CACHE_DIR=str(cwd / "cache"), PYTHONDONTWRITEBYTECODE="1")
-    return subprocess.run([str(a) for a in argv], cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout)
+    return subprocess.run([str(a) for a in argv], cwd=cwd, env=env,
+                          capture_output=True, text=True, timeout=timeout)
 
 
 def test_the_installed_wheel_imports_rbcheck_from_itself_not_from_the_clone(installed, tmp_path):
-    code = "import cross_checks, reference_sim, reports; print(cross_checks.__file__, reference_sim.__file__, reports.__file__)"
+    code = ("import cross_checks, reference_sim, reports; "
+            "print(cross_checks.__file__, reference_sim.__file__, reports.__file__)")
     proc = _run(installed, tmp_path, installed / "bin" / "python", "-c", code)
     assert proc.returncode == 0, proc.stderr
     for f in proc.stdout.split():
@@ -115,9 +119,11 @@ def test_a_sweep_with_its_report_runs_from_the_installed_wheel(installed, tmp_pa
 
 def test_check_runs_from_the_installed_wheel(installed, tmp_path):
     rbcheck = installed / "bin" / "rbcheck"
-    run = _run(installed, tmp_path, rbcheck, "run", "projectile", "--engine", "reference:course", "--out", "t.csv")
+    run = _run(installed, tmp_path, rbcheck, "run", "projectile",
+               "--engine", "reference:course", "--out", "t.csv")
     assert run.returncode == 0, run.stderr
-    check = _run(installed, tmp_path, rbcheck, "check", "t.csv", "--scenario", "projectile", "--plot", "c.png")
+    check = _run(installed, tmp_path, rbcheck, "check", "t.csv",
+                 "--scenario", "projectile", "--plot", "c.png")
     assert check.returncode == 0 and check.stdout.startswith("PASS"), check.stdout + check.stderr
     assert (tmp_path / "c.png").stat().st_size > 0
 
@@ -127,15 +133,16 @@ def test_a_users_pytest_file_calls_assert_engine_from_the_installed_plugin(insta
         def test_the_reference_rk4_is_fourth_order(assert_engine):
             assert_engine("reference:rk4", ["projectile", "constant_spin"])
     """))
-    proc = _run(installed, tmp_path, installed / "bin" / "python", "-m", "pytest", "-q", "-p", "no:cacheprovider",
-                "--rbcheck-keep-reports", "kept", "test_mine.py")
+    proc = _run(installed, tmp_path, installed / "bin" / "python", "-m", "pytest", "-q", "-p",
+                "no:cacheprovider", "--rbcheck-keep-reports", "kept", "test_mine.py")
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-2000:]
     assert "1 passed" in proc.stdout
     assert list((tmp_path / "kept").rglob("index.html")), "the kept report was not written"
 
 
 def test_a_missing_template_is_named_as_an_incomplete_installation(installed, tmp_path):
-    """The same wheel with sort.js deleted from the environment: one line naming the file, exit 2, before any run."""
+    """The same wheel with sort.js deleted from the environment: one line naming the
+    file, exit 2, before any run."""
     import shutil
     broken = tmp_path / "broken"
     shutil.copytree(installed, broken, symlinks=True)
@@ -144,8 +151,9 @@ def test_a_missing_template_is_named_as_an_incomplete_installation(installed, tm
     for exe in (broken / "bin").iterdir():   # scripts name their interpreter by absolute path: repoint them
         if exe.is_file() and not exe.is_symlink() and exe.read_bytes().startswith(b"#!"):
             exe.write_text(exe.read_text().replace(str(installed), str(broken)))
-    proc = _run(broken, tmp_path, broken / "bin" / "rbcheck", "sweep", "projectile", "--engines", "reference:course",
-                "--out", "sw")
+    proc = _run(broken, tmp_path, broken / "bin" / "rbcheck", "sweep", "projectile",
+                "--engines", "reference:course", "--out", "sw")
     assert proc.returncode == 2, proc.stderr
-    assert proc.stderr.count("\n") == 1 and "sort.js: missing from this installation of rbcheck" in proc.stderr
+    assert (proc.stderr.count("\n") == 1
+            and "sort.js: missing from this installation of rbcheck" in proc.stderr)
     assert "installation is incomplete" in proc.stderr and not (tmp_path / "sw").exists()

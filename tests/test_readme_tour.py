@@ -25,8 +25,8 @@ def tour_lines() -> list:
 def _fresh_copy(dest: Path) -> None:
     """The repository's files as a clone has them: tracked and not ignored, no results, caches or venv."""
     try:
-        listed = subprocess.run(["git", "ls-files", "-z", "--cached", "--others", "--exclude-standard"], cwd=ROOT,
-                                capture_output=True, check=True).stdout.decode().split("\0")
+        listed = subprocess.run(["git", "ls-files", "-z", "--cached", "--others", "--exclude-standard"],
+                                cwd=ROOT, capture_output=True, check=True).stdout.decode().split("\0")
     except (OSError, subprocess.CalledProcessError):
         pytest.skip("not a git checkout: cannot tell a clone's files from local ones")
     for rel in filter(None, listed):
@@ -43,7 +43,8 @@ def _script(lines) -> str:
     for ln in lines:
         quoted = ln.replace("'", "'\\''")
         out.append(f"echo '+ {quoted}'")
-        out.append(f"{ln}\nrc=$?; if [ $rc -ne 0 ]; then echo 'TOUR LINE FAILED (exit '$rc'): {quoted}' >&2; exit 1; fi")
+        out.append(f"{ln}\nrc=$?; if [ $rc -ne 0 ]; then echo 'TOUR LINE "
+                   f"FAILED (exit '$rc'): {quoted}' >&2; exit 1; fi")
     return "\n".join(out) + "\n"
 
 
@@ -57,7 +58,8 @@ def _path_without_rbcheck() -> str:
 def test_the_readme_tour_runs_as_written_in_a_fresh_clone(tmp_path):
     venv = Path(sys.prefix)
     if venv == Path(sys.base_prefix) or not (venv / "bin" / "activate").is_file():
-        pytest.skip("the tests do not run in a virtual environment: no .venv to stand in for the install step")
+        pytest.skip(
+            "the tests do not run in a virtual environment: no .venv to stand in for the install step")
     clone = tmp_path / "rbcheck"
     _fresh_copy(clone)
     (clone / ".venv").symlink_to(venv, target_is_directory=True)
@@ -65,8 +67,8 @@ def test_the_readme_tour_runs_as_written_in_a_fresh_clone(tmp_path):
     env = {**os.environ, "PATH": _path_without_rbcheck(), "RBCHECK_CACHE_DIR": str(tmp_path / "cache"),
            "MPLBACKEND": "Agg"}
     env.pop("VIRTUAL_ENV", None)
-    p = subprocess.run(["bash", "-c", _script(tour_lines())], cwd=clone, env=env, capture_output=True, text=True,
-                       timeout=600)
+    p = subprocess.run(["bash", "-c", _script(tour_lines())], cwd=clone, env=env, capture_output=True,
+                       text=True, timeout=600)
     assert p.returncode == 0, f"{p.stderr[-3000:]}\n--- stdout ---\n{p.stdout[-3000:]}"
     out = p.stdout
     assert re.search(r"^rbcheck \d+\.\d+\.\d+$", out, re.M), "rbcheck --version"
@@ -90,8 +92,10 @@ def test_the_tour_has_no_line_that_needs_what_a_fresh_clone_lacks():
     for ln in tour_lines():
         args = ln.split("#", 1)[0].split()
         for a in args[2:]:
-            if re.search(r"\.(toml|csv)$", a) and not a.startswith("-") and args[args.index(a) - 1] != "--out":
-                assert (ROOT / a).is_file() or a in written, f"tour line reads {a}, which nothing provides: {ln}"
+            if (re.search(r"\.(toml|csv)$", a) and not a.startswith("-")
+                    and args[args.index(a) - 1] != "--out"):
+                assert (ROOT / a).is_file() or a in written, (
+                    f"tour line reads {a}, which nothing provides: {ln}")
         if "--out" in args:
             written.add(args[args.index("--out") + 1])
             assert args[args.index("--out") + 1].startswith("tour/"), f"the tour writes into tour/: {ln}"

@@ -285,8 +285,9 @@ def compare_with_expectation(verdict: str, order, expected, order_is_lower_bound
         seen = f"{verdict.replace('_', ' ')}" + (f", fitted order {fmt_order(order)}" if order is not None else "")
         return None, f"no claim on this ladder (pre-asymptotic; {seen})"
     if verdict == "at_roundoff":
-        return (ev == "converges"), ("exact to round-off" if ev == "converges"
-                                     else "exact to round-off although non-convergence was expected")
+        prec = getattr(expected, "precision", "float64")
+        exact = "exact to round-off" if prec == "float64" else f"within {prec} round-off on every rung"
+        return (ev == "converges"), (exact if ev == "converges" else f"{exact} although non-convergence was expected")
     if verdict == "converges":
         if ev != "converges":
             return False, f"converges (order {order:.2f}) although non-convergence was expected"

@@ -28,21 +28,18 @@ import numpy as np
 
 from cross_checks.core.quantities import QUANTITIES
 from cross_checks.engines import declared_imitation, declared_order, declared_traits
-from cross_checks.engines.base import Traits
+from cross_checks.engines.base import DEFAULT_TRAITS, Traits
 from reference_sim.analytic import EQUAL_MOMENTS_REL_TOL
 
 __all__ = ["energy_drift_bound", "characteristic_rate_sq", "QUANTITIES",
            "DEFAULT_TRAITS", "Traits", "traits", "EQUIVALENT_PAIRS", "pair_is_same_arithmetic", "Expectation",
-           "expectation", "expected_order", "forces_change_within_step",
+           "expectation", "expected_order", "forces_change_within_step", "precision", "machine_epsilon",
+           "judged_ladder_s",
            "nominal_order", "gyroscopic_term_matters", "rotation_drives_translation", "translation_drives_rotation",
            "memoized"]
 
 
-#: A variant that declares no traits (e.g. a user engine with only its declared order): assumed to
-#: have the gyroscopic term (a correct engine; if it lacks it, the sweep says so), and, if it is first
-#: order, to drift in either direction in both translation and rotation, whole-state style — the most
-#: cautious choice: no order is claimed wherever any first-order scheme could be pre-asymptotic.
-DEFAULT_TRAITS = Traits(gyroscopic_term=True, translation_drift=None, rotation_drift="whole_state", rotation_sign=None)
+#: A variant that declares no traits: engines.base.DEFAULT_TRAITS (the most cautious choice).
 
 
 def traits(variant: str) -> Traits:
@@ -112,9 +109,60 @@ class Expectation:
     verdict: str | None
     order: float | None
     reason: str
+    precision: str = "float64"
 
     def as_dict(self) -> dict:
         return {"expected_verdict": self.verdict, "expected_order": self.order, "reason": self.reason}
+
+
+def precision(variant: str) -> str:
+    """The floating-point format ``variant`` computes in (Traits.precision): "float64" or "float32"."""
+    return traits(variant).precision
+
+
+def machine_epsilon(variant: str) -> float:
+    """ε of ``variant``'s precision (tolerances.MACHINE_EPSILON): the unit of every round-off floor of its runs."""
+    from cross_checks.core import tolerances as tol
+    return tol.MACHINE_EPSILON[precision(variant)]
+
+
+def judged_ladder_s(scenario, variant: str) -> tuple:
+    """The Δt ladder (s, descending) ``variant`` is judged on: the scenario's; for a variant whose precision
+    leaves its finer rungs at round-off (float32), that ladder plus coarser rungs (each of half the steps of
+    the last, ⌊N/2⌋, so that T/Δt stays whole) until PRECISION_LADDER_MIN_RESOLVED rungs are expected resolved
+    above their floors.
+
+    Expected, not measured (the ladder is planned before anything runs): an order-p scheme matches the
+    Taylor series of the motion up to its p-th term, so one step misses (ω_c Δt)ᵖ⁺¹/(p + 1)! and a run over T
+    ~ (ω_c Δt)ᵖ ω_c T/(p + 1)! relative to the motion's scale (ω_c from :func:`characteristic_rate_sq`, at
+    least 1/T); its round-off floor is ε (N + √N) with N = T/Δt (metrics.roundoff_floor without the
+    amplification, which scales both alike). A rung is added only while ω_c Δt ≤ (p + 1) ×
+    PRECISION_LADDER_STEP_ANGLE_PER_ORDER_RAD and the run keeps PRECISION_LADDER_MIN_STEPS steps; the finer
+    rungs stay (the fit says which were at round-off)."""
+    from cross_checks.core import tolerances as tol
+    dts = sorted({float(d) for d in scenario.dt_ladder_s}, reverse=True)
+    eps = machine_epsilon(variant)
+    if eps <= tol.ROUNDOFF_PER_STEP_REL or not dts:
+        return tuple(dts)
+    T = scenario.duration_s
+    p = nominal_order(variant) or 1.0
+    if forces_change_within_step(scenario, traits(variant)):
+        p = min(p, 1.0)
+    w = max(math.sqrt(characteristic_rate_sq(scenario)), 1.0 / T)
+
+    def resolved(h):
+        n = T / h
+        return (w * h) ** p * w * T / math.factorial(round(p) + 1) >= tol.RESOLVED_ABOVE_FLOOR * eps * (n + math.sqrt(n))
+
+    for _ in range(tol.PRECISION_LADDER_MAX_EXTRA):
+        if sum(resolved(h) for h in dts) >= tol.PRECISION_LADDER_MIN_RESOLVED:
+            break
+        n = round(T / dts[0]) // 2
+        h = T / n if n else math.inf
+        if w * h > (p + 1.0) * tol.PRECISION_LADDER_STEP_ANGLE_PER_ORDER_RAD or n < tol.PRECISION_LADDER_MIN_STEPS:
+            break
+        dts.insert(0, h)
+    return tuple(dts)
 
 
 def nominal_order(variant: str) -> float | None:
@@ -221,6 +269,12 @@ def expectation(scenario, variant: str, quantity: str, mode: str = "free_running
     unless ``measure_physics`` is False: then no pre-asymptotic decision is made, e.g. for a scenario
     whose reference could not be computed, where every run is a failed row anyway).
     """
+    e = _expectation(scenario, variant, quantity, mode, physics, measure_physics)
+    prec = precision(variant)
+    return e if prec == e.precision else Expectation(e.verdict, e.order, e.reason, prec)
+
+
+def _expectation(scenario, variant, quantity, mode, physics, measure_physics) -> Expectation:
     if mode not in ("free_running", "one_step"):
         raise ValueError(f"unknown mode {mode!r}; modes: free_running, one_step")
     free = _memo(("free_running", id(scenario), variant, quantity, id(physics), measure_physics), (scenario, physics),
@@ -267,7 +321,7 @@ def _free_running(scenario, variant: str, quantity: str, physics, measure_physic
     if p > 1.0 and forces_change_within_step(scenario, tr):
         return Expectation("converges", 1.0, _HELD_FORCES_REASON.format(variant=variant, p=p))
     if p == 1.0 and (physics is not None or measure_physics):
-        why = _memo(("pre_asymptotic", id(scenario), tr, quantity, id(physics)), (scenario, physics),
+        why = _memo(("pre_asymptotic", id(scenario), tr, p, quantity, id(physics)), (scenario, physics),
                     lambda: _pre_asymptotic_reason(scenario, variant, quantity, tr, physics))
         if why:
             return Expectation("pre_asymptotic", None, why)
@@ -306,7 +360,7 @@ def _pre_asymptotic_reason(scenario, variant, quantity, tr: Traits, physics) -> 
     from cross_checks.analysis.physics import amplitude_model_order, amplitude_parameter, scenario_physics
     from cross_checks.core import tolerances as tol
     phys = physics if physics is not None else scenario_physics(scenario)
-    dts = sorted(scenario.dt_ladder_s, reverse=True)
+    dts = list(judged_ladder_s(scenario, variant))
     if len(dts) < 2:
         return ""
     T = scenario.duration_s
@@ -371,4 +425,4 @@ def energy_drift_bound(scenario, variant: str, dt_s: float) -> float | None:
     w = math.sqrt(w2)
     n_steps = max(1, round(scenario.duration_s / dt_s))
     # + round-off: N steps of ε each, ×10 for the terms of E (measured 7 N ε on particle_body's RK4).
-    return 2.0 * (w * dt_s) ** p * w * scenario.duration_s + 10.0 * n_steps * 2.2e-16
+    return 2.0 * (w * dt_s) ** p * w * scenario.duration_s + 10.0 * n_steps * machine_epsilon(variant)

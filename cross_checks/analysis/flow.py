@@ -355,7 +355,7 @@ class _RunRows:
     print_floor: dict = field(default_factory=dict)
 
 
-def run_local_defect(scenario, y, dt_s: float, max_rows: int | None = None) -> tuple:
+def run_local_defect(scenario, y, dt_s: float, max_rows: int | None = None, unit_roundoff: float = 2.0 ** -53) -> tuple:
     """The one-step defect of a run recorded at every step (``y`` (N + 1, 13), float64): from each recorded
     state the exact flow over Δt is compared with the next row, over what a consistent scheme of order ≥ 1
     may leave there (:func:`local_allowances`) — ``rbcheck check``'s local evidence, for a sweep's own runs.
@@ -363,7 +363,8 @@ def run_local_defect(scenario, y, dt_s: float, max_rows: int | None = None) -> t
     Returns ``(ratio, quantity, t_s)``: the largest defect / allowance over the decisive rows (h L ≤
     CHECK_MAX_HL, finite states) and where; ``(nan, "", nan)`` when no row is decisive. A wrong equation
     leaves an O(Δt) defect (ratio ∝ 1/Δt), a consistent scheme at most its allowance (ratio ≤ 1).
-    ``max_rows``: judge that many rows, evenly spread over the run (each row's defect stands on its own)."""
+    ``max_rows``: judge that many rows, evenly spread over the run (each row's defect stands on its own).
+    ``unit_roundoff``: of the precision the run's steps compute in (tolerances.UNIT_ROUNDOFF)."""
     y = np.asarray(y, dtype=float)
     n = len(y) - 1
     if n < 1:
@@ -376,7 +377,7 @@ def run_local_defect(scenario, y, dt_s: float, max_rows: int | None = None) -> t
     if not np.any(good):
         return math.nan, "", math.nan
     idx, y0, y1 = idx[good], y0[good], y1[good]
-    rows = _RunRows(np.full(len(idx), float(dt_s)), np.ones(len(idx)))
+    rows = _RunRows(np.full(len(idx), float(dt_s)), np.ones(len(idx)), float(unit_roundoff))
 
     def allowance_fn(M2, rate):
         return local_allowances(rows, y0, M2, rate, y_end=y1).total

@@ -26,6 +26,10 @@ the worst one-step defect of the ladder's runs measured on their recorded states
 allowance (what any consistent scheme of order ≥ 1 leaves, ratio > 1) a pre-asymptotic excuse would hide a
 wrong equation — a user engine that ignores a spring's rest length, or swaps I and I⁻¹, whose errors stay
 flat over the ladder — so the verdict is judged as fitted and the sentence says why the excuse was refused.
+Nor is "every rung within its round-off floor" an agreement for the quantity whose one-step defect is wrong:
+a float32 run on a tumbling body has floors amplified by the motion (ε √N A), under which a wrong gyroscopic
+sign's error can sit on a short run; its one-step defect cannot hide
+(tests/cross_checks/analysis/test_precision.py).
 An expected non-convergence (the course's step on a tumbling body) is not an excuse but a known, named
 missing term: its local defect is what the expectation predicts.
 """
@@ -85,18 +89,38 @@ class Judgement:
     claimed: bool
 
 
-def judge_ladder(dts, errors, floors, statuses, exp, local: LocalEvidence | None = None) -> Judgement:
+def judge_ladder(dts, errors, floors, statuses, exp, local: LocalEvidence | None = None,
+                 quantity: str | None = None) -> Judgement:
     """Fit the ladder (Δt coarse to fine, errors, floors, statuses "ok"/...) and judge it against ``exp``
-    (an :class:`~cross_checks.analysis.expectations.Expectation`); ``local``: the runs' own one-step defect."""
-    return judge_fit(fit_convergence(dts, errors, floors, statuses), exp, local)
+    (an :class:`~cross_checks.analysis.expectations.Expectation`); ``local``: the runs' own one-step defect;
+    ``quantity``: the one whose errors these are."""
+    return judge_fit(fit_convergence(dts, errors, floors, statuses), exp, local, quantity)
 
 
-def judge_fit(fit: ConvergenceFit, exp, local: LocalEvidence | None = None) -> Judgement:
+def judge_fit(fit: ConvergenceFit, exp, local: LocalEvidence | None = None, quantity: str | None = None) -> Judgement:
     """Judge a fit against the expectation ``exp`` (the module's rules, in order); no excuse where ``local``
-    says the runs' equations are wrong."""
-    j = _judge(fit, exp)
-    if local is None or not local.wrong_equations or j.verdict != "pre_asymptotic":
+    says the runs' equations are wrong. A variant of a precision other than float64 says which rungs were
+    judged above its round-off floors."""
+    j = _judged(fit, exp, local, quantity)
+    prec = getattr(exp, "precision", "float64")
+    if prec == "float64" or not fit.dt_s:
         return j
+    judged = [h for h, used in zip(fit.dt_s, fit.fitted) if used]
+    rungs = (f"rungs Δt = {judged[0]:g} … {judged[-1]:g} s judged" if len(judged) > 1 else
+             "no two rungs resolved" if not judged else f"rung Δt = {judged[0]:g} s judged")
+    return Judgement(fit, j.verdict, j.matches, f"{j.assessment} ({prec}: {rungs} of {len(fit.dt_s)}, floors "
+                     f"from ε = {tol.MACHINE_EPSILON[prec]:.2g} per step)", j.claimed)
+
+
+def _judged(fit: ConvergenceFit, exp, local: LocalEvidence | None, quantity: str | None) -> Judgement:
+    j = _judge(fit, exp)
+    if local is None or not local.wrong_equations or j.verdict not in ("pre_asymptotic", "at_roundoff"):
+        return j
+    if j.verdict == "at_roundoff":
+        if quantity != local.quantity or not j.matches:
+            return j   # the defect is another quantity's (the course's missing term in ω leaves x exact)
+        return Judgement(fit, fit.verdict, False, f"no round-off excuse (every rung within its floor): "
+                         f"{local.sentence()}", True)
     p = local.declared_order
     if fit.verdict == "converges" and p is not None and fit.order is not None and fit.order >= p - tol.SWEEP_ORDER_TOL:
         return j   # this quantity shows the declared order: nothing here needed an excuse

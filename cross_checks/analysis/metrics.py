@@ -120,7 +120,8 @@ def drift_kind(t_s, drift, floor: float) -> str:
 
 
 def roundoff_floor(scale: float, n_steps: int, reference_label: str = "analytic", *, reference_error=None,
-                   amplification: float = 1.0, quantity: str = "position") -> float:
+                   amplification: float = 1.0, quantity: str = "position",
+                   eps: float = tol.ROUNDOFF_PER_STEP_REL) -> float:
     """Smallest error that still says something about the scheme (same unit as ``scale``).
 
     With ``reference_error`` (the reference's MEASURED error in this quantity, see
@@ -130,9 +131,10 @@ def roundoff_floor(scale: float, n_steps: int, reference_label: str = "analytic"
     each grown by the measured error amplification A (measured: RK4 orientation flattens at 1.0 √N ε π
     on tennis_racket, at 0.8 √N ε π A on tumbling_box).
     Without a measurement (a caller that has none): ``max(N ε, REFERENCE_ACCURACY_REL[kind])·scale``.
+    ``eps``: the machine epsilon of the run's precision (tolerances.MACHINE_EPSILON; float64 by default) —
+    the reference's error is measured in float64 whatever the run's precision.
     """
     n = max(n_steps, 1)
-    eps = tol.ROUNDOFF_PER_STEP_REL
     if reference_error is None:
         kind = "ground_truth" if reference_label.startswith("ground_truth") else "analytic"
         return max(n * eps, tol.REFERENCE_ACCURACY_REL[kind]) * scale
@@ -140,8 +142,8 @@ def roundoff_floor(scale: float, n_steps: int, reference_label: str = "analytic"
     return float(reference_error) + eps * scale * (biased + math.sqrt(n) * max(1.0, float(amplification)))
 
 
-def drift_floor(n_steps: int, amplification: float = 1.0) -> float:
+def drift_floor(n_steps: int, amplification: float = 1.0, eps: float = tol.ROUNDOFF_PER_STEP_REL) -> float:
     """Round-off level of a relative drift after ``n_steps`` steps:
     ``n_steps · ROUNDOFF_PER_STEP_REL · amplification``, where ``amplification`` (≥ 1) is the size of
     the terms summed into the quantity relative to its initial value (see :func:`energy_J`)."""
-    return max(n_steps, 1) * tol.ROUNDOFF_PER_STEP_REL * max(1.0, float(amplification))
+    return max(n_steps, 1) * eps * max(1.0, float(amplification))

@@ -89,20 +89,22 @@ class _VersionAction(argparse.Action):
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(
         prog="rbcheck",
-        description="Validate rigid-body simulators: a NumPy reference of the GAMES103 course equations, "
-                    "MuJoCo and PyBullet on identical free-body scenarios, against analytic or DOP853 references.",
+        description="Validate rigid-body simulators: a NumPy reference of the "
+                    "GAMES103 course equations, MuJoCo and PyBullet on identical "
+                    "free-body scenarios, against analytic or DOP853 references.",
         epilog="SCENARIO is a catalog name (see `rbcheck list`) or a path to a scenario TOML file. "
                "Exit codes: 0 ok; 1 regression/disagreement, a failed or a diverged run; 2 bad input or an "
                "unwritable output (one line); 130 interrupted (Ctrl-C); 143 terminated (SIGTERM). "
                "Your own engines: --engine-file (docs/engines.md).",
     )
     p.add_argument("--version", action=_VersionAction, nargs=0,
-                   help="print rbcheck's version, those of Python, NumPy and SciPy, and every engine's (or why it cannot run), then exit")
+                   help="print rbcheck's version, those of Python, NumPy and SciPy, "
+                        "and every engine's (or why it cannot run), then exit")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_Parser)
     # One declaration per command, in the order `rbcheck --help` lists them (alike in shape only: each
     # says its own command's arguments).
-    for add in (_add_list, _add_show, _add_run, _add_sweep, _add_report, _add_check, _add_compare, _add_baseline,
-                _add_bench, _add_fuzz):
+    for add in (_add_list, _add_show, _add_run, _add_sweep, _add_report, _add_check, _add_compare,
+                _add_baseline, _add_bench, _add_fuzz):
         add(sub)
     return p
 
@@ -118,153 +120,186 @@ def _add_list(sub) -> None:
 
 def _add_show(sub) -> None:
     sh = sub.add_parser(
-        "show", help="a scenario's body, initial conditions and forces, exactly as every engine receives them "
-                     "(what you need to set it up in your own simulator)",
-        description="Print the scenario with every alternative resolved (inertia 3x3 about the COM in body axes, "
-                    "orientation as a unit quaternion w x y z, angular velocity in WORLD axes, body points from the "
-                    "COM, velocity-decay factors per step at the run's dt). --json prints the exact JSON an "
-                    "engine-file command receives as {scenario_json} (docs/engines.md).")
+        "show",
+        help="a scenario's body, initial conditions and forces, exactly as every "
+             "engine receives them (what you need to set it up in your own simulator)",
+        description="Print the scenario with every alternative resolved (inertia 3x3 about the COM in body "
+                    "axes, orientation as a unit quaternion w x y z, angular velocity in WORLD axes, body "
+                    "points from the COM, velocity-decay factors per step at the run's dt). --json prints "
+                    "the exact JSON an engine-file command receives as {scenario_json} (docs/engines.md).")
     sh.add_argument("scenario", metavar="SCENARIO")
-    sh.add_argument("--json", action="store_true", help="print the resolved scenario JSON instead of the text")
-    sh.add_argument("--dt", type=_positive_float, metavar="DT", help="resolve at this time step, s (default: the scenario's dt)")
-    sh.add_argument("--duration", type=_positive_float, metavar="T", help="simulated time, s (default: the scenario's)")
+    sh.add_argument("--json", action="store_true",
+                    help="print the resolved scenario JSON instead of the text")
+    sh.add_argument("--dt", type=_positive_float, metavar="DT",
+                    help="resolve at this time step, s (default: the scenario's dt)")
+    sh.add_argument("--duration", type=_positive_float, metavar="T",
+                    help="simulated time, s (default: the scenario's)")
 
 
 def _add_run(sub) -> None:
     r = sub.add_parser("run", help="run one scenario with one engine variant and write the trajectory CSV")
     r.add_argument("scenario", metavar="SCENARIO")
     r.add_argument("--engine", required=True, metavar="ENGINE[:VARIANT]",
-                   help="e.g. reference:course, mujoco:rk4; an engine name alone runs its default variant "
-                        "(the first `rbcheck list` shows: reference:course, mujoco:euler, pybullet:multibody)")
-    r.add_argument("--dt", type=_positive_float, metavar="DT", help="time step, s (default: the scenario's dt)")
-    r.add_argument("--duration", type=_positive_float, metavar="T", help="simulated time, s (default: the scenario's)")
-    r.add_argument("--out", required=True, metavar="FILE.csv", help="trajectory CSV (sidecar FILE.json beside it)")
+                   help="e.g. reference:course, mujoco:rk4; an engine name alone runs its default "
+                        "variant (the first `rbcheck list` shows: reference:course, mujoco:euler, "
+                        "pybullet:multibody)")
+    r.add_argument("--dt", type=_positive_float, metavar="DT",
+                   help="time step, s (default: the scenario's dt)")
+    r.add_argument("--duration", type=_positive_float, metavar="T",
+                   help="simulated time, s (default: the scenario's)")
+    r.add_argument("--out", required=True, metavar="FILE.csv",
+                   help="trajectory CSV (sidecar FILE.json beside it)")
     _add_engine_file_option(r)
 
 
 def _add_sweep(sub) -> None:
     s = sub.add_parser(
-        "sweep", help="run scenarios x engine variants x dt ladders; write results, convergence verdicts and the report",
-        description="Run every scenario (default: the whole catalog) with every engine variant (default: all "
-                    "available) at every dt of its ladder, in parallel; write DIR/results.csv, DIR/summary.json, "
-                    "DIR/series/, DIR/plots/ and the HTML report. DIR is replaced only when the sweep is complete. "
-                    "Exit 1 when a result contradicts the expectations (cross_checks/analysis/expectations.py), a "
-                    "run fails, two schemes that must be identical disagree, or a scenario's two references (its "
-                    "closed form or DOP853, and Drake's, when Drake is installed) disagree beyond their measured "
-                    "accuracies.")
-    s.add_argument("scenarios", nargs="*", metavar="SCENARIO", help="catalog names or TOML paths (default: the catalog)")
+        "sweep",
+        help="run scenarios x engine variants x dt ladders; write "
+             "results, convergence verdicts and the report",
+        description="Run every scenario (default: the whole catalog) with every engine variant (default: "
+                    "all available) at every dt of its ladder, in parallel; write DIR/results.csv, "
+                    "DIR/summary.json, DIR/series/, DIR/plots/ and the HTML report. DIR is replaced only "
+                    "when the sweep is complete. Exit 1 when a result contradicts the expectations "
+                    "(cross_checks/analysis/expectations.py), a run fails, two schemes that must be "
+                    "identical disagree, or a scenario's two references (its closed form or DOP853, and "
+                    "Drake's, when Drake is installed) disagree beyond their measured accuracies.")
+    s.add_argument("scenarios", nargs="*", metavar="SCENARIO",
+                   help="catalog names or TOML paths (default: the catalog)")
     s.add_argument("--engines", nargs="+", metavar="ENGINE[:VARIANT]",
                    help="variants to run, e.g. reference:rk4 mujoco (an engine name means all its variants); "
                         "default: every available variant")
     s.add_argument("--jobs", type=_jobs_option, metavar="N", help="worker processes (default: all cores)")
     s.add_argument("--out", required=True, metavar="DIR",
-                   help="results directory, replaced atomically and only when absent, empty or rbcheck's own (its marker)")
+                   help="results directory, replaced atomically and only "
+                        "when absent, empty or rbcheck's own (its marker)")
     s.add_argument("--no-cache", action="store_true",
-                   help="recompute every run instead of reusing cached results ($RBCHECK_CACHE_DIR or ~/.cache/rbcheck)")
-    s.add_argument("--self-contained", action="store_true", help="embed the plots in the HTML pages (for CI artifacts)")
+                   help="recompute every run instead of reusing cached "
+                        "results ($RBCHECK_CACHE_DIR or ~/.cache/rbcheck)")
+    s.add_argument("--self-contained", action="store_true",
+                   help="embed the plots in the HTML pages (for CI artifacts)")
     _add_engine_file_option(s)
     s.add_argument("--time-limit", type=_seconds_option, metavar="S",
-                   help="wall-time limit of each run and of each reference solve, s; one over it is a failed row "
-                        "(default: 900, cross_checks/core/tolerances.py)")
+                   help="wall-time limit of each run and of each reference solve, s; one over "
+                        "it is a failed row (default: 900, cross_checks/core/tolerances.py)")
     s.add_argument("--dask", metavar="ADDRESS",
-                   help="run the jobs on a Dask cluster (scheduler address, e.g. tcp://host:8786) through "
-                        "distributed's Client.get_executor(); needs the optional extra: pip install 'rbcheck[dask]'. "
-                        "Workers must share this machine's filesystem for DIR's parent and the cache")
+                   help="run the jobs on a Dask cluster (scheduler address, e.g. "
+                        "tcp://host:8786) through distributed's Client.get_executor(); needs "
+                        "the optional extra: pip install 'rbcheck[dask]'. Workers must share "
+                        "this machine's filesystem for DIR's parent and the cache")
 
 
 def _add_report(sub) -> None:
-    rp = sub.add_parser("report", help="re-render the plots and HTML of a results directory from its saved data")
+    rp = sub.add_parser("report",
+                        help="re-render the plots and HTML of a results directory from its saved data")
     rp.add_argument("dir", metavar="DIR")
     rp.add_argument("--self-contained", action="store_true", help="embed the plots in the HTML pages")
-    rp.add_argument("--jobs", type=_jobs_option, metavar="N", help="processes drawing figures (default: all cores)")
+    rp.add_argument("--jobs", type=_jobs_option, metavar="N",
+                    help="processes drawing figures (default: all cores)")
 
 
 def _add_check(sub) -> None:
     c = sub.add_parser(
-        "check", help="a true verdict on any simulator's trajectory CSV: correct simulation of the scenario or not, and why",
-        description="Judge TRAJ.csv (trajectory CSV, columns by name; pose-only files too) against SCENARIO: from every "
-                    "recorded state the exact motion over the row's interval is compared with the next row (one-step "
-                    "defect), conserved quantities are checked where the physics conserves them, and the run is "
-                    "compared with the scenario's reference within a capped, derived allowance; every reference "
-                    "variant and a catalog of classic mistakes are compared step for step. Several files of the "
-                    "same scenario at different dt: each is checked and the convergence order is fitted (ladder). "
-                    "Exit 0: it is a correct simulation of the scenario's physics at its dt (or, with --scheme, "
-                    "exactly that scheme); 1: it is not (the output says which quantity, from when, by how much, "
-                    "and the likely cause: a trajectory that is exactly the course's step where that step is wrong "
-                    "fails); 2: bad input. "
-                    "See docs/check.md.")
+        "check",
+        help="a true verdict on any simulator's trajectory CSV: correct "
+             "simulation of the scenario or not, and why",
+        description="Judge TRAJ.csv (trajectory CSV, columns by name; pose-only files too) against "
+                    "SCENARIO: from every recorded state the exact motion over the row's interval is "
+                    "compared with the next row (one-step defect), conserved quantities are checked "
+                    "where the physics conserves them, and the run is compared with the scenario's "
+                    "reference within a capped, derived allowance; every reference variant and a catalog "
+                    "of classic mistakes are compared step for step. Several files of the same scenario "
+                    "at different dt: each is checked and the convergence order is fitted (ladder). Exit "
+                    "0: it is a correct simulation of the scenario's physics at its dt (or, "
+                    "with --scheme, exactly that scheme); 1: it is not (the output says which quantity, "
+                    "from when, by how much, and the likely cause: a trajectory that is exactly the "
+                    "course's step where that step is wrong fails); 2: bad input. See docs/check.md.")
     c.add_argument("trajectories", nargs="+", metavar="TRAJ.csv", help="trajectory CSV file(s)")
     c.add_argument("--scenario", required=True, metavar="SCENARIO", help="catalog name or scenario TOML file")
     c.add_argument("--dt", type=_positive_float, metavar="DT",
-                   help="the simulator's integration step, s, when rows are written less often than every step "
-                        "(default: inferred from the times)")
+                   help="the simulator's integration step, s, when rows are written "
+                        "less often than every step (default: inferred from the times)")
     c.add_argument("--scheme", metavar="ENGINE:VARIANT",
-                   help="ask a different question: is this trajectory exactly that scheme (e.g. reference:course, "
-                        "for a student checking a faithful implementation of the course)? PASS says what the scheme "
-                        "gets wrong on this scenario, if anything. Without it: is it a correct simulation of the "
-                        "scenario's physics?")
+                   help="ask a different question: is this trajectory exactly that scheme (e.g. "
+                        "reference:course, for a student checking a faithful implementation of the "
+                        "course)? PASS says what the scheme gets wrong on this scenario, if "
+                        "anything. Without it: is it a correct simulation of the scenario's physics?")
     c.add_argument("--json", metavar="FILE", help="also write everything the check found as JSON")
-    c.add_argument("--plot", metavar="FILE.png", help="draw the trajectory, the reference, the closest correct scheme "
-                                                      "and the one-step defect over time")
+    c.add_argument("--plot", metavar="FILE.png",
+                   help="draw the trajectory, the reference, the closest "
+                        "correct scheme and the one-step defect over time")
     _add_engine_file_option(c)
 
 
 def _add_compare(sub) -> None:
     cmp_ = sub.add_parser(
-        "compare", help="compare a new results directory with a baseline: regressions, improvements, new/missing rows",
-        description="Match rows of BASELINE_DIR/results.csv and NEW_DIR/results.csv by (scenario, engine, dt). Errors "
-                    "and drifts are better when lower, orders when closer to the expected order; each metric has an "
-                    "absolute + relative tolerance (cross_checks/core/tolerances.py). Either directory may be a full "
-                    "results directory or a compact baseline (rbcheck baseline). NEW_DIR of a subset sweep is "
-                    "compared on the scenarios and variants it ran (its summary.json lists them); the baseline's other "
-                    "rows are counted in one line, not compared; so are, one line per engine, the rows of an optional "
-                    "engine (drake) that was not installed where NEW_DIR was made, unless --require names it. Each variant is "
-                    "judged as a whole — regression, improvement, scheme changed (orders kept, errors both ways "
-                    "within x4) — with its causes first (orders, one-step orders, agreements, energy-drift kind); "
-                    "every row follows (folded in --markdown). Exit 0: no regression (a stale baseline is said in "
-                    "one line); 1: a regression (or rows of what NEW_DIR ran missing from it, unless "
-                    "--allow-missing; a variant NEW_DIR's sweep skipped because its engine is installed but broken "
-                    "counts as missing; with --fail-on-change any change); 2: unusable input. See docs/results.md.")
+        "compare",
+        help="compare a new results directory with a baseline: regressions, improvements, new/missing rows",
+        description="Match rows of BASELINE_DIR/results.csv and NEW_DIR/results.csv by (scenario, "
+                    "engine, dt). Errors and drifts are better when lower, orders when closer to the "
+                    "expected order; each metric has an absolute + relative tolerance "
+                    "(cross_checks/core/tolerances.py). Either directory may be a full results "
+                    "directory or a compact baseline (rbcheck baseline). NEW_DIR of a subset sweep "
+                    "is compared on the scenarios and variants it ran (its summary.json lists them); "
+                    "the baseline's other rows are counted in one line, not compared; so are, one "
+                    "line per engine, the rows of an optional engine (drake) that was not installed "
+                    "where NEW_DIR was made, unless --require names it. Each variant is judged as a "
+                    "whole — regression, improvement, scheme changed (orders kept, errors both ways "
+                    "within x4) — with its causes first (orders, one-step orders, agreements, "
+                    "energy-drift kind); every row follows (folded in --markdown). Exit 0: no "
+                    "regression (a stale baseline is said in one line); 1: a regression (or rows of "
+                    "what NEW_DIR ran missing from it, unless --allow-missing; a variant NEW_DIR's "
+                    "sweep skipped because its engine is installed but broken counts as missing; "
+                    "with --fail-on-change any change); 2: unusable input. See docs/results.md.")
     cmp_.add_argument("baseline", metavar="BASELINE_DIR")
     cmp_.add_argument("new", metavar="NEW_DIR")
-    cmp_.add_argument("--markdown", metavar="FILE", help="also write the comparison as a markdown table (CI job summary)")
+    cmp_.add_argument("--markdown", metavar="FILE",
+                      help="also write the comparison as a markdown table (CI job summary)")
     cmp_.add_argument("--allow-missing", action="store_true",
-                      help="rows absent from NEW_DIR (e.g. a variant unavailable there) are reported but not a regression")
+                      help="rows absent from NEW_DIR (e.g. a variant unavailable "
+                           "there) are reported but not a regression")
     cmp_.add_argument("--fail-on-change", action="store_true",
-                      help="exit 1 on any change, improvements and changed schemes included (a CI job that insists "
-                           "the committed baseline be regenerated); without it a stale baseline is said in one line")
+                      help="exit 1 on any change, improvements and changed schemes "
+                           "included (a CI job that insists the committed baseline be "
+                           "regenerated); without it a stale baseline is said in one line")
     cmp_.add_argument("--require", action="append", default=[], metavar="ENGINE",
-                      help="an engine NEW_DIR must have run (repeatable): an optional engine (e.g. drake) that was "
-                           "not installed there is then a failure instead of one line of rows not compared")
+                      help="an engine NEW_DIR must have run (repeatable): an optional "
+                           "engine (e.g. drake) that was not installed there is then "
+                           "a failure instead of one line of rows not compared")
 
 
 def _add_baseline(sub) -> None:
     bl = sub.add_parser(
-        "baseline", help="write the compact, reviewable baseline of a results directory (what baselines/default holds)",
-        description="Write OUT_DIR/results.csv (RESULTS_DIR's rows without the timing columns wall_s and cached, "
-                    "cells copied exactly) and OUT_DIR/summary.json (provenance and one line per scenario, variant, "
-                    "convergence, local-convergence and agreement record, reduced to what compare reads and a "
-                    "reviewer needs to see a verdict change). rbcheck compare reads it like a results directory. "
-                    "OUT_DIR is replaced as a whole, and only when absent, empty or holding nothing but those two "
-                    "files. Exit 0: written; 2: RESULTS_DIR damaged or not a results directory, OUT_DIR refused or "
-                    "not writable. See docs/results.md.")
+        "baseline",
+        help="write the compact, reviewable baseline of a results directory (what baselines/default holds)",
+        description="Write OUT_DIR/results.csv (RESULTS_DIR's rows without the timing columns "
+                    "wall_s and cached, cells copied exactly) and OUT_DIR/summary.json (provenance "
+                    "and one line per scenario, variant, convergence, local-convergence and "
+                    "agreement record, reduced to what compare reads and a reviewer needs to see a "
+                    "verdict change). rbcheck compare reads it like a results directory. OUT_DIR "
+                    "is replaced as a whole, and only when absent, empty or holding nothing but "
+                    "those two files. Exit 0: written; 2: RESULTS_DIR damaged or not a results "
+                    "directory, OUT_DIR refused or not writable. See docs/results.md.")
     bl.add_argument("results", metavar="RESULTS_DIR", help="a results directory written by rbcheck sweep")
     bl.add_argument("out", metavar="OUT_DIR", help="the baseline directory to write, e.g. baselines/default")
 
 
 def _add_bench(sub) -> None:
-    b = sub.add_parser("bench", help="throughput of the reference vs MuJoCo and PyBullet, and the cold sweep against "
-                                     "its floor, measured in one run",
-                       description="Step the same N free bodies (gravity + a body torque; the same N in every row) "
-                                   "in the batched reference, MuJoCo (N bodies in one model; rollout) and PyBullet, "
-                                   "and a single trajectory in the reference and mj_step; then time a cold sweep "
-                                   "(--no-cache: the catalog with every reference, MuJoCo and PyBullet variant, its "
-                                   "run stage and its report apart) against its floor: total engine steps x one bare "
-                                   "mj_step measured here / cores. Every measurement is repeated: median and "
-                                   "[min, max] (cross_checks/bench.py); and rbcheck fuzz's cases/s per engine "
-                                   "(docs/fuzz.md).")
+    b = sub.add_parser("bench",
+                       help="throughput of the reference vs MuJoCo and PyBullet, and "
+                            "the cold sweep against its floor, measured in one run",
+                       description="Step the same N free bodies (gravity + a body torque; the same N "
+                                   "in every row) in the batched reference, MuJoCo (N bodies in one "
+                                   "model; rollout) and PyBullet, and a single trajectory in the "
+                                   "reference and mj_step; then time a cold sweep (--no-cache: the "
+                                   "catalog with every reference, MuJoCo and PyBullet variant, its run "
+                                   "stage and its report apart) against its floor: total engine steps "
+                                   "x one bare mj_step measured here / cores. Every measurement is "
+                                   "repeated: median and [min, max] (cross_checks/bench.py); and "
+                                   "rbcheck fuzz's cases/s per engine (docs/fuzz.md).")
     b.add_argument("--quick", action="store_true",
-                   help="fewer bodies and steps, and a sweep of 3 scenarios (about a minute instead of several)")
+                   help="fewer bodies and steps, and a sweep of 3 "
+                        "scenarios (about a minute instead of several)")
     b.add_argument("--repeats", type=_repeats_option, default=3, metavar="N",
                    help="repeats of every measurement (default 3, at most 100)")
     b.add_argument("--no-sweep", action="store_true", help="leave out the sweep against its floor")
@@ -273,22 +308,28 @@ def _add_bench(sub) -> None:
 
 def _add_fuzz(sub) -> None:
     fz = sub.add_parser(
-        "fuzz", help="search random valid scenarios for engine disagreements; shrink each failure to a scenario file",
-        description="Draw random valid scenarios (every body, initial-state and force kind) with the dimensionless "
-                    "numbers under control so that a correct engine of its declared order must pass, and check on "
-                    "each: same-scheme pairs agree to round-off, each variant's one-step defect and free-running error "
-                    "have its declared order, conserved quantities drift no more than the scheme allows. Each distinct "
-                    "failure is shrunk to a minimal scenario, DIR/counterexamples/*.toml, which `rbcheck sweep` with "
-                    "the same engines confirms (exit 1). DIR/fuzz.json and DIR/index.html summarise. Deterministic for "
-                    "a seed. Exit 0: nothing found; 1: counterexamples; 2: bad input. See docs/fuzz.md.")
+        "fuzz",
+        help="search random valid scenarios for engine disagreements; "
+             "shrink each failure to a scenario file",
+        description="Draw random valid scenarios (every body, initial-state and force kind) with the "
+                    "dimensionless numbers under control so that a correct engine of its declared order "
+                    "must pass, and check on each: same-scheme pairs agree to round-off, each variant's "
+                    "one-step defect and free-running error have its declared order, conserved quantities "
+                    "drift no more than the scheme allows. Each distinct failure is shrunk to a minimal "
+                    "scenario, DIR/counterexamples/*.toml, which `rbcheck sweep` with the same engines "
+                    "confirms (exit 1). DIR/fuzz.json and DIR/index.html summarise. Deterministic for a "
+                    "seed. Exit 0: nothing found; 1: counterexamples; 2: bad input. See docs/fuzz.md.")
     fz.add_argument("--engines", nargs="+", metavar="ENGINE[:VARIANT]",
-                    help="variants to check (an engine name means all its variants); default: every available variant")
+                    help="variants to check (an engine name means all its "
+                         "variants); default: every available variant")
     fz.add_argument("--budget", type=_seconds_option, default=60.0, metavar="SECONDS",
                     help="seconds of searching (default 60); shrinking the failures found comes after it")
     fz.add_argument("--seed", type=_nonnegative_int, default=0, metavar="N", help="campaign seed (default 0)")
     fz.add_argument("--jobs", type=_jobs_option, metavar="N", help="worker processes (default: all cores)")
-    fz.add_argument("--no-cache", action="store_true", help="recompute every batch instead of reusing cached outcomes")
-    fz.add_argument("--dask", metavar="ADDRESS", help="run the batches on a Dask cluster (as rbcheck sweep --dask)")
+    fz.add_argument("--no-cache", action="store_true",
+                    help="recompute every batch instead of reusing cached outcomes")
+    fz.add_argument("--dask", metavar="ADDRESS",
+                    help="run the batches on a Dask cluster (as rbcheck sweep --dask)")
     fz.add_argument("--out", required=True, metavar="DIR",
                     help="output directory, replaced atomically and only when absent, empty or rbcheck's own")
     _add_engine_file_option(fz)
@@ -297,8 +338,8 @@ def _add_fuzz(sub) -> None:
 def _add_engine_file_option(p) -> None:
     """``--engine-file FILE`` (repeatable): engines main() registers before the command runs."""
     p.add_argument("--engine-file", action="append", metavar="FILE", default=[],
-                   help="add the engine of this engine file (TOML: name, version, [variants.X] order, description, "
-                        "command; docs/engines.md); repeatable. Its variants are NAME:VARIANT")
+                   help="add the engine of this engine file (TOML: name, version, [variants.X] order, "
+                        "description, command; docs/engines.md); repeatable. Its variants are NAME:VARIANT")
 
 
 def _engine_file_inputs(args) -> list:
@@ -368,7 +409,8 @@ def _list_json() -> str:
             defaults[v.engine] = _default_or_none(v.engine)
         variants.append({"name": v.name, "engine": v.engine, "variant": v.variant, "available": v.available,
                          "reason": v.reason, "version": v.version, "declared_order": v.order,
-                         "description": v.description, "source": v.source, "default": v.name == defaults[v.engine]})
+                         "description": v.description, "source": v.source,
+                         "default": v.name == defaults[v.engine]})
     return json.dumps({"scenarios": scenarios, "variants": variants}, indent=1)
 
 
@@ -400,8 +442,8 @@ def cmd_list(args) -> int:
             print(f"  {'':<26} {text.strip()}")
     from cross_checks.engines import unusable_required_engines
     for engine, why in unusable_required_engines().items():
-        print(f"rbcheck list: warning: {engine} is required by rbcheck and cannot run here ({why}): sweep and fuzz "
-              "exit 2 until it is reinstalled", file=sys.stderr)
+        print(f"rbcheck list: warning: {engine} is required by rbcheck and cannot run here ({why}): "
+              "sweep and fuzz exit 2 until it is reinstalled", file=sys.stderr)
     return EXIT_OK
 
 
@@ -482,8 +524,8 @@ def refuse_inputs_as_outputs(outputs, inputs) -> None:
             inside = (not out_is_dir and in_is_dir and _is_within(o, i)) or (out_is_dir and _is_within(i, o))
             if same or inside:
                 how = "is" if same else ("lies inside" if not out_is_dir else "holds")
-                raise BadInput(f"{option} {out}: {how} the {what} {given} this command reads; writing there would "
-                               "destroy its input — choose another path")
+                raise BadInput(f"{option} {out}: {how} the {what} {given} this command reads; "
+                               "writing there would destroy its input — choose another path")
 
 
 def _samefile(a: Path, b: Path) -> bool:
@@ -494,7 +536,8 @@ def _samefile(a: Path, b: Path) -> bool:
 
 
 def _scenario_inputs(specs) -> list:
-    """``[("scenario file", path, False)]`` of the SCENARIO arguments that are files (catalog names are not)."""
+    """``[("scenario file", path, False)]`` of the SCENARIO arguments that are
+    files (catalog names are not)."""
     return [("scenario file", s, False) for s in specs if s and Path(s).exists()]
 
 
@@ -526,7 +569,8 @@ def cmd_run(args) -> int:
         raise BadInput(f"--engine: {exc}{_did_you_mean(args.engine)}") from None
     out = _check_out_path(args.out)
     from cross_checks.core.trajectory import sidecar_path
-    refuse_inputs_as_outputs([("--out", args.out, False), ("--out (its sidecar)", sidecar_path(args.out), False)],
+    refuse_inputs_as_outputs([("--out", args.out, False),
+                              ("--out (its sidecar)", sidecar_path(args.out), False)],
                              _scenario_inputs([args.scenario]) + _engine_file_inputs(args))
     sc = load_scenario(args.scenario)
     dt, T = _step_and_duration(args, sc)
@@ -592,9 +636,9 @@ def _refuse_unusable_required_engines() -> None:
     broken = unusable_required_engines()
     if broken:
         engine, why = next(iter(broken.items()))
-        raise BadInput(f"{engine} is required by rbcheck and cannot run here: {why}; reinstall it "
-                       "(pip install --force-reinstall rbcheck, or pip install -e . in a clone, installs the tested "
-                       "versions)")
+        raise BadInput(f"{engine} is required by rbcheck and cannot run here: {why}; "
+                       "reinstall it (pip install --force-reinstall rbcheck, or pip "
+                       "install -e . in a clone, installs the tested versions)")
 
 
 def _gate_failures(summary) -> list:
@@ -609,8 +653,8 @@ def _gate_failures(summary) -> list:
     for sc in summary.get("scenarios", []):   # every verdict rests on the reference: two that disagree fail
         sr = sc.get("second_reference") or {}
         if sr.get("agrees") is False:
-            out.append(f"the references of {sc['name']} disagree: {sc['reference']} and {sr['label']} differ in "
-                       f"{', '.join(sr.get('disagreeing', []))} beyond their measured accuracies")
+            out.append(f"the references of {sc['name']} disagree: {sc['reference']} and {sr['label']} "
+                       f"differ in {', '.join(sr.get('disagreeing', []))} beyond their measured accuracies")
     n_failed = summary.get("run", {}).get("failed_runs", 0)
     if n_failed:
         out.append(f"{n_failed} run(s) failed (status 'failed' in results.csv)")
@@ -643,7 +687,8 @@ def cmd_sweep(args) -> int:
         check_output_dir(args.out)  # before any work (run_sweep checks again just before it starts)
     except ResultsDirError as exc:
         raise BadInput(str(exc)) from None
-    refuse_inputs_as_outputs([("--out", args.out, True)], _scenario_inputs(args.scenarios) + _engine_file_inputs(args))
+    refuse_inputs_as_outputs([("--out", args.out, True)],
+                             _scenario_inputs(args.scenarios) + _engine_file_inputs(args))
     scenarios = [load_scenario(s) for s in args.scenarios or catalog_names()]
     variants, skipped = _resolve_engines(args.engines)
     if not variants:
@@ -684,7 +729,8 @@ def verdict_count(summary) -> tuple:
     scenario's two references the sweep judged, and how many of them contradict what is expected."""
     conv = [r for r in summary.get("convergence", []) if r.get("matches_expectation") is not None]
     agree = summary.get("agreement", [])
-    refs = [sc["second_reference"] for sc in summary.get("scenarios", []) if (sc.get("second_reference") or {})
+    refs = [sc["second_reference"]
+            for sc in summary.get("scenarios", []) if (sc.get("second_reference") or {})
             .get("agrees") is not None]
     total = len(conv) + len(agree) + len(refs)
     wrong = (sum(r["matches_expectation"] is False for r in conv) + sum(not a.get("agrees") for a in agree)
@@ -759,7 +805,8 @@ def cmd_compare(args) -> int:
     from cross_checks.gates.compare import CompareInputError, compare_dirs, to_markdown, to_text
 
     refuse_inputs_as_outputs([("--markdown", args.markdown, False)],
-                             [("baseline directory", args.baseline, True), ("results directory", args.new, True)])
+                             [("baseline directory", args.baseline, True),
+                              ("results directory", args.new, True)])
     if args.markdown:
         _check_out_path(args.markdown, None, "--markdown")
     try:
@@ -778,7 +825,8 @@ def _variants_ran(new_dir) -> list:
     """The variants NEW_DIR's summary lists (to name the ones that did not change)."""
     import json
     try:
-        return [v["name"] for v in json.loads((Path(new_dir) / "summary.json").read_text()).get("variants", [])]
+        return [v["name"]
+                for v in json.loads((Path(new_dir) / "summary.json").read_text()).get("variants", [])]
     except (OSError, ValueError, KeyError, TypeError):
         return []
 
@@ -806,8 +854,9 @@ def cmd_bench(args) -> int:
     import reports
     from cross_checks.fuzz.throughput import format_fuzz, fuzz_throughput
     jobs = usable_cores()
-    return bench_main(args.quick, args.json, extra={"fuzz": (fuzz_throughput, format_fuzz)}, repeats=args.repeats,
-                      sweep=not args.no_sweep, render=lambda d: reports.render(d, jobs=jobs))
+    return bench_main(args.quick, args.json, extra={"fuzz": (fuzz_throughput, format_fuzz)},
+                      repeats=args.repeats, sweep=not args.no_sweep,
+                      render=lambda d: reports.render(d, jobs=jobs))
 
 
 def cmd_fuzz(args) -> int:
@@ -816,8 +865,9 @@ def cmd_fuzz(args) -> int:
     return run_fuzz(args, BadInput, _resolve_engines, _dask_client)
 
 
-COMMANDS = {"list": cmd_list, "show": cmd_show, "run": cmd_run, "sweep": cmd_sweep, "report": cmd_report, "check": cmd_check,
-            "compare": cmd_compare, "baseline": cmd_baseline, "bench": cmd_bench, "fuzz": cmd_fuzz}
+COMMANDS = {"list": cmd_list, "show": cmd_show, "run": cmd_run, "sweep": cmd_sweep, "report": cmd_report,
+            "check": cmd_check, "compare": cmd_compare, "baseline": cmd_baseline, "bench": cmd_bench,
+            "fuzz": cmd_fuzz}
 
 
 def main(argv=None) -> int:
@@ -847,7 +897,8 @@ def main(argv=None) -> int:
     except OSError as exc:  # a file that could not be read or written: name it, no traceback
         where = f"{exc.filename}: " if exc.filename else ""
         return _error(args.command, f"{where}{exc.strerror or exc}")
-    except (MemoryError, RecursionError, Exception) as exc:  # noqa: BLE001 - every error path: one line, exit 2
+    except (MemoryError, RecursionError, Exception) as exc:  # noqa: BLE001
+        # every error path: one line, exit 2
         if os.environ.get("RBCHECK_DEBUG"):
             raise
         return _error(args.command, f"internal error: {type(exc).__name__}: {exc} "

@@ -49,7 +49,8 @@ def run_check(args, BadInput) -> int:
     if args.plot:
         _write_plot(results, ladder, sc, args.plot)
     if args.json:
-        obj = results[0].as_dict() if ladder is None else {"ladder": ladder, "files": [r.as_dict() for r in results]}
+        obj = (results[0].as_dict() if ladder is None
+               else {"ladder": ladder, "files": [r.as_dict() for r in results]})
         atomic_write_text(args.json, to_json_text(obj))
     passed = all(r.passed for r in results) and (ladder is None or ladder["passed"])
     return 0 if passed else 1

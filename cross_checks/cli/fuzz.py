@@ -16,10 +16,11 @@ __all__ = ["run_fuzz"]
 
 def _print_result(summary, out, t0) -> None:
     c = summary["cases"]
-    print(f"rbcheck fuzz: seed {summary['provenance']['seed']}: {c['judged']} cases judged ({c['skipped']} skipped as "
-          f"outside the fairness bounds) x {len(summary['variants'])} variant(s) = {c['case_variant_runs']} case-variant "
-          f"judgments in {c['search_s']:.0f} s ({c['cases_per_s']:.2f} cases/s; {c['cached_batches']} of {c['batches']} "
-          f"batches cached); {time.perf_counter() - t0:.0f} s in all -> {Path(out) / 'index.html'}")
+    print(f"rbcheck fuzz: seed {summary['provenance']['seed']}: {c['judged']} cases judged "
+          f"({c['skipped']} skipped as outside the fairness bounds) x {len(summary['variants'])} "
+          f"variant(s) = {c['case_variant_runs']} case-variant judgments in {c['search_s']:.0f} s "
+          f"({c['cases_per_s']:.2f} cases/s; {c['cached_batches']} of {c['batches']} batches "
+          f"cached); {time.perf_counter() - t0:.0f} s in all -> {Path(out) / 'index.html'}")
     print(f"  {'variant':<24} {'cases':>7} {'cases/s':>9}   properties checked (no claim)")
     for v, d in summary["per_variant"].items():
         rate = f"{d['cases_per_s']:.1f}" if d["cases_per_s"] else "-"
@@ -56,8 +57,8 @@ def run_fuzz(args, BadInput, resolve_engines, dask_client) -> int:
             client.close()
     _print_result(summary, args.out, t0)
     for e in summary["batch_errors"]:
-        print(f"rbcheck fuzz: warning: batch {e['batch']} could not be judged ({e['error']}); its cases are not "
-              "counted", file=sys.stderr)
+        print(f"rbcheck fuzz: warning: batch {e['batch']} could not be judged ({e['error']}); "
+              "its cases are not counted", file=sys.stderr)
     found = summary["counterexamples"] + summary["not_shrunk"]
     if not found:
         print("rbcheck fuzz: no property violated")
@@ -71,5 +72,6 @@ def run_fuzz(args, BadInput, resolve_engines, dask_client) -> int:
         print(f"    reproduce: {cx['reproduce']}", file=sys.stderr)
     for f in summary["not_shrunk"]:
         why = " (a documented engine behaviour explains each)" if f.get("explained") else ""
-        print(f"  (not shrunk) {f['property']} of {' / '.join(f['variants'])}: {f['cases']} case(s){why}", file=sys.stderr)
+        print(f"  (not shrunk) {f['property']} of {' / '.join(f['variants'])}: {f['cases']} case(s){why}",
+              file=sys.stderr)
     return 1

@@ -59,10 +59,11 @@ def _discard(stream) -> None:
 
 
 #: How characters a stream cannot encode (PYTHONIOENCODING=ascii, a C locale) are written instead.
-_ASCII = {"Δ": "d", "δ": "delta", "ω": "w", "χ": "chi", "θ": "theta", "τ": "tau", "—": "-", "–": "-", "−": "-",
-          "…": "...", "×": "x", "≤": "<=", "≥": ">=", "≈": "~", "±": "+/-", "²": "^2", "³": "^3", "⁻": "^-",
-          "¹": "1", "ᵖ": "^p", "⁺": "+", "→": "->", "·": "*", "√": "sqrt", "✓": "v", "✗": "x", "†": "+", "π": "pi",
-          "µ": "u", "μ": "u", "’": "'", "‘": "'", "“": '"', "”": '"', "⟂": "_|_", "▼": "v", "≪": "<<", "≫": ">>"}
+_ASCII = {"Δ": "d", "δ": "delta", "ω": "w", "χ": "chi", "θ": "theta", "τ": "tau", "—": "-", "–": "-",
+          "−": "-", "…": "...", "×": "x", "≤": "<=", "≥": ">=", "≈": "~", "±": "+/-", "²": "^2", "³": "^3",
+          "⁻": "^-", "¹": "1", "ᵖ": "^p", "⁺": "+", "→": "->", "·": "*", "√": "sqrt", "✓": "v", "✗": "x",
+          "†": "+", "π": "pi", "µ": "u", "μ": "u", "’": "'", "‘": "'", "“": '"', "”": '"', "⟂": "_|_",
+          "▼": "v", "≪": "<<", "≫": ">>"}
 
 
 def _degrade(exc):
@@ -173,7 +174,8 @@ class Progress:
             tail = f", ~{_seconds(left)} left"
         if self.last and not final:
             tail += f"; last: {self.last}"
-        say(f"{self.prefix}: {self.what} {self.done}/{self.total}{pct} in {_seconds(elapsed)}{tail}", self.stream)
+        say(f"{self.prefix}: {self.what} {self.done}/{self.total}{pct} in {_seconds(elapsed)}{tail}",
+            self.stream)
 
     def close(self, finished: bool = True) -> None:
         """End the stage: the bar closes; without a terminal a last line says it is done. A stage

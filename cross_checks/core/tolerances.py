@@ -31,6 +31,27 @@ CLOSED_FORM_VS_GROUND_TRUTH = 1e-10
 #: N ε |y|. Measured: RK4 position on tumbling_box 8.5e-11 m after N = 4e4 steps at |x| = 28 m,
 #: i.e. 0.34 N ε |x|; RK4 orientation on tennis_racket flattens at 1e-13 rad after 16000 steps.
 ROUNDOFF_PER_STEP_REL = 2.2e-16
+#: Machine epsilon of each precision a variant may declare (engines.base.Traits.precision): the spacing of
+#: floating-point numbers at 1 (IEEE 754 binary64 and binary32, numpy.finfo(dtype).eps): 2⁻⁵², written 2.2e-16 as
+#: ROUNDOFF_PER_STEP_REL, and 2⁻²³. Every round-off floor of a variant scales with its precision's ε
+#: (metrics.roundoff_floor).
+MACHINE_EPSILON = {"float64": ROUNDOFF_PER_STEP_REL, "float32": 2.0 ** -23}
+#: Unit roundoff of each precision (half its ε: the largest relative error of one rounding to nearest): what one
+#: step's arithmetic may leave in the one-step defect allowance (analysis.flow.local_allowances).
+UNIT_ROUNDOFF = {"float64": 2.0 ** -53, "float32": 2.0 ** -24}
+#: A float32 variant's ladder reaches coarser steps where its truncation error shows above float32's round-off
+#: (expectations.judged_ladder_s): coarser rungs (half the steps each) are added until this many rungs are
+#: expected RESOLVED_ABOVE_FLOOR times above their floors (a fit needs two; one more shows the curvature) ...
+PRECISION_LADDER_MIN_RESOLVED = 3
+#: ... at most this many (the catalog needs at most 4 at float32: docs/verdicts.md) ...
+PRECISION_LADDER_MAX_EXTRA = 6
+#: ... while a step turns the fastest motion by at most (p + 1) × this angle ω_c Δt (rad) for an order-p variant:
+#: the next term of its error series stays ~(ω_c Δt)/(p + 1) ≤ 15 % of the leading one (the asymptotic regime
+#: the fit measures), and every scheme of the catalog stays stable (explicit Euler's oscillator grows by
+#: ω²Δt² = 0.09 per step at 0.3 rad; RK4's stability interval reaches 2.8 rad, beyond its 0.75) ...
+PRECISION_LADDER_STEP_ANGLE_PER_ORDER_RAD = 0.15
+#: ... and a run keeps at least this many steps (a ladder point of fewer steps is the initial transient).
+PRECISION_LADDER_MIN_STEPS = 16
 #: Round-off scatters about its estimate: a point within this factor of its floor, finer than one
 #: at the floor, is round-off noise too.
 ROUNDOFF_NOISE_FACTOR = 10.0

@@ -1,8 +1,8 @@
 """Trajectories: the CSV + sidecar JSON of docs/trajectory.md.
 
-CSV columns (written in this order, read by name in any order): ``t,x,y,z,vx,vy,vz,qw,qx,qy,qz,wx,wy,wz`` — time (s); COM position (m, world);
-COM velocity (m/s, world); orientation body→world (w, x, y, z); angular velocity (rad/s, WORLD).
-Metadata goes in ``<name>.json`` next to ``<name>.csv``.
+CSV columns (written in this order, read by name in any order): ``t,x,y,z,vx,vy,vz,qw,qx,qy,qz,wx,wy,wz`` —
+time (s); COM position (m, world); COM velocity (m/s, world); orientation body→world (w, x, y, z); angular
+velocity (rad/s, WORLD). Metadata goes in ``<name>.json`` next to ``<name>.csv``.
 """
 from __future__ import annotations
 
@@ -41,9 +41,10 @@ def _limits():
 
 
 def _read_bounded(name: str, path, max_rows: int, max_line: int, max_bytes: int) -> bytes:
-    """The file's bytes, read in chunks and refused as soon as it cannot be a trajectory: a line longer than
-    ``max_line`` bytes (``/dev/zero``, a binary file), more than ``max_rows`` data rows (no run of the limits
-    records more steps), or more than ``max_bytes`` in all. Memory stays bounded by what a valid file holds."""
+    """The file's bytes, read in chunks and refused as soon as it cannot be a trajectory: a line
+    longer than ``max_line`` bytes (``/dev/zero``, a binary file), more than ``max_rows`` data rows
+    (no run of the limits records more steps), or more than ``max_bytes`` in all. Memory stays bounded
+    by what a valid file holds."""
     chunks, size, lines, carry = [], 0, 0, 0   # carry: bytes of the line still open at the chunk's start
     try:
         with open(path, "rb") as fh:
@@ -53,19 +54,20 @@ def _read_bounded(name: str, path, max_rows: int, max_line: int, max_bytes: int)
                     break
                 size += len(chunk)
                 if size > max_bytes:
-                    raise TrajectoryError(f"{name}: larger than {max_bytes / 2 ** 30:.3g} GiB: no trajectory within "
-                                          "rbcheck's limits is (docs/hardening.md)")
+                    raise TrajectoryError(f"{name}: larger than {max_bytes / 2 ** 30:.3g} GiB: no "
+                                          "trajectory within rbcheck's limits is (docs/hardening.md)")
                 parts = chunk.split(b"\n")
                 lengths = [carry + len(parts[0])] + [len(p) for p in parts[1:]]
                 worst = max(range(len(lengths)), key=lengths.__getitem__)
                 if lengths[worst] > max_line:
-                    raise TrajectoryError(f"{name}: line {lines + worst + 1}: longer than {max_line} bytes: not a "
-                                          "trajectory CSV")
+                    raise TrajectoryError(f"{name}: line {lines + worst + 1}: longer "
+                                          f"than {max_line} bytes: not a trajectory CSV")
                 carry = lengths[-1]
                 lines += len(parts) - 1
                 if lines > max_rows + 1:
-                    raise TrajectoryError(f"{name}: rows: more than {max_rows} rows; no run within rbcheck's limits "
-                                          f"records more steps ({max_rows - 1} per run, docs/hardening.md)")
+                    raise TrajectoryError(f"{name}: rows: more than {max_rows} rows; no run "
+                                          "within rbcheck's limits records more steps "
+                                          f"({max_rows - 1} per run, docs/hardening.md)")
                 chunks.append(chunk)
     except OSError as exc:
         raise TrajectoryError(f"{name}: cannot read: {exc.strerror or exc}") from None
@@ -119,7 +121,8 @@ class Trajectory:
         """Write the CSV and its sidecar JSON (atomically each; the JSON last)."""
         csv_path = Path(csv_path)
         atomic_write_text(csv_path, self.to_csv_text())
-        atomic_write_text(sidecar_path(csv_path), json.dumps(self.meta, indent=2, sort_keys=True, default=json_default) + "\n")
+        atomic_write_text(sidecar_path(csv_path),
+                          json.dumps(self.meta, indent=2, sort_keys=True, default=json_default) + "\n")
 
     @classmethod
     def read(cls, csv_path, *, require: tuple = QUANTITY_GROUPS) -> Trajectory:
@@ -262,7 +265,8 @@ def _present_groups(name: str, index: dict, require) -> list:
             raise TrajectoryError(f"{name}: header: {g} columns {','.join(cols)} missing "
                                   f"(expected {','.join(COLUMNS)}, by name, any order)")
     if not present:
-        raise TrajectoryError(f"{name}: header: no state columns (expected {','.join(COLUMNS)}, by name, any order)")
+        raise TrajectoryError(f"{name}: header: no state columns (expected "
+                              f"{','.join(COLUMNS)}, by name, any order)")
     return present
 
 
@@ -273,13 +277,15 @@ def _parse_rows(name: str, rows: list, ncol: int, wanted: list, pos: dict):
     for k, row in enumerate(rows):
         line = k + 2
         if len(row) != ncol:
-            raise TrajectoryError(f"{name}: line {line}: expected {ncol} values (as in the header), got {len(row)}")
+            raise TrajectoryError(f"{name}: line {line}: expected {ncol} "
+                                  f"values (as in the header), got {len(row)}")
         for c, i in wanted:
             cell = row[i].strip()
             try:
                 data[k, pos[c]] = float(cell)
             except ValueError:
-                raise TrajectoryError(f"{name}: line {line}: column {c}: not a number: {cell[:40]!r}") from None
+                raise TrajectoryError(
+                    f"{name}: line {line}: column {c}: not a number: {cell[:40]!r}") from None
     return data
 
 

@@ -62,7 +62,7 @@ __all__ = ["EngineAdapter", "Variant", "harness_force_torque", "stage_force_torq
            "decay_factors", "EngineError", "optional_import", "require", "EngineNotInstalled", "installed_version",
            "library_files", "RunRequest", "Traits",
            "SYMPLECTIC_EULER_EXPLICIT_GYRO", "SYMPLECTIC_EULER_IMPLICIT_GYRO", "WHOLE_STATE_EXPLICIT_EULER",
-           "WHOLE_STATE_IMPLICIT_EULER", "HIGHER_ORDER"]
+           "WHOLE_STATE_IMPLICIT_EULER", "HIGHER_ORDER", "DEFAULT_TRAITS"]
 
 
 class EngineError(RuntimeError):
@@ -226,6 +226,9 @@ class Traits:
           turns; that perturbation grows like any other (the measured amplification).
     rotation_sign : +1 the rotational energy grows (an explicit gyroscopic term), −1 it decays (an
         implicit one), 0 none, None unknown (both are considered).
+    precision : the floating-point format the engine's step computes in, "float64" or "float32"
+        (core.tolerances.MACHINE_EPSILON): every round-off floor of the variant's verdicts scales with its ε,
+        and a float32 variant is judged on a ladder that reaches coarser steps (docs/verdicts.md, "Precision").
     forces_held : the engine holds the applied force and torque it was given over all the stages of a
         step (it cannot evaluate them per stage). On a scenario whose forces change within a step
         (state-dependent forces, velocity decay) a multi-stage scheme is then first order: the held force
@@ -237,6 +240,11 @@ class Traits:
     rotation_drift: str = "none"
     rotation_sign: int | None = 0
     forces_held: bool = False
+    precision: str = "float64"
+
+    def __post_init__(self):
+        if self.precision not in ("float64", "float32"):
+            raise ValueError(f"precision must be 'float64' or 'float32', not {self.precision!r}")
 
 #: A body-frame step of Euler's equations with an explicit gyroscopic term, then the attitude (MuJoCo Euler).
 SYMPLECTIC_EULER_EXPLICIT_GYRO = Traits(rotation_drift="body", rotation_sign=+1)
@@ -247,6 +255,12 @@ SYMPLECTIC_EULER_IMPLICIT_GYRO = Traits(rotation_drift="body", rotation_sign=-1)
 #: implicit gains them; the attitude and ω_W steps are coupled through I_W).
 WHOLE_STATE_EXPLICIT_EULER = Traits(translation_drift=+1, rotation_drift="whole_state", rotation_sign=-1)
 WHOLE_STATE_IMPLICIT_EULER = Traits(translation_drift=-1, rotation_drift="whole_state", rotation_sign=+1)
+#: A variant that declares no traits (e.g. a user engine with only its declared order): assumed to
+#: have the gyroscopic term (a correct engine; if it lacks it, the sweep says so), and, if it is first
+#: order, to drift in either direction in both translation and rotation, whole-state style — the most
+#: cautious choice: no order is claimed wherever any first-order scheme could be pre-asymptotic.
+DEFAULT_TRAITS = Traits(gyroscopic_term=True, translation_drift=None, rotation_drift="whole_state",
+                        rotation_sign=None)
 #: Order ≥ 2: the amplitude error of an order-p scheme is of order p + 1 (|R(iωΔt)|² = 1 + O((ωΔt)^{p+2})); a
 #: symplectic scheme keeps it: no amplitude rule applies.
 HIGHER_ORDER = Traits()

@@ -6,14 +6,15 @@ Model: one ``dart.simulation.World`` per run holding one ``Skeleton`` made of a 
 tensor taken as it is, so the body frame is the scenario's and body origin = COM — no shape node (nothing
 to collide with), gravity and time step from the scenario (DART's defaults: (0, 0, −9.81) m/s² and 1 ms).
 
-State mapping (docs/engine_conventions.md "DART 6.x", pinned by tests/cross_checks/engines/test_dart_engine.py):
-the FreeJoint's positions are ``[r, x_W]`` with ``r`` the ROTATION VECTOR of R_WB (DART's
-``FreeJoint::convertToPositions``: ``logMap(R)``, |r| ≤ π) and ``x_W`` the body origin; its velocities are
-``[ω_W, v_W]``, BOTH IN WORLD AXES (the relative Jacobian of a FreeJoint whose parent is the world is
-``diag(R_WBᵀ, R_WBᵀ)``, ``FreeJoint::updateRelativeJacobian``; ``BodyNode.getSpatialVelocity()`` gives the
-same motion in body axes). The quaternion (w, x, y, z) is converted to and from the rotation vector at the
-boundary only (``quat_log``/``quat_exp``); the recorded quaternion is kept sign-continuous from the scenario's
-initial one (the rotation vector's quaternion has w ≥ 0 and flips sign where |r| passes π).
+State mapping (docs/engine_conventions.md "DART 6.x", pinned by
+tests/cross_checks/engines/test_dart_engine.py): the FreeJoint's positions are ``[r, x_W]`` with ``r`` the
+ROTATION VECTOR of R_WB (DART's ``FreeJoint::convertToPositions``: ``logMap(R)``, |r| ≤ π) and ``x_W`` the
+body origin; its velocities are ``[ω_W, v_W]``, BOTH IN WORLD AXES (the relative Jacobian of a FreeJoint whose
+parent is the world is ``diag(R_WBᵀ, R_WBᵀ)``, ``FreeJoint::updateRelativeJacobian``;
+``BodyNode.getSpatialVelocity()`` gives the same motion in body axes). The quaternion (w, x, y, z) is
+converted to and from the rotation vector at the boundary only (``quat_log``/``quat_exp``); the recorded
+quaternion is kept sign-continuous from the scenario's initial one (the rotation vector's quaternion has w ≥ 0
+and flips sign where |r| passes π).
 
 The step (DART's ``World::step``, dart/simulation/World.cpp): ``Skeleton::computeForwardDynamics`` (the
 articulated-body algorithm: ``ω̇_W = I_W⁻¹(τ − ω × I_W ω)``, the gyroscopic term DART's own) and
@@ -67,17 +68,20 @@ from reference_sim.simulate import BLOWUP_LIMIT, Run, blowup_words, diverged
 
 dart, _IMPORT_ERROR = optional_import("dartpy")
 
-__all__ = ["ENGINE", "VARIANTS", "JOINT_SETTINGS", "EngineError", "version", "simulate", "one_step", "DartBody",
-           "DartAdapter", "neutralise", "to_dart_state", "from_dart_state", "continuous_quaternions"]
+__all__ = ["ENGINE", "VARIANTS", "JOINT_SETTINGS", "EngineError", "version", "simulate", "one_step",
+           "DartBody", "DartAdapter", "neutralise", "to_dart_state", "from_dart_state",
+           "continuous_quaternions"]
 
 ENGINE = "dart"
 #: DART's one integrator (``World::step``; dart::integration::SemiImplicitEulerIntegrator names the scheme):
 #: semi-implicit Euler, first order.
 VARIANTS = {
-    # ω_W += Δt I_W⁻¹(τ − ω × I_W ω) (explicit gyroscopic term), then R ← exp(ω_W Δt) R and x += Δt v with the new
-    # velocities (dart/dynamics/FreeJoint.cpp): MuJoCo Euler's scheme
-    "semi_implicit_euler": Variant(1, "DART World::step: semi-implicit Euler, explicit gyroscopic term (its own "
-                                      "articulated-body dynamics), exponential-map rotation update with the new ω",
+    # ω_W += Δt I_W⁻¹(τ − ω × I_W ω) (explicit gyroscopic term), then R ← exp(ω_W Δt) R and x += Δt v with the
+    # new velocities (dart/dynamics/FreeJoint.cpp): MuJoCo Euler's scheme
+    "semi_implicit_euler": Variant(1,
+                                   "DART World::step: semi-implicit Euler, explicit "
+                                   "gyroscopic term (its own articulated-body dynamics), "
+                                   "exponential-map rotation update with the new ω",
                                    traits=SYMPLECTIC_EULER_EXPLICIT_GYRO),
 }
 
@@ -187,11 +191,13 @@ class DartBody:
         joint, node = skeleton.createFreeJointAndBodyNodePair()
         inertia = dart.dynamics.Inertia(float(body.mass_kg), _ZERO3, np.asarray(body.inertia_B, dtype=float))
         if not inertia.verify():
-            raise EngineError(f"DART {version()} rejects the inertia of scenario {scenario.name!r} "
-                              "(dart::dynamics::Inertia::verify is false: a mass or moment that is not positive)")
+            raise EngineError(f"DART {version()} rejects the inertia of scenario "
+                              f"{scenario.name!r} (dart::dynamics::Inertia::verify "
+                              "is false: a mass or moment that is not positive)")
         node.setInertia(inertia)
         world.addSkeleton(skeleton)
-        world.setGravity(np.asarray(p.forces.gravity_W, dtype=float))   # the world's gravity reaches its skeletons
+        # the world's gravity reaches its skeletons
+        world.setGravity(np.asarray(p.forces.gravity_W, dtype=float))
         world.setTimeStep(float(dt_s))
         neutralise(world, joint, node)
         self.world, self.skeleton, self.joint, self.node = world, skeleton, joint, node

@@ -71,14 +71,14 @@ VARIANTS = {
     "runge_kutta2": ("runge_kutta2", 2, "Drake RK2 (explicit trapezoid / Heun), forces at both stages"),
     "runge_kutta3": ("runge_kutta3", 3, "Drake RK3 (Kutta's third-order scheme), forces at every stage"),
     "implicit_euler": ("implicit_euler", 1,
-                       "Drake implicit Euler on the whole state (Newton iteration, finite-difference Jacobian)"),
+                       "Drake implicit Euler on the whole state (Newton "
+                       "iteration, finite-difference Jacobian)"),
 }
 
-#: What each step does besides its order (cross_checks.engines.base.Traits). Semi-explicit Euler:
-#: ω_W += Δt I_W⁻¹(τ − ω_W × I_W ω_W) at the start-of-step attitude — the body-frame explicit Euler step of
-#: Euler's equations seen in world axes — then q from the new ω (and x from the new v: symplectic in
-#: translation). Implicit Euler: one implicit step of the whole state (q, ω_W, x, v_W), like
-#: reference:implicit_euler.
+#: What each step does besides its order (cross_checks.engines.base.Traits). Semi-explicit Euler: ω_W += Δt
+#: I_W⁻¹(τ − ω_W × I_W ω_W) at the start-of-step attitude — the body-frame explicit Euler step of Euler's
+#: equations seen in world axes — then q from the new ω (and x from the new v: symplectic in translation).
+#: Implicit Euler: one implicit step of the whole state (q, ω_W, x, v_W), like reference:implicit_euler.
 TRAITS = {"semi_explicit_euler": SYMPLECTIC_EULER_EXPLICIT_GYRO, "implicit_euler": WHOLE_STATE_IMPLICIT_EULER,
           "runge_kutta2": HIGHER_ORDER, "runge_kutta3": HIGHER_ORDER}
 
@@ -176,7 +176,8 @@ class DrakeModel:
         try:
             self.body = plant.AddRigidBody("body", _spatial_inertia(p.body))
         except RuntimeError as exc:  # Drake's validity checks of the inertia
-            raise EngineError(f"Drake {version()} rejected the inertia of scenario {scenario.name!r}: {exc}") from None
+            raise EngineError(
+                f"Drake {version()} rejected the inertia of scenario {scenario.name!r}: {exc}") from None
         plant.mutable_gravity_field().set_gravity_vector(np.asarray(forces.gravity_W, dtype=float))
         plant.Finalize()
         self.plant = plant
@@ -197,7 +198,8 @@ class DrakeModel:
             y0 = p.initial_packed()
             f, tau = stage_force_torque(scenario, y0)     # constant: any state gives the same
             weight = p.body.mass_kg * np.asarray(forces.gravity_W, dtype=float)
-            plant.get_applied_generalized_force_input_port().FixValue(self.context, np.concatenate([tau, f - weight]))
+            plant.get_applied_generalized_force_input_port().FixValue(self.context,
+                                                                      np.concatenate([tau, f - weight]))
         self.integrator_name = integrator
         self.integrator = ResetIntegratorFromFlags(self.simulator, integrator, 1.0)
 
@@ -249,7 +251,8 @@ def _diverged(x_out, dt_s: float, n_bad: int, what: str) -> Run:
 
 
 def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
-    """Free run of ``n_steps`` fixed steps of ``dt_s`` from the scenario's initial state, every step recorded."""
+    """Free run of ``n_steps`` fixed steps of ``dt_s`` from the scenario's initial
+    state, every step recorded."""
     model = _model(scenario, variant, dt_s)
     y0 = scenario.problem.initial_packed()
     model.set_state(y0)
@@ -263,7 +266,8 @@ def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
             for n in range(start, stop):
                 try:
                     advance(n * dt_s)
-                except RuntimeError as exc:   # Drake refuses to go on (NaN detected, Newton failed): divergence
+                # Drake refuses to go on (NaN detected, Newton failed): divergence
+                except RuntimeError as exc:
                     first = _first_bad(x_out, start, n)
                     if first is not None:     # the state had already blown up: that is the time
                         return _diverged(x_out, dt_s, *first)

@@ -24,9 +24,9 @@ def drake_label(target_accuracy: float) -> str:
 
 
 def drake_solution(scenario, t_s, target_accuracy: float):
-    """``(y, steps)``: states (T, 13) packed ``[x_W, v_W, q_WB, ω_W]`` at the increasing times ``t_s``
-    (from 0), from the scenario's initial state, and the number of steps Drake took. Raises ImportError when Drake is not installed and RuntimeError when
-    Drake cannot reach a time (its message)."""
+    """``(y, steps)``: states (T, 13) packed ``[x_W, v_W, q_WB, ω_W]`` at the increasing times ``t_s`` (from
+    0), from the scenario's initial state, and the number of steps Drake took. Raises ImportError when Drake
+    is not installed and RuntimeError when Drake cannot reach a time (its message)."""
     t_s = np.asarray(t_s, dtype=float)
     model = DrakeModel(scenario, INTEGRATOR)
     integ = model.integrator

@@ -8,6 +8,7 @@ An engine file is TOML (docs/engines.md)::
     timeout = 300                  # optional: seconds one run may take (default DEFAULT_TIMEOUT_S)
     [variants.euler]
     order = 1                      # the global order its author claims; verdicts check it
+    precision = "float32"          # optional: the format its steps compute in (default "float64")
     description = "semi-implicit Euler, exp-map rotation"
     command = ["./mysim", "{scenario_json}", "{dt}", "{out_csv}"]
 
@@ -40,6 +41,7 @@ commands name.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import hashlib
 import math
 import os
@@ -58,7 +60,7 @@ import numpy as np
 
 from cross_checks.core import tolerances as tol
 from cross_checks.core.names import NAME_RE, unknown_key_reason
-from cross_checks.engines.base import EngineAdapter, EngineError, Variant
+from cross_checks.engines.base import DEFAULT_TRAITS, EngineAdapter, EngineError, Variant
 from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
 
 __all__ = ["EngineFileError", "ExternalEngine", "load_engine_file", "PLACEHOLDERS", "DEFAULT_TIMEOUT_S"]
@@ -82,7 +84,7 @@ FOLDER_MAX_FILES = 5000
 FOLDER_CONTENT_MAX_BYTES = 64 * 2 ** 20
 
 _TOP = {"name", "version", "description", "timeout", "variants"}
-_VARIANT = {"order", "description", "command"}
+_VARIANT = {"order", "description", "command", "precision"}
 
 
 class EngineFileError(ValueError):
@@ -144,12 +146,13 @@ def _resolve_program(path, folder: Path, fld: str, program: str) -> str:
 
 def _parse_command(path, folder: Path, fld: str, cmd) -> list:
     if not isinstance(cmd, list) or not cmd:
-        raise EngineFileError(path, fld, f"must be a non-empty list of strings, e.g. [\"./mysim\", \"{{scenario_json}}\", "
-                                         f"\"{{out_csv}}\"], got {cmd!r}"[:300])
+        raise EngineFileError(path, fld,
+                              f"must be a non-empty list of strings, e.g. [\"./mysim\", "
+                              f"\"{{scenario_json}}\", \"{{out_csv}}\"], got {cmd!r}"[:300])
     parsed = [_parse_argument(path, f"{fld}[{i}]", a) for i, a in enumerate(cmd)]
     if any(name for _, name in parsed[0]):
-        raise EngineFileError(path, f"{fld}[0]", "the program must be named literally (placeholders are for its "
-                                                 "arguments)")
+        raise EngineFileError(path, f"{fld}[0]",
+                              "the program must be named literally (placeholders are for its arguments)")
     used = {name for arg in parsed for _, name in arg if name}
     for need, why in (("out_csv", "where to write the trajectory"), ("scenario_json", "what to simulate")):
         if need not in used:
@@ -170,8 +173,10 @@ def _string(path, d: dict, key: str, fld: str, default=None, nonempty=False):
         return default
     v = d[key]
     if not isinstance(v, str) or (nonempty and not v.strip()):
-        hint = f" (quote it: {key} = \"{v}\")" if isinstance(v, (int, float)) and not isinstance(v, bool) else ""
-        raise EngineFileError(path, fld, f"must be a{' non-empty' if nonempty else ''} string, got {v!r}{hint}")
+        hint = (f" (quote it: {key} = \"{v}\")"
+                if isinstance(v, (int, float)) and not isinstance(v, bool) else "")
+        raise EngineFileError(path, fld,
+                              f"must be a{' non-empty' if nonempty else ''} string, got {v!r}{hint}")
     return v
 
 
@@ -256,10 +261,13 @@ def load_engine_file(path) -> ExternalEngine:
     if name is None:
         raise EngineFileError(path, "name", "missing (required): the engine name, used as NAME:VARIANT")
     if not NAME_RE.match(name):
-        raise EngineFileError(path, "name", f"must match [a-z0-9_]+ (lower-case letters, digits, underscore), got {name!r}")
+        raise EngineFileError(path, "name",
+                              "must match [a-z0-9_]+ (lower-case letters, "
+                              f"digits, underscore), got {name!r}")
     version = _string(path, raw, "version", "version", default="", nonempty=True)
     description = _string(path, raw, "description", "description", default="")
-    timeout = (_number(path, raw, "timeout", "timeout", 0.0, MAX_TIMEOUT_S, f"a number of seconds in (0, {MAX_TIMEOUT_S:g}]")
+    timeout = (_number(path, raw, "timeout", "timeout", 0.0, MAX_TIMEOUT_S,
+                       f"a number of seconds in (0, {MAX_TIMEOUT_S:g}]")
                if "timeout" in raw else DEFAULT_TIMEOUT_S)
     if "variants" not in raw:
         raise EngineFileError(path, "variants", "missing (required): at least one [variants.NAME] table")
@@ -276,14 +284,22 @@ def load_engine_file(path) -> ExternalEngine:
             raise EngineFileError(path, where, f"must be a table [{where}], got {spec!r}")
         _check_keys(path, spec, _VARIANT, where + ".")
         if "order" not in spec:
-            raise EngineFileError(path, f"{where}.order", "missing (required): the global order of accuracy its "
-                                                          "author claims (e.g. 1 for semi-implicit Euler)")
+            raise EngineFileError(path, f"{where}.order",
+                                  "missing (required): the global order of accuracy "
+                                  "its author claims (e.g. 1 for semi-implicit Euler)")
         order = _number(path, spec, "order", f"{where}.order", 0.0, 20.0, "a number in (0, 20]")
         desc = _string(path, spec, "description", f"{where}.description", default="")
         if "command" not in spec:
-            raise EngineFileError(path, f"{where}.command", "missing (required): the command that runs one simulation")
+            raise EngineFileError(path, f"{where}.command",
+                                  "missing (required): the command that runs one simulation")
         commands[vname] = _parse_command(path, folder, f"{where}.command", spec["command"])
-        variants[vname] = Variant(order, desc)
+        precision = _string(path, spec, "precision", f"{where}.precision", default="float64")
+        if precision not in tol.MACHINE_EPSILON:
+            raise EngineFileError(path, f"{where}.precision",
+                                  f"must be one of {', '.join(tol.MACHINE_EPSILON)} (the format its steps "
+                                  f"compute in), got {precision!r}")
+        traits = None if precision == "float64" else dataclasses.replace(DEFAULT_TRAITS, precision=precision)
+        variants[vname] = Variant(order, desc, traits=traits)
     sha = hashlib.sha256(data).hexdigest()
     return ExternalEngine(path.resolve(), name, version, description, timeout, variants, commands, sha,
                           _program_files(folder, commands), folder_fingerprint(folder))
@@ -308,7 +324,8 @@ class _TermKillsGroup:
         self.proc, self.prev = proc, None
 
     def __enter__(self):
-        if threading.current_thread() is threading.main_thread() and signal.getsignal(signal.SIGTERM) == signal.SIG_DFL:
+        if (threading.current_thread() is threading.main_thread()
+                and signal.getsignal(signal.SIGTERM) == signal.SIG_DFL):
             def on_term(signum, frame):
                 _kill_group(self.proc)
                 signal.signal(signal.SIGTERM, signal.SIG_DFL)
@@ -530,23 +547,24 @@ class ExternalEngine(EngineAdapter):
             out_dir.mkdir()
             json_path, out_csv = run_dir / "scenario.json", out_dir / "trajectory.csv"
             json_path.write_text(resolved_json(scenario, dt_s, T), encoding="utf-8")
-            argv = self.argv(variant, {"scenario_json": str(json_path), "dt": repr(float(dt_s)), "steps": str(n_steps),
-                                       "duration": repr(float(T)), "out_csv": str(out_csv),
-                                       "engine_dir": str(self.folder.resolve())})
+            argv = self.argv(variant,
+                             {"scenario_json": str(json_path), "dt": repr(float(dt_s)), "steps": str(n_steps),
+                              "duration": repr(float(T)), "out_csv": str(out_csv),
+                              "engine_dir": str(self.folder.resolve())})
             rc, timed_out, words = _run_command(argv, work, self.timeout_s)
             where = f"{self.name}:{variant} at Δt = {dt_s:g} s"
             said = f" — it said: {words}" if words else " (it printed nothing)"
             if timed_out:
-                raise EngineError(f"{where}: no result within the time limit of {self.timeout_s:g} s (set `timeout` "
-                                  f"in {self.path.name}); the command was killed{said}")
+                raise EngineError(f"{where}: no result within the time limit of {self.timeout_s:g} s "
+                                  f"(set `timeout` in {self.path.name}); the command was killed{said}")
             if rc != 0:
                 raise EngineError(f"{where}: the command {_exit_words(rc)}{said}")
             if not out_csv.is_file():
                 elsewhere = sorted(p.name for p in work.glob("*.csv"))
                 if elsewhere:
-                    raise EngineError(f"{where}: the command wrote no CSV at {{out_csv}} but {', '.join(elsewhere[:3])} "
-                                      f"in its working directory (write the trajectory to the path {{out_csv}} "
-                                      f"gives){said}")
+                    raise EngineError(f"{where}: the command wrote no CSV at {{out_csv}} but "
+                                      f"{', '.join(elsewhere[:3])} in its working directory (write "
+                                      f"the trajectory to the path {{out_csv}} gives){said}")
             run = _read_output(out_csv, scenario, dt_s, n_steps, where, said)
             return run
         finally:
@@ -571,8 +589,8 @@ def _read_output(out_csv: Path, scenario, dt_s: float, n_steps: int, where: str,
         raise EngineError(f"{where}: the command exited 0 but wrote no CSV at {{out_csv}}{said}")
     size = out_csv.stat().st_size
     if size > (n_steps + 2) * MAX_CSV_BYTES_PER_ROW:
-        raise EngineError(f"{where}: the CSV is {size} bytes, more than {MAX_CSV_BYTES_PER_ROW} bytes per row for "
-                          f"{n_steps + 1} rows: not a trajectory")
+        raise EngineError(f"{where}: the CSV is {size} bytes, more than {MAX_CSV_BYTES_PER_ROW} bytes per "
+                          f"row for {n_steps + 1} rows: not a trajectory")
     try:
         t, y, _ = read_columns(out_csv)
     except TrajectoryError as exc:
@@ -581,8 +599,8 @@ def _read_output(out_csv: Path, scenario, dt_s: float, n_steps: int, where: str,
     n_rows = len(t)
     bad = bad_rows(y)
     if n_rows < n_steps + 1 and not np.any(bad):
-        raise EngineError(f"{where}: the CSV has {n_rows} rows, expected {n_steps + 1} (t = 0 and each of the "
-                          f"{n_steps} steps){said}")
+        raise EngineError(f"{where}: the CSV has {n_rows} rows, expected {n_steps + 1} "
+                          f"(t = 0 and each of the {n_steps} steps){said}")
     if n_rows > n_steps + 1:
         raise EngineError(f"{where}: the CSV has {n_rows} rows, more than the {n_steps + 1} of t = 0 and "
                           f"{n_steps} steps{said}")
@@ -590,14 +608,15 @@ def _read_output(out_csv: Path, scenario, dt_s: float, n_steps: int, where: str,
     off = np.abs(t - grid) > 0.5 * dt_s
     if np.any(off):
         k = int(np.argmax(off))
-        raise EngineError(f"{where}: row {k} (line {k + 2}) has t = {float(t[k])!r}, expected {float(grid[k])!r} (one row per step "
-                          f"of {dt_s:g} s from t = 0)")
+        raise EngineError(f"{where}: row {k} (line {k + 2}) has t = {float(t[k])!r}, expected "
+                          f"{float(grid[k])!r} (one row per step of {dt_s:g} s from t = 0)")
     if bad[0]:
         raise EngineError(f"{where}: the first row (t = 0) is not a finite state{said}")
     note = _initial_state_note(y[0], scenario)
     if np.any(bad):
         k = int(np.argmax(bad))
-        return diverged(y[:k], dt_s, f" ({blowup_words(y[k])}, written by the engine)" + (f"; {note}" if note else ""))
+        return diverged(y[:k], dt_s,
+                        f" ({blowup_words(y[k])}, written by the engine)" + (f"; {note}" if note else ""))
     return Run(dt_s * np.arange(n_steps + 1), y, None, note)
 
 
@@ -607,7 +626,8 @@ def _initial_state_note(y0, scenario) -> str:
     ref = scenario.problem.initial_packed()
     scale = max(1.0, float(np.max(np.abs(ref))))
     parts = []
-    for name, sl in (("position", slice(0, 3)), ("velocity", slice(3, 6)), ("angular velocity", slice(10, 13))):
+    for name, sl in (("position", slice(0, 3)), ("velocity", slice(3, 6)),
+                     ("angular velocity", slice(10, 13))):
         d = float(np.max(np.abs(y0[sl] - ref[sl])))
         if d > tol.ENGINE_FILE_INITIAL_STATE_REL * scale:
             parts.append(f"{name} by {d:.3g}")

@@ -55,15 +55,20 @@ from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
 
 p, _IMPORT_ERROR = optional_import("pybullet", quiet_stderr=True)   # it prints its build time at import
 
-__all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate", "simulate_many", "one_step", "DYNAMICS_SETTINGS"]
+__all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate",
+           "simulate_many", "one_step", "DYNAMICS_SETTINGS"]
 
 ENGINE = "pybullet"
 #: The variants with their declared global orders: both modes are semi-implicit Euler (explicit
 #: gyroscopic term in multibody, implicit in maximal coordinates): 1.
 VARIANTS = {
-    "multibody": Variant(1, "PyBullet Featherstone multibody (default): semi-implicit Euler, explicit gyroscopic term",
+    "multibody": Variant(1,
+                         "PyBullet Featherstone multibody (default): "
+                         "semi-implicit Euler, explicit gyroscopic term",
                          traits=SYMPLECTIC_EULER_EXPLICIT_GYRO),
-    "maximal": Variant(1, "PyBullet maximal coordinates (btRigidBody): semi-implicit Euler, implicit gyroscopic term",
+    "maximal": Variant(1,
+                       "PyBullet maximal coordinates (btRigidBody): "
+                       "semi-implicit Euler, implicit gyroscopic term",
                        traits=SYMPLECTIC_EULER_IMPLICIT_GYRO),
 }
 
@@ -293,7 +298,8 @@ def _run_steps(B, scenario, y0, raw, dt_s: float, n_steps: int) -> Run:
 
     def steps(start, stop):
         c, b, apply = B.c, B.b, B.apply
-        step, pose, vel, reset_vel = p.stepSimulation, p.getBasePositionAndOrientation, p.getBaseVelocity, p.resetBaseVelocity
+        step, pose, vel, reset_vel = (p.stepSimulation, p.getBasePositionAndOrientation,
+                                      p.getBaseVelocity, p.resetBaseVelocity)
         f, tau, prev = now["f"], now["tau"], now["prev"]
         rows = []
         for n in range(start, stop):
@@ -301,8 +307,8 @@ def _run_steps(B, scenario, y0, raw, dt_s: float, n_steps: int) -> Run:
                 fx, fy, fz, tx, ty, tz = harness(packed(prev))
                 f, tau = (fx - wx, fy - wy, fz - wz), (tx, ty, tz)
             if decay:
-                reset_vel(b, (prev[3] * gv, prev[4] * gv, prev[5] * gv), (prev[10] * gw, prev[11] * gw, prev[12] * gw),
-                          physicsClientId=c)
+                reset_vel(b, (prev[3] * gv, prev[4] * gv, prev[5] * gv),
+                          (prev[10] * gw, prev[11] * gw, prev[12] * gw), physicsClientId=c)
             apply(f, tau, prev[0:3])
             step(physicsClientId=c)
             ps, orn = pose(b, physicsClientId=c)
@@ -344,7 +350,8 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     if len(y_start) == 0:
         return np.empty_like(y_start).reshape(shape)
     with LOCK, np.errstate(all="ignore"):
-        return _one_steps(_kept_body(scenario, variant, dt_s, y_start[0]), scenario, dt_s, y_start).reshape(shape)
+        return _one_steps(_kept_body(scenario, variant, dt_s, y_start[0]),
+                          scenario, dt_s, y_start).reshape(shape)
 
 
 def _one_steps(B, scenario, dt_s: float, y_start) -> np.ndarray:

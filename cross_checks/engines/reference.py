@@ -13,10 +13,10 @@ from reference_sim.simulate import Run, run_members
 from reference_sim.simulate import simulate as _simulate
 
 ENGINE = "reference"
-#: What each scheme's step does besides its order (cross_checks.engines.base.Traits; tests/cross_checks/analysis/
-#: test_expectations.py pins each sign on the schemes themselves): the course's update has no gyroscopic term;
-#: the course-type schemes with it are body-frame symplectic Euler steps; explicit and implicit Euler step the
-#: whole state in world axes.
+#: What each scheme's step does besides its order (cross_checks.engines.base.Traits;
+#: tests/cross_checks/analysis/test_expectations.py pins each sign on the schemes themselves): the course's
+#: update has no gyroscopic term; the course-type schemes with it are body-frame symplectic Euler steps;
+#: explicit and implicit Euler step the whole state in world axes.
 TRAITS = {
     "course": B.Traits(gyroscopic_term=False),
     "course_gyro": B.SYMPLECTIC_EULER_EXPLICIT_GYRO, "expmap_gyro": B.SYMPLECTIC_EULER_EXPLICIT_GYRO,
@@ -43,8 +43,8 @@ def simulate_many(variant: str, requests) -> list:
     if not requests:
         return []
     problems = [r.scenario.problem for r in requests]
-    return run_members(Members.stack(problems), variant, [r.dt_s for r in requests], [r.n_steps for r in requests],
-                       np.array([p.initial_packed() for p in problems]))
+    return run_members(Members.stack(problems), variant, [r.dt_s for r in requests],
+                       [r.n_steps for r in requests], np.array([p.initial_packed() for p in problems]))
 
 
 def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:

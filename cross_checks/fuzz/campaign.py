@@ -219,7 +219,8 @@ def _tallies(results, variants) -> dict:
                 per[v]["cases"] += judged
         for c in r["cases"]:
             for v, t in c["tally"].items():
-                into = per[v]["properties"] if v in per else pairs.setdefault(v, {p: [0, 0] for p in P.PROPERTIES})
+                into = (per[v]["properties"] if v in per
+                        else pairs.setdefault(v, {p: [0, 0] for p in P.PROPERTIES}))
                 for p, (a, n) in t.items():
                     into[p][0] += a
                     into[p][1] += n
@@ -286,7 +287,8 @@ def _failures(results) -> dict:
             if h[2]["property"] != prop:
                 also.setdefault(h[2]["property"], set()).add(h[1])
         out[key] = {"variants": key[0], "explained": key[1], "hits": chosen,
-                    "cases": len({(h[0], h[1]) for h in chosen}), "also": {p: len(i) for p, i in also.items()}}
+                    "cases": len({(h[0], h[1]) for h in chosen}),
+                    "also": {p: len(i) for p, i in also.items()}}
     return out
 
 
@@ -336,12 +338,13 @@ def _counterexample(failure, engine_files, deadline, log) -> dict:
              and bool(known.explain(final_scenario, v)) == failure["explained"]]
     v_final = found[0] if found else violation
     why = known.explain(final_scenario, v_final)
-    log(f"  {sig[0]} of {' / '.join(variants)}: case {index}, shrunk in {len(steps)} step(s) "
-        f"({time.monotonic() - t0:.0f} s), {'confirmed by rbcheck sweep' if confirmed else 'NOT confirmed by rbcheck sweep'}")
-    return {"property": sig[0], "variants": variants, "quantity": sig[2], "outcome": sig[3], "seed": seed, "index": index,
-            "cases_with_this_failure": failure["cases"], "sentence": v_final["sentence"], "magnitude": _magnitude(v_final),
-            "first_sentence": violation["sentence"], "shrink_steps": steps, "spec": final,
-            "confirmed_by_sweep": confirmed, "sweep_failures": gate, "explanation": why,
+    log(f"  {sig[0]} of {' / '.join(variants)}: case {index}, shrunk in {len(steps)} "
+        f"step(s) ({time.monotonic() - t0:.0f} s), "
+        f"{'confirmed by rbcheck sweep' if confirmed else 'NOT confirmed by rbcheck sweep'}")
+    return {"property": sig[0], "variants": variants, "quantity": sig[2], "outcome": sig[3], "seed": seed,
+            "index": index, "cases_with_this_failure": failure["cases"], "sentence": v_final["sentence"],
+            "magnitude": _magnitude(v_final), "first_sentence": violation["sentence"], "shrink_steps": steps,
+            "spec": final, "confirmed_by_sweep": confirmed, "sweep_failures": gate, "explanation": why,
             "engine_files": list(engine_files), "also_failed": failure["also"],
             "sweep_gated": sig[0] in _SWEEP_GATED}
 
@@ -357,10 +360,12 @@ def _file_text(cx, file_name) -> str:
     lines.append(("reproduce (exit 1): " if cx["confirmed_by_sweep"] else "run: ")
                  + _reproduce_line(file_name, cx["variants"], cx["engine_files"]))
     if cx["also_failed"]:
-        lines.append("the same variant(s) also failed: " + ", ".join(f"{p} on {n} case(s)" for p, n in cx["also_failed"].items()))
+        lines.append("the same variant(s) also failed: "
+                     + ", ".join(f"{p} on {n} case(s)" for p, n in cx["also_failed"].items()))
     if not cx["confirmed_by_sweep"]:
         lines.append("NOTE: rbcheck sweep's gates do not fail on this file" + (
-            "" if cx["sweep_gated"] else f" (they do not check {cx['property']}: run rbcheck fuzz or rbcheck check)"))
+            "" if cx["sweep_gated"] else f" (they do not check {cx['property']}: "
+                                         "run rbcheck fuzz or rbcheck check)"))
     wrapped = []
     for line in lines:
         while len(line) > 110:
@@ -394,7 +399,8 @@ def run_campaign(variants, out_dir, *, budget_s: float, seed: int = 0, jobs: int
         seen["cases"] += len(r["cases"])
         seen["bad"] += sum(1 for c in r["cases"] if c["violations"])
         if r["batch"] % 10 == 0:
-            log(f"rbcheck fuzz: {seen['cases']} cases in {time.monotonic() - t0:.0f} s, {seen['bad']} with a violation")
+            log(f"rbcheck fuzz: {seen['cases']} cases in "
+                f"{time.monotonic() - t0:.0f} s, {seen['bad']} with a violation")
 
     results = search(seed, variants, budget_s, jobs=jobs, executor=executor, cache_root=str(cache_dir()),
                      use_cache=use_cache, on_batch=on_batch)
@@ -404,10 +410,11 @@ def run_campaign(variants, out_dir, *, budget_s: float, seed: int = 0, jobs: int
     shrink_deadline = time.monotonic() + SHRINK_S * MAX_SHRUNK
     for failure in list(failures.values())[:MAX_SHRUNK]:
         counterexamples.append(_counterexample(failure, engine_files, shrink_deadline, log))
-    unshrunk = [{"property": f["hits"][0][2]["property"], "variants": list(f["variants"]), "cases": f["cases"],
-                 "explained": f["explained"],
+    unshrunk = [{"property": f["hits"][0][2]["property"], "variants": list(f["variants"]),
+                 "cases": f["cases"], "explained": f["explained"],
                  "also_failed": f["also"],
-                 "first": {"seed": f["hits"][0][0], "index": f["hits"][0][1], "sentence": f["hits"][0][2]["sentence"]}}
+                 "first": {"seed": f["hits"][0][0], "index": f["hits"][0][1],
+                           "sentence": f["hits"][0][2]["sentence"]}}
                 for f in list(failures.values())[MAX_SHRUNK:]]
     summary = _summary(results, variants, seed, budget_s, jobs, started, search_s, time.monotonic() - t0,
                        counterexamples, unshrunk)
@@ -448,7 +455,8 @@ def _summary(results, variants, seed, budget_s, jobs, started, search_s, wall_s,
     return _clean({
         "format": FORMAT, "schema_version": 1,
         "provenance": {"started": started, "seed": seed, "budget_s": budget_s, "jobs": jobs,
-                       "engines": {e: engine_provenance(e) for e in sorted({v.split(':', 1)[0] for v in variants})},
+                       "engines": {e: engine_provenance(e)
+                                   for e in sorted({v.split(':', 1)[0] for v in variants})},
                        "batch": BATCH, "n0_cycle": list(N0_CYCLE)},
         "variants": list(variants),
         "cases": {"drawn": n_cases, "judged": n_cases - len(skipped), "skipped": len(skipped),

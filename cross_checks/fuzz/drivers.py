@@ -98,7 +98,8 @@ def one_step(variant: str, scenarios, hs, y_start):
     for idx in groups.values():
         try:
             with np.errstate(all="ignore"):
-                out[idx] = np.asarray(adapter.one_step(scenarios[idx[0]], var, float(hs[idx[0]]), y_start[idx]),
+                out[idx] = np.asarray(adapter.one_step(scenarios[idx[0]], var,
+                                                       float(hs[idx[0]]), y_start[idx]),
                                       dtype=float)
         except KeyboardInterrupt:
             raise

@@ -1,10 +1,11 @@
 """The exact motion of a whole batch of cases in one DOP853 solve, and what a case's verdicts need from it.
 
-Every member ``i`` (a case, a perturbed copy of one, or a one-step start state) is integrated over its
-own span ``T_i`` in normalised time ``s = t / T_i`` ∈ [0, 1]: ``dy/ds = T_i F_i(y)``, with ``F_i`` the full
+Every member ``i`` (a case, a perturbed copy of one, or a one-step start state) is integrated over its own
+span ``T_i`` in normalised time ``s = t / T_i`` ∈ [0, 1]: ``dy/ds = T_i F_i(y)``, with ``F_i`` the full
 rigid-body equations of its own scenario (gyroscopic term and the continuous velocity decay −k v, −k ω
 included): the definition ``reference_sim.integrators.rhs`` with every member's parameters as rows
-(reference_sim.forces.Members), so that one evaluation serves all members. All members share the output grid in ``s``, and SciPy's DOP853 advances the stacked system.
+(reference_sim.forces.Members), so that one evaluation serves all members. All members share the output grid
+in ``s``, and SciPy's DOP853 advances the stacked system.
 
 What a case's verdicts take from it, each MEASURED, as the sweep measures them
 (``cross_checks.sweep.jobs.measure_reference``):
@@ -39,7 +40,8 @@ class ExactError(RuntimeError):
     """The batched solve failed (DOP853's own message)."""
 
 
-def solve_members(problems, spans_s, s_eval, *, rtol: float, atol: float = GROUND_TRUTH_ATOL, y0=None) -> np.ndarray:
+def solve_members(problems, spans_s, s_eval, *, rtol: float,
+                  atol: float = GROUND_TRUTH_ATOL, y0=None) -> np.ndarray:
     """States of every member at the normalised times ``s_eval`` (K,) in [0, 1]: ``(K, M, 13)``.
 
     problems : M single-body Problems (their right-hand sides); spans_s : (M,) spans T_i (s);
@@ -50,7 +52,8 @@ def solve_members(problems, spans_s, s_eval, *, rtol: float, atol: float = GROUN
     Y0 = np.array([p.initial_packed() for p in problems]) if y0 is None else np.asarray(y0, dtype=float)
     f = _definition_rhs(problems, spans)
     s_eval = np.asarray(s_eval, dtype=float)
-    sol = solve_ivp(f, (0.0, float(s_eval[-1])), Y0.T.ravel(), method="DOP853", t_eval=s_eval, rtol=rtol, atol=atol)
+    sol = solve_ivp(f, (0.0, float(s_eval[-1])), Y0.T.ravel(),
+                    method="DOP853", t_eval=s_eval, rtol=rtol, atol=atol)
     if not sol.success:
         raise ExactError(f"DOP853 failed on the batch: {sol.message}")
     y = np.moveaxis(sol.y.reshape(13, M, len(s_eval)), (0, 1, 2), (2, 1, 0)).copy()
@@ -84,7 +87,8 @@ def reference(problems, durations_s, n_fine: int):
     """
     s = np.linspace(0.0, 1.0, n_fine + 1)
     y = solve_members(problems, durations_s, s, rtol=GROUND_TRUTH_RTOL)
-    y_check = solve_members(problems, durations_s, s, rtol=tol.REFERENCE_CHECK_RTOL_FACTOR * GROUND_TRUTH_RTOL)
+    y_check = solve_members(problems, durations_s, s,
+                            rtol=tol.REFERENCE_CHECK_RTOL_FACTOR * GROUND_TRUTH_RTOL)
     return y, _max_difference(y_check, y)
 
 
@@ -96,7 +100,8 @@ def amplification(scenarios, scales, n_samples: int = 33, rtol: float = tol.AMPL
     """
     from cross_checks.scenario.references import perturbed_initial_states
     eps = tol.AMPLIFICATION_EPS
-    y0 = np.concatenate([perturbed_initial_states(sc, eps, sc_scales) for sc, sc_scales in zip(scenarios, scales)])
+    y0 = np.concatenate([perturbed_initial_states(sc, eps, sc_scales)
+                         for sc, sc_scales in zip(scenarios, scales)])
     problems = [sc.problem for sc in scenarios for _ in range(13)]
     spans = np.repeat([sc.duration_s for sc in scenarios], 13)
     y = solve_members(problems, spans, np.linspace(0.0, 1.0, n_samples), rtol=rtol, y0=y0)

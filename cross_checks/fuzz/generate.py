@@ -140,7 +140,8 @@ def _particles(rng, mass, size):
         except ValueError:
             continue
         ev = np.linalg.eigvalsh(body.inertia_B)
-        if ev[0] >= tol.FUZZ_MIN_INERTIA_RATIO * ev[-1] and ev[0] + ev[1] >= ev[2] * (1.0 + tol.FUZZ_TRIANGLE_MARGIN):
+        if (ev[0] >= tol.FUZZ_MIN_INERTIA_RATIO * ev[-1]
+                and ev[0] + ev[1] >= ev[2] * (1.0 + tol.FUZZ_TRIANGLE_MARGIN)):
             return P, body, com
 
 

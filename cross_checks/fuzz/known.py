@@ -23,10 +23,10 @@ def _bullet_solve33_singular(scenario, violation) -> str:
     det = float(np.prod(np.linalg.eigvalsh(scenario.problem.body.inertia_B)))
     if det > tol.BULLET_SOLVE33_DET_EPS:
         return ""
-    return (f"PyBullet maximal coordinates solve the implicit gyroscopic step with btMatrix3x3::solve33, which "
-            f"treats |det J| ≤ {tol.BULLET_SOLVE33_DET_EPS:.3g} kg³m⁶ (an absolute threshold) as singular and then "
-            f"scales by det J instead of dividing; this body's I1·I2·I3 = {det:.3g} kg³m⁶ is below it, so every step's "
-            "angular velocity is wrong (docs/engine_conventions.md, PyBullet)")
+    return ("PyBullet maximal coordinates solve the implicit gyroscopic step with btMatrix3x3::solve33, "
+            f"which treats |det J| ≤ {tol.BULLET_SOLVE33_DET_EPS:.3g} kg³m⁶ (an absolute threshold) as "
+            f"singular and then scales by det J instead of dividing; this body's I1·I2·I3 = {det:.3g} kg³m⁶ "
+            "is below it, so every step's angular velocity is wrong (docs/engine_conventions.md, PyBullet)")
 
 
 _EXPLAINERS = (_bullet_solve33_singular,)

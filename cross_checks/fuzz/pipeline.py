@@ -23,6 +23,7 @@ from numpy.linalg import LinAlgError
 
 from cross_checks.analysis import flow
 from cross_checks.analysis import metrics as M
+from cross_checks.analysis.expectations import machine_epsilon
 from cross_checks.analysis.physics import ScenarioPhysics, motion_rates, separatrix_proximity
 from cross_checks.analysis.refinement import refined_ladder_shows_the_order, worth_refining
 from cross_checks.core import tolerances as tol
@@ -114,9 +115,10 @@ def _numbers(case, y_ref, amp_i) -> dict:
     A = max(amp_i.values())
     chi = 0.5 * L * L * h * T
     kdt2 = max([s.stiffness_N_per_m * h * h / p.body.mass_kg for s in p.forces.springs], default=0.0)
-    return {"hL": h * L, "chi": chi, "amplification": A, "A_chi": A * chi, "anisotropy": float((ev[-1] - ev[0]) / ev[-1]),
-            "separatrix_proximity": separatrix_proximity(p), "stiffness_dt2_per_m": kdt2, "n0": case.n0,
-            "dt_s": h, "duration_s": T, **(case.draw.kinds if case.draw is not None else {})}
+    return {"hL": h * L, "chi": chi, "amplification": A, "A_chi": A * chi,
+            "anisotropy": float((ev[-1] - ev[0]) / ev[-1]), "separatrix_proximity": separatrix_proximity(p),
+            "stiffness_dt2_per_m": kdt2, "n0": case.n0, "dt_s": h, "duration_s": T,
+            **(case.draw.kinds if case.draw is not None else {})}
 
 
 def _fair(numbers) -> str:
@@ -169,7 +171,8 @@ def measure(cases) -> tuple:
         allowance = (flow.conservation_allowance(sc, y_ref[:, i], sc.dt_s, sc.duration_s)
                      if cons["energy"][0] or cons["angular_momentum"][0] else {})
         contexts.append(P.Context(sc, c.n0, y_ref[:, i], {q: float(ref_err[q][i]) for q in QUANTITIES}, amp_i,
-                                  scales[i], phys, step_h, step_err, allowance, P.lever_roundoff(sc, y_ref[:, i])))
+                                  scales[i], phys, step_h, step_err, allowance,
+                                  P.lever_roundoff(sc, y_ref[:, i])))
     return contexts, members, y_end
 
 
@@ -235,7 +238,8 @@ def _refined_ladder_shows_the_order(ctx, variant: str, k: int, rec) -> bool:
         dts.append(h)
         errs.append(float(np.max(e)))
         floors.append(M.roundoff_floor(ctx.scales[q], n, reference_error=ctx.ref_err[q], amplification=ctx.amp[q],
-                                       quantity=q) + P.lever_floor(ctx, q, h, h * n, n, ctx.amp[q], variant))
+                                       quantity=q, eps=machine_epsilon(variant))
+                      + P.lever_floor(ctx, q, h, h * n, n, ctx.amp[q], variant))
     # judged on the finest original rung and the refined ones: the asymptotic regime the claim is about
     # (the coarse rungs are the ones in doubt; a wrong order is just as wrong down there). Only a positive
     # result excuses: errors that sink into round-off there show nothing (analysis.refinement)
@@ -255,21 +259,21 @@ def _too_low_free_running_order(rec) -> bool:
 
 
 def _judge(ctx, variant, k, ladder, defects, tally, errors=None) -> list:
-    """The violations of one variant on one case. rbcheck's own verdict code failing on a valid scenario
-    is a finding too (``rbcheck sweep`` would stop with an internal error there): property "internal_error"."""
+    """The violations of one variant on one case. rbcheck's own verdict code failing on a valid scenario is a
+    finding too (``rbcheck sweep`` would stop with an internal error there): property "internal_error"."""
     found = []
     try:
-        for recs, t in (P.free_running_order(ctx, variant, k, ladder, errors), P.conservation(ctx, variant, k, ladder),
-                        P.one_step_order(ctx, variant, k, defects)):
+        for recs, t in (P.free_running_order(ctx, variant, k, ladder, errors),
+                        P.conservation(ctx, variant, k, ladder), P.one_step_order(ctx, variant, k, defects)):
             found += [r for r in recs if not (_too_low_free_running_order(r)
                                               and _refined_ladder_shows_the_order(ctx, variant, k, r))]
             _add(tally, variant, t)
     except (ArithmeticError, ValueError, LinAlgError) as exc:
         found.append({"property": "internal_error", "variants": [variant], "quantity": None,
                       "error": f"{type(exc).__name__}: {exc}",
-                      "sentence": (f"{variant}: rbcheck's own verdict code failed on this valid scenario "
-                                   f"({type(exc).__name__}: {exc}); rbcheck sweep stops there with an internal "
-                                   "error (exit 2)")})
+                      "sentence": (f"{variant}: rbcheck's own verdict code failed on this "
+                                   f"valid scenario ({type(exc).__name__}: {exc}); rbcheck "
+                                   "sweep stops there with an internal error (exit 2)")})
     return found
 
 

@@ -33,15 +33,18 @@ from cross_checks.analysis.expectations import (
     EQUIVALENT_PAIRS,
     expectation,
     gyroscopic_term_matters,
+    machine_epsilon,
     pair_is_same_arithmetic,
     traits,
 )
-from cross_checks.analysis.judge import judge_ladder, two_term_consistent  # noqa: F401 - the name the fuzz docs cite
+
+# the name the fuzz docs cite
+from cross_checks.analysis.judge import judge_ladder, two_term_consistent  # noqa: F401
 from cross_checks.core import tolerances as tol
 from cross_checks.core.quantities import QUANTITIES, UNITS, state_errors
 
-__all__ = ["Context", "ladder_errors", "free_running_order", "one_step_order", "conservation", "agreement", "PROPERTIES",
-           "equivalent_pairs"]
+__all__ = ["Context", "ladder_errors", "free_running_order", "one_step_order", "conservation", "agreement",
+           "PROPERTIES", "equivalent_pairs"]
 
 PROPERTIES = ("free_running_order", "one_step_order", "conservation", "agreement")
 _EPS = 2.0 ** -52
@@ -136,7 +139,7 @@ def _fmt_list(values):
 def _fit_record(ctx, variant, quantity, dts, errors, floors, statuses, exp, prop):
     """(violation or None, claimed) from a ladder and an Expectation, judged by the one judge
     (:func:`cross_checks.analysis.judge.judge_ladder`)."""
-    if exp.verdict != "converges":   # no claim: pre-asymptotic here, or the variant does not model this motion
+    if exp.verdict != "converges":  # no claim: pre-asymptotic here, or the variant does not model this motion
         return None, False            # (see docs/fuzz.md) — nothing to fit
     j = judge_ladder(dts, errors, floors, statuses, exp)
     fit, phrase = j.fit, j.assessment
@@ -145,8 +148,9 @@ def _fit_record(ctx, variant, quantity, dts, errors, floors, statuses, exp, prop
     what = "free-running error (largest over the run)" if prop == "free_running_order" else "one-step defect"
     exp_txt = (f"order {exp.order:g}" if exp.order is not None else exp.verdict.replace("_", " "))
     errs = fit.errors
-    sentence = (f"{variant}: {quantity} {what} {phrase} — errors {_fmt_list(errs)} {UNITS[quantity]} at "
-                f"Δt = {_fmt_list(fit.dt_s)} s, floors {_fmt_list(fit.floors)}; expected {exp_txt} ({exp.reason})")
+    sentence = (f"{variant}: {quantity} {what} {phrase} — errors {_fmt_list(errs)} "
+                f"{UNITS[quantity]} at Δt = {_fmt_list(fit.dt_s)} s, floors "
+                f"{_fmt_list(fit.floors)}; expected {exp_txt} ({exp.reason})")
     deficit = None if fit.order is None or exp.order is None else exp.order - fit.order
     claimed = True
     return {"property": prop, "variants": [variant], "quantity": quantity, "verdict": fit.verdict,
@@ -179,13 +183,15 @@ def free_running_order(ctx: Context, variant: str, i: int, ladder, errors=None) 
         statuses.append(runs.status[i])
         for q in QUANTITIES:
             v = e[q]
-            errs[q].append(float(np.max(v)) if runs.status[i] == "ok" and np.all(np.isfinite(v)) else math.nan)
+            errs[q].append(float(np.max(v))
+                           if runs.status[i] == "ok" and np.all(np.isfinite(v)) else math.nan)
             floors[q].append(M.roundoff_floor(ctx.scales[q], n, reference_error=ctx.ref_err[q],
-                                              amplification=ctx.amp[q], quantity=q)
+                                              amplification=ctx.amp[q], quantity=q, eps=machine_epsilon(variant))
                              + lever_floor(ctx, q, float(runs.h_s[i]), float(runs.h_s[i]) * n, n, ctx.amp[q], variant))
     for q in QUANTITIES:
         exp = expectation(sc, variant, q, "free_running", physics=ctx.physics, measure_physics=False)
-        rec, claimed = _fit_record(ctx, variant, q, dts, errs[q], floors[q], statuses, exp, "free_running_order")
+        rec, claimed = _fit_record(ctx, variant, q, dts, errs[q], floors[q],
+                                   statuses, exp, "free_running_order")
         tally["free_running_order"][0 if claimed else 1] += 1
         if rec is not None:
             out.append(rec)
@@ -200,7 +206,8 @@ def one_step_order(ctx: Context, variant: str, i: int, defects) -> tuple:
         return out, tally
     dts = [float(h) for h in ctx.step_h]
     for q in QUANTITIES:
-        floors = [M.roundoff_floor(ctx.scales[q], 1, reference_error=float(ctx.step_err[q][k]), quantity=q)
+        floors = [M.roundoff_floor(ctx.scales[q], 1, reference_error=float(ctx.step_err[q][k]), quantity=q,
+                                   eps=machine_epsilon(variant))
                   + lever_floor(ctx, q, dts[k], dts[k], 1, variant=variant) for k in range(len(dts))]
         errs = [float(v) for v in defects[q]]
         statuses = ["ok" if np.isfinite(v) else "failed" for v in errs]
@@ -268,9 +275,10 @@ def conservation(ctx: Context, variant: str, i: int, ladder) -> tuple:
             what = "energy" if kind == "energy" else "world angular momentum"
             out.append({"property": "conservation", "variants": [variant], "quantity": kind, "value": drift,
                         "allowance": allowed, "ratio": ratio, "dt_s": h,
-                        "sentence": (f"{variant}: {what} drifts by {drift:.3g} {unit} at Δt = {h:.3g} s, "
-                                     f"{ratio:.3g}× the {allowed:.3g} {unit} a consistent scheme may accumulate "
-                                     "over the run (its local defects weighted by the sensitivity, + round-off)")})
+                        "sentence": (f"{variant}: {what} drifts by {drift:.3g} {unit} at "
+                                     f"Δt = {h:.3g} s, {ratio:.3g}× the {allowed:.3g} {unit} a "
+                                     "consistent scheme may accumulate over the run (its local "
+                                     "defects weighted by the sensitivity, + round-off)")})
     return out, tally
 
 
@@ -318,7 +326,8 @@ def agreement(ctx: Context, pair, i: int, ladder_a, ladder_b) -> tuple:
                 f" at t = {tb:.6g} s" if sb == "diverged" else "")
         else:
             d = state_errors(ra.y[:, i], rb.y[:, i])
-            rel_q = {q: float(np.max(d[q])) / (1.0 if q == "orientation" else ctx.scales[q]) for q in QUANTITIES}
+            rel_q = {q: float(np.max(d[q])) / (1.0 if q == "orientation" else ctx.scales[q])
+                     for q in QUANTITIES}
             q_worst = max(rel_q, key=rel_q.get)
             rel = rel_q[q_worst]
             why = f"largest in {q_worst}"
@@ -329,8 +338,8 @@ def agreement(ctx: Context, pair, i: int, ladder_a, ladder_b) -> tuple:
     tally["agreement"][0] += 1
     ratio, rel, allowed, h, why = worst
     if not ratio <= 1.0:
-        out.append({"property": "agreement", "variants": [a, b], "quantity": None, "value": rel, "allowance": allowed,
-                    "ratio": ratio, "dt_s": h,
+        out.append({"property": "agreement", "variants": [a, b], "quantity": None, "value": rel,
+                    "allowance": allowed, "ratio": ratio, "dt_s": h,
                     "sentence": (f"{a} and {b} should implement the same arithmetic ({reason}) but differ by "
                                  f"{rel:.3g} relative at Δt = {h:.3g} s ({why}), {ratio:.3g}× the round-off "
                                  f"allowance {allowed:.3g}")})

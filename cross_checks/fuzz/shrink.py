@@ -176,7 +176,7 @@ def shrink(spec: dict, sig: tuple, variants, *, deadline: float | None = None,
     return current, steps
 
 
-# --- confirmation by rbcheck sweep ---------------------------------------------------------------------------
+# --- confirmation by rbcheck sweep --------------------------------------------------------------------------
 
 def sweep_gate_failures(summary) -> list:
     """The sentences with which ``rbcheck sweep`` exits 1 on this summary (cli's gates: a verdict that

@@ -44,8 +44,8 @@ def fuzz_throughput(quick: bool = False) -> dict:
     for d in engines.values():
         d["vs_mujoco"] = d["case_variants_per_s"] / mj if mj and d["case_variants_per_s"] else None
     shared = wall - sum(seconds.values())
-    return {"batches": len(batches), "cases": judged, "batch": BATCH, "wall_s": wall, "cpu_s": cpu, "shared_s": shared,
-            "cases_per_s_all_variants": judged / wall if wall > 0 else None,
+    return {"batches": len(batches), "cases": judged, "batch": BATCH, "wall_s": wall, "cpu_s": cpu,
+            "shared_s": shared, "cases_per_s_all_variants": judged / wall if wall > 0 else None,
             "cases_per_cpu_s": judged / cpu if cpu > 0 else None,
             "campaign_cases_600s_2_cores": 2 * 600.0 * judged / cpu if cpu > 0 else None,
             "case_variants_per_s": judged * len(variants) / wall if wall > 0 else None,
@@ -54,12 +54,14 @@ def fuzz_throughput(quick: bool = False) -> dict:
 
 
 def format_fuzz(r: dict) -> str:
-    out = [f"fuzz: {r['cases']} cases x {len(r['per_variant_cases_per_s'])} variants in {r['wall_s']:.1f} s on one core: "
-           f"{r['cases_per_s_all_variants']:.2f} cases/s through every variant, {r['case_variants_per_s']:.1f} "
-           f"case-variant judgments/s ({r['shared_s']:.1f} s choosing steps and solving the exact motions)",
-           f"fuzz: {r['cases_per_cpu_s']:.2f} cases per CPU second ({r['cpu_s']:.1f} s): a 600 s budget on 2 idle cores "
-           f"would judge ~{r['campaign_cases_600s_2_cores']:,.0f} cases through every variant if its two workers "
-           "ran at one core's rate each (a real campaign's own count is what to quote, docs/fuzz.md section 4)"]
+    out = [f"fuzz: {r['cases']} cases x {len(r['per_variant_cases_per_s'])} variants in "
+           f"{r['wall_s']:.1f} s on one core: {r['cases_per_s_all_variants']:.2f} cases/s through "
+           f"every variant, {r['case_variants_per_s']:.1f} case-variant judgments/s "
+           f"({r['shared_s']:.1f} s choosing steps and solving the exact motions)",
+           f"fuzz: {r['cases_per_cpu_s']:.2f} cases per CPU second ({r['cpu_s']:.1f} s): a "
+           f"600 s budget on 2 idle cores would judge ~{r['campaign_cases_600s_2_cores']:,.0f} "
+           "cases through every variant if its two workers ran at one core's rate each (a "
+           "real campaign's own count is what to quote, docs/fuzz.md section 4)"]
     out.append(f"{'fuzz engine':<12} {'case-variants/s':>16} {'vs MuJoCo':>10}")
     for e, d in r["per_engine"].items():
         ratio = f"{d['vs_mujoco']:.2f}x" if d["vs_mujoco"] else "-"

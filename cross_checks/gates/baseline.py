@@ -37,8 +37,8 @@ from cross_checks.sweep.results_dir import (
 )
 from cross_checks.sweep.schema import COMPACT_FORM, COMPACT_LISTS
 
-__all__ = ["BASELINE_COLUMNS", "BASELINE_FILES", "Baseline", "BaselineError", "compact_summary", "compact_summary_text",
-           "compact_results_text", "write_baseline"]
+__all__ = ["BASELINE_COLUMNS", "BASELINE_FILES", "Baseline", "BaselineError", "compact_summary",
+           "compact_summary_text", "compact_results_text", "write_baseline"]
 
 #: results.csv's columns in a baseline: all but the timing columns, in results.csv's order.
 BASELINE_COLUMNS = tuple(c for c in RESULT_COLUMNS if c not in TIMING_COLUMNS)
@@ -60,7 +60,8 @@ class Baseline(NamedTuple):
 def compact_summary(summary: dict) -> dict:
     """The compact form of a (validated) summary.json: schema version, form, provenance, and each list
     of :data:`COMPACT_LISTS` with every record reduced to its fields (those it has, in the spec's order)."""
-    out = {"schema_version": summary["schema_version"], "form": COMPACT_FORM, "provenance": summary["provenance"]}
+    out = {"schema_version": summary["schema_version"],
+           "form": COMPACT_FORM, "provenance": summary["provenance"]}
     for key, spec in COMPACT_LISTS.items():
         if key in summary:
             fields = [k.rstrip("?") for k in spec]
@@ -74,7 +75,8 @@ def _member(key: str, value, last: bool) -> list:
     head = f" {json.dumps(key)}: "
     if isinstance(value, list) and value:
         lines = [head + "["]
-        lines += [f"  {json.dumps(rec, ensure_ascii=False, allow_nan=False)}{',' if i < len(value) - 1 else ''}"
+        lines += [f"  {json.dumps(rec, ensure_ascii=False, allow_nan=False)}"
+                  f"{',' if i < len(value) - 1 else ''}"
                   for i, rec in enumerate(value)]
         return lines + [f" ]{comma}"]
     text = json.dumps(value, indent=1, ensure_ascii=False, allow_nan=False).replace("\n", "\n ")
@@ -97,7 +99,8 @@ def compact_results_text(csv_path: Path) -> tuple:
         reader = csv.DictReader(fh)
         missing = [c for c in BASELINE_COLUMNS if c not in (reader.fieldnames or [])]
         if missing:
-            raise BaselineError(f"{csv_path}: columns {', '.join(missing)} missing (not written by this rbcheck's sweep?)")
+            raise BaselineError(f"{csv_path}: columns {', '.join(missing)} "
+                                "missing (not written by this rbcheck's sweep?)")
         rows = list(reader)
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
@@ -111,7 +114,8 @@ def _check_out_dir(results_dir: Path, out_dir: Path) -> Path:
     """The absolute OUT_DIR, when a baseline may be written there (BaselineError otherwise)."""
     out = out_dir.expanduser().resolve()
     if out == results_dir.resolve():
-        raise BaselineError(f"OUT_DIR {out_dir}: is RESULTS_DIR; name another directory (e.g. baselines/default)")
+        raise BaselineError(f"OUT_DIR {out_dir}: is RESULTS_DIR; name "
+                            "another directory (e.g. baselines/default)")
     if out.exists() and not out.is_dir():
         raise BaselineError(f"OUT_DIR {out_dir}: exists and is not a directory")
     if not out.parent.is_dir():
@@ -123,8 +127,8 @@ def _check_out_dir(results_dir: Path, out_dir: Path) -> Path:
     other = sorted(p.name for p in out.iterdir() if p.name not in BASELINE_FILES) if out.is_dir() else []
     if other:
         shown = ", ".join(other[:3]) + (f" and {len(other) - 3} more" if len(other) > 3 else "")
-        raise BaselineError(f"OUT_DIR {out_dir}: holds more than a baseline ({shown}); refusing to replace it: "
-                            "name a new or empty directory, or a baseline's")
+        raise BaselineError(f"OUT_DIR {out_dir}: holds more than a baseline ({shown}); refusing "
+                            "to replace it: name a new or empty directory, or a baseline's")
     return out
 
 

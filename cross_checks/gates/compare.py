@@ -39,7 +39,8 @@ from cross_checks.sweep.schema import STATUSES
 
 __all__ = ["compare_dirs", "read_results_dir", "Comparison", "CompareInputError", "METRIC_RULES", "ORDER_TOL",
            "VariantChange", "variant_changes",
-           "REQUIRED_COLUMNS", "Scope", "not_compared", "not_installed_lines", "verdict_line", "to_markdown", "to_text"]
+           "REQUIRED_COLUMNS", "Scope", "not_compared", "not_installed_lines", "verdict_line",
+           "to_markdown", "to_text"]
 
 KEY = ["scenario", "engine", "dt"]
 
@@ -184,7 +185,8 @@ def _number(csv, line, col, text, *, nonneg=False, positive=False):
     if math.isnan(v):
         return v
     if not math.isfinite(v) or (nonneg and v < 0) or (positive and v <= 0):
-        need = "a positive finite number" if positive else "a finite number >= 0 (or empty)" if nonneg else "finite"
+        need = ("a positive finite number" if positive
+                else "a finite number >= 0 (or empty)" if nonneg else "finite")
         raise CompareInputError(f"{csv}: line {line}: {col}: must be {need}, got {t[:40]}")
     return v
 
@@ -193,7 +195,8 @@ def _read_csv(csv: Path) -> pd.DataFrame:
     try:
         raw = pd.read_csv(csv, dtype=str, keep_default_na=False, na_filter=False)
     except Exception as exc:  # noqa: BLE001 - pandas raises many kinds; all mean "unusable"
-        raise CompareInputError(f"{csv}: cannot parse: {' '.join(str(exc).split()) or type(exc).__name__}") from None
+        raise CompareInputError(
+            f"{csv}: cannot parse: {' '.join(str(exc).split()) or type(exc).__name__}") from None
     missing = [c for c in REQUIRED_COLUMNS if c not in raw.columns]
     if missing:
         raise CompareInputError(f"{csv}: columns {', '.join(missing)} missing")
@@ -219,7 +222,8 @@ def _read_csv(csv: Path) -> pd.DataFrame:
     df = pd.DataFrame(out)
     if df.duplicated(KEY).any():
         dup = df[df.duplicated(KEY)].iloc[0]
-        raise CompareInputError(f"{csv}: duplicate row for {dup['scenario']}, {dup['engine']}, dt={dup['dt']}")
+        raise CompareInputError(
+            f"{csv}: duplicate row for {dup['scenario']}, {dup['engine']}, dt={dup['dt']}")
     return df
 
 
@@ -299,8 +303,8 @@ def _scope(summary: dict, required: frozenset = frozenset()) -> Scope:
     broken = {v["name"]: v["reason"] for v in skipped if v["name"] not in optional_absent}
     if not isinstance(summary.get("scenarios"), list) or not isinstance(summary.get("variants"), list):
         return Scope(unavailable=broken, not_installed=optional_absent, required=required)
-    return Scope(frozenset(s["name"] for s in summary["scenarios"]), frozenset(v["name"] for v in summary["variants"]),
-                 broken, optional_absent, required)
+    return Scope(frozenset(s["name"] for s in summary["scenarios"]),
+                 frozenset(v["name"] for v in summary["variants"]), broken, optional_absent, required)
 
 
 def _check_required(new_sum: dict, out: Comparison) -> None:
@@ -318,7 +322,8 @@ def _compare_columns(old_df, new_df, out: Comparison):
             out.changes.append(Change("regression", "(all)", "(all)", f"column {metric}",
                                       note="metric missing from the new results.csv"))
         elif metric in new_df.columns and metric not in old_df.columns:
-            out.changes.append(Change("new", "(all)", "(all)", f"column {metric}", note="metric new in these results"))
+            out.changes.append(Change("new", "(all)", "(all)", f"column {metric}",
+                                      note="metric new in these results"))
 
 
 def _compare_rows(merged, out: Comparison):
@@ -330,7 +335,8 @@ def _compare_rows(merged, out: Comparison):
                 out.scope.skip(r["scenario"], r["engine"])
                 continue
             why = out.scope.unavailable.get(r["engine"]) or out.scope.not_installed.get(r["engine"])
-            note = f"variant unavailable in the new sweep: {why}" if why else "row absent from the new results"
+            note = (f"variant unavailable in the new sweep: {why}"
+                    if why else "row absent from the new results")
             out.changes.append(Change("missing", r["scenario"], r["engine"], where, note=note))
             continue
         if r["_merge"] == "right_only":
@@ -350,12 +356,12 @@ def _compare_rows(merged, out: Comparison):
                     kind, old, new, note = change
                     ratio = (float(r[cn]) / float(r[co]) if not pd.isna(r[co]) and not pd.isna(r[cn])
                              and float(r[co]) > 0 else None)
-                    out.changes.append(Change(kind, r["scenario"], r["engine"], f"{where} {metric}", old, new, note,
-                                              ratio=ratio))
+                    out.changes.append(Change(kind, r["scenario"], r["engine"], f"{where} {metric}", old, new,
+                                              note, ratio=ratio))
         ko, kn = r.get("energy_drift_kind_old"), r.get("energy_drift_kind_new")
         if isinstance(ko, str) and isinstance(kn, str) and ko and kn and ko != kn:
-            out.changes.append(Change("changed", r["scenario"], r["engine"], f"{where} energy_drift_kind", ko, kn,
-                                      area="energy kind"))
+            out.changes.append(Change("changed", r["scenario"], r["engine"], f"{where} energy_drift_kind", ko,
+                                      kn, area="energy kind"))
 
 
 def _metric_change(vo, vn, abs_tol, rel_tol):
@@ -363,7 +369,8 @@ def _metric_change(vo, vn, abs_tol, rel_tol):
     if pd.isna(vo) and pd.isna(vn):
         return None
     if pd.isna(vo) or pd.isna(vn):
-        return ("regression" if pd.isna(vn) else "improvement"), _fmt(vo), _fmt(vn), "value appeared/disappeared"
+        return (("regression" if pd.isna(vn) else "improvement"), _fmt(vo), _fmt(vn),
+                "value appeared/disappeared")
     vo, vn = float(vo), float(vn)
     margin = abs_tol + rel_tol * abs(vo)
     if vn > vo + margin:
@@ -403,19 +410,23 @@ def _compare_convergence(old_recs, new_recs, out: Comparison, local: bool = Fals
                     out.scope.skip(scen, eng, record=True)
                 continue
             if local:
-                continue   # a one-step record absent: its engine lost its one-step mode; the rows say the rest
-            out.changes.append(Change("missing", scen, eng, f"order of {qty}", note="convergence record absent"))
+                continue  # a one-step record absent: its engine lost its one-step mode; the rows say the rest
+            out.changes.append(Change("missing", scen, eng, f"order of {qty}",
+                                      note="convergence record absent"))
         elif k not in old:
-            out.changes.append(Change("new", scen, eng, f"{what} of {qty}", new=_fmt(new[k].get("order")), area=area))
+            out.changes.append(Change("new", scen, eng, f"{what} of {qty}",
+                                      new=_fmt(new[k].get("order")), area=area))
         elif old[k].get("verdict") != new[k].get("verdict"):
             vo, vn = old[k].get("verdict"), new[k].get("verdict")
-            out.changes.append(Change(_verdict_change_kind(vo, vn), scen, eng, f"{'one-step ' if local else ''}verdict "
+            out.changes.append(Change(_verdict_change_kind(vo, vn), scen, eng,
+                                      f"{'one-step ' if local else ''}verdict "
                                       f"of {qty}", str(vo), str(vn), area=area))
         else:
             change = _order_change(old[k], new[k])
             if change is not None:
                 kind, old_order, new_order, note = change
-                out.changes.append(Change(kind, scen, eng, f"{what} of {qty}", old_order, new_order, note, area=area))
+                out.changes.append(Change(kind, scen, eng, f"{what} of {qty}",
+                                          old_order, new_order, note, area=area))
 
 
 def _compare_agreement(old_recs, new_recs, out: Comparison):
@@ -430,8 +441,9 @@ def _compare_agreement(old_recs, new_recs, out: Comparison):
             continue
         kind = "regression" if ao else "improvement"
         for eng, other in ((k[0], k[1]), (k[1], k[0])):
-            out.changes.append(Change(kind, k[2], eng, f"agreement with {other}", "agrees" if ao else "differs",
-                                      "agrees" if an else "differs", area="agreement"))
+            out.changes.append(Change(kind, k[2], eng, f"agreement with {other}",
+                                      "agrees" if ao else "differs", "agrees" if an else "differs",
+                                      area="agreement"))
 
 
 def _order_change(ro, rn):
@@ -459,7 +471,8 @@ def _order_change(ro, rn):
 
 def _versions(prov):
     v = prov.get("versions", prov)
-    out = {k: str(val) for k, val in v.items() if k in ("rbcheck", "numpy", "scipy", "mujoco", "pybullet", "python")}
+    out = {k: str(val)
+           for k, val in v.items() if k in ("rbcheck", "numpy", "scipy", "mujoco", "pybullet", "python")}
     for name, e in (prov.get("engines") or {}).items():  # user engines: version, and an engine file's hash
         if name not in out and isinstance(e, dict):
             sha = e.get("engine_file_sha256")
@@ -499,7 +512,8 @@ def _variant_change(variant: str, chs: list) -> VariantChange:
     ratios = [ch.ratio for ch in rows if ch.ratio is not None and ch.ratio > 0]
     explained = [ch for ch in chs if ch.area in _CAUSE_AREAS or (ch.area == "row" and "status" in ch.what)]
     kinds = {ch.kind for ch in explained if ch.kind != "changed"}
-    worse, better = [ch for ch in rows if ch.kind == "regression"], [ch for ch in rows if ch.kind == "improvement"]
+    worse, better = ([ch for ch in rows if ch.kind == "regression"],
+                     [ch for ch in rows if ch.kind == "improvement"])
     if any(ch.kind == "missing" for ch in chs):
         category = "missing"
     elif "regression" in kinds:
@@ -587,9 +601,9 @@ def not_installed_lines(c: Comparison) -> list:
     sc = c.scope
     out = []
     for engine in sorted(set(sc.absent_rows) | set(sc.absent_records)):
-        out.append(f"{engine} not installed: {sc.absent_rows.get(engine, 0)} baseline rows and "
-                   f"{sc.absent_records.get(engine, 0)} convergence records not compared (an optional engine; "
-                   f"--require {engine} makes its absence a failure)")
+        out.append(f"{engine} not installed: {sc.absent_rows.get(engine, 0)} baseline rows "
+                   f"and {sc.absent_records.get(engine, 0)} convergence records not compared "
+                   f"(an optional engine; --require {engine} makes its absence a failure)")
     return out
 
 
@@ -604,8 +618,8 @@ def not_compared(c: Comparison) -> str:
         what.append(f"{len(sc.skipped_scenarios)} scenario(s) ({_names(sc.skipped_scenarios)})")
     if sc.skipped_variants:
         what.append(f"{len(sc.skipped_variants)} variant(s) ({_names(sc.skipped_variants)})")
-    return (f"not compared: {sc.skipped_rows} baseline row(s) and {sc.skipped_records} convergence record(s) of "
-            f"{' and '.join(what)} the new results did not run")
+    return (f"not compared: {sc.skipped_rows} baseline row(s) and {sc.skipped_records} "
+            f"convergence record(s) of {' and '.join(what)} the new results did not run")
 
 
 def verdict_line(c: Comparison, allow_missing=False, fail_on_change=False) -> str:
@@ -637,7 +651,8 @@ def summary_lines(c: Comparison, new_variants=(), allow_missing=False, fail_on_c
         lines.append("versions changed: " + ", ".join(f"{p} {a} -> {b}" for p, a, b in c.version_diffs))
     for v in variant_changes(c):
         cause = "; ".join(v.causes[:3]) + (f"; and {len(v.causes) - 3} more" if len(v.causes) > 3 else "")
-        lines.append(f"  {v.variant}: {v.category.upper()} — {cause or 'errors only'}; errors {_ratio_text(v)}")
+        lines.append(f"  {v.variant}: {v.category.upper()} — "
+                     f"{cause or 'errors only'}; errors {_ratio_text(v)}")
     unchanged = _unchanged_variants(c, new_variants)
     if unchanged:
         lines.append(f"unchanged: {len(unchanged)} variant(s) ({_names(unchanged, 12)})")
@@ -648,15 +663,17 @@ def to_text(c: Comparison, allow_missing=False, new_variants=(), fail_on_change=
     if not c.changes and not c.version_diffs:   # a rerun of the same code: one line (and what was left out)
         quiet = [f"OK: no regression: {c.matched_rows} matching rows compared, nothing changed"]
         return "\n".join(quiet + ([not_compared(c)] if not_compared(c) else []) + not_installed_lines(c))
-    lines = [f"compared {c.matched_rows} matching rows: {len(c.of('regression'))} regressions, "
-             f"{len(c.of('improvement'))} improvements, {len(c.of('new'))} new, {len(c.of('missing'))} missing"]
+    lines = [f"compared {c.matched_rows} matching rows: {len(c.of('regression'))} "
+             f"regressions, {len(c.of('improvement'))} improvements, "
+             f"{len(c.of('new'))} new, {len(c.of('missing'))} missing"]
     lines += summary_lines(c, new_variants, allow_missing, fail_on_change)[1:]
     if not_compared(c):
         lines.append(not_compared(c))
     lines += not_installed_lines(c)
     for pkg, a, b in c.version_diffs:
         lines.append(f"  version of {pkg}: {a} -> {b}")
-    detail = [f"  {kind.upper():<11} {ch.scenario} {ch.engine} {ch.what}: {ch.old} -> {ch.new} {ch.note}".rstrip()
+    detail = [f"  {kind.upper():<11} {ch.scenario} {ch.engine} {ch.what}: "
+              f"{ch.old} -> {ch.new} {ch.note}".rstrip()
               for kind in ("regression", "missing", "improvement", "new", "changed") for ch in c.of(kind)]
     if len(detail) > 40:   # the grouped lines above say it; the markdown (--markdown) keeps every row
         detail = detail[:40] + [f"  ... and {len(detail) - 40} more row(s) (--markdown FILE lists them all)"]
@@ -671,17 +688,18 @@ def _md_escape(s: str) -> str:
 
 def to_markdown(c: Comparison, baseline_dir, new_dir, allow_missing=False, new_variants=(),
                 fail_on_change=False) -> str:
-    """The comparison for a CI job summary: the verdict and, per changed variant, its category, cause and error
-    ratios on the first screen; every row and record below, folded."""
+    """The comparison for a CI job summary: the verdict and, per changed variant, its category, cause and
+    error ratios on the first screen; every row and record below, folded."""
     code = c.exit_code(allow_missing, fail_on_change)
     regressed = (any(v.category == "regression" for v in variant_changes(c))
                  or any(ch.engine == "(all)" for ch in c.of("regression")))
     head = ("✅ no regression" if code == 0 else "❌ regression" if regressed
-            else "❌ rows missing from the new results" if c.of("missing") else "❌ changed (--fail-on-change)")
+            else "❌ rows missing from the new results" if c.of("missing")
+            else "❌ changed (--fail-on-change)")
     md = [f"## rbcheck compare: {head}", "",
-          f"Baseline `{_md_escape(baseline_dir)}` vs new `{_md_escape(new_dir)}`: {c.matched_rows} matching rows, "
-          f"**{len(c.of('regression'))} regressions**, {len(c.of('improvement'))} improvements, "
-          f"{len(c.of('new'))} new, {len(c.of('missing'))} missing.", ""]
+          f"Baseline `{_md_escape(baseline_dir)}` vs new `{_md_escape(new_dir)}`: {c.matched_rows} "
+          f"matching rows, **{len(c.of('regression'))} regressions**, {len(c.of('improvement'))} "
+          f"improvements, {len(c.of('new'))} new, {len(c.of('missing'))} missing.", ""]
     first = summary_lines(c, new_variants, allow_missing, fail_on_change)
     md += [f"**{_md_escape(first[0])}**", ""]
     vcs = variant_changes(c)
@@ -702,14 +720,16 @@ def to_markdown(c: Comparison, baseline_dir, new_dir, allow_missing=False, new_v
     md += [_md_escape(line) + ".\n" for line in not_installed_lines(c)]
     if c.changes:
         md += ["<details><summary>Every changed row and record</summary>", ""]
-    for kind, title in (("regression", "Regressions"), ("missing", "Missing rows"), ("improvement", "Improvements"),
-                        ("new", "New rows"), ("changed", "Other changes (not regressions)")):
+    for kind, title in (("regression", "Regressions"), ("missing", "Missing rows"),
+                        ("improvement", "Improvements"), ("new", "New rows"),
+                        ("changed", "Other changes (not regressions)")):
         rows = c.of(kind)
         if not rows:
             continue
-        md += [f"### {title}", "", "| scenario | engine | what | baseline | new | note |", "|---|---|---|---|---|---|"]
-        md += [f"| {_md_escape(r.scenario)} | {_md_escape(r.engine)} | {_md_escape(r.what)} | {_md_escape(r.old)} | "
-               f"{_md_escape(r.new)} | {_md_escape(r.note)} |" for r in rows]
+        md += [f"### {title}", "", "| scenario | engine | what | baseline | new | note |",
+               "|---|---|---|---|---|---|"]
+        md += [f"| {_md_escape(r.scenario)} | {_md_escape(r.engine)} | {_md_escape(r.what)} | "
+               f"{_md_escape(r.old)} | {_md_escape(r.new)} | {_md_escape(r.note)} |" for r in rows]
         md.append("")
     if c.changes:
         md += ["</details>", ""]

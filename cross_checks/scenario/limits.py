@@ -46,9 +46,10 @@ def check_run_steps(duration_s: float, dt_s: float, field_: str) -> int:
         n = float(np.float64(duration_s) / np.float64(dt_s))
     if not math.isfinite(n) or n > MAX_STEPS_PER_RUN:
         shown = "more than 1e308" if not math.isfinite(n) else f"{n:.3g}"
-        raise LimitExceeded(field_, f"{dt_s:g} s makes {shown} steps over the duration {duration_s:g} s; the limit "
-                                    f"is {MAX_STEPS_PER_RUN:.3g} steps per run ({_gib(tol.JOB_MEMORY_LIMIT_BYTES)} of "
-                                    f"memory at ~{tol.BYTES_PER_RECORDED_STEP} bytes per recorded step)")
+        raise LimitExceeded(field_,
+                            f"{dt_s:g} s makes {shown} steps over the duration {duration_s:g} s; the limit "
+                            f"is {MAX_STEPS_PER_RUN:.3g} steps per run ({_gib(tol.JOB_MEMORY_LIMIT_BYTES)} "
+                            f"of memory at ~{tol.BYTES_PER_RECORDED_STEP} bytes per recorded step)")
     return int(round(n))
 
 
@@ -92,7 +93,8 @@ def fastest_rate(scenario) -> tuple:
         rot = 0.0
         for s in fm.springs:
             r = float(np.linalg.norm(s.attach_B))
-            reach = float(np.linalg.norm(np.asarray(s.anchor_W) - np.asarray(p.initial.x_W))) + r + s.rest_length_m
+            reach = (float(np.linalg.norm(np.asarray(s.anchor_W) - np.asarray(p.initial.x_W)))
+                     + r + s.rest_length_m)
             rot += s.stiffness_N_per_m * r * (r + reach)
         stiffest = max(range(len(fm.springs)), key=lambda i: fm.springs[i].stiffness_N_per_m)
         rates.append((math.sqrt(k_sum / m + rot / i_min), f"forces.spring[{stiffest}].stiffness"))
@@ -101,7 +103,8 @@ def fastest_rate(scenario) -> tuple:
     spin = float(np.linalg.norm(p.initial.w_W)) + torque * scenario.duration_s / i_min
     rates.append((spin, "initial.angular_velocity" if torque == 0 else "forces.torque"))
     rates.append((fm.linear_drag_N_s_per_m / m, "forces.linear_drag"))
-    for key, g in (("velocity_decay", fm.velocity_decay), ("angular_velocity_decay", fm.angular_velocity_decay)):
+    for key, g in (("velocity_decay", fm.velocity_decay),
+                   ("angular_velocity_decay", fm.angular_velocity_decay)):
         rates.append((-math.log(g) / scenario.dt_s, f"forces.{key}"))
     return max(rates, key=lambda r: r[0])
 
@@ -157,8 +160,9 @@ def _check_physical_ranges(scenario) -> None:
         _in_range(float(np.linalg.norm(pf.force)) / p.body.mass_kg, 0.0, tol.PHYSICAL_MAX_ACCELERATION_M_S2,
                   f"forces.point[{i}].force", "the acceleration |f|/m it gives", "m/s²")
     for i, t in enumerate(fm.torques):
-        _in_range(float(np.linalg.norm(t.torque)) / float(moments[0]), 0.0, tol.PHYSICAL_MAX_ANGULAR_ACCELERATION,
-                  f"forces.torque[{i}].torque", "the angular acceleration |τ|/I_min it gives", "rad/s²")
+        _in_range(float(np.linalg.norm(t.torque)) / float(moments[0]), 0.0,
+                  tol.PHYSICAL_MAX_ANGULAR_ACCELERATION, f"forces.torque[{i}].torque",
+                  "the angular acceleration |τ|/I_min it gives", "rad/s²")
 
 
 def check_scenario_limits(scenario) -> None:
@@ -168,15 +172,17 @@ def check_scenario_limits(scenario) -> None:
         check_run_steps(scenario.duration_s, d, fld)
     mem = run_memory_bytes(scenario)
     if mem > tol.JOB_MEMORY_LIMIT_BYTES:
-        raise LimitExceeded("dt_ladder", f"the finest run and the reference on the union of the time grids need "
-                                         f"~{_gib(mem)} of memory; the limit is {_gib(tol.JOB_MEMORY_LIMIT_BYTES)} "
-                                         "per job (use fewer or coarser rungs, or a shorter duration)")
+        raise LimitExceeded("dt_ladder",
+                            "the finest run and the reference on the union of the time grids need "
+                            f"~{_gib(mem)} of memory; the limit is {_gib(tol.JOB_MEMORY_LIMIT_BYTES)} "
+                            "per job (use fewer or coarser rungs, or a shorter duration)")
     evals = reference_evals(scenario)
     if evals > tol.REFERENCE_EVALS_LIMIT:
         rate, fld = fastest_rate(scenario)
-        raise LimitExceeded(fld, f"the dynamics run at {rate:.3g} 1/s, so the DOP853 reference over the duration "
-                                 f"{scenario.duration_s:g} s would need ~{evals:.3g} right-hand-side evaluations; "
-                                 f"the limit is {tol.REFERENCE_EVALS_LIMIT:.3g} (minutes of CPU on any machine; "
-                                 "shorten the duration or soften the dynamics)")
+        raise LimitExceeded(fld,
+                            f"the dynamics run at {rate:.3g} 1/s, so the DOP853 reference over the "
+                            f"duration {scenario.duration_s:g} s would need ~{evals:.3g} right-hand-side "
+                            f"evaluations; the limit is {tol.REFERENCE_EVALS_LIMIT:.3g} (minutes of CPU "
+                            "on any machine; shorten the duration or soften the dynamics)")
 
 

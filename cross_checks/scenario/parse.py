@@ -98,8 +98,9 @@ def load_scenario(spec: str | Path) -> Scenario:
     spec_s = str(spec)
     if NAME_RE.match(spec_s) and not spec_s.endswith(".toml") and not Path(spec_s).exists():
         if spec_s not in catalog_names():
-            raise ScenarioError(spec_s, "", f"no catalog scenario of that name{did_you_mean(spec_s, catalog_names())} "
-                                            f"and no such file (catalog: {', '.join(catalog_names())})")
+            raise ScenarioError(spec_s, "",
+                                f"no catalog scenario of that name{did_you_mean(spec_s, catalog_names())} "
+                                f"and no such file (catalog: {', '.join(catalog_names())})")
         text = catalog_path(spec_s).read_text(encoding="utf-8")
         return parse_scenario(text, source=f"catalog:{spec_s}")
     path = Path(spec_s)
@@ -198,7 +199,8 @@ def _show(v):
 
 _TOP = {"name", "description", "duration", "dt", "dt_ladder", "reference", "body", "initial", "forces"}
 _BODY = {"mass", "inertia", "particles"}
-_INITIAL = {"position", "velocity", "orientation", "euler_zxy_deg", "angular_velocity", "angular_velocity_body"}
+_INITIAL = {"position", "velocity", "orientation", "euler_zxy_deg",
+            "angular_velocity", "angular_velocity_body"}
 _FORCES = {"gravity", "linear_drag", "velocity_decay", "angular_velocity_decay", "spring", "point", "torque"}
 _SPRING = {"anchor", "attach", "stiffness", "rest_length"}
 _POINT = {"force", "point", "frame"}
@@ -226,8 +228,8 @@ def _load_toml(text: str, source: str) -> dict:
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(source, "", f"TOML syntax error: {exc}") from None
     except RecursionError:
-        raise ScenarioError(source, "", "TOML nested too deeply (arrays or tables inside each other "
-                                        "hundreds of levels deep); a scenario needs at most 3 levels") from None
+        raise ScenarioError(source, "", "TOML nested too deeply (arrays or tables inside each other hundreds "
+                                        "of levels deep); a scenario needs at most 3 levels") from None
 
 
 def _parse_timing(r, raw):
@@ -236,9 +238,11 @@ def _parse_timing(r, raw):
         raise r.err("name", "missing (required)")
     name = r.string(raw, "name", "name")
     if not NAME_RE.match(name):
-        raise r.err("name", f"must match [a-z0-9_]+ (lower-case letters, digits, underscore), got {_show(name)}")
+        raise r.err("name",
+                    f"must match [a-z0-9_]+ (lower-case letters, digits, underscore), got {_show(name)}")
     if len(name) > MAX_NAME_CHARS:
-        raise r.err("name", f"must have at most {MAX_NAME_CHARS} characters (it names files), got {len(name)}")
+        raise r.err("name",
+                    f"must have at most {MAX_NAME_CHARS} characters (it names files), got {len(name)}")
     description = r.string(raw, "description", "description", default="")
     duration = r.number(raw, "duration", "duration", required=True, positive=True)
     dt = r.number(raw, "dt", "dt", required=True, positive=True)
@@ -283,8 +287,8 @@ def _parse_body(r, raw):
         try:
             body, com_offset = RigidBody.from_particles(np.array(rows))
         except ValueError as exc:
-            raise r.err("body.particles", f"the inertia of these particles {exc} "
-                                          "(e.g. all on one line: a rod has no inertia about its axis)") from None
+            raise r.err("body.particles", f"the inertia of these particles {exc} (e.g. all on one "
+                                          "line: a rod has no inertia about its axis)") from None
     else:
         mass = r.number(b, "mass", "body.mass", required=True, positive=True)
         if "inertia" not in b:
@@ -296,7 +300,8 @@ def _parse_body(r, raw):
         if any(isinstance(e, list) for e in I):
             if len(I) != 3 or not all(isinstance(e, list) for e in I):
                 raise r.err("body.inertia", f"{shape_msg}, got {len(I)} rows")
-            inertia = np.array([r.vector({"v": row}, "v", f"body.inertia[{i}]", 3) for i, row in enumerate(I)])
+            inertia = np.array([r.vector({"v": row}, "v", f"body.inertia[{i}]", 3)
+                                for i, row in enumerate(I)])
         else:
             inertia = r.vector(b, "inertia", "body.inertia", 3)
         try:
@@ -326,7 +331,8 @@ def _parse_initial(r, raw) -> State:
         q0 = q0 / big  # scale first so the norm cannot overflow (components up to 1.8e308 are finite)
         q0 = q0 / float(np.linalg.norm(q0))
     if "angular_velocity" in ini and "angular_velocity_body" in ini:
-        raise r.err("initial.angular_velocity", "give exactly one of angular_velocity (world) and angular_velocity_body")
+        raise r.err("initial.angular_velocity",
+                    "give exactly one of angular_velocity (world) and angular_velocity_body")
     if "angular_velocity_body" in ini:
         w0 = rotate(q0, r.vector(ini, "angular_velocity_body", "initial.angular_velocity_body", 3))
     else:
@@ -408,6 +414,7 @@ def _check_ladder_spacing(r, vals, ladder):
     for a, b in zip(ladder, ladder[1:]):
         if a / b < MIN_LADDER_RATIO:
             ia, ib = sorted((vals.index(a), vals.index(b)))
-            raise r.err(f"dt_ladder[{ib}]", f"{vals[ib]!r} is too close to dt_ladder[{ia}] = {vals[ia]!r} (ratio "
-                                            f"{max(a, b) / min(a, b):.17g}); adjacent rungs must differ by a factor of "
-                                            f"at least {MIN_LADDER_RATIO:g} for their errors to give an order")
+            raise r.err(f"dt_ladder[{ib}]",
+                        f"{vals[ib]!r} is too close to dt_ladder[{ia}] = {vals[ia]!r} (ratio "
+                        f"{max(a, b) / min(a, b):.17g}); adjacent rungs must differ by a factor "
+                        f"of at least {MIN_LADDER_RATIO:g} for their errors to give an order")

@@ -24,8 +24,8 @@ from reference_sim.ground_truth import GROUND_TRUTH_RTOL, ground_truth
 from reference_sim.quaternion import quat_exp, quat_mul
 from reference_sim.state import Q, V, W, X
 
-__all__ = ["reference_solution", "analytic_available", "error_amplification", "reference_error", "final_states",
-           "perturbed_initial_states"]
+__all__ = ["reference_solution", "analytic_available", "error_amplification", "reference_error",
+           "final_states", "perturbed_initial_states"]
 
 
 def _translation_kind(scenario):

@@ -80,9 +80,11 @@ def resolved_scenario(scenario, dt_s: float | None = None, duration_s: float | N
             "angular_velocity_decay": float(gw),
             "velocity_decay_rate": float(kv),
             "angular_velocity_decay_rate": float(kw),
-            "spring": [{"anchor": _vec(s.anchor_W), "attach": _vec(s.attach_B), "stiffness": float(s.stiffness_N_per_m),
-                        "rest_length": float(s.rest_length_m)} for s in fm.springs],
-            "point": [{"force": _vec(f.force), "point": _vec(f.point_B), "frame": f.frame} for f in fm.point_forces],
+            "spring": [{"anchor": _vec(s.anchor_W), "attach": _vec(s.attach_B),
+                        "stiffness": float(s.stiffness_N_per_m), "rest_length": float(s.rest_length_m)}
+                       for s in fm.springs],
+            "point": [{"force": _vec(f.force), "point": _vec(f.point_B), "frame": f.frame}
+                      for f in fm.point_forces],
             "torque": [{"torque": _vec(t.torque), "frame": t.frame} for t in fm.torques],
         },
     }
@@ -124,8 +126,9 @@ def format_resolved(r: dict) -> str:
     euler, locked = euler_zxy_from_quat(np.array(i["orientation"]))
     euler = np.round(euler, 12) + 0.0  # no "-0.0"
     lines = [f"{r['name']}: {r['description']}".rstrip(": "),
-             f"  time      dt = {_num(r['dt'])} s, {r['steps']} steps (t = 0 … {r['steps'] * r['dt']:.10g} s; scenario "
-             f"duration {_num(r['duration'])} s, default dt {_num(r['scenario_dt'])} s)",
+             f"  time      dt = {_num(r['dt'])} s, {r['steps']} steps "
+             f"(t = 0 … {r['steps'] * r['dt']:.10g} s; scenario duration {_num(r['duration'])} s, "
+             f"default dt {_num(r['scenario_dt'])} s)",
              f"            dt ladder {', '.join(_num(d) for d in r['dt_ladder'])} s",
              "body (origin at the centre of mass)",
              f"  mass      {_num(b['mass'])} kg",
@@ -145,14 +148,15 @@ def format_resolved(r: dict) -> str:
               f"  linear drag       {_num(f['linear_drag'])} N s/m (f = −c v at the COM)"]
     for key, what in (("velocity_decay", "v"), ("angular_velocity_decay", "ω")):
         if f[key] != 1.0:
-            lines.append(f"  {key.replace('_', ' '):<17} {what} ← {_num(f[key])} {what} after each velocity update (per step "
-                         f"of {_num(r['dt'])} s; rate k = {f[key + '_rate']:.10g} 1/s)")
+            lines.append(f"  {key.replace('_', ' '):<17} {what} ← {_num(f[key])} {what} after each velocity "
+                         f"update (per step of {_num(r['dt'])} s; rate k = {f[key + '_rate']:.10g} 1/s)")
     for s in f["spring"]:
-        lines.append(f"  spring            anchor {_triple(s['anchor'])} m (world), attached at {_triple(s['attach'])} m "
-                     f"(body, from the COM), k = {_num(s['stiffness'])} N/m, rest length {_num(s['rest_length'])} m")
+        lines.append(f"  spring            anchor {_triple(s['anchor'])} m (world), attached "
+                     f"at {_triple(s['attach'])} m (body, from the COM), "
+                     f"k = {_num(s['stiffness'])} N/m, rest length {_num(s['rest_length'])} m")
     for p in f["point"]:
-        lines.append(f"  point force       {_triple(p['force'])} N ({p['frame']} axes) at {_triple(p['point'])} m "
-                     "(body, from the COM)")
+        lines.append(f"  point force       {_triple(p['force'])} N ({p['frame']} "
+                     f"axes) at {_triple(p['point'])} m (body, from the COM)")
     for t in f["torque"]:
         lines.append(f"  torque            {_triple(t['torque'])} N m ({t['frame']} axes)")
     lines.append(f"trajectory CSV columns: {','.join(r['csv_columns'])}")

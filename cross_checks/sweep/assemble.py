@@ -13,7 +13,12 @@ from pathlib import Path
 import numpy as np
 
 from cross_checks.analysis import metrics as M
-from cross_checks.analysis.expectations import EQUIVALENT_PAIRS, expectation, pair_is_same_arithmetic
+from cross_checks.analysis.expectations import (
+    EQUIVALENT_PAIRS,
+    expectation,
+    machine_epsilon,
+    pair_is_same_arithmetic,
+)
 from cross_checks.analysis.judge import LocalEvidence, judge_ladder
 from cross_checks.core import tolerances as tol
 from cross_checks.core.files import atomic_write_text, json_default
@@ -21,8 +26,9 @@ from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, UNITS, decimat
 from cross_checks.sweep.jobs import MAX_SERIES_POINTS, RESULT_COLUMNS, SCHEMA_VERSION, load_reference
 from reference_sim.state import Q
 
-__all__ = ["result_rows", "results_csv_text", "convergence_records", "ladder_floors", "agreement_records", "scenario_record",
-           "series_arrays", "build_summary", "write_json", "write_scenario_files", "SCENARIO_FILES", "local_evidence"]
+__all__ = ["result_rows", "results_csv_text", "convergence_records", "ladder_floors", "agreement_records",
+           "scenario_record", "series_arrays", "build_summary", "write_json", "write_scenario_files",
+           "SCENARIO_FILES", "local_evidence"]
 
 
 # --- results.csv ------------------------------------------------------------------------------------
@@ -31,7 +37,8 @@ def result_rows(records, scenario_names, variants) -> list:
     """The rows of the job ``records`` in results.csv's order: scenario, variant (as given), Δt descending."""
     order_v = {v: i for i, v in enumerate(variants)}
     return sorted((rec["row"] for rec in records.values()),
-                  key=lambda r: (scenario_names.index(r["scenario"]), order_v.get(r["engine"], 1e9), -r["dt"]))
+                  key=lambda r: (scenario_names.index(r["scenario"]),
+                                 order_v.get(r["engine"], 1e9), -r["dt"]))
 
 
 def _fmt(v):
@@ -46,7 +53,8 @@ def _fmt(v):
 
 
 def results_csv_text(rows, columns=RESULT_COLUMNS) -> str:
-    """results.csv of ``rows`` (dicts): ``columns`` in order, floats as their shortest exact repr, NaN empty."""
+    """results.csv of ``rows`` (dicts): ``columns`` in order, floats as their
+    shortest exact repr, NaN empty."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(columns)
@@ -57,19 +65,20 @@ def results_csv_text(rows, columns=RESULT_COLUMNS) -> str:
 
 # --- convergence ------------------------------------------------------------------------------------
 
-def ladder_floors(ladder, q, scales, mode, label, measured):
+def ladder_floors(ladder, q, scales, mode, label, measured, eps=tol.ROUNDOFF_PER_STEP_REL):
     """Round-off floor of each ladder point for quantity ``q`` (metrics.roundoff_floor): the reference's
     MEASURED error (at the final time, or of one step in the one-step mode) plus the run's own
-    round-off, amplified by the scenario's measured error amplification."""
+    round-off in its precision (``eps``: expectations.machine_epsilon of the variant), amplified by the
+    scenario's measured error amplification."""
     scale = scales.get(q, 1.0)
     if mode == "free_running":
         ref = (measured.get("reference_error") or {}).get(q)
         amp = measured.get("amplification", {}).get(q, 1.0)
         return [M.roundoff_floor(scale, max(int(r["steps"]), 1), label, reference_error=ref, amplification=amp,
-                                 quantity=q) for r in ladder]
+                                 quantity=q, eps=eps) for r in ladder]
     local = measured.get("local_reference_error") or {}
     return [M.roundoff_floor(scale, 1, label, reference_error=(local.get(repr(float(r["dt"]))) or {}).get(q),
-                             quantity=q) for r in ladder]
+                             quantity=q, eps=eps) for r in ladder]
 
 
 def _ladder_errors(ladder, q, mode):
@@ -79,7 +88,8 @@ def _ladder_errors(ladder, q, mode):
     if mode == "free_running":
         return [r[f"{stem}_err_final"] for r in ladder], [r["status"] for r in ladder]
     errs = [r[f"{stem}_local_err"] for r in ladder]
-    statuses = ["ok" if r["status"] in ("ok", "diverged") and np.isfinite(e) else "failed" for r, e in zip(ladder, errs)]
+    statuses = ["ok" if r["status"] in ("ok", "diverged") and np.isfinite(e) else "failed"
+                for r, e in zip(ladder, errs)]
     return errs, statuses
 
 
@@ -87,11 +97,13 @@ def local_evidence(rows, variant: str = "") -> LocalEvidence | None:
     """The worst one-step defect of the runs ``rows`` of one (scenario, ``variant``), measured on their own
     recorded states (results.csv's ``step_defect_*``), or None when no run has it."""
     from cross_checks.analysis.expectations import nominal_order
-    have = [r for r in rows if isinstance(r.get("step_defect_ratio"), float) and math.isfinite(r["step_defect_ratio"])]
+    have = [r for r in rows
+            if isinstance(r.get("step_defect_ratio"), float) and math.isfinite(r["step_defect_ratio"])]
     if not have:
         return None
     worst = max(have, key=lambda r: r["step_defect_ratio"])
-    return LocalEvidence(worst["step_defect_ratio"], worst["step_defect_quantity"], worst["dt"], nominal_order(variant))
+    return LocalEvidence(worst["step_defect_ratio"], worst["step_defect_quantity"],
+                         worst["dt"], nominal_order(variant))
 
 
 def convergence_records(scenario, variant, rows, scales, mode, measured=None) -> list:
@@ -113,7 +125,8 @@ def convergence_records(scenario, variant, rows, scales, mode, measured=None) ->
     for q in QUANTITIES:
         errs, statuses = _ladder_errors(ladder, q, mode)
         exp = expectation(scenario, variant, q, mode, physics=phys, measure_physics=False)
-        j = judge_ladder(dts, errs, ladder_floors(ladder, q, scales, mode, label, measured), statuses, exp, local)
+        floors = ladder_floors(ladder, q, scales, mode, label, measured, machine_epsilon(variant))
+        j = judge_ladder(dts, errs, floors, statuses, exp, local, q)
         fit, verdict, matches, phrase = j.fit, j.verdict, j.matches, j.assessment
         out.append({
             "scenario": scenario.name, "engine": variant, "quantity": q, "mode": mode,
@@ -154,8 +167,8 @@ def _agreement(a, b, reason, sc, ra, rb) -> dict:
     if ra["y_final"] is None or rb["y_final"] is None:
         return {**rec, "agrees": False, "reason": reason, "note": "one of the runs did not finish"}
     d, mx = _final_state_agreement(ra["y_final"], rb["y_final"])
-    return {**rec, "differences": d, "max_rel": mx, "agrees": bool(mx <= tol.SAME_SCHEME_REL), "reason": reason,
-            "tolerance": tol.SAME_SCHEME_REL, "note": ""}
+    return {**rec, "differences": d, "max_rel": mx, "agrees": bool(mx <= tol.SAME_SCHEME_REL),
+            "reason": reason, "tolerance": tol.SAME_SCHEME_REL, "note": ""}
 
 
 def agreement_records(scenarios, records_by_key) -> list:
@@ -180,13 +193,13 @@ def scenario_record(sc, ref) -> dict:
     """summary.json's record of a scenario and its reference (a :class:`execute.ScenarioReference`)."""
     cons = M.conserved(sc.problem.forces)
     meas = ref.measured or {}
-    return {"name": sc.name, "description": sc.description, "source": sc.source, "content_hash": sc.content_hash,
-            "duration_s": sc.duration_s, "dt_s": sc.dt_s, "dt_ladder_s": list(sc.dt_ladder_s),
-            "reference": ref.label, "scales": ref.scales,
+    return {"name": sc.name, "description": sc.description, "source": sc.source,
+            "content_hash": sc.content_hash, "duration_s": sc.duration_s, "dt_s": sc.dt_s,
+            "dt_ladder_s": list(sc.dt_ladder_s), "reference": ref.label, "scales": ref.scales,
             "conserved": {k: {"conserved": v[0], "why_not": v[1]} for k, v in cons.items()},
-            "error_amplification": meas.get("amplification", {}), "reference_error": meas.get("reference_error"),
-            "physics": meas.get("physics"), "varies": ref.varies,
-            "second_reference": meas.get("second_reference")}
+            "error_amplification": meas.get("amplification", {}),
+            "reference_error": meas.get("reference_error"), "physics": meas.get("physics"),
+            "varies": ref.varies, "second_reference": meas.get("second_reference")}
 
 
 def series_arrays(sc, ref, records_by_key, variants) -> dict:
@@ -243,7 +256,8 @@ def _run_statistics(jobs, rows, wall_s) -> dict:
             "diverged_runs": sum(1 for r in rows if r["status"] == "diverged"),
             "failed_runs": sum(1 for r in rows if r["status"] == "failed"),
             "wall_s": round(wall_s, 3),
-            "cpu_s_in_runs": round(float(np.nansum([r["wall_s"] for r in rows if not r.get("cached")] or [0.0])), 3),
+            "cpu_s_in_runs": round(float(np.nansum([r["wall_s"] for r in rows if not r.get("cached")]
+                                                   or [0.0])), 3),
             "tolerances": {"same_scheme_rel": tol.SAME_SCHEME_REL, "order_tol": tol.SWEEP_ORDER_TOL,
                            "converges_min_order": tol.CONVERGES_MIN_ORDER}}
 
@@ -277,7 +291,8 @@ def build_summary(*, provenance, scenarios, variants, skipped, convergence, loca
         "local_convergence": local,
         "agreement": agreement,
         "run": _run_statistics(jobs, rows, wall_s),
-        "files": {"results": "results.csv", "series": "series/<scenario>.npz: keys '<ENGINE:VARIANT>::<field>' "
+        "files": {"results": "results.csv",
+                  "series": "series/<scenario>.npz: keys '<ENGINE:VARIANT>::<field>' "
                   "(t_s, x_W, q_WB, err_<quantity>, drift_<quantity>) and 'reference::<field>', float32, "
                   "at the scenario's default dt, decimated to <= %d points" % MAX_SERIES_POINTS},
     }

@@ -75,7 +75,8 @@ def store(root: Path, path: Path, key: str, arrays: dict) -> None:
     """Write an entry (atomically); a read-only or full cache never breaks a sweep."""
     from cross_checks.core.files import save_npz_atomic
     try:
-        save_npz_atomic(Path(path), {**arrays, "__key__": np.array(key), "__mac__": np.array(mac(root, key, arrays))},
+        save_npz_atomic(Path(path),
+                        {**arrays, "__key__": np.array(key), "__mac__": np.array(mac(root, key, arrays))},
                         compress=False)   # read back by rbcheck only: written ~20x faster uncompressed
     except OSError:
         pass

@@ -25,7 +25,8 @@ from cross_checks.sweep.jobs import (
 )
 from cross_checks.sweep.lifecycle import worker_init
 
-__all__ = ["Runner", "ScenarioReference", "SecondReference", "run_references", "run_jobs", "second_reference_jobs"]
+__all__ = ["Runner", "ScenarioReference", "SecondReference",
+           "run_references", "run_jobs", "second_reference_jobs"]
 
 #: The end of an iterable of items (``next(items, _END)``).
 _END = object()
@@ -177,15 +178,16 @@ class ScenarioReference:
 class _ReferenceTask:
     """One scenario's reference solve, by index (a small pickle for the workers)."""
 
-    def __init__(self, scenarios, work_dir, cache_root, use_cache, time_limit_s):
+    def __init__(self, scenarios, work_dir, cache_root, use_cache, time_limit_s, variants=()):
         self.scenarios, self.work_dir, self.cache_root, self.use_cache = scenarios, work_dir, cache_root, use_cache
-        self.time_limit_s = time_limit_s
+        self.time_limit_s, self.variants = time_limit_s, tuple(variants)
 
     def path(self, i):
         return str(Path(self.work_dir) / f"ref_{i}.npz")
 
     def __call__(self, i):
-        return reference_job(self.scenarios[i], self.path(i), self.cache_root, self.use_cache, self.time_limit_s)
+        return reference_job(self.scenarios[i], self.path(i), self.cache_root, self.use_cache, self.time_limit_s,
+                             self.variants)
 
 
 def _reference_cost(scenario):
@@ -198,10 +200,11 @@ def _reference_cost(scenario):
 
 
 def run_references(runner: Runner, scenarios, work_dir, cache_root, use_cache, time_limit_s,
-                   show_progress: bool = False) -> list:
-    """The :class:`ScenarioReference` of every scenario, in the order of ``scenarios``."""
+                   show_progress: bool = False, variants=()) -> list:
+    """The :class:`ScenarioReference` of every scenario, in the order of ``scenarios``, on the time grids of
+    every Δt the ``variants`` run."""
     from cross_checks.core.progress import Progress
-    task = _ReferenceTask(scenarios, str(work_dir), cache_root, use_cache, time_limit_s)
+    task = _ReferenceTask(scenarios, str(work_dir), cache_root, use_cache, time_limit_s, variants)
     with Progress("rbcheck sweep", "references", len(scenarios), enabled=show_progress) as bar:
         order = sorted(range(len(scenarios)), key=lambda i: _reference_cost(scenarios[i]))
         results = dict(runner.map_unordered(task, order, lambda i, _r: bar.update(1, scenarios[i].name)))
@@ -212,8 +215,9 @@ def run_references(runner: Runner, scenarios, work_dir, cache_root, use_cache, t
 
 @dataclass(frozen=True, eq=False)  # hashed by identity: the parent keys its records by its own items
 class SecondReference:
-    """The job of a scenario's second reference (Drake's; :func:`cross_checks.sweep.jobs.second_reference_job`),
-    run among the runs, longest first: nothing waits for it but the summary."""
+    """The job of a scenario's second reference (Drake's;
+    :func:`cross_checks.sweep.jobs.second_reference_job`), run among the runs, longest first: nothing
+    waits for it but the summary."""
 
     scenario_index: int
     scenario: str
@@ -236,7 +240,8 @@ def _run_job_item(item):
     Path(marker).touch()
     if isinstance(jobs, SecondReference):
         try:
-            return second_reference_job(scenario, ref_path, jobs.measured, cache_root, use_cache, time_limit_s)
+            return second_reference_job(scenario, ref_path, jobs.measured,
+                                        cache_root, use_cache, time_limit_s)
         except Exception as exc:  # noqa: BLE001 - said in the scenario's record, the sweep goes on
             return failed_second_reference(f"internal error: {type(exc).__name__}: {exc}")
         finally:
@@ -265,7 +270,8 @@ def _crashed(item):
         return failed_second_reference("the worker process died computing it (a crash inside Drake?)")
     if len(item[0]) > 1:
         return None
-    return [failed_record(item[0][0], item[1], "the worker process died running this job, alone (a crash inside the engine?)")]
+    return [failed_record(item[0][0], item[1],
+                          "the worker process died running this job, alone (a crash inside the engine?)")]
 
 
 def second_reference_jobs(scenarios, references) -> list:
@@ -275,7 +281,8 @@ def second_reference_jobs(scenarios, references) -> list:
         import cross_checks.engines.drake_reference  # noqa: F401
     except ImportError:
         return []
-    return [SecondReference(i, sc.name, ref.measured) for i, (sc, ref) in enumerate(zip(scenarios, references))
+    return [SecondReference(i, sc.name, ref.measured)
+            for i, (sc, ref) in enumerate(zip(scenarios, references))
             if not ref.error]
 
 
@@ -314,9 +321,11 @@ def run_jobs(runner: Runner, jobs, scenarios, references, work_dir, cache_root, 
 
     todo = list(second) + _groups([j for j in jobs if j not in records])
     crashed: list = []
-    n_runs = sum(len(g) for g in todo if not isinstance(g, SecondReference))  # what the summary's run count counts
+    # what the summary's run count counts
+    n_runs = sum(len(g) for g in todo if not isinstance(g, SecondReference))
     with Progress("rbcheck sweep", "runs", n_runs, enabled=show_progress,
-                  total_work=sum(j.cost for g in todo if not isinstance(g, SecondReference) for j in g)) as bar:
+                  total_work=sum(j.cost for g in todo if not isinstance(g, SecondReference)
+                                 for j in g)) as bar:
         def done(item, recs):
             if isinstance(item[0], SecondReference):   # among the runs, not one of them
                 records[item[0]] = recs

@@ -23,8 +23,8 @@ __all__ = ["FINGERPRINTED_PACKAGES", "fingerprinted_files", "source_fingerprint"
 #: The packages whose source determines a job's numbers: the course in NumPy and every cross_checks
 #: layer a job runs through (README "Layout": core → scenario → engines → analysis → sweep). The
 #: layers above (gates, reports, cli) only read results: editing them keeps the cache.
-FINGERPRINTED_PACKAGES = ("reference_sim", "cross_checks.core", "cross_checks.scenario", "cross_checks.engines",
-                          "cross_checks.analysis", "cross_checks.sweep")
+FINGERPRINTED_PACKAGES = ("reference_sim", "cross_checks.core", "cross_checks.scenario",
+                          "cross_checks.engines", "cross_checks.analysis", "cross_checks.sweep")
 
 
 def _package_dir(name: str) -> Path:
@@ -134,7 +134,8 @@ def _blas_kernels() -> dict:
         import scipy.linalg  # noqa: F401 - loads SciPy's BLAS beside NumPy's
         from threadpoolctl import threadpool_info
         return {_owner(i["filepath"]): f"{i.get('internal_api', '')} {i.get('version', '')} "
-                f"({i.get('architecture', '?')} kernels)" for i in threadpool_info() if i.get("user_api") == "blas"}
+                f"({i.get('architecture', '?')} kernels)"
+                for i in threadpool_info() if i.get("user_api") == "blas"}
     except Exception:  # noqa: BLE001 - no threadpoolctl or an unusual build: the BLAS versions still say much
         return {}
 
@@ -156,4 +157,5 @@ def numerical_stack() -> str:
     exact baseline test relies on); the kernel build or the machine's name do not enter."""
     kernels = "; ".join(f"{pkg} BLAS {what}" for pkg, what in sorted(_blas_kernels().items()))
     target = _compiled_target()
-    return "; ".join(x for x in (platform.machine(), kernels, f"numba code for {target}" if target else "") if x)
+    return "; ".join(x for x in (platform.machine(), kernels, f"numba code for {target}" if target else "")
+                     if x)

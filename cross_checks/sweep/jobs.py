@@ -24,6 +24,7 @@ from typing import NamedTuple
 import numpy as np
 
 from cross_checks.analysis import metrics as M
+from cross_checks.analysis.expectations import machine_epsilon, precision
 from cross_checks.core import tolerances as tol
 from cross_checks.core.files import json_default, save_npz_atomic
 from cross_checks.core.quantities import (
@@ -78,11 +79,14 @@ class Job:
     cost: float
 
 
-def job_dts(scenario):
-    """Δt values of a scenario: its ladder, plus its default Δt when the ladder lacks it (descending)."""
-    dts = list(scenario.dt_ladder_s)
-    if not any(d == scenario.dt_s for d in dts):
-        dts.append(scenario.dt_s)
+def job_dts(scenario, variants=()):
+    """Δt values of a scenario (descending): its ladder, the coarser rungs the ``variants`` are judged on too
+    (expectations.judged_ladder_s: a float32 variant's), and its default Δt when the ladder lacks it."""
+    from cross_checks.analysis.expectations import judged_ladder_s
+    dts = {float(d) for d in scenario.dt_ladder_s}
+    for v in variants:
+        dts.update(judged_ladder_s(scenario, v))
+    dts.add(float(scenario.dt_s))
     return sorted(dts, reverse=True)
 
 
@@ -90,9 +94,9 @@ def job_dts(scenario):
 
 def _job_key(scenario, variant, dt, engine_version):
     engine = variant.split(":", 1)[0]
-    blob = json.dumps([SCHEMA_VERSION, scenario.content_hash, variant, repr(float(dt)), repr(scenario.duration_s),
-                       engine_version, fingerprint.code_fingerprint(engine), LOCAL_SAMPLES, MAX_SERIES_POINTS,
-                       fingerprint.environment()])
+    blob = json.dumps([SCHEMA_VERSION, scenario.content_hash, variant, repr(float(dt)),
+                       repr(scenario.duration_s), engine_version, fingerprint.code_fingerprint(engine),
+                       LOCAL_SAMPLES, MAX_SERIES_POINTS, fingerprint.environment()])
     return hashlib.sha256(blob.encode()).hexdigest()
 
 
@@ -144,8 +148,8 @@ def _cache_store(root, path: Path, key: str, rec: dict) -> None:
 
 # --- references ------------------------------------------------------------------------------------
 
-def _time_grids(scenario):
-    return {dt: dt * np.arange(scenario.n_steps(dt) + 1) for dt in job_dts(scenario)}
+def _time_grids(scenario, variants=()):
+    return {dt: dt * np.arange(scenario.n_steps(dt) + 1) for dt in job_dts(scenario, variants)}
 
 
 class ReferenceResult(NamedTuple):
@@ -162,11 +166,12 @@ class ReferenceResult(NamedTuple):
 
 
 def reference_job(scenario, out_path: str, cache_root: str | None, use_cache: bool,
-                  time_limit_s: float | None = tol.REFERENCE_TIME_LIMIT_S) -> ReferenceResult:
-    """Compute (or load) the reference on the union of the scenario's time grids and save it to
-    ``out_path`` (npz: t_s, y, label). The second reference (Drake's, :func:`second_reference_job`) is
-    a job of its own: no run waits for it."""
-    label, err, measured = _reference_solution_file(scenario, out_path, cache_root, use_cache, time_limit_s)
+                  time_limit_s: float | None = tol.REFERENCE_TIME_LIMIT_S, variants=()) -> ReferenceResult:
+    """Compute (or load) the reference on the union of the scenario's time grids (those of every Δt the
+    ``variants`` run: :func:`job_dts`) and save it to ``out_path`` (npz: t_s, y, label). The second reference
+    (Drake's, :func:`second_reference_job`) is a job of its own: no run waits for it."""
+    label, err, measured = _reference_solution_file(scenario, out_path, cache_root, use_cache, time_limit_s,
+                                                    variants)
     if err:
         ones = {q: 1.0 for q in QUANTITIES}
         return ReferenceResult(label, err, ones, {}, {"amplification": ones, "reference_error": None,
@@ -192,10 +197,11 @@ def second_reference_job(scenario, ref_path: str, measured: dict, cache_root: st
 
 def failed_second_reference(why: str) -> dict:
     """The ``second_reference`` record of a second reference that could not be computed: ``why``."""
-    return {"label": "drake", "target_accuracy": tol.SECOND_REFERENCE_TARGET_ACCURACY, "agrees": None, "error": why}
+    return {"label": "drake", "target_accuracy": tol.SECOND_REFERENCE_TARGET_ACCURACY,
+            "agrees": None, "error": why}
 
 
-def measure_reference(scenario, t_s, y, label) -> dict:
+def measure_reference(scenario, t_s, y, label, ladder_dts=None) -> dict:
     """Measurements of a scenario's reference ``y`` (on the union grid ``t_s``), JSON-ready:
 
     ``reference_error`` {quantity: its measured error at the final time} (references.reference_error);
@@ -212,14 +218,14 @@ def measure_reference(scenario, t_s, y, label) -> dict:
     rows = grid[decimation_indices(len(grid), RATE_SAMPLES)]
     phys = scenario_physics(scenario, amplification=amp, y_ref=y[rows])
     return {"reference_error": reference_error(scenario, y[-1], label, scales),
-            "local_reference_error": _local_reference_errors(scenario, t_s, y),
+            "local_reference_error": _local_reference_errors(scenario, t_s, y, ladder_dts),
             "amplification": amp, "physics": phys.as_dict()}
 
 
-def _local_reference_errors(scenario, t_s, y) -> dict:
+def _local_reference_errors(scenario, t_s, y, ladder_dts=None) -> dict:
     from reference_sim.ground_truth import ground_truth
     out = {}
-    for dt in scenario.dt_ladder_s:
+    for dt in scenario.dt_ladder_s if ladder_dts is None else ladder_dts:
         grid = np.searchsorted(t_s, dt * np.arange(scenario.n_steps(dt) + 1))
         starts = decimation_indices(len(grid) - 1, LOCAL_SAMPLES)
         y0, y1 = y[grid[starts]], y[grid[starts + 1]]
@@ -230,8 +236,9 @@ def _local_reference_errors(scenario, t_s, y) -> dict:
 
 
 def _reference_key(scenario, t_union) -> str:
-    return hashlib.sha256(json.dumps([SCHEMA_VERSION, scenario.content_hash, fingerprint.code_fingerprint("reference"),
-                                      t_union.size, repr(float(t_union[-1])),
+    return hashlib.sha256(json.dumps([SCHEMA_VERSION, scenario.content_hash,
+                                      fingerprint.code_fingerprint("reference"), t_union.size,
+                                      repr(float(t_union[-1])),
                                       fingerprint.environment()]).encode()).hexdigest()
 
 
@@ -242,10 +249,11 @@ def _cached_reference(cache_root, cpath, key, t_union):
     return None if measured is None else (arrays, measured)
 
 
-def _reference_solution_file(scenario, out_path, cache_root, use_cache, time_limit_s):
+def _reference_solution_file(scenario, out_path, cache_root, use_cache, time_limit_s, variants=()):
     """``(label, error message or "", measured)``; the reference saved to ``out_path`` when it exists."""
     from cross_checks.scenario.references import reference_solution
-    t_union = np.unique(np.concatenate(list(_time_grids(scenario).values())))
+    grids = _time_grids(scenario, variants)
+    t_union = np.unique(np.concatenate(list(grids.values())))
     key = _reference_key(scenario, t_union)
     cpath = _cache_file(Path(cache_root), "reference", key) if cache_root else None
     hit = _cached_reference(cache_root, cpath, key, t_union) if cpath is not None and use_cache else None
@@ -256,15 +264,17 @@ def _reference_solution_file(scenario, out_path, cache_root, use_cache, time_lim
     try:
         with time_limit(time_limit_s, "the reference solution"):
             y, label = reference_solution(scenario, t_union)
-            measured = measure_reference(scenario, t_union, y, label)
+            ladder = [d for d in grids if d != scenario.dt_s or d in scenario.dt_ladder_s]
+            measured = measure_reference(scenario, t_union, y, label, ladder_dts=ladder)
     except TimeLimitExceeded as exc:
         return "", f"reference solution failed: {exc} (cross_checks/core/tolerances.py)", None
     except Exception as exc:  # noqa: BLE001 - reported per scenario, the sweep goes on
         return "", f"reference solution failed: {type(exc).__name__}: {exc}", None
     save_npz_atomic(Path(out_path), {"t_s": t_union, "y": y, "label": np.array(label)}, compress=False)
     if cpath is not None:
-        cache.store(cache_root, cpath, key, {"t_s": t_union, "y": y, "label": np.array(label),
-                                             "measured": np.array(json.dumps(measured, default=json_default))})
+        cache.store(cache_root, cpath, key,
+                    {"t_s": t_union, "y": y, "label": np.array(label),
+                     "measured": np.array(json.dumps(measured, default=json_default))})
     return label, "", measured
 
 
@@ -318,9 +328,9 @@ def clear_reference_memo() -> None:
 def _nan_row(job, scenario, status, message, label, version):
     row = {c: math.nan for c in RESULT_COLUMNS}
     row.update(scenario=job.scenario, engine=job.variant, dt=job.dt_s, steps=0, wall_s=math.nan,
-               energy_drift_kind="n/a", step_defect_quantity="", status=status, diverged_at_s=math.nan, message=message,
-               default_dt=job.default_dt, in_ladder=job.in_ladder, reference=label, engine_version=version,
-               cached=False)
+               energy_drift_kind="n/a", step_defect_quantity="", status=status, diverged_at_s=math.nan,
+               message=message, default_dt=job.default_dt, in_ladder=job.in_ladder, reference=label,
+               engine_version=version, cached=False)
     return row
 
 
@@ -362,7 +372,8 @@ def run_job_group(jobs, scenario, ref_path: str, cache_root: str | None = None, 
     todo = [k for k in range(len(jobs)) if out[k] is None]
     t_ref_all, y_ref_all, label = load_reference(ref_path) if todo else (None, None, "")
     for k, run in zip(todo, _runs([jobs[k] for k in todo], scenario, time_limit_s)):
-        out[k] = rec = _measure(jobs[k], scenario, adapter, variant, version, run, t_ref_all, y_ref_all, label)
+        out[k] = rec = _measure(jobs[k], scenario, adapter, variant,
+                                version, run, t_ref_all, y_ref_all, label)
         if k in keys and rec["row"]["status"] in ("ok", "diverged"):
             _cache_store(cache_root, keys[k][1], keys[k][0], rec)
     return out
@@ -402,7 +413,8 @@ def _step_defect_columns(row, scenario, y, dt_s) -> None:
     A ratio above 1 says the run's equations are not the scenario's (the judge then grants no
     pre-asymptotic excuse); every engine, engine files included, has it."""
     from cross_checks.analysis.flow import run_local_defect
-    ratio, quantity, t_s = run_local_defect(scenario, y, dt_s, max_rows=tol.STEP_DEFECT_ROWS)
+    u = tol.UNIT_ROUNDOFF[precision(row["engine"])]
+    ratio, quantity, t_s = run_local_defect(scenario, y, dt_s, max_rows=tol.STEP_DEFECT_ROWS, unit_roundoff=u)
     row.update(step_defect_ratio=ratio, step_defect_quantity=quantity, step_defect_t_s=t_s)
 
 
@@ -441,7 +453,8 @@ def _conservation_columns(row, problem, t, y) -> dict:
             amp = float(np.max(E_terms) / abs(E[0])) if E[0] != 0 else 1.0
             row["energy_drift_max"] = float(np.max(np.abs(d)))
             row["energy_drift_final"] = float(d[-1])
-            row["energy_drift_kind"] = M.drift_kind(t, d, M.drift_floor(len(t) - 1, amp))
+            eps = machine_epsilon(row["engine"])
+            row["energy_drift_kind"] = M.drift_kind(t, d, M.drift_floor(len(t) - 1, amp, eps))
         if cons["angular_momentum"][0]:
             drifts["angular_momentum"] = M.relative_drift(M.angular_momentum_W(problem, y))
             row["angmom_drift_max"] = float(np.max(drifts["angular_momentum"]))

@@ -12,8 +12,8 @@ import sys
 import threading
 import time
 
-__all__ = ["Terminated", "handle_sigterm", "worker_init", "EXIT_TERMINATED", "TimeLimitExceeded", "time_limit",
-           "each_within_limits"]
+__all__ = ["Terminated", "handle_sigterm", "worker_init", "EXIT_TERMINATED", "TimeLimitExceeded",
+           "time_limit", "each_within_limits"]
 
 #: 128 + SIGTERM, what a shell reports for a process ended by SIGTERM.
 EXIT_TERMINATED = 128 + signal.SIGTERM

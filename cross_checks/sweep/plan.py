@@ -1,6 +1,7 @@
 """Planning a sweep: every (scenario, engine variant, Δt) job, with a rough cost so the longest run first."""
 from __future__ import annotations
 
+from cross_checks.analysis.expectations import judged_ladder_s
 from cross_checks.sweep.jobs import Job, job_dts
 
 __all__ = ["plan_jobs", "job_cost_s"]
@@ -34,8 +35,8 @@ def plan_jobs(scenarios, variants) -> list:
     jobs = []
     for i, sc in enumerate(scenarios):
         for v in variants:
-            for dt in job_dts(sc):
-                jobs.append(Job(i, sc.name, v, dt, any(d == dt for d in sc.dt_ladder_s), dt == sc.dt_s,
-                                job_cost_s(sc, v, dt)))
+            ladder = judged_ladder_s(sc, v)
+            for dt in job_dts(sc, (v,)):
+                jobs.append(Job(i, sc.name, v, dt, any(d == dt for d in ladder), dt == sc.dt_s, job_cost_s(sc, v, dt)))
     jobs.sort(key=lambda j: -j.cost)
     return jobs

@@ -62,11 +62,13 @@ def provenance(started_at: str, variants=()) -> dict:
         engines.setdefault(v.engine, v.version if v.available else f"unavailable ({v.reason})")
     return {
         "rbcheck": reference_sim.__version__, "numpy": numpy.__version__, "scipy": scipy.__version__,
-        "mujoco": engines.get("mujoco", ""), "pybullet": engines.get("pybullet", ""), "drake": engines.get("drake", ""),
-        "python": platform.python_version(), "platform": platform.platform(),
-        "machine": f"{platform.machine()}, {os.cpu_count()} CPUs, {cpu_model()}", "numerics": numerical_stack(),
-        "git_commit": git_commit(), "started_at": started_at,
-        "command": "rbcheck " + " ".join(sys.argv[1:]) if sys.argv and sys.argv[0].endswith("rbcheck") else "",
+        "mujoco": engines.get("mujoco", ""), "pybullet": engines.get("pybullet", ""),
+        "drake": engines.get("drake", ""), "python": platform.python_version(),
+        "platform": platform.platform(),
+        "machine": f"{platform.machine()}, {os.cpu_count()} CPUs, {cpu_model()}",
+        "numerics": numerical_stack(), "git_commit": git_commit(), "started_at": started_at,
+        "command": ("rbcheck " + " ".join(sys.argv[1:])
+                    if sys.argv and sys.argv[0].endswith("rbcheck") else ""),
         "engines": _engines_provenance(variants),
     }
 
@@ -89,8 +91,9 @@ def variant_record(name: str, info) -> dict:
     """summary.json's record of a variant: description, version, declared order, whether it has a
     one-step mode, and where its engine comes from (an engine file with its SHA-256)."""
     from cross_checks.engines import engine_provenance, has_one_step
-    out = {"name": name, "description": info.description if info else "", "version": info.version if info else "",
-           "declared_order": info.order if info else None, "one_step": has_one_step(name)}
+    out = {"name": name, "description": info.description if info else "",
+           "version": info.version if info else "", "declared_order": info.order if info else None,
+           "one_step": has_one_step(name)}
     try:
         out.update({k: v for k, v in engine_provenance(name.split(":", 1)[0]).items() if k != "version"})
     except Exception:  # noqa: BLE001 - an engine that vanished from the registry keeps its basic record

@@ -32,7 +32,8 @@ __all__ = ["rejudge", "qualifies"]
 
 def qualifies(rec) -> bool:
     """A free-running record whose claimed order was not met while its errors shrink."""
-    if rec["mode"] != "free_running" or rec["matches_expectation"] is not False or rec["expected_verdict"] != "converges":
+    if (rec["mode"] != "free_running" or rec["matches_expectation"] is not False
+            or rec["expected_verdict"] != "converges"):
         return False
     return worth_refining(rec["fit_verdict"], rec["errors"])
 
@@ -66,7 +67,8 @@ def rejudge(scenario, variant, rows, ref, records, *, time_limit_s=tol.RUN_TIME_
     if not ladder or not np.isclose(t_ref[-1], scenario.duration_s):
         return records
     finest = ladder[-1]
-    fine = _refined_runs(scenario, variant, float(finest["dt"]), int(finest["steps"]), y_ref[-1], time_limit_s)
+    fine = _refined_runs(scenario, variant, float(finest["dt"]),
+                         int(finest["steps"]), y_ref[-1], time_limit_s)
     if not fine:
         return records
     phys = physics_from_dict(ref.measured["physics"]) if (ref.measured or {}).get("physics") else None
@@ -78,7 +80,8 @@ def rejudge(scenario, variant, rows, ref, records, *, time_limit_s=tol.RUN_TIME_
         dts = [float(finest["dt"])] + [p["dt"] for p in pseudo]
         errs = [float(finest[f"{COLUMN_STEM[q]}_err_final"])] + [e[q] for _, _, _, e in fine]
         statuses = ["ok"] + [s for _, _, s, _ in fine]
-        floors = ladder_floors([finest] + pseudo, q, ref.scales, "free_running", finest["reference"] or "analytic",
+        floors = ladder_floors([finest] + pseudo, q, ref.scales, "free_running",
+                               finest["reference"] or "analytic",
                          ref.measured or {})
         exp = expectation(scenario, variant, q, "free_running", physics=phys, measure_physics=False)
         shows, fit = refined_ladder_shows_the_order(dts, errs, floors, statuses, exp)
@@ -90,6 +93,8 @@ def rejudge(scenario, variant, rows, ref, records, *, time_limit_s=tol.RUN_TIME_
 
 def _assessment(rec, fit, exp) -> str:
     pw = ", ".join("–" if p is None else f"{p:.2f}" for p in fit.pairwise_orders)
-    seen = f"order {rec['order']:.2f}" if rec.get("order") is not None else rec["fit_verdict"].replace("_", " ")
-    return (f"pre-asymptotic on this ladder (measured): {seen} on the file's Δt, but the ladder continued to "
-            f"Δt = {fit.dt_s[-1]:.3g} s shows order {fit.order:.2f} (pairwise {pw}; expected {exp.order:g}); no claim")
+    seen = (f"order {rec['order']:.2f}" if rec.get("order") is not None
+            else rec["fit_verdict"].replace("_", " "))
+    return (f"pre-asymptotic on this ladder (measured): {seen} on the file's Δt, "
+            f"but the ladder continued to Δt = {fit.dt_s[-1]:.3g} s shows order "
+            f"{fit.order:.2f} (pairwise {pw}; expected {exp.order:g}); no claim")

@@ -31,9 +31,10 @@ from pathlib import Path
 
 from cross_checks.core.files import umask
 
-__all__ = ["fix_permissions", "MARKER", "MARKER_FORMAT", "ResultsDirError", "read_marker", "write_marker", "listed_files",
-           "check_output_dir", "check_writable_dir", "foreign_entries", "staging_dir", "replace_dir",
-           "remove_stale_siblings", "owned_name", "is_owned_stale", "is_temp_leftover", "safe_file_stem", "inside"]
+__all__ = ["fix_permissions", "MARKER", "MARKER_FORMAT", "ResultsDirError", "read_marker", "write_marker",
+           "listed_files", "check_output_dir", "check_writable_dir", "foreign_entries", "staging_dir",
+           "replace_dir", "remove_stale_siblings", "owned_name", "is_owned_stale", "is_temp_leftover",
+           "safe_file_stem", "inside"]
 
 MARKER = ".rbcheck-results.json"
 MARKER_FORMAT = "rbcheck results directory"
@@ -109,7 +110,8 @@ def owned_name(prefix: str, kind: str) -> str:
     return f"{prefix}rbcheck-{kind}-{_host()}-{pid}-{_start_ticks(pid)}-{secrets.token_hex(4)}"
 
 
-_OWNED = re.compile(r"rbcheck-(?P<kind>[a-z]+)-(?P<host>[0-9a-f]{8})-(?P<pid>\d+)-(?P<start>\d+)-[0-9a-f]{8}$")
+_OWNED = re.compile(
+    r"rbcheck-(?P<kind>[a-z]+)-(?P<host>[0-9a-f]{8})-(?P<pid>\d+)-(?P<start>\d+)-[0-9a-f]{8}$")
 
 
 def _owner_dead(pid: int, start: int) -> bool:
@@ -200,8 +202,9 @@ def check_output_dir(out_text: str, option: str = "--out") -> Path:
         if marker is None:
             old = (" (results of an rbcheck older than the marker are never replaced either)"
                    if (out / "summary.json").is_file() else "")
-            raise ResultsDirError(f"{option} {out_text}: is not empty and is not an rbcheck results directory (no "
-                                  f"valid {MARKER}); refusing to replace it: name a new or empty directory{old}")
+            raise ResultsDirError(f"{option} {out_text}: is not empty and is not an rbcheck "
+                                  f"results directory (no valid {MARKER}); refusing to "
+                                  f"replace it: name a new or empty directory{old}")
         if marker["schema_version"] > _schema_version():
             raise ResultsDirError(f"{option} {out_text}: written by a newer rbcheck (results schema "
                                   f"{marker['schema_version']}, this one knows {_schema_version()}); "
@@ -209,8 +212,8 @@ def check_output_dir(out_text: str, option: str = "--out") -> Path:
         foreign = foreign_entries(out, set(marker["files"]))
         if foreign:
             shown = ", ".join(foreign[:3]) + (f" and {len(foreign) - 3} more" if len(foreign) > 3 else "")
-            raise ResultsDirError(f"{option} {out_text}: holds files rbcheck did not write ({shown}); refusing to "
-                                  "replace it: move them away or name another directory")
+            raise ResultsDirError(f"{option} {out_text}: holds files rbcheck did not write ({shown}); "
+                                  "refusing to replace it: move them away or name another directory")
     return out
 
 
@@ -315,7 +318,8 @@ def inside(base, *parts) -> Path:
     base_r = Path(base).resolve()
     p = base_r.joinpath(*parts)
     if "\x00" in str(p) or not p.resolve().is_relative_to(base_r) or p.resolve() == base_r:
-        raise ResultsDirError(f"{Path(base) / Path(*parts)}: a file name taken from the data leaves {base}; refused")
+        raise ResultsDirError(f"{Path(base) / Path(*parts)}: a file name "
+                              f"taken from the data leaves {base}; refused")
     return p
 
 

@@ -91,7 +91,8 @@ def _checked_output(out_dir, scenarios):
 def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cache: bool = True,
               progress: bool | None = None, skipped=None, finish=None,
               executor=None, run_time_limit_s: float | None = tol.RUN_TIME_LIMIT_S,
-              reference_time_limit_s: float | None = tol.REFERENCE_TIME_LIMIT_S, second_reference: bool = True) -> dict:
+              reference_time_limit_s: float | None = tol.REFERENCE_TIME_LIMIT_S,
+              second_reference: bool = True) -> dict:
     """Run the sweep and write the results directory ``out_dir`` (atomically).
 
     Parameters
@@ -136,7 +137,7 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
     try:
         runner = Runner(jobs, executor)
         show = sys.stderr.isatty() if progress is None else progress
-        refs = run_references(runner, scenarios, work, cache_root, use_cache, reference_time_limit_s, show)
+        refs = run_references(runner, scenarios, work, cache_root, use_cache, reference_time_limit_s, show, variants)
         second = second_reference_jobs(scenarios, refs) if second_reference else []
         records = run_jobs(runner, planned, scenarios, refs, work, cache_root, use_cache,
                            run_time_limit_s, show, second=second, second_time_limit_s=reference_time_limit_s)
@@ -144,8 +145,8 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
         runner.close()
         runner = None
         stage("rbcheck sweep", "writing results.csv, summary.json and series/", enabled=show)
-        summary = _write_results(staging, scenarios, variants, refs, records, started=started, skipped=skipped,
-                                 jobs=jobs, t_start=t_start)
+        summary = _write_results(staging, scenarios, variants, refs, records, started=started,
+                                 skipped=skipped, jobs=jobs, t_start=t_start)
         if finish is not None:  # e.g. the report, drawn from the saved files only
             finish(staging)
         write_marker(staging)
@@ -154,7 +155,8 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
         staging = None
         return summary
     except KeyboardInterrupt as exc:  # after the swap (staging is None) the new results are complete
-        raise SweepInterrupted(isinstance(exc, Terminated), replaced=staging is None or not staging.exists()) from None
+        raise SweepInterrupted(isinstance(exc, Terminated),
+                               replaced=staging is None or not staging.exists()) from None
     finally:
         if runner is not None:
             runner.close(kill=True)
@@ -187,14 +189,15 @@ def _write_results(staging, scenarios, variants, refs, records, *, started, skip
                 sc, v, vrows, ref.scales, "free_running", ref.measured))
             if has_one_step(v):  # engines without a one-step mode have no local errors to fit
                 local += assemble.convergence_records(sc, v, vrows, ref.scales, "one_step", ref.measured)
-        save_npz_atomic(staging / "series" / f"{sc.name}.npz", assemble.series_arrays(sc, ref, by_key, variants))
+        save_npz_atomic(staging / "series" / f"{sc.name}.npz",
+                        assemble.series_arrays(sc, ref, by_key, variants))
     clear_reference_memo()
     infos = {v.name: v for v in all_variants()}
     shutil.rmtree(staging / "_work")
     summary = assemble.build_summary(
         provenance=provenance(started, variants), scenarios=scenario_records,
-        variants=[variant_record(v, infos.get(v)) for v in variants], skipped=skipped, convergence=convergence,
-        local=local, agreement=assemble.agreement_records(scenarios, by_key), rows=rows, jobs=jobs,
-        wall_s=time.perf_counter() - t_start)
+        variants=[variant_record(v, infos.get(v)) for v in variants], skipped=skipped,
+        convergence=convergence, local=local, agreement=assemble.agreement_records(scenarios, by_key),
+        rows=rows, jobs=jobs, wall_s=time.perf_counter() - t_start)
     assemble.write_json(staging / "summary.json", summary)
     return summary

@@ -103,21 +103,22 @@ SCENARIO = {
 }
 CONVERGENCE_RECORD = {
     "scenario": str, "engine": str, "quantity": QUANTITIES, "order": Nullable(NUM), "verdict": str,
-    "pairwise_orders?": [Nullable(NUM)], "dt_s?": [NUM], "errors?": [Nullable(NUM)], "floors?": [Nullable(NUM)],
-    "fitted?": [bool], "note?": str, "expected_order?": Nullable(NUM), "expected_verdict?": Nullable(str),
-    "matches_expectation?": Nullable(bool), "assessment?": str, "reason?": str,
+    "pairwise_orders?": [Nullable(NUM)], "dt_s?": [NUM], "errors?": [Nullable(NUM)],
+    "floors?": [Nullable(NUM)], "fitted?": [bool], "note?": str, "expected_order?": Nullable(NUM),
+    "expected_verdict?": Nullable(str), "matches_expectation?": Nullable(bool), "assessment?": str,
+    "reason?": str,
 }
 #: What the report needs beyond what compare needs.
 REPORT_RECORD = {"expected_verdict": Nullable(str), "matches_expectation": Nullable(bool), "assessment": str,
-                 "note": str, "reason": str, "dt_s": [NUM], "errors": [Nullable(NUM)], "floors": [Nullable(NUM)],
-                 "fitted": [bool], "pairwise_orders": [Nullable(NUM)]}
+                 "note": str, "reason": str, "dt_s": [NUM], "errors": [Nullable(NUM)],
+                 "floors": [Nullable(NUM)], "fitted": [bool], "pairwise_orders": [Nullable(NUM)]}
 AGREEMENT = {"a": str, "b": str, "scenario": str, "dt_s": NUM, "agrees": bool, "max_rel": Nullable(NUM),
              "reason": str, "note?": str}
 SUMMARY = {
     "schema_version": int,
-    "provenance": {k + "?": Nullable(str) for k in ("rbcheck", "numpy", "scipy", "mujoco", "pybullet", "drake", "python",
-                                                    "platform", "machine", "numerics", "git_commit", "started_at",
-                                                    "command")},
+    "provenance": {k + "?": Nullable(str)
+                   for k in ("rbcheck", "numpy", "scipy", "mujoco", "pybullet", "drake", "python",
+                             "platform", "machine", "numerics", "git_commit", "started_at", "command")},
     "convergence": [CONVERGENCE_RECORD],
     "scenarios?": [SCENARIO],
     "variants?": [{"name": str, "description?": Nullable(str), "version?": Nullable(str)}],
@@ -167,8 +168,8 @@ def check_summary(summary, for_report: bool = False) -> None:
     or (not ``for_report``) a compact baseline's."""
     compact = isinstance(summary, dict) and "form" in summary
     if compact and for_report and summary["form"] == COMPACT_FORM:
-        raise SchemaError("summary.form: a compact baseline (written by `rbcheck baseline`) holds no report data; "
-                          "render the results directory it was made from")
+        raise SchemaError("summary.form: a compact baseline (written by `rbcheck baseline`) "
+                          "holds no report data; render the results directory it was made from")
     check(summary, COMPACT_SUMMARY if compact else SUMMARY, "summary")
     v = summary["schema_version"]
     if not 1 <= v <= KNOWN_SCHEMA_VERSION:
@@ -180,7 +181,8 @@ def check_summary(summary, for_report: bool = False) -> None:
         _unique(recs, lambda r: (r["scenario"], r["engine"], r["quantity"]), f"summary.{key}", "record")
         for i, r in enumerate(recs):
             if r["order"] is not None and not math.isfinite(r["order"]):
-                raise SchemaError(f"summary.{key}[{i}].order: must be a finite number or null, got {r['order']}")
+                raise SchemaError(f"summary.{key}[{i}].order: must be a "
+                                  f"finite number or null, got {r['order']}")
             if for_report:
                 check(r, REPORT_RECORD, f"summary.{key}[{i}]")
     if for_report:
@@ -193,4 +195,5 @@ def check_summary(summary, for_report: bool = False) -> None:
             if not s["name"]:
                 raise SchemaError(f"summary.scenarios[{i}].name: must not be empty")
             if not (s["dt_s"] > 0 and math.isfinite(s["dt_s"])):
-                raise SchemaError(f"summary.scenarios[{i}].dt_s: must be a positive finite number, got {s['dt_s']}")
+                raise SchemaError(f"summary.scenarios[{i}].dt_s: must be a "
+                                  f"positive finite number, got {s['dt_s']}")

@@ -6,7 +6,8 @@ Drake's error-controlled integration (:mod:`cross_checks.engines.drake_reference
 
 * the primary's accuracy: its measured error (references.reference_error: the closed form's
   round-off; for DOP853 the largest distance over the run between two DOP853 solutions, at its
-  tolerance and at a 10× looser one, both solved here), plus the round-off the sweep's verdicts allow a run of the scenario's default Δt;
+  tolerance and at a 10× looser one, both solved here), plus the round-off the sweep's verdicts allow a
+  run of the scenario's default Δt;
 * Drake's accuracy: its largest distance over the run from a second Drake solution at a
   ``SECOND_REFERENCE_CHECK_FACTOR`` times looser target accuracy (that solution's error, an upper
   bound of the tighter one's), plus the round-off of its steps grown by the measured error
@@ -58,8 +59,8 @@ def compare_references(y_primary, y_second, y_check, *, primary_error: dict, amp
     for q in QUANTITIES:
         distance[q] = float(np.max(dist[q]))
         amp = float((amplification or {}).get(q, 1.0))
-        primary_acc[q] = M.roundoff_floor(scales[q], primary_steps, reference_error=float((primary_error or {}).get(q)
-                                                                                          or 0.0),
+        primary_acc[q] = M.roundoff_floor(scales[q], primary_steps,
+                                          reference_error=float((primary_error or {}).get(q) or 0.0),
                                           amplification=amp, quantity=q)
         second_acc[q] = M.roundoff_floor(scales[q], second_steps, reference_error=float(np.max(check[q])),
                                          amplification=amp, quantity=q)
@@ -106,11 +107,13 @@ def _ground_truth_error_over_run(scenario, t_s, cache_root, use_cache) -> dict:
     key = _cache_key(scenario, t_s) + "-dop853-check"
     path = Path(cache_root) / "second_reference" / key[:2] / f"{key}.npz" if cache_root else None
     arrays = cache.load(cache_root, path, key) if path is not None and use_cache else None
-    if arrays is not None and all(arrays.get(k) is not None and arrays[k].shape == (t_s.size, 13) for k in ("y", "y_loose")):
+    if arrays is not None and all(arrays.get(k) is not None and arrays[k].shape == (t_s.size, 13)
+                                  for k in ("y", "y_loose")):
         y, y_loose = arrays["y"], arrays["y_loose"]
     else:
         y = ground_truth(scenario.problem, t_s)
-        y_loose = ground_truth(scenario.problem, t_s, rtol=tol.REFERENCE_CHECK_RTOL_FACTOR * GROUND_TRUTH_RTOL)
+        y_loose = ground_truth(scenario.problem, t_s,
+                               rtol=tol.REFERENCE_CHECK_RTOL_FACTOR * GROUND_TRUTH_RTOL)
         if path is not None:
             cache.store(cache_root, path, key, {"y": y, "y_loose": y_loose})
     d = state_errors(y_loose, y)
@@ -141,5 +144,6 @@ def second_reference(scenario, t_union, y_primary, label: str, measured: dict, c
                                   primary_error=primary_error,
                                   amplification=(measured or {}).get("amplification"),
                                   primary_steps=scenario.n_steps(), second_steps=steps))
-    rec.update(samples=int(t_s.size), steps=steps)   # no wall time: a cached and a fresh sweep give the same record
+    # no wall time: a cached and a fresh sweep give the same record
+    rec.update(samples=int(t_s.size), steps=steps)
     return rec

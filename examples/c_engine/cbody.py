@@ -30,9 +30,12 @@ def inverse3(M):
     c01 = M[1][2] * M[2][0] - M[1][0] * M[2][2]
     c02 = M[1][0] * M[2][1] - M[1][1] * M[2][0]
     det = M[0][0] * c00 + M[0][1] * c01 + M[0][2] * c02
-    return [[c00 / det, (M[0][2] * M[2][1] - M[0][1] * M[2][2]) / det, (M[0][1] * M[1][2] - M[0][2] * M[1][1]) / det],
-            [c01 / det, (M[0][0] * M[2][2] - M[0][2] * M[2][0]) / det, (M[0][2] * M[1][0] - M[0][0] * M[1][2]) / det],
-            [c02 / det, (M[0][1] * M[2][0] - M[0][0] * M[2][1]) / det, (M[0][0] * M[1][1] - M[0][1] * M[1][0]) / det]]
+    return [[c00 / det, (M[0][2] * M[2][1] - M[0][1] * M[2][2]) / det,
+             (M[0][1] * M[1][2] - M[0][2] * M[1][1]) / det],
+            [c01 / det, (M[0][0] * M[2][2] - M[0][2] * M[2][0]) / det,
+             (M[0][2] * M[1][0] - M[0][0] * M[1][2]) / det],
+            [c02 / det, (M[0][1] * M[2][0] - M[0][0] * M[2][1]) / det,
+             (M[0][0] * M[1][1] - M[0][1] * M[1][0]) / det]]
 
 
 def quat_matrix(q):
@@ -93,7 +96,8 @@ def main(argv):
     I = sc["body"]["inertia"]
     Iinv = inverse3(I)
     ini, fr = sc["initial"], sc["forces"]
-    x, v, q, w = list(ini["position"]), list(ini["velocity"]), list(ini["orientation"]), list(ini["angular_velocity"])
+    x, v, q, w = (list(ini["position"]), list(ini["velocity"]), list(ini["orientation"]),
+                  list(ini["angular_velocity"]))
     gv, gw = fr["velocity_decay"], fr["angular_velocity_decay"]
     sign = 1.0 if broken else -1.0
     rows = ["t,x,y,z,vx,vy,vz,qw,qx,qy,qz,wx,wy,wz"]

@@ -3,9 +3,12 @@ the scenarios themselves (no timing is asserted: speed lives in the benchmark's 
 single-trajectory cost beside MuJoCo's through the same adapter interface (None when Drake is absent)."""
 import math
 
+import numpy as np
 import pytest
 
-from cross_checks import bench
+from cross_checks import bench, engines
+from cross_checks.engines import get_adapter
+from cross_checks.engines.base import EngineAdapter, Variant
 
 
 def test_stats_are_the_median_and_the_range():
@@ -80,3 +83,45 @@ def test_without_drake_the_keys_are_none_and_the_table_says_why(monkeypatch):
     r = _table_input()
     r.update(drake_single_us_per_step=None, drake_constant_force_us_per_step=None)
     assert "Drake not installed (pip install 'rbcheck[drake]')" in bench.format_table(r)
+
+
+class _Counting(EngineAdapter):
+    """A batching engine for the bench: the reference's expmap_gyro, counting its simulate_many calls."""
+    name = "countsim"
+    variants = {"expmap_gyro": Variant(1, "reference expmap_gyro, batched")}
+    calls: list = []
+
+    def version(self):
+        return "test"
+
+    def simulate(self, scenario, variant, dt_s, n_steps):
+        return get_adapter("reference").simulate(scenario, variant, dt_s, n_steps)
+
+    def simulate_many(self, variant, requests):
+        self.calls.append(len(requests))
+        return get_adapter("reference").simulate_many(variant, requests)
+
+
+def test_engines_that_batch_are_measured_through_simulate_many_at_the_tables_n(monkeypatch):
+    """Every installed engine whose adapter overrides simulate_many is a row (the table's engines excepted), N
+    different bodies in ONE call, after an untimed warm-up call that takes any compilation."""
+    monkeypatch.setattr(engines, "_user", dict(engines._user))
+    engines.register_adapter(_Counting(), "test_bench.py")
+    assert "countsim:expmap_gyro" in bench.batching_variants()
+    assert bench.batching_variants(["mujoco"]) == []            # MuJoCo has its own rows
+    _Counting.calls.clear()
+    st = bench.adapter_batched("countsim:expmap_gyro", 7, 5, 2)
+    assert _Counting.calls == [7, 7, 7] and st["repeats"] == 2 and st["median"] > 0
+
+
+def test_the_benchs_bodies_are_the_rows_bodies():
+    scs = bench._bench_scenarios(4)
+    assert np.array_equal(np.array([s.problem.initial.w_W for s in scs]), bench._initial_w(4))
+    assert all(repr(s.problem.forces) == repr(bench._bench_scenario().problem.forces) for s in scs)
+
+
+def test_the_table_has_a_row_per_batching_adapter():
+    r = _table_input()
+    r["batched_adapters"] = {"mujoco:euler": 2.0}
+    r["measurements"]["adapter_batched[mujoco:euler]"] = {"median": 2.0, "min": 1.0, "max": 3.0, "repeats": 3}
+    assert "through the adapter, simulate_many: mujoco:euler" in bench.format_table(r)

@@ -1,11 +1,12 @@
 """The same simulators through every entry point — `rbcheck check` on a CSV it wrote, the sweep, and
 `assert_engine` — get the same, true outcome (issue: one judge).
 
-The simulators are a user's engine known to rbcheck only by its declared order (tests/helpers/wrong_engines.py):
-a correct build, and builds with the spring's rest length ignored and with I and I⁻¹ swapped. On
-spring_pendulum and symmetric_top the wrong builds' errors stay flat over the Δt ladder; a first-order
-engine of unknown traits makes no order claim there (pre-asymptotic), so before the sweep judged each run on
-its own recorded states the sweep and assert_engine passed them while `check` failed them from one file."""
+The simulators are a user's engine known to rbcheck only by its declared order
+(tests/helpers/wrong_engines.py): a correct build, and builds with the spring's rest length ignored and
+with I and I⁻¹ swapped. On spring_pendulum and symmetric_top the wrong builds' errors stay flat over the
+Δt ladder; a first-order engine of unknown traits makes no order claim there (pre-asymptotic), so before
+the sweep judged each run on its own recorded states the sweep and assert_engine passed them while
+`check` failed them from one file."""
 import pytest
 
 from cross_checks import engines
@@ -24,7 +25,8 @@ def user_engine():
 
 
 #: (scenario, build): each build where its bug acts (symmetric_top has no spring for the rest-length bug)
-CASES = [("spring_pendulum", b) for b in BUILDS] + [("symmetric_top", "correct"), ("symmetric_top", "inverse_inertia")]
+CASES = [("spring_pendulum", b) for b in BUILDS] + [("symmetric_top", "correct"),
+                                                    ("symmetric_top", "inverse_inertia")]
 
 
 @pytest.mark.parametrize("scenario, build", CASES)
@@ -96,7 +98,8 @@ def test_check_sweep_assert_engine_and_fuzz_agree_on_an_engine_file(cbody, tmp_p
     ef, variant, correct = str(built[which]), f"{name}:euler", which == "good"
     outcomes = {}
     # check: the engine's own run at the scenario's Δt
-    assert main(["run", str(scen), "--engine", variant, "--engine-file", ef, "--out", str(tmp_path / "r.csv")]) == 0
+    assert main(["run", str(scen), "--engine", variant,
+                 "--engine-file", ef, "--out", str(tmp_path / "r.csv")]) == 0
     outcomes["check"] = main(["check", str(tmp_path / "r.csv"), "--scenario", str(scen)])
     outcomes["sweep"] = main(["sweep", str(scen), "--engines", variant, "--engine-file", ef, "--jobs", "1",
                               "--no-cache", "--out", str(tmp_path / "sweep")])
@@ -105,8 +108,8 @@ def test_check_sweep_assert_engine_and_fuzz_agree_on_an_engine_file(cbody, tmp_p
         outcomes["assert_engine"] = 0
     except AssertionError:
         outcomes["assert_engine"] = 1
-    outcomes["fuzz"] = main(["fuzz", "--engines", variant, "--engine-file", ef, "--budget", "3", "--seed", "0",
-                             "--jobs", "1", "--no-cache", "--out", str(tmp_path / "fuzz")])
+    outcomes["fuzz"] = main(["fuzz", "--engines", variant, "--engine-file", ef, "--budget", "3",
+                             "--seed", "0", "--jobs", "1", "--no-cache", "--out", str(tmp_path / "fuzz")])
     engines.reset_registry()   # the engine files main() registered stay out of the next test
     capsys.readouterr()
     assert outcomes == {k: (0 if correct else 1) for k in outcomes}, outcomes

@@ -23,8 +23,9 @@ def readme_test_file() -> str:
 
 def _pytest(args, cwd, timeout=300):
     env = {k: v for k, v in os.environ.items() if not k.startswith(("PYTEST_", "RBCHECK_CACHE"))}
-    return subprocess.run([sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "--import-mode=importlib",
-                           "-q", *args], cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout)
+    return subprocess.run([sys.executable, "-m", "pytest", "-p", "no:cacheprovider",
+                           "--import-mode=importlib", "-q", *args], cwd=cwd, env=env, capture_output=True,
+                          text=True, timeout=timeout)
 
 
 def test_readme_test_file_is_five_lines_and_passes_a_correct_engine_and_fails_a_broken_one(tmp_path):
@@ -54,13 +55,18 @@ def test_readme_test_file_is_five_lines_and_passes_a_correct_engine_and_fails_a_
 
 
 def test_identical_failures_are_one_complete_sentence_naming_every_run(tmp_path):
-    """An engine whose script raises a KeyError on every run: one problem, with the runs it hit and the script's
-    own words, no sentence with empty fields (no final errors to quote)."""
+    """An engine whose script raises a KeyError on every run: one problem, with the runs it hit and the
+    script's own words, no sentence with empty fields (no final errors to quote)."""
     folder = tmp_path / "e"
     folder.mkdir()
-    (folder / "eng.py").write_text("import json, sys\nd = json.load(open(sys.argv[1]))\nprint(d['no_such_key'])\n")
-    (folder / "eng.toml").write_text(f'name = "keyerr"\nversion = "1"\n[variants.euler]\norder = 1\n'
-                                     f'command = ["{sys.executable}", "eng.py", "{{scenario_json}}", "{{out_csv}}"]\n')
+    (folder / "eng.py").write_text("import json, sys\n"
+                                   "d = json.load(open(sys.argv[1]))\nprint(d['no_such_key'])\n")
+    (folder / "eng.toml").write_text('name = "keyerr"\n'
+                                     'version = "1"\n'
+                                     '[variants.euler]\n'
+                                     'order = 1\n'
+                                     f'command = ["{sys.executable}", "eng.py", "{{scenario_json}}", '
+                                     '"{out_csv}"]\n')
     (folder / "test_mine.py").write_text(
         "from pathlib import Path\nENGINE = Path(__file__).parent / 'eng.toml'\n\n"
         "def test_it(assert_engine):\n    assert_engine('keyerr:euler', ['projectile', 'constant_spin'], "
@@ -68,9 +74,10 @@ def test_identical_failures_are_one_complete_sentence_naming_every_run(tmp_path)
     proc = _pytest(["test_mine.py", "--rbcheck-keep-reports", str(tmp_path / "kept")], cwd=folder)
     out = proc.stdout
     assert proc.returncode == 1 and "1 problem(s):" in out, out[-3000:]
-    assert ("keyerr:euler failed on 10 runs (projectile at Δt = 0.02, 0.01, 0.005, 0.0025, 0.00125 s; constant_spin "
-            "at Δt = 0.02, 0.01, 0.005, 0.0025, 0.00125 s): the command exited with status 1") in out
-    assert out.count("KeyError: 'no_such_key'") <= 2          # the message once (and pytest's one-line summary)
+    assert ("keyerr:euler failed on 10 runs (projectile at Δt = 0.02, 0.01, 0.005, 0.0025, 0.00125 s; "
+            "constant_spin at Δt = 0.02, 0.01, 0.005, 0.0025, 0.00125 s): "
+            "the command exited with status 1") in out
+    assert out.count("KeyError: 'no_such_key'") <= 2   # the message once (and pytest's one-line summary)
     assert "final errors  " not in out and "at Δt =  s" not in out
     assert f"results and report kept in {tmp_path / 'kept'}" in out
     assert "cross_checks/testing.py" not in out
@@ -116,9 +123,11 @@ def test_assert_engine_rejects_bad_input_with_value_errors(tmp_path):
     from cross_checks.testing import assert_engine
     with pytest.raises(ValueError, match="unknown engine 'nosuch'"):
         assert_engine("nosuch:euler", "projectile")
-    with pytest.raises(ValueError, match=r"dt_ladder: needs at least two steps to fit an order, got \[0.01\]"):
+    with pytest.raises(ValueError,
+                       match=r"dt_ladder: needs at least two steps to fit an order, got \[0.01\]"):
         p = tmp_path / "one.toml"
-        p.write_text('name = "one"\nduration = 1.0\ndt = 0.01\n[body]\nmass = 1.0\ninertia = [1.0, 1.0, 1.0]\n[initial]\n')
+        p.write_text('name = "one"\nduration = 1.0\ndt = 0.01\n[body]\nmass = 1.0\n'
+                     'inertia = [1.0, 1.0, 1.0]\n[initial]\n')
         assert_engine("reference:course", p)
     with pytest.raises(EngineFileError, match="no such file"):
         assert_engine("x:y", "projectile", engine_file=tmp_path / "missing.toml")

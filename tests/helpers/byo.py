@@ -74,7 +74,8 @@ def write_scenarios(folder: Path) -> dict:
 
 
 def c_compiler():
-    """The C compiler to build the example with (None: use the Python twin; RBCHECK_TEST_NO_CC=1 forces that)."""
+    """The C compiler to build the example with (None: use the Python twin;
+    RBCHECK_TEST_NO_CC=1 forces that)."""
     if os.environ.get("RBCHECK_TEST_NO_CC"):
         return None
     return shutil.which("cc") or shutil.which("gcc") or shutil.which("clang")
@@ -83,8 +84,8 @@ def c_compiler():
 def compile_cbody(cc: str, folder: Path, broken: bool, name: str = "cbody") -> Path:
     exe = folder / name
     flags = ["-DBROKEN_GYRO_SIGN"] if broken else []
-    subprocess.run([cc, "-O2", "-std=c99", *flags, "-o", str(exe), str(EXAMPLE / "cbody.c"), "-lm"], check=True,
-                   capture_output=True, text=True)
+    subprocess.run([cc, "-O2", "-std=c99", *flags, "-o", str(exe), str(EXAMPLE / "cbody.c"), "-lm"],
+                   check=True, capture_output=True, text=True)
     return exe
 
 
@@ -113,7 +114,8 @@ def build_cbody(folder: Path) -> dict:
         kind = "C"
     else:
         warnings.warn("no C compiler on this machine: the example engine runs as the stand-alone Python "
-                      "script examples/c_engine/cbody.py (same algorithm, standard library only)", stacklevel=2)
+                      "script examples/c_engine/cbody.py (same algorithm, standard library only)",
+                      stacklevel=2)
         shutil.copy(EXAMPLE / "cbody.py", folder / "cbody.py")
         _python_engine_file(folder, "cbody.toml", broken=False)
         _python_engine_file(folder, "cbody_broken.toml", broken=True)

@@ -109,7 +109,8 @@ class Browser:
 
     def _attach(self):
         target = self.call("Target.createTarget", {"url": "about:blank"}, session=None)["targetId"]
-        sid = self.call("Target.attachToTarget", {"targetId": target, "flatten": True}, session=None)["sessionId"]
+        sid = self.call("Target.attachToTarget", {"targetId": target, "flatten": True},
+                        session=None)["sessionId"]
         for domain in ("Page", "Runtime", "Log", "Network"):
             self.call(f"{domain}.enable", session=sid)
         return sid
@@ -123,10 +124,12 @@ class Browser:
             self._events.append(self._read_message(deadline))
 
     # --- what the tests use -----------------------------------------------------------------------
-    def load(self, url: str, width: int = 1400, height: int = 900, screenshot: str | Path | None = None) -> dict:
+    def load(self, url: str, width: int = 1400, height: int = 900,
+             screenshot: str | Path | None = None) -> dict:
         """Load ``url`` at ``width`` px; returns ``{"errors": [...], "broken": [...], "overflow_px": int,
         "title": str, "sortable": int}``; writes a full-page PNG to ``screenshot`` when given."""
-        self.call("Emulation.setDeviceMetricsOverride", {"width": width, "height": height, "deviceScaleFactor": 1,
+        self.call("Emulation.setDeviceMetricsOverride",
+                  {"width": width, "height": height, "deviceScaleFactor": 1,
                                                           "mobile": False})
         self._events.clear()
         self.call("Page.navigate", {"url": url})
@@ -138,8 +141,9 @@ class Browser:
         broken += [f"link {h}" for h in audit["links"] if _missing_file(h)]
         if screenshot is not None:
             self._screenshot(screenshot, width)
-        return {"errors": errors, "broken": broken, "overflow_px": audit["scrollWidth"] - audit["clientWidth"],
-                "title": audit["title"], "sortable": audit["sortable"]}
+        return {"errors": errors, "broken": broken,
+                "overflow_px": audit["scrollWidth"] - audit["clientWidth"], "title": audit["title"],
+                "sortable": audit["sortable"]}
 
     def evaluate(self, expression: str):
         r = self.call("Runtime.evaluate", {"expression": expression, "returnByValue": True})
@@ -155,7 +159,8 @@ class Browser:
                 d = p["exceptionDetails"]
                 out.append(f"exception: {d.get('exception', {}).get('description') or d.get('text')}")
             elif e["method"] == "Runtime.consoleAPICalled" and p.get("type") in ("error", "assert"):
-                out.append("console: " + " ".join(str(a.get("value", a.get("description"))) for a in p["args"]))
+                out.append("console: "
+                           + " ".join(str(a.get("value", a.get("description"))) for a in p["args"]))
             elif e["method"] == "Log.entryAdded" and p["entry"]["level"] == "error":
                 out.append(f"log: {p['entry']['text']} {p['entry'].get('url', '')}")
             elif e["method"] == "Network.loadingFailed" and not p.get("canceled"):
@@ -164,7 +169,8 @@ class Browser:
 
     def _screenshot(self, path, width):
         h = self.evaluate("document.documentElement.scrollHeight")
-        self.call("Emulation.setDeviceMetricsOverride", {"width": width, "height": int(h), "deviceScaleFactor": 1,
+        self.call("Emulation.setDeviceMetricsOverride",
+                  {"width": width, "height": int(h), "deviceScaleFactor": 1,
                                                           "mobile": False})
         data = self.call("Page.captureScreenshot", {"format": "png", "captureBeyondViewport": True})["data"]
         Path(path).write_bytes(base64.b64decode(data))

@@ -45,8 +45,8 @@ TINY = scenario_toml("tiny", 0.2, 0.01, (0.02, 0.01))
 
 
 #: Shrunk by the fuzz's 600 s campaign of seed 2026 (docs/fuzz.md §5): a correct scheme pre-asymptotic on its
-#: own 3-rung ladder. Every first-order variant shows velocity errors 4.98e-6, 3.5e-6, 2.41e-6 m/s at dt = 0.02,
-#: 0.01, 0.005 s (order 0.52); the pairwise orders then go 0.80, 0.91, 0.95 down to dt/32.
+#: own 3-rung ladder. Every first-order variant shows velocity errors 4.98e-6, 3.5e-6, 2.41e-6 m/s at
+#: dt = 0.02, 0.01, 0.005 s (order 0.52); the pairwise orders then go 0.80, 0.91, 0.95 down to dt/32.
 PRE_ASYMPTOTIC_ON_ITS_LADDER = '''
 name = "fuzz_2026_80"
 description = "a body released near rest, strong gravity, a weak spring off the COM"
@@ -101,8 +101,8 @@ def write_scenarios(folder: Path, *texts: str) -> dict:
 
 def scenario_from_parts(body=SPINNING_BODY, initial="", forces="", dt=0.01, duration=1.0):
     """A ground-truth scenario from the text of its [body], [initial] and [forces] tables."""
-    return parse_scenario(scenario_toml("t", duration, dt, reference="ground_truth", body=body, initial=initial,
-                                        forces=forces))
+    return parse_scenario(scenario_toml("t", duration, dt, reference="ground_truth", body=body,
+                                        initial=initial, forces=forces))
 
 
 def state(x=(0, 0, 0), v=(0, 0, 0), q=(1, 0, 0, 0), w=(0, 0, 0)):

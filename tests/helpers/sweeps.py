@@ -32,7 +32,8 @@ def built_once(tmp_path_factory, name: str, build) -> Path:
     """
     root = tmp_path_factory.getbasetemp()
     if os.environ.get("PYTEST_XDIST_WORKER"):
-        root = root.parent  # .../pytest-N, shared by the workers of this run (each has .../pytest-N/popen-gwK)
+        # .../pytest-N, shared by the workers of this run (each has .../pytest-N/popen-gwK)
+        root = root.parent
     target, done = root / name, root / f"{name}.built"
     with open(root / f"{name}.lock", "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes, also if build raises
@@ -54,4 +55,5 @@ def result_rows(results_dir: Path) -> list:
 def file_tree(folder: Path) -> dict:
     """Every file below ``folder``: ``{relative posix path: bytes}``, to show a folder unchanged."""
     folder = Path(folder)
-    return {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+    return {p.relative_to(folder).as_posix(): p.read_bytes()
+            for p in sorted(folder.rglob("*")) if p.is_file()}

@@ -21,7 +21,8 @@ def misread(scenario, variant: str):
                                                              for s in p.forces.springs))
         p = dataclasses.replace(p, forces=forces)
     elif variant == "inverse_inertia":
-        p = dataclasses.replace(p, body=dataclasses.replace(p.body, inertia_B=np.linalg.inv(p.body.inertia_B)))
+        p = dataclasses.replace(p,
+                                body=dataclasses.replace(p.body, inertia_B=np.linalg.inv(p.body.inertia_B)))
     return dataclasses.replace(scenario, problem=p)
 
 

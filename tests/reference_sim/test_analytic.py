@@ -281,14 +281,17 @@ def test_jacobi_body_rates_match_euler_equations_in_every_octant(w_abs, octant):
     w0 = signs * np.array(w_abs)
     t = np.linspace(0.0, 10.0, 41)
     # Body rates alone are cheaper to integrate, and the same ROT_TOL argument applies.
-    np.testing.assert_allclose(jacobi_body_rates(moments, w0, t), _euler_ode(moments, w0, t), rtol=0, atol=ROT_TOL)
+    np.testing.assert_allclose(jacobi_body_rates(moments, w0, t),
+                               _euler_ode(moments, w0, t), rtol=0, atol=ROT_TOL)
 
 
-@pytest.mark.parametrize("moments", [[2.7, 1.0, 2.0], [1.0, 2.7, 2.0]])  # unsorted labelling, either handedness
+# unsorted labelling, either handedness
+@pytest.mark.parametrize("moments", [[2.7, 1.0, 2.0], [1.0, 2.7, 2.0]])
 def test_jacobi_body_rates_accept_any_axis_order(moments):
     w0 = np.array([-0.7, 1.1, 0.9])
     t = np.linspace(0.0, 10.0, 41)
-    np.testing.assert_allclose(jacobi_body_rates(moments, w0, t), _euler_ode(moments, w0, t), rtol=0, atol=ROT_TOL)
+    np.testing.assert_allclose(jacobi_body_rates(moments, w0, t),
+                               _euler_ode(moments, w0, t), rtol=0, atol=ROT_TOL)
 
 
 @pytest.mark.parametrize("solver, inertia_B, w0_W", [
@@ -374,8 +377,8 @@ def test_symplectic_euler_gravity_error_matches_course_run():
 
 
 def test_course_spin_phase_lag_matches_course_run():
-    # Δt|ω| = 1.5e-3: the leading-order form's own relative error 0.15 (Δt|ω|)² ≈ 3.4e-7 < 1e-6, and the
-    # lag per step (Δt|ω|)³/12 ≈ 2.8e-10 rad stays far above the ~1e-16 round-off per step.
+    # Δt|ω| = 1.5e-3: the leading-order form's own relative error 0.15 (Δt|ω|)² ≈ 3.4e-7 < 1e-6, and the lag
+    # per step (Δt|ω|)³/12 ≈ 2.8e-10 rad stays far above the ~1e-16 round-off per step.
     dt, n = 1e-3, 4000
     w_W = rotate(Q0, [0.0, 1.5, 0.0])  # about a principal axis: the exact motion is constant_spin
     problem = Problem(RigidBody(1.0, [1.0, 2.0, 3.0]), ForceModel(),
@@ -384,7 +387,8 @@ def test_course_spin_phase_lag_matches_course_run():
     q_exact, _ = constant_spin(Q0, w_W, run.t_s)
     lag = geodesic_angle(q_exact, run.y[:, 6:10])
     steps = np.arange(n + 1)
-    np.testing.assert_allclose(lag[100:], course_spin_phase_lag_exact(w_W, steps, dt)[100:], rtol=PREDICTION_RTOL)
+    np.testing.assert_allclose(lag[100:], course_spin_phase_lag_exact(w_W, steps, dt)[100:],
+                               rtol=PREDICTION_RTOL)
     np.testing.assert_allclose(lag[100:], course_spin_phase_lag(w_W, run.t_s, dt)[100:], rtol=PREDICTION_RTOL)
 
 

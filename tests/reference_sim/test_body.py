@@ -7,7 +7,8 @@ from reference_sim.forces import ForceModel
 from reference_sim.quaternion import matrix_from_quat, quat_normalize
 from tests.helpers.tolerances import QUAT_ALGEBRA
 
-PARTICLES = np.array([[1.0, 0.3, 0.0, 0.1], [2.0, -0.2, 0.4, 0.0], [1.5, 0.0, -0.3, 0.5], [0.5, 0.1, 0.2, -0.4]])
+PARTICLES = np.array([[1.0, 0.3, 0.0, 0.1], [2.0, -0.2, 0.4, 0.0],
+                      [1.5, 0.0, -0.3, 0.5], [0.5, 0.1, 0.2, -0.4]])
 
 
 def test_particle_inertia_is_the_course_sum():
@@ -39,7 +40,8 @@ def test_body_points_keep_their_distances():
     d_body = np.linalg.norm(r[:, None] - r[None], axis=-1)
     for q in quat_normalize(np.random.default_rng(1).normal(size=(20, 4))):
         p = np.array([1.0, 2.0, 3.0]) + r @ matrix_from_quat(q).T
-        np.testing.assert_allclose(np.linalg.norm(p[:, None] - p[None], axis=-1), d_body, atol=10 * QUAT_ALGEBRA)
+        np.testing.assert_allclose(np.linalg.norm(p[:, None] - p[None], axis=-1),
+                                   d_body, atol=10 * QUAT_ALGEBRA)
 
 
 def test_world_inertia_rotates_the_tensor():

@@ -92,10 +92,11 @@ _vec = st.lists(st.floats(-2.0, 2.0), min_size=3, max_size=3).map(np.array)
 @st.composite
 def _problems(draw):
     mass = draw(st.floats(0.2, 5.0))
-    a, b, c = draw(st.lists(st.floats(0.1, 1.0), min_size=3, max_size=3))   # a box's sides, m: a physical body
-    R = matrix_from_quat(quat_normalize(np.array([1.0, *draw(_vec)])))       # its axes turned: products of inertia
+    a, b, c = draw(st.lists(st.floats(0.1, 1.0), min_size=3, max_size=3))  # a box's sides, m: a physical body
+    R = matrix_from_quat(quat_normalize(np.array([1.0, *draw(_vec)])))  # its axes turned: products of inertia
     inertia = R @ np.diag([b * b + c * c, a * a + c * c, a * a + b * b]) * (mass / 12.0) @ R.T
-    springs = tuple(Spring(draw(_vec), 0.2 * draw(_vec), draw(st.floats(0.0, 60.0)), draw(st.floats(0.0, 1.0)))
+    springs = tuple(Spring(draw(_vec), 0.2 * draw(_vec),
+                           draw(st.floats(0.0, 60.0)), draw(st.floats(0.0, 1.0)))
                     for _ in range(draw(st.integers(0, 2))))
     points = tuple(PointForce(draw(_vec), 0.2 * draw(_vec), draw(st.sampled_from(["world", "body"])))
                    for _ in range(draw(st.integers(0, 2))))
@@ -118,7 +119,8 @@ def test_compiled_equals_the_definition_on_random_problems(monkeypatch, problem,
 
 
 def _stiff(k=1e6):
-    return Problem(RigidBody(1.0, [1.0, 1.0, 1.0]), ForceModel(springs=(Spring(np.zeros(3), np.zeros(3), k, 0.0),)),
+    return Problem(RigidBody(1.0, [1.0, 1.0, 1.0]),
+                   ForceModel(springs=(Spring(np.zeros(3), np.zeros(3), k, 0.0),)),
                    State(np.array([0.1, 0, 0]), np.zeros(3), np.array([1.0, 0, 0, 0]), np.zeros(3)))
 
 
@@ -156,7 +158,8 @@ def test_a_leapfrog_half_kick_that_does_not_converge_is_the_definitions_error(mo
 
 def _requests():
     """Members of different scenarios and steps, with different lengths; one blows up (a fast spin)."""
-    scs = [load_scenario(n) for n in ("tennis_racket", "spring_oscillator", "velocity_decay", "applied_torque")]
+    scs = [load_scenario(n)
+           for n in ("tennis_racket", "spring_oscillator", "velocity_decay", "applied_torque")]
     reqs = [RunRequest(sc, dt, n) for sc, dt, n in zip(scs, (0.01, 0.004, 0.02, 0.005), (300, 120, 90, 400))]
     fast_spin = Problem(RigidBody(1.0, [1.0, 2.0, 3.0]), ForceModel(),
                         State(np.zeros(3), np.zeros(3), np.array([1.0, 0, 0, 0]), np.array([0.1, 20.0, 0.1])))
@@ -194,8 +197,8 @@ def _kernel_already_loaded(_):
 
 
 def test_warm_loads_the_kernel_that_forked_workers_inherit():
-    # the sweep and the fuzz call warm() before their process pools fork: a worker then finds the compiled loop
-    # loaded, instead of loading (or compiling) it once more per worker
+    # the sweep and the fuzz call warm() before their process pools fork: a worker then finds the compiled
+    # loop loaded, instead of loading (or compiling) it once more per worker
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
     if "fork" not in mp.get_all_start_methods():
@@ -210,7 +213,8 @@ def test_a_run_in_chunks_is_the_run_in_one_call(monkeypatch):
     whole = S.simulate(problem, "rk4", 1e-3, 1000)
     monkeypatch.setattr(S, "COMPILED_CHUNK", 64)
     chunked, calls = _used_compiled(monkeypatch, problem, "rk4", 1e-3, 1000)
-    assert calls == list(range(0, 1000, 64))   # ceil(1000 / 64) calls, each starting where the previous stopped
+    # ceil(1000 / 64) calls, each starting where the previous stopped
+    assert calls == list(range(0, 1000, 64))
     _assert_same_run(chunked, whole)
 
 

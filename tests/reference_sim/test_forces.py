@@ -41,8 +41,8 @@ def test_spring_force_is_minus_gradient_of_its_potential():
     fm = ForceModel(springs=(s,))
     f, _ = fm.force_torque(BODY, X, V, Q)
     h = 1e-6
-    grad = np.array([(fm.potential_energy_J(BODY, X + h * e, Q) - fm.potential_energy_J(BODY, X - h * e, Q)) / (2 * h)
-                     for e in np.eye(3)])
+    grad = np.array([(fm.potential_energy_J(BODY, X + h * e, Q)
+                      - fm.potential_energy_J(BODY, X - h * e, Q)) / (2 * h) for e in np.eye(3)])
     np.testing.assert_allclose(f, -grad, rtol=1e-8)
 
 
@@ -58,7 +58,8 @@ def test_point_force_world_and_body_frames():
 
 
 def test_pure_torques_world_and_body():
-    f, tau = ForceModel(torques=(Torque(np.array([0, 0, 0.2]), "body"), Torque(np.array([0.1, 0, 0]), "world"))
+    f, tau = ForceModel(torques=(Torque(np.array([0, 0, 0.2]), "body"),
+                                 Torque(np.array([0.1, 0, 0]), "world"))
                         ).force_torque(BODY, X, V, Q)
     np.testing.assert_array_equal(f, 0.0)
     np.testing.assert_allclose(tau, R @ [0, 0, 0.2] + [0.1, 0, 0])
@@ -91,17 +92,20 @@ def test_decay_factor_is_the_course_gamma_exactly_at_its_own_step_and_exponentia
     fm = ForceModel(velocity_decay=0.99, angular_velocity_decay=0.995, decay_dt_s=0.01)
     assert fm.decay_factors(0.01) == (0.99, 0.995)           # bit for bit: the course's own factors
     k_v, k_w = fm.decay_rates_per_s()
-    assert k_v == pytest.approx(-np.log(0.99) / 0.01, rel=1e-15) and k_w == pytest.approx(-np.log(0.995) / 0.01, rel=1e-15)
+    assert (k_v == pytest.approx(-np.log(0.99) / 0.01, rel=1e-15)
+            and k_w == pytest.approx(-np.log(0.995) / 0.01, rel=1e-15))
     for dt in (0.02, 0.005, 0.00125, 0.003):                  # e^{-k dt}: one physical damping rate
         gv, gw = fm.decay_factors(dt)
-        assert gv == pytest.approx(np.exp(-k_v * dt), rel=1e-14) and gw == pytest.approx(np.exp(-k_w * dt), rel=1e-14)
+        assert (gv == pytest.approx(np.exp(-k_v * dt), rel=1e-14)
+                and gw == pytest.approx(np.exp(-k_w * dt), rel=1e-14))
     gv, gw = fm.decay_factors(np.array([0.01, 0.005]))         # arrays of steps (batched integrators)
     np.testing.assert_allclose(gv, [0.99, np.sqrt(0.99)], rtol=1e-15)
     assert ForceModel().decay_factors(0.3) == (1.0, 1.0) and ForceModel().decay_rates_per_s() == (0.0, 0.0)
 
 
 @pytest.mark.parametrize("kwargs", [dict(velocity_decay=0.99), dict(velocity_decay=0.99, decay_dt_s=0.0),
-                                    dict(velocity_decay=1.5, decay_dt_s=0.01), dict(angular_velocity_decay=0.0, decay_dt_s=0.01)])
+                                    dict(velocity_decay=1.5, decay_dt_s=0.01),
+                                    dict(angular_velocity_decay=0.0, decay_dt_s=0.01)])
 def test_decay_needs_a_factor_in_0_1_and_the_step_it_is_given_at(kwargs):
     with pytest.raises(ValueError):
         ForceModel(**kwargs)

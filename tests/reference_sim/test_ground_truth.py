@@ -11,8 +11,10 @@ from reference_sim.state import Problem, State
 def test_the_compiled_path_does_not_enter_the_ground_truth(monkeypatch):
     from reference_sim import compiled
     p = Problem(RigidBody(2.0, [0.3, 0.5, 0.7]),
-                ForceModel(springs=(Spring(np.array([0.0, 0.0, 1.0]), np.array([0.1, 0.0, 0.0]), 20.0, 0.2),)),
-                State(np.zeros(3), np.array([0.1, 0.0, 0.0]), np.array([1.0, 0.0, 0.0, 0.0]), np.array([0.2, 3.0, 0.1])))
+                ForceModel(springs=(Spring(np.array([0.0, 0.0, 1.0]),
+                                           np.array([0.1, 0.0, 0.0]), 20.0, 0.2),)),
+                State(np.zeros(3), np.array([0.1, 0.0, 0.0]),
+                      np.array([1.0, 0.0, 0.0, 0.0]), np.array([0.2, 3.0, 0.1])))
     t = np.linspace(0.0, 1.0, 11)
     before = ground_truth(p, t)
 

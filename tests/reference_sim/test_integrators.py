@@ -67,9 +67,11 @@ def _orders(errs, dts):
 def translation_problem():
     # Zero-length spring at the COM + gravity: harmonic oscillator, closed form below.
     k, m = 40.0, 1.0
-    fm = ForceModel(gravity_W=np.array([0, 0, -9.81]), springs=(Spring(np.array([0, 0, 1.0]), np.zeros(3), k, 0.0),))
+    fm = ForceModel(gravity_W=np.array([0, 0, -9.81]),
+                    springs=(Spring(np.array([0, 0, 1.0]), np.zeros(3), k, 0.0),))
     return Problem(RigidBody(m, [0.05, 0.05, 0.05]), fm,
-                   State(np.array([0.2, -0.1, 0.5]), np.array([0, 0.3, 0]), np.array([1.0, 0, 0, 0]), np.zeros(3)))
+                   State(np.array([0.2, -0.1, 0.5]), np.array([0, 0.3, 0]),
+                         np.array([1.0, 0, 0, 0]), np.zeros(3)))
 
 
 def harmonic_exact(problem, t):
@@ -105,8 +107,9 @@ def test_global_order_translation(variant):
     assert abs(_orders(errs, dts) - VARIANTS[variant].order) < ORDER_TOL, errs
 
 
-@pytest.mark.parametrize("variant", ["explicit_euler", "implicit_euler", "course_gyro", "expmap_gyro", "midpoint",
-                                     "leapfrog", "rk4"])
+@pytest.mark.parametrize("variant",
+                         ["explicit_euler", "implicit_euler", "course_gyro", "expmap_gyro", "midpoint",
+                          "leapfrog", "rk4"])
 def test_global_order_rotation(variant):
     problem, T = rotation_problem(), 1.0
     dts = LADDERS[VARIANTS[variant].order]
@@ -124,7 +127,8 @@ def test_euler_local_error_is_second_order(variant):
     # One step from the exact initial state: error O(Δt²), as the course teaches (order 2 ± 0.1).
     problem = translation_problem()
     dts = np.array([1e-2, 5e-3, 2.5e-3, 1.25e-3])
-    errs = [np.linalg.norm(simulate(problem, variant, dt, 1).y[-1, 0:3] - harmonic_exact(problem, dt)) for dt in dts]
+    errs = [np.linalg.norm(simulate(problem, variant, dt, 1).y[-1, 0:3] - harmonic_exact(problem, dt))
+            for dt in dts]
     assert abs(_orders(errs, dts) - 2.0) < ORDER_TOL, errs
 
 
@@ -152,14 +156,16 @@ def decay_problem(dt_course=0.01):
     fm = ForceModel(gravity_W=np.array([0.0, 0.0, -9.81]), velocity_decay=0.99, angular_velocity_decay=0.995,
                     decay_dt_s=dt_course)
     return Problem(RigidBody(2.0, [0.2, 0.3, 0.4]), fm,
-                   State(np.zeros(3), np.array([1.0, 0.5, 3.0]), np.array([1.0, 0, 0, 0]), np.array([0.0, 0.0, 2.0])))
+                   State(np.zeros(3), np.array([1.0, 0.5, 3.0]),
+                         np.array([1.0, 0, 0, 0]), np.array([0.0, 0.0, 2.0])))
 
 
 def decay_exact(problem, t):
     from reference_sim.analytic import linear_drag
     k_v, k_w = problem.forces.decay_rates_per_s()
     m = problem.body.mass_kg
-    x, v = linear_drag(m, m * k_v, problem.initial.x_W, problem.initial.v_W, problem.forces.gravity_W, np.array([t]))
+    x, v = linear_drag(m, m * k_v, problem.initial.x_W, problem.initial.v_W,
+                       problem.forces.gravity_W, np.array([t]))
     w0 = problem.initial.w_W
     q = quat_exp(-np.expm1(-k_w * t) / k_w * w0)          # angle ∫ω dt = ω0 (1 − e^{−kt}) / k
     return np.concatenate([x[0], v[0], q, w0 * np.exp(-k_w * t)])
@@ -201,7 +207,8 @@ def test_decay_applied_twice_or_left_out_does_not_converge():
     problem, T = decay_problem(), 1.0
     exact = decay_exact(problem, T)
     double = Problem(problem.body, ForceModel(gravity_W=problem.forces.gravity_W, velocity_decay=0.99 ** 2,
-                                              angular_velocity_decay=0.995 ** 2, decay_dt_s=0.01), problem.initial)
+                                              angular_velocity_decay=0.995 ** 2, decay_dt_s=0.01),
+                     problem.initial)
     none = Problem(problem.body, ForceModel(gravity_W=problem.forces.gravity_W), problem.initial)
     for wrong in (double, none):
         errs = [np.linalg.norm(simulate(wrong, "rk4", dt, int(round(T / dt))).y[-1, 3:6] - exact[3:6])

@@ -40,8 +40,8 @@ def _random_quats(rng, n=500):
 
 def test_product_matches_scipy(rng):
     q1, q2 = _random_quats(rng), _random_quats(rng)
-    expected = (Rotation.from_quat(q1, scalar_first=True) * Rotation.from_quat(q2, scalar_first=True)).as_quat(
-        scalar_first=True)
+    expected = (Rotation.from_quat(q1, scalar_first=True)
+                * Rotation.from_quat(q2, scalar_first=True)).as_quat(scalar_first=True)
     assert np.max(geodesic_angle(expected, quat_mul(q1, q2))) < QUAT_ROUND_TRIP
 
 
@@ -70,9 +70,11 @@ def test_matrix_round_trip(rng):
 
 def test_exp_matches_scipy_rotvec(rng):
     w = rng.normal(size=(200, 3)) * 2.0
-    np.testing.assert_allclose(quat_exp(w), Rotation.from_rotvec(w).as_quat(scalar_first=True), atol=QUAT_ALGEBRA)
+    np.testing.assert_allclose(quat_exp(w), Rotation.from_rotvec(w).as_quat(scalar_first=True),
+                               atol=QUAT_ALGEBRA)
     tiny = np.array([[1e-9, -2e-9, 3e-10], [0.0, 0.0, 0.0]])
-    np.testing.assert_allclose(quat_exp(tiny), Rotation.from_rotvec(tiny).as_quat(scalar_first=True), atol=1e-18)
+    np.testing.assert_allclose(quat_exp(tiny),
+                               Rotation.from_rotvec(tiny).as_quat(scalar_first=True), atol=1e-18)
 
 
 def test_axis_angle_round_trip(rng):
@@ -86,7 +88,8 @@ def test_axis_angle_round_trip(rng):
 
 def test_conjugate_inverts(rng):
     q = _random_quats(rng)
-    np.testing.assert_allclose(quat_mul(q, quat_conj(q)), np.tile([1.0, 0, 0, 0], (len(q), 1)), atol=QUAT_ALGEBRA)
+    np.testing.assert_allclose(quat_mul(q, quat_conj(q)),
+                               np.tile([1.0, 0, 0, 0], (len(q), 1)), atol=QUAT_ALGEBRA)
 
 
 def test_normalize_rejects_zero():

@@ -28,7 +28,8 @@ def test_blowup_is_reported_with_its_time_and_no_bad_rows():
 
 def test_stiff_spring_explicit_euler_diverges_implicit_does_not():
     # ω Δt = sqrt(1e6) * 0.01 = 10 >> 2: explicit Euler is unstable; implicit Euler is unconditionally stable.
-    p = Problem(RigidBody(1.0, [1.0, 1.0, 1.0]), ForceModel(springs=(Spring(np.zeros(3), np.zeros(3), 1e6, 0.0),)),
+    p = Problem(RigidBody(1.0, [1.0, 1.0, 1.0]),
+                ForceModel(springs=(Spring(np.zeros(3), np.zeros(3), 1e6, 0.0),)),
                 State(np.array([0.1, 0, 0]), np.zeros(3), np.array([1.0, 0, 0, 0]), np.zeros(3)))
     assert simulate(p, "explicit_euler", 0.01, 200).diverged_at_s is not None
     run = simulate(p, "implicit_euler", 0.01, 200)
@@ -58,8 +59,10 @@ def test_an_exception_in_a_step_is_a_divergence_with_its_words(monkeypatch):
         if np.any(y[..., 0] >= 4e-3 - 1e-12):
             raise ValueError("math domain error")
         return y + 1e-3
-    monkeypatch.setitem(integrators.VARIANTS, "rk4", integrators.Scheme(raise_at_step_5, 4, "raises at step 5"))
+    monkeypatch.setitem(integrators.VARIANTS, "rk4",
+                        integrators.Scheme(raise_at_step_5, 4, "raises at step 5"))
     monkeypatch.setattr(compiled, "kernel", lambda: None)
     run = simulate(_problem([0.1, 1.0, 0.1]), "rk4", 0.01, 100)
-    assert run.diverged_at_s == 0.05 and run.message == "diverged at t = 0.05 s: ValueError: math domain error"
+    assert (run.diverged_at_s == 0.05
+            and run.message == "diverged at t = 0.05 s: ValueError: math domain error")
     assert len(run.y) == 5

@@ -81,7 +81,8 @@ def _browser_sweep(folder):
         (src / f"{name}.toml").write_text(text, encoding="utf-8")
         scs.append(parse_scenario(text, source=str(src / f"{name}.toml")))
     with private_cache(folder / "cache"):
-        run_sweep(scs, VARIANTS, folder / "res", jobs=2, finish=lambda d: reports.render(d, jobs=2, progress=False))
+        run_sweep(scs, VARIANTS, folder / "res", jobs=2,
+                  finish=lambda d: reports.render(d, jobs=2, progress=False))
 
 
 @pytest.fixture(scope="session")
@@ -167,7 +168,8 @@ def test_first_screen_names_the_divergence_and_the_matrix_does_not_paint_it_gree
 def test_scenario_pages_link_their_toml_rows_and_series(results, browser):
     for name, text in (("spin_only", SPIN), ("stiff_spring", STIFF)):
         browser.load(_url(results, f"scenario-{name}.html"))
-        hrefs = browser.evaluate("[...document.querySelectorAll('p.files a')].map(a => a.getAttribute('href'))")
+        hrefs = browser.evaluate("[...document.querySelectorAll('p.files "
+                                 "a')].map(a => a.getAttribute('href'))")
         assert hrefs == [f"scenarios/{name}.toml", f"rows/{name}.csv", f"series/{name}.npz", "#runs"]
         assert (results / f"scenarios/{name}.toml").read_text(encoding="utf-8") == text
         with (results / "results.csv").open(newline="") as fh:
@@ -188,7 +190,8 @@ def test_plots_leave_out_what_carries_no_information(results):
     assert "Not drawn, constant along the reference: x = 0, y = 0, z = 0." in spin
 
 
-def test_planted_contradiction_divergence_and_second_references_reach_the_first_screen(results, tmp_path, browser):
+def test_planted_contradiction_divergence_and_second_references_reach_the_first_screen(
+        results, tmp_path, browser):
     """One re-render of planted records: a contradiction, an expected divergence (its own colour, not
     green), a second reference that disagrees and one that failed."""
     d = tmp_path / "res"
@@ -196,13 +199,14 @@ def test_planted_contradiction_divergence_and_second_references_reach_the_first_
     s = json.loads((d / "summary.json").read_text())
     for r in s["convergence"]:
         if r["engine"] == "reference:explicit_euler" and r["scenario"] == "stiff_spring":
-            r.update(expected_verdict="diverged", matches_expectation=True, assessment="diverged, as expected")
+            r.update(expected_verdict="diverged", matches_expectation=True,
+                     assessment="diverged, as expected")
     rec = next(r for r in s["convergence"] if r["engine"] == "reference:rk4" and r["scenario"] == "spin_only"
                and r["quantity"] == "orientation")
     rec.update(matches_expectation=False, assessment="does not converge (planted), expected order 4")
     s["scenarios"][0]["second_reference"] = {"label": "drake:rk3", "target_accuracy": 1e-10,
-                                             "distance": {"position": 0.0, "orientation": 3e-6, "velocity": 0.0,
-                                                          "angular_velocity": 2e-6},
+                                             "distance": {"position": 0.0, "orientation": 3e-6,
+                                                          "velocity": 0.0, "angular_velocity": 2e-6},
                                              "stated_accuracy": {"position": 1e-9, "orientation": 1e-9,
                                                                  "velocity": 1e-9, "angular_velocity": 1e-9},
                                              "agrees": False}
@@ -238,7 +242,8 @@ def test_report_rendering_prints_progress_lines_while_drawing(results, tmp_path,
     monkeypatch.setattr(reports, "LINE_INTERVAL_S", 0.0)          # a line after every figure
     reports.render(d, jobs=2, progress=True)
     err = capfd.readouterr().out.splitlines()   # stdout: stderr is for errors only
-    assert [line.split(" (")[0] for line in err[:-1]] == [f"rbcheck report: figures {i}/18" for i in range(1, 19)]
+    assert [line.split(" (")[0] for line in err[:-1]] == [f"rbcheck report: figures {i}/18"
+                                                          for i in range(1, 19)]
     assert "left" in err[0] and err[-2].startswith("rbcheck report: figures 18/18 (100%) in ")
     assert err[-1].startswith("rbcheck report: 4 pages and ") and "figures written in" in err[-1]
 

@@ -71,8 +71,8 @@ def _litter(fig, rng):
 
 @pytest.mark.parametrize("sc, kind", [("stiff_spring", "errors"), ("stiff_spring", "convergence"),
                                       ("spin_only", "trajectories"), ("spin_only", "work")])
-def test_a_figure_drawn_in_a_kept_grid_has_the_pixels_of_a_fresh_one(browser_results, tmp_path, monkeypatch, sc,
-                                                                       kind):
+def test_a_figure_drawn_in_a_kept_grid_has_the_pixels_of_a_fresh_one(browser_results, tmp_path, monkeypatch,
+                                                                     sc, kind):
     res = load_results(browser_results)
     plots.release()
     name, fig = _draw_keeping(res, sc, kind, tmp_path / "fresh", monkeypatch)
@@ -86,8 +86,8 @@ def test_a_figure_drawn_in_a_kept_grid_has_the_pixels_of_a_fresh_one(browser_res
 @pytest.mark.parametrize("first, then", [(("spin_only", "trajectories"), ("stiff_spring", "trajectories")),
                                          (("stiff_spring", "trajectories"), ("spin_only", "trajectories")),
                                          (("spin_only", "errors"), ("drop_once", "conservation"))])
-def test_a_figure_drawn_after_one_of_more_or_fewer_rows_has_the_pixels_of_a_fresh_one(browser_results, tmp_path,
-                                                                                     monkeypatch, first, then):
+def test_a_figure_drawn_after_one_of_more_or_fewer_rows_has_the_pixels_of_a_fresh_one(
+        browser_results, tmp_path, monkeypatch, first, then):
     """A layout's panels are kept whatever the number of rows: a figure of 1 row drawn after one of 4
     (rows hidden, its grid laid out anew, the bottom row's x labels moved) and one of 4 after one of 1
     (rows added) draw what they draw in a fresh grid, x tick labels under the bottom row only."""
@@ -126,7 +126,8 @@ def test_a_ladder_row_at_round_off_is_said_and_a_row_above_its_floor_is_drawn(ho
 def test_a_report_drawn_in_this_process_keeps_no_figure(browser_results, tmp_path, monkeypatch):
     figures = []
     save_png = plots.save_png
-    monkeypatch.setattr(plots, "save_png", lambda fig, path: (figures.append(weakref.ref(fig)), save_png(fig, path)))
+    monkeypatch.setattr(plots, "save_png",
+                        lambda fig, path: (figures.append(weakref.ref(fig)), save_png(fig, path)))
     d = tmp_path / "res"
     shutil.copytree(browser_results, d)
     reports.render(d, jobs=1, progress=False)

@@ -28,7 +28,8 @@ def private_uses(source: str) -> list:
             out.append((node.lineno, f"{node.func.id}(..., {node.args[1].value!r})"))
         elif isinstance(node, ast.Import):
             out += [(node.lineno, a.name) for a in node.names if any(_private(p) for p in a.name.split("."))]
-        elif isinstance(node, ast.ImportFrom) and not node.level and not (node.module or "").startswith("reports"):
+        elif (isinstance(node, ast.ImportFrom) and not node.level
+                and not (node.module or "").startswith("reports")):
             out += [(node.lineno, f"{node.module}.{a.name}") for a in node.names
                     if _private(a.name) or any(_private(p) for p in (node.module or "").split("."))]
     return sorted(out)

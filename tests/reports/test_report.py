@@ -108,7 +108,8 @@ def test_pages_parse_and_every_image_resolves(results):
 
 def test_scenario_description_is_escaped(results):
     for name, html in pages(results).items():
-        assert "<script>alert" not in html.lower() and html.lower().count("<script") == 1, name   # only the sorter
+        # only the sorter
+        assert "<script>alert" not in html.lower() and html.lower().count("<script") == 1, name
         assert "<b>bold</b>" not in html
     html = pages(results)["scenario-hostile_spin.html"]
     assert "&lt;script&gt;alert(&#34;pwned&#34;)&lt;/script&gt; &amp; &lt;b&gt;bold&lt;/b&gt;" in html

@@ -7,8 +7,9 @@ the next recorded row (so chaos cannot blur the comparison):
   ``one_step``): the trajectory IS a variant when every step reproduces it within the rounding of the
   data (written digits + the roundings of a step); each variant is also checked against the exact flow
   (is it a correct scheme for this scenario at this Δt?);
-* every catalogued mistake (:mod:`cross_checks.gates.check.mistakes`) on a correct base: named when it explains
-  every step within the local allowance and CHECK_MISTAKE_MARGIN times better than any correct scheme;
+* every catalogued mistake (:mod:`cross_checks.gates.check.mistakes`) on a correct base: named when it
+  explains every step within the local allowance and CHECK_MISTAKE_MARGIN times better than any correct
+  scheme;
 * a Δt mismatch: the scale s of the step that best fits the rows (the exact flow over s Δ);
 * the initial state: which usual slip (ω in body axes, quaternion in (x, y, z, w) order, ...) turns the
   scenario's initial state into the first row.
@@ -28,8 +29,8 @@ from reference_sim.integrators import VARIANTS
 from reference_sim.quaternion import quat_conj, quat_log, quat_mul, rotate
 from reference_sim.state import Q, V, W, X
 
-__all__ = ["CandidateScore", "step_rows", "score_candidate", "score_variants", "diagnose_mistakes", "fit_step_scale",
-           "initial_state_slips"]
+__all__ = ["CandidateScore", "step_rows", "score_candidate", "score_variants", "diagnose_mistakes",
+           "fit_step_scale", "initial_state_slips"]
 
 
 @dataclass
@@ -55,8 +56,8 @@ class CandidateScore:
         return bool(self.own_defect <= 1.0)
 
     def as_dict(self) -> dict:
-        return {"name": self.name, "max_ratio": self.max_ratio, "p99_ratio": self.p99_ratio, "same": self.same,
-                "own_defect_ratio": self.own_defect, "correct_here": self.correct,
+        return {"name": self.name, "max_ratio": self.max_ratio, "p99_ratio": self.p99_ratio,
+                "same": self.same, "own_defect_ratio": self.own_defect, "correct_here": self.correct,
                 "worst_quantity": self.worst_quantity}
 
 
@@ -91,7 +92,8 @@ def score_candidate(name, y_next, y_cand, allow, quantities, flow_end=None, solv
         mx = float(np.max(stack))
         p99 = float(np.max(np.percentile(stack, 99, axis=1)))
         worst = quantities[int(np.argmax(np.max(stack, axis=1)))]
-    tol_same = {q: allow.arith[q] + allow.print_[q] + (0.0 if solve_tol is None else solve_tol[q]) for q in quantities}
+    tol_same = {q: allow.arith[q] + allow.print_[q] + (0.0 if solve_tol is None else solve_tol[q])
+                for q in quantities}
     same = bool(not math.isnan(mx) and all(np.all(d[q] <= tol_same[q]) for q in quantities))
     own = math.nan
     if flow_end is not None:
@@ -110,7 +112,8 @@ def score_variants(inp, scenario, y0, y_next, flow_end, allow):
     from reference_sim.integrators import IMPLICIT_TOL
     adapter = get_adapter("reference")
     solve = {q: inp.span_steps * IMPLICIT_TOL * math.sqrt(BLOCKS[q].stop - BLOCKS[q].start)
-             * (1.0 + np.linalg.norm(np.nan_to_num(y_next[:, BLOCKS[q]]), axis=1)) * (2.0 if q == "orientation" else 1.0)
+             * (1.0 + np.linalg.norm(np.nan_to_num(y_next[:, BLOCKS[q]]), axis=1))
+             * (2.0 if q == "orientation" else 1.0)
              for q in QUANTITIES}
     out = []
     for v, scheme in VARIANTS.items():
@@ -137,7 +140,8 @@ def diagnose_mistakes(inp, scenario, y0, y_next, allow) -> list:
             base = next((b for b in BASES if label.endswith(f"({b})")), None)
             if base is not None:
                 if base not in base_steps:
-                    base_steps[base] = step_rows(lambda z, hh, k=BASES[base]: course_step(scenario, z, hh, k), y0, inp)
+                    base_steps[base] = step_rows(lambda z, hh, k=BASES[base]: course_step(scenario, z, hh, k),
+                                                 y0, inp)
                 d = distances(y_c, base_steps[base], QUANTITIES)
                 s.effect = max(float(np.nanmax(ratio(d[q], allow.total[q]))) for q in QUANTITIES)
             else:

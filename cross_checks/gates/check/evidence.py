@@ -27,8 +27,8 @@ from cross_checks.core.quantities import BLOCKS, QUANTITIES, UNITS, quantity_sca
 from reference_sim.quaternion import matrix_from_quat, quat_conj, quat_log, quat_mul
 from reference_sim.state import Q, V, W, X
 
-__all__ = ["Evidence", "evidence_row", "reconstruct_states", "pose_consistency", "conserved_evidence", "free_running_evidence",
-           "ratio"]
+__all__ = ["Evidence", "evidence_row", "reconstruct_states", "pose_consistency", "conserved_evidence",
+           "free_running_evidence", "ratio"]
 
 UNITS = dict(UNITS, energy="J", angular_momentum="kg m²/s", quaternion_norm="")
 
@@ -74,7 +74,8 @@ class Evidence:
                                             "value_at_worst", "allowance", "first_over_s", "source", "note")}
         d["decisive"] = self.decisive
         d["decisive_until_s"] = (None if self.decisive_until_s is None
-                                 else (self.decisive_until_s if math.isfinite(self.decisive_until_s) else None))
+                                 else (self.decisive_until_s
+                                       if math.isfinite(self.decisive_until_s) else None))
         d["passed"] = self.passed
         return d
 
@@ -96,7 +97,8 @@ def evidence_row(kind, quantity, t_s, value, allowance, source, *, decisive=None
     a = np.asarray(allowance, dtype=float)
     r = ratio(v, a)
     mask = np.ones(len(t), dtype=bool) if decisive is None else np.asarray(decisive, dtype=bool)
-    unit = {"position": "m/s²", "orientation": "rad/s²"}[quantity] if kind == "acceleration" else UNITS.get(quantity, "")
+    unit = ({"position": "m/s²", "orientation": "rad/s²"}[quantity]
+            if kind == "acceleration" else UNITS.get(quantity, ""))
     if len(t) == 0:
         return Evidence(kind, quantity, unit, math.nan, math.nan, math.nan, None, math.nan, source,
                         -math.inf, note)
@@ -121,7 +123,8 @@ def evidence_row(kind, quantity, t_s, value, allowance, source, *, decisive=None
     else:
         until = float(t[np.flatnonzero(mask)[-1]])
     return Evidence(kind, quantity, unit, max_value, max_ratio, float(t[k]), first, float(a[k]),
-                    source, until, note, series={"t_s": t, "value": v, "allowance": a}, value_at_worst=float(v[k]))
+                    source, until, note, series={"t_s": t, "value": v, "allowance": a},
+                    value_at_worst=float(v[k]))
 
 
 # --- pose-only files: acceleration consistency ----------------------------------------------------
@@ -181,18 +184,21 @@ def pose_consistency(inp, scenario, y_hat) -> list:
         res = np.linalg.norm(a_hat - f[:, V], axis=1)
         pf = inp.print_floor["position"]
         mag = np.linalg.norm(yy[ok, X], axis=1)
-        allow = coef * M2["velocity"] + (4.0 * pf[ok] + 4.0 * inp.span_steps[ok] * tol.CHECK_ROUNDINGS_PER_STEP * u * mag) / D ** 2
+        allow = coef * M2["velocity"] + (4.0 * pf[ok] + 4.0 * inp.span_steps[ok]
+                                         * tol.CHECK_ROUNDINGS_PER_STEP * u * mag) / D ** 2
         rows.append(evidence_row("acceleration", "position", t, res, allow,
-                                 "second difference of the positions vs f/m: C (3h + Δ²L/12) |a'| + 4 × written precision / Δ²"))
+                                 "second difference of the positions vs f/m: C "
+                                 "(3h + Δ²L/12) |a'| + 4 × written precision / Δ²"))
     if "orientation" in inp.present:
         qn = yy[:, Q] / np.linalg.norm(yy[:, Q], axis=1, keepdims=True)
         alpha_hat = (_rotvec_rate(qn[ok], qn[ok + 1], D) - _rotvec_rate(qn[ok - 1], qn[ok], D)) / D[:, None]
         res = np.linalg.norm(alpha_hat - f[:, W], axis=1)
         pf = inp.print_floor["orientation"]
-        allow = coef * M2["angular_velocity"] + (4.0 * pf[ok] + 8.0 * inp.span_steps[ok] * tol.CHECK_ROUNDINGS_PER_STEP * u) / D ** 2
+        allow = coef * M2["angular_velocity"] + (4.0 * pf[ok] + 8.0 * inp.span_steps[ok]
+                                                 * tol.CHECK_ROUNDINGS_PER_STEP * u) / D ** 2
         rows.append(evidence_row("acceleration", "orientation", t, res, allow,
-                                 "second difference of the orientations vs Euler's equations: C (3h + Δ²L/12) |α'| "
-                                 "+ 4 × written precision / Δ²"))
+                                 "second difference of the orientations vs Euler's equations: "
+                                 "C (3h + Δ²L/12) |α'| + 4 × written precision / Δ²"))
     return rows
 
 
@@ -214,8 +220,10 @@ def conserved_evidence(inp, scenario, allow) -> list:
         qn = np.linalg.norm(y[:, Q], axis=1)
         pf = inp.print_floor["orientation"] / 2.0
         acc = _cumulative(inp.span_steps * tol.CHECK_ROUNDINGS_PER_STEP * inp.unit_roundoff)
-        rows.append(evidence_row("conserved", "quaternion_norm", t, np.abs(qn - 1.0), pf + acc + 4.0 * inp.unit_roundoff,
-                                 "written precision of q + the roundings of each step (a normalised quaternion)"))
+        rows.append(evidence_row("conserved", "quaternion_norm", t, np.abs(qn - 1.0),
+                                 pf + acc + 4.0 * inp.unit_roundoff,
+                                 "written precision of q + the roundings of each step "
+                                 "(a normalised quaternion)"))
     if not inp.full_state or allow is None:
         return rows
     p = scenario.problem
@@ -230,8 +238,8 @@ def conserved_evidence(inp, scenario, allow) -> list:
         bound += sum(grad[q] * inp.print_floor[q] + grad[q][0] * inp.print_floor[q][0] for q in QUANTITIES)
         bound += 4.0 * inp.unit_roundoff * (E_terms + E_terms[0])
         rows.append(evidence_row("conserved", "energy", t, drift, bound,
-                                 "the local allowances summed along the run, weighted by |∂E/∂y| (a consistent scheme's "
-                                 "drift), + written precision"))
+                                 "the local allowances summed along the run, weighted by |∂E/∂y| "
+                                 "(a consistent scheme's drift), + written precision"))
     if cons["angular_momentum"][0]:
         R = matrix_from_quat(y[:, Q] / np.linalg.norm(y[:, Q], axis=1, keepdims=True))
         L = np.einsum("kij,kj->ki", p.body.world_inertia(R), y[:, W])
@@ -243,8 +251,8 @@ def conserved_evidence(inp, scenario, allow) -> list:
                      for q in ("angular_velocity", "orientation"))
         bound += 4.0 * inp.unit_roundoff * (Lmag + Lmag[0])
         rows.append(evidence_row("conserved", "angular_momentum", t, drift, bound,
-                                 "the local allowances summed along the run, weighted by |∂L/∂y| (world L = I_W ω), "
-                                 "+ written precision"))
+                                 "the local allowances summed along the run, weighted "
+                                 "by |∂L/∂y| (world L = I_W ω), + written precision"))
     return rows
 
 
@@ -287,10 +295,11 @@ def free_running_evidence(inp, scenario, y_ref, ref_label, allow_per_row) -> tup
         note = ""
         if not decisive.all():
             t_cap = float(t[np.argmin(decisive)])
-            note = (f"the allowance reaches the cap ({cap:.3g} {UNITS[q]}) at t = {t_cap:.4g} s: from there the "
-                    "free-running comparison is reported, not decisive (the local evidence decides)")
+            note = (f"the allowance reaches the cap ({cap:.3g} {UNITS[q]}) at t = {t_cap:.4g} s: from there "
+                    "the free-running comparison is reported, not decisive (the local evidence decides)")
         rows.append(evidence_row("free-running", q, t, errs[q], np.minimum(allowance, cap),
-                                 "local allowances carried to t by the scenario's measured error growth, capped at "
-                                 f"{tol.CHECK_FREE_RUN_CAP_FRACTION:g} × how far the quantity moves",
+                                 "local allowances carried to t by the scenario's measured error "
+                                 f"growth, capped at {tol.CHECK_FREE_RUN_CAP_FRACTION:g} × how "
+                                 "far the quantity moves",
                                  decisive=decisive, note=note))
     return rows, growth, errs

@@ -49,7 +49,8 @@ class CheckInput:
     source : the file name used in messages.
     t_rec_s : (K,) recorded times, s.  t_s : (K,) true times ``n_k · h`` (s).
     n_steps : (K,) step index of each row (0 for the first).  span_steps : (K−1,) steps per row interval.
-    h_s : the simulator's step, s (None in variable-step mode).  span_s : (K−1,) length of each row interval, s.
+    h_s : the simulator's step, s (None in variable-step mode).
+    span_s : (K−1,) length of each row interval, s.
     y : (K, 13) packed states [x_W, v_W, q_WB (w x y z), w_W]; NaN columns for absent groups.
     present : quantity groups the file holds.
     print_floor : quantity -> (K,) rounding of the written values of that quantity in each row (m, m/s,
@@ -204,9 +205,9 @@ def _map_rows(source, t, scenario, dt_given, t_half):
         bad = np.flatnonzero((m < 1) | (np.abs(d - m * h) > interval_bound(t[1:], np.maximum(m, 1), t_half)))
         if bad.size:
             k = int(bad[0])
-            raise CheckError(f"{source}: line {k + 3}: column t: with --dt {h:g} s every row interval must be a whole "
-                             f"number of steps; t advances {d[k]:.9g} s from line {k + 2} "
-                             f"({d[k] / h:.4g} steps)")
+            raise CheckError(f"{source}: line {k + 3}: column t: with --dt {h:g} s every row "
+                             "interval must be a whole number of steps; t advances "
+                             f"{d[k]:.9g} s from line {k + 2} ({d[k] / h:.4g} steps)")
         return h, m.astype(np.int64)
     h0 = float(np.median(d))
     m = np.round(d / h0)
@@ -233,8 +234,8 @@ def prepare_input(traj, scenario, source: str, dt_s: float | None = None) -> Che
     t = np.asarray(traj.t_s, dtype=float)
     present = tuple(traj.meta.get("quantities_present", QUANTITY_GROUPS))
     if not any(g in present for g in ("position", "orientation")):
-        raise CheckError(f"{source}: header: needs the position (x,y,z) or orientation (qw,qx,qy,qz) columns; "
-                         f"found only {', '.join(present)}")
+        raise CheckError(f"{source}: header: needs the position (x,y,z) or orientation "
+                         f"(qw,qx,qy,qz) columns; found only {', '.join(present)}")
     if len(t) < 2:
         raise CheckError(f"{source}: rows: need at least 2 rows (t = 0 and one step), got {len(t)}")
     notes = []
@@ -270,9 +271,9 @@ def _time_grid(source, t, scenario, dt_s, notes):
         off = np.abs(t - n * h)
         if not np.any(off > bound + 1e-9 * h):
             if np.max(off) > 16 * EPS64 * max(t[-1], h):
-                notes.append(f"the recorded times drift from n·Δt by up to {np.max(off):.2g} s (single-precision "
-                             f"accumulation allows {bound[int(np.argmax(off))]:.2g} s there): rows were mapped to "
-                             "steps by their intervals and the times n·Δt used")
+                notes.append(f"the recorded times drift from n·Δt by up to {np.max(off):.2g} s "
+                             f"(single-precision accumulation allows {bound[int(np.argmax(off))]:.2g} s "
+                             "there): rows were mapped to steps by their intervals and the times n·Δt used")
             return n * h, n, m, h, float(bound[-1])
         k = int(np.argmax(off - bound))
         if dt_s is not None:
@@ -283,8 +284,8 @@ def _time_grid(source, t, scenario, dt_s, notes):
                      f"{off[k]:.3g} s off): each row interval is taken as one step of its recorded length")
     _check_jumps(source, t, np.maximum(np.round(np.diff(t) / np.median(np.diff(t))), 1))
     if not notes:
-        notes.append("the row intervals are not whole multiples of one Δt: each row interval is taken as one step "
-                     "of its recorded length (variable steps)")
+        notes.append("the row intervals are not whole multiples of one Δt: each row "
+                     "interval is taken as one step of its recorded length (variable steps)")
     if abs(t[0]) > 1e-9 * np.median(np.diff(t)) + t_half:
         raise CheckError(f"{source}: line 2: column t: must start at 0 (the scenario's initial state), "
                          f"starts at {t[0]:g} s")
@@ -307,13 +308,13 @@ def _cut_non_finite(inp):
     finite = ~bad_rows(inp.y[:, cols])
     zero_q = _zero_quaternion_rows(inp)
     if zero_q[0] and finite[0]:
-        raise CheckError(f"{inp.source}: line 2: columns qw,qx,qy,qz: the quaternion is zero, not an orientation "
-                         "(w, x, y, z of a unit quaternion expected)")
+        raise CheckError(f"{inp.source}: line 2: columns qw,qx,qy,qz: the quaternion is zero, "
+                         "not an orientation (w, x, y, z of a unit quaternion expected)")
     if not finite[0]:
         bad = [c for c in cols if not abs(inp.y[0, c]) <= BLOWUP_LIMIT]
         from cross_checks.core.trajectory import COLUMNS
-        raise CheckError(f"{inp.source}: line 2: column {COLUMNS[bad[0] + 1]}: the initial state must be finite "
-                         f"(and below {BLOWUP_LIMIT:g}), got {inp.y[0, bad[0]]}")
+        raise CheckError(f"{inp.source}: line 2: column {COLUMNS[bad[0] + 1]}: the initial state "
+                         f"must be finite (and below {BLOWUP_LIMIT:g}), got {inp.y[0, bad[0]]}")
     good = finite & ~zero_q
     if good.all():
         return
@@ -339,8 +340,9 @@ def _cut_to_duration(inp, scenario):
     if beyond.size:
         k = int(beyond[0])
         inp.dropped_after_s = float(inp.t_s[k - 1])
-        inp.notes.append(f"the file runs to t = {inp.t_s[-1]:.6g} s, beyond the scenario's duration {T:g} s: it is "
-                         f"compared up to t = {inp.t_s[k - 1]:.6g} s ({len(inp.t_s) - k} later rows ignored)")
+        inp.notes.append(f"the file runs to t = {inp.t_s[-1]:.6g} s, beyond the scenario's "
+                         f"duration {T:g} s: it is compared up to "
+                         f"t = {inp.t_s[k - 1]:.6g} s ({len(inp.t_s) - k} later rows ignored)")
         _keep(inp, k)
     if inp.diverged_at_s is None and inp.lost_orientation_at_s is None and inp.t_s[-1] < T - slack:
         inp.ended_early_s = float(inp.t_s[-1])
@@ -351,5 +353,6 @@ def describe_time(inp) -> str:
     if inp.h_s is None:
         return f"{inp.n_rows} rows, t = 0 … {inp.t_s[-1]:.6g} s, variable steps"
     d = inp.decimation
-    per = f"one row per step of Δt = {inp.h_s:g} s" if d == 1 else f"one row every {d} steps of Δt = {inp.h_s:g} s"
+    per = (f"one row per step of Δt = {inp.h_s:g} s" if d == 1
+           else f"one row every {d} steps of Δt = {inp.h_s:g} s")
     return f"{inp.n_rows} rows, t = 0 … {inp.t_s[-1]:.6g} s, {per}"

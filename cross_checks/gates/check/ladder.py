@@ -12,6 +12,7 @@ import math
 from cross_checks.analysis import metrics as M
 from cross_checks.analysis.expectations import Expectation, expectation
 from cross_checks.analysis.judge import judge_ladder
+from cross_checks.core import tolerances as tol
 from cross_checks.core.quantities import QUANTITIES, quantity_scales
 
 __all__ = ["LadderError", "check_ladder"]
@@ -50,8 +51,8 @@ def check_ladder(results, scenario, scheme=None) -> dict:
         if r.input["dt_s"] is None:
             raise LadderError(f"{r.source}: t: variable steps: a ladder needs one Δt per file")
         if any(math.isclose(r.input["dt_s"], d, rel_tol=1e-9) for d in dts):
-            raise LadderError(f"{r.source}: t: Δt = {r.input['dt_s']:g} s appears in two files; a ladder needs "
-                              "distinct steps")
+            raise LadderError(f"{r.source}: t: Δt = {r.input['dt_s']:g} s appears "
+                              "in two files; a ladder needs distinct steps")
         dts.append(r.input["dt_s"])
     notes = []
     statuses = []
@@ -61,6 +62,7 @@ def check_ladder(results, scenario, scheme=None) -> dict:
         if short:
             notes.append(f"{r.source} stops at t = {r.input['t_end_s']:g} s: no final error")
     finals = [_final_errors(r) for r in results]
+    prec = "float32" if any(r.input.get("single_precision") for r in results) else "float64"
     records, ok = [], True
     variant = None
     for q in QUANTITIES:
@@ -68,15 +70,17 @@ def check_ladder(results, scenario, scheme=None) -> dict:
             continue
         errs = [f[q] if s == "ok" else math.nan for f, s in zip(finals, statuses)]
         floors = [M.roundoff_floor(quantity_scales(r.series["y_ref"])[q], int(round(scenario.duration_s / d)),
-                                   r.reference_label) for r, d in zip(results, dts)]
+                                   r.reference_label, eps=tol.MACHINE_EPSILON[prec]) for r, d in zip(results, dts)]
         variant, exp = _expected(results, scenario, q, scheme)
+        if exp.precision != prec:    # the files' precision, as read from their digits, sets the floors
+            exp = Expectation(exp.verdict, exp.order, exp.reason, prec)
         j = judge_ladder(dts, errs, floors, statuses, exp)
         fit, matches, phrase = j.fit, j.matches, j.assessment
         ok &= matches is not False
         records.append({"quantity": q, "order": fit.order, "pairwise_orders": fit.pairwise_orders,
                         "verdict": j.verdict, "assessment": phrase, "matches_expectation": matches,
-                        "expected": exp.as_dict(), "dt_s": fit.dt_s, "errors": fit.errors, "floors": fit.floors,
-                        "fitted": fit.fitted, "note": fit.note})
+                        "expected": exp.as_dict(), "dt_s": fit.dt_s, "errors": fit.errors,
+                        "floors": fit.floors, "fitted": fit.fitted, "note": fit.note})
         if fit.note:
             notes.append(f"{q}: {fit.note}")
     files_ok = all(r.passed for r in results)
@@ -84,13 +88,14 @@ def check_ladder(results, scenario, scheme=None) -> dict:
     failed_files = [r.source for r in results if not r.passed]
     parts = []
     if failed_files:
-        parts.append(f"{len(failed_files)} of {len(results)} files fail their own check ({', '.join(failed_files)})")
+        parts.append(f"{len(failed_files)} of {len(results)} files fail "
+                     f"their own check ({', '.join(failed_files)})")
     if bad:
         parts.append("convergence: " + "; ".join(bad))
     orders = ", ".join(f"{r['quantity']} {r['order']:.2f}" for r in records if r["order"] is not None)
     verdict = "; ".join(parts) if parts else (f"every file passes and the errors converge as expected "
                                               f"(fitted orders: {orders or 'at round-off'})")
-    expected = (f"{variant}'s orders" if variant else "convergence of a consistent scheme (order ≥ 1 not claimed "
-                "from the files alone)")
+    expected = (f"{variant}'s orders" if variant else "convergence of a consistent scheme "
+                "(order ≥ 1 not claimed from the files alone)")
     return {"files": [r.source for r in results], "dt_s": sorted(dts, reverse=True), "convergence": records,
             "passed": bool(files_ok and ok), "verdict": verdict, "expected": expected, "notes": notes}

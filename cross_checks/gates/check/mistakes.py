@@ -1,11 +1,12 @@
 """The classic mistakes of a course-style rigid-body step, as step functions ``rbcheck check`` can try.
 
-Each :class:`Mistake` is the course's semi-implicit step (``v += Δt f/m; x += Δt v; ω += Δt α;
-q += ½Δt [0, ω] q; q /= |q|``, with or without the gyroscopic torque −ω × (I ω), velocity decay as
-``e^{−kΔt}``) with ONE thing done wrong: the definition's course-type step
-(reference_sim.integrators.course_type) with its knobs, or its parameters changed. The checker compares a user's step with each of them from the user's own states, and
-names the mistake whose steps explain the trajectory (see cross_checks.gates.check). Batched over rows: states
-``y`` (N, 13) packed [x_W, v_W, q_WB (w x y z), w_W]; ``h`` (s) a scalar or (N,).
+Each :class:`Mistake` is the course's semi-implicit step
+(``v += Δt f/m; x += Δt v; ω += Δt α; q += ½Δt [0, ω] q; q /= |q|``, with or without the gyroscopic
+torque −ω × (I ω), velocity decay as ``e^{−kΔt}``) with ONE thing done wrong: the definition's course-type
+step (reference_sim.integrators.course_type) with its knobs, or its parameters changed. The checker compares a
+user's step with each of them from the user's own states, and names the mistake whose steps explain the
+trajectory (see cross_checks.gates.check). Batched over rows: states ``y`` (N, 13) packed
+[x_W, v_W, q_WB (w x y z), w_W]; ``h`` (s) a scalar or (N,).
 """
 from __future__ import annotations
 
@@ -58,7 +59,8 @@ class Knobs:
 
 #: The two correct bases a mistake is made on: the course's step with the gyroscopic term, and the
 #: course's own step without it.
-BASES = {"with the gyroscopic term": Knobs(), "without the gyroscopic term (the course's step)": Knobs(gyro=0.0)}
+BASES = {"with the gyroscopic term": Knobs(),
+         "without the gyroscopic term (the course's step)": Knobs(gyro=0.0)}
 
 
 def _members(problem, knobs: Knobs, h, n_rows: int):
@@ -72,11 +74,13 @@ def _members(problem, knobs: Knobs, h, n_rows: int):
         change["drag"] = knobs.drag_sign * m.drag
     if knobs.frames_swapped:
         at_com = np.concatenate([m.force_W[:, None, :], np.zeros((len(m), 1, 3))], axis=-1)   # r_B = 0
-        change.update(world_points=m.body_points, body_points=np.concatenate([at_com, m.world_points], axis=1),
-                      force_W=0.0 * m.force_W, torque_W=m.torque_B, torque_B=m.torque_W)
+        change.update(world_points=m.body_points,
+                      body_points=np.concatenate([at_com, m.world_points], axis=1), force_W=0.0 * m.force_W,
+                      torque_W=m.torque_B, torque_B=m.torque_W)
     if knobs.gyro == 1.0:   # only the gyroscopic term ω × I ω uses I_B itself (with q renormalised)
         if not knobs.normalise:
-            raise ValueError("the gyroscopic sign is flipped through I_B, which a world-axes solve does not allow")
+            raise ValueError("the gyroscopic sign is flipped through I_B, "
+                             "which a world-axes solve does not allow")
         change["inertia_B"] = -m.inertia_B
     if knobs.decay_power != 1.0:
         change["decay_gamma"] = m.decay_gamma ** knobs.decay_power
@@ -103,7 +107,8 @@ def course_step(scenario, y, h, knobs: Knobs = Knobs()):
 
 def _off_com(sc):
     fm = sc.problem.forces
-    return any(np.any(p.point_B != 0) for p in fm.point_forces) or any(np.any(s.attach_B != 0) for s in fm.springs)
+    return (any(np.any(p.point_B != 0) for p in fm.point_forces)
+            or any(np.any(s.attach_B != 0) for s in fm.springs))
 
 
 def _anisotropic(sc):
@@ -140,17 +145,23 @@ class Mistake:
 
 
 CATALOG = (
-    Mistake("gyroscopic term sign", "the gyroscopic term has the wrong sign: +ω × (Iω) where Euler's equations "
-            "have −ω × (Iω)", {"gyro": 1.0}, lambda sc, h: _anisotropic(sc) and _rotates(sc), with_bases=False),
+    Mistake("gyroscopic term sign",
+            "the gyroscopic term has the wrong sign: +ω × (Iω) where Euler's equations "
+            "have −ω × (Iω)", {"gyro": 1.0}, lambda sc, h: _anisotropic(sc) and _rotates(sc),
+            with_bases=False),
     Mistake("quaternion product order", "the quaternion update multiplies on the wrong side: q ⊗ [0, ω] with "
-            "world ω (a world angular velocity needs [0, ω] ⊗ q)", {"quat": "right_world"}, lambda sc, h: _rotates(sc)),
+            "world ω (a world angular velocity needs [0, ω] ⊗ q)", {"quat": "right_world"},
+            lambda sc, h: _rotates(sc)),
     Mistake("angular velocity frame", "ω is taken in the wrong frame: body-axes ω in the world-frame update "
             "[0, ω] ⊗ q", {"quat": "left_body"}, lambda sc, h: _rotates(sc)),
-    Mistake("inertia not rotated", "the inertia is not rotated into world axes: I_body is used with world ω and "
-            "τ (needs I = R I_body Rᵀ)", {"inertia": "body"}, lambda sc, h: _anisotropic(sc) and _rotates(sc)),
+    Mistake("inertia not rotated",
+            "the inertia is not rotated into world axes: I_body is used with world ω and "
+            "τ (needs I = R I_body Rᵀ)", {"inertia": "body"},
+            lambda sc, h: _anisotropic(sc) and _rotates(sc)),
     Mistake("inertia rotated backwards", "the inertia is rotated the wrong way: Rᵀ I_body R instead of "
             "R I_body Rᵀ", {"inertia": "transposed"}, lambda sc, h: _anisotropic(sc) and _rotates(sc)),
-    Mistake("torque cross product order", "the torque is f × r instead of r × f (every applied torque has the "
+    Mistake("torque cross product order",
+            "the torque is f × r instead of r × f (every applied torque has the "
             "wrong sign)", {"torque_sign": -1.0}, lambda sc, h: _off_com(sc)),
     Mistake("lever arm not rotated", "the lever arm is not rotated: τ = r_body × f instead of (R r_body) × f",
             {"lever_rotated": False}, lambda sc, h: _off_com(sc)),
@@ -158,24 +169,31 @@ CATALOG = (
             "torque (τ = r × f left out)", {"point_torque": False}, lambda sc, h: _off_com(sc)),
     Mistake("force or torque frame", "body-frame torques or forces are applied in world axes (or world ones "
             "in body axes)", {"frames_swapped": True},
-            lambda sc, h: bool(sc.problem.forces.torques or any(p.frame == "body" for p in sc.problem.forces.point_forces))),
+            lambda sc, h: bool(sc.problem.forces.torques
+                               or any(p.frame == "body" for p in sc.problem.forces.point_forces))),
     Mistake("spring attachment not rotated", "the spring's attachment point is not rotated with the body "
             "(x + r_body instead of x + R r_body)", {"attach_rotated": False},
             lambda sc, h: any(np.any(s.attach_B != 0) for s in sc.problem.forces.springs)),
-    Mistake("missing ½ in the quaternion update", "the quaternion update lacks the ½: q + Δt [0, ω] q turns the "
+    Mistake("missing ½ in the quaternion update",
+            "the quaternion update lacks the ½: q + Δt [0, ω] q turns the "
             "body twice as fast (q̇ = ½ [0, ω] q)", {"quat_half": 1.0}, lambda sc, h: _rotates(sc)),
-    Mistake("quaternion not normalised", "the quaternion is not renormalised after the update: |q| drifts from 1",
-            {"normalise": False}, lambda sc, h: _rotates(sc)),
+    Mistake("quaternion not normalised",
+            "the quaternion is not renormalised after the update: |q| drifts from 1", {"normalise": False},
+            lambda sc, h: _rotates(sc)),
     Mistake("decay applied twice", "the velocity decay is applied twice per step", {"decay_power": 2.0},
             lambda sc, h: _decay(sc)),
-    Mistake("decay missing", "the velocity decay is not applied", {"decay_power": 0.0}, lambda sc, h: _decay(sc)),
+    Mistake("decay missing", "the velocity decay is not applied",
+            {"decay_power": 0.0}, lambda sc, h: _decay(sc)),
     Mistake("decay per step at another Δt", "the per-step decay factor γ is applied at a Δt other than the "
-            "scenario's: γ is frame-rate dependent (use e^(−kΔt) with k = −ln γ / dt)", {"decay_per_step": True},
+            "scenario's: γ is frame-rate dependent (use e^(−kΔt) with k = −ln γ / dt)",
+            {"decay_per_step": True},
             lambda sc, h: _decay(sc) and not math.isclose(float(np.max(h)), sc.dt_s, rel_tol=1e-9)),
-    Mistake("drag sign", "the linear drag pushes along the velocity (f = +c v instead of −c v)", {"drag_sign": -1.0},
-            lambda sc, h: sc.problem.forces.linear_drag_N_s_per_m != 0.0),
-    Mistake("gravity axis", "gravity acts along the wrong axis (a y-up / z-up mix-up)", {"gravity_axis": "swap_yz"},
-            lambda sc, h: bool(np.asarray(sc.problem.forces.gravity_W)[1] != np.asarray(sc.problem.forces.gravity_W)[2])),
+    Mistake("drag sign", "the linear drag pushes along the velocity (f = +c v instead of −c v)",
+            {"drag_sign": -1.0}, lambda sc, h: sc.problem.forces.linear_drag_N_s_per_m != 0.0),
+    Mistake("gravity axis", "gravity acts along the wrong axis (a y-up / z-up mix-up)",
+            {"gravity_axis": "swap_yz"},
+            lambda sc, h: bool(np.asarray(sc.problem.forces.gravity_W)[1]
+                               != np.asarray(sc.problem.forces.gravity_W)[2])),
 )
 
 

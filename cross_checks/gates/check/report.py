@@ -71,7 +71,8 @@ def format_report(res) -> str:
     for c in res.caveats:
         lines.append(f"caveat: {c}")
     lines += ["", f"{res.source}: {res.input['description']}",
-              f"scenario {res.scenario} ({res.input['duration_s']:g} s); reference: {res.reference_label or '–'}"
+              f"scenario {res.scenario} ({res.input['duration_s']:g} s); "
+              f"reference: {res.reference_label or '–'}"
               + ("; values look single precision" if res.input.get("single_precision") else "")]
     lines += _evidence_table(res)
     lines += _schemes(res)
@@ -91,8 +92,9 @@ def format_report(res) -> str:
             lines.append(f"engine {e['engine']}: {e['error']}")
         else:
             diff = ", ".join(f"{k.replace('_', ' ')} {_num(v)}" for k, v in e["max_difference"].items())
-            lines.append(f"engine {e['engine']}: {'same to round-off' if e['same_to_roundoff'] else 'differs'} "
-                         f"(max difference run free: {diff})")
+            lines.append(f"engine {e['engine']}: "
+                         f"{'same to round-off' if e['same_to_roundoff'] else 'differs'} (max "
+                         f"difference run free: {diff})")
     for n in res.cannot_tell:
         lines.append(f"cannot tell: {n}")
     for n in res.notes:
@@ -116,7 +118,9 @@ def _schemes(res) -> list:
     rows = [c for c in res.candidates if not math.isnan(c.own_defect)]
     if not rows:
         return []
-    out = ["", f"  {'scheme (stepped from the file’s states)':<42}{'vs the file':>13}{'vs exact motion':>17}  here",
+    out = ["",
+           f"  {'scheme (stepped from the file’s states)':<42}{'vs the file':>13}"
+           f"{'vs exact motion':>17}  here",
            f"  {'':<42}{'(× allowance)':>13}{'(× allowance)':>17}"]
     for c in rows:
         tag = "IS the file" if c.same else ("correct" if c.correct else "NOT correct here")
@@ -141,7 +145,8 @@ def format_ladder(lad) -> str:
 
 def to_json_text(obj) -> str:
     """Strict JSON: NaN is written as null and ±inf as the strings "inf" / "-inf"."""
-    return json.dumps(_finite(json.loads(json.dumps(obj, default=_json_default))), indent=2, allow_nan=False) + "\n"
+    return json.dumps(_finite(json.loads(json.dumps(obj, default=_json_default))),
+                      indent=2, allow_nan=False) + "\n"
 
 
 def _json_default(o):

@@ -86,8 +86,8 @@ class CheckResult:
             "verdict": ("PASS: " if self.passed else "FAIL: ") + self.verdict,
             "reasons": self.reasons, "input": self.input,
             "evidence": [e.as_dict() for e in self.evidence],
-            "identity": self.identity, "closest_scheme": self.closest, "closest_correct_scheme": self.closest_correct,
-            "schemes": [c.as_dict() for c in self.candidates],
+            "identity": self.identity, "closest_scheme": self.closest,
+            "closest_correct_scheme": self.closest_correct, "schemes": [c.as_dict() for c in self.candidates],
             "likely_causes": self.likely_causes, "mistakes": self.mistakes, "caveats": self.caveats,
             "notes": self.notes, "cannot_tell": self.cannot_tell, "engines": self.engines,
         }
@@ -137,11 +137,11 @@ def _local_full(inp, scenario) -> _Local:
     model_ok = hl <= tol.CHECK_MAX_HL
     notes = []
     if not model_ok.all():
-        notes.append(f"Δt × the motion's rate reaches {np.max(hl):.2g} (> {tol.CHECK_MAX_HL:g}) on "
-                     f"{int(np.sum(~model_ok))} rows: the one-step error model does not hold there, those rows are "
-                     "reported, not decisive")
-    source = ("C h Δ |y''| (what a consistent scheme of order ≥ 1 leaves over a row; y'' from the exact flow) "
-              "+ the data's precision")
+        notes.append(f"Δt × the motion's rate reaches {np.max(hl):.2g} "
+                     f"(> {tol.CHECK_MAX_HL:g}) on {int(np.sum(~model_ok))} rows: the one-step "
+                     "error model does not hold there, those rows are reported, not decisive")
+    source = ("C h Δ |y''| (what a consistent scheme of order ≥ 1 leaves "
+              "over a row; y'' from the exact flow) + the data's precision")
     t1 = inp.t_s[1:]
     rows = [evidence_row("one-step defect", q, t1, d[q], allow.total[q], source,
                          decisive=None if model_ok.all() else model_ok) for q in QUANTITIES]
@@ -171,7 +171,8 @@ def _pose_candidates(inp, scenario, growth, per_arith):
     if inp.h_s is None:
         return []
     out = []
-    tol_same = {q: sum(growth[(p, q)] * per_arith[p] for p in QUANTITIES) + inp.print_floor[q] for q in inp.present}
+    tol_same = {q: sum(growth[(p, q)] * per_arith[p] for p in QUANTITIES) + inp.print_floor[q]
+                for q in inp.present}
     for v in VARIANTS:
         name = f"reference:{v}"
         run = run_variant(scenario, name, inp.h_s, float(inp.t_s[-1]))
@@ -202,7 +203,8 @@ def _engines(inp, scenario, names, growth, per_arith):
     out = []
     if inp.h_s is None:
         return [{"engine": n, "error": "variable steps: cannot run at the file's Δt"} for n in names]
-    tol_same = {q: sum(growth[(p, q)] * per_arith[p] for p in QUANTITIES) + inp.print_floor[q] for q in inp.present}
+    tol_same = {q: sum(growth[(p, q)] * per_arith[p] for p in QUANTITIES) + inp.print_floor[q]
+                for q in inp.present}
     for name in names:
         try:
             run = run_variant(scenario, name, inp.h_s, float(inp.t_s[-1]))
@@ -222,11 +224,12 @@ def _engines(inp, scenario, names, growth, per_arith):
 def _caveat_for(variant, scenario, own_defect):
     """Why a variant's own step is not the true dynamics here (None when it is). ``own_defect``: its
     measured one-step defect ratio (NaN when not measured: then the expectations module says)."""
-    exp = expectation(scenario, variant, "angular_velocity", measure_physics=False)  # only "does_not_converge" is used
+    # only "does_not_converge" is used
+    exp = expectation(scenario, variant, "angular_velocity", measure_physics=False)
     why = exp.reason if exp.verdict == "does_not_converge" else "its step departs from the true dynamics here"
     if own_defect > 1.0:
-        return (f"{variant}'s own step is not the true dynamics of {scenario.name} at this Δt (its one-step defect "
-                f"reaches {own_defect:.3g}× the allowance of a consistent scheme): {why}")
+        return (f"{variant}'s own step is not the true dynamics of {scenario.name} at this Δt (its "
+                f"one-step defect reaches {own_defect:.3g}× the allowance of a consistent scheme): {why}")
     if math.isnan(own_defect) and exp.verdict == "does_not_converge":
         return f"{variant} does not converge to the true motion of {scenario.name}: {why}"
     return None
@@ -235,8 +238,8 @@ def _caveat_for(variant, scenario, own_defect):
 def _failure_words(e: Evidence) -> str:
     what = {"one-step defect": "one-step defect", "acceleration": "acceleration residual",
             "conserved": "drift", "free-running": "free-running error"}[e.kind]
-    name = {"quaternion_norm": "|q| − 1", "angular_momentum": "angular momentum"}.get(e.quantity,
-                                                                                     e.quantity.replace("_", " "))
+    name = {"quaternion_norm": "|q| − 1",
+            "angular_momentum": "angular momentum"}.get(e.quantity, e.quantity.replace("_", " "))
     if math.isnan(e.max_ratio):
         return f"{name} {what}: not a number (NaN) in the comparison"
     when = f" from t = {e.first_over_s:.4g} s" if e.first_over_s is not None else ""
@@ -262,15 +265,17 @@ def _explain(local, candidates, scenario, inp):
     for c in candidates:
         if not c.correct and explains(c):
             why = (_caveat_for(c.name, scenario, c.own_defect) or "").split(": ", 1)[-1]
-            found.append((c.max_ratio, c.name, f"it matches {c.name} step for step within the allowance "
-                                               f"({c.max_ratio:.2g} of it), a step that is wrong here: {why}"))
+            found.append((c.max_ratio, c.name,
+                          f"it matches {c.name} step for step within the allowance "
+                          f"({c.max_ratio:.2g} of it), a step that is wrong here: {why}"))
     mistakes = diagnose_mistakes(inp, scenario, inp.y[:-1], inp.y[1:], local.allow)
     kept = [{"mistake": m.name, "max_ratio": m.max_ratio, "p99_ratio": m.p99_ratio} for m in mistakes[:5]]
     for m in mistakes:
         if explains(m):
-            found.append((m.max_ratio, m.mistake, f"{m.sentence} — that mistake explains every step within the "
-                                                  f"allowance ({m.max_ratio:.2g} of it; the closest correct scheme "
-                                                  f"needs {best_correct:.3g}×)"))
+            found.append((m.max_ratio, m.mistake,
+                          f"{m.sentence} — that mistake explains every step "
+                          f"within the allowance ({m.max_ratio:.2g} of it; the "
+                          f"closest correct scheme needs {best_correct:.3g}×)"))
     found.sort(key=lambda f: f[0])
     causes = [found[0][2]] if found else []
     others = list(dict.fromkeys(f[1] for f in found[1:] if f[1] != found[0][1]))
@@ -281,8 +286,9 @@ def _explain(local, candidates, scenario, inp):
     best = mistakes[0] if mistakes else None
     if not causes and best is not None and best.p99_ratio <= tol.CHECK_MISTAKE_RESEMBLES \
             and best.p99_ratio * tol.CHECK_MISTAKE_MARGIN <= best_correct:
-        causes.append(f"it resembles: {best.sentence} (that mistake explains 99 % of the steps within "
-                      f"{best.p99_ratio:.2g}× the allowance, not all of them: perhaps combined with another mistake)")
+        causes.append(f"it resembles: {best.sentence} (that mistake explains 99 % "
+                      f"of the steps within {best.p99_ratio:.2g}× the allowance, "
+                      "not all of them: perhaps combined with another mistake)")
     return causes, kept
 
 
@@ -293,9 +299,9 @@ def _dt_mismatch(local, scenario, inp):
     if score is None or not score.max_ratio <= 1.0:
         return []
     h = inp.span_s[0] / inp.span_steps[0]
-    return [f"a Δt mismatch: the simulator advances {s:.4g} × the recorded Δt per row (it steps {s * h:.4g} s while "
-            f"the times say {h:.4g} s) — the true motion over that step explains every row within the allowance "
-            f"({score.max_ratio:.2g} of it)"]
+    return [f"a Δt mismatch: the simulator advances {s:.4g} × the recorded Δt per row (it "
+            f"steps {s * h:.4g} s while the times say {h:.4g} s) — the true motion over that "
+            f"step explains every row within the allowance ({score.max_ratio:.2g} of it)"]
 
 
 # --- the check ---------------------------------------------------------------------------------------
@@ -338,24 +344,24 @@ def _check(inp, scenario, compare_with, scheme=None) -> CheckResult:
 def _no_step_result(inp, scenario):
     why = (f"diverged at t = {inp.diverged_at_s:g} s: non-finite values from the first step on"
            if inp.diverged_at_s is not None else "the quaternion is zero from the first step on")
-    return CheckResult(inp.source, scenario.name, "", _input_dict(inp, scenario), False, why, [why], [], [], None, None,
-                       [], [], [], [], list(inp.notes), [], [])
+    return CheckResult(inp.source, scenario.name, "", _input_dict(inp, scenario), False, why, [why], [], [],
+                       None, None, [], [], [], [], list(inp.notes), [], [])
 
 
 def _input_dict(inp, scenario):
-    return {"rows": inp.n_rows, "t_end_s": float(inp.t_s[-1]), "dt_s": inp.h_s, "rows_per_step": inp.decimation,
-            "description": describe_time(inp), "quantities": list(inp.present),
-            "single_precision": inp.single_precision, "duration_s": scenario.duration_s,
-            "time_drift_bound_s": inp.time_bound_s}
+    return {"rows": inp.n_rows, "t_end_s": float(inp.t_s[-1]), "dt_s": inp.h_s,
+            "rows_per_step": inp.decimation, "description": describe_time(inp),
+            "quantities": list(inp.present), "single_precision": inp.single_precision,
+            "duration_s": scenario.duration_s, "time_drift_bound_s": inp.time_bound_s}
 
 
 def _cannot_tell(inp, scenario):
     out = []
     missing = [g for g in ("position", "velocity", "orientation", "angular_velocity") if g not in inp.present]
     if missing:
-        out.append(f"the file has no {', '.join(m.replace('_', ' ') for m in missing)} columns: those are not "
-                   "checked, the one-step defect and the energy / angular momentum balance need them, and the scheme "
-                   "is identified only from the free-running poses")
+        out.append(f"the file has no {', '.join(m.replace('_', ' ') for m in missing)} columns: those "
+                   "are not checked, the one-step defect and the energy / angular momentum balance "
+                   "need them, and the scheme is identified only from the free-running poses")
     if inp.h_s is None:
         out.append("the steps are not uniform: no reference variant can be run at the file's Δt")
     return out
@@ -378,9 +384,9 @@ def _reproduces_wrong_scheme(variant, scenario, why) -> str:
     missing = _physics_reason(variant, scenario)
     ask = f"(`--scheme {variant}` asks whether it is exactly that scheme)"
     if variant == "reference:course" and missing:
-        return ("it reproduces the course's update exactly; the course omits the gyroscopic term −ω × (I ω), "
-                f"{missing.split(', ', 1)[1] if ', ' in missing else 'which matters here'}, so on this body the "
-                f"motion is wrong {ask}")
+        return ("it reproduces the course's update exactly; the course omits the gyroscopic term "
+                f"−ω × (I ω), {missing.split(', ', 1)[1] if ', ' in missing else 'which matters here'}, "
+                f"so on this body the motion is wrong {ask}")
     if missing:
         return f"it reproduces {variant} exactly; {missing}, so on this body the motion is wrong {ask}"
     return f"it reproduces {variant} exactly, whose step is wrong here: {why.split(': ', 1)[0]} {ask}"
@@ -389,8 +395,9 @@ def _reproduces_wrong_scheme(variant, scenario, why) -> str:
 def _likely_mistake(variant, why) -> str:
     """The cause line of a file that is exactly a scheme that is wrong here: what to change."""
     if variant == "reference:course":
-        return ("the rotational update has no gyroscopic torque: Euler's equations need dω/dt = I⁻¹(τ − ω × (I ω)); "
-                "add the −ω × (I ω) term (reference:course_gyro is the course's step with it)")
+        return ("the rotational update has no gyroscopic torque: Euler's "
+                "equations need dω/dt = I⁻¹(τ − ω × (I ω)); add the −ω × (I ω) "
+                "term (reference:course_gyro is the course's step with it)")
     return f"it matches {variant} step for step, a step that is wrong here: {why.split(': ', 1)[-1]}"
 
 
@@ -409,17 +416,20 @@ def _scheme_outcome(scheme, identity, candidates, engines):
         return False, f"{scheme} could not be run at the file's Δt: {e['error']}"
     if e is not None:
         worst = max(e["max_difference"].items(), key=lambda kv: kv[1] if not math.isnan(kv[1]) else -1.0)
-        return False, f"it is not {scheme}: run free at the file's Δt, it differs by {worst[1]:.3g} in {worst[0]}"
+        return False, (f"it is not {scheme}: run free at the file's Δt, "
+                       f"it differs by {worst[1]:.3g} in {worst[0]}")
     return False, f"{scheme} cannot be compared with this file"
 
 
-def _compose(inp, scenario, label, y_ref, local, evidence, candidates, engines, off, init_words, slips, scheme=None):
+def _compose(inp, scenario, label, y_ref, local, evidence, candidates,
+             engines, off, init_words, slips, scheme=None):
     reasons, caveats, causes, kept = [], [], [], []
     if inp.diverged_at_s is not None:
-        reasons.append(f"diverged at t = {inp.diverged_at_s:.6g} s (non-finite values from there; the rows before "
-                       "are judged below)")
+        reasons.append(f"diverged at t = {inp.diverged_at_s:.6g} s (non-finite "
+                       "values from there; the rows before are judged below)")
     if inp.lost_orientation_at_s is not None:
-        reasons.append(f"the quaternion is zero from t = {inp.lost_orientation_at_s:.6g} s: the orientation is lost")
+        reasons.append("the quaternion is zero from "
+                       f"t = {inp.lost_orientation_at_s:.6g} s: the orientation is lost")
     if inp.ended_early_s is not None:
         reasons.append(f"the run ends at t = {inp.ended_early_s:.6g} s, before the scenario's duration "
                        f"{scenario.duration_s:g} s")
@@ -455,15 +465,16 @@ def _compose(inp, scenario, label, y_ref, local, evidence, candidates, engines, 
             more, kept = _explain(local, candidates, scenario, inp)
             causes += more
         if not causes:
-            causes.append("no catalogued mistake explains it (docs/check.md lists the catalog)" if inp.full_state else
-                          "not diagnosed: the catalog of mistakes is compared step for step from full states, and the "
-                          "file has no velocities")
+            causes.append("no catalogued mistake explains it (docs/check.md lists the catalog)"
+                          if inp.full_state else
+                          "not diagnosed: the catalog of mistakes is compared step "
+                          "for step from full states, and the file has no velocities")
     passed = not reasons
     verdict = _verdict_line(inp, scenario, passed, reasons, identity, local, closest, candidates, scheme)
     series = _series(inp, scenario, y_ref, local, closest_correct)
-    return CheckResult(inp.source, scenario.name, label, _input_dict(inp, scenario), passed, verdict, reasons, evidence,
-                       identity, closest, closest_correct, candidates, causes, kept, caveats, list(inp.notes) + local.notes,
-                       _cannot_tell(inp, scenario), engines, series)
+    return CheckResult(inp.source, scenario.name, label, _input_dict(inp, scenario), passed, verdict, reasons,
+                       evidence, identity, closest, closest_correct, candidates, causes, kept, caveats,
+                       list(inp.notes) + local.notes, _cannot_tell(inp, scenario), engines, series)
 
 
 def _verdict_line(inp, scenario, passed, reasons, identity, local, closest, candidates, scheme=None):
@@ -475,15 +486,16 @@ def _verdict_line(inp, scenario, passed, reasons, identity, local, closest, cand
                 + ("" if scheme in identity else " (compared free-running)"))
     if identity:
         also = f" (indistinguishable here from {', '.join(identity[1:])})" if len(identity) > 1 else ""
-        return (f"is {identity[0]}{also}: it reproduces that scheme's every step at {h} within the rounding of the data")
+        return (f"is {identity[0]}{also}: it reproduces that scheme's "
+                f"every step at {h} within the rounding of the data")
     worst = max((e.max_ratio for e in local.rows), default=math.nan)
     kind = "one-step defect" if inp.full_state else "acceleration residual"
     close = f"; closest scheme {closest}" if closest else ""
-    undecided = (f" (on {local.undecided_rows} of {inp.n_rows - 1} rows Δt is too coarse for the one-step error "
-                 f"model: not decisive there)") if local.undecided_rows else ""
-    return (f"consistent with the equations of motion of {scenario.name} at {h}: every {kind} within what a "
-            f"consistent scheme of order ≥ 1 leaves (largest {worst:.2g} of its allowance){undecided}, and the "
-            f"free-running error within its allowance{close}")
+    undecided = (f" (on {local.undecided_rows} of {inp.n_rows - 1} rows Δt is too coarse for the "
+                 f"one-step error model: not decisive there)") if local.undecided_rows else ""
+    return (f"consistent with the equations of motion of {scenario.name} at {h}: every {kind} "
+            f"within what a consistent scheme of order ≥ 1 leaves (largest {worst:.2g} of its "
+            f"allowance){undecided}, and the free-running error within its allowance{close}")
 
 
 def _series(inp, scenario, y_ref, local, closest_correct):

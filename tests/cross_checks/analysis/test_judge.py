@@ -34,3 +34,22 @@ def test_an_order_two_ladder_still_contradicts_order_three():
     fit = fit_convergence(DTS, e, [x / 50.0 for x in e])
     verdict, matches, _ = _judged(fit, ORDER3)
     assert verdict == "converges" and matches is False
+
+
+def test_every_rung_within_its_floor_is_no_agreement_where_the_steps_are_wrong_in_that_quantity():
+    """Errors all within their floors (here a flat 0.05 under amplified float32 floors of 0.1) agree with
+    "converges" — unless the runs' own one-step defect says their equations are wrong in that quantity; another
+    quantity's defect (the course's missing term in ω) leaves an exact position exact."""
+    from cross_checks.analysis.judge import LocalEvidence
+    dts, errs, floors = [0.01, 0.005, 0.0025], [0.05, 0.05, 0.05], [0.1, 0.1, 0.1]
+    exp = Expectation("converges", 1.0, "an order-1 scheme", "float32")
+    fit = fit_convergence(dts, errs, floors)
+    assert fit.verdict == "at_roundoff"
+    assert judge_fit(fit, exp).matches is True
+    wrong = LocalEvidence(40.0, "angular_velocity", 0.01, 1.0)
+    refused = judge_fit(fit, exp, wrong, "angular_velocity")
+    assert refused.matches is False and "no round-off excuse" in refused.assessment and refused.claimed
+    assert judge_fit(fit, exp, wrong, "position").matches is True
+    assert judge_fit(fit, exp, LocalEvidence(0.5, "angular_velocity", 0.01, 1.0), "angular_velocity").matches is True
+    # a float32 verdict names its precision and the rungs it judged
+    assert "float32" in judge_fit(fit, exp).assessment and "no two rungs resolved of 3" in judge_fit(fit, exp).assessment

@@ -13,7 +13,8 @@ from cross_checks.scenario import load_scenario
 
 SCENARIO = "projectile"
 GOOD = run_variant(load_scenario(SCENARIO), "reference:course", 0.05).to_csv_text()
-TOKENS = ["nan", "inf", "-inf", "1e308", "-1e308", "0", "", "abc", "1e9", "-0.0", "1e-320", "0.05", "7", "1e30"]
+TOKENS = ["nan", "inf", "-inf", "1e308", "-1e308", "0", "",
+          "abc", "1e9", "-0.0", "1e-320", "0.05", "7", "1e30"]
 
 
 @st.composite

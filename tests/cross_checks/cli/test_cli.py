@@ -65,7 +65,8 @@ def test_run_dt_and_duration_override(tmp_path):
     (["run", "projectile", "--engine", "reference:course", "--dt", "nan", "--out", "{tmp}/a.csv"], "--dt"),
     (["run", "projectile", "--engine", "reference:course", "--dt", "5", "--out", "{tmp}/a.csv"], "duration"),
     (["run", "no_such_thing", "--engine", "reference:course", "--out", "{tmp}/a.csv"], "no catalog scenario"),
-    (["run", "{tmp}/bad.toml", "--engine", "reference:course", "--out", "{tmp}/a.csv"], "bad.toml: body.mass"),
+    (["run", "{tmp}/bad.toml", "--engine", "reference:course", "--out", "{tmp}/a.csv"],
+     "bad.toml: body.mass"),
     (["frobnicate"], "invalid choice"),
     (["run", "projectile", "--out", "{tmp}/a.csv"], "--engine"),
 ])
@@ -114,21 +115,24 @@ def test_list_shows_scenarios_and_variants(capsys):
 from tests.cross_checks.scenario.test_parse import BAD, GOOD  # noqa: E402  (the loader's table of bad inputs)
 
 
-@pytest.mark.parametrize("old, new, field, reason", BAD, ids=[f"{b[2] or 'syntax'}-{i}" for i, b in enumerate(BAD)])
+@pytest.mark.parametrize("old, new, field, reason", BAD,
+                         ids=[f"{b[2] or 'syntax'}-{i}" for i, b in enumerate(BAD)])
 def test_every_bad_scenario_exits_2_through_the_cli(tmp_path, capsys, old, new, field, reason):
     bad = tmp_path / "bad.toml"
     bad.write_text(GOOD.replace(old, new, 1))
     out = tmp_path / "t.csv"
     assert main(["run", str(bad), "--engine", "reference:course", "--out", str(out)]) == 2
     err = capsys.readouterr().err
-    assert err.startswith(f"rbcheck run: error: {bad}: {field + ': ' if field else ''}") and reason in err, err
+    assert (err.startswith(f"rbcheck run: error: {bad}: {field + ': ' if field else ''}")
+            and reason in err), err
     assert err.count("\n") == 1 and not out.exists()
 
 
 def test_the_skipped_line_gives_every_skipped_engines_reason(capsys):
     # two optional engines missing: the one line names both engines and both reasons, not the first only
     from cross_checks.cli import _sweep_outcome
-    summary = {"run": {"runs": 0, "cached_runs": 0, "diverged_runs": 0, "failed_runs": 0, "jobs": 1, "wall_s": 0.0},
+    summary = {"run": {"runs": 0, "cached_runs": 0, "diverged_runs": 0,
+                       "failed_runs": 0, "jobs": 1, "wall_s": 0.0},
                "skipped_variants": [{"name": "drake:a", "reason": "drake is not installed"},
                                     {"name": "drake:b", "reason": "drake is not installed"},
                                     {"name": "dart:c", "reason": "dartpy is not installed"}],

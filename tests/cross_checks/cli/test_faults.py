@@ -55,8 +55,8 @@ def test_real_sigint_keeps_previous_results_and_the_rerun_reuses_finished_runs(t
     assert first.returncode == 0, first.stderr
     before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
 
-    proc = subprocess.Popen(base + ["--no-cache"] + files + ["--engines", "reference"], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, start_new_session=True)
+    proc = subprocess.Popen(base + ["--no-cache"] + files + ["--engines", "reference"], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     deadline = time.time() + 120
     while time.time() < deadline and len(list(cache.rglob("*.npz"))) < 8:  # some runs finished and cached
         time.sleep(0.1)
@@ -95,9 +95,10 @@ def test_a_model_mujoco_rejects_is_a_failed_row_with_mujocos_words(tmp_path, cap
     f.write_text(FEATHER.replace("1e-20", "1.0"))
     sc = with_body(load_scenario(f), 1e-20, 1e-20)
     out = tmp_path / "res"
-    summary = run_sweep([sc], ["mujoco:euler", "reference:course"], out, jobs=1, use_cache=False, progress=False,
-                        finish=reports.render)
-    assert _gate_failures(summary)  # a failed run is reported as a failure of the sweep, after writing everything
+    summary = run_sweep([sc], ["mujoco:euler", "reference:course"], out, jobs=1, use_cache=False,
+                        progress=False, finish=reports.render)
+    # a failed run is reported as a failure of the sweep, after writing everything
+    assert _gate_failures(summary)
     import pandas as pd
     df = pd.read_csv(out / "results.csv")
     mj = df[df["engine"] == "mujoco:euler"]
@@ -132,8 +133,10 @@ def test_reruns_are_bit_identical_across_engines(tmp_path, isolated_cache):
             rows = [{c: v for c, v in r.items() if c not in ("wall_s", "cached")} for r in csv.DictReader(fh)]
         texts.append(rows)
     assert texts[0] == texts[1]  # every digit of every metric, of every installed variant
-    engines = {"reference", "mujoco", "pybullet"} | {e for e in ("drake", "dart")   # the optional ones installed here
-                                                     if any(v.startswith(e + ":") for v in available_variants())}
+    # the optional ones installed here
+    engines = {"reference", "mujoco", "pybullet"} | {e for e in ("drake", "dart")
+                                                     if any(v.startswith(e + ":")
+                                                            for v in available_variants())}
     assert {r["engine"].split(":")[0] for r in texts[0]} == engines
 
 
@@ -141,7 +144,8 @@ def test_same_scheme_pairs_that_both_diverge_agree_on_the_time(tmp_path, isolate
     pytest.importorskip("mujoco")
     from cross_checks.scenario import parse_scenario
     from cross_checks.sweep import run_sweep
-    # docs/engine_conventions.md: MuJoCo Euler diverges on this fast spin at t = 8.65 s; expmap_gyro is the same scheme.
+    # docs/engine_conventions.md: MuJoCo Euler diverges on this fast spin at t = 8.65 s;
+    # expmap_gyro is the same scheme.
     sc = parse_scenario("""
 name = "fast_spin"
 duration = 10.0
@@ -153,7 +157,7 @@ inertia = [1.0, 2.0, 3.0]
 [initial]
 angular_velocity = [0.1, 20.0, 0.1]
 """, "fast.toml")
-    summary = run_sweep([sc], ["reference:expmap_gyro", "mujoco:euler"], tmp_path / "r", jobs=1, use_cache=False,
-                        progress=False)
+    summary = run_sweep([sc], ["reference:expmap_gyro", "mujoco:euler"], tmp_path / "r", jobs=1,
+                        use_cache=False, progress=False)
     [rec] = summary["agreement"]
     assert rec["agrees"] and rec["note"].startswith("both diverged, at t = 8.6")

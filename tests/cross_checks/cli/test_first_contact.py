@@ -70,12 +70,20 @@ def test_list_json_is_the_catalog_and_every_variant(capsys):
             "pybullet": "pybullet:multibody"}.items() <= dict(defaults).items()
     orders = {v.name: v.order for v in all_variants()}
     assert all(v["declared_order"] == orders[v["name"]] and v["description"] for v in listed["variants"])
-    assert [v["declared_order"] for v in listed["variants"] if v["engine"] == "reference"] == [1, 1, 1, 1, 1, 2, 2, 4]
+    assert ([v["declared_order"] for v in listed["variants"] if v["engine"] == "reference"]
+            == [1, 1, 1, 1, 1, 2, 2, 4])
 
 
 def test_list_json_of_a_user_engine_file_marks_its_first_variant_default(tmp_path, capsys):
-    (tmp_path / "e.toml").write_text('name = "mine"\nversion = "1"\n[variants.a]\norder = 1\ndescription = "A"\n'
-                                     'command = ["true", "{scenario_json}", "{out_csv}"]\n[variants.b]\norder = 2\ndescription = "B"\n'
+    (tmp_path / "e.toml").write_text('name = "mine"\n'
+                                     'version = "1"\n'
+                                     '[variants.a]\n'
+                                     'order = 1\n'
+                                     'description = "A"\n'
+                                     'command = ["true", "{scenario_json}", "{out_csv}"]\n'
+                                     '[variants.b]\n'
+                                     'order = 2\n'
+                                     'description = "B"\n'
                                      'command = ["true", "{scenario_json}", "{out_csv}"]\n')
     assert main(["list", "--json", "--engine-file", str(tmp_path / "e.toml")]) == 0
     mine = [v for v in json.loads(capsys.readouterr().out)["variants"] if v["engine"] == "mine"]

@@ -1,4 +1,5 @@
-"""``rbcheck fuzz`` as a command: exit codes, one-line errors, the summary, the page and the marker it writes."""
+"""``rbcheck fuzz`` as a command: exit codes, one-line errors, the summary, the
+page and the marker it writes."""
 import json
 
 import pytest
@@ -16,7 +17,8 @@ def cache(tmp_path, monkeypatch):
 def test_a_clean_campaign_exits_0_with_its_summary_and_page(tmp_path, cache, capsys, monkeypatch):
     monkeypatch.setattr(campaign, "BATCH", 4)
     out = tmp_path / "fz"
-    assert main(["fuzz", "--engines", "reference:midpoint", "--budget", "0.5", "--jobs", "1", "--out", str(out)]) == 0
+    assert main(["fuzz", "--engines", "reference:midpoint",
+                 "--budget", "0.5", "--jobs", "1", "--out", str(out)]) == 0
     s = json.loads((out / "fuzz.json").read_text())
     # batches until the budget: one on a loaded machine, more on an idle one (0.5 s)
     assert s["format"] == campaign.FORMAT and s["cases"]["judged"] >= 1

@@ -14,7 +14,8 @@ from hypothesis import strategies as st
 from cross_checks.cli import main
 
 EXAMPLES = int(os.environ.get("RBCHECK_FUZZ_EXAMPLES", 0))
-OUTSIDE = Path(tempfile.gettempdir()) / "rbcheck-fuzz-escape-target"  # fixed: xdist workers must collect the same ids
+# fixed: xdist workers must collect the same ids
+OUTSIDE = Path(tempfile.gettempdir()) / "rbcheck-fuzz-escape-target"
 HOSTILE_NAMES = ["../../x", "../escaped", str(OUTSIDE), "a\x00b", "x" * 300, "", ".", "..", "plots/../../y",
                  "scenario-../../z", "<script>"]
 TOKENS = ["", "nan", "inf", "-inf", "-1", "1e308", "oops", "true", "../../x", "\x00", "ok", "diverged", "0",
@@ -39,10 +40,12 @@ def _paths(obj, path=()):
 
 
 def _slot(obj, path):
-    """``(container, key)`` of ``path`` in ``obj`` as it is now (earlier edits may have changed it), or None."""
+    """``(container, key)`` of ``path`` in ``obj`` as it is now (earlier edits
+    may have changed it), or None."""
     parent = obj
     for k in path[:-1]:
-        if isinstance(parent, dict) and k in parent or isinstance(parent, list) and isinstance(k, int) and k < len(parent):
+        if (isinstance(parent, dict) and k in parent
+                or isinstance(parent, list) and isinstance(k, int) and k < len(parent)):
             parent = parent[k]
         else:
             return None
@@ -114,7 +117,8 @@ def _rename_scenario(d: Path, draw):
 
 @st.composite
 def damage(draw):
-    ops = draw(st.lists(st.sampled_from(["json", "csv", "bytes", "delete", "rename"]), min_size=1, max_size=3))
+    ops = draw(st.lists(st.sampled_from(["json", "csv", "bytes", "delete", "rename"]),
+                        min_size=1, max_size=3))
     seed = draw(st.integers(0, 2 ** 16))
     return ops, seed, draw
 
@@ -166,7 +170,8 @@ def _fuzz(made, data, command):
             if command == "report":
                 rc = main(["report", str(d), "--jobs", "1"])
             else:
-                rc = main(["compare", str(made), str(d)] if data.draw(st.booleans()) else ["compare", str(d), str(made)])
+                rc = main(["compare", str(made), str(d)] if data.draw(st.booleans())
+                          else ["compare", str(d), str(made)])
         _check_outcome(rc, err.getvalue(), (0, 2) if command == "report" else (0, 1, 2), command)
         assert _snapshot(root, d) == before  # nothing written beside the directory
         assert not OUTSIDE.exists() and not (root.parent / "escaped").exists()

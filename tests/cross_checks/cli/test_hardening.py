@@ -12,7 +12,8 @@ from tests.helpers.repo import BASELINE
 
 def _one_line(capsys, command):
     err = capsys.readouterr().err
-    assert err.startswith(f"rbcheck {command}: error: ") and err.count("\n") == 1 and "Traceback" not in err, err
+    assert (err.startswith(f"rbcheck {command}: error: ")
+            and err.count("\n") == 1 and "Traceback" not in err), err
     return err
 
 
@@ -55,7 +56,8 @@ def test_compare_and_baseline_never_write_into_their_inputs(tmp_path, capsys):
 
 
 def test_a_sweep_out_holding_its_own_scenario_file_is_refused(tmp_path, capsys):
-    """The scenario copy a previous sweep wrote into DIR/scenarios/, swept again into DIR: DIR would be replaced."""
+    """The scenario copy a previous sweep wrote into DIR/scenarios/, swept again into
+    DIR: DIR would be replaced."""
     out = tmp_path / "res"
     assert main(["sweep", "projectile", "--engines", "reference:course", "--out", str(out)]) in (0, 1)
     before = _tree(out)
@@ -85,7 +87,8 @@ def test_check_refuses_more_rows_than_any_run_records(tmp_path, capsys, monkeypa
 
 @pytest.mark.parametrize("argv, words", [
     (["fuzz", "--budget", "1e308", "--out", "{tmp}/f"], "--budget: must be at most 1e+06 s"),
-    (["sweep", "projectile", "--time-limit", "1e308", "--out", "{tmp}/s"], "--time-limit: must be at most 1e+06 s"),
+    (["sweep", "projectile", "--time-limit", "1e308", "--out", "{tmp}/s"],
+     "--time-limit: must be at most 1e+06 s"),
     (["sweep", "projectile", "--jobs", "100000", "--out", "{tmp}/s"], "--jobs: must be at most 1024"),
 ])
 def test_option_numbers_are_range_checked(tmp_path, capsys, argv, words):
@@ -102,8 +105,8 @@ def test_show_refuses_a_step_beyond_the_limit(capsys):
 def test_a_sweep_starts_no_more_workers_than_it_has_runs(tmp_path):
     from cross_checks.scenario import load_scenario
     from cross_checks.sweep import run_sweep
-    s = run_sweep([load_scenario("projectile")], ["reference:course"], tmp_path / "r", jobs=1000, use_cache=False,
-                  progress=False)
+    s = run_sweep([load_scenario("projectile")], ["reference:course"], tmp_path / "r", jobs=1000,
+                  use_cache=False, progress=False)
     assert s["run"]["jobs"] <= 6   # 5 runs and 1 reference
 
 
@@ -220,13 +223,16 @@ def test_a_full_disk_names_the_file_that_could_not_be_written(tmp_path):
 def test_a_run_that_diverges_says_what_it_wrote(tmp_path, capsys):
     from cross_checks.scenario import catalog_path
     stiff = tmp_path / "stiff.toml"
-    stiff.write_text(catalog_path("spring_oscillator").read_text().replace('name = "spring_oscillator"', 'name = "stiff"')
+    stiff.write_text(catalog_path("spring_oscillator").read_text()
+                     .replace('name = "spring_oscillator"', 'name = "stiff"')
                      .replace("stiffness = ", "stiffness = 1e4 #"))
     out = tmp_path / "t.csv"
-    assert main(["run", str(stiff), "--engine", "reference:explicit_euler", "--dt", "0.05", "--out", str(out)]) == 1
+    assert main(["run", str(stiff), "--engine", "reference:explicit_euler",
+                 "--dt", "0.05", "--out", str(out)]) == 1
     err = capsys.readouterr().err
     import re
-    assert "diverged at t = " in err and re.search(r"wrote the initial state and the \d+ step\(s\) before it", err)
+    assert ("diverged at t = " in err
+            and re.search(r"wrote the initial state and the \d+ step\(s\) before it", err))
     assert out.is_file()
 
 
@@ -237,7 +243,8 @@ def test_a_report_drawing_in_a_directory_does_not_make_a_sweep_call_its_files_fo
     from cross_checks.sweep import run_sweep
     from cross_checks.sweep.results_dir import check_output_dir, owned_name
     out = tmp_path / "res"
-    run_sweep([load_scenario("projectile")], ["reference:course"], out, jobs=1, use_cache=False, progress=False)
+    run_sweep([load_scenario("projectile")], ["reference:course"],
+              out, jobs=1, use_cache=False, progress=False)
     live = out / owned_name(".", "plots")   # this (live) process's drawing folder, as reports.render makes it
     live.mkdir()
     (live / "scenario-projectile-errors.png").write_bytes(b"png")

@@ -20,7 +20,8 @@ def regular_file(tmp_path):
 
 def _one_line(capsys, command):
     err = capsys.readouterr().err
-    assert err.startswith(f"rbcheck {command}: error: ") and err.count("\n") == 1 and "Traceback" not in err, err
+    assert (err.startswith(f"rbcheck {command}: error: ")
+            and err.count("\n") == 1 and "Traceback" not in err), err
     return err
 
 
@@ -73,7 +74,8 @@ def test_an_unexpected_error_is_one_line_too(monkeypatch, capsys):
         raise RuntimeError("something rbcheck did not foresee\nsecond line")
     monkeypatch.setitem(cli.COMMANDS, "list", boom)
     assert main(["list"]) == 2
-    assert "internal error: RuntimeError: something rbcheck did not foresee second line" in _one_line(capsys, "list")
+    assert ("internal error: RuntimeError: something rbcheck did not foresee second line"
+            in _one_line(capsys, "list"))
 
 
 def test_runs_and_references_over_their_time_limit_are_failed_rows(tmp_path, isolated_cache):
@@ -93,16 +95,20 @@ angular_velocity = [0.3, 1.0, 0.2]
     # 200 s) may take longer than 0.05 s on a loaded machine, which is not what this test is about. Each in a
     # fresh interpreter: the limit is a SIGALRM timer of the main thread, and a test worker's state (after
     # hundreds of other tests) is not what a sweep process starts with.
-    code = ("import json, sys\nfrom cross_checks.scenario import load_scenario\nfrom cross_checks.sweep import run_sweep\n"
+    code = ("import json, sys\n"
+            "from cross_checks.scenario import load_scenario\n"
+            "from cross_checks.sweep import run_sweep\n"
             "s = run_sweep([load_scenario(sys.argv[1])], ['reference:implicit_euler'], sys.argv[2], jobs=1, "
-            "use_cache=False, progress=False, run_time_limit_s=float(sys.argv[3]), reference_time_limit_s=float(sys.argv[4]))\n"
-            "print(json.dumps(s['run']['failed_runs']))")
+            "use_cache=False, progress=False, run_time_limit_s=float(sys.argv[3]), "
+            "reference_time_limit_s=float(sys.argv[4]))\nprint(json.dumps(s['run']['failed_runs']))")
     failed = {}
-    for text, out, run_limit, ref_limit in ((slow_text, "res", 0.05, 600.0), (stiff_text, "res_ref", 600.0, 0.3)):
+    for text, out, run_limit, ref_limit in ((slow_text, "res", 0.05, 600.0),
+                                            (stiff_text, "res_ref", 600.0, 0.3)):
         parse_scenario(text, f"{out}.toml")  # valid, so that a failure below is about the limits
         toml = tmp_path / f"{out}.toml"
         toml.write_text(text)
-        proc = subprocess.run([sys.executable, "-c", code, str(toml), str(tmp_path / out), str(run_limit), str(ref_limit)],
+        proc = subprocess.run([sys.executable, "-c", code, str(toml),
+                               str(tmp_path / out), str(run_limit), str(ref_limit)],
                               capture_output=True, text=True, timeout=120)
         assert proc.returncode == 0, proc.stderr[-2000:]
         failed[out] = json.loads(proc.stdout.strip().splitlines()[-1])
@@ -112,5 +118,6 @@ angular_velocity = [0.3, 1.0, 0.2]
     assert set(run_rows.status) == {"failed"}
     assert run_rows.message.str.contains("the run took longer than the time limit of 0.05 s").all()
     assert set(ref_rows.status) == {"failed"}
-    assert ref_rows.message.str.contains("the reference solution took longer than the time limit of 0.3 s").all()
+    assert ref_rows.message.str.contains(
+        "the reference solution took longer than the time limit of 0.3 s").all()
     assert failed == {"res": len(run_rows), "res_ref": len(ref_rows)}

@@ -34,7 +34,8 @@ def test_without_a_terminal_a_line_every_interval_and_a_last_one():
             clock.t += 0.5  # 50 s in all: a line at most every LINE_INTERVAL_S
             p.update(1, f"job {i}")
     lines = out.getvalue().splitlines()
-    assert len(lines) == int(50 / LINE_INTERVAL_S) - 1 + 1  # every interval before the end, plus the last line
+    # every interval before the end, plus the last line
+    assert len(lines) == int(50 / LINE_INTERVAL_S) - 1 + 1
     assert lines[0] == "rbcheck sweep: runs 10/100 (10%) in 5 s, ~45 s left; last: job 9"
     assert lines[-1] == "rbcheck sweep: runs 100/100 (100%) in 50 s, done"
     assert out.flushed == out.getvalue()  # each line flushed as written
@@ -59,7 +60,8 @@ def test_the_time_left_follows_the_work_done_not_the_count():
     with Progress("rbcheck sweep", "runs", 10, stream=out, tty=False, clock=clock, total_work=100.0) as p:
         clock.t += 9.0
         p.update(1, "the longest", work=90.0)
-    assert out.getvalue().splitlines()[0] == "rbcheck sweep: runs 1/10 (10%) in 9 s, ~1 s left; last: the longest"
+    assert (out.getvalue().splitlines()[0]
+            == "rbcheck sweep: runs 1/10 (10%) in 9 s, ~1 s left; last: the longest")
 
 
 def test_in_a_terminal_a_bar_and_no_log_lines():

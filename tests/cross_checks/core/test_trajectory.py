@@ -9,8 +9,9 @@ ROW1 = dict(ROW0, t=0.5, x=1.5)
 
 
 def _write(path, header, rows):
-    path.write_text(",".join(header) + "\n" + "".join(",".join(str(r[c]) if c in r else "junk" for c in header) + "\n"
-                                                      for r in rows))
+    path.write_text(",".join(header) + "\n"
+                    + "".join(",".join(str(r[c]) if c in r else "junk" for c in header) + "\n"
+                              for r in rows))
     return path
 
 

@@ -52,8 +52,9 @@ def swept(byo):
     out = byo["tmp"] / "results"
     err = io.StringIO()
     with contextlib.redirect_stderr(err):
-        code = main(["sweep", str(byo["byo_tumble"]), "--engines", *GOOD, *BROKEN, "--engine-file", str(byo["good"]),
-                     "--engine-file", str(byo["broken"]), "--out", str(out), "--jobs", "2"])
+        code = main(["sweep", str(byo["byo_tumble"]), "--engines", *GOOD, *BROKEN,
+                     "--engine-file", str(byo["good"]), "--engine-file", str(byo["broken"]),
+                     "--out", str(out), "--jobs", "2"])
     engines.reset_registry()
     return {"code": code, "stderr": err.getvalue(), "dir": out,
             "summary": json.loads((out / "summary.json").read_text())}
@@ -97,7 +98,8 @@ def test_sweep_passes_the_correct_engines_and_exits_1_naming_the_broken_ones(swe
     for v in BROKEN:
         # orientation is claimed for any order-1 engine here; angular velocity may be left unclaimed
         # (pre-asymptotic) for an engine whose traits rbcheck does not know (expectations.DEFAULT_TRAITS)
-        assert any(ln.startswith(f"{v} on byo_tumble: orientation does not converge") and ln.endswith("expected order 1")
+        assert any(ln.startswith(f"{v} on byo_tumble: orientation does not converge")
+                   and ln.endswith("expected order 1")
                    for ln in lines), swept["stderr"]
     assert not any(ln.startswith(GOOD) for ln in lines), swept["stderr"]
     recs = {(r["engine"], r["quantity"]): r for r in swept["summary"]["convergence"]}
@@ -139,7 +141,8 @@ def test_report_shows_user_engines_like_built_in_ones(swept):
     for v in GOOD:
         assert f'<li class="bad">{v}' not in index
         assert f'<tr><th title="{v}" data-sort="{v}">' in index      # a matrix row, under its family
-        assert re.search(rf'<tr class="group"><th colspan="\d+">{v.split(":")[0]}</th></tr>', index)  # its family
+        # its family
+        assert re.search(rf'<tr class="group"><th colspan="\d+">{v.split(":")[0]}</th></tr>', index)
     assert "cbody:euler and cbody_broken:euler have no one-step mode" in index
     assert "<dt>engine cbody</dt>" in index and "SHA-256" in index
     assert 'title="no one-step mode' in page
@@ -175,7 +178,8 @@ def test_compare_catches_a_regressed_build_and_passes_an_unchanged_one(swept, by
     c = compare_dirs(swept["dir"], new)
     assert c.exit_code(allow_missing=True) == 1
     (_, old_v, new_v), = [d for d in c.version_diffs if d[0] == "engine cbody"]  # the rebuild is named
-    assert old_v.startswith("1.0 (engine file ") and old_v.split("programs ")[1] != new_v.split("programs ")[1]
+    assert (old_v.startswith("1.0 (engine file ")
+            and old_v.split("programs ")[1] != new_v.split("programs ")[1])
     regressed = {(ch.engine, ch.what) for ch in c.of("regression")}
     for v in GOOD:
         assert (v, "dt=0.0025 orient_err_final") in regressed, to_text(c, True)
@@ -201,7 +205,8 @@ def test_assert_engine_passes_correct_engines(byo):
     summary = assert_engine("cbody:euler", [byo["byo_tumble"], byo["byo_pushed"]], engine_file=byo["good"])
     assert {r["scenario"] for r in summary["convergence"]} == {"byo_tumble", "byo_pushed"}
     assert assert_engine("fakesim:euler", byo["byo_tumble"])["variants"][0]["version"] == "2.5"
-    assert "cbody" not in [e.name for e in engines.engine_entries()]  # the engine file was registered for the call only
+    # the engine file was registered for the call only
+    assert "cbody" not in [e.name for e in engines.engine_entries()]
 
 
 @pytest.mark.parametrize("variant", BROKEN)
@@ -209,7 +214,8 @@ def test_assert_engine_raises_with_the_verdict_sentences_for_a_broken_engine(byo
     with pytest.raises(AssertionError) as info:
         assert_engine(variant, [byo["byo_tumble"]], engine_file=byo["broken"])
     text = str(info.value)
-    assert text.startswith(f"assert_engine('{variant}') on byo_tumble: ") and "problem(s)" in text.splitlines()[0]
+    assert (text.startswith(f"assert_engine('{variant}') on byo_tumble: ")
+            and "problem(s)" in text.splitlines()[0])
     assert f"{variant} on byo_tumble: orientation does not converge" in text
     assert "expected order 1 — final errors" in text and "rad at Δt = 0.02, 0.01, 0.005, 0.0025 s" in text
 
@@ -218,24 +224,28 @@ def test_an_installed_entry_point_is_found_by_a_fresh_rbcheck_process(byo, tmp_p
     import os
     env = dict(os.environ, PYTHONPATH=str(byo["site"]))
     out = tmp_path / "f.csv"
-    proc = subprocess.run([sys.executable, "-m", "cross_checks.cli", "run", str(byo["byo_tumble"]), "--engine",
-                           "fakesim:euler", "--dt", "0.01", "--out", str(out)], env=env, capture_output=True, text=True)
+    proc = subprocess.run([sys.executable, "-m", "cross_checks.cli", "run", str(byo["byo_tumble"]),
+                           "--engine", "fakesim:euler", "--dt", "0.01", "--out", str(out)], env=env,
+                          capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
     assert "fakesim:euler (2.5): 100 steps" in proc.stdout
     assert Trajectory.read(out).meta["engine"] == "fakesim"
 
 
-def test_check_with_engine_files_identifies_the_user_engine_and_catches_its_broken_copy(byo, tmp_path, capsys):
+def test_check_with_engine_files_identifies_the_user_engine_and_catches_its_broken_copy(
+        byo, tmp_path, capsys):
     """`check --engine-file`: the engine's variants are run free at the file's Δt and compared, so a file
     written by the correct engine IS cbody:euler; the broken engine's file fails (gyroscopic sign)."""
     good, bad = tmp_path / "good.csv", tmp_path / "bad.csv"
     common = [str(byo["byo_tumble"]), "--dt", "0.01"]
-    assert main(["run", *common, "--engine", "cbody:euler", "--engine-file", str(byo["good"]), "--out", str(good)]) == 0
+    assert main(["run", *common, "--engine", "cbody:euler",
+                 "--engine-file", str(byo["good"]), "--out", str(good)]) == 0
     assert main(["run", *common, "--engine", "cbody_broken:euler", "--engine-file", str(byo["broken"]),
                  "--out", str(bad)]) == 0
     capsys.readouterr()
     files = ["--engine-file", str(byo["good"]), "--engine-file", str(byo["broken"])]
-    assert main(["check", str(good), "--scenario", str(byo["byo_tumble"]), *files, "--json", str(tmp_path / "g.json")]) == 0
+    assert main(["check", str(good), "--scenario", str(byo["byo_tumble"]),
+                 *files, "--json", str(tmp_path / "g.json")]) == 0
     out = capsys.readouterr().out
     assert out.startswith("PASS: ")
     engines_seen = {e["engine"]: e for e in json.loads((tmp_path / "g.json").read_text())["engines"]}

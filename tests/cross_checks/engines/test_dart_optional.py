@@ -1,6 +1,7 @@
-"""DART is optional: without dartpy (its absence simulated), the adapter says "not installed" (EngineNotInstalled),
-`rbcheck list` and `--version` say so, a default sweep skips its variants with that reason, and asking for it is bad
-input; an installed dartpy that fails to import is told apart from an absent one."""
+"""DART is optional: without dartpy (its absence simulated), the adapter says "not installed"
+(EngineNotInstalled), `rbcheck list` and `--version` say so, a default sweep skips its variants
+with that reason, and asking for it is bad input; an installed dartpy that fails to import is
+told apart from an absent one."""
 import pytest
 
 from cross_checks import engines
@@ -20,15 +21,18 @@ def no_dart(monkeypatch):
 
 
 def test_version_raises_engine_not_installed_with_the_extra_to_install(no_dart):
-    with pytest.raises(base.EngineNotInstalled, match=r"dartpy is not installed \(pip install 'rbcheck\[dart\]'\)"):
+    with pytest.raises(base.EngineNotInstalled,
+                       match=r"dartpy is not installed \(pip install 'rbcheck\[dart\]'\)"):
         dart_engine.version()
 
 
 def test_a_broken_install_is_not_an_absent_one(monkeypatch):
     monkeypatch.setattr(base, "installed_version", lambda dist: "6.20.0" if dist == "dartpy" else None)
     monkeypatch.setattr(dart_engine, "dart", None)
-    monkeypatch.setattr(dart_engine, "_IMPORT_ERROR", ImportError("libfcl.so.0.7: cannot open shared object file"))
-    with pytest.raises(ImportError, match="dartpy 6.20.0 is installed but cannot be imported: ImportError: libfcl") as e:
+    monkeypatch.setattr(dart_engine, "_IMPORT_ERROR",
+                        ImportError("libfcl.so.0.7: cannot open shared object file"))
+    with pytest.raises(ImportError,
+                       match="dartpy 6.20.0 is installed but cannot be imported: ImportError: libfcl") as e:
         dart_engine.version()
     assert not isinstance(e.value, base.EngineNotInstalled)
 
@@ -36,9 +40,11 @@ def test_a_broken_install_is_not_an_absent_one(monkeypatch):
 def test_list_and_version_say_dart_is_not_installed(no_dart, capsys):
     assert main(["list"]) == 0
     out = capsys.readouterr().out
-    assert "dart:semi_implicit_euler" in out and "dartpy is not installed (pip install 'rbcheck[dart]')" in out
+    assert ("dart:semi_implicit_euler" in out
+            and "dartpy is not installed (pip install 'rbcheck[dart]')" in out)
     infos = [v for v in engines.all_variants() if v.engine == "dart"]
-    assert len(infos) == len(dart_engine.VARIANTS) and not any(v.available or v.installed or v.required for v in infos)
+    assert (len(infos) == len(dart_engine.VARIANTS)
+            and not any(v.available or v.installed or v.required for v in infos))
     assert "dart: dartpy is not installed" in _version_text()
 
 

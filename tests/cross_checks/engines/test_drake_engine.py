@@ -1,5 +1,6 @@
-"""The Drake adapter (cross_checks.engines.drake_engine): every convention it relies on, pinned on Drake itself (docs/engine_conventions.md),
-its force and decay paths against hand-derived steps, its orders, and the planted mistakes it catches."""
+"""The Drake adapter (cross_checks.engines.drake_engine): every convention it relies on, pinned on Drake
+itself (docs/engine_conventions.md), its force and decay paths against hand-derived steps, its orders, and the
+planted mistakes it catches."""
 import dataclasses
 import math
 
@@ -35,8 +36,10 @@ def test_positions_are_the_quaternion_w_x_y_z_then_the_position():
     from pydrake.common.eigen_geometry import Quaternion
     from pydrake.math import RigidTransform
     model = de.DrakeModel(scenario_from_parts(), "runge_kutta3")
-    model.plant.SetFreeBodyPose(model.context, model.body, RigidTransform(Quaternion(*Q_TILT), [1.0, 2.0, 3.0]))
-    np.testing.assert_allclose(model.plant.GetPositions(model.context), np.r_[Q_TILT, 1.0, 2.0, 3.0], rtol=0, atol=1e-15)
+    model.plant.SetFreeBodyPose(model.context, model.body,
+                                RigidTransform(Quaternion(*Q_TILT), [1.0, 2.0, 3.0]))
+    np.testing.assert_allclose(model.plant.GetPositions(model.context),
+                               np.r_[Q_TILT, 1.0, 2.0, 3.0], rtol=0, atol=1e-15)
     y = np.r_[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, Q_TILT, 0.1, 0.2, 0.3]
     np.testing.assert_array_equal(de.from_drake_state(de.to_drake_state(y)), y)
 
@@ -45,7 +48,8 @@ def test_velocities_are_angular_first_both_in_world_axes():
     from pydrake.multibody.math import SpatialVelocity
     model = de.DrakeModel(scenario_from_parts(), "runge_kutta3")
     model.set_state(np.r_[np.zeros(6), Q_TILT, np.zeros(3)])
-    model.plant.SetFreeBodySpatialVelocity(model.context, model.body, SpatialVelocity(w=[0.1, 0.2, 0.3], v=[4.0, 5.0, 6.0]))
+    model.plant.SetFreeBodySpatialVelocity(model.context, model.body,
+                                           SpatialVelocity(w=[0.1, 0.2, 0.3], v=[4.0, 5.0, 6.0]))
     # V_WB expressed in WORLD axes although the body is tilted: the generalized velocities are [ω_W, v_W]
     np.testing.assert_array_equal(model.plant.GetVelocities(model.context), [0.1, 0.2, 0.3, 4.0, 5.0, 6.0])
 
@@ -54,7 +58,8 @@ def test_a_yawed_body_spinning_about_body_x_turns_about_world_y():
     # 90° yaw: body x is world y. A torque-free spin about a principal axis stays there, ω_W constant,
     # and the attitude turns about WORLD y: q(t) = exp(ω_W t) ⊗ q0
     sq = math.sqrt(0.5)
-    sc = scenario_from_parts(initial=f"orientation = [{sq!r}, 0.0, 0.0, {sq!r}]\nangular_velocity = [0.0, 2.0, 0.0]",
+    sc = scenario_from_parts(initial=f"orientation = [{sq!r}, 0.0, 0.0, {sq!r}]\n"
+                                     "angular_velocity = [0.0, 2.0, 0.0]",
                              dt=0.01, duration=0.5)
     run = de.simulate(sc, "runge_kutta3", 0.01, 50)
     np.testing.assert_allclose(run.y[-1, 10:13], [0.0, 2.0, 0.0], atol=1e-12)
@@ -64,15 +69,20 @@ def test_a_yawed_body_spinning_about_body_x_turns_about_world_y():
 
 def test_generalized_forces_are_the_world_torque_then_the_world_force_at_the_com():
     sc = scenario_from_parts(body=FULL_INERTIA, initial=f"orientation = {Q_TILT.tolist()}",
-                             forces='gravity = [0.0, 0.0, -9.81]\n[[forces.torque]]\ntorque = [0.3, -0.2, 0.5]\n'
-                                    'frame = "world"\n[[forces.point]]\nforce = [1.0, 2.0, 3.0]\nframe = "world"')
+                             forces='gravity = [0.0, 0.0, -9.81]\n'
+                                    '[[forces.torque]]\n'
+                                    'torque = [0.3, -0.2, 0.5]\n'
+                                    'frame = "world"\n'
+                                    '[[forces.point]]\nforce = [1.0, 2.0, 3.0]\nframe = "world"')
     model = de.DrakeModel(sc, "runge_kutta3")
     model.set_state(sc.problem.initial_packed())
     vdot = model.plant.EvalTimeDerivatives(model.context).get_generalized_velocity().CopyToVector()
     R = matrix_from_quat(Q_TILT)
     I_W = R @ sc.problem.body.inertia_B @ R.T
-    np.testing.assert_allclose(vdot[0:3], np.linalg.solve(I_W, [0.3, -0.2, 0.5]), rtol=tol.DRAKE_DERIVATIVE_REL)
-    np.testing.assert_allclose(vdot[3:6], np.array([1.0, 2.0, 3.0]) / 2.0 + [0.0, 0.0, -9.81], rtol=tol.DRAKE_DERIVATIVE_REL)
+    np.testing.assert_allclose(vdot[0:3], np.linalg.solve(I_W, [0.3, -0.2, 0.5]),
+                               rtol=tol.DRAKE_DERIVATIVE_REL)
+    np.testing.assert_allclose(vdot[3:6], np.array([1.0, 2.0, 3.0]) / 2.0 + [0.0, 0.0, -9.81],
+                               rtol=tol.DRAKE_DERIVATIVE_REL)
 
 
 def test_the_inertia_is_about_the_com_in_body_axes_full_tensors_included():
@@ -87,14 +97,16 @@ def test_the_inertia_is_about_the_com_in_body_axes_full_tensors_included():
 
 def test_the_gyroscopic_term_is_drakes_own():
     # torque-free full-tensor tumble: ω̇_W = −I_W⁻¹ (ω × I_W ω), nothing of it from rbcheck
-    sc = scenario_from_parts(body=FULL_INERTIA, initial=f"orientation = {Q_TILT.tolist()}\nangular_velocity = [0.4, 1.5, -0.7]")
+    sc = scenario_from_parts(body=FULL_INERTIA,
+                             initial=f"orientation = {Q_TILT.tolist()}\nangular_velocity = [0.4, 1.5, -0.7]")
     model = de.DrakeModel(sc, "runge_kutta3")
     model.set_state(sc.problem.initial_packed())
     vdot = model.plant.EvalTimeDerivatives(model.context).get_generalized_velocity().CopyToVector()
     R = matrix_from_quat(Q_TILT)
     I_W = R @ sc.problem.body.inertia_B @ R.T
     w = sc.problem.initial.w_W
-    np.testing.assert_allclose(vdot[0:3], -np.linalg.solve(I_W, np.cross(w, I_W @ w)), rtol=tol.DRAKE_DERIVATIVE_REL)
+    np.testing.assert_allclose(vdot[0:3], -np.linalg.solve(I_W, np.cross(w, I_W @ w)),
+                               rtol=tol.DRAKE_DERIVATIVE_REL)
 
 
 def test_drake_does_not_renormalise_the_quaternion_and_the_recorded_one_is_unit():
@@ -104,7 +116,7 @@ def test_drake_does_not_renormalise_the_quaternion_and_the_recorded_one_is_unit(
     for k in range(1, 201):
         model.simulator.AdvanceTo(k * 0.01)
     norm = np.linalg.norm(model.drake_state()[0:4])
-    assert norm - 1.0 > tol.DRAKE_QUATERNION_DRIFT_MIN, norm                                       # linear q update: |q| grows
+    assert norm - 1.0 > tol.DRAKE_QUATERNION_DRIFT_MIN, norm   # linear q update: |q| grows
     run = de.simulate(sc, "semi_explicit_euler", 0.01, 200)
     np.testing.assert_allclose(np.linalg.norm(run.y[:, 6:10], axis=1), 1.0, atol=1e-15)
 
@@ -165,7 +177,8 @@ def _forces_held_over_the_step(sc, variant, dt, n):
     (a fixed input value per step) instead of at every stage."""
     fm = sc.problem.forces
     bare = dataclasses.replace(sc, problem=dataclasses.replace(
-        sc.problem, forces=dataclasses.replace(fm, springs=(), point_forces=(), torques=(), linear_drag_N_s_per_m=0.0)))
+        sc.problem,
+        forces=dataclasses.replace(fm, springs=(), point_forces=(), torques=(), linear_drag_N_s_per_m=0.0)))
     model = de._model(bare, variant, dt)
     y = sc.problem.initial_packed()
     model.set_state(y)
@@ -195,8 +208,9 @@ def test_one_step_replays_the_run(variant):
     run = de.simulate(sc, variant, 0.01, 20)
     again = de.one_step(sc, variant, 0.01, run.y[:-1])
     scale = np.maximum(1.0, np.abs(run.y[1:]))
-    assert np.max(np.abs(again - run.y[1:]) / scale) < (tol.DRAKE_REPLAY_IMPLICIT_REL if variant == "implicit_euler"
-                                                          else tol.DRAKE_REPLAY_REL)
+    assert np.max(np.abs(again - run.y[1:]) / scale) < (tol.DRAKE_REPLAY_IMPLICIT_REL
+                                                        if variant == "implicit_euler"
+                                                        else tol.DRAKE_REPLAY_REL)
 
 
 def test_a_blow_up_is_reported_as_divergence_with_the_rows_before_it():
@@ -241,4 +255,5 @@ def test_drake_refusing_to_go_on_is_divergence_at_that_step(monkeypatch):
     monkeypatch.setattr(de, "_model", model)
     run = de.simulate(load_scenario("spring_pendulum"), "runge_kutta2", 0.01, 50)
     assert run.diverged_at_s == pytest.approx(0.07) and len(run.t_s) == 7
-    assert run.message == "diverged at t = 0.07 s (Drake: Detected NaN in applied generalized force input port.)"
+    assert run.message == ("diverged at t = 0.07 s "
+                           "(Drake: Detected NaN in applied generalized force input port.)")

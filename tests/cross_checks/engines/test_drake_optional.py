@@ -31,7 +31,8 @@ def test_list_says_drake_is_not_installed(no_drake, capsys):
     assert "drake is not installed (pip install 'rbcheck[drake]')" in out
     infos = [v for v in engines.all_variants() if v.engine == "drake"]
     assert len(infos) == 4 and not any(v.available for v in infos)
-    available = {v.engine for v in engines.all_variants() if v.available}   # optional engines (dart) may be here
+    # optional engines (dart) may be here
+    available = {v.engine for v in engines.all_variants() if v.available}
     assert "drake" not in available and {"reference", "mujoco", "pybullet"} <= available
 
 

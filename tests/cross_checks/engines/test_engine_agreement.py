@@ -31,15 +31,16 @@ def _run(sc, name, **kw):
 
 # --- projectile closed forms --------------------------------------------------------------------------
 
-@pytest.mark.parametrize("name", ["reference:course", "mujoco:euler", "mujoco:implicit", "mujoco:implicitfast",
-                                  "pybullet:multibody", "pybullet:maximal"])
+@pytest.mark.parametrize("name", ["reference:course", "mujoco:euler", "mujoco:implicit",
+                                  "mujoco:implicitfast", "pybullet:multibody", "pybullet:maximal"])
 def test_projectile_semi_implicit_closed_form(name):
     sc = load_scenario("projectile")
     tr = _run(sc, name)
     h, x0, v0, g = sc.dt_s, sc.problem.initial.x_W, sc.problem.initial.v_W, sc.problem.forces.gravity_W
     n = np.arange(len(tr.t_s))[:, None]
     assert len(tr.t_s) == 101
-    np.testing.assert_allclose(tr.y[:, 0:3], x0 + n * h * v0 + g * h * h * n * (n + 1) / 2, rtol=0, atol=tol.AGREE_PROJECTILE)
+    np.testing.assert_allclose(tr.y[:, 0:3], x0 + n * h * v0 + g * h * h * n * (n + 1) / 2,
+                               rtol=0, atol=tol.AGREE_PROJECTILE)
     np.testing.assert_allclose(tr.y[:, 3:6], v0 + n * h * g, rtol=0, atol=tol.AGREE_PROJECTILE)
 
 
@@ -151,7 +152,7 @@ def test_mujoco_implicitfast_vs_pybullet_maximal():
     assert tol.AGREE_FIRST_ORDER_RATIO[0] < diff[0] / diff[1] < tol.AGREE_FIRST_ORDER_RATIO[1], diff
 
 
-# --- the whole catalog in every engine variant ---------------------------------------------------------------
+# --- the whole catalog in every engine variant --------------------------------------------------------------
 
 @pytest.mark.parametrize("name", ENGINE_VARIANTS)
 def test_every_catalog_scenario_runs(name):
@@ -168,7 +169,8 @@ def test_every_catalog_scenario_runs(name):
 
 @pytest.mark.parametrize("name", ["applied_torque", "spring_pendulum", "linear_drag", "velocity_decay"])
 def test_harness_forces_equal_the_force_model(name):
-    # The engines' per-step forces come from the plain-float kernel; ForceModel.force_torque is the definition.
+    # The engines' per-step forces come from the plain-float kernel;
+    # ForceModel.force_torque is the definition.
     import numpy as np
 
     from cross_checks.engines.base import harness_force_torque
@@ -185,11 +187,13 @@ def test_harness_forces_equal_the_force_model(name):
             f, tau = harness_force_torque(sc, y, dt)
             np.testing.assert_allclose(f, f_ref * gv, rtol=1e-14, atol=1e-14)
             np.testing.assert_allclose(tau, tau_ref * gw, rtol=1e-14, atol=1e-14)
-        # the multi-stage engines' right-hand side: the decay as a damping force −m k_v v and torque −k_ω I_W ω
+        # the multi-stage engines' right-hand side: the decay as a damping
+        # force −m k_v v and torque −k_ω I_W ω
         from cross_checks.engines.base import stage_force_torque
         from reference_sim.quaternion import matrix_from_quat
         k_v, k_w = fm.decay_rates_per_s()
         R = matrix_from_quat(y[6:10])
         f, tau = stage_force_torque(sc, y)
         np.testing.assert_allclose(f, f_ref - body.mass_kg * k_v * y[3:6], rtol=1e-14, atol=1e-14)
-        np.testing.assert_allclose(tau, tau_ref - k_w * body.world_inertia(R) @ y[10:13], rtol=1e-14, atol=1e-14)
+        np.testing.assert_allclose(tau, tau_ref - k_w * body.world_inertia(R) @ y[10:13],
+                                   rtol=1e-14, atol=1e-14)

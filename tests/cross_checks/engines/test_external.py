@@ -3,6 +3,7 @@ nothing written; every misbehaving command is a failed row carrying its own word
 a blow-up written by the engine is "diverged at t = …"; a hung command and everything it started are
 killed at the time limit."""
 import contextlib
+import dataclasses
 import io
 import sys
 from pathlib import Path
@@ -14,7 +15,7 @@ from hypothesis import strategies as st
 from cross_checks import engines
 from cross_checks.cli import main
 from cross_checks.engines.base import EngineError
-from cross_checks.engines.external import load_engine_file
+from cross_checks.engines.external import EngineFileError, load_engine_file
 from cross_checks.scenario import parse_scenario
 from cross_checks.sweep import run_sweep
 
@@ -134,7 +135,8 @@ def test_a_misbehaving_command_fails_with_its_own_words(fake, mode, words):
         p.unlink()  # what a misbehaving engine left behind must not fail the next test
 
 
-@pytest.mark.parametrize("mode, k, what", [("nan_mid", 6, "non-finite state"), ("blowup_mid", 4, "state beyond 1e+08")])
+@pytest.mark.parametrize("mode, k, what",
+                         [("nan_mid", 6, "non-finite state"), ("blowup_mid", 4, "state beyond 1e+08")])
 def test_a_blow_up_written_by_the_engine_is_a_divergence_at_its_time(fake, mode, k, what):
     run = fake.simulate(TINY, mode, 0.01, 10)
     assert run.diverged_at_s == pytest.approx(k * 0.01)
@@ -162,11 +164,13 @@ def _alive(pid: int) -> bool:
 def test_a_hung_command_and_its_children_are_killed_at_the_time_limit(tmp_path):
     pids = tmp_path / "pids"
     path = _engine_file(tmp_path / "hang", modes=[], timeout=3)  # time enough to start on a loaded machine
-    path.write_text(path.read_text() + f'[variants.hang]\norder = 1\ncommand = ["{sys.executable}", "engine.py", "hang", '
-                                       f'"{{scenario_json}}", "{{out_csv}}", "{pids}"]\n')
+    path.write_text(path.read_text() + f'[variants.hang]\norder = 1\ncommand = ["{sys.executable}", '
+                                       '"engine.py", "hang", "{scenario_json}", "{out_csv}", '
+                                       f'"{pids}"]\n')
     eng = load_engine_file(path)
     import time
-    with pytest.raises(EngineError, match=r"no result within the time limit of 3 s \(set `timeout` in fake.toml\)"):
+    with pytest.raises(EngineError,
+                       match=r"no result within the time limit of 3 s \(set `timeout` in fake.toml\)"):
         eng.simulate(TINY, "hang", 0.01, 10)
     # killed at the limit, not let run to its end (which writes the marker after its 60 s sleep)
     assert not Path(f"{pids}.finished").exists()
@@ -183,8 +187,8 @@ def test_a_program_deleted_after_loading_is_a_failed_run(tmp_path):
     prog = folder / "sim.sh"
     prog.write_text("#!/bin/sh\nexit 0\n")
     prog.chmod(0o755)
-    (folder / "e.toml").write_text('name = "gone"\n[variants.v]\norder = 1\ncommand = ["./sim.sh", "{scenario_json}", '
-                                   '"{out_csv}"]\n')
+    (folder / "e.toml").write_text('name = "gone"\n[variants.v]\norder = 1\ncommand = ["./sim.sh", '
+                                   '"{scenario_json}", "{out_csv}"]\n')
     eng = load_engine_file(folder / "e.toml")
     prog.unlink()
     with pytest.raises(EngineError, match="cannot start .*sim.sh.*No such file"):
@@ -208,9 +212,11 @@ def test_failed_runs_are_rows_with_the_words_and_make_the_sweep_exit_1(tmp_path,
 def test_run_of_a_failing_engine_exits_1_with_its_words_and_writes_nothing(tmp_path, capsys):
     path = _engine_file(tmp_path / "eng", modes=["exit3"])
     out = tmp_path / "t.csv"
-    assert main(["run", "projectile", "--engine", "fake:exit3", "--engine-file", str(path), "--out", str(out)]) == 1
+    assert main(["run", "projectile", "--engine", "fake:exit3",
+                 "--engine-file", str(path), "--out", str(out)]) == 1
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "projectile with fake:exit3 failed" in err and "inertia matrix is singular" in err
+    assert (err.count("\n") == 1 and "projectile with fake:exit3 failed" in err
+            and "inertia matrix is singular" in err)
     assert not out.exists() and not out.with_suffix(".json").exists()
 
 
@@ -228,7 +234,8 @@ def test_sweep_records_the_engine_file_run_in_parallel_jobs(tmp_path, isolated_c
 
 # --- bad engine files: exit 2, one line naming file, field and reason ---------------------------------
 
-GOOD_VARIANT = '[variants.v]\norder = 1\ncommand = ["{exe}", "engine.py", "ok", "{{scenario_json}}", "{{out_csv}}"]\n'
+GOOD_VARIANT = ('[variants.v]\norder = 1\n'
+                'command = ["{exe}", "engine.py", "ok", "{{scenario_json}}", "{{out_csv}}"]\n')
 
 BAD_FILES = [
     ('version = "1"\n' + GOOD_VARIANT, "name", "missing (required)"),
@@ -236,16 +243,18 @@ BAD_FILES = [
     ('name = "mujoco"\n' + GOOD_VARIANT, "name", "is already an engine (entry point mujoco"),
     ('name = "reference"\n' + GOOD_VARIANT, "name", "is already an engine"),
     ('name = "x"\nverison = "1"\n' + GOOD_VARIANT, "verison", "unknown key (did you mean 'version'?)"),
-    ('name = "x"\nversion = 0.3\n' + GOOD_VARIANT, "version", 'must be a non-empty string, got 0.3 (quote it: version = "0.3")'),
+    ('name = "x"\nversion = 0.3\n' + GOOD_VARIANT, "version",
+     'must be a non-empty string, got 0.3 (quote it: version = "0.3")'),
     ('name = "x"\ntimeout = -1\n' + GOOD_VARIANT, "timeout", "must be a number of seconds in (0, 86400]"),
     ('name = "x"\n', "variants", "missing (required)"),
     ('name = "x"\nvariants = 3\n', "variants", "must contain at least one [variants.NAME] table"),
     ('name = "x"\n[variants.Euler]\norder = 1\ncommand = ["{exe}", "{{scenario_json}}", "{{out_csv}}"]\n',
      "variants.Euler", "variant name must match"),
     ('name = "x"\n[variants]\nv = 3\n', "variants.v", "must be a table"),
-    ('name = "x"\n[variants.v]\norder = 1\ncmd = []\n', "variants.v.cmd", "unknown key (did you mean 'command'?)"),
-    ('name = "x"\n[variants.v]\ncommand = ["{exe}", "{{scenario_json}}", "{{out_csv}}"]\n', "variants.v.order",
-     "missing (required)"),
+    ('name = "x"\n[variants.v]\norder = 1\ncmd = []\n',
+     "variants.v.cmd", "unknown key (did you mean 'command'?)"),
+    ('name = "x"\n[variants.v]\ncommand = ["{exe}", "{{scenario_json}}", "{{out_csv}}"]\n',
+     "variants.v.order", "missing (required)"),
     ('name = "x"\n[variants.v]\norder = true\ncommand = ["{exe}", "{{scenario_json}}", "{{out_csv}}"]\n',
      "variants.v.order", "must be a number in (0, 20], got True"),
     ('name = "x"\n[variants.v]\norder = "1"\ncommand = ["{exe}", "{{scenario_json}}", "{{out_csv}}"]\n',
@@ -253,16 +262,19 @@ BAD_FILES = [
     ('name = "x"\n[variants.v]\norder = 0\ncommand = ["{exe}", "{{scenario_json}}", "{{out_csv}}"]\n',
      "variants.v.order", "must be a number in (0, 20], got 0"),
     ('name = "x"\n[variants.v]\norder = 1\n', "variants.v.command", "missing (required)"),
-    ('name = "x"\n[variants.v]\norder = 1\ncommand = "./sim {{scenario_json}} {{out_csv}}"\n', "variants.v.command",
-     "must be a non-empty list of strings"),
+    ('name = "x"\n[variants.v]\norder = 1\ncommand = "./sim {{scenario_json}} {{out_csv}}"\n',
+     "variants.v.command", "must be a non-empty list of strings"),
     ('name = "x"\n[variants.v]\norder = 1\ncommand = []\n', "variants.v.command", "must be a non-empty list"),
     ('name = "x"\n[variants.v]\norder = 1\ncommand = ["{exe}", 3, "{{scenario_json}}", "{{out_csv}}"]\n',
      "variants.v.command[1]", "must be a string, got 3"),
     ('name = "x"\n[variants.v]\norder = 1\ncommand = ["{exe}", "{{scenario}}", "{{out_csv}}"]\n',
-     "variants.v.command[1]", "unknown placeholder {scenario} in '{scenario}'; placeholders: {scenario_json}, {dt}"),
-    ('name = "x"\n[variants.v]\norder = 1\ncommand = ["{exe}", "{{dt:.3f}}", "{{scenario_json}}", "{{out_csv}}"]\n',
+     "variants.v.command[1]",
+     "unknown placeholder {scenario} in '{scenario}'; placeholders: {scenario_json}, {dt}"),
+    ('name = "x"\n[variants.v]\norder = 1\ncommand = ["{exe}", '
+     '"{{dt:.3f}}", "{{scenario_json}}", "{{out_csv}}"]\n',
      "variants.v.command[1]", "placeholder {dt} takes no format spec"),
-    ('name = "x"\n[variants.v]\norder = 1\ncommand = ["{exe}", "--dt={{dt", "{{scenario_json}}", "{{out_csv}}"]\n',
+    ('name = "x"\n[variants.v]\norder = 1\ncommand = ["{exe}", '
+     '"--dt={{dt", "{{scenario_json}}", "{{out_csv}}"]\n',
      "variants.v.command[1]", "bad placeholder syntax in '--dt={dt'"),
     ('name = "x"\n[variants.v]\norder = 1\ncommand = ["{exe}", "{{scenario_json}}"]\n', "variants.v.command",
      "never mentions {out_csv}: the command cannot know where to write the trajectory"),
@@ -274,13 +286,15 @@ BAD_FILES = [
      "variants.v.command[0]", "./nope: no such file (looked in"),
     ('name = "x"\n[variants.v]\norder = 1\ncommand = ["./engine.py", "{{scenario_json}}", "{{out_csv}}"]\n',
      "variants.v.command[0]", "./engine.py: is not executable (chmod +x?)"),
-    ('name = "x"\n[variants.v]\norder = 1\ncommand = ["no-such-program-rbcheck", "{{scenario_json}}", "{{out_csv}}"]\n',
+    ('name = "x"\n[variants.v]\norder = 1\ncommand = ["no-such-program-rbcheck", '
+     '"{{scenario_json}}", "{{out_csv}}"]\n',
      "variants.v.command[0]", "'no-such-program-rbcheck': no such program on PATH"),
     ('name = "x"\n[variants.v\norder = 1\n', "", "TOML syntax error"),
 ]
 
 
-@pytest.mark.parametrize("text, field, reason", BAD_FILES, ids=[f"{f or 'toml'}-{i}" for i, (_, f, _) in enumerate(BAD_FILES)])
+@pytest.mark.parametrize("text, field, reason", BAD_FILES,
+                         ids=[f"{f or 'toml'}-{i}" for i, (_, f, _) in enumerate(BAD_FILES)])
 def test_a_bad_engine_file_exits_2_naming_file_field_and_reason(tmp_path, capsys, text, field, reason):
     folder = tmp_path / "eng"
     _engine_file(folder, modes=[])
@@ -295,8 +309,9 @@ def test_a_bad_engine_file_exits_2_naming_file_field_and_reason(tmp_path, capsys
     assert not out.exists()
 
 
-@pytest.mark.parametrize("make, reason", [(lambda p: None, "no such file"), (lambda p: p.mkdir(), "is a directory"),
-                                          (lambda p: p.write_bytes(b"name = \"\xff\"\n"), "is not UTF-8 text")])
+@pytest.mark.parametrize("make, reason",
+                         [(lambda p: None, "no such file"), (lambda p: p.mkdir(), "is a directory"),
+                          (lambda p: p.write_bytes(b"name = \"\xff\"\n"), "is not UTF-8 text")])
 def test_an_unreadable_engine_file_exits_2(tmp_path, capsys, make, reason):
     path = tmp_path / "e.toml"
     make(path)
@@ -311,7 +326,8 @@ def test_two_engine_files_with_one_name_exit_2(tmp_path, capsys):
     b = _engine_file(tmp_path / "b", modes=["ok"])
     assert main(["list", "--engine-file", str(a), "--engine-file", str(b)]) == 2
     err = capsys.readouterr().err
-    assert err.startswith(f"rbcheck list: error: {b}: name: name 'fake' is already registered by engine file {a}")
+    assert err.startswith(f"rbcheck list: error: {b}: name: name 'fake' "
+                          f"is already registered by engine file {a}")
 
 
 def test_the_same_engine_file_twice_is_one_engine(tmp_path, capsys):
@@ -324,9 +340,9 @@ def test_the_same_engine_file_twice_is_one_engine(tmp_path, capsys):
 # --- property: no engine file, however damaged, gives a traceback ---------------------------------------
 
 _PROGRAMS = [sys.executable, "./nope", "no-such-program-rbcheck", "./engine.py"]
-_ARGS = st.lists(st.sampled_from(["engine.py", "ok", "exit3", "garbage", "short", "nan_mid", "{scenario_json}",
-                                  "{out_csv}", "{dt}", "{steps}", "{duration}", "{bogus}", "{dt:.3f}", "{", "}}",
-                                  "--x={dt}"]), max_size=6)
+_ARGS = st.lists(st.sampled_from(["engine.py", "ok", "exit3", "garbage", "short", "nan_mid",
+                                  "{scenario_json}", "{out_csv}", "{dt}", "{steps}", "{duration}", "{bogus}",
+                                  "{dt:.3f}", "{", "}}", "--x={dt}"]), max_size=6)
 
 
 @st.composite
@@ -370,7 +386,8 @@ def test_no_engine_file_gives_a_traceback_only_exit_2_or_a_failed_run(tmp_path, 
     out = folder.parent / f"out-{abs(hash(text))}.csv"
     err = io.StringIO()
     with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
-        code = main(["run", str(tiny), "--engine", f"fuzz:{variant}", "--engine-file", str(path), "--out", str(out)])
+        code = main(["run", str(tiny), "--engine", f"fuzz:{variant}",
+                     "--engine-file", str(path), "--out", str(out)])
     engines.reset_registry()
     text_err = err.getvalue()
     assert "Traceback" not in text_err
@@ -406,10 +423,10 @@ def test_a_file_another_process_writes_into_the_engine_folder_is_not_blamed_on_i
     from tests.helpers.byo import build_cbody
     built = build_cbody(tmp_path / "c_engine")
     env = {**os.environ, "MPLBACKEND": "Agg", "RBCHECK_CACHE_DIR": str(tmp_path / "cache")}
-    cmd = (f"{sys.executable} -m cross_checks.cli sweep tennis_racket applied_torque tumbling_box --engines cbody "
-           f"--engine-file cbody.toml --out ../res > sweep.log")
-    proc = subprocess.run(["bash", "-c", cmd], cwd=built["good"].parent, env=env, capture_output=True, text=True,
-                          timeout=600)
+    cmd = (f"{sys.executable} -m cross_checks.cli sweep tennis_racket applied_torque "
+           "tumbling_box --engines cbody --engine-file cbody.toml --out ../res > sweep.log")
+    proc = subprocess.run(["bash", "-c", cmd], cwd=built["good"].parent, env=env, capture_output=True,
+                          text=True, timeout=600)
     log = (built["good"].parent / "sweep.log").read_text()
     assert proc.returncode == 0, log[-1500:] + proc.stderr[-1500:]
     assert "all " in log.splitlines()[-1] and "verdicts as expected" in log.splitlines()[-1]
@@ -419,8 +436,9 @@ def test_a_child_in_a_session_of_its_own_is_killed_with_the_run(tmp_path):
     import time
     pids = tmp_path / "pids"
     path = _engine_file(tmp_path / "esc", modes=[])
-    path.write_text(path.read_text() + f'[variants.escape]\norder = 1\ncommand = ["{sys.executable}", "engine.py", '
-                                       f'"escape", "{{scenario_json}}", "{{out_csv}}", "{pids}"]\n')
+    path.write_text(path.read_text() + f'[variants.escape]\norder = 1\ncommand = ["{sys.executable}", '
+                                       '"engine.py", "escape", "{scenario_json}", "{out_csv}", '
+                                       f'"{pids}"]\n')
     run = load_engine_file(path).simulate(TINY, "escape", 0.01, 10)
     assert len(run.t_s) == 11
     child = int(pids.read_text().split()[1])
@@ -440,7 +458,8 @@ def test_a_command_that_prints_without_end_keeps_only_a_tail(tmp_path):
 
 
 def test_the_cache_key_covers_every_file_of_the_engine_folder(tmp_path):
-    """A command that runs driver.py, which imports simcore.py beside it: editing simcore.py changes the key."""
+    """A command that runs driver.py, which imports simcore.py beside it: editing
+    simcore.py changes the key."""
     folder = tmp_path / "drv"
     path = _engine_file(folder, modes=["ok"])
     (folder / "simcore.py").write_text("GYRO_SIGN = -1\n")
@@ -455,3 +474,19 @@ def test_the_cache_key_covers_every_file_of_the_engine_folder(tmp_path):
     key2 = load_engine_file(path).cache_token()
     (folder / "results" / "results.csv").write_text("y")         # rbcheck's own results dir: not the engine
     assert load_engine_file(path).cache_token() == key2
+
+
+def test_a_variant_declares_the_precision_its_steps_compute_in(tmp_path):
+    """``precision = "float32"`` gives the variant float32's floors and ladder (docs/verdicts.md, "Precision"),
+    and otherwise the cautious traits of a variant that declares none; float64 is the default; anything else is
+    refused naming the field."""
+    from cross_checks.engines.base import DEFAULT_TRAITS
+    path = _engine_file(tmp_path / "a", modes=["ok"])
+    text = path.read_text().replace('order = 1\n', 'order = 1\nprecision = "float32"\n')
+    path.write_text(text)
+    eng = load_engine_file(path)
+    assert eng.variants["ok"].traits == dataclasses.replace(DEFAULT_TRAITS, precision="float32")
+    assert load_engine_file(_engine_file(tmp_path / "b", modes=["ok"])).variants["ok"].traits is None
+    path.write_text(text.replace('"float32"', '"float16"'))
+    with pytest.raises(EngineFileError, match=r"variants\.ok\.precision: must be one of float64, float32"):
+        load_engine_file(path)

@@ -7,6 +7,7 @@ importing the adapter nor asking its version starts JAX (the sweep forks its wor
 Compilation dominates this module's time (each executable 3-15 s on one core): the tests share executables
 (Euler, the diagonal-tensor structure, one run per call) wherever they can; the RK4 ladders are
 slow-marked."""
+import importlib.util
 import os
 import subprocess
 import sys
@@ -16,7 +17,10 @@ import pytest
 
 from tests.helpers import tolerances as tol
 
-pytest.importorskip("mujoco.mjx", reason="mujoco-mjx is not installed (pip install -e '.[mjx]')")
+# never `importorskip("mujoco.mjx")`: that imports JAX at COLLECTION, in the process whose later tests fork
+# sweeps; JAX starts in the tests below that need it
+if importlib.util.find_spec("mujoco.mjx") is None:
+    pytest.skip("mujoco-mjx is not installed (pip install -e '.[mjx]')", allow_module_level=True)
 
 from cross_checks.engines import mjx_engine as xe  # noqa: E402
 from cross_checks.engines import mujoco_engine as me  # noqa: E402

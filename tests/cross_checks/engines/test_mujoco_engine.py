@@ -71,14 +71,16 @@ def test_state_round_trip_and_quaternion_order():
     np.testing.assert_array_equal(qpos[:, 3:7], y[:, 6:10])          # (w, x, y, z) in both
     np.testing.assert_allclose(me.to_packed(qpos, qvel), y, atol=tol.ADAPTER_ROUND_TRIP * 10)
     for i in range(3):
-        np.testing.assert_allclose(me._packed1(qpos[i], qvel[i]), me.to_packed(qpos[i], qvel[i]), atol=tol.ADAPTER_ROUND_TRIP)
+        np.testing.assert_allclose(me._packed1(qpos[i], qvel[i]),
+                                   me.to_packed(qpos[i], qvel[i]), atol=tol.ADAPTER_ROUND_TRIP)
     # MuJoCo itself reads qpos[3:7] as (w, x, y, z): its body pose after mj_forward is that rotation
     sc = _scenario(initial=YAW90)
     m = me.build_model(sc, "euler", 0.01)
     d = mujoco.MjData(m)
     d.qpos[:], d.qvel[:] = me.to_qpos_qvel(sc.problem.initial_packed())
     mujoco.mj_forward(m, d)
-    np.testing.assert_allclose(d.xmat[1].reshape(3, 3), [[0, -1, 0], [1, 0, 0], [0, 0, 1]], atol=tol.ADAPTER_ROUND_TRIP)
+    np.testing.assert_allclose(d.xmat[1].reshape(3, 3), [[0, -1, 0], [1, 0, 0], [0, 0, 1]],
+                               atol=tol.ADAPTER_ROUND_TRIP)
 
 
 def test_yawed_body_spinning_about_body_x_reads_world_y():
@@ -90,7 +92,8 @@ def test_yawed_body_spinning_about_body_x_reads_world_y():
     _, qvel = me.to_qpos_qvel(y0)
     np.testing.assert_allclose(qvel[3:6], [1.0, 0.0, 0.0], atol=tol.ADAPTER_ROUND_TRIP)
     run = me.simulate(sc, "euler", 0.01, 100)                       # principal-axis spin: exact
-    np.testing.assert_allclose(run.y[:, 10:13], np.tile([0.0, 1.0, 0.0], (101, 1)), atol=tol.ADAPTER_SPIN_100_STEPS)
+    np.testing.assert_allclose(run.y[:, 10:13], np.tile([0.0, 1.0, 0.0], (101, 1)),
+                               atol=tol.ADAPTER_SPIN_100_STEPS)
     expected = quat_mul(quat_from_axis_angle(np.array([0.0, 1.0, 0.0]), run.t_s), y0[6:10])
     assert np.max(geodesic_angle(expected, run.y[:, 6:10])) < tol.ADAPTER_SPIN_100_STEPS
 
@@ -104,7 +107,8 @@ def test_linear_velocity_and_position_are_the_coms():
     run = me.simulate(sc, "euler", 0.01, 100)
     n = np.arange(101)[:, None]
     np.testing.assert_allclose(run.y[:, 0:3], 0.01 * n * np.array([0.5, -0.2, 4.0]), atol=1e-13)
-    np.testing.assert_allclose(run.y[:, 3:6], np.tile([0.5, -0.2, 4.0], (101, 1)), rtol=0, atol=tol.ADAPTER_ROUND_TRIP * 4)
+    np.testing.assert_allclose(run.y[:, 3:6], np.tile([0.5, -0.2, 4.0], (101, 1)),
+                               rtol=0, atol=tol.ADAPTER_ROUND_TRIP * 4)
 
 
 @pytest.mark.parametrize("variant", sorted(me.VARIANTS))
@@ -269,7 +273,8 @@ def test_many_runs_in_one_call_are_the_adapters_runs_bit_for_bit_whatever_ran_be
     simulate's and one_step's on a freshly compiled model, bit for bit, whichever variant ran before."""
     import copy
     scs = _fuzz_cases(4)
-    assert any(sc.problem.forces.state_dependent for sc in scs) and any(sc.problem.forces.has_decay for sc in scs)
+    assert (any(sc.problem.forces.state_dependent for sc in scs)
+            and any(sc.problem.forces.has_decay for sc in scs))
     assert any(not sc.problem.body.is_diagonal() for sc in scs)
     adapter = me.MujocoAdapter()
     for variant in ("implicit", "rk4", "euler", "implicitfast", "implicit"):
@@ -283,7 +288,8 @@ def test_many_runs_in_one_call_are_the_adapters_runs_bit_for_bit_whatever_ran_be
             for k in range(4):
                 y = sc.problem.initial_packed()[None, :]
                 assert np.array_equal(adapter.one_step(sc, variant, sc.dt_s / 2 ** k, y),
-                                      me.one_step(copy.deepcopy(sc), variant, sc.dt_s / 2 ** k, y)), (variant, k)
+                                      me.one_step(copy.deepcopy(sc), variant,
+                                                  sc.dt_s / 2 ** k, y)), (variant, k)
 
 
 def test_members_that_blow_up_diverge_where_simulate_says_and_leave_the_others_alone():
@@ -320,9 +326,9 @@ def test_a_model_mujoco_rejects_is_that_members_engine_error(monkeypatch):
 
 @pytest.mark.parametrize("name", ["tennis_racket", "spring_pendulum", "velocity_decay", "particle_body"])
 def test_discrete_takes_implicitfasts_step_on_a_lone_free_body(name):
-    # MuJoCo's discrete integrator solves the constraints and the implicit velocity update in one, in the metric
-    # M + hD + h²K; with no joint, constraint, damping or stiffness that is implicitfast's step, bit for bit
-    # (torque-free tumble, a spring off the COM, decay through the harness, body-frame forces)
+    # MuJoCo's discrete integrator solves the constraints and the implicit velocity update in one, in the
+    # metric M + hD + h²K; with no joint, constraint, damping or stiffness that is implicitfast's step, bit
+    # for bit (torque-free tumble, a spring off the COM, decay through the harness, body-frame forces)
     sc = load_scenario(name)
     n = sc.n_steps(sc.dt_s)
     a, b = me.simulate(sc, "implicitfast", sc.dt_s, n), me.simulate(sc, "discrete", sc.dt_s, n)

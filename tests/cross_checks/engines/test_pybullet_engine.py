@@ -49,13 +49,15 @@ def test_yawed_body_spinning_about_body_x_reads_world_y(variant):
     sc = _scenario(body="mass = 1.0\ninertia = [1.0, 1.0, 1.0]",
                    initial=YAW90 + "\nangular_velocity_body = [1.0, 0.0, 0.0]")
     run = pe.simulate(sc, variant, 0.01, 100)
-    np.testing.assert_allclose(run.y[:, 10:13], np.tile([0.0, 1.0, 0.0], (101, 1)), atol=tol.ADAPTER_SPIN_100_STEPS)
+    np.testing.assert_allclose(run.y[:, 10:13], np.tile([0.0, 1.0, 0.0], (101, 1)),
+                               atol=tol.ADAPTER_SPIN_100_STEPS)
     expected = quat_mul(quat_from_axis_angle(np.array([0.0, 1.0, 0.0]), run.t_s), run.y[0, 6:10])
     assert np.max(geodesic_angle(expected, run.y[:, 6:10])) < tol.ADAPTER_SPIN_100_STEPS
     # PyBullet's own angular velocity is in world axes (getBaseVelocity), no conversion involved
     raw = pe.BulletBody(sc, variant, 0.01, sc.problem.initial_packed())
     raw.set_state(sc.problem.initial_packed())
-    np.testing.assert_allclose(p.getBaseVelocity(raw.b, physicsClientId=raw.c)[1], [0.0, 1.0, 0.0], atol=tol.ADAPTER_ROUND_TRIP)
+    np.testing.assert_allclose(p.getBaseVelocity(raw.b, physicsClientId=raw.c)[1],
+                               [0.0, 1.0, 0.0], atol=tol.ADAPTER_ROUND_TRIP)
 
 
 def test_quaternion_order_at_the_boundary():
@@ -66,7 +68,8 @@ def test_quaternion_order_at_the_boundary():
     np.testing.assert_allclose(orn, [0.0, 0.0, SQ, SQ], atol=tol.ADAPTER_ROUND_TRIP)            # (x, y, z, w)
     R = np.array(p.getMatrixFromQuaternion(orn)).reshape(3, 3)
     np.testing.assert_allclose(R, [[0, -1, 0], [1, 0, 0], [0, 0, 1]], atol=tol.ADAPTER_ROUND_TRIP)
-    np.testing.assert_allclose(B.raw_to_packed(B.read_raw()), sc.problem.initial_packed(), atol=tol.ADAPTER_ROUND_TRIP)
+    np.testing.assert_allclose(B.raw_to_packed(B.read_raw()),
+                               sc.problem.initial_packed(), atol=tol.ADAPTER_ROUND_TRIP)
 
 
 @pytest.mark.parametrize("variant", sorted(pe.VARIANTS))
@@ -91,7 +94,8 @@ def test_linear_velocity_and_position_are_the_coms():
         run = pe.simulate(sc, variant, 0.01, 100)
         n = np.arange(101)[:, None]
         np.testing.assert_allclose(run.y[:, 0:3], 0.01 * n * np.array([0.5, -0.2, 4.0]), atol=1e-13)
-        np.testing.assert_allclose(run.y[:, 3:6], np.tile([0.5, -0.2, 4.0], (101, 1)), rtol=0, atol=tol.ADAPTER_ROUND_TRIP * 4)
+        np.testing.assert_allclose(run.y[:, 3:6], np.tile([0.5, -0.2, 4.0], (101, 1)),
+                                   rtol=0, atol=tol.ADAPTER_ROUND_TRIP * 4)
 
 
 # --- PyBullet's traps the adapter works around ------------------------------------------------------------
@@ -99,7 +103,8 @@ def test_linear_velocity_and_position_are_the_coms():
 def _projectile_error(run, h):
     sc = load_scenario("projectile")
     n = np.arange(len(run.t_s))[:, None]
-    x = sc.problem.initial.x_W + n * h * sc.problem.initial.v_W + np.array([0, 0, -9.81]) * h * h * n * (n + 1) / 2
+    x = (sc.problem.initial.x_W + n * h * sc.problem.initial.v_W
+         + np.array([0, 0, -9.81]) * h * h * n * (n + 1) / 2)
     return float(np.max(np.abs(run.y[:, 0:3] - x)))
 
 
@@ -132,7 +137,8 @@ def test_maximal_pose_reset_zeroes_velocity_so_velocity_is_reset_last():
     y = sc.problem.initial_packed()
     y[3:6], y[10:13] = [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]
     B.set_state(y)
-    np.testing.assert_array_equal(p.getBaseVelocity(B.b, physicsClientId=B.c), ([1.0, 0.0, 0.0], [0.0, 0.0, 1.0]))
+    np.testing.assert_array_equal(p.getBaseVelocity(B.b, physicsClientId=B.c),
+                                  ([1.0, 0.0, 0.0], [0.0, 0.0, 1.0]))
 
 
 @pytest.mark.parametrize("variant", sorted(pe.VARIANTS))
@@ -148,7 +154,8 @@ def test_external_force_is_cleared_after_each_step(variant):
     np.testing.assert_allclose(v1[3], 0.01, rtol=1e-14)          # one step of 1 N on 1 kg
     np.testing.assert_allclose(v1[12], 0.01, rtol=1e-14)         # one step of 3 N m about I_zz = 3
     assert v2[3] == v1[3]                                        # nothing applied in the second step
-    np.testing.assert_allclose(v2[12], v1[12], rtol=tol.ADAPTER_ROUND_TRIP * 4)   # (maximal: implicit gyro round-off)
+    # (maximal: implicit gyro round-off)
+    np.testing.assert_allclose(v2[12], v1[12], rtol=tol.ADAPTER_ROUND_TRIP * 4)
 
 
 @pytest.mark.parametrize("variant", sorted(pe.VARIANTS))
@@ -168,7 +175,7 @@ def test_fast_spin_multibody_diverges_maximal_does_not():
     sc = parse_scenario(text)
     traj = run_variant(sc, "pybullet:multibody", dt_s=1e-2, duration_s=10.0)
     assert traj.meta["status"] == "diverged"
-    assert 8.5 < traj.meta["diverged_at_s"] < 8.8        # explicit gyroscopic term, like MuJoCo Euler (8.66 s)
+    assert 8.5 < traj.meta["diverged_at_s"] < 8.8   # explicit gyroscopic term, like MuJoCo Euler (8.66 s)
     assert traj.meta["message"].startswith("diverged at t = ")
     assert np.all(np.isfinite(traj.y)) and np.max(np.abs(traj.y)) <= 1e8
     assert run_variant(sc, "pybullet:maximal", dt_s=1e-2, duration_s=10.0).meta["status"] == "ok"
@@ -215,7 +222,8 @@ def test_a_body_kept_for_the_runs_of_its_case_gives_the_runs_of_a_new_body(varia
                 n = int(round(8 * sc.dt_s / h))
                 got = adapter.simulate_many(variant, [RunRequest(sc, h, n)])[0].y
                 want = pe.simulate(copy.deepcopy(sc), variant, h, n).y
-                adapter.one_step(sc, variant, h, sc.problem.initial_packed()[None, :])   # keeps sc's body again
+                # keeps sc's body again
+                adapter.one_step(sc, variant, h, sc.problem.initial_packed()[None, :])
             else:
                 y = sc.problem.initial_packed() + 0.05 * rng.standard_normal((3, 13))
                 y[:, 6:10] /= np.linalg.norm(y[:, 6:10], axis=1, keepdims=True)
@@ -230,7 +238,8 @@ def test_a_run_that_blows_up_among_many_is_simulates_divergence():
     from tests.helpers.scenarios import with_initial
     sc = _fuzz_cases()[0]
     fast = with_initial(sc, v_W=[1e9, 0.0, 0.0])   # beyond BLOWUP_LIMIT after one step
-    got = pe.PybulletAdapter().simulate_many("multibody", [RunRequest(fast, sc.dt_s, 8), RunRequest(sc, sc.dt_s, 8)])
+    got = pe.PybulletAdapter().simulate_many("multibody",
+                                             [RunRequest(fast, sc.dt_s, 8), RunRequest(sc, sc.dt_s, 8)])
     want = pe.simulate(fast, "multibody", sc.dt_s, 8)
     assert got[0].diverged_at_s == want.diverged_at_s is not None and got[0].message == want.message
     assert np.array_equal(got[0].y, want.y)

@@ -21,7 +21,8 @@ def _broken_pybullet_env(tmp_path) -> dict:
     shadow = tmp_path / "shadow"
     shadow.mkdir()
     (shadow / "pybullet.py").write_text(f"raise ImportError({NUMPY1_WHEEL_ERROR!r})\n")
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(shadow), *filter(None, [os.environ.get("PYTHONPATH")])]),
+    env = {**os.environ,
+           "PYTHONPATH": os.pathsep.join([str(shadow), *filter(None, [os.environ.get("PYTHONPATH")])]),
            "RBCHECK_CACHE_DIR": str(tmp_path / "cache"), "MPLBACKEND": "Agg"}
     return env
 
@@ -57,7 +58,8 @@ def test_an_absent_distribution_is_not_installed_a_broken_one_says_its_error(mon
     with pytest.raises(ImportError) as info:
         base.require(None, ImportError("libdrake.so: undefined symbol"), "drake")
     assert not isinstance(info.value, base.EngineNotInstalled)
-    assert str(info.value) == "drake 1.51.1 is installed but cannot be imported: ImportError: libdrake.so: undefined symbol"
+    assert str(info.value) == ("drake 1.51.1 is installed but cannot be imported: "
+                               "ImportError: libdrake.so: undefined symbol")
 
 
 def test_the_required_engines_are_rbcheck_own_dependencies():

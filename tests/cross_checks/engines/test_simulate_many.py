@@ -47,7 +47,8 @@ def test_many_runs_in_one_call_are_simulates_runs_request_by_request(engine):
             assert _same(run, _simulated(adapter, var, r)), (variant, r.scenario.name, r.dt_s)
 
 
-@pytest.mark.parametrize("mutant", [m for m in MUTANTS if not m.variant.startswith("reference:")], ids=lambda m: m.name)
+@pytest.mark.parametrize("mutant", [m for m in MUTANTS if not m.variant.startswith("reference:")],
+                         ids=lambda m: m.name)
 def test_a_bug_planted_in_an_adapter_reaches_its_batched_runs(mutant, monkeypatch):
     if mutant.variant not in available_variants():
         pytest.skip(f"{mutant.variant} unavailable here")
@@ -57,5 +58,6 @@ def test_a_bug_planted_in_an_adapter_reaches_its_batched_runs(mutant, monkeypatc
     clean = adapter.simulate_many(var, requests)
     mutant.apply(monkeypatch)
     planted = adapter.simulate_many(var, requests)
-    assert all(_same(p, _simulated(adapter, var, r)) for r, p in zip(requests, planted))   # the bug's own runs
-    assert not all(_same(c, p) for c, p in zip(clean, planted)), f"{mutant.name} did not reach the batched runs"
+    assert all(_same(p, _simulated(adapter, var, r)) for r, p in zip(requests, planted))  # the bug's own runs
+    assert not all(_same(c, p) for c, p in zip(clean, planted)), (
+        f"{mutant.name} did not reach the batched runs")

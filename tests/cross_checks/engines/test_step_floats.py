@@ -16,7 +16,8 @@ def _cases(n=12, seed=47):
     scs = [scenario_of(generate.draw(seed, i).spec(0.004 * (1 + i % 3), 8)) for i in range(n)]
     kinds = {f for i in range(n) for f in generate.draw(seed, i).kinds["forces"]}
     assert len(kinds) >= 7 and any(not sc.problem.body.is_diagonal() for sc in scs)
-    assert any(sc.problem.forces.has_decay for sc in scs) and any(sc.problem.forces.state_dependent for sc in scs)
+    assert (any(sc.problem.forces.has_decay for sc in scs)
+            and any(sc.problem.forces.state_dependent for sc in scs))
     return scs
 
 
@@ -40,7 +41,8 @@ def test_quaternion_product_is_numpys_bit_for_bit():
 def test_harness_is_the_base_harness_bit_for_bit_at_any_step():
     rng = np.random.default_rng(1)
     for sc in _cases():
-        for h in (sc.dt_s, sc.dt_s / 3):   # the scenario's own step, and one where the decay factors are powers
+        # the scenario's own step, and one where the decay factors are powers
+        for h in (sc.dt_s, sc.dt_s / 3):
             f = harness_fn(sc, h)
             for y in _states(sc, rng):
                 assert f(y.tolist()) == tuple(float(v) for v in base.harness_force_torque_floats(sc, y, h))
@@ -66,7 +68,8 @@ def _pybullet_numpy_loop(sc, variant, h, n):
             y = B.raw_to_packed(row)
         f, tau = base.harness_force_torque(sc, y if sc.problem.forces.state_dependent else y0, h)
         if sc.problem.forces.has_decay:
-            pe.p.resetBaseVelocity(B.b, (row[3:6] * gv).tolist(), (row[10:13] * gw).tolist(), physicsClientId=B.c)
+            pe.p.resetBaseVelocity(B.b, (row[3:6] * gv).tolist(),
+                                   (row[10:13] * gw).tolist(), physicsClientId=B.c)
         B.apply((f - B.weight).tolist(), tau.tolist(), row[0:3].tolist())
         pe.p.stepSimulation(physicsClientId=B.c)
         raw[k] = B.read_raw()

@@ -25,7 +25,8 @@ def cache(tmp_path, monkeypatch):
 
 
 def _sweep(path, variants, out, extra=()):
-    return main(["sweep", str(path), "--engines", *variants, "--jobs", "1", "--no-cache", "--out", str(out), *extra])
+    return main(["sweep", str(path), "--engines", *variants,
+                 "--jobs", "1", "--no-cache", "--out", str(out), *extra])
 
 
 def _found(mutant, tmp_path, monkeypatch, budget_s, shrink_s):
@@ -68,9 +69,10 @@ def test_a_wrong_rk4_stage_weight_is_found_shrunk_and_reproduced(tmp_path, monke
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["gyroscopic_sign_flipped", "body_torque_in_world_axes", "rk4_third_stage_from_k1",
-                                  "midpoint_stage_at_full_step", "mujoco_world_omega_as_body", "course_decay_twice",
-                                  "lever_arms_not_rotated"])
+@pytest.mark.parametrize("name", ["gyroscopic_sign_flipped", "body_torque_in_world_axes",
+                                  "rk4_third_stage_from_k1",
+                                  "midpoint_stage_at_full_step", "mujoco_world_omega_as_body",
+                                  "course_decay_twice", "lever_arms_not_rotated"])
 def test_planted_bugs_are_found_within_two_minutes_and_reproduced(name, tmp_path, monkeypatch, cache):
     s = _found(MUT[name], tmp_path, monkeypatch, budget_s=30.0, shrink_s=40.0)
     _reproduces(s, MUT[name], tmp_path, monkeypatch)
@@ -89,8 +91,8 @@ def clean_registry():
 def test_the_broken_c_engine_is_found_through_its_engine_file(tmp_path, cache, capsys, clean_registry):
     eng = build_cbody(tmp_path / "eng")
     out = tmp_path / "fz"
-    rc = main(["fuzz", "--engine-file", str(eng["broken"]), "--engines", "cbody_broken:euler", "--budget", "60",
-               "--jobs", "2", "--out", str(out)])
+    rc = main(["fuzz", "--engine-file", str(eng["broken"]), "--engines", "cbody_broken:euler",
+               "--budget", "60", "--jobs", "2", "--out", str(out)])
     assert rc == 1
     s = json.loads((out / "fuzz.json").read_text())
     cx = s["counterexamples"][0]
@@ -136,7 +138,8 @@ def test_an_unexplained_failure_is_never_listed_under_an_explained_one_of_the_sa
     # I1 I2 I3 = 1e-18 kg³m⁶ is below Bullet's solve33 threshold (2.2e-16: explained), 0.06 is not
     tiny, usual = _spec_with_moments(1, [1e-6, 1e-6, 1e-6]), _spec_with_moments(2, [0.3, 0.4, 0.5])
     results = [{"seed": 4, "cases": [
-        {"index": 1, "spec": tiny, "violations": [_maximal_violation(), _maximal_violation("one_step_order")]},
+        {"index": 1, "spec": tiny,
+         "violations": [_maximal_violation(), _maximal_violation("one_step_order")]},
         {"index": 2, "spec": usual, "violations": [_maximal_violation()]},
         {"index": 3, "spec": tiny, "violations": [_maximal_violation()]},
         {"index": 4, "spec": usual, "violations": []}]}]
@@ -211,7 +214,8 @@ def test_a_batch_whose_worker_dies_is_reported_as_such_and_the_others_are_judged
     from cross_checks import engines
     monkeypatch.setattr(campaign, "BATCH", 2)   # set before the pool forks: the workers inherit it
     engines.register_adapter(_CrashingEngine(), "tests/cross_checks/fuzz/test_campaign.py")
-    results = campaign.search(0, ["crashing:course"], budget_s=2.0, jobs=2, cache_root=str(cache), use_cache=False)
+    results = campaign.search(0, ["crashing:course"], budget_s=2.0, jobs=2,
+                              cache_root=str(cache), use_cache=False)
     assert [r["batch"] for r in results][:2] == [0, 1]   # both started at once (a window of 2 workers)
     for r in results:
         if r["batch"] == 1:

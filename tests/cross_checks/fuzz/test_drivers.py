@@ -1,4 +1,5 @@
-"""A batch's runs are each engine's own adapter's runs, case by case, recorded whole; a failure is one case's."""
+"""A batch's runs are each engine's own adapter's runs, case by case, recorded
+whole; a failure is one case's."""
 import numpy as np
 import pytest
 
@@ -33,7 +34,8 @@ def test_one_steps_are_the_adapters_and_none_without_a_one_step_mode():
     for variant in ("reference:midpoint", "mujoco:euler", "pybullet:multibody"):
         got = drivers.one_step(variant, [m[0] for m in members], [m[1] for m in members], ys)
         engine, var = variant.split(":")
-        want = np.array([get_adapter(engine).one_step(sc, var, h, y[None, :])[0] for (sc, h), y in zip(members, ys)])
+        want = np.array([get_adapter(engine).one_step(sc, var, h, y[None, :])[0]
+                         for (sc, h), y in zip(members, ys)])
         assert np.array_equal(got, want), variant
 
 
@@ -41,7 +43,8 @@ def test_members_that_blow_up_diverge_where_the_adapter_says_and_leave_the_other
     from tests.helpers.scenarios import with_initial
     scs = _cases(4)
     fast = [with_initial(scenario_of(generate.draw(31, j).spec(0.004, 8)), v_W=[speed, 0.0, 0.0])
-            for j, speed in enumerate((1e9, 3e7))]   # past the parser's physical ranges: set on the parsed case
+            # past the parser's physical ranges: set on the parsed case
+            for j, speed in enumerate((1e9, 3e7))]
     scs = scs[:2] + fast + scs[2:]
     h0s = [sc.dt_s for sc in scs]
     blown_at = set()

@@ -47,7 +47,8 @@ def test_the_draws_cover_every_body_spin_and_force_kind_of_the_schema():
     assert seen["body"] == {"moments", "tensor", "particles"}
     assert seen["shape"] == set(generate.SHAPES) | {"particles"}
     assert seen["spin"] == set(generate.SPIN_KINDS)
-    assert seen["forces"] == {"gravity", "drag", "velocity_decay", "angular_velocity_decay", "spring", "point", "torque"}
+    assert seen["forces"] == {"gravity", "drag", "velocity_decay",
+                              "angular_velocity_decay", "spring", "point", "torque"}
     assert frames == {"world", "body", "torque_world", "torque_body"}
 
 

@@ -35,7 +35,8 @@ rest_length = 0.065
 
 
 def _velocity_order_violations(outcome):
-    return [v for v in outcome.violations if v["property"] == "free_running_order" and v["quantity"] == "velocity"]
+    return [v for v in outcome.violations
+            if v["property"] == "free_running_order" and v["quantity"] == "velocity"]
 
 
 def test_a_pre_asymptotic_ladder_is_not_a_violation_when_the_refined_ladder_shows_the_order(monkeypatch):
@@ -107,7 +108,8 @@ def test_rbcheck_s_own_schemes_are_not_given_an_engine_s_lever_arm_round_off(mon
     import cross_checks.analysis.judge as J
     monkeypatch.setattr(J, "order_within_floors", lambda fit: None)       # the rules as they were
     (before,) = evaluate_specs([FAR_SMALL_BODY], ["reference:rk4"])
-    assert [(v["property"], v["quantity"]) for v in before.violations] == [("one_step_order", "angular_velocity")]
+    assert ([(v["property"], v["quantity"]) for v in before.violations]
+            == [("one_step_order", "angular_velocity")])
 
 
 # A 120 s campaign of seed 3 (case 203, shrunk): a body falling past the anchor of a spring with a rest
@@ -177,7 +179,8 @@ def test_errors_that_shrink_at_every_halving_but_slowly_are_judged_on_the_refine
     (unrefined,) = evaluate_specs([NEAR_INTERMEDIATE_AXIS], ["reference:expmap_gyro"])
     (rec,) = [v for v in unrefined.violations if v["quantity"] == "orientation"]
     assert rec["verdict"] == "does_not_converge" and 0.4 < rec["order"] < 0.5
-    assert rec["errors"][-1] > 0.5 * rec["errors"][0]   # not a first-order halving overall: qualifies by shrinking
+    # not a first-order halving overall: qualifies by shrinking
+    assert rec["errors"][-1] > 0.5 * rec["errors"][0]
 
 
 def test_a_plateau_or_a_growth_is_not_judged_again():

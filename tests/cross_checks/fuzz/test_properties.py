@@ -38,8 +38,8 @@ def test_floors_small_beside_the_errors_leave_a_wrong_order_wrong():
 
 
 def test_an_order_3_rk4_with_three_resolved_rungs_is_not_excused():
-    # a pure third-order error where a fourth is expected: u = e/h⁴ ∝ 1, 2, 4 → third difference 1 − 6 + 8
-    # = 3 of max 4 (0.75 > 0.25), with floors a thousand times below the finest error
+    # a pure third-order error where a fourth is expected: u = e/h⁴ ∝ 1, 2, 4 → third difference 1 − 6 + 8 = 3
+    # of max 4 (0.75 > 0.25), with floors a thousand times below the finest error
     e = 1.35e-12 * (H / H[0]) ** 3
     assert not two_term_consistent(H, e, [e[-1] / 1000.0] * 3, 4.0)
 
@@ -69,7 +69,8 @@ def test_the_lever_arm_floor_covers_mujocos_measured_round_off():
     from cross_checks.fuzz.properties import lever_roundoff
     I = np.diag([0.00113, 0.0128, 0.0131])
     R = np.linalg.qr(np.array([[1.0, 0.3, 0.2], [0.1, 1.0, 0.4], [0.3, 0.2, 1.0]]))[0]
-    spec = {"name": "lever", "duration": 0.4, "dt": 0.01, "body": {"mass": 9.25, "inertia": (R @ I @ R.T).tolist()},
+    spec = {"name": "lever", "duration": 0.4, "dt": 0.01,
+            "body": {"mass": 9.25, "inertia": (R @ I @ R.T).tolist()},
             "initial": {"position": [0.4, -0.3, 0.5], "velocity": [0.28, 0.0, 0.0]},
             "forces": {"gravity": [0.0, 0.0, -11.65]}}
     sc = scenario_of(spec)

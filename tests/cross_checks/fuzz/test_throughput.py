@@ -13,4 +13,5 @@ def test_throughput_reports_every_engine_against_mujoco_measured_in_the_same_run
     assert all(d["case_variants_per_s"] > 0 for d in r["per_engine"].values())
     text = format_fuzz(r)
     assert "vs MuJoCo" in text and "pybullet" in text and "10,000" in text
-    assert r["cpu_s"] > 0 and r["campaign_cases_600s_2_cores"] == pytest.approx(1200.0 * r["cases"] / r["cpu_s"])
+    assert (r["cpu_s"] > 0
+            and r["campaign_cases_600s_2_cores"] == pytest.approx(1200.0 * r["cases"] / r["cpu_s"]))

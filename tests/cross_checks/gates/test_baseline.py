@@ -74,7 +74,8 @@ def test_the_baseline_of_a_baseline_is_itself(base, tmp_path):
 
 
 def _plant_a_verdict_change(results_dir):
-    """What a sweep writes when rk4's orientation stops converging: its finest error grows, the record changes."""
+    """What a sweep writes when rk4's orientation stops converging: its finest
+    error grows, the record changes."""
     rows = _rows(results_dir / "results.csv")
     finest = min((r for r in rows if r["engine"] == "reference:rk4"), key=lambda r: float(r["dt"]))
     finest["orient_err_final"] = repr(float(finest["orient_err_final"]) * 1e6)
@@ -83,7 +84,8 @@ def _plant_a_verdict_change(results_dir):
         w.writeheader()
         w.writerows(rows)
     summary = json.loads((results_dir / "summary.json").read_text())
-    rec = next(r for r in summary["convergence"] if (r["engine"], r["quantity"]) == ("reference:rk4", "orientation"))
+    rec = next(r for r in summary["convergence"]
+               if (r["engine"], r["quantity"]) == ("reference:rk4", "orientation"))
     was = rec["verdict"]
     rec.update(verdict="does_not_converge", order=-0.02, matches_expectation=False,
                assessment="does not converge (fitted order -0.02), expected order 4")
@@ -100,9 +102,11 @@ def test_a_changed_verdict_is_one_changed_line_of_each_file(tiny_results, base, 
     assert main(["baseline", str(changed), str(new_base)]) == 0
     for name in ("results.csv", "summary.json"):
         old, new = (base / name).read_text().splitlines(), (new_base / name).read_text().splitlines()
-        diff = [d for d in difflib.unified_diff(old, new, n=0, lineterm="") if d[:1] in "+-" and d[:3] not in ("---", "+++")]
+        diff = [d for d in difflib.unified_diff(old, new, n=0, lineterm="")
+                if d[:1] in "+-" and d[:3] not in ("---", "+++")]
         assert len(diff) == 2 and diff[0][0] == "-" and diff[1][0] == "+", diff
-        assert "reference:rk4" in diff[1] and ("does_not_converge" in diff[1] if name == "summary.json" else True)
+        assert "reference:rk4" in diff[1] and ("does_not_converge" in diff[1]
+                                               if name == "summary.json" else True)
     capsys.readouterr()
     assert main(["compare", str(base), str(new_base)]) == 1
     out = capsys.readouterr().out
@@ -157,14 +161,17 @@ def test_the_report_of_a_baseline_is_refused_in_one_line_and_writes_nothing(base
     before = _files(base)
     assert main(["report", str(base)]) == 2
     err = capsys.readouterr().err
-    assert "a compact baseline (written by `rbcheck baseline`) holds no report data" in err and err.count("\n") == 1
+    assert ("a compact baseline (written by `rbcheck baseline`) holds no report data" in err
+            and err.count("\n") == 1)
     assert _files(base) == before
 
 
 @pytest.mark.parametrize("edit, words", [
     (lambda s: s["convergence"][0].pop("verdict"), "summary.convergence[0].verdict: missing"),
-    (lambda s: s["local_convergence"][0].__setitem__("order", "fast"), "summary.local_convergence[0].order: must be a number"),
-    (lambda s: s.pop("form"), "summary.scenarios[0].description: missing"),  # compact records are no full ones
+    (lambda s: s["local_convergence"][0].__setitem__("order", "fast"),
+     "summary.local_convergence[0].order: must be a number"),
+    # compact records are no full ones
+    (lambda s: s.pop("form"), "summary.scenarios[0].description: missing"),
 ])
 def test_a_damaged_baseline_is_unusable_input_for_compare(base, tiny_results, capsys, edit, words):
     s = json.loads((base / "summary.json").read_text())

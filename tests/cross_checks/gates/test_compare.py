@@ -11,9 +11,9 @@ ROWS = [
     dict(scenario="tennis_racket", engine="mujoco:euler", dt=1e-3, steps=10000, wall_s=0.1, pos_err_final=0.0,
          vel_err_final=0.0, orient_err_final=0.0125, angvel_err_final=0.02, energy_drift_max=4.6e-3,
          angmom_drift_max=2.4e-3, status="ok"),
-    dict(scenario="tennis_racket", engine="reference:course", dt=1e-3, steps=10000, wall_s=1.2, pos_err_final=0.0,
-         vel_err_final=0.0, orient_err_final=3.05, angvel_err_final=2.9, energy_drift_max=0.0,
-         angmom_drift_max=0.5, status="ok"),
+    dict(scenario="tennis_racket", engine="reference:course", dt=1e-3, steps=10000, wall_s=1.2,
+         pos_err_final=0.0, vel_err_final=0.0, orient_err_final=3.05, angvel_err_final=2.9,
+         energy_drift_max=0.0, angmom_drift_max=0.5, status="ok"),
     dict(scenario="projectile", engine="mujoco:rk4", dt=1e-2, steps=100, wall_s=0.01, pos_err_final=1e-15,
          vel_err_final=1e-15, orient_err_final=0.0, angvel_err_final=0.0, energy_drift_max=1e-15,
          angmom_drift_max=0.0, status="ok"),
@@ -26,7 +26,8 @@ PROV = {"versions": {"rbcheck": "0.1.0", "mujoco": "4.0.0", "pybullet": "3.2.7",
 def write(d, rows=ROWS, conv=CONV, prov=PROV):
     d.mkdir(parents=True, exist_ok=True)
     pd.DataFrame(rows).to_csv(d / "results.csv", index=False)
-    (d / "summary.json").write_text(json.dumps({"schema_version": 1, "provenance": prov, "convergence": conv}))
+    (d / "summary.json").write_text(json.dumps({"schema_version": 1, "provenance": prov,
+                                                "convergence": conv}))
     return d
 
 
@@ -80,8 +81,8 @@ def test_verdict_change_is_a_regression(tmp_path):
 
 def test_missing_and_new_rows_and_versions_reported(tmp_path):
     rows = ROWS[:2] + [dict(ROWS[2], scenario="linear_drag")]
-    c = compare_dirs(write(tmp_path / "a"), write(tmp_path / "b", rows, prov={"versions": {**PROV["versions"],
-                                                                                           "mujoco": "4.1.0"}}))
+    c = compare_dirs(write(tmp_path / "a"),
+                     write(tmp_path / "b", rows, prov={"versions": {**PROV["versions"], "mujoco": "4.1.0"}}))
     assert len(c.of("missing")) == 1 and len(c.of("new")) == 1
     assert c.exit_code() == 1 and c.exit_code(allow_missing=True) == 0
     assert ("mujoco", "4.0.0", "4.1.0") in c.version_diffs
@@ -120,7 +121,7 @@ def test_cli_compare_exit_codes_and_markdown(tmp_path, capsys):
     assert "nope: not a directory" in capsys.readouterr().err
 
 
-# --- damaged input is exit 2, never "no regression" (docs/hardening.md) ---------------------------------------
+# --- damaged input is exit 2, never "no regression" (docs/hardening.md) -------------------------------------
 
 def _cli(capsys, a, b):
     from cross_checks.cli import main
@@ -138,7 +139,8 @@ def test_a_metric_missing_from_the_new_results_is_a_failure(tmp_path):
 @pytest.mark.parametrize("edit, words", [
     (lambda r: r[0].update(orient_err_final="oops"), "line 2: orient_err_final: not a number: 'oops'"),
     (lambda r: r[1].update(pos_err_final=-0.5), "line 3: pos_err_final: must be a finite number >= 0"),
-    (lambda r: r[2].update(energy_drift_max=float("inf")), "line 4: energy_drift_max: must be a finite number >= 0"),
+    (lambda r: r[2].update(energy_drift_max=float("inf")),
+     "line 4: energy_drift_max: must be a finite number >= 0"),
     (lambda r: r[0].update(status="great"), "line 2: status: must be one of ok, diverged, failed"),
     (lambda r: r[0].update(dt=0.0), "line 2: dt: must be a positive finite number"),
     (lambda r: r.append(dict(r[0])), "duplicate row for tennis_racket, mujoco:euler"),
@@ -154,9 +156,11 @@ def test_damaged_rows_are_unusable_input_not_a_pass(tmp_path, capsys, edit, word
     ("[1, 2]", "summary: must be an object"),
     ('{"schema_version": 1, "provenance": {}}', "summary.convergence: missing"),
     ('{"schema_version": 99, "provenance": {}, "convergence": []}', "schema_version: 99"),
-    ('{"schema_version": 1, "provenance": {}, "convergence": [{"scenario": "x"}]}', "convergence[0].engine: missing"),
-    ('{"schema_version": 1, "provenance": {}, "convergence": [{"scenario": "x", "engine": "e", "quantity": "position", '
-     '"order": "fast", "verdict": "converges"}]}', "convergence[0].order: must be a number"),
+    ('{"schema_version": 1, "provenance": {}, "convergence": [{"scenario": "x"}]}',
+     "convergence[0].engine: missing"),
+    ('{"schema_version": 1, "provenance": {}, "convergence": [{"scenario": "x", "engine": "e", '
+     '"quantity": "position", "order": "fast", "verdict": "converges"}]}',
+     "convergence[0].order: must be a number"),
     ("[" * 100000 + "]" * 100000, "cannot parse JSON"),
 ])
 def test_a_malformed_summary_is_unusable_input(tmp_path, capsys, summary, words):
@@ -231,7 +235,8 @@ def test_a_regression_inside_the_subset_is_still_caught(tmp_path):
 
 
 def test_a_row_of_a_scenario_and_variant_the_subset_ran_is_still_missing(tmp_path):
-    """The subset ran tennis_racket x mujoco:euler; the baseline's row at another dt of that pair is absent."""
+    """The subset ran tennis_racket x mujoco:euler; the baseline's row at
+    another dt of that pair is absent."""
     base = write(tmp_path / "a", ROWS + [dict(ROWS[0], dt=5e-4, steps=20000)])
     c = compare_dirs(base, _write_scoped(tmp_path / "b", ROWS[:1]))
     assert [ch.what for ch in c.of("missing")] == ["dt=0.0005"] and c.exit_code() == 1
@@ -277,8 +282,10 @@ def _baseline_without(tmp_path, engine, installed=False, required=False):
     for key in ("convergence", "local_convergence"):
         s[key] = [r for r in s[key] if r["engine"] not in gone]
     s["agreement"] = [a for a in s["agreement"] if a["a"] not in gone and a["b"] not in gone]
-    why = f"{engine} is not installed" if not installed else f"{engine} 1.0 is installed but cannot be imported: X"
-    s["skipped_variants"] = [{"name": n, "reason": why, "installed": installed, "required": required} for n in gone]
+    why = (f"{engine} is not installed" if not installed
+           else f"{engine} 1.0 is installed but cannot be imported: X")
+    s["skipped_variants"] = [{"name": n, "reason": why, "installed": installed, "required": required}
+                             for n in gone]
     (new / "summary.json").write_text(json.dumps(s))
     n_rows = int(pd.read_csv(BASELINE / "results.csv")["engine"].str.startswith(f"{engine}:").sum())
     return new, n_rows
@@ -301,13 +308,15 @@ def test_require_makes_an_absent_optional_engine_a_failure(tmp_path, capsys):
     new, n_rows = _baseline_without(tmp_path, "drake")
     assert main(["compare", str(BASELINE), str(new), "--require", "drake"]) == 1
     c = compare_dirs(BASELINE, new, require=["drake"])
-    assert len([m for m in c.of("missing") if m.engine.startswith("drake:") and m.what.startswith("dt=")]) == n_rows
+    assert len([m for m in c.of("missing")
+                if m.engine.startswith("drake:") and m.what.startswith("dt=")]) == n_rows
     assert "drake is not installed" in c.of("missing")[0].note
 
 
 def test_require_of_an_engine_the_new_results_never_mentioned_fails(tmp_path):
     c = compare_dirs(BASELINE, BASELINE, require=["rapier"])
-    assert c.exit_code() == 1 and c.of("missing")[0].note == "--require rapier: the new results ran none of its variants"
+    assert (c.exit_code() == 1
+            and c.of("missing")[0].note == "--require rapier: the new results ran none of its variants")
 
 
 def test_a_required_or_broken_engine_is_still_missing(tmp_path):
@@ -353,9 +362,11 @@ def test_a_one_step_order_and_an_agreement_are_causes_and_judged(tmp_path):
                   verdict="converges", expected_order=2)]
     agree = [dict(a="mujoco:euler", b="pybullet:multibody", scenario="tennis_racket", dt_s=1e-3, agrees=True,
                   max_rel=1e-14, reason="the same scheme")]
-    a = _with_rows(tmp_path, "a", lambda r: None, summary_extra={"local_convergence": local, "agreement": agree})
+    a = _with_rows(tmp_path, "a", lambda r: None,
+                   summary_extra={"local_convergence": local, "agreement": agree})
     b = _with_rows(tmp_path, "b", lambda r: None, summary_extra={
-        "local_convergence": [dict(local[0], order=1.0)], "agreement": [dict(agree[0], agrees=False, max_rel=0.2)]})
+        "local_convergence": [dict(local[0], order=1.0)],
+        "agreement": [dict(agree[0], agrees=False, max_rel=0.2)]})
     c = compare_dirs(a, b)
     by = {v.variant: v for v in variant_changes(c)}
     assert by["mujoco:euler"].category == "regression" and c.exit_code() == 1
@@ -372,7 +383,8 @@ def test_an_energy_drift_kind_change_is_information(tmp_path):
                    + [rows[0].update(energy_drift_kind="secular")])
     c = compare_dirs(a, b)
     [v] = variant_changes(c)
-    assert v.category == "changed" and "energy-drift kind bounded -> secular" in v.causes[0] and c.exit_code() == 0
+    assert (v.category == "changed" and "energy-drift kind bounded -> secular" in v.causes[0]
+            and c.exit_code() == 0)
 
 
 def test_a_rerun_that_changed_nothing_is_one_line(tmp_path, capsys):

@@ -34,7 +34,8 @@ def scenario_text(name="s", duration=1.0, dt=0.01, extra=""):
     (dict(dt=1e-15), "dt", "1e+15 steps"),
     (dict(dt=1e-320), "dt", "more than 1e308 steps"),
     (dict(extra="dt_ladder = [0.01, 1e-7]"), "dt_ladder[1]", "1e+07 steps"),
-    (dict(extra="dt_ladder = [0.01, 0.010000000000000002]"), "dt_ladder[1]", "too close to dt_ladder[0] = 0.01"),
+    (dict(extra="dt_ladder = [0.01, 0.010000000000000002]"),
+     "dt_ladder[1]", "too close to dt_ladder[0] = 0.01"),
     (dict(extra="dt_ladder = [0.01, 0.009]"), "dt_ladder[1]", "at least 1.2"),
     (dict(name="a" * 300), "name", "at most 100 characters"),
 ])
@@ -98,10 +99,12 @@ def _counted_evals(monkeypatch, sc) -> int:
 
 
 @pytest.mark.parametrize("stiffness, duration", [(40.0, 5.0), (4000.0, 0.5), (4e5, 0.05)])
-def test_reference_evaluation_estimate_is_within_a_few_times_of_scipys_count(monkeypatch, stiffness, duration):
+def test_reference_evaluation_estimate_is_within_a_few_times_of_scipys_count(
+        monkeypatch, stiffness, duration):
     # The estimate counts operations (SciPy's nfev), so the test holds on any machine: within 4x both ways
     # (the margin the limit keeps) over four orders of magnitude of stiffness.
-    sc = parse_scenario(open_catalog("spring_pendulum").replace("stiffness = 40.0", f"stiffness = {stiffness}")
+    sc = parse_scenario(open_catalog("spring_pendulum")
+                        .replace("stiffness = 40.0", f"stiffness = {stiffness}")
                         .replace("duration = 5.0", f"duration = {duration}").replace(
                             "dt_ladder = [0.008, 0.004, 0.002, 0.001, 0.0005]", "dt_ladder = [0.0005]")
                         .replace("dt = 0.001", "dt = 0.0005"),
@@ -120,7 +123,8 @@ def test_the_catalog_is_far_inside_every_limit(name):
 
 def test_rbcheck_run_refuses_an_override_beyond_the_step_limit(tmp_path, capsys):
     out = tmp_path / "t.csv"
-    assert main(["run", "projectile", "--engine", "reference:course", "--dt", "1e-300", "--out", str(out)]) == 2
+    assert main(["run", "projectile", "--engine", "reference:course",
+                 "--dt", "1e-300", "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--dt: 1e-300 s makes" in err and "steps per run" in err
     assert not out.exists()

@@ -54,12 +54,15 @@ BAD = [
     ("mass = 1.0\n", "", "body.mass", "missing"),
     ("inertia = [1.0, 2.0, 3.0]", "inertia = [1.0, 1.0, 3.0]", "body.inertia", "triangle"),
     ("inertia = [1.0, 2.0, 3.0]", "inertia = [1.0, -2.0, 3.0]", "body.inertia", "positive definite"),
-    ("inertia = [1.0, 2.0, 3.0]", "inertia = [[1, 0.5, 0], [0, 2, 0], [0, 0, 3]]", "body.inertia", "symmetric"),
+    ("inertia = [1.0, 2.0, 3.0]", "inertia = [[1, 0.5, 0], [0, 2, 0], [0, 0, 3]]",
+     "body.inertia", "symmetric"),
     ("inertia = [1.0, 2.0, 3.0]", "inertia = [1.0, 2.0]", "body.inertia", "3 numbers"),
     ("inertia = [1.0, 2.0, 3.0]", "inertia = [1.0, 2.0, inf]", "body.inertia[2]", "finite"),
     ("inertia = [1.0, 2.0, 3.0]", "inertia = [[1, 0, 0], [0, 1, 0]]", "body.inertia", "3 principal moments"),
-    ("orientation = [1.0, 0.0, 0.0, 0.0]", "orientation = [0.0, 0.0, 0.0, 0.0]", "initial.orientation", "zero"),
-    ("orientation = [1.0, 0.0, 0.0, 0.0]", "orientation = [1.0, 0.0, 0.0]", "initial.orientation", "4 numbers"),
+    ("orientation = [1.0, 0.0, 0.0, 0.0]",
+     "orientation = [0.0, 0.0, 0.0, 0.0]", "initial.orientation", "zero"),
+    ("orientation = [1.0, 0.0, 0.0, 0.0]",
+     "orientation = [1.0, 0.0, 0.0]", "initial.orientation", "4 numbers"),
     ("position = [0.0, 0.0, 0.0]", "position = [0.0, nan, 0.0]", "initial.position[1]", "finite"),
     ("velocity = [0.0, 0.0, 0.0]", 'velocity = "fast"', "initial.velocity", "list of 3"),
     ("dt = 0.01", "dt = 0.0", "dt", "> 0"),
@@ -87,10 +90,10 @@ BAD = [
     ("torque = [0.0, 0.0, 0.2]", "torque = [0.0, 0.2]", "forces.torque[0].torque", "3 numbers"),
     ("dt = 0.01", "dt = 0.01\ndt = 0.02", "", "TOML syntax error"),
     ("mass = 1.0", "mass = = 1", "", "line"),
-    ("mass = 1.0\ninertia = [1.0, 2.0, 3.0]", "particles = [[1.0, 0, 0, -1], [1.0, 0, 0, 1]]", "body.particles",
-     "positive definite"),
-    ("mass = 1.0\ninertia = [1.0, 2.0, 3.0]", "particles = [[-1.0, 0, 0, -1], [1.0, 0, 1, 1]]", "body.particles[0]",
-     "mass"),
+    ("mass = 1.0\ninertia = [1.0, 2.0, 3.0]", "particles = [[1.0, 0, 0, -1], [1.0, 0, 0, 1]]",
+     "body.particles", "positive definite"),
+    ("mass = 1.0\ninertia = [1.0, 2.0, 3.0]", "particles = [[-1.0, 0, 0, -1], [1.0, 0, 1, 1]]",
+     "body.particles[0]", "mass"),
     ("orientation = [1.0, 0.0, 0.0, 0.0]", "orientation = [1.0, 0.0, 0.0, 0.0]\neuler_zxy_deg = [0, 0, 0]",
      "initial.orientation", "exactly one"),
     ('description = "demo"', 'description = 3', "description", "string"),
@@ -104,7 +107,8 @@ def test_good_scenario_loads():
     assert len(sc.problem.forces.springs) == 1
 
 
-@pytest.mark.parametrize("old, new, field, reason", BAD, ids=[f"{b[2] or 'syntax'}-{i}" for i, b in enumerate(BAD)])
+@pytest.mark.parametrize("old, new, field, reason", BAD,
+                         ids=[f"{b[2] or 'syntax'}-{i}" for i, b in enumerate(BAD)])
 def test_bad_input_names_file_field_reason(old, new, field, reason):
     assert old in GOOD
     with pytest.raises(ScenarioError) as info:
@@ -131,15 +135,17 @@ def test_catalog_scenario_loads_and_names_its_reference(name):
 
 
 def test_catalog_has_the_required_scenarios():
-    required = {"projectile", "linear_drag", "velocity_decay", "spring_oscillator", "spring_pendulum", "constant_spin",
-                "symmetric_top", "tennis_racket", "tumbling_box", "applied_torque", "particle_body"}
+    required = {"projectile", "linear_drag", "velocity_decay", "spring_oscillator", "spring_pendulum",
+                "constant_spin", "symmetric_top", "tennis_racket", "tumbling_box", "applied_torque",
+                "particle_body"}
     assert required <= set(catalog_names())
 
 
 def test_tumbling_box_is_the_gazebo_case():
     sc = load_scenario("tumbling_box")
     a, b, c, m = 0.1, 0.4, 0.9, 10.0
-    np.testing.assert_allclose(np.diag(sc.problem.body.inertia_B), m / 12 * np.array([b*b + c*c, a*a + c*c, a*a + b*b]))
+    np.testing.assert_allclose(np.diag(sc.problem.body.inertia_B),
+                               m / 12 * np.array([b*b + c*c, a*a + c*c, a*a + b*b]))
     np.testing.assert_allclose(sc.problem.initial.v_W, [-2, 2, 8])
     np.testing.assert_allclose(sc.problem.initial.w_W, [0.1, 5, 0.1])  # identity orientation: body = world
     assert sc.duration_s == 10.0
@@ -205,8 +211,10 @@ def test_particle_body_points_are_shifted_by_the_com_of_the_particles():
     # hand computation: COM = mean of the four unit masses = (8/4, 2/4, 1/4) = (2, 0.5, 0.25)
     np.testing.assert_allclose(sc.com_offset_B_m, [2.0, 0.5, 0.25], rtol=0, atol=1e-15)
     fm = sc.problem.forces
-    np.testing.assert_allclose(fm.springs[0].attach_B, [1.0, 0.0, 0.0], rtol=0, atol=1e-15)     # (3, .5, .25) − COM
-    np.testing.assert_allclose(fm.point_forces[0].point_B, [0.0, 0.0, 0.75], rtol=0, atol=1e-15)  # (2, .5, 1) − COM
+    # (3, .5, .25) − COM
+    np.testing.assert_allclose(fm.springs[0].attach_B, [1.0, 0.0, 0.0], rtol=0, atol=1e-15)
+    # (2, .5, 1) − COM
+    np.testing.assert_allclose(fm.point_forces[0].point_B, [0.0, 0.0, 0.75], rtol=0, atol=1e-15)
     np.testing.assert_array_equal(fm.point_forces[1].point_B, np.zeros(3))  # no point given: at the COM
 
 

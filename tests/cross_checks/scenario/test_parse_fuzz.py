@@ -1,4 +1,5 @@
-"""Random and mutated scenario files: the only outcomes are a valid Scenario / a run, or exit 2 with a message."""
+"""Random and mutated scenario files: the only outcomes are a valid Scenario / a
+run, or exit 2 with a message."""
 import os
 import re
 
@@ -10,15 +11,16 @@ from cross_checks.scenario import ScenarioError, catalog_names, catalog_path, pa
 
 CATALOG_TEXTS = [catalog_path(n).read_text() for n in catalog_names()]
 NUMBER = re.compile(r"-?\d+(\.\d+)?(e-?\d+)?")
-TOKENS = ["nan", "inf", "-inf", "-1.0", "0", "0.0", "1e308", "1e-308", "-1e308", '"x"', "[]", "[1.0]", "[[1.0]]",
-          "true", "{}", "[1, 2, 3, 4, 5]", "1e-320", '""', "[nan, 0, 0]", "[0.0, 0.0, 0.0, 0.0]"]
+TOKENS = ["nan", "inf", "-inf", "-1.0", "0", "0.0", "1e308", "1e-308", "-1e308", '"x"', "[]", "[1.0]",
+          "[[1.0]]", "true", "{}", "[1, 2, 3, 4, 5]", "1e-320", '""', "[nan, 0, 0]", "[0.0, 0.0, 0.0, 0.0]"]
 
 
 @st.composite
 def mutated_scenario(draw):
     text = draw(st.sampled_from(CATALOG_TEXTS))
     for _ in range(draw(st.integers(1, 3))):
-        kind = draw(st.sampled_from(["number", "delete_line", "duplicate_line", "truncate", "insert", "key_typo"]))
+        kind = draw(st.sampled_from(["number", "delete_line", "duplicate_line",
+                                     "truncate", "insert", "key_typo"]))
         lines = text.splitlines()
         if kind == "number":
             spans = [m.span() for m in NUMBER.finditer(text)]
@@ -45,7 +47,8 @@ def mutated_scenario(draw):
 
 
 @settings(max_examples=int(os.environ.get("RBCHECK_FUZZ_EXAMPLES", 300)), deadline=None,
-          suppress_health_check=[HealthCheck.too_slow], derandomize=not os.environ.get("RBCHECK_FUZZ_EXAMPLES"))
+          suppress_health_check=[HealthCheck.too_slow],
+          derandomize=not os.environ.get("RBCHECK_FUZZ_EXAMPLES"))
 @given(mutated_scenario())
 def test_loader_accepts_or_rejects_with_a_located_message(text):
     try:
@@ -65,7 +68,8 @@ def test_cli_run_gives_a_run_or_exit_2(tmp_path, capsys, text):
     path.write_text(text)
     out = tmp_path / "out.csv"
     out.unlink(missing_ok=True)
-    rc = main(["run", str(path), "--engine", "reference:course", "--dt", "0.01", "--duration", "0.05", "--out", str(out)])
+    rc = main(["run", str(path), "--engine", "reference:course",
+               "--dt", "0.01", "--duration", "0.05", "--out", str(out)])
     err = capsys.readouterr().err
     assert "Traceback" not in err
     if rc == 2:

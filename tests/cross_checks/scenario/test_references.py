@@ -12,8 +12,8 @@ ANALYTIC = [n for n in catalog_names() if analytic_available(load_scenario(n))[0
 
 
 def test_most_of_the_catalog_has_a_closed_form():
-    assert {"projectile", "linear_drag", "velocity_decay", "spring_oscillator", "constant_spin", "symmetric_top",
-            "tennis_racket", "tumbling_box", "particle_body"} <= set(ANALYTIC)
+    assert {"projectile", "linear_drag", "velocity_decay", "spring_oscillator", "constant_spin",
+            "symmetric_top", "tennis_racket", "tumbling_box", "particle_body"} <= set(ANALYTIC)
     assert not analytic_available(load_scenario("spring_pendulum"))[0]
     assert not analytic_available(load_scenario("applied_torque"))[0]
 

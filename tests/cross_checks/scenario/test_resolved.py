@@ -62,9 +62,11 @@ def test_unity_euler_angles_and_body_rates_are_resolved_to_a_quaternion_and_worl
     assert r["initial"]["angular_velocity_body"] == pytest.approx([1.0, 0.0, 0.0], abs=1e-15)
     assert r["initial"]["position"] == [1.0, 2.0, 3.0] and r["initial"]["velocity"] == [0.0, 0.0, 0.0]
     assert r["body"] == {"mass": 2.0, "inertia": [[2.0, 0.1, 0.0], [0.1, 3.0, 0.0], [0.0, 0.0, 4.0]],
-                         "principal_moments": pytest.approx([2.5 - math.sqrt(0.26), 2.5 + math.sqrt(0.26), 4.0])}
+                         "principal_moments": pytest.approx([2.5 - math.sqrt(0.26),
+                                                             2.5 + math.sqrt(0.26), 4.0])}
     assert r["forces"]["torque"] == [{"torque": [0.0, 0.0, 0.5], "frame": "body"}]
-    assert (r["name"], r["duration"], r["dt"], r["steps"], r["scenario_dt"]) == ("unity_style", 2.0, 0.01, 200, 0.01)
+    assert ((r["name"], r["duration"], r["dt"], r["steps"], r["scenario_dt"])
+            == ("unity_style", 2.0, 0.01, 200, 0.01))
 
 
 @pytest.mark.parametrize("dt, gamma_v, gamma_w, steps", [
@@ -84,8 +86,8 @@ def test_decay_factors_are_per_step_at_the_run_s_dt(dt, gamma_v, gamma_w, steps)
 
 def test_particles_are_resolved_to_mass_inertia_about_the_com_and_body_points_from_the_com():
     r = resolved_scenario(parse_scenario(PARTICLES))
-    # COM = (1·(1,0,0) + 1·(3,0,0) + 2·(2,1,0)) / 4 = (2, ½, 0); about it the particles sit at
-    # (−1, −½, 0), (1, −½, 0), (0, ½, 0): I = Σ m (|r|² 1 − r rᵀ) = diag(1, 2, 3) (worked by hand).
+    # COM = (1·(1,0,0) + 1·(3,0,0) + 2·(2,1,0)) / 4 = (2, ½, 0); about it the particles sit at (−1, −½, 0),
+    # (1, −½, 0), (0, ½, 0): I = Σ m (|r|² 1 − r rᵀ) = diag(1, 2, 3) (worked by hand).
     assert r["body"]["mass"] == 4.0
     assert r["body"]["inertia"] == [[1.0, 0.0, 0.0], [0.0, 2.0, 0.0], [0.0, 0.0, 3.0]]
     assert r["forces"]["spring"] == [{"anchor": [0.0, 0.0, 5.0], "attach": [1.0, 0.0, 0.0], "stiffness": 10.0,
@@ -103,8 +105,8 @@ def test_show_json_is_the_contract_with_every_key_and_exact_floats(tmp_path, cap
         assert key in r
     assert set(r["body"]) >= {"mass", "inertia"}
     assert set(r["initial"]) >= {"position", "velocity", "orientation", "angular_velocity"}
-    assert set(r["forces"]) >= {"gravity", "linear_drag", "velocity_decay", "angular_velocity_decay", "spring", "point",
-                                "torque"}
+    assert set(r["forces"]) >= {"gravity", "linear_drag", "velocity_decay", "angular_velocity_decay",
+                                "spring", "point", "torque"}
     assert r == json.loads(json.dumps(resolved_scenario(parse_scenario(UNITY, source=str(path)), 0.005)))
     assert r["csv_columns"] == "t,x,y,z,vx,vy,vz,qw,qx,qy,qz,wx,wy,wz".split(",")
 
@@ -116,7 +118,8 @@ def test_show_prints_the_initial_conditions_a_student_needs(tmp_path, capsys):
     out = capsys.readouterr().out
     for words in ("orientation       [0.5, 0.5, 0.5, 0.5] (body→world quaternion w, x, y, z)",
                   "= Unity Euler angles (x, y, z) [0, 90, 90]° (rotation order Z, X, Y)",
-                  "angular velocity  [0, 1, 0] rad/s (WORLD axes)", "mass      2 kg", "torque            [0, 0, 0.5] N m (body axes)",
+                  "angular velocity  [0, 1, 0] rad/s (WORLD axes)", "mass      2 kg",
+                  "torque            [0, 0, 0.5] N m (body axes)",
                   "velocity decay    v ← 0.99 v after each velocity update (per step of 0.01 s"):
         assert words in out, out
 

@@ -87,7 +87,8 @@ def test_a_damaged_job_entry_is_recomputed_and_replaced(setup, damage):
 def test_an_entry_copied_under_another_key_is_not_taken_for_it(setup):
     root, ref, truth, entry = setup
     other = run_job(OTHER, SC, ref, None, False)
-    other_entry = _cache_file(root, "job", _job_key(SC, OTHER.variant, OTHER.dt_s, other["row"]["engine_version"]))
+    other_entry = _cache_file(root, "job",
+                              _job_key(SC, OTHER.variant, OTHER.dt_s, other["row"]["engine_version"]))
     other_entry.parent.mkdir(parents=True, exist_ok=True)
     other_entry.write_bytes(entry.read_bytes())  # rk4's record under course's key
     got = run_job(OTHER, SC, ref, str(root), True)

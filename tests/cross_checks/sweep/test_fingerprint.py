@@ -50,7 +50,8 @@ def copy(tmp_path, monkeypatch):
 def test_editing_any_source_file_of_the_fingerprinted_packages_changes_every_key(copy):
     top, keys = copy
     sources = _sources(top)
-    assert len(sources) > 40 and "cross_checks/sweep/run.py" in sources and "reference_sim/simulate.py" in sources
+    assert (len(sources) > 40 and "cross_checks/sweep/run.py" in sources
+            and "reference_sim/simulate.py" in sources)
     before = keys()
     for rel in sources:
         f = top / rel

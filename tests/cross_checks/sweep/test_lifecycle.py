@@ -49,8 +49,8 @@ def _alive(pid):
 
 def _sweep_command(tmp):
     env = {**os.environ, "RBCHECK_CACHE_DIR": str(tmp / "cache"), "MPLBACKEND": "Agg"}
-    cmd = [sys.executable, "-m", "cross_checks.cli", "sweep", str(tmp / "spin.toml"), "--jobs", "2", "--no-cache",
-           "--engines", "reference:course", "reference:rk4", "--out"]
+    cmd = [sys.executable, "-m", "cross_checks.cli", "sweep", str(tmp / "spin.toml"), "--jobs", "2",
+           "--no-cache", "--engines", "reference:course", "reference:rk4", "--out"]
     return env, cmd
 
 
@@ -69,7 +69,8 @@ def setting(tmp_path_factory):
     """Built once per test run (shared by the xdist workers); each case works in a folder of its own."""
     tmp = built_once(tmp_path_factory, "kill", _good_results)
     env, cmd = _sweep_command(tmp)
-    return {"tmp": tmp, "env": env, "cmd": cmd, "good": tmp / "good", "full_s": float((tmp / "full_s").read_text())}
+    return {"tmp": tmp, "env": env, "cmd": cmd, "good": tmp / "good",
+            "full_s": float((tmp / "full_s").read_text())}
 
 
 def kill_at_a_random_point(setting, seed, sig):
@@ -80,7 +81,8 @@ def kill_at_a_random_point(setting, seed, sig):
     subprocess.run(["cp", "-a", str(setting["good"]), str(out)], check=True)
     before = _files(out)
     delay = random.Random(seed).uniform(0.0, setting["full_s"])
-    proc = subprocess.Popen(cmd + [str(out)], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(cmd + [str(out)], env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
     time.sleep(delay)
     workers = _descendants(proc.pid)
     proc.send_signal(sig)  # to the sweep's own process only: its workers must not outlive it
@@ -158,8 +160,8 @@ def test_a_sigterm_raised_inside_a_weakref_callback_still_ends_the_process():
 
 
 def test_an_exception_that_replaces_the_alarm_s_inside_c_code_is_still_the_time_limit():
-    # NumPy interrupted by the alarm while parsing its arguments raised "TypeError: 'axis' must be an
-    # integer" in place of TimeLimitExceeded (a sweep on a loaded machine): stood in for by a body that does so
+    # NumPy interrupted by the alarm while parsing its arguments raised "TypeError: 'axis' must be an integer"
+    # in place of TimeLimitExceeded (a sweep on a loaded machine): stood in for by a body that does so
     with pytest.raises(TimeLimitExceeded, match="the solve took longer than the time limit of 0.05 s"):
         with time_limit(0.05, "the solve"):
             try:
@@ -182,6 +184,6 @@ def test_a_call_over_its_items_limits_runs_item_by_item_and_only_the_slow_item_f
             raise ValueError("item 4 is bad")
         return [10 * i for i in items]
     got = each_within_limits(call, [1, 2, 3, 4], 0.2, "the run")
-    assert got == [10, "the run took longer than the time limit of 0.2 s (cross_checks/core/tolerances.py)", 30,
-                   "ValueError: item 4 is bad"]
+    assert got == [10, "the run took longer than the time limit of 0.2 s (cross_checks/core/tolerances.py)",
+                   30, "ValueError: item 4 is bad"]
     assert each_within_limits(call, [1, 3], 0.2, "the run") == [10, 30]

@@ -20,8 +20,8 @@ PRE_ASYMPTOTIC = PRE_ASYMPTOTIC_ON_ITS_LADDER   # velocity order 0.52 on its fil
 
 
 def _sweep(tmp_path, text, variant):
-    summary = run_sweep([parse_scenario(text, "s.toml")], [variant], tmp_path / "out", jobs=1, use_cache=False,
-                        progress=False)
+    summary = run_sweep([parse_scenario(text, "s.toml")], [variant], tmp_path / "out", jobs=1,
+                        use_cache=False, progress=False)
     return summary, _gate_failures(summary)
 
 
@@ -59,12 +59,14 @@ def test_errors_that_sink_into_round_off_excuse_nothing():
     exp = Expectation(verdict="converges", order=2.0, reason="an order-2 scheme")
     floors = [1e-12] * 4
     at_roundoff = [5e-11, 3e-12, 2e-12, 2e-12]     # the finest original rung resolved, the finer ones not
-    shows, fit = refined_ladder_shows_the_order([1e-3, 5e-4, 2.5e-4, 1.25e-4], at_roundoff, floors, ["ok"] * 4, exp)
+    shows, fit = refined_ladder_shows_the_order([1e-3, 5e-4, 2.5e-4, 1.25e-4],
+                                                at_roundoff, floors, ["ok"] * 4, exp)
     assert not shows, (fit.verdict, fit.order, fit.order_is_lower_bound)
     clean = [4e-6, 1e-6, 2.5e-7, 6.25e-8]
     assert refined_ladder_shows_the_order([1e-3, 5e-4, 2.5e-4, 1.25e-4], clean, floors, ["ok"] * 4, exp)[0]
     first_order = [4e-6, 2e-6, 1e-6, 5e-7]
-    assert not refined_ladder_shows_the_order([1e-3, 5e-4, 2.5e-4, 1.25e-4], first_order, floors, ["ok"] * 4, exp)[0]
+    assert not refined_ladder_shows_the_order([1e-3, 5e-4, 2.5e-4, 1.25e-4],
+                                              first_order, floors, ["ok"] * 4, exp)[0]
 
 
 def test_only_shrinking_errors_are_judged_again():

@@ -14,9 +14,11 @@ from cross_checks.sweep import execute as sweep_mod
 from tests.helpers.scenarios import GRAVITY, scenario_toml, write_scenarios
 from tests.helpers.sweeps import file_tree, result_rows
 
-SPIN = scenario_toml("tiny_spin", 0.5, 0.01, (0.02, 0.01, 0.005), initial="angular_velocity = [0.3, 2.0, 0.2]",
+SPIN = scenario_toml("tiny_spin", 0.5, 0.01, (0.02, 0.01, 0.005),
+                     initial="angular_velocity = [0.3, 2.0, 0.2]",
                      description="Torque-free spin near the intermediate axis, short")
-DROP = scenario_toml("tiny_drop", 0.4, 0.01, (0.02, 0.01, 0.005), description="Projectile with linear drag, short",
+DROP = scenario_toml("tiny_drop", 0.4, 0.01, (0.02, 0.01, 0.005),
+                     description="Projectile with linear drag, short",
                      body="mass = 2.0\ninertia = [0.2, 0.2, 0.2]", initial="velocity = [1.0, 0.0, 3.0]",
                      forces=GRAVITY + "\nlinear_drag = 0.5")
 
@@ -134,7 +136,8 @@ def test_an_engine_exception_is_a_failed_row(tmp_path, scenario_files, monkeypat
     assert "engine exploded" in (out / "index.html").read_text()
 
 
-def test_interrupted_sweep_leaves_the_previous_results(tmp_path, scenario_files, monkeypatch, capsys, tiny_results):
+def test_interrupted_sweep_leaves_the_previous_results(tmp_path, scenario_files,
+                                                       monkeypatch, capsys, tiny_results):
     out = tmp_path / "res"
     shutil.copytree(tiny_results, out)  # the previous results: a real sweep's directory
     before = file_tree(out)
@@ -210,16 +213,19 @@ def test_tumbling_box_whole_state_euler_is_pre_asymptotic_not_non_convergent(tmp
     s = run_sweep([load_scenario("tumbling_box")], ["reference:explicit_euler"], tmp_path / "out", jobs=1,
                   use_cache=False, progress=False)
     v = {r["quantity"]: r for r in s["convergence"]}
-    assert v["orientation"]["verdict"] == "pre_asymptotic" and v["orientation"]["fit_verdict"] == "does_not_converge"
+    assert (v["orientation"]["verdict"] == "pre_asymptotic"
+            and v["orientation"]["fit_verdict"] == "does_not_converge")
     assert v["orientation"]["matches_expectation"] is None and "separatrix" in v["orientation"]["reason"]
     assert v["position"]["verdict"] == "converges" and v["position"]["order"] == pytest.approx(1.0, abs=0.05)
     assert _gate_failures(s) == []
     phys = s["scenarios"][0]["physics"]
-    assert abs(phys["separatrix_proximity"]) < 1e-4 and s["scenarios"][0]["error_amplification"]["orientation"] > 100
+    assert (abs(phys["separatrix_proximity"]) < 1e-4
+            and s["scenarios"][0]["error_amplification"]["orientation"] > 100)
     from reports.data import load_results
     from reports.findings import findings
     texts = [f.text for f in findings(load_results(tmp_path / "out")) if f.severity == "explained"]
-    assert any("reference:explicit_euler on tumbling_box: no order claimed for orientation" in t for t in texts), texts
+    assert any("reference:explicit_euler on tumbling_box: no order claimed for orientation" in t
+               for t in texts), texts
 
 
 def test_a_gentle_file_named_tumbling_box_converges_at_order_1_through_the_sweep(tmp_path):

@@ -91,8 +91,8 @@ def test_a_second_reference_of_a_slightly_wrong_body_is_caught(monkeypatch):
 
     def wrong(body):    # every moment 1e-6 too large (applied_torque's inertia is diagonal)
         from pydrake.multibody.tree import RotationalInertia, SpatialInertia
-        return SpatialInertia.MakeFromCentralInertia(float(body.mass_kg), np.zeros(3),
-                                                     RotationalInertia(*(np.diag(body.inertia_B) * (1.0 + 1e-6))))
+        return SpatialInertia.MakeFromCentralInertia(
+            float(body.mass_kg), np.zeros(3), RotationalInertia(*(np.diag(body.inertia_B) * (1.0 + 1e-6))))
 
     monkeypatch.setattr(drake_engine, "_spatial_inertia", wrong)
     rec = _record(load_scenario("applied_torque"))
@@ -115,8 +115,8 @@ def test_the_comparison_by_hand():
     assert rec["second_accuracy"]["position"] == pytest.approx(1e-9 + 2 * eps, rel=1e-12)
     assert not rec["agrees"] and rec["disagreeing"] == ["position"]
     check[2, 0] = 3e-9
-    assert SR.compare_references(y, second, check, primary_error={q: 1e-10 for q in QUANTITIES}, amplification={},
-                                 primary_steps=1, second_steps=1)["agrees"]
+    assert SR.compare_references(y, second, check, primary_error={q: 1e-10 for q in QUANTITIES},
+                                 amplification={}, primary_steps=1, second_steps=1)["agrees"]
 
 
 def test_the_drake_solutions_are_cached(tmp_path, monkeypatch):
@@ -158,7 +158,7 @@ def test_a_sweep_whose_references_disagree_exits_1_saying_so():
     rec = {"label": "drake X", "agrees": False, "disagreeing": ["orientation"]}
     summary = {"scenarios": [{"name": "tennis_racket", "reference": "analytic", "second_reference": rec},
                              {"name": "projectile", "reference": "analytic", "second_reference": None}]}
-    assert _gate_failures(summary) == ["the references of tennis_racket disagree: analytic and drake X differ in "
-                                       "orientation beyond their measured accuracies"]
+    assert _gate_failures(summary) == ["the references of tennis_racket disagree: analytic and drake "
+                                       "X differ in orientation beyond their measured accuracies"]
     rec["agrees"] = None     # Drake failed: not a disagreement (the record says why)
     assert _gate_failures(summary) == []

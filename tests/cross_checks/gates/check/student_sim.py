@@ -111,9 +111,10 @@ class Student:
         self.kv = -math.log(fm.velocity_decay) / scenario.dt_s
         self.kw = -math.log(fm.angular_velocity_decay) / scenario.dt_s
         self.gamma = (fm.velocity_decay, fm.angular_velocity_decay)
-        self.springs = [([float(c) for c in s.anchor_W], [float(c) for c in s.attach_B], float(s.stiffness_N_per_m),
-                         float(s.rest_length_m)) for s in fm.springs]
-        self.points = [([float(c) for c in pf.force], [float(c) for c in pf.point_B], pf.frame) for pf in fm.point_forces]
+        self.springs = [([float(c) for c in s.anchor_W], [float(c) for c in s.attach_B],
+                         float(s.stiffness_N_per_m), float(s.rest_length_m)) for s in fm.springs]
+        self.points = [([float(c) for c in pf.force], [float(c) for c in pf.point_B], pf.frame)
+                       for pf in fm.point_forces]
         self.torques = [([float(c) for c in t.torque], t.frame) for t in fm.torques]
         ini = p.initial
         self.state = ([float(c) for c in ini.x_W], [float(c) for c in ini.v_W], [float(c) for c in ini.q_WB],
@@ -203,7 +204,8 @@ class Student:
         self.state = (x1, v1, q1, w1)
 
 
-def run(scenario, dt, *, bug="", scheme="course", duration=None, write_every=1, float32=False, float32_time=False):
+def run(scenario, dt, *, bug="", scheme="course", duration=None,
+        write_every=1, float32=False, float32_time=False):
     """Rows (t, x(3), v(3), q(4), ω(3)) of a student run, recorded as the options say."""
     s = Student(scenario, bug, scheme)
     T = scenario.duration_s if duration is None else duration
@@ -223,7 +225,8 @@ def run(scenario, dt, *, bug="", scheme="course", duration=None, write_every=1, 
     return rows
 
 
-def write_csv(path, rows, *, fmt="repr", columns=("t", "x", "y", "z", "vx", "vy", "vz", "qw", "qx", "qy", "qz", "wx", "wy", "wz")):
+def write_csv(path, rows, *, fmt="repr",
+              columns=("t", "x", "y", "z", "vx", "vy", "vz", "qw", "qx", "qy", "qz", "wx", "wy", "wz")):
     """Write rows with a header; ``fmt``: "repr" (round-trip), "%.6f", "%.9g" (a float32 printed in full)."""
     order = ["t", "x", "y", "z", "vx", "vy", "vz", "qw", "qx", "qy", "qz", "wx", "wy", "wz"]
     idx = [order.index(c) for c in columns]

@@ -95,15 +95,18 @@ def test_the_false_passes_reported_in_issue_10_now_fail(tmp_path, capsys, scen, 
     assert rc == 1 and S.BUGS[bug] in out
 
 
-def test_a_step_without_the_gyroscopic_term_that_is_not_the_course_scheme_fails_and_says_why(tmp_path, capsys):
+def test_a_step_without_the_gyroscopic_term_that_is_not_the_course_scheme_fails_and_says_why(
+        tmp_path, capsys):
     sc = scenario_file(tmp_path, "tumbling_box", 2.0)
-    rc, out, _ = check(capsys, student_file(tmp_path, sc, 0.01, bug="no_gyro", scheme="expmap"), "--scenario", sc)
+    rc, out, _ = check(capsys, student_file(tmp_path, sc, 0.01, bug="no_gyro", scheme="expmap"),
+                       "--scenario", sc)
     assert rc == 1
     cause = next(line for line in out.splitlines() if line.startswith("likely cause:"))
     assert "reference:course" in cause and "gyroscopic" in cause
 
 
-def test_the_course_scheme_fails_by_default_where_its_step_is_wrong_and_passes_when_asked_for(tmp_path, capsys):
+def test_the_course_scheme_fails_by_default_where_its_step_is_wrong_and_passes_when_asked_for(
+        tmp_path, capsys):
     """Two questions: "a correct simulation?" (default) FAILS a faithful course implementation on a tumbling
     asymmetric body, in one sentence; "is it exactly reference:course?" (--scheme) PASSES, saying what the
     course gets wrong there."""
@@ -111,8 +114,9 @@ def test_the_course_scheme_fails_by_default_where_its_step_is_wrong_and_passes_w
     path = student_file(tmp_path, sc, 0.01, bug="no_gyro")
     rc, out, _ = check(capsys, path, "--scenario", sc)
     first, second = out.splitlines()[:2]
-    assert rc == 1 and first.startswith("FAIL: it reproduces the course's update exactly; the course omits the "
-                                        "gyroscopic term −ω × (I ω)") and "so on this body the motion is wrong" in first
+    assert (rc == 1 and first.startswith("FAIL: it reproduces the course's update exactly; the course "
+                                         "omits the gyroscopic term −ω × (I ω)")
+            and "so on this body the motion is wrong" in first)
     assert second.startswith("likely cause: the rotational update has no gyroscopic torque")
     rc, out, _ = check(capsys, path, "--scenario", sc, "--scheme", "reference:course")
     assert rc == 0 and out.startswith("PASS: is reference:course")
@@ -138,8 +142,8 @@ frame = "body"
 
 @pytest.mark.parametrize("scen", ["isotropic_tumble", "constant_spin", "projectile"])
 def test_where_the_course_step_is_right_it_passes_both_questions(tmp_path, capsys, scen):
-    """An isotropic body tumbling under a torque (ω × Iω = 0 always), a spin about a principal axis, no rotation:
-    the course's step is physically right there."""
+    """An isotropic body tumbling under a torque (ω × Iω = 0 always), a spin about a principal axis, no
+    rotation: the course's step is physically right there."""
     if scen == "isotropic_tumble":
         sc = tmp_path / "isotropic_tumble.toml"
         sc.write_text(ISOTROPIC_TUMBLE)
@@ -152,9 +156,11 @@ def test_where_the_course_step_is_right_it_passes_both_questions(tmp_path, capsy
         assert "caveat:" not in out
 
 
-def test_a_ladder_of_the_course_on_a_tumbling_body_fails_by_default_and_passes_as_the_scheme(tmp_path, capsys):
+def test_a_ladder_of_the_course_on_a_tumbling_body_fails_by_default_and_passes_as_the_scheme(
+        tmp_path, capsys):
     sc = scenario_file(tmp_path, "tennis_racket", 1.0)
-    files = [student_file(tmp_path, sc, dt, bug="no_gyro", name=f"c{i}.csv") for i, dt in enumerate((0.01, 0.005))]
+    files = [student_file(tmp_path, sc, dt, bug="no_gyro", name=f"c{i}.csv")
+             for i, dt in enumerate((0.01, 0.005))]
     rc, out, _ = check(capsys, *files, "--scenario", sc)
     assert rc == 1 and out.startswith("FAIL: 2 of 2 files fail their own check")
     rc, out, _ = check(capsys, *files, "--scenario", sc, "--scheme", "reference:course")
@@ -197,7 +203,8 @@ def test_a_per_step_decay_at_another_dt_is_never_a_silent_pass(tmp_path, capsys)
     """γ applied per step at Δt ≠ dt is another physical damping. Where reference:course itself does
     that it IS that scheme (PASS, with the frame-rate caveat); otherwise it is a caught mistake."""
     sc_path = scenario_file(tmp_path, "velocity_decay", 1.0)
-    rc, out, _ = check(capsys, student_file(tmp_path, sc_path, 0.005, bug="decay_per_step"), "--scenario", sc_path)
+    rc, out, _ = check(capsys, student_file(tmp_path, sc_path, 0.005, bug="decay_per_step"),
+                       "--scenario", sc_path)
     if _reference_course_applies_the_per_step_factor(0.005):
         assert rc == 0 and "PASS: is reference:course" in out and "frame-rate dependent" in out
     else:
@@ -221,7 +228,8 @@ def test_a_students_correct_simulator_passes(tmp_path, capsys, scheme, scen, dt,
     sc = scenario_file(tmp_path, scen, duration)
     opts = dict(opts)
     fmt = opts.pop("fmt", "repr")
-    rc, out, _ = check(capsys, student_file(tmp_path, sc, dt, fmt=fmt, scheme=scheme, **opts), "--scenario", sc)
+    rc, out, _ = check(capsys, student_file(tmp_path, sc, dt, fmt=fmt, scheme=scheme, **opts),
+                       "--scenario", sc)
     assert rc == 0, out
     assert out.startswith("PASS: ")
 
@@ -258,11 +266,13 @@ def test_every_reference_variant_passes_and_is_recognised(tmp_path, capsys, vari
 ENGINE_GRID = [
     ("mujoco:euler", "tumbling_box", 0.01, 3.0), ("mujoco:rk4", "constant_spin", 0.01, 1.0),
     ("mujoco:implicit", "thruster_box", 0.005, None), ("mujoco:implicitfast", "tennis_racket", 0.001, 0.5),
-    ("pybullet:multibody", "applied_torque", 0.01, 1.0), ("pybullet:maximal", "damped_spring_top", 0.005, None),
+    ("pybullet:multibody", "applied_torque", 0.01, 1.0),
+    ("pybullet:maximal", "damped_spring_top", 0.005, None),
 ]
 
 
-@pytest.mark.parametrize("engine, scen, dt, duration", ENGINE_GRID, ids=[f"{e}-{s}-{d:g}" for e, s, d, _ in ENGINE_GRID])
+@pytest.mark.parametrize("engine, scen, dt, duration", ENGINE_GRID,
+                         ids=[f"{e}-{s}-{d:g}" for e, s, d, _ in ENGINE_GRID])
 def test_mujoco_and_pybullet_trajectories_pass(tmp_path, capsys, engine, scen, dt, duration):
     sc = scenario_file(tmp_path, scen, duration)
     traj = _run(tmp_path, sc, engine, dt)
@@ -315,7 +325,8 @@ def test_output_written_every_tenth_step_is_judged_with_dt(tmp_path, capsys):
 def test_pose_only_files_are_judged_on_what_they_hold(tmp_path, capsys):
     sc = scenario_file(tmp_path, "particle_body", 1.0)
     pose = ("t", "x", "y", "z", "qw", "qx", "qy", "qz")
-    rc, out, _ = check(capsys, student_file(tmp_path, sc, 0.005, columns=pose, name="p.csv"), "--scenario", sc)
+    rc, out, _ = check(capsys, student_file(tmp_path, sc, 0.005, columns=pose, name="p.csv"),
+                       "--scenario", sc)
     assert rc == 0, out
     assert "cannot tell: the file has no velocity, angular velocity columns" in out
     rc, out, _ = check(capsys, student_file(tmp_path, sc, 0.005, columns=pose, bug="gyro_sign", name="q.csv"),
@@ -361,8 +372,10 @@ def test_absurd_files_exit_2_naming_the_line(tmp_path, capsys, edit, words):
 
 @pytest.mark.parametrize("edit, words", [
     (lambda tr: tr.y.__setitem__((slice(50, None), 3), math.nan), "diverged at t = 0.5 s"),
-    (lambda tr: tr.y.__setitem__((slice(30, None), slice(6, 10)), 0.0), "the quaternion is zero from t = 0.3 s"),
-    (lambda tr: tr.y.__setitem__((slice(None), 0), tr.y[:, 0] + 1.0), "does not start at the scenario's initial state"),
+    (lambda tr: tr.y.__setitem__((slice(30, None), slice(6, 10)), 0.0),
+     "the quaternion is zero from t = 0.3 s"),
+    (lambda tr: tr.y.__setitem__((slice(None), 0), tr.y[:, 0] + 1.0),
+     "does not start at the scenario's initial state"),
 ], ids=["nan-from-row-50", "zero-quaternion-from-row-30", "moved"])
 def test_broken_runs_fail_clearly_never_pass(tmp_path, capsys, edit, words):
     sc = scenario_file(tmp_path, "applied_torque", 1.0)
@@ -408,14 +421,16 @@ def test_an_initial_angular_velocity_in_body_axes_is_named(tmp_path, capsys):
 def test_verdict_line_first_then_the_table_json_and_plot(tmp_path, capsys):
     sc = scenario_file(tmp_path, "tumbling_box", 3.0)
     path = student_file(tmp_path, sc, 0.01, bug="gyro_sign")
-    rc, out, err = check(capsys, path, "--scenario", sc, "--json", tmp_path / "r.json", "--plot", tmp_path / "r.png")
+    rc, out, err = check(capsys, path, "--scenario", sc,
+                         "--json", tmp_path / "r.json", "--plot", tmp_path / "r.png")
     lines = out.splitlines()
-    assert rc == 1 and lines[0].startswith("FAIL: angular velocity one-step defect over its allowance from t = 0.01 s")
+    assert rc == 1 and lines[0].startswith("FAIL: angular velocity one-step defect "
+                                           "over its allowance from t = 0.01 s")
     assert lines[1].startswith("likely cause: ") and "gyroscopic term has the wrong sign" in lines[1]
     header = next(i for i, line in enumerate(lines) if line.strip().startswith("evidence"))
     assert "first over" in lines[header] and "allowed" in lines[header] and "value" in lines[header]
     over = [line for line in lines[header + 1:] if line.endswith("OVER") or "OVER (" in line]
-    assert over and over[0].strip().startswith("one-step defect  angular velocity")   # the worst failure first
+    assert over and over[0].strip().startswith("one-step defect  angular velocity")  # the worst failure first
     # each row: the worst ratio with the value and the allowance at the same time
     ratio_s, value_s, allowed_s = over[0].split(")")[1].split()[:3]
     assert float(value_s) / float(allowed_s) == pytest.approx(float(ratio_s), rel=0.01)
@@ -424,7 +439,8 @@ def test_verdict_line_first_then_the_table_json_and_plot(tmp_path, capsys):
     assert out.index("closest scheme:") < out.index("allowances (where each comes from):")
     data = json.loads((tmp_path / "r.json").read_text(), parse_constant=pytest.fail)   # strict JSON: no NaN
     assert data["passed"] is False and data["exit_code"] == 1 and data["verdict"] == lines[0]
-    worst = next(e for e in data["evidence"] if e["kind"] == "one-step defect" and e["quantity"] == "angular_velocity")
+    worst = next(e for e in data["evidence"]
+                 if e["kind"] == "one-step defect" and e["quantity"] == "angular_velocity")
     assert worst["first_over_s"] == pytest.approx(0.01) and worst["max_ratio"] > 10 and worst["source"]
     assert {s["name"] for s in data["schemes"]} >= {f"reference:{v}" for v in
                                                     ("course", "course_gyro", "expmap_gyro", "explicit_euler",
@@ -444,7 +460,7 @@ def test_bad_output_paths_exit_2_before_any_work(tmp_path, capsys):
     assert rc == 2 and "does not exist" in err
 
 
-# --- the API: extra engines compared free-running ------------------------------------------------------------
+# --- the API: extra engines compared free-running -----------------------------------------------------------
 
 def test_extra_engine_variants_are_compared_free_running(tmp_path):
     from cross_checks.gates.check import check_trajectory

@@ -20,23 +20,25 @@ SCENARIOS = catalog_names() + NEW
 DTS = (0.01, 0.005, 0.002, 0.001)
 CAP_S = 3.0
 
-ROTATING = ["constant_spin", "symmetric_top", "tennis_racket", "tumbling_box", "particle_body", "applied_torque",
-            "spring_pendulum", "velocity_decay", "thruster_box", "damped_spring_top", "fast_tensor_spin"]
+ROTATING = ["constant_spin", "symmetric_top", "tennis_racket", "tumbling_box", "particle_body",
+            "applied_torque", "spring_pendulum", "velocity_decay", "thruster_box", "damped_spring_top",
+            "fast_tensor_spin"]
 OFF_COM = ["applied_torque", "spring_pendulum", "thruster_box", "damped_spring_top"]
-GRAVITY_NOT_Y = ["projectile", "linear_drag", "tumbling_box", "particle_body", "applied_torque", "spring_oscillator",
-                 "spring_pendulum", "thruster_box", "damped_spring_top"]
+GRAVITY_NOT_Y = ["projectile", "linear_drag", "tumbling_box", "particle_body", "applied_torque",
+                 "spring_oscillator", "spring_pendulum", "thruster_box", "damped_spring_top"]
 #: bug -> scenarios where its physics matters
 MATTERS = {
     "gyro_sign": [s for s in ROTATING if s not in ("constant_spin", "velocity_decay")],
     "quat_right": ROTATING, "omega_body": ROTATING, "no_half": ROTATING, "no_normalise": ROTATING,
     "inertia_body": ROTATING, "inertia_transposed": ROTATING,
     "torque_order": OFF_COM, "lever_body": OFF_COM, "no_point_torque": OFF_COM,
-    "torque_world": ["applied_torque", "thruster_box"], "attach_body": ["spring_pendulum", "damped_spring_top"],
-    "drag_sign": ["linear_drag", "thruster_box"], "gravity_y": GRAVITY_NOT_Y, "dt_mismatch": SCENARIOS,
+    "torque_world": ["applied_torque", "thruster_box"],
+    "attach_body": ["spring_pendulum", "damped_spring_top"], "drag_sign": ["linear_drag", "thruster_box"],
+    "gravity_y": GRAVITY_NOT_Y, "dt_mismatch": SCENARIOS,
 }
 #: decay bugs at the scenario's own dt (where the course's γ and e^(−kΔt) agree)
-DECAY = [("decay_twice", "velocity_decay"), ("no_decay", "velocity_decay"), ("decay_twice", "damped_spring_top"),
-         ("no_decay", "damped_spring_top")]
+DECAY = [("decay_twice", "velocity_decay"), ("no_decay", "velocity_decay"),
+         ("decay_twice", "damped_spring_top"), ("no_decay", "damped_spring_top")]
 
 
 def _file(tmp_path, name):

@@ -33,4 +33,5 @@ def test_a_quaternion_written_x_y_z_w_is_named():
 def test_degrees_per_second_are_named():
     row = Y0.copy()
     row[10:13] = np.rad2deg(Y0[10:13])
-    assert initial_state_slips(row, Y0, TOL, PRESENT) == ["the angular velocity is in degrees per second (radians expected)"]
+    assert initial_state_slips(row, Y0, TOL, PRESENT) == ["the angular velocity is in degrees "
+                                                          "per second (radians expected)"]

@@ -102,7 +102,8 @@ def test_dt_maps_decimated_rows_to_several_steps():
 
 
 def test_dt_that_does_not_divide_the_rows_is_refused():
-    with pytest.raises(CheckError, match=r"d.csv: line 3: column t: with --dt 0.03 s every row interval must be a whole"):
+    with pytest.raises(CheckError,
+                       match=r"d.csv: line 3: column t: with --dt 0.03 s every row interval must be a whole"):
         prepare_input(_traj(np.arange(11) * 0.1), SC, "d.csv", dt_s=0.03)
 
 

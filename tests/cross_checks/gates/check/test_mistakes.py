@@ -1,5 +1,5 @@
-"""cross_checks.gates.check.mistakes: the correct bases are the reference's course steps; each mistake changes the
-step exactly as its sentence says (effects derived by hand here)."""
+"""cross_checks.gates.check.mistakes: the correct bases are the reference's course steps; each mistake changes
+the step exactly as its sentence says (effects derived by hand here)."""
 import dataclasses
 import math
 
@@ -59,7 +59,8 @@ def test_missing_half_turns_the_body_through_twice_the_angle():
     for knobs, c in ((Knobs(), 0.5), (_knobs(quat_half=1.0), 1.0)):
         y1 = course_step(sc, y, H, knobs)
         angle = np.linalg.norm(quat_log(quat_mul(y1[:, Q], quat_conj(y[:, Q]))), axis=1)
-        np.testing.assert_allclose(angle, 2.0 * np.arctan(c * H * np.linalg.norm(y1[:, W], axis=1)), rtol=1e-10)
+        np.testing.assert_allclose(angle, 2.0 * np.arctan(c * H * np.linalg.norm(y1[:, W], axis=1)),
+                                   rtol=1e-10)
 
 
 def test_without_normalisation_the_norm_grows_by_the_hand_derived_factor():
@@ -79,7 +80,8 @@ def test_the_wrong_side_of_the_product_rotates_about_R_omega():
     w1 = course_step(sc, y, H, Knobs())[:, W]
     z = y.copy()
     z[:, W] = np.einsum("kij,kj->ki", matrix_from_quat(y[:, Q]), w1)
-    q_expected = y[:, Q] + quat_mul(np.concatenate([np.zeros((len(y), 1)), 0.5 * H * z[:, W]], axis=1), y[:, Q])
+    q_expected = y[:, Q] + quat_mul(np.concatenate([np.zeros((len(y), 1)), 0.5 * H * z[:, W]], axis=1),
+                                    y[:, Q])
     q_expected /= np.linalg.norm(q_expected, axis=1, keepdims=True)
     np.testing.assert_allclose(wrong[:, Q], q_expected, atol=1e-14)
     assert np.max(np.abs(wrong[:, Q] - y_rot[:, Q])) > 0
@@ -123,7 +125,8 @@ def test_the_catalog_offers_only_mistakes_that_can_show():
     names = lambda sc, h=0.01: {m.name for m in applicable_mistakes(load_scenario(sc), h)}   # noqa: E731
     assert names("projectile") == {"gravity axis"}
     assert "drag sign" in names("linear_drag") and "decay applied twice" not in names("linear_drag")
-    assert {"torque cross product order", "lever arm not rotated", "force or torque frame"} <= names("applied_torque")
+    assert ({"torque cross product order", "lever arm not rotated", "force or torque frame"}
+            <= names("applied_torque"))
     assert "decay per step at another Δt" not in names("velocity_decay", 0.01)
     assert "decay per step at another Δt" in names("velocity_decay", 0.005)
     assert len({m.name for m in CATALOG}) == len(CATALOG) and all(m.sentence for m in CATALOG)

@@ -1,0 +1,152 @@
+"""The precision model (docs/verdicts.md, "Precision"): a variant declares the floating-point format it computes
+in (Traits.precision); its round-off floors scale with that format's ε and a float32 variant is judged on a
+ladder that reaches coarser steps. Shown on float32 schemes (tests/helpers/float32.py: the reference's schemes
+with their state stored in float32): the correct ones pass the sweep's gates, the same schemes judged with
+float64 floors would not, and float32 schemes with a planted bug (tests/mutants.py) are still caught."""
+import math
+import re
+
+import numpy as np
+import pytest
+
+from cross_checks.analysis import metrics as M
+from cross_checks.analysis.expectations import (
+    characteristic_rate_sq,
+    judged_ladder_s,
+    machine_epsilon,
+    nominal_order,
+    precision,
+)
+from cross_checks.cli import _gate_failures
+from cross_checks.core import tolerances as tol
+from cross_checks.engines import available_variants
+from cross_checks.engines.base import Traits
+from cross_checks.scenario import catalog_names, catalog_path, load_scenario, parse_scenario
+from cross_checks.sweep import run_sweep
+from tests.helpers.float32 import Float32Adapter, register, to_float32
+from tests.mutants import MUTANTS
+
+pytestmark = pytest.mark.usefixtures("isolated_cache")
+
+BY_NAME = {m.name: m for m in MUTANTS}
+SCHEMES = ("reference:expmap_gyro", "reference:midpoint", "reference:rk4")
+#: forces that turn with the body (applied_torque), a spring on a rotating body (spring_pendulum), and a free
+#: tumble near the intermediate axis (tennis_racket: round-off amplified by the motion); the default run takes
+#: the longer two over a shorter time and three rungs (the slow test, the catalog as it is)
+QUICK_SCENARIOS = ("applied_torque", "spring_pendulum", "tennis_racket")
+SHORTER = {"spring_pendulum": (2.0, "[0.008, 0.004, 0.002]"), "tennis_racket": (3.0, "[0.01, 0.005, 0.0025]"),
+           "particle_body": (2.0, "[0.004, 0.002, 0.001]")}
+
+
+def _scenario(name):
+    """The catalog scenario ``name``, over SHORTER's duration and ladder where it has one."""
+    if name not in SHORTER:
+        return load_scenario(name)
+    duration, ladder = SHORTER[name]
+    text = catalog_path(name).read_text()
+    text = re.sub(r"(?m)^duration = .*$", f"duration = {duration!r}", text)
+    text = re.sub(r"(?m)^dt_ladder = .*$", f"dt_ladder = {ladder}", text)
+    return parse_scenario(text, f"{name} (shorter)")
+#: planted bugs of every kind (a stage weight, the gyroscopic sign, a frame mix-up of a torque, of the lever
+#: arms and of ω in the attitude update, a stage at the wrong point), each on the scenario that exposes it
+F32_MUTANTS = ("rk4_wrong_stage_weight", "gyroscopic_sign_flipped", "body_torque_in_world_axes",
+               "lever_arms_not_rotated", "course_quaternion_on_the_right", "midpoint_stage_at_full_step")
+
+
+def _sweep(tmp_path, scenarios, variants, load=_scenario):
+    return run_sweep([load(s) for s in scenarios], list(variants), tmp_path / "out", jobs=1,
+                     use_cache=False, progress=False, second_reference=False)
+
+
+def test_precision_is_float64_or_float32():
+    assert Traits().precision == "float64" and Traits(precision="float32").precision == "float32"
+    with pytest.raises(ValueError, match="precision"):
+        Traits(precision="float16")
+    assert tol.MACHINE_EPSILON["float32"] == float(np.finfo(np.float32).eps)
+    assert tol.MACHINE_EPSILON["float64"] == pytest.approx(np.finfo(np.float64).eps, rel=0.01)
+
+
+def test_every_shipped_variant_is_float64_and_keeps_its_scenarios_ladder():
+    for v in available_variants():
+        assert precision(v) == "float64" and machine_epsilon(v) == tol.ROUNDOFF_PER_STEP_REL
+        for name in catalog_names():
+            sc = load_scenario(name)
+            assert judged_ladder_s(sc, v) == tuple(sorted(sc.dt_ladder_s, reverse=True))
+
+
+def test_the_floors_scale_with_the_precisions_epsilon():
+    for n, amp in ((1, 1.0), (1000, 1.0), (20000, 50.0)):
+        f64 = M.roundoff_floor(2.0, n, reference_error=0.0, amplification=amp)
+        f32 = M.roundoff_floor(2.0, n, reference_error=0.0, amplification=amp, eps=tol.MACHINE_EPSILON["float32"])
+        assert f32 == pytest.approx(f64 * tol.MACHINE_EPSILON["float32"] / tol.MACHINE_EPSILON["float64"])
+        # the reference's own (float64) error is added as measured, whatever the run's precision
+        assert M.roundoff_floor(2.0, n, reference_error=1e-9, eps=1e-7) == pytest.approx(1e-9 + 1e-7 * 2 * (n + n ** .5))
+
+
+@pytest.mark.parametrize("scheme", SCHEMES)
+def test_a_float32_ladder_adds_coarser_rungs_within_the_limits(scheme, monkeypatch):
+    """Every added rung is coarser than the scenario's, of half the steps of the last (T/Δt whole), turns the
+    fastest motion by at most (p + 1) × 0.15 rad and keeps 16 steps; rungs are added until three are expected
+    resolved or a limit stops them (checked here from the limits, not from the function's own arithmetic)."""
+    v = register(monkeypatch, Float32Adapter("ok", scheme))
+    p = nominal_order(v)
+    extended = 0
+    for name in catalog_names():
+        sc = load_scenario(name)
+        given = sorted(sc.dt_ladder_s, reverse=True)
+        ladder = judged_ladder_s(sc, v)
+        extra = ladder[:len(ladder) - len(given)]
+        assert list(ladder[len(extra):]) == given and len(extra) <= tol.PRECISION_LADDER_MAX_EXTRA
+        w = max(math.sqrt(characteristic_rate_sq(sc)), 1.0 / sc.duration_s)
+        for coarse, fine in zip(extra, ladder[1:]):
+            n = sc.duration_s / coarse
+            assert abs(n - round(n)) < 1e-9 * n and round(n) == round(sc.duration_s / fine) // 2
+            assert w * coarse <= (p + 1) * 0.15 + 1e-12 and n >= 16
+        extended += bool(extra)
+    assert extended >= (0 if p == 1 else 5)   # the higher orders need coarser rungs on most of the catalog
+
+
+def test_the_correct_float32_schemes_pass_the_sweeps_gates(tmp_path, monkeypatch):
+    vs = [register(monkeypatch, Float32Adapter(f"ok_{s.split(':')[1]}", s)) for s in SCHEMES]
+    summary = _sweep(tmp_path, QUICK_SCENARIOS, vs)
+    assert _gate_failures(summary) == []
+    recs = summary["convergence"]
+    assert {r["engine"] for r in recs} == set(vs) and all(r["matches_expectation"] is not False for r in recs)
+    # a float32 verdict says so, and which rungs it judged
+    assert all("float32" in r["assessment"] for r in recs), [r["assessment"] for r in recs if "float32" not in
+                                                              r["assessment"]]
+    # every scheme shows its order somewhere (float32 leaves orders measurable, not only "at round-off")
+    for v in vs:
+        shown = [r for r in recs if r["engine"] == v and r["mode"] == "free_running" and r["verdict"] == "converges"
+                 and r["matches_expectation"] is True]
+        assert shown, v
+
+
+def test_the_same_float32_scheme_judged_with_float64_floors_fails(tmp_path, monkeypatch):
+    """What the precision trait is for: the float32 expmap_gyro declared float64 is called non-convergent
+    (its errors grow as Δt shrinks under float32 round-off: applied_torque's velocity)."""
+    v = register(monkeypatch, Float32Adapter("as64", "reference:expmap_gyro", precision="float64"))
+    summary = _sweep(tmp_path, ("applied_torque",), [v])
+    bad = [r for r in summary["convergence"] if r["engine"] == v and r["matches_expectation"] is False]
+    assert bad and _gate_failures(summary)
+
+
+@pytest.mark.parametrize("name", F32_MUTANTS)
+def test_a_float32_scheme_with_a_planted_bug_is_still_caught(name, tmp_path, monkeypatch):
+    m = BY_NAME[name]
+    v = register(monkeypatch, Float32Adapter(name, m.variant, m))
+    summary = _sweep(tmp_path, m.exposed_by, [v])
+    assert _gate_failures(summary), f"float32 {m.name} ({m.bug}) was not caught on {m.exposed_by}"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scheme", SCHEMES)
+def test_a_correct_float32_scheme_passes_on_the_whole_catalog(scheme, tmp_path, monkeypatch):
+    v = register(monkeypatch, Float32Adapter("ok", scheme))
+    assert _gate_failures(_sweep(tmp_path, catalog_names(), [v], load=load_scenario)) == []
+
+
+def test_the_float32_state_is_float32():
+    y = np.array([0.1, 1.0 / 3.0, 2.0 ** 30 + 1.0])
+    assert np.array_equal(to_float32(y).astype(np.float32).astype(np.float64), to_float32(y))
+    assert not np.array_equal(to_float32(y), y)
