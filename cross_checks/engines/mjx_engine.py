@@ -180,8 +180,12 @@ def _engine():
 
 
 def _engine_or_error():
-    """:func:`_engine`, an import failure as EngineError (never called in a process forked after JAX started
-    in its parent: the entry points hand their work to a spawned process there, :func:`_spawned`)."""
+    """:func:`_engine`, an import failure as EngineError; EngineError too in a process forked from one whose
+    JAX was already running (see :func:`_after_fork_in_child`)."""
+    if _FORK["inherited_jax"]:
+        raise EngineError("MJX cannot run in a process forked after JAX started in its parent (a running "
+                          "JAX backend does not survive fork: its threads are gone and it would hang); run "
+                          "the sweep with --jobs 1 from there, or from a process that has not run MJX")
     try:
         _FORK["started"] = True
         return _engine()
@@ -196,36 +200,11 @@ _FORK = {"started": False, "inherited_jax": False}
 
 def _after_fork_in_child() -> None:
     """In a child of ``os.fork``: if the parent had started JAX, the child must not use it (a forked JAX
-    hangs on its first computation: measured with the sweep's process pool under pytest; the sweep's parent
-    starts JAX when it re-runs a variant at finer steps, cross_checks.sweep.refine), so the entry points hand
-    their work to a SPAWNED process (:func:`_spawned`), which starts its own JAX."""
+    hangs on its first computation: measured with the sweep's process pool under pytest), so
+    :func:`_engine_or_error` refuses with an EngineError — a failed row that says why, instead of a sweep that
+    never ends."""
     if _FORK["started"]:
         _FORK["inherited_jax"] = True
-
-
-_SPAWNED: dict = {}
-
-
-def _spawned():
-    """A one-process pool of the "spawn" start method (a fresh interpreter: no inherited JAX), created on
-    first use in a process forked after its parent started JAX; it runs :func:`simulate_many` and
-    :func:`one_step` there (compiling its own executables)."""
-    if "pool" not in _SPAWNED:
-        import multiprocessing as mp
-        from concurrent.futures import ProcessPoolExecutor
-        _SPAWNED["pool"] = ProcessPoolExecutor(max_workers=1, mp_context=mp.get_context("spawn"),
-                                               initializer=_exit_with_parent, initargs=(os.getpid(),))
-    return _SPAWNED["pool"]
-
-
-def _exit_with_parent(parent_pid: int) -> None:
-    """In the spawned process: end it when the process that spawned it is gone (a sweep's worker leaves with
-    ``os._exit``, which never shuts the pool down)."""
-    def watch():
-        while os.getppid() == parent_pid:
-            time.sleep(1.0)
-        os._exit(0)
-    threading.Thread(target=watch, daemon=True).start()
 
 
 os.register_at_fork(after_in_child=_after_fork_in_child)
@@ -436,8 +415,6 @@ def simulate_many(variant: str, requests) -> list:
     MAX_BATCH runs."""
     if variant not in VARIANTS:
         raise ValueError(f"unknown mjx variant {variant!r}; variants: {', '.join(VARIANTS)}")
-    if _FORK["inherited_jax"]:
-        return _spawned().submit(simulate_many, variant, list(requests)).result()
     out: list = [None] * len(requests)
     try:
         _engine_or_error()
@@ -527,8 +504,6 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     from cross_checks.engines.mujoco_engine import to_packed, to_qpos_qvel
     if variant not in VARIANTS:
         raise ValueError(f"unknown mjx variant {variant!r}; variants: {', '.join(VARIANTS)}")
-    if _FORK["inherited_jax"]:
-        return _spawned().submit(one_step, scenario, variant, dt_s, np.asarray(y_start)).result()
     jax, _, _ = _engine_or_error()
     shape = np.shape(y_start)
     y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
