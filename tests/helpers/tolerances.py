@@ -163,3 +163,34 @@ BRAX_REPLAY_REL = 1e-12
 #: A run batched with other Δt (vmap) vs alone: XLA may vectorise the batch differently, a few ε per step
 #: compounding over up to 700 steps of a tumble; measured 0.
 BRAX_BATCH = 1e-10
+#: A body at 1e4 m/s spinning at 100 rad/s for 100 MJX steps: MJX's spatial-velocity arithmetic mixes the two,
+#: measured 2.1e-12 m/s of drift across (≈ ε × 1e4); the bound 1e-10 (a clamp or a sleep would be O(1)).
+MJX_FAST_BODY = 1e-10
+#: MJX (mujoco-mjx 3.17.0, float64) vs MuJoCo C Euler, the same arithmetic in another order of sums: measured
+#: ≤ 1.7e-13 relative (max(1, |state|)) on tennis_racket, applied_torque and spring_pendulum at their own Δt and
+#: duration; float32 would be ~1e-7. The bound: 1e-11. (tumbling_box, 10 s near a separatrix that amplifies
+#: round-off ~1e3: 1.8e-12 on its ladder, 8.6e-11 at its Δt of 1 ms — held to the sweep's SAME_SCHEME_REL.)
+MJX_SAME_AS_MUJOCO_EULER_REL = 1e-11
+#: One MJX Euler step vs the hand-derived semi-implicit step from the same doubles (MJX's RNE, a Cholesky solve,
+#: its quaternion exp map vs NumPy's): measured ≤ 3.6e-16 (RK4's hand step: ≤ 6e-17); 10 ε.
+MJX_HAND_STEP = 2e-15
+#: one_step from a recorded state vs the free run's next row: the same step through the body/world ω conversion
+#: at the boundary (and the force model called on the host from the compiled loop or before it): measured
+#: ≤ 5.2e-16 relative.
+MJX_REPLAY_REL = 1e-14
+#: simulate_many (vmapped, batch of 4) vs simulate (batch of 1): the same executable's arithmetic per member,
+#: measured 2.0e-15 on symmetric_top (XLA vectorises a batch of 4 differently from one member); 5× that.
+MJX_BATCH_VS_SINGLE = 1e-14
+#: mjx:implicitfast vs mjx:euler on the tennis racket (300 steps of 0.01 s): Cholesky vs LDLᵀ of the same M,
+#: measured 0 (bit for bit; 0 on the whole catalog in the sweep's agreement check too).
+MJX_IMPLICITFAST_VS_EULER = 1e-12
+#: MuJoCo C's implicitfast (implicit gyroscopic term) vs MJX's (none) on the same run: measured 2.4e-3 rad/s;
+#: "differs" means beyond 1e-6, 7 decades above MJX vs MuJoCo Euler's round-off.
+MJX_IMPLICITFAST_VS_C_MIN_DIFF = 1e-6
+#: An error ratio at h and h/2 against 2^p for order p: asymptotic only up to the next term, ±15 % (as
+#: DRAKE_ORDER_TOL for fitted orders).
+MJX_ORDER_RATIO_REL = 0.15
+#: mjx:rk4 where RK4 is exact (a spin about a fixed principal axis, constant world force and torque along it: a
+#: polynomial motion): final-state errors measured 7.1e-13 and 7.3e-13 at Δt = 0.05 and 0.025 s over 2 s — the
+#: round-off of the MuJoCo C RK4 reference at Δt/64; a fourth-order error at these steps would be ~1e-6.
+MJX_RK4_EXACT = 1e-11

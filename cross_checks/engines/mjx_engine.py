@@ -1,0 +1,570 @@
+"""MuJoCo XLA (``mujoco-mjx``, MuJoCo's physics in JAX) as an engine adapter (``mjx:VARIANT``); the interface
+is cross_checks.engines.base.
+
+Model: the MuJoCo model of ``cross_checks.engines.mujoco_engine.build_model`` (one free body, explicit
+inertial at the body origin = COM, a full tensor as principal moments + ``iquat`` so the body frame stays the
+scenario's, no geoms, gravity and time step from the scenario, the variant's integrator), put on the device
+with ``mjx.put_model``; each run's initial state goes into ``mjx.put_data``'s Data. Nothing of MuJoCo's
+defaults is left to chance beyond what build_model sets (no damping, stiffness or armature, no geom hence no
+contact, no actuator, no velocity clamp, no sleeping in MJX, one integration per step): each is pinned by a
+test.
+
+Precision: float64. The adapter turns on ``jax_enable_x64`` when it first imports JAX — a PROCESS-GLOBAL JAX
+setting (every JAX computation of the process is then float64 by default); MJX without it computes in float32.
+
+State mapping (docs/engine_conventions.md, "MJX 3.17.0"; MuJoCo's): ``qpos = [x_W, q_WB (w x y z)]``,
+``qvel = [v_W (COM, world axes), ω_B (BODY axes)]``, converted at the boundary with mujoco_engine's
+``to_qpos_qvel``/``to_packed``.
+
+The step (mujoco/mjx/_src/forward.py, ``step``): ``forward`` (kinematics, the bias force ``c(q, v)`` of the
+recursive Newton-Euler pass — the gyroscopic term ω × I ω among it — ``xfrc_applied`` mapped to joint forces,
+``qacc = M⁻¹ (qfrc_applied − qfrc_bias)``), then the variant's integrator:
+
+* ``euler`` (``euler``): ``v ← v + Δt qacc`` then ``qpos`` advanced with the NEW velocity (``_advance``),
+  the quaternion by the exponential map of the body-axes ω (``math.quat_integrate``: ``q ⊗ exp(ω_B Δt)``):
+  semi-implicit Euler with an explicit gyroscopic term — the scheme of ``mujoco:euler``.
+* ``rk4`` (``rungekutta4``): classical RK4, ``forward`` at every stage — with the SAME ``xfrc_applied``: MJX
+  has no control callback (nor any per-stage user hook), so an applied force is held over the step's four
+  stages (``Traits.forces_held``): fourth order where the forces are constant, first order where they change
+  within a step (state-dependent forces, velocity decay).
+* ``implicitfast`` (``implicit``): ``(M − Δt ∂f/∂v) qacc = f`` with ``derivative.deriv_smooth_vel``, which in
+  MJX 3.17 holds only the actuator and damping derivatives ("TODO(team): rne derivative"): for a lone free
+  body without damping it is zero and the step is ``euler``'s (a Cholesky solve instead of MuJoCo's LDLᵀ) —
+  an explicit gyroscopic term, unlike MuJoCo C's implicitfast (measured: docs/engine_conventions.md).
+
+Forces (harness semantics of base.py): the world force at the COM and the world torque of
+``base.harness_force_torque`` minus the weight ``m g`` (MJX applies gravity itself) go into the body's row of
+``xfrc_applied``, evaluated from the start-of-step state; velocity decay ``e^{−kΔt}`` is applied to the
+velocities before each step (that step's force and torque scaled alike) — for every variant, RK4 included
+(its forces are held). Constant forces are evaluated once, on the host, and passed into the compiled loop;
+state-dependent ones are evaluated every step by the package's force model (``step_floats.harness_fn``) on
+the host, from inside the compiled loop, through ``jax.pure_callback``.
+
+Compiled loop: the steps run inside one compiled function (``jax.lax.fori_loop`` over a chunk of CHUNK steps
+recording every state; the chunk is called again from the last state until the run is done), ``jax.vmap``-ed
+over the runs of a ``simulate_many`` call (models stacked leaf by leaf: Δt, mass and inertia are traced, so a
+ladder, or many scenarios of one model structure, share one executable) and over the rows of ``one_step``.
+Each executable is compiled ahead of time once per process (model structure, variant, batch size, with or
+without the force callback) and its compile time is kept apart from stepping: :func:`compile_stats`. JAX's
+persistent compilation cache lives under rbcheck's cache directory (``$RBCHECK_CACHE_DIR/jax`` or the
+platform cache dir's ``rbcheck/jax``).
+
+Fork safety: the sweep forks its workers. Nothing here imports JAX or MJX at module import or in
+``version()`` (package metadata and import specs only), so the parent process never initialises a JAX backend
+(multithreaded) before forking; each worker imports and compiles on its first run.
+
+Divergence: MJX neither warns nor stops on a blow-up; the first recorded state that is non-finite or has a
+component beyond BLOWUP_LIMIT ends the run as ``diverged at t = …``.
+"""
+from __future__ import annotations
+
+import contextlib
+import functools
+import io
+import os
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+from cross_checks.engines.base import (
+    SYMPLECTIC_EULER_EXPLICIT_GYRO,
+    EngineAdapter,
+    EngineError,
+    EngineNotInstalled,
+    RunRequest,
+    Traits,
+    Variant,
+    apply_decay_prestep,
+    decay_factors,
+    harness_force_torque,
+    installed_version,
+)
+from cross_checks.engines.step_floats import harness_fn
+from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
+
+__all__ = ["ENGINE", "VARIANTS", "CHUNK", "ONE_STEP_BATCH", "MAX_BATCH", "EngineError", "version", "simulate",
+           "simulate_many", "one_step", "device_model", "compile_stats", "reset_compiled", "jax_cache_dir",
+           "MjxAdapter"]
+
+ENGINE = "mjx"
+#: MJX's integrators (``mujoco.mjx._src.types.IntegratorType``: EULER, RK4, IMPLICITFAST), their declared
+#: orders from MuJoCo's documentation (Euler and implicitfast first order, RK4 fourth) and the traits read
+#: from mujoco/mjx/_src/forward.py (``euler``, ``rungekutta4``, ``implicit``) and derivative.py (see the
+#: module docstring).
+VARIANTS = {
+    "euler": Variant(1, "MJX Euler: semi-implicit Euler, explicit gyroscopic term, quaternion by the "
+                        "exponential map (mujoco:euler's scheme, in JAX)",
+                     traits=SYMPLECTIC_EULER_EXPLICIT_GYRO),
+    "rk4": Variant(4, "MJX RK4: classical 4th-order Runge-Kutta; the applied force and torque held over the "
+                      "four stages (no per-stage hook in MJX)", traits=Traits(forces_held=True)),
+    "implicitfast": Variant(1, "MJX implicitfast: velocity-implicit in the actuator and damping derivatives "
+                               "only (no RNE derivative in MJX): Euler's step on a lone free body",
+                            traits=SYMPLECTIC_EULER_EXPLICIT_GYRO),
+}
+
+#: Steps per call of the compiled loop (a run longer than this calls it again from its last state).
+CHUNK = 2048
+#: Rows of one one_step call (the sweep's local-error mode asks 64 at a time); more rows run in several calls.
+ONE_STEP_BATCH = 64
+#: Runs per compiled batch of simulate_many (padded to a power of two, so that batch sizes share executables).
+MAX_BATCH = 64
+_BODY = 1   # body id of the free body (0 is the world)
+_DIST = "mujoco-mjx"
+
+_LOCK = threading.RLock()
+
+
+# --- the engine, imported lazily (never at module import, never in version()) -----------------------------
+
+def jax_cache_dir() -> Path:
+    """Where JAX's persistent compilation cache is kept: ``jax`` in rbcheck's cache directory — the rule of
+    cross_checks.sweep.cache.cache_dir (``$RBCHECK_CACHE_DIR``, else ``$XDG_CACHE_HOME/rbcheck``, else
+    ``~/.cache/rbcheck``), restated here because an engine adapter does not import the sweep."""
+    if os.environ.get("RBCHECK_CACHE_DIR"):
+        return Path(os.environ["RBCHECK_CACHE_DIR"]) / "jax"
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "rbcheck" / "jax"
+
+
+def _check_installed() -> None:
+    """EngineNotInstalled when mujoco-mjx is not installed; ImportError when it is but MJX or JAX cannot be
+    found — from package metadata and import specs only (nothing imported, no JAX backend started)."""
+    import importlib.util
+    if installed_version(_DIST) is None:
+        raise EngineNotInstalled(f"{_DIST} is not installed (pip install 'rbcheck[mjx]')")
+    for mod, dist in (("jax", "jax"), ("jaxlib", "jaxlib")):
+        if importlib.util.find_spec(mod) is None:
+            raise ImportError(f"{_DIST} {installed_version(_DIST)} is installed but cannot be imported: "
+                              f"{dist} is missing (pip install 'rbcheck[mjx]')")
+    if importlib.util.find_spec("mujoco.mjx") is None:
+        raise ImportError(f"{_DIST} {installed_version(_DIST)} is installed but mujoco.mjx cannot be found")
+
+
+def version() -> str:
+    """MJX's version and the JAX release it runs on, e.g. ``3.17.0 (jax 0.10.2)``, from package metadata
+    (EngineNotInstalled when mujoco-mjx is absent)."""
+    _check_installed()
+    return _dist_version()
+
+
+@functools.lru_cache(maxsize=1)
+def _dist_version() -> str:
+    return f"{installed_version(_DIST)} (jax {installed_version('jax')})"
+
+
+@functools.lru_cache(maxsize=1)
+def _engine():
+    """``(jax, jax.numpy, mujoco.mjx)``, imported on first use, with float64 on (process-global) and the
+    persistent compilation cache in :func:`jax_cache_dir`. ImportError (with JAX's or MJX's words) when the
+    import fails."""
+    _check_installed()
+    try:
+        # mujoco.mjx prints "Failed to import warp: ..." on stdout when the optional Warp backend is absent
+        with contextlib.redirect_stdout(io.StringIO()):
+            import jax
+            jax.config.update("jax_enable_x64", True)
+            import jax.numpy as jnp
+            from mujoco import mjx
+    except Exception as exc:  # noqa: BLE001 - a broken install: the engine's own words
+        raise ImportError(f"{_DIST} {installed_version(_DIST)} is installed but cannot be imported: "
+                          f"{type(exc).__name__}: {exc}") from exc
+    try:
+        folder = jax_cache_dir()
+        folder.mkdir(parents=True, exist_ok=True)
+        jax.config.update("jax_compilation_cache_dir", str(folder))
+    except OSError:   # pragma: no cover - an unwritable cache directory only costs compile time
+        pass
+    return jax, jnp, mjx
+
+
+def _engine_or_error():
+    """:func:`_engine`, an import failure as EngineError; EngineError too in a process forked from one whose
+    JAX was already running (see :func:`_after_fork_in_child`)."""
+    if _FORK["inherited_jax"]:
+        raise EngineError("MJX cannot run in a process forked after JAX started in its parent (a running "
+                          "JAX backend does not survive fork: its threads are gone and it would hang); run "
+                          "the sweep with --jobs 1 from there, or from a process that has not run MJX")
+    try:
+        _FORK["started"] = True
+        return _engine()
+    except ImportError as exc:
+        raise EngineError(str(exc)) from None
+
+
+#: ``started``: this process has used JAX through this adapter (its backend is running from then on);
+#: ``inherited_jax``: this process was forked from one in which it had (set in the child at fork).
+_FORK = {"started": False, "inherited_jax": False}
+
+
+def _after_fork_in_child() -> None:
+    """In a child of ``os.fork``: if the parent had started JAX, the child must not use it (a forked JAX
+    hangs on its first computation: measured with the sweep's process pool under pytest), so
+    :func:`_engine_or_error` refuses with an EngineError — a failed row that says why, instead of a sweep that
+    never ends."""
+    if _FORK["started"]:
+        _FORK["inherited_jax"] = True
+
+
+os.register_at_fork(after_in_child=_after_fork_in_child)
+
+
+# --- compile bookkeeping ----------------------------------------------------------------------------------
+
+_COMPILED: dict = {}   # key -> compiled executable
+_STATS = {"compilations": 0, "compile_seconds": 0.0, "step_seconds": 0.0, "body_steps": 0}
+
+
+def compile_stats() -> dict:
+    """This process's compilations so far: ``compilations`` (count), ``compile_seconds`` (lowering + XLA
+    compile, wall s), and the stepping apart from it: ``step_seconds`` (wall s inside compiled loops) and
+    ``body_steps`` (steps × bodies they advanced)."""
+    return dict(_STATS)
+
+
+def reset_compiled() -> None:
+    """Forget the compiled executables and zero :func:`compile_stats` (the next run compiles again; JAX's
+    persistent cache may make that faster)."""
+    _COMPILED.clear()
+    _STATS.update(compilations=0, compile_seconds=0.0, step_seconds=0.0, body_steps=0)
+
+
+def _executable(key, fn, *args):
+    """The compiled ``fn`` for ``args`` (ahead-of-time: ``jax.jit(fn).lower(*args).compile()``), once per
+    ``key``; its compile time counted in :func:`compile_stats`."""
+    exe = _COMPILED.get(key)
+    if exe is None:
+        jax, _, _ = _engine()
+        t0 = time.perf_counter()
+        exe = jax.jit(fn).lower(*args).compile()
+        _STATS["compile_seconds"] += time.perf_counter() - t0
+        _STATS["compilations"] += 1
+        _COMPILED[key] = exe
+    return exe
+
+
+# --- models: one compiled MuJoCo model per scenario, on the device, stacked per structure -------------------
+
+def _meta_key(obj, prefix="") -> tuple:
+    """The static (non-array) fields of an MJX Model, recursively, except the name tables — what decides
+    whether two models share one compiled executable (the scenario's name is in the names; Δt, mass and
+    inertia are array leaves)."""
+    import dataclasses
+    jax, _, _ = _engine()
+    out = []
+    for f in dataclasses.fields(obj):
+        v = getattr(obj, f.name)
+        if f.name.startswith("name") or f.name == "signature":
+            continue
+        if dataclasses.is_dataclass(v):
+            out.extend(_meta_key(v, f"{prefix}{f.name}."))
+        elif not isinstance(v, jax.Array):
+            if isinstance(v, np.ndarray):
+                v = (v.dtype.str, v.shape, v.tobytes())
+            elif isinstance(v, tuple):
+                v = tuple((a.dtype.str, a.shape, a.tobytes()) if isinstance(a, np.ndarray) else a for a in v)
+            out.append((prefix + f.name, v))
+    return tuple(out)
+
+
+_TEMPLATES: dict = {}   # structure key -> (template MJX Model, its MjModel)
+
+
+#: The last models put on the device: ``(id(scenario), variant) -> (scenario, key, MJX Model)`` (the scenario
+#: held, so that its id stays its own); a scenario's other steps reuse its model with ``opt.timestep``
+#: replaced (``mjx.put_model`` costs ~40 ms, the step is all a Δt changes: tested against a fresh put).
+_PUT: dict = {}
+_PUT_MAX = 256
+
+
+def device_model(scenario, variant: str, dt_s: float):
+    """``(structure key, MJX Model)`` of the scenario's body for ``variant`` at ``dt_s``: mujoco_engine's
+    ``build_model``, then ``mjx.put_model``; the name tables replaced by those of the first model of the same
+    structure (so that its executables serve it). EngineError with MuJoCo's or MJX's words."""
+    from cross_checks.engines import mujoco_engine
+    _, jnp, mjx = _engine_or_error()
+    held = _PUT.get((id(scenario), variant))
+    if held is not None and held[0] is scenario:
+        _, key, xm = held
+        return key, xm.replace(opt=xm.opt.replace(timestep=jnp.asarray(float(dt_s), dtype=jnp.float64)))
+    m = mujoco_engine.build_model(scenario, variant, dt_s)
+    try:
+        xm = mjx.put_model(m)
+    except Exception as exc:  # noqa: BLE001 - MJX refuses a model feature: its own words
+        raise EngineError(f"MJX {version()} refused the model of scenario {scenario.name!r}: "
+                          f"{type(exc).__name__}: {exc}") from None
+    key = (variant, _meta_key(xm))
+    tpl = _TEMPLATES.get(key)
+    if tpl is None:
+        _TEMPLATES[key] = tpl = (xm, m)
+    else:
+        import dataclasses
+        xm = xm.replace(**{f.name: getattr(tpl[0], f.name) for f in dataclasses.fields(xm)
+                           if f.name.startswith("name") or f.name == "signature"})
+    if len(_PUT) >= _PUT_MAX:
+        _PUT.pop(next(iter(_PUT)))
+    _PUT[(id(scenario), variant)] = (scenario, key, xm)
+    return key, xm
+
+
+def _stack(models):
+    """The models' leaves stacked along a new first axis, on the host (one transfer per leaf when the
+    executable is called; ``jnp.stack`` of 124 leaves × 64 models costs ~2 s of dispatch)."""
+    jax, _, _ = _engine()
+    return jax.tree.map(lambda *xs: np.stack([np.asarray(x) for x in xs]), *models)
+
+
+# --- the host side of the force callback -------------------------------------------------------------------
+
+_HOST: dict = {}   # callback id -> (harness(y) -> 6 floats, weight (3,)): set for the duration of a run
+
+
+def _host_forces(qpos, qvel, ids):
+    """xfrc_applied rows (..., 6) for the states ``qpos`` (..., 7), ``qvel`` (..., 6) of the runs ``ids``:
+    each run's harness force (minus its weight) and torque, from the package's force model."""
+    from cross_checks.engines.mujoco_engine import to_packed
+    qpos, qvel, ids = np.asarray(qpos), np.asarray(qvel), np.asarray(ids)
+    shape = ids.shape
+    with np.errstate(all="ignore"):
+        y = to_packed(qpos.reshape(-1, 7), qvel.reshape(-1, 6))
+    out = np.empty((len(y), 6))
+    for k, (row, i) in enumerate(zip(y.tolist(), ids.reshape(-1).tolist())):
+        harness, (w0, w1, w2) = _HOST[i]
+        fx, fy, fz, tx, ty, tz = harness(row)
+        out[k] = (fx - w0, fy - w1, fz - w2, tx, ty, tz)
+    return out.reshape(*shape, 6)
+
+
+# --- the compiled functions ---------------------------------------------------------------------------------
+
+def _chunk_fn(d0, callback: bool):
+    """``run(models, qpos (B, 7), qvel (B, 6), gains (B, 6), xfrc (B, 6), ids (B,), n)`` -> states (B, CHUNK,
+    13) ``[qpos, qvel]`` after each of the first ``n`` steps (the rest zeros): the chunk of a free run,
+    vmapped over B runs. ``gains``: the pre-step decay factors on qvel; ``xfrc``: the constant applied
+    row, or with ``callback`` the host force model's at every step."""
+    jax, jnp, mjx = _engine()
+    f64 = jax.ShapeDtypeStruct((6,), jnp.float64)
+
+    def member(m, qpos, qvel, gain, xfrc, cb_id, n):
+        d = d0.replace(qpos=qpos, qvel=qvel)
+
+        def body(i, carry):
+            d, out = carry
+            if callback:
+                f = jax.pure_callback(_host_forces, f64, d.qpos, d.qvel, cb_id, vmap_method="broadcast_all")
+            else:
+                f = xfrc
+            d = d.replace(qvel=d.qvel * gain, xfrc_applied=d.xfrc_applied.at[_BODY].set(f))
+            d = mjx.step(m, d)
+            return d, out.at[i].set(jnp.concatenate([d.qpos, d.qvel]))
+
+        _, out = jax.lax.fori_loop(0, n, body, (d, jnp.zeros((CHUNK, 13))))
+        return out
+
+    def run(models, qpos, qvel, gains, xfrc, ids, n):
+        return jax.vmap(member, in_axes=(0, 0, 0, 0, 0, 0, None))(models, qpos, qvel, gains, xfrc, ids, n)
+    return run
+
+
+def _one_step_fn(d0):
+    """``step(model, qpos (R, 7), qvel (R, 6), xfrc (R, 6))`` -> (R, 13) ``[qpos, qvel]`` one step later."""
+    jax, jnp, mjx = _engine()
+
+    def member(m, qpos, qvel, xfrc):
+        d = d0.replace(qpos=qpos, qvel=qvel, xfrc_applied=d0.xfrc_applied.at[_BODY].set(xfrc))
+        d = mjx.step(m, d)
+        return jnp.concatenate([d.qpos, d.qvel])
+
+    def step(m, qpos, qvel, xfrc):
+        return jax.vmap(member, in_axes=(None, 0, 0, 0))(m, qpos, qvel, xfrc)
+    return step
+
+
+def _data0(key):
+    """A fresh MJX Data of the structure ``key`` (its template's MjModel)."""
+    import mujoco
+    _, _, mjx = _engine()
+    m = _TEMPLATES[key][1]
+    return mjx.put_data(m, mujoco.MjData(m))
+
+
+def _bucket(n: int) -> int:
+    """The batch size ``n`` runs are padded to: the next power of two (so that sizes share executables)."""
+    return 1 << max(0, int(n) - 1).bit_length()
+
+
+# --- adapter entry points ---------------------------------------------------------------------------------
+
+def _weight(scenario) -> np.ndarray:
+    return scenario.problem.body.mass_kg * np.asarray(scenario.problem.forces.gravity_W, dtype=float)
+
+
+def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
+    """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded (one
+    request of :func:`simulate_many`)."""
+    run = simulate_many(variant, [RunRequest(scenario, float(dt_s), int(n_steps))])[0]
+    if isinstance(run, EngineError):
+        raise run
+    return run
+
+
+def simulate_many(variant: str, requests) -> list:
+    """The runs of ``requests`` (``base.RunRequest``), each a Run (or its EngineError): grouped by model
+    structure and force callback, each group vmapped through the compiled chunk loop in batches of at most
+    MAX_BATCH runs."""
+    if variant not in VARIANTS:
+        raise ValueError(f"unknown mjx variant {variant!r}; variants: {', '.join(VARIANTS)}")
+    out: list = [None] * len(requests)
+    try:
+        _engine_or_error()
+    except EngineError as exc:
+        return [exc] * len(requests)
+    groups: dict = {}
+    with _LOCK:
+        for j, r in enumerate(requests):
+            try:
+                key, xm = device_model(r.scenario, variant, r.dt_s)
+            except EngineError as exc:
+                out[j] = exc
+                continue
+            callback = bool(r.scenario.problem.forces.state_dependent)
+            groups.setdefault((key, callback), []).append((j, xm))
+        for (key, callback), members in groups.items():
+            for start in range(0, len(members), MAX_BATCH):
+                batch = members[start:start + MAX_BATCH]
+                runs = _run_batch(key, callback, [requests[j] for j, _ in batch], [xm for _, xm in batch])
+                for (j, _), run in zip(batch, runs):
+                    out[j] = run
+    return out
+
+
+def _run_batch(key, callback: bool, reqs, models) -> list:
+    """The Runs of ``reqs`` (one structure; ``models`` their MJX models), vmapped chunk by chunk."""
+    from cross_checks.engines.mujoco_engine import to_packed, to_qpos_qvel
+    jax, jnp, _ = _engine()
+    B, M = len(reqs), _bucket(len(reqs))
+    pad = list(range(B)) + [0] * (M - B)
+    y0 = np.array([r.scenario.problem.initial_packed() for r in reqs])
+    qpos0, qvel0 = to_qpos_qvel(y0)
+    gains = np.empty((B, 6))
+    xfrc = np.zeros((B, 6))
+    ids = np.arange(B)
+    for k, r in enumerate(reqs):
+        gv, gw = (float(g) for g in decay_factors(r.scenario, r.dt_s))
+        gains[k] = (gv, gv, gv, gw, gw, gw)
+        if callback:
+            _HOST[k] = (harness_fn(r.scenario, r.dt_s), _weight(r.scenario).tolist())
+        else:
+            f, tau = harness_force_torque(r.scenario, y0[k], r.dt_s)
+            xfrc[k] = np.r_[f - _weight(r.scenario), tau]
+    stacked = _stack([models[k] for k in pad])
+    n_max = max(r.n_steps for r in reqs)
+    states = np.empty((B, n_max + 1, 13))
+    states[:, 0, 0:7], states[:, 0, 7:13] = qpos0, qvel0
+    qpos, qvel = jnp.asarray(qpos0[pad]), jnp.asarray(qvel0[pad])
+    args = (stacked, qpos, qvel, jnp.asarray(gains[pad]), jnp.asarray(xfrc[pad]), jnp.asarray(ids[pad]),
+            jnp.asarray(0, dtype=jnp.int32))
+    exe = _executable(("chunk", key, callback, M), _chunk_fn(_data0(key), callback), *args)
+    done = np.zeros(B, dtype=bool)   # diverged (the rest of its run is not needed)
+    try:
+        for s in range(0, n_max, CHUNK):
+            n = min(CHUNK, n_max - s)
+            t0 = time.perf_counter()
+            chunk = np.asarray(exe(stacked, qpos, qvel, *args[3:6], jnp.asarray(n, dtype=jnp.int32)))
+            _STATS["step_seconds"] += time.perf_counter() - t0
+            _STATS["body_steps"] += n * M
+            states[:, s + 1:s + n + 1] = chunk[:B, :n]
+            with np.errstate(all="ignore"):
+                done |= ~np.all(np.isfinite(chunk[:B, n - 1]), axis=-1)
+            if done.all():
+                break
+            qpos, qvel = jnp.asarray(chunk[:, n - 1, 0:7]), jnp.asarray(chunk[:, n - 1, 7:13])
+    finally:
+        if callback:
+            _HOST.clear()
+    runs = []
+    with np.errstate(all="ignore"):
+        for k, r in enumerate(reqs):
+            s = states[k, :r.n_steps + 1]
+            y = to_packed(s[:, 0:7], s[:, 7:13])
+            bad = bad_rows(y)
+            if bad.any():
+                n_bad = int(np.argmax(bad))
+                runs.append(diverged(y[:n_bad].copy(), r.dt_s, f" ({blowup_words(y[n_bad])})"))
+            else:
+                runs.append(Run(r.dt_s * np.arange(r.n_steps + 1), y))
+    return runs
+
+
+def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
+    """One step of ``dt_s`` from each row of ``y_start`` (T, 13), all rows vmapped (ONE_STEP_BATCH per call):
+    the forces from the row (host), the pre-step decay. Rows the engine blows up come back as MJX left
+    them."""
+    from cross_checks.engines.mujoco_engine import to_packed, to_qpos_qvel
+    if variant not in VARIANTS:
+        raise ValueError(f"unknown mjx variant {variant!r}; variants: {', '.join(VARIANTS)}")
+    jax, _, _ = _engine_or_error()
+    shape = np.shape(y_start)
+    y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
+    T = len(y_start)
+    with _LOCK:
+        key, xm = device_model(scenario, variant, dt_s)
+        host_model = jax.tree.map(np.asarray, xm)   # one argument signature, whichever way the model was made
+        weight = _weight(scenario)
+        harness = harness_fn(scenario, dt_s)
+        xfrc = np.empty((T, 6))
+        for i, row in enumerate(y_start.tolist()):
+            fx, fy, fz, tx, ty, tz = harness(row)
+            xfrc[i] = (fx - weight[0], fy - weight[1], fz - weight[2], tx, ty, tz)
+        with np.errstate(all="ignore"):
+            qpos_in, qvel_in = to_qpos_qvel(apply_decay_prestep(scenario, y_start, dt_s))
+        out = np.empty((T, 13))
+        fn = None
+        for s in range(0, T, ONE_STEP_BATCH):
+            rows = np.arange(s, min(s + ONE_STEP_BATCH, T))
+            take = np.r_[rows, np.full(ONE_STEP_BATCH - len(rows), rows[0])]
+            args = (host_model, qpos_in[take], qvel_in[take], xfrc[take])
+            if fn is None:
+                fn = _executable(("one_step", key, ONE_STEP_BATCH), _one_step_fn(_data0(key)), *args)
+            t0 = time.perf_counter()
+            out[rows] = np.asarray(fn(*args))[:len(rows)]
+            _STATS["step_seconds"] += time.perf_counter() - t0
+            _STATS["body_steps"] += ONE_STEP_BATCH
+    with np.errstate(all="ignore"):
+        return to_packed(out[:, 0:7], out[:, 7:13]).reshape(shape)
+
+
+class MjxAdapter(EngineAdapter):
+    """``mjx:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
+    (``pip install 'rbcheck[mjx]'``). Declared orders: Euler and implicitfast 1, RK4 4 (first order where the
+    forces change within a step: they are held over its stages)."""
+
+    name = ENGINE
+    variants = VARIANTS
+
+    def version(self) -> str:
+        return version()
+
+    def source_files(self) -> list:
+        """This module, the plain-float harness and mujoco_engine's model builder it uses, and MJX's Python
+        sources (found without importing them: the parent of a sweep must not start JAX)."""
+        import importlib.util
+
+        from cross_checks.engines import mujoco_engine, step_floats
+        files = [*super().source_files(), Path(step_floats.__file__), Path(mujoco_engine.__file__)]
+        spec = importlib.util.find_spec("mujoco.mjx")
+        if spec is not None and spec.origin:
+            src = Path(spec.origin).parent / "_src"
+            files += sorted(p for p in src.glob("*.py") if not p.name.endswith("_test.py"))
+        return files
+
+    def simulate(self, scenario, variant: str, dt_s: float, n_steps: int) -> Run:
+        return simulate(scenario, variant, dt_s, n_steps)
+
+    def simulate_many(self, variant: str, requests) -> list:
+        """:func:`simulate_many`: the requests vmapped through one compiled loop per model structure."""
+        return simulate_many(variant, requests)
+
+    def one_step(self, scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
+        return one_step(scenario, variant, dt_s, y_start)
