@@ -30,7 +30,7 @@ def test_workflow_parses_and_uses_the_readme_commands():
     # the main command's results are compared as they are (Drake absent: one line, exit 0) ...
     assert f".venv/bin/rbcheck compare baselines/default {out}" in runs
     # ... and the baseline's Drake and DART rows are gated by a sweep with them, compared with --require
-    full = [r for r in runs if 'pip install -q -e ".[drake,engines]"' in r and "rbcheck sweep" in r]
+    full = [r for r in runs if 'pip install -q -e ".[drake,dart]"' in r and "rbcheck sweep" in r]
     assert full, "no sweep with Drake"
     full_out = re.search(r"rbcheck sweep .*--out (\S+)", full[0])[1]
     compare = [r for r in runs if f"rbcheck compare baselines/default {full_out}" in r]
