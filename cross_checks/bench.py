@@ -192,18 +192,6 @@ def adapter_single_us(engine_module, variant, n_steps, repeats):
     return _per_step_us(n_steps, lambda: engine_module.simulate(sc, variant, H, n_steps), repeats)
 
 
-def _bench_scenarios(n_bodies) -> list:
-    """The benchmark's body as N scenarios, body i starting with ω0 = _initial_w(N)[i] (the rows' bodies)."""
-    import dataclasses
-    base = _bench_scenario()
-    p = base.problem
-    out = []
-    for w in _initial_w(n_bodies):
-        initial = dataclasses.replace(p.initial, w_W=np.array(w, dtype=float))
-        out.append(dataclasses.replace(base, problem=dataclasses.replace(p, initial=initial)))
-    return out
-
-
 def batching_variants(engines=None) -> list:
     """The available ``ENGINE:VARIANT`` whose adapter batches (overrides ``EngineAdapter.simulate_many``), the
     engines of their own rows (reference, MuJoCo, PyBullet) excepted; ``engines`` narrows them."""
@@ -219,14 +207,17 @@ def batching_variants(engines=None) -> list:
 
 
 def adapter_batched(variant, n_bodies, n_steps, repeats) -> dict:
-    """Body-steps/s of N trajectories (the rows' bodies) in ONE ``simulate_many`` call of an engine's adapter,
-    every state recorded — what a sweep or a fuzz batch pays. The untimed warm-up call takes any compilation
-    (JIT) out of the figure; an engine reports its compile time apart (docs/engine_conventions.md)."""
+    """Body-steps/s of N trajectories of the benchmark's body (one scenario, N requests: the adapters build
+    their model — MJX's put_model, a Brax system, a Genesis scene — once per scenario, which a sweep's ladder
+    shares too) in ONE ``simulate_many`` call of an engine's adapter, every state recorded. The untimed warm-up
+    call takes any compilation (JIT) out of the figure; an engine reports its compile time apart
+    (docs/engine_conventions.md)."""
     from cross_checks.engines import get_adapter
     from cross_checks.engines.base import RunRequest
     engine, name = variant.split(":", 1)
     adapter = get_adapter(engine)
-    requests = [RunRequest(sc, H, n_steps) for sc in _bench_scenarios(n_bodies)]
+    sc = _bench_scenario()
+    requests = [RunRequest(sc, H, n_steps) for _ in range(n_bodies)]
 
     def run():
         for res in adapter.simulate_many(name, requests):

@@ -291,8 +291,9 @@ def _expectation(scenario, variant, quantity, mode, physics, measure_physics) ->
     p = nominal_order(variant)
     if p is None:
         return Expectation("converges", None, f"no nominal order is recorded for {variant}")
-    if free.order == 1.0 and p > 1.0:
-        return Expectation("converges", 2.0, free.reason + ": one step has an O(Δt²) local error")
+    if free.order is not None and free.order < p:
+        return Expectation("converges", free.order + 1.0,
+                           f"{free.reason}: one step has an O(Δt^{free.order + 1.0:g}) local error")
     return Expectation("converges", p + 1.0,
                        f"one step of an order-{p:g} scheme has an O(Δt^{p + 1:g}) local error")
 
@@ -300,6 +301,14 @@ def _expectation(scenario, variant, quantity, mode, physics, measure_physics) ->
 _HELD_FORCES_REASON = ("{variant} is an order-{p:g} scheme, but its engine holds the applied force and "
                        "torque over the stages of a step; here they change within a step (they depend on the "
                        "state, or the velocities decay), and that zero-order hold makes the step first order")
+
+
+def rotation_turns(scenario) -> bool:
+    """Whether the body-axes angular velocity changes direction within a step: the gyroscopic term matters
+    (an anisotropic body off its principal axes) or a torque or off-COM force acts."""
+    fm = scenario.problem.forces
+    return bool(gyroscopic_term_matters(scenario) or fm.torques or fm.springs
+                or any(np.any(pf.point_B != 0) for pf in fm.point_forces))
 
 
 def forces_change_within_step(scenario, tr: Traits) -> bool:
@@ -327,6 +336,11 @@ def _free_running(scenario, variant: str, quantity: str, physics,
         return Expectation("converges", None, f"no nominal order is recorded for {variant}")
     if p > 1.0 and forces_change_within_step(scenario, tr):
         return Expectation("converges", 1.0, _HELD_FORCES_REASON.format(variant=variant, p=p))
+    if (tr.rotation_order is not None and tr.rotation_order < p and rotation_turns(scenario)
+            and (quantity in _ROTATION or rotation_drives_translation(scenario))):
+        return Expectation("converges", tr.rotation_order,
+                           f"{variant} is an order-{p:g} scheme, but its attitude update is order "
+                           f"{tr.rotation_order:g} where the body-axes ω turns within a step, as it does here")
     if p == 1.0 and (physics is not None or measure_physics):
         why = _memo(("pre_asymptotic", id(scenario), tr, p, quantity, id(physics)), (scenario, physics),
                     lambda: _pre_asymptotic_reason(scenario, variant, quantity, tr, physics))
@@ -420,8 +434,11 @@ def energy_drift_bound(scenario, variant: str, dt_s: float) -> float | None:
     p = nominal_order(variant)
     if p is None:
         return None
-    if forces_change_within_step(scenario, traits(variant)):
+    tr = traits(variant)
+    if forces_change_within_step(scenario, tr):
         p = min(p, 1.0)
+    if tr.rotation_order is not None and rotation_turns(scenario):
+        p = min(p, tr.rotation_order)
     w2 = characteristic_rate_sq(scenario)
     g = float(np.linalg.norm(scenario.problem.forces.gravity_W))
     if g > 0.0:

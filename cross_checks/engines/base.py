@@ -226,6 +226,9 @@ class Traits:
           turns; that perturbation grows like any other (the measured amplification).
     rotation_sign : +1 the rotational energy grows (an explicit gyroscopic term), −1 it decays (an
         implicit one), 0 none, None unknown (both are considered).
+    rotation_order : the order of the attitude update where the body-axes ω turns within a step, when it is
+        below the variant's order (MJX's RK4 advances q by ONE exponential of the stages' weighted ω_B: second
+        order); None: the variant's order.
     velocity_from_positions : the step recomputes the velocity as the change of position over Δt (a
         position-based pipeline): the velocity then carries the positions' round-off divided by Δt, which grows
         as Δt shrinks (metrics.differencing_floor).
@@ -245,6 +248,7 @@ class Traits:
     forces_held: bool = False
     precision: str = "float64"
     velocity_from_positions: bool = False
+    rotation_order: float | None = None
 
     def __post_init__(self):
         if self.precision not in ("float64", "float32"):

@@ -3,7 +3,6 @@ the scenarios themselves (no timing is asserted: speed lives in the benchmark's 
 single-trajectory cost beside MuJoCo's through the same adapter interface (None when Drake is absent)."""
 import math
 
-import numpy as np
 import pytest
 
 from cross_checks import bench, engines
@@ -113,12 +112,6 @@ def test_engines_that_batch_are_measured_through_simulate_many_at_the_tables_n(m
     _Counting.calls.clear()
     st = bench.adapter_batched("countsim:expmap_gyro", 7, 5, 2)
     assert _Counting.calls == [7, 7, 7] and st["repeats"] == 2 and st["median"] > 0
-
-
-def test_the_benchs_bodies_are_the_rows_bodies():
-    scs = bench._bench_scenarios(4)
-    assert np.array_equal(np.array([s.problem.initial.w_W for s in scs]), bench._initial_w(4))
-    assert all(repr(s.problem.forces) == repr(bench._bench_scenario().problem.forces) for s in scs)
 
 
 def test_the_table_has_a_row_per_batching_adapter():
