@@ -143,8 +143,8 @@ def roundoff_floor(scale: float, n_steps: int, reference_label: str = "analytic"
     return float(reference_error) + eps * scale * (biased + math.sqrt(n) * max(1.0, float(amplification)))
 
 
-def differencing_floor(position_scale: float, n_steps: int, dt_s: float, eps: float = tol.ROUNDOFF_PER_STEP_REL,
-                       amplification: float = 1.0) -> float:
+def differencing_floor(position_scale: float, n_steps: int, dt_s: float,
+                       eps: float = tol.ROUNDOFF_PER_STEP_REL, amplification: float = 1.0) -> float:
     """Round-off of a velocity recomputed as the change of position over Δt (engines.base.Traits.
     velocity_from_positions), m/s: the positions' round-off after ``n_steps`` steps (``ε·|x|·(N + √N·A)``, as
     :func:`roundoff_floor`'s run round-off of the position) divided by Δt — one step's ``ε|x|/Δt`` for N = 1.

@@ -18,12 +18,12 @@ from cross_checks.core.names import NAME_RE, did_you_mean
 from cross_checks.core.trajectory import Trajectory
 from cross_checks.engines.base import EngineAdapter, EngineError, EngineNotInstalled, Variant
 
-__all__ = ["ENTRY_POINT_GROUP", "VariantInfo", "EngineEntry", "all_variants", "available_variants", "get_adapter",
-           "split_variant", "default_variant", "run_variant", "run_variants", "engine_entries", "engine_variants",
-           "declared_variant", "declared_order", "declared_imitation", "declared_traits", "has_one_step",
-           "load_engine_files", "engine_files_registered", "register_adapter", "user_engines", "adopt_user_engines", "engine_provenance",
-           "reset_registry", "EngineUnavailable", "UnknownVariant", "EngineAdapter", "EngineError", "Variant",
-           "REQUIRED_ENGINES", "unusable_required_engines"]
+__all__ = ["ENTRY_POINT_GROUP", "VariantInfo", "EngineEntry", "all_variants", "available_variants",
+           "get_adapter", "split_variant", "default_variant", "run_variant", "run_variants", "engine_entries",
+           "engine_variants", "declared_variant", "declared_order", "declared_imitation", "declared_traits",
+           "has_one_step", "load_engine_files", "engine_files_registered", "register_adapter", "user_engines",
+           "adopt_user_engines", "engine_provenance", "reset_registry", "EngineUnavailable", "UnknownVariant",
+           "EngineAdapter", "EngineError", "Variant", "REQUIRED_ENGINES", "unusable_required_engines"]
 
 ENTRY_POINT_GROUP = "rbcheck.engines"
 #: rbcheck's own engines, in the order of `rbcheck list`; other engines follow by name.
@@ -129,7 +129,8 @@ def _load_entry_points() -> dict:
             found[ep.name] = prev
             loser = entry.source.rsplit("(", 1)[-1].rstrip(")")
             found[f"{ep.name} ({loser})"] = EngineEntry(
-                ep.name, None, entry.source, f"the engine name {ep.name!r} is already registered by {prev.source}")
+                ep.name, None, entry.source,
+                f"the engine name {ep.name!r} is already registered by {prev.source}")
             continue
         found[ep.name] = entry
     order = {n: i for i, n in enumerate(BUILTIN_ENGINES)}
@@ -142,8 +143,8 @@ def _registry() -> dict:
         _entries = _load_entry_points()
         if "reference" not in _entries:
             raise EngineUnavailable(
-                f"no 'reference' engine under the entry-point group {ENTRY_POINT_GROUP!r}: rbcheck's installation "
-                "metadata is missing or stale; reinstall it (pip install -e .)")
+                f"no 'reference' engine under the entry-point group {ENTRY_POINT_GROUP!r}: rbcheck's "
+                "installation metadata is missing or stale; reinstall it (pip install -e .)")
     return _entries
 
 
@@ -159,7 +160,8 @@ def _entry(engine: str) -> EngineEntry:
     if engine in reg:
         return reg[engine]
     names = list(dict.fromkeys(e.name for e in engine_entries()))
-    raise UnknownVariant(f"unknown engine {engine!r}{did_you_mean(engine, names)}; engines: {', '.join(names)}"
+    raise UnknownVariant(f"unknown engine {engine!r}{did_you_mean(engine, names)}; "
+                         f"engines: {', '.join(names)}"
                          + ("" if _user else " (add your own with --engine-file FILE)"))
 
 
@@ -178,7 +180,8 @@ def register_adapter(adapter: EngineAdapter, source: str) -> EngineEntry:
     taken by another engine or the adapter does not fulfil the interface."""
     name = getattr(adapter, "name", "")
     if name in _registry():
-        raise ValueError(f"name {name!r} is already an engine ({_registry()[name].source}); choose another name")
+        raise ValueError(f"name {name!r} is already an engine ({_registry()[name].source}); "
+                         "choose another name")
     if name in _user:
         prev = _user[name]
         if prev.source == source and getattr(prev.adapter, "same_as", lambda _: False)(adapter):
@@ -248,7 +251,8 @@ def get_adapter(engine: str) -> EngineAdapter:
             raise EngineUnavailable(_failures[engine]) from None
         except ImportError as exc:
             text = str(exc)
-            _failures[engine] = text if "cannot be imported" in text else f"{engine} cannot be imported: {text}"
+            _failures[engine] = (text if "cannot be imported" in text
+                                 else f"{engine} cannot be imported: {text}")
             raise EngineUnavailable(_failures[engine]) from None
         except Exception as exc:  # noqa: BLE001 - a plug-in's version() may fail in any way
             _failures[engine] = f"{engine}: version() failed: {type(exc).__name__}: {exc}"
@@ -283,7 +287,8 @@ def split_variant(name: str):
     if e.adapter is None:
         raise UnknownVariant(f"engine {engine} cannot be loaded: {e.load_error}")
     if variant not in e.adapter.variants:
-        raise UnknownVariant(f"unknown variant {variant!r} of {engine}{did_you_mean(variant, e.adapter.variants)}; variants: "
+        raise UnknownVariant(f"unknown variant {variant!r} of {engine}"
+                             f"{did_you_mean(variant, e.adapter.variants)}; variants: "
                              + ", ".join(f"{engine}:{v}" for v in e.adapter.variants))
     return engine, variant
 
@@ -339,8 +344,8 @@ def all_variants() -> list[VariantInfo]:
         except EngineUnavailable as exc:
             ok, reason, ver = False, str(exc), ""
         for v, spec in e.adapter.variants.items():
-            out.append(VariantInfo(f"{e.name}:{v}", e.name, v, ok, reason, spec.description, ver, spec.order, e.source,
-                                   e.name not in _absent, required))
+            out.append(VariantInfo(f"{e.name}:{v}", e.name, v, ok, reason, spec.description, ver, spec.order,
+                                   e.source, e.name not in _absent, required))
     return out
 
 
@@ -405,7 +410,8 @@ def run_variants(scenario, name: str, dts, duration_s: float | None = None) -> l
     return out
 
 
-def run_variant(scenario, name: str, dt_s: float | None = None, duration_s: float | None = None) -> Trajectory:
+def run_variant(scenario, name: str, dt_s: float | None = None,
+                duration_s: float | None = None) -> Trajectory:
     """Run ``scenario`` with engine variant ``name``; the Trajectory's meta records engine, version,
     variant, dt, scenario hash, status (``ok``/``diverged``) and ``diverged_at_s``. Raises the engine's
     EngineError."""

@@ -57,10 +57,10 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["EngineAdapter", "Variant", "harness_force_torque", "stage_force_torque", "harness_force_torque_floats",
-           "stage_force_torque_floats", "apply_decay_prestep",
-           "decay_factors", "EngineError", "optional_import", "require", "EngineNotInstalled", "installed_version",
-           "library_files", "RunRequest", "Traits",
+__all__ = ["EngineAdapter", "Variant", "harness_force_torque", "stage_force_torque",
+           "harness_force_torque_floats", "stage_force_torque_floats", "apply_decay_prestep",
+           "decay_factors", "EngineError", "optional_import", "require", "EngineNotInstalled",
+           "installed_version", "library_files", "RunRequest", "Traits",
            "SYMPLECTIC_EULER_EXPLICIT_GYRO", "SYMPLECTIC_EULER_IMPLICIT_GYRO", "WHOLE_STATE_EXPLICIT_EULER",
            "WHOLE_STATE_IMPLICIT_EULER", "HIGHER_ORDER", "DEFAULT_TRAITS"]
 
@@ -208,8 +208,8 @@ class RunRequest:
 
 @dataclass(frozen=True)
 class Traits:
-    """What a variant's step does besides its order (the order itself: :attr:`Variant.order`); the sweep derives
-    a variant's expectations from them (cross_checks.analysis.expectations).
+    """What a variant's step does besides its order (the order itself: :attr:`Variant.order`); the sweep
+    derives a variant's expectations from them (cross_checks.analysis.expectations).
 
     gyroscopic_term : whether the rotation update has the gyroscopic torque −ω × (I ω).
     translation_drift : how a first-order step treats the amplitude of a translational oscillation
@@ -230,11 +230,12 @@ class Traits:
         below the variant's order (MJX's RK4 advances q by ONE exponential of the stages' weighted ω_B: second
         order); None: the variant's order.
     velocity_from_positions : the step recomputes the velocity as the change of position over Δt (a
-        position-based pipeline): the velocity then carries the positions' round-off divided by Δt, which grows
-        as Δt shrinks (metrics.differencing_floor).
+        position-based pipeline): the velocity then carries the positions' round-off divided by Δt, which
+        grows as Δt shrinks (metrics.differencing_floor).
     precision : the floating-point format the engine's step computes in, "float64" or "float32"
-        (core.tolerances.MACHINE_EPSILON): every round-off floor of the variant's verdicts scales with its ε,
-        and a float32 variant is judged on a ladder that reaches coarser steps (docs/verdicts.md, "Precision").
+        (core.tolerances.MACHINE_EPSILON): every round-off floor of the variant's verdicts scales with its
+        ε, and a float32 variant is judged on a ladder that reaches coarser steps (docs/verdicts.md,
+        "Precision").
     forces_held : the engine holds the applied force and torque it was given over all the stages of a
         step (it cannot evaluate them per stage). On a scenario whose forces change within a step
         (state-dependent forces, velocity decay) a multi-stage scheme is then first order: the held force
@@ -258,9 +259,9 @@ class Traits:
 SYMPLECTIC_EULER_EXPLICIT_GYRO = Traits(rotation_drift="body", rotation_sign=+1)
 #: The same with an implicit gyroscopic term (MuJoCo implicit, PyBullet maximal).
 SYMPLECTIC_EULER_IMPLICIT_GYRO = Traits(rotation_drift="body", rotation_sign=-1)
-#: Whole-state Euler in world axes: an oscillator's amplitude grows (explicit) or damps (implicit), the rotational
-#: energy does the opposite (measured on every tumbling body of the catalog: explicit Euler loses 2E and |L|²,
-#: implicit gains them; the attitude and ω_W steps are coupled through I_W).
+#: Whole-state Euler in world axes: an oscillator's amplitude grows (explicit) or damps (implicit), the
+#: rotational energy does the opposite (measured on every tumbling body of the catalog: explicit Euler loses
+#: 2E and |L|², implicit gains them; the attitude and ω_W steps are coupled through I_W).
 WHOLE_STATE_EXPLICIT_EULER = Traits(translation_drift=+1, rotation_drift="whole_state", rotation_sign=-1)
 WHOLE_STATE_IMPLICIT_EULER = Traits(translation_drift=-1, rotation_drift="whole_state", rotation_sign=+1)
 #: A variant that declares no traits (e.g. a user engine with only its declared order): assumed to
@@ -276,11 +277,11 @@ HIGHER_ORDER = Traits()
 
 @dataclass(frozen=True)
 class Variant:
-    """A variant an engine offers: its declared global order (the error at a fixed final time shrinks
-    like Δt^order; verdicts check it), a one-line description for ``rbcheck list`` and the report, and
-    ``traits``: what the step does besides its order (:class:`Traits`; None: the cautious default of
-    cross_checks.analysis.expectations), and ``imitates``: the ``ENGINE:VARIANT`` whose scheme this one claims to
-    compute ("" for none), whose traits it then gets — so that it is judged exactly as that scheme."""
+    """A variant an engine offers: its declared global order (the error at a fixed final time shrinks like
+    Δt^order; verdicts check it), a one-line description for ``rbcheck list`` and the report, and ``traits``:
+    what the step does besides its order (:class:`Traits`; None: the cautious default of
+    cross_checks.analysis.expectations), and ``imitates``: the ``ENGINE:VARIANT`` whose scheme this one claims
+    to compute ("" for none), whose traits it then gets — so that it is judged exactly as that scheme."""
 
     order: float
     description: str = ""

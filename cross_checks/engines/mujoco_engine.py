@@ -52,7 +52,8 @@ from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
 
 mujoco, _IMPORT_ERROR = optional_import("mujoco")
 
-__all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate", "simulate_many", "one_step", "build_model"]
+__all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate", "simulate_many", "one_step",
+           "build_model"]
 
 ENGINE = "mujoco"
 #: The variants, named after MuJoCo's integrators (``mjtIntegrator.mjINT_<NAME>``), with their declared
@@ -60,16 +61,20 @@ ENGINE = "mujoco"
 #: forces evaluated at every stage (4); implicit(fast) is velocity-implicit Euler, one linearised solve
 #: per step (1).
 VARIANTS = {
-    "euler": Variant(1, "MuJoCo Euler: semi-implicit Euler, explicit gyroscopic term, quaternion by the exponential map",
+    "euler": Variant(1, "MuJoCo Euler: semi-implicit Euler, explicit gyroscopic term, quaternion by the "
+                        "exponential map",
                      traits=SYMPLECTIC_EULER_EXPLICIT_GYRO),
-    "rk4": Variant(4, "MuJoCo RK4: classical 4th-order Runge-Kutta; state-dependent forces evaluated at every stage",
+    "rk4": Variant(4, "MuJoCo RK4: classical 4th-order Runge-Kutta; state-dependent forces evaluated at "
+                      "every stage",
                    traits=HIGHER_ORDER),
-    "implicit": Variant(1, "MuJoCo implicit: velocity-implicit Euler (gyroscopic/velocity derivatives in the step)",
+    "implicit": Variant(1, "MuJoCo implicit: velocity-implicit Euler (gyroscopic/velocity derivatives in "
+                           "the step)",
                         traits=SYMPLECTIC_EULER_IMPLICIT_GYRO),
-    "implicitfast": Variant(1, "MuJoCo implicitfast: implicit Euler without the Coriolis/centrifugal derivatives",
+    "implicitfast": Variant(1, "MuJoCo implicitfast: implicit Euler without the Coriolis/centrifugal "
+                               "derivatives",
                             traits=SYMPLECTIC_EULER_IMPLICIT_GYRO),
-    "discrete": Variant(1, "MuJoCo discrete: constraint solve and implicit velocity update in one, in the metric "
-                           "M + hD + h²K (for a lone free body: implicitfast's step)",
+    "discrete": Variant(1, "MuJoCo discrete: constraint solve and implicit velocity update in one, in the "
+                           "metric M + hD + h²K (for a lone free body: implicitfast's step)",
                         traits=SYMPLECTIC_EULER_IMPLICIT_GYRO),
 }
 
@@ -394,7 +399,8 @@ def _simulate_loop(scenario, m, d, dt_s, n_steps, control, per_step, decay, xfrc
                     session.raise_callback_error()
                 qpos_out[n] = qpos
                 qvel_out[n] = qvel
-            y[start:stop] = to_packed(qpos_out[start:stop], qvel_out[start:stop])   # row by row: each chunk once
+            # row by row: each chunk once
+            y[start:stop] = to_packed(qpos_out[start:stop], qvel_out[start:stop])
             bad = _divergence(y[start:stop], start, (start, stop - 1), session, dt_s)
             if bad is not None:
                 n_bad, what = bad
@@ -564,7 +570,8 @@ def _rollout_steps(reqs, mods, datas, state, xfrc, per_step, g, weights, qpos, q
     try:
         for n in range(1, len(qpos)):
             for k in per_step:
-                fx, fy, fz, tx, ty, tz = harness[k](_packed_lists(qpos[n - 1, k].tolist(), qvel[n - 1, k].tolist()))
+                fx, fy, fz, tx, ty, tz = harness[k](_packed_lists(qpos[n - 1, k].tolist(),
+                                                                  qvel[n - 1, k].tolist()))
                 w0, w1, w2 = (float(c) for c in weights[k])
                 xfrc[k, 0, 6:12] = (fx - w0, fy - w1, fz - w2, tx, ty, tz)
             st = state.copy()

@@ -43,8 +43,8 @@ from cross_checks.analysis.judge import judge_ladder, two_term_consistent  # noq
 from cross_checks.core import tolerances as tol
 from cross_checks.core.quantities import QUANTITIES, UNITS, state_errors
 
-__all__ = ["Context", "ladder_errors", "free_running_order", "run_floor", "one_step_order", "conservation", "agreement",
-           "PROPERTIES", "equivalent_pairs"]
+__all__ = ["Context", "ladder_errors", "free_running_order", "run_floor", "one_step_order", "conservation",
+           "agreement", "PROPERTIES", "equivalent_pairs"]
 
 PROPERTIES = ("free_running_order", "one_step_order", "conservation", "agreement")
 _EPS = 2.0 ** -52
@@ -198,13 +198,14 @@ def free_running_order(ctx: Context, variant: str, i: int, ladder, errors=None) 
     return out, tally
 
 
-def run_floor(ctx, variant: str, q: str, n: int, h_s: float, reference_error, amplification: float = 1.0) -> float:
-    """The round-off floor of a run of ``n`` steps of ``h_s`` for quantity ``q`` (metrics.roundoff_floor in the
-    variant's precision; plus metrics.differencing_floor for the velocity of a variant that recomputes it from
-    positions), as the sweep's convergence records have it (sweep.assemble.ladder_floors)."""
+def run_floor(ctx, variant: str, q: str, n: int, h_s: float, reference_error,
+              amplification: float = 1.0) -> float:
+    """The round-off floor of a run of ``n`` steps of ``h_s`` for quantity ``q`` (metrics.roundoff_floor in
+    the variant's precision; plus metrics.differencing_floor for the velocity of a variant that recomputes it
+    from positions), as the sweep's convergence records have it (sweep.assemble.ladder_floors)."""
     eps = machine_epsilon(variant)
-    f = M.roundoff_floor(ctx.scales[q], n, reference_error=reference_error, amplification=amplification, quantity=q,
-                         eps=eps)
+    f = M.roundoff_floor(ctx.scales[q], n, reference_error=reference_error, amplification=amplification,
+                         quantity=q, eps=eps)
     if q == "velocity" and traits(variant).velocity_from_positions:
         f += M.differencing_floor(ctx.scales["position"], n, h_s, eps, amplification)
     return f

@@ -83,11 +83,13 @@ def ladder_floors(ladder, q, scales, mode, label, measured, eps=tol.ROUNDOFF_PER
                                    amplification=amp, quantity=q, eps=eps) for r in ladder]
     else:
         local = measured.get("local_reference_error") or {}
-        floors = [M.roundoff_floor(scale, 1, label, reference_error=(local.get(repr(float(r["dt"]))) or {}).get(q),
+        floors = [M.roundoff_floor(scale, 1, label,
+                                   reference_error=(local.get(repr(float(r["dt"]))) or {}).get(q),
                                    quantity=q, eps=eps) for r in ladder]
     if differenced and q == "velocity":
         x_scale = scales.get("position", 1.0)
-        floors = [f + M.differencing_floor(x_scale, max(int(r["steps"]), 1) if free else 1, float(r["dt"]), eps, amp)
+        floors = [f + M.differencing_floor(x_scale, max(int(r["steps"]), 1) if free else 1, float(r["dt"]),
+                                           eps, amp)
                   for f, r in zip(floors, ladder)]
     return floors
 

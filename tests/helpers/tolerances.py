@@ -11,7 +11,8 @@ QUAT_ALGEBRA = 1e-14
 #: @, vectorised cross): per-step difference ~ ε|y|, accumulated over ≤ 1000 steps of a bounded
 #: problem: 1000 · 10 ε ≈ 2e-12 relative.
 READABLE_VS_BATCHED = 1e-11
-#: Closed-form discretisation-error predictions matched to 6 significant digits (tests/reference_sim/test_analytic.py).
+#: Closed-form discretisation-error predictions matched to 6 significant digits
+#: (tests/reference_sim/test_analytic.py).
 CLOSED_FORM_PREDICTION_REL = 1e-6
 #: tumbling_box: 10 s of a fast (5 rad/s) tumble near the intermediate axis, ~10 flips; the ground
 #: truth's error grows through each flip: measured 1.4e-8 at DOP853 rtol 1e-13 and 2.8e-9 at 3e-14,
@@ -56,8 +57,8 @@ ADAPTER_SPIN_100_STEPS = 1e-13
 ADAPTER_ONE_STEP_REPLAY = 1e-14
 #: Semi-implicit closed form of a projectile (h = 0.01, 1 s): sums of 100 terms of size ≤ 3 m: 100 ε · 3.
 PYB_PROJECTILE_EXACT = 1e-12
-#: PyBullet's default multibody damping must visibly fail the projectile: docs/engine_conventions.md measured 0.15 m
-#: after 1 s; anything above 1 cm is far outside discretisation (which is exactly zero here).
+#: PyBullet's default multibody damping must visibly fail the projectile: docs/engine_conventions.md measured
+#: 0.15 m after 1 s; anything above 1 cm is far outside discretisation (which is exactly zero here).
 PYB_DEFAULT_DAMPING_MIN_ERROR = 1e-2
 #: mujoco:rk4 vs DOP853 (GROUND_TRUTH_RTOL) on tennis_racket at dt = 1e-3: the required bound.
 MJ_RK4_VS_GROUND_TRUTH = 1e-8
@@ -101,8 +102,9 @@ DART_TAYLOR_BRANCH_MIN_DIFF = 1e-10
 #: one_step from a recorded state vs the free run's next row: the same DART step from the state through the
 #: boundary conversion (rotation vector -> quaternion -> rotation vector): a few ε of unit-size numbers.
 DART_REPLAY_REL = 1e-13
-#: jaxsim conventions read back through jaxsim's own conversions (Mixed <-> inertial velocities, the transform of
-#: a quaternion): a few roundings of unit-size numbers (measured ≤ 2e-16 on the tilted body at (1, −2, 0.5) m).
+#: jaxsim conventions read back through jaxsim's own conversions (Mixed <-> inertial velocities,
+#: the transform of a quaternion): a few roundings of unit-size numbers (measured ≤ 2e-16 on the
+#: tilted body at (1, −2, 0.5) m).
 JAXSIM_ROUND_TRIP = 1e-15
 #: One jaxsim semi-implicit Euler step vs the hand-derived step in the inertial representation: a 3×3 solve,
 #: cross products of numbers up to ~10; measured 0 in ω and x, 2.2e-16 in v and q: 10 ε scaled.
@@ -113,29 +115,32 @@ JAXSIM_RK4_VS_REFERENCE_STEP = 1e-9
 #: one_step from a recorded state vs the free run's next row: the same compiled step, vmapped vs in a loop
 #: (XLA may fuse them differently): a few ε of numbers of order 10.
 JAXSIM_REPLAY_REL = 1e-13
-#: Fitted orders of jaxsim's variants on the short catalog ladders used by its tests (measured: see the
-#: "jaxsim 0.9" section of docs/engine_conventions.md); ORDER_TOL of the suite is 0.1, ladders this short 0.15.
+#: Fitted orders of jaxsim's variants on the short catalog ladders used by its tests
+#: (measured: see the "jaxsim 0.9" section of docs/engine_conventions.md); ORDER_TOL of the
+#: suite is 0.1, ladders this short 0.15.
 JAXSIM_ORDER_TOL = 0.15
-#: jaxsim:semi_implicit_euler vs reference:course_gyro (the same rotation update) over the first second of a fast
-#: spin (|ω|Δt = 0.2 rad per step): measured 4.3e-13 rad/s of 20 rad/s.
+#: jaxsim:semi_implicit_euler vs reference:course_gyro (the same rotation update) over the first second of a
+#: fast spin (|ω|Δt = 0.2 rad per step): measured 4.3e-13 rad/s of 20 rad/s.
 JAXSIM_SAME_ROTATION = 1e-11
-#: Genesis (genesis-world 1.4.5, float64, fast-math kernels) state round trips at the boundary (quaternion,
-#: ω_W <-> ω_B through the rotation, Genesis's forward pass): a few roundings of unit-size numbers; measured ≤ 4e-16.
+#: Genesis (genesis-world 1.4.5, float64, fast-math kernels) state round trips at the boundary
+#: (quaternion, ω_W <-> ω_B through the rotation, Genesis's forward pass): a few roundings of
+#: unit-size numbers; measured ≤ 4e-16.
 GENESIS_ROUND_TRIP = 2e-15
-#: Genesis's joint-space mass matrix of the free body vs diag(m 1, I_B): assembled from the tensor rotated by the
-#: principal-axes quaternion MuJoCo's compiler computed and back: measured ≤ 1e-15 on unit-size moments.
+#: Genesis's joint-space mass matrix of the free body vs diag(m 1, I_B): assembled from the tensor rotated by
+#: the principal-axes quaternion MuJoCo's compiler computed and back: measured ≤ 1e-15 on unit-size moments.
 GENESIS_MASS_MATRIX = 1e-14
-#: A force and torque read back from one step of 1 ms from rest (m Δv/Δt, I_W Δω/Δt): Δv/Δt divides round-off of
-#: 1e-3-size velocities by 1e-3: ~1e-13.
+#: A force and torque read back from one step of 1 ms from rest (m Δv/Δt, I_W Δω/Δt): Δv/Δt divides round-off
+#: of 1e-3-size velocities by 1e-3: ~1e-13.
 GENESIS_WRENCH = 1e-11
 #: One Genesis step vs the hand-derived step of its scheme from the same doubles (a 3×3 solve, a quaternion
 #: exponential): measured ≤ 5e-16; 10 ε.
 GENESIS_HAND_STEP = 2e-15
-#: The implicit midpoint equation's residual I (ω1 − ω0)/Δt − (τ − ω̄ × I ω̄) (N m) after Genesis's Newton iteration,
-#: which stops at 1e-13 relative to the momentum scale (func_midpoint_free_body): 2/Δt |I ω| ~ 1e3 here, so 1e-10.
+#: The implicit midpoint equation's residual I (ω1 − ω0)/Δt − (τ − ω̄ × I ω̄) (N m) after Genesis's
+#: Newton iteration, which stops at 1e-13 relative to the momentum scale (func_midpoint_free_body):
+#: 2/Δt |I ω| ~ 1e3 here, so 1e-10.
 GENESIS_MIDPOINT_RESIDUAL = 1e-9
-#: Kinetic energy drift of a torque-free full-tensor tumble over 200 midpoint steps: the Newton tolerance per step
-#: (1e-13) summed: measured ~1e-14; the required bound.
+#: Kinetic energy drift of a torque-free full-tensor tumble over 200 midpoint steps: the Newton tolerance per
+#: step (1e-13) summed: measured ~1e-14; the required bound.
 GENESIS_MIDPOINT_ENERGY_REL = 1e-11
 #: genesis:euler vs mujoco:euler on applied_torque, 200 steps of 0.01 s: the same scheme; Genesis's fast-math
 #: kernels reorder a few roundings: measured 2.3e-15.
@@ -143,19 +148,21 @@ GENESIS_SAME_AS_MUJOCO_EULER = 1e-12
 #: one_step from a recorded state vs the free run's next row: the same step through the boundary conversion
 #: (ω_W -> ω_B -> ω_W): measured ≤ 9e-16.
 GENESIS_REPLAY_REL = 1e-13
-#: Brax (cross_checks.engines.brax_engine), float64. State round trips at the boundary (quaternion rotations of
-#: ω between body and world axes, brax's kinematics.forward): a few roundings of unit-size numbers, measured ≤ 5e-16.
+#: Brax (cross_checks.engines.brax_engine), float64. State round trips at the boundary (quaternion
+#: rotations of ω between body and world axes, brax's kinematics.forward): a few roundings of
+#: unit-size numbers, measured ≤ 5e-16.
 BRAX_ROUND_TRIP = 1e-15
-#: MuJoCo's compiler diagonalises the full tensor (principal moments + iquat, its iterative eigensolver) and the
-#: test rebuilds R diag(I) Rᵀ: measured 4e-14 on moments of 2–4 kg m²; 1e-13.
+#: MuJoCo's compiler diagonalises the full tensor (principal moments + iquat, its iterative eigensolver) and
+#: the test rebuilds R diag(I) Rᵀ: measured 4e-14 on moments of 2–4 kg m²; 1e-13.
 BRAX_INERTIA_ROUND_TRIP = 1e-13
 #: One brax step vs the hand-derived step from the same doubles (a 6×6 solve, quaternion products): a few ε.
 BRAX_HAND_STEP = 1e-14
-#: The generalized rotation update turns by Δt(|ω| + 1e-8) about ω/(|ω| + 1e-8) (brax's guard against |ω| = 0):
-#: 1e-10 rad in a step of 0.01 s, above round-off; the hand step's exact exp map is that close.
+#: The generalized rotation update turns by Δt(|ω| + 1e-8) about ω/(|ω| + 1e-8) (brax's
+#: guard against |ω| = 0): 1e-10 rad in a step of 0.01 s, above round-off; the hand step's
+#: exact exp map is that close.
 BRAX_ROTATION_BIAS = 1e-9
-#: The positional pipeline's velocity is (x₁ − x₀)/Δt (project_xd): the round-off of positions of size ~2 m over
-#: Δt = 0.01 s, ε·2/0.01 ≈ 4e-14; 1e-12 leaves room (the sweep measures it growing like 1/Δt).
+#: The positional pipeline's velocity is (x₁ − x₀)/Δt (project_xd): the round-off of positions of size ~2 m
+#: over Δt = 0.01 s, ε·2/0.01 ≈ 4e-14; 1e-12 leaves room (the sweep measures it growing like 1/Δt).
 BRAX_POSITIONAL_VELOCITY = 1e-12
 #: one_step from a recorded state vs the free run's next row: pipeline.init rebuilds the state from q and q̇
 #: (and the positional velocity projection divides round-off by Δt): measured ≤ 5e-14 relative.
@@ -166,17 +173,18 @@ BRAX_BATCH = 1e-10
 #: A body at 1e4 m/s spinning at 100 rad/s for 100 MJX steps: MJX's spatial-velocity arithmetic mixes the two,
 #: measured 2.1e-12 m/s of drift across (≈ ε × 1e4); the bound 1e-10 (a clamp or a sleep would be O(1)).
 MJX_FAST_BODY = 1e-10
-#: MJX (mujoco-mjx 3.17.0, float64) vs MuJoCo C Euler, the same arithmetic in another order of sums: measured
-#: ≤ 1.7e-13 relative (max(1, |state|)) on tennis_racket, applied_torque and spring_pendulum at their own Δt and
-#: duration; float32 would be ~1e-7. The bound: 1e-11. (tumbling_box, 10 s near a separatrix that amplifies
-#: round-off ~1e3: 1.8e-12 on its ladder, 8.6e-11 at its Δt of 1 ms — held to the sweep's SAME_SCHEME_REL.)
+#: MJX (mujoco-mjx 3.17.0, float64) vs MuJoCo C Euler, the same arithmetic in another order of sums:
+#: measured ≤ 1.7e-13 relative (max(1, |state|)) on tennis_racket, applied_torque and spring_pendulum at
+#: their own Δt and duration; float32 would be ~1e-7. The bound: 1e-11. (tumbling_box, 10 s near a
+#: separatrix that amplifies round-off ~1e3: 1.8e-12 on its ladder, 8.6e-11 at its Δt of 1 ms — held to
+#: the sweep's SAME_SCHEME_REL.)
 MJX_SAME_AS_MUJOCO_EULER_REL = 1e-11
-#: One MJX Euler step vs the hand-derived semi-implicit step from the same doubles (MJX's RNE, a Cholesky solve,
-#: its quaternion exp map vs NumPy's): measured ≤ 3.6e-16 (RK4's hand step: ≤ 6e-17); 10 ε.
+#: One MJX Euler step vs the hand-derived semi-implicit step from the same doubles (MJX's RNE, a Cholesky
+#: solve, its quaternion exp map vs NumPy's): measured ≤ 3.6e-16 (RK4's hand step: ≤ 6e-17); 10 ε.
 MJX_HAND_STEP = 2e-15
-#: one_step from a recorded state vs the free run's next row: the same step through the body/world ω conversion
-#: at the boundary (and the force model called on the host from the compiled loop or before it): measured
-#: ≤ 5.2e-16 relative.
+#: one_step from a recorded state vs the free run's next row: the same step through the body/world ω
+#: conversion at the boundary (and the force model called on the host from the compiled loop or before it):
+#: measured ≤ 5.2e-16 relative.
 MJX_REPLAY_REL = 1e-14
 #: simulate_many (vmapped, batch of 4) vs simulate (batch of 1): the same executable's arithmetic per member,
 #: measured 2.0e-15 on symmetric_top (XLA vectorises a batch of 4 differently from one member); 5× that.
@@ -190,7 +198,7 @@ MJX_IMPLICITFAST_VS_C_MIN_DIFF = 1e-6
 #: An error ratio at h and h/2 against 2^p for order p: asymptotic only up to the next term, ±15 % (as
 #: DRAKE_ORDER_TOL for fitted orders).
 MJX_ORDER_RATIO_REL = 0.15
-#: mjx:rk4 where RK4 is exact (a spin about a fixed principal axis, constant world force and torque along it: a
-#: polynomial motion): final-state errors measured 7.1e-13 and 7.3e-13 at Δt = 0.05 and 0.025 s over 2 s — the
-#: round-off of the MuJoCo C RK4 reference at Δt/64; a fourth-order error at these steps would be ~1e-6.
+#: mjx:rk4 where RK4 is exact (a spin about a fixed principal axis, constant world force and torque along it:
+#: a polynomial motion): final-state errors measured 7.1e-13 and 7.3e-13 at Δt = 0.05 and 0.025 s over 2 s —
+#: the round-off of the MuJoCo C RK4 reference at Δt/64; a fourth-order error at these steps would be ~1e-6.
 MJX_RK4_EXACT = 1e-11

@@ -477,9 +477,9 @@ def test_the_cache_key_covers_every_file_of_the_engine_folder(tmp_path):
 
 
 def test_a_variant_declares_the_precision_its_steps_compute_in(tmp_path):
-    """``precision = "float32"`` gives the variant float32's floors and ladder (docs/verdicts.md, "Precision"),
-    and otherwise the cautious traits of a variant that declares none; float64 is the default; anything else is
-    refused naming the field."""
+    """``precision = "float32"`` gives the variant float32's floors and ladder (docs/verdicts.md,
+    "Precision"), and otherwise the cautious traits of a variant that declares none; float64 is the default;
+    anything else is refused naming the field."""
     from cross_checks.engines.base import DEFAULT_TRAITS
     path = _engine_file(tmp_path / "a", modes=["ok"])
     text = path.read_text().replace('order = 1\n', 'order = 1\nprecision = "float32"\n')
