@@ -208,10 +208,10 @@ def batching_variants(engines=None) -> list:
 
 def adapter_batched(variant, n_bodies, n_steps, repeats) -> dict:
     """Body-steps/s of N trajectories of the benchmark's body (one scenario, N requests: the adapters build
-    their model — MJX's put_model, a Brax system, a Genesis scene — once per scenario, which a sweep's ladder
-    shares too) in ONE ``simulate_many`` call of an engine's adapter, every state recorded. The untimed warm-up
-    call takes any compilation (JIT) out of the figure; an engine reports its compile time apart
-    (docs/engine_conventions.md)."""
+    their model — MJX's put_model, a Brax system, a Genesis scene — once per scenario, which a sweep's
+    ladder shares too) in ONE ``simulate_many`` call of an engine's adapter, every state recorded. The
+    untimed warm-up call takes any compilation (JIT) out of the figure; an engine reports its compile time
+    apart (docs/engine_conventions.md)."""
     from cross_checks.engines import get_adapter
     from cross_checks.engines.base import RunRequest
     engine, name = variant.split(":", 1)

@@ -340,7 +340,8 @@ def _free_running(scenario, variant: str, quantity: str, physics,
             and (quantity in _ROTATION or rotation_drives_translation(scenario))):
         return Expectation("converges", tr.rotation_order,
                            f"{variant} is an order-{p:g} scheme, but its attitude update is order "
-                           f"{tr.rotation_order:g} where the body-axes ω turns within a step, as it does here")
+                           f"{tr.rotation_order:g} where the body-axes ω turns within a step, "
+                           "as it does here")
     if p == 1.0 and (physics is not None or measure_physics):
         why = _memo(("pre_asymptotic", id(scenario), tr, p, quantity, id(physics)), (scenario, physics),
                     lambda: _pre_asymptotic_reason(scenario, variant, quantity, tr, physics))

@@ -97,11 +97,12 @@ VARIANTS = {
     "euler": Variant(1, "MJX Euler: semi-implicit Euler, explicit gyroscopic term, quaternion by the "
                         "exponential map (mujoco:euler's scheme, in JAX)",
                      traits=SYMPLECTIC_EULER_EXPLICIT_GYRO),
-    # rungekutta4 advances q by ONE exponential of the stages' weighted body-axes ω (a vector sum): second order
-    # where ω_B turns within a step (reproduced to 6e-17 by tests/cross_checks/engines/test_mjx_engine.py)
-    "rk4": Variant(4, "MJX RK4: classical 4th-order Runge-Kutta; the applied force and torque held over the "
-                      "four stages (no per-stage hook in MJX); the attitude advanced by one exponential of the "
-                      "stages' weighted ω: second order where the body-axes ω turns",
+    # rungekutta4 advances q by ONE exponential of the stages' weighted body-axes ω (a vector sum):
+    # second order where ω_B turns within a step (reproduced to 6e-17 by
+    # tests/cross_checks/engines/test_mjx_engine.py)
+    "rk4": Variant(4, "MJX RK4: classical 4th-order Runge-Kutta; the applied force and torque held over "
+                      "the four stages (no per-stage hook in MJX); the attitude advanced by one exponential "
+                      "of the stages' weighted ω: second order where the body-axes ω turns",
                    traits=Traits(forces_held=True, rotation_order=2.0)),
     "implicitfast": Variant(1, "MJX implicitfast: velocity-implicit in the actuator and damping derivatives "
                                "only (no RNE derivative in MJX): Euler's step on a lone free body",

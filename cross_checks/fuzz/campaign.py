@@ -385,7 +385,13 @@ def run_campaign(variants, out_dir, *, budget_s: float, seed: int = 0, jobs: int
     HTML page through ``finish(staging_dir)``, inside the atomic replacement). Returns the summary. Raises
     FuzzError on an unusable DIR."""
     from cross_checks.sweep.cache import cache_dir
-    from cross_checks.sweep.results_dir import ResultsDirError, check_output_dir, replace_dir, staging_dir, write_marker
+    from cross_checks.sweep.results_dir import (
+        ResultsDirError,
+        check_output_dir,
+        replace_dir,
+        staging_dir,
+        write_marker,
+    )
     log = log or (lambda s: print(s, file=sys.stderr))
     try:
         out = check_output_dir(str(out_dir))

@@ -34,7 +34,12 @@ from pathlib import Path
 
 import pandas as pd
 
-from cross_checks.core.tolerances import COMPARE_ABS_TOL, COMPARE_REL_TOL, COMPARE_SCHEME_CHANGE_MAX_RATIO, ORDER_TOL
+from cross_checks.core.tolerances import (
+    COMPARE_ABS_TOL,
+    COMPARE_REL_TOL,
+    COMPARE_SCHEME_CHANGE_MAX_RATIO,
+    ORDER_TOL,
+)
 from cross_checks.sweep.schema import STATUSES
 
 __all__ = ["compare_dirs", "read_results_dir", "Comparison", "CompareInputError", "METRIC_RULES", "ORDER_TOL",

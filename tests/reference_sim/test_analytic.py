@@ -30,7 +30,14 @@ from reference_sim.analytic import (
 )
 from reference_sim.body import RigidBody
 from reference_sim.forces import ForceModel
-from reference_sim.quaternion import geodesic_angle, matrix_from_quat, quat_conj, quat_mul, quat_normalize, rotate
+from reference_sim.quaternion import (
+    geodesic_angle,
+    matrix_from_quat,
+    quat_conj,
+    quat_mul,
+    quat_normalize,
+    rotate,
+)
 from reference_sim.simulate import simulate
 from reference_sim.state import Problem, State
 from tests.helpers.tolerances import CLOSED_FORM_PREDICTION_REL

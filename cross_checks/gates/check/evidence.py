@@ -21,7 +21,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from cross_checks.analysis import metrics as M
-from cross_checks.analysis.flow import conservation_sensitivities, error_growth, flow_rhs, majorant, motion_rate
+from cross_checks.analysis.flow import (
+    conservation_sensitivities,
+    error_growth,
+    flow_rhs,
+    majorant,
+    motion_rate,
+)
 from cross_checks.core import tolerances as tol
 from cross_checks.core.quantities import BLOCKS, QUANTITIES, UNITS, quantity_scales, state_errors
 from reference_sim.quaternion import matrix_from_quat, quat_conj, quat_log, quat_mul

@@ -36,7 +36,12 @@ from cross_checks.analysis.flow import (
 )
 from cross_checks.core import tolerances as tol
 from cross_checks.core.quantities import BLOCKS, QUANTITIES, UNITS
-from cross_checks.gates.check.diagnosis import diagnose_mistakes, fit_step_scale, initial_state_slips, score_variants
+from cross_checks.gates.check.diagnosis import (
+    diagnose_mistakes,
+    fit_step_scale,
+    initial_state_slips,
+    score_variants,
+)
 from cross_checks.gates.check.evidence import (
     Evidence,
     conserved_evidence,

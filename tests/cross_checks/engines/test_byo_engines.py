@@ -20,7 +20,14 @@ from cross_checks.gates.compare import compare_dirs, to_text
 from cross_checks.scenario import load_scenario
 from cross_checks.sweep import run_sweep
 from cross_checks.testing import assert_engine
-from tests.helpers.byo import EXAMPLE, build_cbody, c_compiler, compile_cbody, make_fake_distribution, write_scenarios
+from tests.helpers.byo import (
+    EXAMPLE,
+    build_cbody,
+    c_compiler,
+    compile_cbody,
+    make_fake_distribution,
+    write_scenarios,
+)
 
 GOOD, BROKEN = ("cbody:euler", "fakesim:euler"), ("cbody_broken:euler", "fakesim:broken")
 
