@@ -13,11 +13,10 @@ import pytest
 
 from cross_checks.analysis.expectations import EQUIVALENT_PAIRS, energy_drift_bound
 from cross_checks.core.tolerances import SAME_SCHEME_REL
-from cross_checks.engines import available_variants
 from cross_checks.gates.compare import compare_dirs, to_text
 from cross_checks.scenario import catalog_names, load_scenario
 from cross_checks.sweep import run_sweep
-from tests.helpers.sweeps import built_once, private_cache
+from tests.helpers.sweeps import built_once, gated_variants, private_cache
 
 ROOT = Path(__file__).resolve().parents[1]
 BASELINE = ROOT / "baselines" / "default"
@@ -32,7 +31,7 @@ def _sweep(tmp_path_factory, names, tag):
     """One sweep of ``names`` with every available variant per test run (the xdist workers share it)."""
     def build(folder):
         with private_cache(folder / "cache"):
-            run_sweep([load_scenario(n) for n in names], available_variants(), folder / "results", jobs=2,
+            run_sweep([load_scenario(n) for n in names], gated_variants(), folder / "results", jobs=2,
                       use_cache=False, progress=False)
     out = built_once(tmp_path_factory, f"gates-{tag}", build) / "results"
     return out, pd.read_csv(out / "results.csv"), json.loads((out / "summary.json").read_text())

@@ -57,3 +57,15 @@ def file_tree(folder: Path) -> dict:
     folder = Path(folder)
     return {p.relative_to(folder).as_posix(): p.read_bytes()
             for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def gated_variants() -> list:
+    """The available variants of the engines the committed baseline holds (baselines/default): what the
+    gates, the rerun and whole-engine tests sweep. The JAX engines (jaxsim, Brax, MJX) and Genesis are judged
+    by their adapter tests until their rows join the baseline (docs/engine_conventions.md)."""
+    import json
+
+    from cross_checks.engines import available_variants
+    summary = Path(__file__).resolve().parents[2] / "baselines" / "default" / "summary.json"
+    engines = {v["name"].split(":", 1)[0] for v in json.loads(summary.read_text())["variants"]}
+    return [v for v in available_variants() if v.split(":", 1)[0] in engines]
