@@ -297,3 +297,31 @@ def test_held_forces_cost_nothing_where_the_forces_are_constant(held_rk4, name):
     sc = load_scenario(name)
     assert not (sc.problem.forces.state_dependent or sc.problem.forces.has_decay)
     assert {expectation(sc, held_rk4, q).order for q in QUANTITIES} == {4.0}
+
+
+class _SecondOrderAttitudeRK4(EngineAdapter):
+    """An order-4 engine whose attitude update is second order where ω_B turns (Traits.rotation_order), as MJX's
+    RK4 (one exponential of the stages' weighted body-axes ω)."""
+    name = "rot2rk4"
+    variants = {"rk4": Variant(4, "RK4, attitude by one exponential", traits=Traits(rotation_order=2.0))}
+
+    def version(self):
+        return "test"
+
+    def simulate(self, scenario, variant, dt_s, n_steps):
+        raise NotImplementedError
+
+
+def test_a_second_order_attitude_update_is_expected_where_the_body_axes_omega_turns(monkeypatch):
+    monkeypatch.setattr(engines, "_user", dict(engines._user))
+    engines.register_adapter(_SecondOrderAttitudeRK4(), "test_expectations.py")
+    v = "rot2rk4:rk4"
+    for name in ("tennis_racket", "particle_body", "tumbling_box"):      # tumbling: ω_B turns
+        sc = load_scenario(name)
+        for q in ("orientation", "angular_velocity"):
+            e = expectation(sc, v, q)
+            assert (e.order, expectation(sc, v, q, "one_step").order) == (2.0, 3.0), (name, q, e)
+            assert "attitude update is order 2" in e.reason
+    for name in ("constant_spin", "projectile"):                          # a fixed rotation axis: order 4
+        sc = load_scenario(name)
+        assert {expectation(sc, v, q).order for q in QUANTITIES} == {4.0}
