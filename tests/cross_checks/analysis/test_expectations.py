@@ -300,8 +300,8 @@ def test_held_forces_cost_nothing_where_the_forces_are_constant(held_rk4, name):
 
 
 class _SecondOrderAttitudeRK4(EngineAdapter):
-    """An order-4 engine whose attitude update is second order where ω_B turns (Traits.rotation_order), as MJX's
-    RK4 (one exponential of the stages' weighted body-axes ω)."""
+    """An order-4 engine whose attitude update is second order where ω_B turns (Traits.rotation_order), as
+    MJX's RK4 (one exponential of the stages' weighted body-axes ω)."""
     name = "rot2rk4"
     variants = {"rk4": Variant(4, "RK4, attitude by one exponential", traits=Traits(rotation_order=2.0))}
 
