@@ -79,7 +79,7 @@ def test_energy_drift_within_its_bound(fast, scenario):
 def test_same_scheme_pairs_agree_on_every_scenario(fast, a, b):
     recs = [r for r in fast[2]["agreement"] if (r["a"], r["b"]) == (a, b)]
     if not recs:
-        pytest.skip(f"{a} or {b} unavailable here")
+        pytest.skip(f"{a} or {b} not swept here (unavailable, or not an engine of the baseline)")
     assert {r["scenario"] for r in recs} == set(FAST_SUBSET)
     bad = [f"{r['scenario']}: {r['max_rel']:.3g}" for r in recs if not r["max_rel"] <= SAME_SCHEME_REL]
     assert not bad, bad
