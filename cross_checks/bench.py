@@ -193,17 +193,19 @@ def adapter_single_us(engine_module, variant, n_steps, repeats):
 
 
 def batching_variants(engines=None) -> list:
-    """The available ``ENGINE:VARIANT`` whose adapter batches (overrides ``EngineAdapter.simulate_many``), the
-    engines of their own rows (reference, MuJoCo, PyBullet) excepted; ``engines`` narrows them."""
+    """The default (first) ``ENGINE:VARIANT`` of every available engine whose adapter batches (overrides
+    ``EngineAdapter.simulate_many``), the engines of their own rows (reference, MuJoCo, PyBullet) excepted;
+    ``engines`` narrows them. One row per engine: a JAX engine's batch costs seconds of compilation per
+    variant before it is timed."""
     from cross_checks.engines import all_variants, get_adapter
     from cross_checks.engines.base import EngineAdapter
-    out = []
+    out: dict = {}
     for v in all_variants():
         if not v.available or v.engine in SWEEP_ENGINES or (engines is not None and v.engine not in engines):
             continue
         if type(get_adapter(v.engine)).simulate_many is not EngineAdapter.simulate_many:
-            out.append(v.name)
-    return out
+            out.setdefault(v.engine, v.name)
+    return list(out.values())
 
 
 def adapter_batched(variant, n_bodies, n_steps, repeats) -> dict:
