@@ -30,6 +30,7 @@ part of a figure drawn for the first time): a figure drawn in a kept grid has th
 from __future__ import annotations
 
 import math
+import textwrap
 
 import matplotlib
 import numpy as np
@@ -169,14 +170,20 @@ def release() -> None:
     _LEGENDS.clear()
 
 
+_TITLE_CHARS_PER_IN = 12
+
+
 def _grid(nrows, ncols, title, panel_h=2.1, log=False, layout="time", legend_rows=0):
     """A grid of panels under a title, with a strip under it for legends of up to ``legend_rows``
     entries; margins in inches."""
     strip = 0.35 + _LEGEND_LINE_IN * legend_rows if legend_rows else 0.0
     w, h = min(13.0, 2.2 + 3.6 * ncols), 1.1 + panel_h * nrows + strip
     fig, axes = _panels(layout, nrows, ncols, (w, h), log)
+    # wrapped to the figure's width (≈ 12 characters per inch at 11 pt): a one-column figure is 5.8 in wide
+    title = textwrap.fill(title, width=int(w * _TITLE_CHARS_PER_IN))
+    extra = 0.2 * title.count("\n")
     fig.suptitle(title, fontsize=11, x=0.01, ha="left")
-    fig.subplots_adjust(left=0.09 if w > 8 else 0.14, right=0.98, top=1.0 - 0.75 / h,
+    fig.subplots_adjust(left=0.09 if w > 8 else 0.14, right=0.98, top=1.0 - (0.75 + extra) / h,
                         bottom=(0.5 + strip) / h, hspace=0.35, wspace=0.08)
     return fig, axes
 
