@@ -600,6 +600,9 @@ def fig_work(res, sc, styles, path):
         NOTES[(sc, "work")] = "no Δt ladder (one Δt only)"
         return False
     qs = [q for q in ("position", "orientation") if res.scenario(sc).get("varies", {}).get(q, True)]
+    if not qs:
+        NOTES[(sc, "work")] = "nothing moves: neither position nor orientation has an error to weigh"
+        return False
     width = 13.0 if len(qs) > 1 else 8.0
     fig, axes = _panels("work", 1, len(qs), (width, 4.6), log=True, outer=False)
     fig.suptitle(f"{sc}: work-precision — final error vs wall time of each run of the ladder", fontsize=11,

@@ -37,6 +37,10 @@ ROUNDOFF_PER_STEP_REL = 2.2e-16
 #: 2.2e-16 as ROUNDOFF_PER_STEP_REL, and 2⁻²³. Every round-off floor of a variant scales with its precision's
 #: ε (metrics.roundoff_floor).
 MACHINE_EPSILON = {"float64": ROUNDOFF_PER_STEP_REL, "float32": 2.0 ** -23}
+#: How far an engine may store a body's mass and inertia from the scenario's, relative to the largest: a few
+#: roundings of the model's text and the engine's own arithmetic (jaxsim holds a mass of 1.4 kg as
+#: 1.3999999999999997 kg, 1 ulp; found by rbcheck fuzz); 16 ε still refuses any wrong value a model could get.
+ENGINE_MODEL_PARAMETER_REL = 16 * ROUNDOFF_PER_STEP_REL
 #: Unit roundoff of each precision (half its ε: the largest relative error of one rounding to nearest): what
 #: one step's arithmetic may leave in the one-step defect allowance (analysis.flow.local_allowances).
 UNIT_ROUNDOFF = {"float64": 2.0 ** -53, "float32": 2.0 ** -24}

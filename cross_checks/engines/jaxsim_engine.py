@@ -93,6 +93,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cross_checks.core import tolerances as tol
 from cross_checks.engines.base import (
     HIGHER_ORDER,
     SYMPLECTIC_EULER_EXPLICIT_GYRO,
@@ -289,7 +290,7 @@ def _model(mass_kg: float, inertia: tuple, gravity: float, variant: str):
     want = np.zeros((6, 6))
     want[:3, :3] = mass_kg * np.eye(3)
     want[3:, 3:] = np.reshape(inertia, (3, 3))
-    if not np.array_equal(M, want):
+    if not np.all(np.abs(M - want) <= tol.ENGINE_MODEL_PARAMETER_REL * np.max(np.abs(want))):
         raise EngineError(
             f"jaxsim's spatial inertia of the link is not the scenario's mass and inertia tensor "
             f"about the link origin: {M.tolist()}"

@@ -163,3 +163,18 @@ def test_report_on_something_else_exits_2(tmp_path, capsys):
     assert main(["report", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert "summary.json" in err and "Traceback" not in err
+
+
+def test_a_body_at_rest_gets_its_report_with_notes_instead_of_empty_figures(tmp_path):
+    """Nothing moves (no force, no velocity): every figure that would weigh an error says so in a note, and
+    the report is written (found by rbcheck fuzz: the work-precision figure asked matplotlib for zero
+    columns)."""
+    sc = parse_scenario('name = "at_rest"\nduration = 0.01\ndt = 0.001\ndt_ladder = [0.002, 0.001]\n'
+                        '[body]\nmass = 1.0\ninertia = [1.0, 5.0, 5.0]\n[initial]\n[forces]\n',
+                        "at_rest.toml")
+    out = tmp_path / "r"
+    run_sweep([sc], ["reference:course", "mujoco:euler"], out, jobs=1, use_cache=False, progress=False,
+              second_reference=False)
+    reports.render(out)
+    page = (out / "scenario-at_rest.html").read_text()
+    assert "nothing moves" in page and (out / "index.html").is_file()

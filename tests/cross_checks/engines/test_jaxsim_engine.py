@@ -575,3 +575,19 @@ def test_a_sweep_with_forked_workers_runs_jaxsim(tmp_path):
     summary = json.loads((tmp_path / "r" / "summary.json").read_text())
     assert {"jaxsim:semi_implicit_euler", "jaxsim:rk4"} <= {v["name"] for v in summary["variants"]}
     assert "os.fork() was called" not in out.stderr  # JAX was never started in the forking process
+
+
+def test_the_link_carries_the_mass_and_inertia_to_a_few_roundings_and_a_wrong_one_is_refused(monkeypatch):
+    """jaxsim holds a mass of 1.4 kg as 1.3999999999999997 kg (found by rbcheck fuzz); a parameter off by more
+    than ENGINE_MODEL_PARAMETER_REL is refused."""
+    sc = scenario_from_parts(body="mass = 1.4\ninertia = [1.0, 5.0, 5.0]")
+    assert np.all(np.isfinite(je.simulate(sc, SIE, 0.01, 2).y))        # built, checked and run
+    _, _, js = je._jax()
+    real = js.model.link_spatial_inertia_matrices
+
+    def off(model):
+        return real(model) * (1.0 + 1e-9)
+    monkeypatch.setattr(js.model, "link_spatial_inertia_matrices", off)
+    je._model.cache_clear()
+    with pytest.raises(je.EngineError, match="spatial inertia"):
+        je.build_model(scenario_from_parts(body="mass = 1.3\ninertia = [1.0, 5.0, 5.0]"), SIE)
