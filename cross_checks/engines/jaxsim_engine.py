@@ -382,8 +382,7 @@ _COMPILED: dict = {}
 
 def _compiled(kind: str, callback: bool, model, *args):
     """The ahead-of-time compiled ``kind`` ("run" or "one") function for these arguments' shapes and the
-    model's
-    static fields (jaxsim's gravity and integrator); compiled once per process, the time counted."""
+    model's static fields (jaxsim's gravity and integrator); compiled once per process, the time counted."""
     jax, jnp, js = _jax()
     key = (kind, callback, model.integrator, model.gravity, tuple(np.shape(a) for a in args))
     with _LOCK:

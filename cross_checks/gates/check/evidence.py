@@ -48,9 +48,8 @@ class Evidence:
     max_value : largest measured value over the decisive window (NaN when any is NaN).  max_ratio :
     largest value / allowance there.  t_worst_s : time of that ratio; value_at_worst and allowance: the
     value and the allowance then.  first_over_s : first decisive time the allowance was exceeded (None:
-    never).  source : where the
-    allowance comes from.  decisive_until_s : end of the decisive window (None: the whole run;
-    ``-inf``: not decisive at all).  note : extra words.
+    never).  source : where the allowance comes from.  decisive_until_s : end of the decisive window (None:
+    the whole run; ``-inf``: not decisive at all).  note : extra words.
     """
 
     kind: str

@@ -384,8 +384,8 @@ def test_version_and_list_name_brax():
 
 def _checks(variant, scenarios, tmp_path):
     """cross_checks.testing.run_engine_checks in THIS process (jobs = 1): this process has run JAX, and a
-    sweep worker forked from it could not (see
-    test_a_process_forked_after_jax_started_refuses_instead_of_hanging)."""
+    sweep worker forked from it could not (see the test that a process forked after JAX started refuses
+    instead of hanging)."""
     from cross_checks.testing import run_engine_checks
     return run_engine_checks(variant, scenarios, cache_dir=tmp_path / "cache", jobs=1)
 

@@ -193,10 +193,9 @@ def test_one_step_is_the_hand_derived_semi_implicit_euler_step_in_the_inertial_r
 
 def _rk4_step(sc, y0, h, f_W, tau_W):
     """jaxsim's RK4 by hand (jaxsim/api/integrators.py rk4_integration): classical RK4 on (x, q, v_in, ω)
-    with the
-    INERTIAL wrench of the start state held — the force f_W and its moment about the WORLD ORIGIN τ_W + x0 ×
-    f_W —
-    each stage's quaternion normalised before its derivative (data.replace), the result's normalised."""
+    with the INERTIAL wrench of the start state held — the force f_W and its moment about the WORLD ORIGIN
+    τ_W + x0 × f_W — each stage's quaternion normalised before its derivative (data.replace), the result's
+    normalised."""
     m, x0 = sc.problem.body.mass_kg, y0[0:3]
     tau_in = tau_W + np.cross(x0, f_W)
     g = np.asarray(sc.problem.forces.gravity_W, dtype=float)

@@ -1,10 +1,7 @@
 """jaxsim is optional: without it (its absence simulated), the adapter says "not installed"
-(EngineNotInstalled),
-`rbcheck list` and `--version` say so, a default sweep skips its variants with that reason, and asking for it
-is bad
-input; an installed jaxsim that cannot be found on the path is told apart from an absent one. None of this
-imports
-JAX."""
+(EngineNotInstalled), `rbcheck list` and `--version` say so, a default sweep skips its variants with that
+reason, and asking for it is bad input; an installed jaxsim that cannot be found on the path is told apart
+from an absent one. None of this imports JAX."""
 
 import importlib.util
 
