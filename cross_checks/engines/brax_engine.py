@@ -76,6 +76,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import io
+import itertools
 import os
 import threading
 import time
@@ -460,15 +461,15 @@ def _initial(variant: str, batch: int):
     return jax.jit(init)
 
 
+_TOKEN_NUMBERS = itertools.count(1)
+
+
 class _Token:
     """Registers a scenario for the host force callback for the duration of a run."""
 
-    _next = 0
-
     def __init__(self, scenario):
         with _LOCK:
-            _Token._next += 1
-            self.token = _Token._next
+            self.token = next(_TOKEN_NUMBERS)
             _CALLBACK_SCENARIOS[self.token] = (scenario, {})
 
     def __enter__(self):
