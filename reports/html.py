@@ -97,8 +97,12 @@ def _provenance(res):
             ("machine", "machine"), ("git_commit", "commit"), ("started_at", "started (UTC)"),
             ("command", "command")]
     out = [(label, str(p.get(k, "")) or "–") for k, label in keys]
-    for name, e in (p.get("engines") or {}).items():  # engines from outside rbcheck: where from, which file
+    # the other engines swept: their version, and where from and which file when not rbcheck's own
+    for name, e in (p.get("engines") or {}).items():
+        if name in ("reference", "mujoco", "pybullet", "drake"):
+            continue
         if e.get("source", "").endswith("(rbcheck)"):
+            out.append((f"engine {name}", e.get("version") or "–"))
             continue
         sha = f", SHA-256 {e['engine_file_sha256'][:16]}…" if e.get("engine_file_sha256") else ""
         out.append((f"engine {name}", f"{e.get('version') or '–'} — {e.get('source', '')}{sha}"))

@@ -132,6 +132,28 @@ def test_the_provenance_shows_every_engine_version_the_results_record(results):
     for key, label in (("mujoco", "MuJoCo"), ("pybullet", "PyBullet"), ("drake", "Drake")):
         if prov.get(key):
             assert re.search(re.escape(label) + r"\s*" + re.escape(prov[key]), text), key
+    for name, e in prov["engines"].items():     # every other engine swept (DART, the JAX engines, ...)
+        if name not in ("reference", "mujoco", "pybullet", "drake"):
+            assert re.search(re.escape(f"engine {name}") + r"\s*" + re.escape(e["version"]), text), name
+
+
+def test_the_provenance_names_the_version_of_every_other_engine_swept(tmp_path):
+    """An optional engine of rbcheck's own (DART, a JAX engine) shows its version beside the fixed ones."""
+    from cross_checks.engines import available_variants
+    other = next((v for v in available_variants()
+                  if v.split(":")[0] not in ("reference", "mujoco", "pybullet", "drake")), None)
+    if other is None:
+        pytest.skip("no optional engine besides Drake installed here")
+    sc = parse_scenario('name = "p"\nduration = 0.02\ndt = 0.01\ndt_ladder = [0.02, 0.01]\n'
+                        '[body]\nmass = 1.0\ninertia = [1.0, 2.0, 3.0]\n[initial]\n'
+                        'angular_velocity = [0.0, 1.0, 0.0]\n[forces]\n', "p.toml")
+    out = tmp_path / "r"
+    run_sweep([sc], [other], out, jobs=1, use_cache=False, progress=False, second_reference=False)
+    reports.render(out)
+    text = " ".join("".join(parse((out / "index.html").read_text()).text).split())
+    engine = other.split(":")[0]
+    version = json.loads((out / "summary.json").read_text())["provenance"]["engines"][engine]["version"]
+    assert re.search(re.escape(f"engine {engine}") + r"\s*" + re.escape(version), text)
 
 
 def test_rerendering_from_saved_data_gives_the_same_html(results, tmp_path, capfd):
