@@ -341,6 +341,14 @@ class EngineAdapter(abc.ABC):
                 out.append(exc)
         return out
 
+    def expressible(self, scenario, variant: str) -> str:
+        """"" when ``variant`` can run the scenario's physics as written; otherwise one sentence saying what of
+        it the engine cannot take (e.g. "brax's spring pipeline takes no applied force but gravity"). The
+        sweep then records the scenario's rows as ``not_expressible`` with that sentence instead of running
+        them: a limit of the engine, said, not a failure. Override it when an engine cannot express part of
+        the scenario schema; by default every scenario is expressible."""
+        return ""
+
     def one_step(self, scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
         """One step from each row of ``y_start`` (T, 13) -> (T, 13). Optional (see :attr:`has_one_step`):
         an adapter that cannot restart its engine from an arbitrary state leaves this one, which refuses."""
