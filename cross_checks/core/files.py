@@ -9,6 +9,30 @@ from pathlib import Path
 import numpy as np
 
 
+def cache_dir(sub: str = "") -> Path:
+    """The user's rbcheck cache directory: ``$RBCHECK_CACHE_DIR``, else ``$XDG_CACHE_HOME/rbcheck``, else
+    ``~/.cache/rbcheck`` (never inside a results directory); with ``sub``, that folder inside it (where an
+    engine keeps its compiled kernels: ``jax``, ``warp``, ...). Nothing is created."""
+    if os.environ.get("RBCHECK_CACHE_DIR"):
+        root = Path(os.environ["RBCHECK_CACHE_DIR"])
+    else:
+        base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+        root = Path(base) / "rbcheck"
+    return root / sub if sub else root
+
+
+def kernel_cache_dir(engine: str) -> Path:
+    """Where ``engine`` keeps what it compiles (JAX's persistent compilation cache, Warp's and Genesis's
+    kernels): ``$RBCHECK_KERNEL_CACHE_DIR/ENGINE``, else ``$XDG_CACHE_HOME/rbcheck/kernels/ENGINE``
+    (``~/.cache/rbcheck/kernels/ENGINE``). Deliberately NOT under ``$RBCHECK_CACHE_DIR``: a fresh result
+    cache (a test's, a ``--no-cache`` sweep's) must not recompile kernels that take seconds to minutes, and a
+    kernel never decides a result (the result cache's key covers the engine's version). Nothing is created."""
+    if os.environ.get("RBCHECK_KERNEL_CACHE_DIR"):
+        return Path(os.environ["RBCHECK_KERNEL_CACHE_DIR"]) / engine
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "rbcheck" / "kernels" / engine
+
+
 def usable_cores() -> int:
     """Cores this process may run on (its CPU affinity where the OS reports it): the default number of
     worker processes of a sweep and of report drawing."""

@@ -342,8 +342,8 @@ class EngineAdapter(abc.ABC):
         return out
 
     def expressible(self, scenario, variant: str) -> str:
-        """"" when ``variant`` can run the scenario's physics as written; otherwise one sentence saying what of
-        it the engine cannot take (e.g. "brax's spring pipeline takes no applied force but gravity"). The
+        """"" when ``variant`` can run the scenario's physics as written; otherwise one sentence saying what
+        of it the engine cannot take (e.g. "brax's spring pipeline takes no applied force but gravity"). The
         sweep then records the scenario's rows as ``not_expressible`` with that sentence instead of running
         them: a limit of the engine, said, not a failure. Override it when an engine cannot express part of
         the scenario schema; by default every scenario is expressible."""

@@ -85,6 +85,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cross_checks.core.files import kernel_cache_dir
 from cross_checks.engines.base import (
     SYMPLECTIC_EULER_EXPLICIT_GYRO,
     EngineAdapter,
@@ -145,15 +146,6 @@ _COMPILE_S: dict = {}        # key -> seconds spent compiling it (lower + compil
 _CALLBACK_SCENARIOS: dict = {}   # token -> scenario (the host force callback's lookup)
 
 
-def _cache_root() -> Path:
-    """rbcheck's cache directory (as cross_checks.sweep.cache.cache_dir, which the engines layer may not
-    import)."""
-    if os.environ.get("RBCHECK_CACHE_DIR"):
-        return Path(os.environ["RBCHECK_CACHE_DIR"])
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "rbcheck"
-
-
 def version() -> str:
     """brax's version and the jax it runs on, from package metadata (no import: a sweep's parent must not
     start JAX before forking). EngineNotInstalled without brax; ImportError without jax/jaxlib."""
@@ -177,7 +169,7 @@ def _lib():
             import jax
             jax.config.update("jax_enable_x64", True)
             try:
-                folder = _cache_root() / "jax"
+                folder = kernel_cache_dir("jax")
                 folder.mkdir(parents=True, exist_ok=True)
                 jax.config.update("jax_compilation_cache_dir", str(folder))
                 jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)

@@ -69,6 +69,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cross_checks.core import files
 from cross_checks.engines import base
 from cross_checks.engines.base import (
     SYMPLECTIC_EULER_EXPLICIT_GYRO,
@@ -196,14 +197,10 @@ def _findable(name: str) -> bool:
 
 def kernel_cache_dir() -> Path:
     """Where Genesis's kernel compiler (Quadrants) keeps its compiled kernels and Genesis its asset caches:
-    ``$RBCHECK_GENESIS_CACHE_DIR``, else ``$XDG_CACHE_HOME/rbcheck/genesis`` (``~/.cache/rbcheck/genesis``).
-    Not under ``$RBCHECK_CACHE_DIR``: a sweep with a fresh result cache must not recompile every kernel (20–60
-    s per integrator). An environment that already sets ``QD_OFFLINE_CACHE_FILE_PATH`` /
-    ``GS_CACHE_FILE_PATH`` keeps them."""
-    if os.environ.get("RBCHECK_GENESIS_CACHE_DIR"):
-        return Path(os.environ["RBCHECK_GENESIS_CACHE_DIR"])
-    root = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(root) / "rbcheck" / "genesis"
+    core.files.kernel_cache_dir("genesis"), not under ``$RBCHECK_CACHE_DIR`` (a sweep with a fresh result
+    cache must not recompile every kernel, 20–60 s per integrator). An environment that already sets
+    ``QD_OFFLINE_CACHE_FILE_PATH`` / ``GS_CACHE_FILE_PATH`` keeps them."""
+    return files.kernel_cache_dir("genesis")
 
 
 def genesis():

@@ -86,7 +86,6 @@ from __future__ import annotations
 import dataclasses
 import functools
 import itertools
-import os
 import threading
 import time
 from pathlib import Path
@@ -94,6 +93,7 @@ from pathlib import Path
 import numpy as np
 
 from cross_checks.core import tolerances as tol
+from cross_checks.core.files import kernel_cache_dir
 from cross_checks.engines.base import (
     HIGHER_ORDER,
     SYMPLECTIC_EULER_EXPLICIT_GYRO,
@@ -187,16 +187,9 @@ def version() -> str:
 
 
 def xla_cache_dir() -> Path:
-    """Where the XLA persistent compilation cache of this adapter lives: ``jaxsim-xla`` in rbcheck's cache
-    directory (the rule of cross_checks.sweep.cache.cache_dir, which this layer cannot import)."""
-    if os.environ.get("RBCHECK_CACHE_DIR"):
-        root = Path(os.environ["RBCHECK_CACHE_DIR"])
-    else:
-        root = (
-            Path(os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"))
-            / "rbcheck"
-        )
-    return root / "jaxsim-xla"
+    """Where the XLA persistent compilation cache of this adapter lives: core.files.kernel_cache_dir("jax")
+    (shared with the other JAX engines: JAX keys its entries by the computation and the jaxlib)."""
+    return kernel_cache_dir("jax")
 
 
 @functools.lru_cache(maxsize=1)

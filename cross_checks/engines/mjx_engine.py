@@ -68,6 +68,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cross_checks.core.files import kernel_cache_dir
 from cross_checks.engines.base import (
     SYMPLECTIC_EULER_EXPLICIT_GYRO,
     EngineAdapter,
@@ -124,13 +125,8 @@ _LOCK = threading.RLock()
 # --- the engine, imported lazily (never at module import, never in version()) -----------------------------
 
 def jax_cache_dir() -> Path:
-    """Where JAX's persistent compilation cache is kept: ``jax`` in rbcheck's cache directory — the rule of
-    cross_checks.sweep.cache.cache_dir (``$RBCHECK_CACHE_DIR``, else ``$XDG_CACHE_HOME/rbcheck``, else
-    ``~/.cache/rbcheck``), restated here because an engine adapter does not import the sweep."""
-    if os.environ.get("RBCHECK_CACHE_DIR"):
-        return Path(os.environ["RBCHECK_CACHE_DIR"]) / "jax"
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "rbcheck" / "jax"
+    """Where JAX's persistent compilation cache is kept: core.files.kernel_cache_dir("jax")."""
+    return kernel_cache_dir("jax")
 
 
 def _check_installed() -> None:

@@ -20,18 +20,13 @@ from pathlib import Path
 
 import numpy as np
 
+from cross_checks.core.files import cache_dir
+
 __all__ = ["load", "store", "mac", "cache_dir"]
 
 _SECRETS: dict = {}
 
 
-def cache_dir() -> Path:
-    """The user's rbcheck cache directory: ``$RBCHECK_CACHE_DIR``, else ``$XDG_CACHE_HOME/rbcheck``, else
-    ``~/.cache/rbcheck`` (never inside a results directory)."""
-    if os.environ.get("RBCHECK_CACHE_DIR"):
-        return Path(os.environ["RBCHECK_CACHE_DIR"])
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "rbcheck"
 
 
 def _secret(root: Path) -> bytes:

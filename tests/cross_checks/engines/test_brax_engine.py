@@ -67,7 +67,8 @@ def test_float64_is_on_and_the_compilation_cache_is_rbchecks():
     sysm = be.build_system(load_scenario("projectile"), "generalized", 0.01)
     assert sysm.link.inertia.i.dtype == np.float64 and sysm.opt.timestep.dtype == np.float64
     folder = Path(jax.config.jax_compilation_cache_dir)
-    assert folder.name == "jax" and (folder.parent.name == "rbcheck" or os.environ.get("RBCHECK_CACHE_DIR"))
+    assert folder.name == "jax"
+    assert folder.parent.name == "kernels" or os.environ.get("RBCHECK_KERNEL_CACHE_DIR")
 
 
 # --- the model ---------------------------------------------------------------------------------------------

@@ -89,11 +89,11 @@ def test_the_kernel_cache_is_rbchecks_and_build_times_are_recorded(tilted, monke
         os.environ["QD_OFFLINE_CACHE_FILE_PATH"].startswith(str(ge.kernel_cache_dir()))
         or "QD_OFFLINE_CACHE_FILE_PATH" in os.environ
     )  # an environment that set it keeps it
-    monkeypatch.setenv("RBCHECK_GENESIS_CACHE_DIR", str(tmp_path))
-    assert ge.kernel_cache_dir() == tmp_path
-    monkeypatch.delenv("RBCHECK_GENESIS_CACHE_DIR")
+    monkeypatch.setenv("RBCHECK_KERNEL_CACHE_DIR", str(tmp_path))
+    assert ge.kernel_cache_dir() == tmp_path / "genesis"
+    monkeypatch.delenv("RBCHECK_KERNEL_CACHE_DIR")
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
-    assert ge.kernel_cache_dir() == tmp_path / "rbcheck" / "genesis"
+    assert ge.kernel_cache_dir() == tmp_path / "rbcheck" / "kernels" / "genesis"
     assert ge.BUILD_SECONDS and all(v in ge.VARIANTS and n >= 0 and s > 0.0 for v, n, s in ge.BUILD_SECONDS)
 
 

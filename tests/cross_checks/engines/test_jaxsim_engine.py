@@ -8,6 +8,7 @@ import importlib.util
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -490,9 +491,12 @@ def test_compile_time_is_measured_apart_and_paid_once_per_shape():
 
 def test_the_xla_cache_lives_in_rbchecks_cache_directory(monkeypatch, tmp_path, jx):
     jax, jnp, js = jx
-    monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path))
-    assert je.xla_cache_dir() == tmp_path / "jaxsim-xla"
-    assert jax.config.jax_compilation_cache_dir.endswith("jaxsim-xla")
+    monkeypatch.setenv("RBCHECK_KERNEL_CACHE_DIR", str(tmp_path))
+    assert je.xla_cache_dir() == tmp_path / "jax"
+    monkeypatch.delenv("RBCHECK_KERNEL_CACHE_DIR")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    assert je.xla_cache_dir() == tmp_path / "rbcheck" / "kernels" / "jax"
+    assert Path(jax.config.jax_compilation_cache_dir).name == "jax"
 
 
 def test_version_and_list_name_jaxsim():

@@ -287,7 +287,9 @@ def test_compile_stats_and_the_persistent_cache_live_where_rbcheck_says(monkeypa
     stats = xe.compile_stats()
     assert set(stats) == {"compilations", "compile_seconds", "step_seconds", "body_steps"}
     assert stats["compilations"] >= 1 and stats["compile_seconds"] > 0.0 and stats["body_steps"] > 0
-    monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path))
+    monkeypatch.setenv("RBCHECK_KERNEL_CACHE_DIR", str(tmp_path))
+    assert xe.jax_cache_dir() == tmp_path / "jax"
+    monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "results-cache"))   # not where kernels go
     assert xe.jax_cache_dir() == tmp_path / "jax"
 
 
