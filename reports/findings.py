@@ -310,7 +310,10 @@ def _not_measured(res, c) -> list:
                             "errors are not measured for them; their verdicts come from the free-running "
                             "errors alone.", None, None))
 
-    # 8. variants not run
+    # 8. variants not run, and scenarios a variant's engine cannot express
     for s in res.summary.get("skipped_variants", []):
         info.append(Finding("info", f"{s['name']} was not run: {s['reason']}.", None, s["name"]))
+    for r in res.summary.get("not_expressible") or []:
+        info.append(Finding("info", f"{r['engine']} cannot express {r['scenario']}, so it was not run there: "
+                            f"{r['reason']}.", r["scenario"], r["engine"]))
     return info

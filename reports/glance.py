@@ -109,6 +109,11 @@ def cell(res, s, v) -> dict:
     title = [f"{v} on {sc} (Δt = {fmt_dt(s['dt_s'])} s)"]
     title += [f"{LABELS[q]}: {recs[q]['assessment']}" for q in QUANTITIES if q in recs]
     if d is None:
+        why = next((r["reason"] for r in res.summary.get("not_expressible") or []
+                    if r["scenario"] == sc and r["engine"] == v), "")
+        if why:
+            return {"cls": "missing", "rank": 98, "head": "cannot express", "marks": [],
+                    "title": f"{title[0]}: not run, the engine cannot express this scenario: {why}"}
         return {"cls": "missing", "rank": 99, "head": "not run", "marks": [], "title": title[0] + ": not run"}
     rel = relative_error(res, s, d) if d["status"] == "ok" else math.nan
     if d["status"] == "ok":

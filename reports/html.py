@@ -146,7 +146,7 @@ def _legend():
                       ("acc1", f"as expected; error ≤ {fmt(tiers[0])} of scale"),
                       ("acc2", f"as expected; error ≤ {fmt(tiers[1])}"),
                       ("acc3", f"as expected; error > {fmt(tiers[1])}"),
-                      ("missing", "not run")],
+                      ("missing", "not run, or the engine cannot express the scenario")],
             "marks": [(mark, g, text) for g, (mark, text) in GLYPHS.items()]}
 
 

@@ -25,6 +25,8 @@ def _print_result(summary, out, t0) -> None:
     for v, d in summary["per_variant"].items():
         rate = f"{d['cases_per_s']:.1f}" if d["cases_per_s"] else "-"
         props = ", ".join(f"{p} {a} ({n})" for p, (a, n) in d["properties"].items() if a or n)
+        if d.get("not_expressible"):
+            props += f"; {d['not_expressible']} case(s) its engine cannot express, not run"
         print(f"  {v:<24} {d['cases']:>7} {rate:>9}   {props}")
     for pair, t in summary["pairs"].items():
         print(f"  {pair}: agreement {t['agreement'][0]} ({t['agreement'][1]})")

@@ -16,14 +16,15 @@ from dataclasses import dataclass
 
 from cross_checks.core.names import NAME_RE, did_you_mean
 from cross_checks.core.trajectory import Trajectory
-from cross_checks.engines.base import EngineAdapter, EngineError, EngineNotInstalled, Variant
+from cross_checks.engines.base import EngineAdapter, EngineError, EngineNotInstalled, NotExpressible, Variant
 
 __all__ = ["ENTRY_POINT_GROUP", "VariantInfo", "EngineEntry", "all_variants", "available_variants",
            "get_adapter", "split_variant", "default_variant", "run_variant", "run_variants", "engine_entries",
            "engine_variants", "declared_variant", "declared_order", "declared_imitation", "declared_traits",
            "has_one_step", "load_engine_files", "engine_files_registered", "register_adapter", "user_engines",
            "adopt_user_engines", "engine_provenance", "reset_registry", "EngineUnavailable", "UnknownVariant",
-           "EngineAdapter", "EngineError", "Variant", "REQUIRED_ENGINES", "unusable_required_engines"]
+           "EngineAdapter", "EngineError", "Variant", "REQUIRED_ENGINES", "unusable_required_engines",
+           "NotExpressible", "not_expressible"]
 
 ENTRY_POINT_GROUP = "rbcheck.engines"
 #: rbcheck's own engines, in the order of `rbcheck list`; other engines follow by name.
@@ -329,6 +330,18 @@ def has_one_step(name: str) -> bool:
     return bool(e.adapter is not None and e.adapter.has_one_step)
 
 
+def not_expressible(scenario, name: str) -> str:
+    """"" when engine variant ``name`` can run ``scenario``'s physics as written, else the engine's sentence
+    saying what of it the engine cannot take (EngineAdapter.expressible). An engine that cannot be loaded
+    here says nothing (its runs fail with the reason it cannot run)."""
+    engine, variant = split_variant(name)
+    try:
+        adapter = get_adapter(engine)
+    except Exception:  # noqa: BLE001 - unavailable: its runs say why
+        return ""
+    return adapter.expressible(scenario, variant) or ""
+
+
 def all_variants() -> list[VariantInfo]:
     """Every ENGINE:VARIANT with availability, declared order and a one-line description."""
     out = []
@@ -379,6 +392,9 @@ def run_variants(scenario, name: str, dts, duration_s: float | None = None) -> l
     engine, variant = split_variant(name)
     adapter = get_adapter(engine)
     T = scenario.duration_s if duration_s is None else float(duration_s)
+    why = adapter.expressible(scenario, variant)
+    if why:
+        return [NotExpressible(why) for _ in dts]
     requests = [RunRequest(scenario, float(dt), scenario.n_steps(float(dt), T)) for dt in dts]
     t0 = time.perf_counter()
     runs = adapter.simulate_many(variant, requests)

@@ -70,6 +70,12 @@ class EngineError(RuntimeError):
     A sweep records the run as `failed` with this message and goes on."""
 
 
+class NotExpressible(EngineError):
+    """The engine cannot take the scenario's physics as written (EngineAdapter.expressible said so): a limit
+    of the engine, not a failure of the run. A sweep lists the pair under ``not_expressible`` and runs
+    nothing for it."""
+
+
 def optional_import(name: str, *, quiet_stderr: bool = False):
     """``(module, None)``, or ``(None, the ImportError)`` when ``name`` cannot be imported: an adapter
     module imports without its engine so that the registry can say why the engine is unavailable.

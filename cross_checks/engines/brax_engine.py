@@ -271,16 +271,15 @@ def expressible(scenario, variant: str, dt_s: float) -> str:
     if variant == "generalized":
         return ""
     fm = scenario.problem.forces
-    why = (f"brax's {variant} pipeline cannot apply scenario {scenario.name!r}'s forces: a free joint takes "
-           f"no actuator force there ({variant}/joints.py gives it zero) and the pipeline has no other force "
-           "input, so it expresses gravity only")
+    why = (f"brax's {variant} pipeline takes no applied force but gravity ({variant}/joints.py gives a free "
+           "joint zero actuator force and the pipeline has no other force input); this scenario has ")
     if fm.state_dependent:
-        return why + " (these forces depend on the state)"
+        return why + "forces that depend on the state"
     f, tau = harness_force_torque(scenario, scenario.problem.initial_packed(), dt_s)
     weight = scenario.problem.body.mass_kg * np.asarray(fm.gravity_W, dtype=float)
     if np.any(tau != 0.0) or not np.allclose(f, weight, rtol=1e-15, atol=0.0):
-        return why + f" (force {np.round(f - weight, 6).tolist()} N besides the weight, torque " \
-                     f"{np.round(tau, 6).tolist()} N m)"
+        return why + f"a force {np.round(f - weight, 6).tolist()} N besides the weight and a torque " \
+                     f"{np.round(tau, 6).tolist()} N m"
     return ""
 
 
@@ -590,6 +589,11 @@ class BraxAdapter(EngineAdapter):
     def compile_seconds(self) -> dict:
         """Seconds spent compiling each executable in this process (see :func:`compile_seconds`)."""
         return compile_seconds()
+
+    def expressible(self, scenario, variant: str) -> str:
+        """Positional and spring take no force but gravity (:func:`expressible`); the harness's forces at the
+        scenario's Δt decide (a constant force is the same at every Δt)."""
+        return expressible(scenario, variant, scenario.dt_s)
 
     def simulate(self, scenario, variant: str, dt_s: float, n_steps: int) -> Run:
         return simulate(scenario, variant, dt_s, n_steps)

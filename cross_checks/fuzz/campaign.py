@@ -106,7 +106,7 @@ def compute_batch(seed, batch, variants) -> dict:
     out = []
     for c, o in zip(cases, outcomes):
         out.append({"index": c.index, "numbers": o.numbers, "violations": o.violations, "tally": o.tally,
-                    "spec": c.spec if o.violations else None})
+                    "not_expressible": o.not_expressible, "spec": c.spec if o.violations else None})
     return _clean({"seed": seed, "batch": batch, "n0": n0, "cases": out, "seconds": seconds})
 
 
@@ -209,7 +209,8 @@ def search(seed, variants, budget_s, *, jobs=1, executor=None, cache_root=None, 
 # --- tallies -------------------------------------------------------------------------------------------
 
 def _tallies(results, variants) -> dict:
-    per = {v: {"cases": 0, "seconds": 0.0, "properties": {p: [0, 0] for p in P.PROPERTIES}} for v in variants}
+    per = {v: {"cases": 0, "seconds": 0.0, "not_expressible": 0,
+               "properties": {p: [0, 0] for p in P.PROPERTIES}} for v in variants}
     pairs = {}
     for r in results:
         judged = sum(1 for c in r["cases"] if "skipped" not in c["numbers"])
@@ -218,6 +219,10 @@ def _tallies(results, variants) -> dict:
                 per[v]["seconds"] += float(s or 0.0)
                 per[v]["cases"] += judged
         for c in r["cases"]:
+            for v in c.get("not_expressible") or {}:
+                if v in per:
+                    per[v]["cases"] -= 1
+                    per[v]["not_expressible"] += 1
             for v, t in c["tally"].items():
                 into = (per[v]["properties"] if v in per
                         else pairs.setdefault(v, {p: [0, 0] for p in P.PROPERTIES}))

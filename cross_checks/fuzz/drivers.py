@@ -17,7 +17,11 @@ from cross_checks.engines import get_adapter, has_one_step, split_variant
 from cross_checks.engines.base import EngineError, RunRequest
 from cross_checks.sweep.lifecycle import each_within_limits
 
-__all__ = ["Runs", "RUNGS", "run_ladder", "one_step"]
+__all__ = ["Runs", "RUNGS", "run_ladder", "one_step", "NOT_EXPRESSIBLE"]
+
+#: The status of a case the variant's engine cannot express (EngineAdapter.expressible; the message says
+#: why): nothing is run, nothing is judged, and the campaign counts it per variant.
+NOT_EXPRESSIBLE = "not_expressible"
 
 #: Rungs of a case's free-running ladder: steps h, h/2, h/4.
 RUNGS = 3
@@ -28,8 +32,8 @@ class Runs:
     """A variant's runs of every case of a batch at one step per case (``h_s``, (B,), s).
 
     y : (n + 1, B, 13) packed states [x_W, v_W, q_WB (w x y z), w_W], NaN from a divergence on, and for
-        a failed run. status : per case "ok", "diverged" or "failed". diverged_at_s : (B,), NaN when not
-        diverged. message : per case ("" when ok).
+        a failed run. status : per case "ok", "diverged", "failed" or NOT_EXPRESSIBLE. diverged_at_s :
+        (B,), NaN when not diverged. message : per case ("" when ok).
     """
 
     h_s: np.ndarray
@@ -74,11 +78,16 @@ def _simulated(adapter, var, requests) -> list:
 def run_ladder(variant: str, scenarios, h0s, n0: int) -> list:
     """The free runs of ``variant`` on every case at h0, h0/2, h0/4 (``n0``, 2 n0, 4 n0 steps): [Runs] × 3."""
     engine, var = split_variant(variant)
+    adapter = get_adapter(engine)
     out = [_empty_runs(np.asarray(h0s, dtype=float) / 2 ** r, n0 * 2 ** r) for r in range(RUNGS)]
-    cells = [(r, i) for r in range(RUNGS) for i in range(len(scenarios))]
+    cannot = [adapter.expressible(sc, var) for sc in scenarios]
+    for i, why in enumerate(cannot):
+        for runs in out if why else ():
+            runs.status[i], runs.message[i] = NOT_EXPRESSIBLE, why
+    cells = [(r, i) for r in range(RUNGS) for i in range(len(scenarios)) if not cannot[i]]
     requests = [RunRequest(scenarios[i], float(out[r].h_s[i]), n0 * 2 ** r) for r, i in cells]
     with np.errstate(all="ignore"):
-        for (r, i), run in zip(cells, _simulated(get_adapter(engine), var, requests)):
+        for (r, i), run in zip(cells, _simulated(adapter, var, requests)):
             _store(out[r], i, run, n0 * 2 ** r)
     return out
 
@@ -94,7 +103,8 @@ def one_step(variant: str, scenarios, hs, y_start):
     out = np.full((len(scenarios), 13), np.nan)
     groups: dict = {}   # (id(scenario), h) -> members, in order (the list holds the scenarios)
     for j, sc in enumerate(scenarios):
-        groups.setdefault((id(sc), float(hs[j])), []).append(j)
+        if not adapter.expressible(sc, var):   # a case the engine cannot express keeps NaN: it is not judged
+            groups.setdefault((id(sc), float(hs[j])), []).append(j)
     for idx in groups.values():
         try:
             with np.errstate(all="ignore"):

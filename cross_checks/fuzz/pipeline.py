@@ -184,6 +184,7 @@ class CaseOutcome:
     numbers: dict
     violations: list
     tally: dict
+    not_expressible: dict = field(default_factory=dict)   # variant -> why its engine cannot run this case
 
 
 def _add(tally, variant, t):
@@ -297,6 +298,9 @@ def evaluate(cases, contexts, members, y_end, variants) -> tuple:
         e = None if y1 is None else state_errors(y1, y_end[m_sel])
         e_ladder = P.ladder_errors(ladder, y_refs, slice(None))
         for k, i in enumerate(judged):
+            if ladder[0].status[k] == drivers.NOT_EXPRESSIBLE:
+                outcomes[i].not_expressible[v] = ladder[0].message[k]
+                continue
             d = None if e is None else _defects(e, rows[i])
             e_case = [{q: er[q][:, k] for q in QUANTITIES} for er in e_ladder]
             outcomes[i].violations += _judge(contexts[i], v, k, ladder, d, outcomes[i].tally, e_case)

@@ -328,8 +328,8 @@ def agreement(ctx: Context, pair, i: int, ladder_a, ladder_b) -> tuple:
         h = float(ra.h_s[i])
         allowed = max(tol.SAME_SCHEME_REL, tol.FUZZ_ROUNDINGS_PER_STEP * n * _EPS * amp)
         sa, sb = ra.status[i], rb.status[i]
-        if sa == "failed" or sb == "failed":
-            continue    # a failed run is its own finding (the order property)
+        if "failed" in (sa, sb) or "not_expressible" in (sa, sb):
+            continue    # a failed run is its own finding (the order property); an inexpressible one none
         if sa == "diverged" or sb == "diverged":
             ta, tb = ra.diverged_at_s[i], rb.diverged_at_s[i]
             same = sa == sb and abs(ta - tb) <= 2.0 * h + 1e-12

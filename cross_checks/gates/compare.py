@@ -116,6 +116,16 @@ class Scope:
     skipped_variants: set = field(default_factory=set)
     absent_rows: dict = field(default_factory=dict)     # engine not installed -> baseline rows not compared
     absent_records: dict = field(default_factory=dict)  # engine not installed -> records not compared
+    inexpressible: dict = field(default_factory=dict)   # (scenario, variant) its engine cannot take -> why
+
+    def missing_note(self, scenario: str, engine: str, default: str) -> str:
+        """Why the new results lack a (scenario, variant) the baseline has: its engine cannot express the
+        scenario now, or the variant was unavailable, else ``default``."""
+        why = self.inexpressible.get((scenario, engine))
+        if why:
+            return f"not expressible by its engine in the new results: {why}"
+        why = self.unavailable.get(engine) or self.not_installed.get(engine)
+        return f"variant unavailable in the new sweep: {why}" if why else default
 
     def absent(self, engine: str) -> bool:
         """Whether ``engine`` (a variant) belongs to an optional engine not installed in the new results,
@@ -306,10 +316,13 @@ def _scope(summary: dict, required: frozenset = frozenset()) -> Scope:
     optional_absent = {v["name"]: v["reason"] for v in skipped
                        if v.get("installed") is False and v.get("required") is False}
     broken = {v["name"]: v["reason"] for v in skipped if v["name"] not in optional_absent}
+    cannot = {(r["scenario"], r["engine"]): r["reason"] for r in summary.get("not_expressible") or []}
     if not isinstance(summary.get("scenarios"), list) or not isinstance(summary.get("variants"), list):
-        return Scope(unavailable=broken, not_installed=optional_absent, required=required)
+        return Scope(unavailable=broken, not_installed=optional_absent, required=required,
+                     inexpressible=cannot)
     return Scope(frozenset(s["name"] for s in summary["scenarios"]),
-                 frozenset(v["name"] for v in summary["variants"]), broken, optional_absent, required)
+                 frozenset(v["name"] for v in summary["variants"]), broken, optional_absent, required,
+                 inexpressible=cannot)
 
 
 def _check_required(new_sum: dict, out: Comparison) -> None:
@@ -339,9 +352,7 @@ def _compare_rows(merged, out: Comparison):
             if not out.scope.ran(r["scenario"], r["engine"]):
                 out.scope.skip(r["scenario"], r["engine"])
                 continue
-            why = out.scope.unavailable.get(r["engine"]) or out.scope.not_installed.get(r["engine"])
-            note = (f"variant unavailable in the new sweep: {why}"
-                    if why else "row absent from the new results")
+            note = out.scope.missing_note(r["scenario"], r["engine"], "row absent from the new results")
             out.changes.append(Change("missing", r["scenario"], r["engine"], where, note=note))
             continue
         if r["_merge"] == "right_only":
@@ -417,7 +428,7 @@ def _compare_convergence(old_recs, new_recs, out: Comparison, local: bool = Fals
             if local:
                 continue  # a one-step record absent: its engine lost its one-step mode; the rows say the rest
             out.changes.append(Change("missing", scen, eng, f"order of {qty}",
-                                      note="convergence record absent"))
+                                      note=out.scope.missing_note(scen, eng, "convergence record absent")))
         elif k not in old:
             out.changes.append(Change("new", scen, eng, f"{what} of {qty}",
                                       new=_fmt(new[k].get("order")), area=area))

@@ -293,7 +293,7 @@ def _skipped_record(name: str, reason: str, info) -> dict:
 
 
 def build_summary(*, provenance, scenarios, variants, skipped, convergence, local, agreement, rows, jobs,
-                  wall_s) -> dict:
+                  wall_s, cannot=None) -> dict:
     """summary.json (docs/results.md): ``scenarios`` are scenario records, ``variants`` variant records."""
     return {
         "schema_version": SCHEMA_VERSION,
@@ -301,6 +301,8 @@ def build_summary(*, provenance, scenarios, variants, skipped, convergence, loca
         "scenarios": scenarios,
         "variants": variants,
         "skipped_variants": _skipped_records(skipped),
+        "not_expressible": [{"scenario": s, "engine": v, "reason": why}
+                            for (s, v), why in (cannot or {}).items()],
         "convergence": convergence,
         "local_convergence": local,
         "agreement": agreement,

@@ -4,7 +4,7 @@ from __future__ import annotations
 from cross_checks.analysis.expectations import judged_ladder_s
 from cross_checks.sweep.jobs import Job, job_dts
 
-__all__ = ["plan_jobs", "job_cost_s"]
+__all__ = ["plan_jobs", "job_cost_s", "inexpressible"]
 
 #: Rough cost per step (µs) of each variant, (forces constant, forces state-dependent), measured on the
 #: catalog (wall_s / steps of results.csv, a --no-cache default sweep on 2 vCPU with 2 workers, Drake
@@ -30,11 +30,27 @@ def job_cost_s(scenario, variant: str, dt: float) -> float:
     return scenario.n_steps(dt) * us * 1e-6
 
 
-def plan_jobs(scenarios, variants) -> list:
-    """Every (scenario, variant, Δt) job, longest first."""
+def inexpressible(scenarios, variants) -> dict:
+    """``{(scenario name, variant): the engine's sentence}`` of every pair whose engine cannot take the
+    scenario's physics (EngineAdapter.expressible): the sweep runs nothing for them and says so."""
+    from cross_checks.engines import not_expressible
+    out = {}
+    for sc in scenarios:
+        for v in variants:
+            why = not_expressible(sc, v)
+            if why:
+                out[(sc.name, v)] = why
+    return out
+
+
+def plan_jobs(scenarios, variants, leave_out=()) -> list:
+    """Every (scenario, variant, Δt) job, longest first, except those of the (scenario name, variant) pairs
+    in ``leave_out``."""
     jobs = []
     for i, sc in enumerate(scenarios):
         for v in variants:
+            if (sc.name, v) in leave_out:
+                continue
             ladder = judged_ladder_s(sc, v)
             for dt in job_dts(sc, (v,)):
                 jobs.append(Job(i, sc.name, v, dt, any(d == dt for d in ladder),

@@ -44,7 +44,7 @@ from cross_checks.sweep.jobs import (
     clear_reference_memo,
 )
 from cross_checks.sweep.lifecycle import Terminated
-from cross_checks.sweep.plan import plan_jobs
+from cross_checks.sweep.plan import inexpressible, plan_jobs
 from cross_checks.sweep.provenance import provenance, variant_record
 from cross_checks.sweep.results_dir import (
     ResultsDirError,
@@ -119,7 +119,8 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
     """
     out = _checked_output(out_dir, scenarios)
     jobs = max(1, int(jobs or usable_cores()))
-    planned = plan_jobs(scenarios, variants)
+    cannot = inexpressible(scenarios, variants)
+    planned = plan_jobs(scenarios, variants, cannot)
     if executor is None:   # local processes: never more than the runs to do, nor than 4 per core
         jobs = min(jobs, max(1, len(planned) + len(scenarios)), 4 * usable_cores())
     started = datetime.now(UTC).replace(microsecond=0).isoformat()
@@ -147,7 +148,7 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
         runner = None
         stage("rbcheck sweep", "writing results.csv, summary.json and series/", enabled=show)
         summary = _write_results(staging, scenarios, variants, refs, records, started=started,
-                                 skipped=skipped, jobs=jobs, t_start=t_start)
+                                 skipped=skipped, jobs=jobs, t_start=t_start, cannot=cannot)
         if finish is not None:  # e.g. the report, drawn from the saved files only
             finish(staging)
         write_marker(staging)
@@ -172,7 +173,8 @@ def _with_second_references(refs, second: dict) -> list:
             for i, r in enumerate(refs)]
 
 
-def _write_results(staging, scenarios, variants, refs, records, *, started, skipped, jobs, t_start) -> dict:
+def _write_results(staging, scenarios, variants, refs, records, *, started, skipped, jobs, t_start,
+                   cannot=None) -> dict:
     """Assemble the job records and write results.csv, series/ and summary.json into ``staging`` (its
     work directory removed); returns the summary."""
     from cross_checks.engines import all_variants, has_one_step
@@ -185,6 +187,8 @@ def _write_results(staging, scenarios, variants, refs, records, *, started, skip
     for sc, ref in zip(scenarios, refs):
         scenario_records.append(assemble.scenario_record(sc, ref))
         for v in variants:
+            if (sc.name, v) in (cannot or {}):
+                continue
             vrows = [r for r in rows if r["scenario"] == sc.name and r["engine"] == v]
             convergence += refine.rejudge(sc, v, vrows, ref, assemble.convergence_records(
                 sc, v, vrows, ref.scales, "free_running", ref.measured))
@@ -199,6 +203,6 @@ def _write_results(staging, scenarios, variants, refs, records, *, started, skip
         provenance=provenance(started, variants), scenarios=scenario_records,
         variants=[variant_record(v, infos.get(v)) for v in variants], skipped=skipped,
         convergence=convergence, local=local, agreement=assemble.agreement_records(scenarios, by_key),
-        rows=rows, jobs=jobs, wall_s=time.perf_counter() - t_start)
+        rows=rows, jobs=jobs, wall_s=time.perf_counter() - t_start, cannot=cannot)
     assemble.write_json(staging / "summary.json", summary)
     return summary

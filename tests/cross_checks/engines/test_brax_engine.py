@@ -237,9 +237,11 @@ def test_positional_and_spring_give_a_free_joint_no_actuator_force(variant):
 @pytest.mark.parametrize("name", ["applied_torque", "linear_drag", "spring_oscillator", "spring_pendulum"])
 def test_positional_and_spring_refuse_every_force_but_gravity(variant, name):
     sc = load_scenario(name)
-    words = f"brax's {variant} pipeline cannot apply scenario '{name}''s forces"
+    words = f"brax's {variant} pipeline takes no applied force but gravity"
     with pytest.raises(be.EngineError, match=words):
         be.simulate(sc, variant, sc.dt_s, 2)
+    assert be.BraxAdapter().expressible(sc, variant).startswith(words)   # the sweep's question
+    assert be.BraxAdapter().expressible(sc, "generalized") == ""
     assert be.expressible(load_scenario("velocity_decay"), variant, 0.01) == ""
     assert be.expressible(load_scenario("projectile"), variant, 0.01) == ""
 
