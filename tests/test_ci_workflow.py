@@ -29,12 +29,18 @@ def test_workflow_parses_and_uses_the_readme_commands():
     out = re.search(r"rbcheck sweep .*--out (\S+)", main_cmd)[1]
     # the main command's results are compared as they are (Drake absent: one line, exit 0) ...
     assert f".venv/bin/rbcheck compare baselines/default {out}" in runs
-    # ... and the baseline's Drake and DART rows are gated by a sweep with them, compared with --require
-    full = [r for r in runs if 'pip install -q -e ".[drake,dart]"' in r and "rbcheck sweep" in r]
+    # ... and the baseline's optional engines' rows are gated by a sweep with them, compared with --require
+    full = [r for r in runs if 'pip install -q -e ".[drake,engines]"' in r and "rbcheck sweep" in r]
     assert full, "no sweep with Drake"
     full_out = re.search(r"rbcheck sweep .*--out (\S+)", full[0])[1]
     compare = [r for r in runs if f"rbcheck compare baselines/default {full_out}" in r]
-    assert compare and "--require drake" in compare[0] and "--require dart" in compare[0]
+    assert compare
+    import json
+    made = json.loads((ROOT / "baselines" / "default" / "summary.json").read_text())
+    optional = {v["name"].split(":", 1)[0] for v in made["variants"]} - {"reference", "mujoco", "pybullet"}
+    assert optional, "the baseline holds no optional engine"
+    for engine in optional:   # every optional engine of the baseline is installed by the sweep and required
+        assert f"--require {engine}" in compare[0], engine
     assert "--markdown" in compare[0]
     assert any("GITHUB_STEP_SUMMARY" in r for r in runs)
     # the full results (report and summary.json) and their compact baseline are uploaded as artifacts
@@ -47,7 +53,7 @@ def test_the_baseline_holds_the_engines_ci_requires():
     import json
     made = json.loads((ROOT / "baselines" / "default" / "summary.json").read_text())
     engines = {v["name"].split(":", 1)[0] for v in made["variants"]}
-    assert {"reference", "mujoco", "pybullet", "drake", "dart"} <= engines
+    assert {"reference", "mujoco", "pybullet", "drake", "dart", "jaxsim", "brax", "mjx"} <= engines
 
 
 def test_ci_run_runs_the_readme_test_command():

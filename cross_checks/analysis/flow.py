@@ -215,13 +215,31 @@ class Allowances:
     total: dict
 
 
-def local_allowances(inp, y_start, M2, rate, flow_roundoff=None, y_end=None) -> Allowances:
+def lever_arm_roundoff(scenario, y, unit_roundoff: float, h_s):
+    """(N,) rad/s: what the roundings of the positions leave in ω over one step of ``h_s`` from each row of
+    ``y`` (N, 13). An engine forms a torque from a lever arm, ``r × F``, with r the difference of two points
+    near x_W (a point of application or the centre of mass it recomputes from its frames), so r carries
+    ``u |x_W|`` and the torque ``u |x_W| |F|`` even when the exact lever arm is zero; over one step ω moves by
+    ``Δt u |x_W| |F| / I_min``. Without it a body that never turns, whose recorded ω is that round-off (MJX,
+    Brax: 1e-15 rad/s at |x| = 10 m under gravity), would read as a wrong equation. |F| = m |a_W| of the exact
+    equations at the row (gravity included)."""
+    p = scenario.problem
+    y = np.asarray(y, dtype=float)
+    a_W = rhs(p, y)[..., 3:6]
+    force_N = float(p.body.mass_kg) * np.linalg.norm(np.nan_to_num(a_W), axis=-1)
+    i_min = float(np.min(np.linalg.eigvalsh(np.asarray(p.body.inertia_B, dtype=float))))
+    x_m = np.linalg.norm(np.nan_to_num(y[..., 0:3]), axis=-1)
+    return np.asarray(h_s) * unit_roundoff * x_m * force_N / i_min
+
+
+def local_allowances(inp, y_start, M2, rate, flow_roundoff=None, y_end=None, scenario=None) -> Allowances:
     """What a consistent scheme of order ≥ 1 may leave over each row interval of ``inp`` (a CheckInput).
 
     Over a row of ``m`` steps of h (Δ = m h): m local defects ``C h² M2`` that the flow carries along,
     ``C h Δ M2 · e^{L(Δ − h)}``, and a velocity defect drifts into position (orientation) by ~(Δ − h)/2.
     ``arith`` adds the roundings of the user's steps (data precision, relative to the larger of the two
-    rows' magnitudes, ``y_start`` and ``y_end``) and of the exact flow itself.
+    rows' magnitudes, ``y_start`` and ``y_end``) and of the exact flow itself; with ``scenario``, also the
+    lever arm's rounding in ω (:func:`lever_arm_roundoff`), per step.
     """
     span = inp.span_s
     h = span / inp.span_steps
@@ -236,6 +254,9 @@ def local_allowances(inp, y_start, M2, rate, flow_roundoff=None, y_end=None) -> 
         mag = (_magnitude(y_start, q) if y_end is None
                else np.fmax(_magnitude(y_start, q), _magnitude(y_end, q)))
         arith[q] = inp.span_steps * tol.CHECK_ROUNDINGS_PER_STEP * u * mag
+        if q == "angular_velocity" and scenario is not None:
+            arith[q] = arith[q] + inp.span_steps * tol.CHECK_ROUNDINGS_PER_STEP * lever_arm_roundoff(
+                scenario, y_start, u, h)
         if flow_roundoff is not None:
             arith[q] = arith[q] + flow_roundoff[q]
         pf = inp.print_floor.get(q)
@@ -389,9 +410,9 @@ def run_local_defect(scenario, y, dt_s: float, max_rows: int | None = None,
     rows = _RunRows(np.full(len(idx), float(dt_s)), np.ones(len(idx)), float(unit_roundoff))
 
     def allowance_fn(M2, rate):
-        return local_allowances(rows, y0, M2, rate, y_end=y1).total
+        return local_allowances(rows, y0, M2, rate, y_end=y1, scenario=scenario).total
     flow = exact_flow(scenario, y0, rows.span_s, allowance_fn=allowance_fn)
-    allow = local_allowances(rows, y0, flow.M2, flow.rate, flow.roundoff, y_end=y1)
+    allow = local_allowances(rows, y0, flow.M2, flow.rate, flow.roundoff, y_end=y1, scenario=scenario)
     d = distances(y1, flow.y_end)
     decisive = dt_s * flow.rate <= tol.CHECK_MAX_HL
     total = dict(allow.total)

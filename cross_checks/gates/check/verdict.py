@@ -133,9 +133,9 @@ def _local_full(inp, scenario) -> _Local:
     y0, y1 = inp.y[:-1], inp.y[1:]
 
     def allowance_fn(M2, rate):
-        return local_allowances(inp, y0, M2, rate, y_end=y1).total
+        return local_allowances(inp, y0, M2, rate, y_end=y1, scenario=scenario).total
     flow = exact_flow(scenario, y0, inp.span_s, allowance_fn=allowance_fn, span_steps=inp.span_steps)
-    allow = local_allowances(inp, y0, flow.M2, flow.rate, flow.roundoff, y_end=y1)
+    allow = local_allowances(inp, y0, flow.M2, flow.rate, flow.roundoff, y_end=y1, scenario=scenario)
     d = distances(y1, flow.y_end)
     h = inp.span_s / inp.span_steps
     hl = h * flow.rate
@@ -163,7 +163,7 @@ def _local_pose(inp, scenario, y_ref) -> _Local:
     F = flow_rhs(scenario)
     rate = motion_rate(scenario, y_hat[:-1])
     M2 = majorant(F, y_hat[:-1], rate)
-    allow = local_allowances(inp, y_hat[:-1], M2, rate, y_end=y_hat[1:])
+    allow = local_allowances(inp, y_hat[:-1], M2, rate, y_end=y_hat[1:], scenario=scenario)
     per_row = {q: allow.physics[q] + allow.arith[q] for q in QUANTITIES}
     ratios = {r.quantity: ratio(r.series["value"], r.series["allowance"]) for r in rows}
     return _Local(rows, allow, per_row, [], [], ratios)

@@ -209,3 +209,30 @@ def test_a_spring_with_a_rest_length_turns_at_the_speed_across_it_over_its_lengt
     assert spring_turn_rate(off.problem, spin)[0] == pytest.approx(0.3 / 0.6)
     zero_length = scenario_from_parts(initial="", forces=spring.format(a=0.0, L0=0.0))   # −k d: linear in d
     assert spring_turn_rate(zero_length.problem, y)[0] == 0.0
+
+
+def test_the_lever_arms_rounding_in_omega_is_allowed_and_nothing_more():
+    """A body that never turns, stepped by a correct scheme, whose ω carries what an engine's lever arm
+    leaves (r = two points near x_W, each rounded: u |x| |F| of torque): within its one-step allowance; the
+    same noise 100× larger (than the allowance) is a defect, so the allowance is that rounding and not a
+    blanket. The scale is hand-derived: ω moves by Δt u |x| |F| / I_min a step."""
+    from cross_checks.analysis.flow import lever_arm_roundoff, run_local_defect
+    from cross_checks.engines import run_variant
+    sc = load_scenario("linear_drag")                  # thrown, never turns: ω = 0 exactly
+    dt = sc.dt_s
+    y = run_variant(sc, "reference:course", dt).y
+    assert np.all(y[:, 10:13] == 0.0)
+    u = 2.0 ** -53
+    step = lever_arm_roundoff(sc, y[:-1], u, dt)
+    m, a = sc.problem.body.mass_kg, np.linalg.norm(y[1, 3:6] - y[0, 3:6]) / dt   # |F| = m |Δv/Δt| here
+    i_min = np.min(np.linalg.eigvalsh(sc.problem.body.inertia_B))
+    assert step[1] == pytest.approx(dt * u * np.linalg.norm(y[1, 0:3]) * m * a / i_min, rel=0.05)
+    rng = np.random.default_rng(3)
+    for scale, within in ((1.0, True), (100.0 * tol.CHECK_ROUNDINGS_PER_STEP, False)):
+        noisy = y.copy()
+        kicks = scale * step[:, None] * rng.choice([-1.0, 1.0], size=(len(step), 3))
+        noisy[1:, 10:13] = np.cumsum(kicks, axis=0)   # a random walk of per-step kicks, as an engine leaves
+        ratio, quantity, _ = run_local_defect(sc, noisy, dt, unit_roundoff=u)
+        assert (ratio <= 1.0) == within, (scale, ratio, quantity)
+        if not within:
+            assert quantity == "angular_velocity"
