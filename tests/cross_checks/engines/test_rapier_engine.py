@@ -1,6 +1,6 @@
 """The Rapier adapter (cross_checks.engines.rapier_engine): every convention it relies on, pinned on rapier3d
-itself (docs/engine_conventions.md, "Rapier 0.36.1"), every default it neutralises, one step against the scheme
-read in Rapier's source written out here in NumPy, its float32 arithmetic, batching, divergence.
+itself (docs/engine_conventions.md, "Rapier 0.36.1"), every default it neutralises, one step against the
+scheme read in Rapier's source written out here in NumPy, its float32 arithmetic, batching, divergence.
 
 Rapier computes in float32: a comparison with a float64 hand computation allows a few float32 roundings
 (F32 below, relative to the quantity's scale), and each test that tells two schemes apart checks that the
@@ -20,7 +20,6 @@ from reference_sim.quaternion import (  # noqa: E402
     geodesic_angle,
     matrix_from_quat,
     quat_exp,
-    quat_from_matrix,
     quat_mul,
     quat_normalize,
 )
@@ -275,8 +274,9 @@ def test_user_forces_are_kept_from_step_to_step_so_the_adapter_replaces_them():
 def test_state_dependent_forces_reach_rapier_as_the_force_models_wrench():
     # a body-frame force off the COM and a spring off the COM: one step from a tumbling state is the hand step
     # with f and τ from ForceModel.force_torque (the gyroscopic term off: ω changes by h I_W⁻¹ τ alone)
-    sc = _tilted(forces='[[forces.point]]\nforce = [0.4, -1.0, 2.0]\npoint = [0.1, 0.2, -0.3]\nframe = "body"\n'
-                        '[[forces.spring]]\nanchor = [0.0, 0.0, 1.0]\nattach = [0.2, 0.0, 0.1]\nstiffness = 5.0',
+    sc = _tilted(forces='[[forces.point]]\nforce = [0.4, -1.0, 2.0]\npoint = [0.1, 0.2, -0.3]\n'
+                        'frame = "body"\n[[forces.spring]]\nanchor = [0.0, 0.0, 1.0]\n'
+                        'attach = [0.2, 0.0, 0.1]\nstiffness = 5.0',
                  angular_velocity="[0.4, 1.5, -0.7]", velocity="[0.3, -0.1, 0.2]")
     y0 = sc.problem.initial_packed()
     p = sc.problem
@@ -449,11 +449,16 @@ def test_simulate_many_runs_each_request_as_it_runs_alone_bit_for_bit():
 def test_the_first_row_is_the_scenarios_and_quaternions_stay_continuous():
     # w < 0 at t = 0 and a spin of 3 rad/s for 2 s (through q → −q)
     sc = scenario_from_parts(body="mass = 1.0\ninertia = [1.0, 1.0, 1.0]",
-                             initial=f"orientation = {(-Q_TILT).tolist()}\nangular_velocity = [0.0, 0.0, 3.0]")
+                             initial=f"orientation = {(-Q_TILT).tolist()}\n"
+                                     "angular_velocity = [0.0, 0.0, 3.0]")
     run = ra.simulate(sc, GYRO, 0.01, 200)
     np.testing.assert_array_equal(run.y[0], sc.problem.initial_packed())
-    assert np.max(np.linalg.norm(np.diff(run.y[:, 6:10], axis=0), axis=1)) < 0.02
-    assert run.y[-1, 6] * math.cos(3.0) * (-Q_TILT[0]) > -1.0     # still on the initial sheet
+    # the continuous curve from −Q_TILT (not merely the same rotations): each step turns by 2 atan(0.015)
+    # about world z
+    k = np.arange(201)
+    expected = quat_mul(quat_exp(np.outer(k * 2 * math.atan(0.015), [0.0, 0.0, 1.0])), -Q_TILT)
+    assert np.max(np.linalg.norm(run.y[:, 6:10] - expected, axis=1)) < 200 * F32
+    assert np.min(np.einsum("ij,ij->i", run.y[1:, 6:10], run.y[:-1, 6:10])) > 0.99
 
 
 def test_a_blow_up_is_reported_as_divergence_with_the_rows_before_it():
@@ -498,6 +503,7 @@ def test_nothing_is_compiled_or_cached_at_run_time(tmp_path, monkeypatch):
     t = ra.timings()
     assert t["compile_seconds"] == 0.0 and t["builds"] == 1 and t["body_steps"] == 100
     assert t["build_seconds"] < t["step_seconds"] + 0.1
+    assert ra.compile_stats()["compilations"] == 0 and ra.compile_stats()["steps"] == 100
     assert not kernel_cache_dir("rapier").exists() and list(tmp_path.iterdir()) == []
 
 

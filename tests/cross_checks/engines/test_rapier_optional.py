@@ -31,8 +31,8 @@ def test_a_broken_install_is_not_an_absent_one(monkeypatch):
     monkeypatch.setattr(rapier_engine, "rapier", None)
     monkeypatch.setattr(rapier_engine, "_IMPORT_ERROR",
                         ImportError("_rapier3d.abi3.so: undefined symbol: PyObject_Vectorcall"))
-    with pytest.raises(ImportError,
-                       match="rapier3d 0.36.1 is installed but cannot be imported: ImportError: _rapier3d") as e:
+    with pytest.raises(ImportError, match="rapier3d 0.36.1 is installed but cannot be imported: "
+                                          "ImportError: _rapier3d") as e:
         rapier_engine.version()
     assert not isinstance(e.value, base.EngineNotInstalled)
 
