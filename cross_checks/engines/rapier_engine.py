@@ -348,6 +348,7 @@ def _run_group(variant: str, reqs) -> list:
             m["prev"] = row
             if len(m["rows"]) >= m["n"]:
                 m["live"] = False
+                W.body(m["i"]).is_enabled = False     # done: stepped no further
     return [_recorded(m["rows"], m["y0"], dt_s, m["why"]) for m in members]
 
 
