@@ -531,7 +531,8 @@ def test_the_tumbling_and_state_dependent_scenarios(assert_engine):
 
 @pytest.mark.slow
 def test_without_gyroscopic_forces_the_tumbling_bodies_do_not_converge_as_declared(assert_engine):
-    summary = assert_engine("rapier:symplectic_euler_no_gyro", ["tennis_racket", "particle_body", "applied_torque"])
+    summary = assert_engine("rapier:symplectic_euler_no_gyro",
+                            ["tennis_racket", "particle_body", "applied_torque"])
     verdicts = {(c["scenario"], c["quantity"]): c["verdict"] for c in summary["convergence"]}
     for name in ("tennis_racket", "particle_body", "applied_torque"):
         assert verdicts[(name, "orientation")] == verdicts[(name, "angular_velocity")] == "does_not_converge"
