@@ -65,7 +65,8 @@ def _floats(values) -> list:
     return [math.nan if v is None else float(v) for v in values]
 
 
-def fit_convergence(dt_s, errors, floors=None, statuses=None) -> ConvergenceFit:
+def fit_convergence(dt_s, errors, floors=None, statuses=None,
+                    amplified_factor: float = tol.AMPLIFIED_ROUNDOFF_FACTOR) -> ConvergenceFit:
     """Fit the convergence order of final errors over a Δt ladder and give a verdict.
 
     Parameters
@@ -74,6 +75,9 @@ def fit_convergence(dt_s, errors, floors=None, statuses=None) -> ConvergenceFit:
     errors : (K,) final errors (NaN for runs that produced none).
     floors : (K,) round-off floor of each point (see :func:`roundoff_floor`); 0 when omitted.
     statuses : (K,) run status per point ("ok", "diverged", "failed"); "ok" when omitted.
+    amplified_factor : how many floors an error growing again at the fine end may reach and still be
+        amplified round-off (AMPLIFIED_ROUNDOFF_FACTOR; judge.judge_ladder gives a float32 variant
+        AMPLIFIED_ROUNDOFF_FACTOR_FLOAT32).
 
     Verdicts: fewer than two finished runs -> "diverged" (when any diverged) or "failed"/"insufficient";
     fewer than two points resolved above their floor -> "at_roundoff" (the scheme is exact here); else the
@@ -107,7 +111,8 @@ def fit_convergence(dt_s, errors, floors=None, statuses=None) -> ConvergenceFit:
         return ConvergenceFit(order=None, fitted=fitted, verdict=verdict, note="; ".join(notes), **res)
 
     idx_ok = [i for i in range(K) if ok[i]]
-    above = _drop_amplified_roundoff(dt, e, fl, _drop_roundoff_tail(dt, e, fl, idx_ok, notes), notes)
+    above = _drop_amplified_roundoff(dt, e, fl, _drop_roundoff_tail(dt, e, fl, idx_ok, notes), notes,
+                                     amplified_factor)
     lower_bound = False
     if len(above) < 2:
         above = _lower_bound_points(e, fl, idx_ok, above)
@@ -146,16 +151,17 @@ def _drop_roundoff_tail(dt, e, fl, idx_ok, notes) -> list:
     return list(idx_ok)
 
 
-def _drop_amplified_roundoff(dt, e, fl, above, notes) -> list:
+def _drop_amplified_roundoff(dt, e, fl, above, notes,
+                             factor: float = tol.AMPLIFIED_ROUNDOFF_FACTOR) -> list:
     """(b) Round-off amplified by the dynamics: the error grows again at the fine end while still tiny
-    (≤ AMPLIFIED_ROUNDOFF_FACTOR × floor); the fine points within ROUNDOFF_NOISE_FACTOR of the smallest
-    error are dropped."""
+    (≤ ``factor`` × floor, AMPLIFIED_ROUNDOFF_FACTOR by default); the fine points within
+    ROUNDOFF_NOISE_FACTOR of the smallest error are dropped."""
     if len(above) < 3 or not e[above[-1]] > e[above[-2]]:
         return above
     m = min(e[i] for i in above)
     i_min = min(above, key=lambda i: e[i])
     finer = [i for i in above if i > i_min]
-    if not (m <= tol.AMPLIFIED_ROUNDOFF_FACTOR * fl[i_min]
+    if not (m <= factor * fl[i_min]
             and all(e[i] <= tol.ROUNDOFF_NOISE_FACTOR * m for i in finer)):
         return above
     keep = list(above)

@@ -96,7 +96,9 @@ def judge_ladder(dts, errors, floors, statuses, exp, local: LocalEvidence | None
     """Fit the ladder (Δt coarse to fine, errors, floors, statuses "ok"/...) and judge it against ``exp``
     (an :class:`~cross_checks.analysis.expectations.Expectation`); ``local``: the runs' own one-step defect;
     ``quantity``: the one whose errors these are."""
-    return judge_fit(fit_convergence(dts, errors, floors, statuses), exp, local, quantity)
+    factor = (tol.AMPLIFIED_ROUNDOFF_FACTOR_FLOAT32 if getattr(exp, "precision", "float64") == "float32"
+              else tol.AMPLIFIED_ROUNDOFF_FACTOR)
+    return judge_fit(fit_convergence(dts, errors, floors, statuses, factor), exp, local, quantity)
 
 
 def judge_fit(fit: ConvergenceFit, exp, local: LocalEvidence | None = None,

@@ -66,6 +66,12 @@ ROUNDOFF_NOISE_FACTOR = 10.0
 #: 10 s. An error that grows again at the fine end while below this multiple of the floor is
 #: amplified round-off, not a failure to converge.
 AMPLIFIED_ROUNDOFF_FACTOR = 1e4
+#: The same for a float32 variant (Traits.precision): 1e4 × a float32 floor (1e-4 … 1e-2 of the quantity's
+#: scale) is the quantity's own scale, so a missing term's plateau that creeps up by < 5 % over the ladder
+#: passed for round-off. Measured on Rapier 0.36.1 over the catalog (docs/engine_conventions.md): the
+#: smallest error of a ladder whose errors grow again is ≤ 24× its floor where it is float32 round-off
+#: (tumbling_box, 2e-5 from the separatrix) and ≥ 224× where it is the plateau of the missing gyroscopic term.
+AMPLIFIED_ROUNDOFF_FACTOR_FLOAT32 = 100.0
 #: Fallback only, for a caller with no measurement of its reference (sweeps measure it: see
 #: references.reference_error and metrics.roundoff_floor). Accuracy of the references relative to a
 #: quantity's scale: closed forms 1e-12 — Jacobi elliptic

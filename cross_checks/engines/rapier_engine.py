@@ -1,0 +1,436 @@
+"""Rapier (``rapier3d``, the official Python bindings of dimforge's Rust engine, 3D, float32) as an engine
+adapter (``rapier:VARIANT``); the interface is cross_checks.engines.base.
+
+Model: one ``rapier3d.PhysicsWorld`` per group of runs (same Δt and gravity) holding one dynamic
+``RigidBody`` per run, with no collider (nothing to collide with, no ground, and no mass from a shape): the
+body's mass properties are ``additional_mass_properties(MassProperties(local_com = 0, mass, principal
+moments, principal frame))`` — the COM at the body origin, so the body frame is the scenario's; a full tensor
+is given as its principal moments and the rotation ``R_BP`` of its principal axes (identity for a diagonal
+tensor). Rapier takes the mass into account at the first step (before it, ``RigidBody.mass`` reads 0).
+
+State mapping (docs/engine_conventions.md "Rapier 0.36.1", pinned by
+tests/cross_checks/engines/test_rapier_engine.py): ``RigidBody.translation`` is the body origin = COM (world),
+``linvel`` the COM's velocity (world), ``angvel`` the angular velocity IN WORLD AXES, ``rotation`` a
+``Rotation3`` whose constructor is ``(w, x, y, z)`` but whose ``to_tuple()`` and ``quaternion`` are
+``(x, y, z, w)``. The quaternion is converted at the boundary only; the recorded one is kept sign-continuous
+from the scenario's initial one. Every number is stored in float32 by the engine: the recorded states are
+float32 values (the first row is the scenario's initial state as given).
+
+The step (rapier src/dynamics/solver/staged_island_solver/worker.rs, with ``num_solver_iterations = 1``: one
+substep): the force increment ``v += Δt f/m`` (f = user force + m g), ``ω += Δt I_W⁻¹ τ`` (I_W at the
+start-of-step attitude), then — gyroscopic forces enabled — ``gyroscopic_corrected_angvel``
+(src/dynamics/rigid_body.rs): in the principal frame at the start-of-step attitude, ``L = I ω``,
+``L' = L − Δt ω × L`` (explicit Euler of Euler's equations) rescaled to ``|L|`` ("ensure angular momentum is
+preserved (similar to Jolt)"), ``ω = I⁻¹ L'``; then ``integrate_linearized``
+(src/dynamics/rigid_body_components.rs): ``x += Δt v``, ``q ← normalize((1, ½Δt ω_W) ⊗ q)`` with the NEW
+velocities; then ``apply_damping`` (``v/(1 + Δt c)``, c = 0 here). Semi-implicit ("symplectic", Rapier's
+docstring of ``integrate_forces_and_velocities``) Euler, first order: an explicit gyroscopic step whose |L|
+is kept and whose energy drifts at second order per step, towards the intermediate-axis separatrix (up
+near the major axis, down near the minor one) — a step to a neighbouring motion, not a time rescaling.
+
+Forces (harness semantics of base.py): ``add_force`` (a world force at the COM) and ``add_torque`` (world
+axes) ACCUMULATE into user forces that Rapier keeps from step to step until ``reset_forces``/
+``reset_torques``: constant forces are added once, state-dependent ones reset and added before every step
+from the start-of-step state. Rapier applies gravity itself (``PhysicsWorld(gravity=...)``, default 0), so the
+harness force minus the weight ``m g`` is added. Velocity decay ``e^{−kΔt}`` is applied to ``linvel`` and
+``angvel`` before each step (base.apply_decay_prestep), that step's force and torque scaled alike.
+
+Defaults that are not the scenario's physics, each neutralised explicitly (:data:`WORLD_SETTINGS`,
+:data:`BODY_SETTINGS`): 4 solver iterations per step, each a SUBSTEP of Δt/4 (set 1); a linear speed cap of
+400 m/s (lifted); an angular speed cap of π/4 rad per step (``allow_fast_rotation``); sleeping after 0.5 s
+below 0.05 m/s (``can_sleep(False)``); damping 0 and gravity scale 1 (set); CCD; extra per-body solver
+iterations (0); a rayon thread pool of every core (one thread per world: the machine is shared, and the
+sweep runs its own workers).
+
+Divergence: Rapier "quarantines" a body whose state becomes non-finite (rolls it back to its last valid pose,
+zeroes its velocities and disables it) instead of stopping; the state is checked after every step: the first
+state that is non-finite, beyond BLOWUP_LIMIT, or quarantined ends the run as ``diverged at t = …``.
+
+Batching: ``simulate_many`` runs the requests that share Δt and gravity as bodies of ONE world (bodies without
+colliders never interact; each body's run is the run it has alone, bit for bit), ``one_step`` its T start
+states as T bodies stepped once. Rapier is ahead-of-time compiled Rust: nothing is compiled or cached at run
+time (:func:`timings` keeps the world builds apart from the stepping).
+"""
+from __future__ import annotations
+
+import functools
+import math
+import time
+
+import numpy as np
+
+from cross_checks.engines.base import (
+    EngineAdapter,
+    EngineError,
+    RunRequest,
+    Traits,
+    Variant,
+    apply_decay_prestep,
+    decay_factors,
+    installed_version,
+    library_files,
+    optional_import,
+    require,
+)
+from cross_checks.engines.step_floats import harness_fn
+from reference_sim.quaternion import quat_from_matrix
+from reference_sim.simulate import BLOWUP_LIMIT, Run, blowup_words, diverged
+
+rapier, _IMPORT_ERROR = optional_import("rapier3d")
+
+__all__ = ["ENGINE", "DIST", "VARIANTS", "WORLD_SETTINGS", "BODY_SETTINGS", "EngineError", "version",
+           "simulate", "simulate_many", "one_step", "RapierWorld", "timings", "reset_timings",
+           "compile_stats",
+           "continuous_quaternions", "RapierAdapter"]
+
+ENGINE = "rapier"
+DIST = "rapier3d"
+
+#: Rapier's rotation step (docs above): |L| kept exactly, the energy moved at O(Δt²) per step in a direction
+#: that depends on the motion (towards the separatrix): a drift to a neighbouring motion, either sign.
+_GYRO_TRAITS = Traits(gyroscopic_term=True, translation_drift=0, rotation_drift="whole_state",
+                      rotation_sign=None, precision="float32")
+#: Without gyroscopic forces ω_W changes only by the torque: ω constant without one.
+_NO_GYRO_TRAITS = Traits(gyroscopic_term=False, translation_drift=0, rotation_drift="none", rotation_sign=0,
+                         precision="float32")
+
+#: Rapier's one integrator, with its gyroscopic forces on (Rapier's default, first) and off.
+#: Order 1: Rapier documents its step as symplectic Euler (rigid_body_components.rs,
+#: ``integrate_forces_and_velocities``: "This uses a symplectic Euler integration scheme").
+VARIANTS = {
+    "symplectic_euler": Variant(1, "Rapier's step (gyroscopic forces on, its default): semi-implicit Euler "
+                                   "in float32, explicit gyroscopic step in the principal frame rescaled to "
+                                   "keep |L|, linearised normalised quaternion update with the new ω",
+                                traits=_GYRO_TRAITS),
+    "symplectic_euler_no_gyro": Variant(1, "Rapier's step with gyroscopic_forces(False): semi-implicit Euler "
+                                           "in float32 without the gyroscopic term (ω_W changes only by the "
+                                           "torque)",
+                                        traits=_NO_GYRO_TRAITS),
+}
+
+#: IntegrationParameters set on every world: (attribute, value). Rapier 0.36.1's defaults are 4, 400, 1, 1.0.
+WORLD_SETTINGS = (
+    ("num_solver_iterations", 1),                         # substeps per step (default 4)
+    ("normalized_max_linear_velocity", math.inf),         # linear speed cap (default 400 m/s)
+    ("max_ccd_substeps", 0),                              # continuous collision detection (default 1)
+    ("length_unit", 1.0),                                 # scales the speed cap and the contact tolerances
+)
+#: RigidBodyBuilder settings every body gets (builder method, value); the gyroscopic flag is the variant's.
+BODY_SETTINGS = (
+    ("can_sleep", False),                  # default True: asleep after 0.5 s below 0.05 m/s and 0.05 rad/s
+    ("allow_fast_rotation", True),         # default False: |ω| capped at (π/4)/Δt
+    ("linear_damping", 0.0),
+    ("angular_damping", 0.0),
+    ("gravity_scale", 1.0),
+    ("ccd_enabled", False),
+    ("additional_solver_iterations", 0),   # extra substeps for this body's island
+)
+
+_STATS = {"builds": 0, "build_seconds": 0.0, "step_seconds": 0.0, "steps": 0, "body_steps": 0}
+
+
+def timings() -> dict:
+    """This process's world builds and stepping, apart: ``builds``, ``build_seconds`` (worlds and bodies
+    created and set up), ``steps`` (``PhysicsWorld.step`` calls), ``step_seconds`` (wall s inside them),
+    ``body_steps`` (steps × bodies they advanced). Rapier compiles nothing at run time (``compile_seconds``
+    is always 0, kept for comparison with the JIT engines)."""
+    return {**_STATS, "compile_seconds": 0.0}
+
+
+def reset_timings() -> None:
+    _STATS.update(builds=0, build_seconds=0.0, step_seconds=0.0, steps=0, body_steps=0)
+
+
+def compile_stats() -> dict:
+    """:func:`timings` under the name the JIT engines' adapters use (mjx_engine.compile_stats): Rapier's
+    ``compilations`` are always 0."""
+    return {**timings(), "compilations": 0}
+
+
+def _require():
+    require(rapier, _IMPORT_ERROR, DIST, hint="pip install 'rbcheck[rapier]'")
+
+
+def version() -> str:
+    """The installed rapier3d distribution's version (EngineNotInstalled when it is absent)."""
+    _require()
+    return _dist_version()
+
+
+@functools.lru_cache(maxsize=1)
+def _dist_version() -> str:
+    return installed_version(DIST) or "unknown"
+
+
+def continuous_quaternions(q, q0):
+    """Quaternion rows ``q`` (n, 4) with signs flipped so that each has a non-negative dot product with the
+    one before, the first with ``q0``: the same rotations, as one continuous curve from ``q0``."""
+    q = np.array(q, dtype=float)
+    if len(q) == 0:
+        return q
+    prev = np.concatenate([np.asarray(q0, dtype=float)[None], q[:-1]])
+    flips = np.where(np.einsum("ij,ij->i", q, prev) < 0.0, -1.0, 1.0)
+    return q * np.cumprod(flips)[:, None]
+
+
+def _mass_properties(body):
+    """``rapier3d.MassProperties`` of an rbcheck RigidBody: COM at the origin, the principal moments and the
+    rotation of the principal axes in body coordinates (identity for a diagonal tensor)."""
+    I = np.asarray(body.inertia_B, dtype=float)
+    if body.is_diagonal():
+        moments, q_BP = np.diag(I).copy(), np.array([1.0, 0.0, 0.0, 0.0])
+    else:
+        moments, R_BP = body.principal_axes()
+        q_BP = quat_from_matrix(R_BP)
+    return rapier.MassProperties(local_com=(0.0, 0.0, 0.0), mass=float(body.mass_kg),
+                                 principal_inertia=tuple(float(m) for m in moments),
+                                 principal_inertia_local_frame=rapier.Rotation3(*(float(c) for c in q_BP)))
+
+
+class RapierWorld:
+    """A world stepping at ``dt_s`` under ``gravity_W`` with the neutral settings; bodies added with
+    :meth:`add`, states set and read at the boundary in rbcheck's packed layout."""
+
+    def __init__(self, dt_s: float, gravity_W, variant: str):
+        _require()
+        if variant not in VARIANTS:
+            raise ValueError(f"unknown rapier variant {variant!r}; variants: {', '.join(VARIANTS)}")
+        t0 = time.perf_counter()
+        self.world = w = rapier.PhysicsWorld(gravity=tuple(float(g) for g in gravity_W))
+        w.set_num_threads(1)
+        ip = w.integration_parameters        # a live view: modified in place
+        ip.dt = float(dt_s)
+        for attr, value in WORLD_SETTINGS:
+            setattr(ip, attr, value)
+        self.gyro = VARIANTS[variant].traits.gyroscopic_term
+        self.dt_s = float(dt_s)
+        self.handles: list = []
+        _STATS["builds"] += 1
+        _STATS["build_seconds"] += time.perf_counter() - t0
+
+    def add(self, body, y) -> int:
+        """Add a body (rbcheck RigidBody) at the packed state ``y`` (13,); its index."""
+        t0 = time.perf_counter()
+        b = rapier.RigidBody.dynamic().additional_mass_properties(_mass_properties(body))
+        for method, value in BODY_SETTINGS:
+            b = getattr(b, method)(value)
+        b = b.gyroscopic_forces(self.gyro)
+        h = self.world.add_body(b)
+        self.handles.append(h)
+        self.set_state(len(self.handles) - 1, y)
+        _STATS["build_seconds"] += time.perf_counter() - t0
+        return len(self.handles) - 1
+
+    def body(self, i: int):
+        return self.world.rigid_bodies[self.handles[i]]
+
+    def set_state(self, i: int, y) -> None:
+        """Put body ``i`` at the packed state ``y`` (13,) (rounded to float32 by Rapier)."""
+        y = [float(v) for v in y]
+        rb = self.body(i)
+        rb.position = rapier.Isometry3((y[0], y[1], y[2]), rapier.Rotation3(y[6], y[7], y[8], y[9]))
+        rb.linvel = (y[3], y[4], y[5])
+        rb.angvel = (y[10], y[11], y[12])
+
+    def set_velocities(self, i: int, v, w) -> None:
+        rb = self.body(i)
+        rb.linvel = tuple(v)
+        rb.angvel = tuple(w)
+
+    def read(self, i: int) -> list:
+        """Body ``i``'s state as 13 floats ``[x_W, v_W, q (w x y z), ω_W]`` (float32 values)."""
+        rb = self.body(i)
+        qx, qy, qz, qw = rb.rotation.to_tuple()
+        return [*rb.translation.to_tuple(), *rb.linvel.to_tuple(), qw, qx, qy, qz, *rb.angvel.to_tuple()]
+
+    def enabled(self, i: int) -> bool:
+        return self.body(i).is_enabled
+
+    def apply(self, i: int, f_W, tau_W) -> None:
+        """Replace body ``i``'s user force (world, at the COM, N) and torque (world, N m): Rapier keeps them
+        for every later step until replaced."""
+        rb = self.body(i)
+        rb.reset_forces(False)
+        rb.reset_torques(False)
+        rb.add_force(tuple(f_W), False)
+        rb.add_torque(tuple(tau_W), False)
+
+    def step(self) -> None:
+        t0 = time.perf_counter()
+        self.world.step()
+        _STATS["step_seconds"] += time.perf_counter() - t0
+        _STATS["steps"] += 1
+        _STATS["body_steps"] += len(self.handles)
+
+    def quarantined(self) -> set:
+        """Indices of the bodies Rapier quarantined in the last step (non-finite state)."""
+        bad = set(self.world.quarantine.bodies)
+        return {i for i, h in enumerate(self.handles) if h in bad} if bad else set()
+
+
+def _bad(row) -> bool:
+    """Whether a packed state (13 floats) is non-finite or has a component beyond BLOWUP_LIMIT
+    (reference_sim.simulate.bad_rows on one state)."""
+    total = sum(row)
+    return total != total or max(row) > BLOWUP_LIMIT or min(row) < -BLOWUP_LIMIT
+
+
+def _recorded(rows, y0, dt_s: float, why: str = "") -> Run:
+    """The Run of packed states ``rows`` (steps 1..n) after the initial state ``y0``, quaternions continuous
+    from y0's; ``why`` non-empty: the run diverged in step n + 1."""
+    y = np.empty((len(rows) + 1, 13))
+    y[0] = y0
+    if rows:
+        y[1:] = np.array(rows)
+        y[1:, 6:10] = continuous_quaternions(y[1:, 6:10], y0[6:10])
+    if why:
+        return diverged(y, dt_s, why)
+    return Run(dt_s * np.arange(len(y)), y)
+
+
+def _weight(scenario) -> list:
+    p = scenario.problem
+    return (p.body.mass_kg * np.asarray(p.forces.gravity_W, dtype=float)).tolist()
+
+
+def _group_key(r) -> tuple:
+    return (float(r.dt_s), tuple(float(g) for g in r.scenario.problem.forces.gravity_W))
+
+
+def _run_group(variant: str, reqs) -> list:
+    """The Runs of ``reqs`` (one Δt, one gravity) as bodies of one world, stepped together to the longest."""
+    dt_s, gravity = _group_key(reqs[0])
+    W = RapierWorld(dt_s, gravity, variant)
+    members = []
+    for r in reqs:
+        y0 = r.scenario.problem.initial_packed()
+        i = W.add(r.scenario.problem.body, y0)
+        forces = r.scenario.problem.forces
+        harness = harness_fn(r.scenario, dt_s)
+        gv, gw = (float(g) for g in decay_factors(r.scenario, dt_s))
+        wx, wy, wz = _weight(r.scenario)
+        fx, fy, fz, tx, ty, tz = harness([float(v) for v in y0])
+        f, tau = (fx - wx, fy - wy, fz - wz), (tx, ty, tz)
+        W.apply(i, f, tau)
+        members.append({"i": i, "y0": y0, "n": int(r.n_steps), "rows": [], "why": "", "prev": y0.tolist(),
+                        "harness": harness, "weight": (wx, wy, wz), "state": bool(forces.state_dependent),
+                        "decay": bool(forces.has_decay), "g": (gv, gw), "live": int(r.n_steps) > 0})
+    k = 0
+    while any(m["live"] for m in members):
+        k += 1
+        for m in members:
+            if not m["live"]:
+                continue
+            prev = m["prev"]
+            if m["state"] and k > 1:
+                fx, fy, fz, tx, ty, tz = m["harness"](prev)
+                wx, wy, wz = m["weight"]
+                W.apply(m["i"], (fx - wx, fy - wy, fz - wz), (tx, ty, tz))
+            if m["decay"]:
+                gv, gw = m["g"]
+                W.set_velocities(m["i"], (gv * prev[3], gv * prev[4], gv * prev[5]),
+                                 (gw * prev[10], gw * prev[11], gw * prev[12]))
+        W.step()
+        quarantined = W.quarantined()
+        for m in members:
+            if not m["live"]:
+                continue
+            row = W.read(m["i"])
+            if m["i"] in quarantined or not W.enabled(m["i"]):
+                m["why"] = " (non-finite state: Rapier quarantined the body)"
+            elif _bad(row):
+                m["why"] = f" ({blowup_words(row)})"
+            if m["why"]:
+                m["live"] = False
+                W.body(m["i"]).is_enabled = False     # stepped no further
+                continue
+            m["rows"].append(row)
+            m["prev"] = row
+            if len(m["rows"]) >= m["n"]:
+                m["live"] = False
+                W.body(m["i"]).is_enabled = False     # done: stepped no further
+    return [_recorded(m["rows"], m["y0"], dt_s, m["why"]) for m in members]
+
+
+def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
+    """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded."""
+    run = simulate_many(variant, [RunRequest(scenario, float(dt_s), int(n_steps))])[0]
+    if isinstance(run, EngineError):
+        raise run
+    return run
+
+
+def simulate_many(variant: str, requests) -> list:
+    """The runs of ``requests`` (``base.RunRequest``), each a Run (or its EngineError): the requests of one Δt
+    and one gravity run as bodies of one world (each body's run is its run alone, bit for bit)."""
+    if variant not in VARIANTS:
+        raise ValueError(f"unknown rapier variant {variant!r}; variants: {', '.join(VARIANTS)}")
+    _require()
+    out: list = [None] * len(requests)
+    groups: dict = {}
+    for j, r in enumerate(requests):
+        groups.setdefault(_group_key(r), []).append(j)
+    for idx in groups.values():
+        try:
+            runs = _run_group(variant, [requests[j] for j in idx])
+        except (rapier.RapierError, RuntimeError) as exc:   # the engine refused: its own words
+            err = EngineError(f"Rapier {version()} failed: {type(exc).__name__}: {exc}")
+            runs = [err] * len(idx)
+        for j, run in zip(idx, runs):
+            out[j] = run
+    return out
+
+
+def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
+    """One step of ``dt_s`` from each row of ``y_start`` (T, 13), all rows as bodies of one world stepped
+    once: the forces from the row, the pre-step decay. A row Rapier quarantines comes back non-finite."""
+    shape = np.shape(y_start)
+    y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
+    W = RapierWorld(dt_s, scenario.problem.forces.gravity_W, variant)
+    y_dec = apply_decay_prestep(scenario, y_start, dt_s)
+    harness = harness_fn(scenario, dt_s)
+    wx, wy, wz = _weight(scenario)
+    body = scenario.problem.body
+    for row, row_dec in zip(y_start.tolist(), y_dec):
+        i = W.add(body, row_dec)
+        fx, fy, fz, tx, ty, tz = harness(row)
+        W.apply(i, (fx - wx, fy - wy, fz - wz), (tx, ty, tz))
+    W.step()
+    quarantined = W.quarantined()
+    out = np.array([W.read(i) if i not in quarantined else [math.nan] * 13 for i in range(len(y_start))])
+    # each quaternion on the side of its start state's (one step turns it by less than π)
+    sign = np.where(np.einsum("ij,ij->i", out[:, 6:10], y_start[:, 6:10]) < 0.0, -1.0, 1.0)
+    out[:, 6:10] *= sign[:, None]
+    return out.reshape(shape)
+
+
+class RapierAdapter(EngineAdapter):
+    """``rapier:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
+    (``pip install 'rbcheck[rapier]'``). Declared order: Rapier's symplectic Euler is first order; float32."""
+
+    name = ENGINE
+    variants = VARIANTS
+
+    def version(self) -> str:
+        return version()
+
+    def source_files(self) -> list:
+        """This module, the plain-float harness its loop runs, and rapier3d's compiled module (a rebuilt or
+        reinstalled wheel is a new engine)."""
+        from pathlib import Path
+
+        from cross_checks.engines import step_floats
+        files = [*super().source_files(), Path(step_floats.__file__)]
+        if rapier is not None:
+            files += library_files(getattr(rapier, "_rapier3d", None))
+        return files
+
+    def simulate(self, scenario, variant: str, dt_s: float, n_steps: int) -> Run:
+        return simulate(scenario, variant, dt_s, n_steps)
+
+    def simulate_many(self, variant: str, requests) -> list:
+        """:func:`simulate_many`: the requests of one Δt and gravity as bodies of one world."""
+        return simulate_many(variant, requests)
+
+    def one_step(self, scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
+        return one_step(scenario, variant, dt_s, y_start)
