@@ -274,7 +274,7 @@ class PhysxScene:
     def set_state(self, c, y) -> None:
         """Put body ``c`` at the packed state ``y`` (13,): actor pose, COM velocity, world ω."""
         y = np.asarray(y, dtype=float)
-        c.set_pose(_engine()[0].Pose(_f32(y[0:3]), _f32(y[6:10])))
+        c.set_entity_pose(_engine()[0].Pose(_f32(y[0:3]), _f32(y[6:10])))
         c.set_linear_velocity(_f32(y[3:6]))
         c.set_angular_velocity(_f32(y[10:13]))
 
