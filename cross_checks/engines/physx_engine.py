@@ -1,10 +1,10 @@
 """NVIDIA PhysX 5 (CPU, through SAPIEN's ``sapien.physx``) as an engine adapter (``physx:VARIANT``); the
 interface is cross_checks.engines.base.
 
-Model: one ``sapien.Scene`` holding one ``PhysxCpuSystem`` (PhysX 5.3.1 as SAPIEN 3.0.3 bundles it, CPU, single
-precision, ``cpuWorkers = 0``: PhysX runs on the calling thread, no worker thread exists to survive a fork),
-the scenario's gravity in the scene config (``px.set_scene_config`` before the system is made: SAPIEN reads it
-then), the solver chosen there (``PhysxSceneConfig.enable_tgs``: TGS or PGS), the run's Δt by
+Model: one ``sapien.Scene`` holding one ``PhysxCpuSystem`` (PhysX 5.3.1 as SAPIEN 3.0.3 bundles it, CPU,
+single precision, ``cpuWorkers = 0``: PhysX runs on the calling thread, no worker thread exists to survive
+a fork), the scenario's gravity in the scene config (``px.set_scene_config`` before the system is made:
+SAPIEN reads it then), the solver chosen there (``PhysxSceneConfig.enable_tgs``: TGS or PGS), the run's Δt by
 ``set_timestep`` (PhysX keeps it in float32). The body is one entity with one ``PhysxRigidDynamicComponent``
 and no collision shape (nothing to collide with, no ground): ``set_mass``; ``set_inertia`` takes the
 PRINCIPAL moments and ``set_cmass_local_pose`` the principal axes (PhysX's mass frame), so a full tensor is
@@ -13,9 +13,10 @@ origin, the mass frame's rotation R_BP); the actor frame stays the scenario's bo
 
 State mapping (docs/engine_conventions.md, "PhysX 5.3.1 (SAPIEN 3.0.3)", pinned by
 tests/cross_checks/engines/test_physx_engine.py): ``pose`` is the actor (body) frame, ``Pose(p, q)`` with q
-(w, x, y, z); ``linear_velocity`` is the COM's and ``angular_velocity`` is in WORLD axes. ``PhysxCpuSystem.pack()``
-gives every body's ``[q (w x y z), p, v, ω]`` (13 float32) in one call: the adapter reads the whole scene's
-state that way after each step. The recorded quaternion is kept sign-continuous from the scenario's initial one.
+(w, x, y, z); ``linear_velocity`` is the COM's and ``angular_velocity`` is in WORLD axes.
+``PhysxCpuSystem.pack()`` gives every body's ``[q (w x y z), p, v, ω]`` (13 float32) in one call: the adapter
+reads the whole scene's state that way after each step. The recorded quaternion is kept sign-continuous from
+the scenario's initial one.
 
 The step (PhysX 5.3.1, physx/source/simulationcontroller/src/ScBodySim.cpp ``BodySim::updateForces``, then
 lowleveldynamics/src/DyBodyCoreIntegrator.h ``bodyCoreComputeUnconstrainedVelocity`` and ``integrateCore``
@@ -91,8 +92,8 @@ from cross_checks.engines.step_floats import harness_fn
 from reference_sim.simulate import BLOWUP_LIMIT, Run, blowup_words, diverged
 
 __all__ = ["ENGINE", "VARIANTS", "BODY_SETTINGS", "PACK_TO_PACKED", "EngineError", "version", "simulate",
-           "simulate_many", "one_step", "PhysxScene", "compile_stats", "reset_stats", "continuous_quaternions",
-           "PhysxAdapter"]
+           "simulate_many", "one_step", "PhysxScene", "compile_stats", "reset_stats",
+           "continuous_quaternions", "PhysxAdapter"]
 
 ENGINE = "physx"
 _DIST = "sapien"
@@ -165,9 +166,9 @@ def _check_installed() -> None:
 
 
 def version() -> str:
-    """SAPIEN's version and the PhysX release it bundles, e.g. ``3.0.3 (PhysX 5.3.1)``, from package metadata and
-    the PhysX header SAPIEN ships (EngineNotInstalled when sapien is absent). Nothing is imported: importing
-    sapien starts a thread, and the sweep's parent forks its workers."""
+    """SAPIEN's version and the PhysX release it bundles, e.g. ``3.0.3 (PhysX 5.3.1)``, from package
+    metadata and the PhysX header SAPIEN ships (EngineNotInstalled when sapien is absent). Nothing is
+    imported: importing sapien starts a thread, and the sweep's parent forks its workers."""
     _check_installed()
     return _dist_version()
 
@@ -178,8 +179,8 @@ def _dist_version() -> str:
 
 
 def _physx_release() -> str:
-    """PhysX's MAJOR.MINOR.BUGFIX from ``sapien/include/physx/include/foundation/PxPhysicsVersion.h`` (found by
-    import spec, not imported); "unknown" when the header is not there."""
+    """PhysX's MAJOR.MINOR.BUGFIX from ``sapien/include/physx/include/foundation/PxPhysicsVersion.h`` (found
+    by import spec, not imported); "unknown" when the header is not there."""
     import importlib.util
     import re
     spec = importlib.util.find_spec("sapien")
@@ -190,7 +191,8 @@ def _physx_release() -> str:
         text = header.read_text(errors="replace")
     except OSError:
         return "unknown"
-    parts = [re.search(rf"#define PX_PHYSICS_VERSION_{k}\s+(\d+)", text) for k in ("MAJOR", "MINOR", "BUGFIX")]
+    parts = [re.search(rf"#define PX_PHYSICS_VERSION_{k}\s+(\d+)", text)
+             for k in ("MAJOR", "MINOR", "BUGFIX")]
     return ".".join(m.group(1) for m in parts) if all(parts) else "unknown"
 
 
@@ -221,11 +223,11 @@ def _f32(v) -> np.ndarray:
     return np.asarray(v, dtype=np.float32)
 
 
-# --- a scene of free bodies -----------------------------------------------------------------------------------
+# --- a scene of free bodies -------------------------------------------------------------------------------
 
 class PhysxScene:
-    """One SAPIEN scene of ``variant``'s solver at ``dt_s`` with gravity ``gravity_W`` and no other entity than
-    the bodies :meth:`add` puts in it (none collides: no shape)."""
+    """One SAPIEN scene of ``variant``'s solver at ``dt_s`` with gravity ``gravity_W`` and no other entity
+    than the bodies :meth:`add` puts in it (none collides: no shape)."""
 
     def __init__(self, variant: str, dt_s: float, gravity_W):
         if variant not in VARIANTS:
@@ -293,8 +295,8 @@ def neutralise(c) -> None:
 
 
 def continuous_quaternions(q, q0):
-    """Quaternion rows ``q`` (n, 4) with signs flipped so that each has a non-negative dot product with the one
-    before, the first with ``q0``: the same rotations, as one continuous curve from ``q0``."""
+    """Quaternion rows ``q`` (n, 4) with signs flipped so that each has a non-negative dot product with the
+    one before, the first with ``q0``: the same rotations, as one continuous curve from ``q0``."""
     q = np.array(q, dtype=float)
     if len(q) == 0:
         return q
@@ -457,8 +459,8 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
 
 class PhysxAdapter(EngineAdapter):
     """``physx:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
-    (``pip install 'rbcheck[physx]'``). Declared orders: both solvers run PhysX's semi-implicit Euler step on a
-    free body: first order, float32."""
+    (``pip install 'rbcheck[physx]'``). Declared orders: both solvers run PhysX's semi-implicit Euler step
+    on a free body: first order, float32."""
 
     name = ENGINE
     variants = VARIANTS
@@ -467,8 +469,8 @@ class PhysxAdapter(EngineAdapter):
         return version()
 
     def source_files(self) -> list:
-        """This module, the plain-float harness its loop runs, and SAPIEN's compiled module and bundled library
-        (PhysX is linked into them)."""
+        """This module, the plain-float harness its loop runs, and SAPIEN's compiled module and bundled
+        library (PhysX is linked into them)."""
         import importlib.util
 
         from cross_checks.engines import step_floats

@@ -1,8 +1,8 @@
-"""The PhysX adapter (cross_checks.engines.physx_engine, PhysX 5.3.1 through SAPIEN 3.0.3): every convention it
-relies on, pinned on the engine itself (docs/engine_conventions.md, "PhysX 5.3.1 (SAPIEN 3.0.3)"), every default
-it neutralises (read back from the engine), one step of each solver against PhysX's step written out by hand in
-numpy below (and against the candidate schemes it is not), batching, divergence, its order on catalog
-scenarios."""
+"""The PhysX adapter (cross_checks.engines.physx_engine, PhysX 5.3.1 through SAPIEN 3.0.3): every convention
+it relies on, pinned on the engine itself (docs/engine_conventions.md, "PhysX 5.3.1 (SAPIEN 3.0.3)"), every
+default it neutralises (read back from the engine), one step of each solver against PhysX's step written out
+by hand in numpy below (and against the candidate schemes it is not), batching, divergence, its order on
+catalog scenarios."""
 import os
 import subprocess
 import sys
@@ -49,13 +49,14 @@ def _raw_body(scene_variant="pgs", dt=0.01, gravity=(0.0, 0.0, 0.0), inertia=(1.
 
 
 # --- PhysX's step, written out by hand (PhysX 5.3.1: ScBodySim.cpp updateForces, DyBodyCoreIntegrator.h,
-# DyRigidBodyToSolverBody.cpp copyToSolverBodyData), in float64 ------------------------------------------------
+# DyRigidBodyToSolverBody.cpp copyToSolverBodyData), in float64 ---------------------------------------------
 
 def physx_step(sc, y, F, tau, h, gyro="renormalised"):
-    """One step from the packed state ``y``: world force ``F`` (N, at the COM, gravity excluded) and world torque
-    ``tau`` (N m) as velocity changes with I_W at the start attitude, then gravity, then the gyroscopic term in
-    the principal frame at the start attitude (``gyro``: "renormalised" = PhysX's explicit step rescaled to |L|,
-    "explicit" = without the rescaling, "none"), then x and q (exponential map, world ω) with the new v, ω."""
+    """One step from the packed state ``y``: world force ``F`` (N, at the COM, gravity excluded) and world
+    torque ``tau`` (N m) as velocity changes with I_W at the start attitude, then gravity, then the
+    gyroscopic term in the principal frame at the start attitude (``gyro``: "renormalised" = PhysX's
+    explicit step rescaled to |L|, "explicit" = without the rescaling, "none"), then x and q (exponential
+    map, world ω) with the new v, ω."""
     body, g = sc.problem.body, np.asarray(sc.problem.forces.gravity_W, float)
     x, v, q, w = y[0:3], y[3:6], y[6:10], y[10:13]
     R = matrix_from_quat(q)
@@ -99,7 +100,8 @@ def test_sapien_and_physx_own_defaults():
     assert c.angular_damping == pytest.approx(0.05) and c.linear_damping == 0.0
     assert c.max_angular_velocity == pytest.approx(100.0)
     assert c.max_linear_velocity == pytest.approx(1e16)
-    assert c.max_depenetration_velocity == pytest.approx(1e32) and c.max_contact_impulse == pytest.approx(1e32)
+    assert c.max_depenetration_velocity == pytest.approx(1e32)
+    assert c.max_contact_impulse == pytest.approx(1e32)
     assert c.sleep_threshold == pytest.approx(0.005)
     assert (c.solver_position_iterations, c.solver_velocity_iterations) == (10, 1)
     assert c.auto_compute_mass and c.mass == pytest.approx(1e-6) and not c.kinematic
@@ -128,8 +130,9 @@ def test_neutralise_sets_every_setting_whatever_it_was():
     S, c = _raw_body()
     hostile = {"set_linear_damping": 0.5, "set_angular_damping": 0.7, "set_max_linear_velocity": 0.1,
                "set_max_angular_velocity": 0.1, "set_max_depenetration_velocity": 0.1,
-               "set_max_contact_impulse": 0.1, "set_sleep_threshold": 10.0, "set_solver_position_iterations": 7,
-               "set_solver_velocity_iterations": 3, "set_disable_gravity": True, "set_kinematic": True}
+               "set_max_contact_impulse": 0.1, "set_sleep_threshold": 10.0,
+               "set_solver_position_iterations": 7, "set_solver_velocity_iterations": 3,
+               "set_disable_gravity": True, "set_kinematic": True}
     assert set(hostile) == {s for s, _ in pe.BODY_SETTINGS}
     for setter, value in hostile.items():
         getattr(c, setter)(value)
@@ -141,7 +144,8 @@ def test_neutralise_sets_every_setting_whatever_it_was():
 
 def test_default_angular_damping_and_clamp_change_a_spin_and_neutralised_they_do_not():
     # isotropic body (no gyroscopic term), ω = 500 rad/s about z: SAPIEN's defaults damp it by (1 − 0.05 Δt)
-    # and clamp it to 100 rad/s in the first step (DyBodyCoreIntegrator.h bodyCoreComputeUnconstrainedVelocity)
+    # and clamp it to 100 rad/s in the first step (DyBodyCoreIntegrator.h
+    # bodyCoreComputeUnconstrainedVelocity)
     S, c = _raw_body()
     c.set_angular_velocity(np.float32([0.0, 0.0, 500.0]))
     S.step()
@@ -160,9 +164,10 @@ def test_default_angular_damping_and_clamp_change_a_spin_and_neutralised_they_do
 
 
 def test_a_slow_spin_falls_asleep_with_the_default_threshold_and_never_with_zero():
-    # 1 mrad/s: mass-normalised energy 5e-7 < 0.005: PhysX puts the body to sleep once its wake counter (0.4 s)
-    # runs out, and a sleeping body is stopped (its ω zeroed; DySleep.cpp); threshold 0 resets the counter every
-    # step (a constant linear drift is not put to sleep: PhysX accumulates the velocities it tests over frames)
+    # 1 mrad/s: mass-normalised energy 5e-7 < 0.005: PhysX puts the body to sleep once its wake counter
+    # (0.4 s) runs out, and a sleeping body is stopped (its ω zeroed; DySleep.cpp); threshold 0 resets the
+    # counter every step (a constant linear drift is not put to sleep: PhysX accumulates the velocities it
+    # tests over frames)
     for neutral in (False, True):
         S, c = _raw_body()
         c.set_angular_damping(0.0)
@@ -224,7 +229,8 @@ def test_quaternion_order_at_the_boundary():
 
 @pytest.mark.parametrize("variant", BOTH)
 def test_a_yawed_body_spinning_about_body_x_turns_about_world_y(variant):
-    # 90° yaw: body x is world y; a torque-free spin about a principal axis keeps ω_W, and q(t) = exp(ω_W t) q0
+    # 90° yaw: body x is world y; a torque-free spin about a principal axis keeps ω_W,
+    # and q(t) = exp(ω_W t) q0
     sc = scenario_from_parts(initial=YAW90 + "\nangular_velocity_body = [2.0, 0.0, 0.0]", dt=0.01,
                              duration=0.5)
     run = pe.simulate(sc, variant, 0.01, 50)
@@ -327,9 +333,9 @@ def test_the_gyroscopic_step_keeps_the_momentums_magnitude(variant):
 
 
 def test_tgs_multiplies_omega_by_1_plus_10_float32_ulps_per_step_and_pgs_does_not():
-    # an isotropic spin (no gyroscopic term, nothing acts): ω is constant in exact arithmetic. TGS carries ω in
-    # sqrt-inertia space and back (two float32 world matrices); measured: +1.19e-6 relative per step, the same
-    # at Δt = 0.01 and 0.001 s; PGS leaves it to 1 ulp
+    # an isotropic spin (no gyroscopic term, nothing acts): ω is constant in exact arithmetic. TGS carries ω
+    # in sqrt-inertia space and back (two float32 world matrices); measured: +1.19e-6 relative per step, the
+    # same at Δt = 0.01 and 0.001 s; PGS leaves it to 1 ulp
     sc = _tilted(body="mass = 1.0\ninertia = [2.0, 2.0, 2.0]", angular_velocity="[0.0, 0.0, 3.0]")
     for h in (0.01, 0.001):
         growth = {}
@@ -357,8 +363,9 @@ def test_decay_is_applied_before_the_step_with_that_steps_force_scaled():
 
 
 def test_body_frame_point_forces_and_springs_reach_physx_as_the_force_models_wrench():
-    sc = _tilted(forces='[[forces.point]]\nforce = [0.4, -1.0, 2.0]\npoint = [0.1, 0.2, -0.3]\nframe = "body"\n'
-                        '[[forces.spring]]\nanchor = [0.0, 0.0, 1.0]\nattach = [0.2, 0.0, 0.1]\nstiffness = 5.0',
+    sc = _tilted(forces='[[forces.point]]\nforce = [0.4, -1.0, 2.0]\npoint = [0.1, 0.2, -0.3]\n'
+                        'frame = "body"\n[[forces.spring]]\nanchor = [0.0, 0.0, 1.0]\n'
+                        'attach = [0.2, 0.0, 0.1]\nstiffness = 5.0',
                  angular_velocity="[0.4, 1.5, -0.7]", velocity="[0.3, -0.1, 0.2]")
     y0 = sc.problem.initial_packed()
     fm, body = sc.problem.forces, sc.problem.body
@@ -379,8 +386,9 @@ def test_one_step_replays_the_run(name):
         again = pe.one_step(sc, variant, 0.01, run.y[:-1])
         scale = np.maximum(1.0, np.abs(run.y[1:]))
         # float32: the run's state is PhysX's own, the restart goes through float64 → float32 (≤ 1 ulp each);
-        # TGS's ω comes back through its sqrt-inertia round trip, whose ~10-ulp error moves with the attitude's
-        # last bits (a principal frame turned by the mass frame's rotation is re-rounded on the way in)
+        # TGS's ω comes back through its sqrt-inertia round trip, whose ~10-ulp error moves with the
+        # attitude's last bits (a principal frame turned by the mass frame's rotation is re-rounded on the
+        # way in)
         bound = 8 * 2.0 ** -23 if variant == "pgs" else ctol.PHYSX_TGS_OMEGA_STEP_REL
         assert np.max(np.abs(again - run.y[1:]) / scale) < bound
 
@@ -403,7 +411,8 @@ def test_simulate_many_steps_runs_of_one_dt_and_gravity_together_bit_for_bit():
 
 def test_the_first_row_is_the_scenarios_and_quaternions_stay_continuous():
     sc = scenario_from_parts(body="mass = 1.0\ninertia = [1.0, 1.0, 1.0]",
-                             initial=f"orientation = {(-Q_TILT).tolist()}\nangular_velocity = [0.0, 0.0, 3.0]")
+                             initial=f"orientation = {(-Q_TILT).tolist()}\n"
+                                     "angular_velocity = [0.0, 0.0, 3.0]")
     run = pe.simulate(sc, "pgs", 0.01, 400)
     np.testing.assert_array_equal(run.y[0], sc.problem.initial_packed())
     assert np.max(np.linalg.norm(np.diff(run.y[:, 6:10], axis=0), axis=1)) < 0.02
