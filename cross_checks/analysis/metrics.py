@@ -128,9 +128,9 @@ def roundoff_floor(scale: float, n_steps: int, reference_label: str = "analytic"
     With ``reference_error`` (the reference's MEASURED error in this quantity, see
     references.reference_error): ``reference_error + ε·scale·(b·N + √N·A)`` — the run's own round-off:
     roundings of the same sign add up linearly (b = 1 for position and velocity: a falling body's
-    increments keep their sign, measured 0.34 N ε |x| on tumbling_box), the rest like a random walk,
-    each grown by the measured error amplification A (measured: RK4 orientation flattens at 1.0 √N ε π
-    on tennis_racket, at 0.8 √N ε π A on tumbling_box).
+    increments keep their sign, measured 0.34 N ε |x| on tumbling_box; in float32 for every quantity), the
+    rest like a random walk, each grown by the measured error amplification A (measured: RK4 orientation
+    flattens at 1.0 √N ε π on tennis_racket, at 0.8 √N ε π A on tumbling_box).
     Without a measurement (a caller that has none): ``max(N ε, REFERENCE_ACCURACY_REL[kind])·scale``.
     ``eps``: the machine epsilon of the run's precision (tolerances.MACHINE_EPSILON; float64 by default) —
     the reference's error is measured in float64 whatever the run's precision.
@@ -139,7 +139,9 @@ def roundoff_floor(scale: float, n_steps: int, reference_label: str = "analytic"
     if reference_error is None:
         kind = "ground_truth" if reference_label.startswith("ground_truth") else "analytic"
         return max(n * eps, tol.REFERENCE_ACCURACY_REL[kind]) * scale
-    biased = n if quantity in ("position", "velocity") else 0
+    # float32: the rotation's roundings keep their sign too (PhysX 5.3.1 PGS spinning about a principal axis,
+    # where its step is exact: ω off by 0.26 N ε|ω| after N steps, docs/engine_conventions.md "PhysX 5.3.1")
+    biased = n if quantity in ("position", "velocity") or eps > tol.ROUNDOFF_PER_STEP_REL else 0
     return float(reference_error) + eps * scale * (biased + math.sqrt(n) * max(1.0, float(amplification)))
 
 
