@@ -242,8 +242,12 @@ class PhysxScene:
         cfg.gravity = _f32(gravity_W)
         cfg.enable_tgs = variant == "tgs"
         with _LOCK:   # the scene config is SAPIEN's process-global default, read when the system is made
+            before = px.get_scene_config()
             px.set_scene_config(cfg)
-            self.system = px.PhysxCpuSystem()
+            try:
+                self.system = px.PhysxCpuSystem()
+            finally:      # SAPIEN's default left as it was for any other user of sapien in the process
+                px.set_scene_config(before)
         self.scene = sapien.Scene(systems=[self.system])
         self.system.set_timestep(float(dt_s))
         self.bodies: list = []

@@ -110,6 +110,7 @@ def test_sapien_and_physx_own_defaults():
 
 def test_a_model_has_the_scenarios_gravity_step_solver_and_neutral_settings():
     sc = scenario_from_parts(forces="gravity = [1.0, -2.0, 0.5]")
+    default = px.get_scene_config()
     for variant in BOTH:
         S = pe.PhysxScene(variant, 0.004, sc.problem.forces.gravity_W)
         c = S.add(sc.problem.body, sc.problem.initial_packed())
@@ -124,6 +125,10 @@ def test_a_model_has_the_scenarios_gravity_step_solver_and_neutral_settings():
         # nothing else in the scene: no ground, no static body, no articulation
         assert len(S.system.rigid_dynamic_components) == 1 and not S.system.rigid_static_components
         assert not S.system.articulation_link_components
+        # SAPIEN's process-wide default scene config is left as it was
+        after = px.get_scene_config()
+        assert after.enable_tgs == default.enable_tgs
+        np.testing.assert_array_equal(after.gravity, default.gravity)
 
 
 def test_neutralise_sets_every_setting_whatever_it_was():
