@@ -290,6 +290,23 @@ def test_mass_and_force_reach_the_velocity_and_forces_are_cleared_after_each_ste
     assert np.linalg.norm(np.array(c.angular_velocity) - w1) < 1e-3 * np.linalg.norm(w1)   # gyroscopic only
 
 
+def test_the_mass_a_force_sees_is_the_one_set_when_the_force_is_added():
+    # PhysX turns a force into an acceleration when it is added (addForce: F × the current 1/m), and applies
+    # it at the start of the next step (BodySim::updateForces): a mass set afterwards does not change it. The
+    # adapter sets the mass when it builds the body, before any force.
+    sc = _tilted()
+    for mass_first, expected_mass in ((True, 4.0), (False, 2.0)):
+        S = pe.PhysxScene("pgs", 0.01, (0.0, 0.0, 0.0))
+        c = S.add(sc.problem.body, sc.problem.initial_packed())
+        if mass_first:
+            c.set_mass(4.0)
+        c.add_force_torque(np.float32([1.0, 2.0, 3.0]), np.float32([0.0, 0.0, 0.0]))
+        if not mass_first:
+            c.set_mass(4.0)
+        S.step()
+        _close(c.linear_velocity, 0.01 * np.array([1.0, 2.0, 3.0]) / expected_mass, HAND)
+
+
 # --- the step -----------------------------------------------------------------------------------------------
 
 def _one_step_case():
