@@ -41,7 +41,8 @@ it has constraints) also integrates once with the whole Δt (``iterativeSolveIsl
 ``numContactConstraintBatches == 0``) — pinned: 1 and 50 iterations give the same bits. The two solvers differ
 in their arithmetic: TGS keeps the angular velocity in "sqrt-inertia" space (``sqrtInertia_W ω``) and turns it
 back with ``sqrtInvInertia_W``, both built in float32 from the start attitude every step: ω comes back
-multiplied by 1 + O(10 ε₃₂) per step (measured: +1.19e-6 relative, independent of Δt), where PGS keeps it.
+multiplied by 1 + 3–10 ε₃₂ per step, depending on the attitude (measured: +1.19e-6 relative in one step,
+independent of Δt; 3e-7 per step averaged over a spin), where PGS keeps it.
 
 Forces (harness semantics of base.py): every step ``harness_force_torque − m g`` (PhysX applies gravity
 itself) and the world torque through the engine's ``add_force_torque`` (PhysX clears them after every
