@@ -132,7 +132,8 @@ def roundoff_floor(scale: float, n_steps: int, reference_label: str = "analytic"
     each grown by the measured error amplification A (measured: RK4 orientation flattens at 1.0 √N ε π
     on tennis_racket, at 0.8 √N ε π A on tumbling_box). In float32 (``eps`` above float64's) b = 1 for every
     quantity: a float32 engine's multi-operation step may round one way every step (Rapier's gyroscopic
-    pass adds 0.3–3 ulp of |ω| per step, always up, on a spin about a principal axis).
+    pass adds 0.3–3 ulp of |ω| per step, always up, on a spin about a principal axis; PhysX PGS, whose step
+    is exact there, leaves ω off by 0.26 N ε |ω| after N steps).
     Without a measurement (a caller that has none): ``max(N ε, REFERENCE_ACCURACY_REL[kind])·scale``.
     ``eps``: the machine epsilon of the run's precision (tolerances.MACHINE_EPSILON; float64 by default) —
     the reference's error is measured in float64 whatever the run's precision.

@@ -355,3 +355,13 @@ REFINE_HALVINGS = 3
 #: the scenario's scale at its default Δt below 1e-6 (a tight scheme's reach on the catalog), below 1e-3
 #: (the size a plot starts to show), or above.
 REPORT_ACCURACY_TIERS = (1e-6, 1e-3)
+
+# --- PhysX 5.3.1 through SAPIEN 3.0.3 (float32; tests/cross_checks/engines/test_physx_engine.py) ---
+#: One PhysX step against the same step written out in float64 numpy, absolute on values of order 1 (m, m/s,
+#: rad, rad/s): PhysX computes in float32 (ε = 1.2e-7): measured ≤ 7e-8 for PGS (ω, v, x, q) at Δt = 0.01 s.
+PHYSX_HAND_STEP = 4 * 2.0 ** -23
+#: The same for TGS's angular velocity, relative to |ω|: TGS turns ω into sqrt-inertia space and back with two
+#: float32 world matrices every step: measured 1.2e-6 relative (10 ε₃₂) on an isotropic spin, 2.6e-6 absolute
+#: on |ω| = 1.7 rad/s with a full tensor, independent of Δt; 4e-6 relative leaves room, and the candidate
+#: schemes PhysX's step is not (plain explicit gyroscopic term, none) are ≥ 6× farther at Δt = 0.05 s.
+PHYSX_TGS_OMEGA_STEP_REL = 4e-6

@@ -59,10 +59,11 @@ def file_tree(folder: Path) -> dict:
             for p in sorted(folder.rglob("*")) if p.is_file()}
 
 
-#: Engines whose every process compiles its steps first (JAX's XLA: seconds to tens of seconds per function and
-#: process), left out of the test suite's own sweeps so that it stays within minutes on 2 cores. Their rows in
-#: the baseline are gated by CI's full sweep (.github/workflows/crosscheck.yml, `--require` each) and their
-#: conventions and verdicts by their adapter tests (tests/cross_checks/engines/test_<engine>_engine.py).
+#: Engines whose every process compiles its steps first (JAX's XLA: seconds to tens of seconds per function
+#: and process), left out of the test suite's own sweeps so that it stays within minutes on 2 cores. Their
+#: rows in the baseline are gated by CI's full sweep (.github/workflows/crosscheck.yml, `--require` each)
+#: and their conventions and verdicts by their adapter tests
+#: (tests/cross_checks/engines/test_<engine>_engine.py).
 COMPILED_ENGINES = ("jaxsim", "brax", "mjx", "genesis")
 
 

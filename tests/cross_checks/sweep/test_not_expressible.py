@@ -1,11 +1,12 @@
-"""A scenario an engine cannot express (EngineAdapter.expressible) is said, the same way, by every entry point:
-the sweep runs nothing for the pair and lists it with the engine's sentence (summary.json ``not_expressible``,
-one line each on the terminal, a "cannot express" cell and a finding in the report) and its verdicts stay
-true; `compare` names the reason when a baseline had rows there; `assert_engine` refuses to pass a pair it
-could not check; the fuzz runs nothing and counts it; a direct run is a NotExpressible error.
+"""A scenario an engine cannot express (EngineAdapter.expressible) is said, the same way, by every entry
+point: the sweep runs nothing for the pair and lists it with the engine's sentence (summary.json
+``not_expressible``, one line each on the terminal, a "cannot express" cell and a finding in the report)
+and its verdicts stay true; `compare` names the reason when a baseline had rows there; `assert_engine`
+refuses to pass a pair it could not check; the fuzz runs nothing and counts it; a direct run is a
+NotExpressible error.
 
-The engine: the course's scheme with the gyroscopic term (correct everywhere it runs) that declares it takes no
-torque — as brax's spring and positional pipelines take no force but gravity."""
+The engine: the course's scheme with the gyroscopic term (correct everywhere it runs) that declares it
+takes no torque — as brax's spring and positional pipelines take no force but gravity."""
 from __future__ import annotations
 
 import json
@@ -52,7 +53,8 @@ def test_the_pair_is_not_run_and_is_said_everywhere(notorque, tmp_path):
     assert NoTorqueEngine().expressible(scs[0], "euler") == REASON   # applied_torque has a torque
     assert NoTorqueEngine().expressible(scs[1], "euler") == ""
     summary = run_sweep(scs, [notorque], tmp_path / "r", jobs=1, use_cache=False, progress=False)
-    assert summary["not_expressible"] == [{"scenario": "applied_torque", "engine": notorque, "reason": REASON}]
+    listed = {"scenario": "applied_torque", "engine": notorque, "reason": REASON}
+    assert summary["not_expressible"] == [listed]
     rows = (tmp_path / "r" / "results.csv").read_text().splitlines()
     assert not any(",applied_torque," in f",{r}," or r.startswith("applied_torque,") for r in rows[1:])
     assert any(r.startswith("projectile,") for r in rows[1:])

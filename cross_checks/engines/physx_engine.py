@@ -1,0 +1,511 @@
+"""NVIDIA PhysX 5 (CPU, through SAPIEN's ``sapien.physx``) as an engine adapter (``physx:VARIANT``); the
+interface is cross_checks.engines.base.
+
+Model: one ``sapien.Scene`` holding one ``PhysxCpuSystem`` (PhysX 5.3.1 as SAPIEN 3.0.3 bundles it, CPU,
+single precision, ``cpuWorkers = 0``: PhysX runs on the calling thread, no worker thread exists to survive
+a fork), the scenario's gravity in the scene config (``px.set_scene_config`` before the system is made:
+SAPIEN reads it then), the solver chosen there (``PhysxSceneConfig.enable_tgs``: TGS or PGS), the run's Δt by
+``set_timestep`` (PhysX keeps it in float32). The body is one entity with one ``PhysxRigidDynamicComponent``
+and no collision shape (nothing to collide with, no ground): ``set_mass``; ``set_inertia`` takes the
+PRINCIPAL moments and ``set_cmass_local_pose`` the principal axes (PhysX's mass frame), so a full tensor is
+diagonalised at the boundary (``RigidBody.principal_axes``: ``I_B = R_BP diag(λ) R_BPᵀ``, the COM at the body
+origin, the mass frame's rotation R_BP); the actor frame stays the scenario's body frame.
+
+State mapping (docs/engine_conventions.md, "PhysX 5.3.1 (SAPIEN 3.0.3)", pinned by
+tests/cross_checks/engines/test_physx_engine.py): ``pose`` is the actor (body) frame, ``Pose(p, q)`` with q
+(w, x, y, z); ``linear_velocity`` is the COM's and ``angular_velocity`` is in WORLD axes.
+``PhysxCpuSystem.pack()`` gives every body's ``[q (w x y z), p, v, ω]`` (13 float32) in one call: the adapter
+reads the whole scene's state that way after each step. The recorded quaternion is kept sign-continuous from
+the scenario's initial one.
+
+The step (PhysX 5.3.1, physx/source/simulationcontroller/src/ScBodySim.cpp ``BodySim::updateForces``, then
+lowleveldynamics/src/DyBodyCoreIntegrator.h ``bodyCoreComputeUnconstrainedVelocity`` and ``integrateCore``
+(PGS) or DyTGSDynamics.cpp ``integrateCoreStep`` (TGS), with DyRigidBodyToSolverBody.cpp
+``copyToSolverBodyData`` / DyTGSDynamics.cpp ``copyToSolverBodyDataStep`` between them):
+
+1. the applied force and torque as velocity changes, ``v += Δt F/m``, ``ω += Δt I_W⁻¹ τ`` (I_W at the
+   start-of-step attitude), then cleared;
+2. gravity ``v += Δt g``, PhysX's own damping ``v ← (1 − c Δt) v`` (neutralised: c = 0), its velocity clamps
+   (neutralised);
+3. the gyroscopic term (``PxRigidBodyFlag::eENABLE_GYROSCOPIC_FORCES``, which SAPIEN sets on every rigid
+   dynamic and does not expose): in the principal frame at the start attitude ``L = I ω_B``,
+   ``L' = L − Δt ω_B × L``, then ``L'`` rescaled to ``|L|`` (the momentum's magnitude kept exactly),
+   ``ω ← R I⁻¹ L'``: an explicit body-frame Euler step of Euler's equations, renormalised;
+4. ``x += Δt v`` and ``q ← normalise(exp(ω_W Δt) ⊗ q)`` (PhysX's "closed form quaternion integrator") with the
+   NEW velocities.
+
+That is semi-implicit (symplectic) Euler with an explicit, momentum-normalised gyroscopic term and an
+exponential-map rotation update: first order. With no contact and no joint the solver has no constraint
+row: PGS integrates once, and TGS (which would split a step into ``solver_position_iterations`` substeps when
+it has constraints) also integrates once with the whole Δt (``iterativeSolveIsland``,
+``numContactConstraintBatches == 0``) — pinned: 1 and 50 iterations give the same bits. The two solvers differ
+in their arithmetic: TGS keeps the angular velocity in "sqrt-inertia" space (``sqrtInertia_W ω``) and turns it
+back with ``sqrtInvInertia_W``, both built in float32 from the start attitude every step: ω comes back
+multiplied by 1 + 3–10 ε₃₂ per step, depending on the attitude (measured: +1.19e-6 relative in one step,
+independent of Δt; 3e-7 per step averaged over a spin), where PGS keeps it.
+
+Forces (harness semantics of base.py): every step ``harness_force_torque − m g`` (PhysX applies gravity
+itself) and the world torque through the engine's ``add_force_torque`` (PhysX clears them after every
+step: pinned), evaluated from the start-of-step state; velocity decay ``e^{−kΔt}`` applied to the velocities
+before the step (base.apply_decay_prestep), that step's force and torque scaled alike.
+
+Defaults that are not the scenario's physics, each set explicitly (``BODY_SETTINGS``) and pinned: angular
+damping (0.05 by default), linear damping, maximum angular velocity (100 rad/s by default: a clamp),
+maximum linear velocity, maximum depenetration velocity and contact impulse (no contact), sleep threshold
+(0.005 by default: a slow body falls asleep, i.e. stops; 0 never sleeps), solver iterations (1 position
+substep, 1 velocity iteration: no constraint, no effect), no locked axis, not kinematic, gravity not
+disabled, automatic mass from shapes off (``set_mass`` turns it off). Contact: no collision shape, no ground.
+
+Batching: runs of one variant with the same float32 Δt and gravity share one scene (bodies without shapes
+never interact; each is its own island), stepped together and read with one ``pack()`` per step:
+``simulate_many``. ``one_step`` puts every start state in one scene and steps once.
+
+Compile time: PhysX's CPU pipeline compiles nothing (no kernel, no JIT: SAPIEN's only download is the GPU
+library, not used here), so ``kernel_cache_dir("physx")`` stays empty; what a run costs before its first step
+(making the scene and the bodies) is measured apart from the stepping: :func:`compile_stats`.
+
+Divergence: PhysX neither warns nor stops on a blow-up (float32 overflows to inf, then NaN); the state is
+checked after every step, and the first non-finite or > BLOWUP_LIMIT state ends that run as
+``diverged at t = …`` (its body is then parked at rest so that PhysX never steps a NaN).
+"""
+from __future__ import annotations
+
+import functools
+import threading
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from cross_checks.engines.base import (
+    EngineAdapter,
+    EngineError,
+    EngineNotInstalled,
+    RunRequest,
+    Traits,
+    Variant,
+    apply_decay_prestep,
+    decay_factors,
+    installed_version,
+)
+from cross_checks.engines.step_floats import harness_fn
+from reference_sim.simulate import BLOWUP_LIMIT, Run, blowup_words, diverged
+
+__all__ = ["ENGINE", "VARIANTS", "BODY_SETTINGS", "PACK_TO_PACKED", "EngineError", "version", "simulate",
+           "simulate_many", "one_step", "PhysxScene", "compile_stats", "reset_stats",
+           "continuous_quaternions", "PhysxAdapter"]
+
+ENGINE = "physx"
+_DIST = "sapien"
+_HINT = "pip install 'rbcheck[physx]'"
+
+#: PhysX's rigid-body step (module docstring): semi-implicit Euler, the gyroscopic term an explicit body-frame
+#: step renormalised to |L|, the attitude by the exponential map of the new ω_W; float32 throughout.
+#: rotation_drift "whole_state": the renormalisation keeps |L| exactly while the rotational energy drifts at
+#: first order (measured: +6.5 % on symmetric_top, −10 % on tumbling_box at their coarsest Δt, halving with
+#: Δt), so the body moves to a neighbouring motion (docs/verdicts.md §3), not a time rescaling of the same one
+#: ("body": energy and |L|² together); its sign depends on the motion (both seen): rotation_sign None.
+_TRAITS = Traits(gyroscopic_term=True, translation_drift=0, rotation_drift="whole_state", rotation_sign=None,
+                 precision="float32")
+VARIANTS = {
+    # sapien's default solver (PhysxSceneConfig.enable_tgs = True)
+    "tgs": Variant(1, "PhysX 5 TGS (SAPIEN's default): semi-implicit Euler, explicit gyroscopic term "
+                      "renormalised to |L|, exponential-map attitude; float32; ω kept in sqrt-inertia space",
+                   traits=_TRAITS),
+    "pgs": Variant(1, "PhysX 5 PGS: semi-implicit Euler, explicit gyroscopic term renormalised to |L|, "
+                      "exponential-map attitude; float32",
+                   traits=_TRAITS),
+}
+
+#: Rigid-dynamic settings every body gets, each set explicitly: (sapien setter, value). PhysX/SAPIEN defaults
+#: in tests/cross_checks/engines/test_physx_engine.py (angular damping 0.05, max angular velocity 100 rad/s,
+#: sleep threshold 0.005, solver iterations 10/1, ...).
+BODY_SETTINGS = (
+    ("set_linear_damping", 0.0),
+    ("set_angular_damping", 0.0),
+    ("set_max_linear_velocity", 1e16),      # |v|² must stay finite in float32 (PhysX stores the square)
+    ("set_max_angular_velocity", 1e16),
+    ("set_max_depenetration_velocity", 1e16),
+    ("set_max_contact_impulse", 1e16),
+    ("set_sleep_threshold", 0.0),           # DySleep.cpp: a zero threshold resets the wake counter every step
+    ("set_solver_position_iterations", 1),
+    ("set_solver_velocity_iterations", 1),
+    ("set_disable_gravity", False),
+    ("set_kinematic", False),
+)
+
+#: Columns of one body's ``pack()`` row ``[q (w x y z), p, v, ω]`` in rbcheck's packed order [x, v, q, ω].
+PACK_TO_PACKED = np.array([4, 5, 6, 7, 8, 9, 0, 1, 2, 3, 10, 11, 12])
+
+#: Where a body whose run diverged is parked (at rest at the origin), so that PhysX never steps a NaN.
+_REST = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+
+_LOCK = threading.RLock()
+_STATS = {"scenes": 0, "bodies": 0, "build_seconds": 0.0, "step_seconds": 0.0, "body_steps": 0}
+
+
+def compile_stats() -> dict:
+    """This process's PhysX work so far: ``compilations`` (always 0: PhysX's CPU pipeline compiles nothing),
+    ``compile_seconds`` (0.0), ``scenes`` and ``bodies`` built and ``build_seconds`` (wall s making them, the
+    cost before a first step), ``step_seconds`` (wall s inside the step loops, force evaluation and state
+    reads included) and ``body_steps`` (steps × bodies advanced)."""
+    return {"compilations": 0, "compile_seconds": 0.0, **_STATS}
+
+
+def reset_stats() -> None:
+    """Zero :func:`compile_stats`."""
+    _STATS.update(scenes=0, bodies=0, build_seconds=0.0, step_seconds=0.0, body_steps=0)
+
+
+# --- the engine, imported on first use ----------------------------------------------------------------------
+
+def _check_installed() -> None:
+    """EngineNotInstalled when sapien is not installed; ImportError when it is but cannot be found."""
+    import importlib.util
+    if installed_version(_DIST) is None:
+        raise EngineNotInstalled(f"sapien is not installed ({_HINT})")
+    if importlib.util.find_spec("sapien") is None:
+        raise ImportError(f"sapien {installed_version(_DIST)} is installed but cannot be imported: "
+                          "no module named 'sapien'")
+
+
+def version() -> str:
+    """SAPIEN's version and the PhysX release it bundles, e.g. ``3.0.3 (PhysX 5.3.1)``, from package
+    metadata and the PhysX header SAPIEN ships (EngineNotInstalled when sapien is absent). Nothing is
+    imported: importing sapien starts a thread, and the sweep's parent forks its workers."""
+    _check_installed()
+    return _dist_version()
+
+
+@functools.lru_cache(maxsize=1)
+def _dist_version() -> str:
+    return f"{installed_version(_DIST)} (PhysX {_physx_release()})"
+
+
+def _physx_release() -> str:
+    """PhysX's MAJOR.MINOR.BUGFIX from ``sapien/include/physx/include/foundation/PxPhysicsVersion.h`` (found
+    by import spec, not imported); "unknown" when the header is not there."""
+    import importlib.util
+    import re
+    spec = importlib.util.find_spec("sapien")
+    if spec is None or not spec.origin:
+        return "unknown"
+    header = Path(spec.origin).parent / "include" / "physx" / "include" / "foundation" / "PxPhysicsVersion.h"
+    try:
+        text = header.read_text(errors="replace")
+    except OSError:
+        return "unknown"
+    parts = [re.search(rf"#define PX_PHYSICS_VERSION_{k}\s+(\d+)", text)
+             for k in ("MAJOR", "MINOR", "BUGFIX")]
+    return ".".join(m.group(1) for m in parts) if all(parts) else "unknown"
+
+
+@functools.lru_cache(maxsize=1)
+def _engine():
+    """``(sapien, sapien.physx)``, imported once; the "Failed to find system libvulkan" warning SAPIEN gives
+    at import (harmless: no rendering here) silenced. ImportError with SAPIEN's words when it fails."""
+    _check_installed()
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            import sapien
+            import sapien.physx as px
+    except Exception as exc:  # noqa: BLE001 - a broken install: the engine's own words
+        raise ImportError(f"sapien {installed_version(_DIST)} is installed but cannot be imported: "
+                          f"{type(exc).__name__}: {exc}") from exc
+    return sapien, px
+
+
+def _engine_or_error():
+    try:
+        return _engine()
+    except ImportError as exc:
+        raise EngineError(str(exc)) from None
+
+
+def _f32(v) -> np.ndarray:
+    return np.asarray(v, dtype=np.float32)
+
+
+# --- a scene of free bodies -------------------------------------------------------------------------------
+
+class PhysxScene:
+    """One SAPIEN scene of ``variant``'s solver at ``dt_s`` with gravity ``gravity_W`` and no other entity
+    than the bodies :meth:`add` puts in it (none collides: no shape)."""
+
+    def __init__(self, variant: str, dt_s: float, gravity_W):
+        if variant not in VARIANTS:
+            raise ValueError(f"unknown physx variant {variant!r}; variants: {', '.join(VARIANTS)}")
+        sapien, px = _engine_or_error()
+        t0 = time.perf_counter()
+        cfg = px.PhysxSceneConfig()
+        cfg.gravity = _f32(gravity_W)
+        cfg.enable_tgs = variant == "tgs"
+        with _LOCK:   # the scene config is SAPIEN's process-global default, read when the system is made
+            before = px.get_scene_config()
+            px.set_scene_config(cfg)
+            try:
+                self.system = px.PhysxCpuSystem()
+            finally:      # SAPIEN's default left as it was for any other user of sapien in the process
+                px.set_scene_config(before)
+        self.scene = sapien.Scene(systems=[self.system])
+        self.system.set_timestep(float(dt_s))
+        self.bodies: list = []
+        self.entities: list = []
+        _STATS["scenes"] += 1
+        _STATS["build_seconds"] += time.perf_counter() - t0
+
+    def add(self, body, y) -> object:
+        """A rigid dynamic of ``body`` (reference_sim RigidBody) at the packed state ``y`` (13,), neutralised
+        (BODY_SETTINGS); returns its component."""
+        from reference_sim.quaternion import quat_from_matrix
+        sapien, px = _engine()
+        t0 = time.perf_counter()
+        moments, R_BP = body.principal_axes()
+        entity = sapien.Entity()
+        c = px.PhysxRigidDynamicComponent()
+        entity.add_component(c)
+        try:
+            c.set_mass(float(body.mass_kg))
+            c.set_inertia(_f32(moments))
+            c.set_cmass_local_pose(sapien.Pose(_f32([0.0, 0.0, 0.0]), _f32(quat_from_matrix(R_BP))))
+        except Exception as exc:  # noqa: BLE001 - PhysX/SAPIEN refuses the mass properties: its words
+            raise EngineError(f"PhysX (sapien {installed_version(_DIST)}) refuses the body: "
+                              f"{type(exc).__name__}: {exc}") from None
+        neutralise(c)
+        self.scene.add_entity(entity)
+        self.set_state(c, y)
+        self.bodies.append(c)
+        self.entities.append(entity)
+        _STATS["bodies"] += 1
+        _STATS["build_seconds"] += time.perf_counter() - t0
+        return c
+
+    def set_state(self, c, y) -> None:
+        """Put body ``c`` at the packed state ``y`` (13,): actor pose, COM velocity, world ω."""
+        y = np.asarray(y, dtype=float)
+        c.set_entity_pose(_engine()[0].Pose(_f32(y[0:3]), _f32(y[6:10])))
+        c.set_linear_velocity(_f32(y[3:6]))
+        c.set_angular_velocity(_f32(y[10:13]))
+
+    def read(self) -> np.ndarray:
+        """Every body's ``pack()`` row ``[q (w x y z), p, v, ω]`` (B, 13) float32 (a copy)."""
+        return np.frombuffer(self.system.pack(), dtype=np.float32).reshape(-1, 13).copy()
+
+    def step(self) -> None:
+        self.system.step()
+
+
+def neutralise(c) -> None:
+    """Every setting of BODY_SETTINGS on the rigid dynamic ``c``, whatever it was."""
+    for setter, value in BODY_SETTINGS:
+        getattr(c, setter)(value)
+
+
+def continuous_quaternions(q, q0):
+    """Quaternion rows ``q`` (n, 4) with signs flipped so that each has a non-negative dot product with the
+    one before, the first with ``q0``: the same rotations, as one continuous curve from ``q0``."""
+    q = np.array(q, dtype=float)
+    if len(q) == 0:
+        return q
+    prev = np.concatenate([np.asarray(q0, dtype=float)[None], q[:-1]])
+    flips = np.where(np.einsum("ij,ij->i", q, prev) < 0.0, -1.0, 1.0)
+    return q * np.cumprod(flips)[:, None]
+
+
+def _packed_row(r) -> list:
+    """A ``pack()`` row (13 floats) -> the packed state as 13 Python floats (for the force model)."""
+    return r[4:10] + r[0:4] + r[10:13]
+
+
+def _weight(scenario) -> np.ndarray:
+    return scenario.problem.body.mass_kg * np.asarray(scenario.problem.forces.gravity_W, dtype=float)
+
+
+def _group_key(variant, r: RunRequest):
+    g = _f32(r.scenario.problem.forces.gravity_W)
+    return (variant, float(np.float32(r.dt_s)), g.tobytes())
+
+
+# --- adapter entry points ----------------------------------------------------------------------------------
+
+def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
+    """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded (one
+    request of :func:`simulate_many`)."""
+    run = simulate_many(variant, [RunRequest(scenario, float(dt_s), int(n_steps))])[0]
+    if isinstance(run, EngineError):
+        raise run
+    return run
+
+
+def simulate_many(variant: str, requests) -> list:
+    """The runs of ``requests`` (``base.RunRequest``), each a Run (or its EngineError): requests of the same
+    float32 Δt and gravity share one scene, stepped together."""
+    if variant not in VARIANTS:
+        raise ValueError(f"unknown physx variant {variant!r}; variants: {', '.join(VARIANTS)}")
+    out: list = [None] * len(requests)
+    try:
+        _engine_or_error()
+    except EngineError as exc:
+        return [exc] * len(requests)
+    groups: dict = {}
+    for j, r in enumerate(requests):
+        groups.setdefault(_group_key(variant, r), []).append(j)
+    for js in groups.values():
+        try:
+            runs = _run_group(variant, [requests[j] for j in js])
+        except EngineError as exc:
+            runs = [exc] * len(js)
+        for j, run in zip(js, runs):
+            out[j] = run
+    return out
+
+
+def _run_group(variant: str, reqs) -> list:
+    """The Runs of ``reqs`` (one Δt, one gravity) in one scene."""
+    r0 = reqs[0]
+    S = PhysxScene(variant, r0.dt_s, r0.scenario.problem.forces.gravity_W)
+    B = len(reqs)
+    y0 = [r.scenario.problem.initial_packed() for r in reqs]
+    comps = [S.add(r.scenario.problem.body, y0[k]) for k, r in enumerate(reqs)]
+    n_max = max(r.n_steps for r in reqs)
+    raw = np.empty((B, n_max + 1, 13), dtype=np.float32)
+    raw[:, 0] = S.read()
+    # per body: (component, harness or None, weight floats, constant force/torque or None, decay factors)
+    plans = []
+    for k, r in enumerate(reqs):
+        fm = r.scenario.problem.forces
+        harness = harness_fn(r.scenario, r.dt_s)
+        w = [float(c) for c in _weight(r.scenario)]
+        gv, gw = (float(g) for g in decay_factors(r.scenario, r.dt_s))
+        const = None
+        if not fm.state_dependent:
+            fx, fy, fz, tx, ty, tz = harness([float(v) for v in y0[k]])
+            f, tau = _f32([fx - w[0], fy - w[1], fz - w[2]]), _f32([tx, ty, tz])
+            const = (f, tau) if (np.any(f != 0.0) or np.any(tau != 0.0)) else None
+        plans.append((comps[k], harness if fm.state_dependent else None, w, const,
+                      (gv, gw) if fm.has_decay else None, r.n_steps))
+    ends = [p[5] for p in plans]
+    # only the bodies with something to do before a step (a force, a torque, a decay) are visited per step
+    busy = [(k, *p[:5]) for k, p in enumerate(plans)
+            if p[1] is not None or p[3] is not None or p[4] is not None]
+    alive = [True] * B
+    bad_at: list = [None] * B
+    last = n_max                      # the longest run still going
+    step, pack = S.system.step, S.system.pack
+    t0 = time.perf_counter()
+    steps_done = 0
+    for i in range(last):
+        if i >= last:
+            break
+        prev = raw[:, i]
+        for k, c, harness, w, const, decay in busy:
+            if i >= ends[k] or not alive[k]:
+                continue
+            if harness is not None:
+                fx, fy, fz, tx, ty, tz = harness(y0[k].tolist() if i == 0 else _packed_row(prev[k].tolist()))
+                c.add_force_torque(_f32([fx - w[0], fy - w[1], fz - w[2]]), _f32([tx, ty, tz]))
+            elif const is not None:
+                c.add_force_torque(*const)
+            if decay is not None:
+                gv, gw = decay
+                c.set_linear_velocity(prev[k, 7:10] * np.float32(gv))
+                c.set_angular_velocity(prev[k, 10:13] * np.float32(gw))
+        step()
+        steps_done += 1
+        cur = raw[:, i + 1]
+        cur[:] = np.frombuffer(pack(), dtype=np.float32).reshape(B, 13)
+        with np.errstate(invalid="ignore"):
+            fine = np.abs(cur).max() <= BLOWUP_LIMIT
+        if not fine:
+            with np.errstate(invalid="ignore"):
+                ok = np.abs(cur).max(axis=1) <= BLOWUP_LIMIT
+            for k in np.flatnonzero(~ok):
+                if alive[k]:
+                    if i < ends[k]:
+                        bad_at[k] = i + 1
+                    alive[k] = False
+                    S.set_state(comps[k], _REST)
+            cur[:] = np.frombuffer(pack(), dtype=np.float32).reshape(B, 13)
+            last = max([ends[k] for k in range(B) if alive[k]], default=0)
+    _STATS["step_seconds"] += time.perf_counter() - t0
+    _STATS["body_steps"] += steps_done * B
+    runs = []
+    for k, r in enumerate(reqs):
+        n = r.n_steps if bad_at[k] is None else bad_at[k]
+        y = np.empty((n + 1, 13))
+        y[0] = y0[k]
+        y[1:] = raw[k, 1:n + 1][:, PACK_TO_PACKED]
+        y[1:, 6:10] = continuous_quaternions(y[1:, 6:10], y0[k][6:10])
+        if bad_at[k] is not None:
+            runs.append(diverged(y[:n].copy(), r.dt_s, f" ({blowup_words(y[n])})"))
+        else:
+            runs.append(Run(r.dt_s * np.arange(n + 1), y))
+    return runs
+
+
+def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
+    """One step of ``dt_s`` from each row of ``y_start`` (T, 13), all rows as bodies of one scene: the forces
+    from the row, the pre-step decay. Rows the engine blows up come back as PhysX left them."""
+    shape = np.shape(y_start)
+    y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
+    S = PhysxScene(variant, dt_s, scenario.problem.forces.gravity_W)
+    with np.errstate(all="ignore"):
+        y_dec = apply_decay_prestep(scenario, y_start, dt_s)
+    harness = harness_fn(scenario, dt_s)
+    w = _weight(scenario)
+    body = scenario.problem.body
+    for i, y in enumerate(y_start.tolist()):
+        c = S.add(body, y_dec[i])
+        fx, fy, fz, tx, ty, tz = harness(y)
+        c.add_force_torque(_f32([fx - w[0], fy - w[1], fz - w[2]]), _f32([tx, ty, tz]))
+    t0 = time.perf_counter()
+    S.step()
+    _STATS["step_seconds"] += time.perf_counter() - t0
+    _STATS["body_steps"] += len(y_start)
+    out = S.read()[:, PACK_TO_PACKED].astype(float)
+    # each quaternion on the side of its start state's (one step turns it by less than π)
+    with np.errstate(invalid="ignore"):
+        sign = np.where(np.einsum("ij,ij->i", out[:, 6:10], y_start[:, 6:10]) < 0.0, -1.0, 1.0)
+    out[:, 6:10] *= sign[:, None]
+    return out.reshape(shape)
+
+
+class PhysxAdapter(EngineAdapter):
+    """``physx:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
+    (``pip install 'rbcheck[physx]'``). Declared orders: both solvers run PhysX's semi-implicit Euler step
+    on a free body: first order, float32."""
+
+    name = ENGINE
+    variants = VARIANTS
+
+    def version(self) -> str:
+        return version()
+
+    def source_files(self) -> list:
+        """This module, the plain-float harness its loop runs, and SAPIEN's compiled module and bundled
+        library (PhysX is linked into them)."""
+        import importlib.util
+
+        from cross_checks.engines import step_floats
+        files = [*super().source_files(), Path(step_floats.__file__)]
+        spec = importlib.util.find_spec("sapien")
+        if spec is not None and spec.origin:
+            root = Path(spec.origin).parent
+            files += sorted(root.glob("pysapien*.so"))
+            libs = root.parent / "sapien.libs"
+            if libs.is_dir():
+                files += sorted(p for p in libs.iterdir() if p.name.startswith("libsapien"))
+        return files
+
+    def simulate(self, scenario, variant: str, dt_s: float, n_steps: int) -> Run:
+        return simulate(scenario, variant, dt_s, n_steps)
+
+    def simulate_many(self, variant: str, requests) -> list:
+        """:func:`simulate_many`: runs of one Δt and gravity stepped together in one scene."""
+        return simulate_many(variant, requests)
+
+    def one_step(self, scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
+        return one_step(scenario, variant, dt_s, y_start)
+
