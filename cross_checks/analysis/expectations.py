@@ -120,10 +120,10 @@ def precision(variant: str) -> str:
 
 
 def machine_epsilon(variant: str) -> float:
-    """ε of ``variant``'s precision (tolerances.MACHINE_EPSILON): the unit of every round-off floor of its
-    runs."""
+    """ε of ``variant``'s precision (tolerances.MACHINE_EPSILON) times its declared Traits.rounding_factor:
+    the unit of every round-off floor of its runs (and twice the unit roundoff of its one-step allowance)."""
     from cross_checks.core import tolerances as tol
-    return tol.MACHINE_EPSILON[precision(variant)]
+    return tol.MACHINE_EPSILON[precision(variant)] * float(traits(variant).rounding_factor)
 
 
 def judged_ladder_s(scenario, variant: str) -> tuple:
@@ -364,7 +364,7 @@ def _drift_parts(scenario, tr: Traits, quantity: str, phys):
     if rotation:
         kind = tr.rotation_drift
         signs = (tr.rotation_sign,) if tr.rotation_sign not in (0, None) else both
-        if kind == "whole_state":
+        if kind in ("whole_state", "momentum"):   # |L| kept or not, the body moves to a neighbouring motion
             # the drift perturbs the turning part of ω (a share a of its scale); the motion amplifies it
             amp = float(phys.amplification.get(quantity, 1.0)) * r.world_rotation_amplitude
             parts.append(("the rotation (ω_W turning with the body)", r.world_rotation ** 2 + r.decay_w ** 2,

@@ -212,6 +212,10 @@ class RunRequest:
     n_steps: int
 
 
+#: The kinds of Traits.rotation_drift.
+ROTATION_DRIFTS = ("none", "body", "whole_state", "momentum")
+
+
 @dataclass(frozen=True)
 class Traits:
     """What a variant's step does besides its order (the order itself: :attr:`Variant.order`); the sweep
@@ -229,7 +233,12 @@ class Traits:
           a phase error, at the rate of the polhode (the body-frame ω);
         "whole_state" — one step of the whole state in world axes: energy and momentum drift
           independently, which moves the body to a neighbouring motion, at the rate at which ω_W
-          turns; that perturbation grows like any other (the measured amplification).
+          turns; that perturbation grows like any other (the measured amplification);
+        "momentum" — an explicit body-frame gyroscopic step whose angular momentum is rescaled to its old
+          magnitude (Jolt's MotionProperties::ApplyGyroscopicForceInternal, Rapier, PhysX): |L| is kept
+          exactly while the rotational energy drifts at O(Δt²) a step towards L²/2I₂, the intermediate-axis
+          separatrix (up below it, about the major axis; down above it, about the minor axis) — a drift to a
+          neighbouring motion, judged as "whole_state" (the sign is then the motion's: None).
     rotation_sign : +1 the rotational energy grows (an explicit gyroscopic term), −1 it decays (an
         implicit one), 0 none, None unknown (both are considered).
     rotation_order : the order of the attitude update where the body-axes ω turns within a step, when it is
@@ -242,6 +251,11 @@ class Traits:
         (core.tolerances.MACHINE_EPSILON): every round-off floor of the variant's verdicts scales with its
         ε, and a float32 variant is judged on a ladder that reaches coarser steps (docs/verdicts.md,
         "Precision").
+    rounding_factor : how many times an ordinary step's rounding the engine's step leaves (1: a step of
+        ~10 operations a component, CHECK_ROUNDINGS_PER_STEP roundings; every round-off floor and the one-step
+        allowance scale with ε × this factor). A step with a deeper arithmetic chain declares more, from its
+        arithmetic and pinned by a measurement in its adapter's tests: PhysX's TGS turns ω into √I space and
+        back with two float32 3×3 products every step (up to 33 u of |ω| measured: 4 × the ordinary 16 u).
     forces_held : the engine holds the applied force and torque it was given over all the stages of a
         step (it cannot evaluate them per stage). On a scenario whose forces change within a step
         (state-dependent forces, velocity decay) a multi-stage scheme is then first order: the held force
@@ -256,8 +270,14 @@ class Traits:
     precision: str = "float64"
     velocity_from_positions: bool = False
     rotation_order: float | None = None
+    rounding_factor: float = 1.0
 
     def __post_init__(self):
+        if not self.rounding_factor >= 1.0:
+            raise ValueError(f"rounding_factor must be at least 1, not {self.rounding_factor!r}")
+        if self.rotation_drift not in ROTATION_DRIFTS:
+            raise ValueError(f"rotation_drift must be one of {', '.join(ROTATION_DRIFTS)}, "
+                             f"not {self.rotation_drift!r}")
         if self.precision not in ("float64", "float32"):
             raise ValueError(f"precision must be 'float64' or 'float32', not {self.precision!r}")
 

@@ -88,7 +88,7 @@ DIST = "rapier3d"
 
 #: Rapier's rotation step (docs above): |L| kept exactly, the energy moved at O(Δt²) per step in a direction
 #: that depends on the motion (towards the separatrix): a drift to a neighbouring motion, either sign.
-_GYRO_TRAITS = Traits(gyroscopic_term=True, translation_drift=0, rotation_drift="whole_state",
+_GYRO_TRAITS = Traits(gyroscopic_term=True, translation_drift=0, rotation_drift="momentum",
                       rotation_sign=None, precision="float32")
 #: Without gyroscopic forces ω_W changes only by the torque: ω constant without one.
 _NO_GYRO_TRAITS = Traits(gyroscopic_term=False, translation_drift=0, rotation_drift="none", rotation_sign=0,

@@ -17,6 +17,7 @@ from cross_checks.analysis.expectations import (
     machine_epsilon,
     nominal_order,
     precision,
+    traits,
 )
 from cross_checks.cli import _gate_failures
 from cross_checks.core import tolerances as tol
@@ -67,9 +68,24 @@ def test_precision_is_float64_or_float32():
     assert tol.MACHINE_EPSILON["float64"] == pytest.approx(np.finfo(np.float64).eps, rel=0.01)
 
 
-def test_every_shipped_variant_is_float64_and_keeps_its_scenarios_ladder():
+#: The engines that step in single precision (their documentation and their pinned dtypes: Rapier's "3D, f32"
+#: build, PhysX's PxReal, Warp's float32 kernels); every other shipped engine computes in float64.
+FLOAT32_ENGINES = ("rapier", "physx", "mujoco_warp", "newton")
+
+
+def test_every_shipped_variant_declares_its_precision_and_float64_keeps_its_scenarios_ladder():
     for v in available_variants():
-        assert precision(v) == "float64" and machine_epsilon(v) == tol.ROUNDOFF_PER_STEP_REL
+        engine = v.split(":", 1)[0]
+        if engine in FLOAT32_ENGINES and precision(v) == "float32":
+            assert machine_epsilon(v) == tol.MACHINE_EPSILON["float32"] * traits(v).rounding_factor
+            for name in catalog_names():   # the float32 ladder extends the scenario's to coarser steps only
+                sc = load_scenario(name)
+                ladder = judged_ladder_s(sc, v)
+                assert ladder[-len(sc.dt_ladder_s):] == tuple(sorted(sc.dt_ladder_s, reverse=True))
+            continue
+        assert engine not in FLOAT32_ENGINES[:3], v   # Rapier, PhysX and MuJoCo Warp have no float64 step
+        assert precision(v) == "float64" and traits(v).rounding_factor == 1.0
+        assert machine_epsilon(v) == tol.ROUNDOFF_PER_STEP_REL
         for name in catalog_names():
             sc = load_scenario(name)
             assert judged_ladder_s(sc, v) == tuple(sorted(sc.dt_ladder_s, reverse=True))

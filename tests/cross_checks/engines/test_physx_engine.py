@@ -509,3 +509,26 @@ def test_first_order_on_catalog_scenarios(assert_engine, variant):
 @pytest.mark.slow
 def test_pgs_on_the_tumbling_and_state_dependent_scenarios(assert_engine):
     assert_engine("physx:pgs", ["tennis_racket", "spring_pendulum", "velocity_decay", "tumbling_box"])
+
+
+def test_tgs_rounds_omega_more_than_an_ordinary_step_and_within_its_declared_factor():
+    """TGS's declared rounding_factor (4): on torque-free spins about a principal axis, where the exact step
+    leaves ω as it is, what one step changes in |ω| is TGS's rounding alone. Its largest such change exceeds
+    an ordinary step's one-step budget (CHECK_ROUNDINGS_PER_STEP u), so the factor is needed, and stays within
+    the declared factor times it; PGS's stays within the ordinary budget."""
+    from cross_checks.analysis.expectations import traits
+    u = 2.0 ** -24
+    worst = {}
+    for variant in BOTH:
+        changes = []
+        for axis, rate in (([1.0, 0.0, 0.0], 2.0), ([0.0, 1.0, 0.0], 1.7), ([0.0, 0.0, 1.0], 3.1)):
+            w = "[" + ", ".join(str(rate * a) for a in axis) + "]"
+            sc = _tilted(body="mass = 1.0\ninertia = [0.2, 0.3, 0.4]", angular_velocity_body=w)
+            y = pe.simulate(sc, variant, 0.01, 40).y
+            mag = np.linalg.norm(y[:, 10:13], axis=1)
+            changes.append(np.max(np.abs(np.diff(mag)) / mag[:-1]))
+        worst[variant] = max(changes)
+    budget = ctol.CHECK_ROUNDINGS_PER_STEP * u
+    assert worst["pgs"] <= budget, worst
+    assert budget < worst["tgs"] <= traits("physx:tgs").rounding_factor * budget, worst
+    assert traits("physx:pgs").rounding_factor == 1.0
