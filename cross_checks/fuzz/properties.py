@@ -274,7 +274,7 @@ def conservation(ctx: Context, variant: str, i: int, ladder) -> tuple:
                 size = max(float(np.max(np.linalg.norm(L, axis=1))), momentum_scale)
                 unit = "kg m²/s"
             allowed = (ctx.allowance[kind] * float(runs.h_s[i]) / h0
-                       + n * tol.CHECK_ROUNDINGS_PER_STEP * _EPS * size
+                       + n * tol.CHECK_ROUNDINGS_PER_STEP * machine_epsilon(variant) * size
                        + _lever_conservation(ctx, kind, I_max, float(runs.h_s[i]) * n, n, variant))
             ratio = drift / allowed if allowed > 0 else (math.inf if drift > 0 else 0.0)
             if worst is None or ratio > worst[0]:
@@ -301,7 +301,8 @@ def _lever_conservation(ctx, kind, I_max, t, n, variant: str = "") -> float:
     if not pays_lever_roundoff(variant):
         return 0.0
     lv = ctx.lever or {}
-    dw = lv.get("acc_rad_s2", 0.0) * t + lv.get("omega_rad_s", 0.0) * (1.0 + math.sqrt(n))
+    scale = machine_epsilon(variant) / _EPS if variant else 1.0   # ctx.lever is in float64's ε
+    dw = scale * (lv.get("acc_rad_s2", 0.0) * t + lv.get("omega_rad_s", 0.0) * (1.0 + math.sqrt(n)))
     if kind == "angular_momentum":
         return I_max * dw
     w_max = float(np.max(np.linalg.norm(ctx.y_ref[:, 10:13], axis=1)))
@@ -326,7 +327,8 @@ def agreement(ctx: Context, pair, i: int, ladder_a, ladder_b) -> tuple:
     for ra, rb in zip(ladder_a, ladder_b):
         n = len(ra.y) - 1
         h = float(ra.h_s[i])
-        allowed = max(tol.SAME_SCHEME_REL, tol.FUZZ_ROUNDINGS_PER_STEP * n * _EPS * amp)
+        eps = max(machine_epsilon(a), machine_epsilon(b))   # the coarser of the pair's roundings
+        allowed = max(tol.SAME_SCHEME_REL, tol.FUZZ_ROUNDINGS_PER_STEP * n * eps * amp)
         sa, sb = ra.status[i], rb.status[i]
         if "failed" in (sa, sb) or "not_expressible" in (sa, sb):
             continue    # a failed run is its own finding (the order property); an inexpressible one none
