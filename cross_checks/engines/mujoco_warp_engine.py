@@ -33,7 +33,8 @@ the variant's integrator:
   ``math.deriv_expmap``, the exact inverse of dexp with the Bortz coefficient), so fourth order in the
   attitude too; ``_forward`` calls ``Model.callback.control`` at every stage, the adapter's per-stage hook:
   state-dependent forces and the decay (as damping, ``base.stage_force_torque``) are evaluated from each
-  stage state, as ``mujoco:rk4`` does through mjcb_control.
+  stage state, as ``mujoco:rk4`` does through mjcb_control — by a Warp kernel (:func:`stage_callback`, the
+  package's force model in float32, tested against it), so the step stays capturable.
 * ``implicit`` and ``implicitfast`` (``implicit``): ``implicit_free_body`` solves
   ``(M − Δt ∂f/∂v) qacc = f`` for a free body with the gyroscopic (RNE) velocity derivative in the 6×6 block
   (``math.free_bias_vel_blocks``): semi-implicit Euler with an implicit gyroscopic term, MuJoCo 4.0's
@@ -52,8 +53,8 @@ Speed (docs/engine_conventions.md): a mujoco_warp step is ~80 kernel launches, ~
 this CPU whatever the number of worlds. The adapter therefore CAPTURES one step per batch
 (``wp.ScopedCapture`` on the CPU device records an APIC operation stream that ``wp.capture_launch`` replays in
 C++, ~40 µs) and replays it every step; between replays it reads qpos/qvel and writes xfrc_applied/qvel
-through zero-copy NumPy views of the CPU arrays (captured replay = uncaptured step, bit for bit: tested). RK4
-with a per-stage callback cannot be captured (the callback is Python): it steps uncaptured. Warp compiles
+through zero-copy NumPy views of the CPU arrays (captured replay = uncaptured step, bit for bit: tested). Warp
+compiles
 mujoco_warp's kernels on first use (minutes, once) into :func:`kernel_cache_dir` (``wp.config.
 kernel_cache_dir``, set before ``wp.init``); the time of each variant's first step in a process — module
 compilation or loading — is kept apart from stepping: :func:`compile_stats`.
@@ -87,7 +88,6 @@ from cross_checks.engines.base import (
     apply_decay_prestep,
     decay_factors,
     installed_version,
-    stage_force_torque_floats,
 )
 from cross_checks.engines.step_floats import harness_fn
 from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
@@ -236,19 +236,21 @@ def reset_stats() -> None:
     _STATS.update(compilations=0, compile_seconds=0.0, step_seconds=0.0, steps=0, body_steps=0, captures=0)
 
 
-def _warm_up(variant: str, m_host, callback: bool) -> None:
+def _warm_up(variant: str, m_host, callback=None) -> None:
     """Load (compile on first use ever, else read from the kernel cache) every kernel a step of ``variant``
-    launches, by one uncaptured step of a scratch world of ``m_host``; its wall time is the compile time."""
-    key = (variant, callback)
+    launches (with the stage-force ``callback``, if any), by one uncaptured step of a scratch world of
+    ``m_host``; its wall time is the compile time."""
+    key = (variant, callback is not None)
     if key in _WARM:
         return
     wp, mjw, mujoco = _engine()
     t0 = time.perf_counter()
     wm = mjw.put_model(m_host)
     wd = mjw.put_data(m_host, mujoco.MjData(m_host), nworld=1)
-    if callback:
-        wm.callback.control = lambda m, d: None
-    mjw.step(wm, wd)
+    if callback is not None:
+        wm.callback.control = callback
+    with wp.ScopedDevice("cpu"):
+        mjw.step(wm, wd)
     wp.synchronize()
     _STATS["compile_seconds"] += time.perf_counter() - t0
     _STATS["compilations"] += 1
@@ -301,7 +303,7 @@ class _Worlds:
     def __init__(self, scenario, variant: str, dts, qpos0, qvel0, callback=None):
         wp, mjw, mujoco = _engine_or_error()
         m = host_model(scenario, variant, float(dts[0]))
-        _warm_up(variant, m, callback is not None)
+        _warm_up(variant, m, callback)
         self.wp, self.mjw = wp, mjw
         with wp.ScopedDevice("cpu"):
             self.m = device_model(m, dts)
@@ -378,26 +380,81 @@ def _packed_lists(qp, qv) -> list:
     return pl(qp, qv)
 
 
-def _stage_callback(reqs, weights, xfrc_row):
-    """``Model.callback.control`` for RK4's stages: every world's force and torque (decay as damping) from its
-    stage state, minus its weight, into its xfrc_applied row."""
-    ft = [functools.partial(stage_force_torque_floats, r.scenario) for r in reqs]
-    errors: list = []
+@functools.lru_cache(maxsize=1)
+def _stage_kernel():
+    """The Warp kernel of RK4's per-stage forces (``base.stage_force_torque`` in float32, the decay as
+    damping), one thread per world: the scenario's forces minus its weight from the stage state in qpos/qvel
+    into the body's row of xfrc_applied. It is launched from ``Model.callback.control``, which ``_forward``
+    calls at every stage — a Warp launch, so the whole RK4 step, stages and forces, is captured and replayed
+    (the Python force model there cost ~25 ms a step). Tested against ``base.stage_force_torque_floats``."""
+    wp, _, _ = _engine()
 
-    def control(m, d):
-        if errors:
-            return
-        try:
-            qp, qv = d.qpos.numpy().tolist(), d.qvel.numpy().tolist()
-            rows = []
-            for k in range(len(ft)):
-                fx, fy, fz, tx, ty, tz = ft[k](_packed_lists(qp[k], qv[k]))
-                w0, w1, w2 = weights[k]
-                rows.append((fx - w0, fy - w1, fz - w2, tx, ty, tz))
-            xfrc_row(d)[:] = rows
-        except BaseException as exc:  # noqa: BLE001 - re-raised after the step
-            errors.append(exc)
-    return control, errors
+    @wp.kernel(module="unique", enable_backward=False)
+    def stage_forces(qpos: wp.array2d(dtype=float), qvel: wp.array2d(dtype=float), f0: wp.vec3, t0: wp.vec3,
+                     tB: wp.vec3, drag: float, m_kv: float, k_w: float, inertia: wp.mat33,
+                     springs: wp.array2d(dtype=float), wpts: wp.array2d(dtype=float),
+                     bpts: wp.array2d(dtype=float), body: int,
+                     xfrc: wp.array2d(dtype=wp.spatial_vector)):
+        k = wp.tid()
+        x = wp.vec3(qpos[k, 0], qpos[k, 1], qpos[k, 2])
+        n = wp.sqrt(qpos[k, 3] * qpos[k, 3] + qpos[k, 4] * qpos[k, 4] + qpos[k, 5] * qpos[k, 5]
+                    + qpos[k, 6] * qpos[k, 6])
+        qw = qpos[k, 3] / n
+        qx = qpos[k, 4] / n
+        qy = qpos[k, 5] / n
+        qz = qpos[k, 6] / n
+        R = wp.mat33(1.0 - 2.0 * (qy * qy + qz * qz), 2.0 * (qx * qy - qw * qz), 2.0 * (qx * qz + qw * qy),
+                     2.0 * (qx * qy + qw * qz), 1.0 - 2.0 * (qx * qx + qz * qz), 2.0 * (qy * qz - qw * qx),
+                     2.0 * (qx * qz - qw * qy), 2.0 * (qy * qz + qw * qx), 1.0 - 2.0 * (qx * qx + qy * qy))
+        v = wp.vec3(qvel[k, 0], qvel[k, 1], qvel[k, 2])
+        w_B = wp.vec3(qvel[k, 3], qvel[k, 4], qvel[k, 5])
+        f = f0 - (drag + m_kv) * v
+        tau = t0 + R @ tB - k_w * (R @ (inertia @ w_B))
+        for j in range(springs.shape[0]):
+            r = R @ wp.vec3(springs[j, 3], springs[j, 4], springs[j, 5])
+            d = x + r - wp.vec3(springs[j, 0], springs[j, 1], springs[j, 2])
+            L = wp.length(d)
+            fs = wp.vec3(0.0)
+            if L > 0.0:
+                fs = (-springs[j, 6] * (L - springs[j, 7]) / L) * d
+            f = f + fs
+            tau = tau + wp.cross(r, fs)
+        for j in range(wpts.shape[0]):
+            g = wp.vec3(wpts[j, 0], wpts[j, 1], wpts[j, 2])
+            f = f + g
+            tau = tau + wp.cross(R @ wp.vec3(wpts[j, 3], wpts[j, 4], wpts[j, 5]), g)
+        for j in range(bpts.shape[0]):
+            g = R @ wp.vec3(bpts[j, 0], bpts[j, 1], bpts[j, 2])
+            f = f + g
+            tau = tau + wp.cross(R @ wp.vec3(bpts[j, 3], bpts[j, 4], bpts[j, 5]), g)
+        xfrc[k, body] = wp.spatial_vector(f[0], f[1], f[2], tau[0], tau[1], tau[2])
+
+    return stage_forces
+
+
+def stage_callback(scenario):
+    """``Model.callback.control`` for RK4's stages: :func:`_stage_kernel` launched over every world of the
+    Data it is given, with the scenario's force parameters (reference_sim.forces.Members)."""
+    wp, _, _ = _engine()
+    kernel = _stage_kernel()
+    mb = scenario.problem.members
+
+    def rows(a, width):
+        a = np.asarray(a, dtype=np.float32).reshape(-1, width)
+        return wp.array(a if len(a) else np.zeros((1, width), dtype=np.float32), dtype=float, device="cpu")
+
+    k_v, k_w = (float(c) for c in np.asarray(mb.decay_rates).reshape(-1)[:2])
+    m = float(np.asarray(mb.mass_kg).reshape(-1)[0])
+    args = [wp.vec3(*np.asarray(mb.force_W, dtype=float).reshape(3)),
+            wp.vec3(*np.asarray(mb.torque_W, dtype=float).reshape(3)),
+            wp.vec3(*np.asarray(mb.torque_B, dtype=float).reshape(3)),
+            float(np.asarray(mb.drag).reshape(-1)[0]), m * k_v, k_w,
+            wp.mat33(*np.asarray(mb.inertia_B, dtype=float).reshape(9)),
+            rows(mb.springs, 8), rows(mb.world_points, 6), rows(mb.body_points, 6), _BODY]
+
+    def control(_m, d):
+        wp.launch(kernel, dim=d.nworld, inputs=[d.qpos, d.qvel, *args], outputs=[d.xfrc_applied], device="cpu")
+    return control
 
 
 def _run_batch(variant: str, reqs) -> list:
@@ -410,11 +467,8 @@ def _run_batch(variant: str, reqs) -> list:
     y0 = np.asarray(sc.problem.initial_packed(), dtype=float)
     qpos0, qvel0 = to_qpos_qvel(np.repeat(y0[None], N, axis=0))
     weight = _weight(sc)
-    weights = [tuple(float(c) for c in weight)] * N
     stage = per_stage(sc, variant)
-    callback, errors = (_stage_callback(reqs, weights, lambda d: d.xfrc_applied.numpy()[:, _BODY])
-                        if stage else (None, []))
-    W = _Worlds(sc, variant, dts, qpos0, qvel0, callback)
+    W = _Worlds(sc, variant, dts, qpos0, qvel0, stage_callback(sc) if stage else None)
     g = np.array([[float(v) for v in decay_factors(sc, h)] for h in dts])   # (N, 2)
     decay = forces.has_decay and not stage
     per_step = forces.state_dependent and not stage
@@ -423,8 +477,7 @@ def _run_batch(variant: str, reqs) -> list:
         for k in range(N):
             fx, fy, fz, tx, ty, tz = harness[k](y0.tolist())
             W.xfrc[k, _BODY] = (fx - weight[0], fy - weight[1], fz - weight[2], tx, ty, tz)
-    if not stage:
-        W.capture()
+    W.capture()
     n_max = max(r.n_steps for r in reqs)
     qpos_out = np.empty((n_max + 1, N, 7), dtype=np.float32)
     qvel_out = np.empty((n_max + 1, N, 6), dtype=np.float32)
@@ -444,9 +497,6 @@ def _run_batch(variant: str, reqs) -> list:
                 qvel[:, 0:3] *= gv
                 qvel[:, 3:6] *= gw
             W.step()
-            if errors:
-                raise EngineError(f"force evaluation inside mujoco_warp's control callback failed: "
-                                  f"{errors[0]!r}")
             qpos_out[n], qvel_out[n] = qpos, qvel
             if n % 256 == 0:   # stop early once every world has blown up
                 alive &= np.isfinite(qvel).all(axis=1) & np.isfinite(qpos).all(axis=1)
@@ -505,12 +555,8 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
             n = len(rows)
             with np.errstate(all="ignore"):
                 qpos0, qvel0 = to_qpos_qvel(rows if stage else apply_decay_prestep(scenario, rows, dt_s))
-            callback, errors = (None, [])
-            if stage:
-                reqs = [RunRequest(scenario, float(dt_s), 1)] * n
-                callback, errors = _stage_callback(reqs, [(w0, w1, w2)] * n,
-                                                   lambda d: d.xfrc_applied.numpy()[:, _BODY])
-            W = _Worlds(scenario, variant, [float(dt_s)] * n, qpos0, qvel0, callback)
+            W = _Worlds(scenario, variant, [float(dt_s)] * n, qpos0, qvel0,
+                        stage_callback(scenario) if stage else None)
             if not stage:
                 for k, row in enumerate(rows.tolist()):
                     fx, fy, fz, tx, ty, tz = harness(row)
@@ -520,8 +566,6 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
             _STATS["step_seconds"] += time.perf_counter() - t0
             _STATS["steps"] += 1
             _STATS["body_steps"] += n
-            if errors:
-                raise EngineError(f"force evaluation inside mujoco_warp's control callback failed: {errors[0]!r}")
             with np.errstate(all="ignore"):
                 y = to_packed(W.qpos.astype(float), W.qvel.astype(float))
             # each quaternion on the side of its start state's (one step turns it by less than π)
