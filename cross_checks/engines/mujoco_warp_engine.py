@@ -5,9 +5,9 @@ Device and precision: Warp's CPU device (no CUDA here), FLOAT32: every Model and
 ``wp.float32`` (``float`` in its kernels), so each variant declares ``Traits(precision="float32")`` and is
 judged with float32's round-off floors (docs/verdicts.md §7).
 
-Model: the MuJoCo model of ``cross_checks.engines.mujoco_engine.build_model`` (one free body, explicit inertial
-at the body origin = COM, a full tensor as principal moments + ``iquat`` so that the body frame stays the
-scenario's, no geoms hence no contact, gravity and step from the scenario, the variant's integrator), with
+Model: the MuJoCo model of ``cross_checks.engines.mujoco_engine.build_model`` (one free body, explicit
+inertial at the body origin = COM, a full tensor as principal moments + ``iquat`` so that the body frame stays
+the scenario's, no geoms hence no contact, gravity and step from the scenario, the variant's integrator), with
 one change: ``mjDSBL_AUTORESET`` cleared, which ``mujoco_warp.put_model`` refuses ("unsupported": mujoco_warp
 never resets a world). ``mjw.put_model`` puts it on the CPU device; ``opt.timestep`` is then a BATCHED
 field (one per world, ``opt_timestep[worldid % shape[0]]`` in every integrator kernel), so the Δt rungs of a
@@ -110,8 +110,8 @@ def _traits(base: Traits) -> Traits:
 #: DISCRETE), their orders from MuJoCo's documentation (Euler and the implicit family first order, RK4 fourth)
 #: and the traits read from mujoco_warp/_src/forward.py (see the module docstring), all float32.
 VARIANTS = {
-    "euler": Variant(1, "MuJoCo Warp Euler (float32): semi-implicit Euler, explicit gyroscopic term, quaternion "
-                        "by the exponential map (mujoco:euler's scheme)",
+    "euler": Variant(1, "MuJoCo Warp Euler (float32): semi-implicit Euler, explicit gyroscopic term, "
+                        "quaternion by the exponential map (mujoco:euler's scheme)",
                      traits=_traits(SYMPLECTIC_EULER_EXPLICIT_GYRO)),
     "rk4": Variant(4, "MuJoCo Warp RK4 (float32): classical 4th-order Runge-Kutta, Munthe-Kaas attitude "
                       "update; state-dependent forces evaluated at every stage (control callback)",
@@ -119,11 +119,11 @@ VARIANTS = {
     "implicit": Variant(1, "MuJoCo Warp implicit (float32): velocity-implicit Euler, the free body's "
                            "gyroscopic derivative in the solve",
                         traits=_traits(SYMPLECTIC_EULER_IMPLICIT_GYRO)),
-    "implicitfast": Variant(1, "MuJoCo Warp implicitfast (float32): on a free body the same solve as implicit "
-                               "(MuJoCo 4.0's free-body gyroscopic derivative)",
+    "implicitfast": Variant(1, "MuJoCo Warp implicitfast (float32): on a free body the same solve as "
+                               "implicit (MuJoCo 4.0's free-body gyroscopic derivative)",
                             traits=_traits(SYMPLECTIC_EULER_IMPLICIT_GYRO)),
-    "discrete": Variant(1, "MuJoCo Warp discrete (float32): qacc in the effective metric with the free body's "
-                           "gyroscopic derivative (implicitfast's step for a lone body)",
+    "discrete": Variant(1, "MuJoCo Warp discrete (float32): qacc in the effective metric with the free "
+                           "body's gyroscopic derivative (implicitfast's step for a lone body)",
                         traits=_traits(SYMPLECTIC_EULER_IMPLICIT_GYRO)),
 }
 
@@ -215,7 +215,7 @@ def _engine_or_error():
         raise EngineError(str(exc)) from None
 
 
-# --- bookkeeping: compile time apart from stepping ------------------------------------------------------------
+# --- bookkeeping: compile time apart from stepping ------------------------------------------------
 
 _STATS = {"compilations": 0, "compile_seconds": 0.0, "step_seconds": 0.0, "steps": 0, "body_steps": 0,
           "captures": 0}
@@ -257,7 +257,7 @@ def _warm_up(variant: str, m_host, callback=None) -> None:
     _WARM.add(key)
 
 
-# --- models ---------------------------------------------------------------------------------------------------
+# --- models ---------------------------------------------------------------------------------------
 
 def host_model(scenario, variant: str, dt_s: float):
     """The scenario's MjModel for ``variant`` at ``dt_s``: mujoco_engine's ``build_model`` with
@@ -453,7 +453,8 @@ def stage_callback(scenario):
             rows(mb.springs, 8), rows(mb.world_points, 6), rows(mb.body_points, 6), _BODY]
 
     def control(_m, d):
-        wp.launch(kernel, dim=d.nworld, inputs=[d.qpos, d.qvel, *args], outputs=[d.xfrc_applied], device="cpu")
+        wp.launch(kernel, dim=d.nworld, inputs=[d.qpos, d.qvel, *args], outputs=[d.xfrc_applied],
+                  device="cpu")
     return control
 
 
@@ -509,7 +510,8 @@ def _run_batch(variant: str, reqs) -> list:
     runs = []
     with np.errstate(all="ignore"):
         for k, r in enumerate(reqs):
-            y = to_packed(qpos_out[:r.n_steps + 1, k].astype(float), qvel_out[:r.n_steps + 1, k].astype(float))
+            rows = slice(0, r.n_steps + 1)
+            y = to_packed(qpos_out[rows, k].astype(float), qvel_out[rows, k].astype(float))
             y[0] = y0
             y[:, 6:10] = continuous_quaternions(y[:, 6:10])
             bad = bad_rows(y)
@@ -535,9 +537,9 @@ def continuous_quaternions(q):
 
 
 def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
-    """One step of ``dt_s`` from each row of ``y_start`` (T, 13), the rows as the worlds of one batch (MAX_WORLDS
-    at a time): the forces from the row, the pre-step decay (RK4 with forces that change within a step: both
-    per stage). Rows the engine blows up come back as it left them."""
+    """One step of ``dt_s`` from each row of ``y_start`` (T, 13), the rows as the worlds of one batch
+    (MAX_WORLDS at a time): the forces from the row, the pre-step decay (RK4 with forces that change within a
+    step: both per stage). Rows the engine blows up come back as it left them."""
     from cross_checks.engines.mujoco_engine import to_packed, to_qpos_qvel
     if variant not in VARIANTS:
         raise ValueError(f"unknown mujoco_warp variant {variant!r}; variants: {', '.join(VARIANTS)}")
