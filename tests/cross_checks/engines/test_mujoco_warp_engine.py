@@ -394,6 +394,30 @@ def test_compile_stats_keep_compilation_apart_from_stepping():
     assert stats["body_steps"] >= stats["steps"] > 0
 
 
+@pytest.mark.filterwarnings("ignore:os.fork:RuntimeWarning")
+def test_a_process_forked_after_warp_started_runs_it_with_the_same_numbers():
+    # the sweep forks its workers, and its parent may itself have run the engine (sweep/refine.py re-runs a
+    # variant at finer steps in the parent): unlike JAX (mjx_engine refuses there), Warp's CPU runtime keeps
+    # working in the child — the same run bit for bit, a captured RK4 with its stage kernel and a new variant
+    sc = load_scenario("spring_pendulum")
+    parent = we.simulate(sc, "rk4", 0.01, 50).y
+    r, w = os.pipe()
+    pid = os.fork()
+    if pid == 0:                                                          # the child
+        os.close(r)
+        try:
+            child = we.simulate(sc, "rk4", 0.01, 50).y
+            we.simulate(sc, "implicit", 0.01, 5)
+            os.write(w, repr(float(np.max(np.abs(child - parent)))).encode())
+        finally:
+            os._exit(0)
+    os.close(w)
+    with os.fdopen(r) as f:
+        said = f.read()
+    os.waitpid(pid, 0)
+    assert said == "0.0"
+
+
 # --- the same schemes as MuJoCo C (float64), to float32 round-off -------------------------------------------
 
 @pytest.mark.parametrize("variant", list(we.VARIANTS))
