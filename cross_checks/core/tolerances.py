@@ -290,6 +290,22 @@ SECOND_REFERENCE_CHECK_FACTOR = 10.0
 
 # --- the Drake adapter's conventions (tests/cross_checks/engines/test_drake_engine.py) ---
 
+# --- the MuJoCo Warp adapter (tests/cross_checks/engines/test_mujoco_warp_engine.py; float32) ---
+#: One mujoco_warp step (float32) vs the scheme written out by hand in NumPy (float64) from the same state,
+#: for values of size ~1-3 (m/s, rad/s): measured ≤ 7.1e-8 (Euler), 4.9e-8 (implicit), 5.8e-8 (RK4's
+#: attitude), i.e. ≤ 0.6 ε32; 1e-6 (8 ε32) keeps 20× below the nearest wrong schemes measured on the same
+#: step (RK4 without the Munthe-Kaas correction 2e-5 rad, the correction's other sign 3.9e-5 rad, Euler for
+#: the implicit family 1e-2).
+MJW_HAND_STEP = 1e-6
+#: mujoco_warp (float32) vs MuJoCo C (float64) with the same integrator, relative to max(1, |state|), over
+#: 100 steps of 10 ms on tennis_racket, applied_torque, spring_pendulum and velocity_decay: measured ≤ 3.5e-6
+#: (spring_pendulum's ω; the float32 roundings of 100 steps); the nearest wrong schemes there differ by 1.5e-4
+#: (MuJoCo C Euler vs the implicit step, tennis_racket) and 0.22 (RK4 with the forces held over its stages).
+MJW_SAME_AS_MUJOCO_REL = 2e-5
+#: RK4's per-stage force kernel (float32) vs base.stage_force_torque (float64), relative to max(1, |wrench|),
+#: on 40 random states: a handful of float32 roundings of products of O(1) numbers; measured ≤ 2.6e-7; 2e-6.
+MJW_STAGE_FORCES_REL = 2e-6
+
 # --- rbcheck fuzz: hard but fair random cases and their verdicts (docs/fuzz.md) ---------------------------
 
 #: Largest h·L at a case's coarsest step (L: the fastest rate of the motion, measured along the run).

@@ -1,0 +1,622 @@
+"""MuJoCo Warp (``mujoco-warp``, MuJoCo's physics as NVIDIA Warp kernels) as an engine adapter
+(``mujoco_warp:VARIANT``); the interface is cross_checks.engines.base.
+
+Device and precision: Warp's CPU device (no CUDA here), FLOAT32: every Model and Data array of mujoco_warp is
+``wp.float32`` (``float`` in its kernels), so each variant declares ``Traits(precision="float32")`` and is
+judged with float32's round-off floors (docs/verdicts.md §7).
+
+Model: the MuJoCo model of ``cross_checks.engines.mujoco_engine.build_model`` (one free body, explicit
+inertial at the body origin = COM, a full tensor as principal moments + ``iquat`` so that the body frame stays
+the scenario's, no geoms hence no contact, gravity and step from the scenario, the variant's integrator), with
+one change: ``mjDSBL_AUTORESET`` cleared, which ``mujoco_warp.put_model`` refuses ("unsupported": mujoco_warp
+never resets a world). ``mjw.put_model`` puts it on the CPU device; ``opt.timestep`` is then a BATCHED
+field (one per world, ``opt_timestep[worldid % shape[0]]`` in every integrator kernel), so the Δt rungs of a
+scenario run as the worlds of ONE ``mjw.put_data(..., nworld=N)`` (tested against single-world runs).
+Nothing of MuJoCo's defaults is left to chance beyond what build_model sets (no damping, stiffness, armature,
+no actuator, no velocity clamp, sleeping off, one integration per step, no contact): each is pinned by a test
+on the mujoco_warp Model.
+
+State mapping (docs/engine_conventions.md, "MuJoCo Warp 4.0.0"; MuJoCo's): ``qpos = [x_W, q_WB (w x y z)]``,
+``qvel = [v_W (COM, world axes), ω_B (BODY axes)]``, converted at the boundary with mujoco_engine's
+``to_qpos_qvel``/``to_packed`` (in float64, from the engine's float32 numbers); the recorded quaternion is
+kept sign-continuous from the scenario's.
+
+The step (mujoco_warp/_src/forward.py, ``step``): ``forward`` (kinematics, the recursive Newton-Euler bias
+force ``c(q, v)`` with the gyroscopic term, ``xfrc_applied`` mapped to joint forces, ``qacc = M⁻¹ f``), then
+the variant's integrator:
+
+* ``euler`` (``euler`` → ``_advance``): ``v ← v + Δt qacc``, then ``qpos`` from the NEW velocity
+  (``_next_position``: ``math.quat_integrate``, ``q ⊗ exp(ω_B Δt)``): semi-implicit Euler, explicit gyroscopic
+  term — ``mujoco:euler``'s scheme.
+* ``rk4`` (``rungekutta4``): classical RK4 with ``_forward`` at every stage, the attitude by the
+  Runge-Kutta-Munthe-Kaas correction (``_rk_correct_velocity``: the stage ω mapped through
+  ``math.deriv_expmap``, the exact inverse of dexp with the Bortz coefficient), so fourth order in the
+  attitude too; ``_forward`` calls ``Model.callback.control`` at every stage, the adapter's per-stage hook:
+  state-dependent forces and the decay (as damping, ``base.stage_force_torque``) are evaluated from each
+  stage state, as ``mujoco:rk4`` does through mjcb_control — by a Warp kernel (:func:`stage_callback`, the
+  package's force model in float32, tested against it), so the step stays capturable.
+* ``implicit`` and ``implicitfast`` (``implicit``): ``implicit_free_body`` solves
+  ``(M − Δt ∂f/∂v) qacc = f`` for a free body with the gyroscopic (RNE) velocity derivative in the 6×6 block
+  (``math.free_bias_vel_blocks``): semi-implicit Euler with an implicit gyroscopic term, MuJoCo 4.0's
+  ``mjd_freeMhat``. (implicitfast takes that path only while ACTUATION, SPRING and DAMPER are not ALL
+  disabled; the adapter disables none of them: pinned.)
+* ``discrete`` (``discrete``): ``_forward`` solves qacc in the effective metric, with the free body's
+  gyroscopic derivative (``_discrete_free_gyro``), then ``_advance``: implicitfast's step for a lone body.
+
+Forces (harness semantics of base.py): the world force at the COM and the world torque of
+``base.harness_force_torque`` minus the weight ``m g`` (mujoco_warp applies gravity itself) go into the body's
+row of ``Data.xfrc_applied`` ([force, torque], world axes), from the start-of-step state; velocity decay
+``e^{−kΔt}`` is applied to qvel before each step (that step's force and torque scaled alike) for every variant
+except RK4 with forces that change within a step (per-stage, above).
+
+Speed (docs/engine_conventions.md): a mujoco_warp step is ~80 kernel launches, ~3 ms of Python per step on
+this CPU whatever the number of worlds. The adapter therefore CAPTURES one step per batch
+(``wp.ScopedCapture`` on the CPU device records an APIC operation stream that ``wp.capture_launch`` replays in
+C++, ~40 µs) and replays it every step; between replays it reads qpos/qvel and writes xfrc_applied/qvel
+through zero-copy NumPy views of the CPU arrays (captured replay = uncaptured step, bit for bit: tested). Warp
+compiles
+mujoco_warp's kernels on first use (minutes, once) into :func:`kernel_cache_dir` (``wp.config.
+kernel_cache_dir``, set before ``wp.init``); the time of each variant's first step in a process — module
+compilation or loading — is kept apart from stepping: :func:`compile_stats`.
+
+Fork safety: neither importing this module nor ``version()`` imports Warp or mujoco_warp (package metadata and
+import specs only); each sweep worker initialises Warp on its first run.
+
+Divergence: mujoco_warp neither warns nor stops on a blow-up; the first recorded state that is non-finite or
+has a component beyond BLOWUP_LIMIT ends the run as ``diverged at t = …``.
+"""
+from __future__ import annotations
+
+import functools
+import os
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+from cross_checks.core.files import kernel_cache_dir
+from cross_checks.engines.base import (
+    SYMPLECTIC_EULER_EXPLICIT_GYRO,
+    SYMPLECTIC_EULER_IMPLICIT_GYRO,
+    EngineAdapter,
+    EngineError,
+    EngineNotInstalled,
+    RunRequest,
+    Traits,
+    Variant,
+    apply_decay_prestep,
+    decay_factors,
+    installed_version,
+)
+from cross_checks.engines.step_floats import harness_fn
+from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
+
+__all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate", "simulate_many", "one_step",
+           "host_model", "device_model", "compile_stats", "reset_stats", "MujocoWarpAdapter"]
+
+ENGINE = "mujoco_warp"
+_DIST = "mujoco-warp"
+_HINT = "pip install 'rbcheck[mujoco_warp]'"
+_F32 = "float32"
+
+
+def _traits(base: Traits) -> Traits:
+    import dataclasses
+    return dataclasses.replace(base, precision=_F32)
+
+
+#: mujoco_warp's integrators (``mujoco_warp._src.types.IntegratorType``: EULER, RK4, IMPLICITFAST, IMPLICIT,
+#: DISCRETE), their orders from MuJoCo's documentation (Euler and the implicit family first order, RK4 fourth)
+#: and the traits read from mujoco_warp/_src/forward.py (see the module docstring), all float32.
+VARIANTS = {
+    "euler": Variant(1, "MuJoCo Warp Euler (float32): semi-implicit Euler, explicit gyroscopic term, "
+                        "quaternion by the exponential map (mujoco:euler's scheme)",
+                     traits=_traits(SYMPLECTIC_EULER_EXPLICIT_GYRO)),
+    "rk4": Variant(4, "MuJoCo Warp RK4 (float32): classical 4th-order Runge-Kutta, Munthe-Kaas attitude "
+                      "update; state-dependent forces evaluated at every stage (control callback)",
+                   traits=Traits(precision=_F32)),
+    "implicit": Variant(1, "MuJoCo Warp implicit (float32): velocity-implicit Euler, the free body's "
+                           "gyroscopic derivative in the solve",
+                        traits=_traits(SYMPLECTIC_EULER_IMPLICIT_GYRO)),
+    "implicitfast": Variant(1, "MuJoCo Warp implicitfast (float32): on a free body the same solve as "
+                               "implicit (MuJoCo 4.0's free-body gyroscopic derivative)",
+                            traits=_traits(SYMPLECTIC_EULER_IMPLICIT_GYRO)),
+    "discrete": Variant(1, "MuJoCo Warp discrete (float32): qacc in the effective metric with the free "
+                           "body's gyroscopic derivative (implicitfast's step for a lone body)",
+                        traits=_traits(SYMPLECTIC_EULER_IMPLICIT_GYRO)),
+}
+
+_BODY = 1   # body id of the free body (0 is the world)
+#: Worlds of one batch at most (a scenario's ladder is 5-10 rungs; one_step's rows are 64 at a time).
+MAX_WORLDS = 256
+
+_LOCK = threading.RLock()
+
+
+# --- the engine, imported lazily (never at module import, never in version()) -----------------------------
+
+def _check_installed() -> None:
+    """EngineNotInstalled when mujoco-warp is not installed; ImportError when it is but Warp is missing —
+    from package metadata and import specs only (nothing imported)."""
+    import importlib.util
+    if installed_version(_DIST) is None:
+        raise EngineNotInstalled(f"{_DIST} is not installed ({_HINT})")
+    if importlib.util.find_spec("warp") is None or installed_version("warp-lang") is None:
+        raise ImportError(f"{_DIST} {installed_version(_DIST)} is installed but cannot be imported: "
+                          f"warp-lang is missing ({_HINT})")
+
+
+def version() -> str:
+    """mujoco_warp's version and the Warp release it runs on, e.g. ``4.0.0 (warp 1.19.0)``, from package
+    metadata (EngineNotInstalled when mujoco-warp is absent)."""
+    _check_installed()
+    return _dist_version()
+
+
+@functools.lru_cache(maxsize=1)
+def _dist_version() -> str:
+    return f"{installed_version(_DIST)} (warp {installed_version('warp-lang')})"
+
+
+class _QuietStderr:
+    """File descriptor 2 to /dev/null for the duration (Warp's C runtime prints "Could not find or load the
+    NVIDIA CUDA driver" there at wp.init on a machine without CUDA)."""
+
+    def __enter__(self):
+        import sys
+        try:
+            sys.stderr.flush()
+            self.saved = os.dup(2)
+        except (OSError, ValueError, AttributeError):
+            self.saved = None
+            return self
+        self.null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(self.null, 2)
+        return self
+
+    def __exit__(self, *exc):
+        if self.saved is not None:
+            os.dup2(self.saved, 2)
+            os.close(self.saved)
+            os.close(self.null)
+        return False
+
+
+@functools.lru_cache(maxsize=1)
+def _engine():
+    """``(warp, mujoco_warp, mujoco)``, imported on first use: Warp's kernel cache set to
+    ``kernel_cache_dir("mujoco_warp")`` BEFORE ``wp.init()``, its greeting silenced. ImportError with the
+    engine's words when the import fails."""
+    _check_installed()
+    try:
+        with _QuietStderr():
+            import warp as wp
+            folder = kernel_cache_dir(ENGINE)
+            try:
+                folder.mkdir(parents=True, exist_ok=True)
+            except OSError:   # pragma: no cover - Warp then reports its own error
+                pass
+            wp.config.kernel_cache_dir = str(folder)
+            wp.config.log_level = wp.LOG_ERROR
+            wp.init()
+            import mujoco
+            import mujoco_warp as mjw
+    except Exception as exc:  # noqa: BLE001 - a broken install: the engine's own words
+        raise ImportError(f"{_DIST} {installed_version(_DIST)} is installed but cannot be imported: "
+                          f"{type(exc).__name__}: {exc}") from exc
+    return wp, mjw, mujoco
+
+
+def _engine_or_error():
+    try:
+        return _engine()
+    except ImportError as exc:
+        raise EngineError(str(exc)) from None
+
+
+# --- bookkeeping: compile time apart from stepping ------------------------------------------------
+
+_STATS = {"compilations": 0, "compile_seconds": 0.0, "step_seconds": 0.0, "steps": 0, "body_steps": 0,
+          "captures": 0}
+_WARM: set = set()   # (variant, callback) whose kernels this process has loaded
+
+
+def compile_stats() -> dict:
+    """This process's kernel work so far: ``compilations`` (variants whose kernels were compiled or loaded
+    from the kernel cache) and ``compile_seconds`` (wall s of their first, uncaptured step on a scratch
+    world), and the stepping apart from it: ``step_seconds`` (wall s of the steps of runs), ``steps`` (engine
+    steps, each advancing every world of its batch), ``body_steps`` (steps × worlds) and ``captures``
+    (graphs recorded)."""
+    return dict(_STATS)
+
+
+def reset_stats() -> None:
+    """Zero :func:`compile_stats` (Warp keeps its loaded modules: a variant is not recompiled)."""
+    _STATS.update(compilations=0, compile_seconds=0.0, step_seconds=0.0, steps=0, body_steps=0, captures=0)
+
+
+def _warm_up(variant: str, m_host, callback=None) -> None:
+    """Load (compile on first use ever, else read from the kernel cache) every kernel a step of ``variant``
+    launches (with the stage-force ``callback``, if any), by one uncaptured step of a scratch world of
+    ``m_host``; its wall time is the compile time."""
+    key = (variant, callback is not None)
+    if key in _WARM:
+        return
+    wp, mjw, mujoco = _engine()
+    t0 = time.perf_counter()
+    wm = mjw.put_model(m_host)
+    wd = mjw.put_data(m_host, mujoco.MjData(m_host), nworld=1)
+    if callback is not None:
+        wm.callback.control = callback
+    with wp.ScopedDevice("cpu"):
+        mjw.step(wm, wd)
+    wp.synchronize()
+    _STATS["compile_seconds"] += time.perf_counter() - t0
+    _STATS["compilations"] += 1
+    _WARM.add(key)
+
+
+# --- models ---------------------------------------------------------------------------------------
+
+def host_model(scenario, variant: str, dt_s: float):
+    """The scenario's MjModel for ``variant`` at ``dt_s``: mujoco_engine's ``build_model`` with
+    ``mjDSBL_AUTORESET`` cleared (mujoco_warp refuses it; it never resets a world). EngineError with MuJoCo's
+    words."""
+    from cross_checks.engines import mujoco_engine
+    if variant not in VARIANTS:
+        raise ValueError(f"unknown mujoco_warp variant {variant!r}; variants: {', '.join(VARIANTS)}")
+    _, _, mujoco = _engine_or_error()
+    m = mujoco_engine.build_model(scenario, variant, dt_s)
+    m.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_AUTORESET)
+    return m
+
+
+def device_model(m_host, dts):
+    """``mjw.put_model(m_host)`` on the CPU device with ``opt.timestep`` one per world (``dts``). EngineError
+    with mujoco_warp's words when it refuses the model."""
+    wp, mjw, _ = _engine()
+    try:
+        with wp.ScopedDevice("cpu"):
+            wm = mjw.put_model(m_host)
+            wm.opt.timestep = wp.array(np.asarray(dts, dtype=np.float32), dtype=wp.float32)
+    except Exception as exc:  # noqa: BLE001 - mujoco_warp refuses a model feature: its own words
+        raise EngineError(f"mujoco_warp {version()} refused the model: {type(exc).__name__}: {exc}") from None
+    return wm
+
+
+def _weight(scenario) -> np.ndarray:
+    return scenario.problem.body.mass_kg * np.asarray(scenario.problem.forces.gravity_W, dtype=float)
+
+
+def per_stage(scenario, variant: str) -> bool:
+    """RK4 with forces that change within a step (state-dependent forces or velocity decay): evaluated at
+    every stage through ``Model.callback.control`` (like mujoco:rk4)."""
+    fm = scenario.problem.forces
+    return variant == "rk4" and bool(fm.state_dependent or fm.has_decay)
+
+
+class _Worlds:
+    """``N`` worlds of one scenario's model on the CPU device, world ``k`` stepping at ``dts[k]``, with
+    zero-copy NumPy views of their qpos, qvel and xfrc_applied (float32)."""
+
+    def __init__(self, scenario, variant: str, dts, qpos0, qvel0, callback=None):
+        wp, mjw, mujoco = _engine_or_error()
+        m = host_model(scenario, variant, float(dts[0]))
+        _warm_up(variant, m, callback)
+        self.wp, self.mjw = wp, mjw
+        with wp.ScopedDevice("cpu"):
+            self.m = device_model(m, dts)
+            self.d = mjw.put_data(m, mujoco.MjData(m), nworld=len(dts))
+        self.qpos, self.qvel = self.d.qpos.numpy(), self.d.qvel.numpy()
+        self.xfrc = self.d.xfrc_applied.numpy()
+        if not (np.shares_memory(self.qpos, self.d.qpos.numpy()) and np.shares_memory(self.xfrc,
+                                                                                         self.d.xfrc_applied.numpy())):
+            raise EngineError("Warp's CPU arrays are not shared with NumPy here: the adapter cannot run")
+        self.qpos[:], self.qvel[:] = qpos0, qvel0
+        self.xfrc[:] = 0.0
+        self.graph = None
+        if callback is not None:
+            self.m.callback.control = callback
+
+    def capture(self) -> None:
+        """Record one step as a graph (replayed by :meth:`step`); the state is not advanced by recording
+        (tested)."""
+        wp = self.wp
+        saved = self.qpos.copy(), self.qvel.copy()
+        with wp.ScopedDevice("cpu"), wp.ScopedCapture() as cap:
+            self.mjw.step(self.m, self.d)
+        self.qpos[:], self.qvel[:] = saved
+        self.graph = cap.graph
+        _STATS["captures"] += 1
+
+    def step(self) -> None:
+        if self.graph is not None:
+            self.wp.capture_launch(self.graph)
+        else:
+            with self.wp.ScopedDevice("cpu"):
+                self.mjw.step(self.m, self.d)
+
+
+# --- adapter entry points ----------------------------------------------------------------------------------
+
+def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
+    """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded (one
+    request of :func:`simulate_many`)."""
+    run = simulate_many(variant, [RunRequest(scenario, float(dt_s), int(n_steps))])[0]
+    if isinstance(run, EngineError):
+        raise run
+    return run
+
+
+def simulate_many(variant: str, requests) -> list:
+    """The runs of ``requests`` (``base.RunRequest``), each a Run (or its EngineError): the requests of one
+    scenario run as the worlds of one batch (one world per Δt, in batches of at most MAX_WORLDS)."""
+    if variant not in VARIANTS:
+        raise ValueError(f"unknown mujoco_warp variant {variant!r}; variants: {', '.join(VARIANTS)}")
+    out: list = [None] * len(requests)
+    try:
+        _engine_or_error()
+    except EngineError as exc:
+        return [exc] * len(requests)
+    groups: dict = {}
+    for j, r in enumerate(requests):
+        groups.setdefault(id(r.scenario), []).append(j)
+    with _LOCK:
+        for idx in groups.values():
+            for s in range(0, len(idx), MAX_WORLDS):
+                part = idx[s:s + MAX_WORLDS]
+                try:
+                    runs = _run_batch(variant, [requests[j] for j in part])
+                except EngineError as exc:
+                    runs = [exc] * len(part)
+                for j, run in zip(part, runs):
+                    out[j] = run
+    return out
+
+
+def _packed_lists(qpos, qvel) -> list:
+    """One state, qpos (7 floats) and qvel (6 floats, ω in body axes) -> the packed state (13 floats, ω in
+    world axes): ``mujoco_engine.to_packed`` for one row in plain floats (it runs for every world at every
+    step of a run with state-dependent forces, where NumPy's small-array overhead would dominate), the
+    arithmetic of the MuJoCo adapter's per-step loop: ω_W = R(q) ω_B = ω + s t + u × t with t = 2 u × ω,
+    u = (a, b, c)."""
+    x0, x1, x2, s, a, b, c = qpos
+    v0, v1, v2, p0, p1, p2 = qvel
+    t0, t1, t2 = 2.0 * (b * p2 - c * p1), 2.0 * (c * p0 - a * p2), 2.0 * (a * p1 - b * p0)
+    return [x0, x1, x2, v0, v1, v2, s, a, b, c,
+            p0 + s * t0 + (b * t2 - c * t1),
+            p1 + s * t1 + (c * t0 - a * t2),
+            p2 + s * t2 + (a * t1 - b * t0)]
+
+
+@functools.lru_cache(maxsize=1)
+def _stage_kernel():
+    """The Warp kernel of RK4's per-stage forces (``base.stage_force_torque`` in float32, the decay as
+    damping), one thread per world: the scenario's forces minus its weight from the stage state in qpos/qvel
+    into the body's row of xfrc_applied. It is launched from ``Model.callback.control``, which ``_forward``
+    calls at every stage — a Warp launch, so the whole RK4 step, stages and forces, is captured and replayed
+    (the Python force model there cost ~25 ms a step). Tested against ``base.stage_force_torque_floats``."""
+    wp, _, _ = _engine()
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def stage_forces(qpos: wp.array2d(dtype=float), qvel: wp.array2d(dtype=float), f0: wp.vec3, t0: wp.vec3,
+                     tB: wp.vec3, drag: float, m_kv: float, k_w: float, inertia: wp.mat33,
+                     springs: wp.array2d(dtype=float), wpts: wp.array2d(dtype=float),
+                     bpts: wp.array2d(dtype=float), body: int,
+                     xfrc: wp.array2d(dtype=wp.spatial_vector)):
+        k = wp.tid()
+        x = wp.vec3(qpos[k, 0], qpos[k, 1], qpos[k, 2])
+        n = wp.sqrt(qpos[k, 3] * qpos[k, 3] + qpos[k, 4] * qpos[k, 4] + qpos[k, 5] * qpos[k, 5]
+                    + qpos[k, 6] * qpos[k, 6])
+        qw = qpos[k, 3] / n
+        qx = qpos[k, 4] / n
+        qy = qpos[k, 5] / n
+        qz = qpos[k, 6] / n
+        R = wp.mat33(1.0 - 2.0 * (qy * qy + qz * qz), 2.0 * (qx * qy - qw * qz), 2.0 * (qx * qz + qw * qy),
+                     2.0 * (qx * qy + qw * qz), 1.0 - 2.0 * (qx * qx + qz * qz), 2.0 * (qy * qz - qw * qx),
+                     2.0 * (qx * qz - qw * qy), 2.0 * (qy * qz + qw * qx), 1.0 - 2.0 * (qx * qx + qy * qy))
+        v = wp.vec3(qvel[k, 0], qvel[k, 1], qvel[k, 2])
+        w_B = wp.vec3(qvel[k, 3], qvel[k, 4], qvel[k, 5])
+        f = f0 - (drag + m_kv) * v
+        tau = t0 + R @ tB - k_w * (R @ (inertia @ w_B))
+        for j in range(springs.shape[0]):
+            r = R @ wp.vec3(springs[j, 3], springs[j, 4], springs[j, 5])
+            d = x + r - wp.vec3(springs[j, 0], springs[j, 1], springs[j, 2])
+            L = wp.length(d)
+            fs = wp.vec3(0.0)
+            if L > 0.0:
+                fs = (-springs[j, 6] * (L - springs[j, 7]) / L) * d
+            f = f + fs
+            tau = tau + wp.cross(r, fs)
+        for j in range(wpts.shape[0]):
+            g = wp.vec3(wpts[j, 0], wpts[j, 1], wpts[j, 2])
+            f = f + g
+            tau = tau + wp.cross(R @ wp.vec3(wpts[j, 3], wpts[j, 4], wpts[j, 5]), g)
+        for j in range(bpts.shape[0]):
+            g = R @ wp.vec3(bpts[j, 0], bpts[j, 1], bpts[j, 2])
+            f = f + g
+            tau = tau + wp.cross(R @ wp.vec3(bpts[j, 3], bpts[j, 4], bpts[j, 5]), g)
+        xfrc[k, body] = wp.spatial_vector(f[0], f[1], f[2], tau[0], tau[1], tau[2])
+
+    return stage_forces
+
+
+def stage_callback(scenario):
+    """``Model.callback.control`` for RK4's stages: :func:`_stage_kernel` launched over every world of the
+    Data it is given, with the scenario's force parameters (reference_sim.forces.Members)."""
+    wp, _, _ = _engine()
+    kernel = _stage_kernel()
+    mb = scenario.problem.members
+
+    def rows(a, width):
+        a = np.asarray(a, dtype=np.float32).reshape(-1, width)
+        return wp.array(a if len(a) else np.zeros((1, width), dtype=np.float32), dtype=float, device="cpu")
+
+    k_v, k_w = (float(c) for c in np.asarray(mb.decay_rates).reshape(-1)[:2])
+    m = float(np.asarray(mb.mass_kg).reshape(-1)[0])
+    args = [wp.vec3(*np.asarray(mb.force_W, dtype=float).reshape(3)),
+            wp.vec3(*np.asarray(mb.torque_W, dtype=float).reshape(3)),
+            wp.vec3(*np.asarray(mb.torque_B, dtype=float).reshape(3)),
+            float(np.asarray(mb.drag).reshape(-1)[0]), m * k_v, k_w,
+            wp.mat33(*np.asarray(mb.inertia_B, dtype=float).reshape(9)),
+            rows(mb.springs, 8), rows(mb.world_points, 6), rows(mb.body_points, 6), _BODY]
+
+    def control(_m, d):
+        wp.launch(kernel, dim=d.nworld, inputs=[d.qpos, d.qvel, *args], outputs=[d.xfrc_applied],
+                  device="cpu")
+    return control
+
+
+def _run_batch(variant: str, reqs) -> list:
+    """The Runs of ``reqs`` (one scenario, any Δt and step counts) as the worlds of one batch."""
+    from cross_checks.engines.mujoco_engine import to_packed, to_qpos_qvel
+    sc = reqs[0].scenario
+    forces = sc.problem.forces
+    N = len(reqs)
+    dts = [float(r.dt_s) for r in reqs]
+    y0 = np.asarray(sc.problem.initial_packed(), dtype=float)
+    qpos0, qvel0 = to_qpos_qvel(np.repeat(y0[None], N, axis=0))
+    weight = _weight(sc)
+    stage = per_stage(sc, variant)
+    W = _Worlds(sc, variant, dts, qpos0, qvel0, stage_callback(sc) if stage else None)
+    g = np.array([[float(v) for v in decay_factors(sc, h)] for h in dts])   # (N, 2)
+    decay = forces.has_decay and not stage
+    per_step = forces.state_dependent and not stage
+    harness = [harness_fn(sc, h) for h in dts]
+    if not stage and not per_step:   # constant (decay scaling included), written once
+        for k in range(N):
+            fx, fy, fz, tx, ty, tz = harness[k](y0.tolist())
+            W.xfrc[k, _BODY] = (fx - weight[0], fy - weight[1], fz - weight[2], tx, ty, tz)
+    W.capture()
+    n_max = max(r.n_steps for r in reqs)
+    qpos_out = np.empty((n_max + 1, N, 7), dtype=np.float32)
+    qvel_out = np.empty((n_max + 1, N, 6), dtype=np.float32)
+    qpos_out[0], qvel_out[0] = W.qpos, W.qvel
+    qpos, qvel, xfrc = W.qpos, W.qvel, W.xfrc
+    gv, gw = g[:, 0:1], g[:, 1:2]
+    w0, w1, w2 = (float(c) for c in weight)
+    alive = np.ones(N, dtype=bool)
+    t0 = time.perf_counter()
+    with np.errstate(all="ignore"):
+        for n in range(1, n_max + 1):
+            if per_step:
+                qp, qv = qpos.tolist(), qvel.tolist()
+                xfrc[:, _BODY] = [(fx - w0, fy - w1, fz - w2, tx, ty, tz) for fx, fy, fz, tx, ty, tz in
+                                  (harness[k](_packed_lists(qp[k], qv[k])) for k in range(N))]
+            if decay:
+                qvel[:, 0:3] *= gv
+                qvel[:, 3:6] *= gw
+            W.step()
+            qpos_out[n], qvel_out[n] = qpos, qvel
+            if n % 256 == 0:   # stop early once every world has blown up
+                alive &= np.isfinite(qvel).all(axis=1) & np.isfinite(qpos).all(axis=1)
+                if not alive.any():
+                    qpos_out[n + 1:], qvel_out[n + 1:] = np.nan, np.nan
+                    break
+    _STATS["step_seconds"] += time.perf_counter() - t0
+    _STATS["steps"] += n
+    _STATS["body_steps"] += n * N
+    runs = []
+    with np.errstate(all="ignore"):
+        for k, r in enumerate(reqs):
+            rows = slice(0, r.n_steps + 1)
+            y = to_packed(qpos_out[rows, k].astype(float), qvel_out[rows, k].astype(float))
+            y[0] = y0
+            y[:, 6:10] = continuous_quaternions(y[:, 6:10])
+            bad = bad_rows(y)
+            if bad.any():
+                n_bad = int(np.argmax(bad))
+                runs.append(diverged(y[:n_bad].copy(), r.dt_s, f" ({blowup_words(y[n_bad])})"))
+            else:
+                runs.append(Run(r.dt_s * np.arange(r.n_steps + 1), y))
+    return runs
+
+
+def continuous_quaternions(q):
+    """Quaternion rows ``q`` (n, 4), the first kept, each later one's sign flipped where needed so that it
+    has a non-negative dot product with the one before: the same rotations as one continuous curve."""
+    q = np.array(q, dtype=float)
+    if len(q) < 2:
+        return q
+    with np.errstate(invalid="ignore"):
+        dots = np.einsum("ij,ij->i", q[1:], q[:-1])
+    flips = np.where(dots < 0.0, -1.0, 1.0)
+    q[1:] *= np.cumprod(flips)[:, None]
+    return q
+
+
+def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
+    """One step of ``dt_s`` from each row of ``y_start`` (T, 13), the rows as the worlds of one batch
+    (MAX_WORLDS at a time): the forces from the row, the pre-step decay (RK4 with forces that change within a
+    step: both per stage). Rows the engine blows up come back as it left them."""
+    from cross_checks.engines.mujoco_engine import to_packed, to_qpos_qvel
+    if variant not in VARIANTS:
+        raise ValueError(f"unknown mujoco_warp variant {variant!r}; variants: {', '.join(VARIANTS)}")
+    shape = np.shape(y_start)
+    y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
+    T = len(y_start)
+    out = np.empty((T, 13))
+    stage = per_stage(scenario, variant)
+    weight = _weight(scenario)
+    w0, w1, w2 = (float(c) for c in weight)
+    harness = harness_fn(scenario, dt_s)
+    with _LOCK:
+        for s in range(0, T, MAX_WORLDS):
+            rows = y_start[s:s + MAX_WORLDS]
+            n = len(rows)
+            with np.errstate(all="ignore"):
+                qpos0, qvel0 = to_qpos_qvel(rows if stage else apply_decay_prestep(scenario, rows, dt_s))
+            W = _Worlds(scenario, variant, [float(dt_s)] * n, qpos0, qvel0,
+                        stage_callback(scenario) if stage else None)
+            if not stage:
+                for k, row in enumerate(rows.tolist()):
+                    fx, fy, fz, tx, ty, tz = harness(row)
+                    W.xfrc[k, _BODY] = (fx - w0, fy - w1, fz - w2, tx, ty, tz)
+            t0 = time.perf_counter()
+            W.step()
+            _STATS["step_seconds"] += time.perf_counter() - t0
+            _STATS["steps"] += 1
+            _STATS["body_steps"] += n
+            with np.errstate(all="ignore"):
+                y = to_packed(W.qpos.astype(float), W.qvel.astype(float))
+            # each quaternion on the side of its start state's (one step turns it by less than π)
+            sign = np.where(np.einsum("ij,ij->i", y[:, 6:10], rows[:, 6:10]) < 0.0, -1.0, 1.0)
+            y[:, 6:10] *= sign[:, None]
+            out[s:s + n] = y
+    return out.reshape(shape)
+
+
+class MujocoWarpAdapter(EngineAdapter):
+    """``mujoco_warp:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
+    (``pip install 'rbcheck[mujoco_warp]'``). Float32 on Warp's CPU device. Declared orders: Euler and the
+    implicit family 1, RK4 4 (its forces evaluated per stage)."""
+
+    name = ENGINE
+    variants = VARIANTS
+
+    def version(self) -> str:
+        return version()
+
+    def source_files(self) -> list:
+        """This module, the plain-float harness and mujoco_engine's model builder it uses, and mujoco_warp's
+        Python sources (found without importing them: the parent of a sweep must not start Warp)."""
+        import importlib.util
+
+        from cross_checks.engines import mujoco_engine, step_floats
+        files = [*super().source_files(), Path(step_floats.__file__), Path(mujoco_engine.__file__)]
+        spec = importlib.util.find_spec("mujoco_warp")
+        if spec is not None and spec.origin:
+            src = Path(spec.origin).parent / "_src"
+            files += sorted(p for p in src.glob("*.py") if not p.name.endswith("_test.py"))
+        return files
+
+    def simulate(self, scenario, variant: str, dt_s: float, n_steps: int) -> Run:
+        return simulate(scenario, variant, dt_s, n_steps)
+
+    def simulate_many(self, variant: str, requests) -> list:
+        """:func:`simulate_many`: a scenario's requests as the worlds of one captured batch."""
+        return simulate_many(variant, requests)
+
+    def one_step(self, scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
+        return one_step(scenario, variant, dt_s, y_start)
