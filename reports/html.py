@@ -15,6 +15,14 @@ from reports.data import LABELS
 from reports.findings import findings, fmt, fmt_dt
 from reports.glance import ACCURACY_TIERS, GLYPHS, cell, families, glyph, order_text, verdict_box
 from reports.install import incomplete
+from reports.ranking import (
+    SCENARIO_FAMILIES,
+    best_sentences,
+    engine_sentence,
+    family_lines,
+    ranking,
+    ratio_text,
+)
 
 __all__ = ["environment", "render_pages", "page_name", "rows_extracts"]
 
@@ -323,12 +331,17 @@ def render_pages(res, figures: dict, self_contained: bool = False) -> dict:
     ``{scenario: [(kind, png filename or None, note)]}``."""
     env = environment()
     all_f = findings(res)
-    nav = [{"name": s["name"], "href": page_name(s["name"])} for s in res.scenarios]
+    nav = [{"name": "ranking", "href": RANKING_PAGE}]
+    nav += [{"name": s["name"], "href": page_name(s["name"])} for s in res.scenarios]
     common = {"nav": nav, "provenance": _provenance(res)}
     pages = {}
     sections = _finding_sections([f for f in all_f if f.severity != "info"])
+    rk = ranking(res)
+    pages[RANKING_PAGE] = env.get_template("ranking.html").render(
+        title="rbcheck: which engine variant?", r=_ranking_view(res, rk), **common)
     pages["index.html"] = env.get_template("index.html").render(
         title="rbcheck results", matrix=_matrix(res), legend=_legend(), box=verdict_box(res),
+        which=_which_view(rk),
         sections=sections, observations=_finding_views([f for f in all_f if f.severity == "info"]),
         skipped=res.summary.get("skipped_variants", []), second=_second_summary(res), **common)
     for s in res.scenarios:
@@ -336,6 +349,66 @@ def render_pages(res, figures: dict, self_contained: bool = False) -> dict:
         pages[page_name(s["name"])] = env.get_template("scenario.html").render(
             title=f"rbcheck: {s['name']}", s=view, legend=_legend(), **common)
     return pages
+
+
+RANKING_PAGE = "ranking.html"
+
+
+def _which_view(rk) -> dict:
+    """The first screen's answer to "which engine?": the best overall, with the link to the ranking."""
+    return {"lines": [(label, text) for label, text, _ in best_sentences(rk, "overall")],
+            "families": family_lines(rk),
+            "note": next((n for _, _, n in best_sentences(rk, "overall")), ""), "href": RANKING_PAGE}
+
+
+def _standing_row(s, n_sc) -> dict:
+    c = s.verdicts
+    verdict = ("✗ contradicts on " + ", ".join(s.contradicts_on) if s.contradicts_on
+               else f"✗ {s.failed} failed run(s)" if s.failed else "✓ as expected")
+    detail = ", ".join(x for x in (f"{c['noconv']} no conv. (expected)" if c["noconv"] else "",
+                                   f"{c['pre']} pre-asymptotic" if c["pre"] else "",
+                                   f"{s.diverged} diverged run(s)" if s.diverged else "") if x)
+    return {"variant": s.variant, "family": s.variant.split(":", 1)[0],
+            "acc_rank": str(s.acc_rank or ""), "acc": ratio_text(s.acc_score),
+            "acc_sort": _num(s.acc_score) if s.acc_rank else "", "acc_n": f"{s.acc_n}/{n_sc}",
+            "cost_rank": str(s.cost_rank or ""),
+            "cost": ratio_text(s.cost_score),
+            "cost_sort": _num(s.cost_score) if s.cost_rank else "", "cost_n": f"{s.cost_n}/{n_sc}",
+            "per_step": fmt(s.per_step_us), "per_step_sort": _num(s.per_step_us),
+            "verdict": verdict, "verdict_cls": "bad" if (s.contradicts_on or s.failed) else "acc1",
+            "verdict_detail": detail, "energy": s.energy or "–", "energy_sort": _num(s.energy_sort)}
+
+
+def _ranking_view(res, rk) -> dict:
+    groups = []
+    for g, grp in rk.groups.items():
+        n_sc = len(grp["scenarios"])
+        rows = sorted(grp["standings"],
+                      key=lambda s: (s.acc_rank or 10 ** 6, s.cost_rank or 10 ** 6, s.variant))
+        groups.append({"name": g, "id": "g-" + g.replace(" ", "-"), "scenarios": ", ".join(grp["scenarios"]),
+                       "best": [(label, text) for label, text, _ in best_sentences(rk, g)],
+                       "rows": [_standing_row(s, n_sc) for s in rows]})
+    scen = []
+    for sc, r in rk.scenarios.items():
+        acc = sorted(((v, x) for v, x in r.accuracy.items() if x.value is not None), key=lambda t: t[1].value)
+        cost = sorted(((v, x) for v, x in r.cost.items() if x.value is not None), key=lambda t: t[1].value)
+        variants = [{"variant": v, "acc": r.accuracy[v].text(), "acc_sort": _num(r.accuracy[v].value),
+                     "acc_why": r.accuracy[v].why,
+                     "cost": r.cost[v].text("s") if v in r.cost else "–",
+                     "cost_sort": _num(r.cost[v].value) if v in r.cost else "",
+                     "cost_why": r.cost[v].why if v in r.cost else "",
+                     "per_step": fmt(r.per_step[v] * 1e6), "per_step_sort": _num(r.per_step[v] * 1e6)}
+                    for v in res.variants if v in r.accuracy]
+        scen.append({"name": sc, "href": page_name(sc), "family": r.family,
+                     "cost": fmt(r.common_cost, "s"), "n_cost": r.n_cost,
+                     "error": fmt(r.common_error), "n_error": r.n_error, "n": len(r.per_step),
+                     "best_acc": acc[0][0] if acc else "–", "best_cost": cost[0][0] if cost else "–",
+                     "variants": variants})
+    cached = sum(bool(r["cached"]) for r in res.rows)
+    sentences = [engine_sentence(rk, v) for v in res.variants
+                 if any(s.variant == v for s in rk.groups["overall"]["standings"])]
+    return {"groups": groups, "scenarios": scen, "sentences": sentences, "families": SCENARIO_FAMILIES,
+            "cached": cached, "n_rows": len(res.rows)}
 
 
 def _second_summary(res) -> str:
