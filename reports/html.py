@@ -23,6 +23,7 @@ from reports.ranking import (
     ranking,
     ratio_text,
 )
+from reports.words import explain
 
 __all__ = ["environment", "render_pages", "page_name", "rows_extracts"]
 
@@ -288,14 +289,15 @@ def _scenario_view(res, s, figs, all_findings, self_contained):
     if no_local:
         captions["local"] += f" Not shown ({_NO_ONE_STEP}): {', '.join(no_local)}."
     mine = [f for f in all_findings if f.scenario == sc]
+    found = _finding_views([f for f in mine if f.severity != "info"])
+    observed = _finding_views([f for f in mine if f.severity == "info"])
+    _explain_in_place([found, observed])
     return {
         "name": sc, "description": s["description"], "source": s["source"], "hash": s["content_hash"],
         "duration": fmt_dt(s["duration_s"]), "dt": fmt_dt(s["dt_s"]),
         "ladder": ", ".join(fmt_dt(d) for d in s["dt_ladder_s"]), "reference": s["reference"],
         "conserved": cons, "files": _files(res, s), "second": _second_reference(s),
-        "findings": _finding_views([f for f in mine if f.severity != "info"]),
-        "any_bad": any(f.severity == "bad" for f in mine),
-        "observations": _finding_views([f for f in mine if f.severity == "info"]),
+        "findings": found, "any_bad": any(f.severity == "bad" for f in mine), "observations": observed,
         "quantities": [f"{LABELS[q]} ({UNITS[q]})" for q in QUANTITIES],
         "quantity_names": [LABELS[q] for q in QUANTITIES],
         "table": _scenario_table(res, sc), "ladder_rows": _ladder_rows(res, sc),
@@ -336,13 +338,17 @@ def render_pages(res, figures: dict, self_contained: bool = False) -> dict:
     common = {"nav": nav, "provenance": _provenance(res)}
     pages = {}
     sections = _finding_sections([f for f in all_f if f.severity != "info"])
+    box = verdict_box(res)
+    observations = _finding_views([f for f in all_f if f.severity == "info"])
+    _explain_in_place([*(g["lines"] for g in box["groups"]), *(sec["entries"] for sec in sections),
+                       observations])
     rk = ranking(res)
     pages[RANKING_PAGE] = env.get_template("ranking.html").render(
         title="rbcheck: which engine variant?", r=_ranking_view(res, rk), **common)
     pages["index.html"] = env.get_template("index.html").render(
-        title="rbcheck results", matrix=_matrix(res), legend=_legend(), box=verdict_box(res),
+        title="rbcheck results", matrix=_matrix(res), legend=_legend(), box=box,
         which=_which_view(rk),
-        sections=sections, observations=_finding_views([f for f in all_f if f.severity == "info"]),
+        sections=sections, observations=observations,
         skipped=res.summary.get("skipped_variants", []), second=_second_summary(res), **common)
     for s in res.scenarios:
         view = _scenario_view(res, s, figures.get(s["name"], []), all_f, self_contained)
@@ -409,6 +415,18 @@ def _ranking_view(res, rk) -> dict:
                  if any(s.variant == v for s in rk.groups["overall"]["standings"])]
     return {"groups": groups, "scenarios": scen, "sentences": sentences, "families": SCENARIO_FAMILIES,
             "cached": cached, "n_rows": len(res.rows)}
+
+
+def _explain_in_place(lists) -> None:
+    """Each symbol explained at its first use on the page (reports.words), in the order of ``lists`` —
+    lists of lines (str) or of finding views (their "text") — as the page shows them."""
+    flat = [(lst, i) for lst in lists for i in range(len(lst))]
+    texts = [lst[i]["text"] if isinstance(lst[i], dict) else lst[i] for lst, i in flat]
+    for (lst, i), text in zip(flat, explain(texts)):
+        if isinstance(lst[i], dict):
+            lst[i] = {**lst[i], "text": text}
+        else:
+            lst[i] = text
 
 
 def _second_summary(res) -> str:

@@ -61,7 +61,7 @@ NOTES: dict = {}
 #: One hue per engine family (in the order the families come), distinct from the reference's grey; a
 #: family's variants are shades of its hue (dark to light), each with its own marker and dash pattern.
 FAMILY_HUES = ("#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#17becf",
-               "#bcbd22", "#393b79", "#637939", "#ad494a")
+               "#bcbd22", "#393b79", "#637939", "#252525")
 _DASHES = ("-", "--", "-.", ":")
 
 
@@ -234,6 +234,12 @@ def _grid(nrows, nfam, title, panel_h=2.1, log=False, layout="time", legend=None
     return fig, axes
 
 
+def _ylabel(axes, i, text) -> None:
+    """Row ``i``'s y label on the first panel of each block of family columns."""
+    for j in range(0, axes.shape[1], _blocks(axes.shape[1])[1]):
+        axes[i, j].set_ylabel(text, fontsize=8)
+
+
 #: The legend's font size (pt) and the figure's left margin for it (inches).
 _LEGEND_PT = 7.5
 _LEGEND_X_IN = 0.1
@@ -395,7 +401,7 @@ def _time_panels(axes, res, sc, fams, styles, rows, log, ser=None):
             if ax.has_data():
                 ax.autoscale_view()
         _same_limits(axes[i], "y", _robust_limits(keep, log) or _robust_limits(every, log))
-        axes[i, 0].set_ylabel(label, fontsize=8)
+        _ylabel(axes, i, label)
     _same_limits(axes.flat, "x")
     for ax in axes[-1]:
         ax.set_xlabel("time t (s)", fontsize=8)
@@ -720,8 +726,8 @@ def fig_ladder(res, sc, styles, path, mode):
         _same_limits(axes[i], "y", None if lim is None else (lim[0] / 10, lim[1]))
         for j, ax in enumerate(axes[i]):
             if lim is not None:
-                _slope_triangles(ax, ladder, labels=j == 0)
-        axes[i, 0].set_ylabel(f"{LABELS[q]} ({UNITS[q]})", fontsize=8)
+                _slope_triangles(ax, ladder, labels=j % _blocks(len(fams))[1] == 0)
+        _ylabel(axes, i, f"{LABELS[q]} ({UNITS[q]})")
     _same_limits(axes.flat, "x")
     for ax in axes.flat:   # every row: the same Δt grid lines; labels on the bottom row only
         ax.xaxis.set_major_locator(FixedLocator(ladder))

@@ -355,8 +355,9 @@ def best_sentences(rk: Ranking, group: str) -> list:
             names.append(f"{s.variant} ({ratio_text(score)}){flag}")
         first, clean = rk.best(group, what)
         tail = ""
-        if first is not None and clean is not None and first is not clean:
-            tail = f"; the first with every verdict as expected: {clean.variant}"
+        if first is not None and first is not clean:
+            tail = (f"; the first with every verdict as expected: {clean.variant}" if clean is not None
+                    else "; none of those ranked has every verdict as expected")
         out.append((label, "; ".join(names) + tail,
                     f"×N: N times {unit} (the geometric mean over the scenarios of the ratio)"))
     return out
