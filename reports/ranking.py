@@ -230,11 +230,13 @@ def _gmean(xs):
     return math.exp(sum(math.log(x) for x in xs) / len(xs)) if xs else None
 
 
-def _rank(standings, score, n, ranked_attr):
+def _rank(standings, score, n, ranked_attr, tie):
+    """Rank by ``score`` (a tie — schemes equally exact — goes to the better ``tie`` score, then the name)."""
     total = {s.variant: s.n_scenarios for s in standings}
     order = sorted((s for s in standings if getattr(s, score) is not None
                     and getattr(s, n) >= max(1, MIN_COVERAGE * total[s.variant])),
-                   key=lambda s: (getattr(s, score), s.variant))
+                   key=lambda s: (round(math.log10(getattr(s, score)), 6),
+                                  getattr(s, tie) if getattr(s, tie) is not None else math.inf, s.variant))
     for i, s in enumerate(order, start=1):
         setattr(s, ranked_attr, i)
 
@@ -311,8 +313,8 @@ def ranking(res) -> Ranking:
     for g, scs in fams.items():
         standings = [_standing(res, v, scs, per_sc) for v in res.variants]
         standings = [s for s in standings if s.n_scenarios]
-        _rank(standings, "acc_score", "acc_n", "acc_rank")
-        _rank(standings, "cost_score", "cost_n", "cost_rank")
+        _rank(standings, "acc_score", "acc_n", "acc_rank", "cost_score")
+        _rank(standings, "cost_score", "cost_n", "cost_rank", "acc_score")
         groups[g] = {"scenarios": scs, "standings": standings}
     return Ranking(per_sc, groups)
 
