@@ -7,8 +7,10 @@ from __future__ import annotations
 
 import base64
 import math
+import re
 
 from jinja2 import Environment, PackageLoader, StrictUndefined, TemplateNotFound, select_autoescape
+from markupsafe import Markup, escape
 
 from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, UNITS
 from reports.data import LABELS
@@ -63,11 +65,20 @@ class _Loader(PackageLoader):
 
 
 def environment() -> Environment:
-    return Environment(loader=_Loader("reports", "templates"),
-                       autoescape=select_autoescape(["html", "htm", "xml"],
-                                                    default_for_string=True, default=True),
-                       undefined=StrictUndefined, trim_blocks=True, lstrip_blocks=True,
-                       keep_trailing_newline=True)
+    env = Environment(loader=_Loader("reports", "templates"),
+                      autoescape=select_autoescape(["html", "htm", "xml"],
+                                                   default_for_string=True, default=True),
+                      undefined=StrictUndefined, trim_blocks=True, lstrip_blocks=True,
+                      keep_trailing_newline=True)
+    env.filters["breakable"] = breakable
+    return env
+
+
+def breakable(name) -> Markup:
+    """A variant's name (escaped) that a narrow table cell may break after its colon and underscores
+    only (``<wbr>``), never inside a word: "semi_implicit_euler" wraps as "semi_ implicit_ euler"."""
+    parts = re.split(r"(?<=[:_])", str(name))
+    return Markup("<wbr>").join(escape(p) for p in parts)
 
 
 def page_name(scenario: str) -> str:

@@ -101,22 +101,30 @@ _YLABEL_PT = 5 * 0.6 * _TICK_PT + 3.5 + 3.5 + 4.0
 _XLABEL_PT = 3.5 + 3.5 + 1.2 * _TICK_PT + 3.0
 
 
-def _panels(layout, nrows, ncols, size_in, log, outer=True, block_rows=None, used=None):
+def _panels(layout, nrows, ncols, size_in, log, outer=True, block_rows=None, used=None, spacer=0.0):
     """A figure of ``nrows`` × ``ncols`` panels (log x and y scales when ``log``), emptied of any previous
     drawing and resized to ``size_in`` (w, h inches). With ``outer`` only the bottom row has x tick
     labels and the first column y tick labels (the callers then give a row one y range and the grid one
     x range: :func:`_same_limits`). The panels are kept by layout whatever the number of rows: a figure
     of fewer rows lays its rows out on a grid of its own and hides the others. ``block_rows``: the rows
     are blocks of that many (the bottom row of each has x tick labels); ``used``: the number of panels of
-    a row of blocks that are shown (the last block's others are hidden)."""
+    a row of blocks that are shown (the last block's others are hidden); ``spacer``: the height of an
+    empty row between two blocks, relative to a panel's."""
     block_rows = block_rows or nrows
+    n_blocks = nrows // block_rows
+    at = lambda i: i + i // block_rows       # noqa: E731 - a panel row's grid row (spacers between blocks)
     key = (layout, ncols, log, outer)
     fig, rows = _FIGURES.setdefault(key, (Figure(dpi=REPORT_DPI), []))
     if not isinstance(fig.canvas, FigureCanvasAgg):
         FigureCanvasAgg(fig)
-    grid = fig.add_gridspec(nrows, ncols)
+    if n_blocks > 1:
+        ratios = [x for b in range(n_blocks)
+                  for x in [1.0] * block_rows + ([spacer] if b < n_blocks - 1 else [])]
+        grid = fig.add_gridspec(len(ratios), ncols, height_ratios=ratios)
+    else:
+        grid = fig.add_gridspec(nrows, ncols)
     while len(rows) < nrows:
-        rows.append([fig.add_subplot(grid[len(rows), j]) for j in range(ncols)])
+        rows.append([fig.add_subplot(grid[at(len(rows)), j]) for j in range(ncols)])
         for j, ax in enumerate(rows[-1]):
             _style(ax, log, left=j == 0 or not outer)
     for i, row in enumerate(rows):
@@ -124,7 +132,7 @@ def _panels(layout, nrows, ncols, size_in, log, outer=True, block_rows=None, use
             shown = i < nrows and (used is None or (i // block_rows) * ncols + j < used)
             ax.set_visible(shown)
             if i < nrows:
-                ax.set_subplotspec(grid[i, j])
+                ax.set_subplotspec(grid[at(i), j])
             bottom = i % block_rows == block_rows - 1 or not outer
             if ax.xaxis.get_tick_params().get("labelbottom") != bottom:   # tick_params restyles every tick
                 ax.tick_params(axis="x", labelbottom=bottom)
@@ -209,24 +217,24 @@ def _grid(nrows, nfam, title, panel_h=2.1, log=False, layout="time", legend=None
     margins in inches. Returns (figure, axes[row, family])."""
     blocks, cols = _blocks(nfam)
     w = min(13.0, 2.2 + 3.6 * cols)
-    fig, phys = _panels(layout, nrows * blocks, cols, (w, 4.0), log, block_rows=nrows, used=nfam)
+    axes_h = (panel_h * nrows - 0.15) / (nrows + 0.35 * (nrows - 1))
+    gap = 0.35 * axes_h
+    spacer = max(_BLOCK_GAP_IN - 2 * gap, 0.05) if blocks > 1 else 0.0    # between blocks: x labels, titles
+    fig, phys = _panels(layout, nrows * blocks, cols, (w, 4.0), log, block_rows=nrows, used=nfam,
+                        spacer=spacer / axes_h)
     leg_h = _figure_legend(fig, w, legend) if legend else 0.0
     strip = leg_h + 0.15 if legend else 0.0
-    if blocks > 1:      # one gap for every row (a grid's hspace is one number): room for x labels and titles
-        gap, axes_h = _BLOCK_GAP_IN, panel_h - 0.35
-    else:
-        axes_h = (panel_h * nrows - 0.15) / (nrows + 0.35 * (nrows - 1))
-        gap = 0.35 * axes_h
-    n_phys = nrows * blocks
-    area = axes_h * n_phys + gap * (n_phys - 1)
+    n_grid = nrows * blocks + blocks - 1
+    area = axes_h * nrows * blocks + spacer * (blocks - 1) + gap * (n_grid - 1)
     # wrapped to the figure's width (≈ 12 characters per inch at 11 pt): a one-column figure is 5.8 in wide
     title = textwrap.fill(title, width=int(w * _TITLE_CHARS_PER_IN))
     extra = 0.2 * title.count("\n")
     h = 0.75 + extra + area + 0.5 + strip
     fig.set_size_inches(w, h)
     fig.suptitle(title, fontsize=11, x=0.01, ha="left")
+    mean_cell = (area - gap * (n_grid - 1)) / n_grid
     fig.subplots_adjust(left=0.09 if w > 8 else 0.14, right=0.98, top=1.0 - (0.75 + extra) / h,
-                        bottom=(0.5 + strip) / h, hspace=gap / axes_h, wspace=0.08)
+                        bottom=(0.5 + strip) / h, hspace=gap / mean_cell, wspace=0.08)
     axes = np.empty((nrows, nfam), dtype=object)
     for j in range(nfam):
         b, c = divmod(j, cols)
