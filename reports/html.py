@@ -378,6 +378,13 @@ def _which_view(rk) -> dict:
             "note": next((n for _, _, n in best_sentences(rk, "overall")), ""), "href": RANKING_PAGE}
 
 
+def _micro(us) -> str:
+    """A cost per step in µs: "0.61", "17", "360", "12000" (no exponent: these are read side by side)."""
+    if us is None or not math.isfinite(us):
+        return "–"
+    return f"{us:.2g}" if us < 100 else f"{float(f'{us:.2g}'):.0f}"
+
+
 def _standing_row(s, n_sc) -> dict:
     c = s.verdicts
     verdict = ("✗ contradicts on " + ", ".join(s.contradicts_on) if s.contradicts_on
@@ -391,7 +398,7 @@ def _standing_row(s, n_sc) -> dict:
             "cost_rank": str(s.cost_rank or ""),
             "cost": ratio_text(s.cost_score),
             "cost_sort": _num(s.cost_score) if s.cost_rank else "", "cost_n": f"{s.cost_n}/{n_sc}",
-            "per_step": fmt(s.per_step_us), "per_step_sort": _num(s.per_step_us),
+            "per_step": _micro(s.per_step_us), "per_step_sort": _num(s.per_step_us),
             "verdict": verdict, "verdict_cls": "bad" if (s.contradicts_on or s.failed) else "acc1",
             "verdict_detail": detail, "energy": s.energy or "–", "energy_sort": _num(s.energy_sort)}
 
@@ -414,7 +421,7 @@ def _ranking_view(res, rk) -> dict:
                      "cost": r.cost[v].text("s") if v in r.cost else "–",
                      "cost_sort": _num(r.cost[v].value) if v in r.cost else "",
                      "cost_why": r.cost[v].why if v in r.cost else "",
-                     "per_step": fmt(r.per_step[v] * 1e6), "per_step_sort": _num(r.per_step[v] * 1e6)}
+                     "per_step": _micro(r.per_step[v] * 1e6), "per_step_sort": _num(r.per_step[v] * 1e6)}
                     for v in res.variants if v in r.accuracy]
         scen.append({"name": sc, "href": page_name(sc), "family": r.family,
                      "cost": fmt(r.common_cost, "s"), "n_cost": r.n_cost,
