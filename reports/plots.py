@@ -193,6 +193,7 @@ def release() -> None:
     """Drop the figures and legends this process keeps (a caller that drew in its own process does not
     keep them)."""
     _FIGURES.clear()
+    _LEGENDS.clear()
 
 
 _TITLE_CHARS_PER_IN = 12
@@ -249,7 +250,7 @@ def _ylabel(axes, i, text) -> None:
 
 
 #: The legend's font size (pt) and the figure's left margin for it (inches).
-_LEGEND_PT = 7.5
+_LEGEND_PT = 8.5
 _LEGEND_X_IN = 0.1
 
 
@@ -263,37 +264,66 @@ def legend_entries(fams, styles, extra=None, markers=True) -> dict:
     return out
 
 
+_LEGENDS: dict = {}   # a family's legend -> its pixels (RGBA, transparent background), per process
 #: A family's legend has at most this many rows (more variants: more columns).
 _LEGEND_ROWS = 4
 _LEGEND_GAP_IN = 0.3
+#: Transparent margin around a legend's pixels (px): antialiased edges of its text are not cut.
+_LEGEND_PAD_PX = 2
+
+
+def legend_figure(dpi, fam, items):
+    """A family's legend (matplotlib's ``Legend``: its name in bold, its variants' lines, markers and
+    names in columns of at most _LEGEND_ROWS) drawn alone on a transparent figure sized to the legend's
+    measured extent plus _LEGEND_PAD_PX — nothing of it is cut. Returns (figure, legend)."""
+    fig = Figure(figsize=(1.0, 1.0), dpi=dpi, facecolor="none")
+    FigureCanvasAgg(fig)
+    handles = [Line2D([], [], color=st["color"], ls=st["ls"], lw=1.4, marker=st.get("marker") or None, ms=4)
+               for _, st in items]
+    leg = fig.legend(handles, [label for label, _ in items], loc="upper left", bbox_to_anchor=(0.0, 0.0),
+                     bbox_transform=fig.dpi_scale_trans, ncols=max(1, math.ceil(len(items) / _LEGEND_ROWS)),
+                     fontsize=_LEGEND_PT, frameon=False, handlelength=2.6, handletextpad=0.5,
+                     columnspacing=1.2, labelspacing=0.25, borderpad=0.0, borderaxespad=0.0, title=fam,
+                     title_fontproperties={"size": 9, "weight": "bold"}, alignment="left")
+    box = leg.get_window_extent(fig.canvas.get_renderer())
+    pad = _LEGEND_PAD_PX / dpi
+    w, h = math.ceil(box.width + 2 * _LEGEND_PAD_PX) / dpi, math.ceil(box.height + 2 * _LEGEND_PAD_PX) / dpi
+    fig.set_size_inches(w, h)
+    leg.set_bbox_to_anchor((pad, h - pad), transform=fig.dpi_scale_trans)
+    return fig, leg
+
+
+def _legend_pixels(dpi, fam, items) -> np.ndarray:
+    """The pixels of :func:`legend_figure`, drawn once per process (the same legend comes back in every
+    figure of a scenario, and of the next)."""
+    key = (dpi, fam, tuple((label, st["color"], st["ls"], st.get("marker")) for label, st in items))
+    if key not in _LEGENDS:
+        fig, _ = legend_figure(dpi, fam, items)
+        with matplotlib.rc_context({"text.hinting": "no_hinting"}):
+            fig.canvas.draw()
+        _LEGENDS[key] = np.asarray(fig.canvas.buffer_rgba()).copy()
+    return _LEGENDS[key]
 
 
 def _figure_legend(fig, width_in, entries) -> float:
-    """The figure's legends under its panels, one per family (its name in bold, its variants in columns
-    of at most _LEGEND_ROWS), laid out left to right and wrapped to ``width_in`` — each measured, so none
-    is cut and none overlaps another. Anchored in inches from the figure's bottom, so that setting the
-    figure's height afterwards does not move them. Returns the height they take (inches)."""
-    renderer = fig.canvas.get_renderer()
-    placed, x, y, line_h = [], _LEGEND_X_IN, 0.0, 0.0
+    """The figure's legends under its panels, one per family (:func:`legend_figure`), laid out left to
+    right and wrapped to ``width_in`` — each as large as it measures, so none is cut and none overlaps
+    another. Placed as images (FigureImage, labelled with the family's name) in pixels from the figure's
+    bottom, so that setting the figure's height afterwards does not move them. Returns the height they
+    take (inches)."""
+    placed, x, y, line_h = [], _LEGEND_X_IN * fig.dpi, 0.0, 0.0
+    limit = (width_in - _LEGEND_X_IN) * fig.dpi
     for fam, items in entries.items():
-        handles = [Line2D([], [], color=st["color"], ls=st["ls"], lw=1.4, marker=st.get("marker") or None,
-                          ms=4) for _, st in items]
-        ncols = max(1, math.ceil(len(items) / _LEGEND_ROWS))
-        leg = fig.legend(handles, [label for label, _ in items], loc="upper left",
-                         bbox_to_anchor=(0.0, 0.0), bbox_transform=fig.dpi_scale_trans, ncols=ncols,
-                         fontsize=_LEGEND_PT, frameon=False, handlelength=2.6, handletextpad=0.5,
-                         columnspacing=1.2, labelspacing=0.25, borderpad=0.0, borderaxespad=0.0,
-                         title=fam, title_fontproperties={"size": 8, "weight": "bold"}, alignment="left")
-        box = leg.get_window_extent(renderer)
-        w, h = box.width / fig.dpi, box.height / fig.dpi
-        if x > _LEGEND_X_IN and x + w > width_in - _LEGEND_X_IN:     # wrap to a new line
-            x, y, line_h = _LEGEND_X_IN, y + line_h + 0.12, 0.0
-        placed.append((leg, x, y))
-        x, line_h = x + w + _LEGEND_GAP_IN, max(line_h, h)
-    total = y + line_h
-    for leg, lx, ly in placed:      # y: from the top of the legends' strip down
-        leg.set_bbox_to_anchor((lx, total + 0.05 - ly), transform=fig.dpi_scale_trans)
-    return total + 0.05
+        pix = _legend_pixels(fig.dpi, fam, items)
+        h, w = pix.shape[:2]
+        if x > _LEGEND_X_IN * fig.dpi and x + w > limit:     # wrap to a new line
+            x, y, line_h = _LEGEND_X_IN * fig.dpi, y + line_h + 0.12 * fig.dpi, 0.0
+        placed.append((fam, pix, x, y))
+        x, line_h = x + w + _LEGEND_GAP_IN * fig.dpi, max(line_h, h)
+    total = math.ceil(y + line_h + 0.05 * fig.dpi)
+    for fam, pix, lx, ly in placed:      # ly: from the top of the legends' strip down
+        fig.figimage(pix, xo=round(lx), yo=total - round(ly) - pix.shape[0], origin="upper").set_label(fam)
+    return total / fig.dpi
 
 
 def _finish(fig, path) -> None:
@@ -447,13 +477,10 @@ def sign_continuous(q, first=None):
     q = np.array(q, dtype=float, copy=True)
     if not len(q):
         return q
-    prev = np.asarray(first, dtype=float) if first is not None else q[0]
-    for k in range(len(q)):
-        if np.all(np.isfinite(q[k])) and float(np.dot(q[k], prev)) < 0:
-            q[k] = -q[k]
-        if np.all(np.isfinite(q[k])):
-            prev = q[k]
-    return q
+    dots = np.einsum("ij,ij->i", q[1:], q[:-1])
+    step = np.where(np.isfinite(dots) & (dots < 0), -1.0, 1.0)     # a row that flips against the last
+    head = 1.0 if first is None or not float(np.dot(q[0], np.asarray(first, dtype=float))) < 0 else -1.0
+    return q * np.cumprod(np.concatenate([[head], step]))[:, None]
 
 
 def _continuous_series(ser) -> dict:
