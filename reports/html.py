@@ -29,7 +29,9 @@ from reports.words import explain
 
 __all__ = ["environment", "render_pages", "page_name", "rows_extracts"]
 
-_FAMILIES = ("One column per engine family, each variant in its own colour; a row shares its y axis. A run "
+_FAMILIES = ("One column per engine family (more than five wrap into blocks of rows); a row shares its y "
+             "axis. Each variant keeps one style in every figure of the report: its family's hue, a shade, "
+             "a dash pattern and a marker of its own (the legends under the panels, one per family). A run "
              "that diverged is drawn up to its divergence (×) and the axes follow the runs that did not.")
 _FIG_CAPTIONS = {
     "trajectories": "The moving position and orientation components against time at the scenario's "
@@ -39,13 +41,14 @@ _FIG_CAPTIONS = {
     "conservation": "Relative drift of the quantities the physics conserves, at the default Δt "
                     "(log–log). " + _FAMILIES,
     "convergence": "Final error against Δt (log–log) over the scenario's Δt ladder, one "
-                   "column per engine family. Filled markers are the points of the "
-                   "least-squares order fit; the grey band is the round-off floor; the "
+                   "column per engine family, each variant in its own style. Filled markers are the points "
+                   "of the least-squares order fit; the grey band is the round-off floor; the "
                    "triangles show slopes 1, 2 and 4. The legends list the fitted orders.",
     "local": "One-step (local) error against Δt: every step restarted from the reference state; an "
              "order-p scheme shows slope p + 1.",
-    "work": "Work-precision: final error against the wall time of each run of "
-            "the ladder, every variant on one axis (colour: engine family).",
+    "work": "Work-precision: final error against the wall time of each run of the ladder, every variant "
+            "on one axis in its own style (hue: engine family). The ranking page reads these curves: "
+            "which variant is most accurate at a common cost, and cheapest at a common accuracy.",
 }
 _NO_ONE_STEP = ("no one-step mode: an engine file runs whole trajectories only, "
                 "so local errors are not measured")

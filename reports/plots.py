@@ -2,8 +2,11 @@
 
 Every figure with time series or Δt ladders is a grid of small multiples: one column per engine family
 (``reference``, ``mujoco``, ``pybullet``, any other engine's name — the part of ``ENGINE:VARIANT`` before
-the colon), one row per quantity, a row sharing its y axis so the families compare at a glance; each
-panel holds only its family's variants, each in its own colour. A run that diverged is drawn up to its
+the colon; more than MAX_COLUMNS families wrap into blocks of rows), one row per quantity, a row sharing
+its y axis so the families compare at a glance; each panel holds only its family's variants, each in the
+style it has in every figure (``variant_styles``: the family's hue, a shade, a dash pattern and a marker),
+named in one legend per family under the panels. Curves that coincide are drawn so that both are seen and
+named in the caption; quaternions are drawn sign-continuous. A run that diverged is drawn up to its
 divergence and marked there (×); the y limits come from the runs that did not diverge, so a blow-up does
 not flatten the others. Panels of a quantity that does not move, or that every variant reproduces
 exactly, are left out and said in a note; a figure with nothing to show is not drawn.
