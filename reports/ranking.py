@@ -334,7 +334,8 @@ def ratio_text(x) -> str:
 
 
 def _ordinal(n: int) -> str:
-    return {1: "1st", 2: "2nd", 3: "3rd"}.get(n, f"{n}th")
+    suffix = "th" if 10 <= n % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(n % 10, "th")
+    return f"{n}{suffix}"
 
 
 def best_sentences(rk: Ranking, group: str) -> list:
@@ -390,15 +391,21 @@ def engine_sentence(rk: Ranking, v: str) -> str:
     if firsts["acc"]:
         parts.append("most accurate at a common cost " + _where(firsts["acc"], rk))
     elif overall and overall.acc_rank:
-        parts.append(f"{_ordinal(overall.acc_rank)} of {n} in accuracy at a common cost "
+        parts.append(f"{_ordinal(overall.acc_rank)} of {n} ranked in accuracy at a common cost "
                      f"({ratio_text(overall.acc_score)} the best error)")
+    elif overall:
+        parts.append(f"not ranked in accuracy at a common cost (a value on {overall.acc_n} of its "
+                     f"{overall.n_scenarios} scenarios: elsewhere its cheapest run costs more, or it has no "
+                     "work-precision curve)")
     if firsts["cost"]:
         parts.append("cheapest at a common accuracy " + _where(firsts["cost"], rk))
     elif overall and overall.cost_rank:
-        parts.append(f"{_ordinal(overall.cost_rank)} of {nc} in cost at a common accuracy "
+        parts.append(f"{_ordinal(overall.cost_rank)} of {nc} ranked in cost at a common accuracy "
                      f"({ratio_text(overall.cost_score)} the cheapest's cost)")
-    if overall is None or (not overall.acc_rank and not overall.cost_rank):
-        parts.append("not ranked (too few scenarios with a work-precision curve)")
+    elif overall:
+        parts.append(f"not ranked in cost at a common accuracy (a value on {overall.cost_n} of its "
+                     f"{overall.n_scenarios} scenarios: elsewhere no run is that accurate, or it has no "
+                     "work-precision curve)")
     if overall is not None:
         c = overall.verdicts
         if overall.contradicts_on:

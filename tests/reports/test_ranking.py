@@ -125,3 +125,11 @@ def test_the_three_accuracy_greens_are_told_apart_in_greyscale():
               for k in ("acc1", "acc2", "acc3")}
     assert l_star["acc1"] + 8 <= l_star["acc2"] and l_star["acc2"] + 8 <= l_star["acc3"], l_star
     assert not math.isnan(sum(l_star.values()))
+
+
+def test_the_sentences_number_places_in_english():
+    from reports.ranking import _ordinal, ratio_text
+    assert [_ordinal(n) for n in (1, 2, 3, 4, 11, 12, 13, 21, 22, 23, 111)] == \
+        ["1st", "2nd", "3rd", "4th", "11th", "12th", "13th", "21st", "22nd", "23rd", "111th"]
+    assert [ratio_text(x) for x in (1.0, 1.34, 12.3, 160.0, 1234.0, 5.2e8)] == \
+        ["×1", "×1.3", "×12", "×160", "×1200", "×5.2e8"]
