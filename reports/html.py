@@ -7,18 +7,31 @@ from __future__ import annotations
 
 import base64
 import math
+import re
 
 from jinja2 import Environment, PackageLoader, StrictUndefined, TemplateNotFound, select_autoescape
+from markupsafe import Markup, escape
 
 from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, UNITS
 from reports.data import LABELS
 from reports.findings import findings, fmt, fmt_dt
 from reports.glance import ACCURACY_TIERS, GLYPHS, cell, families, glyph, order_text, verdict_box
 from reports.install import incomplete
+from reports.ranking import (
+    SCENARIO_FAMILIES,
+    best_sentences,
+    engine_sentence,
+    family_lines,
+    ranking,
+    ratio_text,
+)
+from reports.words import explain
 
 __all__ = ["environment", "render_pages", "page_name", "rows_extracts"]
 
-_FAMILIES = ("One column per engine family, each variant in its own colour; a row shares its y axis. A run "
+_FAMILIES = ("One column per engine family (more than five wrap into blocks of rows); a row shares its y "
+             "axis. Each variant keeps one style in every figure of the report: its family's hue, a shade, "
+             "a dash pattern and a marker of its own (the legends under the panels, one per family). A run "
              "that diverged is drawn up to its divergence (×) and the axes follow the runs that did not.")
 _FIG_CAPTIONS = {
     "trajectories": "The moving position and orientation components against time at the scenario's "
@@ -28,13 +41,14 @@ _FIG_CAPTIONS = {
     "conservation": "Relative drift of the quantities the physics conserves, at the default Δt "
                     "(log–log). " + _FAMILIES,
     "convergence": "Final error against Δt (log–log) over the scenario's Δt ladder, one "
-                   "column per engine family. Filled markers are the points of the "
-                   "least-squares order fit; the grey band is the round-off floor; the "
+                   "column per engine family, each variant in its own style. Filled markers are the points "
+                   "of the least-squares order fit; the grey band is the round-off floor; the "
                    "triangles show slopes 1, 2 and 4. The legends list the fitted orders.",
     "local": "One-step (local) error against Δt: every step restarted from the reference state; an "
              "order-p scheme shows slope p + 1.",
-    "work": "Work-precision: final error against the wall time of each run of "
-            "the ladder, every variant on one axis (colour: engine family).",
+    "work": "Work-precision: final error against the wall time of each run of the ladder, every variant "
+            "on one axis in its own style (hue: engine family). The ranking page reads these curves: "
+            "which variant is most accurate at a common cost, and cheapest at a common accuracy.",
 }
 _NO_ONE_STEP = ("no one-step mode: an engine file runs whole trajectories only, "
                 "so local errors are not measured")
@@ -54,11 +68,20 @@ class _Loader(PackageLoader):
 
 
 def environment() -> Environment:
-    return Environment(loader=_Loader("reports", "templates"),
-                       autoescape=select_autoescape(["html", "htm", "xml"],
-                                                    default_for_string=True, default=True),
-                       undefined=StrictUndefined, trim_blocks=True, lstrip_blocks=True,
-                       keep_trailing_newline=True)
+    env = Environment(loader=_Loader("reports", "templates"),
+                      autoescape=select_autoescape(["html", "htm", "xml"],
+                                                   default_for_string=True, default=True),
+                      undefined=StrictUndefined, trim_blocks=True, lstrip_blocks=True,
+                      keep_trailing_newline=True)
+    env.filters["breakable"] = breakable
+    return env
+
+
+def breakable(name) -> Markup:
+    """A variant's name (escaped) that a narrow table cell may break after its colon and underscores
+    only (``<wbr>``), never inside a word: "semi_implicit_euler" wraps as "semi_ implicit_ euler"."""
+    parts = re.split(r"(?<=[:_])", str(name))
+    return Markup("<wbr>").join(escape(p) for p in parts)
 
 
 def page_name(scenario: str) -> str:
@@ -280,14 +303,15 @@ def _scenario_view(res, s, figs, all_findings, self_contained):
     if no_local:
         captions["local"] += f" Not shown ({_NO_ONE_STEP}): {', '.join(no_local)}."
     mine = [f for f in all_findings if f.scenario == sc]
+    found = _finding_views([f for f in mine if f.severity != "info"])
+    observed = _finding_views([f for f in mine if f.severity == "info"])
+    _explain_in_place([found, observed])
     return {
         "name": sc, "description": s["description"], "source": s["source"], "hash": s["content_hash"],
         "duration": fmt_dt(s["duration_s"]), "dt": fmt_dt(s["dt_s"]),
         "ladder": ", ".join(fmt_dt(d) for d in s["dt_ladder_s"]), "reference": s["reference"],
         "conserved": cons, "files": _files(res, s), "second": _second_reference(s),
-        "findings": _finding_views([f for f in mine if f.severity != "info"]),
-        "any_bad": any(f.severity == "bad" for f in mine),
-        "observations": _finding_views([f for f in mine if f.severity == "info"]),
+        "findings": found, "any_bad": any(f.severity == "bad" for f in mine), "observations": observed,
         "quantities": [f"{LABELS[q]} ({UNITS[q]})" for q in QUANTITIES],
         "quantity_names": [LABELS[q] for q in QUANTITIES],
         "table": _scenario_table(res, sc), "ladder_rows": _ladder_rows(res, sc),
@@ -323,19 +347,107 @@ def render_pages(res, figures: dict, self_contained: bool = False) -> dict:
     ``{scenario: [(kind, png filename or None, note)]}``."""
     env = environment()
     all_f = findings(res)
-    nav = [{"name": s["name"], "href": page_name(s["name"])} for s in res.scenarios]
+    nav = [{"name": "ranking", "href": RANKING_PAGE}]
+    nav += [{"name": s["name"], "href": page_name(s["name"])} for s in res.scenarios]
     common = {"nav": nav, "provenance": _provenance(res)}
     pages = {}
     sections = _finding_sections([f for f in all_f if f.severity != "info"])
+    box = verdict_box(res)
+    observations = _finding_views([f for f in all_f if f.severity == "info"])
+    _explain_in_place([*(g["lines"] for g in box["groups"]), *(sec["entries"] for sec in sections),
+                       observations])
+    rk = ranking(res)
+    pages[RANKING_PAGE] = env.get_template("ranking.html").render(
+        title="rbcheck: which engine variant?", r=_ranking_view(res, rk), **common)
     pages["index.html"] = env.get_template("index.html").render(
-        title="rbcheck results", matrix=_matrix(res), legend=_legend(), box=verdict_box(res),
-        sections=sections, observations=_finding_views([f for f in all_f if f.severity == "info"]),
+        title="rbcheck results", matrix=_matrix(res), legend=_legend(), box=box,
+        which=_which_view(rk),
+        sections=sections, observations=observations,
         skipped=res.summary.get("skipped_variants", []), second=_second_summary(res), **common)
     for s in res.scenarios:
         view = _scenario_view(res, s, figures.get(s["name"], []), all_f, self_contained)
         pages[page_name(s["name"])] = env.get_template("scenario.html").render(
             title=f"rbcheck: {s['name']}", s=view, legend=_legend(), **common)
     return pages
+
+
+RANKING_PAGE = "ranking.html"
+
+
+def _which_view(rk) -> dict:
+    """The first screen's answer to "which engine?": the best overall, with the link to the ranking."""
+    return {"lines": [(label, text) for label, text, _ in best_sentences(rk, "overall")],
+            "families": family_lines(rk),
+            "note": next((n for _, _, n in best_sentences(rk, "overall")), ""), "href": RANKING_PAGE}
+
+
+def _micro(us) -> str:
+    """A cost per step in µs: "0.61", "17", "360", "12000" (no exponent: these are read side by side)."""
+    if us is None or not math.isfinite(us):
+        return "–"
+    return f"{us:.2g}" if us < 100 else f"{float(f'{us:.2g}'):.0f}"
+
+
+def _standing_row(s, n_sc) -> dict:
+    c = s.verdicts
+    verdict = ("✗ contradicts on " + ", ".join(s.contradicts_on) if s.contradicts_on
+               else f"✗ {s.failed} failed run(s)" if s.failed else "✓ as expected")
+    detail = ", ".join(x for x in (f"{c['noconv']} no conv. (expected)" if c["noconv"] else "",
+                                   f"{c['pre']} pre-asymptotic" if c["pre"] else "",
+                                   f"{s.diverged} diverged run(s)" if s.diverged else "") if x)
+    return {"variant": s.variant, "family": s.variant.split(":", 1)[0],
+            "acc_rank": str(s.acc_rank or ""), "acc": ratio_text(s.acc_score),
+            "acc_sort": _num(s.acc_score) if s.acc_rank else "", "acc_n": f"{s.acc_n}/{n_sc}",
+            "cost_rank": str(s.cost_rank or ""),
+            "cost": ratio_text(s.cost_score),
+            "cost_sort": _num(s.cost_score) if s.cost_rank else "", "cost_n": f"{s.cost_n}/{n_sc}",
+            "per_step": _micro(s.per_step_us), "per_step_sort": _num(s.per_step_us),
+            "verdict": verdict, "verdict_cls": "bad" if (s.contradicts_on or s.failed) else "acc1",
+            "verdict_detail": detail, "energy": s.energy or "–", "energy_sort": _num(s.energy_sort)}
+
+
+def _ranking_view(res, rk) -> dict:
+    groups = []
+    for g, grp in rk.groups.items():
+        n_sc = len(grp["scenarios"])
+        rows = sorted(grp["standings"],
+                      key=lambda s: (s.acc_rank or 10 ** 6, s.cost_rank or 10 ** 6, s.variant))
+        groups.append({"name": g, "id": "g-" + g.replace(" ", "-"), "scenarios": ", ".join(grp["scenarios"]),
+                       "best": [(label, text) for label, text, _ in best_sentences(rk, g)],
+                       "rows": [_standing_row(s, n_sc) for s in rows]})
+    scen = []
+    for sc, r in rk.scenarios.items():
+        acc = sorted(((v, x) for v, x in r.accuracy.items() if x.value is not None), key=lambda t: t[1].value)
+        cost = sorted(((v, x) for v, x in r.cost.items() if x.value is not None), key=lambda t: t[1].value)
+        variants = [{"variant": v, "acc": r.accuracy[v].text(), "acc_sort": _num(r.accuracy[v].value),
+                     "acc_why": r.accuracy[v].why,
+                     "cost": r.cost[v].text("s") if v in r.cost else "–",
+                     "cost_sort": _num(r.cost[v].value) if v in r.cost else "",
+                     "cost_why": r.cost[v].why if v in r.cost else "",
+                     "per_step": _micro(r.per_step[v] * 1e6), "per_step_sort": _num(r.per_step[v] * 1e6)}
+                    for v in res.variants if v in r.accuracy]
+        scen.append({"name": sc, "href": page_name(sc), "family": r.family,
+                     "cost": fmt(r.common_cost, "s"), "n_cost": r.n_cost,
+                     "error": fmt(r.common_error), "n_error": r.n_error, "n": len(r.per_step),
+                     "best_acc": acc[0][0] if acc else "–", "best_cost": cost[0][0] if cost else "–",
+                     "variants": variants})
+    cached = sum(bool(r["cached"]) for r in res.rows)
+    sentences = [engine_sentence(rk, v) for v in res.variants
+                 if any(s.variant == v for s in rk.groups["overall"]["standings"])]
+    return {"groups": groups, "scenarios": scen, "sentences": sentences, "families": SCENARIO_FAMILIES,
+            "cached": cached, "n_rows": len(res.rows)}
+
+
+def _explain_in_place(lists) -> None:
+    """Each symbol explained at its first use on the page (reports.words), in the order of ``lists`` —
+    lists of lines (str) or of finding views (their "text") — as the page shows them."""
+    flat = [(lst, i) for lst in lists for i in range(len(lst))]
+    texts = [lst[i]["text"] if isinstance(lst[i], dict) else lst[i] for lst, i in flat]
+    for (lst, i), text in zip(flat, explain(texts)):
+        if isinstance(lst[i], dict):
+            lst[i] = {**lst[i], "text": text}
+        else:
+            lst[i] = text
 
 
 def _second_summary(res) -> str:

@@ -2,8 +2,11 @@
 
 Every figure with time series or Δt ladders is a grid of small multiples: one column per engine family
 (``reference``, ``mujoco``, ``pybullet``, any other engine's name — the part of ``ENGINE:VARIANT`` before
-the colon), one row per quantity, a row sharing its y axis so the families compare at a glance; each
-panel holds only its family's variants, each in its own colour. A run that diverged is drawn up to its
+the colon; more than MAX_COLUMNS families wrap into blocks of rows), one row per quantity, a row sharing
+its y axis so the families compare at a glance; each panel holds only its family's variants, each in the
+style it has in every figure (``variant_styles``: the family's hue, a shade, a dash pattern and a marker),
+named in one legend per family under the panels. Curves that coincide are drawn so that both are seen and
+named in the caption; quaternions are drawn sign-continuous. A run that diverged is drawn up to its
 divergence and marked there (×); the y limits come from the runs that did not diverge, so a blow-up does
 not flatten the others. Panels of a quantity that does not move, or that every variant reproduces
 exactly, are left out and said in a note; a figure with nothing to show is not drawn.
@@ -39,7 +42,7 @@ from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.ticker import FixedFormatter, FixedLocator, LogFormatter, LogLocator, MaxNLocator, NullLocator
-from matplotlib.transforms import ScaledTranslation, offset_copy
+from matplotlib.transforms import offset_copy
 
 from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, UNITS
 from reports.data import LABELS
@@ -56,19 +59,33 @@ LOG_FLOOR = 1e-17
 _MARKERS = "osD^vP*Xh<>p"
 #: What a figure left out, by (scenario, kind): filled while drawing, read by the page's caption.
 NOTES: dict = {}
-#: Height of one legend entry at 7 pt (inches), to size the strip under the panels that holds the legends.
-_LEGEND_LINE_IN = 0.16
-#: The legends' top under their panel's bottom (inches): below the tick labels and the x label.
-_LEGEND_DROP_IN = 0.5
+
+
+#: One hue per engine family (in the order the families come), distinct from the reference's grey; a
+#: family's variants are shades of its hue (dark to light), each with its own marker and dash pattern.
+FAMILY_HUES = ("#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#17becf",
+               "#bcbd22", "#393b79", "#637939", "#252525")
+_DASHES = ("-", "--", "-.", ":")
+
+
+def _shade(hex_color, f):
+    """``hex_color`` darkened (f < 0, towards black) or lightened (f > 0, towards white) by |f|."""
+    rgb = np.array(matplotlib.colors.to_rgb(hex_color))
+    rgb = rgb * (1 + f) if f < 0 else rgb + (1 - rgb) * f
+    return tuple(float(c) for c in np.clip(rgb, 0.0, 1.0))
 
 
 def variant_styles(variants) -> dict:
-    """A colour and marker per variant, distinct within its family (families are drawn apart)."""
-    cmap = matplotlib.colormaps["tab10"]
+    """A colour, dash pattern and marker per variant, the same in every figure of a report (they depend on
+    the list of variants only): the family's hue, a shade per variant from dark to light, and a marker
+    and dash pattern by its place in its family."""
     out = {}
-    for vs in families(variants).values():
+    for k, vs in enumerate(families(variants).values()):
+        hue = FAMILY_HUES[k % len(FAMILY_HUES)]
+        n = len(vs)
         for i, v in enumerate(vs):
-            out[v] = {"color": cmap(i % 10), "ls": "-" if i < 10 else "--",
+            f = 0.0 if n == 1 else -0.35 + 0.8 * i / (n - 1)
+            out[v] = {"color": _shade(hue, f), "ls": _DASHES[i % len(_DASHES)],
                       "marker": _MARKERS[i % len(_MARKERS)]}
     return out
 
@@ -87,27 +104,39 @@ _YLABEL_PT = 5 * 0.6 * _TICK_PT + 3.5 + 3.5 + 4.0
 _XLABEL_PT = 3.5 + 3.5 + 1.2 * _TICK_PT + 3.0
 
 
-def _panels(layout, nrows, ncols, size_in, log, outer=True):
+def _panels(layout, nrows, ncols, size_in, log, outer=True, block_rows=None, used=None, spacer=0.0):
     """A figure of ``nrows`` × ``ncols`` panels (log x and y scales when ``log``), emptied of any previous
     drawing and resized to ``size_in`` (w, h inches). With ``outer`` only the bottom row has x tick
     labels and the first column y tick labels (the callers then give a row one y range and the grid one
     x range: :func:`_same_limits`). The panels are kept by layout whatever the number of rows: a figure
-    of fewer rows lays its rows out on a grid of its own and hides the others."""
+    of fewer rows lays its rows out on a grid of its own and hides the others. ``block_rows``: the rows
+    are blocks of that many (the bottom row of each has x tick labels); ``used``: the number of panels of
+    a row of blocks that are shown (the last block's others are hidden); ``spacer``: the height of an
+    empty row between two blocks, relative to a panel's."""
+    block_rows = block_rows or nrows
+    n_blocks = nrows // block_rows
+    at = lambda i: i + i // block_rows       # noqa: E731 - a panel row's grid row (spacers between blocks)
     key = (layout, ncols, log, outer)
     fig, rows = _FIGURES.setdefault(key, (Figure(dpi=REPORT_DPI), []))
     if not isinstance(fig.canvas, FigureCanvasAgg):
         FigureCanvasAgg(fig)
-    grid = fig.add_gridspec(nrows, ncols)
+    if n_blocks > 1:
+        ratios = [x for b in range(n_blocks)
+                  for x in [1.0] * block_rows + ([spacer] if b < n_blocks - 1 else [])]
+        grid = fig.add_gridspec(len(ratios), ncols, height_ratios=ratios)
+    else:
+        grid = fig.add_gridspec(nrows, ncols)
     while len(rows) < nrows:
-        rows.append([fig.add_subplot(grid[len(rows), j]) for j in range(ncols)])
+        rows.append([fig.add_subplot(grid[at(len(rows)), j]) for j in range(ncols)])
         for j, ax in enumerate(rows[-1]):
             _style(ax, log, left=j == 0 or not outer)
     for i, row in enumerate(rows):
         for j, ax in enumerate(row):
-            ax.set_visible(i < nrows)
+            shown = i < nrows and (used is None or (i // block_rows) * ncols + j < used)
+            ax.set_visible(shown)
             if i < nrows:
-                ax.set_subplotspec(grid[i, j])
-            bottom = i == nrows - 1 or not outer
+                ax.set_subplotspec(grid[at(i), j])
+            bottom = i % block_rows == block_rows - 1 or not outer
             if ax.xaxis.get_tick_params().get("labelbottom") != bottom:   # tick_params restyles every tick
                 ax.tick_params(axis="x", labelbottom=bottom)
             for art in (*ax.lines, *ax.collections, *ax.texts):
@@ -116,7 +145,7 @@ def _panels(layout, nrows, ncols, size_in, log, outer=True):
             ax.set_title("", loc="left")
             ax.relim()
             ax.set_autoscale_on(True)
-    for art in (*fig.images, *fig.texts):   # legends
+    for art in (*fig.images, *fig.texts, *fig.legends):   # titles, legends
         art.remove()
     fig.set_size_inches(*size_in)
     return fig, np.array(rows[:nrows], dtype=object)
@@ -173,19 +202,131 @@ def release() -> None:
 _TITLE_CHARS_PER_IN = 12
 
 
-def _grid(nrows, ncols, title, panel_h=2.1, log=False, layout="time", legend_rows=0):
-    """A grid of panels under a title, with a strip under it for legends of up to ``legend_rows``
-    entries; margins in inches."""
-    strip = 0.35 + _LEGEND_LINE_IN * legend_rows if legend_rows else 0.0
-    w, h = min(13.0, 2.2 + 3.6 * ncols), 1.1 + panel_h * nrows + strip
-    fig, axes = _panels(layout, nrows, ncols, (w, h), log)
+#: At most this many family columns side by side; more families wrap into blocks of rows.
+MAX_COLUMNS = 5
+#: Vertical gap between two blocks of rows (inches): x tick labels, x label, the next block's titles.
+_BLOCK_GAP_IN = 0.85
+
+
+def _blocks(nfam) -> tuple:
+    """(blocks, columns) of a grid of ``nfam`` family columns: as few blocks as MAX_COLUMNS allows, the
+    families spread evenly over them."""
+    blocks = max(1, math.ceil(nfam / MAX_COLUMNS))
+    return blocks, max(1, math.ceil(nfam / blocks))
+
+
+def _grid(nrows, nfam, title, panel_h=2.1, log=False, layout="time", legend=None):
+    """A grid of ``nrows`` quantity rows × ``nfam`` family columns under a title (families wrap into blocks
+    of at most MAX_COLUMNS columns), with the figure's legend (:func:`_figure_legend` entries) under it;
+    margins in inches. Returns (figure, axes[row, family])."""
+    blocks, cols = _blocks(nfam)
+    w = min(13.0, 2.2 + 3.6 * cols)
+    axes_h = (panel_h * nrows - 0.15) / (nrows + 0.35 * (nrows - 1))
+    gap = 0.35 * axes_h
+    spacer = max(_BLOCK_GAP_IN - 2 * gap, 0.05) if blocks > 1 else 0.0    # between blocks: x labels, titles
+    fig, phys = _panels(layout, nrows * blocks, cols, (w, 4.0), log, block_rows=nrows, used=nfam,
+                        spacer=spacer / axes_h)
+    leg_h = _figure_legend(fig, w, legend) if legend else 0.0
+    strip = leg_h + 0.15 if legend else 0.0
+    n_grid = nrows * blocks + blocks - 1
+    area = axes_h * nrows * blocks + spacer * (blocks - 1) + gap * (n_grid - 1)
     # wrapped to the figure's width (≈ 12 characters per inch at 11 pt): a one-column figure is 5.8 in wide
     title = textwrap.fill(title, width=int(w * _TITLE_CHARS_PER_IN))
     extra = 0.2 * title.count("\n")
+    h = 0.75 + extra + area + 0.5 + strip
+    fig.set_size_inches(w, h)
     fig.suptitle(title, fontsize=11, x=0.01, ha="left")
+    mean_cell = (area - gap * (n_grid - 1)) / n_grid
     fig.subplots_adjust(left=0.09 if w > 8 else 0.14, right=0.98, top=1.0 - (0.75 + extra) / h,
-                        bottom=(0.5 + strip) / h, hspace=0.35, wspace=0.08)
+                        bottom=(0.5 + strip) / h, hspace=gap / mean_cell, wspace=0.08)
+    axes = np.empty((nrows, nfam), dtype=object)
+    for j in range(nfam):
+        b, c = divmod(j, cols)
+        axes[:, j] = phys[b * nrows:(b + 1) * nrows, c]
     return fig, axes
+
+
+def _ylabel(axes, i, text) -> None:
+    """Row ``i``'s y label on the first panel of each block of family columns."""
+    for j in range(0, axes.shape[1], _blocks(axes.shape[1])[1]):
+        axes[i, j].set_ylabel(text, fontsize=8)
+
+
+#: The legend's font size (pt) and the figure's left margin for it (inches).
+_LEGEND_PT = 8.5
+_LEGEND_X_IN = 0.1
+
+
+def legend_entries(fams, styles, extra=None, markers=True) -> dict:
+    """The entries of a figure's legends: ``{family: [(label, style)]}``, each variant's short name (and
+    ``extra[v]``) with its colour, dash pattern and (when ``markers``) marker."""
+    out = {}
+    for fam, vs in fams.items():
+        out[fam] = [(_short(v) + (f"  {extra[v]}" if extra and extra.get(v) else ""),
+                     {**styles[v], "marker": styles[v]["marker"] if markers else None}) for v in vs]
+    return out
+
+
+_LEGENDS: dict = {}   # a family's legend -> its pixels (RGBA, transparent background), per process
+#: A family's legend has at most this many rows (more variants: more columns).
+_LEGEND_ROWS = 4
+_LEGEND_GAP_IN = 0.3
+#: Transparent margin around a legend's pixels (px): antialiased edges of its text are not cut.
+_LEGEND_PAD_PX = 2
+
+
+def legend_figure(dpi, fam, items):
+    """A family's legend (matplotlib's ``Legend``: its name in bold, its variants' lines, markers and
+    names in columns of at most _LEGEND_ROWS) drawn alone on a transparent figure sized to the legend's
+    measured extent plus _LEGEND_PAD_PX — nothing of it is cut. Returns (figure, legend)."""
+    fig = Figure(figsize=(1.0, 1.0), dpi=dpi, facecolor="none")
+    FigureCanvasAgg(fig)
+    handles = [Line2D([], [], color=st["color"], ls=st["ls"], lw=1.4, marker=st.get("marker") or None, ms=4)
+               for _, st in items]
+    leg = fig.legend(handles, [label for label, _ in items], loc="upper left", bbox_to_anchor=(0.0, 0.0),
+                     bbox_transform=fig.dpi_scale_trans, ncols=max(1, math.ceil(len(items) / _LEGEND_ROWS)),
+                     fontsize=_LEGEND_PT, frameon=False, handlelength=2.6, handletextpad=0.5,
+                     columnspacing=1.2, labelspacing=0.25, borderpad=0.0, borderaxespad=0.0, title=fam,
+                     title_fontproperties={"size": 9, "weight": "bold"}, alignment="left")
+    box = leg.get_window_extent(fig.canvas.get_renderer())
+    pad = _LEGEND_PAD_PX / dpi
+    w, h = math.ceil(box.width + 2 * _LEGEND_PAD_PX) / dpi, math.ceil(box.height + 2 * _LEGEND_PAD_PX) / dpi
+    fig.set_size_inches(w, h)
+    leg.set_bbox_to_anchor((pad, h - pad), transform=fig.dpi_scale_trans)
+    return fig, leg
+
+
+def _legend_pixels(dpi, fam, items) -> np.ndarray:
+    """The pixels of :func:`legend_figure`, drawn once per process (the same legend comes back in every
+    figure of a scenario, and of the next)."""
+    key = (dpi, fam, tuple((label, st["color"], st["ls"], st.get("marker")) for label, st in items))
+    if key not in _LEGENDS:
+        fig, _ = legend_figure(dpi, fam, items)
+        with matplotlib.rc_context({"text.hinting": "no_hinting"}):
+            fig.canvas.draw()
+        _LEGENDS[key] = np.asarray(fig.canvas.buffer_rgba()).copy()
+    return _LEGENDS[key]
+
+
+def _figure_legend(fig, width_in, entries) -> float:
+    """The figure's legends under its panels, one per family (:func:`legend_figure`), laid out left to
+    right and wrapped to ``width_in`` — each as large as it measures, so none is cut and none overlaps
+    another. Placed as images (FigureImage, labelled with the family's name) in pixels from the figure's
+    bottom, so that setting the figure's height afterwards does not move them. Returns the height they
+    take (inches)."""
+    placed, x, y, line_h = [], _LEGEND_X_IN * fig.dpi, 0.0, 0.0
+    limit = (width_in - _LEGEND_X_IN) * fig.dpi
+    for fam, items in entries.items():
+        pix = _legend_pixels(fig.dpi, fam, items)
+        h, w = pix.shape[:2]
+        if x > _LEGEND_X_IN * fig.dpi and x + w > limit:     # wrap to a new line
+            x, y, line_h = _LEGEND_X_IN * fig.dpi, y + line_h + 0.12 * fig.dpi, 0.0
+        placed.append((fam, pix, x, y))
+        x, line_h = x + w + _LEGEND_GAP_IN * fig.dpi, max(line_h, h)
+    total = math.ceil(y + line_h + 0.05 * fig.dpi)
+    for fam, pix, lx, ly in placed:      # ly: from the top of the legends' strip down
+        fig.figimage(pix, xo=round(lx), yo=total - round(ly) - pix.shape[0], origin="upper").set_label(fam)
+    return total / fig.dpi
 
 
 def _finish(fig, path) -> None:
@@ -222,60 +363,6 @@ def _line(ax, x, y, **style):
     return ax.add_line(Line2D(np.asarray(x, dtype=float), np.asarray(y, dtype=float), **style))
 
 
-def _family_legends(axes_bottom, fams, styles, extra=None, markers=False):
-    """One legend per family column, under its bottom panel (inside a panel it covered curves): the
-    family's variants (and their text)."""
-    for ax, (fam, vs) in zip(axes_bottom, fams.items()):
-        _legend(ax, 0.0, -_LEGEND_DROP_IN, fam,
-                [(_short(v) + (f"  {extra[v]}" if extra and extra.get(v) else ""),
-                  {**styles[v], "marker": styles[v]["marker"] if markers else None})
-                 for v in vs])
-
-
-def _legend(ax, x0, top, title, entries, width_in=3.2) -> None:
-    """A legend of ``entries`` = [(label, style with color, ls, marker)] whose top left corner is
-    (x0, top) inches from ``ax``'s lower left corner, at most ``width_in`` wide: its title, then a short
-    line (and marker) and a text per entry, _LEGEND_LINE_IN apart. The same legend comes back in many
-    figures (every time figure of a report has its families' legends): it is drawn once per process
-    and its pixels placed as a figure image (FigureImage) in the others."""
-    fig = ax.figure
-    key = (fig.dpi, width_in, title,
-           tuple((label, st["color"], st["ls"], st.get("marker")) for label, st in entries))
-    if key not in _LEGENDS:
-        _LEGENDS[key] = _legend_pixels(fig.dpi, width_in, title, entries)
-    x, y = (fig.dpi_scale_trans + ScaledTranslation(0.0, 0.0, ax.transAxes)).transform((x0, top))
-    fig.figimage(_LEGENDS[key], xo=round(x), yo=round(y) - _LEGENDS[key].shape[0], origin="upper")
-
-
-_LEGENDS: dict = {}   # legend -> its RGBA pixels (straight alpha, transparent background), per process
-
-
-def _legend_pixels(dpi, width_in, title, entries) -> np.ndarray:
-    """The pixels of a legend (:func:`_legend`) drawn alone on a transparent figure."""
-    height = 0.3 + _LEGEND_LINE_IN * len(entries)
-    fig = Figure(figsize=(width_in, height), dpi=dpi, facecolor="none")
-    FigureCanvasAgg(fig)
-    at = fig.dpi_scale_trans
-    fig.text(0.0, height, title, transform=at, fontsize=8, va="top")
-    ys = height - 0.2 - _LEGEND_LINE_IN * np.arange(len(entries))
-    xs = (0.05, 0.225)
-    fig.add_artist(LineCollection([[(xs[0], y), (xs[1], y)] for y in ys],
-                                  colors=[st["color"] for _, st in entries],
-                                  linestyles=[st["ls"] for _, st in entries], linewidths=1.4, transform=at))
-    for y, (label, st) in zip(ys, entries):
-        if st.get("marker"):
-            fig.add_artist(Line2D([sum(xs) / 2], [y], color=st["color"], marker=st["marker"], ms=4, ls="none",
-                                  transform=at))
-        fig.text(xs[1] + 0.075, y, label, transform=at, fontsize=7, va="center")
-    with matplotlib.rc_context({"text.hinting": "no_hinting"}):
-        fig.canvas.draw()
-    return np.asarray(fig.canvas.buffer_rgba()).copy()
-
-
-def _legend_rows(fams) -> int:
-    return max((len(vs) for vs in fams.values()), default=0)
-
-
 def _positive(a):
     a = np.asarray(a, dtype=float)
     return np.where(a > 0, a, LOG_FLOOR)
@@ -305,10 +392,12 @@ def _robust_limits(curves, log):
     return lo - pad, hi + pad
 
 
-def _time_panels(axes, res, sc, fams, styles, rows, log):
+def _time_panels(axes, res, sc, fams, styles, rows, log, ser=None):
     """Draw ``rows`` = [(label, fn(series) -> y or None)] × family columns; diverged runs truncated and
-    marked; a row's panels get one y range (from the runs that did not diverge)."""
-    ser = res.series(sc)
+    marked; a row's panels get one y range (from the runs that did not diverge). Curves that coincide
+    (:func:`coinciding`) are drawn so that both are seen; returns them ["a = b (row)"] for the caption."""
+    ser = res.series(sc) if ser is None else ser
+    same = []
     for i, (label, get) in enumerate(rows):
         keep, every = [], []
         for j, (fam, vs) in enumerate(fams.items()):
@@ -329,7 +418,7 @@ def _time_panels(axes, res, sc, fams, styles, rows, log):
                 y_draw = _positive(y) if log else y
                 st = styles[v]
                 if ok.any():
-                    curves.append((np.column_stack([t[ok], y_draw[ok]]), st))
+                    curves.append((np.column_stack([t[ok], y_draw[ok]]), {**st, "name": v}))
                 every.append(y_draw[ok])
                 if tdiv is not None and ok.any():
                     k = np.flatnonzero(ok)[-1]
@@ -337,6 +426,14 @@ def _time_panels(axes, res, sc, fams, styles, rows, log):
                 else:
                     keep.append(y[ok])
             if curves:
+                span = np.ptp(np.concatenate([xy[:, 1] for xy, _ in curves])) if not log else None
+                pairs = coinciding([(st["name"], xy[:, 0], xy[:, 1]) for xy, st in curves], log, span)
+                halo = {b for _, b in pairs}
+                same += [(a, b, label.split(" (")[0]) for a, b in pairs]
+                wide = [(xy, st) for xy, st in curves if st["name"] in halo]
+                if wide:    # under the others: a pale band around the curve it coincides with
+                    ax.add_collection(LineCollection([xy for xy, _ in wide], zorder=1.9, linewidths=3.6,
+                                                     colors=[(*st["color"][:3], 0.5) for _, st in wide]))
                 ax.add_collection(LineCollection([xy for xy, _ in curves],
                                                  colors=[st["color"] for _, st in curves],
                                                  linestyles=[st["ls"] for _, st in curves], linewidths=1.1))
@@ -345,10 +442,11 @@ def _time_panels(axes, res, sc, fams, styles, rows, log):
             if ax.has_data():
                 ax.autoscale_view()
         _same_limits(axes[i], "y", _robust_limits(keep, log) or _robust_limits(every, log))
-        axes[i, 0].set_ylabel(label, fontsize=8)
+        _ylabel(axes, i, label)
     _same_limits(axes.flat, "x")
     for ax in axes[-1]:
         ax.set_xlabel("time t (s)", fontsize=8)
+    return same
 
 
 def _families_with_series(res, ser) -> dict:
@@ -376,10 +474,31 @@ def _moving_components(ser):
     return moving, still
 
 
+def sign_continuous(q, first=None):
+    """Quaternions (N × 4) with each row's sign chosen to follow the previous row (q and −q are the same
+    orientation: a jump between them is no motion), the first row's to follow ``first`` (when given)."""
+    q = np.array(q, dtype=float, copy=True)
+    if not len(q):
+        return q
+    dots = np.einsum("ij,ij->i", q[1:], q[:-1])
+    step = np.where(np.isfinite(dots) & (dots < 0), -1.0, 1.0)     # a row that flips against the last
+    head = 1.0 if first is None or not float(np.dot(q[0], np.asarray(first, dtype=float))) < 0 else -1.0
+    return q * np.cumprod(np.concatenate([[head], step]))[:, None]
+
+
+def _continuous_series(ser) -> dict:
+    """The series with every q_WB sign-continuous, each starting on the reference's sign."""
+    ref = ser.get("reference", {}).get("q_WB")
+    first = None if ref is None or not len(ref) else sign_continuous(ref)[0]
+    return {who: ({**f, "q_WB": sign_continuous(f["q_WB"], first)} if "q_WB" in f else f)
+            for who, f in ser.items()}
+
+
 def fig_trajectories(res, sc, styles, path):
     info = res.scenario(sc)
     ser = res.series(sc)
     fams = _families_with_series(res, ser)
+    ser = _continuous_series(ser)
     moving, still = _moving_components(ser)
     if not fams or not moving:
         NOTES[(sc, "trajectories")] = "nothing moves" if not moving else "no series"
@@ -388,11 +507,13 @@ def fig_trajectories(res, sc, styles, path):
     fig, axes = _grid(len(rows), len(fams),
                       f"{sc}: trajectories at Δt = {info['dt_s']:g} s (thick grey: "
                       f"reference, {info['reference']})", panel_h=1.5,
-                      legend_rows=_legend_rows(fams))
-    _time_panels(axes, res, sc, fams, styles, rows, log=False)
-    _family_legends(axes[-1], fams, styles)
-    NOTES[(sc, "trajectories")] = ("Not drawn, constant along the reference: "
-                                   + ", ".join(still) + ".") if still else ""
+                      legend=legend_entries(fams, styles, markers=False))
+    same = _time_panels(axes, res, sc, fams, styles, rows, log=False, ser=ser)
+    quat = (" Quaternions are drawn sign-continuous: q and −q are the same orientation, so each sample's "
+            "sign is chosen to follow the previous one (a jump between them would be no motion)."
+            if any(fld == "q_WB" for _, fld, _ in moving) else "")
+    NOTES[(sc, "trajectories")] = ((("Not drawn, constant along the reference: " + ", ".join(still) + ".")
+                                    if still else "") + quat + _same_note(same)).strip()
     _finish(fig, path)
     return True
 
@@ -416,13 +537,12 @@ def fig_errors(res, sc, styles, path):
     fig, axes = _grid(len(rows), len(fams),
                       f"{sc}: error against the reference vs time at Δt = {info['dt_s']:g} s "
                       f"(log scales; zero drawn at {LOG_FLOOR:g}; × marks a divergence)", log=True,
-                      layout="time-log", legend_rows=_legend_rows(fams))
-    _time_panels(axes, res, sc, fams, styles, rows, log=True)
-    _family_legends(axes[-1], fams, styles)
+                      layout="time-log", legend=legend_entries(fams, styles, markers=False))
+    same = _time_panels(axes, res, sc, fams, styles, rows, log=True)
     left = [LABELS[q] for q in QUANTITIES if q not in nonzero]
     NOTES[(sc, "errors")] = (("Not drawn: " + ", ".join(left)
                               + " (does not move, or zero error for every variant)."
-                              if left else "") + exact_note).strip()
+                              if left else "") + exact_note + _same_note(same)).strip()
     _finish(fig, path)
     return True
 
@@ -481,9 +601,9 @@ def fig_conservation(res, sc, styles, path):
     fig, axes = _grid(len(rows), len(fams),
                       f"{sc}: relative drift of conserved quantities at Δt = {info['dt_s']:g} s "
                       f"(log scales; zero drawn at {LOG_FLOOR:g}; × marks a divergence)", log=True,
-                      layout="time-log", legend_rows=_legend_rows(fams))
-    _time_panels(axes, res, sc, fams, styles, rows, log=True)
-    _family_legends(axes[-1], fams, styles)
+                      layout="time-log", legend=legend_entries(fams, styles, markers=False))
+    same = _time_panels(axes, res, sc, fams, styles, rows, log=True)
+    NOTES[(sc, "conservation")] = (NOTES[(sc, "conservation")] + _same_note(same)).strip()
     _finish(fig, path)
     return True
 
@@ -512,7 +632,7 @@ def _ladder_cell(ax, res, sc, q, vs, styles, mode):
     """One family's variants on one quantity; returns the Δt drawn and the finite errors drawn."""
     col = f"{COLUMN_STEM[q]}_err_final" if mode == "free_running" else f"{COLUMN_STEM[q]}_local_err"
     recs = {r["engine"]: r for r in res.records(sc, quantity=q, mode=mode)}
-    dts, vals = [], []
+    dts, vals, drawn = [], [], []
     for v in vs:
         rows = sorted([r for r in res.rows_for(sc, v) if r["in_ladder"]], key=lambda r: -r["dt"])
         dt = np.array([r["dt"] for r in rows])
@@ -522,8 +642,10 @@ def _ladder_cell(ax, res, sc, q, vs, styles, mode):
         if not ok.any():
             continue
         st = styles[v]
-        _line(ax, dt[ok], _positive(e[ok]), color=st["color"], ls=st["ls"], lw=1.0, marker=st["marker"], ms=4,
-                  mfc="white")
+        halo = _covered(drawn, (v, dt[ok], _positive(e[ok])), log=True)
+        _line(ax, dt[ok], _positive(e[ok]), color=st["color"], ls=st["ls"], lw=3.2 if halo else 1.0,
+              alpha=0.45 if halo else 1.0, marker=st["marker"], ms=7 if halo else 4, mfc="white")
+        drawn.append((v, dt[ok], _positive(e[ok])))
         rec = recs.get(v)
         if rec is not None and rec["order"] is not None:
             fitted = np.array(rec["fitted"], dtype=bool)
@@ -534,7 +656,72 @@ def _ladder_cell(ax, res, sc, q, vs, styles, mode):
     if recs:
         r0 = next(iter(recs.values()))
         _line(ax, r0["dt_s"], _positive(r0["floors"]), color="0.5", lw=4, alpha=0.22, solid_capstyle="butt")
-    return dts, vals
+    return dts, vals, drawn
+
+
+#: Two curves coincide when they are drawn within this much of each other at every point: a fiftieth of
+#: a decade on log axes (4.7 %), a two-hundredth of the panel's span on linear ones — less than a line's
+#: width in a panel of 1.5–2 in spanning a few decades.
+COINCIDE_LOG = 0.02
+COINCIDE_LIN = 0.005
+
+
+def coinciding(curves, log, span=None) -> list:
+    """Pairs (a, b) of ``curves`` = [(name, x, y)] drawn over each other (the same x, y within
+    COINCIDE_LOG decades or COINCIDE_LIN of ``span``); each later curve paired with the first it covers."""
+    out = []
+    for k, curve in enumerate(curves):
+        a = _covered(curves[:k], curve, log, span)
+        if a is not None:
+            out.append((a, curve[0]))
+    return out
+
+
+def _covered(drawn, curve, log, span=None):
+    """The name of the first of ``drawn`` that ``curve`` (name, x, y) would be drawn over, or None."""
+    xb, yb = (np.asarray(z, dtype=float) for z in curve[1:])
+    for a, xa, ya in drawn:
+        xa, ya = np.asarray(xa, dtype=float), np.asarray(ya, dtype=float)
+        if xa.shape != xb.shape or not xa.size:
+            continue
+        ok = np.isfinite(ya) & np.isfinite(yb) & np.isfinite(xa) & np.isfinite(xb)
+        if not ok.any():
+            continue
+        if log:
+            near = lambda u, w: float(np.abs(np.log10(np.maximum(u, LOG_FLOOR))     # noqa: E731
+                                             - np.log10(np.maximum(w, LOG_FLOOR))).max()) <= COINCIDE_LOG
+            hit = near(xa[ok], xb[ok]) and near(ya[ok], yb[ok])
+        else:
+            hit = (np.allclose(xa[ok], xb[ok], rtol=1e-9, atol=0)
+                   and float(np.abs(ya[ok] - yb[ok]).max()) <= COINCIDE_LIN * (span or 1.0))
+        if hit:
+            return a
+    return None
+
+
+def _same_note(pairs) -> str:
+    """The caption's sentence on coinciding curves ``pairs`` [(a, b, panel row)]: groups of variants drawn
+    over each other, with the rows where they are (each later one drawn wide and pale under the first)."""
+    rows_of = {}
+    for row in dict.fromkeys(r for _, _, r in pairs):
+        group_of = {}
+        for a, b, r in pairs:
+            if r != row:
+                continue
+            g = group_of.get(a) or group_of.get(b) or [a]
+            for v in (a, b):
+                if v not in g:
+                    g.append(v)
+                group_of[v] = g
+        for g in {id(g): g for g in group_of.values()}.values():
+            rows_of.setdefault(tuple(g), []).append(row)
+    if not rows_of:
+        return ""
+    groups = [" = ".join(g) + f" ({', '.join(rows)})" for g, rows in rows_of.items()]
+    shown = groups[:10]
+    return (" Curves drawn over each other (the later wide and pale under the first, so that both are "
+            "seen): " + "; ".join(shown) + (f"; and {len(groups) - 10} more" if len(groups) > 10 else "")
+            + ".")
 
 
 def fig_ladder(res, sc, styles, path, mode):
@@ -557,22 +744,28 @@ def fig_ladder(res, sc, styles, path, mode):
         NOTES[(sc, kind)] = exact_note.strip()
         return False
     what = "final error" if mode == "free_running" else "one-step (local) error"
+    orders = {v: "p " + " / ".join(order_text(next((r for r in res.records(sc, v, q, mode=mode)), None))
+                                   for q in qs)
+              for v in vs_all}
     fig, axes = _grid(len(qs), len(fams),
                       f"{sc}: {what} vs Δt (filled: points of the fitted order; grey band: "
                       "round-off floor; triangles: slopes 1, 2, 4)", log=True,
-                      layout="ladder", legend_rows=_legend_rows(fams))
+                      layout="ladder", legend=legend_entries(fams, styles, orders))
+    same = []
     for i, q in enumerate(qs):
         vals = []
         for j, vs in enumerate(fams.values()):
-            vals += _ladder_cell(axes[i, j], res, sc, q, vs, styles, mode)[1]
+            _, got, drawn = _ladder_cell(axes[i, j], res, sc, q, vs, styles, mode)
+            vals += got
+            same += [(a, b, LABELS[q]) for a, b in coinciding(drawn, log=True)]
             if axes[i, j].has_data():
                 axes[i, j].autoscale_view()
         lim = _robust_limits(vals, log=True)
         _same_limits(axes[i], "y", None if lim is None else (lim[0] / 10, lim[1]))
         for j, ax in enumerate(axes[i]):
             if lim is not None:
-                _slope_triangles(ax, ladder, labels=j == 0)
-        axes[i, 0].set_ylabel(f"{LABELS[q]} ({UNITS[q]})", fontsize=8)
+                _slope_triangles(ax, ladder, labels=j % _blocks(len(fams))[1] == 0)
+        _ylabel(axes, i, f"{LABELS[q]} ({UNITS[q]})")
     _same_limits(axes.flat, "x")
     for ax in axes.flat:   # every row: the same Δt grid lines; labels on the bottom row only
         ax.xaxis.set_major_locator(FixedLocator(ladder))
@@ -580,15 +773,11 @@ def fig_ladder(res, sc, styles, path, mode):
     for ax in axes[-1]:
         ax.tick_params(axis="x", labelsize=7)
         ax.set_xlabel("time step Δt (s)", fontsize=8)
-    orders = {v: "p " + " / ".join(order_text(next((r for r in res.records(sc, v, q, mode=mode)), None))
-                                   for q in qs)
-              for v in vs_all}
-    _family_legends(axes[-1], fams, styles, orders, markers=True)
     for ax, fam in zip(axes[0], fams):
         _title(ax, fam)
     left = [LABELS[q] for q in QUANTITIES if q not in moving]
     NOTES[(sc, kind)] = (("Not drawn: " + ", ".join(left) + " (does not move). ") if left else "") + \
-        "Orders in the legends: " + " / ".join(LABELS[q] for q in qs) + "." + exact_note
+        "Orders in the legends: " + " / ".join(LABELS[q] for q in qs) + "." + exact_note + _same_note(same)
     _finish(fig, path)
     return True
 
@@ -604,13 +793,20 @@ def fig_work(res, sc, styles, path):
         NOTES[(sc, "work")] = "nothing moves: neither position nor orientation has an error to weigh"
         return False
     width = 13.0 if len(qs) > 1 else 8.0
-    fig, axes = _panels("work", 1, len(qs), (width, 4.6), log=True, outer=False)
+    fig, axes = _panels("work", 1, len(qs), (width, 4.0), log=True, outer=False)
+    drawn_vs = [v for v in res.variants
+                if any(r["in_ladder"] and r["status"] == "ok" for r in res.rows_for(sc, v))]
+    leg_h = _figure_legend(fig, width, legend_entries(families(drawn_vs), styles)) if drawn_vs else 0.0
+    axes_h = 3.6
+    h = 0.75 + axes_h + 0.6 + leg_h + 0.15
+    fig.set_size_inches(width, h)
     fig.suptitle(f"{sc}: work-precision — final error vs wall time of each run of the ladder", fontsize=11,
                  x=0.01, ha="left")
-    handles = {}
+    same = []
     for ax, q in zip(axes[0], qs):
         col = f"{COLUMN_STEM[q]}_err_final"
-        for v in res.variants:
+        drawn = []
+        for v in drawn_vs:
             rows = sorted([r for r in res.rows_for(sc, v) if r["in_ladder"] and r["status"] == "ok"],
                           key=lambda r: -r["dt"])
             w = np.array([r["wall_s"] for r in rows], dtype=float)
@@ -618,24 +814,22 @@ def fig_work(res, sc, styles, path):
             ok = np.isfinite(w) & np.isfinite(e) & (w > 0)
             if not ok.any():
                 continue
-            fam = v.split(":", 1)[0]
-            color = matplotlib.colormaps["tab10"](list(families(res.variants)).index(fam) % 10)
-            mk = styles[v]["marker"]
-            _line(ax, w[ok], _positive(e[ok]), color=color, marker=mk, ms=4, lw=0.9, alpha=0.85)
-            handles[v] = {"color": color, "marker": mk, "ls": "-"}
+            st = styles[v]
+            halo = _covered(drawn, (v, w[ok], _positive(e[ok])), log=True)
+            if halo:
+                same.append((halo, v, LABELS[q]))
+            _line(ax, w[ok], _positive(e[ok]), color=st["color"], ls=st["ls"], marker=st["marker"],
+                  ms=7 if halo else 4, lw=3.2 if halo else 1.0, alpha=0.45 if halo else 0.9)
+            drawn.append((v, w[ok], _positive(e[ok])))
         if ax.has_data():
             ax.autoscale_view()
         _title(ax, LABELS[q])
         ax.set_xlabel("wall time of the run (s)", fontsize=8)
         ax.set_ylabel(f"final {LABELS[q]} error ({UNITS[q]})", fontsize=8)
-    fig.subplots_adjust(left=0.7 / width, right=1.0 - 2.3 / width, top=0.88, bottom=0.13, wspace=0.25)
-    if handles:   # at the right, centred on the height
-        pos = axes[0, -1].get_position()
-        _legend(axes[0, -1], pos.width * width + 0.15,
-                (pos.height * 4.6 + 0.3 + _LEGEND_LINE_IN * len(handles)) / 2, "colour: engine family",
-                list(handles.items()), width_in=2.1)
+    fig.subplots_adjust(left=0.75 / width, right=1.0 - 0.2 / width, top=1.0 - 0.75 / h,
+                        bottom=(0.6 + leg_h + 0.15) / h, wspace=0.22)
     _finish(fig, path)
-    NOTES[(sc, "work")] = ""
+    NOTES[(sc, "work")] = _same_note(same).strip()
     return True
 
 

@@ -137,8 +137,8 @@ def is_owned_stale(name: str, prefix: str, kind: str | None = None) -> bool:
 
 
 _TEMP = re.compile(r"^\.(?P<base>.+)\.[A-Za-z0-9_]{8}(\.npz)?$")
-_OUTPUT = re.compile(r"^(index\.html|results\.csv|summary\.json|\.rbcheck-results\.json|scenario-.+\.html"
-                     r"|.+\.png|.+\.npz|.+\.csv|.+\.toml)$")
+_OUTPUT = re.compile(r"^(index\.html|ranking\.html|results\.csv|summary\.json|\.rbcheck-results\.json"
+                     r"|scenario-.+\.html|.+\.png|.+\.npz|.+\.csv|.+\.toml)$")
 
 
 def is_temp_leftover(name: str) -> bool:

@@ -69,7 +69,8 @@ stiffness = 2500.0
 rest_length = 0.0
 """
 VARIANTS = ["reference:course", "reference:rk4", "reference:explicit_euler", "mujoco:euler"]
-PAGES = ["index.html", "scenario-spin_only.html", "scenario-drop_once.html", "scenario-stiff_spring.html"]
+PAGES = ["index.html", "ranking.html", "scenario-spin_only.html", "scenario-drop_once.html",
+         "scenario-stiff_spring.html"]
 
 
 def _browser_sweep(folder):
@@ -245,7 +246,7 @@ def test_report_rendering_prints_progress_lines_while_drawing(results, tmp_path,
     assert [line.split(" (")[0] for line in err[:-1]] == [f"rbcheck report: figures {i}/18"
                                                           for i in range(1, 19)]
     assert "left" in err[0] and err[-2].startswith("rbcheck report: figures 18/18 (100%) in ")
-    assert err[-1].startswith("rbcheck report: 4 pages and ") and "figures written in" in err[-1]
+    assert err[-1].startswith("rbcheck report: 5 pages and ") and "figures written in" in err[-1]
 
 
 def test_a_diverged_run_does_not_flatten_the_others(results, tmp_path, monkeypatch):
