@@ -197,3 +197,21 @@ def test_the_fuzz_passes_a_correct_float32_scheme_and_catches_a_planted_bug(monk
     assert judged.tally[ok]["conservation"][0] >= 1   # energy and momentum were judged, with float32 ε
     assert by[bad], "float32 gyroscopic sign flip not caught by the fuzz"
     assert by[as64], "float32 round-off judged with float64 allowances passed"
+
+
+@pytest.mark.slow
+def test_near_the_separatrix_float32_round_off_is_no_claim_and_a_wrong_step_fails(tmp_path, monkeypatch):
+    """tumbling_box sits 2e-5 from the intermediate-axis separatrix: float32 rounding moves the body to a
+    neighbouring motion, so a correct float32 RK4's errors do not shrink on any ladder. Its steps are the
+    scenario's equations (one-step check), so no claim is made; the same RK4 with its gyroscopic sign flipped
+    is not excused."""
+    ok = register(monkeypatch, Float32Adapter("sep_ok", "reference:rk4"))
+    m = BY_NAME["gyroscopic_sign_flipped_rk4"]
+    bad = register(monkeypatch, Float32Adapter("sep_bad", m.variant, m))
+    summary = run_sweep([load_scenario("tumbling_box")], [ok, bad], tmp_path / "out", jobs=1, use_cache=False,
+                        progress=False, second_reference=False)
+    recs = {(r["engine"], r["quantity"]): r for r in summary["convergence"]}
+    rot = [recs[(ok, q)] for q in ("orientation", "angular_velocity")]
+    assert all(r["matches_expectation"] is not False for r in rot), [r["assessment"] for r in rot]
+    assert any("round-off grown by the motion" in r["assessment"] for r in rot)
+    assert any(r["matches_expectation"] is False for (v, _), r in recs.items() if v == bad)
