@@ -24,7 +24,7 @@ from typing import NamedTuple
 import numpy as np
 
 from cross_checks.analysis import metrics as M
-from cross_checks.analysis.expectations import machine_epsilon, traits
+from cross_checks.analysis.expectations import machine_epsilon, precision, traits
 from cross_checks.core import tolerances as tol
 from cross_checks.core.files import json_default, save_npz_atomic
 from cross_checks.core.quantities import (
@@ -413,7 +413,8 @@ def _step_defect_columns(row, scenario, y, dt_s) -> None:
     A ratio above 1 says the run's equations are not the scenario's (the judge then grants no
     pre-asymptotic excuse); every engine, engine files included, has it."""
     from cross_checks.analysis.flow import run_local_defect
-    u = 0.5 * machine_epsilon(row["engine"])   # the precision's unit roundoff × the step's rounding factor
+    # the precision's unit roundoff × the step's declared rounding factor
+    u = tol.UNIT_ROUNDOFF[precision(row["engine"])] * float(traits(row["engine"]).rounding_factor)
     ratio, quantity, t_s = run_local_defect(scenario, y, dt_s, max_rows=tol.STEP_DEFECT_ROWS, unit_roundoff=u,
                                             velocity_from_positions=traits(row["engine"]).velocity_from_positions)
     row.update(step_defect_ratio=ratio, step_defect_quantity=quantity, step_defect_t_s=t_s)

@@ -63,7 +63,7 @@ def file_tree(folder: Path) -> dict:
 #: and process), left out of the test suite's own sweeps so that it stays within minutes on 2 cores. Their
 #: rows in the baseline are gated by CI's full sweep (.github/workflows/crosscheck.yml, `--require` each)
 #: and their conventions and verdicts by their adapter tests
-#: (tests/cross_checks/engines/test_<engine>_engine.py).
+#: (each engine's test_ENGINE_engine.py in tests/cross_checks/engines).
 COMPILED_ENGINES = ("jaxsim", "brax", "mjx", "genesis")
 
 

@@ -171,8 +171,9 @@ def _momentum_rounding(variant: str, n_steps: int) -> float:
     """How far |L|² may move in n steps of a step that keeps |L| but rounds: 20 N ε — each step rounds ω by up
     to 10 ulp in one direction (PhysX TGS's √I round trip: 3–10 ulp measured, docs/engine_conventions.md), and
     |L|² doubles a relative error."""
-    from cross_checks.analysis.expectations import machine_epsilon
-    return 20.0 * n_steps * machine_epsilon(variant)
+    from cross_checks.analysis.expectations import precision
+    from cross_checks.core import tolerances as tol
+    return 20.0 * n_steps * tol.MACHINE_EPSILON[precision(variant)]
 
 
 @pytest.mark.parametrize("variant", FIRST_ORDER_WITH_GYRO)
