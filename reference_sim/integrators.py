@@ -451,7 +451,7 @@ def _engine_gyro_step(problem, y, dt, gyro_update):
 
 @_one_state_too
 def step_implicit_gyro_body(problem, y, dt):
-    """Bullet's implicit gyroscopic step in body axes (:func:`_gyro_implicit_body`) in the course-type step."""
+    """Bullet's implicit gyroscopic step in body axes (:func:`_gyro_implicit_body`), course-type step."""
     return _engine_gyro_step(problem, y, dt, _gyro_implicit_body)
 
 
@@ -588,11 +588,11 @@ def _free_moser_veselov(p, q, R, w, h):
 
 
 def _strang(problem, y, dt, free_map):
-    """A free-rigid-body map composed with half kicks of the forces, torques and decay (Strang)::
+    """A free-rigid-body map composed with half kicks of the forces, torques and decay (Strang):
 
-        kick (Δt/2, implicit):  v½ = v₀ + Δt/2 (f(x₀, R₀)/m − λ_v v½),   ω½ = ω₀ + Δt/2 (I_W⁻¹ τ(x₀, R₀) − k_ω ω½)
-        drift (Δt):             x₁ = x₀ + Δt v½,   (q₁, ω′) = free map over Δt from (q₀, ω½)
-        kick (Δt/2, explicit):  v₁ = v½ + Δt/2 (f(x₁, R₁)/m − λ_v v½),   ω₁ = ω′ + Δt/2 (I_W⁻¹ τ(x₁, R₁) − k_ω ω′)
+    kick (Δt/2, implicit): v½ = v₀ + Δt/2 (f(x₀, R₀)/m − λ_v v½), ω½ = ω₀ + Δt/2 (I_W⁻¹τ(x₀, R₀) − k_ω ω½)
+    drift (Δt):            x₁ = x₀ + Δt v½,   (q₁, ω′) = the free map over Δt from (q₀, ω½)
+    kick (Δt/2, explicit): v₁ = v½ + Δt/2 (f(x₁, R₁)/m − λ_v v½), ω₁ = ω′ + Δt/2 (I_W⁻¹τ(x₁, R₁) − k_ω ω′)
 
     ``f`` the force without the drag, ``λ_v = c/m + k_v``: the velocities enter the forces linearly (drag,
     decay), so the implicit half kick is solved in closed form. The kicks are the flow, to first order, of
@@ -620,7 +620,8 @@ def _strang(problem, y, dt, free_map):
 
 @_one_state_too
 def step_buss_augmented(problem, y, dt):
-    """Buss's augmented second-order rotation map (:func:`_free_buss`) in the Strang step (:func:`_strang`)."""
+    """Buss's augmented second-order rotation map (:func:`_free_buss`) in the Strang step (:func:`_strang`).
+    """
     return _strang(problem, y, dt, _free_buss)
 
 
@@ -683,7 +684,8 @@ VARIANTS = {
                                   "iteration (Bullet _World), exp-map attitude"),
     "explicit_gyro_clamped": Scheme(step_explicit_gyro_clamped, 1,
                                     "symplectic Euler, explicit gyroscopic torque clamped to "
-                                    f"{BULLET_MAX_GYROSCOPIC_TORQUE:g} N m (Bullet explicit), exp-map attitude"),
+                                    f"{BULLET_MAX_GYROSCOPIC_TORQUE:g} N m (Bullet explicit), "
+                                    "exp-map attitude"),
     "jolt_gyro": Scheme(step_jolt_gyro, 1,
                         "symplectic Euler, explicit body-axes momentum step rescaled to |L| "
                         "(Jolt ApplyGyroscopicForceInternal), exp-map attitude"),

@@ -114,8 +114,8 @@ def run_members(members: Members, variant, dt_s, n_steps, y0) -> list:
     # compiled where the variant has a kernel (compiled.VARIANT_CODES); a variant without one steps by its
     # definition, all members at once
     params = (compiled.parameters(members, h)
-              if isinstance(variant, str) and variant in compiled.VARIANT_CODES and compiled.kernel() is not None
-              else None)
+              if isinstance(variant, str) and variant in compiled.VARIANT_CODES
+              and compiled.kernel() is not None else None)
     with np.errstate(all="ignore"):
         while True:
             todo = np.flatnonzero((pos < n) & ~failed)
