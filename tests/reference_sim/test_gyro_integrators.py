@@ -9,7 +9,7 @@ from reference_sim.body import RigidBody
 from reference_sim.forces import ForceModel
 from reference_sim.ground_truth import ground_truth
 from reference_sim.integrators import BULLET_MAX_GYROSCOPIC_TORQUE, VARIANTS, get_step
-from reference_sim.quaternion import geodesic_angle, matrix_from_quat, quat_normalize
+from reference_sim.quaternion import geodesic_angle, matrix_from_quat, quat_conj, quat_mul, quat_normalize
 from reference_sim.simulate import run_members, simulate
 from reference_sim.state import Problem, State
 from tests.helpers.oracle import step_readable
@@ -138,6 +138,30 @@ def test_dlm_is_symplectic_its_energy_error_stays_bounded():
         err = np.abs(E / E[0] - 1.0)
         first, last = np.max(err[:800]), np.max(err[-800:])
         assert last < 1.2 * first and first < (dt / 2e-2) ** 2 * 1e-3, (dt, first, last)
+
+
+def test_moser_veselov_is_the_midpoint_step_of_a_rescaled_step():
+    # Δt Π = 2/(1+|f|²)(I f + f × I f) is the midpoint equation Δt′ Π = 2 (I f + f × I f) of Δt′ = Δt (1+|f|²)
+    problem, h = tumbling(), 0.05
+    y0 = problem.initial_packed()
+    y_mv = get_step("moser_veselov")(problem, y0, h)
+    rel = quat_mul(quat_conj(y0[6:10]), y_mv[6:10])      # q₀⁻¹ q₁ = [1, f]/|·|: f in body axes
+    f = rel[1:] / rel[0]
+    y_mid = get_step("lp_midpoint")(problem, y0, h * (1.0 + f @ f))
+    np.testing.assert_allclose(y_mid, y_mv, rtol=0, atol=GYRO_ONE_STEP)
+
+
+def test_on_a_principal_axis_spin_the_cayley_maps_turn_by_their_own_angle():
+    # exp-map attitudes (Buss, DLM) turn by |ω|Δt; the midpoint rule by 2 atan(|ω|Δt/2); Moser–Veselov by
+    # asin(|ω|Δt)
+    w, h = 2.0, 0.05
+    problem = Problem(RigidBody(1.0, [1.0, 2.0, 3.0]), ForceModel(),
+                      State(np.zeros(3), np.zeros(3), np.array([1.0, 0, 0, 0]), np.array([0.0, 0.0, w])))
+    for variant, angle in (("buss_augmented", w * h), ("dlm_splitting", w * h),
+                           ("lp_midpoint", 2 * np.arctan(w * h / 2)), ("moser_veselov", np.arcsin(w * h))):
+        y1 = get_step(variant)(problem, problem.initial_packed(), h)
+        assert abs(2 * np.arctan2(y1[9], y1[6]) - angle) < GYRO_ONE_STEP, variant
+        assert np.max(np.abs(y1[10:13] - [0.0, 0.0, w])) <= 1e-15, variant   # ω kept: one rounding
 
 
 LADDER = {1: [8e-3, 4e-3, 2e-3, 1e-3], 2: [2e-2, 1e-2, 5e-3, 2.5e-3]}
