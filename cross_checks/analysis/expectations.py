@@ -369,7 +369,7 @@ def _drift_parts(scenario, tr: Traits, quantity: str, phys):
             amp = float(phys.amplification.get(quantity, 1.0)) * r.world_rotation_amplitude
             parts.append(("the rotation (ω_W turning with the body)", r.world_rotation ** 2 + r.decay_w ** 2,
                           signs, amp, True))
-        elif kind == "body":
+        elif kind in ("body", "momentum_kept"):
             parts.append(("the rotation (the body-frame ω: the polhode)",
                           r.body_rotation ** 2 + r.decay_w ** 2, signs, 1.0, False))
         else:

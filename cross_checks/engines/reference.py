@@ -28,10 +28,9 @@ TRAITS = {
     "implicit_gyro_world": B.SYMPLECTIC_EULER_IMPLICIT_GYRO,
     # Bullet's explicit one: expmap_gyro wherever its clamp does not act (nowhere on the catalog)
     "explicit_gyro_clamped": B.SYMPLECTIC_EULER_EXPLICIT_GYRO,
-    # Jolt's: |L| kept exactly, the energy drifts by O(Δt²) per step towards L²/2I₂ (up below the separatrix
-    # of a spin about the major axis, down for the minor axis): energy and momentum drift independently, which
-    # moves the body to a neighbouring motion, either way — the whole-state model with both signs
-    "jolt_gyro": B.Traits(rotation_drift="whole_state", rotation_sign=None),
+    # Jolt's: |L| kept exactly, the energy drifts by O(Δt²) per step towards L²/2I₂ (up from a spin about the
+    # major axis, down from one about the minor axis): its own kind, either sign
+    "jolt_gyro": B.Traits(rotation_drift="momentum_kept", rotation_sign=None),
     # second order, symmetric (Buss's map is not, but is second order): no amplitude rule applies
     "buss_augmented": B.HIGHER_ORDER, "dlm_splitting": B.HIGHER_ORDER, "lp_midpoint": B.HIGHER_ORDER,
     "moser_veselov": B.HIGHER_ORDER,
