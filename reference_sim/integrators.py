@@ -359,9 +359,19 @@ def _skew(a):
 
 
 def _solve3(M, b):
-    """``M⁻¹ b`` for (..., 3, 3) matrices and (..., 3) vectors (LAPACK, matrix by matrix)."""
+    """``M⁻¹ b`` for (..., 3, 3) matrices and (..., 3) vectors (LAPACK, matrix by matrix); NaN for a row whose
+    matrix is singular (a blown-up state), the others solved alone, so that a bad row spoils no other."""
     M, b = np.broadcast_arrays(M, b[..., None])
-    return np.linalg.solve(M, b)[..., 0]
+    try:
+        return np.linalg.solve(M, b)[..., 0]
+    except np.linalg.LinAlgError:
+        out = np.full(b.shape[:-1], np.nan)
+        for idx in np.ndindex(M.shape[:-2]):
+            try:
+                out[idx] = np.linalg.solve(M[idx], b[idx])[..., 0]
+            except np.linalg.LinAlgError:
+                pass
+        return out
 
 
 def _dot3(a, b):
@@ -524,7 +534,8 @@ def _free_dlm(p, q, R, w, h):
 
 def _newton3(G, x0, what, dt):
     """Newton's method on ``G(x) -> (residual, Jacobian)`` for rows (..., 3), each row stopping when its
-    update is below IMPLICIT_TOL (relative to 1 + |x|), so that its iterations are its own."""
+    update is below IMPLICIT_TOL (relative to 1 + |x|), so that its iterations are its own; a row that turns
+    non-finite stops there (its step is then the non-finite state a divergence check sees)."""
     x = x0
     running = np.ones(x.shape[:-1] + (1,), dtype=bool)
     for _ in range(MAX_ITER):
@@ -532,7 +543,7 @@ def _newton3(G, x0, what, dt):
         x_new = x - _solve3(J, r)
         d = _change(x_new, x)
         x = np.where(running, x_new, x)
-        running &= ~(d <= IMPLICIT_TOL)
+        running &= ~(d <= IMPLICIT_TOL) & np.isfinite(d)   # a non-finite row (a blown-up state) stops as NaN
         if not running.any():
             return x
     raise ImplicitSolveError(f"{what}: Newton did not converge in {MAX_ITER} iterations (dt={dt})")
