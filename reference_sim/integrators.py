@@ -48,10 +48,10 @@ import numpy as np
 from reference_sim.forces import Members
 from reference_sim.quaternion import matrix_from_quat, quat_mul
 from reference_sim.state import STATE_SIZE, Q, V, W, X
-from reference_sim.vec import floating, mat_t_vec3
+from reference_sim.vec import cross3, floating, mat_t_vec3, matvec3
 
 __all__ = ["VARIANTS", "Scheme", "get_step", "rhs", "members", "IMPLICIT_TOL", "MAX_ITER",
-           "ImplicitSolveError", "exp_map_times", "omega_times"]
+           "ImplicitSolveError", "exp_map_times", "omega_times", "BULLET_MAX_GYROSCOPIC_TORQUE"]
 
 #: Convergence tolerance of the implicit solves (implicit Euler's iteration and leapfrog's implicit half
 #: kick): max-norm of the update, relative to 1 + |y|. Two orders above double round-off, so the
@@ -332,6 +332,338 @@ def step_leapfrog(problem, y, dt):
     return z
 
 
+# --- the gyroscopic steps of shipping engines (first order, course-type) -----------------------------
+#
+# Each is a course-type step (velocities from the start-of-step forces, decay e^{−kΔt} after the velocity
+# update, x and q from the new velocities, q ← exp(Δt ω₁) q renormalised) whose angular-velocity update is
+# ``ω₁ = γ_ω (G(ω₀) + Δt I_W⁻¹ τ)``: the engine's gyroscopic update G of the start-of-step ω, plus the
+# torque's impulse (the engines add the applied torque outside the gyroscopic update).
+
+#: Bullet's default clamp of the explicit gyroscopic torque, N m (btContactSolverInfo::m_maxGyroscopicForce
+#: = 100, "only used for the 'explicit' version of gyroscopic force"). On the catalog |ω × I ω| ≤ 14 N m:
+#: the clamp never acts there.
+BULLET_MAX_GYROSCOPIC_TORQUE = 100.0
+
+
+def _hm(h):
+    """A step (scalar, or (N, 1) per row) shaped to multiply (N, 3, 3) matrices."""
+    return h[..., None] if np.ndim(h) else h
+
+
+def _skew(a):
+    """``[a]×`` (..., 3, 3): ``[a]× b = a × b``."""
+    z = 0.0 * a[..., 0]
+    return np.stack([np.stack([z, -a[..., 2], a[..., 1]], axis=-1),
+                     np.stack([a[..., 2], z, -a[..., 0]], axis=-1),
+                     np.stack([-a[..., 1], a[..., 0], z], axis=-1)], axis=-2)
+
+
+def _solve3(M, b):
+    """``M⁻¹ b`` for (..., 3, 3) matrices and (..., 3) vectors (LAPACK, matrix by matrix); NaN for a row whose
+    matrix is singular (a blown-up state), the others solved alone, so that a bad row spoils no other."""
+    M, b = np.broadcast_arrays(M, b[..., None])
+    try:
+        return np.linalg.solve(M, b)[..., 0]
+    except np.linalg.LinAlgError:
+        out = np.full(b.shape[:-1], np.nan)
+        for idx in np.ndindex(M.shape[:-2]):
+            try:
+                out[idx] = np.linalg.solve(M[idx], b[idx])[..., 0]
+            except np.linalg.LinAlgError:
+                pass
+        return out
+
+
+def _dot3(a, b):
+    """``a · b`` (..., 1), summed left to right."""
+    return a[..., 0:1] * b[..., 0:1] + a[..., 1:2] * b[..., 1:2] + a[..., 2:3] * b[..., 2:3]
+
+
+def _world_inertia(p, R):
+    return R @ p.inertia_B @ np.swapaxes(R, -1, -2)
+
+
+def _world_inv_inertia_times(p, R, a):
+    """``I_W⁻¹ a = R I_B⁻¹ Rᵀ a``."""
+    return matvec3(R, matvec3(p.inertia_inv_B, mat_t_vec3(R, a)))
+
+
+def _gyro_implicit_body(p, R, w, h):
+    """Bullet ``btRigidBody::computeGyroscopicImpulseImplicit_Body`` (Catto, GDC 2015, "Numerical Methods",
+    gyroscopic motion): one Newton iteration, from ω_B, on the implicit body-axes step
+    ``I_B (ω′ − ω_B) + Δt ω′ × I_B ω′ = 0``::
+
+        f = Δt ω_B × I_B ω_B,   J = I_B + Δt ([ω_B]× I_B − [I_B ω_B]×),   ω′ = ω_B − J⁻¹ f,   G = R ω′
+    """
+    wb = mat_t_vec3(R, w)
+    Iw = matvec3(p.inertia_B, wb)
+    J = p.inertia_B + _hm(h) * (_skew(wb) @ p.inertia_B - _skew(Iw))
+    return matvec3(R, wb - _solve3(J, h * cross3(wb, Iw)))
+
+
+def _gyro_implicit_world(p, R, w, h):
+    """Bullet ``btRigidBody::computeGyroscopicImpulseImplicit_World`` (with ``evalEulerEqn`` and
+    ``evalEulerEqnDeriv``): one Newton iteration, from ω, on ``I_W (ω′ − ω) + Δt ω′ × I_W ω′ = 0`` with the
+    start-of-step world inertia ``I_W = R I_B Rᵀ`` held::
+
+        f = Δt ω × I_W ω,   J = I_W + Δt ([ω]× I_W − [I_W ω]×),   G = ω − J⁻¹ f
+
+    With I_W held over the step this is the body-axes step seen in world axes (``[Rω]× = R [ω]× Rᵀ``): the
+    two equal each other up to round-off (tests/reference_sim/test_gyro_integrators.py)."""
+    I_W = _world_inertia(p, R)
+    Iw = matvec3(I_W, w)
+    J = I_W + _hm(h) * (_skew(w) @ I_W - _skew(Iw))
+    return w - _solve3(J, h * cross3(w, Iw))
+
+
+def _gyro_explicit_clamped(p, R, w, h):
+    """Bullet ``btRigidBody::computeGyroscopicForceExplicit(maxGyroscopicForce)`` as
+    btSequentialImpulseConstraintSolver applies it: ``g = ω × I_W ω``, scaled to the length
+    ``BULLET_MAX_GYROSCOPIC_TORQUE`` when longer, then ``G = ω − Δt I_W⁻¹ g``."""
+    g = cross3(w, matvec3(_world_inertia(p, R), w))
+    l2 = _dot3(g, g)
+    m = BULLET_MAX_GYROSCOPIC_TORQUE
+    with np.errstate(invalid="ignore", divide="ignore"):
+        g = np.where(l2 > m * m, g * (1.0 / np.sqrt(l2) * m), g)
+    return w - h * _world_inv_inertia_times(p, R, g)
+
+
+def _gyro_momentum_clamped(p, R, w, h):
+    """Jolt ``MotionProperties::ApplyGyroscopicForceInternal`` (Jolt/Physics/Body/MotionProperties.inl):
+    an explicit Euler step of the body-axes momentum ``L_B = I_B ω_B``, rescaled to its old length::
+
+        L′ = L_B − Δt ω_B × L_B,   L″ = L′ |L_B| / |L′|  (0 if L′ = 0),   G = R I_B⁻¹ L″
+
+    (Jolt works in the principal frame with the diagonal inertia; the same with a full I_B.)"""
+    wb = mat_t_vec3(R, w)
+    Lb = matvec3(p.inertia_B, wb)
+    Ln = Lb - h * cross3(wb, Lb)
+    n2 = _dot3(Ln, Ln)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        Ln = np.where(n2 > 0.0, Ln * np.sqrt(_dot3(Lb, Lb) / n2), 0.0)
+    return matvec3(R, matvec3(p.inertia_inv_B, Ln))
+
+
+def _engine_gyro_step(problem, y, dt, gyro_update):
+    """The course-type step with an engine's gyroscopic update (section comment above)."""
+    p = members(problem)
+    h = _dt(dt)
+    x, v, q, w = y[..., X], y[..., V], y[..., Q], y[..., W]
+    R = matrix_from_quat(q)
+    f, tau = p.force_torque(x, v, R)
+    g_v, g_w = p.decay_factors(dt)
+    v1 = g_v * (v + h * (f / p.mass_kg))
+    x1 = x + h * v1
+    w1 = g_w * (gyro_update(p, R, w, h) + h * p.angular_acceleration(R, w, tau, gyro=False))
+    q1 = exp_map_times(h, w1, q)
+    return np.concatenate([x1, v1, q1 / _norm(q1), w1], axis=-1)
+
+
+@_one_state_too
+def step_implicit_gyro_body(problem, y, dt):
+    """Bullet's implicit gyroscopic step in body axes (:func:`_gyro_implicit_body`), course-type step."""
+    return _engine_gyro_step(problem, y, dt, _gyro_implicit_body)
+
+
+@_one_state_too
+def step_implicit_gyro_world(problem, y, dt):
+    """Bullet's implicit gyroscopic step in world axes (:func:`_gyro_implicit_world`) in the course-type
+    step."""
+    return _engine_gyro_step(problem, y, dt, _gyro_implicit_world)
+
+
+@_one_state_too
+def step_explicit_gyro_clamped(problem, y, dt):
+    """Bullet's explicit gyroscopic torque with its maximum-torque clamp (:func:`_gyro_explicit_clamped`) in
+    the course-type step: ``expmap_gyro`` wherever ``|ω × I_W ω| ≤ BULLET_MAX_GYROSCOPIC_TORQUE``."""
+    return _engine_gyro_step(problem, y, dt, _gyro_explicit_clamped)
+
+
+@_one_state_too
+def step_jolt_gyro(problem, y, dt):
+    """Jolt's momentum-magnitude-clamped gyroscopic step (:func:`_gyro_momentum_clamped`) in the course-type
+    step (Jolt's PhysicsSystem::JobApplyGravity: ApplyGyroscopicForceInternal, then
+    ApplyForceTorqueAndDragInternal, both from the start-of-step rotation)."""
+    return _engine_gyro_step(problem, y, dt, _gyro_momentum_clamped)
+
+
+# --- second-order rotation maps of the free rigid body, composed with the forces (Strang) ---------------
+
+def _omega_of_momentum(p, R1, L, w):
+    """``I_W(R₁)⁻¹ L`` (world axes), evaluated as the increment ``w + I_W(R₁)⁻¹ (L − I_W(R₁) w)`` from the
+    step's ω: equal in exact arithmetic, but ω then carries the rounding of one increment per step instead
+    of that of the whole L → ω product, whose bias (the rotation matrix of a rounded unit quaternion is
+    orthogonal only to ~ε) adds up linearly over a run (measured: 1.5e-12 rad/s after 4000 steps of a
+    principal-axis spin, 1e-14 with the increment)."""
+    return w + _world_inv_inertia_times(p, R1, L - matvec3(_world_inertia(p, R1), w))
+
+
+def _free_buss(p, q, R, w, h):
+    """Buss's augmented second-order method (S. R. Buss, "Accurate and efficient simulation of rigid-body
+    rotations", J. Comput. Phys. 164 (2000) 377–406, §4): with ``L = I_W ω`` held and
+    ``α = ω̇ = −I_W⁻¹ (ω × L)``::
+
+        ω̄ = ω + Δt/2 α + Δt²/12 α × ω,   q₁ = exp(Δt ω̄) q,   ω₁ = I_W(q₁)⁻¹ L
+
+    (the Δt²/12 term is the first commutator term of the Magnus series of ``Ṙ = [ω(t)]× R``)."""
+    L = matvec3(_world_inertia(p, R), w)
+    alpha = -_world_inv_inertia_times(p, R, cross3(w, L))
+    wbar = w + (0.5 * h) * alpha + (h * h / 12.0) * cross3(alpha, w)
+    q1 = exp_map_times(h, wbar, q)
+    q1 = q1 / _norm(q1)
+    return q1, _omega_of_momentum(p, matrix_from_quat(q1), L, w)
+
+
+def _free_dlm(p, q, R, w, h):
+    """The symplectic splitting of the free rigid body (A. Dullweber, B. Leimkuhler, R. McLachlan,
+    "Symplectic splitting methods for rigid body molecular dynamics", J. Chem. Phys. 107 (1997) 5840):
+    ``H = Σᵢ Πᵢ²/(2 Iᵢ)`` in the principal axes, each ``Hᵢ`` flowed exactly — a rotation of the body about its
+    principal axis ``aᵢ = R eᵢ`` by ``φ = t Πᵢ/Iᵢ``, ``Πᵢ = aᵢ · L``, with the world momentum L held — and
+    composed symmetrically ``H₁(Δt/2) H₂(Δt/2) H₃(Δt) H₂(Δt/2) H₁(Δt/2)`` (moments ascending, the largest in
+    the middle); then ``ω₁ = I_W(q₁)⁻¹ L`` (:func:`_omega_of_momentum`)."""
+    L = matvec3(_world_inertia(p, R), w)
+    moments, axes = np.linalg.eigh(p.inertia_B)
+    w0 = w
+    for i, frac in ((0, 0.5), (1, 0.5), (2, 1.0), (1, 0.5), (0, 0.5)):
+        a = matvec3(matrix_from_quat(q), axes[..., :, i])
+        phi = (frac * h) * _dot3(a, L) / moments[..., i:i + 1]
+        q = exp_map_times(1.0, phi * a, q)
+    q1 = q / _norm(q)
+    return q1, _omega_of_momentum(p, matrix_from_quat(q1), L, w0)
+
+
+def _newton3(G, x0, what, dt):
+    """Newton's method on ``G(x) -> (residual, Jacobian)`` for rows (..., 3), each row stopping when its
+    update is below IMPLICIT_TOL (relative to 1 + |x|), so that its iterations are its own; a row that turns
+    non-finite stops there (its step is then the non-finite state a divergence check sees)."""
+    x = x0
+    running = np.ones(x.shape[:-1] + (1,), dtype=bool)
+    for _ in range(MAX_ITER):
+        r, J = G(x)
+        x_new = x - _solve3(J, r)
+        d = _change(x_new, x)
+        x = np.where(running, x_new, x)
+        running &= ~(d <= IMPLICIT_TOL) & np.isfinite(d)   # a non-finite row (a blown-up state) stops as NaN
+        if not running.any():
+            return x
+    raise ImplicitSolveError(f"{what}: Newton did not converge in {MAX_ITER} iterations (dt={dt})")
+
+
+def _free_midpoint(p, q, R, w, h):
+    """The implicit midpoint rule on the free rigid body ``Π̇ = Π × I_B⁻¹ Π``, ``Ṙ = R [I_B⁻¹ Π]×`` (Π the
+    body-axes momentum; Lie–Poisson form, e.g. E. Hairer, C. Lubich, G. Wanner, Geometric Numerical
+    Integration, 2nd ed., §VII.5 and §IV.8)::
+
+        Π_m = Π₀ + Δt/2 Π_m × ω_m,  ω_m = I_B⁻¹ Π_m   (Newton to IMPLICIT_TOL)
+        Π₁ = 2 Π_m − Π₀,   R₁ = R₀ cay(Δt ω_m)  (q₁ = q₀ ⊗ [1, Δt ω_m/2] / |·|)
+
+    It keeps every quadratic invariant: |Π|, the energy ½ Π·I_B⁻¹Π and the world momentum R Π."""
+    Pi = matvec3(p.inertia_B, mat_t_vec3(R, w))
+    hh = 0.5 * h
+    eye = np.eye(3)
+
+    def G(m):
+        wm = matvec3(p.inertia_inv_B, m)
+        return (m - Pi - hh * cross3(m, wm),
+                eye - _hm(hh) * (_skew(m) @ p.inertia_inv_B - _skew(wm)))
+
+    m = _newton3(G, Pi, "implicit midpoint", h)
+    a = hh * matvec3(R, matvec3(p.inertia_inv_B, m))    # Δt ω_m / 2 in world axes
+    q1 = _times(a[..., 0:1], a[..., 1:2], a[..., 2:3], q, 1.0)
+    q1 = q1 / _norm(q1)
+    R1 = matrix_from_quat(q1)
+    return q1, _omega_of_momentum(p, R1, matvec3(R1, 2.0 * m - Pi), w)
+
+
+def _free_moser_veselov(p, q, R, w, h):
+    """The discrete Moser–Veselov algorithm (J. Moser, A. P. Veselov, "Discrete versions of some classical
+    integrable systems and factorization of matrix polynomials", Commun. Math. Phys. 139 (1991) 217–243),
+    in the body-momentum form of J. E. Marsden, M. West, "Discrete mechanics and variational integrators",
+    Acta Numerica 10 (2001), §3.3: the relative rotation ``F = R₀ᵀ R₁`` solves
+    ``Δt Π̂₀ = F J_d − J_d Fᵀ`` with ``J_d = ½ tr(I_B) 𝟙 − I_B``; ``Π₁ = Fᵀ Π₀``. With the Cayley form
+    ``F = cay(f)`` (quaternion ``[1, f]/|·|``) the equation is the vector equation::
+
+        Δt Π₀ = 2/(1 + |f|²) (I_B f + f × I_B f)       (Newton to IMPLICIT_TOL, from f = Δt ω_B/2)
+        q₁ = q₀ ⊗ [1, f] / |·|,   ω₁ = I_W(q₁)⁻¹ L  (L = R₀ Π₀ held: Π₁ = Fᵀ Π₀)
+
+    It is the implicit midpoint step of the step Δt (1 + |f|²) (the same equation without that factor):
+    it keeps |Π|, the energy and L exactly."""
+    wb = mat_t_vec3(R, w)
+    Pi = matvec3(p.inertia_B, wb)
+    A = p.inertia_B
+
+    def G(f):
+        n = 1.0 + _dot3(f, f)
+        Af = matvec3(A, f)
+        u = Af + cross3(f, Af)
+        c = 2.0 / n
+        J = (c[..., None] * (A + _skew(f) @ A - _skew(Af))
+             - (4.0 / (n * n))[..., None] * (u[..., :, None] * f[..., None, :]))
+        return c * u - h * Pi, J
+
+    f = _newton3(G, (0.5 * h) * wb, "Moser-Veselov", h)
+    a = matvec3(R, f)
+    q1 = _times(a[..., 0:1], a[..., 1:2], a[..., 2:3], q, 1.0)
+    q1 = q1 / _norm(q1)
+    return q1, _omega_of_momentum(p, matrix_from_quat(q1), matvec3(R, Pi), w)
+
+
+def _strang(problem, y, dt, free_map):
+    """A free-rigid-body map composed with half kicks of the forces, torques and decay (Strang):
+
+    kick (Δt/2, implicit): v½ = v₀ + Δt/2 (f(x₀, R₀)/m − λ_v v½), ω½ = ω₀ + Δt/2 (I_W⁻¹τ(x₀, R₀) − k_ω ω½)
+    drift (Δt):            x₁ = x₀ + Δt v½,   (q₁, ω′) = the free map over Δt from (q₀, ω½)
+    kick (Δt/2, explicit): v₁ = v½ + Δt/2 (f(x₁, R₁)/m − λ_v v½), ω₁ = ω′ + Δt/2 (I_W⁻¹τ(x₁, R₁) − k_ω ω′)
+
+    ``f`` the force without the drag, ``λ_v = c/m + k_v``: the velocities enter the forces linearly (drag,
+    decay), so the implicit half kick is solved in closed form. The kicks are the flow, to first order, of
+    ``v̇ = f/m − λ_v v``, ``L̇ = τ − k_ω L`` with x and R held; implicit then explicit Euler are each other's
+    adjoints, so with a symmetric free map the step is symmetric, and second order with any second-order
+    free map (the leapfrog argument)."""
+    p = members(problem)
+    h = _dt(dt)
+    s = 0.5 * h
+    x, v, q, w = y[..., X], y[..., V], y[..., Q], y[..., W]
+    lam_v = p.drag / p.mass_kg + p.decay_rates[:, 0:1]
+    k_w = p.decay_rates[:, 1:2]
+    R = matrix_from_quat(q)
+    f, tau = p.force_torque(x, 0.0 * v, R)
+    v_half = (v + s * (f / p.mass_kg)) / (1.0 + s * lam_v)
+    w_half = (w + s * p.angular_acceleration(R, w, tau, gyro=False)) / (1.0 + s * k_w)
+    x1 = x + h * v_half
+    q1, w_free = free_map(p, q, R, w_half, h)
+    R1 = matrix_from_quat(q1)
+    f1, tau1 = p.force_torque(x1, 0.0 * v_half, R1)
+    v1 = v_half + s * (f1 / p.mass_kg - lam_v * v_half)
+    w1 = w_free + s * (p.angular_acceleration(R1, w_free, tau1, gyro=False) - k_w * w_free)
+    return np.concatenate([x1, v1, q1, w1], axis=-1)
+
+
+@_one_state_too
+def step_buss_augmented(problem, y, dt):
+    """Buss's augmented second-order rotation map (:func:`_free_buss`) in the Strang step (:func:`_strang`).
+    """
+    return _strang(problem, y, dt, _free_buss)
+
+
+@_one_state_too
+def step_dlm_splitting(problem, y, dt):
+    """The DLM symplectic splitting of the free rigid body (:func:`_free_dlm`) in the Strang step."""
+    return _strang(problem, y, dt, _free_dlm)
+
+
+@_one_state_too
+def step_lp_midpoint(problem, y, dt):
+    """The implicit midpoint rule of the free rigid body (:func:`_free_midpoint`) in the Strang step."""
+    return _strang(problem, y, dt, _free_midpoint)
+
+
+@_one_state_too
+def step_moser_veselov(problem, y, dt):
+    """The discrete Moser–Veselov algorithm (:func:`_free_moser_veselov`) in the Strang step."""
+    return _strang(problem, y, dt, _free_moser_veselov)
+
+
 @dataclass(frozen=True)
 class Scheme:
     """One reference variant: its step function, its global order on the problems it models (proven by
@@ -365,6 +697,29 @@ VARIANTS = {
                        "Stormer-Verlet kick-drift-kick, exp-map drift; velocities at integer steps",
                        iterative=True),
     "rk4": Scheme(step_rk4, 4, "classical Runge-Kutta 4 on the whole state"),
+    "implicit_gyro_body": Scheme(step_implicit_gyro_body, 1,
+                                 "symplectic Euler, implicit gyroscopic step in body axes, one Newton "
+                                 "iteration (Bullet _Body, Catto GDC 2015), exp-map attitude"),
+    "implicit_gyro_world": Scheme(step_implicit_gyro_world, 1,
+                                  "symplectic Euler, implicit gyroscopic step in world axes, one Newton "
+                                  "iteration (Bullet _World), exp-map attitude"),
+    "explicit_gyro_clamped": Scheme(step_explicit_gyro_clamped, 1,
+                                    "symplectic Euler, explicit gyroscopic torque clamped to "
+                                    f"{BULLET_MAX_GYROSCOPIC_TORQUE:g} N m (Bullet explicit), "
+                                    "exp-map attitude"),
+    "jolt_gyro": Scheme(step_jolt_gyro, 1,
+                        "symplectic Euler, explicit body-axes momentum step rescaled to |L| "
+                        "(Jolt ApplyGyroscopicForceInternal), exp-map attitude"),
+    "buss_augmented": Scheme(step_buss_augmented, 2,
+                             "Strang: half kicks around Buss's augmented second-order rotation (JCP 2000)"),
+    "dlm_splitting": Scheme(step_dlm_splitting, 2,
+                            "Strang: half kicks around the DLM symplectic splitting of the free rigid body"),
+    "lp_midpoint": Scheme(step_lp_midpoint, 2,
+                          "Strang: half kicks around the implicit midpoint rule of the free rigid body "
+                          f"(Lie-Poisson, Cayley attitude), solved to {IMPLICIT_TOL:g}", iterative=True),
+    "moser_veselov": Scheme(step_moser_veselov, 2,
+                            "Strang: half kicks around the discrete Moser-Veselov rigid body, "
+                            f"solved to {IMPLICIT_TOL:g}", iterative=True),
 }
 
 

@@ -96,7 +96,8 @@ def run_members(members: Members, variant, dt_s, n_steps, y0) -> list:
     :class:`Run`, each equal to that member's run alone (every row of the definition advances on its own).
 
     The steps are compiled (reference_sim.compiled) in chunks of COMPILED_CHUNK steps per member, or, without
-    numba, taken by the definition for all members at once. A step the compiled loop does not take, or one
+    numba or for a variant that has no kernel (not in ``compiled.VARIANT_CODES``), taken by the definition
+    for all members at once. A step the compiled loop does not take, or one
     whose batched result is not good, is taken by the definition for that member alone: it raises (the
     member diverged: ``": <error type>: <message>"``), gives a bad state (``" (<what is wrong>)"``), or
     solves it, and the member goes on. A member that diverges stops alone."""
@@ -110,8 +111,11 @@ def run_members(members: Members, variant, dt_s, n_steps, y0) -> list:
     why: dict = {}
     failed = np.zeros(N, dtype=bool)
     step = variant if callable(variant) else get_step(variant)
+    # compiled where the variant has a kernel (compiled.VARIANT_CODES); a variant without one steps by its
+    # definition, all members at once
     params = (compiled.parameters(members, h)
-              if isinstance(variant, str) and compiled.kernel() is not None else None)
+              if isinstance(variant, str) and variant in compiled.VARIANT_CODES
+              and compiled.kernel() is not None else None)
     with np.errstate(all="ignore"):
         while True:
             todo = np.flatnonzero((pos < n) & ~failed)

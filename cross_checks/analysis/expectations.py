@@ -364,12 +364,12 @@ def _drift_parts(scenario, tr: Traits, quantity: str, phys):
     if rotation:
         kind = tr.rotation_drift
         signs = (tr.rotation_sign,) if tr.rotation_sign not in (0, None) else both
-        if kind in ("whole_state", "momentum"):   # |L| kept or not, the body moves to a neighbouring motion
+        if kind == "whole_state":
             # the drift perturbs the turning part of ω (a share a of its scale); the motion amplifies it
             amp = float(phys.amplification.get(quantity, 1.0)) * r.world_rotation_amplitude
             parts.append(("the rotation (ω_W turning with the body)", r.world_rotation ** 2 + r.decay_w ** 2,
                           signs, amp, True))
-        elif kind == "body":
+        elif kind in ("body", "momentum"):   # |L| kept, δ moved slowly at the polhode's rate (Traits)
             parts.append(("the rotation (the body-frame ω: the polhode)",
                           r.body_rotation ** 2 + r.decay_w ** 2, signs, 1.0, False))
         else:

@@ -22,6 +22,18 @@ TRAITS = {
     "course_gyro": B.SYMPLECTIC_EULER_EXPLICIT_GYRO, "expmap_gyro": B.SYMPLECTIC_EULER_EXPLICIT_GYRO,
     "explicit_euler": B.WHOLE_STATE_EXPLICIT_EULER, "implicit_euler": B.WHOLE_STATE_IMPLICIT_EULER,
     "midpoint": B.HIGHER_ORDER, "leapfrog": B.HIGHER_ORDER, "rk4": B.HIGHER_ORDER,
+    # Bullet's implicit gyroscopic steps (body and world axes: the same step, see their docstrings): a
+    # body-frame implicit Euler step of Euler's equations, linearised; energy and |L|² decay together
+    "implicit_gyro_body": B.SYMPLECTIC_EULER_IMPLICIT_GYRO,
+    "implicit_gyro_world": B.SYMPLECTIC_EULER_IMPLICIT_GYRO,
+    # Bullet's explicit one: expmap_gyro wherever its clamp does not act (nowhere on the catalog)
+    "explicit_gyro_clamped": B.SYMPLECTIC_EULER_EXPLICIT_GYRO,
+    # Jolt's: |L| kept exactly, the energy drifts by O(Δt²) per step towards L²/2I₂ (up from a spin about the
+    # major axis, down from one about the minor axis): its own kind, either sign
+    "jolt_gyro": B.Traits(rotation_drift="momentum", rotation_sign=None),
+    # second order, symmetric (Buss's map is not, but is second order): no amplitude rule applies
+    "buss_augmented": B.HIGHER_ORDER, "dlm_splitting": B.HIGHER_ORDER, "lp_midpoint": B.HIGHER_ORDER,
+    "moser_veselov": B.HIGHER_ORDER,
 }
 #: Declared variants: reference_sim.integrators.VARIANTS, the one registry (orders proven by its own tests).
 VARIANTS = {v: Variant(float(s.order), s.description, traits=TRAITS[v]) for v, s in SCHEMES.items()}

@@ -202,3 +202,13 @@ MJX_ORDER_RATIO_REL = 0.15
 #: a polynomial motion): final-state errors measured 7.1e-13 and 7.3e-13 at Δt = 0.05 and 0.025 s over 2 s —
 #: the round-off of the MuJoCo C RK4 reference at Δt/64; a fourth-order error at these steps would be ~1e-6.
 MJX_RK4_EXACT = 1e-11
+#: One step of a new gyroscopic scheme vs its transcription from its source (tests/helpers/oracle.py): the
+#: same maths by other operations (scipy rotations, principal frames, fsolve to a 1e-14 residual) on O(1)
+#: quantities: a few tens of ε.
+GYRO_ONE_STEP = 1e-13
+#: A quantity a scheme keeps by construction (|L|, L, the energy), relative, over ≤ 5000 steps: one rounding
+#: of ε per step, adding up at worst linearly: 5000 · 2.2e-16 ≈ 1.1e-12; measured ≤ 3e-14 on these runs.
+KEPT_TO_ROUNDOFF = 2e-12
+#: Bullet's body- and world-axes implicit steps are one step in exact arithmetic: 2000 steps of a stable
+#: tumble apart by round-off only (measured ~1e-14 rad); 1e-11 leaves a wide margin.
+SAME_STEP_TWO_AXES = 1e-11

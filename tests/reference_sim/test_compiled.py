@@ -54,7 +54,11 @@ def _used_compiled(monkeypatch, problem, variant, dt, n):
     return run, calls
 
 
-@pytest.mark.parametrize("variant", list(VARIANTS))
+#: The variants with a kernel; the others step by their definition (test below).
+COMPILED = list(compiled.VARIANT_CODES)
+
+
+@pytest.mark.parametrize("variant", COMPILED)
 @pytest.mark.parametrize("decay", [(1.0, 1.0), (0.99, 0.995)])
 def test_compiled_run_is_bit_identical_to_the_definition_with_every_force_kind(monkeypatch, variant, decay):
     problem = coupled_problem(decay)
@@ -70,7 +74,7 @@ def test_compiled_runs_of_the_catalog_are_bit_identical_at_its_coarsest_step(mon
     sc = load_scenario(name)
     dt = max(sc.dt_ladder_s)
     n = min(sc.n_steps(dt), 300)
-    for variant in VARIANTS:
+    for variant in COMPILED:
         fast, _ = _used_compiled(monkeypatch, sc.problem, variant, dt, n)
         _assert_same_run(fast, _python_run(monkeypatch, sc.problem, variant, dt, n))
 
@@ -80,7 +84,7 @@ def test_compiled_runs_of_the_catalog_are_bit_identical_at_its_coarsest_step(mon
 def test_compiled_runs_of_the_whole_sweep_are_bit_identical(monkeypatch, name):
     from cross_checks.sweep.jobs import job_dts
     sc = load_scenario(name)
-    for variant in VARIANTS:
+    for variant in COMPILED:
         for dt in job_dts(sc):
             fast, _ = _used_compiled(monkeypatch, sc.problem, variant, dt, sc.n_steps(dt))
             _assert_same_run(fast, _python_run(monkeypatch, sc.problem, variant, dt, sc.n_steps(dt)))
@@ -112,7 +116,7 @@ def _problems(draw):
 
 
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(problem=_problems(), variant=st.sampled_from(list(VARIANTS)), dt=st.sampled_from([1e-3, 1e-2, 0.05]))
+@given(problem=_problems(), variant=st.sampled_from(COMPILED), dt=st.sampled_from([1e-3, 1e-2, 0.05]))
 def test_compiled_equals_the_definition_on_random_problems(monkeypatch, problem, variant, dt):
     fast = S.simulate(problem, variant, dt, 120)
     _assert_same_run(fast, _python_run(monkeypatch, problem, variant, dt, 120))
@@ -166,7 +170,10 @@ def _requests():
     return reqs + [RunRequest(type("Sc", (), {"problem": fast_spin})(), 0.01, 2000)]
 
 
-@pytest.mark.parametrize("variant", list(VARIANTS))
+# a variant without a kernel steps by its definition on both sides (slow: ~1 min each); its members' runs are
+# their own: tests/reference_sim/test_gyro_integrators.py::test_members_advance_on_their_own
+@pytest.mark.parametrize("variant", [v if v in COMPILED else pytest.param(v, marks=pytest.mark.slow)
+                                     for v in VARIANTS])
 def test_simulate_many_is_simulate_member_by_member(monkeypatch, variant):
     reqs = _requests()
     many = ReferenceAdapter().simulate_many(variant, reqs)
@@ -179,6 +186,24 @@ def test_simulate_many_is_simulate_member_by_member(monkeypatch, variant):
         m.setattr(compiled, "kernel", lambda: None)
         for a, b in zip(ReferenceAdapter().simulate_many(variant, reqs), many):
             _assert_same_run(a, b)
+
+
+def test_every_kernel_is_a_variant_of_the_registry():
+    assert set(compiled.VARIANT_CODES) <= set(VARIANTS)
+
+
+@pytest.mark.parametrize("variant", [v for v in VARIANTS if v not in compiled.VARIANT_CODES])
+def test_a_variant_without_a_kernel_runs_its_definition(monkeypatch, variant):
+    # VARIANT_CODES lists what has a kernel; any other variant steps by its definition, never compiled
+    problem = coupled_problem((0.99, 0.995))
+    calls = []
+    monkeypatch.setattr(compiled, "advance", lambda *a: calls.append(a))
+    run = S.simulate(problem, variant, 1.5e-3, 60)
+    assert not calls and run.diverged_at_s is None and run.y.shape == (61, 13)
+    y = problem.initial_packed()
+    for n in range(1, 61):
+        y = VARIANTS[variant].step(problem, y, 1.5e-3)
+        assert np.array_equal(run.y[n], y)
 
 
 def test_without_numba_every_run_steps_the_definition(monkeypatch):

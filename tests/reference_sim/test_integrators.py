@@ -96,7 +96,8 @@ LADDERS_ROTATION = {**LADDERS, 4: [1e-1, 5e-2, 2.5e-2, 1.25e-2]}
 
 
 @pytest.mark.parametrize("variant", ["explicit_euler", "implicit_euler", "course", "expmap_gyro", "midpoint",
-                                     "leapfrog", "rk4"])
+                                     "leapfrog", "rk4", "jolt_gyro", "buss_augmented", "dlm_splitting",
+                                     "lp_midpoint", "moser_veselov"])
 def test_global_order_translation(variant):
     problem, T = translation_problem(), 1.0
     dts = LADDERS[VARIANTS[variant].order]
@@ -109,7 +110,9 @@ def test_global_order_translation(variant):
 
 @pytest.mark.parametrize("variant",
                          ["explicit_euler", "implicit_euler", "course_gyro", "expmap_gyro", "midpoint",
-                          "leapfrog", "rk4"])
+                          "leapfrog", "rk4", "implicit_gyro_body", "implicit_gyro_world",
+                          "explicit_gyro_clamped", "jolt_gyro", "buss_augmented", "dlm_splitting",
+                          "lp_midpoint", "moser_veselov"])
 def test_global_order_rotation(variant):
     problem, T = rotation_problem(), 1.0
     dts = LADDERS[VARIANTS[variant].order]
@@ -194,12 +197,18 @@ def test_every_variant_converges_at_its_order_to_the_continuously_damped_motion(
         errs["v"].append(np.linalg.norm(y[3:6] - exact[3:6]))
         errs["w"].append(np.linalg.norm(y[10:13] - exact[10:13]))
         errs["q"].append(float(geodesic_angle(exact[6:10], y[6:10])))
-    course_type = variant in ("course", "course_gyro", "expmap_gyro")
+    course_type = variant in COURSE_TYPE
     for key in ("v", "q") if course_type else ("v", "w", "q"):
         assert abs(_orders(errs[key], dts) - p) < ORDER_TOL, (key, errs[key])
     if course_type:  # e^{−k_ω Δt} per step is the exact decay of a torque-free principal-axis spin:
         # exact up to one rounding of ε|ω0| per step
         assert max(errs["w"]) <= round(T / dts[-1]) * 2.2e-16 * np.linalg.norm(problem.initial.w_W), errs["w"]
+
+
+#: The course-type schemes: decay e^{−kΔt} after the velocity update (the engines' gyroscopic steps are such
+#: steps too: reference_sim.integrators, "the gyroscopic steps of shipping engines").
+COURSE_TYPE = ("course", "course_gyro", "expmap_gyro", "implicit_gyro_body", "implicit_gyro_world",
+               "explicit_gyro_clamped", "jolt_gyro")
 
 
 def test_decay_applied_twice_or_left_out_does_not_converge():

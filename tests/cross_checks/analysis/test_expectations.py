@@ -16,7 +16,7 @@ VARIANT_TRAITS = {v.name: declared_traits(v.name)
 
 def test_every_built_in_variant_has_a_nominal_order_and_traits():
     built_in = [v.name for v in all_variants() if v.engine in ("reference", "mujoco", "pybullet")]
-    assert len(built_in) == 15
+    assert len(built_in) == 23   # 16 reference variants (8 gyroscopic: docs/gyro_integrators.md)
     for v in built_in:
         assert (nominal_order(v) in (1.0, 2.0, 4.0) and declared_traits(v) is not None
                 and traits(v) == declared_traits(v))
