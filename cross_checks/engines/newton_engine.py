@@ -54,9 +54,10 @@ before the step (base.apply_decay_prestep), that step's force and torque scaled 
 Defaults that are not the scenario's physics, each neutralised explicitly (SOLVER_SETTINGS, pinned): the
 angular damping of SemiImplicit and Featherstone (0.05 by default) and XPBD (0), XPBD's restitution (its
 velocity-from-position-deltas is off by default, deprecated, pinned), Featherstone's mass-matrix update
-interval (1: every step); gravity (the
-builder's default is −9.81 along z); no shape, so no contact nor ground; the free joint's armature, damping,
-stiffness and limits are zero/infinite by default (pinned). Newton has no sleeping, no velocity clamp for
+interval (1: every step); gravity (the builder's default is −9.81 along z); ``finalize``'s inertia validation
+(``skip_validation_inertia=True``: by default it shifts the eigenvalues of a tensor with I1 + I2 < I3 or a
+small I1 — another body); no shape, so no contact nor ground; the free joint's armature, friction, target and
+limit gains are zero and its limits ±1e10 by default (pinned). Newton has no sleeping, no velocity clamp for
 rigid bodies (``particle_max_velocity`` acts on particles only) and no substeps in these solvers.
 
 Batching (:func:`simulate_many`): the runs of one call that share a Δt step together, one body (one world)

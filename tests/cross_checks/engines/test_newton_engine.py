@@ -438,6 +438,67 @@ def test_featherstone_loses_float32_precision_on_a_body_that_spins_far_from_the_
                                    atol=100 * F32 * run.y[0, 12])
 
 
+# --- findings (docs/engine_conventions.md "Newton 1.8.0", "What the sweep found") -------------------------
+
+@pytest.mark.slow
+@pytest.mark.parametrize("variant", ["semi_implicit", "xpbd"])
+def test_float32_normalisation_is_biased_so_a_free_spins_omega_drifts_linearly_in_the_number_of_steps(variant):
+    # constant_spin (about a principal axis: ω is exact in the scheme, every error is round-off). Newton's
+    # float32 normalize leaves |q|² − 1 at +0.35 ε on average, not 0, and the body-axes round trip of ω
+    # (quat_rotate_inv, then quat_rotate) scales ω by ~|q|⁴ every step: |ω| drifts by ~ε per step, the same
+    # sign every step — linearly in N, not as a random walk (√N): four times the steps, ~four times the drift
+    sc = load_scenario("constant_spin")
+    drifts = []
+    for dt in (0.005, 0.00125):
+        n = int(round(2.0 / dt))
+        run = ne.simulate(sc, variant, dt, n)
+        q = run.y[1:, 6:10]
+        assert np.mean(np.einsum("ij,ij->i", q, q) - 1.0) > 0.2 * F32
+        w = np.linalg.norm(run.y[:, 10:13], axis=1)
+        drifts.append(abs(w[-1] / w[0] - 1.0))
+    assert drifts[1] > 2.5 * drifts[0] and drifts[1] > 0.3 * 1600 * F32
+    # Featherstone does not rotate ω to body axes: it keeps the spin's |ω| to a few ε
+    run = ne.simulate(sc, "featherstone", 0.00125, 1600)
+    w = np.linalg.norm(run.y[:, 10:13], axis=1)
+    assert abs(w[-1] / w[0] - 1.0) < 0.1 * drifts[1]
+
+
+@pytest.mark.slow
+def test_featherstone_diverges_on_tumbling_box_hundreds_of_metres_from_the_origin_and_not_near_it():
+    # tumbling_box falls 250 m in 8 s while it tumbles at 5 rad/s: Featherstone's float32 FREE-joint update
+    # (origin-based spatial velocity v − ω × x and acceleration α × x, several hundred m/s and m/s² that must
+    # cancel to the COM's) gains energy from t ≈ 5 s and blows up at t = 8.66 s (Δt = 0.002 s; 7.96–9.0 s at
+    # every Δt of the ladder: a distance, not a step size); SemiImplicit keeps it to its truncation error
+    sc = load_scenario("tumbling_box")
+    run = ne.simulate(sc, "featherstone", 0.002, 5000)
+    assert run.diverged_at_s is not None and 7.5 < run.diverged_at_s < 9.5
+    assert np.linalg.norm(run.y[-1, 0:3]) > 200.0
+    assert ne.simulate(sc, "semi_implicit", 0.002, 5000).diverged_at_s is None
+    # the same throw started where the body is at t = 8 s (250 m from the origin) blows up within a second:
+    # the distance from the world origin, not the time run, breaks it
+    p = sc.problem
+    g = np.asarray(p.forces.gravity_W, dtype=float)
+    x8 = p.initial.x_W + 8.0 * p.initial.v_W + 32.0 * g
+    far = scenario_from_parts(
+        body="mass = 10.0\ninertia = [0.8083333333333333, 0.6833333333333333, 0.14166666666666666]",
+        initial=f"position = {x8.tolist()}\nvelocity = {p.initial.v_W.tolist()}\n"
+                "angular_velocity_body = [0.1, 5.0, 0.1]",
+        forces="gravity = [0.0, 0.0, -9.8]", duration=2.0)
+    assert ne.simulate(far, "featherstone", 0.002, 1000).diverged_at_s < 1.0
+    assert ne.simulate(far, "semi_implicit", 0.002, 1000).diverged_at_s is None
+
+
+def test_featherstone_gives_a_body_pushed_at_its_com_a_round_off_spin_the_body_axes_solvers_do_not():
+    # linear_drag: no torque, no rotation (ω = 0 exactly). Featherstone's solve frame rounds the COM's lever
+    # arm to float32 (~ε|x|): a force at the COM gets a torque of ~ε|x||f| and the body starts to turn at
+    # ~1e-6 rad/s; SemiImplicit and XPBD never compute a lever arm: exactly 0
+    sc = load_scenario("linear_drag")
+    fs = ne.simulate(sc, "featherstone", 0.005, 400)
+    assert 1e-8 < np.max(np.abs(fs.y[:, 10:13])) < 1e-4
+    for variant in ("semi_implicit", "xpbd"):
+        assert np.max(np.abs(ne.simulate(sc, variant, 0.005, 400).y[:, 10:13])) == 0.0
+
+
 # --- the record --------------------------------------------------------------------------------------------
 
 def test_the_first_row_is_the_scenarios_and_quaternions_stay_continuous_from_a_negative_w():
