@@ -442,7 +442,7 @@ def test_featherstone_loses_float32_precision_on_a_body_that_spins_far_from_the_
 
 @pytest.mark.slow
 @pytest.mark.parametrize("variant", ["semi_implicit", "xpbd"])
-def test_float32_normalisation_is_biased_so_a_free_spins_omega_drifts_linearly_in_the_number_of_steps(variant):
+def test_float32_normalisation_is_biased_so_a_spins_omega_drifts_linearly_in_the_number_of_steps(variant):
     # constant_spin (about a principal axis: ω is exact in the scheme, every error is round-off). Newton's
     # float32 normalize leaves |q|² − 1 at +0.35 ε on average, not 0, and the body-axes round trip of ω
     # (quat_rotate_inv, then quat_rotate) scales ω by ~|q|⁴ every step: |ω| drifts by ~ε per step, the same
