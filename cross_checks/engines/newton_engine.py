@@ -127,10 +127,19 @@ VARIANTS = {
                                "coordinates on a FREE joint, symplectic Euler, quaternion q + ½Δt ω⊗q "
                                "normalised (float32)",
                             traits=_SYMPLECTIC_F32),
+    # SolverMuJoCo(use_mujoco_cpu=True) copies Newton's float32 state into MuJoCo's MjData before every step
+    # and back after it (update_data_interval 1): MuJoCo C's float64 step on a float32 state. Newton's own
+    # default integrator is implicitfast (MuJoCo's documentation: first order; an implicit gyroscopic term,
+    # the traits of mujoco:implicitfast)
+    "mujoco_cpu": Variant(1, "Newton SolverMuJoCo on MuJoCo C (use_mujoco_cpu): implicitfast, Newton's "
+                             "default "
+                             "integrator, the state copied from and back to Newton's float32 every step",
+                          traits=Traits(rotation_drift="body", rotation_sign=-1, precision="float32")),
 }
 
 #: The solver class of each variant (``newton.solvers.<name>``).
-SOLVERS = {"semi_implicit": "SolverSemiImplicit", "xpbd": "SolverXPBD", "featherstone": "SolverFeatherstone"}
+SOLVERS = {"semi_implicit": "SolverSemiImplicit", "xpbd": "SolverXPBD", "featherstone": "SolverFeatherstone",
+           "mujoco_cpu": "SolverMuJoCo"}
 
 #: Constructor arguments of each solver: every default that is not the scenario's physics, set explicitly
 #: (Newton 1.8.0's defaults in the comments; pinned by the tests).
@@ -142,13 +151,20 @@ SOLVER_SETTINGS = {
     "xpbd": {"angular_damping": 0.0, "iterations": 2, "enable_restitution": False},
     # angular_damping 0.05 (stored, unused by 1.8.0's step), update_mass_matrix_interval 1
     "featherstone": {"angular_damping": 0.0, "update_mass_matrix_interval": 1},
+    # MuJoCo C (not mujoco_warp), Newton's default integrator named, no contact (there is no geom either)
+    # kinematic_switchable_roots True by default: an inactive weld equality per free root (so that it can be
+    # made kinematic), off
+    "mujoco_cpu": {"use_mujoco_cpu": True, "integrator": "implicitfast", "disable_contacts": True,
+                   "kinematic_switchable_roots": False},
 }
 #: Solver attributes set after construction (none: XPBD's ``compute_body_velocity_from_position_delta`` is
 #: False by default and deprecated since Newton 1.6 — setting it warns; its default is pinned instead).
 SOLVER_ATTRIBUTES: dict = {}
 
 #: Variants whose state is Newton's generalized coordinates (``joint_q``/``joint_qd`` of a FREE joint).
-_GENERALIZED = frozenset({"featherstone"})
+_GENERALIZED = frozenset({"featherstone", "mujoco_cpu"})
+#: Variants whose model takes one body only (SolverMuJoCo on MuJoCo C refuses a model of several worlds).
+_ONE_BODY = frozenset({"mujoco_cpu"})
 
 #: Bodies (runs or rows) per model: more run as several models.
 MAX_BATCH = 256
@@ -306,9 +322,22 @@ def make_solver(variant: str, model):
     _, newton = _engine_or_error()
     if variant not in VARIANTS:
         raise ValueError(f"unknown newton variant {variant!r}; variants: {', '.join(VARIANTS)}")
-    solver = getattr(newton.solvers, SOLVERS[variant])(model, **SOLVER_SETTINGS[variant])
+    with warnings.catch_warnings():
+        # SolverMuJoCo warns that MuJoCo 4.0.0 is not the ~=3.17.0 Newton declares (rbcheck pins 4.0.0)
+        warnings.filterwarnings("ignore", message="MuJoCo dependency version mismatch")
+        try:
+            solver = getattr(newton.solvers, SOLVERS[variant])(model, **SOLVER_SETTINGS[variant])
+        except (ImportError, ValueError) as exc:   # a missing backend, a model it refuses: its own words
+            hint = f" ({PIP_HINT} installs mujoco-warp)" if isinstance(exc, ImportError) else ""
+            raise EngineError(f"Newton {version()}'s {SOLVERS[variant]} refused the model: "
+                              f"{type(exc).__name__}: {exc}{hint}") from None
     for attr, value in SOLVER_ATTRIBUTES.get(variant, {}).items():
         setattr(solver, attr, value)
+    if variant == "mujoco_cpu":
+        # MuJoCo resets a run whose acceleration is non-finite or huge to the model's initial state
+        # (autoreset, with a warning): a blow-up would continue from rest; off: divergence is seen
+        import mujoco
+        solver.mj_model.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_AUTORESET)
     return solver
 
 
@@ -423,10 +452,11 @@ def simulate_many(variant: str, requests) -> list:
     groups: dict = {}
     for j, r in enumerate(requests):
         groups.setdefault(float(r.dt_s), []).append(j)
-    with _LOCK:
+    size = 1 if variant in _ONE_BODY else MAX_BATCH
+    with _LOCK, _mujoco_warnings(variant):
         for dt_s, members in groups.items():
-            for start in range(0, len(members), MAX_BATCH):
-                batch = members[start:start + MAX_BATCH]
+            for start in range(0, len(members), size):
+                batch = members[start:start + size]
                 try:
                     runs = _run_batch(variant, dt_s, [requests[j] for j in batch])
                 except EngineError as exc:
@@ -434,6 +464,28 @@ def simulate_many(variant: str, requests) -> list:
                 for j, run in zip(batch, runs):
                     out[j] = run
     return out
+
+
+class _mujoco_warnings:
+    """For the MuJoCo C variant: MuJoCo's warnings ("Nan, Inf or huge value in QACC") go to a handler for the
+    duration (else MuJoCo prints them and writes MUJOCO_LOG.TXT into the working directory); the state they
+    announce is non-finite or huge and ends the run as divergence. The previous handler is restored."""
+
+    def __init__(self, variant: str):
+        self.active = variant == "mujoco_cpu"
+
+    def __enter__(self):
+        if self.active:
+            import mujoco
+            self.prev = mujoco.get_mju_user_warning()
+            mujoco.set_mju_user_warning(lambda msg: None)
+        return self
+
+    def __exit__(self, *exc):
+        if self.active:
+            import mujoco
+            mujoco.set_mju_user_warning(self.prev)
+        return False
 
 
 def _run_batch(variant: str, dt_s: float, reqs) -> list:
@@ -508,10 +560,11 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     out = np.empty((T, 13))
     harness = harness_fn(scenario, dt_s)
     gv, gw = (float(g) for g in decay_factors(scenario, dt_s))
-    with _LOCK:
+    with _LOCK, _mujoco_warnings(variant):
         _warm(variant)
-        for s in range(0, T, MAX_BATCH):
-            rows = y_start[s:s + MAX_BATCH]
+        size = 1 if variant in _ONE_BODY else MAX_BATCH
+        for s in range(0, T, size):
+            rows = y_start[s:s + size]
             batch = _Batch(variant, [_body(scenario)] * len(rows))
             ft = np.array([harness(r) for r in rows.tolist()], dtype=float)
             y_dec = rows.copy()
@@ -552,6 +605,7 @@ class NewtonAdapter(EngineAdapter):
         if spec is not None and spec.origin:
             src = Path(spec.origin).parent / "_src"
             for sub in ("solvers/solver.py", "solvers/semi_implicit", "solvers/xpbd", "solvers/featherstone",
+                        "solvers/mujoco",
                         "sim/builder.py", "sim/model.py", "sim/state.py"):
                 p = src / sub
                 files += sorted(p.glob("*.py")) if p.is_dir() else [p]

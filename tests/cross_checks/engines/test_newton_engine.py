@@ -13,12 +13,14 @@ pytest.importorskip("newton", reason="newton is not installed (pip install -e '.
 
 from cross_checks.core.files import kernel_cache_dir  # noqa: E402
 from cross_checks.engines import newton_engine as ne  # noqa: E402
-from cross_checks.engines.base import RunRequest, apply_decay_prestep, harness_force_torque  # noqa: E402
+from cross_checks.engines.base import EngineError, RunRequest, apply_decay_prestep, harness_force_torque  # noqa: E402
 from cross_checks.scenario import load_scenario  # noqa: E402
 from reference_sim.quaternion import matrix_from_quat, quat_mul  # noqa: E402
 from tests.helpers.scenarios import scenario_from_parts  # noqa: E402
 
 VARIANTS = tuple(ne.VARIANTS)
+#: The variants whose step is Newton's own semi-implicit Euler (mujoco_cpu is MuJoCo C's implicitfast).
+NATIVE = ("semi_implicit", "xpbd", "featherstone")
 F32 = 2.0 ** -23
 #: One float32 step vs the same step in float64 by hand: a handful of float32 roundings of O(1) numbers
 #: (the state is stored in float32, then ~10 operations): 64 ε relative to the state's scale.
@@ -242,6 +244,8 @@ def test_angular_damping_left_at_newtons_default_would_damp_a_free_spin(engine):
 def test_the_adapters_model_and_solver_neutralise_every_default_that_is_not_the_physics(variant):
     g = np.array([1.0, -2.0, 0.5])
     model = ne.build_model(variant, [(2.0, np.eye(3), g), (1.0, np.eye(3), np.zeros(3))])
+    if variant == "mujoco_cpu":
+        return          # one body per model (MuJoCo C takes one world): its own test below
     solver = ne.make_solver(variant, model)
     assert solver.angular_damping == 0.0
     np.testing.assert_allclose(model.gravity.numpy()[:2], [g, np.zeros(3)], rtol=1e-7)   # one world each
@@ -315,7 +319,7 @@ def _expmap_step(y, dt, m, I_B, f_W, tau_W, g):
     return h
 
 
-@pytest.mark.parametrize("variant", VARIANTS)
+@pytest.mark.parametrize("variant", NATIVE)
 def test_one_step_is_the_hand_derived_semi_implicit_euler_step(variant):
     # full tensor, tilted, away from the origin, fast enough that |ω|Δt = 0.25 rad (the attitude update's
     # form shows: normalised additive vs exponential map differ by ~|ω Δt|³/12), a world force at an
@@ -339,7 +343,7 @@ def test_one_step_is_the_hand_derived_semi_implicit_euler_step(variant):
     assert np.max(np.abs(other[6:10] - got[6:10])) > 20 * HAND_STEP_REL
 
 
-@pytest.mark.parametrize("variant", VARIANTS)
+@pytest.mark.parametrize("variant", NATIVE)
 def test_decay_is_applied_before_the_step_with_that_steps_force_scaled(variant):
     sc = load_scenario("velocity_decay")
     dt = 0.02
@@ -385,7 +389,7 @@ def test_projectile_is_the_semi_implicit_closed_form_one_integration_per_step(va
     assert n * 4 * F32 * scale < 0.5 * h * h * 9.81
 
 
-@pytest.mark.parametrize("variant", VARIANTS)
+@pytest.mark.parametrize("variant", NATIVE)
 def test_torque_free_spin_about_a_principal_axis_turns_by_2_atan_of_half_the_step_angle(variant):
     # the normalised additive update turns a constant ω by exactly 2 atan(|ω|Δt/2) per step (not |ω|Δt):
     # after n steps the angle about the fixed axis is n times that, ω unchanged
@@ -436,6 +440,73 @@ def test_featherstone_loses_float32_precision_on_a_body_that_spins_far_from_the_
         run = ne.simulate(sc, "featherstone", 1e-3, 100)
         np.testing.assert_allclose(run.y[:, 10:13], np.tile(run.y[0, 10:13], (101, 1)), rtol=0,
                                    atol=100 * F32 * run.y[0, 12])
+
+
+# --- mujoco_cpu: SolverMuJoCo on MuJoCo C -------------------------------------------------------------------
+
+def test_mujoco_cpu_is_mujocos_implicitfast_with_every_default_neutral_and_the_state_copied_each_step(engine):
+    wp, newton = engine
+    # Newton's own default integrator: implicitfast (not MuJoCo's Euler), through a model attribute
+    sig = inspect.signature(newton.solvers.SolverMuJoCo.__init__).parameters
+    assert sig["integrator"].default is None and sig["use_mujoco_cpu"].default is False
+    g = np.array([0.3, -0.2, -9.81])
+    I = np.array([[2.0, 0.1, 0.05], [0.1, 3.0, -0.2], [0.05, -0.2, 4.0]])
+    model = ne.build_model("mujoco_cpu", [(2.0, I, g)])
+    solver = ne.make_solver("mujoco_cpu", model)
+    mm = solver.mj_model
+    assert int(mm.opt.integrator) == 3 and solver.use_mujoco_cpu         # mjINT_IMPLICITFAST
+    assert solver._update_data_interval == 1            # Newton's state copied into MjData every step
+    assert (mm.ngeom, mm.njnt, mm.nu, mm.neq, mm.ntendon) == (0, 1, 0, 0, 0)
+    # MuJoCo's autoreset (a blown-up run restarted from rest) off: a blow-up is seen (the divergence test)
+    import mujoco
+    assert mm.opt.disableflags & int(mujoco.mjtDisableBit.mjDSBL_AUTORESET)
+    # Newton's kinematic_switchable_roots default adds an (inactive) weld per free root: off
+    assert sig["kinematic_switchable_roots"].default is True
+    for field in ("dof_armature", "dof_damping", "dof_frictionloss"):
+        np.testing.assert_array_equal(getattr(mm, field), np.zeros(6), err_msg=field)
+    np.testing.assert_array_equal(mm.jnt_stiffness, [0.0])
+    np.testing.assert_array_equal(mm.body_gravcomp, [0.0, 0.0])
+    assert mm.opt.density == 0.0 and mm.opt.viscosity == 0.0
+    np.testing.assert_allclose(mm.opt.gravity, g, rtol=1e-7)           # float32 of the scenario's
+    np.testing.assert_allclose(np.sort(mm.body_inertia[1]), np.sort(np.linalg.eigvalsh(I)), rtol=1e-6)
+    assert mm.body_mass[1] == 2.0
+    # MuJoCo C takes one world: a model of two is refused, so the adapter runs one body per model
+    with pytest.raises(EngineError, match="separate_worlds|single-world"):
+        ne.make_solver("mujoco_cpu", ne.build_model("mujoco_cpu", [(1.0, np.eye(3), g)] * 2))
+
+
+def test_one_mujoco_cpu_step_is_mujoco_implicitfasts_step_from_the_float32_state():
+    # the same step as rbcheck's own MuJoCo adapter (float64 MuJoCo C), from the state rounded to float32, to
+    # float32 round-off; MuJoCo Euler's step is far (the implicit gyroscopic term, |ω|Δt = 0.25 rad)
+    from cross_checks.engines import mujoco_engine as me
+    sc = _tilted(angular_velocity="[1.0, 4.0, -2.0]", velocity="[0.5, -1.0, 2.0]",
+                 forces='gravity = [0.3, -0.2, -9.81]\n[[forces.point]]\nforce = [1.0, 2.0, -0.5]\n'
+                        'point = [0.1, -0.2, 0.3]\nframe = "world"\n[[forces.torque]]\n'
+                        'torque = [0.2, -0.4, 0.6]\nframe = "body"')
+    dt = 0.05
+    y0 = sc.problem.initial_packed()
+    y32 = ne.from_newton_rows(*[a.astype(np.float32) for a in ne.to_newton_rows(y0)])
+    got = ne.one_step(sc, "mujoco_cpu", dt, y0[None])[0]
+    want = me.one_step(sc, "implicitfast", dt, y32)[0]
+    scale = np.maximum(1.0, np.abs(want))
+    np.testing.assert_allclose(got / scale, want / scale, rtol=0, atol=HAND_STEP_REL)
+    euler = me.one_step(sc, "euler", dt, y32)[0]
+    assert np.max(np.abs(euler[10:13] - got[10:13])) > 100 * HAND_STEP_REL * np.max(np.abs(want[10:13]))
+
+
+def test_mujoco_cpu_without_mujoco_warp_is_an_engine_error_that_says_so(monkeypatch, engine):
+    import builtins
+    real = builtins.__import__
+
+    def no_mjw(name, *a, **k):
+        if name == "mujoco_warp" or name.startswith("mujoco_warp."):
+            raise ImportError("No module named 'mujoco_warp'")
+        return real(name, *a, **k)
+    monkeypatch.setattr(builtins, "__import__", no_mjw)
+    model = ne.build_model("mujoco_cpu", [(1.0, np.eye(3), np.zeros(3))])
+    with pytest.raises(EngineError, match=r"SolverMuJoCo refused the model: ImportError: .*mujoco_warp.*"
+                                          r"pip install 'rbcheck\[newton\]'"):
+        ne.make_solver("mujoco_cpu", model)
 
 
 # --- findings (docs/engine_conventions.md "Newton 1.8.0", "What the sweep found") -------------------------
