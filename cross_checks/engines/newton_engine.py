@@ -32,7 +32,7 @@ velocity and ω both in WORLD axes; ``body_f`` = ``[f, τ]`` — a world force a
 about the COM.
 The recorded quaternion is made sign-continuous from the scenario's initial one.
 
-The steps (each read in Newton 1.8.0's source; every one is semi-implicit Euler, first order):
+The steps (each read in Newton 1.8.0's source; every one first order):
 
 * ``SolverSemiImplicit`` (solvers/solver.py ``integrate_rigid_body``): ``v += Δt (f/m + g)``,
   ``x += Δt v⁺``; ``ω_B += Δt I⁻¹(τ_B − ω_B × I ω_B)`` in body axes at the start attitude
@@ -44,6 +44,12 @@ The steps (each read in Newton 1.8.0's source; every one is semi-implicit Euler,
   composite-rigid-body mass matrix and ``qdd = M⁻¹(τ − C)`` in world-origin spatial coordinates (the
   gyroscopic term in the bias force, explicit), then ``ω += Δt α``, ``v_COM += Δt a_COM``,
   ``q ← normalize(q + ½ Δt [ω⁺, 0] ⊗ q)``, ``x_COM += Δt v⁺_COM``.
+* ``SolverMuJoCo(use_mujoco_cpu=True)`` (solvers/mujoco/solver_mujoco.py ``step``), variant ``mujoco_cpu``:
+  Newton's float32 ``joint_q``/``joint_qd``/``body_f`` copied into MuJoCo C's MjData before every step,
+  ``mj_step`` (float64) with Newton's default integrator implicitfast (implicit gyroscopic term), and back to
+  float32. MuJoCo C takes one world: one body per model. Its autoreset is turned off (a blow-up would restart
+  from rest) and its warnings go to a handler during runs (no MUJOCO_LOG.TXT). It needs ``mujoco_warp``
+  installed (imported even on MuJoCo C; the extra pins it).
 
 Forces (harness semantics of base.py): Newton applies gravity itself (per world); every step the harness's
 world force at the COM minus the weight ``m g`` and the world torque go into ``State.body_f`` of the step's
