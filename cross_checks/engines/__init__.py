@@ -29,7 +29,7 @@ __all__ = ["ENTRY_POINT_GROUP", "VariantInfo", "EngineEntry", "all_variants", "a
 ENTRY_POINT_GROUP = "rbcheck.engines"
 #: rbcheck's own engines, in the order of `rbcheck list`; other engines follow by name.
 BUILTIN_ENGINES = ("reference", "mujoco", "pybullet", "drake", "dart", "jaxsim", "genesis", "brax", "mjx",
-                   "rapier", "physx", "mujoco_warp")
+                   "rapier", "physx", "mujoco_warp", "newton")
 #: The engines rbcheck depends on (pyproject.toml pins them): one that cannot run here is an error of the
 #: installation, never a variant quietly skipped. The others (Drake, engines to come) are optional extras.
 REQUIRED_ENGINES = ("reference", "mujoco", "pybullet")
