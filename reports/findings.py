@@ -166,8 +166,10 @@ def _expected_non_convergence(res, c) -> list:
             sample = [r for r in rs if r["engine"] == engines[0]]
             shown = [r for r in sample if r["quantity"] in ("position", "orientation")] or sample[:1]
             ranges = _error_ranges(shown)
-            text = (f"No variant converges on {sc} ({len(engines)} of {n_run}; "
-                    f"{_and(LABELS[q] for q in qs)}): {reason}. For example {engines[0]}: {ranges}.")
+            who = (f"No variant converges on {sc}" if len(engines) == n_run else
+                   f"{len(engines)} of the {n_run} variants ({_and(engines)}) do not converge on {sc}")
+            text = (f"{who} ({_and(LABELS[q] for q in qs)}, as expected): {reason}. "
+                    f"For example {engines[0]}: {ranges}.")
             explained.append(Finding("explained", text, sc, None))
         else:
             for eng in engines:

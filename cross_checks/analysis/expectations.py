@@ -329,7 +329,7 @@ def _free_running(scenario, variant: str, quantity: str, physics,
                        "; the spring or body-frame force carries that rotation error into the translation")
             return Expectation(
                 "does_not_converge", None,
-                "the course update has no gyroscopic term −ω × (I ω), which is not zero on this body "
+                "the update has no gyroscopic term −ω × (I ω), which is not zero on this body "
                 f"(anisotropic inertia, ω off the principal axes){coupled}")
     p = nominal_order(variant)
     if p is None:
