@@ -58,7 +58,7 @@ def long_runs(periods: float = 2000.0, dt_s: float = 0.01, spin_rad_s: float = 2
     intermediate axis, the same perturbation); each ``periods`` spin periods ``2π/spin`` long."""
     T = periods * 2.0 * math.pi / spin_rad_s
     n = int(round(T / dt_s))
-    body = RigidBody(1.0, list(_MOMENTS))
+    body = RigidBody(1.0, np.diag(np.asarray(_MOMENTS, dtype=float)))
     out = []
     for name, axis, what in (("major_axis_spin", 2, "a stable spin about the major axis (I₃ = 3)"),
                              ("minor_axis_spin", 0, "a stable spin about the minor axis (I₁ = 1)"),

@@ -65,12 +65,15 @@ def test_the_runs_own_defect_separates_every_correct_variant_from_the_wrong_buil
     """Measured on the runs themselves (what the sweep records as step_defect_ratio): every correct variant
     within its allowance at the coarsest and finest Δt of the ladder, the wrong builds far above it, and
     growing as 1/Δt (a wrong equation's O(Δt) defect over an allowance O(Δt²))."""
+    from cross_checks.analysis.expectations import traits
     from cross_checks.analysis.flow import run_local_defect
     from cross_checks.engines import available_variants, run_variant
     sc = load_scenario("spring_pendulum")
     coarse, fine = max(sc.dt_ladder_s), min(sc.dt_ladder_s)
     for v in [*gated_variants(), *(v for v in available_variants() if v.startswith("userengine:"))]:
-        wrong = v in ("userengine:no_rest_length", "userengine:inverse_inertia", "reference:course")
+        # the wrong builds, and every step declared without the gyroscopic term (the course, Rapier's option)
+        wrong = (v in ("userengine:no_rest_length", "userengine:inverse_inertia")
+                 or not traits(v).gyroscopic_term)
         r = {dt: run_local_defect(sc, run_variant(sc, v, dt).y, dt, max_rows=64)[0] for dt in (coarse, fine)}
         if wrong:
             assert r[coarse] > 5.0 and r[fine] / r[coarse] > 0.5 * coarse / fine, (v, r)

@@ -135,9 +135,9 @@ def test_reruns_are_bit_identical_across_engines(tmp_path, isolated_cache):
         texts.append(rows)
     assert texts[0] == texts[1]  # every digit of every metric, of every installed variant
     # the optional ones installed here
-    engines = {"reference", "mujoco", "pybullet"} | {e for e in ("drake", "dart")
-                                                     if any(v.startswith(e + ":")
-                                                            for v in available_variants())}
+    optional = ("drake", "dart", "rapier", "physx", "mujoco_warp")
+    have = {v.split(":")[0] for v in available_variants()}
+    engines = {"reference", "mujoco", "pybullet"} | {e for e in optional if e in have}
     assert {r["engine"].split(":")[0] for r in texts[0]} == engines
 
 
