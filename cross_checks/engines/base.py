@@ -109,6 +109,22 @@ class EngineNotInstalled(ImportError):
     """The engine's distribution is not installed at all (as opposed to installed and failing to import)."""
 
 
+def package_root(module: str) -> Path | None:
+    """The folder of the installed package ``module`` (dotted: its parent packages are imported, it is not),
+    or None where it is not installed: how an adapter lists the engine's sources for the cache key without
+    starting the engine (a sweep's parent must not start JAX or Warp before forking)."""
+    import importlib.util
+    try:
+        spec = importlib.util.find_spec(module)
+    except (ImportError, ValueError):
+        return None
+    if spec is None:
+        return None
+    if spec.submodule_search_locations:
+        return Path(next(iter(spec.submodule_search_locations)))
+    return Path(spec.origin).parent if spec.origin else None
+
+
 def installed_version(dist: str) -> str | None:
     """The installed version of distribution ``dist`` from its metadata (None when it is not installed)."""
     from importlib.metadata import PackageNotFoundError

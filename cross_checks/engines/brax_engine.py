@@ -81,7 +81,6 @@ import os
 import threading
 import time
 import warnings
-from pathlib import Path
 
 import numpy as np
 
@@ -97,6 +96,7 @@ from cross_checks.engines.base import (
     decay_factors,
     harness_force_torque,
     installed_version,
+    package_root,
 )
 from cross_checks.engines.step_floats import harness_fn
 from reference_sim.quaternion import quat_conj, rotate
@@ -576,11 +576,9 @@ class BraxAdapter(EngineAdapter):
 
     def source_files(self) -> list:
         """This module and brax's pipeline sources (found without importing brax)."""
-        import importlib.util
         files = list(super().source_files())
-        spec = importlib.util.find_spec("brax")
-        if spec is not None and spec.origin:
-            root = Path(spec.origin).parent
+        root = package_root("brax")
+        if root is not None:
             files += [root / d / f for d in ("generalized", "positional", "spring")
                       for f in ("pipeline.py", "integrator.py")]
         return files

@@ -81,6 +81,7 @@ from cross_checks.engines.base import (
     decay_factors,
     harness_force_torque,
     installed_version,
+    package_root,
 )
 from cross_checks.engines.step_floats import harness_fn
 from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
@@ -550,14 +551,11 @@ class MjxAdapter(EngineAdapter):
     def source_files(self) -> list:
         """This module, the plain-float harness and mujoco_engine's model builder it uses, and MJX's Python
         sources (found without importing them: the parent of a sweep must not start JAX)."""
-        import importlib.util
-
         from cross_checks.engines import mujoco_engine, step_floats
         files = [*super().source_files(), Path(step_floats.__file__), Path(mujoco_engine.__file__)]
-        spec = importlib.util.find_spec("mujoco.mjx")
-        if spec is not None and spec.origin:
-            src = Path(spec.origin).parent / "_src"
-            files += sorted(p for p in src.glob("*.py") if not p.name.endswith("_test.py"))
+        root = package_root("mujoco.mjx")
+        if root is not None:
+            files += sorted(p for p in (root / "_src").glob("*.py") if not p.name.endswith("_test.py"))
         return files
 
     def simulate(self, scenario, variant: str, dt_s: float, n_steps: int) -> Run:

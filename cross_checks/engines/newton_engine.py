@@ -101,6 +101,7 @@ from cross_checks.engines.base import (
     Variant,
     decay_factors,
     installed_version,
+    package_root,
 )
 from cross_checks.engines.step_floats import harness_fn
 from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
@@ -603,13 +604,11 @@ class NewtonAdapter(EngineAdapter):
     def source_files(self) -> list:
         """This module, the plain-float harness its loop runs, and Newton's solver sources (found without
         importing Newton or Warp)."""
-        import importlib.util
-
         from cross_checks.engines import step_floats
         files = [*super().source_files(), Path(step_floats.__file__)]
-        spec = importlib.util.find_spec("newton")
-        if spec is not None and spec.origin:
-            src = Path(spec.origin).parent / "_src"
+        root = package_root("newton")
+        if root is not None:
+            src = root / "_src"
             for sub in ("solvers/solver.py", "solvers/semi_implicit", "solvers/xpbd", "solvers/featherstone",
                         "solvers/mujoco",
                         "sim/builder.py", "sim/model.py", "sim/state.py"):
