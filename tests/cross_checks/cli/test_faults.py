@@ -10,6 +10,7 @@ import pytest
 
 from cross_checks.cli import main
 from cross_checks.scenario import load_scenario
+from reference_sim.compiled import VARIANT_CODES
 
 TINY = """
 name = "{name}"
@@ -49,13 +50,16 @@ def test_real_sigint_keeps_previous_results_and_the_rerun_reuses_finished_runs(t
     out, cache = tmp_path / "res", tmp_path / "cache"
     env = {**os.environ, "RBCHECK_CACHE_DIR": str(cache), "MPLBACKEND": "Agg"}
     base = [sys.executable, "-m", "cross_checks.cli", "sweep", "--jobs", "2", "--out", str(out)]
-    cmd = base + files + ["--engines", "reference"]  # --engines takes several values: keep it last
+    # the compiled textbook schemes (the interrupt, not the variants, is under test); --engines takes several
+    # values: keep it last
+    engines = ["--engines", *(f"reference:{v}" for v in VARIANT_CODES)]
+    cmd = base + files + engines
     first = subprocess.run(base + [files[0], "--engines", "reference:course"], env=env, capture_output=True,
                            text=True, timeout=300)
     assert first.returncode == 0, first.stderr
     before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
 
-    proc = subprocess.Popen(base + ["--no-cache"] + files + ["--engines", "reference"], env=env,
+    proc = subprocess.Popen(base + ["--no-cache"] + files + engines, env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     deadline = time.time() + 120
     while time.time() < deadline and len(list(cache.rglob("*.npz"))) < 8:  # some runs finished and cached
