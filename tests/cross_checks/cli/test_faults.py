@@ -43,7 +43,7 @@ velocity = [1.0, 0.0, 0.0]
 
 def test_real_sigint_keeps_previous_results_and_the_rerun_reuses_finished_runs(tmp_path):
     files = []
-    for i in range(3):
+    for i in range(12):   # enough runs of the fast compiled schemes to be still running at the interrupt
         f = tmp_path / f"spin_{i}.toml"
         f.write_text(TINY.format(name=f"spin_{i}"))
         files.append(str(f))
