@@ -61,8 +61,9 @@ def test_real_sigint_keeps_previous_results_and_the_rerun_reuses_finished_runs(t
 
     proc = subprocess.Popen(base + ["--no-cache"] + files + engines, env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    old = set(cache.rglob("*.npz"))   # the first sweep's: only runs of THIS sweep count below
     deadline = time.time() + 120
-    while time.time() < deadline and len(list(cache.rglob("*.npz"))) < 8:  # some runs finished and cached
+    while time.time() < deadline and len(set(cache.rglob("*.npz")) - old) < 8:  # some runs finished, cached
         time.sleep(0.1)
     os.killpg(proc.pid, signal.SIGINT)  # what Ctrl-C in a terminal does: the whole process group
     _, err = proc.communicate(timeout=120)
