@@ -50,8 +50,10 @@ from __future__ import annotations
 
 import abc
 import functools
+import importlib
 import inspect
 import math
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -62,7 +64,7 @@ __all__ = ["EngineAdapter", "Variant", "harness_force_torque", "stage_force_torq
            "decay_factors", "EngineError", "optional_import", "require", "EngineNotInstalled",
            "installed_version", "library_files", "RunRequest", "Traits",
            "SYMPLECTIC_EULER_EXPLICIT_GYRO", "SYMPLECTIC_EULER_IMPLICIT_GYRO", "WHOLE_STATE_EXPLICIT_EULER",
-           "WHOLE_STATE_IMPLICIT_EULER", "HIGHER_ORDER", "DEFAULT_TRAITS"]
+           "WHOLE_STATE_IMPLICIT_EULER", "HIGHER_ORDER", "DEFAULT_TRAITS", "ModuleAdapter", "package_files"]
 
 
 class EngineError(RuntimeError):
@@ -425,3 +427,58 @@ class EngineAdapter(abc.ABC):
             return [Path(inspect.getsourcefile(type(self)))]
         except (TypeError, OSError):
             return []
+
+
+def package_files(module: str, *parts: str, pattern: str = "*.py") -> list:
+    """The files matching ``pattern`` in the folders ``parts`` (paths relative to the installed package
+    ``module``, found by :func:`package_root` without importing it; a part naming a file is taken as it is;
+    ``*_test.py`` left out), sorted; [] where the package is not installed. With no ``parts``: the package
+    folder itself."""
+    root = package_root(module)
+    if root is None:
+        return []
+    files: list = []
+    for part in parts or ("",):
+        p = root / part
+        found = sorted(p.glob(pattern)) if p.is_dir() else [p] if p.is_file() else []
+        files += [f for f in found if not f.name.endswith("_test.py")]
+    return files
+
+
+class ModuleAdapter(EngineAdapter):
+    """An adapter whose engine is the functions of the module defining the class — ``version()``,
+    ``simulate(scenario, variant, dt_s, n_steps)``, ``one_step(scenario, variant, dt_s, y_start)`` and,
+    where the engine batches, ``simulate_many(variant, requests)`` — as every built-in adapter is written.
+    The methods look the functions up when called.
+
+    :meth:`source_files` is the module, the modules of ``harness`` (dotted names of the code its loops run
+    besides its own, e.g. the plain-float harness ``cross_checks.engines.step_floats``), and
+    :meth:`engine_files` (the engine's own files: override it).
+    """
+
+    #: Dotted names of the modules besides the adapter's own whose code decides its results.
+    harness: tuple = ()
+
+    def _engine(self):
+        return sys.modules[type(self).__module__]
+
+    def version(self) -> str:
+        return self._engine().version()
+
+    def simulate(self, scenario, variant: str, dt_s: float, n_steps: int):
+        return self._engine().simulate(scenario, variant, dt_s, n_steps)
+
+    def simulate_many(self, variant: str, requests) -> list:
+        batched = getattr(self._engine(), "simulate_many", None)
+        return super().simulate_many(variant, requests) if batched is None else batched(variant, requests)
+
+    def one_step(self, scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
+        return self._engine().one_step(scenario, variant, dt_s, y_start)
+
+    def engine_files(self) -> list:
+        """The engine's files (sources or compiled libraries) whose content decides its results; [] here."""
+        return []
+
+    def source_files(self) -> list:
+        harness = [Path(importlib.import_module(m).__file__ or "") for m in self.harness]
+        return [*super().source_files(), *harness, *self.engine_files()]

@@ -87,16 +87,16 @@ import numpy as np
 from cross_checks.core.files import kernel_cache_dir
 from cross_checks.engines.base import (
     SYMPLECTIC_EULER_EXPLICIT_GYRO,
-    EngineAdapter,
     EngineError,
     EngineNotInstalled,
+    ModuleAdapter,
     RunRequest,
     Traits,
     Variant,
     decay_factors,
     harness_force_torque,
     installed_version,
-    package_root,
+    package_files,
 )
 from cross_checks.engines.step_floats import harness_fn
 from reference_sim.quaternion import quat_conj, rotate
@@ -563,7 +563,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     return y.reshape(shape)
 
 
-class BraxAdapter(EngineAdapter):
+class BraxAdapter(ModuleAdapter):
     """``brax:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
     (``pip install 'rbcheck[brax]'``). Declared orders: each pipeline is a semi-implicit Euler step, first
     order."""
@@ -571,17 +571,10 @@ class BraxAdapter(EngineAdapter):
     name = ENGINE
     variants = VARIANTS
 
-    def version(self) -> str:
-        return version()
-
-    def source_files(self) -> list:
-        """This module and brax's pipeline sources (found without importing brax)."""
-        files = list(super().source_files())
-        root = package_root("brax")
-        if root is not None:
-            files += [root / d / f for d in ("generalized", "positional", "spring")
-                      for f in ("pipeline.py", "integrator.py")]
-        return files
+    def engine_files(self) -> list:
+        """brax's pipeline sources (found without importing brax)."""
+        return package_files("brax", *(f"{d}/{f}" for d in ("generalized", "positional", "spring")
+                                       for f in ("pipeline.py", "integrator.py")))
 
     @property
     def compile_seconds(self) -> dict:
@@ -592,12 +585,3 @@ class BraxAdapter(EngineAdapter):
         """Positional and spring take no force but gravity (:func:`expressible`); the harness's forces at the
         scenario's Δt decide (a constant force is the same at every Δt)."""
         return expressible(scenario, variant, scenario.dt_s)
-
-    def simulate(self, scenario, variant: str, dt_s: float, n_steps: int) -> Run:
-        return simulate(scenario, variant, dt_s, n_steps)
-
-    def simulate_many(self, variant: str, requests) -> list:
-        return simulate_many(variant, requests)
-
-    def one_step(self, scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
-        return one_step(scenario, variant, dt_s, y_start)

@@ -52,8 +52,8 @@ import numpy as np
 
 from cross_checks.engines.base import (
     SYMPLECTIC_EULER_EXPLICIT_GYRO,
-    EngineAdapter,
     EngineError,
+    ModuleAdapter,
     Variant,
     apply_decay_prestep,
     decay_factors,
@@ -295,26 +295,14 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     return y.reshape(shape)
 
 
-class DartAdapter(EngineAdapter):
+class DartAdapter(ModuleAdapter):
     """``dart:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
     (``pip install 'rbcheck[dart]'``). Declared order: DART's semi-implicit Euler is first order."""
 
     name = ENGINE
     variants = VARIANTS
+    harness = ("cross_checks.engines.step_floats",)
 
-    def version(self) -> str:
-        return version()
-
-    def source_files(self) -> list:
-        """This module, the plain-float harness its loop runs, and dartpy's compiled module (a rebuilt or
-        reinstalled dartpy is a new engine)."""
-        from pathlib import Path
-
-        from cross_checks.engines import step_floats
-        return [*super().source_files(), Path(step_floats.__file__), *library_files(dart)]
-
-    def simulate(self, scenario, variant: str, dt_s: float, n_steps: int) -> Run:
-        return simulate(scenario, variant, dt_s, n_steps)
-
-    def one_step(self, scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
-        return one_step(scenario, variant, dt_s, y_start)
+    def engine_files(self) -> list:
+        """dartpy's compiled module (a rebuilt or reinstalled dartpy is a new engine)."""
+        return library_files(dart)

@@ -37,8 +37,8 @@ from cross_checks.engines.base import (
     HIGHER_ORDER,
     SYMPLECTIC_EULER_EXPLICIT_GYRO,
     WHOLE_STATE_IMPLICIT_EULER,
-    EngineAdapter,
     EngineError,
+    ModuleAdapter,
     Variant,
     library_files,
     require,
@@ -300,7 +300,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     return out.reshape(shape)
 
 
-class DrakeAdapter(EngineAdapter):
+class DrakeAdapter(ModuleAdapter):
     """``drake:VARIANT`` — registered under the entry-point group ``rbcheck.engines``.
 
     Declared orders: semi-explicit Euler and implicit Euler are first order; Drake's RK2 and RK3 are
@@ -310,15 +310,6 @@ class DrakeAdapter(EngineAdapter):
     name = ENGINE
     variants = {v: Variant(float(order), desc, traits=TRAITS[v]) for v, (_, order, desc) in VARIANTS.items()}
 
-    def version(self) -> str:
-        return version()
-
-    def source_files(self) -> list:
-        """This module and Drake's shared libraries (a rebuilt or reinstalled libdrake.so is a new engine)."""
-        return [*super().source_files(), *library_files(pydrake)]
-
-    def simulate(self, scenario, variant: str, dt_s: float, n_steps: int) -> Run:
-        return simulate(scenario, variant, dt_s, n_steps)
-
-    def one_step(self, scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
-        return one_step(scenario, variant, dt_s, y_start)
+    def engine_files(self) -> list:
+        """Drake's shared libraries (a rebuilt or reinstalled libdrake.so is a new engine)."""
+        return library_files(pydrake)

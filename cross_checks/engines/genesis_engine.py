@@ -73,8 +73,8 @@ from cross_checks.core import files
 from cross_checks.engines import base
 from cross_checks.engines.base import (
     SYMPLECTIC_EULER_EXPLICIT_GYRO,
-    EngineAdapter,
     EngineError,
+    ModuleAdapter,
     Traits,
     Variant,
     apply_decay_prestep,
@@ -592,31 +592,17 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
         return to_packed(qpos, vel).reshape(shape)
 
 
-class GenesisAdapter(EngineAdapter):
+class GenesisAdapter(ModuleAdapter):
     """``genesis:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional (``pip
     install 'rbcheck[genesis]'``). Declared orders: every variant is first order in the translation."""
 
     name = ENGINE
     variants = VARIANTS
+    harness = ("cross_checks.engines.step_floats",)
 
-    def version(self) -> str:
-        return version()
-
-    def source_files(self) -> list:
-        """This module, the plain-float harness its loop runs, and Genesis's rigid solver sources (read from
-        the installed distribution without importing it)."""
-        from cross_checks.engines import step_floats
-
-        return [*super().source_files(), Path(step_floats.__file__), *_genesis_files()]
-
-    def simulate(self, scenario, variant: str, dt_s: float, n_steps: int) -> Run:
-        return simulate(scenario, variant, dt_s, n_steps)
-
-    def simulate_many(self, variant: str, requests) -> list:
-        return simulate_many(variant, requests)
-
-    def one_step(self, scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
-        return one_step(scenario, variant, dt_s, y_start)
+    def engine_files(self) -> list:
+        """Genesis's rigid solver sources (read from the installed distribution without importing it)."""
+        return list(_genesis_files())
 
 
 @functools.lru_cache(maxsize=1)

@@ -97,13 +97,14 @@ from cross_checks.core.files import kernel_cache_dir
 from cross_checks.engines.base import (
     HIGHER_ORDER,
     SYMPLECTIC_EULER_EXPLICIT_GYRO,
-    EngineAdapter,
     EngineError,
     EngineNotInstalled,
+    ModuleAdapter,
     Variant,
     decay_factors,
     installed_version,
     optional_import,
+    package_files,
     require,
 )
 from cross_checks.engines.step_floats import harness_fn
@@ -495,15 +496,13 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     return out.reshape(shape)
 
 
-class JaxsimAdapter(EngineAdapter):
+class JaxsimAdapter(ModuleAdapter):
     """``jaxsim:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
     (``pip install 'rbcheck[jaxsim]'``). Declared orders: semi-implicit Euler 1, RK4 4 (its forces held)."""
 
     name = ENGINE
     variants = VARIANTS
-
-    def version(self) -> str:
-        return version()
+    harness = ("cross_checks.engines.step_floats",)
 
     @property
     def compile_seconds(self) -> float:
@@ -513,28 +512,6 @@ class JaxsimAdapter(EngineAdapter):
     def timings(self) -> dict:
         return timings()
 
-    def source_files(self) -> list:
-        """This module, the plain-float harness its callback runs, and jaxsim's Python files (found without
-        importing it: a changed jaxsim is a new engine)."""
-        import importlib.util
-
-        from cross_checks.engines import step_floats
-
-        files = [*super().source_files(), Path(step_floats.__file__)]
-        try:
-            spec = importlib.util.find_spec("jaxsim")
-        except (ImportError, ValueError):
-            spec = None
-        if spec is not None and spec.submodule_search_locations:
-            root = Path(next(iter(spec.submodule_search_locations)))
-            files += sorted(p for p in root.rglob("*.py") if p.is_file())
-        return files
-
-    def simulate(self, scenario, variant: str, dt_s: float, n_steps: int) -> Run:
-        return simulate(scenario, variant, dt_s, n_steps)
-
-    def simulate_many(self, variant: str, requests) -> list:
-        return simulate_many(variant, requests)
-
-    def one_step(self, scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
-        return one_step(scenario, variant, dt_s, y_start)
+    def engine_files(self) -> list:
+        """jaxsim's Python files (found without importing it: a changed jaxsim is a new engine)."""
+        return package_files("jaxsim", pattern="**/*.py")

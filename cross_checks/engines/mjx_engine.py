@@ -71,9 +71,9 @@ import numpy as np
 from cross_checks.core.files import kernel_cache_dir
 from cross_checks.engines.base import (
     SYMPLECTIC_EULER_EXPLICIT_GYRO,
-    EngineAdapter,
     EngineError,
     EngineNotInstalled,
+    ModuleAdapter,
     RunRequest,
     Traits,
     Variant,
@@ -81,7 +81,7 @@ from cross_checks.engines.base import (
     decay_factors,
     harness_force_torque,
     installed_version,
-    package_root,
+    package_files,
 )
 from cross_checks.engines.step_floats import harness_fn
 from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
@@ -537,33 +537,16 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
         return to_packed(out[:, 0:7], out[:, 7:13]).reshape(shape)
 
 
-class MjxAdapter(EngineAdapter):
+class MjxAdapter(ModuleAdapter):
     """``mjx:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
     (``pip install 'rbcheck[mjx]'``). Declared orders: Euler and implicitfast 1, RK4 4 (first order where the
-    forces change within a step: they are held over its stages)."""
+    forces change within a step: they are held over its stages). :func:`simulate_many` vmaps the requests
+    through one compiled loop per model structure."""
 
     name = ENGINE
     variants = VARIANTS
+    harness = ("cross_checks.engines.step_floats", "cross_checks.engines.mujoco_engine")
 
-    def version(self) -> str:
-        return version()
-
-    def source_files(self) -> list:
-        """This module, the plain-float harness and mujoco_engine's model builder it uses, and MJX's Python
-        sources (found without importing them: the parent of a sweep must not start JAX)."""
-        from cross_checks.engines import mujoco_engine, step_floats
-        files = [*super().source_files(), Path(step_floats.__file__), Path(mujoco_engine.__file__)]
-        root = package_root("mujoco.mjx")
-        if root is not None:
-            files += sorted(p for p in (root / "_src").glob("*.py") if not p.name.endswith("_test.py"))
-        return files
-
-    def simulate(self, scenario, variant: str, dt_s: float, n_steps: int) -> Run:
-        return simulate(scenario, variant, dt_s, n_steps)
-
-    def simulate_many(self, variant: str, requests) -> list:
-        """:func:`simulate_many`: the requests vmapped through one compiled loop per model structure."""
-        return simulate_many(variant, requests)
-
-    def one_step(self, scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
-        return one_step(scenario, variant, dt_s, y_start)
+    def engine_files(self) -> list:
+        """MJX's Python sources (found without importing them: the parent of a sweep must not start JAX)."""
+        return package_files("mujoco.mjx", "_src")

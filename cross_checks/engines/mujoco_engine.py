@@ -27,7 +27,6 @@ it was raised in, as does a non-finite state or a component beyond BLOWUP_LIMIT.
 from __future__ import annotations
 
 import threading
-from pathlib import Path
 
 import numpy as np
 
@@ -35,8 +34,8 @@ from cross_checks.engines.base import (
     HIGHER_ORDER,
     SYMPLECTIC_EULER_EXPLICIT_GYRO,
     SYMPLECTIC_EULER_IMPLICIT_GYRO,
-    EngineAdapter,
     EngineError,
+    ModuleAdapter,
     Variant,
     apply_decay_prestep,
     decay_factors,
@@ -585,20 +584,14 @@ def _rollout_steps(reqs, mods, datas, state, xfrc, per_step, g, weights, qpos, q
         runner.close()
 
 
-class MujocoAdapter(EngineAdapter):
-    """``mujoco:VARIANT`` — registered under the entry-point group ``rbcheck.engines``."""
+class MujocoAdapter(ModuleAdapter):
+    """``mujoco:VARIANT`` — registered under the entry-point group ``rbcheck.engines``;
+    :func:`simulate_many` runs the requests through ``mujoco.rollout``."""
 
     name = ENGINE
     variants = VARIANTS
-    version = staticmethod(version)
-    simulate = staticmethod(simulate)
-    one_step = staticmethod(one_step)
+    harness = ("cross_checks.engines.step_floats",)
 
-    def simulate_many(self, variant: str, requests) -> list:
-        """:func:`simulate_many`: the requests' runs through ``mujoco.rollout``."""
-        return simulate_many(variant, requests)
-
-    def source_files(self) -> list:
-        """This module and the plain-float per-step code its loops run (hashed into the cache key)."""
-        from cross_checks.engines import step_floats
-        return [*super().source_files(), Path(step_floats.__file__), *library_files(mujoco)]
+    def engine_files(self) -> list:
+        """MuJoCo's shared library."""
+        return library_files(mujoco)

@@ -71,7 +71,6 @@ import functools
 import os
 import threading
 import time
-from pathlib import Path
 
 import numpy as np
 
@@ -79,16 +78,16 @@ from cross_checks.core.files import kernel_cache_dir
 from cross_checks.engines.base import (
     SYMPLECTIC_EULER_EXPLICIT_GYRO,
     SYMPLECTIC_EULER_IMPLICIT_GYRO,
-    EngineAdapter,
     EngineError,
     EngineNotInstalled,
+    ModuleAdapter,
     RunRequest,
     Traits,
     Variant,
     apply_decay_prestep,
     decay_factors,
     installed_version,
-    package_root,
+    package_files,
 )
 from cross_checks.engines.step_floats import harness_fn
 from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
@@ -588,33 +587,17 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     return out.reshape(shape)
 
 
-class MujocoWarpAdapter(EngineAdapter):
+class MujocoWarpAdapter(ModuleAdapter):
     """``mujoco_warp:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
     (``pip install 'rbcheck[mujoco_warp]'``). Float32 on Warp's CPU device. Declared orders: Euler and the
-    implicit family 1, RK4 4 (its forces evaluated per stage)."""
+    implicit family 1, RK4 4 (its forces evaluated per stage). :func:`simulate_many` runs a scenario's
+    requests as the worlds of one captured batch."""
 
     name = ENGINE
     variants = VARIANTS
+    harness = ("cross_checks.engines.step_floats", "cross_checks.engines.mujoco_engine")
 
-    def version(self) -> str:
-        return version()
-
-    def source_files(self) -> list:
-        """This module, the plain-float harness and mujoco_engine's model builder it uses, and mujoco_warp's
-        Python sources (found without importing them: the parent of a sweep must not start Warp)."""
-        from cross_checks.engines import mujoco_engine, step_floats
-        files = [*super().source_files(), Path(step_floats.__file__), Path(mujoco_engine.__file__)]
-        root = package_root("mujoco_warp")
-        if root is not None:
-            files += sorted(p for p in (root / "_src").glob("*.py") if not p.name.endswith("_test.py"))
-        return files
-
-    def simulate(self, scenario, variant: str, dt_s: float, n_steps: int) -> Run:
-        return simulate(scenario, variant, dt_s, n_steps)
-
-    def simulate_many(self, variant: str, requests) -> list:
-        """:func:`simulate_many`: a scenario's requests as the worlds of one captured batch."""
-        return simulate_many(variant, requests)
-
-    def one_step(self, scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
-        return one_step(scenario, variant, dt_s, y_start)
+    def engine_files(self) -> list:
+        """mujoco_warp's Python sources (found without importing them: the parent of a sweep must not start
+        Warp)."""
+        return package_files("mujoco_warp", "_src")

@@ -87,21 +87,20 @@ import sys
 import threading
 import time
 import warnings
-from pathlib import Path
 
 import numpy as np
 
 from cross_checks.core.files import kernel_cache_dir
 from cross_checks.engines.base import (
-    EngineAdapter,
     EngineError,
     EngineNotInstalled,
+    ModuleAdapter,
     RunRequest,
     Traits,
     Variant,
     decay_factors,
     installed_version,
-    package_root,
+    package_files,
 )
 from cross_checks.engines.step_floats import harness_fn
 from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
@@ -591,37 +590,17 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     return out.reshape(shape)
 
 
-class NewtonAdapter(EngineAdapter):
+class NewtonAdapter(ModuleAdapter):
     """``newton:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
-    (``pip install 'rbcheck[newton]'``). Every variant is first order (semi-implicit Euler) and float32."""
+    (``pip install 'rbcheck[newton]'``). Every variant is first order (semi-implicit Euler) and float32.
+    :func:`simulate_many` steps the requests of one Δt together in one model."""
 
     name = ENGINE
     variants = VARIANTS
+    harness = ("cross_checks.engines.step_floats",)
 
-    def version(self) -> str:
-        return version()
-
-    def source_files(self) -> list:
-        """This module, the plain-float harness its loop runs, and Newton's solver sources (found without
-        importing Newton or Warp)."""
-        from cross_checks.engines import step_floats
-        files = [*super().source_files(), Path(step_floats.__file__)]
-        root = package_root("newton")
-        if root is not None:
-            src = root / "_src"
-            for sub in ("solvers/solver.py", "solvers/semi_implicit", "solvers/xpbd", "solvers/featherstone",
-                        "solvers/mujoco",
-                        "sim/builder.py", "sim/model.py", "sim/state.py"):
-                p = src / sub
-                files += sorted(p.glob("*.py")) if p.is_dir() else [p]
-        return files
-
-    def simulate(self, scenario, variant: str, dt_s: float, n_steps: int) -> Run:
-        return simulate(scenario, variant, dt_s, n_steps)
-
-    def simulate_many(self, variant: str, requests) -> list:
-        """:func:`simulate_many`: the requests of one Δt stepped together in one model."""
-        return simulate_many(variant, requests)
-
-    def one_step(self, scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
-        return one_step(scenario, variant, dt_s, y_start)
+    def engine_files(self) -> list:
+        """Newton's solver sources (found without importing Newton or Warp)."""
+        return package_files("newton", *(f"_src/{p}" for p in (
+            "solvers/solver.py", "solvers/semi_implicit", "solvers/xpbd", "solvers/featherstone",
+            "solvers/mujoco", "sim/builder.py", "sim/model.py", "sim/state.py")))

@@ -80,15 +80,16 @@ from pathlib import Path
 import numpy as np
 
 from cross_checks.engines.base import (
-    EngineAdapter,
     EngineError,
     EngineNotInstalled,
+    ModuleAdapter,
     RunRequest,
     Traits,
     Variant,
     apply_decay_prestep,
     decay_factors,
     installed_version,
+    package_files,
 )
 from cross_checks.engines.step_floats import harness_fn
 from reference_sim.simulate import BLOWUP_LIMIT, Run, blowup_words, diverged
@@ -478,40 +479,17 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     return out.reshape(shape)
 
 
-class PhysxAdapter(EngineAdapter):
+class PhysxAdapter(ModuleAdapter):
     """``physx:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
     (``pip install 'rbcheck[physx]'``). Declared orders: both solvers run PhysX's semi-implicit Euler step
-    on a free body: first order, float32."""
+    on a free body: first order, float32. :func:`simulate_many` steps runs of one Δt and gravity together in
+    one scene."""
 
     name = ENGINE
     variants = VARIANTS
+    harness = ("cross_checks.engines.step_floats",)
 
-    def version(self) -> str:
-        return version()
-
-    def source_files(self) -> list:
-        """This module, the plain-float harness its loop runs, and SAPIEN's compiled module and bundled
-        library (PhysX is linked into them)."""
-        import importlib.util
-
-        from cross_checks.engines import step_floats
-        files = [*super().source_files(), Path(step_floats.__file__)]
-        spec = importlib.util.find_spec("sapien")
-        if spec is not None and spec.origin:
-            root = Path(spec.origin).parent
-            files += sorted(root.glob("pysapien*.so"))
-            libs = root.parent / "sapien.libs"
-            if libs.is_dir():
-                files += sorted(p for p in libs.iterdir() if p.name.startswith("libsapien"))
-        return files
-
-    def simulate(self, scenario, variant: str, dt_s: float, n_steps: int) -> Run:
-        return simulate(scenario, variant, dt_s, n_steps)
-
-    def simulate_many(self, variant: str, requests) -> list:
-        """:func:`simulate_many`: runs of one Δt and gravity stepped together in one scene."""
-        return simulate_many(variant, requests)
-
-    def one_step(self, scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
-        return one_step(scenario, variant, dt_s, y_start)
-
+    def engine_files(self) -> list:
+        """SAPIEN's compiled module and bundled library (PhysX is linked into them)."""
+        return [*package_files("sapien", pattern="pysapien*.so"),
+                *package_files("sapien", "../sapien.libs", pattern="libsapien*")]

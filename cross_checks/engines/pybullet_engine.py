@@ -33,15 +33,14 @@ from __future__ import annotations
 import functools
 import os
 import threading
-from pathlib import Path
 
 import numpy as np
 
 from cross_checks.engines.base import (
     SYMPLECTIC_EULER_EXPLICIT_GYRO,
     SYMPLECTIC_EULER_IMPLICIT_GYRO,
-    EngineAdapter,
     EngineError,
+    ModuleAdapter,
     Variant,
     apply_decay_prestep,
     decay_factors,
@@ -370,20 +369,14 @@ def _one_steps(B, scenario, dt_s: float, y_start) -> np.ndarray:
     return B.raw_to_packed(out)
 
 
-class PybulletAdapter(EngineAdapter):
-    """``pybullet:VARIANT`` — registered under the entry-point group ``rbcheck.engines``."""
+class PybulletAdapter(ModuleAdapter):
+    """``pybullet:VARIANT`` — registered under the entry-point group ``rbcheck.engines``;
+    :func:`simulate_many` runs the requests on kept bodies."""
 
     name = ENGINE
     variants = VARIANTS
-    version = staticmethod(version)
-    simulate = staticmethod(simulate)
-    one_step = staticmethod(one_step)
+    harness = ("cross_checks.engines.step_floats",)
 
-    def simulate_many(self, variant: str, requests) -> list:
-        """:func:`simulate_many`: the requests' runs on kept bodies."""
-        return simulate_many(variant, requests)
-
-    def source_files(self) -> list:
-        """This module and the plain-float per-step code its loops run (hashed into the cache key)."""
-        from cross_checks.engines import step_floats
-        return [*super().source_files(), Path(step_floats.__file__), *library_files(p)]
+    def engine_files(self) -> list:
+        """PyBullet's compiled module."""
+        return library_files(p)

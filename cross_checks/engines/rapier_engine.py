@@ -60,8 +60,8 @@ import time
 import numpy as np
 
 from cross_checks.engines.base import (
-    EngineAdapter,
     EngineError,
+    ModuleAdapter,
     RunRequest,
     Traits,
     Variant,
@@ -404,33 +404,15 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     return out.reshape(shape)
 
 
-class RapierAdapter(EngineAdapter):
+class RapierAdapter(ModuleAdapter):
     """``rapier:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
-    (``pip install 'rbcheck[rapier]'``). Declared order: Rapier's symplectic Euler is first order; float32."""
+    (``pip install 'rbcheck[rapier]'``). Declared order: Rapier's symplectic Euler is first order; float32.
+    :func:`simulate_many` runs the requests of one Δt and gravity as bodies of one world."""
 
     name = ENGINE
     variants = VARIANTS
+    harness = ("cross_checks.engines.step_floats",)
 
-    def version(self) -> str:
-        return version()
-
-    def source_files(self) -> list:
-        """This module, the plain-float harness its loop runs, and rapier3d's compiled module (a rebuilt or
-        reinstalled wheel is a new engine)."""
-        from pathlib import Path
-
-        from cross_checks.engines import step_floats
-        files = [*super().source_files(), Path(step_floats.__file__)]
-        if rapier is not None:
-            files += library_files(getattr(rapier, "_rapier3d", None))
-        return files
-
-    def simulate(self, scenario, variant: str, dt_s: float, n_steps: int) -> Run:
-        return simulate(scenario, variant, dt_s, n_steps)
-
-    def simulate_many(self, variant: str, requests) -> list:
-        """:func:`simulate_many`: the requests of one Δt and gravity as bodies of one world."""
-        return simulate_many(variant, requests)
-
-    def one_step(self, scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
-        return one_step(scenario, variant, dt_s, y_start)
+    def engine_files(self) -> list:
+        """rapier3d's compiled module (a rebuilt or reinstalled wheel is a new engine)."""
+        return [] if rapier is None else library_files(getattr(rapier, "_rapier3d", None))

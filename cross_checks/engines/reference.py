@@ -5,7 +5,7 @@ import numpy as np
 
 import reference_sim
 from cross_checks.engines import base as B
-from cross_checks.engines.base import EngineAdapter, Variant
+from cross_checks.engines.base import ModuleAdapter, Variant
 from reference_sim.forces import Members
 from reference_sim.integrators import VARIANTS as SCHEMES
 from reference_sim.integrators import ImplicitSolveError, get_step
@@ -69,14 +69,8 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
             return np.full(np.shape(y_start), np.nan)
 
 
-class ReferenceAdapter(EngineAdapter):
+class ReferenceAdapter(ModuleAdapter):
     """``reference:VARIANT`` — registered under the entry-point group ``rbcheck.engines``."""
 
     name = ENGINE
     variants = VARIANTS
-    version = staticmethod(version)
-    simulate = staticmethod(simulate)
-    one_step = staticmethod(one_step)
-
-    def simulate_many(self, variant: str, requests) -> list:
-        return simulate_many(variant, requests)
