@@ -30,6 +30,7 @@ __all__ = [
     "rotate",
     "geodesic_angle",
     "quat_canonical",
+    "sign_continuous",
     "euler_zxy_from_quat",
     "quat_from_euler_zxy",
 ]
@@ -172,6 +173,20 @@ def quat_canonical(q):
     lead = np.take_along_axis(q, first[..., None], axis=-1)[..., 0]
     sign = np.where(lead < 0.0, -1.0, 1.0)
     return q * sign[..., None]
+
+
+def sign_continuous(q, first=None):
+    """Quaternion rows ``q`` (N, 4) with each row's sign chosen to follow the row before (``q`` and ``−q`` are
+    the same orientation: a jump between them is no motion), the first row's to follow ``first`` when given:
+    the same rotations as one continuous curve. A row whose dot product is not finite keeps its sign."""
+    q = np.array(q, dtype=float, copy=True)
+    if not len(q):
+        return q
+    with np.errstate(invalid="ignore"):
+        dots = np.einsum("ij,ij->i", q[1:], q[:-1])
+        head = -1.0 if first is not None and float(np.dot(q[0], np.asarray(first, dtype=float))) < 0 else 1.0
+    step = np.where(dots < 0, -1.0, 1.0)
+    return q * np.cumprod(np.concatenate([[head], step]))[:, None]
 
 
 def geodesic_angle(q_ref, q):

@@ -45,6 +45,7 @@ from matplotlib.ticker import FixedFormatter, FixedLocator, LogFormatter, LogLoc
 from matplotlib.transforms import offset_copy
 
 from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, UNITS
+from reference_sim.quaternion import sign_continuous
 from reports.data import LABELS
 from reports.glance import families, order_text
 
@@ -472,18 +473,6 @@ def _moving_components(ser):
         else:
             still.append(f"{label.split()[0]} = {float(vals[0]) if vals.size else 0.0:.3g}")
     return moving, still
-
-
-def sign_continuous(q, first=None):
-    """Quaternions (N × 4) with each row's sign chosen to follow the previous row (q and −q are the same
-    orientation: a jump between them is no motion), the first row's to follow ``first`` (when given)."""
-    q = np.array(q, dtype=float, copy=True)
-    if not len(q):
-        return q
-    dots = np.einsum("ij,ij->i", q[1:], q[:-1])
-    step = np.where(np.isfinite(dots) & (dots < 0), -1.0, 1.0)     # a row that flips against the last
-    head = 1.0 if first is None or not float(np.dot(q[0], np.asarray(first, dtype=float))) < 0 else -1.0
-    return q * np.cumprod(np.concatenate([[head], step]))[:, None]
 
 
 def _continuous_series(ser) -> dict:

@@ -63,14 +63,14 @@ from cross_checks.engines.base import (
     require,
 )
 from cross_checks.engines.step_floats import harness_fn
-from reference_sim.quaternion import quat_exp, quat_log
+from reference_sim.quaternion import quat_exp, quat_log, sign_continuous
 from reference_sim.simulate import BLOWUP_LIMIT, Run, blowup_words, diverged
 
 dart, _IMPORT_ERROR = optional_import("dartpy")
 
 __all__ = ["ENGINE", "VARIANTS", "JOINT_SETTINGS", "EngineError", "version", "simulate", "one_step",
            "DartBody", "DartAdapter", "neutralise", "to_dart_state", "from_dart_state",
-           "continuous_quaternions"]
+           ]
 
 ENGINE = "dart"
 #: DART's one integrator (``World::step``; dart::integration::SemiImplicitEulerIntegrator names the scheme):
@@ -127,20 +127,10 @@ def to_dart_state(y):
 
 def from_dart_state(s):
     """DART's FreeJoint states (..., 12) ``[r, x_W, ω_W, v_W]`` -> packed (..., 13); the quaternion is
-    ``quat_exp(r)`` (w ≥ 0: see :func:`continuous_quaternions`)."""
+    ``quat_exp(r)`` (w ≥ 0: see :func:`reference_sim.quaternion.sign_continuous`)."""
     s = np.asarray(s, dtype=float)
     return np.concatenate([s[..., 3:6], s[..., 9:12], quat_exp(s[..., 0:3]), s[..., 6:9]], axis=-1)
 
-
-def continuous_quaternions(q, q0):
-    """Quaternion rows ``q`` (n, 4) with signs flipped so that each has a non-negative dot product with the
-    one before, the first with ``q0``: the same rotations, as one continuous curve from ``q0``."""
-    q = np.array(q, dtype=float)
-    if len(q) == 0:
-        return q
-    prev = np.concatenate([np.asarray(q0, dtype=float)[None], q[:-1]])
-    flips = np.where(np.einsum("ij,ij->i", q, prev) < 0.0, -1.0, 1.0)
-    return q * np.cumprod(flips)[:, None]
 
 
 def neutralise(world, joint, node) -> None:
@@ -233,7 +223,7 @@ def _recorded(rows, y0, dt_s: float, why: str = "") -> Run:
     y[0] = y0
     if rows:
         y[1:] = from_dart_state(np.array(rows))
-        y[1:, 6:10] = continuous_quaternions(y[1:, 6:10], y0[6:10])
+        y[1:, 6:10] = sign_continuous(y[1:, 6:10], first=y0[6:10])
     if why:
         return diverged(y, dt_s, why)
     return Run(dt_s * np.arange(len(y)), y)

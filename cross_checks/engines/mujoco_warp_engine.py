@@ -90,6 +90,7 @@ from cross_checks.engines.base import (
     package_files,
 )
 from cross_checks.engines.step_floats import harness_fn
+from reference_sim.quaternion import sign_continuous
 from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
 
 __all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate", "simulate_many", "one_step",
@@ -523,7 +524,7 @@ def _run_batch(variant: str, reqs) -> list:
             rows = slice(0, r.n_steps + 1)
             y = to_packed(qpos_out[rows, k].astype(float), qvel_out[rows, k].astype(float))
             y[0] = y0
-            y[:, 6:10] = continuous_quaternions(y[:, 6:10])
+            y[:, 6:10] = sign_continuous(y[:, 6:10])
             bad = bad_rows(y)
             if bad.any():
                 n_bad = int(np.argmax(bad))
@@ -532,18 +533,6 @@ def _run_batch(variant: str, reqs) -> list:
                 runs.append(Run(r.dt_s * np.arange(r.n_steps + 1), y))
     return runs
 
-
-def continuous_quaternions(q):
-    """Quaternion rows ``q`` (n, 4), the first kept, each later one's sign flipped where needed so that it
-    has a non-negative dot product with the one before: the same rotations as one continuous curve."""
-    q = np.array(q, dtype=float)
-    if len(q) < 2:
-        return q
-    with np.errstate(invalid="ignore"):
-        dots = np.einsum("ij,ij->i", q[1:], q[:-1])
-    flips = np.where(dots < 0.0, -1.0, 1.0)
-    q[1:] *= np.cumprod(flips)[:, None]
-    return q
 
 
 def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:

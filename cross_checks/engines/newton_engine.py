@@ -103,11 +103,12 @@ from cross_checks.engines.base import (
     package_files,
 )
 from cross_checks.engines.step_floats import harness_fn
+from reference_sim.quaternion import sign_continuous
 from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
 
 __all__ = ["ENGINE", "VARIANTS", "SOLVERS", "SOLVER_SETTINGS", "EngineError", "version", "simulate",
            "simulate_many", "one_step", "build_model", "make_solver", "compile_stats", "to_newton_rows",
-           "from_newton_rows", "continuous_quaternions", "NewtonAdapter", "PIP_HINT"]
+           "from_newton_rows", "NewtonAdapter", "PIP_HINT"]
 
 ENGINE = "newton"
 _DIST = "newton"
@@ -363,16 +364,6 @@ def from_newton_rows(q, qd):
     return np.concatenate([q[..., 0:3], qd[..., 0:3], q[..., 6:7], q[..., 3:6], qd[..., 3:6]], axis=-1)
 
 
-def continuous_quaternions(q, q0):
-    """Quaternion rows ``q`` (n, 4) with signs flipped so that each has a non-negative dot product with the
-    one before, the first with ``q0``: the same rotations, as one continuous curve from ``q0``."""
-    q = np.array(q, dtype=float)
-    if len(q) == 0:
-        return q
-    prev = np.concatenate([np.asarray(q0, dtype=float)[None], q[:-1]])
-    flips = np.where(np.einsum("ij,ij->i", q, prev) < 0.0, -1.0, 1.0)
-    return q * np.cumprod(flips)[:, None]
-
 
 class _Views:
     """NumPy views (no copy: Warp's CPU arrays share their memory) of one State's pose, velocity and force
@@ -542,7 +533,7 @@ def _run_batch(variant: str, dt_s: float, reqs) -> list:
             y = np.empty((n + 1, 13))
             y[0] = y0[k]
             y[1:] = from_newton_rows(hist_q[:n, k], hist_qd[:n, k])
-            y[1:, 6:10] = continuous_quaternions(y[1:, 6:10], y0[k, 6:10])
+            y[1:, 6:10] = sign_continuous(y[1:, 6:10], first=y0[k, 6:10])
             bad = bad_rows(y)
             if bad.any():
                 n_bad = int(np.argmax(bad))

@@ -92,11 +92,12 @@ from cross_checks.engines.base import (
     package_files,
 )
 from cross_checks.engines.step_floats import harness_fn
+from reference_sim.quaternion import sign_continuous
 from reference_sim.simulate import BLOWUP_LIMIT, Run, blowup_words, diverged
 
 __all__ = ["ENGINE", "VARIANTS", "BODY_SETTINGS", "PACK_TO_PACKED", "EngineError", "version", "simulate",
            "simulate_many", "one_step", "PhysxScene", "compile_stats", "reset_stats",
-           "continuous_quaternions", "PhysxAdapter"]
+           "PhysxAdapter"]
 
 ENGINE = "physx"
 _DIST = "sapien"
@@ -310,16 +311,6 @@ def neutralise(c) -> None:
         getattr(c, setter)(value)
 
 
-def continuous_quaternions(q, q0):
-    """Quaternion rows ``q`` (n, 4) with signs flipped so that each has a non-negative dot product with the
-    one before, the first with ``q0``: the same rotations, as one continuous curve from ``q0``."""
-    q = np.array(q, dtype=float)
-    if len(q) == 0:
-        return q
-    prev = np.concatenate([np.asarray(q0, dtype=float)[None], q[:-1]])
-    flips = np.where(np.einsum("ij,ij->i", q, prev) < 0.0, -1.0, 1.0)
-    return q * np.cumprod(flips)[:, None]
-
 
 def _packed_row(r) -> list:
     """A ``pack()`` row (13 floats) -> the packed state as 13 Python floats (for the force model)."""
@@ -444,7 +435,7 @@ def _run_group(variant: str, reqs) -> list:
         y = np.empty((n + 1, 13))
         y[0] = y0[k]
         y[1:] = raw[k, 1:n + 1][:, PACK_TO_PACKED]
-        y[1:, 6:10] = continuous_quaternions(y[1:, 6:10], y0[k][6:10])
+        y[1:, 6:10] = sign_continuous(y[1:, 6:10], first=y0[k][6:10])
         if bad_at[k] is not None:
             runs.append(diverged(y[:n].copy(), r.dt_s, f" ({blowup_words(y[n])})"))
         else:

@@ -73,7 +73,7 @@ from cross_checks.engines.base import (
     require,
 )
 from cross_checks.engines.step_floats import harness_fn
-from reference_sim.quaternion import quat_from_matrix
+from reference_sim.quaternion import quat_from_matrix, sign_continuous
 from reference_sim.simulate import BLOWUP_LIMIT, Run, blowup_words, diverged
 
 rapier, _IMPORT_ERROR = optional_import("rapier3d")
@@ -81,7 +81,7 @@ rapier, _IMPORT_ERROR = optional_import("rapier3d")
 __all__ = ["ENGINE", "DIST", "VARIANTS", "WORLD_SETTINGS", "BODY_SETTINGS", "EngineError", "version",
            "simulate", "simulate_many", "one_step", "RapierWorld", "timings", "reset_timings",
            "compile_stats",
-           "continuous_quaternions", "RapierAdapter"]
+           "RapierAdapter"]
 
 ENGINE = "rapier"
 DIST = "rapier3d"
@@ -161,16 +161,6 @@ def version() -> str:
 def _dist_version() -> str:
     return installed_version(DIST) or "unknown"
 
-
-def continuous_quaternions(q, q0):
-    """Quaternion rows ``q`` (n, 4) with signs flipped so that each has a non-negative dot product with the
-    one before, the first with ``q0``: the same rotations, as one continuous curve from ``q0``."""
-    q = np.array(q, dtype=float)
-    if len(q) == 0:
-        return q
-    prev = np.concatenate([np.asarray(q0, dtype=float)[None], q[:-1]])
-    flips = np.where(np.einsum("ij,ij->i", q, prev) < 0.0, -1.0, 1.0)
-    return q * np.cumprod(flips)[:, None]
 
 
 def _mass_properties(body):
@@ -282,7 +272,7 @@ def _recorded(rows, y0, dt_s: float, why: str = "") -> Run:
     y[0] = y0
     if rows:
         y[1:] = np.array(rows)
-        y[1:, 6:10] = continuous_quaternions(y[1:, 6:10], y0[6:10])
+        y[1:, 6:10] = sign_continuous(y[1:, 6:10], first=y0[6:10])
     if why:
         return diverged(y, dt_s, why)
     return Run(dt_s * np.arange(len(y)), y)

@@ -21,6 +21,7 @@ from reference_sim.quaternion import (
     quat_norm,
     quat_normalize,
     rotate,
+    sign_continuous,
 )
 from tests.helpers.tolerances import QUAT_ALGEBRA, QUAT_ROUND_TRIP, euler_round_trip_tol
 
@@ -154,3 +155,26 @@ def test_gimbal_lock_flagged_at_pm90_pitch(pitch, yaw_roll):
 def test_no_gimbal_lock_just_off_90():
     _, locked = euler_zxy_from_quat(quat_from_euler_zxy([89.999, 30.0, 10.0]))
     assert not locked
+
+
+def test_sign_continuous_removes_every_jump_to_minus_q_and_keeps_the_orientations():
+    rng = np.random.default_rng(3)
+    q = rng.normal(size=(200, 4))
+    q /= np.linalg.norm(q, axis=1)[:, None]
+    q = np.cumsum(q * 0.05, axis=0) + np.array([1.0, 0, 0, 0])
+    q /= np.linalg.norm(q, axis=1)[:, None]
+    flips = rng.random(200) < 0.3
+    jumpy = np.where(flips[:, None], -q, q)
+    smooth = sign_continuous(jumpy, first=q[0])
+    assert np.all(np.einsum("ij,ij->i", smooth[1:], smooth[:-1]) >= 0)     # no jump to −q
+    assert np.allclose(np.abs(np.einsum("ij,ij->i", smooth, q)), 1.0)      # the same orientations
+    assert np.allclose(smooth, q)                                          # and here the same signs
+    assert np.allclose(sign_continuous(jumpy, first=-q[0]), -q)            # the first row follows `first`
+    assert np.allclose(sign_continuous(jumpy)[0], jumpy[0])                # without it, the first is kept
+
+
+def test_sign_continuous_leaves_a_non_finite_row_and_an_empty_array_alone():
+    q = np.array([[1.0, 0, 0, 0], [np.nan, 0, 0, 0], [-1.0, 0, 0, 0]])
+    out = sign_continuous(q)
+    assert out[0, 0] == 1.0 and np.isnan(out[1, 0]) and out[2, 0] == -1.0
+    assert sign_continuous(np.empty((0, 4))).shape == (0, 4)

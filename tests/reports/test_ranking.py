@@ -9,7 +9,6 @@ import re
 import shutil
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from reports import plots
@@ -94,20 +93,6 @@ def test_the_pages_explain_their_symbols(base):
         for sym in ("χ", "δ", "ω_c", "ω_W"):
             if sym in text:
                 assert GLOSSARY[sym] in text, (page.name, sym)
-
-
-def test_quaternions_are_drawn_sign_continuous():
-    rng = np.random.default_rng(3)
-    q = rng.normal(size=(200, 4))
-    q /= np.linalg.norm(q, axis=1)[:, None]
-    q = np.cumsum(q * 0.05, axis=0) + np.array([1.0, 0, 0, 0])
-    q /= np.linalg.norm(q, axis=1)[:, None]
-    flips = rng.random(200) < 0.3
-    jumpy = np.where(flips[:, None], -q, q)
-    smooth = plots.sign_continuous(jumpy, first=q[0])
-    assert np.all(np.einsum("ij,ij->i", smooth[1:], smooth[:-1]) >= 0)     # no jump to −q
-    assert np.allclose(np.abs(np.einsum("ij,ij->i", smooth, q)), 1.0)      # the same orientations
-    assert np.allclose(smooth, q)                                          # and here the same signs
 
 
 def _lstar(hex_color):
