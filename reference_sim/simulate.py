@@ -11,7 +11,7 @@ from reference_sim.integrators import ImplicitSolveError, get_step
 from reference_sim.state import Problem
 
 __all__ = ["Run", "simulate", "run_members", "BLOWUP_LIMIT",
-           "COMPILED_CHUNK", "bad_rows", "blowup_words", "diverged"]
+           "COMPILED_CHUNK", "bad_rows", "blowup_words", "diverged", "recorded_run"]
 
 #: A state component beyond this magnitude (m, m/s, rad/s) counts as a blow-up. Free-body scenarios
 #: of the catalog stay below 1e3 in every quantity; 1e8 is far outside any physical run yet well
@@ -53,6 +53,16 @@ def diverged(y_good, dt_s: float, why: str) -> Run:
     the message ``diverged at t = … s`` followed by ``why`` (e.g. " (non-finite state)")."""
     n = len(y_good)
     return Run(dt_s * np.arange(n), y_good, n * dt_s, f"diverged at t = {n * dt_s:.6g} s{why}")
+
+
+def recorded_run(y, dt_s: float) -> Run:
+    """The run whose recorded states are ``y`` (n + 1, 13), one every ``dt_s`` from t = 0: all of them, or,
+    at the first state :func:`bad_rows` flags, the states before it as a :func:`diverged` run."""
+    bad = bad_rows(y)
+    if bad.any():
+        n_bad = int(np.argmax(bad))
+        return diverged(y[:n_bad].copy(), dt_s, f" ({blowup_words(y[n_bad])})")
+    return Run(dt_s * np.arange(len(y)), y)
 
 
 def simulate(problem: Problem, variant: str, dt_s: float, n_steps: int, y0=None) -> Run:

@@ -64,7 +64,8 @@ __all__ = ["EngineAdapter", "Variant", "harness_force_torque", "stage_force_torq
            "decay_factors", "EngineError", "optional_import", "require", "EngineNotInstalled",
            "installed_version", "library_files", "RunRequest", "Traits",
            "SYMPLECTIC_EULER_EXPLICIT_GYRO", "SYMPLECTIC_EULER_IMPLICIT_GYRO", "WHOLE_STATE_EXPLICIT_EULER",
-           "WHOLE_STATE_IMPLICIT_EULER", "HIGHER_ORDER", "DEFAULT_TRAITS", "ModuleAdapter", "package_files"]
+           "WHOLE_STATE_IMPLICIT_EULER", "HIGHER_ORDER", "DEFAULT_TRAITS", "ModuleAdapter", "package_files",
+           "one_request"]
 
 
 class EngineError(RuntimeError):
@@ -344,6 +345,15 @@ class Variant:
         if not isinstance(self.imitates, str):
             raise ValueError(f"imitates must be a string (ENGINE:VARIANT or empty), got {self.imitates!r}")
         object.__setattr__(self, "order", float(o))
+
+
+def one_request(simulate_many, scenario, variant: str, dt_s: float, n_steps: int):
+    """``simulate`` of an engine that batches: the run of the one request (scenario, ``dt_s``, ``n_steps``)
+    through its ``simulate_many``, whose :class:`EngineError` is raised."""
+    run = simulate_many(variant, [RunRequest(scenario, float(dt_s), int(n_steps))])[0]
+    if isinstance(run, EngineError):
+        raise run
+    return run
 
 
 class EngineAdapter(abc.ABC):

@@ -74,17 +74,17 @@ from cross_checks.engines.base import (
     EngineError,
     EngineNotInstalled,
     ModuleAdapter,
-    RunRequest,
     Traits,
     Variant,
     apply_decay_prestep,
     decay_factors,
     harness_force_torque,
     installed_version,
+    one_request,
     package_files,
 )
 from cross_checks.engines.step_floats import harness_fn
-from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
+from reference_sim.simulate import Run, recorded_run
 
 __all__ = ["ENGINE", "VARIANTS", "CHUNK", "ONE_STEP_BATCH", "MAX_BATCH", "EngineError", "version", "simulate",
            "simulate_many", "one_step", "device_model", "compile_stats", "reset_compiled", "jax_cache_dir",
@@ -405,10 +405,7 @@ def _weight(scenario) -> np.ndarray:
 def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
     """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded (one
     request of :func:`simulate_many`)."""
-    run = simulate_many(variant, [RunRequest(scenario, float(dt_s), int(n_steps))])[0]
-    if isinstance(run, EngineError):
-        raise run
-    return run
+    return one_request(simulate_many, scenario, variant, dt_s, n_steps)
 
 
 def simulate_many(variant: str, requests) -> list:
@@ -490,12 +487,7 @@ def _run_batch(key, callback: bool, reqs, models) -> list:
         for k, r in enumerate(reqs):
             s = states[k, :r.n_steps + 1]
             y = to_packed(s[:, 0:7], s[:, 7:13])
-            bad = bad_rows(y)
-            if bad.any():
-                n_bad = int(np.argmax(bad))
-                runs.append(diverged(y[:n_bad].copy(), r.dt_s, f" ({blowup_words(y[n_bad])})"))
-            else:
-                runs.append(Run(r.dt_s * np.arange(r.n_steps + 1), y))
+            runs.append(recorded_run(y, r.dt_s))
     return runs
 
 

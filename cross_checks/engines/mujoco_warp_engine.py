@@ -81,17 +81,17 @@ from cross_checks.engines.base import (
     EngineError,
     EngineNotInstalled,
     ModuleAdapter,
-    RunRequest,
     Traits,
     Variant,
     apply_decay_prestep,
     decay_factors,
     installed_version,
+    one_request,
     package_files,
 )
 from cross_checks.engines.step_floats import harness_fn
 from reference_sim.quaternion import sign_continuous
-from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
+from reference_sim.simulate import Run, recorded_run
 
 __all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate", "simulate_many", "one_step",
            "host_model", "device_model", "compile_stats", "reset_stats", "MujocoWarpAdapter"]
@@ -344,10 +344,7 @@ class _Worlds:
 def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
     """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded (one
     request of :func:`simulate_many`)."""
-    run = simulate_many(variant, [RunRequest(scenario, float(dt_s), int(n_steps))])[0]
-    if isinstance(run, EngineError):
-        raise run
-    return run
+    return one_request(simulate_many, scenario, variant, dt_s, n_steps)
 
 
 def simulate_many(variant: str, requests) -> list:
@@ -525,12 +522,7 @@ def _run_batch(variant: str, reqs) -> list:
             y = to_packed(qpos_out[rows, k].astype(float), qvel_out[rows, k].astype(float))
             y[0] = y0
             y[:, 6:10] = sign_continuous(y[:, 6:10])
-            bad = bad_rows(y)
-            if bad.any():
-                n_bad = int(np.argmax(bad))
-                runs.append(diverged(y[:n_bad].copy(), r.dt_s, f" ({blowup_words(y[n_bad])})"))
-            else:
-                runs.append(Run(r.dt_s * np.arange(r.n_steps + 1), y))
+            runs.append(recorded_run(y, r.dt_s))
     return runs
 
 

@@ -89,6 +89,7 @@ from cross_checks.engines.base import (
     apply_decay_prestep,
     decay_factors,
     installed_version,
+    one_request,
     package_files,
 )
 from cross_checks.engines.step_floats import harness_fn
@@ -331,10 +332,7 @@ def _group_key(variant, r: RunRequest):
 def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
     """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded (one
     request of :func:`simulate_many`)."""
-    run = simulate_many(variant, [RunRequest(scenario, float(dt_s), int(n_steps))])[0]
-    if isinstance(run, EngineError):
-        raise run
-    return run
+    return one_request(simulate_many, scenario, variant, dt_s, n_steps)
 
 
 def simulate_many(variant: str, requests) -> list:

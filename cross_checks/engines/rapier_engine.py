@@ -62,13 +62,13 @@ import numpy as np
 from cross_checks.engines.base import (
     EngineError,
     ModuleAdapter,
-    RunRequest,
     Traits,
     Variant,
     apply_decay_prestep,
     decay_factors,
     installed_version,
     library_files,
+    one_request,
     optional_import,
     require,
 )
@@ -344,10 +344,7 @@ def _run_group(variant: str, reqs) -> list:
 
 def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
     """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded."""
-    run = simulate_many(variant, [RunRequest(scenario, float(dt_s), int(n_steps))])[0]
-    if isinstance(run, EngineError):
-        raise run
-    return run
+    return one_request(simulate_many, scenario, variant, dt_s, n_steps)
 
 
 def simulate_many(variant: str, requests) -> list:

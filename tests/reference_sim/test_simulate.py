@@ -3,7 +3,7 @@ import numpy as np
 
 from reference_sim.body import RigidBody
 from reference_sim.forces import ForceModel, Spring
-from reference_sim.simulate import BLOWUP_LIMIT, simulate
+from reference_sim.simulate import BLOWUP_LIMIT, recorded_run, simulate
 from reference_sim.state import Problem, State
 
 
@@ -66,3 +66,16 @@ def test_an_exception_in_a_step_is_a_divergence_with_its_words(monkeypatch):
     assert (run.diverged_at_s == 0.05
             and run.message == "diverged at t = 0.05 s: ValueError: math domain error")
     assert len(run.y) == 5
+
+
+def test_recorded_run_stops_at_the_first_bad_state_and_keeps_the_ones_before():
+    y = np.zeros((6, 13))
+    y[:, 6] = 1.0
+    whole = recorded_run(y, 0.1)
+    assert whole.diverged_at_s is None and np.array_equal(whole.t_s, 0.1 * np.arange(6))
+    y[3, 0], y[4, 1] = np.inf, np.nan
+    cut = recorded_run(y, 0.1)
+    assert len(cut.y) == 3 and cut.diverged_at_s == 0.1 * 3
+    assert cut.message == "diverged at t = 0.3 s (non-finite state)"
+    y[3, 0] = 2 * BLOWUP_LIMIT
+    assert recorded_run(y, 0.1).message.endswith(f"(state beyond {BLOWUP_LIMIT:g})")
