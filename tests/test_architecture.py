@@ -209,3 +209,33 @@ def test_a_planted_private_access_is_found(tmp_path):
         assert _private_accesses(planted, names) == [(5, "cross_checks.engines.mujoco_engine._LOCK")]
     finally:
         planted.unlink()
+
+
+def _tolerance_names(text: str) -> list:
+    """The module-level names a tolerances module assigns or defines."""
+    tree = ast.parse(text)
+    names = [t.id for n in tree.body if isinstance(n, (ast.Assign, ast.AnnAssign))
+             for t in (n.targets if isinstance(n, ast.Assign) else [n.target]) if isinstance(t, ast.Name)]
+    return names + [n.name for n in tree.body if isinstance(n, ast.FunctionDef)]
+
+
+def _unused_in_package(names, package_text: str) -> list:
+    import re
+    return [n for n in names if not re.search(rf"\b{n}\b", package_text)]
+
+
+def _package_text_besides_tolerances() -> str:
+    return "\n".join(p.read_text() for p in SOURCES if p.name != "tolerances.py")
+
+
+def test_every_package_tolerance_is_used_by_the_package():
+    """The package's tolerances module is part of the results' cache key: a number only tests use belongs in
+    tests/helpers/tolerances.py, where tuning it recomputes nothing."""
+    names = _tolerance_names((ROOT / "cross_checks" / "core" / "tolerances.py").read_text())
+    assert len(names) > 50
+    assert _unused_in_package(names, _package_text_besides_tolerances()) == []
+
+
+def test_a_test_only_tolerance_in_the_package_is_found():
+    names = _tolerance_names("#: a number\nTEST_ONLY_NUMBER = 1e-9\nUSED = 2\n")
+    assert _unused_in_package(names, "x = tol.USED\n") == ["TEST_ONLY_NUMBER"]

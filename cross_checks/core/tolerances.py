@@ -1,29 +1,13 @@
-"""Every tolerance rbcheck's tests and verdicts use, each with where its size comes from.
+"""Every tolerance rbcheck's verdicts, limits and floors use, each with where its size comes from (the numbers
+only tests use are in tests/helpers/tolerances.py: this module is part of the results' cache key).
 
 Machine epsilon ε = 2.2e-16. "Same arithmetic" comparisons allow a few ε times the magnitude; physical
 comparisons are derived from the error model of the scheme involved.
 """
 
-#: Round trips through matrices / axis-angle / Euler angles: each conversion loses ~10 ε, and the
-#: acos/atan2 near 0 or π amplify it by ~1/sin; 1e-12 rad covers the test sets (measured ≤ 4e-15).
-QUAT_ROUND_TRIP = 1e-12
-#: Euler-angle round trip near gimbal lock: y and z come from atan2 of entries scaled by cos(pitch),
-#: so their error is ~ε/|cos pitch| (conditioning of the parameterisation, not of the rotation);
-#: 10 ε / |cos pitch| covers it (hypothesis found 2.3e-11 rad at cos pitch = 2e-5, i.e. 2.3 ε/cos).
-#: At lock (|cos pitch| < the gimbal threshold 1e-9 of euler_zxy_from_quat) z is set to 0 by
-#: convention, dropping a rotation of at most ~2·|cos pitch|: the round trip is exact to 2e-9 rad.
-def euler_round_trip_tol(cos_pitch: float, locked: bool = False) -> float:
-    if locked:
-        return QUAT_ROUND_TRIP + 2e-9
-    return QUAT_ROUND_TRIP + 10 * 2.2e-16 / max(abs(cos_pitch), 1e-300)
-
-
 #: Fitted convergence order vs expected in the dedicated order studies (tests/reference_sim): ±0.1, a
 #: tenth of the gap between neighbouring integer orders.
 ORDER_TOL = 0.1
-#: Closed forms vs DOP853 ground truth (rtol 1e-13, reference_sim.ground_truth) over 10 s: ≤ 1e-10, two orders
-#: below the smallest error any verdict resolves.
-CLOSED_FORM_VS_GROUND_TRUTH = 1e-10
 
 # --- sweeps, metrics and verdicts (cross_checks.analysis, cross_checks.sweep, `rbcheck check`) ------
 
@@ -269,15 +253,6 @@ COMPARE_ABS_TOL = 1e-12
 #: regression whatever improved elsewhere.
 COMPARE_SCHEME_CHANGE_MAX_RATIO = 4.0
 
-# --- agreement of engines and closed forms (tests/cross_checks/engines/test_engine_agreement.py) ---
-
-# --- the engine adapters' conventions (the MuJoCo and PyBullet adapter tests in
-# tests/cross_checks/engines/) ---
-
-# --- the PyBullet adapter (tests/cross_checks/engines/test_pybullet_engine.py) ---
-
-# --- the MuJoCo adapter (tests/cross_checks/engines/test_mujoco_engine.py) ---
-
 # --- the second reference: Drake's error-controlled integration (docs/engine_conventions.md) ---
 #: Drake runge_kutta5's target accuracy for the second reference: measured on the catalog 6.9e-10 rad
 #: from the closed form on tennis_racket, 3.9e-7 rad on tumbling_box (δ = 2e-5 from the separatrix),
@@ -287,24 +262,6 @@ SECOND_REFERENCE_TARGET_ACCURACY = 1e-13
 #: target accuracy (an upper bound of its own error: measured 8–13× smaller per decade of target
 #: accuracy on the catalog's tumbling and spring scenarios, like REFERENCE_CHECK_RTOL_FACTOR for DOP853).
 SECOND_REFERENCE_CHECK_FACTOR = 10.0
-
-# --- the Drake adapter's conventions (tests/cross_checks/engines/test_drake_engine.py) ---
-
-# --- the MuJoCo Warp adapter (tests/cross_checks/engines/test_mujoco_warp_engine.py; float32) ---
-#: One mujoco_warp step (float32) vs the scheme written out by hand in NumPy (float64) from the same state,
-#: for values of size ~1-3 (m/s, rad/s): measured ≤ 7.1e-8 (Euler), 4.9e-8 (implicit), 5.8e-8 (RK4's
-#: attitude), i.e. ≤ 0.6 ε32; 1e-6 (8 ε32) keeps 20× below the nearest wrong schemes measured on the same
-#: step (RK4 without the Munthe-Kaas correction 2e-5 rad, the correction's other sign 3.9e-5 rad, Euler for
-#: the implicit family 1e-2).
-MJW_HAND_STEP = 1e-6
-#: mujoco_warp (float32) vs MuJoCo C (float64) with the same integrator, relative to max(1, |state|), over
-#: 100 steps of 10 ms on tennis_racket, applied_torque, spring_pendulum and velocity_decay: measured ≤ 3.5e-6
-#: (spring_pendulum's ω; the float32 roundings of 100 steps); the nearest wrong schemes there differ by 1.5e-4
-#: (MuJoCo C Euler vs the implicit step, tennis_racket) and 0.22 (RK4 with the forces held over its stages).
-MJW_SAME_AS_MUJOCO_REL = 2e-5
-#: RK4's per-stage force kernel (float32) vs base.stage_force_torque (float64), relative to max(1, |wrench|),
-#: on 40 random states: a handful of float32 roundings of products of O(1) numbers; measured ≤ 2.6e-7; 2e-6.
-MJW_STAGE_FORCES_REL = 2e-6
 
 # --- rbcheck fuzz: hard but fair random cases and their verdicts (docs/fuzz.md) ---------------------------
 
@@ -371,13 +328,3 @@ REFINE_HALVINGS = 3
 #: the scenario's scale at its default Δt below 1e-6 (a tight scheme's reach on the catalog), below 1e-3
 #: (the size a plot starts to show), or above.
 REPORT_ACCURACY_TIERS = (1e-6, 1e-3)
-
-# --- PhysX 5.3.1 through SAPIEN 3.0.3 (float32; tests/cross_checks/engines/test_physx_engine.py) ---
-#: One PhysX step against the same step written out in float64 numpy, absolute on values of order 1 (m, m/s,
-#: rad, rad/s): PhysX computes in float32 (ε = 1.2e-7): measured ≤ 7e-8 for PGS (ω, v, x, q) at Δt = 0.01 s.
-PHYSX_HAND_STEP = 4 * 2.0 ** -23
-#: The same for TGS's angular velocity, relative to |ω|: TGS turns ω into sqrt-inertia space and back with two
-#: float32 world matrices every step: measured 1.2e-6 relative (10 ε₃₂) on an isotropic spin, 2.6e-6 absolute
-#: on |ω| = 1.7 rad/s with a full tensor, independent of Δt; 4e-6 relative leaves room, and the candidate
-#: schemes PhysX's step is not (plain explicit gyroscopic term, none) are ≥ 6× farther at Δt = 0.05 s.
-PHYSX_TGS_OMEGA_STEP_REL = 4e-6

@@ -52,7 +52,7 @@ from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
 mujoco, _IMPORT_ERROR = optional_import("mujoco")
 
 __all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate", "simulate_many", "one_step",
-           "build_model"]
+           "build_model", "packed_floats", "to_packed", "to_qpos_qvel"]
 
 ENGINE = "mujoco"
 #: The variants, named after MuJoCo's integrators (``mjtIntegrator.mjINT_<NAME>``), with their declared
@@ -172,11 +172,13 @@ def _packed1(qpos, qvel) -> list:
     """One state: qpos (7,), qvel (6,) -> packed, 13 floats (a list) with ω in WORLD axes (scalar code:
     this runs inside the per-step loop and the RK4 stage callback, where NumPy's small-array overhead
     dominates)."""
-    return _packed_lists(qpos.tolist(), qvel.tolist())
+    return packed_floats(qpos.tolist(), qvel.tolist())
 
 
-def _packed_lists(qpos, qvel) -> list:
-    """:func:`_packed1` of qpos and qvel given as lists of 7 and 6 floats."""
+def packed_floats(qpos, qvel) -> list:
+    """One state, qpos (7 floats) and qvel (6 floats, ω in body axes) -> the packed state (13 floats, ω in
+    world axes): :func:`to_packed` for one row in plain floats, for the per-step loops (every world at every
+    step of a run with state-dependent forces, where NumPy's small-array overhead would dominate)."""
     x0, x1, x2, s, a, b, c = qpos
     v0, v1, v2, p0, p1, p2 = qvel
     # ω_W = R(q) ω_B = ω + s t + u × t with t = 2 u × ω, u = (a, b, c)
@@ -389,7 +391,7 @@ def _simulate_loop(scenario, m, d, dt_s, n_steps, control, per_step, decay, xfrc
                 if reads:
                     qp, qv = qpos.tolist(), qvel.tolist()
                     if per_step:
-                        fx, fy, fz, tx, ty, tz = harness(_packed_lists(qp, qv))
+                        fx, fy, fz, tx, ty, tz = harness(packed_floats(qp, qv))
                         xfrc[:] = (fx - w0, fy - w1, fz - w2, tx, ty, tz)
                     if decay:
                         qvel[:] = (qv[0] * gv, qv[1] * gv, qv[2] * gv, qv[3] * gw, qv[4] * gw, qv[5] * gw)
@@ -569,7 +571,7 @@ def _rollout_steps(reqs, mods, datas, state, xfrc, per_step, g, weights, qpos, q
     try:
         for n in range(1, len(qpos)):
             for k in per_step:
-                fx, fy, fz, tx, ty, tz = harness[k](_packed_lists(qpos[n - 1, k].tolist(),
+                fx, fy, fz, tx, ty, tz = harness[k](packed_floats(qpos[n - 1, k].tolist(),
                                                                   qvel[n - 1, k].tolist()))
                 w0, w1, w2 = (float(c) for c in weights[k])
                 xfrc[k, 0, 6:12] = (fx - w0, fy - w1, fz - w2, tx, ty, tz)

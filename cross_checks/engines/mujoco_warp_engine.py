@@ -373,21 +373,6 @@ def simulate_many(variant: str, requests) -> list:
     return out
 
 
-def _packed_lists(qpos, qvel) -> list:
-    """One state, qpos (7 floats) and qvel (6 floats, ω in body axes) -> the packed state (13 floats, ω in
-    world axes): ``mujoco_engine.to_packed`` for one row in plain floats (it runs for every world at every
-    step of a run with state-dependent forces, where NumPy's small-array overhead would dominate), the
-    arithmetic of the MuJoCo adapter's per-step loop: ω_W = R(q) ω_B = ω + s t + u × t with t = 2 u × ω,
-    u = (a, b, c)."""
-    x0, x1, x2, s, a, b, c = qpos
-    v0, v1, v2, p0, p1, p2 = qvel
-    t0, t1, t2 = 2.0 * (b * p2 - c * p1), 2.0 * (c * p0 - a * p2), 2.0 * (a * p1 - b * p0)
-    return [x0, x1, x2, v0, v1, v2, s, a, b, c,
-            p0 + s * t0 + (b * t2 - c * t1),
-            p1 + s * t1 + (c * t0 - a * t2),
-            p2 + s * t2 + (a * t1 - b * t0)]
-
-
 @functools.lru_cache(maxsize=1)
 def _stage_kernel():
     """The Warp kernel of RK4's per-stage forces (``base.stage_force_torque`` in float32, the decay as
@@ -468,7 +453,7 @@ def stage_callback(scenario):
 
 def _run_batch(variant: str, reqs) -> list:
     """The Runs of ``reqs`` (one scenario, any Δt and step counts) as the worlds of one batch."""
-    from cross_checks.engines.mujoco_engine import to_packed, to_qpos_qvel
+    from cross_checks.engines.mujoco_engine import packed_floats, to_packed, to_qpos_qvel
     sc = reqs[0].scenario
     forces = sc.problem.forces
     N = len(reqs)
@@ -501,7 +486,7 @@ def _run_batch(variant: str, reqs) -> list:
             if per_step:
                 qp, qv = qpos.tolist(), qvel.tolist()
                 xfrc[:, _BODY] = [(fx - w0, fy - w1, fz - w2, tx, ty, tz) for fx, fy, fz, tx, ty, tz in
-                                  (harness[k](_packed_lists(qp[k], qv[k])) for k in range(N))]
+                                  (harness[k](packed_floats(qp[k], qv[k])) for k in range(N))]
             if decay:
                 qvel[:, 0:3] *= gv
                 qvel[:, 3:6] *= gw

@@ -212,3 +212,46 @@ KEPT_TO_ROUNDOFF = 2e-12
 #: Bullet's body- and world-axes implicit steps are one step in exact arithmetic: 2000 steps of a stable
 #: tumble apart by round-off only (measured ~1e-14 rad); 1e-11 leaves a wide margin.
 SAME_STEP_TWO_AXES = 1e-11
+
+# --- quaternion round trips, closed forms, the float32 adapters' hand-written steps ---
+#: Round trips through matrices / axis-angle / Euler angles: each conversion loses ~10 ε, and the
+#: acos/atan2 near 0 or π amplify it by ~1/sin; 1e-12 rad covers the test sets (measured ≤ 4e-15).
+QUAT_ROUND_TRIP = 1e-12
+#: Euler-angle round trip near gimbal lock: y and z come from atan2 of entries scaled by cos(pitch),
+#: so their error is ~ε/|cos pitch| (conditioning of the parameterisation, not of the rotation);
+#: 10 ε / |cos pitch| covers it (hypothesis found 2.3e-11 rad at cos pitch = 2e-5, i.e. 2.3 ε/cos).
+#: At lock (|cos pitch| < the gimbal threshold 1e-9 of euler_zxy_from_quat) z is set to 0 by
+#: convention, dropping a rotation of at most ~2·|cos pitch|: the round trip is exact to 2e-9 rad.
+def euler_round_trip_tol(cos_pitch: float, locked: bool = False) -> float:
+    if locked:
+        return QUAT_ROUND_TRIP + 2e-9
+    return QUAT_ROUND_TRIP + 10 * 2.2e-16 / max(abs(cos_pitch), 1e-300)
+
+
+#: Closed forms vs DOP853 ground truth (rtol 1e-13, reference_sim.ground_truth) over 10 s: ≤ 1e-10, two orders
+#: below the smallest error any verdict resolves.
+CLOSED_FORM_VS_GROUND_TRUTH = 1e-10
+
+#: One mujoco_warp step (float32) vs the scheme written out by hand in NumPy (float64) from the same state,
+#: for values of size ~1-3 (m/s, rad/s): measured ≤ 7.1e-8 (Euler), 4.9e-8 (implicit), 5.8e-8 (RK4's
+#: attitude), i.e. ≤ 0.6 ε32; 1e-6 (8 ε32) keeps 20× below the nearest wrong schemes measured on the same
+#: step (RK4 without the Munthe-Kaas correction 2e-5 rad, the correction's other sign 3.9e-5 rad, Euler for
+#: the implicit family 1e-2).
+MJW_HAND_STEP = 1e-6
+#: mujoco_warp (float32) vs MuJoCo C (float64) with the same integrator, relative to max(1, |state|), over
+#: 100 steps of 10 ms on tennis_racket, applied_torque, spring_pendulum and velocity_decay: measured ≤ 3.5e-6
+#: (spring_pendulum's ω; the float32 roundings of 100 steps); the nearest wrong schemes there differ by 1.5e-4
+#: (MuJoCo C Euler vs the implicit step, tennis_racket) and 0.22 (RK4 with the forces held over its stages).
+MJW_SAME_AS_MUJOCO_REL = 2e-5
+#: RK4's per-stage force kernel (float32) vs base.stage_force_torque (float64), relative to max(1, |wrench|),
+#: on 40 random states: a handful of float32 roundings of products of O(1) numbers; measured ≤ 2.6e-7; 2e-6.
+MJW_STAGE_FORCES_REL = 2e-6
+
+#: One PhysX step against the same step written out in float64 numpy, absolute on values of order 1 (m, m/s,
+#: rad, rad/s): PhysX computes in float32 (ε = 1.2e-7): measured ≤ 7e-8 for PGS (ω, v, x, q) at Δt = 0.01 s.
+PHYSX_HAND_STEP = 4 * 2.0 ** -23
+#: The same for TGS's angular velocity, relative to |ω|: TGS turns ω into sqrt-inertia space and back with two
+#: float32 world matrices every step: measured 1.2e-6 relative (10 ε₃₂) on an isotropic spin, 2.6e-6 absolute
+#: on |ω| = 1.7 rad/s with a full tensor, independent of Δt; 4e-6 relative leaves room, and the candidate
+#: schemes PhysX's step is not (plain explicit gyroscopic term, none) are ≥ 6× farther at Δt = 0.05 s.
+PHYSX_TGS_OMEGA_STEP_REL = 4e-6

@@ -18,7 +18,7 @@ import sys
 import numpy as np
 import pytest
 
-from cross_checks.core import tolerances as ctol
+from tests.helpers import tolerances as ctol
 
 if importlib.util.find_spec("mujoco_warp") is None:
     pytest.skip("mujoco-warp is not installed (pip install -e '.[mujoco_warp]')", allow_module_level=True)

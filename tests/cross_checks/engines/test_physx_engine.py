@@ -10,7 +10,7 @@ import sys
 import numpy as np
 import pytest
 
-from cross_checks.core import tolerances as ctol
+from tests.helpers import tolerances as ctol
 
 pytest.importorskip("sapien", reason="sapien is not installed (pip install -e '.[physx]')")
 
