@@ -72,9 +72,8 @@ process.
 Fork safety: importing jaxsim initialises a JAX backend (it calls ``jax.devices()``), after which a fork can
 deadlock; the sweep forks its workers. So this module never imports JAX at module level, and ``version()``
 reads the distribution's metadata and checks that jaxsim is importable with ``importlib.util.find_spec``
-(no import): a parent process that only lists or schedules never starts JAX. (A sweep that refines a
-pre-asymptotic record runs the variant in its own process, after the workers, and then forks for the report:
-JAX warns that the fork may deadlock; measured harmless, said in the docs.)
+(no import): a parent process that lists, schedules or sweeps never starts JAX (every run of a sweep, its
+refinements included, is a worker's).
 
 Divergence: JAX never stops on a non-finite value, so every chunk of states is checked
 (reference_sim.simulate.bad_rows): the first state that is non-finite or beyond BLOWUP_LIMIT ends the run as

@@ -10,11 +10,15 @@ computed as for the file's rungs (``assemble.ladder_floors``). Only a positive r
 (``analysis.refinement.refined_ladder_shows_the_order``) turns the record into ``pre_asymptotic`` with no
 claim, its assessment naming the continued ladder; a scheme of the wrong order, a plateau, or errors that
 sink into round-off keep the verdict. The extra runs are not rows of results.csv (the file's ladder is
-what the results describe); they run in the sweep's own process, after the runs, only for such records.
+what the results describe). They run on the sweep's runner (its process pool or executor), after the
+runs, only for such records: :func:`requests` says which, :func:`run_refinements` runs them, :func:`rejudge`
+judges each record again. The sweep's own process never starts an engine (a JAX engine started there would
+be unusable in the workers it forks next).
 """
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -27,7 +31,7 @@ from cross_checks.sweep.assemble import ladder_floors
 from cross_checks.sweep.jobs import load_reference
 from cross_checks.sweep.lifecycle import each_within_limits
 
-__all__ = ["rejudge", "qualifies"]
+__all__ = ["rejudge", "qualifies", "requests", "run_refinements", "Refinement"]
 
 
 def qualifies(rec) -> bool:
@@ -56,21 +60,57 @@ def _refined_runs(scenario, variant, dt_min, n_min, y_end_ref, time_limit_s):
     return out
 
 
-def rejudge(scenario, variant, rows, ref, records, *, time_limit_s=tol.RUN_TIME_LIMIT_S) -> list:
-    """``records`` (convergence records of one scenario and variant) with each qualifying free-running
-    record judged again on the continued ladder (module docstring)."""
-    todo = [i for i, r in enumerate(records) if qualifies(r)]
-    if not todo or not ref.path:
-        return records
+@dataclass(frozen=True)
+class Refinement:
+    """The continued ladder of one (scenario, variant): below the file's finest ok rung ``dt_s`` (``n_steps``
+    steps), against the reference's final state ``y_end_ref`` (13,)."""
+
+    scenario: object
+    variant: str
+    dt_s: float
+    n_steps: int
+    y_end_ref: np.ndarray
+
+
+def requests(scenario, variant, rows, ref, records) -> Refinement | None:
+    """The :class:`Refinement` to run when one of ``records`` (convergence records of the scenario and
+    variant, from ``rows``) qualifies and the reference ends at the scenario's duration; else None."""
+    if not any(qualifies(r) for r in records) or not ref.path:
+        return None
     ladder = sorted([r for r in rows if r["in_ladder"] and r["status"] == "ok"], key=lambda r: -r["dt"])
     t_ref, y_ref, _ = load_reference(ref.path)
     if not ladder or not np.isclose(t_ref[-1], scenario.duration_s):
+        return None
+    return Refinement(scenario, variant, float(ladder[-1]["dt"]), int(ladder[-1]["steps"]), y_ref[-1])
+
+
+class _RefineTask:
+    """One :class:`Refinement`'s runs, in a worker (picklable: the time limit only)."""
+
+    def __init__(self, time_limit_s):
+        self.time_limit_s = time_limit_s
+
+    def __call__(self, req: Refinement) -> list:
+        return _refined_runs(req.scenario, req.variant, req.dt_s, req.n_steps, req.y_end_ref,
+                             self.time_limit_s)
+
+
+def run_refinements(runner, reqs, time_limit_s=tol.RUN_TIME_LIMIT_S) -> dict:
+    """``{(scenario name, variant): runs}`` of every request, run on ``runner`` (``execute.Runner``); a
+    request whose worker dies has no runs (its verdict stands)."""
+    done = runner.map_unordered(_RefineTask(time_limit_s), list(reqs), on_crash=lambda _req: [],
+                                in_flight=lambda _req: True)
+    return {(req.scenario.name, req.variant): fine for req, fine in done}
+
+
+def rejudge(scenario, variant, rows, ref, records, fine) -> list:
+    """``records`` (convergence records of one scenario and variant, from ``rows``) with each qualifying
+    free-running record judged again on the continued ladder ``fine`` (the runs of its :class:`Refinement`,
+    [] or None when it had none; module docstring)."""
+    todo = [i for i, r in enumerate(records) if qualifies(r)]
+    if not todo or not fine:
         return records
-    finest = ladder[-1]
-    fine = _refined_runs(scenario, variant, float(finest["dt"]),
-                         int(finest["steps"]), y_ref[-1], time_limit_s)
-    if not fine:
-        return records
+    finest = sorted([r for r in rows if r["in_ladder"] and r["status"] == "ok"], key=lambda r: -r["dt"])[-1]
     phys = physics_from_dict(ref.measured["physics"]) if (ref.measured or {}).get("physics") else None
     pseudo = [{"dt": dt, "steps": n} for dt, n, _, _ in fine]
     out = list(records)
@@ -82,7 +122,7 @@ def rejudge(scenario, variant, rows, ref, records, *, time_limit_s=tol.RUN_TIME_
         statuses = ["ok"] + [s for _, _, s, _ in fine]
         floors = ladder_floors([finest] + pseudo, q, ref.scales, "free_running",
                                finest["reference"] or "analytic",
-                         ref.measured or {})
+                               ref.measured or {})
         exp = expectation(scenario, variant, q, "free_running", physics=phys, measure_physics=False)
         shows, fit = refined_ladder_shows_the_order(dts, errs, floors, statuses, exp)
         if shows:

@@ -144,11 +144,12 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
         records = run_jobs(runner, planned, scenarios, refs, work, cache_root, use_cache,
                            run_time_limit_s, show, second=second, second_time_limit_s=reference_time_limit_s)
         refs = _with_second_references(refs, {s.scenario_index: records.pop(s) for s in second})
-        runner.close()
-        runner = None
         stage("rbcheck sweep", "writing results.csv, summary.json and series/", enabled=show)
         summary = _write_results(staging, scenarios, variants, refs, records, started=started,
-                                 skipped=skipped, jobs=jobs, t_start=t_start, cannot=cannot)
+                                 skipped=skipped, jobs=jobs, t_start=t_start, cannot=cannot,
+                                 runner=runner, run_time_limit_s=run_time_limit_s)
+        runner.close()
+        runner = None
         if finish is not None:  # e.g. the report, drawn from the saved files only
             finish(staging)
         write_marker(staging)
@@ -174,15 +175,16 @@ def _with_second_references(refs, second: dict) -> list:
 
 
 def _write_results(staging, scenarios, variants, refs, records, *, started, skipped, jobs, t_start,
-                   cannot=None) -> dict:
+                   cannot=None, runner, run_time_limit_s=tol.RUN_TIME_LIMIT_S) -> dict:
     """Assemble the job records and write results.csv, series/ and summary.json into ``staging`` (its
-    work directory removed); returns the summary."""
+    work directory removed); returns the summary. The continued ladders of :mod:`.refine` run on
+    ``runner``."""
     from cross_checks.engines import all_variants, has_one_step
     rows = assemble.result_rows(records, [s.name for s in scenarios], variants)
     atomic_write_text(staging / "results.csv", assemble.results_csv_text(rows))
     assemble.write_scenario_files(staging, scenarios)
     by_key = {(j.scenario, j.variant, j.dt_s): rec for j, rec in records.items()}
-    convergence, local, scenario_records = [], [], []
+    local, scenario_records, free = [], [], []
     (staging / "series").mkdir()
     for sc, ref in zip(scenarios, refs):
         scenario_records.append(assemble.scenario_record(sc, ref))
@@ -190,12 +192,15 @@ def _write_results(staging, scenarios, variants, refs, records, *, started, skip
             if (sc.name, v) in (cannot or {}):
                 continue
             vrows = [r for r in rows if r["scenario"] == sc.name and r["engine"] == v]
-            convergence += refine.rejudge(sc, v, vrows, ref, assemble.convergence_records(
-                sc, v, vrows, ref.scales, "free_running", ref.measured))
+            recs = assemble.convergence_records(sc, v, vrows, ref.scales, "free_running", ref.measured)
+            free.append((sc, v, vrows, ref, recs, refine.requests(sc, v, vrows, ref, recs)))
             if has_one_step(v):  # engines without a one-step mode have no local errors to fit
                 local += assemble.convergence_records(sc, v, vrows, ref.scales, "one_step", ref.measured)
         save_npz_atomic(staging / "series" / f"{sc.name}.npz",
                         assemble.series_arrays(sc, ref, by_key, variants))
+    fine = refine.run_refinements(runner, [f[-1] for f in free if f[-1] is not None], run_time_limit_s)
+    convergence = [rec for sc, v, vrows, ref, recs, _ in free
+                   for rec in refine.rejudge(sc, v, vrows, ref, recs, fine.get((sc.name, v)))]
     clear_reference_memo()
     infos = {v.name: v for v in all_variants()}
     shutil.rmtree(staging / "_work")

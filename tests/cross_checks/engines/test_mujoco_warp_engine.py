@@ -396,9 +396,9 @@ def test_compile_stats_keep_compilation_apart_from_stepping():
 
 @pytest.mark.filterwarnings("ignore:os.fork:RuntimeWarning")
 def test_a_process_forked_after_warp_started_runs_it_with_the_same_numbers():
-    # the sweep forks its workers, and its parent may itself have run the engine (sweep/refine.py re-runs a
-    # variant at finer steps in the parent): unlike JAX (mjx_engine refuses there), Warp's CPU runtime keeps
-    # working in the child — the same run bit for bit, a captured RK4 with its stage kernel and a new variant
+    # a process may fork after it ran the engine (a user's script, a pytest process before a sweep):
+    # unlike JAX (mjx_engine refuses there), Warp's CPU runtime keeps working in the child — the same run
+    # bit for bit, a captured RK4 with its stage kernel and a new variant
     sc = load_scenario("spring_pendulum")
     parent = we.simulate(sc, "rk4", 0.01, 50).y
     r, w = os.pipe()

@@ -74,3 +74,23 @@ def test_only_shrinking_errors_are_judged_again():
     assert errors_shrink([6.38e-7, 6.88e-7, 5.24e-7])   # the fuzz's case 9698: up, then down below the start
     assert not errors_shrink([1.0, 1.0, 1.0]) and not errors_shrink([1.0, 2.0, 1.1])
     assert not errors_shrink([1.0, float("nan"), 0.1])
+
+
+def test_the_continued_ladder_runs_in_the_sweep_s_workers_not_in_its_own_process(tmp_path, monkeypatch):
+    """An engine started in the sweep's process (JAX) would be unusable in the workers it forks next."""
+    import os
+    pids = tmp_path / "pids"
+    real = refine._refined_runs
+
+    def recorded(*args):
+        with open(pids, "a") as f:
+            f.write(f"{os.getpid()}\n")
+        return real(*args)
+
+    monkeypatch.setattr(refine, "_refined_runs", recorded)
+    summary = run_sweep([parse_scenario(PRE_ASYMPTOTIC, "s.toml")], ["reference:course_gyro"],
+                        tmp_path / "out", jobs=2, use_cache=False, progress=False)
+    ran_in = {int(p) for p in pids.read_text().split()}
+    assert ran_in and os.getpid() not in ran_in
+    (rec,) = [r for r in summary["convergence"] if r["quantity"] == "velocity"]
+    assert rec["verdict"] == "pre_asymptotic"    # and its result came back to the judge
