@@ -76,6 +76,16 @@ def test_genesis_is_initialised_once_per_process_on_the_cpu_in_float64(tilted):
         gs.init(backend=gs.cpu, precision="64")
 
 
+def test_a_genesis_someone_else_initialised_is_taken_when_it_is_cpu_float64(monkeypatch, tilted):
+    gs = ge.genesis()
+    monkeypatch.setitem(ge._STATE, "gs", None)          # as if the user's script had called gs.init first
+    assert ge.genesis() is gs
+    monkeypatch.setitem(ge._STATE, "gs", None)
+    monkeypatch.setattr(gs, "np_float", np.float32)     # ... and with single precision: refused, said why
+    with pytest.raises(EngineError, match="rbcheck needs gs.init"):
+        ge.genesis()
+
+
 def test_a_genesis_initialised_before_a_fork_is_refused(monkeypatch, tilted):
     monkeypatch.setitem(ge._STATE, "pid", -1)
     with pytest.raises(EngineError, match="initialised in process -1 before this process was forked"):
