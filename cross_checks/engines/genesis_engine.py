@@ -224,14 +224,15 @@ def genesis():
         import genesis as gs
     except Exception as exc:  # noqa: BLE001 - a broken install is the engine's failure, with its words
         raise EngineError(f"{DIST} {ver} cannot be imported: {type(exc).__name__}: {exc}") from exc
+    failed = f"Genesis {ver}: gs.init(backend=gs.cpu, precision='64') failed"
     try:
         with _quiet_stderr():
             gs.init(backend=gs.cpu, precision="64", logging_level="warning")
     except gs.GenesisException as exc:  # a second gs.init is refused: the check below judges the first
         if "already initialized" not in str(exc):
-            raise EngineError(f"Genesis {ver}: gs.init(backend=gs.cpu, precision='64') failed: {exc}") from exc
+            raise EngineError(f"{failed}: {exc}") from exc
     except Exception as exc:  # noqa: BLE001
-        raise EngineError(f"Genesis {ver}: gs.init(backend=gs.cpu, precision='64') failed: {exc}") from exc
+        raise EngineError(f"{failed}: {exc}") from exc
     if gs.backend != gs.cpu or gs.np_float is not np.float64:
         raise EngineError(
             f"Genesis {ver} was initialised in this process with backend {gs.backend} and "
