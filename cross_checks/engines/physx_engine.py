@@ -358,75 +358,56 @@ def simulate_many(variant: str, requests) -> list:
     return out
 
 
-def _run_group(variant: str, reqs) -> list:
-    """The Runs of ``reqs`` (one Δt, one gravity) in one scene."""
-    r0 = reqs[0]
-    S = PhysxScene(variant, r0.dt_s, r0.scenario.problem.forces.gravity_W)
-    B = len(reqs)
-    y0 = [r.scenario.problem.initial_packed() for r in reqs]
-    comps = [S.add(r.scenario.problem.body, y0[k]) for k, r in enumerate(reqs)]
-    n_max = max(r.n_steps for r in reqs)
-    raw = np.empty((B, n_max + 1, 13), dtype=np.float32)
-    raw[:, 0] = S.read()
-    # per body: (component, harness or None, weight floats, constant force/torque or None, decay factors)
-    plans = []
-    for k, r in enumerate(reqs):
-        fm = r.scenario.problem.forces
-        harness = harness_fn(r.scenario, r.dt_s)
-        w = [float(c) for c in _weight(r.scenario)]
-        gv, gw = (float(g) for g in decay_factors(r.scenario, r.dt_s))
-        const = None
-        if not fm.state_dependent:
-            fx, fy, fz, tx, ty, tz = harness([float(v) for v in y0[k]])
-            f, tau = _f32([fx - w[0], fy - w[1], fz - w[2]]), _f32([tx, ty, tz])
-            const = (f, tau) if (np.any(f != 0.0) or np.any(tau != 0.0)) else None
-        plans.append((comps[k], harness if fm.state_dependent else None, w, const,
-                      (gv, gw) if fm.has_decay else None, r.n_steps))
-    ends = [p[5] for p in plans]
-    # only the bodies with something to do before a step (a force, a torque, a decay) are visited per step
-    busy = [(k, *p[:5]) for k, p in enumerate(plans)
-            if p[1] is not None or p[3] is not None or p[4] is not None]
-    alive = [True] * B
-    bad_at: list = [None] * B
-    last = n_max                      # the longest run still going
-    step, pack = S.system.step, S.system.pack
-    t0 = time.perf_counter()
-    steps_done = 0
-    for i in range(last):
-        if i >= last:
-            break
-        prev = raw[:, i]
-        for k, c, harness, w, const, decay in busy:
-            if i >= ends[k] or not alive[k]:
-                continue
-            if harness is not None:
-                fx, fy, fz, tx, ty, tz = harness(y0[k].tolist() if i == 0 else _packed_row(prev[k].tolist()))
-                c.add_force_torque(_f32([fx - w[0], fy - w[1], fz - w[2]]), _f32([tx, ty, tz]))
-            elif const is not None:
-                c.add_force_torque(*const)
-            if decay is not None:
-                gv, gw = decay
-                c.set_linear_velocity(prev[k, 7:10] * np.float32(gv))
-                c.set_angular_velocity(prev[k, 10:13] * np.float32(gw))
-        step()
-        steps_done += 1
-        cur = raw[:, i + 1]
-        cur[:] = np.frombuffer(pack(), dtype=np.float32).reshape(B, 13)
-        with np.errstate(invalid="ignore"):
-            fine = np.abs(cur).max() <= BLOWUP_LIMIT
-        if not fine:
-            with np.errstate(invalid="ignore"):
-                ok = np.abs(cur).max(axis=1) <= BLOWUP_LIMIT
-            for k in np.flatnonzero(~ok):
-                if alive[k]:
-                    if i < ends[k]:
-                        bad_at[k] = i + 1
-                    alive[k] = False
-                    S.set_state(comps[k], _REST)
-            cur[:] = np.frombuffer(pack(), dtype=np.float32).reshape(B, 13)
-            last = max([ends[k] for k in range(B) if alive[k]], default=0)
-    _STATS["step_seconds"] += time.perf_counter() - t0
-    _STATS["body_steps"] += steps_done * B
+def _plan(r, y0, comp) -> tuple:
+    """What body ``comp`` of request ``r`` (initial state ``y0``) needs before each step: ``(comp, harness or
+    None (state-dependent forces), weight floats N, constant (force, torque) float32 or None, decay factors
+    (γ_v, γ_ω) or None)``."""
+    fm = r.scenario.problem.forces
+    harness = harness_fn(r.scenario, r.dt_s)
+    w = [float(c) for c in _weight(r.scenario)]
+    const = None
+    if not fm.state_dependent:
+        fx, fy, fz, tx, ty, tz = harness([float(v) for v in y0])
+        f, tau = _f32([fx - w[0], fy - w[1], fz - w[2]]), _f32([tx, ty, tz])
+        const = (f, tau) if (np.any(f != 0.0) or np.any(tau != 0.0)) else None
+    decay = tuple(float(g) for g in decay_factors(r.scenario, r.dt_s)) if fm.has_decay else None
+    return comp, harness if fm.state_dependent else None, w, const, decay
+
+
+def _pre_step(busy, prev, i: int, y0, ends, alive) -> None:
+    """Before step ``i``: each busy body's force and torque from its state ``prev[k]`` (packed float32 rows)
+    and its decay, for the bodies still running."""
+    for k, c, harness, w, const, decay in busy:
+        if i >= ends[k] or not alive[k]:
+            continue
+        if harness is not None:
+            fx, fy, fz, tx, ty, tz = harness(y0[k].tolist() if i == 0 else _packed_row(prev[k].tolist()))
+            c.add_force_torque(_f32([fx - w[0], fy - w[1], fz - w[2]]), _f32([tx, ty, tz]))
+        elif const is not None:
+            c.add_force_torque(*const)
+        if decay is not None:
+            gv, gw = decay
+            c.set_linear_velocity(prev[k, 7:10] * np.float32(gv))
+            c.set_angular_velocity(prev[k, 10:13] * np.float32(gw))
+
+
+def _retire_blown(S, comps, cur, i: int, ends, alive, bad_at) -> None:
+    """The bodies whose state ``cur`` after step ``i`` is beyond BLOWUP_LIMIT or non-finite: their
+    divergence recorded (``bad_at[k] = i + 1`` when within their run), set at rest so that the others go on;
+    ``cur`` re-read."""
+    with np.errstate(invalid="ignore"):
+        ok = np.abs(cur).max(axis=1) <= BLOWUP_LIMIT
+    for k in np.flatnonzero(~ok):
+        if alive[k]:
+            if i < ends[k]:
+                bad_at[k] = i + 1
+            alive[k] = False
+            S.set_state(comps[k], _REST)
+    cur[:] = np.frombuffer(S.system.pack(), dtype=np.float32).reshape(len(comps), 13)
+
+
+def _runs(reqs, raw, y0, bad_at) -> list:
+    """The Run of each request from its recorded float32 rows ``raw[k]`` (PhysX's packing)."""
     runs = []
     for k, r in enumerate(reqs):
         n = r.n_steps if bad_at[k] is None else bad_at[k]
@@ -434,11 +415,43 @@ def _run_group(variant: str, reqs) -> list:
         y[0] = y0[k]
         y[1:] = raw[k, 1:n + 1][:, PACK_TO_PACKED]
         y[1:, 6:10] = sign_continuous(y[1:, 6:10], first=y0[k][6:10])
-        if bad_at[k] is not None:
-            runs.append(diverged(y[:n].copy(), r.dt_s, f" ({blowup_words(y[n])})"))
-        else:
-            runs.append(Run(r.dt_s * np.arange(n + 1), y))
+        runs.append(Run(r.dt_s * np.arange(n + 1), y) if bad_at[k] is None
+                    else diverged(y[:n].copy(), r.dt_s, f" ({blowup_words(y[n])})"))
     return runs
+
+
+def _run_group(variant: str, reqs) -> list:
+    """The Runs of ``reqs`` (one Δt, one gravity) in one scene: the bodies stepped together, each visited
+    before a step only when it has a force, a torque or a decay; a body that blows up is set at rest."""
+    r0 = reqs[0]
+    S = PhysxScene(variant, r0.dt_s, r0.scenario.problem.forces.gravity_W)
+    B = len(reqs)
+    y0 = [r.scenario.problem.initial_packed() for r in reqs]
+    comps = [S.add(r.scenario.problem.body, y0[k]) for k, r in enumerate(reqs)]
+    ends = [r.n_steps for r in reqs]
+    raw = np.empty((B, max(ends) + 1, 13), dtype=np.float32)
+    raw[:, 0] = S.read()
+    plans = [_plan(r, y0[k], comps[k]) for k, r in enumerate(reqs)]
+    busy = [(k, *p) for k, p in enumerate(plans) if p[1] is not None or p[3] is not None or p[4] is not None]
+    alive, bad_at = [True] * B, [None] * B
+    last = max(ends)                      # the longest run still going
+    step, pack = S.system.step, S.system.pack
+    t0 = time.perf_counter()
+    i = 0
+    while i < last:
+        _pre_step(busy, raw[:, i], i, y0, ends, alive)
+        step()
+        cur = raw[:, i + 1]
+        cur[:] = np.frombuffer(pack(), dtype=np.float32).reshape(B, 13)
+        with np.errstate(invalid="ignore"):
+            fine = np.abs(cur).max() <= BLOWUP_LIMIT
+        if not fine:
+            _retire_blown(S, comps, cur, i, ends, alive, bad_at)
+            last = max([ends[k] for k in range(B) if alive[k]], default=0)
+        i += 1
+    _STATS["step_seconds"] += time.perf_counter() - t0
+    _STATS["body_steps"] += i * B
+    return _runs(reqs, raw, y0, bad_at)
 
 
 def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
