@@ -65,7 +65,7 @@ __all__ = ["EngineAdapter", "Variant", "harness_force_torque", "stage_force_torq
            "installed_version", "library_files", "RunRequest", "Traits",
            "SYMPLECTIC_EULER_EXPLICIT_GYRO", "SYMPLECTIC_EULER_IMPLICIT_GYRO", "WHOLE_STATE_EXPLICIT_EULER",
            "WHOLE_STATE_IMPLICIT_EULER", "HIGHER_ORDER", "DEFAULT_TRAITS", "ModuleAdapter", "package_files",
-           "one_request"]
+           "one_request", "check_variant", "run_in_groups"]
 
 
 class EngineError(RuntimeError):
@@ -345,6 +345,32 @@ class Variant:
         if not isinstance(self.imitates, str):
             raise ValueError(f"imitates must be a string (ENGINE:VARIANT or empty), got {self.imitates!r}")
         object.__setattr__(self, "order", float(o))
+
+
+def check_variant(engine: str, variants, variant: str) -> None:
+    """ValueError naming ``engine``'s variants when ``variant`` is not one of them."""
+    if variant not in variants:
+        raise ValueError(f"unknown {engine} variant {variant!r}; variants: {', '.join(variants)}")
+
+
+def run_in_groups(requests, key, run_group, max_size: int | None = None) -> list:
+    """``simulate_many`` of an engine that steps requests together: the requests grouped by ``key(request)``
+    (in order, at most ``max_size`` per group), each group's runs from ``run_group(list of requests)``; an
+    :class:`EngineError` a group raises is the run of each of its requests."""
+    out: list = [None] * len(requests)
+    groups: dict = {}
+    for j, r in enumerate(requests):
+        groups.setdefault(key(r), []).append(j)
+    for idx in groups.values():
+        size = max_size or len(idx)
+        for part in (idx[s:s + size] for s in range(0, len(idx), size)):
+            try:
+                runs = run_group([requests[j] for j in part])
+            except EngineError as exc:
+                runs = [exc] * len(part)
+            for j, run in zip(part, runs):
+                out[j] = run
+    return out
 
 
 def one_request(simulate_many, scenario, variant: str, dt_s: float, n_steps: int):

@@ -93,6 +93,7 @@ from cross_checks.engines.base import (
     RunRequest,
     Traits,
     Variant,
+    check_variant,
     decay_factors,
     harness_force_torque,
     installed_version,
@@ -287,8 +288,7 @@ def expressible(scenario, variant: str, dt_s: float) -> str:
 def _system_of(scenario, variant: str):
     """The neutralised brax System of the scenario's body for ``variant`` (Δt is set per run)."""
     lib = _lib()
-    if variant not in VARIANTS:
-        raise ValueError(f"unknown brax variant {variant!r}; variants: {', '.join(VARIANTS)}")
+    check_variant(ENGINE, VARIANTS, variant)
     gen = variant == "generalized"
     try:
         with warnings.catch_warnings():

@@ -56,6 +56,7 @@ from cross_checks.engines.base import (
     ModuleAdapter,
     Variant,
     apply_decay_prestep,
+    check_variant,
     decay_factors,
     installed_version,
     library_files,
@@ -211,8 +212,7 @@ class DartBody:
 
 
 def _model(scenario, variant: str, dt_s: float) -> DartBody:
-    if variant not in VARIANTS:
-        raise ValueError(f"unknown dart variant {variant!r}; variants: {', '.join(VARIANTS)}")
+    check_variant(ENGINE, VARIANTS, variant)
     return DartBody(scenario, dt_s)
 
 

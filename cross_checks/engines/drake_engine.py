@@ -40,6 +40,7 @@ from cross_checks.engines.base import (
     EngineError,
     ModuleAdapter,
     Variant,
+    check_variant,
     library_files,
     require,
     stage_force_torque,
@@ -228,8 +229,7 @@ def _bad_rows(y):
 
 
 def _model(scenario, variant: str, dt_s: float) -> DrakeModel:
-    if variant not in VARIANTS:
-        raise ValueError(f"unknown drake variant {variant!r}; variants: {', '.join(VARIANTS)}")
+    check_variant(ENGINE, VARIANTS, variant)
     model = DrakeModel(scenario, VARIANTS[variant][0])
     model.fixed_step(dt_s)
     return model

@@ -78,6 +78,7 @@ from cross_checks.engines.base import (
     Traits,
     Variant,
     apply_decay_prestep,
+    check_variant,
     decay_factors,
 )
 from cross_checks.engines.step_floats import harness_fn
@@ -315,8 +316,7 @@ def scene_options(variant: str, dt_s: float, gravity_W):
 
 
 def _check_variant(variant: str) -> None:
-    if variant not in VARIANTS:
-        raise ValueError(f"unknown genesis variant {variant!r}; variants: {', '.join(VARIANTS)}")
+    check_variant(ENGINE, VARIANTS, variant)
 
 
 class GenesisBody:

@@ -100,6 +100,7 @@ from cross_checks.engines.base import (
     EngineNotInstalled,
     ModuleAdapter,
     Variant,
+    check_variant,
     decay_factors,
     installed_version,
     optional_import,
@@ -250,8 +251,7 @@ def model_sdf(mass_kg: float, inertia_B) -> str:
 
 def build_model(scenario, variant: str):
     """The scenario's jaxsim model for ``variant`` (EngineError with jaxsim's words when it refuses it)."""
-    if variant not in VARIANTS:
-        raise ValueError(f"unknown jaxsim variant {variant!r}; variants: {', '.join(VARIANTS)}")
+    check_variant(ENGINE, VARIANTS, variant)
     body = scenario.problem.body
     inertia = np.asarray(body.inertia_B, dtype=float)
     return _model(float(body.mass_kg), tuple(inertia.reshape(-1).tolist()), engine_gravity(scenario), variant)

@@ -77,6 +77,7 @@ from cross_checks.engines.base import (
     Traits,
     Variant,
     apply_decay_prestep,
+    check_variant,
     decay_factors,
     harness_force_torque,
     installed_version,
@@ -412,8 +413,7 @@ def simulate_many(variant: str, requests) -> list:
     """The runs of ``requests`` (``base.RunRequest``), each a Run (or its EngineError): grouped by model
     structure and force callback, each group vmapped through the compiled chunk loop in batches of at most
     MAX_BATCH runs."""
-    if variant not in VARIANTS:
-        raise ValueError(f"unknown mjx variant {variant!r}; variants: {', '.join(VARIANTS)}")
+    check_variant(ENGINE, VARIANTS, variant)
     out: list = [None] * len(requests)
     try:
         _engine_or_error()
@@ -496,8 +496,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     the forces from the row (host), the pre-step decay. Rows the engine blows up come back as MJX left
     them."""
     from cross_checks.engines.mujoco_engine import to_packed, to_qpos_qvel
-    if variant not in VARIANTS:
-        raise ValueError(f"unknown mjx variant {variant!r}; variants: {', '.join(VARIANTS)}")
+    check_variant(ENGINE, VARIANTS, variant)
     jax, _, _ = _engine_or_error()
     shape = np.shape(y_start)
     y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)

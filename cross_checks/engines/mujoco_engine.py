@@ -38,6 +38,7 @@ from cross_checks.engines.base import (
     ModuleAdapter,
     Variant,
     apply_decay_prestep,
+    check_variant,
     decay_factors,
     harness_force_torque,
     library_files,
@@ -101,8 +102,7 @@ def version() -> str:
 
 def integrator_of(variant):
     _require()
-    if variant not in VARIANTS:
-        raise ValueError(f"unknown mujoco variant {variant!r}; variants: {', '.join(VARIANTS)}")
+    check_variant(ENGINE, VARIANTS, variant)
     return getattr(mujoco.mjtIntegrator, f"mjINT_{variant.upper()}")
 
 

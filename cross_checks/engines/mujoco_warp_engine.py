@@ -84,10 +84,12 @@ from cross_checks.engines.base import (
     Traits,
     Variant,
     apply_decay_prestep,
+    check_variant,
     decay_factors,
     installed_version,
     one_request,
     package_files,
+    run_in_groups,
 )
 from cross_checks.engines.step_floats import harness_fn
 from reference_sim.quaternion import sign_continuous
@@ -265,8 +267,7 @@ def host_model(scenario, variant: str, dt_s: float):
     ``mjDSBL_AUTORESET`` cleared (mujoco_warp refuses it; it never resets a world). EngineError with MuJoCo's
     words."""
     from cross_checks.engines import mujoco_engine
-    if variant not in VARIANTS:
-        raise ValueError(f"unknown mujoco_warp variant {variant!r}; variants: {', '.join(VARIANTS)}")
+    check_variant(ENGINE, VARIANTS, variant)
     _, _, mujoco = _engine_or_error()
     m = mujoco_engine.build_model(scenario, variant, dt_s)
     m.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_AUTORESET)
@@ -350,27 +351,14 @@ def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
 def simulate_many(variant: str, requests) -> list:
     """The runs of ``requests`` (``base.RunRequest``), each a Run (or its EngineError): the requests of one
     scenario run as the worlds of one batch (one world per Δt, in batches of at most MAX_WORLDS)."""
-    if variant not in VARIANTS:
-        raise ValueError(f"unknown mujoco_warp variant {variant!r}; variants: {', '.join(VARIANTS)}")
-    out: list = [None] * len(requests)
+    check_variant(ENGINE, VARIANTS, variant)
     try:
         _engine_or_error()
     except EngineError as exc:
         return [exc] * len(requests)
-    groups: dict = {}
-    for j, r in enumerate(requests):
-        groups.setdefault(id(r.scenario), []).append(j)
     with _LOCK:
-        for idx in groups.values():
-            for s in range(0, len(idx), MAX_WORLDS):
-                part = idx[s:s + MAX_WORLDS]
-                try:
-                    runs = _run_batch(variant, [requests[j] for j in part])
-                except EngineError as exc:
-                    runs = [exc] * len(part)
-                for j, run in zip(part, runs):
-                    out[j] = run
-    return out
+        return run_in_groups(requests, lambda r: id(r.scenario), lambda reqs: _run_batch(variant, reqs),
+                             MAX_WORLDS)
 
 
 @functools.lru_cache(maxsize=1)
@@ -517,8 +505,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     (MAX_WORLDS at a time): the forces from the row, the pre-step decay (RK4 with forces that change within a
     step: both per stage). Rows the engine blows up come back as it left them."""
     from cross_checks.engines.mujoco_engine import to_packed, to_qpos_qvel
-    if variant not in VARIANTS:
-        raise ValueError(f"unknown mujoco_warp variant {variant!r}; variants: {', '.join(VARIANTS)}")
+    check_variant(ENGINE, VARIANTS, variant)
     shape = np.shape(y_start)
     y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
     T = len(y_start)

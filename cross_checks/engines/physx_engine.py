@@ -87,10 +87,12 @@ from cross_checks.engines.base import (
     Traits,
     Variant,
     apply_decay_prestep,
+    check_variant,
     decay_factors,
     installed_version,
     one_request,
     package_files,
+    run_in_groups,
 )
 from cross_checks.engines.step_floats import harness_fn
 from reference_sim.quaternion import sign_continuous
@@ -244,8 +246,7 @@ class PhysxScene:
     than the bodies :meth:`add` puts in it (none collides: no shape)."""
 
     def __init__(self, variant: str, dt_s: float, gravity_W):
-        if variant not in VARIANTS:
-            raise ValueError(f"unknown physx variant {variant!r}; variants: {', '.join(VARIANTS)}")
+        check_variant(ENGINE, VARIANTS, variant)
         sapien, px = _engine_or_error()
         t0 = time.perf_counter()
         cfg = px.PhysxSceneConfig()
@@ -338,24 +339,12 @@ def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
 def simulate_many(variant: str, requests) -> list:
     """The runs of ``requests`` (``base.RunRequest``), each a Run (or its EngineError): requests of the same
     float32 Δt and gravity share one scene, stepped together."""
-    if variant not in VARIANTS:
-        raise ValueError(f"unknown physx variant {variant!r}; variants: {', '.join(VARIANTS)}")
-    out: list = [None] * len(requests)
+    check_variant(ENGINE, VARIANTS, variant)
     try:
         _engine_or_error()
     except EngineError as exc:
         return [exc] * len(requests)
-    groups: dict = {}
-    for j, r in enumerate(requests):
-        groups.setdefault(_group_key(variant, r), []).append(j)
-    for js in groups.values():
-        try:
-            runs = _run_group(variant, [requests[j] for j in js])
-        except EngineError as exc:
-            runs = [exc] * len(js)
-        for j, run in zip(js, runs):
-            out[j] = run
-    return out
+    return run_in_groups(requests, lambda r: _group_key(variant, r), lambda reqs: _run_group(variant, reqs))
 
 
 def _plan(r, y0, comp) -> tuple:

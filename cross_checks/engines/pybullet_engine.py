@@ -43,6 +43,7 @@ from cross_checks.engines.base import (
     ModuleAdapter,
     Variant,
     apply_decay_prestep,
+    check_variant,
     decay_factors,
     library_files,
     optional_import,
@@ -131,8 +132,7 @@ class BulletBody:
 
     def __init__(self, scenario, variant: str, dt_s: float, y0):
         """The body in the adapter's world, reset first."""
-        if variant not in VARIANTS:
-            raise ValueError(f"unknown pybullet variant {variant!r}; variants: {', '.join(VARIANTS)}")
+        check_variant(ENGINE, VARIANTS, variant)
         self.c = c = _connect()
         self.maximal = variant == "maximal"
         body = scenario.problem.body

@@ -65,12 +65,14 @@ from cross_checks.engines.base import (
     Traits,
     Variant,
     apply_decay_prestep,
+    check_variant,
     decay_factors,
     installed_version,
     library_files,
     one_request,
     optional_import,
     require,
+    run_in_groups,
 )
 from cross_checks.engines.step_floats import harness_fn
 from reference_sim.quaternion import quat_from_matrix, sign_continuous
@@ -183,8 +185,7 @@ class RapierWorld:
 
     def __init__(self, dt_s: float, gravity_W, variant: str):
         _require()
-        if variant not in VARIANTS:
-            raise ValueError(f"unknown rapier variant {variant!r}; variants: {', '.join(VARIANTS)}")
+        check_variant(ENGINE, VARIANTS, variant)
         t0 = time.perf_counter()
         self.world = w = rapier.PhysicsWorld(gravity=tuple(float(g) for g in gravity_W))
         w.set_num_threads(1)
@@ -350,22 +351,16 @@ def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
 def simulate_many(variant: str, requests) -> list:
     """The runs of ``requests`` (``base.RunRequest``), each a Run (or its EngineError): the requests of one Δt
     and one gravity run as bodies of one world (each body's run is its run alone, bit for bit)."""
-    if variant not in VARIANTS:
-        raise ValueError(f"unknown rapier variant {variant!r}; variants: {', '.join(VARIANTS)}")
+    check_variant(ENGINE, VARIANTS, variant)
     _require()
-    out: list = [None] * len(requests)
-    groups: dict = {}
-    for j, r in enumerate(requests):
-        groups.setdefault(_group_key(r), []).append(j)
-    for idx in groups.values():
+
+    def run_group(reqs):
         try:
-            runs = _run_group(variant, [requests[j] for j in idx])
+            return _run_group(variant, reqs)
         except (rapier.RapierError, RuntimeError) as exc:   # the engine refused: its own words
-            err = EngineError(f"Rapier {version()} failed: {type(exc).__name__}: {exc}")
-            runs = [err] * len(idx)
-        for j, run in zip(idx, runs):
-            out[j] = run
-    return out
+            raise EngineError(f"Rapier {version()} failed: {type(exc).__name__}: {exc}") from exc
+
+    return run_in_groups(requests, _group_key, run_group)
 
 
 def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:

@@ -1,0 +1,64 @@
+"""The pieces of cross_checks.engines.base the adapters share: the variant check, the grouped batch runner,
+the single request, ModuleAdapter's forwarding and the engine's files found without importing it."""
+import sys
+import types
+
+import numpy as np
+import pytest
+
+from cross_checks.engines import base
+from cross_checks.engines.base import EngineError, ModuleAdapter, RunRequest, Variant
+
+
+def test_an_unknown_variant_is_refused_with_the_engine_s_variants():
+    base.check_variant("mysim", {"euler": 1, "rk4": 2}, "euler")
+    with pytest.raises(ValueError, match=r"unknown mysim variant 'rk2'; variants: euler, rk4"):
+        base.check_variant("mysim", {"euler": 1, "rk4": 2}, "rk2")
+
+
+def test_run_in_groups_keeps_the_order_splits_groups_and_gives_a_group_s_error_to_each_member():
+    reqs = list(range(7))                       # stand-ins: the key and the group runner see them as they are
+    calls = []
+
+    def run_group(group):
+        calls.append(group)
+        if 3 in group:
+            raise EngineError("three")
+        return [f"run {r}" for r in group]
+
+    out = base.run_in_groups(reqs, lambda r: r % 2, run_group, max_size=2)
+    assert calls == [[0, 2], [4, 6], [1, 3], [5]]
+    assert out[0::2] == ["run 0", "run 2", "run 4", "run 6"] and out[5] == "run 5"
+    assert isinstance(out[1], EngineError) and out[1] is out[3]
+
+
+def test_one_request_raises_the_engine_error_of_its_run():
+    ok = base.one_request(lambda v, rs: [f"{v} {rs[0].dt_s} {rs[0].n_steps}"], "sc", "euler", 0.5, 3.0)
+    assert ok == "euler 0.5 3"
+    with pytest.raises(EngineError, match="refused"):
+        base.one_request(lambda v, rs: [EngineError("refused")], "sc", "euler", 0.5, 3)
+
+
+def test_a_module_adapter_forwards_to_its_module_s_functions_looked_up_when_called(monkeypatch):
+    mod = types.ModuleType("fake_engine_for_test")
+    mod.version = lambda: "1.2"
+    mod.simulate = lambda sc, v, dt, n: ("simulate", sc, v, dt, n)
+    mod.one_step = lambda sc, v, dt, y: np.asarray(y) + 1
+    monkeypatch.setitem(sys.modules, mod.__name__, mod)
+    Adapter = type("Adapter", (ModuleAdapter,), {"__module__": mod.__name__, "name": "fake",
+                                                 "variants": {"euler": Variant(1, "e")}})
+    a = Adapter()
+    assert a.version() == "1.2" and a.has_one_step
+    assert a.simulate("sc", "euler", 0.1, 2) == ("simulate", "sc", "euler", 0.1, 2)
+    assert a.one_step("sc", "euler", 0.1, [1.0]).tolist() == [2.0]
+    # without a simulate_many of its own, the runs are simulate's, one by one
+    assert a.simulate_many("euler", [RunRequest("a", 0.1, 1)]) == [("simulate", "a", "euler", 0.1, 1)]
+    mod.simulate_many = lambda v, rs: ["batched"] * len(rs)
+    assert a.simulate_many("euler", [RunRequest("a", 0.1, 1)] * 2) == ["batched", "batched"]
+
+
+def test_package_files_finds_an_installed_package_s_files_without_importing_it():
+    files = base.package_files("json", pattern="*.py")
+    assert any(f.name == "decoder.py" for f in files)
+    assert base.package_files("json", "decoder.py") == [f for f in files if f.name == "decoder.py"]
+    assert base.package_files("no_such_package_here") == []
