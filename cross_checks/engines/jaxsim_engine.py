@@ -64,10 +64,9 @@ computes in float64). jaxsim has no velocity clamp, sleeping or damping to switc
 Compilation: two functions per (variant, force path, jaxsim gravity value) — a run of up to CHUNK steps
 (``lax.fori_loop``) and one step of ROW_BLOCK·k rows (``jax.vmap``) — compiled ahead of time once per process
 (the model, Δt, forces and states are arguments), timed apart from stepping (:func:`timings`,
-``JaxsimAdapter.compile_seconds``). The XLA persistent compilation cache is kept in rbcheck's cache directory
-(``$RBCHECK_CACHE_DIR/jaxsim-xla``, else ``$XDG_CACHE_HOME`` or ``~/.cache`` ``/rbcheck/jaxsim-xla``); JAX
-does not persist an executable holding a host callback, so the state-dependent path compiles in every
-process.
+``JaxsimAdapter.compile_seconds``). The XLA persistent compilation cache is kept in
+``core.files.kernel_cache_dir("jax")`` (shared with the other JAX engines); JAX does not persist an
+executable holding a host callback, so the state-dependent path compiles in every process.
 
 Fork safety: importing jaxsim initialises a JAX backend (it calls ``jax.devices()``), after which a fork can
 deadlock; the sweep forks its workers. So this module never imports JAX at module level, and ``version()``

@@ -46,8 +46,7 @@ over the runs of a ``simulate_many`` call (models stacked leaf by leaf: Δt, mas
 ladder, or many scenarios of one model structure, share one executable) and over the rows of ``one_step``.
 Each executable is compiled ahead of time once per process (model structure, variant, batch size, with or
 without the force callback) and its compile time is kept apart from stepping: :func:`compile_stats`. JAX's
-persistent compilation cache lives under rbcheck's cache directory (``$RBCHECK_CACHE_DIR/jax`` or the
-platform cache dir's ``rbcheck/jax``).
+persistent compilation cache lives in ``core.files.kernel_cache_dir("jax")``.
 
 Fork safety: the sweep forks its workers. Nothing here imports JAX or MJX at module import or in
 ``version()`` (package metadata and import specs only), so the parent process never initialises a JAX backend
