@@ -65,7 +65,8 @@ Stepping: inside ``jax.lax.scan`` chunks of CHUNK steps compiled ahead of time
 ``jax.vmap`` — over the Δt rungs of one scenario (simulate_many) and over the start states of one_step. The
 compiled code takes the system and Δt as arguments, so it is reused across scenarios and steps. JAX's
 persistent compilation cache lives in ``core.files.kernel_cache_dir("jax")``. Nothing here runs a JAX
-computation before a run: ``version()`` reads package metadata, so a sweep's parent process never starts a JAX backend before it forks its workers.
+computation before a run: ``version()`` reads package metadata, so a sweep's parent process never starts a
+JAX backend before it forks its workers.
 
 Divergence: brax never stops; each chunk's states are checked, and the first state that is non-finite or has a
 component beyond BLOWUP_LIMIT ends the run as ``diverged at t = …``.
