@@ -6,7 +6,8 @@ the operations in the definition's order (``a + b + c`` is ``(a + b) + c`` in Nu
 definition's (tests/reference_sim/test_compiled.py). ``P`` is the tuple of reference_sim.compiled.parameters:
 (sc (N, 7) [h, m, c, γ_v, γ_ω, k_v, k_ω], I_B, I_B⁻¹ (N, 3, 3), m g_W, f_W at the COM, τ_W, τ_B (N, 3),
 springs (N, S, 8)
-[anchor_W, attach_B, k, L0], world point forces (N, P, 6) [f_W, r_B], body point forces (N, B, 6) [f_B, r_B]).
+[anchor_W, attach_B, k, L0], world point forces (N, P, 6) [f_W, r_B], body point forces (N, B, 6) [f_B, r_B],
+the principal moments (N, 3) kg m² and axes (N, 3, 3) (columns, body axes) of I_B: ``np.linalg.eigh``).
 """
 from __future__ import annotations
 
@@ -265,12 +266,323 @@ def _implicit_euler(i, y, out, d, z, tol, max_iter, P):
     return False
 
 
+# --- the gyroscopic variants (integrators: the engines' steps and the Strang steps) ------------------------
+# 3x3 matrices are row-major 9-tuples; every formula is the definition's helper of the same name.
+
 @njit(**_JIT)
-def run(code, rows, offsets, pos, stop, limit, tol, max_iter, sc, I, J, mg, fW, tW, tB, springs, wp, bp):
+def _m9(M):
+    """A (3, 3) array as a row-major 9-tuple."""
+    return (M[0, 0], M[0, 1], M[0, 2], M[1, 0], M[1, 1], M[1, 2], M[2, 0], M[2, 1], M[2, 2])
+
+
+@njit(**_JIT)
+def _tr(A):
+    return (A[0], A[3], A[6], A[1], A[4], A[7], A[2], A[5], A[8])
+
+
+@njit(**_JIT)
+def _mm(A, B):
+    """integrators._matmul3."""
+    return (A[0] * B[0] + A[1] * B[3] + A[2] * B[6], A[0] * B[1] + A[1] * B[4] + A[2] * B[7],
+            A[0] * B[2] + A[1] * B[5] + A[2] * B[8],
+            A[3] * B[0] + A[4] * B[3] + A[5] * B[6], A[3] * B[1] + A[4] * B[4] + A[5] * B[7],
+            A[3] * B[2] + A[4] * B[5] + A[5] * B[8],
+            A[6] * B[0] + A[7] * B[3] + A[8] * B[6], A[6] * B[1] + A[7] * B[4] + A[8] * B[7],
+            A[6] * B[2] + A[7] * B[5] + A[8] * B[8])
+
+
+@njit(**_JIT)
+def _cross(a0, a1, a2, b0, b1, b2):
+    """reference_sim.vec.cross3."""
+    return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+
+
+@njit(**_JIT)
+def _dot(a0, a1, a2, b0, b1, b2):
+    """integrators._dot3."""
+    return a0 * b0 + a1 * b1 + a2 * b2
+
+
+@njit(**_JIT)
+def _skew(a0, a1, a2):
+    """integrators._skew."""
+    z = 0.0 * a0
+    return (z, -a2, a1, a2, z, -a0, -a1, a0, z)
+
+
+@njit(**_JIT)
+def _skew_times(a0, a1, a2, M):
+    """integrators._skew_times: column j is a × M[:, j]."""
+    c00, c01, c02 = _cross(a0, a1, a2, M[0], M[3], M[6])
+    c10, c11, c12 = _cross(a0, a1, a2, M[1], M[4], M[7])
+    c20, c21, c22 = _cross(a0, a1, a2, M[2], M[5], M[8])
+    return (c00, c10, c20, c01, c11, c21, c02, c12, c22)
+
+
+@njit(**_JIT)
+def _solve3(M, b0, b1, b2):
+    """integrators._solve3 (Cramer's rule; NaN when det M = 0)."""
+    r00, r01, r02 = _cross(M[1], M[4], M[7], M[2], M[5], M[8])
+    r10, r11, r12 = _cross(M[2], M[5], M[8], M[0], M[3], M[6])
+    r20, r21, r22 = _cross(M[0], M[3], M[6], M[1], M[4], M[7])
+    det = _dot(M[0], M[3], M[6], r00, r01, r02)
+    if not det != 0.0:
+        return np.nan, np.nan, np.nan
+    return (_dot(r00, r01, r02, b0, b1, b2) / det, _dot(r10, r11, r12, b0, b1, b2) / det,
+            _dot(r20, r21, r22, b0, b1, b2) / det)
+
+
+@njit(**_JIT)
+def _world_inertia(R, I9):
+    """integrators._world_inertia: (R I_B) Rᵀ."""
+    return _mm(_mm(R, I9), _tr(R))
+
+
+@njit(**_JIT)
+def _world_inv_inertia_times(R, J9, a0, a1, a2):
+    """integrators._world_inv_inertia_times: R I_B⁻¹ Rᵀ a."""
+    b0, b1, b2 = _mtv(R, a0, a1, a2)
+    c0, c1, c2 = _mv(J9, b0, b1, b2)
+    return _mv(R, c0, c1, c2)
+
+
+@njit(**_JIT)
+def _gyro_update(kind, R, wx, wy, wz, h, I9, J9, max_torque):
+    """The engines' gyroscopic updates G(ω) of integrators: 0 _gyro_implicit_body, 1 _gyro_implicit_world,
+    2 _gyro_explicit_clamped (``max_torque``: BULLET_MAX_GYROSCOPIC_TORQUE), 3 _gyro_momentum_clamped."""
+    if kind == 0:
+        b0, b1, b2 = _mtv(R, wx, wy, wz)
+        l0, l1, l2 = _mv(I9, b0, b1, b2)
+        A, S = _skew_times(b0, b1, b2, I9), _skew(l0, l1, l2)
+        J = (I9[0] + h * (A[0] - S[0]), I9[1] + h * (A[1] - S[1]), I9[2] + h * (A[2] - S[2]),
+             I9[3] + h * (A[3] - S[3]), I9[4] + h * (A[4] - S[4]), I9[5] + h * (A[5] - S[5]),
+             I9[6] + h * (A[6] - S[6]), I9[7] + h * (A[7] - S[7]), I9[8] + h * (A[8] - S[8]))
+        c0, c1, c2 = _cross(b0, b1, b2, l0, l1, l2)
+        s0, s1, s2 = _solve3(J, h * c0, h * c1, h * c2)
+        return _mv(R, b0 - s0, b1 - s1, b2 - s2)
+    if kind == 1:
+        W = _world_inertia(R, I9)
+        l0, l1, l2 = _mv(W, wx, wy, wz)
+        A, S = _skew_times(wx, wy, wz, W), _skew(l0, l1, l2)
+        J = (W[0] + h * (A[0] - S[0]), W[1] + h * (A[1] - S[1]), W[2] + h * (A[2] - S[2]),
+             W[3] + h * (A[3] - S[3]), W[4] + h * (A[4] - S[4]), W[5] + h * (A[5] - S[5]),
+             W[6] + h * (A[6] - S[6]), W[7] + h * (A[7] - S[7]), W[8] + h * (A[8] - S[8]))
+        c0, c1, c2 = _cross(wx, wy, wz, l0, l1, l2)
+        s0, s1, s2 = _solve3(J, h * c0, h * c1, h * c2)
+        return wx - s0, wy - s1, wz - s2
+    if kind == 2:
+        l0, l1, l2 = _mv(_world_inertia(R, I9), wx, wy, wz)
+        g0, g1, g2 = _cross(wx, wy, wz, l0, l1, l2)
+        n2 = _dot(g0, g1, g2, g0, g1, g2)
+        if n2 > max_torque * max_torque:
+            f = 1.0 / math.sqrt(n2) * max_torque
+            g0, g1, g2 = g0 * f, g1 * f, g2 * f
+        a0, a1, a2 = _world_inv_inertia_times(R, J9, g0, g1, g2)
+        return wx - h * a0, wy - h * a1, wz - h * a2
+    b0, b1, b2 = _mtv(R, wx, wy, wz)
+    l0, l1, l2 = _mv(I9, b0, b1, b2)
+    c0, c1, c2 = _cross(b0, b1, b2, l0, l1, l2)
+    n0, n1, n2 = l0 - h * c0, l1 - h * c1, l2 - h * c2
+    nn = _dot(n0, n1, n2, n0, n1, n2)
+    if nn > 0.0:
+        f = math.sqrt(_dot(l0, l1, l2, l0, l1, l2) / nn)
+        n0, n1, n2 = n0 * f, n1 * f, n2 * f
+    else:
+        n0, n1, n2 = 0.0, 0.0, 0.0
+    a0, a1, a2 = _mv(J9, n0, n1, n2)
+    return _mv(R, a0, a1, a2)
+
+
+# The two steps below are called from run, not inlined into it: inlined, they made run's compilation 1.7x as
+# long (90 s against 53 s on 2 cores), and the sweep no faster.
+@njit(**_JIT)
+def _engine_gyro_step(i, y, out, kind, max_torque, P):
+    """integrators._engine_gyro_step of member i with the gyroscopic update ``kind``
+    (:func:`_gyro_update`)."""
+    sc = P[0]
+    h, m, gv, gw = sc[i, 0], sc[i, 1], sc[i, 3], sc[i, 4]
+    qw, qx, qy, qz = y[6], y[7], y[8], y[9]
+    R = _rot(qw, qx, qy, qz)
+    fx, fy, fz, tx, ty, tz = _force_torque(i, y, R, P)
+    vx, vy, vz = gv * (y[3] + h * (fx / m)), gv * (y[4] + h * (fy / m)), gv * (y[5] + h * (fz / m))
+    G0, G1, G2 = _gyro_update(kind, R, y[10], y[11], y[12], h, _m9(P[1][i]), _m9(P[2][i]), max_torque)
+    ax, ay, az = _angular_acceleration(i, R, y[10], y[11], y[12], tx, ty, tz, False, P)
+    wx, wy, wz = gw * (G0 + h * ax), gw * (G1 + h * ay), gw * (G2 + h * az)
+    nw, nx, ny, nz = _exp_map_times(h, wx, wy, wz, qw, qx, qy, qz)
+    out[0], out[1], out[2] = y[0] + h * vx, y[1] + h * vy, y[2] + h * vz
+    out[3], out[4], out[5] = vx, vy, vz
+    out[6], out[7], out[8], out[9] = nw, nx, ny, nz
+    _normalize(out)
+    out[10], out[11], out[12] = wx, wy, wz
+
+
+@njit(**_JIT)
+def _unit(qw, qx, qy, qz):
+    """q / |q| (integrators._norm: summed left to right)."""
+    n = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+    return qw / n, qx / n, qy / n, qz / n
+
+
+@njit(**_JIT)
+def _one_plus_times(ax, ay, az, qw, qx, qy, qz):
+    """[1, a] ⊗ q (integrators._times with aw = 1.0)."""
+    return (1.0 * qw - ax * qx - ay * qy - az * qz, 1.0 * qx + ax * qw + ay * qz - az * qy,
+            1.0 * qy + ay * qw + az * qx - ax * qz, 1.0 * qz + az * qw + ax * qy - ay * qx)
+
+
+@njit(**_JIT)
+def _omega_of_momentum(R1, I9, J9, L0, L1, L2, wx, wy, wz):
+    """integrators._omega_of_momentum: w + I_W(R₁)⁻¹ (L − I_W(R₁) w)."""
+    l0, l1, l2 = _mv(_world_inertia(R1, I9), wx, wy, wz)
+    a0, a1, a2 = _world_inv_inertia_times(R1, J9, L0 - l0, L1 - l1, L2 - l2)
+    return wx + a0, wy + a1, wz + a2
+
+
+@njit(**_JIT)
+def _change3(n0, n1, n2, o0, o1, o2):
+    """integrators._change of 3-vectors: the largest |new − old| / (1 + |new|), NaN if any is NaN."""
+    e0 = abs(n0 - o0) / (1.0 + abs(n0))
+    e1 = abs(n1 - o1) / (1.0 + abs(n1))
+    e2 = abs(n2 - o2) / (1.0 + abs(n2))
+    if e0 != e0 or e1 != e1 or e2 != e2:
+        return np.nan
+    return max(e0, e1, e2)
+
+
+@njit(**_JIT)
+def _free_map(kind, q, R, w, h, I9, J9, moments, axes, tol, max_iter):
+    """The free rigid-body maps of integrators, from attitude ``q`` (its rotation ``R``) and world ω ``w``
+    (rad/s) over ``h`` (s): 0 _free_buss, 1 _free_dlm (``moments``, ``axes``: eigh of I_B), 2 _free_midpoint,
+    3 _free_moser_veselov. Returns (routine, q₁ (4), world ω₁ (3) rad/s); not routine when the Newton
+    iteration of 2 or 3 meets a non-finite update or does not reach ``tol`` in ``max_iter`` (the definition
+    then takes the step)."""
+    qw, qx, qy, qz = q
+    wx, wy, wz = w
+    if kind <= 1:
+        L0, L1, L2 = _mv(_world_inertia(R, I9), wx, wy, wz)
+        if kind == 0:
+            c0, c1, c2 = _cross(wx, wy, wz, L0, L1, L2)
+            a0, a1, a2 = _world_inv_inertia_times(R, J9, c0, c1, c2)
+            a0, a1, a2 = -a0, -a1, -a2
+            hh, h12 = 0.5 * h, h * h / 12.0
+            d0, d1, d2 = _cross(a0, a1, a2, wx, wy, wz)
+            b0, b1, b2 = wx + hh * a0 + h12 * d0, wy + hh * a1 + h12 * d1, wz + hh * a2 + h12 * d2
+            nw, nx, ny, nz = _unit(*_exp_map_times(h, b0, b1, b2, qw, qx, qy, qz))
+        else:
+            nw, nx, ny, nz = qw, qx, qy, qz
+            for j in range(5):
+                k = (0, 1, 2, 1, 0)[j]
+                frac = (0.5, 0.5, 1.0, 0.5, 0.5)[j]
+                a0, a1, a2 = _mv(_rot(nw, nx, ny, nz), axes[0, k], axes[1, k], axes[2, k])
+                phi = (frac * h) * _dot(a0, a1, a2, L0, L1, L2) / moments[k]
+                nw, nx, ny, nz = _exp_map_times(1.0, phi * a0, phi * a1, phi * a2, nw, nx, ny, nz)
+            nw, nx, ny, nz = _unit(nw, nx, ny, nz)
+        o0, o1, o2 = _omega_of_momentum(_rot(nw, nx, ny, nz), I9, J9, L0, L1, L2, wx, wy, wz)
+        return True, (nw, nx, ny, nz), (o0, o1, o2)
+    b0, b1, b2 = _mtv(R, wx, wy, wz)
+    P0, P1, P2 = _mv(I9, b0, b1, b2)
+    hh = 0.5 * h
+    if kind == 2:
+        x0, x1, x2 = P0, P1, P2
+    else:
+        x0, x1, x2 = hh * b0, hh * b1, hh * b2
+    converged = False
+    for _ in range(max_iter):
+        if kind == 2:   # G of _free_midpoint
+            m0, m1, m2 = _mv(J9, x0, x1, x2)
+            c0, c1, c2 = _cross(x0, x1, x2, m0, m1, m2)
+            r0, r1, r2 = x0 - P0 - hh * c0, x1 - P1 - hh * c1, x2 - P2 - hh * c2
+            A, S = _skew_times(x0, x1, x2, J9), _skew(m0, m1, m2)
+            J = (1.0 - hh * (A[0] - S[0]), 0.0 - hh * (A[1] - S[1]), 0.0 - hh * (A[2] - S[2]),
+                 0.0 - hh * (A[3] - S[3]), 1.0 - hh * (A[4] - S[4]), 0.0 - hh * (A[5] - S[5]),
+                 0.0 - hh * (A[6] - S[6]), 0.0 - hh * (A[7] - S[7]), 1.0 - hh * (A[8] - S[8]))
+        else:           # G of _free_moser_veselov
+            n = 1.0 + _dot(x0, x1, x2, x0, x1, x2)
+            f0, f1, f2 = _mv(I9, x0, x1, x2)
+            c0, c1, c2 = _cross(x0, x1, x2, f0, f1, f2)
+            u0, u1, u2 = f0 + c0, f1 + c1, f2 + c2
+            c = 2.0 / n
+            e = 4.0 / (n * n)
+            A, S = _skew_times(x0, x1, x2, I9), _skew(f0, f1, f2)
+            J = (c * (I9[0] + A[0] - S[0]) - e * (u0 * x0), c * (I9[1] + A[1] - S[1]) - e * (u0 * x1),
+                 c * (I9[2] + A[2] - S[2]) - e * (u0 * x2), c * (I9[3] + A[3] - S[3]) - e * (u1 * x0),
+                 c * (I9[4] + A[4] - S[4]) - e * (u1 * x1), c * (I9[5] + A[5] - S[5]) - e * (u1 * x2),
+                 c * (I9[6] + A[6] - S[6]) - e * (u2 * x0), c * (I9[7] + A[7] - S[7]) - e * (u2 * x1),
+                 c * (I9[8] + A[8] - S[8]) - e * (u2 * x2))
+            r0, r1, r2 = c * u0 - h * P0, c * u1 - h * P1, c * u2 - h * P2
+        s0, s1, s2 = _solve3(J, r0, r1, r2)
+        y0, y1, y2 = x0 - s0, x1 - s1, x2 - s2
+        d = _change3(y0, y1, y2, x0, x1, x2)
+        x0, x1, x2 = y0, y1, y2
+        if d <= tol:
+            converged = True
+            break
+        if not abs(d) < np.inf:   # a non-finite row: the definition gives its non-finite state
+            break
+    if not converged:
+        return False, (qw, qx, qy, qz), (wx, wy, wz)
+    if kind == 2:
+        m0, m1, m2 = _mv(J9, x0, x1, x2)
+        a0, a1, a2 = _mv(R, m0, m1, m2)
+        a0, a1, a2 = hh * a0, hh * a1, hh * a2
+    else:
+        a0, a1, a2 = _mv(R, x0, x1, x2)
+    nw, nx, ny, nz = _unit(*_one_plus_times(a0, a1, a2, qw, qx, qy, qz))
+    R1 = _rot(nw, nx, ny, nz)
+    if kind == 2:
+        L0, L1, L2 = _mv(R1, 2.0 * x0 - P0, 2.0 * x1 - P1, 2.0 * x2 - P2)
+    else:
+        L0, L1, L2 = _mv(R, P0, P1, P2)
+    o0, o1, o2 = _omega_of_momentum(R1, I9, J9, L0, L1, L2, wx, wy, wz)
+    return True, (nw, nx, ny, nz), (o0, o1, o2)
+
+
+@njit(**_JIT)
+def _strang(i, y, out, kind, tmp, tol, max_iter, P):
+    """integrators._strang of member i around the free map ``kind`` (:func:`_free_map`); False when that map's
+    step is not routine."""
+    sc = P[0]
+    h, m = sc[i, 0], sc[i, 1]
+    s = 0.5 * h
+    lam_v = sc[i, 2] / m + sc[i, 5]
+    k_w = sc[i, 6]
+    R = _rot(y[6], y[7], y[8], y[9])
+    for j in range(13):
+        tmp[j] = y[j]
+    tmp[3], tmp[4], tmp[5] = 0.0 * y[3], 0.0 * y[4], 0.0 * y[5]
+    fx, fy, fz, tx, ty, tz = _force_torque(i, tmp, R, P)
+    d = 1.0 + s * lam_v
+    vx, vy, vz = (y[3] + s * (fx / m)) / d, (y[4] + s * (fy / m)) / d, (y[5] + s * (fz / m)) / d
+    ax, ay, az = _angular_acceleration(i, R, y[10], y[11], y[12], tx, ty, tz, False, P)
+    d = 1.0 + s * k_w
+    wx, wy, wz = (y[10] + s * ax) / d, (y[11] + s * ay) / d, (y[12] + s * az) / d
+    x0, x1, x2 = y[0] + h * vx, y[1] + h * vy, y[2] + h * vz
+    ok, q1, w1 = _free_map(kind, (y[6], y[7], y[8], y[9]), R, (wx, wy, wz), h, _m9(P[1][i]), _m9(P[2][i]),
+                           P[10][i], P[11][i], tol, max_iter)
+    if not ok:
+        return False
+    R1 = _rot(q1[0], q1[1], q1[2], q1[3])
+    tmp[0], tmp[1], tmp[2] = x0, x1, x2
+    tmp[3], tmp[4], tmp[5] = 0.0 * vx, 0.0 * vy, 0.0 * vz
+    fx, fy, fz, tx, ty, tz = _force_torque(i, tmp, R1, P)
+    out[0], out[1], out[2] = x0, x1, x2
+    out[3], out[4], out[5] = (vx + s * (fx / m - lam_v * vx), vy + s * (fy / m - lam_v * vy),
+                              vz + s * (fz / m - lam_v * vz))
+    out[6], out[7], out[8], out[9] = q1
+    ax, ay, az = _angular_acceleration(i, R1, w1[0], w1[1], w1[2], tx, ty, tz, False, P)
+    out[10], out[11], out[12] = (w1[0] + s * (ax - k_w * w1[0]), w1[1] + s * (ay - k_w * w1[1]),
+                                 w1[2] + s * (az - k_w * w1[2]))
+    return True
+
+
+@njit(**_JIT)
+def run(code, rows, offsets, pos, stop, limit, tol, max_iter, max_torque, sc, I, J, mg, fW, tW, tB, springs,
+        wp, bp, moments, axes):
     """For each member i: step ``rows[offsets[i] + pos[i]]`` on, writing the next rows, until ``pos[i]`` is
     ``stop[i]`` or the next step is not routine (a solve this loop does not finish, or a new state with a
-    component that is non-finite or beyond ``limit``). ``pos`` is updated in place."""
-    P = (sc, I, J, mg, fW, tW, tB, springs, wp, bp)
+    component that is non-finite or beyond ``limit``). ``pos`` is updated in place. ``code``: the variant
+    (reference_sim.compiled.VARIANT_CODES); ``max_torque``: integrators.BULLET_MAX_GYROSCOPIC_TORQUE."""
+    P = (sc, I, J, mg, fW, tW, tB, springs, wp, bp, moments, axes)
     k1, k2, k3, k4, tmp = np.empty(13), np.empty(13), np.empty(13), np.empty(13), np.empty(13)
     u, u_new = np.empty(6), np.empty(6)
     for i in range(offsets.shape[0]):
@@ -284,8 +596,12 @@ def run(code, rows, offsets, pos, stop, limit, tol, max_iter, sc, I, J, mg, fW, 
                 _rk(i, y, out, (1, 2, 4)[code - 3], k1, k2, k3, k4, tmp, P)
             elif code == 6:
                 ok = _leapfrog(i, y, out, k1, u, u_new, tol, max_iter, P)
-            else:
+            elif code == 7:
                 ok = _implicit_euler(i, y, out, k1, tmp, tol, max_iter, P)
+            elif code <= 11:
+                _engine_gyro_step(i, y, out, code - 8, max_torque, P)
+            else:
+                ok = _strang(i, y, out, code - 12, tmp, tol, max_iter, P)
             if not ok:
                 break
             for j in range(13):
@@ -298,12 +614,13 @@ def run(code, rows, offsets, pos, stop, limit, tol, max_iter, sc, I, J, mg, fW, 
 
 
 @njit(**_JIT)
-def force_torque_at(y, stage, sc, I, J, mg, fW, tW, tB, springs, wp, bp):
+def force_torque_at(y, stage, sc, I, J, mg, fW, tW, tB, springs, wp, bp, moments, axes):
     """Members.force_torque of member 0 at state ``y`` (13,), the rotation from q/|q|: 6 floats. With
     ``stage``, the decay as forces too: ``−m k_v v`` and ``−k_ω I_W ω`` (``I_W ω = R I_B Rᵀ ω``)."""
     n = math.sqrt(y[6] * y[6] + y[7] * y[7] + y[8] * y[8] + y[9] * y[9])
     R = _rot(y[6] / n, y[7] / n, y[8] / n, y[9] / n)
-    fx, fy, fz, tx, ty, tz = _force_torque(0, y, R, (sc, I, J, mg, fW, tW, tB, springs, wp, bp))
+    P = (sc, I, J, mg, fW, tW, tB, springs, wp, bp, moments, axes)
+    fx, fy, fz, tx, ty, tz = _force_torque(0, y, R, P)
     kv, kw, m = sc[0, 5], sc[0, 6], sc[0, 1]
     if stage and kv != 0.0:
         fx, fy, fz = fx - m * kv * y[3], fy - m * kv * y[4], fz - m * kv * y[5]

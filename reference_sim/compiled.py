@@ -5,7 +5,8 @@ floats of one member, operation for operation and in the definition's order, com
 off: the states they write are those of the definition (tests/reference_sim/test_compiled.py).
 
 The compiled loop stops at the first step that is not routine — a state that is non-finite or beyond the
-blow-up limit, a leapfrog half kick or an implicit Euler fixed point that does not converge — and returns;
+blow-up limit, a leapfrog half kick or an implicit Euler fixed point that does not converge, a Newton
+iteration of lp_midpoint or moser_veselov that does not converge or turns non-finite — and returns;
 the caller (reference_sim.simulate) takes that one step with the definition (which raises, gives the bad
 state, or solves the step with Newton's method) and resumes compiled.
 
@@ -18,13 +19,16 @@ from __future__ import annotations
 import numpy as np
 
 from reference_sim.forces import Members
-from reference_sim.integrators import IMPLICIT_TOL, MAX_ITER
+from reference_sim.integrators import BULLET_MAX_GYROSCOPIC_TORQUE, IMPLICIT_TOL, MAX_ITER
 
 __all__ = ["VARIANT_CODES", "kernel", "parameters", "advance", "warm", "ForceEvaluator"]
 
 #: The variants the compiled loop knows, by code (the ``code`` argument of the kernel).
 VARIANT_CODES = {"course": 0, "course_gyro": 1, "expmap_gyro": 2, "explicit_euler": 3, "midpoint": 4,
-                 "rk4": 5, "leapfrog": 6, "implicit_euler": 7}
+                 "rk4": 5, "leapfrog": 6, "implicit_euler": 7,
+                 "implicit_gyro_body": 8, "implicit_gyro_world": 9, "explicit_gyro_clamped": 10,
+                 "jolt_gyro": 11, "buss_augmented": 12, "dlm_splitting": 13, "lp_midpoint": 14,
+                 "moser_veselov": 15}
 
 _KERNELS: list = []
 
@@ -53,8 +57,11 @@ def parameters(p: Members, h_s) -> tuple:
     gv, gw = (np.broadcast_to(g, (len(h), 1)) for g in p.decay_factors(h))
     sc = np.ascontiguousarray(np.column_stack([h, p.mass_kg[:, 0], p.drag[:, 0], gv[:, 0], gw[:, 0],
                                                p.decay_rates[:, 0], p.decay_rates[:, 1]]))
+    # the principal moments and axes of I_B, as the definition's dlm_splitting computes them (LAPACK, matrix
+    # by matrix: a member's are the same in any batch)
+    moments, axes = np.linalg.eigh(p.inertia_B)
     arrays = (p.inertia_B, p.inertia_inv_B, p.weight_W, p.force_W, p.torque_W, p.torque_B, p.springs,
-              p.world_points, p.body_points)
+              p.world_points, p.body_points, moments, axes)
     return (sc, *(np.ascontiguousarray(a, dtype=np.float64) for a in arrays))
 
 
@@ -68,7 +75,7 @@ def advance(variant: str, rows: np.ndarray, offsets, pos, stop, limit: float, pa
     if np.any(offsets + stop >= rows.shape[0]) or np.any(pos < 0):  # the compiled loop does not check indices
         raise ValueError(f"steps up to {stop.tolist()} do not fit rows of {rows.shape[0]} states")
     kernel()(VARIANT_CODES[variant], rows, offsets, pos, stop, float(limit), float(IMPLICIT_TOL),
-             int(MAX_ITER), *params)
+             int(MAX_ITER), float(BULLET_MAX_GYROSCOPIC_TORQUE), *params)
 
 
 class ForceEvaluator:

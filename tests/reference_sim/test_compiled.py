@@ -54,7 +54,8 @@ def _used_compiled(monkeypatch, problem, variant, dt, n):
     return run, calls
 
 
-#: The variants with a kernel; the others step by their definition (test below).
+#: The variants with a kernel; a variant without one steps by its definition
+#: (test_a_variant_without_a_kernel_runs_its_definition).
 COMPILED = list(compiled.VARIANT_CODES)
 
 
@@ -128,7 +129,9 @@ def _stiff(k=1e6):
                    State(np.array([0.1, 0, 0]), np.zeros(3), np.array([1.0, 0, 0, 0]), np.zeros(3)))
 
 
-@pytest.mark.parametrize("variant", ["explicit_euler", "course", "midpoint", "rk4"])
+@pytest.mark.parametrize("variant", ["explicit_euler", "course", "midpoint", "rk4", "implicit_gyro_body",
+                                     "implicit_gyro_world", "explicit_gyro_clamped", "jolt_gyro",
+                                     "buss_augmented", "dlm_splitting", "lp_midpoint", "moser_veselov"])
 def test_a_blow_up_is_the_definitions_divergence_time_message_and_states(monkeypatch, variant):
     fast, _ = _used_compiled(monkeypatch, _stiff(), variant, 0.01, 400)
     assert fast.diverged_at_s is not None
@@ -160,6 +163,17 @@ def test_a_leapfrog_half_kick_that_does_not_converge_is_the_definitions_error(mo
     _assert_same_run(fast, _python_run(monkeypatch, p, "leapfrog", 0.1, 20))
 
 
+def test_a_moser_veselov_step_without_a_root_is_the_definitions_non_finite_state(monkeypatch):
+    # on a principal-axis spin the Moser–Veselov equation Δt Π = 2/(1 + f²) I f has a root only while
+    # Δt ω ≤ 1: the torque spins the body up to ω = 10 rad/s (Δt = 0.1 s) at t = 5.4 s, where Newton's iterate
+    # turns non-finite; the compiled loop hands that step to the definition, which gives the non-finite state
+    p = Problem(RigidBody(1.0, [1.0, 2.0, 3.0]), ForceModel(torques=(Torque(np.array([0.0, 0.0, 5.0])),)),
+                State(np.zeros(3), np.zeros(3), np.array([1.0, 0, 0, 0]), np.array([0.0, 0.0, 1.0])))
+    fast, calls = _used_compiled(monkeypatch, p, "moser_veselov", 0.1, 100)
+    assert calls == [0] and fast.diverged_at_s == pytest.approx(5.5) and "non-finite" in fast.message
+    _assert_same_run(fast, _python_run(monkeypatch, p, "moser_veselov", 0.1, 100))
+
+
 def _requests():
     """Members of different scenarios and steps, with different lengths; one blows up (a fast spin)."""
     scs = [load_scenario(n)
@@ -170,10 +184,9 @@ def _requests():
     return reqs + [RunRequest(type("Sc", (), {"problem": fast_spin})(), 0.01, 2000)]
 
 
-# a variant without a kernel steps by its definition on both sides (slow: ~1 min each); its members' runs are
-# their own: tests/reference_sim/test_gyro_integrators.py::test_members_advance_on_their_own
-@pytest.mark.parametrize("variant", [v if v in COMPILED else pytest.param(v, marks=pytest.mark.slow)
-                                     for v in VARIANTS])
+# a variant's members' runs are their own in the definition too:
+# tests/reference_sim/test_gyro_integrators.py::test_members_advance_on_their_own
+@pytest.mark.parametrize("variant", COMPILED)
 def test_simulate_many_is_simulate_member_by_member(monkeypatch, variant):
     reqs = _requests()
     many = ReferenceAdapter().simulate_many(variant, reqs)
@@ -190,15 +203,18 @@ def test_simulate_many_is_simulate_member_by_member(monkeypatch, variant):
 
 def test_every_kernel_is_a_variant_of_the_registry():
     assert set(compiled.VARIANT_CODES) <= set(VARIANTS)
+    assert len(set(compiled.VARIANT_CODES.values())) == len(compiled.VARIANT_CODES)   # one code each
 
 
-@pytest.mark.parametrize("variant", [v for v in VARIANTS if v not in compiled.VARIANT_CODES])
+@pytest.mark.parametrize("variant", ["lp_midpoint", "implicit_euler"])
 def test_a_variant_without_a_kernel_runs_its_definition(monkeypatch, variant):
-    # VARIANT_CODES lists what has a kernel; any other variant steps by its definition, never compiled
+    # VARIANT_CODES lists what has a kernel; any other variant steps by its definition, never compiled: here a
+    # variant registered under a name without a code, with the step of one that has one
     problem = coupled_problem((0.99, 0.995))
+    monkeypatch.setitem(VARIANTS, "no_kernel", VARIANTS[variant])
     calls = []
     monkeypatch.setattr(compiled, "advance", lambda *a: calls.append(a))
-    run = S.simulate(problem, variant, 1.5e-3, 60)
+    run = S.simulate(problem, "no_kernel", 1.5e-3, 60)
     assert not calls and run.diverged_at_s is None and run.y.shape == (61, 13)
     y = problem.initial_packed()
     for n in range(1, 61):

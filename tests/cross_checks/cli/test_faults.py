@@ -50,8 +50,8 @@ def test_real_sigint_keeps_previous_results_and_the_rerun_reuses_finished_runs(t
     out, cache = tmp_path / "res", tmp_path / "cache"
     env = {**os.environ, "RBCHECK_CACHE_DIR": str(cache), "MPLBACKEND": "Agg"}
     base = [sys.executable, "-m", "cross_checks.cli", "sweep", "--jobs", "2", "--out", str(out)]
-    # the compiled textbook schemes (the interrupt, not the variants, is under test); --engines takes several
-    # values: keep it last
+    # the reference's compiled schemes (the interrupt, not the variants, is under test); --engines takes
+    # several values: keep it last
     engines = ["--engines", *(f"reference:{v}" for v in VARIANT_CODES)]
     cmd = base + files + engines
     first = subprocess.run(base + [files[0], "--engines", "reference:course"], env=env, capture_output=True,
