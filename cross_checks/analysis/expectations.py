@@ -103,12 +103,15 @@ class Expectation:
         (no expectation; one-step mode only).
     order : expected order (float) when it converges, else None.
     reason : one sentence saying why (for a non-convergence: the physics the variant misses).
+    precision, rounding_factor : the variant's Traits.precision and Traits.rounding_factor, which its floors
+        are computed with (the judge says so in its words).
     """
 
     verdict: str | None
     order: float | None
     reason: str
     precision: str = "float64"
+    rounding_factor: float = 1.0
 
     def as_dict(self) -> dict:
         return {"expected_verdict": self.verdict, "expected_order": self.order, "reason": self.reason}
@@ -274,8 +277,9 @@ def expectation(scenario, variant: str, quantity: str, mode: str = "free_running
     whose reference could not be computed, where every run is a failed row anyway).
     """
     e = _expectation(scenario, variant, quantity, mode, physics, measure_physics)
-    prec = precision(variant)
-    return e if prec == e.precision else Expectation(e.verdict, e.order, e.reason, prec)
+    prec, factor = precision(variant), float(traits(variant).rounding_factor)
+    return (e if (prec, factor) == (e.precision, e.rounding_factor)
+            else Expectation(e.verdict, e.order, e.reason, prec, factor))
 
 
 def _expectation(scenario, variant, quantity, mode, physics, measure_physics) -> Expectation:

@@ -124,8 +124,12 @@ def judge_fit(fit: ConvergenceFit, exp, local: LocalEvidence | None = None,
     judged = [h for h, used in zip(fit.dt_s, fit.fitted) if used]
     rungs = (f"rungs Δt = {judged[0]:g} … {judged[-1]:g} s judged" if len(judged) > 1 else
              "no two rungs resolved" if not judged else f"rung Δt = {judged[0]:g} s judged")
+    factor = float(getattr(exp, "rounding_factor", 1.0))
+    eps = factor * tol.MACHINE_EPSILON[prec]
+    unit = (f"ε = {eps:.2g} per step" if factor == 1.0 else
+            f"{factor:g} × ε = {eps:.2g} per step, its declared rounding factor")
     return Judgement(fit, j.verdict, j.matches, f"{j.assessment} ({prec}: {rungs} of {len(fit.dt_s)}, floors "
-                     f"from ε = {tol.MACHINE_EPSILON[prec]:.2g} per step)", j.claimed)
+                     f"from {unit})", j.claimed)
 
 
 def _judged(fit: ConvergenceFit, exp, local: LocalEvidence | None, quantity: str | None) -> Judgement:

@@ -33,11 +33,13 @@ class Float32Adapter(EngineAdapter):
     """``f32_NAME:VARIANT``: reference scheme VARIANT, its state rounded to float32 after every step; with a
     mutant (tests/mutants.py), that mutant's knob and broken step."""
 
-    def __init__(self, name: str, variant: str, mutant=None, precision: str = "float32"):
+    def __init__(self, name: str, variant: str, mutant=None, precision: str = "float32",
+                 rounding_factor: float = 1.0):
         self.name, self.scheme = f"f32_{name}", variant.split(":", 1)[1]
         spec = ReferenceAdapter.variants[self.scheme]
         bug = f" WITH A PLANTED BUG: {mutant.bug}" if mutant is not None else ""
-        traits = dataclasses.replace(declared_traits(variant), precision=precision)
+        traits = dataclasses.replace(declared_traits(variant), precision=precision,
+                                     rounding_factor=rounding_factor)
         self.variants = {self.scheme: Variant(spec.order, f"{spec.description}, state in float32{bug}",
                                               imitates=variant, traits=traits)}
         ad = mutant.adapter if mutant is not None else None

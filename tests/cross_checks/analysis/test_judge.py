@@ -55,3 +55,22 @@ def test_every_rung_within_its_floor_is_no_agreement_where_the_steps_are_wrong_i
     # a float32 verdict names its precision and the rungs it judged
     assert ("float32" in judge_fit(fit, exp).assessment
             and "no two rungs resolved of 3" in judge_fit(fit, exp).assessment)
+    # ... and the unit of its floors: ε, or ε times the rounding factor its variant declares
+    assert "floors from ε = 1.2e-07 per step" in judge_fit(fit, exp).assessment
+    deeper = Expectation("converges", 1.0, "an order-1 scheme", "float32", 2.0)
+    assert ("floors from 2 × ε = 2.4e-07 per step, its declared rounding factor)"
+            in judge_fit(fit, deeper).assessment)
+
+
+def test_the_expectation_carries_the_variants_precision_and_rounding_factor(monkeypatch):
+    import dataclasses
+
+    from cross_checks.analysis import expectations as ex
+    from cross_checks.scenario import load_scenario
+    sc = load_scenario("constant_spin")
+    e = ex.expectation(sc, "reference:rk4", "angular_velocity", measure_physics=False)
+    assert (e.precision, e.rounding_factor) == ("float64", 1.0)
+    declared = dataclasses.replace(ex.traits("reference:rk4"), precision="float32", rounding_factor=3.0)
+    monkeypatch.setattr(ex, "traits", lambda variant: declared)
+    e = ex.expectation(sc, "reference:rk4", "angular_velocity", measure_physics=False)
+    assert (e.precision, e.rounding_factor) == ("float32", 3.0)

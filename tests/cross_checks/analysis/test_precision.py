@@ -159,6 +159,18 @@ def test_a_float32_scheme_with_a_planted_bug_is_still_caught(name, tmp_path, mon
     assert _gate_failures(summary), f"float32 {m.name} ({m.bug}) was not caught on {m.exposed_by}"
 
 
+@pytest.mark.parametrize("name", ("gyroscopic_sign_flipped", "lever_arms_not_rotated"))
+def test_a_planted_bug_is_still_caught_where_the_step_declares_a_rounding_factor(name, tmp_path, monkeypatch):
+    """A declared rounding factor (Newton SemiImplicit's 2: its floors and one-step allowance at twice an
+    ordinary step's rounding) widens round-off allowances only: a wrong equation's error and one-step defect
+    are of a lower order in Δt, not a few roundings, and are still caught."""
+    m = BY_NAME[name]
+    v = register(monkeypatch, Float32Adapter(f"{name}_x2", m.variant, m, rounding_factor=2.0))
+    assert machine_epsilon(v) == 2.0 * tol.MACHINE_EPSILON["float32"]
+    summary = _sweep(tmp_path, m.exposed_by, [v])
+    assert _gate_failures(summary), f"float32 {m.name} ({m.bug}), factor 2, not caught on {m.exposed_by}"
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("scheme", SCHEMES)
 def test_a_correct_float32_scheme_passes_on_the_whole_catalog(scheme, tmp_path, monkeypatch):
