@@ -96,16 +96,18 @@ from cross_checks.engines.base import (
     EngineError,
     EngineNotInstalled,
     ModuleAdapter,
-    RunRequest,
     Traits,
     Variant,
+    check_variant,
     decay_factors,
     installed_version,
+    one_request,
     package_files,
+    run_in_groups,
 )
 from cross_checks.engines.step_floats import harness_fn
 from reference_sim.quaternion import sign_continuous
-from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
+from reference_sim.simulate import Run, bad_rows, diverged, recorded_run
 
 __all__ = ["ENGINE", "VARIANTS", "SOLVERS", "SOLVER_SETTINGS", "EngineError", "version", "simulate",
            "simulate_many", "one_step", "build_model", "make_solver", "compile_stats", "to_newton_rows",
@@ -339,8 +341,7 @@ def make_solver(variant: str, model):
     """The variant's Newton solver for ``model``, every setting of SOLVER_SETTINGS and SOLVER_ATTRIBUTES
     applied."""
     _, newton = _engine_or_error()
-    if variant not in VARIANTS:
-        raise ValueError(f"unknown newton variant {variant!r}; variants: {', '.join(VARIANTS)}")
+    check_variant(ENGINE, VARIANTS, variant)
     with warnings.catch_warnings():
         # SolverMuJoCo warns that MuJoCo 4.0.0 is not the ~=3.17.0 Newton declares (rbcheck pins 4.0.0)
         warnings.filterwarnings("ignore", message="MuJoCo dependency version mismatch")
@@ -435,10 +436,7 @@ class _Batch:
 def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
     """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded (one
     request of :func:`simulate_many`)."""
-    run = simulate_many(variant, [RunRequest(scenario, float(dt_s), int(n_steps))])[0]
-    if isinstance(run, EngineError):
-        raise run
-    return run
+    return one_request(simulate_many, scenario, variant, dt_s, n_steps)
 
 
 def _body(scenario):
@@ -450,29 +448,16 @@ def _body(scenario):
 def simulate_many(variant: str, requests) -> list:
     """The runs of ``requests`` (``base.RunRequest``), each a Run (or its EngineError): those of one Δt step
     together as the bodies of one model (at most MAX_BATCH per model)."""
-    if variant not in VARIANTS:
-        raise ValueError(f"unknown newton variant {variant!r}; variants: {', '.join(VARIANTS)}")
-    out: list = [None] * len(requests)
+    check_variant(ENGINE, VARIANTS, variant)
     try:
         with _LOCK:
             _warm(variant)
     except EngineError as exc:
         return [exc] * len(requests)
-    groups: dict = {}
-    for j, r in enumerate(requests):
-        groups.setdefault(float(r.dt_s), []).append(j)
-    size = 1 if variant in _ONE_BODY else MAX_BATCH
     with _LOCK, _mujoco_warnings(variant):
-        for dt_s, members in groups.items():
-            for start in range(0, len(members), size):
-                batch = members[start:start + size]
-                try:
-                    runs = _run_batch(variant, dt_s, [requests[j] for j in batch])
-                except EngineError as exc:
-                    runs = [exc] * len(batch)
-                for j, run in zip(batch, runs):
-                    out[j] = run
-    return out
+        return run_in_groups(requests, lambda r: float(r.dt_s),
+                             lambda reqs: _run_batch(variant, float(reqs[0].dt_s), reqs),
+                             1 if variant in _ONE_BODY else MAX_BATCH)
 
 
 class _mujoco_warnings:
@@ -546,14 +531,10 @@ def _run_batch(variant: str, dt_s: float, reqs) -> list:
             y[0] = y0[k]
             y[1:] = from_newton_rows(hist_q[:n, k], hist_qd[:n, k])
             y[1:, 6:10] = sign_continuous(y[1:, 6:10], first=y0[k, 6:10])
-            bad = bad_rows(y)
-            if bad.any():
-                n_bad = int(np.argmax(bad))
-                runs.append(diverged(y[:n_bad].copy(), r.dt_s, f" ({blowup_words(y[n_bad])})"))
-            elif n < r.n_steps:   # pragma: no cover - the loop stops early only when every run diverged
-                runs.append(diverged(y, r.dt_s, ""))
-            else:
-                runs.append(Run(r.dt_s * np.arange(r.n_steps + 1), y))
+            run = recorded_run(y, r.dt_s)
+            if run.diverged_at_s is None and n < r.n_steps:  # pragma: no cover - only when every run diverged
+                run = diverged(y, r.dt_s, "")
+            runs.append(run)
     return runs
 
 
@@ -561,8 +542,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     """One step of ``dt_s`` from each row of ``y_start`` (T, 13), the rows stepped together as the bodies of
     one model: the forces from the row, the pre-step decay. Rows the engine blows up come back as Newton left
     them."""
-    if variant not in VARIANTS:
-        raise ValueError(f"unknown newton variant {variant!r}; variants: {', '.join(VARIANTS)}")
+    check_variant(ENGINE, VARIANTS, variant)
     shape = np.shape(y_start)
     y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
     T = len(y_start)
