@@ -31,9 +31,14 @@ TRAITS = {
     # Jolt's: |L| kept exactly, the energy drifts by O(Δt²) per step towards L²/2I₂ (up from a spin about the
     # major axis, down from one about the minor axis): its own kind, either sign
     "jolt_gyro": B.Traits(rotation_drift="momentum", rotation_sign=None),
-    # second order, symmetric (Buss's map is not, but is second order): no amplitude rule applies
-    "buss_augmented": B.HIGHER_ORDER, "dlm_splitting": B.HIGHER_ORDER, "lp_midpoint": B.HIGHER_ORDER,
-    "moser_veselov": B.HIGHER_ORDER,
+    # second order, symmetric (Buss's map is not, but is second order): no amplitude rule applies. What each
+    # keeps by construction on a torque-free body (docs/gyro_integrators.md): Buss and DLM hold L over the
+    # step (ω₁ = I_W(R₁)⁻¹ L), DLM is symplectic (bounded energy error); the midpoint rule and Moser–Veselov
+    # keep every quadratic invariant: the energy, |Π| and L (Π₁ = FᵀΠ, R₁ = R F)
+    "buss_augmented": B.Traits(keeps=("angular_momentum",)),
+    "dlm_splitting": B.Traits(keeps=("angular_momentum", "energy_bounded")),
+    "lp_midpoint": B.Traits(keeps=("energy", "angular_momentum")),
+    "moser_veselov": B.Traits(keeps=("energy", "angular_momentum")),
 }
 #: Declared variants: reference_sim.integrators.VARIANTS, the one registry (orders proven by its own tests).
 VARIANTS = {v: Variant(float(s.order), s.description, traits=TRAITS[v]) for v, s in SCHEMES.items()}
