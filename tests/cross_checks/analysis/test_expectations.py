@@ -346,3 +346,27 @@ def test_a_second_order_attitude_update_is_expected_where_the_body_axes_omega_tu
     for name in ("constant_spin", "projectile"):                          # a fixed rotation axis: order 4
         sc = load_scenario(name)
         assert {expectation(sc, v, q).order for q in QUANTITIES} == {4.0}
+
+
+# --- long runs (long_run_expectation: from the declared traits only) ------------------------------------------
+
+@pytest.mark.parametrize("variant,keeps,separatrix", [
+    ("reference:lp_midpoint", ("energy", "angular_momentum_norm", "angular_momentum"), "kept"),
+    ("reference:moser_veselov", ("energy", "angular_momentum_norm", "angular_momentum"), "kept"),
+    ("reference:dlm_splitting", ("energy_bounded", "angular_momentum_norm", "angular_momentum"), "kept"),
+    ("reference:buss_augmented", ("angular_momentum_norm", "angular_momentum"), None),
+    ("reference:jolt_gyro", ("angular_momentum_norm",), "toward_intermediate"),
+    ("reference:implicit_gyro_body", (), None), ("reference:rk4", (), None), ("mujoco:euler", (), None),
+    ("pybullet:maximal", (), None),
+])
+def test_what_each_variant_is_expected_to_keep_on_a_long_run(variant, keeps, separatrix):
+    from cross_checks.analysis.expectations import long_run_expectation
+    e = long_run_expectation(variant)
+    assert (e.keeps, e.separatrix) == (keeps, separatrix), e.reason
+    assert e.reason
+
+
+def test_keeps_names_only_known_invariants():
+    from cross_checks.engines.base import Traits
+    with pytest.raises(ValueError, match="keeps"):
+        Traits(keeps=("momentum",))
