@@ -26,7 +26,8 @@ inertia = [1.0, 2.0, 3.0]
 [initial]
 angular_velocity = [0.02, 0.02, 2.0]
 ''')
-VARIANTS = ["reference:rk4", "reference:jolt_gyro", "reference:lp_midpoint", "mujoco:euler", "planted_keeps:step"]
+VARIANTS = ["reference:rk4", "reference:jolt_gyro", "reference:lp_midpoint", "mujoco:euler",
+            "planted_keeps:step"]
 
 
 @pytest.fixture(scope="module")
@@ -61,7 +62,8 @@ def test_each_finding_is_a_sentence_and_the_planted_drift_is_flagged(results):
     res = load_results(results)
     planted = next(s for s in long_standings(res) if s.variant == "planted_keeps:step")
     assert planted.contradicts == ["tiny_long"]
-    assert "CONTRADICTS what it declares on tiny_long" in integrators_view(res).sentences["planted_keeps:step"]
+    sentence = integrators_view(res).sentences["planted_keeps:step"]
+    assert "CONTRADICTS what it declares on tiny_long" in sentence
 
 
 def test_the_figures_are_drawn(results):

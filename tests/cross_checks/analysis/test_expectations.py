@@ -348,7 +348,7 @@ def test_a_second_order_attitude_update_is_expected_where_the_body_axes_omega_tu
         assert {expectation(sc, v, q).order for q in QUANTITIES} == {4.0}
 
 
-# --- long runs (long_run_expectation: from the declared traits only) ------------------------------------------
+# --- long runs (long_run_expectation: from the declared traits only) ---------------------------------------
 
 @pytest.mark.parametrize("variant,keeps,separatrix", [
     ("reference:lp_midpoint", ("energy", "angular_momentum_norm", "angular_momentum"), "kept"),

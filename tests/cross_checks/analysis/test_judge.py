@@ -61,7 +61,8 @@ def test_every_rung_within_its_floor_is_no_agreement_where_the_steps_are_wrong_i
 
 def _metrics(**kw):
     from cross_checks.analysis.long_run import DriftMetrics
-    base = dict(energy_rate_per_s=0.0, energy_drift_max=1e-14, momentum_rate_per_s=0.0, momentum_drift_max=1e-14,
+    base = dict(energy_rate_per_s=0.0, energy_drift_max=1e-14, momentum_rate_per_s=0.0,
+                momentum_drift_max=1e-14,
                 direction_drift_max_rad=1e-14, separatrix_start=-1 / 3, separatrix_end=-1 / 3,
                 separatrix_rate_per_s=0.0, toward_intermediate=False, away_from_intermediate=False,
                 duration_s=100.0, crossed_separatrix=False, energy_secular=False, steps=2000)
@@ -73,7 +74,8 @@ def _exp(keeps=(), separatrix=None):
     return LongRunExpectation(tuple(keeps), separatrix, "its traits say so")
 
 
-TOWARD = dict(toward_intermediate=True, separatrix_end=-0.01, separatrix_rate_per_s=-3e-3, energy_drift_max=0.4)
+TOWARD = dict(toward_intermediate=True, separatrix_end=-0.01, separatrix_rate_per_s=-3e-3,
+              energy_drift_max=0.4)
 
 
 def test_a_declared_keeper_whose_separatrix_distance_drifts_is_failed_and_named():

@@ -251,7 +251,7 @@ def test_particle_body_moves_like_the_same_body_given_by_mass_and_inertia_from_i
     np.testing.assert_allclose(a.y, b.y, rtol=0, atol=1e-13)
 
 
-# --- long runs (kind = "long_run", docs/scenario.md "Long runs") ----------------------------------------------
+# --- long runs (kind = "long_run", docs/scenario.md "Long runs") -------------------------------------------
 
 LONG = """
 name = "my_long"
