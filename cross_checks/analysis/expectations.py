@@ -37,7 +37,7 @@ __all__ = ["energy_drift_bound", "characteristic_rate_sq", "QUANTITIES",
            "judged_ladder_s",
            "nominal_order", "gyroscopic_term_matters", "rotation_drives_translation",
            "translation_drives_rotation", "memoized", "LongRunExpectation", "long_run_expectation",
-           "INVARIANT_WORDS"]
+           "INVARIANT_WORDS", "gyroscopic_clamp_acts"]
 
 
 #: A variant that declares no traits: engines.base.DEFAULT_TRAITS (the most cautious choice).
@@ -312,6 +312,22 @@ def rotation_turns(scenario) -> bool:
                 or any(np.any(pf.point_B != 0) for pf in fm.point_forces))
 
 
+def gyroscopic_clamp_acts(scenario, variant: str, physics=None, measure_physics: bool = True) -> float | None:
+    """The largest gyroscopic torque |ω × (I ω)| (N m) of the scenario's motion when ``variant``'s step clamps
+    it (Traits.gyroscopic_clamp_N_m) below that — the clamp acts and the step solves another equation —
+    else None. Measured on the reference (physics.MotionRates.gyroscopic_torque_max; ``physics`` measured here
+    when omitted, unless ``measure_physics`` is False: then None)."""
+    limit = traits(variant).gyroscopic_clamp_N_m
+    if limit is None or (physics is None and not measure_physics):
+        return None
+    if not gyroscopic_term_matters(scenario):
+        return None
+    from cross_checks.analysis.physics import scenario_physics
+    phys = physics if physics is not None else scenario_physics(scenario)
+    worst = float(phys.rates.gyroscopic_torque_max)
+    return worst if worst > limit else None
+
+
 def forces_change_within_step(scenario, tr: Traits) -> bool:
     """Whether a variant with traits ``tr`` holds forces that change within a step on ``scenario``
     (Traits.forces_held): its multi-stage scheme is then first order there."""
@@ -332,6 +348,13 @@ def _free_running(scenario, variant: str, quantity: str, physics,
                 "does_not_converge", None,
                 "the update has no gyroscopic term −ω × (I ω), which is not zero on this body "
                 f"(anisotropic inertia, ω off the principal axes){coupled}")
+    clamp = gyroscopic_clamp_acts(scenario, variant, physics, measure_physics)
+    if clamp is not None and (quantity in _ROTATION or rotation_drives_translation(scenario)):
+        return Expectation(
+            "does_not_converge", None,
+            f"its step cuts the gyroscopic torque −ω × (I ω) to {tr.gyroscopic_clamp_N_m:g} N m, and here "
+            f"it reaches {clamp:.3g} N m: the runs converge to the solution of that clamped equation, not to "
+            "the physical motion")
     p = nominal_order(variant)
     if p is None:
         return Expectation("converges", None, f"no nominal order is recorded for {variant}")

@@ -282,6 +282,11 @@ class Traits:
         round-off; "angular_momentum" — the world vector L (its norm and its direction) to round-off. A
         ``rotation_drift`` of "momentum" implies "angular_momentum_norm". () claims nothing: the long runs'
         drifts and findings are then reported, never judged.
+    gyroscopic_clamp_N_m : the step cuts the gyroscopic torque |ω × I ω| to this length (N m) when it is
+        longer (Bullet's ``m_maxGyroscopicForce``, reference:explicit_gyro_clamped); None: no clamp. Where the
+        motion's gyroscopic torque exceeds it (measured on the reference: analysis.physics.MotionRates) the
+        step solves another equation, whose solution the runs converge to instead of the physical one: the
+        variant is then expected not to converge in rotation.
     forces_held : the engine holds the applied force and torque it was given over all the stages of a
         step (it cannot evaluate them per stage). On a scenario whose forces change within a step
         (state-dependent forces, velocity decay) a multi-stage scheme is then first order: the held force
@@ -298,6 +303,7 @@ class Traits:
     rotation_order: float | None = None
     rounding_factor: float = 1.0
     keeps: tuple = ()
+    gyroscopic_clamp_N_m: float | None = None
 
     def __post_init__(self):
         bad = [k for k in self.keeps if k not in INVARIANTS]
