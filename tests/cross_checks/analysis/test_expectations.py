@@ -372,7 +372,7 @@ def test_keeps_names_only_known_invariants():
         Traits(keeps=("momentum",))
 
 
-# --- Bullet's gyroscopic clamp (Traits.gyroscopic_clamp_N_m; found by rbcheck fuzz, seed 0, batch 0) -----------
+# --- Bullet's gyroscopic clamp (Traits.gyroscopic_clamp_N_m; found by rbcheck fuzz, seed 0, batch 0) --------
 
 #: A fast spin of a large body: |ω × I ω| reaches 227 N m, over twice Bullet's 100 N m clamp.
 CLAMPED = '''
