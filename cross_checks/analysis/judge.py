@@ -281,8 +281,8 @@ def judge_long_run(variant: str, run_name: str, metrics, exp, status: str = "ok"
     if exp.separatrix == "kept" and kind != "none":
         lost.append(f"its separatrix distance moved ({said.split(': ', 1)[-1]}), although {exp.reason}")
     elif exp.separatrix == "toward_intermediate" and kind not in ("none", "toward_intermediate"):
-        lost.append(f"its separatrix distance {kind.replace('_', ' ')} ({said.split(': ', 1)[-1]}), although "
-                    f"{exp.reason}")
+        lost.append(f"its separatrix distance moved another way than the step's ({said.split(': ', 1)[-1]}), "
+                    f"although {exp.reason}")
     if lost:
         return LongRunJudgement(kind, False, "; ".join(lost), said)
     if not claims:

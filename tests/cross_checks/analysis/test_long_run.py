@@ -127,3 +127,19 @@ def test_the_series_for_the_report():
     assert set(s) == {"t_s", "energy_rel", "momentum_rel", "direction_rad", "separatrix"}
     assert all(a.shape == (100,) and a.dtype == np.float32 for a in s.values())
     assert np.max(np.abs(s["energy_rel"])) < 1e-6 and s["t_s"][-1] == np.float32(t[-1])
+
+
+def test_reaching_the_separatrix_is_not_crossing_it():
+    # Jolt's step brings the tennis racket's δ = −5e-5 onto the separatrix (+2e-16 after 1000 periods): a drift
+    # toward the intermediate axis, not a crossing — drawn here with |Π| kept and E moved onto L²/2I₂
+    problem, t, _ = _closed_form_run([0.02, 0.02, 2.0], n=2001)
+    d = -5e-5 * np.exp(-t / 50.0) + 2e-16
+    # a body-axes Π with |Π| = 6 whose δ is d(t): Π = |Π| (sin θ, 0, cos θ) on I = (1, 2, 3) gives
+    # δ = 2 sin²θ + (2/3) cos²θ − 1, so sin²θ = (δ + 1/3) · 3/4
+    th = np.arcsin(np.sqrt((d + 1.0 / 3.0) * 0.75))
+    Pi = 6.0 * np.column_stack([np.sin(th), np.zeros_like(th), np.cos(th)])
+    y = np.zeros((len(t), 13))
+    y[:, 6] = 1.0
+    y[:, 10:13] = Pi / np.array([1.0, 2.0, 3.0])
+    m = drift_metrics(problem, t, y)
+    assert m.kind == "toward_intermediate" and not m.crossed_separatrix, m
