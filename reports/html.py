@@ -378,6 +378,13 @@ RANKING_PAGE = "ranking.html"
 INTEGRATORS_PAGE = "integrators.html"
 
 
+def _g(x, digits: int = 2) -> str:
+    """A number to read (``digits`` significant digits), "–" for none or a non-finite one."""
+    if not isinstance(x, (int, float)) or isinstance(x, bool) or not math.isfinite(x):
+        return "–"
+    return f"{x:.{digits}g}"
+
+
 def _integrators_view(res, rk, drawn, self_contained) -> dict:
     """The integrators page (reports.integrators): the work-precision and the long-run standings, every
     finding in a sentence, the figures drawn."""
@@ -397,17 +404,19 @@ def _integrators_view(res, rk, drawn, self_contained) -> dict:
                 cells.append({"text": "–", "sub": "", "cls": ""})
                 continue
             ok = r.get("status") == "ok"
-            sub = (f"E {_num(r.get('energy_drift_max'))}, |L| {_num(r.get('momentum_drift_max'))}, L turns "
-                   f"{_num(r.get('direction_drift_max_rad'))} rad; δ {_num(r.get('separatrix_start'))} → "
-                   f"{_num(r.get('separatrix_end'))}" if ok or r.get("status") == "diverged"
+            sub = (f"E {_g(r.get('energy_drift_max'))}, |L| {_g(r.get('momentum_drift_max'))}, L turns "
+                   f"{_g(r.get('direction_drift_max_rad'))} rad; δ {_g(r.get('separatrix_start'), 3)} → "
+                   f"{_g(r.get('separatrix_end'), 3)}" if ok or r.get("status") == "diverged"
                    else r.get("message", ""))
+            if r.get("status") == "diverged":
+                sub = f"at t = {_g(r.get('diverged_at_s'), 4)} s; " + sub
             mark = ("✗ " if r.get("matches_expectation") is False else
                     "✓ " if r.get("matches_expectation") is True else "")
             words = VERDICT_WORDS.get(r.get("verdict"), str(r.get("verdict")))
             cells.append({"text": mark + words, "sub": sub,
                           "cls": "bad" if r.get("matches_expectation") is False else
                           "acc1" if r.get("matches_expectation") is True else ""})
-        long_rows.append({"rank": s.rank, "variant": s.variant, "score": _num(s.score), "cells": cells,
+        long_rows.append({"rank": s.rank, "variant": s.variant, "score": _g(s.score), "cells": cells,
                           "score_sort": (_num(s.score) if s.score is not None and math.isfinite(s.score)
                                          else "1e300"),
                           "cls": "bad" if s.contradicts else ""})

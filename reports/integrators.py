@@ -225,7 +225,7 @@ def _long_figure(view, path) -> None:
     y = list(range(len(long)))
     finite = [conservation_score(r) for s in long for r in s.records.values()]
     finite = [max(v, _DRAW_FLOOR) for v in finite if math.isfinite(v)]
-    lo, hi = (min(finite) / 3, max(finite) * 30) if finite else (1e-17, 10.0)
+    lo, hi = (min(finite) / 3, max(finite) * 3e3) if finite else (1e-17, 10.0)
     for ax, name in zip(axes, names):
         for yi, s in zip(y, long):
             r = s.records.get(name)
@@ -235,14 +235,16 @@ def _long_figure(view, path) -> None:
             verdict = r.get("verdict") or "failed"
             colour = VERDICT_COLOURS.get(verdict, "#999999")
             if math.isinf(v):
-                ax.barh(yi, hi / lo, left=lo, color="white", edgecolor="#000000", hatch="///", height=0.7)
+                ax.barh(yi, hi - lo, left=lo, color="white", edgecolor="#000000", hatch="///", height=0.7)
                 at = r.get("diverged_at_s")
                 ax.text(lo * 1.5, yi, f"diverged at {_fmt(at, 's')}" if verdict == "diverged" else "failed",
                         va="center", fontsize=8, backgroundcolor="white")
                 continue
-            ax.barh(yi, max(v, _DRAW_FLOOR) / lo, left=lo, color=colour, height=0.7)
-            if r.get("matches_expectation") is False:
-                ax.text(max(v, lo) * 1.3, yi, "✗", va="center", fontsize=10, color="#D55E00")
+            end = max(v, lo * 1.05)
+            ax.barh(yi, end - lo, left=lo, color=colour, height=0.7)
+            mark = "  ✗" if r.get("matches_expectation") is False else ""
+            ax.text(end * 1.4, yi, f"{_fmt(v)}{mark}", va="center", fontsize=8,
+                    color="#B00000" if mark else "#222222")
         ax.set_xscale("log")
         ax.set_xlim(lo, hi)
         ax.set_title(f"{name}\nlargest drift: E, |L| (relative), L's turn (rad)", fontsize=10)
@@ -262,27 +264,32 @@ def _long_figure(view, path) -> None:
 
 
 def _separatrix_figure(res, view, path) -> bool:
-    """δ(t) of every variant whose δ drifted (or that diverged) on each long run; False when none did."""
-    from reports.plots import variant_styles
-    moved = [s.variant for s in view.long
-             if any(r.get("verdict") not in ("none",) for r in s.records.values())]
+    """δ(t) of every variant whose δ drifted, crossed or went away on a long run (not the runs that diverged:
+    the bars show those); False when none did. Few lines, so each gets its own colour of a qualitative
+    palette (tab20) and a dash pattern, named in one legend under the panels."""
+    drifts = ("toward_intermediate", "away_from_intermediate", "crosses_separatrix")
+    moved = [s.variant for s in view.long if any(r.get("verdict") in drifts for r in s.records.values())]
     if not moved:
         return False
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    styles = variant_styles(view.variants)
+    palette = plt.get_cmap("tab20").colors
+    dashes = ("-", "--", "-.", ":")
     names = view.long_runs
-    fig, axes = plt.subplots(1, len(names), figsize=(13.0, 4.6 + 0.22 * math.ceil(len(moved) / 3)),
-                             squeeze=False)
+    rows = math.ceil(len(moved) / 3)
+    legend_in = 0.3 + 0.24 * rows
+    height = 3.8 + legend_in
+    fig, axes = plt.subplots(1, len(names), figsize=(13.0, height), squeeze=False)
     for ax, name in zip(axes[0], names):
         ser = res.series(name)
-        for v in moved:
+        for k, v in enumerate(moved):
             d = ser.get(v)
-            if not d or "separatrix" not in d:
+            rec = next((s.records.get(name) for s in view.long if s.variant == v), None) or {}
+            if not d or "separatrix" not in d or rec.get("status") != "ok":
                 continue
-            st = styles.get(v, {})
-            ax.plot(d["t_s"], d["separatrix"], color=st.get("color"), ls=st.get("ls", "-"), lw=1.4, label=v)
+            ax.plot(d["t_s"], d["separatrix"], color=palette[(2 * k) % 20 + (k // 10) % 2],
+                    ls=dashes[k % len(dashes)], lw=1.6, label=v)
         ax.axhline(0.0, color="#555555", lw=0.8, ls=":")
         ax.set_title(f"{name}: δ(t)", fontsize=10)
         ax.set_xlabel("t (s)")
@@ -295,11 +302,11 @@ def _separatrix_figure(res, view, path) -> bool:
             if lab not in labels:
                 handles.append(h)
                 labels.append(lab)
-    fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=9, frameon=False)
-    rows = math.ceil(len(labels) / 3)
-    fig.suptitle("Separatrix distance of the variants whose δ moved: a stable spin has δ = −1/3 (major axis) "
-                 "or +1 (minor axis); δ → 0 is the intermediate-axis tumble", fontsize=10)
-    fig.tight_layout(rect=(0, min(0.45, 0.06 + 0.055 * rows), 1, 1))
+    fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=9, frameon=False,
+               bbox_to_anchor=(0.5, 0.0))
+    fig.suptitle("δ(t) of the variants whose δ drifted (runs that diverged: see the bars); δ = −1/3: a "
+                 "major-axis spin, ≈ +1: a minor-axis spin, 0: the separatrix", fontsize=10)
+    fig.tight_layout(rect=(0, legend_in / height, 1, 1))
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return True

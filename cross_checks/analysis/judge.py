@@ -42,6 +42,7 @@ conserved against what the variant's traits say it keeps
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -259,7 +260,11 @@ def judge_long_run(variant: str, run_name: str, metrics, exp, status: str = "ok"
     said = finding(variant, run_name, metrics)
     claims = bool(exp.keeps) or exp.separatrix is not None
     if status == "diverged":
+        # a run that blew up has no separatrix distance worth naming (δ of a state beyond 1e8 is meaningless)
         when = f" at t = {diverged_at_s:.4g} s" if diverged_at_s is not None else ""
+        grew = (f" (the energy grew by {metrics.energy_drift_max:.3g} of itself before)"
+                if math.isfinite(metrics.energy_drift_max) else "")
+        said = f"{variant} on {run_name}: diverged{when}{grew}"
         if claims:
             return LongRunJudgement("diverged", False, f"diverged{when}, although {exp.reason}", said)
         return LongRunJudgement("diverged", None, f"diverged{when} (no claim: {exp.reason})", said)

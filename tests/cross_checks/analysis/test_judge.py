@@ -92,7 +92,7 @@ def test_a_momentum_step_drifting_toward_the_intermediate_axis_is_named_not_fail
     j = judge_long_run("x:y", "run", _metrics(**TOWARD), exp)
     assert j.matches is True and "drifts toward the intermediate axis" in j.finding
     away = judge_long_run("x:y", "run", _metrics(away_from_intermediate=True, separatrix_end=-0.5), exp)
-    assert away.matches is False and "away from intermediate" in away.assessment
+    assert away.matches is False and "drifts away from the intermediate axis" in away.assessment
     lost = judge_long_run("x:y", "run", _metrics(**{**TOWARD, "momentum_drift_max": 1e-6}), exp)
     assert lost.matches is False and "|L| drifted by 1e-06" in lost.assessment
 

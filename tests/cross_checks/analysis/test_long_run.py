@@ -130,8 +130,8 @@ def test_the_series_for_the_report():
 
 
 def test_reaching_the_separatrix_is_not_crossing_it():
-    # Jolt's step brings the tennis racket's δ = −5e-5 onto the separatrix (+2e-16 after 1000 periods): a drift
-    # toward the intermediate axis, not a crossing — drawn here with |Π| kept and E moved onto L²/2I₂
+    # Jolt's step brings the tennis racket's δ = −5e-5 onto the separatrix (+2e-16 after 1000 periods): a
+    # drift toward the intermediate axis, not a crossing — drawn here with |Π| kept and E moved onto L²/2I₂
     problem, t, _ = _closed_form_run([0.02, 0.02, 2.0], n=2001)
     d = -5e-5 * np.exp(-t / 50.0) + 2e-16
     # a body-axes Π with |Π| = 6 whose δ is d(t): Π = |Π| (sin θ, 0, cos θ) on I = (1, 2, 3) gives
