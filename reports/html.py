@@ -25,7 +25,7 @@ from reports.ranking import (
     ranking,
     ratio_text,
 )
-from reports.words import explain
+from reports.words import GLOSSARY, explain
 
 __all__ = ["environment", "render_pages", "page_name", "rows_extracts"]
 
@@ -426,7 +426,7 @@ def _integrators_view(res, rk, drawn, self_contained) -> dict:
     scen = res.summary.get("long_run_scenarios") or []
     return {"work": work, "unranked": unranked, "long_runs": iv.long_runs, "long": long_rows,
             "sentences": [iv.sentences[v] for v in iv.variants], "findings": findings, "figs": figs,
-            "n_variants": len(iv.variants), "long_scenarios": scen}
+            "n_variants": len(iv.variants), "long_scenarios": scen, "delta_meaning": GLOSSARY["δ"]}
 
 
 def _which_view(rk) -> dict:
