@@ -183,11 +183,13 @@ def run_long_runs(runner, scenarios, variants, cache_root, use_cache, time_limit
     items.sort(key=lambda it: -_cost(it[0], it[1]))
     out: dict = {}
     n_runs = sum(len(it[1]) for it in items)
-    with Progress("rbcheck sweep", "long runs", n_runs, enabled=show_progress) as bar:
+    costs = {it[0]: _cost(it[0], it[1]) for it in items}   # the time left follows the estimated cost
+    with Progress("rbcheck sweep", "long runs", n_runs, enabled=show_progress,
+                  total_work=sum(costs.values())) as bar:
         def done(item, recs):
-            for sc, rec in zip(item[1], recs):
+            for k, (sc, rec) in enumerate(zip(item[1], recs)):
                 out[(sc.name, item[0])] = rec
-                bar.update(1, f"{sc.name} {item[0]}")
+                bar.update(1, f"{sc.name} {item[0]}", work=costs[item[0]] if k == 0 else 0.0)
 
         def crashed(item):
             why = "the worker process died running this variant's long runs (a crash inside the engine?)"
