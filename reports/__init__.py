@@ -87,6 +87,8 @@ def render(directory, *, self_contained: bool = False,
     new_plots.mkdir()
     try:
         figures = _draw_all(res, names, new_plots, jobs, progress)
+        from reports.integrators import draw_figures, integrators_view
+        figures[None] = draw_figures(res, integrators_view(res), new_plots)   # the integrators page's
         drawn = _move_plots(new_plots, d / "plots")
     finally:
         shutil.rmtree(new_plots, ignore_errors=True)

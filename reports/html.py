@@ -25,7 +25,7 @@ from reports.ranking import (
     ranking,
     ratio_text,
 )
-from reports.words import explain
+from reports.words import GLOSSARY, explain
 
 __all__ = ["environment", "render_pages", "page_name", "rows_extracts"]
 
@@ -347,7 +347,7 @@ def render_pages(res, figures: dict, self_contained: bool = False) -> dict:
     ``{scenario: [(kind, png filename or None, note)]}``."""
     env = environment()
     all_f = findings(res)
-    nav = [{"name": "ranking", "href": RANKING_PAGE}]
+    nav = [{"name": "ranking", "href": RANKING_PAGE}, {"name": "integrators", "href": INTEGRATORS_PAGE}]
     nav += [{"name": s["name"], "href": page_name(s["name"])} for s in res.scenarios]
     common = {"nav": nav, "provenance": _provenance(res)}
     pages = {}
@@ -359,6 +359,9 @@ def render_pages(res, figures: dict, self_contained: bool = False) -> dict:
     rk = ranking(res)
     pages[RANKING_PAGE] = env.get_template("ranking.html").render(
         title="rbcheck: which engine variant?", r=_ranking_view(res, rk), **common)
+    pages[INTEGRATORS_PAGE] = env.get_template("integrators.html").render(
+        title="rbcheck: the integrators, on work precision and over long runs",
+        v=_integrators_view(res, rk, figures.get(None, []), self_contained), **common)
     pages["index.html"] = env.get_template("index.html").render(
         title="rbcheck results", matrix=_matrix(res), legend=_legend(), box=box,
         which=_which_view(rk),
@@ -372,6 +375,58 @@ def render_pages(res, figures: dict, self_contained: bool = False) -> dict:
 
 
 RANKING_PAGE = "ranking.html"
+INTEGRATORS_PAGE = "integrators.html"
+
+
+def _g(x, digits: int = 2) -> str:
+    """A number to read (``digits`` significant digits), "–" for none or a non-finite one."""
+    if not isinstance(x, (int, float)) or isinstance(x, bool) or not math.isfinite(x):
+        return "–"
+    return f"{x:.{digits}g}"
+
+
+def _integrators_view(res, rk, drawn, self_contained) -> dict:
+    """The integrators page (reports.integrators): the work-precision and the long-run standings, every
+    finding in a sentence, the figures drawn."""
+    from reports.integrators import FIGURES, VERDICT_WORDS, integrators_view
+    iv = integrators_view(res, rk)
+    figs = {FIGURES[f]: _img_src(res, f, self_contained) for f in drawn if f in FIGURES}
+    orders = {x["name"]: x.get("declared_order") for x in res.summary.get("variants", [])}
+    work = [{**_standing_row(s, len(rk.groups["overall"]["scenarios"])),
+             "order": "" if orders.get(s.variant) is None else f"{orders[s.variant]:g}"} for s in iv.work]
+    unranked = [v for v in iv.variants if v not in {s.variant for s in iv.work}]
+    long_rows = []
+    for s in iv.long:
+        cells = []
+        for n in iv.long_runs:
+            r = s.records.get(n)
+            if r is None:
+                cells.append({"text": "–", "sub": "", "cls": ""})
+                continue
+            ok = r.get("status") == "ok"
+            sub = (f"E {_g(r.get('energy_drift_max'))}, |L| {_g(r.get('momentum_drift_max'))}, L turns "
+                   f"{_g(r.get('direction_drift_max_rad'))} rad; δ {_g(r.get('separatrix_start'), 3)} → "
+                   f"{_g(r.get('separatrix_end'), 3)}" if ok or r.get("status") == "diverged"
+                   else r.get("message", ""))
+            if r.get("status") == "diverged":
+                sub = f"at t = {_g(r.get('diverged_at_s'), 4)} s; " + sub
+            mark = ("✗ " if r.get("matches_expectation") is False else
+                    "✓ " if r.get("matches_expectation") is True else "")
+            words = VERDICT_WORDS.get(r.get("verdict"), str(r.get("verdict")))
+            cells.append({"text": mark + words, "sub": sub,
+                          "cls": "bad" if r.get("matches_expectation") is False else
+                          "acc1" if r.get("matches_expectation") is True else ""})
+        long_rows.append({"rank": s.rank, "variant": s.variant, "score": _g(s.score), "cells": cells,
+                          "score_sort": (_num(s.score) if s.score is not None and math.isfinite(s.score)
+                                         else "1e300"),
+                          "cls": "bad" if s.contradicts else ""})
+    findings = [{"text": r.get("finding") or f"{r['engine']} on {r['scenario']}: {r.get('assessment', '')}",
+                 "judged": r.get("assessment", ""),
+                 "cls": "bad" if r.get("matches_expectation") is False else "info"} for r in iv.findings]
+    scen = res.summary.get("long_run_scenarios") or []
+    return {"work": work, "unranked": unranked, "long_runs": iv.long_runs, "long": long_rows,
+            "sentences": [iv.sentences[v] for v in iv.variants], "findings": findings, "figs": figs,
+            "n_variants": len(iv.variants), "long_scenarios": scen, "delta_meaning": GLOSSARY["δ"]}
 
 
 def _which_view(rk) -> dict:

@@ -385,3 +385,64 @@ MUTANTS = [
     Mutant("drake_gravity_twice", "drake:implicit_euler", "the weight left in the applied force",
            ("applied_torque",), _drake_gravity_twice),
 ]
+
+
+# --- long runs: a planted drift of the energy towards L²/2I₂ (docs/verdicts.md "Long runs") ---------------
+#
+# Not in MUTANTS (those are swept on the catalog's ladders): these adapters exist for the long runs. Each
+# takes the midpoint rule's step (it keeps the energy, |Π| and L to round-off) and then turns the body-axes
+# momentum Π towards the intermediate axis at |Π| kept (Π₂ grows at
+# LONG_RUN_PLANTED_RATE per second): the energy moves to L²/2I₂ from either side while |L| stays — the drift
+# Jolt's step makes, planted. One adapter DECLARES that it keeps the energy and L (Traits.keeps, as the
+# midpoint rule does): the judge must fail it; the other declares a "momentum" step (as Jolt's): named, not
+# failed.
+
+#: The planted turn's rate, 1/s: Π₂ grows by e^{0.2 t}, so δ moves by more than SECULAR_MIN_CHANGE within
+#: ~20 s of a spin of 2 rad/s.
+LONG_RUN_PLANTED_RATE = 0.2
+
+
+def energy_to_intermediate_step(p, y, dt):
+    """The midpoint rule's step, then Π (body axes) turned towards the intermediate axis (axis 2 of a diagonal
+    inertia) at |Π| kept: |L| stays to round-off, the energy moves to L²/2I₂."""
+    from reference_sim.integrators import members
+    from reference_sim.quaternion import matrix_from_quat
+    from reference_sim.vec import mat_t_vec3, matvec3
+    y1 = get_step("lp_midpoint")(p, y, dt)
+    m = members(p)
+    R = matrix_from_quat(y1[..., 6:10])
+    Pi = matvec3(m.inertia_B, mat_t_vec3(R, y1[..., 10:13]))
+    nudged = Pi + LONG_RUN_PLANTED_RATE * _h(dt) * Pi * np.array([0.0, 1.0, 0.0])
+    nudged *= np.linalg.norm(Pi, axis=-1, keepdims=True) / np.linalg.norm(nudged, axis=-1, keepdims=True)
+    y1[..., 10:13] = matvec3(R, matvec3(m.inertia_inv_B, nudged))
+    return y1
+
+
+class LongRunMutant(EngineAdapter):
+    """``NAME:step``: :func:`energy_to_intermediate_step`, declaring ``traits``."""
+
+    def __init__(self, name: str, traits, what: str):
+        self.name = name
+        what = f"the midpoint rule with the energy planted to drift to L²/2I₂; {what}"
+        self.variants = {"step": Variant(1, what, traits=traits)}
+
+    def version(self) -> str:
+        return "planted"
+
+    def source_files(self) -> list:
+        return [__file__]
+
+    def simulate(self, scenario, variant: str, dt_s: float, n_steps: int):
+        p = scenario.problem
+        return run_members(p.members, energy_to_intermediate_step, [dt_s], [n_steps],
+                           p.initial_packed()[None])[0]
+
+
+def long_run_mutants() -> dict:
+    """``{name: apply(monkeypatch)}`` of the two long-run mutants: ``planted_keeps`` (declares the energy and
+    L kept) and ``planted_momentum`` (declares a "momentum" step)."""
+    from cross_checks.engines.base import Traits
+    return {n: _planter(LongRunMutant(n, tr, what)) for n, tr, what in (
+        ("planted_keeps", Traits(keeps=("energy", "angular_momentum")), "declares the energy and L kept"),
+        ("planted_momentum", Traits(rotation_drift="momentum", rotation_sign=None),
+         "declares a momentum-rescaled step (Jolt's kind)"))}

@@ -111,7 +111,8 @@ def test_a_sweep_with_its_report_runs_from_the_installed_wheel(installed, tmp_pa
                 "--engines", "reference:course", "mujoco:euler", "--jobs", "2", "--out", "sw")
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
     pages = sorted(p.name for p in (tmp_path / "sw").glob("*.html"))
-    assert pages == ["index.html", "ranking.html", "scenario-constant_spin.html", "scenario-projectile.html"]
+    assert pages == ["index.html", "integrators.html", "ranking.html", "scenario-constant_spin.html",
+                     "scenario-projectile.html"]
     assert "function" in (tmp_path / "sw" / "index.html").read_text()   # sort.js, inlined
     again = _run(installed, tmp_path, installed / "bin" / "rbcheck", "report", "sw")
     assert again.returncode == 0, again.stderr

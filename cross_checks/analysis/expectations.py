@@ -36,7 +36,8 @@ __all__ = ["energy_drift_bound", "characteristic_rate_sq", "QUANTITIES",
            "expectation", "expected_order", "forces_change_within_step", "precision", "machine_epsilon",
            "judged_ladder_s",
            "nominal_order", "gyroscopic_term_matters", "rotation_drives_translation",
-           "translation_drives_rotation", "memoized"]
+           "translation_drives_rotation", "memoized", "LongRunExpectation", "long_run_expectation",
+           "INVARIANT_WORDS", "gyroscopic_clamp_acts"]
 
 
 #: A variant that declares no traits: engines.base.DEFAULT_TRAITS (the most cautious choice).
@@ -315,6 +316,22 @@ def rotation_turns(scenario) -> bool:
                 or any(np.any(pf.point_B != 0) for pf in fm.point_forces))
 
 
+def gyroscopic_clamp_acts(scenario, variant: str, physics=None, measure_physics: bool = True) -> float | None:
+    """The largest gyroscopic torque |ω × (I ω)| (N m) of the scenario's motion when ``variant``'s step clamps
+    it (Traits.gyroscopic_clamp_N_m) below that — the clamp acts and the step solves another equation —
+    else None. Measured on the reference (physics.MotionRates.gyroscopic_torque_max; ``physics`` measured here
+    when omitted, unless ``measure_physics`` is False: then None)."""
+    limit = traits(variant).gyroscopic_clamp_N_m
+    if limit is None or (physics is None and not measure_physics):
+        return None
+    if not gyroscopic_term_matters(scenario):
+        return None
+    from cross_checks.analysis.physics import scenario_physics
+    phys = physics if physics is not None else scenario_physics(scenario)
+    worst = float(phys.rates.gyroscopic_torque_max)
+    return worst if worst > limit else None
+
+
 def forces_change_within_step(scenario, tr: Traits) -> bool:
     """Whether a variant with traits ``tr`` holds forces that change within a step on ``scenario``
     (Traits.forces_held): its multi-stage scheme is then first order there."""
@@ -335,6 +352,13 @@ def _free_running(scenario, variant: str, quantity: str, physics,
                 "does_not_converge", None,
                 "the update has no gyroscopic term −ω × (I ω), which is not zero on this body "
                 f"(anisotropic inertia, ω off the principal axes){coupled}")
+    clamp = gyroscopic_clamp_acts(scenario, variant, physics, measure_physics)
+    if clamp is not None and (quantity in _ROTATION or rotation_drives_translation(scenario)):
+        return Expectation(
+            "does_not_converge", None,
+            f"its step cuts the gyroscopic torque −ω × (I ω) to {tr.gyroscopic_clamp_N_m:g} N m, and here "
+            f"it reaches {clamp:.3g} N m: the runs converge to the solution of that clamped equation, not to "
+            "the physical motion")
     p = nominal_order(variant)
     if p is None:
         return Expectation("converges", None, f"no nominal order is recorded for {variant}")
@@ -455,3 +479,63 @@ def energy_drift_bound(scenario, variant: str, dt_s: float) -> float | None:
     n_steps = max(1, round(scenario.duration_s / dt_s))
     # + round-off: N steps of ε each, ×10 for the terms of E (measured 7 N ε on particle_body's RK4).
     return 2.0 * (w * dt_s) ** p * w * scenario.duration_s + 10.0 * n_steps * machine_epsilon(variant)
+
+
+#: The invariants of Traits.keeps in words (the judge's sentences).
+INVARIANT_WORDS = {"energy": "the energy", "energy_bounded": "a bounded energy error (no secular drift)",
+                   "angular_momentum_norm": "|L|", "angular_momentum": "L (its norm and direction)"}
+
+
+@dataclass(frozen=True)
+class LongRunExpectation:
+    """What a variant should do on a long run of a torque-free body (docs/verdicts.md, "Long runs").
+
+    keeps : the invariants it keeps by construction (Traits.keeps; "angular_momentum_norm" added for a
+        "momentum" rotation drift and for a kept L); () claims nothing.
+    separatrix : what its separatrix distance δ may do: "kept" (it keeps the energy — or its error bounded —
+        and |L|, hence δ: any secular drift contradicts), "toward_intermediate" (a "momentum" step: |L| kept,
+        the energy moving towards L²/2I₂ — expected, named; a drift away or a crossing contradicts), or None
+        (no claim: the finding is reported, never judged).
+    reason : one sentence saying why.
+    precision, rounding_factor : what its round-off floors scale with (Traits).
+    """
+
+    keeps: tuple
+    separatrix: str | None
+    reason: str
+    precision: str = "float64"
+    rounding_factor: float = 1.0
+
+    def as_dict(self) -> dict:
+        return {"expected_keeps": list(self.keeps), "expected_separatrix": self.separatrix,
+                "reason": self.reason}
+
+
+def long_run_expectation(variant: str) -> LongRunExpectation:
+    """The :class:`LongRunExpectation` of ``variant`` from its declared traits (nothing else)."""
+    tr = traits(variant)
+    keeps = list(tr.keeps)
+    norm_implied = tr.rotation_drift == "momentum" or "angular_momentum" in keeps
+    if norm_implied and "angular_momentum_norm" not in keeps:
+        keeps.append("angular_momentum_norm")
+    order = [k for k in INVARIANT_WORDS if k in keeps]
+    energy = "energy" in order or "energy_bounded" in order
+    if energy and "angular_momentum_norm" in order:
+        sep = "kept"
+        why = ("it declares that it keeps " + ", ".join(INVARIANT_WORDS[k] for k in order)
+               + ": so the separatrix distance δ = (2E I₂ − |L|²)/|L|² too, and no secular drift of δ is "
+               "allowed")
+    elif tr.rotation_drift == "momentum":
+        sep = "toward_intermediate"
+        why = ("a momentum-rescaled step (rotation_drift \"momentum\"): |L| is kept to round-off while the "
+               "energy drifts at O(Δt²) a step towards L²/2I₂ — a drift toward the intermediate axis is "
+               "expected and named, not failed; away from it or across it would contradict the step")
+    elif order:
+        sep = None
+        why = ("it declares that it keeps " + ", ".join(INVARIANT_WORDS[k] for k in order)
+               + "; the energy is not claimed, so δ may move")
+    else:
+        sep = None
+        why = (f"it declares no invariant it keeps by construction (rotation drift \"{tr.rotation_drift}\"): "
+               "its drifts are measured and its finding named, never judged")
+    return LongRunExpectation(tuple(order), sep, why, tr.precision, float(tr.rounding_factor))

@@ -34,9 +34,15 @@ sign's error can sit on a short run; its one-step defect cannot hide
 (tests/cross_checks/analysis/test_precision.py).
 An expected non-convergence (the course's step on a tumbling body) is not an excuse but a known, named
 missing term: its local defect is what the expectation predicts.
+
+A long run (one Δt over thousands of periods) has no ladder: :func:`judge_long_run` judges what it
+conserved against what the variant's traits say it keeps
+(:func:`~cross_checks.analysis.expectations.long_run_expectation`), with round-off floors from
+:func:`cross_checks.core.tolerances.long_run_roundoff` — the same rules for the sweep and every test.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -51,7 +57,8 @@ from cross_checks.analysis.convergence import (
 )
 from cross_checks.core import tolerances as tol
 
-__all__ = ["Judgement", "LocalEvidence", "judge_ladder", "judge_fit", "two_term_consistent"]
+__all__ = ["Judgement", "LocalEvidence", "judge_ladder", "judge_fit", "two_term_consistent",
+           "LongRunJudgement", "judge_long_run", "LONG_RUN_VERDICTS"]
 
 
 @dataclass(frozen=True)
@@ -221,3 +228,75 @@ def two_term_consistent(dts, errors, floors, order) -> bool:
         if res.status == 0:
             return True
     return False
+
+
+#: The verdicts of a long run: what its separatrix distance did (analysis.long_run.DRIFT_KINDS), or the run
+#: diverged or failed.
+LONG_RUN_VERDICTS = ("crosses_separatrix", "toward_intermediate", "away_from_intermediate", "none",
+                     "diverged", "failed")
+
+
+@dataclass(frozen=True)
+class LongRunJudgement:
+    """What the judge decided of one long run: ``verdict`` (LONG_RUN_VERDICTS), ``matches`` (True / False
+    against the variant's declared invariants, None where it declares none), ``assessment`` (the sentence)
+    and ``finding`` (analysis.long_run.finding: "" when δ drifts neither way)."""
+
+    verdict: str
+    matches: bool | None
+    assessment: str
+    finding: str
+
+
+def judge_long_run(variant: str, run_name: str, metrics, exp, status: str = "ok",
+                   diverged_at_s: float | None = None) -> LongRunJudgement:
+    """Judge a long run's :class:`~cross_checks.analysis.long_run.DriftMetrics` ``metrics`` (None when the
+    run failed) against the :class:`~cross_checks.analysis.expectations.LongRunExpectation` ``exp``.
+
+    Rules, in order: a failed run has no verdict; a run that diverged contradicts any declared invariant;
+    each declared invariant must hold within the round-off a run of that many steps accumulates
+    (tol.long_run_roundoff: the energy's and |L|'s largest relative drift, L's largest turn in rad; "energy
+    bounded": no secular energy drift); then the separatrix distance: kept when the variant keeps the energy
+    and |L| (any secular drift contradicts), toward the intermediate axis or kept for a "momentum" step."""
+    from cross_checks.analysis.long_run import drift_kind, finding
+    if status == "failed" or metrics is None:
+        return LongRunJudgement("failed", None, "the run failed: nothing to judge", "")
+    said = finding(variant, run_name, metrics)
+    claims = bool(exp.keeps) or exp.separatrix is not None
+    if status == "diverged":
+        # a run that blew up has no separatrix distance worth naming (δ of a state beyond 1e8 is meaningless)
+        when = f" at t = {diverged_at_s:.4g} s" if diverged_at_s is not None else ""
+        grew = (f" (the energy grew by {metrics.energy_drift_max:.3g} of itself before)"
+                if math.isfinite(metrics.energy_drift_max) else "")
+        said = f"{variant} on {run_name}: diverged{when}{grew}"
+        if claims:
+            return LongRunJudgement("diverged", False, f"diverged{when}, although {exp.reason}", said)
+        return LongRunJudgement("diverged", None, f"diverged{when} (no claim: {exp.reason})", said)
+    floor = tol.long_run_roundoff(metrics.steps, tol.UNIT_ROUNDOFF[exp.precision], exp.rounding_factor)
+    lost = []
+    measured = {"energy": metrics.energy_drift_max, "angular_momentum_norm": metrics.momentum_drift_max,
+                "angular_momentum": max(metrics.momentum_drift_max, metrics.direction_drift_max_rad)}
+    for k in exp.keeps:
+        if k == "energy_bounded":
+            if metrics.energy_secular:
+                lost.append(f"its energy drifts secularly ({metrics.energy_rate_per_s:+.3g}/s; largest drift "
+                            f"{metrics.energy_drift_max:.3g}), although it declares a bounded energy error")
+        elif measured[k] > floor:
+            what = {"energy": "the energy drifted by", "angular_momentum_norm": "|L| drifted by",
+                    "angular_momentum": "L drifted (norm or direction, relative or rad) by"}[k]
+            lost.append(f"{what} {measured[k]:.3g}, beyond the round-off of {metrics.steps} steps "
+                        f"({floor:.2g}), although it declares that it keeps it")
+    kind = drift_kind(metrics)
+    if exp.separatrix == "kept" and kind != "none":
+        lost.append(f"its separatrix distance moved ({said.split(': ', 1)[-1]}), although {exp.reason}")
+    elif exp.separatrix == "toward_intermediate" and kind not in ("none", "toward_intermediate"):
+        lost.append(f"its separatrix distance moved another way than the step's ({said.split(': ', 1)[-1]}), "
+                    f"although {exp.reason}")
+    if lost:
+        return LongRunJudgement(kind, False, "; ".join(lost), said)
+    if not claims:
+        return LongRunJudgement(kind, None, f"no claim: {exp.reason}", said)
+    held = ", ".join(k.replace("_", " ") for k in exp.keeps) or "nothing"
+    extra = (" — its drift toward the intermediate axis is the one its step makes (expected, named)"
+             if kind == "toward_intermediate" else "")
+    return LongRunJudgement(kind, True, f"keeps {held} as declared (within {floor:.2g}){extra}", said)

@@ -18,23 +18,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cross_checks.core.tolerances import (
+    LONG_RUN_END_FRACTION,
+    SECULAR_MIN_CHANGE,
+    SECULAR_MIN_TREND_TO_SCATTER,
+)
 from reference_sim.body import RigidBody
 from reference_sim.forces import ForceModel
 from reference_sim.quaternion import matrix_from_quat
 from reference_sim.state import Problem, State
 
-__all__ = ["LongRun", "long_runs", "DriftMetrics", "drift_metrics", "finding", "SECULAR_MIN_CHANGE",
-           "SECULAR_MIN_TREND_TO_SCATTER"]
+__all__ = ["LongRun", "long_runs", "DriftMetrics", "drift_metrics", "drift_series", "finding", "drift_kind",
+           "SECULAR_MIN_CHANGE", "SECULAR_MIN_TREND_TO_SCATTER", "DRIFT_KINDS"]
 
-#: A secular drift of |δ| is named only when |δ| has changed by the end (the mean of the last 5 % of the run)
-#: by at least this share of |δ(0)|:
-#: a scheme that keeps δ (to round-off, or with a bounded O(Δt²) oscillation) changes it by far less
-#: (measured on the long runs below: ≤ 1e-9 for the midpoint rule, ≤ 2e-4 for DLM's bounded oscillation).
-SECULAR_MIN_CHANGE = 0.02
-#: ... and at least this many times the scatter of |δ| (its standard deviations over the first and over the
-#: last 5 % of the run, added): a bounded oscillation changes its mean by less than its scatter; a drift, far
-#: more.
-SECULAR_MIN_TREND_TO_SCATTER = 3.0
+#: What a long run's separatrix distance did (DriftMetrics.kind): crossed the separatrix, drifted toward it,
+#: away from it, or neither.
+DRIFT_KINDS = ("crosses_separatrix", "toward_intermediate", "away_from_intermediate", "none")
 
 #: The long runs' body: principal moments 1, 2, 3 kg m² (the catalog's tennis racket).
 _MOMENTS = (1.0, 2.0, 3.0)
@@ -85,6 +84,14 @@ class DriftMetrics:
     toward_intermediate : |δ| has fallen by the end (SECULAR_MIN_CHANGE, SECULAR_MIN_TREND_TO_SCATTER).
     away_from_intermediate : |δ| grows secularly by the same measures (a damped tumble settling into a spin).
     duration_s : the run's length.
+    crossed_separatrix : δ changed sign by the end, from a start clearly off the separatrix, and ends as far
+        past it as a drift must move (SECULAR_MIN_CHANGE of |δ(0)|, SECULAR_MIN_TREND_TO_SCATTER × the
+        scatter): the energy went to L²/2I₂ and past it (a spin about the major axis became one about the
+        minor axis, or the reverse).
+    energy_secular : the relative energy's mean over the last LONG_RUN_END_FRACTION of the run differs from
+        its value at the start by more than SECULAR_MIN_TREND_TO_SCATTER times its scatter there (a bounded
+        oscillation does not; a drift does), and by more than ``energy_floor`` given to :func:`drift_metrics`.
+    steps : the run's recorded steps.
     """
 
     energy_rate_per_s: float
@@ -98,6 +105,25 @@ class DriftMetrics:
     toward_intermediate: bool
     away_from_intermediate: bool
     duration_s: float
+    crossed_separatrix: bool = False
+    energy_secular: bool = False
+    steps: int = 0
+
+    @property
+    def kind(self) -> str:
+        """One of DRIFT_KINDS (a crossing first: it passed through the separatrix on its way)."""
+        return drift_kind(self)
+
+
+def drift_kind(m) -> str:
+    """What the separatrix distance of :class:`DriftMetrics` ``m`` did: one of DRIFT_KINDS."""
+    if m.crossed_separatrix:
+        return "crosses_separatrix"
+    if m.toward_intermediate:
+        return "toward_intermediate"
+    if m.away_from_intermediate:
+        return "away_from_intermediate"
+    return "none"
 
 
 def _slope(t, a):
@@ -107,40 +133,82 @@ def _slope(t, a):
     return float(coef[0]), float(np.sqrt(np.mean((a - A @ coef) ** 2)))
 
 
-def drift_metrics(problem: Problem, t_s, y) -> DriftMetrics:
-    """:class:`DriftMetrics` of the recorded states ``y`` (n, 13) at times ``t_s`` (n,) of a torque-free
-    run."""
-    t = np.asarray(t_s, dtype=float)
-    y = np.asarray(y, dtype=float)
+def _invariants(problem: Problem, y):
+    """Rotational energy (J), world angular momentum about the COM (N m s, (n, 3)) and the separatrix
+    distance δ of the packed states ``y`` (n, 13) of a torque-free body."""
     R = matrix_from_quat(y[:, 6:10] / np.linalg.norm(y[:, 6:10], axis=-1, keepdims=True))
     w = y[:, 10:13]
     L = np.einsum("nij,nj->ni", R @ problem.body.inertia_B @ np.swapaxes(R, -1, -2), w)
     E = 0.5 * np.sum(w * L, axis=-1)
     Lm = np.linalg.norm(L, axis=-1)
     I2 = float(np.linalg.eigvalsh(problem.body.inertia_B)[1])
-    delta = (2.0 * E * I2 - Lm ** 2) / Lm ** 2
+    return E, L, (2.0 * E * I2 - Lm ** 2) / Lm ** 2
+
+
+def _angle(a, b):
+    """The angle (rad) between each row of ``a`` (n, 3) and ``b`` (3,): atan2(|a × b|, a · b), accurate to
+    round-off at any angle (arccos of the cosine is not: its floor is √(2ε) ≈ 2e-8 rad near 0)."""
+    return np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), a @ b)
+
+
+def drift_metrics(problem: Problem, t_s, y, energy_floor: float = 0.0) -> DriftMetrics:
+    """:class:`DriftMetrics` of the recorded states ``y`` (n, 13) at times ``t_s`` (n,) of a torque-free
+    run (n ≥ 2). ``energy_floor``: the relative energy change below which no secular energy drift is named
+    (the round-off a run of this length may accumulate: cross_checks.core.tolerances.long_run_roundoff)."""
+    t = np.asarray(t_s, dtype=float)
+    y = np.asarray(y, dtype=float)
+    E, L, delta = _invariants(problem, y)
+    Lm = np.linalg.norm(L, axis=-1)
     e_rel, l_rel = E / E[0] - 1.0, Lm / Lm[0] - 1.0
-    cos = np.clip(L @ L[0] / (Lm * Lm[0]), -1.0, 1.0)
     T = float(t[-1] - t[0])
-    k = max(1, len(delta) // 20)
+    k = max(1, int(len(delta) * LONG_RUN_END_FRACTION))
     a = np.abs(delta)
     end = float(np.mean(delta[-k:]))
     change = float(a[0] - np.mean(a[-k:]))          # how much |δ| fell over the run (start vs the last 5 %)
-    scatter = float(np.std(a[:k]) + np.std(a[-k:]))  # a bounded oscillation's size at either end
+    # a bounded oscillation has the same size all along: measured at the end, where a drift that has stopped
+    # (at the separatrix) no longer blurs it — the first 5 % would hold the whole of a drift that fast
+    scatter = 2.0 * float(np.std(a[-k:]))
 
     def secular(c):
         return bool(c >= SECULAR_MIN_CHANGE * abs(delta[0]) and c >= SECULAR_MIN_TREND_TO_SCATTER * scatter)
 
+    # across: δ ends clearly on the other side (by the same measures as a drift), not on the separatrix itself
+    # (Jolt's step brings the tennis racket's δ = −5e-5 to 2e-16: onto the separatrix, not across it)
+    crossed = bool(np.sign(end) != np.sign(delta[0]) and secular(abs(end))
+                   and abs(delta[0]) > SECULAR_MIN_TREND_TO_SCATTER * scatter)
+    e_change = abs(float(np.mean(e_rel[-k:])))
+    e_secular = bool(e_change > SECULAR_MIN_TREND_TO_SCATTER * 2.0 * float(np.std(e_rel[-k:]))
+                     and e_change > energy_floor)
     return DriftMetrics(_slope(t, e_rel)[0], float(np.max(np.abs(e_rel))), _slope(t, l_rel)[0],
-                        float(np.max(np.abs(l_rel))), float(np.max(np.arccos(cos))), float(delta[0]), end,
-                        -change / T, secular(change), secular(-change), T)
+                        float(np.max(np.abs(l_rel))), float(np.max(_angle(L, L[0]))), float(delta[0]), end,
+                        -change / T, secular(change) and not crossed, secular(-change) and not crossed, T,
+                        crossed, e_secular, len(t) - 1)
+
+
+def drift_series(problem: Problem, t_s, y, points: int) -> dict:
+    """The long run's invariants at ``points`` times spread evenly over it (the first and last included),
+    float32: ``t_s`` (s), ``energy_rel`` (E/E₀ − 1), ``momentum_rel`` (|L|/|L₀| − 1), ``direction_rad`` (the
+    angle between L and L₀, rad) and ``separatrix`` (δ): what the report draws."""
+    from cross_checks.core.quantities import decimation_indices
+    idx = decimation_indices(len(t_s), points)
+    y = np.asarray(y, dtype=float)[idx]
+    E, L, delta = _invariants(problem, y)
+    E0, L0 = _invariants(problem, np.asarray(y[:1]))[:2]
+    Lm, L0m = np.linalg.norm(L, axis=-1), float(np.linalg.norm(L0[0]))
+    return {"t_s": np.asarray(t_s, dtype=float)[idx].astype(np.float32),
+            "energy_rel": (E / E0[0] - 1.0).astype(np.float32),
+            "momentum_rel": (Lm / L0m - 1.0).astype(np.float32),
+            "direction_rad": _angle(L, L0[0]).astype(np.float32), "separatrix": delta.astype(np.float32)}
 
 
 def finding(variant: str, run_name: str, m: DriftMetrics) -> str:
     """The finding of a long run: "" when |δ| drifts neither way."""
-    if m.toward_intermediate:
+    kind = drift_kind(m)
+    if kind == "crosses_separatrix":
+        what = "crosses the intermediate-axis separatrix (energy → L²/2I₂ and past it)"
+    elif kind == "toward_intermediate":
         what = "drifts toward the intermediate axis (energy → L²/2I₂)"
-    elif m.away_from_intermediate:
+    elif kind == "away_from_intermediate":
         what = "drifts away from the intermediate axis (a tumble settles into a spin)"
     else:
         return ""

@@ -52,6 +52,7 @@ class MotionRates:
     decay_v: float            # k_v
     decay_w: float            # k_ω
     world_rotation_amplitude: float = 0.0  # rms|ω_W − ω̄_W| / max(1, max|ω_W|): the share of ω that turns
+    gyroscopic_torque_max: float = 0.0     # max |ω × (I_W ω)| over the samples, N m (Traits' clamp)
 
 
 @dataclass(frozen=True)
@@ -103,11 +104,13 @@ def motion_rates(problem, y) -> MotionRates:
     w_W = y[:, 10:13]
     dev = w_W - w_W.mean(axis=0)
     scale_w = max(1.0, float(np.max(np.linalg.norm(w_W, axis=-1))))
+    Iw_B = w_B @ problem.body.inertia_B     # I_B symmetric: (I_B ω_B) per row; |ω × I_W ω| = |ω_B × I_B ω_B|
+    gyro = float(np.max(np.linalg.norm(np.cross(w_B, Iw_B), axis=-1)))
     return MotionRates(translation=_rate(y[:, 3:6], d[:, 3:6]), body_rotation=_rate(w_B, dw_B),
                        world_rotation=_rate(w_W, d[:, 10:13]),
                        drag=fm.linear_drag_N_s_per_m / problem.body.mass_kg, decay_v=k_v, decay_w=k_w,
                        world_rotation_amplitude=(math.sqrt(float(np.mean(np.sum(dev * dev, axis=-1))))
-                                                 / scale_w))
+                                                 / scale_w), gyroscopic_torque_max=gyro)
 
 
 def separatrix_proximity(problem) -> float | None:

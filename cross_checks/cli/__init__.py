@@ -165,7 +165,12 @@ def _add_sweep(sub) -> None:
                     "identical disagree, or a scenario's two references (its closed form or DOP853, and "
                     "Drake's, when Drake is installed) disagree beyond their measured accuracies.")
     s.add_argument("scenarios", nargs="*", metavar="SCENARIO",
-                   help="catalog names or TOML paths (default: the catalog)")
+                   help="catalog names or TOML paths (default: the catalog); a long run "
+                        "(kind = \"long_run\", e.g. long_tennis_racket) runs in the long-run stage")
+    s.add_argument("--long", action="store_true",
+                   help="add the catalog's long runs (rbcheck list: every variant over 1000 spin periods, "
+                        "judged on the energy, |L| and the drift toward the intermediate axis; minutes: "
+                        "docs/scenario.md \"Long runs\")")
     s.add_argument("--engines", nargs="+", metavar="ENGINE[:VARIANT]",
                    help="variants to run, e.g. reference:rk4 mujoco (an engine name means all its variants); "
                         "default: every available variant")
@@ -395,7 +400,7 @@ def _list_json() -> str:
     import json
 
     from cross_checks.engines import all_variants
-    from cross_checks.scenario import catalog_names, load_scenario
+    from cross_checks.scenario import catalog_names, load_scenario, long_run_names
 
     scenarios = []
     for name in catalog_names():
@@ -411,12 +416,17 @@ def _list_json() -> str:
                          "reason": v.reason, "version": v.version, "declared_order": v.order,
                          "description": v.description, "source": v.source,
                          "default": v.name == defaults[v.engine]})
-    return json.dumps({"scenarios": scenarios, "variants": variants}, indent=1)
+    long_runs = []
+    for name in long_run_names():
+        sc = load_scenario(name)
+        long_runs.append({"name": sc.name, "description": sc.description, "kind": sc.kind,
+                          "duration_s": sc.duration_s, "dt_s": sc.dt_s})
+    return json.dumps({"scenarios": scenarios, "long_runs": long_runs, "variants": variants}, indent=1)
 
 
 def cmd_list(args) -> int:
     from cross_checks.engines import all_variants
-    from cross_checks.scenario import catalog_names, load_scenario
+    from cross_checks.scenario import catalog_names, load_scenario, long_run_names
 
     if args.json:
         print(_list_json())
@@ -425,6 +435,10 @@ def cmd_list(args) -> int:
     for name in catalog_names():
         sc = load_scenario(name)
         print(f"  {name:<18} {sc.description}")
+    print("\nLong runs (rbcheck sweep --long, or by name):")
+    for name in long_run_names():
+        sc = load_scenario(name)
+        print(f"  {name:<22} {sc.description}")
     print("\nEngine variants:")
     shown, defaults = set(), {}
     for v in all_variants():
@@ -655,9 +669,15 @@ def _gate_failures(summary) -> list:
         if sr.get("agrees") is False:
             out.append(f"the references of {sc['name']} disagree: {sc['reference']} and {sr['label']} "
                        f"differ in {', '.join(sr.get('disagreeing', []))} beyond their measured accuracies")
+    for r in summary.get("long_runs", []):
+        if r.get("matches_expectation") is False:
+            out.append(f"{r['engine']} on {r['scenario']} (long run): {r['assessment']}")
     n_failed = summary.get("run", {}).get("failed_runs", 0)
     if n_failed:
         out.append(f"{n_failed} run(s) failed (status 'failed' in results.csv)")
+    n_long_failed = (summary.get("run", {}).get("long_runs") or {}).get("failed_runs", 0)
+    if n_long_failed:
+        out.append(f"{n_long_failed} long run(s) failed (status 'failed' in long_runs.csv)")
     return out
 
 
@@ -679,7 +699,7 @@ def _time_limits(seconds) -> dict:
 
 def cmd_sweep(args) -> int:
     import reports
-    from cross_checks.scenario import catalog_names, load_scenario
+    from cross_checks.scenario import catalog_names, load_scenario, long_run_names
     from cross_checks.sweep import SweepError, SweepInterrupted
     from cross_checks.sweep.results_dir import ResultsDirError, check_output_dir
     reports.check_installation()  # the report's templates, before minutes of runs
@@ -689,7 +709,10 @@ def cmd_sweep(args) -> int:
         raise BadInput(str(exc)) from None
     refuse_inputs_as_outputs([("--out", args.out, True)],
                              _scenario_inputs(args.scenarios) + _engine_file_inputs(args))
-    scenarios = [load_scenario(s) for s in args.scenarios or catalog_names()]
+    names = list(args.scenarios or catalog_names())
+    if args.long:
+        names += [n for n in long_run_names() if n not in names]
+    scenarios = [load_scenario(s) for s in names]
     variants, skipped = _resolve_engines(args.engines)
     if not variants:
         raise BadInput("--engines: no available engine variant to run")
@@ -732,9 +755,10 @@ def verdict_count(summary) -> tuple:
     refs = [sc["second_reference"]
             for sc in summary.get("scenarios", []) if (sc.get("second_reference") or {})
             .get("agrees") is not None]
-    total = len(conv) + len(agree) + len(refs)
+    long = [r for r in summary.get("long_runs", []) if r.get("matches_expectation") is not None]
+    total = len(conv) + len(agree) + len(refs) + len(long)
     wrong = (sum(r["matches_expectation"] is False for r in conv) + sum(not a.get("agrees") for a in agree)
-             + sum(r["agrees"] is False for r in refs))
+             + sum(r["agrees"] is False for r in refs) + sum(r["matches_expectation"] is False for r in long))
     return total, wrong
 
 

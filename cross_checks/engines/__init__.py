@@ -19,7 +19,8 @@ from cross_checks.core.trajectory import Trajectory
 from cross_checks.engines.base import EngineAdapter, EngineError, EngineNotInstalled, NotExpressible, Variant
 
 __all__ = ["ENTRY_POINT_GROUP", "VariantInfo", "EngineEntry", "all_variants", "available_variants",
-           "get_adapter", "split_variant", "default_variant", "run_variant", "run_variants", "engine_entries",
+           "get_adapter", "split_variant", "default_variant", "run_variant", "run_variants", "run_requests",
+           "engine_entries",
            "engine_variants", "declared_variant", "declared_order", "declared_imitation", "declared_traits",
            "has_one_step", "load_engine_files", "engine_files_registered", "register_adapter", "user_engines",
            "adopt_user_engines", "engine_provenance", "reset_registry", "EngineUnavailable", "UnknownVariant",
@@ -390,20 +391,31 @@ def run_variants(scenario, name: str, dts, duration_s: float | None = None) -> l
     EngineError its run raised. Each run's ``wall_s`` is the call's wall time shared in proportion to the
     runs' steps (an engine that batches has no time of its own per run)."""
     from cross_checks.engines.base import RunRequest
+    T = scenario.duration_s if duration_s is None else float(duration_s)
+    return run_requests(name, [RunRequest(scenario, float(dt), scenario.n_steps(float(dt), T)) for dt in dts])
+
+
+def run_requests(name: str, requests) -> list:
+    """The runs of ``requests`` (base.RunRequest, of any scenarios) with engine variant ``name`` in one
+    ``EngineAdapter.simulate_many`` call: per request a Trajectory, the EngineError its run raised, or
+    NotExpressible when the engine cannot take that scenario (nothing is run for it). ``wall_s`` as in
+    :func:`run_variants`. The long runs of a sweep run all the long-run scenarios of a variant this way."""
     engine, variant = split_variant(name)
     adapter = get_adapter(engine)
-    T = scenario.duration_s if duration_s is None else float(duration_s)
-    why = adapter.expressible(scenario, variant)
-    if why:
-        return [NotExpressible(why) for _ in dts]
-    requests = [RunRequest(scenario, float(dt), scenario.n_steps(float(dt), T)) for dt in dts]
+    requests = list(requests)
+    why = [adapter.expressible(r.scenario, variant) for r in requests]
+    todo = [r for r, w in zip(requests, why) if not w]
     t0 = time.perf_counter()
-    runs = adapter.simulate_many(variant, requests)
+    runs = iter(adapter.simulate_many(variant, todo) if todo else [])
     wall = time.perf_counter() - t0
-    steps = sum(r.n_steps for r in requests) or 1
+    steps = sum(r.n_steps for r in todo) or 1
     import reference_sim
-    out = []
-    for r, run in zip(requests, runs):
+    out: list = []
+    for r, w in zip(requests, why):
+        if w:
+            out.append(NotExpressible(w))
+            continue
+        run = next(runs)
         if isinstance(run, EngineError):
             out.append(run)
             continue
@@ -412,11 +424,11 @@ def run_variants(scenario, name: str, dts, duration_s: float | None = None) -> l
             "engine_version": adapter.version(),
             "variant": name,
             "dt_s": r.dt_s,
-            "duration_s": T,
+            "duration_s": r.n_steps * r.dt_s,
             "n_steps": r.n_steps,
-            "scenario": scenario.name,
-            "scenario_hash": scenario.content_hash,
-            "scenario_source": scenario.source,
+            "scenario": r.scenario.name,
+            "scenario_hash": r.scenario.content_hash,
+            "scenario_source": r.scenario.source,
             "status": "diverged" if run.diverged_at_s is not None else "ok",
             "diverged_at_s": run.diverged_at_s,
             "message": run.message,

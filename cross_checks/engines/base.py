@@ -62,7 +62,7 @@ import numpy as np
 __all__ = ["EngineAdapter", "Variant", "harness_force_torque", "stage_force_torque",
            "harness_force_torque_floats", "stage_force_torque_floats", "apply_decay_prestep",
            "decay_factors", "EngineError", "optional_import", "require", "EngineNotInstalled",
-           "installed_version", "library_files", "RunRequest", "Traits",
+           "installed_version", "library_files", "RunRequest", "Traits", "INVARIANTS",
            "SYMPLECTIC_EULER_EXPLICIT_GYRO", "SYMPLECTIC_EULER_IMPLICIT_GYRO", "WHOLE_STATE_EXPLICIT_EULER",
            "WHOLE_STATE_IMPLICIT_EULER", "HIGHER_ORDER", "DEFAULT_TRAITS", "ModuleAdapter", "package_files",
            "one_request", "check_variant", "run_in_groups"]
@@ -233,6 +233,8 @@ class RunRequest:
 
 #: The kinds of Traits.rotation_drift.
 ROTATION_DRIFTS = ("none", "body", "whole_state", "momentum")
+#: What Traits.keeps may name: invariants of the torque-free body a step keeps by construction.
+INVARIANTS = ("energy", "energy_bounded", "angular_momentum_norm", "angular_momentum")
 
 
 @dataclass(frozen=True)
@@ -276,6 +278,18 @@ class Traits:
         allowance scale with ε × this factor). A step with a deeper arithmetic chain declares more, from its
         arithmetic and pinned by a measurement in its adapter's tests: PhysX's TGS turns ω into √I space and
         back with two float32 3×3 products every step (up to 33 u of |ω| measured: 4 × the ordinary 16 u).
+    keeps : the invariants of the torque-free body the step keeps BY CONSTRUCTION (a subset of INVARIANTS),
+        judged on the long runs (cross_checks.analysis.judge.judge_long_run, docs/verdicts.md "Long runs"):
+        "energy" — the rotational energy to round-off; "energy_bounded" — no secular energy drift (a
+        symplectic step: its energy error stays bounded, O(Δt^p)); "angular_momentum_norm" — |L| to
+        round-off; "angular_momentum" — the world vector L (its norm and its direction) to round-off. A
+        ``rotation_drift`` of "momentum" implies "angular_momentum_norm". () claims nothing: the long runs'
+        drifts and findings are then reported, never judged.
+    gyroscopic_clamp_N_m : the step cuts the gyroscopic torque |ω × I ω| to this length (N m) when it is
+        longer (Bullet's ``m_maxGyroscopicForce``, reference:explicit_gyro_clamped); None: no clamp. Where the
+        motion's gyroscopic torque exceeds it (measured on the reference: analysis.physics.MotionRates) the
+        step solves another equation, whose solution the runs converge to instead of the physical one: the
+        variant is then expected not to converge in rotation.
     forces_held : the engine holds the applied force and torque it was given over all the stages of a
         step (it cannot evaluate them per stage). On a scenario whose forces change within a step
         (state-dependent forces, velocity decay) a multi-stage scheme is then first order: the held force
@@ -291,8 +305,13 @@ class Traits:
     velocity_from_positions: bool = False
     rotation_order: float | None = None
     rounding_factor: float = 1.0
+    keeps: tuple = ()
+    gyroscopic_clamp_N_m: float | None = None
 
     def __post_init__(self):
+        bad = [k for k in self.keeps if k not in INVARIANTS]
+        if bad or not isinstance(self.keeps, tuple):
+            raise ValueError(f"keeps must be a tuple of {', '.join(INVARIANTS)}, not {self.keeps!r}")
         if not self.rounding_factor >= 1.0:
             raise ValueError(f"rounding_factor must be at least 1, not {self.rounding_factor!r}")
         if self.rotation_drift not in ROTATION_DRIFTS:

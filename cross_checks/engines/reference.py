@@ -1,14 +1,16 @@
 """The NumPy reference of the course equations as an engine adapter (``reference:VARIANT``)."""
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 import reference_sim
 from cross_checks.engines import base as B
 from cross_checks.engines.base import ModuleAdapter, Variant
 from reference_sim.forces import Members
+from reference_sim.integrators import BULLET_MAX_GYROSCOPIC_TORQUE, ImplicitSolveError, get_step
 from reference_sim.integrators import VARIANTS as SCHEMES
-from reference_sim.integrators import ImplicitSolveError, get_step
 from reference_sim.simulate import Run, run_members
 from reference_sim.simulate import simulate as _simulate
 
@@ -26,14 +28,21 @@ TRAITS = {
     # body-frame implicit Euler step of Euler's equations, linearised; energy and |L|² decay together
     "implicit_gyro_body": B.SYMPLECTIC_EULER_IMPLICIT_GYRO,
     "implicit_gyro_world": B.SYMPLECTIC_EULER_IMPLICIT_GYRO,
-    # Bullet's explicit one: expmap_gyro wherever its clamp does not act (nowhere on the catalog)
-    "explicit_gyro_clamped": B.SYMPLECTIC_EULER_EXPLICIT_GYRO,
+    # Bullet's explicit one: expmap_gyro wherever its clamp does not act (nowhere on the catalog); where it
+    # acts (found by rbcheck fuzz: a fast spin of a large body) it solves another equation
+    "explicit_gyro_clamped": dataclasses.replace(B.SYMPLECTIC_EULER_EXPLICIT_GYRO,
+                                                 gyroscopic_clamp_N_m=BULLET_MAX_GYROSCOPIC_TORQUE),
     # Jolt's: |L| kept exactly, the energy drifts by O(Δt²) per step towards L²/2I₂ (up from a spin about the
     # major axis, down from one about the minor axis): its own kind, either sign
     "jolt_gyro": B.Traits(rotation_drift="momentum", rotation_sign=None),
-    # second order, symmetric (Buss's map is not, but is second order): no amplitude rule applies
-    "buss_augmented": B.HIGHER_ORDER, "dlm_splitting": B.HIGHER_ORDER, "lp_midpoint": B.HIGHER_ORDER,
-    "moser_veselov": B.HIGHER_ORDER,
+    # second order, symmetric (Buss's map is not, but is second order): no amplitude rule applies. What each
+    # keeps by construction on a torque-free body (docs/gyro_integrators.md): Buss and DLM hold L over the
+    # step (ω₁ = I_W(R₁)⁻¹ L), DLM is symplectic (bounded energy error); the midpoint rule and Moser–Veselov
+    # keep every quadratic invariant: the energy, |Π| and L (Π₁ = FᵀΠ, R₁ = R F)
+    "buss_augmented": B.Traits(keeps=("angular_momentum",)),
+    "dlm_splitting": B.Traits(keeps=("angular_momentum", "energy_bounded")),
+    "lp_midpoint": B.Traits(keeps=("energy", "angular_momentum")),
+    "moser_veselov": B.Traits(keeps=("energy", "angular_momentum")),
 }
 #: Declared variants: reference_sim.integrators.VARIANTS, the one registry (orders proven by its own tests).
 VARIANTS = {v: Variant(float(s.order), s.description, traits=TRAITS[v]) for v, s in SCHEMES.items()}

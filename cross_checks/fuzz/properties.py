@@ -32,6 +32,7 @@ from cross_checks.analysis import metrics as M
 from cross_checks.analysis.expectations import (
     EQUIVALENT_PAIRS,
     expectation,
+    gyroscopic_clamp_acts,
     gyroscopic_term_matters,
     machine_epsilon,
     pair_is_same_arithmetic,
@@ -231,8 +232,11 @@ def one_step_order(ctx: Context, variant: str, i: int, defects) -> tuple:
     return out, tally
 
 
-def _models_physics(sc, variant) -> bool:
-    """The variant models the conserved motion (not the course update where the gyroscopic term matters)."""
+def _models_physics(sc, variant, physics=None) -> bool:
+    """The variant models the conserved motion: not the course update where the gyroscopic term matters, nor
+    a step whose gyroscopic clamp acts on this motion (expectations.gyroscopic_clamp_acts)."""
+    if traits(variant).gyroscopic_term and gyroscopic_clamp_acts(sc, variant, physics, physics is not None):
+        return False
     return traits(variant).gyroscopic_term or not gyroscopic_term_matters(sc)
 
 
@@ -245,7 +249,7 @@ def conservation(ctx: Context, variant: str, i: int, ladder) -> tuple:
     kinds = [k for k in ("energy", "angular_momentum") if cons[k][0]]
     if not kinds:
         return out, tally
-    if not _models_physics(sc, variant):
+    if not _models_physics(sc, variant, ctx.physics):
         tally["conservation"][1] += len(kinds)
         return out, tally
     h0 = sc.dt_s

@@ -23,12 +23,15 @@ from reference_sim.quaternion import quat_from_euler_zxy, rotate
 from reference_sim.state import Problem, State
 
 __all__ = ["Scenario", "ScenarioError", "load_scenario", "parse_scenario", "catalog_names", "catalog_path",
-           "REFERENCE_KINDS"]
+           "REFERENCE_KINDS", "SCENARIO_KINDS", "long_run_names"]
 
 #: How a scenario's reference solution is obtained: "analytic" (a closed form of reference_sim.analytic
 #: must exist for it), "ground_truth" (DOP853 at reference_sim.ground_truth.GROUND_TRUTH_RTOL), or "auto"
 #: (analytic when one exists).
 REFERENCE_KINDS = ("auto", "analytic", "ground_truth")
+#: What a scenario is for: "convergence" (the default: its Δt ladder, errors against its reference) or
+#: "long_run" (one Δt over thousands of periods: conservation and the drift towards the intermediate axis).
+SCENARIO_KINDS = ("convergence", "long_run")
 
 
 class ScenarioError(ValueError):
@@ -53,6 +56,9 @@ class Scenario:
     com_offset_B_m : for a body given as ``particles``, where their COM is in the particles' own
         coordinates (m); every body point of the file (spring ``attach``, force ``point``) is in those
         coordinates and was shifted by it, so the Problem's points are from the COM. None otherwise.
+    kind : one of SCENARIO_KINDS: ``"convergence"`` (a Δt ladder judged against a reference) or
+        ``"long_run"`` (one Δt over a long duration, judged on what it conserves: docs/scenario.md,
+        "Long runs").
     """
 
     name: str
@@ -65,6 +71,13 @@ class Scenario:
     source: str
     raw: dict = field(repr=False)
     com_offset_B_m: np.ndarray | None = None
+    kind: str = "convergence"
+
+    @property
+    def long_run(self) -> bool:
+        """Whether this is a long run (kind ``"long_run"``): the sweep's long-run stage runs it, at ``dt_s``
+        only, and measures its conservation (cross_checks.analysis.long_run) instead of its convergence."""
+        return self.kind == "long_run"
 
     @property
     def content_hash(self) -> str:
@@ -84,12 +97,25 @@ def _catalog_dir():
     return resources.files("cross_checks.scenario") / "catalog"
 
 
+def _long_run_dir():
+    return _catalog_dir() / "long_runs"
+
+
 def catalog_names() -> list[str]:
-    """Names of the built-in scenarios, sorted."""
+    """Names of the built-in convergence scenarios (``catalog/*.toml``), sorted: the default sweep's."""
     return sorted(p.name[:-5] for p in _catalog_dir().iterdir() if p.name.endswith(".toml"))
 
 
+def long_run_names() -> list[str]:
+    """Names of the built-in long runs (``catalog/long_runs/*.toml``, each ``kind = "long_run"``), sorted:
+    what ``rbcheck sweep --long`` adds (docs/scenario.md, "Long runs")."""
+    return sorted(p.name[:-5] for p in _long_run_dir().iterdir() if p.name.endswith(".toml"))
+
+
 def catalog_path(name: str):
+    """The file of the built-in scenario ``name``: a convergence scenario or a long run."""
+    if name in long_run_names():
+        return _long_run_dir() / f"{name}.toml"
     return _catalog_dir() / f"{name}.toml"
 
 
@@ -97,10 +123,11 @@ def load_scenario(spec: str | Path) -> Scenario:
     """Load a catalog scenario by name, or a TOML file by path. Raises ScenarioError on bad input."""
     spec_s = str(spec)
     if NAME_RE.match(spec_s) and not spec_s.endswith(".toml") and not Path(spec_s).exists():
-        if spec_s not in catalog_names():
+        known = catalog_names() + long_run_names()
+        if spec_s not in known:
             raise ScenarioError(spec_s, "",
-                                f"no catalog scenario of that name{did_you_mean(spec_s, catalog_names())} "
-                                f"and no such file (catalog: {', '.join(catalog_names())})")
+                                f"no catalog scenario of that name{did_you_mean(spec_s, known)} "
+                                f"and no such file (catalog: {', '.join(known)})")
         text = catalog_path(spec_s).read_text(encoding="utf-8")
         return parse_scenario(text, source=f"catalog:{spec_s}")
     path = Path(spec_s)
@@ -197,7 +224,8 @@ def _show(v):
     return s if len(s) <= 40 else s[:37] + "..."
 
 
-_TOP = {"name", "description", "duration", "dt", "dt_ladder", "reference", "body", "initial", "forces"}
+_TOP = {"name", "description", "kind", "duration", "dt", "dt_ladder", "reference", "body", "initial",
+        "forces"}
 _BODY = {"mass", "inertia", "particles"}
 _INITIAL = {"position", "velocity", "orientation", "euler_zxy_deg",
             "angular_velocity", "angular_velocity_body"}
@@ -213,10 +241,14 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
     raw = _load_toml(text, source)
     r.check_keys(raw, _TOP, "")
     name, description, duration, dt, ladder, reference = _parse_timing(r, raw)
+    kind = r.string(raw, "kind", "kind", default="convergence", choices=SCENARIO_KINDS)
     body, com_offset = _parse_body(r, raw)
     problem = Problem(body, _parse_forces(r, raw, dt, com_offset), _parse_initial(r, raw))
     sc = Scenario(name=name, description=description, duration_s=duration, dt_s=dt, dt_ladder_s=ladder,
-                  reference=reference, problem=problem, source=source, raw=raw, com_offset_B_m=com_offset)
+                  reference=reference, problem=problem, source=source, raw=raw, com_offset_B_m=com_offset,
+                  kind=kind)
+    if sc.long_run:
+        _check_long_run(r, raw, sc)
     _check_scenario(r, sc)
     return sc
 
@@ -406,6 +438,22 @@ def _check_scenario(r, sc) -> None:
         check_scenario_limits(sc)
     except LimitExceeded as exc:
         raise r.err(exc.field, exc.reason) from None
+
+
+def _check_long_run(r, raw, sc) -> None:
+    """A long run has one Δt and physics that conserves the rotational energy and the angular momentum about
+    the COM (no torque, drag, decay or spring; uniform gravity acts at the COM and is allowed): what its
+    metrics (cross_checks.analysis.long_run.drift_metrics) measure the drift of."""
+    if "dt_ladder" in raw:
+        raise r.err("dt_ladder", 'a long run (kind = "long_run") runs at its one dt; remove dt_ladder')
+    fm = sc.problem.forces
+    for key, present in (("spring", bool(fm.springs)), ("point", bool(fm.point_forces)),
+                         ("torque", bool(fm.torques)), ("linear_drag", fm.linear_drag_N_s_per_m != 0.0),
+                         ("velocity_decay", fm.velocity_decay != 1.0),
+                         ("angular_velocity_decay", fm.angular_velocity_decay != 1.0)):
+        if present:
+            raise r.err(f"forces.{key}", 'a long run (kind = "long_run") measures the drift of the energy '
+                        "and the angular momentum, which this force changes; only gravity may act")
 
 
 def _check_ladder_spacing(r, vals, ladder):

@@ -20,6 +20,12 @@ _COST_US = {
     "pybullet:maximal": (12, 42), "pybullet:multibody": (12, 44),
     "drake:semi_explicit_euler": (21, 62), "drake:runge_kutta2": (29, 91), "drake:runge_kutta3": (37, 127),
     "drake:implicit_euler": (126, 382),
+    # the eight gyroscopic variants step by their definition (no compiled kernel: docs/gyro_integrators.md):
+    # NumPy per step, measured on the long runs (3 members a call, torque-free; run_members)
+    "reference:implicit_gyro_body": (380, 420), "reference:implicit_gyro_world": (410, 450),
+    "reference:explicit_gyro_clamped": (340, 380), "reference:jolt_gyro": (350, 390),
+    "reference:buss_augmented": (530, 580), "reference:dlm_splitting": (950, 1050),
+    "reference:lp_midpoint": (850, 950), "reference:moser_veselov": (970, 1070),
 }
 _COST_DEFAULT_US = (5, 75)
 

@@ -7,7 +7,9 @@ the results directory of docs/results.md, written atomically. :func:`run_sweep` 
    :func:`.jobs.run_job_group` (cached: :mod:`.cache`, :mod:`.fingerprint`);
 3. assemble (:mod:`.assemble`): rows, convergence and agreement records, scenario records, series,
    provenance (:mod:`.provenance`), summary;
-4. write: everything into a staging sibling of DIR, then the caller's ``finish`` (the report), the
+4. the long runs (:mod:`.long_runs`), when any scenario is a long run (``kind = "long_run"``): every
+   variant on each, at its one Δt, judged on what it conserves;
+5. write: everything into a staging sibling of DIR, then the caller's ``finish`` (the report), the
    marker, and the swap that replaces DIR only when complete and only when it is rbcheck's own
    (:mod:`.results_dir`).
 
@@ -18,6 +20,7 @@ Results directory::
     summary.json           provenance, scenarios, variants, convergence (+ local_convergence),
                            agreement of equivalent schemes, run statistics
     series/<scenario>.npz  decimated time series at the scenario's default Δt (float32)
+    long_runs.csv          one row per (long-run scenario, engine): LONG_RUN_COLUMNS (only with long runs)
     plots/*.png, index.html, scenario-<name>.html   (written by the caller's ``finish``: reports.render)
 """
 from __future__ import annotations
@@ -44,6 +47,12 @@ from cross_checks.sweep.jobs import (
     clear_reference_memo,
 )
 from cross_checks.sweep.lifecycle import Terminated
+from cross_checks.sweep.long_runs import (
+    LONG_RUN_COLUMNS,
+    judged_rows,
+    long_run_scenario_record,
+    run_long_runs,
+)
 from cross_checks.sweep.plan import inexpressible, plan_jobs
 from cross_checks.sweep.provenance import provenance, variant_record
 from cross_checks.sweep.results_dir import (
@@ -119,7 +128,10 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
     """
     out = _checked_output(out_dir, scenarios)
     jobs = max(1, int(jobs or usable_cores()))
+    long_scenarios = [s for s in scenarios if getattr(s, "long_run", False)]
+    scenarios = [s for s in scenarios if not getattr(s, "long_run", False)]
     cannot = inexpressible(scenarios, variants)
+    cannot_long = inexpressible(long_scenarios, variants)
     planned = plan_jobs(scenarios, variants, cannot)
     if executor is None:   # local processes: never more than the runs to do, nor than 4 per core
         jobs = min(jobs, max(1, len(planned) + len(scenarios)), 4 * usable_cores())
@@ -144,10 +156,14 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
         records = run_jobs(runner, planned, scenarios, refs, work, cache_root, use_cache,
                            run_time_limit_s, show, second=second, second_time_limit_s=reference_time_limit_s)
         refs = _with_second_references(refs, {s.scenario_index: records.pop(s) for s in second})
+        long_records = (run_long_runs(runner, long_scenarios, variants, cache_root, use_cache,
+                                      run_time_limit_s, show, cannot_long) if long_scenarios else {})
         stage("rbcheck sweep", "writing results.csv, summary.json and series/", enabled=show)
         summary = _write_results(staging, scenarios, variants, refs, records, started=started,
-                                 skipped=skipped, jobs=jobs, t_start=t_start, cannot=cannot,
-                                 runner=runner, run_time_limit_s=run_time_limit_s)
+                                 skipped=skipped, jobs=jobs, t_start=t_start,
+                                 cannot={**cannot, **cannot_long}, runner=runner,
+                                 run_time_limit_s=run_time_limit_s,
+                                 long_scenarios=long_scenarios, long_records=long_records)
         runner.close()
         runner = None
         if finish is not None:  # e.g. the report, drawn from the saved files only
@@ -175,10 +191,11 @@ def _with_second_references(refs, second: dict) -> list:
 
 
 def _write_results(staging, scenarios, variants, refs, records, *, started, skipped, jobs, t_start,
-                   cannot=None, runner, run_time_limit_s=tol.RUN_TIME_LIMIT_S) -> dict:
+                   cannot=None, runner, run_time_limit_s=tol.RUN_TIME_LIMIT_S, long_scenarios=(),
+                   long_records=None) -> dict:
     """Assemble the job records and write results.csv, series/ and summary.json into ``staging`` (its
-    work directory removed); returns the summary. The continued ladders of :mod:`.refine` run on
-    ``runner``."""
+    work directory removed) — and, with long runs, long_runs.csv and their series; returns the summary. The
+    continued ladders of :mod:`.refine` run on ``runner``."""
     from cross_checks.engines import all_variants, has_one_step
     rows = assemble.result_rows(records, [s.name for s in scenarios], variants)
     atomic_write_text(staging / "results.csv", assemble.results_csv_text(rows))
@@ -209,5 +226,31 @@ def _write_results(staging, scenarios, variants, refs, records, *, started, skip
         variants=[variant_record(v, infos.get(v)) for v in variants], skipped=skipped,
         convergence=convergence, local=local, agreement=assemble.agreement_records(scenarios, by_key),
         rows=rows, jobs=jobs, wall_s=time.perf_counter() - t_start, cannot=cannot)
+    if long_scenarios:
+        _write_long_runs(staging, summary, long_scenarios, variants, long_records or {})
     assemble.write_json(staging / "summary.json", summary)
     return summary
+
+
+def _write_long_runs(staging, summary, long_scenarios, variants, long_records) -> None:
+    """long_runs.csv, series/<long run>.npz and the summary's ``long_run_scenarios``, ``long_runs`` and
+    ``run.long_runs`` (docs/results.md, "Long runs")."""
+    import math
+    rows, recs = judged_rows(long_records, long_scenarios, variants)
+    atomic_write_text(staging / "long_runs.csv", assemble.results_csv_text(rows, LONG_RUN_COLUMNS))
+    for sc in long_scenarios:
+        arrays = {f"{v}::{k}": a for v in variants for k, a in
+                  ((long_records.get((sc.name, v)) or {}).get("series") or {}).items()}
+        if arrays:
+            save_npz_atomic(staging / "series" / f"{sc.name}.npz", arrays)
+    summary["long_run_scenarios"] = [long_run_scenario_record(sc) for sc in long_scenarios]
+    summary["long_runs"] = recs
+    summary["files"]["long_runs"] = ("long_runs.csv; series/<long run>.npz: keys '<ENGINE:VARIANT>::<field>' "
+                                     "(t_s, energy_rel, momentum_rel, direction_rad, separatrix), float32, "
+                                     f"<= {tol.LONG_RUN_SERIES_POINTS} points")
+    summary["run"]["long_runs"] = {
+        "runs": len(rows), "cached_runs": sum(bool(r["cached"]) for r in rows),
+        "diverged_runs": sum(r["status"] == "diverged" for r in rows),
+        "failed_runs": sum(r["status"] == "failed" for r in rows),
+        "wall_s_in_runs": float(sum(r["wall_s"] for r in rows
+                                    if isinstance(r["wall_s"], float) and math.isfinite(r["wall_s"])))}

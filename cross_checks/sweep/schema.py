@@ -112,6 +112,18 @@ CONVERGENCE_RECORD = {
 REPORT_RECORD = {"expected_verdict": Nullable(str), "matches_expectation": Nullable(bool), "assessment": str,
                  "note": str, "reason": str, "dt_s": [NUM], "errors": [Nullable(NUM)],
                  "floors": [Nullable(NUM)], "fitted": [bool], "pairwise_orders": [Nullable(NUM)]}
+#: A long run's record (docs/results.md, "Long runs"): what the report's integrators page reads.
+LONG_RUN_RECORD = {
+    "scenario": str, "engine": str, "dt": NUM, "steps": int, "status": STATUSES, "verdict": str,
+    "matches_expectation": Nullable(bool), "finding": str, "assessment": str, "reason?": str,
+    "expected_keeps?": [str], "expected_separatrix?": str,
+    **{k + "?": Nullable(NUM) for k in (
+        "duration_s", "diverged_at_s", "energy_rate_per_s", "energy_drift_max", "momentum_rate_per_s",
+        "momentum_drift_max", "direction_drift_max_rad", "separatrix_start", "separatrix_end",
+        "separatrix_rate_per_s")},
+}
+LONG_RUN_SCENARIO = {"name": str, "description": str, "duration_s": NUM, "dt_s": NUM, "steps": int,
+                     "content_hash?": str, "source?": str}
 AGREEMENT = {"a": str, "b": str, "scenario": str, "dt_s": NUM, "agrees": bool, "max_rel": Nullable(NUM),
              "reason": str, "note?": str}
 SUMMARY = {
@@ -126,6 +138,8 @@ SUMMARY = {
     "not_expressible?": [{"scenario": str, "engine": str, "reason": str}],
     "local_convergence?": [CONVERGENCE_RECORD],
     "agreement?": [AGREEMENT],
+    "long_run_scenarios?": [LONG_RUN_SCENARIO],
+    "long_runs?": [LONG_RUN_RECORD],
     "run?": {k + "?": Nullable(NUM) for k in ("jobs", "runs", "cached_runs", "diverged_runs", "failed_runs",
                                                "wall_s", "cpu_s_in_runs")},
 }

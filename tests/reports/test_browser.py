@@ -246,7 +246,7 @@ def test_report_rendering_prints_progress_lines_while_drawing(results, tmp_path,
     assert [line.split(" (")[0] for line in err[:-1]] == [f"rbcheck report: figures {i}/18"
                                                           for i in range(1, 19)]
     assert "left" in err[0] and err[-2].startswith("rbcheck report: figures 18/18 (100%) in ")
-    assert err[-1].startswith("rbcheck report: 5 pages and ") and "figures written in" in err[-1]
+    assert err[-1].startswith("rbcheck report: 6 pages and ") and "figures written in" in err[-1]
 
 
 def test_a_diverged_run_does_not_flatten_the_others(results, tmp_path, monkeypatch):

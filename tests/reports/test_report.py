@@ -89,7 +89,7 @@ def pages(d):
 
 def test_pages_parse_and_every_image_resolves(results):
     ps = pages(results)
-    assert set(ps) == {"index.html", "ranking.html", "scenario-hostile_spin.html"}
+    assert set(ps) == {"index.html", "ranking.html", "integrators.html", "scenario-hostile_spin.html"}
     n_img = 0
     for html in ps.values():
         p = parse(html)

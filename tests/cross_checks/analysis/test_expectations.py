@@ -354,3 +354,70 @@ def test_a_second_order_attitude_update_is_expected_where_the_body_axes_omega_tu
     for name in ("constant_spin", "projectile"):                          # a fixed rotation axis: order 4
         sc = load_scenario(name)
         assert {expectation(sc, v, q).order for q in QUANTITIES} == {4.0}
+
+
+# --- long runs (long_run_expectation: from the declared traits only) ---------------------------------------
+
+@pytest.mark.parametrize("variant,keeps,separatrix", [
+    ("reference:lp_midpoint", ("energy", "angular_momentum_norm", "angular_momentum"), "kept"),
+    ("reference:moser_veselov", ("energy", "angular_momentum_norm", "angular_momentum"), "kept"),
+    ("reference:dlm_splitting", ("energy_bounded", "angular_momentum_norm", "angular_momentum"), "kept"),
+    ("reference:buss_augmented", ("angular_momentum_norm", "angular_momentum"), None),
+    ("reference:jolt_gyro", ("angular_momentum_norm",), "toward_intermediate"),
+    ("reference:implicit_gyro_body", (), None), ("reference:rk4", (), None), ("mujoco:euler", (), None),
+    ("pybullet:maximal", (), None),
+])
+def test_what_each_variant_is_expected_to_keep_on_a_long_run(variant, keeps, separatrix):
+    from cross_checks.analysis.expectations import long_run_expectation
+    e = long_run_expectation(variant)
+    assert (e.keeps, e.separatrix) == (keeps, separatrix), e.reason
+    assert e.reason
+
+
+def test_keeps_names_only_known_invariants():
+    from cross_checks.engines.base import Traits
+    with pytest.raises(ValueError, match="keeps"):
+        Traits(keeps=("momentum",))
+
+
+# --- Bullet's gyroscopic clamp (Traits.gyroscopic_clamp_N_m; found by rbcheck fuzz, seed 0, batch 0) --------
+
+#: A fast spin of a large body: |ω × I ω| reaches 227 N m, over twice Bullet's 100 N m clamp.
+CLAMPED = '''
+name = "clamped"
+duration = 0.5
+dt = 0.002
+dt_ladder = [0.004, 0.002, 0.001]
+[body]
+mass = 1.0
+inertia = [10.0, 20.0, 30.0]
+[initial]
+angular_velocity = [2.0, 10.0, 1.0]
+'''
+
+
+def test_where_bullets_clamp_acts_the_clamped_step_is_expected_not_to_converge():
+    from cross_checks.analysis.expectations import expectation, gyroscopic_clamp_acts
+    from cross_checks.scenario import load_scenario, parse_scenario
+    sc = parse_scenario(CLAMPED)
+    worst = gyroscopic_clamp_acts(sc, "reference:explicit_gyro_clamped")
+    # closed form at t = 0: |ω × I ω| with ω = (2, 10, 1), I ω = (20, 200, 30)
+    assert worst >= float(np.linalg.norm(np.cross([2.0, 10.0, 1.0], [20.0, 200.0, 30.0]))) - 1e-9
+    e = expectation(sc, "reference:explicit_gyro_clamped", "angular_velocity")
+    assert e.verdict == "does_not_converge" and "100 N m" in e.reason
+    assert expectation(sc, "reference:expmap_gyro", "angular_velocity").verdict != "does_not_converge"
+    assert gyroscopic_clamp_acts(sc, "reference:expmap_gyro") is None           # no clamp declared
+    racket = load_scenario("tennis_racket")                                      # |ω × I ω| ≤ 14 N m there
+    assert gyroscopic_clamp_acts(racket, "reference:explicit_gyro_clamped") is None
+
+
+def test_the_sweep_agrees_that_the_clamped_step_does_not_converge_there(tmp_path):
+    from cross_checks.scenario import parse_scenario
+    from cross_checks.sweep import run_sweep
+    from tests.helpers.sweeps import private_cache
+    with private_cache(tmp_path / "cache"):
+        summary = run_sweep([parse_scenario(CLAMPED)], ["reference:explicit_gyro_clamped"], tmp_path / "res",
+                            jobs=1)
+    recs = {r["quantity"]: r for r in summary["convergence"]}
+    for q in ("orientation", "angular_velocity"):
+        assert recs[q]["verdict"] == "does_not_converge" and recs[q]["matches_expectation"] is True, recs[q]

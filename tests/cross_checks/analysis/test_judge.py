@@ -74,3 +74,65 @@ def test_the_expectation_carries_the_variants_precision_and_rounding_factor(monk
     monkeypatch.setattr(ex, "traits", lambda variant: declared)
     e = ex.expectation(sc, "reference:rk4", "angular_velocity", measure_physics=False)
     assert (e.precision, e.rounding_factor) == ("float32", 3.0)
+
+
+# --- long runs (judge_long_run) ---------------------------------------------------------------------------
+
+def _metrics(**kw):
+    from cross_checks.analysis.long_run import DriftMetrics
+    base = dict(energy_rate_per_s=0.0, energy_drift_max=1e-14, momentum_rate_per_s=0.0,
+                momentum_drift_max=1e-14,
+                direction_drift_max_rad=1e-14, separatrix_start=-1 / 3, separatrix_end=-1 / 3,
+                separatrix_rate_per_s=0.0, toward_intermediate=False, away_from_intermediate=False,
+                duration_s=100.0, crossed_separatrix=False, energy_secular=False, steps=2000)
+    return DriftMetrics(**{**base, **kw})
+
+
+def _exp(keeps=(), separatrix=None):
+    from cross_checks.analysis.expectations import LongRunExpectation
+    return LongRunExpectation(tuple(keeps), separatrix, "its traits say so")
+
+
+TOWARD = dict(toward_intermediate=True, separatrix_end=-0.01, separatrix_rate_per_s=-3e-3,
+              energy_drift_max=0.4)
+
+
+def test_a_declared_keeper_whose_separatrix_distance_drifts_is_failed_and_named():
+    from cross_checks.analysis.judge import judge_long_run
+    j = judge_long_run("x:y", "run", _metrics(**TOWARD), _exp(("energy", "angular_momentum_norm"), "kept"))
+    assert j.matches is False and j.verdict == "toward_intermediate"
+    assert "drifts toward the intermediate axis (energy → L²/2I₂) at rate 0.003/s" in j.finding
+    assert "the energy drifted by 0.4" in j.assessment
+
+
+def test_a_momentum_step_drifting_toward_the_intermediate_axis_is_named_not_failed():
+    from cross_checks.analysis.judge import judge_long_run
+    exp = _exp(("angular_momentum_norm",), "toward_intermediate")
+    j = judge_long_run("x:y", "run", _metrics(**TOWARD), exp)
+    assert j.matches is True and "drifts toward the intermediate axis" in j.finding
+    away = judge_long_run("x:y", "run", _metrics(away_from_intermediate=True, separatrix_end=-0.5), exp)
+    assert away.matches is False and "drifts away from the intermediate axis" in away.assessment
+    lost = judge_long_run("x:y", "run", _metrics(**{**TOWARD, "momentum_drift_max": 1e-6}), exp)
+    assert lost.matches is False and "|L| drifted by 1e-06" in lost.assessment
+
+
+def test_a_variant_that_declares_nothing_is_measured_not_judged():
+    from cross_checks.analysis.judge import judge_long_run
+    j = judge_long_run("x:y", "run", _metrics(**TOWARD), _exp())
+    assert j.matches is None and j.finding and j.assessment.startswith("no claim")
+    d = judge_long_run("x:y", "run", _metrics(), _exp(), status="diverged", diverged_at_s=61.75)
+    assert d.verdict == "diverged" and d.matches is None and "61.75" in d.assessment
+
+
+def test_the_round_off_floor_of_a_kept_invariant_grows_with_the_steps():
+    from cross_checks.analysis.judge import judge_long_run
+    from cross_checks.core import tolerances as tol
+    floor = tol.long_run_roundoff(2000, tol.UNIT_ROUNDOFF["float64"])
+    assert floor == pytest.approx(16 * 2.0 ** -53 * 2000)
+    exp = _exp(("energy", "angular_momentum"), "kept")
+    assert judge_long_run("x:y", "r", _metrics(energy_drift_max=0.9 * floor), exp).matches is True
+    assert judge_long_run("x:y", "r", _metrics(direction_drift_max_rad=1.1 * floor), exp).matches is False
+    assert judge_long_run("x:y", "r", _metrics(), exp, status="diverged").matches is False
+    bounded = _exp(("energy_bounded", "angular_momentum"), "kept")
+    assert judge_long_run("x:y", "r", _metrics(energy_drift_max=1e-5), bounded).matches is True
+    assert judge_long_run("x:y", "r", _metrics(energy_secular=True), bounded).matches is False

@@ -84,3 +84,62 @@ def test_a_thousand_periods(variant, named):
     for lr in long_runs(periods=1000.0, dt_s=0.02)[:2]:
         m = _run(lr, variant)
         assert m.toward_intermediate == named, finding(variant, lr.name, m)
+
+
+def _closed_form_run(w0_W, periods=20.0, n=4001):
+    """The torque-free body's exact motion (reference_sim.analytic.torque_free, Landau & Lifshitz §37) sampled
+    at n times: E and L are its constants, so every drift measured on it is the metric's own error."""
+    from reference_sim.analytic import torque_free
+    lr = long_runs(periods=1.0)[0]
+    I = lr.problem.body.inertia_B
+    t = np.linspace(0.0, periods * 2 * np.pi / np.linalg.norm(w0_W), n)
+    q, w = torque_free(I, np.array([1.0, 0.0, 0.0, 0.0]), np.asarray(w0_W, dtype=float), t)
+    y = np.zeros((n, 13))
+    y[:, 6:10], y[:, 10:13] = q, w
+    return lr.problem, t, y
+
+
+@pytest.mark.parametrize("w0", [[0.02, 0.02, 2.0], [2.0, 0.02, 0.02], [0.3, 1.0, 0.2]])
+def test_the_metrics_of_the_closed_form_show_no_drift(w0):
+    problem, t, y = _closed_form_run(w0)
+    m = drift_metrics(problem, t, y)
+    assert m.energy_drift_max < 1e-12 and m.momentum_drift_max < 1e-12 and m.direction_drift_max_rad < 1e-12
+    assert m.kind == "none" and not finding("closed form", "run", m) and not m.energy_secular
+
+
+def test_a_crossing_of_the_separatrix_is_named_as_such():
+    # Π turned (body axes, |Π| kept) from near the major axis to near the minor one: δ from −1/3 to +1
+    problem, t, _ = _closed_form_run([0.02, 0.02, 2.0], n=2001)
+    th = np.linspace(0.05, np.pi / 2 - 0.05, len(t))
+    Pi = 6.0 * np.column_stack([np.sin(th), np.zeros_like(th), np.cos(th)])
+    y = np.zeros((len(t), 13))
+    y[:, 6] = 1.0
+    y[:, 10:13] = Pi / np.array([1.0, 2.0, 3.0])
+    m = drift_metrics(problem, t, y)
+    assert m.crossed_separatrix and m.kind == "crosses_separatrix"
+    assert "crosses the intermediate-axis separatrix" in finding("x", "run", m)
+
+
+def test_the_series_for_the_report():
+    from cross_checks.analysis.long_run import drift_series
+    problem, t, y = _closed_form_run([0.3, 1.0, 0.2], n=1001)
+    s = drift_series(problem, t, y, 100)
+    assert set(s) == {"t_s", "energy_rel", "momentum_rel", "direction_rad", "separatrix"}
+    assert all(a.shape == (100,) and a.dtype == np.float32 for a in s.values())
+    assert np.max(np.abs(s["energy_rel"])) < 1e-6 and s["t_s"][-1] == np.float32(t[-1])
+
+
+def test_reaching_the_separatrix_is_not_crossing_it():
+    # Jolt's step brings the tennis racket's δ = −5e-5 onto the separatrix (+2e-16 after 1000 periods): a
+    # drift toward the intermediate axis, not a crossing — drawn here with |Π| kept and E moved onto L²/2I₂
+    problem, t, _ = _closed_form_run([0.02, 0.02, 2.0], n=2001)
+    d = -5e-5 * np.exp(-t / 50.0) + 2e-16
+    # a body-axes Π with |Π| = 6 whose δ is d(t): Π = |Π| (sin θ, 0, cos θ) on I = (1, 2, 3) gives
+    # δ = 2 sin²θ + (2/3) cos²θ − 1, so sin²θ = (δ + 1/3) · 3/4
+    th = np.arcsin(np.sqrt((d + 1.0 / 3.0) * 0.75))
+    Pi = 6.0 * np.column_stack([np.sin(th), np.zeros_like(th), np.cos(th)])
+    y = np.zeros((len(t), 13))
+    y[:, 6] = 1.0
+    y[:, 10:13] = Pi / np.array([1.0, 2.0, 3.0])
+    m = drift_metrics(problem, t, y)
+    assert m.kind == "toward_intermediate" and not m.crossed_separatrix, m

@@ -137,7 +137,8 @@ def _drop_column(d, column="engine_version"):
         (d / "summary.json").read_text().replace('"form": "compact baseline"', '"form": "abridged"')),
      "{src}", "{base}", "summary.form: must be one of compact baseline, got 'abridged'"),
     (None, "{src}", "{src}", "is the results directory"),
-    (None, "{src}", "{tiny}", "holds more than a baseline (.rbcheck-results.json, index.html, plots"),
+    (None, "{src}", "{tiny}",
+     "holds more than a baseline (.rbcheck-results.json, index.html, integrators.html"),
     (None, "{src}", "{base}/results.csv", "exists and is not a directory"),
     (None, "{src}", "{tmp}/no/such/dir", "does not exist"),
 ])

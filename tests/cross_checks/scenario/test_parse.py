@@ -249,3 +249,57 @@ def test_particle_body_moves_like_the_same_body_given_by_mass_and_inertia_from_i
     a = run_variant(sc, "reference:rk4", duration_s=0.5)
     b = run_variant(parse_scenario(same, "same.toml"), "reference:rk4", duration_s=0.5)
     np.testing.assert_allclose(a.y, b.y, rtol=0, atol=1e-13)
+
+
+# --- long runs (kind = "long_run", docs/scenario.md "Long runs") -------------------------------------------
+
+LONG = """
+name = "my_long"
+kind = "long_run"
+duration = 100.0
+dt = 0.05
+[body]
+mass = 1.0
+inertia = [1.0, 2.0, 3.0]
+[initial]
+angular_velocity = [0.02, 0.02, 2.0]
+"""
+
+
+def test_the_catalogs_long_runs_are_thousands_of_periods_of_a_torque_free_spin():
+    from cross_checks.scenario import long_run_names
+    names = long_run_names()
+    assert names == ["long_major_axis_spin", "long_minor_axis_spin", "long_tennis_racket"]
+    assert not set(names) & set(catalog_names())          # the ladders' catalog is unchanged
+    for n in names:
+        sc = load_scenario(n)
+        assert sc.long_run and sc.kind == "long_run" and sc.dt_ladder_s == (sc.dt_s,)
+        spin = float(np.linalg.norm(sc.problem.initial.w_W))
+        assert sc.duration_s * spin / (2 * np.pi) >= 1000.0 - 1e-9, n      # periods of the spin
+        assert not sc.problem.forces.springs and not sc.problem.forces.torques
+
+
+def test_kind_defaults_to_convergence_and_a_long_run_parses():
+    assert parse_scenario(GOOD).kind == "convergence" and not parse_scenario(GOOD).long_run
+    sc = parse_scenario(LONG)
+    assert sc.long_run and sc.n_steps() == 2000
+
+
+@pytest.mark.parametrize("extra,field", [
+    ('dt_ladder = [0.1, 0.05]\n', "dt_ladder"),
+    ('[forces]\nlinear_drag = 0.1\n', "forces.linear_drag"),
+    ('[forces]\nangular_velocity_decay = 0.99\n', "forces.angular_velocity_decay"),
+    ('[[forces.torque]]\ntorque = [0.0, 0.0, 0.1]\n', "forces.torque"),
+])
+def test_a_long_run_refuses_a_ladder_and_forces_that_change_what_it_measures(extra, field):
+    head, rest = LONG.split("[body]")
+    text = head + (extra if extra.startswith("dt_") else "") + "[body]" + rest + (
+        "" if extra.startswith("dt_") else extra)
+    with pytest.raises(ScenarioError) as e:
+        parse_scenario(text, source="x.toml")
+    assert f"x.toml: {field}:" in str(e.value)
+
+
+def test_kind_must_be_known():
+    with pytest.raises(ScenarioError, match="kind"):
+        parse_scenario(LONG.replace('"long_run"', '"long"'))

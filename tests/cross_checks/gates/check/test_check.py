@@ -472,3 +472,18 @@ def test_extra_engine_variants_are_compared_free_running(tmp_path):
     assert by["pybullet:multibody"]["same_to_roundoff"] is True      # the same scheme: ~1e-14 rad apart
     assert by["reference:rk4"]["same_to_roundoff"] is False
     assert by["reference:rk4"]["max_difference"]["angular_velocity"] > 1e-5
+
+
+@pytest.mark.parametrize("scheme", ["jolt_gyro", "lp_midpoint", "implicit_gyro_body"])
+def test_check_names_the_gyroscopic_schemes_of_engines_and_the_literature(tmp_path, capsys, scheme):
+    """`rbcheck check --scheme reference:jolt_gyro` (and the others of docs/gyro_integrators.md) on that
+    scheme's own run of the tennis racket: PASS, the file IS that scheme; another scheme's name: FAIL."""
+    sc = scenario_file(tmp_path, "tennis_racket", 2.0)
+    path = tmp_path / f"{scheme}.csv"
+    assert main(["run", str(sc), "--engine", f"reference:{scheme}", "--dt", "0.01", "--out", str(path)]) == 0
+    capsys.readouterr()
+    rc, out, _ = check(capsys, path, "--scenario", sc, "--scheme", f"reference:{scheme}")
+    assert rc == 0 and out.startswith(f"PASS: is reference:{scheme}"), out[:300]
+    other = "dlm_splitting" if scheme != "dlm_splitting" else "rk4"
+    rc, out, _ = check(capsys, path, "--scenario", sc, "--scheme", f"reference:{other}")
+    assert rc == 1 and out.startswith(f"FAIL: it is not reference:{other}"), out[:300]

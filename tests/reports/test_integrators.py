@@ -1,0 +1,88 @@
+"""The integrators page (reports/integrators.py): every variant of the sweep is listed and ranked on work
+precision and on long-run conservation; every long-run finding is a sentence on the page; the planted drift
+toward the intermediate axis is named and flagged; a sweep without long runs says how to get them."""
+import re
+
+import numpy as np
+import pytest
+
+import reports
+from cross_checks.scenario import parse_scenario
+from cross_checks.sweep import run_sweep
+from reports.data import load_results
+from reports.integrators import conservation_score, integrators_view, long_standings
+from tests.helpers.scenarios import TINY
+from tests.helpers.sweeps import private_cache
+from tests.mutants import long_run_mutants
+
+LONG = parse_scenario('''
+name = "tiny_long"
+kind = "long_run"
+duration = 31.41592653589793
+dt = 0.05
+[body]
+mass = 1.0
+inertia = [1.0, 2.0, 3.0]
+[initial]
+angular_velocity = [0.02, 0.02, 2.0]
+''')
+VARIANTS = ["reference:rk4", "reference:jolt_gyro", "reference:lp_midpoint", "mujoco:euler",
+            "planted_keeps:step"]
+
+
+@pytest.fixture(scope="module")
+def results(tmp_path_factory):
+    d = tmp_path_factory.mktemp("integrators")
+    with pytest.MonkeyPatch.context() as mp, private_cache(d / "cache"):
+        long_run_mutants()["planted_keeps"](mp)
+        run_sweep([parse_scenario(TINY), LONG], VARIANTS, d / "res", jobs=1,
+                  finish=lambda out: reports.render(out, progress=False))
+    return d / "res"
+
+
+def test_the_page_lists_and_ranks_every_variant(results):
+    html = (results / "integrators.html").read_text(encoding="utf-8")
+    text = re.sub(r"<[^>]+>|&[a-z#0-9]+;", "", html)
+    for v in VARIANTS:
+        assert text.count(v) >= 3, v          # work-precision table, long-run table, its sentence
+    res = load_results(results)
+    view = integrators_view(res)
+    assert {s.variant for s in view.work} == set(VARIANTS)
+    assert [s.variant for s in view.long][:1] == ["reference:lp_midpoint"]   # keeps E and L to round-off
+    assert all(v in view.sentences for v in VARIANTS)
+    assert 'href="integrators.html"' in (results / "index.html").read_text(encoding="utf-8")
+
+
+def test_each_finding_is_a_sentence_and_the_planted_drift_is_flagged(results):
+    html = (results / "integrators.html").read_text(encoding="utf-8")
+    assert ("planted_keeps:step on tiny_long: drifts toward the intermediate axis (energy → L²/2I₂) at rate"
+            in html)
+    assert "reference:jolt_gyro on tiny_long: drifts toward the intermediate axis" in html
+    assert "reference:lp_midpoint on tiny_long: drifts" not in html
+    res = load_results(results)
+    planted = next(s for s in long_standings(res) if s.variant == "planted_keeps:step")
+    assert planted.contradicts == ["tiny_long"]
+    sentence = integrators_view(res).sentences["planted_keeps:step"]
+    assert "CONTRADICTS what it declares on tiny_long" in sentence
+
+
+def test_the_figures_are_drawn(results):
+    from matplotlib.image import imread
+    for name in ("integrators-work-precision.png", "integrators-long-runs.png", "integrators-separatrix.png"):
+        img = imread(results / "plots" / name)
+        assert img.shape[0] > 200 and img.shape[1] > 1000, name
+        assert np.std(img) > 0.05, name         # not blank
+
+
+def test_the_conservation_score_ranks_a_divergence_last():
+    assert conservation_score({"status": "diverged"}) == float("inf")
+    assert conservation_score({"status": "ok", "energy_drift_max": 1e-3, "momentum_drift_max": 1e-9,
+                               "direction_drift_max_rad": 2e-3}) == 2e-3
+
+
+def test_without_long_runs_the_page_says_how_to_get_them(tmp_path):
+    with private_cache(tmp_path / "cache"):
+        run_sweep([parse_scenario(TINY)], ["reference:rk4"], tmp_path / "res", jobs=1,
+                  finish=lambda out: reports.render(out, progress=False))
+    html = (tmp_path / "res" / "integrators.html").read_text(encoding="utf-8")
+    assert "This sweep ran no long run" in html and "rbcheck sweep --long" in html
