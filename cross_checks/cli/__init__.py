@@ -165,12 +165,14 @@ def _add_sweep(sub) -> None:
                     "identical disagree, or a scenario's two references (its closed form or DOP853, and "
                     "Drake's, when Drake is installed) disagree beyond their measured accuracies.")
     s.add_argument("scenarios", nargs="*", metavar="SCENARIO",
-                   help="catalog names or TOML paths (default: the catalog); a long run "
-                        "(kind = \"long_run\", e.g. long_tennis_racket) runs in the long-run stage")
+                   help="catalog names or TOML paths (default: the catalog and its long runs); a long "
+                        "run (kind = \"long_run\", e.g. long_tennis_racket) runs in the long-run stage")
     s.add_argument("--long", action="store_true",
-                   help="add the catalog's long runs (rbcheck list: every variant over 1000 spin periods, "
-                        "judged on the energy, |L| and the drift toward the intermediate axis; minutes: "
-                        "docs/scenario.md \"Long runs\")")
+                   help="add the catalog's long runs to the SCENARIOs named (rbcheck list: every variant "
+                        "over 1000 spin periods, judged on the energy, |L| and the drift toward the "
+                        "intermediate axis; docs/scenario.md \"Long runs\"); the default sweep has them")
+    s.add_argument("--no-long", action="store_true",
+                   help="leave the long runs out of the default sweep (the Δt ladders only)")
     s.add_argument("--engines", nargs="+", metavar="ENGINE[:VARIANT]",
                    help="variants to run, e.g. reference:rk4 mujoco (an engine name means all its variants); "
                         "default: every available variant")
@@ -435,7 +437,7 @@ def cmd_list(args) -> int:
     for name in catalog_names():
         sc = load_scenario(name)
         print(f"  {name:<18} {sc.description}")
-    print("\nLong runs (rbcheck sweep --long, or by name):")
+    print("\nLong runs (in the default sweep; with SCENARIOs named: rbcheck sweep --long, or by name):")
     for name in long_run_names():
         sc = load_scenario(name)
         print(f"  {name:<22} {sc.description}")
@@ -710,7 +712,7 @@ def cmd_sweep(args) -> int:
     refuse_inputs_as_outputs([("--out", args.out, True)],
                              _scenario_inputs(args.scenarios) + _engine_file_inputs(args))
     names = list(args.scenarios or catalog_names())
-    if args.long:
+    if args.long or not (args.scenarios or args.no_long):   # the default sweep has the long runs
         names += [n for n in long_run_names() if n not in names]
     scenarios = [load_scenario(s) for s in names]
     variants, skipped = _resolve_engines(args.engines)
@@ -772,10 +774,13 @@ def _sweep_outcome(summary, out, n_scenarios, n_variants, elapsed_s) -> int:
     line says whether every verdict was as expected."""
     from cross_checks.core.progress import say
     run = summary["run"]
+    lr = run.get("long_runs") or {}
+    long_text = (f" and {lr['runs']} long runs ({lr['cached_runs']} cached, {lr['diverged_runs']} diverged, "
+                 f"{lr['failed_runs']} failed)" if lr.get("runs") else "")
     say(f"rbcheck sweep: {n_scenarios} scenario(s) x {n_variants} variant(s): {run['runs']} runs "
-          f"({run['cached_runs']} cached, {run['diverged_runs']} diverged, {run['failed_runs']} failed) "
-          f"in {elapsed_s:.1f} s on {run['jobs']} worker(s) (runs and metrics {run['wall_s']:.1f} s, "
-          f"then the report) -> {Path(out) / 'index.html'}")
+          f"({run['cached_runs']} cached, {run['diverged_runs']} diverged, {run['failed_runs']} failed)"
+          f"{long_text} in {elapsed_s:.1f} s on {run['jobs']} worker(s) (runs and metrics "
+          f"{run['wall_s']:.1f} s, then the report) -> {Path(out) / 'index.html'}")
     skipped = summary.get("skipped_variants") or []
     if skipped:
         reasons = dict.fromkeys(v["reason"] for v in skipped)   # one per engine, in the order skipped

@@ -134,7 +134,8 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
     cannot_long = inexpressible(long_scenarios, variants)
     planned = plan_jobs(scenarios, variants, cannot)
     if executor is None:   # local processes: never more than the runs to do, nor than 4 per core
-        jobs = min(jobs, max(1, len(planned) + len(scenarios)), 4 * usable_cores())
+        long_calls = len(variants) if long_scenarios else 0   # one simulate_many call per variant
+        jobs = min(jobs, max(1, len(planned) + len(scenarios) + long_calls), 4 * usable_cores())
     started = datetime.now(UTC).replace(microsecond=0).isoformat()
     t_start = time.perf_counter()
     cache_root = str(cache_dir())

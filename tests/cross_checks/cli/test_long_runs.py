@@ -67,10 +67,28 @@ def test_long_adds_the_catalogs_long_runs_and_list_shows_them(capsys):
     assert build_parser().parse_args(["sweep", "--long", "--out", "x"]).long
     assert main(["list"]) == 0
     out = capsys.readouterr().out
-    assert "Long runs (rbcheck sweep --long" in out
+    assert "Long runs (in the default sweep; with SCENARIOs named: rbcheck sweep --long" in out
     for n in ("long_major_axis_spin", "long_minor_axis_spin", "long_tennis_racket"):
         assert n in out
     assert main(["list", "--json"]) == 0
     listed = json.loads(capsys.readouterr().out)
     assert [r["name"] for r in listed["long_runs"]] == ["long_major_axis_spin", "long_minor_axis_spin",
                                                         "long_tennis_racket"]
+
+
+@pytest.mark.parametrize("argv, has_long", [([], True), (["--no-long"], False), (["projectile"], False),
+                                            (["projectile", "--long"], True)])
+def test_the_default_sweep_has_the_long_runs_and_no_long_leaves_them_out(monkeypatch, tmp_path, argv,
+                                                                          has_long):
+    import cross_checks.cli as cli
+    from cross_checks.scenario import catalog_names, long_run_names
+    seen = {}
+
+    def capture(args, scenarios, variants, skipped):   # the scenarios the sweep would run; nothing runs
+        seen["names"] = [s.name for s in scenarios]
+        raise cli.BadInput("stopped by the test")
+
+    monkeypatch.setattr(cli, "_run_sweep", capture)
+    assert main(["sweep", *argv, "--engines", "reference:course", "--out", str(tmp_path / "out")]) == 2
+    assert (set(long_run_names()) <= set(seen["names"])) is has_long
+    assert not has_long or set(long_run_names()).isdisjoint(catalog_names())
