@@ -128,8 +128,8 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
     """
     out = _checked_output(out_dir, scenarios)
     jobs = max(1, int(jobs or usable_cores()))
-    long_scenarios = [s for s in scenarios if getattr(s, "long_run", False)]
-    scenarios = [s for s in scenarios if not getattr(s, "long_run", False)]
+    long_scenarios, scenarios = ([s for s in scenarios if getattr(s, "long_run", False) is long]
+                                 for long in (True, False))
     cannot = inexpressible(scenarios, variants)
     cannot_long = inexpressible(long_scenarios, variants)
     planned = plan_jobs(scenarios, variants, cannot)
@@ -139,14 +139,9 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
     started = datetime.now(UTC).replace(microsecond=0).isoformat()
     t_start = time.perf_counter()
     cache_root = str(cache_dir())
-    for engine in dict.fromkeys(["reference", *(v.split(":", 1)[0] for v in variants)]):
-        code_fingerprint(engine)  # once, here: forked workers inherit it
-    if any(v.startswith("reference:") for v in variants):
-        from reference_sim import compiled
-        compiled.warm()   # the compiled reference steps, loaded once here: forked workers inherit them
+    _load_before_forking(variants)
     staging = staging_dir(out)
-    work = staging / "_work"
-    work.mkdir()
+    (work := staging / "_work").mkdir()
     runner = None
     try:
         runner = Runner(jobs, executor)
@@ -182,6 +177,16 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
             runner.close(kill=True)
         if staging is not None:
             shutil.rmtree(staging, ignore_errors=True)
+
+
+def _load_before_forking(variants) -> None:
+    """What every worker needs, computed once here so that forked workers inherit it: each engine's code
+    fingerprint and, when the reference runs, its compiled steps."""
+    for engine in dict.fromkeys(["reference", *(v.split(":", 1)[0] for v in variants)]):
+        code_fingerprint(engine)
+    if any(v.startswith("reference:") for v in variants):
+        from reference_sim import compiled
+        compiled.warm()
 
 
 def _with_second_references(refs, second: dict) -> list:
