@@ -450,35 +450,74 @@ def _change3(n0, n1, n2, o0, o1, o2):
 
 
 @njit(**_JIT)
+def _free_explicit(kind, q, R, w, h, I9, J9, moments, axes):
+    """_free_buss (kind 0) or _free_dlm (kind 1: ``moments``, ``axes``, eigh of I_B) of integrators, from
+    attitude ``q`` (its rotation ``R``) and world ω ``w`` (rad/s) over ``h`` (s): (q₁ (4), world ω₁ (3))."""
+    qw, qx, qy, qz = q
+    wx, wy, wz = w
+    L0, L1, L2 = _mv(_world_inertia(R, I9), wx, wy, wz)
+    if kind == 0:
+        c0, c1, c2 = _cross(wx, wy, wz, L0, L1, L2)
+        a0, a1, a2 = _world_inv_inertia_times(R, J9, c0, c1, c2)
+        a0, a1, a2 = -a0, -a1, -a2
+        hh, h12 = 0.5 * h, h * h / 12.0
+        d0, d1, d2 = _cross(a0, a1, a2, wx, wy, wz)
+        b0, b1, b2 = wx + hh * a0 + h12 * d0, wy + hh * a1 + h12 * d1, wz + hh * a2 + h12 * d2
+        nw, nx, ny, nz = _unit(*_exp_map_times(h, b0, b1, b2, qw, qx, qy, qz))
+    else:
+        nw, nx, ny, nz = qw, qx, qy, qz
+        for j in range(5):
+            k = (0, 1, 2, 1, 0)[j]
+            frac = (0.5, 0.5, 1.0, 0.5, 0.5)[j]
+            a0, a1, a2 = _mv(_rot(nw, nx, ny, nz), axes[0, k], axes[1, k], axes[2, k])
+            phi = (frac * h) * _dot(a0, a1, a2, L0, L1, L2) / moments[k]
+            nw, nx, ny, nz = _exp_map_times(1.0, phi * a0, phi * a1, phi * a2, nw, nx, ny, nz)
+        nw, nx, ny, nz = _unit(nw, nx, ny, nz)
+    o0, o1, o2 = _omega_of_momentum(_rot(nw, nx, ny, nz), I9, J9, L0, L1, L2, wx, wy, wz)
+    return (nw, nx, ny, nz), (o0, o1, o2)
+
+
+@njit(**_JIT)
+def _newton_system(kind, x0, x1, x2, P0, P1, P2, h, I9, J9):
+    """The Jacobian (9, row-major) and residual (3) at iterate ``x`` of the Newton solve of _free_midpoint
+    (kind 2: G(Π_m) = Π_m − Π − h/2 Π_m × I⁻¹Π_m) or of _free_moser_veselov (kind 3), ``P`` = Π (body)."""
+    hh = 0.5 * h
+    if kind == 2:
+        m0, m1, m2 = _mv(J9, x0, x1, x2)
+        c0, c1, c2 = _cross(x0, x1, x2, m0, m1, m2)
+        r0, r1, r2 = x0 - P0 - hh * c0, x1 - P1 - hh * c1, x2 - P2 - hh * c2
+        A, S = _skew_times(x0, x1, x2, J9), _skew(m0, m1, m2)
+        J = (1.0 - hh * (A[0] - S[0]), 0.0 - hh * (A[1] - S[1]), 0.0 - hh * (A[2] - S[2]),
+             0.0 - hh * (A[3] - S[3]), 1.0 - hh * (A[4] - S[4]), 0.0 - hh * (A[5] - S[5]),
+             0.0 - hh * (A[6] - S[6]), 0.0 - hh * (A[7] - S[7]), 1.0 - hh * (A[8] - S[8]))
+        return J, (r0, r1, r2)
+    n = 1.0 + _dot(x0, x1, x2, x0, x1, x2)
+    f0, f1, f2 = _mv(I9, x0, x1, x2)
+    c0, c1, c2 = _cross(x0, x1, x2, f0, f1, f2)
+    u0, u1, u2 = f0 + c0, f1 + c1, f2 + c2
+    c = 2.0 / n
+    e = 4.0 / (n * n)
+    A, S = _skew_times(x0, x1, x2, I9), _skew(f0, f1, f2)
+    J = (c * (I9[0] + A[0] - S[0]) - e * (u0 * x0), c * (I9[1] + A[1] - S[1]) - e * (u0 * x1),
+         c * (I9[2] + A[2] - S[2]) - e * (u0 * x2), c * (I9[3] + A[3] - S[3]) - e * (u1 * x0),
+         c * (I9[4] + A[4] - S[4]) - e * (u1 * x1), c * (I9[5] + A[5] - S[5]) - e * (u1 * x2),
+         c * (I9[6] + A[6] - S[6]) - e * (u2 * x0), c * (I9[7] + A[7] - S[7]) - e * (u2 * x1),
+         c * (I9[8] + A[8] - S[8]) - e * (u2 * x2))
+    return J, (c * u0 - h * P0, c * u1 - h * P1, c * u2 - h * P2)
+
+
+@njit(**_JIT)
 def _free_map(kind, q, R, w, h, I9, J9, moments, axes, tol, max_iter):
     """The free rigid-body maps of integrators, from attitude ``q`` (its rotation ``R``) and world ω ``w``
     (rad/s) over ``h`` (s): 0 _free_buss, 1 _free_dlm (``moments``, ``axes``: eigh of I_B), 2 _free_midpoint,
     3 _free_moser_veselov. Returns (routine, q₁ (4), world ω₁ (3) rad/s); not routine when the Newton
     iteration of 2 or 3 meets a non-finite update or does not reach ``tol`` in ``max_iter`` (the definition
     then takes the step)."""
+    if kind <= 1:
+        q1, w1 = _free_explicit(kind, q, R, w, h, I9, J9, moments, axes)
+        return True, q1, w1
     qw, qx, qy, qz = q
     wx, wy, wz = w
-    if kind <= 1:
-        L0, L1, L2 = _mv(_world_inertia(R, I9), wx, wy, wz)
-        if kind == 0:
-            c0, c1, c2 = _cross(wx, wy, wz, L0, L1, L2)
-            a0, a1, a2 = _world_inv_inertia_times(R, J9, c0, c1, c2)
-            a0, a1, a2 = -a0, -a1, -a2
-            hh, h12 = 0.5 * h, h * h / 12.0
-            d0, d1, d2 = _cross(a0, a1, a2, wx, wy, wz)
-            b0, b1, b2 = wx + hh * a0 + h12 * d0, wy + hh * a1 + h12 * d1, wz + hh * a2 + h12 * d2
-            nw, nx, ny, nz = _unit(*_exp_map_times(h, b0, b1, b2, qw, qx, qy, qz))
-        else:
-            nw, nx, ny, nz = qw, qx, qy, qz
-            for j in range(5):
-                k = (0, 1, 2, 1, 0)[j]
-                frac = (0.5, 0.5, 1.0, 0.5, 0.5)[j]
-                a0, a1, a2 = _mv(_rot(nw, nx, ny, nz), axes[0, k], axes[1, k], axes[2, k])
-                phi = (frac * h) * _dot(a0, a1, a2, L0, L1, L2) / moments[k]
-                nw, nx, ny, nz = _exp_map_times(1.0, phi * a0, phi * a1, phi * a2, nw, nx, ny, nz)
-            nw, nx, ny, nz = _unit(nw, nx, ny, nz)
-        o0, o1, o2 = _omega_of_momentum(_rot(nw, nx, ny, nz), I9, J9, L0, L1, L2, wx, wy, wz)
-        return True, (nw, nx, ny, nz), (o0, o1, o2)
     b0, b1, b2 = _mtv(R, wx, wy, wz)
     P0, P1, P2 = _mv(I9, b0, b1, b2)
     hh = 0.5 * h
@@ -488,28 +527,7 @@ def _free_map(kind, q, R, w, h, I9, J9, moments, axes, tol, max_iter):
         x0, x1, x2 = hh * b0, hh * b1, hh * b2
     converged = False
     for _ in range(max_iter):
-        if kind == 2:   # G of _free_midpoint
-            m0, m1, m2 = _mv(J9, x0, x1, x2)
-            c0, c1, c2 = _cross(x0, x1, x2, m0, m1, m2)
-            r0, r1, r2 = x0 - P0 - hh * c0, x1 - P1 - hh * c1, x2 - P2 - hh * c2
-            A, S = _skew_times(x0, x1, x2, J9), _skew(m0, m1, m2)
-            J = (1.0 - hh * (A[0] - S[0]), 0.0 - hh * (A[1] - S[1]), 0.0 - hh * (A[2] - S[2]),
-                 0.0 - hh * (A[3] - S[3]), 1.0 - hh * (A[4] - S[4]), 0.0 - hh * (A[5] - S[5]),
-                 0.0 - hh * (A[6] - S[6]), 0.0 - hh * (A[7] - S[7]), 1.0 - hh * (A[8] - S[8]))
-        else:           # G of _free_moser_veselov
-            n = 1.0 + _dot(x0, x1, x2, x0, x1, x2)
-            f0, f1, f2 = _mv(I9, x0, x1, x2)
-            c0, c1, c2 = _cross(x0, x1, x2, f0, f1, f2)
-            u0, u1, u2 = f0 + c0, f1 + c1, f2 + c2
-            c = 2.0 / n
-            e = 4.0 / (n * n)
-            A, S = _skew_times(x0, x1, x2, I9), _skew(f0, f1, f2)
-            J = (c * (I9[0] + A[0] - S[0]) - e * (u0 * x0), c * (I9[1] + A[1] - S[1]) - e * (u0 * x1),
-                 c * (I9[2] + A[2] - S[2]) - e * (u0 * x2), c * (I9[3] + A[3] - S[3]) - e * (u1 * x0),
-                 c * (I9[4] + A[4] - S[4]) - e * (u1 * x1), c * (I9[5] + A[5] - S[5]) - e * (u1 * x2),
-                 c * (I9[6] + A[6] - S[6]) - e * (u2 * x0), c * (I9[7] + A[7] - S[7]) - e * (u2 * x1),
-                 c * (I9[8] + A[8] - S[8]) - e * (u2 * x2))
-            r0, r1, r2 = c * u0 - h * P0, c * u1 - h * P1, c * u2 - h * P2
+        J, (r0, r1, r2) = _newton_system(kind, x0, x1, x2, P0, P1, P2, h, I9, J9)
         s0, s1, s2 = _solve3(J, r0, r1, r2)
         y0, y1, y2 = x0 - s0, x1 - s1, x2 - s2
         d = _change3(y0, y1, y2, x0, x1, x2)
