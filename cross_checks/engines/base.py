@@ -65,7 +65,7 @@ __all__ = ["EngineAdapter", "Variant", "harness_force_torque", "stage_force_torq
            "installed_version", "library_files", "RunRequest", "Traits", "INVARIANTS",
            "SYMPLECTIC_EULER_EXPLICIT_GYRO", "SYMPLECTIC_EULER_IMPLICIT_GYRO", "WHOLE_STATE_EXPLICIT_EULER",
            "WHOLE_STATE_IMPLICIT_EULER", "HIGHER_ORDER", "DEFAULT_TRAITS", "ModuleAdapter", "package_files",
-           "one_request", "check_variant", "run_in_groups"]
+           "one_request", "check_variant", "run_in_groups", "check_installed"]
 
 
 class EngineError(RuntimeError):
@@ -364,6 +364,21 @@ class Variant:
         if not isinstance(self.imitates, str):
             raise ValueError(f"imitates must be a string (ENGINE:VARIANT or empty), got {self.imitates!r}")
         object.__setattr__(self, "order", float(o))
+
+
+def check_installed(dist: str, hint: str, needs: tuple = (), version_of=None) -> None:
+    """From package metadata and import specs only (nothing imported): :class:`EngineNotInstalled` when the
+    distribution ``dist`` is not installed; ImportError when it is but one of ``needs`` — (module,
+    distribution) pairs it runs on — is missing. ``hint`` says how to install it; ``version_of`` (default
+    :func:`installed_version`) reads a distribution's installed version."""
+    import importlib.util
+    version_of = version_of or installed_version
+    if version_of(dist) is None:
+        raise EngineNotInstalled(f"{dist} is not installed ({hint})")
+    for module, needed in needs:
+        if importlib.util.find_spec(module) is None or version_of(needed) is None:
+            raise ImportError(f"{dist} {version_of(dist)} is installed but cannot be imported: "
+                              f"{needed} is missing ({hint})")
 
 
 def check_variant(engine: str, variants, variant: str) -> None:

@@ -79,11 +79,11 @@ from cross_checks.engines.base import (
     SYMPLECTIC_EULER_EXPLICIT_GYRO,
     SYMPLECTIC_EULER_IMPLICIT_GYRO,
     EngineError,
-    EngineNotInstalled,
     ModuleAdapter,
     Traits,
     Variant,
     apply_decay_prestep,
+    check_installed,
     check_variant,
     decay_factors,
     installed_version,
@@ -140,14 +140,8 @@ _LOCK = threading.RLock()
 # --- the engine, imported lazily (never at module import, never in version()) -----------------------------
 
 def _check_installed() -> None:
-    """EngineNotInstalled when mujoco-warp is not installed; ImportError when it is but Warp is missing —
-    from package metadata and import specs only (nothing imported)."""
-    import importlib.util
-    if installed_version(_DIST) is None:
-        raise EngineNotInstalled(f"{_DIST} is not installed ({_HINT})")
-    if importlib.util.find_spec("warp") is None or installed_version("warp-lang") is None:
-        raise ImportError(f"{_DIST} {installed_version(_DIST)} is installed but cannot be imported: "
-                          f"warp-lang is missing ({_HINT})")
+    """base.check_installed for this engine and the Warp it runs on."""
+    check_installed(_DIST, _HINT, (("warp", "warp-lang"),), installed_version)
 
 
 def version() -> str:

@@ -94,10 +94,10 @@ import numpy as np
 from cross_checks.core.files import kernel_cache_dir
 from cross_checks.engines.base import (
     EngineError,
-    EngineNotInstalled,
     ModuleAdapter,
     Traits,
     Variant,
+    check_installed,
     check_variant,
     decay_factors,
     installed_version,
@@ -196,14 +196,8 @@ _LOCK = threading.RLock()
 # --- the engine, imported lazily (never at module import, never in version()) -----------------------------
 
 def _check_installed() -> None:
-    """EngineNotInstalled when newton is not installed; ImportError when it is but warp cannot be found
-    (package metadata and import specs only: nothing imported)."""
-    import importlib.util
-    if installed_version(_DIST) is None:
-        raise EngineNotInstalled(f"newton is not installed ({PIP_HINT})")
-    if importlib.util.find_spec("warp") is None or installed_version("warp-lang") is None:
-        raise ImportError(f"newton {installed_version(_DIST)} is installed but cannot be imported: warp-lang "
-                          f"is missing ({PIP_HINT})")
+    """base.check_installed for this engine and the Warp it runs on."""
+    check_installed(_DIST, PIP_HINT, (("warp", "warp-lang"),), installed_version)
 
 
 def version() -> str:

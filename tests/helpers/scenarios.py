@@ -128,3 +128,16 @@ def with_initial(scenario, **state):
     init = dataclasses.replace(scenario.problem.initial,
                                **{k: np.asarray(v, dtype=float) for k, v in state.items()})
     return dataclasses.replace(scenario, problem=dataclasses.replace(scenario.problem, initial=init))
+
+#: A long run of 10 periods (628 steps) of a spin about the major axis: the long-run stage end to end, fast.
+TINY_LONG_RUN = '''name = "tiny_long"
+description = "10 periods of a spin about the major axis"
+kind = "long_run"
+duration = 31.41592653589793
+dt = 0.05
+[body]
+mass = 1.0
+inertia = [1.0, 2.0, 3.0]
+[initial]
+angular_velocity = [0.02, 0.02, 2.0]
+'''

@@ -11,21 +11,11 @@ from cross_checks.scenario import parse_scenario
 from cross_checks.sweep import run_sweep
 from reports.data import load_results
 from reports.integrators import conservation_score, integrators_view, long_standings
-from tests.helpers.scenarios import TINY
+from tests.helpers.scenarios import TINY, TINY_LONG_RUN
 from tests.helpers.sweeps import private_cache
 from tests.mutants import long_run_mutants
 
-LONG = parse_scenario('''
-name = "tiny_long"
-kind = "long_run"
-duration = 31.41592653589793
-dt = 0.05
-[body]
-mass = 1.0
-inertia = [1.0, 2.0, 3.0]
-[initial]
-angular_velocity = [0.02, 0.02, 2.0]
-''')
+LONG = parse_scenario(TINY_LONG_RUN)
 VARIANTS = ["reference:rk4", "reference:jolt_gyro", "reference:lp_midpoint", "mujoco:euler",
             "planted_keeps:step"]
 

@@ -7,26 +7,15 @@ import json
 import pytest
 
 from cross_checks.cli import build_parser, main
+from tests.helpers.scenarios import TINY_LONG_RUN
 from tests.mutants import long_run_mutants
-
-TINY_LONG = '''name = "tiny_long"
-description = "10 periods of a spin about the major axis"
-kind = "long_run"
-duration = 31.41592653589793
-dt = 0.05
-[body]
-mass = 1.0
-inertia = [1.0, 2.0, 3.0]
-[initial]
-angular_velocity = [0.02, 0.02, 2.0]
-'''
 
 
 @pytest.fixture
 def long_file(tmp_path, monkeypatch):
     monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "cache"))
     p = tmp_path / "tiny_long.toml"
-    p.write_text(TINY_LONG, encoding="utf-8")
+    p.write_text(TINY_LONG_RUN, encoding="utf-8")
     return p
 
 

@@ -62,3 +62,14 @@ def test_package_files_finds_an_installed_package_s_files_without_importing_it()
     assert any(f.name == "decoder.py" for f in files)
     assert base.package_files("json", "decoder.py") == [f for f in files if f.name == "decoder.py"]
     assert base.package_files("no_such_package_here") == []
+
+
+def test_check_installed_tells_an_absent_engine_from_one_missing_what_it_runs_on(monkeypatch):
+    versions = {"mysim": "1.0", "mylib": None}
+    base.check_installed("mysim", "pip install mysim", version_of=versions.get)
+    with pytest.raises(base.EngineNotInstalled, match=r"^othersim is not installed \(pip install x\)$"):
+        base.check_installed("othersim", "pip install x", version_of=versions.get)
+    said = "mysim 1.0 is installed but cannot be imported: mylib is missing"
+    with pytest.raises(ImportError, match=said) as e:
+        base.check_installed("mysim", "pip install mysim", (("json", "mylib"),), version_of=versions.get)
+    assert not isinstance(e.value, base.EngineNotInstalled)
