@@ -85,20 +85,8 @@ import warnings
 import numpy as np
 
 from cross_checks.core.files import kernel_cache_dir
-from cross_checks.engines.base import (
-    SYMPLECTIC_EULER_EXPLICIT_GYRO,
-    EngineError,
-    EngineNotInstalled,
-    ModuleAdapter,
-    RunRequest,
-    Traits,
-    Variant,
-    check_variant,
-    decay_factors,
-    harness_force_torque,
-    installed_version,
-    package_files,
-)
+from cross_checks.engines import base
+from cross_checks.engines.base import EngineError, ModuleAdapter, Traits, Variant, installed_version
 from cross_checks.engines.step_floats import harness_fn
 from reference_sim.quaternion import quat_conj, rotate
 from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
@@ -114,7 +102,7 @@ VARIANTS = {
     "generalized": Variant(1, "brax generalized pipeline: semi-implicit Euler in generalized coordinates, "
                               "explicit gyroscopic term (body axes), exponential-map rotation update with "
                               "the new ω",
-                           traits=SYMPLECTIC_EULER_EXPLICIT_GYRO),
+                           traits=base.SYMPLECTIC_EULER_EXPLICIT_GYRO),
     # spring/pipeline.py + spring/integrator.py: ω_W += Δt I_W⁻¹ τ (no gyroscopic term), q += ½Δt ω_W ⊗ q
     "spring": Variant(1, "brax spring pipeline: semi-implicit Euler in maximal coordinates, NO gyroscopic "
                          "term, quaternion q += ½Δt ω ⊗ q renormalised; forces: gravity only",
@@ -152,7 +140,7 @@ def version() -> str:
     start JAX before forking). EngineNotInstalled without brax; ImportError without jax/jaxlib."""
     ver = installed_version("brax")
     if ver is None:
-        raise EngineNotInstalled("brax is not installed (pip install 'rbcheck[brax]')")
+        raise base.EngineNotInstalled("brax is not installed (pip install 'rbcheck[brax]')")
     jax_ver, jaxlib_ver = installed_version("jax"), installed_version("jaxlib")
     if jax_ver is None or jaxlib_ver is None:
         raise ImportError(f"brax {ver} is installed but jax or jaxlib is not (pip install 'rbcheck[brax]')")
@@ -276,7 +264,7 @@ def expressible(scenario, variant: str, dt_s: float) -> str:
            "joint zero actuator force and the pipeline has no other force input); this scenario has ")
     if fm.state_dependent:
         return why + "forces that depend on the state"
-    f, tau = harness_force_torque(scenario, scenario.problem.initial_packed(), dt_s)
+    f, tau = base.harness_force_torque(scenario, scenario.problem.initial_packed(), dt_s)
     weight = scenario.problem.body.mass_kg * np.asarray(fm.gravity_W, dtype=float)
     if np.any(tau != 0.0) or not np.allclose(f, weight, rtol=1e-15, atol=0.0):
         return why + f"a force {np.round(f - weight, 6).tolist()} N besides the weight and a torque " \
@@ -288,7 +276,7 @@ def expressible(scenario, variant: str, dt_s: float) -> str:
 def _system_of(scenario, variant: str):
     """The neutralised brax System of the scenario's body for ``variant`` (Δt is set per run)."""
     lib = _lib()
-    check_variant(ENGINE, VARIANTS, variant)
+    base.check_variant(ENGINE, VARIANTS, variant)
     gen = variant == "generalized"
     try:
         with warnings.catch_warnings():
@@ -429,13 +417,13 @@ def _mode_and_consts(scenario, variant: str, dt_s: float):
     p = scenario.problem
     fm = p.forces
     weight = p.body.mass_kg * np.asarray(fm.gravity_W, dtype=float)
-    gv, gw = (float(g) for g in decay_factors(scenario, dt_s))
+    gv, gw = (float(g) for g in base.decay_factors(scenario, dt_s))
     decay = 1.0 if fm.has_decay else 0.0
     if variant != "generalized":
         return "none", np.r_[np.zeros(6), gv, gw, decay]
     if fm.state_dependent:
         return "callback", np.r_[-weight, np.zeros(3), gv, gw, decay]
-    f, tau = harness_force_torque(scenario, p.initial_packed(), dt_s)
+    f, tau = base.harness_force_torque(scenario, p.initial_packed(), dt_s)
     return "const", np.r_[f - weight, tau, gv, gw, decay]
 
 
@@ -539,7 +527,7 @@ def simulate_many(variant: str, requests) -> list:
 
 def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
     """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded."""
-    return _run_group(scenario, variant, [RunRequest(scenario, float(dt_s), int(n_steps))])[0]
+    return _run_group(scenario, variant, [base.RunRequest(scenario, float(dt_s), int(n_steps))])[0]
 
 
 def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
@@ -573,7 +561,7 @@ class BraxAdapter(ModuleAdapter):
 
     def engine_files(self) -> list:
         """brax's pipeline sources (found without importing brax)."""
-        return package_files("brax", *(f"{d}/{f}" for d in ("generalized", "positional", "spring")
+        return base.package_files("brax", *(f"{d}/{f}" for d in ("generalized", "positional", "spring")
                                        for f in ("pipeline.py", "integrator.py")))
 
     @property

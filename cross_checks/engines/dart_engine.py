@@ -50,24 +50,13 @@ import math
 
 import numpy as np
 
-from cross_checks.engines.base import (
-    SYMPLECTIC_EULER_EXPLICIT_GYRO,
-    EngineError,
-    ModuleAdapter,
-    Variant,
-    apply_decay_prestep,
-    check_variant,
-    decay_factors,
-    installed_version,
-    library_files,
-    optional_import,
-    require,
-)
+from cross_checks.engines import base
+from cross_checks.engines.base import EngineError, ModuleAdapter, Variant
 from cross_checks.engines.step_floats import harness_fn
 from reference_sim.quaternion import quat_exp, quat_log, sign_continuous
 from reference_sim.simulate import BLOWUP_LIMIT, Run, blowup_words, diverged
 
-dart, _IMPORT_ERROR = optional_import("dartpy")
+dart, _IMPORT_ERROR = base.optional_import("dartpy")
 
 __all__ = ["ENGINE", "VARIANTS", "JOINT_SETTINGS", "EngineError", "version", "simulate", "one_step",
            "DartBody", "DartAdapter", "neutralise", "to_dart_state", "from_dart_state",
@@ -83,7 +72,7 @@ VARIANTS = {
                                    "DART World::step: semi-implicit Euler, explicit "
                                    "gyroscopic term (its own articulated-body dynamics), "
                                    "exponential-map rotation update with the new ω",
-                                   traits=SYMPLECTIC_EULER_EXPLICIT_GYRO),
+                                   traits=base.SYMPLECTIC_EULER_EXPLICIT_GYRO),
 }
 
 #: FreeJoint settings every body gets, each DART 6.20's default today (pinned) and set explicitly so that
@@ -103,7 +92,7 @@ _ZERO3 = np.zeros(3)
 
 
 def _require():
-    require(dart, _IMPORT_ERROR, "dartpy", hint="pip install 'rbcheck[dart]'")
+    base.require(dart, _IMPORT_ERROR, "dartpy", hint="pip install 'rbcheck[dart]'")
 
 
 def version() -> str:
@@ -114,7 +103,7 @@ def version() -> str:
 
 @functools.lru_cache(maxsize=1)
 def _dist_version() -> str:
-    return installed_version("dartpy") or "unknown"
+    return base.installed_version("dartpy") or "unknown"
 
 
 # --- state conversion (the boundary) --------------------------------------------------------------------
@@ -212,7 +201,7 @@ class DartBody:
 
 
 def _model(scenario, variant: str, dt_s: float) -> DartBody:
-    check_variant(ENGINE, VARIANTS, variant)
+    base.check_variant(ENGINE, VARIANTS, variant)
     return DartBody(scenario, dt_s)
 
 
@@ -237,7 +226,7 @@ def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
     forces = scenario.problem.forces
     state_dependent, decay = forces.state_dependent, forces.has_decay
     harness = harness_fn(scenario, dt_s)
-    gv, gw = (float(g) for g in decay_factors(scenario, dt_s))
+    gv, gw = (float(g) for g in base.decay_factors(scenario, dt_s))
     wx, wy, wz = B.weight
     fx, fy, fz, tx, ty, tz = harness([float(v) for v in y0])
     f, tau = np.array([fx - wx, fy - wy, fz - wz]), np.array([tx, ty, tz])
@@ -268,7 +257,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     shape = np.shape(y_start)
     y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
     B = _model(scenario, variant, dt_s)
-    y_dec = apply_decay_prestep(scenario, y_start, dt_s)
+    y_dec = base.apply_decay_prestep(scenario, y_start, dt_s)
     harness = harness_fn(scenario, dt_s)
     wx, wy, wz = B.weight
     out = np.empty((len(y_start), 12))
@@ -295,4 +284,4 @@ class DartAdapter(ModuleAdapter):
 
     def engine_files(self) -> list:
         """dartpy's compiled module (a rebuilt or reinstalled dartpy is a new engine)."""
-        return library_files(dart)
+        return base.library_files(dart)

@@ -33,18 +33,8 @@ import functools
 
 import numpy as np
 
-from cross_checks.engines.base import (
-    HIGHER_ORDER,
-    SYMPLECTIC_EULER_EXPLICIT_GYRO,
-    WHOLE_STATE_IMPLICIT_EULER,
-    EngineError,
-    ModuleAdapter,
-    Variant,
-    check_variant,
-    library_files,
-    require,
-    stage_force_torque,
-)
+from cross_checks.engines import base
+from cross_checks.engines.base import EngineError, ModuleAdapter, Variant
 from reference_sim.simulate import BLOWUP_LIMIT, Run
 
 try:  # the module imports without pydrake so the registry can report why it is unavailable
@@ -80,8 +70,9 @@ VARIANTS = {
 #: I_W⁻¹(τ − ω_W × I_W ω_W) at the start-of-step attitude — the body-frame explicit Euler step of Euler's
 #: equations seen in world axes — then q from the new ω (and x from the new v: symplectic in translation).
 #: Implicit Euler: one implicit step of the whole state (q, ω_W, x, v_W), like reference:implicit_euler.
-TRAITS = {"semi_explicit_euler": SYMPLECTIC_EULER_EXPLICIT_GYRO, "implicit_euler": WHOLE_STATE_IMPLICIT_EULER,
-          "runge_kutta2": HIGHER_ORDER, "runge_kutta3": HIGHER_ORDER}
+TRAITS = {"semi_explicit_euler": base.SYMPLECTIC_EULER_EXPLICIT_GYRO,
+          "implicit_euler": base.WHOLE_STATE_IMPLICIT_EULER, "runge_kutta2": base.HIGHER_ORDER,
+          "runge_kutta3": base.HIGHER_ORDER}
 
 #: Steps between divergence checks of a free run.
 _CHUNK = 256
@@ -97,7 +88,7 @@ _IMPLICIT = ("implicit_euler",)
 
 
 def _require():
-    require(pydrake, _IMPORT_ERROR, "drake", hint="pip install 'rbcheck[drake]'")
+    base.require(pydrake, _IMPORT_ERROR, "drake", hint="pip install 'rbcheck[drake]'")
 
 
 def version() -> str:
@@ -147,7 +138,7 @@ def _force_system_class():
             # plain floats: this runs at every derivative evaluation (a Newton iteration's Jacobian too)
             x = self._x.Eval(context).tolist()
             y = [x[4], x[5], x[6], x[10], x[11], x[12], x[0], x[1], x[2], x[3], x[7], x[8], x[9]]
-            f, tau = stage_force_torque(self._scenario, y)
+            f, tau = base.stage_force_torque(self._scenario, y)
             w = self._weight
             output.SetFromVector(np.array([tau[0], tau[1], tau[2], f[0] - w[0], f[1] - w[1], f[2] - w[2]]))
 
@@ -197,7 +188,7 @@ class DrakeModel:
         self.context = plant.GetMyMutableContextFromRoot(root)
         if not self.per_stage and (forces.point_forces or forces.torques):
             y0 = p.initial_packed()
-            f, tau = stage_force_torque(scenario, y0)     # constant: any state gives the same
+            f, tau = base.stage_force_torque(scenario, y0)     # constant: any state gives the same
             weight = p.body.mass_kg * np.asarray(forces.gravity_W, dtype=float)
             plant.get_applied_generalized_force_input_port().FixValue(self.context,
                                                                       np.concatenate([tau, f - weight]))
@@ -229,7 +220,7 @@ def _bad_rows(y):
 
 
 def _model(scenario, variant: str, dt_s: float) -> DrakeModel:
-    check_variant(ENGINE, VARIANTS, variant)
+    base.check_variant(ENGINE, VARIANTS, variant)
     model = DrakeModel(scenario, VARIANTS[variant][0])
     model.fixed_step(dt_s)
     return model
@@ -312,4 +303,4 @@ class DrakeAdapter(ModuleAdapter):
 
     def engine_files(self) -> list:
         """Drake's shared libraries (a rebuilt or reinstalled libdrake.so is a new engine)."""
-        return library_files(pydrake)
+        return base.library_files(pydrake)

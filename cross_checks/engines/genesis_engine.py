@@ -71,16 +71,7 @@ import numpy as np
 
 from cross_checks.core import files
 from cross_checks.engines import base
-from cross_checks.engines.base import (
-    SYMPLECTIC_EULER_EXPLICIT_GYRO,
-    EngineError,
-    ModuleAdapter,
-    Traits,
-    Variant,
-    apply_decay_prestep,
-    check_variant,
-    decay_factors,
-)
+from cross_checks.engines.base import EngineError, ModuleAdapter, Traits, Variant
 from cross_checks.engines.step_floats import harness_fn
 from reference_sim.quaternion import quat_conj, rotate
 from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
@@ -133,7 +124,7 @@ VARIANTS = {
         1,
         "Genesis Euler: semi-implicit Euler, explicit gyroscopic term, quaternion by the "
         "exponential map (MuJoCo Euler's scheme)",
-        traits=SYMPLECTIC_EULER_EXPLICIT_GYRO,
+        traits=base.SYMPLECTIC_EULER_EXPLICIT_GYRO,
     ),
     # func_midpoint_free_body: ω by the implicit midpoint rule (Newton), q ← q ⊗ exp(Δt ω̄); v += Δt a, x +=
     # Δt v_new
@@ -316,7 +307,7 @@ def scene_options(variant: str, dt_s: float, gravity_W):
 
 
 def _check_variant(variant: str) -> None:
-    check_variant(ENGINE, VARIANTS, variant)
+    base.check_variant(ENGINE, VARIANTS, variant)
 
 
 class GenesisBody:
@@ -497,7 +488,7 @@ def _simulate_batch(scenarios, variant: str, dt_s: float, n_steps: int) -> list:
     harness = [harness_fn(sc, dt_s) for sc in scenarios]
     per_step = any(sc.problem.forces.state_dependent for sc in scenarios)
     decay = any(sc.problem.forces.has_decay for sc in scenarios)
-    g = np.array([[float(v) for v in decay_factors(sc, dt_s)] for sc in scenarios])
+    g = np.array([[float(v) for v in base.decay_factors(sc, dt_s)] for sc in scenarios])
     gvel = np.repeat(g, 3, axis=1)  # (n, 6): γ_v γ_v γ_v γ_ω γ_ω γ_ω
     ft = np.array([h(y.tolist()) for h, y in zip(harness, y0)])  # (n, 6) from the initial state
     f, tau = ft[:, 0:3] - weight, ft[:, 3:6]
@@ -584,7 +575,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     B = body(scenario, variant, dt_s, n_envs=0 if T == 1 else T)
     harness = harness_fn(scenario, dt_s)
     ft = np.array([harness(row) for row in y_start.tolist()]).reshape(T, 6)
-    B.set_state(apply_decay_prestep(scenario, y_start, dt_s))
+    B.set_state(base.apply_decay_prestep(scenario, y_start, dt_s))
     B.apply(ft[:, 0:3] - _weight(scenario), ft[:, 3:6])
     if B.step():
         return np.full(shape, math.nan)

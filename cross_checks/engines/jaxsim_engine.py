@@ -92,20 +92,8 @@ import numpy as np
 
 from cross_checks.core import tolerances as tol
 from cross_checks.core.files import kernel_cache_dir
-from cross_checks.engines.base import (
-    HIGHER_ORDER,
-    SYMPLECTIC_EULER_EXPLICIT_GYRO,
-    EngineError,
-    EngineNotInstalled,
-    ModuleAdapter,
-    Variant,
-    check_variant,
-    decay_factors,
-    installed_version,
-    optional_import,
-    package_files,
-    require,
-)
+from cross_checks.engines import base
+from cross_checks.engines.base import EngineError, ModuleAdapter, Variant
 from cross_checks.engines.step_floats import harness_fn
 from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
 
@@ -140,7 +128,7 @@ VARIANTS = {
         1,
         "jaxsim SemiImplicitEuler: symplectic Euler in the inertial representation, "
         "explicit gyroscopic term, q += Δt q̇ then normalised",
-        traits=SYMPLECTIC_EULER_EXPLICIT_GYRO,
+        traits=base.SYMPLECTIC_EULER_EXPLICIT_GYRO,
     ),
     # jaxsim/api/integrators.py rk4_integration: classical RK4, the step's link forces (an inertial wrench)
     # held over its 4 stages
@@ -148,7 +136,7 @@ VARIANTS = {
         4,
         "jaxsim RungeKutta4: classical 4th-order Runge-Kutta; the applied force and torque held over "
         "the step (first order where they change within it)",
-        traits=dataclasses.replace(HIGHER_ORDER, forces_held=True),
+        traits=dataclasses.replace(base.HIGHER_ORDER, forces_held=True),
     ),
 }
 
@@ -172,9 +160,9 @@ def version() -> str:
     EngineNotInstalled when it is absent; ImportError when it is installed but not importable."""
     import importlib.util
 
-    ver = installed_version("jaxsim")
+    ver = base.installed_version("jaxsim")
     if ver is None:
-        raise EngineNotInstalled(f"jaxsim is not installed ({HINT})")
+        raise base.EngineNotInstalled(f"jaxsim is not installed ({HINT})")
     try:
         spec = importlib.util.find_spec("jaxsim")
     except (ImportError, ValueError) as exc:
@@ -197,8 +185,8 @@ def _jax():
     """(jax, jax.numpy, jaxsim.api): imported on first use (never in a process that only lists engines),
     float64 switched on before jaxsim's import and checked after, the persistent cache in rbcheck's
     directory."""
-    jax, err = optional_import("jax")
-    require(jax, err, "jax", hint=HINT)
+    jax, err = base.optional_import("jax")
+    base.require(jax, err, "jax", hint=HINT)
     jax.config.update("jax_enable_x64", True)
     try:
         path = xla_cache_dir()
@@ -207,8 +195,8 @@ def _jax():
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
     except OSError:  # no writable cache directory: compile every time
         pass
-    jaxsim, err = optional_import("jaxsim")
-    require(jaxsim, err, "jaxsim", hint=HINT)
+    jaxsim, err = base.optional_import("jaxsim")
+    base.require(jaxsim, err, "jaxsim", hint=HINT)
     import jax.numpy as jnp
     import jaxsim.api as js
 
@@ -250,7 +238,7 @@ def model_sdf(mass_kg: float, inertia_B) -> str:
 
 def build_model(scenario, variant: str):
     """The scenario's jaxsim model for ``variant`` (EngineError with jaxsim's words when it refuses it)."""
-    check_variant(ENGINE, VARIANTS, variant)
+    base.check_variant(ENGINE, VARIANTS, variant)
     body = scenario.problem.body
     inertia = np.asarray(body.inertia_B, dtype=float)
     return _model(float(body.mass_kg), tuple(inertia.reshape(-1).tolist()), engine_gravity(scenario), variant)
@@ -404,7 +392,7 @@ def _inputs(scenario, dt_s: float):
     forces = scenario.problem.forces
     harness = harness_fn(scenario, dt_s)
     wx, wy, wz = _weight(scenario)
-    gv, gw = (float(g) for g in decay_factors(scenario, dt_s))
+    gv, gw = (float(g) for g in base.decay_factors(scenario, dt_s))
     scale = np.ones(13)
     scale[3:6] = gv
     scale[10:13] = gw
@@ -512,4 +500,4 @@ class JaxsimAdapter(ModuleAdapter):
 
     def engine_files(self) -> list:
         """jaxsim's Python files (found without importing it: a changed jaxsim is a new engine)."""
-        return package_files("jaxsim", pattern="**/*.py")
+        return base.package_files("jaxsim", pattern="**/*.py")

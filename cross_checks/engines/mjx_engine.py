@@ -68,21 +68,8 @@ from pathlib import Path
 import numpy as np
 
 from cross_checks.core.files import kernel_cache_dir
-from cross_checks.engines.base import (
-    SYMPLECTIC_EULER_EXPLICIT_GYRO,
-    EngineError,
-    EngineNotInstalled,
-    ModuleAdapter,
-    Traits,
-    Variant,
-    apply_decay_prestep,
-    check_variant,
-    decay_factors,
-    harness_force_torque,
-    installed_version,
-    one_request,
-    package_files,
-)
+from cross_checks.engines import base
+from cross_checks.engines.base import EngineError, ModuleAdapter, Traits, Variant, installed_version
 from cross_checks.engines.step_floats import harness_fn
 from reference_sim.simulate import Run, recorded_run
 
@@ -98,7 +85,7 @@ ENGINE = "mjx"
 VARIANTS = {
     "euler": Variant(1, "MJX Euler: semi-implicit Euler, explicit gyroscopic term, quaternion by the "
                         "exponential map (mujoco:euler's scheme, in JAX)",
-                     traits=SYMPLECTIC_EULER_EXPLICIT_GYRO),
+                     traits=base.SYMPLECTIC_EULER_EXPLICIT_GYRO),
     # rungekutta4 advances q by ONE exponential of the stages' weighted body-axes ω (a vector sum):
     # second order where ω_B turns within a step (reproduced to 6e-17 by
     # tests/cross_checks/engines/test_mjx_engine.py)
@@ -108,7 +95,7 @@ VARIANTS = {
                    traits=Traits(forces_held=True, rotation_order=2.0)),
     "implicitfast": Variant(1, "MJX implicitfast: velocity-implicit in the actuator and damping derivatives "
                                "only (no RNE derivative in MJX): Euler's step on a lone free body",
-                            traits=SYMPLECTIC_EULER_EXPLICIT_GYRO),
+                            traits=base.SYMPLECTIC_EULER_EXPLICIT_GYRO),
 }
 
 #: Steps per call of the compiled loop (a run longer than this calls it again from its last state).
@@ -135,7 +122,7 @@ def _check_installed() -> None:
     found — from package metadata and import specs only (nothing imported, no JAX backend started)."""
     import importlib.util
     if installed_version(_DIST) is None:
-        raise EngineNotInstalled(f"{_DIST} is not installed (pip install 'rbcheck[mjx]')")
+        raise base.EngineNotInstalled(f"{_DIST} is not installed (pip install 'rbcheck[mjx]')")
     for mod, dist in (("jax", "jax"), ("jaxlib", "jaxlib")):
         if importlib.util.find_spec(mod) is None:
             raise ImportError(f"{_DIST} {installed_version(_DIST)} is installed but cannot be imported: "
@@ -405,14 +392,14 @@ def _weight(scenario) -> np.ndarray:
 def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
     """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded (one
     request of :func:`simulate_many`)."""
-    return one_request(simulate_many, scenario, variant, dt_s, n_steps)
+    return base.one_request(simulate_many, scenario, variant, dt_s, n_steps)
 
 
 def simulate_many(variant: str, requests) -> list:
     """The runs of ``requests`` (``base.RunRequest``), each a Run (or its EngineError): grouped by model
     structure and force callback, each group vmapped through the compiled chunk loop in batches of at most
     MAX_BATCH runs."""
-    check_variant(ENGINE, VARIANTS, variant)
+    base.check_variant(ENGINE, VARIANTS, variant)
     out: list = [None] * len(requests)
     try:
         _engine_or_error()
@@ -449,12 +436,12 @@ def _run_batch(key, callback: bool, reqs, models) -> list:
     xfrc = np.zeros((B, 6))
     ids = np.arange(B)
     for k, r in enumerate(reqs):
-        gv, gw = (float(g) for g in decay_factors(r.scenario, r.dt_s))
+        gv, gw = (float(g) for g in base.decay_factors(r.scenario, r.dt_s))
         gains[k] = (gv, gv, gv, gw, gw, gw)
         if callback:
             _HOST[k] = (harness_fn(r.scenario, r.dt_s), _weight(r.scenario).tolist())
         else:
-            f, tau = harness_force_torque(r.scenario, y0[k], r.dt_s)
+            f, tau = base.harness_force_torque(r.scenario, y0[k], r.dt_s)
             xfrc[k] = np.r_[f - _weight(r.scenario), tau]
     stacked = _stack([models[k] for k in pad])
     n_max = max(r.n_steps for r in reqs)
@@ -495,7 +482,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     the forces from the row (host), the pre-step decay. Rows the engine blows up come back as MJX left
     them."""
     from cross_checks.engines.mujoco_engine import to_packed, to_qpos_qvel
-    check_variant(ENGINE, VARIANTS, variant)
+    base.check_variant(ENGINE, VARIANTS, variant)
     jax, _, _ = _engine_or_error()
     shape = np.shape(y_start)
     y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
@@ -510,7 +497,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
             fx, fy, fz, tx, ty, tz = harness(row)
             xfrc[i] = (fx - weight[0], fy - weight[1], fz - weight[2], tx, ty, tz)
         with np.errstate(all="ignore"):
-            qpos_in, qvel_in = to_qpos_qvel(apply_decay_prestep(scenario, y_start, dt_s))
+            qpos_in, qvel_in = to_qpos_qvel(base.apply_decay_prestep(scenario, y_start, dt_s))
         out = np.empty((T, 13))
         fn = None
         for s in range(0, T, ONE_STEP_BATCH):
@@ -539,4 +526,4 @@ class MjxAdapter(ModuleAdapter):
 
     def engine_files(self) -> list:
         """MJX's Python sources (found without importing them: the parent of a sweep must not start JAX)."""
-        return package_files("mujoco.mjx", "_src")
+        return base.package_files("mujoco.mjx", "_src")

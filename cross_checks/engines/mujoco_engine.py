@@ -30,27 +30,19 @@ import threading
 
 import numpy as np
 
+from cross_checks.engines import base
 from cross_checks.engines.base import (
-    HIGHER_ORDER,
-    SYMPLECTIC_EULER_EXPLICIT_GYRO,
-    SYMPLECTIC_EULER_IMPLICIT_GYRO,
     EngineError,
     ModuleAdapter,
     Variant,
-    apply_decay_prestep,
-    check_variant,
-    decay_factors,
     harness_force_torque,
-    library_files,
-    optional_import,
-    require,
     stage_force_torque_floats,
 )
 from cross_checks.engines.step_floats import harness_fn
 from reference_sim.quaternion import quat_conj, quat_from_matrix, rotate
 from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
 
-mujoco, _IMPORT_ERROR = optional_import("mujoco")
+mujoco, _IMPORT_ERROR = base.optional_import("mujoco")
 
 __all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate", "simulate_many", "one_step",
            "build_model", "packed_floats", "to_packed", "to_qpos_qvel"]
@@ -63,19 +55,19 @@ ENGINE = "mujoco"
 VARIANTS = {
     "euler": Variant(1, "MuJoCo Euler: semi-implicit Euler, explicit gyroscopic term, quaternion by the "
                         "exponential map",
-                     traits=SYMPLECTIC_EULER_EXPLICIT_GYRO),
+                     traits=base.SYMPLECTIC_EULER_EXPLICIT_GYRO),
     "rk4": Variant(4, "MuJoCo RK4: classical 4th-order Runge-Kutta; state-dependent forces evaluated at "
                       "every stage",
-                   traits=HIGHER_ORDER),
+                   traits=base.HIGHER_ORDER),
     "implicit": Variant(1, "MuJoCo implicit: velocity-implicit Euler (gyroscopic/velocity derivatives in "
                            "the step)",
-                        traits=SYMPLECTIC_EULER_IMPLICIT_GYRO),
+                        traits=base.SYMPLECTIC_EULER_IMPLICIT_GYRO),
     "implicitfast": Variant(1, "MuJoCo implicitfast: implicit Euler without the Coriolis/centrifugal "
                                "derivatives",
-                            traits=SYMPLECTIC_EULER_IMPLICIT_GYRO),
+                            traits=base.SYMPLECTIC_EULER_IMPLICIT_GYRO),
     "discrete": Variant(1, "MuJoCo discrete: constraint solve and implicit velocity update in one, in the "
                            "metric M + hD + h²K (for a lone free body: implicitfast's step)",
-                        traits=SYMPLECTIC_EULER_IMPLICIT_GYRO),
+                        traits=base.SYMPLECTIC_EULER_IMPLICIT_GYRO),
 }
 
 #: Steps between divergence checks of a free-running simulation (checked vectorised per chunk).
@@ -92,7 +84,7 @@ _RK4_STAGE_FORCES = True
 
 
 def _require():
-    require(mujoco, _IMPORT_ERROR, "mujoco")
+    base.require(mujoco, _IMPORT_ERROR, "mujoco")
 
 
 def version() -> str:
@@ -102,7 +94,7 @@ def version() -> str:
 
 def integrator_of(variant):
     _require()
-    check_variant(ENGINE, VARIANTS, variant)
+    base.check_variant(ENGINE, VARIANTS, variant)
     return getattr(mujoco.mjtIntegrator, f"mjINT_{variant.upper()}")
 
 
@@ -372,7 +364,7 @@ def _simulate_loop(scenario, m, d, dt_s, n_steps, control, per_step, decay, xfrc
     decay applied to qvel (``decay``), the RK4 stage callback (``control``); divergence checked per chunk.
     Per step in plain floats (one read of qpos/qvel, one write of xfrc_applied and of qvel): the numbers of
     :func:`_apply` and ``base.harness_force_torque``, bit for bit (tested)."""
-    gv, gw = (float(g) for g in decay_factors(scenario, dt_s))
+    gv, gw = (float(g) for g in base.decay_factors(scenario, dt_s))
     harness = harness_fn(scenario, dt_s) if per_step else None
     w0, w1, w2 = (float(c) for c in weight)
     qpos, qvel = d.qpos, d.qvel   # views of d's arrays, bound once
@@ -417,7 +409,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     m, d, xfrc, weight = _model_and_data(scenario, variant, dt_s)
     per_stage = forces_per_stage(scenario, variant)
     control = _stage_force_writer(scenario, d, xfrc, weight) if per_stage else None
-    y_dec = y_start if per_stage else apply_decay_prestep(scenario, y_start, dt_s)
+    y_dec = y_start if per_stage else base.apply_decay_prestep(scenario, y_start, dt_s)
     qpos_in, qvel_in = to_qpos_qvel(y_dec)
     qpos_out = np.empty((len(y_start), 7))
     qvel_out = np.empty((len(y_start), 6))
@@ -540,7 +532,7 @@ def _rollout_group(reqs, mods):
     for k, r in enumerate(reqs):
         if k not in per_step:
             _apply(xfrc[k, 0, 6:12], *harness_force_torque(r.scenario, y0[k], r.dt_s), weights[k])
-    g = np.array([[float(v) for v in decay_factors(r.scenario, r.dt_s)] for r in reqs])
+    g = np.array([[float(v) for v in base.decay_factors(r.scenario, r.dt_s)] for r in reqs])
     decay = any(r.scenario.problem.forces.has_decay for r in reqs)
     qpos = np.empty((n_max + 1, M, 7))
     qvel = np.empty((n_max + 1, M, 6))
@@ -596,4 +588,4 @@ class MujocoAdapter(ModuleAdapter):
 
     def engine_files(self) -> list:
         """MuJoCo's shared library."""
-        return library_files(mujoco)
+        return base.library_files(mujoco)

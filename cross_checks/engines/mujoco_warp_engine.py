@@ -75,22 +75,8 @@ import time
 import numpy as np
 
 from cross_checks.core.files import kernel_cache_dir
-from cross_checks.engines.base import (
-    SYMPLECTIC_EULER_EXPLICIT_GYRO,
-    SYMPLECTIC_EULER_IMPLICIT_GYRO,
-    EngineError,
-    ModuleAdapter,
-    Traits,
-    Variant,
-    apply_decay_prestep,
-    check_installed,
-    check_variant,
-    decay_factors,
-    installed_version,
-    one_request,
-    package_files,
-    run_in_groups,
-)
+from cross_checks.engines import base
+from cross_checks.engines.base import EngineError, ModuleAdapter, Traits, Variant, installed_version
 from cross_checks.engines.step_floats import harness_fn
 from reference_sim.quaternion import sign_continuous
 from reference_sim.simulate import Run, recorded_run
@@ -115,19 +101,19 @@ def _traits(base: Traits) -> Traits:
 VARIANTS = {
     "euler": Variant(1, "MuJoCo Warp Euler (float32): semi-implicit Euler, explicit gyroscopic term, "
                         "quaternion by the exponential map (mujoco:euler's scheme)",
-                     traits=_traits(SYMPLECTIC_EULER_EXPLICIT_GYRO)),
+                     traits=_traits(base.SYMPLECTIC_EULER_EXPLICIT_GYRO)),
     "rk4": Variant(4, "MuJoCo Warp RK4 (float32): classical 4th-order Runge-Kutta, Munthe-Kaas attitude "
                       "update; state-dependent forces evaluated at every stage (control callback)",
                    traits=Traits(precision=_F32)),
     "implicit": Variant(1, "MuJoCo Warp implicit (float32): velocity-implicit Euler, the free body's "
                            "gyroscopic derivative in the solve",
-                        traits=_traits(SYMPLECTIC_EULER_IMPLICIT_GYRO)),
+                        traits=_traits(base.SYMPLECTIC_EULER_IMPLICIT_GYRO)),
     "implicitfast": Variant(1, "MuJoCo Warp implicitfast (float32): on a free body the same solve as "
                                "implicit (MuJoCo 4.0's free-body gyroscopic derivative)",
-                            traits=_traits(SYMPLECTIC_EULER_IMPLICIT_GYRO)),
+                            traits=_traits(base.SYMPLECTIC_EULER_IMPLICIT_GYRO)),
     "discrete": Variant(1, "MuJoCo Warp discrete (float32): qacc in the effective metric with the free "
                            "body's gyroscopic derivative (implicitfast's step for a lone body)",
-                        traits=_traits(SYMPLECTIC_EULER_IMPLICIT_GYRO)),
+                        traits=_traits(base.SYMPLECTIC_EULER_IMPLICIT_GYRO)),
 }
 
 _BODY = 1   # body id of the free body (0 is the world)
@@ -141,7 +127,7 @@ _LOCK = threading.RLock()
 
 def _check_installed() -> None:
     """base.check_installed for this engine and the Warp it runs on."""
-    check_installed(_DIST, _HINT, (("warp", "warp-lang"),), installed_version)
+    base.check_installed(_DIST, _HINT, (("warp", "warp-lang"),), installed_version)
 
 
 def version() -> str:
@@ -261,7 +247,7 @@ def host_model(scenario, variant: str, dt_s: float):
     ``mjDSBL_AUTORESET`` cleared (mujoco_warp refuses it; it never resets a world). EngineError with MuJoCo's
     words."""
     from cross_checks.engines import mujoco_engine
-    check_variant(ENGINE, VARIANTS, variant)
+    base.check_variant(ENGINE, VARIANTS, variant)
     _, _, mujoco = _engine_or_error()
     m = mujoco_engine.build_model(scenario, variant, dt_s)
     m.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_AUTORESET)
@@ -339,19 +325,19 @@ class _Worlds:
 def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
     """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded (one
     request of :func:`simulate_many`)."""
-    return one_request(simulate_many, scenario, variant, dt_s, n_steps)
+    return base.one_request(simulate_many, scenario, variant, dt_s, n_steps)
 
 
 def simulate_many(variant: str, requests) -> list:
     """The runs of ``requests`` (``base.RunRequest``), each a Run (or its EngineError): the requests of one
     scenario run as the worlds of one batch (one world per Δt, in batches of at most MAX_WORLDS)."""
-    check_variant(ENGINE, VARIANTS, variant)
+    base.check_variant(ENGINE, VARIANTS, variant)
     try:
         _engine_or_error()
     except EngineError as exc:
         return [exc] * len(requests)
     with _LOCK:
-        return run_in_groups(requests, lambda r: id(r.scenario), lambda reqs: _run_batch(variant, reqs),
+        return base.run_in_groups(requests, lambda r: id(r.scenario), lambda reqs: _run_batch(variant, reqs),
                              MAX_WORLDS)
 
 
@@ -445,7 +431,7 @@ def _run_batch(variant: str, reqs) -> list:
     weight = _weight(sc)
     stage = per_stage(sc, variant)
     W = _Worlds(sc, variant, dts, qpos0, qvel0, stage_callback(sc) if stage else None)
-    g = np.array([[float(v) for v in decay_factors(sc, h)] for h in dts])   # (N, 2)
+    g = np.array([[float(v) for v in base.decay_factors(sc, h)] for h in dts])   # (N, 2)
     decay = forces.has_decay and not stage
     per_step = forces.state_dependent and not stage
     harness = [harness_fn(sc, h) for h in dts]
@@ -499,7 +485,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     (MAX_WORLDS at a time): the forces from the row, the pre-step decay (RK4 with forces that change within a
     step: both per stage). Rows the engine blows up come back as it left them."""
     from cross_checks.engines.mujoco_engine import to_packed, to_qpos_qvel
-    check_variant(ENGINE, VARIANTS, variant)
+    base.check_variant(ENGINE, VARIANTS, variant)
     shape = np.shape(y_start)
     y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
     T = len(y_start)
@@ -513,7 +499,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
             rows = y_start[s:s + MAX_WORLDS]
             n = len(rows)
             with np.errstate(all="ignore"):
-                qpos0, qvel0 = to_qpos_qvel(rows if stage else apply_decay_prestep(scenario, rows, dt_s))
+                qpos0, qvel0 = to_qpos_qvel(rows if stage else base.apply_decay_prestep(scenario, rows, dt_s))
             W = _Worlds(scenario, variant, [float(dt_s)] * n, qpos0, qvel0,
                         stage_callback(scenario) if stage else None)
             if not stage:
@@ -547,4 +533,4 @@ class MujocoWarpAdapter(ModuleAdapter):
     def engine_files(self) -> list:
         """mujoco_warp's Python sources (found without importing them: the parent of a sweep must not start
         Warp)."""
-        return package_files("mujoco_warp", "_src")
+        return base.package_files("mujoco_warp", "_src")

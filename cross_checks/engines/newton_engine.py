@@ -92,19 +92,8 @@ import warnings
 import numpy as np
 
 from cross_checks.core.files import kernel_cache_dir
-from cross_checks.engines.base import (
-    EngineError,
-    ModuleAdapter,
-    Traits,
-    Variant,
-    check_installed,
-    check_variant,
-    decay_factors,
-    installed_version,
-    one_request,
-    package_files,
-    run_in_groups,
-)
+from cross_checks.engines import base
+from cross_checks.engines.base import EngineError, ModuleAdapter, Traits, Variant, installed_version
 from cross_checks.engines.step_floats import harness_fn
 from reference_sim.quaternion import sign_continuous
 from reference_sim.simulate import Run, bad_rows, diverged, recorded_run
@@ -197,7 +186,7 @@ _LOCK = threading.RLock()
 
 def _check_installed() -> None:
     """base.check_installed for this engine and the Warp it runs on."""
-    check_installed(_DIST, PIP_HINT, (("warp", "warp-lang"),), installed_version)
+    base.check_installed(_DIST, PIP_HINT, (("warp", "warp-lang"),), installed_version)
 
 
 def version() -> str:
@@ -335,7 +324,7 @@ def make_solver(variant: str, model):
     """The variant's Newton solver for ``model``, every setting of SOLVER_SETTINGS and SOLVER_ATTRIBUTES
     applied."""
     _, newton = _engine_or_error()
-    check_variant(ENGINE, VARIANTS, variant)
+    base.check_variant(ENGINE, VARIANTS, variant)
     with warnings.catch_warnings():
         # SolverMuJoCo warns that MuJoCo 4.0.0 is not the ~=3.17.0 Newton declares (rbcheck pins 4.0.0)
         warnings.filterwarnings("ignore", message="MuJoCo dependency version mismatch")
@@ -430,7 +419,7 @@ class _Batch:
 def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
     """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded (one
     request of :func:`simulate_many`)."""
-    return one_request(simulate_many, scenario, variant, dt_s, n_steps)
+    return base.one_request(simulate_many, scenario, variant, dt_s, n_steps)
 
 
 def _body(scenario):
@@ -442,14 +431,14 @@ def _body(scenario):
 def simulate_many(variant: str, requests) -> list:
     """The runs of ``requests`` (``base.RunRequest``), each a Run (or its EngineError): those of one Δt step
     together as the bodies of one model (at most MAX_BATCH per model)."""
-    check_variant(ENGINE, VARIANTS, variant)
+    base.check_variant(ENGINE, VARIANTS, variant)
     try:
         with _LOCK:
             _warm(variant)
     except EngineError as exc:
         return [exc] * len(requests)
     with _LOCK, _mujoco_warnings(variant):
-        return run_in_groups(requests, lambda r: float(r.dt_s),
+        return base.run_in_groups(requests, lambda r: float(r.dt_s),
                              lambda reqs: _run_batch(variant, float(reqs[0].dt_s), reqs),
                              1 if variant in _ONE_BODY else MAX_BATCH)
 
@@ -485,7 +474,7 @@ def _run_batch(variant: str, dt_s: float, reqs) -> list:
     n_max = max(r.n_steps for r in reqs)
     harness = [harness_fn(r.scenario, dt_s) for r in reqs]
     varying = [k for k, r in enumerate(reqs) if r.scenario.problem.forces.state_dependent]
-    gains = np.array([[float(g) for g in decay_factors(r.scenario, dt_s)] for r in reqs])   # (B, 2)
+    gains = np.array([[float(g) for g in base.decay_factors(r.scenario, dt_s)] for r in reqs])   # (B, 2)
     decay = [k for k, r in enumerate(reqs) if r.scenario.problem.forces.has_decay]
     gv = np.repeat(gains[:, 0:1], 3, axis=1)
     gw = np.repeat(gains[:, 1:2], 3, axis=1)
@@ -536,13 +525,13 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     """One step of ``dt_s`` from each row of ``y_start`` (T, 13), the rows stepped together as the bodies of
     one model: the forces from the row, the pre-step decay. Rows the engine blows up come back as Newton left
     them."""
-    check_variant(ENGINE, VARIANTS, variant)
+    base.check_variant(ENGINE, VARIANTS, variant)
     shape = np.shape(y_start)
     y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
     T = len(y_start)
     out = np.empty((T, 13))
     harness = harness_fn(scenario, dt_s)
-    gv, gw = (float(g) for g in decay_factors(scenario, dt_s))
+    gv, gw = (float(g) for g in base.decay_factors(scenario, dt_s))
     with _LOCK, _mujoco_warnings(variant):
         _warm(variant)
         size = 1 if variant in _ONE_BODY else MAX_BATCH
@@ -578,6 +567,6 @@ class NewtonAdapter(ModuleAdapter):
 
     def engine_files(self) -> list:
         """Newton's solver sources (found without importing Newton or Warp)."""
-        return package_files("newton", *(f"_src/{p}" for p in (
+        return base.package_files("newton", *(f"_src/{p}" for p in (
             "solvers/solver.py", "solvers/semi_implicit", "solvers/xpbd", "solvers/featherstone",
             "solvers/mujoco", "sim/builder.py", "sim/model.py", "sim/state.py")))

@@ -79,21 +79,8 @@ from pathlib import Path
 
 import numpy as np
 
-from cross_checks.engines.base import (
-    EngineError,
-    EngineNotInstalled,
-    ModuleAdapter,
-    RunRequest,
-    Traits,
-    Variant,
-    apply_decay_prestep,
-    check_variant,
-    decay_factors,
-    installed_version,
-    one_request,
-    package_files,
-    run_in_groups,
-)
+from cross_checks.engines import base
+from cross_checks.engines.base import EngineError, ModuleAdapter, Traits, Variant, installed_version
 from cross_checks.engines.step_floats import harness_fn
 from reference_sim.quaternion import sign_continuous
 from reference_sim.simulate import BLOWUP_LIMIT, Run, blowup_words, diverged
@@ -175,7 +162,7 @@ def _check_installed() -> None:
     """EngineNotInstalled when sapien is not installed; ImportError when it is but cannot be found."""
     import importlib.util
     if installed_version(_DIST) is None:
-        raise EngineNotInstalled(f"sapien is not installed ({_HINT})")
+        raise base.EngineNotInstalled(f"sapien is not installed ({_HINT})")
     if importlib.util.find_spec("sapien") is None:
         raise ImportError(f"sapien {installed_version(_DIST)} is installed but cannot be imported: "
                           "no module named 'sapien'")
@@ -246,7 +233,7 @@ class PhysxScene:
     than the bodies :meth:`add` puts in it (none collides: no shape)."""
 
     def __init__(self, variant: str, dt_s: float, gravity_W):
-        check_variant(ENGINE, VARIANTS, variant)
+        base.check_variant(ENGINE, VARIANTS, variant)
         sapien, px = _engine_or_error()
         t0 = time.perf_counter()
         cfg = px.PhysxSceneConfig()
@@ -323,7 +310,7 @@ def _weight(scenario) -> np.ndarray:
     return scenario.problem.body.mass_kg * np.asarray(scenario.problem.forces.gravity_W, dtype=float)
 
 
-def _group_key(variant, r: RunRequest):
+def _group_key(variant, r: base.RunRequest):
     g = _f32(r.scenario.problem.forces.gravity_W)
     return (variant, float(np.float32(r.dt_s)), g.tobytes())
 
@@ -333,18 +320,19 @@ def _group_key(variant, r: RunRequest):
 def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
     """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded (one
     request of :func:`simulate_many`)."""
-    return one_request(simulate_many, scenario, variant, dt_s, n_steps)
+    return base.one_request(simulate_many, scenario, variant, dt_s, n_steps)
 
 
 def simulate_many(variant: str, requests) -> list:
     """The runs of ``requests`` (``base.RunRequest``), each a Run (or its EngineError): requests of the same
     float32 Δt and gravity share one scene, stepped together."""
-    check_variant(ENGINE, VARIANTS, variant)
+    base.check_variant(ENGINE, VARIANTS, variant)
     try:
         _engine_or_error()
     except EngineError as exc:
         return [exc] * len(requests)
-    return run_in_groups(requests, lambda r: _group_key(variant, r), lambda reqs: _run_group(variant, reqs))
+    return base.run_in_groups(requests, lambda r: _group_key(variant, r),
+                              lambda reqs: _run_group(variant, reqs))
 
 
 def _plan(r, y0, comp) -> tuple:
@@ -359,7 +347,7 @@ def _plan(r, y0, comp) -> tuple:
         fx, fy, fz, tx, ty, tz = harness([float(v) for v in y0])
         f, tau = _f32([fx - w[0], fy - w[1], fz - w[2]]), _f32([tx, ty, tz])
         const = (f, tau) if (np.any(f != 0.0) or np.any(tau != 0.0)) else None
-    decay = tuple(float(g) for g in decay_factors(r.scenario, r.dt_s)) if fm.has_decay else None
+    decay = tuple(float(g) for g in base.decay_factors(r.scenario, r.dt_s)) if fm.has_decay else None
     return comp, harness if fm.state_dependent else None, w, const, decay
 
 
@@ -450,7 +438,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
     S = PhysxScene(variant, dt_s, scenario.problem.forces.gravity_W)
     with np.errstate(all="ignore"):
-        y_dec = apply_decay_prestep(scenario, y_start, dt_s)
+        y_dec = base.apply_decay_prestep(scenario, y_start, dt_s)
     harness = harness_fn(scenario, dt_s)
     w = _weight(scenario)
     body = scenario.problem.body
@@ -482,5 +470,5 @@ class PhysxAdapter(ModuleAdapter):
 
     def engine_files(self) -> list:
         """SAPIEN's compiled module and bundled library (PhysX is linked into them)."""
-        return [*package_files("sapien", pattern="pysapien*.so"),
-                *package_files("sapien", "../sapien.libs", pattern="libsapien*")]
+        return [*base.package_files("sapien", pattern="pysapien*.so"),
+                *base.package_files("sapien", "../sapien.libs", pattern="libsapien*")]

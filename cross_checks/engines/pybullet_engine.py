@@ -36,24 +36,13 @@ import threading
 
 import numpy as np
 
-from cross_checks.engines.base import (
-    SYMPLECTIC_EULER_EXPLICIT_GYRO,
-    SYMPLECTIC_EULER_IMPLICIT_GYRO,
-    EngineError,
-    ModuleAdapter,
-    Variant,
-    apply_decay_prestep,
-    check_variant,
-    decay_factors,
-    library_files,
-    optional_import,
-    require,
-)
+from cross_checks.engines import base
+from cross_checks.engines.base import EngineError, ModuleAdapter, Variant, decay_factors
 from cross_checks.engines.step_floats import harness_fn, quat_mul_floats
 from reference_sim.quaternion import quat_conj, quat_from_matrix, quat_mul
 from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
 
-p, _IMPORT_ERROR = optional_import("pybullet", quiet_stderr=True)   # it prints its build time at import
+p, _IMPORT_ERROR = base.optional_import("pybullet", quiet_stderr=True)   # it prints its build time at import
 
 __all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate",
            "simulate_many", "one_step", "DYNAMICS_SETTINGS"]
@@ -65,11 +54,11 @@ VARIANTS = {
     "multibody": Variant(1,
                          "PyBullet Featherstone multibody (default): "
                          "semi-implicit Euler, explicit gyroscopic term",
-                         traits=SYMPLECTIC_EULER_EXPLICIT_GYRO),
+                         traits=base.SYMPLECTIC_EULER_EXPLICIT_GYRO),
     "maximal": Variant(1,
                        "PyBullet maximal coordinates (btRigidBody): "
                        "semi-implicit Euler, implicit gyroscopic term",
-                       traits=SYMPLECTIC_EULER_IMPLICIT_GYRO),
+                       traits=base.SYMPLECTIC_EULER_IMPLICIT_GYRO),
 }
 
 #: changeDynamics settings every body gets (besides mass and inertia); see the module docstring.
@@ -90,7 +79,7 @@ _client_pid: int | None = None
 
 
 def _require():
-    require(p, _IMPORT_ERROR, "pybullet")
+    base.require(p, _IMPORT_ERROR, "pybullet")
 
 
 def version() -> str:
@@ -132,7 +121,7 @@ class BulletBody:
 
     def __init__(self, scenario, variant: str, dt_s: float, y0):
         """The body in the adapter's world, reset first."""
-        check_variant(ENGINE, VARIANTS, variant)
+        base.check_variant(ENGINE, VARIANTS, variant)
         self.c = c = _connect()
         self.maximal = variant == "maximal"
         body = scenario.problem.body
@@ -356,7 +345,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
 def _one_steps(B, scenario, dt_s: float, y_start) -> np.ndarray:
     """One step of ``dt_s`` of body ``B`` (as for :func:`_free_run`) from each row of ``y_start`` (T, 13):
     the forces from the row, the pre-step decay, the state reset per row. The caller holds ``LOCK``."""
-    y_dec = apply_decay_prestep(scenario, y_start, dt_s)
+    y_dec = base.apply_decay_prestep(scenario, y_start, dt_s)
     harness = harness_fn(scenario, dt_s)
     wx, wy, wz = B.weight.tolist()
     out = np.empty_like(y_start)
@@ -379,4 +368,4 @@ class PybulletAdapter(ModuleAdapter):
 
     def engine_files(self) -> list:
         """PyBullet's compiled module."""
-        return library_files(p)
+        return base.library_files(p)

@@ -59,26 +59,13 @@ import time
 
 import numpy as np
 
-from cross_checks.engines.base import (
-    EngineError,
-    ModuleAdapter,
-    Traits,
-    Variant,
-    apply_decay_prestep,
-    check_variant,
-    decay_factors,
-    installed_version,
-    library_files,
-    one_request,
-    optional_import,
-    require,
-    run_in_groups,
-)
+from cross_checks.engines import base
+from cross_checks.engines.base import EngineError, ModuleAdapter, Traits, Variant
 from cross_checks.engines.step_floats import harness_fn
 from reference_sim.quaternion import quat_from_matrix, sign_continuous
 from reference_sim.simulate import BLOWUP_LIMIT, Run, blowup_words, diverged
 
-rapier, _IMPORT_ERROR = optional_import("rapier3d")
+rapier, _IMPORT_ERROR = base.optional_import("rapier3d")
 
 __all__ = ["ENGINE", "DIST", "VARIANTS", "WORLD_SETTINGS", "BODY_SETTINGS", "EngineError", "version",
            "simulate", "simulate_many", "one_step", "RapierWorld", "timings", "reset_timings",
@@ -150,7 +137,7 @@ def compile_stats() -> dict:
 
 
 def _require():
-    require(rapier, _IMPORT_ERROR, DIST, hint="pip install 'rbcheck[rapier]'")
+    base.require(rapier, _IMPORT_ERROR, DIST, hint="pip install 'rbcheck[rapier]'")
 
 
 def version() -> str:
@@ -161,7 +148,7 @@ def version() -> str:
 
 @functools.lru_cache(maxsize=1)
 def _dist_version() -> str:
-    return installed_version(DIST) or "unknown"
+    return base.installed_version(DIST) or "unknown"
 
 
 
@@ -185,7 +172,7 @@ class RapierWorld:
 
     def __init__(self, dt_s: float, gravity_W, variant: str):
         _require()
-        check_variant(ENGINE, VARIANTS, variant)
+        base.check_variant(ENGINE, VARIANTS, variant)
         t0 = time.perf_counter()
         self.world = w = rapier.PhysicsWorld(gravity=tuple(float(g) for g in gravity_W))
         w.set_num_threads(1)
@@ -298,7 +285,7 @@ def _run_group(variant: str, reqs) -> list:
         i = W.add(r.scenario.problem.body, y0)
         forces = r.scenario.problem.forces
         harness = harness_fn(r.scenario, dt_s)
-        gv, gw = (float(g) for g in decay_factors(r.scenario, dt_s))
+        gv, gw = (float(g) for g in base.decay_factors(r.scenario, dt_s))
         wx, wy, wz = _weight(r.scenario)
         fx, fy, fz, tx, ty, tz = harness([float(v) for v in y0])
         f, tau = (fx - wx, fy - wy, fz - wz), (tx, ty, tz)
@@ -345,13 +332,13 @@ def _run_group(variant: str, reqs) -> list:
 
 def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
     """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded."""
-    return one_request(simulate_many, scenario, variant, dt_s, n_steps)
+    return base.one_request(simulate_many, scenario, variant, dt_s, n_steps)
 
 
 def simulate_many(variant: str, requests) -> list:
     """The runs of ``requests`` (``base.RunRequest``), each a Run (or its EngineError): the requests of one Δt
     and one gravity run as bodies of one world (each body's run is its run alone, bit for bit)."""
-    check_variant(ENGINE, VARIANTS, variant)
+    base.check_variant(ENGINE, VARIANTS, variant)
     _require()
 
     def run_group(reqs):
@@ -360,7 +347,7 @@ def simulate_many(variant: str, requests) -> list:
         except (rapier.RapierError, RuntimeError) as exc:   # the engine refused: its own words
             raise EngineError(f"Rapier {version()} failed: {type(exc).__name__}: {exc}") from exc
 
-    return run_in_groups(requests, _group_key, run_group)
+    return base.run_in_groups(requests, _group_key, run_group)
 
 
 def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
@@ -369,7 +356,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     shape = np.shape(y_start)
     y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
     W = RapierWorld(dt_s, scenario.problem.forces.gravity_W, variant)
-    y_dec = apply_decay_prestep(scenario, y_start, dt_s)
+    y_dec = base.apply_decay_prestep(scenario, y_start, dt_s)
     harness = harness_fn(scenario, dt_s)
     wx, wy, wz = _weight(scenario)
     body = scenario.problem.body
@@ -397,4 +384,4 @@ class RapierAdapter(ModuleAdapter):
 
     def engine_files(self) -> list:
         """rapier3d's compiled module (a rebuilt or reinstalled wheel is a new engine)."""
-        return [] if rapier is None else library_files(getattr(rapier, "_rapier3d", None))
+        return [] if rapier is None else base.library_files(getattr(rapier, "_rapier3d", None))
