@@ -603,18 +603,7 @@ def torque_free_asymmetric(inertia_B, q0_WB, w0_W, t_s):
     up to round-off in the phase (~ε |ω| t); over 10 s at a few rad/s it agrees with a DOP853 solve
     at rtol 2.3e-14 to ≤ 3e-12 rad, that solver's own error. ψ(0) = 0 fixes L's frame from ``q0_WB``.
 
-    Parameters
-    ----------
-    inertia_B : (3,) principal moments or (3, 3) body-frame inertia tensor about the COM, kg m²
-        (three distinct principal moments; the tensor's principal axes are used).
-    q0_WB : (4,) initial orientation body→world (w, x, y, z).
-    w0_W : (3,) initial angular velocity, world axes, rad/s.
-    t_s : (T,) times, s.
-
-    Returns
-    -------
-    q_WB : (T, 4) orientations (w, x, y, z), continuous in t.
-    w_W : (T, 3) angular velocities, world axes, rad/s.
+    Parameters and returns: those of :func:`axisymmetric_top`, with three distinct principal moments.
 
     Raises
     ------

@@ -653,29 +653,19 @@ def _strang(problem, y, dt, free_map):
     return np.concatenate([x1, v1, q1, w1], axis=-1)
 
 
-@_one_state_too
-def step_buss_augmented(problem, y, dt):
-    """Buss's augmented second-order rotation map (:func:`_free_buss`) in the Strang step (:func:`_strang`).
-    """
-    return _strang(problem, y, dt, _free_buss)
+def _strang_step(free, name: str):
+    """The step ``name``: the Strang step (:func:`_strang`) around the free rigid body map ``free``."""
+    def step(problem, y, dt):
+        return _strang(problem, y, dt, free)
+    step.__name__ = step.__qualname__ = name
+    step.__doc__ = f"The Strang step (:func:`_strang`) around :func:`{free.__name__}`."
+    return _one_state_too(step)
 
 
-@_one_state_too
-def step_dlm_splitting(problem, y, dt):
-    """The DLM symplectic splitting of the free rigid body (:func:`_free_dlm`) in the Strang step."""
-    return _strang(problem, y, dt, _free_dlm)
-
-
-@_one_state_too
-def step_lp_midpoint(problem, y, dt):
-    """The implicit midpoint rule of the free rigid body (:func:`_free_midpoint`) in the Strang step."""
-    return _strang(problem, y, dt, _free_midpoint)
-
-
-@_one_state_too
-def step_moser_veselov(problem, y, dt):
-    """The discrete Moser–Veselov algorithm (:func:`_free_moser_veselov`) in the Strang step."""
-    return _strang(problem, y, dt, _free_moser_veselov)
+step_buss_augmented = _strang_step(_free_buss, "step_buss_augmented")     # Buss's augmented 2nd-order map
+step_dlm_splitting = _strang_step(_free_dlm, "step_dlm_splitting")        # the DLM symplectic splitting
+step_lp_midpoint = _strang_step(_free_midpoint, "step_lp_midpoint")       # the implicit midpoint rule
+step_moser_veselov = _strang_step(_free_moser_veselov, "step_moser_veselov")  # discrete Moser-Veselov
 
 
 @dataclass(frozen=True)

@@ -386,26 +386,20 @@ def engine_sentence(rk: Ranking, v: str) -> str:
                 if getattr(s, f"{what}_rank") == 1:
                     firsts[what].append(g)
     overall = next((s for s in rk.groups["overall"]["standings"] if s.variant == v), None)
-    n = sum(1 for s in rk.groups["overall"]["standings"] if s.acc_rank)
-    nc = sum(1 for s in rk.groups["overall"]["standings"] if s.cost_rank)
-    if firsts["acc"]:
-        parts.append("most accurate at a common cost " + _where(firsts["acc"], rk))
-    elif overall and overall.acc_rank:
-        parts.append(f"{_ordinal(overall.acc_rank)} of {n} ranked in accuracy at a common cost "
-                     f"({ratio_text(overall.acc_score)} the best error)")
-    elif overall:
-        parts.append(f"not ranked in accuracy at a common cost (a value on {overall.acc_n} of its "
-                     f"{overall.n_scenarios} scenarios: elsewhere its cheapest run costs more, or it has no "
-                     "work-precision curve)")
-    if firsts["cost"]:
-        parts.append("cheapest at a common accuracy " + _where(firsts["cost"], rk))
-    elif overall and overall.cost_rank:
-        parts.append(f"{_ordinal(overall.cost_rank)} of {nc} ranked in cost at a common accuracy "
-                     f"({ratio_text(overall.cost_score)} the cheapest's cost)")
-    elif overall:
-        parts.append(f"not ranked in cost at a common accuracy (a value on {overall.cost_n} of its "
-                     f"{overall.n_scenarios} scenarios: elsewhere no run is that accurate, or it has no "
-                     "work-precision curve)")
+    for what, where, best, unranked in (
+            ("acc", "accuracy at a common cost", "the best error", "its cheapest run costs more"),
+            ("cost", "cost at a common accuracy", "the cheapest's cost", "no run is that accurate")):
+        n = sum(1 for s in rk.groups["overall"]["standings"] if getattr(s, f"{what}_rank"))
+        if firsts[what]:
+            first = "most accurate" if what == "acc" else "cheapest"
+            parts.append(f"{first} at {where.split(' at ')[1]} " + _where(firsts[what], rk))
+        elif overall and getattr(overall, f"{what}_rank"):
+            parts.append(f"{_ordinal(getattr(overall, f'{what}_rank'))} of {n} ranked in {where} "
+                         f"({ratio_text(getattr(overall, f'{what}_score'))} {best})")
+        elif overall:
+            parts.append(f"not ranked in {where} (a value on {getattr(overall, f'{what}_n')} of its "
+                         f"{overall.n_scenarios} scenarios: elsewhere {unranked}, or it has no "
+                         "work-precision curve)")
     if overall is not None:
         c = overall.verdicts
         if overall.contradicts_on:

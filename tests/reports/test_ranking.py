@@ -52,21 +52,24 @@ def base(tmp_path_factory):
 
 
 def test_a_contradicted_variant_is_not_named_most_accurate_without_saying_so(base, tmp_path):
+    # which variant ranks first depends on the costs measured in this run (wall time): the test plants the
+    # contradiction on whichever it is
     res = load_results(base)
     first, clean = ranking(res).best("overall", "acc")
-    assert first is clean and first.variant == "reference:rk4"    # measured: RK4 is the most accurate
+    assert first is clean    # every verdict of the base sweep as expected
     d = tmp_path / "res"
     shutil.copytree(base, d)
     s = json.loads((d / "summary.json").read_text())
-    for r in s["convergence"]:      # every verdict as expected but one of RK4's
-        planted = r["engine"] == "reference:rk4" and r["scenario"] == "spin_only"
+    planted_on = next(r["scenario"] for r in s["convergence"] if r["engine"] == first.variant)
+    for r in s["convergence"]:      # every verdict as expected but one of the first's
+        planted = r["engine"] == first.variant and r["scenario"] == planted_on
         r.update(matches_expectation=not planted, assessment="planted")
     (d / "summary.json").write_text(json.dumps(s))
     rk = ranking(load_results(d))
-    first, clean = rk.best("overall", "acc")
-    assert first.variant == "reference:rk4" and clean is not None and clean.variant != "reference:rk4"
+    now_first, clean = rk.best("overall", "acc")
+    assert now_first.variant == first.variant and clean is not None and clean.variant != first.variant
     line = {label: text for label, text, _ in best_sentences(rk, "overall")}["Most accurate at a common cost"]
-    assert "reference:rk4 (×1) — but its verdicts contradict the expectations on spin_only" in line
+    assert f"{first.variant} (×1) — but its verdicts contradict the expectations on {planted_on}" in line
     assert f"the first with every verdict as expected: {clean.variant}" in line
 
 
