@@ -381,6 +381,17 @@ def check_installed(dist: str, hint: str, needs: tuple = (), version_of=None) ->
                               f"{needed} is missing ({hint})")
 
 
+def on_rows(one_step):
+    """An adapter's ``one_step(scenario, variant, dt_s, y_start)`` for ``y_start`` of any shape (..., 13):
+    ``one_step`` sees the states as float rows (T, 13) and its (T, 13) answer comes back in ``y_start``'s
+    shape."""
+    @functools.wraps(one_step)
+    def on_any_shape(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
+        rows = np.asarray(y_start, dtype=float).reshape(-1, 13)
+        return np.asarray(one_step(scenario, variant, dt_s, rows)).reshape(np.shape(y_start))
+    return on_any_shape
+
+
 def check_variant(engine: str, variants, variant: str) -> None:
     """ValueError naming ``engine``'s variants when ``variant`` is not one of them."""
     if variant not in variants:

@@ -530,13 +530,12 @@ def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
     return _run_group(scenario, variant, [base.RunRequest(scenario, float(dt_s), int(n_steps))])[0]
 
 
+@base.on_rows
 def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     """One step of ``dt_s`` from each row of ``y_start`` (T, 13), batched (vmap): the forces from the row, the
     pre-step decay, brax's state built from the row by ``pipeline.init``."""
     lib = _usable()
     jp = lib["jp"]
-    shape = np.shape(y_start)
-    y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
     sys = _system_of(scenario, variant)
     mode, consts = _mode_and_consts(scenario, variant, dt_s)
     T = len(y_start)
@@ -548,7 +547,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
                 jp.asarray(np.tile(consts, (B, 1))), token, jp.asarray(consts[8]))
         exe = _compiled("one_step", variant, mode, B, args)
         y = np.array(exe(*args))[:T]
-    return y.reshape(shape)
+    return y
 
 
 class BraxAdapter(ModuleAdapter):

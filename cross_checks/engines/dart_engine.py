@@ -251,11 +251,10 @@ def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
     return _recorded(rows, y0, dt_s)
 
 
+@base.on_rows
 def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     """One step of ``dt_s`` from each row of ``y_start`` (T, 13): the forces from the row, the pre-step
     decay, the state set per row. A row whose step blows up comes back as DART left it."""
-    shape = np.shape(y_start)
-    y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
     B = _model(scenario, variant, dt_s)
     y_dec = base.apply_decay_prestep(scenario, y_start, dt_s)
     harness = harness_fn(scenario, dt_s)
@@ -271,7 +270,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     # each quaternion on the side of its start state's (one step turns it by less than π)
     sign = np.where(np.einsum("ij,ij->i", y[:, 6:10], y_start[:, 6:10]) < 0.0, -1.0, 1.0)
     y[:, 6:10] *= sign[:, None]
-    return y.reshape(shape)
+    return y
 
 
 class DartAdapter(ModuleAdapter):

@@ -34,7 +34,7 @@ import functools
 import numpy as np
 
 from cross_checks.engines import base
-from cross_checks.engines.base import EngineError, ModuleAdapter, Variant
+from cross_checks.engines.base import EngineError, ModuleAdapter, Variant, stage_force_torque
 from reference_sim.simulate import BLOWUP_LIMIT, Run
 
 try:  # the module imports without pydrake so the registry can report why it is unavailable
@@ -138,7 +138,7 @@ def _force_system_class():
             # plain floats: this runs at every derivative evaluation (a Newton iteration's Jacobian too)
             x = self._x.Eval(context).tolist()
             y = [x[4], x[5], x[6], x[10], x[11], x[12], x[0], x[1], x[2], x[3], x[7], x[8], x[9]]
-            f, tau = base.stage_force_torque(self._scenario, y)
+            f, tau = stage_force_torque(self._scenario, y)
             w = self._weight
             output.SetFromVector(np.array([tau[0], tau[1], tau[2], f[0] - w[0], f[1] - w[1], f[2] - w[2]]))
 
@@ -188,7 +188,7 @@ class DrakeModel:
         self.context = plant.GetMyMutableContextFromRoot(root)
         if not self.per_stage and (forces.point_forces or forces.torques):
             y0 = p.initial_packed()
-            f, tau = base.stage_force_torque(scenario, y0)     # constant: any state gives the same
+            f, tau = stage_force_torque(scenario, y0)     # constant: any state gives the same
             weight = p.body.mass_kg * np.asarray(forces.gravity_W, dtype=float)
             plant.get_applied_generalized_force_input_port().FixValue(self.context,
                                                                       np.concatenate([tau, f - weight]))
@@ -272,12 +272,11 @@ def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
     return Run(dt_s * np.arange(n_steps + 1), from_drake_state(x_out))
 
 
+@base.on_rows
 def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     """One fixed step of ``dt_s`` from each row of ``y_start`` (T, 13), the simulator re-initialised
     from exactly that state (Drake's integrators keep no history between steps except the implicit
     Euler's Jacobian, which re-initialising drops). A row Drake refuses comes back non-finite."""
-    shape = np.shape(y_start)
-    y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
     model = _model(scenario, variant, dt_s)
     out = np.full_like(y_start, np.nan)
     with np.errstate(all="ignore"):
@@ -288,7 +287,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
             except RuntimeError:
                 continue
             out[i] = model.state()
-    return out.reshape(shape)
+    return out
 
 
 class DrakeAdapter(ModuleAdapter):

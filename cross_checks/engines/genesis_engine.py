@@ -565,12 +565,11 @@ def simulate_many(variant: str, requests) -> list:
     return out
 
 
+@base.on_rows
 def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     """One step of ``dt_s`` from each row of ``y_start`` (T, 13), all rows at once as the environments of one
     scene: the forces from each row, the pre-step decay, the state set per environment. A row whose step blows
     up comes back as Genesis left it (a step Genesis refuses: NaN rows)."""
-    shape = np.shape(y_start)
-    y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
     T = len(y_start)
     B = body(scenario, variant, dt_s, n_envs=0 if T == 1 else T)
     harness = harness_fn(scenario, dt_s)
@@ -578,10 +577,10 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     B.set_state(base.apply_decay_prestep(scenario, y_start, dt_s))
     B.apply(ft[:, 0:3] - _weight(scenario), ft[:, 3:6])
     if B.step():
-        return np.full(shape, math.nan)
+        return np.full(y_start.shape, math.nan)
     qpos, vel = B.read()
     with np.errstate(all="ignore"):
-        return to_packed(qpos, vel).reshape(shape)
+        return to_packed(qpos, vel)
 
 
 class GenesisAdapter(ModuleAdapter):

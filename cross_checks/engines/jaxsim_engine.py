@@ -93,7 +93,7 @@ import numpy as np
 from cross_checks.core import tolerances as tol
 from cross_checks.core.files import kernel_cache_dir
 from cross_checks.engines import base
-from cross_checks.engines.base import EngineError, ModuleAdapter, Variant
+from cross_checks.engines.base import EngineError, ModuleAdapter, Variant, installed_version
 from cross_checks.engines.step_floats import harness_fn
 from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
 
@@ -160,7 +160,7 @@ def version() -> str:
     EngineNotInstalled when it is absent; ImportError when it is installed but not importable."""
     import importlib.util
 
-    ver = base.installed_version("jaxsim")
+    ver = installed_version("jaxsim")
     if ver is None:
         raise base.EngineNotInstalled(f"jaxsim is not installed ({HINT})")
     try:
@@ -460,18 +460,17 @@ def simulate_many(variant: str, requests) -> list:
     return out
 
 
+@base.on_rows
 def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     """One step of ``dt_s`` from each row of ``y_start`` (T, 13), all rows in one vmapped call (padded to a
     multiple of ROW_BLOCK rows): the forces from each row, the pre-step decay — the free run's step."""
-    shape = np.shape(y_start)
-    ys = np.asarray(y_start, dtype=float).reshape(-1, 13)
-    n = len(ys)
+    n = len(y_start)
     if n == 0:
-        return np.empty(shape)
+        return np.empty((0, 13))
     model = build_model(scenario, variant)
     callback, f6, scale, harness = _inputs(scenario, dt_s)
     pad = -n % ROW_BLOCK
-    padded = np.concatenate([ys, np.repeat(ys[:1], pad, axis=0)]) if pad else ys
+    padded = np.concatenate([y_start, np.repeat(y_start[:1], pad, axis=0)]) if pad else y_start
     dt = np.float64(dt_s)
     with _Context(scenario, harness) as key:
         fn = _compiled("one", callback, model, dt, padded, f6, scale, key)
@@ -479,7 +478,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
         out = np.asarray(fn(model, dt, padded, f6, scale, key))[:n]
         _TIMES["run_seconds"] += time.perf_counter() - t0
         _TIMES["steps"] += n
-    return out.reshape(shape)
+    return out
 
 
 class JaxsimAdapter(ModuleAdapter):

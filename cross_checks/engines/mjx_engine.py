@@ -477,6 +477,7 @@ def _run_batch(key, callback: bool, reqs, models) -> list:
     return runs
 
 
+@base.on_rows
 def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     """One step of ``dt_s`` from each row of ``y_start`` (T, 13), all rows vmapped (ONE_STEP_BATCH per call):
     the forces from the row (host), the pre-step decay. Rows the engine blows up come back as MJX left
@@ -484,8 +485,6 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     from cross_checks.engines.mujoco_engine import to_packed, to_qpos_qvel
     base.check_variant(ENGINE, VARIANTS, variant)
     jax, _, _ = _engine_or_error()
-    shape = np.shape(y_start)
-    y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
     T = len(y_start)
     with _LOCK:
         key, xm = device_model(scenario, variant, dt_s)
@@ -511,7 +510,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
             _STATS["step_seconds"] += time.perf_counter() - t0
             _STATS["body_steps"] += ONE_STEP_BATCH
     with np.errstate(all="ignore"):
-        return to_packed(out[:, 0:7], out[:, 7:13]).reshape(shape)
+        return to_packed(out[:, 0:7], out[:, 7:13])
 
 
 class MjxAdapter(ModuleAdapter):

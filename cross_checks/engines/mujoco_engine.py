@@ -401,11 +401,10 @@ def _simulate_loop(scenario, m, d, dt_s, n_steps, control, per_step, decay, xfrc
     return Run(dt_s * np.arange(n_steps + 1), y)
 
 
+@base.on_rows
 def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     """One step of ``dt_s`` from each row of ``y_start`` (T, 13); rows the engine blows up come back as
     whatever MuJoCo produced (possibly non-finite)."""
-    shape = np.shape(y_start)
-    y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
     m, d, xfrc, weight = _model_and_data(scenario, variant, dt_s)
     per_stage = forces_per_stage(scenario, variant)
     control = _stage_force_writer(scenario, d, xfrc, weight) if per_stage else None
@@ -427,7 +426,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
             qvel_out[i] = qvel
             session.warnings.clear()
     with np.errstate(all="ignore"):
-        return to_packed(qpos_out, qvel_out).reshape(shape)
+        return to_packed(qpos_out, qvel_out)
 
 
 # --- many runs in one call: mujoco.rollout, one compiled model per scenario -----------------------------

@@ -480,14 +480,13 @@ def _run_batch(variant: str, reqs) -> list:
 
 
 
+@base.on_rows
 def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     """One step of ``dt_s`` from each row of ``y_start`` (T, 13), the rows as the worlds of one batch
     (MAX_WORLDS at a time): the forces from the row, the pre-step decay (RK4 with forces that change within a
     step: both per stage). Rows the engine blows up come back as it left them."""
     from cross_checks.engines.mujoco_engine import to_packed, to_qpos_qvel
     base.check_variant(ENGINE, VARIANTS, variant)
-    shape = np.shape(y_start)
-    y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
     T = len(y_start)
     out = np.empty((T, 13))
     stage = per_stage(scenario, variant)
@@ -517,7 +516,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
             sign = np.where(np.einsum("ij,ij->i", y[:, 6:10], rows[:, 6:10]) < 0.0, -1.0, 1.0)
             y[:, 6:10] *= sign[:, None]
             out[s:s + n] = y
-    return out.reshape(shape)
+    return out
 
 
 class MujocoWarpAdapter(ModuleAdapter):

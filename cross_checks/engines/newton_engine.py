@@ -521,13 +521,12 @@ def _run_batch(variant: str, dt_s: float, reqs) -> list:
     return runs
 
 
+@base.on_rows
 def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     """One step of ``dt_s`` from each row of ``y_start`` (T, 13), the rows stepped together as the bodies of
     one model: the forces from the row, the pre-step decay. Rows the engine blows up come back as Newton left
     them."""
     base.check_variant(ENGINE, VARIANTS, variant)
-    shape = np.shape(y_start)
-    y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
     T = len(y_start)
     out = np.empty((T, 13))
     harness = harness_fn(scenario, dt_s)
@@ -553,7 +552,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     with np.errstate(all="ignore"):
         sign = np.where(np.einsum("ij,ij->i", out[:, 6:10], y_start[:, 6:10]) < 0.0, -1.0, 1.0)
     out[:, 6:10] *= sign[:, None]
-    return out.reshape(shape)
+    return out
 
 
 class NewtonAdapter(ModuleAdapter):

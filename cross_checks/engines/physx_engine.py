@@ -431,11 +431,10 @@ def _run_group(variant: str, reqs) -> list:
     return _runs(reqs, raw, y0, bad_at)
 
 
+@base.on_rows
 def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     """One step of ``dt_s`` from each row of ``y_start`` (T, 13), all rows as bodies of one scene: the forces
     from the row, the pre-step decay. Rows the engine blows up come back as PhysX left them."""
-    shape = np.shape(y_start)
-    y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
     S = PhysxScene(variant, dt_s, scenario.problem.forces.gravity_W)
     with np.errstate(all="ignore"):
         y_dec = base.apply_decay_prestep(scenario, y_start, dt_s)
@@ -455,7 +454,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     with np.errstate(invalid="ignore"):
         sign = np.where(np.einsum("ij,ij->i", out[:, 6:10], y_start[:, 6:10]) < 0.0, -1.0, 1.0)
     out[:, 6:10] *= sign[:, None]
-    return out.reshape(shape)
+    return out
 
 
 class PhysxAdapter(ModuleAdapter):

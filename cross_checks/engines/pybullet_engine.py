@@ -331,15 +331,14 @@ def _diverged_in(B, raw, start: int, stop: int, dt_s: float):
     return diverged(B.raw_to_packed(raw[:n_bad]), dt_s, f" ({blowup_words(raw[n_bad])})")
 
 
+@base.on_rows
 def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     """One step of ``dt_s`` from each row of ``y_start`` (T, 13) (state reset per row)."""
-    shape = np.shape(y_start)
-    y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
     if len(y_start) == 0:
-        return np.empty_like(y_start).reshape(shape)
+        return np.empty_like(y_start)
     with LOCK, np.errstate(all="ignore"):
         return _one_steps(_kept_body(scenario, variant, dt_s, y_start[0]),
-                          scenario, dt_s, y_start).reshape(shape)
+                          scenario, dt_s, y_start)
 
 
 def _one_steps(B, scenario, dt_s: float, y_start) -> np.ndarray:

@@ -350,11 +350,10 @@ def simulate_many(variant: str, requests) -> list:
     return base.run_in_groups(requests, _group_key, run_group)
 
 
+@base.on_rows
 def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     """One step of ``dt_s`` from each row of ``y_start`` (T, 13), all rows as bodies of one world stepped
     once: the forces from the row, the pre-step decay. A row Rapier quarantines comes back non-finite."""
-    shape = np.shape(y_start)
-    y_start = np.asarray(y_start, dtype=float).reshape(-1, 13)
     W = RapierWorld(dt_s, scenario.problem.forces.gravity_W, variant)
     y_dec = base.apply_decay_prestep(scenario, y_start, dt_s)
     harness = harness_fn(scenario, dt_s)
@@ -370,7 +369,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     # each quaternion on the side of its start state's (one step turns it by less than π)
     sign = np.where(np.einsum("ij,ij->i", out[:, 6:10], y_start[:, 6:10]) < 0.0, -1.0, 1.0)
     out[:, 6:10] *= sign[:, None]
-    return out.reshape(shape)
+    return out
 
 
 class RapierAdapter(ModuleAdapter):

@@ -73,3 +73,18 @@ def test_check_installed_tells_an_absent_engine_from_one_missing_what_it_runs_on
     with pytest.raises(ImportError, match=said) as e:
         base.check_installed("mysim", "pip install mysim", (("json", "mylib"),), version_of=versions.get)
     assert not isinstance(e.value, base.EngineNotInstalled)
+
+
+def test_on_rows_gives_one_step_float_rows_and_returns_the_callers_shape():
+    seen = []
+
+    @base.on_rows
+    def one_step(scenario, variant, dt_s, y_start):
+        seen.append((y_start.shape, y_start.dtype))
+        return y_start + 1.0
+
+    for shape in [(13,), (2, 3, 13), (0, 13)]:
+        y = np.zeros(shape, dtype=np.float32)
+        out = one_step(None, "v", 0.1, y)
+        assert out.shape == shape and np.all(out == 1.0)
+        assert seen[-1] == ((int(np.prod(shape[:-1])), 13), np.float64)
