@@ -56,7 +56,7 @@ from reports.data import LABELS
 from reports.glance import families, order_text
 
 __all__ = ["KINDS", "figure_tasks", "draw", "families", "variant_styles", "NOTES", "save_png",
-           "release"]
+           "prepare", "release"]
 
 KINDS = ("trajectories", "errors", "conservation", "convergence", "local", "work")
 DPI = 100            # rbcheck check --plot (reports.check_plot)
@@ -125,14 +125,21 @@ def _stamp(dpi, text, size, ha="left", va="baseline", rotation=0, weight="normal
         t = Text(0.0, 0.0, text, fontsize=size, ha=ha, va=va, rotation=rotation, rotation_mode="anchor",
                  fontweight=weight, color=color, transform=IdentityTransform())
         t.set_figure(fig)
-        with matplotlib.rc_context({"text.hinting": "no_hinting"}):
-            box = t.get_window_extent(probe)
-            x0, y0 = math.floor(box.x0) - 2, math.floor(box.y0) - 2      # 2 px for antialiased edges
-            r = RendererAgg(math.ceil(box.x1) + 2 - x0, math.ceil(box.y1) + 2 - y0, dpi)
-            t.set_position((-x0, -y0))
-            t.draw(r)
-        got = _STAMPS[key] = (np.asarray(r.buffer_rgba())[::-1].copy(), x0, y0, box.width, box.height)
+        if matplotlib.rcParams["text.hinting"] == "no_hinting":   # drawing a figure (save_png): as it is
+            got = _STAMPS[key] = _stamp_pixels(t, probe, dpi)
+        else:                                                     # (an rc_context copies every setting)
+            with matplotlib.rc_context({"text.hinting": "no_hinting"}):
+                got = _STAMPS[key] = _stamp_pixels(t, probe, dpi)
     return got
+
+
+def _stamp_pixels(t, probe, dpi) -> tuple:
+    box = t.get_window_extent(probe)
+    x0, y0 = math.floor(box.x0) - 2, math.floor(box.y0) - 2      # 2 px for antialiased edges
+    r = RendererAgg(math.ceil(box.x1) + 2 - x0, math.ceil(box.y1) + 2 - y0, dpi)
+    t.set_position((-x0, -y0))
+    t.draw(r)
+    return np.asarray(r.buffer_rgba())[::-1].copy(), x0, y0, box.width, box.height
 
 
 def _place(renderer, gc, dpi, x, y, text, size, **style) -> Bbox:
@@ -343,11 +350,34 @@ def _title(ax, text) -> None:
     _frame(ax).title = text
 
 
+def prepare(res) -> None:
+    """Build what every drawing process would otherwise build for itself, before they are forked (they
+    inherit it): the grids of panels of each layout of ``res``'s figures, with as many rows as a figure
+    can have (creating axes is most of a process's first figures), and the legends without orders (the
+    same in every scenario)."""
+    fams = families(res.variants)
+    blocks, cols = _blocks(len(fams))
+    for layout, rows, log in (("time", 7, False), ("time-log", len(QUANTITIES), True),
+                              ("ladder", len(QUANTITIES), True)):
+        _panels(layout, rows * blocks, cols, (13.0, 4.0), log, block_rows=rows, used=len(fams))
+    for n in (1, 2):
+        _panels("work", 1, n, (13.0, 4.0), log=True, outer=False)
+    with matplotlib.rc_context({"text.hinting": "no_hinting"}):
+        for text in [f"{10.0 ** e:.0e}" for e in range(-18, 0)] + ["1"]:   # the log panels' decades
+            _stamp(REPORT_DPI, text, _TICK_PT, ha="right", va="center_baseline")
+            _stamp(REPORT_DPI, text, _TICK_PT, ha="center", va="top")
+    styles = variant_styles(res.variants)
+    for markers in (False, True):
+        for fam, items in legend_entries(fams, styles, markers=markers).items():
+            _legend_pixels(REPORT_DPI, fam, items)
+
+
 def release() -> None:
     """Drop the figures and legends this process keeps (a caller that drew in its own process does not
     keep them)."""
     _FIGURES.clear()
     _LEGENDS.clear()
+    _STAMPS.clear()
 
 
 _TITLE_CHARS_PER_IN = 12
@@ -485,8 +515,8 @@ def _legend_pixels(dpi, fam, items) -> np.ndarray:
     figure of a scenario, and of the next)."""
     key = (dpi, fam, tuple((label, st["color"], st["ls"], st.get("marker")) for label, st in items))
     if key not in _LEGENDS:
-        fig, _ = legend_figure(dpi, fam, items)
         with matplotlib.rc_context({"text.hinting": "no_hinting"}):
+            fig, _ = legend_figure(dpi, fam, items)
             fig.canvas.draw()
         _LEGENDS[key] = np.asarray(fig.canvas.buffer_rgba()).copy()
     return _LEGENDS[key]
