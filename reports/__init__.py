@@ -86,9 +86,9 @@ def render(directory, *, self_contained: bool = False,
     new_plots = d / owned_name(".", "plots")
     new_plots.mkdir()
     try:
-        figures = _draw_all(res, names, new_plots, jobs, progress)
         from reports.integrators import draw_figures, integrators_view
-        figures[None] = draw_figures(res, integrators_view(res), new_plots)   # the integrators page's
+        figures = _draw_all(res, names, new_plots, jobs, progress,   # and the integrators page's, meanwhile
+                            meanwhile=lambda: draw_figures(res, integrators_view(res), new_plots))
         drawn = _move_plots(new_plots, d / "plots")
     finally:
         shutil.rmtree(new_plots, ignore_errors=True)
@@ -135,9 +135,10 @@ def _tidy(d, written, drawn, listed, marked) -> None:
     fix_permissions(d)
 
 
-def _draw_all(res, names, plot_dir: Path, jobs, progress) -> dict:
-    """Draw every figure (in ``jobs`` processes, costliest first, each reported as it is done); returns
-    ``{scenario: [(kind, file or None, note)]}`` in the order of plots.KINDS."""
+def _draw_all(res, names, plot_dir: Path, jobs, progress, meanwhile=lambda: []) -> dict:
+    """Draw every figure (in ``jobs`` processes, costliest first, each reported as it is done) and call
+    ``meanwhile()`` here while they draw; returns ``{scenario: [(kind, file or None, note)]}`` in the
+    order of plots.KINDS, and ``meanwhile()``'s result under None."""
     # here: forked workers inherit matplotlib
     from reports.plots import KINDS, figure_tasks, relative_cost, release
     tasks = [(sc, kind, str(plot_dir)) for sc in names for _, kind in figure_tasks(res, sc)]
@@ -157,34 +158,42 @@ def _draw_all(res, names, plot_dir: Path, jobs, progress) -> dict:
 
     try:
         if jobs and jobs > 1 and len(tasks) > 1:
-            _draw_in_processes(tasks, min(jobs, len(tasks)), done)
+            extra = _draw_in_processes(tasks, min(jobs, len(tasks)), done, res, meanwhile)
         else:
             for t in tasks:
                 done(_draw(t))
+            extra = meanwhile()
         bar.close()
     finally:
         bar.close(finished=False)   # after an error: the bar ends, no "done" line (a no-op after close())
         _SHARED.clear()
         release()
-    return {sc: [figs[k] for k in KINDS if k in figs] for sc, figs in out.items()}
+    return {**{sc: [figs[k] for k in KINDS if k in figs] for sc, figs in out.items()}, None: extra}
 
 
-def _draw_in_processes(tasks, jobs, done) -> None:
-    """``done(_draw(task))`` for every task, drawn in ``jobs`` processes in the order given; forked
-    processes inherit the loaded results (spawned ones load the directory once each). A drawing
+def _draw_in_processes(tasks, jobs, done, res, meanwhile):
+    """``done(_draw(task))`` for every task, drawn in ``jobs`` processes in the order given, and
+    ``meanwhile()`` here (returned); forked processes inherit the loaded results and the grids and
+    legends :func:`reports.plots.prepare` builds (spawned ones load the directory once each). A drawing
     process's exception is raised here."""
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
+    from reports.plots import prepare, release
     ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else None
+    if ctx is not None:
+        prepare(res)
     with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_quiet_init,
                              initargs=(os.getpid(), _SHARED["directory"])) as pool:
         futures = [pool.submit(_draw, t) for t in tasks]
         try:
+            release()    # the processes are forked (all at the first submit): what prepare() built is theirs
+            extra = meanwhile()
             for f in as_completed(futures):
                 done(f.result())
         finally:
             pool.shutdown(cancel_futures=True)   # after an error: the figures not begun are not drawn
+    return extra
 
 
 def _move_plots(src: Path, plots: Path) -> list:

@@ -28,7 +28,10 @@ layout measures every text of a figure again on each draw: it doubled a figure's
 process keeps one figure per layout (kind of grid, columns) and empties it of its data for the next
 figure of that layout, whatever its number of rows (creating axes and their ticks is the costliest
 part of a figure drawn for the first time): a figure drawn in a kept grid has the pixels of a fresh one
-(tests/reports/test_plots.py).
+(tests/reports/test_plots.py). A panel's grid, tick labels, axis labels and title are drawn by one artist
+of its own (``_Frame``), and every repeated text (those and the legends') is drawn by matplotlib once per
+process and placed as an image (``_stamp``): matplotlib 3.11 lays out each glyph from Python, and its
+axis artists lay out every tick label twice per draw.
 """
 from __future__ import annotations
 
@@ -37,12 +40,15 @@ import textwrap
 
 import matplotlib
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.artist import Artist
+from matplotlib.backends.backend_agg import FigureCanvasAgg, RendererAgg
 from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
+from matplotlib.path import Path as MplPath
+from matplotlib.text import Text
 from matplotlib.ticker import FixedFormatter, FixedLocator, LogFormatter, LogLocator, MaxNLocator, NullLocator
-from matplotlib.transforms import offset_copy
+from matplotlib.transforms import Bbox, IdentityTransform
 
 from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, UNITS
 from reference_sim.quaternion import sign_continuous
@@ -50,7 +56,7 @@ from reports.data import LABELS
 from reports.glance import families, order_text
 
 __all__ = ["KINDS", "figure_tasks", "draw", "families", "variant_styles", "NOTES", "save_png",
-           "release"]
+           "prepare", "release"]
 
 KINDS = ("trajectories", "errors", "conservation", "convergence", "local", "work")
 DPI = 100            # rbcheck check --plot (reports.check_plot)
@@ -95,12 +101,164 @@ def _short(v):
     return v.split(":", 1)[1] if ":" in v else v
 
 
+# --- text drawn once per process ------------------------------------------------------------------------
+#: Text bitmaps by (dpi, text, size, alignment, rotation, weight, colour): a report's figures repeat the
+#: same few hundred strings (tick labels, axis labels, panel titles, legend entries) thousands of times,
+#: and matplotlib 3.11 lays out and renders each glyph from Python (~0.6 ms a label). Each string is
+#: drawn once by matplotlib (a Text on a renderer of its own size) and then placed as an image.
+_STAMPS: dict = {}
+_SCRATCH: dict = {}   # dpi -> (figure the Text artists belong to, a renderer to measure them with)
+
+
+def _stamp(dpi, text, size, ha="left", va="baseline", rotation=0, weight="normal", color="black"):
+    """(pixels, x0, y0, width, height) of ``text`` drawn by matplotlib, unhinted: RGBA rows bottom row
+    first, the image's lower left corner (x0, y0) px from the text's anchor (its ``ha``/``va`` point,
+    rotated about it as matplotlib's y labels are), and the text's own extent (w, h px)."""
+    key = (dpi, text, size, ha, va, rotation, weight, color)
+    got = _STAMPS.get(key)
+    if got is None:
+        if dpi not in _SCRATCH:
+            fig = Figure(figsize=(1.0, 1.0), dpi=dpi)
+            FigureCanvasAgg(fig)
+            _SCRATCH[dpi] = (fig, RendererAgg(8, 8, dpi))
+        fig, probe = _SCRATCH[dpi]
+        t = Text(0.0, 0.0, text, fontsize=size, ha=ha, va=va, rotation=rotation, rotation_mode="anchor",
+                 fontweight=weight, color=color, transform=IdentityTransform())
+        t.set_figure(fig)
+        if matplotlib.rcParams["text.hinting"] == "no_hinting":   # drawing a figure (save_png): as it is
+            got = _STAMPS[key] = _stamp_pixels(t, probe, dpi)
+        else:                                                     # (an rc_context copies every setting)
+            with matplotlib.rc_context({"text.hinting": "no_hinting"}):
+                got = _STAMPS[key] = _stamp_pixels(t, probe, dpi)
+    return got
+
+
+def _stamp_pixels(t, probe, dpi) -> tuple:
+    box = t.get_window_extent(probe)
+    x0, y0 = math.floor(box.x0) - 2, math.floor(box.y0) - 2      # 2 px for antialiased edges
+    r = RendererAgg(math.ceil(box.x1) + 2 - x0, math.ceil(box.y1) + 2 - y0, dpi)
+    t.set_position((-x0, -y0))
+    t.draw(r)
+    return np.asarray(r.buffer_rgba())[::-1].copy(), x0, y0, box.width, box.height
+
+
+def _place(renderer, gc, dpi, x, y, text, size, **style) -> Bbox:
+    """Draw ``text`` (:func:`_stamp`) with its anchor at display pixel (x, y); returns its extent."""
+    img, x0, y0, w, h = _stamp(dpi, text, size, **style)
+    left, bottom = round(x) + x0, round(y) + y0
+    renderer.draw_image(gc, left, bottom, img)
+    return Bbox.from_bounds(left + 2, bottom + 2, w, h)
+
+
+class _Stamps(Artist):
+    """Texts (:func:`_stamp`) at display pixels: ``items`` [(x, y, text, size, style)]."""
+
+    def __init__(self, items):
+        super().__init__()
+        self.items = items
+
+    def draw(self, renderer):
+        if not self.get_visible():
+            return
+        gc = renderer.new_gc()
+        for x, y, text, size, style in self.items:
+            _place(renderer, gc, self.get_figure(root=True).dpi, x, y, text, size, **style)
+        gc.restore()
+
+
+def _ticks(axis, labels=True):
+    """(display positions, labels) of ``axis``'s major ticks inside its view, as matplotlib draws them
+    (the locator's ticks, the formatter's labels)."""
+    locs = np.asarray(axis.get_major_locator()(), dtype=float)
+    lo, hi = sorted(axis.get_view_interval())
+    tol = 1e-10 * (hi - lo)
+    if axis.get_scale() == "log":
+        tol = 0.0
+    locs = locs[(locs >= lo - tol) & (locs <= hi + tol)]
+    texts = axis.get_major_formatter().format_ticks(locs) if labels and locs.size else [""] * len(locs)
+    ax = axis.axes
+    if axis is ax.xaxis:
+        pix = ax.transData.transform(np.column_stack([locs, np.ones_like(locs)]))[:, 0] if locs.size else locs
+    else:
+        pix = ax.transData.transform(np.column_stack([np.ones_like(locs), locs]))[:, 1] if locs.size else locs
+    return pix, texts
+
+
+class _Frame(Artist):
+    """A panel's grid lines, tick labels, axis labels and title, drawn by one artist (the axes' own
+    axis artists are hidden): grid lines at the major ticks as one path, texts as :func:`_stamp` images
+    at matplotlib's places (tick labels 7 pt off the axes, axis labels at fixed distances, the title 4 pt
+    above at the left). Tick labels where the axis's tick parameters say (``labelbottom``,
+    ``labelleft``); the labels' texts and sizes are the axes' own (``set_xlabel``, ``set_ylabel``)."""
+
+    zorder = 0.5
+
+    def __init__(self):
+        super().__init__()
+        self.title = ""
+        self.x_size = _TICK_PT
+
+    def draw(self, renderer):
+        ax = self.axes
+        if not self.get_visible():
+            return
+        dpi = self.get_figure(root=True).dpi
+        pt = dpi / 72.0
+        box = ax.bbox
+        bottom = ax.xaxis.get_tick_params().get("labelbottom", True)
+        left = ax.yaxis.get_tick_params().get("labelleft", True)
+        xs, xlabels = _ticks(ax.xaxis, bottom)
+        ys, ylabels = _ticks(ax.yaxis, left)
+        gc = renderer.new_gc()
+        segs = [((x, box.y0), (x, box.y1)) for x in xs] + [((box.x0, y), (box.x1, y)) for y in ys]
+        if segs:
+            codes = [MplPath.MOVETO, MplPath.LINETO] * len(segs)
+            gc.set_foreground((0.690, 0.690, 0.690, 0.3), isRGBA=True)      # #b0b0b0 at alpha 0.3
+            gc.set_linewidth(0.8)
+            renderer.draw_path(gc, MplPath(np.array(segs, dtype=float).reshape(-1, 2), codes),
+                               IdentityTransform())
+        gc.restore()
+        gc = renderer.new_gc()
+        for x, text in zip(xs, xlabels):
+            if text:
+                _place(renderer, gc, dpi, x, box.y0 - _TICK_PAD_PT * pt, text, self.x_size, ha="center",
+                       va="top")
+        for y, text in zip(ys, ylabels):
+            if text:
+                _place(renderer, gc, dpi, box.x0 - _TICK_PAD_PT * pt, y, text, _TICK_PT, ha="right",
+                       va="center_baseline")
+        x_offset = (box.x1, box.y0 - (_TICK_PAD_PT + 1.2 * self.x_size) * pt, "right", "top")
+        for axis, offset in ((ax.xaxis, x_offset), (ax.yaxis, (box.x0, box.y1 + _TITLE_PAD_PT * pt, "left",
+                                                               "baseline"))):
+            shown = bottom if axis is ax.xaxis else left
+            extra = axis.get_major_formatter().get_offset() if shown else ""
+            if extra:
+                _place(renderer, gc, dpi, offset[0], offset[1], extra, _TICK_PT, ha=offset[2], va=offset[3])
+        xl, yl = ax.xaxis.label, ax.yaxis.label
+        if xl.get_text():
+            _place(renderer, gc, dpi, (box.x0 + box.x1) / 2, box.y0 - _XLABEL_PT * pt, xl.get_text(),
+                   xl.get_fontsize(), ha="center", va="top")
+        if yl.get_text():
+            _place(renderer, gc, dpi, box.x0 - _YLABEL_PT * pt, (box.y0 + box.y1) / 2, yl.get_text(),
+                   yl.get_fontsize(), ha="center", va="bottom", rotation=90)
+        if self.title:
+            _place(renderer, gc, dpi, box.x0, box.y1 + _TITLE_PAD_PT * pt, self.title, 10.0)
+        gc.restore()
+
+
+def _frame(ax) -> _Frame:
+    return next(a for a in ax.artists if isinstance(a, _Frame))
+
+
 _FIGURES: dict = {}   # (layout, columns, log, outer) -> (figure, rows of axes): kept per drawing process
-#: Tick labels' size (pt) and the axis labels' fixed distances from their axes (pt), so that matplotlib
-#: need not measure every tick label to place them: y label left of the widest tick label drawn ("1e-15",
+#: Tick labels' size (pt) and the axis labels' fixed distances from their axes (pt), so that no tick
+#: label need be measured to place them: y label left of the widest tick label drawn ("1e-15",
 #: "−0.25": 5 characters of ~0.6 em) plus tick (3.5 pt), pad (3.5 pt) and 4 pt; x label under the tick,
-#: pad, one line of tick labels (1.2 em) and 3 pt.
+#: pad, one line of tick labels (1.2 em) and 3 pt. Tick labels sit tick + pad (7 pt) off their axes, a
+#: title 4 pt above its panel (matplotlib's places).
 _TICK_PT = 10.0
+_TICK_PAD_PT = 3.5 + 3.5
+_TITLE_PAD_PT = 4.0
 _YLABEL_PT = 5 * 0.6 * _TICK_PT + 3.5 + 3.5 + 4.0
 _XLABEL_PT = 3.5 + 3.5 + 1.2 * _TICK_PT + 3.0
 
@@ -143,7 +301,8 @@ def _panels(layout, nrows, ncols, size_in, log, outer=True, block_rows=None, use
             for art in (*ax.lines, *ax.collections, *ax.texts):
                 art.remove()
             ax.set(xlabel="", ylabel="")
-            ax.set_title("", loc="left")
+            frame = _frame(ax)
+            frame.title, frame.x_size = "", _TICK_PT
             ax.relim()
             ax.set_autoscale_on(True)
     for art in (*fig.images, *fig.texts, *fig.legends):   # titles, legends
@@ -154,10 +313,14 @@ def _panels(layout, nrows, ncols, size_in, log, outer=True, block_rows=None, use
 
 def _style(ax, log, left) -> None:
     """Plain decade labels ("1e-06", not mathtext) and no minor ticks on log axes, at most 5 ticks on
-    linear ones (decades read as well, and labels are most of what a figure costs to draw); axis labels
-    at fixed distances from the axes."""
+    linear ones (decades read as well); no tick marks; the axes' grid, tick labels, axis labels and
+    title drawn by a :class:`_Frame` (its axis artists hidden: they lay out every label again on every
+    draw)."""
     ax.patch.set_visible(False)   # white on the figure's white
     ax.tick_params(labelsize=_TICK_PT, labelleft=left, bottom=False, left=False)
+    ax.xaxis.set_visible(False)
+    ax.yaxis.set_visible(False)
+    ax.add_artist(_Frame())
     if log:
         ax.set_xscale("log")
         ax.set_yscale("log")
@@ -168,12 +331,6 @@ def _style(ax, log, left) -> None:
             axis.set_minor_locator(NullLocator())
         else:
             axis.set_major_locator(MaxNLocator(nbins=4))
-    ax.yaxis.set_label_coords(0.0, 0.5, transform=offset_copy(ax.transAxes, x=-_YLABEL_PT, units="points",
-                                                               fig=ax.figure))
-    ax.yaxis.label.set_verticalalignment("bottom")
-    ax.xaxis.set_label_coords(0.5, 0.0, transform=offset_copy(ax.transAxes, y=-_XLABEL_PT, units="points",
-                                                               fig=ax.figure))
-    ax.xaxis.label.set_verticalalignment("top")
 
 
 def _same_limits(axes, which, lim=None) -> None:
@@ -189,8 +346,30 @@ def _same_limits(axes, which, lim=None) -> None:
 
 
 def _title(ax, text) -> None:
-    """A panel's title at the left, at a fixed height (an automatic one measures the tick labels)."""
-    ax.set_title(text, loc="left", fontsize=10, y=1.0, pad=4.0)
+    """A panel's title at the left, at a fixed height (:class:`_Frame`)."""
+    _frame(ax).title = text
+
+
+def prepare(res) -> None:
+    """Build what every drawing process would otherwise build for itself, before they are forked (they
+    inherit it): the grids of panels of each layout of ``res``'s figures, with as many rows as a figure
+    can have (creating axes is most of a process's first figures), and the legends without orders (the
+    same in every scenario)."""
+    fams = families(res.variants)
+    blocks, cols = _blocks(len(fams))
+    for layout, rows, log in (("time", 7, False), ("time-log", len(QUANTITIES), True),
+                              ("ladder", len(QUANTITIES), True)):
+        _panels(layout, rows * blocks, cols, (13.0, 4.0), log, block_rows=rows, used=len(fams))
+    for n in (1, 2):
+        _panels("work", 1, n, (13.0, 4.0), log=True, outer=False)
+    with matplotlib.rc_context({"text.hinting": "no_hinting"}):
+        for text in [f"{10.0 ** e:.0e}" for e in range(-18, 0)] + ["1"]:   # the log panels' decades
+            _stamp(REPORT_DPI, text, _TICK_PT, ha="right", va="center_baseline")
+            _stamp(REPORT_DPI, text, _TICK_PT, ha="center", va="top")
+    styles = variant_styles(res.variants)
+    for markers in (False, True):
+        for fam, items in legend_entries(fams, styles, markers=markers).items():
+            _legend_pixels(REPORT_DPI, fam, items)
 
 
 def release() -> None:
@@ -198,6 +377,7 @@ def release() -> None:
     keep them)."""
     _FIGURES.clear()
     _LEGENDS.clear()
+    _STAMPS.clear()
 
 
 _TITLE_CHARS_PER_IN = 12
@@ -276,25 +456,58 @@ _LEGEND_GAP_IN = 0.3
 _LEGEND_PAD_PX = 2
 
 
+class LegendBoxes:
+    """Where :func:`legend_figure` put a legend's texts: ``texts`` [(text, extent)], display pixels of
+    its figure, the title first; ``get_window_extent()`` the extent of the whole legend."""
+
+    def __init__(self, texts, extent):
+        self.texts, self.extent = texts, extent
+
+    def get_window_extent(self, renderer=None) -> Bbox:
+        return self.extent
+
+
 def legend_figure(dpi, fam, items):
-    """A family's legend (matplotlib's ``Legend``: its name in bold, its variants' lines, markers and
-    names in columns of at most _LEGEND_ROWS) drawn alone on a transparent figure sized to the legend's
-    measured extent plus _LEGEND_PAD_PX — nothing of it is cut. Returns (figure, legend)."""
-    fig = Figure(figsize=(1.0, 1.0), dpi=dpi, facecolor="none")
+    """A family's legend (its name in bold, its variants' lines, markers and names in columns of at most
+    _LEGEND_ROWS, as matplotlib's ``Legend`` lays them out: handles 2.6 em long, 0.5 em to the text,
+    1.2 em between columns, 0.25 em between rows) drawn alone on a transparent figure sized to its
+    measured extent plus _LEGEND_PAD_PX — nothing of it is cut. Laid out by hand from the texts' measured
+    extents (:func:`_stamp`: a Legend measures and lays out its texts twice, a quarter of a report's
+    drawing). Returns (figure, :class:`LegendBoxes`)."""
+    pt = dpi / 72.0
+    em = _LEGEND_PT * pt
+    pad = _LEGEND_PAD_PX
+    title = _stamp(dpi, fam, 9, va="top", weight="bold")
+    labels = [_stamp(dpi, label, _LEGEND_PT, va="center_baseline") for label, _ in items]
+    row_h = max([h for *_, h in labels] + [1.0])
+    ncols = max(1, math.ceil(len(items) / _LEGEND_ROWS))
+    nrows = min(len(items), _LEGEND_ROWS)
+    handle, gap, col_gap, row_gap = 2.6 * em, 0.5 * em, 1.2 * em, 0.25 * em
+    columns = [range(c * _LEGEND_ROWS, min(len(items), (c + 1) * _LEGEND_ROWS)) for c in range(ncols)]
+    widths = [handle + gap + max([labels[k][3] for k in col] + [0.0]) for col in columns]
+    w = math.ceil(2 * pad + max(title[3], sum(widths) + col_gap * (ncols - 1)))
+    top_rows = title[4] + 0.5 * em
+    h = math.ceil(2 * pad + top_rows + nrows * row_h + max(nrows - 1, 0) * row_gap)
+    fig = Figure(figsize=(w / dpi, h / dpi), dpi=dpi, facecolor="none")
     FigureCanvasAgg(fig)
-    handles = [Line2D([], [], color=st["color"], ls=st["ls"], lw=1.4, marker=st.get("marker") or None, ms=4)
-               for _, st in items]
-    leg = fig.legend(handles, [label for label, _ in items], loc="upper left", bbox_to_anchor=(0.0, 0.0),
-                     bbox_transform=fig.dpi_scale_trans, ncols=max(1, math.ceil(len(items) / _LEGEND_ROWS)),
-                     fontsize=_LEGEND_PT, frameon=False, handlelength=2.6, handletextpad=0.5,
-                     columnspacing=1.2, labelspacing=0.25, borderpad=0.0, borderaxespad=0.0, title=fam,
-                     title_fontproperties={"size": 9, "weight": "bold"}, alignment="left")
-    box = leg.get_window_extent(fig.canvas.get_renderer())
-    pad = _LEGEND_PAD_PX / dpi
-    w, h = math.ceil(box.width + 2 * _LEGEND_PAD_PX) / dpi, math.ceil(box.height + 2 * _LEGEND_PAD_PX) / dpi
-    fig.set_size_inches(w, h)
-    leg.set_bbox_to_anchor((pad, h - pad), transform=fig.dpi_scale_trans)
-    return fig, leg
+    texts = [(pad, h - pad, fam, 9, {"va": "top", "weight": "bold"})]
+    x = float(pad)
+    for c, col in enumerate(columns):
+        for r, k in enumerate(col):
+            y = h - pad - top_rows - r * (row_h + row_gap) - row_h / 2
+            st = items[k][1]
+            fig.add_artist(Line2D([x, x + handle / 2, x + handle], [y, y, y], color=st["color"], ls=st["ls"],
+                                  lw=1.4, marker=st.get("marker") or None, ms=4, markevery=[1],
+                                  transform=IdentityTransform()))
+            texts.append((x + handle + gap, y, items[k][0], _LEGEND_PT, {"va": "center_baseline"}))
+        x += widths[c] + col_gap
+    fig.add_artist(_Stamps(texts))
+    boxes = []
+    for tx, ty, text, size, style in texts:
+        _, x0, y0, bw, bh = _stamp(dpi, text, size, **style)
+        boxes.append((text, Bbox.from_bounds(round(tx) + x0 + 2, round(ty) + y0 + 2, bw, bh)))
+    extent = Bbox.union([b for _, b in boxes])
+    return fig, LegendBoxes(boxes, extent)
 
 
 def _legend_pixels(dpi, fam, items) -> np.ndarray:
@@ -302,8 +515,8 @@ def _legend_pixels(dpi, fam, items) -> np.ndarray:
     figure of a scenario, and of the next)."""
     key = (dpi, fam, tuple((label, st["color"], st["ls"], st.get("marker")) for label, st in items))
     if key not in _LEGENDS:
-        fig, _ = legend_figure(dpi, fam, items)
         with matplotlib.rc_context({"text.hinting": "no_hinting"}):
+            fig, _ = legend_figure(dpi, fam, items)
             fig.canvas.draw()
         _LEGENDS[key] = np.asarray(fig.canvas.buffer_rgba()).copy()
     return _LEGENDS[key]
@@ -331,16 +544,7 @@ def _figure_legend(fig, width_in, entries) -> float:
 
 
 def _finish(fig, path) -> None:
-    """Grid lines at the major ticks of every panel shown, drawn as one collection per axis (a grid of
-    matplotlib's draws a line per tick: a fifth of a figure's drawing time), then the PNG."""
-    for ax in fig.axes:
-        if ax.get_visible():
-            for locs, along, trans in ((ax.get_xticks(), lambda x: [(x, 0), (x, 1)],
-                                        ax.get_xaxis_transform()),
-                                       (ax.get_yticks(), lambda y: [(0, y), (1, y)],
-                                        ax.get_yaxis_transform())):
-                ax.add_collection(LineCollection([along(v) for v in locs], colors="#b0b0b0", linewidths=0.8,
-                                                 alpha=0.3, zorder=0.5, transform=trans), autolim=False)
+    """The PNG (each panel's grid lines are drawn by its :class:`_Frame`, one path per panel)."""
     save_png(fig, path)
 
 
@@ -765,7 +969,7 @@ def fig_ladder(res, sc, styles, path, mode):
         ax.xaxis.set_major_locator(FixedLocator(asc))
         ax.xaxis.set_major_formatter(FixedFormatter([f"{d:g}" if d in shown else "" for d in asc]))
     for ax in axes[-1]:
-        ax.tick_params(axis="x", labelsize=7)
+        _frame(ax).x_size = 7
         ax.set_xlabel("time step Δt (s)", fontsize=8)
     for ax, fam in zip(axes[0], fams):
         _title(ax, fam)

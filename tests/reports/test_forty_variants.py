@@ -107,8 +107,8 @@ def _overlap(a, b, tol=1.0) -> bool:
 
 @pytest.mark.parametrize("kind", plots.KINDS)
 def test_every_figure_keeps_its_legends_inside_apart_and_off_the_panels(forty, tmp_path, monkeypatch, kind):
-    """Measured on the drawn figures: each family's legend (a matplotlib Legend drawn on its own figure and
-    placed as an image) lies whole — every text, the title — inside the figure it is drawn on; the
+    """Measured on the drawn figures: each family's legend (laid out on its own figure and placed as an
+    image) lies whole — every text, the title, none over another — inside the figure it is drawn on; the
     placed legends and every text of the figure lie inside the figure (to 1 px: extents are rounded to
     pixels), no two legends overlap, no legend covers a panel shown, and every family drawn has its
     legend."""
@@ -151,8 +151,9 @@ def test_every_figure_keeps_its_legends_inside_apart_and_off_the_panels(forty, t
         lr = lfig.canvas.get_renderer()
         inside = _inside(lfig.bbox)
         assert inside(leg.get_window_extent(lr)), (fam, "legend cut")
-        for t in (*leg.get_texts(), leg.get_title()):
-            assert inside(t.get_window_extent(lr)), (fam, t.get_text())
+        for k, (text, box) in enumerate(leg.texts):
+            assert inside(box), (fam, text)
+            assert not any(_overlap(box, other) for _, other in leg.texts[k + 1:]), (fam, text, "overlap")
         assert {(fam, label.split("  ")[0]) for label in labels} <= names
 
 
