@@ -8,6 +8,12 @@ definition's (tests/reference_sim/test_compiled.py). ``P`` is the tuple of refer
 springs (N, S, 8)
 [anchor_W, attach_B, k, L0], world point forces (N, P, 6) [f_W, r_B], body point forces (N, B, 6) [f_B, r_B],
 the principal moments (N, 3) kg m² and axes (N, 3, 3) (columns, body axes) of I_B: ``np.linalg.eigh``).
+
+``run`` steps the members of :func:`lane_members` (a course-type variant; no springs or point forces in the
+batch, no drag on the member) LANES at a time (``_run_lanes``): each member's step is the same scalar
+arithmetic, the loop over the members vectorised by LLVM (lanes are independent, so that changes no bit), its
+terms without state dependence (``h (f / m)``) computed once per member with the definition's operations.
+Every other member is stepped alone.
 """
 from __future__ import annotations
 
