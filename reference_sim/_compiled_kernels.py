@@ -8,6 +8,12 @@ definition's (tests/reference_sim/test_compiled.py). ``P`` is the tuple of refer
 springs (N, S, 8)
 [anchor_W, attach_B, k, L0], world point forces (N, P, 6) [f_W, r_B], body point forces (N, B, 6) [f_B, r_B],
 the principal moments (N, 3) kg m² and axes (N, 3, 3) (columns, body axes) of I_B: ``np.linalg.eigh``).
+
+``run`` steps the members of :func:`lane_members` (a course-type variant; no springs or point forces in the
+batch, no drag on the member) LANES at a time (``_run_lanes``): each member's step is the same scalar
+arithmetic, the loop over the members vectorised by LLVM (lanes are independent, so that changes no bit), its
+terms without state dependence (``h (f / m)``) computed once per member with the definition's operations.
+Every other member is stepped alone.
 """
 from __future__ import annotations
 
@@ -593,6 +599,181 @@ def _strang(i, y, out, kind, tmp, tol, max_iter, P):
     return True
 
 
+# --- the course-type steps of members whose forces do not depend on the state, LANES members at a time -----
+# A lane holds one member: its state in column k of S (13 rows of LANES), its constants in column k of Pm
+# (_LANE_PARAMS rows of LANES). One call of a lane step advances every lane in use by one step, each lane with
+# the scalar arithmetic of _course_type in its order; the lanes are independent, so LLVM vectorises the loop
+# over them (LLVM leaves a loop of fewer than 16 iterations that needs alias checks scalar: hence 16 lanes).
+# Pm rows: 0 h, 1 γ_v, 2 γ_ω, 3–5 h (f / m) with f = m g + f_W, 6–8 τ_W, 9–11 τ_B, 12 τ_B ≠ 0 (1.0 or 0.0),
+# 13–21 I_B⁻¹, 22–30 I_B (row-major).
+LANES = 16
+_LANE_PARAMS = 31
+
+
+@njit(**_INLINE)
+def _course_lanes(nl, S, Pm, T, OK, limit, gyro, expmap):
+    """_course_type of the first ``nl`` lanes, in place; ``OK[k]``: lane k's new state is within ``limit``
+    (finite). ``T``: scratch (4 LANES) for the exponential map's sine and cosine, taken by libm lane by
+    lane."""
+    K = LANES
+    for k in range(nl):
+        h, gv, gw = Pm[k], Pm[K + k], Pm[2 * K + k]
+        qw, qx, qy, qz = S[6 * K + k], S[7 * K + k], S[8 * K + k], S[9 * K + k]
+        w0, w1, w2 = S[10 * K + k], S[11 * K + k], S[12 * K + k]
+        R0, R1, R2 = 1.0 - 2.0 * (qy * qy + qz * qz), 2.0 * (qx * qy - qw * qz), 2.0 * (qx * qz + qw * qy)
+        R3, R4, R5 = 2.0 * (qx * qy + qw * qz), 1.0 - 2.0 * (qx * qx + qz * qz), 2.0 * (qy * qz - qw * qx)
+        R6, R7, R8 = 2.0 * (qx * qz - qw * qy), 2.0 * (qy * qz + qw * qx), 1.0 - 2.0 * (qx * qx + qy * qy)
+        tx, ty, tz = Pm[6 * K + k], Pm[7 * K + k], Pm[8 * K + k]
+        bx, by, bz = Pm[9 * K + k], Pm[10 * K + k], Pm[11 * K + k]
+        ux = tx + (R0 * bx + R1 * by + R2 * bz)
+        uy = ty + (R3 * bx + R4 * by + R5 * bz)
+        uz = tz + (R6 * bx + R7 * by + R8 * bz)
+        if Pm[12 * K + k] != 0.0:   # _force_torque adds R τ_B only where τ_B is not zero
+            tx, ty, tz = ux, uy, uz
+        vx, vy, vz = gv * (S[3 * K + k] + Pm[3 * K + k]), gv * (S[4 * K + k] + Pm[4 * K + k]), \
+            gv * (S[5 * K + k] + Pm[5 * K + k])
+        cx, cy, cz = R0 * tx + R3 * ty + R6 * tz, R1 * tx + R4 * ty + R7 * tz, R2 * tx + R5 * ty + R8 * tz
+        if gyro:
+            ox, oy, oz = R0 * w0 + R3 * w1 + R6 * w2, R1 * w0 + R4 * w1 + R7 * w2, R2 * w0 + R5 * w1 + R8 * w2
+            lx = Pm[22 * K + k] * ox + Pm[23 * K + k] * oy + Pm[24 * K + k] * oz
+            ly = Pm[25 * K + k] * ox + Pm[26 * K + k] * oy + Pm[27 * K + k] * oz
+            lz = Pm[28 * K + k] * ox + Pm[29 * K + k] * oy + Pm[30 * K + k] * oz
+            cx, cy, cz = cx - (oy * lz - oz * ly), cy - (oz * lx - ox * lz), cz - (ox * ly - oy * lx)
+        ax = Pm[13 * K + k] * cx + Pm[14 * K + k] * cy + Pm[15 * K + k] * cz
+        ay = Pm[16 * K + k] * cx + Pm[17 * K + k] * cy + Pm[18 * K + k] * cz
+        az = Pm[19 * K + k] * cx + Pm[20 * K + k] * cy + Pm[21 * K + k] * cz
+        ex, ey, ez = R0 * ax + R1 * ay + R2 * az, R3 * ax + R4 * ay + R5 * az, R6 * ax + R7 * ay + R8 * az
+        n0, n1, n2 = gw * (w0 + h * ex), gw * (w1 + h * ey), gw * (w2 + h * ez)
+        S[k], S[K + k], S[2 * K + k] = S[k] + h * vx, S[K + k] + h * vy, S[2 * K + k] + h * vz
+        S[3 * K + k], S[4 * K + k], S[5 * K + k] = vx, vy, vz
+        S[10 * K + k], S[11 * K + k], S[12 * K + k] = n0, n1, n2
+        if expmap:
+            th = h * math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+            T[k], T[K + k] = 0.5 * th, th
+        else:
+            half = 0.5 * h
+            a0, a1, a2 = half * n0, half * n1, half * n2
+            pw, px = qw + -(a0 * qx + a1 * qy + a2 * qz), qx + (a0 * qw + a1 * qz - a2 * qy)
+            py, pz = qy + (a1 * qw + a2 * qx - a0 * qz), qz + (a2 * qw + a0 * qy - a1 * qx)
+            nn = math.sqrt(pw * pw + px * px + py * py + pz * pz)
+            S[6 * K + k], S[7 * K + k], S[8 * K + k], S[9 * K + k] = pw / nn, px / nn, py / nn, pz / nn
+    if expmap:   # _exp_map_times: the libm calls in a loop of their own, the rest vectorised around them
+        for k in range(nl):
+            T[2 * K + k], T[3 * K + k] = math.sin(T[k]), math.cos(T[k])
+        for k in range(nl):
+            h, th = Pm[k], T[K + k]
+            qw, qx, qy, qz = S[6 * K + k], S[7 * K + k], S[8 * K + k], S[9 * K + k]
+            t2 = th * th
+            s = h * (0.5 - t2 / 48.0 + t2 * t2 / 3840.0) if th < 1e-4 else h * (T[2 * K + k] / th)
+            ew, ex, ey, ez = T[3 * K + k], s * S[10 * K + k], s * S[11 * K + k], s * S[12 * K + k]
+            pw, px = ew * qw - ex * qx - ey * qy - ez * qz, ew * qx + ex * qw + ey * qz - ez * qy
+            py, pz = ew * qy + ey * qw + ez * qx - ex * qz, ew * qz + ez * qw + ex * qy - ey * qx
+            nn = math.sqrt(pw * pw + px * px + py * py + pz * pz)
+            S[6 * K + k], S[7 * K + k], S[8 * K + k], S[9 * K + k] = pw / nn, px / nn, py / nn, pz / nn
+    for k in range(nl):
+        ok = True
+        for j in range(13):
+            ok = ok & (abs(S[j * K + k]) <= limit)   # NaN compares false: simulate.bad_rows
+        OK[k] = ok
+
+
+@njit(**_JIT)
+def _course_lanes_0(nl, S, Pm, T, OK, limit):
+    _course_lanes(nl, S, Pm, T, OK, limit, False, False)
+
+
+@njit(**_JIT)
+def _course_lanes_1(nl, S, Pm, T, OK, limit):
+    _course_lanes(nl, S, Pm, T, OK, limit, True, False)
+
+
+@njit(**_JIT)
+def _course_lanes_2(nl, S, Pm, T, OK, limit):
+    _course_lanes(nl, S, Pm, T, OK, limit, True, True)
+
+
+@njit(**_JIT)
+def _lane_load(S, Pm, k, i, y, sc, I, J, mg, fW, tW, tB):
+    """Lane k: member i at state ``y``, with its constants as _course_type computes them."""
+    K = LANES
+    for j in range(13):
+        S[j * K + k] = y[j]
+    h, m = sc[i, 0], sc[i, 1]
+    Pm[k], Pm[K + k], Pm[2 * K + k] = h, sc[i, 3], sc[i, 4]
+    for j in range(3):
+        Pm[(3 + j) * K + k] = h * ((mg[i, j] + fW[i, j]) / m)
+        Pm[(6 + j) * K + k], Pm[(9 + j) * K + k] = tW[i, j], tB[i, j]
+    Pm[12 * K + k] = 1.0 if tB[i, 0] != 0.0 or tB[i, 1] != 0.0 or tB[i, 2] != 0.0 else 0.0
+    for a in range(3):
+        for b in range(3):
+            Pm[(13 + 3 * a + b) * K + k], Pm[(22 + 3 * a + b) * K + k] = J[i, a, b], I[i, a, b]
+
+
+@njit(**_JIT)
+def _lane_move(S, Pm, src, dst):
+    """Lane ``src``'s state and constants into lane ``dst``."""
+    K = LANES
+    for j in range(13):
+        S[j * K + dst] = S[j * K + src]
+    for j in range(_LANE_PARAMS):
+        Pm[j * K + dst] = Pm[j * K + src]
+
+
+@njit(**_JIT)
+def _run_lanes(code, rows, offsets, pos, stop, limit, order, sc, I, J, mg, fW, tW, tB):
+    """``run`` for the members ``order`` (longest run first) of a course-type variant (code 0, 1, 2) whose
+    forces do not depend on the state (no drag, springs or point forces): LANES members at a time, a lane
+    taking the next member when its member reaches ``stop`` or meets a step that is not routine."""
+    K = LANES
+    S, Pm, T = np.zeros(13 * K), np.zeros(_LANE_PARAMS * K), np.zeros(4 * K)
+    OK = np.zeros(K, dtype=np.bool_)
+    member, n_at = np.zeros(K, dtype=np.int64), np.zeros(K, dtype=np.int64)
+    nl, nxt = 0, 0
+    while True:
+        while nl < K and nxt < order.shape[0]:   # fill the free lanes
+            i = order[nxt]
+            nxt += 1
+            if pos[i] < stop[i]:
+                member[nl], n_at[nl] = i, pos[i]
+                _lane_load(S, Pm, nl, i, rows[offsets[i] + pos[i]], sc, I, J, mg, fW, tW, tB)
+                nl += 1
+        if nl == 0:
+            return
+        if code == 0:
+            _course_lanes_0(nl, S, Pm, T, OK, limit)
+        elif code == 1:
+            _course_lanes_1(nl, S, Pm, T, OK, limit)
+        else:
+            _course_lanes_2(nl, S, Pm, T, OK, limit)
+        k = 0
+        while k < nl:
+            i, n = member[k], n_at[k]
+            if OK[k]:
+                out = rows[offsets[i] + n + 1]
+                for j in range(13):
+                    out[j] = S[j * K + k]
+                n += 1
+                n_at[k] = n
+            if OK[k] and n < stop[i]:
+                k += 1
+                continue
+            # done, or its next step is not routine: the lane is free, and the last lane moves into it
+            pos[i] = n
+            nl -= 1
+            if k < nl:
+                _lane_move(S, Pm, nl, k)
+                member[k], n_at[k], OK[k] = member[nl], n_at[nl], OK[nl]
+
+
+@njit(**_JIT)
+def lane_members(code, sc, springs, wp, bp):
+    """The members (N,) bool that ``run`` steps in lanes (_run_lanes): a course-type variant (code 0, 1, 2),
+    a batch without springs or point forces, a member without drag."""
+    if 0 <= code <= 2 and springs.shape[1] == 0 and wp.shape[1] == 0 and bp.shape[1] == 0:
+        return sc[:, 2] == 0.0
+    return np.zeros(sc.shape[0], dtype=np.bool_)
+
+
 @njit(**_JIT)
 def run(code, rows, offsets, pos, stop, limit, tol, max_iter, max_torque, sc, I, J, mg, fW, tW, tB, springs,
         wp, bp, moments, axes):
@@ -601,9 +782,16 @@ def run(code, rows, offsets, pos, stop, limit, tol, max_iter, max_torque, sc, I,
     component that is non-finite or beyond ``limit``). ``pos`` is updated in place. ``code``: the variant
     (reference_sim.compiled.VARIANT_CODES); ``max_torque``: integrators.BULLET_MAX_GYROSCOPIC_TORQUE."""
     P = (sc, I, J, mg, fW, tW, tB, springs, wp, bp, moments, axes)
+    in_lanes = lane_members(code, sc, springs, wp, bp)
+    if in_lanes.any():
+        free = np.flatnonzero(in_lanes)
+        order = free[np.argsort(pos[free] - stop[free], kind="mergesort")]
+        _run_lanes(code, rows, offsets, pos, stop, limit, order, sc, I, J, mg, fW, tW, tB)
     k1, k2, k3, k4, tmp = np.empty(13), np.empty(13), np.empty(13), np.empty(13), np.empty(13)
     u, u_new = np.empty(6), np.empty(6)
     for i in range(offsets.shape[0]):
+        if in_lanes[i]:
+            continue
         n = pos[i]
         while n < stop[i]:
             y, out = rows[offsets[i] + n], rows[offsets[i] + n + 1]

@@ -21,7 +21,7 @@ import numpy as np
 from reference_sim.forces import Members
 from reference_sim.integrators import BULLET_MAX_GYROSCOPIC_TORQUE, IMPLICIT_TOL, MAX_ITER
 
-__all__ = ["VARIANT_CODES", "kernel", "parameters", "advance", "warm", "ForceEvaluator"]
+__all__ = ["VARIANT_CODES", "kernel", "parameters", "advance", "lane_members", "warm", "ForceEvaluator"]
 
 #: The variants the compiled loop knows, by code (the ``code`` argument of the kernel).
 VARIANT_CODES = {"course": 0, "course_gyro": 1, "expmap_gyro": 2, "explicit_euler": 3, "midpoint": 4,
@@ -76,6 +76,13 @@ def advance(variant: str, rows: np.ndarray, offsets, pos, stop, limit: float, pa
         raise ValueError(f"steps up to {stop.tolist()} do not fit rows of {rows.shape[0]} states")
     kernel()(VARIANT_CODES[variant], rows, offsets, pos, stop, float(limit), float(IMPLICIT_TOL),
              int(MAX_ITER), float(BULLET_MAX_GYROSCOPIC_TORQUE), *params)
+
+
+def lane_members(variant: str, params: tuple) -> np.ndarray:
+    """The members (N,) bool whose steps the compiled loop takes LANES at a time, vectorised across members
+    (``_compiled_kernels.lane_members``: a course-type variant, a batch without springs or point forces, a
+    member without drag); the others it steps one by one. Either way the states are the definition's."""
+    return _kernels().lane_members(VARIANT_CODES[variant], params[0], params[7], params[8], params[9])
 
 
 class ForceEvaluator:

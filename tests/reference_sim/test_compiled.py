@@ -4,6 +4,8 @@ stepped by reference_sim.integrators alone (its divergence time, message and sta
 Every comparison is exact (``np.array_equal``): the compiled kernels transcribe the definition's arithmetic
 operation for operation, in its order, with fastmath off, so there is no round-off to allow for.
 """
+import dataclasses
+
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -15,7 +17,7 @@ from cross_checks.engines.reference import ReferenceAdapter
 from cross_checks.scenario import catalog_names, load_scenario
 from reference_sim import compiled
 from reference_sim.body import RigidBody
-from reference_sim.forces import ForceModel, PointForce, Spring, Torque
+from reference_sim.forces import ForceModel, Members, PointForce, Spring, Torque
 from reference_sim.integrators import VARIANTS
 from reference_sim.quaternion import matrix_from_quat, quat_normalize
 from reference_sim.state import Problem, State
@@ -70,6 +72,28 @@ def test_compiled_run_is_bit_identical_to_the_definition_with_every_force_kind(m
     assert np.array_equal(step(problem, fast.y[:-1], 1.5e-3), fast.y[1:])
 
 
+@pytest.mark.parametrize("variant", COMPILED)
+@pytest.mark.parametrize("decay", [(1.0, 1.0), (0.99, 0.995)])
+def test_compiled_batch_with_every_constant_force_kind_is_bit_identical(monkeypatch, variant, decay):
+    # the forces of the course-type steps taken in lanes (compiled.lane_members): gravity, a world and a body
+    # torque (every component), on coupled_problem's body (products of inertia); members from their own
+    # initial ω and v, every fourth from rest (where the first step's ω is Δt ω̇, every bit of the torque
+    # showing), at their own steps, for their own numbers of steps
+    p = coupled_problem(decay)
+    fm = dataclasses.replace(p.forces, springs=(), point_forces=(), linear_drag_N_s_per_m=0.0,
+                             torques=(Torque(np.array([0.3, -0.2, 0.7]), "body"),
+                                      Torque(np.array([0.1, 0.2, -0.3]), "world")))
+    p = Problem(p.body, fm, p.initial)
+    members = p.members.take(np.zeros(_BATCH, dtype=int))
+    dts = 1.5e-3 * np.array([1.0, 0.5, 2.0])[np.arange(_BATCH) % 3]
+    y0 = np.tile(p.initial_packed(), (_BATCH, 1))
+    y0[:, 3:6] *= np.linspace(0.5, 2.0, _BATCH)[:, None]
+    y0[:, 10:13] *= np.where(np.arange(_BATCH) % 4 == 0, 0.0, np.linspace(2.0, 0.5, _BATCH))[:, None]
+    _batch_runs(monkeypatch, members, variant, dts, 200 + 10 * np.arange(_BATCH), y0)
+    lanes = compiled.lane_members(variant, compiled.parameters(members, dts))
+    assert lanes.all() if variant in ("course", "course_gyro", "expmap_gyro") else not lanes.any()
+
+
 @pytest.mark.parametrize("name", catalog_names())
 def test_compiled_runs_of_the_catalog_are_bit_identical_at_its_coarsest_step(monkeypatch, name):
     sc = load_scenario(name)
@@ -95,16 +119,18 @@ _vec = st.lists(st.floats(-2.0, 2.0), min_size=3, max_size=3).map(np.array)
 
 
 @st.composite
-def _problems(draw):
+def _problems(draw, constant_forces=False):
+    """A random problem; ``constant_forces``: without springs or point forces (the forces of the course-type
+    steps the compiled loop takes in lanes, compiled.lane_members), with or without drag."""
     mass = draw(st.floats(0.2, 5.0))
     a, b, c = draw(st.lists(st.floats(0.1, 1.0), min_size=3, max_size=3))  # a box's sides, m: a physical body
     R = matrix_from_quat(quat_normalize(np.array([1.0, *draw(_vec)])))  # its axes turned: products of inertia
     inertia = R @ np.diag([b * b + c * c, a * a + c * c, a * a + b * b]) * (mass / 12.0) @ R.T
     springs = tuple(Spring(draw(_vec), 0.2 * draw(_vec),
                            draw(st.floats(0.0, 60.0)), draw(st.floats(0.0, 1.0)))
-                    for _ in range(draw(st.integers(0, 2))))
+                    for _ in range(draw(st.integers(0, 0 if constant_forces else 2))))
     points = tuple(PointForce(draw(_vec), 0.2 * draw(_vec), draw(st.sampled_from(["world", "body"])))
-                   for _ in range(draw(st.integers(0, 2))))
+                   for _ in range(draw(st.integers(0, 0 if constant_forces else 2))))
     torques = tuple(Torque(draw(_vec), draw(st.sampled_from(["world", "body"])))
                     for _ in range(draw(st.integers(0, 2))))
     fm = ForceModel(gravity_W=draw(_vec) * 5.0, linear_drag_N_s_per_m=draw(st.sampled_from([0.0, 0.4])),
@@ -121,6 +147,75 @@ def _problems(draw):
 def test_compiled_equals_the_definition_on_random_problems(monkeypatch, problem, variant, dt):
     fast = S.simulate(problem, variant, dt, 120)
     _assert_same_run(fast, _python_run(monkeypatch, problem, variant, dt, 120))
+
+
+def _batch_runs(monkeypatch, members, variant, dts, ns, y0):
+    """run_members compiled and by the definition alone (every member at once), asserted equal run by run;
+    the compiled runs."""
+    fast = S.run_members(members, variant, dts, ns, y0)
+    with monkeypatch.context() as m:
+        m.setattr(compiled, "kernel", lambda: None)
+        slow = S.run_members(members, variant, dts, ns, y0)
+    for a, b in zip(fast, slow):
+        _assert_same_run(a, b)
+    return fast
+
+
+#: More than twice as many members as lanes (_compiled_kernels.LANES, 16): every lane in use, lanes taking the
+#: next member as runs of different lengths end
+_BATCH = 35
+
+
+@pytest.mark.parametrize("name", catalog_names())
+def test_compiled_batches_of_the_catalog_are_bit_identical(monkeypatch, name):
+    # the scenario's problem as many members, each at a step of its ladder, for its own number of steps, from
+    # its own initial ω and v: the course-type steps of a scenario without springs, point forces or drag go
+    # through the lanes (vectorised across members), the others one member at a time
+    assert _BATCH > 2 * compiled._kernels().LANES
+    sc = load_scenario(name)
+    members = sc.problem.members.take(np.zeros(_BATCH, dtype=int))
+    dts = np.array([sc.dt_ladder_s[j % len(sc.dt_ladder_s)] for j in range(_BATCH)])
+    ns = np.array([min(sc.n_steps(dt), 40 + 7 * j) for j, dt in enumerate(dts)])
+    y0 = np.tile(sc.problem.initial_packed(), (_BATCH, 1))
+    y0[:, 3:6] *= 1.0 + 0.01 * np.arange(_BATCH)[:, None]
+    y0[:, 10:13] *= 1.0 - 0.01 * np.arange(_BATCH)[:, None]
+    fm = sc.problem.forces
+    for variant in COMPILED:
+        _batch_runs(monkeypatch, members, variant, dts, ns, y0)
+        lanes = compiled.lane_members(variant, compiled.parameters(members, dts))
+        constant = not fm.springs and not fm.point_forces and fm.linear_drag_N_s_per_m == 0.0
+        course_type = variant in ("course", "course_gyro", "expmap_gyro")
+        assert lanes.all() if constant and course_type else not lanes.any()
+
+
+@pytest.mark.parametrize("variant", COMPILED)
+@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(problems=st.lists(_problems(constant_forces=True), min_size=1, max_size=40),
+       dt=st.sampled_from([1e-3, 1e-2, 0.05]), data=st.data())
+def test_compiled_batches_equal_the_definition_on_random_problems(monkeypatch, variant, problems, dt, data):
+    # random members without springs or point forces, some with drag (stepped one by one, the others in lanes
+    # for a course-type variant), each with its own step and number of steps
+    members = Members.stack(problems)
+    dts = dt * np.array(data.draw(st.lists(st.sampled_from([1.0, 0.5, 0.25]), min_size=len(problems),
+                                           max_size=len(problems))))
+    ns = np.array(data.draw(st.lists(st.integers(0, 120), min_size=len(problems), max_size=len(problems))))
+    _batch_runs(monkeypatch, members, variant, dts, ns, np.array([p.initial_packed() for p in problems]))
+
+
+@pytest.mark.parametrize("variant", ["course_gyro", "expmap_gyro"])
+def test_spins_that_blow_up_in_lanes_are_cut_where_the_definition_cuts_them(monkeypatch, variant):
+    # a fast spin about the intermediate axis blows up (test_a_spin_that_blows_up_is_cut_where_the_definition_
+    # cuts_it): faster spins blow up sooner, the slowest not within the run; every lane meets its own end
+    p = Problem(RigidBody(1.0, [1.0, 2.0, 3.0]), ForceModel(),
+                State(np.zeros(3), np.zeros(3), np.array([1.0, 0, 0, 0]), np.array([0.1, 20.0, 0.1])))
+    n = _BATCH
+    members = p.members.take(np.zeros(n, dtype=int))
+    y0 = np.tile(p.initial_packed(), (n, 1))
+    y0[:, 10:13] *= np.linspace(0.2, 1.5, n)[:, None]
+    assert compiled.lane_members(variant, compiled.parameters(members, np.full(n, 0.01))).all()
+    runs = _batch_runs(monkeypatch, members, variant, 0.01, 2000, y0)
+    cut = [r.diverged_at_s for r in runs if r.diverged_at_s is not None]
+    assert 1 < len(cut) < n and len(set(cut)) > 1
 
 
 def _stiff(k=1e6):
