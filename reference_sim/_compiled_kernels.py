@@ -125,6 +125,16 @@ def _normalize(y):
 
 
 @njit(**_INLINE)
+def _symplectic_end(y, h, vx, vy, vz, nw, nx, ny, nz, wx, wy, wz, out):
+    """The end of a symplectic Euler step: x + h v⁺, v⁺, the new attitude normalised, ω⁺."""
+    out[0], out[1], out[2] = y[0] + h * vx, y[1] + h * vy, y[2] + h * vz
+    out[3], out[4], out[5] = vx, vy, vz
+    out[6], out[7], out[8], out[9] = nw, nx, ny, nz
+    _normalize(out)
+    out[10], out[11], out[12] = wx, wy, wz
+
+
+@njit(**_INLINE)
 def _rhs(i, y, out, P):
     """integrators.rhs of member i."""
     sc = P[0]
@@ -162,11 +172,7 @@ def _course_type(i, y, out, gyro, expmap, P):
         half = 0.5 * h
         dw, dx, dy, dz = _omega_times(half * wx, half * wy, half * wz, qw, qx, qy, qz)
         nw, nx, ny, nz = qw + dw, qx + dx, qy + dy, qz + dz
-    out[0], out[1], out[2] = y[0] + h * vx, y[1] + h * vy, y[2] + h * vz
-    out[3], out[4], out[5] = vx, vy, vz
-    out[6], out[7], out[8], out[9] = nw, nx, ny, nz
-    _normalize(out)
-    out[10], out[11], out[12] = wx, wy, wz
+    _symplectic_end(y, h, vx, vy, vz, nw, nx, ny, nz, wx, wy, wz, out)
 
 
 @njit(**_JIT)
@@ -415,11 +421,7 @@ def _engine_gyro_step(i, y, out, kind, max_torque, P):
     ax, ay, az = _angular_acceleration(i, R, y[10], y[11], y[12], tx, ty, tz, False, P)
     wx, wy, wz = gw * (G0 + h * ax), gw * (G1 + h * ay), gw * (G2 + h * az)
     nw, nx, ny, nz = _exp_map_times(h, wx, wy, wz, qw, qx, qy, qz)
-    out[0], out[1], out[2] = y[0] + h * vx, y[1] + h * vy, y[2] + h * vz
-    out[3], out[4], out[5] = vx, vy, vz
-    out[6], out[7], out[8], out[9] = nw, nx, ny, nz
-    _normalize(out)
-    out[10], out[11], out[12] = wx, wy, wz
+    _symplectic_end(y, h, vx, vy, vz, nw, nx, ny, nz, wx, wy, wz, out)
 
 
 @njit(**_JIT)
