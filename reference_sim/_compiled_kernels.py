@@ -358,29 +358,29 @@ def _world_inv_inertia_times(R, J9, a0, a1, a2):
     return _mv(R, c0, c1, c2)
 
 
+@njit(**_INLINE)
+def _gyro_newton_step(M, w0, w1, w2, h):
+    """The one Newton step of the implicit gyroscopic update in the axes of the inertia ``M`` (9,):
+    (M + h([ω]× M − [M ω]×))⁻¹ h ω × M ω, which the update subtracts from ω."""
+    l0, l1, l2 = _mv(M, w0, w1, w2)
+    A, S = _skew_times(w0, w1, w2, M), _skew(l0, l1, l2)
+    J = (M[0] + h * (A[0] - S[0]), M[1] + h * (A[1] - S[1]), M[2] + h * (A[2] - S[2]),
+         M[3] + h * (A[3] - S[3]), M[4] + h * (A[4] - S[4]), M[5] + h * (A[5] - S[5]),
+         M[6] + h * (A[6] - S[6]), M[7] + h * (A[7] - S[7]), M[8] + h * (A[8] - S[8]))
+    c0, c1, c2 = _cross(w0, w1, w2, l0, l1, l2)
+    return _solve3(J, h * c0, h * c1, h * c2)
+
+
 @njit(**_JIT)
 def _gyro_update(kind, R, wx, wy, wz, h, I9, J9, max_torque):
     """The engines' gyroscopic updates G(ω) of integrators: 0 _gyro_implicit_body, 1 _gyro_implicit_world,
     2 _gyro_explicit_clamped (``max_torque``: BULLET_MAX_GYROSCOPIC_TORQUE), 3 _gyro_momentum_clamped."""
     if kind == 0:
         b0, b1, b2 = _mtv(R, wx, wy, wz)
-        l0, l1, l2 = _mv(I9, b0, b1, b2)
-        A, S = _skew_times(b0, b1, b2, I9), _skew(l0, l1, l2)
-        J = (I9[0] + h * (A[0] - S[0]), I9[1] + h * (A[1] - S[1]), I9[2] + h * (A[2] - S[2]),
-             I9[3] + h * (A[3] - S[3]), I9[4] + h * (A[4] - S[4]), I9[5] + h * (A[5] - S[5]),
-             I9[6] + h * (A[6] - S[6]), I9[7] + h * (A[7] - S[7]), I9[8] + h * (A[8] - S[8]))
-        c0, c1, c2 = _cross(b0, b1, b2, l0, l1, l2)
-        s0, s1, s2 = _solve3(J, h * c0, h * c1, h * c2)
+        s0, s1, s2 = _gyro_newton_step(I9, b0, b1, b2, h)
         return _mv(R, b0 - s0, b1 - s1, b2 - s2)
     if kind == 1:
-        W = _world_inertia(R, I9)
-        l0, l1, l2 = _mv(W, wx, wy, wz)
-        A, S = _skew_times(wx, wy, wz, W), _skew(l0, l1, l2)
-        J = (W[0] + h * (A[0] - S[0]), W[1] + h * (A[1] - S[1]), W[2] + h * (A[2] - S[2]),
-             W[3] + h * (A[3] - S[3]), W[4] + h * (A[4] - S[4]), W[5] + h * (A[5] - S[5]),
-             W[6] + h * (A[6] - S[6]), W[7] + h * (A[7] - S[7]), W[8] + h * (A[8] - S[8]))
-        c0, c1, c2 = _cross(wx, wy, wz, l0, l1, l2)
-        s0, s1, s2 = _solve3(J, h * c0, h * c1, h * c2)
+        s0, s1, s2 = _gyro_newton_step(_world_inertia(R, I9), wx, wy, wz, h)
         return wx - s0, wy - s1, wz - s2
     if kind == 2:
         l0, l1, l2 = _mv(_world_inertia(R, I9), wx, wy, wz)
