@@ -45,6 +45,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg, RendererAgg
 from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
+from matplotlib.markers import MarkerStyle
 from matplotlib.path import Path as MplPath
 from matplotlib.text import Text
 from matplotlib.ticker import FixedFormatter, FixedLocator, LogFormatter, LogLocator, MaxNLocator, NullLocator
@@ -163,6 +164,28 @@ class _Stamps(Artist):
         gc = renderer.new_gc()
         for x, y, text, size, style in self.items:
             _place(renderer, gc, self.get_figure(root=True).dpi, x, y, text, size, **style)
+        gc.restore()
+
+
+class _DataStamps(Artist):
+    """Texts (:func:`_stamp`) at data coordinates of their axes, over the curves as an ``ax.text`` is:
+    ``items`` [(x, y, text, size, style)] (the slope triangles' orders: the same three strings in every
+    ladder panel, laid out by matplotlib once per process instead of once per panel)."""
+
+    zorder = 3
+
+    def __init__(self, items):
+        super().__init__()
+        self.items = items
+
+    def draw(self, renderer):
+        if not self.get_visible() or self.axes is None:
+            return
+        dpi = self.get_figure(root=True).dpi
+        gc = renderer.new_gc()
+        for x, y, text, size, style in self.items:
+            px, py = self.axes.transData.transform((x, y))
+            _place(renderer, gc, dpi, px, py, text, size, **style)
         gc.restore()
 
 
@@ -298,7 +321,8 @@ def _panels(layout, nrows, ncols, size_in, log, outer=True, block_rows=None, use
             bottom = i % block_rows == block_rows - 1 or not outer
             if ax.xaxis.get_tick_params().get("labelbottom") != bottom:   # tick_params restyles every tick
                 ax.tick_params(axis="x", labelbottom=bottom)
-            for art in (*ax.lines, *ax.collections, *ax.texts):
+            for art in (*ax.lines, *ax.collections, *ax.texts,
+                        *[a for a in ax.artists if isinstance(a, _DataStamps)]):
                 art.remove()
             ax.set(xlabel="", ylabel="")
             frame = _frame(ax)
@@ -478,13 +502,20 @@ def legend_figure(dpi, fam, items):
     em = _LEGEND_PT * pt
     pad = _LEGEND_PAD_PX
     title = _stamp(dpi, fam, 9, va="top", weight="bold")
-    labels = [_stamp(dpi, label, _LEGEND_PT, va="center_baseline") for label, _ in items]
-    row_h = max([h for *_, h in labels] + [1.0])
+    # a label "name  extra" is drawn as two texts, the extra (a ladder's orders) where it would be in the
+    # whole label: texts' widths add up (advances), the two spaces measured once. The names come back in
+    # every legend of a report and the orders in many: ~200 texts of a report laid out once instead.
+    parts = [label.partition("  ")[::2] for label, _ in items]
+    text = lambda t: _stamp(dpi, t, _LEGEND_PT, va="center_baseline")   # noqa: E731
+    stamps = [(text(name), text(extra) if extra else None) for name, extra in parts]
+    sep = text("a  p")[3] - text("a")[3] - text("p")[3] if any(extra for _, extra in parts) else 0.0
+    labels = [(a[3] + (sep + b[3] if b else 0.0), max(a[4], b[4] if b else 0.0)) for a, b in stamps]
+    row_h = max([h for _, h in labels] + [1.0])
     ncols = max(1, math.ceil(len(items) / _LEGEND_ROWS))
     nrows = min(len(items), _LEGEND_ROWS)
     handle, gap, col_gap, row_gap = 2.6 * em, 0.5 * em, 1.2 * em, 0.25 * em
     columns = [range(c * _LEGEND_ROWS, min(len(items), (c + 1) * _LEGEND_ROWS)) for c in range(ncols)]
-    widths = [handle + gap + max([labels[k][3] for k in col] + [0.0]) for col in columns]
+    widths = [handle + gap + max([labels[k][0] for k in col] + [0.0]) for col in columns]
     w = math.ceil(2 * pad + max(title[3], sum(widths) + col_gap * (ncols - 1)))
     top_rows = title[4] + 0.5 * em
     h = math.ceil(2 * pad + top_rows + nrows * row_h + max(nrows - 1, 0) * row_gap)
@@ -499,7 +530,11 @@ def legend_figure(dpi, fam, items):
             fig.add_artist(Line2D([x, x + handle / 2, x + handle], [y, y, y], color=st["color"], ls=st["ls"],
                                   lw=1.4, marker=st.get("marker") or None, ms=4, markevery=[1],
                                   transform=IdentityTransform()))
-            texts.append((x + handle + gap, y, items[k][0], _LEGEND_PT, {"va": "center_baseline"}))
+            name, extra = parts[k]
+            texts.append((x + handle + gap, y, name, _LEGEND_PT, {"va": "center_baseline"}))
+            if extra:
+                texts.append((x + handle + gap + stamps[k][0][3] + sep, y, extra, _LEGEND_PT,
+                              {"va": "center_baseline"}))
         x += widths[c] + col_gap
     fig.add_artist(_Stamps(texts))
     boxes = []
@@ -562,9 +597,84 @@ def save_png(fig, path) -> None:
     q.save(path, format="PNG", compress_level=6)
 
 
+def _dashes(ls, lw) -> tuple:
+    """(offset, dash lengths in pt) of dash pattern ``ls`` at line width ``lw``, as a Line2D has them (the
+    rc patterns, scaled by the width when ``lines.scale_dashes``)."""
+    name = {"-": "solid", "--": "dashed", "-.": "dashdot", ":": "dotted"}.get(ls, ls)
+    if name == "solid":
+        return 0.0, None
+    dashes = tuple(matplotlib.rcParams[f"lines.{name}_pattern"])
+    if matplotlib.rcParams["lines.scale_dashes"]:
+        dashes = tuple(d * lw for d in dashes)
+    return 0.0, dashes
+
+
+class _Curves(Line2D):
+    """A panel's variants in one artist instead of a Line2D or two per variant (the ladders and the work
+    figures held ~2,000 lines: creating, adding and drawing them was a fifth of a report's drawing).
+    ``parts``, drawn in their order: ``("line", x, y, rgba, dash pattern, width)`` and ``("marks", x, y,
+    marker, size pt, face rgba, edge rgba)``, each drawn as a Line2D of that style draws it (the same
+    renderer calls: caps, joins, dashes, marker snapping, 1 pt marker edges), clipped to the axes. As a
+    Line2D of all their points (drawing nothing of its own) it gives the axes their data limits."""
+
+    def __init__(self, parts):
+        pts = [np.column_stack([np.asarray(x, dtype=float), np.asarray(y, dtype=float)])
+               for _, x, y, *_ in parts]
+        xy = np.concatenate(pts) if pts else np.zeros((0, 2))
+        super().__init__(xy[:, 0], xy[:, 1], ls="none", marker="none")
+        self.parts = parts
+
+    def draw(self, renderer):
+        if not self.get_visible() or self.axes is None:
+            return
+        trans, clip = self.axes.transData, self.axes.bbox
+        for what, x, y, *style in self.parts:
+            gc = renderer.new_gc()
+            gc.set_clip_rectangle(clip)
+            gc.set_antialiased(True)
+            path = MplPath(trans.transform(np.column_stack([x, y])))
+            if what == "line":
+                rgba, ls, lw = style
+                gc.set_linewidth(lw)
+                gc.set_joinstyle("round")
+                gc.set_capstyle("projecting" if ls == "-" else "butt")
+                gc.set_foreground(rgba, isRGBA=True)
+                gc.set_dashes(*_dashes(ls, lw))
+                renderer.draw_path(gc, path, IdentityTransform())
+            else:
+                marker, ms, face, edge = style
+                mark = _marker_style(marker)
+                w = renderer.points_to_pixels(ms)
+                gc.set_linewidth(1.0)
+                gc.set_foreground(edge, isRGBA=True)
+                snap = mark.get_snap_threshold()
+                gc.set_snap(w >= snap if isinstance(snap, (int, float)) else snap)
+                gc.set_joinstyle(mark.get_joinstyle())
+                gc.set_capstyle(mark.get_capstyle())
+                renderer.draw_markers(gc, mark.get_path(), mark.get_transform().frozen().scale(w), path,
+                                      IdentityTransform(), face)
+            gc.restore()
+        self.stale = False
+
+
+_MARKER_STYLES: dict = {}
+
+
+def _marker_style(marker) -> MarkerStyle:
+    if marker not in _MARKER_STYLES:
+        _MARKER_STYLES[marker] = MarkerStyle(marker)
+    return _MARKER_STYLES[marker]
+
+
+def _curves(ax, parts) -> None:
+    """Add a panel's variants as one :class:`_Curves` (nothing when there are none)."""
+    if parts:
+        ax.add_line(_Curves(parts))
+
+
 def _line(ax, x, y, **style):
     """One line of the given style (a Line2D added as it is: ``plot``'s argument parsing is a third of
-    its cost, and the ladders have ~2,000 lines); the axes are autoscaled when the panel is done."""
+    its cost); the axes are autoscaled when the panel is done."""
     return ax.add_line(Line2D(np.asarray(x, dtype=float), np.asarray(y, dtype=float), **style))
 
 
@@ -810,22 +920,24 @@ def _slope_triangles(ax, dts, labels, orders=(1, 2, 4)):
     x1 = max(dts) / 10 ** (0.04 * span_x)
     x0 = x1 / 10 ** (0.3 * span_x)
     span = math.log10(hi) - math.log10(lo)
-    xs, ys = [], []
+    xs, ys, texts = [], [], []
     for k, p in enumerate(orders):
         y0 = 10 ** (math.log10(lo) + span * (0.04 + 0.09 * k))
         y1 = y0 * (x1 / x0) ** p
         xs += [x0, x1, x1, x0, np.nan]
         ys += [y0, y0, y1, y0, np.nan]
-        if labels:
-            ax.text(x0 / 10 ** (0.01 * span_x), y0, f"{p}", fontsize=7, color="0.3", va="bottom", ha="right")
+        texts.append((x0 / 10 ** (0.01 * span_x), y0, f"{p}", 7,
+                      {"color": "0.3", "va": "bottom", "ha": "right"}))
     _line(ax, xs, ys, color="0.45", lw=0.8)   # one line for the three triangles (one artist to draw)
+    if labels:
+        ax.add_artist(_DataStamps(texts))
 
 
 def _ladder_cell(ax, res, sc, q, vs, styles, mode):
     """One family's variants on one quantity; returns the Δt drawn and the finite errors drawn."""
     col = f"{COLUMN_STEM[q]}_err_final" if mode == "free_running" else f"{COLUMN_STEM[q]}_local_err"
     recs = {r["engine"]: r for r in res.records(sc, quantity=q, mode=mode)}
-    dts, vals, drawn = [], [], []
+    dts, vals, drawn, parts = [], [], [], []
     for v in vs:
         rows = sorted([r for r in res.rows_for(sc, v) if r["in_ladder"]], key=lambda r: -r["dt"])
         dt = np.array([r["dt"] for r in rows])
@@ -836,16 +948,20 @@ def _ladder_cell(ax, res, sc, q, vs, styles, mode):
             continue
         st = styles[v]
         halo = _covered(drawn, (v, dt[ok], _positive(e[ok])), log=True)
-        _line(ax, dt[ok], _positive(e[ok]), color=st["color"], ls=st["ls"], lw=3.2 if halo else 1.0,
-              alpha=0.45 if halo else 1.0, marker=st["marker"], ms=7 if halo else 4, mfc="white")
+        a = 0.45 if halo else 1.0
+        parts += [("line", dt[ok], _positive(e[ok]), (*st["color"][:3], a), st["ls"], 3.2 if halo else 1.0),
+                  ("marks", dt[ok], _positive(e[ok]), st["marker"], 7 if halo else 4, (1.0, 1.0, 1.0, a),
+                   (*st["color"][:3], a))]
         drawn.append((v, dt[ok], _positive(e[ok])))
         rec = recs.get(v)
         if rec is not None and rec["order"] is not None:
             fitted = np.array(rec["fitted"], dtype=bool)
-            _line(ax, np.array(rec["dt_s"])[fitted], _positive(np.array(rec["errors"], dtype=float)[fitted]),
-                      ls="none", marker=st["marker"], ms=4, color=st["color"])
+            c = (*st["color"][:3], 1.0)
+            parts.append(("marks", np.array(rec["dt_s"], dtype=float)[fitted],
+                          _positive(np.array(rec["errors"], dtype=float)[fitted]), st["marker"], 4, c, c))
         dts += dt[ok].tolist()
         vals.append(_positive(e[ok]))
+    _curves(ax, parts)
     if recs:
         r0 = next(iter(recs.values()))
         _line(ax, r0["dt_s"], _positive(r0["floors"]), color="0.5", lw=4, alpha=0.22, solid_capstyle="butt")
@@ -1003,7 +1119,7 @@ def fig_work(res, sc, styles, path):
     same = []
     for ax, q in zip(axes[0], qs):
         col = f"{COLUMN_STEM[q]}_err_final"
-        drawn = []
+        drawn, parts = [], []
         for v in drawn_vs:
             rows = sorted([r for r in res.rows_for(sc, v) if r["in_ladder"] and r["status"] == "ok"],
                           key=lambda r: -r["dt"])
@@ -1016,9 +1132,11 @@ def fig_work(res, sc, styles, path):
             halo = _covered(drawn, (v, w[ok], _positive(e[ok])), log=True)
             if halo:
                 same.append((halo, v, LABELS[q]))
-            _line(ax, w[ok], _positive(e[ok]), color=st["color"], ls=st["ls"], marker=st["marker"],
-                  ms=7 if halo else 4, lw=3.2 if halo else 1.0, alpha=0.45 if halo else 0.9)
+            c = (*st["color"][:3], 0.45 if halo else 0.9)
+            parts += [("line", w[ok], _positive(e[ok]), c, st["ls"], 3.2 if halo else 1.0),
+                      ("marks", w[ok], _positive(e[ok]), st["marker"], 7 if halo else 4, c, c)]
             drawn.append((v, w[ok], _positive(e[ok])))
+        _curves(ax, parts)
         if ax.has_data():
             ax.autoscale_view()
         _title(ax, LABELS[q])
