@@ -42,7 +42,6 @@ import matplotlib
 import numpy as np
 from matplotlib.artist import Artist
 from matplotlib.backends.backend_agg import FigureCanvasAgg, RendererAgg
-from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.markers import MarkerStyle
@@ -614,15 +613,16 @@ class _Curves(Line2D):
     figures held ~2,000 lines: creating, adding and drawing them was a fifth of a report's drawing).
     ``parts``, drawn in their order: ``("line", x, y, rgba, dash pattern, width)`` and ``("marks", x, y,
     marker, size pt, face rgba, edge rgba)``, each drawn as a Line2D of that style draws it (the same
-    renderer calls: caps, joins, dashes, marker snapping, 1 pt marker edges), clipped to the axes. As a
+    renderer calls: caps, joins, dashes, marker snapping, 1 pt marker edges), clipped to the axes; with
+    ``capstyle`` every line has those caps (a LineCollection's: "butt"). As a
     Line2D of all their points (drawing nothing of its own) it gives the axes their data limits."""
 
-    def __init__(self, parts):
+    def __init__(self, parts, capstyle=None, **kwargs):
         pts = [np.column_stack([np.asarray(x, dtype=float), np.asarray(y, dtype=float)])
                for _, x, y, *_ in parts]
         xy = np.concatenate(pts) if pts else np.zeros((0, 2))
-        super().__init__(xy[:, 0], xy[:, 1], ls="none", marker="none")
-        self.parts = parts
+        super().__init__(xy[:, 0], xy[:, 1], ls="none", marker="none", **kwargs)
+        self.parts, self.capstyle = parts, capstyle
 
     def draw(self, renderer):
         if not self.get_visible() or self.axes is None:
@@ -637,7 +637,7 @@ class _Curves(Line2D):
                 rgba, ls, lw = style
                 gc.set_linewidth(lw)
                 gc.set_joinstyle("round")
-                gc.set_capstyle("projecting" if ls == "-" else "butt")
+                gc.set_capstyle(self.capstyle or ("projecting" if ls == "-" else "butt"))
                 gc.set_foreground(rgba, isRGBA=True)
                 gc.set_dashes(*_dashes(ls, lw))
                 renderer.draw_path(gc, path, IdentityTransform())
@@ -717,7 +717,7 @@ def _time_panels(axes, res, sc, fams, styles, rows, log, ser=None):
         keep, every = [], []
         for j, (fam, vs) in enumerate(fams.items()):
             ax = axes[i, j]
-            curves = []   # (xy, style): the panel's variants, drawn as one collection (one artist)
+            curves = []   # (xy, style): the panel's variants, drawn as one artist (_Curves)
             ref = ser.get("reference")
             if not log and ref is not None and get(ref) is not None:
                 _line(ax, ref["t_s"], get(ref), color="black", lw=3.2, alpha=0.28)
@@ -747,11 +747,10 @@ def _time_panels(axes, res, sc, fams, styles, rows, log, ser=None):
                 same += [(a, b, label.split(" (")[0]) for a, b in pairs]
                 wide = [(xy, st) for xy, st in curves if st["name"] in halo]
                 if wide:    # under the others: a pale band around the curve it coincides with
-                    ax.add_collection(LineCollection([xy for xy, _ in wide], zorder=1.9, linewidths=3.6,
-                                                     colors=[(*st["color"][:3], 0.5) for _, st in wide]))
-                ax.add_collection(LineCollection([xy for xy, _ in curves],
-                                                 colors=[st["color"] for _, st in curves],
-                                                 linestyles=[st["ls"] for _, st in curves], linewidths=1.1))
+                    ax.add_line(_Curves([("line", xy[:, 0], xy[:, 1], (*st["color"][:3], 0.5), "-", 3.6)
+                                         for xy, st in wide], capstyle="butt", zorder=1.9))
+                ax.add_line(_Curves([("line", xy[:, 0], xy[:, 1], (*st["color"][:3], 1.0), st["ls"], 1.1)
+                                     for xy, st in curves], capstyle="butt"))
             if i == 0:
                 _title(ax, fam)
             if ax.has_data():
