@@ -1,42 +1,12 @@
 """Engine files: any simulator, in any language, as an rbcheck engine (``--engine-file FILE``).
 
-An engine file is TOML (docs/engines.md)::
-
-    name = "mysim"                 # variants are mysim:VARIANT; [a-z0-9_]+, not a built-in engine's name
-    version = "0.3"                # optional string; recorded in every result and in the cache key
-    description = "..."            # optional
-    timeout = 300                  # optional: seconds one run may take (default DEFAULT_TIMEOUT_S)
-    [variants.euler]
-    order = 1                      # the global order its author claims; verdicts check it
-    precision = "float32"          # optional: the format its steps compute in (default "float64")
-    description = "semi-implicit Euler, exp-map rotation"
-    command = ["./mysim", "{scenario_json}", "{dt}", "{out_csv}"]
-
-Placeholders (anywhere inside an argument; ``{{``/``}}`` are literal braces): ``{scenario_json}`` the
-resolved scenario JSON of this run (:mod:`cross_checks.scenario.resolved`, Δt-specific), ``{dt}`` (s),
-``{steps}``, ``{duration}`` (s), ``{out_csv}``, where the command writes the trajectory CSV (one row
-per step from t = 0, columns by name: ``t,x,y,z,vx,vy,vz,qw,qx,qy,qz,wx,wy,wz``), and ``{engine_dir}``,
-the engine file's folder (absolute). Every path placeholder is absolute. The command must name both
-``{scenario_json}`` and ``{out_csv}``; an argument that names a file of the engine file's folder
-literally (the program, a script: ``./cbody``, ``cbody.py``) is that file, given to the command as an
-absolute path; a bare program name is looked up on PATH.
-
-Each run gets a private temporary directory that rbcheck creates and removes: the JSON, ``{out_csv}``
-and the command's working directory (its scratch space) are in it, so what the command writes there is
-its own and nothing another process writes elsewhere (a log, an editor's swap file, a build) is blamed
-on it. The command runs with stdin closed, in its own process group, under the time limit; when it
-ends, or on time-out, its whole process tree is killed — the group, and any process it started in a new
-session (rbcheck is their subreaper, Linux ``PR_SET_CHILD_SUBREAPER``). Its stdout and stderr are read
-as they come and only their last OUTPUT_TAIL_BYTES kept. A run is ``failed`` (its message carries the
-command's own words: the tail of its stderr, else stdout) when the program cannot be started, times
-out, exits non-zero or by a signal, writes no CSV, a CSV the shared trajectory reader rejects, a CSV
-with more or fewer rows than steps + 1 or times off the Δt grid, or a first row that is not finite. A
-row that becomes non-finite or exceeds BLOWUP_LIMIT after t = 0 is a divergence, reported as "diverged
-at t = …" with the rows before it, as for every other engine.
-
-The cache key of an engine file's results covers the engine file and every file under its folder
-(:func:`folder_fingerprint`: a script's module beside it, a rebuilt program), not only the files its
-commands name.
+An engine file (TOML) names an engine and, per variant, its declared order, optional precision and the
+command that runs one simulation; :func:`load_engine_file` validates it (EngineFileError,
+``FILE: FIELD: REASON``) into an :class:`ExternalEngine`. A run writes the resolved scenario JSON, runs the
+command with its placeholders (:data:`PLACEHOLDERS`) filled in a private temporary directory, kills its
+whole process tree when it ends, and reads the trajectory CSV it wrote: EngineError (with the command's
+own words) when it fails, a ``diverged`` Run when a row after t = 0 is non-finite or beyond BLOWUP_LIMIT.
+The format, the placeholders, how a run goes and what fails it: docs/engines.md, "Engine files".
 """
 from __future__ import annotations
 
@@ -565,8 +535,7 @@ class ExternalEngine(EngineAdapter):
                     raise EngineError(f"{where}: the command wrote no CSV at {{out_csv}} but "
                                       f"{', '.join(elsewhere[:3])} in its working directory (write "
                                       f"the trajectory to the path {{out_csv}} gives){said}")
-            run = _read_output(out_csv, scenario, dt_s, n_steps, where, said)
-            return run
+            return _read_output(out_csv, scenario, dt_s, n_steps, where, said)
         finally:
             shutil.rmtree(run_dir, ignore_errors=True)
 
