@@ -1,28 +1,14 @@
-"""MuJoCo as an engine adapter (``mujoco:VARIANT``); the interface is cross_checks.engines.base.
+"""MuJoCo as an engine adapter (``mujoco:VARIANT``, float64); the interface is cross_checks.engines.base.
 
-Model: one body with a free joint and an explicit inertial (``ipos = 0``, so body origin = COM; a
-full inertia tensor is given as its principal moments plus ``iquat`` = the principal axes in body
-coordinates, so the BODY frame stays the scenario's body frame and ``qpos[3:7]`` is ``q_WB``), no
-geoms, gravity and timestep from the scenario, ``autoreset`` disabled so divergence is seen.
-
-State mapping (docs/engine_conventions.md): ``qpos = [x_W, q_WB (w x y z)]``; ``qvel = [v_W (COM, world),
-ω_B (BODY axes)]``, so ``ω_W = R(q) ω_B``. The state is read from qpos/qvel, never from xpos/xquat
-(those are one step stale after ``mj_step``).
-
-Forces (harness semantics of base.py): the world force at the COM and the world torque of
-``base.harness_force_torque`` minus the weight ``m g`` (MuJoCo applies gravity itself) go into
-``xfrc_applied``. Every step they are evaluated from the start-of-step state and overwritten (MuJoCo
-never clears them). ``mujoco:rk4`` with state-dependent forces or velocity decay evaluates them at
-every RK4 stage from the stage state through MuJoCo's control callback (base.stage_force_torque: the
-decay as the damping force ``−m k_v v`` and torque ``−k_ω I_W ω``), so it keeps its 4th order; the
-callback is process-global, so it is installed only for the duration of a run, under a module lock,
-and the previous one is restored. The Euler-type integrators get the decay ``e^{−kΔt}`` applied to
-qvel before the step, with that step's force and torque scaled alike (base.apply_decay_prestep,
-base.harness_force_torque).
-
-MuJoCo's warnings ("Nan, Inf or huge value in QACC ...") are routed to a handler during a run, so no
-MUJOCO_LOG.TXT is written into the working directory; such a warning counts as divergence at the step
-it was raised in, as does a non-finite state or a component beyond BLOWUP_LIMIT.
+State at the boundary: ``qpos = [x_W, q_WB (w x y z)]``, ``qvel = [v_W (COM), ω_B (BODY axes)]``, so the
+packed state's ``ω_W = R(q) ω_B``; read from qpos/qvel only. Forces: the harness's world force at the COM
+minus the weight ``m g`` (MuJoCo applies gravity) and world torque, written into ``xfrc_applied`` before
+every step from the start-of-step state; ``mujoco:rk4`` with state-dependent forces or decay evaluates them
+at every RK4 stage through MuJoCo's process-global control callback (:class:`Session`); the other
+integrators get the decay before the step (base.apply_decay_prestep). :func:`simulate_many` runs the
+requests through ``mujoco.rollout``. Divergence: the first bad state (reference_sim.simulate.bad_rows) or
+MuJoCo warning ends the run as ``diverged at t = …``; no MUJOCO_LOG.TXT is written.
+Conventions, defaults neutralised and what pins them: docs/engine_conventions.md, "MuJoCo 4.0.0".
 """
 from __future__ import annotations
 
@@ -48,10 +34,7 @@ __all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate", "simulate
            "build_model", "packed_floats", "to_packed", "to_qpos_qvel"]
 
 ENGINE = "mujoco"
-#: The variants, named after MuJoCo's integrators (``mjtIntegrator.mjINT_<NAME>``), with their declared
-#: global orders: Euler is semi-implicit Euler + exp-map quaternion (1); RK4 is classical RK4 with the
-#: forces evaluated at every stage (4); implicit(fast) is velocity-implicit Euler, one linearised solve
-#: per step (1).
+#: The variants, named after MuJoCo's integrators (``mjtIntegrator.mjINT_<NAME>``).
 VARIANTS = {
     "euler": Variant(1, "MuJoCo Euler: semi-implicit Euler, explicit gyroscopic term, quaternion by the "
                         "exponential map",
@@ -79,8 +62,6 @@ _LOCK = threading.RLock()
 #: Evaluate state-dependent forces at every RK4 stage (True) or hold the start-of-step value over the
 #: step like the other variants (False: first order in the force; kept for the tests that show why).
 _RK4_STAGE_FORCES = True
-
-
 
 
 def _require():
@@ -161,16 +142,13 @@ def to_packed(qpos, qvel):
 
 
 def _packed1(qpos, qvel) -> list:
-    """One state: qpos (7,), qvel (6,) -> packed, 13 floats (a list) with ω in WORLD axes (scalar code:
-    this runs inside the per-step loop and the RK4 stage callback, where NumPy's small-array overhead
-    dominates)."""
+    """One state: qpos (7,), qvel (6,) arrays -> :func:`packed_floats`."""
     return packed_floats(qpos.tolist(), qvel.tolist())
 
 
 def packed_floats(qpos, qvel) -> list:
     """One state, qpos (7 floats) and qvel (6 floats, ω in body axes) -> the packed state (13 floats, ω in
-    world axes): :func:`to_packed` for one row in plain floats, for the per-step loops (every world at every
-    step of a run with state-dependent forces, where NumPy's small-array overhead would dominate)."""
+    world axes): :func:`to_packed` of one row in plain floats, for the per-step loops."""
     x0, x1, x2, s, a, b, c = qpos
     v0, v1, v2, p0, p1, p2 = qvel
     # ω_W = R(q) ω_B = ω + s t + u × t with t = 2 u × ω, u = (a, b, c)
@@ -307,11 +285,8 @@ def _divergence(y_rows, first: int, warn_steps: tuple, session, dt_s: float):
 
 
 #: Each thread's last compiled model and its MjData: ``(scenario, build_model, model, data)`` (the scenario
-#: held, so it is matched by identity). A sweep's job runs a scenario twice (its free run, then its one-step
-#: batch), the fuzz runs a scenario's rungs and one-step rungs in a row: the next run of the same scenario
-#: takes that model (~1 ms to compile) with its integrator and step set in place and its MjData reset
-#: (``opt.integrator`` and ``opt.timestep`` are all a variant and a step change in a compiled model: the
-#: same numbers as a fresh compile, tested for every variant).
+#: matched by identity). The next run of the same scenario takes that model, its integrator and step set in
+#: place (the same numbers as a fresh compile, tested for every variant), and its MjData reset.
 _LAST = threading.local()
 
 
@@ -442,14 +417,11 @@ def simulate_many(variant: str, requests) -> list:
     """The runs of ``requests`` (``base.RunRequest``) through ``mujoco.rollout``: each element
     :func:`simulate`'s Run bit for bit (tested), or its EngineError.
 
-    One model is compiled per scenario and set to each request's step in place (:func:`_set_variant`),
-    so a scenario's requests at different steps run in successive rounds; members of a round are grouped
-    by model structure (:func:`_structure`). The harness is :func:`simulate`'s: constant forces evaluated
-    once from the initial state (``harness_force_torque``), state-dependent ones in plain floats from
-    every start-of-step state (``step_floats.harness_fn``), the pre-step decay applied to the velocities
-    between one-step rollouts. RK4 with forces that change within a step (the per-stage callback), and
-    every member of a group that blew up or made MuJoCo warn, run through :func:`simulate` itself (its
-    divergence time and message)."""
+    One model is compiled per scenario and set to each request's step in place (:func:`_set_variant`), so a
+    scenario's requests at different steps run in successive rounds (:func:`_rounds`), grouped by model
+    structure (:func:`_structure`); the harness is :func:`simulate`'s. RK4 with per-stage forces, and every
+    member of a group that blew up or made MuJoCo warn, run through :func:`simulate` itself (its divergence
+    time and message)."""
     out: list = [None] * len(requests)
     models: dict = {}   # id(scenario) -> its compiled model or EngineError (the requests hold the scenarios)
     alone = []
@@ -511,8 +483,7 @@ def _rounds(requests, idx) -> list:
 def _structure(m) -> tuple:
     """What one MjData needs of the models it serves in a rollout besides their sizes: a free body whose
     inertial frame is the body frame is "simple" (diagonal mass-matrix storage), a rotated one is not.
-    Across structures rollout silently produces garbage (measured: the non-simple models blow up in their
-    first step)."""
+    Across structures rollout silently produces wrong states."""
     return tuple(int(v) for v in m.body_simple), tuple(int(v) for v in m.dof_simplenum)
 
 
