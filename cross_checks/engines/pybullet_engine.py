@@ -1,32 +1,15 @@
-"""PyBullet as an engine adapter (``pybullet:VARIANT``); the interface is cross_checks.engines.base.
+"""PyBullet as an engine adapter (``pybullet:VARIANT``, float64); the interface is cross_checks.engines.base.
 
-One ``DIRECT`` connection per process (module-level, created on first use; ``resetSimulation``
-between runs). Every run sets gravity and ``fixedTimeStep`` from the scenario, ``numSubSteps = 0``,
-and creates one body with ``createMultiBody`` (no collision shape, ``useMaximalCoordinates`` False for
-``multibody``, True for ``maximal``), then ``changeDynamics(mass=m, localInertiaDiagonal=moments)``
-with damping zeroed (multibody defaults to 0.04 linear + quadratic), ``maxJointVelocity`` raised
-(multibody clamps every velocity component to ±100 by default) and sleeping disabled.
-
-Body frames (docs/engine_conventions.md): PyBullet takes only a diagonal inertia, and what it reports as the
-base pose is the inertial (principal) frame P. The adapter therefore gives PyBullet the principal
-frame as the body (``baseInertialFrameOrientation`` identity) and rotates at the boundary:
-``q_WP = q_WB ⊗ q_BP`` in, ``q_WB = q_WP ⊗ q_BP⁻¹`` out, with ``R_BP`` from
-``RigidBody.principal_axes()`` (identity, with no rotation at all, when the inertia is diagonal).
-Position and linear velocity are the COM's in world axes, ``getBaseVelocity``'s angular velocity is
-WORLD axes; quaternions are (x, y, z, w) in PyBullet and converted at the boundary.
-
-Forces (harness semantics of base.py): PyBullet clears external forces after every
-``stepSimulation``, so each step applies ``harness_force_torque − m g`` (PyBullet applies gravity
-itself) with ``applyExternalForce`` (WORLD_FRAME, at the COM's world position) and
-``applyExternalTorque`` (WORLD_FRAME), evaluated from the start-of-step state. Velocity decay
-``e^{−kΔt}`` is applied before the step with ``resetBaseVelocity`` (base.apply_decay_prestep), that
-step's force and torque scaled alike.
-
-Maximal-coordinate bodies: ``resetBasePositionAndOrientation`` zeroes their velocity, so the velocity
-is always reset after the pose. PyBullet is reported to use a stale world inertia in the first step after a
-pose reset or ``changeDynamics``; every pose reset is primed with one zero-velocity step at that pose,
-then reset again. (With this adapter's call order no effect of the priming was measurable in 3.2.7 —
-primed and unprimed runs agree bit for bit — it is kept as cheap insurance.)
+One ``DIRECT`` client per process, the world reset between runs; the body is a ``createMultiBody`` without
+collision shape (maximal coordinates for ``maximal``), neutralised (:data:`DYNAMICS_SETTINGS`, sleeping
+disabled). PyBullet takes a diagonal inertia and reports the inertial (principal) frame P as the base pose,
+so the boundary rotates: ``q_WP = q_WB ⊗ q_BP`` in, ``q_WB = q_WP ⊗ q_BP⁻¹`` out (quaternions (x, y, z, w)
+in PyBullet); position and velocity are the COM's, ω in WORLD axes. Forces: before every step (PyBullet
+clears them) the harness's world force at the COM minus the weight ``m g`` and world torque, from the
+start-of-step state; the decay before the step (base.apply_decay_prestep). :func:`simulate_many` runs a
+scenario's requests on one kept body. Divergence: the first bad state (reference_sim.simulate.bad_rows)
+ends the run. Conventions, defaults neutralised and what pins them: docs/engine_conventions.md,
+"PyBullet 3.2.7".
 """
 from __future__ import annotations
 
@@ -48,8 +31,7 @@ __all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate",
            "simulate_many", "one_step", "DYNAMICS_SETTINGS"]
 
 ENGINE = "pybullet"
-#: The variants with their declared global orders: both modes are semi-implicit Euler (explicit
-#: gyroscopic term in multibody, implicit in maximal coordinates): 1.
+#: Both modes are semi-implicit Euler: explicit gyroscopic term in multibody, implicit in maximal coordinates.
 VARIANTS = {
     "multibody": Variant(1,
                          "PyBullet Featherstone multibody (default): "
@@ -61,14 +43,11 @@ VARIANTS = {
                        traits=base.SYMPLECTIC_EULER_IMPLICIT_GYRO),
 }
 
-#: changeDynamics settings every body gets (besides mass and inertia); see the module docstring.
-#: maxJointVelocity far above BLOWUP_LIMIT (1e8): a lower clamp would cap a blow-up (e.g. at 1e6 rad/s)
-#: and hide the divergence from the harness.
+#: changeDynamics settings every body gets (besides mass and inertia): damping zeroed, and maxJointVelocity
+#: far above BLOWUP_LIMIT (1e8) so that no clamp hides a blow-up from the harness.
 DYNAMICS_SETTINGS = {"linearDamping": 0.0, "angularDamping": 0.0, "maxJointVelocity": 1e12}
 
-#: Steps between divergence checks of a free-running simulation (checked vectorised per chunk; a run that
-#: blows up stops at the end of its chunk, its recorded states end before the first bad one whatever the
-#: chunk).
+#: Steps between divergence checks of a free-running simulation (checked vectorised per chunk).
 _CHUNK = 1024
 
 LOCK = threading.RLock()
@@ -76,27 +55,19 @@ _client: int | None = None
 _client_pid: int | None = None
 
 
-
-
 def _require():
     base.require(p, _IMPORT_ERROR, "pybullet")
 
 
 def version() -> str:
-    """The installed pybullet distribution's version (read from its metadata once per process: a lookup
-    costs ~1 ms, and every run records it)."""
+    """The installed pybullet distribution's version (read from its metadata once per process)."""
     _require()
     return _dist_version()
 
 
 @functools.lru_cache(maxsize=1)
 def _dist_version() -> str:
-    from importlib.metadata import PackageNotFoundError
-    from importlib.metadata import version as dist_version
-    try:
-        return dist_version("pybullet")
-    except PackageNotFoundError:  # pragma: no cover - a source build without metadata
-        return "unknown"
+    return base.installed_version("pybullet") or "unknown"
 
 
 def _connect() -> int:
@@ -157,7 +128,9 @@ class BulletBody:
         return [float(v) for v in y[0:3]], _xyzw(q_WP)
 
     def set_state(self, y):
-        """Put the body at packed state ``y`` (13,) (maximal coordinates: primed, see module docstring)."""
+        """Put the body at packed state ``y`` (13,). Maximal coordinates: the pose reset zeroes the velocity,
+        so it is set last, and every pose reset is primed with one zero-velocity step (a stale world inertia
+        reported in the first step after a reset; docs/engine_conventions.md)."""
         c, b = self.c, self.b
         pos, orn = self._pose_in(y)
         p.resetBasePositionAndOrientation(b, pos, orn, physicsClientId=c)
@@ -216,11 +189,9 @@ def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
 
 
 #: The body :func:`simulate_many` and :func:`one_step` last built in this process's world:
-#: ``(pid, scenario, variant, BulletBody.__init__, body)``, the scenario held and matched by identity.
-#: Resetting the world and building a body costs ~1 ms, more than a short run: the next run of the same
-#: scenario and variant keeps that body, its step and gravity set again, and puts it at its start state
-#: (the numbers of a new body in a reset world, tested: runs and one steps of a case at other steps, in
-#: any order).
+#: ``(pid, scenario, variant, BulletBody.__init__, body)``, the scenario matched by identity. The next run of
+#: the same scenario and variant keeps that body, its step and gravity set again, and puts it at its start
+#: state (the numbers of a new body in a reset world, tested).
 _KEPT: list = []
 
 
