@@ -1,47 +1,17 @@
-"""DART (``dartpy``) as an engine adapter (``dart:VARIANT``); the interface is cross_checks.engines.base.
+"""DART (``dartpy``) as an engine adapter (``dart:VARIANT``, float64); the interface is
+cross_checks.engines.base.
 
-Model: one ``dart.simulation.World`` per run holding one ``Skeleton`` made of a single
-``FreeJoint``/``BodyNode`` pair (``Skeleton.createFreeJointAndBodyNodePair``), the body's inertia
-``dart.dynamics.Inertia(m, com_B = 0, I_B)`` — the moment of inertia about the COM in body axes, a full
-tensor taken as it is, so the body frame is the scenario's and body origin = COM — no shape node (nothing
-to collide with), gravity and time step from the scenario (DART's defaults: (0, 0, −9.81) m/s² and 1 ms).
-
-State mapping (docs/engine_conventions.md "DART 6.x", pinned by
-tests/cross_checks/engines/test_dart_engine.py): the FreeJoint's positions are ``[r, x_W]`` with ``r`` the
-ROTATION VECTOR of R_WB (DART's ``FreeJoint::convertToPositions``: ``logMap(R)``, |r| ≤ π) and ``x_W`` the
-body origin; its velocities are ``[ω_W, v_W]``, BOTH IN WORLD AXES (the relative Jacobian of a FreeJoint whose
-parent is the world is ``diag(R_WBᵀ, R_WBᵀ)``, ``FreeJoint::updateRelativeJacobian``;
-``BodyNode.getSpatialVelocity()`` gives the same motion in body axes). The quaternion (w, x, y, z) is
-converted to and from the rotation vector at the boundary only (``quat_log``/``quat_exp``); the recorded
-quaternion is kept sign-continuous from the scenario's initial one (the rotation vector's quaternion has w ≥ 0
-and flips sign where |r| passes π).
-
-The step (DART's ``World::step``, dart/simulation/World.cpp): ``Skeleton::computeForwardDynamics`` (the
-articulated-body algorithm: ``ω̇_W = I_W⁻¹(τ − ω × I_W ω)``, the gyroscopic term DART's own) and
-``integrateVelocities`` (v += Δt v̇ in the generalized coordinates above), then the constraint solver
-(nothing to do: no contact, no joint limit), then ``integratePositions`` (``FreeJoint::integratePositions``:
-``R ← R expMapRot(R_WBᵀ ω_W Δt) = exp(ω_W Δt) R``, ``x += Δt v_W``, with the NEW velocity), then the external
-forces are cleared. That is semi-implicit Euler with an explicit gyroscopic term and an exponential-map
-rotation update — the scheme of ``mujoco:euler`` and ``reference:expmap_gyro``. DART's ``World`` has no other
-integrator (``dart.integration``'s classes are not used by ``World::step`` nor bound in dartpy), so there is
-one variant.
-
-Forces (harness semantics of base.py): DART clears the external wrench after every ``World.step``, so every
-step applies ``harness_force_torque − m g`` (DART applies gravity itself) with
-``BodyNode.setExtForce(f_W, 0, isForceLocal=False, isOffsetLocal=True)`` — a world force at the body origin =
-COM — THEN ``BodyNode.setExtTorque(τ_W, isLocal=False)``: ``setExtForce`` replaces the whole external wrench,
-torque included, so the other order would drop the torque. Forces are evaluated from the start-of-step state.
-Velocity decay ``e^{−kΔt}`` is applied to the joint velocities before the step (base.apply_decay_prestep),
-that step's force and torque scaled alike.
-
-Defaults that are not the scenario's physics, each neutralised explicitly (JOINT_SETTINGS, and the world's
-deactivation): joint damping, spring stiffness and rest positions, Coulomb friction, position limits and
-their enforcement, velocity, acceleration and force limits; the world's deactivation ("sleeping", on by
-default in 6.20); collision (no shape node, the body not collidable). DART 6.20's joints have no armature.
-
-Divergence: DART replaces non-finite accelerations by zero and a non-finite transform by the identity (with a
-warning) instead of stopping, so the state is checked after every step: the first state that is non-finite
-or has a component beyond BLOWUP_LIMIT ends the run as ``diverged at t = …``.
+One ``World`` per run holding one ``FreeJoint``/``BodyNode`` pair, its inertia ``Inertia(m, com_B = 0, I_B)``
+(body origin = COM, the scenario's tensor as given), neutralised (:data:`JOINT_SETTINGS`, :func:`neutralise`).
+State at the boundary: FreeJoint positions ``[r, x_W]`` (``r`` the rotation vector of R_WB) and velocities
+``[ω_W, v_W]``, both in WORLD axes; the recorded quaternion is sign-continuous from the scenario's initial
+one. The step is ``World::step`` (dart/simulation/World.cpp): semi-implicit Euler, explicit gyroscopic term,
+exponential-map rotation — MuJoCo Euler's scheme, DART's only integrator. Forces: before every step (DART
+clears them) the harness's world force at the COM minus the weight ``m g``, then the world torque
+(``setExtForce`` replaces the whole wrench), from the start-of-step state; the decay before the step
+(base.apply_decay_prestep). Divergence: DART goes on after a blow-up, so the state is checked after every
+step and the first bad one (non-finite or beyond BLOWUP_LIMIT) ends the run.
+Conventions, defaults neutralised and what pins them: docs/engine_conventions.md, "DART 6.x".
 """
 from __future__ import annotations
 
@@ -63,11 +33,8 @@ __all__ = ["ENGINE", "VARIANTS", "JOINT_SETTINGS", "EngineError", "version", "si
            ]
 
 ENGINE = "dart"
-#: DART's one integrator (``World::step``; dart::integration::SemiImplicitEulerIntegrator names the scheme):
-#: semi-implicit Euler, first order.
+#: DART's one integrator (``World::step``): semi-implicit Euler, first order.
 VARIANTS = {
-    # ω_W += Δt I_W⁻¹(τ − ω × I_W ω) (explicit gyroscopic term), then R ← exp(ω_W Δt) R and x += Δt v with the
-    # new velocities (dart/dynamics/FreeJoint.cpp): MuJoCo Euler's scheme
     "semi_implicit_euler": Variant(1,
                                    "DART World::step: semi-implicit Euler, explicit "
                                    "gyroscopic term (its own articulated-body dynamics), "
@@ -75,8 +42,8 @@ VARIANTS = {
                                    traits=base.SYMPLECTIC_EULER_EXPLICIT_GYRO),
 }
 
-#: FreeJoint settings every body gets, each DART 6.20's default today (pinned) and set explicitly so that
-#: another release's default cannot change the physics: (dartpy Joint setter, value for each of the 6 DOFs).
+#: FreeJoint settings every body gets, set explicitly so that no release's default changes the physics:
+#: (dartpy Joint setter, value for each of the 6 DOFs).
 JOINT_SETTINGS = (
     ("setDampingCoefficient", 0.0),
     ("setSpringStiffness", 0.0),
