@@ -1,31 +1,14 @@
-"""Drake as an engine adapter (``drake:VARIANT``); the interface is cross_checks.engines.base.
+"""Drake as an engine adapter (``drake:VARIANT``, float64); the interface is cross_checks.engines.base.
 
-Model: a continuous-time ``MultibodyPlant`` (``time_step = 0``) with one free rigid body and nothing
-else (no geometry, no contact). Its spatial inertia is taken about the body origin, which is the COM
-(``SpatialInertia.MakeFromCentralInertia`` with ``p_BoBcm = 0``); a full inertia tensor is given as
-its principal moments re-expressed in body axes through the principal frame (``R_BP``), so the body
-frame stays the scenario's body frame. Gravity is the plant's own uniform gravity field.
-
-State mapping (docs/engine_conventions.md, pinned by tests/cross_checks/engines/test_drake_engine.py):
-``q = [q_WB (w x y z), x_W]`` (7), ``v = [ω_W, v_W]`` (6): angular velocity FIRST, both in WORLD
-axes; generalized forces ``τ = [torque about the COM, force at the COM]`` in world axes. Drake
-integrates the quaternion as four numbers (``q̇ = ½ [0, ω_W] ⊗ q``) and does not renormalise it, so
-its norm drifts (by O(Δt) per unit time for the Euler schemes); the recorded orientation is ``q/|q|``.
-
-Forces: every force of the scenario schema besides gravity goes through the plant's applied
-generalized-force input port. Constant ones (world forces at the COM, world torques) are a fixed
-value; state-dependent ones (springs, drag, forces at body points or in body axes, body torques) and
-the velocity decay come from a LeafSystem that evaluates ``base.stage_force_torque`` on the state it
-is given, so every stage of a multi-stage scheme sees the forces of its own stage state. The decay
-is in the right-hand side for EVERY Drake variant — ``−m k_v v`` at the COM and ``−k_ω I_W ω``
-(k = −ln γ / dt, docs/semantics.md): Drake's integrators integrate one ODE and none applies a factor
-per step, so no variant gets ``e^{−kΔt}`` per step.
-
-Fixed-step runs: one ``Simulator.AdvanceTo(k Δt)`` per step in fixed-step mode (the maximum step is
-``Δt (1 + FIXED_STEP_SLACK)`` so that a target one rounding away from ``Δt`` is one step, never a
-step and a sliver). An exception Drake raises while stepping (e.g. the implicit Euler's Newton
-iteration failing to converge), a non-finite state or a component beyond BLOWUP_LIMIT is reported as
-``diverged at t = …``.
+A continuous ``MultibodyPlant`` with one free body, its spatial inertia about the body origin = COM in body
+axes, gravity the plant's own. State at the boundary: ``q = [q_WB (w x y z), x_W]``, ``v = [ω_W, v_W]``
+(angular first, both in WORLD axes); Drake does not renormalise the quaternion, so the recorded one is
+``q/|q|``. Forces: the applied generalized force ``[τ_W, f_W − m g]``, a fixed value when constant, else a
+LeafSystem evaluating ``base.stage_force_torque`` (the decay as damping in the right-hand side) at every
+derivative evaluation, so every stage of a multi-stage scheme sees its own stage state. A run is one
+``Simulator.AdvanceTo(k Δt)`` per step in fixed-step mode. Divergence: a bad state
+(reference_sim.simulate.bad_rows) or an exception Drake raises while stepping ends the run.
+Conventions and what pins them: docs/engine_conventions.md, "Drake 1.51.1".
 """
 from __future__ import annotations
 
@@ -35,7 +18,7 @@ import numpy as np
 
 from cross_checks.engines import base
 from cross_checks.engines.base import EngineError, ModuleAdapter, Variant, stage_force_torque
-from reference_sim.simulate import BLOWUP_LIMIT, Run
+from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
 
 try:  # the module imports without pydrake so the registry can report why it is unavailable
     import pydrake  # noqa: F401
@@ -66,10 +49,7 @@ VARIANTS = {
                        "iteration, finite-difference Jacobian)"),
 }
 
-#: What each step does besides its order (cross_checks.engines.base.Traits). Semi-explicit Euler: ω_W += Δt
-#: I_W⁻¹(τ − ω_W × I_W ω_W) at the start-of-step attitude — the body-frame explicit Euler step of Euler's
-#: equations seen in world axes — then q from the new ω (and x from the new v: symplectic in translation).
-#: Implicit Euler: one implicit step of the whole state (q, ω_W, x, v_W), like reference:implicit_euler.
+#: What each step does besides its order (cross_checks.engines.base.Traits; docs/engine_conventions.md).
 TRAITS = {"semi_explicit_euler": base.SYMPLECTIC_EULER_EXPLICIT_GYRO,
           "implicit_euler": base.WHOLE_STATE_IMPLICIT_EULER, "runge_kutta2": base.HIGHER_ORDER,
           "runge_kutta3": base.HIGHER_ORDER}
@@ -77,8 +57,7 @@ TRAITS = {"semi_explicit_euler": base.SYMPLECTIC_EULER_EXPLICIT_GYRO,
 #: Steps between divergence checks of a free run.
 _CHUNK = 256
 #: The fixed step's maximum is Δt (1 + FIXED_STEP_SLACK): AdvanceTo(k Δt) from (k − 1) Δt is then one
-#: step even where k Δt − (k − 1) Δt exceeds Δt by a rounding (measured: 8992 steps for 8000 targets
-#: at Δt = 1e-3 with the maximum exactly Δt).
+#: step even where k Δt − (k − 1) Δt exceeds Δt by a rounding.
 FIXED_STEP_SLACK = 1e-9
 #: Accuracy asked of the implicit Euler's Newton iteration (Drake uses the target accuracy to stop it
 #: in fixed-step mode too): far below the scheme's own O(Δt²) local error at every Δt of the catalog.
@@ -93,12 +72,7 @@ def _require():
 
 def version() -> str:
     _require()
-    from importlib.metadata import PackageNotFoundError
-    from importlib.metadata import version as dist_version
-    try:
-        return dist_version("drake")
-    except PackageNotFoundError:  # a pydrake built from source
-        return getattr(pydrake, "__version__", "unknown")
+    return base.installed_version("drake") or getattr(pydrake, "__version__", "unknown")   # from source
 
 
 # --- state conversion --------------------------------------------------------------------------------
@@ -214,11 +188,6 @@ class DrakeModel:
         return from_drake_state(self.drake_state())
 
 
-def _bad_rows(y):
-    with np.errstate(invalid="ignore"):
-        return ~np.all(np.isfinite(y), axis=-1) | (np.max(np.abs(y), axis=-1) > BLOWUP_LIMIT)
-
-
 def _model(scenario, variant: str, dt_s: float) -> DrakeModel:
     base.check_variant(ENGINE, VARIANTS, variant)
     model = DrakeModel(scenario, VARIANTS[variant][0])
@@ -229,16 +198,15 @@ def _model(scenario, variant: str, dt_s: float) -> DrakeModel:
 def _first_bad(x_out, start: int, stop: int):
     """``(step, reason)`` of the first recorded row in ``[start, stop)`` that is non-finite or beyond
     BLOWUP_LIMIT, else None."""
-    bad = _bad_rows(from_drake_state(x_out[start:stop]))
+    bad = bad_rows(from_drake_state(x_out[start:stop]))
     if not bad.any():
         return None
     n = start + int(np.argmax(bad))
-    return n, (f"state beyond {BLOWUP_LIMIT:g}" if np.all(np.isfinite(x_out[n])) else "non-finite state")
+    return n, blowup_words(x_out[n])
 
 
 def _diverged(x_out, dt_s: float, n_bad: int, what: str) -> Run:
-    return Run(dt_s * np.arange(n_bad), from_drake_state(x_out[:n_bad]), n_bad * dt_s,
-               f"diverged at t = {n_bad * dt_s:.6g} s ({what})")
+    return diverged(from_drake_state(x_out[:n_bad]), dt_s, f" ({what})")
 
 
 def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
@@ -291,11 +259,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
 
 
 class DrakeAdapter(ModuleAdapter):
-    """``drake:VARIANT`` — registered under the entry-point group ``rbcheck.engines``.
-
-    Declared orders: semi-explicit Euler and implicit Euler are first order; Drake's RK2 and RK3 are
-    second and third order, with the forces (and the decay) evaluated at every stage.
-    """
+    """``drake:VARIANT`` — registered under the entry-point group ``rbcheck.engines``."""
 
     name = ENGINE
     variants = {v: Variant(float(order), desc, traits=TRAITS[v]) for v, (_, order, desc) in VARIANTS.items()}

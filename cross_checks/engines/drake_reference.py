@@ -14,8 +14,7 @@ from cross_checks.engines.drake_engine import DrakeModel, version
 
 __all__ = ["INTEGRATOR", "drake_solution", "drake_label", "version"]
 
-#: Drake's error-controlled integrator of the second reference (5th order: ~10× fewer steps than
-#: runge_kutta3 at a target accuracy of 1e-12, measured on tennis_racket).
+#: Drake's error-controlled integrator of the second reference (Dormand–Prince 5(4)).
 INTEGRATOR = "runge_kutta5"
 
 
