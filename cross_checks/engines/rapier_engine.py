@@ -1,55 +1,19 @@
-"""Rapier (``rapier3d``, the official Python bindings of dimforge's Rust engine, 3D, float32) as an engine
-adapter (``rapier:VARIANT``); the interface is cross_checks.engines.base.
+"""Rapier (``rapier3d``, dimforge's Python bindings, 3D, float32) as an engine adapter (``rapier:VARIANT``);
+the interface is cross_checks.engines.base.
 
-Model: one ``rapier3d.PhysicsWorld`` per group of runs (same Δt and gravity) holding one dynamic
-``RigidBody`` per run, with no collider (nothing to collide with, no ground, and no mass from a shape): the
-body's mass properties are ``additional_mass_properties(MassProperties(local_com = 0, mass, principal
-moments, principal frame))`` — the COM at the body origin, so the body frame is the scenario's; a full tensor
-is given as its principal moments and the rotation ``R_BP`` of its principal axes (identity for a diagonal
-tensor). Rapier takes the mass into account at the first step (before it, ``RigidBody.mass`` reads 0).
-
-State mapping (docs/engine_conventions.md "Rapier 0.36.1", pinned by
-tests/cross_checks/engines/test_rapier_engine.py): ``RigidBody.translation`` is the body origin = COM (world),
-``linvel`` the COM's velocity (world), ``angvel`` the angular velocity IN WORLD AXES, ``rotation`` a
-``Rotation3`` whose constructor is ``(w, x, y, z)`` but whose ``to_tuple()`` and ``quaternion`` are
-``(x, y, z, w)``. The quaternion is converted at the boundary only; the recorded one is kept sign-continuous
-from the scenario's initial one. Every number is stored in float32 by the engine: the recorded states are
-float32 values (the first row is the scenario's initial state as given).
-
-The step (rapier src/dynamics/solver/staged_island_solver/worker.rs, with ``num_solver_iterations = 1``: one
-substep): the force increment ``v += Δt f/m`` (f = user force + m g), ``ω += Δt I_W⁻¹ τ`` (I_W at the
-start-of-step attitude), then — gyroscopic forces enabled — ``gyroscopic_corrected_angvel``
-(src/dynamics/rigid_body.rs): in the principal frame at the start-of-step attitude, ``L = I ω``,
-``L' = L − Δt ω × L`` (explicit Euler of Euler's equations) rescaled to ``|L|`` ("ensure angular momentum is
-preserved (similar to Jolt)"), ``ω = I⁻¹ L'``; then ``integrate_linearized``
-(src/dynamics/rigid_body_components.rs): ``x += Δt v``, ``q ← normalize((1, ½Δt ω_W) ⊗ q)`` with the NEW
-velocities; then ``apply_damping`` (``v/(1 + Δt c)``, c = 0 here). Semi-implicit ("symplectic", Rapier's
-docstring of ``integrate_forces_and_velocities``) Euler, first order: an explicit gyroscopic step whose |L|
-is kept and whose energy drifts at second order per step, towards the intermediate-axis separatrix (up
-near the major axis, down near the minor one) — a step to a neighbouring motion, not a time rescaling.
-
-Forces (harness semantics of base.py): ``add_force`` (a world force at the COM) and ``add_torque`` (world
-axes) ACCUMULATE into user forces that Rapier keeps from step to step until ``reset_forces``/
-``reset_torques``: constant forces are added once, state-dependent ones reset and added before every step
-from the start-of-step state. Rapier applies gravity itself (``PhysicsWorld(gravity=...)``, default 0), so the
-harness force minus the weight ``m g`` is added. Velocity decay ``e^{−kΔt}`` is applied to ``linvel`` and
-``angvel`` before each step (base.apply_decay_prestep), that step's force and torque scaled alike.
-
-Defaults that are not the scenario's physics, each neutralised explicitly (:data:`WORLD_SETTINGS`,
-:data:`BODY_SETTINGS`): 4 solver iterations per step, each a SUBSTEP of Δt/4 (set 1); a linear speed cap of
-400 m/s (lifted); an angular speed cap of π/4 rad per step (``allow_fast_rotation``); sleeping after 0.5 s
-below 0.05 m/s (``can_sleep(False)``); damping 0 and gravity scale 1 (set); CCD; extra per-body solver
-iterations (0); a rayon thread pool of every core (one thread per world: the machine is shared, and the
-sweep runs its own workers).
-
-Divergence: Rapier "quarantines" a body whose state becomes non-finite (rolls it back to its last valid pose,
-zeroes its velocities and disables it) instead of stopping; the state is checked after every step: the first
-state that is non-finite, beyond BLOWUP_LIMIT, or quarantined ends the run as ``diverged at t = …``.
-
-Batching: ``simulate_many`` runs the requests that share Δt and gravity as bodies of ONE world (bodies without
-colliders never interact; each body's run is the run it has alone, bit for bit), ``one_step`` its T start
-states as T bodies stepped once. Rapier is ahead-of-time compiled Rust: nothing is compiled or cached at run
-time (:func:`timings` keeps the world builds apart from the stepping).
+One ``PhysicsWorld`` per group of runs (same Δt and gravity), one dynamic ``RigidBody`` per run, no
+collider; mass properties ``MassProperties(local_com = 0, mass, principal moments, principal frame R_BP)``,
+so body origin = COM and the body frame is the scenario's; defaults neutralised (:data:`WORLD_SETTINGS`,
+:data:`BODY_SETTINGS`, one thread per world). State at the boundary: ``translation`` and ``linvel`` the
+COM's (world), ``angvel`` in WORLD axes, ``Rotation3`` built (w, x, y, z) but read (x, y, z, w); the recorded
+states are float32 values, the quaternion sign-continuous from the scenario's. The step (rapier
+src/dynamics/solver/staged_island_solver/worker.rs, one substep): semi-implicit Euler whose explicit
+gyroscopic step is rescaled to keep |L| (``gyroscopic_corrected_angvel``), first order. Forces: the user
+force (world, at the COM) and torque (world) ACCUMULATE until reset: the harness's force minus the weight
+``m g`` and torque, replaced before every step when state-dependent; the decay before the step
+(base.apply_decay_prestep). Divergence: a bad state (non-finite, beyond BLOWUP_LIMIT) or a body Rapier
+quarantined ends that run. Nothing is compiled at run time (:func:`timings`).
+Conventions, defaults neutralised and what pins them: docs/engine_conventions.md, "Rapier 0.36.1".
 """
 from __future__ import annotations
 
@@ -75,17 +39,15 @@ __all__ = ["ENGINE", "DIST", "VARIANTS", "WORLD_SETTINGS", "BODY_SETTINGS", "Eng
 ENGINE = "rapier"
 DIST = "rapier3d"
 
-#: Rapier's rotation step (docs above): |L| kept exactly, the energy moved at O(Δt²) per step in a direction
-#: that depends on the motion (towards the separatrix): a drift to a neighbouring motion, either sign.
+#: Rapier's rotation step: |L| kept exactly, the energy drifting towards the separatrix (either sign).
 _GYRO_TRAITS = Traits(gyroscopic_term=True, translation_drift=0, rotation_drift="momentum",
                       rotation_sign=None, precision="float32")
 #: Without gyroscopic forces ω_W changes only by the torque: ω constant without one.
 _NO_GYRO_TRAITS = Traits(gyroscopic_term=False, translation_drift=0, rotation_drift="none", rotation_sign=0,
                          precision="float32")
 
-#: Rapier's one integrator, with its gyroscopic forces on (Rapier's default, first) and off.
-#: Order 1: Rapier documents its step as symplectic Euler (rigid_body_components.rs,
-#: ``integrate_forces_and_velocities``: "This uses a symplectic Euler integration scheme").
+#: Rapier's one integrator (symplectic Euler: rigid_body_components.rs, ``integrate_forces_and_velocities``),
+#: with its gyroscopic forces on (Rapier's default, first) and off.
 VARIANTS = {
     "symplectic_euler": Variant(1, "Rapier's step (gyroscopic forces on, its default): semi-implicit Euler "
                                    "in float32, explicit gyroscopic step in the principal frame rescaled to "
@@ -149,7 +111,6 @@ def version() -> str:
 @functools.lru_cache(maxsize=1)
 def _dist_version() -> str:
     return base.installed_version(DIST) or "unknown"
-
 
 
 def _mass_properties(body):
