@@ -1,72 +1,21 @@
-"""NVIDIA PhysX 5 (CPU, through SAPIEN's ``sapien.physx``) as an engine adapter (``physx:VARIANT``); the
-interface is cross_checks.engines.base.
+"""NVIDIA PhysX 5 (CPU, through SAPIEN's ``sapien.physx``) as an engine adapter (``physx:VARIANT``, float32);
+the interface is cross_checks.engines.base.
 
-Model: one ``sapien.Scene`` holding one ``PhysxCpuSystem`` (PhysX 5.3.1 as SAPIEN 3.0.3 bundles it, CPU,
-single precision, ``cpuWorkers = 0``: PhysX runs on the calling thread, no worker thread exists to survive
-a fork), the scenario's gravity in the scene config (``px.set_scene_config`` before the system is made:
-SAPIEN reads it then), the solver chosen there (``PhysxSceneConfig.enable_tgs``: TGS or PGS), the run's Δt by
-``set_timestep`` (PhysX keeps it in float32). The body is one entity with one ``PhysxRigidDynamicComponent``
-and no collision shape (nothing to collide with, no ground): ``set_mass``; ``set_inertia`` takes the
-PRINCIPAL moments and ``set_cmass_local_pose`` the principal axes (PhysX's mass frame), so a full tensor is
-diagonalised at the boundary (``RigidBody.principal_axes``: ``I_B = R_BP diag(λ) R_BPᵀ``, the COM at the body
-origin, the mass frame's rotation R_BP); the actor frame stays the scenario's body frame.
-
-State mapping (docs/engine_conventions.md, "PhysX 5.3.1 (SAPIEN 3.0.3)", pinned by
-tests/cross_checks/engines/test_physx_engine.py): ``pose`` is the actor (body) frame, ``Pose(p, q)`` with q
-(w, x, y, z); ``linear_velocity`` is the COM's and ``angular_velocity`` is in WORLD axes.
-``PhysxCpuSystem.pack()`` gives every body's ``[q (w x y z), p, v, ω]`` (13 float32) in one call: the adapter
-reads the whole scene's state that way after each step. The recorded quaternion is kept sign-continuous from
-the scenario's initial one.
-
-The step (PhysX 5.3.1, physx/source/simulationcontroller/src/ScBodySim.cpp ``BodySim::updateForces``, then
-lowleveldynamics/src/DyBodyCoreIntegrator.h ``bodyCoreComputeUnconstrainedVelocity`` and ``integrateCore``
-(PGS) or DyTGSDynamics.cpp ``integrateCoreStep`` (TGS), with DyRigidBodyToSolverBody.cpp
-``copyToSolverBodyData`` / DyTGSDynamics.cpp ``copyToSolverBodyDataStep`` between them):
-
-1. the applied force and torque as velocity changes, ``v += Δt F/m``, ``ω += Δt I_W⁻¹ τ`` (I_W at the
-   start-of-step attitude), then cleared;
-2. gravity ``v += Δt g``, PhysX's own damping ``v ← (1 − c Δt) v`` (neutralised: c = 0), its velocity clamps
-   (neutralised);
-3. the gyroscopic term (``PxRigidBodyFlag::eENABLE_GYROSCOPIC_FORCES``, which SAPIEN sets on every rigid
-   dynamic and does not expose): in the principal frame at the start attitude ``L = I ω_B``,
-   ``L' = L − Δt ω_B × L``, then ``L'`` rescaled to ``|L|`` (the momentum's magnitude kept exactly),
-   ``ω ← R I⁻¹ L'``: an explicit body-frame Euler step of Euler's equations, renormalised;
-4. ``x += Δt v`` and ``q ← normalise(exp(ω_W Δt) ⊗ q)`` (PhysX's "closed form quaternion integrator") with the
-   NEW velocities.
-
-That is semi-implicit (symplectic) Euler with an explicit, momentum-normalised gyroscopic term and an
-exponential-map rotation update: first order. With no contact and no joint the solver has no constraint
-row: PGS integrates once, and TGS (which would split a step into ``solver_position_iterations`` substeps when
-it has constraints) also integrates once with the whole Δt (``iterativeSolveIsland``,
-``numContactConstraintBatches == 0``) — pinned: 1 and 50 iterations give the same bits. The two solvers differ
-in their arithmetic: TGS keeps the angular velocity in "sqrt-inertia" space (``sqrtInertia_W ω``) and turns it
-back with ``sqrtInvInertia_W``, both built in float32 from the start attitude every step: ω comes back
-multiplied by 1 + 3–10 ε₃₂ per step, depending on the attitude (measured: +1.19e-6 relative in one step,
-independent of Δt; 3e-7 per step averaged over a spin), where PGS keeps it.
-
-Forces (harness semantics of base.py): every step ``harness_force_torque − m g`` (PhysX applies gravity
-itself) and the world torque through the engine's ``add_force_torque`` (PhysX clears them after every
-step: pinned), evaluated from the start-of-step state; velocity decay ``e^{−kΔt}`` applied to the velocities
-before the step (base.apply_decay_prestep), that step's force and torque scaled alike.
-
-Defaults that are not the scenario's physics, each set explicitly (``BODY_SETTINGS``) and pinned: angular
-damping (0.05 by default), linear damping, maximum angular velocity (100 rad/s by default: a clamp),
-maximum linear velocity, maximum depenetration velocity and contact impulse (no contact), sleep threshold
-(0.005 by default: a slow body falls asleep, i.e. stops; 0 never sleeps), solver iterations (1 position
-substep, 1 velocity iteration: no constraint, no effect), no locked axis, not kinematic, gravity not
-disabled, automatic mass from shapes off (``set_mass`` turns it off). Contact: no collision shape, no ground.
-
-Batching: runs of one variant with the same float32 Δt and gravity share one scene (bodies without shapes
-never interact; each is its own island), stepped together and read with one ``pack()`` per step:
-``simulate_many``. ``one_step`` puts every start state in one scene and steps once.
-
-Compile time: PhysX's CPU pipeline compiles nothing (no kernel, no JIT: SAPIEN's only download is the GPU
-library, not used here), so ``kernel_cache_dir("physx")`` stays empty; what a run costs before its first step
-(making the scene and the bodies) is measured apart from the stepping: :func:`compile_stats`.
-
-Divergence: PhysX neither warns nor stops on a blow-up (float32 overflows to inf, then NaN); the state is
-checked after every step, and the first non-finite or > BLOWUP_LIMIT state ends that run as
-``diverged at t = …`` (its body is then parked at rest so that PhysX never steps a NaN).
+One ``sapien.Scene`` with one ``PhysxCpuSystem`` (PhysX 5.3.1 as SAPIEN 3.0.3 bundles it, on the calling
+thread) per variant, float32 Δt and gravity; one ``PhysxRigidDynamicComponent`` per run, no collision shape,
+the full tensor given as principal moments and mass frame R_BP (the actor frame stays the scenario's body
+frame), neutralised (:data:`BODY_SETTINGS`). State at the boundary: the actor pose ``Pose(p, q (w x y z))``,
+the COM's linear velocity, ω in WORLD axes; the whole scene read with one ``pack()`` per step
+(:data:`PACK_TO_PACKED`), the recorded quaternion sign-continuous from the scenario's. The step (PhysX's
+``BodySim::updateForces``, ``bodyCoreComputeUnconstrainedVelocity``, ``integrateCore``/``integrateCoreStep``):
+semi-implicit Euler with an explicit gyroscopic step rescaled to keep |L| and an exponential-map attitude,
+first order; TGS keeps ω in sqrt-inertia space. Forces: before every step (PhysX clears them) the
+harness's world force at the COM minus the weight ``m g`` and world torque, from the start-of-step state;
+the decay before the step (base.apply_decay_prestep). :func:`simulate_many` steps the runs of one scene
+together; nothing is compiled (:func:`compile_stats`). Divergence: the first non-finite or > BLOWUP_LIMIT
+state ends that run, its body parked at rest so that PhysX never steps a NaN.
+Conventions, defaults neutralised and what pins them: docs/engine_conventions.md,
+"PhysX 5.3.1 (SAPIEN 3.0.3)".
 """
 from __future__ import annotations
 
@@ -93,18 +42,12 @@ ENGINE = "physx"
 _DIST = "sapien"
 _HINT = "pip install 'rbcheck[physx]'"
 
-#: PhysX's rigid-body step (module docstring): semi-implicit Euler, the gyroscopic term an explicit body-frame
-#: step renormalised to |L|, the attitude by the exponential map of the new ω_W; float32 throughout.
-#: rotation_drift "momentum": the renormalisation keeps |L| exactly while the rotational energy drifts at
-#: first order (measured: +6.5 % on symmetric_top, −10 % on tumbling_box at their coarsest Δt, halving with
-#: Δt), so the body moves to a neighbouring motion (docs/verdicts.md §3), not a time rescaling of the same one
-#: ("body": energy and |L|² together); its sign depends on the motion (both seen): rotation_sign None.
+#: PhysX's rigid-body step: the renormalisation keeps |L| exactly while the rotational energy drifts at first
+#: order, either sign (docs/verdicts.md §3).
 _TRAITS = Traits(gyroscopic_term=True, translation_drift=0, rotation_drift="momentum", rotation_sign=None,
                  precision="float32")
-#: TGS keeps ω in √I space and converts it back with two float32 3×3 products built from the attitude every
-#: step: measured 21–33 u of |ω| in one step on spins about a principal axis (where the exact step changes
-#: nothing), PGS 1.4 u (test_tgs_rounds_omega_more_than_an_ordinary_step_and_within_its_declared_factor).
-#: Four ordinary steps' rounding (64 u in one step, against CHECK_ROUNDINGS_PER_STEP = 16 u) covers it.
+#: TGS keeps ω in √I space and converts it back with two float32 3×3 products every step: four ordinary
+#: steps' rounding (docs/verdicts.md, ``rounding_factor``).
 _TGS_TRAITS = dataclasses.replace(_TRAITS, rounding_factor=4.0)
 VARIANTS = {
     # sapien's default solver (PhysxSceneConfig.enable_tgs = True)
@@ -116,9 +59,7 @@ VARIANTS = {
                    traits=_TRAITS),
 }
 
-#: Rigid-dynamic settings every body gets, each set explicitly: (sapien setter, value). PhysX/SAPIEN defaults
-#: in tests/cross_checks/engines/test_physx_engine.py (angular damping 0.05, max angular velocity 100 rad/s,
-#: sleep threshold 0.005, solver iterations 10/1, ...).
+#: Rigid-dynamic settings every body gets, each set explicitly: (sapien setter, value).
 BODY_SETTINGS = (
     ("set_linear_damping", 0.0),
     ("set_angular_damping", 0.0),
@@ -298,7 +239,6 @@ def neutralise(c) -> None:
     """Every setting of BODY_SETTINGS on the rigid dynamic ``c``, whatever it was."""
     for setter, value in BODY_SETTINGS:
         getattr(c, setter)(value)
-
 
 
 def _packed_row(r) -> list:
