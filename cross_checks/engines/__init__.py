@@ -309,8 +309,7 @@ def declared_variant(name: str):
 
 def declared_order(name: str) -> float | None:
     """The order an engine declares for ``ENGINE:VARIANT`` (None when unknown)."""
-    spec = declared_variant(name)
-    return spec.order if spec is not None else None
+    return getattr(declared_variant(name), "order", None)
 
 
 def declared_traits(name: str):

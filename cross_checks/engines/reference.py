@@ -28,8 +28,8 @@ TRAITS = {
     # body-frame implicit Euler step of Euler's equations, linearised; energy and |L|² decay together
     "implicit_gyro_body": B.SYMPLECTIC_EULER_IMPLICIT_GYRO,
     "implicit_gyro_world": B.SYMPLECTIC_EULER_IMPLICIT_GYRO,
-    # Bullet's explicit one: expmap_gyro wherever its clamp does not act (nowhere on the catalog); where it
-    # acts (found by rbcheck fuzz: a fast spin of a large body) it solves another equation
+    # Bullet's explicit one: expmap_gyro wherever its clamp does not act; where it acts (a fast spin of a
+    # large body) it solves another equation
     "explicit_gyro_clamped": dataclasses.replace(B.SYMPLECTIC_EULER_EXPLICIT_GYRO,
                                                  gyroscopic_clamp_N_m=BULLET_MAX_GYROSCOPIC_TORQUE),
     # Jolt's: |L| kept exactly, the energy drifts by O(Δt²) per step towards L²/2I₂ (up from a spin about the

@@ -1,11 +1,9 @@
-"""Plain-float pieces of the engine adapters' per-step loops (MuJoCo, PyBullet): the same numbers, bit for
-bit, as the NumPy functions they stand for, without building tiny arrays every step.
+"""Plain-float pieces of the engine adapters' per-step loops: the same numbers, bit for bit, as the NumPy
+functions they stand for, without building tiny arrays every step.
 
-A step of a free body costs MuJoCo or PyBullet 1–4 µs; a NumPy call on a 3- or 4-vector costs ~1 µs, so an
-adapter whose loop builds a handful of small arrays per step spends most of its time in NumPy. These
-functions take and return Python floats; each says which function it reproduces and in which order it
-does the arithmetic (IEEE 754 results depend on it), and tests/cross_checks/engines/test_step_floats.py
-compares them with that function bit for bit.
+Each takes and returns Python floats and says which function it reproduces and in which order it does the
+arithmetic (IEEE 754 results depend on it); tests/cross_checks/engines/test_step_floats.py compares them
+with that function bit for bit.
 """
 from __future__ import annotations
 
