@@ -1,59 +1,21 @@
-"""Genesis (``genesis-world``) as an engine adapter (``genesis:VARIANT``); the interface is
+"""Genesis (``genesis-world``) as an engine adapter (``genesis:VARIANT``, CPU, float64); the interface is
 cross_checks.engines.base.
 
-Model: one scene per (variant, Δt, body, gravity, number of environments) holding one MJCF body
-(``gs.morphs.MJCF``, the XML given inline) with a free joint and an explicit inertial: ``pos = 0`` (body
-origin = COM) and ``fullinertia`` = the scenario's tensor in BODY axes, so the body frame is the scenario's.
-Genesis parses MJCF through MuJoCo's compiler (genesis/utils/mjcf.py), so the compiler options that would
-alter a body are set in the XML (``alignfree``, ``inertiafromgeom``, ``balanceinertia``, ``boundmass``,
-``boundinertia``), and the morph is loaded with ``align=False`` (Genesis's default moves a lone free body's
-frame onto its principal axes, genesis/engine/entities/rigid_entity/description.py ``_align_free_roots``) and
-``default_armature=0`` (its default, 0.1 kg m², goes to revolute and prismatic joints only in 1.4.5; set all
-the same). No geom, no ground plane, collision off. The scene: ``SimOptions(dt, substeps=1, gravity)``,
-``RigidOptions(integrator, enable_collision=False, enable_joint_limit=False, use_hibernation=False,
-disable_constraint=True)``, CPU backend, float64 (``gs.init(backend=gs.cpu, precision="64")``, process-global:
-see :func:`genesis`).
-
-State mapping (docs/engine_conventions.md "Genesis 1.4.5", pinned by tests/cross_checks/engines/
-test_genesis_engine.py): ``qpos = [x_W, q_WB (w x y z)]``; the free joint's DOF velocity is ``[v_W, ω_B]``
-(linear in world axes, angular in BODY axes, as MuJoCo's qvel); ``entity.get_ang()`` is ω in world axes,
-``get_quat()`` the quaternion (w, x, y, z). Converted at the boundary only (:func:`to_qpos_vel`,
-:func:`to_packed`).
-
-The step (genesis/engine/solvers/rigid/abd/forward_dynamics.py, ``func_integrate``): forward dynamics gives
-``acc = M⁻¹(applied + external − bias)``, the bias holding the gyroscopic term at the start-of-step state.
-``euler``: ``vel += Δt acc``, then ``x += Δt v_new`` and ``q ← q ⊗ exp(Δt ω_B,new)`` — semi-implicit Euler
-with an explicit gyroscopic term and the exponential map: MuJoCo Euler's scheme. ``implicitfast`` and
-``approximate_implicitfast``: a lone free body (``func_midpoint_eligible``: a 6-DOF free root, unconstrained)
-has its ANGULAR velocity advanced by the IMPLICIT MIDPOINT rule ``I (ω₁ − ω₀)/Δt = τ − ω̄ × I ω̄`` with ``ω̄ =
-(ω₀ + ω₁)/2`` (Newton iteration to 1e-13 relative, ``func_midpoint_free_body``), the attitude by ``q ⊗ exp(Δt
-ω̄)``; a body whose COM is at the joint origin (ours) keeps the standard translation update ``v += Δt a``, ``x
-+= Δt v_new`` (``func_midpoint_is_aligned``). So the rotation is second order and keeps the kinetic energy and
-|L|² of torque-free tumbling; the translation is semi-implicit Euler (first order wherever a force acts):
-declared order 1, traits below.
-
-Forces (harness semantics of base.py): Genesis clears the external wrench after every step (genesis/engine/
-simulator.py, ``clear_external_force``), so every step applies ``harness_force_torque − m g`` (Genesis applies
-gravity itself) with ``rigid_solver.apply_links_external_wrench(force, torque, ref=link_COM, local=False)``: a
-world force at the COM and a world torque (a free run writes the same accumulators directly:
-:meth:`GenesisBody.apply_fast`, the same step bit for bit). Forces are evaluated from the start-of-step state
-and held over the step (the engine takes one wrench per step). Velocity decay ``e^{−kΔt}`` is applied to the
-DOF velocities before the step (base.apply_decay_prestep), that step's force and torque scaled alike.
-
-Defaults that are not the scenario's physics, each neutralised (:data:`NEUTRAL_DOFS`, :func:`scene_options`):
-armature, joint damping, stiffness, frictionloss (none in the XML; pinned), joint limits (a free joint's are
-±∞; ``enable_joint_limit`` off), collision and the ground (no geom, ``enable_collision`` off), hibernation
-(sleeping; off by default, set off), substeps (1), the frame alignment (``align=False``).
-
-Divergence: Genesis raises (``check_errno``, "Invalid accelerations causing 'nan'") on a NaN it detects, and
-lets a huge state run on; both end the run as ``diverged at t = …`` (the engine's words in the message), the
-state checked after every step (non-finite or beyond BLOWUP_LIMIT).
-
-Processes: importing this module does not import Genesis (it imports torch and its kernel compiler, ~8 s);
-:func:`version` reads the distribution's metadata and finds the packages without importing them, so the
-sweep's parent never initialises Genesis before forking its workers. The first run in a process imports and
-initialises it (:func:`genesis`) and compiles or loads the rigid solver's kernels (20–60 s cold; cached on
-disk in :func:`kernel_cache_dir`); :data:`BUILD_SECONDS` records every scene build's wall time."""
+One scene per (variant, Δt, body, gravity, number of environments) holding one MJCF body (:func:`mjcf_text`:
+a free joint, ``pos = 0`` so body origin = COM, ``fullinertia`` the scenario's tensor in BODY axes), loaded
+with ``align=False`` and neutralised (:data:`NEUTRAL_DOFS`, :func:`scene_options`). State at the boundary:
+``qpos = [x_W, q_WB (w x y z)]``, DOF velocity ``[v_W, ω_B]`` (ω in BODY axes). The step
+(genesis/engine/solvers/rigid/abd/forward_dynamics.py ``func_integrate``): ``euler`` is MuJoCo Euler's
+scheme; ``implicitfast`` and ``approximate_implicitfast`` advance a lone free body's rotation by the
+implicit midpoint rule and its translation by semi-implicit Euler. Forces: before every step (Genesis clears
+them) the harness's world force at the COM minus the weight ``m g`` and world torque, from the start-of-step
+state; the decay before the step (base.apply_decay_prestep). :func:`simulate_many` and :func:`one_step` run
+batches as the environments of one scene. Divergence: a bad state (non-finite, beyond BLOWUP_LIMIT) or a
+NaN Genesis raises on ends the run. Importing this module or asking :func:`version` imports no Genesis; the
+first run of a process initialises it (:func:`genesis`) and compiles or loads its kernels
+(:func:`kernel_cache_dir`, :data:`BUILD_SECONDS`).
+Conventions, defaults neutralised and what pins them: docs/engine_conventions.md, "Genesis 1.4.5".
+"""
 
 from __future__ import annotations
 
@@ -102,32 +64,24 @@ ENGINE = "genesis"
 DIST = "genesis-world"
 
 #: The implicit variants on a lone free body: the rotation by the implicit midpoint rule (keeps the kinetic
-#: energy and |L|² of torque-free tumbling: no rotation drift, second order), the translation by semi-implicit
-#: Euler (keeps an oscillator's amplitude); forces held over the step (one stage).
+#: energy and |L|² of torque-free tumbling), the translation by semi-implicit Euler.
 _MIDPOINT_ROTATION = Traits(translation_drift=0, rotation_drift="none", rotation_sign=0)
 
-#: The variants, named after ``gs.integrator``, Genesis's default (RigidOptions.integrator) first; orders from
-#: Genesis's RigidOptions documentation ("'Euler' and 'implicitfast' are consistent with their Mujoco
-#: counterpart") and its step (genesis/engine/solvers/rigid/abd/forward_dynamics.py ``func_integrate``), read
-#: for 1.4.5: every one is first order in the translation.
+#: The variants, named after ``gs.integrator``, Genesis's default first; every one first order in the
+#: translation.
 VARIANTS = {
-    # the same free-body path (the approximation concerns the mass-matrix solve with damping, zero here)
     "approximate_implicitfast": Variant(
         1,
         "Genesis approximate_implicitfast (its default): on a lone free body "
         "implicitfast's midpoint rotation and semi-implicit Euler translation",
         traits=_MIDPOINT_ROTATION,
     ),
-    # vel += Δt M⁻¹(f − bias) (explicit gyroscopic term), then x += Δt v_new, q ← q ⊗ exp(Δt ω_B,new): MuJoCo
-    # Euler
     "euler": Variant(
         1,
         "Genesis Euler: semi-implicit Euler, explicit gyroscopic term, quaternion by the "
         "exponential map (MuJoCo Euler's scheme)",
         traits=base.SYMPLECTIC_EULER_EXPLICIT_GYRO,
     ),
-    # func_midpoint_free_body: ω by the implicit midpoint rule (Newton), q ← q ⊗ exp(Δt ω̄); v += Δt a, x +=
-    # Δt v_new
     "implicitfast": Variant(
         1,
         "Genesis implicitfast: on a lone free body the rotation by the implicit midpoint "
@@ -148,7 +102,7 @@ _INTEGRATORS = {
 NEUTRAL_DOFS = (("armature", 0.0), ("damping", 0.0), ("stiffness", 0.0), ("frictionloss", 0.0))
 
 #: Wall time (s) of every scene build in this process: ``(variant, n_envs, seconds)``; the first includes the
-#: kernels' compilation or loading from the on-disk cache (docs/engine_conventions.md quotes it).
+#: kernels' compilation or loading from the on-disk cache.
 BUILD_SECONDS: list = []
 
 #: Scenes kept per process (the most recently used; each holds its kernels' data, ~MBs).
@@ -164,10 +118,9 @@ _SCENES: OrderedDict = OrderedDict()
 
 
 def version() -> str:
-    """The installed genesis-world distribution's version, from its metadata: Genesis is NOT imported (it
-    imports torch and initialises nothing, but its import alone takes seconds), and its packages (``genesis``,
+    """The installed genesis-world distribution's version, from its metadata; its packages (``genesis``,
     ``torch``, ``quadrants``) are found without importing them. EngineNotInstalled when the distribution is
-    absent."""
+    absent, ImportError when a package is missing."""
     ver = base.installed_version(DIST)
     if ver is None:
         raise base.EngineNotInstalled(f"{DIST} is not installed (pip install 'rbcheck[genesis]')")
@@ -189,9 +142,9 @@ def _findable(name: str) -> bool:
 
 def kernel_cache_dir() -> Path:
     """Where Genesis's kernel compiler (Quadrants) keeps its compiled kernels and Genesis its asset caches:
-    core.files.kernel_cache_dir("genesis"), not under ``$RBCHECK_CACHE_DIR`` (a sweep with a fresh result
-    cache must not recompile every kernel, 20–60 s per integrator). An environment that already sets
-    ``QD_OFFLINE_CACHE_FILE_PATH`` / ``GS_CACHE_FILE_PATH`` keeps them."""
+    core.files.kernel_cache_dir("genesis"), not under ``$RBCHECK_CACHE_DIR`` (a fresh result cache must not
+    recompile every kernel). An environment that already sets ``QD_OFFLINE_CACHE_FILE_PATH`` /
+    ``GS_CACHE_FILE_PATH`` keeps them."""
     return files.kernel_cache_dir("genesis")
 
 
@@ -306,10 +259,6 @@ def scene_options(variant: str, dt_s: float, gravity_W):
     return sim, rigid
 
 
-def _check_variant(variant: str) -> None:
-    base.check_variant(ENGINE, VARIANTS, variant)
-
-
 class GenesisBody:
     """A scenario's free body alone in a built Genesis scene of ``n_envs`` environments (0: unbatched)
     stepping at ``dt_s``; ``set_state``/``read``/``apply`` at the boundary, every array (n, ...) with n =
@@ -385,9 +334,8 @@ class GenesisBody:
         """:meth:`apply` by writing what Genesis's kernel writes (genesis/engine/solvers/rigid/abd/misc.py,
         ``func_apply_link_external_wrench`` with ``ref=link_COM``, ``local=False``) into the accumulators,
         which the previous step cleared: ``cfrc_applied_vel −= f``, ``cfrc_applied_ang −= τ + i_pos × f``
-        (i_pos: the COM's arm from the root COM, zero for a lone body). The same step bit for bit (tested);
-        40× cheaper than the API's argument sanitising and kernel launch, which would dominate a free run's
-        step."""
+        (i_pos: the COM's arm from the root COM, zero for a lone body). The same step bit for bit (tested),
+        without the API's argument sanitising and kernel launch."""
         if self._qpos is None:
             self.apply(f_W, tau_W)
             return
@@ -425,7 +373,7 @@ class GenesisBody:
 def body(scenario, variant: str, dt_s: float, n_envs: int = 0) -> GenesisBody:
     """The scene of ``scenario``'s body for ``variant`` at ``dt_s`` with ``n_envs`` environments: built once
     per process and reused (the :data:`_SCENES_KEPT` most recent), its state and wrench set by every run."""
-    _check_variant(variant)
+    base.check_variant(ENGINE, VARIANTS, variant)
     xml = mjcf_text(scenario, dt_s)
     g = tuple(float(v) for v in scenario.problem.forces.gravity_W)
     key = (variant, float(dt_s), xml, g, int(n_envs))
@@ -548,21 +496,12 @@ def _batch_key(r) -> tuple:
 def simulate_many(variant: str, requests) -> list:
     """The runs of ``requests`` (``base.RunRequest``): those that share a body, gravity, Δt and step count run
     as the environments of one scene (``scene.build(n_envs=N)``), the others one by one; each element
-    :func:`simulate`'s Run (tested) or its EngineError. A sweep's group (one scenario's Δt ladder) has no two
-    requests at one Δt, so it runs them one by one; the fuzz's and the tests' batches share."""
-    out: list = [None] * len(requests)
-    groups: dict = {}
-    for j, r in enumerate(requests):
-        groups.setdefault(_batch_key(r), []).append(j)
-    for idx in groups.values():
-        r0 = requests[idx[0]]
-        try:
-            runs = _simulate_batch([requests[j].scenario for j in idx], variant, r0.dt_s, r0.n_steps)
-        except EngineError as exc:
-            runs = [exc] * len(idx)
-        for j, run in zip(idx, runs):
-            out[j] = run
-    return out
+    :func:`simulate`'s Run (tested) or its EngineError."""
+
+    def run_group(reqs):
+        return _simulate_batch([r.scenario for r in reqs], variant, reqs[0].dt_s, reqs[0].n_steps)
+
+    return base.run_in_groups(requests, _batch_key, run_group)
 
 
 @base.on_rows
@@ -600,9 +539,4 @@ class GenesisAdapter(ModuleAdapter):
 def _genesis_files() -> tuple:
     """The rigid solver's step sources of the installed Genesis (found, not imported): what its results depend
     on beyond the version string."""
-    spec = importlib.util.find_spec("genesis") if _findable("genesis") else None
-    if spec is None or not spec.submodule_search_locations:
-        return ()
-    root = Path(next(iter(spec.submodule_search_locations)))
-    rigid = root / "engine" / "solvers" / "rigid"
-    return tuple(sorted([*rigid.glob("*.py"), *(rigid / "abd").glob("*.py")]))
+    return tuple(base.package_files("genesis", "engine/solvers/rigid", "engine/solvers/rigid/abd"))
