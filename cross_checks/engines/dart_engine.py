@@ -22,9 +22,9 @@ import numpy as np
 
 from cross_checks.engines import base
 from cross_checks.engines.base import EngineError, ModuleAdapter, Variant
-from cross_checks.engines.step_floats import harness_fn
+from cross_checks.engines.step_floats import bad_floats, harness_fn
 from reference_sim.quaternion import quat_exp, quat_log, sign_continuous
-from reference_sim.simulate import BLOWUP_LIMIT, Run, blowup_words, diverged
+from reference_sim.simulate import Run, blowup_words, diverged
 
 dart, _IMPORT_ERROR = base.optional_import("dartpy")
 
@@ -118,13 +118,6 @@ def _packed_floats(row) -> list:
     return [x0, x1, x2, v0, v1, v2, math.cos(0.5 * theta), s * r0, s * r1, s * r2, w0, w1, w2]
 
 
-def _bad(row) -> bool:
-    """Whether a DART state (12 floats) is non-finite or has a component beyond BLOWUP_LIMIT — the same
-    verdict as reference_sim.simulate.bad_rows on its packed state (|r| ≤ π and |q| = 1 never exceed it)."""
-    total = sum(row)
-    return total != total or max(row) > BLOWUP_LIMIT or min(row) < -BLOWUP_LIMIT
-
-
 class DartBody:
     """A scenario's free body alone in a DART world stepping at ``dt_s``; ``set_state``/``read`` at the
     boundary."""
@@ -212,7 +205,7 @@ def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
             apply(f, tau)
         step()
         prev = positions().tolist() + velocities().tolist()
-        if _bad(prev):
+        if bad_floats(prev):     # DART's state: its packed state's verdict (|r| ≤ π, |q| = 1 never exceed it)
             return _recorded(rows, y0, dt_s, f" ({blowup_words(prev)})")
         rows.append(prev)
     return _recorded(rows, y0, dt_s)

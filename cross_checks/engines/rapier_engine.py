@@ -25,9 +25,9 @@ import numpy as np
 
 from cross_checks.engines import base
 from cross_checks.engines.base import EngineError, ModuleAdapter, Traits, Variant
-from cross_checks.engines.step_floats import harness_fn
+from cross_checks.engines.step_floats import bad_floats, harness_fn
 from reference_sim.quaternion import quat_from_matrix, sign_continuous
-from reference_sim.simulate import BLOWUP_LIMIT, Run, blowup_words, diverged
+from reference_sim.simulate import Run, blowup_words, diverged
 
 rapier, _IMPORT_ERROR = base.optional_import("rapier3d")
 
@@ -207,13 +207,6 @@ class RapierWorld:
         return {i for i, h in enumerate(self.handles) if h in bad} if bad else set()
 
 
-def _bad(row) -> bool:
-    """Whether a packed state (13 floats) is non-finite or has a component beyond BLOWUP_LIMIT
-    (reference_sim.simulate.bad_rows on one state)."""
-    total = sum(row)
-    return total != total or max(row) > BLOWUP_LIMIT or min(row) < -BLOWUP_LIMIT
-
-
 def _recorded(rows, y0, dt_s: float, why: str = "") -> Run:
     """The Run of packed states ``rows`` (steps 1..n) after the initial state ``y0``, quaternions continuous
     from y0's; ``why`` non-empty: the run diverged in step n + 1."""
@@ -277,7 +270,7 @@ def _run_group(variant: str, reqs) -> list:
             row = W.read(m["i"])
             if m["i"] in quarantined or not W.enabled(m["i"]):
                 m["why"] = " (non-finite state: Rapier quarantined the body)"
-            elif _bad(row):
+            elif bad_floats(row):
                 m["why"] = f" ({blowup_words(row)})"
             if m["why"]:
                 m["live"] = False

@@ -8,8 +8,9 @@ with that function bit for bit.
 from __future__ import annotations
 
 from cross_checks.engines import base
+from reference_sim.simulate import BLOWUP_LIMIT
 
-__all__ = ["harness_fn", "quat_mul_floats"]
+__all__ = ["harness_fn", "quat_mul_floats", "bad_floats"]
 
 
 def harness_fn(scenario, dt_s: float):
@@ -35,3 +36,10 @@ def quat_mul_floats(a, b) -> list:
             s1 * x2 + s2 * x1 + (y1 * z2 - z1 * y2),
             s1 * y2 + s2 * y1 + (z1 * x2 - x1 * z2),
             s1 * z2 + s2 * z1 + (x1 * y2 - y1 * x2)]
+
+
+def bad_floats(row) -> bool:
+    """``reference_sim.simulate.bad_rows`` of one state given as floats: whether it is non-finite or has a
+    component beyond BLOWUP_LIMIT."""
+    total = sum(row)
+    return total != total or max(row) > BLOWUP_LIMIT or min(row) < -BLOWUP_LIMIT

@@ -6,10 +6,11 @@ import numpy as np
 import pytest
 
 from cross_checks.engines import base
-from cross_checks.engines.step_floats import harness_fn, quat_mul_floats
+from cross_checks.engines.step_floats import bad_floats, harness_fn, quat_mul_floats
 from cross_checks.fuzz import generate
 from cross_checks.fuzz.pipeline import scenario_of
 from reference_sim.quaternion import quat_mul
+from reference_sim.simulate import BLOWUP_LIMIT, bad_rows
 
 
 def _cases(n=12, seed=47):
@@ -36,6 +37,19 @@ def test_quaternion_product_is_numpys_bit_for_bit():
     want = quat_mul(a, b)
     got = np.array([quat_mul_floats(p.tolist(), q.tolist()) for p, q in zip(a, b)])
     assert np.array_equal(np.signbit(got), np.signbit(want)) and np.array_equal(got, want)
+
+
+def test_one_state_is_bad_exactly_when_bad_rows_says_so():
+    rng = np.random.default_rng(1)
+    y = rng.standard_normal((400, 13))
+    y[1::8, 3] = np.inf
+    y[2::8, 5] = -np.inf
+    y[3::8, 7] = np.nan
+    y[4::8, 0] = 2.0 * BLOWUP_LIMIT
+    y[5::8, 12] = -2.0 * BLOWUP_LIMIT
+    y[6::8, 2] = BLOWUP_LIMIT
+    y[7::8, [1, 2]] = [np.inf, -np.inf]
+    assert [bad_floats(row) for row in y.tolist()] == bad_rows(y).tolist()
 
 
 def test_harness_is_the_base_harness_bit_for_bit_at_any_step():
