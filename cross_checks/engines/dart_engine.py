@@ -235,7 +235,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
 
 class DartAdapter(ModuleAdapter):
     """``dart:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
-    (``pip install 'rbcheck[dart]'``). Declared order: DART's semi-implicit Euler is first order."""
+    (``pip install 'rbcheck[dart]'``)."""
 
     name = ENGINE
     variants = VARIANTS

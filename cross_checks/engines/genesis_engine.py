@@ -523,8 +523,8 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
 
 
 class GenesisAdapter(ModuleAdapter):
-    """``genesis:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional (``pip
-    install 'rbcheck[genesis]'``). Declared orders: every variant is first order in the translation."""
+    """``genesis:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
+    (``pip install 'rbcheck[genesis]'``)."""
 
     name = ENGINE
     variants = VARIANTS

@@ -549,8 +549,7 @@ def _rollout_steps(reqs, mods, datas, state, xfrc, per_step, g, weights, qpos, q
 
 
 class MujocoAdapter(ModuleAdapter):
-    """``mujoco:VARIANT`` — registered under the entry-point group ``rbcheck.engines``;
-    :func:`simulate_many` runs the requests through ``mujoco.rollout``."""
+    """``mujoco:VARIANT`` — registered under the entry-point group ``rbcheck.engines``."""
 
     name = ENGINE
     variants = VARIANTS

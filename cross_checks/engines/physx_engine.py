@@ -399,9 +399,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
 
 class PhysxAdapter(ModuleAdapter):
     """``physx:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
-    (``pip install 'rbcheck[physx]'``). Declared orders: both solvers run PhysX's semi-implicit Euler step
-    on a free body: first order, float32. :func:`simulate_many` steps runs of one Δt and gravity together in
-    one scene."""
+    (``pip install 'rbcheck[physx]'``)."""
 
     name = ENGINE
     variants = VARIANTS

@@ -329,8 +329,7 @@ def _one_steps(B, scenario, dt_s: float, y_start) -> np.ndarray:
 
 
 class PybulletAdapter(ModuleAdapter):
-    """``pybullet:VARIANT`` — registered under the entry-point group ``rbcheck.engines``;
-    :func:`simulate_many` runs the requests on kept bodies."""
+    """``pybullet:VARIANT`` — registered under the entry-point group ``rbcheck.engines``."""
 
     name = ENGINE
     variants = VARIANTS

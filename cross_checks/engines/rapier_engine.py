@@ -328,8 +328,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
 
 class RapierAdapter(ModuleAdapter):
     """``rapier:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
-    (``pip install 'rbcheck[rapier]'``). Declared order: Rapier's symplectic Euler is first order; float32.
-    :func:`simulate_many` runs the requests of one Δt and gravity as bodies of one world."""
+    (``pip install 'rbcheck[rapier]'``)."""
 
     name = ENGINE
     variants = VARIANTS
