@@ -40,9 +40,6 @@ __all__ = ["energy_drift_bound", "characteristic_rate_sq", "QUANTITIES",
            "INVARIANT_WORDS", "gyroscopic_clamp_acts"]
 
 
-#: A variant that declares no traits: engines.base.DEFAULT_TRAITS (the most cautious choice).
-
-
 def traits(variant: str) -> Traits:
     """The traits ``ENGINE:VARIANT`` declares (Variant.traits), or those of the variant it declares it
     imitates (Variant.imitates); DEFAULT_TRAITS for one this module does not know."""
@@ -84,7 +81,7 @@ def pair_is_same_arithmetic(scenario, a: str, b: str) -> bool:
     step (ω ← γω, torque × γ, then the step) agree exactly unless the gyroscopic term ω × Iω sees the
     angular factor γ_ω twice: with angular-velocity decay on a motion whose gyroscopic torque does not
     vanish the two differ by O((1 − γ_ω) Δt) per step — both first order, no longer the same arithmetic
-    (the engines' harness, docs/verdicts.md "Velocity decay"; found by ``rbcheck fuzz``).
+    (docs/verdicts.md "Velocity decay").
     """
     if (a in _POST_STEP_DECAY) == (b in _POST_STEP_DECAY):
         return True
@@ -193,9 +190,8 @@ def memoized():
     """Within this block, decisions that depend only on a scenario (and its measured physics) are made once
     per scenario object and reused: ``gyroscopic_term_matters``, the free-running expectation of a
     (variant, quantity) — which the one-step mode asks for again — and the pre-asymptotic reason of a
-    (traits, quantity), the same for every variant with those traits. For a fuzz batch (thousands of
-    expectations of 64 scenarios), whose scenarios are not changed while it runs; results are the ones
-    computed without it."""
+    (traits, quantity), the same for every variant with those traits. The scenarios must not change
+    within the block; results are the ones computed without it."""
     global _MEMO
     outer = _MEMO
     if outer is None:
@@ -451,8 +447,7 @@ def energy_drift_bound(scenario, variant: str, dt_s: float) -> float | None:
 
     An order-p scheme's global error over T at step Δt on a motion of angular frequency ω is
     ~ C (ωΔt)^p ωT; energy errors are of the same relative size. C ≤ 2 covers every scheme here
-    (explicit Euler's energy grows as e^{2χ} − 1 ≈ ω²ΔtT = (ωΔt)ωT, i.e. C = 1; docs/engine_conventions.md:
-    MuJoCo Euler on the tennis racket drifts 4.6e-3 over 20 s at Δt = 1e-3, C = 0.29). Returns None where no
+    (explicit Euler's energy grows as e^{2χ} − 1 ≈ ω²ΔtT = (ωΔt)ωT, i.e. C = 1). Returns None where no
     bound applies: a non-conservative scenario, a variant without a nominal order, or the course
     update on a body whose gyroscopic term matters (it does not model the conserved motion at all).
     """
@@ -477,7 +472,7 @@ def energy_drift_bound(scenario, variant: str, dt_s: float) -> float | None:
         w2 = max(w2, (g / v0) ** 2 if v0 > 0.0 else math.inf)
     w = math.sqrt(w2)
     n_steps = max(1, round(scenario.duration_s / dt_s))
-    # + round-off: N steps of ε each, ×10 for the terms of E (measured 7 N ε on particle_body's RK4).
+    # + round-off: N steps of ε each, ×10 for the terms of E.
     return 2.0 * (w * dt_s) ** p * w * scenario.duration_s + 10.0 * n_steps * machine_epsilon(variant)
 
 

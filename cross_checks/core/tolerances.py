@@ -14,9 +14,9 @@ ORDER_TOL = 0.1
 #: Round-off of a run, relative to a quantity's scale, per step: each step rounds every component
 #: by ~ε|y|, and when the increments keep their sign (a falling body) the roundings add up linearly: N ε |y|.
 ROUNDOFF_PER_STEP_REL = 2.2e-16
-#: Machine epsilon of each precision a variant may declare (engines.base.Traits.precision): numpy.finfo(dtype).eps,
-#: 2⁻⁵² (written 2.2e-16 as ROUNDOFF_PER_STEP_REL) and 2⁻²³. Every round-off floor scales with it
-#: (metrics.roundoff_floor).
+#: Machine epsilon of each precision a variant may declare (engines.base.Traits.precision):
+#: numpy.finfo(dtype).eps, 2⁻⁵² (written 2.2e-16 as ROUNDOFF_PER_STEP_REL) and 2⁻²³. Every round-off floor
+#: scales with it (metrics.roundoff_floor).
 MACHINE_EPSILON = {"float64": ROUNDOFF_PER_STEP_REL, "float32": 2.0 ** -23}
 #: How far an engine may store a body's mass and inertia from the scenario's, relative to the largest: a few
 #: roundings of the model's text and the engine's arithmetic (jaxsim stores 1.4 kg 1 ulp off); 16 ε still
@@ -319,6 +319,6 @@ def long_run_roundoff(n_steps: int, unit_roundoff: float, rounding_factor: float
     """The largest relative change of an invariant a step keeps BY CONSTRUCTION (Traits.keeps) may show after
     ``n_steps`` steps from round-off alone: each step rounds it by at most CHECK_ROUNDINGS_PER_STEP unit
     roundoffs (times the variant's declared rounding factor), and roundings that keep their sign add up
-    linearly (the worst case). The Newton solves of the implicit steps (reference_sim.integrators.IMPLICIT_TOL)
-    converge quadratically, so they add nothing measurable here."""
+    linearly (the worst case). The Newton solves of the implicit steps
+    (reference_sim.integrators.IMPLICIT_TOL) converge quadratically, so they add nothing measurable here."""
     return CHECK_ROUNDINGS_PER_STEP * unit_roundoff * rounding_factor * max(int(n_steps), 1)
