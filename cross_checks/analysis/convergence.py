@@ -53,8 +53,8 @@ class ConvergenceFit:
 
 
 def _lsq_slope(x, y):
-    """Least-squares slope of y over x ((K,) float arrays). The means are ``add.reduce / K`` — what
-    ``ndarray.mean`` computes — without its Python wrappers (this runs ~7,000 times per fuzz batch)."""
+    """Least-squares slope of y over x ((K,) float arrays); the means are ``add.reduce / K``, what
+    ``ndarray.mean`` computes, without its Python wrappers."""
     add = np.add.reduce
     xm = x - add(x) / len(x)
     return float(add(xm * (y - add(y) / len(y))) / add(xm * xm))
@@ -141,8 +141,8 @@ def fit_convergence(dt_s, errors, floors=None, statuses=None,
 def _drop_roundoff_tail(dt, e, fl, idx_ok, notes) -> list:
     """(a) Round-off at the fine end: the first point not resolved above its floor (≤ RESOLVED_ABOVE_FLOOR
     × floor: round-off may be a tenth of it) and every finer one are dropped, provided none of the finer
-    ones is resolved (else the low point is an accident of the ladder — e.g. the one Δt where frame-rate
-    dependent physics happens to match). Returns the indices kept (coarse to fine)."""
+    ones is resolved (else the low point is an accident of the ladder). Returns the indices kept (coarse to
+    fine)."""
     for k, i in enumerate(idx_ok):
         if all(e[j] <= tol.RESOLVED_ABOVE_FLOOR * fl[j] for j in idx_ok[k:]):
             notes.append(f"{len(idx_ok) - k} point(s) within {tol.RESOLVED_ABOVE_FLOOR:g}× "
@@ -245,11 +245,8 @@ def order_within_floors(fit: ConvergenceFit):
     is each rung's floor instead: round-off, measured. None when fewer than two points stand above their
     floors (or the fit has no order).
 
-    A claim that the order is too low holds only if this order is too low as well: a floor generous enough to
-    drop the finest rung (an engine's lever-arm round-off bound, fuzz.properties) otherwise left the order to
-    the coarsest pair alone, where the next term of the error series bends it most — the fuzz called Drake's
-    runge_kutta3 order 2.66 on errors 8.62e-11, 1.36e-11, 1.89e-12 rad with floors up to 3.1e-13 (order
-    within the floors 2.89; the sweep, with its ε floors, fits 2.75 on all three)."""
+    A claim that the order is too low holds only if this order is too low as well (docs/verdicts.md §4,
+    "Within the round-off floors")."""
     if fit.order is None:
         return None
     idx = [i for i, f in enumerate(fit.fitted) if f]
@@ -259,8 +256,8 @@ def order_within_floors(fit: ConvergenceFit):
     tail = [i for i in range(len(fit.dt_s)) if not fit.fitted[i] and fit.dt_s[i] < finest
             and math.isfinite(fit.errors[i]) and fit.errors[i] > 0.0]
     # a flat tail of dropped rungs (two or more within a factor 2: the error no longer shrinks with Δt) is
-    # round-off, measured: where it stands above the floor estimate (MuJoCo's one-step defects flat at
-    # 3.4e-15 rad/s over floors of 1.3–1.8e-15), its level bounds the round-off in every rung instead
+    # round-off, measured: where it stands above the floor estimate, its level bounds the round-off in every
+    # rung instead
     te = [fit.errors[i] for i in tail]
     level = max(te) if len(te) >= 2 and max(te) <= 2.0 * min(te) else 0.0
     floor = [max(f, level) for f in fit.floors]

@@ -97,10 +97,8 @@ def spring_turn_rate(problem, y) -> np.ndarray:
     spring (attachment point minus anchor, world), v⊥ the attachment point's velocity across it.
 
     A spring of rest length L0 pulls with −k d + k L0 d/|d|: the second part has constant magnitude and
-    turns with d, at this rate, however soft the spring. Found by the fuzz: a body falling past the anchor
-    (|d| down to 5 cm at 2.3 m/s: 44 /s) whose step had been chosen from √(k/m) and |ω| alone (1.6 /s), so
-    h·L was 1.6, not 0.06, and a third-order scheme's one-step defect still had order 2.5 on (h, h/2).
-    Zero-length springs are linear in d and add nothing here."""
+    turns with d, at this rate, however soft the spring (a body passing close to the anchor turns it
+    fast). Zero-length springs are linear in d and add nothing here."""
     from reference_sim.quaternion import matrix_from_quat
     y = np.nan_to_num(np.asarray(y, dtype=float))
     out = np.zeros(y.shape[:-1])
@@ -220,9 +218,8 @@ def lever_arm_roundoff(scenario, y, unit_roundoff: float, h_s):
     ``y`` (N, 13). An engine forms a torque from a lever arm, ``r × F``, with r the difference of two points
     near x_W (a point of application or the centre of mass it recomputes from its frames), so r carries
     ``u |x_W|`` and the torque ``u |x_W| |F|`` even when the exact lever arm is zero; over one step ω moves by
-    ``Δt u |x_W| |F| / I_min``. Without it a body that never turns, whose recorded ω is that round-off (MJX,
-    Brax: 1e-15 rad/s at |x| = 10 m under gravity), would read as a wrong equation. |F| = m |a_W| of the exact
-    equations at the row (gravity included)."""
+    ``Δt u |x_W| |F| / I_min``. Without it a body that never turns, whose recorded ω is that round-off,
+    would read as a wrong equation. |F| = m |a_W| of the exact equations at the row (gravity included)."""
     p = scenario.problem
     y = np.asarray(y, dtype=float)
     a_W = rhs(p, y)[..., 3:6]
@@ -424,8 +421,8 @@ def run_local_defect(scenario, y, dt_s: float, max_rows: int | None = None,
         with np.errstate(divide="ignore", invalid="ignore"):
             r = np.where(total[q] > 0.0, d[q] / total[q], np.where(d[q] > 0.0, np.inf, 0.0))
         # a quantity exactly zero at both ends of the exact step (a body that never turns) has nothing to
-        # measure: what an engine leaves there is the round-off of the other quantities' terms (MJX leaves
-        # 6e-16 rad/s in the ω of a body that never turns), and a gross error shows in the free runs
+        # measure: what an engine leaves there is the round-off of the other quantities' terms, and a gross
+        # error shows in the free runs
         moving = (_magnitude(y0, q) > 0.0) | (_magnitude(flow.y_end, q) > 0.0)
         r = np.where(decisive & moving, r, np.nan)
         if np.all(np.isnan(r)):
