@@ -9,10 +9,9 @@ from reference_sim.state import Problem, Q
 
 __all__ = ["ground_truth", "GROUND_TRUTH_RTOL", "GROUND_TRUTH_ATOL"]
 
-#: DOP853 tolerances (docs/semantics.md, "References"). At rtol 1e-12 the tennis racket's 10 s ground
-#: truth is 4e-10 from the Jacobi closed form (the flip amplifies local errors), at 1e-13 it is 5e-12
-#: (tests/cross_checks/scenario/test_references.py), so 1e-13 is used. atol 1e-14: every state component
-#: of the catalog is O(0.01–10) in SI units, so the absolute part never dominates.
+#: DOP853 tolerances: rtol 1e-13, as 1e-12 leaves the tennis racket 4e-10 off its closed form
+#: (docs/semantics.md, "References"); atol 1e-14: every state component of the catalog is O(0.01–10) in SI
+#: units, so the absolute part never dominates.
 GROUND_TRUTH_RTOL = 1e-13
 GROUND_TRUTH_ATOL = 1e-14
 
