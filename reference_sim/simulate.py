@@ -91,8 +91,9 @@ def simulate(problem: Problem, variant: str, dt_s: float, n_steps: int, y0=None)
     return Run(dt_s * np.arange(n_steps + 1), out)
 
 
-#: Steps of one call into the compiled loop per member: between calls Python runs, so a run's time limit (a SIGALRM handler, cross_checks.sweep.lifecycle) stops it within that long — inside compiled
-#: code a signal handler waits until the call returns.
+#: Steps of one call into the compiled loop per member (a fraction of a second): between calls Python runs,
+#: so a run's time limit (a SIGALRM handler, cross_checks.sweep.lifecycle) stops it within that long —
+#: inside compiled code a signal handler waits until the call returns.
 COMPILED_CHUNK = 65536
 
 _STEP_ERRORS = (ImplicitSolveError, np.linalg.LinAlgError, OverflowError, ZeroDivisionError, ValueError)

@@ -24,8 +24,9 @@ __all__ = ["errors_shrink", "worth_refining", "refined_ladder_shows_the_order"]
 def errors_shrink(errors) -> bool:
     """Whether a ladder's errors (coarse to fine, all finite) shrink over the ladder: the finest below the
     coarsest, however slowly and whether or not at every halving (a velocity error crossing zero at one
-    rung; the largest error over a short run moving in time). A flat plateau, a growth or a failed point does not qualify. Only the ladder continued decides: a plateau that
-    happens to dip at the finest rung stays a plateau there (refined_ladder_shows_the_order)."""
+    rung; the largest error over a short run moving in time). A flat plateau, a growth or a failed point
+    does not qualify. Only the ladder continued decides: a plateau that happens to dip at the finest rung
+    stays a plateau there (refined_ladder_shows_the_order)."""
     errs = list(errors)
     if len(errs) < 2 or any(e is None or not math.isfinite(e) for e in errs):
         return False

@@ -423,7 +423,7 @@ def _parse_forces(r, raw, dt, com_offset) -> ForceModel:
 def _check_scenario(r, sc) -> None:
     """What needs the whole scenario: its physical numbers within the ranges rbcheck judges; a requested
     closed form exists; the run stays within the limits."""
-    from cross_checks.scenario.limits import LimitExceeded, check_physical_ranges
+    from cross_checks.scenario.limits import LimitExceeded, check_physical_ranges, check_scenario_limits
     try:
         check_physical_ranges(sc)
     except LimitExceeded as exc:
@@ -433,7 +433,6 @@ def _check_scenario(r, sc) -> None:
         ok, why = analytic_available(sc)
         if not ok:
             raise r.err("reference", f"'analytic' requested but no closed form covers this scenario: {why}")
-    from cross_checks.scenario.limits import LimitExceeded, check_scenario_limits
     try:
         check_scenario_limits(sc)
     except LimitExceeded as exc:
