@@ -281,7 +281,7 @@ BULLET_SOLVE33_DET_EPS = 2.220446049250313e-16
 #: Roundings in a lever arm measured from the world origin (fuzz.properties.lever_roundoff): the COM and the
 #: frame origin each rounded (2), the cross product r × F two products and a difference (2 more): 4.
 FUZZ_LEVER_ROUNDINGS = 4.0
-#: A free-running ladder is "two-term consistent" (fuzz.properties.two_term_consistent) when the third
+#: A free-running ladder is "two-term consistent" (analysis.judge.two_term_consistent) when the third
 #: difference of e/h^p is within this fraction of its size: an order-p error with its next term gives 0
 #: (plus the third term, ~0.4 (c₃/c₁) h² ≪ 0.25 in the asymptotic range); an order deficit of 0.5 gives 0.38,
 #: of 1 gives 0.75. Each error is allowed its round-off floor (it bounds the round-off in it).
