@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import ellipj, ellipk, ellipkinc, elliprj
 
-from reference_sim.body import check_inertia
+from reference_sim.body import check_inertia, principal_axes
 from reference_sim.quaternion import quat_conj, quat_exp, quat_from_matrix, quat_mul, quat_normalize, rotate
 
 __all__ = [
@@ -118,10 +118,7 @@ def _principal(inertia_B):
         I_B = check_inertia(inertia_B)
     except ValueError as exc:
         raise ValueError(f"inertia_B {exc}") from None
-    moments, R_BP = np.linalg.eigh(I_B)
-    if np.linalg.det(R_BP) < 0.0:
-        R_BP[:, 2] *= -1.0
-    return moments, R_BP
+    return principal_axes(I_B)
 
 
 def _qx(angle):

@@ -5,7 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["RigidBody", "inertia_from_particles", "check_inertia"]
+__all__ = ["RigidBody", "inertia_from_particles", "check_inertia", "principal_axes"]
 
 # Relative tolerance for symmetry and the triangle inequality of an inertia tensor: a few ulps of
 # the largest moment, so tensors typed with ~15 significant digits pass and real violations do not.
@@ -53,6 +53,15 @@ def check_inertia(inertia_B) -> np.ndarray:
             "(no physical body has these)"
         )
     return 0.5 * (I + I.T)
+
+
+def principal_axes(inertia_B):
+    """Principal moments ``(3,)`` ascending (kg m²) and ``R_BP`` (3, 3), det +1, of a symmetric (3, 3)
+    inertia: ``inertia_B = R_BP diag(moments) R_BPᵀ`` (columns: principal axes in body coordinates)."""
+    moments, R = np.linalg.eigh(inertia_B)
+    if np.linalg.det(R) < 0:
+        R[:, 2] *= -1.0
+    return moments, R
 
 
 def inertia_from_particles(masses_kg, points_B_m):
@@ -121,12 +130,8 @@ class RigidBody:
         return cls(mass, I, rel), com
 
     def principal_axes(self):
-        """Principal moments ``(3,)`` ascending (kg m²) and ``R_BP`` (3, 3), det +1, with
-        ``inertia_B = R_BP diag(moments) R_BPᵀ`` (columns: principal axes in body coordinates)."""
-        moments, R = np.linalg.eigh(self.inertia_B)
-        if np.linalg.det(R) < 0:
-            R[:, 2] *= -1.0
-        return moments, R
+        """:func:`principal_axes` of this body's inertia."""
+        return principal_axes(self.inertia_B)
 
     def is_diagonal(self) -> bool:
         off = self.inertia_B - np.diag(np.diag(self.inertia_B))

@@ -71,7 +71,7 @@ def _principal_frame(spec):
     """The same motion with the body given by its principal moments in its principal frame P: the
     orientation becomes q_WP = q_WB ⊗ q_BP and every body-frame vector and point is rotated into P
     (a particle body becomes its mass and tensor about the COM first)."""
-    from reference_sim.body import RigidBody, check_inertia
+    from reference_sim.body import RigidBody, check_inertia, principal_axes
     s = copy.deepcopy(spec)
     b, ini, f = s["body"], s.setdefault("initial", {}), s.get("forces", {})
     com = np.zeros(3)
@@ -80,9 +80,7 @@ def _principal_frame(spec):
         mass, I = body.mass_kg, body.inertia_B
     else:
         mass, I = float(b["mass"]), check_inertia(b["inertia"])
-    moments, R = np.linalg.eigh(I)
-    if np.linalg.det(R) < 0:
-        R[:, 2] *= -1.0
+    moments, R = principal_axes(I)
     s["body"] = {"mass": mass, "inertia": moments.tolist()}
     q = (quat_from_euler_zxy(ini.pop("euler_zxy_deg")) if "euler_zxy_deg" in ini
          else np.asarray(ini.get("orientation", [1.0, 0.0, 0.0, 0.0]), dtype=float))
