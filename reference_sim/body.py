@@ -65,19 +65,10 @@ def principal_axes(inertia_B):
 
 
 def inertia_from_particles(masses_kg, points_B_m):
-    """Mass, COM and inertia of point masses, as the course defines them.
-
-    Parameters
-    ----------
-    masses_kg : (K,) masses, kg.
-    points_B_m : (K, 3) positions in body coordinates, m.
-
-    Returns
-    -------
-    mass_kg : float
-    com_B_m : (3,) centre of mass in the given body coordinates, m.
-    inertia_B : (3, 3) ``I_ref = Σ m_i [(r_iᵀ r_i) I₃ − r_i r_iᵀ]`` about the COM, with
-        ``r_i = points_B_m[i] − com_B_m``, kg m².
+    """Mass, COM and inertia of point masses ``masses_kg`` (K,) at ``points_B_m`` (K, 3) (body coordinates,
+    m), as the course defines them: ``(mass_kg, com_B_m (3,) m in the given coordinates, inertia_B (3, 3)
+    kg m²)`` with ``I_ref = Σ m_i [(r_iᵀ r_i) I₃ − r_i r_iᵀ]`` about the COM,
+    ``r_i = points_B_m[i] − com_B_m``.
     """
     m = np.asarray(masses_kg, dtype=float)
     p = np.asarray(points_B_m, dtype=float)
@@ -91,14 +82,9 @@ def inertia_from_particles(masses_kg, points_B_m):
 
 @dataclass(frozen=True, eq=False)
 class RigidBody:
-    """Mass properties of one rigid body whose body frame has its origin at the COM.
-
-    Attributes
-    ----------
-    mass_kg : float, kg.
-    inertia_B : (3, 3) inertia tensor about the COM in body axes, kg m² (symmetric, positive definite).
-    particles : optional (K, 4) ``[m, x, y, z]`` point masses (body coordinates relative to the COM,
-        m) when the body was built from particles; kept so the course's per-particle view is available.
+    """Mass properties of one rigid body whose body frame has its origin at the COM: ``mass_kg`` (kg),
+    ``inertia_B`` (3, 3) about the COM in body axes, kg m² (symmetric, positive definite), and, for a body
+    built from particles, ``particles`` (K, 4) ``[m, x, y, z]`` (body coordinates from the COM, m).
     """
 
     mass_kg: float

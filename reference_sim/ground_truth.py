@@ -21,14 +21,9 @@ def ground_truth(problem: Problem, t_s, y0=None, rtol: float = GROUND_TRUTH_RTOL
     """Solve ``ẏ = F(y)`` (reference_sim.integrators.rhs: gyroscopic term and the continuous velocity
     decay ``−k v``, ``−k ω`` included) with DOP853.
 
-    Parameters
-    ----------
-    problem : single-body Problem, or a batch: ``y0`` of shape (B, 13) solves B initial states as one
-        system (the same steps for all; used to measure how the dynamics amplify perturbations).
-    t_s : (T,) increasing output times, s, starting at 0.
-    Returns
-    -------
-    y : (T, 13) (or (T, B, 13)) packed states [x_W, v_W, q_WB (w x y z, renormalised), w_W].
+    ``problem``: a single-body Problem; ``y0`` (B, 13) solves B initial states as one system (the same steps
+    for all). ``t_s`` (T,): increasing output times, s, from 0. Returns ``y`` (T, 13) (or (T, B, 13)) packed
+    states [x_W, v_W, q_WB (w x y z, renormalised), w_W].
     """
     t_s = np.asarray(t_s, dtype=float)
     y0 = problem.initial_packed() if y0 is None else np.asarray(y0, dtype=float)

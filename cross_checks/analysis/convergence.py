@@ -69,11 +69,9 @@ def fit_convergence(dt_s, errors, floors=None, statuses=None,
                     amplified_factor: float = tol.AMPLIFIED_ROUNDOFF_FACTOR) -> ConvergenceFit:
     """Fit the convergence order of final errors over a Δt ladder and give a verdict.
 
-    Parameters
-    ----------
     dt_s : (K,) steps, s (any order; sorted descending here).
     errors : (K,) final errors (NaN for runs that produced none).
-    floors : (K,) round-off floor of each point (see :func:`roundoff_floor`); 0 when omitted.
+    floors : (K,) round-off floor of each point (metrics.roundoff_floor); 0 when omitted.
     statuses : (K,) run status per point ("ok", "diverged", "failed"); "ok" when omitted.
     amplified_factor : how many floors an error growing again at the fine end may reach and still be
         amplified round-off (AMPLIFIED_ROUNDOFF_FACTOR; judge.judge_ladder gives a float32 variant
