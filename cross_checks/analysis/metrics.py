@@ -38,9 +38,8 @@ def energy_J(problem, y, *, with_scale: bool = False):
     y = np.asarray(y, dtype=float)
     body, fm = problem.body, problem.forces
     q = unit_q(y[..., Q])
-    R = matrix_from_quat(q)
     w = y[..., W]
-    L = np.einsum("...ij,...j->...i", body.world_inertia(R), w)
+    L = angular_momentum_W(problem, y)
     kinetic = 0.5 * body.mass_kg * np.sum(y[..., V] ** 2, axis=-1) + 0.5 * np.sum(w * L, axis=-1)
     potential = fm.potential_energy_J(body, y[..., X], q)
     if with_scale:
