@@ -1,16 +1,11 @@
-"""``rbcheck check``, step 2: the physics every verdict is measured against.
+"""``rbcheck check``, step 2: the physics every verdict is measured against (docs/check.md, "The evidence").
 
-* :func:`exact_flow` — the true motion over each row interval, from each recorded state at once
-  (batched RK4 with substeps on ``reference_sim.integrators.rhs``, which includes the continuous velocity
-  decay −k v, −k ω), with a Richardson estimate of its own error.
-* :func:`majorant` — M2, a bound on |y''| per quantity, block by block: ``Σ_b |J_b F_b|`` with J the
-  Jacobian of the right-hand side F and b ∈ {x, v, q, ω}. Every consistent one-step scheme of order
-  ≥ 1 leaves a local defect ≤ ½ h² M2 + O(h³) (tolerances.CHECK_LOCAL_C), a wrong equation O(h).
-* :func:`local_allowances` — what a consistent scheme may leave per row interval (h steps spanning
-  Δ): ``C h Δ M2`` (+ the drift of the velocity defects into position / orientation over Δ), plus the
-  data's precision (printed digits, and the roundings of a step in the data's precision).
-* :func:`error_growth` — how the scenario's dynamics amplify an error made at t = 0 by time t,
-  quantity to quantity (perturbed runs of the same flow from the initial state).
+* :func:`exact_flow` — the true motion over each row interval, from each recorded state at once (batched
+  RK4 with substeps on ``reference_sim.integrators.rhs``), with a Richardson estimate of its own error.
+* :func:`majorant` — M2 = ``Σ_b |J_b F_b|``, a block bound on |y''| per quantity: every consistent
+  one-step scheme of order ≥ 1 leaves a local defect ≤ ½ h² M2 + O(h³), a wrong equation O(h).
+* :func:`local_allowances` — what a consistent scheme may leave per row interval, plus the data's precision.
+* :func:`error_growth` — how the scenario's dynamics amplify an error made at t = 0, quantity to quantity.
 
 Quantities: position (m), velocity (m/s), orientation (rad: twice the quaternion distance, which for
 unit quaternions is the geodesic angle to first order and also counts a change of |q|), angular
