@@ -1,22 +1,15 @@
 """What each engine variant is expected to do on each scenario: the ONE place for expected orders.
 
 A sweep fits a convergence order per (scenario, variant, quantity) and compares it with
-:func:`expectation`, decided from the variant's traits (:func:`traits`, one table keyed by variant,
-with a documented default for a variant it knows nothing about) and the scenario's PHYSICS
-(:mod:`cross_checks.analysis.physics`: rates, separatrix proximity and error amplification measured on its
-reference) — never from a scenario's name:
-
-* ``does_not_converge``: the variant lacks a term the motion needs (the course's update has no
-  gyroscopic torque, which matters on an anisotropic body off its principal axes).
-* ``pre_asymptotic`` — no claim on this ladder: a first-order variant that does not preserve
-  amplitudes would show a fitted order more than AMPLITUDE_MODEL_ORDER_DEV away from 1 on this ladder
-  from its amplitude drift alone (:func:`physics.amplitude_model_order`).
-* ``converges`` at the nominal order otherwise.
+:func:`expectation`, decided from the variant's traits (:func:`traits`) and the scenario's PHYSICS
+(:mod:`cross_checks.analysis.physics`), never from a scenario's name: ``does_not_converge`` where the
+variant lacks a term the motion needs, ``pre_asymptotic`` (no claim) where a first-order variant's
+amplitude drift alone would bend its fit beyond AMPLITUDE_MODEL_ORDER_DEV, ``converges`` at the nominal
+order otherwise (docs/verdicts.md §3).
 
 The reason strings end up, verbatim, in summary.json and in the report's findings, so they are
 written as sentences for users. Orders are global orders of the error at a fixed final time,
-``e(Δt) ≈ C Δt^p``. In the one-step mode (each step restarted from the reference state) the local
-error of an order-p scheme is O(Δt^{p+1}), whatever its amplitude drift does over a run.
+``e(Δt) ≈ C Δt^p``; in the one-step mode the local order is p + 1.
 """
 from __future__ import annotations
 
