@@ -1,20 +1,12 @@
-"""The four properties checked on every case, each with an allowance derived as the sweep derives its own.
+"""The four properties checked on every case, each with an allowance derived as the sweep derives its own
+(docs/fuzz.md §2). For a case (its measured :class:`Context`) and a variant's runs:
 
-For a case (its measured :class:`Context`) and a variant's runs:
-
-* ``free_running_order`` — the largest error over the run at h, h/2, h/4, per quantity, fitted over the
-  ladder above its measured floor (the reference's measured error plus the run's round-off grown by the
-  measured amplification: ``analysis.metrics.roundoff_floor``) and compared with what the variant's
-  traits and the case's measured physics expect (``analysis.expectations.expectation``), judged by the
-  one judge every entry point uses (``analysis.judge.judge_ladder``) — the sweep's verdict,
-  on the largest error over the run rather than the final one, which a crossing through zero at the
-  final time cannot fool;
+* ``free_running_order`` — the largest error over the run at h, h/2, h/4, per quantity, judged above its
+  measured floor by the one judge (``analysis.judge.judge_ladder``) against ``analysis.expectations``;
 * ``one_step_order`` — the one-step defect against the exact flow from reference states, at h … h/8,
-  fitted the same way against the local order p + 1 (``expectation(..., "one_step")``);
-* ``conservation`` — where the physics conserves energy or world angular momentum and the variant
-  models that physics: the largest drift over the run within ``analysis.flow.conservation_allowance``
-  (a consistent scheme's local defects, weighted by the quantity's sensitivity, summed over the run)
-  plus the run's round-off;
+  judged the same way against the local order p + 1;
+* ``conservation`` — where the physics conserves energy or world angular momentum and the variant models
+  that physics: the largest drift within ``analysis.flow.conservation_allowance`` plus the run's round-off;
 * ``agreement`` — the pairs of ``analysis.expectations.EQUIVALENT_PAIRS`` agree to round-off over the
   run: ``max(SAME_SCHEME_REL, FUZZ_ROUNDINGS_PER_STEP · N ε · A)`` relative to each quantity's scale.
 
