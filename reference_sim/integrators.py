@@ -13,29 +13,11 @@ The continuous equations (world ω, course convention; Euler's equations in worl
 
     ẋ = v,   v̇ = f / m,   q̇ = ½ [0, ω] q,   I_W ω̇ = τ − ω × (I_W ω),   I_W = R I_B Rᵀ
 
-Variants (names fixed by docs/engines.md and the README):
-
-``course``        the course's step exactly: v += Δt f/m; x += Δt v; ω += Δt I_W⁻¹ τ;
-                  q += [0, Δt/2 ω] q; q /= |q|. No gyroscopic term.
-``course_gyro``   the same with the explicit gyroscopic torque −ω × (I_W ω).
-``expmap_gyro``   symplectic Euler with explicit gyroscopic term, q ← exp(Δt ω_new) q (MuJoCo Euler).
-``explicit_euler`` y ← y + Δt F(y).
-``implicit_euler`` y ← y + Δt F(y_new): the fixed point z ← y + Δt F(z) from the explicit Euler predictor,
-                  and Newton's method for a row where it does not contract (see ``IMPLICIT_TOL``).
-``midpoint``      explicit mid-point (RK2): y ← y + Δt F(y + Δt/2 F(y)).
-``leapfrog``      Störmer–Verlet kick–drift–kick; the first half kick is implicit in the velocities
-                  (fixed point, ``IMPLICIT_TOL``) so the scheme stays second order with
-                  velocity-dependent forces and the gyroscopic term; velocities reported at integer steps.
-``rk4``           classical Runge–Kutta 4.
-
-Whole-state schemes renormalise the quaternion after the step.
-
-Velocity decay: the course's per-step factors γ are given at the scenario's step dt; physically they
-are exponential damping at the rates ``k = −ln γ / dt`` (``ForceModel.decay_rates_per_s``). The three
-course-type schemes (course, course_gyro, expmap_gyro) multiply v and ω by ``e^{−kΔt}``
-(``Members.decay_factors``) right after their velocity update — exactly the course's γ when
-Δt = dt; the whole-state schemes have ``−k v`` and ``−k ω`` in their right-hand side (:func:`rhs`), so
-each converges at its order to the continuously damped motion.
+The variants, their orders and one-line descriptions: :data:`VARIANTS` (names fixed by docs/engines.md and
+the README); each step function states its scheme. Whole-state schemes renormalise the quaternion after the
+step. Velocity decay (docs/semantics.md, "Velocity decay"): the course-type schemes (course, course_gyro,
+expmap_gyro and the engines' gyroscopic steps) multiply v and ω by ``e^{−kΔt}`` (``Members.decay_factors``)
+right after their velocity update; the whole-state schemes have ``−k v`` and ``−k ω`` in :func:`rhs`.
 """
 from __future__ import annotations
 
