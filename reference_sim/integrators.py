@@ -14,10 +14,11 @@ The continuous equations (world ω, course convention; Euler's equations in worl
     ẋ = v,   v̇ = f / m,   q̇ = ½ [0, ω] q,   I_W ω̇ = τ − ω × (I_W ω),   I_W = R I_B Rᵀ
 
 The variants, their orders and one-line descriptions: :data:`VARIANTS` (names fixed by docs/engines.md and
-the README); each step function states its scheme. Whole-state schemes renormalise the quaternion after the
-step. Velocity decay (docs/semantics.md, "Velocity decay"): the course-type schemes (course, course_gyro,
-expmap_gyro and the engines' gyroscopic steps) multiply v and ω by ``e^{−kΔt}`` (``Members.decay_factors``)
-right after their velocity update; the whole-state schemes have ``−k v`` and ``−k ω`` in :func:`rhs`.
+the README); the step functions below write each scheme. Whole-state schemes renormalise the quaternion
+after the step. Velocity decay (docs/semantics.md, "Velocity decay"): the course-type schemes (course,
+course_gyro, expmap_gyro and the engines' gyroscopic steps) multiply v and ω by ``e^{−kΔt}``
+(``Members.decay_factors``) right after their velocity update; the whole-state schemes have ``−k v`` and
+``−k ω`` in :func:`rhs`; the Strang steps damp in their kicks.
 """
 from __future__ import annotations
 
