@@ -240,13 +240,8 @@ class LongRunJudgement:
 def judge_long_run(variant: str, run_name: str, metrics, exp, status: str = "ok",
                    diverged_at_s: float | None = None) -> LongRunJudgement:
     """Judge a long run's :class:`~cross_checks.analysis.long_run.DriftMetrics` ``metrics`` (None when the
-    run failed) against the :class:`~cross_checks.analysis.expectations.LongRunExpectation` ``exp``.
-
-    Rules, in order: a failed run has no verdict; a run that diverged contradicts any declared invariant;
-    each declared invariant must hold within the round-off a run of that many steps accumulates
-    (tol.long_run_roundoff: the energy's and |L|'s largest relative drift, L's largest turn in rad; "energy
-    bounded": no secular energy drift); then the separatrix distance: kept when the variant keeps the energy
-    and |L| (any secular drift contradicts), toward the intermediate axis or kept for a "momentum" step."""
+    run failed) against the :class:`~cross_checks.analysis.expectations.LongRunExpectation` ``exp``, by the
+    rules of docs/verdicts.md §8, in order (round-off: tol.long_run_roundoff)."""
     from cross_checks.analysis.long_run import drift_kind, finding
     if status == "failed" or metrics is None:
         return LongRunJudgement("failed", None, "the run failed: nothing to judge", "")
