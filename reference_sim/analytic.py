@@ -9,15 +9,8 @@ docs/course_equations.md:
 * the angular velocity ``w_W`` is in WORLD axes; ``q̇ = ½ [0, ω_W] q`` (left multiplication);
 * ``inertia_B`` is the body-frame inertia about the COM (3 principal moments or a 3×3 tensor, kg m²).
 
-Translational closed forms (no torque: every force acts at the COM)
-    :func:`projectile`, :func:`linear_drag`, :func:`harmonic_oscillator`.
-Torque-free rotation
-    :func:`constant_spin` (principal-axis or isotropic spin), :func:`axisymmetric_top` (two equal
-    moments), :func:`torque_free_asymmetric` / :func:`jacobi_body_rates` (three distinct moments,
-    Jacobi elliptic functions), and the dispatcher :func:`torque_free`.
-Discretisation error of the course scheme
-    :func:`symplectic_euler_gravity_error`, :func:`course_spin_phase_lag`,
-    :func:`course_spin_phase_lag_exact`.
+Translational closed forms (every force at the COM), torque-free rotation (:func:`torque_free` picks the
+closed form that applies) and the discretisation error of the course scheme.
 """
 from __future__ import annotations
 
@@ -498,8 +491,7 @@ def jacobi_body_rates(moments, w0_B, t_s):
 def _jacobi_attitude(sol: _Jacobi, t, w_Pp, am, sn, cn):
     """Orientation ``q_LP'`` (T, 4) of P' relative to the world-fixed frame L (z along L_W).
 
-    ZXZ Euler angles: ``R_LP' = Rz(ψ) Rx(θ) Rz(χ)`` with ``l_P' = L_P'/|L| =
-    (sinθ sinχ, sinθ cosχ, cosθ)`` and ``ψ̇ = |L| (I1 ω1² + I2 ω2²) / (I1² ω1² + I2² ω2²)``.
+    ZXZ Euler angles ``R_LP' = Rz(ψ) Rx(θ) Rz(χ)`` (:func:`torque_free_asymmetric`).
     """
     I1, I2, I3 = sol.I
     d31, d32, d21 = I3 - I1, I3 - I2, I2 - I1
@@ -510,10 +502,7 @@ def _jacobi_attitude(sol: _Jacobi, t, w_Pp, am, sn, cn):
     a_, b_ = I1 * sol.a[0], I2 * sol.a[1]
     mu = am + np.arctan2((b_ - a_) * sn * cn, a_ * cn * cn + b_ * sn * sn)
     chi = 0.5 * np.pi - sol.sigma * mu
-    # ψ̇ = (L/I1) [1 + c2 sn²/(1 − n sn²)], n = −I3 (I2−I1)/(I1 (I3−I2)) < 0,
-    # c2 = (I1−I2)(I3−I1)/(I1 (I3−I2)); so ψ(t) = (L/I1) [t + (c2/p) (S(u) − S(u0))] with
-    # S(u) = ∫_0^u sn²/(1 − n sn²) du = ⅓ sn³ R_J(cn², dn², 1, 1 − n sn²) for |u| <= K
-    # (DLMF §19.25(i): Π = F + (n/3) sin³φ R_J; this is the R_J part) and S(u + 2K) = S(u) + 2 S(K).
+    # ψ(t) = (L/I1) [t + (c2/p) (S(u) − S(u0))], n, c2 and S as in torque_free_asymmetric's docstring
     n = -I3 * d21 / (I1 * d32)
     c2 = (I1 - I2) * d31 / (I1 * d32)
     S_K = elliprj(0.0, 1.0 - sol.m, 1.0, 1.0 - n) / 3.0
