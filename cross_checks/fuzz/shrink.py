@@ -1,18 +1,12 @@
-"""Shrinking a failing case to a minimal scenario that still fails, and confirming it with ``rbcheck sweep``.
+"""Shrinking a failing case to a minimal scenario that still fails, and confirming it with ``rbcheck sweep``
+(docs/fuzz.md §3).
 
-A failure has a *signature*: the property, the variant(s) and, for a run that failed or diverged, that
-outcome (:func:`signature`). :func:`shrink` is a greedy shrinker in the spirit of hypothesis's, on the
-scenario's own structure: each round proposes simpler scenarios (:func:`candidates`, simplest first),
-judges them in small batches with the same pipeline that found the failure (their own step, ladder and
-duration; a candidate outside the fairness bounds is skipped by the pipeline and so never accepted) and
-keeps the first that still shows the signature, until no candidate does. Simpler means: a shorter run,
-fewer forces, a body given by principal moments in its principal frame (the same motion: orientation,
-body-frame vectors and points are rotated with it), initial values at their defaults, numbers with
-fewer significant digits.
-
-:func:`confirm` writes the result as a scenario file and runs ``rbcheck sweep`` on it (in this process,
-with the same engines) — the counterexample counts only if the sweep's own gates fail on it, as they
-would make ``rbcheck sweep FILE --engines ...`` exit 1.
+A failure has a *signature* (:func:`signature`). :func:`shrink` is a greedy shrinker in the spirit of
+hypothesis's: each round proposes simpler scenarios (:func:`candidates`, simplest first), judges them in
+small batches with the same pipeline that found the failure (a candidate outside the fairness bounds is
+skipped by the pipeline and so never accepted) and keeps the first that still shows the signature, until
+no candidate does. :func:`confirm` runs ``rbcheck sweep`` on the result (in this process, with the same
+engines): the counterexample counts only if the sweep's own gates fail on it.
 """
 from __future__ import annotations
 
