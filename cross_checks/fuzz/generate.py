@@ -145,19 +145,16 @@ def _draw_body(rng, kinds):
     kinds["shape"] = shape
     m = _moments(rng, shape, mass, size)
     if kind == "moments":
-        order = np.argsort(m)
-        R = np.eye(3)[:, order]
-        if np.linalg.det(R) < 0:
-            R[:, 2] *= -1.0
-        return {"mass": mass, "inertia": m.tolist()}, np.zeros(3), m[order], R, size, mass
-    R = matrix_from_quat(_random_quat(rng))   # principal axes in body coordinates: products of inertia
-    I = R @ np.diag(m) @ R.T
-    I = 0.5 * (I + I.T)
+        R, inertia = np.eye(3), m.tolist()
+    else:
+        R = matrix_from_quat(_random_quat(rng))   # principal axes in body coordinates: products of inertia
+        I = R @ np.diag(m) @ R.T
+        inertia = (0.5 * (I + I.T)).tolist()
     order = np.argsort(m)
     R = R[:, order]
     if np.linalg.det(R) < 0:
         R[:, 2] *= -1.0
-    return {"mass": mass, "inertia": I.tolist()}, np.zeros(3), m[order], R, size, mass
+    return {"mass": mass, "inertia": inertia}, np.zeros(3), m[order], R, size, mass
 
 
 # --- the initial state ------------------------------------------------------------------------------
