@@ -191,14 +191,7 @@ class _Reader:
             raise self.err(fld, f"must be a list of {n} numbers, got {_show(v)}")
         if len(v) != n:
             raise self.err(fld, f"must have {n} numbers, got {len(v)}")
-        out = []
-        for i, e in enumerate(v):
-            if isinstance(e, bool) or not isinstance(e, (int, float)):
-                raise self.err(f"{fld}[{i}]", f"must be a number, got {_show(e)}")
-            if not math.isfinite(float(e)):
-                raise self.err(f"{fld}[{i}]", f"must be finite, got {e}")
-            out.append(float(e))
-        return np.array(out)
+        return np.array([self.number({"v": e}, "v", f"{fld}[{i}]") for i, e in enumerate(v)])
 
     def string(self, d, key, fld, *, default=None, choices=None):
         if key not in d:
