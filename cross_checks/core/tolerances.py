@@ -97,15 +97,12 @@ CSV_MAX_BYTES = 2 ** 30
 #: DOP853 (rtol 1e-13) right-hand-side evaluations per radian of the fastest rate of the dynamics: springs
 #: and spins need 64–93; 100 covers both.
 DOP853_EVALS_PER_RAD = 100
-#: Physical ranges rbcheck judges (scenario.limits.check_physical_ranges), refused outside like an inertia
-#: that violates the triangle inequality. Masses from 1 mg to 1e6 kg and moments from 1e-12 to 1e9 kg m² (a
-#: 1 mm bead to a ship): MuJoCo refuses masses and moments below its mjMINVAL (1e-15), and nine decades either
-#: side of 1 keep every term of the equations far from float64's range. A moment ratio up to 1e6 (a rod of
-#: 1000:1): beyond it the gyroscopic products lose every digit of the small moment's axis. Initial spin up to
-#: 1e4 rad/s (a dental drill), speed up to 1e4 m/s (above orbital speed), positions within 1e6 m,
-#: accelerations (gravity, |f|/m) up to 1e6 m/s² and angular accelerations |τ|/I_min up to 1e8 rad/s²: with
-#: the duration and the step limits these keep every state below ~1e12, where round-off is the floors'
-#: ε |y|, not an overflow.
+#: Physical ranges rbcheck judges (scenario.limits.check_physical_ranges; docs/hardening.md). Masses and
+#: moments from a 1 mm bead to a ship (MuJoCo refuses them below its mjMINVAL, 1e-15; nine decades either
+#: side of 1 keep every term far from float64's range); a moment ratio up to 1e6 (a rod of 1000:1: beyond
+#: it the gyroscopic products lose every digit of the small moment's axis); spin, speed, distance and
+#: accelerations that, with the duration and step limits, keep every state below ~1e12, where round-off is
+#: the floors' ε |y|, not an overflow.
 PHYSICAL_MASS_KG = (1e-6, 1e6)
 PHYSICAL_INERTIA_KG_M2 = (1e-12, 1e9)
 PHYSICAL_MAX_INERTIA_RATIO = 1e6
