@@ -81,9 +81,6 @@ def fit_convergence(dt_s, errors, floors=None, statuses=None,
     fewer than two points resolved above their floor -> "at_roundoff" (the scheme is exact here); else the
     least-squares order over the asymptotic points: "converges" when it is ≥ CONVERGES_MIN_ORDER and
     the error shrinks at every halving, otherwise "does_not_converge".
-
-    The ladder is handled as Python lists of floats (a handful of points: NumPy calls would cost more
-    than the arithmetic); the slope itself is NumPy's least squares.
     """
     dt0, e0 = _floats(dt_s), _floats(errors)
     K = len(dt0)
@@ -184,8 +181,7 @@ def _lower_bound_points(e, fl, idx_ok, above):
 
 
 def _median(values) -> float:
-    """``np.median`` of a few floats, exactly (the middle one, or the two middle ones' sum halved), at a
-    hundredth of its cost."""
+    """``np.median`` of a few floats, exactly (the middle one, or the two middle ones' sum halved)."""
     s = sorted(values)
     m = len(s) // 2
     return float(s[m] if len(s) % 2 else (s[m - 1] + s[m]) / 2.0)
