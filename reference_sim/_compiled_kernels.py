@@ -405,8 +405,8 @@ def _gyro_update(kind, R, wx, wy, wz, h, I9, J9, max_torque):
     return _mv(R, a0, a1, a2)
 
 
-# The two steps below are called from run, not inlined into it: inlined, they made run's compilation 1.7x as
-# long (90 s against 53 s on 2 cores), and the sweep no faster.
+# The two steps below are called from run, not inlined into it: inlined, they lengthen run's compilation and
+# make the sweep no faster.
 @njit(**_JIT)
 def _engine_gyro_step(i, y, out, kind, max_torque, P):
     """integrators._engine_gyro_step of member i with the gyroscopic update ``kind``

@@ -9,15 +9,8 @@ docs/course_equations.md:
 * the angular velocity ``w_W`` is in WORLD axes; ``q̇ = ½ [0, ω_W] q`` (left multiplication);
 * ``inertia_B`` is the body-frame inertia about the COM (3 principal moments or a 3×3 tensor, kg m²).
 
-Translational closed forms (no torque: every force acts at the COM)
-    :func:`projectile`, :func:`linear_drag`, :func:`harmonic_oscillator`.
-Torque-free rotation
-    :func:`constant_spin` (principal-axis or isotropic spin), :func:`axisymmetric_top` (two equal
-    moments), :func:`torque_free_asymmetric` / :func:`jacobi_body_rates` (three distinct moments,
-    Jacobi elliptic functions), and the dispatcher :func:`torque_free`.
-Discretisation error of the course scheme
-    :func:`symplectic_euler_gravity_error`, :func:`course_spin_phase_lag`,
-    :func:`course_spin_phase_lag_exact`.
+Translational closed forms (every force at the COM), torque-free rotation (:func:`torque_free` picks the
+closed form that applies) and the discretisation error of the course scheme.
 """
 from __future__ import annotations
 
@@ -27,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import ellipj, ellipk, ellipkinc, elliprj
 
-from reference_sim.body import check_inertia
+from reference_sim.body import check_inertia, principal_axes
 from reference_sim.quaternion import quat_conj, quat_exp, quat_from_matrix, quat_mul, quat_normalize, rotate
 
 __all__ = [
@@ -118,10 +111,7 @@ def _principal(inertia_B):
         I_B = check_inertia(inertia_B)
     except ValueError as exc:
         raise ValueError(f"inertia_B {exc}") from None
-    moments, R_BP = np.linalg.eigh(I_B)
-    if np.linalg.det(R_BP) < 0.0:
-        R_BP[:, 2] *= -1.0
-    return moments, R_BP
+    return principal_axes(I_B)
 
 
 def _qx(angle):
@@ -146,17 +136,9 @@ def projectile(x0_W, v0_W, g_W, t_s):
     ``x(t) = x0 + v0 t + ½ g t²``, ``v(t) = v0 + g t`` (elementary kinematics; e.g. J. R. Taylor,
     *Classical Mechanics* (2005), ch. 2).
 
-    Parameters
-    ----------
-    x0_W : (3,) initial COM position, world, m.
-    v0_W : (3,) initial COM velocity, world, m/s.
-    g_W : (3,) gravitational acceleration, world, m/s².
-    t_s : (T,) times, s.
-
-    Returns
-    -------
-    x_W : (T, 3) COM positions, world, m.
-    v_W : (T, 3) COM velocities, world, m/s.
+    Parameters: ``x0_W``, ``v0_W``, ``g_W`` (3,) initial COM position (m), velocity (m/s) and gravitational
+    acceleration (m/s²), world; ``t_s`` (T,) times, s.
+    Returns: ``x_W`` (T, 3) COM positions, m, and ``v_W`` (T, 3) COM velocities, m/s, world.
     """
     x0, v0, g = _vec3("x0_W", x0_W), _vec3("v0_W", v0_W), _vec3("g_W", g_W)
     t = _times(t_s)[:, None]
@@ -202,16 +184,8 @@ def linear_drag(mass_kg, c_N_s_per_m, x0_W, v0_W, g_W, t_s):
     φ2 a Taylor series for small ``z``, so the result is accurate to round-off for every k·t, and
     ``c = 0`` reproduces :func:`projectile` exactly (φ1 = 1, φ2 = ½).
 
-    Parameters
-    ----------
-    mass_kg : body mass, kg (> 0).
-    c_N_s_per_m : drag coefficient c in ``f = −c v``, N s/m (>= 0).
-    x0_W, v0_W, g_W : (3,) initial position (m), velocity (m/s), gravity (m/s²), world.
-    t_s : (T,) times, s.
-
-    Returns
-    -------
-    x_W : (T, 3) m;  v_W : (T, 3) m/s; world.
+    Parameters: ``mass_kg`` (> 0); ``c_N_s_per_m`` the drag coefficient c in ``f = −c v``, N s/m (>= 0);
+    ``x0_W``, ``v0_W``, ``g_W`` and ``t_s`` as in :func:`projectile`. Returns: as :func:`projectile`.
     """
     m = _positive("mass_kg", mass_kg)
     c = float(c_N_s_per_m)
@@ -241,23 +215,13 @@ def harmonic_oscillator(mass_kg, k_N_per_m, rest_length_m, anchor_W, x0_W, v0_W,
 
     (L. D. Landau & E. M. Lifshitz, *Mechanics*, 3rd ed., §21, free oscillations in one dimension.)
 
-    Parameters
-    ----------
-    mass_kg : kg (> 0).  k_N_per_m : stiffness, N/m (> 0).  rest_length_m : L0, m (>= 0).
-    anchor_W, x0_W, v0_W, g_W : (3,) anchor (m), initial COM position (m) and velocity (m/s),
-        gravity (m/s²), world.
-    t_s : (T,) times, s.
+    Parameters: ``mass_kg`` (> 0), ``k_N_per_m`` stiffness (> 0), ``rest_length_m`` L0 (>= 0),
+    ``anchor_W`` (3,) the anchor, world, m; ``x0_W``, ``v0_W``, ``g_W`` and ``t_s`` as in :func:`projectile`.
+    Returns: as :func:`projectile`.
 
-    Returns
-    -------
-    x_W : (T, 3) m;  v_W : (T, 3) m/s; world.
-
-    Raises
-    ------
-    ValueError
-        For ``L0 > 0`` when the motion is not on one line through the anchor (x0 at the anchor,
-        v0 or g not parallel to x0 − anchor), or when the body reaches the anchor at some time
-        between 0 and the extreme times of ``t_s`` (the 1-D model no longer holds there).
+    Raises ValueError for ``L0 > 0`` when the motion is not on one line through the anchor (x0 at the
+    anchor, v0 or g not parallel to x0 − anchor), or when the body reaches the anchor at some time between 0
+    and the extreme times of ``t_s`` (the 1-D model does not hold there).
     """
     m = _positive("mass_kg", mass_kg)
     k = _positive("k_N_per_m", k_N_per_m)
@@ -328,16 +292,10 @@ def constant_spin(q0_WB, w_W, t_s):
     E. M. Lifshitz, *Mechanics*, 3rd ed., §36). This function does not know the inertia: checking
     that one of those cases holds is the caller's job (:func:`torque_free` does it).
 
-    Parameters
-    ----------
-    q0_WB : (4,) initial orientation body→world, unit quaternion (w, x, y, z) (normalised here).
-    w_W : (3,) angular velocity, world axes, rad/s.
-    t_s : (T,) times, s.
-
-    Returns
-    -------
-    q_WB : (T, 4) orientations (w, x, y, z), continuous in t.
-    w_W : (T, 3) angular velocities (all equal to the input), world, rad/s.
+    Parameters: ``q0_WB`` (4,) initial orientation body→world, quaternion (w, x, y, z) (normalised here);
+    ``w_W`` (3,) angular velocity, world axes, rad/s; ``t_s`` (T,) times, s.
+    Returns: ``q_WB`` (T, 4) orientations (w, x, y, z), continuous in t, and ``w_W`` (T, 3) angular
+    velocities, world axes, rad/s (all equal to the input).
     """
     q0 = _quat("q0_WB", q0_WB)
     w = _vec3("w_W", w_W)
@@ -383,19 +341,10 @@ def axisymmetric_top(inertia_B, q0_WB, w0_W, t_s):
     ``ω_W = L_W / I_perp + λ R e``; the formula satisfies ``Ṙ Rᵀ = [L_W/I_perp + λ R e]×`` (the
     right factor commutes with ``[e]×``) with the right R(0), so it is the solution.
 
-    Parameters
-    ----------
-    inertia_B : (3,) principal moments or (3, 3) body-frame inertia tensor about the COM, kg m²; two
-        principal moments equal within EQUAL_MOMENTS_REL_TOL (any axis may be the symmetry axis;
-        the tensor's principal axes are used).
-    q0_WB : (4,) initial orientation body→world (w, x, y, z).
-    w0_W : (3,) initial angular velocity, world axes, rad/s.
-    t_s : (T,) times, s.
-
-    Returns
-    -------
-    q_WB : (T, 4) orientations (w, x, y, z), continuous in t.
-    w_W : (T, 3) angular velocities, world axes, rad/s.
+    Parameters: ``inertia_B`` (3,) principal moments or (3, 3) body-frame inertia tensor about the COM,
+    kg m², two principal moments equal within EQUAL_MOMENTS_REL_TOL (any axis may be the symmetry axis);
+    ``q0_WB``, ``w0_W`` (initial angular velocity) and ``t_s`` as in :func:`constant_spin`.
+    Returns: as :func:`constant_spin`.
     """
     moments, R_BP = _principal(inertia_B)
     e_B, I_s, I_perp = _symmetry_axis(moments, R_BP)
@@ -517,22 +466,12 @@ def jacobi_body_rates(moments, w0_B, t_s):
     ``u0 = F(am(u0) | k²)`` (incomplete elliptic integral, ``scipy.special.ellipkinc``), which covers
     all sign combinations (octants) of ω(0).
 
-    Parameters
-    ----------
-    moments : (3,) principal moments, kg m², in any order, pairwise distinct.
-    w0_B : (3,) initial angular velocity in the principal body frame (inertia = diag(moments)), rad/s.
-    t_s : (T,) times, s.
-
-    Returns
-    -------
-    w_B : (T, 3) angular velocity in the same principal body frame, rad/s.
-
-    Raises
-    ------
-    ValueError
-        For non-positive or equal moments, or an initial condition on the separatrix
-        ``2 E I_mid = L²`` (see SEPARATRIX_REL_TOL). Spin exactly about one principal axis (two
-        zero components) is returned as constant.
+    Parameters: ``moments`` (3,) principal moments, kg m², in any order, pairwise distinct; ``w0_B`` (3,)
+    initial angular velocity in the principal body frame (inertia = diag(moments)), rad/s; ``t_s`` (T,) s.
+    Returns ``w_B`` (T, 3), the angular velocity in the same principal body frame, rad/s; constant for a
+    spin exactly about one principal axis (two zero components).
+    Raises ValueError for non-positive or equal moments, or an initial condition on the separatrix
+    ``2 E I_mid = L²`` (see SEPARATRIX_REL_TOL).
     """
     I = _vec3("moments", moments)
     if np.any(I <= 0.0):
@@ -552,8 +491,7 @@ def jacobi_body_rates(moments, w0_B, t_s):
 def _jacobi_attitude(sol: _Jacobi, t, w_Pp, am, sn, cn):
     """Orientation ``q_LP'`` (T, 4) of P' relative to the world-fixed frame L (z along L_W).
 
-    ZXZ Euler angles: ``R_LP' = Rz(ψ) Rx(θ) Rz(χ)`` with ``l_P' = L_P'/|L| =
-    (sinθ sinχ, sinθ cosχ, cosθ)`` and ``ψ̇ = |L| (I1 ω1² + I2 ω2²) / (I1² ω1² + I2² ω2²)``.
+    ZXZ Euler angles ``R_LP' = Rz(ψ) Rx(θ) Rz(χ)`` (:func:`torque_free_asymmetric`).
     """
     I1, I2, I3 = sol.I
     d31, d32, d21 = I3 - I1, I3 - I2, I2 - I1
@@ -564,10 +502,7 @@ def _jacobi_attitude(sol: _Jacobi, t, w_Pp, am, sn, cn):
     a_, b_ = I1 * sol.a[0], I2 * sol.a[1]
     mu = am + np.arctan2((b_ - a_) * sn * cn, a_ * cn * cn + b_ * sn * sn)
     chi = 0.5 * np.pi - sol.sigma * mu
-    # ψ̇ = (L/I1) [1 + c2 sn²/(1 − n sn²)], n = −I3 (I2−I1)/(I1 (I3−I2)) < 0,
-    # c2 = (I1−I2)(I3−I1)/(I1 (I3−I2)); so ψ(t) = (L/I1) [t + (c2/p) (S(u) − S(u0))] with
-    # S(u) = ∫_0^u sn²/(1 − n sn²) du = ⅓ sn³ R_J(cn², dn², 1, 1 − n sn²) for |u| <= K
-    # (DLMF §19.25(i): Π = F + (n/3) sin³φ R_J; this is the R_J part) and S(u + 2K) = S(u) + 2 S(K).
+    # ψ(t) = (L/I1) [t + (c2/p) (S(u) − S(u0))], n, c2 and S as in torque_free_asymmetric's docstring
     n = -I3 * d21 / (I1 * d32)
     c2 = (I1 - I2) * d31 / (I1 * d32)
     S_K = elliprj(0.0, 1.0 - sol.m, 1.0, 1.0 - n) / 3.0
@@ -600,15 +535,10 @@ def torque_free_asymmetric(inertia_B, q0_WB, w0_W, t_s):
     ``S(u) = ∫₀ᵘ sn²/(1 − n sn²) = ⅓ sn³u R_J(cn²u, dn²u, 1, 1 − n sn²u)`` on |u| <= K extended by
     ``S(u + 2K) = S(u) + 2 S(K)`` (the elliptic integral of the third kind in Carlson form, DLMF
     §19.25(i); B. C. Carlson, Numer. Algorithms 10 (1995) 13). No quadrature: the attitude is exact
-    up to round-off in the phase (~ε |ω| t); over 10 s at a few rad/s it agrees with a DOP853 solve
-    at rtol 2.3e-14 to ≤ 3e-12 rad, that solver's own error. ψ(0) = 0 fixes L's frame from ``q0_WB``.
+    up to round-off in the phase (~ε |ω| t). ψ(0) = 0 fixes L's frame from ``q0_WB``.
 
     Parameters and returns: those of :func:`axisymmetric_top`, with three distinct principal moments.
-
-    Raises
-    ------
-    ValueError
-        Two moments equal (use :func:`axisymmetric_top`), or ω(0) on the separatrix.
+    Raises ValueError when two moments are equal (use :func:`axisymmetric_top`), or ω(0) is on the separatrix.
     """
     moments, R_BP = _principal(inertia_B)
     if np.min(np.diff(moments)) <= EQUAL_MOMENTS_REL_TOL * moments[2]:
@@ -643,16 +573,7 @@ def torque_free(inertia_B, q0_WB, w0_W, t_s):
     * two principal moments equal (EQUAL_MOMENTS_REL_TOL) → :func:`axisymmetric_top`;
     * otherwise → :func:`torque_free_asymmetric`.
 
-    Parameters
-    ----------
-    inertia_B : (3,) principal moments or (3, 3) body-frame inertia tensor about the COM, kg m².
-    q0_WB : (4,) initial orientation body→world (w, x, y, z).
-    w0_W : (3,) initial angular velocity, world axes, rad/s.
-    t_s : (T,) times, s.
-
-    Returns
-    -------
-    q_WB : (T, 4) orientations (w, x, y, z);  w_W : (T, 3) angular velocities, world, rad/s.
+    Parameters and returns: those of :func:`axisymmetric_top`, with any body-frame inertia.
     """
     kind = _torque_free_kind(inertia_B, q0_WB, w0_W)
     if kind == "constant_spin":
@@ -690,13 +611,8 @@ def symplectic_euler_gravity_error(g_W, t_s, dt_s):
     parabola is ``x0 + n Δt v0 + g (n Δt)²/2``, so ``x_n − x(t_n) = g Δt² n/2`` and
     ``|error| = ½ |g| t Δt`` exactly (no higher-order terms; derived from docs/course_equations.md).
 
-    Parameters
-    ----------
-    g_W : (3,) gravity, world, m/s².  t_s : (T,) times (multiples of dt_s), s.  dt_s : step, s.
-
-    Returns
-    -------
-    error_m : (T,) norm of the position error, m.
+    Parameters: ``g_W`` (3,) gravity, world, m/s²; ``t_s`` (T,) times (multiples of ``dt_s``), s; ``dt_s``
+    the step, s. Returns ``error_m`` (T,), the norm of the position error, m.
     """
     g = _vec3("g_W", g_W)
     return 0.5 * float(np.linalg.norm(g)) * _times(t_s) * float(dt_s)
@@ -713,14 +629,9 @@ def course_spin_phase_lag(w_W, t_s, dt_s):
 
     (relative error of this form: ``0.15 (Δt|ω|)²``; :func:`course_spin_phase_lag_exact` has none).
 
-    Parameters
-    ----------
-    w_W : (3,) angular velocity, rad/s (any frame: only |ω| matters).
-    t_s : (T,) times, s.  dt_s : step, s.
-
-    Returns
-    -------
-    lag_rad : (T,) geodesic angle between the course orientation and the exact constant spin, rad.
+    Parameters: ``w_W`` (3,) angular velocity, rad/s (any frame: only |ω| matters); ``t_s`` (T,) times, s;
+    ``dt_s`` the step, s. Returns ``lag_rad`` (T,), the geodesic angle between the course orientation and
+    the exact constant spin, rad.
     """
     w = float(np.linalg.norm(_vec3("w_W", w_W)))
     return _times(t_s) * w ** 3 * float(dt_s) ** 2 / 12.0
@@ -734,13 +645,8 @@ def course_spin_phase_lag_exact(w_W, n_steps, dt_s):
     y < 0.25 so the result keeps full relative precision (the direct difference loses ~3 ε / y²).
     As a geodesic angle it is meaningful while below π.
 
-    Parameters
-    ----------
-    w_W : (3,) angular velocity, rad/s.  n_steps : int or (T,) ints, steps taken.  dt_s : step, s.
-
-    Returns
-    -------
-    lag_rad : float or (T,) rad.
+    Parameters: ``w_W`` (3,) angular velocity, rad/s; ``n_steps`` int or (T,) ints, steps taken; ``dt_s``
+    the step, s. Returns ``lag_rad``, float or (T,), rad.
     """
     y = 0.5 * float(dt_s) * float(np.linalg.norm(_vec3("w_W", w_W)))
     if y < 0.25:

@@ -5,7 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["RigidBody", "inertia_from_particles", "check_inertia"]
+__all__ = ["RigidBody", "inertia_from_particles", "check_inertia", "principal_axes"]
 
 # Relative tolerance for symmetry and the triangle inequality of an inertia tensor: a few ulps of
 # the largest moment, so tensors typed with ~15 significant digits pass and real violations do not.
@@ -55,20 +55,20 @@ def check_inertia(inertia_B) -> np.ndarray:
     return 0.5 * (I + I.T)
 
 
+def principal_axes(inertia_B):
+    """Principal moments ``(3,)`` ascending (kg m²) and ``R_BP`` (3, 3), det +1, of a symmetric (3, 3)
+    inertia: ``inertia_B = R_BP diag(moments) R_BPᵀ`` (columns: principal axes in body coordinates)."""
+    moments, R = np.linalg.eigh(inertia_B)
+    if np.linalg.det(R) < 0:
+        R[:, 2] *= -1.0
+    return moments, R
+
+
 def inertia_from_particles(masses_kg, points_B_m):
-    """Mass, COM and inertia of point masses, as the course defines them.
-
-    Parameters
-    ----------
-    masses_kg : (K,) masses, kg.
-    points_B_m : (K, 3) positions in body coordinates, m.
-
-    Returns
-    -------
-    mass_kg : float
-    com_B_m : (3,) centre of mass in the given body coordinates, m.
-    inertia_B : (3, 3) ``I_ref = Σ m_i [(r_iᵀ r_i) I₃ − r_i r_iᵀ]`` about the COM, with
-        ``r_i = points_B_m[i] − com_B_m``, kg m².
+    """Mass, COM and inertia of point masses ``masses_kg`` (K,) at ``points_B_m`` (K, 3) (body coordinates,
+    m), as the course defines them: ``(mass_kg, com_B_m (3,) m in the given coordinates, inertia_B (3, 3)
+    kg m²)`` with ``I_ref = Σ m_i [(r_iᵀ r_i) I₃ − r_i r_iᵀ]`` about the COM,
+    ``r_i = points_B_m[i] − com_B_m``.
     """
     m = np.asarray(masses_kg, dtype=float)
     p = np.asarray(points_B_m, dtype=float)
@@ -82,14 +82,9 @@ def inertia_from_particles(masses_kg, points_B_m):
 
 @dataclass(frozen=True, eq=False)
 class RigidBody:
-    """Mass properties of one rigid body whose body frame has its origin at the COM.
-
-    Attributes
-    ----------
-    mass_kg : float, kg.
-    inertia_B : (3, 3) inertia tensor about the COM in body axes, kg m² (symmetric, positive definite).
-    particles : optional (K, 4) ``[m, x, y, z]`` point masses (body coordinates relative to the COM,
-        m) when the body was built from particles; kept so the course's per-particle view is available.
+    """Mass properties of one rigid body whose body frame has its origin at the COM: ``mass_kg`` (kg),
+    ``inertia_B`` (3, 3) about the COM in body axes, kg m² (symmetric, positive definite), and, for a body
+    built from particles, ``particles`` (K, 4) ``[m, x, y, z]`` (body coordinates from the COM, m).
     """
 
     mass_kg: float
@@ -121,12 +116,8 @@ class RigidBody:
         return cls(mass, I, rel), com
 
     def principal_axes(self):
-        """Principal moments ``(3,)`` ascending (kg m²) and ``R_BP`` (3, 3), det +1, with
-        ``inertia_B = R_BP diag(moments) R_BPᵀ`` (columns: principal axes in body coordinates)."""
-        moments, R = np.linalg.eigh(self.inertia_B)
-        if np.linalg.det(R) < 0:
-            R[:, 2] *= -1.0
-        return moments, R
+        """:func:`principal_axes` of this body's inertia."""
+        return principal_axes(self.inertia_B)
 
     def is_diagonal(self) -> bool:
         off = self.inertia_B - np.diag(np.diag(self.inertia_B))

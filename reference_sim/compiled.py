@@ -10,7 +10,7 @@ iteration of lp_midpoint or moser_veselov that does not converge or turns non-fi
 the caller (reference_sim.simulate) takes that one step with the definition (which raises, gives the bad
 state, or solves the step with Newton's method) and resumes compiled.
 
-numba is imported on first use (~0.5 s), and the kernels are compiled once per machine (``cache=True``);
+numba is imported on first use, and the kernels are compiled once per machine (``cache=True``);
 where numba cannot be imported, :func:`kernel` is None and runs step with the definition.
 State layout as everywhere: [x_W (3) m, v_W (3) m/s, q_WB (w, x, y, z), w_W (3) rad/s].
 """
@@ -87,8 +87,8 @@ def lane_members(variant: str, params: tuple) -> np.ndarray:
 
 class ForceEvaluator:
     """One body's forces at a single state, as plain floats, for an engine's per-step loop (where a NumPy call
-    costs more than the engine's step): the compiled ``Members.force_torque`` of the definition (about 1 µs a
-    call), or the definition itself without numba."""
+    costs more than the engine's step): the compiled ``Members.force_torque`` of the definition, or the
+    definition itself without numba."""
 
     def __init__(self, problem):
         self.members = problem.members

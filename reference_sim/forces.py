@@ -57,17 +57,13 @@ class Torque:
 class ForceModel:
     """All forces of a scenario.
 
-    Attributes
-    ----------
     gravity_W : (3,) m/s², uniform: acts at the COM, no torque.
     linear_drag_N_s_per_m : c in ``f = −c v_W`` at the COM.
     velocity_decay, angular_velocity_decay : the course's per-step factors γ on v and ω (1 = off),
         given at the step ``decay_dt_s``.
     decay_dt_s : s, the step at which the factors are the course's (the scenario's dt); required when
-        a factor is not 1. Physically the factors are exponential damping at the rates
-        ``k = −ln γ / decay_dt_s`` (1/s): ``v̇ = f/m − k_v v``, ``ω̇ = … − k_ω ω`` (see
-        :meth:`decay_rates_per_s`); a scheme with step Δt applies :meth:`decay_factors` ``(Δt)`` per
-        step, or puts the rates in its right-hand side.
+        a factor is not 1. The factors are the damping rates :meth:`decay_rates_per_s`
+        (docs/semantics.md, "Velocity decay").
     springs, point_forces, torques : tuples of the above.
     """
 

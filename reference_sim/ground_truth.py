@@ -9,10 +9,9 @@ from reference_sim.state import Problem, Q
 
 __all__ = ["ground_truth", "GROUND_TRUTH_RTOL", "GROUND_TRUTH_ATOL"]
 
-#: DOP853 tolerances (docs/semantics.md, "References"). At rtol 1e-12 the tennis racket's 10 s ground
-#: truth is 4e-10 from the Jacobi closed form (the flip amplifies local errors), at 1e-13 it is 5e-12
-#: (tests/cross_checks/scenario/test_references.py), so 1e-13 is used. atol 1e-14: every state component
-#: of the catalog is O(0.01–10) in SI units, so the absolute part never dominates.
+#: DOP853 tolerances: rtol 1e-13, as 1e-12 leaves the tennis racket 4e-10 off its closed form
+#: (docs/semantics.md, "References"); atol 1e-14: every state component of the catalog is O(0.01–10) in SI
+#: units, so the absolute part never dominates.
 GROUND_TRUTH_RTOL = 1e-13
 GROUND_TRUTH_ATOL = 1e-14
 
@@ -22,14 +21,9 @@ def ground_truth(problem: Problem, t_s, y0=None, rtol: float = GROUND_TRUTH_RTOL
     """Solve ``ẏ = F(y)`` (reference_sim.integrators.rhs: gyroscopic term and the continuous velocity
     decay ``−k v``, ``−k ω`` included) with DOP853.
 
-    Parameters
-    ----------
-    problem : single-body Problem, or a batch: ``y0`` of shape (B, 13) solves B initial states as one
-        system (the same steps for all; used to measure how the dynamics amplify perturbations).
-    t_s : (T,) increasing output times, s, starting at 0.
-    Returns
-    -------
-    y : (T, 13) (or (T, B, 13)) packed states [x_W, v_W, q_WB (w x y z, renormalised), w_W].
+    ``problem``: a single-body Problem; ``y0`` (B, 13) solves B initial states as one system (the same steps
+    for all). ``t_s`` (T,): increasing output times, s, from 0. Returns ``y`` (T, 13) (or (T, B, 13)) packed
+    states [x_W, v_W, q_WB (w x y z, renormalised), w_W].
     """
     t_s = np.asarray(t_s, dtype=float)
     y0 = problem.initial_packed() if y0 is None else np.asarray(y0, dtype=float)

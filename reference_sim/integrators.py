@@ -13,29 +13,12 @@ The continuous equations (world ω, course convention; Euler's equations in worl
 
     ẋ = v,   v̇ = f / m,   q̇ = ½ [0, ω] q,   I_W ω̇ = τ − ω × (I_W ω),   I_W = R I_B Rᵀ
 
-Variants (names fixed by docs/engines.md and the README):
-
-``course``        the course's step exactly: v += Δt f/m; x += Δt v; ω += Δt I_W⁻¹ τ;
-                  q += [0, Δt/2 ω] q; q /= |q|. No gyroscopic term.
-``course_gyro``   the same with the explicit gyroscopic torque −ω × (I_W ω).
-``expmap_gyro``   symplectic Euler with explicit gyroscopic term, q ← exp(Δt ω_new) q (MuJoCo Euler).
-``explicit_euler`` y ← y + Δt F(y).
-``implicit_euler`` y ← y + Δt F(y_new): the fixed point z ← y + Δt F(z) from the explicit Euler predictor,
-                  and Newton's method for a row where it does not contract (see ``IMPLICIT_TOL``).
-``midpoint``      explicit mid-point (RK2): y ← y + Δt F(y + Δt/2 F(y)).
-``leapfrog``      Störmer–Verlet kick–drift–kick; the first half kick is implicit in the velocities
-                  (fixed point, ``IMPLICIT_TOL``) so the scheme stays second order with
-                  velocity-dependent forces and the gyroscopic term; velocities reported at integer steps.
-``rk4``           classical Runge–Kutta 4.
-
-Whole-state schemes renormalise the quaternion after the step.
-
-Velocity decay: the course's per-step factors γ are given at the scenario's step dt; physically they
-are exponential damping at the rates ``k = −ln γ / dt`` (``ForceModel.decay_rates_per_s``). The three
-course-type schemes (course, course_gyro, expmap_gyro) multiply v and ω by ``e^{−kΔt}``
-(``Members.decay_factors``) right after their velocity update — exactly the course's γ when
-Δt = dt; the whole-state schemes have ``−k v`` and ``−k ω`` in their right-hand side (:func:`rhs`), so
-each converges at its order to the continuously damped motion.
+The variants, their orders and one-line descriptions: :data:`VARIANTS` (names fixed by docs/engines.md and
+the README); the step functions below write each scheme. Whole-state schemes renormalise the quaternion
+after the step. Velocity decay (docs/semantics.md, "Velocity decay"): the course-type schemes (course,
+course_gyro, expmap_gyro and the engines' gyroscopic steps) multiply v and ω by ``e^{−kΔt}``
+(``Members.decay_factors``) right after their velocity update; the whole-state schemes have ``−k v`` and
+``−k ω`` in :func:`rhs`; the Strang steps damp in their kicks.
 """
 from __future__ import annotations
 
@@ -54,8 +37,8 @@ __all__ = ["VARIANTS", "Scheme", "get_step", "rhs", "members", "IMPLICIT_TOL", "
            "ImplicitSolveError", "exp_map_times", "omega_times", "BULLET_MAX_GYROSCOPIC_TORQUE"]
 
 #: Convergence tolerance of the implicit solves (implicit Euler's iteration and leapfrog's implicit half
-#: kick): max-norm of the update, relative to 1 + |y|. Two orders above double round-off, so the
-#: iteration error is invisible at every dt of the ladders (errors ≥ 1e-9 there).
+#: kick): max-norm of the update, relative to 1 + |y|. Two orders above double round-off, far below the
+#: errors of any ladder's step.
 IMPLICIT_TOL = 1e-13
 #: Iterations of an implicit solve before it counts as failed (its fixed points contract by ~Δt |∂F/∂y|,
 #: 0.02–0.25 on the catalog ladders: ~10 iterations reach IMPLICIT_TOL).
@@ -340,8 +323,7 @@ def step_leapfrog(problem, y, dt):
 # torque's impulse (the engines add the applied torque outside the gyroscopic update).
 
 #: Bullet's default clamp of the explicit gyroscopic torque, N m (btContactSolverInfo::m_maxGyroscopicForce
-#: = 100, "only used for the 'explicit' version of gyroscopic force"). On the catalog |ω × I ω| ≤ 14 N m:
-#: the clamp never acts there.
+#: = 100, "only used for the 'explicit' version of gyroscopic force").
 BULLET_MAX_GYROSCOPIC_TORQUE = 100.0
 
 
@@ -507,8 +489,7 @@ def _omega_of_momentum(p, R1, L, w):
     """``I_W(R₁)⁻¹ L`` (world axes), evaluated as the increment ``w + I_W(R₁)⁻¹ (L − I_W(R₁) w)`` from the
     step's ω: equal in exact arithmetic, but ω then carries the rounding of one increment per step instead
     of that of the whole L → ω product, whose bias (the rotation matrix of a rounded unit quaternion is
-    orthogonal only to ~ε) adds up linearly over a run (measured: 1.5e-12 rad/s after 4000 steps of a
-    principal-axis spin, 1e-14 with the increment)."""
+    orthogonal only to ~ε) adds up linearly over a run (docs/gyro_integrators.md)."""
     return w + _world_inv_inertia_times(p, R1, L - matvec3(_world_inertia(p, R1), w))
 
 

@@ -13,9 +13,9 @@ from reference_sim.state import Problem
 __all__ = ["Run", "simulate", "run_members", "BLOWUP_LIMIT",
            "COMPILED_CHUNK", "bad_rows", "blowup_words", "diverged", "recorded_run"]
 
-#: A state component beyond this magnitude (m, m/s, rad/s) counts as a blow-up. Free-body scenarios
-#: of the catalog stay below 1e3 in every quantity; 1e8 is far outside any physical run yet well
-#: below float overflow, so an exponential instability is caught before it turns into inf/NaN.
+#: A state component beyond this magnitude (m, m/s, rad/s) counts as a blow-up: far outside the catalog's
+#: runs (below 1e3) yet well below float overflow, so an exponential instability is caught before it turns
+#: into inf/NaN.
 BLOWUP_LIMIT = 1e8
 
 
@@ -91,9 +91,9 @@ def simulate(problem: Problem, variant: str, dt_s: float, n_steps: int, y0=None)
     return Run(dt_s * np.arange(n_steps + 1), out)
 
 
-#: Steps of one call into the compiled loop per member (0.05–0.3 s): between calls Python runs, so a run's
-#: time limit (a SIGALRM handler, cross_checks.sweep.lifecycle) stops it within that long — inside compiled
-#: code a signal handler waits until the call returns.
+#: Steps of one call into the compiled loop per member (a fraction of a second): between calls Python runs,
+#: so a run's time limit (a SIGALRM handler, cross_checks.sweep.lifecycle) stops it within that long —
+#: inside compiled code a signal handler waits until the call returns.
 COMPILED_CHUNK = 65536
 
 _STEP_ERRORS = (ImplicitSolveError, np.linalg.LinAlgError, OverflowError, ZeroDivisionError, ValueError)

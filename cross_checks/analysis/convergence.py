@@ -53,8 +53,8 @@ class ConvergenceFit:
 
 
 def _lsq_slope(x, y):
-    """Least-squares slope of y over x ((K,) float arrays). The means are ``add.reduce / K`` — what
-    ``ndarray.mean`` computes — without its Python wrappers (this runs ~7,000 times per fuzz batch)."""
+    """Least-squares slope of y over x ((K,) float arrays); the means are ``add.reduce / K``, what
+    ``ndarray.mean`` computes, without its Python wrappers."""
     add = np.add.reduce
     xm = x - add(x) / len(x)
     return float(add(xm * (y - add(y) / len(y))) / add(xm * xm))
@@ -69,11 +69,9 @@ def fit_convergence(dt_s, errors, floors=None, statuses=None,
                     amplified_factor: float = tol.AMPLIFIED_ROUNDOFF_FACTOR) -> ConvergenceFit:
     """Fit the convergence order of final errors over a Δt ladder and give a verdict.
 
-    Parameters
-    ----------
     dt_s : (K,) steps, s (any order; sorted descending here).
     errors : (K,) final errors (NaN for runs that produced none).
-    floors : (K,) round-off floor of each point (see :func:`roundoff_floor`); 0 when omitted.
+    floors : (K,) round-off floor of each point (metrics.roundoff_floor); 0 when omitted.
     statuses : (K,) run status per point ("ok", "diverged", "failed"); "ok" when omitted.
     amplified_factor : how many floors an error growing again at the fine end may reach and still be
         amplified round-off (AMPLIFIED_ROUNDOFF_FACTOR; judge.judge_ladder gives a float32 variant
@@ -83,9 +81,6 @@ def fit_convergence(dt_s, errors, floors=None, statuses=None,
     fewer than two points resolved above their floor -> "at_roundoff" (the scheme is exact here); else the
     least-squares order over the asymptotic points: "converges" when it is ≥ CONVERGES_MIN_ORDER and
     the error shrinks at every halving, otherwise "does_not_converge".
-
-    The ladder is handled as Python lists of floats (a handful of points: NumPy calls would cost more
-    than the arithmetic); the slope itself is NumPy's least squares.
     """
     dt0, e0 = _floats(dt_s), _floats(errors)
     K = len(dt0)
@@ -141,8 +136,8 @@ def fit_convergence(dt_s, errors, floors=None, statuses=None,
 def _drop_roundoff_tail(dt, e, fl, idx_ok, notes) -> list:
     """(a) Round-off at the fine end: the first point not resolved above its floor (≤ RESOLVED_ABOVE_FLOOR
     × floor: round-off may be a tenth of it) and every finer one are dropped, provided none of the finer
-    ones is resolved (else the low point is an accident of the ladder — e.g. the one Δt where frame-rate
-    dependent physics happens to match). Returns the indices kept (coarse to fine)."""
+    ones is resolved (else the low point is an accident of the ladder). Returns the indices kept (coarse to
+    fine)."""
     for k, i in enumerate(idx_ok):
         if all(e[j] <= tol.RESOLVED_ABOVE_FLOOR * fl[j] for j in idx_ok[k:]):
             notes.append(f"{len(idx_ok) - k} point(s) within {tol.RESOLVED_ABOVE_FLOOR:g}× "
@@ -186,8 +181,7 @@ def _lower_bound_points(e, fl, idx_ok, above):
 
 
 def _median(values) -> float:
-    """``np.median`` of a few floats, exactly (the middle one, or the two middle ones' sum halved), at a
-    hundredth of its cost."""
+    """``np.median`` of a few floats, exactly (the middle one, or the two middle ones' sum halved)."""
     s = sorted(values)
     m = len(s) // 2
     return float(s[m] if len(s) % 2 else (s[m - 1] + s[m]) / 2.0)
@@ -245,11 +239,8 @@ def order_within_floors(fit: ConvergenceFit):
     is each rung's floor instead: round-off, measured. None when fewer than two points stand above their
     floors (or the fit has no order).
 
-    A claim that the order is too low holds only if this order is too low as well: a floor generous enough to
-    drop the finest rung (an engine's lever-arm round-off bound, fuzz.properties) otherwise left the order to
-    the coarsest pair alone, where the next term of the error series bends it most — the fuzz called Drake's
-    runge_kutta3 order 2.66 on errors 8.62e-11, 1.36e-11, 1.89e-12 rad with floors up to 3.1e-13 (order
-    within the floors 2.89; the sweep, with its ε floors, fits 2.75 on all three)."""
+    A claim that the order is too low holds only if this order is too low as well (docs/verdicts.md §4,
+    "Within the round-off floors")."""
     if fit.order is None:
         return None
     idx = [i for i, f in enumerate(fit.fitted) if f]
@@ -259,8 +250,8 @@ def order_within_floors(fit: ConvergenceFit):
     tail = [i for i in range(len(fit.dt_s)) if not fit.fitted[i] and fit.dt_s[i] < finest
             and math.isfinite(fit.errors[i]) and fit.errors[i] > 0.0]
     # a flat tail of dropped rungs (two or more within a factor 2: the error no longer shrinks with Δt) is
-    # round-off, measured: where it stands above the floor estimate (MuJoCo's one-step defects flat at
-    # 3.4e-15 rad/s over floors of 1.3–1.8e-15), its level bounds the round-off in every rung instead
+    # round-off, measured: where it stands above the floor estimate, its level bounds the round-off in every
+    # rung instead
     te = [fit.errors[i] for i in tail]
     level = max(te) if len(te) >= 2 and max(te) <= 2.0 * min(te) else 0.0
     floor = [max(f, level) for f in fit.floors]

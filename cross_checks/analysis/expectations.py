@@ -1,22 +1,15 @@
 """What each engine variant is expected to do on each scenario: the ONE place for expected orders.
 
 A sweep fits a convergence order per (scenario, variant, quantity) and compares it with
-:func:`expectation`, decided from the variant's traits (:func:`traits`, one table keyed by variant,
-with a documented default for a variant it knows nothing about) and the scenario's PHYSICS
-(:mod:`cross_checks.analysis.physics`: rates, separatrix proximity and error amplification measured on its
-reference) — never from a scenario's name:
-
-* ``does_not_converge``: the variant lacks a term the motion needs (the course's update has no
-  gyroscopic torque, which matters on an anisotropic body off its principal axes).
-* ``pre_asymptotic`` — no claim on this ladder: a first-order variant that does not preserve
-  amplitudes would show a fitted order more than AMPLITUDE_MODEL_ORDER_DEV away from 1 on this ladder
-  from its amplitude drift alone (:func:`physics.amplitude_model_order`).
-* ``converges`` at the nominal order otherwise.
+:func:`expectation`, decided from the variant's traits (:func:`traits`) and the scenario's PHYSICS
+(:mod:`cross_checks.analysis.physics`), never from a scenario's name: ``does_not_converge`` where the
+variant lacks a term the motion needs, ``pre_asymptotic`` (no claim) where a first-order variant's
+amplitude drift alone would bend its fit beyond AMPLITUDE_MODEL_ORDER_DEV, ``converges`` at the nominal
+order otherwise (docs/verdicts.md §3).
 
 The reason strings end up, verbatim, in summary.json and in the report's findings, so they are
 written as sentences for users. Orders are global orders of the error at a fixed final time,
-``e(Δt) ≈ C Δt^p``. In the one-step mode (each step restarted from the reference state) the local
-error of an order-p scheme is O(Δt^{p+1}), whatever its amplitude drift does over a run.
+``e(Δt) ≈ C Δt^p``; in the one-step mode the local order is p + 1.
 """
 from __future__ import annotations
 
@@ -38,9 +31,6 @@ __all__ = ["energy_drift_bound", "characteristic_rate_sq", "QUANTITIES",
            "nominal_order", "gyroscopic_term_matters", "rotation_drives_translation",
            "translation_drives_rotation", "memoized", "LongRunExpectation", "long_run_expectation",
            "INVARIANT_WORDS", "gyroscopic_clamp_acts"]
-
-
-#: A variant that declares no traits: engines.base.DEFAULT_TRAITS (the most cautious choice).
 
 
 def traits(variant: str) -> Traits:
@@ -84,7 +74,7 @@ def pair_is_same_arithmetic(scenario, a: str, b: str) -> bool:
     step (ω ← γω, torque × γ, then the step) agree exactly unless the gyroscopic term ω × Iω sees the
     angular factor γ_ω twice: with angular-velocity decay on a motion whose gyroscopic torque does not
     vanish the two differ by O((1 − γ_ω) Δt) per step — both first order, no longer the same arithmetic
-    (the engines' harness, docs/verdicts.md "Velocity decay"; found by ``rbcheck fuzz``).
+    (docs/verdicts.md "Velocity decay").
     """
     if (a in _POST_STEP_DECAY) == (b in _POST_STEP_DECAY):
         return True
@@ -193,9 +183,8 @@ def memoized():
     """Within this block, decisions that depend only on a scenario (and its measured physics) are made once
     per scenario object and reused: ``gyroscopic_term_matters``, the free-running expectation of a
     (variant, quantity) — which the one-step mode asks for again — and the pre-asymptotic reason of a
-    (traits, quantity), the same for every variant with those traits. For a fuzz batch (thousands of
-    expectations of 64 scenarios), whose scenarios are not changed while it runs; results are the ones
-    computed without it."""
+    (traits, quantity), the same for every variant with those traits. The scenarios must not change
+    within the block; results are the ones computed without it."""
     global _MEMO
     outer = _MEMO
     if outer is None:
@@ -451,8 +440,7 @@ def energy_drift_bound(scenario, variant: str, dt_s: float) -> float | None:
 
     An order-p scheme's global error over T at step Δt on a motion of angular frequency ω is
     ~ C (ωΔt)^p ωT; energy errors are of the same relative size. C ≤ 2 covers every scheme here
-    (explicit Euler's energy grows as e^{2χ} − 1 ≈ ω²ΔtT = (ωΔt)ωT, i.e. C = 1; docs/engine_conventions.md:
-    MuJoCo Euler on the tennis racket drifts 4.6e-3 over 20 s at Δt = 1e-3, C = 0.29). Returns None where no
+    (explicit Euler's energy grows as e^{2χ} − 1 ≈ ω²ΔtT = (ωΔt)ωT, i.e. C = 1). Returns None where no
     bound applies: a non-conservative scenario, a variant without a nominal order, or the course
     update on a body whose gyroscopic term matters (it does not model the conserved motion at all).
     """
@@ -477,7 +465,7 @@ def energy_drift_bound(scenario, variant: str, dt_s: float) -> float | None:
         w2 = max(w2, (g / v0) ** 2 if v0 > 0.0 else math.inf)
     w = math.sqrt(w2)
     n_steps = max(1, round(scenario.duration_s / dt_s))
-    # + round-off: N steps of ε each, ×10 for the terms of E (measured 7 N ε on particle_body's RK4).
+    # + round-off: N steps of ε each, ×10 for the terms of E.
     return 2.0 * (w * dt_s) ** p * w * scenario.duration_s + 10.0 * n_steps * machine_epsilon(variant)
 
 

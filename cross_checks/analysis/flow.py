@@ -1,16 +1,11 @@
-"""``rbcheck check``, step 2: the physics every verdict is measured against.
+"""``rbcheck check``, step 2: the physics every verdict is measured against (docs/check.md, "The evidence").
 
-* :func:`exact_flow` — the true motion over each row interval, from each recorded state at once
-  (batched RK4 with substeps on ``reference_sim.integrators.rhs``, which includes the continuous velocity
-  decay −k v, −k ω), with a Richardson estimate of its own error.
-* :func:`majorant` — M2, a bound on |y''| per quantity, block by block: ``Σ_b |J_b F_b|`` with J the
-  Jacobian of the right-hand side F and b ∈ {x, v, q, ω}. Every consistent one-step scheme of order
-  ≥ 1 leaves a local defect ≤ ½ h² M2 + O(h³) (tolerances.CHECK_LOCAL_C), a wrong equation O(h).
-* :func:`local_allowances` — what a consistent scheme may leave per row interval (h steps spanning
-  Δ): ``C h Δ M2`` (+ the drift of the velocity defects into position / orientation over Δ), plus the
-  data's precision (printed digits, and the roundings of a step in the data's precision).
-* :func:`error_growth` — how the scenario's dynamics amplify an error made at t = 0 by time t,
-  quantity to quantity (perturbed runs of the same flow from the initial state).
+* :func:`exact_flow` — the true motion over each row interval, from each recorded state at once (batched
+  RK4 with substeps on ``reference_sim.integrators.rhs``), with a Richardson estimate of its own error.
+* :func:`majorant` — M2 = ``Σ_b |J_b F_b|``, a block bound on |y''| per quantity: every consistent
+  one-step scheme of order ≥ 1 leaves a local defect ≤ ½ h² M2 + O(h³), a wrong equation O(h).
+* :func:`local_allowances` — what a consistent scheme may leave per row interval, plus the data's precision.
+* :func:`error_growth` — how the scenario's dynamics amplify an error made at t = 0, quantity to quantity.
 
 Quantities: position (m), velocity (m/s), orientation (rad: twice the quaternion distance, which for
 unit quaternions is the geodesic angle to first order and also counts a change of |q|), angular
@@ -97,10 +92,8 @@ def spring_turn_rate(problem, y) -> np.ndarray:
     spring (attachment point minus anchor, world), v⊥ the attachment point's velocity across it.
 
     A spring of rest length L0 pulls with −k d + k L0 d/|d|: the second part has constant magnitude and
-    turns with d, at this rate, however soft the spring. Found by the fuzz: a body falling past the anchor
-    (|d| down to 5 cm at 2.3 m/s: 44 /s) whose step had been chosen from √(k/m) and |ω| alone (1.6 /s), so
-    h·L was 1.6, not 0.06, and a third-order scheme's one-step defect still had order 2.5 on (h, h/2).
-    Zero-length springs are linear in d and add nothing here."""
+    turns with d, at this rate, however soft the spring (a body passing close to the anchor turns it
+    fast). Zero-length springs are linear in d and add nothing here."""
     from reference_sim.quaternion import matrix_from_quat
     y = np.nan_to_num(np.asarray(y, dtype=float))
     out = np.zeros(y.shape[:-1])
@@ -220,9 +213,8 @@ def lever_arm_roundoff(scenario, y, unit_roundoff: float, h_s):
     ``y`` (N, 13). An engine forms a torque from a lever arm, ``r × F``, with r the difference of two points
     near x_W (a point of application or the centre of mass it recomputes from its frames), so r carries
     ``u |x_W|`` and the torque ``u |x_W| |F|`` even when the exact lever arm is zero; over one step ω moves by
-    ``Δt u |x_W| |F| / I_min``. Without it a body that never turns, whose recorded ω is that round-off (MJX,
-    Brax: 1e-15 rad/s at |x| = 10 m under gravity), would read as a wrong equation. |F| = m |a_W| of the exact
-    equations at the row (gravity included)."""
+    ``Δt u |x_W| |F| / I_min``. Without it a body that never turns, whose recorded ω is that round-off,
+    would read as a wrong equation. |F| = m |a_W| of the exact equations at the row (gravity included)."""
     p = scenario.problem
     y = np.asarray(y, dtype=float)
     a_W = rhs(p, y)[..., 3:6]
@@ -424,8 +416,8 @@ def run_local_defect(scenario, y, dt_s: float, max_rows: int | None = None,
         with np.errstate(divide="ignore", invalid="ignore"):
             r = np.where(total[q] > 0.0, d[q] / total[q], np.where(d[q] > 0.0, np.inf, 0.0))
         # a quantity exactly zero at both ends of the exact step (a body that never turns) has nothing to
-        # measure: what an engine leaves there is the round-off of the other quantities' terms (MJX leaves
-        # 6e-16 rad/s in the ω of a body that never turns), and a gross error shows in the free runs
+        # measure: what an engine leaves there is the round-off of the other quantities' terms, and a gross
+        # error shows in the free runs
         moving = (_magnitude(y0, q) > 0.0) | (_magnitude(flow.y_end, q) > 0.0)
         r = np.where(decisive & moving, r, np.nan)
         if np.all(np.isnan(r)):

@@ -1,44 +1,35 @@
 """The one judge of a convergence ladder: from the errors over a Δt ladder, their round-off floors and what
-the variant is expected to do (its declared order and traits against the scenario's measured physics:
-:mod:`cross_checks.analysis.expectations`) to a verdict, whether it matches, and the sentence saying why.
+the variant is expected to do (:mod:`cross_checks.analysis.expectations`) to a verdict, whether it matches,
+and the sentence saying why.
 
 Every entry point decides a ladder's verdict here and nowhere else: the sweep's convergence records
 (:mod:`cross_checks.sweep.assemble`, and through it ``assert_engine``), the fuzz's order properties
 (:mod:`cross_checks.fuzz.properties`) and ``rbcheck check``'s ladder mode
-(:mod:`cross_checks.gates.check.ladder`). tests/cross_checks/analysis/test_judge.py draws ladders and asserts
-that all of them say the same.
+(:mod:`cross_checks.gates.check.ladder`).
 
-The rules, in order (each a measured reason, never a tolerance widened):
+The rules, in order (each a measured reason, never a tolerance widened; docs/verdicts.md §4):
 
 1. The fit (:func:`~cross_checks.analysis.convergence.fit_convergence`) over the points resolved above
    their floors, compared with the expectation
    (:func:`~cross_checks.analysis.convergence.compare_with_expectation`).
-2. An expectation that makes no claim on this ladder (``pre_asymptotic``: the variant's amplitude drift
-   would bend a first-order fit) turns a fitted converges / does_not_converge into ``pre_asymptotic``.
-3. A too-low order whose finest pair already shows the expected order while the coarser pairs approach it is
-   pre-asymptotic, measured (:func:`~cross_checks.analysis.convergence.measured_pre_asymptotic`).
+2. An expectation that makes no claim on this ladder (``pre_asymptotic``) turns a fitted converges /
+   does_not_converge into ``pre_asymptotic``.
+3. A too-low order measured pre-asymptotic
+   (:func:`~cross_checks.analysis.convergence.measured_pre_asymptotic`).
 4. A too-low order that the errors, each allowed its round-off floor, do not refute
    (:func:`~cross_checks.analysis.convergence.order_within_floors`) — no claim.
-5. Three halving rungs that fit ``a hᵖ + b hᵖ⁺¹`` within their floors (:func:`two_term_consistent`): the
-   next term of the error series, not the order — no claim.
+5. Three halving rungs that fit ``a hᵖ + b hᵖ⁺¹`` within their floors (:func:`two_term_consistent`): no
+   claim.
 
-No excuse (rules 2 and 3) is given to runs whose own steps are not the scenario's equations: ``local`` is
-the worst one-step defect of the ladder's runs measured on their recorded states
-(:func:`cross_checks.analysis.flow.run_local_defect`, what ``rbcheck check`` measures of a file). Above its
-allowance (what any consistent scheme of order ≥ 1 leaves, ratio > 1) a pre-asymptotic excuse would hide a
-wrong equation — a user engine that ignores a spring's rest length, or swaps I and I⁻¹, whose errors stay
-flat over the ladder — so the verdict is judged as fitted and the sentence says why the excuse was refused.
-Nor is "every rung within its round-off floor" an agreement for the quantity whose one-step defect is wrong:
-a float32 run on a tumbling body has floors amplified by the motion (ε √N A), under which a wrong gyroscopic
-sign's error can sit on a short run; its one-step defect cannot hide
-(tests/cross_checks/analysis/test_precision.py).
-An expected non-convergence (the course's step on a tumbling body) is not an excuse but a known, named
-missing term: its local defect is what the expectation predicts.
+No excuse (rules 2 and 3, nor "every rung within its round-off floor" for the quantity concerned) is given to
+runs whose own steps are not the scenario's equations: ``local`` is the worst one-step defect of the ladder's
+runs on their recorded states (:func:`cross_checks.analysis.flow.run_local_defect`); above its allowance
+(ratio > 1) the verdict is judged as fitted and the sentence says why the excuse was refused
+(docs/verdicts.md, "No excuse for wrong equations").
 
-A long run (one Δt over thousands of periods) has no ladder: :func:`judge_long_run` judges what it
-conserved against what the variant's traits say it keeps
-(:func:`~cross_checks.analysis.expectations.long_run_expectation`), with round-off floors from
-:func:`cross_checks.core.tolerances.long_run_roundoff` — the same rules for the sweep and every test.
+A long run has no ladder: :func:`judge_long_run` judges what it conserved against what the variant's traits
+say it keeps (:func:`~cross_checks.analysis.expectations.long_run_expectation`), with round-off floors from
+:func:`cross_checks.core.tolerances.long_run_roundoff` (docs/verdicts.md §8).
 """
 from __future__ import annotations
 
@@ -121,8 +112,7 @@ def judge_fit(fit: ConvergenceFit, exp, local: LocalEvidence | None = None,
             and not local.wrong_equations):
         # A consistent step's truncation errors shrink; its runs' steps are measured consistent (the one-step
         # check is sharp in any precision), so errors that do not shrink are round-off the motion grew past
-        # the floors' linear estimate: near a separatrix float32 rounding moves the body to a neighbouring
-        # motion (PhysX, MuJoCo Warp and the float32 reference RK4 on tumbling_box, δ = 2e-5). No claim.
+        # the floors' linear estimate (docs/verdicts.md §7). No claim.
         j = Judgement(fit, "pre_asymptotic", None,
                       f"{j.assessment}, but every step of its runs is the scenario's equations (one-step "
                       f"defect at most {local.ratio:.2g}× what a consistent scheme leaves): errors that do "
@@ -193,17 +183,16 @@ def two_term_consistent(dts, errors, floors, order) -> bool:
 
     Then u = e / h^p is affine in h, so u0 − 3 u1 + 2 u2 = 0 (rungs halving). A leading coefficient a
     that happens to be small (two first-order contributions nearly cancelling) makes b h dominate at the
-    coarse rungs and the fitted order meaningless, although the scheme has order p — found by the fuzz on
-    a weakly decayed spring released from rest. An order q < p instead gives u ∝ h^(q−p), whose residual is
-    ≥ 0.38 of max |u| for q ≤ p − 0.5 (0.75 for q = p − 1): above FUZZ_TWO_TERM_TOL.
+    coarse rungs and the fitted order meaningless, although the scheme has order p. An order q < p instead
+    gives u ∝ h^(q−p), whose residual is ≥ 0.38 of max |u| for q ≤ p − 0.5 (0.75 for q = p − 1): above
+    FUZZ_TWO_TERM_TOL.
 
     Each measured error is the truncation error plus round-off and the reference's error, which its floor
     bounds: the ladder is consistent when SOME truncation errors e'_i ∈ [max(0, e_i − f_i), e_i + f_i] give
     |u'0 − 3 u'1 + 2 u'2| ≤ FUZZ_TWO_TERM_TOL · max u' (a linear program per candidate maximum, SciPy's
     HiGHS). Errors far above their floors are judged as measured; a rung within its floor leaves two
-    resolved rungs, on which a next term that cancels the leading one cannot be told from a lower order
-    (reference:rk4 at 1.35e-12, 1.25e-13, 1.08e-14 rad/s over floors up to 1.6e-14: pairwise orders 3.44,
-    then 3.60, 3.82, 3.91 on finer steps in extended precision), so no claim either way. Only ladders of
+    resolved rungs, on which a next term that cancels the leading one cannot be told from a lower order,
+    so no claim either way. Only ladders of
     exactly three halving rungs qualify (the fuzz's); longer ladders are judged by the other rules."""
     from scipy.optimize import linprog
     h = np.asarray(dts, dtype=float)
@@ -251,13 +240,8 @@ class LongRunJudgement:
 def judge_long_run(variant: str, run_name: str, metrics, exp, status: str = "ok",
                    diverged_at_s: float | None = None) -> LongRunJudgement:
     """Judge a long run's :class:`~cross_checks.analysis.long_run.DriftMetrics` ``metrics`` (None when the
-    run failed) against the :class:`~cross_checks.analysis.expectations.LongRunExpectation` ``exp``.
-
-    Rules, in order: a failed run has no verdict; a run that diverged contradicts any declared invariant;
-    each declared invariant must hold within the round-off a run of that many steps accumulates
-    (tol.long_run_roundoff: the energy's and |L|'s largest relative drift, L's largest turn in rad; "energy
-    bounded": no secular energy drift); then the separatrix distance: kept when the variant keeps the energy
-    and |L| (any secular drift contradicts), toward the intermediate axis or kept for a "momentum" step."""
+    run failed) against the :class:`~cross_checks.analysis.expectations.LongRunExpectation` ``exp``, by the
+    rules of docs/verdicts.md §8, in order (round-off: tol.long_run_roundoff)."""
     from cross_checks.analysis.long_run import drift_kind, finding
     if status == "failed" or metrics is None:
         return LongRunJudgement("failed", None, "the run failed: nothing to judge", "")

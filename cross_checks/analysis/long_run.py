@@ -173,7 +173,6 @@ def drift_metrics(problem: Problem, t_s, y, energy_floor: float = 0.0) -> DriftM
         return bool(c >= SECULAR_MIN_CHANGE * abs(delta[0]) and c >= SECULAR_MIN_TREND_TO_SCATTER * scatter)
 
     # across: δ ends clearly on the other side (by the same measures as a drift), not on the separatrix itself
-    # (Jolt's step brings the tennis racket's δ = −5e-5 to 2e-16: onto the separatrix, not across it)
     crossed = bool(np.sign(end) != np.sign(delta[0]) and secular(abs(end))
                    and abs(delta[0]) > SECULAR_MIN_TREND_TO_SCATTER * scatter)
     e_change = abs(float(np.mean(e_rel[-k:])))

@@ -38,9 +38,8 @@ def energy_J(problem, y, *, with_scale: bool = False):
     y = np.asarray(y, dtype=float)
     body, fm = problem.body, problem.forces
     q = unit_q(y[..., Q])
-    R = matrix_from_quat(q)
     w = y[..., W]
-    L = np.einsum("...ij,...j->...i", body.world_inertia(R), w)
+    L = angular_momentum_W(problem, y)
     kinetic = 0.5 * body.mass_kg * np.sum(y[..., V] ** 2, axis=-1) + 0.5 * np.sum(w * L, axis=-1)
     potential = fm.potential_energy_J(body, y[..., X], q)
     if with_scale:
@@ -127,13 +126,9 @@ def roundoff_floor(scale: float, n_steps: int, reference_label: str = "analytic"
 
     With ``reference_error`` (the reference's MEASURED error in this quantity, see
     references.reference_error): ``reference_error + ε·scale·(b·N + √N·A)`` — the run's own round-off:
-    roundings of the same sign add up linearly (b = 1 for position and velocity: a falling body's
-    increments keep their sign, measured 0.34 N ε |x| on tumbling_box), the rest like a random walk,
-    each grown by the measured error amplification A (measured: RK4 orientation flattens at 1.0 √N ε π
-    on tennis_racket, at 0.8 √N ε π A on tumbling_box). In float32 (``eps`` above float64's) b = 1 for every
-    quantity: a float32 engine's multi-operation step may round one way every step (Rapier's gyroscopic
-    pass adds 0.3–3 ulp of |ω| per step, always up, on a spin about a principal axis; PhysX PGS, whose step
-    is exact there, leaves ω off by 0.26 N ε |ω| after N steps).
+    roundings of the same sign add up linearly (b = 1 for position and velocity, and for every quantity in
+    float32), the rest like a random walk, each grown by the measured error amplification A
+    (docs/verdicts.md §1).
     Without a measurement (a caller that has none): ``max(N ε, REFERENCE_ACCURACY_REL[kind])·scale``.
     ``eps``: the machine epsilon of the run's precision (tolerances.MACHINE_EPSILON; float64 by default) —
     the reference's error is measured in float64 whatever the run's precision.

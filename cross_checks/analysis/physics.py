@@ -19,12 +19,9 @@ of :mod:`cross_checks.analysis.expectations` are decided from (never the scenari
   separatrix through the intermediate axis I₂). Reported with the measured amplification
   (``references.error_amplification``), which is what decides: a perturbation that moves the body
   to a neighbouring motion grows by that factor.
-* **χ = ½ ω_c² Δt T**: a first-order scheme that does not preserve the amplitude of a mode of rate
-  ``ω_c`` multiplies it by ``|1 + iω_cΔt|^{±1} = (1 + (ω_cΔt)²)^{±1/2}`` per step, i.e. by ``e^{±χ}``
-  over the run (the sign: explicit grows, implicit damps). Its final error then goes like
-  ``|e^{±χ} − 1|``, whose log-log slope is ``1 ± χ/2``, not 1, until χ is small:
-  :func:`amplitude_model_order` is the order a fit over the ladder would find from that mechanism
-  alone.
+* **χ = ½ ω_c² Δt T**: the amplitude drift ``e^{±χ}`` over the run of a first-order scheme that does not
+  preserve the amplitude of a mode of rate ``ω_c``; :func:`amplitude_model_order` is the order a fit over
+  the ladder would find from that drift alone (docs/verdicts.md §3, rule 2).
 """
 from __future__ import annotations
 

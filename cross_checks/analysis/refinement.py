@@ -2,10 +2,9 @@
 
 An order claim is about the asymptotic regime. On a short ladder a correct scheme can still be
 pre-asymptotic: its error series e(h) = h^p A(t) + h^(p+1) B(t) + … with A small where the error is
-measured, so the next term bends the fitted order at the coarse rungs (the fuzz found first-order schemes
-at order 0.5 on (h, h/2, h/4) whose pairwise orders went 0.77, 0.89, 0.96 down to h/32 — docs/fuzz.md §5).
-A scheme of the wrong order has that order on the finer rungs too. So a too-low order whose errors do
-shrink is judged again on the ladder's finest rung and ``tol.SWEEP_REFINE_HALVINGS`` halvings below it, by
+measured, so the next term bends the fitted order at the coarse rungs (docs/fuzz.md §5). A scheme of the
+wrong order has that order on the finer rungs too. So a too-low order whose errors do shrink is judged
+again on the ladder's finest rung and ``tol.REFINE_HALVINGS`` halvings below it, by
 the same fit (:func:`convergence.fit_convergence`), and it is excused only by a POSITIVE result there: a
 converging fit on points resolved above their floors (not a lower bound, not round-off) whose order matches
 the claim. Errors that sink into round-off on the finer rungs show nothing, and the verdict stands.
@@ -25,10 +24,9 @@ __all__ = ["errors_shrink", "worth_refining", "refined_ladder_shows_the_order"]
 def errors_shrink(errors) -> bool:
     """Whether a ladder's errors (coarse to fine, all finite) shrink over the ladder: the finest below the
     coarsest, however slowly and whether or not at every halving (a velocity error crossing zero at one
-    rung; the largest error over a short run moving in time: 6.38e-7, 6.88e-7, 5.24e-7 m/s for the
-    first-order schemes on the fuzz's seed 2026 case 9698, order 0.77 → 0.95 on the ladder continued). A flat
-    plateau, a growth or a failed point does not qualify. Only the ladder continued decides: a plateau that
-    happens to dip at the finest rung stays a plateau there (refined_ladder_shows_the_order)."""
+    rung; the largest error over a short run moving in time). A flat plateau, a growth or a failed point
+    does not qualify. Only the ladder continued decides: a plateau that happens to dip at the finest rung
+    stays a plateau there (refined_ladder_shows_the_order)."""
     errs = list(errors)
     if len(errs) < 2 or any(e is None or not math.isfinite(e) for e in errs):
         return False

@@ -106,7 +106,6 @@ def _seconds(s: float) -> str:
 def stage(prefix: str, message: str, *, enabled: bool = True, stream=None) -> None:
     """One line ``"<prefix>: <message>"`` on stdout (or ``stream``), flushed: a stage begins."""
     if enabled:
-        stream = sys.stdout if stream is None else stream
         say(f"{prefix}: {message}", stream)
 
 

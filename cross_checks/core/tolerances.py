@@ -12,18 +12,15 @@ ORDER_TOL = 0.1
 # --- sweeps, metrics and verdicts (cross_checks.analysis, cross_checks.sweep, `rbcheck check`) ------
 
 #: Round-off of a run, relative to a quantity's scale, per step: each step rounds every component
-#: by ~ε|y|, and when the increments keep their sign (a falling body) the roundings add up linearly:
-#: N ε |y|. Measured: RK4 position on tumbling_box 8.5e-11 m after N = 4e4 steps at |x| = 28 m,
-#: i.e. 0.34 N ε |x|; RK4 orientation on tennis_racket flattens at 1e-13 rad after 16000 steps.
+#: by ~ε|y|, and when the increments keep their sign (a falling body) the roundings add up linearly: N ε |y|.
 ROUNDOFF_PER_STEP_REL = 2.2e-16
-#: Machine epsilon of each precision a variant may declare (engines.base.Traits.precision): the spacing of
-#: floating-point numbers at 1 (IEEE 754 binary64 and binary32, numpy.finfo(dtype).eps): 2⁻⁵², written
-#: 2.2e-16 as ROUNDOFF_PER_STEP_REL, and 2⁻²³. Every round-off floor of a variant scales with its precision's
-#: ε (metrics.roundoff_floor).
+#: Machine epsilon of each precision a variant may declare (engines.base.Traits.precision):
+#: numpy.finfo(dtype).eps, 2⁻⁵² (written 2.2e-16 as ROUNDOFF_PER_STEP_REL) and 2⁻²³. Every round-off floor
+#: scales with it (metrics.roundoff_floor).
 MACHINE_EPSILON = {"float64": ROUNDOFF_PER_STEP_REL, "float32": 2.0 ** -23}
 #: How far an engine may store a body's mass and inertia from the scenario's, relative to the largest: a few
-#: roundings of the model's text and the engine's own arithmetic (jaxsim holds a mass of 1.4 kg as
-#: 1.3999999999999997 kg, 1 ulp; found by rbcheck fuzz); 16 ε still refuses any wrong value a model could get.
+#: roundings of the model's text and the engine's arithmetic (jaxsim stores 1.4 kg 1 ulp off); 16 ε still
+#: refuses any wrong value a model could get.
 ENGINE_MODEL_PARAMETER_REL = 16 * ROUNDOFF_PER_STEP_REL
 #: Unit roundoff of each precision (half its ε: the largest relative error of one rounding to nearest): what
 #: one step's arithmetic may leave in the one-step defect allowance (analysis.flow.local_allowances).
@@ -36,40 +33,32 @@ PRECISION_LADDER_MIN_RESOLVED = 3
 PRECISION_LADDER_MAX_EXTRA = 6
 #: ... while a step turns the fastest motion by at most (p + 1) × this angle ω_c Δt (rad) for an
 #: order-p variant: the next term of its error series stays ~(ω_c Δt)/(p + 1) ≤ 15 % of the leading
-#: one (the asymptotic regime the fit measures), and every scheme of the catalog stays stable
-#: (explicit Euler's oscillator grows by ω²Δt² = 0.09 per step at 0.3 rad; RK4's stability interval
-#: reaches 2.8 rad, beyond its 0.75) ...
+#: one, and every scheme of the catalog stays stable (RK4's stability interval reaches 2.8 rad) ...
 PRECISION_LADDER_STEP_ANGLE_PER_ORDER_RAD = 0.15
 #: ... and a run keeps at least this many steps (a ladder point of fewer steps is the initial transient).
 PRECISION_LADDER_MIN_STEPS = 16
 #: Round-off scatters about its estimate: a point within this factor of its floor, finer than one
 #: at the floor, is round-off noise too.
 ROUNDOFF_NOISE_FACTOR = 10.0
-#: Near an unstable rotation (the tennis racket's and tumbling box's separatrix) the dynamics
-#: amplify round-off: DOP853 at rtol 1e-13 and the closed form of tumbling_box part by 2e-9 rad at
-#: 10 s. An error that grows again at the fine end while below this multiple of the floor is
-#: amplified round-off, not a failure to converge.
+#: Near an unstable rotation (the tennis racket's and tumbling box's separatrix) the dynamics amplify
+#: round-off: an error that grows again at the fine end while below this multiple of the floor is
+#: amplified round-off, not a failure to converge (DOP853 at rtol 1e-13 and tumbling_box's closed form part
+#: by 2e-9 rad at 10 s).
 AMPLIFIED_ROUNDOFF_FACTOR = 1e4
-#: The same for a float32 variant (Traits.precision): 1e4 × a float32 floor (1e-4 … 1e-2 of the quantity's
-#: scale) is the quantity's own scale, so a missing term's plateau that creeps up by < 5 % over the ladder
-#: passed for round-off. Measured on Rapier 0.36.1 over the catalog (docs/engine_conventions.md): the
-#: smallest error of a ladder whose errors grow again is ≤ 24× its floor where it is float32 round-off
-#: (tumbling_box, 2e-5 from the separatrix) and ≥ 224× where it is the plateau of the missing gyroscopic term.
+#: The same for a float32 variant (Traits.precision): 1e4 × a float32 floor is the quantity's own scale; 100
+#: separates float32 round-off from a missing term's plateau (docs/engine_conventions.md, Rapier).
 AMPLIFIED_ROUNDOFF_FACTOR_FLOAT32 = 100.0
 #: Fallback only, for a caller with no measurement of its reference (sweeps measure it: see
-#: references.reference_error and metrics.roundoff_floor). Accuracy of the references relative to a
-#: quantity's scale: closed forms 1e-12 — Jacobi elliptic
-#: functions from scipy, evaluated at arbitrary times: one RK4 step (local error ~1e-20) from the
-#: tennis-racket closed form at one time lands 1.6e-12 rad from it at the next, in MuJoCo and NumPy
-#: alike; the DOP853 ground truth (rtol 1e-13) is within CLOSED_FORM_VS_GROUND_TRUTH = 1e-10 of the
-#: closed forms over 10 s (but see AMPLIFIED_ROUNDOFF_FACTOR for tumbling bodies).
+#: references.reference_error and metrics.roundoff_floor). Accuracy relative to a quantity's scale: closed
+#: forms 1e-12 (scipy's Jacobi elliptic functions at arbitrary times), the DOP853 ground truth (rtol 1e-13)
+#: 1e-10 of them over 10 s.
 REFERENCE_ACCURACY_REL = {"analytic": 1e-12, "ground_truth": 1e-10}
 #: A fitted order below this means "does not converge": a consistent scheme has order ≥ 1, an error
 #: plateau (missing physics) has order ≈ 0; 0.5 is halfway.
 CONVERGES_MIN_ORDER = 0.5
 #: Observed vs expected order in a sweep verdict. Expected orders are the integers 1, 2 and 4; ±0.3 separates
 #: neighbours with margin and absorbs the curvature left in a 16× ladder once the coarsest pre-asymptotic
-#: point is dropped (ORDER_TOL = 0.1 is for the dedicated order studies of tests/reference_sim).
+#: point is dropped.
 SWEEP_ORDER_TOL = 0.3
 #: The coarsest ladder point is pre-asymptotic (dropped from the fit when ≥ 3 points remain) when
 #: its pairwise order differs from the median of the finer pairs by more than this: half an order
@@ -90,16 +79,14 @@ SAME_SCHEME_REL = 1e-9
 #: the resolved JSON). 1e-5: a CSV printed with 6 significant digits differs from the state by up to 5e-6.
 ENGINE_FILE_INITIAL_STATE_REL = 1e-5
 
-# --- bounded work, honest inputs (docs/hardening.md) ----------------------------------------------
+# --- bounded work, honest inputs: hardening (docs/hardening.md) ------------------------------------
 
-#: Peak memory of one sweep job per recorded step (its run plus the reference on the same grid),
-#: measured as the growth of the worker's max RSS: 1090 B/step at 2e5 steps, 890 at 1e6
-#: (reference:course), 780 (mujoco:euler); the trajectory alone is 14 float64 = 112 B, the rest is
-#: the error arrays, drifts and the reference slice. 1100 covers every measurement.
+#: Peak memory of one sweep job per recorded step (its run plus the reference on the same grid): the
+#: trajectory is 14 float64 = 112 B, the rest the error arrays, drifts and the reference slice; 1100 covers
+#: the growth of a worker's max RSS (docs/hardening.md).
 BYTES_PER_RECORDED_STEP = 1100
 #: Memory one job may use: 2 GiB, so a laptop with 8 GiB and 4 cores runs 4 jobs side by side and
-#: keeps half its memory. At BYTES_PER_RECORDED_STEP this allows ~1.9e6 steps per run; the catalog's
-#: largest run has 2e4 (100x inside), a user's 60 s at Δt = 1e-4 has 6e5.
+#: keeps half its memory (~1.9e6 steps per run at BYTES_PER_RECORDED_STEP).
 JOB_MEMORY_LIMIT_BYTES = 2 * 2 ** 30
 #: The longest line a trajectory CSV may have: the 14 contract columns at full precision take ~350 bytes;
 #: 64 KiB leaves room for a thousand extra columns and refuses /dev/zero or a binary file at once.
@@ -107,18 +94,15 @@ CSV_MAX_LINE_BYTES = 64 * 1024
 #: The largest trajectory CSV read: ~1.9e6 rows (the steps one run may record) of the 14 columns at full
 #: precision are ~700 MB; 1 GiB bounds what reading one costs, whatever the file holds.
 CSV_MAX_BYTES = 2 ** 30
-#: DOP853 (rtol 1e-13) right-hand-side evaluations per radian of the fastest rate of the dynamics:
-#: measured 90–93 for springs from k = 40 to 1e6 N/m and 64 for spins of 50–500 rad/s; 100 covers both.
+#: DOP853 (rtol 1e-13) right-hand-side evaluations per radian of the fastest rate of the dynamics: springs
+#: and spins need 64–93; 100 covers both.
 DOP853_EVALS_PER_RAD = 100
-#: Physical ranges rbcheck judges (scenario.limits.check_physical_ranges), refused outside like an inertia
-#: that violates the triangle inequality. Masses from 1 mg to 1e6 kg and moments from 1e-12 to 1e9 kg m² (a
-#: 1 mm bead to a ship): MuJoCo refuses masses and moments below its mjMINVAL (1e-15) — a mass of 1e-300 made
-#: both its implicit variants fail — and nine decades either side of 1 keep every term of the equations far
-#: from float64's range. A moment ratio up to 1e6 (a rod of 1000:1; the fuzz draws up to 1e3): beyond it the
-#: gyroscopic products lose every digit of the small moment's axis. Initial spin up to 1e4 rad/s (a dental
-#: drill, ~1e5 rpm), speed up to 1e4 m/s (above orbital speed), positions within 1e6 m, accelerations
-#: (gravity, |f|/m) up to 1e6 m/s² and angular accelerations |τ|/I_min up to 1e8 rad/s²: with the duration and
-#: the step limits these keep every state below ~1e12, where round-off is the floors' ε |y|, not an overflow.
+#: Physical ranges rbcheck judges (scenario.limits.check_physical_ranges; docs/hardening.md). Masses and
+#: moments from a 1 mm bead to a ship (MuJoCo refuses them below its mjMINVAL, 1e-15; nine decades either
+#: side of 1 keep every term far from float64's range); a moment ratio up to 1e6 (a rod of 1000:1: beyond
+#: it the gyroscopic products lose every digit of the small moment's axis); spin, speed, distance and
+#: accelerations that, with the duration and step limits, keep every state below ~1e12, where round-off is
+#: the floors' ε |y|, not an overflow.
 PHYSICAL_MASS_KG = (1e-6, 1e6)
 PHYSICAL_INERTIA_KG_M2 = (1e-12, 1e9)
 PHYSICAL_MAX_INERTIA_RATIO = 1e6
@@ -127,25 +111,20 @@ PHYSICAL_MAX_SPEED_M_S = 1e4
 PHYSICAL_MAX_DISTANCE_M = 1e6
 PHYSICAL_MAX_ACCELERATION_M_S2 = 1e6
 PHYSICAL_MAX_ANGULAR_ACCELERATION = 1e8
-#: Right-hand-side evaluations a scenario's DOP853 reference may need, refused up front beyond it:
-#: 1.2e6 is 300 s of CPU at the slowest cost per evaluation measured here (250 µs: the NumPy rhs of one
-#: body plus DOP853's own work; 40-60 µs on a faster machine), while the catalog's two DOP853
-#: references need < 3e4; a stiff spring (k = 1e9 N/m, ~2.5e6 evaluations per simulated second) is
-#: refused at once instead of running for hours. A count, not a time, so every machine refuses alike.
+#: Right-hand-side evaluations a scenario's DOP853 reference may need, refused up front beyond it: 300 s of
+#: CPU at the slowest cost per evaluation (docs/hardening.md); the catalog needs < 3e4. A count, not a time,
+#: so every machine refuses alike.
 REFERENCE_EVALS_LIMIT = 1.2e6
 #: Wall-time limit of one reference solve while it runs: 3x what REFERENCE_EVALS_LIMIT costs at the
-#: slowest measured evaluation, so only an estimate that is far too low (or a much slower machine)
-#: meets it; the solve then is a `failed` scenario.
+#: slowest evaluation, so only a far too low estimate (or a much slower machine) meets it.
 REFERENCE_TIME_LIMIT_S = 900.0
-#: Wall-time limit of one run while it runs: the largest run allowed (~1.9e6 steps) at the slowest
-#: measured per-step cost (MuJoCo RK4 evaluating forces in Python at its 4 stages, 270 µs) takes
-#: ~530 s; 900 s leaves 1.7x for a slower machine. The catalog's longest run takes 0.8 s.
+#: Wall-time limit of one run while it runs: the largest run allowed (~1.9e6 steps) at the slowest per-step
+#: cost (MuJoCo RK4 evaluating forces in Python, 270 µs) takes ~530 s; 900 s leaves 1.7x for a slower machine.
 RUN_TIME_LIMIT_S = 900.0
 #: Adjacent rungs of a Δt ladder must differ by at least this ratio. The order from a pair is
 #: ln(e_a/e_b) / ln(h_a/h_b); a relative error perturbation δ (the next-order term, a few % at a
 #: catalog Δt; round-off near the floor) moves it by δ / ln(ratio). With δ = 5 % and the ±0.3
 #: tolerance of a sweep verdict (SWEEP_ORDER_TOL), ln(ratio) ≥ 0.05/0.3 gives ratio ≥ 1.18: 1.2.
-#: [0.01, 0.010000000000000002] (ratio 1 + 2e-16) would otherwise read as "does not converge".
 MIN_LADDER_RATIO = 1.2
 #: Longest scenario name: it becomes file names (scenario-<name>.html, plots/<name>__conservation.png,
 #: series/<name>.npz) that must fit the 255-byte limit of common filesystems with room to spare.
@@ -155,15 +134,13 @@ MAX_NAME_CHARS = 100
 
 #: Relative size of the initial-state perturbations that measure the error amplification: far above
 #: the references' accuracy (closed forms ~1e-13; DOP853 at AMPLIFICATION_RTOL, whose batched members
-#: share their steps, so their differences are finer than the tolerance), small enough to stay linear
-#: (tumbling_box, amplification ~1e3: 1e-3 of its scale; the second-order part is ~1e-3 of the first).
+#: share their steps), small enough to stay linear (amplification ~1e3: second-order part ~1e-3 of the first).
 AMPLIFICATION_EPS = 1e-6
-#: DOP853 tolerance of the batched amplification solve: measured on spring_pendulum, the amplification
-#: at (ε, rtol) = (1e-6, 1e-8) equals that at (1e-7, 1e-10) to 4 digits, at 60 % of the cost.
+#: DOP853 tolerance of the batched amplification solve: the amplification at (ε, rtol) = (1e-6, 1e-8)
+#: equals that at (1e-7, 1e-10) to 4 digits.
 AMPLIFICATION_RTOL = 1e-8
 #: A DOP853 reference's error is measured as its difference from a solution at this many times its
-#: tolerance: the looser solution's error, an upper bound of the reference's (measured on the catalog:
-#: |y(1e-12) − y(1e-13)| is 4–7× |y(1e-13) − closed form| wherever there is a closed form).
+#: tolerance: the looser solution's error, an upper bound of the reference's.
 REFERENCE_CHECK_RTOL_FACTOR = 10.0
 #: A closed form's round-off is measured by moving its inputs (initial state, final time) by this many
 #: ulps of their scale: a closed form rounds ~1e2 intermediate results (Jacobi elliptic functions plus
@@ -171,13 +148,11 @@ REFERENCE_CHECK_RTOL_FACTOR = 10.0
 CLOSED_FORM_INPUT_ULPS = 16
 #: An amplitude drift may bend the fitted order by at most this before the sweep stops claiming an
 #: order (verdict "pre_asymptotic"): half the match tolerance SWEEP_ORDER_TOL, the other half left for
-#: the scheme's error constants, other error terms and the fit. (The model is exact for a linear
-#: oscillator: spring_oscillator's explicit/implicit Euler fit 1.14/0.88, predicted 1.14/0.87.)
+#: the scheme's error constants, other error terms and the fit.
 AMPLITUDE_MODEL_ORDER_DEV = 0.15
 #: An error is used in an order fit only above this multiple of its floor (convergence.fit_convergence):
 #: round-off then makes at most a tenth of it, which moves a pairwise order by ≤ log2(1.1) = 0.14 —
-#: within AMPLITUDE_MODEL_ORDER_DEV. (Measured: mujoco:rk4 on tumbling_box, ω error 3.2e-10 at 1.7× its
-#: floor, bent the fitted order from 3.9 to 3.4.)
+#: within AMPLITUDE_MODEL_ORDER_DEV.
 RESOLVED_ABOVE_FLOOR = 10.0
 
 # --- `rbcheck check`: a true verdict on any simulator's trajectory (docs/check.md) -----------------
@@ -191,10 +166,8 @@ CHECK_LOCAL_C = 1.0
 #: The one-step error model above holds while h L ≤ this (L: the fastest rate of the motion).
 CHECK_MAX_HL = 0.43
 #: Recorded states of each sweep run from which its one-step defect is measured (spread evenly over the
-#: run; each row's defect stands on its own): a wrong equation leaves an O(Δt) defect at every row where
-#: its wrong term acts — measured 63–6300× the allowance for a user engine with the spring's rest length
-#: ignored or I and I⁻¹ swapped, 5.6–553× for the course's step on tumbling bodies — while every correct
-#: variant of the catalog stays at ≤ 0.57 at every Δt of every ladder. 64 rows cost ~7 ms per run.
+#: run; each row's defect stands on its own): a wrong equation leaves an O(Δt) defect at every row where its
+#: wrong term acts, so 64 rows find it at a small cost per run (docs/check.md).
 STEP_DEFECT_ROWS = 64
 #: Roundings of one step, in units of the data's unit roundoff times |y| (per component): a step is
 #: ~10 operations per component (x + h v, a quaternion product and normalisation); 16 covers them.
@@ -240,27 +213,23 @@ CHECK_MISTAKE_RESEMBLES = 3.0
 
 # --- compare: a new results directory against the baseline (docs/results.md) ---
 #: Relative change of an error or drift that counts as a regression (or improvement): the same code on
-#: another machine reproduces errors to ~1e-12 relative (libm/BLAS rounding, amplified by at most ~1e3
-#: on the chaotic tumbling cases), while a real change of scheme, default or force semantics changes
-#: errors by factors; 5 % separates the two with margin.
+#: another machine reproduces errors to ~1e-12 relative (×1e3 at most on the chaotic tumbling cases), while a
+#: real change of scheme, default or force semantics changes errors by factors; 5 % separates the two.
 COMPARE_REL_TOL = 0.05
 #: Absolute change below which an error or drift has not changed: values at the round-off floor
 #: (≤ 1e-12) fluctuate by O(1) factors between machines and mean nothing.
 COMPARE_ABS_TOL = 1e-12
 #: A variant whose errors moved both ways at unchanged orders is a "scheme changed" (another scheme of the
-#: same order: its error constants reorder by O(1) factors — MuJoCo 3.3.7 -> 4.0.0 RK4 moved them x0.69 to
-#: x1.91), not a regression, unless one error grew more than this factor: a loss of accuracy a user calls a
-#: regression whatever improved elsewhere.
+#: same order reorders its error constants by O(1) factors: MuJoCo 3.3.7 -> 4.0.0 RK4 ×0.69 … ×1.91), not a
+#: regression, unless one error grew more than this factor: a loss of accuracy whatever improved elsewhere.
 COMPARE_SCHEME_CHANGE_MAX_RATIO = 4.0
 
 # --- the second reference: Drake's error-controlled integration (docs/engine_conventions.md) ---
-#: Drake runge_kutta5's target accuracy for the second reference: measured on the catalog 6.9e-10 rad
-#: from the closed form on tennis_racket, 3.9e-7 rad on tumbling_box (δ = 2e-5 from the separatrix),
-#: ≤ 1.2e-10 rad elsewhere; 1e-14 costs 1.5–2× the time for one more decade.
+#: Drake runge_kutta5's target accuracy for the second reference: its distances from the primary references
+#: are in docs/engine_conventions.md "The second reference"; 1e-14 costs 1.5–2× the time for one more decade.
 SECOND_REFERENCE_TARGET_ACCURACY = 1e-13
 #: Drake's accuracy is MEASURED as its distance from a second Drake solution at this many times looser
-#: target accuracy (an upper bound of its own error: measured 8–13× smaller per decade of target
-#: accuracy on the catalog's tumbling and spring scenarios, like REFERENCE_CHECK_RTOL_FACTOR for DOP853).
+#: target accuracy (an upper bound of its own error, like REFERENCE_CHECK_RTOL_FACTOR for DOP853).
 SECOND_REFERENCE_CHECK_FACTOR = 10.0
 
 # --- rbcheck fuzz: hard but fair random cases and their verdicts (docs/fuzz.md) ---------------------------
@@ -300,27 +269,24 @@ FUZZ_PILOT_RTOL = 1e-6
 FUZZ_BOUND_SLACK = 1.25
 #: Smallest relative margin of the triangle inequality I1 + I2 ≥ I3 (1 + margin) of a drawn body. MuJoCo
 #: refuses a model whose moments violate A + B ≥ C after its own eigen-decomposition
-#: (docs/engine_conventions.md: a failed row), and a lamina (any three particles) sits exactly on the
-#: edge, where round-off (~1e-16 relative) decides; 1e-6 keeps ten orders of magnitude between the two
-#: while a body stays visibly flat.
+#: (docs/engine_conventions.md), and a lamina (any three particles) sits exactly on the edge, where
+#: round-off (~1e-16 relative) decides; 1e-6 keeps ten orders of magnitude between the two.
 FUZZ_TRIANGLE_MARGIN = 1e-6
 #: Bullet's btMatrix3x3::solve33 inverts det only when |det| > SIMD_EPSILON = DBL_EPSILON (2.22e-16, Bullet
 #: built in double precision as PyBullet is): below it PyBullet maximal's implicit gyroscopic step is wrong.
-#: Measured (tests/cross_checks/fuzz/test_known.py): moments (1, 2, 2.5)·1e-6 kg m² fail, ·1e-5 do not.
 BULLET_SOLVE33_DET_EPS = 2.220446049250313e-16
 #: Roundings in a lever arm measured from the world origin (fuzz.properties.lever_roundoff): the COM and the
 #: frame origin each rounded (2), the cross product r × F two products and a difference (2 more): 4.
 FUZZ_LEVER_ROUNDINGS = 4.0
-#: A free-running ladder is "two-term consistent" (fuzz.properties.two_term_consistent) when the third
+#: A free-running ladder is "two-term consistent" (analysis.judge.two_term_consistent) when the third
 #: difference of e/h^p is within this fraction of its size: an order-p error with its next term gives 0
 #: (plus the third term, ~0.4 (c₃/c₁) h² ≪ 0.25 in the asymptotic range); an order deficit of 0.5 gives 0.38,
 #: of 1 gives 0.75. Each error is allowed its round-off floor (it bounds the round-off in it).
 FUZZ_TWO_TERM_TOL = 0.25
 #: Extra halvings a too-low free-running order is re-judged on before it counts (the fuzz: h/8 … h/32 after
-#: (h, h/2, h/4); the sweep: three halvings below its file's finest Δt; analysis.refinement): the 600 s
-#: campaign of seed 2026 found correct first-order variants at order 0.52 on (h, h/2, h/4) whose pairwise
-#: orders went 0.51, 0.54, 0.80, 0.91, 0.95 down to h/32 (docs/fuzz.md §5); three more pairs let the finest
-#: one reach the order within SWEEP_ORDER_TOL there, while a wrong order stays wrong on all of them.
+#: (h, h/2, h/4); the sweep: three halvings below its file's finest Δt; analysis.refinement): three more
+#: pairs let a slowly converging correct variant reach its order within SWEEP_ORDER_TOL (docs/fuzz.md §5),
+#: while a wrong order stays wrong on all of them.
 REFINE_HALVINGS = 3
 
 # --- report display tiers (docs/results.md "The report") ---
@@ -334,9 +300,8 @@ REPORT_ACCURACY_TIERS = (1e-6, 1e-3)
 #: polhode periods, so a bounded oscillation averages out), and its scatter is measured there.
 LONG_RUN_END_FRACTION = 0.05
 #: A secular drift of the separatrix distance |δ| is named only when |δ| has changed by the end by at least
-#: this share of |δ(0)|: a scheme that keeps δ (to round-off, or with a bounded O(Δt²) oscillation) changes it
-#: by far less (measured over 1000 periods at Δt = 0.02 s: ≤ 1e-9 for the midpoint rule, ≤ 2e-4 for DLM's
-#: bounded oscillation) ...
+#: this share of |δ(0)|: a scheme that keeps δ (to round-off, or with a bounded O(Δt²) oscillation) changes
+#: it by far less (docs/verdicts.md "Long runs") ...
 SECULAR_MIN_CHANGE = 0.02
 #: ... and at least this many times the scatter of |δ| at the end (twice its standard deviation over the
 #: last LONG_RUN_END_FRACTION: a sinusoid of amplitude A has deviation A/√2, so a bounded oscillation moves
@@ -351,8 +316,6 @@ def long_run_roundoff(n_steps: int, unit_roundoff: float, rounding_factor: float
     """The largest relative change of an invariant a step keeps BY CONSTRUCTION (Traits.keeps) may show after
     ``n_steps`` steps from round-off alone: each step rounds it by at most CHECK_ROUNDINGS_PER_STEP unit
     roundoffs (times the variant's declared rounding factor), and roundings that keep their sign add up
-    linearly (the worst case; measured far below it: the midpoint rule's energy 1e-13 and |L| 6e-14 over
-    31 416 steps, 0.003 of this bound; Jolt's rescaled |L| 1.4e-11 over 62 832 steps, 0.13 of it). The
-    Newton solves of the implicit steps (reference_sim.integrators.IMPLICIT_TOL) converge quadratically: their
-    last iterate's residual is far below the tolerance, so they add nothing measurable here."""
+    linearly (the worst case). The Newton solves of the implicit steps
+    (reference_sim.integrators.IMPLICIT_TOL) converge quadratically, so they add nothing measurable here."""
     return CHECK_ROUNDINGS_PER_STEP * unit_roundoff * rounding_factor * max(int(n_steps), 1)

@@ -75,8 +75,7 @@ def _read_bounded(name: str, path, max_rows: int, max_line: int, max_bytes: int)
 
 
 def sidecar_path(csv_path) -> Path:
-    p = Path(csv_path)
-    return p.with_suffix(".json")
+    return Path(csv_path).with_suffix(".json")
 
 
 @dataclass
@@ -158,8 +157,7 @@ def _fast_table(text: str):
     """``(header cells, (N, ncol) float array)`` when the CSV is plain — no quotes or NULs, every
     non-blank line with the header's number of fields, every field a number for ``float()`` — else
     None. The same strings go through the same ``float()`` as the general path, so where this
-    succeeds the values are identical; anything else is left to the general path and its messages.
-    (An engine's 40 000-row trajectory: ~10x faster than csv.reader and one float() per cell.)"""
+    succeeds the values are identical; anything else is left to the general path and its messages."""
     if '"' in text or "\x00" in text:
         return None
     lines = text.split("\n")

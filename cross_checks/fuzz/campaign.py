@@ -1,21 +1,16 @@
 """``rbcheck fuzz``: batches of random cases until the budget is spent, then each distinct failure shrunk
-to a minimal scenario file that ``rbcheck sweep`` confirms.
+to a minimal scenario file that ``rbcheck sweep`` confirms (docs/fuzz.md §3–§4).
 
 * A campaign of seed S is the sequence of batches 0, 1, 2, …; batch b holds cases b·BATCH … (b+1)·BATCH − 1
   (each drawn from its own generator, :func:`~cross_checks.fuzz.generate.case_rng`) at n0 = N0_CYCLE[b mod 3]
-  steps per coarsest rung. Whatever worker runs a batch, and whatever ran before, it gives the same
-  verdicts: a campaign is deterministic per seed; the budget only decides how many batches it reaches.
-* Batches run on the sweep's :class:`~cross_checks.sweep.execute.Runner`: here (``jobs`` 1), in its process
-  pool (a batch whose worker dies is a batch error saying so), or on any ``concurrent.futures.Executor``
-  (Dask); a batch's outcome is cached (``sweep.cache``: self-verifying entries) under a key holding the seed,
-  the batch, the variants, the engine versions, the versions of the numerical stack and a fingerprint of
-  rbcheck's source, so a rerun with the same seed reuses it (``use_cache=False`` recomputes).
-* Every violation has a signature (property, variants, outcome); the first case of each signature is
-  shrunk (:mod:`~cross_checks.fuzz.shrink`, at most SHRINK_S seconds each, MAX_SHRUNK signatures) and the
-  result confirmed with ``rbcheck sweep`` (its gates must fail on it); the counterexample is written as
-  ``DIR/counterexamples/<name>.toml`` with a header saying which property failed, by how much, and the
-  command that reproduces it.
-* ``DIR/fuzz.json`` is the summary (docs/fuzz.md); DIR is replaced as a whole, like a sweep's.
+  steps per coarsest rung: deterministic per seed, whatever worker runs a batch; the budget only decides
+  how many batches it reaches.
+* Batches run on the sweep's :class:`~cross_checks.sweep.execute.Runner` (here, its process pool, or any
+  ``concurrent.futures.Executor``); a batch's outcome is cached (``sweep.cache``) under a key holding the
+  seed, the batch, the variants, the engine versions, the numerical stack and rbcheck's source fingerprint.
+* The first case of each distinct failure is shrunk (:mod:`~cross_checks.fuzz.shrink`, SHRINK_S seconds
+  each, MAX_SHRUNK failures), confirmed with ``rbcheck sweep`` and written as
+  ``DIR/counterexamples/<name>.toml``; ``DIR/fuzz.json`` is the summary. DIR is replaced as a whole.
 """
 from __future__ import annotations
 
@@ -37,10 +32,9 @@ from cross_checks.fuzz import shrink as S
 __all__ = ["BATCH", "N0_CYCLE", "SHRINK_S", "MAX_SHRUNK", "FuzzError", "run_batch", "run_campaign",
            "SUMMARY", "FORMAT"]
 
-#: Cases per batch: the stacked exact solves and the batched engine runs (``simulate_many``: MuJoCo's
-#: rollouts) cost per call nearly what they cost for one case up to ~200 members (3 rungs x 64 cases), so
-#: a batch's fixed costs are shared by 64 cases; few enough that a batch takes ~10 s on one core (a batch
-#: started is finished: the budget decides which start).
+#: Cases per batch: the stacked exact solves and the batched engine runs (``simulate_many``) cost per call
+#: nearly what they cost for one case, so 64 cases share a batch's fixed costs; few enough that a batch
+#: stays short (a batch started is finished: the budget decides which start).
 BATCH = 64
 #: Steps at a batch's coarsest rung, cycled over the batches (short and long runs: a long run lets an
 #: error grow, a short one reaches the coarsest fair step).
@@ -98,7 +92,7 @@ def compute_batch(seed, batch, variants) -> dict:
     from cross_checks.analysis.expectations import memoized
     # one BLAS thread: the large stacked DOP853 solves give the same last bits whatever the machine's core
     # count (a batch is a function of its seed alone, as the cache key assumes), and two workers on two
-    # cores no longer fight over four BLAS threads (docs/fuzz.md §4)
+    # cores do not fight over BLAS threads (docs/fuzz.md §4)
     with threadpool_limits(limits=1, user_api="blas"), memoized():
         cases = pipeline.prepare(draws, n0)
         contexts, members, y_end = pipeline.measure(cases)

@@ -7,19 +7,10 @@ included): the definition ``reference_sim.integrators.rhs`` with every member's 
 (reference_sim.forces.Members), so that one evaluation serves all members. All members share the output grid
 in ``s``, and SciPy's DOP853 advances the stacked system.
 
-What a case's verdicts take from it, each MEASURED, as the sweep measures them
-(``cross_checks.sweep.jobs.measure_reference``):
-
-* :func:`reference` — the trajectory on the finest rung's grid at rtol GROUND_TRUTH_RTOL, and its error:
-  the largest difference (per quantity, over the run) from a second solve at a
-  REFERENCE_CHECK_RTOL_FACTOR times looser tolerance (that solution's error, an upper bound of the
-  reference's own);
-* :func:`amplification` — how much the dynamics grow an initial error: the initial state moved by
-  AMPLIFICATION_EPS × its scale along each of its 12 directions (``references.perturbed_initial_states``),
-  the largest relative change of each quantity over the run per unit of relative perturbation (the sweep
-  takes it at the final time; the largest over the run is never smaller);
-* :func:`step_flows` — the exact state one step after each start state, for the one-step defects, with
-  its error measured the same way.
+What a case's verdicts take from it — :func:`reference` and its error, :func:`amplification`,
+:func:`step_flows` — is measured as the sweep measures it (``cross_checks.sweep.jobs.measure_reference``),
+except that the amplification is the largest over the run (never smaller than the sweep's, at the final
+time).
 """
 from __future__ import annotations
 
@@ -94,7 +85,8 @@ def reference(problems, durations_s, n_fine: int):
 
 def amplification(scenarios, scales, n_samples: int = 33, rtol: float = tol.AMPLIFICATION_RTOL):
     """{quantity: (M,)}: the largest relative change of each quantity over the run per unit of relative
-    initial perturbation (≥ 1), over the 12 directions of ``references.perturbed_initial_states``.
+    initial perturbation (≥ 1), over the 12 directions of ``references.perturbed_initial_states`` moved by
+    AMPLIFICATION_EPS × their scale.
 
     scenarios : M Scenarios; scales : M dicts {quantity: scale} (core.quantities.quantity_scales).
     """
@@ -118,7 +110,8 @@ def amplification(scenarios, scales, n_samples: int = 33, rtol: float = tol.AMPL
 
 
 def step_flows(problems, spans_s, y_start):
-    """The exact state ``span`` after each start state: ``(y_end (M, 13), error {quantity: (M,)})``."""
+    """The exact state ``span`` after each start state: ``(y_end (M, 13), error {quantity: (M,)})``, the
+    error measured as :func:`reference`'s."""
     s = np.array([0.0, 1.0])
     y = solve_members(problems, spans_s, s, rtol=GROUND_TRUTH_RTOL, y0=y_start)[-1]
     y_check = solve_members(problems, spans_s, s, rtol=tol.REFERENCE_CHECK_RTOL_FACTOR * GROUND_TRUTH_RTOL,

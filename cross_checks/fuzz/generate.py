@@ -3,25 +3,11 @@
 A case is drawn in two parts:
 
 * :func:`draw` — everything about the physics, in the units of a base rate Ω (rad/s), a mass and a size:
-  the body (principal moments, a full tensor with large products of inertia, or particles whose COM is
-  off their origin; generic, symmetric, nearly symmetric, isotropic or flat shapes), the initial state
-  (a random tumble, a spin near a principal axis, a spin near the intermediate axis' separatrix, or at
-  rest; world or body angular velocity; quaternion or Unity Euler angles) and every force kind of the
-  schema (gravity, drag, both decays, springs attached off the COM, world and body point forces,
-  world and body torques), each present at random.
+  the body, the initial state and every force kind of the schema, each present at random (docs/fuzz.md §1).
 * :meth:`CaseDraw.spec` — the scenario file at a coarsest step h (dt = h, ladder [h, h/2, h/4], duration
-  n0·h). The step is what makes a case fair: the pipeline (:mod:`cross_checks.fuzz.campaign`) picks h
-  from the numbers below, measured on a pilot solve of the exact motion, never from the draw alone.
-
-The numbers (bounds and their derivations in ``cross_checks/core/tolerances.py``, "fuzz"):
-
-* ``hL`` = h × L, L the fastest rate of the motion (``analysis.flow.motion_rate``: |ω| along the run,
-  spring frequencies, drag and decay rates): ≤ FUZZ_HL_MAX keeps every scheme in its asymptotic range;
-* ``χ`` = ½ L² h T, the amplitude drift of a first-order step over the run (docs/verdicts.md):
-  drawn log-uniformly up to FUZZ_CHI_MAX, which fixes hL = √(2χ / n0) for the batch's n0 steps;
-* ``A χ`` ≤ FUZZ_LINEAR_MAX, with A the measured error amplification: the error model stays linear;
-* the anisotropy ``(I_max − I_min) / I_max``, the separatrix proximity δ and ``k Δt² / m`` are drawn
-  through the body shape, the initial spin and the spring rates, and reported per case.
+  n0·h). The step is what makes a case fair: :func:`cross_checks.fuzz.pipeline.prepare` picks h from the
+  measured numbers h·L, χ = ½ L² h T (drawn log-uniformly up to FUZZ_CHI_MAX) and A·χ, never from the draw
+  alone (bounds and their derivations: ``cross_checks/core/tolerances.py``, "rbcheck fuzz"; docs/fuzz.md §1).
 """
 from __future__ import annotations
 
@@ -126,7 +112,7 @@ def _moments(rng, shape, mass, size):
 
 
 def _particles(rng, mass, size):
-    """3–6 point masses around an offset origin (their COM need not be at 0): [[m, x, y, z], ...]."""
+    """4–7 point masses around an offset origin (their COM need not be at 0): [[m, x, y, z], ...]."""
     from reference_sim.body import RigidBody
     while True:
         k = int(rng.integers(4, 8))   # three points are always coplanar: a lamina (see _margin_ok)
@@ -159,19 +145,16 @@ def _draw_body(rng, kinds):
     kinds["shape"] = shape
     m = _moments(rng, shape, mass, size)
     if kind == "moments":
-        order = np.argsort(m)
-        R = np.eye(3)[:, order]
-        if np.linalg.det(R) < 0:
-            R[:, 2] *= -1.0
-        return {"mass": mass, "inertia": m.tolist()}, np.zeros(3), m[order], R, size, mass
-    R = matrix_from_quat(_random_quat(rng))   # principal axes in body coordinates: products of inertia
-    I = R @ np.diag(m) @ R.T
-    I = 0.5 * (I + I.T)
+        R, inertia = np.eye(3), m.tolist()
+    else:
+        R = matrix_from_quat(_random_quat(rng))   # principal axes in body coordinates: products of inertia
+        I = R @ np.diag(m) @ R.T
+        inertia = (0.5 * (I + I.T)).tolist()
     order = np.argsort(m)
     R = R[:, order]
     if np.linalg.det(R) < 0:
         R[:, 2] *= -1.0
-    return {"mass": mass, "inertia": I.tolist()}, np.zeros(3), m[order], R, size, mass
+    return {"mass": mass, "inertia": inertia}, np.zeros(3), m[order], R, size, mass
 
 
 # --- the initial state ------------------------------------------------------------------------------

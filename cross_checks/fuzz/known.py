@@ -13,11 +13,8 @@ __all__ = ["explain"]
 
 
 def _bullet_solve33_singular(scenario, violation) -> str:
-    """PyBullet maximal coordinates: btRigidBody's implicit gyroscopic step solves J Δω = f with
-    btMatrix3x3::solve33, which treats |det J| ≤ SIMD_EPSILON (2.2e-16 in double precision) as singular —
-    an ABSOLUTE threshold in kg³ m⁶ — and then multiplies by det J instead of dividing. With J ≈ I (the
-    body's inertia, Δt small) a body with I1 I2 I3 ≤ 2.2e-16 kg³ m⁶ (moments below ~6e-6 kg m²) gets a
-    wrong angular velocity every step."""
+    """PyBullet maximal coordinates on a body whose I1·I2·I3 is at most BULLET_SOLVE33_DET_EPS (J ≈ I for a
+    small Δt): btMatrix3x3::solve33 takes its implicit gyroscopic step as singular (the returned sentence)."""
     if "pybullet:maximal" not in violation.get("variants", []):
         return ""
     det = float(np.prod(np.linalg.eigvalsh(scenario.problem.body.inertia_B)))

@@ -218,11 +218,8 @@ def _defects(e, rows):
 
 def _refined_ladder_shows_the_order(ctx, variant: str, k: int, rec) -> bool:
     """Whether a free-running order that came out too low (or errors that shrink, but not at every halving)
-    on (h, h/2, h/4) shows the claimed order when the ladder goes on to h/2^(2 + tol.REFINE_HALVINGS):
-    the rungs h/4 … h/32 judged by the same rules (:func:`properties._fit_record`: fit above the floors,
-    ``measured_pre_asymptotic``). A correct scheme whose error series is not yet asymptotic at h
-    (e(h) = h A(t) + h² B(t) with A small where the error is largest) passes; a scheme of the wrong order
-    has that order on the fine rungs too and is still a violation."""
+    on (h, h/2, h/4) shows the claimed order when the ladder goes on to h/2^(2 + tol.REFINE_HALVINGS): the
+    rungs h/4 … h/32 judged by :func:`cross_checks.analysis.refinement.refined_ladder_shows_the_order`."""
     from cross_checks.analysis.expectations import expectation
     sc, q = ctx.scenario, rec["quantity"]
     dts, errs, floors = list(rec["dt_s"]), list(rec["errors"]), list(rec["floors"])  # h, h/2, h/4
@@ -239,9 +236,7 @@ def _refined_ladder_shows_the_order(ctx, variant: str, k: int, rec) -> bool:
         errs.append(float(np.max(e)))
         floors.append(P.run_floor(ctx, variant, q, n, h, ctx.ref_err[q], ctx.amp[q])
                       + P.lever_floor(ctx, q, h, h * n, n, ctx.amp[q], variant))
-    # judged on the finest original rung and the refined ones: the asymptotic regime the claim is about
-    # (the coarse rungs are the ones in doubt; a wrong order is just as wrong down there). Only a positive
-    # result excuses: errors that sink into round-off there show nothing (analysis.refinement)
+    # judged on the finest original rung and the refined ones (analysis.refinement)
     dts, errs, floors = dts[2:], errs[2:], floors[2:]
     exp = expectation(sc, variant, q, "free_running", physics=ctx.physics, measure_physics=False)
     shows, _ = refined_ladder_shows_the_order(dts, errs, floors, ["ok"] * len(dts), exp)

@@ -1,20 +1,12 @@
-"""The four properties checked on every case, each with an allowance derived as the sweep derives its own.
+"""The four properties checked on every case, each with an allowance derived as the sweep derives its own
+(docs/fuzz.md §2). For a case (its measured :class:`Context`) and a variant's runs:
 
-For a case (its measured :class:`Context`) and a variant's runs:
-
-* ``free_running_order`` — the largest error over the run at h, h/2, h/4, per quantity, fitted over the
-  ladder above its measured floor (the reference's measured error plus the run's round-off grown by the
-  measured amplification: ``analysis.metrics.roundoff_floor``) and compared with what the variant's
-  traits and the case's measured physics expect (``analysis.expectations.expectation``), judged by the
-  one judge every entry point uses (``analysis.judge.judge_ladder``) — the sweep's verdict,
-  on the largest error over the run rather than the final one, which a crossing through zero at the
-  final time cannot fool;
+* ``free_running_order`` — the largest error over the run at h, h/2, h/4, per quantity, judged above its
+  measured floor by the one judge (``analysis.judge.judge_ladder``) against ``analysis.expectations``;
 * ``one_step_order`` — the one-step defect against the exact flow from reference states, at h … h/8,
-  fitted the same way against the local order p + 1 (``expectation(..., "one_step")``);
-* ``conservation`` — where the physics conserves energy or world angular momentum and the variant
-  models that physics: the largest drift over the run within ``analysis.flow.conservation_allowance``
-  (a consistent scheme's local defects, weighted by the quantity's sensitivity, summed over the run)
-  plus the run's round-off;
+  judged the same way against the local order p + 1;
+* ``conservation`` — where the physics conserves energy or world angular momentum and the variant models
+  that physics: the largest drift within ``analysis.flow.conservation_allowance`` plus the run's round-off;
 * ``agreement`` — the pairs of ``analysis.expectations.EQUIVALENT_PAIRS`` agree to round-off over the
   run: ``max(SAME_SCHEME_REL, FUZZ_ROUNDINGS_PER_STEP · N ε · A)`` relative to each quantity's scale.
 
@@ -38,9 +30,7 @@ from cross_checks.analysis.expectations import (
     pair_is_same_arithmetic,
     traits,
 )
-
-# the name the fuzz docs cite
-from cross_checks.analysis.judge import judge_ladder, two_term_consistent  # noqa: F401
+from cross_checks.analysis.judge import judge_ladder
 from cross_checks.core import tolerances as tol
 from cross_checks.core.quantities import QUANTITIES, UNITS, state_errors
 
@@ -83,9 +73,7 @@ def lever_roundoff(scenario, y_ref) -> dict:
     a = K ε |x|max (|m g| + |F|max) / I_min the angular acceleration it may add, u = K ε |x|max |ω|max the
     velocity error of a spatial transform v − ω × x, and w = K ε m |x|max |v|max / I_min the angular
     velocity error of recovering ω from a momentum about the origin that holds m x × v
-    (K = FUZZ_LEVER_ROUNDINGS). Measured on MuJoCo (docs/fuzz.md): a falling tensor body at rest, 0.7 m
-    from the origin, picks up 5.7e-13 rad/s² (an O(Δt) one-step defect of ~1e-14 rad/s); a free tensor
-    body at rest moving at 18 m/s 2 m from the origin, ω = 1.5e-14 rad/s from MuJoCo RK4's first step on."""
+    (K = FUZZ_LEVER_ROUNDINGS; measured on MuJoCo: docs/fuzz.md §5)."""
     from reference_sim.quaternion import matrix_from_quat
     p = scenario.problem
     q = y_ref[:, 6:10] / np.linalg.norm(y_ref[:, 6:10], axis=1, keepdims=True)
@@ -105,10 +93,8 @@ def pays_lever_roundoff(variant: str) -> bool:
     """Whether ``variant``'s arithmetic may hold lever arms from the world origin (``lever_roundoff``).
     rbcheck's own schemes do not: they take torques r × F with r = R r_B from the COM and step ω itself,
     never recovering it from a momentum about the origin (reference_sim/integrators.py) — their round-off is
-    the ε-per-step of ``roundoff_floor``. Every other engine, an engine file included, is assumed to (its
-    algebra is not known here). Giving rbcheck's schemes this floor made the fuzz call reference:rk4's
-    one-step order 4.70: a body 0.6 m from the origin moving at 3 m/s, I_min = 1.2e-4 kg m², gave them an
-    8.1e-12 rad/s floor, which left one resolved pair, the coarsest, bent by the next term."""
+    the ε-per-step of ``roundoff_floor``, and a floor they do not pay hides their order (docs/fuzz.md §5).
+    Every other engine, an engine file included, is assumed to (its algebra is not known here)."""
     return not variant.startswith("reference:")
 
 

@@ -1,18 +1,12 @@
-"""Shrinking a failing case to a minimal scenario that still fails, and confirming it with ``rbcheck sweep``.
+"""Shrinking a failing case to a minimal scenario that still fails, and confirming it with ``rbcheck sweep``
+(docs/fuzz.md §3).
 
-A failure has a *signature*: the property, the variant(s) and, for a run that failed or diverged, that
-outcome (:func:`signature`). :func:`shrink` is a greedy shrinker in the spirit of hypothesis's, on the
-scenario's own structure: each round proposes simpler scenarios (:func:`candidates`, simplest first),
-judges them in small batches with the same pipeline that found the failure (their own step, ladder and
-duration; a candidate outside the fairness bounds is skipped by the pipeline and so never accepted) and
-keeps the first that still shows the signature, until no candidate does. Simpler means: a shorter run,
-fewer forces, a body given by principal moments in its principal frame (the same motion: orientation,
-body-frame vectors and points are rotated with it), initial values at their defaults, numbers with
-fewer significant digits.
-
-:func:`confirm` writes the result as a scenario file and runs ``rbcheck sweep`` on it (in this process,
-with the same engines) — the counterexample counts only if the sweep's own gates fail on it, as they
-would make ``rbcheck sweep FILE --engines ...`` exit 1.
+A failure has a *signature* (:func:`signature`). :func:`shrink` is a greedy shrinker in the spirit of
+hypothesis's: each round proposes simpler scenarios (:func:`candidates`, simplest first), judges them in
+small batches with the same pipeline that found the failure (a candidate outside the fairness bounds is
+skipped by the pipeline and so never accepted) and keeps the first that still shows the signature, until
+no candidate does. :func:`confirm` runs ``rbcheck sweep`` on the result (in this process, with the same
+engines): the counterexample counts only if the sweep's own gates fail on it.
 """
 from __future__ import annotations
 
@@ -71,7 +65,7 @@ def _principal_frame(spec):
     """The same motion with the body given by its principal moments in its principal frame P: the
     orientation becomes q_WP = q_WB ⊗ q_BP and every body-frame vector and point is rotated into P
     (a particle body becomes its mass and tensor about the COM first)."""
-    from reference_sim.body import RigidBody, check_inertia
+    from reference_sim.body import RigidBody, check_inertia, principal_axes
     s = copy.deepcopy(spec)
     b, ini, f = s["body"], s.setdefault("initial", {}), s.get("forces", {})
     com = np.zeros(3)
@@ -80,9 +74,7 @@ def _principal_frame(spec):
         mass, I = body.mass_kg, body.inertia_B
     else:
         mass, I = float(b["mass"]), check_inertia(b["inertia"])
-    moments, R = np.linalg.eigh(I)
-    if np.linalg.det(R) < 0:
-        R[:, 2] *= -1.0
+    moments, R = principal_axes(I)
     s["body"] = {"mass": mass, "inertia": moments.tolist()}
     q = (quat_from_euler_zxy(ini.pop("euler_zxy_deg")) if "euler_zxy_deg" in ini
          else np.asarray(ini.get("orientation", [1.0, 0.0, 0.0, 0.0]), dtype=float))

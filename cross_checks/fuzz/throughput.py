@@ -4,10 +4,10 @@ One batch per n0 of the cycle (one with ``quick``) of campaign seed 0, every ava
 MuJoCo and PyBullet variant: the seconds each variant spent running the batch's cases (free runs at
 three rungs and one-step runs) and checking their properties, and the seconds the batch spent choosing
 its steps and solving the exact motions (shared by every variant). Ratios are against MuJoCo measured
-in the same run (docs/fuzz.md, "Throughput"). The CPU seconds of the batches (``time.process_time``,
+in the same run. The CPU seconds of the batches (``time.process_time``,
 not disturbed by other work on a shared machine) give the cases a 10-minute campaign on 2 idle cores
 would judge if its two workers (``--jobs 2``: one batch per core) each kept one core's rate — an upper
-bound: measured, two workers reach ~70 % of it (docs/fuzz.md, "Throughput").
+bound (docs/fuzz.md §4).
 """
 from __future__ import annotations
 

@@ -1,15 +1,12 @@
-"""Resource limits of a scenario, decided up front from the scenario alone (before any run starts).
+"""Resource limits of a scenario, decided up front from the scenario alone (before any run starts;
+docs/hardening.md, "Limits decided from the scenario").
 
-A run records every step, so its memory grows with ``duration / Δt``; the DOP853 reference costs CPU
-in proportion to ``duration × (the fastest rate of the dynamics)``, counted in right-hand-side
-evaluations (never in seconds: the limits are the same on every machine). Both are estimated from the
-scenario and refused with a :class:`~cross_checks.scenario.ScenarioError` naming the field, the
-estimate and the limit, instead of a MemoryError or an hour-long solve. The numbers (and where each
-comes from) are in :mod:`cross_checks.core.tolerances` under "hardening".
-
-The time limits that hold while the work runs (per reference solve, per run) are enforced by
-:func:`time_limit`, a SIGALRM timer in the process doing the work: the interrupted run becomes a
-``failed`` row saying which limit it hit.
+A run's memory grows with ``duration / Δt``; the DOP853 reference's CPU with ``duration × (the fastest
+rate of the dynamics)``, counted in right-hand-side evaluations (never in seconds: the limits are the same
+on every machine). A scenario beyond them is refused with a :class:`~cross_checks.scenario.ScenarioError`
+naming the field, the estimate and the limit. The numbers, and where each comes from, are in
+:mod:`cross_checks.core.tolerances` ("hardening"); the time limits that hold while the work runs are the
+sweep's (``--time-limit``).
 """
 from __future__ import annotations
 

@@ -191,14 +191,7 @@ class _Reader:
             raise self.err(fld, f"must be a list of {n} numbers, got {_show(v)}")
         if len(v) != n:
             raise self.err(fld, f"must have {n} numbers, got {len(v)}")
-        out = []
-        for i, e in enumerate(v):
-            if isinstance(e, bool) or not isinstance(e, (int, float)):
-                raise self.err(f"{fld}[{i}]", f"must be a number, got {_show(e)}")
-            if not math.isfinite(float(e)):
-                raise self.err(f"{fld}[{i}]", f"must be finite, got {e}")
-            out.append(float(e))
-        return np.array(out)
+        return np.array([self.number({"v": e}, "v", f"{fld}[{i}]") for i, e in enumerate(v)])
 
     def string(self, d, key, fld, *, default=None, choices=None):
         if key not in d:
@@ -423,7 +416,7 @@ def _parse_forces(r, raw, dt, com_offset) -> ForceModel:
 def _check_scenario(r, sc) -> None:
     """What needs the whole scenario: its physical numbers within the ranges rbcheck judges; a requested
     closed form exists; the run stays within the limits."""
-    from cross_checks.scenario.limits import LimitExceeded, check_physical_ranges
+    from cross_checks.scenario.limits import LimitExceeded, check_physical_ranges, check_scenario_limits
     try:
         check_physical_ranges(sc)
     except LimitExceeded as exc:
@@ -433,7 +426,6 @@ def _check_scenario(r, sc) -> None:
         ok, why = analytic_available(sc)
         if not ok:
             raise r.err("reference", f"'analytic' requested but no closed form covers this scenario: {why}")
-    from cross_checks.scenario.limits import LimitExceeded, check_scenario_limits
     try:
         check_scenario_limits(sc)
     except LimitExceeded as exc:

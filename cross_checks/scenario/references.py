@@ -8,10 +8,8 @@ each part gets its own closed form:
 * rotation (torque-free): reference_sim.analytic.torque_free (constant spin, axisymmetric top, or the
   Jacobi elliptic solution); with angular velocity decay, only a spin about a principal axis.
 
-The course's per-step decay factor γ (given at the scenario's dt) is, physically, exponential
-damping at the rate ``k = −ln γ / dt``: ``v̇ = f/m − k v`` (and the same for ω). The reference is that
-continuously damped motion; every engine variant applies ``e^{−kΔt}`` per step or ``−k v`` in its
-right-hand side, so every variant converges to it (at Δt = dt the course variants apply exactly γ).
+The course's velocity decay is the continuously damped motion ``v̇ = f/m − k v``, ``k = −ln γ / dt``
+(docs/semantics.md, "Velocity decay").
 """
 from __future__ import annotations
 
@@ -166,8 +164,7 @@ def error_amplification(scenario, scales: dict | None = None) -> dict:
     ``max_k |Δq(T)| / scale_q / ε`` over perturbations of relative size ε = AMPLIFICATION_EPS along each
     of the 12 directions of the initial state (:func:`perturbed_initial_states`; ``scales`` as in
     quantities.quantity_scales). The closed form where there is one, else a batched DOP853 solve at
-    AMPLIFICATION_RTOL. Near an unstable rotation this is ~1e2–1e3 (tumbling_box flips ~8 times in
-    10 s): round-off grows by as much.
+    AMPLIFICATION_RTOL. Near an unstable rotation it is large, and round-off grows by as much.
     """
     from cross_checks.core import tolerances as tol
     from cross_checks.core.quantities import QUANTITIES, state_errors
@@ -183,7 +180,7 @@ def reference_error(scenario, y_final, label: str, scales: dict | None = None) -
 
     * DOP853: the difference from a second solution at a REFERENCE_CHECK_RTOL_FACTOR times looser
       tolerance — that solution's error, an upper bound of the reference's own (DOP853's error falls
-      with its tolerance: measured 4–7× per decade on the catalog).
+      with its tolerance: docs/verdicts.md §1).
     * Closed form: its own round-off, seen by evaluating it in a perturbed way — its inputs (each
       direction of the initial state, :func:`perturbed_initial_states`) and the final time moved by
       CLOSED_FORM_INPUT_ULPS ulps, as its internal roundings move them: the largest change.

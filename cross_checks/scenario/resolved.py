@@ -1,24 +1,9 @@
 """The resolved scenario: what every engine receives (``rbcheck show SCENARIO [--json]``).
 
 :func:`resolved_scenario` turns a validated :class:`~cross_checks.scenario.Scenario` into a plain
-dict in the scenario TOML's own key names, every alternative resolved, at the Δt of one run:
-
-* ``name``, ``description``, ``duration`` (s), ``dt`` (s, the run's Δt), ``steps`` (at that Δt);
-* ``body.mass`` (kg), ``body.inertia`` — 3×3 (kg m²) about the COM, in body axes (particles resolved);
-* ``initial.position`` (COM, world, m), ``initial.velocity`` (COM, world, m/s),
-  ``initial.orientation`` (body→world unit quaternion, w x y z; Unity ``euler_zxy_deg`` resolved),
-  ``initial.angular_velocity`` (WORLD axes, rad/s; ``angular_velocity_body`` resolved);
-* ``forces.gravity`` (m/s²), ``forces.linear_drag`` (N s/m), ``forces.velocity_decay`` and
-  ``forces.angular_velocity_decay`` — per-step factors AT THE RUN'S Δt: the scenario's γ is defined at
-  its own dt as the decay rate k = −ln γ / dt, so the factor for a step Δt is e^(−kΔt) = γ^(Δt/dt);
-* ``forces.spring[]`` (``anchor`` world m, ``attach`` body m from the COM, ``stiffness`` N/m,
-  ``rest_length`` m), ``forces.point[]`` (``force`` N, ``point`` body m from the COM, ``frame``),
-  ``forces.torque[]`` (``torque`` N m, ``frame``).
-
-Extra keys (informative; the keys above never change): ``scenario_dt`` and ``dt_ladder`` (s),
-``content_hash``, ``rbcheck_version``, ``csv_columns`` (the trajectory CSV header),
-``body.principal_moments`` (kg m², ascending), ``initial.angular_velocity_body`` (body axes, rad/s),
-``forces.velocity_decay_rate`` and ``forces.angular_velocity_decay_rate`` (k, 1/s).
+dict in the scenario TOML's own key names, every alternative resolved, at the Δt of one run (the decay
+factors too: e^(−kΔt) = γ^(Δt/dt)). Its keys, with their units and frames, and the informative extra keys:
+docs/engines.md, "The resolved scenario".
 """
 from __future__ import annotations
 
