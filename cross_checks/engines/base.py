@@ -49,15 +49,20 @@ Harness semantics (identical in every built-in adapter):
 from __future__ import annotations
 
 import abc
+import contextlib
 import functools
 import importlib
 import inspect
 import math
+import os
 import sys
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from cross_checks.core.files import kernel_cache_dir
 
 __all__ = ["EngineAdapter", "Variant", "harness_force_torque", "stage_force_torque",
            "harness_force_torque_floats", "stage_force_torque_floats", "apply_decay_prestep",
@@ -65,7 +70,8 @@ __all__ = ["EngineAdapter", "Variant", "harness_force_torque", "stage_force_torq
            "installed_version", "library_files", "RunRequest", "Traits", "INVARIANTS",
            "SYMPLECTIC_EULER_EXPLICIT_GYRO", "SYMPLECTIC_EULER_IMPLICIT_GYRO", "WHOLE_STATE_EXPLICIT_EULER",
            "WHOLE_STATE_IMPLICIT_EULER", "HIGHER_ORDER", "DEFAULT_TRAITS", "ModuleAdapter", "package_files",
-           "one_request", "check_variant", "run_in_groups", "check_installed"]
+           "one_request", "check_variant", "run_in_groups", "check_installed", "quiet_fd2", "first_import",
+           "engine_or_error", "start_jax", "refuse_forked_jax", "start_warp", "Stats"]
 
 
 class EngineError(RuntimeError):
@@ -79,33 +85,36 @@ class NotExpressible(EngineError):
     nothing for it."""
 
 
+@contextlib.contextmanager
+def quiet_fd2():
+    """File descriptor 2 sent to /dev/null for the duration: what a native library prints there (PyBullet's
+    build time at import, Warp's missing CUDA driver at ``wp.init``) would land in every CLI run's error
+    output. Nothing is silenced where fd 2 cannot be duplicated."""
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError, AttributeError):   # pragma: no cover - no usable fd 2
+        yield
+        return
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, 2)
+    os.close(devnull)
+    try:
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
 def optional_import(name: str, *, quiet_stderr: bool = False):
     """``(module, None)``, or ``(None, the ImportError)`` when ``name`` cannot be imported: an adapter
     module imports without its engine so that the registry can say why the engine is unavailable.
-    ``quiet_stderr`` silences file descriptor 2 during the import (PyBullet prints its build time there,
-    which would land in every CLI run's error output)."""
-    import importlib
-    import os
-    import sys
-    saved = None
-    if quiet_stderr:
+    ``quiet_stderr``: fd 2 silenced during the import (:func:`quiet_fd2`)."""
+    with quiet_fd2() if quiet_stderr else contextlib.nullcontext():
         try:
-            sys.stderr.flush()
-            saved = os.dup(2)
-        except (OSError, ValueError, AttributeError):
-            saved = None
-    devnull = os.open(os.devnull, os.O_WRONLY) if saved is not None else None
-    try:
-        if saved is not None:
-            os.dup2(devnull, 2)
-        return importlib.import_module(name), None
-    except ImportError as exc:  # pragma: no cover - exercised only where the engine is missing
-        return None, exc
-    finally:
-        if saved is not None:
-            os.dup2(saved, 2)
-            os.close(saved)
-            os.close(devnull)
+            return importlib.import_module(name), None
+        except ImportError as exc:  # pragma: no cover - exercised only where the engine is missing
+            return None, exc
 
 
 class EngineNotInstalled(ImportError):
@@ -379,6 +388,100 @@ def check_installed(dist: str, hint: str, needs: tuple = (), version_of=None) ->
         if importlib.util.find_spec(module) is None or version_of(needed) is None:
             raise ImportError(f"{dist} {version_of(dist)} is installed but cannot be imported: "
                               f"{needed} is missing ({hint})")
+
+
+@contextlib.contextmanager
+def first_import(dist: str, version_of=None):
+    """Around an engine's import on first use: any exception in the block is raised as ImportError "DIST VER
+    is installed but cannot be imported: TYPE: words" (a broken install, never read as an absent one);
+    ``version_of`` (default :func:`installed_version`) reads the installed version."""
+    try:
+        yield
+    except Exception as exc:  # noqa: BLE001 - a broken install: the engine's own words
+        ver = (version_of or installed_version)(dist)
+        raise ImportError(f"{dist} {ver} is installed but cannot be imported: {type(exc).__name__}: {exc}") \
+            from exc
+
+
+def engine_or_error(engine):
+    """``engine()`` (an adapter's import on first use) with its ImportError raised as :class:`EngineError`."""
+    try:
+        return engine()
+    except ImportError as exc:
+        raise EngineError(str(exc)) from None
+
+
+@functools.lru_cache(maxsize=1)
+def start_jax():
+    """``jax`` with float64 on (``jax_enable_x64``: process-global, so every JAX engine of the process
+    computes in float64) and its persistent compilation cache in ``core.files.kernel_cache_dir("jax")``,
+    shared by the JAX engines. Called on first use only: a sweep's parent must not start JAX (it forks)."""
+    import jax
+    jax.config.update("jax_enable_x64", True)
+    try:
+        folder = kernel_cache_dir("jax")
+        folder.mkdir(parents=True, exist_ok=True)
+        jax.config.update("jax_compilation_cache_dir", str(folder))
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+    except OSError:   # pragma: no cover - an unwritable cache directory only costs compile time
+        pass
+    return jax
+
+
+#: True in a process forked after JAX's backend had started in its parent (set in the child at fork).
+_FORKED_AFTER_JAX = [False]
+
+
+def _after_fork_in_child() -> None:
+    if "jax" in sys.modules:
+        from jax._src import xla_bridge
+        _FORKED_AFTER_JAX[0] = bool(xla_bridge.backends_are_initialized())
+
+
+os.register_at_fork(after_in_child=_after_fork_in_child)
+
+
+def refuse_forked_jax(words: str) -> None:
+    """:class:`EngineError` with ``words`` in a process forked after JAX started in its parent: a running JAX
+    backend does not survive fork (its threads are gone) and its first computation would hang."""
+    if _FORKED_AFTER_JAX[0]:
+        raise EngineError(words)
+
+
+def start_warp(cache: str, log_level: str, quiet: bool = False):
+    """``warp``, initialised on first use with its kernel cache in ``core.files.kernel_cache_dir(cache)`` (set
+    before ``wp.init``), ``wp.config.log_level = wp.<log_level>`` and ``wp.config.quiet``; fd 2 silenced
+    meanwhile (Warp's runtime prints there that no CUDA driver exists)."""
+    with quiet_fd2():
+        import warp as wp
+        folder = kernel_cache_dir(cache)
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError:   # pragma: no cover - Warp then reports its own error
+            pass
+        wp.config.kernel_cache_dir = str(folder)
+        wp.config.quiet = quiet
+        wp.config.log_level = getattr(wp, log_level)
+        wp.init()
+    return wp
+
+
+class Stats(dict):
+    """An adapter's counters in this process (compilations, wall seconds, steps), zeroed by :meth:`reset`."""
+
+    def __init__(self, **zeros):
+        super().__init__(zeros)
+        self.zeros = zeros
+
+    def reset(self) -> None:
+        self.update(self.zeros)
+
+    @contextlib.contextmanager
+    def timing(self, key: str):
+        """Adds the block's wall seconds to ``self[key]`` (nothing when it raises)."""
+        t0 = time.perf_counter()
+        yield
+        self[key] += time.perf_counter() - t0
 
 
 def on_rows(one_step):
