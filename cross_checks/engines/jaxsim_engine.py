@@ -3,7 +3,8 @@ jaxsim does, the defaults neutralised and what was measured: docs/engine_convent
 
 Model: one ``JaxSimModel`` per body built from an SDF string (:func:`model_sdf`: one link, its inertial at the
 link origin = COM, no collision, no joint: a floating base), its spatial inertia checked against the
-scenario's. Precision: float64 (JAX started by base.start_jax; importing jaxsim also turns ``jax_enable_x64`` on).
+scenario's. Precision: float64 (JAX started by base.start_jax; importing jaxsim also turns
+``jax_enable_x64`` on).
 
 State at the boundary, in the Mixed velocity representation: ``base_position`` = x_W (m), ``base_quaternion``
 = q_WB (w, x, y, z), ``base_velocity`` = [v_W (m/s, COM, world axes), ω_W (rad/s, world axes)] — the packed
