@@ -1,50 +1,22 @@
-"""The engine adapter interface (:class:`EngineAdapter`), and the harness semantics adapters share.
+"""The engine adapter interface (:class:`EngineAdapter`), the harness semantics adapters share, and the
+plumbing of the optional engines (import on first use, JAX and Warp started once, fd 2 silenced).
 
-An engine is an adapter CLASS registered under the entry-point group ``rbcheck.engines`` (the
-built-in reference, MuJoCo and PyBullet adapters are registered that way in rbcheck's own
-pyproject.toml), or an engine file (TOML, :mod:`cross_checks.engines.external`), which rbcheck turns
-into an adapter of the same interface. The registry (:mod:`cross_checks.engines`) instantiates the
-class with no arguments. See docs/engines.md for a worked example.
+An engine is an adapter class registered under the entry-point group ``rbcheck.engines``, or an engine file
+(TOML, :mod:`cross_checks.engines.external`) turned into an adapter of the same interface; the registry
+(:mod:`cross_checks.engines`) instantiates the class with no arguments. The contract and a worked example:
+docs/engines.md, "Python engines: an adapter class and an entry point", and each method's docstring below.
 
-An adapter provides:
+Harness semantics (every built-in adapter; docs/semantics.md, "Forces are evaluated where each scheme's
+equations say" and "Velocity decay"):
 
-``name``              the engine name used in ``ENGINE:VARIANT`` (the entry point's name).
-``variants``          dict variant -> :class:`Variant` (declared global order, one-line description);
-                      verdicts check the declared order. The first is the engine's default
-                      (``rbcheck run --engine ENGINE``).
-``version()``         the engine's version string; raises ImportError (or any exception) when the
-                      engine cannot run here: the engine is then listed as unavailable with that reason.
-``simulate(scenario, variant, dt_s, n_steps) -> reference_sim.simulate.Run``
-                      free-running run from the scenario's initial state, every step recorded
-                      (``Run.y``: (n+1, 13) packed [x_W, v_W, q_WB (w x y z), w_W]); a blow-up stops the
-                      run with ``diverged_at_s`` set, never an exception. :class:`EngineError` says the
-                      engine refused or failed (a ``failed`` row with its message).
-``simulate_many(variant, requests) -> list``   (optional)
-                      the runs of many :class:`RunRequest` (scenario, Δt, steps) in one call: each
-                      element a ``Run`` equal to ``simulate``'s for that request, or the
-                      :class:`EngineError` it raised. The default calls ``simulate`` once per request;
-                      an engine that batches (MuJoCo's rollout, a reused PyBullet world, the reference's
-                      columns) overrides it. The sweep and the fuzz run through it.
-``one_step(scenario, variant, dt_s, y_start) -> y_next``   (optional)
-                      for each row of ``y_start`` (T, 13), one step of ``dt_s`` from exactly that
-                      state (the local error mode of the metrics). Without it the local-error columns
-                      stay empty.
-
-Harness semantics (identical in every built-in adapter):
-
-* Forces and torques are evaluated by ``scenario.problem.forces.force_torque`` from the state at the
-  start of each step and held over the step (zero-order hold) unless the engine can evaluate them at
-  every stage (MuJoCo RK4 through its control callback).
-* Velocity decay (the course's per-step factor γ at the scenario's dt) is exponential damping at the
-  rate ``k = −ln γ / dt``; an engine with step Δt gets the factor ``e^{−kΔt}`` (``decay_factors``,
-  exactly γ at Δt = dt). Euler-type engines (one force evaluation per step) have no equivalent, so
-  the harness applies it BEFORE the step: ``v ← e^{−k_vΔt} v``, ``ω ← e^{−k_ωΔt} ω``, and scales that
-  step's applied force and torque by the same factors. For a semi-implicit engine this reproduces
-  ``v ← e^{−kΔt} (v + Δt f/m)`` — the course's step at Δt = dt — exactly, and the rotation exactly
-  whenever the gyroscopic torque vanishes; otherwise the gyroscopic term sees the factor twice, a
-  difference of order (1 − e^{−kΔt}) Δt that keeps the scheme first order. A multi-stage engine
-  (MuJoCo RK4) instead gets the damping in its right-hand side at every stage
-  (``stage_force_torque``): a force ``−m k_v v`` at the COM and a torque ``−k_ω I_W ω``.
+* Forces and torques are evaluated from the state at the start of each step and held over the step
+  (zero-order hold), unless the engine evaluates them at every stage (:func:`stage_force_torque`).
+* Velocity decay (the per-step factor γ at the scenario's dt) is damping at the rate ``k = −ln γ / dt``: a
+  step Δt gets ``e^{−kΔt}`` (:func:`decay_factors`). A single-stage engine gets it BEFORE the step,
+  ``v ← e^{−k_vΔt} v``, ``ω ← e^{−k_ωΔt} ω``, with that step's force and torque scaled alike: for a
+  semi-implicit step exactly the course's ``v ← e^{−kΔt} (v + Δt f/m)``, and its rotation exactly where the
+  gyroscopic torque vanishes (else a difference of order (1 − e^{−kΔt}) Δt: still first order). A multi-stage
+  engine gets the damping in its right-hand side: a force ``−m k_v v`` at the COM, a torque ``−k_ω I_W ω``.
 """
 from __future__ import annotations
 
@@ -249,60 +221,41 @@ INVARIANTS = ("energy", "energy_bounded", "angular_momentum_norm", "angular_mome
 @dataclass(frozen=True)
 class Traits:
     """What a variant's step does besides its order (the order itself: :attr:`Variant.order`); the sweep
-    derives a variant's expectations from them (cross_checks.analysis.expectations).
+    derives a variant's expectations from them (cross_checks.analysis.expectations). What each trait means
+    for the verdicts, and why: docs/verdicts.md, §3.
 
     gyroscopic_term : whether the rotation update has the gyroscopic torque −ω × (I ω).
-    translation_drift : how a first-order step treats the amplitude of a translational oscillation
-        (a spring): 0 keeps it (symplectic Euler: bounded energy error), +1 grows it (explicit), −1
-        damps it (implicit), None unknown (both are considered).
-    rotation_drift : how a first-order step treats the rotation's energy and momentum:
-        "none" — keeps them (no gyroscopic term: ω is constant without torques);
-        "body" — a body-frame Euler step of Euler's equations (explicit or implicit gyroscopic term)
-          before the attitude update: energy and |L|² drift TOGETHER (measured: equal relative drifts,
-          so the separatrix distance is kept), i.e. ω → (1 + r) ω, a time rescaling of the same motion —
-          a phase error, at the rate of the polhode (the body-frame ω);
-        "whole_state" — one step of the whole state in world axes: energy and momentum drift
-          independently, which moves the body to a neighbouring motion, at the rate at which ω_W
-          turns; that perturbation grows like any other (the measured amplification);
-        "momentum" — an explicit body-frame gyroscopic step whose angular momentum is rescaled to its old
-          magnitude (Jolt's MotionProperties::ApplyGyroscopicForceInternal, reference:jolt_gyro, Rapier,
-          PhysX): |L| is kept exactly while the rotational energy drifts at O(Δt²) a step towards L²/2I₂,
-          the intermediate-axis separatrix (up about the major axis, down about the minor one): the
-          separatrix distance moves, but slowly and at the polhode's rate (tumbling_box: 0.14 of δ in 5 s,
-          where a whole-state step moves it by > 100 δ), either way: judged as "body" with both signs.
+    translation_drift : a first-order step's effect on the amplitude of a translational oscillation: 0 keeps
+        it (symplectic Euler), +1 grows it (explicit), −1 damps it (implicit), None unknown (both considered).
+    rotation_drift : a first-order step's effect on the rotation's energy and momentum (ROTATION_DRIFTS):
+        "none" — no gyroscopic term (ω constant without torques); "body" — a body-frame Euler step of Euler's
+        equations before the attitude update (energy and |L|² drift together: a phase error);
+        "whole_state" — one step of the whole state in world axes (they drift independently: a neighbouring
+        motion); "momentum" — an explicit body-frame gyroscopic step with |L| rescaled to its old magnitude
+        (Jolt's MotionProperties::ApplyGyroscopicForceInternal, reference:jolt_gyro, Rapier, PhysX), judged
+        as "body" with both signs.
     rotation_sign : +1 the rotational energy grows (an explicit gyroscopic term), −1 it decays (an
         implicit one), 0 none, None unknown (both are considered).
     rotation_order : the order of the attitude update where the body-axes ω turns within a step, when it is
-        below the variant's order (MJX's RK4 advances q by ONE exponential of the stages' weighted ω_B: second
-        order); None: the variant's order.
-    velocity_from_positions : the step recomputes the velocity as the change of position over Δt (a
-        position-based pipeline): the velocity then carries the positions' round-off divided by Δt, which
-        grows as Δt shrinks (metrics.differencing_floor).
+        below the variant's order; None: the variant's order.
+    velocity_from_positions : the step recomputes the velocity as the change of position over Δt (its
+        round-off then grows as Δt shrinks: metrics.differencing_floor).
     precision : the floating-point format the engine's step computes in, "float64" or "float32"
-        (core.tolerances.MACHINE_EPSILON): every round-off floor of the variant's verdicts scales with its
-        ε, and a float32 variant is judged on a ladder that reaches coarser steps (docs/verdicts.md,
-        "Precision").
-    rounding_factor : how many times an ordinary step's rounding the engine's step leaves (1: a step of
-        ~10 operations a component, CHECK_ROUNDINGS_PER_STEP roundings; every round-off floor and the one-step
-        allowance scale with ε × this factor). A step with a deeper arithmetic chain declares more, from its
-        arithmetic and pinned by a measurement in its adapter's tests: PhysX's TGS turns ω into √I space and
-        back with two float32 3×3 products every step (up to 33 u of |ω| measured: 4 × the ordinary 16 u).
+        (core.tolerances.MACHINE_EPSILON; docs/verdicts.md §7).
+    rounding_factor : how many times an ordinary step's rounding (CHECK_ROUNDINGS_PER_STEP roundings) the
+        engine's step leaves, ≥ 1: every round-off floor and the one-step allowance scale with ε × this
+        factor. Declared from the step's arithmetic and pinned by a measurement in its adapter's tests.
     keeps : the invariants of the torque-free body the step keeps BY CONSTRUCTION (a subset of INVARIANTS),
-        judged on the long runs (cross_checks.analysis.judge.judge_long_run, docs/verdicts.md "Long runs"):
-        "energy" — the rotational energy to round-off; "energy_bounded" — no secular energy drift (a
-        symplectic step: its energy error stays bounded, O(Δt^p)); "angular_momentum_norm" — |L| to
-        round-off; "angular_momentum" — the world vector L (its norm and its direction) to round-off. A
-        ``rotation_drift`` of "momentum" implies "angular_momentum_norm". () claims nothing: the long runs'
-        drifts and findings are then reported, never judged.
+        judged on the long runs (cross_checks.analysis.judge.judge_long_run): "energy" and
+        "angular_momentum_norm" (|L|) to round-off, "energy_bounded" (no secular drift: a symplectic step),
+        "angular_momentum" (the world vector L) to round-off. "momentum" drift implies
+        "angular_momentum_norm". () claims nothing: the long runs are reported, never judged.
     gyroscopic_clamp_N_m : the step cuts the gyroscopic torque |ω × I ω| to this length (N m) when it is
-        longer (Bullet's ``m_maxGyroscopicForce``, reference:explicit_gyro_clamped); None: no clamp. Where the
-        motion's gyroscopic torque exceeds it (measured on the reference: analysis.physics.MotionRates) the
-        step solves another equation, whose solution the runs converge to instead of the physical one: the
-        variant is then expected not to converge in rotation.
-    forces_held : the engine holds the applied force and torque it was given over all the stages of a
-        step (it cannot evaluate them per stage). On a scenario whose forces change within a step
-        (state-dependent forces, velocity decay) a multi-stage scheme is then first order: the held force
-        is a zero-order hold, an O(Δt) local error in the acceleration per step.
+        longer (Bullet's ``m_maxGyroscopicForce``, reference:explicit_gyro_clamped); None: no clamp. Where
+        the motion's gyroscopic torque exceeds it the variant is expected not to converge in rotation.
+    forces_held : the engine holds the applied force and torque over all the stages of a step (no per-stage
+        evaluation): a multi-stage scheme is then first order where the forces change within a step
+        (state-dependent forces, velocity decay).
     """
 
     gyroscopic_term: bool = True
@@ -334,8 +287,7 @@ SYMPLECTIC_EULER_EXPLICIT_GYRO = Traits(rotation_drift="body", rotation_sign=+1)
 #: The same with an implicit gyroscopic term (MuJoCo implicit, PyBullet maximal).
 SYMPLECTIC_EULER_IMPLICIT_GYRO = Traits(rotation_drift="body", rotation_sign=-1)
 #: Whole-state Euler in world axes: an oscillator's amplitude grows (explicit) or damps (implicit), the
-#: rotational energy does the opposite (measured on every tumbling body of the catalog: explicit Euler loses
-#: 2E and |L|², implicit gains them; the attitude and ω_W steps are coupled through I_W).
+#: rotational energy does the opposite (explicit Euler loses 2E and |L|², implicit gains them).
 WHOLE_STATE_EXPLICIT_EULER = Traits(translation_drift=+1, rotation_drift="whole_state", rotation_sign=-1)
 WHOLE_STATE_IMPLICIT_EULER = Traits(translation_drift=-1, rotation_drift="whole_state", rotation_sign=+1)
 #: A variant that declares no traits (e.g. a user engine with only its declared order): assumed to
@@ -579,8 +531,9 @@ class EngineAdapter(abc.ABC):
         return ""
 
     def one_step(self, scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
-        """One step from each row of ``y_start`` (T, 13) -> (T, 13). Optional (see :attr:`has_one_step`):
-        an adapter that cannot restart its engine from an arbitrary state leaves this one, which refuses."""
+        """One step of ``dt_s`` from exactly each row of ``y_start`` (T, 13) -> (T, 13): the local-error mode.
+        Optional (see :attr:`has_one_step`): an adapter that cannot restart its engine from an arbitrary state
+        leaves this one, which refuses (the local-error columns then stay empty)."""
         raise EngineError(f"{self.name or type(self).__name__} has no one-step mode")
 
     @property
