@@ -25,9 +25,11 @@ import contextlib
 import functools
 import importlib
 import inspect
+import itertools
 import math
 import os
 import sys
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -43,7 +45,8 @@ __all__ = ["EngineAdapter", "Variant", "harness_force_torque", "stage_force_torq
            "SYMPLECTIC_EULER_EXPLICIT_GYRO", "SYMPLECTIC_EULER_IMPLICIT_GYRO", "WHOLE_STATE_EXPLICIT_EULER",
            "WHOLE_STATE_IMPLICIT_EULER", "HIGHER_ORDER", "DEFAULT_TRAITS", "ModuleAdapter", "package_files",
            "one_request", "check_variant", "run_in_groups", "check_installed", "quiet_fd2", "first_import",
-           "engine_or_error", "start_jax", "refuse_forked_jax", "start_warp", "Stats"]
+           "engine_or_error", "start_jax", "refuse_forked_jax", "start_warp", "Stats", "Registry",
+           "weight_W"]
 
 
 class EngineError(RuntimeError):
@@ -434,6 +437,33 @@ class Stats(dict):
         t0 = time.perf_counter()
         yield
         self[key] += time.perf_counter() - t0
+
+
+class Registry(dict):
+    """Values held under fresh integer keys for the duration of a block: what a host callback inside compiled
+    code (``jax.pure_callback``) looks up by the key it was given."""
+
+    def __init__(self):
+        super().__init__()
+        self._keys = itertools.count(1)
+        self._lock = threading.Lock()
+
+    @contextlib.contextmanager
+    def holding(self, value):
+        """``np.int64(key)`` of ``value`` for the block; the entry is dropped after it."""
+        with self._lock:
+            key = next(self._keys)
+            self[key] = value
+        try:
+            yield np.int64(key)
+        finally:
+            self.pop(key, None)
+
+
+def weight_W(scenario) -> np.ndarray:
+    """The body's weight ``m g`` (N, world axes): what an engine that applies gravity itself must not get
+    again in its applied force."""
+    return scenario.problem.body.mass_kg * np.asarray(scenario.problem.forces.gravity_W, dtype=float)
 
 
 def on_rows(one_step):

@@ -27,7 +27,6 @@ from __future__ import annotations
 import contextlib
 import functools
 import io
-import itertools
 import threading
 import time
 import warnings
@@ -81,7 +80,7 @@ ONE_STEP_MIN_BATCH = 64
 _LOCK = threading.RLock()
 _COMPILED: dict = {}         # key -> compiled executable
 _COMPILE_S: dict = {}        # key -> seconds spent compiling it (lower + compile)
-_CALLBACK_SCENARIOS: dict = {}   # token -> scenario (the host force callback's lookup)
+_CALLBACK_SCENARIOS = base.Registry()   # token -> (scenario, {Δt: harness}), for the host force callback
 
 
 def version() -> str:
@@ -190,7 +189,7 @@ def expressible(scenario, variant: str, dt_s: float) -> str:
     if fm.state_dependent:
         return why + "forces that depend on the state"
     f, tau = base.harness_force_torque(scenario, scenario.problem.initial_packed(), dt_s)
-    weight = scenario.problem.body.mass_kg * np.asarray(fm.gravity_W, dtype=float)
+    weight = base.weight_W(scenario)
     if np.any(tau != 0.0) or not np.allclose(f, weight, rtol=1e-15, atol=0.0):
         return why + f"a force {np.round(f - weight, 6).tolist()} N besides the weight and a torque " \
                      f"{np.round(tau, 6).tolist()} N m"
@@ -341,7 +340,7 @@ def _mode_and_consts(scenario, variant: str, dt_s: float):
         raise EngineError(why)
     p = scenario.problem
     fm = p.forces
-    weight = p.body.mass_kg * np.asarray(fm.gravity_W, dtype=float)
+    weight = base.weight_W(scenario)
     gv, gw = (float(g) for g in base.decay_factors(scenario, dt_s))
     decay = 1.0 if fm.has_decay else 0.0
     if variant != "generalized":
@@ -365,26 +364,6 @@ def _initial(variant: str, batch: int):
     return jax.jit(init)
 
 
-_TOKEN_NUMBERS = itertools.count(1)
-
-
-class _Token:
-    """Registers a scenario for the host force callback for the duration of a run."""
-
-    def __init__(self, scenario):
-        with _LOCK:
-            self.token = next(_TOKEN_NUMBERS)
-            _CALLBACK_SCENARIOS[self.token] = (scenario, {})
-
-    def __enter__(self):
-        return np.int64(self.token)
-
-    def __exit__(self, *exc):
-        with _LOCK:
-            _CALLBACK_SCENARIOS.pop(self.token, None)
-        return False
-
-
 def _run_group(scenario, variant: str, requests) -> list:
     """The runs of ``requests`` (all of ``scenario``), batched over their Δt: one vmapped scan per chunk."""
     lib = _usable()
@@ -404,7 +383,7 @@ def _run_group(scenario, variant: str, requests) -> list:
     rows[:, 0] = y0
     done = np.zeros(B, dtype=bool)
     first_bad = np.full(B, -1)
-    with _Token(scenario) as token:
+    with _CALLBACK_SCENARIOS.holding((scenario, {})) as token:
         args = (sys, state, jp.asarray(dts), jp.asarray(consts), token, jp.asarray(consts[0, 8]))
         exe = _compiled("run", variant, mode, B, args)
         k = 0
@@ -455,7 +434,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     B = _padded(max(T, ONE_STEP_MIN_BATCH))
     pad = np.concatenate([y_start, np.broadcast_to(scenario.problem.initial_packed(), (B - T, 13))])
     q, qd = to_q_qd(pad)
-    with _Token(scenario) as token:
+    with _CALLBACK_SCENARIOS.holding((scenario, {})) as token:
         args = (sys, jp.asarray(q), jp.asarray(qd), jp.full(B, float(dt_s)),
                 jp.asarray(np.tile(consts, (B, 1))), token, jp.asarray(consts[8]))
         exe = _compiled("one_step", variant, mode, B, args)

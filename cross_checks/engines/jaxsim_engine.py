@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import itertools
 import threading
 from pathlib import Path
 
@@ -88,8 +87,7 @@ MODEL_NAME = "rbcheck_body"
 
 _LOCK = threading.RLock()
 _TIMES = base.Stats(compile_seconds=0.0, compiles=0, run_seconds=0.0, steps=0)
-_CONTEXTS: dict = {}  # callback key -> (harness, weight floats): the forces of one run / one_step call
-_KEYS = itertools.count(1)
+_CONTEXTS = base.Registry()  # callback key -> (harness, weight floats): the forces of one run / one_step call
 
 
 # --- availability without importing JAX (fork safety) --------------------------------------------------
@@ -339,21 +337,6 @@ def _inputs(scenario, dt_s: float):
     return False, np.array([fx - wx, fy - wy, fz - wz, tx, ty, tz]), scale, harness
 
 
-class _Context:
-    """The callback key of one run or one_step call, registered for its duration."""
-
-    def __init__(self, scenario, harness):
-        self.key = next(_KEYS)
-        self.value = (harness, _weight(scenario))
-
-    def __enter__(self):
-        _CONTEXTS[self.key] = self.value
-        return np.asarray(self.key, dtype=np.int64)
-
-    def __exit__(self, *exc):
-        _CONTEXTS.pop(self.key, None)
-
-
 def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
     """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded."""
     _refuse_forked_jax()
@@ -364,7 +347,7 @@ def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
     rows = [y0[None]]
     y = y0
     done = 0
-    with _Context(scenario, harness) as key:
+    with _CONTEXTS.holding((harness, _weight(scenario))) as key:
         fn = _compiled("run", callback, model, dt, y0, np.int64(0), f6, scale, key)
         while done < n_steps:
             count = min(CHUNK, n_steps - done)
@@ -408,7 +391,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     pad = -n % ROW_BLOCK
     padded = np.concatenate([y_start, np.repeat(y_start[:1], pad, axis=0)]) if pad else y_start
     dt = np.float64(dt_s)
-    with _Context(scenario, harness) as key:
+    with _CONTEXTS.holding((harness, _weight(scenario))) as key:
         fn = _compiled("one", callback, model, dt, padded, f6, scale, key)
         with _TIMES.timing("run_seconds"):
             out = np.asarray(fn(model, dt, padded, f6, scale, key))[:n]

@@ -310,10 +310,6 @@ def _bucket(n: int) -> int:
 
 # --- adapter entry points ---------------------------------------------------------------------------------
 
-def _weight(scenario) -> np.ndarray:
-    return scenario.problem.body.mass_kg * np.asarray(scenario.problem.forces.gravity_W, dtype=float)
-
-
 def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
     """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded (one
     request of :func:`simulate_many`)."""
@@ -364,10 +360,10 @@ def _run_batch(key, callback: bool, reqs, models) -> list:
         gv, gw = (float(g) for g in base.decay_factors(r.scenario, r.dt_s))
         gains[k] = (gv, gv, gv, gw, gw, gw)
         if callback:
-            _HOST[k] = (harness_fn(r.scenario, r.dt_s), _weight(r.scenario).tolist())
+            _HOST[k] = (harness_fn(r.scenario, r.dt_s), base.weight_W(r.scenario).tolist())
         else:
             f, tau = base.harness_force_torque(r.scenario, y0[k], r.dt_s)
-            xfrc[k] = np.r_[f - _weight(r.scenario), tau]
+            xfrc[k] = np.r_[f - base.weight_W(r.scenario), tau]
     stacked = _stack([models[k] for k in pad])
     n_max = max(r.n_steps for r in reqs)
     states = np.empty((B, n_max + 1, 13))
@@ -413,7 +409,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     with _LOCK:
         key, xm = device_model(scenario, variant, dt_s)
         host_model = jax.tree.map(np.asarray, xm)   # one argument signature, whichever way the model was made
-        weight = _weight(scenario)
+        weight = base.weight_W(scenario)
         harness = harness_fn(scenario, dt_s)
         xfrc = np.empty((T, 6))
         for i, row in enumerate(y_start.tolist()):

@@ -180,10 +180,6 @@ def device_model(m_host, dts):
     return wm
 
 
-def _weight(scenario) -> np.ndarray:
-    return scenario.problem.body.mass_kg * np.asarray(scenario.problem.forces.gravity_W, dtype=float)
-
-
 def per_stage(scenario, variant: str) -> bool:
     """RK4 with forces that change within a step (state-dependent forces or velocity decay): evaluated at
     every stage through ``Model.callback.control`` (like mujoco:rk4)."""
@@ -340,7 +336,7 @@ def _run_batch(variant: str, reqs) -> list:
     dts = [float(r.dt_s) for r in reqs]
     y0 = np.asarray(sc.problem.initial_packed(), dtype=float)
     qpos0, qvel0 = to_qpos_qvel(np.repeat(y0[None], N, axis=0))
-    weight = _weight(sc)
+    weight = base.weight_W(sc)
     stage = per_stage(sc, variant)
     W = _Worlds(sc, variant, dts, qpos0, qvel0, stage_callback(sc) if stage else None)
     g = np.array([[float(v) for v in base.decay_factors(sc, h)] for h in dts])   # (N, 2)
@@ -399,7 +395,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     T = len(y_start)
     out = np.empty((T, 13))
     stage = per_stage(scenario, variant)
-    weight = _weight(scenario)
+    weight = base.weight_W(scenario)
     w0, w1, w2 = (float(c) for c in weight)
     harness = harness_fn(scenario, dt_s)
     with _LOCK:

@@ -137,3 +137,20 @@ def test_stats_time_blocks_and_reset_to_their_zeros():
         raise RuntimeError("failed")
     stats.reset()
     assert dict(stats) == {"compilations": 0, "step_seconds": 0.0}
+
+
+def test_a_registry_holds_a_value_under_a_fresh_key_for_the_block_only():
+    reg = base.Registry()
+    with reg.holding("a") as ka, reg.holding("b") as kb:
+        assert isinstance(ka, np.int64) and ka != kb and reg == {int(ka): "a", int(kb): "b"}
+    assert reg == {}
+    with pytest.raises(RuntimeError), reg.holding("c"):
+        raise RuntimeError("failed")
+    assert reg == {}
+
+
+def test_weight_is_mass_times_gravity_in_world_axes():
+    from cross_checks.scenario import load_scenario
+    sc = load_scenario("projectile")
+    want = sc.problem.body.mass_kg * np.asarray(sc.problem.forces.gravity_W)
+    assert base.weight_W(sc).tolist() == want.tolist()
