@@ -90,9 +90,6 @@ SOLVER_SETTINGS = {
     "mujoco_cpu": {"use_mujoco_cpu": True, "integrator": "implicitfast", "disable_contacts": True,
                    "kinematic_switchable_roots": False},
 }
-#: Solver attributes set after construction (none: XPBD's deprecated
-#: ``compute_body_velocity_from_position_delta`` warns when set; its default, False, is pinned instead).
-SOLVER_ATTRIBUTES: dict = {}
 
 #: Variants whose state is Newton's generalized coordinates (``joint_q``/``joint_qd`` of a FREE joint).
 _GENERALIZED = frozenset({"featherstone", "mujoco_cpu"})
@@ -203,8 +200,7 @@ def build_model(variant: str, bodies):
 
 
 def make_solver(variant: str, model):
-    """The variant's Newton solver for ``model``, every setting of SOLVER_SETTINGS and SOLVER_ATTRIBUTES
-    applied."""
+    """The variant's Newton solver for ``model``, every setting of SOLVER_SETTINGS applied."""
     _, newton = _engine_or_error()
     base.check_variant(ENGINE, VARIANTS, variant)
     with warnings.catch_warnings():
@@ -216,8 +212,6 @@ def make_solver(variant: str, model):
             hint = f" ({PIP_HINT} installs mujoco-warp)" if isinstance(exc, ImportError) else ""
             raise EngineError(f"Newton {version()}'s {SOLVERS[variant]} refused the model: "
                               f"{type(exc).__name__}: {exc}{hint}") from None
-    for attr, value in SOLVER_ATTRIBUTES.get(variant, {}).items():
-        setattr(solver, attr, value)
     if variant == "mujoco_cpu":
         # MuJoCo resets a run whose acceleration is non-finite or huge to the model's initial state
         # (autoreset, with a warning): a blow-up would continue from rest; off: divergence is seen
