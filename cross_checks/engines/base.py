@@ -46,7 +46,7 @@ __all__ = ["EngineAdapter", "Variant", "harness_force_torque", "stage_force_torq
            "WHOLE_STATE_IMPLICIT_EULER", "HIGHER_ORDER", "DEFAULT_TRAITS", "ModuleAdapter", "package_files",
            "one_request", "check_variant", "run_in_groups", "check_installed", "quiet_fd2", "first_import",
            "engine_or_error", "start_jax", "refuse_forked_jax", "start_warp", "Stats", "Registry",
-           "weight_W"]
+           "weight_W", "minus_weight", "power_of_two"]
 
 
 class EngineError(RuntimeError):
@@ -166,11 +166,8 @@ def decay_factors(scenario, dt_s: float):
 
 def harness_force_torque(scenario, y, dt_s: float):
     """World force (N, at the COM) and world torque (N m) to apply for the step of ``dt_s`` starting at
-    ``y`` (13,), scaled by the pre-step decay factors (see the module docstring).
-
-    Evaluated by :func:`float_forces` (the definition's ForceModel formulas, compiled): it runs once per
-    engine step, or once per RK4 stage, where NumPy's per-call overhead would dominate the engine's step.
-    """
+    ``y`` (13,), scaled by the pre-step decay factors (see the module docstring); evaluated by
+    :func:`float_forces`."""
     fx, fy, fz, tx, ty, tz = harness_force_torque_floats(scenario, y, dt_s)
     return np.array([fx, fy, fz]), np.array([tx, ty, tz])
 
@@ -464,6 +461,23 @@ def weight_W(scenario) -> np.ndarray:
     """The body's weight ``m g`` (N, world axes): what an engine that applies gravity itself must not get
     again in its applied force."""
     return scenario.problem.body.mass_kg * np.asarray(scenario.problem.forces.gravity_W, dtype=float)
+
+
+def minus_weight(harness, weight_W):
+    """``y -> (fx, fy, fz, tx, ty, tz)``: the plain-float ``harness(y)`` (step_floats.harness_fn) with the
+    weight ``weight_W`` (N, world axes) taken off its force: what an engine that applies gravity gets."""
+    w0, w1, w2 = (float(w) for w in weight_W)
+
+    def wrench(y):
+        fx, fy, fz, tx, ty, tz = harness(y)
+        return fx - w0, fy - w1, fz - w2, tx, ty, tz
+    return wrench
+
+
+def power_of_two(n: int) -> int:
+    """The batch size ``n`` (≥ 1) runs or rows are padded to: the next power of two, so that a handful of
+    compiled executables serve every batch size."""
+    return 1 << (int(n) - 1).bit_length()
 
 
 def on_rows(one_step):

@@ -328,11 +328,6 @@ def _compiled(kind: str, variant: str, mode: str, batch: int, args):
     return exe
 
 
-def _padded(n: int) -> int:
-    """Batch sizes are padded to a power of two (a handful of executables serve every batch)."""
-    return 1 << max(0, (n - 1).bit_length())
-
-
 def _mode_and_consts(scenario, variant: str, dt_s: float):
     """``(mode, consts (9,))`` of the scenario's forces at step ``dt_s`` (see :func:`_step_fn`)."""
     why = expressible(scenario, variant, dt_s)
@@ -373,7 +368,7 @@ def _run_group(scenario, variant: str, requests) -> list:
     modes = [_mode_and_consts(scenario, variant, r.dt_s) for r in requests]
     mode = modes[0][0]
     n = len(requests)
-    B = _padded(n)
+    B = base.power_of_two(n)
     dts = np.array([r.dt_s for r in requests] + [requests[0].dt_s] * (B - n), dtype=float)
     consts = np.stack([m[1] for m in modes] + [modes[0][1]] * (B - n))
     q0, qd0 = to_q_qd(y0)
@@ -431,7 +426,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     sys = _system_of(scenario, variant)
     mode, consts = _mode_and_consts(scenario, variant, dt_s)
     T = len(y_start)
-    B = _padded(max(T, ONE_STEP_MIN_BATCH))
+    B = base.power_of_two(max(T, ONE_STEP_MIN_BATCH))
     pad = np.concatenate([y_start, np.broadcast_to(scenario.problem.initial_packed(), (B - T, 13))])
     q, qd = to_q_qd(pad)
     with _CALLBACK_SCENARIOS.holding((scenario, {})) as token:

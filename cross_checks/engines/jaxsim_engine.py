@@ -87,7 +87,7 @@ MODEL_NAME = "rbcheck_body"
 
 _LOCK = threading.RLock()
 _TIMES = base.Stats(compile_seconds=0.0, compiles=0, run_seconds=0.0, steps=0)
-_CONTEXTS = base.Registry()  # callback key -> (harness, weight floats): the forces of one run / one_step call
+_CONTEXTS = base.Registry()  # callback key -> y -> link force (6 floats) of one run / one_step call
 
 
 # --- availability without importing JAX (fork safety) --------------------------------------------------
@@ -227,9 +227,7 @@ def _host_forces(key, y):
     rows = y.reshape(-1, 13)
     out = np.empty((len(rows), 6))
     for i, (k, row) in enumerate(zip(keys.tolist(), rows.tolist())):
-        harness, (wx, wy, wz) = _CONTEXTS[k]
-        fx, fy, fz, tx, ty, tz = harness(row)
-        out[i] = (fx - wx, fy - wy, fz - wz, tx, ty, tz)
+        out[i] = _CONTEXTS[k](row)
     return out.reshape(y.shape[:-1] + (6,))
 
 
@@ -323,31 +321,30 @@ def _weight(scenario) -> tuple:
 
 
 def _inputs(scenario, dt_s: float):
-    """(callback?, constant link force (6,), pre-step decay scale (13,), harness) of a run at ``dt_s``."""
+    """(callback?, constant link force (6,), pre-step decay scale (13,), ``y -> link force`` (6 floats)) of a
+    run at ``dt_s``."""
     forces = scenario.problem.forces
-    harness = harness_fn(scenario, dt_s)
-    wx, wy, wz = _weight(scenario)
+    wrench = base.minus_weight(harness_fn(scenario, dt_s), _weight(scenario))
     gv, gw = (float(g) for g in base.decay_factors(scenario, dt_s))
     scale = np.ones(13)
     scale[3:6] = gv
     scale[10:13] = gw
     if forces.state_dependent:
-        return True, np.zeros(6), scale, harness
-    fx, fy, fz, tx, ty, tz = harness([float(v) for v in scenario.problem.initial_packed()])
-    return False, np.array([fx - wx, fy - wy, fz - wz, tx, ty, tz]), scale, harness
+        return True, np.zeros(6), scale, wrench
+    return False, np.array(wrench([float(v) for v in scenario.problem.initial_packed()])), scale, wrench
 
 
 def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
     """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded."""
     _refuse_forked_jax()
     model = build_model(scenario, variant)
-    callback, f6, scale, harness = _inputs(scenario, dt_s)
+    callback, f6, scale, wrench = _inputs(scenario, dt_s)
     y0 = np.asarray(scenario.problem.initial_packed(), dtype=float)
     dt = np.float64(dt_s)
     rows = [y0[None]]
     y = y0
     done = 0
-    with _CONTEXTS.holding((harness, _weight(scenario))) as key:
+    with _CONTEXTS.holding(wrench) as key:
         fn = _compiled("run", callback, model, dt, y0, np.int64(0), f6, scale, key)
         while done < n_steps:
             count = min(CHUNK, n_steps - done)
@@ -387,11 +384,11 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
         return np.empty((0, 13))
     _refuse_forked_jax()
     model = build_model(scenario, variant)
-    callback, f6, scale, harness = _inputs(scenario, dt_s)
+    callback, f6, scale, wrench = _inputs(scenario, dt_s)
     pad = -n % ROW_BLOCK
     padded = np.concatenate([y_start, np.repeat(y_start[:1], pad, axis=0)]) if pad else y_start
     dt = np.float64(dt_s)
-    with _CONTEXTS.holding((harness, _weight(scenario))) as key:
+    with _CONTEXTS.holding(wrench) as key:
         fn = _compiled("one", callback, model, dt, padded, f6, scale, key)
         with _TIMES.timing("run_seconds"):
             out = np.asarray(fn(model, dt, padded, f6, scale, key))[:n]

@@ -81,8 +81,7 @@ def _check_installed() -> None:
     """EngineNotInstalled when mujoco-mjx is not installed; ImportError when it is but MJX or JAX cannot be
     found — from package metadata and import specs only (nothing imported, no JAX backend started)."""
     import importlib.util
-    if installed_version(_DIST) is None:
-        raise base.EngineNotInstalled(f"{_DIST} is not installed ({_HINT})")
+    base.check_installed(_DIST, _HINT, version_of=installed_version)
     for mod in ("jax", "jaxlib"):
         if importlib.util.find_spec(mod) is None:
             raise ImportError(f"{_DIST} {installed_version(_DIST)} is installed but cannot be imported: "
@@ -231,7 +230,7 @@ def _stack(models):
 
 # --- the host side of the force callback -------------------------------------------------------------------
 
-_HOST: dict = {}   # callback id -> (harness(y) -> 6 floats, weight (3,)): set for the duration of a run
+_HOST: dict = {}   # callback id -> base.minus_weight's y -> 6 floats: set for the duration of a run
 
 
 def _host_forces(qpos, qvel, ids):
@@ -244,9 +243,7 @@ def _host_forces(qpos, qvel, ids):
         y = to_packed(qpos.reshape(-1, 7), qvel.reshape(-1, 6))
     out = np.empty((len(y), 6))
     for k, (row, i) in enumerate(zip(y.tolist(), ids.reshape(-1).tolist())):
-        harness, (w0, w1, w2) = _HOST[i]
-        fx, fy, fz, tx, ty, tz = harness(row)
-        out[k] = (fx - w0, fy - w1, fz - w2, tx, ty, tz)
+        out[k] = _HOST[i](row)
     return out.reshape(*shape, 6)
 
 
@@ -303,11 +300,6 @@ def _data0(key):
     return mjx.put_data(m, mujoco.MjData(m))
 
 
-def _bucket(n: int) -> int:
-    """The batch size ``n`` runs are padded to: the next power of two (so that sizes share executables)."""
-    return 1 << max(0, int(n) - 1).bit_length()
-
-
 # --- adapter entry points ---------------------------------------------------------------------------------
 
 def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
@@ -349,7 +341,7 @@ def _run_batch(key, callback: bool, reqs, models) -> list:
     """The Runs of ``reqs`` (one structure; ``models`` their MJX models), vmapped chunk by chunk."""
     from cross_checks.engines.mujoco_engine import to_packed, to_qpos_qvel
     jax, jnp, _ = _engine()
-    B, M = len(reqs), _bucket(len(reqs))
+    B, M = len(reqs), base.power_of_two(len(reqs))
     pad = list(range(B)) + [0] * (M - B)
     y0 = np.array([r.scenario.problem.initial_packed() for r in reqs])
     qpos0, qvel0 = to_qpos_qvel(y0)
@@ -360,7 +352,7 @@ def _run_batch(key, callback: bool, reqs, models) -> list:
         gv, gw = (float(g) for g in base.decay_factors(r.scenario, r.dt_s))
         gains[k] = (gv, gv, gv, gw, gw, gw)
         if callback:
-            _HOST[k] = (harness_fn(r.scenario, r.dt_s), base.weight_W(r.scenario).tolist())
+            _HOST[k] = base.minus_weight(harness_fn(r.scenario, r.dt_s), base.weight_W(r.scenario))
         else:
             f, tau = base.harness_force_torque(r.scenario, y0[k], r.dt_s)
             xfrc[k] = np.r_[f - base.weight_W(r.scenario), tau]
@@ -409,12 +401,10 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     with _LOCK:
         key, xm = device_model(scenario, variant, dt_s)
         host_model = jax.tree.map(np.asarray, xm)   # one argument signature, whichever way the model was made
-        weight = base.weight_W(scenario)
-        harness = harness_fn(scenario, dt_s)
+        wrench = base.minus_weight(harness_fn(scenario, dt_s), base.weight_W(scenario))
         xfrc = np.empty((T, 6))
         for i, row in enumerate(y_start.tolist()):
-            fx, fy, fz, tx, ty, tz = harness(row)
-            xfrc[i] = (fx - weight[0], fy - weight[1], fz - weight[2], tx, ty, tz)
+            xfrc[i] = wrench(row)
         with np.errstate(all="ignore"):
             qpos_in, qvel_in = to_qpos_qvel(base.apply_decay_prestep(scenario, y_start, dt_s))
         out = np.empty((T, 13))

@@ -336,17 +336,15 @@ def _run_batch(variant: str, reqs) -> list:
     dts = [float(r.dt_s) for r in reqs]
     y0 = np.asarray(sc.problem.initial_packed(), dtype=float)
     qpos0, qvel0 = to_qpos_qvel(np.repeat(y0[None], N, axis=0))
-    weight = base.weight_W(sc)
     stage = per_stage(sc, variant)
     W = _Worlds(sc, variant, dts, qpos0, qvel0, stage_callback(sc) if stage else None)
     g = np.array([[float(v) for v in base.decay_factors(sc, h)] for h in dts])   # (N, 2)
     decay = forces.has_decay and not stage
     per_step = forces.state_dependent and not stage
-    harness = [harness_fn(sc, h) for h in dts]
+    wrench = [base.minus_weight(harness_fn(sc, h), base.weight_W(sc)) for h in dts]
     if not stage and not per_step:   # constant (decay scaling included), written once
         for k in range(N):
-            fx, fy, fz, tx, ty, tz = harness[k](y0.tolist())
-            W.xfrc[k, _BODY] = (fx - weight[0], fy - weight[1], fz - weight[2], tx, ty, tz)
+            W.xfrc[k, _BODY] = wrench[k](y0.tolist())
     W.capture()
     n_max = max(r.n_steps for r in reqs)
     qpos_out = np.empty((n_max + 1, N, 7), dtype=np.float32)
@@ -354,14 +352,12 @@ def _run_batch(variant: str, reqs) -> list:
     qpos_out[0], qvel_out[0] = W.qpos, W.qvel
     qpos, qvel, xfrc = W.qpos, W.qvel, W.xfrc
     gv, gw = g[:, 0:1], g[:, 1:2]
-    w0, w1, w2 = (float(c) for c in weight)
     alive = np.ones(N, dtype=bool)
     with _STATS.timing("step_seconds"), np.errstate(all="ignore"):
         for n in range(1, n_max + 1):
             if per_step:
                 qp, qv = qpos.tolist(), qvel.tolist()
-                xfrc[:, _BODY] = [(fx - w0, fy - w1, fz - w2, tx, ty, tz) for fx, fy, fz, tx, ty, tz in
-                                  (harness[k](packed_floats(qp[k], qv[k])) for k in range(N))]
+                xfrc[:, _BODY] = [wrench[k](packed_floats(qp[k], qv[k])) for k in range(N)]
             if decay:
                 qvel[:, 0:3] *= gv
                 qvel[:, 3:6] *= gw
@@ -395,9 +391,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     T = len(y_start)
     out = np.empty((T, 13))
     stage = per_stage(scenario, variant)
-    weight = base.weight_W(scenario)
-    w0, w1, w2 = (float(c) for c in weight)
-    harness = harness_fn(scenario, dt_s)
+    wrench = base.minus_weight(harness_fn(scenario, dt_s), base.weight_W(scenario))
     with _LOCK:
         for s in range(0, T, MAX_WORLDS):
             rows = y_start[s:s + MAX_WORLDS]
@@ -408,8 +402,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
                         stage_callback(scenario) if stage else None)
             if not stage:
                 for k, row in enumerate(rows.tolist()):
-                    fx, fy, fz, tx, ty, tz = harness(row)
-                    W.xfrc[k, _BODY] = (fx - w0, fy - w1, fz - w2, tx, ty, tz)
+                    W.xfrc[k, _BODY] = wrench(row)
             with _STATS.timing("step_seconds"):
                 W.step()
             _STATS["steps"] += 1

@@ -154,3 +154,12 @@ def test_weight_is_mass_times_gravity_in_world_axes():
     sc = load_scenario("projectile")
     want = sc.problem.body.mass_kg * np.asarray(sc.problem.forces.gravity_W)
     assert base.weight_W(sc).tolist() == want.tolist()
+
+
+def test_minus_weight_takes_the_weight_off_the_force_only():
+    wrench = base.minus_weight(lambda y: (1.0, 2.0, 3.0 + y[0], 4.0, 5.0, 6.0), np.array([0.5, 0.0, -9.75]))
+    assert wrench([0.25]) == (0.5, 2.0, 13.0, 4.0, 5.0, 6.0)
+
+
+def test_batches_are_padded_to_the_next_power_of_two():
+    assert [base.power_of_two(n) for n in (1, 2, 3, 4, 5, 64, 65)] == [1, 2, 4, 4, 8, 64, 128]
