@@ -109,10 +109,6 @@ def _engine():
     return wp, mjw, mujoco
 
 
-def _engine_or_error():
-    return base.engine_or_error(_engine)
-
-
 # --- bookkeeping: compile time apart from stepping ------------------------------------------------
 
 _STATS = base.Stats(compilations=0, compile_seconds=0.0, step_seconds=0.0, steps=0, body_steps=0, captures=0)
@@ -161,7 +157,7 @@ def host_model(scenario, variant: str, dt_s: float):
     words."""
     from cross_checks.engines import mujoco_engine
     base.check_variant(ENGINE, VARIANTS, variant)
-    _, _, mujoco = _engine_or_error()
+    _, _, mujoco = base.engine_or_error(_engine)
     m = mujoco_engine.build_model(scenario, variant, dt_s)
     m.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_AUTORESET)
     return m
@@ -192,7 +188,7 @@ class _Worlds:
     zero-copy NumPy views of their qpos, qvel and xfrc_applied (float32)."""
 
     def __init__(self, scenario, variant: str, dts, qpos0, qvel0, callback=None):
-        wp, mjw, mujoco = _engine_or_error()
+        wp, mjw, mujoco = base.engine_or_error(_engine)
         m = host_model(scenario, variant, float(dts[0]))
         _warm_up(variant, m, callback)
         self.wp, self.mjw = wp, mjw
@@ -242,7 +238,7 @@ def simulate_many(variant: str, requests) -> list:
     scenario run as the worlds of one batch (one world per Δt, in batches of at most MAX_WORLDS)."""
     base.check_variant(ENGINE, VARIANTS, variant)
     try:
-        _engine_or_error()
+        base.engine_or_error(_engine)
     except EngineError as exc:
         return [exc] * len(requests)
     with _LOCK:

@@ -133,10 +133,6 @@ def _engine():
     return wp, newton
 
 
-def _engine_or_error():
-    return base.engine_or_error(_engine)
-
-
 # --- compile bookkeeping ----------------------------------------------------------------------------------
 
 _WARM: dict = {}    # variant -> seconds its first model build and step took (kernel compile or cache load)
@@ -156,7 +152,7 @@ def _warm(variant: str) -> None:
     """Compile (or load) every kernel module ``variant`` uses, once per process, timed apart from the runs."""
     if variant in _WARM:
         return
-    wp, newton = _engine_or_error()
+    wp, newton = base.engine_or_error(_engine)
     t0 = time.perf_counter()
     model = build_model(variant, [(1.0, np.eye(3), np.zeros(3))])
     solver = make_solver(variant, model)
@@ -175,7 +171,7 @@ def build_model(variant: str, bodies):
     gravity_W (3,))`` each): jointless links for the maximal-coordinate solvers, FREE-jointed bodies for
     Featherstone; com = 0, no shape. EngineError when ``finalize`` did not keep the mass or the inertia (its
     inertia validation corrects a tensor it finds non-physical)."""
-    wp, newton = _engine_or_error()
+    wp, newton = base.engine_or_error(_engine)
     builder = newton.ModelBuilder(gravity=(0.0, 0.0, 0.0))
     add = builder.add_body if variant in _GENERALIZED else builder.add_link
     for mass, inertia, gravity in bodies:
@@ -201,7 +197,7 @@ def build_model(variant: str, bodies):
 
 def make_solver(variant: str, model):
     """The variant's Newton solver for ``model``, every setting of SOLVER_SETTINGS applied."""
-    _, newton = _engine_or_error()
+    _, newton = base.engine_or_error(_engine)
     base.check_variant(ENGINE, VARIANTS, variant)
     with warnings.catch_warnings():
         # SolverMuJoCo warns that MuJoCo 4.0.0 is not the ~=3.17.0 Newton declares (rbcheck pins 4.0.0)
