@@ -1,63 +1,42 @@
-"""The engine adapter interface (:class:`EngineAdapter`), and the harness semantics adapters share.
+"""The engine adapter interface (:class:`EngineAdapter`), the harness semantics adapters share, and the
+plumbing of the optional engines (import on first use, JAX and Warp started once, fd 2 silenced).
 
-An engine is an adapter CLASS registered under the entry-point group ``rbcheck.engines`` (the
-built-in reference, MuJoCo and PyBullet adapters are registered that way in rbcheck's own
-pyproject.toml), or an engine file (TOML, :mod:`cross_checks.engines.external`), which rbcheck turns
-into an adapter of the same interface. The registry (:mod:`cross_checks.engines`) instantiates the
-class with no arguments. See docs/engines.md for a worked example.
+An engine is an adapter class registered under the entry-point group ``rbcheck.engines``, or an engine file
+(TOML, :mod:`cross_checks.engines.external`) turned into an adapter of the same interface; the registry
+(:mod:`cross_checks.engines`) instantiates the class with no arguments. The contract and a worked example:
+docs/engines.md, "Python engines: an adapter class and an entry point", and each method's docstring below.
 
-An adapter provides:
+Harness semantics (every built-in adapter; docs/semantics.md, "Forces are evaluated where each scheme's
+equations say" and "Velocity decay"):
 
-``name``              the engine name used in ``ENGINE:VARIANT`` (the entry point's name).
-``variants``          dict variant -> :class:`Variant` (declared global order, one-line description);
-                      verdicts check the declared order. The first is the engine's default
-                      (``rbcheck run --engine ENGINE``).
-``version()``         the engine's version string; raises ImportError (or any exception) when the
-                      engine cannot run here: the engine is then listed as unavailable with that reason.
-``simulate(scenario, variant, dt_s, n_steps) -> reference_sim.simulate.Run``
-                      free-running run from the scenario's initial state, every step recorded
-                      (``Run.y``: (n+1, 13) packed [x_W, v_W, q_WB (w x y z), w_W]); a blow-up stops the
-                      run with ``diverged_at_s`` set, never an exception. :class:`EngineError` says the
-                      engine refused or failed (a ``failed`` row with its message).
-``simulate_many(variant, requests) -> list``   (optional)
-                      the runs of many :class:`RunRequest` (scenario, Δt, steps) in one call: each
-                      element a ``Run`` equal to ``simulate``'s for that request, or the
-                      :class:`EngineError` it raised. The default calls ``simulate`` once per request;
-                      an engine that batches (MuJoCo's rollout, a reused PyBullet world, the reference's
-                      columns) overrides it. The sweep and the fuzz run through it.
-``one_step(scenario, variant, dt_s, y_start) -> y_next``   (optional)
-                      for each row of ``y_start`` (T, 13), one step of ``dt_s`` from exactly that
-                      state (the local error mode of the metrics). Without it the local-error columns
-                      stay empty.
-
-Harness semantics (identical in every built-in adapter):
-
-* Forces and torques are evaluated by ``scenario.problem.forces.force_torque`` from the state at the
-  start of each step and held over the step (zero-order hold) unless the engine can evaluate them at
-  every stage (MuJoCo RK4 through its control callback).
-* Velocity decay (the course's per-step factor γ at the scenario's dt) is exponential damping at the
-  rate ``k = −ln γ / dt``; an engine with step Δt gets the factor ``e^{−kΔt}`` (``decay_factors``,
-  exactly γ at Δt = dt). Euler-type engines (one force evaluation per step) have no equivalent, so
-  the harness applies it BEFORE the step: ``v ← e^{−k_vΔt} v``, ``ω ← e^{−k_ωΔt} ω``, and scales that
-  step's applied force and torque by the same factors. For a semi-implicit engine this reproduces
-  ``v ← e^{−kΔt} (v + Δt f/m)`` — the course's step at Δt = dt — exactly, and the rotation exactly
-  whenever the gyroscopic torque vanishes; otherwise the gyroscopic term sees the factor twice, a
-  difference of order (1 − e^{−kΔt}) Δt that keeps the scheme first order. A multi-stage engine
-  (MuJoCo RK4) instead gets the damping in its right-hand side at every stage
-  (``stage_force_torque``): a force ``−m k_v v`` at the COM and a torque ``−k_ω I_W ω``.
+* Forces and torques are evaluated from the state at the start of each step and held over the step
+  (zero-order hold), unless the engine evaluates them at every stage (:func:`stage_force_torque`).
+* Velocity decay (the per-step factor γ at the scenario's dt) is damping at the rate ``k = −ln γ / dt``: a
+  step Δt gets ``e^{−kΔt}`` (:func:`decay_factors`). A single-stage engine gets it BEFORE the step,
+  ``v ← e^{−k_vΔt} v``, ``ω ← e^{−k_ωΔt} ω``, with that step's force and torque scaled alike: for a
+  semi-implicit step exactly the course's ``v ← e^{−kΔt} (v + Δt f/m)``, and its rotation exactly where the
+  gyroscopic torque vanishes (else a difference of order (1 − e^{−kΔt}) Δt: still first order). A multi-stage
+  engine gets the damping in its right-hand side: a force ``−m k_v v`` at the COM, a torque ``−k_ω I_W ω``.
 """
 from __future__ import annotations
 
 import abc
+import contextlib
 import functools
 import importlib
 import inspect
+import itertools
 import math
+import os
 import sys
+import threading
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from cross_checks.core.files import kernel_cache_dir
 
 __all__ = ["EngineAdapter", "Variant", "harness_force_torque", "stage_force_torque",
            "harness_force_torque_floats", "stage_force_torque_floats", "apply_decay_prestep",
@@ -65,7 +44,9 @@ __all__ = ["EngineAdapter", "Variant", "harness_force_torque", "stage_force_torq
            "installed_version", "library_files", "RunRequest", "Traits", "INVARIANTS",
            "SYMPLECTIC_EULER_EXPLICIT_GYRO", "SYMPLECTIC_EULER_IMPLICIT_GYRO", "WHOLE_STATE_EXPLICIT_EULER",
            "WHOLE_STATE_IMPLICIT_EULER", "HIGHER_ORDER", "DEFAULT_TRAITS", "ModuleAdapter", "package_files",
-           "one_request", "check_variant", "run_in_groups", "check_installed"]
+           "one_request", "check_variant", "run_in_groups", "check_installed", "quiet_fd2", "first_import",
+           "engine_or_error", "start_jax", "refuse_forked_jax", "start_warp", "Stats", "Registry",
+           "weight_W", "minus_weight", "power_of_two"]
 
 
 class EngineError(RuntimeError):
@@ -79,33 +60,36 @@ class NotExpressible(EngineError):
     nothing for it."""
 
 
+@contextlib.contextmanager
+def quiet_fd2():
+    """File descriptor 2 sent to /dev/null for the duration: what a native library prints there (PyBullet's
+    build time at import, Warp's missing CUDA driver at ``wp.init``) would land in every CLI run's error
+    output. Nothing is silenced where fd 2 cannot be duplicated."""
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError, AttributeError):   # pragma: no cover - no usable fd 2
+        yield
+        return
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, 2)
+    os.close(devnull)
+    try:
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
 def optional_import(name: str, *, quiet_stderr: bool = False):
     """``(module, None)``, or ``(None, the ImportError)`` when ``name`` cannot be imported: an adapter
     module imports without its engine so that the registry can say why the engine is unavailable.
-    ``quiet_stderr`` silences file descriptor 2 during the import (PyBullet prints its build time there,
-    which would land in every CLI run's error output)."""
-    import importlib
-    import os
-    import sys
-    saved = None
-    if quiet_stderr:
+    ``quiet_stderr``: fd 2 silenced during the import (:func:`quiet_fd2`)."""
+    with quiet_fd2() if quiet_stderr else contextlib.nullcontext():
         try:
-            sys.stderr.flush()
-            saved = os.dup(2)
-        except (OSError, ValueError, AttributeError):
-            saved = None
-    devnull = os.open(os.devnull, os.O_WRONLY) if saved is not None else None
-    try:
-        if saved is not None:
-            os.dup2(devnull, 2)
-        return importlib.import_module(name), None
-    except ImportError as exc:  # pragma: no cover - exercised only where the engine is missing
-        return None, exc
-    finally:
-        if saved is not None:
-            os.dup2(saved, 2)
-            os.close(saved)
-            os.close(devnull)
+            return importlib.import_module(name), None
+        except ImportError as exc:  # pragma: no cover - exercised only where the engine is missing
+            return None, exc
 
 
 class EngineNotInstalled(ImportError):
@@ -182,11 +166,8 @@ def decay_factors(scenario, dt_s: float):
 
 def harness_force_torque(scenario, y, dt_s: float):
     """World force (N, at the COM) and world torque (N m) to apply for the step of ``dt_s`` starting at
-    ``y`` (13,), scaled by the pre-step decay factors (see the module docstring).
-
-    Evaluated by :func:`float_forces` (the definition's ForceModel formulas, compiled): it runs once per
-    engine step, or once per RK4 stage, where NumPy's per-call overhead would dominate the engine's step.
-    """
+    ``y`` (13,), scaled by the pre-step decay factors (see the module docstring); evaluated by
+    :func:`float_forces`."""
     fx, fy, fz, tx, ty, tz = harness_force_torque_floats(scenario, y, dt_s)
     return np.array([fx, fy, fz]), np.array([tx, ty, tz])
 
@@ -240,60 +221,41 @@ INVARIANTS = ("energy", "energy_bounded", "angular_momentum_norm", "angular_mome
 @dataclass(frozen=True)
 class Traits:
     """What a variant's step does besides its order (the order itself: :attr:`Variant.order`); the sweep
-    derives a variant's expectations from them (cross_checks.analysis.expectations).
+    derives a variant's expectations from them (cross_checks.analysis.expectations). What each trait means
+    for the verdicts, and why: docs/verdicts.md, §3.
 
     gyroscopic_term : whether the rotation update has the gyroscopic torque −ω × (I ω).
-    translation_drift : how a first-order step treats the amplitude of a translational oscillation
-        (a spring): 0 keeps it (symplectic Euler: bounded energy error), +1 grows it (explicit), −1
-        damps it (implicit), None unknown (both are considered).
-    rotation_drift : how a first-order step treats the rotation's energy and momentum:
-        "none" — keeps them (no gyroscopic term: ω is constant without torques);
-        "body" — a body-frame Euler step of Euler's equations (explicit or implicit gyroscopic term)
-          before the attitude update: energy and |L|² drift TOGETHER (measured: equal relative drifts,
-          so the separatrix distance is kept), i.e. ω → (1 + r) ω, a time rescaling of the same motion —
-          a phase error, at the rate of the polhode (the body-frame ω);
-        "whole_state" — one step of the whole state in world axes: energy and momentum drift
-          independently, which moves the body to a neighbouring motion, at the rate at which ω_W
-          turns; that perturbation grows like any other (the measured amplification);
-        "momentum" — an explicit body-frame gyroscopic step whose angular momentum is rescaled to its old
-          magnitude (Jolt's MotionProperties::ApplyGyroscopicForceInternal, reference:jolt_gyro, Rapier,
-          PhysX): |L| is kept exactly while the rotational energy drifts at O(Δt²) a step towards L²/2I₂,
-          the intermediate-axis separatrix (up about the major axis, down about the minor one): the
-          separatrix distance moves, but slowly and at the polhode's rate (tumbling_box: 0.14 of δ in 5 s,
-          where a whole-state step moves it by > 100 δ), either way: judged as "body" with both signs.
+    translation_drift : a first-order step's effect on the amplitude of a translational oscillation: 0 keeps
+        it (symplectic Euler), +1 grows it (explicit), −1 damps it (implicit), None unknown (both considered).
+    rotation_drift : a first-order step's effect on the rotation's energy and momentum (ROTATION_DRIFTS):
+        "none" — no gyroscopic term (ω constant without torques); "body" — a body-frame Euler step of Euler's
+        equations before the attitude update (energy and |L|² drift together: a phase error);
+        "whole_state" — one step of the whole state in world axes (they drift independently: a neighbouring
+        motion); "momentum" — an explicit body-frame gyroscopic step with |L| rescaled to its old magnitude
+        (Jolt's MotionProperties::ApplyGyroscopicForceInternal, reference:jolt_gyro, Rapier, PhysX), judged
+        as "body" with both signs.
     rotation_sign : +1 the rotational energy grows (an explicit gyroscopic term), −1 it decays (an
         implicit one), 0 none, None unknown (both are considered).
     rotation_order : the order of the attitude update where the body-axes ω turns within a step, when it is
-        below the variant's order (MJX's RK4 advances q by ONE exponential of the stages' weighted ω_B: second
-        order); None: the variant's order.
-    velocity_from_positions : the step recomputes the velocity as the change of position over Δt (a
-        position-based pipeline): the velocity then carries the positions' round-off divided by Δt, which
-        grows as Δt shrinks (metrics.differencing_floor).
+        below the variant's order; None: the variant's order.
+    velocity_from_positions : the step recomputes the velocity as the change of position over Δt (its
+        round-off then grows as Δt shrinks: metrics.differencing_floor).
     precision : the floating-point format the engine's step computes in, "float64" or "float32"
-        (core.tolerances.MACHINE_EPSILON): every round-off floor of the variant's verdicts scales with its
-        ε, and a float32 variant is judged on a ladder that reaches coarser steps (docs/verdicts.md,
-        "Precision").
-    rounding_factor : how many times an ordinary step's rounding the engine's step leaves (1: a step of
-        ~10 operations a component, CHECK_ROUNDINGS_PER_STEP roundings; every round-off floor and the one-step
-        allowance scale with ε × this factor). A step with a deeper arithmetic chain declares more, from its
-        arithmetic and pinned by a measurement in its adapter's tests: PhysX's TGS turns ω into √I space and
-        back with two float32 3×3 products every step (up to 33 u of |ω| measured: 4 × the ordinary 16 u).
+        (core.tolerances.MACHINE_EPSILON; docs/verdicts.md §7).
+    rounding_factor : how many times an ordinary step's rounding (CHECK_ROUNDINGS_PER_STEP roundings) the
+        engine's step leaves, ≥ 1: every round-off floor and the one-step allowance scale with ε × this
+        factor. Declared from the step's arithmetic and pinned by a measurement in its adapter's tests.
     keeps : the invariants of the torque-free body the step keeps BY CONSTRUCTION (a subset of INVARIANTS),
-        judged on the long runs (cross_checks.analysis.judge.judge_long_run, docs/verdicts.md "Long runs"):
-        "energy" — the rotational energy to round-off; "energy_bounded" — no secular energy drift (a
-        symplectic step: its energy error stays bounded, O(Δt^p)); "angular_momentum_norm" — |L| to
-        round-off; "angular_momentum" — the world vector L (its norm and its direction) to round-off. A
-        ``rotation_drift`` of "momentum" implies "angular_momentum_norm". () claims nothing: the long runs'
-        drifts and findings are then reported, never judged.
+        judged on the long runs (cross_checks.analysis.judge.judge_long_run): "energy" and
+        "angular_momentum_norm" (|L|) to round-off, "energy_bounded" (no secular drift: a symplectic step),
+        "angular_momentum" (the world vector L) to round-off. "momentum" drift implies
+        "angular_momentum_norm". () claims nothing: the long runs are reported, never judged.
     gyroscopic_clamp_N_m : the step cuts the gyroscopic torque |ω × I ω| to this length (N m) when it is
-        longer (Bullet's ``m_maxGyroscopicForce``, reference:explicit_gyro_clamped); None: no clamp. Where the
-        motion's gyroscopic torque exceeds it (measured on the reference: analysis.physics.MotionRates) the
-        step solves another equation, whose solution the runs converge to instead of the physical one: the
-        variant is then expected not to converge in rotation.
-    forces_held : the engine holds the applied force and torque it was given over all the stages of a
-        step (it cannot evaluate them per stage). On a scenario whose forces change within a step
-        (state-dependent forces, velocity decay) a multi-stage scheme is then first order: the held force
-        is a zero-order hold, an O(Δt) local error in the acceleration per step.
+        longer (Bullet's ``m_maxGyroscopicForce``, reference:explicit_gyro_clamped); None: no clamp. Where
+        the motion's gyroscopic torque exceeds it the variant is expected not to converge in rotation.
+    forces_held : the engine holds the applied force and torque over all the stages of a step (no per-stage
+        evaluation): a multi-stage scheme is then first order where the forces change within a step
+        (state-dependent forces, velocity decay).
     """
 
     gyroscopic_term: bool = True
@@ -325,8 +287,7 @@ SYMPLECTIC_EULER_EXPLICIT_GYRO = Traits(rotation_drift="body", rotation_sign=+1)
 #: The same with an implicit gyroscopic term (MuJoCo implicit, PyBullet maximal).
 SYMPLECTIC_EULER_IMPLICIT_GYRO = Traits(rotation_drift="body", rotation_sign=-1)
 #: Whole-state Euler in world axes: an oscillator's amplitude grows (explicit) or damps (implicit), the
-#: rotational energy does the opposite (measured on every tumbling body of the catalog: explicit Euler loses
-#: 2E and |L|², implicit gains them; the attitude and ω_W steps are coupled through I_W).
+#: rotational energy does the opposite (explicit Euler loses 2E and |L|², implicit gains them).
 WHOLE_STATE_EXPLICIT_EULER = Traits(translation_drift=+1, rotation_drift="whole_state", rotation_sign=-1)
 WHOLE_STATE_IMPLICIT_EULER = Traits(translation_drift=-1, rotation_drift="whole_state", rotation_sign=+1)
 #: A variant that declares no traits (e.g. a user engine with only its declared order): assumed to
@@ -379,6 +340,144 @@ def check_installed(dist: str, hint: str, needs: tuple = (), version_of=None) ->
         if importlib.util.find_spec(module) is None or version_of(needed) is None:
             raise ImportError(f"{dist} {version_of(dist)} is installed but cannot be imported: "
                               f"{needed} is missing ({hint})")
+
+
+@contextlib.contextmanager
+def first_import(dist: str, version_of=None):
+    """Around an engine's import on first use: any exception in the block is raised as ImportError "DIST VER
+    is installed but cannot be imported: TYPE: words" (a broken install, never read as an absent one);
+    ``version_of`` (default :func:`installed_version`) reads the installed version."""
+    try:
+        yield
+    except Exception as exc:  # noqa: BLE001 - a broken install: the engine's own words
+        ver = (version_of or installed_version)(dist)
+        raise ImportError(f"{dist} {ver} is installed but cannot be imported: {type(exc).__name__}: {exc}") \
+            from exc
+
+
+def engine_or_error(engine):
+    """``engine()`` (an adapter's import on first use) with its ImportError raised as :class:`EngineError`."""
+    try:
+        return engine()
+    except ImportError as exc:
+        raise EngineError(str(exc)) from None
+
+
+@functools.lru_cache(maxsize=1)
+def start_jax():
+    """``jax`` with float64 on (``jax_enable_x64``: process-global, so every JAX engine of the process
+    computes in float64) and its persistent compilation cache in ``core.files.kernel_cache_dir("jax")``,
+    shared by the JAX engines. Called on first use only: a sweep's parent must not start JAX (it forks)."""
+    import jax
+    jax.config.update("jax_enable_x64", True)
+    try:
+        folder = kernel_cache_dir("jax")
+        folder.mkdir(parents=True, exist_ok=True)
+        jax.config.update("jax_compilation_cache_dir", str(folder))
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+    except OSError:   # pragma: no cover - an unwritable cache directory only costs compile time
+        pass
+    return jax
+
+
+#: True in a process forked after JAX's backend had started in its parent (set in the child at fork).
+_FORKED_AFTER_JAX = [False]
+
+
+def _after_fork_in_child() -> None:
+    if "jax" in sys.modules:
+        from jax._src import xla_bridge
+        _FORKED_AFTER_JAX[0] = bool(xla_bridge.backends_are_initialized())
+
+
+os.register_at_fork(after_in_child=_after_fork_in_child)
+
+
+def refuse_forked_jax(words: str) -> None:
+    """:class:`EngineError` with ``words`` in a process forked after JAX started in its parent: a running JAX
+    backend does not survive fork (its threads are gone) and its first computation would hang."""
+    if _FORKED_AFTER_JAX[0]:
+        raise EngineError(words)
+
+
+def start_warp(cache: str, log_level: str, quiet: bool = False):
+    """``warp``, initialised on first use with its kernel cache in ``core.files.kernel_cache_dir(cache)`` (set
+    before ``wp.init``), ``wp.config.log_level = wp.<log_level>`` and ``wp.config.quiet``; fd 2 silenced
+    meanwhile (Warp's runtime prints there that no CUDA driver exists)."""
+    with quiet_fd2():
+        import warp as wp
+        folder = kernel_cache_dir(cache)
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError:   # pragma: no cover - Warp then reports its own error
+            pass
+        wp.config.kernel_cache_dir = str(folder)
+        wp.config.quiet = quiet
+        wp.config.log_level = getattr(wp, log_level)
+        wp.init()
+    return wp
+
+
+class Stats(dict):
+    """An adapter's counters in this process (compilations, wall seconds, steps), zeroed by :meth:`reset`."""
+
+    def __init__(self, **zeros):
+        super().__init__(zeros)
+        self.zeros = zeros
+
+    def reset(self) -> None:
+        self.update(self.zeros)
+
+    @contextlib.contextmanager
+    def timing(self, key: str):
+        """Adds the block's wall seconds to ``self[key]`` (nothing when it raises)."""
+        t0 = time.perf_counter()
+        yield
+        self[key] += time.perf_counter() - t0
+
+
+class Registry(dict):
+    """Values held under fresh integer keys for the duration of a block: what a host callback inside compiled
+    code (``jax.pure_callback``) looks up by the key it was given."""
+
+    def __init__(self):
+        super().__init__()
+        self._keys = itertools.count(1)
+        self._lock = threading.Lock()
+
+    @contextlib.contextmanager
+    def holding(self, value):
+        """``np.int64(key)`` of ``value`` for the block; the entry is dropped after it."""
+        with self._lock:
+            key = next(self._keys)
+            self[key] = value
+        try:
+            yield np.int64(key)
+        finally:
+            self.pop(key, None)
+
+
+def weight_W(scenario) -> np.ndarray:
+    """The body's weight ``m g`` (N, world axes): what an engine that applies gravity itself must not get
+    again in its applied force."""
+    return scenario.problem.body.mass_kg * np.asarray(scenario.problem.forces.gravity_W, dtype=float)
+
+
+def minus_weight(harness, weight_W):
+    """``y -> (fx, fy, fz, tx, ty, tz)``: the plain-float ``harness(y)`` (step_floats.harness_fn) with the
+    weight ``weight_W`` (N, world axes) taken off its force: what an engine that applies gravity gets."""
+    w0, w1, w2 = (float(w) for w in weight_W)
+
+    def wrench(y):
+        fx, fy, fz, tx, ty, tz = harness(y)
+        return fx - w0, fy - w1, fz - w2, tx, ty, tz
+    return wrench
+
+
+def power_of_two(n: int) -> int:
+    """The batch size ``n`` (≥ 1) runs or rows are padded to: the next power of two, so that a handful of
+    compiled executables serve every batch size."""
+    return 1 << (int(n) - 1).bit_length()
 
 
 def on_rows(one_step):
@@ -476,8 +575,9 @@ class EngineAdapter(abc.ABC):
         return ""
 
     def one_step(self, scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
-        """One step from each row of ``y_start`` (T, 13) -> (T, 13). Optional (see :attr:`has_one_step`):
-        an adapter that cannot restart its engine from an arbitrary state leaves this one, which refuses."""
+        """One step of ``dt_s`` from exactly each row of ``y_start`` (T, 13) -> (T, 13): the local-error mode.
+        Optional (see :attr:`has_one_step`): an adapter that cannot restart its engine from an arbitrary state
+        leaves this one, which refuses (the local-error columns then stay empty)."""
         raise EngineError(f"{self.name or type(self).__name__} has no one-step mode")
 
     @property

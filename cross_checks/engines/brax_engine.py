@@ -1,90 +1,38 @@
-"""Brax (JAX) as an engine adapter (``brax:VARIANT``); the interface is cross_checks.engines.base.
+"""Brax (JAX) as an engine adapter (``brax:VARIANT``), one variant per pipeline; the interface is
+cross_checks.engines.base. What each pipeline does, the defaults neutralised (NEUTRAL_SYSTEM, NEUTRAL_DOF) and
+what was measured: docs/engine_conventions.md, "Brax 0.14.2".
 
-Brax says it is no longer actively maintained (a UserWarning of ``brax.io.mjcf.load_model`` points to MJX);
-the adapter pins brax 0.14.2 on jax 0.10.2 and computes in float64 (``jax_enable_x64`` set before any model is
-built).
+Model: the scenario's free body as MJCF (:func:`mjcf_text`) loaded by ``brax.io.mjcf.loads``; a model MuJoCo's
+compiler rejects is an EngineError with its words. Precision: float64 (JAX started by base.start_jax).
 
-Model: an MJCF string loaded by ``brax.io.mjcf.loads`` (MuJoCo's compiler, then brax's ``System``): one body
-with a ``<freejoint>``, an explicit ``<inertial pos="0 0 0" mass=… fullinertia=…>`` — the moment of inertia
-about the COM in the scenario's body axes, a full tensor taken as it is (MuJoCo diagonalises it into principal
-moments and ``iquat``; brax keeps both in ``link.inertia``), so body origin = COM and the body frame is the
-scenario's — and one geom brax needs to build a system, with ``contype = conaffinity = 0`` (it never collides)
-and ``mass = 0`` under ``inertiafromgeom="false"`` (it changes neither mass nor inertia: pinned).
-``alignfree="false"`` keeps the joint on the body frame. Gravity and ``option.timestep`` from the scenario. A
-model MuJoCo's compiler rejects (e.g. moments violating ``A + B ≥ C``) is an EngineError with its words.
+State at the boundary: ``pipeline.init(sys, q, qd)`` with ``q = [x_W, q_WB (w x y z)]``, ``qd = [v_W, ω_B]``
+(ω in body axes); read back from ``state.x.pos``, ``state.x.rot`` (w x y z), ``state.xd.vel`` and
+``state.xd.ang`` (world axes).
 
-State mapping (docs/engine_conventions.md "Brax 0.14.2", pinned by
-tests/cross_checks/engines/test_brax_engine.py): ``pipeline.init(sys, q, qd)`` with ``q = [x_W, q_WB (w x y
-z)]`` and ``qd = [v_W, ω_B]`` (ω in BODY axes); the state is read from ``state.x.pos`` (body origin = COM,
-world), ``state.x.rot`` (w, x, y, z) and ``state.xd.vel``, ``state.xd.ang`` (both WORLD axes). The conversion
-ω_W ↔ ω_B happens at the boundary only.
+Forces: brax has no external-wrench input. The generalized pipeline gets them as
+``act = [f − m g, R_WBᵀ τ_W]`` through six actuators on the free joint's DOFs (:func:`six_dof_actuator`; brax
+applies gravity itself), from the start-of-step state (state-dependent ones on the host through
+``jax.pure_callback``); the positional and spring pipelines take gravity only (:func:`expressible`). The
+decay is applied to ``qd`` before each step.
 
-The three pipelines, each one variant (declared from brax's source, brax/<pipeline>/pipeline.py and
-integrator.py):
+:func:`simulate_many` vmaps one scenario's Δt rungs through compiled ``jax.lax.scan`` chunks of CHUNK steps;
+:func:`one_step` vmaps its rows. JAX is imported on first use only (never at import or in ``version()``): a
+sweep's parent must not start it before forking.
 
-* ``generalized`` — ``generalized.pipeline.step``: ``qf_smooth = τ − C(q, q̇)`` (``dynamics.forward``: the
-  recursive Newton-Euler bias force, which contains ω_B × I ω_B, evaluated at the start of the step), then
-  ``integrator.integrate``: ``q̇ += Δt M⁻¹ qf``, ``x += Δt v`` and ``q_WB ← normalize(q_WB ⊗ quat_rot_axis(ω̂,
-  Δt|ω|))`` with the NEW velocities (ω̂ = ω_B/(|ω_B| + 1e-8), angle Δt(|ω_B| + 1e-8): a 1e-8 rad/s bias). That
-  is semi-implicit Euler with an explicit gyroscopic term in body axes and an exponential-map rotation update
-  — the scheme of mujoco:euler: first order, SYMPLECTIC_EULER_EXPLICIT_GYRO.
-* ``spring`` — ``spring.pipeline.step``: ``ω_W += Δt I_W⁻¹ τ_W`` (com.inv_inertia; NO gyroscopic term: ω_W is
-  constant without a torque), ``v += Δt (g + f/m)``, then ``spring.integrator.integrate``: ``q ← normalize(q +
-  ½Δt (0, ω_W) ⊗ q)``, ``x += Δt v`` with the new velocities. First order, no gyroscopic term.
-* ``positional`` — ``positional.pipeline.step``: the same velocity update (no gyroscopic term) and position
-  update (``integrate_xdd``), then the position-based-dynamics projection ``project_xd``: v = Δx/Δt, and ω_W =
-  2 vec(q_new ⊗ q_old⁻¹)/Δt, which is ω_W/√(1 + (|ω|Δt/2)²): every step shrinks |ω| by |ω|²Δt²/8 — a
-  rotational energy loss of first order in Δt. First order, no gyroscopic term, rotational energy decays.
-
-Forces (harness semantics of base.py): brax has no external-wrench input (no ``xfrc_applied``); its one
-applied force input is ``act`` through ``sys.actuator`` (brax/actuator.py ``to_tau``: ``τ[qd_id] += gear (gain
-act)``). MJCF motors on a free joint reach only the joint's FIRST DOF in brax (io/mjcf.py takes ``jnt_dofadr``
-and ``gear[:, 0]``), so the generalized model gets six MJCF motors whose brax actuator is then set to DOFs
-0..5 with gear 1, gain 1, no bias and no limits (``System.replace``; ACTUATOR). The generalized force of a
-free joint is ``[f_W at the body origin, τ_B in body axes]`` (pinned), so ``act = [f − m g, R_WBᵀ τ_W]`` with
-``f, τ`` from ``base.harness_force_torque`` (brax applies gravity itself), evaluated from the start-of-step
-state — constants computed once when the scenario's forces do not depend on the state, else a
-``jax.pure_callback`` to the package's force model (base.harness_force_torque_floats) every step. The
-pipelines are single-stage: no force is held over stages (``forces_held`` does not arise). The positional and
-spring pipelines give a free joint NO actuator force (positional/joints.py and spring/joints.py
-``_free``/``_free_joint`` return zero) and have no other force input: they express only gravity (and the
-velocity decay, below); any other force or torque is an EngineError naming the scenario (brax cannot take it).
-Velocity decay ``e^{−kΔt}`` is applied to ``qd`` before every step (a new ``pipeline.init`` from the decayed
-``q, qd``: every derived quantity recomputed), that step's force scaled alike.
-
-Defaults that are not the scenario's physics, each set explicitly (NEUTRAL_SYSTEM, NEUTRAL_DOF):
-``vel_damping`` and ``ang_damping`` (brax's exponential velocity damping in the positional and spring
-integrators), ``spring_mass_scale`` and ``spring_inertia_scale`` (they rescale mass and inertia as
-``m^(1−s)``), the DOF damping and armature (in the generalized mass matrix), ``matrix_inv_iterations`` (0: an
-exact solve of M⁻¹ instead of brax's default 10 Newton-Schulz iterations from the previous inverse), fluid
-forces off (viscosity and density 0), collisions off (the geom's contype/conaffinity 0). There are no
-substeps: ``pipeline.step`` is one step (``n_frames`` belongs to brax.envs, which the adapter does not use).
-
-Stepping: inside ``jax.lax.scan`` chunks of CHUNK steps compiled ahead of time
-(``jit(...).lower().compile()``, timed apart from stepping: :func:`compile_seconds`), batched with
-``jax.vmap`` — over the Δt rungs of one scenario (simulate_many) and over the start states of one_step. The
-compiled code takes the system and Δt as arguments, so it is reused across scenarios and steps. JAX's
-persistent compilation cache lives in ``core.files.kernel_cache_dir("jax")``. Nothing here runs a JAX
-computation before a run: ``version()`` reads package metadata, so a sweep's parent process never starts a
-JAX backend before it forks its workers.
-
-Divergence: brax never stops; each chunk's states are checked, and the first state that is non-finite or has a
-component beyond BLOWUP_LIMIT ends the run as ``diverged at t = …``.
+Divergence: the first recorded state that is non-finite or beyond BLOWUP_LIMIT ends the run
+(``diverged at t = …``).
 """
 from __future__ import annotations
 
 import contextlib
 import functools
 import io
-import itertools
-import os
 import threading
 import time
 import warnings
 
 import numpy as np
 
-from cross_checks.core.files import kernel_cache_dir
 from cross_checks.engines import base
 from cross_checks.engines.base import EngineError, ModuleAdapter, Traits, Variant, installed_version
 from cross_checks.engines.step_floats import harness_fn
@@ -96,7 +44,7 @@ __all__ = ["ENGINE", "VARIANTS", "NEUTRAL_SYSTEM", "NEUTRAL_DOF", "CHUNK", "ONE_
            "compile_seconds", "BraxAdapter", "expressible"]
 
 ENGINE = "brax"
-#: The pipelines' integrators (read in brax 0.14.2's source; see the module docstring): all first order.
+#: The pipelines' integrators (read in brax 0.14.2's source): all first order.
 VARIANTS = {
     # generalized/integrator.py: q̇ += Δt M⁻¹(τ − C) (C has ω_B × I ω_B), then q with the new q̇ (exp map)
     "generalized": Variant(1, "brax generalized pipeline: semi-implicit Euler in generalized coordinates, "
@@ -132,7 +80,7 @@ ONE_STEP_MIN_BATCH = 64
 _LOCK = threading.RLock()
 _COMPILED: dict = {}         # key -> compiled executable
 _COMPILE_S: dict = {}        # key -> seconds spent compiling it (lower + compile)
-_CALLBACK_SCENARIOS: dict = {}   # token -> scenario (the host force callback's lookup)
+_CALLBACK_SCENARIOS = base.Registry()   # token -> (scenario, {Δt: harness}), for the host force callback
 
 
 def version() -> str:
@@ -149,53 +97,29 @@ def version() -> str:
 
 @functools.lru_cache(maxsize=1)
 def _lib():
-    """brax and jax, imported on first use with float64 on and the persistent compilation cache in rbcheck's
-    cache directory (mujoco.mjx prints "Failed to import warp" on stdout: silenced)."""
+    """brax and jax, imported on first use (base.start_jax); mujoco.mjx's "Failed to import warp" on stdout
+    and brax's warnings silenced."""
     version()
-    try:
-        with contextlib.redirect_stdout(io.StringIO()), warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            import jax
-            jax.config.update("jax_enable_x64", True)
-            try:
-                folder = kernel_cache_dir("jax")
-                folder.mkdir(parents=True, exist_ok=True)
-                jax.config.update("jax_compilation_cache_dir", str(folder))
-                jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
-            except OSError:
-                pass
-            import jax.numpy as jp
-            from brax.base import Actuator
-            from brax.generalized import pipeline as generalized
-            from brax.io import mjcf
-            from brax.positional import pipeline as positional
-            from brax.spring import pipeline as spring
-    except ImportError as exc:
-        raise ImportError(f"brax {installed_version('brax')} is installed but cannot be imported: "
-                          f"{exc}") from exc
-    os.register_at_fork(after_in_child=_after_fork_in_child)
+    with base.first_import("brax", installed_version), contextlib.redirect_stdout(io.StringIO()), \
+            warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        jax = base.start_jax()
+        import jax.numpy as jp
+        from brax.base import Actuator
+        from brax.generalized import pipeline as generalized
+        from brax.io import mjcf
+        from brax.positional import pipeline as positional
+        from brax.spring import pipeline as spring
     return {"jax": jax, "jp": jp, "mjcf": mjcf, "Actuator": Actuator,
             "pipelines": {"generalized": generalized, "positional": positional, "spring": spring}}
-
-
-#: True in a process forked after JAX's backend had started in its parent: JAX hangs there (its thread pools
-#: do not survive a fork; measured: a jitted call in such a child never returns, clear_backends() does not
-#: help).
-_FORKED_AFTER_JAX = [False]
-
-
-def _after_fork_in_child():
-    from jax._src import xla_bridge
-    _FORKED_AFTER_JAX[0] = bool(xla_bridge.backends_are_initialized())
 
 
 def _usable():
     """The brax/jax modules, or EngineError in a process forked after its parent had run JAX (instead of a
     hang)."""
     lib = _lib()
-    if _FORKED_AFTER_JAX[0]:
-        raise EngineError("JAX cannot run in this process: it was forked after JAX had started in its parent "
-                          "(run brax in a fresh process, e.g. the rbcheck CLI, or with one job)")
+    base.refuse_forked_jax("JAX cannot run in this process: it was forked after JAX had started in its "
+                           "parent (run brax in a fresh process, e.g. the rbcheck CLI, or with one job)")
     return lib
 
 
@@ -265,7 +189,7 @@ def expressible(scenario, variant: str, dt_s: float) -> str:
     if fm.state_dependent:
         return why + "forces that depend on the state"
     f, tau = base.harness_force_torque(scenario, scenario.problem.initial_packed(), dt_s)
-    weight = scenario.problem.body.mass_kg * np.asarray(fm.gravity_W, dtype=float)
+    weight = base.weight_W(scenario)
     if np.any(tau != 0.0) or not np.allclose(f, weight, rtol=1e-15, atol=0.0):
         return why + f"a force {np.round(f - weight, 6).tolist()} N besides the weight and a torque " \
                      f"{np.round(tau, 6).tolist()} N m"
@@ -404,11 +328,6 @@ def _compiled(kind: str, variant: str, mode: str, batch: int, args):
     return exe
 
 
-def _padded(n: int) -> int:
-    """Batch sizes are padded to a power of two (a handful of executables serve every batch)."""
-    return 1 << max(0, (n - 1).bit_length())
-
-
 def _mode_and_consts(scenario, variant: str, dt_s: float):
     """``(mode, consts (9,))`` of the scenario's forces at step ``dt_s`` (see :func:`_step_fn`)."""
     why = expressible(scenario, variant, dt_s)
@@ -416,7 +335,7 @@ def _mode_and_consts(scenario, variant: str, dt_s: float):
         raise EngineError(why)
     p = scenario.problem
     fm = p.forces
-    weight = p.body.mass_kg * np.asarray(fm.gravity_W, dtype=float)
+    weight = base.weight_W(scenario)
     gv, gw = (float(g) for g in base.decay_factors(scenario, dt_s))
     decay = 1.0 if fm.has_decay else 0.0
     if variant != "generalized":
@@ -429,8 +348,8 @@ def _mode_and_consts(scenario, variant: str, dt_s: float):
 
 @functools.lru_cache(maxsize=64)
 def _initial(variant: str, batch: int):
-    """``(sys, q, qd) -> state``: ``pipeline.init`` broadcast to ``batch`` members, jitted (eagerly it costs
-    ~0.2 s of small operations per run)."""
+    """``(sys, q, qd) -> state``: ``pipeline.init`` broadcast to ``batch`` members, jitted (eagerly it is
+    many small operations per run)."""
     lib = _lib()
     jax, jp = lib["jax"], lib["jp"]
     P = lib["pipelines"][variant]
@@ -438,26 +357,6 @@ def _initial(variant: str, batch: int):
     def init(sys, q, qd):
         return jax.tree.map(lambda a: jp.broadcast_to(a, (batch, *jp.shape(a))), P.init(sys, q, qd))
     return jax.jit(init)
-
-
-_TOKEN_NUMBERS = itertools.count(1)
-
-
-class _Token:
-    """Registers a scenario for the host force callback for the duration of a run."""
-
-    def __init__(self, scenario):
-        with _LOCK:
-            self.token = next(_TOKEN_NUMBERS)
-            _CALLBACK_SCENARIOS[self.token] = (scenario, {})
-
-    def __enter__(self):
-        return np.int64(self.token)
-
-    def __exit__(self, *exc):
-        with _LOCK:
-            _CALLBACK_SCENARIOS.pop(self.token, None)
-        return False
 
 
 def _run_group(scenario, variant: str, requests) -> list:
@@ -469,7 +368,7 @@ def _run_group(scenario, variant: str, requests) -> list:
     modes = [_mode_and_consts(scenario, variant, r.dt_s) for r in requests]
     mode = modes[0][0]
     n = len(requests)
-    B = _padded(n)
+    B = base.power_of_two(n)
     dts = np.array([r.dt_s for r in requests] + [requests[0].dt_s] * (B - n), dtype=float)
     consts = np.stack([m[1] for m in modes] + [modes[0][1]] * (B - n))
     q0, qd0 = to_q_qd(y0)
@@ -479,7 +378,7 @@ def _run_group(scenario, variant: str, requests) -> list:
     rows[:, 0] = y0
     done = np.zeros(B, dtype=bool)
     first_bad = np.full(B, -1)
-    with _Token(scenario) as token:
+    with _CALLBACK_SCENARIOS.holding((scenario, {})) as token:
         args = (sys, state, jp.asarray(dts), jp.asarray(consts), token, jp.asarray(consts[0, 8]))
         exe = _compiled("run", variant, mode, B, args)
         k = 0
@@ -509,20 +408,8 @@ def _run_group(scenario, variant: str, requests) -> list:
 def simulate_many(variant: str, requests) -> list:
     """The runs of ``requests`` (RunRequest), in order: grouped by scenario, each group one batch over its
     Δt."""
-    requests = list(requests)
-    out: list = [None] * len(requests)
-    groups: dict = {}
-    for i, r in enumerate(requests):
-        groups.setdefault(id(r.scenario), []).append(i)
-    for idx in groups.values():
-        sc = requests[idx[0]].scenario
-        try:
-            runs = _run_group(sc, variant, [requests[i] for i in idx])
-        except EngineError as exc:
-            runs = [exc] * len(idx)
-        for i, run in zip(idx, runs):
-            out[i] = run
-    return out
+    return base.run_in_groups(list(requests), lambda r: id(r.scenario),
+                              lambda reqs: _run_group(reqs[0].scenario, variant, reqs))
 
 
 def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
@@ -539,10 +426,10 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     sys = _system_of(scenario, variant)
     mode, consts = _mode_and_consts(scenario, variant, dt_s)
     T = len(y_start)
-    B = _padded(max(T, ONE_STEP_MIN_BATCH))
+    B = base.power_of_two(max(T, ONE_STEP_MIN_BATCH))
     pad = np.concatenate([y_start, np.broadcast_to(scenario.problem.initial_packed(), (B - T, 13))])
     q, qd = to_q_qd(pad)
-    with _Token(scenario) as token:
+    with _CALLBACK_SCENARIOS.holding((scenario, {})) as token:
         args = (sys, jp.asarray(q), jp.asarray(qd), jp.full(B, float(dt_s)),
                 jp.asarray(np.tile(consts, (B, 1))), token, jp.asarray(consts[8]))
         exe = _compiled("one_step", variant, mode, B, args)
@@ -552,8 +439,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
 
 class BraxAdapter(ModuleAdapter):
     """``brax:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
-    (``pip install 'rbcheck[brax]'``). Declared orders: each pipeline is a semi-implicit Euler step, first
-    order."""
+    (``pip install 'rbcheck[brax]'``)."""
 
     name = ENGINE
     variants = VARIANTS

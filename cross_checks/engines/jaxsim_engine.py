@@ -1,91 +1,34 @@
-"""jaxsim (JAX, float64) as an engine adapter (``jaxsim:VARIANT``); the interface: cross_checks.engines.base.
+"""jaxsim (JAX) as an engine adapter (``jaxsim:VARIANT``); the interface: cross_checks.engines.base. What
+jaxsim does, the defaults neutralised and what was measured: docs/engine_conventions.md, "jaxsim 0.9".
 
-Model: one ``JaxSimModel`` per scenario built from an SDF string
-(``JaxSimModel.build_from_model_description(sdf, is_urdf=False, gravity=…, integrator=…)``; a URDF would need
-Gazebo's ``gz``): one link, its ``<inertial>`` at the link origin with the scenario's mass and the FULL
-inertia tensor about the COM in link axes (ixx … iyz), so the link frame is the scenario's body frame and
-link origin = COM (checked after the build: jaxsim's spatial inertia must hold exactly that mass and tensor,
-else EngineError). A model without joints is floating-base (a 6-DOF ``world_to_base`` joint).
+Model: one ``JaxSimModel`` per body built from an SDF string (:func:`model_sdf`: one link, its inertial at the
+link origin = COM, no collision, no joint: a floating base), its spatial inertia checked against the
+scenario's. Precision: float64 (JAX started by base.start_jax; importing jaxsim also turns
+``jax_enable_x64`` on).
 
-State mapping (docs/engine_conventions.md "jaxsim 0.9", pinned by tests/cross_checks/engines/
-test_jaxsim_engine.py): the data are built in the MIXED velocity representation (``VelRepr.Mixed``):
-``base_position`` = x_W (m), ``base_quaternion`` = q_WB in (w, x, y, z) order (jaxsim's own order: no
-conversion), ``base_velocity`` = [v_W (m/s, the link origin = COM, world axes), ω_W (rad/s, world axes)]:
-the packed state's own quantities. jaxsim stores the velocity internally in the INERTIAL representation
-(v_in = ẋ − ω × x, the velocity of the body point passing through the world origin) and converts at
-``build``/``base_velocity``: a round off of ε·|ω||x| per step, nothing else.
+State at the boundary, in the Mixed velocity representation: ``base_position`` = x_W (m), ``base_quaternion``
+= q_WB (w, x, y, z), ``base_velocity`` = [v_W (m/s, COM, world axes), ω_W (rad/s, world axes)] — the packed
+state's own quantities. Every step starts from the packed state (``JaxSimModelData.build``).
 
-Every step starts from the packed state: ``JaxSimModelData.build`` from it, ``js.model.step``, the packed
-state read back — so a free run and :func:`one_step` from any recorded state take the same step.
+Forces: ``link_forces`` = [f_W (N) at the COM minus the weight jaxsim applies, τ_W (N m)], the harness's from
+the start-of-step state (state-dependent ones on the host through ``jax.pure_callback``); RK4 holds them over
+its stages. Gravity (0, 0, −g) is jaxsim's scalar g; any other direction goes into the link force
+(:func:`engine_gravity`). The decay is applied to v and ω before each step.
 
-The step (jaxsim/api/model.py ``step`` → jaxsim/api/integrators.py): the link forces are converted to the
-inertial representation ONCE, at the start state, then
+:func:`simulate` runs compiled ``lax.fori_loop`` chunks of CHUNK steps; :func:`simulate_many` runs its
+requests one after the other through the same compiled function; :func:`one_step` vmaps its rows (padded to a
+multiple of ROW_BLOCK). JAX is imported on first use only (never at import or in ``version()``): a sweep's
+parent must not start it before forking.
 
-* ``semi_implicit_euler`` (``semi_implicit_euler_integration``): the ABA acceleration in the inertial
-  representation (gravity added as the inertial acceleration [0, 0, −g, 0, 0, 0]; ω̇_W = I_W⁻¹(τ − ω × I_W ω),
-  the explicit gyroscopic term), ``ν_in += Δt ν̇_in``, then ``x += Δt (v_in⁺ + ω⁺ × x)`` and
-  ``q += Δt · ½ [0, ω⁺] ⊗ q`` (``Quaternion.derivative``, Baumgarte K = 0.1 on |q| − 1 = 0), normalised:
-  symplectic Euler with an explicit gyroscopic term and the course's quaternion update, the rotation of
-  reference:course_gyro exactly. Its translation is that of the INERTIAL velocity: where the body spins
-  (ω ≠ 0) away from the world origin it differs from the course's ``v += Δt f/m`` by O(Δt) terms in ω × ẋ
-  (first order still; tumbling_box at 1e-3 s: 35 m of position error against MuJoCo Euler's 0.05 m).
-* ``rk4`` (``rk4_integration``): classical RK4 on (x, q, v_in, ω) with ``system_dynamics``, each stage's
-  quaternion normalised (``data.replace``); 4th order. Its four stages take the SAME link forces
-  (``link_forces`` is an argument of the integrator, converted once per step): jaxsim has no per-stage force
-  hook (no control callback; the contact model is the only per-stage force and needs collision points), so
-  the applied force and torque are held over the step (Traits.forces_held): first order where they change
-  within a step (state-dependent forces, velocity decay). The held wrench is the INERTIAL one (the force and
-  its moment about the world origin): the force keeps its line of action in space over the stages, so even a
-  constant force at the COM gives a moving body a spurious torque (x0 − x_stage) × f — first order in
-  rotation (pinned; no catalog scenario has such a force besides gravity, which jaxsim applies as an
-  acceleration).
-* ``RungeKutta4Fast`` is not offered: with no collidable point its ``rk4fast_integration`` reads
-  ``W_f_L_terrain`` before assigning it (UnboundLocalError in jaxsim 0.9.0, pinned by a test).
-
-Forces (harness semantics of base.py): ``link_forces`` (1, 6) in the Mixed representation — [f_W (N) at the
-link origin = COM, τ_W (N m) about it, world axes] — exactly base.harness_force_torque's force and torque,
-minus the weight m g that jaxsim applies itself, given afresh to every step (``step`` keeps nothing).
-Gravity: jaxsim's is a scalar along −z (a static field of the model): a scenario gravity (0, 0, −g) is
-jaxsim's gravity g; any other direction is given to jaxsim as gravity 0 with the weight in the link force.
-Forces that depend on the state are evaluated by the package's force model (step_floats.harness_fn:
-reference_sim.compiled.ForceEvaluator) from the start-of-step state through ``jax.pure_callback`` inside the
-compiled loop; constant ones are evaluated once and passed in. Velocity decay: the pre-step factors
-(base.decay_factors) multiply v and ω before the step (base.apply_decay_prestep's arithmetic), that step's
-force and torque scaled alike (by the harness).
-
-Defaults that are not the scenario's physics, each neutralised and pinned by a test: contact — jaxsim's
-default SoftContacts with a flat terrain at z = 0 act only on collidable points, and the link has no
-``<collision>``, so there is none (a body below z = 0 moves as one above); no joint (so no joint friction,
-damping, limits or actuation model terms); no kinematic constraint; one integrator call per step (no
-substeps); float64 — importing jaxsim switches ``jax_enable_x64`` on PROCESS-WIDE (jaxsim/__init__.py),
-which this adapter also sets before the import and checks after (every JAX engine in the same process then
-computes in float64). jaxsim has no velocity clamp, sleeping or damping to switch off.
-
-Compilation: two functions per (variant, force path, jaxsim gravity value) — a run of up to CHUNK steps
-(``lax.fori_loop``) and one step of ROW_BLOCK·k rows (``jax.vmap``) — compiled ahead of time once per process
-(the model, Δt, forces and states are arguments), timed apart from stepping (:func:`timings`,
-``JaxsimAdapter.compile_seconds``). The XLA persistent compilation cache is kept in
-``core.files.kernel_cache_dir("jax")`` (shared with the other JAX engines); JAX does not persist an
-executable holding a host callback, so the state-dependent path compiles in every process.
-
-Fork safety: importing jaxsim initialises a JAX backend (it calls ``jax.devices()``), after which a fork can
-deadlock; the sweep forks its workers. So this module never imports JAX at module level, and ``version()``
-reads the distribution's metadata and checks that jaxsim is importable with ``importlib.util.find_spec``
-(no import): a parent process that lists, schedules or sweeps never starts JAX (every run of a sweep, its
-refinements included, is a worker's).
-
-Divergence: JAX never stops on a non-finite value, so every chunk of states is checked
-(reference_sim.simulate.bad_rows): the first state that is non-finite or beyond BLOWUP_LIMIT ends the run as
-``diverged at t = …``.
+Divergence: the first recorded state that is non-finite or beyond BLOWUP_LIMIT ends the run
+(``diverged at t = …``).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import functools
-import itertools
 import threading
-import time
 from pathlib import Path
 
 import numpy as np
@@ -120,18 +63,14 @@ ENGINE = "jaxsim"
 HINT = "pip install 'rbcheck[jaxsim]'"
 #: variant -> jaxsim's ``IntegratorType`` member.
 INTEGRATORS = {"semi_implicit_euler": "SemiImplicitEuler", "rk4": "RungeKutta4"}
+#: Schemes read in jaxsim/api/integrators.py (``semi_implicit_euler_integration``, ``rk4_integration``).
 VARIANTS = {
-    # jaxsim/api/integrators.py semi_implicit_euler_integration: ω_W += Δt I_W⁻¹(τ − ω × I_W ω), then
-    # q += Δt ½ [0, ω⁺] ⊗ q, normalised, and x with the new velocity: a body-frame symplectic Euler step
-    # with an explicit gyroscopic term (MuJoCo Euler's and reference:course_gyro's velocity update)
     "semi_implicit_euler": Variant(
         1,
         "jaxsim SemiImplicitEuler: symplectic Euler in the inertial representation, "
         "explicit gyroscopic term, q += Δt q̇ then normalised",
         traits=base.SYMPLECTIC_EULER_EXPLICIT_GYRO,
     ),
-    # jaxsim/api/integrators.py rk4_integration: classical RK4, the step's link forces (an inertial wrench)
-    # held over its 4 stages
     "rk4": Variant(
         4,
         "jaxsim RungeKutta4: classical 4th-order Runge-Kutta; the applied force and torque held over "
@@ -147,16 +86,15 @@ ROW_BLOCK = 64
 MODEL_NAME = "rbcheck_body"
 
 _LOCK = threading.RLock()
-_TIMES = {"compile_seconds": 0.0, "compiles": 0, "run_seconds": 0.0, "steps": 0}
-_CONTEXTS: dict = {}  # callback key -> (harness, weight floats): the forces of one run / one_step call
-_KEYS = itertools.count(1)
+_TIMES = base.Stats(compile_seconds=0.0, compiles=0, run_seconds=0.0, steps=0)
+_CONTEXTS = base.Registry()  # callback key -> y -> link force (6 floats) of one run / one_step call
 
 
 # --- availability without importing JAX (fork safety) --------------------------------------------------
 
 
 def version() -> str:
-    """The installed jaxsim distribution's version, from its metadata: no import (see the module docstring).
+    """The installed jaxsim distribution's version, from its metadata and import spec: nothing imported.
     EngineNotInstalled when it is absent; ImportError when it is installed but not importable."""
     import importlib.util
 
@@ -182,19 +120,11 @@ def xla_cache_dir() -> Path:
 
 @functools.lru_cache(maxsize=1)
 def _jax():
-    """(jax, jax.numpy, jaxsim.api): imported on first use (never in a process that only lists engines),
-    float64 switched on before jaxsim's import and checked after, the persistent cache in rbcheck's
-    directory."""
+    """(jax, jax.numpy, jaxsim.api): imported on first use (base.start_jax: float64 on before jaxsim's import,
+    checked after)."""
     jax, err = base.optional_import("jax")
     base.require(jax, err, "jax", hint=HINT)
-    jax.config.update("jax_enable_x64", True)
-    try:
-        path = xla_cache_dir()
-        path.mkdir(parents=True, exist_ok=True)
-        jax.config.update("jax_compilation_cache_dir", str(path))
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
-    except OSError:  # no writable cache directory: compile every time
-        pass
+    base.start_jax()
     jaxsim, err = base.optional_import("jaxsim")
     base.require(jaxsim, err, "jaxsim", hint=HINT)
     import jax.numpy as jnp
@@ -203,6 +133,12 @@ def _jax():
     if not jax.config.jax_enable_x64:
         raise EngineError("jaxsim: jax_enable_x64 is off after importing jaxsim; rbcheck needs float64")
     return jax, jnp, js
+
+
+def _refuse_forked_jax() -> None:
+    base.refuse_forked_jax("jaxsim cannot run in a process forked after JAX started in its parent (a running "
+                           "JAX backend does not survive fork: it would hang); run the sweep with --jobs 1 "
+                           "from there, or from a process that has not run JAX")
 
 
 def timings() -> dict:
@@ -291,9 +227,7 @@ def _host_forces(key, y):
     rows = y.reshape(-1, 13)
     out = np.empty((len(rows), 6))
     for i, (k, row) in enumerate(zip(keys.tolist(), rows.tolist())):
-        harness, (wx, wy, wz) = _CONTEXTS[k]
-        fx, fy, fz, tx, ty, tz = harness(row)
-        out[i] = (fx - wx, fy - wy, fz - wz, tx, ty, tz)
+        out[i] = _CONTEXTS[k](row)
     return out.reshape(y.shape[:-1] + (6,))
 
 
@@ -368,15 +302,14 @@ def _compiled(kind: str, callback: bool, model, *args):
     with _LOCK:
         fn = _COMPILED.get(key)
         if fn is None:
-            t0 = time.perf_counter()
             make = _run_fn if kind == "run" else _one_fn
             try:
-                fn = jax.jit(make(callback)).lower(model, *args).compile()
+                with _TIMES.timing("compile_seconds"):
+                    fn = jax.jit(make(callback)).lower(model, *args).compile()
             except Exception as exc:  # noqa: BLE001 - jaxsim or XLA refusing the computation
                 raise EngineError(
                     f"jaxsim/XLA could not compile the step: {type(exc).__name__}: {exc}"
                 ) from None
-            _TIMES["compile_seconds"] += time.perf_counter() - t0
             _TIMES["compiles"] += 1
             _COMPILED[key] = fn
     return fn
@@ -388,52 +321,36 @@ def _weight(scenario) -> tuple:
 
 
 def _inputs(scenario, dt_s: float):
-    """(callback?, constant link force (6,), pre-step decay scale (13,), harness) of a run at ``dt_s``."""
+    """(callback?, constant link force (6,), pre-step decay scale (13,), ``y -> link force`` (6 floats)) of a
+    run at ``dt_s``."""
     forces = scenario.problem.forces
-    harness = harness_fn(scenario, dt_s)
-    wx, wy, wz = _weight(scenario)
+    wrench = base.minus_weight(harness_fn(scenario, dt_s), _weight(scenario))
     gv, gw = (float(g) for g in base.decay_factors(scenario, dt_s))
     scale = np.ones(13)
     scale[3:6] = gv
     scale[10:13] = gw
     if forces.state_dependent:
-        return True, np.zeros(6), scale, harness
-    fx, fy, fz, tx, ty, tz = harness([float(v) for v in scenario.problem.initial_packed()])
-    return False, np.array([fx - wx, fy - wy, fz - wz, tx, ty, tz]), scale, harness
-
-
-class _Context:
-    """The callback key of one run or one_step call, registered for its duration."""
-
-    def __init__(self, scenario, harness):
-        self.key = next(_KEYS)
-        self.value = (harness, _weight(scenario))
-
-    def __enter__(self):
-        _CONTEXTS[self.key] = self.value
-        return np.asarray(self.key, dtype=np.int64)
-
-    def __exit__(self, *exc):
-        _CONTEXTS.pop(self.key, None)
+        return True, np.zeros(6), scale, wrench
+    return False, np.array(wrench([float(v) for v in scenario.problem.initial_packed()])), scale, wrench
 
 
 def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
     """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded."""
+    _refuse_forked_jax()
     model = build_model(scenario, variant)
-    callback, f6, scale, harness = _inputs(scenario, dt_s)
+    callback, f6, scale, wrench = _inputs(scenario, dt_s)
     y0 = np.asarray(scenario.problem.initial_packed(), dtype=float)
     dt = np.float64(dt_s)
     rows = [y0[None]]
     y = y0
     done = 0
-    with _Context(scenario, harness) as key:
+    with _CONTEXTS.holding(wrench) as key:
         fn = _compiled("run", callback, model, dt, y0, np.int64(0), f6, scale, key)
         while done < n_steps:
             count = min(CHUNK, n_steps - done)
-            t0 = time.perf_counter()
-            y, chunk = fn(model, dt, y, np.int64(count), f6, scale, key)
-            chunk = np.asarray(chunk)[:count]
-            _TIMES["run_seconds"] += time.perf_counter() - t0
+            with _TIMES.timing("run_seconds"):
+                y, chunk = fn(model, dt, y, np.int64(count), f6, scale, key)
+                chunk = np.asarray(chunk)[:count]
             _TIMES["steps"] += count
             bad = bad_rows(chunk)
             if bad.any():
@@ -448,9 +365,7 @@ def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
 
 def simulate_many(variant: str, requests) -> list:
     """The runs of ``requests`` (base.RunRequest), one after the other through the same compiled run function
-    (one compilation for a whole Δt ladder): each equal to :func:`simulate`'s. A ladder is not vmapped: its
-    runs differ in length (a batch steps all lanes to the longest) and each batch size is another compilation
-    (docs/engine_conventions.md, "jaxsim 0.9": measured no gain)."""
+    (one compilation for a whole Δt ladder): each equal to :func:`simulate`'s."""
     out: list = []
     for r in requests:
         try:
@@ -467,23 +382,23 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     n = len(y_start)
     if n == 0:
         return np.empty((0, 13))
+    _refuse_forked_jax()
     model = build_model(scenario, variant)
-    callback, f6, scale, harness = _inputs(scenario, dt_s)
+    callback, f6, scale, wrench = _inputs(scenario, dt_s)
     pad = -n % ROW_BLOCK
     padded = np.concatenate([y_start, np.repeat(y_start[:1], pad, axis=0)]) if pad else y_start
     dt = np.float64(dt_s)
-    with _Context(scenario, harness) as key:
+    with _CONTEXTS.holding(wrench) as key:
         fn = _compiled("one", callback, model, dt, padded, f6, scale, key)
-        t0 = time.perf_counter()
-        out = np.asarray(fn(model, dt, padded, f6, scale, key))[:n]
-        _TIMES["run_seconds"] += time.perf_counter() - t0
+        with _TIMES.timing("run_seconds"):
+            out = np.asarray(fn(model, dt, padded, f6, scale, key))[:n]
         _TIMES["steps"] += n
     return out
 
 
 class JaxsimAdapter(ModuleAdapter):
     """``jaxsim:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
-    (``pip install 'rbcheck[jaxsim]'``). Declared orders: semi-implicit Euler 1, RK4 4 (its forces held)."""
+    (``pip install 'rbcheck[jaxsim]'``)."""
 
     name = ENGINE
     variants = VARIANTS

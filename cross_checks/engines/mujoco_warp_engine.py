@@ -1,80 +1,36 @@
 """MuJoCo Warp (``mujoco-warp``, MuJoCo's physics as NVIDIA Warp kernels) as an engine adapter
-(``mujoco_warp:VARIANT``); the interface is cross_checks.engines.base.
+(``mujoco_warp:VARIANT``); the interface is cross_checks.engines.base. What mujoco_warp does, the defaults
+neutralised and what was measured: docs/engine_conventions.md, "MuJoCo Warp 4.0.0".
 
-Device and precision: Warp's CPU device (no CUDA here), FLOAT32: every Model and Data array of mujoco_warp is
-``wp.float32`` (``float`` in its kernels), so each variant declares ``Traits(precision="float32")`` and is
-judged with float32's round-off floors (docs/verdicts.md §7).
+Precision: float32 on Warp's CPU device (every Model and Data array is ``wp.float32``): each variant declares
+``Traits(precision="float32")``.
 
-Model: the MuJoCo model of ``cross_checks.engines.mujoco_engine.build_model`` (one free body, explicit
-inertial at the body origin = COM, a full tensor as principal moments + ``iquat`` so that the body frame stays
-the scenario's, no geoms hence no contact, gravity and step from the scenario, the variant's integrator), with
-one change: ``mjDSBL_AUTORESET`` cleared, which ``mujoco_warp.put_model`` refuses ("unsupported": mujoco_warp
-never resets a world). ``mjw.put_model`` puts it on the CPU device; ``opt.timestep`` is then a BATCHED
-field (one per world, ``opt_timestep[worldid % shape[0]]`` in every integrator kernel), so the Δt rungs of a
-scenario run as the worlds of ONE ``mjw.put_data(..., nworld=N)`` (tested against single-world runs).
-Nothing of MuJoCo's defaults is left to chance beyond what build_model sets (no damping, stiffness, armature,
-no actuator, no velocity clamp, sleeping off, one integration per step, no contact): each is pinned by a test
-on the mujoco_warp Model.
+Model: ``mujoco_engine.build_model``'s with ``mjDSBL_AUTORESET`` cleared (``mjw.put_model`` refuses it), put
+on the CPU device; ``opt.timestep`` is per world, so a scenario's Δt rungs run as the worlds of one batch.
 
-State mapping (docs/engine_conventions.md, "MuJoCo Warp 4.0.0"; MuJoCo's): ``qpos = [x_W, q_WB (w x y z)]``,
-``qvel = [v_W (COM, world axes), ω_B (BODY axes)]``, converted at the boundary with mujoco_engine's
-``to_qpos_qvel``/``to_packed`` (in float64, from the engine's float32 numbers); the recorded quaternion is
+State at the boundary (MuJoCo's, converted in float64 by mujoco_engine's ``to_qpos_qvel``/``to_packed``):
+``qpos = [x_W, q_WB (w x y z)]``, ``qvel = [v_W (COM, world axes), ω_B (body axes)]``; the recorded quaternion
 kept sign-continuous from the scenario's.
 
-The step (mujoco_warp/_src/forward.py, ``step``): ``forward`` (kinematics, the recursive Newton-Euler bias
-force ``c(q, v)`` with the gyroscopic term, ``xfrc_applied`` mapped to joint forces, ``qacc = M⁻¹ f``), then
-the variant's integrator:
+Forces: the harness's world force at the COM minus the weight ``m g`` (mujoco_warp applies gravity) and its
+world torque go into the body's row of ``Data.xfrc_applied``, from the start-of-step state, the decay applied
+to qvel before the step — except RK4 with forces that change within a step, which evaluates them at every
+stage through ``Model.callback.control`` (:func:`stage_callback`, the decay as damping).
 
-* ``euler`` (``euler`` → ``_advance``): ``v ← v + Δt qacc``, then ``qpos`` from the NEW velocity
-  (``_next_position``: ``math.quat_integrate``, ``q ⊗ exp(ω_B Δt)``): semi-implicit Euler, explicit gyroscopic
-  term — ``mujoco:euler``'s scheme.
-* ``rk4`` (``rungekutta4``): classical RK4 with ``_forward`` at every stage, the attitude by the
-  Runge-Kutta-Munthe-Kaas correction (``_rk_correct_velocity``: the stage ω mapped through
-  ``math.deriv_expmap``, the exact inverse of dexp with the Bortz coefficient), so fourth order in the
-  attitude too; ``_forward`` calls ``Model.callback.control`` at every stage, the adapter's per-stage hook:
-  state-dependent forces and the decay (as damping, ``base.stage_force_torque``) are evaluated from each
-  stage state, as ``mujoco:rk4`` does through mjcb_control — by a Warp kernel (:func:`stage_callback`, the
-  package's force model in float32, tested against it), so the step stays capturable.
-* ``implicit`` and ``implicitfast`` (``implicit``): ``implicit_free_body`` solves
-  ``(M − Δt ∂f/∂v) qacc = f`` for a free body with the gyroscopic (RNE) velocity derivative in the 6×6 block
-  (``math.free_bias_vel_blocks``): semi-implicit Euler with an implicit gyroscopic term, MuJoCo 4.0's
-  ``mjd_freeMhat``. (implicitfast takes that path only while ACTUATION, SPRING and DAMPER are not ALL
-  disabled; the adapter disables none of them: pinned.)
-* ``discrete`` (``discrete``): ``_forward`` solves qacc in the effective metric, with the free body's
-  gyroscopic derivative (``_discrete_free_gyro``), then ``_advance``: implicitfast's step for a lone body.
+:func:`simulate_many` runs one scenario's requests as the worlds of one batch (at most MAX_WORLDS), one step
+captured as a Warp graph and replayed; :func:`one_step` runs its rows as worlds. Warp is imported on first use
+only (never at import or in ``version()``); its kernels are compiled into ``kernel_cache_dir("mujoco_warp")``.
 
-Forces (harness semantics of base.py): the world force at the COM and the world torque of
-``base.harness_force_torque`` minus the weight ``m g`` (mujoco_warp applies gravity itself) go into the body's
-row of ``Data.xfrc_applied`` ([force, torque], world axes), from the start-of-step state; velocity decay
-``e^{−kΔt}`` is applied to qvel before each step (that step's force and torque scaled alike) for every variant
-except RK4 with forces that change within a step (per-stage, above).
-
-Speed (docs/engine_conventions.md): a mujoco_warp step is ~80 kernel launches, ~3 ms of Python per step on
-this CPU whatever the number of worlds. The adapter therefore CAPTURES one step per batch
-(``wp.ScopedCapture`` on the CPU device records an APIC operation stream that ``wp.capture_launch`` replays in
-C++, ~40 µs) and replays it every step; between replays it reads qpos/qvel and writes xfrc_applied/qvel
-through zero-copy NumPy views of the CPU arrays (captured replay = uncaptured step, bit for bit: tested). Warp
-compiles
-mujoco_warp's kernels on first use (minutes, once) into :func:`kernel_cache_dir` (``wp.config.
-kernel_cache_dir``, set before ``wp.init``); the time of each variant's first step in a process — module
-compilation or loading — is kept apart from stepping: :func:`compile_stats`.
-
-Fork safety: neither importing this module nor ``version()`` imports Warp or mujoco_warp (package metadata and
-import specs only); each sweep worker initialises Warp on its first run.
-
-Divergence: mujoco_warp neither warns nor stops on a blow-up; the first recorded state that is non-finite or
-has a component beyond BLOWUP_LIMIT ends the run as ``diverged at t = …``.
+Divergence: the first recorded state that is non-finite or beyond BLOWUP_LIMIT ends the run
+(``diverged at t = …``).
 """
 from __future__ import annotations
 
 import functools
-import os
 import threading
-import time
 
 import numpy as np
 
-from cross_checks.core.files import kernel_cache_dir
 from cross_checks.engines import base
 from cross_checks.engines.base import EngineError, ModuleAdapter, Traits, Variant, installed_version
 from cross_checks.engines.step_floats import harness_fn
@@ -95,9 +51,8 @@ def _traits(base: Traits) -> Traits:
     return dataclasses.replace(base, precision=_F32)
 
 
-#: mujoco_warp's integrators (``mujoco_warp._src.types.IntegratorType``: EULER, RK4, IMPLICITFAST, IMPLICIT,
-#: DISCRETE), their orders from MuJoCo's documentation (Euler and the implicit family first order, RK4 fourth)
-#: and the traits read from mujoco_warp/_src/forward.py (see the module docstring), all float32.
+#: mujoco_warp's integrators (``IntegratorType``), orders from MuJoCo's documentation, traits read in
+#: mujoco_warp/_src/forward.py, all float32.
 VARIANTS = {
     "euler": Variant(1, "MuJoCo Warp Euler (float32): semi-implicit Euler, explicit gyroscopic term, "
                         "quaternion by the exponential map (mujoco:euler's scheme)",
@@ -142,66 +97,21 @@ def _dist_version() -> str:
     return f"{installed_version(_DIST)} (warp {installed_version('warp-lang')})"
 
 
-class _QuietStderr:
-    """File descriptor 2 to /dev/null for the duration (Warp's C runtime prints "Could not find or load the
-    NVIDIA CUDA driver" there at wp.init on a machine without CUDA)."""
-
-    def __enter__(self):
-        import sys
-        try:
-            sys.stderr.flush()
-            self.saved = os.dup(2)
-        except (OSError, ValueError, AttributeError):
-            self.saved = None
-            return self
-        self.null = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(self.null, 2)
-        return self
-
-    def __exit__(self, *exc):
-        if self.saved is not None:
-            os.dup2(self.saved, 2)
-            os.close(self.saved)
-            os.close(self.null)
-        return False
-
-
 @functools.lru_cache(maxsize=1)
 def _engine():
-    """``(warp, mujoco_warp, mujoco)``, imported on first use: Warp's kernel cache set to
-    ``kernel_cache_dir("mujoco_warp")`` BEFORE ``wp.init()``, its greeting silenced. ImportError with the
-    engine's words when the import fails."""
+    """``(warp, mujoco_warp, mujoco)``, imported on first use (base.start_warp: the kernel cache in
+    ``kernel_cache_dir("mujoco_warp")``). ImportError with the engine's words when the import fails."""
     _check_installed()
-    try:
-        with _QuietStderr():
-            import warp as wp
-            folder = kernel_cache_dir(ENGINE)
-            try:
-                folder.mkdir(parents=True, exist_ok=True)
-            except OSError:   # pragma: no cover - Warp then reports its own error
-                pass
-            wp.config.kernel_cache_dir = str(folder)
-            wp.config.log_level = wp.LOG_ERROR
-            wp.init()
-            import mujoco
-            import mujoco_warp as mjw
-    except Exception as exc:  # noqa: BLE001 - a broken install: the engine's own words
-        raise ImportError(f"{_DIST} {installed_version(_DIST)} is installed but cannot be imported: "
-                          f"{type(exc).__name__}: {exc}") from exc
+    with base.first_import(_DIST, installed_version), base.quiet_fd2():
+        wp = base.start_warp(ENGINE, "LOG_ERROR")
+        import mujoco
+        import mujoco_warp as mjw
     return wp, mjw, mujoco
-
-
-def _engine_or_error():
-    try:
-        return _engine()
-    except ImportError as exc:
-        raise EngineError(str(exc)) from None
 
 
 # --- bookkeeping: compile time apart from stepping ------------------------------------------------
 
-_STATS = {"compilations": 0, "compile_seconds": 0.0, "step_seconds": 0.0, "steps": 0, "body_steps": 0,
-          "captures": 0}
+_STATS = base.Stats(compilations=0, compile_seconds=0.0, step_seconds=0.0, steps=0, body_steps=0, captures=0)
 _WARM: set = set()   # (variant, callback) whose kernels this process has loaded
 
 
@@ -216,7 +126,7 @@ def compile_stats() -> dict:
 
 def reset_stats() -> None:
     """Zero :func:`compile_stats` (Warp keeps its loaded modules: a variant is not recompiled)."""
-    _STATS.update(compilations=0, compile_seconds=0.0, step_seconds=0.0, steps=0, body_steps=0, captures=0)
+    _STATS.reset()
 
 
 def _warm_up(variant: str, m_host, callback=None) -> None:
@@ -227,15 +137,14 @@ def _warm_up(variant: str, m_host, callback=None) -> None:
     if key in _WARM:
         return
     wp, mjw, mujoco = _engine()
-    t0 = time.perf_counter()
-    wm = mjw.put_model(m_host)
-    wd = mjw.put_data(m_host, mujoco.MjData(m_host), nworld=1)
-    if callback is not None:
-        wm.callback.control = callback
-    with wp.ScopedDevice("cpu"):
-        mjw.step(wm, wd)
-    wp.synchronize()
-    _STATS["compile_seconds"] += time.perf_counter() - t0
+    with _STATS.timing("compile_seconds"):
+        wm = mjw.put_model(m_host)
+        wd = mjw.put_data(m_host, mujoco.MjData(m_host), nworld=1)
+        if callback is not None:
+            wm.callback.control = callback
+        with wp.ScopedDevice("cpu"):
+            mjw.step(wm, wd)
+        wp.synchronize()
     _STATS["compilations"] += 1
     _WARM.add(key)
 
@@ -248,7 +157,7 @@ def host_model(scenario, variant: str, dt_s: float):
     words."""
     from cross_checks.engines import mujoco_engine
     base.check_variant(ENGINE, VARIANTS, variant)
-    _, _, mujoco = _engine_or_error()
+    _, _, mujoco = base.engine_or_error(_engine)
     m = mujoco_engine.build_model(scenario, variant, dt_s)
     m.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_AUTORESET)
     return m
@@ -267,10 +176,6 @@ def device_model(m_host, dts):
     return wm
 
 
-def _weight(scenario) -> np.ndarray:
-    return scenario.problem.body.mass_kg * np.asarray(scenario.problem.forces.gravity_W, dtype=float)
-
-
 def per_stage(scenario, variant: str) -> bool:
     """RK4 with forces that change within a step (state-dependent forces or velocity decay): evaluated at
     every stage through ``Model.callback.control`` (like mujoco:rk4)."""
@@ -283,7 +188,7 @@ class _Worlds:
     zero-copy NumPy views of their qpos, qvel and xfrc_applied (float32)."""
 
     def __init__(self, scenario, variant: str, dts, qpos0, qvel0, callback=None):
-        wp, mjw, mujoco = _engine_or_error()
+        wp, mjw, mujoco = base.engine_or_error(_engine)
         m = host_model(scenario, variant, float(dts[0]))
         _warm_up(variant, m, callback)
         self.wp, self.mjw = wp, mjw
@@ -333,7 +238,7 @@ def simulate_many(variant: str, requests) -> list:
     scenario run as the worlds of one batch (one world per Δt, in batches of at most MAX_WORLDS)."""
     base.check_variant(ENGINE, VARIANTS, variant)
     try:
-        _engine_or_error()
+        base.engine_or_error(_engine)
     except EngineError as exc:
         return [exc] * len(requests)
     with _LOCK:
@@ -345,9 +250,8 @@ def simulate_many(variant: str, requests) -> list:
 def _stage_kernel():
     """The Warp kernel of RK4's per-stage forces (``base.stage_force_torque`` in float32, the decay as
     damping), one thread per world: the scenario's forces minus its weight from the stage state in qpos/qvel
-    into the body's row of xfrc_applied. It is launched from ``Model.callback.control``, which ``_forward``
-    calls at every stage — a Warp launch, so the whole RK4 step, stages and forces, is captured and replayed
-    (the Python force model there cost ~25 ms a step). Tested against ``base.stage_force_torque_floats``."""
+    into the body's row of xfrc_applied. Launched from ``Model.callback.control``, which ``_forward`` calls at
+    every stage, so the whole RK4 step, stages and forces, is captured and replayed."""
     wp, _, _ = _engine()
 
     @wp.kernel(module="unique", enable_backward=False)
@@ -428,17 +332,15 @@ def _run_batch(variant: str, reqs) -> list:
     dts = [float(r.dt_s) for r in reqs]
     y0 = np.asarray(sc.problem.initial_packed(), dtype=float)
     qpos0, qvel0 = to_qpos_qvel(np.repeat(y0[None], N, axis=0))
-    weight = _weight(sc)
     stage = per_stage(sc, variant)
     W = _Worlds(sc, variant, dts, qpos0, qvel0, stage_callback(sc) if stage else None)
     g = np.array([[float(v) for v in base.decay_factors(sc, h)] for h in dts])   # (N, 2)
     decay = forces.has_decay and not stage
     per_step = forces.state_dependent and not stage
-    harness = [harness_fn(sc, h) for h in dts]
+    wrench = [base.minus_weight(harness_fn(sc, h), base.weight_W(sc)) for h in dts]
     if not stage and not per_step:   # constant (decay scaling included), written once
         for k in range(N):
-            fx, fy, fz, tx, ty, tz = harness[k](y0.tolist())
-            W.xfrc[k, _BODY] = (fx - weight[0], fy - weight[1], fz - weight[2], tx, ty, tz)
+            W.xfrc[k, _BODY] = wrench[k](y0.tolist())
     W.capture()
     n_max = max(r.n_steps for r in reqs)
     qpos_out = np.empty((n_max + 1, N, 7), dtype=np.float32)
@@ -446,15 +348,12 @@ def _run_batch(variant: str, reqs) -> list:
     qpos_out[0], qvel_out[0] = W.qpos, W.qvel
     qpos, qvel, xfrc = W.qpos, W.qvel, W.xfrc
     gv, gw = g[:, 0:1], g[:, 1:2]
-    w0, w1, w2 = (float(c) for c in weight)
     alive = np.ones(N, dtype=bool)
-    t0 = time.perf_counter()
-    with np.errstate(all="ignore"):
+    with _STATS.timing("step_seconds"), np.errstate(all="ignore"):
         for n in range(1, n_max + 1):
             if per_step:
                 qp, qv = qpos.tolist(), qvel.tolist()
-                xfrc[:, _BODY] = [(fx - w0, fy - w1, fz - w2, tx, ty, tz) for fx, fy, fz, tx, ty, tz in
-                                  (harness[k](packed_floats(qp[k], qv[k])) for k in range(N))]
+                xfrc[:, _BODY] = [wrench[k](packed_floats(qp[k], qv[k])) for k in range(N)]
             if decay:
                 qvel[:, 0:3] *= gv
                 qvel[:, 3:6] *= gw
@@ -465,7 +364,6 @@ def _run_batch(variant: str, reqs) -> list:
                 if not alive.any():
                     qpos_out[n + 1:], qvel_out[n + 1:] = np.nan, np.nan
                     break
-    _STATS["step_seconds"] += time.perf_counter() - t0
     _STATS["steps"] += n
     _STATS["body_steps"] += n * N
     runs = []
@@ -479,7 +377,6 @@ def _run_batch(variant: str, reqs) -> list:
     return runs
 
 
-
 @base.on_rows
 def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     """One step of ``dt_s`` from each row of ``y_start`` (T, 13), the rows as the worlds of one batch
@@ -490,9 +387,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     T = len(y_start)
     out = np.empty((T, 13))
     stage = per_stage(scenario, variant)
-    weight = _weight(scenario)
-    w0, w1, w2 = (float(c) for c in weight)
-    harness = harness_fn(scenario, dt_s)
+    wrench = base.minus_weight(harness_fn(scenario, dt_s), base.weight_W(scenario))
     with _LOCK:
         for s in range(0, T, MAX_WORLDS):
             rows = y_start[s:s + MAX_WORLDS]
@@ -503,11 +398,9 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
                         stage_callback(scenario) if stage else None)
             if not stage:
                 for k, row in enumerate(rows.tolist()):
-                    fx, fy, fz, tx, ty, tz = harness(row)
-                    W.xfrc[k, _BODY] = (fx - w0, fy - w1, fz - w2, tx, ty, tz)
-            t0 = time.perf_counter()
-            W.step()
-            _STATS["step_seconds"] += time.perf_counter() - t0
+                    W.xfrc[k, _BODY] = wrench(row)
+            with _STATS.timing("step_seconds"):
+                W.step()
             _STATS["steps"] += 1
             _STATS["body_steps"] += n
             with np.errstate(all="ignore"):
@@ -521,9 +414,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
 
 class MujocoWarpAdapter(ModuleAdapter):
     """``mujoco_warp:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
-    (``pip install 'rbcheck[mujoco_warp]'``). Float32 on Warp's CPU device. Declared orders: Euler and the
-    implicit family 1, RK4 4 (its forces evaluated per stage). :func:`simulate_many` runs a scenario's
-    requests as the worlds of one captured batch."""
+    (``pip install 'rbcheck[mujoco_warp]'``)."""
 
     name = ENGINE
     variants = VARIANTS

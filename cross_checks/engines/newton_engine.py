@@ -1,97 +1,40 @@
-"""Newton (``newton``, NVIDIA/Disney/DeepMind's physics engine on NVIDIA Warp) as an engine adapter
-(``newton:VARIANT``); the interface is cross_checks.engines.base.
+"""Newton (``newton``, the physics engine on NVIDIA Warp) as an engine adapter (``newton:VARIANT``); the
+interface is cross_checks.engines.base. What each solver does, the defaults neutralised (SOLVER_SETTINGS) and
+what was measured: docs/engine_conventions.md, "Newton 1.8.0".
 
-Precision: FLOAT32. Newton's state (``State.body_q``, ``body_qd``, ``joint_q``, ``joint_qd``), its model
-(mass, inertia, gravity) and the step size it passes to its kernels are Warp ``float32``; every variant
-declares ``Traits(precision="float32")`` (docs/verdicts.md §7). The device is Warp's CPU (``"cpu"``): the
-kernels are compiled to native code by Warp's bundled LLVM/Clang, once per module, and cached in
-``core.files.kernel_cache_dir("newton")`` (``wp.config.kernel_cache_dir``, set before Warp initialises).
+Precision: float32 on Warp's CPU device (state, model and Δt are ``wp.float32``): each variant declares
+``Traits(precision="float32")``. Kernels are compiled into ``core.files.kernel_cache_dir("newton")``.
 
-Model (:func:`build_model`): a ``newton.ModelBuilder(gravity=(0, 0, 0))`` with ONE WORLD PER BODY
-(``begin_world(gravity=g)``: each world its own gravity vector, so runs of different scenarios share one
-model); each body has ``com = 0`` (body origin = centre of mass, so the recorded position and velocity are
-the COM's), ``mass`` and ``inertia`` = the scenario's tensor about the COM in body axes (a full 3×3 taken as
-given; what ``finalize`` stored is checked against it, to float32). No shape (nothing to collide with, no
-ground), no particle, no spring.
+Model (:func:`build_model`): one world per body, each with its own gravity; ``com = 0`` (body origin = COM),
+the scenario's mass and full inertia tensor (about the COM, body axes), checked after ``finalize``; no shape.
+``semi_implicit`` and ``xpbd`` step jointless links (``State.body_q``/``body_qd``), ``featherstone`` and
+``mujoco_cpu`` a FREE joint (``State.joint_q``/``joint_qd``).
 
-* ``semi_implicit`` and ``xpbd`` (maximal coordinates: ``State.body_q``/``body_qd``): a body WITHOUT a joint
-  (``ModelBuilder.add_link``). Newton's ``add_body`` adds a FREE joint, and with any joint
-  ``SolverXPBD`` applies its (zero) joint corrections through ``apply_body_deltas``, which sets every linear
-  or angular velocity below 1e-4 to exactly zero ("this improves gradient stability",
-  newton/_src/solvers/xpbd/kernels.py) — a body released near rest, or whose ω passes through zero, would
-  stop. A jointless body is free in both solvers (they integrate ``body_q`` whatever the joints). Pinned.
-* ``featherstone`` (generalized coordinates: ``State.joint_q``/``joint_qd``): ``add_body`` (a FREE joint to
-  the world, its own articulation); the state goes in and out through ``joint_q`` =
-  ``[x_W, q_WB (x y z w)]`` and ``joint_qd`` = ``[v_COM (world), ω (world)]`` (Newton's public FREE joint
-  convention), the solver converting them to its internal origin-based spatial velocity every step.
+State at the boundary (:func:`to_newton_rows`, :func:`from_newton_rows`): ``[x_W, q_WB (x, y, z, w)]`` — Warp
+quaternions are xyzw — and ``[v_W (COM), ω_W]``, linear first, both world axes; the recorded quaternion kept
+sign-continuous from the scenario's.
 
-State mapping (docs/engine_conventions.md "Newton 1.8.0", pinned by
-tests/cross_checks/engines/test_newton_engine.py): ``body_q`` = ``[p, q (x, y, z, w)]`` — Warp quaternions
-are (x, y, z, w), converted at the boundary only; ``body_qd`` = ``[v, ω]`` — LINEAR FIRST, the COM's
-velocity and ω both in WORLD axes; ``body_f`` = ``[f, τ]`` — a world force at the COM and a world torque
-about the COM.
-The recorded quaternion is made sign-continuous from the scenario's initial one.
+Forces: the harness's world force at the COM minus the weight ``m g`` (Newton applies gravity per world) and
+its world torque go into ``State.body_f`` of the step's input state, from the start-of-step state; the decay
+is applied to the velocities before the step.
 
-The steps (each read in Newton 1.8.0's source; every one first order):
+:func:`simulate_many` steps the runs that share a Δt as the bodies of one model (at most MAX_BATCH; one for
+``mujoco_cpu``, whose MuJoCo C takes one world); :func:`one_step` steps its rows as bodies. Warp and Newton
+are imported on first use only (never at import or in ``version()``).
 
-* ``SolverSemiImplicit`` (solvers/solver.py ``integrate_rigid_body``): ``v += Δt (f/m + g)``,
-  ``x += Δt v⁺``; ``ω_B += Δt I⁻¹(τ_B − ω_B × I ω_B)`` in body axes at the start attitude
-  (explicit gyroscopic term), ``q ← normalize(q + ½ Δt [ω⁺_W, 0] ⊗ q)``; then
-  ``ω ← (1 − angular_damping Δt) ω``.
-* ``SolverXPBD`` (solvers/xpbd/solver_xpbd.py ``step``): the same ``integrate_bodies`` kernel, then its
-  constraint iterations — nothing to solve for a jointless body without contacts.
-* ``SolverFeatherstone`` (solvers/featherstone/kernels.py ``jcalc_integrate``, FREE joint): the
-  composite-rigid-body mass matrix and ``qdd = M⁻¹(τ − C)`` in world-origin spatial coordinates (the
-  gyroscopic term in the bias force, explicit), then ``ω += Δt α``, ``v_COM += Δt a_COM``,
-  ``q ← normalize(q + ½ Δt [ω⁺, 0] ⊗ q)``, ``x_COM += Δt v⁺_COM``.
-* ``SolverMuJoCo(use_mujoco_cpu=True)`` (solvers/mujoco/solver_mujoco.py ``step``), variant ``mujoco_cpu``:
-  Newton's float32 ``joint_q``/``joint_qd``/``body_f`` copied into MuJoCo C's MjData before every step,
-  ``mj_step`` (float64) with Newton's default integrator implicitfast (implicit gyroscopic term), and back to
-  float32. MuJoCo C takes one world: one body per model. Its autoreset is turned off (a blow-up would restart
-  from rest) and its warnings go to a handler during runs (no MUJOCO_LOG.TXT). It needs ``mujoco_warp``
-  installed (imported even on MuJoCo C; the extra pins it).
-
-Forces (harness semantics of base.py): Newton applies gravity itself (per world); every step the harness's
-world force at the COM minus the weight ``m g`` and the world torque go into ``State.body_f`` of the step's
-input state, evaluated from the start-of-step state (state-dependent ones by the package's force model,
-``step_floats.harness_fn``, on the host); velocity decay ``e^{−kΔt}`` is applied to the state's velocities
-before the step (base.apply_decay_prestep), that step's force and torque scaled alike.
-
-Defaults that are not the scenario's physics, each neutralised explicitly (SOLVER_SETTINGS, pinned): the
-angular damping of SemiImplicit and Featherstone (0.05 by default) and XPBD (0), XPBD's restitution (its
-velocity-from-position-deltas is off by default, deprecated, pinned), Featherstone's mass-matrix update
-interval (1: every step); gravity (the builder's default is −9.81 along z); ``finalize``'s inertia validation
-(``skip_validation_inertia=True``: by default it shifts the eigenvalues of a tensor with I1 + I2 < I3 or a
-small I1 — another body); no shape, so no contact nor ground; the free joint's armature, friction, target and
-limit gains are zero and its limits ±1e10 by default (pinned). Newton has no sleeping, no velocity clamp for
-rigid bodies (``particle_max_velocity`` acts on particles only) and no substeps in these solvers.
-
-Batching (:func:`simulate_many`): the runs of one call that share a Δt step together, one body (one world)
-each, in one model — a ladder's rungs have different Δt and run one after another, the fuzz's cases at one
-rung run together; :func:`one_step` steps its rows as that many bodies of one model. The Python loop calls
-``solver.step`` once per step (Warp's CPU launches cannot be captured in a graph), reading and writing the
-state through NumPy views of Warp's CPU arrays (no copy).
-
-Compile time: Warp compiles (or loads from its cache) each kernel module on first launch. The first use of a
-variant in a process builds a one-body model and takes one step outside any run, timed apart:
-:func:`compile_stats`.
-
-Divergence: Newton neither warns nor stops; the first recorded state that is non-finite or has a component
-beyond BLOWUP_LIMIT ends the run as ``diverged at t = …``.
+Divergence: the first recorded state that is non-finite or beyond BLOWUP_LIMIT ends the run
+(``diverged at t = …``).
 """
 from __future__ import annotations
 
 import dataclasses
 import functools
-import os
-import sys
 import threading
 import time
 import warnings
 
 import numpy as np
 
-from cross_checks.core.files import kernel_cache_dir
 from cross_checks.engines import base
 from cross_checks.engines.base import EngineError, ModuleAdapter, Traits, Variant, installed_version
 from cross_checks.engines.step_floats import harness_fn
@@ -106,26 +49,15 @@ ENGINE = "newton"
 _DIST = "newton"
 PIP_HINT = "pip install 'rbcheck[newton]'"
 
-#: Semi-implicit Euler with an explicit gyroscopic term in body axes before the attitude update (energy and
-#: |L|² drift together, a phase error; the explicit term makes the energy grow), computed in float32.
+#: Semi-implicit Euler with an explicit gyroscopic term in body axes before the attitude update, in float32.
 _SYMPLECTIC_F32 = Traits(rotation_drift="body", rotation_sign=+1, precision="float32")
-#: SemiImplicit's and XPBD's step (``integrate_rigid_body``) takes ω to body axes and back with Warp's
-#: ``quat_rotate_inv``/``quat_rotate``, whose ``c = 2w² − 1`` is exact for a unit quaternion only: a vector
-#: along the rotation axis comes back as ``(2|q|² − 1) v``, so every step scales ω by ≈ (1 + 2δ)²,
-#: δ = |q|² − 1 as float32 ``normalize`` left it — not zero on average (measured +0.4 ε or −0.5 ε over a run,
-#: depending on the motion). On spins about a principal axis, where the exact step keeps |ω|, measured: |ω|
-#: moves by 0.4–1.8 ε per step on average, ALWAYS THE SAME WAY over a run (the floors' one-sided term allows
-#: 1 ε), and by up to 18.8 u in one step (the one-step allowance: CHECK_ROUNDINGS_PER_STEP = 16 u). Two
-#: ordinary steps' rounding covers both
-#: (test_semi_implicit_rounds_omega_one_way_more_than_an_ordinary_step_and_within_its_factor); Featherstone
-#: (ω stays in world axes) and MuJoCo C (float64 inside) stay within one.
+#: SemiImplicit's and XPBD's step takes ω to body axes and back with Warp's ``quat_rotate_inv`` and
+#: ``quat_rotate``, exact for a unit quaternion only: it rounds ω one way over a run, within two ordinary
+#: steps' rounding.
 _SYMPLECTIC_F32_BODY_AXES_ROUND_TRIP = dataclasses.replace(_SYMPLECTIC_F32, rounding_factor=2.0)
 
-#: Newton's solvers that step a free rigid body, their orders from Newton's documentation and source
-#: (SolverSemiImplicit: "A semi-implicit integrator using symplectic Euler"; SolverXPBD integrates the bodies
-#: with the same kernel before its position-based constraint iterations (Macklin et al. 2016, first order);
-#: SolverFeatherstone's FREE joint: "symplectic Euler" in jcalc_integrate), and their traits (module
-#: docstring).
+#: Newton's solvers that step a free rigid body, all first order (symplectic Euler; XPBD integrates the bodies
+#: with the same kernel before its constraint iterations, Macklin et al. 2016).
 VARIANTS = {
     "semi_implicit": Variant(1, "Newton SolverSemiImplicit: symplectic Euler, explicit gyroscopic term in "
                                 "body axes, quaternion q + ½Δt ω⊗q normalised (float32)",
@@ -137,10 +69,8 @@ VARIANTS = {
                                "coordinates on a FREE joint, symplectic Euler, quaternion q + ½Δt ω⊗q "
                                "normalised (float32)",
                             traits=_SYMPLECTIC_F32),
-    # SolverMuJoCo(use_mujoco_cpu=True) copies Newton's float32 state into MuJoCo's MjData before every step
-    # and back after it (update_data_interval 1): MuJoCo C's float64 step on a float32 state. Newton's own
-    # default integrator is implicitfast (MuJoCo's documentation: first order; an implicit gyroscopic term,
-    # the traits of mujoco:implicitfast)
+    # MuJoCo C's float64 implicitfast step (Newton's default integrator) on Newton's float32 state, copied in
+    # and out every step: mujoco:implicitfast's traits
     "mujoco_cpu": Variant(1, "Newton SolverMuJoCo on MuJoCo C (use_mujoco_cpu): implicitfast, Newton's "
                              "default "
                              "integrator, the state copied from and back to Newton's float32 every step",
@@ -152,24 +82,14 @@ SOLVERS = {"semi_implicit": "SolverSemiImplicit", "xpbd": "SolverXPBD", "feather
            "mujoco_cpu": "SolverMuJoCo"}
 
 #: Constructor arguments of each solver: every default that is not the scenario's physics, set explicitly
-#: (Newton 1.8.0's defaults in the comments; pinned by the tests).
+#: (Newton 1.8.0's defaults: docs/engine_conventions.md, "Newton 1.8.0").
 SOLVER_SETTINGS = {
-    # angular_damping 0.05 (ω ← (1 − 0.05 Δt) ω every step)
     "semi_implicit": {"angular_damping": 0.0},
-    # angular_damping 0.0, iterations 2 (constraint iterations, not substeps: nothing to solve here),
-    # enable_restitution False
     "xpbd": {"angular_damping": 0.0, "iterations": 2, "enable_restitution": False},
-    # angular_damping 0.05 (stored, unused by 1.8.0's step), update_mass_matrix_interval 1
     "featherstone": {"angular_damping": 0.0, "update_mass_matrix_interval": 1},
-    # MuJoCo C (not mujoco_warp), Newton's default integrator named, no contact (there is no geom either)
-    # kinematic_switchable_roots True by default: an inactive weld equality per free root (so that it can be
-    # made kinematic), off
     "mujoco_cpu": {"use_mujoco_cpu": True, "integrator": "implicitfast", "disable_contacts": True,
                    "kinematic_switchable_roots": False},
 }
-#: Solver attributes set after construction (none: XPBD's ``compute_body_velocity_from_position_delta`` is
-#: False by default and deprecated since Newton 1.6 — setting it warns; its default is pinned instead).
-SOLVER_ATTRIBUTES: dict = {}
 
 #: Variants whose state is Newton's generalized coordinates (``joint_q``/``joint_qd`` of a FREE joint).
 _GENERALIZED = frozenset({"featherstone", "mujoco_cpu"})
@@ -203,64 +123,20 @@ def _dist_version() -> str:
 
 @functools.lru_cache(maxsize=1)
 def _engine():
-    """``(warp, newton)``, imported on first use, Warp's kernel cache in ``kernel_cache_dir("newton")`` and
-    its
-    messages (device banner, module loads) off. ImportError with the engine's words when the import fails."""
+    """``(warp, newton)``, imported on first use (base.start_warp: the kernel cache in
+    ``kernel_cache_dir("newton")``, the device banner and module loads off). ImportError with the engine's
+    words when the import fails."""
     _check_installed()
-    try:
-        import warp as wp
-        folder = kernel_cache_dir(ENGINE)
-        try:
-            folder.mkdir(parents=True, exist_ok=True)
-        except OSError:   # pragma: no cover - Warp then falls back to its own cache directory
-            pass
-        wp.config.kernel_cache_dir = str(folder)
-        wp.config.quiet = True
-        wp.config.log_level = wp.LOG_WARNING
+    with base.first_import(_DIST, installed_version):
+        wp = base.start_warp(ENGINE, "LOG_WARNING", quiet=True)
         import newton
-        # Warp's native library warns on stderr that no CUDA driver exists (CPU only here)
-        with _quiet_fd2():
-            wp.init()
-    except Exception as exc:  # noqa: BLE001 - a broken install: the engine's own words
-        raise ImportError(f"newton {installed_version(_DIST)} is installed but cannot be imported: "
-                          f"{type(exc).__name__}: {exc}") from exc
     return wp, newton
-
-
-class _quiet_fd2:
-    """File descriptor 2 sent to /dev/null for the duration (what a native library prints there)."""
-
-    def __enter__(self):
-        try:
-            sys.stderr.flush()
-            self.saved = os.dup(2)
-        except (OSError, ValueError, AttributeError):   # pragma: no cover - no usable fd 2
-            self.saved = None
-            return self
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, 2)
-        os.close(devnull)
-        return self
-
-    def __exit__(self, *exc):
-        if self.saved is not None:
-            os.dup2(self.saved, 2)
-            os.close(self.saved)
-        return False
-
-
-def _engine_or_error():
-    try:
-        return _engine()
-    except ImportError as exc:
-        raise EngineError(str(exc)) from None
 
 
 # --- compile bookkeeping ----------------------------------------------------------------------------------
 
 _WARM: dict = {}    # variant -> seconds its first model build and step took (kernel compile or cache load)
-_STATS = {"compilations": 0, "compile_seconds": 0.0, "build_seconds": 0.0, "step_seconds": 0.0,
-          "body_steps": 0}
+_STATS = base.Stats(compilations=0, compile_seconds=0.0, build_seconds=0.0, step_seconds=0.0, body_steps=0)
 
 
 def compile_stats() -> dict:
@@ -276,7 +152,7 @@ def _warm(variant: str) -> None:
     """Compile (or load) every kernel module ``variant`` uses, once per process, timed apart from the runs."""
     if variant in _WARM:
         return
-    wp, newton = _engine_or_error()
+    wp, newton = base.engine_or_error(_engine)
     t0 = time.perf_counter()
     model = build_model(variant, [(1.0, np.eye(3), np.zeros(3))])
     solver = make_solver(variant, model)
@@ -295,7 +171,7 @@ def build_model(variant: str, bodies):
     gravity_W (3,))`` each): jointless links for the maximal-coordinate solvers, FREE-jointed bodies for
     Featherstone; com = 0, no shape. EngineError when ``finalize`` did not keep the mass or the inertia (its
     inertia validation corrects a tensor it finds non-physical)."""
-    wp, newton = _engine_or_error()
+    wp, newton = base.engine_or_error(_engine)
     builder = newton.ModelBuilder(gravity=(0.0, 0.0, 0.0))
     add = builder.add_body if variant in _GENERALIZED else builder.add_link
     for mass, inertia, gravity in bodies:
@@ -304,9 +180,8 @@ def build_model(variant: str, bodies):
             mass=float(mass), inertia=wp.mat33(*(float(v) for v in np.asarray(inertia, dtype=float).ravel())))
         builder.end_world()
     try:
-        # skip_validation_inertia: finalize would otherwise "correct" a tensor it finds non-physical (shift
-        # its eigenvalues to satisfy I1 + I2 >= I3 with balance_inertia, or a relative floor on the smallest
-        # one) — a body other than the scenario's; rbcheck's own body check has already refused a bad one
+        # skip_validation_inertia: finalize would otherwise "correct" a tensor it finds non-physical (another
+        # body); rbcheck's own body check has already refused a bad one
         with warnings.catch_warnings():
             warnings.simplefilter("error", category=UserWarning)
             model = builder.finalize(device="cpu", skip_validation_inertia=True)
@@ -321,9 +196,8 @@ def build_model(variant: str, bodies):
 
 
 def make_solver(variant: str, model):
-    """The variant's Newton solver for ``model``, every setting of SOLVER_SETTINGS and SOLVER_ATTRIBUTES
-    applied."""
-    _, newton = _engine_or_error()
+    """The variant's Newton solver for ``model``, every setting of SOLVER_SETTINGS applied."""
+    _, newton = base.engine_or_error(_engine)
     base.check_variant(ENGINE, VARIANTS, variant)
     with warnings.catch_warnings():
         # SolverMuJoCo warns that MuJoCo 4.0.0 is not the ~=3.17.0 Newton declares (rbcheck pins 4.0.0)
@@ -334,8 +208,6 @@ def make_solver(variant: str, model):
             hint = f" ({PIP_HINT} installs mujoco-warp)" if isinstance(exc, ImportError) else ""
             raise EngineError(f"Newton {version()}'s {SOLVERS[variant]} refused the model: "
                               f"{type(exc).__name__}: {exc}{hint}") from None
-    for attr, value in SOLVER_ATTRIBUTES.get(variant, {}).items():
-        setattr(solver, attr, value)
     if variant == "mujoco_cpu":
         # MuJoCo resets a run whose acceleration is non-finite or huge to the model's initial state
         # (autoreset, with a warning): a blow-up would continue from rest; off: divergence is seen
@@ -360,7 +232,6 @@ def from_newton_rows(q, qd):
     return np.concatenate([q[..., 0:3], qd[..., 0:3], q[..., 6:7], q[..., 3:6], qd[..., 3:6]], axis=-1)
 
 
-
 class _Views:
     """NumPy views (no copy: Warp's CPU arrays share their memory) of one State's pose, velocity and force
     arrays, shaped (N, 7), (N, 6), (N, 6)."""
@@ -382,14 +253,13 @@ class _Batch:
 
     def __init__(self, variant: str, bodies):
         self.variant = variant
-        t0 = time.perf_counter()
-        self.model = build_model(variant, bodies)
-        self.solver = make_solver(variant, self.model)
-        gen = variant in _GENERALIZED
-        self.states = [self.model.state(), self.model.state()]
-        self.views = [_Views(s, gen) for s in self.states]
-        self.weights = np.array([np.asarray(g, dtype=float) * m for m, _, g in bodies])
-        _STATS["build_seconds"] += time.perf_counter() - t0
+        with _STATS.timing("build_seconds"):
+            self.model = build_model(variant, bodies)
+            self.solver = make_solver(variant, self.model)
+            gen = variant in _GENERALIZED
+            self.states = [self.model.state(), self.model.state()]
+            self.views = [_Views(s, gen) for s in self.states]
+            self.weights = np.array([np.asarray(g, dtype=float) * m for m, _, g in bodies])
 
     def set_state(self, y) -> None:
         """Put body i at packed state ``y[i]`` in the current input state (float32)."""
@@ -482,9 +352,8 @@ def _run_batch(variant: str, dt_s: float, reqs) -> list:
     hist_q = np.empty((n_max, B, 7), dtype=np.float32)
     hist_qd = np.empty((n_max, B, 6), dtype=np.float32)
     done = np.zeros(B, dtype=bool)
-    t0 = time.perf_counter()
     steps = 0
-    with np.errstate(all="ignore"):
+    with _STATS.timing("step_seconds"), np.errstate(all="ignore"):
         for i in range(n_max):
             if i and varying:
                 v = batch.views[0]
@@ -504,7 +373,6 @@ def _run_batch(variant: str, dt_s: float, reqs) -> list:
                 done |= bad_rows(from_newton_rows(v.q, v.qd))
                 if done.all():
                     break
-    _STATS["step_seconds"] += time.perf_counter() - t0
     _STATS["body_steps"] += steps * B
     runs = []
     with np.errstate(all="ignore"):
@@ -542,10 +410,8 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
             y_dec[:, 3:6] *= gv
             y_dec[:, 10:13] *= gw
             batch.set_state(y_dec)
-            t0 = time.perf_counter()
-            with np.errstate(all="ignore"):
+            with _STATS.timing("step_seconds"), np.errstate(all="ignore"):
                 batch.step(float(dt_s), ft)
-            _STATS["step_seconds"] += time.perf_counter() - t0
             _STATS["body_steps"] += len(rows)
             out[s:s + len(rows)] = batch.read()
     # each quaternion on the side of its start state's (one step turns it by less than π)
@@ -557,8 +423,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
 
 class NewtonAdapter(ModuleAdapter):
     """``newton:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
-    (``pip install 'rbcheck[newton]'``). Every variant is first order (semi-implicit Euler) and float32.
-    :func:`simulate_many` steps the requests of one Δt together in one model."""
+    (``pip install 'rbcheck[newton]'``)."""
 
     name = ENGINE
     variants = VARIANTS

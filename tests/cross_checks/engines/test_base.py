@@ -1,5 +1,8 @@
 """The pieces of cross_checks.engines.base the adapters share: the variant check, the grouped batch runner,
-the single request, ModuleAdapter's forwarding and the engine's files found without importing it."""
+the single request, ModuleAdapter's forwarding, the engine's files found without importing it, and the
+plumbing of the optional engines (fd 2 silenced, the first import's error, the fork guard, the counters)."""
+import os
+import subprocess
 import sys
 import types
 
@@ -88,3 +91,75 @@ def test_on_rows_gives_one_step_float_rows_and_returns_the_callers_shape():
         out = one_step(None, "v", 0.1, y)
         assert out.shape == shape and np.all(out == 1.0)
         assert seen[-1] == ((int(np.prod(shape[:-1])), 13), np.float64)
+
+
+def test_quiet_fd2_silences_file_descriptor_2_for_the_block_only():
+    code = ("import os\nfrom cross_checks.engines import base\nos.write(2, b'before ')\n"
+            "with base.quiet_fd2():\n    os.write(2, b'hidden ')\nos.write(2, b'after')\n"
+            "with base.quiet_fd2():\n    pass\nos.write(2, b'!')\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, timeout=120,
+                         env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
+    assert out.returncode == 0 and out.stderr == b"before after!"
+
+
+def test_first_import_tells_a_broken_install_by_its_version_and_the_engine_s_words():
+    with pytest.raises(ImportError, match=r"^mysim 1\.2 is installed but cannot be imported: "
+                                          r"AttributeError: no attribute 'x'$") as e:
+        with base.first_import("mysim", {"mysim": "1.2"}.get):
+            raise AttributeError("no attribute 'x'")
+    assert not isinstance(e.value, base.EngineNotInstalled)
+    with base.first_import("mysim", {"mysim": "1.2"}.get):
+        pass
+
+
+def test_engine_or_error_makes_an_import_failure_an_engine_error():
+    def broken():
+        raise ImportError("mysim 1.2 is installed but cannot be imported: OSError: libmysim.so")
+
+    with pytest.raises(EngineError, match="^mysim 1.2 is installed but cannot be imported: OSError"):
+        base.engine_or_error(broken)
+    assert base.engine_or_error(lambda: ("modules",)) == ("modules",)
+
+
+def test_refuse_forked_jax_refuses_only_in_a_child_forked_after_jax_started(monkeypatch):
+    base.refuse_forked_jax("never said")   # this process was not forked after JAX started
+    monkeypatch.setattr(base, "_FORKED_AFTER_JAX", [True])
+    with pytest.raises(EngineError, match="^forked: run with --jobs 1$"):
+        base.refuse_forked_jax("forked: run with --jobs 1")
+
+
+def test_stats_time_blocks_and_reset_to_their_zeros():
+    stats = base.Stats(compilations=0, step_seconds=0.0)
+    with stats.timing("step_seconds"):
+        stats["compilations"] += 2
+    assert stats["compilations"] == 2 and stats["step_seconds"] > 0.0
+    with pytest.raises(RuntimeError), stats.timing("step_seconds"):
+        raise RuntimeError("failed")
+    stats.reset()
+    assert dict(stats) == {"compilations": 0, "step_seconds": 0.0}
+
+
+def test_a_registry_holds_a_value_under_a_fresh_key_for_the_block_only():
+    reg = base.Registry()
+    with reg.holding("a") as ka, reg.holding("b") as kb:
+        assert isinstance(ka, np.int64) and ka != kb and reg == {int(ka): "a", int(kb): "b"}
+    assert reg == {}
+    with pytest.raises(RuntimeError), reg.holding("c"):
+        raise RuntimeError("failed")
+    assert reg == {}
+
+
+def test_weight_is_mass_times_gravity_in_world_axes():
+    from cross_checks.scenario import load_scenario
+    sc = load_scenario("projectile")
+    want = sc.problem.body.mass_kg * np.asarray(sc.problem.forces.gravity_W)
+    assert base.weight_W(sc).tolist() == want.tolist()
+
+
+def test_minus_weight_takes_the_weight_off_the_force_only():
+    wrench = base.minus_weight(lambda y: (1.0, 2.0, 3.0 + y[0], 4.0, 5.0, 6.0), np.array([0.5, 0.0, -9.75]))
+    assert wrench([0.25]) == (0.5, 2.0, 13.0, 4.0, 5.0, 6.0)
+
+
+def test_batches_are_padded_to_the_next_power_of_two():
+    assert [base.power_of_two(n) for n in (1, 2, 3, 4, 5, 64, 65)] == [1, 2, 4, 4, 8, 64, 128]

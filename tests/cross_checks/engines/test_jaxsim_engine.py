@@ -594,3 +594,14 @@ def test_the_link_carries_the_mass_and_inertia_to_a_few_roundings_and_a_wrong_on
     je._model.cache_clear()
     with pytest.raises(je.EngineError, match="spatial inertia"):
         je.build_model(scenario_from_parts(body="mass = 1.3\ninertia = [1.0, 5.0, 5.0]"), SIE)
+
+
+def test_a_process_forked_after_jax_started_refuses_with_an_engine_error(monkeypatch):
+    from cross_checks.engines import base
+    monkeypatch.setattr(base, "_FORKED_AFTER_JAX", [True])   # what base's fork hook sets in such a child
+    sc = load_scenario("projectile")
+    said = "forked after JAX started in its parent.*--jobs 1"
+    with pytest.raises(je.EngineError, match=said):
+        je.simulate(sc, SIE, 0.01, 3)
+    with pytest.raises(je.EngineError, match=said):
+        je.one_step(sc, SIE, 0.01, np.ones((2, 13)))
