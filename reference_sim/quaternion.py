@@ -31,6 +31,7 @@ __all__ = [
     "geodesic_angle",
     "quat_canonical",
     "sign_continuous",
+    "same_side",
     "euler_zxy_from_quat",
     "quat_from_euler_zxy",
 ]
@@ -187,6 +188,16 @@ def sign_continuous(q, first=None):
         head = -1.0 if first is not None and float(np.dot(q[0], np.asarray(first, dtype=float))) < 0 else 1.0
     step = np.where(dots < 0, -1.0, 1.0)
     return q * np.cumprod(np.concatenate([[head], step]))[:, None]
+
+
+def same_side(q, q_ref):
+    """Quaternions ``q`` (..., 4), each with the sign that makes its dot product with ``q_ref``'s (same shape)
+    non-negative: after one step from ``q_ref``, which turns by less than π, the representative of ±q on
+    ``q_ref``'s side. A row whose dot product is not finite keeps its sign."""
+    q = np.asarray(q, dtype=float)
+    with np.errstate(invalid="ignore", over="ignore"):
+        dots = np.einsum("...i,...i->...", q, np.asarray(q_ref, dtype=float))
+    return q * np.where(dots < 0.0, -1.0, 1.0)[..., None]
 
 
 def geodesic_angle(q_ref, q):

@@ -632,13 +632,21 @@ class ModuleAdapter(EngineAdapter):
     where the engine batches, ``simulate_many(variant, requests)`` — as every built-in adapter is written.
     The methods look the functions up when called.
 
-    :meth:`source_files` is the module, the modules of ``harness`` (dotted names of the code its loops run
-    besides its own, e.g. the plain-float harness ``cross_checks.engines.step_floats``), and
+    ``name`` and ``variants`` default to the module's ``ENGINE`` and ``VARIANTS``. :meth:`source_files` is the
+    module, the modules of ``harness`` (dotted names of the code its loops run besides its own), and
     :meth:`engine_files` (the engine's own files: override it).
     """
 
-    #: Dotted names of the modules besides the adapter's own whose code decides its results.
-    harness: tuple = ()
+    #: Dotted names of the modules besides the adapter's own whose code decides its results (default: the
+    #: plain-float harness that evaluates the forces between an engine's steps).
+    harness: tuple = ("cross_checks.engines.step_floats",)
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        module = sys.modules[cls.__module__]
+        for attr, default in (("name", "ENGINE"), ("variants", "VARIANTS")):
+            if attr not in cls.__dict__ and hasattr(module, default):
+                setattr(cls, attr, getattr(module, default))
 
     def _engine(self):
         return sys.modules[type(self).__module__]

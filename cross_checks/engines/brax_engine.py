@@ -441,8 +441,7 @@ class BraxAdapter(ModuleAdapter):
     """``brax:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
     (``pip install 'rbcheck[brax]'``)."""
 
-    name = ENGINE
-    variants = VARIANTS
+    harness = ()
 
     def engine_files(self) -> list:
         """brax's pipeline sources (found without importing brax)."""

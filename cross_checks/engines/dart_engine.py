@@ -23,7 +23,7 @@ import numpy as np
 from cross_checks.engines import base
 from cross_checks.engines.base import EngineError, ModuleAdapter, Variant
 from cross_checks.engines.step_floats import bad_floats, harness_fn
-from reference_sim.quaternion import quat_exp, quat_log, sign_continuous
+from reference_sim.quaternion import quat_exp, quat_log, same_side, sign_continuous
 from reference_sim.simulate import Run, blowup_words, diverged
 
 dart, _IMPORT_ERROR = base.optional_import("dartpy")
@@ -227,19 +227,13 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
         B.world.step()
         out[i] = B.read()
     y = from_dart_state(out)
-    # each quaternion on the side of its start state's (one step turns it by less than π)
-    sign = np.where(np.einsum("ij,ij->i", y[:, 6:10], y_start[:, 6:10]) < 0.0, -1.0, 1.0)
-    y[:, 6:10] *= sign[:, None]
+    y[:, 6:10] = same_side(y[:, 6:10], y_start[:, 6:10])
     return y
 
 
 class DartAdapter(ModuleAdapter):
     """``dart:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
     (``pip install 'rbcheck[dart]'``)."""
-
-    name = ENGINE
-    variants = VARIANTS
-    harness = ("cross_checks.engines.step_floats",)
 
     def engine_files(self) -> list:
         """dartpy's compiled module (a rebuilt or reinstalled dartpy is a new engine)."""

@@ -261,7 +261,6 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
 class DrakeAdapter(ModuleAdapter):
     """``drake:VARIANT`` — registered under the entry-point group ``rbcheck.engines``."""
 
-    name = ENGINE
     variants = {v: Variant(float(order), desc, traits=TRAITS[v]) for v, (_, order, desc) in VARIANTS.items()}
 
     def engine_files(self) -> list:

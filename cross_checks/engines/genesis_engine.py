@@ -525,10 +525,6 @@ class GenesisAdapter(ModuleAdapter):
     """``genesis:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
     (``pip install 'rbcheck[genesis]'``)."""
 
-    name = ENGINE
-    variants = VARIANTS
-    harness = ("cross_checks.engines.step_floats",)
-
     def engine_files(self) -> list:
         """Genesis's rigid solver sources (read from the installed distribution without importing it)."""
         return list(_genesis_files())

@@ -400,10 +400,6 @@ class JaxsimAdapter(ModuleAdapter):
     """``jaxsim:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
     (``pip install 'rbcheck[jaxsim]'``)."""
 
-    name = ENGINE
-    variants = VARIANTS
-    harness = ("cross_checks.engines.step_floats",)
-
     @property
     def compile_seconds(self) -> float:
         """Seconds this process spent compiling jaxsim's run and one-step functions (apart from stepping)."""

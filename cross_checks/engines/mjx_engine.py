@@ -426,8 +426,6 @@ class MjxAdapter(ModuleAdapter):
     """``mjx:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
     (``pip install 'rbcheck[mjx]'``)."""
 
-    name = ENGINE
-    variants = VARIANTS
     harness = ("cross_checks.engines.step_floats", "cross_checks.engines.mujoco_engine")
 
     def engine_files(self) -> list:

@@ -551,10 +551,6 @@ def _rollout_steps(reqs, mods, datas, state, xfrc, per_step, g, weights, qpos, q
 class MujocoAdapter(ModuleAdapter):
     """``mujoco:VARIANT`` — registered under the entry-point group ``rbcheck.engines``."""
 
-    name = ENGINE
-    variants = VARIANTS
-    harness = ("cross_checks.engines.step_floats",)
-
     def engine_files(self) -> list:
         """MuJoCo's shared library."""
         return base.library_files(mujoco)

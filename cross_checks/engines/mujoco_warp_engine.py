@@ -34,7 +34,7 @@ import numpy as np
 from cross_checks.engines import base
 from cross_checks.engines.base import EngineError, ModuleAdapter, Traits, Variant, installed_version
 from cross_checks.engines.step_floats import harness_fn
-from reference_sim.quaternion import sign_continuous
+from reference_sim.quaternion import same_side, sign_continuous
 from reference_sim.simulate import Run, recorded_run
 
 __all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate", "simulate_many", "one_step",
@@ -405,9 +405,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
             _STATS["body_steps"] += n
             with np.errstate(all="ignore"):
                 y = to_packed(W.qpos.astype(float), W.qvel.astype(float))
-            # each quaternion on the side of its start state's (one step turns it by less than π)
-            sign = np.where(np.einsum("ij,ij->i", y[:, 6:10], rows[:, 6:10]) < 0.0, -1.0, 1.0)
-            y[:, 6:10] *= sign[:, None]
+            y[:, 6:10] = same_side(y[:, 6:10], rows[:, 6:10])
             out[s:s + n] = y
     return out
 
@@ -416,8 +414,6 @@ class MujocoWarpAdapter(ModuleAdapter):
     """``mujoco_warp:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
     (``pip install 'rbcheck[mujoco_warp]'``)."""
 
-    name = ENGINE
-    variants = VARIANTS
     harness = ("cross_checks.engines.step_floats", "cross_checks.engines.mujoco_engine")
 
     def engine_files(self) -> list:

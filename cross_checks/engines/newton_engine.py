@@ -38,7 +38,7 @@ import numpy as np
 from cross_checks.engines import base
 from cross_checks.engines.base import EngineError, ModuleAdapter, Traits, Variant, installed_version
 from cross_checks.engines.step_floats import harness_fn
-from reference_sim.quaternion import sign_continuous
+from reference_sim.quaternion import same_side, sign_continuous
 from reference_sim.simulate import Run, bad_rows, diverged, recorded_run
 
 __all__ = ["ENGINE", "VARIANTS", "SOLVERS", "SOLVER_SETTINGS", "EngineError", "version", "simulate",
@@ -414,20 +414,13 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
                 batch.step(float(dt_s), ft)
             _STATS["body_steps"] += len(rows)
             out[s:s + len(rows)] = batch.read()
-    # each quaternion on the side of its start state's (one step turns it by less than π)
-    with np.errstate(all="ignore"):
-        sign = np.where(np.einsum("ij,ij->i", out[:, 6:10], y_start[:, 6:10]) < 0.0, -1.0, 1.0)
-    out[:, 6:10] *= sign[:, None]
+    out[:, 6:10] = same_side(out[:, 6:10], y_start[:, 6:10])
     return out
 
 
 class NewtonAdapter(ModuleAdapter):
     """``newton:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
     (``pip install 'rbcheck[newton]'``)."""
-
-    name = ENGINE
-    variants = VARIANTS
-    harness = ("cross_checks.engines.step_floats",)
 
     def engine_files(self) -> list:
         """Newton's solver sources (found without importing Newton or Warp)."""

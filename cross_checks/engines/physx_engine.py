@@ -31,7 +31,7 @@ import numpy as np
 from cross_checks.engines import base
 from cross_checks.engines.base import EngineError, ModuleAdapter, Traits, Variant, installed_version
 from cross_checks.engines.step_floats import harness_fn
-from reference_sim.quaternion import sign_continuous
+from reference_sim.quaternion import same_side, sign_continuous
 from reference_sim.simulate import BLOWUP_LIMIT, Run, blowup_words, diverged
 
 __all__ = ["ENGINE", "VARIANTS", "BODY_SETTINGS", "PACK_TO_PACKED", "EngineError", "version", "simulate",
@@ -390,20 +390,13 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     _STATS["step_seconds"] += time.perf_counter() - t0
     _STATS["body_steps"] += len(y_start)
     out = S.read()[:, PACK_TO_PACKED].astype(float)
-    # each quaternion on the side of its start state's (one step turns it by less than π)
-    with np.errstate(invalid="ignore"):
-        sign = np.where(np.einsum("ij,ij->i", out[:, 6:10], y_start[:, 6:10]) < 0.0, -1.0, 1.0)
-    out[:, 6:10] *= sign[:, None]
+    out[:, 6:10] = same_side(out[:, 6:10], y_start[:, 6:10])
     return out
 
 
 class PhysxAdapter(ModuleAdapter):
     """``physx:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
     (``pip install 'rbcheck[physx]'``)."""
-
-    name = ENGINE
-    variants = VARIANTS
-    harness = ("cross_checks.engines.step_floats",)
 
     def engine_files(self) -> list:
         """SAPIEN's compiled module and bundled library (PhysX is linked into them)."""

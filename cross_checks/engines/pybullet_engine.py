@@ -331,10 +331,6 @@ def _one_steps(B, scenario, dt_s: float, y_start) -> np.ndarray:
 class PybulletAdapter(ModuleAdapter):
     """``pybullet:VARIANT`` — registered under the entry-point group ``rbcheck.engines``."""
 
-    name = ENGINE
-    variants = VARIANTS
-    harness = ("cross_checks.engines.step_floats",)
-
     def engine_files(self) -> list:
         """PyBullet's compiled module."""
         return base.library_files(p)

@@ -26,7 +26,7 @@ import numpy as np
 from cross_checks.engines import base
 from cross_checks.engines.base import EngineError, ModuleAdapter, Traits, Variant
 from cross_checks.engines.step_floats import bad_floats, harness_fn
-from reference_sim.quaternion import quat_from_matrix, sign_continuous
+from reference_sim.quaternion import quat_from_matrix, same_side, sign_continuous
 from reference_sim.simulate import Run, blowup_words, diverged
 
 rapier, _IMPORT_ERROR = base.optional_import("rapier3d")
@@ -320,19 +320,13 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     W.step()
     quarantined = W.quarantined()
     out = np.array([W.read(i) if i not in quarantined else [math.nan] * 13 for i in range(len(y_start))])
-    # each quaternion on the side of its start state's (one step turns it by less than π)
-    sign = np.where(np.einsum("ij,ij->i", out[:, 6:10], y_start[:, 6:10]) < 0.0, -1.0, 1.0)
-    out[:, 6:10] *= sign[:, None]
+    out[:, 6:10] = same_side(out[:, 6:10], y_start[:, 6:10])
     return out
 
 
 class RapierAdapter(ModuleAdapter):
     """``rapier:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
     (``pip install 'rbcheck[rapier]'``)."""
-
-    name = ENGINE
-    variants = VARIANTS
-    harness = ("cross_checks.engines.step_floats",)
 
     def engine_files(self) -> list:
         """rapier3d's compiled module (a rebuilt or reinstalled wheel is a new engine)."""

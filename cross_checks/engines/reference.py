@@ -81,5 +81,4 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
 class ReferenceAdapter(ModuleAdapter):
     """``reference:VARIANT`` — registered under the entry-point group ``rbcheck.engines``."""
 
-    name = ENGINE
-    variants = VARIANTS
+    harness = ()

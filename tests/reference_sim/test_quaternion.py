@@ -21,6 +21,7 @@ from reference_sim.quaternion import (
     quat_norm,
     quat_normalize,
     rotate,
+    same_side,
     sign_continuous,
 )
 from tests.helpers.tolerances import QUAT_ALGEBRA, QUAT_ROUND_TRIP, euler_round_trip_tol
@@ -171,6 +172,20 @@ def test_sign_continuous_removes_every_jump_to_minus_q_and_keeps_the_orientation
     assert np.allclose(smooth, q)                                          # and here the same signs
     assert np.allclose(sign_continuous(jumpy, first=-q[0]), -q)            # the first row follows `first`
     assert np.allclose(sign_continuous(jumpy)[0], jumpy[0])                # without it, the first is kept
+
+
+def test_same_side_picks_the_sign_nearest_the_reference_and_keeps_the_orientation():
+    rng = np.random.default_rng(5)
+    q_ref = rng.normal(size=(300, 4))
+    q_ref /= np.linalg.norm(q_ref, axis=1)[:, None]
+    q = q_ref + 0.4 * rng.normal(size=(300, 4))          # a step away, some of it past a quarter turn
+    q /= np.linalg.norm(q, axis=1)[:, None]
+    flips = rng.random(300) < 0.5
+    out = same_side(np.where(flips[:, None], -q, q), q_ref)
+    by_hand = np.array([qi if np.dot(qi, ri) >= 0 else -qi for qi, ri in zip(q, q_ref)])
+    assert np.array_equal(out, by_hand)
+    row = same_side(np.array([np.nan, 0.0, 0.0, 1.0]), np.array([0.0, 0.0, 0.0, -1.0]))
+    assert np.isnan(row[0]) and row[3] == 1.0                                   # not finite: sign kept
 
 
 def test_sign_continuous_leaves_a_non_finite_row_and_an_empty_array_alone():
