@@ -1,28 +1,16 @@
 """``rbcheck bench``: throughput of the batched reference vs MuJoCo and PyBullet, and the cold sweep
-against its floor, measured in one run.
-
-Every engine steps the same free bodies — the SAME number N of them in every row of the table —:
-I = diag(1, 2, 3) kg m², m = 1 kg, gravity (0, 0, −9.81), a constant body-axes torque (0, 0, 0.2) N m,
-random initial ω, h = 1e-3 s. Every measurement is repeated (``repeats``) and reported as its median
-and spread (min, max). Results are ratios against the engines measured in the same process, never
-absolute thresholds.
-
-**The sweep against its floor.** A cold sweep (``--no-cache``: every run, reference and report computed)
-of the catalog (``quick``: QUICK_SCENARIOS) with every reference, MuJoCo and PyBullet variant, in a
-temporary directory with its own cache, on all usable cores. Its floor is what the same physics costs
-in the fastest engine: ``total engine steps × one bare mj_step of a free body (measured here) ÷ cores``.
-The run stage (references, runs, metrics, results files) and the report stage are timed separately;
-``sweep_floor_ratio`` = (run + report) / floor, ``sweep_run_floor_ratio`` = run / floor.
+against its floor, measured in one run (what each measures, the body and the floor: docs/speed.md,
+"What `rbcheck bench` measures"). Every measurement is repeated (``repeats``): median and (min, max);
+results are ratios against the engines measured in the same process, never absolute thresholds.
 
 Keys written by ``--json`` (fixed; medians): reference_batched_body_steps_per_s,
 mujoco_best_body_steps_per_s, pybullet_body_steps_per_s, reference_single_us_per_step,
 mujoco_single_us_per_step, mujoco_bare_step_us, drake_single_us_per_step (None without Drake),
-sweep_floor_ratio, sweep_run_floor_ratio, ``batched_adapters`` {ENGINE:VARIANT: body-steps/s through the
-adapter's ``simulate_many``} (mujoco:euler and every installed engine that batches), plus the individual
-measurements and ``measurements`` {name: {median, min, max, repeats}}.
-
-Drake (``drake_*``) is measured on one trajectory only, beside MuJoCo on the same trajectory through
-the same adapter interface (``mujoco_adapter_single_us_per_step``): the per-step cost a sweep pays.
+sweep_floor_ratio ((run + report) / floor), sweep_run_floor_ratio (run / floor), ``batched_adapters``
+{ENGINE:VARIANT: body-steps/s through the adapter's ``simulate_many``} (mujoco:euler and every installed
+engine that batches), plus the individual measurements and ``measurements`` {name: {median, min, max,
+repeats}}. Drake is measured on one trajectory only, beside MuJoCo through the same adapter interface
+(``mujoco_adapter_single_us_per_step``).
 """
 from __future__ import annotations
 

@@ -1,15 +1,8 @@
 """PNG figures of one scenario, drawn from the saved results only (one idea per figure).
 
-Every figure with time series or Δt ladders is a grid of small multiples: one column per engine family
-(``reference``, ``mujoco``, ``pybullet``, any other engine's name — the part of ``ENGINE:VARIANT`` before
-the colon; more than MAX_COLUMNS families wrap into blocks of rows), one row per quantity, a row sharing
-its y axis so the families compare at a glance; each panel holds only its family's variants, each in the
-style it has in every figure (``variant_styles``: the family's hue, a shade, a dash pattern and a marker),
-named in one legend per family under the panels. Curves that coincide are drawn so that both are seen and
-named in the caption; quaternions are drawn sign-continuous. A run that diverged is drawn up to its
-divergence and marked there (×); the y limits come from the runs that did not diverge, so a blow-up does
-not flatten the others. Panels of a quantity that does not move, or that every variant reproduces
-exactly, are left out and said in a note; a figure with nothing to show is not drawn.
+Small multiples: one column per engine family (more than MAX_COLUMNS wrap into blocks of rows), one row
+per quantity sharing its y axis, each variant in its one style (``variant_styles``), one legend per
+family under the panels; what is drawn, marked or left out: docs/results.md, "The report" (Figures).
 
 Figures (``plots/<scenario>__<kind>.png``):
 

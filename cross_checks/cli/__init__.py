@@ -363,29 +363,24 @@ def _use_engine_files(paths) -> None:
         raise BadInput(str(exc)) from None
 
 
-def _positive_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a whole number, got {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {v}")
-    return v
+def _whole_number(least: int):
+    """An option type: a whole number, refused below ``least``."""
+    def option(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be a whole number, got {text!r}") from None
+        if v < least:
+            raise argparse.ArgumentTypeError(f"must be >= {least}, got {v}")
+        return v
+    return option
 
 
+_positive_int = _whole_number(1)
+_nonnegative_int = _whole_number(0)
 _seconds_option = _at_most(_positive_float, MAX_OPTION_SECONDS, " s (11.6 days)")
 _jobs_option = _at_most(_positive_int, MAX_OPTION_JOBS)
 _repeats_option = _at_most(_positive_int, 100)
-
-
-def _nonnegative_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a whole number, got {text!r}") from None
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {v}")
-    return v
 
 
 def _default_or_none(engine: str):

@@ -1,14 +1,10 @@
 """Self-verifying cache entries: an entry is trusted only when it proves it is the entry asked for.
 
-An entry is an ``.npz`` of plain arrays (no pickles) plus two more: ``__key__``, the cache key it was
-stored under, and ``__mac__``, an HMAC-SHA256 of the key and of every array (name, dtype, shape,
-bytes) under a random secret kept in the cache directory (``.secret``, mode 0600). :func:`load`
-returns None — so the caller recomputes and :func:`store` replaces the entry — for anything that does
-not verify: a missing, truncated, bit-flipped or empty file, an entry copied under another key, or
-numbers edited by hand (without the secret a forger cannot make a valid MAC). It never raises.
-
-Entries live in the user's cache directory (:func:`cache_dir`), never inside a results directory;
-what their keys are made of is :mod:`cross_checks.sweep.jobs`'s and :mod:`cross_checks.sweep.fingerprint`'s.
+An entry is an ``.npz`` of plain arrays (no pickles) plus ``__key__`` (the key it was stored under) and
+``__mac__`` (an HMAC-SHA256 of the key and of every array's name, dtype, shape and bytes under the
+secret ``.secret`` of the cache directory). :func:`load` returns None for anything that does not verify
+and never raises; :func:`store` never breaks a sweep. Entries live in :func:`cache_dir`, never inside a
+results directory. What is refused and what keys hold: docs/hardening.md, "The cache".
 """
 from __future__ import annotations
 
