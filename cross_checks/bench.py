@@ -58,16 +58,21 @@ def _initial_w(n, seed=0):
     return np.random.default_rng(seed).normal(size=(n, 3))
 
 
+def _bench_problem(w_W):
+    """The benchmark's body as a reference_sim Problem at rest at the origin, angular velocity ``w_W``
+    (rad/s, world axes)."""
+    from reference_sim.body import RigidBody
+    from reference_sim.forces import ForceModel, Torque
+    from reference_sim.state import Problem, State
+    return Problem(RigidBody(1.0, MOMENTS), ForceModel(gravity_W=G, torques=(Torque(TORQUE_B, "body"),)),
+                   State(np.zeros(3), np.zeros(3), np.array([1.0, 0, 0, 0]), w_W))
+
+
 def reference_batched(n_bodies, n_steps, variant, repeats):
     """The batched reference: N bodies as N members of one compiled run (reference_sim.simulate.run_members),
     every state recorded."""
-    from reference_sim.body import RigidBody
-    from reference_sim.forces import ForceModel, Torque
     from reference_sim.simulate import run_members
-    from reference_sim.state import Problem, State
-    problem = Problem(RigidBody(1.0, MOMENTS), ForceModel(gravity_W=G, torques=(Torque(TORQUE_B, "body"),)),
-                      State(np.zeros(3), np.zeros(3), np.array([1.0, 0, 0, 0]), np.zeros(3)))
-    members = problem.members.take(np.zeros(n_bodies, dtype=int))
+    members = _bench_problem(np.zeros(3)).members.take(np.zeros(n_bodies, dtype=int))
     y0 = np.zeros((n_bodies, 13))
     y0[:, 6] = 1.0
     y0[:, 10:13] = _initial_w(n_bodies)
@@ -75,12 +80,8 @@ def reference_batched(n_bodies, n_steps, variant, repeats):
 
 
 def reference_single_us(n_steps, repeats, variant="expmap_gyro"):
-    from reference_sim.body import RigidBody
-    from reference_sim.forces import ForceModel, Torque
     from reference_sim.simulate import simulate
-    from reference_sim.state import Problem, State
-    problem = Problem(RigidBody(1.0, MOMENTS), ForceModel(gravity_W=G, torques=(Torque(TORQUE_B, "body"),)),
-                      State(np.zeros(3), np.zeros(3), np.array([1.0, 0, 0, 0]), _initial_w(1)[0]))
+    problem = _bench_problem(_initial_w(1)[0])
     return _per_step_us(n_steps, lambda: simulate(problem, variant, H, n_steps), repeats)
 
 
@@ -287,11 +288,10 @@ def _sweep_once(scenarios, variants, jobs, render) -> dict:
     import pandas as pd
 
     from cross_checks.sweep import run_sweep
+    from cross_checks.sweep.cache import using_cache_dir
     t = {}
-    with tempfile.TemporaryDirectory(prefix="rbcheck-bench-") as tmp:
-        old = os.environ.get("RBCHECK_CACHE_DIR")
-        # a cold cache; the user's stays untouched
-        os.environ["RBCHECK_CACHE_DIR"] = os.path.join(tmp, "cache")
+    with (tempfile.TemporaryDirectory(prefix="rbcheck-bench-") as tmp,
+          using_cache_dir(os.path.join(tmp, "cache"))):   # a cold cache; the user's stays untouched
 
         def finish(staging):
             t["run"] = time.perf_counter() - t0
@@ -301,17 +301,10 @@ def _sweep_once(scenarios, variants, jobs, render) -> dict:
                 r0 = time.perf_counter()
                 render(staging)
                 t["report"] = time.perf_counter() - r0
-        try:
-            t0 = time.perf_counter()
-            # Drake's second reference is a cross-check of the references, not engine steps of this sweep
-            # (the default sweep: references, MuJoCo and PyBullet; the README's main command has no Drake).
-            summary = run_sweep(scenarios, variants, os.path.join(tmp, "out"), jobs=jobs, use_cache=False,
-                                progress=False, finish=finish, second_reference=False)
-        finally:
-            if old is None:
-                os.environ.pop("RBCHECK_CACHE_DIR", None)
-            else:
-                os.environ["RBCHECK_CACHE_DIR"] = old
+        t0 = time.perf_counter()
+        # Drake's second reference is a cross-check of the references, not engine steps of this sweep
+        summary = run_sweep(scenarios, variants, os.path.join(tmp, "out"), jobs=jobs, use_cache=False,
+                            progress=False, finish=finish, second_reference=False)
     return {"run_s": t["run"], "report_s": t.get("report", 0.0), "steps": t["steps"],
             "runs": summary["run"]["runs"], "s_in_simulate": summary["run"]["cpu_s_in_runs"]}
 
@@ -346,9 +339,7 @@ def run_bench(quick: bool = False, repeats: int = 3, render=None, sweep: bool = 
     import mujoco
 
     from cross_checks.engines import pybullet_engine  # imports pybullet with its stderr banner silenced
-    # One N for every row: MuJoCo's multi-body model is at its best around N = 1000 (10,000 free bodies
-    # in one model take 35 s to compile and step slower per body), so every engine steps N = 1000
-    # bodies (quick: 200) — a row compares engines on the same work.
+    # one N for every row: a row compares engines on the same work
     n = 200 if quick else 1000
     steps = 20 if quick else 100
     m = {

@@ -8,6 +8,7 @@ results directory. What is refused and what keys hold: docs/hardening.md, "The c
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import hmac
 import os
@@ -18,11 +19,24 @@ import numpy as np
 
 from cross_checks.core.files import cache_dir
 
-__all__ = ["load", "store", "mac", "cache_dir"]
+__all__ = ["load", "store", "mac", "cache_dir", "using_cache_dir"]
 
 _SECRETS: dict = {}
 
 
+@contextlib.contextmanager
+def using_cache_dir(path):
+    """Use ``path`` as rbcheck's cache directory ($RBCHECK_CACHE_DIR, read by :func:`cache_dir`) for the
+    duration; the previous setting is put back."""
+    old = os.environ.get("RBCHECK_CACHE_DIR")
+    os.environ["RBCHECK_CACHE_DIR"] = str(path)
+    try:
+        yield
+    finally:
+        if old is None:
+            os.environ.pop("RBCHECK_CACHE_DIR", None)
+        else:
+            os.environ["RBCHECK_CACHE_DIR"] = old
 
 
 def _secret(root: Path) -> bytes:
