@@ -72,8 +72,7 @@ class Results:
         return next(s for s in self.scenarios if s["name"] == name)
 
     def rows_for(self, scenario, engine=None) -> list:
-        """The rows of ``scenario`` (of one ``engine`` variant), in file order (indexed once: the figures
-        ask ~2,300 times, and a scan of every row each time was a twentieth of their drawing time)."""
+        """The rows of ``scenario`` (of one ``engine`` variant), in file order (indexed on first use)."""
         if self._index is None:
             self._index = {}
             for r in self.rows:

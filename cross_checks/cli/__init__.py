@@ -759,11 +759,6 @@ def verdict_count(summary) -> tuple:
     return total, wrong
 
 
-def _inexpressible_lines(cannot) -> list:
-    """One line per (scenario, variant) its engine cannot take, with the engine's reason."""
-    return [f"{r['engine']} on {r['scenario']}: {r['reason']}" for r in cannot]
-
-
 def _sweep_outcome(summary, out, n_scenarios, n_variants, elapsed_s) -> int:
     """Print what the sweep did and every result that contradicts the expectations (then exit 1); the last
     line says whether every verdict was as expected."""
@@ -785,8 +780,8 @@ def _sweep_outcome(summary, out, n_scenarios, n_variants, elapsed_s) -> int:
     if cannot:
         say(f"rbcheck sweep: {len(cannot)} (scenario, variant) pair(s) not run because the engine cannot "
             "express the scenario (summary.json not_expressible; the report lists them):")
-        for line in _inexpressible_lines(cannot)[:10]:
-            say(f"  {line}")
+        for r in cannot[:10]:   # each with its engine's reason
+            say(f"  {r['engine']} on {r['scenario']}: {r['reason']}")
     fails = _gate_failures(summary)
     total, wrong = verdict_count(summary)
     failed = run.get("failed_runs", 0)

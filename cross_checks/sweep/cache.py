@@ -82,7 +82,7 @@ def store(root: Path, path: Path, key: str, arrays: dict) -> None:
     try:
         save_npz_atomic(Path(path),
                         {**arrays, "__key__": np.array(key), "__mac__": np.array(mac(root, key, arrays))},
-                        compress=False)   # read back by rbcheck only: written ~20x faster uncompressed
+                        compress=False)   # read back by rbcheck only
     except OSError:
         pass
 

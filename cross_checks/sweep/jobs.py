@@ -299,9 +299,7 @@ def _measured_of(arrays: dict):
 
 
 _REF_MEMO: dict = {}
-#: References a worker keeps in memory: the jobs run longest first, which interleaves the scenarios, so a
-#: memo of one would reread a reference file for almost every job; the catalog's largest reference is
-#: 1.7 MB (16,001 times x 13), so a sweep's references fit many times over.
+#: References a worker keeps in memory (the jobs run longest first, which interleaves the scenarios).
 REFERENCE_MEMO_SIZE = 32
 
 
