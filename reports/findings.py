@@ -112,7 +112,6 @@ def findings(res) -> list:
 def _contradictions(res, c) -> list:
     """1. Results that contradict the expectations, per scenario and variant."""
     bad = []
-    # 1. results that contradict the expectations
     for (sc, eng), rs in sorted(_group([r for r in c.recs if r["matches_expectation"] is False],
                                        lambda r: (r["scenario"], r["engine"])).items(),
                                 key=lambda kv: (c.scen_order.get(kv[0][0], 99),
@@ -126,7 +125,6 @@ def _contradictions(res, c) -> list:
         if notes:
             text += " (" + "; ".join(sorted(notes)) + ")"
         bad.append(Finding("bad", text, sc, eng))
-
     return bad
 
 
@@ -134,7 +132,6 @@ def _failed_and_diverged(res, c) -> tuple:
     """2. Failed runs (bad) and diverged runs (information: left out of the order fits)."""
     bad = []
     info = []
-    # 2. failed and diverged runs
     for (sc, eng), rows in _group([r for r in res.rows if r["status"] == "failed"],
                                   lambda r: (r["scenario"], r["engine"])).items():
         msgs = sorted({r["message"] for r in rows})
@@ -147,14 +144,12 @@ def _failed_and_diverged(res, c) -> tuple:
         info.append(Finding("info",
                             f"{eng} diverged on {sc} at {where}; those runs are left out of the order fits.",
                             sc, eng))
-
     return bad, info
 
 
 def _expected_non_convergence(res, c) -> list:
     """3. Expected non-convergence, with the reason (one line when most variants share it)."""
     explained = []
-    # 3. expected non-convergence, with the reason
     exp_rs = [r for r in c.recs if r["expected_verdict"] == "does_not_converge" and r["matches_expectation"]]
     per_engine = {}
     for (sc, reason), rs in sorted(_group(exp_rs, lambda r: (r["scenario"], r["reason"])).items(),
@@ -181,14 +176,12 @@ def _expected_non_convergence(res, c) -> list:
         reasons = [a for a in reasons if not any(b != a and b.startswith(a) for b in reasons)]
         explained.append(Finding("explained", f"{eng} does not converge on {sc}: {_error_ranges(er)}; "
                                               + "; ".join(reasons) + ".", sc, eng))
-
     return explained
 
 
 def _pre_asymptotic(res, c) -> list:
     """3b. No claim on this ladder (pre-asymptotic), with the reason (physics, or the errors themselves)."""
     explained = []
-    # 3b. no claim on this ladder (pre-asymptotic), with the reason (physics, or the errors themselves)
     pre = [r for r in c.recs if r["verdict"] == "pre_asymptotic"]
     for (sc, eng), rs in sorted(_group(pre, lambda r: (r["scenario"], r["engine"])).items(),
                                 key=lambda kv: (c.scen_order.get(kv[0][0], 99),
@@ -202,14 +195,12 @@ def _pre_asymptotic(res, c) -> list:
         if len(rs) > 1:
             text += f" (likewise, with its own numbers, for {_and(LABELS[r['quantity']] for r in rs[1:])})"
         explained.append(Finding("explained", text + ".", sc, eng))
-
     return explained
 
 
 def _exact_and_faster(res, c) -> list:
     """4. Exact to round-off, and orders above the nominal one (information)."""
     info = []
-    # 4. exact to round-off, and orders above the nominal one (information)
     exact = [r for r in c.recs
              if r["verdict"] == "at_roundoff" and c.varies.get(r["scenario"], {}).get(r["quantity"], True)]
     for (sc, q), rs in sorted(_group(exact, lambda r: (r["scenario"], r["quantity"])).items(),
@@ -230,14 +221,12 @@ def _exact_and_faster(res, c) -> list:
                             f"(order {orders}) with "
                             + _and(f"{r['engine']} (nominal {r['expected_order']:g})" for r in rs) + ".",
                             sc, None))
-
     return info
 
 
 def _conservation(res, c) -> list:
     """5. Conservation at the default Δt (information)."""
     info = []
-    # 5. conservation at the default Δt
     for s in res.scenarios:
         sc = s["name"]
         rows = [r for r in res.rows if r["scenario"] == sc and r["dt"] == s["dt_s"] and r["status"] == "ok"]
@@ -270,7 +259,6 @@ def _conservation(res, c) -> list:
                                                     for r in worst[:4])
                                     + (f" (and {len(worst) - 4} more)" if len(worst) > 4 else "")
                                     + f" at Δt = {fmt_dt(s['dt_s'])} s.", sc, None))
-
     return info
 
 
@@ -278,7 +266,6 @@ def _same_schemes(res, c) -> tuple:
     """6. Schemes that must be identical: disagreements (bad) and agreements (information)."""
     bad = []
     info = []
-    # 6. schemes that must be identical
     for (a, b), rs in _group(res.summary.get("agreement", []), lambda r: (r["a"], r["b"])).items():
         good = [r for r in rs if r["agrees"]]
         badr = [r for r in rs if not r["agrees"]]
@@ -296,7 +283,6 @@ def _same_schemes(res, c) -> tuple:
                                 f"{b} reproduces {a} on {len(good)} scenario(s) to {fmt(worst)} (largest "
                                 f"relative final-state difference at the default Δt): {rs[0]['reason']}.",
                                 None, b))
-
     return bad, info
 
 
