@@ -117,7 +117,6 @@ def time_limit(seconds: float | None, what: str):
         signal.signal(signal.SIGALRM, previous)
 
 
-
 def each_within_limits(call, items: list, time_limit_s: float | None, what: str) -> list:
     """``call(items)`` (one result per item) within the items' time limits added up; when it fails as a
     whole (over that limit, an error of its own), ``call([item])`` for each item alone within its own
