@@ -16,7 +16,7 @@ from cross_checks.core import tolerances as tol
 from cross_checks.core.quantities import QUANTITIES, UNITS
 from reports.data import LABELS
 
-__all__ = ["Finding", "findings", "fmt", "fmt_dt"]
+__all__ = ["Finding", "findings", "fmt", "fmt_dt", "group_by"]
 
 
 @dataclass(frozen=True)
@@ -78,10 +78,11 @@ def _error_ranges(recs) -> str:
     return _and(p for p, _ in parts) + f" over {span}"
 
 
-def _group(records, key):
+def group_by(items, key) -> dict:
+    """``{key(item): [items]}``, keys and items in the order the items come."""
     out = {}
-    for r in records:
-        out.setdefault(key(r), []).append(r)
+    for it in items:
+        out.setdefault(key(it), []).append(it)
     return out
 
 
@@ -112,8 +113,8 @@ def findings(res) -> list:
 def _contradictions(res, c) -> list:
     """1. Results that contradict the expectations, per scenario and variant."""
     bad = []
-    for (sc, eng), rs in sorted(_group([r for r in c.recs if r["matches_expectation"] is False],
-                                       lambda r: (r["scenario"], r["engine"])).items(),
+    for (sc, eng), rs in sorted(group_by([r for r in c.recs if r["matches_expectation"] is False],
+                                         lambda r: (r["scenario"], r["engine"])).items(),
                                 key=lambda kv: (c.scen_order.get(kv[0][0], 99),
                                                 c.var_order.get(kv[0][1], 99))):
         parts = [f"{LABELS[r['quantity']]} {r['assessment']}" for r in rs]
@@ -132,13 +133,13 @@ def _failed_and_diverged(res, c) -> tuple:
     """2. Failed runs (bad) and diverged runs (information: left out of the order fits)."""
     bad = []
     info = []
-    for (sc, eng), rows in _group([r for r in res.rows if r["status"] == "failed"],
-                                  lambda r: (r["scenario"], r["engine"])).items():
+    for (sc, eng), rows in group_by([r for r in res.rows if r["status"] == "failed"],
+                                    lambda r: (r["scenario"], r["engine"])).items():
         msgs = sorted({r["message"] for r in rows})
         dts = ", ".join(fmt_dt(r["dt"]) for r in rows)
         bad.append(Finding("bad", f"{eng} failed on {sc} at Δt = {dts} s: {'; '.join(msgs)}", sc, eng))
-    for (sc, eng), rows in _group([r for r in res.rows if r["status"] == "diverged"],
-                                  lambda r: (r["scenario"], r["engine"])).items():
+    for (sc, eng), rows in group_by([r for r in res.rows if r["status"] == "diverged"],
+                                    lambda r: (r["scenario"], r["engine"])).items():
         where = ", ".join(f"Δt = {fmt_dt(r['dt'])} s (at t = {fmt(r['diverged_at_s'], 's', 3)})"
                           for r in rows)
         info.append(Finding("info",
@@ -152,7 +153,7 @@ def _expected_non_convergence(res, c) -> list:
     explained = []
     exp_rs = [r for r in c.recs if r["expected_verdict"] == "does_not_converge" and r["matches_expectation"]]
     per_engine = {}
-    for (sc, reason), rs in sorted(_group(exp_rs, lambda r: (r["scenario"], r["reason"])).items(),
+    for (sc, reason), rs in sorted(group_by(exp_rs, lambda r: (r["scenario"], r["reason"])).items(),
                                    key=lambda kv: c.scen_order.get(kv[0][0], 99)):
         engines = sorted({r["engine"] for r in rs}, key=lambda e: c.var_order.get(e, 99))
         if len(engines) > 2:
@@ -183,7 +184,7 @@ def _pre_asymptotic(res, c) -> list:
     """3b. No claim on this ladder (pre-asymptotic), with the reason (physics, or the errors themselves)."""
     explained = []
     pre = [r for r in c.recs if r["verdict"] == "pre_asymptotic"]
-    for (sc, eng), rs in sorted(_group(pre, lambda r: (r["scenario"], r["engine"])).items(),
+    for (sc, eng), rs in sorted(group_by(pre, lambda r: (r["scenario"], r["engine"])).items(),
                                 key=lambda kv: (c.scen_order.get(kv[0][0], 99),
                                                 c.var_order.get(kv[0][1], 99))):
         rs.sort(key=lambda r: QUANTITIES.index(r["quantity"]))
@@ -203,7 +204,7 @@ def _exact_and_faster(res, c) -> list:
     info = []
     exact = [r for r in c.recs
              if r["verdict"] == "at_roundoff" and c.varies.get(r["scenario"], {}).get(r["quantity"], True)]
-    for (sc, q), rs in sorted(_group(exact, lambda r: (r["scenario"], r["quantity"])).items(),
+    for (sc, q), rs in sorted(group_by(exact, lambda r: (r["scenario"], r["quantity"])).items(),
                               key=lambda kv: (c.scen_order.get(kv[0][0], 99), QUANTITIES.index(kv[0][1]))):
         engines = sorted({r["engine"] for r in rs}, key=lambda e: c.var_order.get(e, 99))
         info.append(Finding("info", f"On {sc}, {LABELS[q]} is exact to round-off at every Δt with "
@@ -211,7 +212,7 @@ def _exact_and_faster(res, c) -> list:
     above = [r for r in c.recs
              if r["verdict"] == "converges" and r["matches_expectation"] and r["order"] is not None
              and r["expected_order"] is not None and r["order"] > r["expected_order"] + tol.SWEEP_ORDER_TOL]
-    for (sc, q), rs in sorted(_group(above, lambda r: (r["scenario"], r["quantity"])).items(),
+    for (sc, q), rs in sorted(group_by(above, lambda r: (r["scenario"], r["quantity"])).items(),
                               key=lambda kv: (c.scen_order.get(kv[0][0], 99), QUANTITIES.index(kv[0][1]))):
         rs.sort(key=lambda r: c.var_order.get(r["engine"], 99))
         lo, hi = min(r["order"] for r in rs), max(r["order"] for r in rs)
@@ -266,7 +267,7 @@ def _same_schemes(res, c) -> tuple:
     """6. Schemes that must be identical: disagreements (bad) and agreements (information)."""
     bad = []
     info = []
-    for (a, b), rs in _group(res.summary.get("agreement", []), lambda r: (r["a"], r["b"])).items():
+    for (a, b), rs in group_by(res.summary.get("agreement", []), lambda r: (r["a"], r["b"])).items():
         good = [r for r in rs if r["agrees"]]
         badr = [r for r in rs if not r["agrees"]]
         if badr:

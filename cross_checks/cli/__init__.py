@@ -7,6 +7,7 @@ no traceback); 130 interrupted (Ctrl-C); 143 terminated (SIGTERM). The README ha
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import os
 import sys
@@ -678,16 +679,25 @@ def _gate_failures(summary) -> list:
     return out
 
 
-def _dask_client(address: str):
+@contextlib.contextmanager
+def _dask_executor(address: str | None):
+    """The executor of a client of the Dask scheduler at ``address`` (None without one), closed after."""
+    if not address:
+        yield None
+        return
     try:
         from distributed import Client
     except ImportError:
         raise BadInput("--dask: the 'distributed' package is not installed; install the optional extra: "
                        "pip install -e '.[dask]'") from None
     try:
-        return Client(address, timeout=10)
+        client = Client(address, timeout=10)
     except (OSError, TimeoutError, ValueError) as exc:
         raise BadInput(f"--dask {address}: cannot connect to the Dask scheduler: {exc}") from None
+    try:
+        yield client.get_executor()
+    finally:
+        client.close()
 
 
 def _time_limits(seconds) -> dict:
@@ -731,17 +741,12 @@ def _run_sweep(args, scenarios, variants, skipped) -> dict:
     import reports
     from cross_checks.sweep import run_sweep
 
-    client = _dask_client(args.dask) if args.dask else None
     jobs = args.jobs or usable_cores()
-    try:
+    with _dask_executor(args.dask) as executor:
         return run_sweep(scenarios, variants, args.out, jobs=jobs, use_cache=not args.no_cache, progress=True,
                          finish=lambda d: reports.render(d, self_contained=args.self_contained, jobs=jobs,
                                                         progress=True),
-                         skipped=skipped, **_time_limits(args.time_limit),
-                         executor=client.get_executor() if client is not None else None)
-    finally:
-        if client is not None:
-            client.close()
+                         skipped=skipped, **_time_limits(args.time_limit), executor=executor)
 
 
 def verdict_count(summary) -> tuple:
@@ -892,7 +897,7 @@ def cmd_bench(args) -> int:
 def cmd_fuzz(args) -> int:
     from cross_checks.cli.fuzz import run_fuzz
     refuse_inputs_as_outputs([("--out", args.out, True)], _engine_file_inputs(args))
-    return run_fuzz(args, BadInput, _resolve_engines, _dask_client)
+    return run_fuzz(args, BadInput, _resolve_engines, _dask_executor)
 
 
 COMMANDS = {"list": cmd_list, "show": cmd_show, "run": cmd_run, "sweep": cmd_sweep, "report": cmd_report,

@@ -11,15 +11,16 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import hmac
+import json
 import os
 import secrets
 from pathlib import Path
 
 import numpy as np
 
-from cross_checks.core.files import cache_dir
+from cross_checks.core.files import cache_dir, json_default
 
-__all__ = ["load", "store", "mac", "cache_dir", "using_cache_dir"]
+__all__ = ["load", "store", "mac", "cache_dir", "using_cache_dir", "pack", "unpack", "entry_path"]
 
 _SECRETS: dict = {}
 
@@ -85,6 +86,27 @@ def store(root: Path, path: Path, key: str, arrays: dict) -> None:
                         compress=False)   # read back by rbcheck only
     except OSError:
         pass
+
+
+def entry_path(root, kind: str, key: str) -> Path:
+    """Where the entry of ``key`` lives in the cache ``root``: ``<kind>/<first 2 hex digits>/<key>.npz``."""
+    return Path(root) / kind / key[:2] / f"{key}.npz"
+
+
+def pack(fields: dict, series: dict | None) -> dict:
+    """A record as an entry's arrays: ``fields`` as JSON (``__json__``: no pickles) and each array of
+    ``series`` as ``series::<name>``."""
+    arrays = {"__json__": np.array(json.dumps(fields, default=json_default))}
+    for k, a in (series or {}).items():
+        arrays[f"series::{k}"] = a
+    return arrays
+
+
+def unpack(arrays: dict) -> tuple:
+    """``(fields, series or None)`` of :func:`pack`'s arrays (KeyError or ValueError when unreadable)."""
+    fields = json.loads(str(arrays["__json__"]))
+    series = {k[len("series::"):]: v for k, v in arrays.items() if k.startswith("series::")}
+    return fields, series or None
 
 
 def load(root: Path, path: Path, key: str) -> dict | None:

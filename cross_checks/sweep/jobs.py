@@ -100,26 +100,6 @@ def _job_key(scenario, variant, dt, engine_version):
     return hashlib.sha256(blob.encode()).hexdigest()
 
 
-def _cache_file(root: Path, kind: str, key: str) -> Path:
-    return root / kind / key[:2] / f"{key}.npz"
-
-
-def _pack_record(rec: dict) -> dict:
-    """A job record as npz arrays (JSON for the scalars; no pickles)."""
-    arrays = {"__json__": np.array(json.dumps({k: v for k, v in rec.items() if k != "series"},
-                                              default=json_default))}
-    for k, a in (rec.get("series") or {}).items():
-        arrays[f"series::{k}"] = a
-    return arrays
-
-
-def _unpack_record(arrays: dict) -> dict:
-    rec = json.loads(str(arrays["__json__"]))
-    series = {k[len("series::"):]: v for k, v in arrays.items() if k.startswith("series::")}
-    rec["series"] = series or None
-    return rec
-
-
 def _record_is_for(rec, job) -> bool:
     """A cached record that verified is also checked to be a whole record of this very job."""
     row = rec.get("row") if isinstance(rec, dict) else None
@@ -136,14 +116,16 @@ def _cache_load(root, path: Path, key: str, job):
     if arrays is None:
         return None
     try:
-        rec = _unpack_record(arrays)
+        fields, series = cache.unpack(arrays)
+        rec = {**fields, "series": series}
     except (KeyError, ValueError, TypeError):
         return None
     return rec if _record_is_for(rec, job) else None
 
 
 def _cache_store(root, path: Path, key: str, rec: dict) -> None:
-    cache.store(root, path, key, _pack_record(rec))  # a read-only or full cache never breaks a sweep
+    fields = {k: v for k, v in rec.items() if k != "series"}
+    cache.store(root, path, key, cache.pack(fields, rec.get("series")))  # a full cache never breaks a sweep
 
 
 # --- references ------------------------------------------------------------------------------------
@@ -255,7 +237,7 @@ def _reference_solution_file(scenario, out_path, cache_root, use_cache, time_lim
     grids = _time_grids(scenario, variants)
     t_union = np.unique(np.concatenate(list(grids.values())))
     key = _reference_key(scenario, t_union)
-    cpath = _cache_file(Path(cache_root), "reference", key) if cache_root else None
+    cpath = cache.entry_path(cache_root, "reference", key) if cache_root else None
     hit = _cached_reference(cache_root, cpath, key, t_union) if cpath is not None and use_cache else None
     if hit is not None:
         arrays, measured = hit
@@ -362,7 +344,7 @@ def run_job_group(jobs, scenario, ref_path: str, cache_root: str | None = None, 
     for k, job in enumerate(jobs):
         if cache_root:
             ckey = _job_key(scenario, job.variant, job.dt_s, version)
-            keys[k] = (ckey, _cache_file(Path(cache_root), "job", ckey))
+            keys[k] = (ckey, cache.entry_path(cache_root, "job", ckey))
             rec = _cache_load(cache_root, keys[k][1], ckey, job) if use_cache else None
             if rec is not None:
                 rec["row"].update(default_dt=job.default_dt, in_ladder=job.in_ladder, cached=True)

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-from pathlib import Path
 
 import numpy as np
 
@@ -78,7 +77,7 @@ def _drake_solutions(scenario, t_s, cache_root, use_cache):
     """Drake's solution at the target accuracy and at the check accuracy on ``t_s``, cached."""
     from cross_checks.engines.drake_reference import drake_solution
     key = _cache_key(scenario, t_s)
-    path = Path(cache_root) / "second_reference" / key[:2] / f"{key}.npz" if cache_root else None
+    path = cache.entry_path(cache_root, "second_reference", key) if cache_root else None
     if path is not None and use_cache:
         arrays = cache.load(cache_root, path, key)
         if arrays is not None and arrays.get("y") is not None and arrays["y"].shape == (t_s.size, 13):
@@ -97,7 +96,7 @@ def _ground_truth_error_over_run(scenario, t_s, cache_root, use_cache) -> dict:
     the primary's numbers being right (references.reference_error measures it at the final time only)."""
     from reference_sim.ground_truth import GROUND_TRUTH_RTOL, ground_truth
     key = _cache_key(scenario, t_s) + "-dop853-check"
-    path = Path(cache_root) / "second_reference" / key[:2] / f"{key}.npz" if cache_root else None
+    path = cache.entry_path(cache_root, "second_reference", key) if cache_root else None
     arrays = cache.load(cache_root, path, key) if path is not None and use_cache else None
     if arrays is not None and all(arrays.get(k) is not None and arrays[k].shape == (t_s.size, 13)
                                   for k in ("y", "y_loose")):
