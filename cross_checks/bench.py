@@ -420,6 +420,8 @@ def format_table(r: dict) -> str:
         ("MuJoCo, rollout of N single bodies", "mujoco_rollout_body_steps_per_s"),
         ("PyBullet, N bodies incl. state read-back", "pybullet_body_steps_per_s"),
     ]
+    rows += [(f"through the adapter, simulate_many: {v}", f"adapter_batched[{v}]")
+             for v in r.get("batched_adapters", {})]
     best = r["mujoco_best_body_steps_per_s"]
     out = [f"every row: N = {n} bodies; median of {r['repeats']} repeats, [min, max] beside it"
            + (f"; load average {r['load_average'][0]:.1f} on {r['cpu_count']} cores"
@@ -427,9 +429,6 @@ def format_table(r: dict) -> str:
            f"{'measurement':<42} {'body-steps/s':>12} {'[min, max]':>22} {'vs MuJoCo best':>15}"]
     out += [f"{name:<42} {m[k]['median']:>12.3e} {_spread(m[k]):>22} {m[k]['median'] / best:>14.2f}x"
             for name, k in rows]
-    out += [f"{'through the adapter, simulate_many: ' + v:<42} {m[f'adapter_batched[{v}]']['median']:>12.3e} "
-            f"{_spread(m[f'adapter_batched[{v}]']):>22} {m[f'adapter_batched[{v}]']['median'] / best:>14.2f}x"
-            for v in r.get("batched_adapters", {})]
     out.append("")
     out.append(f"single trajectory: reference:expmap_gyro {r['reference_single_us_per_step']:.2f} us/step "
                f"{_spread(m['reference_single_us_per_step'])}, mj_step with a force "
