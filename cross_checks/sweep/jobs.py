@@ -124,8 +124,9 @@ def _cache_load(root, path: Path, key: str, job):
 
 
 def _cache_store(root, path: Path, key: str, rec: dict) -> None:
+    """Store ``rec`` (a read-only or full cache never breaks a sweep)."""
     fields = {k: v for k, v in rec.items() if k != "series"}
-    cache.store(root, path, key, cache.pack(fields, rec.get("series")))  # a full cache never breaks a sweep
+    cache.store(root, path, key, cache.pack(fields, rec.get("series")))
 
 
 # --- references ------------------------------------------------------------------------------------
