@@ -71,10 +71,9 @@ class Change:
 class VariantChange:
     """What changed for one engine variant, judged as a whole (:func:`variant_changes`).
 
-    category : "regression" (a verdict or order lost, a run that stopped finishing, errors only worse or one
-        worse beyond COMPARE_SCHEME_CHANGE_MAX_RATIO), "improvement" (gained, or errors only better),
-        "scheme changed" (orders kept, errors moved both ways within that ratio), "changed" (information
-        only: a verdict that makes no claim, an energy-drift kind), "missing".
+    category : "regression", "improvement", "scheme changed" (errors moved both ways within
+        COMPARE_SCHEME_CHANGE_MAX_RATIO), "changed" (information only) or "missing" (docs/results.md,
+        "Comparing two results directories").
     causes : the explaining facts first — verdicts and fitted orders, one-step orders, agreement with the
         same-scheme variant, energy-drift kind — one sentence each, at most a few.
     ratio_range : (lowest, highest) new/old over the metric changes; rows, scenarios : how many moved.
