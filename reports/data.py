@@ -86,7 +86,7 @@ class Results:
 
     def records(self, scenario=None, engine=None, quantity=None, mode="free_running") -> list:
         key = "convergence" if mode == "free_running" else "local_convergence"
-        if (key, scenario) not in self._records:   # indexed by scenario once (asked ~1,500 times per report)
+        if (key, scenario) not in self._records:   # indexed by scenario once
             self._records[(key, scenario)] = [r for r in self.summary.get(key, [])
                                               if scenario is None or r["scenario"] == scenario]
         return [r for r in self._records[(key, scenario)]
