@@ -161,13 +161,15 @@ def _local_pose(inp, scenario, y_ref) -> _Local:
     return _Local(rows, allow, per_row, [], [], ratios)
 
 
-def _pose_candidates(inp, scenario, tol_same):
+def _pose_candidates(inp, scenario, growth, per_arith):
     """Free-running comparison of a pose-only file with every reference variant from the initial state."""
     from cross_checks.engines import run_variant
     from reference_sim.integrators import VARIANTS
     if inp.h_s is None:
         return []
     out = []
+    tol_same = {q: sum(growth[(p, q)] * per_arith[p] for p in QUANTITIES) + inp.print_floor[q]
+                for q in inp.present}
     for v in VARIANTS:
         name = f"reference:{v}"
         run = run_variant(scenario, name, inp.h_s, float(inp.t_s[-1]))
@@ -192,12 +194,14 @@ def _free_score(name, d, tol_same, inp):
     return s
 
 
-def _engines(inp, scenario, names, tol_same):
+def _engines(inp, scenario, names, growth, per_arith):
     """Free-running comparison with extra ENGINE:VARIANT runs (e.g. user engines)."""
     from cross_checks.engines import run_variant
     out = []
     if inp.h_s is None:
         return [{"engine": n, "error": "variable steps: cannot run at the file's Δt"} for n in names]
+    tol_same = {q: sum(growth[(p, q)] * per_arith[p] for p in QUANTITIES) + inp.print_floor[q]
+                for q in inp.present}
     for name in names:
         try:
             run = run_variant(scenario, name, inp.h_s, float(inp.t_s[-1]))
@@ -326,11 +330,8 @@ def _check(inp, scenario, compare_with, scheme=None) -> CheckResult:
     cons = conserved_evidence(inp, scenario, local.allow)
     free, growth, _ = free_running_evidence(inp, scenario, y_ref, label, local.per_row)
     arith = {q: np.concatenate([[0.0], np.cumsum(local.allow.arith[q])]) for q in QUANTITIES}
-    # two runs of one scheme differ by each step's roundings carried by the growth, + the written precision
-    tol_same = {q: sum(growth[(p, q)] * arith[p] for p in QUANTITIES) + inp.print_floor[q]
-                for q in inp.present}
-    candidates = local.candidates if inp.full_state else _pose_candidates(inp, scenario, tol_same)
-    engines = _engines(inp, scenario, list(compare_with), tol_same) if compare_with else []
+    candidates = local.candidates if inp.full_state else _pose_candidates(inp, scenario, growth, arith)
+    engines = _engines(inp, scenario, list(compare_with), growth, arith) if compare_with else []
     off, init_words, slips = _initial_state(inp, scenario)
     evidence = local.rows + cons + free
     return _compose(inp, scenario, label, y_ref, local, evidence, candidates, engines, off, init_words, slips,
