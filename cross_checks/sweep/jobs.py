@@ -1,16 +1,10 @@
 """One sweep job — a (scenario, engine variant, Δt) run — and its measurement; the job cache.
 
-A worker process calls :func:`run_job_group` with the jobs of one scenario and variant: it runs them
-through the engine registry in one call (the adapter's ``simulate_many``), compares
-every step with the scenario's reference (computed once per scenario by :func:`reference_job` on the
-union of the scenario's time grids), measures conservation drifts, takes the one-step (local) errors
-from ``LOCAL_SAMPLES`` reference states, and returns small summaries — plus, at the scenario's default
-Δt only, series decimated to ``MAX_SERIES_POINTS`` points for the plots. Full trajectories never leave
-the worker.
-
-Results are cached per job in the user's cache directory (:func:`cross_checks.sweep.cache.cache_dir`),
-keyed by the scenario's content hash, the variant, Δt, the engine version, the code that computes the
-numbers and the versions that run it (:mod:`cross_checks.sweep.fingerprint`).
+A worker runs a scenario's jobs of one variant in one call (:func:`run_job_group`), measures each against
+the scenario's reference (:func:`reference_job`, once per scenario on the union of its time grids) and
+returns small records: full trajectories never leave the worker. Records are cached per job
+(:mod:`cross_checks.sweep.cache`), keyed by the scenario's content hash, the variant, Δt, the engine
+version and what :mod:`cross_checks.sweep.fingerprint` adds.
 """
 from __future__ import annotations
 
