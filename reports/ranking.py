@@ -14,7 +14,7 @@ from reports.findings import fmt
 from reports.glance import relative_error
 
 __all__ = ["Point", "Curve", "SCENARIO_FAMILIES", "scenario_family", "curves", "common_level", "at_cost",
-           "cost_at", "ranking", "Ranking"]
+           "cost_at", "ranking", "Ranking", "ordinal"]
 
 #: Scenario families, from what moves along the reference (summary.json ``scenarios[].varies``).
 SCENARIO_FAMILIES = ("translation only", "rotation only", "translation and rotation")
@@ -309,7 +309,8 @@ def ratio_text(x) -> str:
     return f"×{m}e{int(e)}"
 
 
-def _ordinal(n: int) -> str:
+def ordinal(n: int) -> str:
+    """``1st``, ``2nd``, ``3rd``, ``4th``, ``11th``, ``21st``."""
     suffix = "th" if 10 <= n % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(n % 10, "th")
     return f"{n}{suffix}"
 
@@ -370,7 +371,7 @@ def engine_sentence(rk: Ranking, v: str) -> str:
             first = "most accurate" if what == "acc" else "cheapest"
             parts.append(f"{first} at {where.split(' at ')[1]} " + _where(firsts[what], rk))
         elif overall and getattr(overall, f"{what}_rank"):
-            parts.append(f"{_ordinal(getattr(overall, f'{what}_rank'))} of {n} ranked in {where} "
+            parts.append(f"{ordinal(getattr(overall, f'{what}_rank'))} of {n} ranked in {where} "
                          f"({ratio_text(getattr(overall, f'{what}_score'))} {best})")
         elif overall:
             parts.append(f"not ranked in {where} (a value on {getattr(overall, f'{what}_n')} of its "
