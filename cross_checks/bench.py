@@ -1,28 +1,16 @@
 """``rbcheck bench``: throughput of the batched reference vs MuJoCo and PyBullet, and the cold sweep
-against its floor, measured in one run.
-
-Every engine steps the same free bodies — the SAME number N of them in every row of the table —:
-I = diag(1, 2, 3) kg m², m = 1 kg, gravity (0, 0, −9.81), a constant body-axes torque (0, 0, 0.2) N m,
-random initial ω, h = 1e-3 s. Every measurement is repeated (``repeats``) and reported as its median
-and spread (min, max). Results are ratios against the engines measured in the same process, never
-absolute thresholds.
-
-**The sweep against its floor.** A cold sweep (``--no-cache``: every run, reference and report computed)
-of the catalog (``quick``: QUICK_SCENARIOS) with every reference, MuJoCo and PyBullet variant, in a
-temporary directory with its own cache, on all usable cores. Its floor is what the same physics costs
-in the fastest engine: ``total engine steps × one bare mj_step of a free body (measured here) ÷ cores``.
-The run stage (references, runs, metrics, results files) and the report stage are timed separately;
-``sweep_floor_ratio`` = (run + report) / floor, ``sweep_run_floor_ratio`` = run / floor.
+against its floor, measured in one run (what each measures, the body and the floor: docs/speed.md,
+"What `rbcheck bench` measures"). Every measurement is repeated (``repeats``): median and (min, max);
+results are ratios against the engines measured in the same process, never absolute thresholds.
 
 Keys written by ``--json`` (fixed; medians): reference_batched_body_steps_per_s,
 mujoco_best_body_steps_per_s, pybullet_body_steps_per_s, reference_single_us_per_step,
 mujoco_single_us_per_step, mujoco_bare_step_us, drake_single_us_per_step (None without Drake),
-sweep_floor_ratio, sweep_run_floor_ratio, ``batched_adapters`` {ENGINE:VARIANT: body-steps/s through the
-adapter's ``simulate_many``} (mujoco:euler and every installed engine that batches), plus the individual
-measurements and ``measurements`` {name: {median, min, max, repeats}}.
-
-Drake (``drake_*``) is measured on one trajectory only, beside MuJoCo on the same trajectory through
-the same adapter interface (``mujoco_adapter_single_us_per_step``): the per-step cost a sweep pays.
+sweep_floor_ratio ((run + report) / floor), sweep_run_floor_ratio (run / floor), ``batched_adapters``
+{ENGINE:VARIANT: body-steps/s through the adapter's ``simulate_many``} (mujoco:euler and every installed
+engine that batches), plus the individual measurements and ``measurements`` {name: {median, min, max,
+repeats}}. Drake is measured on one trajectory only, beside MuJoCo through the same adapter interface
+(``mujoco_adapter_single_us_per_step``).
 """
 from __future__ import annotations
 
@@ -70,16 +58,21 @@ def _initial_w(n, seed=0):
     return np.random.default_rng(seed).normal(size=(n, 3))
 
 
+def _bench_problem(w_W):
+    """The benchmark's body as a reference_sim Problem at rest at the origin, angular velocity ``w_W``
+    (rad/s, world axes)."""
+    from reference_sim.body import RigidBody
+    from reference_sim.forces import ForceModel, Torque
+    from reference_sim.state import Problem, State
+    return Problem(RigidBody(1.0, MOMENTS), ForceModel(gravity_W=G, torques=(Torque(TORQUE_B, "body"),)),
+                   State(np.zeros(3), np.zeros(3), np.array([1.0, 0, 0, 0]), w_W))
+
+
 def reference_batched(n_bodies, n_steps, variant, repeats):
     """The batched reference: N bodies as N members of one compiled run (reference_sim.simulate.run_members),
     every state recorded."""
-    from reference_sim.body import RigidBody
-    from reference_sim.forces import ForceModel, Torque
     from reference_sim.simulate import run_members
-    from reference_sim.state import Problem, State
-    problem = Problem(RigidBody(1.0, MOMENTS), ForceModel(gravity_W=G, torques=(Torque(TORQUE_B, "body"),)),
-                      State(np.zeros(3), np.zeros(3), np.array([1.0, 0, 0, 0]), np.zeros(3)))
-    members = problem.members.take(np.zeros(n_bodies, dtype=int))
+    members = _bench_problem(np.zeros(3)).members.take(np.zeros(n_bodies, dtype=int))
     y0 = np.zeros((n_bodies, 13))
     y0[:, 6] = 1.0
     y0[:, 10:13] = _initial_w(n_bodies)
@@ -87,12 +80,8 @@ def reference_batched(n_bodies, n_steps, variant, repeats):
 
 
 def reference_single_us(n_steps, repeats, variant="expmap_gyro"):
-    from reference_sim.body import RigidBody
-    from reference_sim.forces import ForceModel, Torque
     from reference_sim.simulate import simulate
-    from reference_sim.state import Problem, State
-    problem = Problem(RigidBody(1.0, MOMENTS), ForceModel(gravity_W=G, torques=(Torque(TORQUE_B, "body"),)),
-                      State(np.zeros(3), np.zeros(3), np.array([1.0, 0, 0, 0]), _initial_w(1)[0]))
+    problem = _bench_problem(_initial_w(1)[0])
     return _per_step_us(n_steps, lambda: simulate(problem, variant, H, n_steps), repeats)
 
 
@@ -299,11 +288,10 @@ def _sweep_once(scenarios, variants, jobs, render) -> dict:
     import pandas as pd
 
     from cross_checks.sweep import run_sweep
+    from cross_checks.sweep.cache import using_cache_dir
     t = {}
-    with tempfile.TemporaryDirectory(prefix="rbcheck-bench-") as tmp:
-        old = os.environ.get("RBCHECK_CACHE_DIR")
-        # a cold cache; the user's stays untouched
-        os.environ["RBCHECK_CACHE_DIR"] = os.path.join(tmp, "cache")
+    with (tempfile.TemporaryDirectory(prefix="rbcheck-bench-") as tmp,
+          using_cache_dir(os.path.join(tmp, "cache"))):   # a cold cache; the user's stays untouched
 
         def finish(staging):
             t["run"] = time.perf_counter() - t0
@@ -313,17 +301,10 @@ def _sweep_once(scenarios, variants, jobs, render) -> dict:
                 r0 = time.perf_counter()
                 render(staging)
                 t["report"] = time.perf_counter() - r0
-        try:
-            t0 = time.perf_counter()
-            # Drake's second reference is a cross-check of the references, not engine steps of this sweep
-            # (the default sweep: references, MuJoCo and PyBullet; the README's main command has no Drake).
-            summary = run_sweep(scenarios, variants, os.path.join(tmp, "out"), jobs=jobs, use_cache=False,
-                                progress=False, finish=finish, second_reference=False)
-        finally:
-            if old is None:
-                os.environ.pop("RBCHECK_CACHE_DIR", None)
-            else:
-                os.environ["RBCHECK_CACHE_DIR"] = old
+        t0 = time.perf_counter()
+        # Drake's second reference is a cross-check of the references, not engine steps of this sweep
+        summary = run_sweep(scenarios, variants, os.path.join(tmp, "out"), jobs=jobs, use_cache=False,
+                            progress=False, finish=finish, second_reference=False)
     return {"run_s": t["run"], "report_s": t.get("report", 0.0), "steps": t["steps"],
             "runs": summary["run"]["runs"], "s_in_simulate": summary["run"]["cpu_s_in_runs"]}
 
@@ -358,9 +339,7 @@ def run_bench(quick: bool = False, repeats: int = 3, render=None, sweep: bool = 
     import mujoco
 
     from cross_checks.engines import pybullet_engine  # imports pybullet with its stderr banner silenced
-    # One N for every row: MuJoCo's multi-body model is at its best around N = 1000 (10,000 free bodies
-    # in one model take 35 s to compile and step slower per body), so every engine steps N = 1000
-    # bodies (quick: 200) — a row compares engines on the same work.
+    # one N for every row: a row compares engines on the same work
     n = 200 if quick else 1000
     steps = 20 if quick else 100
     m = {
@@ -441,6 +420,8 @@ def format_table(r: dict) -> str:
         ("MuJoCo, rollout of N single bodies", "mujoco_rollout_body_steps_per_s"),
         ("PyBullet, N bodies incl. state read-back", "pybullet_body_steps_per_s"),
     ]
+    rows += [(f"through the adapter, simulate_many: {v}", f"adapter_batched[{v}]")
+             for v in r.get("batched_adapters", {})]
     best = r["mujoco_best_body_steps_per_s"]
     out = [f"every row: N = {n} bodies; median of {r['repeats']} repeats, [min, max] beside it"
            + (f"; load average {r['load_average'][0]:.1f} on {r['cpu_count']} cores"
@@ -448,9 +429,6 @@ def format_table(r: dict) -> str:
            f"{'measurement':<42} {'body-steps/s':>12} {'[min, max]':>22} {'vs MuJoCo best':>15}"]
     out += [f"{name:<42} {m[k]['median']:>12.3e} {_spread(m[k]):>22} {m[k]['median'] / best:>14.2f}x"
             for name, k in rows]
-    out += [f"{'through the adapter, simulate_many: ' + v:<42} {m[f'adapter_batched[{v}]']['median']:>12.3e} "
-            f"{_spread(m[f'adapter_batched[{v}]']):>22} {m[f'adapter_batched[{v}]']['median'] / best:>14.2f}x"
-            for v in r.get("batched_adapters", {})]
     out.append("")
     out.append(f"single trajectory: reference:expmap_gyro {r['reference_single_us_per_step']:.2f} us/step "
                f"{_spread(m['reference_single_us_per_step'])}, mj_step with a force "

@@ -1,16 +1,7 @@
-"""rbcheck's pytest plugin (entry point ``pytest11``): the ``assert_engine`` fixture.
-
-The fixture is :func:`cross_checks.testing.assert_engine` with a per-session cache: every run of the
-session is computed once (calls that share scenarios and variants reuse it) and never comes from an
-earlier session, unless ``--rbcheck-cache-dir DIR`` names a persistent cache. Options:
-
-``--rbcheck-keep-reports DIR``   keep each call's results directory and HTML report in
-                                 ``DIR/<test>/<n>-<variant>/`` (the failure message names it);
-``--rbcheck-engine-file FILE``   register an engine file for every call (repeatable);
-``--rbcheck-cache-dir DIR``      use DIR as the run cache instead of a fresh one per session;
-``--rbcheck-jobs N``             worker processes per sweep (default: all cores).
-
-Importing this module costs nothing: rbcheck itself is imported when the fixture is first used.
+"""rbcheck's pytest plugin (entry point ``pytest11``): the ``assert_engine`` fixture, i.e.
+:func:`cross_checks.testing.assert_engine` with a per-session cache (or ``--rbcheck-cache-dir DIR``).
+Its options (``--rbcheck-keep-reports``, ``--rbcheck-engine-file``, ``--rbcheck-cache-dir``,
+``--rbcheck-jobs``): docs/engines.md. rbcheck itself is imported when the fixture is first used.
 Disable the plugin with ``-p no:rbcheck``.
 """
 from __future__ import annotations

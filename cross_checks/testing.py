@@ -65,6 +65,7 @@ def run_engine_checks(variant, scenarios, *, engine_file=None,
     __tracebackhide__ = True
     from cross_checks.engines import EngineUnavailable, engine_files_registered, get_adapter
     from cross_checks.sweep import SweepError, run_sweep
+    from cross_checks.sweep.cache import using_cache_dir
 
     if out_dir is not None:
         from reports.install import check_templates
@@ -84,7 +85,7 @@ def run_engine_checks(variant, scenarios, *, engine_file=None,
         else:
             out = Path(out_dir)
         if cache_dir is not None:
-            stack.enter_context(_cache_env(cache_dir))
+            stack.enter_context(using_cache_dir(cache_dir))
         try:
             summary = run_sweep(scs, variants, out, jobs=jobs, progress=False,
                                 finish=_render if out_dir is not None else None)
@@ -219,20 +220,6 @@ def _scenarios(scenarios) -> list:
             raise ValueError(f"{s.source}: dt_ladder: needs at least two steps to fit an order, got "
                              f"{list(s.dt_ladder_s)}")
     return out
-
-
-@contextlib.contextmanager
-def _cache_env(cache_dir):
-    """Use ``cache_dir`` as rbcheck's job cache for the duration (the sweep reads $RBCHECK_CACHE_DIR)."""
-    old = os.environ.get("RBCHECK_CACHE_DIR")
-    os.environ["RBCHECK_CACHE_DIR"] = str(cache_dir)
-    try:
-        yield
-    finally:
-        if old is None:
-            os.environ.pop("RBCHECK_CACHE_DIR", None)
-        else:
-            os.environ["RBCHECK_CACHE_DIR"] = old
 
 
 def _read_rows(path: Path) -> list:

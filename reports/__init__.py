@@ -45,12 +45,6 @@ def _quiet_init(parent_pid, directory):
     _SHARED.setdefault("directory", directory)   # a spawned process loads the results once
 
 
-def _say(line: str) -> None:
-    """A progress line, flushed (reaches a CI log without a terminal), on stdout like the sweep's
-    (cross_checks.core.progress): stderr stays the channel of errors, one line each."""
-    stage("rbcheck report", line)
-
-
 #: Seconds between two progress lines while drawing (as the sweep's: a CI log never looks hung).
 LINE_INTERVAL_S = 5.0
 
@@ -95,12 +89,12 @@ def render(directory, *, self_contained: bool = False,
     written = _write_pages(res, figures, self_contained)
     _tidy(d, written, drawn, listed, marked)
     pages = [p for p in written if p.suffix == ".html"]
-    if progress:
+    if progress:   # a flushed line on stdout, like the sweep's (cross_checks.core.progress)
         n_figures = sum(len(kinds) for kinds in figures.values())
         noted = n_figures - len(drawn)
-        _say(f"{len(pages)} pages and {n_figures} figures written in {time.perf_counter() - t0:.1f} s"
-             + (f" ({len(drawn)} drawn, {noted} a note instead: a quantity that does not move)"
-                if noted else ""))
+        why = f" ({len(drawn)} drawn, {noted} a note instead: a quantity that does not move)" if noted else ""
+        stage("rbcheck report", f"{len(pages)} pages and {n_figures} figures written in "
+                                f"{time.perf_counter() - t0:.1f} s{why}")
     return pages
 
 

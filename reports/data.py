@@ -72,8 +72,7 @@ class Results:
         return next(s for s in self.scenarios if s["name"] == name)
 
     def rows_for(self, scenario, engine=None) -> list:
-        """The rows of ``scenario`` (of one ``engine`` variant), in file order (indexed once: the figures
-        ask ~2,300 times, and a scan of every row each time was a twentieth of their drawing time)."""
+        """The rows of ``scenario`` (of one ``engine`` variant), in file order (indexed on first use)."""
         if self._index is None:
             self._index = {}
             for r in self.rows:
@@ -87,7 +86,7 @@ class Results:
 
     def records(self, scenario=None, engine=None, quantity=None, mode="free_running") -> list:
         key = "convergence" if mode == "free_running" else "local_convergence"
-        if (key, scenario) not in self._records:   # indexed by scenario once (asked ~1,500 times per report)
+        if (key, scenario) not in self._records:   # indexed by scenario once
             self._records[(key, scenario)] = [r for r in self.summary.get(key, [])
                                               if scenario is None or r["scenario"] == scenario]
         return [r for r in self._records[(key, scenario)]

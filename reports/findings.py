@@ -16,7 +16,7 @@ from cross_checks.core import tolerances as tol
 from cross_checks.core.quantities import QUANTITIES, UNITS
 from reports.data import LABELS
 
-__all__ = ["Finding", "findings", "fmt", "fmt_dt"]
+__all__ = ["Finding", "findings", "fmt", "fmt_dt", "group_by"]
 
 
 @dataclass(frozen=True)
@@ -78,10 +78,11 @@ def _error_ranges(recs) -> str:
     return _and(p for p, _ in parts) + f" over {span}"
 
 
-def _group(records, key):
+def group_by(items, key) -> dict:
+    """``{key(item): [items]}``, keys and items in the order the items come."""
     out = {}
-    for r in records:
-        out.setdefault(key(r), []).append(r)
+    for it in items:
+        out.setdefault(key(it), []).append(it)
     return out
 
 
@@ -112,9 +113,8 @@ def findings(res) -> list:
 def _contradictions(res, c) -> list:
     """1. Results that contradict the expectations, per scenario and variant."""
     bad = []
-    # 1. results that contradict the expectations
-    for (sc, eng), rs in sorted(_group([r for r in c.recs if r["matches_expectation"] is False],
-                                       lambda r: (r["scenario"], r["engine"])).items(),
+    for (sc, eng), rs in sorted(group_by([r for r in c.recs if r["matches_expectation"] is False],
+                                         lambda r: (r["scenario"], r["engine"])).items(),
                                 key=lambda kv: (c.scen_order.get(kv[0][0], 99),
                                                 c.var_order.get(kv[0][1], 99))):
         parts = [f"{LABELS[r['quantity']]} {r['assessment']}" for r in rs]
@@ -126,7 +126,6 @@ def _contradictions(res, c) -> list:
         if notes:
             text += " (" + "; ".join(sorted(notes)) + ")"
         bad.append(Finding("bad", text, sc, eng))
-
     return bad
 
 
@@ -134,30 +133,27 @@ def _failed_and_diverged(res, c) -> tuple:
     """2. Failed runs (bad) and diverged runs (information: left out of the order fits)."""
     bad = []
     info = []
-    # 2. failed and diverged runs
-    for (sc, eng), rows in _group([r for r in res.rows if r["status"] == "failed"],
-                                  lambda r: (r["scenario"], r["engine"])).items():
+    for (sc, eng), rows in group_by([r for r in res.rows if r["status"] == "failed"],
+                                    lambda r: (r["scenario"], r["engine"])).items():
         msgs = sorted({r["message"] for r in rows})
         dts = ", ".join(fmt_dt(r["dt"]) for r in rows)
         bad.append(Finding("bad", f"{eng} failed on {sc} at Δt = {dts} s: {'; '.join(msgs)}", sc, eng))
-    for (sc, eng), rows in _group([r for r in res.rows if r["status"] == "diverged"],
-                                  lambda r: (r["scenario"], r["engine"])).items():
+    for (sc, eng), rows in group_by([r for r in res.rows if r["status"] == "diverged"],
+                                    lambda r: (r["scenario"], r["engine"])).items():
         where = ", ".join(f"Δt = {fmt_dt(r['dt'])} s (at t = {fmt(r['diverged_at_s'], 's', 3)})"
                           for r in rows)
         info.append(Finding("info",
                             f"{eng} diverged on {sc} at {where}; those runs are left out of the order fits.",
                             sc, eng))
-
     return bad, info
 
 
 def _expected_non_convergence(res, c) -> list:
     """3. Expected non-convergence, with the reason (one line when most variants share it)."""
     explained = []
-    # 3. expected non-convergence, with the reason
     exp_rs = [r for r in c.recs if r["expected_verdict"] == "does_not_converge" and r["matches_expectation"]]
     per_engine = {}
-    for (sc, reason), rs in sorted(_group(exp_rs, lambda r: (r["scenario"], r["reason"])).items(),
+    for (sc, reason), rs in sorted(group_by(exp_rs, lambda r: (r["scenario"], r["reason"])).items(),
                                    key=lambda kv: c.scen_order.get(kv[0][0], 99)):
         engines = sorted({r["engine"] for r in rs}, key=lambda e: c.var_order.get(e, 99))
         if len(engines) > 2:
@@ -181,16 +177,14 @@ def _expected_non_convergence(res, c) -> list:
         reasons = [a for a in reasons if not any(b != a and b.startswith(a) for b in reasons)]
         explained.append(Finding("explained", f"{eng} does not converge on {sc}: {_error_ranges(er)}; "
                                               + "; ".join(reasons) + ".", sc, eng))
-
     return explained
 
 
 def _pre_asymptotic(res, c) -> list:
     """3b. No claim on this ladder (pre-asymptotic), with the reason (physics, or the errors themselves)."""
     explained = []
-    # 3b. no claim on this ladder (pre-asymptotic), with the reason (physics, or the errors themselves)
     pre = [r for r in c.recs if r["verdict"] == "pre_asymptotic"]
-    for (sc, eng), rs in sorted(_group(pre, lambda r: (r["scenario"], r["engine"])).items(),
+    for (sc, eng), rs in sorted(group_by(pre, lambda r: (r["scenario"], r["engine"])).items(),
                                 key=lambda kv: (c.scen_order.get(kv[0][0], 99),
                                                 c.var_order.get(kv[0][1], 99))):
         rs.sort(key=lambda r: QUANTITIES.index(r["quantity"]))
@@ -202,17 +196,15 @@ def _pre_asymptotic(res, c) -> list:
         if len(rs) > 1:
             text += f" (likewise, with its own numbers, for {_and(LABELS[r['quantity']] for r in rs[1:])})"
         explained.append(Finding("explained", text + ".", sc, eng))
-
     return explained
 
 
 def _exact_and_faster(res, c) -> list:
     """4. Exact to round-off, and orders above the nominal one (information)."""
     info = []
-    # 4. exact to round-off, and orders above the nominal one (information)
     exact = [r for r in c.recs
              if r["verdict"] == "at_roundoff" and c.varies.get(r["scenario"], {}).get(r["quantity"], True)]
-    for (sc, q), rs in sorted(_group(exact, lambda r: (r["scenario"], r["quantity"])).items(),
+    for (sc, q), rs in sorted(group_by(exact, lambda r: (r["scenario"], r["quantity"])).items(),
                               key=lambda kv: (c.scen_order.get(kv[0][0], 99), QUANTITIES.index(kv[0][1]))):
         engines = sorted({r["engine"] for r in rs}, key=lambda e: c.var_order.get(e, 99))
         info.append(Finding("info", f"On {sc}, {LABELS[q]} is exact to round-off at every Δt with "
@@ -220,7 +212,7 @@ def _exact_and_faster(res, c) -> list:
     above = [r for r in c.recs
              if r["verdict"] == "converges" and r["matches_expectation"] and r["order"] is not None
              and r["expected_order"] is not None and r["order"] > r["expected_order"] + tol.SWEEP_ORDER_TOL]
-    for (sc, q), rs in sorted(_group(above, lambda r: (r["scenario"], r["quantity"])).items(),
+    for (sc, q), rs in sorted(group_by(above, lambda r: (r["scenario"], r["quantity"])).items(),
                               key=lambda kv: (c.scen_order.get(kv[0][0], 99), QUANTITIES.index(kv[0][1]))):
         rs.sort(key=lambda r: c.var_order.get(r["engine"], 99))
         lo, hi = min(r["order"] for r in rs), max(r["order"] for r in rs)
@@ -230,14 +222,12 @@ def _exact_and_faster(res, c) -> list:
                             f"(order {orders}) with "
                             + _and(f"{r['engine']} (nominal {r['expected_order']:g})" for r in rs) + ".",
                             sc, None))
-
     return info
 
 
 def _conservation(res, c) -> list:
     """5. Conservation at the default Δt (information)."""
     info = []
-    # 5. conservation at the default Δt
     for s in res.scenarios:
         sc = s["name"]
         rows = [r for r in res.rows if r["scenario"] == sc and r["dt"] == s["dt_s"] and r["status"] == "ok"]
@@ -270,7 +260,6 @@ def _conservation(res, c) -> list:
                                                     for r in worst[:4])
                                     + (f" (and {len(worst) - 4} more)" if len(worst) > 4 else "")
                                     + f" at Δt = {fmt_dt(s['dt_s'])} s.", sc, None))
-
     return info
 
 
@@ -278,8 +267,7 @@ def _same_schemes(res, c) -> tuple:
     """6. Schemes that must be identical: disagreements (bad) and agreements (information)."""
     bad = []
     info = []
-    # 6. schemes that must be identical
-    for (a, b), rs in _group(res.summary.get("agreement", []), lambda r: (r["a"], r["b"])).items():
+    for (a, b), rs in group_by(res.summary.get("agreement", []), lambda r: (r["a"], r["b"])).items():
         good = [r for r in rs if r["agrees"]]
         badr = [r for r in rs if not r["agrees"]]
         if badr:
@@ -296,7 +284,6 @@ def _same_schemes(res, c) -> tuple:
                                 f"{b} reproduces {a} on {len(good)} scenario(s) to {fmt(worst)} (largest "
                                 f"relative final-state difference at the default Δt): {rs[0]['reason']}.",
                                 None, b))
-
     return bad, info
 
 

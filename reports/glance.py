@@ -19,7 +19,7 @@ import math
 from cross_checks.core import tolerances as tol
 from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES
 from reports.data import LABELS
-from reports.findings import fmt, fmt_dt
+from reports.findings import fmt, fmt_dt, group_by
 
 __all__ = ["CELL_CLASSES", "ACCURACY_TIERS", "GLYPHS", "glyph", "cell", "verdict_box", "relative_error",
            "family_of", "families", "order_text"]
@@ -147,13 +147,6 @@ def cell(res, s, v) -> dict:
 
 # --- the verdict box -------------------------------------------------------------------------------
 
-def _group(items, key):
-    out = {}
-    for it in items:
-        out.setdefault(key(it), []).append(it)
-    return out
-
-
 def _scen_list(names, most=4) -> str:
     names = list(dict.fromkeys(names))
     return ", ".join(names[:most]) + (f" and {len(names) - most} more" if len(names) > most else "")
@@ -178,7 +171,7 @@ def verdict_box(res) -> dict:
 
     contra = [r for r in recs if r["matches_expectation"] is False]
     lines = []
-    for (v, sc), rs in sorted(_group(contra, lambda r: (r["engine"], r["scenario"])).items(),
+    for (v, sc), rs in sorted(group_by(contra, lambda r: (r["engine"], r["scenario"])).items(),
                               key=lambda kv: (kv[0][0], order.get(kv[0][1], 99))):
         lines.append(f"{v} on {sc}: " + "; ".join(f"{LABELS[r['quantity']]} {r['assessment']}" for r in rs))
     for a in res.summary.get("agreement", []):
@@ -196,7 +189,7 @@ def verdict_box(res) -> dict:
     failed = [r for r in res.rows if r["status"] == "failed"]
     lines = [f"{v}: {len(rs)} run(s) on {_scen_list(r['scenario'] for r in rs)} "
              f"— {_first_sentence(rs[0]['message'])}"
-             for v, rs in _group(failed, lambda r: r["engine"]).items()]
+             for v, rs in group_by(failed, lambda r: r["engine"]).items()]
     lines += [f"{s['name']}: the second reference ({s['second_reference'].get('label', '?')}) failed: "
               f"{_first_sentence(str(s['second_reference']['error']))}" for s in res.scenarios
               if isinstance(s.get("second_reference"), dict) and s["second_reference"].get("error")]
@@ -204,7 +197,7 @@ def verdict_box(res) -> dict:
 
     div = [r for r in res.rows if r["status"] == "diverged"]
     lines = []
-    for v, rs in _group(div, lambda r: r["engine"]).items():
+    for v, rs in group_by(div, lambda r: r["engine"]).items():
         scs = list(dict.fromkeys(r["scenario"] for r in rs))
         unexpected = [sc for sc in scs if any(x["matches_expectation"] is False for x in res.records(sc, v))]
         per = [f"{sc} (Δt ≥ {fmt_dt(min(r['dt'] for r in rs if r['scenario'] == sc))} s)" for sc in scs]
@@ -214,9 +207,9 @@ def verdict_box(res) -> dict:
 
     noconv = [r for r in recs if r["expected_verdict"] == "does_not_converge" and r["matches_expectation"]]
     lines = []
-    for reason, rs in sorted(_group(noconv, lambda r: _first_sentence(r["reason"] or "")).items(),
+    for reason, rs in sorted(group_by(noconv, lambda r: _first_sentence(r["reason"] or "")).items(),
                              key=lambda kv: -len(kv[1])):
-        by_v = _group(rs, lambda r: r["engine"])
+        by_v = group_by(rs, lambda r: r["engine"])
         lines.append(f"{reason or 'no reason recorded'} — " + "; ".join(
             f"{v} on {_scen_list(r['scenario'] for r in vr)}" for v, vr in by_v.items()))
     groups.append({"title": "Does not converge, as expected (why)", "cls": "noconv", "lines": lines})
@@ -227,8 +220,8 @@ def verdict_box(res) -> dict:
     def why(r):
         text = r["reason"] if r["expected_verdict"] == "pre_asymptotic" else r["assessment"]
         return _first_sentence(text.removeprefix("pre-asymptotic on this ladder: "), 140)
-    for (v, reason), rs in _group(pre, lambda r: (r["engine"], why(r))).items():
-        per = _group(rs, lambda r: r["scenario"])
+    for (v, reason), rs in group_by(pre, lambda r: (r["engine"], why(r))).items():
+        per = group_by(rs, lambda r: r["scenario"])
         lines.append(f"{v} on "
                      + _scen_list([f"{sc} ({', '.join(LABELS[r['quantity']] for r in x)})"
                                    for sc, x in sorted(per.items(), key=lambda kv: order.get(kv[0], 99))], 5)

@@ -17,6 +17,7 @@ from reports.data import LABELS
 from reports.findings import findings, fmt, fmt_dt
 from reports.glance import ACCURACY_TIERS, GLYPHS, cell, families, glyph, order_text, verdict_box
 from reports.install import incomplete
+from reports.integrators import PAGE as INTEGRATORS_PAGE
 from reports.ranking import (
     SCENARIO_FAMILIES,
     best_sentences,
@@ -202,9 +203,7 @@ def _scenario_table(res, sc):
             "variant": v, "status": status,
             "status_cls": {"ok": "", "diverged": "diverged"}.get(d["status"], "bad"),
             "steps": str(d["steps"]), "wall": fmt(d["wall_s"], "s"),
-            "errors": [{"text": fmt(d[f"{COLUMN_STEM[q]}_err_final"]),
-                        "sort": _num(d[f"{COLUMN_STEM[q]}_err_final"])}
-                       for q in QUANTITIES],
+            "errors": [_value(d[f"{COLUMN_STEM[q]}_err_final"]) for q in QUANTITIES],
             "energy": fmt(d["energy_drift_max"]),
             "energy_kind": d["energy_drift_kind"] if not math.isnan(d["energy_drift_max"]) else "",
             "energy_sort": _num(d["energy_drift_max"]),
@@ -221,6 +220,11 @@ def _num(v) -> str:
     return "" if v is None or not math.isfinite(v) else repr(float(v))
 
 
+def _value(v) -> dict:
+    """A table cell of a number: its text and its sort key."""
+    return {"text": fmt(v), "sort": _num(v)}
+
+
 def _ladder_rows(res, sc):
     out = []
     for r in sorted(res.rows_for(sc),
@@ -232,11 +236,8 @@ def _ladder_rows(res, sc):
                     "flags": ", ".join(x for x, on in (("default Δt", r["default_dt"]),
                                                        ("ladder", r["in_ladder"]),
                                                        ("cached", r["cached"])) if on),
-                    "errors": [{"text": fmt(r[f"{COLUMN_STEM[q]}_err_final"]),
-                                "sort": _num(r[f"{COLUMN_STEM[q]}_err_final"])} for q in QUANTITIES],
-                    "local": [{"text": fmt(r[f"{COLUMN_STEM[q]}_local_err"]),
-                               "sort": _num(r[f"{COLUMN_STEM[q]}_local_err"])}
-                              for q in QUANTITIES],
+                    "errors": [_value(r[f"{COLUMN_STEM[q]}_err_final"]) for q in QUANTITIES],
+                    "local": [_value(r[f"{COLUMN_STEM[q]}_local_err"]) for q in QUANTITIES],
                     "wall": fmt(r["wall_s"], "s"), "wall_sort": _num(r["wall_s"]), "message": r["message"]})
     return out
 
@@ -375,7 +376,6 @@ def render_pages(res, figures: dict, self_contained: bool = False) -> dict:
 
 
 RANKING_PAGE = "ranking.html"
-INTEGRATORS_PAGE = "integrators.html"
 
 
 def _g(x, digits: int = 2) -> str:

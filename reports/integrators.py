@@ -109,7 +109,8 @@ def _fmt(x, unit="") -> str:
 
 
 def _long_sentence(st: LongStanding, n_ranked: int) -> str:
-    parts = [f"{_ordinal(st.rank)} of {n_ranked} in long-run conservation"]
+    from reports.ranking import ordinal
+    parts = [f"{ordinal(st.rank)} of {n_ranked} in long-run conservation"]
     if st.diverged:
         parts[0] += " (diverged on " + ", ".join(f"{n} at t = {_fmt(t, 's')}" for n, t in st.diverged) + ")"
     else:
@@ -128,10 +129,6 @@ def _long_sentence(st: LongStanding, n_ranked: int) -> str:
             kinds.setdefault(VERDICT_WORDS[r["verdict"]], []).append(n)
     parts += [f"{k} on {', '.join(ns)}" for k, ns in kinds.items()]
     return "; ".join(parts)
-
-
-def _ordinal(n: int) -> str:
-    return f"{n}{'th' if 10 <= n % 100 <= 20 else {1: 'st', 2: 'nd', 3: 'rd'}.get(n % 10, 'th')}"
 
 
 def integrators_view(res, rk=None) -> IntegratorsView:

@@ -1,15 +1,8 @@
 """PNG figures of one scenario, drawn from the saved results only (one idea per figure).
 
-Every figure with time series or Δt ladders is a grid of small multiples: one column per engine family
-(``reference``, ``mujoco``, ``pybullet``, any other engine's name — the part of ``ENGINE:VARIANT`` before
-the colon; more than MAX_COLUMNS families wrap into blocks of rows), one row per quantity, a row sharing
-its y axis so the families compare at a glance; each panel holds only its family's variants, each in the
-style it has in every figure (``variant_styles``: the family's hue, a shade, a dash pattern and a marker),
-named in one legend per family under the panels. Curves that coincide are drawn so that both are seen and
-named in the caption; quaternions are drawn sign-continuous. A run that diverged is drawn up to its
-divergence and marked there (×); the y limits come from the runs that did not diverge, so a blow-up does
-not flatten the others. Panels of a quantity that does not move, or that every variant reproduces
-exactly, are left out and said in a note; a figure with nothing to show is not drawn.
+Small multiples: one column per engine family (more than MAX_COLUMNS wrap into blocks of rows), one row
+per quantity sharing its y axis, each variant in its one style (``variant_styles``), one legend per
+family under the panels; what is drawn, marked or left out: docs/results.md, "The report" (Figures).
 
 Figures (``plots/<scenario>__<kind>.png``):
 
@@ -23,15 +16,9 @@ Figures (``plots/<scenario>__<kind>.png``):
 ``figure_tasks(res, sc)`` lists the figures a scenario has (so they can be drawn in parallel);
 ``draw(res, sc, kind, path)`` draws one and returns whether it carried anything.
 
-Drawn with matplotlib's public API on the Agg canvas, margins in inches (matplotlib's constrained
-layout measures every text of a figure again on each draw: it doubled a figure's cost). A drawing
-process keeps one figure per layout (kind of grid, columns) and empties it of its data for the next
-figure of that layout, whatever its number of rows (creating axes and their ticks is the costliest
-part of a figure drawn for the first time): a figure drawn in a kept grid has the pixels of a fresh one
-(tests/reports/test_plots.py). A panel's grid, tick labels, axis labels and title are drawn by one artist
-of its own (``_Frame``), and every repeated text (those and the legends') is drawn by matplotlib once per
-process and placed as an image (``_stamp``): matplotlib 3.11 lays out each glyph from Python, and its
-axis artists lay out every tick label twice per draw.
+Drawn with matplotlib's public API on the Agg canvas, margins in inches; a drawing process keeps one
+figure per layout and empties it for the next (same pixels as a fresh one: tests/reports/test_plots.py).
+How the drawing is kept fast (``_Frame``, ``_stamp``, ``_Curves``): docs/speed.md, "The report".
 """
 from __future__ import annotations
 
@@ -102,10 +89,7 @@ def _short(v):
 
 
 # --- text drawn once per process ------------------------------------------------------------------------
-#: Text bitmaps by (dpi, text, size, alignment, rotation, weight, colour): a report's figures repeat the
-#: same few hundred strings (tick labels, axis labels, panel titles, legend entries) thousands of times,
-#: and matplotlib 3.11 lays out and renders each glyph from Python (~0.6 ms a label). Each string is
-#: drawn once by matplotlib (a Text on a renderer of its own size) and then placed as an image.
+#: Text bitmaps by (dpi, text, size, alignment, rotation, weight, colour), each drawn once by matplotlib.
 _STAMPS: dict = {}
 _SCRATCH: dict = {}   # dpi -> (figure the Text artists belong to, a renderer to measure them with)
 
@@ -168,8 +152,7 @@ class _Stamps(Artist):
 
 class _DataStamps(Artist):
     """Texts (:func:`_stamp`) at data coordinates of their axes, over the curves as an ``ax.text`` is:
-    ``items`` [(x, y, text, size, style)] (the slope triangles' orders: the same three strings in every
-    ladder panel, laid out by matplotlib once per process instead of once per panel)."""
+    ``items`` [(x, y, text, size, style)]."""
 
     zorder = 3
 
@@ -207,11 +190,10 @@ def _ticks(axis, labels=True):
 
 
 class _Frame(Artist):
-    """A panel's grid lines, tick labels, axis labels and title, drawn by one artist (the axes' own
-    axis artists are hidden): grid lines at the major ticks as one path, texts as :func:`_stamp` images
-    at matplotlib's places (tick labels 7 pt off the axes, axis labels at fixed distances, the title 4 pt
-    above at the left). Tick labels where the axis's tick parameters say (``labelbottom``,
-    ``labelleft``); the labels' texts and sizes are the axes' own (``set_xlabel``, ``set_ylabel``)."""
+    """A panel's grid lines (one path at the major ticks), tick labels, axis labels and title, drawn by
+    one artist as :func:`_stamp` images at matplotlib's places (the axes' axis artists are hidden). Tick
+    labels where the tick parameters say (``labelbottom``, ``labelleft``); the labels' texts and sizes
+    are the axes' own (``set_xlabel``, ``set_ylabel``)."""
 
     zorder = 0.5
 
@@ -287,13 +269,11 @@ _XLABEL_PT = 3.5 + 3.5 + 1.2 * _TICK_PT + 3.0
 
 def _panels(layout, nrows, ncols, size_in, log, outer=True, block_rows=None, used=None, spacer=0.0):
     """A figure of ``nrows`` × ``ncols`` panels (log x and y scales when ``log``), emptied of any previous
-    drawing and resized to ``size_in`` (w, h inches). With ``outer`` only the bottom row has x tick
-    labels and the first column y tick labels (the callers then give a row one y range and the grid one
-    x range: :func:`_same_limits`). The panels are kept by layout whatever the number of rows: a figure
-    of fewer rows lays its rows out on a grid of its own and hides the others. ``block_rows``: the rows
-    are blocks of that many (the bottom row of each has x tick labels); ``used``: the number of panels of
-    a row of blocks that are shown (the last block's others are hidden); ``spacer``: the height of an
-    empty row between two blocks, relative to a panel's."""
+    drawing and resized to ``size_in`` (w, h inches); kept per layout, surplus rows hidden. With
+    ``outer`` only the bottom row has x tick labels and the first column y tick labels (callers then
+    share limits: :func:`_same_limits`). ``block_rows``: the rows are blocks of that many (the bottom row
+    of each has x tick labels); ``used``: the panels of a row of blocks that are shown; ``spacer``: the
+    height of an empty row between two blocks, relative to a panel's."""
     block_rows = block_rows or nrows
     n_blocks = nrows // block_rows
     at = lambda i: i + i // block_rows       # noqa: E731 - a panel row's grid row (spacers between blocks)
@@ -336,9 +316,7 @@ def _panels(layout, nrows, ncols, size_in, log, outer=True, block_rows=None, use
 
 def _style(ax, log, left) -> None:
     """Plain decade labels ("1e-06", not mathtext) and no minor ticks on log axes, at most 5 ticks on
-    linear ones (decades read as well); no tick marks; the axes' grid, tick labels, axis labels and
-    title drawn by a :class:`_Frame` (its axis artists hidden: they lay out every label again on every
-    draw)."""
+    linear ones; no tick marks; grid, labels and title drawn by a :class:`_Frame`."""
     ax.patch.set_visible(False)   # white on the figure's white
     ax.tick_params(labelsize=_TICK_PT, labelleft=left, bottom=False, left=False)
     ax.xaxis.set_visible(False)
@@ -374,10 +352,9 @@ def _title(ax, text) -> None:
 
 
 def prepare(res) -> None:
-    """Build what every drawing process would otherwise build for itself, before they are forked (they
-    inherit it): the grids of panels of each layout of ``res``'s figures, with as many rows as a figure
-    can have (creating axes is most of a process's first figures), and the legends without orders (the
-    same in every scenario)."""
+    """Build, before the drawing processes are forked, what each would build for itself: the grids of
+    panels of each layout of ``res``'s figures (as many rows as a figure can have), the decade labels
+    and the legends without orders."""
     fams = families(res.variants)
     blocks, cols = _blocks(len(fams))
     for layout, rows, log in (("time", 7, False), ("time-log", len(QUANTITIES), True),
@@ -492,18 +469,16 @@ class LegendBoxes:
 
 def legend_figure(dpi, fam, items):
     """A family's legend (its name in bold, its variants' lines, markers and names in columns of at most
-    _LEGEND_ROWS, as matplotlib's ``Legend`` lays them out: handles 2.6 em long, 0.5 em to the text,
-    1.2 em between columns, 0.25 em between rows) drawn alone on a transparent figure sized to its
-    measured extent plus _LEGEND_PAD_PX — nothing of it is cut. Laid out by hand from the texts' measured
-    extents (:func:`_stamp`: a Legend measures and lays out its texts twice, a quarter of a report's
-    drawing). Returns (figure, :class:`LegendBoxes`)."""
+    _LEGEND_ROWS, spaced as matplotlib's ``Legend``: handles 2.6 em long, 0.5 em to the text, 1.2 em
+    between columns, 0.25 em between rows), laid out from the texts' measured extents (:func:`_stamp`)
+    on a transparent figure sized to them plus _LEGEND_PAD_PX, so nothing is cut. Returns (figure,
+    :class:`LegendBoxes`)."""
     pt = dpi / 72.0
     em = _LEGEND_PT * pt
     pad = _LEGEND_PAD_PX
     title = _stamp(dpi, fam, 9, va="top", weight="bold")
     # a label "name  extra" is drawn as two texts, the extra (a ladder's orders) where it would be in the
-    # whole label: texts' widths add up (advances), the two spaces measured once. The names come back in
-    # every legend of a report and the orders in many: ~200 texts of a report laid out once instead.
+    # whole label: texts' widths add up (advances), the two spaces measured once
     parts = [label.partition("  ")[::2] for label, _ in items]
     text = lambda t: _stamp(dpi, t, _LEGEND_PT, va="center_baseline")   # noqa: E731
     stamps = [(text(name), text(extra) if extra else None) for name, extra in parts]
@@ -545,8 +520,7 @@ def legend_figure(dpi, fam, items):
 
 
 def _legend_pixels(dpi, fam, items) -> np.ndarray:
-    """The pixels of :func:`legend_figure`, drawn once per process (the same legend comes back in every
-    figure of a scenario, and of the next)."""
+    """The pixels of :func:`legend_figure`, drawn once per process."""
     key = (dpi, fam, tuple((label, st["color"], st["ls"], st.get("marker")) for label, st in items))
     if key not in _LEGENDS:
         with matplotlib.rc_context({"text.hinting": "no_hinting"}):
@@ -557,11 +531,10 @@ def _legend_pixels(dpi, fam, items) -> np.ndarray:
 
 
 def _figure_legend(fig, width_in, entries) -> float:
-    """The figure's legends under its panels, one per family (:func:`legend_figure`), laid out left to
-    right and wrapped to ``width_in`` — each as large as it measures, so none is cut and none overlaps
-    another. Placed as images (FigureImage, labelled with the family's name) in pixels from the figure's
-    bottom, so that setting the figure's height afterwards does not move them. Returns the height they
-    take (inches)."""
+    """The figure's legends under its panels, one per family (:func:`legend_figure`), left to right and
+    wrapped to ``width_in``, none cut or overlapping; placed as images (FigureImage, labelled with the
+    family's name) in pixels from the figure's bottom, so that a later height does not move them.
+    Returns the height they take (inches)."""
     placed, x, y, line_h = [], _LEGEND_X_IN * fig.dpi, 0.0, 0.0
     limit = (width_in - _LEGEND_X_IN) * fig.dpi
     for fam, items in entries.items():
@@ -577,18 +550,11 @@ def _figure_legend(fig, width_in, entries) -> float:
     return total / fig.dpi
 
 
-def _finish(fig, path) -> None:
-    """The PNG (each panel's grid lines are drawn by its :class:`_Frame`, one path per panel)."""
-    save_png(fig, path)
-
-
 def save_png(fig, path) -> None:
-    """Save as an 8-bit palette PNG: the figures use a few dozen colours, and a palette makes the
-    files ~3× smaller than RGBA at no visible cost (no dithering). Deterministic for equal input. The
-    canvas is drawn once and its pixels quantized directly."""
+    """Save as an 8-bit palette PNG (no dithering), unhinted text; deterministic for equal input."""
     from PIL import Image
     canvas = fig.canvas if isinstance(fig.canvas, FigureCanvasAgg) else FigureCanvasAgg(fig)
-    with matplotlib.rc_context({"text.hinting": "no_hinting"}):   # the same glyphs, unhinted: a third cheaper
+    with matplotlib.rc_context({"text.hinting": "no_hinting"}):
         canvas.draw()
     w, h = canvas.get_width_height(physical=True)
     im = Image.frombuffer("RGBA", (w, h), canvas.buffer_rgba(), "raw", "RGBA", 0, 1).convert("RGB")
@@ -609,13 +575,11 @@ def _dashes(ls, lw) -> tuple:
 
 
 class _Curves(Line2D):
-    """A panel's variants in one artist instead of a Line2D or two per variant (the ladders and the work
-    figures held ~2,000 lines: creating, adding and drawing them was a fifth of a report's drawing).
-    ``parts``, drawn in their order: ``("line", x, y, rgba, dash pattern, width)`` and ``("marks", x, y,
-    marker, size pt, face rgba, edge rgba)``, each drawn as a Line2D of that style draws it (the same
-    renderer calls: caps, joins, dashes, marker snapping, 1 pt marker edges), clipped to the axes; with
-    ``capstyle`` every line has those caps (a LineCollection's: "butt"). As a
-    Line2D of all their points (drawing nothing of its own) it gives the axes their data limits."""
+    """A panel's variants in one artist. ``parts``, drawn in their order: ``("line", x, y, rgba, dash
+    pattern, width)`` and ``("marks", x, y, marker, size pt, face rgba, edge rgba)``, each with the
+    renderer calls a Line2D of that style makes (caps, joins, dashes, marker snapping, 1 pt marker
+    edges), clipped to the axes; with ``capstyle`` every line has those caps. As a Line2D of all their
+    points (drawing nothing of its own) it gives the axes their data limits."""
 
     def __init__(self, parts, capstyle=None, **kwargs):
         pts = [np.column_stack([np.asarray(x, dtype=float), np.asarray(y, dtype=float)])
@@ -673,8 +637,7 @@ def _curves(ax, parts) -> None:
 
 
 def _line(ax, x, y, **style):
-    """One line of the given style (a Line2D added as it is: ``plot``'s argument parsing is a third of
-    its cost); the axes are autoscaled when the panel is done."""
+    """One Line2D of the given style added to ``ax`` (not autoscaled: the panel is, when done)."""
     return ax.add_line(Line2D(np.asarray(x, dtype=float), np.asarray(y, dtype=float), **style))
 
 
@@ -816,7 +779,7 @@ def fig_trajectories(res, sc, styles, path):
             if any(fld == "q_WB" for _, fld, _ in moving) else "")
     NOTES[(sc, "trajectories")] = ((("Not drawn, constant along the reference: " + ", ".join(still) + ".")
                                     if still else "") + quat + _same_note(same)).strip()
-    _finish(fig, path)
+    save_png(fig, path)
     return True
 
 
@@ -845,7 +808,7 @@ def fig_errors(res, sc, styles, path):
     NOTES[(sc, "errors")] = (("Not drawn: " + ", ".join(left)
                               + " (does not move, or zero error for every variant)."
                               if left else "") + exact_note + _same_note(same)).strip()
-    _finish(fig, path)
+    save_png(fig, path)
     return True
 
 
@@ -906,7 +869,7 @@ def fig_conservation(res, sc, styles, path):
                       layout="time-log", legend=legend_entries(fams, styles, markers=False))
     same = _time_panels(axes, res, sc, fams, styles, rows, log=True)
     NOTES[(sc, "conservation")] = (NOTES[(sc, "conservation")] + _same_note(same)).strip()
-    _finish(fig, path)
+    save_png(fig, path)
     return True
 
 
@@ -1075,8 +1038,8 @@ def fig_ladder(res, sc, styles, path, mode):
                 _slope_triangles(ax, ladder, labels=j % _blocks(len(fams))[1] == 0)
         _ylabel(axes, i, f"{LABELS[q]} ({UNITS[q]})")
     _same_limits(axes.flat, "x")
-    # every row: the same Δt grid lines; labels on the bottom row only, on at most 4 of them (a float32
-    # variant's ladder adds coarser rungs: 10 labels of a halving ladder would overlap at a panel's width)
+    # every row: the same Δt grid lines; labels on the bottom row only, on at most 4 of them (they would
+    # overlap at a panel's width)
     step = -(-len(ladder) // 4)
     asc = sorted(ladder)
     shown = {d for k, d in enumerate(asc) if k % step == 0}
@@ -1091,7 +1054,7 @@ def fig_ladder(res, sc, styles, path, mode):
     left = [LABELS[q] for q in QUANTITIES if q not in moving]
     NOTES[(sc, kind)] = (("Not drawn: " + ", ".join(left) + " (does not move). ") if left else "") + \
         "Orders in the legends: " + " / ".join(LABELS[q] for q in qs) + "." + exact_note + _same_note(same)
-    _finish(fig, path)
+    save_png(fig, path)
     return True
 
 
@@ -1143,7 +1106,7 @@ def fig_work(res, sc, styles, path):
         ax.set_ylabel(f"final {LABELS[q]} error ({UNITS[q]})", fontsize=8)
     fig.subplots_adjust(left=0.75 / width, right=1.0 - 0.2 / width, top=1.0 - 0.75 / h,
                         bottom=(0.6 + leg_h + 0.15) / h, wspace=0.22)
-    _finish(fig, path)
+    save_png(fig, path)
     NOTES[(sc, "work")] = _same_note(same).strip()
     return True
 
@@ -1163,9 +1126,7 @@ def figure_tasks(res, sc) -> list:
     return [(sc, k) for k in KINDS]
 
 
-#: Relative drawing cost of one panel of each kind (CPU time per panel, measured on the default sweep's
-#: report: a ladder panel carries a line and markers per variant, triangles and Δt labels; a work panel
-#: holds every variant).
+#: Relative drawing cost of one panel of each kind (CPU time per panel, trajectories = 1).
 _PANEL_COST = {"convergence": 1.9, "local": 1.9, "trajectories": 1.0,
                "errors": 1.0, "conservation": 1.0, "work": 1.8}
 

@@ -1,33 +1,9 @@
-"""Which engine variant is most accurate, and which is cheapest for a given accuracy: the ranking, derived
-from the measured work-precision data only (results.csv: each run's final errors, its steps and its wall
-time; summary.json: the scenarios' scales and physics, the verdicts) — nothing here is hand-written.
-
-Per scenario (docs/results.md, "The ranking"):
-
-* a run's **error** is its largest final error relative to the scenario's scale of each quantity (the
-  summary matrix's number, :func:`reports.glance.relative_error`);
-* a variant's **cost per step** is the median of ``wall_s / steps`` over its runs of the Δt ladder, all
-  measured in this sweep; a run's **cost** is its steps times that cost per step (the median irons out the
-  timer's noise, so a run with more steps never costs less);
-* its **work-precision curve** is (cost, error) over its ladder runs that finished, ordered by cost, and it is
-  read between its measured points by linear interpolation of log error against log cost — never beyond
-  them: outside its measured range a value is a bound (said "≤") or unreachable;
-* the **common cost** is the run cost inside the measured cost range of the most variants (among the costs
-  measured; a tie goes to the one nearest the median of log cost), and a variant's **accuracy at the common
-  cost** is its curve's error there — "≤ e" when the common cost is above its costliest run (its finest
-  measured error, which more steps would not worsen for a scheme that converges), unreachable when it is
-  below its cheapest run;
-* the **common accuracy** is likewise the error inside the measured error range of the most variants, and
-  a variant's **cost at the common accuracy** is where its curve first comes down to it — "≤ c" when its
-  cheapest run is already that accurate, unreached when even its finest run is not.
-
-Per scenario family (what moves, measured on the reference: translation only, rotation only, both) and
-overall, a variant's score is the geometric mean over the scenarios of its error at the common cost over the
-best one there (×1 = the best), and of its cost at the common accuracy over the cheapest one; a variant with
-values on fewer than half of the family's scenarios is listed after the ranked ones. A variant with a
-verdict that contradicts its expectation is never named "most accurate" or "cheapest" in a sentence without
-saying so: the sentence names the first one whose verdicts are all as expected, and says why the one before
-it is passed over.
+"""Which engine variant is most accurate at a common cost, and which is cheapest at a common accuracy,
+derived from the sweep's measured work-precision data only (results.csv: final errors, steps, wall
+times; summary.json: scales, what moves, verdicts). The definitions (a run's error and cost, the
+work-precision curve read between measured points only, the common cost and accuracy, the scores per
+scenario family, the rule for variants whose verdicts contradict their expectations): docs/results.md,
+"The ranking".
 """
 from __future__ import annotations
 
@@ -38,7 +14,7 @@ from reports.findings import fmt
 from reports.glance import relative_error
 
 __all__ = ["Point", "Curve", "SCENARIO_FAMILIES", "scenario_family", "curves", "common_level", "at_cost",
-           "cost_at", "ranking", "Ranking"]
+           "cost_at", "ranking", "Ranking", "ordinal"]
 
 #: Scenario families, from what moves along the reference (summary.json ``scenarios[].varies``).
 SCENARIO_FAMILIES = ("translation only", "rotation only", "translation and rotation")
@@ -333,7 +309,8 @@ def ratio_text(x) -> str:
     return f"×{m}e{int(e)}"
 
 
-def _ordinal(n: int) -> str:
+def ordinal(n: int) -> str:
+    """``1st``, ``2nd``, ``3rd``, ``4th``, ``11th``, ``21st``."""
     suffix = "th" if 10 <= n % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(n % 10, "th")
     return f"{n}{suffix}"
 
@@ -394,7 +371,7 @@ def engine_sentence(rk: Ranking, v: str) -> str:
             first = "most accurate" if what == "acc" else "cheapest"
             parts.append(f"{first} at {where.split(' at ')[1]} " + _where(firsts[what], rk))
         elif overall and getattr(overall, f"{what}_rank"):
-            parts.append(f"{_ordinal(getattr(overall, f'{what}_rank'))} of {n} ranked in {where} "
+            parts.append(f"{ordinal(getattr(overall, f'{what}_rank'))} of {n} ranked in {where} "
                          f"({ratio_text(getattr(overall, f'{what}_score'))} {best})")
         elif overall:
             parts.append(f"not ranked in {where} (a value on {getattr(overall, f'{what}_n')} of its "

@@ -7,6 +7,7 @@ no traceback); 130 interrupted (Ctrl-C); 143 terminated (SIGTERM). The README ha
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import os
 import sys
@@ -363,29 +364,24 @@ def _use_engine_files(paths) -> None:
         raise BadInput(str(exc)) from None
 
 
-def _positive_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a whole number, got {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {v}")
-    return v
+def _whole_number(least: int):
+    """An option type: a whole number, refused below ``least``."""
+    def option(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be a whole number, got {text!r}") from None
+        if v < least:
+            raise argparse.ArgumentTypeError(f"must be >= {least}, got {v}")
+        return v
+    return option
 
 
+_positive_int = _whole_number(1)
+_nonnegative_int = _whole_number(0)
 _seconds_option = _at_most(_positive_float, MAX_OPTION_SECONDS, " s (11.6 days)")
 _jobs_option = _at_most(_positive_int, MAX_OPTION_JOBS)
 _repeats_option = _at_most(_positive_int, 100)
-
-
-def _nonnegative_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a whole number, got {text!r}") from None
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {v}")
-    return v
 
 
 def _default_or_none(engine: str):
@@ -683,16 +679,25 @@ def _gate_failures(summary) -> list:
     return out
 
 
-def _dask_client(address: str):
+@contextlib.contextmanager
+def _dask_executor(address: str | None):
+    """The executor of a client of the Dask scheduler at ``address`` (None without one), closed after."""
+    if not address:
+        yield None
+        return
     try:
         from distributed import Client
     except ImportError:
         raise BadInput("--dask: the 'distributed' package is not installed; install the optional extra: "
                        "pip install -e '.[dask]'") from None
     try:
-        return Client(address, timeout=10)
+        client = Client(address, timeout=10)
     except (OSError, TimeoutError, ValueError) as exc:
         raise BadInput(f"--dask {address}: cannot connect to the Dask scheduler: {exc}") from None
+    try:
+        yield client.get_executor()
+    finally:
+        client.close()
 
 
 def _time_limits(seconds) -> dict:
@@ -736,17 +741,12 @@ def _run_sweep(args, scenarios, variants, skipped) -> dict:
     import reports
     from cross_checks.sweep import run_sweep
 
-    client = _dask_client(args.dask) if args.dask else None
     jobs = args.jobs or usable_cores()
-    try:
+    with _dask_executor(args.dask) as executor:
         return run_sweep(scenarios, variants, args.out, jobs=jobs, use_cache=not args.no_cache, progress=True,
                          finish=lambda d: reports.render(d, self_contained=args.self_contained, jobs=jobs,
                                                         progress=True),
-                         skipped=skipped, **_time_limits(args.time_limit),
-                         executor=client.get_executor() if client is not None else None)
-    finally:
-        if client is not None:
-            client.close()
+                         skipped=skipped, **_time_limits(args.time_limit), executor=executor)
 
 
 def verdict_count(summary) -> tuple:
@@ -762,11 +762,6 @@ def verdict_count(summary) -> tuple:
     wrong = (sum(r["matches_expectation"] is False for r in conv) + sum(not a.get("agrees") for a in agree)
              + sum(r["agrees"] is False for r in refs) + sum(r["matches_expectation"] is False for r in long))
     return total, wrong
-
-
-def _inexpressible_lines(cannot) -> list:
-    """One line per (scenario, variant) its engine cannot take, with the engine's reason."""
-    return [f"{r['engine']} on {r['scenario']}: {r['reason']}" for r in cannot]
 
 
 def _sweep_outcome(summary, out, n_scenarios, n_variants, elapsed_s) -> int:
@@ -790,8 +785,8 @@ def _sweep_outcome(summary, out, n_scenarios, n_variants, elapsed_s) -> int:
     if cannot:
         say(f"rbcheck sweep: {len(cannot)} (scenario, variant) pair(s) not run because the engine cannot "
             "express the scenario (summary.json not_expressible; the report lists them):")
-        for line in _inexpressible_lines(cannot)[:10]:
-            say(f"  {line}")
+        for r in cannot[:10]:   # each with its engine's reason
+            say(f"  {r['engine']} on {r['scenario']}: {r['reason']}")
     fails = _gate_failures(summary)
     total, wrong = verdict_count(summary)
     failed = run.get("failed_runs", 0)
@@ -902,7 +897,7 @@ def cmd_bench(args) -> int:
 def cmd_fuzz(args) -> int:
     from cross_checks.cli.fuzz import run_fuzz
     refuse_inputs_as_outputs([("--out", args.out, True)], _engine_file_inputs(args))
-    return run_fuzz(args, BadInput, _resolve_engines, _dask_client)
+    return run_fuzz(args, BadInput, _resolve_engines, _dask_executor)
 
 
 COMMANDS = {"list": cmd_list, "show": cmd_show, "run": cmd_run, "sweep": cmd_sweep, "report": cmd_report,

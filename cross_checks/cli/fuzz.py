@@ -32,7 +32,7 @@ def _print_result(summary, out, t0) -> None:
         print(f"  {pair}: agreement {t['agreement'][0]} ({t['agreement'][1]})")
 
 
-def run_fuzz(args, BadInput, resolve_engines, dask_client) -> int:
+def run_fuzz(args, BadInput, resolve_engines, dask_executor) -> int:
     import reports.fuzz_page as page
     from cross_checks.fuzz.campaign import FuzzError, run_campaign
     from cross_checks.sweep.results_dir import ResultsDirError, check_output_dir
@@ -45,18 +45,15 @@ def run_fuzz(args, BadInput, resolve_engines, dask_client) -> int:
     variants, _ = resolve_engines(args.engines)
     if not variants:
         raise BadInput("--engines: no available engine variant to run")
-    client = dask_client(args.dask) if args.dask else None
-    t0 = time.perf_counter()
-    try:
-        summary = run_campaign(variants, args.out, budget_s=args.budget, seed=args.seed,
-                               jobs=args.jobs or usable_cores(), use_cache=not args.no_cache,
-                               executor=client.get_executor() if client is not None else None,
-                               engine_files=list(args.engine_file or []), finish=page.render_fuzz)
-    except FuzzError as exc:
-        raise BadInput(str(exc)) from None
-    finally:
-        if client is not None:
-            client.close()
+    with dask_executor(args.dask) as executor:
+        t0 = time.perf_counter()
+        try:
+            summary = run_campaign(variants, args.out, budget_s=args.budget, seed=args.seed,
+                                   jobs=args.jobs or usable_cores(), use_cache=not args.no_cache,
+                                   executor=executor, engine_files=list(args.engine_file or []),
+                                   finish=page.render_fuzz)
+        except FuzzError as exc:
+            raise BadInput(str(exc)) from None
     _print_result(summary, args.out, t0)
     for e in summary["batch_errors"]:
         print(f"rbcheck fuzz: warning: batch {e['batch']} could not be judged ({e['error']}); "

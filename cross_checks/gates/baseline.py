@@ -1,19 +1,11 @@
-"""``rbcheck baseline RESULTS_DIR OUT_DIR``: the committed baseline, in a form a reviewer can read in a diff
-(docs/results.md "The baseline").
+"""``rbcheck baseline RESULTS_DIR OUT_DIR``: the committed baseline, in a form a reviewer can read in a diff.
 
-* ``results.csv``: every row and column of RESULTS_DIR's but the timing columns (``wall_s``,
-  ``cached``: they change on every run), cells copied as text — the numbers are the sweep's own, bit
-  for bit, so a regeneration on the same code and machine changes no line;
-* ``summary.json``: ``"form": "compact baseline"``, the provenance, and one line per record of the
-  scenarios, variants, convergence, local convergence and agreement, each reduced to the fields of
-  :data:`cross_checks.sweep.schema.COMPACT_LISTS` — what ``rbcheck compare`` reads plus what a
-  reviewer needs to see a verdict change (verdict, order, expected verdict and order, whether it
-  matches, the assessment). The full summary stays in the results directory (CI uploads it).
-
-``rbcheck compare`` reads a compact baseline like any results directory. OUT_DIR is replaced as a
-whole (a staging sibling and two renames), and only when it is absent, empty, or holds nothing but a
-``results.csv`` and a ``summary.json``; RESULTS_DIR is validated in full first, and what is written is
-read back through compare's validation before it replaces anything.
+``results.csv`` without the timing columns (cells copied as text) and a compact ``summary.json``
+(``"form": "compact baseline"``, records reduced to :data:`cross_checks.sweep.schema.COMPACT_LISTS`).
+OUT_DIR is replaced as a whole (a staging sibling and two renames), and only when absent, empty, or
+holding nothing but those two files; RESULTS_DIR is validated in full first, and what is written is read
+back through compare's validation before it replaces anything. Contents and rules: docs/results.md,
+"The baseline".
 """
 from __future__ import annotations
 

@@ -1,26 +1,16 @@
 """``rbcheck compare BASELINE_DIR NEW_DIR``: direction-aware regression check of two results directories.
 
-Rows of ``results.csv`` are matched by (scenario, engine, dt). Each metric has a direction and an
-absolute + relative tolerance (``METRIC_RULES``): errors and drifts are better when lower; a value
-is a regression when ``new > old + abs_tol + rel_tol·|old|``, an improvement when
-``new < old − abs_tol − rel_tol·|old|``. A status change away from ``ok`` is a regression.
-Convergence records of ``summary.json`` are matched by (scenario, engine, quantity): an order that
-moves further from its expected value by more than ``ORDER_TOL`` or a verdict that changes from
-``converges`` is a regression. Engine versions of both provenances are compared and reported.
+Rows of ``results.csv`` are matched by (scenario, engine, dt), convergence records by (scenario, engine,
+quantity). Each metric has a direction and an absolute + relative tolerance (``METRIC_RULES``): a value is
+a regression when ``new > old + abs_tol + rel_tol·|old|``, an improvement when
+``new < old − abs_tol − rel_tol·|old|``; a status change away from ``ok``, an order further from its
+expected value by more than ``ORDER_TOL``, or a verdict that changes from ``converges`` is a regression.
 
-Either directory may be a full results directory (``rbcheck sweep``) or a compact baseline
-(``rbcheck baseline``, :mod:`cross_checks.gates.baseline`): compare reads only what both hold. Both are
-validated in full before anything is compared (the columns compare reads, a number in every numeric
-cell, no negative error or drift, known statuses, no duplicate rows, a summary.json of a known schema
-version with well-formed convergence records): damaged input is exit 2 with one line, never read as
-"no regression". A metric column the baseline has and the new results lack, or an order that
-vanished, is a regression.
-
-A sweep of a subset (its summary.json lists the scenarios and variants it ran) is compared on what it
-ran: baseline rows and records of a scenario or variant it did not run are counted as NOT COMPARED and
-named in one line, not reported row by row as missing. A variant the new sweep left out because it was
-unavailable there (its ``skipped_variants``) is still missing: its rows are what the gate must see.
-Rows of a scenario and variant the new sweep ran are compared one by one; one absent there is missing.
+Either side may be a full results directory or a compact baseline; both are validated in full first
+(damaged input is exit 2 with one line, never "no regression": docs/hardening.md, "compare"). A sweep
+of a subset is compared on what it ran (the rest counted as NOT COMPARED in one line); a variant it
+skipped as unavailable is missing. Verdicts per variant and the output: docs/results.md, "Comparing two
+results directories".
 
 Exit codes: 0 no regression; 1 regression (or missing rows, unless allowed); 2 unusable input.
 """
@@ -81,10 +71,9 @@ class Change:
 class VariantChange:
     """What changed for one engine variant, judged as a whole (:func:`variant_changes`).
 
-    category : "regression" (a verdict or order lost, a run that stopped finishing, errors only worse or one
-        worse beyond COMPARE_SCHEME_CHANGE_MAX_RATIO), "improvement" (gained, or errors only better),
-        "scheme changed" (orders kept, errors moved both ways within that ratio), "changed" (information
-        only: a verdict that makes no claim, an energy-drift kind), "missing".
+    category : "regression", "improvement", "scheme changed" (errors moved both ways within
+        COMPARE_SCHEME_CHANGE_MAX_RATIO), "changed" (information only) or "missing" (docs/results.md,
+        "Comparing two results directories").
     causes : the explaining facts first — verdicts and fitted orders, one-step orders, agreement with the
         same-scheme variant, energy-drift kind — one sentence each, at most a few.
     ratio_range : (lowest, highest) new/old over the metric changes; rows, scenarios : how many moved.

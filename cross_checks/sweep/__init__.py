@@ -1,8 +1,5 @@
-"""``rbcheck sweep``, in the order its stages run (``run``): planning (``plan``), executing the references
-and jobs here, in a pool or on an executor (``execute``), one job and its measurement (``jobs``),
-assembling rows, records and summary (``assemble``, ``provenance``); the verified cache (``cache``) and
-what its keys hold (``fingerprint``); workers, signals and time limits (``lifecycle``); the results
-directory and its marker (``results_dir``, ``schema``)."""
+"""``rbcheck sweep``: its stages in order in :mod:`cross_checks.sweep.run`, each module's part in the README,
+"Layout"."""
 from cross_checks.sweep.run import (
                                     LOCAL_SAMPLES,
                                     MAX_SERIES_POINTS,

@@ -284,12 +284,10 @@ def _skipped_records(skipped: dict) -> list:
         return []
     from cross_checks.engines import all_variants
     infos = {v.name: v for v in all_variants()}
-    return [_skipped_record(name, reason, infos.get(name)) for name, reason in skipped.items()]
-
-
-def _skipped_record(name: str, reason: str, info) -> dict:
-    return {"name": name, "reason": reason, "installed": info.installed if info else True,
-            "required": info.required if info else False}
+    return [{"name": name, "reason": reason,
+             "installed": infos[name].installed if name in infos else True,
+             "required": infos[name].required if name in infos else False}
+            for name, reason in skipped.items()]
 
 
 def build_summary(*, provenance, scenarios, variants, skipped, convergence, local, agreement, rows, jobs,

@@ -1,32 +1,43 @@
 """Self-verifying cache entries: an entry is trusted only when it proves it is the entry asked for.
 
-An entry is an ``.npz`` of plain arrays (no pickles) plus two more: ``__key__``, the cache key it was
-stored under, and ``__mac__``, an HMAC-SHA256 of the key and of every array (name, dtype, shape,
-bytes) under a random secret kept in the cache directory (``.secret``, mode 0600). :func:`load`
-returns None — so the caller recomputes and :func:`store` replaces the entry — for anything that does
-not verify: a missing, truncated, bit-flipped or empty file, an entry copied under another key, or
-numbers edited by hand (without the secret a forger cannot make a valid MAC). It never raises.
-
-Entries live in the user's cache directory (:func:`cache_dir`), never inside a results directory;
-what their keys are made of is :mod:`cross_checks.sweep.jobs`'s and :mod:`cross_checks.sweep.fingerprint`'s.
+An entry is an ``.npz`` of plain arrays (no pickles) plus ``__key__`` (the key it was stored under) and
+``__mac__`` (an HMAC-SHA256 of the key and of every array's name, dtype, shape and bytes under the
+secret ``.secret`` of the cache directory). :func:`load` returns None for anything that does not verify
+and never raises; :func:`store` never breaks a sweep. Entries live in :func:`cache_dir`, never inside a
+results directory. What is refused and what keys hold: docs/hardening.md, "The cache".
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import hmac
+import json
 import os
 import secrets
 from pathlib import Path
 
 import numpy as np
 
-from cross_checks.core.files import cache_dir
+from cross_checks.core.files import cache_dir, json_default
 
-__all__ = ["load", "store", "mac", "cache_dir"]
+__all__ = ["load", "store", "mac", "cache_dir", "using_cache_dir", "pack", "unpack", "entry_path"]
 
 _SECRETS: dict = {}
 
 
+@contextlib.contextmanager
+def using_cache_dir(path):
+    """Use ``path`` as rbcheck's cache directory ($RBCHECK_CACHE_DIR, read by :func:`cache_dir`) for the
+    duration; the previous setting is put back."""
+    old = os.environ.get("RBCHECK_CACHE_DIR")
+    os.environ["RBCHECK_CACHE_DIR"] = str(path)
+    try:
+        yield
+    finally:
+        if old is None:
+            os.environ.pop("RBCHECK_CACHE_DIR", None)
+        else:
+            os.environ["RBCHECK_CACHE_DIR"] = old
 
 
 def _secret(root: Path) -> bytes:
@@ -72,9 +83,30 @@ def store(root: Path, path: Path, key: str, arrays: dict) -> None:
     try:
         save_npz_atomic(Path(path),
                         {**arrays, "__key__": np.array(key), "__mac__": np.array(mac(root, key, arrays))},
-                        compress=False)   # read back by rbcheck only: written ~20x faster uncompressed
+                        compress=False)   # read back by rbcheck only
     except OSError:
         pass
+
+
+def entry_path(root, kind: str, key: str) -> Path:
+    """Where the entry of ``key`` lives in the cache ``root``: ``<kind>/<first 2 hex digits>/<key>.npz``."""
+    return Path(root) / kind / key[:2] / f"{key}.npz"
+
+
+def pack(fields: dict, series: dict | None) -> dict:
+    """A record as an entry's arrays: ``fields`` as JSON (``__json__``: no pickles) and each array of
+    ``series`` as ``series::<name>``."""
+    arrays = {"__json__": np.array(json.dumps(fields, default=json_default))}
+    for k, a in (series or {}).items():
+        arrays[f"series::{k}"] = a
+    return arrays
+
+
+def unpack(arrays: dict) -> tuple:
+    """``(fields, series or None)`` of :func:`pack`'s arrays (KeyError or ValueError when unreadable)."""
+    fields = json.loads(str(arrays["__json__"]))
+    series = {k[len("series::"):]: v for k, v in arrays.items() if k.startswith("series::")}
+    return fields, series or None
 
 
 def load(root: Path, path: Path, key: str) -> dict | None:

@@ -33,9 +33,8 @@ _END = object()
 
 
 class Runner:
-    """Runs callables here (jobs == 1), in a process pool, or on any ``concurrent.futures.Executor``
-    given by the caller (e.g. a Dask cluster's ``Client.get_executor()``), yielding results as they
-    finish. An external executor is used as it is: never shut down or replaced here."""
+    """Runs callables here (jobs == 1), in a process pool, or on the caller's executor (used as it is:
+    never shut down or replaced here), yielding results as they finish."""
 
     def __init__(self, jobs: int, executor=None):
         self.jobs = jobs

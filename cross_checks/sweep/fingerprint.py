@@ -1,14 +1,8 @@
 """What a cached number depends on besides a job's inputs (scenario content, variant, Δt): the code
-that computes it and the versions that run that code. Both go into every cache key
-(:mod:`cross_checks.sweep.jobs`), so a change to either recomputes instead of serving stale numbers.
-
-* :func:`code_fingerprint`: every Python source file of the packages that determine a job's numbers
-  (``FINGERPRINTED_PACKAGES``: reference_sim and the cross_checks layers up to the sweep) — whole
-  packages, so a new module is covered without anyone keeping a list — plus the engine adapter's own
-  ``cache_token()`` (for an engine file: the file and the programs it names).
-* :func:`environment`: rbcheck's version, numpy, scipy, Python, the machine (architecture and CPU
-  model: libm and BLAS kernels are chosen per CPU) and the BLAS builds numpy and SciPy use. The
-  engine's own version is added per job (``EngineAdapter.version()``).
+that computes it (:func:`code_fingerprint`: every source file of ``FINGERPRINTED_PACKAGES`` plus the
+adapter's ``cache_token()``) and the versions and machine that run it (:func:`environment`; the engine's
+version is added per job). Both go into every cache key (:mod:`cross_checks.sweep.jobs`), so a change to
+either recomputes; what a key holds: docs/hardening.md, "The cache".
 """
 from __future__ import annotations
 

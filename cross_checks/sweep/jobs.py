@@ -1,16 +1,10 @@
 """One sweep job — a (scenario, engine variant, Δt) run — and its measurement; the job cache.
 
-A worker process calls :func:`run_job_group` with the jobs of one scenario and variant: it runs them
-through the engine registry in one call (the adapter's ``simulate_many``), compares
-every step with the scenario's reference (computed once per scenario by :func:`reference_job` on the
-union of the scenario's time grids), measures conservation drifts, takes the one-step (local) errors
-from ``LOCAL_SAMPLES`` reference states, and returns small summaries — plus, at the scenario's default
-Δt only, series decimated to ``MAX_SERIES_POINTS`` points for the plots. Full trajectories never leave
-the worker.
-
-Results are cached per job in the user's cache directory (:func:`cross_checks.sweep.cache.cache_dir`),
-keyed by the scenario's content hash, the variant, Δt, the engine version, the code that computes the
-numbers and the versions that run it (:mod:`cross_checks.sweep.fingerprint`).
+A worker runs a scenario's jobs of one variant in one call (:func:`run_job_group`), measures each against
+the scenario's reference (:func:`reference_job`, once per scenario on the union of its time grids) and
+returns small records: full trajectories never leave the worker. Records are cached per job
+(:mod:`cross_checks.sweep.cache`), keyed by the scenario's content hash, the variant, Δt, the engine
+version and what :mod:`cross_checks.sweep.fingerprint` adds.
 """
 from __future__ import annotations
 
@@ -100,26 +94,6 @@ def _job_key(scenario, variant, dt, engine_version):
     return hashlib.sha256(blob.encode()).hexdigest()
 
 
-def _cache_file(root: Path, kind: str, key: str) -> Path:
-    return root / kind / key[:2] / f"{key}.npz"
-
-
-def _pack_record(rec: dict) -> dict:
-    """A job record as npz arrays (JSON for the scalars; no pickles)."""
-    arrays = {"__json__": np.array(json.dumps({k: v for k, v in rec.items() if k != "series"},
-                                              default=json_default))}
-    for k, a in (rec.get("series") or {}).items():
-        arrays[f"series::{k}"] = a
-    return arrays
-
-
-def _unpack_record(arrays: dict) -> dict:
-    rec = json.loads(str(arrays["__json__"]))
-    series = {k[len("series::"):]: v for k, v in arrays.items() if k.startswith("series::")}
-    rec["series"] = series or None
-    return rec
-
-
 def _record_is_for(rec, job) -> bool:
     """A cached record that verified is also checked to be a whole record of this very job."""
     row = rec.get("row") if isinstance(rec, dict) else None
@@ -136,14 +110,17 @@ def _cache_load(root, path: Path, key: str, job):
     if arrays is None:
         return None
     try:
-        rec = _unpack_record(arrays)
+        fields, series = cache.unpack(arrays)
+        rec = {**fields, "series": series}
     except (KeyError, ValueError, TypeError):
         return None
     return rec if _record_is_for(rec, job) else None
 
 
 def _cache_store(root, path: Path, key: str, rec: dict) -> None:
-    cache.store(root, path, key, _pack_record(rec))  # a read-only or full cache never breaks a sweep
+    """Store ``rec`` (a read-only or full cache never breaks a sweep)."""
+    fields = {k: v for k, v in rec.items() if k != "series"}
+    cache.store(root, path, key, cache.pack(fields, rec.get("series")))
 
 
 # --- references ------------------------------------------------------------------------------------
@@ -255,7 +232,7 @@ def _reference_solution_file(scenario, out_path, cache_root, use_cache, time_lim
     grids = _time_grids(scenario, variants)
     t_union = np.unique(np.concatenate(list(grids.values())))
     key = _reference_key(scenario, t_union)
-    cpath = _cache_file(Path(cache_root), "reference", key) if cache_root else None
+    cpath = cache.entry_path(cache_root, "reference", key) if cache_root else None
     hit = _cached_reference(cache_root, cpath, key, t_union) if cpath is not None and use_cache else None
     if hit is not None:
         arrays, measured = hit
@@ -299,9 +276,7 @@ def _measured_of(arrays: dict):
 
 
 _REF_MEMO: dict = {}
-#: References a worker keeps in memory: the jobs run longest first, which interleaves the scenarios, so a
-#: memo of one would reread a reference file for almost every job; the catalog's largest reference is
-#: 1.7 MB (16,001 times x 13), so a sweep's references fit many times over.
+#: References a worker keeps in memory (the jobs run longest first, which interleaves the scenarios).
 REFERENCE_MEMO_SIZE = 32
 
 
@@ -364,7 +339,7 @@ def run_job_group(jobs, scenario, ref_path: str, cache_root: str | None = None, 
     for k, job in enumerate(jobs):
         if cache_root:
             ckey = _job_key(scenario, job.variant, job.dt_s, version)
-            keys[k] = (ckey, _cache_file(Path(cache_root), "job", ckey))
+            keys[k] = (ckey, cache.entry_path(cache_root, "job", ckey))
             rec = _cache_load(cache_root, keys[k][1], ckey, job) if use_cache else None
             if rec is not None:
                 rec["row"].update(default_dt=job.default_dt, in_ladder=job.in_ladder, cached=True)

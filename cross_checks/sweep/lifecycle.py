@@ -107,16 +107,14 @@ def time_limit(seconds: float | None, what: str):
     except TimeLimitExceeded:
         raise
     except Exception as exc:
-        # The alarm's exception raised inside C code may come out as another one (NumPy, interrupted while
-        # parsing its arguments, reported "TypeError: 'axis' must be an integer" on a loaded machine): once
-        # the alarm has fired, whatever ends the body is the time limit.
+        # the alarm's exception raised inside C code may come out as another one (e.g. a NumPy TypeError):
+        # once the alarm has fired, whatever ends the body is the time limit
         if fired:
             raise TimeLimitExceeded(message) from exc
         raise
     finally:
         signal.setitimer(signal.ITIMER_REAL, 0.0)
         signal.signal(signal.SIGALRM, previous)
-
 
 
 def each_within_limits(call, items: list, time_limit_s: float | None, what: str) -> list:

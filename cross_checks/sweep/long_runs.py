@@ -20,7 +20,6 @@ from pathlib import Path
 import numpy as np
 
 from cross_checks.core import tolerances as tol
-from cross_checks.core.files import json_default
 from cross_checks.sweep import cache, fingerprint
 from cross_checks.sweep.lifecycle import each_within_limits
 from cross_checks.sweep.schema import SCHEMA_VERSION
@@ -63,6 +62,12 @@ def _empty_row(scenario, variant: str, status: str, message: str, version: str) 
     return row
 
 
+def _failed(scenarios, variant: str, why: str) -> list:
+    """Failed records of ``variant``'s long runs of ``scenarios``, each saying ``why``."""
+    return [{"row": {**_empty_row(s, variant, "failed", why, ""), "cached": False}, "series": None}
+            for s in scenarios]
+
+
 def _measure(scenario, variant: str, version: str, run) -> dict:
     """The record of one long run (a Trajectory, or the failure's message)."""
     from cross_checks.analysis.expectations import long_run_expectation
@@ -88,24 +93,17 @@ def _measure(scenario, variant: str, version: str, run) -> dict:
     return {"row": row, "series": series}
 
 
-def _pack(rec: dict) -> dict:
-    arrays = {"__json__": np.array(json.dumps(rec["row"], default=json_default))}
-    for k, a in (rec.get("series") or {}).items():
-        arrays[f"series::{k}"] = a
-    return arrays
-
-
 def _unpack(arrays: dict, scenario, variant: str):
+    """The cached record of ``variant``'s long run of ``scenario``, or None when it is not a whole one."""
     try:
-        row = json.loads(str(arrays["__json__"]))
+        row, series = cache.unpack(arrays)
     except (KeyError, ValueError, TypeError):
         return None
     if (not isinstance(row, dict) or any(c not in row for c in MEASURED_COLUMNS)
             or row["scenario"] != scenario.name or row["engine"] != variant
             or row["status"] not in ("ok", "diverged")):
         return None
-    series = {k[len("series::"):]: v for k, v in arrays.items() if k.startswith("series::")}
-    return {"row": row, "series": series or None}
+    return {"row": row, "series": series}
 
 
 def run_long_group(variant: str, scenarios, cache_root: str | None = None, use_cache: bool = True,
@@ -119,14 +117,13 @@ def run_long_group(variant: str, scenarios, cache_root: str | None = None, use_c
     try:
         version = get_adapter(engine).version()
     except Exception as exc:  # noqa: BLE001 - an engine that cannot run here: failed rows
-        return [{"row": {**_empty_row(s, variant, "failed", str(exc), ""), "cached": False}, "series": None}
-                for s in scenarios]
+        return _failed(scenarios, variant, str(exc))
     out: list = [None] * len(scenarios)
     keys = {}
     for i, sc in enumerate(scenarios):
         if cache_root:
             k = _key(sc, variant, version)
-            keys[i] = (k, Path(cache_root) / "long_run" / k[:2] / f"{k}.npz")
+            keys[i] = (k, cache.entry_path(cache_root, "long_run", k))
             arrays = cache.load(Path(cache_root), keys[i][1], k) if use_cache else None
             rec = _unpack(arrays, sc, variant) if arrays is not None else None
             if rec is not None:
@@ -143,7 +140,7 @@ def run_long_group(variant: str, scenarios, cache_root: str | None = None, use_c
             rec["row"]["cached"] = False
             out[i] = rec
             if i in keys and rec["row"]["status"] in ("ok", "diverged"):
-                cache.store(Path(cache_root), keys[i][1], keys[i][0], _pack(rec))
+                cache.store(Path(cache_root), keys[i][1], keys[i][0], cache.pack(rec["row"], rec["series"]))
     return out
 
 
@@ -157,9 +154,8 @@ def _run_long_item(item):
         adopt_user_engines(user_engines)
         return run_long_group(variant, scenarios, cache_root, use_cache, time_limit_s)
     except Exception as exc:  # noqa: BLE001
-        why = f"internal error while measuring the long run: {type(exc).__name__}: {exc}"
-        return [{"row": {**_empty_row(s, variant, "failed", why, ""), "cached": False}, "series": None}
-                for s in scenarios]
+        return _failed(scenarios, variant,
+                       f"internal error while measuring the long run: {type(exc).__name__}: {exc}")
 
 
 def _cost(variant: str, scenarios) -> float:
@@ -192,9 +188,8 @@ def run_long_runs(runner, scenarios, variants, cache_root, use_cache, time_limit
                 bar.update(1, f"{sc.name} {item[0]}", work=costs[item[0]] if k == 0 else 0.0)
 
         def crashed(item):
-            why = "the worker process died running this variant's long runs (a crash inside the engine?)"
-            return [{"row": {**_empty_row(s, item[0], "failed", why, ""), "cached": False}, "series": None}
-                    for s in item[1]]
+            return _failed(item[1], item[0], "the worker process died running this variant's long runs "
+                                             "(a crash inside the engine?)")
 
         runner.map_unordered(_run_long_item, items, done, on_crash=crashed, in_flight=lambda it: True)
     return out

@@ -6,11 +6,9 @@ from cross_checks.sweep.jobs import Job, job_dts
 
 __all__ = ["plan_jobs", "job_cost_s", "inexpressible"]
 
-#: Rough cost per step (µs) of each variant, (forces constant, forces state-dependent), measured on the
-#: catalog (wall_s / steps of results.csv, a --no-cache default sweep on 2 vCPU with 2 workers, Drake
-#: included; implicit Euler and leapfrog as measured on their own, ~35–45 µs/step). Used to
-#: run the longest jobs first and to estimate the time left; an engine not listed (e.g. an engine file)
-#: counts _COST_DEFAULT_US.
+#: Rough cost per step (µs) of each variant, (forces constant, forces state-dependent), from results.csv's
+#: wall_s / steps. Used to run the longest jobs first and to estimate the time left; an engine not listed
+#: (e.g. an engine file) counts _COST_DEFAULT_US.
 _COST_US = {
     "reference:course": (11, 13), "reference:course_gyro": (12, 15), "reference:expmap_gyro": (13, 16),
     "reference:explicit_euler": (13, 16), "reference:midpoint": (22, 29), "reference:rk4": (34, 44),
@@ -20,8 +18,8 @@ _COST_US = {
     "pybullet:maximal": (12, 42), "pybullet:multibody": (12, 44),
     "drake:semi_explicit_euler": (21, 62), "drake:runge_kutta2": (29, 91), "drake:runge_kutta3": (37, 127),
     "drake:implicit_euler": (126, 382),
-    # the eight gyroscopic variants step by their definition (no compiled kernel: docs/gyro_integrators.md):
-    # NumPy per step, measured on the long runs (3 members a call, torque-free; run_members)
+    # the eight gyroscopic variants step by their definition in NumPy (no compiled kernel:
+    # docs/gyro_integrators.md)
     "reference:implicit_gyro_body": (380, 420), "reference:implicit_gyro_world": (410, 450),
     "reference:explicit_gyro_clamped": (340, 380), "reference:jolt_gyro": (350, 390),
     "reference:buss_augmented": (530, 580), "reference:dlm_splitting": (950, 1050),

@@ -1,19 +1,14 @@
-"""A sweep's too-low free-running orders, judged again on the scenario's ladder continued to finer steps.
+"""A sweep's too-low free-running orders, judged again on the scenario's ladder continued to finer steps
+(docs/verdicts.md, "On the ladder continued to finer steps").
 
-A scenario file's Δt ladder may stop before its errors are asymptotic: a correct scheme then shows a low
-order, or errors that shrink but not at every halving, and the sweep would fail it (the fuzz's shrunk
-counterexamples of a correct scheme did: docs/fuzz.md §5). Where a free-running record does not match its
-claimed order and its errors do shrink (``analysis.refinement.worth_refining``), the variant is run again
-at the file's finest Δt halved ``tol.REFINE_HALVINGS`` times, its final errors measured against the same
-reference (its final state: the runs end at the scenario's duration whatever their step), with floors
-computed as for the file's rungs (``assemble.ladder_floors``). Only a positive result on those rungs
-(``analysis.refinement.refined_ladder_shows_the_order``) turns the record into ``pre_asymptotic`` with no
-claim, its assessment naming the continued ladder; a scheme of the wrong order, a plateau, or errors that
-sink into round-off keep the verdict. The extra runs are not rows of results.csv (the file's ladder is
-what the results describe). They run on the sweep's runner (its process pool or executor), after the
-runs, only for such records: :func:`requests` says which, :func:`run_refinements` runs them, :func:`rejudge`
-judges each record again. The sweep's own process never starts an engine (a JAX engine started there would
-be unusable in the workers it forks next).
+Where a free-running record does not match its claimed order while its errors shrink
+(``analysis.refinement.worth_refining``), the variant is run again at the file's finest Δt halved
+``tol.REFINE_HALVINGS`` times, its final errors measured against the same reference with floors as for
+the file's rungs (``assemble.ladder_floors``); only a positive result
+(``analysis.refinement.refined_ladder_shows_the_order``) turns the record into ``pre_asymptotic``. The
+extra runs are not rows of results.csv. They run on the sweep's runner, never in the sweep's own process
+(a JAX engine started there would be unusable in the workers it forks next): :func:`requests` says which,
+:func:`run_refinements` runs them, :func:`rejudge` judges each record again.
 """
 from __future__ import annotations
 

@@ -1,20 +1,8 @@
-"""The results directory as a place on disk: recognised by a marker file only rbcheck writes, never
-replaced while it holds anything rbcheck did not write, replaced by renames only, and the temporary
-siblings of a killed run cleaned up by the next one.
-
-* ``.rbcheck-results.json`` (the marker) says ``format``, ``schema_version`` and lists every file
-  rbcheck wrote in the directory (relative POSIX paths). ``rbcheck sweep --out DIR`` replaces DIR
-  only when DIR is absent, empty, or marked and holding nothing but the files its marker lists;
-  anything else is refused before any work starts (exit 2). Directories without the marker (written
-  before it existed, or a compact baseline such as ``baselines/default``) stay readable by ``compare``
-  (and, when full, by ``report``); a sweep never replaces them.
-* A sweep builds the new directory in a sibling ``.<DIR>.rbcheck-staging-<host>-<pid>-<start>-<rand>``
-  and swaps it in by two renames; the previous directory, renamed to ``.<DIR>.rbcheck-old-...``, is
-  removed afterwards, file by listed file: anything unlisted (a file the user dropped in during the
-  run) is moved into the new directory, never deleted.
-* Those sibling names carry the host, the process id and the process start time, so the next run can
-  tell that their owner is dead (kill -9) and remove them; a ``-old-`` sibling left between the two
-  renames is the previous results, and is put back in place when DIR is missing.
+"""The results directory as a place on disk: recognised by its marker ``.rbcheck-results.json`` (format,
+schema_version, every file rbcheck wrote there), never replaced while it holds anything rbcheck did not
+write, replaced by two renames from a staging sibling, and the siblings of a killed run (named by host,
+pid and process start time) cleaned up or put back by the next one. The rules: docs/hardening.md,
+"The results directory".
 """
 from __future__ import annotations
 

@@ -13,15 +13,7 @@ the results directory of docs/results.md, written atomically. :func:`run_sweep` 
    marker, and the swap that replaces DIR only when complete and only when it is rbcheck's own
    (:mod:`.results_dir`).
 
-Results directory::
-
-    .rbcheck-results.json  the marker: format, schema_version, every file rbcheck wrote here
-    results.csv            one row per (scenario, engine, dt): RESULT_COLUMNS
-    summary.json           provenance, scenarios, variants, convergence (+ local_convergence),
-                           agreement of equivalent schemes, run statistics
-    series/<scenario>.npz  decimated time series at the scenario's default Δt (float32)
-    long_runs.csv          one row per (long-run scenario, engine): LONG_RUN_COLUMNS (only with long runs)
-    plots/*.png, index.html, scenario-<name>.html   (written by the caller's ``finish``: reports.render)
+The files of the results directory: docs/results.md, "Files".
 """
 from __future__ import annotations
 

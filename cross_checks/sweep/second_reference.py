@@ -1,27 +1,18 @@
-"""The second, independent reference of every scenario, beside the primary (closed form or DOP853).
+"""The second, independent reference of every scenario: Drake's error-controlled integration
+(:mod:`cross_checks.engines.drake_reference`) at ``SECOND_REFERENCE_TARGET_ACCURACY``, compared with the
+primary (closed form or DOP853) at up to ``SAMPLES`` times of the default-Δt grid.
 
-Drake's error-controlled integration (:mod:`cross_checks.engines.drake_reference`) of the scenario at
-``SECOND_REFERENCE_TARGET_ACCURACY`` is compared with the primary reference over the run, at up to
-``SAMPLES`` times of the default-Δt grid. What each claims is MEASURED, not assumed:
-
-* the primary's accuracy: its measured error (references.reference_error: the closed form's
-  round-off; for DOP853 the largest distance over the run between two DOP853 solutions, at its
-  tolerance and at a 10× looser one, both solved here), plus the round-off the sweep's verdicts allow a
-  run of the scenario's default Δt;
-* Drake's accuracy: its largest distance over the run from a second Drake solution at a
-  ``SECOND_REFERENCE_CHECK_FACTOR`` times looser target accuracy (that solution's error, an upper
-  bound of the tighter one's), plus the round-off of its steps grown by the measured error
-  amplification (metrics.roundoff_floor).
-
-The two agree when, in every quantity, their largest distance is within the sum of the two
-accuracies. The record (``scenarios[i].second_reference`` of summary.json, docs/results.md) is None
-when Drake is not installed; the Drake solutions are cached like the primary reference.
+Each side's accuracy is measured, not assumed: the primary's measured error (references.reference_error)
+plus the round-off the sweep's verdicts allow a run at the default Δt; Drake's distance from a second
+Drake solution at a ``SECOND_REFERENCE_CHECK_FACTOR`` times looser target, plus its steps' round-off grown
+by the measured amplification (metrics.roundoff_floor). They agree when, in every quantity, their largest
+distance is within the sum. The record is ``scenarios[i].second_reference`` of summary.json (None without
+Drake); docs/engine_conventions.md, "The second reference".
 """
 from __future__ import annotations
 
 import hashlib
 import json
-from pathlib import Path
 
 import numpy as np
 
@@ -86,7 +77,7 @@ def _drake_solutions(scenario, t_s, cache_root, use_cache):
     """Drake's solution at the target accuracy and at the check accuracy on ``t_s``, cached."""
     from cross_checks.engines.drake_reference import drake_solution
     key = _cache_key(scenario, t_s)
-    path = Path(cache_root) / "second_reference" / key[:2] / f"{key}.npz" if cache_root else None
+    path = cache.entry_path(cache_root, "second_reference", key) if cache_root else None
     if path is not None and use_cache:
         arrays = cache.load(cache_root, path, key)
         if arrays is not None and arrays.get("y") is not None and arrays["y"].shape == (t_s.size, 13):
@@ -105,7 +96,7 @@ def _ground_truth_error_over_run(scenario, t_s, cache_root, use_cache) -> dict:
     the primary's numbers being right (references.reference_error measures it at the final time only)."""
     from reference_sim.ground_truth import GROUND_TRUTH_RTOL, ground_truth
     key = _cache_key(scenario, t_s) + "-dop853-check"
-    path = Path(cache_root) / "second_reference" / key[:2] / f"{key}.npz" if cache_root else None
+    path = cache.entry_path(cache_root, "second_reference", key) if cache_root else None
     arrays = cache.load(cache_root, path, key) if path is not None and use_cache else None
     if arrays is not None and all(arrays.get(k) is not None and arrays[k].shape == (t_s.size, 13)
                                   for k in ("y", "y_loose")):

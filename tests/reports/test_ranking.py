@@ -116,7 +116,8 @@ def test_the_three_accuracy_greens_are_told_apart_in_greyscale():
 
 
 def test_the_sentences_number_places_in_english():
-    from reports.ranking import _ordinal, ratio_text
+    from reports.ranking import ordinal as _ordinal
+    from reports.ranking import ratio_text
     assert [_ordinal(n) for n in (1, 2, 3, 4, 11, 12, 13, 21, 22, 23, 111)] == \
         ["1st", "2nd", "3rd", "4th", "11th", "12th", "13th", "21st", "22nd", "23rd", "111th"]
     assert [ratio_text(x) for x in (1.0, 1.34, 12.3, 160.0, 1234.0, 5.2e8)] == \

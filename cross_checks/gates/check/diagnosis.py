@@ -1,18 +1,12 @@
-"""``rbcheck check``, step 4: which scheme a trajectory is, and which mistake explains it.
+"""``rbcheck check``, step 4: which scheme a trajectory is, and which mistake explains it (docs/check.md,
+"Which scheme it is" and "Likely cause").
 
-From the user's own recorded states, every candidate advances one row interval and is compared with
-the next recorded row (so chaos cannot blur the comparison):
-
-* every reference variant (``reference_sim.integrators.VARIANTS`` through the reference adapter's
-  ``one_step``): the trajectory IS a variant when every step reproduces it within the rounding of the
-  data (written digits + the roundings of a step); each variant is also checked against the exact flow
-  (is it a correct scheme for this scenario at this Δt?);
-* every catalogued mistake (:mod:`cross_checks.gates.check.mistakes`) on a correct base: named when it
-  explains every step within the local allowance and CHECK_MISTAKE_MARGIN times better than any correct
-  scheme;
-* a Δt mismatch: the scale s of the step that best fits the rows (the exact flow over s Δ);
-* the initial state: which usual slip (ω in body axes, quaternion in (x, y, z, w) order, ...) turns the
-  scenario's initial state into the first row.
+From the user's own recorded states every candidate advances one row interval and is compared with the
+next row: every reference variant (through the reference adapter's ``one_step``; IS a variant when every
+step reproduces it within the rounding of the data, and each variant is checked against the exact flow),
+every catalogued mistake (:mod:`cross_checks.gates.check.mistakes`: named when it explains every step
+within the local allowance and CHECK_MISTAKE_MARGIN times better than any correct scheme), a Δt
+mismatch (the scale s of the step that best fits), and the usual slips of the initial state.
 """
 from __future__ import annotations
 

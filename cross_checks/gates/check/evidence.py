@@ -1,14 +1,8 @@
-"""``rbcheck check``, step 3: the evidence rows of a verdict, each measured against a derived allowance.
-
-* one-step defect (full-state files): from each recorded state, the exact flow over the row interval
-  against the next row (:mod:`cross_checks.analysis.flow`);
-* acceleration consistency (pose-only files): second differences of the poses against the equations
-  of motion at the reconstructed state;
-* conserved quantities where the physics conserves them: energy and world angular momentum (drift
-  bounded by the local allowances summed along the run), and |q| = 1;
-* free-running error against the scenario's reference, with the local allowances carried to each time
-  by the scenario's measured error growth and CAPPED (tolerances.CHECK_FREE_RUN_CAP_FRACTION): beyond
-  the time the allowance reaches the cap it is reported but not decisive.
+"""``rbcheck check``, step 3: the evidence rows of a verdict, each measured against a derived allowance
+(docs/check.md, "The evidence"): the one-step defect against the exact flow (full-state files,
+:mod:`cross_checks.analysis.flow`), the acceleration consistency of the poses (pose-only files), the
+conserved quantities, and the free-running error against the reference, its allowance capped
+(tolerances.CHECK_FREE_RUN_CAP_FRACTION) and not decisive beyond the cap.
 
 An :class:`Evidence` row is decisive over a time window; it fails when its value exceeds the
 allowance at any decisive time — and a NaN never passes.
@@ -119,9 +113,7 @@ def evidence_row(kind, quantity, t_s, value, allowance, source, *, decisive=None
     else:
         k = int(np.argmax(np.nan_to_num(r, nan=np.inf)))
         max_ratio, first = float(r[k]), None
-    if decisive is None:
-        until = None
-    elif mask.all():
+    if decisive is None or mask.all():
         until = None
     elif not mask.any():
         until = -math.inf

@@ -1,21 +1,13 @@
-"""``rbcheck check``, step 1: what a trajectory file says, as people write it.
+"""``rbcheck check``, step 1: what a trajectory file says, as people write it (docs/check.md, "What to
+give it").
 
 Turns the rows of a trajectory CSV (read by column name, :func:`cross_checks.core.trajectory.read_columns`)
 into a :class:`CheckInput`: the simulator's step ``h``, how many steps each row interval spans, the
-true time of every row (``n_k h``: recorded times are trusted only to their precision), the precision
-the values were written (and probably computed) in, which quantities the file holds, and what had to
-be decided on the way (notes). Everything the checker cannot work with is a :class:`CheckError`
-(exit 2) naming the file, the line or column and the reason.
-
-Times. A simulator that accumulates ``t += dt`` in single precision (Unity) drifts from ``n·dt`` by
-up to ``2⁻²⁴ t (n + 3) / 2`` after n steps (each addition rounds by ≤ ½ ulp(t) ≤ 2⁻²⁴ t, and dt itself
-is rounded once): 3 ms after 10 000 steps of 1 ms. So rows are mapped to steps from the row
-INTERVALS (each interval is accurate to a few ulps of t), and the recorded times are then checked
-against ``n_k h`` within that bound; nothing else is read from them.
-
-Precision. The values' printed precision is measured per column (the largest rounding quantum any
-value of the column shows, e.g. 1e-6 for ``%.6f``); data written with at most 9 significant digits,
-or exactly representable in single precision, is taken to be computed in single precision.
+true time of every row (``n_k h``: rows are mapped to steps from their INTERVALS, and the recorded
+times checked against ``n_k h`` within :func:`single_precision_time_bound`), the precision the values
+were written in (per column, the largest rounding quantum shown), which quantities the file holds, and
+what had to be decided on the way (notes). Everything the checker cannot work with is a
+:class:`CheckError` (exit 2) naming the file, the line or column and the reason.
 """
 from __future__ import annotations
 

@@ -9,10 +9,8 @@ from cross_checks.core.files import json_default
 
 __all__ = ["format_report", "format_ladder", "to_json_text"]
 
-_KIND_SHORT = {"one-step defect": "one-step defect", "acceleration": "acceleration", "conserved": "conserved",
-               "free-running": "free-running"}
-_NAMES = {"quaternion_norm": "|q| - 1", "angular_momentum": "angular momentum L", "energy": "energy",
-          "position": "position", "velocity": "velocity", "orientation": "orientation",
+#: A quantity's name in the report, where it is not the quantity's own.
+_NAMES = {"quaternion_norm": "|q| - 1", "angular_momentum": "angular momentum L",
           "angular_velocity": "angular velocity"}
 
 
@@ -51,7 +49,7 @@ def _evidence_table(res) -> list:
             first = "–" if e.first_over_s is None else f"{e.first_over_s:.4g}"
             name = _NAMES.get(e.quantity, e.quantity) + (f" ({e.unit})" if e.unit else "")
             worst = e.value_at_worst if not math.isnan(e.value_at_worst) else e.max_value
-            out.append(f"  {_KIND_SHORT[e.kind]:<17}{name:<29}{_num(e.max_ratio):>15}{_num(worst):>11}"
+            out.append(f"  {e.kind:<17}{name:<29}{_num(e.max_ratio):>15}{_num(worst):>11}"
                        f"{_num(e.allowance):>11}{_num(e.t_worst_s):>10}{first:>12}  {_status(e)}")
     if still:
         out.append(f"  not moving in this scenario (nothing to judge): {', '.join(still)}")

@@ -1,21 +1,13 @@
 """``rbcheck check TRAJ.csv --scenario SCENARIO``: a true verdict on any simulator's trajectory.
 
-Two questions, never mixed. By default: is this a correct simulation of the scenario's physics? PASS
-(exit 0) when the trajectory is consistent with the scenario's equations of motion within what a
-consistent scheme of order ≥ 1 leaves at its Δt, or IS a reference variant step for step whose own step
-is right on this scenario. A trajectory that is exactly a scheme whose step is wrong here (the course's
-update, which omits the gyroscopic term, on a tumbling asymmetric body) FAILS, and the verdict says so
-in one sentence. ``scheme="ENGINE:VARIANT"`` asks instead: is this exactly that scheme? PASS when it
-reproduces that scheme step for step (said with what the scheme gets wrong here, if anything), FAIL
-otherwise. Either way FAIL when the run diverged, ended early or did not start at the scenario's
-initial state. Bad input is a :class:`CheckError` (exit 2).
-
-The evidence (docs/check.md): the one-step defect from every recorded state against the exact flow
-(chaos-independent), conserved quantities, and the free-running error against the reference within
-its capped, growth-carried allowance; for files without velocities, the consistency of the poses'
-second differences with the equations of motion. Every allowance is derived in
-:mod:`cross_checks.analysis.flow` / :mod:`cross_checks.gates.check.evidence`, its constants in
-``cross_checks/core/tolerances.py``.
+Two questions, never mixed (docs/check.md). By default: is this a correct simulation of the scenario's
+physics? PASS when the trajectory is consistent with the equations of motion within what a consistent
+scheme of order ≥ 1 leaves at its Δt, or IS a reference variant step for step whose own step is right on
+this scenario; a trajectory that is exactly a scheme whose step is wrong here FAILS. With
+``scheme="ENGINE:VARIANT"``: is this exactly that scheme? Either way FAIL when the run diverged, ended
+early or did not start at the scenario's initial state. Bad input is a :class:`CheckError` (exit 2).
+Every allowance is derived in :mod:`cross_checks.analysis.flow` / :mod:`cross_checks.gates.check.evidence`,
+its constants in ``cross_checks/core/tolerances.py``.
 """
 from __future__ import annotations
 

@@ -8,7 +8,8 @@ import pytest
 
 from cross_checks.scenario import parse_scenario
 from cross_checks.sweep import cache
-from cross_checks.sweep.jobs import Job, _cache_file, _job_key, reference_job, run_job_group
+from cross_checks.sweep.cache import entry_path as _cache_file
+from cross_checks.sweep.jobs import Job, _job_key, reference_job, run_job_group
 from tests.helpers.scenarios import TINY
 from tests.helpers.sweeps import RUN_DEPENDENT_COLUMNS
 
