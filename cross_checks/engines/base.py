@@ -41,7 +41,7 @@ from cross_checks.core.files import kernel_cache_dir
 __all__ = ["EngineAdapter", "Variant", "harness_force_torque", "stage_force_torque",
            "harness_force_torque_floats", "stage_force_torque_floats", "apply_decay_prestep",
            "decay_factors", "EngineError", "optional_import", "require", "EngineNotInstalled",
-           "installed_version", "library_files", "RunRequest", "Traits", "INVARIANTS",
+           "installed_version", "release", "library_files", "RunRequest", "Traits", "INVARIANTS",
            "SYMPLECTIC_EULER_EXPLICIT_GYRO", "SYMPLECTIC_EULER_IMPLICIT_GYRO", "WHOLE_STATE_EXPLICIT_EULER",
            "WHOLE_STATE_IMPLICIT_EULER", "HIGHER_ORDER", "DEFAULT_TRAITS", "ModuleAdapter", "package_files",
            "one_request", "check_variant", "run_in_groups", "check_installed", "quiet_fd2", "first_import",
@@ -120,6 +120,14 @@ def installed_version(dist: str) -> str | None:
         return dist_version(dist)
     except PackageNotFoundError:
         return None
+
+
+@functools.cache
+def release(dist: str, runs_on: tuple = ()) -> str:
+    """Distribution ``dist``'s installed version ("unknown" without metadata), read once per process, and
+    with ``runs_on = (label, distribution)`` the version of what it runs on: ``"4.0.0 (warp 1.19.0)"``."""
+    ver = installed_version(dist) or "unknown"
+    return f"{ver} ({runs_on[0]} {installed_version(runs_on[1])})" if runs_on else ver
 
 
 def library_files(module) -> list:

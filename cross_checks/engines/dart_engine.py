@@ -15,7 +15,6 @@ Conventions, defaults neutralised and what pins them: docs/engine_conventions.md
 """
 from __future__ import annotations
 
-import functools
 import math
 
 import numpy as np
@@ -65,12 +64,7 @@ def _require():
 def version() -> str:
     """The installed dartpy distribution's version (EngineNotInstalled when it is absent)."""
     _require()
-    return _dist_version()
-
-
-@functools.lru_cache(maxsize=1)
-def _dist_version() -> str:
-    return base.installed_version("dartpy") or "unknown"
+    return base.release("dartpy")
 
 
 # --- state conversion (the boundary) --------------------------------------------------------------------

@@ -94,12 +94,7 @@ def version() -> str:
     """MJX's version and the JAX release it runs on, e.g. ``3.17.0 (jax 0.10.2)``, from package metadata
     (EngineNotInstalled when mujoco-mjx is absent)."""
     _check_installed()
-    return _dist_version()
-
-
-@functools.lru_cache(maxsize=1)
-def _dist_version() -> str:
-    return f"{installed_version(_DIST)} (jax {installed_version('jax')})"
+    return base.release(_DIST, ("jax", "jax"))
 
 
 @functools.lru_cache(maxsize=1)

@@ -113,12 +113,7 @@ def version() -> str:
     """Newton's version and the Warp release it runs on, e.g. ``1.8.0 (warp 1.19.0)``, from package metadata
     (EngineNotInstalled when newton is absent)."""
     _check_installed()
-    return _dist_version()
-
-
-@functools.lru_cache(maxsize=1)
-def _dist_version() -> str:
-    return f"{installed_version(_DIST)} (warp {installed_version('warp-lang')})"
+    return base.release(_DIST, ("warp", "warp-lang"))
 
 
 @functools.lru_cache(maxsize=1)

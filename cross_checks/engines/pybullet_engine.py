@@ -13,7 +13,6 @@ ends the run. Conventions, defaults neutralised and what pins them: docs/engine_
 """
 from __future__ import annotations
 
-import functools
 import os
 import threading
 
@@ -62,12 +61,7 @@ def _require():
 def version() -> str:
     """The installed pybullet distribution's version (read from its metadata once per process)."""
     _require()
-    return _dist_version()
-
-
-@functools.lru_cache(maxsize=1)
-def _dist_version() -> str:
-    return base.installed_version("pybullet") or "unknown"
+    return base.release("pybullet")
 
 
 def _connect() -> int:

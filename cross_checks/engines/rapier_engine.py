@@ -17,7 +17,6 @@ Conventions, defaults neutralised and what pins them: docs/engine_conventions.md
 """
 from __future__ import annotations
 
-import functools
 import math
 import time
 
@@ -105,12 +104,7 @@ def _require():
 def version() -> str:
     """The installed rapier3d distribution's version (EngineNotInstalled when it is absent)."""
     _require()
-    return _dist_version()
-
-
-@functools.lru_cache(maxsize=1)
-def _dist_version() -> str:
-    return base.installed_version(DIST) or "unknown"
+    return base.release(DIST)
 
 
 def _mass_properties(body):

@@ -163,3 +163,10 @@ def test_minus_weight_takes_the_weight_off_the_force_only():
 
 def test_batches_are_padded_to_the_next_power_of_two():
     assert [base.power_of_two(n) for n in (1, 2, 3, 4, 5, 64, 65)] == [1, 2, 4, 4, 8, 64, 128]
+
+
+def test_release_reads_the_installed_versions_from_package_metadata():
+    from importlib.metadata import version as dist_version
+    assert base.release("numpy") == dist_version("numpy")
+    assert base.release("numpy", ("scipy", "scipy")) == f"{dist_version('numpy')} (scipy {dist_version('scipy')})"
+    assert base.release("no-such-distribution-rbcheck") == "unknown"

@@ -16,11 +16,9 @@ def no_mjx(monkeypatch):
     real = base.installed_version
     monkeypatch.setattr(mjx_engine, "installed_version",
                         lambda dist: None if dist == "mujoco-mjx" else real(dist))
-    mjx_engine._dist_version.cache_clear()
     engines.reset_registry()
     yield
     engines.reset_registry()
-    mjx_engine._dist_version.cache_clear()
 
 
 def test_version_raises_engine_not_installed_with_the_extra_to_install(no_mjx):

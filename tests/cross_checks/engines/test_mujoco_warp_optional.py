@@ -16,11 +16,9 @@ def no_mujoco_warp(monkeypatch):
     real = base.installed_version
     monkeypatch.setattr(mujoco_warp_engine, "installed_version",
                         lambda dist: None if dist == "mujoco-warp" else real(dist))
-    mujoco_warp_engine._dist_version.cache_clear()
     engines.reset_registry()
     yield
     engines.reset_registry()
-    mujoco_warp_engine._dist_version.cache_clear()
 
 
 def test_version_raises_engine_not_installed_with_the_extra_to_install(no_mujoco_warp):

@@ -16,11 +16,9 @@ def no_newton(monkeypatch):
     real = base.installed_version
     monkeypatch.setattr(newton_engine, "installed_version",
                         lambda dist: None if dist == "newton" else real(dist))
-    newton_engine._dist_version.cache_clear()
     engines.reset_registry()
     yield
     engines.reset_registry()
-    newton_engine._dist_version.cache_clear()
 
 
 def test_version_raises_engine_not_installed_with_the_extra_to_install(no_newton):
