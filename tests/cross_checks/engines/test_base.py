@@ -168,5 +168,6 @@ def test_batches_are_padded_to_the_next_power_of_two():
 def test_release_reads_the_installed_versions_from_package_metadata():
     from importlib.metadata import version as dist_version
     assert base.release("numpy") == dist_version("numpy")
-    assert base.release("numpy", ("scipy", "scipy")) == f"{dist_version('numpy')} (scipy {dist_version('scipy')})"
+    on_scipy = f"{dist_version('numpy')} (scipy {dist_version('scipy')})"
+    assert base.release("numpy", ("scipy", "scipy")) == on_scipy
     assert base.release("no-such-distribution-rbcheck") == "unknown"
