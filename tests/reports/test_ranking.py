@@ -52,11 +52,10 @@ def base(tmp_path_factory):
 
 
 def test_a_contradicted_variant_is_not_named_most_accurate_without_saying_so(base, tmp_path):
-    # which variant ranks first depends on the costs measured in this run (wall time): the test plants the
-    # contradiction on whichever it is
-    res = load_results(base)
-    first, clean = ranking(res).best("overall", "acc")
-    assert first is clean    # every verdict of the base sweep as expected
+    # which variant ranks first depends on the costs measured in this run (wall time), and the base sweep has
+    # contradictions of its own (its 2-rung stiff spring): the test makes every verdict as expected but one
+    # of whichever variant ranks first
+    first, _ = ranking(load_results(base)).best("overall", "acc")
     d = tmp_path / "res"
     shutil.copytree(base, d)
     s = json.loads((d / "summary.json").read_text())
