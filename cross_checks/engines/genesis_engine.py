@@ -413,11 +413,6 @@ def to_packed(qpos, vel):
 # --- runs ---------------------------------------------------------------------------------------------
 
 
-def _weight(scenario) -> np.ndarray:
-    p = scenario.problem
-    return p.body.mass_kg * np.asarray(p.forces.gravity_W, dtype=float)
-
-
 def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
     """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded."""
     return _simulate_batch([scenario], variant, dt_s, n_steps)[0]
@@ -431,7 +426,7 @@ def _simulate_batch(scenarios, variant: str, dt_s: float, n_steps: int) -> list:
     B = body(scenarios[0], variant, dt_s, n_envs=0 if n == 1 else n)
     y0 = np.array([sc.problem.initial_packed() for sc in scenarios])
     B.set_state(y0)
-    weight = np.array([_weight(sc) for sc in scenarios])
+    weight = np.array([base.weight_W(sc) for sc in scenarios])
     harness = [harness_fn(sc, dt_s) for sc in scenarios]
     per_step = any(sc.problem.forces.state_dependent for sc in scenarios)
     decay = any(sc.problem.forces.has_decay for sc in scenarios)
@@ -513,7 +508,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     harness = harness_fn(scenario, dt_s)
     ft = np.array([harness(row) for row in y_start.tolist()]).reshape(T, 6)
     B.set_state(base.apply_decay_prestep(scenario, y_start, dt_s))
-    B.apply(ft[:, 0:3] - _weight(scenario), ft[:, 3:6])
+    B.apply(ft[:, 0:3] - base.weight_W(scenario), ft[:, 3:6])
     if B.step():
         return np.full(y_start.shape, math.nan)
     qpos, vel = B.read()

@@ -246,10 +246,6 @@ def _packed_row(r) -> list:
     return r[4:10] + r[0:4] + r[10:13]
 
 
-def _weight(scenario) -> np.ndarray:
-    return scenario.problem.body.mass_kg * np.asarray(scenario.problem.forces.gravity_W, dtype=float)
-
-
 def _group_key(variant, r: base.RunRequest):
     g = _f32(r.scenario.problem.forces.gravity_W)
     return (variant, float(np.float32(r.dt_s)), g.tobytes())
@@ -281,7 +277,7 @@ def _plan(r, y0, comp) -> tuple:
     (γ_v, γ_ω) or None)``."""
     fm = r.scenario.problem.forces
     harness = harness_fn(r.scenario, r.dt_s)
-    w = [float(c) for c in _weight(r.scenario)]
+    w = [float(c) for c in base.weight_W(r.scenario)]
     const = None
     if not fm.state_dependent:
         fx, fy, fz, tx, ty, tz = harness([float(v) for v in y0])
@@ -379,7 +375,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     with np.errstate(all="ignore"):
         y_dec = base.apply_decay_prestep(scenario, y_start, dt_s)
     harness = harness_fn(scenario, dt_s)
-    w = _weight(scenario)
+    w = base.weight_W(scenario)
     body = scenario.problem.body
     for i, y in enumerate(y_start.tolist()):
         c = S.add(body, y_dec[i])

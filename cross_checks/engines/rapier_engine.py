@@ -214,11 +214,6 @@ def _recorded(rows, y0, dt_s: float, why: str = "") -> Run:
     return Run(dt_s * np.arange(len(y)), y)
 
 
-def _weight(scenario) -> list:
-    p = scenario.problem
-    return (p.body.mass_kg * np.asarray(p.forces.gravity_W, dtype=float)).tolist()
-
-
 def _group_key(r) -> tuple:
     return (float(r.dt_s), tuple(float(g) for g in r.scenario.problem.forces.gravity_W))
 
@@ -234,7 +229,7 @@ def _run_group(variant: str, reqs) -> list:
         forces = r.scenario.problem.forces
         harness = harness_fn(r.scenario, dt_s)
         gv, gw = (float(g) for g in base.decay_factors(r.scenario, dt_s))
-        wx, wy, wz = _weight(r.scenario)
+        wx, wy, wz = base.weight_W(r.scenario).tolist()
         fx, fy, fz, tx, ty, tz = harness([float(v) for v in y0])
         f, tau = (fx - wx, fy - wy, fz - wz), (tx, ty, tz)
         W.apply(i, f, tau)
@@ -305,7 +300,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     W = RapierWorld(dt_s, scenario.problem.forces.gravity_W, variant)
     y_dec = base.apply_decay_prestep(scenario, y_start, dt_s)
     harness = harness_fn(scenario, dt_s)
-    wx, wy, wz = _weight(scenario)
+    wx, wy, wz = base.weight_W(scenario).tolist()
     body = scenario.problem.body
     for row, row_dec in zip(y_start.tolist(), y_dec):
         i = W.add(body, row_dec)
