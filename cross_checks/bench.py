@@ -361,6 +361,8 @@ def run_bench(quick: bool = False, repeats: int = 3, render=None, sweep: bool = 
         "measurements": m,
         **{k: v["median"] for k, v in m.items()},
     }
+    # the sweep before any adapter row: it forks its workers, which must not inherit a running JAX or Warp
+    sw = sweep_floor(quick, repeats, render, r["mujoco_bare_step_us"]) if sweep else None
     from cross_checks.engines import mujoco_engine
     # 5000 steps in both modes: a run's set-up (model compile, simulator) is part of its cost per step
     m["mujoco_adapter_single_us_per_step"] = adapter_single_us(mujoco_engine, "euler", 5000, repeats)
@@ -390,8 +392,7 @@ def run_bench(quick: bool = False, repeats: int = 3, render=None, sweep: bool = 
         "reference_batched >= 3x mujoco_best": r["ratio_reference_batched_vs_mujoco_best"] >= 3.0,
         "reference_single <= 5x mj_step": r["ratio_reference_single_vs_mj_step"] <= 5.0,
     }
-    if sweep:
-        sw = sweep_floor(quick, repeats, render, r["mujoco_bare_step_us"])
+    if sw is not None:
         r["sweep"] = sw
         r["sweep_floor_ratio"] = sw["total_s"]["median"] / sw["floor_s"]
         r["sweep_run_floor_ratio"] = sw["run_s"]["median"] / sw["floor_s"]

@@ -119,3 +119,22 @@ def test_the_table_has_a_row_per_batching_adapter():
     r["batched_adapters"] = {"mujoco:euler": 2.0}
     r["measurements"]["adapter_batched[mujoco:euler]"] = {"median": 2.0, "min": 1.0, "max": 3.0, "repeats": 3}
     assert "through the adapter, simulate_many: mujoco:euler" in bench.format_table(r)
+
+
+def test_the_sweep_is_measured_before_any_engine_adapter_runs_in_the_process(monkeypatch):
+    """The sweep forks its workers: a JAX or Warp engine started before it in the bench's process would be
+    inherited by them (JAX warns of a deadlock at every fork), so the adapters' rows come after it."""
+    order = []
+    stat = {"median": 1.0, "min": 1.0, "max": 1.0, "repeats": 1}
+    for name in ("reference_batched", "mujoco_multibody", "mujoco_rollout", "pybullet_bodies",
+                 "reference_single_us", "mujoco_single_us", "mujoco_bare_step_us"):
+        monkeypatch.setattr(bench, name, lambda *a, **k: stat)
+    monkeypatch.setattr(bench, "adapter_single_us", lambda *a, **k: order.append("adapter") or stat)
+    monkeypatch.setattr(bench, "drake_single_us", lambda *a, **k: order.append("adapter") or (None, None))
+    monkeypatch.setattr(bench, "adapter_batched", lambda *a, **k: order.append("adapter") or stat)
+    monkeypatch.setattr(bench, "batching_variants", lambda *a, **k: ["jaxsim:semi_implicit_euler"])
+    sweep = {"total_s": stat, "run_s": stat, "floor_s": 1.0}
+    monkeypatch.setattr(bench, "sweep_floor", lambda *a, **k: order.append("sweep") or sweep)
+    r = bench.run_bench(quick=True, repeats=1)
+    assert order[0] == "sweep" and order.count("sweep") == 1 and "adapter" in order
+    assert r["sweep"] is sweep and r["targets"]["sweep (run + report) <= 8x its floor"]
