@@ -3,6 +3,7 @@ says: log-log interpolation between measured points, bounds outside them, never 
 common cost and accuracy are where the most variants were measured; a variant whose verdicts contradict
 its expectations is never named the most accurate without that said. Also: the plain-words glossary,
 the sign-continuous quaternions and the accuracy colours told apart in greyscale."""
+import csv
 import json
 import math
 import re
@@ -52,13 +53,25 @@ def base(tmp_path_factory):
 
 
 def test_a_contradicted_variant_is_not_named_most_accurate_without_saying_so(base, tmp_path):
-    # which variant ranks first depends on the costs measured in this run (wall time), and the base sweep has
-    # contradictions of its own (its 2-rung stiff spring): the test makes every verdict as expected but one
-    # of whichever variant ranks first
-    first, _ = ranking(load_results(base)).best("overall", "acc")
+    # the costs measured in the base sweep are wall times (load-dependent) and its 2-rung stiff spring has
+    # contradictions of its own: the copy gets fixed costs (every variant 1 µs a step) and every verdict as
+    # expected but one of whichever variant then ranks first
     d = tmp_path / "res"
     shutil.copytree(base, d)
+    with (d / "results.csv").open(encoding="utf-8", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    for r in rows:
+        r["wall_s"] = repr(int(r["steps"]) * 1e-6)
+    with (d / "results.csv").open("w", encoding="utf-8", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
     s = json.loads((d / "summary.json").read_text())
+    for r in s["convergence"]:
+        r.update(matches_expectation=True, assessment="as expected")
+    (d / "summary.json").write_text(json.dumps(s))
+    first, clean = ranking(load_results(d)).best("overall", "acc")
+    assert first is clean and len(ranking(load_results(d)).groups["overall"]["standings"]) > 1
     planted_on = next(r["scenario"] for r in s["convergence"] if r["engine"] == first.variant)
     for r in s["convergence"]:      # every verdict as expected but one of the first's
         planted = r["engine"] == first.variant and r["scenario"] == planted_on
