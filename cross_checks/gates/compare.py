@@ -207,8 +207,7 @@ def _read_csv(csv: Path) -> pd.DataFrame:
     metrics = [m for m in METRIC_RULES if m in raw.columns]
     kinds = ["energy_drift_kind"] if "energy_drift_kind" in raw.columns else []
     out = {c: [] for c in ["scenario", "engine", "dt", "status", *metrics, *kinds]}
-    for i, r in enumerate(raw.itertuples(index=False), start=2):
-        r = r._asdict() if hasattr(r, "_asdict") else dict(zip(raw.columns, r))
+    for i, r in enumerate(raw.to_dict("records"), start=2):
         for c in ("scenario", "engine"):
             if not r[c].strip():
                 raise CompareInputError(f"{csv}: line {i}: {c}: empty")
