@@ -28,12 +28,17 @@ class Run:
     diverged_at_s : time of the first non-finite or blown-up state, or None. When set, ``t_s`` and
         ``y`` stop at the last good state.
     message : why it diverged ("" when it did not).
+    engine_s : seconds spent inside the engine's own step (or compiled loop) for this run, None where the
+        engine cannot tell them apart from its caller's.
+    host_s : seconds the caller (rbcheck's loop: forces, recording, checks) spent on this run besides.
     """
 
     t_s: np.ndarray
     y: np.ndarray
     diverged_at_s: float | None = None
     message: str = ""
+    engine_s: float | None = None
+    host_s: float | None = None
 
 
 def bad_rows(y):

@@ -457,6 +457,7 @@ def _standing_row(s, n_sc) -> dict:
             "cost": ratio_text(s.cost_score),
             "cost_sort": _num(s.cost_score) if s.cost_rank else "", "cost_n": f"{s.cost_n}/{n_sc}",
             "per_step": _micro(s.per_step_us), "per_step_sort": _num(s.per_step_us),
+            "overhead": _micro(s.overhead_us), "overhead_sort": _num(s.overhead_us),
             "verdict": verdict, "verdict_cls": "bad" if (s.contradicts_on or s.failed) else "acc1",
             "verdict_detail": detail, "energy": s.energy or "–", "energy_sort": _num(s.energy_sort)}
 

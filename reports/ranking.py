@@ -63,15 +63,31 @@ def _log(x):
     return math.log10(max(x, 1e-300))
 
 
+def run_cost_s(row) -> float:
+    """A run's cost: the seconds inside the engine's own steps (``engine_s``) where the engine's loop is
+    rbcheck's and so measured apart, else the whole run's wall time (an adapter that owns its loop)."""
+    e = row.get("engine_s", math.nan)
+    return e if isinstance(e, float) and math.isfinite(e) and e > 0 else row["wall_s"]
+
+
+def overhead_per_step_s(res, v) -> float:
+    """rbcheck's own seconds per step beside the engine's for variant ``v`` (the median over its runs whose
+    engine time is measured), NaN where none is."""
+    per = sorted((r["wall_s"] - r["engine_s"]) / r["steps"] for r in res.rows
+                 if r["engine"] == v and r["steps"] > 0 and not r.get("cached")
+                 and math.isfinite(r.get("engine_s", math.nan)) and math.isfinite(r["wall_s"]))
+    return per[len(per) // 2] if per else math.nan
+
+
 def curves(res, sc) -> dict:
     """``{variant: Curve}`` of a scenario, from its ladder runs that finished with a finite error and a
-    measured wall time (a variant without two such runs has no curve)."""
+    measured cost (:func:`run_cost_s`; a variant without two such runs has no curve)."""
     s = res.scenario(sc)
     out = {}
     for v in res.variants:
         rows = [r for r in res.rows_for(sc, v) if r["in_ladder"] and r["status"] == "ok"
-                and r["steps"] > 0 and math.isfinite(r["wall_s"]) and r["wall_s"] > 0]
-        per_step = sorted(r["wall_s"] / r["steps"] for r in rows)
+                and r["steps"] > 0 and math.isfinite(run_cost_s(r)) and run_cost_s(r) > 0]
+        per_step = sorted(run_cost_s(r) / r["steps"] for r in rows)
         pts = []
         if per_step:
             n = len(per_step)
@@ -193,6 +209,7 @@ class Standing:
     acc_rank: int | None = None
     cost_rank: int | None = None
     per_step_us: float | None = None   # median cost per step over the family's scenarios (µs)
+    overhead_us: float | None = None   # rbcheck's own time per step beside the engine's (µs; None: not split)
     verdicts: dict = field(default_factory=dict)   # as_expected, contradicts, noconv, pre, exact
     contradicts_on: list = field(default_factory=list)
     failed: int = 0
@@ -228,6 +245,8 @@ def _standing(res, v, scs, per_sc) -> Standing:
                   sum(c is not None for c in cost), len(ran))
     steps = [per_sc[sc].per_step[v] for sc in scs if v in per_sc[sc].per_step]
     st.per_step_us = sorted(steps)[len(steps) // 2] * 1e6 if steps else None
+    over = overhead_per_step_s(res, v)
+    st.overhead_us = over * 1e6 if math.isfinite(over) else None
     counts = {"as_expected": 0, "contradicts": 0, "noconv": 0, "pre": 0}
     bad_on = []
     for sc in scs:

@@ -226,12 +226,8 @@ def _mujoco_body_omega_read_as_world(mp):
 
 def _mujoco_gravity_twice(mp):
     from cross_checks.engines import mujoco_engine as me
-    orig = me.harness_force_torque
-
-    def harness(scenario, y, dt_s):
-        f, tau = orig(scenario, y, dt_s)   # BUG: the weight is left in, and MuJoCo adds gravity itself
-        return f + scenario.problem.body.mass_kg * np.asarray(scenario.problem.forces.gravity_W), tau
-    mp.setattr(me, "harness_force_torque", harness)
+    # BUG: the weight is left in the applied force, and MuJoCo adds gravity itself
+    mp.setattr(me.MujocoEngine, "applies_gravity", False)
 
 
 def _mujoco_rk4_forces_held_over_the_step(mp):
@@ -253,12 +249,12 @@ def _mujoco_rk4_decay_twice(mp):
 
 def _pybullet_principal_axes_dropped(mp):
     from cross_checks.engines import pybullet_engine as pe
-    orig = pe.BulletBody.__init__
+    orig = pe.BulletWorld._add
 
-    def init(self, *a, **kw):
-        orig(self, *a, **kw)
-        self.q_BP = None   # BUG: the principal frame taken as the body frame
-    mp.setattr(pe.BulletBody, "__init__", init)
+    def add(self, scenario):
+        orig(self, scenario)
+        self.q_BP[-1] = None   # BUG: the principal frame taken as the body frame
+    mp.setattr(pe.BulletWorld, "_add", add)
 
 
 def _pybullet_quaternion_order(mp):
@@ -269,19 +265,20 @@ def _pybullet_quaternion_order(mp):
 
 def _pybullet_decay_left_out(mp):
     from cross_checks.engines import pybullet_engine as pe
-    mp.setattr(pe, "decay_factors", lambda scenario, dt_s: (1.0, 1.0))   # BUG: no decay at all
+    mp.setattr(pe.BulletWorld, "decay", lambda self, g_v, g_w: None)   # BUG: no decay in a run
 
 
 def _pybullet_torque_in_link_frame(mp):
     from cross_checks.engines import pybullet_engine as pe
 
-    def apply(self, f_W, tau_W, x_W):   # 3 floats each, as BulletBody.apply
+    def apply(self, f_W, tau_W):   # (B, 3) each, as BulletWorld.apply
         p = pe.p
-        if any(v != 0.0 for v in f_W):
-            p.applyExternalForce(self.b, -1, list(f_W), list(x_W), p.WORLD_FRAME, physicsClientId=self.c)
-        if any(v != 0.0 for v in tau_W):   # BUG: a world torque given in the link (body) frame
-            p.applyExternalTorque(self.b, -1, list(tau_W), p.LINK_FRAME, physicsClientId=self.c)
-    mp.setattr(pe.BulletBody, "apply", apply)
+        for b, f, tau, prev in zip(self.bodies, f_W.tolist(), tau_W.tolist(), self.last):
+            if any(v != 0.0 for v in f):
+                p.applyExternalForce(b, -1, f, prev[0:3], p.WORLD_FRAME, physicsClientId=self.c)
+            if any(v != 0.0 for v in tau):   # BUG: a world torque given in the link (body) frame
+                p.applyExternalTorque(b, -1, tau, p.LINK_FRAME, physicsClientId=self.c)
+    mp.setattr(pe.BulletWorld, "apply", apply)
 
 
 def _drake_omega_in_body_axes(mp):

@@ -405,16 +405,22 @@ def run_requests(name: str, requests) -> list:
     why = [adapter.expressible(r.scenario, variant) for r in requests]
     todo = [r for r, w in zip(requests, why) if not w]
     t0 = time.perf_counter()
-    runs = iter(adapter.simulate_many(variant, todo) if todo else [])
+    done = adapter.simulate_many(variant, todo) if todo else []
     wall = time.perf_counter() - t0
     steps = sum(r.n_steps for r in todo) or 1
+    # a run whose loop timed itself (engine_s + host_s, per world) gets those and a share of the rest of the
+    # call's time; the others share the call's time in proportion to their steps
+    timed = [(getattr(x, "engine_s", None) or 0.0) + (getattr(x, "host_s", None) or 0.0)
+             if getattr(x, "host_s", None) is not None else None for x in done]
+    rest = max(0.0, wall - sum(t for t in timed if t is not None))
+    runs = iter(zip(done, timed))
     import reference_sim
     out: list = []
     for r, w in zip(requests, why):
         if w:
             out.append(NotExpressible(w))
             continue
-        run = next(runs)
+        run, own = next(runs)
         if isinstance(run, EngineError):
             out.append(run)
             continue
@@ -431,7 +437,10 @@ def run_requests(name: str, requests) -> list:
             "status": "diverged" if run.diverged_at_s is not None else "ok",
             "diverged_at_s": run.diverged_at_s,
             "message": run.message,
-            "wall_s": wall * (r.n_steps / steps),
+            "wall_s": wall * (r.n_steps / steps) if own is None else own + rest * (r.n_steps / steps),
+            # the seconds inside the engine's own step (the host loop's split; NaN where the adapter owns its
+            # loop and cannot tell them apart)
+            "engine_s": float("nan") if getattr(run, "engine_s", None) is None else float(run.engine_s),
             "rbcheck_version": reference_sim.__version__,
         }
         out.append(Trajectory(run.t_s, run.y, meta))

@@ -1,32 +1,27 @@
-"""MuJoCo as an engine adapter (``mujoco:VARIANT``, float64); the interface is cross_checks.engines.base.
+"""MuJoCo as an engine (``mujoco:VARIANT``, float64): a world of free bodies for rbcheck's loop
+(cross_checks.engines.world, cross_checks.engines.loop).
 
 State at the boundary: ``qpos = [x_W, q_WB (w x y z)]``, ``qvel = [v_W (COM), ω_B (BODY axes)]``, so the
-packed state's ``ω_W = R(q) ω_B``; read from qpos/qvel only. Forces: the harness's world force at the COM
-minus the weight ``m g`` (MuJoCo applies gravity) and world torque, written into ``xfrc_applied`` before
-every step from the start-of-step state; ``mujoco:rk4`` with state-dependent forces or decay evaluates them
-at every RK4 stage through MuJoCo's process-global control callback (:class:`Session`); the other
-integrators get the decay before the step (base.apply_decay_prestep). :func:`simulate_many` runs the
-requests through ``mujoco.rollout``. Divergence: the first bad state (reference_sim.simulate.bad_rows) or
-MuJoCo warning ends the run as ``diverged at t = …``; no MUJOCO_LOG.TXT is written.
+packed state's ``ω_W = R(q) ω_B``; read from qpos/qvel only. Forces: the loop's world force at the COM (the
+weight ``m g`` taken off: MuJoCo applies gravity) and world torque, written into ``xfrc_applied`` (kept by
+MuJoCo between steps); ``mujoco:rk4`` with state-dependent forces or decay evaluates them at every RK4 stage
+through MuJoCo's process-global control callback (:class:`Session`); the other integrators get the loop's
+pre-step decay. With the forces held, the steps run in ``mujoco.rollout``. Divergence: the loop's, plus a
+MuJoCo warning, which ends its body's run as ``diverged at t = …``; no MUJOCO_LOG.TXT is written.
 Conventions, defaults neutralised and what pins them: docs/engine_conventions.md, "MuJoCo 4.0.0".
 """
 from __future__ import annotations
 
 import threading
+import time
 
 import numpy as np
 
 from cross_checks.engines import base
-from cross_checks.engines.base import (
-    EngineError,
-    ModuleAdapter,
-    Variant,
-    harness_force_torque,
-    stage_force_torque_floats,
-)
-from cross_checks.engines.step_floats import harness_fn
+from cross_checks.engines.base import EngineError, Variant, stage_force_torque_floats
+from cross_checks.engines.world import World, WorldEngine
 from reference_sim.quaternion import quat_conj, quat_from_matrix, rotate
-from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
+from reference_sim.simulate import Run
 
 mujoco, _IMPORT_ERROR = base.optional_import("mujoco")
 
@@ -53,8 +48,6 @@ VARIANTS = {
                         traits=base.SYMPLECTIC_EULER_IMPLICIT_GYRO),
 }
 
-#: Steps between divergence checks of a free-running simulation (checked vectorised per chunk).
-_CHUNK = 256
 _BODY = 1  # body id of the free body (0 is the world)
 
 _LOCK = threading.RLock()
@@ -180,7 +173,7 @@ def _restore_force_callbacks(prev):
 
 
 class Session:
-    """Installs the warning handler (and, when given, the control callback) for one run.
+    """Installs the warning handler (and, when given, the control callback) for one world.
 
     MuJoCo's callbacks and warning handler are process-global: the session holds a module lock,
     clears any control/passive callback (a user's would add forces to this body), stores the previous
@@ -192,19 +185,19 @@ class Session:
     def __init__(self, data, control=None):
         self.data = data
         self.control = control
-        self.warnings: list[tuple[float, str]] = []   # (d.time when raised, message)
+        self.warnings: list[str] = []   # MuJoCo's messages, in order
         self.callback_error: BaseException | None = None
 
     def _on_warning(self, msg):
-        self.warnings.append((float(self.data.time), str(msg)))
+        self.warnings.append(str(msg))
 
     def _control_hook(self):
-        """The function installed as MuJoCo's control callback: ``control`` for this run's MjData only,
-        skipped after a failure (a closure: it runs at every RK4 stage)."""
-        data, control = self.data, self.control
+        """The function installed as MuJoCo's control callback: ``control``, skipped after a failure (a
+        closure: it runs at every RK4 stage)."""
+        control = self.control
 
         def on_control(m, d):
-            if d is not data or self.callback_error is not None:
+            if self.callback_error is not None:
                 return
             try:
                 control(m, d)
@@ -266,27 +259,9 @@ def _stage_force_writer(scenario, d, xfrc, weight):
     return control
 
 
-def _divergence(y_rows, first: int, warn_steps: tuple, session, dt_s: float):
-    """``(step, words)`` of the first divergence among recorded states ``y_rows`` (step ``first`` onwards):
-    a bad row (:func:`reference_sim.simulate.bad_rows`) or a MuJoCo warning, which counts in the step
-    begun when it was raised (clamped to ``warn_steps`` = (first, last) step of the chunk); None if none."""
-    candidates = []
-    bad = bad_rows(y_rows)
-    if bad.any():
-        k = int(np.argmax(bad))
-        candidates.append((first + k, blowup_words(y_rows[k])))
-    if session.warnings:
-        t_warn, msg = session.warnings[0]
-        lo, hi = warn_steps
-        candidates.append((min(max(int(round(t_warn / dt_s)) + 1, lo), hi), f"MuJoCo: {msg}"))
-    if not candidates:
-        return None
-    return min(c[0] for c in candidates), "; ".join(c[1] for c in sorted(candidates))
-
-
-#: Each thread's last compiled model and its MjData: ``(scenario, build_model, model, data)`` (the scenario
-#: matched by identity). The next run of the same scenario takes that model, its integrator and step set in
-#: place (the same numbers as a fresh compile, tested for every variant), and its MjData reset.
+#: Each thread's compiled models: ``(scenario, build_model, model)`` per scenario (matched by identity), the
+#: last few kept. A world of the same scenario takes that model with its integrator and step set in place (the
+#: same numbers as a fresh compile, tested for every variant).
 _LAST = threading.local()
 
 
@@ -297,187 +272,18 @@ def _set_variant(m, variant, dt_s):
     return m
 
 
-def _compiled(scenario, variant, dt_s):
-    """``build_model(scenario, variant, dt_s)`` and a fresh (or reset) MjData of it."""
-    last = getattr(_LAST, "run", None)
-    if last is not None and last[0] is scenario and last[1] is build_model:
-        mujoco.mj_resetData(last[2], last[3])
-        return _set_variant(last[2], variant, dt_s), last[3]
+def _model(scenario, variant, dt_s):
+    """``build_model(scenario, variant, dt_s)``, or the thread's model of that scenario set to them."""
+    kept = getattr(_LAST, "models", None)
+    if kept is None:
+        kept = _LAST.models = []
+    for sc, builder, m in kept:
+        if sc is scenario and builder is build_model:
+            return _set_variant(m, variant, dt_s)
     m = build_model(scenario, variant, dt_s)
-    d = mujoco.MjData(m)
-    _LAST.run = (scenario, build_model, m, d)
-    return m, d
-
-
-def _model_and_data(scenario, variant, dt_s):
-    """``(MjModel, MjData, its xfrc_applied row, weight m g)`` of one run of the scenario's body."""
-    m, d = _compiled(scenario, variant, dt_s)
-    weight = scenario.problem.body.mass_kg * np.asarray(scenario.problem.forces.gravity_W, dtype=float)
-    return m, d, d.xfrc_applied[_BODY], weight
-
-
-# --- adapter entry points ----------------------------------------------------------------------------
-
-def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
-    """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded: a
-    loop of ``mj_step`` (:func:`simulate_many` records runs with ``mujoco.rollout``, the same numbers)."""
-    m, d, xfrc, weight = _model_and_data(scenario, variant, dt_s)
-    forces = scenario.problem.forces
-    y0 = scenario.problem.initial_packed()
-    d.qpos[:], d.qvel[:] = to_qpos_qvel(y0)
-    per_stage = forces_per_stage(scenario, variant)
-    decay = forces.has_decay and not per_stage       # pre-step decay (Euler-type integrators)
-    per_step = forces.state_dependent and not per_stage
-    if not forces.state_dependent:
-        _apply(xfrc, *harness_force_torque(scenario, y0, dt_s), weight)   # constant (decay scaling included)
-    control = _stage_force_writer(scenario, d, xfrc, weight) if per_stage else None
-    return _simulate_loop(scenario, m, d, dt_s, n_steps, control, per_step, decay, xfrc, weight)
-
-
-def _simulate_loop(scenario, m, d, dt_s, n_steps, control, per_step, decay, xfrc, weight) -> Run:
-    """The run as a Python loop of mj_step: forces written before each step (``per_step``), the pre-step
-    decay applied to qvel (``decay``), the RK4 stage callback (``control``); divergence checked per chunk.
-    Per step in plain floats (one read of qpos/qvel, one write of xfrc_applied and of qvel): the numbers of
-    :func:`_apply` and ``base.harness_force_torque``, bit for bit (tested)."""
-    gv, gw = (float(g) for g in base.decay_factors(scenario, dt_s))
-    harness = harness_fn(scenario, dt_s) if per_step else None
-    w0, w1, w2 = (float(c) for c in weight)
-    qpos, qvel = d.qpos, d.qvel   # views of d's arrays, bound once
-    qpos_out = np.empty((n_steps + 1, 7))
-    qvel_out = np.empty((n_steps + 1, 6))
-    qpos_out[0], qvel_out[0] = qpos, qvel
-    y = np.empty((n_steps + 1, 13))
-    with np.errstate(all="ignore"):
-        y[0:1] = to_packed(qpos_out[0:1], qvel_out[0:1])
-    step = mujoco.mj_step
-    reads = per_step or decay
-    with Session(d, control) as session, np.errstate(all="ignore"):
-        for start in range(1, n_steps + 1, _CHUNK):
-            stop = min(start + _CHUNK, n_steps + 1)
-            for n in range(start, stop):
-                if reads:
-                    qp, qv = qpos.tolist(), qvel.tolist()
-                    if per_step:
-                        fx, fy, fz, tx, ty, tz = harness(packed_floats(qp, qv))
-                        xfrc[:] = (fx - w0, fy - w1, fz - w2, tx, ty, tz)
-                    if decay:
-                        qvel[:] = (qv[0] * gv, qv[1] * gv, qv[2] * gv, qv[3] * gw, qv[4] * gw, qv[5] * gw)
-                step(m, d)
-                if session.callback_error is not None:
-                    session.raise_callback_error()
-                qpos_out[n] = qpos
-                qvel_out[n] = qvel
-            # row by row: each chunk once
-            y[start:stop] = to_packed(qpos_out[start:stop], qvel_out[start:stop])
-            bad = _divergence(y[start:stop], start, (start, stop - 1), session, dt_s)
-            if bad is not None:
-                n_bad, what = bad
-                return diverged(y[:n_bad].copy(), dt_s, f" ({what})")
-    return Run(dt_s * np.arange(n_steps + 1), y)
-
-
-@base.on_rows
-def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
-    """One step of ``dt_s`` from each row of ``y_start`` (T, 13); rows the engine blows up come back as
-    whatever MuJoCo produced (possibly non-finite)."""
-    m, d, xfrc, weight = _model_and_data(scenario, variant, dt_s)
-    per_stage = forces_per_stage(scenario, variant)
-    control = _stage_force_writer(scenario, d, xfrc, weight) if per_stage else None
-    y_dec = y_start if per_stage else base.apply_decay_prestep(scenario, y_start, dt_s)
-    qpos_in, qvel_in = to_qpos_qvel(y_dec)
-    qpos_out = np.empty((len(y_start), 7))
-    qvel_out = np.empty((len(y_start), 6))
-    qpos, qvel, step = d.qpos, d.qvel, mujoco.mj_step   # views of d's arrays, bound once
-    with Session(d, control) as session, np.errstate(all="ignore"):
-        for i in range(len(y_start)):
-            if not per_stage:
-                _apply(xfrc, *harness_force_torque(scenario, y_start[i], dt_s), weight)
-            d.time = 0.0
-            qpos[:] = qpos_in[i]
-            qvel[:] = qvel_in[i]
-            step(m, d)
-            session.raise_callback_error()
-            qpos_out[i] = qpos
-            qvel_out[i] = qvel
-            session.warnings.clear()
-    with np.errstate(all="ignore"):
-        return to_packed(qpos_out, qvel_out)
-
-
-# --- many runs in one call: mujoco.rollout, one compiled model per scenario -----------------------------
-
-class _NoData:
-    """The MjData stand-in of a rollout's Session: the time of a warning is not kept (a member of a rollout
-    that warned is run again through :func:`simulate`, which keeps it)."""
-
-    time = float("nan")
-
-
-def simulate_many(variant: str, requests) -> list:
-    """The runs of ``requests`` (``base.RunRequest``) through ``mujoco.rollout``: each element
-    :func:`simulate`'s Run bit for bit (tested), or its EngineError.
-
-    One model is compiled per scenario and set to each request's step in place (:func:`_set_variant`), so a
-    scenario's requests at different steps run in successive rounds (:func:`_rounds`), grouped by model
-    structure (:func:`_structure`); the harness is :func:`simulate`'s. RK4 with per-stage forces, and every
-    member of a group that blew up or made MuJoCo warn, run through :func:`simulate` itself (its divergence
-    time and message)."""
-    out: list = [None] * len(requests)
-    models: dict = {}   # id(scenario) -> its compiled model or EngineError (the requests hold the scenarios)
-    alone = []
-    for j, r in enumerate(requests):
-        if forces_per_stage(r.scenario, variant):
-            alone.append(j)
-            continue
-        if id(r.scenario) not in models:
-            try:
-                models[id(r.scenario)] = build_model(r.scenario, variant, r.dt_s)
-            except EngineError as exc:
-                models[id(r.scenario)] = exc
-        if isinstance(models[id(r.scenario)], EngineError):
-            out[j] = models[id(r.scenario)]
-    batched = [j for j in range(len(requests)) if out[j] is None and j not in set(alone)]
-    for rnd in _rounds(requests, batched):
-        groups: dict = {}
-        for j in rnd:
-            m = _set_variant(models[id(requests[j].scenario)], variant, requests[j].dt_s)
-            groups.setdefault(_structure(m), []).append(j)
-        for grp in groups.values():
-            reqs = [requests[j] for j in grp]
-            y, warned = _rollout_group(reqs, [models[id(r.scenario)] for r in reqs])
-            for k, (j, r) in enumerate(zip(grp, reqs)):
-                yj = y[:r.n_steps + 1, k]
-                if warned or bad_rows(yj).any():
-                    alone.append(j)
-                else:
-                    out[j] = Run(r.dt_s * np.arange(r.n_steps + 1), yj.copy())
-    first = {}   # a scenario's runs one after the other: each takes the model compiled for the previous
-    for j in alone:
-        first.setdefault(id(requests[j].scenario), j)
-    for j in sorted(alone, key=lambda j: (first[id(requests[j].scenario)], j)):
-        r = requests[j]
-        try:
-            out[j] = simulate(r.scenario, variant, r.dt_s, r.n_steps)
-        except EngineError as exc:
-            out[j] = exc
-    return out
-
-
-def _rounds(requests, idx) -> list:
-    """The request numbers ``idx`` in rounds that hold each scenario at one step only (its compiled model is
-    shared): round k holds every scenario's k-th distinct step."""
-    steps: dict = {}
-    rounds: list = []
-    for j in idx:
-        seen = steps.setdefault(id(requests[j].scenario), [])
-        h = float(requests[j].dt_s)
-        if h not in seen:
-            seen.append(h)
-        k = seen.index(h)
-        while len(rounds) <= k:
-            rounds.append([])
-        rounds[k].append(j)
-    return rounds
+    kept.append((scenario, build_model, m))
+    del kept[:-8]
+    return m
 
 
 def _structure(m) -> tuple:
@@ -487,70 +293,145 @@ def _structure(m) -> tuple:
     return tuple(int(v) for v in m.body_simple), tuple(int(v) for v in m.dof_simplenum)
 
 
-def _rollout_group(reqs, mods):
-    """Packed states (n_max + 1, M, 13) of requests whose models share one structure, each set to its
-    request's variant and step, and whether MuJoCo warned during the rollouts."""
-    from mujoco import rollout
-    M, n_max = len(reqs), max(r.n_steps for r in reqs)
-    y0 = np.array([r.scenario.problem.initial_packed() for r in reqs])
-    qpos0, qvel0 = to_qpos_qvel(y0)
-    state = np.concatenate([np.zeros((M, 1)), qpos0, qvel0], axis=1)   # [time, qpos, qvel]
-    xfrc = np.zeros((M, 1, 12))   # xfrc_applied rows: the world body's (zeros), the free body's
-    weights = [r.scenario.problem.body.mass_kg * np.asarray(r.scenario.problem.forces.gravity_W, dtype=float)
-               for r in reqs]
-    per_step = [k for k, r in enumerate(reqs) if r.scenario.problem.forces.state_dependent]
-    for k, r in enumerate(reqs):
-        if k not in per_step:
-            _apply(xfrc[k, 0, 6:12], *harness_force_torque(r.scenario, y0[k], r.dt_s), weights[k])
-    g = np.array([[float(v) for v in base.decay_factors(r.scenario, r.dt_s)] for r in reqs])
-    decay = any(r.scenario.problem.forces.has_decay for r in reqs)
-    qpos = np.empty((n_max + 1, M, 7))
-    qvel = np.empty((n_max + 1, M, 6))
-    qpos[0], qvel[0] = qpos0, qvel0
-    datas = [mujoco.MjData(mods[0])]
-    spec = mujoco.mjtState.mjSTATE_XFRC_APPLIED
-    with Session(_NoData()) as session, np.errstate(all="ignore"):
-        if n_max and not per_step and not decay:
-            states, _ = rollout.rollout(mods, datas, state, xfrc, control_spec=spec, nstep=n_max)
-            qpos[1:], qvel[1:] = np.moveaxis(states[:, :, 1:8], 1, 0), np.moveaxis(states[:, :, 8:14], 1, 0)
-        elif n_max:
-            _rollout_steps(reqs, mods, datas, state, xfrc, per_step, g, weights, qpos, qvel)
-        warned = bool(session.warnings)
-    with np.errstate(all="ignore"):
-        return to_packed(qpos, qvel), warned
+class MujocoWorld(World):
+    """B free bodies, each its own MjModel (shared by the bodies of one scenario) and MjData, stepped by
+    ``mj_step`` or, with the forces held, by ``mujoco.rollout``. Raw rows: ``[qpos (7), qvel (6)]``, ω in
+    BODY axes. The warning handler (and RK4's stage-force callback) are installed for the world's lifetime
+    (:class:`Session`); a warning is attributed to the body whose step raised it."""
+
+    def __init__(self, requests, variant, dt_s):
+        super().__init__()
+        self.models = [_model(r.scenario, variant, dt_s) for r in requests]
+        self.datas = [mujoco.MjData(m) for m in self.models]
+        self.xfrc = [d.xfrc_applied[_BODY] for d in self.datas]
+        self.per_stage = forces_per_stage(requests[0].scenario, variant)
+        self.n = 0
+        self.host_s = 0.0
+        control = None
+        if self.per_stage:
+            writers = {id(d): _stage_force_writer(r.scenario, d, x, base.weight_W(r.scenario))
+                       for r, d, x in zip(requests, self.datas, self.xfrc)}
+            perf = time.perf_counter
+
+            def control(m, d):
+                t0 = perf()
+                writers[id(d)](m, d)
+                self.host_s += perf() - t0
+        self.session = Session(None, control).__enter__()
+
+    def set_state(self, y):
+        qpos, qvel = to_qpos_qvel(y)
+        for k, d in enumerate(self.datas):
+            d.time = 0.0
+            d.qpos[:] = qpos[k]
+            d.qvel[:] = qvel[k]
+        self.n = 0
+
+    def apply(self, f_W, tau_W):
+        for k, x in enumerate(self.xfrc):
+            x[0:3] = f_W[k]
+            x[3:6] = tau_W[k]
+
+    def decay(self, g_v, g_w):
+        for d, gv, gw in zip(self.datas, g_v.tolist(), g_w.tolist()):
+            qv = d.qvel.tolist()
+            d.qvel[:] = (qv[0] * gv, qv[1] * gv, qv[2] * gv, qv[3] * gw, qv[4] * gw, qv[5] * gw)
+
+    def step(self):
+        self.n += 1
+        session, step = self.session, mujoco.mj_step
+        for k, (m, d) in enumerate(zip(self.models, self.datas)):
+            seen = len(session.warnings)
+            step(m, d)
+            if session.callback_error is not None:
+                session.raise_callback_error()
+            if len(session.warnings) > seen:
+                self.warnings.append((k, self.n, f"MuJoCo: {session.warnings[seen]}"))
+
+    def read(self):
+        return np.array([np.concatenate((d.qpos, d.qvel)) for d in self.datas])
+
+    def packed(self, raw):
+        raw = np.asarray(raw, dtype=float)
+        return to_packed(raw[..., 0:7], raw[..., 7:13])
+
+    def packed_row(self, raw):
+        return [packed_floats(r[0:7], r[7:13]) for r in np.asarray(raw).tolist()]
+
+    def rollout(self, n_steps):
+        """``n_steps`` steps of every body in ``mujoco.rollout`` (one call per model structure) with the
+        applied forces held; if MuJoCo warned, the steps again one by one (:meth:`step`), which attribute
+        it."""
+        from mujoco import rollout
+        start = self.read()
+        state = np.concatenate([np.zeros((len(start), 1)), start], axis=1)    # [time, qpos, qvel]
+        xfrc = np.zeros((len(start), 1, 12))   # xfrc_applied rows: the world body's (zeros), the free body's
+        for k, x in enumerate(self.xfrc):
+            xfrc[k, 0, 6:12] = x
+        out = np.empty((n_steps, len(start), 13))
+        groups: dict = {}
+        for k, m in enumerate(self.models):
+            groups.setdefault(_structure(m), []).append(k)
+        seen = len(self.session.warnings)
+        for idx in groups.values():
+            mods = [self.models[k] for k in idx]
+            states, _ = rollout.rollout(mods, [mujoco.MjData(mods[0])], state[idx], xfrc[idx],
+                                        control_spec=mujoco.mjtState.mjSTATE_XFRC_APPLIED, nstep=n_steps)
+            out[:, idx] = np.moveaxis(states[:, :, 1:14], 1, 0)
+        if len(self.session.warnings) == seen:
+            return out
+        self.set_state(self.packed(start))
+        for k, d in enumerate(self.datas):     # exactly the start state, not its round trip through packing
+            d.qpos[:], d.qvel[:] = start[k, 0:7], start[k, 7:13]
+        for n in range(n_steps):
+            self.step()
+            out[n] = self.read()
+        return out
+
+    def close(self):
+        self.session.__exit__(None, None, None)
 
 
-def _rollout_steps(reqs, mods, datas, state, xfrc, per_step, g, weights, qpos, qvel) -> None:
-    """The rollout one step per call (into ``qpos``, ``qvel``): state-dependent forces of members
-    ``per_step`` from each start-of-step state, the pre-step decay factors ``g`` (M, 2) on the velocities.
-    The arrays rollout's wrapper would check and allocate every call are given once, in its shapes."""
-    from mujoco import rollout
-    harness = {k: harness_fn(reqs[k].scenario, reqs[k].dt_s) for k in per_step}
-    M = len(reqs)
-    out = np.empty((M, 1, state.shape[1]))
-    sensors = np.empty((M, 1, mods[0].nsensordata))
-    runner = rollout.Rollout(nthread=0)
-    try:
-        for n in range(1, len(qpos)):
-            for k in per_step:
-                fx, fy, fz, tx, ty, tz = harness[k](packed_floats(qpos[n - 1, k].tolist(),
-                                                                  qvel[n - 1, k].tolist()))
-                w0, w1, w2 = (float(c) for c in weights[k])
-                xfrc[k, 0, 6:12] = (fx - w0, fy - w1, fz - w2, tx, ty, tz)
-            st = state.copy()
-            st[:, 8:11] *= g[:, 0:1]
-            st[:, 11:14] *= g[:, 1:2]
-            runner.rollout(mods, datas, st, xfrc, control_spec=mujoco.mjtState.mjSTATE_XFRC_APPLIED, nstep=1,
-                           state=out, sensordata=sensors, skip_checks=True)
-            state = out[:, 0, :].copy()
-            qpos[n], qvel[n] = state[:, 1:8], state[:, 8:14]
-    finally:
-        runner.close()
-
-
-class MujocoAdapter(ModuleAdapter):
+class MujocoEngine(WorldEngine):
     """``mujoco:VARIANT`` — registered under the entry-point group ``rbcheck.engines``."""
 
-    def engine_files(self) -> list:
-        """MuJoCo's shared library."""
-        return base.library_files(mujoco)
+    name = ENGINE
+    variants = VARIANTS
+    distribution = "mujoco"
+    keeps_forces = True     # xfrc_applied is never cleared by MuJoCo
+    chunk = 256
+
+    def version(self) -> str:
+        _require()
+        return mujoco.__version__
+
+    def build(self, requests, variant, dt_s):
+        _require()
+        return MujocoWorld(requests, variant, dt_s)
+
+    def group_key(self, request) -> tuple:
+        """One world per step: the bodies of a call's scenarios at one Δt step together (each its own
+        model and data; a body's numbers do not depend on its world)."""
+        return (float(request.dt_s),)
+
+    def per_stage(self, scenario, variant):
+        return forces_per_stage(scenario, variant)
+
+
+_ENGINE = MujocoEngine()
+
+
+def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
+    """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state (the host loop's)."""
+    return _ENGINE.simulate(scenario, variant, dt_s, n_steps)
+
+
+def simulate_many(variant: str, requests) -> list:
+    return _ENGINE.simulate_many(variant, requests)
+
+
+def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
+    return _ENGINE.one_step(scenario, variant, dt_s, y_start)
+
+
+MujocoAdapter = MujocoEngine

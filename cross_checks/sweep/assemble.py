@@ -272,6 +272,9 @@ def _run_statistics(jobs, rows, wall_s) -> dict:
             "wall_s": round(wall_s, 3),
             "cpu_s_in_runs": round(float(np.nansum([r["wall_s"] for r in rows if not r.get("cached")]
                                                    or [0.0])), 3),
+            # the part of it inside the engines' own steps (runs whose engine time is measured)
+            "engine_s_in_runs": round(float(np.nansum([r.get("engine_s", np.nan) for r in rows
+                                                      if not r.get("cached")] or [0.0])), 3),
             "tolerances": {"same_scheme_rel": tol.SAME_SCHEME_REL, "order_tol": tol.SWEEP_ORDER_TOL,
                            "converges_min_order": tol.CONVERGES_MIN_ORDER}}
 

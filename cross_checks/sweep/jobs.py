@@ -45,7 +45,7 @@ MAX_SERIES_POINTS = 500
 LOCAL_SAMPLES = 64
 
 RESULT_COLUMNS = (
-    "scenario", "engine", "dt", "steps", "wall_s",
+    "scenario", "engine", "dt", "steps", "wall_s", "engine_s",
     "pos_err_final", "vel_err_final", "orient_err_final", "angvel_err_final",
     "pos_err_max", "vel_err_max", "orient_err_max", "angvel_err_max",
     "energy_drift_max", "energy_drift_final", "energy_drift_kind",
@@ -57,7 +57,7 @@ RESULT_COLUMNS = (
 )
 #: Columns that differ between two runs of the same code (wall time, whether the cache served the
 #: row): everything else in a row is a result, reproduced bit for bit by the same code and versions.
-TIMING_COLUMNS = ("wall_s", "cached")
+TIMING_COLUMNS = ("wall_s", "engine_s", "cached")
 
 
 @dataclass(frozen=True)
@@ -303,7 +303,7 @@ def clear_reference_memo() -> None:
 def _nan_row(job, scenario, status, message, label, version):
     row = {c: math.nan for c in RESULT_COLUMNS}
     row.update(scenario=job.scenario, engine=job.variant, dt=job.dt_s, steps=0, wall_s=math.nan,
-               energy_drift_kind="n/a", step_defect_quantity="", status=status, diverged_at_s=math.nan,
+               engine_s=math.nan, energy_drift_kind="n/a", step_defect_quantity="", status=status, diverged_at_s=math.nan,
                message=message, default_dt=job.default_dt, in_ladder=job.in_ladder, reference=label,
                engine_version=version, cached=False)
     return row
@@ -366,7 +366,8 @@ def _measure(job, scenario, adapter, variant, version, run, t_ref_all, y_ref_all
     status = meta.get("status", "ok")
     errs = state_errors(y, y_ref)
     row = _nan_row(job, scenario, status, meta.get("message", "") or "", label, version)
-    row.update(steps=len(t) - 1, wall_s=float(meta.get("wall_s", math.nan)))
+    row.update(steps=len(t) - 1, wall_s=float(meta.get("wall_s", math.nan)),
+               engine_s=float(meta.get("engine_s", math.nan)))
     if status == "diverged":
         row["diverged_at_s"] = float(meta.get("diverged_at_s"))
     summ = error_summary(errs)

@@ -29,7 +29,8 @@ __all__ = ["LONG_RUN_COLUMNS", "MEASURED_COLUMNS", "run_long_group", "run_long_r
 
 #: The columns of long_runs.csv (docs/results.md, "long_runs.csv").
 LONG_RUN_COLUMNS = (
-    "scenario", "engine", "dt", "steps", "duration_s", "wall_s", "status", "diverged_at_s", "message",
+    "scenario", "engine", "dt", "steps", "duration_s", "wall_s", "engine_s", "status", "diverged_at_s",
+    "message",
     "energy_rate_per_s", "energy_drift_max", "momentum_rate_per_s", "momentum_drift_max",
     "direction_drift_max_rad", "separatrix_start", "separatrix_end", "separatrix_rate_per_s",
     "crossed_separatrix", "toward_intermediate", "away_from_intermediate", "energy_secular",
@@ -77,7 +78,8 @@ def _measure(scenario, variant: str, version: str, run) -> dict:
     meta, t, y = run.meta, np.asarray(run.t_s, dtype=float), np.asarray(run.y, dtype=float)
     status = meta.get("status", "ok")
     row = _empty_row(scenario, variant, status, meta.get("message", "") or "", version)
-    row.update(steps=len(t) - 1, wall_s=float(meta.get("wall_s", math.nan)))
+    row.update(steps=len(t) - 1, wall_s=float(meta.get("wall_s", math.nan)),
+               engine_s=float(meta.get("engine_s", math.nan)))
     if status == "diverged":
         row["diverged_at_s"] = float(meta.get("diverged_at_s"))
     if len(t) < 3:

@@ -40,3 +40,33 @@ class UserEngine(EngineAdapter):
     def simulate(self, scenario, variant, dt_s, n_steps):
         from cross_checks.engines import get_adapter
         return get_adapter("reference").simulate(misread(scenario, variant), "course_gyro", dt_s, n_steps)
+
+
+class BulletBody:
+    """One scenario body in a PyBullet world of its own (the adapter's ``BulletWorld`` of one body, LOCK not
+    taken), seen as a single body: what the PyBullet convention tests and their NumPy oracle drive."""
+
+    def __init__(self, scenario, variant: str, dt_s: float, y0=None):
+        import numpy as np
+
+        from cross_checks.engines import base
+        from cross_checks.engines import pybullet_engine as pe
+        from cross_checks.engines.base import RunRequest
+        self.world = pe.BulletWorld([RunRequest(scenario, float(dt_s), 1)], variant, float(dt_s))
+        self.b, self.c, self.q_BP = self.world.bodies[0], self.world.c, self.world.q_BP[0]
+        self.weight = base.weight_W(scenario)
+        self._np = np
+
+    def set_state(self, y):
+        self.world.set_state(self._np.asarray(y, dtype=float)[None])
+
+    def read_raw(self) -> list:
+        return list(self.world.read()[0])
+
+    def raw_to_packed(self, raw):
+        return self.world.packed(self._np.asarray(raw, dtype=float)[..., None, :])[..., 0, :]
+
+    def apply(self, f_W, tau_W, x_W):
+        """World force ``f_W`` at ``x_W`` and world torque ``tau_W`` (3 numbers each) for the next step."""
+        self.world.last = [[float(v) for v in x_W] + [0.0] * 10]
+        self.world.apply(self._np.asarray([f_W], dtype=float), self._np.asarray([tau_W], dtype=float))

@@ -238,20 +238,20 @@ def test_rollout_runs_are_bit_identical_to_the_mj_step_loop(name, variant):
 
 
 def test_runs_of_one_scenario_in_a_row_take_its_model_with_a_new_models_numbers():
-    """A scenario's next run (a job's one-step batch after its free run, a fuzz case's rungs) takes the model
-    compiled for its previous run, set to its own integrator and step, with the MjData reset: the numbers of
+    """A scenario's next world (a job's one-step batch after its free run, a fuzz case's rungs) takes the
+    model compiled for its previous one, set to its own integrator and step, with a new MjData: the numbers of
     a new model, bit for bit; another scenario compiles."""
     sc, other = load_scenario("spring_pendulum"), load_scenario("tumbling_box")
     ys = me.simulate(sc, "rk4", 0.004, 40).y[::5]
     for variant in ("rk4", "euler"):
-        me.simulate(other, variant, 0.004, 5)
-        fresh = me.one_step(sc, variant, 0.004, ys)             # after another scenario's run: compiled anew
-        model = me._LAST.run[2]
+        me._LAST.models = []
+        fresh = me.one_step(sc, variant, 0.004, ys)             # compiled anew
+        model = me._model(sc, variant, 0.004)
         me.simulate(sc, "implicit", 0.002, 40)
-        assert np.array_equal(me.one_step(sc, variant, 0.004, ys), fresh)
-        assert me._LAST.run[2] is model                            # the scenario's model, reused
         me.simulate(other, variant, 0.004, 5)
-        assert me._LAST.run[2] is not model                        # another scenario: compiled
+        assert np.array_equal(me.one_step(sc, variant, 0.004, ys), fresh)
+        assert me._model(sc, variant, 0.004) is model              # the scenario's model, reused
+        assert me._model(other, variant, 0.004) is not model       # another scenario: its own
 
 
 # --- many runs in one call (simulate_many) ------------------------------------------------------------

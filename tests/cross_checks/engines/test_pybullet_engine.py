@@ -14,6 +14,7 @@ from cross_checks.scenario import catalog_path, load_scenario, parse_scenario  #
 from reference_sim.quaternion import geodesic_angle, quat_from_axis_angle, quat_mul  # noqa: E402
 from tests.helpers.scenarios import SQ, YAW90  # noqa: E402,F401
 from tests.helpers.scenarios import scenario_from_parts as _scenario
+from tests.helpers.wrong_engines import BulletBody  # noqa: E402
 
 
 def test_version_and_engine_error():
@@ -35,7 +36,7 @@ def test_one_client_per_process_and_a_clean_world_per_run():
 @pytest.mark.parametrize("variant", sorted(pe.VARIANTS))
 def test_body_settings(variant):
     sc = load_scenario("tumbling_box")
-    B = pe.BulletBody(sc, variant, 0.001, sc.problem.initial_packed())
+    B = BulletBody(sc, variant, 0.001, sc.problem.initial_packed())
     info = p.getDynamicsInfo(B.b, -1, physicsClientId=B.c)
     assert info[0] == 10.0                                                   # mass
     np.testing.assert_array_equal(info[2], np.diag(sc.problem.body.inertia_B))   # local inertia diagonal
@@ -54,7 +55,7 @@ def test_yawed_body_spinning_about_body_x_reads_world_y(variant):
     expected = quat_mul(quat_from_axis_angle(np.array([0.0, 1.0, 0.0]), run.t_s), run.y[0, 6:10])
     assert np.max(geodesic_angle(expected, run.y[:, 6:10])) < tol.ADAPTER_SPIN_100_STEPS
     # PyBullet's own angular velocity is in world axes (getBaseVelocity), no conversion involved
-    raw = pe.BulletBody(sc, variant, 0.01, sc.problem.initial_packed())
+    raw = BulletBody(sc, variant, 0.01, sc.problem.initial_packed())
     raw.set_state(sc.problem.initial_packed())
     np.testing.assert_allclose(p.getBaseVelocity(raw.b, physicsClientId=raw.c)[1],
                                [0.0, 1.0, 0.0], atol=tol.ADAPTER_ROUND_TRIP)
@@ -62,7 +63,7 @@ def test_yawed_body_spinning_about_body_x_reads_world_y(variant):
 
 def test_quaternion_order_at_the_boundary():
     sc = _scenario(initial=YAW90)
-    B = pe.BulletBody(sc, "multibody", 0.01, sc.problem.initial_packed())
+    B = BulletBody(sc, "multibody", 0.01, sc.problem.initial_packed())
     B.set_state(sc.problem.initial_packed())
     orn = p.getBasePositionAndOrientation(B.b, physicsClientId=B.c)[1]
     np.testing.assert_allclose(orn, [0.0, 0.0, SQ, SQ], atol=tol.ADAPTER_ROUND_TRIP)            # (x, y, z, w)
@@ -77,7 +78,7 @@ def test_full_tensor_reports_the_scenario_body_frame(variant):
     """PyBullet holds the principal frame P; the adapter reports q_WB = q_WP q_BP⁻¹."""
     sc = load_scenario("particle_body")
     y0 = sc.problem.initial_packed()
-    B = pe.BulletBody(sc, variant, 0.001, y0)
+    B = BulletBody(sc, variant, 0.001, y0)
     B.set_state(y0)
     q_WP = np.roll(p.getBasePositionAndOrientation(B.b, physicsClientId=B.c)[1], 1)
     assert geodesic_angle(q_WP, quat_mul(y0[6:10], B.q_BP)) < tol.ADAPTER_ROUND_TRIP * 10
@@ -130,7 +131,7 @@ def test_default_multibody_velocity_clamp_is_lifted(monkeypatch):
 
 def test_maximal_pose_reset_zeroes_velocity_so_velocity_is_reset_last():
     sc = _scenario()
-    B = pe.BulletBody(sc, "maximal", 0.01, sc.problem.initial_packed())
+    B = BulletBody(sc, "maximal", 0.01, sc.problem.initial_packed())
     p.resetBaseVelocity(B.b, [1.0, 0.0, 0.0], [0.0, 0.0, 1.0], physicsClientId=B.c)
     p.resetBasePositionAndOrientation(B.b, [0, 0, 0], [0, 0, 0, 1], physicsClientId=B.c)
     assert np.all(np.array(p.getBaseVelocity(B.b, physicsClientId=B.c)) == 0.0)
@@ -144,7 +145,7 @@ def test_maximal_pose_reset_zeroes_velocity_so_velocity_is_reset_last():
 @pytest.mark.parametrize("variant", sorted(pe.VARIANTS))
 def test_external_force_is_cleared_after_each_step(variant):
     sc = _scenario()
-    B = pe.BulletBody(sc, variant, 0.01, sc.problem.initial_packed())
+    B = BulletBody(sc, variant, 0.01, sc.problem.initial_packed())
     B.set_state(sc.problem.initial_packed())
     B.apply(np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.0, 3.0]), [0.0, 0.0, 0.0])
     p.stepSimulation(physicsClientId=B.c)

@@ -1,0 +1,255 @@
+"""The host loop: every :class:`~cross_checks.engines.world.WorldEngine`'s runs, written once.
+
+For each world of B bodies (the requests grouped by ``WorldEngine.group_key``), step n = 1, 2, …:
+
+1. the harness force and torque of each body (base.harness_force_torque_floats: forces from the
+   start-of-step state, held over the step, scaled by the pre-step decay factors), from the requested initial
+   state at step 1 and from the state the engine returned after; constant forces (no state dependence)
+   evaluated once, and applied once to an engine that keeps them (``keeps_forces``);
+2. the weight ``m g`` taken off when the engine applies gravity itself;
+3. the pre-step decay ``v ← γ_v v``, ``ω ← γ_ω ω`` (``World.decay``; docs/semantics.md, "Velocity decay");
+4. ``World.step()``: timed, the engine's own time (``Run.engine_s``); everything else is rbcheck's;
+5. the state read back and recorded; every ``chunk`` steps, a body whose state is non-finite or beyond
+   reference_sim.simulate.BLOWUP_LIMIT, or whose engine warned, ends its run as "diverged at t = …".
+
+When nothing changes between steps (no state-dependent force, no decay) and the world has a compiled
+``rollout``, the steps run there in one call. A world that evaluates forces at every stage (``per_stage``)
+gets neither forces nor decay from the loop.
+
+An engine that raises, returns the wrong shape, or returns a non-finite state without diverging is an
+:class:`~cross_checks.engines.base.EngineError` naming the engine and the run, for that world's runs only.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from cross_checks.engines import base
+from cross_checks.engines.base import EngineError
+from reference_sim.quaternion import same_side
+from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
+
+__all__ = ["run", "one_step", "Harness"]
+
+
+class Harness:
+    """The harness forces of B bodies (one request each) at step ``dt_s``: per body the plain-float
+    evaluator of base.harness_force_torque_floats, and the pre-step decay factors (B,)."""
+
+    def __init__(self, scenarios, dt_s: float, applies_gravity: bool):
+        self.ft = [base.float_forces(sc).force_torque for sc in scenarios]
+        g = [tuple(float(x) for x in base.decay_factors(sc, dt_s)) for sc in scenarios]
+        self.g_v = np.array([a for a, _ in g])
+        self.g_w = np.array([b for _, b in g])
+        self.weight = np.array([base.weight_W(sc) if applies_gravity else np.zeros(3) for sc in scenarios])
+        self.state_dependent = any(sc.problem.forces.state_dependent for sc in scenarios)
+        self.decays = any(sc.problem.forces.has_decay for sc in scenarios)
+
+    def wrench(self, y) -> tuple:
+        """``(f_W, tau_W)`` (B, 3) each at packed states ``y`` (B, 13): the harness's force minus the weight
+        the engine applies, and its torque."""
+        w = np.array([ft(row) for ft, row in zip(self.ft, y)])
+        f = w[:, 0:3] * self.g_v[:, None] - self.weight
+        tau = w[:, 3:6] * self.g_w[:, None]
+        return f, tau
+
+
+def _words(engine, variant: str, requests) -> str:
+    names = ", ".join(sorted({r.scenario.name for r in requests}))
+    return f"{engine.name}:{variant} on {names}"
+
+
+def _checked(engine, variant, requests, y, B: int, what: str) -> np.ndarray:
+    y = np.asarray(y, dtype=float)
+    if y.ndim < 2 or y.shape[-2:] != (B, 13):
+        raise EngineError(f"{_words(engine, variant, requests)}: the world's {what} has shape {y.shape}, "
+                          f"not (..., {B}, 13)")
+    return y
+
+
+def run(engine, variant: str, requests) -> list:
+    """The runs of ``requests`` (base.RunRequest) with ``engine``'s ``variant``, in order: each a
+    reference_sim.simulate.Run with ``engine_s`` (the seconds inside the engine) and ``host_s`` (rbcheck's),
+    or the EngineError of its world."""
+    base.check_variant(engine.name, engine.variants, variant)
+    out: list = [None] * len(requests)
+    groups: dict = {}
+    for j, r in enumerate(requests):
+        groups.setdefault((engine.group_key(r), engine.per_stage(r.scenario, variant)), []).append(j)
+    for idx in groups.values():
+        for j, r in zip(idx, _run_group(engine, variant, [requests[j] for j in idx])):
+            out[j] = r
+    return out
+
+
+def _run_group(engine, variant: str, reqs) -> list:
+    """The runs of one world; when the engine rejects the world (a model it refuses) and it holds several
+    scenarios, each scenario in a world of its own, so that only the refused one fails."""
+    try:
+        return _run_world(engine, variant, reqs)
+    except EngineError as exc:
+        scenarios = list(dict.fromkeys(id(r.scenario) for r in reqs))
+        if len(scenarios) < 2:
+            return [exc] * len(reqs)
+        out: list = [None] * len(reqs)
+        for key in scenarios:
+            idx = [j for j, r in enumerate(reqs) if id(r.scenario) == key]
+            for j, run_j in zip(idx, _run_group(engine, variant, [reqs[j] for j in idx])):
+                out[j] = run_j
+        return out
+    except Exception as exc:  # noqa: BLE001 - an engine's own failure: the run fails, the rest go on
+        return [EngineError(f"{_words(engine, variant, reqs)}: {type(exc).__name__}: {exc}")] * len(reqs)
+
+
+def _run_world(engine, variant: str, reqs) -> list:
+    t_all = time.perf_counter()
+    dt = float(reqs[0].dt_s)
+    B, n_max = len(reqs), max(int(r.n_steps) for r in reqs)
+    scenarios = [r.scenario for r in reqs]
+    harness = Harness(scenarios, dt, engine.applies_gravity)
+    y0 = np.array([sc.problem.initial_packed() for sc in scenarios])
+    world = engine.build(reqs, variant, dt)
+    engine_s = 0.0
+    try:
+        with np.errstate(all="ignore"):
+            world.set_state(y0)
+            raw0 = np.asarray(world.read(), dtype=float)
+            rec = np.empty((n_max + 1, *raw0.shape))
+            rec[0] = raw0
+            per_stage = bool(world.per_stage)
+            constant = not harness.state_dependent
+            f, tau = (None, None) if per_stage else harness.wrench(y0)
+            ends = np.array([int(r.n_steps) for r in reqs])
+            stopped: dict = {}   # body -> (step, words)
+            rollout = getattr(world, "rollout", None)
+            if not per_stage and constant and not harness.decays and rollout is not None and n_max:
+                world.apply(f, tau)
+                t0 = time.perf_counter()
+                rec[1:] = np.asarray(rollout(n_max), dtype=float)
+                engine_s += time.perf_counter() - t0
+                _check(engine, variant, reqs, world, rec, 1, n_max + 1, ends, stopped)
+            else:
+                engine_s = _steps(engine, variant, reqs, world, harness, rec, n_max, f, tau, ends, stopped,
+                                  per_stage)
+            engine_s -= float(world.host_s)
+            y = _checked(engine, variant, reqs, world.packed(rec), B, "packed states")
+    finally:
+        world.close()
+    if engine.sign_continuity:
+        y = _same_side(y)
+    host_s = time.perf_counter() - t_all - engine_s
+    runs = []
+    for i, r in enumerate(reqs):
+        n = int(r.n_steps)
+        if i in stopped:
+            n_bad, why = stopped[i]
+            run_i = diverged(y[:n_bad, i].copy(), dt, f" ({why})")
+        else:
+            run_i = Run(dt * np.arange(n + 1), y[:n + 1, i].copy())
+        share = (n / max(1, int(ends.sum())))
+        run_i.engine_s, run_i.host_s = engine_s * share, host_s * share
+        runs.append(run_i)
+    return runs
+
+
+def _steps(engine, variant, reqs, world, harness, rec, n_max, f, tau, ends, stopped, per_stage) -> float:
+    """The per-step loop (module docstring) into ``rec``; returns the seconds inside ``world.step()``."""
+    engine_s = 0.0
+    perf = time.perf_counter
+    step, read, apply, decay = world.step, world.read, world.apply, world.decay
+    state_dependent, decays = harness.state_dependent, harness.decays
+    kept = engine.keeps_forces and not state_dependent
+    if not per_stage and kept:
+        apply(f, tau)
+    start = 1
+    while start <= n_max:
+        stop = min(start + engine.chunk, n_max + 1)
+        for n in range(start, stop):
+            if not per_stage:
+                if state_dependent and n > 1:
+                    f, tau = harness.wrench(world.packed_row(rec[n - 1]))
+                if decays:
+                    decay(harness.g_v, harness.g_w)
+                if not kept:
+                    apply(f, tau)
+            t0 = perf()
+            step()
+            engine_s += perf() - t0
+            rec[n] = read()
+        _check(engine, variant, reqs, world, rec, start, stop, ends, stopped)
+        if len(stopped) == len(reqs) or all(i in stopped or ends[i] < stop for i in range(len(reqs))):
+            rec[stop:] = np.nan
+            break
+        start = stop
+    return engine_s
+
+
+def _check(engine, variant, reqs, world, rec, start: int, stop: int, ends, stopped: dict) -> None:
+    """Bodies whose recorded states of steps ``start..stop-1`` (within their own runs) blew up, or whose
+    engine warned there, into ``stopped`` as ``(first bad step, words)``."""
+    y = _checked(engine, variant, reqs, world.packed(rec[start:stop]), len(reqs), "states")
+    bad = bad_rows(y)
+    warned: dict = {}
+    for i, n, words in world.warnings:
+        if start <= n < stop and i not in warned:
+            warned[i] = (n, words)
+    for i in range(len(reqs)):
+        if i in stopped or ends[i] < start:
+            continue
+        last = min(stop, ends[i] + 1) - start
+        candidates = []
+        if bad[:last, i].any():
+            k = int(np.argmax(bad[:last, i]))
+            candidates.append((start + k, blowup_words(y[k, i])))
+        if i in warned and warned[i][0] < start + last:
+            candidates.append(warned[i])
+        if candidates:
+            stopped[i] = (min(c[0] for c in candidates), "; ".join(c[1] for c in sorted(candidates)))
+
+
+def _same_side(y) -> np.ndarray:
+    """States (n + 1, B, 13) with each quaternion's sign on the previous recorded one's side
+    (reference_sim.quaternion.same_side, step after step): the sign of row n is the product of the signs
+    of the dot products of consecutive raw rows (a sign flip is exact)."""
+    q = y[..., 6:10]
+    with np.errstate(invalid="ignore", over="ignore"):
+        dots = np.einsum("nbi,nbi->nb", q[1:], q[:-1])
+    flips = np.where(dots < 0.0, -1.0, 1.0)
+    sign = np.concatenate([np.ones((1, y.shape[1])), np.cumprod(flips, axis=0)])
+    out = y.copy()
+    out[..., 6:10] = q * sign[..., None]
+    return out
+
+
+def one_step(engine, scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
+    """One step of ``dt_s`` from exactly each row of ``y_start`` (..., 13): a world of one body per row, put
+    at the row with its pre-step decay, the harness forces of the row applied, stepped once and read."""
+    base.check_variant(engine.name, engine.variants, variant)
+    rows = np.asarray(y_start, dtype=float).reshape(-1, 13)
+    if len(rows) == 0:
+        return np.empty(np.shape(y_start))
+    from cross_checks.engines.base import RunRequest
+    reqs = [RunRequest(scenario, float(dt_s), 1)] * len(rows)
+    harness = Harness([scenario] * len(rows), dt_s, engine.applies_gravity)
+    world = engine.build(reqs, variant, float(dt_s))
+    try:
+        with np.errstate(all="ignore"):
+            per_stage = bool(world.per_stage)
+            if per_stage:
+                world.set_state(rows)
+            else:
+                y_dec = rows.copy()
+                y_dec[:, 3:6] *= harness.g_v[:, None]
+                y_dec[:, 10:13] *= harness.g_w[:, None]
+                world.set_state(y_dec)
+                world.apply(*harness.wrench(rows))
+            world.step()
+            y1 = _checked(engine, variant, reqs, world.packed(np.asarray(world.read(), dtype=float)[None]),
+                          len(rows), "states")[0]
+    finally:
+        world.close()
+    if engine.sign_continuity:
+        y1 = y1.copy()
+        y1[:, 6:10] = same_side(y1[:, 6:10], rows[:, 6:10])
+    return y1.reshape(np.shape(y_start))

@@ -1,0 +1,154 @@
+"""One engine machinery: an engine supplies a :class:`World` of B bodies; rbcheck owns the loop that steps it.
+
+An engine is a :class:`WorldEngine` subclass: declarations (its distribution, the pip extra that installs it,
+its variants, whether it applies gravity itself, whether applied forces persist between its steps) and one
+method, :meth:`WorldEngine.build`, that returns a world of bodies for a variant at one Δt. Everything else —
+the harness forces and the pre-step velocity decay, the weight an engine applies itself, divergence, the
+quaternion sign, recording, the one-step mode, grouping requests into worlds, the installed version, and the
+time spent inside the engine apart from rbcheck's own — is :mod:`cross_checks.engines.loop`'s, written once.
+
+The world's contract (states packed as in reference_sim.state: ``[x_W (m), v_W (m/s, COM), q_WB (w, x, y, z),
+ω_W (rad/s, world axes)]``, one row per body, in the order of the requests it was built for):
+
+* ``set_state(y)``: put body i at ``y[i]`` (B, 13).
+* ``apply(f_W, tau_W)``: the world force at the COM (N) and world torque (N m), (B, 3) each, for the next
+  step (the weight already taken off when the engine applies gravity itself).
+* ``step()``: one step of every body. Only this (and ``rollout``) is timed as the engine's own work.
+* ``read()``: the bodies' current states in the engine's own layout (B, R) (a cheap copy), and
+  ``packed(raw)``: such rows (..., B, R) as packed states (..., B, 13) (identity by default).
+* optional ``decay(g_v, g_w)``: scale every body's velocities by (B,) factors before a step (by default the
+  packed state is read, scaled and set again);
+* optional ``rollout(n_steps)``: ``n_steps`` steps with the applied forces held, the raw states (n_steps, B,
+  R) after each, in the engine's compiled loop (used when nothing changes between steps: no state-dependent
+  force, no decay);
+* optional ``warnings``: a list the world appends ``(body, step, words)`` to when the engine reports that a
+  body's step failed (the step counted from 1 since the last ``set_state``);
+* optional ``per_stage``: True when the world evaluates the harness forces inside the engine's step, at every
+  stage (then the loop applies neither forces nor decay), and ``host_s``: the seconds of that evaluation
+  spent inside ``step()``, which are rbcheck's, not the engine's;
+* optional ``close()``.
+
+The contract is tested for every installed engine by tests/cross_checks/engines/test_contract.py; a complete
+engine of a few dozen lines is in docs/engines.md.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from cross_checks.engines import base
+
+__all__ = ["World", "WorldEngine"]
+
+
+class World:
+    """The base of a world (see the module docstring): ``packed`` is the identity, ``decay`` goes through the
+    packed state, and a world has no warnings, no per-stage forces and nothing to close."""
+
+    per_stage = False
+    host_s = 0.0
+
+    def __init__(self):
+        self.warnings: list = []
+
+    def set_state(self, y) -> None:   # pragma: no cover - every world defines it
+        raise NotImplementedError
+
+    def apply(self, f_W, tau_W) -> None:   # pragma: no cover
+        raise NotImplementedError
+
+    def step(self) -> None:   # pragma: no cover
+        raise NotImplementedError
+
+    def read(self):   # pragma: no cover
+        raise NotImplementedError
+
+    def packed(self, raw) -> np.ndarray:
+        return np.asarray(raw, dtype=float)
+
+    def packed_row(self, raw) -> list:
+        """One read's raw rows (B, R) as packed states (B rows of 13 numbers): :meth:`packed` of them, bit for
+        bit; a world may give it in plain floats, for the loop's per-step forces."""
+        return self.packed(np.asarray(raw, dtype=float)[None])[0]
+
+    def decay(self, g_v, g_w) -> None:
+        y = self.packed(self.read()).copy()
+        y[:, 3:6] *= np.asarray(g_v, dtype=float)[:, None]
+        y[:, 10:13] *= np.asarray(g_w, dtype=float)[:, None]
+        self.set_state(y)
+
+    def close(self) -> None:
+        pass
+
+
+class WorldEngine(base.EngineAdapter):
+    """An engine adapter whose engine supplies a :class:`World` and whose runs are the host loop's
+    (:mod:`cross_checks.engines.loop`). Subclass it, declare the fields below and implement :meth:`build`.
+
+    ``distribution`` (the pip distribution whose version every result records), ``module`` (its import name,
+    default ``distribution``), ``extra`` (rbcheck's pip extra that installs it, "" for a required engine) and
+    ``runs_on`` (``(label, distribution)`` of what it runs on, recorded beside its version) give
+    :meth:`version`, the install checks and :meth:`engine_files`.
+    """
+
+    distribution: str = ""
+    module: str = ""
+    extra: str = ""
+    runs_on: tuple = ()
+    #: The engine adds gravity itself (the loop takes the weight off the harness force).
+    applies_gravity: bool = True
+    #: Forces applied to a body stay applied over the next steps until changed (MuJoCo's xfrc_applied): the
+    #: loop applies constant forces once. False: the engine clears them after every step (Bullet, PhysX).
+    keeps_forces: bool = False
+    #: The quaternion the engine returns may change sign between steps: the loop picks, after each step, the
+    #: sign on the previous state's side (reference_sim.quaternion.same_side).
+    sign_continuity: bool = False
+    #: Steps between the loop's divergence checks.
+    chunk: int = 1024
+    #: Harness modules whose code decides the results besides the engine's own (the result cache's key).
+    harness: tuple = ("cross_checks.engines.loop", "cross_checks.engines.world")
+
+    def build(self, requests, variant: str, dt_s: float) -> World:   # pragma: no cover - every engine does
+        """A world of the bodies of ``requests`` (base.RunRequest, at step ``dt_s``) for ``variant``. Raise
+        :class:`~cross_checks.engines.base.EngineError` with the engine's words when it rejects a model."""
+        raise NotImplementedError
+
+    def group_key(self, request) -> tuple:
+        """Requests with equal keys are run in one world (default: equal step and step count)."""
+        return (float(request.dt_s), int(request.n_steps))
+
+    def per_stage(self, scenario, variant: str) -> bool:
+        """True when ``variant`` evaluates the forces of ``scenario`` at every stage of its step (its world
+        does: ``World.per_stage``), so the loop applies neither forces nor decay before the step."""
+        return False
+
+    def _installed(self):
+        base.require(*base.optional_import(self.module or self.distribution),
+                     name=self.module or self.distribution, dist=self.distribution,
+                     hint=f'pip install -e ".[{self.extra}]"' if self.extra else "")
+
+    def version(self) -> str:
+        self._installed()
+        return base.release(self.distribution, self.runs_on)
+
+    def simulate(self, scenario, variant: str, dt_s: float, n_steps: int):
+        from cross_checks.engines import loop
+        return base.one_request(lambda v, reqs: loop.run(self, v, reqs), scenario, variant, dt_s, n_steps)
+
+    def simulate_many(self, variant: str, requests) -> list:
+        from cross_checks.engines import loop
+        return loop.run(self, variant, list(requests))
+
+    def one_step(self, scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
+        from cross_checks.engines import loop
+        return loop.one_step(self, scenario, variant, dt_s, y_start)
+
+    def engine_files(self) -> list:
+        """The engine's compiled libraries (hashed into the result cache's key)."""
+        mod, _ = base.optional_import(self.module or self.distribution)
+        return base.library_files(mod)
+
+    def source_files(self) -> list:
+        import importlib
+        from pathlib import Path
+        harness = [Path(importlib.import_module(m).__file__ or "") for m in self.harness]
+        return [*super().source_files(), *harness, *self.engine_files()]
