@@ -304,8 +304,8 @@ def _nan_row(job, scenario, status, message, label, version):
     row = {c: math.nan for c in RESULT_COLUMNS}
     row.update(scenario=job.scenario, engine=job.variant, dt=job.dt_s, steps=0, wall_s=math.nan,
                engine_s=math.nan, energy_drift_kind="n/a", step_defect_quantity="", status=status,
-               diverged_at_s=math.nan, message=message, default_dt=job.default_dt, in_ladder=job.in_ladder, reference=label,
-               engine_version=version, cached=False)
+               diverged_at_s=math.nan, message=message, default_dt=job.default_dt, in_ladder=job.in_ladder,
+               reference=label, engine_version=version, cached=False)
     return row
 
 

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 #: results.csv columns that legitimately differ between two runs of the same sweep (timing, cache use).
-RUN_DEPENDENT_COLUMNS = ("wall_s", "cached")
+RUN_DEPENDENT_COLUMNS = ("wall_s", "engine_s", "cached")
 
 
 @contextmanager
