@@ -136,7 +136,8 @@ def test_reruns_are_bit_identical_across_engines(tmp_path, isolated_cache):
         out = tmp_path / f"r{k}"
         run_sweep([sc], gated_variants(), out, jobs=2, use_cache=False, progress=False)
         with open(out / "results.csv", newline="") as fh:
-            rows = [{c: v for c, v in r.items() if c not in ("wall_s", "engine_s", "cached")} for r in csv.DictReader(fh)]
+            rows = [{c: v for c, v in r.items() if c not in ("wall_s", "engine_s", "cached")}
+                    for r in csv.DictReader(fh)]
         texts.append(rows)
     assert texts[0] == texts[1]  # every digit of every metric, of every installed variant
     # the optional ones installed here
