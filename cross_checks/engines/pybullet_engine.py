@@ -1,13 +1,14 @@
 """PyBullet as an engine (``pybullet:VARIANT``, float64): a world of bodies for rbcheck's loop
 (cross_checks.engines.world, cross_checks.engines.loop).
 
-One ``DIRECT`` client per process, its world reset for each world of bodies; a body is a
-``createMultiBody`` without collision shape (maximal coordinates for ``maximal``), neutralised
-(:data:`DYNAMICS_SETTINGS`, sleeping disabled). PyBullet takes a diagonal inertia and reports the inertial
-(principal) frame P as the base pose, so the boundary rotates: ``q_WP = q_WB ⊗ q_BP`` in,
-``q_WB = q_WP ⊗ q_BP⁻¹`` out (quaternions (x, y, z, w) in PyBullet); position and velocity are the COM's, ω in WORLD axes. Forces: the loop's, applied before every
-step (PyBullet clears them), the weight ``m g`` taken off; the decay by setting the velocities last read,
-scaled. Conventions, defaults neutralised and what pins them: docs/engine_conventions.md, "PyBullet 3.2.7".
+One ``DIRECT`` client per process, its world reset for each world of bodies; a body is a ``createMultiBody``
+without collision shape (maximal coordinates for ``maximal``), neutralised (:data:`DYNAMICS_SETTINGS`,
+sleeping disabled). PyBullet takes a diagonal inertia and reports the inertial (principal) frame P as the base
+pose, so the boundary rotates: ``q_WP = q_WB ⊗ q_BP`` in, ``q_WB = q_WP ⊗ q_BP⁻¹`` out (quaternions (x, y, z,
+w) in PyBullet); position and velocity are the COM's, ω in WORLD axes. Forces: the loop's, applied before
+every step (PyBullet clears them), the weight ``m g`` taken off; the decay by setting the velocities last
+read, scaled. Conventions, defaults neutralised and what pins them: docs/engine_conventions.md, "PyBullet
+3.2.7".
 """
 from __future__ import annotations
 
