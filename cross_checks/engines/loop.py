@@ -115,6 +115,10 @@ def _run_world(engine, variant: str, reqs) -> list:
         with np.errstate(all="ignore"):
             world.set_state(y0)
             raw0 = np.asarray(world.read(), dtype=float)
+            start = _checked(engine, variant, reqs, world.packed(raw0[None]), B, "first state")
+            if not np.all(np.isfinite(start)):
+                raise EngineError(f"{_words(engine, variant, reqs)}: the world returned a non-finite state "
+                                  "before any step (set_state then read)")
             rec = np.empty((n_max + 1, *raw0.shape))
             rec[0] = raw0
             per_stage = bool(world.per_stage)

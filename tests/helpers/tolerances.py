@@ -48,6 +48,19 @@ AGREE_INITIAL_ROW = 1e-14
 #: Same-arithmetic conversions at an adapter's boundary (MuJoCo: qpos/qvel <-> packed state, one rotation
 #: of a unit vector; PyBullet: quaternion order, principal-frame rotation): a few ε.
 ADAPTER_ROUND_TRIP = 1e-15
+#: The contract suite (tests/cross_checks/engines/test_contract.py), in units of the variant's rounding unit ε
+#: (float64 or float32), relative to max(1, |state|): the state set then read back goes through the engine's
+#: own layout (ω rotated into body axes and back: two products with a rotation built from q, ~8 roundings
+#: each; float32 engines round every component once more): 16 ε.
+CONTRACT_ROUND_TRIP_EPS = 16
+#: One step against its closed form (Δv = g Δt from rest; v scaled by γ), or one_step from a recorded state
+#: against the recorded next state: the round trip above, amplified by one step of O(1) numbers, plus the
+#: step's own few roundings: 64 ε. A wrong force (the weight twice: Δv off by g Δt ≈ 0.1 m/s) or a decay
+#: left out (1 − γ ≈ 1e-2) is 10⁴–10¹³ times beyond it.
+CONTRACT_ONE_STEP_EPS = 64
+#: one_step from a recorded state against the recorded next state: CONTRACT_ONE_STEP_EPS, and an implicit
+#: step's Newton iterations, each rounding (Drake's implicit Euler: measured 127 ε on spring_pendulum): 256 ε.
+CONTRACT_RESTART_EPS = 256
 #: Exact exponential-map spin about a principal axis over 100 steps: each step rounds the quaternion
 #: product (~ε; MuJoCo also renormalises): 100 · a few ε.
 ADAPTER_SPIN_100_STEPS = 1e-13
