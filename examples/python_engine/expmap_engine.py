@@ -1,5 +1,5 @@
-"""A complete rbcheck engine in Python: B free bodies in NumPy, stepped by semi-implicit Euler with an explicit
-gyroscopic term and the exponential-map attitude update (MuJoCo's Euler step, rbcheck's reference:expmap_gyro).
+"""A complete rbcheck engine in Python: B free bodies in NumPy, stepped by semi-implicit Euler with an
+explicit gyroscopic term and the exponential-map attitude update (MuJoCo's Euler step, reference:expmap_gyro).
 
 rbcheck's loop owns everything else: the forces (applied before every step, held over it), velocity decay,
 divergence, recording, the one-step mode and the timing. Register it in your package's pyproject.toml:
@@ -15,7 +15,7 @@ from cross_checks.engines.world import World, WorldEngine
 
 
 class ExpmapWorld(World):
-    """The bodies of ``requests``: mass (B,) kg, inertia I_B (B, 3, 3) kg m² in body axes, and gravity (B, 3)."""
+    """The bodies of ``requests``: mass (B,) kg, inertia I_B (B, 3, 3) kg m² in body axes, gravity (B, 3)."""
 
     def __init__(self, requests, dt_s: float):
         super().__init__()
