@@ -21,6 +21,7 @@ from reports.integrators import PAGE as INTEGRATORS_PAGE
 from reports.ranking import (
     SCENARIO_FAMILIES,
     best_sentences,
+    engine_answer,
     engine_sentence,
     family_lines,
     ranking,
@@ -358,14 +359,15 @@ def render_pages(res, figures: dict, self_contained: bool = False) -> dict:
     _explain_in_place([*(g["lines"] for g in box["groups"]), *(sec["entries"] for sec in sections),
                        observations])
     rk = ranking(res)
+    answer = engine_answer(res)
     pages[RANKING_PAGE] = env.get_template("ranking.html").render(
-        title="rbcheck: which engine variant?", r=_ranking_view(res, rk), **common)
+        title="rbcheck: which engine?", r=_ranking_view(res, rk), e=answer, **common)
     pages[INTEGRATORS_PAGE] = env.get_template("integrators.html").render(
         title="rbcheck: the integrators, on work precision and over long runs",
         v=_integrators_view(res, rk, figures.get(None, []), self_contained), **common)
     pages["index.html"] = env.get_template("index.html").render(
         title="rbcheck results", matrix=_matrix(res), legend=_legend(), box=box,
-        which=_which_view(rk),
+        which=_which_view(rk, answer),
         sections=sections, observations=observations,
         skipped=res.summary.get("skipped_variants", []), second=_second_summary(res), **common)
     for s in res.scenarios:
@@ -429,9 +431,12 @@ def _integrators_view(res, rk, drawn, self_contained) -> dict:
             "n_variants": len(iv.variants), "long_scenarios": scen, "delta_meaning": GLOSSARY["δ"]}
 
 
-def _which_view(rk) -> dict:
-    """The first screen's answer to "which engine?": the best overall, with the link to the ranking."""
-    return {"lines": [(label, text) for label, text, _ in best_sentences(rk, "overall")],
+def _which_view(rk, answer) -> dict:
+    """The first screen's answer to "which engine?": the engines' best overall (and over the long runs), then
+    every variant's, the reference's schemes included, with the link to the ranking."""
+    engines_first = [(f"{label} (engines)", text) for label, text in answer["overall"] + answer["long"]]
+    return {"lines": engines_first + [(f"{label} (every variant)", text)
+                                      for label, text, _ in best_sentences(rk, "overall")],
             "families": family_lines(rk),
             "note": next((n for _, _, n in best_sentences(rk, "overall")), ""), "href": RANKING_PAGE}
 

@@ -18,8 +18,14 @@ __all__ = ["Point", "Curve", "SCENARIO_FAMILIES", "scenario_family", "curves", "
 
 #: Scenario families, from what moves along the reference (summary.json ``scenarios[].varies``).
 SCENARIO_FAMILIES = ("translation only", "rotation only", "translation and rotation")
-#: A variant is ranked in a family when it has a value on at least this share of the family's scenarios.
+#: A variant is ranked in a family when its verdicts are as expected on at least this share of the family's
+#: scenarios that it ran (where its curve does not reach a common level, the nearest measured value, a bound,
+#: stands in: never a blank).
 MIN_COVERAGE = 0.5
+#: The long runs' drifts the "which engine?" answer names the best keepers of (summary.json ``long_runs``).
+LONG_RUN_QUANTITIES = (("energy_drift_max", "energy", "largest relative energy drift"),
+                       ("momentum_drift_max", "|L|", "largest relative |L| drift"),
+                       ("direction_drift_max_rad", "the spin axis", "largest turn of L, rad"))
 
 
 def scenario_family(s) -> str:
@@ -126,6 +132,13 @@ class Value:
         return f"{self.bound}{fmt(self.value, unit)}"
 
 
+def _slope(a: Point, b: Point) -> float:
+    """d log(error) / d log(cost) between two measured points (0 where the costs are equal)."""
+    if b.cost == a.cost:
+        return 0.0
+    return (_log(b.error) - _log(a.error)) / (_log(b.cost) - _log(a.cost))
+
+
 def _interp(x, x0, x1, y0, y1):
     if x1 == x0:
         return min(y0, y1)
@@ -138,7 +151,15 @@ def at_cost(curve: Curve, cost: float) -> Value:
     pts = curve.points
     lo, hi = curve.cost_range
     if cost < lo * (1 - 1e-12):
-        return Value(None, why=f"its cheapest run costs ×{fmt(lo / cost)} the common cost")
+        # cheaper than its cheapest run: along its measured convergence (error ∝ cost^slope from its two
+        # cheapest runs) when its error falls with cost there, else no less than its cheapest run's error
+        slope = _slope(pts[0], pts[1]) if len(pts) > 1 else 0.0
+        if slope < 0:
+            return Value(pts[0].error * (cost / pts[0].cost) ** slope, "≈",
+                         f"its cheapest run costs ×{fmt(lo / cost)} the common cost: extrapolated along its "
+                         f"measured slope ({slope:.2g}) from there")
+        return Value(pts[0].error, "≥", f"its cheapest run costs ×{fmt(lo / cost)} the common cost: its "
+                                        "error there, a lower bound")
     if cost >= hi:
         return Value(pts[-1].error, "≤" if cost > hi * (1 + 1e-12) else "",
                      "its costliest run is cheaper: its finest measured error" if cost > hi else "")
@@ -160,7 +181,16 @@ def cost_at(curve: Curve, error: float) -> Value:
                 return Value(b.cost)
             f = (_log(error) - _log(a.error)) / (_log(b.error) - _log(a.error))
             return Value(10 ** (_log(a.cost) + f * (_log(b.cost) - _log(a.cost))))
-    return Value(None, why=f"not reached: its smallest error is {fmt(min(p.error for p in pts))}")
+    # not reached: along its measured convergence from its two finest runs when its error still falls with
+    # cost there, else at least its costliest run's cost
+    slope = _slope(pts[-2], pts[-1]) if len(pts) > 1 else 0.0
+    if slope < 0 and pts[-1].error > error:
+        return Value(pts[-1].cost * (error / pts[-1].error) ** (1.0 / slope), "≈",
+                     f"beyond its finest run ({fmt(pts[-1].error)}): extrapolated along its measured slope "
+                     f"({slope:.2g}) from there")
+    return Value(max(p.cost for p in pts), "≥",
+                 f"not reached: its smallest error is {fmt(min(p.error for p in pts))}; its costliest run's "
+                 "cost, a lower bound")
 
 
 @dataclass
@@ -184,8 +214,10 @@ class ScenarioRanking:
         return {v: (x / best if best > 0 else (1.0 if x == 0 else math.inf)) for v, x in vals.items()}
 
 
-def rank_scenario(res, sc) -> ScenarioRanking:
+def rank_scenario(res, sc, variants=None) -> ScenarioRanking:
     cs = curves(res, sc)
+    if variants is not None:
+        cs = {v: c for v, c in cs.items() if v in variants}
     c_star = common_level([c.cost_range for c in cs.values()])
     e_star = common_level([c.error_range for c in cs.values()])
     return ScenarioRanking(
@@ -224,10 +256,10 @@ def _gmean(xs):
 
 
 def _rank(standings, score, n, ranked_attr, tie):
-    """Rank by ``score`` (a tie — schemes equally exact — goes to the better ``tie`` score, then the name)."""
-    total = {s.variant: s.n_scenarios for s in standings}
-    order = sorted((s for s in standings if getattr(s, score) is not None
-                    and getattr(s, n) >= max(1, MIN_COVERAGE * total[s.variant])),
+    """Rank by ``score`` (a tie — schemes equally exact — goes to the better ``tie`` score, then the name)
+    every variant with a value whose verdicts are as expected on at least MIN_COVERAGE of its scenarios."""
+    order = sorted((s for s in standings if getattr(s, score) is not None and getattr(s, n) >= 1
+                    and s.n_scenarios - len(s.contradicts_on) >= MIN_COVERAGE * s.n_scenarios),
                    key=lambda s: (round(math.log10(getattr(s, score)), 6),
                                   getattr(s, tie) if getattr(s, tie) is not None else math.inf, s.variant))
     for i, s in enumerate(order, start=1):
@@ -297,8 +329,10 @@ class Ranking:
         return first, clean
 
 
-def ranking(res) -> Ranking:
-    per_sc = {s["name"]: rank_scenario(res, s["name"]) for s in res.scenarios}
+def ranking(res, variants=None) -> Ranking:
+    """The ranking of ``variants`` (default: every variant of the sweep), its common levels chosen among
+    their own curves."""
+    per_sc = {s["name"]: rank_scenario(res, s["name"], variants) for s in res.scenarios}
     groups = {}
     fams = {"overall": list(per_sc)}
     for f in SCENARIO_FAMILIES:
@@ -306,7 +340,7 @@ def ranking(res) -> Ranking:
         if scs:
             fams[f] = scs
     for g, scs in fams.items():
-        standings = [_standing(res, v, scs, per_sc) for v in res.variants]
+        standings = [_standing(res, v, scs, per_sc) for v in (res.variants if variants is None else variants)]
         standings = [s for s in standings if s.n_scenarios]
         _rank(standings, "acc_score", "acc_n", "acc_rank", "cost_score")
         _rank(standings, "cost_score", "cost_n", "cost_rank", "acc_score")
@@ -434,3 +468,53 @@ def family_lines(rk: Ranking) -> list:
         if names:
             out.append((f"{g.capitalize()} ({len(grp['scenarios'])})", ", ".join(names)))
     return out
+
+
+# --- "which engine?": engines only, apart from the reference's schemes ---------------------------------
+
+def is_engine(variant: str) -> bool:
+    """An engine's variant (not one of the reference's schemes, which are rbcheck's own)."""
+    return not variant.startswith("reference:")
+
+
+def long_run_keepers(res, variants) -> list:
+    """``(label, sentence)`` per quantity of LONG_RUN_QUANTITIES: the variants (of ``variants``) that keep it
+    best over the long runs, by the geometric mean over the long runs of its largest drift (a run that
+    diverged or failed puts a variant last), the best three named with their numbers."""
+    recs = [r for r in res.summary.get("long_runs") or [] if r["engine"] in variants]
+    names = [s["name"] for s in res.summary.get("long_run_scenarios") or []]
+    out = []
+    for key, what, unit in LONG_RUN_QUANTITIES:
+        scores = {}
+        for v in variants:
+            mine = [r for r in recs if r["engine"] == v and r["scenario"] in names]
+            if not mine:
+                continue
+            vals = [float(r[key]) if r.get("status") == "ok" and isinstance(r.get(key), (int, float))
+                    and math.isfinite(r[key]) else math.inf for r in mine]
+            if any(math.isinf(x) for x in vals):
+                scores[v] = (math.inf, len(mine))
+            else:
+                scores[v] = (math.exp(sum(math.log(max(x, 1e-300)) for x in vals) / len(vals)), len(mine))
+        if not scores:
+            continue
+        best = sorted(scores, key=lambda v: (scores[v][0], v))[:3]
+        words = {v: "diverged on a long run" if math.isinf(scores[v][0]) else fmt(scores[v][0]) for v in best}
+        text = "; ".join(f"{v} ({words[v]})" for v in best)
+        out.append((f"Keeps {what} best over the long runs", f"{text} ({unit}, geometric mean over "
+                    f"{max(n for _, n in scores.values())} long runs)"))
+    return out
+
+
+def engine_answer(res) -> dict:
+    """The answer to "which engine?": among the engines' variants only, overall and per scenario family, the
+    most accurate at a common cost and the cheapest at a common accuracy (their own common levels), and the
+    best keepers of energy, |L| and the spin axis over the long runs. Empty lists without an engine."""
+    engines_ = [v for v in res.variants if is_engine(v)]
+    if not engines_:
+        return {"overall": [], "families": [], "long": [], "ranking": None}
+    rk = ranking(res, engines_)
+    fams = [(g, [(label, text) for label, text, _ in best_sentences(rk, g)]) for g in rk.groups
+            if g != "overall"]
+    return {"overall": [(label, text) for label, text, _ in best_sentences(rk, "overall")],
+            "families": fams, "long": long_run_keepers(res, engines_), "ranking": rk}

@@ -14,7 +14,17 @@ import pytest
 
 from reports import plots
 from reports.data import load_results
-from reports.ranking import Curve, Point, at_cost, best_sentences, common_level, cost_at, ranking
+from reports.ranking import (
+    Curve,
+    Point,
+    at_cost,
+    best_sentences,
+    common_level,
+    cost_at,
+    engine_answer,
+    is_engine,
+    ranking,
+)
 from reports.words import GLOSSARY, explain
 from tests.helpers.sweeps import built_once
 from tests.reports.test_browser import _browser_sweep
@@ -26,7 +36,7 @@ def _power_law(p=2.0, c0=1e-3, e0=1e-2, n=5):
     return Curve("x:y", "s", 1e-6, pts)
 
 
-def test_interpolation_is_exact_on_a_power_law_and_never_extrapolates():
+def test_interpolation_is_exact_on_a_power_law_and_extrapolates_only_along_the_measured_slope():
     c = _power_law()
     for cost in (1.3e-3, 3.7e-3, 1.1e-2):                 # inside: a power law is a line in log-log
         v = at_cost(c, cost)
@@ -35,9 +45,17 @@ def test_interpolation_is_exact_on_a_power_law_and_never_extrapolates():
         assert back.bound == "" and back.value == pytest.approx(cost, rel=1e-12)
     above = at_cost(c, 1.0)                                # costlier than its costliest run: a bound
     assert above.bound == "≤" and above.value == c.points[-1].error
-    assert at_cost(c, 1e-4).value is None                  # cheaper than its cheapest run: unreachable
+    # cheaper than its cheapest run: along the measured slope (exact on a power law), said as such
+    below = at_cost(c, 1e-4)
+    assert below.bound == "≈" and below.value == pytest.approx(1e-2 * (1e-4 / 1e-3) ** -2.0, rel=1e-12)
+    assert "extrapolated along its measured slope" in below.why
     assert cost_at(c, 1.0).bound == "≤" and cost_at(c, 1.0).value == c.points[0].cost
-    assert cost_at(c, 1e-12).value is None and "not reached" in cost_at(c, 1e-12).why
+    beyond = cost_at(c, 1e-12)                             # finer than its finest run: the same, reversed
+    # (a round-off floor: no slope to follow, the nearest measured value as a bound)
+    assert beyond.bound == "≈" and beyond.value == pytest.approx(1e-3 * (1e-12 / 1e-2) ** -0.5, rel=1e-9)
+    flat = Curve("x:y", "s", 1e-6, [Point(0.01, 1e-3, 1e-9), Point(0.005, 2e-3, 1e-9)])
+    assert cost_at(flat, 1e-12).bound == "≥" and cost_at(flat, 1e-12).value == 2e-3
+    assert at_cost(flat, 1e-4).bound == "≥" and at_cost(flat, 1e-4).value == 1e-9
 
 
 def test_the_common_level_is_inside_the_most_measured_ranges():
@@ -61,7 +79,7 @@ def test_a_contradicted_variant_is_not_named_most_accurate_without_saying_so(bas
     with (d / "results.csv").open(encoding="utf-8", newline="") as fh:
         rows = list(csv.DictReader(fh))
     for r in rows:
-        r["wall_s"] = repr(int(r["steps"]) * 1e-6)
+        r["wall_s"] = r["engine_s"] = repr(int(r["steps"]) * 1e-6)
     with (d / "results.csv").open("w", encoding="utf-8", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(rows[0]))
         w.writeheader()
@@ -134,3 +152,20 @@ def test_the_sentences_number_places_in_english():
         ["1st", "2nd", "3rd", "4th", "11th", "12th", "13th", "21st", "22nd", "23rd", "111th"]
     assert [ratio_text(x) for x in (1.0, 1.34, 12.3, 160.0, 1234.0, 5.2e8)] == \
         ["×1", "×1.3", "×12", "×160", "×1200", "×5.2e8"]
+
+
+def test_which_engine_is_answered_among_engines_and_every_engine_variant_is_ranked(base):
+    """The ranking page's first answer names engines only (the reference's schemes are rbcheck's), and every
+    engine variant whose verdicts are as expected on half its scenarios gets an accuracy rank, even where its
+    curve does not reach the common cost (its measured slope, or its nearest measured value, stands in)."""
+    res = load_results(base)
+    answer = engine_answer(res)
+    engines_swept = [v for v in res.variants if is_engine(v)]
+    assert engines_swept and answer["overall"]
+    named = " ".join(text for _, text in answer["overall"])
+    assert any(v in named for v in engines_swept) and "reference:" not in named
+    for s in answer["ranking"].groups["overall"]["standings"]:
+        if s.n_scenarios - len(s.contradicts_on) >= 0.5 * s.n_scenarios:
+            assert s.acc_rank is not None, s.variant
+    page = (base / "ranking.html").read_text(encoding="utf-8")
+    assert page.index("Which engine?") < page.index("Which variant, the reference's schemes included?")
