@@ -210,6 +210,10 @@ CHECK_GROWTH_RATE_PER_STEP = 0.25
 #: "Resembles" a mistake (said with that caution) when it explains 99 % of the steps within this many
 #: allowances and CHECK_MISTAKE_MARGIN times better than any correct scheme; beyond, nothing is named.
 CHECK_MISTAKE_RESEMBLES = 3.0
+#: Schemes whose 99th-percentile step difference from a file is within this factor of the closest one's are
+#: as close as it (``check`` names them all, and no "closest scheme" when every scheme ties): the local
+#: allowance they are measured in is a bound with a constant C, not sharper than a few tens of percent.
+CHECK_CLOSEST_TIE_RATIO = 1.25
 
 # --- compare: a new results directory against the baseline (docs/results.md) ---
 #: Relative change of an error or drift that counts as a regression (or improvement): the same code on
