@@ -772,9 +772,11 @@ def _sweep_outcome(summary, out, n_scenarios, n_variants, elapsed_s) -> int:
     lr = run.get("long_runs") or {}
     long_text = (f" and {lr['runs']} long runs ({lr['cached_runs']} cached, {lr['diverged_runs']} diverged, "
                  f"{lr['failed_runs']} failed)" if lr.get("runs") else "")
+    compiled = (f"compiling the reference's integrators {run['compile_s']:.1f} s, "
+                if run.get("compile_s") else "")
     say(f"rbcheck sweep: {n_scenarios} scenario(s) x {n_variants} variant(s): {run['runs']} runs "
           f"({run['cached_runs']} cached, {run['diverged_runs']} diverged, {run['failed_runs']} failed)"
-          f"{long_text} in {elapsed_s:.1f} s on {run['jobs']} worker(s) (runs and metrics "
+          f"{long_text} in {elapsed_s:.1f} s on {run['jobs']} worker(s) ({compiled}runs and metrics "
           f"{run['wall_s']:.1f} s, then the report) -> {Path(out) / 'index.html'}")
     skipped = summary.get("skipped_variants") or []
     if skipped:

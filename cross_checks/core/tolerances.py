@@ -323,3 +323,8 @@ def long_run_roundoff(n_steps: int, unit_roundoff: float, rounding_factor: float
     linearly (the worst case). The Newton solves of the implicit steps
     (reference_sim.integrators.IMPLICIT_TOL) converge quadratically, so they add nothing measurable here."""
     return CHECK_ROUNDINGS_PER_STEP * unit_roundoff * rounding_factor * max(int(n_steps), 1)
+
+# --- progress ---
+#: Loading the reference's cached numba kernels takes ~1 s (numba's import and index lookup, measured on 2
+#: cores); a warm-up still going after this many seconds is compiling, and the sweep says so (issue 44).
+COMPILE_NOTICE_AFTER_S = 3.0
