@@ -658,7 +658,8 @@ def _gate_failures(summary) -> list:
     out = []
     for r in summary.get("convergence", []):
         if r.get("matches_expectation") is False:
-            out.append(f"{r['engine']} on {r['scenario']}: {r['quantity']} {r['assessment']}")
+            out.append(f"{r['engine']} on {r['scenario']}: "
+                       f"{r['quantity'].replace('_', ' ')} {r['assessment']}")
     for a in summary.get("agreement", []):
         if not a.get("agrees"):
             out.append(f"{a['a']} and {a['b']} differ on {a['scenario']} (should be the same scheme)")
@@ -733,7 +734,8 @@ def cmd_sweep(args) -> int:
                 else f"{args.out} left as it was")
         print(f"rbcheck sweep: {'terminated' if exc.terminated else 'interrupted'}; {what}", file=sys.stderr)
         return EXIT_TERMINATED if exc.terminated else EXIT_INTERRUPTED
-    return _sweep_outcome(summary, args.out, len(scenarios), len(variants), time.perf_counter() - t0)
+    return _sweep_outcome(summary, args.out, len(scenarios), len(variants), time.perf_counter() - t0,
+                          scenarios)
 
 
 def _run_sweep(args, scenarios, variants, skipped) -> dict:
@@ -750,21 +752,77 @@ def _run_sweep(args, scenarios, variants, skipped) -> dict:
 
 
 def verdict_count(summary) -> tuple:
-    """``(verdicts, not as expected)``: every convergence verdict, same-scheme agreement and agreement of a
-    scenario's two references the sweep judged, and how many of them contradict what is expected."""
-    conv = [r for r in summary.get("convergence", []) if r.get("matches_expectation") is not None]
-    agree = summary.get("agreement", [])
-    refs = [sc["second_reference"]
-            for sc in summary.get("scenarios", []) if (sc.get("second_reference") or {})
-            .get("agrees") is not None]
-    long = [r for r in summary.get("long_runs", []) if r.get("matches_expectation") is not None]
-    total = len(conv) + len(agree) + len(refs) + len(long)
-    wrong = (sum(r["matches_expectation"] is False for r in conv) + sum(not a.get("agrees") for a in agree)
-             + sum(r["agrees"] is False for r in refs) + sum(r["matches_expectation"] is False for r in long))
-    return total, wrong
+    """``(verdicts, not as expected)``: :func:`cross_checks.sweep.assemble.verdict_count`."""
+    from cross_checks.sweep.assemble import verdict_count as count
+    return count(summary)
 
 
-def _sweep_outcome(summary, out, n_scenarios, n_variants, elapsed_s) -> int:
+def _failed_rows(out) -> list:
+    """The failed rows of DIR/results.csv and DIR/long_runs.csv (as dicts; [] for a file it lacks)."""
+    import csv
+    rows = []
+    for name in ("results.csv", "long_runs.csv"):
+        try:
+            with open(Path(out) / name, newline="", encoding="utf-8") as fh:
+                rows += [r for r in csv.DictReader(fh) if r.get("status") == "failed"]
+        except OSError:
+            continue
+    return rows
+
+
+#: What an engine-file command's words most often mean (docs/engines.md, "When a run fails").
+_FAILURE_HINTS = (
+    (("can't open file", "No such file or directory", "cannot find", "not found"),
+     "a file the command names is not where it runs: each run has a private working directory, so name your "
+     "files relative to the engine file (found in its folder) or through {engine_dir}"),
+    (("ModuleNotFoundError", "ImportError"),
+     "a module the command imports is not installed for the interpreter the command runs"),
+    (("Permission denied",), "the program or a file it needs is not executable or readable"),
+)
+
+
+def _failure_hint(sentence: str) -> str:
+    return next((hint for needles, hint in _FAILURE_HINTS if any(n in sentence for n in needles)), "")
+
+
+def _say_failed_runs(out, n_failed: int) -> None:
+    """Every distinct reason the failed runs give, in the command's own words (as `run` and assert_engine
+    print them), with what it most likely means."""
+    from cross_checks.core.progress import say
+    from cross_checks.gates.failures import failed_run_sentences
+    groups = failed_run_sentences(_failed_rows(out), statuses=("failed",))
+    say(f"rbcheck sweep: {n_failed} run(s) failed, for {len(groups)} distinct reason(s):", sys.stderr)
+    for _, _, sentence, _ in groups[:10]:
+        say(f"  {sentence}", sys.stderr)
+        if _failure_hint(sentence):
+            say(f"    likely cause: {_failure_hint(sentence)}", sys.stderr)
+    if len(groups) > 10:
+        say(f"  ... and {len(groups) - 10} more reason(s) (results.csv's message column)", sys.stderr)
+
+
+#: The most user-engine contradictions the sweep explains by `rbcheck check`'s catalog (each reruns the
+#: variant at the scenario's coarsest Δt and checks it: a few seconds each).
+MAX_LIKELY_CAUSES = 4
+
+
+def _say_likely_causes(summary, scenarios) -> None:
+    """The likely cause of each contradicting (scenario, variant) of a user engine (an engine file or an
+    entry point), as assert_engine gives it."""
+    from cross_checks.core.progress import say
+    from cross_checks.engines import all_variants
+    from cross_checks.gates.failures import likely_causes
+    builtin = {v.name for v in all_variants() if v.source.endswith("(rbcheck)")}
+    failed = {(r["scenario"], r["engine"])
+              for r in summary.get("convergence", []) if r["verdict"] == "failed"}
+    pairs = list(dict.fromkeys((r["scenario"], r["engine"]) for r in summary.get("convergence", [])
+                               if r.get("matches_expectation") is False and r["engine"] not in builtin
+                               and (r["scenario"], r["engine"]) not in failed))
+    by_name = {s.name: s for s in scenarios}
+    for (sc, v), cause in likely_causes(by_name, pairs[:MAX_LIKELY_CAUSES]).items():
+        say(f"  likely cause ({v} on {sc}): {cause}", sys.stderr)
+
+
+def _sweep_outcome(summary, out, n_scenarios, n_variants, elapsed_s, scenarios=None) -> int:
     """Print what the sweep did and every result that contradicts the expectations (then exit 1); the last
     line says whether every verdict was as expected."""
     from cross_checks.core.progress import say
@@ -791,13 +849,18 @@ def _sweep_outcome(summary, out, n_scenarios, n_variants, elapsed_s) -> int:
             say(f"  {r['engine']} on {r['scenario']}: {r['reason']}")
     fails = _gate_failures(summary)
     total, wrong = verdict_count(summary)
-    failed = run.get("failed_runs", 0)
-    if fails:
-        say(f"rbcheck sweep: {len(fails)} result(s) contradict the expectations:", sys.stderr)
-        for line in fails[:20]:
+    failed = run.get("failed_runs", 0) + lr.get("failed_runs", 0)
+    contra = [f for f in fails if not f.endswith("(status 'failed' in results.csv)")
+              and not f.endswith("(status 'failed' in long_runs.csv)")]
+    if contra:   # the count of the last line, of the report's badge and of the CI formats: verdicts
+        say(f"rbcheck sweep: {wrong} of {total} verdicts contradict the expectations:", sys.stderr)
+        for line in contra[:20]:
             say(f"  {line}", sys.stderr)
-        if len(fails) > 20:
-            say(f"  ... and {len(fails) - 20} more (see the findings in index.html)", sys.stderr)
+        if len(contra) > 20:
+            say(f"  ... and {len(contra) - 20} more (see the findings in index.html)", sys.stderr)
+        _say_likely_causes(summary, scenarios or [])
+    if failed:
+        _say_failed_runs(out, failed)
     if not wrong and not failed:
         say(f"rbcheck sweep: all {total} verdicts as expected")
     else:
