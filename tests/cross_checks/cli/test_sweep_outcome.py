@@ -45,9 +45,9 @@ def test_a_failed_engine_file_run_is_said_in_the_commands_words_once(tmp_path, c
                "--jobs", "1", "--out", str(tmp_path / "res")])
     err = capsys.readouterr().err
     assert rc == 1
-    reason = ("student:euler failed on 2 runs (tiny at Δt = 0.02, 0.01 s): the command exited with status 2 — "
-              "it said: python3: can't open file '<its working directory>/simm.py': [Errno 2] No such file or "
-              "directory")
+    reason = ("student:euler failed on 2 runs (tiny at Δt = 0.02, 0.01 s): the command exited with status "
+              "2 — it said: python3: can't open file '<its working directory>/simm.py': [Errno 2] No such "
+              "file or directory")
     assert err.count(reason) == 1, err
     assert "2 run(s) failed, for 1 distinct reason(s):" in err
     assert "likely cause: a file the command names is not where it runs" in err
