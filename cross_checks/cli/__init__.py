@@ -853,7 +853,7 @@ def _sweep_outcome(summary, out, n_scenarios, n_variants, elapsed_s, scenarios=N
     contra = [f for f in fails if not f.endswith("(status 'failed' in results.csv)")
               and not f.endswith("(status 'failed' in long_runs.csv)")]
     if contra:   # the count of the last line, of the report's badge and of the CI formats: verdicts
-        say(f"rbcheck sweep: {wrong} of {total} verdicts contradict the expectations:", sys.stderr)
+        say(f"rbcheck sweep: {wrong} of {total} verdicts not as expected:", sys.stderr)
         for line in contra[:20]:
             say(f"  {line}", sys.stderr)
         if len(contra) > 20:

@@ -298,6 +298,11 @@ REFINE_HALVINGS = 3
 #: the scenario's scale at its default Δt below 1e-6 (a tight scheme's reach on the catalog), below 1e-3
 #: (the size a plot starts to show), or above.
 REPORT_ACCURACY_TIERS = (1e-6, 1e-3)
+#: A long run's cell is green (display only, never a verdict) when it keeps what it declares AND its largest
+#: drift — the relative energy and |L| drifts and L's turn in rad — is below this: the size a plot starts to
+#: show (REPORT_ACCURACY_TIERS[1]). A variant that keeps what it declares but drifts more (a "momentum" step
+#: losing energy as expected) is amber: as declared, not conserving.
+REPORT_LONG_RUN_CONSERVES = 1e-3
 
 # --- long runs (cross_checks.analysis.long_run, judge.judge_long_run; docs/verdicts.md "Long runs") ---
 #: The end of a long run is the mean over its last 5 % (the run's final stretch, ~50 of 1000 periods: many
