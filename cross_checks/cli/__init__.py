@@ -190,6 +190,7 @@ def _add_sweep(sub) -> None:
     s.add_argument("--time-limit", type=_seconds_option, metavar="S",
                    help="wall-time limit of each run and of each reference solve, s; one over "
                         "it is a failed row (default: 900, cross_checks/core/tolerances.py)")
+    _add_ci_options(s)
     s.add_argument("--dask", metavar="ADDRESS",
                    help="run the jobs on a Dask cluster (scheduler address, e.g. "
                         "tcp://host:8786) through distributed's Client.get_executor(); needs "
@@ -270,6 +271,7 @@ def _add_compare(sub) -> None:
                       help="exit 1 on any change, improvements and changed schemes "
                            "included (a CI job that insists the committed baseline be "
                            "regenerated); without it a stale baseline is said in one line")
+    _add_ci_options(cmp_)
     cmp_.add_argument("--require", action="append", default=[], metavar="ENGINE",
                       help="an engine NEW_DIR must have run (repeatable): an optional "
                            "engine (e.g. drake) that was not installed there is then "
@@ -341,6 +343,35 @@ def _add_fuzz(sub) -> None:
     fz.add_argument("--out", required=True, metavar="DIR",
                     help="output directory, replaced atomically and only when absent, empty or rbcheck's own")
     _add_engine_file_option(fz)
+
+
+def _add_ci_options(p) -> None:
+    """``--junit FILE`` and ``--github-annotations`` of sweep and compare (docs/cli.md, "CI formats"); with
+    $GITHUB_STEP_SUMMARY set, both also append their markdown summary to it."""
+    p.add_argument("--junit", metavar="FILE.xml",
+                   help="also write JUnit XML: one test case per verdict (variant x scenario x quantity, the "
+                        "runs, each long run and agreement), a failure for each contradiction, failed run "
+                        "or regression with the verdict sentence as its message")
+    p.add_argument("--github-annotations", action="store_true",
+                   help="print GitHub workflow commands (::error title=...::sentence, ::warning ...) for "
+                        "every failure, so that they annotate the run")
+
+
+def _ci_outputs(command: str, junit_path, root, annotations: list, markdown) -> None:
+    """Write the JUnit file, print the annotations and append the markdown to $GITHUB_STEP_SUMMARY (a
+    summary that cannot be appended to is said on stderr; the command's result stands)."""
+    from cross_checks.core.progress import say
+    from cross_checks.gates.ci import STEP_SUMMARY_ENV, append_step_summary, write_junit
+    if junit_path:
+        write_junit(junit_path, root())
+    for line in annotations:
+        say(line)
+    if os.environ.get(STEP_SUMMARY_ENV):
+        try:
+            append_step_summary(markdown())
+        except OSError as exc:
+            say(f"rbcheck {command}: warning: ${STEP_SUMMARY_ENV} {os.environ[STEP_SUMMARY_ENV]}: cannot "
+                f"append the summary: {exc.strerror or exc}", sys.stderr)
 
 
 def _add_engine_file_option(p) -> None:
@@ -715,8 +746,13 @@ def cmd_sweep(args) -> int:
         check_output_dir(args.out)  # before any work (run_sweep checks again just before it starts)
     except ResultsDirError as exc:
         raise BadInput(str(exc)) from None
-    refuse_inputs_as_outputs([("--out", args.out, True)],
+    refuse_inputs_as_outputs([("--out", args.out, True), ("--junit", args.junit, False)],
                              _scenario_inputs(args.scenarios) + _engine_file_inputs(args))
+    if args.junit:
+        _check_out_path(args.junit, ".xml", "--junit")
+        if _is_within(_resolved(args.junit), _resolved(args.out)):
+            raise BadInput(f"--junit {args.junit}: lies inside --out {args.out}, which the sweep replaces "
+                           "as a whole; choose a path outside it")
     names = list(args.scenarios or catalog_names())
     if args.long or not (args.scenarios or args.no_long):   # the default sweep has the long runs
         names += [n for n in long_run_names() if n not in names]
@@ -734,8 +770,18 @@ def cmd_sweep(args) -> int:
                 else f"{args.out} left as it was")
         print(f"rbcheck sweep: {'terminated' if exc.terminated else 'interrupted'}; {what}", file=sys.stderr)
         return EXIT_TERMINATED if exc.terminated else EXIT_INTERRUPTED
-    return _sweep_outcome(summary, args.out, len(scenarios), len(variants), time.perf_counter() - t0,
+    code = _sweep_outcome(summary, args.out, len(scenarios), len(variants), time.perf_counter() - t0,
                           scenarios)
+    _sweep_ci_outputs(args, summary)
+    return code
+
+
+def _sweep_ci_outputs(args, summary) -> None:
+    from cross_checks.gates import ci
+    rows, long_rows = _result_rows(args.out, "results.csv"), _result_rows(args.out, "long_runs.csv")
+    _ci_outputs("sweep", args.junit, lambda: ci.sweep_junit(summary, rows, long_rows),
+                ci.sweep_annotations(summary, rows, long_rows) if args.github_annotations else [],
+                lambda: ci.sweep_markdown(summary, args.out, rows, long_rows))
 
 
 def _run_sweep(args, scenarios, variants, skipped) -> dict:
@@ -757,17 +803,20 @@ def verdict_count(summary) -> tuple:
     return count(summary)
 
 
-def _failed_rows(out) -> list:
-    """The failed rows of DIR/results.csv and DIR/long_runs.csv (as dicts; [] for a file it lacks)."""
+def _result_rows(out, name: str) -> list:
+    """The rows of DIR/NAME (results.csv, long_runs.csv) as dicts ([] for a file the sweep did not write)."""
     import csv
-    rows = []
-    for name in ("results.csv", "long_runs.csv"):
-        try:
-            with open(Path(out) / name, newline="", encoding="utf-8") as fh:
-                rows += [r for r in csv.DictReader(fh) if r.get("status") == "failed"]
-        except OSError:
-            continue
-    return rows
+    try:
+        with open(Path(out) / name, newline="", encoding="utf-8") as fh:
+            return list(csv.DictReader(fh))
+    except OSError:
+        return []
+
+
+def _failed_rows(out) -> list:
+    """The failed rows of DIR/results.csv and DIR/long_runs.csv (as dicts)."""
+    return [r for name in ("results.csv", "long_runs.csv") for r in _result_rows(out, name)
+            if r.get("status") == "failed"]
 
 
 #: What an engine-file command's words most often mean (docs/engines.md, "When a run fails").
@@ -902,22 +951,38 @@ def cmd_check(args) -> int:
 
 def cmd_compare(args) -> int:
     from cross_checks.core.files import atomic_write_text
-    from cross_checks.gates.compare import CompareInputError, compare_dirs, to_markdown, to_text
+    from cross_checks.gates.compare import (
+        CompareInputError,
+        compare_dirs,
+        read_results_dir,
+        to_markdown,
+        to_text,
+    )
 
-    refuse_inputs_as_outputs([("--markdown", args.markdown, False)],
+    refuse_inputs_as_outputs([("--markdown", args.markdown, False), ("--junit", args.junit, False)],
                              [("baseline directory", args.baseline, True),
                               ("results directory", args.new, True)])
     if args.markdown:
         _check_out_path(args.markdown, None, "--markdown")
+    if args.junit:
+        _check_out_path(args.junit, ".xml", "--junit")
     try:
         c = compare_dirs(args.baseline, args.new, require=args.require)
+        _, new_summary = read_results_dir(args.new)
     except CompareInputError as exc:
         raise BadInput(str(exc)) from None
     ran = _variants_ran(args.new)
     print(to_text(c, args.allow_missing, ran, args.fail_on_change))
+
+    def markdown():
+        return to_markdown(c, args.baseline, args.new, args.allow_missing, ran, args.fail_on_change)
     if args.markdown:
-        atomic_write_text(args.markdown, to_markdown(c, args.baseline, args.new, args.allow_missing, ran,
-                                                     args.fail_on_change) + "\n")
+        atomic_write_text(args.markdown, markdown() + "\n")
+    from cross_checks.gates import ci
+    _ci_outputs("compare", args.junit,
+                lambda: ci.compare_junit(c, new_summary, args.allow_missing, args.fail_on_change),
+                ci.compare_annotations(c, new_summary, args.allow_missing, args.fail_on_change)
+                if args.github_annotations else [], markdown)
     return c.exit_code(args.allow_missing, args.fail_on_change)
 
 
