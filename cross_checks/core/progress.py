@@ -183,9 +183,10 @@ class Progress:
         (steps) keeps a sweep's many short runs after its long ones from reading "~0 s left"; the start
         term keeps a slow first item (imports, a font cache) from being multiplied by every item left.
         Until there are more finishing times than terms: proportional to the work (or the count) done."""
-        work = bool(self.total_work) and self.work_done > 0
+        total_work = self.total_work or 0.0
+        work = total_work > 0 and self.work_done > 0
         rest_n = self.total - self.done
-        rest_w = max(self.total_work - self.work_done, 0.0) if work else 0.0
+        rest_w = max(total_work - self.work_done, 0.0) if work else 0.0
         pts = self._samples
         if len({p[1] for p in pts}) > 2 + work:
             import numpy as np
