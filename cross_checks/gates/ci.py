@@ -146,6 +146,9 @@ def _change_case(ch) -> str:
 
 
 def _change_sentence(ch, category: str) -> str:
+    if ch.kind == "contradiction":   # new: nothing to compare with; its own verdict sentence
+        qty = _label(ch.what.rsplit(" of ", 1)[-1])
+        return f"CONTRADICTION {ch.engine} on {ch.scenario}: {qty} {ch.note} (new in these results)"
     what = f"{ch.what}: {ch.old} -> {ch.new}".replace(": ->", ":").rstrip(" ->")
     head = {"contradiction": "CONTRADICTION", "missing": "MISSING"}.get(ch.kind, category.upper())
     return " ".join(f"{head} {ch.engine} on {ch.scenario}: {what} {ch.note}".split())

@@ -709,7 +709,7 @@ def to_text(c: Comparison, allow_missing=False, new_variants=(), fail_on_change=
              f"{_count(len(c.of('improvement')), 'improvement')}, "
              f"{len(c.of('new'))} new, {len(c.of('missing'))} missing"
              + (f"; {_count(len(c.of('contradiction')), 'new verdict')} contradicting "
-                "what its variant declares" if c.of("contradiction") else "")]
+                "what the variant declares" if c.of("contradiction") else "")]
     lines += summary_lines(c, new_variants, allow_missing, fail_on_change)[1:]
     if not_compared(c):
         lines.append(not_compared(c))
