@@ -18,7 +18,7 @@ import math
 
 from cross_checks.core import tolerances as tol
 from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES
-from cross_checks.sweep.assemble import verdict_count
+from cross_checks.sweep.assemble import normalise_message, verdict_count
 from reports.data import LABELS
 from reports.findings import fmt, fmt_dt, group_by
 
@@ -191,8 +191,9 @@ def verdict_box(res) -> dict:
     groups.append({"title": "Contradicts the expectations", "cls": "bad", "lines": lines})
 
     failed = [r for r in res.rows if r["status"] == "failed"]
+    # the command's words, without the run's name and private paths (the file it names is kept)
     lines = [f"{v}: {len(rs)} run(s) on {_scen_list(r['scenario'] for r in rs)} "
-             f"— {_first_sentence(rs[0]['message'])}"
+             f"— {_first_sentence(normalise_message(rs[0]['message']), 240)}"
              for v, rs in group_by(failed, lambda r: r["engine"]).items()]
     lines += [f"{s['name']}: the second reference ({s['second_reference'].get('label', '?')}) failed: "
               f"{_first_sentence(str(s['second_reference']['error']))}" for s in res.scenarios

@@ -6,25 +6,10 @@ contradiction from ``rbcheck check``'s catalog of mistakes.
 from __future__ import annotations
 
 import math
-import re
+
+from cross_checks.sweep.assemble import normalise_message
 
 __all__ = ["failed_run_sentences", "verdict_sentence", "likely_causes", "normalise_message", "runs_hit"]
-
-#: A run's private temporary directory as an engine-file command's words may name it (``rbcheck-NAME-XXXX``,
-#: created by cross_checks/engines/external.py for each run): replaced by what it stands for, so the same
-#: reason on every run reads as one.
-_PRIVATE = re.compile(r"(?:/[^\s'\"]*)?/rbcheck-[A-Za-z0-9_.-]+-[A-Za-z0-9_]+/(work|out|scenario\.json)")
-_PRIVATE_WORDS = {"work": "<its working directory>", "out": "<the directory of {out_csv}>",
-                  "scenario.json": "{scenario_json}"}
-
-
-def normalise_message(message) -> str:
-    """A failed run's message on one line, without what differs from run to run: its own name and Δt (said
-    once in the list of runs) and the private temporary paths of an engine-file command."""
-    text = " ".join(str(message or "no message").split())
-    text = re.sub(r"^(?:\w+Error: )?\S+ at Δt = [0-9.eE+-]+ s: ", "", text)
-    return _PRIVATE.sub(lambda m: _PRIVATE_WORDS[m.group(1)], text)
-
 
 def runs_hit(rows) -> str:
     """``2 runs (tennis_racket at Δt = 0.01, 0.005 s; projectile at Δt = 0.02 s)``: the runs one failure

@@ -8,6 +8,7 @@ import csv
 import io
 import json
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -29,7 +30,7 @@ from reference_sim.state import Q
 
 __all__ = ["result_rows", "results_csv_text", "convergence_records", "ladder_floors", "agreement_records",
            "scenario_record", "series_arrays", "build_summary", "write_json", "write_scenario_files",
-           "SCENARIO_FILES", "local_evidence", "verdict_count"]
+           "SCENARIO_FILES", "local_evidence", "verdict_count", "normalise_message"]
 
 
 # --- results.csv ------------------------------------------------------------------------------------
@@ -342,3 +343,19 @@ def verdict_count(summary) -> tuple:
     wrong = (sum(r["matches_expectation"] is False for r in conv) + sum(not a.get("agrees") for a in agree)
              + sum(r["agrees"] is False for r in refs) + sum(r["matches_expectation"] is False for r in long))
     return total, wrong
+
+
+#: A run's private temporary directory as an engine-file command's words may name it (``rbcheck-NAME-XXXX``,
+#: created by cross_checks/engines/external.py for each run): replaced by what it stands for, so the same
+#: reason on every run reads as one.
+_PRIVATE = re.compile(r"(?:/[^\s'\"]*)?/rbcheck-[A-Za-z0-9_.-]+-[A-Za-z0-9_]+/(work|out|scenario\.json)")
+_PRIVATE_WORDS = {"work": "<its working directory>", "out": "<the directory of {out_csv}>",
+                  "scenario.json": "{scenario_json}"}
+
+
+def normalise_message(message) -> str:
+    """A failed run's message on one line, without what differs from run to run: its own name and Δt (said
+    once in the list of runs) and the private temporary paths of an engine-file command."""
+    text = " ".join(str(message or "no message").split())
+    text = re.sub(r"^(?:\w+Error: )?\S+ at Δt = [0-9.eE+-]+ s: ", "", text)
+    return _PRIVATE.sub(lambda m: _PRIVATE_WORDS[m.group(1)], text)

@@ -33,3 +33,18 @@ def test_the_badges_count_verdicts_and_long_runs_as_the_terminal_does():
     assert counts["diverged run(s)"] == 12                                  # the long runs that diverged
     lines = [ln for g in box["groups"] for ln in g["lines"]]
     assert any(ln.startswith("planted:step on long_major (long run): |L| drifts") for ln in lines)
+
+
+def test_a_failed_run_of_an_engine_file_keeps_the_file_it_names():
+    """Issue 44, point 3: "At a glance" cut the command's words before the file name (the run's name and a
+    private temporary path came first)."""
+    message = ("student:euler at Δt = 0.01 s: the command exited with status 2 — it said: python3: can't "
+               "open file '/tmp/rbcheck-student-k2j4x9/work/simm.py': [Errno 2] No such file or directory")
+    rows = [{"scenario": "tennis_racket", "engine": "student:euler", "status": "failed", "message": message,
+             "dt": 0.01}]
+    res = SimpleNamespace(summary={"convergence": []}, scenarios=[{"name": "tennis_racket"}], rows=rows,
+                          records=lambda sc, v: [])
+    [line] = next(g["lines"] for g in verdict_box(res)["groups"] if g["title"] == "Failures")
+    assert line == ("student:euler: 1 run(s) on tennis_racket — the command exited with status 2 — it said: "
+                    "python3: can't open file '<its working directory>/simm.py': [Errno 2] No such file or "
+                    "directory")
