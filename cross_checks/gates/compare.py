@@ -75,8 +75,9 @@ class VariantChange:
     """What changed for one engine variant, judged as a whole (:func:`variant_changes`).
 
     category : "regression", "improvement", "scheme changed" (errors moved both ways within
-        COMPARE_SCHEME_CHANGE_MAX_RATIO), "changed" (information only) or "missing" (docs/results.md,
-        "Comparing two results directories").
+        COMPARE_SCHEME_CHANGE_MAX_RATIO), "changed" (information only), "missing", "new" (only in the new
+        results, every verdict as declared) or "contradiction" (new, and a verdict contradicts its
+        declaration) (docs/results.md, "Comparing two results directories").
     causes : the explaining facts first — verdicts and fitted orders, one-step orders, agreement with the
         same-scheme variant, energy-drift kind — one sentence each, at most a few.
     ratio_range : (lowest, highest) new/old over the metric changes; rows, scenarios : how many moved.
@@ -518,7 +519,7 @@ def variant_changes(c: Comparison) -> list:
         by.setdefault(ch.engine, []).append(ch)
     out = [_variant_change(v, chs) for v, chs in by.items()]
     rank = {"contradiction": 0, "regression": 1, "missing": 2, "scheme changed": 3, "improvement": 4,
-            "changed": 5}
+            "new": 5, "changed": 6}
     return sorted(out, key=lambda v: (rank[v.category], v.variant))
 
 
@@ -535,6 +536,11 @@ def _variant_change(variant: str, chs: list) -> VariantChange:
                   for ch in contradictions]
         return VariantChange(variant, "contradiction", causes, None, len(rows),
                              sorted({ch.scenario for ch in contradictions}))
+    if all(ch.kind == "new" for ch in chs):   # nothing to compare with, and none of its verdicts contradicts
+        scen = sorted({ch.scenario for ch in chs})
+        why = (f"new in these results on {len(scen)} scenario(s) ({_names(scen, 3)}): no verdict "
+               "contradicts what it declares")
+        return VariantChange(variant, "new", [why], None, 0, scen)
     if any(ch.kind == "missing" for ch in chs):
         category = "missing"
     elif "regression" in kinds:
@@ -753,7 +759,8 @@ def to_markdown(c: Comparison, baseline_dir, new_dir, allow_missing=False, new_v
           f"matching rows, **{_count(len(c.of('regression')), 'regression')}**, "
           f"{_count(len(c.of('improvement')), 'improvement')}, {len(c.of('new'))} new, "
           f"{len(c.of('missing'))} missing"
-          + (f", **{_count(len(c.of('contradiction')), 'new verdict')} contradicting its declaration**"
+          + (f", **{_count(len(c.of('contradiction')), 'new verdict')} contradicting what the variant "
+             "declares**"
              if c.of("contradiction") else "") + ".", ""]
     first = summary_lines(c, new_variants, allow_missing, fail_on_change)
     md += [f"**{_md_escape(first[0])}**", ""]
