@@ -617,6 +617,9 @@ def cmd_run(args) -> int:
                              _scenario_inputs([args.scenario]) + _engine_file_inputs(args))
     sc = load_scenario(args.scenario)
     dt, T = _step_and_duration(args, sc)
+    if args.engine.startswith("reference:"):   # a cold first run compiles for a minute: say so (stderr)
+        from cross_checks.sweep.run import warm_reference
+        warm_reference("rbcheck run", True, stream=sys.stderr)
     try:
         traj = run_variant(sc, args.engine, dt, T)
     except EngineUnavailable as exc:

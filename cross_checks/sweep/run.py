@@ -58,7 +58,7 @@ from cross_checks.sweep.results_dir import (
 )
 
 __all__ = ["RESULT_COLUMNS", "SweepError", "SweepInterrupted", "Job", "plan_jobs", "run_sweep", "cache_dir",
-           "MAX_SERIES_POINTS", "LOCAL_SAMPLES", "SCHEMA_VERSION"]
+           "MAX_SERIES_POINTS", "LOCAL_SAMPLES", "SCHEMA_VERSION", "warm_reference"]
 
 
 class SweepError(Exception):
@@ -184,7 +184,8 @@ def _load_before_forking(variants, show: bool = False) -> float:
     return 0.0
 
 
-def warm_reference(prefix: str, show: bool, notice_after_s: float = tol.COMPILE_NOTICE_AFTER_S) -> float:
+def warm_reference(prefix: str, show: bool, notice_after_s: float = tol.COMPILE_NOTICE_AFTER_S,
+                   stream=None) -> float:
     """Load (the first time on a machine: compile) the reference's numba kernels; returns the seconds it
     took when it compiled, else 0.
 
@@ -200,7 +201,8 @@ def warm_reference(prefix: str, show: bool, notice_after_s: float = tol.COMPILE_
     def notice():
         said.set()
         stage(prefix, f"compiling the reference's {len(compiled.VARIANT_CODES)} integrators with numba, once "
-                      f"per machine: {compiled.COMPILE_ESTIMATE_S}; cached for every later run", enabled=show)
+                      f"per machine: {compiled.COMPILE_ESTIMATE_S}; cached for every later run", enabled=show,
+              stream=stream)
     timer = threading.Timer(notice_after_s, notice)
     timer.daemon = True
     timer.start()
@@ -210,7 +212,7 @@ def warm_reference(prefix: str, show: bool, notice_after_s: float = tol.COMPILE_
         timer.cancel()
     took = time.perf_counter() - t0
     if said.is_set():
-        stage(prefix, f"compiled the reference's integrators in {took:.0f} s", enabled=show)
+        stage(prefix, f"compiled the reference's integrators in {took:.0f} s", enabled=show, stream=stream)
         return took
     return 0.0
 

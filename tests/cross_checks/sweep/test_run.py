@@ -331,3 +331,36 @@ def test_rk4_order_is_fitted_and_checked_wherever_its_errors_are_above_the_measu
         old = [M.roundoff_floor(s["scenarios"][0]["scales"][r["quantity"]], round(1.0 / dt), "ground_truth")
                for dt in r["dt_s"]]
         assert sum(e > f for e, f in zip(r["errors"], old)) < sum(r["fitted"]), (r["errors"], old)
+
+
+@pytest.mark.parametrize("command", ["run", "check"])
+def test_run_and_check_say_a_cold_compile_on_stderr(tmp_path, monkeypatch, capsys, command):
+    """`rbcheck run --engine reference:…` and `rbcheck check` compile the same kernels on a cold machine: a
+    line on stderr says so while it happens (stdout keeps the command's own output)."""
+    import threading
+
+    from cross_checks.sweep import run as run_mod
+    from reference_sim import compiled
+    said, real_warm, real_stage = threading.Event(), compiled.warm, run_mod.stage
+
+    def stage(prefix, message, **kw):
+        real_stage(prefix, message, **kw)
+        if message.startswith("compiling"):
+            said.set()
+
+    def cold_warm():
+        said.wait(120)
+        return real_warm()
+    csv = tmp_path / "t.csv"
+    if command == "check":
+        assert main(["run", "projectile", "--engine", "reference:rk4", "--out", str(csv)]) == 0
+        capsys.readouterr()
+    monkeypatch.setattr(run_mod, "stage", stage)
+    monkeypatch.setattr(compiled, "warm", cold_warm)
+    args = (["run", "projectile", "--engine", "reference:rk4", "--out", str(tmp_path / "r.csv")]
+            if command == "run" else ["check", str(csv), "--scenario", "projectile"])
+    assert main(args) == 0
+    out, err = capsys.readouterr()
+    assert said.is_set()
+    assert err.startswith(f"rbcheck {command}: compiling the reference's 16 integrators with numba")
+    assert "compiling" not in out
