@@ -163,7 +163,7 @@ def _first_sentence(text: str, limit: int = 120) -> str:
 
 
 def verdict_box(res) -> dict:
-    """``{"headline": [(count, label, cls)], "groups": [{"title", "cls", "lines": [text]}]}``: what
+    """``{"headline": [(count, label, cls)], "groups": [{"title", "cls", "lines": [text], "count"}]}``: what
     contradicts the expectations, what failed, what diverged, then what is expected not to converge and
     what is pre-asymptotic, each with a one-line reason."""
     recs = res.summary.get("convergence", [])
@@ -252,5 +252,7 @@ def verdict_box(res) -> dict:
                 (len({(r['engine'], r['scenario']) for r in noconv}),
                  "expected non-convergence(s)", "noconv"),
                 (len({(r['engine'], r['scenario']) for r in pre}), "pre-asymptotic", "pre")]
+    for g, (n, label, _) in zip(groups, headline):   # each group says the count of its badge
+        g["count"] = f"{n} {label}"
     return {"headline": headline, "groups": [g for g in groups if g["lines"]],
             "all_clear": not groups[0]["lines"] and not groups[1]["lines"]}

@@ -31,6 +31,8 @@ def test_the_badges_count_verdicts_and_long_runs_as_the_terminal_does():
     total, wrong = verdict_count(summary)
     assert wrong == 5 and counts["verdict(s) not as expected"] == wrong   # 4 verdicts (2 pairs) + 1 long run
     assert counts["diverged run(s)"] == 12                                  # the long runs that diverged
+    # each group of the box says its badge's count (not its number of lines: 2 pairs hold the 4 verdicts)
+    assert next(g for g in box["groups"] if g["cls"] == "bad")["count"] == "5 verdict(s) not as expected"
     lines = [ln for g in box["groups"] for ln in g["lines"]]
     assert any(ln.startswith("planted:step on long_major (long run): |L| drifts") for ln in lines)
 
