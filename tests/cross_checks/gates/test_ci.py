@@ -91,3 +91,21 @@ def test_sweep_junit_has_one_case_per_verdict_and_failures_with_the_sentences():
 def test_annotations_are_escaped_as_github_reads_them():
     assert annotation("error", "rbcheck: sweep", "50% worse\nsecond line") == \
         "::error title=rbcheck%3A sweep::50%25 worse%0Asecond line"
+
+
+def test_the_junit_failures_agree_with_the_exit_code(tmp_path):
+    """A JUnit reader and the exit code never disagree: failures exactly when compare exits 1."""
+    from cross_checks.gates.ci import compare_junit
+    from cross_checks.gates.compare import compare_dirs, read_results_dir
+    better = [dict(r) for r in ROWS]
+    better[1]["orient_err_final"] = 1e-3        # an improvement (exit 0; 1 with --fail-on-change)
+    worse = [dict(r) for r in ROWS]
+    worse[2]["status"] = "diverged"             # a regression
+    cases = {"same": ROWS, "better": better, "worse": worse, "missing": ROWS[:2]}
+    a = write(tmp_path / "a")
+    for name, rows in cases.items():
+        b = write(tmp_path / name, rows)
+        c = compare_dirs(a, b)
+        for allow, strict in ((False, False), (True, False), (False, True)):
+            root = compare_junit(c, read_results_dir(b)[1], allow, strict)
+            assert (int(root.get("failures")) > 0) == (c.exit_code(allow, strict) == 1), (name, allow, strict)
