@@ -15,9 +15,7 @@ A complete user test file (docs/engines.md)::
 from __future__ import annotations
 
 import contextlib
-import math
 import os
-import re
 import tempfile
 from pathlib import Path
 
@@ -113,22 +111,13 @@ def verdict_problems(summary: dict, rows: list) -> list:
     same words are one sentence naming every run they hit; then diverged runs; then every convergence verdict
     that contradicts its expectation (the declared order) — except of a (scenario, variant) whose runs failed
     (the failure is the cause, said once)."""
-    out = []
-    failed_pairs = set()
-    for status in ("failed", "diverged"):
-        groups: dict = {}
-        for r in rows:
-            if r["status"] == status:
-                message = " ".join(str(r.get("message") or "no message").split())
-                # the run's own name and Δt are said once in the list of runs: the engine's words group
-                message = re.sub(r"^(?:\w+Error: )?\S+ at Δt = [0-9.eE+-]+ s: ", "", message)
-                groups.setdefault((r["engine"], message), []).append(r)
-                failed_pairs.add((r["scenario"], r["engine"]))
-        for (engine, message), hit in groups.items():
-            out.append(f"{engine} {status} on {_runs_hit(hit)}: {message}")
+    from cross_checks.gates.failures import failed_run_sentences, verdict_sentence
+    groups = failed_run_sentences(rows)
+    out = [sentence for _, _, sentence, _ in groups]
+    failed_pairs = {(r["scenario"], r["engine"]) for *_, hit in groups for r in hit}
     for rec in summary.get("convergence", []):
         if rec.get("matches_expectation") is False and (rec["scenario"], rec["engine"]) not in failed_pairs:
-            out.append(_verdict_sentence(rec))
+            out.append(verdict_sentence(rec))
     # a pair the engine cannot express was not run: nothing about it was checked, so it cannot pass (a sweep
     # over many engines lists these pairs and goes on; an assertion about one engine may not)
     for r in summary.get("not_expressible") or []:
@@ -137,52 +126,10 @@ def verdict_problems(summary: dict, rows: list) -> list:
     return out
 
 
-def _runs_hit(rows) -> str:
-    """``tennis_racket at Δt = 0.01, 0.005 s; projectile at Δt = 0.02 s`` (the runs one failure hit)."""
-    by = {}
-    for r in rows:
-        by.setdefault(r["scenario"], []).append(f"{float(r['dt']):g}")
-    n = len(rows)
-    return (f"{n} run{'s' if n > 1 else ''} ("
-            + "; ".join(f"{sc} at Δt = {', '.join(d)} s" for sc, d in by.items())
-            + ")")
-
-
-def _verdict_sentence(rec: dict) -> str:
-    pts = [(d, e) for d, e in zip(rec["dt_s"], rec["errors"]) if e is not None and math.isfinite(e)]
-    what = f"{rec['engine']} on {rec['scenario']}: {rec['quantity'].replace('_', ' ')} {rec['assessment']}"
-    if pts:
-        errs = ", ".join(f"{e:.3g}" for _, e in pts)
-        dts = ", ".join(f"{d:g}" for d, _ in pts)
-        text = f"{what} — final errors {errs} {rec.get('unit', '')}".rstrip() + f" at Δt = {dts} s"
-    else:
-        text = f"{what} — no run of the ladder gave a final error"
-    if rec.get("expected_verdict") == "does_not_converge" and rec.get("reason"):
-        text += f"; expected not to converge: {rec['reason']}"
-    if rec.get("note"):
-        text += f" ({rec['note']})"
-    return text
-
-
 def likely_causes(scenarios: dict, problems_of) -> dict:
-    """``{(scenario name, variant): likely cause}`` for the failing verdicts (``scenarios``:
-    name -> Scenario), from the same catalog of mistakes ``rbcheck check`` uses: the variant's
-    run at the scenario's coarsest ladder Δt, checked step for step (a cause is said only
-    where one explains every step)."""
-    from cross_checks.engines import run_variant
-    from cross_checks.gates.check import check_trajectory
-    out = {}
-    for sc_name, variant in problems_of:
-        try:
-            sc = scenarios[sc_name]
-            traj = run_variant(sc, variant, max(sc.dt_ladder_s))
-            res = check_trajectory(traj, sc, f"{variant} on {sc_name}")
-        except Exception:  # noqa: BLE001
-            # a cause is a courtesy: an engine that cannot run again has its failure said
-            continue
-        if res.likely_causes and not res.likely_causes[0].startswith("no catalogued mistake"):
-            out[(sc_name, variant)] = res.likely_causes[0]
-    return out
+    """:func:`cross_checks.gates.failures.likely_causes` (kept here: part of this module's API)."""
+    from cross_checks.gates.failures import likely_causes as causes
+    return causes(scenarios, problems_of)
 
 
 def as_list(x) -> list:

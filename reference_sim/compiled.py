@@ -21,7 +21,8 @@ import numpy as np
 from reference_sim.forces import Members
 from reference_sim.integrators import BULLET_MAX_GYROSCOPIC_TORQUE, IMPLICIT_TOL, MAX_ITER
 
-__all__ = ["VARIANT_CODES", "kernel", "parameters", "advance", "lane_members", "warm", "ForceEvaluator"]
+__all__ = ["VARIANT_CODES", "COMPILE_ESTIMATE_S", "kernel", "parameters", "advance", "lane_members", "warm",
+           "ForceEvaluator"]
 
 #: The variants the compiled loop knows, by code (the ``code`` argument of the kernel).
 VARIANT_CODES = {"course": 0, "course_gyro": 1, "expmap_gyro": 2, "explicit_euler": 3, "midpoint": 4,
@@ -29,6 +30,11 @@ VARIANT_CODES = {"course": 0, "course_gyro": 1, "expmap_gyro": 2, "explicit_eule
                  "implicit_gyro_body": 8, "implicit_gyro_world": 9, "explicit_gyro_clamped": 10,
                  "jolt_gyro": 11, "buss_augmented": 12, "dlm_splitting": 13, "lp_midpoint": 14,
                  "moser_veselov": 15}
+
+#: How long compiling the kernels takes the first time on a machine (numba, ``cache=True``), as the sweep
+#: says it: measured 53-75 s on 2 cores (a cold `rbcheck sweep tennis_racket --engines reference:course_gyro`:
+#: 53 s; a first `rbcheck run tennis_racket --engine reference:rk4`: 70 s; issue 44: 55-75 s).
+COMPILE_ESTIMATE_S = "about a minute (53-75 s measured on 2 cores)"
 
 _KERNELS: list = []
 

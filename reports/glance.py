@@ -18,6 +18,7 @@ import math
 
 from cross_checks.core import tolerances as tol
 from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES
+from cross_checks.sweep.assemble import normalise_message, verdict_count
 from reports.data import LABELS
 from reports.findings import fmt, fmt_dt, group_by
 
@@ -162,7 +163,7 @@ def _first_sentence(text: str, limit: int = 120) -> str:
 
 
 def verdict_box(res) -> dict:
-    """``{"headline": [(count, label, cls)], "groups": [{"title", "cls", "lines": [text]}]}``: what
+    """``{"headline": [(count, label, cls)], "groups": [{"title", "cls", "lines": [text], "count"}]}``: what
     contradicts the expectations, what failed, what diverged, then what is expected not to converge and
     what is pre-asymptotic, each with a one-line reason."""
     recs = res.summary.get("convergence", [])
@@ -184,18 +185,27 @@ def verdict_box(res) -> dict:
             sr = s["second_reference"]
             lines.append(f"{s['name']}: the second reference ({sr.get('label', '?')}) "
                          "disagrees with the reference beyond their stated accuracy")
+    long_recs = res.summary.get("long_runs") or []
+    lines += [f"{r['engine']} on {r['scenario']} (long run): {r.get('assessment', 'not as expected')}"
+              for r in long_recs if r.get("matches_expectation") is False]
     groups.append({"title": "Contradicts the expectations", "cls": "bad", "lines": lines})
 
     failed = [r for r in res.rows if r["status"] == "failed"]
+    # the command's words, without the run's name and private paths (the file it names is kept)
     lines = [f"{v}: {len(rs)} run(s) on {_scen_list(r['scenario'] for r in rs)} "
-             f"— {_first_sentence(rs[0]['message'])}"
+             f"— {_first_sentence(normalise_message(rs[0]['message']), 240)}"
              for v, rs in group_by(failed, lambda r: r["engine"]).items()]
     lines += [f"{s['name']}: the second reference ({s['second_reference'].get('label', '?')}) failed: "
               f"{_first_sentence(str(s['second_reference']['error']))}" for s in res.scenarios
               if isinstance(s.get("second_reference"), dict) and s["second_reference"].get("error")]
+    long_failed = [r for r in long_recs if r.get("status") == "failed"]
+    lines += [f"{v}: {len(rs)} long run(s) on {_scen_list(r['scenario'] for r in rs)} "
+              f"— {_first_sentence(str(rs[0].get('message') or 'failed'))}"
+              for v, rs in group_by(long_failed, lambda r: r["engine"]).items()]
     groups.append({"title": "Failures", "cls": "bad", "lines": lines})
 
     div = [r for r in res.rows if r["status"] == "diverged"]
+    long_div = [r for r in long_recs if r.get("status") == "diverged"]
     lines = []
     for v, rs in group_by(div, lambda r: r["engine"]).items():
         scs = list(dict.fromkeys(r["scenario"] for r in rs))
@@ -203,7 +213,11 @@ def verdict_box(res) -> dict:
         per = [f"{sc} (Δt ≥ {fmt_dt(min(r['dt'] for r in rs if r['scenario'] == sc))} s)" for sc in scs]
         lines.append(f"{v}: {len(rs)} run(s) — " + _scen_list(per, 5)
                      + ("" if unexpected else "; every verdict of these scenarios is still as expected"))
-    groups.append({"title": "Diverged runs (left out of the order fits)", "cls": "diverged", "lines": lines})
+    for v, rs in group_by(long_div, lambda r: r["engine"]).items():
+        lines.append(f"{v}: {len(rs)} long run(s) — " + _scen_list(
+            [f"{r['scenario']} (at t = {fmt(r.get('diverged_at_s'), '', 3)} s)" for r in rs], 5))
+    groups.append({"title": "Diverged runs (left out of the order fits; long runs judged as diverged)",
+                   "cls": "diverged", "lines": lines})
 
     noconv = [r for r in recs if r["expected_verdict"] == "does_not_converge" and r["matches_expectation"]]
     lines = []
@@ -229,10 +243,16 @@ def verdict_box(res) -> dict:
     groups.append({"title": "Pre-asymptotic on this ladder: no order claimed (why)",
                    "cls": "pre", "lines": lines})
 
-    headline = [(len(groups[0]["lines"]), "contradiction(s)", "bad"),
-                (len(groups[1]["lines"]), "failure(s)", "bad"), (len(div), "diverged run(s)", "diverged"),
+    # counted as the terminal counts them: verdicts not as expected (cross_checks.sweep.assemble), runs failed
+    # and runs diverged, the long runs' included
+    _, wrong = verdict_count(res.summary)
+    n_failed = sum(r["status"] == "failed" for r in res.rows) + len(long_failed)
+    headline = [(wrong, "verdict(s) not as expected", "bad"),
+                (n_failed, "failed run(s)", "bad"), (len(div) + len(long_div), "diverged run(s)", "diverged"),
                 (len({(r['engine'], r['scenario']) for r in noconv}),
                  "expected non-convergence(s)", "noconv"),
                 (len({(r['engine'], r['scenario']) for r in pre}), "pre-asymptotic", "pre")]
+    for g, (n, label, _) in zip(groups, headline):   # each group says the count of its badge
+        g["count"] = f"{n} {label}"
     return {"headline": headline, "groups": [g for g in groups if g["lines"]],
             "all_clear": not groups[0]["lines"] and not groups[1]["lines"]}

@@ -13,6 +13,7 @@ from jinja2 import Environment, PackageLoader, StrictUndefined, TemplateNotFound
 from markupsafe import Markup, escape
 
 from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, UNITS
+from cross_checks.core.tolerances import REPORT_LONG_RUN_CONSERVES
 from reports.data import LABELS
 from reports.findings import findings, fmt, fmt_dt
 from reports.glance import ACCURACY_TIERS, GLYPHS, cell, families, glyph, order_text, verdict_box
@@ -390,7 +391,13 @@ def _g(x, digits: int = 2) -> str:
 def _integrators_view(res, rk, drawn, self_contained) -> dict:
     """The integrators page (reports.integrators): the work-precision and the long-run standings, every
     finding in a sentence, the figures drawn."""
-    from reports.integrators import FIGURES, VERDICT_WORDS, integrators_view
+    from reports.integrators import (
+        FIGURES,
+        VERDICT_WORDS,
+        conservation_score,
+        integrators_view,
+        long_cell_class,
+    )
     iv = integrators_view(res, rk)
     figs = {FIGURES[f]: _img_src(res, f, self_contained) for f in drawn if f in FIGURES}
     orders = {x["name"]: x.get("declared_order") for x in res.summary.get("variants", [])}
@@ -415,9 +422,10 @@ def _integrators_view(res, rk, drawn, self_contained) -> dict:
             mark = ("✗ " if r.get("matches_expectation") is False else
                     "✓ " if r.get("matches_expectation") is True else "")
             words = VERDICT_WORDS.get(r.get("verdict"), str(r.get("verdict")))
-            cells.append({"text": mark + words, "sub": sub,
-                          "cls": "bad" if r.get("matches_expectation") is False else
-                          "acc1" if r.get("matches_expectation") is True else ""})
+            cls = long_cell_class(r)   # green: keeps what it declares AND conserves; amber: drifts
+            if cls == "noconv" and mark:
+                words = f"as declared, but drifts (largest {_g(conservation_score(r))}): {words}"
+            cells.append({"text": mark + words, "sub": sub, "cls": cls})
         long_rows.append({"rank": s.rank, "variant": s.variant, "score": _g(s.score), "cells": cells,
                           "score_sort": (_num(s.score) if s.score is not None and math.isfinite(s.score)
                                          else "1e300"),
@@ -428,7 +436,8 @@ def _integrators_view(res, rk, drawn, self_contained) -> dict:
     scen = res.summary.get("long_run_scenarios") or []
     return {"work": work, "unranked": unranked, "long_runs": iv.long_runs, "long": long_rows,
             "sentences": [iv.sentences[v] for v in iv.variants], "findings": findings, "figs": figs,
-            "n_variants": len(iv.variants), "long_scenarios": scen, "delta_meaning": GLOSSARY["δ"]}
+            "n_variants": len(iv.variants), "long_scenarios": scen, "delta_meaning": GLOSSARY["δ"],
+            "conserves": f"{REPORT_LONG_RUN_CONSERVES:g}"}
 
 
 def _which_view(rk, answer) -> dict:

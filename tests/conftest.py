@@ -11,6 +11,13 @@ matplotlib.use("Agg")
 os.environ.setdefault("MPLBACKEND", "Agg")
 
 
+@pytest.fixture(autouse=True)
+def _no_job_summary(monkeypatch):
+    """No test appends to the job summary of the CI run that runs the tests ($GITHUB_STEP_SUMMARY: sweep and
+    compare append to it); a test of that sets its own file."""
+    monkeypatch.delenv("GITHUB_STEP_SUMMARY", raising=False)
+
+
 @pytest.fixture
 def isolated_cache(tmp_path, monkeypatch):
     """A private, empty rbcheck cache for this test (RBCHECK_CACHE_DIR = tmp_path/cache, restored after):

@@ -24,11 +24,11 @@ def test_workflow_parses_and_uses_the_readme_commands():
     assert test_cmd in _runs(wf["jobs"]["tests"])
     steps = wf["jobs"]["crosscheck"]["steps"]
     runs = _runs(wf["jobs"]["crosscheck"])
-    # on a fresh runner: the README's main command as a newcomer runs it
-    assert runs[0] == "" and main_cmd in runs
+    # on a fresh runner: the README's main command as a newcomer runs it (and the CI formats after it)
+    assert runs[0] == "" and any(r == main_cmd or r.startswith(main_cmd + " --junit ") for r in runs)
     out = re.search(r"rbcheck sweep .*--out (\S+)", main_cmd)[1]
     # the main command's results are compared as they are (Drake absent: one line, exit 0) ...
-    assert f".venv/bin/rbcheck compare baselines/default {out}" in runs
+    assert any(r.startswith(f".venv/bin/rbcheck compare baselines/default {out} ") for r in runs)
     # ... and the baseline's optional engines' rows are gated by a sweep with them, compared with --require
     full = [r for r in runs if 'pip install -q -e ".[drake,engines]"' in r and "rbcheck sweep" in r]
     assert full, "no sweep with Drake"
@@ -42,9 +42,17 @@ def test_workflow_parses_and_uses_the_readme_commands():
     for engine in optional:   # every optional engine of the baseline is installed by the sweep and required
         assert f"--require {engine}" in compare[0], engine
     assert "--markdown" in compare[0]
-    assert any("GITHUB_STEP_SUMMARY" in r for r in runs)
+    # the CI formats (issue 44): every sweep and compare writes JUnit XML and annotates the run; each appends
+    # its own markdown to the job summary ($GITHUB_STEP_SUMMARY), so no step copies it there by hand
+    gates = [r for r in runs if "rbcheck sweep" in r or "rbcheck compare" in r]
+    junit = [re.search(r"--junit (\S+)", r) for r in gates]
+    assert len(gates) == 4 and all(junit) and all("--github-annotations" in r for r in gates)
+    assert len({m[1] for m in junit}) == 4
+    assert not any("GITHUB_STEP_SUMMARY" in r for r in runs)
     # the full results (report and summary.json) and their compact baseline are uploaded as artifacts
     uploaded = [s["with"]["path"] for s in steps if s.get("uses", "").startswith("actions/upload-artifact")]
+    import fnmatch
+    assert all(any(fnmatch.fnmatch(m[1], p) for p in uploaded) for m in junit), "a JUnit file not uploaded"
     baseline = [r.split() for r in runs if "rbcheck baseline" in r]
     assert full_out in uploaded and baseline and baseline[0][-2] == full_out and baseline[0][-1] in uploaded
 

@@ -158,3 +158,15 @@ def test_a_missing_template_is_named_as_an_incomplete_installation(installed, tm
     assert (proc.stderr.count("\n") == 1
             and "sort.js: missing from this installation of rbcheck" in proc.stderr)
     assert "installation is incomplete" in proc.stderr and not (tmp_path / "sw").exists()
+
+
+def test_the_plugin_has_an_extra_that_brings_pytest_and_the_readme_names_it():
+    """Issue 44, point 5: after `pip install -e .` a user's pytest file got "fixture 'assert_engine' not
+    found" (pytest was not in rbcheck's environment). `.[pytest]` brings the pytest the tests run with."""
+    import tomllib
+    extras = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"]
+    [pin] = extras["pytest"]
+    assert pin.startswith("pytest>=") and pin in extras["test"]
+    readme = (ROOT / "README.md").read_text()
+    plugin = " ".join(readme[readme.index("In your own pytest suite"):][:600].split())
+    assert 'pip install -e ".[pytest]"' in plugin and "fixture 'assert_engine' not found" in plugin

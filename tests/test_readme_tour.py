@@ -99,3 +99,22 @@ def test_the_tour_has_no_line_that_needs_what_a_fresh_clone_lacks():
         if "--out" in args:
             written.add(args[args.index("--out") + 1])
             assert args[args.index("--out") + 1].startswith("tour/"), f"the tour writes into tour/: {ln}"
+
+
+def test_every_output_the_readme_writes_is_git_ignored():
+    """Issue 44, point 10: the C example wrote `results/` at the repository's root, which git did not ignore.
+    Every `--out` / `--markdown` / `--json` / `--plot` path and `rbcheck baseline`'s OUT_DIR in the README's
+    and the examples' commands is ignored by git (a user's `git status` stays clean)."""
+    import re
+    import subprocess
+    texts = [(ROOT / "README.md").read_text(), (ROOT / "examples" / "c_engine" / "README.md").read_text()]
+    paths = set()
+    for text in texts:
+        for block in re.findall(r"```bash\n(.*?)```", text, flags=re.S):
+            block = block.replace("\\\n", " ")
+            paths |= set(re.findall(r"--(?:out|markdown|json|plot) ([^-\s]\S*)", block))
+            paths |= {m.split()[-1] for m in re.findall(r"rbcheck baseline \S+ \S+", block)}
+    assert "tour/cbody/" in paths and len(paths) > 5, paths
+    for p in sorted(paths):
+        ignored = subprocess.run(["git", "check-ignore", "-q", "--no-index", p.rstrip("/") + "/x"], cwd=ROOT)
+        assert ignored.returncode == 0, f"{p} is not ignored by git"

@@ -190,6 +190,7 @@ def _add_sweep(sub) -> None:
     s.add_argument("--time-limit", type=_seconds_option, metavar="S",
                    help="wall-time limit of each run and of each reference solve, s; one over "
                         "it is a failed row (default: 900, cross_checks/core/tolerances.py)")
+    _add_ci_options(s)
     s.add_argument("--dask", metavar="ADDRESS",
                    help="run the jobs on a Dask cluster (scheduler address, e.g. "
                         "tcp://host:8786) through distributed's Client.get_executor(); needs "
@@ -270,6 +271,7 @@ def _add_compare(sub) -> None:
                       help="exit 1 on any change, improvements and changed schemes "
                            "included (a CI job that insists the committed baseline be "
                            "regenerated); without it a stale baseline is said in one line")
+    _add_ci_options(cmp_)
     cmp_.add_argument("--require", action="append", default=[], metavar="ENGINE",
                       help="an engine NEW_DIR must have run (repeatable): an optional "
                            "engine (e.g. drake) that was not installed there is then "
@@ -341,6 +343,35 @@ def _add_fuzz(sub) -> None:
     fz.add_argument("--out", required=True, metavar="DIR",
                     help="output directory, replaced atomically and only when absent, empty or rbcheck's own")
     _add_engine_file_option(fz)
+
+
+def _add_ci_options(p) -> None:
+    """``--junit FILE`` and ``--github-annotations`` of sweep and compare (docs/cli.md, "CI formats"); with
+    $GITHUB_STEP_SUMMARY set, both also append their markdown summary to it."""
+    p.add_argument("--junit", metavar="FILE.xml",
+                   help="also write JUnit XML: one test case per verdict (variant x scenario x quantity, the "
+                        "runs, each long run and agreement), a failure for each contradiction, failed run "
+                        "or regression with the verdict sentence as its message")
+    p.add_argument("--github-annotations", action="store_true",
+                   help="print GitHub workflow commands (::error title=...::sentence, ::warning ...) for "
+                        "every failure, so that they annotate the run")
+
+
+def _ci_outputs(command: str, junit_path, root, annotations: list, markdown) -> None:
+    """Write the JUnit file, print the annotations and append the markdown to $GITHUB_STEP_SUMMARY (a
+    summary that cannot be appended to is said on stderr; the command's result stands)."""
+    from cross_checks.core.progress import say
+    from cross_checks.gates.ci import STEP_SUMMARY_ENV, append_step_summary, write_junit
+    if junit_path:
+        write_junit(junit_path, root())
+    for line in annotations:
+        say(line)
+    if os.environ.get(STEP_SUMMARY_ENV):
+        try:
+            append_step_summary(markdown())
+        except OSError as exc:
+            say(f"rbcheck {command}: warning: ${STEP_SUMMARY_ENV} {os.environ[STEP_SUMMARY_ENV]}: cannot "
+                f"append the summary: {exc.strerror or exc}", sys.stderr)
 
 
 def _add_engine_file_option(p) -> None:
@@ -586,6 +617,9 @@ def cmd_run(args) -> int:
                              _scenario_inputs([args.scenario]) + _engine_file_inputs(args))
     sc = load_scenario(args.scenario)
     dt, T = _step_and_duration(args, sc)
+    if args.engine.startswith("reference:"):   # a cold first run compiles for a minute: say so (stderr)
+        from cross_checks.sweep.run import warm_reference
+        warm_reference("rbcheck run", True, stream=sys.stderr)
     try:
         traj = run_variant(sc, args.engine, dt, T)
     except EngineUnavailable as exc:
@@ -658,7 +692,8 @@ def _gate_failures(summary) -> list:
     out = []
     for r in summary.get("convergence", []):
         if r.get("matches_expectation") is False:
-            out.append(f"{r['engine']} on {r['scenario']}: {r['quantity']} {r['assessment']}")
+            out.append(f"{r['engine']} on {r['scenario']}: "
+                       f"{r['quantity'].replace('_', ' ')} {r['assessment']}")
     for a in summary.get("agreement", []):
         if not a.get("agrees"):
             out.append(f"{a['a']} and {a['b']} differ on {a['scenario']} (should be the same scheme)")
@@ -714,8 +749,13 @@ def cmd_sweep(args) -> int:
         check_output_dir(args.out)  # before any work (run_sweep checks again just before it starts)
     except ResultsDirError as exc:
         raise BadInput(str(exc)) from None
-    refuse_inputs_as_outputs([("--out", args.out, True)],
+    refuse_inputs_as_outputs([("--out", args.out, True), ("--junit", args.junit, False)],
                              _scenario_inputs(args.scenarios) + _engine_file_inputs(args))
+    if args.junit:
+        _check_out_path(args.junit, ".xml", "--junit")
+        if _is_within(_resolved(args.junit), _resolved(args.out)):
+            raise BadInput(f"--junit {args.junit}: lies inside --out {args.out}, which the sweep replaces "
+                           "as a whole; choose a path outside it")
     names = list(args.scenarios or catalog_names())
     if args.long or not (args.scenarios or args.no_long):   # the default sweep has the long runs
         names += [n for n in long_run_names() if n not in names]
@@ -733,7 +773,18 @@ def cmd_sweep(args) -> int:
                 else f"{args.out} left as it was")
         print(f"rbcheck sweep: {'terminated' if exc.terminated else 'interrupted'}; {what}", file=sys.stderr)
         return EXIT_TERMINATED if exc.terminated else EXIT_INTERRUPTED
-    return _sweep_outcome(summary, args.out, len(scenarios), len(variants), time.perf_counter() - t0)
+    code = _sweep_outcome(summary, args.out, len(scenarios), len(variants), time.perf_counter() - t0,
+                          scenarios)
+    _sweep_ci_outputs(args, summary)
+    return code
+
+
+def _sweep_ci_outputs(args, summary) -> None:
+    from cross_checks.gates import ci
+    rows, long_rows = _result_rows(args.out, "results.csv"), _result_rows(args.out, "long_runs.csv")
+    _ci_outputs("sweep", args.junit, lambda: ci.sweep_junit(summary, rows, long_rows),
+                ci.sweep_annotations(summary, rows, long_rows) if args.github_annotations else [],
+                lambda: ci.sweep_markdown(summary, args.out, rows, long_rows))
 
 
 def _run_sweep(args, scenarios, variants, skipped) -> dict:
@@ -750,21 +801,80 @@ def _run_sweep(args, scenarios, variants, skipped) -> dict:
 
 
 def verdict_count(summary) -> tuple:
-    """``(verdicts, not as expected)``: every convergence verdict, same-scheme agreement and agreement of a
-    scenario's two references the sweep judged, and how many of them contradict what is expected."""
-    conv = [r for r in summary.get("convergence", []) if r.get("matches_expectation") is not None]
-    agree = summary.get("agreement", [])
-    refs = [sc["second_reference"]
-            for sc in summary.get("scenarios", []) if (sc.get("second_reference") or {})
-            .get("agrees") is not None]
-    long = [r for r in summary.get("long_runs", []) if r.get("matches_expectation") is not None]
-    total = len(conv) + len(agree) + len(refs) + len(long)
-    wrong = (sum(r["matches_expectation"] is False for r in conv) + sum(not a.get("agrees") for a in agree)
-             + sum(r["agrees"] is False for r in refs) + sum(r["matches_expectation"] is False for r in long))
-    return total, wrong
+    """``(verdicts, not as expected)``: :func:`cross_checks.sweep.assemble.verdict_count`."""
+    from cross_checks.sweep.assemble import verdict_count as count
+    return count(summary)
 
 
-def _sweep_outcome(summary, out, n_scenarios, n_variants, elapsed_s) -> int:
+def _result_rows(out, name: str) -> list:
+    """The rows of DIR/NAME (results.csv, long_runs.csv) as dicts ([] for a file the sweep did not write)."""
+    import csv
+    try:
+        with open(Path(out) / name, newline="", encoding="utf-8") as fh:
+            return list(csv.DictReader(fh))
+    except OSError:
+        return []
+
+
+def _failed_rows(out) -> list:
+    """The failed rows of DIR/results.csv and DIR/long_runs.csv (as dicts)."""
+    return [r for name in ("results.csv", "long_runs.csv") for r in _result_rows(out, name)
+            if r.get("status") == "failed"]
+
+
+#: What an engine-file command's words most often mean (docs/engines.md, "When a run fails").
+_FAILURE_HINTS = (
+    (("can't open file", "No such file or directory", "cannot find", "not found"),
+     "a file the command names is not where it runs: each run has a private working directory, so name your "
+     "files relative to the engine file (found in its folder) or through {engine_dir}"),
+    (("ModuleNotFoundError", "ImportError"),
+     "a module the command imports is not installed for the interpreter the command runs"),
+    (("Permission denied",), "the program or a file it needs is not executable or readable"),
+)
+
+
+def _failure_hint(sentence: str) -> str:
+    return next((hint for needles, hint in _FAILURE_HINTS if any(n in sentence for n in needles)), "")
+
+
+def _say_failed_runs(out, n_failed: int) -> None:
+    """Every distinct reason the failed runs give, in the command's own words (as `run` and assert_engine
+    print them), with what it most likely means."""
+    from cross_checks.core.progress import say
+    from cross_checks.gates.failures import failed_run_sentences
+    groups = failed_run_sentences(_failed_rows(out), statuses=("failed",))
+    say(f"rbcheck sweep: {n_failed} run(s) failed, for {len(groups)} distinct reason(s):", sys.stderr)
+    for _, _, sentence, _ in groups[:10]:
+        say(f"  {sentence}", sys.stderr)
+        if _failure_hint(sentence):
+            say(f"    likely cause: {_failure_hint(sentence)}", sys.stderr)
+    if len(groups) > 10:
+        say(f"  ... and {len(groups) - 10} more reason(s) (results.csv's message column)", sys.stderr)
+
+
+#: The most user-engine contradictions the sweep explains by `rbcheck check`'s catalog (each reruns the
+#: variant at the scenario's coarsest Δt and checks it: a few seconds each).
+MAX_LIKELY_CAUSES = 4
+
+
+def _say_likely_causes(summary, scenarios) -> None:
+    """The likely cause of each contradicting (scenario, variant) of a user engine (an engine file or an
+    entry point), as assert_engine gives it."""
+    from cross_checks.core.progress import say
+    from cross_checks.engines import all_variants
+    from cross_checks.gates.failures import likely_causes
+    builtin = {v.name for v in all_variants() if v.source.endswith("(rbcheck)")}
+    failed = {(r["scenario"], r["engine"])
+              for r in summary.get("convergence", []) if r["verdict"] == "failed"}
+    pairs = list(dict.fromkeys((r["scenario"], r["engine"]) for r in summary.get("convergence", [])
+                               if r.get("matches_expectation") is False and r["engine"] not in builtin
+                               and (r["scenario"], r["engine"]) not in failed))
+    by_name = {s.name: s for s in scenarios}
+    for (sc, v), cause in likely_causes(by_name, pairs[:MAX_LIKELY_CAUSES]).items():
+        say(f"  likely cause ({v} on {sc}): {cause}", sys.stderr)
+
+
+def _sweep_outcome(summary, out, n_scenarios, n_variants, elapsed_s, scenarios=None) -> int:
     """Print what the sweep did and every result that contradicts the expectations (then exit 1); the last
     line says whether every verdict was as expected."""
     from cross_checks.core.progress import say
@@ -772,9 +882,11 @@ def _sweep_outcome(summary, out, n_scenarios, n_variants, elapsed_s) -> int:
     lr = run.get("long_runs") or {}
     long_text = (f" and {lr['runs']} long runs ({lr['cached_runs']} cached, {lr['diverged_runs']} diverged, "
                  f"{lr['failed_runs']} failed)" if lr.get("runs") else "")
+    compiled = (f"compiling the reference's integrators {run['compile_s']:.1f} s, "
+                if run.get("compile_s") else "")
     say(f"rbcheck sweep: {n_scenarios} scenario(s) x {n_variants} variant(s): {run['runs']} runs "
           f"({run['cached_runs']} cached, {run['diverged_runs']} diverged, {run['failed_runs']} failed)"
-          f"{long_text} in {elapsed_s:.1f} s on {run['jobs']} worker(s) (runs and metrics "
+          f"{long_text} in {elapsed_s:.1f} s on {run['jobs']} worker(s) ({compiled}runs and metrics "
           f"{run['wall_s']:.1f} s, then the report) -> {Path(out) / 'index.html'}")
     skipped = summary.get("skipped_variants") or []
     if skipped:
@@ -789,13 +901,18 @@ def _sweep_outcome(summary, out, n_scenarios, n_variants, elapsed_s) -> int:
             say(f"  {r['engine']} on {r['scenario']}: {r['reason']}")
     fails = _gate_failures(summary)
     total, wrong = verdict_count(summary)
-    failed = run.get("failed_runs", 0)
-    if fails:
-        say(f"rbcheck sweep: {len(fails)} result(s) contradict the expectations:", sys.stderr)
-        for line in fails[:20]:
+    failed = run.get("failed_runs", 0) + lr.get("failed_runs", 0)
+    contra = [f for f in fails if not f.endswith("(status 'failed' in results.csv)")
+              and not f.endswith("(status 'failed' in long_runs.csv)")]
+    if contra:   # the count of the last line, of the report's badge and of the CI formats: verdicts
+        say(f"rbcheck sweep: {wrong} of {total} verdicts not as expected:", sys.stderr)
+        for line in contra[:20]:
             say(f"  {line}", sys.stderr)
-        if len(fails) > 20:
-            say(f"  ... and {len(fails) - 20} more (see the findings in index.html)", sys.stderr)
+        if len(contra) > 20:
+            say(f"  ... and {len(contra) - 20} more (see the findings in index.html)", sys.stderr)
+        _say_likely_causes(summary, scenarios or [])
+    if failed:
+        _say_failed_runs(out, failed)
     if not wrong and not failed:
         say(f"rbcheck sweep: all {total} verdicts as expected")
     else:
@@ -837,22 +954,38 @@ def cmd_check(args) -> int:
 
 def cmd_compare(args) -> int:
     from cross_checks.core.files import atomic_write_text
-    from cross_checks.gates.compare import CompareInputError, compare_dirs, to_markdown, to_text
+    from cross_checks.gates.compare import (
+        CompareInputError,
+        compare_dirs,
+        read_results_dir,
+        to_markdown,
+        to_text,
+    )
 
-    refuse_inputs_as_outputs([("--markdown", args.markdown, False)],
+    refuse_inputs_as_outputs([("--markdown", args.markdown, False), ("--junit", args.junit, False)],
                              [("baseline directory", args.baseline, True),
                               ("results directory", args.new, True)])
     if args.markdown:
         _check_out_path(args.markdown, None, "--markdown")
+    if args.junit:
+        _check_out_path(args.junit, ".xml", "--junit")
     try:
         c = compare_dirs(args.baseline, args.new, require=args.require)
+        _, new_summary = read_results_dir(args.new)
     except CompareInputError as exc:
         raise BadInput(str(exc)) from None
     ran = _variants_ran(args.new)
     print(to_text(c, args.allow_missing, ran, args.fail_on_change))
+
+    def markdown():
+        return to_markdown(c, args.baseline, args.new, args.allow_missing, ran, args.fail_on_change)
     if args.markdown:
-        atomic_write_text(args.markdown, to_markdown(c, args.baseline, args.new, args.allow_missing, ran,
-                                                     args.fail_on_change) + "\n")
+        atomic_write_text(args.markdown, markdown() + "\n")
+    from cross_checks.gates import ci
+    _ci_outputs("compare", args.junit,
+                lambda: ci.compare_junit(c, new_summary, args.allow_missing, args.fail_on_change),
+                ci.compare_annotations(c, new_summary, args.allow_missing, args.fail_on_change)
+                if args.github_annotations else [], markdown)
     return c.exit_code(args.allow_missing, args.fail_on_change)
 
 

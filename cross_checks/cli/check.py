@@ -29,8 +29,13 @@ def run_check(args, BadInput) -> int:
             split_variant(args.scheme)
         except UnknownVariant as exc:
             raise BadInput(f"--scheme: {exc}") from None
-    for path in args.trajectories:
+    for i, path in enumerate(args.trajectories):
         traj = Trajectory.read(path, require=())
+        if i == 0:   # the reference's schemes, compiled once per machine: a cold first check says so
+            import sys
+
+            from cross_checks.sweep.run import warm_reference
+            warm_reference("rbcheck check", True, stream=sys.stderr)
         try:
             results.append(check_trajectory(traj, sc, source=path, dt_s=args.dt, compare_with=compare_with,
                                             scheme=args.scheme))

@@ -131,6 +131,7 @@ class Progress:
         self.interval_s, self.clock = interval_s, clock
         self.done, self.last = 0, ""
         self.t0 = self._last_line = clock()
+        self._samples: list = []   # (elapsed s, items done, work done) at each update: the time-left fit
         self.bar = None
         if enabled and bar:
             from tqdm import tqdm
@@ -156,6 +157,8 @@ class Progress:
                 self.bar.set_postfix_str(last, refresh=False)
             return
         now = self.clock()
+        if n:
+            self._samples.append((now - self.t0, self.done, self.work_done))
         if now - self._last_line >= self.interval_s and self.done < self.total:
             self._last_line = now
             self._line(now)
@@ -166,15 +169,36 @@ class Progress:
         pct = f" ({100 * self.done / self.total:.0f}%)" if self.total else ""
         tail = f", {final}" if final else ""
         if not final and 0 < self.done < self.total:
-            if self.total_work and self.work_done > 0:
-                left = elapsed * max(self.total_work - self.work_done, 0.0) / self.work_done
-            else:
-                left = elapsed * (self.total - self.done) / self.done
-            tail = f", ~{_seconds(left)} left"
+            tail = f", ~{_seconds(self._time_left(elapsed))} left"
         if self.last and not final:
             tail += f"; last: {self.last}"
         say(f"{self.prefix}: {self.what} {self.done}/{self.total}{pct} in {_seconds(elapsed)}{tail}",
             self.stream)
+
+    def _time_left(self, elapsed: float) -> float:
+        """Seconds left: the times at which items finished fitted as ``start + a × items + b × work``
+        (non-negative least squares), carried over what remains.
+
+        A cost per item (a process, a reference, the metrics of a run) beside the cost per unit of work
+        (steps) keeps a sweep's many short runs after its long ones from reading "~0 s left"; the start
+        term keeps a slow first item (imports, a font cache) from being multiplied by every item left.
+        Until there are more finishing times than terms: proportional to the work (or the count) done."""
+        total_work = self.total_work or 0.0
+        work = total_work > 0 and self.work_done > 0
+        rest_n = self.total - self.done
+        rest_w = max(total_work - self.work_done, 0.0) if work else 0.0
+        pts = self._samples
+        if len({p[1] for p in pts}) > 2 + work:
+            import numpy as np
+            from scipy.optimize import nnls
+            a = np.array([(1.0, n, w) if work else (1.0, n) for _, n, w in pts])
+            b = np.array([t for t, _, _ in pts])
+            scale = np.maximum(np.abs(a).max(axis=0), 1e-300)   # columns of comparable size for nnls
+            coef = nnls(a / scale, b)[0] / scale
+            return float(coef[1] * rest_n + (coef[2] * rest_w if work else 0.0))
+        if work:
+            return elapsed * rest_w / self.work_done
+        return elapsed * rest_n / self.done
 
     def close(self, finished: bool = True) -> None:
         """End the stage: the bar closes; without a terminal a last line says it is done. A stage

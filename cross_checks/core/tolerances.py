@@ -210,6 +210,10 @@ CHECK_GROWTH_RATE_PER_STEP = 0.25
 #: "Resembles" a mistake (said with that caution) when it explains 99 % of the steps within this many
 #: allowances and CHECK_MISTAKE_MARGIN times better than any correct scheme; beyond, nothing is named.
 CHECK_MISTAKE_RESEMBLES = 3.0
+#: Schemes whose 99th-percentile step difference from a file is within this factor of the closest one's are
+#: as close as it (``check`` names them all, and no "closest scheme" when every scheme ties): the local
+#: allowance they are measured in is a bound with a constant C, not sharper than a few tens of percent.
+CHECK_CLOSEST_TIE_RATIO = 1.25
 
 # --- compare: a new results directory against the baseline (docs/results.md) ---
 #: Relative change of an error or drift that counts as a regression (or improvement): the same code on
@@ -294,6 +298,11 @@ REFINE_HALVINGS = 3
 #: the scenario's scale at its default Δt below 1e-6 (a tight scheme's reach on the catalog), below 1e-3
 #: (the size a plot starts to show), or above.
 REPORT_ACCURACY_TIERS = (1e-6, 1e-3)
+#: A long run's cell is green (display only, never a verdict) when it keeps what it declares AND its largest
+#: drift — the relative energy and |L| drifts and L's turn in rad — is below this: the size a plot starts to
+#: show (REPORT_ACCURACY_TIERS[1]). A variant that keeps what it declares but drifts more (a "momentum" step
+#: losing energy as expected) is amber: as declared, not conserving.
+REPORT_LONG_RUN_CONSERVES = 1e-3
 
 # --- long runs (cross_checks.analysis.long_run, judge.judge_long_run; docs/verdicts.md "Long runs") ---
 #: The end of a long run is the mean over its last 5 % (the run's final stretch, ~50 of 1000 periods: many
@@ -319,3 +328,8 @@ def long_run_roundoff(n_steps: int, unit_roundoff: float, rounding_factor: float
     linearly (the worst case). The Newton solves of the implicit steps
     (reference_sim.integrators.IMPLICIT_TOL) converge quadratically, so they add nothing measurable here."""
     return CHECK_ROUNDINGS_PER_STEP * unit_roundoff * rounding_factor * max(int(n_steps), 1)
+
+# --- progress ---
+#: Loading the reference's cached numba kernels takes ~1 s (numba's import and index lookup, measured on 2
+#: cores); a warm-up still going after this many seconds is compiling, and the sweep says so (issue 44).
+COMPILE_NOTICE_AFTER_S = 3.0

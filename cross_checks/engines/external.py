@@ -128,7 +128,43 @@ def _parse_command(path, folder: Path, fld: str, cmd) -> list:
         if need not in used:
             raise EngineFileError(path, fld, f"never mentions {{{need}}}: the command cannot know {why}")
     program = _resolve_program(path, folder, f"{fld}[0]", parsed[0][0][0])
+    for i, arg in enumerate(parsed[1:], start=1):
+        if len(arg) == 1 and arg[0][1] is None:
+            _check_file_argument(path, folder, f"{fld}[{i}]", arg[0][0])
     return [[(program, None)]] + parsed[1:]
+
+
+#: Suffixes of the files a command names as arguments (its script, its model, its data): an argument
+#: ending in one names a file, which must then be in the engine file's folder (or be an absolute path).
+FILE_SUFFIXES = frozenset(
+    ".py .jl .js .mjs .ts .rb .pl .lua .r .m .sh .bash .jar .exe .dll .so .dylib .cs .csx .java .class .kt "
+    ".wasm .json .toml .yaml .yml .xml .urdf .sdf .mjcf .csv .txt .dat .cfg .ini .mat .npz .npy".split())
+
+
+def _check_file_argument(path, folder: Path, fld: str, text: str) -> None:
+    """EngineFileError when a literal argument names a file (a relative path ``dir/x``, ``./x``, or a name
+    with a file suffix, ``sim.py``) that does not exist: the command runs in a private working directory,
+    so the file is looked up in the engine file's folder — a typo would otherwise fail every run."""
+    if not text or text.startswith("-") or "://" in text or "=" in text:
+        return
+    p = Path(text)
+    relative_path = "/" in text and not p.is_absolute() and not all(x.replace(".", "").isdigit()
+                                                                      for x in text.split("/"))  # not 1/2
+    if not (relative_path or p.suffix.lower() in FILE_SUFFIXES):
+        return
+    where = p if p.is_absolute() else folder / p
+    if where.exists():
+        return
+    import difflib
+    try:
+        near = difflib.get_close_matches(p.name, [f.name for f in where.parent.iterdir()], n=1)
+    except OSError:
+        near = []
+    hint = f"; did you mean {str(p.with_name(near[0]))!r}?" if near else ""
+    looked = "" if p.is_absolute() else (f" (looked in {where.parent}: the command runs in a private "
+                                         "working directory, and a file it names is taken from the engine "
+                                         "file's folder)")
+    raise EngineFileError(path, fld, f"{text}: no such file{looked}{hint}")
 
 
 def _number(path, d: dict, key: str, fld: str, lo: float, hi: float, what: str):

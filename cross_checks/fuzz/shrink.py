@@ -173,7 +173,7 @@ def shrink(spec: dict, sig: tuple, variants, *, deadline: float | None = None,
 def sweep_gate_failures(summary) -> list:
     """The sentences with which ``rbcheck sweep`` exits 1 on this summary (cli's gates: a verdict that
     contradicts its expectation, two same-scheme variants that differ, a failed run)."""
-    out = [f"{r['engine']} on {r['scenario']}: {r['quantity']} {r['assessment']}"
+    out = [f"{r['engine']} on {r['scenario']}: {r['quantity'].replace('_', ' ')} {r['assessment']}"
            for r in summary.get("convergence", []) if r.get("matches_expectation") is False]
     out += [f"{a['a']} and {a['b']} differ on {a['scenario']} (should be the same scheme)"
             for a in summary.get("agreement", []) if not a.get("agrees")]

@@ -34,7 +34,8 @@ from cross_checks.sweep.schema import STATUSES
 
 __all__ = ["compare_dirs", "read_results_dir", "Comparison", "CompareInputError", "METRIC_RULES", "ORDER_TOL",
            "VariantChange", "variant_changes",
-           "REQUIRED_COLUMNS", "Scope", "not_compared", "not_installed_lines", "verdict_line",
+           "REQUIRED_COLUMNS", "Scope", "not_compared", "not_installed_lines", "not_installed_sentence",
+           "verdict_line",
            "to_markdown", "to_text"]
 
 KEY = ["scenario", "engine", "dt"]
@@ -56,7 +57,8 @@ class CompareInputError(ValueError):
 
 @dataclass
 class Change:
-    kind: str          # regression | improvement | new | missing | changed (informational)
+    kind: str          # regression | improvement | new | missing | changed (informational) | contradiction
+    #                    (a record with nothing to compare with whose own verdict contradicts its declaration)
     scenario: str
     engine: str
     what: str          # dt=... metric, or quantity
@@ -64,6 +66,7 @@ class Change:
     new: str = ""
     note: str = ""
     area: str = "row"  # row (a metric or status) | order | local order | agreement | energy kind | engine
+    #                    | contradiction
     ratio: float | None = None   # new / old of a metric that moved
 
 
@@ -72,8 +75,9 @@ class VariantChange:
     """What changed for one engine variant, judged as a whole (:func:`variant_changes`).
 
     category : "regression", "improvement", "scheme changed" (errors moved both ways within
-        COMPARE_SCHEME_CHANGE_MAX_RATIO), "changed" (information only) or "missing" (docs/results.md,
-        "Comparing two results directories").
+        COMPARE_SCHEME_CHANGE_MAX_RATIO), "changed" (information only), "missing", "new" (only in the new
+        results, every verdict as declared) or "contradiction" (new, and a verdict contradicts its
+        declaration) (docs/results.md, "Comparing two results directories").
     causes : the explaining facts first — verdicts and fitted orders, one-step orders, agreement with the
         same-scheme variant, energy-drift kind — one sentence each, at most a few.
     ratio_range : (lowest, highest) new/old over the metric changes; rows, scenarios : how many moved.
@@ -162,7 +166,7 @@ class Comparison:
         on any change at all, improvements and changed schemes included (a stale baseline); else 0."""
         cats = {v.category for v in variant_changes(self)}
         overall = any(ch.engine == "(all)" for ch in self.of("regression"))   # a metric column gone
-        if "regression" in cats or overall or (self.of("missing") and not allow_missing):
+        if {"regression", "contradiction"} & cats or overall or (self.of("missing") and not allow_missing):
             return 1
         if fail_on_change and (self.changes or self.version_diffs):
             return 1
@@ -420,6 +424,13 @@ def _compare_convergence(old_recs, new_recs, out: Comparison, local: bool = Fals
         elif k not in old:
             out.changes.append(Change("new", scen, eng, f"{what} of {qty}",
                                       new=_fmt(new[k].get("order")), area=area))
+            if not local and new[k].get("matches_expectation") is False:
+                # nothing to compare it with, but its own verdict contradicts what its variant declares:
+                # a broken new variant (or scenario) must not pass the gate as "new"
+                out.changes.append(Change("contradiction", scen, eng, f"verdict of {qty}",
+                                          new=str(new[k].get("verdict")),
+                                          note=str(new[k].get("assessment") or "not as expected"),
+                                          area="contradiction"))
         elif old[k].get("verdict") != new[k].get("verdict"):
             vo, vn = old[k].get("verdict"), new[k].get("verdict")
             out.changes.append(Change(_verdict_change_kind(vo, vn), scen, eng,
@@ -507,7 +518,8 @@ def variant_changes(c: Comparison) -> list:
             continue
         by.setdefault(ch.engine, []).append(ch)
     out = [_variant_change(v, chs) for v, chs in by.items()]
-    rank = {"regression": 0, "missing": 1, "scheme changed": 2, "improvement": 3, "changed": 4}
+    rank = {"contradiction": 0, "regression": 1, "missing": 2, "scheme changed": 3, "improvement": 4,
+            "new": 5, "changed": 6}
     return sorted(out, key=lambda v: (rank[v.category], v.variant))
 
 
@@ -518,6 +530,17 @@ def _variant_change(variant: str, chs: list) -> VariantChange:
     kinds = {ch.kind for ch in explained if ch.kind != "changed"}
     worse, better = ([ch for ch in rows if ch.kind == "regression"],
                      [ch for ch in rows if ch.kind == "improvement"])
+    contradictions = [ch for ch in chs if ch.kind == "contradiction"]
+    if contradictions:   # its verdicts say it is broken, whatever else moved
+        causes = [f"{ch.what.removeprefix('verdict of ').replace('_', ' ')} on {ch.scenario}: {ch.note}"
+                  for ch in contradictions]
+        return VariantChange(variant, "contradiction", causes, None, len(rows),
+                             sorted({ch.scenario for ch in contradictions}))
+    if all(ch.kind == "new" for ch in chs):   # nothing to compare with, and none of its verdicts contradicts
+        scen = sorted({ch.scenario for ch in chs})
+        why = (f"new in these results on {len(scen)} scenario(s) ({_names(scen, 3)}): no verdict "
+               "contradicts what it declares")
+        return VariantChange(variant, "new", [why], None, 0, scen)
     if any(ch.kind == "missing" for ch in chs):
         category = "missing"
     elif "regression" in kinds:
@@ -611,6 +634,19 @@ def not_installed_lines(c: Comparison) -> list:
     return out
 
 
+def not_installed_sentence(c: Comparison) -> str:
+    """All optional engines not installed where the new results were made, in one sentence ("" when none):
+    the markdown's single paragraph for them."""
+    sc = c.scope
+    engines = sorted(set(sc.absent_rows) | set(sc.absent_records))
+    if not engines:
+        return ""
+    each = ", ".join(f"{e} ({sc.absent_rows.get(e, 0)} baseline rows, {sc.absent_records.get(e, 0)} "
+                     "convergence records)" for e in engines)
+    return (f"Not compared: {len(engines)} optional engine(s) not installed where the new results were made "
+            f"— {each}; --require ENGINE makes an absence a failure")
+
+
 def not_compared(c: Comparison) -> str:
     """One sentence on the baseline rows and records of scenarios/variants the new results did not run
     ("" when there are none)."""
@@ -632,6 +668,14 @@ def verdict_line(c: Comparison, allow_missing=False, fail_on_change=False) -> st
     reg = [v.variant for v in vcs if v.category == "regression"]
     reg += ["every variant"] * any(ch.engine == "(all)" for ch in c.of("regression"))
     n_miss = len(c.of("missing"))
+    bad = [v for v in vcs if v.category == "contradiction"]
+    if bad:   # new in these results, nothing to compare with: judged on their own verdicts
+        n = len(c.of("contradiction"))
+        also = f"; {len(reg)} variant(s) regressed ({_names(reg, 4)})" if reg else ""
+        return (f"CONTRADICTION: {len(bad)} new variant(s) contradict what they declare "
+                f"({_names([v.variant for v in bad], 4)}): {bad[0].variant}: {bad[0].causes[0]}"
+                + (f"; {n} such verdict(s) in all" if n > 1 else "") + also
+                + (f", {n_miss} missing" if n_miss else ""))
     if reg:
         return (f"REGRESSION: {len(reg)} variant(s) regressed ({_names(reg, 4)}); {len(c.of('regression'))} "
                 "regression(s) in all" + (f", {n_miss} missing" if n_miss else ""))
@@ -667,9 +711,11 @@ def to_text(c: Comparison, allow_missing=False, new_variants=(), fail_on_change=
     if not c.changes and not c.version_diffs:   # a rerun of the same code: one line (and what was left out)
         quiet = [f"OK: no regression: {c.matched_rows} matching rows compared, nothing changed"]
         return "\n".join(quiet + ([not_compared(c)] if not_compared(c) else []) + not_installed_lines(c))
-    lines = [f"compared {c.matched_rows} matching rows: {len(c.of('regression'))} "
-             f"regressions, {len(c.of('improvement'))} improvements, "
-             f"{len(c.of('new'))} new, {len(c.of('missing'))} missing"]
+    lines = [f"compared {c.matched_rows} matching rows: {_count(len(c.of('regression')), 'regression')}, "
+             f"{_count(len(c.of('improvement')), 'improvement')}, "
+             f"{len(c.of('new'))} new, {len(c.of('missing'))} missing"
+             + (f"; {_count(len(c.of('contradiction')), 'new verdict')} contradicting "
+                "what the variant declares" if c.of("contradiction") else "")]
     lines += summary_lines(c, new_variants, allow_missing, fail_on_change)[1:]
     if not_compared(c):
         lines.append(not_compared(c))
@@ -678,12 +724,18 @@ def to_text(c: Comparison, allow_missing=False, new_variants=(), fail_on_change=
         lines.append(f"  version of {pkg}: {a} -> {b}")
     detail = [f"  {kind.upper():<11} {ch.scenario} {ch.engine} {ch.what}: "
               f"{ch.old} -> {ch.new} {ch.note}".rstrip()
-              for kind in ("regression", "missing", "improvement", "new", "changed") for ch in c.of(kind)]
+              for kind in ("contradiction", "regression", "missing", "improvement", "new", "changed")
+              for ch in c.of(kind)]
     if len(detail) > 40:   # the grouped lines above say it; the markdown (--markdown) keeps every row
         detail = detail[:40] + [f"  ... and {len(detail) - 40} more row(s) (--markdown FILE lists them all)"]
     lines += detail
     lines.append(verdict_line(c, allow_missing, fail_on_change))
     return "\n".join(lines)
+
+
+def _count(n: int, noun: str) -> str:
+    """``1 regression``, ``2 regressions``."""
+    return f"{n} {noun}" + ("" if n == 1 else "s")
 
 
 def _md_escape(s: str) -> str:
@@ -697,13 +749,19 @@ def to_markdown(c: Comparison, baseline_dir, new_dir, allow_missing=False, new_v
     code = c.exit_code(allow_missing, fail_on_change)
     regressed = (any(v.category == "regression" for v in variant_changes(c))
                  or any(ch.engine == "(all)" for ch in c.of("regression")))
-    head = ("✅ no regression" if code == 0 else "❌ regression" if regressed
+    head = ("✅ no regression" if code == 0
+            else "❌ a new variant contradicts what it declares" if c.of("contradiction")
+            else "❌ regression" if regressed
             else "❌ rows missing from the new results" if c.of("missing")
             else "❌ changed (--fail-on-change)")
     md = [f"## rbcheck compare: {head}", "",
           f"Baseline `{_md_escape(baseline_dir)}` vs new `{_md_escape(new_dir)}`: {c.matched_rows} "
-          f"matching rows, **{len(c.of('regression'))} regressions**, {len(c.of('improvement'))} "
-          f"improvements, {len(c.of('new'))} new, {len(c.of('missing'))} missing.", ""]
+          f"matching rows, **{_count(len(c.of('regression')), 'regression')}**, "
+          f"{_count(len(c.of('improvement')), 'improvement')}, {len(c.of('new'))} new, "
+          f"{len(c.of('missing'))} missing"
+          + (f", **{_count(len(c.of('contradiction')), 'new verdict')} contradicting what the variant "
+             "declares**"
+             if c.of("contradiction") else "") + ".", ""]
     first = summary_lines(c, new_variants, allow_missing, fail_on_change)
     md += [f"**{_md_escape(first[0])}**", ""]
     vcs = variant_changes(c)
@@ -721,10 +779,12 @@ def to_markdown(c: Comparison, baseline_dir, new_dir, allow_missing=False, new_v
         md += [f"Unchanged: {len(unchanged)} variant(s) ({_md_escape(_names(unchanged, 12))}).", ""]
     if not_compared(c):
         md += [_md_escape(not_compared(c)[0].upper() + not_compared(c)[1:]) + ".", ""]
-    md += [_md_escape(line) + ".\n" for line in not_installed_lines(c)]
+    if not_installed_sentence(c):   # one paragraph, however many engines
+        md += [_md_escape(not_installed_sentence(c)) + ".", ""]
     if c.changes:
         md += ["<details><summary>Every changed row and record</summary>", ""]
-    for kind, title in (("regression", "Regressions"), ("missing", "Missing rows"),
+    for kind, title in (("contradiction", "New verdicts that contradict the declaration"),
+                        ("regression", "Regressions"), ("missing", "Missing rows"),
                         ("improvement", "Improvements"), ("new", "New rows"),
                         ("changed", "Other changes (not regressions)")):
         rows = c.of(kind)

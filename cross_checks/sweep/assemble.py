@@ -8,6 +8,7 @@ import csv
 import io
 import json
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -29,7 +30,7 @@ from reference_sim.state import Q
 
 __all__ = ["result_rows", "results_csv_text", "convergence_records", "ladder_floors", "agreement_records",
            "scenario_record", "series_arrays", "build_summary", "write_json", "write_scenario_files",
-           "SCENARIO_FILES", "local_evidence"]
+           "SCENARIO_FILES", "local_evidence", "verdict_count", "normalise_message"]
 
 
 # --- results.csv ------------------------------------------------------------------------------------
@@ -329,3 +330,35 @@ def write_json(path, obj) -> None:
     """``obj`` as JSON (indent 1; NaN and infinities as null), written atomically."""
     atomic_write_text(path, json.dumps(_nan_to_none(obj), indent=1, sort_keys=False, default=json_default,
                                        allow_nan=False) + "\n")
+
+
+def verdict_count(summary) -> tuple:
+    """``(verdicts, not as expected)`` of a summary: every convergence verdict, same-scheme agreement,
+    agreement of a scenario's two references and long-run verdict the sweep judged, and how many of them
+    contradict what is expected — the one count the terminal, the report and the CI formats give."""
+    conv = [r for r in summary.get("convergence", []) if r.get("matches_expectation") is not None]
+    agree = summary.get("agreement", [])
+    refs = [sc["second_reference"]
+            for sc in summary.get("scenarios", []) if (sc.get("second_reference") or {})
+            .get("agrees") is not None]
+    long = [r for r in summary.get("long_runs", []) if r.get("matches_expectation") is not None]
+    total = len(conv) + len(agree) + len(refs) + len(long)
+    wrong = (sum(r["matches_expectation"] is False for r in conv) + sum(not a.get("agrees") for a in agree)
+             + sum(r["agrees"] is False for r in refs) + sum(r["matches_expectation"] is False for r in long))
+    return total, wrong
+
+
+#: A run's private temporary directory as an engine-file command's words may name it (``rbcheck-NAME-XXXX``,
+#: created by cross_checks/engines/external.py for each run): replaced by what it stands for, so the same
+#: reason on every run reads as one.
+_PRIVATE = re.compile(r"(?:/[^\s'\"]*)?/rbcheck-[A-Za-z0-9_.-]+-[A-Za-z0-9_]+/(work|out|scenario\.json)")
+_PRIVATE_WORDS = {"work": "<its working directory>", "out": "<the directory of {out_csv}>",
+                  "scenario.json": "{scenario_json}"}
+
+
+def normalise_message(message) -> str:
+    """A failed run's message on one line, without what differs from run to run: its own name and Δt (said
+    once in the list of runs) and the private temporary paths of an engine-file command."""
+    text = " ".join(str(message or "no message").split())
+    text = re.sub(r"^(?:\w+Error: )?\S+ at Δt = [0-9.eE+-]+ s: ", "", text)
+    return _PRIVATE.sub(lambda m: _PRIVATE_WORDS[m.group(1)], text)

@@ -58,7 +58,7 @@ from cross_checks.sweep.results_dir import (
 )
 
 __all__ = ["RESULT_COLUMNS", "SweepError", "SweepInterrupted", "Job", "plan_jobs", "run_sweep", "cache_dir",
-           "MAX_SERIES_POINTS", "LOCAL_SAMPLES", "SCHEMA_VERSION"]
+           "MAX_SERIES_POINTS", "LOCAL_SAMPLES", "SCHEMA_VERSION", "warm_reference"]
 
 
 class SweepError(Exception):
@@ -129,15 +129,15 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
         long_calls = len(variants) if long_scenarios else 0   # one simulate_many call per variant
         jobs = min(jobs, max(1, len(planned) + len(scenarios) + long_calls), 4 * usable_cores())
     started = datetime.now(UTC).replace(microsecond=0).isoformat()
-    t_start = time.perf_counter()
+    show = sys.stderr.isatty() if progress is None else progress
     cache_root = str(cache_dir())
-    _load_before_forking(variants)
+    compile_s = _load_before_forking(variants, show)
+    t_start = time.perf_counter()   # the runs and metrics (summary run.wall_s), the compilation apart
     staging = staging_dir(out)
     (work := staging / "_work").mkdir()
     runner = None
     try:
         runner = Runner(jobs, executor)
-        show = sys.stderr.isatty() if progress is None else progress
         refs = run_references(runner, scenarios, work, cache_root, use_cache,
                               reference_time_limit_s, show, variants)
         second = second_reference_jobs(scenarios, refs) if second_reference else []
@@ -151,7 +151,8 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
                                  skipped=skipped, jobs=jobs, t_start=t_start,
                                  cannot={**cannot, **cannot_long}, runner=runner,
                                  run_time_limit_s=run_time_limit_s,
-                                 long_scenarios=long_scenarios, long_records=long_records)
+                                 long_scenarios=long_scenarios, long_records=long_records,
+                                 compile_s=compile_s)
         runner.close()
         runner = None
         if finish is not None:  # e.g. the report, drawn from the saved files only
@@ -171,14 +172,49 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
             shutil.rmtree(staging, ignore_errors=True)
 
 
-def _load_before_forking(variants) -> None:
+def _load_before_forking(variants, show: bool = False) -> float:
     """What every worker needs, computed once here so that forked workers inherit it: each engine's code
-    fingerprint and, when the reference runs, its compiled steps."""
+    fingerprint and, when the reference runs, its compiled steps. Returns the seconds spent compiling them
+    (0 when they were cached); the first time on a machine a line says what is compiled and for about how
+    long (:func:`warm_reference`)."""
     for engine in dict.fromkeys(["reference", *(v.split(":", 1)[0] for v in variants)]):
         code_fingerprint(engine)
     if any(v.startswith("reference:") for v in variants):
-        from reference_sim import compiled
+        return warm_reference("rbcheck sweep", show)
+    return 0.0
+
+
+def warm_reference(prefix: str, show: bool, notice_after_s: float = tol.COMPILE_NOTICE_AFTER_S,
+                   stream=None) -> float:
+    """Load (the first time on a machine: compile) the reference's numba kernels; returns the seconds it
+    took when it compiled, else 0.
+
+    Loading cached kernels takes well under ``notice_after_s``; when it takes longer, they are being
+    compiled: one line then says so, what and for about how long, while it happens (a cold first run
+    would otherwise say nothing for a minute), and one more when it is done."""
+    import threading
+
+    from reference_sim import compiled
+    t0 = time.perf_counter()
+    said = threading.Event()
+
+    def notice():
+        said.set()
+        stage(prefix, f"compiling the reference's {len(compiled.VARIANT_CODES)} integrators with numba, once "
+                      f"per machine: {compiled.COMPILE_ESTIMATE_S}; cached for every later run", enabled=show,
+              stream=stream)
+    timer = threading.Timer(notice_after_s, notice)
+    timer.daemon = True
+    timer.start()
+    try:
         compiled.warm()
+    finally:
+        timer.cancel()
+    took = time.perf_counter() - t0
+    if said.is_set():
+        stage(prefix, f"compiled the reference's integrators in {took:.0f} s", enabled=show, stream=stream)
+        return took
+    return 0.0
 
 
 def _with_second_references(refs, second: dict) -> list:
@@ -190,7 +226,7 @@ def _with_second_references(refs, second: dict) -> list:
 
 def _write_results(staging, scenarios, variants, refs, records, *, started, skipped, jobs, t_start,
                    cannot=None, runner, run_time_limit_s=tol.RUN_TIME_LIMIT_S, long_scenarios=(),
-                   long_records=None) -> dict:
+                   long_records=None, compile_s: float = 0.0) -> dict:
     """Assemble the job records and write results.csv, series/ and summary.json into ``staging`` (its
     work directory removed) — and, with long runs, long_runs.csv and their series; returns the summary. The
     continued ladders of :mod:`.refine` run on ``runner``."""
@@ -224,6 +260,7 @@ def _write_results(staging, scenarios, variants, refs, records, *, started, skip
         variants=[variant_record(v, infos.get(v)) for v in variants], skipped=skipped,
         convergence=convergence, local=local, agreement=assemble.agreement_records(scenarios, by_key),
         rows=rows, jobs=jobs, wall_s=time.perf_counter() - t_start, cannot=cannot)
+    summary["run"]["compile_s"] = round(compile_s, 3)   # before the runs (wall_s): the reference's kernels
     if long_scenarios:
         _write_long_runs(staging, summary, long_scenarios, variants, long_records or {})
     assemble.write_json(staging / "summary.json", summary)

@@ -76,3 +76,33 @@ def test_without_long_runs_the_page_says_how_to_get_them(tmp_path):
                   finish=lambda out: reports.render(out, progress=False))
     html = (tmp_path / "res" / "integrators.html").read_text(encoding="utf-8")
     assert "This sweep ran no long run" in html and "rbcheck sweep --long" in html
+
+
+def _long_rec(engine, scenario, drift, matches, verdict="none", status="ok"):
+    return {"engine": engine, "scenario": scenario, "status": status, "energy_drift_max": drift,
+            "momentum_drift_max": 1e-15, "direction_drift_max_rad": 1e-15, "matches_expectation": matches,
+            "verdict": verdict, "diverged_at_s": None}
+
+
+def test_green_means_conserves_not_only_as_declared():
+    """Issue 44, point 8: buss_augmented keeps |L| as it declares and loses 63 % of its energy: its cell is
+    amber (as declared, drifting), never the green of a run that conserves."""
+    from reports.integrators import long_cell_class
+    assert long_cell_class(_long_rec("reference:buss_augmented", "long_tennis_racket", 0.63, True,
+                                     "toward_intermediate")) == "noconv"
+    assert long_cell_class(_long_rec("reference:lp_midpoint", "long_tennis_racket", 3e-14, True)) == "acc1"
+    assert long_cell_class(_long_rec("x:y", "long_tennis_racket", 3e-14, False)) == "bad"
+    assert long_cell_class(_long_rec("x:y", "long_tennis_racket", 0.2, None)) == "noconv"
+    assert long_cell_class(_long_rec("x:y", "long_tennis_racket", 0.2, None, status="diverged")) == "diverged"
+
+
+def test_the_largest_drift_is_the_worst_run_not_a_mean():
+    """Issue 44, point 8: a run that lost 63 % of its energy beside two that kept it read 0.015 as a geometric
+    mean; the "largest drift" is the largest."""
+    from types import SimpleNamespace
+    names = ["long_major", "long_minor", "long_tennis_racket"]
+    recs = [_long_rec("reference:buss_augmented", n, d, True) for n, d in zip(names, (1e-6, 1e-6, 0.63))]
+    res = SimpleNamespace(summary={"long_runs": recs, "long_run_scenarios": [{"name": n} for n in names]},
+                          variants=["reference:buss_augmented"])
+    [st] = long_standings(res)
+    assert st.score == 0.63 and st.worst == "long_tennis_racket"

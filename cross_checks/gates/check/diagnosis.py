@@ -24,7 +24,7 @@ from reference_sim.quaternion import quat_conj, quat_log, quat_mul, rotate
 from reference_sim.state import Q, V, W, X
 
 __all__ = ["CandidateScore", "step_rows", "score_candidate", "score_variants", "diagnose_mistakes",
-           "fit_step_scale", "initial_state_slips"]
+           "fit_step_scale", "initial_state_slips", "written_slips", "OMEGA_IN_BODY_AXES"]
 
 
 @dataclass
@@ -180,8 +180,7 @@ def initial_state_slips(y_row0, y_init, tol_q, present):
     slips = []
     q0 = y_init[Q]
     cands = {
-        "the angular velocity is written in body axes (the file's columns wx,wy,wz are world axes)":
-            lambda y: _with(y, W, rotate(quat_conj(q0), y[W])),
+        OMEGA_IN_BODY_AXES: lambda y: _with(y, W, rotate(quat_conj(q0), y[W])),
         "the angular velocity is in degrees per second (radians expected)":
             lambda y: _with(y, W, np.rad2deg(y[W])),
         "the quaternion is written in (x, y, z, w) order under the names qw,qx,qy,qz":
@@ -197,6 +196,48 @@ def initial_state_slips(y_row0, y_init, tol_q, present):
                 not all(quantity_distance(y_row0, y_init, q) <= tol_q[q] for q in present):
             slips.append(words)
     return slips
+
+
+#: The words of the slip "ω written in body axes" (the first row's, and every row's, diagnosis).
+OMEGA_IN_BODY_AXES = ("the angular velocity is written in body axes "
+                      "(the file's columns wx,wy,wz are world axes)")
+
+#: Slips in WRITING the state, made on every row: each maps the file's rows (N, 13) to what the simulator
+#: must have held if it made that slip (ω_W = R(q) ω_B for ω written in body axes).
+_WRITTEN = {
+    OMEGA_IN_BODY_AXES: lambda y: _with_rows(y, W, rotate(y[:, Q], y[:, W])),
+    "the angular velocity is in degrees per second (radians expected)":
+        lambda y: _with_rows(y, W, np.deg2rad(y[:, W])),
+}
+
+
+def written_slips(inp, scenario, one_step) -> list:
+    """``[(words, worst ratio)]``: each slip in writing the state (ω in body axes, ω in degrees), with the
+    largest one-step defect over its allowance of the file's rows read back as that slip says.
+
+    Visible on every row, not only the first: at the identity orientation (the tennis racket's start) ω in
+    body and world axes agree on the first row and part from the second on. ``one_step(inp)`` gives
+    ``(flow, allowances, distances)`` of a CheckInput's rows (verdict._one_step)."""
+    import dataclasses
+    out = []
+    for words, f in _WRITTEN.items():
+        y = f(np.array(inp.y, dtype=float))
+        if np.allclose(y, inp.y, rtol=0.0, atol=0.0, equal_nan=True):
+            continue   # nothing to read differently (ω = 0 on every row)
+        alt = dataclasses.replace(inp, y=y)
+        with np.errstate(all="ignore"):
+            _, allow, d = one_step(alt)
+            r = [ratio(d[q], allow.total[q]) for q in QUANTITIES]
+        worst = float(np.max(np.stack(r))) if not np.any(np.isnan(np.stack(r))) else math.nan
+        if not math.isnan(worst):
+            out.append((words, worst))
+    return out
+
+
+def _with_rows(y, sl, value):
+    y = y.copy()
+    y[:, sl] = value
+    return y
 
 
 def _with(y, sl, value):

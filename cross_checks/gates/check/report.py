@@ -6,6 +6,7 @@ import json
 import math
 
 from cross_checks.core.files import json_default
+from cross_checks.core.tolerances import CHECK_CLOSEST_TIE_RATIO
 
 __all__ = ["format_report", "format_ladder", "to_json_text"]
 
@@ -82,9 +83,14 @@ def format_report(res) -> str:
         how = ("its steps differ from the file's by up to " f"{_num(c.max_ratio)}× the local allowance"
                if res.input["quantities"] and len(res.input["quantities"]) == 4
                else f"largest free-running difference {_num(c.max_rel_diff)}")
-        lines.append(f"closest scheme: {res.closest} ({how})"
+        also = (f"; as close: {', '.join(n for n in res.tied if n != res.closest)}"
+                if len(res.tied) > 1 else "")
+        lines.append(f"closest scheme: {res.closest} ({how}){also}"
                      + (f"; closest correct scheme: {res.closest_correct}"
                         if res.closest_correct and res.closest_correct != res.closest else ""))
+    elif res.tied:
+        lines.append(f"closest scheme: none — all {len(res.tied)} schemes are as far from the file (within "
+                     f"×{CHECK_CLOSEST_TIE_RATIO:g} of each other): what differs is not a choice of scheme")
     for e in res.engines:
         if "error" in e:
             lines.append(f"engine {e['engine']}: {e['error']}")

@@ -33,6 +33,7 @@ from cross_checks.gates.check.diagnosis import (
     fit_step_scale,
     initial_state_slips,
     score_variants,
+    written_slips,
 )
 from cross_checks.gates.check.evidence import (
     Evidence,
@@ -71,6 +72,7 @@ class CheckResult:
     cannot_tell: list
     engines: list
     series: dict = field(default_factory=dict, repr=False)
+    tied: list = field(default_factory=list)   # the schemes as close as the closest (CHECK_CLOSEST_TIE_RATIO)
 
     @property
     def exit_code(self) -> int:
@@ -83,7 +85,7 @@ class CheckResult:
             "verdict": ("PASS: " if self.passed else "FAIL: ") + self.verdict,
             "reasons": self.reasons, "input": self.input,
             "evidence": [e.as_dict() for e in self.evidence],
-            "identity": self.identity, "closest_scheme": self.closest,
+            "identity": self.identity, "closest_scheme": self.closest, "closest_tied": self.tied,
             "closest_correct_scheme": self.closest_correct, "schemes": [c.as_dict() for c in self.candidates],
             "likely_causes": self.likely_causes, "mistakes": self.mistakes, "caveats": self.caveats,
             "notes": self.notes, "cannot_tell": self.cannot_tell, "engines": self.engines,
@@ -120,15 +122,22 @@ class _Local:
     undecided_rows: int = 0  # rows where the one-step error model does not hold (h L > CHECK_MAX_HL)
 
 
-def _local_full(inp, scenario) -> _Local:
-    """One-step defects of a full-state file, scheme scores and (lazily) mistake scores."""
+def _one_step(inp, scenario):
+    """``(exact flow over each row interval, allowances, distances of the next rows from it)`` of a
+    full-state file's rows ``inp.y``."""
     y0, y1 = inp.y[:-1], inp.y[1:]
 
     def allowance_fn(M2, rate):
         return local_allowances(inp, y0, M2, rate, y_end=y1, scenario=scenario).total
     flow = exact_flow(scenario, y0, inp.span_s, allowance_fn=allowance_fn, span_steps=inp.span_steps)
     allow = local_allowances(inp, y0, flow.M2, flow.rate, flow.roundoff, y_end=y1, scenario=scenario)
-    d = distances(y1, flow.y_end)
+    return flow, allow, distances(y1, flow.y_end)
+
+
+def _local_full(inp, scenario) -> _Local:
+    """One-step defects of a full-state file, scheme scores and (lazily) mistake scores."""
+    y0, y1 = inp.y[:-1], inp.y[1:]
+    flow, allow, d = _one_step(inp, scenario)
     h = inp.span_s / inp.span_steps
     hl = h * flow.rate
     model_ok = hl <= tol.CHECK_MAX_HL
@@ -273,6 +282,11 @@ def _explain(local, candidates, scenario, inp):
                           f"{m.sentence} — that mistake explains every step "
                           f"within the allowance ({m.max_ratio:.2g} of it; the "
                           f"closest correct scheme needs {best_correct:.3g}×)"))
+    for words, worst in written_slips(inp, scenario, lambda i: _one_step(i, scenario)):
+        if worst <= 1.0 and worst * tol.CHECK_MISTAKE_MARGIN <= best_correct:
+            found.append((worst, words, f"{words} — read back that way, every row is a consistent step of "
+                                        f"the scenario's motion ({worst:.2g} of the one-step allowance; the "
+                                        f"closest correct scheme needs {best_correct:.3g}× as written)"))
     found.sort(key=lambda f: f[0])
     causes = [found[0][2]] if found else []
     others = list(dict.fromkeys(f[1] for f in found[1:] if f[1] != found[0][1]))
@@ -434,7 +448,9 @@ def _compose(inp, scenario, label, y_ref, local, evidence, candidates,
         reasons.append(f"does not start at the scenario's initial state ({init_words})")
         causes += [f"{s}" for s in slips]
     ranked = sorted((c for c in candidates if not math.isnan(c.p99_ratio)), key=lambda c: c.p99_ratio)
-    closest = ranked[0].name if ranked else None
+    # the closest scheme, unless others are as close (then all of them; none when every scheme ties)
+    tied = [c.name for c in ranked if c.p99_ratio <= ranked[0].p99_ratio * tol.CHECK_CLOSEST_TIE_RATIO]
+    closest = ranked[0].name if ranked and (len(tied) < len(ranked) or len(ranked) == 1) else None
     # pose-only files have no one-step evidence per variant: a variant is taken as correct there unless
     # the expectations say it does not converge on this scenario
     correct = [c for c in ranked if (c.correct if inp.full_state
@@ -460,7 +476,7 @@ def _compose(inp, scenario, label, y_ref, local, evidence, candidates,
         reasons += [_failure_words(e) for e in failing]
         if inp.full_state:
             more, kept = _explain(local, candidates, scenario, inp)
-            causes += more
+            causes += [m for m in more if not any(m.startswith(s) for s in slips)]   # a slip said once
         if not causes:
             causes.append("no catalogued mistake explains it (docs/check.md lists the catalog)"
                           if inp.full_state else
@@ -471,7 +487,8 @@ def _compose(inp, scenario, label, y_ref, local, evidence, candidates,
     series = _series(inp, scenario, y_ref, local, closest_correct)
     return CheckResult(inp.source, scenario.name, label, _input_dict(inp, scenario), passed, verdict, reasons,
                        evidence, identity, closest, closest_correct, candidates, causes, kept, caveats,
-                       list(inp.notes) + local.notes, _cannot_tell(inp, scenario), engines, series)
+                       list(inp.notes) + local.notes, _cannot_tell(inp, scenario), engines, series,
+                       tied if len(tied) > 1 else [])
 
 
 def _verdict_line(inp, scenario, passed, reasons, identity, local, closest, candidates, scheme=None):

@@ -64,6 +64,39 @@ def test_the_time_left_follows_the_work_done_not_the_count():
             == "rbcheck sweep: runs 1/10 (10%) in 9 s, ~1 s left; last: the longest")
 
 
+def _left_s(line):
+    return float(re.search(r"~(\d+) s left", line)[1])
+
+
+def test_many_short_runs_after_the_long_ones_are_not_0_s_left():
+    """Issue 44, point 7: longest first, 2 s per run beside 0.01 s per step of work. After the long runs
+    the work is nearly done but 30 short runs (60 s) are left: the estimate says so, not "~0 s"."""
+    clock, out = Clock(), Flushed()
+    works = [1000.0] * 10 + [1.0] * 60
+    with Progress("rbcheck sweep", "runs", len(works), stream=out, tty=False, clock=clock,
+                  total_work=sum(works), interval_s=1e9) as p:
+        for i, w in enumerate(works[:40]):
+            clock.t += 2.0 + 0.01 * w
+            p.update(1, f"run {i}", work=w)
+        p._line(clock())   # the line the next interval would print
+    truth = sum(2.0 + 0.01 * w for w in works[40:])
+    assert _left_s(out.getvalue().splitlines()[0]) == round(truth)
+
+
+def test_a_slow_first_item_is_not_multiplied_by_every_item_left():
+    """Issue 44, point 7: the report's first figure takes 30 s (imports), the others 0.1 s each: half-way
+    the estimate is the 0.1 s per figure left, not 30 s x the count ("~8.8 min left", done 1 s later)."""
+    clock, out = Clock(), Flushed()
+    with Progress("rbcheck report", "figures", 100, stream=out, tty=False, clock=clock, interval_s=1e9) as p:
+        clock.t += 30.0
+        p.update(1)
+        for _ in range(49):
+            clock.t += 0.1
+            p.update(1)
+        p._line(clock())
+    assert _left_s(out.getvalue().splitlines()[0]) == round(50 * 0.1)
+
+
 def test_in_a_terminal_a_bar_and_no_log_lines():
     out = io.StringIO()
     with Progress("rbcheck sweep", "runs", 3, stream=out, tty=True) as p:

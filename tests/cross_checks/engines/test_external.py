@@ -290,6 +290,13 @@ BAD_FILES = [
      '"{{scenario_json}}", "{{out_csv}}"]\n',
      "variants.v.command[0]", "'no-such-program-rbcheck': no such program on PATH"),
     ('name = "x"\n[variants.v\norder = 1\n', "", "TOML syntax error"),
+    # a script name with a typo is found when the file is read, not by every run failing (issue 44, point 4)
+    ('name = "x"\n[variants.v]\norder = 1\ncommand = ["{exe}", "enigne.py", "{{scenario_json}}", "{{out_csv}}"]\n',
+     "variants.v.command[1]", "enigne.py: no such file (looked in"),
+    ('name = "x"\n[variants.v]\norder = 1\ncommand = ["{exe}", "enigne.py", "{{scenario_json}}", "{{out_csv}}"]\n',
+     "variants.v.command[1]", "did you mean 'engine.py'?"),
+    ('name = "x"\n[variants.v]\norder = 1\ncommand = ["{exe}", "src/sim", "{{scenario_json}}", "{{out_csv}}"]\n',
+     "variants.v.command[1]", "src/sim: no such file"),
 ]
 
 
@@ -307,6 +314,17 @@ def test_a_bad_engine_file_exits_2_naming_file_field_and_reason(tmp_path, capsys
     prefix = f"rbcheck run: error: {path}: {field + ': ' if field else ''}"
     assert err.startswith(prefix) and reason in err, err
     assert not out.exists()
+
+
+def test_arguments_that_are_not_files_are_not_checked(tmp_path):
+    """Options, modules, numbers and files that exist pass validation (only a named file that is missing is
+    refused)."""
+    folder = tmp_path / "eng"
+    _engine_file(folder, modes=[])
+    path = folder / "ok.toml"
+    path.write_text(f'name = "x"\n[variants.v]\norder = 1\ncommand = ["{sys.executable}", "-m", "mysim.main", '
+                    '"--gain=1.5", "0.5", "engine.py", "{engine_dir}/engine.py", "{scenario_json}", "{out_csv}"]\n')
+    assert load_engine_file(path).name == "x"
 
 
 @pytest.mark.parametrize("make, reason",

@@ -300,7 +300,11 @@ def test_an_optional_engine_not_installed_is_one_line_not_a_failure(tmp_path, ca
     assert len(lines) == 1 and lines[0].startswith(f"drake not installed: {n_rows} baseline rows and ")
     assert "--require drake makes its absence a failure" in lines[0] and "OK: no regression" in out
     assert "MISSING" not in out
-    assert f"drake not installed: {n_rows} baseline rows" in (tmp_path / "c.md").read_text()
+    md = (tmp_path / "c.md").read_text()
+    # every engine not installed in ONE paragraph of the markdown (issue 44, point 9)
+    assert [p for p in md.split("\n\n") if "not installed" in p] == [
+        p for p in md.split("\n\n") if "Not compared: 1 optional engine(s) not installed" in p]
+    assert f"drake ({n_rows} baseline rows, " in md
 
 
 def test_require_makes_an_absent_optional_engine_a_failure(tmp_path, capsys):
@@ -392,3 +396,50 @@ def test_a_rerun_that_changed_nothing_is_one_line(tmp_path, capsys):
     assert main(["compare", str(write(tmp_path / "a")), str(write(tmp_path / "b"))]) == 0
     out = capsys.readouterr().out
     assert out == "OK: no regression: 3 matching rows compared, nothing changed\n"
+
+
+# --- a NEW variant is judged on its own verdicts (issue 44, point 1) ---------------------------------------
+
+BROKEN = dict(scenario="tennis_racket", engine="student:broken", quantity="orientation", order=-0.02,
+              pairwise_orders=[0.1, -0.02], verdict="does_not_converge", expected_order=1,
+              matches_expectation=False,
+              assessment="does not converge (fitted order -0.02), expected order 1")
+GOOD_NEW = dict(BROKEN, engine="student:euler", order=1.0, verdict="converges", matches_expectation=True,
+                assessment="order 1.00 as expected (1)")
+
+
+def _with_new_variants(tmp_path, records):
+    rows = ROWS + [dict(ROWS[0], engine=r["engine"]) for r in records]
+    return write(tmp_path / "b", rows, conv=CONV + records)
+
+
+def test_a_new_variant_whose_verdict_contradicts_its_declaration_fails_the_gate(tmp_path, capsys):
+    from cross_checks.cli import main
+    a, b = write(tmp_path / "a"), _with_new_variants(tmp_path, [GOOD_NEW, BROKEN])
+    c = compare_dirs(a, b)
+    assert c.exit_code() == 1 and c.exit_code(allow_missing=True) == 1
+    [ch] = c.of("contradiction")
+    assert (ch.engine, ch.scenario) == ("student:broken", "tennis_racket")
+    assert main(["compare", str(a), str(b), "--markdown", str(tmp_path / "c.md")]) == 1
+    out = capsys.readouterr().out.splitlines()
+    first_screen = "\n".join(out[:10])
+    assert "student:broken: CONTRADICTION" in first_screen
+    assert "does not converge (fitted order -0.02), expected order 1" in first_screen
+    assert out[-1].startswith("CONTRADICTION: 1 new variant(s) contradict what they declare (student:broken)")
+    assert "OK" not in out[-1] and "student:euler: CONTRADICTION" not in first_screen
+    md = (tmp_path / "c.md").read_text()
+    assert md.startswith("## rbcheck compare: ❌ a new variant contradicts what it declares")
+
+
+def test_a_new_variant_as_declared_is_new_and_passes(tmp_path):
+    c = compare_dirs(write(tmp_path / "a"), _with_new_variants(tmp_path, [GOOD_NEW]))
+    assert c.exit_code() == 0 and not c.of("contradiction") and c.of("new")
+
+
+def test_counts_are_written_in_the_singular_and_plural(tmp_path):
+    from cross_checks.gates.compare import to_text
+    rows = [dict(r) for r in ROWS]
+    rows[0]["orient_err_final"] *= 1.5
+    c = compare_dirs(write(tmp_path / "a"), write(tmp_path / "b", rows))
+    assert "1 regression," in to_text(c) and "1 regressions" not in to_text(c)
+    assert "**1 regression**" in to_markdown(c, "a", "b")

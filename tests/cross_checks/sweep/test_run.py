@@ -85,6 +85,51 @@ def test_sweep_writes_the_results_directory(tmp_path, scenario_files):
     assert not any("cache" in p.name for p in out.rglob("*"))
 
 
+def test_a_cold_compile_is_said_while_it_happens_and_timed_apart_from_the_runs(tmp_path, scenario_files,
+                                                                             monkeypatch, capsys):
+    """Issue 44, point 2: the first run compiles the reference's kernels for about a minute. The first line
+    says so WHILE it compiles (the compile here lasts until a line has said it), what and for how long; the
+    last line and summary.json give its time apart from the runs and metrics, which agree with the
+    progress lines."""
+    import threading
+
+    from cross_checks.sweep import run as run_mod
+    from reference_sim import compiled
+    said, real_warm, real_stage = threading.Event(), compiled.warm, run_mod.stage
+
+    def stage(prefix, message, **kw):
+        real_stage(prefix, message, **kw)
+        if message.startswith("compiling"):
+            said.set()
+
+    def cold_warm():   # a compile that is not over before the user has been told
+        said.wait(120)
+        return real_warm()
+    monkeypatch.setattr(run_mod, "stage", stage)
+    monkeypatch.setattr(compiled, "warm", cold_warm)
+    out = tmp_path / "res"
+    assert sweep([scenario_files[0], "--engines", "reference:course", "--jobs", "1"], out) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert said.is_set()
+    assert lines[0].startswith("rbcheck sweep: compiling the reference's 16 integrators with numba, once per "
+                               "machine: about a minute"), lines[0]
+    assert lines[1].startswith("rbcheck sweep: compiled the reference's integrators in ")
+    run = json.loads((out / "summary.json").read_text())["run"]
+    assert run["compile_s"] > 0
+    last = next(ln for ln in lines if "worker(s)" in ln)
+    assert (f"(compiling the reference's integrators {run['compile_s']:.1f} s, runs and metrics "
+            f"{run['wall_s']:.1f} s, then the report)") in last
+
+
+def test_cached_kernels_are_loaded_without_a_line(tmp_path, scenario_files, capsys):
+    from reference_sim import compiled
+    compiled.warm()   # (compiled once per machine: cached from here on)
+    assert sweep([scenario_files[0], "--engines", "reference:course", "--jobs", "1"], tmp_path / "r") == 0
+    out = capsys.readouterr().out
+    assert "compiling" not in out
+    assert json.loads((tmp_path / "r" / "summary.json").read_text())["run"]["compile_s"] == 0
+
+
 def test_parallel_and_cached_sweeps_give_the_same_results(tmp_path, scenario_files):
     from cross_checks.scenario import load_scenario
     scs = [load_scenario(f) for f in scenario_files]
@@ -286,3 +331,36 @@ def test_rk4_order_is_fitted_and_checked_wherever_its_errors_are_above_the_measu
         old = [M.roundoff_floor(s["scenarios"][0]["scales"][r["quantity"]], round(1.0 / dt), "ground_truth")
                for dt in r["dt_s"]]
         assert sum(e > f for e, f in zip(r["errors"], old)) < sum(r["fitted"]), (r["errors"], old)
+
+
+@pytest.mark.parametrize("command", ["run", "check"])
+def test_run_and_check_say_a_cold_compile_on_stderr(tmp_path, monkeypatch, capsys, command):
+    """`rbcheck run --engine reference:…` and `rbcheck check` compile the same kernels on a cold machine: a
+    line on stderr says so while it happens (stdout keeps the command's own output)."""
+    import threading
+
+    from cross_checks.sweep import run as run_mod
+    from reference_sim import compiled
+    said, real_warm, real_stage = threading.Event(), compiled.warm, run_mod.stage
+
+    def stage(prefix, message, **kw):
+        real_stage(prefix, message, **kw)
+        if message.startswith("compiling"):
+            said.set()
+
+    def cold_warm():
+        said.wait(120)
+        return real_warm()
+    csv = tmp_path / "t.csv"
+    if command == "check":
+        assert main(["run", "projectile", "--engine", "reference:rk4", "--out", str(csv)]) == 0
+        capsys.readouterr()
+    monkeypatch.setattr(run_mod, "stage", stage)
+    monkeypatch.setattr(compiled, "warm", cold_warm)
+    args = (["run", "projectile", "--engine", "reference:rk4", "--out", str(tmp_path / "r.csv")]
+            if command == "run" else ["check", str(csv), "--scenario", "projectile"])
+    assert main(args) == 0
+    out, err = capsys.readouterr()
+    assert said.is_set()
+    assert err.startswith(f"rbcheck {command}: compiling the reference's 16 integrators with numba")
+    assert "compiling" not in out

@@ -416,6 +416,23 @@ def test_an_initial_angular_velocity_in_body_axes_is_named(tmp_path, capsys):
     assert rc == 1 and "likely cause: the angular velocity is written in body axes" in out
 
 
+def test_angular_velocity_in_body_axes_is_named_from_the_identity_orientation(tmp_path, capsys):
+    """The README's tennis_racket starts at the identity: the first row is the same in both frames, and the
+    rows after it say that ω is written in body axes (issue 44, point 6)."""
+    from reference_sim.quaternion import quat_conj, rotate
+    sc = scenario_file(tmp_path, "tennis_racket", 2.0)
+
+    traj = Trajectory.read(_run(tmp_path, sc, "reference:course_gyro", 0.002))   # a correct simulator ...
+    traj.y[:, 10:13] = rotate(quat_conj(traj.y[:, 6:10]), traj.y[:, 10:13])    # ... writing ω_B as wx,wy,wz
+    traj.write(tmp_path / "body_axes.csv")
+    rc, out, _ = check(capsys, tmp_path / "body_axes.csv", "--scenario", sc)
+    assert rc == 1
+    assert "likely cause: the angular velocity is written in body axes" in out, out
+    assert "no catalogued mistake" not in out
+    # every scheme is as far from a file written in the wrong frame: none is named the closest (point 9)
+    assert "closest scheme: none — all 16 schemes are as far from the file" in out, out
+
+
 # --- output ---------------------------------------------------------------------------------------------
 
 def test_verdict_line_first_then_the_table_json_and_plot(tmp_path, capsys):
