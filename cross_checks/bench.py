@@ -10,7 +10,10 @@ sweep_floor_ratio ((run + report) / floor), sweep_run_floor_ratio (run / floor),
 {ENGINE:VARIANT: body-steps/s through the adapter's ``simulate_many``} (mujoco:euler and every installed
 engine that batches), plus the individual measurements and ``measurements`` {name: {median, min, max,
 repeats}}. Drake is measured on one trajectory only, beside MuJoCo through the same adapter interface
-(``mujoco_adapter_single_us_per_step``).
+(``mujoco_adapter_single_us_per_step``). ``overhead``: per installed engine (default variant) ``{variant,
+engine_us_per_step, rbcheck_us_per_step}`` (the engine's own time per step, the whole cost through rbcheck);
+``batched``: ``{variant, engine_body_steps_per_s, rbcheck_body_steps_per_s}`` (the engine's own batched
+throughput in this run beside simulate_many's at the same N).
 """
 from __future__ import annotations
 
@@ -217,6 +220,49 @@ def adapter_batched(variant, n_bodies, n_steps, repeats) -> dict:
     return _rates(n_bodies * n_steps, run, repeats)
 
 
+def overhead_rows(n_steps, repeats, variants=None) -> list:
+    """Per installed engine (its default variant), one trajectory of the benchmark's body through rbcheck
+    (``simulate``: the host loop, its forces evaluated every step, every step recorded): ``{variant,
+    engine_us_per_step, rbcheck_us_per_step}``, medians over ``repeats`` — the time inside the engine's own
+    step (Run.engine_s; None for an adapter that owns its loop and cannot tell it apart) and the whole cost
+    per step through rbcheck, the engine's included. The issue's single-run goal reads
+    ``rbcheck_us_per_step <= 2 x engine_us_per_step``."""
+    from cross_checks.engines import all_variants, get_adapter
+    sc = _bench_scenario()
+    chosen: dict = {}
+    for v in all_variants():
+        if v.available and v.engine != "reference" and (variants is None or v.name in variants):
+            chosen.setdefault(v.engine, v.name)
+    out = []
+    for name in chosen.values():
+        engine, variant = name.split(":", 1)
+        adapter = get_adapter(engine)
+        adapter.simulate(sc, variant, H, min(n_steps, 50))   # warm-up: compilation, first model build
+        whole, own = [], []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            run = adapter.simulate(sc, variant, H, n_steps)
+            whole.append((time.perf_counter() - t0) / n_steps * 1e6)
+            own.append(None if run.engine_s is None else run.engine_s / n_steps * 1e6)
+        med = (lambda xs: sorted(xs)[len(xs) // 2])
+        out.append({"variant": name, "engine_us_per_step": None if None in own else med(own),
+                    "rbcheck_us_per_step": med(whole)})
+    return out
+
+
+def batched_rows(n_bodies, n_steps, repeats, own: dict) -> list:
+    """``{variant, engine_body_steps_per_s, rbcheck_body_steps_per_s}``: N trajectories of the benchmark's
+    body in one ``simulate_many`` call through rbcheck (:func:`adapter_batched`) beside the engine's own
+    batched throughput measured in this run (``own``: {variant: body-steps/s}; None where this bench has no
+    measurement of the engine by itself)."""
+    out = []
+    for v, engine_rate in own.items():
+        st = adapter_batched(v, n_bodies, n_steps, repeats)
+        out.append({"variant": v, "engine_body_steps_per_s": engine_rate,
+                    "rbcheck_body_steps_per_s": st["median"]})
+    return out
+
+
 def drake_single_us(n_steps, repeats):
     """Drake's single trajectory, µs per step, through its adapter (semi-explicit Euler; the body
     torque turns with the body, so a LeafSystem evaluates it at every derivative) and, as Drake's
@@ -379,6 +425,11 @@ def run_bench(quick: bool = False, repeats: int = 3, render=None, sweep: bool = 
         st = adapter_batched(v, n, steps, repeats)
         m[f"adapter_batched[{v}]"] = st
         r["batched_adapters"][v] = st["median"]
+    # the engines' own cost against the cost through rbcheck (its loop, forces and recording)
+    r["overhead"] = overhead_rows(1000 if quick else 5000, repeats)
+    own = {"mujoco:euler": max(r["mujoco_multibody_body_steps_per_s"], r["mujoco_rollout_body_steps_per_s"]),
+           "pybullet:multibody": r["pybullet_body_steps_per_s"]}
+    r["batched"] = batched_rows(n, steps, repeats, own)
     r["versions"]["drake"] = _drake_version()
     r["reference_batched_body_steps_per_s"] = max(r["reference_course_body_steps_per_s"],
                                                   r["reference_expmap_gyro_body_steps_per_s"])
@@ -443,6 +494,17 @@ def format_table(r: dict) -> str:
                   f"({d / r['mujoco_adapter_single_us_per_step']:.1f}x); Drake with a constant applied "
                   f"force {r['drake_constant_force_us_per_step']:.2f} us/step"
                   if d is not None else "Drake not installed (pip install 'rbcheck[drake]')"))
+    if r.get("overhead"):
+        head = f"{'one trajectory, us per step':<42} {'engine':>10} {'through rbcheck':>16} {'ratio':>7}"
+        out += ["", head]
+        for row in r["overhead"]:
+            e, w = row["engine_us_per_step"], row["rbcheck_us_per_step"]
+            out.append(f"{row['variant']:<42} {'n/a' if e is None else f'{e:.2f}':>10} {w:>16.2f} "
+                       f"{'' if e is None else f'{w / e:.1f}x':>7}")
+    for row in r.get("batched", []):
+        e, w = row["engine_body_steps_per_s"], row["rbcheck_body_steps_per_s"]
+        out.append(f"batched, N = {n}: {row['variant']} by itself {e:.3e} body-steps/s, through rbcheck "
+                   f"{w:.3e} ({w / e:.2f} of it)")
     if "sweep" in r:
         out += ["", *_sweep_lines(r)]
     for name, ok in r["targets"].items():

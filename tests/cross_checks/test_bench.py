@@ -132,9 +132,26 @@ def test_the_sweep_is_measured_before_any_engine_adapter_runs_in_the_process(mon
     monkeypatch.setattr(bench, "adapter_single_us", lambda *a, **k: order.append("adapter") or stat)
     monkeypatch.setattr(bench, "drake_single_us", lambda *a, **k: order.append("adapter") or (None, None))
     monkeypatch.setattr(bench, "adapter_batched", lambda *a, **k: order.append("adapter") or stat)
+    monkeypatch.setattr(bench, "overhead_rows", lambda *a, **k: order.append("adapter") or [])
     monkeypatch.setattr(bench, "batching_variants", lambda *a, **k: ["jaxsim:semi_implicit_euler"])
     sweep = {"total_s": stat, "run_s": stat, "floor_s": 1.0}
     monkeypatch.setattr(bench, "sweep_floor", lambda *a, **k: order.append("sweep") or sweep)
     r = bench.run_bench(quick=True, repeats=1)
     assert order[0] == "sweep" and order.count("sweep") == 1 and "adapter" in order
     assert r["sweep"] is sweep and r["targets"]["sweep (run + report) <= 8x its floor"]
+
+
+def test_the_engines_own_time_is_measured_apart_from_rbchecks_and_both_are_printed():
+    """One trajectory through rbcheck: the engine's own time per step (inside its step) and the whole cost
+    per step through rbcheck, engine included; the first never exceeds the second, and the table prints
+    both and their ratio."""
+    rows = bench.overhead_rows(300, 1, variants={"mujoco:euler", "pybullet:multibody"})
+    assert {r["variant"] for r in rows} == {"mujoco:euler", "pybullet:multibody"}
+    for r in rows:
+        assert 0 < r["engine_us_per_step"] <= r["rbcheck_us_per_step"]
+    t = _table_input()
+    t["overhead"] = rows
+    t["batched"] = [{"variant": "mujoco:euler", "engine_body_steps_per_s": 4e6,
+                     "rbcheck_body_steps_per_s": 1e6}]
+    text = bench.format_table(t)
+    assert "mujoco:euler" in text and "through rbcheck" in text and "(0.25 of it)" in text
