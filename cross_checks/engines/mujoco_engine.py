@@ -72,17 +72,21 @@ def integrator_of(variant):
     return getattr(mujoco.mjtIntegrator, f"mjINT_{variant.upper()}")
 
 
-def build_model(scenario, variant: str, dt_s: float):
-    """Compile the scenario's free body for ``variant`` at step ``dt_s``; returns ``mujoco.MjModel``.
+def build_model(scenario, variant: str, dt_s: float, copies: int = 1):
+    """Compile the scenario's free body (``copies`` of it, body k's qpos at 7k, qvel at 6k) for ``variant``
+    at step ``dt_s``; returns ``mujoco.MjModel``. Raises EngineError with MuJoCo's message when the compiler
+    rejects the model (e.g. principal moments violating MuJoCo's own ``A + B >= C`` check)."""
+    return build_world_model([scenario] * copies, variant, dt_s)
 
-    Raises EngineError with MuJoCo's message when the compiler rejects the model (e.g. principal
-    moments violating MuJoCo's own ``A + B >= C`` check).
-    """
+
+def build_world_model(scenarios, variant: str, dt_s: float):
+    """One model of the scenarios' free bodies (body k+1 is scenario k's; they share the first one's
+    gravity): each body moves in it exactly, bit for bit, as alone in a model of its own (MuJoCo steps
+    separate kinematic trees apart; tested)."""
     integrator = integrator_of(variant)
-    body = scenario.problem.body
-    forces = scenario.problem.forces
+    forces = scenarios[0].problem.forces
     spec = mujoco.MjSpec()
-    spec.modelname = f"rbcheck_{scenario.name}"
+    spec.modelname = f"rbcheck_{scenarios[0].name}"
     spec.compiler.alignfree = False        # keep the joint (= qpos) on the body frame, not the inertial frame
     spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
     spec.compiler.balanceinertia = False   # never alter the scenario's inertia silently
@@ -92,8 +96,26 @@ def build_model(scenario, variant: str, dt_s: float):
     spec.option.gravity = np.asarray(forces.gravity_W, dtype=float)
     spec.option.integrator = integrator
     spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_AUTORESET
+    for k, scenario in enumerate(scenarios):
+        _add_body(spec, scenario, "body" if k == 0 else f"body{k}")
+    try:
+        with _LOCK:
+            prev = _clear_force_callbacks()
+            try:
+                return spec.compile()
+            finally:
+                _restore_force_callbacks(prev)
+    except ValueError as exc:
+        names = ", ".join(dict.fromkeys(repr(sc.name) for sc in scenarios))
+        raise EngineError(f"MuJoCo {mujoco.__version__} rejected the model of scenario {names}: "
+                          f"{exc}") from None
+
+
+def _add_body(spec, scenario, name: str) -> None:
+    """The scenario's free body in ``spec``: its joint on the body frame, its mass and inertia as given."""
+    body = scenario.problem.body
     b = spec.worldbody.add_body()
-    b.name = "body"
+    b.name = name
     b.add_freejoint()
     b.explicitinertial = True
     b.ipos = [0.0, 0.0, 0.0]               # explicit: unset (NaN) would let geoms override the inertial
@@ -105,16 +127,6 @@ def build_model(scenario, variant: str, dt_s: float):
         moments, R_BP = body.principal_axes()
         b.iquat = quat_from_matrix(R_BP)   # principal frame P in body coordinates (w x y z)
         b.inertia = moments
-    try:
-        with _LOCK:
-            prev = _clear_force_callbacks()
-            try:
-                return spec.compile()
-            finally:
-                _restore_force_callbacks(prev)
-    except ValueError as exc:
-        raise EngineError(f"MuJoCo {mujoco.__version__} rejected the model of scenario "
-                          f"{scenario.name!r}: {exc}") from None
 
 
 # --- state conversion --------------------------------------------------------------------------------
@@ -246,12 +258,11 @@ def _apply(xfrc, f, tau, weight):
     xfrc[3:6] = tau
 
 
-def _stage_force_writer(scenario, d, xfrc, weight):
-    """Control callback body for MjData ``d`` (the only one Session passes it): forces from the (stage)
-    state in its qpos/qvel into xfrc_applied, as :func:`_apply` writes them, in plain floats (it runs at
-    every RK4 stage)."""
+def _stage_force_writer(scenario, qpos, qvel, xfrc, weight):
+    """Control callback body for one body, whose (stage) state is in the views ``qpos`` (7) and ``qvel`` (6)
+    of the world's MjData: its forces into its row ``xfrc`` of xfrc_applied, as :func:`_apply` writes them,
+    in plain floats (it runs at every RK4 stage)."""
     w0, w1, w2 = (float(c) for c in weight)
-    qpos, qvel = d.qpos, d.qvel   # views of d's arrays, bound once
 
     def control(_m, _d):
         fx, fy, fz, tx, ty, tz = stage_force_torque_floats(scenario, _packed1(qpos, qvel))
@@ -259,9 +270,9 @@ def _stage_force_writer(scenario, d, xfrc, weight):
     return control
 
 
-#: Each thread's compiled models: ``(scenario, build_model, model)`` per scenario (matched by identity), the
-#: last few kept. A world of the same scenario takes that model with its integrator and step set in place (the
-#: same numbers as a fresh compile, tested for every variant).
+#: Each thread's compiled world models: ``(scenarios, build_world_model, model)`` (the scenarios matched by
+#: identity), the last few kept. A world of the same scenarios takes that model with its integrator and step
+#: set in place (the same numbers as a fresh compile, tested for every variant).
 _LAST = threading.local()
 
 
@@ -272,84 +283,93 @@ def _set_variant(m, variant, dt_s):
     return m
 
 
-def _model(scenario, variant, dt_s):
-    """``build_model(scenario, variant, dt_s)``, or the thread's model of that scenario set to them."""
+def _model(scenarios, variant, dt_s):
+    """``build_world_model(scenarios, variant, dt_s)``, or the thread's model of those scenarios set to them
+    (``scenarios``: one scenario, or a list)."""
+    scenarios = list(scenarios) if isinstance(scenarios, (list, tuple)) else [scenarios]
     kept = getattr(_LAST, "models", None)
     if kept is None:
         kept = _LAST.models = []
-    for sc, builder, m in kept:
-        if sc is scenario and builder is build_model:
+    for scs, builder, m in kept:
+        if builder is build_world_model and len(scs) == len(scenarios) and all(
+                a is b for a, b in zip(scs, scenarios)):
             return _set_variant(m, variant, dt_s)
-    m = build_model(scenario, variant, dt_s)
-    kept.append((scenario, build_model, m))
+    m = build_world_model(scenarios, variant, dt_s)
+    kept.append((scenarios, build_world_model, m))
     del kept[:-8]
     return m
 
 
-def _structure(m) -> tuple:
-    """What one MjData needs of the models it serves in a rollout besides their sizes: a free body whose
-    inertial frame is the body frame is "simple" (diagonal mass-matrix storage), a rotated one is not.
-    Across structures rollout silently produces wrong states."""
-    return tuple(int(v) for v in m.body_simple), tuple(int(v) for v in m.dof_simplenum)
+def _body_of_warning(msg: str, n_bodies: int):
+    """``(body, message as a lone body's)`` of a MuJoCo warning that names a DOF ("... in QACC at DOF 9"; a
+    qpos index for QPOS): the body it belongs to and the message with the DOF counted in that body (what the
+    body alone in its model would say); ``(None, msg)`` when it names none."""
+    import re
+    m = re.search(r"(QPOS|QVEL|QACC)? at DOF (\d+)", msg)
+    if m is None or n_bodies == 0:
+        return None, msg
+    width = 7 if m.group(1) == "QPOS" else 6
+    i = int(m.group(2))
+    return min(i // width, n_bodies - 1), msg[:m.start(2)] + str(i % width) + msg[m.end(2):]
 
 
 class MujocoWorld(World):
-    """B free bodies, each its own MjModel (shared by the bodies of one scenario) and MjData, stepped by
-    ``mj_step`` or, with the forces held, by ``mujoco.rollout``. Raw rows: ``[qpos (7), qvel (6)]``, ω in
-    BODY axes. The warning handler (and RK4's stage-force callback) are installed for the world's lifetime
-    (:class:`Session`); a warning is attributed to the body whose step raised it."""
+    """B free bodies in one MjModel (one kinematic tree each) and one MjData, stepped by ``mj_step`` or, with
+    the forces held, by ``mujoco.rollout``. Raw rows: ``[qpos (7), qvel (6)]`` per body, ω in BODY axes. The
+    warning handler (and RK4's stage-force callback) are installed for the world's lifetime
+    (:class:`Session`); a warning is attributed to the body whose DOF it names."""
 
     def __init__(self, requests, variant, dt_s):
         super().__init__()
-        self.models = [_model(r.scenario, variant, dt_s) for r in requests]
-        self.datas = [mujoco.MjData(m) for m in self.models]
-        self.xfrc = [d.xfrc_applied[_BODY] for d in self.datas]
+        self.B = len(requests)
+        self.model = m = _model([r.scenario for r in requests], variant, dt_s)
+        self.data = d = mujoco.MjData(m)
+        self.qpos, self.qvel = d.qpos.reshape(self.B, 7), d.qvel.reshape(self.B, 6)
+        self.xfrc = d.xfrc_applied[1:]
         self.per_stage = forces_per_stage(requests[0].scenario, variant)
         self.n = 0
         self.host_s = 0.0
         control = None
         if self.per_stage:
-            writers = {id(d): _stage_force_writer(r.scenario, d, x, base.weight_W(r.scenario))
-                       for r, d, x in zip(requests, self.datas, self.xfrc)}
+            writers = [_stage_force_writer(r.scenario, self.qpos[k], self.qvel[k], self.xfrc[k],
+                                           base.weight_W(r.scenario)) for k, r in enumerate(requests)]
             perf = time.perf_counter
 
-            def control(m, d):
+            def control(m_, d_):
                 t0 = perf()
-                writers[id(d)](m, d)
+                for w in writers:
+                    w(m_, d_)
                 self.host_s += perf() - t0
-        self.session = Session(None, control).__enter__()
+        self.session = Session(d, control).__enter__()
 
     def set_state(self, y):
         qpos, qvel = to_qpos_qvel(y)
-        for k, d in enumerate(self.datas):
-            d.time = 0.0
-            d.qpos[:] = qpos[k]
-            d.qvel[:] = qvel[k]
+        self.data.time = 0.0
+        self.qpos[:], self.qvel[:] = qpos, qvel
         self.n = 0
 
     def apply(self, f_W, tau_W):
-        for k, x in enumerate(self.xfrc):
-            x[0:3] = f_W[k]
-            x[3:6] = tau_W[k]
+        self.xfrc[:, 0:3] = f_W
+        self.xfrc[:, 3:6] = tau_W
 
     def decay(self, g_v, g_w):
-        for d, gv, gw in zip(self.datas, g_v.tolist(), g_w.tolist()):
-            qv = d.qvel.tolist()
-            d.qvel[:] = (qv[0] * gv, qv[1] * gv, qv[2] * gv, qv[3] * gw, qv[4] * gw, qv[5] * gw)
+        self.qvel[:, 0:3] *= g_v[:, None]
+        self.qvel[:, 3:6] *= g_w[:, None]
 
     def step(self):
         self.n += 1
-        session, step = self.session, mujoco.mj_step
-        for k, (m, d) in enumerate(zip(self.models, self.datas)):
-            seen = len(session.warnings)
-            step(m, d)
-            if session.callback_error is not None:
-                session.raise_callback_error()
-            if len(session.warnings) > seen:
-                self.warnings.append((k, self.n, f"MuJoCo: {session.warnings[seen]}"))
+        session = self.session
+        seen = len(session.warnings)
+        mujoco.mj_step(self.model, self.data)
+        if session.callback_error is not None:
+            session.raise_callback_error()
+        for msg in session.warnings[seen:]:
+            body, words = _body_of_warning(msg, self.B)
+            for k in range(self.B) if body is None else (body,):
+                self.warnings.append((k, self.n, f"MuJoCo: {words}"))
 
     def read(self):
-        return np.array([np.concatenate((d.qpos, d.qvel)) for d in self.datas])
+        return np.concatenate((self.qpos, self.qvel), axis=1)
 
     def packed(self, raw):
         raw = np.asarray(raw, dtype=float)
@@ -359,33 +379,25 @@ class MujocoWorld(World):
         return [packed_floats(r[0:7], r[7:13]) for r in np.asarray(raw).tolist()]
 
     def rollout(self, n_steps):
-        """``n_steps`` steps of every body in ``mujoco.rollout`` (one call per model structure) with the
-        applied forces held; if MuJoCo warned, the steps again one by one (:meth:`step`), which attribute
-        it."""
+        """``n_steps`` steps in ``mujoco.rollout`` with the applied forces held; if MuJoCo warned, the steps
+        again one by one (:meth:`step`), which attribute the warning to its body."""
         from mujoco import rollout
+        m, d = self.model, self.data
         start = self.read()
-        state = np.concatenate([np.zeros((len(start), 1)), start], axis=1)    # [time, qpos, qvel]
-        xfrc = np.zeros((len(start), 1, 12))   # xfrc_applied rows: the world body's (zeros), the free body's
-        for k, x in enumerate(self.xfrc):
-            xfrc[k, 0, 6:12] = x
-        out = np.empty((n_steps, len(start), 13))
-        groups: dict = {}
-        for k, m in enumerate(self.models):
-            groups.setdefault(_structure(m), []).append(k)
+        state = np.concatenate([[0.0], d.qpos, d.qvel])[None]    # [time, qpos, qvel]
+        control = d.xfrc_applied.ravel()[None, None]
         seen = len(self.session.warnings)
-        for idx in groups.values():
-            mods = [self.models[k] for k in idx]
-            states, _ = rollout.rollout(mods, [mujoco.MjData(mods[0])], state[idx], xfrc[idx],
-                                        control_spec=mujoco.mjtState.mjSTATE_XFRC_APPLIED, nstep=n_steps)
-            out[:, idx] = np.moveaxis(states[:, :, 1:14], 1, 0)
+        states, _ = rollout.rollout(m, [mujoco.MjData(m)], state, control,
+                                    control_spec=mujoco.mjtState.mjSTATE_XFRC_APPLIED, nstep=n_steps)
+        out = np.concatenate((states[0, :, 1:1 + m.nq].reshape(n_steps, self.B, 7),
+                              states[0, :, 1 + m.nq:].reshape(n_steps, self.B, 6)), axis=2)
         if len(self.session.warnings) == seen:
             return out
-        self.set_state(self.packed(start))
-        for k, d in enumerate(self.datas):     # exactly the start state, not its round trip through packing
-            d.qpos[:], d.qvel[:] = start[k, 0:7], start[k, 7:13]
-        for n in range(n_steps):
+        self.qpos[:], self.qvel[:] = start[:, 0:7], start[:, 7:13]
+        self.data.time, self.n = 0.0, 0
+        for k in range(n_steps):
             self.step()
-            out[n] = self.read()
+            out[k] = self.read()
         return out
 
     def close(self):
@@ -410,9 +422,9 @@ class MujocoEngine(WorldEngine):
         return MujocoWorld(requests, variant, dt_s)
 
     def group_key(self, request) -> tuple:
-        """One world per step: the bodies of a call's scenarios at one Δt step together (each its own
-        model and data; a body's numbers do not depend on its world)."""
-        return (float(request.dt_s),)
+        """One world per step and gravity (a model has one of each): the bodies of a call's scenarios step
+        together, each exactly as alone."""
+        return (float(request.dt_s), tuple(float(g) for g in request.scenario.problem.forces.gravity_W))
 
     def per_stage(self, scenario, variant):
         return forces_per_stage(scenario, variant)

@@ -246,11 +246,11 @@ def test_runs_of_one_scenario_in_a_row_take_its_model_with_a_new_models_numbers(
     for variant in ("rk4", "euler"):
         me._LAST.models = []
         fresh = me.one_step(sc, variant, 0.004, ys)             # compiled anew
-        model = me._model(sc, variant, 0.004)
+        model = me._model([sc] * len(ys), variant, 0.004)
         me.simulate(sc, "implicit", 0.002, 40)
         me.simulate(other, variant, 0.004, 5)
         assert np.array_equal(me.one_step(sc, variant, 0.004, ys), fresh)
-        assert me._model(sc, variant, 0.004) is model              # the scenario's model, reused
+        assert me._model([sc] * len(ys), variant, 0.004) is model  # the scenario's model, reused
         assert me._model(other, variant, 0.004) is not model       # another scenario: its own
 
 
@@ -308,13 +308,14 @@ def test_members_that_blow_up_diverge_where_simulate_says_and_leave_the_others_a
 def test_a_model_mujoco_rejects_is_that_members_engine_error(monkeypatch):
     from cross_checks.engines.base import EngineError
     scs = _fuzz_cases(3)
-    build = me.build_model
+    add = me._add_body
 
-    def rejecting(scenario, variant, dt_s):
+    def rejecting(spec, scenario, name):
         if scenario is scs[1]:
             raise EngineError("rejected here")
-        return build(scenario, variant, dt_s)
-    monkeypatch.setattr(me, "build_model", rejecting)
+        return add(spec, scenario, name)
+    monkeypatch.setattr(me, "_add_body", rejecting)
+    monkeypatch.setattr(me._LAST, "models", [])
     requests = _ladder_requests(scs, rungs=2)
     got = me.MujocoAdapter().simulate_many("euler", requests)
     for r, run in zip(requests, got):
