@@ -24,7 +24,6 @@ from cross_checks.engines.base import EngineError, Variant
 from cross_checks.engines.step_floats import bad_floats
 from cross_checks.engines.world import World, WorldEngine
 from reference_sim.quaternion import quat_exp, quat_log
-from reference_sim.simulate import Run
 
 dart, _IMPORT_ERROR = base.optional_import("dartpy")
 
@@ -68,8 +67,6 @@ def version() -> str:
     return base.release("dartpy")
 
 
-# --- state conversion (the boundary) --------------------------------------------------------------------
-
 def to_dart_state(y):
     """Packed states (..., 13) ``[x_W, v_W, q_WB (w x y z), ω_W]`` -> DART's FreeJoint ``[r, x_W, ω_W, v_W]``
     (..., 12), ``r`` the rotation vector of q_WB (rad)."""
@@ -82,7 +79,6 @@ def from_dart_state(s):
     ``quat_exp(r)`` (w ≥ 0: see :func:`reference_sim.quaternion.sign_continuous`)."""
     s = np.asarray(s, dtype=float)
     return np.concatenate([s[..., 3:6], s[..., 9:12], quat_exp(s[..., 0:3]), s[..., 6:9]], axis=-1)
-
 
 
 def neutralise(world, joint, node) -> None:
@@ -131,8 +127,7 @@ class DartBody:
                               "is false: a mass or moment that is not positive)")
         node.setInertia(inertia)
         world.addSkeleton(skeleton)
-        # the world's gravity reaches its skeletons
-        world.setGravity(np.asarray(p.forces.gravity_W, dtype=float))
+        world.setGravity(np.asarray(p.forces.gravity_W, dtype=float))   # the world's reaches its skeletons
         world.setTimeStep(float(dt_s))
         neutralise(world, joint, node)
         self.world, self.skeleton, self.joint, self.node = world, skeleton, joint, node
@@ -189,8 +184,8 @@ class DartWorld(World):
 
     def apply(self, f_W, tau_W):
         """A zero wrench of state-independent forces is not set (DART clears them after every step)."""
-        for b, always, f, tau in zip(self.bodies, self.always, f_W, tau_W):
-            if always or f.any() or tau.any():
+        for b, live, always, f, tau in zip(self.bodies, self.live, self.always, f_W, tau_W):
+            if live and (always or f.any() or tau.any()):
                 b.apply(f, tau)
 
     def step(self):
@@ -217,19 +212,5 @@ class DartEngine(WorldEngine):
 
 
 _ENGINE = DartEngine()
-
-
-def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
-    """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state (the host loop's)."""
-    return _ENGINE.simulate(scenario, variant, dt_s, n_steps)
-
-
-def simulate_many(variant: str, requests) -> list:
-    return _ENGINE.simulate_many(variant, requests)
-
-
-def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
-    return _ENGINE.one_step(scenario, variant, dt_s, y_start)
-
-
+simulate, simulate_many, one_step = _ENGINE.simulate, _ENGINE.simulate_many, _ENGINE.one_step
 DartAdapter = DartEngine

@@ -22,50 +22,34 @@ import numpy as np
 from cross_checks.engines import base
 from cross_checks.engines.base import EngineError, Variant, stage_force_torque
 from cross_checks.engines.world import World, WorldEngine
-from reference_sim.simulate import Run
 
-try:  # the module imports without pydrake so the registry can report why it is unavailable
-    import pydrake  # noqa: F401
-    from pydrake.math import RotationMatrix
-    from pydrake.multibody.plant import MultibodyPlant
-    from pydrake.multibody.tree import RotationalInertia, SpatialInertia
-    from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
-    from pydrake.systems.framework import DiagramBuilder, LeafSystem
-except ImportError as _exc:
-    pydrake = None
-    _IMPORT_ERROR = _exc
-else:
-    _IMPORT_ERROR = None
+# imported without pydrake so that the registry can say why it is unavailable; its classes on first use
+pydrake, _IMPORT_ERROR = base.optional_import("pydrake")
 
 __all__ = ["ENGINE", "VARIANTS", "version", "simulate", "simulate_many", "one_step", "DrakeModel",
            "DrakeWorld", "DrakeAdapter", "to_drake_state", "from_drake_state"]
 
 ENGINE = "drake"
-#: variant -> (Drake's integrator name, declared global order, description)
+#: The variants, named after Drake's integrators (``ResetIntegratorFromFlags``), with what each step does
+#: besides its order (cross_checks.engines.base.Traits; docs/engine_conventions.md).
 VARIANTS = {
-    "semi_explicit_euler": ("semi_explicit_euler", 1,
-                            "Drake semi-explicit Euler: v from the start-of-step forces (explicit gyroscopic "
-                            "term), then q from the new v; quaternion integrated linearly, not renormalised"),
-    "runge_kutta2": ("runge_kutta2", 2, "Drake RK2 (explicit trapezoid / Heun), forces at both stages"),
-    "runge_kutta3": ("runge_kutta3", 3, "Drake RK3 (Kutta's third-order scheme), forces at every stage"),
-    "implicit_euler": ("implicit_euler", 1,
-                       "Drake implicit Euler on the whole state (Newton "
-                       "iteration, finite-difference Jacobian)"),
+    "semi_explicit_euler": Variant(1.0, "Drake semi-explicit Euler: v from the start-of-step forces "
+                                        "(explicit gyroscopic term), then q from the new v; quaternion "
+                                        "integrated linearly, not renormalised",
+                                   traits=base.SYMPLECTIC_EULER_EXPLICIT_GYRO),
+    "runge_kutta2": Variant(2.0, "Drake RK2 (explicit trapezoid / Heun), forces at both stages",
+                            traits=base.HIGHER_ORDER),
+    "runge_kutta3": Variant(3.0, "Drake RK3 (Kutta's third-order scheme), forces at every stage",
+                            traits=base.HIGHER_ORDER),
+    "implicit_euler": Variant(1.0, "Drake implicit Euler on the whole state (Newton iteration, "
+                                   "finite-difference Jacobian)", traits=base.WHOLE_STATE_IMPLICIT_EULER),
 }
-
-#: What each step does besides its order (cross_checks.engines.base.Traits; docs/engine_conventions.md).
-TRAITS = {"semi_explicit_euler": base.SYMPLECTIC_EULER_EXPLICIT_GYRO,
-          "implicit_euler": base.WHOLE_STATE_IMPLICIT_EULER, "runge_kutta2": base.HIGHER_ORDER,
-          "runge_kutta3": base.HIGHER_ORDER}
-
 #: The fixed step's maximum is Δt (1 + FIXED_STEP_SLACK): AdvanceTo(k Δt) from (k − 1) Δt is then one
 #: step even where k Δt − (k − 1) Δt exceeds Δt by a rounding.
 FIXED_STEP_SLACK = 1e-9
 #: Accuracy asked of the implicit Euler's Newton iteration (Drake uses the target accuracy to stop it
 #: in fixed-step mode too): far below the scheme's own O(Δt²) local error at every Δt of the catalog.
 NEWTON_ACCURACY = 1e-6
-#: Drake's integrators that iterate (and so take a target accuracy in fixed-step mode).
-_IMPLICIT = ("implicit_euler",)
 
 
 def _require():
@@ -77,8 +61,6 @@ def version() -> str:
     return base.installed_version("drake") or getattr(pydrake, "__version__", "unknown")   # from source
 
 
-# --- state conversion --------------------------------------------------------------------------------
-
 def to_drake_state(y):
     """Packed states (..., 13) ``[x_W, v_W, q_WB, ω_W]`` -> Drake's ``[q_WB, x_W, ω_W, v_W]`` (..., 13)."""
     y = np.asarray(y, dtype=float)
@@ -88,15 +70,15 @@ def to_drake_state(y):
 def from_drake_state(x):
     """Drake's states (..., 13) -> packed (..., 13), the quaternion normalised (Drake's is not unit)."""
     x = np.asarray(x, dtype=float)
-    q = x[..., 0:4]
     with np.errstate(invalid="ignore", divide="ignore"):
-        q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+        q = x[..., 0:4] / np.linalg.norm(x[..., 0:4], axis=-1, keepdims=True)
     return np.concatenate([x[..., 4:7], x[..., 10:13], q, x[..., 7:10]], axis=-1)
 
 
 @functools.lru_cache(maxsize=1)
 def _force_system_class():
     """The LeafSystem class (defined on first use: pydrake may be absent when this module is imported)."""
+    from pydrake.systems.framework import LeafSystem
 
     class StageForces(LeafSystem):
         """Input: the plant's state (13); output: the generalized force ``[τ_W, f_W − m g]`` (6) of the
@@ -105,12 +87,9 @@ def _force_system_class():
 
         def __init__(self, scenario):
             super().__init__()
-            self._scenario = scenario
-            p = scenario.problem
-            self._weight = (p.body.mass_kg * np.asarray(p.forces.gravity_W, dtype=float)).tolist()
+            self._scenario, self._weight, self.host_s = scenario, base.weight_W(scenario).tolist(), 0.0
             self._x = self.DeclareVectorInputPort("state", 13)
             self.DeclareVectorOutputPort("generalized_force", 6, self._calc)
-            self.host_s = 0.0
 
         def _calc(self, context, output):
             # plain floats: this runs at every derivative evaluation (a Newton iteration's Jacobian too)
@@ -121,13 +100,14 @@ def _force_system_class():
             w = self._weight
             output.SetFromVector(np.array([tau[0], tau[1], tau[2], f[0] - w[0], f[1] - w[1], f[2] - w[2]]))
             self.host_s += time.perf_counter() - t0
-
     return StageForces
 
 
 def _spatial_inertia(body):
     """The body's spatial inertia about its origin = COM, in body axes (principal moments rotated by
     R_BP for a full tensor)."""
+    from pydrake.math import RotationMatrix
+    from pydrake.multibody.tree import RotationalInertia, SpatialInertia
     if body.is_diagonal():
         I = RotationalInertia(*np.diag(body.inertia_B))
     else:
@@ -139,23 +119,23 @@ def _spatial_inertia(body):
 class DrakeModel:
     """A scenario's free body in Drake, with a simulator whose integrator is ``integrator`` (a Drake
     integrator name); ``set_state``/``state`` in the packed layout. ``constant_forces``: the scenario's
-    constant forces fixed on the plant here (False: the caller's :meth:`apply`)."""
+    constant forces fixed on the plant here (False: by the caller, :meth:`apply`)."""
 
     def __init__(self, scenario, integrator: str, constant_forces: bool = True):
         _require()
-        p = scenario.problem
-        forces = p.forces
-        plant = MultibodyPlant(0.0)
+        from pydrake.multibody.plant import MultibodyPlant
+        from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
+        from pydrake.systems.framework import DiagramBuilder
+        p, self.plant = scenario.problem, (plant := MultibodyPlant(0.0))
         try:
             self.body = plant.AddRigidBody("body", _spatial_inertia(p.body))
         except RuntimeError as exc:  # Drake's validity checks of the inertia
             raise EngineError(
                 f"Drake {version()} rejected the inertia of scenario {scenario.name!r}: {exc}") from None
-        plant.mutable_gravity_field().set_gravity_vector(np.asarray(forces.gravity_W, dtype=float))
+        plant.mutable_gravity_field().set_gravity_vector(np.asarray(p.forces.gravity_W, dtype=float))
         plant.Finalize()
-        self.plant = plant
-        self.per_stage = bool(forces.state_dependent or forces.has_decay)
-        self.stage_forces = None
+        self.per_stage = bool(p.forces.state_dependent or p.forces.has_decay)
+        system, self.stage_forces = plant, None
         if self.per_stage:
             builder = DiagramBuilder()
             builder.AddSystem(plant)
@@ -163,20 +143,17 @@ class DrakeModel:
             builder.Connect(plant.get_state_output_port(), fs.get_input_port(0))
             builder.Connect(fs.get_output_port(0), plant.get_applied_generalized_force_input_port())
             system = builder.Build()
-        else:
-            system = plant
         self.simulator = Simulator(system)
-        root = self.simulator.get_mutable_context()
-        self.context = plant.GetMyMutableContextFromRoot(root)
-        if constant_forces and not self.per_stage and (forces.point_forces or forces.torques):
+        self.context = plant.GetMyMutableContextFromRoot(self.simulator.get_mutable_context())
+        if constant_forces and not self.per_stage and (p.forces.point_forces or p.forces.torques):
             f, tau = stage_force_torque(scenario, p.initial_packed())     # constant: any state gives the same
             self.apply(f - base.weight_W(scenario), tau)
         self.integrator_name = integrator
         self.integrator = ResetIntegratorFromFlags(self.simulator, integrator, 1.0)
 
     def apply(self, f_W, tau_W) -> None:
-        """The applied generalized force ``[τ_W, f_W]`` (N m, N; world axes, the force at the COM and without
-        the weight, which the plant applies) from now on."""
+        """The applied generalized force ``[τ_W, f_W]`` (N m, N, world axes; the force at the COM without the
+        weight, which the plant applies) from now on."""
         port = self.plant.get_applied_generalized_force_input_port()
         port.FixValue(self.context, np.concatenate([tau_W, f_W]))
 
@@ -184,7 +161,7 @@ class DrakeModel:
         """Fixed-step mode at ``dt_s`` (see FIXED_STEP_SLACK)."""
         self.integrator.set_maximum_step_size(float(dt_s) * (1.0 + FIXED_STEP_SLACK))
         self.integrator.set_fixed_step_mode(True)
-        if self.integrator_name in _IMPLICIT:  # its Newton tolerance (explicit ones refuse any accuracy)
+        if self.integrator_name == "implicit_euler":  # its Newton tolerance (explicit ones refuse any)
             self.integrator.set_target_accuracy(NEWTON_ACCURACY)
 
     def set_state(self, y, t_s: float = 0.0) -> None:
@@ -200,7 +177,7 @@ class DrakeModel:
 
 
 def _model(scenario, variant: str, dt_s: float, constant_forces: bool = True) -> DrakeModel:
-    model = DrakeModel(scenario, VARIANTS[variant][0], constant_forces)
+    model = DrakeModel(scenario, variant, constant_forces)   # the variants are named after the integrators
     model.fixed_step(dt_s)
     return model
 
@@ -215,8 +192,7 @@ class DrakeWorld(World):
     def __init__(self, requests, variant: str, dt_s: float):
         super().__init__()
         self.models = [_model(r.scenario, variant, dt_s, False) for r in requests]
-        self.per_stage = self.models[0].per_stage
-        self.dt_s, self.n, self.failed = dt_s, 0, set()
+        self.per_stage, self.dt_s = self.models[0].per_stage, dt_s
 
     @property
     def host_s(self) -> float:
@@ -228,19 +204,17 @@ class DrakeWorld(World):
         self.n, self.failed, self.last = 0, set(), np.array([m.drake_state() for m in self.models])
 
     def apply(self, f_W, tau_W):
-        """Fixed until changed (a zero wrench leaves the port unconnected)."""
+        """Fixed until fixed again (a zero wrench leaves the port unconnected)."""
         for m, f, tau in zip(self.models, f_W, tau_W):
             if f.any() or tau.any():
                 m.apply(f, tau)
 
     def step(self):
         self.n += 1
-        t = self.n * self.dt_s
         for k, m in enumerate(self.models):
-            if k in self.failed:
-                continue
             try:
-                m.simulator.AdvanceTo(t)
+                if k not in self.failed:
+                    m.simulator.AdvanceTo(self.n * self.dt_s)
             except RuntimeError as exc:
                 words = str(exc).strip().splitlines()
                 self.failed.add(k)
@@ -260,8 +234,7 @@ class DrakeWorld(World):
 class DrakeEngine(WorldEngine):
     """``drake:VARIANT`` — registered under the entry-point group ``rbcheck.engines``."""
 
-    name = ENGINE
-    variants = {v: Variant(float(order), desc, traits=TRAITS[v]) for v, (_, order, desc) in VARIANTS.items()}
+    name, variants = ENGINE, VARIANTS
     distribution, module = "drake", "pydrake"
     keeps_forces = True     # a fixed input port value stays until it is fixed again
     chunk = 256
@@ -274,27 +247,9 @@ class DrakeEngine(WorldEngine):
         return DrakeWorld(requests, variant, dt_s)
 
     def per_stage(self, scenario, variant):
-        forces = scenario.problem.forces
-        return bool(forces.state_dependent or forces.has_decay)
+        return bool(scenario.problem.forces.state_dependent or scenario.problem.forces.has_decay)
 
 
 _ENGINE = DrakeEngine()
-
-
-def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
-    """Free run of ``n_steps`` fixed steps of ``dt_s`` from the scenario's initial state (the host loop's)."""
-    return _ENGINE.simulate(scenario, variant, dt_s, n_steps)
-
-
-def simulate_many(variant: str, requests) -> list:
-    return _ENGINE.simulate_many(variant, requests)
-
-
-def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
-    """One fixed step of ``dt_s`` from each row of ``y_start`` (..., 13), each in a simulator initialised at
-    exactly that state (Drake's integrators keep no history between steps but the implicit Euler's Jacobian,
-    which initialising drops). A row Drake refuses comes back non-finite."""
-    return _ENGINE.one_step(scenario, variant, dt_s, y_start)
-
-
+simulate, simulate_many, one_step = _ENGINE.simulate, _ENGINE.simulate_many, _ENGINE.one_step
 DrakeAdapter = DrakeEngine
