@@ -34,21 +34,16 @@ __all__ = ["ENGINE", "VARIANTS", "JOINT_SETTINGS", "EngineError", "version", "si
 ENGINE = "dart"
 #: DART's one integrator (``World::step``): semi-implicit Euler, first order.
 VARIANTS = {
-    "semi_implicit_euler": Variant(1,
-                                   "DART World::step: semi-implicit Euler, explicit "
-                                   "gyroscopic term (its own articulated-body dynamics), "
-                                   "exponential-map rotation update with the new ω",
-                                   traits=base.SYMPLECTIC_EULER_EXPLICIT_GYRO),
+    "semi_implicit_euler": Variant(1, "DART World::step: semi-implicit Euler, explicit gyroscopic term (its "
+                                      "own articulated-body dynamics), exponential-map rotation update with "
+                                      "the new ω", traits=base.SYMPLECTIC_EULER_EXPLICIT_GYRO),
 }
 
 #: FreeJoint settings every body gets, set explicitly so that no release's default changes the physics:
 #: (dartpy Joint setter, value for each of the 6 DOFs).
 JOINT_SETTINGS = (
-    ("setDampingCoefficient", 0.0),
-    ("setSpringStiffness", 0.0),
-    ("setRestPosition", 0.0),
-    ("setCoulombFriction", 0.0),
-    ("setPositionLowerLimit", -math.inf), ("setPositionUpperLimit", math.inf),
+    ("setDampingCoefficient", 0.0), ("setSpringStiffness", 0.0), ("setRestPosition", 0.0),
+    ("setCoulombFriction", 0.0), ("setPositionLowerLimit", -math.inf), ("setPositionUpperLimit", math.inf),
     ("setVelocityLowerLimit", -math.inf), ("setVelocityUpperLimit", math.inf),
     ("setAccelerationLowerLimit", -math.inf), ("setAccelerationUpperLimit", math.inf),
     ("setForceLowerLimit", -math.inf), ("setForceUpperLimit", math.inf),
@@ -115,9 +110,7 @@ class DartBody:
 
     def __init__(self, scenario, dt_s: float):
         _require()
-        p = scenario.problem
-        body = p.body
-        world = dart.simulation.World()
+        p, body, world = scenario.problem, scenario.problem.body, dart.simulation.World()
         skeleton = dart.dynamics.Skeleton("body")
         joint, node = skeleton.createFreeJointAndBodyNodePair()
         inertia = dart.dynamics.Inertia(float(body.mass_kg), _ZERO3, np.asarray(body.inertia_B, dtype=float))
@@ -198,8 +191,7 @@ class DartEngine(WorldEngine):
     """``dart:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
     (``pip install 'rbcheck[dart]'``)."""
 
-    name = ENGINE
-    variants = VARIANTS
+    name, variants = ENGINE, VARIANTS
     distribution, module, extra = "dartpy", "dartpy", "dart"
     sign_continuity = True
 
