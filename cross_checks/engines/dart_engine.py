@@ -1,16 +1,16 @@
-"""DART (``dartpy``) as an engine adapter (``dart:VARIANT``, float64); the interface is
-cross_checks.engines.base.
+"""DART (``dartpy``) as an engine (``dart:VARIANT``, float64): a world of free bodies for rbcheck's loop
+(cross_checks.engines.world, cross_checks.engines.loop).
 
-One ``World`` per run holding one ``FreeJoint``/``BodyNode`` pair, its inertia ``Inertia(m, com_B = 0, I_B)``
-(body origin = COM, the scenario's tensor as given), neutralised (:data:`JOINT_SETTINGS`, :func:`neutralise`).
-State at the boundary: FreeJoint positions ``[r, x_W]`` (``r`` the rotation vector of R_WB) and velocities
-``[ω_W, v_W]``, both in WORLD axes; the recorded quaternion is sign-continuous from the scenario's initial
-one. The step is ``World::step`` (dart/simulation/World.cpp): semi-implicit Euler, explicit gyroscopic term,
-exponential-map rotation — MuJoCo Euler's scheme, DART's only integrator. Forces: before every step (DART
-clears them) the harness's world force at the COM minus the weight ``m g``, then the world torque
-(``setExtForce`` replaces the whole wrench), from the start-of-step state; the decay before the step
-(base.apply_decay_prestep). Divergence: DART goes on after a blow-up, so the state is checked after every
-step and the first bad one (non-finite or beyond BLOWUP_LIMIT) ends the run.
+Each body alone in a DART ``World`` of its own (:class:`DartBody`): one ``FreeJoint``/``BodyNode`` pair, its
+inertia ``Inertia(m, com_B = 0, I_B)`` (body origin = COM, the scenario's tensor as given), neutralised
+(:data:`JOINT_SETTINGS`, :func:`neutralise`). State at the boundary: FreeJoint positions ``[r, x_W]`` (``r``
+the rotation vector of R_WB) and velocities ``[ω_W, v_W]``, both in WORLD axes; the recorded quaternion is
+sign-continuous from the scenario's initial one, recorded as given (the rotation vector's round trip is not
+exact). The step is ``World::step`` (dart/simulation/World.cpp): semi-implicit Euler, explicit gyroscopic
+term, exponential-map rotation — MuJoCo Euler's scheme, DART's only integrator. Forces: the loop's, set
+before every step (DART clears them): the world force at the COM minus the weight ``m g``, then the world
+torque (``setExtForce`` replaces the whole wrench); the decay by setting the velocities last read, scaled.
+Divergence: the loop's (DART goes on after a blow-up).
 Conventions, defaults neutralised and what pins them: docs/engine_conventions.md, "DART 6.x".
 """
 from __future__ import annotations
@@ -20,35 +20,30 @@ import math
 import numpy as np
 
 from cross_checks.engines import base
-from cross_checks.engines.base import EngineError, ModuleAdapter, Variant
-from cross_checks.engines.step_floats import bad_floats, harness_fn
-from reference_sim.quaternion import quat_exp, quat_log, same_side, sign_continuous
-from reference_sim.simulate import Run, blowup_words, diverged
+from cross_checks.engines.base import EngineError, Variant
+from cross_checks.engines.step_floats import bad_floats
+from cross_checks.engines.world import World, WorldEngine
+from reference_sim.quaternion import quat_exp, quat_log
 
 dart, _IMPORT_ERROR = base.optional_import("dartpy")
 
-__all__ = ["ENGINE", "VARIANTS", "JOINT_SETTINGS", "EngineError", "version", "simulate", "one_step",
-           "DartBody", "DartAdapter", "neutralise", "to_dart_state", "from_dart_state",
-           ]
+__all__ = ["ENGINE", "VARIANTS", "JOINT_SETTINGS", "EngineError", "version", "simulate", "simulate_many",
+           "one_step", "DartBody", "DartWorld", "DartAdapter", "neutralise", "to_dart_state",
+           "from_dart_state"]
 
 ENGINE = "dart"
 #: DART's one integrator (``World::step``): semi-implicit Euler, first order.
 VARIANTS = {
-    "semi_implicit_euler": Variant(1,
-                                   "DART World::step: semi-implicit Euler, explicit "
-                                   "gyroscopic term (its own articulated-body dynamics), "
-                                   "exponential-map rotation update with the new ω",
-                                   traits=base.SYMPLECTIC_EULER_EXPLICIT_GYRO),
+    "semi_implicit_euler": Variant(1, "DART World::step: semi-implicit Euler, explicit gyroscopic term (its "
+                                      "own articulated-body dynamics), exponential-map rotation update with "
+                                      "the new ω", traits=base.SYMPLECTIC_EULER_EXPLICIT_GYRO),
 }
 
 #: FreeJoint settings every body gets, set explicitly so that no release's default changes the physics:
 #: (dartpy Joint setter, value for each of the 6 DOFs).
 JOINT_SETTINGS = (
-    ("setDampingCoefficient", 0.0),
-    ("setSpringStiffness", 0.0),
-    ("setRestPosition", 0.0),
-    ("setCoulombFriction", 0.0),
-    ("setPositionLowerLimit", -math.inf), ("setPositionUpperLimit", math.inf),
+    ("setDampingCoefficient", 0.0), ("setSpringStiffness", 0.0), ("setRestPosition", 0.0),
+    ("setCoulombFriction", 0.0), ("setPositionLowerLimit", -math.inf), ("setPositionUpperLimit", math.inf),
     ("setVelocityLowerLimit", -math.inf), ("setVelocityUpperLimit", math.inf),
     ("setAccelerationLowerLimit", -math.inf), ("setAccelerationUpperLimit", math.inf),
     ("setForceLowerLimit", -math.inf), ("setForceUpperLimit", math.inf),
@@ -67,8 +62,6 @@ def version() -> str:
     return base.release("dartpy")
 
 
-# --- state conversion (the boundary) --------------------------------------------------------------------
-
 def to_dart_state(y):
     """Packed states (..., 13) ``[x_W, v_W, q_WB (w x y z), ω_W]`` -> DART's FreeJoint ``[r, x_W, ω_W, v_W]``
     (..., 12), ``r`` the rotation vector of q_WB (rad)."""
@@ -81,7 +74,6 @@ def from_dart_state(s):
     ``quat_exp(r)`` (w ≥ 0: see :func:`reference_sim.quaternion.sign_continuous`)."""
     s = np.asarray(s, dtype=float)
     return np.concatenate([s[..., 3:6], s[..., 9:12], quat_exp(s[..., 0:3]), s[..., 6:9]], axis=-1)
-
 
 
 def neutralise(world, joint, node) -> None:
@@ -118,9 +110,7 @@ class DartBody:
 
     def __init__(self, scenario, dt_s: float):
         _require()
-        p = scenario.problem
-        body = p.body
-        world = dart.simulation.World()
+        p, body, world = scenario.problem, scenario.problem.body, dart.simulation.World()
         skeleton = dart.dynamics.Skeleton("body")
         joint, node = skeleton.createFreeJointAndBodyNodePair()
         inertia = dart.dynamics.Inertia(float(body.mass_kg), _ZERO3, np.asarray(body.inertia_B, dtype=float))
@@ -130,12 +120,10 @@ class DartBody:
                               "is false: a mass or moment that is not positive)")
         node.setInertia(inertia)
         world.addSkeleton(skeleton)
-        # the world's gravity reaches its skeletons
-        world.setGravity(np.asarray(p.forces.gravity_W, dtype=float))
+        world.setGravity(np.asarray(p.forces.gravity_W, dtype=float))   # the world's reaches its skeletons
         world.setTimeStep(float(dt_s))
         neutralise(world, joint, node)
         self.world, self.skeleton, self.joint, self.node = world, skeleton, joint, node
-        self.weight = (body.mass_kg * np.asarray(p.forces.gravity_W, dtype=float)).tolist()
 
     def set_state(self, y) -> None:
         """Put the body at the packed state ``y`` (13,)."""
@@ -154,81 +142,67 @@ class DartBody:
         self.node.setExtTorque(tau_W, False)
 
 
-def _model(scenario, variant: str, dt_s: float) -> DartBody:
-    base.check_variant(ENGINE, VARIANTS, variant)
-    return DartBody(scenario, dt_s)
+class DartWorld(World):
+    """B bodies, each a :class:`DartBody`, stepped in turn. Raw rows: DART's ``[r, x_W, ω_W, v_W]`` (12). A
+    body whose state blew up is not stepped again (DART would go on, warning on stderr; the loop ends its
+    run)."""
+
+    exact_start = True
+
+    def __init__(self, requests, dt_s: float):
+        super().__init__()
+        self.bodies = [DartBody(r.scenario, dt_s) for r in requests]
+        self.always = [r.scenario.problem.forces.state_dependent for r in requests]
+
+    def set_state(self, y):
+        for b, row in zip(self.bodies, y):
+            b.set_state(row)
+        self.live = [True] * len(self.bodies)
+
+    def read(self):
+        self.last = [b.read() for b in self.bodies]
+        self.live = [not bad_floats(row) for row in self.last]   # DART's |r| ≤ π: the packed state's verdict
+        return self.last
+
+    def packed(self, raw):
+        return from_dart_state(raw)
+
+    def packed_row(self, raw):
+        return [_packed_floats(r) for r in np.asarray(raw).tolist()]
+
+    def decay(self, g_v, g_w):
+        """The velocities last read, scaled (the pose is not set again: its round trip is not exact)."""
+        for b, prev, gv, gw in zip(self.bodies, self.last, g_v.tolist(), g_w.tolist()):
+            b.skeleton.setVelocities(np.array(prev[6:12]) * (gw, gw, gw, gv, gv, gv))
+
+    def apply(self, f_W, tau_W):
+        """A zero wrench of state-independent forces is not set (DART clears them after every step)."""
+        for b, live, always, f, tau in zip(self.bodies, self.live, self.always, f_W, tau_W):
+            if live and (always or f.any() or tau.any()):
+                b.apply(f, tau)
+
+    def step(self):
+        for b, live in zip(self.bodies, self.live):
+            if live:
+                b.world.step()
 
 
-def _recorded(rows, y0, dt_s: float, why: str = "") -> Run:
-    """The Run of DART states ``rows`` (steps 1..n, 12 floats each) after the initial packed state ``y0``:
-    the quaternions continuous from y0's; ``why`` non-empty: the run diverged in step n + 1."""
-    y = np.empty((len(rows) + 1, 13))
-    y[0] = y0
-    if rows:
-        y[1:] = from_dart_state(np.array(rows))
-        y[1:, 6:10] = sign_continuous(y[1:, 6:10], first=y0[6:10])
-    if why:
-        return diverged(y, dt_s, why)
-    return Run(dt_s * np.arange(len(y)), y)
-
-
-def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
-    """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded."""
-    B = _model(scenario, variant, dt_s)
-    y0 = scenario.problem.initial_packed()
-    B.set_state(y0)
-    forces = scenario.problem.forces
-    state_dependent, decay = forces.state_dependent, forces.has_decay
-    harness = harness_fn(scenario, dt_s)
-    gv, gw = (float(g) for g in base.decay_factors(scenario, dt_s))
-    wx, wy, wz = B.weight
-    fx, fy, fz, tx, ty, tz = harness([float(v) for v in y0])
-    f, tau = np.array([fx - wx, fy - wy, fz - wz]), np.array([tx, ty, tz])
-    applies = bool(np.any(f != 0.0) or np.any(tau != 0.0)) or state_dependent
-    step, positions, velocities = B.world.step, B.skeleton.getPositions, B.skeleton.getVelocities
-    set_velocities, apply = B.skeleton.setVelocities, B.apply
-    rows: list = []
-    prev = B.read()
-    for _ in range(n_steps):
-        if state_dependent and rows:
-            fx, fy, fz, tx, ty, tz = harness(_packed_floats(prev))
-            f, tau = np.array([fx - wx, fy - wy, fz - wz]), np.array([tx, ty, tz])
-        if decay:
-            set_velocities(np.array(prev[6:12]) * (gw, gw, gw, gv, gv, gv))
-        if applies:
-            apply(f, tau)
-        step()
-        prev = positions().tolist() + velocities().tolist()
-        if bad_floats(prev):     # DART's state: its packed state's verdict (|r| ≤ π, |q| = 1 never exceed it)
-            return _recorded(rows, y0, dt_s, f" ({blowup_words(prev)})")
-        rows.append(prev)
-    return _recorded(rows, y0, dt_s)
-
-
-@base.on_rows
-def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
-    """One step of ``dt_s`` from each row of ``y_start`` (T, 13): the forces from the row, the pre-step
-    decay, the state set per row. A row whose step blows up comes back as DART left it."""
-    B = _model(scenario, variant, dt_s)
-    y_dec = base.apply_decay_prestep(scenario, y_start, dt_s)
-    harness = harness_fn(scenario, dt_s)
-    wx, wy, wz = B.weight
-    out = np.empty((len(y_start), 12))
-    for i, y in enumerate(y_start.tolist()):
-        fx, fy, fz, tx, ty, tz = harness(y)
-        B.set_state(y_dec[i])
-        B.apply(np.array([fx - wx, fy - wy, fz - wz]), np.array([tx, ty, tz]))
-        B.world.step()
-        out[i] = B.read()
-    y = from_dart_state(out)
-    y[:, 6:10] = same_side(y[:, 6:10], y_start[:, 6:10])
-    return y
-
-
-class DartAdapter(ModuleAdapter):
+class DartEngine(WorldEngine):
     """``dart:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
     (``pip install 'rbcheck[dart]'``)."""
 
-    def engine_files(self) -> list:
-        """dartpy's compiled module (a rebuilt or reinstalled dartpy is a new engine)."""
-        return base.library_files(dart)
+    name, variants = ENGINE, VARIANTS
+    distribution, module, extra = "dartpy", "dartpy", "dart"
+    sign_continuity = True
+
+    def version(self) -> str:
+        return version()
+
+    def build(self, requests, variant, dt_s):
+        _require()
+        return DartWorld(requests, dt_s)
+
+
+_ENGINE = DartEngine()
+simulate, simulate_many, one_step = _ENGINE.simulate, _ENGINE.simulate_many, _ENGINE.one_step
+DartAdapter = DartEngine

@@ -10,7 +10,12 @@ For each world of B bodies (the requests grouped by ``WorldEngine.group_key``), 
 3. the pre-step decay ``v ← γ_v v``, ``ω ← γ_ω ω`` (``World.decay``; docs/semantics.md, "Velocity decay");
 4. ``World.step()``: timed, the engine's own time (``Run.engine_s``); everything else is rbcheck's;
 5. the state read back and recorded; every ``chunk`` steps, a body whose state is non-finite or beyond
-   reference_sim.simulate.BLOWUP_LIMIT, or whose engine warned, ends its run as "diverged at t = …".
+   reference_sim.simulate.BLOWUP_LIMIT, or whose engine warned, ends its run as "diverged at t = …" at the
+   first such step, with the words of what was found in the chunk (or at that step only:
+   ``World.first_cause_only``).
+
+The state recorded at t = 0 is the world's reading of the requested one, or, where the world says its
+round trip is not exact (``World.exact_start``), the requested one itself.
 
 When nothing changes between steps (no state-dependent force, no decay) and the world has a compiled
 ``rollout``, the steps run there in one call. A world that evaluates forces at every stage (``per_stage``)
@@ -138,6 +143,8 @@ def _run_world(engine, variant: str, reqs) -> list:
                                   per_stage)
             engine_s -= float(world.host_s)
             y = _checked(engine, variant, reqs, world.packed(rec), B, "packed states")
+            if world.exact_start:
+                y[0] = y0
     finally:
         world.close()
     if engine.sign_continuity:
@@ -191,7 +198,8 @@ def _steps(engine, variant, reqs, world, harness, rec, n_max, f, tau, ends, stop
 
 def _check(engine, variant, reqs, world, rec, start: int, stop: int, ends, stopped: dict) -> None:
     """Bodies whose recorded states of steps ``start..stop-1`` (within their own runs) blew up, or whose
-    engine warned there, into ``stopped`` as ``(first bad step, words)``."""
+    engine warned there, into ``stopped`` as ``(first bad step, words)``: the words of everything found in
+    the chunk (``World.first_cause_only``: of what was found at that step only)."""
     y = _checked(engine, variant, reqs, world.packed(rec[start:stop]), len(reqs), "states")
     bad = bad_rows(y)
     warned: dict = {}
@@ -209,7 +217,9 @@ def _check(engine, variant, reqs, world, rec, start: int, stop: int, ends, stopp
         if i in warned and warned[i][0] < start + last:
             candidates.append(warned[i])
         if candidates:
-            stopped[i] = (min(c[0] for c in candidates), "; ".join(c[1] for c in sorted(candidates)))
+            first = min(c[0] for c in candidates)
+            stopped[i] = (first, "; ".join(c[1] for c in sorted(candidates)
+                                           if c[0] == first or not world.first_cause_only))
 
 
 def _same_side(y) -> np.ndarray:
@@ -228,7 +238,8 @@ def _same_side(y) -> np.ndarray:
 
 def one_step(engine, scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     """One step of ``dt_s`` from exactly each row of ``y_start`` (..., 13): a world of one body per row, put
-    at the row with its pre-step decay, the harness forces of the row applied, stepped once and read."""
+    at the row with its pre-step decay, the harness forces of the row applied, stepped once and read; a row
+    whose step the engine reported failed (``World.warnings``) comes back non-finite."""
     base.check_variant(engine.name, engine.variants, variant)
     rows = np.asarray(y_start, dtype=float).reshape(-1, 13)
     if len(rows) == 0:
@@ -251,6 +262,8 @@ def one_step(engine, scenario, variant: str, dt_s: float, y_start) -> np.ndarray
             world.step()
             y1 = _checked(engine, variant, reqs, world.packed(np.asarray(world.read(), dtype=float)[None]),
                           len(rows), "states")[0]
+            for i, _, _ in world.warnings:   # a step the engine reported failed has no state
+                y1[i] = np.nan
     finally:
         world.close()
     if engine.sign_continuity:

@@ -26,6 +26,10 @@ The world's contract (states packed as in reference_sim.state: ``[x_W (m), v_W (
 * optional ``per_stage``: True when the world evaluates the harness forces inside the engine's step, at every
   stage (then the loop applies neither forces nor decay), and ``host_s``: the seconds of that evaluation
   spent inside ``step()``, which are rbcheck's, not the engine's;
+* optional ``first_cause_only``: True when a warning in a step after the body's first bad state is a
+  consequence (an engine refusing to step a state that had already blown up), left out of the run's words;
+* optional ``exact_start``: True when ``packed(read())`` after ``set_state(y)`` is not ``y`` bit for bit
+  (e.g. a rotation vector's round trip): the loop then records the requested initial state at t = 0;
 * optional ``close()``.
 
 The contract is tested for every installed engine by tests/cross_checks/engines/test_contract.py; a complete
@@ -42,10 +46,13 @@ __all__ = ["World", "WorldEngine"]
 
 class World:
     """The base of a world (see the module docstring): ``packed`` is the identity, ``decay`` goes through the
-    packed state, and a world has no warnings, no per-stage forces and nothing to close."""
+    packed state, the state recorded at t = 0 is the world's reading, and a world has no warnings, no
+    per-stage forces and nothing to close."""
 
     per_stage = False
     host_s = 0.0
+    exact_start = False
+    first_cause_only = False
 
     def __init__(self):
         self.warnings: list = []

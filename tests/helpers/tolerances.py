@@ -112,9 +112,6 @@ DART_SAME_AS_MUJOCO_EULER = 1e-10
 #: spring_pendulum (ω passes through 0, so many steps turn by < 1e-3 rad): DART vs MuJoCo Euler measured
 #: 1.8e-8 rad/s over 5 s at its dt, 5 decades above that pair's round-off; "differs" means beyond 1e-10.
 DART_TAYLOR_BRANCH_MIN_DIFF = 1e-10
-#: one_step from a recorded state vs the free run's next row: the same DART step from the state through the
-#: boundary conversion (rotation vector -> quaternion -> rotation vector): a few ε of unit-size numbers.
-DART_REPLAY_REL = 1e-13
 #: jaxsim conventions read back through jaxsim's own conversions (Mixed <-> inertial velocities,
 #: the transform of a quaternion): a few roundings of unit-size numbers (measured ≤ 2e-16 on the
 #: tilted body at (1, −2, 0.5) m).

@@ -369,15 +369,6 @@ def test_projectile_is_the_semi_implicit_closed_form():
 
 # --- runs --------------------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("name", ["spring_pendulum", "velocity_decay", "applied_torque"])
-def test_one_step_replays_the_run(name):
-    sc = load_scenario(name)
-    run = de.simulate(sc, VARIANT, 0.01, 20)
-    again = de.one_step(sc, VARIANT, 0.01, run.y[:-1])
-    scale = np.maximum(1.0, np.abs(run.y[1:]))
-    assert np.max(np.abs(again - run.y[1:]) / scale) < tol.DART_REPLAY_REL
-
-
 def test_the_first_row_is_the_scenarios_and_quaternions_stay_continuous_through_pi():
     # w < 0 at t = 0 and a spin of 6 rad: DART's rotation vector wraps at |r| = π (its quaternion flips sign),
     # the recorded quaternion does not
@@ -392,15 +383,16 @@ def test_the_first_row_is_the_scenarios_and_quaternions_stay_continuous_through_
     assert np.max(geodesic_angle(expected, run.y[:, 6:10])) < tol.ADAPTER_SPIN_100_STEPS * 2
 
 
-def test_a_blow_up_is_reported_as_divergence_with_the_rows_before_it():
-    # k/m = 1e6: semi-implicit Euler is unstable for ωΔt > 2; here ωΔt = 10
+def test_a_blown_up_body_is_not_stepped_on_into_darts_warnings(capfd):
+    # k/m = 1e6: semi-implicit Euler is unstable for ωΔt > 2; here ωΔt = 10. DART goes on after a blow-up, to
+    # non-finite states and forces, and warns on stderr at every step; the world leaves the body alone instead
     sc = scenario_from_parts(initial="position = [0.1, 0.0, 0.0]",
                              forces="[[forces.spring]]\nanchor = [0.0, 0.0, 0.0]\nattach = [0.0, 0.0, 0.0]\n"
                                     "stiffness = 1e6\nrest_length = 0.0", dt=0.01, duration=1.0)
-    run = de.simulate(sc, VARIANT, 0.01, 100)
+    run = de.simulate(sc, VARIANT, 0.01, 300)
     assert run.diverged_at_s is not None and 0.0 < run.diverged_at_s < 0.2
     assert run.message == f"diverged at t = {run.diverged_at_s:.6g} s (state beyond 1e+08)"
-    assert len(run.t_s) == round(run.diverged_at_s / 0.01) and np.all(np.abs(run.y) <= 1e8)
+    assert "Warning" not in capfd.readouterr().err
 
 
 def test_the_fast_spin_diverges_where_the_reference_of_the_same_scheme_does():

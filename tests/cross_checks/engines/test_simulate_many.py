@@ -32,7 +32,7 @@ def _simulated(adapter, var, r):
         return exc
 
 
-@pytest.mark.parametrize("engine", ["reference", "mujoco", "pybullet", "drake"])
+@pytest.mark.parametrize("engine", ["reference", "mujoco", "pybullet", "drake", "dart"])
 def test_many_runs_in_one_call_are_simulates_runs_request_by_request(engine):
     variants = [v for v in available_variants() if v.startswith(f"{engine}:")]
     if not variants:
