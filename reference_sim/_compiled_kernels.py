@@ -822,6 +822,19 @@ def run(code, rows, offsets, pos, stop, limit, tol, max_iter, max_torque, sc, I,
 
 
 @njit(**_JIT)
+def force_torque_rows(Y, out, sc, I, J, mg, fW, tW, tB, springs, wp, bp, moments, axes):
+    """Members.force_torque of member i at state ``Y[i]`` (N, 13), the rotation from q/|q|, for every i, into
+    ``out`` (N, 6): force_torque_at's arithmetic (without the stage decay), member by member."""
+    P = (sc, I, J, mg, fW, tW, tB, springs, wp, bp, moments, axes)
+    for i in range(Y.shape[0]):
+        y = Y[i]
+        n = math.sqrt(y[6] * y[6] + y[7] * y[7] + y[8] * y[8] + y[9] * y[9])
+        R = _rot(y[6] / n, y[7] / n, y[8] / n, y[9] / n)
+        fx, fy, fz, tx, ty, tz = _force_torque(i, y, R, P)
+        out[i, 0], out[i, 1], out[i, 2], out[i, 3], out[i, 4], out[i, 5] = fx, fy, fz, tx, ty, tz
+
+
+@njit(**_JIT)
 def force_torque_at(y, stage, sc, I, J, mg, fW, tW, tB, springs, wp, bp, moments, axes):
     """Members.force_torque of member 0 at state ``y`` (13,), the rotation from q/|q|: 6 floats. With
     ``stage``, the decay as forces too: ``−m k_v v`` and ``−k_ω I_W ω`` (``I_W ω = R I_B Rᵀ ω``)."""

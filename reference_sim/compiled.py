@@ -134,6 +134,28 @@ class ForceEvaluator:
         return tuple(float(c) for c in (*f[0], *tau[0]))
 
 
+class ForceRows:
+    """The forces of N bodies (one problem each) at N states at once, for an engine loop stepping them
+    together: the compiled ``Members.force_torque`` of each member (the numbers of :class:`ForceEvaluator`,
+    member by member), or None where numba is missing (:meth:`of`)."""
+
+    def __init__(self, problems, kernel):
+        self.params = parameters(Members.stack(problems), np.ones(len(problems)))
+        self._rows = kernel
+
+    @classmethod
+    def of(cls, problems):
+        k = _kernels()
+        return None if k is None else cls(problems, k.force_torque_rows)
+
+    def force_torque(self, Y) -> np.ndarray:
+        """World force at the COM (N) and world torque (N m) of each body, (N, 6), at states ``Y`` (N, 13)."""
+        Y = np.ascontiguousarray(Y, dtype=np.float64)
+        out = np.empty((len(Y), 6))
+        self._rows(Y, out, *self.params)
+        return out
+
+
 def warm() -> bool:
     """Load (or, the first time on a machine, compile) the compiled loop in this process — before a process
     pool forks, so that every forked worker inherits it. True when the compiled path is available."""
@@ -147,4 +169,5 @@ def warm() -> bool:
     rows[0, 6] = 1.0
     advance("rk4", rows, [0], np.zeros(1, dtype=np.int64), [1], 1e8, parameters(p, [0.01]))  # one signature
     _kernels().force_torque_at(rows[0], True, *parameters(p, [0.01]))
+    _kernels().force_torque_rows(rows[:1], np.empty((1, 6)), *parameters(p, [0.01]))
     return True
