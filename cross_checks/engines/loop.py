@@ -114,7 +114,7 @@ def _run_world(engine, variant: str, reqs) -> list:
     try:
         with np.errstate(all="ignore"):
             world.set_state(y0)
-            raw0 = np.asarray(world.read(), dtype=float)
+            raw0 = np.asarray(world.first(y0), dtype=float)
             rec = np.empty((n_max + 1, *raw0.shape))
             rec[0] = raw0
             per_stage = bool(world.per_stage)
