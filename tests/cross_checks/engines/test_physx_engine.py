@@ -471,6 +471,24 @@ def test_a_blow_up_is_reported_as_divergence_with_the_rows_before_it():
         np.testing.assert_array_equal(other.y, pe.simulate(calm, variant, 0.01, 100).y)
 
 
+def test_a_state_that_goes_non_finite_is_reported_as_such_and_its_body_parked(monkeypatch):
+    # a force beyond float32's range (no scenario file may ask for one: the force model is replaced): PhysX
+    # steps the velocity to inf and the position to inf or NaN without passing 1e8 first; the run ends there
+    # with the words of that state (not of the rest state the body is parked at), the body beside untouched
+    from types import SimpleNamespace
+
+    from cross_checks.engines import base
+    sc, calm = scenario_from_parts(initial="velocity = [1.0, 0.0, 0.0]"), load_scenario("tennis_racket")
+    alone = {v: pe.simulate(calm, v, 0.01, 20).y for v in BOTH}
+    huge = SimpleNamespace(force_torque=lambda y: (1e39, 0.0, 0.0, 0.0, 0.0, 0.0))
+    real = base.float_forces
+    monkeypatch.setattr(base, "float_forces", lambda scenario: huge if scenario is sc else real(scenario))
+    for variant in BOTH:
+        run, other = pe.simulate_many(variant, [RunRequest(sc, 0.01, 20), RunRequest(calm, 0.01, 20)])
+        assert run.message == "diverged at t = 0.01 s (non-finite state)" and len(run.t_s) == 1
+        np.testing.assert_array_equal(other.y, alone[variant])
+
+
 def test_projectile_is_the_semi_implicit_closed_form_to_float32():
     sc = load_scenario("projectile")
     n, h = 100, 0.01
