@@ -140,7 +140,7 @@ class RapierWorld(World):
             qx, qy, qz, qw = rb.rotation.to_tuple()
             x, v, w = rb.translation.to_tuple(), rb.linvel.to_tuple(), rb.angvel.to_tuple()
             rows.append([math.nan] * 13 if k in self.dead else [*x, *v, qw, qx, qy, qz, *w])
-            if k not in self.dead and (self.n == self.ends[k] or bad_floats(rows[-1])):
+            if k not in self.dead and (self.n >= self.ends[k] or bad_floats(rows[-1])):
                 self.dead.add(k)
                 rb.is_enabled = False
         self.last = rows
