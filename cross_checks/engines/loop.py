@@ -123,7 +123,7 @@ def _run_world(engine, variant: str, reqs) -> list:
     try:
         with np.errstate(all="ignore"):
             world.set_state(y0)
-            raw0 = np.asarray(world.read(), dtype=float)
+            raw0 = np.asarray(world.first(y0), dtype=float)
             start = _checked(engine, variant, reqs, world.packed(raw0[None]), B, "first state")
             if not np.all(np.isfinite(start)):
                 raise EngineError(f"{_words(engine, variant, reqs)}: the world returned a non-finite state "

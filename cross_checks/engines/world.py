@@ -15,7 +15,10 @@ The world's contract (states packed as in reference_sim.state: ``[x_W (m), v_W (
   step (the weight already taken off when the engine applies gravity itself).
 * ``step()``: one step of every body. Only this (and ``rollout``) is timed as the engine's own work.
 * ``read()``: the bodies' current states in the engine's own layout (B, R) (a cheap copy), and
-  ``packed(raw)``: such rows (..., B, R) as packed states (..., B, 13) (identity by default).
+  ``packed(raw)``: such rows (..., B, R) as packed states (..., B, 13) (identity by default);
+* optional ``first(y0)``: the raw rows recorded as step 0 after ``set_state(y0)`` (by default what ``read()``
+  gives; a float32 engine gives ``y0`` itself, so that a run starts at the scenario's state exactly and its
+  quaternion sign follows the scenario's);
 * optional ``decay(g_v, g_w)``: scale every body's velocities by (B,) factors before a step (by default the
   packed state is read, scaled and set again);
 * optional ``rollout(n_steps)``: ``n_steps`` steps with the applied forces held, the raw states (n_steps, B,
@@ -68,6 +71,10 @@ class World:
 
     def read(self):   # pragma: no cover
         raise NotImplementedError
+
+    def first(self, y0):
+        """The raw rows (B, R) recorded as step 0 after ``set_state(y0)``: what :meth:`read` gives."""
+        return self.read()
 
     def packed(self, raw) -> np.ndarray:
         return np.asarray(raw, dtype=float)
