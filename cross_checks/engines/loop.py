@@ -85,7 +85,9 @@ def run(engine, variant: str, requests) -> list:
     out: list = [None] * len(requests)
     groups: dict = {}
     for j, r in enumerate(requests):
-        groups.setdefault((engine.group_key(r), engine.per_stage(r.scenario, variant)), []).append(j)
+        # a world has one step (whatever the engine's key) and one way of taking the forces
+        key = (float(r.dt_s), engine.group_key(r), engine.per_stage(r.scenario, variant))
+        groups.setdefault(key, []).append(j)
     for idx in groups.values():
         for j, r in zip(idx, _run_group(engine, variant, [requests[j] for j in idx])):
             out[j] = r

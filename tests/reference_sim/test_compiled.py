@@ -396,3 +396,19 @@ def test_the_compiled_forces_are_the_definitions(monkeypatch):
     for row in y:
         for stage in (False, True):
             assert fast.force_torque(row, stage) == slow.force_torque(row, stage)
+
+
+def test_the_forces_of_many_bodies_at_once_are_each_bodys_own_bit_for_bit():
+    """compiled.ForceRows (one compiled call for N bodies of different problems: padded spring and point
+    arrays) gives each body exactly ForceEvaluator's numbers at its own state."""
+    from cross_checks.scenario import catalog_names, load_scenario
+    from reference_sim.compiled import ForceEvaluator, ForceRows
+    problems = [load_scenario(n).problem for n in catalog_names()]
+    rng = np.random.default_rng(5)
+    Y = np.array([p.initial_packed() for p in problems]) + 0.1 * rng.standard_normal((len(problems), 13))
+    rows = ForceRows.of(problems)
+    if rows is None:
+        pytest.skip("numba is not available here")
+    got = rows.force_torque(Y)
+    want = np.array([ForceEvaluator(p)._evaluate(y, False) for p, y in zip(problems, Y)])
+    assert np.array_equal(got, want)

@@ -1,0 +1,115 @@
+"""The host loop (cross_checks.engines.loop) against worlds that break the contract: a world that raises,
+returns the wrong shape or a non-finite state before any step fails its own runs with an EngineError naming
+the engine and the runs, and every other world's runs are kept; the loop's split of a run's time into the
+engine's and rbcheck's; and the loop's per-step semantics against a readable loop written here."""
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cross_checks.engines import base
+from cross_checks.engines.base import EngineError, RunRequest
+from cross_checks.scenario import load_scenario
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[3] / "examples" / "python_engine"))
+from expmap_engine import ExpmapEngine, ExpmapWorld  # noqa: E402
+
+sys.path.pop(0)
+
+
+class _Faulty(ExpmapWorld):
+    fault = ""
+
+    def read(self):
+        y = super().read()
+        if self.fault == "shape":
+            return y[:, :12]
+        if self.fault == "nan_first":
+            return np.full_like(y, np.nan)
+        return y
+
+    def step(self):
+        if self.fault == "raise":
+            raise RuntimeError("the engine's own words")
+        super().step()
+
+
+class _FaultyEngine(ExpmapEngine):
+    name = "faulty"
+
+    def __init__(self, fault_for):
+        self.fault_for = fault_for     # scenario name -> fault
+
+    def group_key(self, request):
+        return (request.scenario.name,)   # one world per scenario: a fault stays in its world
+
+    def build(self, requests, variant, dt_s):
+        w = _Faulty(requests, dt_s)
+        w.fault = self.fault_for.get(requests[0].scenario.name, "")
+        return w
+
+
+@pytest.mark.parametrize("fault, words", [("raise", "RuntimeError: the engine's own words"),
+                                          ("shape", "has shape"),
+                                          ("nan_first", "non-finite state before any step")])
+def test_a_broken_world_fails_its_runs_and_keeps_every_other(fault, words):
+    good, bad = load_scenario("projectile"), load_scenario("tennis_racket")
+    engine = _FaultyEngine({"tennis_racket": fault})
+    reqs = [RunRequest(good, good.dt_s, 20), RunRequest(bad, bad.dt_s, 20),
+            RunRequest(good, good.dt_s / 2, 20)]
+    runs = engine.simulate_many("euler", reqs)
+    assert isinstance(runs[1], EngineError) and words in str(runs[1])
+    assert "faulty:euler on tennis_racket" in str(runs[1]) or fault == "nan_first"
+    clean = ExpmapEngine().simulate_many("euler", [reqs[0], reqs[2]])
+    for got, want in zip((runs[0], runs[2]), clean):
+        assert not isinstance(got, EngineError) and np.array_equal(got.y, want.y)
+
+
+def test_the_engines_time_is_the_time_inside_its_steps():
+    """A world whose step sleeps: the run's engine_s holds the sleeps (and only a little more), host_s the
+    rest; neither is negative."""
+    import time
+
+    class Slow(ExpmapWorld):
+        def step(self):
+            time.sleep(0.002)
+            super().step()
+
+    class SlowEngine(ExpmapEngine):
+        def build(self, requests, variant, dt_s):
+            return Slow(requests, dt_s)
+
+    sc = load_scenario("projectile")
+    run = SlowEngine().simulate(sc, "euler", sc.dt_s, 20)
+    assert 20 * 0.002 <= run.engine_s and run.host_s >= 0.0
+    assert run.engine_s > 10 * run.host_s   # the loop's own work is far below 2 ms a step
+
+
+def _readable_loop(sc, dt, n):
+    """The loop's semantics written out for one body of the example engine: forces from the start of each
+    step (the requested state at step 1), the weight taken off, the pre-step decay, one step, read."""
+    w = ExpmapWorld([RunRequest(sc, dt, n)], dt)
+    y0 = sc.problem.initial_packed()
+    w.set_state(y0[None])
+    ys, y = [w.read()[0]], y0
+    g_v, g_w = base.decay_factors(sc, dt)
+    for k in range(n):
+        f, tau = base.harness_force_torque(sc, y if k else y0, dt)
+        if sc.problem.forces.has_decay:
+            yd = w.read()[0].copy()
+            yd[3:6] *= g_v
+            yd[10:13] *= g_w
+            w.set_state(yd[None])
+        w.apply((f - base.weight_W(sc))[None], tau[None])
+        w.step()
+        y = w.read()[0]
+        ys.append(y)
+    return np.array(ys)
+
+
+@pytest.mark.parametrize("name", ["spring_pendulum", "velocity_decay", "linear_drag", "tennis_racket"])
+def test_the_loop_is_the_readable_loop_bit_for_bit(name):
+    sc = load_scenario(name)
+    run = ExpmapEngine().simulate(sc, "euler", sc.dt_s, 50)
+    assert np.array_equal(run.y, _readable_loop(sc, sc.dt_s, 50))
