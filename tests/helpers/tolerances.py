@@ -61,7 +61,8 @@ CONTRACT_ONE_STEP_EPS = 64
 #: The World API's example engine (SciPy rotations, NumPy solve) against reference:expmap_gyro, the scheme it
 #: implements, relative to max(1, |state|): the same arithmetic in another order, ε per rounding over ≤ 1e4
 #: steps of a motion that amplifies little (measured 1.2e-13 on tennis_racket's 1e4 steps): 1e-10. A
-#: first-order difference of scheme (another gyroscopic step, the attitude update on the other side) is ≥ 1e-4.
+#: first-order difference of scheme (another gyroscopic step, the attitude update on the other side) is
+#: ≥ 1e-4.
 EXAMPLE_ENGINE_VS_ITS_SCHEME = 1e-10
 #: one_step from a recorded state against the recorded next state: CONTRACT_ONE_STEP_EPS, and an implicit
 #: step's Newton iterations, each rounding (Drake's implicit Euler: measured 127 ε on spring_pendulum): 256 ε.
