@@ -70,8 +70,8 @@ stiffness = 2500.0
 rest_length = 0.0
 """
 VARIANTS = ["reference:course", "reference:rk4", "reference:explicit_euler", "mujoco:euler"]
-PAGES = ["index.html", "ranking.html", "integrators.html", "scenario-spin_only.html", "scenario-drop_once.html",
-         "scenario-stiff_spring.html"]
+PAGES = ["index.html", "ranking.html", "integrators.html", "scenario-spin_only.html",
+         "scenario-drop_once.html", "scenario-stiff_spring.html"]
 
 
 def _browser_sweep(folder):
@@ -289,7 +289,8 @@ def test_a_turning_scenario_shows_its_polhode_and_the_body_moving(results, brows
     import time
     r = browser.load(_url(results, "scenario-spin_only.html"), width=width)
     assert r["errors"] == [] and r["broken"] == [] and r["overflow_px"] <= 0
-    img = browser.evaluate("""(() => { const i = document.querySelector('img[src="plots/spin_only__polhode.png"]');
+    img = browser.evaluate("""(() => {
+        const i = document.querySelector('img[src="plots/spin_only__polhode.png"]');
         return i ? [i.naturalWidth, i.getBoundingClientRect().width] : null; })()""")
     assert img is not None and img[0] > 1000 and 0 < img[1] <= width
     runs = browser.evaluate("[...document.querySelectorAll('#anim-panels canvas')].map(c => c.dataset.run)")
@@ -305,7 +306,8 @@ def test_a_turning_scenario_shows_its_polhode_and_the_body_moving(results, brows
         s.dispatchEvent(new Event('input')); })()""")
     assert browser.evaluate("document.getElementById('anim-time').textContent") == "t = 0.000 s"
     other = browser.evaluate("""(() => { const c = [...document.querySelectorAll('input.anim-pick')]
-        .find(c => !c.checked); c.checked = true; c.dispatchEvent(new Event('change')); return c.value; })()""")
+        .find(c => !c.checked); c.checked = true; c.dispatchEvent(new Event('change'));
+        return c.value; })()""")
     runs = browser.evaluate("[...document.querySelectorAll('#anim-panels canvas')].map(c => c.dataset.run)")
     assert other in runs and len(runs) == 3
     assert _canvas_ink(browser, 2)[0] > 1500

@@ -125,7 +125,8 @@ def test_the_series_for_the_report():
     problem, t, y = _closed_form_run([0.3, 1.0, 0.2], n=1001)
     s = drift_series(problem, t, y, 100)
     assert set(s) == {"t_s", "energy_rel", "momentum_rel", "direction_rad", "separatrix", "L_B"}
-    assert all(a.shape == ((100, 3) if k == "L_B" else (100,)) and a.dtype == np.float32 for k, a in s.items())
+    assert all(a.shape == ((100, 3) if k == "L_B" else (100,)) and a.dtype == np.float32
+               for k, a in s.items())
     assert np.max(np.abs(s["energy_rel"])) < 1e-6 and s["t_s"][-1] == np.float32(t[-1])
     # the polhode's body-axes L: I_B ω_B of the decimated states, with the world |L| and the energy
     from cross_checks.core.quantities import decimation_indices
