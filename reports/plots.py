@@ -1135,7 +1135,7 @@ def figure_tasks(res, sc) -> list:
 
 #: Relative drawing cost of one panel of each kind (CPU time per panel, trajectories = 1).
 _PANEL_COST = {"convergence": 1.9, "local": 1.9, "trajectories": 1.0,
-               "errors": 1.0, "conservation": 1.0, "work": 1.8, "polhode": 0.6}
+               "errors": 1.0, "conservation": 1.0, "work": 1.8, "polhode": 3.0}
 
 
 def relative_cost(res, sc, kind) -> float:

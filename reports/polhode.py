@@ -173,24 +173,46 @@ def _split(P, view=VIEW) -> tuple:
     return front, back
 
 
+def _line(ax, x, y, **style):
+    """One Line2D added to ``ax`` as it is (no autoscaling: the panels have fixed limits)."""
+    from matplotlib.lines import Line2D
+    return ax.add_line(Line2D(np.asarray(x, dtype=float), np.asarray(y, dtype=float), **style))
+
+
+def _joined(parts) -> np.ndarray:
+    """(n, 2) arrays joined into one, NaN rows between them: one artist for many curves."""
+    gap = np.full((1, 2), np.nan)
+    return np.concatenate([x for p in parts for x in (p, gap)]) if parts else np.zeros((0, 2))
+
+
+_CURVE_STYLE = {"own": ("#222222", 1.3, "-"), "separatrix": ("#7f7f7f", 1.0, "--"),
+                "other": ("#b0b0b0", 0.7, "-")}
+
+
 def _sphere(ax, curves, moments, axis_labels=True, fontsize=7.5) -> None:
-    """The unit sphere's outline, the polhodes (back half faint) and the principal axes."""
+    """The unit sphere's outline, the polhodes (back half faint) and the principal axes; one artist per kind
+    of curve and side (the report draws many panels)."""
+    from reports.plots import _DataStamps
     t = np.linspace(0, 2 * math.pi, 181)
-    ax.plot(np.cos(t), np.sin(t), color="#888888", lw=0.8)
-    for kind, c in curves:
-        f, b = _split(c)
-        style = {"own": ("#222222", 1.3, "-"), "separatrix": ("#7f7f7f", 1.0, "--"),
-                 "other": ("#b0b0b0", 0.7, "-")}[kind]
-        ax.plot(f[:, 0], f[:, 1], color=style[0], lw=style[1], ls=style[2], zorder=1.5)
-        ax.plot(b[:, 0], b[:, 1], color=style[0], lw=style[1] * 0.8, ls=":", alpha=0.45, zorder=1.2)
+    _line(ax, np.cos(t), np.sin(t), color="#888888", lw=0.8)
+    for kind, (colour, lw, ls) in _CURVE_STYLE.items():
+        sides = [_split(c) for k, c in curves if k == kind]
+        if not sides:
+            continue
+        f, b = _joined([f for f, _ in sides]), _joined([b for _, b in sides])
+        _line(ax, f[:, 0], f[:, 1], color=colour, lw=lw, ls=ls, zorder=1.5)
+        _line(ax, b[:, 0], b[:, 1], color=colour, lw=lw * 0.8, ls=":", alpha=0.45, zorder=1.2)
+    labels = []
     for i in range(3):
         e = np.zeros((2, 3))
         e[1, i] = 1.18
         x, y, d = project(e)
-        ax.plot(x, y, color=_AXIS_COLOURS[i], lw=1.0, alpha=0.9 if d[1] >= 0 else 0.45, zorder=1.1)
+        _line(ax, x, y, color=_AXIS_COLOURS[i], lw=1.0, alpha=0.9 if d[1] >= 0 else 0.45, zorder=1.1)
         if axis_labels:
-            ax.text(x[1] * 1.06, y[1] * 1.06, f"e{i + 1}", color=_AXIS_COLOURS[i], fontsize=fontsize,
-                    ha="center", va="center")
+            labels.append((x[1] * 1.07, y[1] * 1.07, f"e{i + 1}", fontsize,
+                           {"ha": "center", "va": "center", "color": _AXIS_COLOURS[i]}))
+    if labels:
+        ax.add_artist(_DataStamps(labels))
     ax.set_xlim(-1.3, 1.3)
     ax.set_ylim(-1.3, 1.3)
     ax.set_aspect("equal")
@@ -200,9 +222,9 @@ def _sphere(ax, curves, moments, axis_labels=True, fontsize=7.5) -> None:
 def _path(ax, P, gid, color, ls="-", lw=1.2, alpha=1.0, zorder=2.0, key=None) -> None:
     """A 3-D path (unit sphere = |L₀|) drawn front solid, back faint; its points kept in PATHS[key, gid]."""
     f, b = _split(P)
-    ax.plot(f[:, 0], f[:, 1], color=color, ls=ls, lw=lw, alpha=alpha, zorder=zorder, gid=gid)
-    ax.plot(b[:, 0], b[:, 1], color=color, ls=ls, lw=lw * 0.8, alpha=alpha * 0.35, zorder=zorder - 0.5,
-            gid=gid + " (back)")
+    _line(ax, f[:, 0], f[:, 1], color=color, ls=ls, lw=lw, alpha=alpha, zorder=zorder, gid=gid)
+    _line(ax, b[:, 0], b[:, 1], color=color, ls=ls, lw=lw * 0.8, alpha=alpha * 0.35, zorder=zorder - 0.5,
+          gid=gid + " (back)")
     if key is not None:
         PATHS[(key, gid)] = np.asarray(P, dtype=float)
 
@@ -213,8 +235,8 @@ def _start_end(ax, P, color) -> None:
         return
     for k, marker in ((ok[0], "o"), (ok[-1], "s")):
         x, y, d = project(P[[k]])
-        ax.plot(x, y, marker=marker, ms=4.5, color=color, mec="black", mew=0.6, ls="none", zorder=3,
-                alpha=1.0 if d[0] >= 0 else 0.5)
+        _line(ax, x, y, marker=marker, ms=4.5, color=color, mec="black", mew=0.6, ls="none", zorder=3,
+              alpha=1.0 if d[0] >= 0 else 0.5)
 
 
 def rotating(L_P_ref) -> bool:
@@ -243,11 +265,12 @@ def polhode_panel(ax, moments, paths, torque_free: bool, title: str = "", key=No
             still.append((gid, P, st.get("color", "black")))
     for k, (gid, P, colour) in enumerate(still):   # a path that sits still is a point: say so beside it
         x, y, _ = project(P[[0]])
-        ax.plot(x, y, marker="*", ms=11, color=colour, mec="black", mew=0.7, ls="none", zorder=3.5)
+        _line(ax, x, y, marker="*", ms=11, color=colour, mec="black", mew=0.7, ls="none", zorder=3.5)
         ax.annotate(f"★ {gid.split(':', 1)[-1]}: fixed", (x[0], y[0]), xytext=(-4, -13 - 10 * k),
                     textcoords="offset points", ha="right", fontsize=7, color="black", zorder=3.5)
     if title:
-        ax.set_title(title, fontsize=9)
+        from reports.plots import _DataStamps
+        ax.add_artist(_DataStamps([(0.0, 1.36, title, 9, {"ha": "center", "va": "baseline"})]))
 
 
 # --- the scenario page --------------------------------------------------------------------------------
@@ -297,7 +320,7 @@ def fig_polhode(res, sc, styles, path) -> bool:
 def polhode_figure(res, sc, styles):
     """The scenario's polhode figure: the reference alone, then one panel per engine family (its variants in
     their styles over the reference's path in thick grey); None (a note instead) when nothing rotates."""
-    from reports.plots import MAX_COLUMNS, NOTES, REPORT_DPI, families
+    from reports.plots import MAX_COLUMNS, NOTES, REPORT_DPI, _figure_legend, families, legend_entries
     info = res.scenario(sc)
     paths = scenario_paths(res, sc)
     if not paths:
@@ -318,19 +341,17 @@ def polhode_figure(res, sc, styles):
     rows = math.ceil(n / cols)
     w_in = 13.0
     cell = w_in / cols
-    lines = [0] + [math.ceil(len(vs) / _legend_columns(vs)) for vs in fams.values()]
-    legend_in = [0.1 + 0.125 * max(lines[r * cols:(r + 1) * cols]) for r in range(rows)]
-    title_in, head_in = 0.55, 0.3
-    h_in = title_in + sum(cell + head_in + lg for lg in legend_in)
-    fig = Figure(figsize=(w_in, h_in), dpi=REPORT_DPI)
+    fig = Figure(figsize=(w_in, 4.0), dpi=REPORT_DPI)
     FigureCanvasAgg(fig)
+    leg_in = _figure_legend(fig, w_in, legend_entries(fams, styles, markers=False))   # the report's legends
+    title_in, head_in = 0.5, 0.3
+    h_in = title_in + rows * (cell + head_in) + leg_in + 0.15
+    fig.set_size_inches(w_in, h_in)
     axes = np.empty((rows, cols), dtype=object)
-    y = h_in - title_in
     for r in range(rows):
-        y -= head_in + cell
+        y = h_in - title_in - (r + 1) * (cell + head_in) + 0.05
         for c in range(cols):
             axes[r, c] = fig.add_axes(((c * cell + 0.05) / w_in, y / h_in, (cell - 0.1) / w_in, cell / h_in))
-        y -= legend_in[r]
     key = ("scenario", sc)
     grey = {"color": "#000000", "lw": 3.0, "alpha": 0.22, "ends": False, "zorder": 1.8}
     polhode_panel(axes.flat[0], moments, [("reference", ref, {"color": "#333333", "lw": 1.4})], free,
@@ -338,7 +359,6 @@ def polhode_figure(res, sc, styles):
     for ax, (fam, vs) in zip(axes.flat[1:], fams.items()):
         polhode_panel(ax, moments, [("reference", ref, grey)]
                       + [(v, paths[v], {**styles[v], "lw": 1.1}) for v in vs], free, fam, key=key)
-        _family_legend(ax, vs, styles)
     for ax in axes.flat[n:]:
         ax.set_axis_off()
     what = ("L in the principal axes on the sphere |L| = |L₀| with the polhodes for the reference's E and |L|"
@@ -347,19 +367,6 @@ def polhode_figure(res, sc, styles):
     fig.suptitle(f"{sc}: polhode at Δt = {info['dt_s']:g} s: {what}", x=0.01, ha="left", fontsize=10)
     NOTES[(sc, "polhode")] = _note(paths, res, sc, free)
     return fig
-
-
-def _legend_columns(vs) -> int:
-    return 2 if max(len(v.split(":", 1)[-1]) for v in vs) <= 17 else 1
-
-
-def _family_legend(ax, vs, styles) -> None:
-    from matplotlib.lines import Line2D
-    handles = [Line2D([], [], color=styles[v]["color"], ls=styles[v]["ls"], lw=1.2,
-                      label=v.split(":", 1)[-1]) for v in vs]
-    ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, 0.0), fontsize=7,
-              ncol=_legend_columns(vs),
-              frameon=False, handlelength=2.2, columnspacing=0.8, labelspacing=0.15, borderaxespad=0.1)
 
 
 def spread_rad(L_P) -> float:
