@@ -355,7 +355,7 @@ def polhode_figure(res, sc, styles):
     key = ("scenario", sc)
     grey = {"color": "#000000", "lw": 3.0, "alpha": 0.22, "ends": False, "zorder": 1.8}
     polhode_panel(axes.flat[0], moments, [("reference", ref, {"color": "#333333", "lw": 1.4})], free,
-                  f"reference ({info['reference']})", key=key)
+                  f"reference solution ({info['reference'].split(' (')[0]})", key=key)
     for ax, (fam, vs) in zip(axes.flat[1:], fams.items()):
         polhode_panel(ax, moments, [("reference", ref, grey)]
                       + [(v, paths[v], {**styles[v], "lw": 1.1}) for v in vs], free, fam, key=key)
