@@ -1,7 +1,7 @@
 // The body moving (reports/animation.py, report_animation): a box with the body's principal moments and its
 // principal axes, turned by each run's quaternions, drawn on a canvas per run the reader picks (the
 // reference first; each variant over the reference's box drawn faint and dashed). Data: the page's
-// <script id="anim-data"> (int16 base64), so the page works offline and self-contained.
+// JSON element #anim-data (int16 base64), so the page works offline and self-contained.
 (function () {
   "use strict";
   var el = document.getElementById("anim-data");
