@@ -111,7 +111,7 @@ def orientation_error_rad(q, q_ref) -> np.ndarray:
 
 
 def _camera():
-    from reports.polhode import _camera as cam
+    from reports.polhode import camera as cam
     return cam(CAMERA)
 
 
@@ -271,7 +271,7 @@ def report_animation(res, sc, styles) -> dict | None:
     box, the frame times (≤ REPORT_FRAMES, uniform in time), and per run (the reference, every variant with
     a saved series) its quaternions at those times (int16 × 32767, base64; a run that diverged stops at
     its divergence), its orientation error (degrees × 100) and its colour; the sampling in words."""
-    from reports.plots import _diverged
+    from reports.plots import diverged_at
     info = res.scenario(sc)
     ser = res.series(sc)
     ref = ser.get("reference")
@@ -296,7 +296,7 @@ def report_animation(res, sc, styles) -> dict | None:
             continue
         tv = np.asarray(f["t_s"], dtype=float)
         ok = np.all(np.isfinite(f["q_WB"]), axis=1)
-        tdiv = _diverged(res, sc, v)
+        tdiv = diverged_at(res, sc, v)
         if tdiv is not None:
             ok &= tv <= tdiv
         if ok.sum() < 2:

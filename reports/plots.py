@@ -12,7 +12,8 @@ Figures (``plots/<scenario>__<kind>.png``):
 ``convergence``    final error vs Δt (log-log) with the fitted points and slope triangles (ladders only)
 ``local``          one-step (local) error vs Δt (log-log), same layout (ladders only)
 ``work``           work-precision: final error vs wall time, every variant on one axis (ladders only)
-``polhode``        L in the principal axes on the sphere |L| = const with the polhodes (reports.polhode)
+
+(The polhode figure, ``plots/<scenario>__polhode.png``, is reports.polhode's: it draws with these styles.)
 
 ``figure_tasks(res, sc)`` lists the figures a scenario has (so they can be drawn in parallel);
 ``draw(res, sc, kind, path)`` draws one and returns whether it carried anything.
@@ -44,9 +45,10 @@ from reports.data import LABELS
 from reports.glance import families, order_text
 
 __all__ = ["KINDS", "figure_tasks", "draw", "families", "variant_styles", "NOTES", "save_png",
-           "prepare", "release"]
+           "prepare", "release", "DataStamps", "figure_legend", "diverged_at", "legend_entries",
+           "figure_name", "relative_cost", "MAX_COLUMNS", "REPORT_DPI"]
 
-KINDS = ("trajectories", "errors", "conservation", "convergence", "local", "work", "polhode")
+KINDS = ("trajectories", "errors", "conservation", "convergence", "local", "work")
 DPI = 100            # rbcheck check --plot (reports.check_plot)
 REPORT_DPI = 90      # the report's figures: up to 13 in wide, 1170 px, fits a 1400 px page without scaling
 #: Errors of exactly zero cannot be drawn on a log axis; they are drawn at this value (and said so).
@@ -1112,15 +1114,16 @@ def fig_work(res, sc, styles, path):
     return True
 
 
+#: What other figure modules of the report (reports.polhode, reports.animation) draw with, to look the same:
+#: text stamps at data coordinates, the legends under the panels, the time a run diverged.
+DataStamps = _DataStamps
+figure_legend = _figure_legend
+diverged_at = _diverged
+
+
 _DRAW = {"trajectories": fig_trajectories, "errors": fig_errors, "conservation": fig_conservation,
          "convergence": lambda r, s, st, p: fig_ladder(r, s, st, p, "free_running"),
-         "local": lambda r, s, st, p: fig_ladder(r, s, st, p, "one_step"), "work": fig_work,
-         "polhode": lambda r, s, st, p: _polhode(r, s, st, p)}
-
-
-def _polhode(res, sc, styles, path):
-    from reports.polhode import fig_polhode  # its own module; it draws with this module's styles
-    return fig_polhode(res, sc, styles, path)
+         "local": lambda r, s, st, p: fig_ladder(r, s, st, p, "one_step"), "work": fig_work}
 
 
 def figure_name(sc, kind) -> str:
@@ -1135,7 +1138,7 @@ def figure_tasks(res, sc) -> list:
 
 #: Relative drawing cost of one panel of each kind (CPU time per panel, trajectories = 1).
 _PANEL_COST = {"convergence": 1.9, "local": 1.9, "trajectories": 1.0,
-               "errors": 1.0, "conservation": 1.0, "work": 1.8, "polhode": 3.0}
+               "errors": 1.0, "conservation": 1.0, "work": 1.8}
 
 
 def relative_cost(res, sc, kind) -> float:
@@ -1145,8 +1148,8 @@ def relative_cost(res, sc, kind) -> float:
     varies = {q: info.get("varies", {}).get(q, True) for q in QUANTITIES}
     n_fam = len(families(res.variants))
     rows = {"trajectories": 3 * varies["position"] + 4 * varies["orientation"], "work": 2 / max(n_fam, 1),
-            "conservation": sum(bool(c.get("conserved")) for c in info.get("conserved", {}).values()),
-            "polhode": 1.0 if varies["orientation"] else 0.1}.get(kind, sum(varies.values()))
+            "conservation": sum(bool(c.get("conserved")) for c in info.get("conserved", {}).values())
+            }.get(kind, sum(varies.values()))
     return _PANEL_COST[kind] * max(rows, 1) * n_fam * (1 + 0.1 * len(res.variants))
 
 

@@ -26,7 +26,8 @@ from reference_sim.quaternion import matrix_from_quat
 
 __all__ = ["principal_frame", "momentum_principal", "body_to_principal", "polhode_curves", "project",
            "polhode_panel", "fig_polhode", "polhode_figure", "spread_rad", "fig_long_polhode",
-           "long_run_columns", "rotating", "PATHS", "VIEW"]
+           "long_run_columns", "rotating", "PATHS", "VIEW", "KIND", "draw", "camera",
+           "relative_cost"]
 
 #: The viewing direction of every polhode panel (elevation, azimuth, degrees): from above the major axis e₃,
 #: tilted towards e₁, so that the intermediate axis ±e₂ sits near the outline and a flip +e₂ → −e₂ crosses
@@ -150,7 +151,7 @@ def _level_curve(moments, D, n, through=None):
     return np.vstack([loops[0], gap, loops[1]])
 
 
-def _camera(view=VIEW):
+def camera(view=VIEW):
     el, az = (math.radians(v) for v in view)
     right = np.array([-math.sin(az), math.cos(az), 0.0])
     up = np.array([-math.sin(el) * math.cos(az), -math.sin(el) * math.sin(az), math.cos(el)])
@@ -160,7 +161,7 @@ def _camera(view=VIEW):
 
 def project(P, view=VIEW) -> tuple:
     """Orthographic projection of 3-D points ``P`` (n, 3): ``(x, y, depth)``, depth > 0 towards the viewer."""
-    right, up, toward = _camera(view)
+    right, up, toward = camera(view)
     P = np.asarray(P, dtype=float)
     return P @ right, P @ up, P @ toward
 
@@ -192,7 +193,7 @@ _CURVE_STYLE = {"own": ("#222222", 1.3, "-"), "separatrix": ("#7f7f7f", 1.0, "--
 def _sphere(ax, curves, moments, axis_labels=True, fontsize=7.5) -> None:
     """The unit sphere's outline, the polhodes (back half faint) and the principal axes; one artist per kind
     of curve and side (the report draws many panels)."""
-    from reports.plots import _DataStamps
+    from reports.plots import DataStamps
     t = np.linspace(0, 2 * math.pi, 181)
     _line(ax, np.cos(t), np.sin(t), color="#888888", lw=0.8)
     for kind, (colour, lw, ls) in _CURVE_STYLE.items():
@@ -212,7 +213,7 @@ def _sphere(ax, curves, moments, axis_labels=True, fontsize=7.5) -> None:
             labels.append((x[1] * 1.07, y[1] * 1.07, f"e{i + 1}", fontsize,
                            {"ha": "center", "va": "center", "color": _AXIS_COLOURS[i]}))
     if labels:
-        ax.add_artist(_DataStamps(labels))
+        ax.add_artist(DataStamps(labels))
     ax.set_xlim(-1.3, 1.3)
     ax.set_ylim(-1.3, 1.3)
     ax.set_aspect("equal")
@@ -269,8 +270,8 @@ def polhode_panel(ax, moments, paths, torque_free: bool, title: str = "", key=No
         ax.annotate(f"★ {gid.split(':', 1)[-1]}: fixed", (x[0], y[0]), xytext=(-4, -13 - 10 * k),
                     textcoords="offset points", ha="right", fontsize=7, color="black", zorder=3.5)
     if title:
-        from reports.plots import _DataStamps
-        ax.add_artist(_DataStamps([(0.0, 1.36, title, 9, {"ha": "center", "va": "baseline"})]))
+        from reports.plots import DataStamps
+        ax.add_artist(DataStamps([(0.0, 1.36, title, 9, {"ha": "center", "va": "baseline"})]))
 
 
 # --- the scenario page --------------------------------------------------------------------------------
@@ -283,7 +284,7 @@ def _body(info):
 def scenario_paths(res, sc) -> dict:
     """``{owner: L in principal axes (n, 3), N m s}`` of the scenario's saved series (the reference and
     every variant with ``w_W``), each run that diverged cut at its divergence; {} without the body or ω."""
-    from reports.plots import _diverged
+    from reports.plots import diverged_at
     info = res.scenario(sc)
     inertia = _body(info)
     ser = res.series(sc)
@@ -294,7 +295,7 @@ def scenario_paths(res, sc) -> dict:
         if "w_W" not in f or "q_WB" not in f:
             continue
         L = momentum_principal(f["q_WB"], f["w_W"], inertia)
-        tdiv = None if who == "reference" else _diverged(res, sc, who)
+        tdiv = None if who == "reference" else diverged_at(res, sc, who)
         if tdiv is not None:
             L = np.where((f["t_s"] <= tdiv)[:, None], L, np.nan)
         out[who] = L
@@ -305,6 +306,29 @@ def _torque_free(info) -> bool:
     """No torque about the COM and no angular decay (L conserved): then the rotational energy is conserved
     too (gravity and forces through the COM leave both alone), and the polhodes apply."""
     return bool(info.get("conserved", {}).get("angular_momentum", {}).get("conserved"))
+
+
+#: The figure's kind in the report's task list (reports.render draws it beside reports.plots.KINDS).
+KIND = "polhode"
+
+
+def draw(res, sc, plot_dir) -> tuple:
+    """Draw the scenario's polhode into ``plot_dir``, as reports.plots.draw draws its figures; returns
+    ``(KIND, filename or None, note)``."""
+    from cross_checks.sweep.results_dir import inside
+    from reports.plots import NOTES, figure_name, variant_styles
+    name = figure_name(sc, KIND)
+    ok = fig_polhode(res, sc, variant_styles(res.variants), inside(plot_dir, name))
+    return KIND, (name if ok else None), NOTES.pop((sc, KIND), "")
+
+
+def relative_cost(res, sc) -> float:
+    """The figure's drawing cost in reports.plots.relative_cost's units (a trajectories panel = 1): one
+    panel per engine family and the reference's, each ~3 (measured), ~0 when the body does not turn."""
+    from reports.plots import families
+    varies = res.scenario(sc).get("varies", {}).get("orientation", True)
+    n = len(families(res.variants)) + 1
+    return (3.0 if varies else 0.1) * n * (1 + 0.1 * len(res.variants))
 
 
 def fig_polhode(res, sc, styles, path) -> bool:
@@ -320,7 +344,7 @@ def fig_polhode(res, sc, styles, path) -> bool:
 def polhode_figure(res, sc, styles):
     """The scenario's polhode figure: the reference alone, then one panel per engine family (its variants in
     their styles over the reference's path in thick grey); None (a note instead) when nothing rotates."""
-    from reports.plots import MAX_COLUMNS, NOTES, REPORT_DPI, _figure_legend, families, legend_entries
+    from reports.plots import MAX_COLUMNS, NOTES, REPORT_DPI, families, figure_legend, legend_entries
     info = res.scenario(sc)
     paths = scenario_paths(res, sc)
     if not paths:
@@ -343,7 +367,7 @@ def polhode_figure(res, sc, styles):
     cell = w_in / cols
     fig = Figure(figsize=(w_in, 4.0), dpi=REPORT_DPI)
     FigureCanvasAgg(fig)
-    leg_in = _figure_legend(fig, w_in, legend_entries(fams, styles, markers=False))   # the report's legends
+    leg_in = figure_legend(fig, w_in, legend_entries(fams, styles, markers=False))   # the report's legends
     title_in, head_in = 0.5, 0.3
     h_in = title_in + rows * (cell + head_in) + leg_in + 0.15
     fig.set_size_inches(w_in, h_in)

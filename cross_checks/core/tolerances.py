@@ -311,16 +311,6 @@ SECULAR_MIN_TREND_TO_SCATTER = 3.0
 #: ~1000 px.
 LONG_RUN_SERIES_POINTS = 500
 
-# --- the report's pictures (reports/polhode.py, reports/animation.py; tests/reports/test_polhode.py) ---
-#: The closed-form polhodes (sphere ∩ energy ellipsoid) are evaluated in float64 from a handful of square
-#: roots: |P| and Σ P_i²/I_i along them hold to a few ulps (2.2e-16 each) of the terms; 1e-12 leaves ~1000×.
-POLHODE_CLOSED_FORM = 1e-12
-#: How far (rad) L's direction in body axes may move along a run whose ω is fixed in body axes (the course's
-#: step, no gyroscopic term, on a torque-free body: ω_W constant, the body spins about it) as read from the
-#: report's float32 series: q and ω each rounded to 6e-8 relative, the direction computed from them to ~10×
-#: that; 1e-5 leaves a margin of ~20×, and the reference's L turns by π (the flip) on tennis_racket.
-POLHODE_FIXED_RAD = 1e-5
-
 
 def long_run_roundoff(n_steps: int, unit_roundoff: float, rounding_factor: float = 1.0) -> float:
     """The largest relative change of an invariant a step keeps BY CONSTRUCTION (Traits.keeps) may show after

@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 import reports
-from cross_checks.core import tolerances as tol
 from cross_checks.engines import run_variant
 from cross_checks.gates.check import check_trajectory
 from cross_checks.scenario import load_scenario
@@ -17,6 +16,7 @@ from reports import polhode as P
 from reports.check_plot import check_figure
 from reports.data import load_results
 from reports.plots import variant_styles
+from tests.helpers import tolerances as tol
 from tests.helpers.sweeps import built_once, private_cache
 
 MOMENTS = (1.0, 2.0, 3.0)
