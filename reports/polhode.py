@@ -166,9 +166,11 @@ def project(P, view=VIEW) -> tuple:
     return P @ right, P @ up, P @ toward
 
 
-def _split(P, view=VIEW) -> tuple:
-    """(front xy, back xy) of a path: each an (n, 2) array with NaN where the other side is."""
+def _split(P, view=VIEW, at=(0.0, 0.0)) -> tuple:
+    """(front xy, back xy) of a path, shifted by ``at``: each an (n, 2) array with NaN where the other side
+    is."""
     x, y, d = project(P, view)
+    x, y = x + at[0], y + at[1]
     front = np.where((d >= 0)[:, None], np.column_stack([x, y]), np.nan)
     back = np.where((d < 0)[:, None], np.column_stack([x, y]), np.nan)
     return front, back
@@ -190,14 +192,15 @@ _CURVE_STYLE = {"own": ("#222222", 1.3, "-"), "separatrix": ("#7f7f7f", 1.0, "--
                 "other": ("#b0b0b0", 0.7, "-")}
 
 
-def _sphere(ax, curves, moments, axis_labels=True, fontsize=7.5) -> None:
-    """The unit sphere's outline, the polhodes (back half faint) and the principal axes; one artist per kind
-    of curve and side (the report draws many panels)."""
+def _sphere(ax, curves, moments, axis_labels=True, fontsize=7.5, at=(0.0, 0.0), frame=True) -> None:
+    """The unit sphere's outline, the polhodes (back half faint) and the principal axes, centred at ``at``
+    (data units); one artist per kind of curve and side (the report draws many panels). ``frame``: the
+    axes are this panel's own (limits ±1.3, equal aspect, no axis lines)."""
     from reports.plots import DataStamps
     t = np.linspace(0, 2 * math.pi, 181)
-    _line(ax, np.cos(t), np.sin(t), color="#888888", lw=0.8)
+    _line(ax, np.cos(t) + at[0], np.sin(t) + at[1], color="#888888", lw=0.8)
     for kind, (colour, lw, ls) in _CURVE_STYLE.items():
-        sides = [_split(c) for k, c in curves if k == kind]
+        sides = [_split(c, at=at) for k, c in curves if k == kind]
         if not sides:
             continue
         f, b = _joined([f for f, _ in sides]), _joined([b for _, b in sides])
@@ -208,21 +211,23 @@ def _sphere(ax, curves, moments, axis_labels=True, fontsize=7.5) -> None:
         e = np.zeros((2, 3))
         e[1, i] = 1.18
         x, y, d = project(e)
-        _line(ax, x, y, color=_AXIS_COLOURS[i], lw=1.0, alpha=0.9 if d[1] >= 0 else 0.45, zorder=1.1)
+        _line(ax, x + at[0], y + at[1], color=_AXIS_COLOURS[i], lw=1.0, alpha=0.9 if d[1] >= 0 else 0.45,
+              zorder=1.1)
         if axis_labels:
-            labels.append((x[1] * 1.07, y[1] * 1.07, f"e{i + 1}", fontsize,
+            labels.append((x[1] * 1.07 + at[0], y[1] * 1.07 + at[1], f"e{i + 1}", fontsize,
                            {"ha": "center", "va": "center", "color": _AXIS_COLOURS[i]}))
     if labels:
         ax.add_artist(DataStamps(labels))
-    ax.set_xlim(-1.3, 1.3)
-    ax.set_ylim(-1.3, 1.3)
-    ax.set_aspect("equal")
-    ax.set_axis_off()
+    if frame:
+        ax.set_xlim(-1.3, 1.3)
+        ax.set_ylim(-1.3, 1.3)
+        ax.set_aspect("equal")
+        ax.set_axis_off()
 
 
-def _path(ax, P, gid, color, ls="-", lw=1.2, alpha=1.0, zorder=2.0, key=None) -> None:
+def _path(ax, P, gid, color, ls="-", lw=1.2, alpha=1.0, zorder=2.0, key=None, at=(0.0, 0.0)) -> None:
     """A 3-D path (unit sphere = |L₀|) drawn front solid, back faint; its points kept in PATHS[key, gid]."""
-    f, b = _split(P)
+    f, b = _split(P, at=at)
     _line(ax, f[:, 0], f[:, 1], color=color, ls=ls, lw=lw, alpha=alpha, zorder=zorder, gid=gid)
     _line(ax, b[:, 0], b[:, 1], color=color, ls=ls, lw=lw * 0.8, alpha=alpha * 0.35, zorder=zorder - 0.5,
           gid=gid + " (back)")
@@ -230,14 +235,14 @@ def _path(ax, P, gid, color, ls="-", lw=1.2, alpha=1.0, zorder=2.0, key=None) ->
         PATHS[(key, gid)] = np.asarray(P, dtype=float)
 
 
-def _start_end(ax, P, color) -> None:
+def _start_end(ax, P, color, at=(0.0, 0.0)) -> None:
     ok = np.flatnonzero(np.all(np.isfinite(P), axis=1))
     if not ok.size:
         return
     for k, marker in ((ok[0], "o"), (ok[-1], "s")):
         x, y, d = project(P[[k]])
-        _line(ax, x, y, marker=marker, ms=4.5, color=color, mec="black", mew=0.6, ls="none", zorder=3,
-              alpha=1.0 if d[0] >= 0 else 0.5)
+        _line(ax, x + at[0], y + at[1], marker=marker, ms=4.5, color=color, mec="black", mew=0.6, ls="none",
+              zorder=3, alpha=1.0 if d[0] >= 0 else 0.5)
 
 
 def rotating(L_P_ref) -> bool:
@@ -245,33 +250,36 @@ def rotating(L_P_ref) -> bool:
     return _points(L_P_ref) and float(np.linalg.norm(L_P_ref[0])) > 0.0
 
 
-def polhode_panel(ax, moments, paths, torque_free: bool, title: str = "", key=None) -> None:
-    """One polhode panel on ``ax``: ``paths`` [(gid, L_P (n, 3) N m s, style dict: color, ls, lw,
-    alpha)], the first one the reference (its first sample sets |L₀| and the curves). A path that is not
-    torque-free is drawn as L's direction (|L| changes along it) without curves."""
+def polhode_panel(ax, moments, paths, torque_free: bool, title: str = "", key=None, at=(0.0, 0.0),
+                  frame=True) -> None:
+    """One polhode panel on ``ax``, centred at ``at`` (data units; ``frame``: the axes are the panel's own):
+    ``paths`` [(gid, L_P (n, 3) N m s, style dict: color, ls, lw, alpha)], the first one the reference (its
+    first sample sets |L₀| and the curves). A path that is not torque-free is drawn as L's direction (|L|
+    changes along it) without curves."""
     ref = paths[0][1]
     Lm = float(np.linalg.norm(ref[0]))
     curves = polhode_curves(moments, ref[0]) if torque_free else []
-    _sphere(ax, curves, moments)
+    _sphere(ax, curves, moments, at=at, frame=frame)
     moves = spread_rad(ref) > STILL_RAD * 10
     still = []
     for gid, L, st in paths:
         L = np.asarray(L, dtype=float)
         P = L / Lm if torque_free else L / np.linalg.norm(L, axis=1, keepdims=True)
         _path(ax, P, gid, st.get("color", "black"), st.get("ls", "-"), st.get("lw", 1.2),
-              st.get("alpha", 1.0), st.get("zorder", 2.0), key)
+              st.get("alpha", 1.0), st.get("zorder", 2.0), key, at)
         if st.get("ends", True):
-            _start_end(ax, P, st.get("color", "black"))
+            _start_end(ax, P, st.get("color", "black"), at)
         if moves and gid != paths[0][0] and spread_rad(L) < STILL_RAD:
             still.append((gid, P, st.get("color", "black")))
     for k, (gid, P, colour) in enumerate(still):   # a path that sits still is a point: say so beside it
         x, y, _ = project(P[[0]])
+        x, y = x + at[0], y + at[1]
         _line(ax, x, y, marker="*", ms=11, color=colour, mec="black", mew=0.7, ls="none", zorder=3.5)
         ax.annotate(f"★ {gid.split(':', 1)[-1]}: fixed", (x[0], y[0]), xytext=(-4, -13 - 10 * k),
                     textcoords="offset points", ha="right", fontsize=7, color="black", zorder=3.5)
     if title:
         from reports.plots import DataStamps
-        ax.add_artist(DataStamps([(0.0, 1.36, title, 9, {"ha": "center", "va": "baseline"})]))
+        ax.add_artist(DataStamps([(at[0], at[1] + 1.36, title, 9, {"ha": "center", "va": "baseline"})]))
 
 
 # --- the scenario page --------------------------------------------------------------------------------
@@ -371,20 +379,26 @@ def polhode_figure(res, sc, styles):
     title_in, head_in = 0.5, 0.3
     h_in = title_in + rows * (cell + head_in) + leg_in + 0.15
     fig.set_size_inches(w_in, h_in)
-    axes = np.empty((rows, cols), dtype=object)
-    for r in range(rows):
-        y = h_in - title_in - (r + 1) * (cell + head_in) + 0.05
-        for c in range(cols):
-            axes[r, c] = fig.add_axes(((c * cell + 0.05) / w_in, y / h_in, (cell - 0.1) / w_in, cell / h_in))
+    # one axes for every panel (an axes each costs more to draw than its curves): a data unit is the same
+    # length in x and y, a sphere of radius 1 fills its cell (±1.3 across cell − 0.1 in)
+    unit = (cell - 0.1) / 2.6
+    ax = fig.add_axes((0.0, 0.0, 1.0, 1.0))
+    ax.set_xlim(0.0, w_in / unit)
+    ax.set_ylim(0.0, h_in / unit)
+    ax.set_axis_off()
+
+    def centre(k):
+        r, c = divmod(k, cols)
+        return ((c + 0.5) * cell / unit, (h_in - title_in - head_in - r * (cell + head_in) - cell / 2) / unit)
     key = ("scenario", sc)
     grey = {"color": "#000000", "lw": 3.0, "alpha": 0.22, "ends": False, "zorder": 1.8}
-    polhode_panel(axes.flat[0], moments, [("reference", ref, {"color": "#333333", "lw": 1.4})], free,
-                  f"reference solution ({info['reference'].split(' (')[0]})", key=key)
-    for ax, (fam, vs) in zip(axes.flat[1:], fams.items()):
+    polhode_panel(ax, moments, [("reference", ref, {"color": "#333333", "lw": 1.4})], free,
+                  f"reference solution ({info['reference'].split(' (')[0]})", key=key, at=centre(0),
+                  frame=False)
+    for k, (fam, vs) in enumerate(fams.items(), start=1):
         polhode_panel(ax, moments, [("reference", ref, grey)]
-                      + [(v, paths[v], {**styles[v], "lw": 1.1}) for v in vs], free, fam, key=key)
-    for ax in axes.flat[n:]:
-        ax.set_axis_off()
+                      + [(v, paths[v], {**styles[v], "lw": 1.1}) for v in vs], free, fam, key=key,
+                      at=centre(k), frame=False)
     what = ("L in the principal axes on the sphere |L| = |L₀| with the polhodes for the reference's E and |L|"
             if free else "the direction of L in the principal axes (the torque changes E and |L|: no "
                          "polhodes)")
