@@ -136,3 +136,24 @@ def test_the_sweep_saves_what_the_polhode_needs(tennis):
     for who in ("reference", *res.variants):
         assert ser[who]["w_W"].shape == (len(ser[who]["t_s"]), 3)
     assert np.allclose(ser["reference"]["w_W"][0], [0.01, 2.0, 0.01], rtol=1e-6)
+
+
+def test_results_written_before_the_polhode_say_so_instead(tennis, tmp_path):
+    """A results directory without ω in its series nor the body in summary.json (an older rbcheck's): the page
+    says why there is no polhode, and has no animation; nothing fails."""
+    import json
+    import shutil
+    d = tmp_path / "res"
+    shutil.copytree(tennis, d)
+    npz = d / "series" / "tennis_racket.npz"
+    with np.load(npz) as z:
+        kept = {k: z[k] for k in z.files if not k.endswith("::w_W")}
+    np.savez(npz, **kept)
+    s = json.loads((d / "summary.json").read_text())
+    for sc in s["scenarios"]:
+        sc.pop("inertia_B_kg_m2"), sc.pop("mass_kg")
+    (d / "summary.json").write_text(json.dumps(s))
+    reports.render(d, progress=False)
+    html = (d / "scenario-tennis_racket.html").read_text(encoding="utf-8")
+    assert "Polhode (L in body axes): no angular velocity in the saved series" in html
+    assert 'id="anim-data"' not in html and not (d / "plots" / "tennis_racket__polhode.png").exists()

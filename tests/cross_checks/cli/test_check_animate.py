@@ -59,13 +59,15 @@ def test_bad_formats_are_one_line_exit_2_and_nothing_written(correct_csv, tmp_pa
     assert list(tmp_path.iterdir()) == []
 
 
-def test_an_mp4_is_written_where_ffmpeg_is_installed(correct_csv, tmp_path):
+@pytest.mark.parametrize("suffix", [".mp4", ".webm"])
+def test_an_mp4_or_webm_is_written_where_ffmpeg_is_installed(correct_csv, tmp_path, suffix):
     from matplotlib import animation
     if not animation.writers.is_available("ffmpeg"):
         pytest.skip("ffmpeg is not installed here (MP4/WebM need it; the GIF path is tested above)")
-    out = tmp_path / "out.mp4"
+    out = tmp_path / f"out{suffix}"
     assert main(["check", str(correct_csv), "--scenario", "tennis_racket", "--animate", str(out)]) == 0
     assert out.stat().st_size > 10_000
+    assert sorted(p.name for p in tmp_path.iterdir()) == [out.name]
 
 
 def test_a_pose_less_file_is_bad_input(tmp_path, capsys):
