@@ -32,11 +32,20 @@ _SHARED: dict = {}   # the loaded results, inherited by forked drawing processes
 
 
 def _draw(task):
+    from reports import polhode
     from reports.plots import draw
     sc, kind, plot_dir = task
     res = _SHARED.get("res") or load_results(_SHARED["directory"])
     _SHARED["res"] = res
+    if kind == polhode.KIND:
+        return (sc, *polhode.draw(res, sc, Path(plot_dir)))
     return (sc, *draw(res, sc, kind, Path(plot_dir)))
+
+
+def _cost(res, sc, kind) -> float:
+    from reports import polhode
+    from reports.plots import relative_cost
+    return polhode.relative_cost(res, sc) if kind == polhode.KIND else relative_cost(res, sc, kind)
 
 
 def _quiet_init(parent_pid, directory):
@@ -132,23 +141,26 @@ def _tidy(d, written, drawn, listed, marked) -> None:
 def _draw_all(res, names, plot_dir: Path, jobs, progress, meanwhile=lambda: []) -> dict:
     """Draw every figure (in ``jobs`` processes, costliest first, each reported as it is done) and call
     ``meanwhile()`` here while they draw; returns ``{scenario: [(kind, file or None, note)]}`` in the
-    order of plots.KINDS, and ``meanwhile()``'s result under None."""
+    order of plots.KINDS then the polhode, and ``meanwhile()``'s result under None."""
     # here: forked workers inherit matplotlib
-    from reports.plots import KINDS, figure_tasks, relative_cost, release
-    tasks = [(sc, kind, str(plot_dir)) for sc in names for _, kind in figure_tasks(res, sc)]
+    from reports import polhode
+    from reports.plots import KINDS, figure_tasks, release
+    kinds = (*KINDS, polhode.KIND)   # the polhode is reports.polhode's, drawn in the report's styles
+    tasks = [(sc, kind, str(plot_dir)) for sc in names
+             for kind in [k for _, k in figure_tasks(res, sc)] + [polhode.KIND]]
     # the costliest figures first, so that no process is left drawing a large one while the other idles
-    tasks.sort(key=lambda t: -relative_cost(res, t[0], t[1]))
+    tasks.sort(key=lambda t: -_cost(res, t[0], t[1]))
     _SHARED.clear()
     _SHARED.update(res=res, directory=str(res.directory))
     out = {sc: {} for sc in names}
     bar = Progress("rbcheck report", "figures", len(tasks), enabled=progress, interval_s=LINE_INTERVAL_S,
                    # time left follows the cost
-                   total_work=sum(relative_cost(res, t[0], t[1]) for t in tasks))
+                   total_work=sum(_cost(res, t[0], t[1]) for t in tasks))
 
     def done(item):
         sc, kind, fname, note = item
         out[sc][kind] = (kind, fname, note)
-        bar.update(1, f"{sc} {kind}", work=relative_cost(res, sc, kind))
+        bar.update(1, f"{sc} {kind}", work=_cost(res, sc, kind))
 
     try:
         if jobs and jobs > 1 and len(tasks) > 1:
@@ -162,7 +174,7 @@ def _draw_all(res, names, plot_dir: Path, jobs, progress, meanwhile=lambda: []) 
         bar.close(finished=False)   # after an error: the bar ends, no "done" line (a no-op after close())
         _SHARED.clear()
         release()
-    return {**{sc: [figs[k] for k in KINDS if k in figs] for sc, figs in out.items()}, None: extra}
+    return {**{sc: [figs[k] for k in kinds if k in figs] for sc, figs in out.items()}, None: extra}
 
 
 def _draw_in_processes(tasks, jobs, done, res, meanwhile):

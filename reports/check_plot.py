@@ -86,13 +86,54 @@ def _free_errors(ax, res):
     ax.legend(fontsize=8, loc="lower right")
 
 
+def _polhode_paths(res, scenario):
+    """``(moments, torque free, [(gid, L in principal axes (n, 3) N m s, style)])`` of the file, the reference
+    and the closest correct scheme, or None when the file has no orientation or angular velocity or the
+    reference does not rotate (reports.polhode)."""
+    from reports.polhode import momentum_principal, principal_frame, rotating
+    s = res.series
+    if not {"orientation", "angular_velocity"} <= set(s["present"]):
+        return None
+    inertia = scenario.problem.body.inertia_B
+    y, y_ref = np.asarray(s["y"], dtype=float), np.asarray(s["y_ref"], dtype=float)
+    L_ref = momentum_principal(y_ref[:, 6:10], y_ref[:, 10:13], inertia)
+    if not rotating(L_ref):
+        return None
+    with np.errstate(all="ignore"):
+        L = momentum_principal(y[:, 6:10], y[:, 10:13], inertia)
+    paths = [("reference", L_ref, {"color": "#000000", "lw": 4.0, "alpha": 0.25, "ends": False}),
+             ("file", L, {"color": "tab:red", "lw": 1.3})]
+    closest = s.get("closest")
+    if closest:
+        paths.append((closest[0], momentum_principal(closest[2][:, 6:10], closest[2][:, 10:13], inertia),
+                      {"color": "tab:blue", "lw": 1.1, "ls": "--"}))
+    forces = scenario.problem.forces
+    torque_free = bool(forces.torque_free and forces.angular_velocity_decay == 1.0)
+    return principal_frame(inertia)[0], torque_free, paths
+
+
+def _polhode_axis(ax, polhode, res) -> None:
+    from reports.polhode import polhode_panel
+    moments, torque_free, paths = polhode
+    polhode_panel(ax, moments, paths, torque_free, key=("check", res.source))
+    ax.set_title("polhode: L in the principal axes" + (", |L| = |L₀|" if torque_free else " (direction)"),
+                 fontsize=10)
+    lines = ["red: the file, thick grey: the reference"
+             + (",\ndashed blue: the closest correct scheme" if len(paths) > 2 else ""),
+             "grey curves: polhodes of the reference's E and |L|\n(black: its own, dashed: the separatrix)"
+             if torque_free else "torques act: E and |L| change, no polhodes",
+             "front of the sphere solid, back faint; ○ start, □ end"]
+    ax.text(0.5, -0.02, "\n".join(lines), transform=ax.transAxes, fontsize=8, va="top", ha="center")
+
+
 def check_figure(res, scenario, path) -> None:
     """Draw the figure of one CheckResult to ``path`` (PNG)."""
     s = res.series
-    fig = Figure(figsize=(14.0, 8.8), dpi=DPI)
+    polhode = _polhode_paths(res, scenario)
+    fig = Figure(figsize=(18.0 if polhode else 14.0, 8.8), dpi=DPI)
     FigureCanvasAgg(fig)
-    gs = fig.add_gridspec(2, 3, height_ratios=[1.0, 1.0], hspace=0.45, wspace=0.28,
-                          left=0.06, right=0.985, top=0.83, bottom=0.07)
+    gs = fig.add_gridspec(2, 4 if polhode else 3, height_ratios=[1.0, 1.0], hspace=0.45, wspace=0.28,
+                          left=0.05 if polhode else 0.06, right=0.985, top=0.83, bottom=0.07)
     head = (("PASS: " + res.verdict) if res.passed
             else ("FAIL: " + res.reasons[0] if res.reasons else res.verdict))
     head = head.split(" (`--scheme")[0]   # the option is said in the terminal; the figure keeps the cause
@@ -146,7 +187,9 @@ def check_figure(res, scenario, path) -> None:
             if e.kind == "conserved":   # drifts drawn as their running maximum (round-off flickers otherwise)
                 r = np.fmax.accumulate(r)
             free[("conserved " if e.kind == "conserved" else "") + e.quantity] = (t_e, r, dec)
-    _ratio_axis(fig.add_subplot(gs[1, 2]), free,
+    if polhode:
+        _polhode_axis(fig.add_subplot(gs[0, 3]), polhode, res)
+    _ratio_axis(fig.add_subplot(gs[1, 2:]), free,
                 "free-running error, conserved drift / allowance\n"
                 "(drifts: running max; dashed: past the cap)")
     handles = [Line2D([], [], color="gray", lw=1.2, label=f"{res.source} (the file)"),
@@ -155,7 +198,7 @@ def check_figure(res, scenario, path) -> None:
         handles.append(Line2D([], [], color="gray", lw=1.2, ls="--",
                               label=f"{label_closest} run free (closest correct)"))
     fig.legend(handles=handles, loc="upper right",
-               bbox_to_anchor=(0.985, 0.895), ncol=3, fontsize=9, frameon=False)
+               bbox_to_anchor=(0.74 if polhode else 0.985, 0.895), ncol=3, fontsize=9, frameon=False)
     save_png(fig, path)
 
 

@@ -112,7 +112,7 @@ class Results:
         return self._series[scenario]
 
 
-_SERIES_WIDTH = {"t_s": 0, "x_W": 3, "q_WB": 4}
+_SERIES_WIDTH = {"t_s": 0, "x_W": 3, "q_WB": 4, "w_W": 3, "L_B": 3}
 
 
 def _check_series(path, out) -> None:

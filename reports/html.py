@@ -52,12 +52,21 @@ _FIG_CAPTIONS = {
     "work": "Work-precision: final error against the wall time of each run of the ladder, every variant "
             "on one axis in its own style (hue: engine family). The ranking page reads these curves: "
             "which variant is most accurate at a common cost, and cheapest at a common accuracy.",
+    "polhode": "The polhode: the angular momentum L seen from the body (in its principal axes e1 minor, "
+               "e2 intermediate, e3 major), on the sphere |L| = |L₀|, at the default Δt (series of ≤ 500 "
+               "samples). Grey curves: the polhodes, where that sphere meets the energy ellipsoid 2E = Σ "
+               "L_i²/I_i (closed form, not integrated); black: the one of the reference's E and |L|; dashed: "
+               "the separatrix through ±e2. The front of the sphere is solid, its back faint and dotted; ○ "
+               "the start, □ the end of each path. A correct step stays on the black curve; one that pumps "
+               "or drains energy slides across the curves; one without the gyroscopic term sits still (ω "
+               "fixed in world axes: the body spins about it). First panel: the reference alone; then one "
+               "panel per engine family over the reference's path in thick grey.",
 }
 _NO_ONE_STEP = ("no one-step mode: an engine file runs whole trajectories only, "
                 "so local errors are not measured")
 _FIG_TITLES = {"trajectories": "Trajectories", "errors": "Error vs time", "conservation": "Conservation",
                "convergence": "Convergence (free-running)", "local": "Local error (one-step mode)",
-               "work": "Work-precision"}
+               "work": "Work-precision", "polhode": "Polhode (L in body axes)"}
 
 
 class _Loader(PackageLoader):
@@ -323,7 +332,34 @@ def _scenario_view(res, s, figs, all_findings, self_contained):
                      "alt": f"{sc}: {_FIG_TITLES[kind]}"}
                     for kind, fname, note in figs if fname],
         "not_drawn": [f"{_FIG_TITLES[kind]}: {note}" for kind, fname, note in figs if not fname and note],
+        "animation": _animation_view(res, sc),
     }
+
+
+def _animation_view(res, sc):
+    """The scenario page's animation (reports.animation.report_animation): its data as JSON for the page's
+    script (``</`` escaped: it sits in a <script> element), the variants to pick by family, the caption."""
+    import json
+
+    from reports.animation import report_animation
+    from reports.plots import variant_styles
+    data = report_animation(res, sc, variant_styles(res.variants))
+    if data is None:
+        return None
+    runs = {r["name"]: r for r in data["runs"][1:]}
+    fams = [{"name": fam, "runs": [{"name": v, "short": v.split(":", 1)[-1], "color": runs[v]["color"],
+                                    "checked": v == data["default"], "div": runs[v]["div"] is not None}
+                                   for v in vs if v in runs]}
+            for fam, vs in families(res.variants).items()]
+    text = ("The body as the box of its principal moments, with its principal axes (e1 minor red, e2 "
+            "intermediate green, e3 major blue), turning about its centre of mass: the reference, then each "
+            "variant picked above over the reference's box drawn faint and dashed, with its orientation "
+            "error to the reference. A run that diverged stops at its divergence and says so. "
+            + data["caption"] + (f" Shown first: {data['default']}, the largest orientation error among the "
+                                 "runs that did not diverge." if data["default"] else ""))
+    blob = json.dumps(data, separators=(",", ":")).replace("</", "<\\/")
+    return {"json": Markup(blob), "frames": len(data["t"]), "families": [f for f in fams if f["runs"]],
+            "text": text}
 
 
 def rows_extracts(res) -> dict:

@@ -13,7 +13,7 @@ __all__ = ["TEMPLATE_FILES", "IncompleteInstallation", "check_templates", "incom
 #: Every file of ``reports/templates/`` the pages are rendered from: each must be installed with the
 #: package (pyproject.toml's package data; tests/test_packaging.py installs the wheel and renders).
 TEMPLATE_FILES = ("base.html", "index.html", "ranking.html", "integrators.html", "scenario.html", "fuzz.html",
-                  "sort.js", "style.css")
+                  "sort.js", "style.css", "animation.js")
 
 
 class IncompleteInstallation(RuntimeError):

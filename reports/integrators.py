@@ -19,7 +19,7 @@ __all__ = ["IntegratorsView", "integrators_view", "draw_figures", "PAGE", "FIGUR
 PAGE = "integrators.html"
 #: The page's figures (plots/<name>): what each shows.
 FIGURES = {"integrators-work-precision.png": "work precision", "integrators-long-runs.png": "long runs",
-           "integrators-separatrix.png": "separatrix"}
+           "integrators-separatrix.png": "separatrix", "integrators-polhode.png": "polhode"}
 #: The long-run verdicts in words, and the colour of their bars (Okabe–Ito: told apart by colour-blind
 #: readers; the hatch marks a divergence in greyscale too).
 VERDICT_WORDS = {"crosses_separatrix": "crosses the separatrix", "toward_intermediate": "drifts toward the "
@@ -183,6 +183,9 @@ def draw_figures(res, view: IntegratorsView, out_dir) -> list:
         out.append("integrators-long-runs.png")
         if _separatrix_figure(res, view, Path(out_dir) / "integrators-separatrix.png"):
             out.append("integrators-separatrix.png")
+        from reports.polhode import fig_long_polhode  # the polhodes of the long runs (reports.polhode)
+        if fig_long_polhode(res, view, Path(out_dir) / "integrators-polhode.png"):
+            out.append("integrators-polhode.png")
     return out
 
 

@@ -13,6 +13,8 @@ Figures (``plots/<scenario>__<kind>.png``):
 ``local``          one-step (local) error vs Δt (log-log), same layout (ladders only)
 ``work``           work-precision: final error vs wall time, every variant on one axis (ladders only)
 
+(The polhode figure, ``plots/<scenario>__polhode.png``, is reports.polhode's: it draws with these styles.)
+
 ``figure_tasks(res, sc)`` lists the figures a scenario has (so they can be drawn in parallel);
 ``draw(res, sc, kind, path)`` draws one and returns whether it carried anything.
 
@@ -43,7 +45,8 @@ from reports.data import LABELS
 from reports.glance import families, order_text
 
 __all__ = ["KINDS", "figure_tasks", "draw", "families", "variant_styles", "NOTES", "save_png",
-           "prepare", "release"]
+           "prepare", "release", "DataStamps", "figure_legend", "diverged_at", "legend_entries",
+           "figure_name", "relative_cost", "MAX_COLUMNS", "REPORT_DPI"]
 
 KINDS = ("trajectories", "errors", "conservation", "convergence", "local", "work")
 DPI = 100            # rbcheck check --plot (reports.check_plot)
@@ -1109,6 +1112,13 @@ def fig_work(res, sc, styles, path):
     save_png(fig, path)
     NOTES[(sc, "work")] = _same_note(same).strip()
     return True
+
+
+#: What other figure modules of the report (reports.polhode, reports.animation) draw with, to look the same:
+#: text stamps at data coordinates, the legends under the panels, the time a run diverged.
+DataStamps = _DataStamps
+figure_legend = _figure_legend
+diverged_at = _diverged
 
 
 _DRAW = {"trajectories": fig_trajectories, "errors": fig_errors, "conservation": fig_conservation,

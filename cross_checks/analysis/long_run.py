@@ -187,7 +187,8 @@ def drift_metrics(problem: Problem, t_s, y, energy_floor: float = 0.0) -> DriftM
 def drift_series(problem: Problem, t_s, y, points: int) -> dict:
     """The long run's invariants at ``points`` times spread evenly over it (the first and last included),
     float32: ``t_s`` (s), ``energy_rel`` (E/E₀ − 1), ``momentum_rel`` (|L|/|L₀| − 1), ``direction_rad`` (the
-    angle between L and L₀, rad) and ``separatrix`` (δ): what the report draws."""
+    angle between L and L₀, rad), ``separatrix`` (δ) and ``L_B`` (the angular momentum in body axes, N m s,
+    (points, 3): the report's polhode): what the report draws."""
     from cross_checks.core.quantities import decimation_indices
     idx = decimation_indices(len(t_s), points)
     y = np.asarray(y, dtype=float)[idx]
@@ -197,7 +198,14 @@ def drift_series(problem: Problem, t_s, y, points: int) -> dict:
     return {"t_s": np.asarray(t_s, dtype=float)[idx].astype(np.float32),
             "energy_rel": (E / E0[0] - 1.0).astype(np.float32),
             "momentum_rel": (Lm / L0m - 1.0).astype(np.float32),
-            "direction_rad": _angle(L, L0[0]).astype(np.float32), "separatrix": delta.astype(np.float32)}
+            "direction_rad": _angle(L, L0[0]).astype(np.float32), "separatrix": delta.astype(np.float32),
+            "L_B": _body_momentum(problem, y).astype(np.float32)}
+
+
+def _body_momentum(problem: Problem, y):
+    """The angular momentum about the COM in body axes, I_B R^T ω_W (N m s, (n, 3)), of packed states y."""
+    R = matrix_from_quat(y[:, 6:10] / np.linalg.norm(y[:, 6:10], axis=-1, keepdims=True))
+    return np.einsum("ij,nkj,nk->ni", problem.body.inertia_B, R, y[:, 10:13])
 
 
 def finding(variant: str, run_name: str, m: DriftMetrics) -> str:

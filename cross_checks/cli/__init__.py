@@ -236,7 +236,12 @@ def _add_check(sub) -> None:
     c.add_argument("--json", metavar="FILE", help="also write everything the check found as JSON")
     c.add_argument("--plot", metavar="FILE.png",
                    help="draw the trajectory, the reference, the closest "
-                        "correct scheme and the one-step defect over time")
+                        "correct scheme, the polhode and the one-step defect over time")
+    c.add_argument("--animate", metavar="FILE.gif",
+                   help="animate the body (a box with its principal axes) beside the reference's, with the "
+                        "time and the current error in each frame: .gif (always), .mp4 or .webm (where "
+                        "ffmpeg is installed); at most 200 frames sampled uniformly in time. With several "
+                        "files: the first")
     _add_engine_file_option(c)
 
 
@@ -941,7 +946,8 @@ def cmd_report(args) -> int:
 
 def cmd_check(args) -> int:
     from cross_checks.cli.check import run_check
-    refuse_inputs_as_outputs([("--json", args.json, False), ("--plot", args.plot, False)],
+    refuse_inputs_as_outputs([("--json", args.json, False), ("--plot", args.plot, False),
+                              ("--animate", args.animate, False)],
                              [("trajectory", t, False) for t in args.trajectories]
                              + [("sidecar", Path(t).with_suffix(".json"), False) for t in args.trajectories]
                              + _scenario_inputs([args.scenario]) + _engine_file_inputs(args))
@@ -949,6 +955,13 @@ def cmd_check(args) -> int:
         _check_out_path(args.json, None, "--json")
     if args.plot:
         _check_out_path(args.plot, ".png", "--plot")
+    if args.animate:
+        from reports.animation import AnimationError, check_animation_path
+        _check_out_path(args.animate, None, "--animate")
+        try:
+            check_animation_path(args.animate)
+        except AnimationError as exc:
+            raise BadInput(str(exc)) from None
     return run_check(args, BadInput)
 
 

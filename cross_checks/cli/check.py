@@ -41,6 +41,9 @@ def run_check(args, BadInput) -> int:
                                             scheme=args.scheme))
         except CheckError as exc:
             raise BadInput(str(exc)) from None
+    if args.animate and "orientation" not in results[0].series["present"]:
+        raise BadInput(f"--animate: {args.trajectories[0]} has no orientation columns (qw, qx, qy, qz): "
+                       "there is no motion of the body to animate")
     ladder = None
     if len(results) > 1:
         try:
@@ -53,6 +56,8 @@ def run_check(args, BadInput) -> int:
     print(("\n\n" + "=" * 100 + "\n\n").join(texts))
     if args.plot:
         _write_plot(results, ladder, sc, args.plot)
+    if args.animate:
+        _write_animation(results[0], sc, args.animate)
     if args.json:
         obj = (results[0].as_dict() if ladder is None
                else {"ladder": ladder, "files": [r.as_dict() for r in results]})
@@ -66,6 +71,15 @@ def _user_variants() -> list:
     the file's Δt and compared with it, so the check can say the file IS one of them."""
     from cross_checks.engines import engine_variants, user_engines
     return [f"{a.name}:{v}" for a in user_engines() for v in engine_variants(a.name)]
+
+
+def _write_animation(result, scenario, path):
+    """Animate the (first) file's motion beside the reference into ``path`` (written whole or not at all)."""
+    from reports.animation import write_check_animation
+    got = write_check_animation(path, result, scenario)
+    div = (f"; diverged at t = {got['diverged_at_s']:.4g} s: animated up to there"
+           if got["diverged_at_s"] is not None else "")
+    print(f"animation -> {path} ({got['caption']}{div})", file=sys.stderr)
 
 
 def _write_plot(results, ladder, scenario, path):

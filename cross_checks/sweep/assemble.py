@@ -30,7 +30,7 @@ from reference_sim.state import Q
 
 __all__ = ["result_rows", "results_csv_text", "convergence_records", "ladder_floors", "agreement_records",
            "scenario_record", "series_arrays", "build_summary", "write_json", "write_scenario_files",
-           "SCENARIO_FILES", "local_evidence", "verdict_count", "normalise_message"]
+           "SCENARIO_FILES", "local_evidence", "verdict_count", "normalise_message", "body_record"]
 
 
 # --- results.csv ------------------------------------------------------------------------------------
@@ -214,7 +214,15 @@ def scenario_record(sc, ref) -> dict:
             "conserved": {k: {"conserved": v[0], "why_not": v[1]} for k, v in cons.items()},
             "error_amplification": meas.get("amplification", {}),
             "reference_error": meas.get("reference_error"), "physics": meas.get("physics"),
-            "varies": ref.varies, "second_reference": meas.get("second_reference")}
+            "varies": ref.varies, "second_reference": meas.get("second_reference"),
+            **body_record(sc.problem.body)}
+
+
+def body_record(body) -> dict:
+    """The body's mass (kg) and inertia tensor about the COM in body axes (kg m²): what the report's
+    polhode and animation draw the body from (docs/results.md)."""
+    return {"mass_kg": float(body.mass_kg),
+            "inertia_B_kg_m2": np.asarray(body.inertia_B, dtype=float).tolist()}
 
 
 def series_arrays(sc, ref, records_by_key, variants) -> dict:
@@ -228,6 +236,7 @@ def series_arrays(sc, ref, records_by_key, variants) -> dict:
         arrays["reference::t_s"] = t_ref[k].astype(np.float32)
         arrays["reference::x_W"] = y_ref[k, 0:3].astype(np.float32)
         arrays["reference::q_WB"] = y_ref[k][:, Q].astype(np.float32)
+        arrays["reference::w_W"] = y_ref[k, 10:13].astype(np.float32)   # rad/s, world axes
     for v in variants:
         rec = records_by_key.get((sc.name, v, sc.dt_s))
         for key, a in ((rec or {}).get("series") or {}).items():
@@ -311,7 +320,8 @@ def build_summary(*, provenance, scenarios, variants, skipped, convergence, loca
         "run": _run_statistics(jobs, rows, wall_s),
         "files": {"results": "results.csv",
                   "series": "series/<scenario>.npz: keys '<ENGINE:VARIANT>::<field>' "
-                  "(t_s, x_W, q_WB, err_<quantity>, drift_<quantity>) and 'reference::<field>', float32, "
+                  "(t_s, x_W, q_WB, w_W, err_<quantity>, drift_<quantity>) and 'reference::<field>', "
+                  "float32, "
                   "at the scenario's default dt, decimated to <= %d points" % MAX_SERIES_POINTS},
     }
 

@@ -466,7 +466,8 @@ def _local_error_columns(row, adapter, scenario, variant, dt_s, t_ref_all, y_ref
 def _series(t, y, y_ref, errs, drifts) -> dict:
     """The plotted series of a run at its scenario's default Δt: decimated to MAX_SERIES_POINTS, float32."""
     k = decimation_indices(len(t), MAX_SERIES_POINTS)
-    series = {"t_s": t[k], "x_W": y[k, 0:3], "q_WB": _canonical_to(y[k][:, Q], y_ref[k][:, Q])}
+    series = {"t_s": t[k], "x_W": y[k, 0:3], "q_WB": _canonical_to(y[k][:, Q], y_ref[k][:, Q]),
+              "w_W": y[k, 10:13]}   # angular velocity, world axes, rad/s: the report's polhode
     for q in QUANTITIES:
         series[f"err_{q}"] = errs[q][k]
     for name, d in drifts.items():

@@ -238,4 +238,5 @@ def long_run_scenario_record(sc) -> dict:
     return {"name": sc.name, "description": sc.description, "source": sc.source,
             "content_hash": sc.content_hash, "duration_s": float(sc.duration_s), "dt_s": float(sc.dt_s),
             "steps": int(sc.n_steps()), "principal_moments_kg_m2": [float(m) for m in moments],
-            "spin_rad_s": float(np.linalg.norm(sc.problem.initial.w_W))}
+            "spin_rad_s": float(np.linalg.norm(sc.problem.initial.w_W)),
+            "inertia_B_kg_m2": np.asarray(sc.problem.body.inertia_B, dtype=float).tolist()}

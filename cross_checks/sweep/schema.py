@@ -96,6 +96,7 @@ SCENARIO = {
     "dt_ladder_s": [NUM], "reference": str,
     "conserved": {"energy": _CONSERVED, "angular_momentum": _CONSERVED, "linear_momentum": _CONSERVED},
     "varies?": {q + "?": bool for q in QUANTITIES},
+    "mass_kg?": NUM, "inertia_B_kg_m2?": [[NUM]],   # the body (the report's polhode and animation)
     # Drake's error-controlled solution beside the primary reference (None without Drake; docs/results.md)
     "second_reference?": Nullable({"label": str, "target_accuracy": NUM, "agrees": Nullable(bool),
                                    "distance?": {q: NUM for q in QUANTITIES},
@@ -123,7 +124,7 @@ LONG_RUN_RECORD = {
         "separatrix_rate_per_s")},
 }
 LONG_RUN_SCENARIO = {"name": str, "description": str, "duration_s": NUM, "dt_s": NUM, "steps": int,
-                     "content_hash?": str, "source?": str}
+                     "content_hash?": str, "source?": str, "inertia_B_kg_m2?": [[NUM]]}
 AGREEMENT = {"a": str, "b": str, "scenario": str, "dt_s": NUM, "agrees": bool, "max_rel": Nullable(NUM),
              "reason": str, "note?": str}
 SUMMARY = {

@@ -271,3 +271,13 @@ PHYSX_HAND_STEP = 4 * 2.0 ** -23
 #: on |ω| = 1.7 rad/s with a full tensor, independent of Δt; 4e-6 relative leaves room, and the candidate
 #: schemes PhysX's step is not (plain explicit gyroscopic term, none) are ≥ 6× farther at Δt = 0.05 s.
 PHYSX_TGS_OMEGA_STEP_REL = 4e-6
+
+# --- the report's pictures (reports/polhode.py; tests/reports/test_polhode.py) ---
+#: The closed-form polhodes (sphere ∩ energy ellipsoid) are evaluated in float64 from a handful of square
+#: roots: |P| and Σ P_i²/I_i along them hold to a few ulps (2.2e-16 each) of the terms; 1e-12 leaves ~1000×.
+POLHODE_CLOSED_FORM = 1e-12
+#: How far (rad) L's direction in body axes may move along a run whose ω is fixed in body axes (the course's
+#: step, no gyroscopic term, on a torque-free body: ω_W constant, the body spins about it) as read from the
+#: report's float32 series: q and ω each rounded to 6e-8 relative, the direction computed from them to ~10×
+#: that; 1e-5 leaves a margin of ~20×, and the reference's L turns by π (the flip) on tennis_racket.
+POLHODE_FIXED_RAD = 1e-5

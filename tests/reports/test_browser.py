@@ -17,6 +17,7 @@ import reports
 from cross_checks.scenario import parse_scenario
 from cross_checks.sweep import run_sweep
 from tests.helpers.chromium import Browser
+from tests.helpers.scenarios import TINY_LONG_RUN
 from tests.helpers.sweeps import built_once, private_cache
 
 # position never moves (only a spin): its panels must be replaced by a note
@@ -69,8 +70,8 @@ stiffness = 2500.0
 rest_length = 0.0
 """
 VARIANTS = ["reference:course", "reference:rk4", "reference:explicit_euler", "mujoco:euler"]
-PAGES = ["index.html", "ranking.html", "scenario-spin_only.html", "scenario-drop_once.html",
-         "scenario-stiff_spring.html"]
+PAGES = ["index.html", "ranking.html", "integrators.html", "scenario-spin_only.html",
+         "scenario-drop_once.html", "scenario-stiff_spring.html"]
 
 
 def _browser_sweep(folder):
@@ -81,6 +82,7 @@ def _browser_sweep(folder):
         name = text.split('"')[1]
         (src / f"{name}.toml").write_text(text, encoding="utf-8")
         scs.append(parse_scenario(text, source=str(src / f"{name}.toml")))
+    scs.append(parse_scenario(TINY_LONG_RUN))    # a long run: integrators.html's figures, the polhode's too
     with private_cache(folder / "cache"):
         run_sweep(scs, VARIANTS, folder / "res", jobs=2,
                   finish=lambda d: reports.render(d, jobs=2, progress=False))
@@ -243,9 +245,9 @@ def test_report_rendering_prints_progress_lines_while_drawing(results, tmp_path,
     monkeypatch.setattr(reports, "LINE_INTERVAL_S", 0.0)          # a line after every figure
     reports.render(d, jobs=2, progress=True)
     err = capfd.readouterr().out.splitlines()   # stdout: stderr is for errors only
-    assert [line.split(" (")[0] for line in err[:-1]] == [f"rbcheck report: figures {i}/18"
-                                                          for i in range(1, 19)]
-    assert "left" in err[0] and err[-2].startswith("rbcheck report: figures 18/18 (100%) in ")
+    assert [line.split(" (")[0] for line in err[:-1]] == [f"rbcheck report: figures {i}/21"
+                                                          for i in range(1, 22)]
+    assert "left" in err[0] and err[-2].startswith("rbcheck report: figures 21/21 (100%) in ")
     assert err[-1].startswith("rbcheck report: 6 pages and ") and "figures written in" in err[-1]
 
 
@@ -269,3 +271,68 @@ def test_a_diverged_run_does_not_flatten_the_others(results, tmp_path, monkeypat
     assert others.max() <= hi <= 10 * others.max() * 1.01 and lo <= others[others > 0].min()
     euler = [ln for ln in ax.get_lines() if ln.get_marker() == "x"]
     assert len(euler) == 1                                      # one divergence mark, on explicit Euler
+
+
+def _canvas_ink(browser, k):
+    """How many pixels of the k-th animation canvas are not white, and a digest of them (to tell frames)."""
+    return browser.evaluate(f"""(() => {{ const c = document.querySelectorAll('#anim-panels canvas')[{k}];
+        const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data; let n = 0, h = 0;
+        for (let i = 0; i < d.length; i += 4) {{ if (d[i] < 250 || d[i + 1] < 250 || d[i + 2] < 250) {{
+            n++; h = (h * 31 + i) % 1000000007; }} }}
+        return [n, h]; }})()""")
+
+
+@pytest.mark.parametrize("width", [1024, 1400])
+def test_a_turning_scenario_shows_its_polhode_and_the_body_moving(results, browser, width):
+    """spin_only (a free asymmetric body): the polhode figure is loaded, the animation draws the reference and
+    the default variant, plays (frames change), follows the slider, and a ticked variant gets its panel."""
+    import time
+    r = browser.load(_url(results, "scenario-spin_only.html"), width=width)
+    assert r["errors"] == [] and r["broken"] == [] and r["overflow_px"] <= 0
+    img = browser.evaluate("""(() => {
+        const i = document.querySelector('img[src="plots/spin_only__polhode.png"]');
+        return i ? [i.naturalWidth, i.getBoundingClientRect().width] : null; })()""")
+    assert img is not None and img[0] > 1000 and 0 < img[1] <= width
+    runs = browser.evaluate("[...document.querySelectorAll('#anim-panels canvas')].map(c => c.dataset.run)")
+    picked = browser.evaluate("[...document.querySelectorAll('input.anim-pick:checked')].map(c => c.value)")
+    assert runs[0] == "reference" and runs[1:] == picked and len(picked) == 1
+    ink0 = _canvas_ink(browser, 0)
+    assert ink0[0] > 1500                                  # a box is drawn, not an empty canvas
+    t0 = browser.evaluate("document.getElementById('anim-slider').value")
+    time.sleep(0.6)
+    assert browser.evaluate("document.getElementById('anim-slider').value") != t0   # it plays
+    assert _canvas_ink(browser, 0) != ink0                 # and the body turns
+    browser.evaluate("""(() => { const s = document.getElementById('anim-slider'); s.value = 0;
+        s.dispatchEvent(new Event('input')); })()""")
+    assert browser.evaluate("document.getElementById('anim-time').textContent") == "t = 0.000 s"
+    other = browser.evaluate("""(() => { const c = [...document.querySelectorAll('input.anim-pick')]
+        .find(c => !c.checked); c.checked = true; c.dispatchEvent(new Event('change'));
+        return c.value; })()""")
+    runs = browser.evaluate("[...document.querySelectorAll('#anim-panels canvas')].map(c => c.dataset.run)")
+    assert other in runs and len(runs) == 3
+    assert _canvas_ink(browser, 2)[0] > 1500
+
+
+def test_a_scenario_that_does_not_turn_has_neither(results, browser):
+    browser.load(_url(results, "scenario-drop_once.html"), width=1024)
+    assert browser.evaluate("document.getElementById('animation')") is None
+    assert not (results / "plots" / "drop_once__polhode.png").exists()
+
+
+def test_the_animation_works_self_contained_without_the_plots_folder(results, tmp_path, browser):
+    d = tmp_path / "res"
+    shutil.copytree(results, d)
+    reports.render(d, self_contained=True, jobs=1, progress=False)
+    shutil.rmtree(d / "plots")
+    r = browser.load(_url(d, "scenario-spin_only.html"), width=1400)
+    assert r["errors"] == [] and r["broken"] == []
+    assert browser.evaluate("document.querySelectorAll('img[src^=\"data:image/png\"]').length") >= 5
+    assert _canvas_ink(browser, 1)[0] > 1500
+
+
+def test_integrators_page_shows_the_long_runs_polhode(results, browser):
+    r = browser.load(_url(results, "integrators.html"), width=1024)
+    assert r["errors"] == [] and r["broken"] == [] and r["overflow_px"] <= 0
+    got = browser.evaluate("""(() => { const i = document.querySelector('#polhode img');
+        return i ? [i.naturalWidth, i.complete, i.getBoundingClientRect().width] : null; })()""")
+    assert got is not None and got[0] > 300 and got[1] and got[2] <= 1024

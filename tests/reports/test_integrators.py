@@ -106,3 +106,26 @@ def test_the_largest_drift_is_the_worst_run_not_a_mean():
                           variants=["reference:buss_augmented"])
     [st] = long_standings(res)
     assert st.score == 0.63 and st.worst == "long_tennis_racket"
+
+
+def test_the_long_runs_polhode_shows_the_drift_toward_the_intermediate_axis(results):
+    """The polhode figure's data: a scheme that keeps E and |L| (lp_midpoint) stays on its polhode (|L|²/2E
+    constant along its samples); Jolt's step, whose energy drifts toward L²/2I₂, slides across the polhodes
+    toward the separatrix (|L|²/2E moves toward I₂ = 2)."""
+    from matplotlib.image import imread
+
+    from reports import polhode as P
+    img = imread(results / "plots" / "integrators-polhode.png")
+    assert img.shape[1] > 400 and np.std(img) > 0.05
+    html = (results / "integrators.html").read_text(encoding="utf-8")
+    assert 'src="plots/integrators-polhode.png"' in html and "The polhode of each long run" in html
+    view = integrators_view(load_results(results))
+    shown = [v for v, _ in P.long_run_columns(view)]
+    assert shown[0] == "reference:lp_midpoint" and "reference:jolt_gyro" in shown
+
+    def level(v):      # |L|²/2E of each sample, in units of the moments (1, 2, 3)
+        L = P.PATHS[(("long", "tiny_long"), v)]
+        return np.sum(L ** 2, axis=1) / np.sum(L ** 2 / np.array([1.0, 2.0, 3.0]), axis=1)
+    keeps, jolt = level("reference:lp_midpoint"), level("reference:jolt_gyro")
+    assert np.ptp(keeps) < 1e-6
+    assert abs(jolt[-1] - 2.0) < abs(jolt[0] - 2.0) - 0.01

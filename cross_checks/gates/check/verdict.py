@@ -363,7 +363,9 @@ def _input_dict(inp, scenario):
     return {"rows": inp.n_rows, "t_end_s": float(inp.t_s[-1]), "dt_s": inp.h_s,
             "rows_per_step": inp.decimation, "description": describe_time(inp),
             "quantities": list(inp.present), "single_precision": inp.single_precision,
-            "duration_s": scenario.duration_s, "time_drift_bound_s": inp.time_bound_s}
+            "duration_s": scenario.duration_s, "time_drift_bound_s": inp.time_bound_s,
+            # where the rows stop being usable (the rows from there are dropped): what --animate stops at
+            "diverged_at_s": inp.diverged_at_s, "lost_orientation_at_s": inp.lost_orientation_at_s}
 
 
 def _cannot_tell(inp, scenario):

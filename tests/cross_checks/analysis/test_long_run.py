@@ -124,9 +124,20 @@ def test_the_series_for_the_report():
     from cross_checks.analysis.long_run import drift_series
     problem, t, y = _closed_form_run([0.3, 1.0, 0.2], n=1001)
     s = drift_series(problem, t, y, 100)
-    assert set(s) == {"t_s", "energy_rel", "momentum_rel", "direction_rad", "separatrix"}
-    assert all(a.shape == (100,) and a.dtype == np.float32 for a in s.values())
+    assert set(s) == {"t_s", "energy_rel", "momentum_rel", "direction_rad", "separatrix", "L_B"}
+    assert all(a.shape == ((100, 3) if k == "L_B" else (100,)) and a.dtype == np.float32
+               for k, a in s.items())
     assert np.max(np.abs(s["energy_rel"])) < 1e-6 and s["t_s"][-1] == np.float32(t[-1])
+    # the polhode's body-axes L: I_B ω_B of the decimated states, with the world |L| and the energy
+    from cross_checks.core.quantities import decimation_indices
+    from reference_sim.quaternion import matrix_from_quat
+    k = decimation_indices(len(t), 100)
+    R = matrix_from_quat(y[k, 6:10])
+    w_B = np.einsum("nji,nj->ni", R, y[k, 10:13])
+    assert np.allclose(s["L_B"], w_B @ problem.body.inertia_B.T, rtol=1e-6, atol=1e-6)
+    E = 0.5 * np.sum(w_B * (w_B @ problem.body.inertia_B.T), axis=1)
+    assert np.allclose(0.5 * np.sum(s["L_B"] * (s["L_B"] @ np.linalg.inv(problem.body.inertia_B).T), axis=1),
+                       E, rtol=1e-6)
 
 
 def test_reaching_the_separatrix_is_not_crossing_it():
