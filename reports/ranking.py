@@ -132,6 +132,12 @@ class Value:
         return f"{self.bound}{fmt(self.value, unit)}"
 
 
+def _along(y0: float, ratio: float, slope: float) -> float:
+    """``y0 · ratio^slope`` in log space, kept within floats (an exact scheme's error of 0 is drawn at 1e-300:
+    a slope from it can be hundreds)."""
+    return 10 ** min(300.0, max(-300.0, _log(y0) + slope * _log(ratio)))
+
+
 def _slope(a: Point, b: Point) -> float:
     """d log(error) / d log(cost) between two measured points (0 where the costs are equal)."""
     if b.cost == a.cost:
@@ -155,7 +161,7 @@ def at_cost(curve: Curve, cost: float) -> Value:
         # cheapest runs) when its error falls with cost there, else no less than its cheapest run's error
         slope = _slope(pts[0], pts[1]) if len(pts) > 1 else 0.0
         if slope < 0:
-            return Value(pts[0].error * (cost / pts[0].cost) ** slope, "≈",
+            return Value(_along(pts[0].error, cost / pts[0].cost, slope), "≈",
                          f"its cheapest run costs ×{fmt(lo / cost)} the common cost: extrapolated along its "
                          f"measured slope ({slope:.2g}) from there")
         return Value(pts[0].error, "≥", f"its cheapest run costs ×{fmt(lo / cost)} the common cost: its "
@@ -185,7 +191,7 @@ def cost_at(curve: Curve, error: float) -> Value:
     # cost there, else at least its costliest run's cost
     slope = _slope(pts[-2], pts[-1]) if len(pts) > 1 else 0.0
     if slope < 0 and pts[-1].error > error:
-        return Value(pts[-1].cost * (error / pts[-1].error) ** (1.0 / slope), "≈",
+        return Value(_along(pts[-1].cost, error / pts[-1].error, 1.0 / slope), "≈",
                      f"beyond its finest run ({fmt(pts[-1].error)}): extrapolated along its measured slope "
                      f"({slope:.2g}) from there")
     return Value(max(p.cost for p in pts), "≥",
