@@ -27,9 +27,9 @@ runs on their recorded states (:func:`cross_checks.analysis.flow.run_local_defec
 (ratio > 1) the verdict is judged as fitted and the sentence says why the excuse was refused
 (docs/verdicts.md, "No excuse for wrong equations").
 
-An invariance check (docs/invariance.md) has no ladder either: :func:`judge_invariance` judges how far a variant's
-run of a transformed scenario, mapped back, is from its run of the original, against the two runs' round-off
-in the variant's precision grown by the motion's measured amplification (:func:`invariance_allowance`).
+An invariance check (docs/invariance.md) has no ladder either: :func:`judge_invariance` judges how far a
+variant's run of a transformed scenario, mapped back, is from its run of the original, against the two runs'
+round-off in the variant's precision grown by the motion's measured amplification (:func:`invariance_allowance`).
 
 A long run has no ladder: :func:`judge_long_run` judges what it conserved against what the variant's traits
 say it keeps (:func:`~cross_checks.analysis.expectations.long_run_expectation`), with round-off floors from
@@ -323,7 +323,8 @@ def invariance_allowance(scales: dict, amplification: dict, n_steps: int, *, pre
     """``(base, offset)`` allowances per quantity (its unit) for two runs of ``n_steps`` steps of one variant
     that differ only in how the same physics is written.
 
-    Each run rounds as :func:`cross_checks.analysis.metrics.roundoff_floor` models it, ``ε·scale·(b N + √N A)``
+    Each run rounds as :func:`cross_checks.analysis.metrics.roundoff_floor` models it,
+    ``ε·scale·(b N + √N A)``
     with ε = MACHINE_EPSILON[precision] × ``rounding_factor`` and A the motion's measured amplification; the
     two runs' difference is bounded by the sum (INVARIANCE_RUNS_COMPARED), and round-off scatters about its
     estimate by up to ROUNDOFF_NOISE_FACTOR. ``offset_m`` (a translation's |d|) makes every position

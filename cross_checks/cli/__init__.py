@@ -175,7 +175,8 @@ def _add_sweep(sub) -> None:
     s.add_argument("--no-long", action="store_true",
                    help="leave the long runs out of the default sweep (the Δt ladders only)")
     s.add_argument("--invariance", action="store_true",
-                   help="also run every variant on each scenario translated (10 m, 1 km, 10 km), in a rotated "
+                   help="also run every variant on each scenario translated (10 m, 1 km, 10 km), in a "
+                        "rotated "
                         "world, with a non-principal body frame and scaled (k, mu = 0.01 and 100), each "
                         "mapped back and judged against its own run of the original: DIR/invariance.csv; "
                         "exit 1 on a broken invariance (docs/invariance.md)")

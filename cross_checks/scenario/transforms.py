@@ -290,7 +290,8 @@ def scenario_dict(scenario) -> dict:
                     "velocity_decay": float(fm.velocity_decay),
                     "angular_velocity_decay": float(fm.angular_velocity_decay),
                     "spring": [{"anchor": _vec(s.anchor_W), "attach": _vec(s.attach_B),
-                                "stiffness": float(s.stiffness_N_per_m), "rest_length": float(s.rest_length_m)}
+                                "stiffness": float(s.stiffness_N_per_m),
+                                "rest_length": float(s.rest_length_m)}
                                for s in fm.springs],
                     "point": [{"force": _vec(f.force), "point": _vec(f.point_B), "frame": f.frame}
                               for f in fm.point_forces],

@@ -1,10 +1,11 @@
 """The invariance checks of a sweep (``rbcheck sweep --invariance``, ``assert_engine(..., invariance=True)``;
-docs/invariance.md): each variant runs each scenario and its transforms (:mod:`cross_checks.scenario.transforms`)
-in one ``simulate_many`` call at the scenario's dt; each transformed run, mapped back to the original's frames,
+docs/invariance.md): each variant runs each scenario and its transforms
+(:mod:`cross_checks.scenario.transforms`) in one ``simulate_many`` call at the scenario's dt; each transformed
+run, mapped back to the original's frames,
 is judged against the variant's run of the original by :func:`cross_checks.analysis.judge.judge_invariance`.
 
-Rows (invariance.csv, :data:`INVARIANCE_COLUMNS`): variant, scenario, transform, magnitude, the Δt and steps, per
-quantity the largest deviation over the run and its allowance, the verdict and its sentence.
+Rows (invariance.csv, :data:`INVARIANCE_COLUMNS`): variant, scenario, transform, magnitude, the Δt and steps,
+per quantity the largest deviation over the run and its allowance, the verdict and its sentence.
 """
 from __future__ import annotations
 
@@ -16,8 +17,8 @@ from cross_checks.scenario.transforms import TransformRefused, apply, default_tr
 
 __all__ = ["INVARIANCE_COLUMNS", "check_invariance", "invariance_summary", "broken_lines"]
 
-INVARIANCE_COLUMNS = (["engine", "scenario", "transform", "magnitude", "dt", "steps", "verdict", "worst_quantity",
-                       "worst_ratio"]
+INVARIANCE_COLUMNS = (["engine", "scenario", "transform", "magnitude", "dt", "steps", "verdict",
+                       "worst_quantity", "worst_ratio"]
                       + [f"{COLUMN_STEM[q]}_dev" for q in QUANTITIES]
                       + [f"{COLUMN_STEM[q]}_allowance" for q in QUANTITIES]
                       + ["assessment"])
@@ -58,10 +59,12 @@ def check_invariance(scenario, variant: str, transforms=None, *, scales: dict | 
     runs = run_requests(variant, [RunRequest(s, dt, n) for s in [scenario] + [s for _, s in todo]])
     original, transformed = runs[0], runs[1:]
     if isinstance(original, NotExpressible):
-        return rows + [_row(variant, scenario, t, "cannot express", f"cannot express the scenario: {original}")
+        return rows + [_row(variant, scenario, t, "cannot express",
+                            f"cannot express the scenario: {original}")
                        for t, _ in todo]
     if isinstance(original, EngineError) or original.meta.get("status") != "ok":
-        why = original if isinstance(original, EngineError) else f"diverged at {original.meta['diverged_at_s']} s"
+        why = (original if isinstance(original, EngineError)
+               else f"diverged at {original.meta['diverged_at_s']} s")
         return rows + [_row(variant, scenario, t, "not judged",
                             f"not judged: the run of the original failed ({why}); see results.csv")
                        for t, _ in todo]

@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
-"""The invariance zoo's engine (tests only): examples/c_engine/cbody.py's scheme (semi-implicit Euler, explicit
-gyroscopic term, exp-map quaternion) run as an engine file, correct or with one planted representation bug.
+"""The invariance zoo's engine (tests only): examples/c_engine/cbody.py's scheme (semi-implicit Euler,
+explicit gyroscopic term, exp-map quaternion) run as an engine file, correct or with one planted
+representation bug.
 
     python3 zoo_engine.py MODE SCENARIO_JSON OUT_CSV
 

@@ -1,5 +1,5 @@
-"""The invariance rule of the one judge (cross_checks.analysis.judge.judge_invariance, docs/invariance.md): its
-allowance against numbers derived by hand, and each verdict on states built to land on it."""
+"""The invariance rule of the one judge (cross_checks.analysis.judge.judge_invariance, docs/invariance.md):
+its allowance against numbers derived by hand, and each verdict on states built to land on it."""
 import math
 
 import numpy as np
@@ -21,7 +21,8 @@ def test_the_allowance_by_hand():
     assert off["position"] == pytest.approx(k * 1000 * 110, rel=1e-12)     # ε |d| (N + √N A)
     assert off["angular_velocity"] == pytest.approx(k * 1000 * 10, rel=1e-12)
     b32, _ = invariance_allowance(ONES, AMP, 100, precision="float32", rounding_factor=3.0)
-    assert b32["orientation"] == pytest.approx(20 * 3 * 2 ** -23 * math.pi * 110, rel=1e-12)   # float32: biased
+    # float32: every quantity biased
+    assert b32["orientation"] == pytest.approx(20 * 3 * 2 ** -23 * math.pi * 110, rel=1e-12)
     bamp, _ = invariance_allowance(ONES, {**AMP, "orientation": 1e4}, 100)
     assert bamp["orientation"] == pytest.approx(k * math.pi * 10 * 1e4, rel=1e-12)
     bdiff, _ = invariance_allowance(ONES, AMP, 100, dt_s=1e-3, differenced=True)

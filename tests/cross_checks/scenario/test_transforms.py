@@ -94,7 +94,8 @@ def test_translation_moves_the_com_and_the_anchors_only(base):
     t = Translation((1.0, 2.0, 3.0))
     sc = apply(t, base)
     y0, y1 = base.problem.initial_packed(), sc.problem.initial_packed()
-    assert np.array_equal(y1[0:3], y0[0:3] + [1.0, 2.0, 3.0]) and np.allclose(y1[3:], y0[3:], rtol=0, atol=EPS)
+    assert np.array_equal(y1[0:3], y0[0:3] + [1.0, 2.0, 3.0])
+    assert np.allclose(y1[3:], y0[3:], rtol=0, atol=EPS)
     assert np.array_equal(_forces(sc).springs[0].anchor_W, [1.0, 3.0, 3.0])
     assert np.array_equal(_forces(sc).springs[0].attach_B, [1.0, 0.0, 0.0])   # a body point: unchanged
     assert np.array_equal(_forces(sc).point_forces[0].force, [1.0, 0.0, 0.0])
@@ -234,7 +235,8 @@ def test_map_back_undoes_each_transform_of_the_initial_state_exactly():
         y = t.map_back(apply(t, sc).problem.initial_packed()[None])[0]
         d = state_errors(y[None], y0[None])
         assert d["position"][0] <= 4 * EPS * (1.0 + t.position_offset_m()), t.label
-        assert all(d[q][0] < 4 * EPS * 10 for q in ("velocity", "orientation", "angular_velocity")), (t.label, d)
+        rest = ("velocity", "orientation", "angular_velocity")
+        assert all(d[q][0] < 4 * EPS * 10 for q in rest), (t.label, d)
 
 
 def test_transform_is_abstract():
