@@ -29,7 +29,8 @@ runs on their recorded states (:func:`cross_checks.analysis.flow.run_local_defec
 
 An invariance check (docs/invariance.md) has no ladder either: :func:`judge_invariance` judges how far a
 variant's run of a transformed scenario, mapped back, is from its run of the original, against the two runs'
-round-off in the variant's precision grown by the motion's measured amplification (:func:`invariance_allowance`).
+round-off in the variant's precision grown by the motion's measured amplification
+(:func:`invariance_allowance`).
 
 A long run has no ladder: :func:`judge_long_run` judges what it conserved against what the variant's traits
 say it keeps (:func:`~cross_checks.analysis.expectations.long_run_expectation`), with round-off floors from
