@@ -388,10 +388,14 @@ def judge_invariance(y_original, y_mapped, *, scales: dict, amplification: dict,
                                    f"holds: {what}, within its round-off {base[worst]:.2g}")
     if all(dev[q] <= allowance[q] for q in QUANTITIES):
         over = max((q for q in QUANTITIES if dev[q] > base[q]), key=lambda q: dev[q] / base[q])
+        scale = float(scales.get(over, 1.0))
+        blind = (f"; at this distance {precision}'s allowance exceeds the motion's own scale ({scale:.3g} "
+                 f"{UNITS[over]}): this check cannot tell an error from round-off here"
+                 if allowance[over] >= scale else "")
         return InvarianceJudgement("precision loss", dev, allowance, base, over,
                                    f"precision loss (expected): {dev[over]:.3g} {UNITS[over]} in "
                                    f"{over.replace('_', ' ')}, within the {allowance[over]:.2g} that "
-                                   f"{precision} at |d| = {offset_m:g} m allows")
+                                   f"{precision} at |d| = {offset_m:g} m allows{blind}")
     return InvarianceJudgement("broken", dev, allowance, base, worst,
                                f"broken: {what}, {dev[worst] / allowance[worst]:.3g}× the allowance "
                                f"{allowance[worst]:.2g} of {precision} round-off")

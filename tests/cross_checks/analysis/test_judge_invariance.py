@@ -56,7 +56,15 @@ def test_a_loss_within_the_offset_allowance_is_precision_loss_with_its_number():
     assert j.verdict == "precision loss" and j.worst == "position"
     assert j.deviation["position"] == pytest.approx(1e-11, rel=1e-3)
     assert "1e-11 m in position" in j.assessment and "|d| = 1000 m" in j.assessment
+    assert "cannot tell" not in j.assessment
     assert _judge(_states(), y1).verdict == "broken"          # the same loss without a translation
+
+
+def test_an_allowance_beyond_the_motion_s_scale_says_the_check_is_blind_there():
+    y1 = _states()
+    y1[-1, 0] += 0.5            # float32 at 10 km over 100 steps allows ~2.6e3 m: more than the 1 m scale
+    j = _judge(_states(), y1, offset_m=1e4, precision="float32")
+    assert j.verdict == "precision loss" and "cannot tell an error from round-off here" in j.assessment
 
 
 def test_a_deviation_beyond_the_allowance_is_broken():
