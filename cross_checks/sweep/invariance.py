@@ -75,7 +75,11 @@ def check_invariance(scenario, variant: str, transforms=None, *, scales: dict | 
     if amplification is None:
         from cross_checks.scenario.references import error_amplification
         amplification = error_amplification(scenario, scales)
-    for (t, _), run in zip(todo, transformed):
+    for (t, tsc), run in zip(todo, transformed):
+        clamp = _clamped(traits, original, scenario, tsc)
+        if clamp:
+            rows.append(_row(variant, scenario, t, "cannot express", f"cannot express: {clamp}", dt, n))
+            continue
         if isinstance(run, NotExpressible):
             rows.append(_row(variant, scenario, t, "cannot express", f"cannot express: {run}", dt, n))
             continue
@@ -90,6 +94,29 @@ def check_invariance(scenario, variant: str, transforms=None, *, scales: dict | 
                              differenced=getattr(traits, "velocity_from_positions", False))
         rows.append(_row(variant, scenario, t, j.verdict, j.assessment, dt, n, j))
     return rows
+
+
+def _clamped(traits, original, scenario, transformed) -> str:
+    """"" unless the variant clamps the gyroscopic torque (Traits.gyroscopic_clamp_N_m) and the transformed
+    body's exceeds the clamp where the original's does not: then the sentence saying so. The gyroscopic torque
+    |ω_B × I ω_B| along the variant's own run of the original, in the transformed body's scale (every
+    transform keeps ω; only a scale changes the inertia's size: by its largest moment's ratio)."""
+    limit = getattr(traits, "gyroscopic_clamp_N_m", None)
+    if limit is None:
+        return ""
+    import numpy as np
+
+    from reference_sim.quaternion import quat_conj, rotate
+    inertia = scenario.problem.body.inertia_B
+    w_B = rotate(quat_conj(original.y[:, 6:10]), original.y[:, 10:13])
+    torque = float(np.nanmax(np.linalg.norm(np.cross(w_B, w_B @ inertia.T), axis=-1)))
+    ratio = (float(np.linalg.eigvalsh(transformed.problem.body.inertia_B)[-1])
+             / float(np.linalg.eigvalsh(inertia)[-1]))
+    if torque * ratio > limit >= torque:
+        return (f"its step clamps the gyroscopic torque to {limit:g} N m (a declared trait); this body's "
+                f"|ω × Iω| reaches {torque * ratio:.3g} N m here (the original's {torque:.3g}), beyond the "
+                "clamp, so it moves otherwise by design")
+    return ""
 
 
 def invariance_summary(rows) -> tuple:

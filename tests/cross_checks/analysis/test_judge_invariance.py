@@ -13,20 +13,20 @@ AMP = {"position": 1.0, "velocity": 1.0, "orientation": 1.0, "angular_velocity":
 
 
 def test_the_allowance_by_hand():
-    # two runs × the noise factor 10 = 20 roundings ε of each step's scale; N = 100, √N = 10, A = 1
+    # two runs × the noise factor 10 × 16 unit roundoffs (2⁻⁵³) of each step's scale; N = 100, √N = 10, A = 1
     base, off = invariance_allowance(ONES, AMP, 100, offset_m=1000.0)
-    k = 20 * 2.2e-16
+    k = 20 * 16 * 2.0 ** -53
     assert base["position"] == pytest.approx(k * 110, rel=1e-12)           # N + √N A: biased (a sum)
-    assert base["orientation"] == pytest.approx(k * math.pi * 10, rel=1e-12)   # √N A: a random walk
+    assert base["orientation"] == pytest.approx(k * math.pi * 110, rel=1e-12)  # biased in every quantity
     assert off["position"] == pytest.approx(k * 1000 * 110, rel=1e-12)     # ε |d| (N + √N A)
     assert off["angular_velocity"] == pytest.approx(k * 1000 * 10, rel=1e-12)
     b32, _ = invariance_allowance(ONES, AMP, 100, precision="float32", rounding_factor=3.0)
     # float32: every quantity biased
-    assert b32["orientation"] == pytest.approx(20 * 3 * 2 ** -23 * math.pi * 110, rel=1e-12)
+    assert b32["orientation"] == pytest.approx(20 * 16 * 3 * 2 ** -24 * math.pi * 110, rel=1e-12)
     bamp, _ = invariance_allowance(ONES, {**AMP, "orientation": 1e4}, 100)
-    assert bamp["orientation"] == pytest.approx(k * math.pi * 10 * 1e4, rel=1e-12)
+    assert bamp["orientation"] == pytest.approx(k * math.pi * (100 + 10 * 1e4), rel=1e-12)
     bdiff, _ = invariance_allowance(ONES, AMP, 100, dt_s=1e-3, differenced=True)
-    assert bdiff["velocity"] == pytest.approx(k * 110 + 20 * 2.2e-16 * 110 / 1e-3, rel=1e-12)
+    assert bdiff["velocity"] == pytest.approx(k * 110 + k * 110 / 1e-3, rel=1e-12)
 
 
 def _states(n=101):
@@ -51,11 +51,11 @@ def test_identical_runs_hold():
 
 def test_a_loss_within_the_offset_allowance_is_precision_loss_with_its_number():
     y1 = _states()
-    y1[-1, 0] += 1e-11          # above the base 4.8e-13 m, below the 4.8e-10 m of |d| = 1 km
+    y1[-1, 0] += 1e-10          # above the base 3.9e-12 m, below the 3.9e-9 m of |d| = 1 km
     j = _judge(_states(), y1, offset_m=1000.0)
     assert j.verdict == "precision loss" and j.worst == "position"
-    assert j.deviation["position"] == pytest.approx(1e-11, rel=1e-3)
-    assert "1e-11 m in position" in j.assessment and "|d| = 1000 m" in j.assessment
+    assert j.deviation["position"] == pytest.approx(1e-10, rel=1e-3)
+    assert "1e-10 m in position" in j.assessment and "|d| = 1000 m" in j.assessment
     assert "cannot tell" not in j.assessment
     assert _judge(_states(), y1).verdict == "broken"          # the same loss without a translation
 

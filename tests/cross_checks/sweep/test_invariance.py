@@ -139,3 +139,16 @@ def test_a_refused_transform_is_a_row_naming_the_field(zoo):
     # 10 m along (2, -3, 6)/7 moves x by 2.9 m only: within 1e6 m; 1 km, 10 km and the 100x scale are not
     assert [r["magnitude"] for r in refused] == ["1e+03 m", "1e+04 m", "k=100 mu=100"]
     assert all("initial.position" in r["assessment"] for r in refused)
+
+
+def test_a_declared_gyroscopic_clamp_makes_the_large_scale_cannot_express():
+    """reference:explicit_gyro_clamped clamps |ω × Iω| to 100 N m (Bullet's m_maxGyroscopicForce): scaled by
+    μk² = 1e6, tennis_racket's 4.6 N m is 4.6e6 N m: it moves otherwise by design, said, never broken; the
+    small scale stays below the clamp and holds."""
+    from cross_checks.scenario import load_scenario
+    rows = {r["magnitude"]: r for r in check_invariance(load_scenario("tennis_racket"),
+                                                         "reference:explicit_gyro_clamped")
+            if r["transform"] == "scale"}
+    assert rows["k=100 mu=100"]["verdict"] == "cannot express"
+    assert "clamps the gyroscopic torque to 100 N m" in rows["k=100 mu=100"]["assessment"]
+    assert rows["k=0.01 mu=0.01"]["verdict"] == "holds"
