@@ -152,3 +152,10 @@ def test_a_declared_gyroscopic_clamp_makes_the_large_scale_cannot_express():
     assert rows["k=100 mu=100"]["verdict"] == "cannot express"
     assert "clamps the gyroscopic torque to 100 N m" in rows["k=100 mu=100"]["assessment"]
     assert rows["k=0.01 mu=0.01"]["verdict"] == "holds"
+
+
+def test_the_pytest_fixture_takes_invariance(assert_engine, zoo):
+    """The plugin's assert_engine passes ``invariance=True`` through (a user's suite: docs/invariance.md)."""
+    engine_file, scenario = zoo
+    summary = assert_engine("zoo:correct", [scenario], engine_file=engine_file, invariance=True)
+    assert summary["run"]["invariance"]["checks"] == 7 and summary["run"]["invariance"]["broken"] == 0
