@@ -93,6 +93,11 @@ def test_sweep_invariance_end_to_end_then_compare(zoo, tmp_path, monkeypatch, ca
     summary = json.loads((out / "summary.json").read_text())
     assert summary["run"]["invariance"]["checks"] == 14 and summary["run"]["invariance"]["broken"] == 1
     assert [r["transform"] for r in summary["invariance"] if r["verdict"] == "broken"] == ["body_frame"]
+    from cross_checks.gates import ci
+    junit = ci.junit_text(ci.sweep_junit(summary))
+    assert "invariance under body_frame 41 deg broken" in junit and 'failures="1"' in junit
+    md = ci.sweep_markdown(summary, out)
+    assert md.startswith("## rbcheck sweep: ❌ invariance broken") and "1 broken invariance(s)" in md
     page = (out / "index.html").read_text(encoding="utf-8")
     assert "1 broken invariance(s)</a>" in page and 'href="invariance.csv"' in page
     assert "zoo:diagonal_inertia on byo_tumble: under body_frame 41 deg, broken" in page   # a finding
