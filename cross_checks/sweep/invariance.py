@@ -15,7 +15,7 @@ from cross_checks.analysis.judge import judge_invariance
 from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, quantity_scales
 from cross_checks.scenario.transforms import TransformRefused, apply, default_transforms
 
-__all__ = ["INVARIANCE_COLUMNS", "check_invariance", "invariance_summary", "broken_lines"]
+__all__ = ["INVARIANCE_COLUMNS", "check_invariance", "run_invariance", "invariance_summary", "broken_lines"]
 
 INVARIANCE_COLUMNS = (["engine", "scenario", "transform", "magnitude", "dt", "steps", "verdict",
                        "worst_quantity", "worst_ratio"]
@@ -94,6 +94,51 @@ def check_invariance(scenario, variant: str, transforms=None, *, scales: dict | 
                              differenced=getattr(traits, "velocity_from_positions", False))
         rows.append(_row(variant, scenario, t, j.verdict, j.assessment, dt, n, j))
     return rows
+
+
+def _run_item(item) -> list:
+    """``item`` = (scenario, variant, scales, amplification, user engines): :func:`check_invariance` in a
+    worker (engine files registered there too); any error of the harness becomes rows saying so."""
+    scenario, variant, scales, amplification, user_engines = item
+    try:
+        from cross_checks.engines import adopt_user_engines
+        adopt_user_engines(user_engines)
+        return check_invariance(scenario, variant, scales=scales, amplification=amplification)
+    except Exception as exc:  # noqa: BLE001
+        return _unjudged(scenario, variant, f"internal error while checking: {type(exc).__name__}: {exc}")
+
+
+def _unjudged(scenario, variant, why: str) -> list:
+    return [_row(variant, scenario, t, "not judged", f"not judged: {why}") for t in default_transforms()]
+
+
+def run_invariance(runner, scenarios, variants, refs, leave_out=(), show_progress: bool = False) -> list:
+    """Every invariance row of ``variants`` on ``scenarios`` (each with its reference result ``refs``: the
+    scales and error amplification the sweep measured), on ``runner`` (cross_checks.sweep.execute.Runner:
+    one item per (scenario, variant), longest first), except the pairs in ``leave_out``. A worker that dies
+    leaves its pair's rows "not judged", saying so. Rows in scenario, then variant order."""
+    from cross_checks.core.progress import Progress
+    from cross_checks.engines import user_engines
+    from cross_checks.sweep.plan import job_cost_s
+    extra = user_engines()
+    items = [(sc, v, ref.scales, (ref.measured or {}).get("amplification"), extra)
+             for sc, ref in zip(scenarios, refs) for v in variants if (sc.name, v) not in leave_out]
+    cost = {(it[0].name, it[1]): job_cost_s(it[0], it[1], it[0].dt_s) for it in items}
+    order = {(it[0].name, it[1]): i for i, it in enumerate(items)}
+    items.sort(key=lambda it: -cost[(it[0].name, it[1])])
+    out: dict = {}
+    with Progress("rbcheck sweep", "invariance checks", len(items), enabled=show_progress,
+                  total_work=sum(cost.values())) as bar:
+        def done(item, rows):
+            out[(item[0].name, item[1])] = rows
+            bar.update(1, f"{item[0].name} {item[1]}", work=cost[(item[0].name, item[1])])
+
+        def crashed(item):
+            return _unjudged(item[0], item[1], "the worker process died running the transforms (a crash "
+                                               "inside the engine?)")
+
+        runner.map_unordered(_run_item, items, done, on_crash=crashed, in_flight=lambda it: True)
+    return [r for key in sorted(out, key=order.get) for r in out[key]]
 
 
 def _clamped(traits, original, scenario, transformed) -> str:

@@ -265,23 +265,17 @@ def _write_results(staging, scenarios, variants, refs, records, *, started, skip
     if long_scenarios:
         _write_long_runs(staging, summary, long_scenarios, variants, long_records or {})
     if invariance:
-        _write_invariance(staging, summary, scenarios, variants, refs, cannot or {}, show)
+        _write_invariance(staging, summary, scenarios, variants, refs, cannot or {}, show, runner)
     assemble.write_json(staging / "summary.json", summary)
     return summary
 
 
-def _write_invariance(staging, summary, scenarios, variants, refs, cannot, show) -> None:
+def _write_invariance(staging, summary, scenarios, variants, refs, cannot, show, runner) -> None:
     """invariance.csv, summary.json's ``invariance`` and ``run.invariance`` (docs/invariance.md): every
-    variant on every convergence scenario it can express, with the scales and error amplification the
-    sweep measured for the scenario's floors."""
-    from cross_checks.sweep.invariance import INVARIANCE_COLUMNS, check_invariance, invariance_summary
-    rows = []
-    for sc, ref in zip(scenarios, refs):
-        stage("rbcheck sweep", f"invariance checks on {sc.name}", enabled=show)
-        amp = (ref.measured or {}).get("amplification")
-        for v in variants:
-            if (sc.name, v) not in cannot:
-                rows += check_invariance(sc, v, scales=ref.scales, amplification=amp)
+    variant on every convergence scenario it can express, on the sweep's workers, with the scales and error
+    amplification the sweep measured for the scenario's floors."""
+    from cross_checks.sweep.invariance import INVARIANCE_COLUMNS, invariance_summary, run_invariance
+    rows = run_invariance(runner, scenarios, variants, refs, cannot, show)
     atomic_write_text(staging / "invariance.csv", assemble.results_csv_text(rows, INVARIANCE_COLUMNS))
     summary["invariance"], summary["run"]["invariance"] = invariance_summary(rows)
     summary["files"]["invariance"] = "invariance.csv (docs/invariance.md)"
