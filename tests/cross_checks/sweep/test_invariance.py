@@ -164,3 +164,11 @@ def test_the_pytest_fixture_takes_invariance(assert_engine, zoo):
     engine_file, scenario = zoo
     summary = assert_engine("zoo:correct", [scenario], engine_file=engine_file, invariance=True)
     assert summary["run"]["invariance"]["checks"] == 7 and summary["run"]["invariance"]["broken"] == 0
+
+
+def test_an_error_of_the_harness_leaves_the_pair_not_judged():
+    from cross_checks.sweep.invariance import _run_item
+    sc = parse_scenario(TUMBLE, "t.toml")
+    rows = _run_item((sc, "nosuchengine:x", None, None, []))
+    assert len(rows) == 7 and {r["verdict"] for r in rows} == {"not judged"}
+    assert "internal error while checking" in rows[0]["assessment"]
