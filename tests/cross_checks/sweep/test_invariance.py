@@ -113,6 +113,11 @@ def test_sweep_invariance_end_to_end_then_compare(zoo, tmp_path, monkeypatch, ca
     said = capsys.readouterr().out
     assert "invariance under body_frame 41 deg" in said, said[-2000:]
     assert main(["compare", str(out), str(base)]) == 0          # fixed: an improvement
+    compact = tmp_path / "compact"                              # a compact baseline keeps the records
+    assert main(["baseline", str(out), str(compact)]) == 0
+    kept = json.loads((compact / "summary.json").read_text())["invariance"]
+    assert [r["transform"] for r in kept if r["verdict"] == "broken"] == ["body_frame"]
+    assert main(["compare", str(compact), str(out)]) == 0
 
 
 def test_without_the_flag_nothing_changes(zoo, tmp_path, monkeypatch, capsys):
