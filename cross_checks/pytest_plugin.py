@@ -39,14 +39,15 @@ def _safe(text: str) -> str:
 
 @pytest.fixture
 def assert_engine(request, rbcheck_cache_dir):
-    """``assert_engine(variant, scenarios, *, engine_file=None)`` — see cross_checks.testing.assert_engine."""
+    """``assert_engine(variant, scenarios, *, engine_file=None, invariance=False)`` — see
+    cross_checks.testing.assert_engine."""
     cfg = request.config
     keep = cfg.getoption("rbcheck_keep_reports")
     session_files = [Path(f) for f in cfg.getoption("rbcheck_engine_file")]
     jobs = cfg.getoption("rbcheck_jobs")
     calls = []
 
-    def check(variant, scenarios, *, engine_file=None):
+    def check(variant, scenarios, *, engine_file=None, invariance=False):
         __tracebackhide__ = True   # the user sees the verdict sentences, not rbcheck's frames
         from cross_checks.testing import as_list, run_engine_checks
         calls.append(variant)
@@ -55,6 +56,6 @@ def assert_engine(request, rbcheck_cache_dir):
             out = Path(keep) / _safe(request.node.nodeid) / f"{len(calls)}-{_safe(str(variant))}"
             out.parent.mkdir(parents=True, exist_ok=True)
         return run_engine_checks(variant, scenarios, engine_file=session_files + as_list(engine_file),
-                                 out_dir=out, cache_dir=rbcheck_cache_dir, jobs=jobs)
+                                 out_dir=out, cache_dir=rbcheck_cache_dir, jobs=jobs, invariance=invariance)
 
     return check

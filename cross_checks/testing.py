@@ -22,7 +22,7 @@ from pathlib import Path
 __all__ = ["assert_engine"]
 
 
-def assert_engine(variant, scenarios, *, engine_file=None) -> dict:
+def assert_engine(variant, scenarios, *, engine_file=None, invariance: bool = False) -> dict:
     """Sweep ``variant`` over the Δt ladders of ``scenarios`` and assert that its verdicts agree with the
     order its engine declares, and that no run failed or diverged.
 
@@ -35,6 +35,10 @@ def assert_engine(variant, scenarios, *, engine_file=None) -> dict:
         two steps (the order is fitted over it).
     engine_file : str or path, or a list of them, optional
         Engine file(s) to register first (engine-file engines). Entry-point engines need none.
+    invariance : bool, optional
+        Also run the invariance checks (docs/invariance.md): each scenario translated, in a rotated world,
+        with a non-principal body frame and scaled, mapped back and compared with the variant's own run of
+        the original; a broken invariance is a problem (its sentence names the transform and the deviation).
 
     Returns
     -------
@@ -53,11 +57,11 @@ def assert_engine(variant, scenarios, *, engine_file=None) -> dict:
         scenario without a Δt ladder.
     """
     __tracebackhide__ = True   # pytest shows the verdict, not rbcheck's own frames
-    return run_engine_checks(variant, scenarios, engine_file=engine_file)
+    return run_engine_checks(variant, scenarios, engine_file=engine_file, invariance=invariance)
 
 
 def run_engine_checks(variant, scenarios, *, engine_file=None,
-                      out_dir=None, cache_dir=None, jobs=None) -> dict:
+                      out_dir=None, cache_dir=None, jobs=None, invariance: bool = False) -> dict:
     """:func:`assert_engine` with the plugin's settings: ``out_dir`` keeps the results directory and its
     HTML report there; ``cache_dir`` replaces the user's rbcheck cache; ``jobs`` worker processes."""
     __tracebackhide__ = True
@@ -86,11 +90,15 @@ def run_engine_checks(variant, scenarios, *, engine_file=None,
             stack.enter_context(using_cache_dir(cache_dir))
         try:
             summary = run_sweep(scs, variants, out, jobs=jobs, progress=False,
-                                finish=_render if out_dir is not None else None)
+                                finish=_render if out_dir is not None else None,
+                                **({"invariance": True} if invariance else {}))
         except SweepError as exc:
             raise ValueError(str(exc)) from None
         rows = _read_rows(out / "results.csv")
         problems = verdict_problems(summary, rows)
+        if invariance:
+            from cross_checks.sweep.invariance import broken_lines
+            problems += broken_lines(summary)
         failed = {(r["scenario"], r["engine"]) for r in rows if r["status"] in ("failed", "diverged")}
         wrong = dict.fromkeys((r["scenario"], r["engine"]) for r in summary.get("convergence", [])
                               if r.get("matches_expectation") is False

@@ -107,7 +107,24 @@ def findings(res) -> list:
     explained = _expected_non_convergence(res, c) + _pre_asymptotic(res, c)
     info = diverged + _exact_and_faster(res, c) + _conservation(res, c)
     disagree, agree = _same_schemes(res, c)
-    return bad + disagree + explained + info + agree + _not_measured(res, c)
+    broken, lost = _invariance(res, c)
+    return bad + broken + disagree + explained + info + lost + agree + _not_measured(res, c)
+
+
+def _invariance(res, c) -> tuple:
+    """Invariance checks (summary.json ``invariance``, docs/invariance.md): a broken one is bad; a precision
+    loss is information, with its number; what an engine cannot express, said once per variant."""
+    bad, info = [], []
+    recs = sorted(res.summary.get("invariance") or [],
+                  key=lambda r: (c.scen_order.get(r["scenario"], 99), c.var_order.get(r["engine"], 99)))
+    for r in recs:
+        text = (f"{r['engine']} on {r['scenario']}: under {r['transform']} {r['magnitude']}, "
+                f"{r['assessment']}.")
+        if r["verdict"] == "broken":
+            bad.append(Finding("bad", text, r["scenario"], r["engine"]))
+        elif r["verdict"] == "precision loss":
+            info.append(Finding("info", text, r["scenario"], r["engine"]))
+    return bad, info
 
 
 def _contradictions(res, c) -> list:

@@ -406,7 +406,8 @@ def render_pages(res, figures: dict, self_contained: bool = False) -> dict:
         title="rbcheck results", matrix=_matrix(res), legend=_legend(), box=box,
         which=_which_view(rk, answer),
         sections=sections, observations=observations,
-        skipped=res.summary.get("skipped_variants", []), second=_second_summary(res), **common)
+        skipped=res.summary.get("skipped_variants", []), second=_second_summary(res),
+        invariance=(res.summary.get("run") or {}).get("invariance"), **common)
     for s in res.scenarios:
         view = _scenario_view(res, s, figures.get(s["name"], []), all_f, self_contained)
         pages[page_name(s["name"])] = env.get_template("scenario.html").render(

@@ -27,6 +27,11 @@ runs on their recorded states (:func:`cross_checks.analysis.flow.run_local_defec
 (ratio > 1) the verdict is judged as fitted and the sentence says why the excuse was refused
 (docs/verdicts.md, "No excuse for wrong equations").
 
+An invariance check (docs/invariance.md) has no ladder either: :func:`judge_invariance` judges how far a
+variant's run of a transformed scenario, mapped back, is from its run of the original, against the two runs'
+round-off in the variant's precision grown by the motion's measured amplification
+(:func:`invariance_allowance`).
+
 A long run has no ladder: :func:`judge_long_run` judges what it conserved against what the variant's traits
 say it keeps (:func:`~cross_checks.analysis.expectations.long_run_expectation`), with round-off floors from
 :func:`cross_checks.core.tolerances.long_run_roundoff` (docs/verdicts.md §8).
@@ -49,7 +54,8 @@ from cross_checks.analysis.convergence import (
 from cross_checks.core import tolerances as tol
 
 __all__ = ["Judgement", "LocalEvidence", "judge_ladder", "judge_fit", "two_term_consistent",
-           "LongRunJudgement", "judge_long_run", "LONG_RUN_VERDICTS"]
+           "LongRunJudgement", "judge_long_run", "LONG_RUN_VERDICTS", "INVARIANCE_VERDICTS",
+           "InvarianceJudgement", "invariance_allowance", "judge_invariance"]
 
 
 @dataclass(frozen=True)
@@ -284,3 +290,119 @@ def judge_long_run(variant: str, run_name: str, metrics, exp, status: str = "ok"
     extra = (" — its drift toward the intermediate axis is the one its step makes (expected, named)"
              if kind == "toward_intermediate" else "")
     return LongRunJudgement(kind, True, f"keeps {held} as declared (within {floor:.2g}){extra}", said)
+
+
+# --- invariance checks -----------------------------------------------------------------------------------
+
+#: Verdicts of an invariance check: ``holds`` (within the round-off of the motion itself), ``precision loss``
+#: (beyond it, within what the transform's larger magnitudes allow: expected, with its number), ``broken``
+#: (beyond the allowance: the engine, or its adapter, does not move the same physics the same),
+#: ``cannot express`` (the engine cannot take the transformed scenario: said, never a failure) and
+#: ``refused`` (rbcheck refuses the transform on this scenario: it would leave the physical ranges) and
+#: ``not judged`` (the variant's run of the original failed or diverged: results.csv says why).
+INVARIANCE_VERDICTS = ("holds", "precision loss", "broken", "cannot express", "refused", "not judged")
+
+
+@dataclass(frozen=True)
+class InvarianceJudgement:
+    """What the judge decided of one invariance check: ``verdict`` (INVARIANCE_VERDICTS), per quantity the
+    largest ``deviation`` over the run (its unit: m, rad, m/s, rad/s), the ``allowance`` (base + offset) and
+    its ``base`` part (the motion's own round-off), the ``worst`` quantity (largest deviation / allowance) and
+    the ``assessment`` sentence."""
+
+    verdict: str
+    deviation: dict
+    allowance: dict
+    base: dict
+    worst: str
+    assessment: str
+
+
+def invariance_allowance(scales: dict, amplification: dict, n_steps: int, *, precision: str = "float64",
+                         rounding_factor: float = 1.0, offset_m: float = 0.0, dt_s: float | None = None,
+                         differenced: bool = False) -> tuple:
+    """``(base, offset)`` allowances per quantity (its unit) for two runs of ``n_steps`` steps of one variant
+    that differ only in how the same physics is written.
+
+    Each run rounds as :func:`cross_checks.analysis.metrics.roundoff_floor` models it,
+    ``ε·scale·(b N + √N A)``
+    with ε = CHECK_ROUNDINGS_PER_STEP unit roundoffs (UNIT_ROUNDOFF[precision]: the roundings of a step's ~10
+    operations per component) × ``rounding_factor`` and A the motion's measured amplification, and
+    b = 1 for every quantity: a transform changes every rounding of the step (a turned frame rounds each
+    component differently), so the two runs' roundings are not paired, and a step that renormalises (the
+    quaternion, a rescaled |L|) rounds the same way every step — the worst case adds up linearly, as
+    tolerances.long_run_roundoff takes it (measured: the Jolt and Bullet implicit gyroscopic steps of the
+    reference part by 3e-11 rad over 1e4 steps of tennis_racket in a turned world, 2.4× the √N model with one
+    rounding a step; by 1.9e-8 rad/s on tumbling_box, 5× it with the linear term; implicit Euler, whose Newton
+    solve stops at its tolerance, by 2.7e-10 m/s on spring_oscillator scaled, 5.6× it). The
+    two runs' difference is bounded by the sum (INVARIANCE_RUNS_COMPARED), and round-off scatters about its
+    estimate by up to ROUNDOFF_NOISE_FACTOR. ``offset_m`` (a translation's |d|) makes every position
+    |d| larger: its rounding ``ε |d|`` per step adds ``ε |d| (N + √N A_x)`` to the position and, through the
+    motion (A_q per position perturbation of relative size ε), ``ε (|d| / scale_x) scale_q √N A_q`` to the
+    others; a velocity recomputed from positions (``differenced``) adds their round-off over Δt."""
+    from cross_checks.analysis.metrics import differencing_floor
+    from cross_checks.core.quantities import QUANTITIES
+    eps = tol.CHECK_ROUNDINGS_PER_STEP * tol.UNIT_ROUNDOFF[precision] * max(1.0, float(rounding_factor))
+    k = tol.INVARIANCE_RUNS_COMPARED * tol.ROUNDOFF_NOISE_FACTOR
+    n = max(int(n_steps), 1)
+    base, offset = {}, {}
+    x_scale = float(scales.get("position", 1.0))
+    for q in QUANTITIES:
+        a = max(1.0, float((amplification or {}).get(q, 1.0)))
+        scale = float(scales.get(q, 1.0))
+        base[q] = k * eps * scale * (n + math.sqrt(n) * a)
+        if q == "position":
+            offset[q] = k * eps * offset_m * (n + math.sqrt(n) * a)
+        else:
+            offset[q] = k * eps * (offset_m / x_scale) * scale * math.sqrt(n) * a
+        if differenced and q == "velocity" and dt_s:
+            base[q] += k * differencing_floor(x_scale, n, dt_s, eps, a)
+            offset[q] += k * differencing_floor(offset_m, n, dt_s, eps, a)
+    return base, offset
+
+
+def judge_invariance(y_original, y_mapped, *, scales: dict, amplification: dict, n_steps: int,
+                     precision: str = "float64", rounding_factor: float = 1.0, offset_m: float = 0.0,
+                     dt_s: float | None = None, differenced: bool = False) -> InvarianceJudgement:
+    """Judge the states ``y_mapped`` ((T, 13): a run of a transformed scenario, mapped back to the original's
+    frames) against ``y_original`` ((T, 13): the same variant's run of the original) with the allowance of
+    :func:`invariance_allowance`: ``holds`` within its base, ``precision loss`` within base + offset,
+    ``broken`` beyond (or where one run left the finite numbers and the other did not)."""
+    from cross_checks.core.quantities import QUANTITIES, UNITS, state_errors
+    y0, y1 = np.asarray(y_original, dtype=float), np.asarray(y_mapped, dtype=float)
+    base, offset = invariance_allowance(scales, amplification, n_steps, precision=precision,
+                                        rounding_factor=rounding_factor, offset_m=offset_m, dt_s=dt_s,
+                                        differenced=differenced)
+    allowance = {q: base[q] + offset[q] for q in QUANTITIES}
+    if y0.shape != y1.shape:
+        dev = {q: math.inf for q in QUANTITIES}
+        return InvarianceJudgement("broken", dev, allowance, base, "position",
+                                   f"the transformed run recorded {len(y1)} states, the original {len(y0)}")
+    errs = state_errors(y1, y0)
+    finite0 = np.all(np.isfinite(y0), axis=-1)
+    dev = {}
+    for q in QUANTITIES:
+        e = np.where(finite0, errs[q], 0.0)
+        dev[q] = math.inf if not np.all(np.isfinite(e)) else float(np.max(e, initial=0.0))
+    worst = max(QUANTITIES, key=lambda q: dev[q] / allowance[q] if allowance[q] > 0 else math.inf)
+    what = (f"largest deviation {dev[worst]:.3g} {UNITS[worst]} in {worst.replace('_', ' ')}")
+    if not math.isfinite(dev[worst]):
+        return InvarianceJudgement("broken", dev, allowance, base, worst,
+                                   f"the transformed run left the finite numbers where the original did not "
+                                   f"({worst.replace('_', ' ')})")
+    if all(dev[q] <= base[q] for q in QUANTITIES):
+        return InvarianceJudgement("holds", dev, allowance, base, worst,
+                                   f"holds: {what}, within its round-off {base[worst]:.2g}")
+    if all(dev[q] <= allowance[q] for q in QUANTITIES):
+        over = max((q for q in QUANTITIES if dev[q] > base[q]), key=lambda q: dev[q] / base[q])
+        scale = float(scales.get(over, 1.0))
+        blind = (f"; at this distance {precision}'s allowance exceeds the motion's own scale ({scale:.3g} "
+                 f"{UNITS[over]}): this check cannot tell an error from round-off here"
+                 if allowance[over] >= scale else "")
+        return InvarianceJudgement("precision loss", dev, allowance, base, over,
+                                   f"precision loss (expected): {dev[over]:.3g} {UNITS[over]} in "
+                                   f"{over.replace('_', ' ')}, within the {allowance[over]:.2g} that "
+                                   f"{precision} at |d| = {offset_m:g} m allows{blind}")
+    return InvarianceJudgement("broken", dev, allowance, base, worst,
+                               f"broken: {what}, {dev[worst] / allowance[worst]:.3g}× the allowance "
+                               f"{allowance[worst]:.2g} of {precision} round-off")

@@ -174,6 +174,12 @@ def _add_sweep(sub) -> None:
                         "intermediate axis; docs/scenario.md \"Long runs\"); the default sweep has them")
     s.add_argument("--no-long", action="store_true",
                    help="leave the long runs out of the default sweep (the Δt ladders only)")
+    s.add_argument("--invariance", action="store_true",
+                   help="also run every variant on each scenario translated (10 m, 1 km, 10 km), in a "
+                        "rotated "
+                        "world, with a non-principal body frame and scaled (k, mu = 0.01 and 100), each "
+                        "mapped back and judged against its own run of the original: DIR/invariance.csv; "
+                        "exit 1 on a broken invariance (docs/invariance.md)")
     s.add_argument("--engines", nargs="+", metavar="ENGINE[:VARIANT]",
                    help="variants to run, e.g. reference:rk4 mujoco (an engine name means all its variants); "
                         "default: every available variant")
@@ -710,6 +716,8 @@ def _gate_failures(summary) -> list:
     for r in summary.get("long_runs", []):
         if r.get("matches_expectation") is False:
             out.append(f"{r['engine']} on {r['scenario']} (long run): {r['assessment']}")
+    from cross_checks.sweep.invariance import broken_lines
+    out += broken_lines(summary)
     n_failed = summary.get("run", {}).get("failed_runs", 0)
     if n_failed:
         out.append(f"{n_failed} run(s) failed (status 'failed' in results.csv)")
@@ -802,7 +810,8 @@ def _run_sweep(args, scenarios, variants, skipped) -> dict:
         return run_sweep(scenarios, variants, args.out, jobs=jobs, use_cache=not args.no_cache, progress=True,
                          finish=lambda d: reports.render(d, self_contained=args.self_contained, jobs=jobs,
                                                         progress=True),
-                         skipped=skipped, **_time_limits(args.time_limit), executor=executor)
+                         skipped=skipped, **_time_limits(args.time_limit), executor=executor,
+                         **({"invariance": True} if getattr(args, "invariance", False) else {}))
 
 
 def verdict_count(summary) -> tuple:
@@ -918,11 +927,18 @@ def _sweep_outcome(summary, out, n_scenarios, n_variants, elapsed_s, scenarios=N
         _say_likely_causes(summary, scenarios or [])
     if failed:
         _say_failed_runs(out, failed)
-    if not wrong and not failed:
+    inv = run.get("invariance") or {}
+    if inv:
+        say(f"rbcheck sweep: {inv['checks']} invariance checks: "
+            + ", ".join(f"{n} {v}" for v, n in inv.items() if v != "checks" and n)
+            + f" ({Path(out) / 'invariance.csv'})")
+    if not wrong and not failed and not inv.get("broken"):
         say(f"rbcheck sweep: all {total} verdicts as expected")
     else:
         say(f"rbcheck sweep: {wrong} of {total} verdicts not as expected"
-            + (f", {failed} run(s) failed" if failed else "") + f" (see {Path(out) / 'index.html'})")
+            + (f", {failed} run(s) failed" if failed else "")
+            + (f", {inv['broken']} broken invariance(s)" if inv.get("broken") else "")
+            + f" (see {Path(out) / 'index.html'})")
     return EXIT_FAIL if fails else EXIT_OK
 
 

@@ -333,3 +333,18 @@ def long_run_roundoff(n_steps: int, unit_roundoff: float, rounding_factor: float
 #: Loading the reference's cached numba kernels takes ~1 s (numba's import and index lookup, measured on 2
 #: cores); a warm-up still going after this many seconds is compiling, and the sweep says so (issue 44).
 COMPILE_NOTICE_AFTER_S = 3.0
+
+# --- invariance checks (cross_checks.scenario.transforms, judge.judge_invariance; docs/invariance.md) ---
+#: Translations of the world origin the sweep's invariance checks make (m): a room (10 m), a site (1 km) and
+#: a map tile (10 km), where float32 keeps 4, 2 and 1 mm of resolution (1e4 × 2⁻²³ = 1.2 mm: MuJoCo Warp
+#: #1546's regime); all within PHYSICAL_MAX_DISTANCE_M of the catalog's positions.
+INVARIANCE_TRANSLATIONS_M = (10.0, 1e3, 1e4)
+#: Length and mass factors (k, μ) of the scale transforms: the scale range of the issue, 1e-2 to 1e2 (a
+#: 1 cm, 10 g version of a 1 m, 1 kg body and its 100× larger, heavier twin). Within them every catalog body
+#: stays inside PHYSICAL_MASS_KG and PHYSICAL_INERTIA_KG_M2 (inertia × μk² from 1e-6 to 1e6).
+INVARIANCE_SCALES = ((1e-2, 1e-2), (1e2, 1e2))
+#: The range a scale factor k or μ may take (a transform outside it is refused, naming k or mu).
+INVARIANCE_SCALE_RANGE = (1e-2, 1e2)
+#: An invariance check compares two runs of the same variant, each with its own round-off
+#: (metrics.roundoff_floor's ε·scale·(b N + √N A) per run): the difference of two runs is bounded by the sum.
+INVARIANCE_RUNS_COMPARED = 2

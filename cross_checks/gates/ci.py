@@ -109,6 +109,12 @@ def sweep_junit(summary: dict, rows=(), long_rows=()) -> ET.Element:
             x.case(v, f"rbcheck.{v}", f"{sc}: long run", skipped=sentence)
         else:
             x.case(v, f"rbcheck.{v}", f"{sc}: long run")
+    for r in summary.get("invariance") or []:   # the checks that do not hold (docs/invariance.md)
+        if r["verdict"] == "broken":
+            x.case(r["engine"], f"rbcheck.{r['engine']}",
+                   f"{r['scenario']}: invariance under {r['transform']} {r['magnitude']}",
+                   failure=f"{r['engine']} on {r['scenario']}: invariance under {r['transform']} "
+                           f"{r['magnitude']} {r['assessment']}", kind="contradiction")
     for a in summary.get("agreement", []):
         sentence = (f"{a['a']} and {a['b']} differ on {a['scenario']} (should be the same scheme)"
                     if not a.get("agrees") else "")
@@ -254,6 +260,13 @@ def sweep_markdown(summary: dict, out_dir, rows=(), long_rows=()) -> str:
                for r in summary.get("long_runs") or [] if r.get("matches_expectation") is False]
     contra += [f"{a['a']} and {a['b']} differ on {a['scenario']} (should be the same scheme)"
                for a in summary.get("agreement", []) if not a.get("agrees")]
+    from cross_checks.sweep.invariance import broken_lines
+    broken = broken_lines(summary)
+    contra += broken
+    if broken:
+        md[2] += f" **{len(broken)} broken invariance(s)** (invariance.csv)."
+        if ok:
+            md[0] = "## rbcheck sweep: ❌ invariance broken"
     if contra:
         fold = len(contra) > 10
         md += (["<details><summary>Not as expected</summary>", ""] if fold else ["**Not as expected**", ""])

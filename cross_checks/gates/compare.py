@@ -298,6 +298,7 @@ def compare_dirs(baseline_dir, new_dir, require=()) -> Comparison:
     _compare_convergence(old_sum.get("local_convergence", []), new_sum.get("local_convergence", []), out,
                          local=True)
     _compare_agreement(old_sum.get("agreement", []), new_sum.get("agreement", []), out)
+    _compare_invariance(old_sum.get("invariance"), new_sum.get("invariance"), out)
     _compare_versions(old_sum.get("provenance", {}), new_sum.get("provenance", {}), out)
     return out
 
@@ -461,6 +462,28 @@ def _compare_agreement(old_recs, new_recs, out: Comparison):
                                       area="agreement"))
 
 
+def _compare_invariance(old_recs, new_recs, out: Comparison):
+    """Invariance checks (summary.json ``invariance``: the checks that do not hold), matched by (scenario,
+    engine, transform, magnitude): a broken invariance the baseline does not have broken is a regression
+    (whether the baseline held it or did not run the checks: docs/invariance.md); one broken there and no
+    longer broken is an improvement. Without the checks in the new results nothing is compared."""
+    if new_recs is None:
+        return
+    key = lambda r: (r["scenario"], r["engine"], r["transform"], r["magnitude"])  # noqa: E731
+    old = {key(r): r for r in old_recs or []}
+    new = {key(r): r for r in new_recs}
+    for k in sorted(set(old) | set(new)):
+        bo = k in old and old[k]["verdict"] == "broken"
+        bn = k in new and new[k]["verdict"] == "broken"
+        if bo == bn:
+            continue
+        before = old[k]["verdict"] if k in old else ("holds" if old_recs is not None else "not run")
+        after = new[k]["verdict"] if k in new else "holds"
+        out.changes.append(Change("regression" if bn else "improvement", k[0], k[1],
+                                  f"invariance under {k[2]} {k[3]}", before, after,
+                                  note=(new[k] if bn else old[k])["assessment"], area="invariance"))
+
+
 def _order_change(ro, rn):
     """``(kind, old, new, note)`` when the order of a record whose verdict did not change moved, else None."""
     oo, on = ro.get("order"), rn.get("order")
@@ -507,7 +530,7 @@ def _compare_versions(po, pn, out: Comparison):
             out.version_diffs.append((k, vo.get(k, "—"), vn.get(k, "—")))
 
 
-_CAUSE_AREAS = ("order", "local order", "agreement", "energy kind")
+_CAUSE_AREAS = ("order", "local order", "agreement", "energy kind", "invariance")
 
 
 def variant_changes(c: Comparison) -> list:

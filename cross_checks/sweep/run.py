@@ -93,7 +93,7 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
               progress: bool | None = None, skipped=None, finish=None,
               executor=None, run_time_limit_s: float | None = tol.RUN_TIME_LIMIT_S,
               reference_time_limit_s: float | None = tol.REFERENCE_TIME_LIMIT_S,
-              second_reference: bool = True) -> dict:
+              second_reference: bool = True, invariance: bool = False) -> dict:
     """Run the sweep and write the results directory ``out_dir`` (atomically).
 
     Parameters
@@ -152,7 +152,7 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
                                  cannot={**cannot, **cannot_long}, runner=runner,
                                  run_time_limit_s=run_time_limit_s,
                                  long_scenarios=long_scenarios, long_records=long_records,
-                                 compile_s=compile_s)
+                                 compile_s=compile_s, invariance=invariance, show=show)
         runner.close()
         runner = None
         if finish is not None:  # e.g. the report, drawn from the saved files only
@@ -226,7 +226,8 @@ def _with_second_references(refs, second: dict) -> list:
 
 def _write_results(staging, scenarios, variants, refs, records, *, started, skipped, jobs, t_start,
                    cannot=None, runner, run_time_limit_s=tol.RUN_TIME_LIMIT_S, long_scenarios=(),
-                   long_records=None, compile_s: float = 0.0) -> dict:
+                   long_records=None, compile_s: float = 0.0, invariance: bool = False,
+                   show: bool = False) -> dict:
     """Assemble the job records and write results.csv, series/ and summary.json into ``staging`` (its
     work directory removed) — and, with long runs, long_runs.csv and their series; returns the summary. The
     continued ladders of :mod:`.refine` run on ``runner``."""
@@ -263,8 +264,21 @@ def _write_results(staging, scenarios, variants, refs, records, *, started, skip
     summary["run"]["compile_s"] = round(compile_s, 3)   # before the runs (wall_s): the reference's kernels
     if long_scenarios:
         _write_long_runs(staging, summary, long_scenarios, variants, long_records or {})
+    if invariance:
+        _write_invariance(staging, summary, scenarios, variants, refs, cannot or {}, show, runner)
     assemble.write_json(staging / "summary.json", summary)
     return summary
+
+
+def _write_invariance(staging, summary, scenarios, variants, refs, cannot, show, runner) -> None:
+    """invariance.csv, summary.json's ``invariance`` and ``run.invariance`` (docs/invariance.md): every
+    variant on every convergence scenario it can express, on the sweep's workers, with the scales and error
+    amplification the sweep measured for the scenario's floors."""
+    from cross_checks.sweep.invariance import INVARIANCE_COLUMNS, invariance_summary, run_invariance
+    rows = run_invariance(runner, scenarios, variants, refs, cannot, show)
+    atomic_write_text(staging / "invariance.csv", assemble.results_csv_text(rows, INVARIANCE_COLUMNS))
+    summary["invariance"], summary["run"]["invariance"] = invariance_summary(rows)
+    summary["files"]["invariance"] = "invariance.csv (docs/invariance.md)"
 
 
 def _write_long_runs(staging, summary, long_scenarios, variants, long_records) -> None:

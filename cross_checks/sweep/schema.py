@@ -127,6 +127,9 @@ LONG_RUN_SCENARIO = {"name": str, "description": str, "duration_s": NUM, "dt_s":
                      "content_hash?": str, "source?": str, "inertia_B_kg_m2?": [[NUM]]}
 AGREEMENT = {"a": str, "b": str, "scenario": str, "dt_s": NUM, "agrees": bool, "max_rel": Nullable(NUM),
              "reason": str, "note?": str}
+#: An invariance check that does not hold (docs/invariance.md): summary.json's ``invariance`` list.
+INVARIANCE_RECORD = {"engine": str, "scenario": str, "transform": str, "magnitude": str, "verdict": str,
+                     "worst_quantity": str, "worst_ratio": Nullable(NUM), "assessment": str}
 SUMMARY = {
     "schema_version": int,
     "provenance": {k + "?": Nullable(str)
@@ -141,6 +144,7 @@ SUMMARY = {
     "agreement?": [AGREEMENT],
     "long_run_scenarios?": [LONG_RUN_SCENARIO],
     "long_runs?": [LONG_RUN_RECORD],
+    "invariance?": [INVARIANCE_RECORD],
     "run?": {k + "?": Nullable(NUM) for k in ("jobs", "runs", "cached_runs", "diverged_runs", "failed_runs",
                                                "wall_s", "cpu_s_in_runs", "engine_s_in_runs",
                                                "compile_s")},
@@ -165,6 +169,7 @@ COMPACT_LISTS = {
     "local_convergence": COMPACT_CONVERGENCE,
     "agreement": {"a": str, "b": str, "scenario": str, "dt_s": NUM, "agrees": bool, "max_rel": Nullable(NUM),
                   "note?": str},
+    "invariance": INVARIANCE_RECORD,
 }
 COMPACT_SUMMARY = {"schema_version": int, "form": (COMPACT_FORM,), "provenance": SUMMARY["provenance"],
                    "convergence": [COMPACT_CONVERGENCE],

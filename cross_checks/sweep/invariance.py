@@ -1,0 +1,187 @@
+"""The invariance checks of a sweep (``rbcheck sweep --invariance``, ``assert_engine(..., invariance=True)``;
+docs/invariance.md): each variant runs each scenario and its transforms
+(:mod:`cross_checks.scenario.transforms`) in one ``simulate_many`` call at the scenario's dt; each transformed
+run, mapped back to the original's frames,
+is judged against the variant's run of the original by :func:`cross_checks.analysis.judge.judge_invariance`.
+
+Rows (invariance.csv, :data:`INVARIANCE_COLUMNS`): variant, scenario, transform, magnitude, the Δt and steps,
+per quantity the largest deviation over the run and its allowance, the verdict and its sentence.
+"""
+from __future__ import annotations
+
+import math
+
+from cross_checks.analysis.judge import judge_invariance
+from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, quantity_scales
+from cross_checks.scenario.transforms import TransformRefused, apply, default_transforms
+
+__all__ = ["INVARIANCE_COLUMNS", "check_invariance", "run_invariance", "invariance_summary", "broken_lines"]
+
+INVARIANCE_COLUMNS = (["engine", "scenario", "transform", "magnitude", "dt", "steps", "verdict",
+                       "worst_quantity", "worst_ratio"]
+                      + [f"{COLUMN_STEM[q]}_dev" for q in QUANTITIES]
+                      + [f"{COLUMN_STEM[q]}_allowance" for q in QUANTITIES]
+                      + ["assessment"])
+
+
+def _row(variant, scenario, transform, verdict, assessment, dt="", steps="", judgement=None) -> dict:
+    row = {"engine": variant, "scenario": scenario.name, "transform": transform.kind,
+           "magnitude": transform.magnitude, "dt": dt, "steps": steps, "verdict": verdict,
+           "worst_quantity": "", "worst_ratio": math.nan,
+           "assessment": " ".join(str(assessment).split())}   # an engine's multi-line message on one line
+    for q in QUANTITIES:
+        row[f"{COLUMN_STEM[q]}_dev"] = math.nan if judgement is None else judgement.deviation[q]
+        row[f"{COLUMN_STEM[q]}_allowance"] = math.nan if judgement is None else judgement.allowance[q]
+    if judgement is not None:
+        w = judgement.worst
+        row["worst_quantity"] = w
+        a = judgement.allowance[w]
+        row["worst_ratio"] = judgement.deviation[w] / a if a > 0 else math.inf
+    return row
+
+
+def check_invariance(scenario, variant: str, transforms=None, *, scales: dict | None = None,
+                     amplification: dict | None = None) -> list:
+    """The invariance rows of ``variant`` on ``scenario`` for ``transforms`` (default:
+    :func:`~cross_checks.scenario.transforms.default_transforms`). ``scales`` and ``amplification`` (per
+    quantity, as the sweep measures them for its floors); measured here when not given (the scales from the
+    variant's own run of the original, the amplification by references.error_amplification)."""
+    from cross_checks.engines import EngineError, NotExpressible, declared_traits, run_requests
+    from cross_checks.engines.base import RunRequest
+    transforms = list(default_transforms() if transforms is None else transforms)
+    dt, n = scenario.dt_s, scenario.n_steps()
+    rows, todo = [], []
+    for t in transforms:
+        try:
+            todo.append((t, apply(t, scenario)))
+        except TransformRefused as exc:
+            rows.append(_row(variant, scenario, t, "refused", f"refused: {exc.field}: {exc.reason}"))
+    runs = run_requests(variant, [RunRequest(s, dt, n) for s in [scenario] + [s for _, s in todo]])
+    original, transformed = runs[0], runs[1:]
+    if isinstance(original, NotExpressible):
+        return rows + [_row(variant, scenario, t, "cannot express",
+                            f"cannot express the scenario: {original}")
+                       for t, _ in todo]
+    if isinstance(original, EngineError) or original.meta.get("status") != "ok":
+        why = (original if isinstance(original, EngineError)
+               else f"diverged at {original.meta['diverged_at_s']} s")
+        return rows + [_row(variant, scenario, t, "not judged",
+                            f"not judged: the run of the original failed ({why}); see results.csv")
+                       for t, _ in todo]
+    traits = declared_traits(variant)
+    precision = getattr(traits, "precision", "float64")
+    if scales is None:
+        scales = quantity_scales(original.y)
+    if amplification is None:
+        from cross_checks.scenario.references import error_amplification
+        amplification = error_amplification(scenario, scales)
+    for (t, tsc), run in zip(todo, transformed):
+        clamp = _clamped(traits, original, scenario, tsc)
+        if clamp:
+            rows.append(_row(variant, scenario, t, "cannot express", f"cannot express: {clamp}", dt, n))
+            continue
+        if isinstance(run, NotExpressible):
+            rows.append(_row(variant, scenario, t, "cannot express", f"cannot express: {run}", dt, n))
+            continue
+        if isinstance(run, EngineError):
+            rows.append(_row(variant, scenario, t, "broken",
+                             f"broken: the original runs, the transformed scenario fails: {run}", dt, n))
+            continue
+        j = judge_invariance(original.y, t.map_back(run.y), scales=scales, amplification=amplification,
+                             n_steps=n, precision=precision,
+                             rounding_factor=getattr(traits, "rounding_factor", 1.0),
+                             offset_m=t.position_offset_m(), dt_s=dt,
+                             differenced=getattr(traits, "velocity_from_positions", False))
+        rows.append(_row(variant, scenario, t, j.verdict, j.assessment, dt, n, j))
+    return rows
+
+
+def _run_item(item) -> list:
+    """``item`` = (scenario, variant, scales, amplification, user engines): :func:`check_invariance` in a
+    worker (engine files registered there too); any error of the harness becomes rows saying so."""
+    scenario, variant, scales, amplification, user_engines = item
+    try:
+        from cross_checks.engines import adopt_user_engines
+        adopt_user_engines(user_engines)
+        return check_invariance(scenario, variant, scales=scales, amplification=amplification)
+    except Exception as exc:  # noqa: BLE001
+        return _unjudged(scenario, variant, f"internal error while checking: {type(exc).__name__}: {exc}")
+
+
+def _unjudged(scenario, variant, why: str) -> list:
+    return [_row(variant, scenario, t, "not judged", f"not judged: {why}") for t in default_transforms()]
+
+
+def run_invariance(runner, scenarios, variants, refs, leave_out=(), show_progress: bool = False) -> list:
+    """Every invariance row of ``variants`` on ``scenarios`` (each with its reference result ``refs``: the
+    scales and error amplification the sweep measured), on ``runner`` (cross_checks.sweep.execute.Runner:
+    one item per (scenario, variant), longest first), except the pairs in ``leave_out``. A worker that dies
+    leaves its pair's rows "not judged", saying so. Rows in scenario, then variant order."""
+    from cross_checks.core.progress import Progress
+    from cross_checks.engines import user_engines
+    from cross_checks.sweep.plan import job_cost_s
+    extra = user_engines()
+    items = [(sc, v, ref.scales, (ref.measured or {}).get("amplification"), extra)
+             for sc, ref in zip(scenarios, refs) for v in variants if (sc.name, v) not in leave_out]
+    cost = {(it[0].name, it[1]): job_cost_s(it[0], it[1], it[0].dt_s) for it in items}
+    order = {(it[0].name, it[1]): i for i, it in enumerate(items)}
+    items.sort(key=lambda it: -cost[(it[0].name, it[1])])
+    out: dict = {}
+    with Progress("rbcheck sweep", "invariance checks", len(items), enabled=show_progress,
+                  total_work=sum(cost.values())) as bar:
+        def done(item, rows):
+            out[(item[0].name, item[1])] = rows
+            bar.update(1, f"{item[0].name} {item[1]}", work=cost[(item[0].name, item[1])])
+
+        def crashed(item):
+            return _unjudged(item[0], item[1], "the worker process died running the transforms (a crash "
+                                               "inside the engine?)")
+
+        runner.map_unordered(_run_item, items, done, on_crash=crashed, in_flight=lambda it: True)
+    return [r for key in sorted(out, key=order.get) for r in out[key]]
+
+
+def _clamped(traits, original, scenario, transformed) -> str:
+    """"" unless the variant clamps the gyroscopic torque (Traits.gyroscopic_clamp_N_m) and the transformed
+    body's exceeds the clamp where the original's does not: then the sentence saying so. The gyroscopic torque
+    |ω_B × I ω_B| along the variant's own run of the original, in the transformed body's scale (every
+    transform keeps ω; only a scale changes the inertia's size: by its largest moment's ratio)."""
+    limit = getattr(traits, "gyroscopic_clamp_N_m", None)
+    if limit is None:
+        return ""
+    import numpy as np
+
+    from reference_sim.quaternion import quat_conj, rotate
+    inertia = scenario.problem.body.inertia_B
+    w_B = rotate(quat_conj(original.y[:, 6:10]), original.y[:, 10:13])
+    torque = float(np.nanmax(np.linalg.norm(np.cross(w_B, w_B @ inertia.T), axis=-1)))
+    ratio = (float(np.linalg.eigvalsh(transformed.problem.body.inertia_B)[-1])
+             / float(np.linalg.eigvalsh(inertia)[-1]))
+    if torque * ratio > limit >= torque:
+        return (f"its step clamps the gyroscopic torque to {limit:g} N m (a declared trait); this body's "
+                f"|ω × Iω| reaches {torque * ratio:.3g} N m here (the original's {torque:.3g}), beyond the "
+                "clamp, so it moves otherwise by design")
+    return ""
+
+
+def invariance_summary(rows) -> tuple:
+    """``(records, counts)``: summary.json's ``invariance`` (one record per check that does not hold,
+    schema.INVARIANCE_RECORD) and ``run.invariance`` (the number of checks and of each verdict)."""
+    from cross_checks.analysis.judge import INVARIANCE_VERDICTS
+    keep = ("engine", "scenario", "transform", "magnitude", "verdict", "worst_quantity", "assessment")
+    records = []
+    for r in rows:
+        if r["verdict"] != "holds":
+            rec = {k: r[k] for k in keep}
+            ratio = r["worst_ratio"]
+            rec["worst_ratio"] = float(ratio) if isinstance(ratio, float) and math.isfinite(ratio) else None
+            records.append(rec)
+    counts = {"checks": len(rows), **{v: sum(r["verdict"] == v for r in rows) for v in INVARIANCE_VERDICTS}}
+    return records, counts
+
+
+def broken_lines(summary) -> list:
+    """One line per broken invariance of a summary (what makes the sweep exit 1)."""
+    return [f"{r['engine']} on {r['scenario']}: invariance under {r['transform']} {r['magnitude']} "
+            f"{r['assessment']}"
+            for r in summary.get("invariance") or [] if r["verdict"] == "broken"]

@@ -1,0 +1,179 @@
+"""The invariance checks of a sweep (cross_checks.sweep.invariance, docs/invariance.md) on the zoo of planted
+engine files (tests/helpers/zoo_engine.py): a correct engine passes every transform, one that uses only the
+diagonal of the inertia tensor and one that keeps positions in float32 while it declares float64 are caught
+— through check_invariance, `rbcheck sweep --invariance` (invariance.csv, summary.json, exit 1), `compare` (a
+new broken invariance is a regression) and assert_engine(..., invariance=True)."""
+import csv
+import json
+import shutil
+import sys
+
+import pytest
+
+from cross_checks.cli import main
+from cross_checks.engines import engine_files_registered
+from cross_checks.scenario import parse_scenario
+from cross_checks.sweep.invariance import INVARIANCE_COLUMNS, check_invariance
+from cross_checks.testing import assert_engine
+from tests.helpers.byo import TUMBLE
+from tests.helpers.repo import ROOT
+
+ZOO = ROOT / "tests" / "helpers" / "zoo_engine.py"
+MODES = ("correct", "diagonal_inertia", "float32_positions")
+
+
+def _engine_file(folder):
+    lines = ['name = "zoo"', 'version = "1.0"', "timeout = 120"]
+    for mode in MODES:
+        lines += ["", f"[variants.{mode}]", "order = 1", f'description = "cbody.py\'s scheme, {mode}"',
+                  f'command = ["{sys.executable}", "{ZOO}", "{mode}", "{{scenario_json}}", "{{out_csv}}"]']
+    p = folder / "zoo.toml"
+    p.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return p
+
+
+@pytest.fixture(scope="module")
+def zoo(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("zoo")
+    scenario = folder / "byo_tumble.toml"
+    scenario.write_text(TUMBLE, encoding="utf-8")
+    return _engine_file(folder), scenario
+
+
+@pytest.fixture(scope="module")
+def zoo_rows(zoo):
+    engine_file, scenario = zoo
+    sc = parse_scenario(TUMBLE, str(scenario))
+    with engine_files_registered([engine_file]):
+        return {mode: {(r["transform"], r["magnitude"]): r for r in check_invariance(sc, f"zoo:{mode}")}
+                for mode in MODES}
+
+
+def test_the_correct_engine_file_passes_every_transform(zoo_rows):
+    rows = zoo_rows["correct"]
+    assert len(rows) == 7
+    for (kind, mag), r in rows.items():
+        allowed = ("holds", "precision loss") if kind == "translation" else ("holds",)
+        assert r["verdict"] in allowed, (kind, mag, r["assessment"])
+        assert r["worst_ratio"] <= 1.0
+
+
+def test_the_diagonal_only_inertia_is_caught_by_the_body_frame_alone(zoo_rows):
+    rows = zoo_rows["diagonal_inertia"]
+    broken = {k for k, r in rows.items() if r["verdict"] == "broken"}
+    assert broken == {("body_frame", "41 deg")}, {k: r["assessment"] for k, r in rows.items()}
+    r = rows[("body_frame", "41 deg")]
+    assert r["worst_ratio"] > 1e6, r["assessment"]
+    assert r["worst_quantity"] in ("orientation", "angular_velocity"), r["assessment"]
+
+
+def test_float32_positions_declared_float64_are_caught_far_from_the_origin(zoo_rows):
+    rows = zoo_rows["float32_positions"]
+    far = rows[("translation", "1e+04 m")]
+    assert far["verdict"] == "broken" and far["worst_quantity"] == "position", far["assessment"]
+    assert far["pos_dev"] > 1e-5                      # float32 at 1e4 m: an ulp of 1 mm, lost every step
+    assert far["pos_dev"] > 1e3 * far["pos_allowance"]
+
+
+def test_sweep_invariance_end_to_end_then_compare(zoo, tmp_path, monkeypatch, capsys):
+    monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "cache"))
+    engine_file, scenario = zoo
+    out = tmp_path / "res"
+    rc = main(["sweep", str(scenario), "--engines", "zoo:correct", "zoo:diagonal_inertia", "--engine-file",
+               str(engine_file), "--invariance", "--out", str(out), "--jobs", "1"])
+    text = capsys.readouterr()
+    assert rc == 1, text.out[-2000:]
+    assert "zoo:diagonal_inertia on byo_tumble: invariance under body_frame 41 deg broken" in text.err
+    assert text.out.strip().splitlines()[-1].endswith(f"1 broken invariance(s) (see {out / 'index.html'})")
+    with open(out / "invariance.csv", encoding="utf-8", newline="") as fh:
+        reader = csv.DictReader(fh)
+        assert reader.fieldnames == INVARIANCE_COLUMNS
+        rows = list(reader)
+    assert len(rows) == 14 and {r["engine"] for r in rows} == {"zoo:correct", "zoo:diagonal_inertia"}
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["run"]["invariance"]["checks"] == 14 and summary["run"]["invariance"]["broken"] == 1
+    assert [r["transform"] for r in summary["invariance"] if r["verdict"] == "broken"] == ["body_frame"]
+    from cross_checks.gates import ci
+    junit = ci.junit_text(ci.sweep_junit(summary))
+    assert "invariance under body_frame 41 deg broken" in junit and 'failures="1"' in junit
+    md = ci.sweep_markdown(summary, out)
+    assert md.startswith("## rbcheck sweep: ❌ invariance broken") and "1 broken invariance(s)" in md
+    page = (out / "index.html").read_text(encoding="utf-8")
+    assert "1 broken invariance(s)</a>" in page and 'href="invariance.csv"' in page
+    assert "zoo:diagonal_inertia on byo_tumble: under body_frame 41 deg, broken" in page   # a finding
+
+    # compare: the same results are no regression; a baseline where it held makes it a new one (exit 1)
+    assert main(["compare", str(out), str(out)]) == 0
+    base = tmp_path / "base"
+    shutil.copytree(out, base)
+    summary["invariance"] = [r for r in summary["invariance"] if r["verdict"] != "broken"]
+    (base / "summary.json").write_text(json.dumps(summary), encoding="utf-8")
+    capsys.readouterr()
+    assert main(["compare", str(base), str(out)]) == 1
+    said = capsys.readouterr().out
+    assert "invariance under body_frame 41 deg" in said, said[-2000:]
+    assert main(["compare", str(out), str(base)]) == 0          # fixed: an improvement
+    compact = tmp_path / "compact"                              # a compact baseline keeps the records
+    assert main(["baseline", str(out), str(compact)]) == 0
+    kept = json.loads((compact / "summary.json").read_text())["invariance"]
+    assert [r["transform"] for r in kept if r["verdict"] == "broken"] == ["body_frame"]
+    assert main(["compare", str(compact), str(out)]) == 0
+
+
+def test_without_the_flag_nothing_changes(zoo, tmp_path, monkeypatch, capsys):
+    monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "cache"))
+    engine_file, scenario = zoo
+    out = tmp_path / "res"
+    rc = main(["sweep", str(scenario), "--engines", "zoo:diagonal_inertia", "--engine-file", str(engine_file),
+               "--out", str(out), "--jobs", "1"])
+    assert rc == 0, capsys.readouterr().err[-2000:]
+    assert not (out / "invariance.csv").exists()
+    assert "invariance" not in json.loads((out / "summary.json").read_text())
+
+
+def test_assert_engine_with_invariance(zoo, tmp_path, monkeypatch):
+    monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "cache"))
+    engine_file, scenario = zoo
+    assert_engine("zoo:correct", [scenario], engine_file=engine_file, invariance=True)
+    assert_engine("zoo:diagonal_inertia", [scenario], engine_file=engine_file)   # its orders are right
+    with pytest.raises(AssertionError) as exc:
+        assert_engine("zoo:diagonal_inertia", [scenario], engine_file=engine_file, invariance=True)
+    assert "invariance under body_frame 41 deg broken" in str(exc.value)
+
+
+def test_a_refused_transform_is_a_row_naming_the_field(zoo):
+    far = parse_scenario(TUMBLE.replace("velocity = [0.3, 0.0, 2.0]",
+                                        "position = [999995.0, 0.0, 0.0]\nvelocity = [0.3, 0.0, 2.0]"), "far")
+    rows = check_invariance(far, "reference:course_gyro")
+    refused = [r for r in rows if r["verdict"] == "refused"]
+    # 10 m along (2, -3, 6)/7 moves x by 2.9 m only: within 1e6 m; 1 km, 10 km and the 100x scale are not
+    assert [r["magnitude"] for r in refused] == ["1e+03 m", "1e+04 m", "k=100 mu=100"]
+    assert all("initial.position" in r["assessment"] for r in refused)
+
+
+def test_a_declared_gyroscopic_clamp_makes_the_large_scale_cannot_express():
+    """reference:explicit_gyro_clamped clamps |ω × Iω| to 100 N m (Bullet's m_maxGyroscopicForce): scaled by
+    μk² = 1e6, tennis_racket's 4.6 N m is 4.6e6 N m: it moves otherwise by design, said, never broken; the
+    small scale stays below the clamp and holds."""
+    from cross_checks.scenario import load_scenario
+    rows = {r["magnitude"]: r for r in check_invariance(load_scenario("tennis_racket"),
+                                                         "reference:explicit_gyro_clamped")
+            if r["transform"] == "scale"}
+    assert rows["k=100 mu=100"]["verdict"] == "cannot express"
+    assert "clamps the gyroscopic torque to 100 N m" in rows["k=100 mu=100"]["assessment"]
+    assert rows["k=0.01 mu=0.01"]["verdict"] == "holds"
+
+
+def test_the_pytest_fixture_takes_invariance(assert_engine, zoo):
+    """The plugin's assert_engine passes ``invariance=True`` through (a user's suite: docs/invariance.md)."""
+    engine_file, scenario = zoo
+    summary = assert_engine("zoo:correct", [scenario], engine_file=engine_file, invariance=True)
+    assert summary["run"]["invariance"]["checks"] == 7 and summary["run"]["invariance"]["broken"] == 0
+
+
+def test_an_error_of_the_harness_leaves_the_pair_not_judged():
+    from cross_checks.sweep.invariance import _run_item
+    sc = parse_scenario(TUMBLE, "t.toml")
+    rows = _run_item((sc, "nosuchengine:x", None, None, []))
+    assert len(rows) == 7 and {r["verdict"] for r in rows} == {"not judged"}
+    assert "internal error while checking" in rows[0]["assessment"]

@@ -1,0 +1,43 @@
+"""MuJoCo and PyBullet under the invariance transforms on tennis_racket (docs/invariance.md; measured findings
+in docs/engine_conventions.md, "Invariance"): translation, world rotation, non-principal body frame and scale
+hold, except two findings kept as strict expected failures, each with its measured cause:
+
+* MuJoCo's body frame: rbcheck's adapter gives MuJoCo the eigen-decomposition of the rotated tensor, whose
+  moments (1, 2, 3 kg m², on the triangle inequality's boundary) come back with A + B − C = −1.8e-15, and
+  MuJoCo (with balanceinertia off) refuses the model: the adapter's finding.
+* PyBullet maximal at k = μ = 0.01: Bullet's implicit gyroscopic step solves its 3×3 system with
+  btMatrix3x3::solve33, which skips the division when |det| ≤ SIMD_EPSILON (2.2e-16 in the double build): with
+  moments (1, 2, 3)e-6 kg m² the gyroscopic term is dropped and ω stays at its initial value: the engine's."""
+import pytest
+
+from cross_checks.scenario import load_scenario
+from cross_checks.sweep.invariance import check_invariance
+
+KNOWN = {
+    ("mujoco:euler", "body_frame"):
+        "the adapter's eigen-decomposition leaves A + B < C by 1.8e-15; MuJoCo refuses",
+    ("pybullet:maximal", "scale k=0.01 mu=0.01"):
+        "Bullet's solve33 drops the gyroscopic step below |det| 2.2e-16",
+}
+
+
+@pytest.fixture(scope="module")
+def rows():
+    sc = load_scenario("tennis_racket")
+    return {v: check_invariance(sc, v) for v in ("mujoco:euler", "pybullet:multibody", "pybullet:maximal")}
+
+
+def _cases():
+    from cross_checks.scenario.transforms import default_transforms
+    for v in ("mujoco:euler", "pybullet:multibody", "pybullet:maximal"):
+        for i, t in enumerate(default_transforms()):
+            why = KNOWN.get((v, t.kind)) or KNOWN.get((v, t.label))
+            marks = [pytest.mark.xfail(strict=True, reason=why)] if why else []
+            yield pytest.param(v, i, id=f"{v}-{t.label.replace(' ', '_')}", marks=marks)
+
+
+@pytest.mark.parametrize("variant, index", list(_cases()))
+def test_tennis_racket_invariance(rows, variant, index):
+    r = rows[variant][index]
+    allowed = ("holds", "precision loss") if r["transform"] == "translation" else ("holds",)
+    assert r["verdict"] in allowed, r["assessment"]
