@@ -126,7 +126,20 @@ def _add_body(spec, scenario, name: str) -> None:
     else:
         moments, R_BP = body.principal_axes()
         b.iquat = quat_from_matrix(R_BP)   # principal frame P in body coordinates (w x y z)
-        b.inertia = moments
+        b.inertia = on_the_triangle(moments)
+
+
+def on_the_triangle(moments_kg_m2) -> np.ndarray:
+    """Principal moments (3,) with the largest set to the sum of the other two where it exceeds it by
+    round-off only (≤ 8 ε of it): a body on the boundary A + B = C (a flat body: tennis_racket's 1, 2, 3
+    kg m²) comes back from an eigen-decomposition 1e-15 beyond it, which MuJoCo's compiler refuses
+    (balanceinertia off)."""
+    m = np.array(moments_kg_m2, dtype=float)
+    k = int(np.argmax(m))
+    rest = float(np.sum(m) - m[k])
+    if rest < m[k] <= rest + 8 * np.finfo(float).eps * m[k]:
+        m[k] = rest
+    return m
 
 
 # --- state conversion --------------------------------------------------------------------------------

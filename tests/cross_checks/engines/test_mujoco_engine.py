@@ -334,3 +334,12 @@ def test_discrete_takes_implicitfasts_step_on_a_lone_free_body(name):
     n = sc.n_steps(sc.dt_s)
     a, b = me.simulate(sc, "implicitfast", sc.dt_s, n), me.simulate(sc, "discrete", sc.dt_s, n)
     assert np.array_equal(a.y, b.y) and np.any(a.y[-1] != a.y[0])
+
+
+def test_moments_beyond_the_triangle_by_round_off_only_are_put_on_it():
+    """A flat body's moments (A + B = C) come back from an eigen-decomposition a few ε beyond the boundary,
+    which MuJoCo refuses: they are put on it; a body beyond it by more is left for MuJoCo to refuse."""
+    eps = np.finfo(float).eps
+    np.testing.assert_array_equal(me.on_the_triangle([1.0, 2.0, 3.0 * (1 + 2 * eps)]), [1.0, 2.0, 3.0])
+    np.testing.assert_array_equal(me.on_the_triangle([1.0, 2.0, 3.1]), [1.0, 2.0, 3.1])
+    np.testing.assert_array_equal(me.on_the_triangle([1.0, 2.0, 2.5]), [1.0, 2.0, 2.5])

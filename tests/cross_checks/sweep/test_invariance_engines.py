@@ -1,10 +1,9 @@
 """MuJoCo and PyBullet under the invariance transforms on tennis_racket (docs/invariance.md; measured findings
 in docs/engine_conventions.md, "Invariance"): translation, world rotation, non-principal body frame and scale
-hold, except two findings kept as strict expected failures, each with its measured cause:
+hold (MuJoCo's body frame since its adapter puts moments that the eigen-decomposition leaves 1.8e-15
+beyond A + B = C back on it: mujoco_engine.on_the_triangle), except one finding kept as a strict expected
+failure, with its measured cause:
 
-* MuJoCo's body frame: rbcheck's adapter gives MuJoCo the eigen-decomposition of the rotated tensor, whose
-  moments (1, 2, 3 kg m², on the triangle inequality's boundary) come back with A + B − C = −1.8e-15, and
-  MuJoCo (with balanceinertia off) refuses the model: the adapter's finding.
 * PyBullet maximal at k = μ = 0.01: Bullet's implicit gyroscopic step solves its 3×3 system with
   btMatrix3x3::solve33, which skips the division when |det| ≤ SIMD_EPSILON (2.2e-16 in the double build): with
   moments (1, 2, 3)e-6 kg m² the gyroscopic term is dropped and ω stays at its initial value: the engine's."""
@@ -14,8 +13,6 @@ from cross_checks.scenario import load_scenario
 from cross_checks.sweep.invariance import check_invariance
 
 KNOWN = {
-    ("mujoco:euler", "body_frame"):
-        "the adapter's eigen-decomposition leaves A + B < C by 1.8e-15; MuJoCo refuses",
     ("pybullet:maximal", "scale k=0.01 mu=0.01"):
         "Bullet's solve33 drops the gyroscopic step below |det| 2.2e-16",
 }
