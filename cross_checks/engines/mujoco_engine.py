@@ -136,7 +136,8 @@ def on_the_triangle(moments_kg_m2) -> np.ndarray:
     (balanceinertia off)."""
     m = np.array(moments_kg_m2, dtype=float)
     k = int(np.argmax(m))
-    rest = float(np.sum(m) - m[k])
+    i, j = (x for x in range(3) if x != k)
+    rest = float(m[i] + m[j])
     if rest < m[k] <= rest + 8 * np.finfo(float).eps * m[k]:
         m[k] = rest
     return m
