@@ -185,6 +185,10 @@ def _draw_in_processes(tasks, jobs, done, res, meanwhile):
             extra = meanwhile()
             for f in as_completed(futures):
                 done(f.result())
+        except KeyboardInterrupt:   # Ctrl-C, SIGTERM: stop the drawing processes now, without waiting
+            from cross_checks.sweep.lifecycle import kill_pool
+            kill_pool(pool)
+            raise
         finally:
             pool.shutdown(cancel_futures=True)   # after an error: the figures not begun are not drawn
     return extra

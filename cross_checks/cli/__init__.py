@@ -707,7 +707,7 @@ def _time_limits(seconds) -> dict:
 def cmd_sweep(args) -> int:
     import reports
     from cross_checks.scenario import catalog_names, load_scenario, long_run_names
-    from cross_checks.sweep import SweepError, SweepInterrupted
+    from cross_checks.sweep import ReportFailed, SweepError, SweepInterrupted
     from cross_checks.sweep.results_dir import ResultsDirError, check_output_dir
     reports.check_installation()  # the report's templates, before minutes of runs
     try:
@@ -728,6 +728,10 @@ def cmd_sweep(args) -> int:
         summary = _run_sweep(args, scenarios, variants, skipped)
     except SweepError as exc:
         raise BadInput(str(exc)) from None
+    except ReportFailed as exc:   # the results are written; the report's bug is an internal error (exit 2)
+        if os.environ.get("RBCHECK_DEBUG"):
+            raise exc.error from None
+        return _error("sweep", f"{exc} (RBCHECK_DEBUG=1 shows the traceback)")
     except SweepInterrupted as exc:
         what = (f"after the new results were complete in {args.out}" if exc.replaced
                 else f"{args.out} left as it was")

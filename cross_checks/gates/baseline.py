@@ -26,6 +26,7 @@ from cross_checks.sweep.results_dir import (
     remove_stale_siblings,
     replace_dir,
     staging_dir,
+    work_place,
 )
 from cross_checks.sweep.schema import COMPACT_FORM, COMPACT_LISTS
 
@@ -113,7 +114,7 @@ def _check_out_dir(results_dir: Path, out_dir: Path) -> Path:
     if not out.parent.is_dir():
         raise BaselineError(f"OUT_DIR {out_dir}: parent directory {out.parent} does not exist")
     try:
-        check_writable_dir(out.parent, "OUT_DIR", str(out_dir))
+        check_writable_dir(work_place(out), "OUT_DIR", str(out_dir))
     except ResultsDirError as exc:
         raise BaselineError(str(exc)) from None
     other = sorted(p.name for p in out.iterdir() if p.name not in BASELINE_FILES) if out.is_dir() else []

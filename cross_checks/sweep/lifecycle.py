@@ -12,8 +12,8 @@ import sys
 import threading
 import time
 
-__all__ = ["Terminated", "handle_sigterm", "worker_init", "EXIT_TERMINATED", "TimeLimitExceeded",
-           "time_limit", "each_within_limits"]
+__all__ = ["Terminated", "handle_sigterm", "kill_pool", "interrupted_by", "worker_init", "EXIT_TERMINATED",
+           "TimeLimitExceeded", "time_limit", "each_within_limits"]
 
 #: 128 + SIGTERM, what a shell reports for a process ended by SIGTERM.
 EXIT_TERMINATED = 128 + signal.SIGTERM
@@ -24,34 +24,86 @@ class Terminated(KeyboardInterrupt):
     """SIGTERM arrived; a KeyboardInterrupt so that every Ctrl-C clean-up path runs for it too."""
 
 
+#: The signal that interrupted this process (0: none yet). Only the first one raises: the clean-up it
+#: starts (workers stopped, staging and private run directories removed, the one line said) must run to
+#: its end, and ``timeout`` forwarding Ctrl-C to the process group, or a user pressing Ctrl-C twice,
+#: sends a second one while it runs.
+_interrupted = [0]
+
+
+def _on_signal(signum, frame):
+    if _interrupted[0]:
+        return   # cleaning up after the first one: the exit code stays the first one's
+    _interrupted[0] = signum
+    raise Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
+
+
 def _on_sigterm(signum, frame):
-    raise Terminated()
+    _on_signal(signal.SIGTERM, frame)
+
+
+def interrupted_by() -> int:
+    """The signal (SIGINT or SIGTERM) that interrupted this process since :func:`handle_sigterm`, or 0."""
+    return _interrupted[0]
 
 
 def _redeliver_swallowed_sigterm(unraisable, _previous=None) -> None:
-    """``sys.unraisablehook``: a SIGTERM whose Terminated was raised inside a ``__del__`` or a weakref
-    callback (where Python prints "Exception ignored" and carries on) is sent again, so that it lands in
-    the main flow instead of being lost; anything else goes to the previous hook. It is sent from a bare
-    thread 10 ms later: ``os.kill`` here, or anything that waits here (``Thread.start``), would run the
-    handler at once, inside the hook."""
-    if isinstance(unraisable.exc_value, Terminated):
-        _thread.start_new_thread(_send_sigterm_later, (0.01,))
+    """``sys.unraisablehook``: a SIGTERM or Ctrl-C whose exception was raised inside a ``__del__`` or a
+    weakref callback (where Python prints "Exception ignored" and carries on) is sent again, so that it
+    lands in the main flow instead of being lost; anything else goes to the previous hook. It is sent from
+    a bare thread 10 ms later: ``os.kill`` here, or anything that waits here (``Thread.start``), would run
+    the handler at once, inside the hook."""
+    if isinstance(unraisable.exc_value, KeyboardInterrupt) and _interrupted[0]:
+        signum, _interrupted[0] = _interrupted[0], 0   # lost: the re-sent one raises again
+        _thread.start_new_thread(_send_signal_later, (0.01, signum))
         return
     (_previous or sys.__unraisablehook__)(unraisable)
 
 
-def _send_sigterm_later(delay_s: float) -> None:
+def _send_signal_later(delay_s: float, signum: int = signal.SIGTERM) -> None:
     time.sleep(delay_s)
-    os.kill(os.getpid(), signal.SIGTERM)
+    os.kill(os.getpid(), signum)
+
+
+_fork_mask = threading.local()
+
+
+def _block_before_fork() -> None:
+    _fork_mask.before = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+
+
+def _unblock_in_parent() -> None:
+    signal.pthread_sigmask(signal.SIG_SETMASK, getattr(_fork_mask, "before", set()))
+
+
+def _unblock_in_child() -> None:
+    """A forked child (a pool worker) gets a worker's handlers before it can take a signal: with the parent's,
+    a Ctrl-C or SIGTERM sent to the group while it starts raised inside multiprocessing's start-up and
+    printed a traceback. One blocked meanwhile is delivered now, to these handlers."""
+    with contextlib.suppress(ValueError, OSError):
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_SETMASK, getattr(_fork_mask, "before", set()))
+
+
+_fork_hooks = []
 
 
 def handle_sigterm() -> None:
-    """Make SIGTERM raise Terminated in the main thread (no-op elsewhere), also when it arrives while
-    Python runs a finaliser or weakref callback (see :func:`_redeliver_swallowed_sigterm`)."""
+    """Make SIGTERM raise Terminated and Ctrl-C KeyboardInterrupt in the main thread (no-op elsewhere),
+    the first of them only (:data:`_interrupted`), also when it arrives while Python runs a finaliser or
+    weakref callback (see :func:`_redeliver_swallowed_sigterm`)."""
+    _interrupted[0] = 0
     try:
         signal.signal(signal.SIGTERM, _on_sigterm)
+        if signal.getsignal(signal.SIGINT) is signal.default_int_handler:   # not when the caller ignores it
+            signal.signal(signal.SIGINT, _on_signal)
     except ValueError:  # not the main thread
         return
+    if not _fork_hooks and hasattr(os, "register_at_fork"):
+        os.register_at_fork(before=_block_before_fork, after_in_parent=_unblock_in_parent,
+                            after_in_child=_unblock_in_child)
+        _fork_hooks.append(True)
     previous = sys.unraisablehook
     if getattr(previous, "__name__", "") != "_hook":
         def _hook(unraisable):
@@ -131,3 +183,30 @@ def each_within_limits(call, items: list, time_limit_s: float | None, what: str)
         if isinstance(exc, TimeLimitExceeded):
             return [f"{exc} (cross_checks/core/tolerances.py)"]
         return [f"{type(exc).__name__}: {exc}".strip()]
+
+
+def kill_pool(pool) -> None:
+    """Stop a ``concurrent.futures.ProcessPoolExecutor``'s workers (they ignore SIGINT) by their own process
+    ids, and make sure that its manager thread ends, which Python joins at exit. A worker killed while it
+    wrote a large pickled result leaves part of the message in the result pipe; the manager thread then
+    waits in ``os.read`` for the rest, for ever, because this process holds the pipe's write end too:
+    closing that end once no worker is left turns the wait into end-of-file (a broken pool, which ends the
+    thread) instead of a hang."""
+    procs = list((getattr(pool, "_processes", None) or {}).values())
+    # read before shutdown(), which drops them
+    queue, manager = getattr(pool, "_result_queue", None), getattr(pool, "_executor_manager_thread", None)
+    pool.shutdown(wait=False, cancel_futures=True)
+    for p in procs:
+        if p.is_alive():
+            p.terminate()
+    for p in procs:
+        p.join(timeout=2)
+        if p.is_alive():   # stuck (e.g. in uninterruptible I/O): SIGKILL cannot be ignored
+            p.kill()
+            p.join(timeout=2)
+    if queue is not None and not any(p.is_alive() for p in procs):
+        with contextlib.suppress(OSError):
+            queue._writer.close()
+    if manager is not None and manager is not threading.current_thread():
+        manager.join(timeout=5)
+

@@ -57,8 +57,8 @@ from cross_checks.sweep.results_dir import (
     write_marker,
 )
 
-__all__ = ["RESULT_COLUMNS", "SweepError", "SweepInterrupted", "Job", "plan_jobs", "run_sweep", "cache_dir",
-           "MAX_SERIES_POINTS", "LOCAL_SAMPLES", "SCHEMA_VERSION"]
+__all__ = ["RESULT_COLUMNS", "SweepError", "SweepInterrupted", "ReportFailed", "Job", "plan_jobs",
+           "run_sweep", "cache_dir", "MAX_SERIES_POINTS", "LOCAL_SAMPLES", "SCHEMA_VERSION"]
 
 
 class SweepError(Exception):
@@ -71,6 +71,16 @@ class SweepInterrupted(KeyboardInterrupt):
     def __init__(self, terminated: bool = False, replaced: bool = False):
         super().__init__()
         self.terminated, self.replaced = terminated, replaced
+
+
+class ReportFailed(Exception):
+    """The results were written, but the report drawn on them raised (a bug of the report): ``summary`` is the
+    sweep's, ``error`` the report's exception."""
+
+    def __init__(self, summary: dict, out, error: BaseException):
+        super().__init__(f"the report could not be drawn (internal error: {type(error).__name__}: {error}); "
+                         f"the results are written in {out}: 'rbcheck report {out}' draws it again")
+        self.summary, self.error = summary, error
 
 
 def _checked_output(out_dir, scenarios):
@@ -154,12 +164,18 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
                                  long_scenarios=long_scenarios, long_records=long_records)
         runner.close()
         runner = None
+        report_error = None
         if finish is not None:  # e.g. the report, drawn from the saved files only
-            finish(staging)
+            try:
+                finish(staging)
+            except Exception as exc:  # noqa: BLE001 - a report-side bug never throws the results away
+                report_error = exc
         write_marker(staging)
         fix_permissions(staging)
         replace_dir(staging, out)
         staging = None
+        if report_error is not None:
+            raise ReportFailed(summary, out, report_error) from report_error
         return summary
     except KeyboardInterrupt as exc:  # after the swap (staging is None) the new results are complete
         raise SweepInterrupted(isinstance(exc, Terminated),

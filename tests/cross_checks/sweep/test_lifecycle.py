@@ -1,6 +1,7 @@
 """The sweep's lifecycle (cross_checks.sweep.lifecycle): a sweep killed at a random point (SIGTERM or
 SIGKILL, several seeds) keeps the previous results intact, leaves no worker alive, and the next run
 removes every leftover and writes correct results; a time limit interrupts the work and names it."""
+import contextlib
 import os
 import random
 import signal
@@ -187,3 +188,139 @@ def test_a_call_over_its_items_limits_runs_item_by_item_and_only_the_slow_item_f
     assert got == [10, "the run took longer than the time limit of 0.2 s (cross_checks/core/tolerances.py)",
                    30, "ValueError: item 4 is bad"]
     assert each_within_limits(call, [1, 3], 0.2, "the run") == [10, 30]
+
+
+# --- interrupts while results stream back (issue 45) ------------------------------------------------------
+
+#: Three 2 s tumbles on a 4-rung ladder down to 1 ms: every reference scheme's records carry long series, so
+#: with a warm cache 8 workers spend their time writing large pickled results into the pipe.
+STREAM = [scenario_toml(f"stream_{i}", 2.0, 0.001, (0.004, 0.002, 0.001, 0.0005)) for i in range(3)]
+#: How long a run may take to end after the signal: the issue's bound ("every run exits within 5 s"), a hang
+#: detector (a hang never ends), not a speed measure.
+EXIT_AFTER_SIGNAL_S = 5.0
+
+
+def _sessions_members(sid):
+    """Processes in session ``sid`` (the sweep was started in a session of its own), zombies excluded."""
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if fields[0] != "Z" and int(fields[3]) == sid:
+            out.append(int(stat.parent.name))
+    return out
+
+
+def _stream_command(tmp, out):
+    files = [str(tmp / f"stream_{i}.toml") for i in range(3)]
+    return [sys.executable, "-m", "cross_checks.cli", "sweep", *files,
+            "--jobs", "8", "--out", str(out), "--engines", "reference"]
+
+
+def _stream_setting(tmp):
+    write_scenarios(tmp, *STREAM)
+    env = {**os.environ, "RBCHECK_CACHE_DIR": str(tmp / "cache"), "MPLBACKEND": "Agg"}
+    cmd = _stream_command(tmp, tmp / "res")
+    warm = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=900, cwd=tmp)
+    assert warm.returncode in (0, 1), warm.stderr
+
+
+@pytest.fixture(scope="session")
+def streaming(tmp_path_factory):
+    tmp = built_once(tmp_path_factory, "stream", _stream_setting)
+    env = {**os.environ, "RBCHECK_CACHE_DIR": str(tmp / "cache"), "MPLBACKEND": "Agg"}
+    return tmp, env
+
+
+def interrupt_while_streaming(streaming, seed):
+    """One sweep (warm cache, 8 workers) sent SIGINT or SIGTERM, as Ctrl-C and ``timeout`` do (the whole
+    process group), 0.05–1.5 s after its staging folder appears: it must end within
+    :data:`EXIT_AFTER_SIGNAL_S` with 130/143 and one line (or 0/1 when it had finished), leaving no process
+    and no staging folder."""
+    tmp, env = streaming
+    rng = random.Random(seed)
+    sig = rng.choice([signal.SIGINT, signal.SIGTERM])
+    case = tmp / f"case-{seed}"
+    case.mkdir()
+    cmd = _stream_command(tmp, case / "res")
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True, cwd=case)
+    deadline = time.monotonic() + 120
+    while (not list(case.glob(".res.rbcheck-staging-*")) and proc.poll() is None
+           and time.monotonic() < deadline):
+        time.sleep(0.005)
+    time.sleep(rng.uniform(0.05, 1.5))
+    with contextlib.suppress(ProcessLookupError):   # already finished: then it must have ended well
+        os.killpg(proc.pid, sig)
+    try:
+        _, err = proc.communicate(timeout=EXIT_AFTER_SIGNAL_S)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
+        pytest.fail(f"seed {seed}: {sig.name} did not end the sweep within {EXIT_AFTER_SIGNAL_S} s")
+    assert "Traceback" not in err and "Exception ignored" not in err, err
+    expected = {signal.SIGINT: 130, signal.SIGTERM: 143}[sig]
+    assert proc.returncode in (expected, 0, 1), (seed, sig.name, proc.returncode, err)
+    if proc.returncode == expected:
+        assert len(err.strip().splitlines()) == 1 and "left as it was" in err, err
+    deadline = time.monotonic() + 10   # workers killed by the parent are reaped by init just after
+    while _sessions_members(proc.pid) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not _sessions_members(proc.pid), "a process of the sweep outlived it"
+    assert sorted(p.name for p in case.iterdir() if p.name.startswith(".")) == []
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_a_signal_while_results_stream_back_ends_the_sweep_promptly(streaming, seed):
+    interrupt_while_streaming(streaming, seed)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", range(3, 53))
+def test_fifty_signals_while_results_stream_back_each_end_the_sweep_promptly(streaming, seed):
+    interrupt_while_streaming(streaming, seed)
+
+
+def test_a_ctrl_c_raised_inside_a_weakref_callback_still_ends_the_process():
+    """As for SIGTERM above, for Ctrl-C: before, "Exception ignored ... KeyboardInterrupt" was printed and the
+    work (a report) carried on to exit 0. Planted deterministically: the callback runs the installed handler,
+    as the signal would."""
+    code = textwrap.dedent("""
+        import signal, sys, time, weakref
+        from cross_checks.sweep import lifecycle
+        lifecycle.handle_sigterm()
+        class Body: pass
+        b = Body()
+        r = weakref.ref(b, lambda _: signal.getsignal(signal.SIGINT)(signal.SIGINT, None))
+        try:
+            del b
+            time.sleep(20)  # the re-sent signal interrupts the sleep
+            print("lost")
+        except KeyboardInterrupt as exc:
+            print(type(exc).__name__)
+    """)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert proc.stdout.strip() == "KeyboardInterrupt", proc.stderr
+    assert "Exception ignored" not in proc.stderr
+
+
+def test_a_second_signal_during_clean_up_does_not_cut_it_short():
+    """``timeout`` forwards Ctrl-C to the group, a user presses it twice: the second signal used to raise
+    inside the clean-up of the first (staging folder left, "left as it was" not said)."""
+    code = textwrap.dedent("""
+        import os, signal, time
+        from cross_checks.sweep import lifecycle
+        lifecycle.handle_sigterm()
+        try:
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(20)
+        except KeyboardInterrupt:
+            os.kill(os.getpid(), signal.SIGTERM)   # arrives while cleaning up
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.2)
+            print("cleaned up", lifecycle.interrupted_by() == signal.SIGINT)
+    """)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert proc.stdout.strip() == "cleaned up True", proc.stderr
