@@ -855,8 +855,9 @@ def cmd_compare(args) -> int:
     ran = _variants_ran(args.new)
     print(to_text(c, args.allow_missing, ran, args.fail_on_change))
     if args.markdown:
-        atomic_write_text(args.markdown, to_markdown(c, args.baseline, args.new, args.allow_missing, ran,
-                                                     args.fail_on_change) + "\n")
+        from cross_checks.core.progress import shown
+        text = to_markdown(c, args.baseline, args.new, args.allow_missing, ran, args.fail_on_change)
+        atomic_write_text(args.markdown, shown(text) + "\n")
     return c.exit_code(args.allow_missing, args.fail_on_change)
 
 
@@ -910,6 +911,13 @@ COMMANDS = {"list": cmd_list, "show": cmd_show, "run": cmd_run, "sweep": cmd_swe
 
 
 def main(argv=None) -> int:
+    """The ``rbcheck`` command; its output shows control characters escaped (docs/hardening.md)."""
+    from cross_checks.core.progress import escaped_output
+    with escaped_output():
+        return _main(argv)
+
+
+def _main(argv=None) -> int:
     from cross_checks.core.progress import degrade_unencodable
     from cross_checks.core.trajectory import TrajectoryError
     from cross_checks.scenario import ScenarioError
