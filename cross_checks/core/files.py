@@ -98,3 +98,38 @@ def save_npz_atomic(path: Path, arrays: dict, *, compress: bool = True) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     save = np.savez_compressed if compress else np.savez
     atomic_write(path, lambda tmp: save(tmp, **arrays), suffix=".npz")
+
+
+def npz_array_bytes(path) -> dict:
+    """``{member: bytes}`` of the arrays of an ``.npz``, from their npy headers only (shape x itemsize): what
+    reading each would allocate, known before any is read. ValueError for a member that is not a plain
+    array (an object array, a damaged header)."""
+    import zipfile
+
+    import numpy as np
+    out = {}
+    with zipfile.ZipFile(path) as zf:
+        for info in zf.infolist():
+            name = info.filename[:-4] if info.filename.endswith(".npy") else info.filename
+            with zf.open(info) as fh:
+                version = np.lib.format.read_magic(fh)
+                read = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                        else np.lib.format.read_array_header_2_0)
+                shape, _fortran, dtype = read(fh, max_header_size=10000)
+            if dtype.hasobject:
+                raise ValueError(f"{name}: an object array")
+            out[name] = int(np.prod(shape, dtype=object)) * dtype.itemsize
+    return out
+
+
+def check_npz_size(path, max_bytes: int) -> None:
+    """ValueError naming the member when reading the ``.npz`` at ``path`` would allocate more than
+    ``max_bytes`` in all (checked from the npy headers, before reading any data)."""
+    sizes = npz_array_bytes(path)
+    total = sum(sizes.values())
+    if total > max_bytes:
+        big = max(sizes, key=sizes.get)
+        raise ValueError(f"its arrays would take {total / 2 ** 20:.0f} MiB to read ({big}: "
+                         f"{sizes[big] / 2 ** 20:.0f} MiB), more than the {max_bytes / 2 ** 20:.0f} MiB "
+                         "allowed (cross_checks/core/tolerances.py)")
+
