@@ -33,6 +33,38 @@ def kernel_cache_dir(engine: str) -> Path:
     return Path(base) / "rbcheck" / "kernels" / engine
 
 
+_SKIPPED_CACHES: dict = {}
+
+
+def usable_cache_dir(folder, what: str) -> Path:
+    """``folder`` (created) when a file can be written there; else a private temporary folder of this process
+    (removed at exit) in its place, and one line on stderr, once per folder, naming it and the reason: a
+    cache is a cache, and a read-only or full one must not stop what it only speeds up."""
+    folder = Path(folder)
+    if str(folder) in _SKIPPED_CACHES:
+        return _SKIPPED_CACHES[str(folder)]
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(prefix=".rbcheck-probe-", dir=folder)
+        try:
+            os.write(fd, b"\0" * 4096)
+        finally:
+            os.close(fd)
+            os.unlink(probe)
+        return folder
+    except OSError as exc:
+        why = exc.strerror or str(exc)
+    import atexit
+    import shutil
+    import sys
+    private = Path(tempfile.mkdtemp(prefix="rbcheck-kernels-"))
+    atexit.register(shutil.rmtree, private, True)
+    _SKIPPED_CACHES[str(folder)] = private
+    print(f"rbcheck: {what} cache folder {folder} skipped ({why}); using {private} for this run instead",
+          file=sys.stderr, flush=True)
+    return private
+
+
 def usable_cores() -> int:
     """Cores this process may run on (its CPU affinity where the OS reports it): the default number of
     worker processes of a sweep and of report drawing."""

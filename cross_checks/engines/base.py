@@ -412,13 +412,10 @@ def start_warp(cache: str, log_level: str, quiet: bool = False):
     """``warp``, initialised on first use with its kernel cache in ``core.files.kernel_cache_dir(cache)`` (set
     before ``wp.init``), ``wp.config.log_level = wp.<log_level>`` and ``wp.config.quiet``; fd 2 silenced
     meanwhile (Warp's runtime prints there that no CUDA driver exists)."""
+    from cross_checks.core.files import usable_cache_dir
+    folder = usable_cache_dir(kernel_cache_dir(cache), f"{cache}'s kernel")   # read-only, full: skipped, said
     with quiet_fd2():
         import warp as wp
-        folder = kernel_cache_dir(cache)
-        try:
-            folder.mkdir(parents=True, exist_ok=True)
-        except OSError:   # pragma: no cover - Warp then reports its own error
-            pass
         wp.config.kernel_cache_dir = str(folder)
         wp.config.quiet = quiet
         wp.config.log_level = getattr(wp, log_level)

@@ -54,3 +54,16 @@ def test_a_secret_that_is_a_link_to_dev_zero_is_replaced_not_read(tmp_path):
     secret = cache._secret(tmp_path)
     assert len(secret) == 32 and not (tmp_path / ".secret").is_symlink()
     assert (tmp_path / ".secret").read_bytes() == secret
+
+
+def test_a_kernel_cache_folder_that_cannot_be_written_is_replaced_by_a_private_one(tmp_path, capsys):
+    from cross_checks.core.files import usable_cache_dir
+    (tmp_path / "file").write_text("")
+    bad = tmp_path / "file" / "warp"   # below a regular file: no one can create it, root included
+    first, again = usable_cache_dir(bad, "warp's kernel"), usable_cache_dir(bad, "warp's kernel")
+    assert first == again and first.is_dir() and not first.is_relative_to(tmp_path)
+    (first / "k.o").write_bytes(b"x")   # usable
+    [line] = capsys.readouterr().err.splitlines()
+    assert line.startswith(f"rbcheck: warp's kernel cache folder {bad} skipped (Not a directory); using ")
+    good = tmp_path / "good"
+    assert usable_cache_dir(good, "warp's kernel") == good and good.is_dir()

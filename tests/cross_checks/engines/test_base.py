@@ -171,3 +171,28 @@ def test_release_reads_the_installed_versions_from_package_metadata():
     on_scipy = f"{dist_version('numpy')} (scipy {dist_version('scipy')})"
     assert base.release("numpy", ("scipy", "scipy")) == on_scipy
     assert base.release("no-such-distribution-rbcheck") == "unknown"
+
+
+def test_warp_with_a_kernel_cache_it_cannot_write_compiles_elsewhere_and_says_so(tmp_path):
+    """Before: MuJoCo Warp with a read-only kernel cache failed every row."""
+    from pathlib import Path
+    pytest.importorskip("warp")
+    (tmp_path / "file").write_text("")
+    code = ("from cross_checks.engines.base import start_warp\n"
+            "wp = start_warp('warp', 'LOG_ERROR', quiet=True)\n"
+            "import warp\n"
+            "@warp.kernel\n"
+            "def twice(a: warp.array(dtype=float)):\n"
+            "    i = warp.tid()\n"
+            "    a[i] = 2.0 * a[i]\n"
+            "a = warp.array([1.0, 2.0], dtype=float, device='cpu')\n"
+            "warp.launch(twice, dim=2, inputs=[a], device='cpu')\n"
+            "print(a.numpy().tolist(), wp.config.kernel_cache_dir)\n")
+    (tmp_path / "k.py").write_text(code)   # Warp reads a kernel's source from its file
+    env = {**os.environ, "RBCHECK_KERNEL_CACHE_DIR": str(tmp_path / "file")}
+    proc = subprocess.run([sys.executable, str(tmp_path / "k.py")], capture_output=True, text=True,
+                          timeout=600, env=env, cwd=Path(base.__file__).parents[2])
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    values, folder = proc.stdout.strip().rsplit(" ", 1)
+    assert values == "[2.0, 4.0]" and not folder.startswith(str(tmp_path))
+    assert f"warp's kernel cache folder {tmp_path / 'file' / 'warp'} skipped (Not a directory)" in proc.stderr
