@@ -921,7 +921,7 @@ def _main(argv=None) -> int:
     from cross_checks.core.progress import degrade_unencodable
     from cross_checks.core.trajectory import TrajectoryError
     from cross_checks.scenario import ScenarioError
-    from cross_checks.sweep.lifecycle import Terminated, handle_sigterm
+    from cross_checks.sweep.lifecycle import Terminated, handle_sigterm, interrupted_by
     from reports.install import IncompleteInstallation
     degrade_unencodable(sys.stdout, sys.stderr)   # Δt -> dt where the locale cannot write it
     try:
@@ -945,6 +945,12 @@ def _main(argv=None) -> int:
         where = f"{exc.filename}: " if exc.filename else ""
         return _error(args.command, f"{where}{exc.strerror or exc}")
     except (MemoryError, RecursionError, Exception) as exc:  # noqa: BLE001
+        signum = interrupted_by()
+        if signum:   # a signal's exception turned into another on its way (e.g. raised inside an import)
+            import signal
+            what = "terminated" if signum == signal.SIGTERM else "interrupted"
+            print(f"rbcheck {args.command}: {what}", file=sys.stderr)
+            return EXIT_TERMINATED if signum == signal.SIGTERM else EXIT_INTERRUPTED
         # every error path: one line, exit 2
         if os.environ.get("RBCHECK_DEBUG"):
             raise

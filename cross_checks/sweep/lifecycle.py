@@ -12,7 +12,8 @@ import sys
 import threading
 import time
 
-__all__ = ["Terminated", "handle_sigterm", "kill_pool", "interrupted_by", "worker_init", "EXIT_TERMINATED",
+__all__ = ["Terminated", "handle_sigterm", "kill_pool", "interrupted_by", "signals_deferred",
+           "interrupted_exception", "worker_init", "EXIT_TERMINATED",
            "TimeLimitExceeded", "time_limit", "each_within_limits"]
 
 #: 128 + SIGTERM, what a shell reports for a process ended by SIGTERM.
@@ -31,11 +32,39 @@ class Terminated(KeyboardInterrupt):
 _interrupted = [0]
 
 
+#: The lists of :func:`signals_deferred` blocks running now: a signal is recorded in each, not raised.
+_deferring: list = []
+
+
 def _on_signal(signum, frame):
+    if _deferring:   # a clean-up, a fork hook: recorded, acted on at the block's end
+        if not _interrupted[0]:
+            _interrupted[0] = signum
+        for pending in _deferring:
+            pending.append(signum)
+        return
     if _interrupted[0]:
         return   # cleaning up after the first one: the exit code stays the first one's
     _interrupted[0] = signum
     raise Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
+
+
+@contextlib.contextmanager
+def signals_deferred():
+    """A block no Ctrl-C or SIGTERM interrupts (a clean-up that must finish: workers stopped, the staging
+    folder removed); the signals that came meanwhile are in the list it yields, for the caller to act on
+    after it (the first one is also :func:`interrupted_by`)."""
+    pending: list = []
+    _deferring.append(pending)
+    try:
+        yield pending
+    finally:
+        _deferring.remove(pending)
+
+
+def interrupted_exception(signum: int) -> KeyboardInterrupt:
+    """What a signal raises: Terminated for SIGTERM, KeyboardInterrupt for Ctrl-C."""
+    return Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
 
 
 def _on_sigterm(signum, frame):
@@ -73,7 +102,14 @@ def _block_before_fork() -> None:
 
 
 def _unblock_in_parent() -> None:
-    signal.pthread_sigmask(signal.SIG_SETMASK, getattr(_fork_mask, "before", set()))
+    """A signal that came during the fork is delivered when the mask is restored, here, inside the fork's
+    hook, where an exception is swallowed: it is recorded instead and handed to the main thread again
+    (``_thread.interrupt_main``), whose next Python line after ``os.fork`` then raises it."""
+    with signals_deferred() as pending:
+        signal.pthread_sigmask(signal.SIG_SETMASK, getattr(_fork_mask, "before", set()))
+    if pending and _interrupted[0] == pending[0]:
+        _interrupted[0] = 0
+        _thread.interrupt_main(pending[0])
 
 
 def _unblock_in_child() -> None:

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import shutil
+import signal
 import sys
 import time
 from datetime import UTC, datetime
@@ -38,7 +39,7 @@ from cross_checks.sweep.jobs import (
     Job,
     clear_reference_memo,
 )
-from cross_checks.sweep.lifecycle import Terminated
+from cross_checks.sweep.lifecycle import Terminated, signals_deferred
 from cross_checks.sweep.long_runs import (
     LONG_RUN_COLUMNS,
     judged_rows,
@@ -177,14 +178,20 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
         if report_error is not None:
             raise ReportFailed(summary, out, report_error) from report_error
         return summary
-    except KeyboardInterrupt as exc:  # after the swap (staging is None) the new results are complete
-        raise SweepInterrupted(isinstance(exc, Terminated),
-                               replaced=staging is None or not staging.exists()) from None
-    finally:
-        if runner is not None:
-            runner.close(kill=True)
-        if staging is not None:
-            shutil.rmtree(staging, ignore_errors=True)
+    except BaseException as exc:
+        # the clean-up runs to its end whatever signal comes meanwhile (timeout forwarding Ctrl-C, a worker
+        # killed by the same SIGTERM breaking the pool before the signal reached this line)
+        with signals_deferred() as pending:
+            if runner is not None:
+                runner.close(kill=True)
+            replaced = staging is None or not staging.exists()   # after the swap: the new results complete
+            if staging is not None:
+                shutil.rmtree(staging, ignore_errors=True)
+        if isinstance(exc, KeyboardInterrupt) or pending:
+            terminated = isinstance(exc, Terminated) or (not isinstance(exc, KeyboardInterrupt)
+                                                         and pending[0] == signal.SIGTERM)
+            raise SweepInterrupted(terminated, replaced=replaced) from None
+        raise
 
 
 def _load_before_forking(variants) -> None:

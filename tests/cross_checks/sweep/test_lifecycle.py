@@ -230,7 +230,8 @@ def _stream_setting(tmp):
 @pytest.fixture(scope="session")
 def streaming(tmp_path_factory):
     tmp = built_once(tmp_path_factory, "stream", _stream_setting)
-    env = {**os.environ, "RBCHECK_CACHE_DIR": str(tmp / "cache"), "MPLBACKEND": "Agg"}
+    env = {**os.environ, "RBCHECK_CACHE_DIR": str(tmp / "cache"), "MPLBACKEND": "Agg",
+           "PYTHONFAULTHANDLER": "1"}
     return tmp, env
 
 
@@ -257,9 +258,15 @@ def interrupt_while_streaming(streaming, seed):
     try:
         _, err = proc.communicate(timeout=EXIT_AFTER_SIGNAL_S)
     except subprocess.TimeoutExpired:
+        os.kill(proc.pid, signal.SIGABRT)   # PYTHONFAULTHANDLER: where each thread waits, on stderr
+        try:
+            _, err = proc.communicate(timeout=10)
+        except subprocess.TimeoutExpired:
+            err = ""
         os.killpg(proc.pid, signal.SIGKILL)
         proc.communicate()
-        pytest.fail(f"seed {seed}: {sig.name} did not end the sweep within {EXIT_AFTER_SIGNAL_S} s")
+        pytest.fail(f"seed {seed}: {sig.name} did not end the sweep within {EXIT_AFTER_SIGNAL_S} s:\n"
+                    f"{err[-5000:]}")
     assert "Traceback" not in err and "Exception ignored" not in err, err
     expected = {signal.SIGINT: 130, signal.SIGTERM: 143}[sig]
     assert proc.returncode in (expected, 0, 1), (seed, sig.name, proc.returncode, err)
@@ -324,3 +331,64 @@ def test_a_second_signal_during_clean_up_does_not_cut_it_short():
     """)
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert proc.stdout.strip() == "cleaned up True", proc.stderr
+
+
+_LATE_SIGNAL = """
+import os, signal, sys
+from concurrent.futures.process import BrokenProcessPool
+from pathlib import Path
+from cross_checks.scenario import parse_scenario
+from cross_checks.sweep import execute, lifecycle
+from cross_checks.sweep import run as sweep_run
+lifecycle.handle_sigterm()
+
+def broken(*a, **k):   # the SIGTERM sent to the group killed the workers before it reached this process
+    raise BrokenProcessPool("a worker process died")
+
+real_close = execute.Runner.close
+
+def close(self, kill=False):   # ...and it reaches this process during the clean-up
+    os.kill(os.getpid(), signal.SIGTERM)
+    real_close(self, kill)
+
+sweep_run.run_references, execute.Runner.close = broken, close
+out = Path(sys.argv[1]) / "res"
+try:
+    sweep_run.run_sweep([parse_scenario(sys.argv[2], "tiny.toml")], ["reference:course"], out, jobs=2,
+                        progress=False)
+except sweep_run.SweepInterrupted as exc:
+    print("interrupted", exc.terminated, sorted(p.name for p in out.parent.iterdir()))
+"""
+
+
+def test_a_signal_during_the_clean_up_of_another_error_ends_it_as_an_interrupt(tmp_path):
+    """A SIGTERM to the group kills the workers (the pool breaks) a moment before the parent's handler runs:
+    it then arrived during the clean-up of that error and cut it short (staging folder left, "terminated"
+    without "left as it was")."""
+    from tests.helpers.scenarios import TINY
+    (tmp_path / "w").mkdir()
+    env = {**os.environ, "RBCHECK_CACHE_DIR": str(tmp_path / "c")}
+    proc = subprocess.run([sys.executable, "-c", _LATE_SIGNAL, str(tmp_path / "w"), TINY],
+                          capture_output=True, text=True, timeout=300, env=env)
+    assert proc.stdout.strip() == "interrupted True []", proc.stderr[-3000:]
+
+
+def test_a_signal_turned_into_another_error_is_still_the_interrupt():
+    """Python wraps an exception raised in some places (a class body's ``__set_name__`` while a module is
+    imported) into a RuntimeError: a SIGTERM landing there ended as "internal error", exit 2."""
+    code = textwrap.dedent("""
+        import signal, sys
+        import cross_checks.cli as cli
+        from cross_checks.sweep import lifecycle
+
+        def cmd(args):
+            try:
+                signal.getsignal(signal.SIGTERM)(signal.SIGTERM, None)   # as the signal would, mid-import
+            except lifecycle.Terminated as exc:
+                raise RuntimeError("Error calling __set_name__ on 'cached_property' instance") from exc
+
+        cli.COMMANDS["list"] = cmd
+        sys.exit(cli.main(["list"]))
+    """)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 143 and proc.stderr.strip() == "rbcheck list: terminated", proc.stderr
