@@ -391,16 +391,16 @@ def _kill_strays(before: set) -> None:
                 os.waitpid(pid, 0)   # ours once reparented (subreaper); others are reaped by their parent
 
 
-#: The command's supervisor (``python -I -S -c``, argv: rbcheck's pid, then the command): it starts the
-#: command as its child in the session ``_run_command`` made, and passes its exit status on (a signal's death
-#: as that signal). It dies with rbcheck's process that started it, whatever ended that one (``kill -9``
-#: of the group, ``timeout -s KILL``, a CI cancel, the OOM killer): Linux sends it SIGTERM then
-#: (``PR_SET_PDEATHSIG``), and it kills the command and everything the command started (it is their
-#: subreaper) before going. Only the supervisor can get that signal: a parent-death signal is not
-#: inherited by the command's own children.
+#: The command's supervisor (``python -I -S -c``, argv: rbcheck's pid, the run's private directory or "",
+#: then the command): it starts the command as its child in the session ``_run_command`` made, and passes its
+#: exit status on (a signal's death as that signal). It dies with rbcheck's process that started it, whatever
+#: ended that one (``kill -9`` of the group, ``timeout -s KILL``, a CI cancel, the OOM killer): Linux sends it
+#: SIGTERM then (``PR_SET_PDEATHSIG``), and it kills the command and everything the command started (it is
+#: their subreaper) and removes the run's private directory before going. Only the supervisor can get that
+#: signal: a parent-death signal is not inherited by the command's own children.
 _SUPERVISOR = r"""
-import ctypes, os, signal, sys
-parent, argv = int(sys.argv[1]), sys.argv[2:]
+import ctypes, os, shutil, signal, sys
+parent, private, argv = int(sys.argv[1]), sys.argv[2], sys.argv[3:]
 libc = ctypes.CDLL(None, use_errno=True)
 def descendants():
     out, todo = [], [os.getpid()]
@@ -426,6 +426,8 @@ def die(signum, frame):
                 os.kill(pid, signal.SIGKILL)
             except OSError:
                 pass
+    if private:   # the run's private directory, which rbcheck can no longer remove
+        shutil.rmtree(private, ignore_errors=True)
     os._exit(128 + signum)
 signal.signal(signal.SIGTERM, die)
 libc.prctl(36, 1, 0, 0, 0)                    # PR_SET_CHILD_SUBREAPER
@@ -456,7 +458,7 @@ os._exit(os.waitstatus_to_exitcode(status))
 """
 
 
-def _supervised(argv: list, cwd: Path) -> list:
+def _supervised(argv: list, cwd: Path, private: Path | None = None) -> list:
     """``argv`` under :data:`_SUPERVISOR` (Linux; elsewhere ``argv`` itself). EngineError, as Popen would
     raise it, when its program cannot be started: the supervisor's child would only say so in its status."""
     program = argv[0] if os.sep in argv[0] else shutil.which(argv[0])
@@ -469,7 +471,7 @@ def _supervised(argv: list, cwd: Path) -> list:
     if not os.path.isdir(f"/proc/{os.getpid()}"):
         return argv
     import sys
-    return [sys.executable, "-I", "-S", "-c", _SUPERVISOR, str(os.getpid()), *argv]
+    return [sys.executable, "-I", "-S", "-c", _SUPERVISOR, str(os.getpid()), str(private or ""), *argv]
 
 
 def _run_command(argv: list, cwd: Path, timeout_s: float):
@@ -480,18 +482,18 @@ def _run_command(argv: list, cwd: Path, timeout_s: float):
     The wait is a pidfd poll or ``waitpid`` (no polling latency); at the end the command's whole process
     tree is killed. Its output is read as it comes, only the tail kept. ``cwd``'s parent, when it is a
     private run directory (``rbcheck-*`` in the temporary folder), is removed if SIGTERM ends this process
-    meanwhile.
+    meanwhile, or by the supervisor if this process dies.
     """
     _become_subreaper()
     before = _descendants(os.getpid())
-    try:
-        proc = subprocess.Popen(_supervised(argv, cwd), cwd=cwd, stdin=subprocess.DEVNULL,
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
-    except OSError as exc:
-        raise EngineError(f"cannot start {argv[0]!r}: {exc.strerror or exc}") from None
     private = Path(cwd).parent
     private = (private if private.name.startswith("rbcheck-")
                and private.parent == Path(tempfile.gettempdir()) else None)
+    try:
+        proc = subprocess.Popen(_supervised(argv, cwd, private), cwd=cwd, stdin=subprocess.DEVNULL,
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
+    except OSError as exc:
+        raise EngineError(f"cannot start {argv[0]!r}: {exc.strerror or exc}") from None
     with _LIVE_LOCK:
         _LIVE.add(proc.pid)
     out, err = _Tail(proc.stdout), _Tail(proc.stderr)

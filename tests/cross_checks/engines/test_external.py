@@ -536,13 +536,18 @@ def _all_gone(pids):
 
 def test_an_engine_command_dies_with_a_worker_killed_by_sigkill(tmp_path):
     """``kill -9`` of the sweep's process group (timeout -s KILL, a CI cancel, the OOM killer) left the command
-    and its child running, re-parented to init, with no time limit."""
+    and its child running, re-parented to init, with no time limit, and their private directory."""
     import os
     import signal
+    import time
     worker, pids = _worker_running_a_hung_command(tmp_path)
     os.killpg(worker.pid, signal.SIGKILL)   # the command runs in a session of its own: not in this group
     worker.wait()
     assert _all_gone(pids) == [], "the engine command outlived rbcheck"
+    deadline = time.monotonic() + 10.0   # removed by the supervisor as it goes
+    while list((tmp_path / "tmp").iterdir()) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert list((tmp_path / "tmp").iterdir()) == [], "the run's private directory outlived rbcheck"
 
 
 def test_a_worker_stopped_by_sigterm_removes_the_run_s_private_directory(tmp_path):
