@@ -913,8 +913,12 @@ COMMANDS = {"list": cmd_list, "show": cmd_show, "run": cmd_run, "sweep": cmd_swe
 def main(argv=None) -> int:
     """The ``rbcheck`` command; its output shows control characters escaped (docs/hardening.md)."""
     from cross_checks.core.progress import escaped_output
+    from cross_checks.sweep.lifecycle import exit_at_once, interrupted_by
     with escaped_output():
-        return _main(argv)
+        code = _main(argv)
+    if code in (EXIT_INTERRUPTED, EXIT_TERMINATED) and interrupted_by() and argv is None:
+        exit_at_once(code)   # the command line's rbcheck only (argv None), not a caller's main([...])
+    return code
 
 
 def _main(argv=None) -> int:

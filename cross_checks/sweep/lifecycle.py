@@ -13,7 +13,7 @@ import threading
 import time
 
 __all__ = ["Terminated", "handle_sigterm", "kill_pool", "interrupted_by", "signals_deferred",
-           "interrupted_exception", "worker_init", "EXIT_TERMINATED",
+           "interrupted_exception", "exit_at_once", "worker_init", "EXIT_TERMINATED",
            "TimeLimitExceeded", "time_limit", "each_within_limits"]
 
 #: 128 + SIGTERM, what a shell reports for a process ended by SIGTERM.
@@ -122,7 +122,29 @@ def _unblock_in_child() -> None:
     signal.pthread_sigmask(signal.SIG_SETMASK, getattr(_fork_mask, "before", set()))
 
 
-_fork_hooks = []
+_fork_hooks: list = []
+_exit_hook: list = []
+
+
+#: The exit code :func:`exit_at_once` asked for (None: the interpreter's usual exit).
+_exit_code: list = [None]
+
+
+def _exit_now_if_asked() -> None:
+    if _exit_code[0] is None:
+        return
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    os._exit(_exit_code[0])
+
+
+def exit_at_once(code: int) -> None:
+    """After an interrupt whose clean-up is done and said: end the process with ``code`` as soon as Python's
+    exit reaches the atexit handlers (registered first, they run last), skipping the rest of the interpreter's
+    finalisation, where a C extension interrupted in its initialisation, or a library's thread, could
+    still hang or abort the exit."""
+    _exit_code[0] = code
 
 
 def handle_sigterm() -> None:
@@ -130,6 +152,10 @@ def handle_sigterm() -> None:
     the first of them only (:data:`_interrupted`), also when it arrives while Python runs a finaliser or
     weakref callback (see :func:`_redeliver_swallowed_sigterm`)."""
     _interrupted[0] = 0
+    if not _exit_hook:
+        import atexit
+        atexit.register(_exit_now_if_asked)
+        _exit_hook.append(True)
     try:
         signal.signal(signal.SIGTERM, _on_sigterm)
         if signal.getsignal(signal.SIGINT) is signal.default_int_handler:   # not when the caller ignores it

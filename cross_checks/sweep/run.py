@@ -39,7 +39,7 @@ from cross_checks.sweep.jobs import (
     Job,
     clear_reference_memo,
 )
-from cross_checks.sweep.lifecycle import Terminated, signals_deferred
+from cross_checks.sweep.lifecycle import Terminated, interrupted_by, interrupted_exception, signals_deferred
 from cross_checks.sweep.long_runs import (
     LONG_RUN_COLUMNS,
     judged_rows,
@@ -170,6 +170,8 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
             try:
                 finish(staging)
             except Exception as exc:  # noqa: BLE001 - a report-side bug never throws the results away
+                if interrupted_by():   # a signal's exception Python turned into another (in an import)
+                    raise interrupted_exception(interrupted_by()) from None
                 report_error = exc
         write_marker(staging)
         fix_permissions(staging)

@@ -392,3 +392,55 @@ def test_a_signal_turned_into_another_error_is_still_the_interrupt():
     """)
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 143 and proc.stderr.strip() == "rbcheck list: terminated", proc.stderr
+
+
+_SIGNAL_IN_THE_REPORT = """
+import signal, sys
+from pathlib import Path
+from cross_checks.scenario import parse_scenario
+from cross_checks.sweep import lifecycle
+from cross_checks.sweep import run as sweep_run
+lifecycle.handle_sigterm()
+
+def report(staging):   # SIGTERM while the report imports a C extension: Python says ImportError
+    try:
+        signal.getsignal(signal.SIGTERM)(signal.SIGTERM, None)
+    except lifecycle.Terminated as exc:
+        raise ImportError("initialization of _imaging raised unreported exception") from exc
+
+out = Path(sys.argv[1]) / "res"
+try:
+    sweep_run.run_sweep([parse_scenario(sys.argv[2], "tiny.toml")], ["reference:course"], out, jobs=1,
+                        progress=False, finish=report)
+except sweep_run.SweepInterrupted as exc:
+    print("interrupted", exc.terminated, exc.replaced, sorted(p.name for p in out.parent.iterdir()))
+"""
+
+
+def test_a_signal_inside_the_report_is_the_interrupt_not_a_report_error(tmp_path):
+    """A SIGTERM during the report came out as "the report could not be drawn (ImportError ...)", exit 2,
+    with the results swapped in: it is the interrupt (143), and DIR is left as it was."""
+    from tests.helpers.scenarios import TINY
+    (tmp_path / "w").mkdir()
+    env = {**os.environ, "RBCHECK_CACHE_DIR": str(tmp_path / "c")}
+    proc = subprocess.run([sys.executable, "-c", _SIGNAL_IN_THE_REPORT, str(tmp_path / "w"), TINY],
+                          capture_output=True, text=True, timeout=300, env=env)
+    assert proc.stdout.strip() == "interrupted True False []", proc.stderr[-3000:]
+
+
+def test_after_an_interrupt_the_process_exits_without_the_interpreter_s_finalisation():
+    """What finalisation would run (here a finaliser that prints; in the issue, a C extension interrupted in
+    its initialisation aborting the exit with SIGABRT) is skipped; what was printed before is flushed."""
+    code = textwrap.dedent("""
+        import sys
+        from cross_checks.sweep import lifecycle
+        lifecycle.handle_sigterm()
+        class Late:
+            def __del__(self):
+                print("finalised", flush=True)
+        keep = Late()
+        sys.stdout.write("said")
+        lifecycle.exit_at_once(143)
+    """)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert (proc.returncode, proc.stdout) == (143, "said"), proc.stderr
