@@ -323,7 +323,7 @@ def _put_back_inside(old: Path, out: Path) -> str:
     """A killed in-place replacement (:func:`_replace_contents`): with the new marker in place, the new
     results are complete and ``old`` is disposed of; without it, the entries moved in are removed and the
     previous ones put back."""
-    if (out / MARKER).exists() and not (old / MARKER).exists():
+    if (out / MARKER).exists():   # the old marker went into ``old`` first, the new one comes in last
         _dispose_old(old, out)
         return f"removed {old.name}"
     for entry in sorted(out.iterdir()):

@@ -265,3 +265,15 @@ def test_an_in_place_replacement_killed_half_way_is_put_right_by_the_next_run(tm
     (out / "summary.json").write_text("new")
     remove_stale_siblings(out)
     assert {p.name: p.read_text() for p in out.iterdir()} == {"results.csv": "old", MARKER: "old marker"}
+    # killed after the new marker came in, before the previous results were disposed of: the new ones stand
+    old.mkdir()
+    marker = json.dumps({"format": "rbcheck results directory", "schema_version": 1, "written_by": "rbcheck",
+                         "files": ["results.csv"]})
+    (old / "results.csv").write_text("older")
+    (old / MARKER).write_text(marker)
+    (out / "results.csv").write_text("newest")
+    (out / MARKER).write_text(marker)
+    remove_stale_siblings(out)
+    assert sorted(p.name for p in out.iterdir()) == [MARKER, "results.csv"]
+    assert (out / "results.csv").read_text() == "newest"
+
