@@ -277,3 +277,15 @@ def test_an_in_place_replacement_killed_half_way_is_put_right_by_the_next_run(tm
     assert sorted(p.name for p in out.iterdir()) == [MARKER, "results.csv"]
     assert (out / "results.csv").read_text() == "newest"
 
+
+
+def test_a_baseline_killed_inside_a_mount_point_does_not_block_the_next(tmp_path, made, monkeypatch):
+    import cross_checks.sweep.results_dir as rd
+    from cross_checks.gates.baseline import write_baseline
+    out = tmp_path / "base"
+    out.mkdir()
+    monkeypatch.setattr(rd.os.path, "ismount", lambda p: os.path.abspath(p) == str(out))
+    host = hashlib.sha256(socket.gethostname().encode()).hexdigest()[:8]
+    (out / f".rbcheck-staging-{host}-{_dead_pid()}-1-0badf00d").mkdir()   # a killed baseline's
+    write_baseline(made, out)
+    assert sorted(p.name for p in out.iterdir()) == ["results.csv", "summary.json"]
