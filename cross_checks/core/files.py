@@ -160,7 +160,7 @@ def check_npz_size(path, max_bytes: int) -> None:
     sizes = npz_array_bytes(path)
     total = sum(sizes.values())
     if total > max_bytes:
-        big = max(sizes, key=sizes.get)
+        big = max(sizes, key=lambda name: sizes[name])
         raise ValueError(f"its arrays would take {total / 2 ** 20:.0f} MiB to read ({big}: "
                          f"{sizes[big] / 2 ** 20:.0f} MiB), more than the {max_bytes / 2 ** 20:.0f} MiB "
                          "allowed (cross_checks/core/tolerances.py)")
