@@ -72,3 +72,30 @@ def test_a_cache_folder_that_cannot_be_written_is_skipped_and_the_installation_l
     [line] = proc.stderr.splitlines()
     assert f"{tmp_path / 'file' / 'numba'} skipped (cannot write there" in line
     assert not list(module.rglob("*.nb*"))   # numba did not fall back to the source's __pycache__
+
+
+@pytest.mark.slow
+def test_the_reference_s_kernels_with_their_cache_cut_in_half_give_the_same_trajectory(tmp_path):
+    """The issue's case on the real kernels (each compile takes minutes: slow): numba's cache files of the
+    reference cut in half made every run that touches the reference exit 2 "internal error: UnpicklingError".
+    The trajectory must be the one written with a whole cache, digit for digit."""
+    from tests.helpers.scenarios import TINY
+    (tmp_path / "tiny.toml").write_text(TINY)
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba"), "RBCHECK_CACHE_DIR": str(tmp_path / "c")}
+
+    def run(name):
+        return subprocess.run([sys.executable, "-m", "cross_checks.cli", "run", str(tmp_path / "tiny.toml"),
+                               "--engine", "reference:rk4", "--out", str(tmp_path / f"{name}.csv")],
+                              capture_output=True, text=True, timeout=1800, env=env,
+                              cwd=Path(__file__).parents[2])
+    whole = run("whole")
+    assert whole.returncode == 0, whole.stderr
+    files = list((tmp_path / "numba").rglob("*.nb*"))
+    assert files
+    for f in files:
+        data = f.read_bytes()
+        f.write_bytes(data[: len(data) // 2])
+    cut = run("cut")
+    assert cut.returncode == 0, cut.stderr
+    assert (tmp_path / "cut.csv").read_text() == (tmp_path / "whole.csv").read_text()
+    assert [ln for ln in cut.stderr.splitlines() if "numba's cache folder" in ln and "skipped" in ln]
