@@ -179,8 +179,8 @@ def _draw_in_processes(tasks, jobs, done, res, meanwhile):
         prepare(res)
     with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_quiet_init,
                              initargs=(os.getpid(), _SHARED["directory"])) as pool:
-        futures = [pool.submit(_draw, t) for t in tasks]
         try:
+            futures = [pool.submit(_draw, t) for t in tasks]   # (a signal may land while they are forked)
             release()    # the processes are forked (all at the first submit): what prepare() built is theirs
             extra = meanwhile()
             for f in as_completed(futures):

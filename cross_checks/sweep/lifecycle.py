@@ -143,8 +143,16 @@ def exit_at_once(code: int) -> None:
     """After an interrupt whose clean-up is done and said: end the process with ``code`` as soon as Python's
     exit reaches the atexit handlers (registered first, they run last), skipping the rest of the interpreter's
     finalisation, where a C extension interrupted in its initialisation, or a library's thread, could
-    still hang or abort the exit."""
+    still hang or abort the exit. A worker process still alive (a pool the signal interrupted while it
+    forked its workers) is killed now: multiprocessing's own atexit handler would wait for it for ever."""
     _exit_code[0] = code
+    mp = sys.modules.get("multiprocessing")
+    if mp is None:
+        return
+    for p in mp.active_children():
+        with contextlib.suppress(Exception):
+            p.kill()
+            p.join(timeout=2)
 
 
 def handle_sigterm() -> None:

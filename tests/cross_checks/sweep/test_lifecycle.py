@@ -444,3 +444,21 @@ def test_after_an_interrupt_the_process_exits_without_the_interpreter_s_finalisa
     """)
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert (proc.returncode, proc.stdout) == (143, "said"), proc.stderr
+
+
+def test_after_an_interrupt_a_worker_left_alive_does_not_hold_the_exit():
+    """A pool interrupted while it forked its workers was never shut down: its live workers made
+    multiprocessing's atexit handler wait for them for ever (found hung 28 min after a SIGTERM). A hang is
+    detected by the timeout (60 s, against under a second)."""
+    code = textwrap.dedent("""
+        import multiprocessing, time
+        from cross_checks.sweep import lifecycle
+        lifecycle.handle_sigterm()
+        worker = multiprocessing.get_context("fork").Process(target=time.sleep, args=(600,))
+        worker.start()
+        print(worker.pid, flush=True)
+        lifecycle.exit_at_once(130)
+    """)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 130, proc.stderr
+    assert not _alive(int(proc.stdout.split()[0]))
