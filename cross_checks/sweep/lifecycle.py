@@ -13,7 +13,7 @@ import threading
 import time
 
 __all__ = ["Terminated", "handle_sigterm", "kill_pool", "interrupted_by", "signals_deferred",
-           "interrupted_exception", "exit_at_once", "worker_init", "EXIT_TERMINATED",
+           "interrupted_exception", "await_group_signal", "exit_at_once", "worker_init", "EXIT_TERMINATED",
            "TimeLimitExceeded", "time_limit", "each_within_limits"]
 
 #: 128 + SIGTERM, what a shell reports for a process ended by SIGTERM.
@@ -60,6 +60,19 @@ def signals_deferred():
         yield pending
     finally:
         _deferring.remove(pending)
+
+
+#: How long a sweep whose workers died waits for a signal to reach it too: a SIGTERM sent to the process
+#: group (``timeout``, ``kill -TERM -PGID``) kills the workers (SIGTERM at its default there) and is handled
+#: here only when this process is next scheduled; on 2 loaded cores that took longer than the clean-up.
+GROUP_SIGNAL_GRACE_S = 1.0
+
+
+def await_group_signal(pending: list, grace_s: float = GROUP_SIGNAL_GRACE_S) -> None:
+    """Inside :func:`signals_deferred` (``pending`` its list): wait at most ``grace_s`` for a signal."""
+    deadline = time.monotonic() + grace_s
+    while not pending and time.monotonic() < deadline:
+        time.sleep(0.01)
 
 
 def interrupted_exception(signum: int) -> KeyboardInterrupt:

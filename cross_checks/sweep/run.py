@@ -22,6 +22,7 @@ import shutil
 import signal
 import sys
 import time
+from concurrent.futures.process import BrokenProcessPool
 from datetime import UTC, datetime
 
 from cross_checks.core import tolerances as tol
@@ -39,7 +40,13 @@ from cross_checks.sweep.jobs import (
     Job,
     clear_reference_memo,
 )
-from cross_checks.sweep.lifecycle import Terminated, interrupted_by, interrupted_exception, signals_deferred
+from cross_checks.sweep.lifecycle import (
+    Terminated,
+    await_group_signal,
+    interrupted_by,
+    interrupted_exception,
+    signals_deferred,
+)
 from cross_checks.sweep.long_runs import (
     LONG_RUN_COLUMNS,
     judged_rows,
@@ -189,6 +196,8 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
             replaced = staging is None or not staging.exists()   # after the swap: the new results complete
             if staging is not None:
                 shutil.rmtree(staging, ignore_errors=True)
+            if isinstance(exc, BrokenProcessPool) and not pending:
+                await_group_signal(pending)   # workers killed by a SIGTERM sent to the whole group
         if isinstance(exc, KeyboardInterrupt) or pending:
             terminated = isinstance(exc, Terminated) or (not isinstance(exc, KeyboardInterrupt)
                                                          and pending[0] == signal.SIGTERM)
