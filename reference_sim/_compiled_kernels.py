@@ -22,8 +22,11 @@ import math
 import numpy as np
 from numba import njit
 
-# fastmath stays off: no reassociation, no contraction into fused multiply-adds
-_JIT = dict(cache=True, nogil=True, error_model="numpy")
+from reference_sim.compiled import cache_wanted
+
+# fastmath stays off: no reassociation, no contraction into fused multiply-adds; numba's on-disk cache unless
+# its folder proved unusable (reference_sim.compiled.load_compiled: then compiled in memory)
+_JIT = dict(cache=cache_wanted(), nogil=True, error_model="numpy")
 _INLINE = dict(_JIT, inline="always")   # the pieces of a step: inlined into it (no call per piece)
 
 

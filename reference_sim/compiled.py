@@ -10,8 +10,10 @@ iteration of lp_midpoint or moser_veselov that does not converge or turns non-fi
 the caller (reference_sim.simulate) takes that one step with the definition (which raises, gives the bad
 state, or solves the step with Newton's method) and resumes compiled.
 
-numba is imported on first use, and the kernels are compiled once per machine (``cache=True``);
-where numba cannot be imported, :func:`kernel` is None and runs step with the definition.
+numba is imported on first use, and the kernels are compiled once per machine (numba's cache); a cache folder
+that cannot be written or read is skipped, said once, and the kernels compiled in memory
+(:func:`load_compiled`); where numba cannot be imported, :func:`kernel` is None and runs step with the
+definition.
 State layout as everywhere: [x_W (3) m, v_W (3) m/s, q_WB (w, x, y, z), w_W (3) rad/s].
 """
 from __future__ import annotations
@@ -37,18 +39,107 @@ VARIANT_CODES = {"course": 0, "course_gyro": 1, "expmap_gyro": 2, "explicit_eule
 COMPILE_ESTIMATE_S = "about a minute (53-75 s measured on 2 cores)"
 
 _KERNELS: list = []
+#: Whether the kernels use numba's on-disk cache (``cache=`` of ``_compiled_kernels``): False once its folder
+#: was found unusable, the kernels then being compiled in memory (:func:`load_compiled`).
+_CACHE = [True]
+
+
+def cache_wanted() -> bool:
+    """``cache=`` for ``_compiled_kernels``' functions (read when that module is imported)."""
+    return _CACHE[0]
 
 
 def _kernels():
-    """The kernels module, or None where numba cannot be imported or cannot cache. Loaded once per process."""
+    """The kernels module, loaded (from numba's cache, else compiled) once per process, or None where numba
+    cannot be imported."""
     if not _KERNELS:
-        try:
-            from reference_sim import _compiled_kernels
-        except (ImportError, RuntimeError, OSError):   # no numba, or nowhere numba may write its cache
-            _KERNELS.append(None)
-        else:
-            _KERNELS.append(_compiled_kernels)
+        _KERNELS.append(load_compiled("reference_sim._compiled_kernels", _first_calls, _CACHE))
     return _KERNELS[0]
+
+
+def load_compiled(name: str, first_calls, flag: list):
+    """The module ``name`` of numba functions compiled with ``cache=flag[0]``, after ``first_calls(module)``
+    loaded or compiled them; None where numba (or the module) cannot be imported.
+
+    A cache is a cache: a folder numba cannot write (a read-only or missing ``NUMBA_CACHE_DIR``: checked
+    first, so that numba does not fall back to the installation's ``__pycache__``), or files it cannot read
+    or write (cut in half, a full disk: the first calls raise) make ``flag[0]`` False; the folder and the
+    reason are said once on stderr, and the module is imported again without the cache, compiled in memory."""
+    try:
+        import numba
+    except ImportError:
+        return None
+    folder = getattr(numba.config, "CACHE_DIR", "") or ""
+    if flag[0] and folder:
+        why = _unwritable(folder)
+        if why:
+            flag[0] = False
+            _say_skipped(folder, why)
+    import importlib
+    try:
+        module = importlib.import_module(name)
+    except (ImportError, RuntimeError, OSError):
+        return None
+    if not flag[0]:
+        first_calls(module)
+        return module
+    try:
+        first_calls(module)
+    except Exception as exc:  # noqa: BLE001 - whatever the cache's files did, compile in memory
+        flag[0] = False
+        _say_skipped(_cache_folder(module) or folder or "numba's cache folder",
+                     f"{type(exc).__name__}: {exc}".strip())
+        module = importlib.reload(module)
+        first_calls(module)
+    return module
+
+
+def _unwritable(folder: str) -> str:
+    """Why numba could not keep its cache in ``folder`` ("" when a file can be created and written there)."""
+    import os
+    import tempfile
+    try:
+        os.makedirs(folder, exist_ok=True)
+        fd, probe = tempfile.mkstemp(prefix=".rbcheck-probe-", dir=folder)
+        try:
+            os.write(fd, b"\0" * 4096)
+        finally:
+            os.close(fd)
+            os.unlink(probe)
+    except OSError as exc:
+        return f"cannot write there: {exc.strerror or exc}"
+    return ""
+
+
+def _cache_folder(module) -> str:
+    """The folder numba keeps ``module``'s cache in (its ``run`` function's), or ""."""
+    for f in vars(module).values():
+        path = getattr(getattr(f, "_cache", None), "_cache_path", None)
+        if path:
+            return str(path)
+    return ""
+
+
+def _say_skipped(folder: str, why: str) -> None:
+    import sys
+    print(f"rbcheck: numba's cache folder {folder} skipped ({why}); the reference's compiled steps are "
+          "compiled in memory instead, in each process", file=sys.stderr, flush=True)
+
+
+def _first_calls(k) -> None:
+    """One call of each kernel on one member: loads them from numba's cache, or compiles them."""
+    from reference_sim.body import RigidBody
+    from reference_sim.forces import ForceModel
+    p = Members.stack([(RigidBody(1.0, [1.0, 1.0, 1.0]), ForceModel())])
+    rows = np.zeros((2, 13))
+    rows[0, 6] = 1.0
+    params = parameters(p, [0.01])
+    k.run(VARIANT_CODES["rk4"], rows, np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64),
+          np.ones(1, dtype=np.int64), 1e8, float(IMPLICIT_TOL), int(MAX_ITER),
+          float(BULLET_MAX_GYROSCOPIC_TORQUE), *params)
+    k.force_torque_at(rows[0], True, *params)
+    k.force_torque_rows(rows[:1], np.empty((1, 6)), *params)
+    k.lane_members(VARIANT_CODES["rk4"], params[0], params[7], params[8], params[9])
 
 
 def kernel():
@@ -159,15 +250,4 @@ class ForceRows:
 def warm() -> bool:
     """Load (or, the first time on a machine, compile) the compiled loop in this process — before a process
     pool forks, so that every forked worker inherits it. True when the compiled path is available."""
-    run = kernel()
-    if run is None:
-        return False
-    from reference_sim.body import RigidBody
-    from reference_sim.forces import ForceModel
-    p = Members.stack([(RigidBody(1.0, [1.0, 1.0, 1.0]), ForceModel())])
-    rows = np.zeros((2, 13))
-    rows[0, 6] = 1.0
-    advance("rk4", rows, [0], np.zeros(1, dtype=np.int64), [1], 1e8, parameters(p, [0.01]))  # one signature
-    _kernels().force_torque_at(rows[0], True, *parameters(p, [0.01]))
-    _kernels().force_torque_rows(rows[:1], np.empty((1, 6)), *parameters(p, [0.01]))
-    return True
+    return kernel() is not None   # loading the kernels makes their first calls (_first_calls)

@@ -191,12 +191,16 @@ def _draw_in_processes(tasks, jobs, done, res, meanwhile):
         prepare(res)
     with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_quiet_init,
                              initargs=(os.getpid(), _SHARED["directory"])) as pool:
-        futures = [pool.submit(_draw, t) for t in tasks]
         try:
+            futures = [pool.submit(_draw, t) for t in tasks]   # (a signal may land while they are forked)
             release()    # the processes are forked (all at the first submit): what prepare() built is theirs
             extra = meanwhile()
             for f in as_completed(futures):
                 done(f.result())
+        except KeyboardInterrupt:   # Ctrl-C, SIGTERM: stop the drawing processes now, without waiting
+            from cross_checks.sweep.lifecycle import kill_pool
+            kill_pool(pool)
+            raise
         finally:
             pool.shutdown(cancel_futures=True)   # after an error: the figures not begun are not drawn
     return extra

@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from cross_checks.core import tolerances as tol
+from cross_checks.core.files import check_npz_size
 from cross_checks.sweep.results_dir import inside, safe_file_stem
 from cross_checks.sweep.schema import STATUSES
 
@@ -101,6 +103,7 @@ class Results:
             out = {}
             if path.is_file():
                 try:
+                    check_npz_size(path, tol.SERIES_FILE_MAX_BYTES)   # from the headers, before any data
                     with np.load(path, allow_pickle=False) as d:
                         for k in d.files:
                             who, fld = k.split("::", 1)

@@ -296,10 +296,16 @@ def _same_schemes(res, c) -> tuple:
                                f"(relative) on {parts}.",
                                None, b))
         if good:
-            worst = max(r["max_rel"] for r in good)
-            info.append(Finding("info",
-                                f"{b} reproduces {a} on {len(good)} scenario(s) to {fmt(worst)} (largest "
-                                f"relative final-state difference at the default Δt): {rs[0]['reason']}.",
+            # "both diverged" agreements (at the same step) have no final states, hence no max_rel
+            ended = [r["max_rel"] for r in good if r["max_rel"] is not None]
+            blew_up = [r["scenario"] for r in good if r["max_rel"] is None]
+            how = []
+            if ended:
+                how.append(f"on {len(ended)} scenario(s) to {fmt(max(ended))} (largest relative final-state "
+                           "difference at the default Δt)")
+            if blew_up:
+                how.append(f"on {_and(blew_up)} by diverging at the same time (within two steps)")
+            info.append(Finding("info", f"{b} reproduces {a} {' and '.join(how)}: {rs[0]['reason']}.",
                                 None, b))
     return bad, info
 

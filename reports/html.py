@@ -79,12 +79,24 @@ class _Loader(PackageLoader):
             raise incomplete(template) from None
 
 
+def _escape_controls(value):
+    """Every value a template shows, with control characters written ``\\xNN``
+    (:func:`cross_checks.core.progress.shown`): autoescaping takes care of ``<`` and ``>``, not of ESC. Markup
+    (already HTML: an inline figure) stays Markup."""
+    from markupsafe import Markup
+
+    from cross_checks.core.progress import shown
+    if isinstance(value, Markup):
+        return Markup(shown(value))
+    return shown(value) if isinstance(value, str) else value
+
+
 def environment() -> Environment:
     env = Environment(loader=_Loader("reports", "templates"),
                       autoescape=select_autoescape(["html", "htm", "xml"],
                                                    default_for_string=True, default=True),
                       undefined=StrictUndefined, trim_blocks=True, lstrip_blocks=True,
-                      keep_trailing_newline=True)
+                      keep_trailing_newline=True, finalize=_escape_controls)
     env.filters["breakable"] = breakable
     return env
 

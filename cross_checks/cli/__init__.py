@@ -755,7 +755,7 @@ def _time_limits(seconds) -> dict:
 def cmd_sweep(args) -> int:
     import reports
     from cross_checks.scenario import catalog_names, load_scenario, long_run_names
-    from cross_checks.sweep import SweepError, SweepInterrupted
+    from cross_checks.sweep import ReportFailed, SweepError, SweepInterrupted
     from cross_checks.sweep.results_dir import ResultsDirError, check_output_dir
     reports.check_installation()  # the report's templates, before minutes of runs
     try:
@@ -781,6 +781,10 @@ def cmd_sweep(args) -> int:
         summary = _run_sweep(args, scenarios, variants, skipped)
     except SweepError as exc:
         raise BadInput(str(exc)) from None
+    except ReportFailed as exc:   # the results are written; the report's bug is an internal error (exit 2)
+        if os.environ.get("RBCHECK_DEBUG"):
+            raise exc.error from None
+        return _error("sweep", f"{exc} (RBCHECK_DEBUG=1 shows the traceback)")
     except SweepInterrupted as exc:
         what = (f"after the new results were complete in {args.out}" if exc.replaced
                 else f"{args.out} left as it was")
@@ -1006,15 +1010,17 @@ def cmd_compare(args) -> int:
     ran = _variants_ran(args.new)
     print(to_text(c, args.allow_missing, ran, args.fail_on_change))
 
+    from cross_checks.core.progress import shown
+
     def markdown():
         return to_markdown(c, args.baseline, args.new, args.allow_missing, ran, args.fail_on_change)
     if args.markdown:
-        atomic_write_text(args.markdown, markdown() + "\n")
+        atomic_write_text(args.markdown, shown(markdown()) + "\n")
     from cross_checks.gates import ci
     _ci_outputs("compare", args.junit,
                 lambda: ci.compare_junit(c, new_summary, args.allow_missing, args.fail_on_change),
                 ci.compare_annotations(c, new_summary, args.allow_missing, args.fail_on_change)
-                if args.github_annotations else [], markdown)
+                if args.github_annotations else [], lambda: shown(markdown()))
     return c.exit_code(args.allow_missing, args.fail_on_change)
 
 
@@ -1068,10 +1074,21 @@ COMMANDS = {"list": cmd_list, "show": cmd_show, "run": cmd_run, "sweep": cmd_swe
 
 
 def main(argv=None) -> int:
+    """The ``rbcheck`` command; its output shows control characters escaped (docs/hardening.md)."""
+    from cross_checks.core.progress import escaped_output
+    from cross_checks.sweep.lifecycle import exit_at_once, interrupted_by
+    with escaped_output():
+        code = _main(argv)
+    if code in (EXIT_INTERRUPTED, EXIT_TERMINATED) and interrupted_by() and argv is None:
+        exit_at_once(code)   # the command line's rbcheck only (argv None), not a caller's main([...])
+    return code
+
+
+def _main(argv=None) -> int:
     from cross_checks.core.progress import degrade_unencodable
     from cross_checks.core.trajectory import TrajectoryError
     from cross_checks.scenario import ScenarioError
-    from cross_checks.sweep.lifecycle import Terminated, handle_sigterm
+    from cross_checks.sweep.lifecycle import Terminated, handle_sigterm, interrupted_by
     from reports.install import IncompleteInstallation
     degrade_unencodable(sys.stdout, sys.stderr)   # Δt -> dt where the locale cannot write it
     try:
@@ -1095,6 +1112,12 @@ def main(argv=None) -> int:
         where = f"{exc.filename}: " if exc.filename else ""
         return _error(args.command, f"{where}{exc.strerror or exc}")
     except (MemoryError, RecursionError, Exception) as exc:  # noqa: BLE001
+        signum = interrupted_by()
+        if signum:   # a signal's exception turned into another on its way (e.g. raised inside an import)
+            import signal
+            what = "terminated" if signum == signal.SIGTERM else "interrupted"
+            print(f"rbcheck {args.command}: {what}", file=sys.stderr)
+            return EXIT_TERMINATED if signum == signal.SIGTERM else EXIT_INTERRUPTED
         # every error path: one line, exit 2
         if os.environ.get("RBCHECK_DEBUG"):
             raise

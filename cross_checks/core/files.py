@@ -33,6 +33,38 @@ def kernel_cache_dir(engine: str) -> Path:
     return Path(base) / "rbcheck" / "kernels" / engine
 
 
+_SKIPPED_CACHES: dict = {}
+
+
+def usable_cache_dir(folder, what: str) -> Path:
+    """``folder`` (created) when a file can be written there; else a private temporary folder of this process
+    (removed at exit) in its place, and one line on stderr, once per folder, naming it and the reason: a
+    cache is a cache, and a read-only or full one must not stop what it only speeds up."""
+    folder = Path(folder)
+    if str(folder) in _SKIPPED_CACHES:
+        return _SKIPPED_CACHES[str(folder)]
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(prefix=".rbcheck-probe-", dir=folder)
+        try:
+            os.write(fd, b"\0" * 4096)
+        finally:
+            os.close(fd)
+            os.unlink(probe)
+        return folder
+    except OSError as exc:
+        why = exc.strerror or str(exc)
+    import atexit
+    import shutil
+    import sys
+    private = Path(tempfile.mkdtemp(prefix="rbcheck-kernels-"))
+    atexit.register(shutil.rmtree, private, True)
+    _SKIPPED_CACHES[str(folder)] = private
+    print(f"rbcheck: {what} cache folder {folder} skipped ({why}); using {private} for this run instead",
+          file=sys.stderr, flush=True)
+    return private
+
+
 def usable_cores() -> int:
     """Cores this process may run on (its CPU affinity where the OS reports it): the default number of
     worker processes of a sweep and of report drawing."""
@@ -98,3 +130,38 @@ def save_npz_atomic(path: Path, arrays: dict, *, compress: bool = True) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     save = np.savez_compressed if compress else np.savez
     atomic_write(path, lambda tmp: save(tmp, **arrays), suffix=".npz")
+
+
+def npz_array_bytes(path) -> dict:
+    """``{member: bytes}`` of the arrays of an ``.npz``, from their npy headers only (shape x itemsize): what
+    reading each would allocate, known before any is read. ValueError for a member that is not a plain
+    array (an object array, a damaged header)."""
+    import zipfile
+
+    import numpy as np
+    out = {}
+    with zipfile.ZipFile(path) as zf:
+        for info in zf.infolist():
+            name = info.filename[:-4] if info.filename.endswith(".npy") else info.filename
+            with zf.open(info) as fh:
+                version = np.lib.format.read_magic(fh)
+                read = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                        else np.lib.format.read_array_header_2_0)
+                shape, _fortran, dtype = read(fh, max_header_size=10000)
+            if dtype.hasobject:
+                raise ValueError(f"{name}: an object array")
+            out[name] = int(np.prod(shape, dtype=object)) * dtype.itemsize
+    return out
+
+
+def check_npz_size(path, max_bytes: int) -> None:
+    """ValueError naming the member when reading the ``.npz`` at ``path`` would allocate more than
+    ``max_bytes`` in all (checked from the npy headers, before reading any data)."""
+    sizes = npz_array_bytes(path)
+    total = sum(sizes.values())
+    if total > max_bytes:
+        big = max(sizes, key=lambda name: sizes[name])
+        raise ValueError(f"its arrays would take {total / 2 ** 20:.0f} MiB to read ({big}: "
+                         f"{sizes[big] / 2 ** 20:.0f} MiB), more than the {max_bytes / 2 ** 20:.0f} MiB "
+                         "allowed (cross_checks/core/tolerances.py)")
+

@@ -13,14 +13,52 @@ pytest plugin).
 """
 from __future__ import annotations
 
+import contextlib
+import re
 import sys
 import time
 
-__all__ = ["LINE_INTERVAL_S", "Progress", "stage", "is_tty", "say", "degrade_unencodable"]
+__all__ = ["LINE_INTERVAL_S", "Progress", "stage", "is_tty", "say", "degrade_unencodable", "shown",
+           "EscapingStream", "escaped_output"]
 
 #: Seconds between two progress lines without a terminal: often enough that a CI log never looks hung
 #: (GitHub Actions streams lines as they come), rarely enough that a 1000-run sweep prints ~20 lines.
 LINE_INTERVAL_S = 5.0
+
+
+_CONTROL = re.compile(r"[\x00-\x08\x0b-\x1f\x7f-\x9f]")
+
+
+def shown(text) -> str:
+    """``text`` with every control character but newline and tab written as ``\\xNN`` (ESC as ``\\x1b``, CR as
+    ``\\x0d``): text from an engine file, a command's stderr or a results directory someone sent can then
+    neither move the cursor, rewrite a CI log's lines nor forge one (an "OK: no regression" of its own)."""
+    return _CONTROL.sub(lambda m: f"\\x{ord(m.group()):02x}", str(text))
+
+
+class EscapingStream:
+    """A text stream that writes through :func:`shown`; everything else is the wrapped stream's. The progress
+    bar (tqdm: carriage returns on purpose) writes to ``raw``."""
+
+    def __init__(self, stream):
+        self.raw = stream
+
+    def write(self, text):
+        return self.raw.write(shown(text))
+
+    def __getattr__(self, name):
+        return getattr(self.raw, name)
+
+
+@contextlib.contextmanager
+def escaped_output():
+    """sys.stdout and sys.stderr through :class:`EscapingStream` for the block (restored after)."""
+    out, err = sys.stdout, sys.stderr
+    sys.stdout, sys.stderr = EscapingStream(out), EscapingStream(err)
+    try:
+        yield
+    finally:
+        sys.stdout, sys.stderr = out, err
 
 
 def is_tty(stream) -> bool:
@@ -136,7 +174,7 @@ class Progress:
         if enabled and bar:
             from tqdm import tqdm
             self.bar = tqdm(total=self.total, unit=what.rstrip("s") or what, desc=f"{prefix}: {what}",
-                            file=self.stream, dynamic_ncols=True)
+                            file=getattr(self.stream, "raw", self.stream), dynamic_ncols=True)
 
     def __enter__(self):
         return self

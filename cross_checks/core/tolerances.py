@@ -94,6 +94,14 @@ CSV_MAX_LINE_BYTES = 64 * 1024
 #: The largest trajectory CSV read: ~1.9e6 rows (the steps one run may record) of the 14 columns at full
 #: precision are ~700 MB; 1 GiB bounds what reading one costs, whatever the file holds.
 CSV_MAX_BYTES = 2 ** 30
+#: The largest series file (series/<scenario>.npz) a report reads, from its npy headers before any data: a
+#: sweep writes at most MAX_SERIES_POINTS (500) points per field, ~15 fields per variant, float64: ~60 kB per
+#: variant, 2.4 MB for 40 variants; 256 MiB is 100x that and refuses a 1.9 MB zip of two 2.5e8-element
+#: members (4 GB to read, issue 45) before reading it.
+SERIES_FILE_MAX_BYTES = 256 * 2 ** 20
+#: The largest cache entry read, from its npy headers after its key matched: an entry is one job's record or
+#: reference, which JOB_MEMORY_LIMIT_BYTES bounds.
+CACHE_ENTRY_MAX_BYTES = JOB_MEMORY_LIMIT_BYTES
 #: DOP853 (rtol 1e-13) right-hand-side evaluations per radian of the fastest rate of the dynamics: springs
 #: and spins need 64–93; 100 covers both.
 DOP853_EVALS_PER_RAD = 100

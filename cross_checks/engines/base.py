@@ -411,18 +411,48 @@ def refuse_forked_jax(words: str) -> None:
 def start_warp(cache: str, log_level: str, quiet: bool = False):
     """``warp``, initialised on first use with its kernel cache in ``core.files.kernel_cache_dir(cache)`` (set
     before ``wp.init``), ``wp.config.log_level = wp.<log_level>`` and ``wp.config.quiet``; fd 2 silenced
-    meanwhile (Warp's runtime prints there that no CUDA driver exists)."""
+    meanwhile (Warp's runtime prints there that no CUDA driver exists).
+
+    A cache is a cache (docs/hardening.md): a folder where nothing can be written is replaced by a private
+    one for the run; a module whose cached files cannot be loaded (an object cut in half: "Failed to load CPU
+    module", a damaged metadata file) has its folder removed, said once, and is compiled again."""
+    from cross_checks.core.files import usable_cache_dir
+    folder = usable_cache_dir(kernel_cache_dir(cache), f"{cache}'s kernel")   # read-only, full: skipped, said
     with quiet_fd2():
         import warp as wp
-        folder = kernel_cache_dir(cache)
-        try:
-            folder.mkdir(parents=True, exist_ok=True)
-        except OSError:   # pragma: no cover - Warp then reports its own error
-            pass
         wp.config.kernel_cache_dir = str(folder)
         wp.config.quiet = quiet
         wp.config.log_level = getattr(wp, log_level)
         wp.init()
+    module_class = getattr(getattr(getattr(wp, "_src", None), "context", None), "Module", None)
+    load = getattr(module_class, "load", None)
+    if load is not None and not getattr(load, "rbcheck_recompiles_damaged", False):
+        import json
+        import shutil
+        import sys
+
+        def load_or_recompile(self, device, block_dim=None, binary_path=None, output_arch=None,
+                              meta_path=None):
+            try:
+                return load(self, device, block_dim, binary_path, output_arch, meta_path)
+            except Exception as exc:
+                damaged = (isinstance(exc, json.JSONDecodeError) or "Failed to load" in str(exc)
+                           or "metadata file" in str(exc))   # not a build error of the kernel's own
+                if binary_path is not None or not damaged:   # (binary_path: the caller's, not the cache)
+                    raise
+                try:
+                    where = os.path.join(wp.config.kernel_cache_dir, self.get_module_identifier(
+                        block_dim if block_dim is not None else self.options["block_dim"]))
+                except Exception:  # noqa: BLE001 - Warp's internals changed: its own error stands
+                    raise exc from None
+                if not os.path.isdir(where):
+                    raise
+                print(f"rbcheck: {cache}'s kernel cache entry {where} could not be loaded ({exc}); removed, "
+                      "compiling it again", file=sys.stderr, flush=True)
+                shutil.rmtree(where, ignore_errors=True)
+                return load(self, device, block_dim, binary_path, output_arch, meta_path)
+        load_or_recompile.rbcheck_recompiles_damaged = True
+        module_class.load = load_or_recompile
     return wp
 
 

@@ -324,16 +324,19 @@ def _kill_group(proc) -> None:
 
 class _TermKillsGroup:
     """While a command runs in the main thread: SIGTERM (a sweep stopping its workers) first kills the
-    command's process group, so no engine outlives the worker that started it."""
+    command's process group and removes the run's private directory ``private`` (a worker dies of that
+    SIGTERM at once: no ``finally`` of the run would remove it), so neither outlives the worker."""
 
-    def __init__(self, proc):
-        self.proc, self.prev = proc, None
+    def __init__(self, proc, private: Path | None = None):
+        self.proc, self.prev, self.private = proc, None, private
 
     def __enter__(self):
         if (threading.current_thread() is threading.main_thread()
                 and signal.getsignal(signal.SIGTERM) == signal.SIG_DFL):
             def on_term(signum, frame):
                 _kill_group(self.proc)
+                if self.private is not None:
+                    shutil.rmtree(self.private, ignore_errors=True)
                 signal.signal(signal.SIGTERM, signal.SIG_DFL)
                 os.kill(os.getpid(), signal.SIGTERM)
             self.prev = signal.signal(signal.SIGTERM, on_term)
@@ -424,18 +427,107 @@ def _kill_strays(before: set) -> None:
                 os.waitpid(pid, 0)   # ours once reparented (subreaper); others are reaped by their parent
 
 
+#: The command's supervisor (``python -I -S -c``, argv: rbcheck's pid, the run's private directory or "",
+#: then the command): it starts the command as its child in the session ``_run_command`` made, and passes its
+#: exit status on (a signal's death as that signal). It dies with rbcheck's process that started it, whatever
+#: ended that one (``kill -9`` of the group, ``timeout -s KILL``, a CI cancel, the OOM killer): Linux sends it
+#: SIGTERM then (``PR_SET_PDEATHSIG``), and it kills the command and everything the command started (it is
+#: their subreaper) and removes the run's private directory before going. Only the supervisor can get that
+#: signal: a parent-death signal is not inherited by the command's own children.
+_SUPERVISOR = r"""
+import ctypes, os, shutil, signal, sys
+parent, private, argv = int(sys.argv[1]), sys.argv[2], sys.argv[3:]
+libc = ctypes.CDLL(None, use_errno=True)
+def descendants():
+    out, todo = [], [os.getpid()]
+    while todo:
+        p = todo.pop()
+        try:
+            tasks = os.listdir(f"/proc/{p}/task")
+        except OSError:
+            continue
+        for t in tasks:
+            try:
+                with open(f"/proc/{p}/task/{t}/children") as fh:
+                    kids = [int(c) for c in fh.read().split()]
+            except (OSError, ValueError):
+                kids = []
+            out += kids
+            todo += kids
+    return out
+def die(signum, frame):
+    for _ in range(3):
+        for pid in descendants():
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except OSError:
+                pass
+    if private:   # the run's private directory, which rbcheck can no longer remove
+        shutil.rmtree(private, ignore_errors=True)
+    os._exit(128 + signum)
+signal.signal(signal.SIGTERM, die)
+libc.prctl(36, 1, 0, 0, 0)                    # PR_SET_CHILD_SUBREAPER
+libc.prctl(1, int(signal.SIGTERM), 0, 0, 0)   # PR_SET_PDEATHSIG
+if os.getppid() != parent:                    # rbcheck died before prctl took effect
+    die(signal.SIGTERM, None)
+pid = os.fork()
+if pid == 0:
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    try:
+        os.execvp(argv[0], argv)
+    except OSError as exc:
+        sys.stderr.write(f"cannot start {argv[0]!r}: {exc.strerror}\n")
+        sys.stderr.flush()
+    os._exit(127)
+while True:
+    try:
+        _, status = os.waitpid(pid, 0)
+        break
+    except InterruptedError:
+        continue
+if os.WIFSIGNALED(status):
+    import resource
+    resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
+    signal.signal(os.WTERMSIG(status), signal.SIG_DFL)
+    os.kill(os.getpid(), os.WTERMSIG(status))
+os._exit(os.waitstatus_to_exitcode(status))
+"""
+
+
+def _supervised(argv: list, cwd: Path, private: Path | None = None) -> list:
+    """``argv`` under :data:`_SUPERVISOR` (Linux; elsewhere ``argv`` itself). EngineError, as Popen would
+    raise it, when its program cannot be started: the supervisor's child would only say so in its status."""
+    program = argv[0] if os.sep in argv[0] else shutil.which(argv[0])
+    if program is not None and os.sep in argv[0] and not os.path.isabs(program):
+        program = os.path.join(cwd, program)
+    if program is None or not os.path.isfile(program):
+        raise EngineError(f"cannot start {argv[0]!r}: {os.strerror(2)}")
+    if not os.access(program, os.X_OK):
+        raise EngineError(f"cannot start {argv[0]!r}: {os.strerror(13)}")
+    if not os.path.isdir(f"/proc/{os.getpid()}"):
+        return argv
+    import sys
+    return [sys.executable, "-I", "-S", "-c", _SUPERVISOR, str(os.getpid()), str(private or ""), *argv]
+
+
 def _run_command(argv: list, cwd: Path, timeout_s: float):
-    """Run ``argv`` in ``cwd`` in a new process group under a time limit.
+    """Run ``argv`` in ``cwd`` in a new process group under a time limit, under a supervisor that ends it if
+    this process dies (:data:`_SUPERVISOR`).
 
     Returns ``(returncode, timed_out, output_tail)``; raises EngineError when it cannot be started.
     The wait is a pidfd poll or ``waitpid`` (no polling latency); at the end the command's whole process
-    tree is killed. Its output is read as it comes, only the tail kept.
+    tree is killed. Its output is read as it comes, only the tail kept. ``cwd``'s parent, when it is a
+    private run directory (``rbcheck-*`` in the temporary folder), is removed if SIGTERM ends this process
+    meanwhile, or by the supervisor if this process dies.
     """
     _become_subreaper()
     before = _descendants(os.getpid())
+    private = Path(cwd).parent
+    private = (private if private.name.startswith("rbcheck-")
+               and private.parent == Path(tempfile.gettempdir()) else None)
     try:
-        proc = subprocess.Popen(argv, cwd=cwd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                                stderr=subprocess.PIPE, start_new_session=True)
+        proc = subprocess.Popen(_supervised(argv, cwd, private), cwd=cwd, stdin=subprocess.DEVNULL,
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
     except OSError as exc:
         raise EngineError(f"cannot start {argv[0]!r}: {exc.strerror or exc}") from None
     with _LIVE_LOCK:
@@ -444,7 +536,7 @@ def _run_command(argv: list, cwd: Path, timeout_s: float):
     out.start()
     err.start()
     try:
-        with _TermKillsGroup(proc):
+        with _TermKillsGroup(proc, private):
             timed_out = _wait(proc, timeout_s)
     finally:
         _kill_group(proc)  # on time-out, Ctrl-C, or stray children of a finished command

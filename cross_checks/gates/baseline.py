@@ -26,6 +26,7 @@ from cross_checks.sweep.results_dir import (
     remove_stale_siblings,
     replace_dir,
     staging_dir,
+    work_place,
 )
 from cross_checks.sweep.schema import COMPACT_FORM, COMPACT_LISTS
 
@@ -113,9 +114,10 @@ def _check_out_dir(results_dir: Path, out_dir: Path) -> Path:
     if not out.parent.is_dir():
         raise BaselineError(f"OUT_DIR {out_dir}: parent directory {out.parent} does not exist")
     try:
-        check_writable_dir(out.parent, "OUT_DIR", str(out_dir))
+        check_writable_dir(work_place(out), "OUT_DIR", str(out_dir))
     except ResultsDirError as exc:
         raise BaselineError(str(exc)) from None
+    remove_stale_siblings(out)   # what a killed run left (inside OUT_DIR when it is a mount point)
     other = sorted(p.name for p in out.iterdir() if p.name not in BASELINE_FILES) if out.is_dir() else []
     if other:
         shown = ", ".join(other[:3]) + (f" and {len(other) - 3} more" if len(other) > 3 else "")
@@ -133,7 +135,6 @@ def write_baseline(results_dir, out_dir) -> Baseline:
     _, summary = read_results_dir(results_dir)
     compact = compact_summary(summary)
     csv_text, n_rows = compact_results_text(results_dir / "results.csv")
-    remove_stale_siblings(out)
     staging = staging_dir(out)
     try:
         atomic_write_text(staging / "results.csv", csv_text)

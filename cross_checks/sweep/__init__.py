@@ -6,6 +6,7 @@ from cross_checks.sweep.run import (
                                     RESULT_COLUMNS,
                                     SCHEMA_VERSION,
                                     Job,
+                                    ReportFailed,
                                     SweepError,
                                     SweepInterrupted,
                                     cache_dir,
@@ -13,5 +14,5 @@ from cross_checks.sweep.run import (
                                     run_sweep,
 )
 
-__all__ = ["RESULT_COLUMNS", "SweepError", "SweepInterrupted", "Job", "plan_jobs", "run_sweep", "cache_dir",
-           "MAX_SERIES_POINTS", "LOCAL_SAMPLES", "SCHEMA_VERSION"]
+__all__ = ["RESULT_COLUMNS", "SweepError", "SweepInterrupted", "ReportFailed", "Job", "plan_jobs",
+           "run_sweep", "cache_dir", "MAX_SERIES_POINTS", "LOCAL_SAMPLES", "SCHEMA_VERSION"]

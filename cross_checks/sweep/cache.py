@@ -40,16 +40,27 @@ def using_cache_dir(path):
             os.environ["RBCHECK_CACHE_DIR"] = old
 
 
+def _read_secret(path: Path) -> bytes:
+    """The secret's bytes, when ``path`` is a regular file (not a link: /dev/zero would be read for ever),
+    at most 33 of them read; b"" otherwise."""
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0))
+    except OSError:
+        return b""
+    with os.fdopen(fd, "rb") as fh:
+        import stat
+        if not stat.S_ISREG(os.fstat(fh.fileno()).st_mode):
+            return b""
+        return fh.read(33)
+
+
 def _secret(root: Path) -> bytes:
     """The cache's HMAC secret (created on first use, readable by the owner only)."""
     root = Path(root)
     if str(root) in _SECRETS:
         return _SECRETS[str(root)]
     path = root / ".secret"
-    try:
-        data = path.read_bytes()
-    except OSError:
-        data = b""
+    data = _read_secret(path)
     if len(data) != 32:
         root.mkdir(parents=True, exist_ok=True)
         data = secrets.token_bytes(32)
@@ -60,7 +71,11 @@ def _secret(root: Path) -> bytes:
         try:
             os.link(tmp, path)  # first writer wins; the others read its secret
         except FileExistsError:
-            data = path.read_bytes()
+            theirs = _read_secret(path)
+            if len(theirs) == 32:
+                data = theirs
+            else:   # not a secret (a symlink to /dev/zero, a damaged file): replaced, the link itself
+                os.replace(tmp, path)
         finally:
             tmp.unlink(missing_ok=True)
     _SECRETS[str(root)] = data
@@ -109,6 +124,16 @@ def unpack(arrays: dict) -> tuple:
     return fields, series or None
 
 
+def _size_ok(path) -> bool:
+    from cross_checks.core import tolerances as tol
+    from cross_checks.core.files import check_npz_size
+    try:
+        check_npz_size(path, tol.CACHE_ENTRY_MAX_BYTES)
+    except (ValueError, OSError):
+        return False
+    return True
+
+
 def load(root: Path, path: Path, key: str) -> dict | None:
     """The arrays of the entry at ``path`` when it verifies as the entry of ``key``; else None (and
     the bad file is removed, so it is replaced by the recomputed entry)."""
@@ -117,10 +142,14 @@ def load(root: Path, path: Path, key: str) -> dict | None:
         return None
     try:
         with np.load(path, allow_pickle=False) as data:
-            arrays = {k: data[k] for k in data.files}
-        stored_key, stored_mac = str(arrays.pop("__key__")), str(arrays.pop("__mac__"))
-        if stored_key == key and hmac.compare_digest(stored_mac, mac(root, key, arrays)):
-            return arrays
+            # the sizes from the npy headers, then the key: an entry too large to be a job's, or of another
+            # key, is never read
+            if _size_ok(path) and str(data["__key__"]) == key:
+                arrays = {k: data[k] for k in data.files}
+                stored_mac = str(arrays.pop("__mac__"))
+                arrays.pop("__key__")
+                if hmac.compare_digest(stored_mac, mac(root, key, arrays)):
+                    return arrays
     except Exception:  # noqa: BLE001 - a damaged entry in any way is simply not an entry
         pass
     try:

@@ -23,7 +23,7 @@ from cross_checks.sweep.jobs import (
     run_job_group,
     second_reference_job,
 )
-from cross_checks.sweep.lifecycle import worker_init
+from cross_checks.sweep.lifecycle import kill_pool, worker_init
 
 __all__ = ["Runner", "ScenarioReference", "SecondReference",
            "run_references", "run_jobs", "second_reference_jobs"]
@@ -145,14 +145,7 @@ class Runner:
             self.pool = None
             return
         if kill:
-            # Stop the workers this sweep started (they ignore SIGINT): by their own process ids.
-            procs = list(getattr(self.pool, "_processes", {}).values())
-            self.pool.shutdown(wait=False, cancel_futures=True)
-            for p in procs:
-                if p.is_alive():
-                    p.terminate()
-            for p in procs:
-                p.join(timeout=5)
+            kill_pool(self.pool)
         else:
             self.pool.shutdown(wait=True)
         self.pool = None

@@ -12,8 +12,9 @@ import sys
 import threading
 import time
 
-__all__ = ["Terminated", "handle_sigterm", "worker_init", "EXIT_TERMINATED", "TimeLimitExceeded",
-           "time_limit", "each_within_limits"]
+__all__ = ["Terminated", "handle_sigterm", "kill_pool", "interrupted_by", "signals_deferred",
+           "interrupted_exception", "await_group_signal", "exit_at_once", "worker_init", "EXIT_TERMINATED",
+           "TimeLimitExceeded", "time_limit", "each_within_limits"]
 
 #: 128 + SIGTERM, what a shell reports for a process ended by SIGTERM.
 EXIT_TERMINATED = 128 + signal.SIGTERM
@@ -24,34 +25,168 @@ class Terminated(KeyboardInterrupt):
     """SIGTERM arrived; a KeyboardInterrupt so that every Ctrl-C clean-up path runs for it too."""
 
 
+#: The signal that interrupted this process (0: none yet). Only the first one raises: the clean-up it
+#: starts (workers stopped, staging and private run directories removed, the one line said) must run to
+#: its end, and ``timeout`` forwarding Ctrl-C to the process group, or a user pressing Ctrl-C twice,
+#: sends a second one while it runs.
+_interrupted = [0]
+
+
+#: The lists of :func:`signals_deferred` blocks running now: a signal is recorded in each, not raised.
+_deferring: list = []
+
+
+def _on_signal(signum, frame):
+    if _deferring:   # a clean-up, a fork hook: recorded, acted on at the block's end
+        if not _interrupted[0]:
+            _interrupted[0] = signum
+        for pending in _deferring:
+            pending.append(signum)
+        return
+    if _interrupted[0]:
+        return   # cleaning up after the first one: the exit code stays the first one's
+    _interrupted[0] = signum
+    raise Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
+
+
+@contextlib.contextmanager
+def signals_deferred():
+    """A block no Ctrl-C or SIGTERM interrupts (a clean-up that must finish: workers stopped, the staging
+    folder removed); the signals that came meanwhile are in the list it yields, for the caller to act on
+    after it (the first one is also :func:`interrupted_by`)."""
+    pending: list = []
+    _deferring.append(pending)
+    try:
+        yield pending
+    finally:
+        _deferring.remove(pending)
+
+
+#: How long a sweep whose workers died waits for a signal to reach it too: a SIGTERM sent to the process
+#: group (``timeout``, ``kill -TERM -PGID``) kills the workers (SIGTERM at its default there) and is handled
+#: here only when this process is next scheduled; on 2 loaded cores that took longer than the clean-up.
+GROUP_SIGNAL_GRACE_S = 1.0
+
+
+def await_group_signal(pending: list, grace_s: float = GROUP_SIGNAL_GRACE_S) -> None:
+    """Inside :func:`signals_deferred` (``pending`` its list): wait at most ``grace_s`` for a signal."""
+    deadline = time.monotonic() + grace_s
+    while not pending and time.monotonic() < deadline:
+        time.sleep(0.01)
+
+
+def interrupted_exception(signum: int) -> KeyboardInterrupt:
+    """What a signal raises: Terminated for SIGTERM, KeyboardInterrupt for Ctrl-C."""
+    return Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
+
+
 def _on_sigterm(signum, frame):
-    raise Terminated()
+    _on_signal(signal.SIGTERM, frame)
+
+
+def interrupted_by() -> int:
+    """The signal (SIGINT or SIGTERM) that interrupted this process since :func:`handle_sigterm`, or 0."""
+    return _interrupted[0]
 
 
 def _redeliver_swallowed_sigterm(unraisable, _previous=None) -> None:
-    """``sys.unraisablehook``: a SIGTERM whose Terminated was raised inside a ``__del__`` or a weakref
-    callback (where Python prints "Exception ignored" and carries on) is sent again, so that it lands in
-    the main flow instead of being lost; anything else goes to the previous hook. It is sent from a bare
-    thread 10 ms later: ``os.kill`` here, or anything that waits here (``Thread.start``), would run the
-    handler at once, inside the hook."""
-    if isinstance(unraisable.exc_value, Terminated):
-        _thread.start_new_thread(_send_sigterm_later, (0.01,))
+    """``sys.unraisablehook``: a SIGTERM or Ctrl-C whose exception was raised inside a ``__del__`` or a
+    weakref callback (where Python prints "Exception ignored" and carries on) is sent again, so that it
+    lands in the main flow instead of being lost; anything else goes to the previous hook. It is sent from
+    a bare thread 10 ms later: ``os.kill`` here, or anything that waits here (``Thread.start``), would run
+    the handler at once, inside the hook."""
+    if isinstance(unraisable.exc_value, KeyboardInterrupt) and _interrupted[0]:
+        signum, _interrupted[0] = _interrupted[0], 0   # lost: the re-sent one raises again
+        _thread.start_new_thread(_send_signal_later, (0.01, signum))
         return
     (_previous or sys.__unraisablehook__)(unraisable)
 
 
-def _send_sigterm_later(delay_s: float) -> None:
+def _send_signal_later(delay_s: float, signum: int = signal.SIGTERM) -> None:
     time.sleep(delay_s)
-    os.kill(os.getpid(), signal.SIGTERM)
+    os.kill(os.getpid(), signum)
+
+
+_fork_mask = threading.local()
+
+
+def _block_before_fork() -> None:
+    _fork_mask.before = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+
+
+def _unblock_in_parent() -> None:
+    """A signal that came during the fork is delivered when the mask is restored, here, inside the fork's
+    hook, where an exception is swallowed: it is recorded instead and handed to the main thread again
+    (``_thread.interrupt_main``), whose next Python line after ``os.fork`` then raises it."""
+    with signals_deferred() as pending:
+        signal.pthread_sigmask(signal.SIG_SETMASK, getattr(_fork_mask, "before", set()))
+    if pending and _interrupted[0] == pending[0]:
+        _interrupted[0] = 0
+        _thread.interrupt_main(pending[0])
+
+
+def _unblock_in_child() -> None:
+    """A forked child (a pool worker) gets a worker's handlers before it can take a signal: with the parent's,
+    a Ctrl-C or SIGTERM sent to the group while it starts raised inside multiprocessing's start-up and
+    printed a traceback. One blocked meanwhile is delivered now, to these handlers."""
+    with contextlib.suppress(ValueError, OSError):
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_SETMASK, getattr(_fork_mask, "before", set()))
+
+
+_fork_hooks: list = []
+_exit_hook: list = []
+
+
+#: The exit code :func:`exit_at_once` asked for (None: the interpreter's usual exit).
+_exit_code: list = [None]
+
+
+def _exit_now_if_asked() -> None:
+    if _exit_code[0] is None:
+        return
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    os._exit(_exit_code[0])
+
+
+def exit_at_once(code: int) -> None:
+    """After an interrupt whose clean-up is done and said: end the process with ``code`` as soon as Python's
+    exit reaches the atexit handlers (registered first, they run last), skipping the rest of the interpreter's
+    finalisation, where a C extension interrupted in its initialisation, or a library's thread, could
+    still hang or abort the exit. A worker process still alive (a pool the signal interrupted while it
+    forked its workers) is killed now: multiprocessing's own atexit handler would wait for it for ever."""
+    _exit_code[0] = code
+    mp = sys.modules.get("multiprocessing")
+    if mp is None:
+        return
+    for p in mp.active_children():
+        with contextlib.suppress(Exception):
+            p.kill()
+            p.join(timeout=2)
 
 
 def handle_sigterm() -> None:
-    """Make SIGTERM raise Terminated in the main thread (no-op elsewhere), also when it arrives while
-    Python runs a finaliser or weakref callback (see :func:`_redeliver_swallowed_sigterm`)."""
+    """Make SIGTERM raise Terminated and Ctrl-C KeyboardInterrupt in the main thread (no-op elsewhere),
+    the first of them only (:data:`_interrupted`), also when it arrives while Python runs a finaliser or
+    weakref callback (see :func:`_redeliver_swallowed_sigterm`)."""
+    _interrupted[0] = 0
+    if not _exit_hook:
+        import atexit
+        atexit.register(_exit_now_if_asked)
+        _exit_hook.append(True)
     try:
         signal.signal(signal.SIGTERM, _on_sigterm)
+        if signal.getsignal(signal.SIGINT) is signal.default_int_handler:   # not when the caller ignores it
+            signal.signal(signal.SIGINT, _on_signal)
     except ValueError:  # not the main thread
         return
+    if not _fork_hooks and hasattr(os, "register_at_fork"):
+        os.register_at_fork(before=_block_before_fork, after_in_parent=_unblock_in_parent,
+                            after_in_child=_unblock_in_child)
+        _fork_hooks.append(True)
     previous = sys.unraisablehook
     if getattr(previous, "__name__", "") != "_hook":
         def _hook(unraisable):
@@ -131,3 +266,30 @@ def each_within_limits(call, items: list, time_limit_s: float | None, what: str)
         if isinstance(exc, TimeLimitExceeded):
             return [f"{exc} (cross_checks/core/tolerances.py)"]
         return [f"{type(exc).__name__}: {exc}".strip()]
+
+
+def kill_pool(pool) -> None:
+    """Stop a ``concurrent.futures.ProcessPoolExecutor``'s workers (they ignore SIGINT) by their own process
+    ids, and make sure that its manager thread ends, which Python joins at exit. A worker killed while it
+    wrote a large pickled result leaves part of the message in the result pipe; the manager thread then
+    waits in ``os.read`` for the rest, for ever, because this process holds the pipe's write end too:
+    closing that end once no worker is left turns the wait into end-of-file (a broken pool, which ends the
+    thread) instead of a hang."""
+    procs = list((getattr(pool, "_processes", None) or {}).values())
+    # read before shutdown(), which drops them
+    queue, manager = getattr(pool, "_result_queue", None), getattr(pool, "_executor_manager_thread", None)
+    pool.shutdown(wait=False, cancel_futures=True)
+    for p in procs:
+        if p.is_alive():
+            p.terminate()
+    for p in procs:
+        p.join(timeout=2)
+        if p.is_alive():   # stuck (e.g. in uninterruptible I/O): SIGKILL cannot be ignored
+            p.kill()
+            p.join(timeout=2)
+    if queue is not None and not any(p.is_alive() for p in procs):
+        with contextlib.suppress(OSError):
+            queue._writer.close()
+    if manager is not None and manager is not threading.current_thread():
+        manager.join(timeout=5)
+

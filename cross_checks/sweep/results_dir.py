@@ -6,6 +6,7 @@ pid and process start time) cleaned up or put back by the next one. The rules: d
 """
 from __future__ import annotations
 
+import errno
 import hashlib
 import json
 import os
@@ -22,7 +23,7 @@ from cross_checks.core.files import umask
 __all__ = ["fix_permissions", "MARKER", "MARKER_FORMAT", "ResultsDirError", "read_marker", "write_marker",
            "listed_files", "check_output_dir", "check_writable_dir", "foreign_entries", "staging_dir",
            "replace_dir", "remove_stale_siblings", "owned_name", "is_owned_stale", "is_temp_leftover",
-           "safe_file_stem", "inside"]
+           "safe_file_stem", "inside", "is_mount_point", "work_place"]
 
 MARKER = ".rbcheck-results.json"
 MARKER_FORMAT = "rbcheck results directory"
@@ -184,7 +185,7 @@ def check_output_dir(out_text: str, option: str = "--out") -> Path:
     if not out.parent.is_dir():
         what = "is not a directory" if out.parent.exists() else "does not exist"
         raise ResultsDirError(f"{option} {out_text}: parent directory {out.parent} {what}")
-    check_writable_dir(out.parent, option, out_text)
+    check_writable_dir(work_place(out), option, out_text)
     if out.is_dir() and any(out.iterdir()):
         marker = read_marker(out)
         if marker is None:
@@ -211,9 +212,26 @@ def _sibling_prefix(out: Path) -> str:
     return f".{out.name}."
 
 
+def is_mount_point(out: Path) -> bool:
+    """``out`` is a mount point (a Docker volume, a tmpfs): it cannot be renamed (EBUSY), and a sibling is on
+    another file system."""
+    try:
+        return out.is_dir() and os.path.ismount(out)
+    except OSError:
+        return False
+
+
+def work_place(out: Path) -> Path:
+    """Where the staging folder of ``out`` goes: beside it, or inside it when it is a mount point (then it is
+    filled in place, entry by entry: :func:`replace_dir`)."""
+    return out if is_mount_point(out) else out.parent
+
+
 def staging_dir(out: Path) -> Path:
-    """A new, empty staging sibling of ``out`` whose name says which process owns it."""
-    p = out.parent / owned_name(_sibling_prefix(out), "staging")
+    """A new, empty staging folder for ``out`` whose name says which process owns it: a sibling, or a hidden
+    folder inside ``out`` when ``out`` is a mount point."""
+    p = (out / owned_name(".", "staging") if is_mount_point(out)
+         else out.parent / owned_name(_sibling_prefix(out), "staging"))
     p.mkdir()
     return p
 
@@ -232,7 +250,8 @@ def _dispose_old(old: Path, out: Path, owned=None) -> None:
         dst.parent.mkdir(parents=True, exist_ok=True)
         os.replace(src, dst)
     if clash:
-        keep = out.parent / f"{out.name}.previous-{secrets.token_hex(3)}"
+        keep = (out / f"previous-{secrets.token_hex(3)}" if old.parent == out   # inside a mount point
+                else out.parent / f"{out.name}.previous-{secrets.token_hex(3)}")
         os.replace(old, keep)
         print(f"rbcheck: kept the previous {out.name} as {keep} ({', '.join(clash[:3])} "
               f"appeared in it during the run and clash with new files)", file=sys.stderr)
@@ -245,17 +264,78 @@ def replace_dir(staging: Path, out: Path, owned=None) -> None:
     complete directory or the new one (between the two renames, briefly, absent — and the next run
     puts the old one back if this process dies right there). ``owned``: the files of ``out`` that may
     be removed (default: those its marker lists); any other is moved into the new ``out``."""
+    if staging.parent == out:   # a mount point: filled in place
+        _replace_contents(staging, out, owned)
+        return
     if not out.exists():
         os.replace(staging, out)
         return
     old = out.parent / owned_name(_sibling_prefix(out), "old")
-    os.replace(out, old)
+    try:
+        os.replace(out, old)
+    except OSError as exc:
+        if exc.errno not in (errno.EBUSY, errno.EXDEV, errno.EPERM, errno.EACCES):
+            raise
+        # ``out`` cannot be renamed (a mount point seen only now, a bind mount inside it): fill it in place
+        _replace_contents(staging, out, owned)
+        return
     try:
         os.replace(staging, out)
     except BaseException:
         os.replace(old, out)
         raise
     _dispose_old(old, out, owned)
+
+
+def _own_folder(name: str) -> bool:
+    """A hidden working folder of rbcheck's inside a results directory (staging, old, a report's)."""
+    return name.startswith(".") and bool(_OWNED.match(name[1:]))
+
+
+def _move(src: Path, dst: Path) -> None:
+    try:
+        os.replace(src, dst)
+    except OSError as exc:
+        if exc.errno != errno.EXDEV:
+            raise
+        shutil.move(str(src), str(dst))   # from a sibling staging folder on another file system: copied
+
+
+def _replace_contents(staging: Path, out: Path, owned=None) -> None:
+    """Replace what ``out`` holds (not ``out`` itself, which cannot be renamed: a mount point) by what
+    ``staging`` holds, entry by entry: ``out``'s entries go into a hidden ``.rbcheck-old-...`` folder inside
+    it, the new ones in, the marker last (what says the new results are complete), then the old folder is
+    disposed of as after a swap (:func:`_dispose_old`). Not atomic: a run killed in between is put right
+    by the next one (:func:`remove_stale_siblings`)."""
+    old = out / owned_name(".", "old")
+    old.mkdir()
+    for entry in sorted(out.iterdir()):
+        if entry != old and entry != staging and not _own_folder(entry.name):
+            os.replace(entry, old / entry.name)
+    entries = sorted(staging.iterdir(), key=lambda e: e.name == MARKER)   # the marker last
+    for entry in entries:
+        _move(entry, out / entry.name)
+    shutil.rmtree(staging, ignore_errors=True)
+    _dispose_old(old, out, owned)
+
+
+def _put_back_inside(old: Path, out: Path) -> str:
+    """A killed in-place replacement (:func:`_replace_contents`): with the new marker in place, the new
+    results are complete and ``old`` is disposed of; without it, the entries moved in are removed and the
+    previous ones put back."""
+    if (out / MARKER).exists():   # the old marker went into ``old`` first, the new one comes in last
+        _dispose_old(old, out)
+        return f"removed {old.name}"
+    for entry in sorted(out.iterdir()):
+        if entry != old and not _own_folder(entry.name) and not (old / entry.name).exists():
+            shutil.rmtree(entry) if entry.is_dir() and not entry.is_symlink() else entry.unlink()
+    for entry in sorted(old.iterdir()):
+        dst = out / entry.name
+        if dst.is_dir() and not dst.is_symlink():
+            shutil.rmtree(dst)
+        os.replace(entry, dst)
+    old.rmdir()
+    return f"restored the previous results from {old.name}"
 
 
 def remove_stale_siblings(out: Path) -> list:
@@ -267,6 +347,14 @@ def remove_stale_siblings(out: Path) -> list:
         entries = sorted(out.parent.iterdir())
     except OSError:
         return done
+    if is_mount_point(out):   # working folders inside it (:func:`_replace_contents`)
+        for p in sorted(out.iterdir()):
+            if p.is_dir() and not p.is_symlink() and is_owned_stale(p.name, ".", "staging"):
+                shutil.rmtree(p, ignore_errors=True)
+                done.append(f"removed {p.name}")
+        for p in sorted(out.iterdir()):
+            if p.is_dir() and not p.is_symlink() and is_owned_stale(p.name, ".", "old"):
+                done.append(_put_back_inside(p, out))
     for p in entries:
         if not p.is_dir() or p.is_symlink() or not is_owned_stale(p.name, prefix):
             continue

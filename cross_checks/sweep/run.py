@@ -19,8 +19,10 @@ from __future__ import annotations
 
 import dataclasses
 import shutil
+import signal
 import sys
 import time
+from concurrent.futures.process import BrokenProcessPool
 from datetime import UTC, datetime
 
 from cross_checks.core import tolerances as tol
@@ -38,7 +40,13 @@ from cross_checks.sweep.jobs import (
     Job,
     clear_reference_memo,
 )
-from cross_checks.sweep.lifecycle import Terminated
+from cross_checks.sweep.lifecycle import (
+    Terminated,
+    await_group_signal,
+    interrupted_by,
+    interrupted_exception,
+    signals_deferred,
+)
 from cross_checks.sweep.long_runs import (
     LONG_RUN_COLUMNS,
     judged_rows,
@@ -57,8 +65,8 @@ from cross_checks.sweep.results_dir import (
     write_marker,
 )
 
-__all__ = ["RESULT_COLUMNS", "SweepError", "SweepInterrupted", "Job", "plan_jobs", "run_sweep", "cache_dir",
-           "MAX_SERIES_POINTS", "LOCAL_SAMPLES", "SCHEMA_VERSION", "warm_reference"]
+__all__ = ["RESULT_COLUMNS", "SweepError", "SweepInterrupted", "ReportFailed", "Job", "plan_jobs",
+           "run_sweep", "cache_dir", "MAX_SERIES_POINTS", "LOCAL_SAMPLES", "SCHEMA_VERSION", "warm_reference"]
 
 
 class SweepError(Exception):
@@ -71,6 +79,16 @@ class SweepInterrupted(KeyboardInterrupt):
     def __init__(self, terminated: bool = False, replaced: bool = False):
         super().__init__()
         self.terminated, self.replaced = terminated, replaced
+
+
+class ReportFailed(Exception):
+    """The results were written, but the report drawn on them raised (a bug of the report): ``summary`` is the
+    sweep's, ``error`` the report's exception."""
+
+    def __init__(self, summary: dict, out, error: BaseException):
+        super().__init__(f"the report could not be drawn (internal error: {type(error).__name__}: {error}); "
+                         f"the results are written in {out}: 'rbcheck report {out}' draws it again")
+        self.summary, self.error = summary, error
 
 
 def _checked_output(out_dir, scenarios):
@@ -155,21 +173,37 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
                                  compile_s=compile_s, invariance=invariance, show=show)
         runner.close()
         runner = None
+        report_error = None
         if finish is not None:  # e.g. the report, drawn from the saved files only
-            finish(staging)
+            try:
+                finish(staging)
+            except Exception as exc:  # noqa: BLE001 - a report-side bug never throws the results away
+                if interrupted_by():   # a signal's exception Python turned into another (in an import)
+                    raise interrupted_exception(interrupted_by()) from None
+                report_error = exc
         write_marker(staging)
         fix_permissions(staging)
         replace_dir(staging, out)
         staging = None
+        if report_error is not None:
+            raise ReportFailed(summary, out, report_error) from report_error
         return summary
-    except KeyboardInterrupt as exc:  # after the swap (staging is None) the new results are complete
-        raise SweepInterrupted(isinstance(exc, Terminated),
-                               replaced=staging is None or not staging.exists()) from None
-    finally:
-        if runner is not None:
-            runner.close(kill=True)
-        if staging is not None:
-            shutil.rmtree(staging, ignore_errors=True)
+    except BaseException as exc:
+        # the clean-up runs to its end whatever signal comes meanwhile (timeout forwarding Ctrl-C, a worker
+        # killed by the same SIGTERM breaking the pool before the signal reached this line)
+        with signals_deferred() as pending:
+            if runner is not None:
+                runner.close(kill=True)
+            replaced = staging is None or not staging.exists()   # after the swap: the new results complete
+            if staging is not None:
+                shutil.rmtree(staging, ignore_errors=True)
+            if isinstance(exc, BrokenProcessPool) and not pending:
+                await_group_signal(pending)   # workers killed by a SIGTERM sent to the whole group
+        if isinstance(exc, KeyboardInterrupt) or pending:
+            terminated = isinstance(exc, Terminated) or (not isinstance(exc, KeyboardInterrupt)
+                                                         and pending[0] == signal.SIGTERM)
+            raise SweepInterrupted(terminated, replaced=replaced) from None
+        raise
 
 
 def _load_before_forking(variants, show: bool = False) -> float:

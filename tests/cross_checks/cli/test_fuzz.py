@@ -63,3 +63,28 @@ def test_the_confirmation_uses_exactly_the_sweeps_exit_rule():
     ]
     for s in summaries:
         assert sweep_gate_failures(s) == _gate_failures(s)
+
+
+def test_a_campaign_into_a_directory_that_cannot_be_renamed_is_written(tmp_path, cache, monkeypatch):
+    """``--out`` a mount point (a Docker volume): the campaign ran, then the final rename failed with EBUSY
+    and everything was discarded (issue 45). Simulated: renaming DIR itself raises EBUSY."""
+    import errno
+    import os
+
+    import cross_checks.sweep.results_dir as rd
+    monkeypatch.setattr(campaign, "BATCH", 4)
+    out = tmp_path / "fz"
+    args = ["fuzz", "--engines", "reference:midpoint", "--budget", "0.5", "--jobs", "1", "--out", str(out)]
+    assert main(args) == 0
+    real = os.replace
+
+    def replace(src, dst, *a, **k):
+        if os.path.abspath(src) == str(out):
+            raise OSError(errno.EBUSY, os.strerror(errno.EBUSY), str(src))
+        return real(src, dst, *a, **k)
+    monkeypatch.setattr(rd.os, "replace", replace)
+    (out / "index.html").write_text("previous")
+    assert main(args) == 0
+    assert (out / "index.html").read_text() != "previous" and (out / "fuzz.json").is_file()
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+    assert not [p for p in out.iterdir() if p.name.startswith(".") and p.name != ".rbcheck-results.json"]

@@ -508,3 +508,71 @@ def test_a_variant_declares_the_precision_its_steps_compute_in(tmp_path):
     path.write_text(text.replace('"float32"', '"float16"'))
     with pytest.raises(EngineFileError, match=r"variants\.ok\.precision: must be one of float64, float32"):
         load_engine_file(path)
+
+
+# --- what outlives rbcheck (issue 45) -------------------------------------------------------------------------
+
+#: A process that runs an engine file's hanging command as a pool worker would (SIGTERM at its default; the
+#: command writes its pid and its child's into PIDS). argv: engine file, pids file.
+_WORKER = """
+import signal, sys
+signal.signal(signal.SIGTERM, signal.SIG_DFL)
+from cross_checks.engines.external import load_engine_file
+from cross_checks.scenario import parse_scenario
+sc = parse_scenario('''{scenario}''', source="tiny.toml")
+load_engine_file(sys.argv[1]).simulate(sc, "hang", 0.01, 10)
+"""
+
+
+def _worker_running_a_hung_command(tmp_path):
+    import os
+    import subprocess
+    import time
+    pids = tmp_path / "pids"
+    path = _engine_file(tmp_path / "hang", modes=[], timeout=300)
+    path.write_text(path.read_text() + f'[variants.hang]\norder = 1\ncommand = ["{sys.executable}", '
+                                       '"engine.py", "hang", "{scenario_json}", "{out_csv}", '
+                                       f'"{pids}"]\n')
+    (tmp_path / "tmp").mkdir()
+    env = {**os.environ, "TMPDIR": str(tmp_path / "tmp")}
+    worker = subprocess.Popen([sys.executable, "-c", _WORKER.format(scenario=TINY_TEXT), str(path)], env=env,
+                              cwd=Path(engines.__file__).parents[2], start_new_session=True)
+    deadline = time.monotonic() + 120
+    while not (pids.exists() and len(pids.read_text().split()) == 2) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert list((tmp_path / "tmp").glob("rbcheck-fake-*")), "the run's private directory"
+    return worker, [int(p) for p in pids.read_text().split()]
+
+
+def _all_gone(pids):
+    import time
+    deadline = time.monotonic() + 10.0   # the death signals are delivered asynchronously
+    while any(_alive(p) for p in pids) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return [p for p in pids if _alive(p)]
+
+
+def test_an_engine_command_dies_with_a_worker_killed_by_sigkill(tmp_path):
+    """``kill -9`` of the sweep's process group (timeout -s KILL, a CI cancel, the OOM killer) left the command
+    and its child running, re-parented to init, with no time limit, and their private directory."""
+    import os
+    import signal
+    import time
+    worker, pids = _worker_running_a_hung_command(tmp_path)
+    os.killpg(worker.pid, signal.SIGKILL)   # the command runs in a session of its own: not in this group
+    worker.wait()
+    assert _all_gone(pids) == [], "the engine command outlived rbcheck"
+    deadline = time.monotonic() + 10.0   # removed by the supervisor as it goes
+    while list((tmp_path / "tmp").iterdir()) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert list((tmp_path / "tmp").iterdir()) == [], "the run's private directory outlived rbcheck"
+
+
+def test_a_worker_stopped_by_sigterm_removes_the_run_s_private_directory(tmp_path):
+    import os
+    import signal
+    worker, pids = _worker_running_a_hung_command(tmp_path)
+    os.kill(worker.pid, signal.SIGTERM)   # how a sweep stops its workers after Ctrl-C or SIGTERM
+    worker.wait(timeout=60)
+    assert _all_gone(pids) == []
+    assert list((tmp_path / "tmp").iterdir()) == []

@@ -45,3 +45,32 @@ def test_items_are_read_as_work_is_submitted_at_most_a_window_in_flight():
         runner.close()
     assert got == [(0, 0), (1, 1), (2, 4)]
 
+
+
+_KILLED_MID_RESULT = """
+import sys, threading, time
+from cross_checks.sweep.execute import Runner
+
+def big(i):   # a result much larger than a pipe's buffer: a worker is writing one most of the time
+    return b"x" * 20_000_000
+
+runner = Runner(4)
+threading.Thread(target=lambda: runner.map_unordered(big, range(10 ** 6)), daemon=True).start()
+time.sleep(float(sys.argv[1]))
+runner.close(kill=True)
+print("closed", flush=True)
+"""
+
+
+def test_a_pool_killed_while_a_worker_writes_a_large_result_lets_the_process_exit(tmp_path):
+    """Runner.close(kill=True) kills workers mid-write; the pool's manager thread (which Python joins at
+    exit) then waited for the rest of the message for ever: the process never exited. A hang is detected
+    by the subprocess' timeout (60 s, against well under a second when it works)."""
+    import subprocess
+    import sys
+    script = tmp_path / "killed.py"
+    script.write_text(_KILLED_MID_RESULT)
+    for delay in ("0.8", "1.5"):
+        proc = subprocess.run([sys.executable, str(script), delay], capture_output=True, text=True,
+                              timeout=60, cwd=Path(cross_checks.__file__).parents[1])
+        assert proc.returncode == 0 and proc.stdout.strip() == "closed", proc.stderr

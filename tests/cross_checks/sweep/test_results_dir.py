@@ -191,3 +191,101 @@ def test_inside_refuses_an_escape(tmp_path):
     for bad in ("../x", "/tmp/x", "a/../../x"):
         with pytest.raises(ResultsDirError, match="leaves"):
             inside(tmp_path, bad)
+
+
+# --- an --out that cannot be renamed: a mount point (issue 45) ----------------------------------------------
+
+def _rename_of_out_fails(monkeypatch, out, errno_=16):
+    """os.replace raises EBUSY ("Device or resource busy", what Linux says for a mount point) when asked to
+    move ``out`` itself, as it does for a Docker volume or a tmpfs mounted there."""
+    import cross_checks.sweep.results_dir as rd
+    real = os.replace
+
+    def replace(src, dst, *a, **k):
+        if os.path.abspath(src) == str(out):
+            raise OSError(errno_, os.strerror(errno_), str(src))
+        return real(src, dst, *a, **k)
+    monkeypatch.setattr(rd.os, "replace", replace)
+
+
+def test_a_sweep_into_a_directory_that_cannot_be_renamed_fills_it_in_place(tiny, tmp_path, made, monkeypatch):
+    """Before: everything computed, then "Device or resource busy" on the final rename, and all discarded."""
+    out = copy_of(made, tmp_path)
+    (out / "index.html").write_text("previous")
+    _rename_of_out_fails(monkeypatch, out)
+    assert sweep(tiny, out) in (0, 1)
+    marker = read_marker(out)
+    assert set(marker["files"]) == set(tree(out)) - {MARKER} and "results.csv" in marker["files"]
+    assert (out / "index.html").read_text() != "previous"
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]   # nothing left beside it
+    assert not [p for p in out.iterdir() if p.name.startswith(".") and p.name != MARKER]
+
+
+def test_a_mount_point_gets_its_staging_folder_inside_and_is_filled_in_place(tiny, tmp_path, made,
+                                                                             monkeypatch):
+    import cross_checks.sweep.results_dir as rd
+    out = copy_of(made, tmp_path)
+    monkeypatch.setattr(rd.os.path, "ismount", lambda p: os.path.abspath(p) == str(out))
+    _rename_of_out_fails(monkeypatch, out)
+    seen = []
+    real_staging = rd.staging_dir
+    monkeypatch.setattr("cross_checks.sweep.run.staging_dir",
+                        lambda o: seen.append(real_staging(o)) or seen[-1])
+    assert sweep(tiny, out) in (0, 1)
+    assert seen and seen[0].parent == out   # on the mount's own file system, not beside it
+    assert "results.csv" in read_marker(out)["files"]
+    assert not [p for p in out.iterdir() if p.name.startswith(".") and p.name != MARKER]
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+def test_a_baseline_into_a_directory_that_cannot_be_renamed_is_written(tmp_path, made, monkeypatch):
+    from cross_checks.gates.baseline import write_baseline
+    out = tmp_path / "base"
+    write_baseline(made, out)
+    (out / "results.csv").write_text("previous")
+    _rename_of_out_fails(monkeypatch, out.resolve())
+    write_baseline(made, out)
+    assert sorted(p.name for p in out.iterdir()) == ["results.csv", "summary.json"]
+    assert (out / "results.csv").read_text() != "previous"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["base"]
+
+
+def test_an_in_place_replacement_killed_half_way_is_put_right_by_the_next_run(tmp_path, monkeypatch):
+    import cross_checks.sweep.results_dir as rd
+    out = tmp_path / "res"
+    out.mkdir()
+    monkeypatch.setattr(rd.os.path, "ismount", lambda p: os.path.abspath(p) == str(out))
+    # killed after moving the previous results aside and one new file in, before the new marker
+    host = hashlib.sha256(socket.gethostname().encode()).hexdigest()[:8]
+    old = out / f".rbcheck-old-{host}-{_dead_pid()}-1-0badf00d"
+    old.mkdir()
+    (old / "results.csv").write_text("old")
+    (old / MARKER).write_text("old marker")
+    (out / "results.csv").write_text("new")
+    (out / "summary.json").write_text("new")
+    remove_stale_siblings(out)
+    assert {p.name: p.read_text() for p in out.iterdir()} == {"results.csv": "old", MARKER: "old marker"}
+    # killed after the new marker came in, before the previous results were disposed of: the new ones stand
+    old.mkdir()
+    marker = json.dumps({"format": "rbcheck results directory", "schema_version": 1, "written_by": "rbcheck",
+                         "files": ["results.csv"]})
+    (old / "results.csv").write_text("older")
+    (old / MARKER).write_text(marker)
+    (out / "results.csv").write_text("newest")
+    (out / MARKER).write_text(marker)
+    remove_stale_siblings(out)
+    assert sorted(p.name for p in out.iterdir()) == [MARKER, "results.csv"]
+    assert (out / "results.csv").read_text() == "newest"
+
+
+
+def test_a_baseline_killed_inside_a_mount_point_does_not_block_the_next(tmp_path, made, monkeypatch):
+    import cross_checks.sweep.results_dir as rd
+    from cross_checks.gates.baseline import write_baseline
+    out = tmp_path / "base"
+    out.mkdir()
+    monkeypatch.setattr(rd.os.path, "ismount", lambda p: os.path.abspath(p) == str(out))
+    host = hashlib.sha256(socket.gethostname().encode()).hexdigest()[:8]
+    (out / f".rbcheck-staging-{host}-{_dead_pid()}-1-0badf00d").mkdir()   # a killed baseline's
+    write_baseline(made, out)
+    assert sorted(p.name for p in out.iterdir()) == ["results.csv", "summary.json"]
