@@ -33,7 +33,7 @@ import time
 import numpy as np
 
 from cross_checks.engines import base
-from cross_checks.engines.base import EngineError, Traits, Variant, installed_version
+from cross_checks.engines.base import EngineError, Traits, Variant
 from cross_checks.engines.world import World, WorldEngine
 
 __all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate", "simulate_many", "one_step",
@@ -81,7 +81,7 @@ _LOCK = threading.RLock()
 
 def _check_installed() -> None:
     """base.check_installed for this engine and the Warp it runs on."""
-    base.check_installed(_DIST, _HINT, (("warp", "warp-lang"),), installed_version)
+    base.check_installed(_DIST, _HINT, (("warp", "warp-lang"),))
 
 
 def version() -> str:
@@ -96,7 +96,7 @@ def _engine():
     """``(warp, mujoco_warp, mujoco)``, imported on first use (base.start_warp: the kernel cache in
     ``kernel_cache_dir("mujoco_warp")``). ImportError with the engine's words when the import fails."""
     _check_installed()
-    with base.first_import(_DIST, installed_version), base.quiet_fd2():
+    with base.first_import(_DIST), base.quiet_fd2():
         wp = base.start_warp(ENGINE, "LOG_ERROR")
         import mujoco
         import mujoco_warp as mjw
