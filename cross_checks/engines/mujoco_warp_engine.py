@@ -9,20 +9,19 @@ Model: ``mujoco_engine.build_model``'s with ``mjDSBL_AUTORESET`` cleared (``mjw.
 on the CPU device; ``opt.timestep`` is per world, so a scenario's Δt rungs run as the worlds of one batch.
 
 State at the boundary (MuJoCo's, converted in float64 by mujoco_engine's ``to_qpos_qvel``/``to_packed``):
-``qpos = [x_W, q_WB (w x y z)]``, ``qvel = [v_W (COM, world axes), ω_B (body axes)]``; the recorded quaternion
-kept sign-continuous from the scenario's.
+``qpos = [x_W, q_WB (w x y z)]``, ``qvel = [v_W (COM, world axes), ω_B (body axes)]``.
 
 Forces: the harness's world force at the COM minus the weight ``m g`` (mujoco_warp applies gravity) and its
 world torque go into the body's row of ``Data.xfrc_applied``, from the start-of-step state, the decay applied
 to qvel before the step — except RK4 with forces that change within a step, which evaluates them at every
 stage through ``Model.callback.control`` (:func:`stage_callback`, the decay as damping).
 
-:func:`simulate_many` runs one scenario's requests as the worlds of one batch (at most MAX_WORLDS), one step
-captured as a Warp graph and replayed; :func:`one_step` runs its rows as worlds. Warp is imported on first use
-only (never at import or in ``version()``); its kernels are compiled into ``kernel_cache_dir("mujoco_warp")``.
-
-Divergence: the first recorded state that is non-finite or beyond BLOWUP_LIMIT ends the run
-(``diverged at t = …``).
+A world of rbcheck's loop (cross_checks.engines.world, cross_checks.engines.loop): :class:`WarpWorld`, one
+scenario's requests whatever their Δt as the worlds of one batch (at most MAX_WORLDS), one step captured as a
+Warp graph and replayed in its ``rollout``, which takes every force itself; the loop's one-step mode steps its
+rows as worlds, uncaptured. Warp is imported on first use only (never at import or in ``version()``); its
+kernels are compiled into ``kernel_cache_dir("mujoco_warp")``. Divergence, the recorded state at t = 0 and the
+quaternion's sign are the loop's.
 """
 from __future__ import annotations
 
