@@ -18,8 +18,9 @@ The state recorded at t = 0 is the world's reading of the requested one, or, whe
 round trip is not exact (``World.exact_start``), the requested one itself.
 
 When nothing changes between steps (no state-dependent force, no decay) and the world has a compiled
-``rollout``, the steps run there in one call. A world that evaluates forces at every stage (``per_stage``)
-gets neither forces nor decay from the loop.
+``rollout``, the steps run there in one call; a world whose rollout takes every kind of force
+(``World.rollout_forces``: it calls the :class:`Harness` back per step or stage) runs every run there. A
+world that evaluates forces at every stage (``per_stage``) gets neither forces nor decay from the loop.
 
 An engine that raises, returns the wrong shape, or returns a non-finite state without diverging is an
 :class:`~cross_checks.engines.base.EngineError` naming the engine and the run, for that world's runs only.
@@ -40,27 +41,36 @@ __all__ = ["run", "one_step", "Harness"]
 
 
 class Harness:
-    """The harness forces of B bodies (one request each) at step ``dt_s``: per body the plain-float
-    evaluator of base.harness_force_torque_floats, and the pre-step decay factors (B,)."""
+    """The harness forces of B bodies (one request each) at step ``dt_s`` (one for all, or one per body):
+    per body the plain-float evaluator of base.harness_force_torque_floats, and the pre-step decay factors
+    (B,)."""
 
-    def __init__(self, scenarios, dt_s: float, applies_gravity: bool):
+    def __init__(self, scenarios, dt_s, applies_gravity: bool):
         self.ft = [base.float_forces(sc).force_torque for sc in scenarios]
         # many bodies: one compiled call for all of them (the same numbers, member by member)
         self.rows = ForceRows.of([sc.problem for sc in scenarios]) if len(scenarios) > 4 else None
-        g = [tuple(float(x) for x in base.decay_factors(sc, dt_s)) for sc in scenarios]
+        dts = [dt_s] * len(scenarios) if np.ndim(dt_s) == 0 else list(dt_s)
+        g = [tuple(float(x) for x in base.decay_factors(sc, h)) for sc, h in zip(scenarios, dts)]
         self.g_v = np.array([a for a, _ in g])
         self.g_w = np.array([b for _, b in g])
         self.weight = np.array([base.weight_W(sc) if applies_gravity else np.zeros(3) for sc in scenarios])
         self.state_dependent = any(sc.problem.forces.state_dependent for sc in scenarios)
         self.decays = any(sc.problem.forces.has_decay for sc in scenarios)
 
-    def wrench(self, y) -> tuple:
+    def wrench(self, y, bodies=None) -> tuple:
         """``(f_W, tau_W)`` (B, 3) each at packed states ``y`` (B, 13): the harness's force minus the weight
-        the engine applies, and its torque."""
-        w = (self.rows.force_torque(y) if self.rows is not None
-             else np.array([ft(row) for ft, row in zip(self.ft, y)]))
-        f = w[:, 0:3] * self.g_v[:, None] - self.weight
-        tau = w[:, 3:6] * self.g_w[:, None]
+        the engine applies, and its torque. ``bodies``: the bodies (indices) whose states the rows of ``y``
+        are, when not all of them in order (each row then evaluated alone, in plain floats)."""
+        if bodies is not None:
+            bodies = np.asarray(bodies, dtype=int)
+            w = np.array([self.ft[i](row) for i, row in zip(bodies.tolist(), np.asarray(y).tolist())])
+            g_v, g_w, weight = self.g_v[bodies], self.g_w[bodies], self.weight[bodies]
+        else:
+            w = (self.rows.force_torque(y) if self.rows is not None
+                 else np.array([ft(row) for ft, row in zip(self.ft, y)]))
+            g_v, g_w, weight = self.g_v, self.g_w, self.weight
+        f = w[:, 0:3] * g_v[:, None] - weight
+        tau = w[:, 3:6] * g_w[:, None]
         return f, tau
 
 
@@ -85,8 +95,7 @@ def run(engine, variant: str, requests) -> list:
     out: list = [None] * len(requests)
     groups: dict = {}
     for j, r in enumerate(requests):
-        # a world has one step (whatever the engine's key) and one way of taking the forces
-        key = (float(r.dt_s), engine.group_key(r), engine.per_stage(r.scenario, variant))
+        key = engine.world_key(r, variant)
         groups.setdefault(key, []).append(j)
     for idx in groups.values():
         for j, r in zip(idx, _run_group(engine, variant, [requests[j] for j in idx])):
@@ -115,12 +124,12 @@ def _run_group(engine, variant: str, reqs) -> list:
 
 def _run_world(engine, variant: str, reqs) -> list:
     t_all = time.perf_counter()
-    dt = float(reqs[0].dt_s)
+    dts = [float(r.dt_s) for r in reqs]   # one step, unless the engine's worlds take several (world_key)
     B, n_max = len(reqs), max(int(r.n_steps) for r in reqs)
     scenarios = [r.scenario for r in reqs]
-    harness = Harness(scenarios, dt, engine.applies_gravity)
+    harness = Harness(scenarios, dts, engine.applies_gravity)
     y0 = np.array([sc.problem.initial_packed() for sc in scenarios])
-    world = engine.build(reqs, variant, dt)
+    world = engine.build(reqs, variant, dts[0])
     engine_s = 0.0
     try:
         with np.errstate(all="ignore"):
@@ -138,10 +147,12 @@ def _run_world(engine, variant: str, reqs) -> list:
             ends = np.array([int(r.n_steps) for r in reqs])
             stopped: dict = {}   # body -> (step, words)
             rollout = getattr(world, "rollout", None)
-            if not per_stage and constant and not harness.decays and rollout is not None and n_max:
-                world.apply(f, tau)
+            whole = world.rollout_forces or (not per_stage and constant and not harness.decays)
+            if whole and rollout is not None and n_max:
+                if not per_stage:
+                    world.apply(f, tau)
                 t0 = time.perf_counter()
-                rec[1:] = np.asarray(rollout(n_max), dtype=float)
+                rec[1:] = np.asarray(rollout(n_max, harness), dtype=float)
                 engine_s += time.perf_counter() - t0
                 _check(engine, variant, reqs, world, rec, 1, n_max + 1, ends, stopped)
             else:
@@ -158,7 +169,7 @@ def _run_world(engine, variant: str, reqs) -> list:
     host_s = time.perf_counter() - t_all - engine_s
     runs = []
     for i, r in enumerate(reqs):
-        n = int(r.n_steps)
+        n, dt = int(r.n_steps), dts[i]
         if i in stopped:
             n_bad, why = stopped[i]
             run_i = diverged(y[:n_bad, i].copy(), dt, f" ({why})")

@@ -9,16 +9,15 @@ State at the boundary (MuJoCo's, converted by mujoco_engine's ``to_qpos_qvel``/`
 ``qpos = [x_W, q_WB (w x y z)]``, ``qvel = [v_W (COM, world axes), ω_B (body axes)]``.
 
 Forces: the harness's world force at the COM minus the weight ``m g`` (MJX applies gravity) and its world
-torque go into the body's row of ``xfrc_applied``, from the start-of-step state (state-dependent ones on the
-host through ``jax.pure_callback``), the decay applied before the step; RK4 holds them over its stages (MJX
-has no per-stage hook).
+torque go into the body's row of ``xfrc_applied``, from the start-of-step state (state-dependent ones by the
+loop's harness on the host through ``jax.pure_callback``), the decay applied before the step; RK4 holds them
+over its stages (MJX has no per-stage hook).
 
-:func:`simulate_many` vmaps its runs through one compiled loop (CHUNK steps a call) per model structure, in
-batches of at most MAX_BATCH; :func:`one_step` vmaps its rows. JAX is imported on first use only (never at
-import or in ``version()``): a sweep's parent must not start it before forking.
-
-Divergence: the first recorded state that is non-finite or beyond BLOWUP_LIMIT ends the run
-(``diverged at t = …``).
+A world of rbcheck's loop (cross_checks.engines.world, cross_checks.engines.loop): :class:`MjxWorld`, the
+requests of one model structure whatever their Δt, vmapped through one compiled loop (CHUNK steps a call)
+per structure in batches of at most MAX_BATCH, its ``rollout``, which takes every force itself; the loop's
+one-step mode vmaps the rows. JAX is imported on first use only (never at import or in ``version()``): a
+sweep's parent must not start it before forking. Divergence is the loop's.
 """
 from __future__ import annotations
 
@@ -26,19 +25,19 @@ import contextlib
 import functools
 import io
 import threading
+import time
 from pathlib import Path
 
 import numpy as np
 
 from cross_checks.core.files import kernel_cache_dir
 from cross_checks.engines import base
-from cross_checks.engines.base import EngineError, ModuleAdapter, Traits, Variant, installed_version
-from cross_checks.engines.step_floats import harness_fn
-from reference_sim.simulate import Run, recorded_run
+from cross_checks.engines.base import EngineError, Traits, Variant
+from cross_checks.engines.world import World, WorldEngine
 
 __all__ = ["ENGINE", "VARIANTS", "CHUNK", "ONE_STEP_BATCH", "MAX_BATCH", "EngineError", "version", "simulate",
            "simulate_many", "one_step", "device_model", "compile_stats", "reset_compiled", "jax_cache_dir",
-           "MjxAdapter"]
+           "MjxWorld", "MjxAdapter"]
 
 ENGINE = "mjx"
 #: MJX's integrators (``IntegratorType``), orders from MuJoCo's documentation, traits read in
@@ -81,13 +80,14 @@ def _check_installed() -> None:
     """EngineNotInstalled when mujoco-mjx is not installed; ImportError when it is but MJX or JAX cannot be
     found — from package metadata and import specs only (nothing imported, no JAX backend started)."""
     import importlib.util
-    base.check_installed(_DIST, _HINT, version_of=installed_version)
+    base.check_installed(_DIST, _HINT)
     for mod in ("jax", "jaxlib"):
         if importlib.util.find_spec(mod) is None:
-            raise ImportError(f"{_DIST} {installed_version(_DIST)} is installed but cannot be imported: "
+            raise ImportError(f"{_DIST} {base.installed_version(_DIST)} is installed but cannot be imported: "
                               f"{mod} is missing ({_HINT})")
     if importlib.util.find_spec("mujoco.mjx") is None:
-        raise ImportError(f"{_DIST} {installed_version(_DIST)} is installed but mujoco.mjx cannot be found")
+        raise ImportError(f"{_DIST} {base.installed_version(_DIST)} is installed but mujoco.mjx cannot be "
+                          "found")
 
 
 def version() -> str:
@@ -103,7 +103,7 @@ def _engine():
     MJX's words) when the import fails."""
     _check_installed()
     # mujoco.mjx prints "Failed to import warp: ..." on stdout when the optional Warp backend is absent
-    with base.first_import(_DIST, installed_version), contextlib.redirect_stdout(io.StringIO()):
+    with base.first_import(_DIST), contextlib.redirect_stdout(io.StringIO()):
         jax = base.start_jax()
         import jax.numpy as jnp
         from mujoco import mjx
@@ -225,21 +225,21 @@ def _stack(models):
 
 # --- the host side of the force callback -------------------------------------------------------------------
 
-_HOST: dict = {}   # callback id -> base.minus_weight's y -> 6 floats: set for the duration of a run
+#: The world whose compiled loop is running (under _LOCK): its ``forces(y (R, 13), bodies (R,))`` gives the
+#: xfrc_applied rows (R, 6) of those bodies at those packed states.
+_HOST: dict = {}
 
 
 def _host_forces(qpos, qvel, ids):
-    """xfrc_applied rows (..., 6) for the states ``qpos`` (..., 7), ``qvel`` (..., 6) of the runs ``ids``:
-    each run's harness force (minus its weight) and torque, from the package's force model."""
+    """xfrc_applied rows (..., 6) for the states ``qpos`` (..., 7), ``qvel`` (..., 6) of the bodies ``ids`` of
+    the running world: each body's harness force (minus its weight) and torque, from the package's force
+    model (the loop's Harness, called back from the compiled loop)."""
     from cross_checks.engines.mujoco_engine import to_packed
     qpos, qvel, ids = np.asarray(qpos), np.asarray(qvel), np.asarray(ids)
     shape = ids.shape
     with np.errstate(all="ignore"):
         y = to_packed(qpos.reshape(-1, 7), qvel.reshape(-1, 6))
-    out = np.empty((len(y), 6))
-    for k, (row, i) in enumerate(zip(y.tolist(), ids.reshape(-1).tolist())):
-        out[k] = _HOST[i](row)
-    return out.reshape(*shape, 6)
+    return _HOST["world"].forces(y, ids.reshape(-1)).reshape(*shape, 6)
 
 
 # --- the compiled functions ---------------------------------------------------------------------------------
@@ -248,7 +248,7 @@ def _chunk_fn(d0, callback: bool):
     """``run(models, qpos (B, 7), qvel (B, 6), gains (B, 6), xfrc (B, 6), ids (B,), n)`` -> states (B, CHUNK,
     13) ``[qpos, qvel]`` after each of the first ``n`` steps (the rest zeros): the chunk of a free run,
     vmapped over B runs. ``gains``: the pre-step decay factors on qvel; ``xfrc``: the constant applied
-    row, or with ``callback`` the host force model's at every step."""
+    row, or with ``callback`` the host force model's at every step (of the bodies ``ids``)."""
     jax, jnp, mjx = _engine()
     f64 = jax.ShapeDtypeStruct((6,), jnp.float64)
 
@@ -295,134 +295,149 @@ def _data0(key):
     return mjx.put_data(m, mujoco.MjData(m))
 
 
-# --- adapter entry points ---------------------------------------------------------------------------------
+# --- the world ----------------------------------------------------------------------------------------------
 
-def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
-    """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded (one
-    request of :func:`simulate_many`)."""
-    return base.one_request(simulate_many, scenario, variant, dt_s, n_steps)
+class MjxWorld(World):
+    """B free bodies of one model structure (:func:`device_model`, each at its request's Δt). Raw rows:
+    ``[qpos (7), qvel (6)]`` per body, ω in BODY axes. :meth:`rollout` vmaps the bodies through the compiled
+    chunk loop (CHUNK steps a call) in batches of at most MAX_BATCH, padded to a power of two, taking every
+    force itself (constant: the applied rows; state-dependent: the loop's Harness through
+    ``jax.pure_callback``; the decay as gains on qvel before each step); :meth:`step` (the one-step mode)
+    vmaps the bodies of one model through the one-step executable, ONE_STEP_BATCH at a time."""
 
+    rollout_forces = True
 
-def simulate_many(variant: str, requests) -> list:
-    """The runs of ``requests`` (``base.RunRequest``), each a Run (or its EngineError): grouped by model
-    structure and force callback, each group vmapped through the compiled chunk loop in batches of at most
-    MAX_BATCH runs."""
-    base.check_variant(ENGINE, VARIANTS, variant)
-    out: list = [None] * len(requests)
-    try:
-        _engine_or_error()
-    except EngineError as exc:
-        return [exc] * len(requests)
-    groups: dict = {}
-    with _LOCK:
-        for j, r in enumerate(requests):
+    def __init__(self, requests, variant: str):
+        super().__init__()
+        with _LOCK:
+            held: dict = {}   # (scenario, Δt) -> its MJX model, put once per world
+            for r in requests:
+                k = (id(r.scenario), float(r.dt_s))
+                if k not in held:
+                    held[k] = device_model(r.scenario, variant, r.dt_s)
+        self.models = [held[id(r.scenario), float(r.dt_s)][1] for r in requests]
+        self.same = [list(held).index((id(r.scenario), float(r.dt_s))) for r in requests]
+        self.key = held[id(requests[0].scenario), float(requests[0].dt_s)][0]
+        self.callback = bool(requests[0].scenario.problem.forces.state_dependent)
+        B = self.B = len(requests)
+        self.qpos, self.qvel, self.xfrc = np.zeros((B, 7)), np.zeros((B, 6)), np.zeros((B, 6))
+        self.host_s = 0.0
+
+    def set_state(self, y):
+        from cross_checks.engines.mujoco_engine import to_qpos_qvel
+        self.qpos, self.qvel = to_qpos_qvel(y)
+
+    def apply(self, f_W, tau_W):
+        self.xfrc = np.concatenate([f_W, tau_W], axis=1)
+
+    def read(self):
+        return np.concatenate((self.qpos, self.qvel), axis=1)
+
+    def packed(self, raw):
+        from cross_checks.engines.mujoco_engine import to_packed
+        raw = np.asarray(raw, dtype=float)
+        return to_packed(raw[..., 0:7], raw[..., 7:13])
+
+    def forces(self, y, bodies):
+        """xfrc_applied rows (R, 6) of ``bodies`` at packed states ``y`` (R, 13) (the host callback)."""
+        t0 = time.perf_counter()
+        f, tau = self.harness.wrench(y, bodies)
+        self.host_s += time.perf_counter() - t0
+        return np.concatenate([f, tau], axis=1)
+
+    def step(self):
+        """One step of every body, the bodies of one model (scenario and Δt) vmapped together."""
+        jax, _, _ = _engine_or_error()
+        out = np.empty((self.B, 13))
+        with _LOCK:
+            for model in dict.fromkeys(self.same):
+                idx = np.flatnonzero(np.asarray(self.same) == model)
+                host_model = jax.tree.map(np.asarray, self.models[idx[0]])
+                fn = None
+                for s in range(0, len(idx), ONE_STEP_BATCH):
+                    rows = idx[s:s + ONE_STEP_BATCH]
+                    take = np.r_[rows, np.full(ONE_STEP_BATCH - len(rows), rows[0])]
+                    args = (host_model, self.qpos[take], self.qvel[take], self.xfrc[take])
+                    if fn is None:
+                        fn = _executable(("one_step", self.key, ONE_STEP_BATCH),
+                                         _one_step_fn(_data0(self.key)), *args)
+                    with _STATS.timing("step_seconds"):
+                        out[rows] = np.asarray(fn(*args))[:len(rows)]
+                    _STATS["body_steps"] += ONE_STEP_BATCH
+        self.qpos, self.qvel = out[:, 0:7], out[:, 7:13]
+
+    def rollout(self, n_steps, harness):
+        """``n_steps`` steps of every body in the compiled chunk loop, batch by batch; a batch whose bodies
+        all ended non-finite stops there (its later rows NaN)."""
+        _, jnp, _ = _engine_or_error()
+        gains = np.concatenate([np.repeat(harness.g_v[:, None], 3, 1), np.repeat(harness.g_w[:, None], 3, 1)],
+                               axis=1)
+        out = np.full((n_steps, self.B, 13), np.nan)
+        self.harness = harness
+        with _LOCK:
+            if self.callback:
+                _HOST["world"] = self
             try:
-                key, xm = device_model(r.scenario, variant, r.dt_s)
-            except EngineError as exc:
-                out[j] = exc
-                continue
-            callback = bool(r.scenario.problem.forces.state_dependent)
-            groups.setdefault((key, callback), []).append((j, xm))
-        for (key, callback), members in groups.items():
-            for start in range(0, len(members), MAX_BATCH):
-                batch = members[start:start + MAX_BATCH]
-                runs = _run_batch(key, callback, [requests[j] for j, _ in batch], [xm for _, xm in batch])
-                for (j, _), run in zip(batch, runs):
-                    out[j] = run
-    return out
+                for s in range(0, self.B, MAX_BATCH):
+                    self._batch(list(range(s, min(s + MAX_BATCH, self.B))), n_steps, gains, out, jnp)
+            finally:
+                _HOST.clear()
+        return out
 
-
-def _run_batch(key, callback: bool, reqs, models) -> list:
-    """The Runs of ``reqs`` (one structure; ``models`` their MJX models), vmapped chunk by chunk."""
-    from cross_checks.engines.mujoco_engine import to_packed, to_qpos_qvel
-    jax, jnp, _ = _engine()
-    B, M = len(reqs), base.power_of_two(len(reqs))
-    pad = list(range(B)) + [0] * (M - B)
-    y0 = np.array([r.scenario.problem.initial_packed() for r in reqs])
-    qpos0, qvel0 = to_qpos_qvel(y0)
-    gains = np.empty((B, 6))
-    xfrc = np.zeros((B, 6))
-    ids = np.arange(B)
-    for k, r in enumerate(reqs):
-        gv, gw = (float(g) for g in base.decay_factors(r.scenario, r.dt_s))
-        gains[k] = (gv, gv, gv, gw, gw, gw)
-        if callback:
-            _HOST[k] = base.minus_weight(harness_fn(r.scenario, r.dt_s), base.weight_W(r.scenario))
-        else:
-            f, tau = base.harness_force_torque(r.scenario, y0[k], r.dt_s)
-            xfrc[k] = np.r_[f - base.weight_W(r.scenario), tau]
-    stacked = _stack([models[k] for k in pad])
-    n_max = max(r.n_steps for r in reqs)
-    states = np.empty((B, n_max + 1, 13))
-    states[:, 0, 0:7], states[:, 0, 7:13] = qpos0, qvel0
-    qpos, qvel = jnp.asarray(qpos0[pad]), jnp.asarray(qvel0[pad])
-    args = (stacked, qpos, qvel, jnp.asarray(gains[pad]), jnp.asarray(xfrc[pad]), jnp.asarray(ids[pad]),
-            jnp.asarray(0, dtype=jnp.int32))
-    exe = _executable(("chunk", key, callback, M), _chunk_fn(_data0(key), callback), *args)
-    done = np.zeros(B, dtype=bool)   # diverged (the rest of its run is not needed)
-    try:
+    def _batch(self, idx, n_max, gains, out, jnp):
+        B, M = len(idx), base.power_of_two(len(idx))
+        pad = idx + [idx[0]] * (M - B)
+        t0 = time.perf_counter()
+        stacked = _stack([self.models[k] for k in pad])
+        qpos, qvel = jnp.asarray(self.qpos[pad]), jnp.asarray(self.qvel[pad])
+        args = (stacked, qpos, qvel, jnp.asarray(gains[pad]), jnp.asarray(self.xfrc[pad]),
+                jnp.asarray(np.asarray(pad)), jnp.asarray(0, dtype=jnp.int32))
+        exe = _executable(("chunk", self.key, self.callback, M), _chunk_fn(_data0(self.key), self.callback),
+                          *args)
+        self.host_s += time.perf_counter() - t0   # putting the models on the device, compiling: not stepping
+        done = np.zeros(B, dtype=bool)   # diverged (the rest of its run is not needed)
         for s in range(0, n_max, CHUNK):
             n = min(CHUNK, n_max - s)
             with _STATS.timing("step_seconds"):
                 chunk = np.asarray(exe(stacked, qpos, qvel, *args[3:6], jnp.asarray(n, dtype=jnp.int32)))
             _STATS["body_steps"] += n * M
-            states[:, s + 1:s + n + 1] = chunk[:B, :n]
+            out[s:s + n, idx] = chunk[:B, :n].transpose(1, 0, 2)
             with np.errstate(all="ignore"):
                 done |= ~np.all(np.isfinite(chunk[:B, n - 1]), axis=-1)
             if done.all():
                 break
             qpos, qvel = jnp.asarray(chunk[:, n - 1, 0:7]), jnp.asarray(chunk[:, n - 1, 7:13])
-    finally:
-        if callback:
-            _HOST.clear()
-    runs = []
-    with np.errstate(all="ignore"):
-        for k, r in enumerate(reqs):
-            s = states[k, :r.n_steps + 1]
-            y = to_packed(s[:, 0:7], s[:, 7:13])
-            runs.append(recorded_run(y, r.dt_s))
-    return runs
 
 
-@base.on_rows
-def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
-    """One step of ``dt_s`` from each row of ``y_start`` (T, 13), all rows vmapped (ONE_STEP_BATCH per call):
-    the forces from the row (host), the pre-step decay. Rows the engine blows up come back as MJX left
-    them."""
-    from cross_checks.engines.mujoco_engine import to_packed, to_qpos_qvel
-    base.check_variant(ENGINE, VARIANTS, variant)
-    jax, _, _ = _engine_or_error()
-    T = len(y_start)
-    with _LOCK:
-        key, xm = device_model(scenario, variant, dt_s)
-        host_model = jax.tree.map(np.asarray, xm)   # one argument signature, whichever way the model was made
-        wrench = base.minus_weight(harness_fn(scenario, dt_s), base.weight_W(scenario))
-        xfrc = np.empty((T, 6))
-        for i, row in enumerate(y_start.tolist()):
-            xfrc[i] = wrench(row)
-        with np.errstate(all="ignore"):
-            qpos_in, qvel_in = to_qpos_qvel(base.apply_decay_prestep(scenario, y_start, dt_s))
-        out = np.empty((T, 13))
-        fn = None
-        for s in range(0, T, ONE_STEP_BATCH):
-            rows = np.arange(s, min(s + ONE_STEP_BATCH, T))
-            take = np.r_[rows, np.full(ONE_STEP_BATCH - len(rows), rows[0])]
-            args = (host_model, qpos_in[take], qvel_in[take], xfrc[take])
-            if fn is None:
-                fn = _executable(("one_step", key, ONE_STEP_BATCH), _one_step_fn(_data0(key)), *args)
-            with _STATS.timing("step_seconds"):
-                out[rows] = np.asarray(fn(*args))[:len(rows)]
-            _STATS["body_steps"] += ONE_STEP_BATCH
-    with np.errstate(all="ignore"):
-        return to_packed(out[:, 0:7], out[:, 7:13])
-
-
-class MjxAdapter(ModuleAdapter):
+class MjxEngine(WorldEngine):
     """``mjx:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
     (``pip install 'rbcheck[mjx]'``)."""
 
-    harness = ("cross_checks.engines.step_floats", "cross_checks.engines.mujoco_engine")
+    name, variants, distribution, module, extra = ENGINE, VARIANTS, _DIST, "mujoco.mjx", "mjx"
+    harness = (*WorldEngine.harness, "cross_checks.engines.mujoco_engine")
+
+    version = staticmethod(version)   # the module's: from package metadata, JAX not started
+
+    def build(self, requests, variant, dt_s):
+        _engine_or_error()
+        return MjxWorld(requests, variant)
+
+    def world_key(self, request, variant):
+        """One world per model structure and force callback, whatever the steps (each body's model carries
+        its Δt); a request whose model is refused in a world of its scenario, whose build then says why."""
+        try:
+            with _LOCK:
+                key, _ = device_model(request.scenario, variant, request.dt_s)
+        except EngineError:
+            return ("refused", id(request.scenario))
+        return (key, bool(request.scenario.problem.forces.state_dependent))
 
     def engine_files(self) -> list:
         """MJX's Python sources (found without importing them: the parent of a sweep must not start JAX)."""
         return base.package_files("mujoco.mjx", "_src")
+
+
+_ENGINE = MjxEngine()
+#: The module's functions (tests and scripts call them): the engine's, through the host loop.
+simulate, simulate_many, one_step = _ENGINE.simulate, _ENGINE.simulate_many, _ENGINE.one_step
+MjxAdapter = MjxEngine

@@ -394,7 +394,7 @@ class MujocoWorld(World):
             return self.packed(np.asarray(raw, dtype=float)[None])[0]
         return [packed_floats(r[0:7], r[7:13]) for r in np.asarray(raw).tolist()]
 
-    def rollout(self, n_steps):
+    def rollout(self, n_steps, harness=None):
         """``n_steps`` steps in ``mujoco.rollout`` with the applied forces held; if MuJoCo warned, the steps
         again one by one (:meth:`step`), which attribute the warning to its body."""
         from mujoco import rollout

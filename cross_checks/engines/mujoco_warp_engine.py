@@ -9,36 +9,34 @@ Model: ``mujoco_engine.build_model``'s with ``mjDSBL_AUTORESET`` cleared (``mjw.
 on the CPU device; ``opt.timestep`` is per world, so a scenario's Δt rungs run as the worlds of one batch.
 
 State at the boundary (MuJoCo's, converted in float64 by mujoco_engine's ``to_qpos_qvel``/``to_packed``):
-``qpos = [x_W, q_WB (w x y z)]``, ``qvel = [v_W (COM, world axes), ω_B (body axes)]``; the recorded quaternion
-kept sign-continuous from the scenario's.
+``qpos = [x_W, q_WB (w x y z)]``, ``qvel = [v_W (COM, world axes), ω_B (body axes)]``.
 
 Forces: the harness's world force at the COM minus the weight ``m g`` (mujoco_warp applies gravity) and its
 world torque go into the body's row of ``Data.xfrc_applied``, from the start-of-step state, the decay applied
 to qvel before the step — except RK4 with forces that change within a step, which evaluates them at every
 stage through ``Model.callback.control`` (:func:`stage_callback`, the decay as damping).
 
-:func:`simulate_many` runs one scenario's requests as the worlds of one batch (at most MAX_WORLDS), one step
-captured as a Warp graph and replayed; :func:`one_step` runs its rows as worlds. Warp is imported on first use
-only (never at import or in ``version()``); its kernels are compiled into ``kernel_cache_dir("mujoco_warp")``.
-
-Divergence: the first recorded state that is non-finite or beyond BLOWUP_LIMIT ends the run
-(``diverged at t = …``).
+A world of rbcheck's loop (cross_checks.engines.world, cross_checks.engines.loop): :class:`WarpWorld`, one
+scenario's requests whatever their Δt as the worlds of one batch (at most MAX_WORLDS), one step captured as a
+Warp graph and replayed in its ``rollout``, which takes every force itself; the loop's one-step mode steps its
+rows as worlds, uncaptured. Warp is imported on first use only (never at import or in ``version()``); its
+kernels are compiled into ``kernel_cache_dir("mujoco_warp")``. Divergence, the recorded state at t = 0 and the
+quaternion's sign are the loop's.
 """
 from __future__ import annotations
 
 import functools
 import threading
+import time
 
 import numpy as np
 
 from cross_checks.engines import base
-from cross_checks.engines.base import EngineError, ModuleAdapter, Traits, Variant, installed_version
-from cross_checks.engines.step_floats import harness_fn
-from reference_sim.quaternion import same_side, sign_continuous
-from reference_sim.simulate import Run, recorded_run
+from cross_checks.engines.base import EngineError, Traits, Variant
+from cross_checks.engines.world import World, WorldEngine
 
 __all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate", "simulate_many", "one_step",
-           "host_model", "device_model", "compile_stats", "reset_stats", "MujocoWarpAdapter"]
+           "host_model", "device_model", "compile_stats", "reset_stats", "WarpWorld", "MujocoWarpAdapter"]
 
 ENGINE = "mujoco_warp"
 _DIST = "mujoco-warp"
@@ -82,7 +80,7 @@ _LOCK = threading.RLock()
 
 def _check_installed() -> None:
     """base.check_installed for this engine and the Warp it runs on."""
-    base.check_installed(_DIST, _HINT, (("warp", "warp-lang"),), installed_version)
+    base.check_installed(_DIST, _HINT, (("warp", "warp-lang"),))
 
 
 def version() -> str:
@@ -97,7 +95,7 @@ def _engine():
     """``(warp, mujoco_warp, mujoco)``, imported on first use (base.start_warp: the kernel cache in
     ``kernel_cache_dir("mujoco_warp")``). ImportError with the engine's words when the import fails."""
     _check_installed()
-    with base.first_import(_DIST, installed_version), base.quiet_fd2():
+    with base.first_import(_DIST), base.quiet_fd2():
         wp = base.start_warp(ENGINE, "LOG_ERROR")
         import mujoco
         import mujoco_warp as mjw
@@ -220,27 +218,6 @@ class _Worlds:
                 self.mjw.step(self.m, self.d)
 
 
-# --- adapter entry points ----------------------------------------------------------------------------------
-
-def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
-    """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded (one
-    request of :func:`simulate_many`)."""
-    return base.one_request(simulate_many, scenario, variant, dt_s, n_steps)
-
-
-def simulate_many(variant: str, requests) -> list:
-    """The runs of ``requests`` (``base.RunRequest``), each a Run (or its EngineError): the requests of one
-    scenario run as the worlds of one batch (one world per Δt, in batches of at most MAX_WORLDS)."""
-    base.check_variant(ENGINE, VARIANTS, variant)
-    try:
-        base.engine_or_error(_engine)
-    except EngineError as exc:
-        return [exc] * len(requests)
-    with _LOCK:
-        return base.run_in_groups(requests, lambda r: id(r.scenario), lambda reqs: _run_batch(variant, reqs),
-                             MAX_WORLDS)
-
-
 @functools.lru_cache(maxsize=1)
 def _stage_kernel():
     """The Warp kernel of RK4's per-stage forces (``base.stage_force_torque`` in float32, the decay as
@@ -318,100 +295,134 @@ def stage_callback(scenario):
     return control
 
 
-def _run_batch(variant: str, reqs) -> list:
-    """The Runs of ``reqs`` (one scenario, any Δt and step counts) as the worlds of one batch."""
-    from cross_checks.engines.mujoco_engine import packed_floats, to_packed, to_qpos_qvel
-    sc = reqs[0].scenario
-    forces = sc.problem.forces
-    N = len(reqs)
-    dts = [float(r.dt_s) for r in reqs]
-    y0 = np.asarray(sc.problem.initial_packed(), dtype=float)
-    qpos0, qvel0 = to_qpos_qvel(np.repeat(y0[None], N, axis=0))
-    stage = per_stage(sc, variant)
-    W = _Worlds(sc, variant, dts, qpos0, qvel0, stage_callback(sc) if stage else None)
-    g = np.array([[float(v) for v in base.decay_factors(sc, h)] for h in dts])   # (N, 2)
-    decay = forces.has_decay and not stage
-    per_step = forces.state_dependent and not stage
-    wrench = [base.minus_weight(harness_fn(sc, h), base.weight_W(sc)) for h in dts]
-    if not stage and not per_step:   # constant (decay scaling included), written once
-        for k in range(N):
-            W.xfrc[k, _BODY] = wrench[k](y0.tolist())
-    W.capture()
-    n_max = max(r.n_steps for r in reqs)
-    qpos_out = np.empty((n_max + 1, N, 7), dtype=np.float32)
-    qvel_out = np.empty((n_max + 1, N, 6), dtype=np.float32)
-    qpos_out[0], qvel_out[0] = W.qpos, W.qvel
-    qpos, qvel, xfrc = W.qpos, W.qvel, W.xfrc
-    gv, gw = g[:, 0:1], g[:, 1:2]
-    alive = np.ones(N, dtype=bool)
-    with _STATS.timing("step_seconds"), np.errstate(all="ignore"):
-        for n in range(1, n_max + 1):
-            if per_step:
-                qp, qv = qpos.tolist(), qvel.tolist()
-                xfrc[:, _BODY] = [wrench[k](packed_floats(qp[k], qv[k])) for k in range(N)]
-            if decay:
-                qvel[:, 0:3] *= gv
-                qvel[:, 3:6] *= gw
+class WarpWorld(World):
+    """The bodies of one scenario's requests as the worlds of :class:`_Worlds` batches (MAX_WORLDS at most),
+    world k stepping at its request's Δt. Raw rows: ``[qpos (7), qvel (6)]`` per body (float32 values, ω in
+    BODY axes). :meth:`rollout` captures one step as a Warp graph and replays it, taking every force itself:
+    the loop's Harness at every step from the float32 state (state-dependent forces), the decay on qvel
+    before the step, or RK4's stage callback; :meth:`step` (the one-step mode) steps uncaptured."""
+
+    exact_start = True
+    rollout_forces = True
+
+    def __init__(self, requests, variant: str):
+        super().__init__()
+        sc = requests[0].scenario
+        self.per_stage = per_stage(sc, variant)
+        self.B, self.host_s = len(requests), 0.0
+        self.parts = []   # (slice of the bodies, _Worlds)
+        for s in range(0, self.B, MAX_WORLDS):
+            part = slice(s, min(s + MAX_WORLDS, self.B))
+            dts = [float(r.dt_s) for r in requests[part]]
+            zeros = np.zeros((len(dts), 7)), np.zeros((len(dts), 6))
+            self.parts.append((part, _Worlds(sc, variant, dts, *zeros,
+                                             stage_callback(sc) if self.per_stage else None)))
+
+    def set_state(self, y):
+        from cross_checks.engines.mujoco_engine import to_qpos_qvel
+        qpos, qvel = to_qpos_qvel(y)
+        for part, W in self.parts:
+            W.qpos[:], W.qvel[:] = qpos[part], qvel[part]
+
+    def apply(self, f_W, tau_W):
+        for part, W in self.parts:
+            W.xfrc[:, _BODY, 0:3], W.xfrc[:, _BODY, 3:6] = f_W[part], tau_W[part]
+
+    def decay(self, g_v, g_w):
+        for part, W in self.parts:
+            W.qvel[:, 0:3] *= g_v[part, None]
+            W.qvel[:, 3:6] *= g_w[part, None]
+
+    def step(self):
+        for _, W in self.parts:
             W.step()
-            qpos_out[n], qvel_out[n] = qpos, qvel
-            if n % 256 == 0:   # stop early once every world has blown up
-                alive &= np.isfinite(qvel).all(axis=1) & np.isfinite(qpos).all(axis=1)
-                if not alive.any():
-                    qpos_out[n + 1:], qvel_out[n + 1:] = np.nan, np.nan
-                    break
-    _STATS["steps"] += n
-    _STATS["body_steps"] += n * N
-    runs = []
-    with np.errstate(all="ignore"):
-        for k, r in enumerate(reqs):
-            rows = slice(0, r.n_steps + 1)
-            y = to_packed(qpos_out[rows, k].astype(float), qvel_out[rows, k].astype(float))
-            y[0] = y0
-            y[:, 6:10] = sign_continuous(y[:, 6:10])
-            runs.append(recorded_run(y, r.dt_s))
-    return runs
-
-
-@base.on_rows
-def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
-    """One step of ``dt_s`` from each row of ``y_start`` (T, 13), the rows as the worlds of one batch
-    (MAX_WORLDS at a time): the forces from the row, the pre-step decay (RK4 with forces that change within a
-    step: both per stage). Rows the engine blows up come back as it left them."""
-    from cross_checks.engines.mujoco_engine import to_packed, to_qpos_qvel
-    base.check_variant(ENGINE, VARIANTS, variant)
-    T = len(y_start)
-    out = np.empty((T, 13))
-    stage = per_stage(scenario, variant)
-    wrench = base.minus_weight(harness_fn(scenario, dt_s), base.weight_W(scenario))
-    with _LOCK:
-        for s in range(0, T, MAX_WORLDS):
-            rows = y_start[s:s + MAX_WORLDS]
-            n = len(rows)
-            with np.errstate(all="ignore"):
-                qpos0, qvel0 = to_qpos_qvel(rows if stage else base.apply_decay_prestep(scenario, rows, dt_s))
-            W = _Worlds(scenario, variant, [float(dt_s)] * n, qpos0, qvel0,
-                        stage_callback(scenario) if stage else None)
-            if not stage:
-                for k, row in enumerate(rows.tolist()):
-                    W.xfrc[k, _BODY] = wrench(row)
-            with _STATS.timing("step_seconds"):
-                W.step()
             _STATS["steps"] += 1
-            _STATS["body_steps"] += n
-            with np.errstate(all="ignore"):
-                y = to_packed(W.qpos.astype(float), W.qvel.astype(float))
-            y[:, 6:10] = same_side(y[:, 6:10], rows[:, 6:10])
-            out[s:s + n] = y
-    return out
+            _STATS["body_steps"] += len(W.qpos)
+
+    def read(self):
+        return np.concatenate([np.concatenate((W.qpos, W.qvel), axis=1) for _, W in self.parts]).astype(float)
+
+    def packed(self, raw):
+        from cross_checks.engines.mujoco_engine import to_packed
+        raw = np.asarray(raw, dtype=float)
+        return to_packed(raw[..., 0:7], raw[..., 7:13])
+
+    def rollout(self, n_steps, harness):
+        """``n_steps`` steps of every world, batch by batch, the step captured once and replayed; a batch
+        whose worlds have all blown up stops there (its later rows NaN). The seconds outside the engine's
+        steps (forces, decay, recording, the capture) go to ``host_s``."""
+        out = np.empty((n_steps, self.B, 13))
+        with _LOCK:
+            for part, W in self.parts:
+                out[:, part] = self._run(W, np.arange(self.B)[part], n_steps, harness)
+        return out
+
+    def _run(self, W, bodies, n_max, harness):
+        from cross_checks.engines.mujoco_engine import packed_floats
+        t_all, t_steps = time.perf_counter(), 0.0
+        per_step = harness.state_dependent and not self.per_stage
+        decay = harness.decays and not self.per_stage
+        W.capture()
+        N = len(bodies)
+        qpos_out = np.empty((n_max, N, 7), dtype=np.float32)
+        qvel_out = np.empty((n_max, N, 6), dtype=np.float32)
+        qpos, qvel, xfrc = W.qpos, W.qvel, W.xfrc
+        gv, gw = harness.g_v[bodies, None], harness.g_w[bodies, None]
+        alive = np.ones(N, dtype=bool)
+        perf = time.perf_counter
+        with _STATS.timing("step_seconds"), np.errstate(all="ignore"):
+            for n in range(1, n_max + 1):
+                if per_step:
+                    qp, qv = qpos.tolist(), qvel.tolist()
+                    f, tau = harness.wrench([packed_floats(qp[k], qv[k]) for k in range(N)], bodies)
+                    xfrc[:, _BODY, 0:3], xfrc[:, _BODY, 3:6] = f, tau
+                if decay:
+                    qvel[:, 0:3] *= gv
+                    qvel[:, 3:6] *= gw
+                t0 = perf()
+                W.step()
+                t_steps += perf() - t0
+                qpos_out[n - 1], qvel_out[n - 1] = qpos, qvel
+                if n % 256 == 0:   # stop early once every world has blown up
+                    alive &= np.isfinite(qvel).all(axis=1) & np.isfinite(qpos).all(axis=1)
+                    if not alive.any():
+                        qpos_out[n:], qvel_out[n:] = np.nan, np.nan
+                        break
+        _STATS["steps"] += n
+        _STATS["body_steps"] += n * N
+        self.host_s += time.perf_counter() - t_all - t_steps
+        return np.concatenate((qpos_out, qvel_out), axis=2).astype(float)
 
 
-class MujocoWarpAdapter(ModuleAdapter):
+class MujocoWarpEngine(WorldEngine):
     """``mujoco_warp:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
     (``pip install 'rbcheck[mujoco_warp]'``)."""
 
-    harness = ("cross_checks.engines.step_floats", "cross_checks.engines.mujoco_engine")
+    name, variants, distribution, extra = ENGINE, VARIANTS, _DIST, "mujoco_warp"
+    harness = (*WorldEngine.harness, "cross_checks.engines.mujoco_engine")
+    sign_continuity = True   # the recorded quaternion kept on the previous one's side
+
+    version = staticmethod(version)   # the module's: from package metadata, Warp not started
+
+    def build(self, requests, variant, dt_s):
+        base.engine_or_error(_engine)
+        with _LOCK:
+            return WarpWorld(requests, variant)
+
+    def world_key(self, request, variant):
+        """One world per scenario, whatever the steps (``opt.timestep`` is per world)."""
+        return (id(request.scenario), per_stage(request.scenario, variant))
+
+    def per_stage(self, scenario, variant):
+        return per_stage(scenario, variant)
 
     def engine_files(self) -> list:
         """mujoco_warp's Python sources (found without importing them: the parent of a sweep must not start
         Warp)."""
         return base.package_files("mujoco_warp", "_src")
+
+
+_ENGINE = MujocoWarpEngine()
+#: The module's functions (tests and scripts call them): the engine's, through the host loop.
+simulate, simulate_many, one_step = _ENGINE.simulate, _ENGINE.simulate_many, _ENGINE.one_step
+MujocoWarpAdapter = MujocoWarpEngine

@@ -21,9 +21,13 @@ The world's contract (states packed as in reference_sim.state: ``[x_W (m), v_W (
   quaternion sign follows the scenario's);
 * optional ``decay(g_v, g_w)``: scale every body's velocities by (B,) factors before a step (by default the
   packed state is read, scaled and set again);
-* optional ``rollout(n_steps)``: ``n_steps`` steps with the applied forces held, the raw states (n_steps, B,
-  R) after each, in the engine's compiled loop (used when nothing changes between steps: no state-dependent
-  force, no decay);
+* optional ``rollout(n_steps, harness)``: ``n_steps`` steps with the applied forces held, the raw states
+  (n_steps, B, R) after each, in the engine's compiled loop (used when nothing changes between steps: no
+  state-dependent force, no decay); with ``rollout_forces`` True, a rollout that takes every kind of force
+  itself, calling back the loop's ``harness`` (cross_checks.engines.loop.Harness: ``wrench(y)`` at packed
+  states, the decay factors ``g_v``, ``g_w``) per step or stage as its compiled loop needs them (the loop
+  then runs every run there, after ``apply`` of the start forces unless ``per_stage``; the seconds of those
+  callbacks go to ``host_s``);
 * optional ``warnings``: a list the world appends ``(body, step, words)`` to when the engine reports that a
   body's step failed (the step counted from 1 since the last ``set_state``);
 * optional ``per_stage``: True when the world evaluates the harness forces inside the engine's step, at every
@@ -54,6 +58,7 @@ class World:
 
     per_stage = False
     host_s = 0.0
+    rollout_forces = False
     exact_start = False
     first_cause_only = False
 
@@ -129,6 +134,12 @@ class WorldEngine(base.EngineAdapter):
     def group_key(self, request) -> tuple:
         """Requests with equal keys are run in one world (default: equal step and step count)."""
         return (float(request.dt_s), int(request.n_steps))
+
+    def world_key(self, request, variant: str) -> tuple:
+        """The loop's grouping of ``variant``'s requests into worlds: a world has one step (whatever
+        :meth:`group_key` says) and one way of taking the forces (:meth:`per_stage`). An engine whose world
+        holds bodies of different steps (each body's Δt its request's) overrides it."""
+        return (float(request.dt_s), self.group_key(request), self.per_stage(request.scenario, variant))
 
     def per_stage(self, scenario, variant: str) -> bool:
         """True when ``variant`` evaluates the forces of ``scenario`` at every stage of its step (its world

@@ -28,6 +28,11 @@ SCENARIOS = ("tennis_racket", "projectile", "spring_pendulum", "velocity_decay")
 #: Engines whose every new run shape is compiled (JAX, Warp: seconds to a minute each): their first variant
 #: only, so that the suite stays a few minutes on 2 cores; their other variants share that code path.
 COMPILED = {"jaxsim", "brax", "mjx", "mujoco_warp", "genesis", "newton"}
+#: World engines whose compiled batch (mjx: ``jax.vmap`` over the bodies, padded to a power of two) orders
+#: a step's sums otherwise than a batch of one: their batched runs are their single ones to the round-off
+#: allowed below (_same), not bit for bit (measured: the MJX adapter before its port onto the loop,
+#: bit-identical to it, did the same).
+VECTORISED = {"mjx"}
 #: Where an engine is known to break the contract, with the measurement (docs/engine_conventions.md): the
 #: test runs and must keep failing (strict), so a fix upstream or in the adapter is noticed.
 KNOWN = {("jaxsim", "decay"): "jaxsim's decayed step moves v by 2e-4 m/s in z on velocity_decay (no force "
@@ -137,7 +142,8 @@ def test_many_runs_in_one_call_are_its_single_runs(costly_adapter):
             except EngineError as exc:
                 single = exc
             assert _same(run, single, _eps(adapter, variant)), (variant, r.scenario.name, r.dt_s)
-            if isinstance(adapter, WorldEngine) or adapter.name == "reference":
+            exact = isinstance(adapter, WorldEngine) or adapter.name == "reference"
+            if exact and adapter.name not in VECTORISED:
                 assert _same(run, single, 0.0), "the loop runs each body of a world as if alone"
 
 

@@ -113,3 +113,47 @@ def test_the_loop_is_the_readable_loop_bit_for_bit(name):
     sc = load_scenario(name)
     run = ExpmapEngine().simulate(sc, "euler", sc.dt_s, 50)
     assert np.array_equal(run.y, _readable_loop(sc, sc.dt_s, 50))
+
+
+class _RolloutWorld(ExpmapWorld):
+    """The example's bodies, each at its own step, with a rollout that takes every kind of force itself
+    (``rollout_forces``), as a compiled engine's loop does: the loop's harness called back every step."""
+
+    rollout_forces = True
+
+    def __init__(self, requests):
+        super().__init__(requests, np.array([[float(r.dt_s)] for r in requests]))
+
+    def rollout(self, n_steps, harness):
+        out = []
+        for _ in range(n_steps):
+            if harness.state_dependent:   # forces from the start-of-step state, then the decay
+                self.apply(*harness.wrench(self.y, np.arange(len(self.y))))
+            self.y[:, 3:6] *= harness.g_v[:, None]
+            self.y[:, 10:13] *= harness.g_w[:, None]
+            self.step()
+            out.append(self.read())
+        return np.array(out)
+
+
+def test_a_world_of_several_steps_whose_rollout_takes_every_force_runs_each_body_as_alone():
+    """One world (world_key) for two scenarios at two steps each, state-dependent forces and decay among
+    them: every run is the per-step loop's run of its request alone, bit for bit, on its own time axis."""
+    built = []
+
+    class RolloutEngine(ExpmapEngine):
+        def world_key(self, request, variant):
+            return ("one world",)
+
+        def build(self, requests, variant, dt_s):
+            built.append(len(requests))
+            return _RolloutWorld(requests)
+
+    scs = [load_scenario("spring_pendulum"), load_scenario("velocity_decay")]
+    reqs = [RunRequest(sc, h, n) for sc in scs for h, n in ((sc.dt_s, 30), (sc.dt_s / 2, 45))]
+    runs = RolloutEngine().simulate_many("euler", reqs)
+    assert built == [4]
+    for r, run in zip(reqs, runs):
+        alone = ExpmapEngine().simulate(r.scenario, "euler", r.dt_s, r.n_steps)
+        assert np.array_equal(run.y, alone.y) and np.array_equal(run.t_s, alone.t_s)
+        assert run.engine_s > 0.0 and run.host_s >= 0.0

@@ -14,7 +14,7 @@ from cross_checks.engines import base, mjx_engine
 @pytest.fixture
 def no_mjx(monkeypatch):
     real = base.installed_version
-    monkeypatch.setattr(mjx_engine, "installed_version",
+    monkeypatch.setattr(base, "installed_version",
                         lambda dist: None if dist == "mujoco-mjx" else real(dist))
     engines.reset_registry()
     yield
@@ -29,7 +29,7 @@ def test_version_raises_engine_not_installed_with_the_extra_to_install(no_mjx):
 
 def test_a_broken_install_is_not_an_absent_one(monkeypatch):
     real = importlib.util.find_spec
-    monkeypatch.setattr(mjx_engine, "installed_version",
+    monkeypatch.setattr(base, "installed_version",
                         lambda dist: "3.17.0" if dist == "mujoco-mjx" else None)
     monkeypatch.setattr(importlib.util, "find_spec",
                         lambda name, *a: None if name == "jaxlib" else real(name, *a))

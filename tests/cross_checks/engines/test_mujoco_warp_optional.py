@@ -14,7 +14,7 @@ from cross_checks.engines import base, mujoco_warp_engine
 @pytest.fixture
 def no_mujoco_warp(monkeypatch):
     real = base.installed_version
-    monkeypatch.setattr(mujoco_warp_engine, "installed_version",
+    monkeypatch.setattr(base, "installed_version",
                         lambda dist: None if dist == "mujoco-warp" else real(dist))
     engines.reset_registry()
     yield
@@ -29,7 +29,7 @@ def test_version_raises_engine_not_installed_with_the_extra_to_install(no_mujoco
 
 def test_a_broken_install_is_not_an_absent_one(monkeypatch):
     real = importlib.util.find_spec
-    monkeypatch.setattr(mujoco_warp_engine, "installed_version",
+    monkeypatch.setattr(base, "installed_version",
                         lambda dist: "4.0.0" if dist == "mujoco-warp" else None)
     monkeypatch.setattr(importlib.util, "find_spec",
                         lambda name, *a: None if name == "warp" else real(name, *a))
