@@ -18,8 +18,11 @@ The state recorded at t = 0 is the world's reading of the requested one, or, whe
 round trip is not exact (``World.exact_start``), the requested one itself.
 
 When nothing changes between steps (no state-dependent force, no decay) and the world has a compiled
-``rollout``, the steps run there in one call. A world that evaluates forces at every stage (``per_stage``)
-gets neither forces nor decay from the loop.
+``rollout``, the steps run there in one call; a world whose rollout takes every force itself
+(``World.rollout_takes_all_forces``: JAX engines, calling the :class:`Harness` back from their compiled loop)
+runs every run there, and its one-step mode is ``rollout(1, harness)`` from the rows. An engine whose worlds
+hold several Δt (``WorldEngine.mixed_steps``) gets each run's own Δt in the harness and its run. A world
+that evaluates forces at every stage (``per_stage``) gets neither forces nor decay from the loop.
 
 An engine that raises, returns the wrong shape, or returns a non-finite state without diverging is an
 :class:`~cross_checks.engines.base.EngineError` naming the engine and the run, for that world's runs only.
@@ -40,14 +43,16 @@ __all__ = ["run", "one_step", "Harness"]
 
 
 class Harness:
-    """The harness forces of B bodies (one request each) at step ``dt_s``: per body the plain-float
+    """The harness forces of B bodies (one request each) at step ``dt_s`` (one Δt, or one per body in a
+    world of several steps: ``WorldEngine.mixed_steps``): per body the plain-float
     evaluator of base.harness_force_torque_floats, and the pre-step decay factors (B,)."""
 
     def __init__(self, scenarios, dt_s: float, applies_gravity: bool):
         self.ft = [base.float_forces(sc).force_torque for sc in scenarios]
         # many bodies: one compiled call for all of them (the same numbers, member by member)
         self.rows = ForceRows.of([sc.problem for sc in scenarios]) if len(scenarios) > 4 else None
-        g = [tuple(float(x) for x in base.decay_factors(sc, dt_s)) for sc in scenarios]
+        dts = np.broadcast_to(np.asarray(dt_s, dtype=float), (len(scenarios),)).tolist()
+        g = [tuple(float(x) for x in base.decay_factors(sc, dt)) for sc, dt in zip(scenarios, dts)]
         self.g_v = np.array([a for a, _ in g])
         self.g_w = np.array([b for _, b in g])
         self.weight = np.array([base.weight_W(sc) if applies_gravity else np.zeros(3) for sc in scenarios])
@@ -86,7 +91,8 @@ def run(engine, variant: str, requests) -> list:
     groups: dict = {}
     for j, r in enumerate(requests):
         # a world has one step (whatever the engine's key) and one way of taking the forces
-        key = (float(r.dt_s), engine.group_key(r), engine.per_stage(r.scenario, variant))
+        key = (None if engine.mixed_steps else float(r.dt_s), engine.group_key(r),
+               engine.per_stage(r.scenario, variant))
         groups.setdefault(key, []).append(j)
     for idx in groups.values():
         for j, r in zip(idx, _run_group(engine, variant, [requests[j] for j in idx])):
@@ -118,7 +124,7 @@ def _run_world(engine, variant: str, reqs) -> list:
     dt = float(reqs[0].dt_s)
     B, n_max = len(reqs), max(int(r.n_steps) for r in reqs)
     scenarios = [r.scenario for r in reqs]
-    harness = Harness(scenarios, dt, engine.applies_gravity)
+    harness = Harness(scenarios, [float(r.dt_s) for r in reqs], engine.applies_gravity)
     y0 = np.array([sc.problem.initial_packed() for sc in scenarios])
     world = engine.build(reqs, variant, dt)
     engine_s = 0.0
@@ -138,7 +144,13 @@ def _run_world(engine, variant: str, reqs) -> list:
             ends = np.array([int(r.n_steps) for r in reqs])
             stopped: dict = {}   # body -> (step, words)
             rollout = getattr(world, "rollout", None)
-            if not per_stage and constant and not harness.decays and rollout is not None and n_max:
+            if getattr(world, "rollout_takes_all_forces", False) and n_max:
+                # the world's compiled loop takes every force itself (the harness, called back from it)
+                t0 = time.perf_counter()
+                rec[1:] = np.asarray(rollout(n_max, harness), dtype=float)
+                engine_s += time.perf_counter() - t0
+                _check(engine, variant, reqs, world, rec, 1, n_max + 1, ends, stopped)
+            elif not per_stage and constant and not harness.decays and rollout is not None and n_max:
                 world.apply(f, tau)
                 t0 = time.perf_counter()
                 rec[1:] = np.asarray(rollout(n_max), dtype=float)
@@ -161,9 +173,9 @@ def _run_world(engine, variant: str, reqs) -> list:
         n = int(r.n_steps)
         if i in stopped:
             n_bad, why = stopped[i]
-            run_i = diverged(y[:n_bad, i].copy(), dt, f" ({why})")
+            run_i = diverged(y[:n_bad, i].copy(), float(r.dt_s), f" ({why})")
         else:
-            run_i = Run(dt * np.arange(n + 1), y[:n + 1, i].copy())
+            run_i = Run(float(r.dt_s) * np.arange(n + 1), y[:n + 1, i].copy())
         share = (n / max(1, int(ends.sum())))
         run_i.engine_s, run_i.host_s = engine_s * share, host_s * share
         runs.append(run_i)
@@ -257,17 +269,21 @@ def one_step(engine, scenario, variant: str, dt_s: float, y_start) -> np.ndarray
     try:
         with np.errstate(all="ignore"):
             per_stage = bool(world.per_stage)
-            if per_stage:
+            if getattr(world, "rollout_takes_all_forces", False):   # the decay and the forces: the world's
                 world.set_state(rows)
+                raw1 = np.asarray(world.rollout(1, harness), dtype=float)
             else:
-                y_dec = rows.copy()
-                y_dec[:, 3:6] *= harness.g_v[:, None]
-                y_dec[:, 10:13] *= harness.g_w[:, None]
-                world.set_state(y_dec)
-                world.apply(*harness.wrench(rows))
-            world.step()
-            y1 = _checked(engine, variant, reqs, world.packed(np.asarray(world.read(), dtype=float)[None]),
-                          len(rows), "states")[0]
+                if per_stage:
+                    world.set_state(rows)
+                else:
+                    y_dec = rows.copy()
+                    y_dec[:, 3:6] *= harness.g_v[:, None]
+                    y_dec[:, 10:13] *= harness.g_w[:, None]
+                    world.set_state(y_dec)
+                    world.apply(*harness.wrench(rows))
+                world.step()
+                raw1 = np.asarray(world.read(), dtype=float)[None]
+            y1 = _checked(engine, variant, reqs, world.packed(raw1), len(rows), "states")[0]
             for i, _, _ in world.warnings:   # a step the engine reported failed has no state
                 y1[i] = np.nan
     finally:
