@@ -32,7 +32,7 @@ import warnings
 import numpy as np
 
 from cross_checks.engines import base
-from cross_checks.engines.base import EngineError, Traits, Variant, installed_version
+from cross_checks.engines.base import EngineError, Traits, Variant
 from cross_checks.engines.world import World, WorldEngine
 from reference_sim.quaternion import quat_conj, rotate
 from reference_sim.simulate import bad_rows
@@ -84,10 +84,10 @@ _CALLBACK_WORLDS = base.Registry()   # token -> (world, harness, {Δt: y -> 6 fl
 def version() -> str:
     """brax's version and the jax it runs on, from package metadata (no import: a sweep's parent must not
     start JAX before forking). EngineNotInstalled without brax; ImportError without jax/jaxlib."""
-    ver = installed_version("brax")
+    ver = base.installed_version("brax")
     if ver is None:
         raise base.EngineNotInstalled("brax is not installed (pip install 'rbcheck[brax]')")
-    jax_ver, jaxlib_ver = installed_version("jax"), installed_version("jaxlib")
+    jax_ver, jaxlib_ver = base.installed_version("jax"), base.installed_version("jaxlib")
     if jax_ver is None or jaxlib_ver is None:
         raise ImportError(f"brax {ver} is installed but jax or jaxlib is not (pip install 'rbcheck[brax]')")
     return f"{ver} (jax {jax_ver})"
@@ -98,7 +98,7 @@ def _lib():
     """brax and jax, imported on first use (base.start_jax); mujoco.mjx's "Failed to import warp" on stdout
     and brax's warnings silenced."""
     version()
-    with base.first_import("brax", installed_version), contextlib.redirect_stdout(io.StringIO()), \
+    with base.first_import("brax", base.installed_version), contextlib.redirect_stdout(io.StringIO()), \
             warnings.catch_warnings():
         warnings.simplefilter("ignore")
         jax = base.start_jax()
@@ -206,7 +206,7 @@ def _system_of(scenario, variant: str):
             sys = lib["mjcf"].loads(mjcf_text(scenario, 0.01, actuators=gen))
         lib["mjcf"].validate_model(sys.mj_model)
     except (ValueError, NotImplementedError, RuntimeError) as exc:
-        raise EngineError(f"brax {installed_version('brax')} (MuJoCo's compiler) rejected the model of "
+        raise EngineError(f"brax {base.installed_version('brax')} (MuJoCo's compiler) rejected the model of "
                           f"scenario {scenario.name!r}: {' '.join(str(exc).split())}") from None
     sys = neutralise(sys)
     if gen:

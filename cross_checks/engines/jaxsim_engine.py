@@ -35,7 +35,7 @@ import numpy as np
 from cross_checks.core import tolerances as tol
 from cross_checks.core.files import kernel_cache_dir
 from cross_checks.engines import base
-from cross_checks.engines.base import EngineError, Variant, installed_version
+from cross_checks.engines.base import EngineError, Variant
 from cross_checks.engines.world import World, WorldEngine
 from reference_sim.simulate import bad_rows
 
@@ -82,7 +82,7 @@ def version() -> str:
     EngineNotInstalled when it is absent; ImportError when it is installed but not importable."""
     import importlib.util
 
-    ver = installed_version("jaxsim")
+    ver = base.installed_version("jaxsim")
     if ver is None:
         raise base.EngineNotInstalled(f"jaxsim is not installed ({HINT})")
     try:
