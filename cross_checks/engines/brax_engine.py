@@ -397,11 +397,13 @@ class BraxWorld(World):
 
     def rollout(self, n_steps, harness):
         """The states (n_steps, B, 13) after each step (NaN after a run's last step or its first chunk with
-        a blown-up state); one step of every row, from each row, in one vmapped call when ``n_steps`` is 1."""
+        a blown-up state); one step of one Δt from each row (the one-step mode) in one vmapped call."""
         seconds = sum(_COMPILE_S.values())
         try:
             with _CALLBACK_WORLDS.holding((self, harness, {})) as token:
-                return self._one(token)[None] if n_steps == 1 else self._run(n_steps, token)
+                if n_steps == 1 and len(set(self.dts)) == 1:
+                    return self._one(token)[None]
+                return self._run(n_steps, token)
         finally:   # compiling is not stepping: counted apart, with the host's seconds
             self.host_s += sum(_COMPILE_S.values()) - seconds
 

@@ -344,6 +344,16 @@ def test_simulate_many_is_simulate_and_keeps_the_order():
         np.testing.assert_array_equal(run.t_s, one.t_s)
 
 
+def test_one_step_runs_of_several_steps_in_one_call_each_take_their_own_step():
+    # a world of one-step runs at two Δt is a batch of runs (not the one-step mode, which has one Δt)
+    sc = load_scenario("projectile")
+    reqs = [RunRequest(sc, 0.01, 1), RunRequest(sc, 0.02, 1)]
+    for r, run in zip(reqs, be.simulate_many("generalized", reqs)):
+        one = be.simulate(sc, "generalized", r.dt_s, 1)
+        np.testing.assert_array_equal(run.t_s, [0.0, r.dt_s])
+        np.testing.assert_allclose(run.y, one.y, rtol=0, atol=tol.BRAX_BATCH)
+
+
 def test_simulate_many_returns_a_refusal_in_place():
     reqs = [RunRequest(load_scenario("projectile"), 0.01, 10),
             RunRequest(load_scenario("linear_drag"), 0.01, 10)]
