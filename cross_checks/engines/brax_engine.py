@@ -11,16 +11,14 @@ State at the boundary: ``pipeline.init(sys, q, qd)`` with ``q = [x_W, q_WB (w x 
 
 Forces: brax has no external-wrench input. The generalized pipeline gets them as
 ``act = [f − m g, R_WBᵀ τ_W]`` through six actuators on the free joint's DOFs (:func:`six_dof_actuator`; brax
-applies gravity itself), from the start-of-step state (state-dependent ones on the host through
-``jax.pure_callback``); the positional and spring pipelines take gravity only (:func:`expressible`). The
-decay is applied to ``qd`` before each step.
+applies gravity itself), from the start-of-step state (state-dependent ones from the loop's harness on the
+host through ``jax.pure_callback``); the positional and spring pipelines take gravity only
+(:func:`expressible`). The decay is applied to ``qd`` before each step.
 
-:func:`simulate_many` vmaps one scenario's Δt rungs through compiled ``jax.lax.scan`` chunks of CHUNK steps;
-:func:`one_step` vmaps its rows. JAX is imported on first use only (never at import or in ``version()``): a
-sweep's parent must not start it before forking.
-
-Divergence: the first recorded state that is non-finite or beyond BLOWUP_LIMIT ends the run
-(``diverged at t = …``).
+A :class:`BraxWorld` holds one scenario's runs at any Δt (``WorldEngine.mixed_steps``) and takes every force
+itself (``World.rollout_takes_all_forces``): its rollout vmaps the runs (their Δt ladder) through compiled
+``jax.lax.scan`` chunks of CHUNK steps, and one step of many rows is one vmapped call. JAX is imported on
+first use only (never at import or in ``version()``): a sweep's parent must not start it before forking.
 """
 from __future__ import annotations
 
@@ -34,14 +32,14 @@ import warnings
 import numpy as np
 
 from cross_checks.engines import base
-from cross_checks.engines.base import EngineError, ModuleAdapter, Traits, Variant, installed_version
-from cross_checks.engines.step_floats import harness_fn
+from cross_checks.engines.base import EngineError, Traits, Variant
+from cross_checks.engines.world import World, WorldEngine
 from reference_sim.quaternion import quat_conj, rotate
-from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
+from reference_sim.simulate import bad_rows
 
 __all__ = ["ENGINE", "VARIANTS", "NEUTRAL_SYSTEM", "NEUTRAL_DOF", "CHUNK", "ONE_STEP_MIN_BATCH",
            "EngineError", "version", "mjcf_text", "build_system", "simulate", "simulate_many", "one_step",
-           "compile_seconds", "BraxAdapter", "expressible"]
+           "compile_seconds", "BraxWorld", "BraxEngine", "BraxAdapter", "expressible"]
 
 ENGINE = "brax"
 #: The pipelines' integrators (read in brax 0.14.2's source): all first order.
@@ -80,16 +78,16 @@ ONE_STEP_MIN_BATCH = 64
 _LOCK = threading.RLock()
 _COMPILED: dict = {}         # key -> compiled executable
 _COMPILE_S: dict = {}        # key -> seconds spent compiling it (lower + compile)
-_CALLBACK_SCENARIOS = base.Registry()   # token -> (scenario, {Δt: harness}), for the host force callback
+_CALLBACK_WORLDS = base.Registry()   # token -> (world, harness, {Δt: y -> 6 floats}): the force callback's
 
 
 def version() -> str:
     """brax's version and the jax it runs on, from package metadata (no import: a sweep's parent must not
     start JAX before forking). EngineNotInstalled without brax; ImportError without jax/jaxlib."""
-    ver = installed_version("brax")
+    ver = base.installed_version("brax")
     if ver is None:
         raise base.EngineNotInstalled("brax is not installed (pip install 'rbcheck[brax]')")
-    jax_ver, jaxlib_ver = installed_version("jax"), installed_version("jaxlib")
+    jax_ver, jaxlib_ver = base.installed_version("jax"), base.installed_version("jaxlib")
     if jax_ver is None or jaxlib_ver is None:
         raise ImportError(f"brax {ver} is installed but jax or jaxlib is not (pip install 'rbcheck[brax]')")
     return f"{ver} (jax {jax_ver})"
@@ -100,7 +98,7 @@ def _lib():
     """brax and jax, imported on first use (base.start_jax); mujoco.mjx's "Failed to import warp" on stdout
     and brax's warnings silenced."""
     version()
-    with base.first_import("brax", installed_version), contextlib.redirect_stdout(io.StringIO()), \
+    with base.first_import("brax", base.installed_version), contextlib.redirect_stdout(io.StringIO()), \
             warnings.catch_warnings():
         warnings.simplefilter("ignore")
         jax = base.start_jax()
@@ -208,7 +206,7 @@ def _system_of(scenario, variant: str):
             sys = lib["mjcf"].loads(mjcf_text(scenario, 0.01, actuators=gen))
         lib["mjcf"].validate_model(sys.mj_model)
     except (ValueError, NotImplementedError, RuntimeError) as exc:
-        raise EngineError(f"brax {installed_version('brax')} (MuJoCo's compiler) rejected the model of "
+        raise EngineError(f"brax {base.installed_version('brax')} (MuJoCo's compiler) rejected the model of "
                           f"scenario {scenario.name!r}: {' '.join(str(exc).split())}") from None
     sys = neutralise(sys)
     if gen:
@@ -244,19 +242,33 @@ def _packed(state):
 
 def _host_forces(token, y, dt):
     """The force callback (host): base.harness_force_torque_floats of each row of ``y`` (B, 13) at its step
-    ``dt`` (B,) — through step_floats.harness_fn, the evaluator and decay factors looked up once per run and
-    Δt — for the scenario registered under ``token``."""
+    ``dt`` (B,) — the loop's harness (force evaluator, decay factors) of the world's body at that Δt, looked
+    up once per rollout and Δt — for the world registered under ``token`` (its seconds the world's
+    ``host_s``)."""
+    t0 = time.perf_counter()
     token = np.asarray(token).reshape(-1)
     y = np.asarray(y, dtype=float).reshape(-1, 13)
     dt = np.broadcast_to(np.asarray(dt, dtype=float).reshape(-1), (len(y),)).tolist()
-    scenario, fns = _CALLBACK_SCENARIOS[int(token[0])]
+    world, harness, fns = _CALLBACK_WORLDS[int(token[0])]
     out = np.empty((len(y), 6))
     for i, row in enumerate(y.tolist()):
         h = fns.get(dt[i])
         if h is None:
-            h = fns[dt[i]] = harness_fn(scenario, dt[i])
+            h = fns[dt[i]] = _decayed_forces(harness, world.dts.index(dt[i]))
         out[i] = h(row)
+    world.host_s += time.perf_counter() - t0
     return out
+
+
+def _decayed_forces(harness, j: int):
+    """``y -> 6 floats``: body ``j``'s harness force and torque scaled by its pre-step decay factors
+    (base.harness_force_torque_floats, with the loop's evaluator)."""
+    ft, gv, gw = harness.ft[j], float(harness.g_v[j]), float(harness.g_w[j])
+
+    def forces(y):
+        fx, fy, fz, tx, ty, tz = ft(y)
+        return gv * fx, gv * fy, gv * fz, gw * tx, gw * ty, gw * tz
+    return forces
 
 
 def _step_fn(variant: str, mode: str):
@@ -359,89 +371,94 @@ def _initial(variant: str, batch: int):
     return jax.jit(init)
 
 
-def _run_group(scenario, variant: str, requests) -> list:
-    """The runs of ``requests`` (all of ``scenario``), batched over their Δt: one vmapped scan per chunk."""
-    lib = _usable()
-    jp = lib["jp"]
-    sys = _system_of(scenario, variant)
-    y0 = scenario.problem.initial_packed()
-    modes = [_mode_and_consts(scenario, variant, r.dt_s) for r in requests]
-    mode = modes[0][0]
-    n = len(requests)
-    B = base.power_of_two(n)
-    dts = np.array([r.dt_s for r in requests] + [requests[0].dt_s] * (B - n), dtype=float)
-    consts = np.stack([m[1] for m in modes] + [modes[0][1]] * (B - n))
-    q0, qd0 = to_q_qd(y0)
-    state = _initial(variant, B)(sys, jp.asarray(q0), jp.asarray(qd0))
-    n_max = max(r.n_steps for r in requests)
-    rows = np.empty((B, n_max + 1, 13))
-    rows[:, 0] = y0
-    done = np.zeros(B, dtype=bool)
-    first_bad = np.full(B, -1)
-    with _CALLBACK_SCENARIOS.holding((scenario, {})) as token:
-        args = (sys, state, jp.asarray(dts), jp.asarray(consts), token, jp.asarray(consts[0, 8]))
-        exe = _compiled("run", variant, mode, B, args)
+class BraxWorld(World):
+    """One scenario's runs (any Δt each) in one brax batch; raw rows are packed states. Its rollout takes
+    every force (:func:`_mode_and_consts`; state-dependent ones called back from the compiled step) and the
+    decay; compilation and callbacks are counted in ``host_s``."""
+
+    rollout_takes_all_forces = True
+
+    def __init__(self, requests, variant: str):
+        super().__init__()
+        self.lib = _usable()
+        self.scenario, self.variant = requests[0].scenario, variant
+        self.sys = _system_of(self.scenario, variant)
+        self.dts = [float(r.dt_s) for r in requests]
+        self.modes = [_mode_and_consts(self.scenario, variant, dt) for dt in self.dts]
+        self.ends = [int(r.n_steps) for r in requests]
+        self.host_s = 0.0
+        self.y = np.empty((len(requests), 13))
+
+    def set_state(self, y):
+        self.y = np.array(y, dtype=float)
+
+    def read(self):
+        return self.y
+
+    def rollout(self, n_steps, harness):
+        """The states (n_steps, B, 13) after each step (NaN after a run's last step or its first chunk with
+        a blown-up state); one step of one Δt from each row (the one-step mode) in one vmapped call."""
+        seconds = sum(_COMPILE_S.values())
+        try:
+            with _CALLBACK_WORLDS.holding((self, harness, {})) as token:
+                if n_steps == 1 and len(set(self.dts)) == 1:
+                    return self._one(token)[None]
+                return self._run(n_steps, token)
+        finally:   # compiling is not stepping: counted apart, with the host's seconds
+            self.host_s += sum(_COMPILE_S.values()) - seconds
+
+    def _run(self, n_max: int, token):
+        jp, n = self.lib["jp"], len(self.dts)
+        mode = self.modes[0][0]
+        B = base.power_of_two(n)
+        dts = np.array(self.dts + [self.dts[0]] * (B - n), dtype=float)
+        consts = np.stack([m[1] for m in self.modes] + [self.modes[0][1]] * (B - n))
+        q0, qd0 = to_q_qd(self.y[0])    # every run starts at its scenario's state
+        state = _initial(self.variant, B)(self.sys, jp.asarray(q0), jp.asarray(qd0))
+        out = np.full((n_max, n, 13), np.nan)
+        done = np.zeros(n, dtype=bool)
+        args = (self.sys, state, jp.asarray(dts), jp.asarray(consts), token, jp.asarray(consts[0, 8]))
+        exe = _compiled("run", self.variant, mode, B, args)
         k = 0
-        while k < n_max and not done[:n].all():
-            state, ys = exe(sys, state, *args[2:])
+        while k < n_max and not done.all():
+            state, ys = exe(self.sys, state, *args[2:])
             ys = np.asarray(ys)
             m = min(CHUNK, n_max - k)
-            rows[:, k + 1:k + 1 + m] = ys[:, :m]
-            bad = bad_rows(ys[:, :m])
-            for i in range(n):
-                if first_bad[i] < 0 and bad[i].any():
-                    first_bad[i] = k + 1 + int(np.argmax(bad[i]))
-                if first_bad[i] >= 0 or k + m >= requests[i].n_steps:
-                    done[i] = True
+            out[k:k + m] = ys[:n, :m].transpose(1, 0, 2)
+            bad = bad_rows(ys[:n, :m])
+            done |= bad.any(axis=1) | (k + m >= np.array(self.ends))
             k += m
-    out: list = []
-    for i, r in enumerate(requests):
-        if 0 <= first_bad[i] <= r.n_steps:
-            j = int(first_bad[i])
-            out.append(diverged(rows[i, :j].copy(), r.dt_s, f" ({blowup_words(rows[i, j])})"))
-        else:
-            y = rows[i, :r.n_steps + 1].copy()
-            out.append(Run(r.dt_s * np.arange(len(y)), y))
-    return out
+        return out
 
-
-def simulate_many(variant: str, requests) -> list:
-    """The runs of ``requests`` (RunRequest), in order: grouped by scenario, each group one batch over its
-    Δt."""
-    return base.run_in_groups(list(requests), lambda r: id(r.scenario),
-                              lambda reqs: _run_group(reqs[0].scenario, variant, reqs))
-
-
-def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
-    """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded."""
-    return _run_group(scenario, variant, [base.RunRequest(scenario, float(dt_s), int(n_steps))])[0]
-
-
-@base.on_rows
-def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
-    """One step of ``dt_s`` from each row of ``y_start`` (T, 13), batched (vmap): the forces from the row, the
-    pre-step decay, brax's state built from the row by ``pipeline.init``."""
-    lib = _usable()
-    jp = lib["jp"]
-    sys = _system_of(scenario, variant)
-    mode, consts = _mode_and_consts(scenario, variant, dt_s)
-    T = len(y_start)
-    B = base.power_of_two(max(T, ONE_STEP_MIN_BATCH))
-    pad = np.concatenate([y_start, np.broadcast_to(scenario.problem.initial_packed(), (B - T, 13))])
-    q, qd = to_q_qd(pad)
-    with _CALLBACK_SCENARIOS.holding((scenario, {})) as token:
-        args = (sys, jp.asarray(q), jp.asarray(qd), jp.full(B, float(dt_s)),
+    def _one(self, token):
+        jp, T = self.lib["jp"], len(self.y)
+        mode, consts = self.modes[0]
+        B = base.power_of_two(max(T, ONE_STEP_MIN_BATCH))
+        pad = np.concatenate([self.y, np.broadcast_to(self.scenario.problem.initial_packed(), (B - T, 13))])
+        q, qd = to_q_qd(pad)
+        args = (self.sys, jp.asarray(q), jp.asarray(qd), jp.full(B, self.dts[0]),
                 jp.asarray(np.tile(consts, (B, 1))), token, jp.asarray(consts[8]))
-        exe = _compiled("one_step", variant, mode, B, args)
-        y = np.array(exe(*args))[:T]
-    return y
+        exe = _compiled("one_step", self.variant, mode, B, args)
+        return np.array(exe(*args))[:T]
 
 
-class BraxAdapter(ModuleAdapter):
+class BraxEngine(WorldEngine):
     """``brax:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
     (``pip install 'rbcheck[brax]'``)."""
 
-    harness = ()
+    name = ENGINE
+    variants = VARIANTS
+    distribution = module = extra = "brax"
+    mixed_steps = True     # a scenario's Δt ladder in one batch
+
+    def version(self) -> str:   # from metadata: JAX must not start in a sweep's parent
+        return version()
+
+    def build(self, requests, variant, dt_s):
+        return BraxWorld(requests, variant)
+
+    def group_key(self, request) -> tuple:   # one System per world: one scenario
+        return (id(request.scenario),)
 
     def engine_files(self) -> list:
         """brax's pipeline sources (found without importing brax)."""
@@ -457,3 +474,9 @@ class BraxAdapter(ModuleAdapter):
         """Positional and spring take no force but gravity (:func:`expressible`); the harness's forces at the
         scenario's Δt decide (a constant force is the same at every Δt)."""
         return expressible(scenario, variant, scenario.dt_s)
+
+
+_ENGINE = BraxEngine()
+#: The module's functions (tests and scripts call them): the engine's, through the host loop.
+simulate, simulate_many, one_step = _ENGINE.simulate, _ENGINE.simulate_many, _ENGINE.one_step
+BraxAdapter = BraxEngine

@@ -1,5 +1,6 @@
-"""jaxsim (JAX) as an engine adapter (``jaxsim:VARIANT``); the interface: cross_checks.engines.base. What
-jaxsim does, the defaults neutralised and what was measured: docs/engine_conventions.md, "jaxsim 0.9".
+"""jaxsim (JAX) as an engine (``jaxsim:VARIANT``): a :class:`JaxsimWorld` stepped by the host loop
+(cross_checks.engines.loop) through its compiled rollout. What jaxsim does, the defaults neutralised and what
+was measured: docs/engine_conventions.md, "jaxsim 0.9".
 
 Model: one ``JaxSimModel`` per body built from an SDF string (:func:`model_sdf`: one link, its inertial at the
 link origin = COM, no collision, no joint: a floating base), its spatial inertia checked against the
@@ -10,18 +11,15 @@ State at the boundary, in the Mixed velocity representation: ``base_position`` =
 = q_WB (w, x, y, z), ``base_velocity`` = [v_W (m/s, COM, world axes), ω_W (rad/s, world axes)] — the packed
 state's own quantities. Every step starts from the packed state (``JaxSimModelData.build``).
 
-Forces: ``link_forces`` = [f_W (N) at the COM minus the weight jaxsim applies, τ_W (N m)], the harness's from
-the start-of-step state (state-dependent ones on the host through ``jax.pure_callback``); RK4 holds them over
-its stages. Gravity (0, 0, −g) is jaxsim's scalar g; any other direction goes into the link force
-(:func:`engine_gravity`). The decay is applied to v and ω before each step.
+Forces: ``link_forces`` = [f_W (N) at the COM minus the weight jaxsim applies, τ_W (N m)], the loop's harness
+from the start-of-step state (state-dependent ones on the host through ``jax.pure_callback``); RK4 holds them
+over its stages. Gravity (0, 0, −g) is jaxsim's scalar g; any other direction goes into the link force
+(:func:`engine_gravity`). The decay is applied to v and ω before each step, inside the compiled step.
 
-:func:`simulate` runs compiled ``lax.fori_loop`` chunks of CHUNK steps; :func:`simulate_many` runs its
-requests one after the other through the same compiled function; :func:`one_step` vmaps its rows (padded to a
+The world's rollout (it takes every force: ``World.rollout_takes_all_forces``) runs its bodies one after the
+other through compiled ``lax.fori_loop`` chunks of CHUNK steps; the one-step mode vmaps its rows (padded to a
 multiple of ROW_BLOCK). JAX is imported on first use only (never at import or in ``version()``): a sweep's
 parent must not start it before forking.
-
-Divergence: the first recorded state that is non-finite or beyond BLOWUP_LIMIT ends the run
-(``diverged at t = …``).
 """
 
 from __future__ import annotations
@@ -29,6 +27,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -36,28 +35,13 @@ import numpy as np
 from cross_checks.core import tolerances as tol
 from cross_checks.core.files import kernel_cache_dir
 from cross_checks.engines import base
-from cross_checks.engines.base import EngineError, ModuleAdapter, Variant, installed_version
-from cross_checks.engines.step_floats import harness_fn
-from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
+from cross_checks.engines.base import EngineError, Variant
+from cross_checks.engines.world import World, WorldEngine
+from reference_sim.simulate import bad_rows
 
-__all__ = [
-    "ENGINE",
-    "VARIANTS",
-    "INTEGRATORS",
-    "CHUNK",
-    "ROW_BLOCK",
-    "EngineError",
-    "version",
-    "simulate",
-    "simulate_many",
-    "one_step",
-    "build_model",
-    "model_sdf",
-    "engine_gravity",
-    "timings",
-    "xla_cache_dir",
-    "JaxsimAdapter",
-]
+__all__ = ["ENGINE", "VARIANTS", "INTEGRATORS", "CHUNK", "ROW_BLOCK", "EngineError", "version", "simulate",
+           "simulate_many", "one_step", "build_model", "model_sdf", "engine_gravity", "timings",
+           "xla_cache_dir", "JaxsimWorld", "JaxsimEngine", "JaxsimAdapter"]
 
 ENGINE = "jaxsim"
 HINT = "pip install 'rbcheck[jaxsim]'"
@@ -87,7 +71,7 @@ MODEL_NAME = "rbcheck_body"
 
 _LOCK = threading.RLock()
 _TIMES = base.Stats(compile_seconds=0.0, compiles=0, run_seconds=0.0, steps=0)
-_CONTEXTS = base.Registry()  # callback key -> y -> link force (6 floats) of one run / one_step call
+_CONTEXTS = base.Registry()  # callback key -> (world, y -> link force (6 floats)) of one body's rollout
 
 
 # --- availability without importing JAX (fork safety) --------------------------------------------------
@@ -98,7 +82,7 @@ def version() -> str:
     EngineNotInstalled when it is absent; ImportError when it is installed but not importable."""
     import importlib.util
 
-    ver = installed_version("jaxsim")
+    ver = base.installed_version("jaxsim")
     if ver is None:
         raise base.EngineNotInstalled(f"jaxsim is not installed ({HINT})")
     try:
@@ -220,14 +204,19 @@ def _model(mass_kg: float, inertia: tuple, gravity: float, variant: str):
 
 
 def _host_forces(key, y):
-    """The link forces (..., 6) [f_W − m g_jaxsim, τ_W] of the states ``y`` (..., 13) of the call ``key``:
-    the package's harness (step_floats.harness_fn) in plain floats (the jax.pure_callback target)."""
+    """The link forces (..., 6) [f_W − m g_jaxsim, τ_W] of the states ``y`` (..., 13) of the rollout ``key``:
+    the loop's harness in plain floats (the jax.pure_callback target), its seconds the world's ``host_s``."""
+    t0 = time.perf_counter()
     y = np.asarray(y, dtype=np.float64)
     keys = np.broadcast_to(np.asarray(key), y.shape[:-1]).reshape(-1)
     rows = y.reshape(-1, 13)
     out = np.empty((len(rows), 6))
+    world = None
     for i, (k, row) in enumerate(zip(keys.tolist(), rows.tolist())):
-        out[i] = _CONTEXTS[k](row)
+        world, wrench = _CONTEXTS[k]
+        out[i] = wrench(row)
+    if world is not None:
+        world.host_s += time.perf_counter() - t0
     return out.reshape(y.shape[:-1] + (6,))
 
 
@@ -320,85 +309,109 @@ def _weight(scenario) -> tuple:
     return (0.0, 0.0, -float(scenario.problem.body.mass_kg) * engine_gravity(scenario))
 
 
-def _inputs(scenario, dt_s: float):
-    """(callback?, constant link force (6,), pre-step decay scale (13,), ``y -> link force`` (6 floats)) of a
-    run at ``dt_s``."""
-    forces = scenario.problem.forces
-    wrench = base.minus_weight(harness_fn(scenario, dt_s), _weight(scenario))
-    gv, gw = (float(g) for g in base.decay_factors(scenario, dt_s))
+def _inputs(scenario, harness, i: int):
+    """(callback?, constant link force (6,), pre-step decay scale (13,), ``y -> link force`` (6 floats)) of
+    body ``i`` of ``harness`` (the loop's: its force evaluator and decay factors; jaxsim's own weight off)."""
+    ft, gv, gw = harness.ft[i], float(harness.g_v[i]), float(harness.g_w[i])
+
+    def decayed(y):   # base.harness_force_torque_floats, with the loop's evaluator
+        fx, fy, fz, tx, ty, tz = ft(y)
+        return gv * fx, gv * fy, gv * fz, gw * tx, gw * ty, gw * tz
+    wrench = base.minus_weight(decayed, _weight(scenario))
     scale = np.ones(13)
     scale[3:6] = gv
     scale[10:13] = gw
-    if forces.state_dependent:
+    if scenario.problem.forces.state_dependent:
         return True, np.zeros(6), scale, wrench
     return False, np.array(wrench([float(v) for v in scenario.problem.initial_packed()])), scale, wrench
 
 
-def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
-    """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded."""
-    _refuse_forked_jax()
-    model = build_model(scenario, variant)
-    callback, f6, scale, wrench = _inputs(scenario, dt_s)
-    y0 = np.asarray(scenario.problem.initial_packed(), dtype=float)
-    dt = np.float64(dt_s)
-    rows = [y0[None]]
-    y = y0
-    done = 0
-    with _CONTEXTS.holding(wrench) as key:
-        fn = _compiled("run", callback, model, dt, y0, np.int64(0), f6, scale, key)
-        while done < n_steps:
-            count = min(CHUNK, n_steps - done)
-            with _TIMES.timing("run_seconds"):
-                y, chunk = fn(model, dt, y, np.int64(count), f6, scale, key)
-                chunk = np.asarray(chunk)[:count]
-            _TIMES["steps"] += count
-            bad = bad_rows(chunk)
-            if bad.any():
-                k = int(np.argmax(bad))
-                return diverged(
-                    np.concatenate(rows + [chunk[:k]]), float(dt_s), f" ({blowup_words(chunk[k])})"
-                )
-            rows.append(chunk)
-            done += count
-    return Run(float(dt_s) * np.arange(n_steps + 1), np.concatenate(rows))
+class JaxsimWorld(World):
+    """B bodies, each its own jaxsim model, stepped by the compiled functions above; raw rows are packed
+    states. Its rollout takes every force (``rollout_takes_all_forces``): the harness's, constant or called
+    back from the compiled step, and the decay; compilation and callbacks are counted in ``host_s``."""
 
+    rollout_takes_all_forces = True
 
-def simulate_many(variant: str, requests) -> list:
-    """The runs of ``requests`` (base.RunRequest), one after the other through the same compiled run function
-    (one compilation for a whole Δt ladder): each equal to :func:`simulate`'s."""
-    out: list = []
-    for r in requests:
+    def __init__(self, requests, variant: str, dt_s: float):
+        super().__init__()
+        _refuse_forked_jax()
+        self.scenarios = [r.scenario for r in requests]
+        self.models = [build_model(sc, variant) for sc in self.scenarios]
+        self.ends = [int(r.n_steps) for r in requests]
+        self.dt = np.float64(dt_s)
+        self.host_s = 0.0
+        self.y = np.empty((len(requests), 13))
+
+    def set_state(self, y):
+        self.y = np.array(y, dtype=float)
+
+    def read(self):
+        return self.y
+
+    def rollout(self, n_steps, harness):
+        """The states (n_steps, B, 13) after each step: one step of every row in one vmapped call when the
+        bodies are one scenario's (the one-step mode), else each body's run in compiled chunks (NaN after
+        its last step or its first chunk with a blown-up state)."""
+        compiled = _TIMES["compile_seconds"]
         try:
-            out.append(simulate(r.scenario, variant, r.dt_s, r.n_steps))
-        except EngineError as exc:
-            out.append(exc)
-    return out
+            if n_steps == 1 and all(sc is self.scenarios[0] for sc in self.scenarios):
+                return self._one(harness)[None]
+            out = np.full((n_steps, len(self.y), 13), np.nan)
+            for i in range(len(self.y)):
+                self._run(i, min(n_steps, self.ends[i]), harness, out[:, i])
+            return out
+        finally:   # compiling is not stepping: counted apart, with the host's seconds
+            self.host_s += _TIMES["compile_seconds"] - compiled
+
+    def _run(self, i: int, n_steps: int, harness, out) -> None:
+        model, dt = self.models[i], self.dt
+        callback, f6, scale, wrench = _inputs(self.scenarios[i], harness, i)
+        y = self.y[i]
+        done = 0
+        with _CONTEXTS.holding((self, wrench)) as key:
+            fn = _compiled("run", callback, model, dt, y, np.int64(0), f6, scale, key)
+            while done < n_steps:
+                count = min(CHUNK, n_steps - done)
+                with _TIMES.timing("run_seconds"):
+                    y, chunk = fn(model, dt, y, np.int64(count), f6, scale, key)
+                    chunk = np.asarray(chunk)[:count]
+                _TIMES["steps"] += count
+                out[done:done + count] = chunk
+                done += count
+                if bad_rows(chunk).any():
+                    return
+
+    def _one(self, harness):
+        n = len(self.y)
+        model, dt = self.models[0], self.dt
+        callback, f6, scale, wrench = _inputs(self.scenarios[0], harness, 0)
+        pad = -n % ROW_BLOCK
+        padded = np.concatenate([self.y, np.repeat(self.y[:1], pad, axis=0)]) if pad else self.y
+        with _CONTEXTS.holding((self, wrench)) as key:
+            fn = _compiled("one", callback, model, dt, padded, f6, scale, key)
+            with _TIMES.timing("run_seconds"):
+                out = np.asarray(fn(model, dt, padded, f6, scale, key))[:n]
+            _TIMES["steps"] += n
+        return out
 
 
-@base.on_rows
-def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
-    """One step of ``dt_s`` from each row of ``y_start`` (T, 13), all rows in one vmapped call (padded to a
-    multiple of ROW_BLOCK rows): the forces from each row, the pre-step decay — the free run's step."""
-    n = len(y_start)
-    if n == 0:
-        return np.empty((0, 13))
-    _refuse_forked_jax()
-    model = build_model(scenario, variant)
-    callback, f6, scale, wrench = _inputs(scenario, dt_s)
-    pad = -n % ROW_BLOCK
-    padded = np.concatenate([y_start, np.repeat(y_start[:1], pad, axis=0)]) if pad else y_start
-    dt = np.float64(dt_s)
-    with _CONTEXTS.holding(wrench) as key:
-        fn = _compiled("one", callback, model, dt, padded, f6, scale, key)
-        with _TIMES.timing("run_seconds"):
-            out = np.asarray(fn(model, dt, padded, f6, scale, key))[:n]
-        _TIMES["steps"] += n
-    return out
-
-
-class JaxsimAdapter(ModuleAdapter):
+class JaxsimEngine(WorldEngine):
     """``jaxsim:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
     (``pip install 'rbcheck[jaxsim]'``)."""
+
+    name = ENGINE
+    variants = VARIANTS
+    distribution = module = extra = "jaxsim"
+
+    def version(self) -> str:   # from metadata: JAX must not start in a sweep's parent
+        return version()
+
+    def build(self, requests, variant, dt_s):
+        return JaxsimWorld(requests, variant, dt_s)
+
+    def group_key(self, request) -> tuple:   # the bodies run one after the other: any runs share a world
+        return (float(request.dt_s),)
 
     @property
     def compile_seconds(self) -> float:
@@ -411,3 +424,9 @@ class JaxsimAdapter(ModuleAdapter):
     def engine_files(self) -> list:
         """jaxsim's Python files (found without importing it: a changed jaxsim is a new engine)."""
         return base.package_files("jaxsim", pattern="**/*.py")
+
+
+_ENGINE = JaxsimEngine()
+#: The module's functions (tests and scripts call them): the engine's, through the host loop.
+simulate, simulate_many, one_step = _ENGINE.simulate, _ENGINE.simulate_many, _ENGINE.one_step
+JaxsimAdapter = JaxsimEngine

@@ -18,9 +18,13 @@ The state recorded at t = 0 is the world's reading of the requested one, or, whe
 round trip is not exact (``World.exact_start``), the requested one itself.
 
 When nothing changes between steps (no state-dependent force, no decay) and the world has a compiled
-``rollout``, the steps run there in one call; a world whose rollout takes every kind of force
-(``World.rollout_forces``: it calls the :class:`Harness` back per step or stage) runs every run there. A
-world that evaluates forces at every stage (``per_stage``) gets neither forces nor decay from the loop.
+``rollout``, the steps run there in one call; a world whose rollout takes every kind of force runs every
+run there: with the start-of-step forces applied by the loop and the harness called back per step or stage
+(``World.rollout_forces``: MJX, MuJoCo Warp), or taking every force and the decay itself
+(``World.rollout_takes_all_forces``: jaxsim, Brax; its one-step mode is then ``rollout(1, harness)`` from
+the rows). An engine whose worlds hold several Δt (``WorldEngine.world_key``; ``WorldEngine.mixed_steps``)
+gets each run's own Δt in the harness and its run. A world that evaluates forces at every stage
+(``per_stage``) gets neither forces nor decay from the loop.
 
 An engine that raises, returns the wrong shape, or returns a non-finite state without diverging is an
 :class:`~cross_checks.engines.base.EngineError` naming the engine and the run, for that world's runs only.
@@ -147,8 +151,14 @@ def _run_world(engine, variant: str, reqs) -> list:
             ends = np.array([int(r.n_steps) for r in reqs])
             stopped: dict = {}   # body -> (step, words)
             rollout = getattr(world, "rollout", None)
-            whole = world.rollout_forces or (not per_stage and constant and not harness.decays)
-            if whole and rollout is not None and n_max:
+            if getattr(world, "rollout_takes_all_forces", False) and n_max:
+                # the world's compiled loop takes every force itself (the harness, called back from it)
+                t0 = time.perf_counter()
+                rec[1:] = np.asarray(rollout(n_max, harness), dtype=float)
+                engine_s += time.perf_counter() - t0
+                _check(engine, variant, reqs, world, rec, 1, n_max + 1, ends, stopped)
+            elif (world.rollout_forces or (not per_stage and constant and not harness.decays)) \
+                    and rollout is not None and n_max:
                 if not per_stage:
                     world.apply(f, tau)
                 t0 = time.perf_counter()
@@ -172,9 +182,9 @@ def _run_world(engine, variant: str, reqs) -> list:
         n, dt = int(r.n_steps), dts[i]
         if i in stopped:
             n_bad, why = stopped[i]
-            run_i = diverged(y[:n_bad, i].copy(), dt, f" ({why})")
+            run_i = diverged(y[:n_bad, i].copy(), float(r.dt_s), f" ({why})")
         else:
-            run_i = Run(dt * np.arange(n + 1), y[:n + 1, i].copy())
+            run_i = Run(float(r.dt_s) * np.arange(n + 1), y[:n + 1, i].copy())
         share = (n / max(1, int(ends.sum())))
         run_i.engine_s, run_i.host_s = engine_s * share, host_s * share
         runs.append(run_i)
@@ -268,17 +278,21 @@ def one_step(engine, scenario, variant: str, dt_s: float, y_start) -> np.ndarray
     try:
         with np.errstate(all="ignore"):
             per_stage = bool(world.per_stage)
-            if per_stage:
+            if getattr(world, "rollout_takes_all_forces", False):   # the decay and the forces: the world's
                 world.set_state(rows)
+                raw1 = np.asarray(world.rollout(1, harness), dtype=float)
             else:
-                y_dec = rows.copy()
-                y_dec[:, 3:6] *= harness.g_v[:, None]
-                y_dec[:, 10:13] *= harness.g_w[:, None]
-                world.set_state(y_dec)
-                world.apply(*harness.wrench(rows))
-            world.step()
-            y1 = _checked(engine, variant, reqs, world.packed(np.asarray(world.read(), dtype=float)[None]),
-                          len(rows), "states")[0]
+                if per_stage:
+                    world.set_state(rows)
+                else:
+                    y_dec = rows.copy()
+                    y_dec[:, 3:6] *= harness.g_v[:, None]
+                    y_dec[:, 10:13] *= harness.g_w[:, None]
+                    world.set_state(y_dec)
+                    world.apply(*harness.wrench(rows))
+                world.step()
+                raw1 = np.asarray(world.read(), dtype=float)[None]
+            y1 = _checked(engine, variant, reqs, world.packed(raw1), len(rows), "states")[0]
             for i, _, _ in world.warnings:   # a step the engine reported failed has no state
                 y1[i] = np.nan
     finally:

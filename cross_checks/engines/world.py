@@ -28,6 +28,11 @@ The world's contract (states packed as in reference_sim.state: ``[x_W (m), v_W (
   states, the decay factors ``g_v``, ``g_w``) per step or stage as its compiled loop needs them (the loop
   then runs every run there, after ``apply`` of the start forces unless ``per_stage``; the seconds of those
   callbacks go to ``host_s``);
+* optional ``rollout_takes_all_forces``: True when ``rollout(n_steps, harness)`` takes every kind of force
+  itself (the loop's :class:`~cross_checks.engines.loop.Harness`: its compiled loop calls ``harness``'s
+  evaluators back from the host per step or stage, and applies the decay): the loop then uses it for every
+  run of the world and for the one-step mode (``rollout(1, harness)`` after ``set_state(rows)``); the
+  seconds of its host callbacks go to ``host_s``;
 * optional ``warnings``: a list the world appends ``(body, step, words)`` to when the engine reports that a
   body's step failed (the step counted from 1 since the last ``set_state``);
 * optional ``per_stage``: True when the world evaluates the harness forces inside the engine's step, at every
@@ -57,6 +62,7 @@ class World:
     per-stage forces and nothing to close."""
 
     per_stage = False
+    rollout_takes_all_forces = False
     host_s = 0.0
     rollout_forces = False
     exact_start = False
@@ -121,6 +127,10 @@ class WorldEngine(base.EngineAdapter):
     #: The quaternion the engine returns may change sign between steps: the loop picks, after each step, the
     #: sign on the previous state's side (reference_sim.quaternion.same_side).
     sign_continuity: bool = False
+    #: A world may hold runs of different Δt (the loop then groups requests by ``group_key`` alone, the
+    #: harness has each body's own decay factors, and ``build`` gets the first request's Δt; each request
+    #: keeps its own): for an engine that batches a Δt ladder in one compiled call (Brax).
+    mixed_steps: bool = False
     #: Steps between the loop's divergence checks.
     chunk: int = 1024
     #: Harness modules whose code decides the results besides the engine's own (the result cache's key).
@@ -139,7 +149,8 @@ class WorldEngine(base.EngineAdapter):
         """The loop's grouping of ``variant``'s requests into worlds: a world has one step (whatever
         :meth:`group_key` says) and one way of taking the forces (:meth:`per_stage`). An engine whose world
         holds bodies of different steps (each body's Δt its request's) overrides it."""
-        return (float(request.dt_s), self.group_key(request), self.per_stage(request.scenario, variant))
+        return (None if self.mixed_steps else float(request.dt_s), self.group_key(request),
+                self.per_stage(request.scenario, variant))
 
     def per_stage(self, scenario, variant: str) -> bool:
         """True when ``variant`` evaluates the forces of ``scenario`` at every stage of its step (its world

@@ -12,7 +12,7 @@ from cross_checks.engines import base, brax_engine
 @pytest.fixture
 def no_brax(monkeypatch):
     real = base.installed_version
-    monkeypatch.setattr(brax_engine, "installed_version", lambda dist: None if dist == "brax" else real(dist))
+    monkeypatch.setattr(base, "installed_version", lambda dist: None if dist == "brax" else real(dist))
     brax_engine._lib.cache_clear()
     engines.reset_registry()
     yield
@@ -27,7 +27,7 @@ def test_version_raises_engine_not_installed_with_the_extra_to_install(no_brax):
 
 
 def test_brax_without_jax_is_not_an_absent_brax(monkeypatch):
-    monkeypatch.setattr(brax_engine, "installed_version", lambda dist: "0.14.2" if dist == "brax" else None)
+    monkeypatch.setattr(base, "installed_version", lambda dist: "0.14.2" if dist == "brax" else None)
     with pytest.raises(ImportError, match="brax 0.14.2 is installed but jax or jaxlib is not") as e:
         brax_engine.version()
     assert not isinstance(e.value, base.EngineNotInstalled)

@@ -142,7 +142,11 @@ def test_many_runs_in_one_call_are_its_single_runs(costly_adapter):
             except EngineError as exc:
                 single = exc
             assert _same(run, single, _eps(adapter, variant)), (variant, r.scenario.name, r.dt_s)
-            exact = isinstance(adapter, WorldEngine) or adapter.name == "reference"
+            # a world of several Δt (WorldEngine.mixed_steps: Brax's vmapped ladder) or a vmapped batch
+            # (MJX) is one compiled batch, whose sums may be ordered otherwise than a batch of one: the
+            # tolerance above only
+            exact = ((isinstance(adapter, WorldEngine) and not adapter.mixed_steps)
+                     or adapter.name == "reference")
             if exact and adapter.name not in VECTORISED:
                 assert _same(run, single, 0.0), "the loop runs each body of a world as if alone"
 

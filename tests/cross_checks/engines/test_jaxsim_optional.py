@@ -14,9 +14,9 @@ from cross_checks.engines import base, jaxsim_engine
 
 @pytest.fixture
 def no_jaxsim(monkeypatch):
-    real = jaxsim_engine.installed_version
+    real = base.installed_version
     monkeypatch.setattr(
-        jaxsim_engine, "installed_version", lambda dist: None if dist == "jaxsim" else real(dist)
+        base, "installed_version", lambda dist: None if dist == "jaxsim" else real(dist)
     )
     engines.reset_registry()
     yield
@@ -32,7 +32,7 @@ def test_version_raises_engine_not_installed_with_the_extra_to_install(no_jaxsim
 
 def test_a_broken_install_is_not_an_absent_one(monkeypatch):
     monkeypatch.setattr(
-        jaxsim_engine, "installed_version", lambda dist: "0.9.0" if dist == "jaxsim" else None
+        base, "installed_version", lambda dist: "0.9.0" if dist == "jaxsim" else None
     )
     real = importlib.util.find_spec
     monkeypatch.setattr(

@@ -136,6 +136,34 @@ class _RolloutWorld(ExpmapWorld):
         return np.array(out)
 
 
+class _Rolling(ExpmapWorld):
+    """A world whose rollout takes every force (a compiled engine's loop, written out): per step the
+    harness's wrench from the current state, the pre-step decay, one step; the loop must never step it."""
+
+    rollout_takes_all_forces = True
+
+    def __init__(self, requests, dt_s, calls):
+        super().__init__(requests, dt_s)
+        self.calls = calls
+
+    def step(self):
+        raise AssertionError("the loop stepped a world whose rollout takes every force")
+
+    def rollout(self, n_steps, harness):
+        self.calls.append(n_steps)
+        out = []
+        for _ in range(n_steps):
+            y = self.read()
+            f, tau = harness.wrench(y)
+            y[:, 3:6] *= harness.g_v[:, None]
+            y[:, 10:13] *= harness.g_w[:, None]
+            self.set_state(y)
+            self.apply(f, tau)
+            ExpmapWorld.step(self)
+            out.append(self.read())
+        return np.array(out)
+
+
 def test_a_world_of_several_steps_whose_rollout_takes_every_force_runs_each_body_as_alone():
     """One world (world_key) for two scenarios at two steps each, state-dependent forces and decay among
     them: every run is the per-step loop's run of its request alone, bit for bit, on its own time axis."""
@@ -157,3 +185,61 @@ def test_a_world_of_several_steps_whose_rollout_takes_every_force_runs_each_body
         alone = ExpmapEngine().simulate(r.scenario, "euler", r.dt_s, r.n_steps)
         assert np.array_equal(run.y, alone.y) and np.array_equal(run.t_s, alone.t_s)
         assert run.engine_s > 0.0 and run.host_s >= 0.0
+
+
+class _RollingEngine(ExpmapEngine):
+    def __init__(self):
+        self.calls = []
+
+    def build(self, requests, variant, dt_s):
+        return _Rolling(requests, dt_s, self.calls)
+
+
+@pytest.mark.parametrize("name", ["spring_pendulum", "velocity_decay", "tennis_racket"])
+def test_a_world_whose_rollout_takes_every_force_runs_every_run_and_one_step_there(name):
+    """World.rollout_takes_all_forces: the loop hands every run (state-dependent forces and decay included)
+    and the one-step mode to ``rollout(n, harness)``, whose results are the per-step loop's bit for bit."""
+    sc = load_scenario(name)
+    engine, plain = _RollingEngine(), ExpmapEngine()
+    run = engine.simulate(sc, "euler", sc.dt_s, 40)
+    assert engine.calls == [40] and np.array_equal(run.y, plain.simulate(sc, "euler", sc.dt_s, 40).y)
+    rows = run.y[::9]
+    got, want = engine.one_step(sc, "euler", sc.dt_s, rows), plain.one_step(sc, "euler", sc.dt_s, rows)
+    assert np.array_equal(got, want)
+    assert engine.calls == [40, 1]
+
+
+class _Mixed(ExpmapWorld):
+    """The example world stepping each body at its own Δt."""
+
+    def __init__(self, requests, dt_s):
+        super().__init__(requests, dt_s)
+        self.dt_s = np.array([float(r.dt_s) for r in requests])[:, None]
+
+
+class _MixedEngine(ExpmapEngine):
+    mixed_steps = True
+
+    def __init__(self):
+        self.worlds = 0
+
+    def group_key(self, request):
+        return (request.scenario.name,)
+
+    def build(self, requests, variant, dt_s):
+        self.worlds += 1
+        return _Mixed(requests, dt_s)
+
+
+@pytest.mark.parametrize("name", ["spring_pendulum", "velocity_decay"])
+def test_a_world_of_several_steps_gives_each_run_its_own_step_and_decay(name):
+    """WorldEngine.mixed_steps: a scenario's Δt ladder in one world, each run (its decay factors, its times)
+    bit for bit the run of its Δt alone."""
+    sc = load_scenario(name)
+    engine = _MixedEngine()
+    reqs = [RunRequest(sc, sc.dt_s, 30), RunRequest(sc, sc.dt_s / 2, 50), RunRequest(sc, sc.dt_s / 4, 7)]
+    runs = engine.simulate_many("euler", reqs)
+    assert engine.worlds == 1
+    for r, got in zip(reqs, runs):
+        want = ExpmapEngine().simulate(sc, "euler", r.dt_s, r.n_steps)
+        assert np.array_equal(got.y, want.y) and np.array_equal(got.t_s, want.t_s)
