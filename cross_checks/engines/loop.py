@@ -182,9 +182,9 @@ def _run_world(engine, variant: str, reqs) -> list:
         n, dt = int(r.n_steps), dts[i]
         if i in stopped:
             n_bad, why = stopped[i]
-            run_i = diverged(y[:n_bad, i].copy(), float(r.dt_s), f" ({why})")
+            run_i = diverged(y[:n_bad, i].copy(), dt, f" ({why})")
         else:
-            run_i = Run(float(r.dt_s) * np.arange(n + 1), y[:n + 1, i].copy())
+            run_i = Run(dt * np.arange(n + 1), y[:n + 1, i].copy())
         share = (n / max(1, int(ends.sum())))
         run_i.engine_s, run_i.host_s = engine_s * share, host_s * share
         runs.append(run_i)
