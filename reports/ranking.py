@@ -507,8 +507,8 @@ def long_run_keepers(res, variants) -> list:
         best = sorted(scores, key=lambda v: (scores[v][0], v))[:3]
         words = {v: "diverged on a long run" if math.isinf(scores[v][0]) else fmt(scores[v][0]) for v in best}
         text = "; ".join(f"{v} ({words[v]})" for v in best)
-        caveat = ("; a step without the gyroscopic term keeps E and |L| too, ω fixed in body axes: read these "
-                  "with the spin axis" if key != "direction_drift_max_rad" else "")
+        caveat = ("; a step without the gyroscopic term keeps E and |L| too, ω fixed in body axes: read "
+                  "these with the spin axis" if key != "direction_drift_max_rad" else "")
         out.append((f"Keeps {what} best over the long runs", f"{text} ({unit}, geometric mean over "
                     f"{max(n for _, n in scores.values())} long runs{caveat})"))
     return out
