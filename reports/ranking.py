@@ -132,6 +132,10 @@ class Value:
         return f"{self.bound}{fmt(self.value, unit)}"
 
 
+#: An error of 0 (an exact run) is drawn at 1e-300 on the log axes: no slope is read from such a point.
+_ZERO = 1e-290
+
+
 def _along(y0: float, ratio: float, slope: float) -> float:
     """``y0 · ratio^slope`` in log space, kept within floats (an exact scheme's error of 0 is drawn at 1e-300:
     a slope from it can be hundreds)."""
@@ -159,7 +163,7 @@ def at_cost(curve: Curve, cost: float) -> Value:
     if cost < lo * (1 - 1e-12):
         # cheaper than its cheapest run: along its measured convergence (error ∝ cost^slope from its two
         # cheapest runs) when its error falls with cost there, else no less than its cheapest run's error
-        slope = _slope(pts[0], pts[1]) if len(pts) > 1 else 0.0
+        slope = _slope(pts[0], pts[1]) if len(pts) > 1 and min(pts[0].error, pts[1].error) > _ZERO else 0.0
         if slope < 0:
             return Value(_along(pts[0].error, cost / pts[0].cost, slope), "≈",
                          f"its cheapest run costs ×{fmt(lo / cost)} the common cost: extrapolated along its "
@@ -189,7 +193,7 @@ def cost_at(curve: Curve, error: float) -> Value:
             return Value(10 ** (_log(a.cost) + f * (_log(b.cost) - _log(a.cost))))
     # not reached: along its measured convergence from its two finest runs when its error still falls with
     # cost there, else at least its costliest run's cost
-    slope = _slope(pts[-2], pts[-1]) if len(pts) > 1 else 0.0
+    slope = _slope(pts[-2], pts[-1]) if len(pts) > 1 and min(pts[-2].error, pts[-1].error) > _ZERO else 0.0
     if slope < 0 and pts[-1].error > error:
         return Value(_along(pts[-1].cost, error / pts[-1].error, 1.0 / slope), "≈",
                      f"beyond its finest run ({fmt(pts[-1].error)}): extrapolated along its measured slope "

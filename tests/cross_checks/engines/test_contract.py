@@ -217,6 +217,8 @@ def test_a_run_through_the_registry_records_the_engines_own_time_within_its_wall
 def test_an_engine_that_is_missing_says_how_to_install_it(adapter):
     if not isinstance(adapter, WorldEngine) or not adapter.extra:
         pytest.skip(f"{adapter.name} is a required engine or not a world engine")
+    if type(adapter).version is not WorldEngine.version:
+        pytest.skip(f"{adapter.name} reads its version from its module (its absence: its _optional tests)")
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(base, "installed_version", lambda dist: None)
         mp.setattr(base, "optional_import",
