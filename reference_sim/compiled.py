@@ -231,7 +231,14 @@ class ForceRows:
     member by member), or None where numba is missing (:meth:`of`)."""
 
     def __init__(self, problems, kernel):
-        self.params = parameters(Members.stack(problems), np.ones(len(problems)))
+        # each distinct problem stacked once, its parameters gathered per body (the same values, member by
+        # member: a batch of one scenario's copies costs one member's stacking)
+        first: dict = {}
+        for p in problems:
+            first.setdefault(id(p), (len(first), p))
+        index = np.array([first[id(p)][0] for p in problems])
+        unique = parameters(Members.stack([p for _, p in first.values()]), np.ones(len(first)))
+        self.params = tuple(np.ascontiguousarray(a[index]) for a in unique)
         self._rows = kernel
 
     @classmethod
