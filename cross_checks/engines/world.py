@@ -49,6 +49,8 @@ engine of a few dozen lines is in docs/engines.md.
 """
 from __future__ import annotations
 
+import abc
+
 import numpy as np
 
 from cross_checks.engines import base
@@ -71,17 +73,19 @@ class World:
     def __init__(self):
         self.warnings: list = []
 
-    def set_state(self, y) -> None:   # pragma: no cover - every world defines it
-        raise NotImplementedError
+    # The contract's methods: every world defines set_state and read; apply and step too, unless its
+    # rollout takes every force itself (rollout_takes_all_forces: the loop then never calls them).
+    def set_state(self, y) -> None:   # pragma: no cover
+        raise TypeError(f"{type(self).__name__} does not define set_state (the World contract)")
 
     def apply(self, f_W, tau_W) -> None:   # pragma: no cover
-        raise NotImplementedError
+        raise TypeError(f"{type(self).__name__} does not define apply (the World contract)")
 
     def step(self) -> None:   # pragma: no cover
-        raise NotImplementedError
+        raise TypeError(f"{type(self).__name__} does not define step (the World contract)")
 
     def read(self):   # pragma: no cover
-        raise NotImplementedError
+        raise TypeError(f"{type(self).__name__} does not define read (the World contract)")
 
     def first(self, y0):
         """The raw rows (B, R) recorded as step 0 after ``set_state(y0)``: what :meth:`read` gives."""
@@ -136,10 +140,10 @@ class WorldEngine(base.EngineAdapter):
     #: Harness modules whose code decides the results besides the engine's own (the result cache's key).
     harness: tuple = ("cross_checks.engines.loop", "cross_checks.engines.world")
 
-    def build(self, requests, variant: str, dt_s: float) -> World:   # pragma: no cover - every engine does
+    @abc.abstractmethod
+    def build(self, requests, variant: str, dt_s: float) -> World:
         """A world of the bodies of ``requests`` (base.RunRequest, at step ``dt_s``) for ``variant``. Raise
         :class:`~cross_checks.engines.base.EngineError` with the engine's words when it rejects a model."""
-        raise NotImplementedError
 
     def group_key(self, request) -> tuple:
         """Requests with equal keys are run in one world (default: equal step and step count)."""
