@@ -26,6 +26,7 @@ like any scenario file, so engine files receive it as their resolved JSON), or r
 """
 from __future__ import annotations
 
+import abc
 import json
 import math
 from dataclasses import dataclass
@@ -62,30 +63,32 @@ class TransformRefused(ValueError):
 
 
 @dataclass(frozen=True)
-class Transform:
+class Transform(abc.ABC):
     """A transform: ``kind`` (one of TRANSFORM_KINDS) and ``magnitude`` (its size as one text: "1e+04 m",
     "73 deg", "k=0.01 mu=0.01")."""
 
     @property
+    @abc.abstractmethod
     def kind(self) -> str:
-        raise NotImplementedError
+        """One of TRANSFORM_KINDS."""
 
     @property
+    @abc.abstractmethod
     def magnitude(self) -> str:
-        raise NotImplementedError
+        """The transform's size as one text."""
 
     @property
     def label(self) -> str:
         return f"{self.kind} {self.magnitude}"
 
+    @abc.abstractmethod
     def rewrite(self, d: dict) -> dict:
         """The transformed scenario dict (:func:`scenario_dict`'s keys) of ``d``."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def map_back(self, y) -> np.ndarray:
         """States ``y (..., 13)`` of the transformed run ([x_W m, v_W m/s, q_WB (w, x, y, z), ω_W rad/s]
         in the transformed world and body frames) in the original's frames."""
-        raise NotImplementedError
 
     def position_offset_m(self) -> float:
         """How far the transform moves the world origin (m): what a translation adds to the positions'
