@@ -14,7 +14,6 @@ written as sentences for users. Orders are global orders of the error at a fixed
 from __future__ import annotations
 
 import math
-from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,7 +28,7 @@ __all__ = ["energy_drift_bound", "characteristic_rate_sq", "QUANTITIES",
            "expectation", "expected_order", "forces_change_within_step", "precision", "machine_epsilon",
            "judged_ladder_s",
            "nominal_order", "gyroscopic_term_matters", "rotation_drives_translation",
-           "translation_drives_rotation", "memoized", "LongRunExpectation", "long_run_expectation",
+           "translation_drives_rotation", "LongRunExpectation", "long_run_expectation",
            "INVARIANT_WORDS", "gyroscopic_clamp_acts"]
 
 
@@ -173,37 +172,18 @@ def _isotropic(inertia_B) -> bool:
     return bool(m[-1] - m[0] <= EQUAL_MOMENTS_REL_TOL * m[-1])
 
 
-#: While :func:`memoized` is active: what the expectations decided, {key: (the objects it was decided for,
-#: value)} — the objects are kept so that their ids cannot be reused while memoized.
-_MEMO: dict | None = None
-
-
-@contextmanager
-def memoized():
-    """Within this block, decisions that depend only on a scenario (and its measured physics) are made once
-    per scenario object and reused: ``gyroscopic_term_matters``, the free-running expectation of a
-    (variant, quantity) — which the one-step mode asks for again — and the pre-asymptotic reason of a
-    (traits, quantity), the same for every variant with those traits. The scenarios must not change
-    within the block; results are the ones computed without it."""
-    global _MEMO
-    outer = _MEMO
-    if outer is None:
-        _MEMO = {}
-    try:
-        yield
-    finally:
-        if outer is None:
-            _MEMO = None
-
-
-def _memo(key, objs, compute):
-    """``compute()``, memoized under ``key`` (holding ``objs``) while :func:`memoized` is active."""
-    if _MEMO is None:
+def _decided(physics, key, compute):
+    """``compute()``, kept on the scenario's measured physics (``ScenarioPhysics.decided``) under ``key``:
+    decisions that depend only on that scenario — the free-running expectation of a (variant, quantity),
+    which the one-step mode asks for again, and the pre-asymptotic reason of a (traits, quantity), the same
+    for every variant with those traits — are made once per scenario whose physics is passed, with no global
+    state (results are those computed without it)."""
+    if physics is None:
         return compute()
-    hit = _MEMO.get(key)
-    if hit is None or any(a is not b for a, b in zip(hit[0], objs)):
-        hit = _MEMO[key] = (objs, compute())
-    return hit[1]
+    memo = physics.decided
+    if key not in memo:
+        memo[key] = compute()
+    return memo[key]
 
 
 def gyroscopic_term_matters(scenario) -> bool:
@@ -213,11 +193,6 @@ def gyroscopic_term_matters(scenario) -> bool:
     ω lies along a principal axis (then ω stays there). Any torque on an anisotropic body moves ω off
     the principal axes sooner or later.
     """
-    return _memo(("gyroscopic_term_matters", id(scenario)), (scenario,),
-                 lambda: _gyroscopic_term_matters(scenario))
-
-
-def _gyroscopic_term_matters(scenario) -> bool:
     p = scenario.problem
     if _isotropic(p.body.inertia_B):
         return False
@@ -275,9 +250,8 @@ def expectation(scenario, variant: str, quantity: str, mode: str = "free_running
 def _expectation(scenario, variant, quantity, mode, physics, measure_physics) -> Expectation:
     if mode not in ("free_running", "one_step"):
         raise ValueError(f"unknown mode {mode!r}; modes: free_running, one_step")
-    free = _memo(("free_running", id(scenario), variant, quantity, id(physics), measure_physics),
-                 (scenario, physics),
-                 lambda: _free_running(scenario, variant, quantity, physics, measure_physics))
+    free = _decided(physics, ("free_running", str(variant), quantity, measure_physics),
+                    lambda: _free_running(scenario, variant, quantity, physics, measure_physics))
     if mode == "free_running":
         return free
     if free.verdict == "does_not_converge":
@@ -360,8 +334,8 @@ def _free_running(scenario, variant: str, quantity: str, physics,
                            f"{tr.rotation_order:g} where the body-axes ω turns within a step, "
                            "as it does here")
     if p == 1.0 and (physics is not None or measure_physics):
-        why = _memo(("pre_asymptotic", id(scenario), tr, p, quantity, id(physics)), (scenario, physics),
-                    lambda: _pre_asymptotic_reason(scenario, variant, quantity, tr, physics))
+        why = _decided(physics, ("pre_asymptotic", tr, p, quantity),
+                       lambda: _pre_asymptotic_reason(scenario, variant, quantity, tr, physics))
         if why:
             return Expectation("pre_asymptotic", None, why)
     return Expectation("converges", p, f"{variant} is an order-{p:g} scheme")

@@ -26,7 +26,7 @@ of :mod:`cross_checks.analysis.expectations` are decided from (never the scenari
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
@@ -60,12 +60,15 @@ class ScenarioPhysics:
     separatrix_proximity : δ (None unless torque-free with three distinct moments and ω ≠ 0).
     amplification : {quantity: A ≥ 1}: relative final error per relative initial error (measured).
     duration_s : T.
+    decided : what the expectations decided from these physics (expectations._decided), kept with them:
+        not a measurement (left out of equality, ``repr`` and :meth:`as_dict`).
     """
 
     rates: MotionRates
     separatrix_proximity: float | None
     amplification: dict
     duration_s: float
+    decided: dict = field(default_factory=dict, compare=False, repr=False)
 
     def as_dict(self) -> dict:
         return {"rates": asdict(self.rates), "separatrix_proximity": self.separatrix_proximity,

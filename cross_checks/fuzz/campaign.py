@@ -89,11 +89,10 @@ def compute_batch(seed, batch, variants) -> dict:
     draws = [generate.draw(seed, batch * BATCH + k) for k in range(BATCH)]
     from threadpoolctl import threadpool_limits
 
-    from cross_checks.analysis.expectations import memoized
     # one BLAS thread: the large stacked DOP853 solves give the same last bits whatever the machine's core
     # count (a batch is a function of its seed alone, as the cache key assumes), and two workers on two
     # cores do not fight over BLAS threads (docs/fuzz.md §4)
-    with threadpool_limits(limits=1, user_api="blas"), memoized():
+    with threadpool_limits(limits=1, user_api="blas"):
         cases = pipeline.prepare(draws, n0)
         contexts, members, y_end = pipeline.measure(cases)
         outcomes, seconds = pipeline.evaluate(cases, contexts, members, y_end, variants)

@@ -269,24 +269,25 @@ def test_pre_step_decay_breaks_the_expmap_gyro_mujoco_euler_pair_only_with_a_gyr
     assert pair_is_same_arithmetic(sym, "reference:expmap_gyro", "mujoco:euler")
 
 
-def test_memoized_expectations_are_the_ones_computed_without_memo():
-    """``memoized()`` (a fuzz batch) reuses per-scenario decisions across variants, quantities and modes:
-    every expectation, reason included, equals the one computed without it, on every catalog scenario."""
-    from cross_checks.analysis.expectations import memoized
-    from cross_checks.analysis.physics import scenario_physics
+def test_decisions_kept_on_the_physics_are_the_ones_computed_afresh():
+    """The expectations kept on a scenario's physics (``ScenarioPhysics.decided``: a fuzz case's or a sweep
+    scenario's decisions, reused across variants, quantities and modes) equal those computed on a fresh
+    copy of the same physics, reasons included, on every catalog scenario; asked again, from the kept ones."""
+    from cross_checks.analysis.physics import physics_from_dict, scenario_physics
     variants = ["reference:course", "reference:course_gyro", "mujoco:euler", "pybullet:multibody",
                 "reference:rk4", "reference:explicit_euler", "reference:implicit_euler", "mujoco:implicit",
                 "nobody:knows"]
     for name in sorted(set(catalog_names()) - {"spring_pendulum", "applied_torque"}):
         sc = load_scenario(name)
         phys = scenario_physics(sc)
-        plain = {(v, q, m): expectation(sc, v, q, m, physics=phys, measure_physics=False)
-                 for v in variants for q in QUANTITIES for m in ("free_running", "one_step")}
-        with memoized():
-            for _ in range(2):
-                for (v, q, m), want in plain.items():
-                    assert expectation(sc, v, q, m, physics=phys,
-                                       measure_physics=False) == want, (name, v, q, m)
+        keys = [(v, q, m) for v in variants for q in QUANTITIES for m in ("free_running", "one_step")]
+        fresh = {k: expectation(sc, *k, physics=physics_from_dict(phys.as_dict()), measure_physics=False)
+                 for k in keys}
+        assert not phys.decided
+        for _ in range(2):
+            for k in keys:
+                assert expectation(sc, *k, physics=phys, measure_physics=False) == fresh[k], (name, k)
+        assert phys.decided   # kept, not recomputed
 
 
 class _HeldForcesRK4(EngineAdapter):
