@@ -60,6 +60,8 @@ class Harness:
         self.weight = np.array([base.weight_W(sc) if applies_gravity else np.zeros(3) for sc in scenarios])
         self.state_dependent = any(sc.problem.forces.state_dependent for sc in scenarios)
         self.decays = any(sc.problem.forces.has_decay for sc in scenarios)
+        # a few bodies: per body, plain floats (ft, γ_v, γ_ω, the weight), two arrays built at the end
+        self._floats = list(zip(self.ft, self.g_v.tolist(), self.g_w.tolist(), self.weight.tolist()))
 
     def wrench(self, y, bodies=None) -> tuple:
         """``(f_W, tau_W)`` (B, 3) each at packed states ``y`` (B, 13): the harness's force minus the weight
@@ -69,10 +71,22 @@ class Harness:
             bodies = np.asarray(bodies, dtype=int)
             w = np.array([self.ft[i](row) for i, row in zip(bodies.tolist(), np.asarray(y).tolist())])
             g_v, g_w, weight = self.g_v[bodies], self.g_w[bodies], self.weight[bodies]
-        else:
-            w = (self.rows.force_torque(y) if self.rows is not None
-                 else np.array([ft(row) for ft, row in zip(self.ft, y)]))
-            g_v, g_w, weight = self.g_v, self.g_w, self.weight
+        elif self.rows is None:
+            # the same IEEE operations as the array path below (γ_v f − w, γ_ω τ), in plain floats: a few
+            # bodies' arrays cost more than the engine's step
+            f_rows, tau_rows = [], []
+            for (ft, gv, gw, (wx, wy, wz)), row in zip(self._floats, y):
+                fx, fy, fz, tx, ty, tz = ft(row)
+                f_rows.append((gv * fx - wx, gv * fy - wy, gv * fz - wz))
+                tau_rows.append((gw * tx, gw * ty, gw * tz))
+            return np.array(f_rows), np.array(tau_rows)
+        else:   # many bodies: the same operations in place, on the compiled call's own (B, 6) array
+            w = self.rows.force_torque(y)
+            f, tau = w[:, 0:3], w[:, 3:6]
+            f *= self.g_v[:, None]
+            f -= self.weight
+            tau *= self.g_w[:, None]
+            return f, tau
         f = w[:, 0:3] * g_v[:, None] - weight
         tau = w[:, 3:6] * g_w[:, None]
         return f, tau
