@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cross_checks.core.quantities import QUANTITIES
-from cross_checks.engines import declared_imitation, declared_order, declared_traits
+from cross_checks.engines import Resolved, resolve
 from cross_checks.engines.base import DEFAULT_TRAITS, Traits
 from reference_sim.analytic import EQUAL_MOMENTS_REL_TOL
 
@@ -32,10 +32,10 @@ __all__ = ["energy_drift_bound", "characteristic_rate_sq", "QUANTITIES",
            "INVARIANT_WORDS", "gyroscopic_clamp_acts"]
 
 
-def traits(variant: str) -> Traits:
+def traits(variant: str | Resolved) -> Traits:
     """The traits ``ENGINE:VARIANT`` declares (Variant.traits), or those of the variant it declares it
-    imitates (Variant.imitates); DEFAULT_TRAITS for one this module does not know."""
-    return declared_traits(variant) or declared_traits(declared_imitation(variant)) or DEFAULT_TRAITS
+    imitates (Variant.imitates); DEFAULT_TRAITS for one this module does not know (Resolved.traits)."""
+    return resolve(variant).traits
 
 
 #: Pairs that implement the same arithmetic and must agree to round-off (tolerances.SAME_SCHEME_REL).
@@ -107,19 +107,18 @@ class Expectation:
         return {"expected_verdict": self.verdict, "expected_order": self.order, "reason": self.reason}
 
 
-def precision(variant: str) -> str:
+def precision(variant: str | Resolved) -> str:
     """The floating-point format ``variant`` computes in (Traits.precision): "float64" or "float32"."""
-    return traits(variant).precision
+    return resolve(variant).precision
 
 
-def machine_epsilon(variant: str) -> float:
+def machine_epsilon(variant: str | Resolved) -> float:
     """ε of ``variant``'s precision (tolerances.MACHINE_EPSILON) times its declared Traits.rounding_factor:
     the unit of every round-off floor of its runs (and twice the unit roundoff of its one-step allowance)."""
-    from cross_checks.core import tolerances as tol
-    return tol.MACHINE_EPSILON[precision(variant)] * float(traits(variant).rounding_factor)
+    return resolve(variant).rounding_unit
 
 
-def judged_ladder_s(scenario, variant: str) -> tuple:
+def judged_ladder_s(scenario, variant: str | Resolved) -> tuple:
     """The Δt ladder (s, descending) ``variant`` is judged on: the scenario's; for a variant whose precision
     leaves its finer rungs at round-off (float32), that ladder plus coarser rungs (each of half the steps of
     the last, ⌊N/2⌋, so that T/Δt stays whole) until PRECISION_LADDER_MIN_RESOLVED rungs are expected resolved
@@ -133,13 +132,14 @@ def judged_ladder_s(scenario, variant: str) -> tuple:
     PRECISION_LADDER_STEP_ANGLE_PER_ORDER_RAD and the run keeps PRECISION_LADDER_MIN_STEPS steps; the finer
     rungs stay (the fit says which were at round-off)."""
     from cross_checks.core import tolerances as tol
+    v = resolve(variant)
     dts = sorted({float(d) for d in scenario.dt_ladder_s}, reverse=True)
-    eps = machine_epsilon(variant)
+    eps = v.rounding_unit
     if eps <= tol.ROUNDOFF_PER_STEP_REL or not dts:
         return tuple(dts)
     T = scenario.duration_s
-    p = nominal_order(variant) or 1.0
-    if forces_change_within_step(scenario, traits(variant)):
+    p = v.order or 1.0
+    if forces_change_within_step(scenario, v.traits):
         p = min(p, 1.0)
     w = max(math.sqrt(characteristic_rate_sq(scenario)), 1.0 / T)
 
@@ -160,11 +160,11 @@ def judged_ladder_s(scenario, variant: str) -> tuple:
     return tuple(dts)
 
 
-def nominal_order(variant: str) -> float | None:
+def nominal_order(variant: str | Resolved) -> float | None:
     """The nominal global order of ``ENGINE:VARIANT``, the same for every quantity: the order its adapter
     declares (rbcheck's own adapters and a user's engine file or entry point alike; verdicts then check
     it); None for a name nobody declares."""
-    return declared_order(variant)
+    return resolve(variant).order
 
 
 def _isotropic(inertia_B) -> bool:
@@ -229,7 +229,7 @@ def characteristic_rate_sq(scenario) -> float:
     return max(rates)
 
 
-def expectation(scenario, variant: str, quantity: str, mode: str = "free_running", physics=None, *,
+def expectation(scenario, variant: str | Resolved, quantity: str, mode: str = "free_running", physics=None, *,
                 measure_physics: bool = True) -> Expectation:
     """The expected verdict and order of ``variant`` on ``scenario`` for ``quantity``.
 
@@ -241,13 +241,14 @@ def expectation(scenario, variant: str, quantity: str, mode: str = "free_running
     unless ``measure_physics`` is False: then no pre-asymptotic decision is made, e.g. for a scenario
     whose reference could not be computed, where every run is a failed row anyway).
     """
+    variant = resolve(variant)
     e = _expectation(scenario, variant, quantity, mode, physics, measure_physics)
-    prec, factor = precision(variant), float(traits(variant).rounding_factor)
+    prec, factor = variant.precision, float(variant.traits.rounding_factor)
     return (e if (prec, factor) == (e.precision, e.rounding_factor)
             else Expectation(e.verdict, e.order, e.reason, prec, factor))
 
 
-def _expectation(scenario, variant, quantity, mode, physics, measure_physics) -> Expectation:
+def _expectation(scenario, variant: Resolved, quantity, mode, physics, measure_physics) -> Expectation:
     if mode not in ("free_running", "one_step"):
         raise ValueError(f"unknown mode {mode!r}; modes: free_running, one_step")
     free = _decided(physics, ("free_running", str(variant), quantity, measure_physics),
@@ -256,7 +257,7 @@ def _expectation(scenario, variant, quantity, mode, physics, measure_physics) ->
         return free
     if free.verdict == "does_not_converge":
         return Expectation(None, None, free.reason)
-    p = nominal_order(variant)
+    p = variant.order
     if p is None:
         return Expectation("converges", None, f"no nominal order is recorded for {variant}")
     if free.order is not None and free.order < p:
@@ -279,12 +280,13 @@ def rotation_turns(scenario) -> bool:
                 or any(np.any(pf.point_B != 0) for pf in fm.point_forces))
 
 
-def gyroscopic_clamp_acts(scenario, variant: str, physics=None, measure_physics: bool = True) -> float | None:
+def gyroscopic_clamp_acts(scenario, variant: str | Resolved, physics=None,
+                         measure_physics: bool = True) -> float | None:
     """The largest gyroscopic torque |ω × (I ω)| (N m) of the scenario's motion when ``variant``'s step clamps
     it (Traits.gyroscopic_clamp_N_m) below that — the clamp acts and the step solves another equation —
     else None. Measured on the reference (physics.MotionRates.gyroscopic_torque_max; ``physics`` measured here
     when omitted, unless ``measure_physics`` is False: then None)."""
-    limit = traits(variant).gyroscopic_clamp_N_m
+    limit = resolve(variant).traits.gyroscopic_clamp_N_m
     if limit is None or (physics is None and not measure_physics):
         return None
     if not gyroscopic_term_matters(scenario):
@@ -302,11 +304,11 @@ def forces_change_within_step(scenario, tr: Traits) -> bool:
     return tr.forces_held and (fm.state_dependent or fm.has_decay)
 
 
-def _free_running(scenario, variant: str, quantity: str, physics,
+def _free_running(scenario, variant: Resolved, quantity: str, physics,
                   measure_physics: bool = True) -> Expectation:
     if quantity not in QUANTITIES:
         raise ValueError(f"unknown quantity {quantity!r}; quantities: {', '.join(QUANTITIES)}")
-    tr = traits(variant)
+    tr = variant.traits
     if not tr.gyroscopic_term and gyroscopic_term_matters(scenario):
         if quantity in _ROTATION or rotation_drives_translation(scenario):
             coupled = ("" if quantity in _ROTATION else
@@ -322,7 +324,7 @@ def _free_running(scenario, variant: str, quantity: str, physics,
             f"its step cuts the gyroscopic torque −ω × (I ω) to {tr.gyroscopic_clamp_N_m:g} N m, and here "
             f"it reaches {clamp:.3g} N m: the runs converge to the solution of that clamped equation, not to "
             "the physical motion")
-    p = nominal_order(variant)
+    p = variant.order
     if p is None:
         return Expectation("converges", None, f"no nominal order is recorded for {variant}")
     if p > 1.0 and forces_change_within_step(scenario, tr):
@@ -368,7 +370,7 @@ def _drift_parts(scenario, tr: Traits, quantity: str, phys):
     return parts
 
 
-def _pre_asymptotic_reason(scenario, variant, quantity, tr: Traits, physics) -> str:
+def _pre_asymptotic_reason(scenario, variant: Resolved, quantity, tr: Traits, physics) -> str:
     """The reason a first-order variant makes no claim on this ladder ("" when it does claim order 1)."""
     from cross_checks.analysis.physics import amplitude_model_order, amplitude_parameter, scenario_physics
     from cross_checks.core import tolerances as tol
@@ -398,7 +400,7 @@ def _pre_asymptotic_reason(scenario, variant, quantity, tr: Traits, physics) -> 
     return ""
 
 
-def expected_order(variant: str, quantity: str, scenario=None) -> float | None:
+def expected_order(variant: str | Resolved, quantity: str, scenario=None) -> float | None:
     """The expected global order of ``variant`` for ``quantity`` (None where it is expected not to
     converge). ``scenario``: a Scenario, a catalog name, or None (then the nominal order)."""
     if scenario is None:
@@ -409,7 +411,7 @@ def expected_order(variant: str, quantity: str, scenario=None) -> float | None:
     return expectation(scenario, variant, quantity).order
 
 
-def energy_drift_bound(scenario, variant: str, dt_s: float) -> float | None:
+def energy_drift_bound(scenario, variant: str | Resolved, dt_s: float) -> float | None:
     """Upper bound on the maximum relative energy drift of ``variant`` on a conservative scenario.
 
     An order-p scheme's global error over T at step Δt on a motion of angular frequency ω is
@@ -420,12 +422,13 @@ def energy_drift_bound(scenario, variant: str, dt_s: float) -> float | None:
     """
     if not scenario.problem.forces.conservative:
         return None
-    if not traits(variant).gyroscopic_term and gyroscopic_term_matters(scenario):
+    v = resolve(variant)
+    tr = v.traits
+    if not tr.gyroscopic_term and gyroscopic_term_matters(scenario):
         return None
-    p = nominal_order(variant)
+    p = v.order
     if p is None:
         return None
-    tr = traits(variant)
     if forces_change_within_step(scenario, tr):
         p = min(p, 1.0)
     if tr.rotation_order is not None and rotation_turns(scenario):
@@ -440,7 +443,7 @@ def energy_drift_bound(scenario, variant: str, dt_s: float) -> float | None:
     w = math.sqrt(w2)
     n_steps = max(1, round(scenario.duration_s / dt_s))
     # + round-off: N steps of ε each, ×10 for the terms of E.
-    return 2.0 * (w * dt_s) ** p * w * scenario.duration_s + 10.0 * n_steps * machine_epsilon(variant)
+    return 2.0 * (w * dt_s) ** p * w * scenario.duration_s + 10.0 * n_steps * v.rounding_unit
 
 
 #: The invariants of Traits.keeps in words (the judge's sentences).
@@ -473,9 +476,9 @@ class LongRunExpectation:
                 "reason": self.reason}
 
 
-def long_run_expectation(variant: str) -> LongRunExpectation:
+def long_run_expectation(variant: str | Resolved) -> LongRunExpectation:
     """The :class:`LongRunExpectation` of ``variant`` from its declared traits (nothing else)."""
-    tr = traits(variant)
+    tr = resolve(variant).traits
     keeps = list(tr.keeps)
     norm_implied = tr.rotation_drift == "momentum" or "angular_momentum" in keeps
     if norm_implied and "angular_momentum_norm" not in keeps:

@@ -25,7 +25,7 @@ __all__ = ["ENTRY_POINT_GROUP", "VariantInfo", "EngineEntry", "all_variants", "a
            "has_one_step", "load_engine_files", "engine_files_registered", "register_adapter", "user_engines",
            "adopt_user_engines", "engine_provenance", "reset_registry", "EngineUnavailable", "UnknownVariant",
            "EngineAdapter", "EngineError", "Variant", "REQUIRED_ENGINES", "unusable_required_engines",
-           "NotExpressible", "not_expressible"]
+           "NotExpressible", "not_expressible", "Resolved", "resolve"]
 
 ENTRY_POINT_GROUP = "rbcheck.engines"
 #: rbcheck's own engines, in the order of `rbcheck list`; other engines follow by name.
@@ -320,6 +320,62 @@ def declared_traits(name: str):
 def declared_imitation(name: str) -> str:
     """The ``ENGINE:VARIANT`` whose scheme ``name`` declares it imitates (Variant.imitates; "" when none)."""
     return getattr(declared_variant(name), "imitates", "") or ""
+
+
+class Resolved(str):
+    """``ENGINE:VARIANT`` resolved once (:func:`resolve`), for the sweep's plan, a fuzz batch and ``check`` to
+    pass down instead of looking the name up again: a ``str`` equal to the name (a key, a results row's
+    ``variant``, a message's word, pickled to a worker as itself) that carries what its engine declares —
+
+    * ``engine``, ``variant``: the two halves of the name;
+    * ``order``: the declared global order (None when no loadable engine declares the name);
+    * ``traits``: its own Traits, or those of the variant it ``imitates``; DEFAULT_TRAITS when neither;
+    * ``precision``: "float64" or "float32" (Traits.precision), and ``rounding_unit``: ε of that precision
+      × Traits.rounding_factor, the unit of every round-off floor of its runs;
+    * ``one_step``: its engine has a one-step (local error) mode;
+    * ``known``: a loadable engine declares it (False for a name read from someone else's results).
+
+    Immutable by convention: made only by :func:`resolve`."""
+
+    def __new__(cls, name: str, **fields):
+        obj = super().__new__(cls, name)
+        obj.__dict__.update(fields)
+        return obj
+
+    def __reduce__(self):
+        return (_rebuilt, (str(self), dict(self.__dict__)))
+
+    def __repr__(self) -> str:
+        return f"Resolved({str(self)!r})"
+
+    @property
+    def adapter(self) -> EngineAdapter:
+        """The engine's adapter (:func:`get_adapter`: EngineUnavailable when it cannot run here)."""
+        return get_adapter(self.engine)
+
+
+def _rebuilt(name: str, fields: dict) -> Resolved:
+    return Resolved(name, **fields)
+
+
+def resolve(name) -> Resolved:
+    """``name`` (``ENGINE:VARIANT``) as a :class:`Resolved` (itself when it already is one). Never raises: a
+    name no loadable engine declares resolves to the cautious defaults (no order, DEFAULT_TRAITS), as its
+    verdicts are then judged; :func:`split_variant` is the strict lookup for user input."""
+    if isinstance(name, Resolved):
+        return name
+    from cross_checks.core.tolerances import MACHINE_EPSILON
+    from cross_checks.engines.base import DEFAULT_TRAITS
+    name = str(name)
+    engine, _, variant = name.partition(":")
+    spec = declared_variant(name)
+    imitates = getattr(spec, "imitates", "") or ""
+    traits = (getattr(spec, "traits", None) or getattr(declared_variant(imitates), "traits", None)
+              or DEFAULT_TRAITS)
+    return Resolved(name, engine=engine, variant=variant, order=getattr(spec, "order", None), traits=traits,
+                    imitates=imitates, precision=traits.precision,
+                    rounding_unit=MACHINE_EPSILON[traits.precision] * float(traits.rounding_factor),
+                    one_step=has_one_step(name), known=spec is not None)
 
 
 def has_one_step(name: str) -> bool:

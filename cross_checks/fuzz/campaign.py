@@ -85,6 +85,8 @@ def _cache_path(cache_root, key):
 
 
 def compute_batch(seed, batch, variants) -> dict:
+    from cross_checks.engines import resolve
+    variants = [resolve(v) for v in variants]   # once per batch: every property reads what they declare
     n0 = N0_CYCLE[batch % len(N0_CYCLE)]
     draws = [generate.draw(seed, batch * BATCH + k) for k in range(BATCH)]
     from threadpoolctl import threadpool_limits

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cross_checks.core import tolerances as tol
-from cross_checks.engines import get_adapter, has_one_step, split_variant
+from cross_checks.engines import resolve
 from cross_checks.engines.base import EngineError, RunRequest
 from cross_checks.sweep.lifecycle import each_within_limits
 
@@ -77,8 +77,8 @@ def _simulated(adapter, var, requests) -> list:
 
 def run_ladder(variant: str, scenarios, h0s, n0: int) -> list:
     """The free runs of ``variant`` on every case at h0, h0/2, h0/4 (``n0``, 2 n0, 4 n0 steps): [Runs] × 3."""
-    engine, var = split_variant(variant)
-    adapter = get_adapter(engine)
+    variant = resolve(variant)   # the batch's Resolved (a name, when a caller gives one)
+    adapter, var = variant.adapter, variant.variant
     out = [_empty_runs(np.asarray(h0s, dtype=float) / 2 ** r, n0 * 2 ** r) for r in range(RUNGS)]
     cannot = [adapter.expressible(sc, var) for sc in scenarios]
     for i, why in enumerate(cannot):
@@ -95,10 +95,10 @@ def run_ladder(variant: str, scenarios, h0s, n0: int) -> list:
 def one_step(variant: str, scenarios, hs, y_start):
     """One step of ``hs[j]`` from ``y_start[j]`` (M, 13) for members of ``scenarios[j]``: (M, 13), NaN
     where the engine failed; None when the engine has no one-step mode."""
-    if not has_one_step(variant):
+    variant = resolve(variant)
+    if not variant.one_step:
         return None
-    engine, var = split_variant(variant)
-    adapter = get_adapter(engine)
+    adapter, var = variant.adapter, variant.variant
     y_start = np.asarray(y_start, dtype=float)
     out = np.full((len(scenarios), 13), np.nan)
     groups: dict = {}   # (id(scenario), h) -> members, in order (the list holds the scenarios)

@@ -26,13 +26,12 @@ from cross_checks.analysis.expectations import (
     expectation,
     gyroscopic_clamp_acts,
     gyroscopic_term_matters,
-    machine_epsilon,
     pair_is_same_arithmetic,
-    traits,
 )
 from cross_checks.analysis.judge import judge_ladder
 from cross_checks.core import tolerances as tol
 from cross_checks.core.quantities import QUANTITIES, UNITS, state_errors
+from cross_checks.engines import resolve
 
 __all__ = ["Context", "ladder_errors", "free_running_order", "run_floor", "one_step_order", "conservation",
            "agreement", "PROPERTIES", "equivalent_pairs"]
@@ -190,10 +189,11 @@ def run_floor(ctx, variant: str, q: str, n: int, h_s: float, reference_error,
     """The round-off floor of a run of ``n`` steps of ``h_s`` for quantity ``q`` (metrics.roundoff_floor in
     the variant's precision; plus metrics.differencing_floor for the velocity of a variant that recomputes it
     from positions), as the sweep's convergence records have it (sweep.assemble.ladder_floors)."""
-    eps = machine_epsilon(variant)
+    variant = resolve(variant)
+    eps = variant.rounding_unit
     f = M.roundoff_floor(ctx.scales[q], n, reference_error=reference_error, amplification=amplification,
                          quantity=q, eps=eps)
-    if q == "velocity" and traits(variant).velocity_from_positions:
+    if q == "velocity" and variant.traits.velocity_from_positions:
         f += M.differencing_floor(ctx.scales["position"], n, h_s, eps, amplification)
     return f
 
@@ -221,9 +221,10 @@ def one_step_order(ctx: Context, variant: str, i: int, defects) -> tuple:
 def _models_physics(sc, variant, physics=None) -> bool:
     """The variant models the conserved motion: not the course update where the gyroscopic term matters, nor
     a step whose gyroscopic clamp acts on this motion (expectations.gyroscopic_clamp_acts)."""
-    if traits(variant).gyroscopic_term and gyroscopic_clamp_acts(sc, variant, physics, physics is not None):
+    variant = resolve(variant)
+    if variant.traits.gyroscopic_term and gyroscopic_clamp_acts(sc, variant, physics, physics is not None):
         return False
-    return traits(variant).gyroscopic_term or not gyroscopic_term_matters(sc)
+    return variant.traits.gyroscopic_term or not gyroscopic_term_matters(sc)
 
 
 def conservation(ctx: Context, variant: str, i: int, ladder) -> tuple:
@@ -264,7 +265,7 @@ def conservation(ctx: Context, variant: str, i: int, ladder) -> tuple:
                 size = max(float(np.max(np.linalg.norm(L, axis=1))), momentum_scale)
                 unit = "kg m²/s"
             allowed = (ctx.allowance[kind] * float(runs.h_s[i]) / h0
-                       + n * tol.CHECK_ROUNDINGS_PER_STEP * machine_epsilon(variant) * size
+                       + n * tol.CHECK_ROUNDINGS_PER_STEP * resolve(variant).rounding_unit * size
                        + _lever_conservation(ctx, kind, I_max, float(runs.h_s[i]) * n, n, variant))
             ratio = drift / allowed if allowed > 0 else (math.inf if drift > 0 else 0.0)
             if worst is None or ratio > worst[0]:
@@ -291,7 +292,7 @@ def _lever_conservation(ctx, kind, I_max, t, n, variant: str = "") -> float:
     if not pays_lever_roundoff(variant):
         return 0.0
     lv = ctx.lever or {}
-    scale = machine_epsilon(variant) / _EPS if variant else 1.0   # ctx.lever is in float64's ε
+    scale = resolve(variant).rounding_unit / _EPS if variant else 1.0   # ctx.lever is in float64's ε
     dw = scale * (lv.get("acc_rad_s2", 0.0) * t + lv.get("omega_rad_s", 0.0) * (1.0 + math.sqrt(n)))
     if kind == "angular_momentum":
         return I_max * dw
@@ -301,8 +302,8 @@ def _lever_conservation(ctx, kind, I_max, t, n, variant: str = "") -> float:
 
 def equivalent_pairs(variants) -> list:
     """The EQUIVALENT_PAIRS whose two variants are both among ``variants``: [(a, b, reason)]."""
-    have = set(variants)
-    return [(a, b, why) for a, b, why in EQUIVALENT_PAIRS if a in have and b in have]
+    have = {v: v for v in variants}   # the batch's own (Resolved) variants, looked up by name
+    return [(have[a], have[b], why) for a, b, why in EQUIVALENT_PAIRS if a in have and b in have]
 
 
 def agreement(ctx: Context, pair, i: int, ladder_a, ladder_b) -> tuple:
@@ -317,7 +318,7 @@ def agreement(ctx: Context, pair, i: int, ladder_a, ladder_b) -> tuple:
     for ra, rb in zip(ladder_a, ladder_b):
         n = len(ra.y) - 1
         h = float(ra.h_s[i])
-        eps = max(machine_epsilon(a), machine_epsilon(b))   # the coarser of the pair's roundings
+        eps = max(resolve(a).rounding_unit, resolve(b).rounding_unit)   # the coarser of the pair's roundings
         allowed = max(tol.SAME_SCHEME_REL, tol.FUZZ_ROUNDINGS_PER_STEP * n * eps * amp)
         sa, sb = ra.status[i], rb.status[i]
         if "failed" in (sa, sb) or "not_expressible" in (sa, sb):

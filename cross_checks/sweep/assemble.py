@@ -17,9 +17,7 @@ from cross_checks.analysis import metrics as M
 from cross_checks.analysis.expectations import (
     EQUIVALENT_PAIRS,
     expectation,
-    machine_epsilon,
     pair_is_same_arithmetic,
-    traits,
 )
 from cross_checks.analysis.judge import LocalEvidence, judge_ladder
 from cross_checks.core import tolerances as tol
@@ -110,14 +108,14 @@ def _ladder_errors(ladder, q, mode):
 def local_evidence(rows, variant: str = "") -> LocalEvidence | None:
     """The worst one-step defect of the runs ``rows`` of one (scenario, ``variant``), measured on their own
     recorded states (results.csv's ``step_defect_*``), or None when no run has it."""
-    from cross_checks.analysis.expectations import nominal_order
+    from cross_checks.engines import resolve
     have = [r for r in rows
             if isinstance(r.get("step_defect_ratio"), float) and math.isfinite(r["step_defect_ratio"])]
     if not have:
         return None
     worst = max(have, key=lambda r: r["step_defect_ratio"])
     return LocalEvidence(worst["step_defect_ratio"], worst["step_defect_quantity"],
-                         worst["dt"], nominal_order(variant))
+                         worst["dt"], resolve(variant).order)
 
 
 def convergence_records(scenario, variant, rows, scales, mode, measured=None) -> list:
@@ -127,6 +125,8 @@ def convergence_records(scenario, variant, rows, scales, mode, measured=None) ->
     ``fit_verdict``). ``mode`` is
     ``free_running`` (final errors) or ``one_step`` (local errors)."""
     from cross_checks.analysis.physics import physics_from_dict
+    from cross_checks.engines import resolve
+    variant = resolve(variant)   # the sweep's Resolved (a name, when a caller gives one)
     measured = measured or {}
     phys = physics_from_dict(measured["physics"]) if measured.get("physics") else None
     ladder = sorted([r for r in rows if r["in_ladder"]], key=lambda r: -r["dt"])
@@ -139,12 +139,12 @@ def convergence_records(scenario, variant, rows, scales, mode, measured=None) ->
     for q in QUANTITIES:
         errs, statuses = _ladder_errors(ladder, q, mode)
         exp = expectation(scenario, variant, q, mode, physics=phys, measure_physics=False)
-        floors = ladder_floors(ladder, q, scales, mode, label, measured, machine_epsilon(variant),
-                               traits(variant).velocity_from_positions)
+        floors = ladder_floors(ladder, q, scales, mode, label, measured, variant.rounding_unit,
+                               variant.traits.velocity_from_positions)
         j = judge_ladder(dts, errs, floors, statuses, exp, local, q)
         fit, verdict, matches, phrase = j.fit, j.verdict, j.matches, j.assessment
         out.append({
-            "scenario": scenario.name, "engine": variant, "quantity": q, "mode": mode,
+            "scenario": scenario.name, "engine": str(variant), "quantity": q, "mode": mode,
             "order": fit.order, "pairwise_orders": fit.pairwise_orders, "verdict": verdict,
             "fit_verdict": fit.verdict,
             "dt_s": fit.dt_s, "errors": [None if not np.isfinite(e) else e for e in fit.errors],

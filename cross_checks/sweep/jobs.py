@@ -18,7 +18,6 @@ from typing import NamedTuple
 import numpy as np
 
 from cross_checks.analysis import metrics as M
-from cross_checks.analysis.expectations import machine_epsilon, precision, traits
 from cross_checks.core import tolerances as tol
 from cross_checks.core.files import json_default, save_npz_atomic
 from cross_checks.core.quantities import (
@@ -327,10 +326,10 @@ def run_job_group(jobs, scenario, ref_path: str, cache_root: str | None = None, 
     None), ``series`` (dict of float32 arrays for the default Δt, else None). The runs not cached are asked
     of the engine in one call (:func:`_runs`). A run that finished (ok or diverged) is cached; a failed one
     is not."""
-    from cross_checks.engines import get_adapter, split_variant
-    engine, variant = split_variant(jobs[0].variant)
+    from cross_checks.engines import resolve
+    resolved = resolve(jobs[0].variant)   # the plan's Resolved (a name, when a caller gives one)
     try:
-        adapter = get_adapter(engine)
+        adapter = resolved.adapter
         version = adapter.version()
     except Exception as exc:  # noqa: BLE001 - an engine that cannot run here is a failed row
         return [_record(_nan_row(job, scenario, "failed", str(exc), "", "")) for job in jobs]
@@ -347,14 +346,13 @@ def run_job_group(jobs, scenario, ref_path: str, cache_root: str | None = None, 
     todo = [k for k in range(len(jobs)) if out[k] is None]
     t_ref_all, y_ref_all, label = load_reference(ref_path) if todo else (None, None, "")
     for k, run in zip(todo, _runs([jobs[k] for k in todo], scenario, time_limit_s)):
-        out[k] = rec = _measure(jobs[k], scenario, adapter, variant,
-                                version, run, t_ref_all, y_ref_all, label)
+        out[k] = rec = _measure(jobs[k], scenario, resolved, version, run, t_ref_all, y_ref_all, label)
         if k in keys and rec["row"]["status"] in ("ok", "diverged"):
             _cache_store(cache_root, keys[k][1], keys[k][0], rec)
     return out
 
 
-def _measure(job, scenario, adapter, variant, version, run, t_ref_all, y_ref_all, label) -> dict:
+def _measure(job, scenario, resolved, version, run, t_ref_all, y_ref_all, label) -> dict:
     """Measure the job's run ``run`` (``(trajectory, "")`` or ``(None, why it failed)``) against the
     reference ``y_ref_all`` on ``t_ref_all``: errors, conservation drifts, one-step errors and (at the
     default Δt) the plotted series."""
@@ -375,14 +373,14 @@ def _measure(job, scenario, adapter, variant, version, run, t_ref_all, y_ref_all
         stem = COLUMN_STEM[q]
         row[f"{stem}_err_final"] = summ[q]["final"] if status == "ok" else math.nan
         row[f"{stem}_err_max"] = summ[q]["max"]
-    drifts = _conservation_columns(row, scenario.problem, t, y)
-    _local_error_columns(row, adapter, scenario, variant, job.dt_s, t_ref_all, y_ref_all)
-    _step_defect_columns(row, scenario, y, job.dt_s)
+    drifts = _conservation_columns(row, scenario.problem, t, y, resolved.rounding_unit)
+    _local_error_columns(row, resolved, scenario, job.dt_s, t_ref_all, y_ref_all)
+    _step_defect_columns(row, scenario, y, job.dt_s, resolved)
     series = _series(t, y, y_ref, errs, drifts) if job.default_dt else None
     return _record(row, y[-1].tolist() if status == "ok" else None, series)
 
 
-def _step_defect_columns(row, scenario, y, dt_s) -> None:
+def _step_defect_columns(row, scenario, y, dt_s, resolved) -> None:
     """The run judged on its own recorded states, as ``rbcheck check`` judges a file: from each of
     tol.STEP_DEFECT_ROWS recorded states spread over the run, the exact flow over Δt against the next
     row, over what a consistent scheme of order ≥ 1 leaves there (``analysis.flow.run_local_defect``).
@@ -390,9 +388,10 @@ def _step_defect_columns(row, scenario, y, dt_s) -> None:
     pre-asymptotic excuse); every engine, engine files included, has it."""
     from cross_checks.analysis.flow import run_local_defect
     # the precision's unit roundoff × the step's declared rounding factor
-    u = tol.UNIT_ROUNDOFF[precision(row["engine"])] * float(traits(row["engine"]).rounding_factor)
+    tr = resolved.traits
+    u = tol.UNIT_ROUNDOFF[resolved.precision] * float(tr.rounding_factor)
     ratio, quantity, t_s = run_local_defect(scenario, y, dt_s, max_rows=tol.STEP_DEFECT_ROWS, unit_roundoff=u,
-                                            velocity_from_positions=traits(row["engine"]).velocity_from_positions)
+                                            velocity_from_positions=tr.velocity_from_positions)
     row.update(step_defect_ratio=ratio, step_defect_quantity=quantity, step_defect_t_s=t_s)
 
 
@@ -419,9 +418,9 @@ def _reference_on(t, t_ref_all, y_ref_all, scenario, label):
     return reference_solution(scenario, t)
 
 
-def _conservation_columns(row, problem, t, y) -> dict:
-    """Fill the drift columns of ``row`` where the physics conserves the quantity; returns the drift
-    series {quantity: relative drift per step}."""
+def _conservation_columns(row, problem, t, y, eps: float) -> dict:
+    """Fill the drift columns of ``row`` where the physics conserves the quantity (``eps``: the variant's
+    rounding unit, Resolved.rounding_unit); returns the drift series {quantity: relative drift per step}."""
     cons = M.conserved(problem.forces)
     drifts = {}
     with np.errstate(all="ignore"):
@@ -431,7 +430,6 @@ def _conservation_columns(row, problem, t, y) -> dict:
             amp = float(np.max(E_terms) / abs(E[0])) if E[0] != 0 else 1.0
             row["energy_drift_max"] = float(np.max(np.abs(d)))
             row["energy_drift_final"] = float(d[-1])
-            eps = machine_epsilon(row["engine"])
             row["energy_drift_kind"] = M.drift_kind(t, d, M.drift_floor(len(t) - 1, amp, eps))
         if cons["angular_momentum"][0]:
             drifts["angular_momentum"] = M.relative_drift(M.angular_momentum_W(problem, y))
@@ -442,18 +440,18 @@ def _conservation_columns(row, problem, t, y) -> dict:
     return drifts
 
 
-def _local_error_columns(row, adapter, scenario, variant, dt_s, t_ref_all, y_ref_all) -> None:
+def _local_error_columns(row, resolved, scenario, dt_s, t_ref_all, y_ref_all) -> None:
     """One-step (local) errors from LOCAL_SAMPLES reference states on the run's own grid. They stay
     empty for an engine without a one-step mode (an engine file: whole runs only); a one-step mode that
     fails leaves them empty and says so in the row's message."""
-    if not adapter.has_one_step:
+    if not resolved.one_step:
         return
     grid_idx = np.searchsorted(t_ref_all, dt_s * np.arange(scenario.n_steps(dt_s) + 1))
     starts = decimation_indices(len(grid_idx) - 1, LOCAL_SAMPLES)
     y0, y1_ref = y_ref_all[grid_idx[starts]], y_ref_all[grid_idx[starts + 1]]
     try:
         with np.errstate(all="ignore"):
-            y1 = np.asarray(adapter.one_step(scenario, variant, dt_s, y0), dtype=float)
+            y1 = np.asarray(resolved.adapter.one_step(scenario, resolved.variant, dt_s, y0), dtype=float)
         lerr = state_errors(y1, y1_ref)
     except Exception as exc:  # noqa: BLE001
         row["message"] = (row["message"] + "; " if row["message"] else "") + f"one-step mode failed: {exc}"

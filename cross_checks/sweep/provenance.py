@@ -90,12 +90,13 @@ def _engines_provenance(variants) -> dict:
 def variant_record(name: str, info) -> dict:
     """summary.json's record of a variant: description, version, declared order, whether it has a
     one-step mode, and where its engine comes from (an engine file with its SHA-256)."""
-    from cross_checks.engines import engine_provenance, has_one_step
-    out = {"name": name, "description": info.description if info else "",
+    from cross_checks.engines import engine_provenance, resolve
+    name = resolve(name)   # the sweep's Resolved
+    out = {"name": str(name), "description": info.description if info else "",
            "version": info.version if info else "", "declared_order": info.order if info else None,
-           "one_step": has_one_step(name)}
+           "one_step": name.one_step}
     try:
-        out.update({k: v for k, v in engine_provenance(name.split(":", 1)[0]).items() if k != "version"})
+        out.update({k: v for k, v in engine_provenance(name.engine).items() if k != "version"})
     except Exception:  # noqa: BLE001 - an engine that vanished from the registry keeps its basic record
         pass
     return out

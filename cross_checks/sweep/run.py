@@ -117,7 +117,7 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
     Parameters
     ----------
     scenarios : list of Scenario (distinct names).
-    variants : list of available ``ENGINE:VARIANT`` names.
+    variants : list of available ``ENGINE:VARIANT`` names (resolved here once, engines.Resolved).
     jobs : worker processes (default: all cores); 1 runs everything in this process.
     use_cache : read cached job results (they are always written).
     skipped : ``{variant: reason}`` of variants left out (recorded in summary.json).
@@ -136,7 +136,9 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
     Returns the summary dict (as written to summary.json). Raises SweepError (bad input) or
     SweepInterrupted (Ctrl-C: nothing was replaced).
     """
+    from cross_checks.engines import resolve
     out = _checked_output(out_dir, scenarios)
+    variants = [resolve(v) for v in variants]   # once: every stage below reads what they declare from these
     jobs = max(1, int(jobs or usable_cores()))
     long_scenarios, scenarios = ([s for s in scenarios if getattr(s, "long_run", False) is long]
                                  for long in (True, False))
@@ -265,7 +267,7 @@ def _write_results(staging, scenarios, variants, refs, records, *, started, skip
     """Assemble the job records and write results.csv, series/ and summary.json into ``staging`` (its
     work directory removed) — and, with long runs, long_runs.csv and their series; returns the summary. The
     continued ladders of :mod:`.refine` run on ``runner``."""
-    from cross_checks.engines import all_variants, has_one_step
+    from cross_checks.engines import all_variants
     rows = assemble.result_rows(records, [s.name for s in scenarios], variants)
     atomic_write_text(staging / "results.csv", assemble.results_csv_text(rows))
     assemble.write_scenario_files(staging, scenarios)
@@ -280,7 +282,7 @@ def _write_results(staging, scenarios, variants, refs, records, *, started, skip
             vrows = [r for r in rows if r["scenario"] == sc.name and r["engine"] == v]
             recs = assemble.convergence_records(sc, v, vrows, ref.scales, "free_running", ref.measured)
             free.append((sc, v, vrows, ref, recs, refine.requests(sc, v, vrows, ref, recs)))
-            if has_one_step(v):  # engines without a one-step mode have no local errors to fit
+            if v.one_step:  # engines without a one-step mode have no local errors to fit
                 local += assemble.convergence_records(sc, v, vrows, ref.scales, "one_step", ref.measured)
         save_npz_atomic(staging / "series" / f"{sc.name}.npz",
                         assemble.series_arrays(sc, ref, by_key, variants))

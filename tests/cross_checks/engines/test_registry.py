@@ -106,3 +106,28 @@ def test_an_adapter_that_breaks_the_interface_is_refused(adapter_attrs, words):
 def test_a_declared_order_must_be_a_positive_number(order):
     with pytest.raises(ValueError, match="order must be a number in"):
         Variant(order)
+
+
+def test_resolved_variant_carries_what_its_engine_declares_and_stays_its_name():
+    """A variant is resolved once (engines.resolve) and passed down: it equals, hashes, formats and pickles as
+    its name, and carries the declared order, traits (an imitation's, when it imitates), precision, rounding
+    unit and one-step mode — each equal to what the registry's one-off lookups say."""
+    import pickle
+
+    from cross_checks.core.tolerances import MACHINE_EPSILON
+    from cross_checks.engines import Resolved, declared_order, declared_traits, has_one_step, resolve
+    for name in ("reference:rk4", "mujoco:euler", "pybullet:multibody"):
+        v = resolve(name)
+        assert isinstance(v, Resolved) and v == name and hash(v) == hash(name) and f"{v}" == name
+        assert {v: 1}[name] == 1 and resolve(v) is v
+        assert (v.engine, v.variant) == tuple(name.split(":"))
+        assert v.order == declared_order(name) and v.traits == declared_traits(name)
+        assert v.precision == v.traits.precision == "float64" and v.one_step == has_one_step(name)
+        assert v.rounding_unit == MACHINE_EPSILON["float64"] * v.traits.rounding_factor
+        back = pickle.loads(pickle.dumps(v))
+        assert isinstance(back, Resolved) and back == v and back.traits == v.traits and back.order == v.order
+        assert v.adapter.name == v.engine and v.known
+    unknown = resolve("nobody:knows")   # a name from someone else's results: the cautious defaults
+    from cross_checks.engines.base import DEFAULT_TRAITS
+    assert unknown.order is None and unknown.traits == DEFAULT_TRAITS and not unknown.known
+    assert not unknown.one_step
