@@ -16,7 +16,14 @@ from dataclasses import dataclass
 
 from cross_checks.core.names import NAME_RE, did_you_mean
 from cross_checks.core.trajectory import Trajectory
-from cross_checks.engines.base import EngineAdapter, EngineError, EngineNotInstalled, NotExpressible, Variant
+from cross_checks.engines.base import (
+    EngineAdapter,
+    EngineError,
+    EngineNotInstalled,
+    NotExpressible,
+    Traits,
+    Variant,
+)
 
 __all__ = ["ENTRY_POINT_GROUP", "VariantInfo", "EngineEntry", "all_variants", "available_variants",
            "get_adapter", "split_variant", "default_variant", "run_variant", "run_variants", "run_requests",
@@ -336,6 +343,16 @@ class Resolved(str):
     * ``known``: a loadable engine declares it (False for a name read from someone else's results).
 
     Immutable by convention: made only by :func:`resolve`."""
+
+    engine: str
+    variant: str
+    order: float | None
+    traits: Traits
+    imitates: str
+    precision: str
+    rounding_unit: float
+    one_step: bool
+    known: bool
 
     def __new__(cls, name: str, **fields):
         obj = super().__new__(cls, name)
