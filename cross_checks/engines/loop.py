@@ -5,7 +5,9 @@ For each world of B bodies (the requests grouped by ``WorldEngine.group_key``), 
 1. the harness force and torque of each body (base.harness_force_torque_floats: forces from the
    start-of-step state, held over the step, scaled by the pre-step decay factors), from the requested initial
    state at step 1 and from the state the engine returned after; constant forces (no state dependence)
-   evaluated once, and applied once to an engine that keeps them (``keeps_forces``);
+   evaluated once, and applied once to an engine that keeps them (``keeps_forces``); an engine that takes
+   the torques fixed in body axes itself (``takes_body_torque``) is given them once, and the harness
+   evaluates the other forces only;
 2. the weight ``m g`` taken off when the engine applies gravity itself;
 3. the pre-step decay ``v ← γ_v v``, ``ω ← γ_ω ω`` (``World.decay``; docs/semantics.md, "Velocity decay");
 4. ``World.step()``: timed, the engine's own time (``Run.engine_s``); everything else is rbcheck's;
@@ -31,34 +33,60 @@ An engine that raises, returns the wrong shape, or returns a non-finite state wi
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
 
 from cross_checks.engines import base
 from cross_checks.engines.base import EngineError
-from reference_sim.compiled import ForceRows
+from reference_sim.compiled import ForceEvaluator, ForceRows
 from reference_sim.quaternion import same_side
 from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
 
-__all__ = ["run", "one_step", "Harness"]
+__all__ = ["run", "one_step", "Harness", "host_problem"]
+
+
+def host_problem(problem, body_torque: bool):
+    """``problem`` as the harness evaluates its forces: for an engine that applies the torques fixed in body
+    axes itself (``WorldEngine.takes_body_torque``), without them; otherwise ``problem`` itself."""
+    fm = problem.forces
+    if not body_torque or not any(t.frame == "body" for t in fm.torques):
+        return problem
+    kept = tuple(t for t in fm.torques if t.frame != "body")
+    return dataclasses.replace(problem, forces=dataclasses.replace(fm, torques=kept))
+
+
+def body_torque_B(problem) -> np.ndarray:
+    """The sum of ``problem``'s torques fixed in body axes (N m, body axes): what an engine that takes them
+    itself is given (``World.apply_body_torque``)."""
+    return sum((np.asarray(t.torque, dtype=float) for t in problem.forces.torques if t.frame == "body"),
+               np.zeros(3))
 
 
 class Harness:
     """The harness forces of B bodies (one request each) at step ``dt_s`` (one for all, or one per body):
     per body the plain-float evaluator of base.harness_force_torque_floats, and the pre-step decay factors
-    (B,)."""
+    (B,). ``body_torque``: the engine applies the torques fixed in body axes itself (``body_torque_B``, the
+    (B, 3) it is given); the harness's forces are then the rest (:func:`host_problem`)."""
 
-    def __init__(self, scenarios, dt_s, applies_gravity: bool):
-        self.ft = [base.float_forces(sc).force_torque for sc in scenarios]
+    def __init__(self, scenarios, dt_s, applies_gravity: bool, body_torque: bool = False):
+        host = {}   # each scenario's problem as the harness evaluates it, once
+        for sc in scenarios:
+            if id(sc) not in host:
+                host[id(sc)] = host_problem(sc.problem, body_torque)
+        problems = [host[id(sc)] for sc in scenarios]
+        self.ft = [ForceEvaluator(p).force_torque for p in problems]
         # many bodies: one compiled call for all of them (the same numbers, member by member)
-        self.rows = ForceRows.of([sc.problem for sc in scenarios]) if len(scenarios) > 4 else None
+        self.rows = ForceRows.of(problems) if len(scenarios) > 4 else None
         dts = [dt_s] * len(scenarios) if np.ndim(dt_s) == 0 else list(dt_s)
         g = [tuple(float(x) for x in base.decay_factors(sc, h)) for sc, h in zip(scenarios, dts)]
         self.g_v = np.array([a for a, _ in g])
         self.g_w = np.array([b for _, b in g])
         self.weight = np.array([base.weight_W(sc) if applies_gravity else np.zeros(3) for sc in scenarios])
-        self.state_dependent = any(sc.problem.forces.state_dependent for sc in scenarios)
+        self.state_dependent = any(p.forces.state_dependent for p in problems)
+        self.body_torque_B = (np.array([body_torque_B(sc.problem) for sc in scenarios]) if body_torque
+                              else None)
         self.decays = any(sc.problem.forces.has_decay for sc in scenarios)
         # a few bodies: per body, plain floats (ft, γ_v, γ_ω, the weight), two arrays built at the end
         self._floats = list(zip(self.ft, self.g_v.tolist(), self.g_w.tolist(), self.weight.tolist()))
@@ -145,7 +173,7 @@ def _run_world(engine, variant: str, reqs) -> list:
     dts = [float(r.dt_s) for r in reqs]   # one step, unless the engine's worlds take several (world_key)
     B, n_max = len(reqs), max(int(r.n_steps) for r in reqs)
     scenarios = [r.scenario for r in reqs]
-    harness = Harness(scenarios, dts, engine.applies_gravity)
+    harness = Harness(scenarios, dts, engine.applies_gravity, engine.takes_body_torque)
     first = {}
     for sc in scenarios:   # a scenario's initial state once, however many of its runs the world holds
         if id(sc) not in first:
@@ -164,6 +192,7 @@ def _run_world(engine, variant: str, reqs) -> list:
             rec = np.empty((n_max + 1, *raw0.shape))
             rec[0] = raw0
             per_stage = bool(world.per_stage)
+            _body_torque(world, harness, per_stage)
             constant = not harness.state_dependent
             f, tau = (None, None) if per_stage else harness.wrench(y0)
             ends = np.array([int(r.n_steps) for r in reqs])
@@ -241,6 +270,15 @@ def _steps(engine, variant, reqs, world, harness, rec, n_max, f, tau, ends, stop
     return engine_s
 
 
+def _body_torque(world, harness, per_stage: bool) -> None:
+    """Give a world that takes the body-axes torques itself (``WorldEngine.takes_body_torque``) its bodies'
+    torques, once (it keeps them): scaled by the pre-step decay factor γ_ω as the harness's own torques are,
+    unless its forces are evaluated at every stage (the decay is then a damping torque of the stages)."""
+    tau_B = harness.body_torque_B
+    if tau_B is not None:
+        world.apply_body_torque(tau_B if per_stage else tau_B * harness.g_w[:, None])
+
+
 def _check(engine, variant, reqs, world, rec, start: int, stop: int, ends, stopped: dict) -> None:
     """Bodies whose recorded states of steps ``start..stop-1`` (within their own runs) blew up, or whose
     engine warned there, into ``stopped`` as ``(first bad step, words)``: the words of everything found in
@@ -291,7 +329,7 @@ def one_step(engine, scenario, variant: str, dt_s: float, y_start) -> np.ndarray
         return np.empty(np.shape(y_start))
     from cross_checks.engines.base import RunRequest
     reqs = [RunRequest(scenario, float(dt_s), 1)] * len(rows)
-    harness = Harness([scenario] * len(rows), dt_s, engine.applies_gravity)
+    harness = Harness([scenario] * len(rows), dt_s, engine.applies_gravity, engine.takes_body_torque)
     world = engine.build(reqs, variant, float(dt_s))
     try:
         with np.errstate(all="ignore"):
@@ -300,6 +338,7 @@ def one_step(engine, scenario, variant: str, dt_s: float, y_start) -> np.ndarray
                 world.set_state(rows)
                 raw1 = np.asarray(world.rollout(1, harness), dtype=float)
             else:
+                _body_torque(world, harness, per_stage)
                 if per_stage:
                     world.set_state(rows)
                 else:

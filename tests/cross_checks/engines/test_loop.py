@@ -243,3 +243,69 @@ def test_a_world_of_several_steps_gives_each_run_its_own_step_and_decay(name):
     for r, got in zip(reqs, runs):
         want = ExpmapEngine().simulate(sc, "euler", r.dt_s, r.n_steps)
         assert np.array_equal(got.y, want.y) and np.array_equal(got.t_s, want.t_s)
+
+
+class _BodyTorqueWorld(ExpmapWorld):
+    """The example world taking the torques fixed in body axes itself (WorldEngine.takes_body_torque), as
+    MuJoCo's qfrc_applied does: τ_W = R(q) τ_B at the start of each step (``world_axes``: a planted bug
+    that applies τ_B as if it were in world axes)."""
+    world_axes = False
+
+    def __init__(self, requests, dt_s):
+        super().__init__(requests, dt_s)
+        self.tau_B = np.zeros((len(requests), 3))
+
+    def apply_body_torque(self, tau_B):
+        self.tau_B = np.array(tau_B, dtype=float)
+
+    def step(self):
+        from scipy.spatial.transform import Rotation
+        given = self.tau_W
+        own = (self.tau_B if self.world_axes
+               else Rotation.from_quat(self.y[:, 6:10], scalar_first=True).apply(self.tau_B))
+        self.tau_W = given + own
+        super().step()
+        self.tau_W = given
+
+
+def _body_torque_engine(world_axes: bool):
+    class BodyTorqueEngine(ExpmapEngine):
+        name = "bodytorque"
+        takes_body_torque = True
+
+        def build(self, requests, variant, dt_s):
+            w = _BodyTorqueWorld(requests, dt_s)
+            w.world_axes = world_axes
+            return w
+    return BodyTorqueEngine()
+
+
+def _decaying_applied_torque():
+    """applied_torque with both velocity decays on (the body torque then scaled by γ_ω before each step)."""
+    from cross_checks.scenario import parse_scenario
+    text = (Path(__file__).resolve().parents[3] / "cross_checks/scenario/catalog/applied_torque.toml").read_text()
+    return parse_scenario(text.replace('name = "applied_torque"', 'name = "decaying_torque"').replace(
+        "[forces]\n", "[forces]\nvelocity_decay = 0.999\nangular_velocity_decay = 0.998\n"), "<test>")
+
+
+@pytest.mark.parametrize("name", ["applied_torque", "decaying_torque", "velocity_decay", "tumbling_box"])
+def test_a_world_that_takes_the_body_torque_itself_moves_as_the_harness_drives_it(name):
+    """An engine declaring ``takes_body_torque`` gets each body's body-axes torques (scaled by the pre-step
+    γ_ω) once, and the harness's forces without them: its runs and one step equal the same world driven
+    by the harness alone, to round-off (R(q)τ_B computed by the world instead of the harness), on the
+    catalog's body-torque scenario, on decay and on a torque-free one; a world that takes that torque in
+    world axes instead is caught (the error of a wrong torque direction grows like t², far above round-off)."""
+    from cross_checks.core import tolerances as tol
+    sc = _decaying_applied_torque() if name == "decaying_torque" else load_scenario(name)
+    assert (name != "decaying_torque") or sc.problem.forces.has_decay
+    n = min(sc.n_steps(), 400)
+    plain = ExpmapEngine().simulate(sc, "euler", sc.dt_s, n).y
+    own = _body_torque_engine(False).simulate(sc, "euler", sc.dt_s, n).y
+    scale = np.max(np.abs(plain), axis=0) + 1.0
+    assert np.max(np.abs(own - plain) / scale) <= tol.SAME_SCHEME_REL
+    y0 = plain[n // 2: n // 2 + 3]
+    one = _body_torque_engine(False).one_step(sc, "euler", sc.dt_s, y0)
+    assert np.max(np.abs(one - ExpmapEngine().one_step(sc, "euler", sc.dt_s, y0))) <= tol.SAME_SCHEME_REL
+    body_torque = any(t.frame == "body" for t in sc.problem.forces.torques)
+    wrong = _body_torque_engine(True).simulate(sc, "euler", sc.dt_s, n).y
+    assert (np.max(np.abs(wrong - plain) / scale) > 1e3 * tol.SAME_SCHEME_REL) == body_torque
