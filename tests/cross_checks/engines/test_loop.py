@@ -283,7 +283,8 @@ def _body_torque_engine(world_axes: bool):
 def _decaying_applied_torque():
     """applied_torque with both velocity decays on (the body torque then scaled by γ_ω before each step)."""
     from cross_checks.scenario import parse_scenario
-    text = (Path(__file__).resolve().parents[3] / "cross_checks/scenario/catalog/applied_torque.toml").read_text()
+    catalog = Path(__file__).resolve().parents[3] / "cross_checks" / "scenario" / "catalog"
+    text = (catalog / "applied_torque.toml").read_text()
     return parse_scenario(text.replace('name = "applied_torque"', 'name = "decaying_torque"').replace(
         "[forces]\n", "[forces]\nvelocity_decay = 0.999\nangular_velocity_decay = 0.998\n"), "<test>")
 
@@ -294,7 +295,7 @@ def test_a_world_that_takes_the_body_torque_itself_moves_as_the_harness_drives_i
     γ_ω) once, and the harness's forces without them: its runs and one step equal the same world driven
     by the harness alone, to round-off (R(q)τ_B computed by the world instead of the harness), on the
     catalog's body-torque scenario, on decay and on a torque-free one; a world that takes that torque in
-    world axes instead is caught (the error of a wrong torque direction grows like t², far above round-off)."""
+    world axes instead is caught (a wrong torque direction's error grows like t², far above round-off)."""
     from cross_checks.core import tolerances as tol
     sc = _decaying_applied_torque() if name == "decaying_torque" else load_scenario(name)
     assert (name != "decaying_torque") or sc.problem.forces.has_decay
