@@ -5,7 +5,7 @@ definition of the equations with one bug and declares the reference scheme it im
 exactly that scheme's expectations; an engine mutant patches (with pytest's ``monkeypatch``) one function
 of the MuJoCo, PyBullet or Drake adapter, so the variant keeps its name and its expectations. A sweep of
 ``Mutant.swept`` meets the bug. tests/test_gates_mutants.py asserts that the sweep's
-gates (``cli._gate_failures``) catch every one. ``exposed_by`` names the catalog scenarios whose
+gates (``cli.sweep._gate_failures``) catch every one. ``exposed_by`` names the catalog scenarios whose
 physics exercises the bug (used by the quick default-run subset; the slow test sweeps the catalog).
 """
 from __future__ import annotations

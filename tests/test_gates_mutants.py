@@ -6,7 +6,7 @@ whole catalog for every mutant and reports the mutation score.
 """
 import pytest
 
-from cross_checks.cli import _gate_failures
+from cross_checks.cli.sweep import _gate_failures
 from cross_checks.engines import available_variants
 from cross_checks.scenario import catalog_names, load_scenario
 from cross_checks.sweep import run_sweep

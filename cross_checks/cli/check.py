@@ -1,12 +1,42 @@
-"""``rbcheck check``: read the files, check each, fit a ladder, print, write --json and --plot."""
+"""``rbcheck check``: refuse outputs that would replace an input, read the files, check each, fit a ladder,
+print, write --json, --plot and --animate."""
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
-__all__ = ["run_check"]
+from cross_checks.cli.errors import (
+    BadInput,
+    check_out_path,
+    engine_file_inputs,
+    refuse_inputs_as_outputs,
+    scenario_inputs,
+)
+
+__all__ = ["cmd_check", "run_check"]
 
 
-def run_check(args, BadInput) -> int:
+def cmd_check(args) -> int:
+    refuse_inputs_as_outputs([("--json", args.json, False), ("--plot", args.plot, False),
+                              ("--animate", args.animate, False)],
+                             [("trajectory", t, False) for t in args.trajectories]
+                             + [("sidecar", Path(t).with_suffix(".json"), False) for t in args.trajectories]
+                             + scenario_inputs([args.scenario]) + engine_file_inputs(args))
+    if args.json:
+        check_out_path(args.json, None, "--json")
+    if args.plot:
+        check_out_path(args.plot, ".png", "--plot")
+    if args.animate:
+        from reports.animation import AnimationError, check_animation_path
+        check_out_path(args.animate, None, "--animate")
+        try:
+            check_animation_path(args.animate)
+        except AnimationError as exc:
+            raise BadInput(str(exc)) from None
+    return run_check(args)
+
+
+def run_check(args) -> int:
     from cross_checks.core.files import atomic_write_text
     from cross_checks.core.trajectory import Trajectory
     from cross_checks.gates.check import CheckError, check_trajectory

@@ -9,9 +9,16 @@ import sys
 import time
 from pathlib import Path
 
+from cross_checks.cli.engines import dask_executor, resolve_engines
+from cross_checks.cli.errors import BadInput, engine_file_inputs, refuse_inputs_as_outputs
 from cross_checks.core.files import usable_cores
 
-__all__ = ["run_fuzz"]
+__all__ = ["cmd_fuzz", "run_fuzz"]
+
+
+def cmd_fuzz(args) -> int:
+    refuse_inputs_as_outputs([("--out", args.out, True)], engine_file_inputs(args))
+    return run_fuzz(args)
 
 
 def _print_result(summary, out, t0) -> None:
@@ -32,7 +39,7 @@ def _print_result(summary, out, t0) -> None:
         print(f"  {pair}: agreement {t['agreement'][0]} ({t['agreement'][1]})")
 
 
-def run_fuzz(args, BadInput, resolve_engines, dask_executor) -> int:
+def run_fuzz(args) -> int:
     import reports.fuzz_page as page
     from cross_checks.fuzz.campaign import FuzzError, run_campaign
     from cross_checks.sweep.results_dir import ResultsDirError, check_output_dir

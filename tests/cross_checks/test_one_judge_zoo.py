@@ -32,7 +32,8 @@ CASES = [("spring_pendulum", b) for b in BUILDS] + [("symmetric_top", "correct")
 
 @pytest.mark.parametrize("scenario, build", CASES)
 def test_check_sweep_and_assert_engine_agree(user_engine, tmp_path, capsys, scenario, build):
-    from cross_checks.cli import _gate_failures, main
+    from cross_checks.cli import main
+    from cross_checks.cli.sweep import _gate_failures
     from cross_checks.sweep import run_sweep
     from cross_checks.testing import assert_engine
     variant = f"userengine:{build}"

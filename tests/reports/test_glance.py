@@ -2,7 +2,7 @@
 points 8 and 9): verdicts not as expected, failed and diverged runs, the long runs' included."""
 from types import SimpleNamespace
 
-from cross_checks.cli import verdict_count
+from cross_checks.cli.sweep import verdict_count
 from reports.glance import verdict_box
 
 

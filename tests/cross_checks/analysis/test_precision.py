@@ -19,7 +19,7 @@ from cross_checks.analysis.expectations import (
     precision,
     traits,
 )
-from cross_checks.cli import _gate_failures
+from cross_checks.cli.sweep import _gate_failures
 from cross_checks.core import tolerances as tol
 from cross_checks.engines import available_variants
 from cross_checks.engines.base import Traits

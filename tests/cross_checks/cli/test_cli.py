@@ -130,7 +130,7 @@ def test_every_bad_scenario_exits_2_through_the_cli(tmp_path, capsys, old, new, 
 
 def test_the_skipped_line_gives_every_skipped_engines_reason(capsys):
     # two optional engines missing: the one line names both engines and both reasons, not the first only
-    from cross_checks.cli import _sweep_outcome
+    from cross_checks.cli.sweep import _sweep_outcome
     summary = {"run": {"runs": 0, "cached_runs": 0, "diverged_runs": 0,
                        "failed_runs": 0, "jobs": 1, "wall_s": 0.0},
                "skipped_variants": [{"name": "drake:a", "reason": "drake is not installed"},

@@ -93,7 +93,7 @@ def test_a_model_mujoco_rejects_is_a_failed_row_with_mujocos_words(tmp_path, cap
     MuJoCo runs are failed rows with MuJoCo's own words, the sweep goes on and the report says it."""
     pytest.importorskip("mujoco")
     import reports
-    from cross_checks.cli import _gate_failures
+    from cross_checks.cli.sweep import _gate_failures
     from cross_checks.sweep import run_sweep
     from tests.helpers.scenarios import with_body
     f = tmp_path / "feather.toml"

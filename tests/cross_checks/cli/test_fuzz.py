@@ -50,8 +50,8 @@ def test_an_output_that_is_not_rbchecks_is_refused_before_any_work(tmp_path, cap
 
 
 def test_the_confirmation_uses_exactly_the_sweeps_exit_rule():
-    """shrink.sweep_gate_failures repeats cli._gate_failures (the fuzz may not import the cli layer)."""
-    from cross_checks.cli import _gate_failures
+    """shrink.sweep_gate_failures repeats cli.sweep._gate_failures (the fuzz may not import the cli layer)."""
+    from cross_checks.cli.sweep import _gate_failures
     from cross_checks.fuzz.shrink import sweep_gate_failures
     summaries = [
         {"convergence": [{"engine": "e:v", "scenario": "s", "quantity": "position", "assessment": "order 2",

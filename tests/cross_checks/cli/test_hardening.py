@@ -161,7 +161,7 @@ def test_two_failed_runs_are_never_said_to_differ(tmp_path):
     """Both MuJoCo implicit variants refuse a body below mjMINVAL (handed through the Python API): their rows
     fail, and no agreement record claims the same scheme gave different results."""
     pytest.importorskip("mujoco")
-    from cross_checks.cli import _gate_failures
+    from cross_checks.cli.sweep import _gate_failures
     from cross_checks.scenario import load_scenario
     from cross_checks.sweep import run_sweep
     from tests.helpers.scenarios import with_body

@@ -6,7 +6,8 @@ import json
 
 import pytest
 
-from cross_checks.cli import build_parser, main
+from cross_checks.cli import main
+from cross_checks.cli.parser import build_parser
 from tests.helpers.scenarios import TINY_LONG_RUN
 from tests.mutants import long_run_mutants
 
@@ -69,15 +70,16 @@ def test_long_adds_the_catalogs_long_runs_and_list_shows_them(capsys):
                                             (["projectile", "--long"], True)])
 def test_the_default_sweep_has_the_long_runs_and_no_long_leaves_them_out(monkeypatch, tmp_path, argv,
                                                                           has_long):
-    import cross_checks.cli as cli
+    import cross_checks.cli.sweep as sweep
+    from cross_checks.cli.errors import BadInput
     from cross_checks.scenario import catalog_names, long_run_names
     seen = {}
 
     def capture(args, scenarios, variants, skipped):   # the scenarios the sweep would run; nothing runs
         seen["names"] = [s.name for s in scenarios]
-        raise cli.BadInput("stopped by the test")
+        raise BadInput("stopped by the test")
 
-    monkeypatch.setattr(cli, "_run_sweep", capture)
+    monkeypatch.setattr(sweep, "_run_sweep", capture)
     assert main(["sweep", *argv, "--engines", "reference:course", "--out", str(tmp_path / "out")]) == 2
     assert (set(long_run_names()) <= set(seen["names"])) is has_long
     assert not has_long or set(long_run_names()).isdisjoint(catalog_names())

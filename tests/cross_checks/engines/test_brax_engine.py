@@ -380,7 +380,7 @@ def test_the_adapter_reports_its_compile_time_apart_from_stepping():
 
 
 def test_version_and_list_name_brax():
-    from cross_checks.cli import _version_text
+    from cross_checks.cli.parser import _version_text
     from cross_checks.engines import all_variants
     assert "brax 0.14.2 (jax 0.10.2)" in _version_text()
     infos = {v.name: v for v in all_variants()}

@@ -5,7 +5,8 @@ itself never imports brax or jax."""
 import pytest
 
 from cross_checks import engines
-from cross_checks.cli import _version_text, main
+from cross_checks.cli import main
+from cross_checks.cli.parser import _version_text
 from cross_checks.engines import base, brax_engine
 
 
@@ -44,8 +45,8 @@ def test_list_and_version_say_brax_is_not_installed(no_brax, capsys):
 
 
 def test_a_default_sweep_skips_brax_and_asking_for_it_is_bad_input(no_brax, tmp_path, capsys):
-    from cross_checks.cli import _resolve_engines
-    run, skipped = _resolve_engines(None)
+    from cross_checks.cli.engines import resolve_engines
+    run, skipped = resolve_engines(None)
     assert not any(v.startswith("brax:") for v in run)
     assert {v for v in skipped if v.startswith("brax:")} == {f"brax:{v}" for v in brax_engine.VARIANTS}
     assert all("brax is not installed" in skipped[f"brax:{v}"] for v in brax_engine.VARIANTS)

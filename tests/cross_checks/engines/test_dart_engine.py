@@ -419,7 +419,7 @@ def test_the_wheel_ships_a_top_level_tests_package_that_pytest_keeps_apart_from_
 
 
 def test_version_and_list_name_dart():
-    from cross_checks.cli import _version_text
+    from cross_checks.cli.parser import _version_text
     from cross_checks.engines import all_variants
     assert "dart 6.20.0" in _version_text()
     info = {v.name: v for v in all_variants()}["dart:semi_implicit_euler"]

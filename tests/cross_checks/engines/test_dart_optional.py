@@ -5,7 +5,8 @@ told apart from an absent one."""
 import pytest
 
 from cross_checks import engines
-from cross_checks.cli import _version_text, main
+from cross_checks.cli import main
+from cross_checks.cli.parser import _version_text
 from cross_checks.engines import base, dart_engine
 
 
@@ -49,8 +50,8 @@ def test_list_and_version_say_dart_is_not_installed(no_dart, capsys):
 
 
 def test_a_default_sweep_skips_dart_and_asking_for_it_is_bad_input(no_dart, tmp_path, capsys):
-    from cross_checks.cli import _resolve_engines
-    run, skipped = _resolve_engines(None)
+    from cross_checks.cli.engines import resolve_engines
+    run, skipped = resolve_engines(None)
     assert not any(v.startswith("dart:") for v in run)
     assert {v for v in skipped if v.startswith("dart:")} == {f"dart:{v}" for v in dart_engine.VARIANTS}
     assert all("dartpy is not installed" in skipped[f"dart:{v}"] for v in dart_engine.VARIANTS)

@@ -38,9 +38,9 @@ def test_list_says_drake_is_not_installed(no_drake, capsys):
 
 def test_a_default_sweep_skips_drake_and_says_why(no_drake, tmp_path):
     # what `rbcheck sweep` does with no --engines, run on one variant to stay quick
-    from cross_checks.cli import _resolve_engines
+    from cross_checks.cli.engines import resolve_engines
     from cross_checks.sweep.run import run_sweep
-    run, skipped = _resolve_engines(None)
+    run, skipped = resolve_engines(None)
     assert not any(v.startswith("drake:") for v in run)
     drake_skipped = {v: r for v, r in skipped.items() if v.startswith("drake:")}
     assert set(drake_skipped) == {f"drake:{v}" for v in drake_engine.VARIANTS}

@@ -196,7 +196,7 @@ def test_a_program_deleted_after_loading_is_a_failed_run(tmp_path):
 
 
 def test_failed_runs_are_rows_with_the_words_and_make_the_sweep_exit_1(tmp_path, isolated_cache):
-    from cross_checks.cli import _gate_failures
+    from cross_checks.cli.sweep import _gate_failures
     path = _engine_file(tmp_path / "eng", modes=["ok", "exit3"])
     with engines.engine_files_registered([path]):
         summary = run_sweep([TINY], ["fake:ok", "fake:exit3"], tmp_path / "r", jobs=2, progress=False)

@@ -464,7 +464,7 @@ def test_an_inertia_the_compiler_refuses_is_an_engine_error_with_its_words():
 
 
 def test_version_and_list_name_genesis():
-    from cross_checks.cli import _version_text
+    from cross_checks.cli.parser import _version_text
     from cross_checks.engines import all_variants
 
     assert "genesis 1.4.5" in _version_text()

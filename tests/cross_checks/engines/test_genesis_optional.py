@@ -8,7 +8,8 @@ import sys
 import pytest
 
 from cross_checks import engines
-from cross_checks.cli import _version_text, main
+from cross_checks.cli import main
+from cross_checks.cli.parser import _version_text
 from cross_checks.engines import base, genesis_engine
 
 
@@ -51,9 +52,9 @@ def test_list_and_version_say_genesis_is_not_installed(no_genesis, capsys):
 
 
 def test_a_default_sweep_skips_genesis_and_asking_for_it_is_bad_input(no_genesis, tmp_path, capsys):
-    from cross_checks.cli import _resolve_engines
+    from cross_checks.cli.engines import resolve_engines
 
-    run, skipped = _resolve_engines(None)
+    run, skipped = resolve_engines(None)
     assert not any(v.startswith("genesis:") for v in run)
     assert {v for v in skipped if v.startswith("genesis:")} == {
         f"genesis:{v}" for v in genesis_engine.VARIANTS

@@ -500,7 +500,7 @@ def test_the_xla_cache_lives_in_rbchecks_cache_directory(monkeypatch, tmp_path, 
 
 
 def test_version_and_list_name_jaxsim():
-    from cross_checks.cli import _version_text
+    from cross_checks.cli.parser import _version_text
     from cross_checks.engines import all_variants
 
     assert "jaxsim 0.9.0" in _version_text()

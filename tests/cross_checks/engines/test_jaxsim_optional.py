@@ -8,7 +8,8 @@ import importlib.util
 import pytest
 
 from cross_checks import engines
-from cross_checks.cli import _version_text, main
+from cross_checks.cli import main
+from cross_checks.cli.parser import _version_text
 from cross_checks.engines import base, jaxsim_engine
 
 
@@ -60,9 +61,9 @@ def test_list_and_version_say_jaxsim_is_not_installed(no_jaxsim, capsys):
 
 
 def test_a_default_sweep_skips_jaxsim_and_asking_for_it_is_bad_input(no_jaxsim, tmp_path, capsys):
-    from cross_checks.cli import _resolve_engines
+    from cross_checks.cli.engines import resolve_engines
 
-    run, skipped = _resolve_engines(None)
+    run, skipped = resolve_engines(None)
     assert not any(v.startswith("jaxsim:") for v in run)
     assert {v for v in skipped if v.startswith("jaxsim:")} == {f"jaxsim:{v}" for v in jaxsim_engine.VARIANTS}
     assert all("jaxsim is not installed" in skipped[f"jaxsim:{v}"] for v in jaxsim_engine.VARIANTS)

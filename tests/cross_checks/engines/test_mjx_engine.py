@@ -432,7 +432,7 @@ def test_a_process_forked_after_jax_started_refuses_with_an_engine_error_instead
 
 
 def test_version_and_list_name_mjx():
-    from cross_checks.cli import _version_text
+    from cross_checks.cli.parser import _version_text
     from cross_checks.engines import all_variants
     assert "mjx 3.17.0 (jax 0.10.2)" in _version_text()
     info = {v.name: v for v in all_variants()}

@@ -7,7 +7,8 @@ import importlib.util
 import pytest
 
 from cross_checks import engines
-from cross_checks.cli import _version_text, main
+from cross_checks.cli import main
+from cross_checks.cli.parser import _version_text
 from cross_checks.engines import base, mjx_engine
 
 
@@ -50,8 +51,8 @@ def test_list_and_version_say_mjx_is_not_installed(no_mjx, capsys):
 
 
 def test_a_default_sweep_skips_mjx_and_asking_for_it_is_bad_input(no_mjx, tmp_path, capsys):
-    from cross_checks.cli import _resolve_engines
-    run, skipped = _resolve_engines(None)
+    from cross_checks.cli.engines import resolve_engines
+    run, skipped = resolve_engines(None)
     assert not any(v.startswith("mjx:") for v in run)
     assert {v for v in skipped if v.startswith("mjx:")} == {f"mjx:{v}" for v in mjx_engine.VARIANTS}
     assert all("mujoco-mjx is not installed" in skipped[f"mjx:{v}"] for v in mjx_engine.VARIANTS)

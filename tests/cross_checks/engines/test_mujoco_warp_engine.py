@@ -481,7 +481,7 @@ def test_a_real_sweep_forks_two_workers_that_run_mujoco_warp(tmp_path):
 
 def test_version_and_list_name_mujoco_warp_with_float32_traits():
     from cross_checks.analysis import expectations
-    from cross_checks.cli import _version_text
+    from cross_checks.cli.parser import _version_text
     from cross_checks.engines import all_variants
     assert "mujoco_warp 4.0.0 (warp 1.19.0)" in _version_text()
     info = {v.name: v for v in all_variants()}

@@ -7,7 +7,8 @@ import importlib.util
 import pytest
 
 from cross_checks import engines
-from cross_checks.cli import _version_text, main
+from cross_checks.cli import main
+from cross_checks.cli.parser import _version_text
 from cross_checks.engines import base, mujoco_warp_engine
 
 
@@ -51,8 +52,8 @@ def test_list_and_version_say_mujoco_warp_is_not_installed(no_mujoco_warp, capsy
 
 
 def test_a_default_sweep_skips_mujoco_warp_and_asking_for_it_is_bad_input(no_mujoco_warp, tmp_path, capsys):
-    from cross_checks.cli import _resolve_engines
-    run, skipped = _resolve_engines(None)
+    from cross_checks.cli.engines import resolve_engines
+    run, skipped = resolve_engines(None)
     assert not any(v.startswith("mujoco_warp:") for v in run)
     assert {v for v in skipped if v.startswith("mujoco_warp:")} == {f"mujoco_warp:{v}"
                                                                    for v in mujoco_warp_engine.VARIANTS}

@@ -7,7 +7,8 @@ import importlib.util
 import pytest
 
 from cross_checks import engines
-from cross_checks.cli import _version_text, main
+from cross_checks.cli import main
+from cross_checks.cli.parser import _version_text
 from cross_checks.engines import base, newton_engine
 
 
@@ -52,8 +53,8 @@ def test_list_and_version_say_newton_is_not_installed(no_newton, capsys):
 
 
 def test_a_default_sweep_skips_newton_and_asking_for_it_is_bad_input(no_newton, tmp_path, capsys):
-    from cross_checks.cli import _resolve_engines
-    run, skipped = _resolve_engines(None)
+    from cross_checks.cli.engines import resolve_engines
+    run, skipped = resolve_engines(None)
     assert not any(v.startswith("newton:") for v in run)
     assert {v for v in skipped if v.startswith("newton:")} == {f"newton:{v}" for v in newton_engine.VARIANTS}
     assert all("newton is not installed" in skipped[f"newton:{v}"] for v in newton_engine.VARIANTS)

@@ -521,7 +521,7 @@ def test_importing_the_adapter_and_asking_its_version_import_no_sapien():
 
 
 def test_version_and_list_name_physx():
-    from cross_checks.cli import _version_text
+    from cross_checks.cli.parser import _version_text
     from cross_checks.engines import all_variants
     assert "physx 3.0.3 (PhysX 5.3.1)" in _version_text()
     info = {v.name: v for v in all_variants()}

@@ -518,7 +518,7 @@ def test_nothing_is_compiled_or_cached_at_run_time(tmp_path, monkeypatch):
 
 
 def test_version_and_list_name_rapier():
-    from cross_checks.cli import _version_text
+    from cross_checks.cli.parser import _version_text
     from cross_checks.engines import all_variants
     assert "rapier 0.36.1" in _version_text()
     infos = {v.name: v for v in all_variants()}

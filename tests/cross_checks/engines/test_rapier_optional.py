@@ -5,7 +5,8 @@ told apart from an absent one."""
 import pytest
 
 from cross_checks import engines
-from cross_checks.cli import _version_text, main
+from cross_checks.cli import main
+from cross_checks.cli.parser import _version_text
 from cross_checks.engines import base, rapier_engine
 
 
@@ -55,8 +56,8 @@ def test_list_and_version_say_rapier_is_not_installed(no_rapier, capsys):
 
 
 def test_a_default_sweep_skips_rapier_and_asking_for_it_is_bad_input(no_rapier, tmp_path, capsys):
-    from cross_checks.cli import _resolve_engines
-    run, skipped = _resolve_engines(None)
+    from cross_checks.cli.engines import resolve_engines
+    run, skipped = resolve_engines(None)
     assert not any(v.startswith("rapier:") for v in run)
     assert {v for v in skipped if v.startswith("rapier:")} == {f"rapier:{v}" for v in rapier_engine.VARIANTS}
     assert all("rapier3d is not installed" in skipped[f"rapier:{v}"] for v in rapier_engine.VARIANTS)
@@ -65,14 +66,14 @@ def test_a_default_sweep_skips_rapier_and_asking_for_it_is_bad_input(no_rapier, 
 
 
 def test_a_sweep_without_rapier_runs_the_others_and_records_the_skip(no_rapier, tmp_path, monkeypatch):
-    # the default sweep's skipped variants (the CLI's _resolve_engines(None)) reach summary.json with the
+    # the default sweep's skipped variants (the CLI's resolve_engines(None)) reach summary.json with the
     # reason; a tiny scenario and one reference variant keep it short
-    from cross_checks.cli import _resolve_engines
+    from cross_checks.cli.engines import resolve_engines
     from cross_checks.scenario import parse_scenario
     from cross_checks.sweep import run_sweep
     from tests.helpers.scenarios import TINY
     monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "cache"))
-    _, skipped = _resolve_engines(None)
+    _, skipped = resolve_engines(None)
     summary = run_sweep([parse_scenario(TINY)], ["reference:expmap_gyro"], tmp_path / "r", jobs=1,
                         skipped={k: v for k, v in skipped.items() if k.startswith("rapier:")},
                         second_reference=False)

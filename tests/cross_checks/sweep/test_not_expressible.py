@@ -47,7 +47,7 @@ def notorque():
 
 
 def test_the_pair_is_not_run_and_is_said_everywhere(notorque, tmp_path):
-    from cross_checks.cli import _gate_failures, verdict_count
+    from cross_checks.cli.sweep import _gate_failures, verdict_count
     from cross_checks.sweep import run_sweep
     scs = [load_scenario("applied_torque"), load_scenario("projectile")]
     assert NoTorqueEngine().expressible(scs[0], "euler") == REASON   # applied_torque has a torque

@@ -7,7 +7,7 @@ import pytest
 
 from cross_checks.analysis.expectations import Expectation
 from cross_checks.analysis.refinement import errors_shrink, refined_ladder_shows_the_order
-from cross_checks.cli import _gate_failures
+from cross_checks.cli.sweep import _gate_failures
 from cross_checks.fuzz.generate import to_toml
 from cross_checks.scenario import parse_scenario
 from cross_checks.sweep import refine, run_sweep

@@ -253,7 +253,7 @@ def _catalog_text_renamed(name, **replace):
 def test_tumbling_box_whole_state_euler_is_pre_asymptotic_not_non_convergent(tmp_path):
     # ~8 flips in 10 s near the intermediate-axis separatrix: no order is claimed for the rotation, the
     # record says so (verdict pre_asymptotic, the fitted order kept), and nothing contradicts.
-    from cross_checks.cli import _gate_failures
+    from cross_checks.cli.sweep import _gate_failures
     from cross_checks.scenario import load_scenario
     s = run_sweep([load_scenario("tumbling_box")], ["reference:explicit_euler"], tmp_path / "out", jobs=1,
                   use_cache=False, progress=False)
@@ -274,7 +274,7 @@ def test_tumbling_box_whole_state_euler_is_pre_asymptotic_not_non_convergent(tmp
 
 
 def test_a_gentle_file_named_tumbling_box_converges_at_order_1_through_the_sweep(tmp_path):
-    from cross_checks.cli import _gate_failures
+    from cross_checks.cli.sweep import _gate_failures
     gentle = tmp_path / "tumbling_box.toml"
     gentle.write_text(_catalog_text_renamed("tumbling_box", **{
         "angular_velocity_body = [0.1, 5.0, 0.1]": "angular_velocity_body = [0.3, 0.5, 0.2]",
@@ -318,7 +318,7 @@ def test_rk4_order_is_fitted_and_checked_wherever_its_errors_are_above_the_measu
     # RK4 errors of 1e-9 … 1e-12 on a DOP853 reference: the old blanket floor (1e-10 × scale) called them
     # round-off; the measured floor (the reference against a 10× looser DOP853 solution) is far below.
     from cross_checks.analysis import metrics as M
-    from cross_checks.cli import _gate_failures
+    from cross_checks.cli.sweep import _gate_failures
     from cross_checks.scenario import parse_scenario
     sc = parse_scenario(PARTICLE_SPRING, "particle_spring.toml")
     s = run_sweep([sc], ["reference:rk4"], tmp_path / "out", jobs=1, use_cache=False, progress=False)

@@ -154,7 +154,7 @@ def test_a_drake_failure_is_reported_not_raised(monkeypatch):
 
 
 def test_a_sweep_whose_references_disagree_exits_1_saying_so():
-    from cross_checks.cli import _gate_failures
+    from cross_checks.cli.sweep import _gate_failures
     rec = {"label": "drake X", "agrees": False, "disagreeing": ["orientation"]}
     summary = {"scenarios": [{"name": "tennis_racket", "reference": "analytic", "second_reference": rec},
                              {"name": "projectile", "reference": "analytic", "second_reference": None}]}
