@@ -443,12 +443,38 @@ def run_bench(quick: bool = False, repeats: int = 3, render=None, sweep: bool = 
         "reference_batched >= 3x mujoco_best": r["ratio_reference_batched_vs_mujoco_best"] >= 3.0,
         "reference_single <= 5x mj_step": r["ratio_reference_single_vs_mj_step"] <= 5.0,
     }
+    r["targets"].update(overhead_targets(r["overhead"], r["batched"], r["mujoco_single_us_per_step"]))
     if sw is not None:
         r["sweep"] = sw
         r["sweep_floor_ratio"] = sw["total_s"]["median"] / sw["floor_s"]
         r["sweep_run_floor_ratio"] = sw["run_s"]["median"] / sw["floor_s"]
         r["targets"]["sweep (run + report) <= 8x its floor"] = r["sweep_floor_ratio"] <= 8.0
     return r
+
+
+#: The CPU engines whose single-run overhead the bench holds to its target (the compiled engines' rollouts
+#: are one call, their host time the compilation's and the callbacks').
+CPU_ENGINES = ("mujoco", "pybullet", "drake", "dart", "rapier", "physx")
+
+
+def overhead_targets(overhead: list, batched: list, mj_step_loop_us: float) -> dict:
+    """The speed targets of rbcheck's own time (docs/speed.md), met or not, from this run's rows: per CPU
+    engine, the whole cost per step through rbcheck at most twice the engine's own; per batched row,
+    ``simulate_many`` at least half the engine's own batched throughput; and MuJoCo's own time per step
+    through rbcheck at most 3x a bare Python loop of ``mj_step`` with the same body torque re-applied
+    (``mj_step_loop_us``)."""
+    out = {}
+    for row in overhead:
+        e, w = row["engine_us_per_step"], row["rbcheck_us_per_step"]
+        if row["variant"].split(":", 1)[0] in CPU_ENGINES and e:
+            out[f"{row['variant']}: through rbcheck <= 2x the engine's own per step"] = w <= 2.0 * e
+        if row["variant"] == "mujoco:euler" and e:
+            out["mujoco:euler: engine_s per step <= 3x a Python loop of mj_step"] = e <= 3.0 * mj_step_loop_us
+    for row in batched:
+        e, w = row["engine_body_steps_per_s"], row["rbcheck_body_steps_per_s"]
+        if e:
+            out[f"{row['variant']}: simulate_many >= 0.5x the engine's own batched throughput"] = w >= 0.5 * e
+    return out
 
 
 def _spread(st: dict, fmt: str = ".3g") -> str:

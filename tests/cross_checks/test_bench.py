@@ -155,3 +155,27 @@ def test_the_engines_own_time_is_measured_apart_from_rbchecks_and_both_are_print
                      "rbcheck_body_steps_per_s": 1e6}]
     text = bench.format_table(t)
     assert "mujoco:euler" in text and "through rbcheck" in text and "(0.25 of it)" in text
+
+
+def test_the_overhead_targets_are_read_from_the_rows_as_the_issue_words_them():
+    """Hand-made rows: a CPU engine at 1.9x / 2.1x its own time, a compiled engine (no single-run target), a
+    batched row at 0.49x / 0.5x, and MuJoCo's own step against 3x a Python loop of mj_step."""
+    overhead = [{"variant": "mujoco:euler", "engine_us_per_step": 1.0, "rbcheck_us_per_step": 1.9},
+                {"variant": "pybullet:multibody", "engine_us_per_step": 4.0, "rbcheck_us_per_step": 8.4},
+                {"variant": "mjx:euler", "engine_us_per_step": 100.0, "rbcheck_us_per_step": 900.0},
+                {"variant": "drake:semi_explicit_euler", "engine_us_per_step": None,
+                 "rbcheck_us_per_step": 9.0}]
+    batched = [{"variant": "mujoco:euler", "engine_body_steps_per_s": 4e6, "rbcheck_body_steps_per_s": 2e6},
+               {"variant": "pybullet:multibody", "engine_body_steps_per_s": 1e6,
+                "rbcheck_body_steps_per_s": 4.9e5},
+               {"variant": "rapier:symplectic_euler", "engine_body_steps_per_s": None,
+                "rbcheck_body_steps_per_s": 1.0}]
+    t = bench.overhead_targets(overhead, batched, mj_step_loop_us=0.34)
+    assert t == {
+        "mujoco:euler: through rbcheck <= 2x the engine's own per step": True,
+        "mujoco:euler: engine_s per step <= 3x a Python loop of mj_step": True,
+        "pybullet:multibody: through rbcheck <= 2x the engine's own per step": False,
+        "mujoco:euler: simulate_many >= 0.5x the engine's own batched throughput": True,
+        "pybullet:multibody: simulate_many >= 0.5x the engine's own batched throughput": False}
+    assert not bench.overhead_targets(overhead[:1], [], mj_step_loop_us=0.33)[
+        "mujoco:euler: engine_s per step <= 3x a Python loop of mj_step"]
