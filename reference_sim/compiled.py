@@ -24,6 +24,7 @@ from reference_sim.forces import Members
 from reference_sim.integrators import BULLET_MAX_GYROSCOPIC_TORQUE, IMPLICIT_TOL, MAX_ITER
 
 __all__ = ["VARIANT_CODES", "COMPILE_ESTIMATE_S", "kernel", "parameters", "advance", "lane_members", "warm",
+           "unwritable",
            "ForceEvaluator"]
 
 #: The variants the compiled loop knows, by code (the ``code`` argument of the kernel).
@@ -71,10 +72,10 @@ def load_compiled(name: str, first_calls, flag: list):
         return None
     folder = getattr(numba.config, "CACHE_DIR", "") or ""
     if flag[0] and folder:
-        why = _unwritable(folder)
+        why = unwritable(folder)
         if why:
             flag[0] = False
-            _say_skipped(folder, why)
+            _say_skipped(folder, f"cannot write there: {why}")
     import importlib
     try:
         module = importlib.import_module(name)
@@ -94,8 +95,9 @@ def load_compiled(name: str, first_calls, flag: list):
     return module
 
 
-def _unwritable(folder: str) -> str:
-    """Why numba could not keep its cache in ``folder`` ("" when a file can be created and written there)."""
+def unwritable(folder) -> str:
+    """Why a cache cannot be kept in ``folder`` ("" when it can be created, and a file created and written in
+    it): numba's kernel cache here, every cache of cross_checks (core.files.usable_cache_dir)."""
     import os
     import tempfile
     try:
@@ -107,7 +109,7 @@ def _unwritable(folder: str) -> str:
             os.close(fd)
             os.unlink(probe)
     except OSError as exc:
-        return f"cannot write there: {exc.strerror or exc}"
+        return exc.strerror or str(exc)
     return ""
 
 

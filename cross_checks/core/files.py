@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
+from reference_sim.compiled import unwritable
+
 
 def cache_dir(sub: str = "") -> Path:
     """The user's rbcheck cache directory: ``$RBCHECK_CACHE_DIR``, else ``$XDG_CACHE_HOME/rbcheck``, else
@@ -43,17 +45,9 @@ def usable_cache_dir(folder, what: str) -> Path:
     folder = Path(folder)
     if str(folder) in _SKIPPED_CACHES:
         return _SKIPPED_CACHES[str(folder)]
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-        fd, probe = tempfile.mkstemp(prefix=".rbcheck-probe-", dir=folder)
-        try:
-            os.write(fd, b"\0" * 4096)
-        finally:
-            os.close(fd)
-            os.unlink(probe)
+    why = unwritable(folder)
+    if not why:
         return folder
-    except OSError as exc:
-        why = exc.strerror or str(exc)
     import atexit
     import shutil
     import sys
