@@ -16,7 +16,8 @@ from dataclasses import dataclass
 
 from cross_checks.core.names import NAME_RE, did_you_mean
 from cross_checks.core.trajectory import Trajectory
-from cross_checks.engines.base import EngineAdapter, EngineError, EngineNotInstalled, NotExpressible, Variant
+from cross_checks.engines.base import EngineAdapter, EngineError, NotExpressible, Variant
+from cross_checks.engines.install import EngineNotInstalled
 
 __all__ = ["ENTRY_POINT_GROUP", "VariantInfo", "EngineEntry", "all_variants", "available_variants",
            "get_adapter", "split_variant", "default_variant", "run_variant", "run_variants", "run_requests",
