@@ -323,7 +323,7 @@ class ModuleAdapter(EngineAdapter):
     """
 
     #: Dotted names of the modules besides the adapter's own whose code decides its results (default: the
-    #: plain-float harness that evaluates the forces between an engine's steps).
+    #: harness's forces and their plain-float twins, evaluated between an engine's steps).
     harness: tuple = ("cross_checks.engines.forces", "cross_checks.engines.step_floats")
 
     def __init_subclass__(cls, **kwargs):
