@@ -198,7 +198,7 @@ def _draw_in_processes(tasks, jobs, done, res, meanwhile):
             for f in as_completed(futures):
                 done(f.result())
         except KeyboardInterrupt:   # Ctrl-C, SIGTERM: stop the drawing processes now, without waiting
-            from cross_checks.sweep.lifecycle import kill_pool
+            from cross_checks.core.processes import kill_pool
             kill_pool(pool)
             raise
         finally:

@@ -19,11 +19,11 @@ from cross_checks.core.trajectory import Trajectory
 from cross_checks.engines.base import (
     EngineAdapter,
     EngineError,
-    EngineNotInstalled,
     NotExpressible,
     Traits,
     Variant,
 )
+from cross_checks.engines.install import EngineNotInstalled
 
 __all__ = ["ENTRY_POINT_GROUP", "VariantInfo", "EngineEntry", "all_variants", "available_variants",
            "get_adapter", "split_variant", "default_variant", "run_variant", "run_variants", "run_requests",

@@ -3,7 +3,7 @@ cross_checks.engines.base. What each pipeline does, the defaults neutralised (NE
 what was measured: docs/engine_conventions.md, "Brax 0.14.2".
 
 Model: the scenario's free body as MJCF (:func:`mjcf_text`) loaded by ``brax.io.mjcf.loads``; a model MuJoCo's
-compiler rejects is an EngineError with its words. Precision: float64 (JAX started by base.start_jax).
+compiler rejects is an EngineError with its words. Precision: float64 (JAX started by runtimes.start_jax).
 
 State at the boundary: ``pipeline.init(sys, q, qd)`` with ``q = [x_W, q_WB (w x y z)]``, ``qd = [v_W, ω_B]``
 (ω in body axes); read back from ``state.x.pos``, ``state.x.rot`` (w x y z), ``state.xd.vel`` and
@@ -31,7 +31,7 @@ import warnings
 
 import numpy as np
 
-from cross_checks.engines import base
+from cross_checks.engines import base, forces, install, runtimes
 from cross_checks.engines.base import EngineError, Traits, Variant
 from cross_checks.engines.world import World, WorldEngine
 from reference_sim.quaternion import quat_conj, rotate
@@ -78,16 +78,16 @@ ONE_STEP_MIN_BATCH = 64
 _LOCK = threading.RLock()
 _COMPILED: dict = {}         # key -> compiled executable
 _COMPILE_S: dict = {}        # key -> seconds spent compiling it (lower + compile)
-_CALLBACK_WORLDS = base.Registry()   # token -> (world, harness, {Δt: y -> 6 floats}): the force callback's
+_CALLBACK_WORLDS = runtimes.Registry()  # token -> (world, harness, {Δt: y -> 6 floats}): the force callback's
 
 
 def version() -> str:
     """brax's version and the jax it runs on, from package metadata (no import: a sweep's parent must not
     start JAX before forking). EngineNotInstalled without brax; ImportError without jax/jaxlib."""
-    ver = base.installed_version("brax")
+    ver = install.installed_version("brax")
     if ver is None:
-        raise base.EngineNotInstalled("brax is not installed (pip install 'rbcheck[brax]')")
-    jax_ver, jaxlib_ver = base.installed_version("jax"), base.installed_version("jaxlib")
+        raise install.EngineNotInstalled("brax is not installed (pip install 'rbcheck[brax]')")
+    jax_ver, jaxlib_ver = install.installed_version("jax"), install.installed_version("jaxlib")
     if jax_ver is None or jaxlib_ver is None:
         raise ImportError(f"brax {ver} is installed but jax or jaxlib is not (pip install 'rbcheck[brax]')")
     return f"{ver} (jax {jax_ver})"
@@ -95,13 +95,13 @@ def version() -> str:
 
 @functools.lru_cache(maxsize=1)
 def _lib():
-    """brax and jax, imported on first use (base.start_jax); mujoco.mjx's "Failed to import warp" on stdout
-    and brax's warnings silenced."""
+    """brax and jax, imported on first use (runtimes.start_jax); mujoco.mjx's "Failed to import warp" on
+    stdout and brax's warnings silenced."""
     version()
-    with base.first_import("brax", base.installed_version), contextlib.redirect_stdout(io.StringIO()), \
+    with install.first_import("brax", install.installed_version), contextlib.redirect_stdout(io.StringIO()), \
             warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        jax = base.start_jax()
+        jax = runtimes.start_jax()
         import jax.numpy as jp
         from brax.base import Actuator
         from brax.generalized import pipeline as generalized
@@ -116,8 +116,8 @@ def _usable():
     """The brax/jax modules, or EngineError in a process forked after its parent had run JAX (instead of a
     hang)."""
     lib = _lib()
-    base.refuse_forked_jax("JAX cannot run in this process: it was forked after JAX had started in its "
-                           "parent (run brax in a fresh process, e.g. the rbcheck CLI, or with one job)")
+    runtimes.refuse_forked_jax("JAX cannot run in this process: it was forked after JAX had started in its "
+                               "parent (run brax in a fresh process, e.g. the rbcheck CLI, or with one job)")
     return lib
 
 
@@ -186,8 +186,8 @@ def expressible(scenario, variant: str, dt_s: float) -> str:
            "joint zero actuator force and the pipeline has no other force input); this scenario has ")
     if fm.state_dependent:
         return why + "forces that depend on the state"
-    f, tau = base.harness_force_torque(scenario, scenario.problem.initial_packed(), dt_s)
-    weight = base.weight_W(scenario)
+    f, tau = forces.harness_force_torque(scenario, scenario.problem.initial_packed(), dt_s)
+    weight = forces.weight_W(scenario)
     if np.any(tau != 0.0) or not np.allclose(f, weight, rtol=1e-15, atol=0.0):
         return why + f"a force {np.round(f - weight, 6).tolist()} N besides the weight and a torque " \
                      f"{np.round(tau, 6).tolist()} N m"
@@ -206,8 +206,8 @@ def _system_of(scenario, variant: str):
             sys = lib["mjcf"].loads(mjcf_text(scenario, 0.01, actuators=gen))
         lib["mjcf"].validate_model(sys.mj_model)
     except (ValueError, NotImplementedError, RuntimeError) as exc:
-        raise EngineError(f"brax {base.installed_version('brax')} (MuJoCo's compiler) rejected the model of "
-                          f"scenario {scenario.name!r}: {' '.join(str(exc).split())}") from None
+        raise EngineError(f"brax {install.installed_version('brax')} (MuJoCo's compiler) rejected the model "
+                          f"of scenario {scenario.name!r}: {' '.join(str(exc).split())}") from None
     sys = neutralise(sys)
     if gen:
         sys = six_dof_actuator(sys)
@@ -241,7 +241,7 @@ def _packed(state):
 # --- the compiled step ------------------------------------------------------------------------------------
 
 def _host_forces(token, y, dt):
-    """The force callback (host): base.harness_force_torque_floats of each row of ``y`` (B, 13) at its step
+    """The force callback (host): forces.harness_force_torque_floats of each row of ``y`` (B, 13) at its step
     ``dt`` (B,) — the loop's harness (force evaluator, decay factors) of the world's body at that Δt, looked
     up once per rollout and Δt — for the world registered under ``token`` (its seconds the world's
     ``host_s``)."""
@@ -262,7 +262,7 @@ def _host_forces(token, y, dt):
 
 def _decayed_forces(harness, j: int):
     """``y -> 6 floats``: body ``j``'s harness force and torque scaled by its pre-step decay factors
-    (base.harness_force_torque_floats, with the loop's evaluator)."""
+    (forces.harness_force_torque_floats, with the loop's evaluator)."""
     ft, gv, gw = harness.ft[j], float(harness.g_v[j]), float(harness.g_w[j])
 
     def forces(y):
@@ -347,14 +347,14 @@ def _mode_and_consts(scenario, variant: str, dt_s: float):
         raise EngineError(why)
     p = scenario.problem
     fm = p.forces
-    weight = base.weight_W(scenario)
-    gv, gw = (float(g) for g in base.decay_factors(scenario, dt_s))
+    weight = forces.weight_W(scenario)
+    gv, gw = (float(g) for g in forces.decay_factors(scenario, dt_s))
     decay = 1.0 if fm.has_decay else 0.0
     if variant != "generalized":
         return "none", np.r_[np.zeros(6), gv, gw, decay]
     if fm.state_dependent:
         return "callback", np.r_[-weight, np.zeros(3), gv, gw, decay]
-    f, tau = base.harness_force_torque(scenario, p.initial_packed(), dt_s)
+    f, tau = forces.harness_force_torque(scenario, p.initial_packed(), dt_s)
     return "const", np.r_[f - weight, tau, gv, gw, decay]
 
 
@@ -410,7 +410,7 @@ class BraxWorld(World):
     def _run(self, n_max: int, token):
         jp, n = self.lib["jp"], len(self.dts)
         mode = self.modes[0][0]
-        B = base.power_of_two(n)
+        B = runtimes.power_of_two(n)
         dts = np.array(self.dts + [self.dts[0]] * (B - n), dtype=float)
         consts = np.stack([m[1] for m in self.modes] + [self.modes[0][1]] * (B - n))
         q0, qd0 = to_q_qd(self.y[0])    # every run starts at its scenario's state
@@ -433,7 +433,7 @@ class BraxWorld(World):
     def _one(self, token):
         jp, T = self.lib["jp"], len(self.y)
         mode, consts = self.modes[0]
-        B = base.power_of_two(max(T, ONE_STEP_MIN_BATCH))
+        B = runtimes.power_of_two(max(T, ONE_STEP_MIN_BATCH))
         pad = np.concatenate([self.y, np.broadcast_to(self.scenario.problem.initial_packed(), (B - T, 13))])
         q, qd = to_q_qd(pad)
         args = (self.sys, jp.asarray(q), jp.asarray(qd), jp.full(B, self.dts[0]),
@@ -462,8 +462,8 @@ class BraxEngine(WorldEngine):
 
     def engine_files(self) -> list:
         """brax's pipeline sources (found without importing brax)."""
-        return base.package_files("brax", *(f"{d}/{f}" for d in ("generalized", "positional", "spring")
-                                       for f in ("pipeline.py", "integrator.py")))
+        return install.package_files("brax", *(f"{d}/{f}" for d in ("generalized", "positional", "spring")
+                                          for f in ("pipeline.py", "integrator.py")))
 
     @property
     def compile_seconds(self) -> dict:

@@ -19,13 +19,13 @@ import math
 
 import numpy as np
 
-from cross_checks.engines import base
+from cross_checks.engines import base, install
 from cross_checks.engines.base import EngineError, Variant
 from cross_checks.engines.step_floats import bad_floats
 from cross_checks.engines.world import World, WorldEngine
 from reference_sim.quaternion import quat_exp, quat_log
 
-dart, _IMPORT_ERROR = base.optional_import("dartpy")
+dart, _IMPORT_ERROR = install.optional_import("dartpy")
 
 __all__ = ["ENGINE", "VARIANTS", "JOINT_SETTINGS", "EngineError", "version", "simulate", "simulate_many",
            "one_step", "DartBody", "DartWorld", "DartAdapter", "neutralise", "to_dart_state",
@@ -53,13 +53,13 @@ _ZERO3 = np.zeros(3)
 
 
 def _require():
-    base.require(dart, _IMPORT_ERROR, "dartpy", hint="pip install 'rbcheck[dart]'")
+    install.require(dart, _IMPORT_ERROR, "dartpy", hint="pip install 'rbcheck[dart]'")
 
 
 def version() -> str:
     """The installed dartpy distribution's version (EngineNotInstalled when it is absent)."""
     _require()
-    return base.release("dartpy")
+    return install.release("dartpy")
 
 
 def to_dart_state(y):

@@ -6,7 +6,7 @@ the body origin = COM in body axes, gravity the plant's own, and a ``Simulator``
 mode: step n is ``AdvanceTo(n Δt)``. State at the boundary: ``q = [q_WB (w x y z), x_W]``, ``v = [ω_W, v_W]``
 (angular first, both in WORLD axes); Drake does not renormalise the quaternion, so the recorded one is
 ``q/|q|``. Forces: the loop's constant ``[τ_W, f_W − m g]`` fixed once on the applied generalized force port
-(Drake keeps it); state-dependent forces or decay are a LeafSystem evaluating ``base.stage_force_torque``
+(Drake keeps it); state-dependent forces or decay are a LeafSystem evaluating ``forces.stage_force_torque``
 (the decay as damping in the right-hand side) at every derivative evaluation, so every stage of a
 multi-stage scheme sees its own stage state (the loop applies neither; that evaluation's time is rbcheck's).
 Divergence: the loop's, and an exception Drake raises while stepping ends its body's run at that step.
@@ -19,12 +19,13 @@ import time
 
 import numpy as np
 
-from cross_checks.engines import base
-from cross_checks.engines.base import EngineError, Variant, stage_force_torque
+from cross_checks.engines import base, forces, install
+from cross_checks.engines.base import EngineError, Variant
+from cross_checks.engines.forces import stage_force_torque
 from cross_checks.engines.world import World, WorldEngine
 
 # imported without pydrake so that the registry can say why it is unavailable; its classes on first use
-pydrake, _IMPORT_ERROR = base.optional_import("pydrake")
+pydrake, _IMPORT_ERROR = install.optional_import("pydrake")
 
 __all__ = ["ENGINE", "VARIANTS", "version", "simulate", "simulate_many", "one_step", "DrakeModel",
            "DrakeWorld", "DrakeAdapter", "to_drake_state", "from_drake_state"]
@@ -53,12 +54,12 @@ NEWTON_ACCURACY = 1e-6
 
 
 def _require():
-    base.require(pydrake, _IMPORT_ERROR, "drake", hint="pip install 'rbcheck[drake]'")
+    install.require(pydrake, _IMPORT_ERROR, "drake", hint="pip install 'rbcheck[drake]'")
 
 
 def version() -> str:
     _require()
-    return base.installed_version("drake") or getattr(pydrake, "__version__", "unknown")   # from source
+    return install.installed_version("drake") or getattr(pydrake, "__version__", "unknown")   # from source
 
 
 def to_drake_state(y):
@@ -87,7 +88,7 @@ def _force_system_class():
 
         def __init__(self, scenario):
             super().__init__()
-            self._scenario, self._weight, self.host_s = scenario, base.weight_W(scenario).tolist(), 0.0
+            self._scenario, self._weight, self.host_s = scenario, forces.weight_W(scenario).tolist(), 0.0
             self._x = self.DeclareVectorInputPort("state", 13)
             self.DeclareVectorOutputPort("generalized_force", 6, self._calc)
 
@@ -147,7 +148,7 @@ class DrakeModel:
         self.context = plant.GetMyMutableContextFromRoot(self.simulator.get_mutable_context())
         if constant_forces and not self.per_stage and (p.forces.point_forces or p.forces.torques):
             f, tau = stage_force_torque(scenario, p.initial_packed())     # constant: any state gives the same
-            self.apply(f - base.weight_W(scenario), tau)
+            self.apply(f - forces.weight_W(scenario), tau)
         self.integrator_name = integrator
         self.integrator = ResetIntegratorFromFlags(self.simulator, integrator, 1.0)
 

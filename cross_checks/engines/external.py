@@ -7,27 +7,26 @@ command with its placeholders (:data:`PLACEHOLDERS`) filled in a private tempora
 whole process tree when it ends, and reads the trajectory CSV it wrote: EngineError (with the command's
 own words) when it fails, a ``diverged`` Run when a row after t = 0 is non-finite or beyond BLOWUP_LIMIT.
 The format, the placeholders, how a run goes and what fails it: docs/engines.md, "Engine files".
+
+This module is the file and its protocol (the TOML, the JSON the command reads, the CSV it writes); how the
+command runs (its supervisor, its time limit, its process tree killed, its output read without hanging, a
+Ctrl-C or SIGTERM meanwhile) is :func:`cross_checks.core.processes.run_command`.
 """
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import hashlib
 import math
 import os
-import select
 import shutil
-import signal
 import string
-import subprocess
 import tempfile
-import threading
-import time
 import tomllib
 from pathlib import Path
 
 import numpy as np
 
+from cross_checks.core import processes
 from cross_checks.core import tolerances as tol
 from cross_checks.core.names import NAME_RE, unknown_key_reason
 from cross_checks.engines.base import DEFAULT_TRAITS, EngineAdapter, EngineError, Variant
@@ -43,11 +42,6 @@ MAX_TIMEOUT_S = 86400.0
 #: A trajectory row holds 14 numbers of ≤ 25 characters; 1 KiB per row leaves room for extra columns.
 #: A larger CSV is garbage and is not read.
 MAX_CSV_BYTES_PER_ROW = 1024
-#: Characters of the command's stderr/stdout kept in a failed row's message.
-OUTPUT_TAIL_CHARS = 600
-#: Bytes of each of the command's output streams kept while it runs (the rest is read and dropped: a
-#: command that prints without end neither fills a disk nor holds memory).
-OUTPUT_TAIL_BYTES = 4 * OUTPUT_TAIL_CHARS
 #: The folder fingerprint hashes the content of at most this many files (then their sizes and times), and
 #: skips hidden folders, __pycache__ and rbcheck's own results directories.
 FOLDER_MAX_FILES = 5000
@@ -311,279 +305,6 @@ def load_engine_file(path) -> ExternalEngine:
                           _program_files(folder, commands), folder_fingerprint(folder))
 
 
-# --- running ----------------------------------------------------------------------------------------
-
-def _kill_group(proc) -> None:
-    """SIGKILL the command's process group (the command and anything it started), then reap it."""
-    try:
-        os.killpg(proc.pid, signal.SIGKILL)
-    except (ProcessLookupError, PermissionError):
-        pass
-    proc.wait()
-
-
-class _TermKillsGroup:
-    """While a command runs in the main thread: SIGTERM (a sweep stopping its workers) first kills the
-    command's process group and removes the run's private directory ``private`` (a worker dies of that
-    SIGTERM at once: no ``finally`` of the run would remove it), so neither outlives the worker."""
-
-    def __init__(self, proc, private: Path | None = None):
-        self.proc, self.prev, self.private = proc, None, private
-
-    def __enter__(self):
-        if (threading.current_thread() is threading.main_thread()
-                and signal.getsignal(signal.SIGTERM) == signal.SIG_DFL):
-            def on_term(signum, frame):
-                _kill_group(self.proc)
-                if self.private is not None:
-                    shutil.rmtree(self.private, ignore_errors=True)
-                signal.signal(signal.SIGTERM, signal.SIG_DFL)
-                os.kill(os.getpid(), signal.SIGTERM)
-            self.prev = signal.signal(signal.SIGTERM, on_term)
-        return self
-
-    def __exit__(self, *exc):
-        if self.prev is not None:
-            signal.signal(signal.SIGTERM, self.prev)
-        return False
-
-
-class _Tail(threading.Thread):
-    """Reads one of the command's output pipes to its end, keeping only the last OUTPUT_TAIL_BYTES."""
-
-    def __init__(self, pipe):
-        super().__init__(daemon=True)
-        self.pipe, self.kept = pipe, b""
-
-    def run(self):
-        try:
-            for chunk in iter(lambda: self.pipe.read1(65536), b""):
-                self.kept = (self.kept + chunk)[-OUTPUT_TAIL_BYTES:]
-        except (OSError, ValueError):
-            pass
-
-    def words(self) -> str:
-        text = self.kept.decode("utf-8", errors="replace")
-        lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
-        text = " | ".join(lines)
-        return text if len(text) <= OUTPUT_TAIL_CHARS else "…" + text[-OUTPUT_TAIL_CHARS:]
-
-
-def _become_subreaper() -> bool:
-    """Make this process the reaper of its orphaned descendants (Linux ``PR_SET_CHILD_SUBREAPER``): a
-    child the command starts in a new session (``setsid cmd &``) is then still ours to find and kill."""
-    try:
-        import ctypes
-        libc = ctypes.CDLL(None, use_errno=True)
-        return libc.prctl(36, 1, 0, 0, 0) == 0   # PR_SET_CHILD_SUBREAPER = 36
-    except (OSError, AttributeError):
-        return False
-
-
-def _children(pid: int) -> set:
-    """The direct children of ``pid`` (Linux /proc; empty elsewhere)."""
-    out = set()
-    try:
-        for task in os.listdir(f"/proc/{pid}/task"):
-            with contextlib.suppress(OSError, ValueError):
-                out.update(int(c) for c in Path(f"/proc/{pid}/task/{task}/children").read_text().split())
-    except OSError:
-        pass
-    return out
-
-
-def _descendants(pid: int) -> set:
-    seen, todo = set(), [pid]
-    while todo:
-        for c in _children(todo.pop()):
-            if c not in seen:
-                seen.add(c)
-                todo.append(c)
-    return seen
-
-
-#: The commands running now in this process (other threads' runs), never taken for a run's strays.
-_LIVE: set = set()
-_LIVE_LOCK = threading.Lock()
-
-
-def _kill_strays(before: set) -> None:
-    """SIGKILL and reap every descendant of this process that was not there before the command started:
-    what the command left running, in its group or in a session of its own (reparented to us) — but
-    not a command another thread runs now, nor what it started."""
-    me = os.getpid()
-    for _ in range(3):   # a dying process may have started another in the meantime
-        with _LIVE_LOCK:
-            others = set(_LIVE)
-        busy = others | {d for pid in others for d in _descendants(pid)}
-        strays = _descendants(me) - before - busy
-        if not strays:
-            return
-        for pid in strays:
-            with contextlib.suppress(ProcessLookupError, PermissionError):
-                os.kill(pid, signal.SIGKILL)
-        for pid in strays:
-            with contextlib.suppress(ChildProcessError, OSError):
-                os.waitpid(pid, 0)   # ours once reparented (subreaper); others are reaped by their parent
-
-
-#: The command's supervisor (``python -I -S -c``, argv: rbcheck's pid, the run's private directory or "",
-#: then the command): it starts the command as its child in the session ``_run_command`` made, and passes its
-#: exit status on (a signal's death as that signal). It dies with rbcheck's process that started it, whatever
-#: ended that one (``kill -9`` of the group, ``timeout -s KILL``, a CI cancel, the OOM killer): Linux sends it
-#: SIGTERM then (``PR_SET_PDEATHSIG``), and it kills the command and everything the command started (it is
-#: their subreaper) and removes the run's private directory before going. Only the supervisor can get that
-#: signal: a parent-death signal is not inherited by the command's own children.
-_SUPERVISOR = r"""
-import ctypes, os, shutil, signal, sys
-parent, private, argv = int(sys.argv[1]), sys.argv[2], sys.argv[3:]
-libc = ctypes.CDLL(None, use_errno=True)
-def descendants():
-    out, todo = [], [os.getpid()]
-    while todo:
-        p = todo.pop()
-        try:
-            tasks = os.listdir(f"/proc/{p}/task")
-        except OSError:
-            continue
-        for t in tasks:
-            try:
-                with open(f"/proc/{p}/task/{t}/children") as fh:
-                    kids = [int(c) for c in fh.read().split()]
-            except (OSError, ValueError):
-                kids = []
-            out += kids
-            todo += kids
-    return out
-def die(signum, frame):
-    for _ in range(3):
-        for pid in descendants():
-            try:
-                os.kill(pid, signal.SIGKILL)
-            except OSError:
-                pass
-    if private:   # the run's private directory, which rbcheck can no longer remove
-        shutil.rmtree(private, ignore_errors=True)
-    os._exit(128 + signum)
-signal.signal(signal.SIGTERM, die)
-libc.prctl(36, 1, 0, 0, 0)                    # PR_SET_CHILD_SUBREAPER
-libc.prctl(1, int(signal.SIGTERM), 0, 0, 0)   # PR_SET_PDEATHSIG
-if os.getppid() != parent:                    # rbcheck died before prctl took effect
-    die(signal.SIGTERM, None)
-pid = os.fork()
-if pid == 0:
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
-    try:
-        os.execvp(argv[0], argv)
-    except OSError as exc:
-        sys.stderr.write(f"cannot start {argv[0]!r}: {exc.strerror}\n")
-        sys.stderr.flush()
-    os._exit(127)
-while True:
-    try:
-        _, status = os.waitpid(pid, 0)
-        break
-    except InterruptedError:
-        continue
-if os.WIFSIGNALED(status):
-    import resource
-    resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
-    signal.signal(os.WTERMSIG(status), signal.SIG_DFL)
-    os.kill(os.getpid(), os.WTERMSIG(status))
-os._exit(os.waitstatus_to_exitcode(status))
-"""
-
-
-def _supervised(argv: list, cwd: Path, private: Path | None = None) -> list:
-    """``argv`` under :data:`_SUPERVISOR` (Linux; elsewhere ``argv`` itself). EngineError, as Popen would
-    raise it, when its program cannot be started: the supervisor's child would only say so in its status."""
-    program = argv[0] if os.sep in argv[0] else shutil.which(argv[0])
-    if program is not None and os.sep in argv[0] and not os.path.isabs(program):
-        program = os.path.join(cwd, program)
-    if program is None or not os.path.isfile(program):
-        raise EngineError(f"cannot start {argv[0]!r}: {os.strerror(2)}")
-    if not os.access(program, os.X_OK):
-        raise EngineError(f"cannot start {argv[0]!r}: {os.strerror(13)}")
-    if not os.path.isdir(f"/proc/{os.getpid()}"):
-        return argv
-    import sys
-    return [sys.executable, "-I", "-S", "-c", _SUPERVISOR, str(os.getpid()), str(private or ""), *argv]
-
-
-def _run_command(argv: list, cwd: Path, timeout_s: float):
-    """Run ``argv`` in ``cwd`` in a new process group under a time limit, under a supervisor that ends it if
-    this process dies (:data:`_SUPERVISOR`).
-
-    Returns ``(returncode, timed_out, output_tail)``; raises EngineError when it cannot be started.
-    The wait is a pidfd poll or ``waitpid`` (no polling latency); at the end the command's whole process
-    tree is killed. Its output is read as it comes, only the tail kept. ``cwd``'s parent, when it is a
-    private run directory (``rbcheck-*`` in the temporary folder), is removed if SIGTERM ends this process
-    meanwhile, or by the supervisor if this process dies.
-    """
-    _become_subreaper()
-    before = _descendants(os.getpid())
-    private = Path(cwd).parent
-    private = (private if private.name.startswith("rbcheck-")
-               and private.parent == Path(tempfile.gettempdir()) else None)
-    try:
-        proc = subprocess.Popen(_supervised(argv, cwd, private), cwd=cwd, stdin=subprocess.DEVNULL,
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
-    except OSError as exc:
-        raise EngineError(f"cannot start {argv[0]!r}: {exc.strerror or exc}") from None
-    with _LIVE_LOCK:
-        _LIVE.add(proc.pid)
-    out, err = _Tail(proc.stdout), _Tail(proc.stderr)
-    out.start()
-    err.start()
-    try:
-        with _TermKillsGroup(proc, private):
-            timed_out = _wait(proc, timeout_s)
-    finally:
-        _kill_group(proc)  # on time-out, Ctrl-C, or stray children of a finished command
-        with _LIVE_LOCK:
-            _LIVE.discard(proc.pid)
-        _kill_strays(before)
-        for t in (out, err):
-            t.join(timeout=5.0)
-        for pipe in (proc.stdout, proc.stderr):
-            with contextlib.suppress(OSError):
-                pipe.close()
-    return proc.returncode, timed_out, err.words() or out.words()
-
-
-def _wait(proc, timeout_s: float) -> bool:
-    """Wait for ``proc`` at most ``timeout_s``; True when the time ran out. A pidfd (Linux) wakes the
-    instant the process exits; elsewhere a timer thread kills the group at the limit."""
-    try:
-        fd = os.pidfd_open(proc.pid)
-    except (AttributeError, OSError):
-        expired = threading.Event()
-
-        def on_timeout():
-            expired.set()
-            with contextlib.suppress(ProcessLookupError, PermissionError):
-                os.killpg(proc.pid, signal.SIGKILL)
-
-        timer = threading.Timer(timeout_s, on_timeout)
-        timer.daemon = True
-        timer.start()
-        try:
-            proc.wait()
-        finally:
-            timer.cancel()
-        return expired.is_set()
-    try:
-        poller = select.poll()
-        poller.register(fd, select.POLLIN)
-        deadline = time.monotonic() + timeout_s
-        while not poller.poll(max(0.0, deadline - time.monotonic()) * 1000.0):
-            if time.monotonic() >= deadline:
-                return True
-        return False
-    finally:
-        os.close(fd)
-
-
 class ExternalEngine(EngineAdapter):
     """An engine file as an adapter (picklable: plain data, so sweep workers receive it)."""
 
@@ -649,14 +370,17 @@ class ExternalEngine(EngineAdapter):
                              {"scenario_json": str(json_path), "dt": repr(float(dt_s)), "steps": str(n_steps),
                               "duration": repr(float(T)), "out_csv": str(out_csv),
                               "engine_dir": str(self.folder.resolve())})
-            rc, timed_out, words = _run_command(argv, work, self.timeout_s)
+            try:
+                rc, timed_out, words = processes.run_command(argv, work, self.timeout_s, private=run_dir)
+            except processes.CannotStart as exc:
+                raise EngineError(str(exc)) from None
             where = f"{self.name}:{variant} at Δt = {dt_s:g} s"
             said = f" — it said: {words}" if words else " (it printed nothing)"
             if timed_out:
                 raise EngineError(f"{where}: no result within the time limit of {self.timeout_s:g} s "
                                   f"(set `timeout` in {self.path.name}); the command was killed{said}")
             if rc != 0:
-                raise EngineError(f"{where}: the command {_exit_words(rc)}{said}")
+                raise EngineError(f"{where}: the command {processes.exit_words(rc)}{said}")
             if not out_csv.is_file():
                 elsewhere = sorted(p.name for p in work.glob("*.csv"))
                 if elsewhere:
@@ -666,15 +390,6 @@ class ExternalEngine(EngineAdapter):
             return _read_output(out_csv, scenario, dt_s, n_steps, where, said)
         finally:
             shutil.rmtree(run_dir, ignore_errors=True)
-
-
-def _exit_words(rc: int) -> str:
-    if rc >= 0:
-        return f"exited with status {rc}"
-    try:
-        return f"was killed by signal {signal.Signals(-rc).name}"
-    except ValueError:  # e.g. a real-time signal, which has no name
-        return f"was killed by signal {-rc}"
 
 
 def _read_output(out_csv: Path, scenario, dt_s: float, n_steps: int, where: str, said: str) -> Run:

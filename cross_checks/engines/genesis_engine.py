@@ -9,7 +9,7 @@ with ``align=False`` and neutralised (:data:`NEUTRAL_DOFS`, :func:`scene_options
 scheme; ``implicitfast`` and ``approximate_implicitfast`` advance a lone free body's rotation by the
 implicit midpoint rule and its translation by semi-implicit Euler. Forces: before every step (Genesis clears
 them) the harness's world force at the COM minus the weight ``m g`` and world torque, from the start-of-step
-state; the decay before the step (base.apply_decay_prestep). :func:`simulate_many` and :func:`one_step` run
+state; the decay before the step (forces.apply_decay_prestep). :func:`simulate_many` and :func:`one_step` run
 batches as the environments of one scene. Divergence: a bad state (non-finite, beyond BLOWUP_LIMIT) or a
 NaN Genesis raises on ends the run. Importing this module or asking :func:`version` imports no Genesis; the
 first run of a process initialises it (:func:`genesis`) and compiles or loads its kernels
@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from cross_checks.core import files
-from cross_checks.engines import base
+from cross_checks.engines import base, forces, install
 from cross_checks.engines.base import EngineError, ModuleAdapter, Traits, Variant
 from cross_checks.engines.step_floats import harness_fn
 from reference_sim.quaternion import quat_conj, rotate
@@ -121,9 +121,9 @@ def version() -> str:
     """The installed genesis-world distribution's version, from its metadata; its packages (``genesis``,
     ``torch``, ``quadrants``) are found without importing them. EngineNotInstalled when the distribution is
     absent, ImportError when a package is missing."""
-    ver = base.installed_version(DIST)
+    ver = install.installed_version(DIST)
     if ver is None:
-        raise base.EngineNotInstalled(f"{DIST} is not installed (pip install 'rbcheck[genesis]')")
+        raise install.EngineNotInstalled(f"{DIST} is not installed (pip install 'rbcheck[genesis]')")
     missing = [m for m in ("genesis", "torch", "quadrants") if not _findable(m)]
     if missing:
         raise ImportError(
@@ -426,11 +426,11 @@ def _simulate_batch(scenarios, variant: str, dt_s: float, n_steps: int) -> list:
     B = body(scenarios[0], variant, dt_s, n_envs=0 if n == 1 else n)
     y0 = np.array([sc.problem.initial_packed() for sc in scenarios])
     B.set_state(y0)
-    weight = np.array([base.weight_W(sc) for sc in scenarios])
+    weight = np.array([forces.weight_W(sc) for sc in scenarios])
     harness = [harness_fn(sc, dt_s) for sc in scenarios]
     per_step = any(sc.problem.forces.state_dependent for sc in scenarios)
     decay = any(sc.problem.forces.has_decay for sc in scenarios)
-    g = np.array([[float(v) for v in base.decay_factors(sc, dt_s)] for sc in scenarios])
+    g = np.array([[float(v) for v in forces.decay_factors(sc, dt_s)] for sc in scenarios])
     gvel = np.repeat(g, 3, axis=1)  # (n, 6): γ_v γ_v γ_v γ_ω γ_ω γ_ω
     ft = np.array([h(y.tolist()) for h, y in zip(harness, y0)])  # (n, 6) from the initial state
     f, tau = ft[:, 0:3] - weight, ft[:, 3:6]
@@ -507,8 +507,8 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     B = body(scenario, variant, dt_s, n_envs=0 if T == 1 else T)
     harness = harness_fn(scenario, dt_s)
     ft = np.array([harness(row) for row in y_start.tolist()]).reshape(T, 6)
-    B.set_state(base.apply_decay_prestep(scenario, y_start, dt_s))
-    B.apply(ft[:, 0:3] - base.weight_W(scenario), ft[:, 3:6])
+    B.set_state(forces.apply_decay_prestep(scenario, y_start, dt_s))
+    B.apply(ft[:, 0:3] - forces.weight_W(scenario), ft[:, 3:6])
     if B.step():
         return np.full(y_start.shape, math.nan)
     qpos, vel = B.read()
@@ -529,4 +529,4 @@ class GenesisAdapter(ModuleAdapter):
 def _genesis_files() -> tuple:
     """The rigid solver's step sources of the installed Genesis (found, not imported): what its results depend
     on beyond the version string."""
-    return tuple(base.package_files("genesis", "engine/solvers/rigid", "engine/solvers/rigid/abd"))
+    return tuple(install.package_files("genesis", "engine/solvers/rigid", "engine/solvers/rigid/abd"))

@@ -4,7 +4,7 @@ was measured: docs/engine_conventions.md, "jaxsim 0.9".
 
 Model: one ``JaxSimModel`` per body built from an SDF string (:func:`model_sdf`: one link, its inertial at the
 link origin = COM, no collision, no joint: a floating base), its spatial inertia checked against the
-scenario's. Precision: float64 (JAX started by base.start_jax; importing jaxsim also turns
+scenario's. Precision: float64 (JAX started by runtimes.start_jax; importing jaxsim also turns
 ``jax_enable_x64`` on).
 
 State at the boundary, in the Mixed velocity representation: ``base_position`` = x_W (m), ``base_quaternion``
@@ -34,7 +34,7 @@ import numpy as np
 
 from cross_checks.core import tolerances as tol
 from cross_checks.core.files import kernel_cache_dir
-from cross_checks.engines import base
+from cross_checks.engines import base, forces, install, runtimes
 from cross_checks.engines.base import EngineError, Variant
 from cross_checks.engines.world import World, WorldEngine
 from reference_sim.simulate import bad_rows
@@ -70,8 +70,8 @@ ROW_BLOCK = 64
 MODEL_NAME = "rbcheck_body"
 
 _LOCK = threading.RLock()
-_TIMES = base.Stats(compile_seconds=0.0, compiles=0, run_seconds=0.0, steps=0)
-_CONTEXTS = base.Registry()  # callback key -> (world, y -> link force (6 floats)) of one body's rollout
+_TIMES = runtimes.Stats(compile_seconds=0.0, compiles=0, run_seconds=0.0, steps=0)
+_CONTEXTS = runtimes.Registry()  # callback key -> (world, y -> link force (6 floats)) of one body's rollout
 
 
 # --- availability without importing JAX (fork safety) --------------------------------------------------
@@ -82,9 +82,9 @@ def version() -> str:
     EngineNotInstalled when it is absent; ImportError when it is installed but not importable."""
     import importlib.util
 
-    ver = base.installed_version("jaxsim")
+    ver = install.installed_version("jaxsim")
     if ver is None:
-        raise base.EngineNotInstalled(f"jaxsim is not installed ({HINT})")
+        raise install.EngineNotInstalled(f"jaxsim is not installed ({HINT})")
     try:
         spec = importlib.util.find_spec("jaxsim")
     except (ImportError, ValueError) as exc:
@@ -104,13 +104,13 @@ def xla_cache_dir() -> Path:
 
 @functools.lru_cache(maxsize=1)
 def _jax():
-    """(jax, jax.numpy, jaxsim.api): imported on first use (base.start_jax: float64 on before jaxsim's import,
-    checked after)."""
-    jax, err = base.optional_import("jax")
-    base.require(jax, err, "jax", hint=HINT)
-    base.start_jax()
-    jaxsim, err = base.optional_import("jaxsim")
-    base.require(jaxsim, err, "jaxsim", hint=HINT)
+    """(jax, jax.numpy, jaxsim.api): imported on first use (runtimes.start_jax: float64 on before jaxsim's
+    import, checked after)."""
+    jax, err = install.optional_import("jax")
+    install.require(jax, err, "jax", hint=HINT)
+    runtimes.start_jax()
+    jaxsim, err = install.optional_import("jaxsim")
+    install.require(jaxsim, err, "jaxsim", hint=HINT)
     import jax.numpy as jnp
     import jaxsim.api as js
 
@@ -120,9 +120,10 @@ def _jax():
 
 
 def _refuse_forked_jax() -> None:
-    base.refuse_forked_jax("jaxsim cannot run in a process forked after JAX started in its parent (a running "
-                           "JAX backend does not survive fork: it would hang); run the sweep with --jobs 1 "
-                           "from there, or from a process that has not run JAX")
+    runtimes.refuse_forked_jax(
+        "jaxsim cannot run in a process forked after JAX started in its parent (a running JAX backend "
+        "does not survive fork: it would hang); run the sweep with --jobs 1 from there, or from a "
+        "process that has not run JAX")
 
 
 def timings() -> dict:
@@ -222,7 +223,7 @@ def _host_forces(key, y):
 
 def _step_fn(callback: bool):
     """One jaxsim step of the packed state ``y`` (13,): pre-step decay ``scale`` (13,), link force ``f6`` (6,)
-    or, with ``callback``, the harness's at ``y`` (before the decay, as base.harness_force_torque)."""
+    or, with ``callback``, the harness's at ``y`` (before the decay, as forces.harness_force_torque)."""
     jax, jnp, js = _jax()
     from jaxsim import VelRepr
 
@@ -314,10 +315,10 @@ def _inputs(scenario, harness, i: int):
     body ``i`` of ``harness`` (the loop's: its force evaluator and decay factors; jaxsim's own weight off)."""
     ft, gv, gw = harness.ft[i], float(harness.g_v[i]), float(harness.g_w[i])
 
-    def decayed(y):   # base.harness_force_torque_floats, with the loop's evaluator
+    def decayed(y):   # forces.harness_force_torque_floats, with the loop's evaluator
         fx, fy, fz, tx, ty, tz = ft(y)
         return gv * fx, gv * fy, gv * fz, gw * tx, gw * ty, gw * tz
-    wrench = base.minus_weight(decayed, _weight(scenario))
+    wrench = forces.minus_weight(decayed, _weight(scenario))
     scale = np.ones(13)
     scale[3:6] = gv
     scale[10:13] = gw
@@ -423,7 +424,7 @@ class JaxsimEngine(WorldEngine):
 
     def engine_files(self) -> list:
         """jaxsim's Python files (found without importing it: a changed jaxsim is a new engine)."""
-        return base.package_files("jaxsim", pattern="**/*.py")
+        return install.package_files("jaxsim", pattern="**/*.py")
 
 
 _ENGINE = JaxsimEngine()

@@ -2,7 +2,7 @@
 
 For each world of B bodies (the requests grouped by ``WorldEngine.group_key``), step n = 1, 2, …:
 
-1. the harness force and torque of each body (base.harness_force_torque_floats: forces from the
+1. the harness force and torque of each body (forces.harness_force_torque_floats: forces from the
    start-of-step state, held over the step, scaled by the pre-step decay factors), from the requested initial
    state at step 1 and from the state the engine returned after; constant forces (no state dependence)
    evaluated once, and applied once to an engine that keeps them (``keeps_forces``); an engine that takes
@@ -38,7 +38,7 @@ import time
 
 import numpy as np
 
-from cross_checks.engines import base
+from cross_checks.engines import base, forces
 from cross_checks.engines.base import EngineError
 from reference_sim.compiled import ForceEvaluator, ForceRows
 from reference_sim.quaternion import same_side
@@ -66,7 +66,7 @@ def body_torque_B(problem) -> np.ndarray:
 
 class Harness:
     """The harness forces of B bodies (one request each) at step ``dt_s`` (one for all, or one per body):
-    per body the plain-float evaluator of base.harness_force_torque_floats, and the pre-step decay factors
+    per body the plain-float evaluator of forces.harness_force_torque_floats, and the pre-step decay factors
     (B,). ``body_torque``: the engine applies the torques fixed in body axes itself (``body_torque_B``, the
     (B, 3) it is given); the harness's forces are then the rest (:func:`host_problem`)."""
 
@@ -80,10 +80,10 @@ class Harness:
         # many bodies: one compiled call for all of them (the same numbers, member by member)
         self.rows = ForceRows.of(problems) if len(scenarios) > 4 else None
         dts = [dt_s] * len(scenarios) if np.ndim(dt_s) == 0 else list(dt_s)
-        g = [tuple(float(x) for x in base.decay_factors(sc, h)) for sc, h in zip(scenarios, dts)]
+        g = [tuple(float(x) for x in forces.decay_factors(sc, h)) for sc, h in zip(scenarios, dts)]
         self.g_v = np.array([a for a, _ in g])
         self.g_w = np.array([b for _, b in g])
-        self.weight = np.array([base.weight_W(sc) if applies_gravity else np.zeros(3) for sc in scenarios])
+        self.weight = np.array([forces.weight_W(sc) if applies_gravity else np.zeros(3) for sc in scenarios])
         self.state_dependent = any(p.forces.state_dependent for p in problems)
         self.body_torque_B = (np.array([body_torque_B(sc.problem) for sc in scenarios]) if body_torque
                               else None)

@@ -3,7 +3,7 @@ interface is cross_checks.engines.base. What MJX does, the defaults neutralised 
 docs/engine_conventions.md, "MJX 3.17.0".
 
 Model: ``mujoco_engine.build_model``'s, put on the device by ``mjx.put_model``. Precision: float64 (JAX
-started by base.start_jax: ``jax_enable_x64`` is process-global).
+started by runtimes.start_jax: ``jax_enable_x64`` is process-global).
 
 State at the boundary (MuJoCo's, converted by mujoco_engine's ``to_qpos_qvel``/``to_packed``):
 ``qpos = [x_W, q_WB (w x y z)]``, ``qvel = [v_W (COM, world axes), ω_B (body axes)]``.
@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from cross_checks.core.files import kernel_cache_dir
-from cross_checks.engines import base
+from cross_checks.engines import base, install, runtimes
 from cross_checks.engines.base import EngineError, Traits, Variant
 from cross_checks.engines.world import World, WorldEngine
 
@@ -80,13 +80,13 @@ def _check_installed() -> None:
     """EngineNotInstalled when mujoco-mjx is not installed; ImportError when it is but MJX or JAX cannot be
     found — from package metadata and import specs only (nothing imported, no JAX backend started)."""
     import importlib.util
-    base.check_installed(_DIST, _HINT)
+    install.check_installed(_DIST, _HINT)
     for mod in ("jax", "jaxlib"):
         if importlib.util.find_spec(mod) is None:
-            raise ImportError(f"{_DIST} {base.installed_version(_DIST)} is installed but cannot be imported: "
-                              f"{mod} is missing ({_HINT})")
+            raise ImportError(f"{_DIST} {install.installed_version(_DIST)} is installed but cannot be "
+                              f"imported: {mod} is missing ({_HINT})")
     if importlib.util.find_spec("mujoco.mjx") is None:
-        raise ImportError(f"{_DIST} {base.installed_version(_DIST)} is installed but mujoco.mjx cannot be "
+        raise ImportError(f"{_DIST} {install.installed_version(_DIST)} is installed but mujoco.mjx cannot be "
                           "found")
 
 
@@ -94,17 +94,17 @@ def version() -> str:
     """MJX's version and the JAX release it runs on, e.g. ``3.17.0 (jax 0.10.2)``, from package metadata
     (EngineNotInstalled when mujoco-mjx is absent)."""
     _check_installed()
-    return base.release(_DIST, ("jax", "jax"))
+    return install.release(_DIST, ("jax", "jax"))
 
 
 @functools.lru_cache(maxsize=1)
 def _engine():
-    """``(jax, jax.numpy, mujoco.mjx)``, imported on first use (base.start_jax). ImportError (with JAX's or
-    MJX's words) when the import fails."""
+    """``(jax, jax.numpy, mujoco.mjx)``, imported on first use (runtimes.start_jax). ImportError (with JAX's
+    or MJX's words) when the import fails."""
     _check_installed()
     # mujoco.mjx prints "Failed to import warp: ..." on stdout when the optional Warp backend is absent
-    with base.first_import(_DIST), contextlib.redirect_stdout(io.StringIO()):
-        jax = base.start_jax()
+    with install.first_import(_DIST), contextlib.redirect_stdout(io.StringIO()):
+        jax = runtimes.start_jax()
         import jax.numpy as jnp
         from mujoco import mjx
     return jax, jnp, mjx
@@ -113,16 +113,17 @@ def _engine():
 def _engine_or_error():
     """:func:`_engine`, an import failure as EngineError; EngineError too in a process forked after JAX
     started in its parent."""
-    base.refuse_forked_jax("MJX cannot run in a process forked after JAX started in its parent (a running "
-                           "JAX backend does not survive fork: its threads are gone and it would hang); run "
-                           "the sweep with --jobs 1 from there, or from a process that has not run MJX")
-    return base.engine_or_error(_engine)
+    runtimes.refuse_forked_jax(
+        "MJX cannot run in a process forked after JAX started in its parent (a running JAX backend does "
+        "not survive fork: its threads are gone and it would hang); run the sweep with --jobs 1 from "
+        "there, or from a process that has not run MJX")
+    return install.engine_or_error(_engine)
 
 
 # --- compile bookkeeping ----------------------------------------------------------------------------------
 
 _COMPILED: dict = {}   # key -> compiled executable
-_STATS = base.Stats(compilations=0, compile_seconds=0.0, step_seconds=0.0, body_steps=0)
+_STATS = runtimes.Stats(compilations=0, compile_seconds=0.0, step_seconds=0.0, body_steps=0)
 
 
 def compile_stats() -> dict:
@@ -385,7 +386,7 @@ class MjxWorld(World):
         return out
 
     def _batch(self, idx, n_max, gains, out, jnp):
-        B, M = len(idx), base.power_of_two(len(idx))
+        B, M = len(idx), runtimes.power_of_two(len(idx))
         pad = idx + [idx[0]] * (M - B)
         t0 = time.perf_counter()
         stacked = _stack([self.models[k] for k in pad])
@@ -434,7 +435,7 @@ class MjxEngine(WorldEngine):
 
     def engine_files(self) -> list:
         """MJX's Python sources (found without importing them: the parent of a sweep must not start JAX)."""
-        return base.package_files("mujoco.mjx", "_src")
+        return install.package_files("mujoco.mjx", "_src")
 
 
 _ENGINE = MjxEngine()

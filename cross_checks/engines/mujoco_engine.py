@@ -17,13 +17,14 @@ import time
 
 import numpy as np
 
-from cross_checks.engines import base
-from cross_checks.engines.base import EngineError, Variant, stage_force_torque_floats
+from cross_checks.engines import base, forces, install
+from cross_checks.engines.base import EngineError, Variant
+from cross_checks.engines.forces import stage_force_torque_floats
 from cross_checks.engines.world import World, WorldEngine
 from reference_sim.quaternion import quat_conj, quat_from_matrix, rotate
 from reference_sim.simulate import Run
 
-mujoco, _IMPORT_ERROR = base.optional_import("mujoco")
+mujoco, _IMPORT_ERROR = install.optional_import("mujoco")
 
 __all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate", "simulate_many", "one_step",
            "build_model", "packed_floats", "to_packed", "to_qpos_qvel"]
@@ -58,7 +59,7 @@ _RK4_STAGE_FORCES = True
 
 
 def _require():
-    base.require(mujoco, _IMPORT_ERROR, "mujoco")
+    install.require(mujoco, _IMPORT_ERROR, "mujoco")
 
 
 def version() -> str:
@@ -346,7 +347,7 @@ class MujocoWorld(World):
         control = None
         if self.per_stage:
             writers = [_stage_force_writer(r.scenario, self.qpos[k], self.qvel[k], self.xfrc[k],
-                                           base.weight_W(r.scenario)) for k, r in enumerate(requests)]
+                                           forces.weight_W(r.scenario)) for k, r in enumerate(requests)]
             perf = time.perf_counter
 
             def control(m_, d_):

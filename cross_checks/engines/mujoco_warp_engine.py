@@ -31,7 +31,7 @@ import time
 
 import numpy as np
 
-from cross_checks.engines import base
+from cross_checks.engines import base, install, runtimes
 from cross_checks.engines.base import EngineError, Traits, Variant
 from cross_checks.engines.world import World, WorldEngine
 
@@ -79,24 +79,24 @@ _LOCK = threading.RLock()
 # --- the engine, imported lazily (never at module import, never in version()) -----------------------------
 
 def _check_installed() -> None:
-    """base.check_installed for this engine and the Warp it runs on."""
-    base.check_installed(_DIST, _HINT, (("warp", "warp-lang"),))
+    """install.check_installed for this engine and the Warp it runs on."""
+    install.check_installed(_DIST, _HINT, (("warp", "warp-lang"),))
 
 
 def version() -> str:
     """mujoco_warp's version and the Warp release it runs on, e.g. ``4.0.0 (warp 1.19.0)``, from package
     metadata (EngineNotInstalled when mujoco-warp is absent)."""
     _check_installed()
-    return base.release(_DIST, ("warp", "warp-lang"))
+    return install.release(_DIST, ("warp", "warp-lang"))
 
 
 @functools.lru_cache(maxsize=1)
 def _engine():
-    """``(warp, mujoco_warp, mujoco)``, imported on first use (base.start_warp: the kernel cache in
+    """``(warp, mujoco_warp, mujoco)``, imported on first use (runtimes.start_warp: the kernel cache in
     ``kernel_cache_dir("mujoco_warp")``). ImportError with the engine's words when the import fails."""
     _check_installed()
-    with base.first_import(_DIST), base.quiet_fd2():
-        wp = base.start_warp(ENGINE, "LOG_ERROR")
+    with install.first_import(_DIST), install.quiet_fd2():
+        wp = runtimes.start_warp(ENGINE, "LOG_ERROR")
         import mujoco
         import mujoco_warp as mjw
     return wp, mjw, mujoco
@@ -104,7 +104,8 @@ def _engine():
 
 # --- bookkeeping: compile time apart from stepping ------------------------------------------------
 
-_STATS = base.Stats(compilations=0, compile_seconds=0.0, step_seconds=0.0, steps=0, body_steps=0, captures=0)
+_STATS = runtimes.Stats(compilations=0, compile_seconds=0.0, step_seconds=0.0, steps=0, body_steps=0,
+                        captures=0)
 _WARM: set = set()   # (variant, callback) whose kernels this process has loaded
 
 
@@ -150,7 +151,7 @@ def host_model(scenario, variant: str, dt_s: float):
     words."""
     from cross_checks.engines import mujoco_engine
     base.check_variant(ENGINE, VARIANTS, variant)
-    _, _, mujoco = base.engine_or_error(_engine)
+    _, _, mujoco = install.engine_or_error(_engine)
     m = mujoco_engine.build_model(scenario, variant, dt_s)
     m.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_AUTORESET)
     return m
@@ -181,7 +182,7 @@ class _Worlds:
     zero-copy NumPy views of their qpos, qvel and xfrc_applied (float32)."""
 
     def __init__(self, scenario, variant: str, dts, qpos0, qvel0, callback=None):
-        wp, mjw, mujoco = base.engine_or_error(_engine)
+        wp, mjw, mujoco = install.engine_or_error(_engine)
         m = host_model(scenario, variant, float(dts[0]))
         _warm_up(variant, m, callback)
         self.wp, self.mjw = wp, mjw
@@ -220,7 +221,7 @@ class _Worlds:
 
 @functools.lru_cache(maxsize=1)
 def _stage_kernel():
-    """The Warp kernel of RK4's per-stage forces (``base.stage_force_torque`` in float32, the decay as
+    """The Warp kernel of RK4's per-stage forces (``forces.stage_force_torque`` in float32, the decay as
     damping), one thread per world: the scenario's forces minus its weight from the stage state in qpos/qvel
     into the body's row of xfrc_applied. Launched from ``Model.callback.control``, which ``_forward`` calls at
     every stage, so the whole RK4 step, stages and forces, is captured and replayed."""
@@ -405,7 +406,7 @@ class MujocoWarpEngine(WorldEngine):
     version = staticmethod(version)   # the module's: from package metadata, Warp not started
 
     def build(self, requests, variant, dt_s):
-        base.engine_or_error(_engine)
+        install.engine_or_error(_engine)
         with _LOCK:
             return WarpWorld(requests, variant)
 
@@ -419,7 +420,7 @@ class MujocoWarpEngine(WorldEngine):
     def engine_files(self) -> list:
         """mujoco_warp's Python sources (found without importing them: the parent of a sweep must not start
         Warp)."""
-        return base.package_files("mujoco_warp", "_src")
+        return install.package_files("mujoco_warp", "_src")
 
 
 _ENGINE = MujocoWarpEngine()

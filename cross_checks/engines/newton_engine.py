@@ -35,8 +35,9 @@ import warnings
 
 import numpy as np
 
-from cross_checks.engines import base
-from cross_checks.engines.base import EngineError, ModuleAdapter, Traits, Variant, installed_version
+from cross_checks.engines import base, forces, install, runtimes
+from cross_checks.engines.base import EngineError, ModuleAdapter, Traits, Variant
+from cross_checks.engines.install import installed_version
 from cross_checks.engines.step_floats import harness_fn
 from reference_sim.quaternion import same_side, sign_continuous
 from reference_sim.simulate import Run, bad_rows, diverged, recorded_run
@@ -105,25 +106,25 @@ _LOCK = threading.RLock()
 # --- the engine, imported lazily (never at module import, never in version()) -----------------------------
 
 def _check_installed() -> None:
-    """base.check_installed for this engine and the Warp it runs on."""
-    base.check_installed(_DIST, PIP_HINT, (("warp", "warp-lang"),), installed_version)
+    """install.check_installed for this engine and the Warp it runs on."""
+    install.check_installed(_DIST, PIP_HINT, (("warp", "warp-lang"),), installed_version)
 
 
 def version() -> str:
     """Newton's version and the Warp release it runs on, e.g. ``1.8.0 (warp 1.19.0)``, from package metadata
     (EngineNotInstalled when newton is absent)."""
     _check_installed()
-    return base.release(_DIST, ("warp", "warp-lang"))
+    return install.release(_DIST, ("warp", "warp-lang"))
 
 
 @functools.lru_cache(maxsize=1)
 def _engine():
-    """``(warp, newton)``, imported on first use (base.start_warp: the kernel cache in
+    """``(warp, newton)``, imported on first use (runtimes.start_warp: the kernel cache in
     ``kernel_cache_dir("newton")``, the device banner and module loads off). ImportError with the engine's
     words when the import fails."""
     _check_installed()
-    with base.first_import(_DIST, installed_version):
-        wp = base.start_warp(ENGINE, "LOG_WARNING", quiet=True)
+    with install.first_import(_DIST, installed_version):
+        wp = runtimes.start_warp(ENGINE, "LOG_WARNING", quiet=True)
         import newton
     return wp, newton
 
@@ -131,7 +132,8 @@ def _engine():
 # --- compile bookkeeping ----------------------------------------------------------------------------------
 
 _WARM: dict = {}    # variant -> seconds its first model build and step took (kernel compile or cache load)
-_STATS = base.Stats(compilations=0, compile_seconds=0.0, build_seconds=0.0, step_seconds=0.0, body_steps=0)
+_STATS = runtimes.Stats(compilations=0, compile_seconds=0.0, build_seconds=0.0, step_seconds=0.0,
+                        body_steps=0)
 
 
 def compile_stats() -> dict:
@@ -147,7 +149,7 @@ def _warm(variant: str) -> None:
     """Compile (or load) every kernel module ``variant`` uses, once per process, timed apart from the runs."""
     if variant in _WARM:
         return
-    wp, newton = base.engine_or_error(_engine)
+    wp, newton = install.engine_or_error(_engine)
     t0 = time.perf_counter()
     model = build_model(variant, [(1.0, np.eye(3), np.zeros(3))])
     solver = make_solver(variant, model)
@@ -166,7 +168,7 @@ def build_model(variant: str, bodies):
     gravity_W (3,))`` each): jointless links for the maximal-coordinate solvers, FREE-jointed bodies for
     Featherstone; com = 0, no shape. EngineError when ``finalize`` did not keep the mass or the inertia (its
     inertia validation corrects a tensor it finds non-physical)."""
-    wp, newton = base.engine_or_error(_engine)
+    wp, newton = install.engine_or_error(_engine)
     builder = newton.ModelBuilder(gravity=(0.0, 0.0, 0.0))
     add = builder.add_body if variant in _GENERALIZED else builder.add_link
     for mass, inertia, gravity in bodies:
@@ -192,7 +194,7 @@ def build_model(variant: str, bodies):
 
 def make_solver(variant: str, model):
     """The variant's Newton solver for ``model``, every setting of SOLVER_SETTINGS applied."""
-    _, newton = base.engine_or_error(_engine)
+    _, newton = install.engine_or_error(_engine)
     base.check_variant(ENGINE, VARIANTS, variant)
     with warnings.catch_warnings():
         # SolverMuJoCo warns that MuJoCo 4.0.0 is not the ~=3.17.0 Newton declares (rbcheck pins 4.0.0)
@@ -339,7 +341,7 @@ def _run_batch(variant: str, dt_s: float, reqs) -> list:
     n_max = max(r.n_steps for r in reqs)
     harness = [harness_fn(r.scenario, dt_s) for r in reqs]
     varying = [k for k, r in enumerate(reqs) if r.scenario.problem.forces.state_dependent]
-    gains = np.array([[float(g) for g in base.decay_factors(r.scenario, dt_s)] for r in reqs])   # (B, 2)
+    gains = np.array([[float(g) for g in forces.decay_factors(r.scenario, dt_s)] for r in reqs])   # (B, 2)
     decay = [k for k, r in enumerate(reqs) if r.scenario.problem.forces.has_decay]
     gv = np.repeat(gains[:, 0:1], 3, axis=1)
     gw = np.repeat(gains[:, 1:2], 3, axis=1)
@@ -393,7 +395,7 @@ def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
     T = len(y_start)
     out = np.empty((T, 13))
     harness = harness_fn(scenario, dt_s)
-    gv, gw = (float(g) for g in base.decay_factors(scenario, dt_s))
+    gv, gw = (float(g) for g in forces.decay_factors(scenario, dt_s))
     with _LOCK, _mujoco_warnings(variant):
         _warm(variant)
         size = 1 if variant in _ONE_BODY else MAX_BATCH
@@ -419,6 +421,6 @@ class NewtonAdapter(ModuleAdapter):
 
     def engine_files(self) -> list:
         """Newton's solver sources (found without importing Newton or Warp)."""
-        return base.package_files("newton", *(f"_src/{p}" for p in (
+        return install.package_files("newton", *(f"_src/{p}" for p in (
             "solvers/solver.py", "solvers/semi_implicit", "solvers/xpbd", "solvers/featherstone",
             "solvers/mujoco", "sim/builder.py", "sim/model.py", "sim/state.py")))

@@ -20,8 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from cross_checks.engines import base
-from cross_checks.engines.base import EngineError, Traits, Variant, installed_version
+from cross_checks.engines import install
+from cross_checks.engines.base import EngineError, Traits, Variant
+from cross_checks.engines.install import installed_version
 from cross_checks.engines.world import World, WorldEngine
 from reference_sim.quaternion import quat_from_matrix
 from reference_sim.simulate import BLOWUP_LIMIT
@@ -65,7 +66,7 @@ def version() -> str:
     """SAPIEN's version and the PhysX release it bundles, e.g. ``3.0.3 (PhysX 5.3.1)``, without importing
     sapien (its import starts a thread; the sweep forks): EngineNotInstalled, or ImportError if not found."""
     if installed_version(_DIST) is None:
-        raise base.EngineNotInstalled("sapien is not installed (pip install 'rbcheck[physx]')")
+        raise install.EngineNotInstalled("sapien is not installed (pip install 'rbcheck[physx]')")
     if importlib.util.find_spec("sapien") is None:
         raise ImportError(f"sapien {installed_version(_DIST)} is installed but cannot be imported: "
                           "no module named 'sapien'")
@@ -193,8 +194,8 @@ class PhysxEngine(WorldEngine):
         return (float(request.dt_s), np.float32(request.scenario.problem.forces.gravity_W).tobytes())
 
     def engine_files(self) -> list:   # SAPIEN's compiled module and library (PhysX linked in), not imported
-        return [*base.package_files("sapien", pattern="pysapien*.so"),
-                *base.package_files("sapien", "../sapien.libs", pattern="libsapien*")]
+        return [*install.package_files("sapien", pattern="pysapien*.so"),
+                *install.package_files("sapien", "../sapien.libs", pattern="libsapien*")]
 
 
 _ENGINE = PhysxEngine()

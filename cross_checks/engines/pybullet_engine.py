@@ -17,14 +17,14 @@ import threading
 
 import numpy as np
 
-from cross_checks.engines import base
+from cross_checks.engines import base, install
 from cross_checks.engines.base import EngineError, Variant
 from cross_checks.engines.step_floats import quat_mul_floats
 from cross_checks.engines.world import World, WorldEngine
 from reference_sim.quaternion import quat_conj, quat_from_matrix, quat_mul
 from reference_sim.simulate import Run
 
-p, _IMPORT_ERROR = base.optional_import("pybullet", quiet_stderr=True)   # it prints its build time at import
+p, _IMPORT_ERROR = install.optional_import("pybullet", quiet_stderr=True)   # prints its build time at import
 
 __all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate",
            "simulate_many", "one_step", "DYNAMICS_SETTINGS"]
@@ -52,13 +52,13 @@ _client_pid: int | None = None
 
 
 def _require():
-    base.require(p, _IMPORT_ERROR, "pybullet")
+    install.require(p, _IMPORT_ERROR, "pybullet")
 
 
 def version() -> str:
     """The installed pybullet distribution's version (read from its metadata once per process)."""
     _require()
-    return base.release("pybullet")
+    return install.release("pybullet")
 
 
 def _connect() -> int:
@@ -226,7 +226,7 @@ class PybulletEngine(WorldEngine):
 
     def engine_files(self) -> list:
         """PyBullet's compiled module."""
-        return base.library_files(p)
+        return install.library_files(p)
 
 
 _ENGINE = PybulletEngine()

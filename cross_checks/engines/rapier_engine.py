@@ -14,13 +14,13 @@ import math
 
 import numpy as np
 
-from cross_checks.engines import base
+from cross_checks.engines import install
 from cross_checks.engines.base import EngineError, Traits, Variant
 from cross_checks.engines.step_floats import bad_floats
 from cross_checks.engines.world import World, WorldEngine
 from reference_sim.quaternion import quat_from_matrix
 
-rapier, _IMPORT_ERROR = base.optional_import("rapier3d")
+rapier, _IMPORT_ERROR = install.optional_import("rapier3d")
 
 __all__ = ["ENGINE", "DIST", "VARIANTS", "WORLD_SETTINGS", "BODY_SETTINGS", "EngineError", "version",
            "simulate", "simulate_many", "one_step", "RapierWorld", "RapierAdapter"]
@@ -157,7 +157,7 @@ class RapierEngine(WorldEngine):
     sign_continuity = True
 
     def _installed(self):
-        base.require(rapier, _IMPORT_ERROR, DIST, hint="pip install 'rbcheck[rapier]'")
+        install.require(rapier, _IMPORT_ERROR, DIST, hint="pip install 'rbcheck[rapier]'")
 
     def build(self, requests, variant, dt_s):
         self._installed()
@@ -167,7 +167,7 @@ class RapierEngine(WorldEngine):
         return (float(request.dt_s), tuple(float(g) for g in request.scenario.problem.forces.gravity_W))
 
     def engine_files(self) -> list:   # rapier3d's compiled module (a rebuilt wheel is a new engine)
-        return [] if rapier is None else base.library_files(getattr(rapier, "_rapier3d", None))
+        return [] if rapier is None else install.library_files(getattr(rapier, "_rapier3d", None))
 
 
 _ENGINE = RapierEngine()

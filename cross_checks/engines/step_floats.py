@@ -7,18 +7,18 @@ with that function bit for bit.
 """
 from __future__ import annotations
 
-from cross_checks.engines import base
+from cross_checks.engines import forces
 from reference_sim.simulate import BLOWUP_LIMIT
 
 __all__ = ["harness_fn", "quat_mul_floats", "bad_floats"]
 
 
 def harness_fn(scenario, dt_s: float):
-    """``y -> base.harness_force_torque_floats(scenario, y, dt_s)`` (6 floats: world force at the COM, N,
+    """``y -> forces.harness_force_torque_floats(scenario, y, dt_s)`` (6 floats: world force at the COM, N,
     and world torque, N m, scaled by the pre-step decay factors), with the float force evaluator and the
     factors looked up once instead of every step. ``y``: the packed state (13 floats, a list preferred)."""
-    ft = base.float_forces(scenario).force_torque
-    gv, gw = (float(g) for g in base.decay_factors(scenario, dt_s))
+    ft = forces.float_forces(scenario).force_torque
+    gv, gw = (float(g) for g in forces.decay_factors(scenario, dt_s))
 
     def harness(y):
         fx, fy, fz, tx, ty, tz = ft(y)

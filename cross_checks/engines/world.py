@@ -55,7 +55,7 @@ import abc
 
 import numpy as np
 
-from cross_checks.engines import base
+from cross_checks.engines import base, install
 
 __all__ = ["World", "WorldEngine"]
 
@@ -144,7 +144,8 @@ class WorldEngine(base.EngineAdapter):
     #: Steps between the loop's divergence checks.
     chunk: int = 1024
     #: Harness modules whose code decides the results besides the engine's own (the result cache's key).
-    harness: tuple = ("cross_checks.engines.loop", "cross_checks.engines.world")
+    harness: tuple = ("cross_checks.engines.forces", "cross_checks.engines.loop",
+                      "cross_checks.engines.world")
 
     @abc.abstractmethod
     def build(self, requests, variant: str, dt_s: float) -> World:
@@ -168,13 +169,13 @@ class WorldEngine(base.EngineAdapter):
         return False
 
     def _installed(self):
-        base.require(*base.optional_import(self.module or self.distribution),
-                     name=self.module or self.distribution, dist=self.distribution,
-                     hint=f'pip install -e ".[{self.extra}]"' if self.extra else "")
+        install.require(*install.optional_import(self.module or self.distribution),
+                        name=self.module or self.distribution, dist=self.distribution,
+                        hint=f'pip install -e ".[{self.extra}]"' if self.extra else "")
 
     def version(self) -> str:
         self._installed()
-        return base.release(self.distribution, self.runs_on)
+        return install.release(self.distribution, self.runs_on)
 
     def simulate(self, scenario, variant: str, dt_s: float, n_steps: int):
         from cross_checks.engines import loop
@@ -190,8 +191,8 @@ class WorldEngine(base.EngineAdapter):
 
     def engine_files(self) -> list:
         """The engine's compiled libraries (hashed into the result cache's key)."""
-        mod, _ = base.optional_import(self.module or self.distribution)
-        return base.library_files(mod)
+        mod, _ = install.optional_import(self.module or self.distribution)
+        return install.library_files(mod)
 
     def source_files(self) -> list:
         import importlib

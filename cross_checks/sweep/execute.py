@@ -16,6 +16,7 @@ from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
 
+from cross_checks.core.processes import kill_pool
 from cross_checks.sweep.jobs import (
     failed_record,
     failed_second_reference,
@@ -23,7 +24,7 @@ from cross_checks.sweep.jobs import (
     run_job_group,
     second_reference_job,
 )
-from cross_checks.sweep.lifecycle import kill_pool, worker_init
+from cross_checks.sweep.lifecycle import worker_init
 
 __all__ = ["Runner", "ScenarioReference", "SecondReference",
            "run_references", "run_jobs", "second_reference_jobs"]

@@ -1,24 +1,25 @@
 """How rbcheck's processes end: SIGTERM is handled like Ctrl-C (the same clean-up runs: staging
 directories removed, workers stopped, exit 143 instead of 130), and worker processes die with the
-process that started them, even when it is killed with SIGKILL (Linux PR_SET_PDEATHSIG)."""
+process that started them, even when it is killed with SIGKILL (Linux PR_SET_PDEATHSIG); the time limits
+of a run. Starting, supervising and stopping the processes themselves: :mod:`cross_checks.core.processes`."""
 from __future__ import annotations
 
 import _thread
 import contextlib
-import ctypes
 import os
 import signal
 import sys
 import threading
 import time
 
-__all__ = ["Terminated", "handle_sigterm", "kill_pool", "interrupted_by", "signals_deferred",
+from cross_checks.core import processes
+
+__all__ = ["Terminated", "handle_sigterm", "interrupted_by", "signals_deferred",
            "interrupted_exception", "await_group_signal", "exit_at_once", "worker_init", "EXIT_TERMINATED",
            "TimeLimitExceeded", "time_limit", "each_within_limits"]
 
 #: 128 + SIGTERM, what a shell reports for a process ended by SIGTERM.
 EXIT_TERMINATED = 128 + signal.SIGTERM
-_PR_SET_PDEATHSIG = 1
 
 
 class Terminated(KeyboardInterrupt):
@@ -164,8 +165,7 @@ def exit_at_once(code: int) -> None:
         return
     for p in mp.active_children():
         with contextlib.suppress(Exception):
-            p.kill()
-            p.join(timeout=2)
+            processes.end_processes([p], terminate_first=False)
 
 
 def handle_sigterm() -> None:
@@ -194,25 +194,13 @@ def handle_sigterm() -> None:
         sys.unraisablehook = _hook
 
 
-def _die_with_parent(parent_pid: int) -> None:
-    if not sys.platform.startswith("linux"):
-        return
-    try:
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
-    except (OSError, AttributeError):
-        return
-    if os.getppid() != parent_pid:  # the parent died before prctl took effect
-        os._exit(1)
-
-
 def worker_init(parent_pid: int | None = None) -> None:
     """Initializer of rbcheck's pool workers: Ctrl-C and SIGTERM are the parent's to handle (it then
     stops the workers by their ids); a worker must not print its own traceback, and it is killed
     when its parent dies without stopping it (kill -9)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
-    _die_with_parent(parent_pid if parent_pid is not None else os.getppid())
+    processes.die_with_parent(parent_pid if parent_pid is not None else os.getppid())
 
 
 class TimeLimitExceeded(Exception):
@@ -266,30 +254,3 @@ def each_within_limits(call, items: list, time_limit_s: float | None, what: str)
         if isinstance(exc, TimeLimitExceeded):
             return [f"{exc} (cross_checks/core/tolerances.py)"]
         return [f"{type(exc).__name__}: {exc}".strip()]
-
-
-def kill_pool(pool) -> None:
-    """Stop a ``concurrent.futures.ProcessPoolExecutor``'s workers (they ignore SIGINT) by their own process
-    ids, and make sure that its manager thread ends, which Python joins at exit. A worker killed while it
-    wrote a large pickled result leaves part of the message in the result pipe; the manager thread then
-    waits in ``os.read`` for the rest, for ever, because this process holds the pipe's write end too:
-    closing that end once no worker is left turns the wait into end-of-file (a broken pool, which ends the
-    thread) instead of a hang."""
-    procs = list((getattr(pool, "_processes", None) or {}).values())
-    # read before shutdown(), which drops them
-    queue, manager = getattr(pool, "_result_queue", None), getattr(pool, "_executor_manager_thread", None)
-    pool.shutdown(wait=False, cancel_futures=True)
-    for p in procs:
-        if p.is_alive():
-            p.terminate()
-    for p in procs:
-        p.join(timeout=2)
-        if p.is_alive():   # stuck (e.g. in uninterruptible I/O): SIGKILL cannot be ignored
-            p.kill()
-            p.join(timeout=2)
-    if queue is not None and not any(p.is_alive() for p in procs):
-        with contextlib.suppress(OSError):
-            queue._writer.close()
-    if manager is not None and manager is not threading.current_thread():
-        manager.join(timeout=5)
-

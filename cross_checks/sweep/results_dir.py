@@ -18,6 +18,7 @@ import sys
 import tempfile
 from pathlib import Path
 
+from cross_checks.core import processes
 from cross_checks.core.files import umask
 
 __all__ = ["fix_permissions", "MARKER", "MARKER_FORMAT", "ResultsDirError", "read_marker", "write_marker",
@@ -84,35 +85,14 @@ def _host() -> str:
     return hashlib.sha256(socket.gethostname().encode()).hexdigest()[:8]
 
 
-def _start_ticks(pid: int) -> int:
-    """Start time of process ``pid`` in clock ticks since boot (Linux /proc); 0 when unknown."""
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-        return int(stat.rsplit(")", 1)[1].split()[19])
-    except (OSError, ValueError, IndexError):
-        return 0
-
-
 def owned_name(prefix: str, kind: str) -> str:
     """``<prefix>rbcheck-<kind>-<host>-<pid>-<start>-<random>``: a name that says who made it."""
     pid = os.getpid()
-    return f"{prefix}rbcheck-{kind}-{_host()}-{pid}-{_start_ticks(pid)}-{secrets.token_hex(4)}"
+    return f"{prefix}rbcheck-{kind}-{_host()}-{pid}-{processes.start_ticks(pid)}-{secrets.token_hex(4)}"
 
 
 _OWNED = re.compile(
     r"rbcheck-(?P<kind>[a-z]+)-(?P<host>[0-9a-f]{8})-(?P<pid>\d+)-(?P<start>\d+)-[0-9a-f]{8}$")
-
-
-def _owner_dead(pid: int, start: int) -> bool:
-    if pid == os.getpid() and start == _start_ticks(pid):
-        return False
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return True
-    except PermissionError:
-        pass  # alive, another user's
-    return start != 0 and _start_ticks(pid) not in (0, start)  # the pid was reused by another process
 
 
 def is_owned_stale(name: str, prefix: str, kind: str | None = None) -> bool:
@@ -122,7 +102,7 @@ def is_owned_stale(name: str, prefix: str, kind: str | None = None) -> bool:
     m = _OWNED.match(name[len(prefix):])
     if not m or (kind is not None and m["kind"] != kind) or m["host"] != _host():
         return False
-    return _owner_dead(int(m["pid"]), int(m["start"]))
+    return processes.is_gone(int(m["pid"]), int(m["start"]))
 
 
 _TEMP = re.compile(r"^\.(?P<base>.+)\.[A-Za-z0-9_]{8}(\.npz)?$")

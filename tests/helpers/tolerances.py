@@ -259,8 +259,9 @@ MJW_HAND_STEP = 1e-6
 #: (spring_pendulum's ω; the float32 roundings of 100 steps); the nearest wrong schemes there differ by 1.5e-4
 #: (MuJoCo C Euler vs the implicit step, tennis_racket) and 0.22 (RK4 with the forces held over its stages).
 MJW_SAME_AS_MUJOCO_REL = 2e-5
-#: RK4's per-stage force kernel (float32) vs base.stage_force_torque (float64), relative to max(1, |wrench|),
-#: on 40 random states: a handful of float32 roundings of products of O(1) numbers; measured ≤ 2.6e-7; 2e-6.
+#: RK4's per-stage force kernel (float32) vs forces.stage_force_torque (float64), relative to
+#: max(1, |wrench|), on 40 random states: a handful of float32 roundings of products of O(1) numbers;
+#: measured ≤ 2.6e-7; 2e-6.
 MJW_STAGE_FORCES_REL = 2e-6
 
 #: One PhysX step against the same step written out in float64 numpy, absolute on values of order 1 (m, m/s,

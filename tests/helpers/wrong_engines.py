@@ -49,12 +49,12 @@ class BulletBody:
     def __init__(self, scenario, variant: str, dt_s: float, y0=None):
         import numpy as np
 
-        from cross_checks.engines import base
+        from cross_checks.engines import forces
         from cross_checks.engines import pybullet_engine as pe
         from cross_checks.engines.base import RunRequest
         self.world = pe.BulletWorld([RunRequest(scenario, float(dt_s), 1)], variant, float(dt_s))
         self.b, self.c, self.q_BP = self.world.bodies[0], self.world.c, self.world.q_BP[0]
-        self.weight = base.weight_W(scenario)
+        self.weight = forces.weight_W(scenario)
         self._np = np
 
     def set_state(self, y):

@@ -7,13 +7,13 @@ import pytest
 from cross_checks import engines
 from cross_checks.cli import main
 from cross_checks.cli.parser import _version_text
-from cross_checks.engines import base, brax_engine
+from cross_checks.engines import brax_engine, install
 
 
 @pytest.fixture
 def no_brax(monkeypatch):
-    real = base.installed_version
-    monkeypatch.setattr(base, "installed_version", lambda dist: None if dist == "brax" else real(dist))
+    real = install.installed_version
+    monkeypatch.setattr(install, "installed_version", lambda dist: None if dist == "brax" else real(dist))
     brax_engine._lib.cache_clear()
     engines.reset_registry()
     yield
@@ -23,15 +23,15 @@ def no_brax(monkeypatch):
 
 def test_version_raises_engine_not_installed_with_the_extra_to_install(no_brax):
     words = r"brax is not installed \(pip install 'rbcheck\[brax\]'\)"
-    with pytest.raises(base.EngineNotInstalled, match=words):
+    with pytest.raises(install.EngineNotInstalled, match=words):
         brax_engine.version()
 
 
 def test_brax_without_jax_is_not_an_absent_brax(monkeypatch):
-    monkeypatch.setattr(base, "installed_version", lambda dist: "0.14.2" if dist == "brax" else None)
+    monkeypatch.setattr(install, "installed_version", lambda dist: "0.14.2" if dist == "brax" else None)
     with pytest.raises(ImportError, match="brax 0.14.2 is installed but jax or jaxlib is not") as e:
         brax_engine.version()
-    assert not isinstance(e.value, base.EngineNotInstalled)
+    assert not isinstance(e.value, install.EngineNotInstalled)
 
 
 def test_list_and_version_say_brax_is_not_installed(no_brax, capsys):

@@ -13,7 +13,7 @@ import pytest
 
 from cross_checks import engines
 from cross_checks.core import tolerances as core_tol
-from cross_checks.engines import base
+from cross_checks.engines import install
 from cross_checks.engines.base import EngineError, RunRequest
 from cross_checks.engines.world import WorldEngine
 from cross_checks.scenario import load_scenario
@@ -223,8 +223,8 @@ def test_an_engine_that_is_missing_says_how_to_install_it(adapter):
     if type(adapter).version is not WorldEngine.version:
         pytest.skip(f"{adapter.name} reads its version from its module (its absence: its _optional tests)")
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(base, "installed_version", lambda dist: None)
-        mp.setattr(base, "optional_import",
+        mp.setattr(install, "installed_version", lambda dist: None)
+        mp.setattr(install, "optional_import",
                    lambda name, **kw: (None, ImportError(f"No module named {name!r}")))
-        with pytest.raises(base.EngineNotInstalled, match=rf"\[{adapter.extra}\]"):
+        with pytest.raises(install.EngineNotInstalled, match=rf"\[{adapter.extra}\]"):
             adapter.version()

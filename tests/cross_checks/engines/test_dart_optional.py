@@ -7,13 +7,13 @@ import pytest
 from cross_checks import engines
 from cross_checks.cli import main
 from cross_checks.cli.parser import _version_text
-from cross_checks.engines import base, dart_engine
+from cross_checks.engines import dart_engine, install
 
 
 @pytest.fixture
 def no_dart(monkeypatch):
-    real = base.installed_version
-    monkeypatch.setattr(base, "installed_version", lambda dist: None if dist == "dartpy" else real(dist))
+    real = install.installed_version
+    monkeypatch.setattr(install, "installed_version", lambda dist: None if dist == "dartpy" else real(dist))
     monkeypatch.setattr(dart_engine, "dart", None)
     monkeypatch.setattr(dart_engine, "_IMPORT_ERROR", ImportError("No module named 'dartpy'"))
     engines.reset_registry()
@@ -22,20 +22,20 @@ def no_dart(monkeypatch):
 
 
 def test_version_raises_engine_not_installed_with_the_extra_to_install(no_dart):
-    with pytest.raises(base.EngineNotInstalled,
+    with pytest.raises(install.EngineNotInstalled,
                        match=r"dartpy is not installed \(pip install 'rbcheck\[dart\]'\)"):
         dart_engine.version()
 
 
 def test_a_broken_install_is_not_an_absent_one(monkeypatch):
-    monkeypatch.setattr(base, "installed_version", lambda dist: "6.20.0" if dist == "dartpy" else None)
+    monkeypatch.setattr(install, "installed_version", lambda dist: "6.20.0" if dist == "dartpy" else None)
     monkeypatch.setattr(dart_engine, "dart", None)
     monkeypatch.setattr(dart_engine, "_IMPORT_ERROR",
                         ImportError("libfcl.so.0.7: cannot open shared object file"))
     with pytest.raises(ImportError,
                        match="dartpy 6.20.0 is installed but cannot be imported: ImportError: libfcl") as e:
         dart_engine.version()
-    assert not isinstance(e.value, base.EngineNotInstalled)
+    assert not isinstance(e.value, install.EngineNotInstalled)
 
 
 def test_list_and_version_say_dart_is_not_installed(no_dart, capsys):

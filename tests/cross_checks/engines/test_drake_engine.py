@@ -12,7 +12,7 @@ from tests.helpers import tolerances as tol
 pytest.importorskip("pydrake", reason="drake is not installed (pip install -e '.[drake]')")
 
 from cross_checks.engines import drake_engine as de  # noqa: E402
-from cross_checks.engines.base import stage_force_torque  # noqa: E402
+from cross_checks.engines.forces import stage_force_torque  # noqa: E402
 from cross_checks.scenario import load_scenario  # noqa: E402
 from reference_sim.ground_truth import ground_truth  # noqa: E402
 from reference_sim.quaternion import geodesic_angle, matrix_from_quat, quat_exp, quat_mul  # noqa: E402

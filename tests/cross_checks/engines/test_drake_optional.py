@@ -13,9 +13,9 @@ from cross_checks.scenario import load_scenario
 
 @pytest.fixture
 def no_drake(monkeypatch):
-    from cross_checks.engines import base
-    real = base.installed_version
-    monkeypatch.setattr(base, "installed_version", lambda dist: None if dist == "drake" else real(dist))
+    from cross_checks.engines import install
+    real = install.installed_version
+    monkeypatch.setattr(install, "installed_version", lambda dist: None if dist == "drake" else real(dist))
     monkeypatch.setattr(drake_engine, "pydrake", None)
     monkeypatch.setattr(drake_engine, "_IMPORT_ERROR", ImportError("No module named 'pydrake'"))
     engines.reset_registry()

@@ -173,7 +173,7 @@ def test_harness_forces_equal_the_force_model(name):
     # ForceModel.force_torque is the definition.
     import numpy as np
 
-    from cross_checks.engines.base import harness_force_torque
+    from cross_checks.engines.forces import harness_force_torque
     from reference_sim.quaternion import quat_normalize
     sc = load_scenario(name)
     fm, body = sc.problem.forces, sc.problem.body
@@ -189,7 +189,7 @@ def test_harness_forces_equal_the_force_model(name):
             np.testing.assert_allclose(tau, tau_ref * gw, rtol=1e-14, atol=1e-14)
         # the multi-stage engines' right-hand side: the decay as a damping
         # force −m k_v v and torque −k_ω I_W ω
-        from cross_checks.engines.base import stage_force_torque
+        from cross_checks.engines.forces import stage_force_torque
         from reference_sim.quaternion import matrix_from_quat
         k_v, k_w = fm.decay_rates_per_s()
         R = matrix_from_quat(y[6:10])

@@ -10,14 +10,14 @@ import pytest
 from cross_checks import engines
 from cross_checks.cli import main
 from cross_checks.cli.parser import _version_text
-from cross_checks.engines import base, genesis_engine
+from cross_checks.engines import genesis_engine, install
 
 
 @pytest.fixture
 def no_genesis(monkeypatch):
-    real = base.installed_version
+    real = install.installed_version
     monkeypatch.setattr(
-        base, "installed_version", lambda dist: None if dist == "genesis-world" else real(dist)
+        install, "installed_version", lambda dist: None if dist == "genesis-world" else real(dist)
     )
     engines.reset_registry()
     yield
@@ -26,19 +26,21 @@ def no_genesis(monkeypatch):
 
 def test_version_raises_engine_not_installed_with_the_extra_to_install(no_genesis):
     with pytest.raises(
-        base.EngineNotInstalled, match=r"genesis-world is not installed \(pip install 'rbcheck\[genesis\]'\)"
+        install.EngineNotInstalled,
+        match=r"genesis-world is not installed \(pip install 'rbcheck\[genesis\]'\)"
     ):
         genesis_engine.version()
 
 
 def test_a_broken_install_is_not_an_absent_one(monkeypatch):
-    monkeypatch.setattr(base, "installed_version", lambda dist: "1.4.5" if dist == "genesis-world" else None)
+    monkeypatch.setattr(install, "installed_version",
+                        lambda dist: "1.4.5" if dist == "genesis-world" else None)
     monkeypatch.setattr(genesis_engine, "_findable", lambda name: name != "torch")
     with pytest.raises(
         ImportError, match="genesis-world 1.4.5 is installed but cannot be imported: no module named 'torch'"
     ) as e:
         genesis_engine.version()
-    assert not isinstance(e.value, base.EngineNotInstalled)
+    assert not isinstance(e.value, install.EngineNotInstalled)
 
 
 def test_list_and_version_say_genesis_is_not_installed(no_genesis, capsys):

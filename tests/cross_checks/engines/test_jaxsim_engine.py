@@ -597,8 +597,8 @@ def test_the_link_carries_the_mass_and_inertia_to_a_few_roundings_and_a_wrong_on
 
 
 def test_a_process_forked_after_jax_started_refuses_with_an_engine_error(monkeypatch):
-    from cross_checks.engines import base
-    monkeypatch.setattr(base, "_FORKED_AFTER_JAX", [True])   # what base's fork hook sets in such a child
+    from cross_checks.engines import runtimes
+    monkeypatch.setattr(runtimes, "_FORKED_AFTER_JAX", [True])   # what base's fork hook sets in such a child
     sc = load_scenario("projectile")
     said = "forked after JAX started in its parent.*--jobs 1"
     with pytest.raises(je.EngineError, match=said):

@@ -10,14 +10,14 @@ import pytest
 from cross_checks import engines
 from cross_checks.cli import main
 from cross_checks.cli.parser import _version_text
-from cross_checks.engines import base, jaxsim_engine
+from cross_checks.engines import install, jaxsim_engine
 
 
 @pytest.fixture
 def no_jaxsim(monkeypatch):
-    real = base.installed_version
+    real = install.installed_version
     monkeypatch.setattr(
-        base, "installed_version", lambda dist: None if dist == "jaxsim" else real(dist)
+        install, "installed_version", lambda dist: None if dist == "jaxsim" else real(dist)
     )
     engines.reset_registry()
     yield
@@ -26,14 +26,14 @@ def no_jaxsim(monkeypatch):
 
 def test_version_raises_engine_not_installed_with_the_extra_to_install(no_jaxsim):
     with pytest.raises(
-        base.EngineNotInstalled, match=r"jaxsim is not installed \(pip install 'rbcheck\[jaxsim\]'\)"
+        install.EngineNotInstalled, match=r"jaxsim is not installed \(pip install 'rbcheck\[jaxsim\]'\)"
     ):
         jaxsim_engine.version()
 
 
 def test_a_broken_install_is_not_an_absent_one(monkeypatch):
     monkeypatch.setattr(
-        base, "installed_version", lambda dist: "0.9.0" if dist == "jaxsim" else None
+        install, "installed_version", lambda dist: "0.9.0" if dist == "jaxsim" else None
     )
     real = importlib.util.find_spec
     monkeypatch.setattr(
@@ -41,7 +41,7 @@ def test_a_broken_install_is_not_an_absent_one(monkeypatch):
     )
     with pytest.raises(ImportError, match="jaxsim 0.9.0 is installed but cannot be imported") as e:
         jaxsim_engine.version()
-    assert not isinstance(e.value, base.EngineNotInstalled)
+    assert not isinstance(e.value, install.EngineNotInstalled)
 
 
 def test_list_and_version_say_jaxsim_is_not_installed(no_jaxsim, capsys):

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cross_checks.engines import base
+from cross_checks.engines import forces
 from cross_checks.engines.base import EngineError, RunRequest
 from cross_checks.scenario import load_scenario
 
@@ -93,15 +93,15 @@ def _readable_loop(sc, dt, n):
     y0 = sc.problem.initial_packed()
     w.set_state(y0[None])
     ys, y = [w.read()[0]], y0
-    g_v, g_w = base.decay_factors(sc, dt)
+    g_v, g_w = forces.decay_factors(sc, dt)
     for k in range(n):
-        f, tau = base.harness_force_torque(sc, y if k else y0, dt)
+        f, tau = forces.harness_force_torque(sc, y if k else y0, dt)
         if sc.problem.forces.has_decay:
             yd = w.read()[0].copy()
             yd[3:6] *= g_v
             yd[10:13] *= g_w
             w.set_state(yd[None])
-        w.apply((f - base.weight_W(sc))[None], tau[None])
+        w.apply((f - forces.weight_W(sc))[None], tau[None])
         w.step()
         y = w.read()[0]
         ys.append(y)

@@ -25,7 +25,8 @@ if importlib.util.find_spec("mujoco_warp") is None:
 
 from cross_checks.engines import mujoco_engine as me  # noqa: E402
 from cross_checks.engines import mujoco_warp_engine as we  # noqa: E402
-from cross_checks.engines.base import EngineError, RunRequest, stage_force_torque_floats  # noqa: E402
+from cross_checks.engines.base import EngineError, RunRequest  # noqa: E402
+from cross_checks.engines.forces import stage_force_torque_floats  # noqa: E402
 from cross_checks.scenario import load_scenario  # noqa: E402
 from reference_sim.quaternion import geodesic_angle, matrix_from_quat, quat_exp, quat_mul  # noqa: E402
 from tests.helpers.scenarios import YAW90, scenario_from_parts  # noqa: E402
@@ -264,8 +265,9 @@ ALL_FORCES = ('gravity = [0.0, 0.0, -9.81]\nlinear_drag = 0.3\nvelocity_decay = 
 @pytest.mark.parametrize("name", ["all_forces", "spring_pendulum", "applied_torque", "linear_drag",
                                   "velocity_decay"])
 def test_the_stage_force_kernel_is_the_force_model_with_the_decay_as_damping(name):
-    # RK4's per-stage forces are evaluated by a Warp kernel (float32) launched from Model.callback.control: on
-    # random states it writes base.stage_force_torque minus the weight into xfrc_applied, to float32 round-off
+    # RK4's per-stage forces are evaluated by a Warp kernel (float32) launched from Model.callback.control:
+    # on random states it writes forces.stage_force_torque minus the weight into xfrc_applied, to float32
+    # round-off
     wp, mjw, mujoco = we._engine()
     sc = (scenario_from_parts(body=FULL_INERTIA, forces=ALL_FORCES) if name == "all_forces"
           else load_scenario(name))

@@ -9,13 +9,13 @@ import pytest
 from cross_checks import engines
 from cross_checks.cli import main
 from cross_checks.cli.parser import _version_text
-from cross_checks.engines import base, mujoco_warp_engine
+from cross_checks.engines import install, mujoco_warp_engine
 
 
 @pytest.fixture
 def no_mujoco_warp(monkeypatch):
-    real = base.installed_version
-    monkeypatch.setattr(base, "installed_version",
+    real = install.installed_version
+    monkeypatch.setattr(install, "installed_version",
                         lambda dist: None if dist == "mujoco-warp" else real(dist))
     engines.reset_registry()
     yield
@@ -23,21 +23,21 @@ def no_mujoco_warp(monkeypatch):
 
 
 def test_version_raises_engine_not_installed_with_the_extra_to_install(no_mujoco_warp):
-    with pytest.raises(base.EngineNotInstalled,
+    with pytest.raises(install.EngineNotInstalled,
                        match=r"mujoco-warp is not installed \(pip install 'rbcheck\[mujoco_warp\]'\)"):
         mujoco_warp_engine.version()
 
 
 def test_a_broken_install_is_not_an_absent_one(monkeypatch):
     real = importlib.util.find_spec
-    monkeypatch.setattr(base, "installed_version",
+    monkeypatch.setattr(install, "installed_version",
                         lambda dist: "4.0.0" if dist == "mujoco-warp" else None)
     monkeypatch.setattr(importlib.util, "find_spec",
                         lambda name, *a: None if name == "warp" else real(name, *a))
     said = r"mujoco-warp 4.0.0 is installed but cannot be imported: warp-lang is missing"
     with pytest.raises(ImportError, match=said) as e:
         mujoco_warp_engine.version()
-    assert not isinstance(e.value, base.EngineNotInstalled)
+    assert not isinstance(e.value, install.EngineNotInstalled)
 
 
 def test_list_and_version_say_mujoco_warp_is_not_installed(no_mujoco_warp, capsys):

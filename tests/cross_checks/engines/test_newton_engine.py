@@ -13,7 +13,8 @@ pytest.importorskip("newton", reason="newton is not installed (pip install -e '.
 
 from cross_checks.core.files import kernel_cache_dir  # noqa: E402
 from cross_checks.engines import newton_engine as ne  # noqa: E402
-from cross_checks.engines.base import EngineError, RunRequest, apply_decay_prestep, harness_force_torque  # noqa: E402
+from cross_checks.engines.base import EngineError, RunRequest  # noqa: E402
+from cross_checks.engines.forces import apply_decay_prestep, harness_force_torque  # noqa: E402
 from cross_checks.scenario import load_scenario  # noqa: E402
 from reference_sim.quaternion import matrix_from_quat, quat_mul  # noqa: E402
 from tests.helpers.scenarios import scenario_from_parts  # noqa: E402

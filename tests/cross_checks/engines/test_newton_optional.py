@@ -9,12 +9,12 @@ import pytest
 from cross_checks import engines
 from cross_checks.cli import main
 from cross_checks.cli.parser import _version_text
-from cross_checks.engines import base, newton_engine
+from cross_checks.engines import install, newton_engine
 
 
 @pytest.fixture
 def no_newton(monkeypatch):
-    real = base.installed_version
+    real = install.installed_version
     monkeypatch.setattr(newton_engine, "installed_version",
                         lambda dist: None if dist == "newton" else real(dist))
     engines.reset_registry()
@@ -23,7 +23,7 @@ def no_newton(monkeypatch):
 
 
 def test_version_raises_engine_not_installed_with_the_extra_to_install(no_newton):
-    with pytest.raises(base.EngineNotInstalled,
+    with pytest.raises(install.EngineNotInstalled,
                        match=r"newton is not installed \(pip install 'rbcheck\[newton\]'\)"):
         newton_engine.version()
 
@@ -37,7 +37,7 @@ def test_a_broken_install_is_not_an_absent_one(monkeypatch):
     said = "newton 1.8.0 is installed but cannot be imported: warp-lang is missing"
     with pytest.raises(ImportError, match=said) as e:
         newton_engine.version()
-    assert not isinstance(e.value, base.EngineNotInstalled)
+    assert not isinstance(e.value, install.EngineNotInstalled)
 
 
 def test_list_and_version_say_newton_is_not_installed(no_newton, capsys):

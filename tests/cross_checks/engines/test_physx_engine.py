@@ -477,12 +477,12 @@ def test_a_state_that_goes_non_finite_is_reported_as_such_and_its_body_parked(mo
     # with the words of that state (not of the rest state the body is parked at), the body beside untouched
     from types import SimpleNamespace
 
-    from cross_checks.engines import base
+    from cross_checks.engines import forces
     sc, calm = scenario_from_parts(initial="velocity = [1.0, 0.0, 0.0]"), load_scenario("tennis_racket")
     alone = {v: pe.simulate(calm, v, 0.01, 20).y for v in BOTH}
     huge = SimpleNamespace(force_torque=lambda y: (1e39, 0.0, 0.0, 0.0, 0.0, 0.0))
-    real = base.float_forces
-    monkeypatch.setattr(base, "float_forces", lambda scenario: huge if scenario is sc else real(scenario))
+    real = forces.float_forces
+    monkeypatch.setattr(forces, "float_forces", lambda scenario: huge if scenario is sc else real(scenario))
     for variant in BOTH:
         run, other = pe.simulate_many(variant, [RunRequest(sc, 0.01, 20), RunRequest(calm, 0.01, 20)])
         assert run.message == "diverged at t = 0.01 s (non-finite state)" and len(run.t_s) == 1

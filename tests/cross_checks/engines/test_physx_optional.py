@@ -9,13 +9,13 @@ import pytest
 from cross_checks import engines
 from cross_checks.cli import main
 from cross_checks.cli.parser import _version_text
-from cross_checks.engines import base, physx_engine
+from cross_checks.engines import install, physx_engine
 
 
 @pytest.fixture
 def no_sapien(monkeypatch):
-    real = base.installed_version
-    monkeypatch.setattr(base, "installed_version", lambda dist: None if dist == "sapien" else real(dist))
+    real = install.installed_version
+    monkeypatch.setattr(install, "installed_version", lambda dist: None if dist == "sapien" else real(dist))
     monkeypatch.setattr(physx_engine, "installed_version",
                         lambda dist: None if dist == "sapien" else real(dist))
     physx_engine._dist_version.cache_clear()
@@ -26,7 +26,7 @@ def no_sapien(monkeypatch):
 
 
 def test_version_raises_engine_not_installed_with_the_extra_to_install(no_sapien):
-    with pytest.raises(base.EngineNotInstalled,
+    with pytest.raises(install.EngineNotInstalled,
                        match=r"sapien is not installed \(pip install 'rbcheck\[physx\]'\)"):
         physx_engine.version()
 
@@ -38,7 +38,7 @@ def test_a_broken_install_is_not_an_absent_one(monkeypatch):
                         lambda name, *a: None if name == "sapien" else real_find(name, *a))
     with pytest.raises(ImportError, match="sapien 3.0.3 is installed but cannot be imported") as e:
         physx_engine.version()
-    assert not isinstance(e.value, base.EngineNotInstalled)
+    assert not isinstance(e.value, install.EngineNotInstalled)
 
 
 def test_list_and_version_say_physx_is_not_installed(no_sapien, capsys):

@@ -493,9 +493,9 @@ def test_a_body_rapier_quarantines_ends_the_run_as_divergence(monkeypatch):
     assert W.warnings == [(0, 1, "Rapier quarantined the body")] and np.isnan(W.read()).all()
     from types import SimpleNamespace
 
-    from cross_checks.engines import base
+    from cross_checks.engines import forces
     huge = SimpleNamespace(force_torque=lambda y: (1e39, 0.0, 0.0, 0.0, 0.0, 0.0))
-    monkeypatch.setattr(base, "float_forces", lambda scenario: huge)
+    monkeypatch.setattr(forces, "float_forces", lambda scenario: huge)
     run = ra.simulate(sc, GYRO, 0.01, 100)
     assert run.diverged_at_s == 0.01 and len(run.t_s) == 1
     assert run.message == "diverged at t = 0.01 s (Rapier quarantined the body; non-finite state)"

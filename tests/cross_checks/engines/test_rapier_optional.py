@@ -7,13 +7,13 @@ import pytest
 from cross_checks import engines
 from cross_checks.cli import main
 from cross_checks.cli.parser import _version_text
-from cross_checks.engines import base, rapier_engine
+from cross_checks.engines import install, rapier_engine
 
 
 @pytest.fixture
 def no_rapier(monkeypatch):
-    real = base.installed_version
-    monkeypatch.setattr(base, "installed_version", lambda dist: None if dist == "rapier3d" else real(dist))
+    real = install.installed_version
+    monkeypatch.setattr(install, "installed_version", lambda dist: None if dist == "rapier3d" else real(dist))
     monkeypatch.setattr(rapier_engine, "rapier", None)
     monkeypatch.setattr(rapier_engine, "_IMPORT_ERROR", ImportError("No module named 'rapier3d'"))
     engines.reset_registry()
@@ -22,20 +22,20 @@ def no_rapier(monkeypatch):
 
 
 def test_version_raises_engine_not_installed_with_the_extra_to_install(no_rapier):
-    with pytest.raises(base.EngineNotInstalled,
+    with pytest.raises(install.EngineNotInstalled,
                        match=r"rapier3d is not installed \(pip install 'rbcheck\[rapier\]'\)"):
         rapier_engine.version()
 
 
 def test_a_broken_install_is_not_an_absent_one(monkeypatch):
-    monkeypatch.setattr(base, "installed_version", lambda dist: "0.36.1" if dist == "rapier3d" else None)
+    monkeypatch.setattr(install, "installed_version", lambda dist: "0.36.1" if dist == "rapier3d" else None)
     monkeypatch.setattr(rapier_engine, "rapier", None)
     monkeypatch.setattr(rapier_engine, "_IMPORT_ERROR",
                         ImportError("_rapier3d.abi3.so: undefined symbol: PyObject_Vectorcall"))
     with pytest.raises(ImportError, match="rapier3d 0.36.1 is installed but cannot be imported: "
                                           "ImportError: _rapier3d") as e:
         rapier_engine.version()
-    assert not isinstance(e.value, base.EngineNotInstalled)
+    assert not isinstance(e.value, install.EngineNotInstalled)
 
 
 def test_the_adapter_module_imports_and_lists_its_files_without_rapier(no_rapier):

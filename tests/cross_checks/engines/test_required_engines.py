@@ -12,7 +12,7 @@ import sys
 
 import pytest
 
-from cross_checks.engines import base
+from cross_checks.engines import install
 
 NUMPY1_WHEEL_ERROR = "numpy.core.multiarray failed to import"
 
@@ -51,13 +51,13 @@ def test_a_required_engine_that_fails_to_import_stops_the_sweep_with_its_import_
 
 
 def test_an_absent_distribution_is_not_installed_a_broken_one_says_its_error(monkeypatch):
-    with pytest.raises(base.EngineNotInstalled, match=r"^drake is not installed \(pip install x\)$"):
-        monkeypatch.setattr(base, "installed_version", lambda d: None)
-        base.require(None, ImportError("No module named 'pydrake'"), "drake", hint="pip install x")
-    monkeypatch.setattr(base, "installed_version", lambda d: "1.51.1")
+    with pytest.raises(install.EngineNotInstalled, match=r"^drake is not installed \(pip install x\)$"):
+        monkeypatch.setattr(install, "installed_version", lambda d: None)
+        install.require(None, ImportError("No module named 'pydrake'"), "drake", hint="pip install x")
+    monkeypatch.setattr(install, "installed_version", lambda d: "1.51.1")
     with pytest.raises(ImportError) as info:
-        base.require(None, ImportError("libdrake.so: undefined symbol"), "drake")
-    assert not isinstance(info.value, base.EngineNotInstalled)
+        install.require(None, ImportError("libdrake.so: undefined symbol"), "drake")
+    assert not isinstance(info.value, install.EngineNotInstalled)
     assert str(info.value) == ("drake 1.51.1 is installed but cannot be imported: "
                                "ImportError: libdrake.so: undefined symbol")
 

@@ -1,11 +1,11 @@
 """The adapters' plain-float per-step code (cross_checks.engines.step_floats and the loops built on it) gives
 the numbers of the NumPy formulas it stands for, bit for bit: the same trajectories as the straightforward
-NumPy loops written out here (start-of-step forces from ``base.harness_force_torque``, states converted by
+NumPy loops written out here (start-of-step forces from ``forces.harness_force_torque``, states converted by
 the adapters' array functions), on fuzz-drawn cases of every force kind with full inertia tensors."""
 import numpy as np
 import pytest
 
-from cross_checks.engines import base
+from cross_checks.engines import base, forces
 from cross_checks.engines.step_floats import bad_floats, harness_fn, quat_mul_floats
 from cross_checks.fuzz import generate
 from cross_checks.fuzz.pipeline import scenario_of
@@ -59,7 +59,7 @@ def test_harness_is_the_base_harness_bit_for_bit_at_any_step():
         for h in (sc.dt_s, sc.dt_s / 3):
             f = harness_fn(sc, h)
             for y in _states(sc, rng):
-                assert f(y.tolist()) == tuple(float(v) for v in base.harness_force_torque_floats(sc, y, h))
+                assert f(y.tolist()) == tuple(float(v) for v in forces.harness_force_torque_floats(sc, y, h))
 
 
 # --- PyBullet -------------------------------------------------------------------------------------------
@@ -73,7 +73,7 @@ def _pybullet_numpy_loop(sc, variant, h, n):
     y0 = sc.problem.initial_packed()
     B = BulletBody(sc, variant, h, y0)
     B.set_state(y0)
-    gv, gw = base.decay_factors(sc, h)
+    gv, gw = forces.decay_factors(sc, h)
     raw = np.empty((n + 1, 13))
     raw[0] = B.read_raw()
     y = y0
@@ -81,7 +81,7 @@ def _pybullet_numpy_loop(sc, variant, h, n):
         row = raw[k - 1]
         if k > 1:
             y = B.raw_to_packed(row)
-        f, tau = base.harness_force_torque(sc, y if sc.problem.forces.state_dependent else y0, h)
+        f, tau = forces.harness_force_torque(sc, y if sc.problem.forces.state_dependent else y0, h)
         if sc.problem.forces.has_decay:
             pe.p.resetBaseVelocity(B.b, (row[3:6] * gv).tolist(),
                                    (row[10:13] * gw).tolist(), physicsClientId=B.c)
@@ -114,17 +114,17 @@ def _mujoco_numpy_loop(sc, variant, h, n):
     weight = sc.problem.body.mass_kg * np.asarray(sc.problem.forces.gravity_W, dtype=float)
     d.qpos[:], d.qvel[:] = me.to_qpos_qvel(sc.problem.initial_packed())
     per_stage = me.forces_per_stage(sc, variant)
-    gv, gw = base.decay_factors(sc, h)
+    gv, gw = forces.decay_factors(sc, h)
 
     def control(_m, dd):
-        me._apply(xfrc, *base.stage_force_torque(sc, me.to_packed(dd.qpos.copy(), dd.qvel.copy())), weight)
+        me._apply(xfrc, *forces.stage_force_torque(sc, me.to_packed(dd.qpos.copy(), dd.qvel.copy())), weight)
     qpos, qvel = [d.qpos.copy()], [d.qvel.copy()]
     prev = me._clear_force_callbacks()
     mujoco.set_mjcb_control(control if per_stage else None)
     try:
         for _ in range(n):
             if not per_stage:
-                me._apply(xfrc, *base.harness_force_torque(sc, me.to_packed(d.qpos, d.qvel), h), weight)
+                me._apply(xfrc, *forces.harness_force_torque(sc, me.to_packed(d.qpos, d.qvel), h), weight)
                 d.qvel[0:3] *= gv
                 d.qvel[3:6] *= gw
             mujoco.mj_step(m, d)

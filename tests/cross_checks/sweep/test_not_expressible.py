@@ -30,7 +30,7 @@ class NoTorqueEngine(EngineAdapter):
         return "1.0"
 
     def expressible(self, scenario, variant):
-        from cross_checks.engines.base import harness_force_torque
+        from cross_checks.engines.forces import harness_force_torque
         _, tau = harness_force_torque(scenario, scenario.problem.initial_packed(), scenario.dt_s)
         return REASON if np.any(tau != 0.0) else ""
 

@@ -1,0 +1,156 @@
+"""The compiled engines' runtimes: JAX started once per process (float64, its persistent compilation cache)
+and refused in a process forked after it started, Warp initialised once (its kernel cache, its output
+silenced, a damaged cache entry compiled again), and what their adapters share: counters of compilations
+and seconds (:class:`Stats`), the values a host callback inside compiled code looks up (:class:`Registry`),
+batch sizes padded to a power of two (a handful of compiled executables serve every batch size).
+
+Both are started on first use only: a sweep's parent forks its workers, and a running JAX backend or Warp
+runtime does not survive a fork.
+"""
+from __future__ import annotations
+
+import contextlib
+import functools
+import itertools
+import os
+import sys
+import threading
+import time
+
+import numpy as np
+
+from cross_checks.core.files import kernel_cache_dir
+from cross_checks.engines.base import EngineError
+from cross_checks.engines.install import quiet_fd2
+
+__all__ = ["start_jax", "refuse_forked_jax", "start_warp", "Stats", "Registry", "power_of_two"]
+
+
+@functools.lru_cache(maxsize=1)
+def start_jax():
+    """``jax`` with float64 on (``jax_enable_x64``: process-global, so every JAX engine of the process
+    computes in float64) and its persistent compilation cache in ``core.files.kernel_cache_dir("jax")``,
+    shared by the JAX engines. Called on first use only: a sweep's parent must not start JAX (it forks)."""
+    import jax
+    jax.config.update("jax_enable_x64", True)
+    try:
+        folder = kernel_cache_dir("jax")
+        folder.mkdir(parents=True, exist_ok=True)
+        jax.config.update("jax_compilation_cache_dir", str(folder))
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+    except OSError:   # pragma: no cover - an unwritable cache directory only costs compile time
+        pass
+    return jax
+
+
+#: True in a process forked after JAX's backend had started in its parent (set in the child at fork).
+_FORKED_AFTER_JAX = [False]
+
+
+def _after_fork_in_child() -> None:
+    if "jax" in sys.modules:
+        from jax._src import xla_bridge
+        _FORKED_AFTER_JAX[0] = bool(xla_bridge.backends_are_initialized())
+
+
+os.register_at_fork(after_in_child=_after_fork_in_child)
+
+
+def refuse_forked_jax(words: str) -> None:
+    """:class:`EngineError` with ``words`` in a process forked after JAX started in its parent: a running JAX
+    backend does not survive fork (its threads are gone) and its first computation would hang."""
+    if _FORKED_AFTER_JAX[0]:
+        raise EngineError(words)
+
+
+def start_warp(cache: str, log_level: str, quiet: bool = False):
+    """``warp``, initialised on first use with its kernel cache in ``core.files.kernel_cache_dir(cache)`` (set
+    before ``wp.init``), ``wp.config.log_level = wp.<log_level>`` and ``wp.config.quiet``; fd 2 silenced
+    meanwhile (Warp's runtime prints there that no CUDA driver exists).
+
+    A cache is a cache (docs/hardening.md): a folder where nothing can be written is replaced by a private
+    one for the run; a module whose cached files cannot be loaded (an object cut in half: "Failed to load CPU
+    module", a damaged metadata file) has its folder removed, said once, and is compiled again."""
+    from cross_checks.core.files import usable_cache_dir
+    folder = usable_cache_dir(kernel_cache_dir(cache), f"{cache}'s kernel")   # read-only, full: skipped, said
+    with quiet_fd2():
+        import warp as wp
+        wp.config.kernel_cache_dir = str(folder)
+        wp.config.quiet = quiet
+        wp.config.log_level = getattr(wp, log_level)
+        wp.init()
+    module_class = getattr(getattr(getattr(wp, "_src", None), "context", None), "Module", None)
+    load = getattr(module_class, "load", None)
+    if load is not None and not getattr(load, "rbcheck_recompiles_damaged", False):
+        import json
+        import shutil
+        import sys
+
+        def load_or_recompile(self, device, block_dim=None, binary_path=None, output_arch=None,
+                              meta_path=None):
+            try:
+                return load(self, device, block_dim, binary_path, output_arch, meta_path)
+            except Exception as exc:
+                damaged = (isinstance(exc, json.JSONDecodeError) or "Failed to load" in str(exc)
+                           or "metadata file" in str(exc))   # not a build error of the kernel's own
+                if binary_path is not None or not damaged:   # (binary_path: the caller's, not the cache)
+                    raise
+                try:
+                    where = os.path.join(wp.config.kernel_cache_dir, self.get_module_identifier(
+                        block_dim if block_dim is not None else self.options["block_dim"]))
+                except Exception:  # noqa: BLE001 - Warp's internals changed: its own error stands
+                    raise exc from None
+                if not os.path.isdir(where):
+                    raise
+                print(f"rbcheck: {cache}'s kernel cache entry {where} could not be loaded ({exc}); removed, "
+                      "compiling it again", file=sys.stderr, flush=True)
+                shutil.rmtree(where, ignore_errors=True)
+                return load(self, device, block_dim, binary_path, output_arch, meta_path)
+        load_or_recompile.rbcheck_recompiles_damaged = True
+        module_class.load = load_or_recompile
+    return wp
+
+
+class Stats(dict):
+    """An adapter's counters in this process (compilations, wall seconds, steps), zeroed by :meth:`reset`."""
+
+    def __init__(self, **zeros):
+        super().__init__(zeros)
+        self.zeros = zeros
+
+    def reset(self) -> None:
+        self.update(self.zeros)
+
+    @contextlib.contextmanager
+    def timing(self, key: str):
+        """Adds the block's wall seconds to ``self[key]`` (nothing when it raises)."""
+        t0 = time.perf_counter()
+        yield
+        self[key] += time.perf_counter() - t0
+
+
+class Registry(dict):
+    """Values held under fresh integer keys for the duration of a block: what a host callback inside compiled
+    code (``jax.pure_callback``) looks up by the key it was given."""
+
+    def __init__(self):
+        super().__init__()
+        self._keys = itertools.count(1)
+        self._lock = threading.Lock()
+
+    @contextlib.contextmanager
+    def holding(self, value):
+        """``np.int64(key)`` of ``value`` for the block; the entry is dropped after it."""
+        with self._lock:
+            key = next(self._keys)
+            self[key] = value
+        try:
+            yield np.int64(key)
+        finally:
+            self.pop(key, None)
+
+
+def power_of_two(n: int) -> int:
+    """The batch size ``n`` (≥ 1) runs or rows are padded to: the next power of two, so that a handful of
+    compiled executables serve every batch size."""
+    return 1 << (int(n) - 1).bit_length()

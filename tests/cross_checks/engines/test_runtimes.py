@@ -1,0 +1,106 @@
+"""cross_checks.engines.runtimes: the fork guard of JAX, the counters, the callback registry, the batch
+padding, and Warp's kernel cache (a folder that cannot be written, objects cut in half)."""
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from cross_checks.engines import runtimes
+from cross_checks.engines.base import EngineError
+
+
+def test_refuse_forked_jax_refuses_only_in_a_child_forked_after_jax_started(monkeypatch):
+    runtimes.refuse_forked_jax("never said")   # this process was not forked after JAX started
+    monkeypatch.setattr(runtimes, "_FORKED_AFTER_JAX", [True])
+    with pytest.raises(EngineError, match="^forked: run with --jobs 1$"):
+        runtimes.refuse_forked_jax("forked: run with --jobs 1")
+
+
+def test_stats_time_blocks_and_reset_to_their_zeros():
+    stats = runtimes.Stats(compilations=0, step_seconds=0.0)
+    with stats.timing("step_seconds"):
+        stats["compilations"] += 2
+    assert stats["compilations"] == 2 and stats["step_seconds"] > 0.0
+    with pytest.raises(RuntimeError), stats.timing("step_seconds"):
+        raise RuntimeError("failed")
+    stats.reset()
+    assert dict(stats) == {"compilations": 0, "step_seconds": 0.0}
+
+
+def test_a_registry_holds_a_value_under_a_fresh_key_for_the_block_only():
+    reg = runtimes.Registry()
+    with reg.holding("a") as ka, reg.holding("b") as kb:
+        assert isinstance(ka, np.int64) and ka != kb and reg == {int(ka): "a", int(kb): "b"}
+    assert reg == {}
+    with pytest.raises(RuntimeError), reg.holding("c"):
+        raise RuntimeError("failed")
+    assert reg == {}
+
+
+def test_batches_are_padded_to_the_next_power_of_two():
+    assert [runtimes.power_of_two(n) for n in (1, 2, 3, 4, 5, 64, 65)] == [1, 2, 4, 4, 8, 64, 128]
+
+
+def test_warp_with_a_kernel_cache_it_cannot_write_compiles_elsewhere_and_says_so(tmp_path):
+    """Before: MuJoCo Warp with a read-only kernel cache failed every row."""
+    from pathlib import Path
+    pytest.importorskip("warp")
+    (tmp_path / "file").write_text("")
+    code = ("from cross_checks.engines.runtimes import start_warp\n"
+            "wp = start_warp('warp', 'LOG_ERROR', quiet=True)\n"
+            "import warp\n"
+            "@warp.kernel\n"
+            "def twice(a: warp.array(dtype=float)):\n"
+            "    i = warp.tid()\n"
+            "    a[i] = 2.0 * a[i]\n"
+            "a = warp.array([1.0, 2.0], dtype=float, device='cpu')\n"
+            "warp.launch(twice, dim=2, inputs=[a], device='cpu')\n"
+            "print(a.numpy().tolist(), wp.config.kernel_cache_dir)\n")
+    (tmp_path / "k.py").write_text(code)   # Warp reads a kernel's source from its file
+    env = {**os.environ, "RBCHECK_KERNEL_CACHE_DIR": str(tmp_path / "file")}
+    proc = subprocess.run([sys.executable, str(tmp_path / "k.py")], capture_output=True, text=True,
+                          timeout=600, env=env, cwd=Path(runtimes.__file__).parents[2])
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    values, folder = proc.stdout.strip().rsplit(" ", 1)
+    assert values == "[2.0, 4.0]" and not folder.startswith(str(tmp_path))
+    assert f"warp's kernel cache folder {tmp_path / 'file' / 'warp'} skipped (Not a directory)" in proc.stderr
+
+
+_TWICE = """
+import sys
+from cross_checks.engines.runtimes import start_warp
+wp = start_warp("warp", "LOG_ERROR", quiet=True)
+
+@wp.kernel
+def twice(a: wp.array(dtype=float)):
+    i = wp.tid()
+    a[i] = 2.0 * a[i]
+
+a = wp.array([1.0, 2.0], dtype=float, device="cpu")
+wp.launch(twice, dim=2, inputs=[a], device="cpu")
+print(a.numpy().tolist())
+"""
+
+
+def test_warp_kernel_objects_cut_in_half_are_compiled_again(tmp_path):
+    """Before: every run failed "Failed to load CPU module" until the user found the folder."""
+    from pathlib import Path
+    pytest.importorskip("warp")
+    (tmp_path / "k.py").write_text(_TWICE)   # Warp reads a kernel's source from its file
+    env = {**os.environ, "RBCHECK_KERNEL_CACHE_DIR": str(tmp_path / "kernels")}
+
+    def run():
+        return subprocess.run([sys.executable, str(tmp_path / "k.py")], capture_output=True, text=True,
+                              timeout=600, env=env, cwd=Path(runtimes.__file__).parents[2])
+    assert run().stdout.strip() == "[2.0, 4.0]"
+    objects = list((tmp_path / "kernels").rglob("*.o"))
+    assert objects
+    for o in objects:
+        o.write_bytes(o.read_bytes()[: o.stat().st_size // 2])
+    again = run()
+    assert again.returncode == 0 and again.stdout.strip() == "[2.0, 4.0]", again.stderr[-2000:]
+    [line] = [ln for ln in again.stderr.splitlines() if ln.startswith("rbcheck:")]
+    assert "kernel cache entry" in line and str(tmp_path / "kernels") in line and "compiling it again" in line
+    assert run().stderr.count("rbcheck:") == 0   # the entry compiled again is whole
