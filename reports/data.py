@@ -10,17 +10,19 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from cross_checks.sweep import reader
-from cross_checks.sweep.jobs import RESULT_COLUMNS
 from cross_checks.sweep.reader import ResultsReadError
 
-__all__ = ["Results", "ResultsError", "load_results", "LABELS"]
+__all__ = ["Results", "ResultsError", "load_results", "LABELS", "REPORT_COLUMNS"]
 
 #: How the report names each quantity (cross_checks.core.quantities.QUANTITIES) in its sentences.
 LABELS = {"position": "position", "velocity": "velocity", "orientation": "orientation",
           "angular_velocity": "angular velocity"}
-#: Why the report needs every column of results.csv (said when one is missing).
-_WHY_COLUMNS = ("the report shows every column of a results directory written by this rbcheck's sweep; "
-                "run the sweep again")
+#: The columns of results.csv the report reads by name, beside those every reader needs
+#: (cross_checks.sweep.reader.REQUIRED_COLUMNS); the others (engine_s, the step defect, the divergence time,
+#: the maxima) it shows when present, so that a results directory written before them still renders.
+REPORT_COLUMNS = ("wall_s", "default_dt", "in_ladder", "cached", "message", "energy_drift_kind",
+                  "pos_local_err", "vel_local_err", "orient_local_err", "angvel_local_err")
+_WHY_COLUMNS = "the report shows them; run the sweep again with this rbcheck"
 
 
 class ResultsError(ValueError):
@@ -91,7 +93,7 @@ class Results:
 def load_results(directory) -> Results:
     """Load a results directory; raises ResultsError naming the file, the field and the reason."""
     try:
-        got = reader.read_results_dir(directory, need=RESULT_COLUMNS, why=_WHY_COLUMNS, for_report=True)
+        got = reader.read_results_dir(directory, need=REPORT_COLUMNS, why=_WHY_COLUMNS, for_report=True)
     except ResultsReadError as exc:
         raise ResultsError(str(exc)) from None
     return Results(got.directory, got.table.rows, got.summary)
