@@ -177,8 +177,8 @@ def write_check_animation(path, result, scenario) -> dict:
     never a half-written file). A run that diverged is animated up to its divergence and its last frame
     says so. Returns {"frames": n, "caption": the sampling in words}."""
     from matplotlib import animation
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+
+    from reports.canvas import new_figure
     writer_name = check_animation_path(path)
     s = result.series
     if "orientation" not in s["present"]:
@@ -209,8 +209,7 @@ def write_check_animation(path, result, scenario) -> dict:
     dt_rows = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
     caption = _sampling_words(t, idx, dt_rows)
 
-    fig = Figure(figsize=(9.0, 5.0), dpi=72)
-    FigureCanvasAgg(fig)
+    fig = new_figure((9.0, 5.0), dpi=72)
     ax_ref = fig.add_axes((0.0, 0.13, 0.5, 0.74))
     ax_file = fig.add_axes((0.5, 0.13, 0.5, 0.74))
     extent = 1.25 * float(max(np.linalg.norm(half), axis_lengths(half).max()))
@@ -271,7 +270,7 @@ def report_animation(res, sc, styles) -> dict | None:
     box, the frame times (≤ REPORT_FRAMES, uniform in time), and per run (the reference, every variant with
     a saved series) its quaternions at those times (int16 × 32767, base64; a run that diverged stops at
     its divergence), its orientation error (degrees × 100) and its colour; the sampling in words."""
-    from reports.plots import diverged_at
+    from reports.canvas import diverged_at
     info = res.scenario(sc)
     ser = res.series(sc)
     ref = ser.get("reference")

@@ -11,12 +11,10 @@ from __future__ import annotations
 import textwrap
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.ticker import NullFormatter
 
-from reports.plots import DPI, LOG_FLOOR, save_png
+from reports.canvas import DPI, LOG_FLOOR, new_figure, save_png
 
 __all__ = ["check_figure", "ladder_figure"]
 
@@ -130,8 +128,7 @@ def check_figure(res, scenario, path) -> None:
     """Draw the figure of one CheckResult to ``path`` (PNG)."""
     s = res.series
     polhode = _polhode_paths(res, scenario)
-    fig = Figure(figsize=(18.0 if polhode else 14.0, 8.8), dpi=DPI)
-    FigureCanvasAgg(fig)
+    fig = new_figure((18.0 if polhode else 14.0, 8.8), dpi=DPI)
     gs = fig.add_gridspec(2, 4 if polhode else 3, height_ratios=[1.0, 1.0], hspace=0.45, wspace=0.28,
                           left=0.05 if polhode else 0.06, right=0.985, top=0.83, bottom=0.07)
     head = (("PASS: " + res.verdict) if res.passed
@@ -205,8 +202,7 @@ def check_figure(res, scenario, path) -> None:
 def ladder_figure(results, ladder, scenario, path) -> None:
     """Final error against Δt (log-log) per quantity, with the fitted order."""
     recs = ladder["convergence"]
-    fig = Figure(figsize=(4.0 * max(1, len(recs)), 4.6), dpi=DPI)
-    FigureCanvasAgg(fig)
+    fig = new_figure((4.0 * max(1, len(recs)), 4.6), dpi=DPI)
     axes = fig.subplots(1, max(1, len(recs)), squeeze=False)
     fig.suptitle(("PASS: " if ladder["passed"] else "FAIL: ")
                  + "\n".join(textwrap.wrap(ladder["verdict"], 140)[:2]), x=0.01, ha="left", fontsize=10,

@@ -1,48 +1,32 @@
-"""Reading a results directory (docs/results.md): results.csv, summary.json and series/*.npz.
+"""A loaded results directory (docs/results.md): results.csv, summary.json and series/*.npz, read by the one
+reader of a results directory (cross_checks.sweep.reader, which compare and baseline use too), with the
+look-ups the report's pages and figures make.
 
 This is all the report knows about a sweep: it never runs a simulation nor imports an engine.
 """
 from __future__ import annotations
 
-import csv
-import json
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
+from cross_checks.sweep import reader
+from cross_checks.sweep.reader import ResultsReadError
 
-from cross_checks.core import tolerances as tol
-from cross_checks.core.files import check_npz_size
-from cross_checks.sweep.results_dir import inside, safe_file_stem
-from cross_checks.sweep.schema import STATUSES
-
-__all__ = ["Results", "ResultsError", "load_results", "read_summary", "LABELS"]
+__all__ = ["Results", "ResultsError", "load_results", "LABELS", "REPORT_COLUMNS"]
 
 #: How the report names each quantity (cross_checks.core.quantities.QUANTITIES) in its sentences.
 LABELS = {"position": "position", "velocity": "velocity", "orientation": "orientation",
           "angular_velocity": "angular velocity"}
-
-_INT = {"steps"}
-_BOOL = {"default_dt", "in_ladder", "cached"}
-_STR = {"scenario", "engine", "status", "message", "reference", "engine_version", "energy_drift_kind",
-        "step_defect_quantity"}
-_REQUIRED = ("scenario", "engine", "dt", "steps", "wall_s", "pos_err_final", "vel_err_final",
-             "orient_err_final", "angvel_err_final", "energy_drift_max", "angmom_drift_max", "status")
+#: The columns of results.csv the report reads by name, beside those every reader needs
+#: (cross_checks.sweep.reader.REQUIRED_COLUMNS); the others (engine_s, the step defect, the divergence time,
+#: the maxima) it shows when present, so that a results directory written before them still renders.
+REPORT_COLUMNS = ("wall_s", "default_dt", "in_ladder", "cached", "message", "energy_drift_kind",
+                  "pos_local_err", "vel_local_err", "orient_local_err", "angvel_local_err")
+_WHY_COLUMNS = "the report shows them; run the sweep again with this rbcheck"
 
 
 class ResultsError(ValueError):
     """A results directory that cannot be read; the message names the file and the reason."""
-
-
-def _parse(col, text):
-    if col in _STR:
-        return text
-    if col in _BOOL:
-        return text.strip().lower() == "true"
-    if col in _INT:
-        return int(text) if text.strip() else 0
-    return float(text) if text.strip() else math.nan
 
 
 @dataclass
@@ -99,92 +83,17 @@ class Results:
         """``{variant: {field: array}}`` plus ``"reference"``, from
         series/<scenario>.npz (empty when absent)."""
         if scenario not in self._series:
-            path = inside(self.directory, "series", f"{safe_file_stem(scenario)}.npz")
-            out = {}
-            if path.is_file():
-                try:
-                    check_npz_size(path, tol.SERIES_FILE_MAX_BYTES)   # from the headers, before any data
-                    with np.load(path, allow_pickle=False) as d:
-                        for k in d.files:
-                            who, fld = k.split("::", 1)
-                            out.setdefault(who, {})[fld] = np.asarray(d[k], dtype=float)
-                except Exception as exc:  # noqa: BLE001 - zip, npy and dtype errors all mean "damaged"
-                    raise ResultsError(f"{path}: cannot read: {type(exc).__name__}: {exc}") from None
-                _check_series(path, out)
-            self._series[scenario] = out
+            try:
+                self._series[scenario] = reader.read_series(self.directory, scenario)
+            except ResultsReadError as exc:
+                raise ResultsError(str(exc)) from None
         return self._series[scenario]
 
 
-_SERIES_WIDTH = {"t_s": 0, "x_W": 3, "q_WB": 4, "w_W": 3, "L_B": 3}
-
-
-def _check_series(path, out) -> None:
-    """Every series of one owner shares t_s's length; vectors have their width (ResultsError otherwise)."""
-    for who, fields in out.items():
-        if "t_s" not in fields:
-            raise ResultsError(f"{path}: {who}::t_s: missing")
-        n = fields["t_s"].shape
-        for fld, a in fields.items():
-            width = _SERIES_WIDTH.get(fld, 0)
-            want = n if width == 0 else (n[0], width) if len(n) == 1 else None
-            if len(n) != 1 or a.shape != want:
-                raise ResultsError(f"{path}: {who}::{fld}: shape {a.shape} does not match {who}::t_s {n}")
-
-
 def load_results(directory) -> Results:
-    """Load a results directory; raises ResultsError naming the file and the reason."""
-    d = Path(directory)
-    if not d.is_dir():
-        raise ResultsError(f"{d}: no such directory")
-    sj = d / "summary.json"
-    rc = d / "results.csv"
-    for p in (sj, rc):
-        if not p.is_file():
-            raise ResultsError(f"{p}: missing (not an rbcheck results directory?)")
-    summary = read_summary(sj, for_report=True)
+    """Load a results directory; raises ResultsError naming the file, the field and the reason."""
     try:
-        with rc.open(encoding="utf-8", newline="") as fh:
-            reader = csv.DictReader(fh)
-            missing = [c for c in _REQUIRED if c not in (reader.fieldnames or [])]
-            if missing:
-                raise ResultsError(f"{rc}: header: missing column(s) {', '.join(missing)}")
-            rows = []
-            for i, raw in enumerate(reader, start=2):
-                rows.append(_parse_row(rc, i, raw))
-    except OSError as exc:
-        raise ResultsError(f"{rc}: cannot read: {exc}") from None
-    except (csv.Error, UnicodeDecodeError) as exc:
-        raise ResultsError(f"{rc}: cannot parse: {exc}") from None
-    return Results(d, rows, summary)
-
-
-def read_summary(sj: Path, for_report: bool = False) -> dict:
-    """summary.json, checked against cross_checks.sweep.schema (ResultsError
-    naming the file and the field)."""
-    from cross_checks.sweep.schema import SchemaError, check_summary
-    try:
-        summary = json.loads(sj.read_text(encoding="utf-8"))
-    except (OSError, ValueError, RecursionError) as exc:
-        raise ResultsError(f"{sj}: cannot parse: {str(exc) or type(exc).__name__}") from None
-    try:
-        check_summary(summary, for_report=for_report)
-    except SchemaError as exc:
-        raise ResultsError(f"{sj}: {exc}") from None
-    return summary
-
-
-def _parse_row(rc, line, raw) -> dict:
-    if None in raw:
-        raise ResultsError(f"{rc}: line {line}: more cells than columns")
-    row = {}
-    for k, v in raw.items():
-        try:
-            row[k] = _parse(k, v if v is not None else "")
-        except ValueError:
-            raise ResultsError(f"{rc}: line {line}: {k}: not a number: {v[:40]!r}") from None
-    if row["status"] not in STATUSES:
-        raise ResultsError(f"{rc}: line {line}: status: must be one of "
-                           f"{', '.join(STATUSES)}, got {row['status'][:40]!r}")
-    if not (row["dt"] > 0 and math.isfinite(row["dt"])):
-        raise ResultsError(f"{rc}: line {line}: dt: must be a positive finite number, got {row['dt']}")
-    return row
+        got = reader.read_results_dir(directory, need=REPORT_COLUMNS, why=_WHY_COLUMNS, for_report=True)
+    except ResultsReadError as exc:
+        raise ResultsError(str(exc)) from None
+    return Results(got.directory, got.table.rows, got.summary)

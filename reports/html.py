@@ -354,7 +354,7 @@ def _animation_view(res, sc):
     import json
 
     from reports.animation import report_animation
-    from reports.plots import variant_styles
+    from reports.canvas import variant_styles
     data = report_animation(res, sc, variant_styles(res.variants))
     if data is None:
         return None

@@ -28,6 +28,8 @@ VERDICT_WORDS = {"crosses_separatrix": "crosses the separatrix", "toward_interme
 VERDICT_COLOURS = {"crosses_separatrix": "#CC79A7", "toward_intermediate": "#D55E00",
                    "away_from_intermediate": "#0072B2", "none": "#999999", "diverged": "#000000",
                    "failed": "#E69F00"}
+#: The page's figures' resolution (dots per inch): full-colour PNGs, 1300 px wide.
+_DPI = 100
 #: A drift below this is drawn at it (round-off is at ~1e-16 relative; a log axis needs a floor).
 _DRAW_FLOOR = 1e-17
 
@@ -190,17 +192,18 @@ def draw_figures(res, view: IntegratorsView, out_dir) -> list:
 
 
 def _bar_figure(n_rows, n_cols, width_in=13.0):
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    """A figure of ``n_cols`` panels side by side sharing their y axis (one bar row per variant), on the
+    report's canvas."""
+    from reports.canvas import new_figure
     height = 1.4 + 0.26 * max(n_rows, 4)
-    fig, axes = plt.subplots(1, n_cols, figsize=(width_in, height), sharey=True, squeeze=False)
-    return plt, fig, axes[0]
+    fig = new_figure((width_in, height), dpi=_DPI)
+    return fig, fig.subplots(1, n_cols, sharey=True, squeeze=False)[0]
 
 
 def _work_figure(view, path) -> None:
+    from reports.canvas import save_png
     work = view.work
-    plt, fig, axes = _bar_figure(len(work), 3)
+    fig, axes = _bar_figure(len(work), 3)
     y = list(range(len(work)))
     labels = [s.variant + ("  ✗" if s.contradicts_on else "") for s in work]
     cols = (("acc_score", "error at a common cost\n(× the best; ranked by this)", "#0072B2"),
@@ -227,14 +230,15 @@ def _work_figure(view, path) -> None:
     fig.suptitle("Work precision over every scenario's Δt ladder (reports.ranking): top = most accurate at a "
                  "common cost; ✗ = a verdict contradicts its expectations", fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save_png(fig, path, palette=False, dpi=_DPI)
 
 
 def _long_figure(view, path) -> None:
     from matplotlib.patches import Patch
+
+    from reports.canvas import save_png
     long, names = view.long, view.long_runs
-    plt, fig, axes = _bar_figure(len(long), len(names))
+    fig, axes = _bar_figure(len(long), len(names))
     y = list(range(len(long)))
     finite = [conservation_score(r) for s in long for r in s.records.values()]
     finite = [max(v, _DRAW_FLOOR) for v in finite if math.isfinite(v)]
@@ -272,8 +276,7 @@ def _long_figure(view, path) -> None:
     fig.suptitle("Long-run conservation, ranked (top = keeps best); colour: what the separatrix distance δ "
                  "did; ✗ = does not keep what it declares", fontsize=10)
     fig.tight_layout(rect=(0, 0.05, 1, 1))
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save_png(fig, path, palette=False, dpi=_DPI)
 
 
 def _separatrix_figure(res, view, path) -> bool:
@@ -285,15 +288,17 @@ def _separatrix_figure(res, view, path) -> bool:
     if not moved:
         return False
     import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    palette = plt.get_cmap("tab20").colors
+
+    from reports.canvas import new_figure, save_png
+    cmap = matplotlib.colormaps["tab20"]
+    palette = [cmap(k) for k in range(cmap.N)]   # a qualitative palette: its 20 colours as given
     dashes = ("-", "--", "-.", ":")
     names = view.long_runs
     rows = math.ceil(len(moved) / 3)
     legend_in = 0.3 + 0.24 * rows
     height = 3.8 + legend_in
-    fig, axes = plt.subplots(1, len(names), figsize=(13.0, height), squeeze=False)
+    fig = new_figure((13.0, height), dpi=_DPI)
+    axes = fig.subplots(1, len(names), squeeze=False)
     for ax, name in zip(axes[0], names):
         ser = res.series(name)
         for k, v in enumerate(moved):
@@ -320,6 +325,5 @@ def _separatrix_figure(res, view, path) -> bool:
     fig.suptitle("δ(t) of the variants whose δ drifted (runs that diverged: see the bars); δ = −1/3: a "
                  "major-axis spin, ≈ +1: a minor-axis spin, 0: the separatrix", fontsize=10)
     fig.tight_layout(rect=(0, legend_in / height, 1, 1))
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save_png(fig, path, palette=False, dpi=_DPI)
     return True

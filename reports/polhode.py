@@ -8,7 +8,7 @@ without the gyroscopic term (the course's) keeps ω fixed in world axes, so the 
 axis and its L, seen from the body, sits still where the reference's flips.
 
 The curves come from the closed form of sphere ∩ ellipsoid (:func:`polhode_curves`), never from an
-integration. Drawn, in the report's styles (reports.plots.variant_styles), on each scenario page
+integration. Drawn, in the report's styles (reports.canvas.variant_styles), on each scenario page
 (:func:`fig_polhode`: the reference and one panel per engine family), on integrators.html for the long runs
 (:func:`fig_long_polhode`) and in ``rbcheck check --plot`` (:func:`polhode_panel`). Every drawn path is an
 artist whose gid is its owner ("reference", "ENGINE:VARIANT", "file"), its 3-D points (unit sphere =
@@ -19,8 +19,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
 
 from reference_sim.quaternion import matrix_from_quat
 
@@ -196,7 +194,7 @@ def _sphere(ax, curves, moments, axis_labels=True, fontsize=7.5, at=(0.0, 0.0), 
     """The unit sphere's outline, the polhodes (back half faint) and the principal axes, centred at ``at``
     (data units); one artist per kind of curve and side (the report draws many panels). ``frame``: the
     axes are this panel's own (limits ±1.3, equal aspect, no axis lines)."""
-    from reports.plots import DataStamps
+    from reports.canvas import DataStamps
     t = np.linspace(0, 2 * math.pi, 181)
     _line(ax, np.cos(t) + at[0], np.sin(t) + at[1], color="#888888", lw=0.8)
     for kind, (colour, lw, ls) in _CURVE_STYLE.items():
@@ -278,7 +276,7 @@ def polhode_panel(ax, moments, paths, torque_free: bool, title: str = "", key=No
         ax.annotate(f"★ {gid.split(':', 1)[-1]}: fixed", (x[0], y[0]), xytext=(-4, -13 - 10 * k),
                     textcoords="offset points", ha="right", fontsize=7, color="black", zorder=3.5)
     if title:
-        from reports.plots import DataStamps
+        from reports.canvas import DataStamps
         ax.add_artist(DataStamps([(at[0], at[1] + 1.36, title, 9, {"ha": "center", "va": "baseline"})]))
 
 
@@ -292,7 +290,7 @@ def _body(info):
 def scenario_paths(res, sc) -> dict:
     """``{owner: L in principal axes (n, 3), N m s}`` of the scenario's saved series (the reference and
     every variant with ``w_W``), each run that diverged cut at its divergence; {} without the body or ω."""
-    from reports.plots import diverged_at
+    from reports.canvas import diverged_at
     info = res.scenario(sc)
     inertia = _body(info)
     ser = res.series(sc)
@@ -324,7 +322,7 @@ def draw(res, sc, plot_dir) -> tuple:
     """Draw the scenario's polhode into ``plot_dir``, as reports.plots.draw draws its figures; returns
     ``(KIND, filename or None, note)``."""
     from cross_checks.sweep.results_dir import inside
-    from reports.plots import NOTES, figure_name, variant_styles
+    from reports.canvas import NOTES, figure_name, variant_styles
     name = figure_name(sc, KIND)
     ok = fig_polhode(res, sc, variant_styles(res.variants), inside(plot_dir, name))
     return KIND, (name if ok else None), NOTES.pop((sc, KIND), "")
@@ -333,7 +331,7 @@ def draw(res, sc, plot_dir) -> tuple:
 def relative_cost(res, sc) -> float:
     """The figure's drawing cost in reports.plots.relative_cost's units (a trajectories panel = 1): one
     panel per engine family and the reference's, each ~3 (measured), ~0 when the body does not turn."""
-    from reports.plots import families
+    from reports.glance import families
     varies = res.scenario(sc).get("varies", {}).get("orientation", True)
     n = len(families(res.variants)) + 1
     return (3.0 if varies else 0.1) * n * (1 + 0.1 * len(res.variants))
@@ -341,7 +339,7 @@ def relative_cost(res, sc) -> float:
 
 def fig_polhode(res, sc, styles, path) -> bool:
     """Draw :func:`polhode_figure` to ``path``; False (a note instead) when nothing rotates."""
-    from reports.plots import save_png
+    from reports.canvas import save_png
     fig = polhode_figure(res, sc, styles)
     if fig is None:
         return False
@@ -352,7 +350,8 @@ def fig_polhode(res, sc, styles, path) -> bool:
 def polhode_figure(res, sc, styles):
     """The scenario's polhode figure: the reference alone, then one panel per engine family (its variants in
     their styles over the reference's path in thick grey); None (a note instead) when nothing rotates."""
-    from reports.plots import MAX_COLUMNS, NOTES, REPORT_DPI, families, figure_legend, legend_entries
+    from reports.canvas import MAX_COLUMNS, NOTES, REPORT_DPI, figure_legend, legend_entries, new_figure
+    from reports.glance import families
     info = res.scenario(sc)
     paths = scenario_paths(res, sc)
     if not paths:
@@ -373,8 +372,7 @@ def polhode_figure(res, sc, styles):
     rows = math.ceil(n / cols)
     w_in = 13.0
     cell = w_in / cols
-    fig = Figure(figsize=(w_in, 4.0), dpi=REPORT_DPI)
-    FigureCanvasAgg(fig)
+    fig = new_figure((w_in, 4.0), dpi=REPORT_DPI)
     leg_in = figure_legend(fig, w_in, legend_entries(fams, styles, markers=False))   # the report's legends
     title_in, head_in = 0.5, 0.3
     h_in = title_in + rows * (cell + head_in) + leg_in + 0.15
@@ -468,7 +466,7 @@ def fig_long_polhode(res, view, path) -> bool:
     import matplotlib
     from matplotlib import cm
 
-    from reports.plots import REPORT_DPI, save_png
+    from reports.canvas import REPORT_DPI, new_figure, save_png
     names = view.long_runs
     recs = {x["name"]: x for x in res.summary.get("long_run_scenarios") or []}
     columns = long_run_columns(view)
@@ -485,8 +483,7 @@ def fig_long_polhode(res, view, path) -> bool:
     w_in = cell * cols + 0.4
     top_in, bar_in, head_in = 0.45, 0.75, 0.42
     h_in = top_in + (cell + head_in) * len(names) + also_in + bar_in
-    fig = Figure(figsize=(w_in, h_in), dpi=REPORT_DPI)
-    FigureCanvasAgg(fig)
+    fig = new_figure((w_in, h_in), dpi=REPORT_DPI)
     cmap = matplotlib.colormaps["viridis"]
     for r, name in enumerate(names):
         inertia = recs.get(name, {}).get("inertia_B_kg_m2")

@@ -17,8 +17,10 @@ from pathlib import Path
 from typing import NamedTuple
 
 from cross_checks.core.files import atomic_write_text
-from cross_checks.gates.compare import read_results_dir
+from cross_checks.gates.compare import CompareInputError, read_results_dir
+from cross_checks.sweep import reader
 from cross_checks.sweep.jobs import RESULT_COLUMNS, TIMING_COLUMNS
+from cross_checks.sweep.reader import ResultsReadError, ResultsTable
 from cross_checks.sweep.results_dir import (
     ResultsDirError,
     check_writable_dir,
@@ -37,6 +39,7 @@ __all__ = ["BASELINE_COLUMNS", "BASELINE_FILES", "Baseline", "BaselineError", "c
 BASELINE_COLUMNS = tuple(c for c in RESULT_COLUMNS if c not in TIMING_COLUMNS)
 #: What a baseline directory holds (and all that ``rbcheck baseline`` ever replaces).
 BASELINE_FILES = ("results.csv", "summary.json")
+_WHY_COLUMNS = "a baseline keeps every result column; not written by this rbcheck's sweep?"
 
 
 class BaselineError(ValueError):
@@ -85,22 +88,15 @@ def compact_summary_text(compact: dict) -> str:
     return "\n".join(lines + ["}"]) + "\n"
 
 
-def compact_results_text(csv_path: Path) -> tuple:
-    """``(text, number of rows)`` of results.csv without the timing columns, every kept cell copied as
-    it is (BaselineError when a column of :data:`BASELINE_COLUMNS` is missing)."""
-    with open(csv_path, newline="", encoding="utf-8") as fh:
-        reader = csv.DictReader(fh)
-        missing = [c for c in BASELINE_COLUMNS if c not in (reader.fieldnames or [])]
-        if missing:
-            raise BaselineError(f"{csv_path}: columns {', '.join(missing)} "
-                                "missing (not written by this rbcheck's sweep?)")
-        rows = list(reader)
+def compact_results_text(table: ResultsTable) -> str:
+    """results.csv without the timing columns, every kept cell copied as it is written in ``table`` (read
+    by cross_checks.sweep.reader with every column of :data:`BASELINE_COLUMNS`)."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(BASELINE_COLUMNS)
-    for r in rows:
+    for r in table.cells:
         w.writerow([r[c] for c in BASELINE_COLUMNS])
-    return buf.getvalue(), len(rows)
+    return buf.getvalue()
 
 
 def _check_out_dir(results_dir: Path, out_dir: Path) -> Path:
@@ -132,9 +128,12 @@ def write_baseline(results_dir, out_dir) -> Baseline:
     CompareInputError (a damaged RESULTS_DIR, or — never expected — a baseline compare could not read)."""
     results_dir, out_dir = Path(results_dir), Path(out_dir)
     out = _check_out_dir(results_dir, out_dir)
-    _, summary = read_results_dir(results_dir)
-    compact = compact_summary(summary)
-    csv_text, n_rows = compact_results_text(results_dir / "results.csv")
+    try:   # the one reader of a results directory, with every column a baseline keeps
+        got = reader.read_results_dir(results_dir, need=BASELINE_COLUMNS, why=_WHY_COLUMNS)
+    except ResultsReadError as exc:
+        raise CompareInputError(str(exc)) from None
+    compact = compact_summary(got.summary)
+    csv_text, n_rows = compact_results_text(got.table), len(got.table.rows)
     staging = staging_dir(out)
     try:
         atomic_write_text(staging / "results.csv", csv_text)

@@ -17,7 +17,6 @@ Exit codes: 0 no regression; 1 regression (or missing rows, unless allowed); 2 u
 from __future__ import annotations
 
 import hashlib
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,7 +29,8 @@ from cross_checks.core.tolerances import (
     COMPARE_SCHEME_CHANGE_MAX_RATIO,
     ORDER_TOL,
 )
-from cross_checks.sweep.schema import STATUSES
+from cross_checks.sweep import reader
+from cross_checks.sweep.reader import REQUIRED_COLUMNS, ResultsReadError
 
 __all__ = ["compare_dirs", "read_results_dir", "Comparison", "CompareInputError", "METRIC_RULES", "ORDER_TOL",
            "VariantChange", "variant_changes",
@@ -38,7 +38,7 @@ __all__ = ["compare_dirs", "read_results_dir", "Comparison", "CompareInputError"
            "verdict_line",
            "to_markdown", "to_text"]
 
-KEY = ["scenario", "engine", "dt"]
+KEY = list(reader.KEY)
 
 #: metric column -> (abs_tol, rel_tol), from cross_checks/core/tolerances.py (their derivation is
 #: there). All are "lower is better". An order is compared within ORDER_TOL (the order studies' tolerance).
@@ -173,95 +173,20 @@ class Comparison:
         return 0
 
 
-#: The columns every results.csv compare reads must have: those of docs/results.md that both a results
-#: directory and a compact baseline (no timing columns) hold and compare reads or validates.
-REQUIRED_COLUMNS = ("scenario", "engine", "dt", "steps", "pos_err_final", "vel_err_final", "orient_err_final",
-                    "angvel_err_final", "energy_drift_max", "angmom_drift_max", "status")
-
-
-def _number(csv, line, col, text, *, nonneg=False, positive=False):
-    """A results.csv cell as a float (empty = NaN); CompareInputError naming line, column and reason."""
-    t = text.strip()
-    if t == "":
-        if positive:
-            raise CompareInputError(f"{csv}: line {line}: {col}: missing")
-        return math.nan
-    try:
-        v = float(t)
-    except ValueError:
-        raise CompareInputError(f"{csv}: line {line}: {col}: not a number: {t[:40]!r}") from None
-    if math.isnan(v):
-        return v
-    if not math.isfinite(v) or (nonneg and v < 0) or (positive and v <= 0):
-        need = ("a positive finite number" if positive
-                else "a finite number >= 0 (or empty)" if nonneg else "finite")
-        raise CompareInputError(f"{csv}: line {line}: {col}: must be {need}, got {t[:40]}")
-    return v
-
-
-def _read_csv(csv: Path) -> pd.DataFrame:
-    try:
-        raw = pd.read_csv(csv, dtype=str, keep_default_na=False, na_filter=False)
-    except Exception as exc:  # noqa: BLE001 - pandas raises many kinds; all mean "unusable"
-        raise CompareInputError(
-            f"{csv}: cannot parse: {' '.join(str(exc).split()) or type(exc).__name__}") from None
-    missing = [c for c in REQUIRED_COLUMNS if c not in raw.columns]
-    if missing:
-        raise CompareInputError(f"{csv}: columns {', '.join(missing)} missing")
-    metrics = [m for m in METRIC_RULES if m in raw.columns]
-    kinds = ["energy_drift_kind"] if "energy_drift_kind" in raw.columns else []
-    out = {c: [] for c in ["scenario", "engine", "dt", "status", *metrics, *kinds]}
-    for i, r in enumerate(raw.to_dict("records"), start=2):
-        for c in ("scenario", "engine"):
-            if not r[c].strip():
-                raise CompareInputError(f"{csv}: line {i}: {c}: empty")
-            out[c].append(r[c])
-        if r["status"] not in STATUSES:
-            raise CompareInputError(f"{csv}: line {i}: status: must be one of {', '.join(STATUSES)}, "
-                                    f"got {r['status'][:40]!r}")
-        out["status"].append(r["status"])
-        out["dt"].append(_number(csv, i, "dt", r["dt"], positive=True))
-        _number(csv, i, "steps", r["steps"], nonneg=True)
-        for m in metrics:
-            out[m].append(_number(csv, i, m, r[m], nonneg=True))
-        for k in kinds:
-            out[k].append(r[k].strip())
-    df = pd.DataFrame(out)
-    if df.duplicated(KEY).any():
-        dup = df[df.duplicated(KEY)].iloc[0]
-        raise CompareInputError(
-            f"{csv}: duplicate row for {dup['scenario']}, {dup['engine']}, dt={dup['dt']}")
-    return df
-
-
-def _read_summary(sj: Path) -> dict:
-    from cross_checks.sweep.schema import SchemaError, check_summary
-    if not sj.is_file():
-        raise CompareInputError(f"{sj}: missing (every results directory written by `rbcheck sweep` has one)")
-    try:
-        summary = json.loads(sj.read_text(encoding="utf-8"))
-    except (ValueError, RecursionError) as exc:
-        raise CompareInputError(f"{sj}: cannot parse JSON: {str(exc) or type(exc).__name__}") from None
-    try:
-        check_summary(summary)
-    except SchemaError as exc:
-        raise CompareInputError(f"{sj}: {exc}") from None
-    return summary
-
-
 def read_results_dir(d: Path):
     """``(results.csv as a DataFrame of the columns compare reads, summary.json)`` of a results directory
-    or a compact baseline, validated in full (CompareInputError naming the file, the field and the reason)."""
-    d = Path(d)
-    if not d.is_dir():
-        raise CompareInputError(f"{d}: not a directory")
-    csv = d / "results.csv"
-    if not csv.is_file():
-        raise CompareInputError(f"{csv}: missing (is {d} a results directory written by `rbcheck sweep`?)")
+    or a compact baseline, validated in full by the one reader of a results directory
+    (cross_checks.sweep.reader; CompareInputError naming the file, the field and the reason)."""
     try:
-        return _read_csv(csv), _read_summary(d / "summary.json")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise CompareInputError(f"{d}: cannot read: {exc}") from None
+        got = reader.read_results_dir(d)
+    except ResultsReadError as exc:
+        raise CompareInputError(str(exc)) from None
+    cols = got.table.columns
+    df = got.table.frame(["scenario", "engine", "dt", "status", *[m for m in METRIC_RULES if m in cols],
+                          *(["energy_drift_kind"] if "energy_drift_kind" in cols else [])])
+    if "energy_drift_kind" in cols:
+        df["energy_drift_kind"] = df["energy_drift_kind"].str.strip()
+    return df, got.summary
 
 
 def _fmt(v):

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from reports import animation as A
+from reports.canvas import variant_styles
 from reports.data import load_results
-from reports.plots import variant_styles
 from tests.reports.test_polhode import tennis  # noqa: F401 - the shared tennis_racket results (fixture)
 
 
@@ -64,8 +64,8 @@ def test_the_report_data_decodes_to_the_series_and_stays_small(tennis):  # noqa:
 
 def test_a_run_that_diverged_stops_at_its_divergence(tennis, monkeypatch):  # noqa: F811
     res = load_results(tennis)
-    import reports.plots
-    monkeypatch.setattr(reports.plots, "diverged_at", lambda r, s, v: 4.0 if v == "reference:rk4" else None)
+    import reports.canvas
+    monkeypatch.setattr(reports.canvas, "diverged_at", lambda r, s, v: 4.0 if v == "reference:rk4" else None)
     data = A.report_animation(res, "tennis_racket", variant_styles(res.variants))
     run = next(r for r in data["runs"] if r["name"] == "reference:rk4")
     q = _decode(run["q"], 32767).reshape(-1, 4)

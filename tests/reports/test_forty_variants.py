@@ -17,7 +17,7 @@ import pytest
 from matplotlib.transforms import Bbox
 
 import reports
-from reports import plots
+from reports import canvas, plots
 from reports.data import load_results
 from tests.helpers.sweeps import built_once
 from tests.reports.test_browser import _browser_sweep, _click, _column, _url, browser  # noqa: F401
@@ -85,15 +85,15 @@ def forty(tmp_path_factory):
 
 def _drawn(res, sc, kind, folder, monkeypatch):
     kept = {}
-    save = plots.save_png
+    save = canvas.save_png
 
     def keep(fig, path):
         save(fig, path)
         kept["fig"] = fig
-    monkeypatch.setattr(plots, "save_png", keep)
+    monkeypatch.setattr(canvas, "save_png", keep)
     folder.mkdir(exist_ok=True)
     name = plots.draw(res, sc, kind, folder)[1]
-    monkeypatch.setattr(plots, "save_png", save)
+    monkeypatch.setattr(canvas, "save_png", save)
     return name, kept.get("fig")
 
 
@@ -115,13 +115,13 @@ def test_every_figure_keeps_its_legends_inside_apart_and_off_the_panels(forty, t
     legend."""
     res = load_results(forty)
     made = []
-    legend_figure = plots.legend_figure
+    legend_figure = canvas.legend_figure
 
     def record(dpi, fam, items):
         fig, leg = legend_figure(dpi, fam, items)
         made.append((fam, [label for label, _ in items], fig, leg))
         return fig, leg
-    monkeypatch.setattr(plots, "legend_figure", record)
+    monkeypatch.setattr(canvas, "legend_figure", record)
     plots.release()
     drawn = 0
     for s in res.scenarios:
@@ -160,10 +160,10 @@ def test_every_figure_keeps_its_legends_inside_apart_and_off_the_panels(forty, t
 
 def test_each_variant_keeps_one_style_in_every_figure_and_forty_are_told_apart():
     names = forty_names()
-    st = plots.variant_styles(names)
+    st = canvas.variant_styles(names)
     keys = {(tuple(round(c, 3) for c in st[v]["color"]), st[v]["ls"], st[v]["marker"]) for v in names}
     assert len(keys) == 40                                   # no two variants drawn alike
-    assert plots.variant_styles(list(names)) == st           # the same list: the same styles, every figure
+    assert canvas.variant_styles(list(names)) == st           # the same list: the same styles, every figure
     # a family's variants share its hue; families differ in hue
     import colorsys
     hue = {v: colorsys.rgb_to_hsv(*st[v]["color"])[0] for v in names}
@@ -174,12 +174,12 @@ def test_each_variant_keeps_one_style_in_every_figure_and_forty_are_told_apart()
 
 def test_the_lines_of_a_variant_have_its_colour_in_the_work_figure(forty, tmp_path, monkeypatch):
     res = load_results(forty)
-    st = plots.variant_styles(res.variants)
+    st = canvas.variant_styles(res.variants)
     _, fig = _drawn(res, "spin_only", "work", tmp_path, monkeypatch)
     colours = {tuple(round(c, 3) for c in s["color"]) for s in st.values()}
-    # a panel's variants are one artist (plots._Curves): its parts are each variant's line and markers
+    # a panel's variants are one artist (canvas.Curves): its parts are each variant's line and markers
     lines = [part for ax in fig.axes if ax.get_visible() for ln in ax.get_lines()
-             if isinstance(ln, plots._Curves) for part in ln.parts if part[0] == "line"]
+             if isinstance(ln, canvas.Curves) for part in ln.parts if part[0] == "line"]
     assert len(lines) >= 40
     assert all(tuple(round(c, 3) for c in part[3][:3]) in colours for part in lines)
 

@@ -16,7 +16,7 @@ import pytest
 from PIL import Image
 
 import reports
-from reports import plots
+from reports import canvas, plots
 from reports.data import load_results
 from tests.helpers.sweeps import built_once
 from tests.reports.test_browser import _browser_sweep
@@ -48,11 +48,11 @@ def _draw_keeping(res, sc, kind, folder, monkeypatch):
         kept["fig"] = fig
         save_png(fig, path)
 
-    save_png = plots.save_png
-    monkeypatch.setattr(plots, "save_png", save)
+    save_png = canvas.save_png
+    monkeypatch.setattr(canvas, "save_png", save)
     folder.mkdir(exist_ok=True)
     name = plots.draw(res, sc, kind, folder)[1]
-    monkeypatch.setattr(plots, "save_png", save_png)
+    monkeypatch.setattr(canvas, "save_png", save_png)
     assert name is not None
     return name, kept["fig"]
 
@@ -125,13 +125,14 @@ def test_a_ladder_row_at_round_off_is_said_and_a_row_above_its_floor_is_drawn(ho
 
 def test_a_report_drawn_in_this_process_keeps_no_figure(browser_results, tmp_path, monkeypatch):
     figures = []
-    save_png = plots.save_png
-    monkeypatch.setattr(plots, "save_png",
-                        lambda fig, path: (figures.append(weakref.ref(fig)), save_png(fig, path)))
+    save_png = canvas.save_png
+    monkeypatch.setattr(canvas, "save_png",
+                        lambda fig, path, **kw: (figures.append(weakref.ref(fig)), save_png(fig, path, **kw)))
     d = tmp_path / "res"
     shutil.copytree(browser_results, d)
     reports.render(d, jobs=1, progress=False)
     gc.collect()
+    gc.collect()   # the integrators page's shared axes: weak references whose callbacks free the rest
     assert figures and all(ref() is None for ref in figures)
 
 

@@ -13,9 +13,9 @@ from cross_checks.gates.check import check_trajectory
 from cross_checks.scenario import load_scenario
 from cross_checks.sweep import run_sweep
 from reports import polhode as P
+from reports.canvas import variant_styles
 from reports.check_plot import check_figure
 from reports.data import load_results
-from reports.plots import variant_styles
 from tests.helpers import tolerances as tol
 from tests.helpers.sweeps import built_once, private_cache
 
@@ -100,7 +100,7 @@ def test_the_course_step_sits_still_in_body_axes_while_the_reference_flips(tenni
     # on the figure itself: the course's drawn points sit on one spot, the reference's span the sphere
     spot, flip = _drawn(fig, "reference:course"), _drawn(fig, "reference")
     assert np.ptp(spot, axis=0).max() < tol.POLHODE_FIXED_RAD and np.ptp(flip, axis=0).max() > 1.0
-    assert "for: reference:course:" in reports.plots.NOTES.pop(("tennis_racket", "polhode"))
+    assert "for: reference:course:" in reports.canvas.NOTES.pop(("tennis_racket", "polhode"))
 
 
 def test_the_scenario_page_shows_the_polhode_and_says_which_run_sits_still(tennis):
