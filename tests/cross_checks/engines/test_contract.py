@@ -23,8 +23,9 @@ from tests.helpers.scenarios import with_initial
 ROOT = Path(__file__).resolve().parents[3]
 #: The engines with one declared order per variant that the suite runs (optional ones skip when absent).
 BUILTIN = engines.BUILTIN_ENGINES
-#: Scenarios with every force kind the loop treats apart: none, constant, state-dependent, decay.
-SCENARIOS = ("tennis_racket", "projectile", "spring_pendulum", "velocity_decay")
+#: Scenarios with every force kind the loop treats apart: none, constant (a force, a torque), state-dependent,
+#: decay.
+SCENARIOS = ("tennis_racket", "projectile", "spring_pendulum", "velocity_decay", "applied_torque")
 #: Engines whose every new run shape is compiled (JAX, Warp: seconds to a minute each): their first variant
 #: only, so that the suite stays a few minutes on 2 cores; their other variants share that code path.
 COMPILED = {"jaxsim", "brax", "mjx", "mujoco_warp", "genesis", "newton"}
@@ -218,7 +219,7 @@ def test_an_engine_that_is_missing_says_how_to_install_it(adapter):
     if not isinstance(adapter, WorldEngine) or not adapter.extra:
         pytest.skip(f"{adapter.name} is a required engine or not a world engine")
     if type(adapter).version is not WorldEngine.version:
-        pytest.skip(f"{adapter.name} reads its version from its module (its absence: its _optional tests)")
+        pytest.skip(f"{adapter.name} reads its version from its module (its absence: test_optional.py)")
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(base, "installed_version", lambda dist: None)
         mp.setattr(base, "optional_import",
