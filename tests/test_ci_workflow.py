@@ -64,6 +64,24 @@ def test_the_baseline_holds_the_engines_ci_requires():
     assert {"reference", "mujoco", "pybullet", "drake", "dart", "jaxsim", "brax", "mjx"} <= engines
 
 
-def test_ci_run_runs_the_readme_test_command():
+INTEGRATION = ".venv/bin/python -m pytest -n 2 -m integration"
+
+
+def test_ci_run_runs_the_readme_test_command_then_the_integration_tests_it_leaves_out():
     _, test_cmd = readme_commands()
-    assert test_cmd in (ROOT / ".ci/run").read_text()
+    lines = [ln.strip() for ln in (ROOT / ".ci/run").read_text().splitlines()]
+    assert test_cmd in lines and INTEGRATION in lines
+    assert lines.index(test_cmd) < lines.index(INTEGRATION)
+    # the README's command leaves them (and the slow studies) out, the second invocation runs exactly them
+    import tomllib
+    opts = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["pytest"]["ini_options"]
+    assert "-m 'not slow and not integration'" in opts["addopts"]
+    assert any(m.startswith("integration:") for m in opts["markers"])
+    assert "-m integration" in (ROOT / "README.md").read_text()
+
+
+def test_the_workflow_runs_the_integration_tests_after_the_readme_test_command():
+    wf = yaml.safe_load((ROOT / ".github/workflows/crosscheck.yml").read_text())
+    _, test_cmd = readme_commands()
+    runs = _runs(wf["jobs"]["tests"])
+    assert INTEGRATION in runs and runs.index(test_cmd) < runs.index(INTEGRATION)

@@ -1,6 +1,7 @@
 """The lint and type gates: ruff (its rules in pyproject.toml, [tool.ruff]) passes on the whole tree and mypy
-([tool.mypy]) on the layers every result rests on, run by the README's test command. A planted unused import
-and a planted type error are caught, so the gates can fail."""
+([tool.mypy]) on the layers every result rests on. A planted unused import and a planted type error are
+caught, so the gates can fail. Marked `integration`: `.ci/run` and CI run them after the README's test command
+(`pytest -m integration`)."""
 import shutil
 import subprocess
 import sys
@@ -8,6 +9,9 @@ import sys
 import pytest
 
 from tests.helpers.repo import ROOT
+
+#: ruff and mypy over the whole tree (tens of seconds): run by .ci/run and CI with -m integration
+pytestmark = pytest.mark.integration
 
 
 def _ruff():

@@ -58,6 +58,7 @@ def wheel(tmp_path_factory) -> Path:
     return path
 
 
+@pytest.mark.integration
 def test_the_wheel_holds_every_module_and_data_file_of_the_packages(wheel):
     files = _tracked()
     in_wheel = set(zipfile.ZipFile(wheel).namelist())
@@ -97,6 +98,7 @@ def _run(env_dir: Path, cwd: Path, *argv, timeout=600):
                           capture_output=True, text=True, timeout=timeout)
 
 
+@pytest.mark.integration
 def test_the_installed_wheel_imports_rbcheck_from_itself_not_from_the_clone(installed, tmp_path):
     code = ("import cross_checks, reference_sim, reports; "
             "print(cross_checks.__file__, reference_sim.__file__, reports.__file__)")
@@ -106,6 +108,7 @@ def test_the_installed_wheel_imports_rbcheck_from_itself_not_from_the_clone(inst
         assert Path(f).is_relative_to(installed) and not Path(f).is_relative_to(ROOT), f
 
 
+@pytest.mark.integration
 def test_a_sweep_with_its_report_runs_from_the_installed_wheel(installed, tmp_path):
     proc = _run(installed, tmp_path, installed / "bin" / "rbcheck", "sweep", "projectile", "constant_spin",
                 "--engines", "reference:course", "mujoco:euler", "--jobs", "2", "--out", "sw")
@@ -118,6 +121,7 @@ def test_a_sweep_with_its_report_runs_from_the_installed_wheel(installed, tmp_pa
     assert again.returncode == 0, again.stderr
 
 
+@pytest.mark.integration
 def test_check_runs_from_the_installed_wheel(installed, tmp_path):
     rbcheck = installed / "bin" / "rbcheck"
     run = _run(installed, tmp_path, rbcheck, "run", "projectile",
@@ -129,6 +133,7 @@ def test_check_runs_from_the_installed_wheel(installed, tmp_path):
     assert (tmp_path / "c.png").stat().st_size > 0
 
 
+@pytest.mark.integration
 def test_a_users_pytest_file_calls_assert_engine_from_the_installed_plugin(installed, tmp_path):
     (tmp_path / "test_mine.py").write_text(textwrap.dedent("""
         def test_the_reference_rk4_is_fourth_order(assert_engine):
@@ -141,6 +146,7 @@ def test_a_users_pytest_file_calls_assert_engine_from_the_installed_plugin(insta
     assert list((tmp_path / "kept").rglob("index.html")), "the kept report was not written"
 
 
+@pytest.mark.integration
 def test_a_missing_template_is_named_as_an_incomplete_installation(installed, tmp_path):
     """The same wheel with sort.js deleted from the environment: one line naming the
     file, exit 2, before any run."""

@@ -55,6 +55,7 @@ def _path_without_rbcheck() -> str:
     return os.pathsep.join(keep)
 
 
+@pytest.mark.integration
 def test_the_readme_tour_runs_as_written_in_a_fresh_clone(tmp_path):
     venv = Path(sys.prefix)
     if venv == Path(sys.base_prefix) or not (venv / "bin" / "activate").is_file():

@@ -97,10 +97,6 @@ DRAKE_SPIN_RK3 = 1e-6
 #: |q| − 1 of Drake's (unnormalised) quaternion after 200 semi-explicit Euler steps of 0.01 s on the
 #: tennis racket: ~Σ (|ω|Δt)²/8 ≈ 200 · 5e-5 = 1e-2 (measured 1.2e-2); 1e-3 says "it drifts".
 DRAKE_QUATERNION_DRIFT_MIN = 1e-3
-#: One step restarted from a recorded state vs the free run's next row: the step from (k−1)Δt to kΔt is
-#: Δt only up to a rounding of kΔt, so ~ε; the implicit Euler's Newton stops at its tolerance (1e-6).
-DRAKE_REPLAY_REL = 1e-13
-DRAKE_REPLAY_IMPLICIT_REL = 1e-6
 #: drake:runge_kutta3 at Δt = 1e-3 on the tennis racket over 10 s: ~C (ωΔt)³ ωT ≈ 1e-7 rad.
 DRAKE_RK3_TENNIS_RAD = 1e-6
 #: DART state round trips at the boundary (quaternion -> rotation vector -> DART's expMapRot / AngleAxis and

@@ -3,7 +3,9 @@ every page loads with no console error, no broken image or link, fits 1024 px; t
 their headers; the first screen says what is wrong and whether it is expected; scenario pages link the
 scenario's TOML, its rows and its series; the plots leave out what carries no information.
 
-Where no Chromium is found the browser tests are skipped with the reason (`.ci/run` installs it).
+Where no Chromium is found the browser tests are skipped with the reason (`.ci/run` installs it). They are
+marked `integration`: the README's test command leaves them out, `.ci/run` and CI run them after it
+(`pytest -m integration`).
 """
 import csv
 import io
@@ -107,6 +109,7 @@ def _url(d, page):
     return (Path(d) / page).resolve().as_uri()
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("width", [1024, 1400])
 def test_every_page_loads_without_console_error_broken_image_or_link_and_fits(results, browser, width):
     for page in PAGES:
@@ -126,6 +129,7 @@ def _click(browser, selector):
     browser.evaluate(f"document.querySelector({json.dumps(selector)}).click()")
 
 
+@pytest.mark.integration
 def test_headers_sort_rows_both_ways_and_family_headings_stay_on_top(results, browser):
     browser.load(_url(results, "index.html"), width=1024)
     _click(browser, "table.matrix th[data-col='3']")       # stiff_spring: explicit Euler's red/purple first
@@ -142,6 +146,7 @@ def test_headers_sort_rows_both_ways_and_family_headings_stay_on_top(results, br
     assert dts == sorted(dts) and len(set(dts)) == 3
 
 
+@pytest.mark.integration
 def test_table_headers_stay_visible_while_scrolling(results, browser):
     browser.load(_url(results, "scenario-spin_only.html"), width=1024, height=500)
     top = browser.evaluate("""(() => { const t = document.querySelector('table.results');
@@ -156,6 +161,7 @@ def _matrix_class(browser, variant, col):
                                                                            r.cells[{col}].innerText])""")
 
 
+@pytest.mark.integration
 def test_first_screen_names_the_divergence_and_the_matrix_does_not_paint_it_green(results, browser):
     browser.load(_url(results, "index.html"), width=1024, height=768)
     box = browser.evaluate("(() => { const b = document.querySelector('#verdict').getBoundingClientRect();"
@@ -168,6 +174,7 @@ def test_first_screen_names_the_divergence_and_the_matrix_does_not_paint_it_gree
     assert cls == "acc1" and all(m in text for m in "xθvω")            # every quantity's mark, no hovering
 
 
+@pytest.mark.integration
 def test_scenario_pages_link_their_toml_rows_and_series(results, browser):
     for name, text in (("spin_only", SPIN), ("stiff_spring", STIFF)):
         browser.load(_url(results, f"scenario-{name}.html"))
@@ -193,6 +200,7 @@ def test_plots_leave_out_what_carries_no_information(results):
     assert "Not drawn, constant along the reference: x = 0, y = 0, z = 0." in spin
 
 
+@pytest.mark.integration
 def test_planted_contradiction_divergence_and_second_references_reach_the_first_screen(
         results, tmp_path, browser):
     """One re-render of planted records: a contradiction, an expected divergence (its own colour, not
@@ -282,6 +290,7 @@ def _canvas_ink(browser, k):
         return [n, h]; }})()""")
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("width", [1024, 1400])
 def test_a_turning_scenario_shows_its_polhode_and_the_body_moving(results, browser, width):
     """spin_only (a free asymmetric body): the polhode figure is loaded, the animation draws the reference and
@@ -313,12 +322,14 @@ def test_a_turning_scenario_shows_its_polhode_and_the_body_moving(results, brows
     assert _canvas_ink(browser, 2)[0] > 1500
 
 
+@pytest.mark.integration
 def test_a_scenario_that_does_not_turn_has_neither(results, browser):
     browser.load(_url(results, "scenario-drop_once.html"), width=1024)
     assert browser.evaluate("document.getElementById('animation')") is None
     assert not (results / "plots" / "drop_once__polhode.png").exists()
 
 
+@pytest.mark.integration
 def test_the_animation_works_self_contained_without_the_plots_folder(results, tmp_path, browser):
     d = tmp_path / "res"
     shutil.copytree(results, d)
@@ -330,6 +341,7 @@ def test_the_animation_works_self_contained_without_the_plots_folder(results, tm
     assert _canvas_ink(browser, 1)[0] > 1500
 
 
+@pytest.mark.integration
 def test_integrators_page_shows_the_long_runs_polhode(results, browser):
     r = browser.load(_url(results, "integrators.html"), width=1024)
     assert r["errors"] == [] and r["broken"] == [] and r["overflow_px"] <= 0

@@ -9,6 +9,7 @@ from PIL import Image
 from cross_checks.cli import main
 from cross_checks.engines import run_variant
 from cross_checks.scenario import load_scenario
+from tests.helpers.repo import ROOT
 
 SC = load_scenario("tennis_racket")
 
@@ -18,6 +19,25 @@ def correct_csv(tmp_path_factory):
     p = tmp_path_factory.mktemp("anim") / "rk4.csv"
     p.write_text(run_variant(SC, "reference:rk4", 0.005, SC.duration_s).to_csv_text(), encoding="utf-8")
     return p
+
+
+@pytest.fixture(scope="module")
+def short(tmp_path_factory):
+    """tennis_racket cut to 0.5 s (its scenario file with that duration) and its reference:rk4 run at
+    Δt = 0.005 s: 101 rows, so 101 frames instead of MAX_FRAMES = 200 (each frame is a matplotlib draw, then
+    an encode), for the tests of a format or of a divergence, which need frames, not the frame cap (the GIF
+    test keeps the 10 s run, whose 2001 rows the cap must bring down to 200)."""
+    from cross_checks.scenario import parse_scenario
+    folder = tmp_path_factory.mktemp("anim_short")
+    toml = folder / "tennis_racket_short.toml"
+    catalog = ROOT / "cross_checks" / "scenario" / "catalog" / "tennis_racket.toml"
+    text = catalog.read_text(encoding="utf-8").replace("duration = 10.0", "duration = 0.5", 1)
+    assert "duration = 0.5" in text
+    toml.write_text(text, encoding="utf-8")
+    csv = folder / "rk4.csv"
+    csv.write_text(run_variant(parse_scenario(text, str(toml)), "reference:rk4", 0.005).to_csv_text(),
+                   encoding="utf-8")
+    return toml, csv
 
 
 def _frames(path):
@@ -60,12 +80,12 @@ def test_bad_formats_are_one_line_exit_2_and_nothing_written(correct_csv, tmp_pa
 
 
 @pytest.mark.parametrize("suffix", [".mp4", ".webm"])
-def test_an_mp4_or_webm_is_written_where_ffmpeg_is_installed(correct_csv, tmp_path, suffix):
+def test_an_mp4_or_webm_is_written_where_ffmpeg_is_installed(short, tmp_path, suffix):
     from matplotlib import animation
     if not animation.writers.is_available("ffmpeg"):
         pytest.skip("ffmpeg is not installed here (MP4/WebM need it; the GIF path is tested above)")
     out = tmp_path / f"out{suffix}"
-    assert main(["check", str(correct_csv), "--scenario", "tennis_racket", "--animate", str(out)]) == 0
+    assert main(["check", str(short[1]), "--scenario", str(short[0]), "--animate", str(out)]) == 0
     assert out.stat().st_size > 10_000
     assert sorted(p.name for p in tmp_path.iterdir()) == [out.name]
 
@@ -82,8 +102,8 @@ def test_a_pose_less_file_is_bad_input(tmp_path, capsys):
     assert not out.exists()
 
 
-def test_a_diverged_file_animates_up_to_its_divergence_and_says_so(correct_csv, tmp_path, capsys):
-    head, *rows = correct_csv.read_text(encoding="utf-8").splitlines()
+def test_a_diverged_file_animates_up_to_its_divergence_and_says_so(short, tmp_path, capsys):
+    head, *rows = short[1].read_text(encoding="utf-8").splitlines()
     cut = len(rows) // 2
     cols = head.split(",")
     bad = []
@@ -94,10 +114,10 @@ def test_a_diverged_file_animates_up_to_its_divergence_and_says_so(correct_csv, 
     src = tmp_path / "diverged.csv"
     src.write_text("\n".join([head, *rows[:cut], *bad]) + "\n", encoding="utf-8")
     out = tmp_path / "d.gif"
-    assert main(["check", str(src), "--scenario", "tennis_racket", "--animate", str(out)]) == 1
-    assert "diverged at t = 5 s: animated up to there" in capsys.readouterr().err
+    assert main(["check", str(src), "--scenario", str(short[0]), "--animate", str(out)]) == 1
+    assert "diverged at t = 0.25 s: animated up to there" in capsys.readouterr().err
     frames = _frames(out)
-    assert 30 <= len(frames) <= 400
+    assert len(frames) == cut    # every row before the divergence (t = 0 ... 0.245 s), and none after
 
     def red(f):   # the dark red of the divergence message (the FAIL label is dark red too, but small)
         return int(np.sum((f[..., 0] > 110) & (f[..., 0] < 170) & (f[..., 1] < 40) & (f[..., 2] < 40)))

@@ -23,8 +23,9 @@ from tests.helpers.scenarios import with_initial
 ROOT = Path(__file__).resolve().parents[3]
 #: The engines with one declared order per variant that the suite runs (optional ones skip when absent).
 BUILTIN = engines.BUILTIN_ENGINES
-#: Scenarios with every force kind the loop treats apart: none, constant, state-dependent, decay.
-SCENARIOS = ("tennis_racket", "projectile", "spring_pendulum", "velocity_decay")
+#: Scenarios with every force kind the loop treats apart: none, constant (a force, a torque), state-dependent,
+#: decay.
+SCENARIOS = ("tennis_racket", "projectile", "spring_pendulum", "velocity_decay", "applied_torque")
 #: Engines whose every new run shape is compiled (JAX, Warp: seconds to a minute each): their first variant
 #: only, so that the suite stays a few minutes on 2 cores; their other variants share that code path.
 COMPILED = {"jaxsim", "brax", "mjx", "mujoco_warp", "genesis", "newton"}
@@ -108,6 +109,14 @@ def _same(a, b, eps: float) -> bool:
     return a.y.shape == b.y.shape and bool(np.all(np.abs(a.y - b.y) <= allowed))
 
 
+def _bit_for_bit(adapter) -> bool:
+    """Whether the engine's batched runs are its single ones bit for bit: a world of several Δt
+    (WorldEngine.mixed_steps: Brax's vmapped ladder) or a vmapped batch (MJX) is one compiled batch, whose
+    sums may be ordered otherwise than a batch of one (the tolerance of _same only)."""
+    return (((isinstance(adapter, WorldEngine) and not adapter.mixed_steps) or adapter.name == "reference")
+            and adapter.name not in VECTORISED)
+
+
 def test_it_declares_a_version_and_variants_with_orders(adapter):
     assert isinstance(adapter.version(), str) and adapter.version()
     assert adapter.variants and all(0 < v.order <= 20 for v in adapter.variants.values())
@@ -138,12 +147,7 @@ def test_many_runs_in_one_call_are_its_single_runs(costly_adapter):
             except EngineError as exc:
                 single = exc
             assert _same(run, single, _eps(adapter, variant)), (variant, r.scenario.name, r.dt_s)
-            # a world of several Δt (WorldEngine.mixed_steps: Brax's vmapped ladder) or a vmapped batch
-            # (MJX) is one compiled batch, whose sums may be ordered otherwise than a batch of one: the
-            # tolerance above only
-            exact = ((isinstance(adapter, WorldEngine) and not adapter.mixed_steps)
-                     or adapter.name == "reference")
-            if exact and adapter.name not in VECTORISED:
+            if _bit_for_bit(adapter):
                 assert _same(run, single, 0.0), "the loop runs each body of a world as if alone"
 
 
@@ -179,15 +183,44 @@ def test_the_weight_is_applied_once_and_the_decay_before_the_step(adapter):
         assert np.max(np.abs(v1 - g_v * v_free)) <= allowed, variant
 
 
-def test_a_blow_up_is_a_divergence_at_its_step(adapter):
-    # below reference_sim.simulate.BLOWUP_LIMIT (1e8) at t = 0, beyond it after one step (x + Δt v > 1e8)
+#: Steps a blown-up run records before its divergence (below): the rows before it are kept.
+ROWS_BEFORE = 4
+
+
+def _blow_up():
+    """tennis_racket moving fast in x (no force: x = x0 + k Δt v for any consistent scheme): below
+    reference_sim.simulate.BLOWUP_LIMIT (1e8) for ROWS_BEFORE steps, beyond it at the next one."""
     sc = load_scenario("tennis_racket")
     v = 5e7
-    sc = with_initial(sc, x_W=[1e8 - 0.5 * v * sc.dt_s, 0.0, 0.0], v_W=[v, 0.0, 0.0])
+    return with_initial(sc, x_W=[1e8 - (ROWS_BEFORE - 0.5) * v * sc.dt_s, 0.0, 0.0], v_W=[v, 0.0, 0.0])
+
+
+def _is_the_blow_up(adapter, run, dt_s) -> bool:
+    # an engine file's run says that the engine wrote the state (engines/external.py), an adapter's does not
+    by = ", written by the engine" if type(adapter).__module__ == "cross_checks.engines.external" else ""
+    return (run.diverged_at_s == pytest.approx(ROWS_BEFORE * dt_s)
+            and run.message == f"diverged at t = {run.diverged_at_s:.6g} s (state beyond 1e+08{by})"
+            and len(run.y) == len(run.t_s) == ROWS_BEFORE and bool(np.all(np.abs(run.y) <= 1e8)))
+
+
+def test_a_blow_up_is_a_divergence_at_its_step_with_the_rows_before_it(adapter):
+    sc = _blow_up()
     for variant in _variants(adapter):
-        run = adapter.simulate(sc, variant, sc.dt_s, 5)
-        assert run.diverged_at_s == pytest.approx(sc.dt_s) and run.message.startswith("diverged at t = ")
-        assert len(run.y) == len(run.t_s) == 1
+        run = adapter.simulate(sc, variant, sc.dt_s, 2 * ROWS_BEFORE)
+        assert _is_the_blow_up(adapter, run, sc.dt_s), (variant, run.diverged_at_s, run.message, len(run.y))
+        np.testing.assert_array_equal(run.t_s, sc.dt_s * np.arange(ROWS_BEFORE))
+
+
+def test_a_blow_up_among_many_runs_leaves_the_others_alone(costly_adapter):
+    adapter, sc = costly_adapter, _blow_up()
+    calm = load_scenario("tennis_racket")
+    for variant in _variants(adapter):
+        blown, other = adapter.simulate_many(variant, [RunRequest(sc, sc.dt_s, 2 * ROWS_BEFORE),
+                                                       RunRequest(calm, sc.dt_s, 2 * ROWS_BEFORE)])
+        assert _is_the_blow_up(adapter, blown, sc.dt_s), variant
+        assert other.diverged_at_s is None
+        alone = adapter.simulate(calm, variant, sc.dt_s, 2 * ROWS_BEFORE)
+        assert _same(other, alone, 0.0 if _bit_for_bit(adapter) else _eps(adapter, variant)), variant
 
 
 def test_one_step_restarts_from_any_state(costly_adapter):
@@ -221,7 +254,7 @@ def test_an_engine_that_is_missing_says_how_to_install_it(adapter):
     if not isinstance(adapter, WorldEngine) or not adapter.extra:
         pytest.skip(f"{adapter.name} is a required engine or not a world engine")
     if type(adapter).version is not WorldEngine.version:
-        pytest.skip(f"{adapter.name} reads its version from its module (its absence: its _optional tests)")
+        pytest.skip(f"{adapter.name} reads its version from its module (its absence: test_optional.py)")
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(install, "installed_version", lambda dist: None)
         mp.setattr(install, "optional_import",

@@ -202,17 +202,6 @@ def test_forces_held_over_the_step_cost_rk3_its_order():
 
 # --- runs ------------------------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("variant", list(de.VARIANTS))
-def test_one_step_replays_the_run(variant):
-    sc = load_scenario("spring_pendulum")
-    run = de.simulate(sc, variant, 0.01, 20)
-    again = de.one_step(sc, variant, 0.01, run.y[:-1])
-    scale = np.maximum(1.0, np.abs(run.y[1:]))
-    assert np.max(np.abs(again - run.y[1:]) / scale) < (tol.DRAKE_REPLAY_IMPLICIT_REL
-                                                        if variant == "implicit_euler"
-                                                        else tol.DRAKE_REPLAY_REL)
-
-
 def test_a_blow_up_is_reported_as_divergence_with_the_rows_before_it():
     # k/m = 1e6: semi-explicit Euler is unstable for ωΔt > 2; here ωΔt = 10, |x| grows ~100× per step
     sc = scenario_from_parts(initial="position = [0.1, 0.0, 0.0]",

@@ -457,20 +457,6 @@ def test_the_first_row_is_the_scenarios_and_quaternions_stay_continuous():
     assert np.max(geodesic_angle(expected, run.y[:, 6:10])) < 1e-4
 
 
-def test_a_blow_up_is_reported_as_divergence_with_the_rows_before_it():
-    sc = scenario_from_parts(initial="position = [0.1, 0.0, 0.0]",
-                             forces="[[forces.spring]]\nanchor = [0.0, 0.0, 0.0]\nattach = [0.0, 0.0, 0.0]\n"
-                                    "stiffness = 1e6\nrest_length = 0.0", dt=0.01, duration=1.0)
-    calm = load_scenario("projectile")
-    for variant in BOTH:
-        run, other = pe.simulate_many(variant, [RunRequest(sc, 0.01, 100), RunRequest(calm, 0.01, 100)])
-        assert run.diverged_at_s is not None and 0.0 < run.diverged_at_s < 0.2
-        assert run.message == f"diverged at t = {run.diverged_at_s:.6g} s (state beyond 1e+08)"
-        assert len(run.t_s) == round(run.diverged_at_s / 0.01) and np.all(np.abs(run.y) <= 1e8)
-        # the body stepped beside it is untouched by the blow-up
-        np.testing.assert_array_equal(other.y, pe.simulate(calm, variant, 0.01, 100).y)
-
-
 def test_a_state_that_goes_non_finite_is_reported_as_such_and_its_body_parked(monkeypatch):
     # a force beyond float32's range (no scenario file may ask for one: the force model is replaced): PhysX
     # steps the velocity to inf and the position to inf or NaN without passing 1e8 first; the run ends there

@@ -232,16 +232,3 @@ def test_a_body_kept_for_the_runs_of_its_case_gives_the_runs_of_a_new_body(varia
                 want = adapter.one_step(copy.deepcopy(sc), variant, h, y)
                 adapter.one_step(sc, variant, h, y[:1])   # sc's body kept again for the next one
             assert np.array_equal(got, want), (sc.name, kind, h)
-
-
-def test_a_run_that_blows_up_among_many_is_simulates_divergence():
-    from cross_checks.engines.base import RunRequest
-    from tests.helpers.scenarios import with_initial
-    sc = _fuzz_cases()[0]
-    fast = with_initial(sc, v_W=[1e9, 0.0, 0.0])   # beyond BLOWUP_LIMIT after one step
-    got = pe.PybulletAdapter().simulate_many("multibody",
-                                             [RunRequest(fast, sc.dt_s, 8), RunRequest(sc, sc.dt_s, 8)])
-    want = pe.simulate(fast, "multibody", sc.dt_s, 8)
-    assert got[0].diverged_at_s == want.diverged_at_s is not None and got[0].message == want.message
-    assert np.array_equal(got[0].y, want.y)
-    assert np.array_equal(got[1].y, pe.simulate(sc, "multibody", sc.dt_s, 8).y)

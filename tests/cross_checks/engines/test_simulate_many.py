@@ -1,6 +1,7 @@
-"""EngineAdapter.simulate_many, the one batched seam of the sweep and the fuzz: every engine's runs of many
-requests in one call are its ``simulate``'s, request by request, and a bug planted in an adapter
-(tests/mutants.py) reaches them."""
+"""EngineAdapter.simulate_many, the one batched seam of the sweep and the fuzz: a bug planted in an adapter
+(tests/mutants.py) reaches its runs of many requests in one call, which are its ``simulate``'s with the bug
+(that an engine's batched runs are its single ones: test_contract.py's
+test_many_runs_in_one_call_are_its_single_runs, for every installed engine)."""
 import numpy as np
 import pytest
 
@@ -8,9 +9,6 @@ from cross_checks.engines import available_variants, get_adapter, split_variant
 from cross_checks.engines.base import EngineError, RunRequest
 from cross_checks.scenario import load_scenario
 from tests.mutants import MUTANTS
-
-#: Catalog scenarios with every force kind the adapters treat apart: none, constant, state-dependent, decay.
-SCENARIOS = ("tennis_racket", "particle_body", "applied_torque", "spring_oscillator", "velocity_decay")
 
 
 def _requests(names, steps=60):
@@ -30,21 +28,6 @@ def _simulated(adapter, var, r):
         return adapter.simulate(r.scenario, var, r.dt_s, r.n_steps)
     except EngineError as exc:
         return exc
-
-
-@pytest.mark.parametrize("engine", ["reference", "mujoco", "pybullet", "drake", "dart"])
-def test_many_runs_in_one_call_are_simulates_runs_request_by_request(engine):
-    variants = [v for v in available_variants() if v.startswith(f"{engine}:")]
-    if not variants:
-        pytest.skip(f"{engine} unavailable here")
-    adapter = get_adapter(engine)
-    requests = _requests(SCENARIOS, steps=40 if engine == "drake" else 120)
-    for variant in variants:
-        var = split_variant(variant)[1]
-        got = adapter.simulate_many(var, requests)
-        assert len(got) == len(requests)
-        for r, run in zip(requests, got):
-            assert _same(run, _simulated(adapter, var, r)), (variant, r.scenario.name, r.dt_s)
 
 
 @pytest.mark.parametrize("mutant", [m for m in MUTANTS if not m.variant.startswith("reference:")],
