@@ -1,0 +1,296 @@
+"""Standalone reproducers (``rbcheck repro``; docs/repro.md): one Python script per claim about a variant on a
+scenario, importing only the engine and NumPy, that an engine's maintainers can run without rbcheck.
+
+The script is made of three parts, two of them rbcheck's own code placed as it is:
+
+1. the engine's world (cross_checks/engines/worlds/<engine>.py: the model the adapter builds, with the same
+   neutralised defaults, in the engine's own API — the adapter imports it, so it is not a copy);
+2. the measurement (:mod:`cross_checks.sweep.repro_measure`: the run with the forces held, and the claim's
+   number);
+3. the numbers: the scenario's body, initial state and forces, and the reference values the claim needs
+   (the exact final state at each Δt, the round-off floors, the invariants), then ``main()``.
+
+It prints the engine's, NumPy's and Python's versions and the platform, then the measured value beside the
+expected one, and exits 1 while the defect holds, 0 when it does not. Writing a script runs it here (in
+this process, the same code): a claim that does not hold is written anyway and said so.
+
+Claims: ``order QUANTITY`` (the fitted order over the variant's judged Δt ladder against its declared
+order), ``drift`` (a long run: energy, |L|, the separatrix distance), ``gyroscopic`` (the torque-free flip of
+an intermediate-axis spin is missing). ``invariance TRANSFORM`` is not supported yet (:class:`ReproError`).
+"""
+from __future__ import annotations
+
+import contextlib
+import importlib
+import inspect
+import io
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from cross_checks.core import tolerances as tol
+from cross_checks.core.quantities import QUANTITIES
+
+__all__ = ["ENGINES", "CLAIMS", "ReproError", "Repro", "parse_claim", "reproducer", "write_reproducer",
+           "claim_of_finding"]
+
+#: Engines that can write reproducers: engine -> (pip distribution, its world module, its adapter module).
+ENGINES = {
+    "mujoco": ("mujoco", "cross_checks.engines.worlds.mujoco", "cross_checks.engines.mujoco_engine"),
+    "rapier": ("rapier3d", "cross_checks.engines.worlds.rapier", "cross_checks.engines.rapier_engine"),
+    "pybullet": ("pybullet", "cross_checks.engines.worlds.pybullet", "cross_checks.engines.pybullet_engine"),
+}
+#: claim -> the word it takes ("" for none).
+CLAIMS = {"order": "QUANTITY", "drift": "", "gyroscopic": "", "invariance": "TRANSFORM"}
+
+
+class ReproError(ValueError):
+    """A claim or a variant/scenario a reproducer cannot be written for: one line (the CLI's exit 2)."""
+
+
+@dataclass
+class Repro:
+    """A written reproducer: its ``text``, whether the defect ``holds`` here, and the script's ``output``
+    (what it printed when run here)."""
+
+    text: str
+    holds: bool
+    output: str
+    claim: str
+
+    @property
+    def summary(self) -> str:
+        """The script's verdict line (its last)."""
+        lines = self.output.strip().splitlines()
+        return lines[-1] if lines else ""
+
+
+def parse_claim(words) -> tuple:
+    """``["order", "orientation"]`` -> ``("order", "orientation")``; ``["drift"]`` -> ``("drift", "")``.
+    ReproError (one line) for an unknown claim, a missing or unknown word."""
+    words = list(words or [])
+    if not words:
+        raise ReproError("--claim: give a claim: " + ", ".join(f"{c} {w}".strip() for c, w in CLAIMS.items()))
+    kind, rest = words[0], words[1:]
+    if kind not in CLAIMS:
+        raise ReproError(f"--claim: unknown claim {kind!r}; claims: "
+                         + ", ".join(f"{c} {w}".strip() for c, w in CLAIMS.items()))
+    need = CLAIMS[kind]
+    if need and len(rest) != 1:
+        raise ReproError(f"--claim {kind}: give one {need} (e.g. --claim {kind} "
+                         f"{'orientation' if kind == 'order' else 'rotated'})")
+    if not need and rest:
+        raise ReproError(f"--claim {kind} takes no word, got {' '.join(rest)!r}")
+    arg = rest[0] if rest else ""
+    if kind == "order" and arg not in QUANTITIES:
+        raise ReproError(f"--claim order: unknown quantity {arg!r}; quantities: {', '.join(QUANTITIES)}")
+    return kind, arg
+
+
+def _engine(variant_name: str):
+    """(engine, variant, dist, world module, adapter module); ReproError when the engine cannot write one."""
+    from cross_checks.engines import UnknownVariant, get_adapter, split_variant
+    from cross_checks.engines.external import ExternalEngine
+    try:
+        engine, variant = split_variant(variant_name)
+    except UnknownVariant as exc:
+        raise ReproError(str(exc)) from None
+    try:
+        adapter = get_adapter(engine)
+    except Exception as exc:  # noqa: BLE001 - EngineUnavailable: the engine's own words
+        raise ReproError(f"{variant_name}: {exc}") from None
+    if isinstance(adapter, ExternalEngine):
+        raise ReproError(f"{engine} is an engine file: it cannot write a reproducer; its command is the "
+                         "reproducer (docs/repro.md)")
+    if engine not in ENGINES:
+        raise ReproError(f"{engine} cannot write reproducers yet; these can: {', '.join(ENGINES)} "
+                         "(docs/repro.md)")
+    dist, world_mod, adapter_mod = ENGINES[engine]
+    return engine, variant, dist, importlib.import_module(world_mod), importlib.import_module(adapter_mod)
+
+
+def _floats(a) -> str:
+    """Numbers as Python literals that read back bit for bit (repr of floats), nested lists kept."""
+    if isinstance(a, (list, tuple, np.ndarray)):
+        return "[" + ", ".join(_floats(x) for x in (a.tolist() if isinstance(a, np.ndarray) else a)) + "]"
+    return repr(float(a))
+
+
+def _source(module) -> str:
+    """A module's text, as it is, without its trailing newline."""
+    return inspect.getsource(module).rstrip("\n")
+
+
+def _measure_source(main: str) -> str:
+    """:mod:`repro_measure`'s module docstring and imports, and the functions ``main`` needs (its text)."""
+    from cross_checks.sweep import repro_measure as rm
+    text = inspect.getsource(rm)
+    head = text[text.index("\nimport "):text.index("\ndef ")].lstrip("\n")   # its imports
+    needs = {"order": ("versions", "run", "error", "fitted_order", "main_order"),
+             "drift": ("versions", "run", "invariants", "main_drift"),
+             "gyroscopic": ("versions", "run", "first_flip_s", "main_gyroscopic")}[main]
+    return head.rstrip("\n") + "\n\n\n" + "\n\n\n".join(inspect.getsource(getattr(rm, f)).rstrip("\n")
+                                                        for f in needs)
+
+
+def _constant_forces(scenario, adapter_mod) -> tuple:
+    """The force (minus the weight where the engine applies gravity) and torque held over a run, world axes
+    (N, N m); ReproError when the scenario's forces change within the run."""
+    from cross_checks.engines.loop import Harness
+    fm = scenario.problem.forces
+    if fm.state_dependent or fm.has_decay:
+        raise ReproError(f"scenario {scenario.name}: its forces change with the state (springs, drag, "
+                         "body-frame or point forces, decay); a reproducer holds the forces constant: "
+                         "choose a torque-free or constant-force scenario")
+    engine = adapter_mod._ENGINE
+    h = Harness([scenario], scenario.dt_s, engine.applies_gravity)
+    f, tau = h.wrench(scenario.problem.initial_packed()[None])
+    return f[0], tau[0]
+
+
+def reproducer(variant_name: str, scenario, claim_words, *, command: str = "") -> Repro:
+    """The reproducer of ``claim_words`` (e.g. ``["order", "orientation"]``) about ``variant_name`` on
+    ``scenario`` (a parsed Scenario), run here: a :class:`Repro`. ReproError for what it cannot be written
+    for (one line)."""
+    import reference_sim
+    kind, arg = parse_claim(claim_words)
+    if kind == "invariance":
+        raise ReproError("--claim invariance: not supported yet (the invariance transforms of issue 46 are "
+                         "not in a reproducer's reach: the script would have to rewrite the scenario); "
+                         "claims: order QUANTITY, drift, gyroscopic")
+    engine, variant, dist, world_mod, adapter_mod = _engine(variant_name)
+    f_W, tau_W = _constant_forces(scenario, adapter_mod)
+    body = adapter_mod.body_spec(scenario.problem.body)
+    common = {"DIST": repr(dist), "VARIANT": repr(variant),
+              "BODIES": "[(" + ", ".join(_floats(x) for x in body) + ")]",
+              "GRAVITY_W": _floats(scenario.problem.forces.gravity_W),
+              "Y0": _floats(scenario.problem.initial_packed()),
+              "F_W": _floats(f_W), "TAU_W": _floats(tau_W)}
+    claim_text = f"{kind} {arg}".strip()
+    data, expect = {"order": _order_data, "drift": _drift_data, "gyroscopic": _gyro_data}[kind](
+        variant_name, scenario, arg)
+    command = command or f"rbcheck repro {variant_name} {scenario.name} --claim {claim_text}"
+    header = (f'"""{variant_name} on {scenario.name}: {expect}\n\n'
+              f"Written by rbcheck {reference_sim.__version__} ({command}). Needs only numpy and {dist}.\n"
+              f"Exit 1 while the defect holds, 0 when it does not.\n"
+              f"The world below is rbcheck's adapter's (cross_checks/engines/worlds/{engine}.py), as it is;\n"
+              f'the measurement is cross_checks/sweep/repro_measure.py\'s."""\n'
+              "import sys\n")
+    lines = [f"{k} = {v}" for k, v in {**common, **data}.items()]
+    main = {"order": "main_order", "drift": "main_drift", "gyroscopic": "main_gyroscopic"}[kind]
+    text = (header + "\n" + _source(world_mod) + "\n\n\n" + _measure_source(kind) + "\n\n\n"
+            + "# the scenario (SI units; states [x_W, v_W, q_WB (w x y z), ω_W]) and the reference values\n"
+            + "\n".join(lines) + "\n\n\n"
+            + f"def main():\n    return {main}(world, globals())\n\n\n"
+            + 'if __name__ == "__main__":\n    sys.exit(main())\n')
+    ns = {"__name__": "rbcheck_repro"}
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        exec(compile(text, f"<repro {variant_name} {scenario.name}>", "exec"), ns)   # noqa: S102 - our own
+        code = ns["main"]()
+    return Repro(text=text, holds=bool(code), output=out.getvalue(), claim=claim_text)
+
+
+def _order_data(variant_name, scenario, quantity) -> tuple:
+    from cross_checks.analysis import metrics as M
+    from cross_checks.analysis.expectations import judged_ladder_s, machine_epsilon, nominal_order
+    from cross_checks.core.quantities import quantity_scales
+    from cross_checks.scenario.references import error_amplification, reference_error, reference_solution
+    if scenario.long_run:
+        raise ReproError(f"scenario {scenario.name} is a long run (no Δt ladder): its claim is drift")
+    declared = nominal_order(variant_name)
+    if declared is None:
+        raise ReproError(f"{variant_name} declares no order: an order claim needs one")
+    dts = list(judged_ladder_s(scenario, variant_name))
+    steps = [scenario.n_steps(h) for h in dts]
+    y_all, label = reference_solution(scenario, np.linspace(0.0, scenario.duration_s, 201))
+    scales = quantity_scales(y_all)
+    amp = error_amplification(scenario, scales).get(quantity, 1.0)
+    refs, floors = [], []
+    for h, n in zip(dts, steps):
+        y_ref = reference_solution(scenario, np.array([0.0, n * h]))[0][-1]
+        ref_err = reference_error(scenario, y_ref, label, scales)[quantity]
+        refs.append(y_ref)
+        floors.append(M.roundoff_floor(scales[quantity], n, label, reference_error=ref_err, amplification=amp,
+                                       quantity=quantity, eps=machine_epsilon(variant_name)))
+    data = {"QUANTITY": repr(quantity), "DT_S": _floats(dts), "STEPS": repr(steps),
+            "Y_REF": "[" + ",\n         ".join(_floats(r) for r in refs) + "]",
+            "FLOORS": _floats(floors), "DECLARED": repr(float(declared)),
+            "ORDER_TOL": repr(tol.SWEEP_ORDER_TOL), "RESOLVED": repr(tol.RESOLVED_ABOVE_FLOOR)}
+    return data, (f"{quantity} converges at order {declared:g} (declared) over Δt = "
+                  f"{', '.join(f'{h:g}' for h in dts)} s? Reference: {label}.")
+
+
+def _torque_free(scenario, what: str) -> None:
+    from cross_checks.analysis.metrics import conserved
+    c = conserved(scenario.problem.forces)
+    if not (c["energy"][0] and c["angular_momentum"][0]):
+        raise ReproError(f"scenario {scenario.name}: a {what} claim needs a torque-free scenario whose "
+                         f"energy and angular momentum are conserved "
+                         f"({c['energy'][1] or c['angular_momentum'][1]})")
+
+
+def _drift_data(variant_name, scenario, _arg) -> tuple:
+    _torque_free(scenario, "drift")
+    inertia = scenario.problem.body.inertia_B
+    I2 = float(np.linalg.eigvalsh(inertia)[1])
+    n = scenario.n_steps()
+    data = {"DT": repr(float(scenario.dt_s)), "N": repr(n), "INERTIA_B": _floats(inertia), "I2": repr(I2),
+            "END_FRACTION": repr(tol.LONG_RUN_END_FRACTION), "MIN_CHANGE": repr(tol.SECULAR_MIN_CHANGE),
+            "TREND_TO_SCATTER": repr(tol.SECULAR_MIN_TREND_TO_SCATTER)}
+    return data, (f"does a torque-free run of {n} steps of {scenario.dt_s:g} s keep its energy, |L| and its "
+                  "separatrix distance δ = (2E I₂ − |L|²)/|L|²?")
+
+
+def _gyro_data(variant_name, scenario, _arg) -> tuple:
+    from cross_checks.scenario.references import reference_solution
+    from cross_checks.sweep import repro_measure as rm
+    from reference_sim.quaternion import quat_from_matrix
+    _torque_free(scenario, "gyroscopic")
+    body = scenario.problem.body
+    moments, R_BP = body.principal_axes()
+    q_BP = np.array([1.0, 0.0, 0.0, 0.0]) if body.is_diagonal() else quat_from_matrix(R_BP)
+    axis = 1 if not body.is_diagonal() else int(np.argsort(np.diag(body.inertia_B), kind="stable")[1])
+    dt, n = float(scenario.dt_s), scenario.n_steps()
+    y_ref, label = reference_solution(scenario, dt * np.arange(n + 1))
+    flip = rm.first_flip_s(y_ref, q_BP, axis, dt)
+    if flip is None:
+        raise ReproError(f"scenario {scenario.name}: the reference ({label}) does not flip within "
+                         f"{scenario.duration_s:g} s: a gyroscopic claim needs a torque-free spin near the "
+                         "intermediate axis (e.g. tennis_racket)")
+    data = {"DT": repr(dt), "N": repr(n), "Q_BP": _floats(q_BP), "AXIS": repr(axis), "FLIP_S": repr(flip)}
+    return data, (f"does the torque-free spin near the intermediate axis flip (at t = {flip:.4g} s, "
+                  f"{label})?")
+
+
+def write_reproducer(repro: Repro, out) -> Path:
+    """Write ``repro``'s script to ``out`` atomically (executable); returns the path."""
+    from cross_checks.core.files import atomic_write_text
+    out = Path(out)
+    atomic_write_text(out, repro.text)
+    out.chmod(0o755)
+    return out
+
+
+def claim_of_finding(variant_name: str, scenario, *, quantity: str | None = None,
+                     long_run_kind: str | None = None) -> list | None:
+    """The claim words of a sweep finding, or None when no reproducer can state it: a contradicted order
+    (``quantity``), a long run that drifts (``long_run_kind`` toward/away/crosses), on an engine of
+    :data:`ENGINES` with constant forces."""
+    engine = variant_name.split(":", 1)[0]
+    if engine not in ENGINES or scenario.problem.forces.state_dependent or scenario.problem.forces.has_decay:
+        return None
+    if long_run_kind is not None:
+        return ["drift"] if long_run_kind != "none" else None
+    if quantity is not None and quantity in QUANTITIES:
+        return ["order", quantity]
+    return None
+
+
+def file_name(variant_name: str, scenario_name: str, claim: str) -> str:
+    """``mujoco_rk4__tennis_racket__order_orientation.py``: a reproducer's file name in DIR/repro/."""
+    safe = re.sub(r"[^A-Za-z0-9_]+", "_", f"{variant_name}__{scenario_name}__{claim}")
+    return safe.strip("_") + ".py"
+
