@@ -105,9 +105,20 @@ def build_parser() -> argparse.ArgumentParser:
     # One declaration per command, in the order `rbcheck --help` lists them (alike in shape only: each
     # says its own command's arguments).
     for add in (_add_list, _add_show, _add_run, _add_sweep, _add_report, _add_check, _add_compare,
-                _add_baseline, _add_bench, _add_fuzz):
+                _add_baseline, _add_bench, _add_fuzz, _add_repro):
         add(sub)
     return p
+
+
+def _add_repro(sub) -> None:
+    from cross_checks.cli.repro import add_repro
+    add_repro(sub, _add_engine_file_option)
+
+
+def cmd_repro(args) -> int:
+    from cross_checks.cli.repro import run_repro
+    return run_repro(args, BadInput, _check_out_path, lambda out: refuse_inputs_as_outputs(
+        [("--out", out, False)], _scenario_inputs([args.scenario]) + _engine_file_inputs(args)))
 
 
 def _add_list(sub) -> None:
@@ -1070,7 +1081,7 @@ def cmd_fuzz(args) -> int:
 
 COMMANDS = {"list": cmd_list, "show": cmd_show, "run": cmd_run, "sweep": cmd_sweep, "report": cmd_report,
             "check": cmd_check, "compare": cmd_compare, "baseline": cmd_baseline, "bench": cmd_bench,
-            "fuzz": cmd_fuzz}
+            "fuzz": cmd_fuzz, "repro": cmd_repro}
 
 
 def main(argv=None) -> int:

@@ -14,18 +14,22 @@ from __future__ import annotations
 
 import threading
 import time
+import types
 
 import numpy as np
 
 from cross_checks.engines import base
 from cross_checks.engines.base import EngineError, Variant, stage_force_torque_floats
 from cross_checks.engines.world import World, WorldEngine
-from cross_checks.engines.worlds import mujoco as mjw
-from cross_checks.engines.worlds.mujoco import to_packed, to_qpos_qvel
 from reference_sim.quaternion import quat_from_matrix
 from reference_sim.simulate import Run
 
 mujoco, _IMPORT_ERROR = base.optional_import("mujoco")
+if _IMPORT_ERROR is None:   # the world (what rbcheck repro embeds) imports the engine itself
+    from cross_checks.engines.worlds import mujoco as mjw
+    from cross_checks.engines.worlds.mujoco import to_packed, to_qpos_qvel
+else:   # not installed: the adapter still loads, and says so when used
+    mjw = types.SimpleNamespace(Bodies=object)
 
 __all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate", "simulate_many", "one_step",
            "build_model", "packed_floats", "to_packed", "to_qpos_qvel"]

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import os
 import threading
+import types
 
 import numpy as np
 
@@ -21,12 +22,15 @@ from cross_checks.engines import base
 from cross_checks.engines.base import EngineError, Variant
 from cross_checks.engines.step_floats import quat_mul_floats
 from cross_checks.engines.world import World, WorldEngine
-from cross_checks.engines.worlds import pybullet as pbw
-from cross_checks.engines.worlds.pybullet import DYNAMICS_SETTINGS
 from reference_sim.quaternion import quat_conj, quat_from_matrix
 from reference_sim.simulate import Run
 
 p, _IMPORT_ERROR = base.optional_import("pybullet", quiet_stderr=True)   # it prints its build time at import
+if _IMPORT_ERROR is None:   # the world (what rbcheck repro embeds) imports the engine itself
+    from cross_checks.engines.worlds import pybullet as pbw
+    from cross_checks.engines.worlds.pybullet import DYNAMICS_SETTINGS
+else:   # not installed: the adapter still loads, and says so when used
+    pbw = types.SimpleNamespace(Bodies=object)
 
 __all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate",
            "simulate_many", "one_step", "DYNAMICS_SETTINGS"]

@@ -10,17 +10,22 @@ what pins them: docs/engine_conventions.md, "Rapier 0.36.1".
 """
 from __future__ import annotations
 
+import types
+
 import numpy as np
 
 from cross_checks.engines import base
 from cross_checks.engines.base import EngineError, Traits, Variant
 from cross_checks.engines.step_floats import bad_floats
 from cross_checks.engines.world import World, WorldEngine
-from cross_checks.engines.worlds import rapier as rpw
-from cross_checks.engines.worlds.rapier import BODY_SETTINGS, WORLD_SETTINGS
 from reference_sim.quaternion import quat_from_matrix
 
 rapier, _IMPORT_ERROR = base.optional_import("rapier3d")
+if _IMPORT_ERROR is None:   # the world (what rbcheck repro embeds) imports the engine itself
+    from cross_checks.engines.worlds import rapier as rpw
+    from cross_checks.engines.worlds.rapier import BODY_SETTINGS, WORLD_SETTINGS
+else:   # not installed: the adapter still loads, and says so when used
+    rpw = types.SimpleNamespace(Bodies=object)
 
 __all__ = ["ENGINE", "DIST", "VARIANTS", "WORLD_SETTINGS", "BODY_SETTINGS", "EngineError", "version",
            "simulate", "simulate_many", "one_step", "RapierWorld", "RapierAdapter"]

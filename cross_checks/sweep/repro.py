@@ -112,7 +112,9 @@ def _engine(variant_name: str):
 
 
 def _floats(a) -> str:
-    """Numbers as Python literals that read back bit for bit (repr of floats), nested lists kept."""
+    """Numbers as Python literals that read back bit for bit (repr of floats), nested lists kept, None."""
+    if a is None:
+        return "None"
     if isinstance(a, (list, tuple, np.ndarray)):
         return "[" + ", ".join(_floats(x) for x in (a.tolist() if isinstance(a, np.ndarray) else a)) + "]"
     return repr(float(a))

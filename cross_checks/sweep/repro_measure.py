@@ -84,7 +84,13 @@ def invariants(y, inertia_B, I2):
 
 def main_drift(world, s):
     versions(s["DIST"])
-    E, Lm, d = invariants(run(world, s, s["DT"], s["N"]), s["INERTIA_B"], s["I2"])
+    y = run(world, s, s["DT"], s["N"])
+    bad = np.nonzero(~np.all(np.isfinite(y), axis=1) | (np.abs(y).max(axis=1) > 1e8))[0]
+    if len(bad):   # a blow-up keeps nothing
+        print(f"{s['N']} steps of {s['DT']:g} s: the state diverged at t = {bad[0] * s['DT']:.4g} s; "
+              "expected the energy, |L| and δ conserved: DEFECT")
+        return 1
+    E, Lm, d = invariants(y, s["INERTIA_B"], s["I2"])
     k = max(1, int(len(d) * s["END_FRACTION"]))
     end, scatter = float(np.mean(d[-k:])), 2.0 * float(np.std(np.abs(d[-k:])))
     change = abs(d[0]) - float(np.mean(np.abs(d[-k:])))     # how much |δ| fell (start vs the last part)

@@ -29,6 +29,14 @@ BODY_SETTINGS = (
 )
 
 
+def mass_properties(mass_kg, moments, q_BP):
+    """``rapier3d.MassProperties``: COM at the origin, the principal moments (kg m²) and the principal frame
+    ``q_BP`` (w x y z) in body coordinates."""
+    return rapier.MassProperties(local_com=(0.0, 0.0, 0.0), mass=float(mass_kg),
+                                 principal_inertia=tuple(float(m) for m in moments),
+                                 principal_inertia_local_frame=rapier.Rotation3(*(float(c) for c in q_BP)))
+
+
 class Bodies:
     """The bodies (live ``RigidBody`` views) in one ``PhysicsWorld`` at ``dt_s`` under ``gravity_W``. Raw rows
     are packed states (float32 values); a body in ``dead`` gets no force nor decay and reads non-finite."""
@@ -40,11 +48,7 @@ class Bodies:
             setattr(w.integration_parameters, attr, value)      # a live view: modified in place
         self.handles, self.bodies, self.dead, self.last = [], [], set(), []
         for mass_kg, moments, q_BP in bodies:
-            P = rapier.Rotation3(*(float(c) for c in q_BP))       # principal frame in body axes (w x y z)
-            mp = rapier.MassProperties(local_com=(0.0, 0.0, 0.0), mass=float(mass_kg),
-                                       principal_inertia=tuple(float(m) for m in moments),
-                                       principal_inertia_local_frame=P)
-            b = rapier.RigidBody.dynamic().additional_mass_properties(mp)
+            b = rapier.RigidBody.dynamic().additional_mass_properties(mass_properties(mass_kg, moments, q_BP))
             for method, value in BODY_SETTINGS:
                 b = getattr(b, method)(value)
             self.handles.append(w.add_body(b.gyroscopic_forces(GYROSCOPIC[variant])))
