@@ -34,7 +34,7 @@ from cross_checks.core import tolerances as tol
 from cross_checks.core.quantities import QUANTITIES
 
 __all__ = ["ENGINES", "CLAIMS", "ReproError", "Repro", "parse_claim", "reproducer", "write_reproducer",
-           "claim_of_finding"]
+           "findings_claims", "write_sweep_reproducers", "file_name"]
 
 #: Engines that can write reproducers: engine -> (pip distribution, its world module, its adapter module).
 ENGINES = {
@@ -56,7 +56,7 @@ class Repro:
     (what it printed when run here)."""
 
     text: str
-    holds: bool
+    holds: bool | None
     output: str
     claim: str
 
@@ -152,10 +152,10 @@ def _constant_forces(scenario, adapter_mod) -> tuple:
     return f[0], tau[0]
 
 
-def reproducer(variant_name: str, scenario, claim_words, *, command: str = "") -> Repro:
+def reproducer(variant_name: str, scenario, claim_words, *, command: str = "", run: bool = True) -> Repro:
     """The reproducer of ``claim_words`` (e.g. ``["order", "orientation"]``) about ``variant_name`` on
-    ``scenario`` (a parsed Scenario), run here: a :class:`Repro`. ReproError for what it cannot be written
-    for (one line)."""
+    ``scenario`` (a parsed Scenario), run here (``run``; else ``holds`` is None: the sweep, which measured
+    it already): a :class:`Repro`. ReproError for what it cannot be written for (one line)."""
     import reference_sim
     kind, arg = parse_claim(claim_words)
     if kind == "invariance":
@@ -187,6 +187,8 @@ def reproducer(variant_name: str, scenario, claim_words, *, command: str = "") -
             + "\n".join(lines) + "\n\n\n"
             + f"def main():\n    return {main}(world, globals())\n\n\n"
             + 'if __name__ == "__main__":\n    sys.exit(main())\n')
+    if not run:
+        return Repro(text=text, holds=None, output="", claim=claim_text)
     ns = {"__name__": "rbcheck_repro"}
     out = io.StringIO()
     with contextlib.redirect_stdout(out):
@@ -276,19 +278,60 @@ def write_reproducer(repro: Repro, out) -> Path:
     return out
 
 
-def claim_of_finding(variant_name: str, scenario, *, quantity: str | None = None,
-                     long_run_kind: str | None = None) -> list | None:
-    """The claim words of a sweep finding, or None when no reproducer can state it: a contradicted order
-    (``quantity``), a long run that drifts (``long_run_kind`` toward/away/crosses), on an engine of
-    :data:`ENGINES` with constant forces."""
-    engine = variant_name.split(":", 1)[0]
-    if engine not in ENGINES or scenario.problem.forces.state_dependent or scenario.problem.forces.has_decay:
-        return None
-    if long_run_kind is not None:
-        return ["drift"] if long_run_kind != "none" else None
-    if quantity is not None and quantity in QUANTITIES:
-        return ["order", quantity]
-    return None
+#: The quantity a contradicted order's reproducer states, when several of a variant's are contradicted.
+_QUANTITY_PREFERENCE = ("orientation", "angular_velocity", "position", "velocity")
+
+
+def findings_claims(summary: dict, scenarios) -> list:
+    """``[(variant, scenario, claim words)]``: the sweep's findings a reproducer states, once per variant and
+    scenario — every contradicted order (``order QUANTITY``, the quantity of :data:`_QUANTITY_PREFERENCE`
+    first), every long run with a finding (``drift``: toward, away from or across the separatrix, or
+    diverged), and every expected non-convergence of a variant without a gyroscopic term on a torque-free
+    scenario (``gyroscopic``). The reference's own schemes (``reference:``) are rbcheck's: none."""
+    from cross_checks.analysis.expectations import traits
+    from cross_checks.analysis.metrics import conserved
+    by_name = {sc.name: sc for sc in scenarios}
+    out: dict = {}
+    recs = summary.get("convergence") or []
+    for r in sorted((r for r in recs if r.get("matches_expectation") is False),
+                    key=lambda r: _QUANTITY_PREFERENCE.index(r["quantity"])):
+        out.setdefault((r["engine"], r["scenario"]), ["order", r["quantity"]])
+    for r in recs:
+        key = (r["engine"], r["scenario"])
+        sc = by_name.get(r["scenario"])
+        if (key in out or sc is None or r.get("expected_verdict") != "does_not_converge"
+                or traits(r["engine"]).gyroscopic_term):
+            continue
+        c = conserved(sc.problem.forces)
+        if c["energy"][0] and c["angular_momentum"][0]:
+            out[key] = ["gyroscopic"]
+    for r in summary.get("long_runs") or []:
+        if r.get("finding") or r.get("status") == "diverged":
+            out.setdefault((r["engine"], r["scenario"]), ["drift"])
+    return [(v, by_name[s], claim) for (v, s), claim in out.items()
+            if s in by_name and not v.startswith("reference:")]
+
+
+def write_sweep_reproducers(out_dir, summary: dict, scenarios) -> list:
+    """A reproducer of each of the sweep's findings (:func:`findings_claims`) in ``out_dir``/repro/, written
+    without running them again (the sweep measured them); returns summary.json's ``reproducers`` records:
+    ``{engine, scenario, claim, file}`` (``file`` relative to ``out_dir``), or ``file`` "" and ``note``
+    saying why none could be written (an engine that cannot yet, forces a script cannot hold)."""
+    out_dir = Path(out_dir)
+    records = []
+    for variant, sc, claim in findings_claims(summary, scenarios):
+        text = " ".join(claim)
+        rec = {"engine": variant, "scenario": sc.name, "claim": text, "file": ""}
+        try:
+            r = reproducer(variant, sc, claim, run=False)
+        except ReproError as exc:
+            records.append({**rec, "note": str(exc)})
+            continue
+        name = f"repro/{file_name(variant, sc.name, text)}"
+        (out_dir / "repro").mkdir(exist_ok=True)
+        write_reproducer(r, out_dir / name)
+        records.append({**rec, "file": name})
+    return records
 
 
 def file_name(variant_name: str, scenario_name: str, claim: str) -> str:

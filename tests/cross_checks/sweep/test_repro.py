@@ -108,3 +108,41 @@ def test_the_script_embeds_the_adapters_world_as_it_is():
     from cross_checks.engines.worlds import mujoco as mjw
     r = reproducer("mujoco:rk4", load_scenario("tennis_racket"), ["order", "orientation"])
     assert inspect.getsource(mjw).rstrip("\n") in r.text
+
+
+def test_findings_claims_states_each_finding_once_with_the_preferred_quantity():
+    from cross_checks.sweep.repro import findings_claims
+    sc, lr = load_scenario("tennis_racket"), load_scenario("long_major_axis_spin")
+    rec = {"scenario": "tennis_racket", "matches_expectation": True, "expected_verdict": "converges"}
+    summary = {"convergence": [
+        {**rec, "engine": "mujoco:rk4", "quantity": "position", "matches_expectation": False},
+        {**rec, "engine": "mujoco:rk4", "quantity": "orientation", "matches_expectation": False},
+        {**rec, "engine": "rapier:symplectic_euler_no_gyro", "quantity": "orientation",
+         "expected_verdict": "does_not_converge"},
+        {**rec, "engine": "reference:course", "quantity": "orientation",
+         "expected_verdict": "does_not_converge"},
+        {**rec, "engine": "mujoco:euler", "quantity": "orientation"}],
+        "long_runs": [{"engine": "rapier:symplectic_euler", "scenario": "long_major_axis_spin",
+                       "finding": "drifts toward the intermediate axis", "status": "ok"},
+                      {"engine": "mujoco:rk4", "scenario": "long_major_axis_spin", "finding": "",
+                       "status": "ok"}]}
+    got = [(v, s.name, c) for v, s, c in findings_claims(summary, [sc, lr])]
+    assert got == [("mujoco:rk4", "tennis_racket", ["order", "orientation"]),
+                   ("rapier:symplectic_euler_no_gyro", "tennis_racket", ["gyroscopic"]),
+                   ("rapier:symplectic_euler", "long_major_axis_spin", ["drift"])]
+
+
+def test_the_sweep_writes_each_findings_reproducer_and_the_report_links_it(tmp_path, monkeypatch):
+    import json
+
+    from cross_checks.cli import main
+    monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "cache"))
+    out = tmp_path / "sweep"
+    main(["sweep", "long_tennis_racket", "--engines", "mujoco:implicit", "--jobs", "1", "--out", str(out)])
+    recs = json.loads((out / "summary.json").read_text())["reproducers"]
+    assert recs == [{"engine": "mujoco:implicit", "scenario": "long_tennis_racket", "claim": "drift",
+                     "file": "repro/mujoco_implicit__long_tennis_racket__drift.py"}]
+    page = (out / "integrators.html").read_text()
+    assert 'href="repro/mujoco_implicit__long_tennis_racket__drift.py"' in page
+    done = _run_alone(out / recs[0]["file"], tmp_path)
+    assert done.returncode == 1 and done.stdout.strip().endswith("DEFECT"), done.stdout + done.stderr
