@@ -36,12 +36,18 @@ from cross_checks.core.quantities import QUANTITIES
 __all__ = ["ENGINES", "CLAIMS", "ReproError", "Repro", "parse_claim", "reproducer", "write_reproducer",
            "findings_claims", "write_sweep_reproducers", "file_name"]
 
-#: Engines that can write reproducers: engine -> (pip distribution, its world module, its adapter module).
+#: Engines that can write reproducers: engine -> (the distributions whose versions the script prints, the
+#: world modules it embeds in order, the adapter module, the module whose ``body_spec`` gives the bodies).
+_W, _A = "cross_checks.engines.worlds.", "cross_checks.engines."
 ENGINES = {
-    "mujoco": ("mujoco", "cross_checks.engines.worlds.mujoco", "cross_checks.engines.mujoco_engine"),
-    "rapier": ("rapier3d", "cross_checks.engines.worlds.rapier", "cross_checks.engines.rapier_engine"),
-    "pybullet": ("pybullet", "cross_checks.engines.worlds.pybullet", "cross_checks.engines.pybullet_engine"),
+    "mujoco": (("mujoco",), (_W + "mujoco",), _A + "mujoco_engine", _A + "mujoco_engine"),
+    "rapier": (("rapier3d",), (_W + "rapier",), _A + "rapier_engine", _A + "rapier_engine"),
+    "pybullet": (("pybullet",), (_W + "pybullet",), _A + "pybullet_engine", _A + "pybullet_engine"),
+    "mjx": (("mujoco-mjx", "mujoco", "jax"), (_W + "mujoco", _W + "mjx"), _A + "mjx_engine",
+            _A + "mujoco_engine"),
 }
+#: A line of a world module that a reproducer leaves out: the import of a sibling world embedded above it.
+_SIBLING_IMPORT = re.compile(r"^from \.\w+ import .*$\n", re.MULTILINE)
 #: claim -> the word it takes ("" for none).
 CLAIMS = {"order": "QUANTITY", "drift": "", "gyroscopic": "", "invariance": "TRANSFORM"}
 
@@ -90,7 +96,8 @@ def parse_claim(words) -> tuple:
 
 
 def _engine(variant_name: str):
-    """(engine, variant, dist, world module, adapter module); ReproError when the engine cannot write one."""
+    """(engine, variant, distributions, world modules, adapter module, body_spec's module); ReproError when
+    the engine cannot write one."""
     from cross_checks.engines import UnknownVariant, get_adapter, split_variant
     from cross_checks.engines.external import ExternalEngine
     try:
@@ -107,8 +114,9 @@ def _engine(variant_name: str):
     if engine not in ENGINES:
         raise ReproError(f"{engine} cannot write reproducers yet; these can: {', '.join(ENGINES)} "
                          "(docs/repro.md)")
-    dist, world_mod, adapter_mod = ENGINES[engine]
-    return engine, variant, dist, importlib.import_module(world_mod), importlib.import_module(adapter_mod)
+    dists, worlds, adapter_mod, spec_mod = ENGINES[engine]
+    return (engine, variant, dists, [importlib.import_module(w) for w in worlds],
+            importlib.import_module(adapter_mod), importlib.import_module(spec_mod))
 
 
 def _floats(a) -> str:
@@ -121,8 +129,9 @@ def _floats(a) -> str:
 
 
 def _source(module) -> str:
-    """A module's text, as it is, without its trailing newline."""
-    return inspect.getsource(module).rstrip("\n")
+    """A world module's text, as it is (but the import of a sibling world embedded above it), without its
+    trailing newline."""
+    return _SIBLING_IMPORT.sub("", inspect.getsource(module)).rstrip("\n")
 
 
 def _measure_source(main: str) -> str:
@@ -162,10 +171,10 @@ def reproducer(variant_name: str, scenario, claim_words, *, command: str = "", r
         raise ReproError("--claim invariance: not supported yet (the invariance transforms of issue 46 are "
                          "not in a reproducer's reach: the script would have to rewrite the scenario); "
                          "claims: order QUANTITY, drift, gyroscopic")
-    engine, variant, dist, world_mod, adapter_mod = _engine(variant_name)
+    engine, variant, dists, world_mods, adapter_mod, spec_mod = _engine(variant_name)
     f_W, tau_W = _constant_forces(scenario, adapter_mod)
-    body = adapter_mod.body_spec(scenario.problem.body)
-    common = {"DIST": repr(dist), "VARIANT": repr(variant),
+    body = spec_mod.body_spec(scenario.problem.body)
+    common = {"DIST": repr(dists), "VARIANT": repr(variant),
               "BODIES": "[(" + ", ".join(_floats(x) for x in body) + ")]",
               "GRAVITY_W": _floats(scenario.problem.forces.gravity_W),
               "Y0": _floats(scenario.problem.initial_packed()),
@@ -175,14 +184,16 @@ def reproducer(variant_name: str, scenario, claim_words, *, command: str = "", r
         variant_name, scenario, arg)
     command = command or f"rbcheck repro {variant_name} {scenario.name} --claim {claim_text}"
     header = (f'"""{variant_name} on {scenario.name}: {expect}\n\n'
-              f"Written by rbcheck {reference_sim.__version__} ({command}). Needs only numpy and {dist}.\n"
+              f"Written by rbcheck {reference_sim.__version__} ({command}). Needs only numpy and "
+              f"{', '.join(dists)}.\n"
               f"Exit 1 while the defect holds, 0 when it does not.\n"
               f"The world below is rbcheck's adapter's (cross_checks/engines/worlds/{engine}.py), as it is;\n"
               f'the measurement is cross_checks/sweep/repro_measure.py\'s."""\n'
               "import sys\n")
     lines = [f"{k} = {v}" for k, v in {**common, **data}.items()]
     main = {"order": "main_order", "drift": "main_drift", "gyroscopic": "main_gyroscopic"}[kind]
-    text = (header + "\n" + _source(world_mod) + "\n\n\n" + _measure_source(kind) + "\n\n\n"
+    text = (header + "\n" + "\n\n\n".join(_source(w) for w in world_mods) + "\n\n\n"
+            + _measure_source(kind) + "\n\n\n"
             + "# the scenario (SI units; states [x_W, v_W, q_WB (w x y z), ω_W]) and the reference values\n"
             + "\n".join(lines) + "\n\n\n"
             + f"def main():\n    return {main}(world, globals())\n\n\n"
@@ -286,8 +297,10 @@ def findings_claims(summary: dict, scenarios) -> list:
     """``[(variant, scenario, claim words)]``: the sweep's findings a reproducer states, once per variant and
     scenario — every contradicted order (``order QUANTITY``, the quantity of :data:`_QUANTITY_PREFERENCE`
     first), every long run with a finding (``drift``: toward, away from or across the separatrix, or
-    diverged), and every expected non-convergence of a variant without a gyroscopic term on a torque-free
-    scenario (``gyroscopic``). The reference's own schemes (``reference:``) are rbcheck's: none."""
+    diverged), every expected non-convergence of a variant without a gyroscopic term on a torque-free
+    scenario (``gyroscopic``), and every order the variant's traits expect below the one it declares (an
+    engine's known shortfall, e.g. MJX's RK4 attitude at order 2: ``order QUANTITY``) where the forces are
+    constant. The reference's own schemes (``reference:``) are rbcheck's: none."""
     from cross_checks.analysis.expectations import traits
     from cross_checks.analysis.metrics import conserved
     by_name = {sc.name: sc for sc in scenarios}
@@ -296,15 +309,22 @@ def findings_claims(summary: dict, scenarios) -> list:
     for r in sorted((r for r in recs if r.get("matches_expectation") is False),
                     key=lambda r: _QUANTITY_PREFERENCE.index(r["quantity"])):
         out.setdefault((r["engine"], r["scenario"]), ["order", r["quantity"]])
-    for r in recs:
+    declared = {v["name"]: v.get("declared_order") for v in summary.get("variants") or []}
+    for r in sorted(recs, key=lambda r: _QUANTITY_PREFERENCE.index(r["quantity"])):
         key = (r["engine"], r["scenario"])
         sc = by_name.get(r["scenario"])
-        if (key in out or sc is None or r.get("expected_verdict") != "does_not_converge"
-                or traits(r["engine"]).gyroscopic_term):
+        if key in out or sc is None:
             continue
-        c = conserved(sc.problem.forces)
-        if c["energy"][0] and c["angular_momentum"][0]:
+        fm = sc.problem.forces
+        c = conserved(fm)
+        if (r.get("expected_verdict") == "does_not_converge" and not traits(r["engine"]).gyroscopic_term
+                and c["energy"][0] and c["angular_momentum"][0]):
             out[key] = ["gyroscopic"]
+        elif (r.get("expected_verdict") == "converges" and r.get("matches_expectation")
+              and r.get("expected_order") is not None and declared.get(r["engine"]) is not None
+              and r["expected_order"] < declared[r["engine"]] - tol.SWEEP_ORDER_TOL
+              and not (fm.state_dependent or fm.has_decay)):
+            out[key] = ["order", r["quantity"]]   # the engine's own known shortfall (its traits say it)
     for r in summary.get("long_runs") or []:
         if r.get("finding") or r.get("status") == "diverged":
             out.setdefault((r["engine"], r["scenario"]), ["drift"])

@@ -14,9 +14,9 @@ import platform
 import numpy as np
 
 
-def versions(dist):
-    print(f"{dist} {importlib.metadata.version(dist)}, numpy {np.__version__}, "
-          f"Python {platform.python_version()}, {platform.platform()}")
+def versions(dists):
+    print(", ".join(f"{d} {importlib.metadata.version(d)}" for d in dists)
+          + f", numpy {np.__version__}, Python {platform.python_version()}, {platform.platform()}")
 
 
 def run(world, s, dt_s, n_steps):

@@ -45,7 +45,7 @@ def test_claims_parse():
 
 @pytest.mark.parametrize("variant,scenario,claim,says", [
     ("mujoco:rk4", "tennis_racket", ["invariance", "rotated"], "not supported yet"),
-    ("mjx:rk4", "tennis_racket", ["order", "orientation"], "these can: mujoco, rapier, pybullet"),
+    ("brax:spring", "tennis_racket", ["gyroscopic"], "these can: mujoco, rapier, pybullet, mjx"),
     ("mujoco:rk4", "spring_pendulum", ["order", "orientation"], "forces change with the state"),
     ("mujoco:rk4", "projectile", ["gyroscopic"], "does not flip"),
     ("mujoco:rk4", "long_major_axis_spin", ["order", "orientation"], "is a long run"),
@@ -121,7 +121,11 @@ def test_findings_claims_states_each_finding_once_with_the_preferred_quantity():
          "expected_verdict": "does_not_converge"},
         {**rec, "engine": "reference:course", "quantity": "orientation",
          "expected_verdict": "does_not_converge"},
-        {**rec, "engine": "mujoco:euler", "quantity": "orientation"}],
+        {**rec, "engine": "mujoco:euler", "quantity": "orientation", "expected_order": 1.0},
+        {**rec, "engine": "mjx:rk4", "quantity": "position", "expected_order": 4.0},
+        {**rec, "engine": "mjx:rk4", "quantity": "orientation", "expected_order": 2.0}],   # known shortfall
+        "variants": [{"name": "mujoco:euler", "declared_order": 1.0},
+                     {"name": "mjx:rk4", "declared_order": 4.0}],
         "long_runs": [{"engine": "rapier:symplectic_euler", "scenario": "long_major_axis_spin",
                        "finding": "drifts toward the intermediate axis", "status": "ok"},
                       {"engine": "mujoco:rk4", "scenario": "long_major_axis_spin", "finding": "",
@@ -129,6 +133,7 @@ def test_findings_claims_states_each_finding_once_with_the_preferred_quantity():
     got = [(v, s.name, c) for v, s, c in findings_claims(summary, [sc, lr])]
     assert got == [("mujoco:rk4", "tennis_racket", ["order", "orientation"]),
                    ("rapier:symplectic_euler_no_gyro", "tennis_racket", ["gyroscopic"]),
+                   ("mjx:rk4", "tennis_racket", ["order", "orientation"]),
                    ("rapier:symplectic_euler", "long_major_axis_spin", ["drift"])]
 
 

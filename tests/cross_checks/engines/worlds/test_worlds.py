@@ -12,8 +12,10 @@ from cross_checks.engines.base import RunRequest
 from cross_checks.scenario import load_scenario
 
 WORLDS = Path(__file__).resolve().parents[4] / "cross_checks" / "engines" / "worlds"
-#: the module each world may import besides numpy and the standard library
-ENGINE_IMPORT = {"mujoco": "mujoco", "rapier": "rapier3d", "pybullet": "pybullet"}
+#: the modules each world may import besides numpy and the standard library ("." : a sibling world, which a
+#: reproducer embeds above it)
+ENGINE_IMPORT = {"mujoco": {"mujoco"}, "rapier": {"rapier3d"}, "pybullet": {"pybullet"},
+                 "mjx": {"jax", "mujoco", "."}}
 STDLIB = {"math"}
 
 
@@ -30,27 +32,30 @@ def _imports(path: Path) -> set:
 @pytest.mark.parametrize("engine", sorted(ENGINE_IMPORT))
 def test_a_world_imports_only_numpy_and_its_engine(engine):
     got = _imports(WORLDS / f"{engine}.py")
-    assert got <= {"numpy", ENGINE_IMPORT[engine], *STDLIB}, got
+    assert got <= {"numpy", *ENGINE_IMPORT[engine], *STDLIB}, got
 
 
 # variant, scenario (a full-tensor tumble for the engines whose boundary rotates into the principal frame)
 CASES = [("mujoco", "rk4", "tennis_racket"), ("mujoco", "euler", "tumbling_box"),
          ("rapier", "symplectic_euler", "tennis_racket"), ("pybullet", "maximal", "tumbling_box"),
-         ("pybullet", "multibody", "projectile")]
+         ("pybullet", "multibody", "projectile"),
+         pytest.param("mjx", "rk4", "tennis_racket", marks=pytest.mark.slow)]   # ~1 min: JAX compiles
 
 
 @pytest.mark.parametrize("engine,variant,name", CASES)
 def test_the_reproducers_run_of_the_world_is_the_adapters_bit_for_bit(engine, variant, name):
-    pytest.importorskip(ENGINE_IMPORT[engine])
+    pytest.importorskip({"rapier": "rapier3d", "mjx": "mujoco.mjx"}.get(engine, engine))
     from cross_checks.engines import get_adapter
     from cross_checks.engines.loop import Harness
     from cross_checks.sweep import repro_measure
-    adapter_mod = importlib.import_module(f"cross_checks.engines.{engine}_engine")
-    world_mod = importlib.import_module(f"cross_checks.engines.worlds.{engine}")
+    from cross_checks.sweep.repro import ENGINES
+    adapter_mod = importlib.import_module(ENGINES[engine][2])
+    spec_mod = importlib.import_module(ENGINES[engine][3])
+    world_mod = importlib.import_module(ENGINES[engine][1][-1])
     sc = load_scenario(name)
     dt, n = sc.dt_ladder_s[0], 200
     f, tau = Harness([sc], dt, adapter_mod._ENGINE.applies_gravity).wrench(sc.problem.initial_packed()[None])
-    s = {"BODIES": [adapter_mod.body_spec(sc.problem.body)], "GRAVITY_W": sc.problem.forces.gravity_W,
+    s = {"BODIES": [spec_mod.body_spec(sc.problem.body)], "GRAVITY_W": sc.problem.forces.gravity_W,
          "VARIANT": variant, "Y0": sc.problem.initial_packed(), "F_W": f[0], "TAU_W": tau[0]}
     mine = repro_measure.run(world_mod.world, s, dt, n)
     theirs = get_adapter(engine).simulate_many(variant, [RunRequest(sc, dt, n)])[0].y
