@@ -45,6 +45,7 @@ ENGINES = {
     "pybullet": (("pybullet",), (_W + "pybullet",), _A + "pybullet_engine", _A + "pybullet_engine"),
     "mjx": (("mujoco-mjx", "mujoco", "jax"), (_W + "mujoco", _W + "mjx"), _A + "mjx_engine",
             _A + "mujoco_engine"),
+    "brax": (("brax", "jax", "mujoco"), (_W + "brax",), _A + "brax_engine", _A + "brax_engine"),
 }
 #: A line of a world module that a reproducer leaves out: the import of a sibling world embedded above it.
 _SIBLING_IMPORT = re.compile(r"^from \.\w+ import .*$\n", re.MULTILINE)
@@ -96,8 +97,8 @@ def parse_claim(words) -> tuple:
 
 
 def _engine(variant_name: str):
-    """(engine, variant, distributions, world modules, adapter module, body_spec's module); ReproError when
-    the engine cannot write one."""
+    """(engine, variant, distributions, world module names, adapter module, body_spec's module); ReproError
+    when the engine cannot write one."""
     from cross_checks.engines import UnknownVariant, get_adapter, split_variant
     from cross_checks.engines.external import ExternalEngine
     try:
@@ -115,8 +116,8 @@ def _engine(variant_name: str):
         raise ReproError(f"{engine} cannot write reproducers yet; these can: {', '.join(ENGINES)} "
                          "(docs/repro.md)")
     dists, worlds, adapter_mod, spec_mod = ENGINES[engine]
-    return (engine, variant, dists, [importlib.import_module(w) for w in worlds],
-            importlib.import_module(adapter_mod), importlib.import_module(spec_mod))
+    return (engine, variant, dists, list(worlds), importlib.import_module(adapter_mod),
+            importlib.import_module(spec_mod))
 
 
 def _floats(a) -> str:
@@ -128,10 +129,12 @@ def _floats(a) -> str:
     return repr(float(a))
 
 
-def _source(module) -> str:
+def _source(module: str) -> str:
     """A world module's text, as it is (but the import of a sibling world embedded above it), without its
-    trailing newline."""
-    return _SIBLING_IMPORT.sub("", inspect.getsource(module)).rstrip("\n")
+    trailing newline; read from its file, not imported (a sweep's parent must not start JAX)."""
+    import importlib.util
+    text = Path(importlib.util.find_spec(module).origin).read_text(encoding="utf-8")
+    return _SIBLING_IMPORT.sub("", text).rstrip("\n")
 
 
 def _measure_source(main: str) -> str:

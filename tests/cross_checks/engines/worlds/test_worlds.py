@@ -15,7 +15,7 @@ WORLDS = Path(__file__).resolve().parents[4] / "cross_checks" / "engines" / "wor
 #: the modules each world may import besides numpy and the standard library ("." : a sibling world, which a
 #: reproducer embeds above it)
 ENGINE_IMPORT = {"mujoco": {"mujoco"}, "rapier": {"rapier3d"}, "pybullet": {"pybullet"},
-                 "mjx": {"jax", "mujoco", "."}}
+                 "mjx": {"jax", "mujoco", "."}, "brax": {"jax", "brax"}}
 STDLIB = {"math"}
 
 
@@ -39,7 +39,9 @@ def test_a_world_imports_only_numpy_and_its_engine(engine):
 CASES = [("mujoco", "rk4", "tennis_racket"), ("mujoco", "euler", "tumbling_box"),
          ("rapier", "symplectic_euler", "tennis_racket"), ("pybullet", "maximal", "tumbling_box"),
          ("pybullet", "multibody", "projectile"),
-         pytest.param("mjx", "rk4", "tennis_racket", marks=pytest.mark.slow)]   # ~1 min: JAX compiles
+         pytest.param("mjx", "rk4", "tennis_racket", marks=pytest.mark.slow),   # ~1 min each: JAX compiles
+         pytest.param("brax", "spring", "tennis_racket", marks=pytest.mark.slow),
+         pytest.param("brax", "generalized", "projectile", marks=pytest.mark.slow)]
 
 
 @pytest.mark.parametrize("engine,variant,name", CASES)
