@@ -47,6 +47,7 @@ ENGINES = {
             _A + "mujoco_engine"),
     "brax": (("brax", "jax", "mujoco"), (_W + "brax",), _A + "brax_engine", _A + "brax_engine"),
     "physx": (("sapien",), (_W + "physx",), _A + "physx_engine", _A + "physx_engine"),
+    "dart": (("dartpy",), (_W + "dart",), _A + "dart_engine", _A + "dart_engine"),
 }
 #: A line of a world module that a reproducer leaves out: the import of a sibling world embedded above it.
 _SIBLING_IMPORT = re.compile(r"^from \.\w+ import .*$\n", re.MULTILINE)

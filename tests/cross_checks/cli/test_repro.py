@@ -30,8 +30,8 @@ def test_a_claim_that_does_not_hold_is_written_and_said(tmp_path, capsys):
     (["mujoco:rk4", "tennis_racket", "--claim", "order", "speed"], "unknown quantity 'speed'"),
     (["mujoco:rk4", "tennis_racket", "--claim", "wobble"], "unknown claim 'wobble'"),
     (["mujoco:rk4", "tennis_racket", "--claim", "invariance", "rotated"], "not supported yet"),
-    (["dart:semi_implicit_euler", "tennis_racket", "--claim", "gyroscopic"],
-     "these can: mujoco, rapier, pybullet, mjx, brax, physx"),
+    (["drake:semi_explicit_euler", "tennis_racket", "--claim", "gyroscopic"],
+     "these can: mujoco, rapier, pybullet, mjx, brax, physx, dart"),
     (["mujoco:rk5", "tennis_racket", "--claim", "order", "orientation"], "unknown variant 'rk5'"),
     (["mujoco:rk4", "spring_pendulum", "--claim", "drift"], "forces change with the state"),
 ])

@@ -16,7 +16,7 @@ WORLDS = Path(__file__).resolve().parents[4] / "cross_checks" / "engines" / "wor
 #: reproducer embeds above it)
 ENGINE_IMPORT = {"mujoco": {"mujoco"}, "rapier": {"rapier3d"}, "pybullet": {"pybullet"},
                  "mjx": {"jax", "mujoco", "."}, "brax": {"jax", "brax"},
-                 "physx": {"sapien"}}
+                 "physx": {"sapien"}, "dart": {"dartpy"}}
 STDLIB = {"math"}
 
 
@@ -40,7 +40,7 @@ def test_a_world_imports_only_numpy_and_its_engine(engine):
 CASES = [("mujoco", "rk4", "tennis_racket"), ("mujoco", "euler", "tumbling_box"),
          ("rapier", "symplectic_euler", "tennis_racket"), ("pybullet", "maximal", "tumbling_box"),
          ("pybullet", "multibody", "projectile"), ("physx", "tgs", "tumbling_box"),
-         ("physx", "pgs", "projectile"),
+         ("physx", "pgs", "projectile"), ("dart", "semi_implicit_euler", "tumbling_box"),
          pytest.param("mjx", "rk4", "tennis_racket", marks=pytest.mark.slow),   # ~1 min each: JAX compiles
          pytest.param("brax", "spring", "tennis_racket", marks=pytest.mark.slow),
          pytest.param("brax", "generalized", "projectile", marks=pytest.mark.slow)]
@@ -48,7 +48,8 @@ CASES = [("mujoco", "rk4", "tennis_racket"), ("mujoco", "euler", "tumbling_box")
 
 @pytest.mark.parametrize("engine,variant,name", CASES)
 def test_the_reproducers_run_of_the_world_is_the_adapters_bit_for_bit(engine, variant, name):
-    pytest.importorskip({"rapier": "rapier3d", "mjx": "mujoco.mjx", "physx": "sapien"}.get(engine, engine))
+    pytest.importorskip({"rapier": "rapier3d", "mjx": "mujoco.mjx", "physx": "sapien",
+                         "dart": "dartpy"}.get(engine, engine))
     from cross_checks.engines import get_adapter
     from cross_checks.engines.loop import Harness
     from cross_checks.sweep import repro_measure
