@@ -197,8 +197,17 @@ def _legend():
             "marks": [(mark, g, text) for g, (mark, text) in GLYPHS.items()]}
 
 
-def _finding_views(fs):
-    return [{"cls": f.severity, "text": f.text} for f in fs]
+def _finding_views(fs, res=None):
+    """The findings as the templates show them; with ``res``, each one's standalone reproducer where the
+    sweep wrote one (``repro``: its path in the results directory; docs/repro.md)."""
+    links = _repro_links(res) if res is not None else {}
+    return [{"cls": f.severity, "text": f.text, "repro": links.get((f.engine, f.scenario), "")} for f in fs]
+
+
+def _repro_links(res) -> dict:
+    """``(ENGINE:VARIANT, scenario) -> repro/….py`` of summary.json's ``reproducers`` (those written)."""
+    return {(r["engine"], r["scenario"]): r["file"] for r in res.summary.get("reproducers") or []
+            if r.get("file")}
 
 
 _SECTIONS = (("bad", "Results that contradict the expectations"),
@@ -206,8 +215,8 @@ _SECTIONS = (("bad", "Results that contradict the expectations"),
              ("info", "Observations"))
 
 
-def _finding_sections(fs):
-    return [{"title": title, "cls": sev, "entries": _finding_views([f for f in fs if f.severity == sev])}
+def _finding_sections(fs, res=None):
+    return [{"title": title, "cls": sev, "entries": _finding_views([f for f in fs if f.severity == sev], res)}
             for sev, title in _SECTIONS if any(f.severity == sev for f in fs)]
 
 
@@ -327,8 +336,8 @@ def _scenario_view(res, s, figs, all_findings, self_contained):
     if no_local:
         captions["local"] += f" Not shown ({_NO_ONE_STEP}): {', '.join(no_local)}."
     mine = [f for f in all_findings if f.scenario == sc]
-    found = _finding_views([f for f in mine if f.severity != "info"])
-    observed = _finding_views([f for f in mine if f.severity == "info"])
+    found = _finding_views([f for f in mine if f.severity != "info"], res)
+    observed = _finding_views([f for f in mine if f.severity == "info"], res)
     _explain_in_place([found, observed])
     return {
         "name": sc, "description": s["description"], "source": s["source"], "hash": s["content_hash"],
@@ -402,9 +411,9 @@ def render_pages(res, figures: dict, self_contained: bool = False) -> dict:
     nav += [{"name": s["name"], "href": page_name(s["name"])} for s in res.scenarios]
     common = {"nav": nav, "provenance": _provenance(res)}
     pages = {}
-    sections = _finding_sections([f for f in all_f if f.severity != "info"])
+    sections = _finding_sections([f for f in all_f if f.severity != "info"], res)
     box = verdict_box(res)
-    observations = _finding_views([f for f in all_f if f.severity == "info"])
+    observations = _finding_views([f for f in all_f if f.severity == "info"], res)
     _explain_in_place([*(g["lines"] for g in box["groups"]), *(sec["entries"] for sec in sections),
                        observations])
     rk = ranking(res)
@@ -479,8 +488,9 @@ def _integrators_view(res, rk, drawn, self_contained) -> dict:
                           "score_sort": (_num(s.score) if s.score is not None and math.isfinite(s.score)
                                          else "1e300"),
                           "cls": "bad" if s.contradicts else ""})
+    links = _repro_links(res)
     findings = [{"text": r.get("finding") or f"{r['engine']} on {r['scenario']}: {r.get('assessment', '')}",
-                 "judged": r.get("assessment", ""),
+                 "judged": r.get("assessment", ""), "repro": links.get((r["engine"], r["scenario"]), ""),
                  "cls": "bad" if r.get("matches_expectation") is False else "info"} for r in iv.findings]
     scen = res.summary.get("long_run_scenarios") or []
     return {"work": work, "unranked": unranked, "long_runs": iv.long_runs, "long": long_rows,

@@ -258,7 +258,7 @@ def _pybullet_principal_axes_dropped(mp):
 
 
 def _pybullet_quaternion_order(mp):
-    from cross_checks.engines import pybullet_engine as pe
+    from cross_checks.engines.worlds import pybullet as pe  # the adapter's world (what repro embeds)
     # BUG: wxyz passed
     mp.setattr(pe, "_xyzw", lambda q: [float(q[0]), float(q[1]), float(q[2]), float(q[3])])
 

@@ -37,6 +37,7 @@ BAD = {
     "baseline": ["baseline", "{tmp}/missing", "{tmp}/out"],
     "bench": ["bench", "--json", "{tmp}/no/such/dir/b.json"],
     "fuzz": ["fuzz", "--engines", "reference:nope", "--out", "{tmp}/fz"],
+    "repro": ["repro", "mujoco:rk4", "projectile", "--claim", "wobble", "--out", "{tmp}/r.py"],
 }
 
 

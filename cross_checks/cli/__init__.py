@@ -6,8 +6,8 @@ no traceback); 130 interrupted (Ctrl-C); 143 terminated (SIGTERM). The README ha
 
 This module is the dispatch only: :func:`main` parses (``parser``), registers the ``--engine-file``
 engines, runs the command's ``cmd_*`` (one module per command: ``listing``, ``show``, ``run``, ``sweep``,
-``report``, ``check``, ``compare``, ``baseline``, ``bench``, ``fuzz``) and turns every error into one line and
-its exit code (``errors``).
+``report``, ``check``, ``compare``, ``baseline``, ``bench``, ``fuzz``, ``repro``) and turns every error into
+one line and its exit code (``errors``).
 """
 from __future__ import annotations
 
@@ -24,6 +24,7 @@ from cross_checks.cli.fuzz import cmd_fuzz
 from cross_checks.cli.listing import cmd_list
 from cross_checks.cli.parser import build_parser
 from cross_checks.cli.report import cmd_report
+from cross_checks.cli.repro import cmd_repro
 from cross_checks.cli.run import cmd_run
 from cross_checks.cli.show import cmd_show
 from cross_checks.cli.sweep import cmd_sweep
@@ -33,7 +34,7 @@ __all__ = ["main"]
 
 COMMANDS = {"list": cmd_list, "show": cmd_show, "run": cmd_run, "sweep": cmd_sweep, "report": cmd_report,
             "check": cmd_check, "compare": cmd_compare, "baseline": cmd_baseline, "bench": cmd_bench,
-            "fuzz": cmd_fuzz}
+            "fuzz": cmd_fuzz, "repro": cmd_repro}
 
 
 def main(argv=None) -> int:

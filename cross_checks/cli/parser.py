@@ -88,9 +88,14 @@ def build_parser() -> argparse.ArgumentParser:
     # One declaration per command, in the order `rbcheck --help` lists them (alike in shape only: each
     # says its own command's arguments).
     for add in (_add_list, _add_show, _add_run, _add_sweep, _add_report, _add_check, _add_compare,
-                _add_baseline, _add_bench, _add_fuzz):
+                _add_baseline, _add_bench, _add_fuzz, _add_repro):
         add(sub)
     return p
+
+
+def _add_repro(sub) -> None:
+    from cross_checks.cli.repro import add_repro
+    add_repro(sub, _add_engine_file_option)
 
 
 def _add_list(sub) -> None:

@@ -34,10 +34,9 @@ import numpy as np
 from cross_checks.engines import base, forces, install, runtimes
 from cross_checks.engines.base import EngineError, Traits, Variant
 from cross_checks.engines.world import World, WorldEngine
-from reference_sim.quaternion import quat_conj, rotate
 from reference_sim.simulate import bad_rows
 
-__all__ = ["ENGINE", "VARIANTS", "NEUTRAL_SYSTEM", "NEUTRAL_DOF", "CHUNK", "ONE_STEP_MIN_BATCH",
+__all__ = ["ENGINE", "VARIANTS", "CHUNK", "ONE_STEP_MIN_BATCH",
            "EngineError", "version", "mjcf_text", "build_system", "simulate", "simulate_many", "one_step",
            "compile_seconds", "BraxWorld", "BraxEngine", "BraxAdapter", "expressible"]
 
@@ -63,12 +62,6 @@ VARIANTS = {
 }
 
 
-#: System fields set on every model (``System.replace``), each brax 0.14.2's MJCF default except
-#: matrix_inv_iterations (default 10: an approximate inverse), set so that no default can change the physics.
-NEUTRAL_SYSTEM = (("vel_damping", 0.0), ("ang_damping", 0.0), ("spring_mass_scale", 0.0),
-                  ("spring_inertia_scale", 0.0), ("matrix_inv_iterations", 0))
-#: DoF fields (per DOF of the free joint): joint damping and armature, both 0 by default.
-NEUTRAL_DOF = (("damping", 0.0), ("armature", 0.0))
 #: Steps per compiled scan chunk: a run of n steps runs ceil(n / CHUNK) chunks (the steps past n are dropped).
 CHUNK = 512
 #: one_step batches are padded to at least this many rows (a power of two): one step of 64 bodies costs about
@@ -108,8 +101,17 @@ def _lib():
         from brax.io import mjcf
         from brax.positional import pipeline as positional
         from brax.spring import pipeline as spring
-    return {"jax": jax, "jp": jp, "mjcf": mjcf, "Actuator": Actuator,
+
+        from cross_checks.engines.worlds import brax as world  # the model and step rbcheck repro embeds
+    return {"jax": jax, "jp": jp, "mjcf": mjcf, "Actuator": Actuator, "world": world,
             "pipelines": {"generalized": generalized, "positional": positional, "spring": spring}}
+
+
+def __getattr__(name):
+    """``NEUTRAL_SYSTEM`` and ``NEUTRAL_DOF``: cross_checks.engines.worlds.brax's (brax imported then)."""
+    if name in ("NEUTRAL_SYSTEM", "NEUTRAL_DOF"):
+        return getattr(_lib()["world"], name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def _usable():
@@ -131,49 +133,27 @@ def compile_seconds() -> dict:
 
 # --- the model --------------------------------------------------------------------------------------------
 
-def _num(v) -> str:
-    return repr(float(v))
-
-
 def mjcf_text(scenario, dt_s: float, *, actuators: bool) -> str:
-    """The scenario's free body as MJCF for ``brax.io.mjcf.loads`` (full-precision numbers)."""
+    """The scenario's free body as MJCF for ``brax.io.mjcf.loads`` (full-precision numbers):
+    cross_checks.engines.worlds.brax's."""
     p = scenario.problem
-    I = np.asarray(p.body.inertia_B, dtype=float)
-    full = " ".join(_num(v) for v in (I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]))
-    g = " ".join(_num(v) for v in p.forces.gravity_W)
-    motors = ""
-    if actuators:
-        gears = ["1 0 0 0 0 0", "0 1 0 0 0 0", "0 0 1 0 0 0", "0 0 0 1 0 0", "0 0 0 0 1 0", "0 0 0 0 0 1"]
-        motors = "".join(f'<motor joint="free" gear="{gr}" ctrllimited="false"/>' for gr in gears)
-        motors = f"<actuator>{motors}</actuator>"
-    return (f'<mujoco model="rbcheck"><compiler alignfree="false" inertiafromgeom="false" '
-            f'balanceinertia="false" boundmass="0" boundinertia="0"/>'
-            f'<option timestep="{_num(dt_s)}" gravity="{g}" viscosity="0" density="0" integrator="Euler"/>'
-            f'<worldbody><body name="body"><freejoint name="free"/>'
-            f'<inertial pos="0 0 0" mass="{_num(p.body.mass_kg)}" fullinertia="{full}"/>'
-            f'<geom type="sphere" size="0.01" contype="0" conaffinity="0" mass="0"/>'
-            f'</body></worldbody>{motors}</mujoco>')
+    return _lib()["world"].mjcf_text(p.body.mass_kg, p.body.inertia_B, p.forces.gravity_W, dt_s, actuators)
 
 
 def neutralise(sys):
     """``sys`` with every NEUTRAL_SYSTEM and NEUTRAL_DOF field set (whatever it was)."""
-    lib = _lib()
-    jp = lib["jp"]
-    dof = sys.dof
-    for field, value in NEUTRAL_DOF:
-        dof = dof.replace(**{field: jp.full_like(getattr(dof, field), value)})
-    return sys.replace(dof=dof, **{k: v for k, v in NEUTRAL_SYSTEM})
+    return _lib()["world"].neutralise(sys)
 
 
 def six_dof_actuator(sys):
-    """``sys`` with its actuator set to one motor per DOF of the free joint (DOFs 0..5), gear 1, gain 1, no
-    bias, no control or force limit: ``act`` is then the generalized force ``[f_W, τ_B]``."""
-    lib = _lib()
-    jp = lib["jp"]
-    inf = jp.full((6, 2), jp.inf) * jp.array([-1.0, 1.0])
-    act = lib["Actuator"](q_id=jp.arange(6), qd_id=jp.arange(6), ctrl_range=inf, force_range=inf,
-                          gain=jp.ones(6), gear=jp.ones(6), bias_q=jp.zeros(6), bias_qd=jp.zeros(6))
-    return sys.replace(actuator=act)
+    """``sys`` with one motor per DOF of the free joint, gear 1: ``act`` is the generalized force
+    ``[f_W, τ_B]`` (cross_checks.engines.worlds.brax's)."""
+    return _lib()["world"].six_dof_actuator(sys)
+
+
+def body_spec(body) -> tuple:
+    """``(mass_kg, inertia_B (3, 3), None)``: brax takes the full tensor (MJCF ``fullinertia``)."""
+    return float(body.mass_kg), np.asarray(body.inertia_B, dtype=float), None
 
 
 def expressible(scenario, variant: str, dt_s: float) -> str:
@@ -199,18 +179,15 @@ def _system_of(scenario, variant: str):
     """The neutralised brax System of the scenario's body for ``variant`` (Δt is set per run)."""
     lib = _lib()
     base.check_variant(ENGINE, VARIANTS, variant)
-    gen = variant == "generalized"
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")     # brax's "not actively being maintained", on every load
-            sys = lib["mjcf"].loads(mjcf_text(scenario, 0.01, actuators=gen))
+            mass, inertia, _ = body_spec(scenario.problem.body)
+            sys = lib["world"].system(mass, inertia, scenario.problem.forces.gravity_W, variant)
         lib["mjcf"].validate_model(sys.mj_model)
     except (ValueError, NotImplementedError, RuntimeError) as exc:
         raise EngineError(f"brax {install.installed_version('brax')} (MuJoCo's compiler) rejected the model "
                           f"of scenario {scenario.name!r}: {' '.join(str(exc).split())}") from None
-    sys = neutralise(sys)
-    if gen:
-        sys = six_dof_actuator(sys)
     # mj_model is a static field: left in, every scenario would compile its own executable (validated above)
     return sys.replace(mj_model=None)
 
@@ -225,17 +202,13 @@ def build_system(scenario, variant: str, dt_s: float):
 
 def to_q_qd(y):
     """Packed states (..., 13) -> brax ``q = [x_W, q_WB (w x y z)]`` (..., 7), ``qd = [v_W, ω_B]``
-    (..., 6)."""
-    y = np.asarray(y, dtype=float)
-    q = y[..., 6:10]
-    return (np.concatenate([y[..., 0:3], q], axis=-1),
-            np.concatenate([y[..., 3:6], rotate(quat_conj(q), y[..., 10:13])], axis=-1))
+    (..., 6) (cross_checks.engines.worlds.brax's)."""
+    return _lib()["world"].to_q_qd(y)
 
 
 def _packed(state):
     """A brax state (one body) -> packed (13,): x.pos, xd.vel, x.rot (w x y z), xd.ang — all world axes."""
-    jp = _lib()["jp"]
-    return jp.concatenate([state.x.pos[0], state.xd.vel[0], state.x.rot[0], state.xd.ang[0]])
+    return _lib()["world"].packed(state)
 
 
 # --- the compiled step ------------------------------------------------------------------------------------
@@ -280,24 +253,20 @@ def _step_fn(variant: str, mode: str):
     is)."""
     lib = _lib()
     jax, jp = lib["jax"], lib["jp"]
-    P = lib["pipelines"][variant]
-    from brax import math as bmath
+    P, W = lib["pipelines"][variant], lib["world"]
 
     def step(sys, state, consts, token, decay):
         factors = jp.concatenate([jp.full(3, consts[6]), jp.full(3, consts[7])])
         state = jax.lax.cond(decay > 0.0, lambda s: P.init(sys, s.q, s.qd * factors), lambda s: s, state)
         if mode == "none":
-            act = jp.zeros(sys.act_size())
+            f = tau = None
+        elif mode == "const":
+            f, tau = consts[0:3], consts[3:6]
         else:
-            rot = state.x.rot[0]
-            if mode == "const":
-                f, tau = consts[0:3], consts[3:6]
-            else:
-                ft = jax.pure_callback(_host_forces, jax.ShapeDtypeStruct((6,), jp.float64), token,
-                                       _packed(state), sys.opt.timestep, vmap_method="broadcast_all")
-                f, tau = ft[0:3] + consts[0:3], ft[3:6]
-            act = jp.concatenate([f, bmath.inv_rotate(tau, rot)])
-        return P.step(sys, state, act)
+            ft = jax.pure_callback(_host_forces, jax.ShapeDtypeStruct((6,), jp.float64), token,
+                                   _packed(state), sys.opt.timestep, vmap_method="broadcast_all")
+            f, tau = ft[0:3] + consts[0:3], ft[3:6]
+        return P.step(sys, state, W.act(sys, state, f, tau, variant))   # the act rbcheck repro embeds
     return step
 
 

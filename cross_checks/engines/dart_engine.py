@@ -16,6 +16,7 @@ Conventions, defaults neutralised and what pins them: docs/engine_conventions.md
 from __future__ import annotations
 
 import math
+import types
 
 import numpy as np
 
@@ -23,9 +24,13 @@ from cross_checks.engines import base, install
 from cross_checks.engines.base import EngineError, Variant
 from cross_checks.engines.step_floats import bad_floats
 from cross_checks.engines.world import World, WorldEngine
-from reference_sim.quaternion import quat_exp, quat_log
 
 dart, _IMPORT_ERROR = install.optional_import("dartpy")
+if _IMPORT_ERROR is None:   # the world (what rbcheck repro embeds) imports the engine itself
+    from cross_checks.engines.worlds import dart as dtw
+    from cross_checks.engines.worlds.dart import JOINT_SETTINGS, from_dart_state, neutralise, to_dart_state
+else:   # not installed: the adapter still loads, and says so when used
+    dtw = types.SimpleNamespace(Body=object, Bodies=object)
 
 __all__ = ["ENGINE", "VARIANTS", "JOINT_SETTINGS", "EngineError", "version", "simulate", "simulate_many",
            "one_step", "DartBody", "DartWorld", "DartAdapter", "neutralise", "to_dart_state",
@@ -39,19 +44,6 @@ VARIANTS = {
                                       "the new ω", traits=base.SYMPLECTIC_EULER_EXPLICIT_GYRO),
 }
 
-#: FreeJoint settings every body gets, set explicitly so that no release's default changes the physics:
-#: (dartpy Joint setter, value for each of the 6 DOFs).
-JOINT_SETTINGS = (
-    ("setDampingCoefficient", 0.0), ("setSpringStiffness", 0.0), ("setRestPosition", 0.0),
-    ("setCoulombFriction", 0.0), ("setPositionLowerLimit", -math.inf), ("setPositionUpperLimit", math.inf),
-    ("setVelocityLowerLimit", -math.inf), ("setVelocityUpperLimit", math.inf),
-    ("setAccelerationLowerLimit", -math.inf), ("setAccelerationUpperLimit", math.inf),
-    ("setForceLowerLimit", -math.inf), ("setForceUpperLimit", math.inf),
-)
-
-_ZERO3 = np.zeros(3)
-
-
 def _require():
     install.require(dart, _IMPORT_ERROR, "dartpy", hint="pip install 'rbcheck[dart]'")
 
@@ -60,34 +52,6 @@ def version() -> str:
     """The installed dartpy distribution's version (EngineNotInstalled when it is absent)."""
     _require()
     return install.release("dartpy")
-
-
-def to_dart_state(y):
-    """Packed states (..., 13) ``[x_W, v_W, q_WB (w x y z), ω_W]`` -> DART's FreeJoint ``[r, x_W, ω_W, v_W]``
-    (..., 12), ``r`` the rotation vector of q_WB (rad)."""
-    y = np.asarray(y, dtype=float)
-    return np.concatenate([quat_log(y[..., 6:10]), y[..., 0:3], y[..., 10:13], y[..., 3:6]], axis=-1)
-
-
-def from_dart_state(s):
-    """DART's FreeJoint states (..., 12) ``[r, x_W, ω_W, v_W]`` -> packed (..., 13); the quaternion is
-    ``quat_exp(r)`` (w ≥ 0: see :func:`reference_sim.quaternion.sign_continuous`)."""
-    s = np.asarray(s, dtype=float)
-    return np.concatenate([s[..., 3:6], s[..., 9:12], quat_exp(s[..., 0:3]), s[..., 6:9]], axis=-1)
-
-
-def neutralise(world, joint, node) -> None:
-    """Set every default of DART that is not the scenario's physics to its neutral value, whatever it was:
-    each of JOINT_SETTINGS on the 6 DOFs of ``joint``, its limit enforcement off, ``node`` not collidable,
-    and the ``world``'s deactivation (sleeping) off."""
-    for setter, value in JOINT_SETTINGS:
-        for i in range(6):
-            getattr(joint, setter)(i, value)
-    joint.setLimitEnforcement(False)
-    node.setCollidable(False)
-    sleep = world.getDeactivationOptions()
-    sleep.mEnabled = False
-    world.setDeactivationOptions(sleep)
 
 
 def _packed_floats(row) -> list:
@@ -104,45 +68,27 @@ def _packed_floats(row) -> list:
     return [x0, x1, x2, v0, v1, v2, math.cos(0.5 * theta), s * r0, s * r1, s * r2, w0, w1, w2]
 
 
-class DartBody:
-    """A scenario's free body alone in a DART world stepping at ``dt_s``; ``set_state``/``read`` at the
-    boundary."""
+def body_spec(body) -> tuple:
+    """``(mass_kg, inertia_B (3, 3), None)``: DART takes the full tensor (``Inertia(m, 0, I_B)``)."""
+    return float(body.mass_kg), np.asarray(body.inertia_B, dtype=float), None
+
+
+class DartBody(dtw.Body):
+    """A scenario's free body alone in a DART world stepping at ``dt_s``
+    (:class:`cross_checks.engines.worlds.dart.Body`, what ``rbcheck repro`` embeds); ``set_state``/``read``
+    at the boundary."""
 
     def __init__(self, scenario, dt_s: float):
         _require()
-        p, body, world = scenario.problem, scenario.problem.body, dart.simulation.World()
-        skeleton = dart.dynamics.Skeleton("body")
-        joint, node = skeleton.createFreeJointAndBodyNodePair()
-        inertia = dart.dynamics.Inertia(float(body.mass_kg), _ZERO3, np.asarray(body.inertia_B, dtype=float))
-        if not inertia.verify():
+        p = scenario.problem
+        super().__init__(p.body.mass_kg, p.body.inertia_B, p.forces.gravity_W, dt_s)
+        if not self.ok:
             raise EngineError(f"DART {version()} rejects the inertia of scenario "
                               f"{scenario.name!r} (dart::dynamics::Inertia::verify "
                               "is false: a mass or moment that is not positive)")
-        node.setInertia(inertia)
-        world.addSkeleton(skeleton)
-        world.setGravity(np.asarray(p.forces.gravity_W, dtype=float))   # the world's reaches its skeletons
-        world.setTimeStep(float(dt_s))
-        neutralise(world, joint, node)
-        self.world, self.skeleton, self.joint, self.node = world, skeleton, joint, node
-
-    def set_state(self, y) -> None:
-        """Put the body at the packed state ``y`` (13,)."""
-        s = to_dart_state(y)
-        self.skeleton.setPositions(s[0:6])
-        self.skeleton.setVelocities(s[6:12])
-
-    def read(self) -> list:
-        """DART's state ``[r, x_W, ω_W, v_W]`` as 12 floats."""
-        return self.skeleton.getPositions().tolist() + self.skeleton.getVelocities().tolist()
-
-    def apply(self, f_W, tau_W) -> None:
-        """World force ``f_W`` (N) at the COM and world torque ``tau_W`` (N m), for the next step only (DART
-        clears them after it). ``setExtForce`` first: it replaces the whole external wrench."""
-        self.node.setExtForce(f_W, _ZERO3, False, True)
-        self.node.setExtTorque(tau_W, False)
 
 
-class DartWorld(World):
+class DartWorld(dtw.Bodies, World):
     """B bodies, each a :class:`DartBody`, stepped in turn. Raw rows: DART's ``[r, x_W, ω_W, v_W]`` (12). A
     body whose state blew up is not stepped again (DART would go on, warning on stderr; the loop ends its
     run)."""
@@ -150,41 +96,17 @@ class DartWorld(World):
     exact_start = True
 
     def __init__(self, requests, dt_s: float):
-        super().__init__()
-        self.bodies = [DartBody(r.scenario, dt_s) for r in requests]
+        World.__init__(self)
+        dtw.Bodies.__init__(self, [DartBody(r.scenario, dt_s) for r in requests])
         self.always = [r.scenario.problem.forces.state_dependent for r in requests]
 
-    def set_state(self, y):
-        for b, row in zip(self.bodies, y):
-            b.set_state(row)
-        self.live = [True] * len(self.bodies)
-
     def read(self):
-        self.last = [b.read() for b in self.bodies]
-        self.live = [not bad_floats(row) for row in self.last]   # DART's |r| ≤ π: the packed state's verdict
-        return self.last
-
-    def packed(self, raw):
-        return from_dart_state(raw)
+        rows = dtw.Bodies.read(self)
+        self.live = [not bad_floats(row) for row in rows]   # DART's |r| ≤ π: the packed state's verdict
+        return rows
 
     def packed_row(self, raw):
         return [_packed_floats(r) for r in np.asarray(raw).tolist()]
-
-    def decay(self, g_v, g_w):
-        """The velocities last read, scaled (the pose is not set again: its round trip is not exact)."""
-        for b, prev, gv, gw in zip(self.bodies, self.last, g_v.tolist(), g_w.tolist()):
-            b.skeleton.setVelocities(np.array(prev[6:12]) * (gw, gw, gw, gv, gv, gv))
-
-    def apply(self, f_W, tau_W):
-        """A zero wrench of state-independent forces is not set (DART clears them after every step)."""
-        for b, live, always, f, tau in zip(self.bodies, self.live, self.always, f_W, tau_W):
-            if live and (always or f.any() or tau.any()):
-                b.apply(f, tau)
-
-    def step(self):
-        for b, live in zip(self.bodies, self.live):
-            if live:
-                b.world.step()
 
 
 class DartEngine(WorldEngine):

@@ -27,10 +27,11 @@ __all__ = ["float_forces", "decay_factors", "harness_force_torque", "harness_for
 
 @functools.lru_cache(maxsize=64)
 def float_forces(scenario):
-    """The single-state force evaluator of this scenario (reference_sim.compiled.ForceEvaluator: the
-    definition's force model, compiled), built once: ``.force_torque(y)`` -> 6 floats."""
+    """The single-state force evaluator of this scenario (or of a Problem: the loop's, when the engine takes
+    some forces itself) (reference_sim.compiled.ForceEvaluator: the definition's force model, compiled):
+    ``.force_torque(y)`` -> 6 floats."""
     from reference_sim.compiled import ForceEvaluator
-    return ForceEvaluator(scenario.problem)
+    return ForceEvaluator(getattr(scenario, "problem", scenario))
 
 
 def decay_factors(scenario, dt_s: float):

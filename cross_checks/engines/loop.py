@@ -40,7 +40,7 @@ import numpy as np
 
 from cross_checks.engines import base, forces
 from cross_checks.engines.base import EngineError
-from reference_sim.compiled import ForceEvaluator, ForceRows
+from reference_sim.compiled import ForceRows
 from reference_sim.quaternion import same_side
 from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
 
@@ -76,7 +76,9 @@ class Harness:
             if id(sc) not in host:
                 host[id(sc)] = host_problem(sc.problem, body_torque)
         problems = [host[id(sc)] for sc in scenarios]
-        self.ft = [ForceEvaluator(p).force_torque for p in problems]
+        # the scenario's own evaluator where the harness evaluates all of its forces
+        self.ft = [forces.float_forces(sc if p is sc.problem else p).force_torque
+                   for sc, p in zip(scenarios, problems)]
         # many bodies: one compiled call for all of them (the same numbers, member by member)
         self.rows = ForceRows.of(problems) if len(scenarios) > 4 else None
         dts = [dt_s] * len(scenarios) if np.ndim(dt_s) == 0 else list(dt_s)

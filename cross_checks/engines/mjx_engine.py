@@ -253,6 +253,8 @@ def _chunk_fn(d0, callback: bool):
     jax, jnp, mjx = _engine()
     f64 = jax.ShapeDtypeStruct((6,), jnp.float64)
 
+    from cross_checks.engines.worlds.mjx import step_one  # the step rbcheck repro embeds
+
     def member(m, qpos, qvel, gain, xfrc, cb_id, n):
         d = d0.replace(qpos=qpos, qvel=qvel)
 
@@ -262,8 +264,7 @@ def _chunk_fn(d0, callback: bool):
                 f = jax.pure_callback(_host_forces, f64, d.qpos, d.qvel, cb_id, vmap_method="broadcast_all")
             else:
                 f = xfrc
-            d = d.replace(qvel=d.qvel * gain, xfrc_applied=d.xfrc_applied.at[_BODY].set(f))
-            d = mjx.step(m, d)
+            d = step_one(m, d, gain, f)
             return d, out.at[i].set(jnp.concatenate([d.qpos, d.qvel]))
 
         _, out = jax.lax.fori_loop(0, n, body, (d, jnp.zeros((CHUNK, 13))))

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import threading
 import time
+import types
 
 import numpy as np
 
@@ -21,10 +22,15 @@ from cross_checks.engines import base, forces, install
 from cross_checks.engines.base import EngineError, Variant
 from cross_checks.engines.forces import stage_force_torque_floats
 from cross_checks.engines.world import World, WorldEngine
-from reference_sim.quaternion import quat_conj, quat_from_matrix, rotate
+from reference_sim.quaternion import quat_from_matrix
 from reference_sim.simulate import Run
 
 mujoco, _IMPORT_ERROR = install.optional_import("mujoco")
+if _IMPORT_ERROR is None:   # the world (what rbcheck repro embeds) imports the engine itself
+    from cross_checks.engines.worlds import mujoco as mjw
+    from cross_checks.engines.worlds.mujoco import to_packed, to_qpos_qvel
+else:   # not installed: the adapter still loads, and says so when used
+    mjw = types.SimpleNamespace(Bodies=object)
 
 __all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate", "simulate_many", "one_step",
            "build_model", "packed_floats", "to_packed", "to_qpos_qvel"]
@@ -83,27 +89,16 @@ def build_model(scenario, variant: str, dt_s: float, copies: int = 1):
 def build_world_model(scenarios, variant: str, dt_s: float):
     """One model of the scenarios' free bodies (body k+1 is scenario k's; they share the first one's
     gravity): each body moves in it exactly, bit for bit, as alone in a model of its own (MuJoCo steps
-    separate kinematic trees apart; tested)."""
-    integrator = integrator_of(variant)
+    separate kinematic trees apart; tested). The MjSpec is :mod:`cross_checks.engines.worlds.mujoco`'s (what
+    ``rbcheck repro`` embeds), of the bodies' :func:`body_spec`."""
+    integrator_of(variant)
     forces = scenarios[0].problem.forces
-    spec = mujoco.MjSpec()
-    spec.modelname = f"rbcheck_{scenarios[0].name}"
-    spec.compiler.alignfree = False        # keep the joint (= qpos) on the body frame, not the inertial frame
-    spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
-    spec.compiler.balanceinertia = False   # never alter the scenario's inertia silently
-    spec.compiler.boundmass = 0.0
-    spec.compiler.boundinertia = 0.0
-    spec.option.timestep = float(dt_s)
-    spec.option.gravity = np.asarray(forces.gravity_W, dtype=float)
-    spec.option.integrator = integrator
-    spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_AUTORESET
-    for k, scenario in enumerate(scenarios):
-        _add_body(spec, scenario, "body" if k == 0 else f"body{k}")
     try:
         with _LOCK:
             prev = _clear_force_callbacks()
             try:
-                return spec.compile()
+                return mjw.build_model([body_spec(sc.problem.body) for sc in scenarios], forces.gravity_W,
+                                       variant, dt_s, name=f"rbcheck_{scenarios[0].name}")
             finally:
                 _restore_force_callbacks(prev)
     except ValueError as exc:
@@ -112,22 +107,14 @@ def build_world_model(scenarios, variant: str, dt_s: float):
                           f"{exc}") from None
 
 
-def _add_body(spec, scenario, name: str) -> None:
-    """The scenario's free body in ``spec``: its joint on the body frame, its mass and inertia as given."""
-    body = scenario.problem.body
-    b = spec.worldbody.add_body()
-    b.name = name
-    b.add_freejoint()
-    b.explicitinertial = True
-    b.ipos = [0.0, 0.0, 0.0]               # explicit: unset (NaN) would let geoms override the inertial
-    b.mass = float(body.mass_kg)
+def body_spec(body) -> tuple:
+    """``(mass_kg, moments (3,), q_BP (w x y z))`` of an rbcheck RigidBody as MuJoCo takes it: a diagonal
+    tensor as it is (no frame rotation), a full one as its principal moments (:func:`on_the_triangle`) and
+    the principal frame P in body coordinates."""
     if body.is_diagonal():
-        b.iquat = [1.0, 0.0, 0.0, 0.0]
-        b.inertia = np.diag(body.inertia_B).copy()
-    else:
-        moments, R_BP = body.principal_axes()
-        b.iquat = quat_from_matrix(R_BP)   # principal frame P in body coordinates (w x y z)
-        b.inertia = on_the_triangle(moments)
+        return float(body.mass_kg), np.diag(body.inertia_B).copy(), [1.0, 0.0, 0.0, 0.0]
+    moments, R_BP = body.principal_axes()
+    return float(body.mass_kg), on_the_triangle(moments), quat_from_matrix(R_BP)
 
 
 def on_the_triangle(moments_kg_m2) -> np.ndarray:
@@ -145,21 +132,6 @@ def on_the_triangle(moments_kg_m2) -> np.ndarray:
 
 
 # --- state conversion --------------------------------------------------------------------------------
-
-def to_qpos_qvel(y):
-    """Packed states (..., 13) -> qpos (..., 7), qvel (..., 6) with ω in BODY axes."""
-    y = np.asarray(y, dtype=float)
-    q = y[..., 6:10]
-    qpos = np.concatenate([y[..., 0:3], q], axis=-1)
-    qvel = np.concatenate([y[..., 3:6], rotate(quat_conj(q), y[..., 10:13])], axis=-1)
-    return qpos, qvel
-
-
-def to_packed(qpos, qvel):
-    """qpos (..., 7), qvel (..., 6) -> packed states (..., 13) with ω in WORLD axes."""
-    q = qpos[..., 3:7]
-    return np.concatenate([qpos[..., 0:3], qvel[..., 0:3], q, rotate(q, qvel[..., 3:6])], axis=-1)
-
 
 def _packed1(qpos, qvel) -> list:
     """One state: qpos (7,), qvel (6,) arrays -> :func:`packed_floats`."""
@@ -328,19 +300,16 @@ def _body_of_warning(msg: str, n_bodies: int):
     return min(i // width, n_bodies - 1), msg[:m.start(2)] + str(i % width) + msg[m.end(2):]
 
 
-class MujocoWorld(World):
+class MujocoWorld(mjw.Bodies, World):
     """B free bodies in one MjModel (one kinematic tree each) and one MjData, stepped by ``mj_step`` or, with
     the forces held, by ``mujoco.rollout``. Raw rows: ``[qpos (7), qvel (6)]`` per body, ω in BODY axes. The
     warning handler (and RK4's stage-force callback) are installed for the world's lifetime
     (:class:`Session`); a warning is attributed to the body whose DOF it names."""
 
     def __init__(self, requests, variant, dt_s):
-        super().__init__()
-        self.B = len(requests)
-        self.model = m = _model([r.scenario for r in requests], variant, dt_s)
-        self.data = d = mujoco.MjData(m)
-        self.qpos, self.qvel = d.qpos.reshape(self.B, 7), d.qvel.reshape(self.B, 6)
-        self.xfrc = d.xfrc_applied[1:]
+        World.__init__(self)
+        mjw.Bodies.__init__(self, _model([r.scenario for r in requests], variant, dt_s))
+        d = self.data
         self.per_stage = forces_per_stage(requests[0].scenario, variant)
         self.n = 0
         self.host_s = 0.0
@@ -358,37 +327,20 @@ class MujocoWorld(World):
         self.session = Session(d, control).__enter__()
 
     def set_state(self, y):
-        qpos, qvel = to_qpos_qvel(y)
-        self.data.time = 0.0
-        self.qpos[:], self.qvel[:] = qpos, qvel
+        mjw.Bodies.set_state(self, y)
         self.n = 0
-
-    def apply(self, f_W, tau_W):
-        self.xfrc[:, 0:3] = f_W
-        self.xfrc[:, 3:6] = tau_W
-
-    def decay(self, g_v, g_w):
-        self.qvel[:, 0:3] *= g_v[:, None]
-        self.qvel[:, 3:6] *= g_w[:, None]
 
     def step(self):
         self.n += 1
         session = self.session
         seen = len(session.warnings)
-        mujoco.mj_step(self.model, self.data)
+        mjw.Bodies.step(self)
         if session.callback_error is not None:
             session.raise_callback_error()
         for msg in session.warnings[seen:]:
             body, words = _body_of_warning(msg, self.B)
             for k in range(self.B) if body is None else (body,):
                 self.warnings.append((k, self.n, f"MuJoCo: {words}"))
-
-    def read(self):
-        return np.concatenate((self.qpos, self.qvel), axis=1)
-
-    def packed(self, raw):
-        raw = np.asarray(raw, dtype=float)
-        return to_packed(raw[..., 0:7], raw[..., 7:13])
 
     def packed_row(self, raw):
         if self.B > 4:   # many bodies: the vectorised conversion, the same numbers (tested)

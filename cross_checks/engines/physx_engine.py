@@ -27,8 +27,8 @@ from cross_checks.engines.world import World, WorldEngine
 from reference_sim.quaternion import quat_from_matrix
 from reference_sim.simulate import BLOWUP_LIMIT
 
-__all__ = ["ENGINE", "VARIANTS", "BODY_SETTINGS", "PACK_TO_PACKED", "EngineError", "version", "simulate",
-           "simulate_many", "one_step", "PhysxWorld", "neutralise", "PhysxAdapter"]
+__all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate", "simulate_many", "one_step",
+           "PhysxWorld", "PhysxAdapter"]
 
 ENGINE = "physx"
 _DIST = "sapien"
@@ -47,17 +47,6 @@ VARIANTS = {
                       "exponential-map attitude; float32", traits=_TRAITS),
 }
 
-#: Rigid-dynamic settings every body gets, each set explicitly: (sapien setter, value). The velocity limits:
-#: |v|² must stay finite in float32 (PhysX stores the square); a zero sleep threshold resets the wake counter
-#: every step (DySleep.cpp).
-BODY_SETTINGS = (("set_linear_damping", 0.0), ("set_angular_damping", 0.0), ("set_max_linear_velocity", 1e16),
-                 ("set_max_angular_velocity", 1e16), ("set_max_depenetration_velocity", 1e16),
-                 ("set_max_contact_impulse", 1e16), ("set_sleep_threshold", 0.0),
-                 ("set_solver_position_iterations", 1), ("set_solver_velocity_iterations", 1),
-                 ("set_disable_gravity", False), ("set_kinematic", False))
-
-#: Columns of one body's ``pack()`` row ``[q (w x y z), p, v, ω]`` in rbcheck's packed order [x, v, q, ω].
-PACK_TO_PACKED = np.array([4, 5, 6, 7, 8, 9, 0, 1, 2, 3, 10, 11, 12])
 _REST = np.eye(1, 13, 6)[0]   # where a body whose run blew up is parked: at rest at the origin
 _LOCK = threading.RLock()
 
@@ -95,88 +84,78 @@ def _engine():
     return sapien, px
 
 
-def neutralise(c) -> None:   # every setting of BODY_SETTINGS on the rigid dynamic c, whatever it was
-    for setter, value in BODY_SETTINGS:
-        getattr(c, setter)(value)
+@functools.lru_cache(maxsize=1)
+def _world_module():
+    """cross_checks.engines.worlds.physx (what rbcheck repro embeds), after :func:`_engine`."""
+    _engine()
+    from cross_checks.engines.worlds import physx as world
+    return world
 
 
-class PhysxWorld(World):
-    """The bodies of ``requests`` (``comps``: their rigid dynamics) in one scene of ``variant``'s solver at
-    ``dt_s`` under the first request's gravity. Raw rows are packed states (float32 values)."""
+def __getattr__(name):
+    """``BODY_SETTINGS``, ``PACK_TO_PACKED`` and ``neutralise``: cross_checks.engines.worlds.physx's (sapien
+    imported then)."""
+    if name in ("BODY_SETTINGS", "PACK_TO_PACKED", "neutralise"):
+        return getattr(_world_module(), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
-    def __init__(self, requests, variant: str, dt_s: float):
-        super().__init__()
-        sapien, px = _engine()
-        self.Pose = sapien.Pose
-        cfg = px.PhysxSceneConfig()
-        cfg.gravity = np.float32(requests[0].scenario.problem.forces.gravity_W)
-        cfg.enable_tgs = variant == "tgs"
-        with _LOCK:   # the scene config is SAPIEN's process-global default, read when the system is made
-            before = px.get_scene_config()
-            px.set_scene_config(cfg)
-            try:
-                self.system = px.PhysxCpuSystem()
-            finally:      # SAPIEN's default left as it was for any other user of sapien in the process
-                px.set_scene_config(before)
-        self.scene = sapien.Scene(systems=[self.system])
-        self.system.set_timestep(float(dt_s))
-        self.comps = []
-        for r in requests:
-            moments, R_BP = r.scenario.problem.body.principal_axes()
-            entity, c = sapien.Entity(), px.PhysxRigidDynamicComponent()
-            entity.add_component(c)
-            try:
-                c.set_mass(float(r.scenario.problem.body.mass_kg))
-                c.set_inertia(np.float32(moments))
-                c.set_cmass_local_pose(sapien.Pose(np.float32([0, 0, 0]), np.float32(quat_from_matrix(R_BP))))
-            except Exception as exc:  # noqa: BLE001 - PhysX/SAPIEN refuses the mass properties: its words
-                raise EngineError(f"PhysX (sapien {installed_version(_DIST)}) refuses the body: "
-                                  f"{type(exc).__name__}: {exc}") from None
-            neutralise(c)
-            self.scene.add_entity(entity)
-            self.comps.append(c)
-        self.always = np.array([r.scenario.problem.forces.state_dependent for r in requests], dtype=bool)
 
-    def _put(self, k: int, y) -> None:   # body k at the packed state y (13,): pose, COM velocity, world ω
-        c = self.comps[k]
-        c.set_entity_pose(self.Pose(np.float32(y[0:3]), np.float32(y[6:10])))
-        c.set_linear_velocity(np.float32(y[3:6]))
-        c.set_angular_velocity(np.float32(y[10:13]))
+def body_spec(body) -> tuple:
+    """``(mass_kg, principal moments (3,), q_BP (w x y z))`` as PhysX takes them (its principal axes always:
+    reference_sim.body.principal_axes, a diagonal tensor's too)."""
+    moments, R_BP = body.principal_axes()
+    return float(body.mass_kg), moments, quat_from_matrix(R_BP)
 
-    def set_state(self, y):
-        for k, row in enumerate(np.asarray(y, dtype=float)):
-            self._put(k, row)
-        self.alive, self.raw = np.ones(len(self.comps), dtype=bool), self._pack()
 
-    def first(self, y0):   # the scenario's own first row, not its float32 round trip
-        return y0
+_Bodies = None   # the world module's Bodies, once sapien is imported (PhysxWorld's base)
 
-    def apply(self, f_W, tau_W):   # world forces at the COMs (N) and world torques (N m), float32
-        F, T = np.float32(f_W), np.float32(tau_W)
-        for k in np.flatnonzero(self.alive & (self.always | F.any(axis=1) | T.any(axis=1))):
-            self.comps[k].add_force_torque(F[k], T[k])
 
-    def decay(self, g_v, g_w):   # the float32 velocities last read, scaled in float32
-        for k, (c, gv, gw) in enumerate(zip(self.comps, g_v.tolist(), g_w.tolist())):
-            if self.alive[k]:
-                c.set_linear_velocity(self.raw[k, 7:10] * np.float32(gv))
-                c.set_angular_velocity(self.raw[k, 10:13] * np.float32(gw))
+def _world_class():
+    global _Bodies
+    if _Bodies is None:
+        W = _world_module()
 
-    def step(self):
-        self.system.step()
+        class PhysxWorld(W.Bodies, World):
+            """The bodies of ``requests`` in one scene of ``variant``'s solver at ``dt_s`` under the first
+            request's gravity (:class:`cross_checks.engines.worlds.physx.Bodies`). Raw rows are packed states
+            (float32 values); a body whose state blew up is parked at rest."""
 
-    def read(self):
-        """The packed rows; a body whose state is non-finite or beyond BLOWUP_LIMIT is parked at rest once
-        read (so that PhysX never steps a NaN), with no force and no decay from then on."""
-        self.raw = raw = self._pack()
-        fine = np.abs(raw).max() <= BLOWUP_LIMIT          # (NaN compares False)
-        for k in () if fine else np.flatnonzero(self.alive & ~(np.abs(raw).max(axis=1) <= BLOWUP_LIMIT)):
-            self.alive[k] = False
-            self._put(k, _REST)
-        return raw[:, PACK_TO_PACKED]
+            def __init__(self, requests, variant: str, dt_s: float):
+                World.__init__(self)
+                with _LOCK:   # the scene config is SAPIEN's process-global default
+                    W.Bodies.__init__(self, requests[0].scenario.problem.forces.gravity_W, variant, dt_s)
+                for r in requests:
+                    try:
+                        self.add_body(*body_spec(r.scenario.problem.body))
+                    except Exception as exc:  # noqa: BLE001 - PhysX/SAPIEN refuses the mass properties
+                        raise EngineError(f"PhysX (sapien {installed_version(_DIST)}) refuses the body: "
+                                          f"{type(exc).__name__}: {exc}") from None
+                self.always = np.array([r.scenario.problem.forces.state_dependent for r in requests],
+                                       dtype=bool)
 
-    def _pack(self):   # every body's ``pack()`` row [q (w x y z), p, v, ω] (B, 13) float32, a copy
-        return np.frombuffer(self.system.pack(), dtype=np.float32).reshape(len(self.comps), 13).copy()
+            def first(self, y0):   # the scenario's own first row, not its float32 round trip
+                return y0
+
+            def read(self):
+                """The packed rows; a body whose state is non-finite or beyond BLOWUP_LIMIT is parked at rest
+                once read (so that PhysX never steps a NaN), with no force and no decay from then on."""
+                rows = W.Bodies.read(self)
+                raw = self.raw
+                fine = np.abs(raw).max() <= BLOWUP_LIMIT          # (NaN compares False)
+                if not fine:
+                    for k in np.flatnonzero(self.alive & ~(np.abs(raw).max(axis=1) <= BLOWUP_LIMIT)):
+                        self.alive[k] = False
+                        self._put(k, _REST)
+                return rows
+
+        _Bodies = PhysxWorld
+    return _Bodies
+
+
+def PhysxWorld(requests, variant: str, dt_s: float):
+    """A world of ``requests`` (the class built on cross_checks.engines.worlds.physx.Bodies once sapien is
+    imported: sapien's import starts a thread, never at this module's import)."""
+    return _world_class()(requests, variant, dt_s)
 
 
 class PhysxEngine(WorldEngine):

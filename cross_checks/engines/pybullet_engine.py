@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import os
 import threading
+import types
 
 import numpy as np
 
@@ -21,10 +22,15 @@ from cross_checks.engines import base, install
 from cross_checks.engines.base import EngineError, Variant
 from cross_checks.engines.step_floats import quat_mul_floats
 from cross_checks.engines.world import World, WorldEngine
-from reference_sim.quaternion import quat_conj, quat_from_matrix, quat_mul
+from reference_sim.quaternion import quat_conj, quat_from_matrix
 from reference_sim.simulate import Run
 
 p, _IMPORT_ERROR = install.optional_import("pybullet", quiet_stderr=True)   # prints its build time at import
+if _IMPORT_ERROR is None:   # the world (what rbcheck repro embeds) imports the engine itself
+    from cross_checks.engines.worlds import pybullet as pbw
+    from cross_checks.engines.worlds.pybullet import DYNAMICS_SETTINGS
+else:   # not installed: the adapter still loads, and says so when used
+    pbw = types.SimpleNamespace(Bodies=object)
 
 __all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate",
            "simulate_many", "one_step", "DYNAMICS_SETTINGS"]
@@ -41,10 +47,6 @@ VARIANTS = {
                        "semi-implicit Euler, implicit gyroscopic term",
                        traits=base.SYMPLECTIC_EULER_IMPLICIT_GYRO),
 }
-
-#: changeDynamics settings every body gets (besides mass and inertia): damping zeroed, and maxJointVelocity
-#: far above BLOWUP_LIMIT (1e8) so that no clamp hides a blow-up from the harness.
-DYNAMICS_SETTINGS = {"linearDamping": 0.0, "angularDamping": 0.0, "maxJointVelocity": 1e12}
 
 LOCK = threading.RLock()
 _client: int | None = None
@@ -74,96 +76,35 @@ def _connect() -> int:
     return cid
 
 
-def _xyzw(q):
-    return [float(q[1]), float(q[2]), float(q[3]), float(q[0])]
+def body_spec(body) -> tuple:
+    """``(mass_kg, principal moments (3,), q_BP (w x y z) or None)`` of an rbcheck RigidBody as PyBullet
+    takes it: a diagonal tensor as it is (None: no frame rotation), a full one as its principal moments and
+    frame."""
+    if body.is_diagonal():
+        return float(body.mass_kg), np.diag(body.inertia_B).copy(), None
+    moments, R_BP = body.principal_axes()
+    return float(body.mass_kg), moments, quat_from_matrix(R_BP)
 
 
-class BulletWorld(World):
-    """The bodies of one run group in the process's (reset) PyBullet world, with the boundary conversions.
-    Raw rows: ``[x_W (COM), v_W, q_WP (x, y, z, w), ω_W]`` as PyBullet reports them (P: the inertial
-    frame)."""
+class BulletWorld(pbw.Bodies, World):
+    """The bodies of one run group in the process's (reset) PyBullet world, with the boundary conversions
+    (:class:`cross_checks.engines.worlds.pybullet.Bodies`, what ``rbcheck repro`` embeds). Raw rows:
+    ``[x_W (COM), v_W, q_WP (x, y, z, w), ω_W]`` as PyBullet reports them (P: the inertial frame)."""
 
     def __init__(self, requests, variant: str, dt_s: float):
         """The bodies in the adapter's world, reset first; the caller holds ``LOCK``."""
-        super().__init__()
-        self.c = c = _connect()
-        self.maximal = variant == "maximal"
-        self.q_BP: list = []
-        self.bodies: list = []
-        forces = requests[0].scenario.problem.forces
+        World.__init__(self)
+        r = requests[0]
         try:
-            p.resetSimulation(physicsClientId=c)
-            p.setGravity(*[float(g) for g in forces.gravity_W], physicsClientId=c)
-            p.setPhysicsEngineParameter(fixedTimeStep=float(dt_s), numSubSteps=0, physicsClientId=c)
+            pbw.Bodies.__init__(self, _connect(), r.scenario.problem.forces.gravity_W, variant, dt_s)
             for r in requests:
                 self._add(r.scenario)
         except p.error as exc:
             raise EngineError(f"PyBullet rejected the model of scenario {r.scenario.name!r}: {exc}") from None
 
     def _add(self, scenario):
-        c, body = self.c, scenario.problem.body
-        if body.is_diagonal():
-            moments, q_BP = np.diag(body.inertia_B).copy(), None
-        else:
-            moments, R_BP = body.principal_axes()
-            q_BP = quat_from_matrix(R_BP)
-        self.q_BP.append(q_BP)
-        x0, q0 = self._pose_in(scenario.problem.initial_packed(), len(self.bodies))
-        b = p.createMultiBody(baseMass=float(body.mass_kg), baseCollisionShapeIndex=-1,
-                              baseVisualShapeIndex=-1, basePosition=x0, baseOrientation=q0,
-                              useMaximalCoordinates=self.maximal, physicsClientId=c)
-        if b < 0:
+        if not self.add_body(*body_spec(scenario.problem.body), scenario.problem.initial_packed()):
             raise EngineError(f"pybullet.createMultiBody failed for scenario {scenario.name!r}")
-        p.changeDynamics(b, -1, mass=float(body.mass_kg), localInertiaDiagonal=[float(v) for v in moments],
-                         activationState=p.ACTIVATION_STATE_DISABLE_SLEEPING, physicsClientId=c,
-                         **DYNAMICS_SETTINGS)
-        self.bodies.append(b)
-
-    # -- boundary conversions ------------------------------------------------------------------
-    def _pose_in(self, y, k: int):
-        q_WB = [float(v) for v in y[6:10]]
-        q_BP = self.q_BP[k]
-        q_WP = q_WB if q_BP is None else quat_mul_floats(q_WB, q_BP.tolist())
-        return [float(v) for v in y[0:3]], _xyzw(q_WP)
-
-    def set_state(self, y):
-        """Put the bodies at packed states ``y`` (B, 13). Maximal coordinates: the pose reset zeroes the
-        velocity, so it is set last, and every pose reset is primed with one zero-velocity step (a stale world
-        inertia reported in the first step after a reset; docs/engine_conventions.md)."""
-        c = self.c
-        self.last = np.asarray(y, dtype=float).tolist()   # where forces apply until the next read
-        poses = [self._pose_in(row, k) for k, row in enumerate(y)]
-        for b, (pos, orn) in zip(self.bodies, poses):
-            p.resetBasePositionAndOrientation(b, pos, orn, physicsClientId=c)
-        if self.maximal:
-            for b in self.bodies:
-                p.resetBaseVelocity(b, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], physicsClientId=c)
-            p.stepSimulation(physicsClientId=c)
-            for b, (pos, orn) in zip(self.bodies, poses):
-                p.resetBasePositionAndOrientation(b, pos, orn, physicsClientId=c)
-        for b, row in zip(self.bodies, y):
-            p.resetBaseVelocity(b, [float(v) for v in row[3:6]], [float(v) for v in row[10:13]],
-                                physicsClientId=c)
-
-    def read(self):
-        c, pose, vel = self.c, p.getBasePositionAndOrientation, p.getBaseVelocity
-        rows = []
-        for b in self.bodies:
-            ps, orn = pose(b, physicsClientId=c)
-            lin, ang = vel(b, physicsClientId=c)
-            rows.append(ps + lin + orn + ang)
-        self.last = rows
-        return rows
-
-    def packed(self, raw):
-        """Raw rows (..., B, 13) -> packed states (..., B, 13) of the SCENARIO body frame."""
-        raw = np.asarray(raw, dtype=float)
-        y = raw.copy()
-        y[..., 6:10] = np.concatenate([raw[..., 9:10], raw[..., 6:9]], axis=-1)
-        for k, q_BP in enumerate(self.q_BP):
-            if q_BP is not None:
-                y[..., k, 6:10] = quat_mul(y[..., k, 6:10], quat_conj(q_BP))
-        return y
 
     def packed_row(self, raw):
         """:meth:`packed` of one read in plain floats (the quaternion product: quat_mul_floats)."""
@@ -174,27 +115,6 @@ class BulletWorld(World):
                  else quat_mul_floats((qw, qx, qy, qz), quat_conj(q_BP).tolist()))
             out.append([x0, x1, x2, v0, v1, v2, *q, w0, w1, w2])
         return out
-
-    def decay(self, g_v, g_w):
-        """The velocities last read, scaled (no pose reset: it would prime a maximal body again)."""
-        c = self.c
-        for b, prev, gv, gw in zip(self.bodies, self.last, g_v.tolist(), g_w.tolist()):
-            p.resetBaseVelocity(b, (prev[3] * gv, prev[4] * gv, prev[5] * gv),
-                                (prev[10] * gw, prev[11] * gw, prev[12] * gw), physicsClientId=c)
-
-    def apply(self, f_W, tau_W):
-        """External world forces at the COMs (at their last read positions) and world torques (B, 3), for
-        the next step only. A zero force or torque is not applied (PyBullet clears them after every step: the
-        same step)."""
-        c = self.c
-        for b, f, tau, prev in zip(self.bodies, f_W.tolist(), tau_W.tolist(), self.last):
-            if f[0] != 0.0 or f[1] != 0.0 or f[2] != 0.0:
-                p.applyExternalForce(b, -1, f, prev[0:3], p.WORLD_FRAME, physicsClientId=c)
-            if tau[0] != 0.0 or tau[1] != 0.0 or tau[2] != 0.0:
-                p.applyExternalTorque(b, -1, tau, p.WORLD_FRAME, physicsClientId=c)
-
-    def step(self):
-        p.stepSimulation(physicsClientId=self.c)
 
     def close(self):
         LOCK.release()

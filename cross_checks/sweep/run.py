@@ -302,6 +302,10 @@ def _write_results(staging, scenarios, variants, refs, records, *, started, skip
         _write_long_runs(staging, summary, long_scenarios, variants, long_records or {})
     if invariance:
         _write_invariance(staging, summary, scenarios, variants, refs, cannot or {}, show, runner)
+    from cross_checks.sweep.repro import write_sweep_reproducers  # each finding's standalone script
+    summary["reproducers"] = write_sweep_reproducers(staging, summary, [*scenarios, *long_scenarios])
+    if summary["reproducers"]:
+        summary["files"]["repro"] = "repro/*.py: a standalone reproducer of each finding (docs/repro.md)"
     assemble.write_json(staging / "summary.json", summary)
     return summary
 

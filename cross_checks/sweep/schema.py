@@ -145,6 +145,7 @@ SUMMARY = {
     "long_run_scenarios?": [LONG_RUN_SCENARIO],
     "long_runs?": [LONG_RUN_RECORD],
     "invariance?": [INVARIANCE_RECORD],
+    "reproducers?": [{"engine": str, "scenario": str, "claim": str, "file": str, "note?": str}],
     "run?": {k + "?": Nullable(NUM) for k in ("jobs", "runs", "cached_runs", "diverged_runs", "failed_runs",
                                                "wall_s", "cpu_s_in_runs", "engine_s_in_runs",
                                                "compile_s")},

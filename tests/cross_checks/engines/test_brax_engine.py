@@ -116,8 +116,9 @@ def test_mjcf_motors_on_a_free_joint_reach_only_its_first_dof_so_the_adapter_set
 def test_mujocos_refusal_is_an_engine_error_in_its_words(monkeypatch):
     # rbcheck's own body check refuses such moments first; a model MuJoCo's compiler rejects still reads as
     # its words
-    real = be.mjcf_text
-    monkeypatch.setattr(be, "mjcf_text",
+    world = be._lib()["world"]   # the MJCF the adapter loads: cross_checks.engines.worlds.brax's
+    real = world.mjcf_text
+    monkeypatch.setattr(world, "mjcf_text",
                         lambda *a, **k: real(*a, **k).replace('fullinertia="', 'fullinertia="9 '))
     sc = _tilted(velocity="[0.0, 0.0, 1.0]")           # a scenario object of its own: nothing cached for it
     with pytest.raises(be.EngineError, match="rejected the model of scenario 't'.*fullinertia"):

@@ -308,13 +308,13 @@ def test_members_that_blow_up_diverge_where_simulate_says_and_leave_the_others_a
 def test_a_model_mujoco_rejects_is_that_members_engine_error(monkeypatch):
     from cross_checks.engines.base import EngineError
     scs = _fuzz_cases(3)
-    add = me._add_body
+    spec = me.body_spec
 
-    def rejecting(spec, scenario, name):
-        if scenario is scs[1]:
+    def rejecting(body):
+        if body is scs[1].problem.body:
             raise EngineError("rejected here")
-        return add(spec, scenario, name)
-    monkeypatch.setattr(me, "_add_body", rejecting)
+        return spec(body)
+    monkeypatch.setattr(me, "body_spec", rejecting)
     monkeypatch.setattr(me._LAST, "models", [])
     requests = _ladder_requests(scs, rungs=2)
     got = me.MujocoAdapter().simulate_many("euler", requests)

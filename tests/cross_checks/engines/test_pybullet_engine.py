@@ -10,6 +10,7 @@ p = pytest.importorskip("pybullet", reason="pybullet is not installed")
 
 from cross_checks.engines import pybullet_engine as pe  # noqa: E402
 from cross_checks.engines import run_variant  # noqa: E402
+from cross_checks.engines.worlds import pybullet as pbw  # noqa: E402
 from cross_checks.scenario import catalog_path, load_scenario, parse_scenario  # noqa: E402
 from reference_sim.quaternion import geodesic_angle, quat_from_axis_angle, quat_mul  # noqa: E402
 from tests.helpers.scenarios import SQ, YAW90  # noqa: E402,F401
@@ -112,7 +113,7 @@ def _projectile_error(run, h):
 def test_default_multibody_damping_fails_projectile_and_adapter_settings_pass(monkeypatch):
     sc = load_scenario("projectile")
     assert _projectile_error(pe.simulate(sc, "multibody", 0.01, 100), 0.01) < tol.PYB_PROJECTILE_EXACT
-    monkeypatch.setattr(pe, "DYNAMICS_SETTINGS", {})      # PyBullet's defaults (damping 0.04, clamp 100)
+    monkeypatch.setattr(pbw, "DYNAMICS_SETTINGS", {})      # PyBullet's defaults (damping 0.04, clamp 100)
     err = _projectile_error(pe.simulate(sc, "multibody", 0.01, 100), 0.01)
     assert err > tol.PYB_DEFAULT_DAMPING_MIN_ERROR
     # maximal-coordinate bodies have no default damping
@@ -124,7 +125,7 @@ def test_default_multibody_velocity_clamp_is_lifted(monkeypatch):
                    initial="velocity = [150.0, 0.0, 0.0]\nangular_velocity = [0.0, 0.0, 150.0]")
     run = pe.simulate(sc, "multibody", 0.01, 2)
     np.testing.assert_array_equal(run.y[-1, [3, 12]], [150.0, 150.0])
-    monkeypatch.setattr(pe, "DYNAMICS_SETTINGS", {"linearDamping": 0.0, "angularDamping": 0.0})
+    monkeypatch.setattr(pbw, "DYNAMICS_SETTINGS", {"linearDamping": 0.0, "angularDamping": 0.0})
     run = pe.simulate(sc, "multibody", 0.01, 2)
     np.testing.assert_allclose(run.y[-1, [3, 12]], [100.0, 100.0])   # clamped by PyBullet
 

@@ -1,0 +1,100 @@
+"""MuJoCo's world of free bodies (numpy and mujoco only: ``rbcheck repro`` embeds this file as it is).
+
+One MjSpec body per body, with a free joint on the body frame and the mass and inertia exactly as given
+(alignfree, inertiafromgeom, balanceinertia, boundmass and boundinertia neutralised; no auto-reset).
+MuJoCo's state is ``qpos = [x_W, q_WB (w x y z)]``, ``qvel = [v_W, ω_B (BODY axes)]``; forces go into
+``xfrc_applied`` (world force at the COM, world torque; MuJoCo keeps them). docs/engine_conventions.md.
+"""
+import mujoco
+import numpy as np
+
+
+def build_model(bodies, gravity_W, variant, dt_s, name="rbcheck"):
+    """The compiled MjModel of ``bodies`` ((mass_kg, moments (3,), q_BP (w x y z)) each) for the integrator
+    ``variant`` ("euler", "rk4", "implicit", "implicitfast", "discrete") at step ``dt_s`` (s)."""
+    spec = mujoco.MjSpec()
+    spec.modelname = name
+    spec.compiler.alignfree = False        # keep the joint (= qpos) on the body frame, not the inertial frame
+    spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
+    spec.compiler.balanceinertia = False   # never alter the inertia silently
+    spec.compiler.boundmass = 0.0
+    spec.compiler.boundinertia = 0.0
+    spec.option.timestep = float(dt_s)
+    spec.option.gravity = np.asarray(gravity_W, dtype=float)
+    spec.option.integrator = getattr(mujoco.mjtIntegrator, f"mjINT_{variant.upper()}")
+    spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_AUTORESET
+    for k, (mass_kg, moments, q_BP) in enumerate(bodies):
+        b = spec.worldbody.add_body()
+        b.name = "body" if k == 0 else f"body{k}"
+        b.add_freejoint()
+        b.explicitinertial = True
+        b.ipos = [0.0, 0.0, 0.0]           # explicit: unset (NaN) would let geoms override the inertial
+        b.mass = float(mass_kg)
+        b.iquat = q_BP                     # principal frame P in body coordinates (w x y z)
+        b.inertia = moments
+    return spec.compile()
+
+
+def _cross(a, b):
+    a0, a1, a2, b0, b1, b2 = a[..., 0], a[..., 1], a[..., 2], b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
+def rotate(q, v):
+    """``R(q) v`` for quaternions q (..., 4) (w, x, y, z) and vectors v (..., 3)."""
+    s, u = q[..., :1], q[..., 1:]
+    t = 2.0 * _cross(u, v)
+    return v + s * t + _cross(u, t)
+
+
+def to_qpos_qvel(y):
+    """Packed states (..., 13) -> qpos (..., 7), qvel (..., 6) with ω in BODY axes."""
+    y = np.asarray(y, dtype=float)
+    q = y[..., 6:10]
+    qpos = np.concatenate([y[..., 0:3], q], axis=-1)
+    w_B = rotate(q * np.array([1.0, -1.0, -1.0, -1.0]), y[..., 10:13])   # R(q)ᵀ ω_W
+    qvel = np.concatenate([y[..., 3:6], w_B], axis=-1)
+    return qpos, qvel
+
+
+def to_packed(qpos, qvel):
+    """qpos (..., 7), qvel (..., 6) -> packed states (..., 13) with ω in WORLD axes."""
+    q = qpos[..., 3:7]
+    return np.concatenate([qpos[..., 0:3], qvel[..., 0:3], q, rotate(q, qvel[..., 3:6])], axis=-1)
+
+
+class Bodies:
+    """B free bodies in one MjModel (one kinematic tree each: they never interact) and one MjData. Raw rows:
+    ``[qpos (7), qvel (6)]`` per body."""
+
+    def __init__(self, model):
+        self.model, self.data = model, mujoco.MjData(model)
+        self.B = model.nbody - 1
+        self.qpos, self.qvel = self.data.qpos.reshape(self.B, 7), self.data.qvel.reshape(self.B, 6)
+        self.xfrc = self.data.xfrc_applied[1:]
+
+    def set_state(self, y):
+        self.data.time = 0.0
+        self.qpos[:], self.qvel[:] = to_qpos_qvel(y)
+
+    def apply(self, f_W, tau_W):   # world force at the COM (N; MuJoCo adds the weight), world torque (N m)
+        self.xfrc[:, 0:3] = f_W
+        self.xfrc[:, 3:6] = tau_W
+
+    def decay(self, g_v, g_w):
+        self.qvel[:, 0:3] *= g_v[:, None]
+        self.qvel[:, 3:6] *= g_w[:, None]
+
+    def step(self):
+        mujoco.mj_step(self.model, self.data)
+
+    def read(self):
+        return np.concatenate((self.qpos, self.qvel), axis=1)
+
+    def packed(self, raw):
+        raw = np.asarray(raw, dtype=float)
+        return to_packed(raw[..., 0:7], raw[..., 7:13])
+
+
+def world(bodies, gravity_W, variant, dt_s):
+    return Bodies(build_model(bodies, gravity_W, variant, dt_s))

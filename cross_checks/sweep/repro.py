@@ -1,0 +1,366 @@
+"""Standalone reproducers (``rbcheck repro``; docs/repro.md): one Python script per claim about a variant on a
+scenario, importing only the engine and NumPy, that an engine's maintainers can run without rbcheck.
+
+The script is made of three parts, two of them rbcheck's own code placed as it is:
+
+1. the engine's world (cross_checks/engines/worlds/<engine>.py: the model the adapter builds, with the same
+   neutralised defaults, in the engine's own API — the adapter imports it, so it is not a copy);
+2. the measurement (:mod:`cross_checks.sweep.repro_measure`: the run with the forces held, and the claim's
+   number);
+3. the numbers: the scenario's body, initial state and forces, and the reference values the claim needs
+   (the exact final state at each Δt, the round-off floors, the invariants), then ``main()``.
+
+It prints the engine's, NumPy's and Python's versions and the platform, then the measured value beside the
+expected one, and exits 1 while the defect holds, 0 when it does not. Writing a script runs it here (in
+this process, the same code): a claim that does not hold is written anyway and said so.
+
+Claims: ``order QUANTITY`` (the fitted order over the variant's judged Δt ladder against its declared
+order), ``drift`` (a long run: energy, |L|, the separatrix distance), ``gyroscopic`` (the torque-free flip of
+an intermediate-axis spin is missing). ``invariance TRANSFORM`` is not supported yet (:class:`ReproError`).
+"""
+from __future__ import annotations
+
+import contextlib
+import importlib
+import inspect
+import io
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from cross_checks.core import tolerances as tol
+from cross_checks.core.quantities import QUANTITIES
+
+__all__ = ["ENGINES", "CLAIMS", "ReproError", "Repro", "parse_claim", "reproducer", "write_reproducer",
+           "findings_claims", "write_sweep_reproducers", "file_name"]
+
+#: Engines that can write reproducers: engine -> (the distributions whose versions the script prints, the
+#: world modules it embeds in order, the adapter module, the module whose ``body_spec`` gives the bodies).
+_W, _A = "cross_checks.engines.worlds.", "cross_checks.engines."
+ENGINES = {
+    "mujoco": (("mujoco",), (_W + "mujoco",), _A + "mujoco_engine", _A + "mujoco_engine"),
+    "rapier": (("rapier3d",), (_W + "rapier",), _A + "rapier_engine", _A + "rapier_engine"),
+    "pybullet": (("pybullet",), (_W + "pybullet",), _A + "pybullet_engine", _A + "pybullet_engine"),
+    "mjx": (("mujoco-mjx", "mujoco", "jax"), (_W + "mujoco", _W + "mjx"), _A + "mjx_engine",
+            _A + "mujoco_engine"),
+    "brax": (("brax", "jax", "mujoco"), (_W + "brax",), _A + "brax_engine", _A + "brax_engine"),
+    "physx": (("sapien",), (_W + "physx",), _A + "physx_engine", _A + "physx_engine"),
+    "dart": (("dartpy",), (_W + "dart",), _A + "dart_engine", _A + "dart_engine"),
+}
+#: A line of a world module that a reproducer leaves out: the import of a sibling world embedded above it.
+_SIBLING_IMPORT = re.compile(r"^from \.\w+ import .*$\n", re.MULTILINE)
+#: claim -> the word it takes ("" for none).
+CLAIMS = {"order": "QUANTITY", "drift": "", "gyroscopic": "", "invariance": "TRANSFORM"}
+
+
+class ReproError(ValueError):
+    """A claim or a variant/scenario a reproducer cannot be written for: one line (the CLI's exit 2)."""
+
+
+@dataclass
+class Repro:
+    """A written reproducer: its ``text``, whether the defect ``holds`` here, and the script's ``output``
+    (what it printed when run here)."""
+
+    text: str
+    holds: bool | None
+    output: str
+    claim: str
+
+    @property
+    def summary(self) -> str:
+        """The script's verdict line (its last)."""
+        lines = self.output.strip().splitlines()
+        return lines[-1] if lines else ""
+
+
+def parse_claim(words) -> tuple:
+    """``["order", "orientation"]`` -> ``("order", "orientation")``; ``["drift"]`` -> ``("drift", "")``.
+    ReproError (one line) for an unknown claim, a missing or unknown word."""
+    words = list(words or [])
+    if not words:
+        raise ReproError("--claim: give a claim: " + ", ".join(f"{c} {w}".strip() for c, w in CLAIMS.items()))
+    kind, rest = words[0], words[1:]
+    if kind not in CLAIMS:
+        raise ReproError(f"--claim: unknown claim {kind!r}; claims: "
+                         + ", ".join(f"{c} {w}".strip() for c, w in CLAIMS.items()))
+    need = CLAIMS[kind]
+    if need and len(rest) != 1:
+        raise ReproError(f"--claim {kind}: give one {need} (e.g. --claim {kind} "
+                         f"{'orientation' if kind == 'order' else 'rotated'})")
+    if not need and rest:
+        raise ReproError(f"--claim {kind} takes no word, got {' '.join(rest)!r}")
+    arg = rest[0] if rest else ""
+    if kind == "order" and arg not in QUANTITIES:
+        raise ReproError(f"--claim order: unknown quantity {arg!r}; quantities: {', '.join(QUANTITIES)}")
+    return kind, arg
+
+
+def _engine(variant_name: str):
+    """(engine, variant, distributions, world module names, adapter module, body_spec's module); ReproError
+    when the engine cannot write one."""
+    from cross_checks.engines import UnknownVariant, get_adapter, split_variant
+    from cross_checks.engines.external import ExternalEngine
+    try:
+        engine, variant = split_variant(variant_name)
+    except UnknownVariant as exc:
+        raise ReproError(str(exc)) from None
+    try:
+        adapter = get_adapter(engine)
+    except Exception as exc:  # noqa: BLE001 - EngineUnavailable: the engine's own words
+        raise ReproError(f"{variant_name}: {exc}") from None
+    if isinstance(adapter, ExternalEngine):
+        raise ReproError(f"{engine} is an engine file: it cannot write a reproducer; its command is the "
+                         "reproducer (docs/repro.md)")
+    if engine not in ENGINES:
+        raise ReproError(f"{engine} cannot write reproducers yet; these can: {', '.join(ENGINES)} "
+                         "(docs/repro.md)")
+    dists, worlds, adapter_mod, spec_mod = ENGINES[engine]
+    return (engine, variant, dists, list(worlds), importlib.import_module(adapter_mod),
+            importlib.import_module(spec_mod))
+
+
+def _floats(a) -> str:
+    """Numbers as Python literals that read back bit for bit (repr of floats), nested lists kept, None."""
+    if a is None:
+        return "None"
+    if isinstance(a, (list, tuple, np.ndarray)):
+        return "[" + ", ".join(_floats(x) for x in (a.tolist() if isinstance(a, np.ndarray) else a)) + "]"
+    return repr(float(a))
+
+
+def _source(module: str) -> str:
+    """A world module's text, as it is (but the import of a sibling world embedded above it), without its
+    trailing newline; read from its file, not imported (a sweep's parent must not start JAX)."""
+    import importlib.util
+    text = Path(importlib.util.find_spec(module).origin).read_text(encoding="utf-8")
+    return _SIBLING_IMPORT.sub("", text).rstrip("\n")
+
+
+def _measure_source(main: str) -> str:
+    """:mod:`repro_measure`'s module docstring and imports, and the functions ``main`` needs (its text)."""
+    from cross_checks.sweep import repro_measure as rm
+    text = inspect.getsource(rm)
+    head = text[text.index("\nimport "):text.index("\ndef ")].lstrip("\n")   # its imports
+    needs = {"order": ("versions", "run", "error", "fitted_order", "main_order"),
+             "drift": ("versions", "run", "invariants", "main_drift"),
+             "gyroscopic": ("versions", "run", "first_flip_s", "main_gyroscopic")}[main]
+    return head.rstrip("\n") + "\n\n\n" + "\n\n\n".join(inspect.getsource(getattr(rm, f)).rstrip("\n")
+                                                        for f in needs)
+
+
+def _constant_forces(scenario, adapter_mod) -> tuple:
+    """The force (minus the weight where the engine applies gravity) and torque held over a run, world axes
+    (N, N m); ReproError when the scenario's forces change within the run."""
+    from cross_checks.engines.loop import Harness
+    fm = scenario.problem.forces
+    if fm.state_dependent or fm.has_decay:
+        raise ReproError(f"scenario {scenario.name}: its forces change with the state (springs, drag, "
+                         "body-frame or point forces, decay); a reproducer holds the forces constant: "
+                         "choose a torque-free or constant-force scenario")
+    engine = adapter_mod._ENGINE
+    h = Harness([scenario], scenario.dt_s, engine.applies_gravity)
+    f, tau = h.wrench(scenario.problem.initial_packed()[None])
+    return f[0], tau[0]
+
+
+def reproducer(variant_name: str, scenario, claim_words, *, command: str = "", run: bool = True) -> Repro:
+    """The reproducer of ``claim_words`` (e.g. ``["order", "orientation"]``) about ``variant_name`` on
+    ``scenario`` (a parsed Scenario), run here (``run``; else ``holds`` is None: the sweep, which measured
+    it already): a :class:`Repro`. ReproError for what it cannot be written for (one line)."""
+    import reference_sim
+    kind, arg = parse_claim(claim_words)
+    if kind == "invariance":
+        raise ReproError("--claim invariance: not supported yet (the invariance transforms of issue 46 are "
+                         "not in a reproducer's reach: the script would have to rewrite the scenario); "
+                         "claims: order QUANTITY, drift, gyroscopic")
+    engine, variant, dists, world_mods, adapter_mod, spec_mod = _engine(variant_name)
+    f_W, tau_W = _constant_forces(scenario, adapter_mod)
+    body = spec_mod.body_spec(scenario.problem.body)
+    common = {"DIST": repr(dists), "VARIANT": repr(variant),
+              "BODIES": "[(" + ", ".join(_floats(x) for x in body) + ")]",
+              "GRAVITY_W": _floats(scenario.problem.forces.gravity_W),
+              "Y0": _floats(scenario.problem.initial_packed()),
+              "F_W": _floats(f_W), "TAU_W": _floats(tau_W)}
+    claim_text = f"{kind} {arg}".strip()
+    data, expect = {"order": _order_data, "drift": _drift_data, "gyroscopic": _gyro_data}[kind](
+        variant_name, scenario, arg)
+    command = command or f"rbcheck repro {variant_name} {scenario.name} --claim {claim_text}"
+    header = (f'"""{variant_name} on {scenario.name}: {expect}\n\n'
+              f"Written by rbcheck {reference_sim.__version__} ({command}). Needs only numpy and "
+              f"{', '.join(dists)}.\n"
+              f"Exit 1 while the defect holds, 0 when it does not.\n"
+              f"The world below is rbcheck's adapter's (cross_checks/engines/worlds/{engine}.py), as it is;\n"
+              f'the measurement is cross_checks/sweep/repro_measure.py\'s."""\n'
+              "import sys\n")
+    lines = [f"{k} = {v}" for k, v in {**common, **data}.items()]
+    main = {"order": "main_order", "drift": "main_drift", "gyroscopic": "main_gyroscopic"}[kind]
+    text = (header + "\n" + "\n\n\n".join(_source(w) for w in world_mods) + "\n\n\n"
+            + _measure_source(kind) + "\n\n\n"
+            + "# the scenario (SI units; states [x_W, v_W, q_WB (w x y z), ω_W]) and the reference values\n"
+            + "\n".join(lines) + "\n\n\n"
+            + f"def main():\n    return {main}(world, globals())\n\n\n"
+            + 'if __name__ == "__main__":\n    sys.exit(main())\n')
+    if not run:
+        return Repro(text=text, holds=None, output="", claim=claim_text)
+    ns = {"__name__": "rbcheck_repro"}
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        exec(compile(text, f"<repro {variant_name} {scenario.name}>", "exec"), ns)   # noqa: S102 - our own
+        code = ns["main"]()
+    return Repro(text=text, holds=bool(code), output=out.getvalue(), claim=claim_text)
+
+
+def _order_data(variant_name, scenario, quantity) -> tuple:
+    from cross_checks.analysis import metrics as M
+    from cross_checks.analysis.expectations import judged_ladder_s, machine_epsilon, nominal_order
+    from cross_checks.core.quantities import quantity_scales
+    from cross_checks.scenario.references import error_amplification, reference_error, reference_solution
+    if scenario.long_run:
+        raise ReproError(f"scenario {scenario.name} is a long run (no Δt ladder): its claim is drift")
+    declared = nominal_order(variant_name)
+    if declared is None:
+        raise ReproError(f"{variant_name} declares no order: an order claim needs one")
+    dts = list(judged_ladder_s(scenario, variant_name))
+    steps = [scenario.n_steps(h) for h in dts]
+    y_all, label = reference_solution(scenario, np.linspace(0.0, scenario.duration_s, 201))
+    scales = quantity_scales(y_all)
+    amp = error_amplification(scenario, scales).get(quantity, 1.0)
+    refs, floors = [], []
+    for h, n in zip(dts, steps):
+        y_ref = reference_solution(scenario, np.array([0.0, n * h]))[0][-1]
+        ref_err = reference_error(scenario, y_ref, label, scales)[quantity]
+        refs.append(y_ref)
+        floors.append(M.roundoff_floor(scales[quantity], n, label, reference_error=ref_err, amplification=amp,
+                                       quantity=quantity, eps=machine_epsilon(variant_name)))
+    data = {"QUANTITY": repr(quantity), "DT_S": _floats(dts), "STEPS": repr(steps),
+            "Y_REF": "[" + ",\n         ".join(_floats(r) for r in refs) + "]",
+            "FLOORS": _floats(floors), "DECLARED": repr(float(declared)),
+            "ORDER_TOL": repr(tol.SWEEP_ORDER_TOL), "RESOLVED": repr(tol.RESOLVED_ABOVE_FLOOR)}
+    return data, (f"{quantity} converges at order {declared:g} (declared) over Δt = "
+                  f"{', '.join(f'{h:g}' for h in dts)} s? Reference: {label}.")
+
+
+def _torque_free(scenario, what: str) -> None:
+    from cross_checks.analysis.metrics import conserved
+    c = conserved(scenario.problem.forces)
+    if not (c["energy"][0] and c["angular_momentum"][0]):
+        raise ReproError(f"scenario {scenario.name}: a {what} claim needs a torque-free scenario whose "
+                         f"energy and angular momentum are conserved "
+                         f"({c['energy'][1] or c['angular_momentum'][1]})")
+
+
+def _drift_data(variant_name, scenario, _arg) -> tuple:
+    _torque_free(scenario, "drift")
+    inertia = scenario.problem.body.inertia_B
+    I2 = float(np.linalg.eigvalsh(inertia)[1])
+    n = scenario.n_steps()
+    data = {"DT": repr(float(scenario.dt_s)), "N": repr(n), "INERTIA_B": _floats(inertia), "I2": repr(I2),
+            "END_FRACTION": repr(tol.LONG_RUN_END_FRACTION), "MIN_CHANGE": repr(tol.SECULAR_MIN_CHANGE),
+            "TREND_TO_SCATTER": repr(tol.SECULAR_MIN_TREND_TO_SCATTER)}
+    return data, (f"does a torque-free run of {n} steps of {scenario.dt_s:g} s keep its energy, |L| and its "
+                  "separatrix distance δ = (2E I₂ − |L|²)/|L|²?")
+
+
+def _gyro_data(variant_name, scenario, _arg) -> tuple:
+    from cross_checks.scenario.references import reference_solution
+    from cross_checks.sweep import repro_measure as rm
+    from reference_sim.quaternion import quat_from_matrix
+    _torque_free(scenario, "gyroscopic")
+    body = scenario.problem.body
+    moments, R_BP = body.principal_axes()
+    q_BP = np.array([1.0, 0.0, 0.0, 0.0]) if body.is_diagonal() else quat_from_matrix(R_BP)
+    axis = 1 if not body.is_diagonal() else int(np.argsort(np.diag(body.inertia_B), kind="stable")[1])
+    dt, n = float(scenario.dt_s), scenario.n_steps()
+    y_ref, label = reference_solution(scenario, dt * np.arange(n + 1))
+    flip = rm.first_flip_s(y_ref, q_BP, axis, dt)
+    if flip is None:
+        raise ReproError(f"scenario {scenario.name}: the reference ({label}) does not flip within "
+                         f"{scenario.duration_s:g} s: a gyroscopic claim needs a torque-free spin near the "
+                         "intermediate axis (e.g. tennis_racket)")
+    data = {"DT": repr(dt), "N": repr(n), "Q_BP": _floats(q_BP), "AXIS": repr(axis), "FLIP_S": repr(flip)}
+    return data, (f"does the torque-free spin near the intermediate axis flip (at t = {flip:.4g} s, "
+                  f"{label})?")
+
+
+def write_reproducer(repro: Repro, out) -> Path:
+    """Write ``repro``'s script to ``out`` atomically (executable); returns the path."""
+    from cross_checks.core.files import atomic_write_text
+    out = Path(out)
+    atomic_write_text(out, repro.text)
+    out.chmod(0o755)
+    return out
+
+
+#: The quantity a contradicted order's reproducer states, when several of a variant's are contradicted.
+_QUANTITY_PREFERENCE = ("orientation", "angular_velocity", "position", "velocity")
+
+
+def findings_claims(summary: dict, scenarios) -> list:
+    """``[(variant, scenario, claim words)]``: the sweep's findings a reproducer states, once per variant and
+    scenario — every contradicted order (``order QUANTITY``, the quantity of :data:`_QUANTITY_PREFERENCE`
+    first), every long run with a finding (``drift``: toward, away from or across the separatrix, or
+    diverged), every expected non-convergence of a variant without a gyroscopic term on a torque-free
+    scenario (``gyroscopic``), and every order the variant's traits expect below the one it declares (an
+    engine's known shortfall, e.g. MJX's RK4 attitude at order 2: ``order QUANTITY``) where the forces are
+    constant. The reference's own schemes (``reference:``) are rbcheck's: none."""
+    from cross_checks.analysis.expectations import traits
+    from cross_checks.analysis.metrics import conserved
+    by_name = {sc.name: sc for sc in scenarios}
+    out: dict = {}
+    recs = summary.get("convergence") or []
+    for r in sorted((r for r in recs if r.get("matches_expectation") is False),
+                    key=lambda r: _QUANTITY_PREFERENCE.index(r["quantity"])):
+        out.setdefault((r["engine"], r["scenario"]), ["order", r["quantity"]])
+    declared = {v["name"]: v.get("declared_order") for v in summary.get("variants") or []}
+    for r in sorted(recs, key=lambda r: _QUANTITY_PREFERENCE.index(r["quantity"])):
+        key = (r["engine"], r["scenario"])
+        sc = by_name.get(r["scenario"])
+        if key in out or sc is None:
+            continue
+        fm = sc.problem.forces
+        c = conserved(fm)
+        if (r.get("expected_verdict") == "does_not_converge" and not traits(r["engine"]).gyroscopic_term
+                and c["energy"][0] and c["angular_momentum"][0]):
+            out[key] = ["gyroscopic"]
+        elif (r.get("expected_verdict") == "converges" and r.get("matches_expectation")
+              and r.get("expected_order") is not None and declared.get(r["engine"]) is not None
+              and r["expected_order"] < declared[r["engine"]] - tol.SWEEP_ORDER_TOL
+              and not (fm.state_dependent or fm.has_decay)):
+            out[key] = ["order", r["quantity"]]   # the engine's own known shortfall (its traits say it)
+    for r in summary.get("long_runs") or []:
+        if r.get("finding") or r.get("status") == "diverged":
+            out.setdefault((r["engine"], r["scenario"]), ["drift"])
+    return [(v, by_name[s], claim) for (v, s), claim in out.items()
+            if s in by_name and not v.startswith("reference:")]
+
+
+def write_sweep_reproducers(out_dir, summary: dict, scenarios) -> list:
+    """A reproducer of each of the sweep's findings (:func:`findings_claims`) in ``out_dir``/repro/, written
+    without running them again (the sweep measured them); returns summary.json's ``reproducers`` records:
+    ``{engine, scenario, claim, file}`` (``file`` relative to ``out_dir``), or ``file`` "" and ``note``
+    saying why none could be written (an engine that cannot yet, forces a script cannot hold)."""
+    out_dir = Path(out_dir)
+    records = []
+    for variant, sc, claim in findings_claims(summary, scenarios):
+        text = " ".join(claim)
+        rec = {"engine": variant, "scenario": sc.name, "claim": text, "file": ""}
+        try:
+            r = reproducer(variant, sc, claim, run=False)
+        except ReproError as exc:
+            records.append({**rec, "note": str(exc)})
+            continue
+        name = f"repro/{file_name(variant, sc.name, text)}"
+        (out_dir / "repro").mkdir(exist_ok=True)
+        write_reproducer(r, out_dir / name)
+        records.append({**rec, "file": name})
+    return records
+
+
+def file_name(variant_name: str, scenario_name: str, claim: str) -> str:
+    """``mujoco_rk4__tennis_racket__order_orientation.py``: a reproducer's file name in DIR/repro/."""
+    safe = re.sub(r"[^A-Za-z0-9_]+", "_", f"{variant_name}__{scenario_name}__{claim}")
+    return safe.strip("_") + ".py"
+
