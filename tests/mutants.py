@@ -205,23 +205,23 @@ def _reference(name, variant, bug, exposed_by, members=None, step=None) -> Mutan
 # --- the engine adapters --------------------------------------------------------------------------------
 
 def _mujoco_world_omega_as_body(mp):
-    from cross_checks.engines import mujoco_engine as me
+    from cross_checks.engines.worlds import mujoco as mjw  # the world's own conversion (what repro embeds)
 
     def to_qpos_qvel(y):
         y = np.asarray(y, dtype=float)
         qpos = np.concatenate([y[..., 0:3], y[..., 6:10]], axis=-1)
         qvel = np.concatenate([y[..., 3:6], y[..., 10:13]], axis=-1)   # BUG: ω_W written where ω_B belongs
         return qpos, qvel
-    mp.setattr(me, "to_qpos_qvel", to_qpos_qvel)
+    mp.setattr(mjw, "to_qpos_qvel", to_qpos_qvel)
 
 
 def _mujoco_body_omega_read_as_world(mp):
-    from cross_checks.engines import mujoco_engine as me
+    from cross_checks.engines.worlds import mujoco as mjw
 
     def to_packed(qpos, qvel):
         # BUG
         return np.concatenate([qpos[..., 0:3], qvel[..., 0:3], qpos[..., 3:7], qvel[..., 3:6]], axis=-1)
-    mp.setattr(me, "to_packed", to_packed)
+    mp.setattr(mjw, "to_packed", to_packed)
 
 
 def _mujoco_gravity_twice(mp):

@@ -21,6 +21,7 @@ import numpy as np
 from cross_checks.engines import base, forces, install
 from cross_checks.engines.base import EngineError, Variant
 from cross_checks.engines.forces import stage_force_torque_floats
+from cross_checks.engines.loop import host_problem
 from cross_checks.engines.world import World, WorldEngine
 from reference_sim.quaternion import quat_from_matrix
 from reference_sim.simulate import Run
@@ -232,9 +233,9 @@ class Session:
 
 
 def forces_per_stage(scenario, variant) -> bool:
-    """RK4 with forces that change within a step (state-dependent forces or velocity decay): evaluated
-    at every stage through the control callback."""
-    fm = scenario.problem.forces
+    """RK4 with forces that change within a step (state-dependent forces or velocity decay; a torque fixed in
+    body axes is MuJoCo's own, in qfrc_applied): evaluated at every stage through the control callback."""
+    fm = host_problem(scenario.problem, MujocoEngine.takes_body_torque).forces
     return variant == "rk4" and (fm.state_dependent or fm.has_decay) and _RK4_STAGE_FORCES
 
 
@@ -248,8 +249,13 @@ def _apply(xfrc, f, tau, weight):
 def _stage_force_writer(scenario, qpos, qvel, xfrc, weight):
     """Control callback body for one body, whose (stage) state is in the views ``qpos`` (7) and ``qvel`` (6)
     of the world's MjData: its forces into its row ``xfrc`` of xfrc_applied, as :func:`_apply` writes them,
-    in plain floats (it runs at every RK4 stage)."""
+    in plain floats (it runs at every RK4 stage). The torques fixed in body axes are not among them: MuJoCo
+    holds them in qfrc_applied (MujocoEngine.takes_body_torque)."""
+    import dataclasses
     w0, w1, w2 = (float(c) for c in weight)
+    host = host_problem(scenario.problem, MujocoEngine.takes_body_torque)
+    if host is not scenario.problem:
+        scenario = dataclasses.replace(scenario, problem=host)
 
     def control(_m, _d):
         fx, fy, fz, tx, ty, tz = stage_force_torque_floats(scenario, _packed1(qpos, qvel))
@@ -348,18 +354,26 @@ class MujocoWorld(mjw.Bodies, World):
         return [packed_floats(r[0:7], r[7:13]) for r in np.asarray(raw).tolist()]
 
     def rollout(self, n_steps, harness=None):
-        """``n_steps`` steps in ``mujoco.rollout`` with the applied forces held; if MuJoCo warned, the steps
-        again one by one (:meth:`step`), which attribute the warning to its body."""
+        """``n_steps`` steps in ``mujoco.rollout`` with the applied forces (xfrc_applied, and the body-axes
+        torques in qfrc_applied) held; if MuJoCo warned, the steps again one by one (:meth:`step`), which
+        attribute the warning to its body."""
         from mujoco import rollout
+        t_all = time.perf_counter()
         m, d = self.model, self.data
         start = self.read()
         state = np.concatenate([[0.0], d.qpos, d.qvel])[None]    # [time, qpos, qvel]
-        control = d.xfrc_applied.ravel()[None, None]
+        spec = mujoco.mjtState.mjSTATE_QFRC_APPLIED | mujoco.mjtState.mjSTATE_XFRC_APPLIED
+        control = np.empty(mujoco.mj_stateSize(m, spec))
+        mujoco.mj_getState(m, d, control, spec)                  # in MuJoCo's own order of the two
         seen = len(self.session.warnings)
-        states, _ = rollout.rollout(m, [mujoco.MjData(m)], state, control,
-                                    control_spec=mujoco.mjtState.mjSTATE_XFRC_APPLIED, nstep=n_steps)
+        datas = [mujoco.MjData(m)]
+        t0 = time.perf_counter()
+        states, _ = rollout.rollout(m, datas, state, control[None, None], control_spec=spec, nstep=n_steps)
+        t1 = time.perf_counter()
         out = np.concatenate((states[0, :, 1:1 + m.nq].reshape(n_steps, self.B, 7),
                               states[0, :, 1 + m.nq:].reshape(n_steps, self.B, 6)), axis=2)
+        # the engine's own time is the rollout call's; the set-up and the rows' layout are rbcheck's
+        self.host_s += time.perf_counter() - t_all - (t1 - t0)
         if len(self.session.warnings) == seen:
             return out
         self.qpos[:], self.qvel[:] = start[:, 0:7], start[:, 7:13]
@@ -380,6 +394,7 @@ class MujocoEngine(WorldEngine):
     variants = VARIANTS
     distribution = "mujoco"
     keeps_forces = True     # xfrc_applied is never cleared by MuJoCo
+    takes_body_torque = True   # a free joint's rotational DOFs are body axes: qfrc_applied holds τ_B itself
     chunk = 256
 
     def version(self) -> str:

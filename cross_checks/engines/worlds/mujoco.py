@@ -3,7 +3,8 @@
 One MjSpec body per body, with a free joint on the body frame and the mass and inertia exactly as given
 (alignfree, inertiafromgeom, balanceinertia, boundmass and boundinertia neutralised; no auto-reset).
 MuJoCo's state is ``qpos = [x_W, q_WB (w x y z)]``, ``qvel = [v_W, ω_B (BODY axes)]``; forces go into
-``xfrc_applied`` (world force at the COM, world torque; MuJoCo keeps them). docs/engine_conventions.md.
+``xfrc_applied`` (world force at the COM, world torque; MuJoCo keeps them), a torque fixed in body axes into
+``qfrc_applied`` (a free joint's rotational DOFs are body axes). docs/engine_conventions.md.
 """
 import mujoco
 import numpy as np
@@ -80,6 +81,9 @@ class Bodies:
     def apply(self, f_W, tau_W):   # world force at the COM (N; MuJoCo adds the weight), world torque (N m)
         self.xfrc[:, 0:3] = f_W
         self.xfrc[:, 3:6] = tau_W
+
+    def apply_body_torque(self, tau_B):   # torques fixed in body axes (N m, (B, 3)), kept by MuJoCo
+        self.data.qfrc_applied.reshape(self.B, 6)[:, 3:6] = tau_B
 
     def decay(self, g_v, g_w):
         self.qvel[:, 0:3] *= g_v[:, None]

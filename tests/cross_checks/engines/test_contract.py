@@ -239,6 +239,26 @@ def test_one_step_restarts_from_any_state(costly_adapter):
         assert np.max(np.abs(y1 - run.y[1:]) / scale) <= tol.CONTRACT_RESTART_EPS * _eps(adapter, variant)
 
 
+def test_a_body_torque_the_engine_takes_itself_moves_the_body_as_the_harness_does(adapter, monkeypatch):
+    """An engine that declares ``takes_body_torque`` (MuJoCo: qfrc_applied on the free joint's body-axes
+    DOFs) moves applied_torque's body (a body-frame torque beside an off-COM world force) as the same engine
+    driven by the harness alone (its torque R(q)τ_B at the start of each step, or each stage): the runs at
+    two Δt and one step from the run's states agree to the round-off of the torque's other rotation
+    (tests/helpers/tolerances.SAME_SCHEME_REL; measured on MuJoCo: ≤ 1.6e-15 relative)."""
+    if not getattr(adapter, "takes_body_torque", False):
+        pytest.skip(f"{adapter.name} takes no body torque itself")
+    sc = load_scenario("applied_torque")
+    own = {v: [adapter.simulate(sc, v, h, 200).y for h in (sc.dt_s * 4, sc.dt_s)] for v in adapter.variants}
+    ones = {v: adapter.one_step(sc, v, sc.dt_s, own[v][1][::20]) for v in adapter.variants}
+    monkeypatch.setattr(type(adapter), "takes_body_torque", False)
+    for v in adapter.variants:
+        for y, h in zip(own[v], (sc.dt_s * 4, sc.dt_s)):
+            want = adapter.simulate(sc, v, h, 200).y
+            assert np.max(np.abs(y - want) / (np.abs(want).max(axis=0) + 1.0)) <= tol.SAME_SCHEME_REL, (v, h)
+        want = adapter.one_step(sc, v, sc.dt_s, own[v][1][::20])
+        assert np.max(np.abs(ones[v] - want) / (np.abs(want) + 1.0)) <= tol.SAME_SCHEME_REL, v
+
+
 def test_a_run_through_the_registry_records_the_engines_own_time_within_its_wall_time(adapter):
     variant = next(iter(adapter.variants))
     sc = load_scenario("spring_pendulum")

@@ -106,8 +106,13 @@ me = pytest.importorskip("cross_checks.engines.mujoco_engine")
 
 def _mujoco_numpy_loop(sc, variant, h, n):
     """The MuJoCo run as the adapter's NumPy formulas give it: forces from the start-of-step state (or at
-    every RK4 stage through the control callback), the decay applied to qvel before the step."""
+    every RK4 stage through the control callback), the decay applied to qvel before the step; the torques
+    fixed in body axes in qfrc_applied's rotational DOFs (body axes), scaled by γ_ω unless per stage."""
+    import dataclasses
+
     import mujoco
+
+    from cross_checks.engines.loop import body_torque_B, host_problem
     m = me.build_model(sc, variant, h)
     d = mujoco.MjData(m)
     xfrc = d.xfrc_applied[1]
@@ -115,6 +120,8 @@ def _mujoco_numpy_loop(sc, variant, h, n):
     d.qpos[:], d.qvel[:] = me.to_qpos_qvel(sc.problem.initial_packed())
     per_stage = me.forces_per_stage(sc, variant)
     gv, gw = forces.decay_factors(sc, h)
+    d.qfrc_applied[3:6] = body_torque_B(sc.problem) * (1.0 if per_stage else gw)
+    sc = dataclasses.replace(sc, problem=host_problem(sc.problem, True))   # the other forces
 
     def control(_m, dd):
         me._apply(xfrc, *forces.stage_force_torque(sc, me.to_packed(dd.qpos.copy(), dd.qvel.copy())), weight)
