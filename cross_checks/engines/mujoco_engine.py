@@ -112,13 +112,33 @@ def build_world_model(scenarios, variant: str, dt_s: float):
 
 
 def _add_body(spec, scenario, name: str) -> None:
-    """The scenario's free body in ``spec``: its joint on the body frame, its mass and inertia as given."""
+    """The scenario's free body in ``spec``: its joint on the body frame, its mass and inertia as given; a
+    body whose frame origin is off its COM (scenario.body_com_B_m) has its inertial frame there, and a body
+    of welded parts (scenario.body_parts) is the first part with the others as child bodies without a joint
+    (welded), each with its own inertial frame (MuJoCo #3553's form)."""
     body = scenario.problem.body
     b = spec.worldbody.add_body()
     b.name = name
     b.add_freejoint()
+    parts = getattr(scenario, "body_parts", ())
+    if parts:
+        _set_inertial(b, parts[0].mass_kg, parts[0].inertia_B, parts[0].com_B_m)
+        for k, part in enumerate(parts[1:], 1):
+            child = b.add_body()
+            child.name = f"{name}_part{k}"
+            child.pos = [0.0, 0.0, 0.0]    # the child's frame is the body frame: its part's COM from there
+            _set_inertial(child, part.mass_kg, part.inertia_B, part.com_B_m)
+        return
+    com = getattr(scenario, "body_com_B_m", None)
+    _set_inertial(b, body.mass_kg, body.inertia_B, np.zeros(3) if com is None else com)
+
+
+def _set_inertial(b, mass_kg, inertia_B, com_B_m) -> None:
+    """Body ``b``'s inertial frame: mass, its COM ``com_B_m`` in the body frame and the inertia about it."""
+    from reference_sim.body import RigidBody
+    body = RigidBody(float(mass_kg), inertia_B)
     b.explicitinertial = True
-    b.ipos = [0.0, 0.0, 0.0]               # explicit: unset (NaN) would let geoms override the inertial
+    b.ipos = [float(v) for v in com_B_m]   # explicit: unset (NaN) would let geoms override the inertial
     b.mass = float(body.mass_kg)
     if body.is_diagonal():
         b.iquat = [1.0, 0.0, 0.0, 0.0]
@@ -272,16 +292,68 @@ def _apply(xfrc, f, tau, weight):
     xfrc[3:6] = tau
 
 
-def _stage_force_writer(scenario, qpos, qvel, xfrc, weight):
+def _stage_force_writer(scenario, qpos, qvel, xfrc, weight, form=None):
     """Control callback body for one body, whose (stage) state is in the views ``qpos`` (7) and ``qvel`` (6)
     of the world's MjData: its forces into its row ``xfrc`` of xfrc_applied, as :func:`_apply` writes them,
-    in plain floats (it runs at every RK4 stage)."""
+    in plain floats (it runs at every RK4 stage). ``form`` (a body off its COM or of parts, BodyForm): the
+    state converted to the COM's, the force shared among its parts."""
     w0, w1, w2 = (float(c) for c in weight)
+    if form is not None:
+        def control_form(_m, _d):
+            y = form.com_rows(np.concatenate((qpos, qvel))[None])[0]
+            f = np.array(stage_force_torque_floats(scenario, y.tolist()))
+            form.write(xfrc, (f[0:3] - weight)[None], f[3:6][None])
+        return control_form
 
     def control(_m, _d):
         fx, fy, fz, tx, ty, tz = stage_force_torque_floats(scenario, _packed1(qpos, qvel))
         xfrc[:] = (fx - w0, fy - w1, fz - w2, tx, ty, tz)
     return control
+
+
+class BodyForm:
+    """The bodies of a world whose frame origin is off their COM or that are welded parts: per scenario
+    body, its COM in its frame (``com_B`` (B, 3), m) and the rows of xfrc_applied its parts are (the first
+    its jointed body) with their shares of its mass. MuJoCo's qpos/qvel are the body frame origin's
+    (x_o, v_o) and xfrc_applied acts at each MuJoCo body's own COM: the world force f at the composite COM
+    is shared by mass (Σ (m_i/m) f at the parts' COMs has no torque about their composite COM), the torque
+    goes to the jointed body."""
+
+    def __init__(self, scenarios):
+        self.com_B = np.array([np.zeros(3) if getattr(sc, "body_com_B_m", None) is None
+                               else np.asarray(sc.body_com_B_m, dtype=float) for sc in scenarios])
+        self.rows, row = [], 0
+        for sc in scenarios:
+            parts = getattr(sc, "body_parts", ())
+            m = [p.mass_kg for p in parts] or [sc.problem.body.mass_kg]
+            self.rows.append((list(range(row, row + len(m))), np.array(m) / sum(m)))
+            row += len(m)
+
+    def com_rows(self, raw):
+        """Raw rows ``[qpos (7), qvel (6)]`` (..., B, 13) -> packed COM states (..., B, 13)."""
+        from reference_sim.body import com_state
+        y = to_packed(raw[..., 0:7], raw[..., 7:13])
+        return com_state(y[..., 0:3], y[..., 3:6], y[..., 6:10], y[..., 10:13], self.com_B)
+
+    def origin_rows(self, y):
+        """Packed COM states (B, 13) -> qpos (B, 7), qvel (B, 6) of the body frame origins."""
+        from reference_sim.body import origin_state
+        x_o, v_o = origin_state(y, self.com_B)
+        y = np.array(y, dtype=float)
+        y[:, 0:3], y[:, 3:6] = x_o, v_o
+        return to_qpos_qvel(y)
+
+    def write(self, xfrc, f_W, tau_W):
+        """World forces ``f_W`` and torques ``tau_W`` (B, 3) at the bodies' COMs into ``xfrc`` (the world's
+        rows of xfrc_applied, from its first body's)."""
+        for (rows, share), f, tau in zip(self.rows, np.asarray(f_W, dtype=float), np.asarray(tau_W, dtype=float)):
+            for i, w in zip(rows, share):
+                xfrc[i, 0:3] = w * f
+                xfrc[i, 3:6] = tau if i == rows[0] else 0.0
+
+    def span(self, k) -> slice:
+        """Body ``k``'s rows of xfrc_applied (from the world's first body's)."""
+        return slice(self.rows[k][0][0], self.rows[k][0][-1] + 1)
 
 
 #: Each thread's compiled world models: ``(scenarios, build_world_model, model)`` (the scenarios matched by
@@ -340,13 +412,20 @@ class MujocoWorld(World):
         self.data = d = mujoco.MjData(m)
         self.qpos, self.qvel = d.qpos.reshape(self.B, 7), d.qvel.reshape(self.B, 6)
         self.xfrc = d.xfrc_applied[1:]
+        scs = [r.scenario for r in requests]
+        self.form = (BodyForm(scs) if any(getattr(sc, "body_com_B_m", None) is not None for sc in scs)
+                     else None)
         self.per_stage = forces_per_stage(requests[0].scenario, variant)
         self.n = 0
         self.host_s = 0.0
         control = None
         if self.per_stage:
             writers = [_stage_force_writer(r.scenario, self.qpos[k], self.qvel[k], self.xfrc[k],
-                                           base.weight_W(r.scenario)) for k, r in enumerate(requests)]
+                                           base.weight_W(r.scenario)) if self.form is None else
+                       _stage_force_writer(r.scenario, self.qpos[k], self.qvel[k],
+                                           self.xfrc[self.form.span(k)], base.weight_W(r.scenario),
+                                           BodyForm([r.scenario]))
+                       for k, r in enumerate(requests)]
             perf = time.perf_counter
 
             def control(m_, d_):
@@ -357,16 +436,25 @@ class MujocoWorld(World):
         self.session = Session(d, control).__enter__()
 
     def set_state(self, y):
-        qpos, qvel = to_qpos_qvel(y)
+        qpos, qvel = to_qpos_qvel(y) if self.form is None else self.form.origin_rows(y)
         self.data.time = 0.0
         self.qpos[:], self.qvel[:] = qpos, qvel
         self.n = 0
 
     def apply(self, f_W, tau_W):
+        if self.form is not None:
+            self.form.write(self.xfrc, f_W, tau_W)
+            return
         self.xfrc[:, 0:3] = f_W
         self.xfrc[:, 3:6] = tau_W
 
     def decay(self, g_v, g_w):
+        if self.form is not None:   # the COM's v and ω decay: the origin's velocity is v − ω × R c
+            y = self.form.com_rows(self.read())
+            y[:, 3:6] *= g_v[:, None]
+            y[:, 10:13] *= g_w[:, None]
+            self.qpos[:], self.qvel[:] = self.form.origin_rows(y)
+            return
         self.qvel[:, 0:3] *= g_v[:, None]
         self.qvel[:, 3:6] *= g_w[:, None]
 
@@ -387,10 +475,12 @@ class MujocoWorld(World):
 
     def packed(self, raw):
         raw = np.asarray(raw, dtype=float)
+        if self.form is not None:
+            return self.form.com_rows(raw)
         return to_packed(raw[..., 0:7], raw[..., 7:13])
 
     def packed_row(self, raw):
-        if self.B > 4:   # many bodies: the vectorised conversion, the same numbers (tested)
+        if self.B > 4 or self.form is not None:   # many bodies: the vectorised conversion, the same numbers (tested)
             return self.packed(np.asarray(raw, dtype=float)[None])[0]
         return [packed_floats(r[0:7], r[7:13]) for r in np.asarray(raw).tolist()]
 
@@ -426,6 +516,7 @@ class MujocoEngine(WorldEngine):
     name = ENGINE
     variants = VARIANTS
     distribution = "mujoco"
+    body_forms = frozenset({"com_offset", "welded_parts"})   # an inertial frame off the body's; welded children
     keeps_forces = True     # xfrc_applied is never cleared by MuJoCo
     chunk = 256
 

@@ -316,8 +316,8 @@ class WeldedSplit(Transform):
     """The body as two welded parts with its total mass, COM and inertia: a parent and a child taking
     ``child_mass`` of the mass, their COMs ``separation`` radii of gyration apart along a generic axis (on
     either side of the COM, so it stays at the origin), the inertia the parallel-axis terms leave shared
-    ``1 − child_inertia`` : ``child_inertia``. The separation is halved until both parts' inertias are
-    physical (a flat body leaves little room off its plane)."""
+    ``1 − child_inertia`` : ``child_inertia``. The parts lie apart perpendicular to the axis of the largest
+    moment (in a flat body's plane); the separation is halved until both parts' inertias are physical."""
 
     child_mass: float = tol.INVARIANCE_SPLIT_CHILD_MASS_FRACTION
     child_inertia: float = tol.INVARIANCE_SPLIT_CHILD_INERTIA_FRACTION
@@ -337,7 +337,11 @@ class WeldedSplit(Transform):
         from reference_sim.body import check_inertia
         m, inertia = float(d["body"]["mass"]), np.asarray(d["body"]["inertia"], dtype=float)
         f = float(self.child_mass)
-        u = _SPLIT_AXIS
+        # the parts apart along a generic direction perpendicular to the axis of the largest moment: in a flat
+        # body's plane (A + B = C: every part of a flat body is flat in that plane, or it is not physical)
+        axis = np.linalg.eigh(inertia)[1][:, -1]
+        u = _SPLIT_AXIS - float(_SPLIT_AXIS @ axis) * axis
+        u = u / float(np.linalg.norm(u))
         s = self.separation * _gyration_radius_m(d["body"])
         lam_min = float(np.linalg.eigvalsh(inertia)[0])
         for _ in range(60):
