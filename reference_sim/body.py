@@ -5,8 +5,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["RigidBody", "BodyPart", "compose_parts", "inertia_from_particles", "check_inertia", "principal_axes",
-           "origin_state", "com_state"]
+__all__ = ["RigidBody", "BodyPart", "compose_parts", "inertia_from_particles", "check_inertia",
+           "principal_axes", "origin_state", "com_state"]
 
 # Relative tolerance for symmetry and the triangle inequality of an inertia tensor: a few ulps of
 # the largest moment, so tensors typed with ~15 significant digits pass and real violations do not.
@@ -164,8 +164,8 @@ def compose_parts(parts) -> tuple:
     mass = float(m.sum())
     com = (m[:, None] * c).sum(axis=0) / mass
     d = c - com
-    inertia = sum(p.inertia_B for p in parts) + np.einsum(
-        "k,kij->ij", m, np.einsum("ki,ki->k", d, d)[:, None, None] * np.eye(3) - d[:, :, None] * d[:, None, :])
+    shift = np.einsum("ki,ki->k", d, d)[:, None, None] * np.eye(3) - d[:, :, None] * d[:, None, :]
+    inertia = sum(p.inertia_B for p in parts) + np.einsum("k,kij->ij", m, shift)
     return mass, com, 0.5 * (inertia + inertia.T)
 
 

@@ -419,7 +419,8 @@ def run_requests(name: str, requests) -> list:
     engine, variant = split_variant(name)
     adapter = get_adapter(engine)
     requests = list(requests)
-    why = [adapter.expressible(r.scenario, variant) or body_form_missing(adapter, r.scenario) for r in requests]
+    why = [adapter.expressible(r.scenario, variant) or body_form_missing(adapter, r.scenario)
+           for r in requests]
     todo = [r for r, w in zip(requests, why) if not w]
     t0 = time.perf_counter()
     done = adapter.simulate_many(variant, todo) if todo else []

@@ -346,7 +346,8 @@ class BodyForm:
     def write(self, xfrc, f_W, tau_W):
         """World forces ``f_W`` and torques ``tau_W`` (B, 3) at the bodies' COMs into ``xfrc`` (the world's
         rows of xfrc_applied, from its first body's)."""
-        for (rows, share), f, tau in zip(self.rows, np.asarray(f_W, dtype=float), np.asarray(tau_W, dtype=float)):
+        f_W, tau_W = np.asarray(f_W, dtype=float), np.asarray(tau_W, dtype=float)
+        for (rows, share), f, tau in zip(self.rows, f_W, tau_W):
             for i, w in zip(rows, share):
                 xfrc[i, 0:3] = w * f
                 xfrc[i, 3:6] = tau if i == rows[0] else 0.0
@@ -480,7 +481,8 @@ class MujocoWorld(World):
         return to_packed(raw[..., 0:7], raw[..., 7:13])
 
     def packed_row(self, raw):
-        if self.B > 4 or self.form is not None:   # many bodies: the vectorised conversion, the same numbers (tested)
+        # many bodies (or bodies off their COM): the vectorised conversion, the same numbers (tested)
+        if self.B > 4 or self.form is not None:
             return self.packed(np.asarray(raw, dtype=float)[None])[0]
         return [packed_floats(r[0:7], r[7:13]) for r in np.asarray(raw).tolist()]
 
@@ -516,7 +518,7 @@ class MujocoEngine(WorldEngine):
     name = ENGINE
     variants = VARIANTS
     distribution = "mujoco"
-    body_forms = frozenset({"com_offset", "welded_parts"})   # an inertial frame off the body's; welded children
+    body_forms = frozenset({"com_offset", "welded_parts"})   # inertial frame off the body's; welded children
     keeps_forces = True     # xfrc_applied is never cleared by MuJoCo
     chunk = 256
 

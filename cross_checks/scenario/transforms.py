@@ -291,7 +291,7 @@ class ComOffset(Transform):
         return f"{self.radii:g} gyration radii"
 
     def com_B_m(self, d: dict) -> np.ndarray:
-        """The COM in the body frame (m, body axes, from the origin) this transform gives the body of ``d``."""
+        """The COM in the body frame (m, body axes, from the origin) this transform gives ``d``'s body."""
         return self.radii * _gyration_radius_m(d["body"]) * _COM_AXIS
 
     def rewrite(self, d: dict) -> dict:
@@ -300,7 +300,8 @@ class ComOffset(Transform):
         r_W = _rot(ini["orientation"]) @ c
         b["com"] = list(c)
         ini["position"] = list(np.asarray(ini["position"]) - r_W)
-        ini["velocity"] = list(np.asarray(ini["velocity"]) - np.cross(np.asarray(ini["angular_velocity"]), r_W))
+        w_W = np.asarray(ini["angular_velocity"])
+        ini["velocity"] = list(np.asarray(ini["velocity"]) - np.cross(w_W, r_W))
         for s in fr["spring"]:
             s["attach"] = list(np.asarray(s["attach"]) + c)
         for p in fr["point"]:
@@ -355,7 +356,8 @@ class WeldedSplit(Transform):
                 pass
             s *= 0.5
         a = float(self.child_inertia)
-        return [{"mass": m * (1.0 - f), "com": list(f * s * u), "inertia": [list(r) for r in (1.0 - a) * rest]},
+        return [{"mass": m * (1.0 - f), "com": list(f * s * u),
+                 "inertia": [list(r) for r in (1.0 - a) * rest]},
                 {"mass": m * f, "com": list(-(1.0 - f) * s * u), "inertia": [list(r) for r in a * rest]}]
 
     def rewrite(self, d: dict) -> dict:

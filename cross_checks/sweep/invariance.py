@@ -128,7 +128,8 @@ def _refine(rows, refine, scenario, variant) -> None:
         devs = [j.deviation[q]]
         for level in range(len(fine)):
             a, b = runs[level * width], runs[level * width + 1 + k]
-            if any(isinstance(x, (EngineError, NotExpressible)) or x.meta.get("status") != "ok" for x in (a, b)):
+            if any(isinstance(x, (EngineError, NotExpressible)) or x.meta.get("status") != "ok"
+                   for x in (a, b)):
                 devs = None
                 break
             y0 = np.asarray(a.y, dtype=float)
@@ -140,16 +141,17 @@ def _refine(rows, refine, scenario, variant) -> None:
         steps = [a / b for a, b in zip([1.0] + list(tol.INVARIANCE_REFINEMENTS), tol.INVARIANCE_REFINEMENTS)]
         orders = [math.log(r) / math.log(1.0 / s) if r > 0 else -math.inf for r, s in zip(ratios, steps)]
         shown = ", ".join(f"{d:.3g}" for d in devs)
-        at = ", ".join(f"Δt/{r:g}" for r in [1] + list(tol.INVARIANCE_REFINEMENTS))
+        at = ", ".join(["Δt"] + [f"Δt/{r:g}" for r in tol.INVARIANCE_REFINEMENTS])
         said = (f"largest deviation in {q.replace('_', ' ')} {shown} {UNITS[q]} at {at}: order "
                 f"{', '.join(f'{o:.2f}' for o in orders)} as Δt shrinks")
         row = rows[i]
         if min(orders) >= tol.INVARIANCE_STEP_MIN_ORDER:
             row["verdict"] = "step-dependent"
-            row["assessment"] = (f"step-dependent (the scheme's own): {said}: the transformed run converges to "
-                                 f"the original's motion; the step is not covariant under this transform, and "
-                                 f"what parts them is its truncation error ({j.deviation[q] / j.allowance[q]:.3g}"
-                                 f"× round-off at Δt), vanishing as Δt → 0")
+            ratio = j.deviation[q] / j.allowance[q]
+            row["assessment"] = (f"step-dependent (the scheme's own): {said}: the transformed run converges "
+                                 "to the original's motion; the step is not covariant under this transform, "
+                                 f"and what parts them is its truncation error ({ratio:.3g}× round-off at "
+                                 "Δt), vanishing as Δt → 0")
         else:
             row["assessment"] = f"{row['assessment']}; it does not vanish as Δt shrinks ({said})"
 
