@@ -109,9 +109,14 @@ class BulletWorld(World):
             q_BP = quat_from_matrix(R_BP)
         self.q_BP.append(q_BP)
         x0, q0 = self._pose_in(scenario.problem.initial_packed(), len(self.bodies))
+        inertial = {}
+        com = getattr(scenario, "body_com_B_m", None)
+        if com is not None:   # the body frame's origin off the COM: the inertial frame's pose in the link frame
+            inertial = {"baseInertialFramePosition": [float(v) for v in com],
+                        "baseInertialFrameOrientation": [0.0, 0.0, 0.0, 1.0] if q_BP is None else _xyzw(q_BP)}
         b = p.createMultiBody(baseMass=float(body.mass_kg), baseCollisionShapeIndex=-1,
                               baseVisualShapeIndex=-1, basePosition=x0, baseOrientation=q0,
-                              useMaximalCoordinates=self.maximal, physicsClientId=c)
+                              useMaximalCoordinates=self.maximal, physicsClientId=c, **inertial)
         if b < 0:
             raise EngineError(f"pybullet.createMultiBody failed for scenario {scenario.name!r}")
         p.changeDynamics(b, -1, mass=float(body.mass_kg), localInertiaDiagonal=[float(v) for v in moments],
@@ -206,6 +211,8 @@ class PybulletEngine(WorldEngine):
     name = ENGINE
     variants = VARIANTS
     distribution = "pybullet"
+    #: a body frame off the COM: the base's inertial frame (its pose is what PyBullet's base state is)
+    body_forms = frozenset({"com_offset"})
 
     def version(self) -> str:
         return version()
