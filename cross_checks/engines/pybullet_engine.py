@@ -111,7 +111,7 @@ class BulletWorld(World):
         x0, q0 = self._pose_in(scenario.problem.initial_packed(), len(self.bodies))
         inertial = {}
         com = getattr(scenario, "body_com_B_m", None)
-        if com is not None:   # the body frame's origin off the COM: the inertial frame's pose in the link frame
+        if com is not None:   # the body frame origin off the COM: the inertial frame pose in the link frame
             inertial = {"baseInertialFramePosition": [float(v) for v in com],
                         "baseInertialFrameOrientation": [0.0, 0.0, 0.0, 1.0] if q_BP is None else _xyzw(q_BP)}
         b = p.createMultiBody(baseMass=float(body.mass_kg), baseCollisionShapeIndex=-1,

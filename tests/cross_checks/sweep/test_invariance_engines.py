@@ -12,6 +12,16 @@ import pytest
 from cross_checks.scenario import load_scenario
 from cross_checks.sweep.invariance import check_invariance
 
+#: What the two transforms that change the body's form give (measured; docs/engine_conventions.md, "Invariance"):
+#: MuJoCo's Euler integrates the body frame's origin, so with the origin off the COM the COM moves otherwise by
+#: the step's truncation error (order 1: step-dependent); PyBullet's base state is its inertial frame's (exact);
+#: rbcheck's PyBullet adapter builds no welded links.
+EXPECTED = {
+    ("mujoco:euler", "com_offset"): ("step-dependent",),
+    ("pybullet:multibody", "welded_split"): ("cannot express",),
+    ("pybullet:maximal", "welded_split"): ("cannot express",),
+}
+
 KNOWN = {
     ("pybullet:maximal", "scale k=0.01 mu=0.01"):
         "Bullet's solve33 drops the gyroscopic step below |det| 2.2e-16",
@@ -36,5 +46,6 @@ def _cases():
 @pytest.mark.parametrize("variant, index", list(_cases()))
 def test_tennis_racket_invariance(rows, variant, index):
     r = rows[variant][index]
-    allowed = ("holds", "precision loss") if r["transform"] == "translation" else ("holds",)
+    allowed = EXPECTED.get((variant, r["transform"])) or (
+        ("holds", "precision loss") if r["transform"] == "translation" else ("holds",))
     assert r["verdict"] in allowed, r["assessment"]
