@@ -247,7 +247,7 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
     body, com_offset, body_com, parts = _parse_body(r, raw)
     shift = com_offset if body_com is None else body_com
     initial = _parse_initial(r, raw)
-    if body_com is not None:   # the file's initial state is the body origin's: the COM's x_o + R c, v_o + ω × R c
+    if body_com is not None:   # the file's initial state is the origin's; the COM's: x_o + R c, v_o + ω × R c
         from reference_sim.body import com_state
         y = com_state(initial.x_W, initial.v_W, initial.q_WB, initial.w_W, body_com)
         initial = State(y[0:3], y[3:6], y[6:10], y[10:13])

@@ -5,7 +5,8 @@ dict in the scenario TOML's own key names, every alternative resolved, at the Δ
 factors too: e^(−kΔt) = γ^(Δt/dt)). A body whose frame origin is not at its COM (``body.com``, present only
 then: absent means [0, 0, 0]) has its initial position and velocity given for that origin and its body points
 from it; a body of welded parts lists them (``body.parts``, present only then).
-Its keys, with their units and frames, and the informative extra keys: docs/engines.md, "The resolved scenario".
+Its keys, with their units and frames, and the informative extra keys: docs/engines.md, "The resolved
+scenario".
 """
 from __future__ import annotations
 
@@ -142,7 +143,8 @@ def format_resolved(r: dict) -> str:
     for k, pt in enumerate(b.get("parts", ())):
         lines.append(f"  part {k}    {_num(pt['mass'])} kg, its COM at {_triple(pt['com'])} m (body axes, "
                      "from "
-                     f"the origin), inertia about it {', '.join(_triple(row) for row in pt['inertia'])} kg m² "
+                     f"the origin), inertia about it {', '.join(_triple(row) for row in pt['inertia'])} "
+                     "kg m² "
                      "(welded: one rigid body)")
     lines += [f"  principal moments {_triple(b['principal_moments'])} kg m²",
               "initial state",

@@ -245,7 +245,7 @@ def test_transform_is_abstract():
         Transform()
 
 
-# --- the body's form: its frame origin off the COM, welded parts ------------------------------------------------
+# --- the body's form: its frame origin off the COM, welded parts -------------------------------------------
 
 def test_a_com_offset_keeps_the_com_state_and_gives_the_origin_s_in_the_file():
     from cross_checks.scenario.resolved import resolved_scenario
@@ -263,11 +263,12 @@ def test_a_com_offset_keeps_the_com_state_and_gives_the_origin_s_in_the_file():
     y0 = sc.problem.initial_packed()
     r_W = rotate(y0[6:10], c)
     np.testing.assert_allclose(r["initial"]["position"], y0[0:3] - r_W, rtol=0, atol=1e-15)
-    np.testing.assert_allclose(r["initial"]["velocity"], y0[3:6] - np.cross(y0[10:13], r_W), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(r["initial"]["velocity"], y0[3:6] - np.cross(y0[10:13], r_W), rtol=0,
+                               atol=1e-15)
     assert r["body"]["com"] == list(c)
     np.testing.assert_allclose(r["forces"]["spring"][0]["attach"], sc.problem.forces.springs[0].attach_B + c,
                                rtol=0, atol=1e-15)
-    assert "com" not in resolved_scenario(sc)["body"]        # absent means [0, 0, 0]: old engine files unchanged
+    assert "com" not in resolved_scenario(sc)["body"]   # absent means [0, 0, 0]: old engine files unchanged
 
 
 def test_a_welded_split_has_the_original_s_mass_com_and_inertia_with_a_massive_child():

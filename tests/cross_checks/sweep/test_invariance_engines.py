@@ -12,10 +12,10 @@ import pytest
 from cross_checks.scenario import load_scenario
 from cross_checks.sweep.invariance import check_invariance
 
-#: What the two transforms that change the body's form give (measured; docs/engine_conventions.md, "Invariance"):
-#: MuJoCo's Euler integrates the body frame's origin, so with the origin off the COM the COM moves otherwise by
-#: the step's truncation error (order 1: step-dependent); PyBullet's base state is its inertial frame's (exact);
-#: rbcheck's PyBullet adapter builds no welded links.
+#: What the two transforms that change the body's form give (measured; docs/engine_conventions.md,
+#: "Invariance"): MuJoCo's Euler integrates the body frame's origin, so with the origin off the COM the COM
+#: moves otherwise by the step's truncation error (order 1: step-dependent); PyBullet's base state is its
+#: inertial frame's (exact); rbcheck's PyBullet adapter builds no welded links.
 EXPECTED = {
     ("mujoco:euler", "com_offset"): ("step-dependent",),
     ("pybullet:multibody", "welded_split"): ("cannot express",),
