@@ -197,3 +197,27 @@ def test_an_error_of_the_harness_leaves_the_pair_not_judged():
     rows = _run_item((sc, "nosuchengine:x", None, None, []))
     assert len(rows) == 9 and {r["verdict"] for r in rows} == {"not judged"}
     assert "internal error while checking" in rows[0]["assessment"]
+
+
+def test_a_splitting_along_a_degenerate_eigenspace_is_step_dependent_not_broken():
+    """reference:dlm_splitting splits the kinetic energy along the principal axes eigh returns; a symmetric
+    top's two equal moments leave eigh free to return any pair in their plane, and a turned body frame gets
+    another pair: the split (rotations about different axes do not commute) parts the runs by its O(Δt²)
+    truncation error, not by round-off (measured 7.05e-9, 1.76e-9, 4.41e-10 rad/s at Δt, Δt/2, Δt/4)."""
+    from cross_checks.scenario import load_scenario
+    from cross_checks.scenario.transforms import default_transforms
+    t = [x for x in default_transforms() if x.kind == "body_frame"]
+    (r,) = check_invariance(load_scenario("symmetric_top"), "reference:dlm_splitting", t)
+    assert r["verdict"] == "step-dependent", r["assessment"]
+    assert "order 2.00, 2.00" in r["assessment"] and r["worst_ratio"] > 1.0, r["assessment"]
+    # a body whose principal axes are unique (1, 2, 3 kg m²): the same scheme holds to round-off
+    (r,) = check_invariance(load_scenario("tennis_racket"), "reference:dlm_splitting", t)
+    assert r["verdict"] == "holds", r["assessment"]
+
+
+def test_an_adapter_that_does_not_build_a_body_form_says_cannot_express():
+    from cross_checks.scenario.transforms import ComOffset, WeldedSplit
+    rows = check_invariance(parse_scenario(TUMBLE, "t.toml"), "reference:course_gyro", [ComOffset(), WeldedSplit()])
+    assert [r["verdict"] for r in rows] == ["cannot express"] * 2
+    assert "reference cannot express a body whose frame origin is not at its COM" in rows[0]["assessment"]
+    assert "reference cannot express a body of welded parts" in rows[1]["assessment"]
