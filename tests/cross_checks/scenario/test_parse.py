@@ -373,7 +373,8 @@ def test_a_bad_body_form_is_refused_naming_the_field(body, field, words):
 
 def test_more_parts_than_the_limit_are_refused():
     from cross_checks.core.tolerances import MAX_BODY_PARTS
-    parts = "".join("[[body.parts]]\nmass = 1.0\ninertia = [1.0, 1.0, 1.0]\n" for _ in range(MAX_BODY_PARTS + 1))
+    one = "[[body.parts]]\nmass = 1.0\ninertia = [1.0, 1.0, 1.0]\n"
+    parts = one * (MAX_BODY_PARTS + 1)
     with pytest.raises(ScenarioError) as info:
         parse_scenario(_HEAD + parts + "[initial]\n", "f.toml")
     assert info.value.field == "body.parts" and f"1 to {MAX_BODY_PARTS}" in info.value.reason

@@ -217,7 +217,8 @@ def test_a_splitting_along_a_degenerate_eigenspace_is_step_dependent_not_broken(
 
 def test_an_adapter_that_does_not_build_a_body_form_says_cannot_express():
     from cross_checks.scenario.transforms import ComOffset, WeldedSplit
-    rows = check_invariance(parse_scenario(TUMBLE, "t.toml"), "reference:course_gyro", [ComOffset(), WeldedSplit()])
+    rows = check_invariance(parse_scenario(TUMBLE, "t.toml"), "reference:course_gyro",
+                            [ComOffset(), WeldedSplit()])
     assert [r["verdict"] for r in rows] == ["cannot express"] * 2
     assert "reference cannot express a body whose frame origin is not at its COM" in rows[0]["assessment"]
     assert "reference cannot express a body of welded parts" in rows[1]["assessment"]
