@@ -209,7 +209,8 @@ def test_a_splitting_along_a_degenerate_eigenspace_is_step_dependent_not_broken(
     t = [x for x in default_transforms() if x.kind == "body_frame"]
     (r,) = check_invariance(load_scenario("symmetric_top"), "reference:dlm_splitting", t)
     assert r["verdict"] == "step-dependent", r["assessment"]
-    assert "order 2.00, 2.00" in r["assessment"] and r["worst_ratio"] > 1.0, r["assessment"]
+    assert "7.05e-09, 1.76e-09, 4.41e-10 rad/s" in r["assessment"], r["assessment"]
+    assert "order 2.00 (then within round-off), 2.00" in r["assessment"] and r["worst_ratio"] > 1.0
     # a body whose principal axes are unique (1, 2, 3 kg m²): the same scheme holds to round-off
     (r,) = check_invariance(load_scenario("tennis_racket"), "reference:dlm_splitting", t)
     assert r["verdict"] == "holds", r["assessment"]
