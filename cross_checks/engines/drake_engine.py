@@ -110,7 +110,7 @@ def _force_system_class():
                 y = from_drake_state(np.array(x), self._com)
             f, tau = stage_force_torque(self._scenario, y)
             w = self._weight
-            if self._com is not None:   # f − m g at the COM is f − m g at Bo plus the torque (R c) × (f − m g)
+            if self._com is not None:   # f − m g at the COM: f − m g at Bo and the torque (R c) × (f − m g)
                 r_W = y[0:3] - np.asarray(x[4:7])
                 tau = np.asarray(tau) + np.cross(r_W, np.asarray(f) - np.asarray(w))
             output.SetFromVector(np.array([tau[0], tau[1], tau[2], f[0] - w[0], f[1] - w[1], f[2] - w[2]]))
@@ -143,6 +143,7 @@ def _add_bodies(plant, scenario):
     its welded parts (WeldJoint from the first part's frame, the body frame, to each other's: the same
     frame), each with its own COM and inertia. Returns the first (the floating) body."""
     from pydrake.math import RigidTransform
+
     from reference_sim.body import RigidBody
     parts = getattr(scenario, "body_parts", ())
     if not parts:
@@ -197,9 +198,9 @@ class DrakeModel:
         at its COM (a point fixed in the body, p_BoBq_B = c) on the applied spatial force port: Drake moves
         it to Bo in every configuration (a generalized force is about Bo)."""
         if self.com_B is not None:
+            from pydrake.common.value import AbstractValue
             from pydrake.multibody.math import SpatialForce
             from pydrake.multibody.plant import ExternallyAppliedSpatialForce
-            from pydrake.common.value import AbstractValue
             F = ExternallyAppliedSpatialForce()
             F.body_index, F.p_BoBq_B = self.body.index(), self.com_B
             F.F_Bq_W = SpatialForce(np.asarray(tau_W, dtype=float), np.asarray(f_W, dtype=float))
