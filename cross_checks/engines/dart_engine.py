@@ -113,20 +113,37 @@ class DartBody:
         p, body, world = scenario.problem, scenario.problem.body, dart.simulation.World()
         skeleton = dart.dynamics.Skeleton("body")
         joint, node = skeleton.createFreeJointAndBodyNodePair()
-        inertia = dart.dynamics.Inertia(float(body.mass_kg), _ZERO3, np.asarray(body.inertia_B, dtype=float))
-        if not inertia.verify():
-            raise EngineError(f"DART {version()} rejects the inertia of scenario "
-                              f"{scenario.name!r} (dart::dynamics::Inertia::verify "
-                              "is false: a mass or moment that is not positive)")
-        node.setInertia(inertia)
+        c = getattr(scenario, "body_com_B_m", None)
+        self.com_B = None if c is None else np.asarray(c, dtype=float)   # the body origin off the COM
+        parts = getattr(scenario, "body_parts", ())
+        inertias = ([(p_.mass_kg, p_.com_B_m, p_.inertia_B) for p_ in parts] if parts else
+                    [(body.mass_kg, _ZERO3 if c is None else self.com_B, body.inertia_B)])
+        nodes = [node]
+        for _ in inertias[1:]:   # welded parts: WeldJoint children at the body frame itself
+            _, child = skeleton.createWeldJointAndBodyNodePair(node)
+            nodes.append(child)
+        for n, (m, com, I) in zip(nodes, inertias):
+            inertia = dart.dynamics.Inertia(float(m), np.asarray(com, dtype=float),
+                                            np.asarray(I, dtype=float))
+            if not inertia.verify():
+                raise EngineError(f"DART {version()} rejects the inertia of scenario "
+                                  f"{scenario.name!r} (dart::dynamics::Inertia::verify "
+                                  "is false: a mass or moment that is not positive)")
+            n.setInertia(inertia)
         world.addSkeleton(skeleton)
         world.setGravity(np.asarray(p.forces.gravity_W, dtype=float))   # the world's reaches its skeletons
         world.setTimeStep(float(dt_s))
         neutralise(world, joint, node)
+        for child in nodes[1:]:
+            child.setCollidable(False)
         self.world, self.skeleton, self.joint, self.node = world, skeleton, joint, node
 
     def set_state(self, y) -> None:
         """Put the body at the packed state ``y`` (13,)."""
+        if self.com_B is not None:   # DART's state is the body origin's: x − R c, v − ω × R c
+            from reference_sim.body import origin_state
+            y = np.array(y, dtype=float)
+            y[0:3], y[3:6] = origin_state(y, self.com_B)
         s = to_dart_state(y)
         self.skeleton.setPositions(s[0:6])
         self.skeleton.setVelocities(s[6:12])
@@ -138,8 +155,16 @@ class DartBody:
     def apply(self, f_W, tau_W) -> None:
         """World force ``f_W`` (N) at the COM and world torque ``tau_W`` (N m), for the next step only (DART
         clears them after it). ``setExtForce`` first: it replaces the whole external wrench."""
+        if self.com_B is None:
+            self.node.setExtForce(f_W, _ZERO3, False, True)
+            self.node.setExtTorque(tau_W, False)
+            return
+        # the body origin off the COM: setExtTorque replaces the wrench's whole moment about the origin, the
+        # one setExtForce's offset made too, so the force at the origin and the moment of f at the COM added
+        r_W = self.node.getWorldTransform().rotation() @ self.com_B
         self.node.setExtForce(f_W, _ZERO3, False, True)
-        self.node.setExtTorque(tau_W, False)
+        self.node.setExtTorque(np.asarray(tau_W, dtype=float) + np.cross(r_W, np.asarray(f_W, dtype=float)),
+                               False)
 
 
 class DartWorld(World):
@@ -165,14 +190,32 @@ class DartWorld(World):
         return self.last
 
     def packed(self, raw):
-        return from_dart_state(raw)
+        y = from_dart_state(raw)
+        for k, b in enumerate(self.bodies):
+            if b.com_B is not None:   # the COM's x and v from the body origin's
+                from reference_sim.body import com_state
+                yk = y[..., k, :]
+                y[..., k, :] = com_state(yk[..., 0:3], yk[..., 3:6], yk[..., 6:10], yk[..., 10:13], b.com_B)
+        return y
 
     def packed_row(self, raw):
+        if any(b.com_B is not None for b in self.bodies):
+            return self.packed(np.asarray(raw, dtype=float)[None])[0].tolist()
         return [_packed_floats(r) for r in np.asarray(raw).tolist()]
 
     def decay(self, g_v, g_w):
-        """The velocities last read, scaled (the pose is not set again: its round trip is not exact)."""
-        for b, prev, gv, gw in zip(self.bodies, self.last, g_v.tolist(), g_w.tolist()):
+        """The velocities last read, scaled (the pose is not set again: its round trip is not exact); a body
+        whose origin is off its COM: the COM's v and ω scaled, the origin's v = v − ω × R c set."""
+        y_all = None
+        for k, (b, prev, gv, gw) in enumerate(zip(self.bodies, self.last, g_v.tolist(), g_w.tolist())):
+            if b.com_B is not None:
+                if y_all is None:
+                    y_all = self.packed(np.asarray(self.last, dtype=float)[None])[0]
+                y = y_all[k]
+                r_W = y[0:3] - np.asarray(prev[3:6])
+                w, v = gw * y[10:13], gv * y[3:6]
+                b.skeleton.setVelocities(np.concatenate([w, v - np.cross(w, r_W)]))
+                continue
             b.skeleton.setVelocities(np.array(prev[6:12]) * (gw, gw, gw, gv, gv, gv))
 
     def apply(self, f_W, tau_W):
@@ -193,6 +236,8 @@ class DartEngine(WorldEngine):
 
     name, variants = ENGINE, VARIANTS
     distribution, module, extra = "dartpy", "dartpy", "dart"
+    #: the COM off the body origin (Inertia's local COM); welded parts (WeldJoint children)
+    body_forms = frozenset({"com_offset", "welded_parts"})
     sign_continuity = True
 
     def version(self) -> str:
