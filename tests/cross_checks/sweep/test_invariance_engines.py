@@ -54,9 +54,10 @@ def test_tennis_racket_invariance(rows, variant, index):
 @pytest.mark.parametrize("variant", ["drake:semi_explicit_euler", "dart:semi_implicit_euler"])
 def test_drake_and_dart_express_the_body_s_form(variant):
     """Drake (SpatialInertia about Bo with p_BoBcm, WeldFrames) and DART (local COM, WeldJoint): the welded
-    split holds to round-off; the COM offset is step-dependent at order 1 (their Euler step integrates the body
-    origin: measured 0.465 (Drake) or 0.466 (DART), 0.231, 0.115 rad/s on spring_pendulum, as MuJoCo Euler). Before the DART adapter
-    added the moment setExtTorque drops, its COM offset was broken there (3.07 m/s, not vanishing)."""
+    split holds to round-off; the COM offset is step-dependent at order 1 (their Euler step integrates the
+    body origin: measured 0.465 (Drake) or 0.466 (DART), 0.231, 0.115 rad/s on spring_pendulum, as MuJoCo
+    Euler). Before the DART adapter added the moment setExtTorque drops, its COM offset was broken there
+    (3.07 m/s, not vanishing)."""
     engine = variant.split(":")[0]
     pytest.importorskip("pydrake" if engine == "drake" else "dartpy")
     from cross_checks.scenario.transforms import ComOffset, WeldedSplit
