@@ -5,7 +5,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["RigidBody", "inertia_from_particles", "check_inertia", "principal_axes"]
+__all__ = ["RigidBody", "BodyPart", "compose_parts", "inertia_from_particles", "check_inertia",
+           "principal_axes", "origin_state", "com_state"]
 
 # Relative tolerance for symmetry and the triangle inequality of an inertia tensor: a few ulps of
 # the largest moment, so tensors typed with ~15 significant digits pass and real violations do not.
@@ -135,3 +136,55 @@ class RigidBody:
     def world_inertia(self, R_WB):
         """World-frame inertia ``R I_B Rᵀ`` (kg m²) for rotations ``R_WB`` (..., 3, 3)."""
         return R_WB @ self.inertia_B @ np.swapaxes(R_WB, -1, -2)
+
+
+@dataclass(frozen=True, eq=False)
+class BodyPart:
+    """One of the rigidly joined (welded) parts of a body: ``mass_kg`` (kg), ``com_B_m`` (3,) its COM in the
+    body's own frame, from the body frame's origin (m, body axes), and ``inertia_B`` (3, 3) about its own COM
+    in body axes (kg m²)."""
+
+    mass_kg: float
+    com_B_m: np.ndarray
+    inertia_B: np.ndarray
+
+    def __post_init__(self):
+        if not (np.isfinite(self.mass_kg) and self.mass_kg > 0.0):
+            raise ValueError(f"mass must be a positive finite number, got {self.mass_kg!r}")
+        object.__setattr__(self, "com_B_m", np.asarray(self.com_B_m, dtype=float).reshape(3))
+        object.__setattr__(self, "inertia_B", check_inertia(self.inertia_B))
+
+
+def compose_parts(parts) -> tuple:
+    """The rigid body the welded ``parts`` (BodyPart) make: ``(mass_kg, com_B_m (3,) from the body frame's
+    origin, inertia_B (3, 3) about that COM in body axes)``; each part's inertia moved to the common COM by
+    the parallel-axis theorem, ``I = Σ [I_i + m_i ((d_iᵀ d_i) I₃ − d_i d_iᵀ)]``, ``d_i = com_i − com``."""
+    m = np.array([p.mass_kg for p in parts], dtype=float)
+    c = np.array([p.com_B_m for p in parts], dtype=float)
+    mass = float(m.sum())
+    com = (m[:, None] * c).sum(axis=0) / mass
+    d = c - com
+    shift = np.einsum("ki,ki->k", d, d)[:, None, None] * np.eye(3) - d[:, :, None] * d[:, None, :]
+    inertia = sum(p.inertia_B for p in parts) + np.einsum("k,kij->ij", m, shift)
+    return mass, com, 0.5 * (inertia + inertia.T)
+
+
+def origin_state(y, com_B_m):
+    """The body frame origin's position ``x_o = x − R c`` (m, world) and velocity ``v_o = v − ω × R c``
+    (m/s, world) of packed COM states ``y`` (..., 13) of a body whose COM is at ``com_B_m`` (3,) in its own
+    frame (m, body axes): ``(x_o, v_o)``, each (..., 3)."""
+    from reference_sim.quaternion import rotate
+    y = np.asarray(y, dtype=float)
+    r_W = rotate(y[..., 6:10], np.broadcast_to(np.asarray(com_B_m, dtype=float), y[..., 0:3].shape))
+    return y[..., 0:3] - r_W, y[..., 3:6] - np.cross(y[..., 10:13], r_W)
+
+
+def com_state(x_o_W, v_o_W, q_WB, w_W, com_B_m):
+    """Packed COM states (..., 13) of a body whose frame origin is at ``x_o_W`` (m, world) moving at
+    ``v_o_W`` (m/s, world), oriented ``q_WB`` (w, x, y, z) and turning at ``w_W`` (rad/s, world), with its COM
+    at ``com_B_m`` (3,) in its own frame: ``x = x_o + R c``, ``v = v_o + ω × R c``."""
+    from reference_sim.quaternion import rotate
+    x_o, v_o = np.asarray(x_o_W, dtype=float), np.asarray(v_o_W, dtype=float)
+    q, w = np.asarray(q_WB, dtype=float), np.asarray(w_W, dtype=float)
+    r_W = rotate(q, np.broadcast_to(np.asarray(com_B_m, dtype=float), x_o.shape))
+    return np.concatenate([x_o + r_W, v_o + np.cross(w, r_W), q, w], axis=-1)

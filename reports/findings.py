@@ -113,7 +113,8 @@ def findings(res) -> list:
 
 def _invariance(res, c) -> tuple:
     """Invariance checks (summary.json ``invariance``, docs/invariance.md): a broken one is bad; a precision
-    loss is information, with its number; what an engine cannot express, said once per variant."""
+    loss or a step-dependent one (the scheme's own truncation error) is information, with its number; what
+    an engine cannot express, said once per variant."""
     bad, info = [], []
     recs = sorted(res.summary.get("invariance") or [],
                   key=lambda r: (c.scen_order.get(r["scenario"], 99), c.var_order.get(r["engine"], 99)))
@@ -122,7 +123,7 @@ def _invariance(res, c) -> tuple:
                 f"{r['assessment']}.")
         if r["verdict"] == "broken":
             bad.append(Finding("bad", text, r["scenario"], r["engine"]))
-        elif r["verdict"] == "precision loss":
+        elif r["verdict"] in ("precision loss", "step-dependent"):
             info.append(Finding("info", text, r["scenario"], r["engine"]))
     return bad, info
 

@@ -297,10 +297,14 @@ def judge_long_run(variant: str, run_name: str, metrics, exp, status: str = "ok"
 #: Verdicts of an invariance check: ``holds`` (within the round-off of the motion itself), ``precision loss``
 #: (beyond it, within what the transform's larger magnitudes allow: expected, with its number), ``broken``
 #: (beyond the allowance: the engine, or its adapter, does not move the same physics the same),
+#: ``step-dependent`` (beyond it, but shrinking at a consistent scheme's order as Δt halves: the step is not
+#: covariant under the transform, and its truncation error parts the runs: the scheme's own, said with its
+#: numbers, never a failure; decided by cross_checks.sweep.invariance, which reruns the broken ones finer),
 #: ``cannot express`` (the engine cannot take the transformed scenario: said, never a failure) and
 #: ``refused`` (rbcheck refuses the transform on this scenario: it would leave the physical ranges) and
 #: ``not judged`` (the variant's run of the original failed or diverged: results.csv says why).
-INVARIANCE_VERDICTS = ("holds", "precision loss", "broken", "cannot express", "refused", "not judged")
+INVARIANCE_VERDICTS = ("holds", "precision loss", "step-dependent", "broken", "cannot express", "refused",
+                       "not judged")
 
 
 @dataclass(frozen=True)

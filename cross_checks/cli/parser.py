@@ -165,7 +165,8 @@ def _add_sweep(sub) -> None:
     s.add_argument("--invariance", action="store_true",
                    help="also run every variant on each scenario translated (10 m, 1 km, 10 km), in a "
                         "rotated "
-                        "world, with a non-principal body frame and scaled (k, mu = 0.01 and 100), each "
+                        "world, with a non-principal body frame, scaled (k, mu = 0.01 and 100), with its "
+                        "frame origin off its COM and split into two welded parts, each "
                         "mapped back and judged against its own run of the original: DIR/invariance.csv; "
                         "exit 1 on a broken invariance (docs/invariance.md)")
     s.add_argument("--engines", nargs="+", metavar="ENGINE[:VARIANT]",

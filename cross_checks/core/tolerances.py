@@ -351,6 +351,29 @@ INVARIANCE_TRANSLATIONS_M = (10.0, 1e3, 1e4)
 #: 1 cm, 10 g version of a 1 m, 1 kg body and its 100× larger, heavier twin). Within them every catalog body
 #: stays inside PHYSICAL_MASS_KG and PHYSICAL_INERTIA_KG_M2 (inertia × μk² from 1e-6 to 1e6).
 INVARIANCE_SCALES = ((1e-2, 1e-2), (1e2, 1e2))
+#: A broken invariance is run again at Δt/2 and Δt/4 (cross_checks.sweep.invariance): a deviation that is the
+#: step's truncation error (a step not covariant under the transform) shrinks with Δt; round-off or a wrong
+#: model does not. Two halvings: two pairwise orders, so one lucky ratio cannot decide.
+INVARIANCE_REFINEMENTS = (2.0, 4.0)
+#: The order each halving's deviation must shrink at to be the step's own: a consistent scheme's truncation
+#: error shrinks at order ≥ 1 (its declared order or more), read within the sweep's order tolerance
+#: SWEEP_ORDER_TOL (0.3); a wrong model plateaus (order ≈ 0), round-off grows (order < 0). Measured:
+#: reference:dlm_splitting on symmetric_top under the body-frame transform, 7.05e-9, 1.76e-9, 4.41e-10,
+#: 1.10e-10 rad/s at Δt, Δt/2, Δt/4, Δt/8 (order 2.00 each halving: its splitting along body axes).
+INVARIANCE_STEP_MIN_ORDER = 0.7
+#: The most welded parts a body may be given as (``[[body.parts]]``): the invariance check splits a body in
+#: two; a handful covers a user's composite body, and each part is a body every engine compiles.
+MAX_BODY_PARTS = 8
+#: The COM-offset transform puts the body frame's origin this many radii of gyration (sqrt(I_max / m)) from
+#: the COM: far enough that an engine that ignores the offset is off by a body's size, near enough that the
+#: origin stays inside a body of that size.
+INVARIANCE_COM_OFFSET_GYRATION_RADII = 1.5
+#: The welded split: the child's share of the mass (MuJoCo #3553's "massive fixed child": the larger part)
+#: and of the inertia left after the parallel-axis terms, and the distance between the two parts' COMs in
+#: radii of gyration (halved until the parts' inertias are physical).
+INVARIANCE_SPLIT_CHILD_MASS_FRACTION = 0.75
+INVARIANCE_SPLIT_CHILD_INERTIA_FRACTION = 0.6
+INVARIANCE_SPLIT_SEPARATION_GYRATION_RADII = 1.0
 #: The range a scale factor k or μ may take (a transform outside it is refused, naming k or mu).
 INVARIANCE_SCALE_RANGE = (1e-2, 1e2)
 #: An invariance check compares two runs of the same variant, each with its own round-off

@@ -404,6 +404,23 @@ def has_one_step(name: str) -> bool:
     return bool(e.adapter is not None and e.adapter.has_one_step)
 
 
+#: The body forms beyond "a body whose frame origin is its COM" (docs/invariance.md): an adapter says which it
+#: builds in its ``body_forms`` (a set of these); a scenario that needs another is "cannot express" for it.
+BODY_FORMS = {"com_offset": "a body whose frame origin is not at its COM (body.com)",
+              "welded_parts": "a body of welded parts (body.parts)"}
+
+
+def body_form_missing(adapter, scenario) -> str:
+    """"" when ``adapter`` builds the scenario's body as given (its ``body_forms``), else the sentence saying
+    which form it cannot build: an adapter that does not declare a form would build the body at its COM
+    (the same physics, so the check would say nothing), and must not pretend it expressed it."""
+    need = ("welded_parts" if getattr(scenario, "body_parts", ())
+            else "com_offset" if getattr(scenario, "body_com_B_m", None) is not None else "")
+    if not need or need in getattr(adapter, "body_forms", ()):
+        return ""
+    return f"{adapter.name or type(adapter).__name__} cannot express {BODY_FORMS[need]}"
+
+
 def not_expressible(scenario, name: str) -> str:
     """"" when engine variant ``name`` can run ``scenario``'s physics as written, else the engine's sentence
     saying what of it the engine cannot take (EngineAdapter.expressible). An engine that cannot be loaded
@@ -413,7 +430,7 @@ def not_expressible(scenario, name: str) -> str:
         adapter = get_adapter(engine)
     except Exception:  # noqa: BLE001 - unavailable: its runs say why
         return ""
-    return adapter.expressible(scenario, variant) or ""
+    return adapter.expressible(scenario, variant) or body_form_missing(adapter, scenario)
 
 
 def all_variants() -> list[VariantInfo]:
@@ -475,7 +492,8 @@ def run_requests(name: str, requests) -> list:
     engine, variant = split_variant(name)
     adapter = get_adapter(engine)
     requests = list(requests)
-    why = [adapter.expressible(r.scenario, variant) for r in requests]
+    why = [adapter.expressible(r.scenario, variant) or body_form_missing(adapter, r.scenario)
+           for r in requests]
     todo = [r for r, w in zip(requests, why) if not w]
     t0 = time.perf_counter()
     done = adapter.simulate_many(variant, todo) if todo else []

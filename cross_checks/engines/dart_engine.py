@@ -82,10 +82,47 @@ class DartBody(dtw.Body):
         _require()
         p = scenario.problem
         super().__init__(p.body.mass_kg, p.body.inertia_B, p.forces.gravity_W, dt_s)
+        c = getattr(scenario, "body_com_B_m", None)
+        self.com_B = None if c is None else np.asarray(c, dtype=float)   # the body origin off the COM
+        parts = getattr(scenario, "body_parts", ())
+        if parts or c is not None:   # Inertia's local COM; welded parts: WeldJoint children at the body frame
+            inertias = ([(q.mass_kg, q.com_B_m, q.inertia_B) for q in parts] if parts else
+                        [(p.body.mass_kg, self.com_B, p.body.inertia_B)])
+            nodes = [self.node]
+            for _ in inertias[1:]:
+                _, child = self.skeleton.createWeldJointAndBodyNodePair(self.node)
+                child.setCollidable(False)
+                nodes.append(child)
+            for n, (m, com, inertia_B) in zip(nodes, inertias):
+                inertia = dart.dynamics.Inertia(float(m), np.asarray(com, dtype=float),
+                                                np.asarray(inertia_B, dtype=float))
+                self.ok = self.ok and inertia.verify()
+                n.setInertia(inertia)
         if not self.ok:
             raise EngineError(f"DART {version()} rejects the inertia of scenario "
                               f"{scenario.name!r} (dart::dynamics::Inertia::verify "
                               "is false: a mass or moment that is not positive)")
+
+    def set_state(self, y) -> None:
+        """Put the body at the packed state ``y`` (13,); DART's state is the body origin's: x − R c,
+        v − ω × R c where it is off the COM."""
+        if self.com_B is not None:
+            from reference_sim.body import origin_state
+            y = np.array(y, dtype=float)
+            y[0:3], y[3:6] = origin_state(y, self.com_B)
+        super().set_state(y)
+
+    def apply(self, f_W, tau_W) -> None:
+        """World force ``f_W`` (N) at the COM and world torque ``tau_W`` (N m), for the next step only. With
+        the body origin off the COM, setExtTorque replaces the wrench's whole moment about the origin (the one
+        setExtForce's offset made too), so the moment of f at the COM is added to it."""
+        if self.com_B is None:
+            super().apply(f_W, tau_W)
+            return
+        r_W = self.node.getWorldTransform().rotation() @ self.com_B
+        self.node.setExtForce(f_W, np.zeros(3), False, True)
+        self.node.setExtTorque(np.asarray(tau_W, dtype=float) + np.cross(r_W, np.asarray(f_W, dtype=float)),
+                               False)
 
 
 class DartWorld(dtw.Bodies, World):
@@ -105,8 +142,35 @@ class DartWorld(dtw.Bodies, World):
         self.live = [not bad_floats(row) for row in rows]   # DART's |r| ≤ π: the packed state's verdict
         return rows
 
+    def packed(self, raw):
+        y = from_dart_state(raw)
+        for k, b in enumerate(self.bodies):
+            if b.com_B is not None:   # the COM's x and v from the body origin's
+                from reference_sim.body import com_state
+                yk = y[..., k, :]
+                y[..., k, :] = com_state(yk[..., 0:3], yk[..., 3:6], yk[..., 6:10], yk[..., 10:13], b.com_B)
+        return y
+
     def packed_row(self, raw):
+        if any(b.com_B is not None for b in self.bodies):
+            return self.packed(np.asarray(raw, dtype=float)[None])[0].tolist()
         return [_packed_floats(r) for r in np.asarray(raw).tolist()]
+
+    def decay(self, g_v, g_w):
+        """The velocities last read, scaled (the pose is not set again: its round trip is not exact); a body
+        whose origin is off its COM: the COM's v and ω scaled, the origin's v = v − ω × R c set."""
+        if all(b.com_B is None for b in self.bodies):
+            dtw.Bodies.decay(self, g_v, g_w)
+            return
+        y_all = self.packed(np.asarray(self.last, dtype=float)[None])[0]
+        for k, (b, prev, gv, gw) in enumerate(zip(self.bodies, self.last, g_v.tolist(), g_w.tolist())):
+            if b.com_B is None:
+                b.skeleton.setVelocities(np.array(prev[6:12]) * (gw, gw, gw, gv, gv, gv))
+                continue
+            y = y_all[k]
+            r_W = y[0:3] - np.asarray(prev[3:6])
+            w, v = gw * y[10:13], gv * y[3:6]
+            b.skeleton.setVelocities(np.concatenate([w, v - np.cross(w, r_W)]))
 
 
 class DartEngine(WorldEngine):
@@ -115,6 +179,8 @@ class DartEngine(WorldEngine):
 
     name, variants = ENGINE, VARIANTS
     distribution, module, extra = "dartpy", "dartpy", "dart"
+    #: the COM off the body origin (Inertia's local COM); welded parts (WeldJoint children)
+    body_forms = frozenset({"com_offset", "welded_parts"})
     sign_continuity = True
 
     def version(self) -> str:

@@ -62,17 +62,26 @@ def version() -> str:
     return install.installed_version("drake") or getattr(pydrake, "__version__", "unknown")   # from source
 
 
-def to_drake_state(y):
-    """Packed states (..., 13) ``[x_W, v_W, q_WB, ω_W]`` -> Drake's ``[q_WB, x_W, ω_W, v_W]`` (..., 13)."""
+def to_drake_state(y, com_B_m=None):
+    """Packed states (..., 13) ``[x_W, v_W, q_WB, ω_W]`` -> Drake's ``[q_WB, x_W, ω_W, v_W]`` (..., 13); for a
+    body whose COM is at ``com_B_m`` from its origin Bo, Drake's x and v are Bo's (x − R c, v − ω × R c)."""
     y = np.asarray(y, dtype=float)
+    if com_B_m is not None:
+        from reference_sim.body import origin_state
+        x_o, v_o = origin_state(y, com_B_m)
+        y = np.concatenate([x_o, v_o, y[..., 6:13]], axis=-1)
     return np.concatenate([y[..., 6:10], y[..., 0:3], y[..., 10:13], y[..., 3:6]], axis=-1)
 
 
-def from_drake_state(x):
-    """Drake's states (..., 13) -> packed (..., 13), the quaternion normalised (Drake's is not unit)."""
+def from_drake_state(x, com_B_m=None):
+    """Drake's states (..., 13) -> packed (..., 13), the quaternion normalised (Drake's is not unit); for a
+    body whose COM is at ``com_B_m`` from its origin, the COM's x and v (x_o + R c, v_o + ω × R c)."""
     x = np.asarray(x, dtype=float)
     with np.errstate(invalid="ignore", divide="ignore"):
         q = x[..., 0:4] / np.linalg.norm(x[..., 0:4], axis=-1, keepdims=True)
+    if com_B_m is not None:
+        from reference_sim.body import com_state
+        return com_state(x[..., 4:7], x[..., 10:13], q, x[..., 7:10], com_B_m)
     return np.concatenate([x[..., 4:7], x[..., 10:13], q, x[..., 7:10]], axis=-1)
 
 
@@ -86,9 +95,10 @@ def _force_system_class():
         scenario's forces and decay at that state (gravity is the plant's own); ``host_s``: the seconds spent
         evaluating it (rbcheck's, not Drake's)."""
 
-        def __init__(self, scenario):
+        def __init__(self, scenario, com_B_m=None):
             super().__init__()
             self._scenario, self._weight, self.host_s = scenario, forces.weight_W(scenario).tolist(), 0.0
+            self._com = com_B_m   # the body origin Bo off the COM: the state converted, the torque about Bo
             self._x = self.DeclareVectorInputPort("state", 13)
             self.DeclareVectorOutputPort("generalized_force", 6, self._calc)
 
@@ -97,16 +107,21 @@ def _force_system_class():
             t0 = time.perf_counter()
             x = self._x.Eval(context).tolist()
             y = [x[4], x[5], x[6], x[10], x[11], x[12], x[0], x[1], x[2], x[3], x[7], x[8], x[9]]
+            if self._com is not None:
+                y = from_drake_state(np.array(x), self._com)
             f, tau = stage_force_torque(self._scenario, y)
             w = self._weight
+            if self._com is not None:   # f − m g at the COM: f − m g at Bo and the torque (R c) × (f − m g)
+                r_W = y[0:3] - np.asarray(x[4:7])
+                tau = np.asarray(tau) + np.cross(r_W, np.asarray(f) - np.asarray(w))
             output.SetFromVector(np.array([tau[0], tau[1], tau[2], f[0] - w[0], f[1] - w[1], f[2] - w[2]]))
             self.host_s += time.perf_counter() - t0
     return StageForces
 
 
-def _spatial_inertia(body):
-    """The body's spatial inertia about its origin = COM, in body axes (principal moments rotated by
-    R_BP for a full tensor)."""
+def _spatial_inertia(body, com_B_m=None):
+    """The body's spatial inertia about its origin Bo, in body axes (principal moments rotated by R_BP for a
+    full tensor), its COM at ``com_B_m`` from Bo (p_BoBcm_B; default: at Bo)."""
     from pydrake.math import RotationMatrix
     from pydrake.multibody.tree import RotationalInertia, SpatialInertia
     if body.is_diagonal():
@@ -114,7 +129,32 @@ def _spatial_inertia(body):
     else:
         moments, R_BP = body.principal_axes()
         I = RotationalInertia(*moments).ReExpress(RotationMatrix(R_BP))
-    return SpatialInertia.MakeFromCentralInertia(float(body.mass_kg), np.zeros(3), I)
+    com = np.zeros(3) if com_B_m is None else np.asarray(com_B_m, dtype=float)
+    return SpatialInertia.MakeFromCentralInertia(float(body.mass_kg), com, I)
+
+
+def _com_of(scenario):
+    """The COM in the scenario's body frame from its origin (m; None: at the origin)."""
+    c = getattr(scenario, "body_com_B_m", None)
+    return None if c is None else np.asarray(c, dtype=float)
+
+
+def _add_bodies(plant, scenario):
+    """The scenario's body in ``plant``: one rigid body with its COM where the scenario puts it (p_BoBcm), or
+    its welded parts (WeldJoint from the first part's frame, the body frame, to each other's: the same
+    frame), each with its own COM and inertia. Returns the first (the floating) body."""
+    from pydrake.math import RigidTransform
+
+    from reference_sim.body import RigidBody
+    parts = getattr(scenario, "body_parts", ())
+    if not parts:
+        return plant.AddRigidBody("body", _spatial_inertia(scenario.problem.body, _com_of(scenario)))
+    bodies = [plant.AddRigidBody("body" if k == 0 else f"body_part{k}",
+                                 _spatial_inertia(RigidBody(p.mass_kg, p.inertia_B), p.com_B_m))
+              for k, p in enumerate(parts)]
+    for child in bodies[1:]:
+        plant.WeldFrames(bodies[0].body_frame(), child.body_frame(), RigidTransform())
+    return bodies[0]
 
 
 class DrakeModel:
@@ -128,8 +168,9 @@ class DrakeModel:
         from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
         from pydrake.systems.framework import DiagramBuilder
         p, self.plant = scenario.problem, (plant := MultibodyPlant(0.0))
+        self.com_B = _com_of(scenario)
         try:
-            self.body = plant.AddRigidBody("body", _spatial_inertia(p.body))
+            self.body = _add_bodies(plant, scenario)
         except RuntimeError as exc:  # Drake's validity checks of the inertia
             raise EngineError(
                 f"Drake {version()} rejected the inertia of scenario {scenario.name!r}: {exc}") from None
@@ -140,7 +181,7 @@ class DrakeModel:
         if self.per_stage:
             builder = DiagramBuilder()
             builder.AddSystem(plant)
-            fs = self.stage_forces = builder.AddSystem(_force_system_class()(scenario))
+            fs = self.stage_forces = builder.AddSystem(_force_system_class()(scenario, self.com_B))
             builder.Connect(plant.get_state_output_port(), fs.get_input_port(0))
             builder.Connect(fs.get_output_port(0), plant.get_applied_generalized_force_input_port())
             system = builder.Build()
@@ -154,7 +195,18 @@ class DrakeModel:
 
     def apply(self, f_W, tau_W) -> None:
         """The applied generalized force ``[τ_W, f_W]`` (N m, N, world axes; the force at the COM without the
-        weight, which the plant applies) from now on."""
+        weight, which the plant applies) from now on. A body whose origin is off its COM: the spatial force
+        at its COM (a point fixed in the body, p_BoBq_B = c) on the applied spatial force port: Drake moves
+        it to Bo in every configuration (a generalized force is about Bo)."""
+        if self.com_B is not None:
+            from pydrake.common.value import AbstractValue
+            from pydrake.multibody.math import SpatialForce
+            from pydrake.multibody.plant import ExternallyAppliedSpatialForce
+            F = ExternallyAppliedSpatialForce()
+            F.body_index, F.p_BoBq_B = self.body.index(), self.com_B
+            F.F_Bq_W = SpatialForce(np.asarray(tau_W, dtype=float), np.asarray(f_W, dtype=float))
+            self.plant.get_applied_spatial_force_input_port().FixValue(self.context, AbstractValue.Make([F]))
+            return
         port = self.plant.get_applied_generalized_force_input_port()
         port.FixValue(self.context, np.concatenate([tau_W, f_W]))
 
@@ -167,14 +219,14 @@ class DrakeModel:
 
     def set_state(self, y, t_s: float = 0.0) -> None:
         self.simulator.get_mutable_context().SetTime(float(t_s))
-        self.plant.SetPositionsAndVelocities(self.context, to_drake_state(y))
+        self.plant.SetPositionsAndVelocities(self.context, to_drake_state(y, self.com_B))
         self.simulator.Initialize()
 
     def drake_state(self) -> np.ndarray:
         return self.plant.GetPositionsAndVelocities(self.context)
 
     def state(self) -> np.ndarray:
-        return from_drake_state(self.drake_state())
+        return from_drake_state(self.drake_state(), self.com_B)
 
 
 def _model(scenario, variant: str, dt_s: float, constant_forces: bool = True) -> DrakeModel:
@@ -229,7 +281,11 @@ class DrakeWorld(World):
         return rows
 
     def packed(self, raw):
-        return from_drake_state(raw)
+        coms = [m.com_B for m in self.models]
+        if all(c is None for c in coms):
+            return from_drake_state(raw)
+        raw = np.asarray(raw, dtype=float)
+        return np.stack([from_drake_state(raw[..., k, :], c) for k, c in enumerate(coms)], axis=-2)
 
 
 class DrakeEngine(WorldEngine):
@@ -237,6 +293,8 @@ class DrakeEngine(WorldEngine):
 
     name, variants = ENGINE, VARIANTS
     distribution, module = "drake", "pydrake"
+    #: the COM off the body origin (SpatialInertia with p_BoBcm); welded parts (WeldJoint)
+    body_forms = frozenset({"com_offset", "welded_parts"})
     keeps_forces = True     # a fixed input port value stays until it is fixed again
     chunk = 256
 

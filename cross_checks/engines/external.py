@@ -308,6 +308,10 @@ def load_engine_file(path) -> ExternalEngine:
 class ExternalEngine(EngineAdapter):
     """An engine file as an adapter (picklable: plain data, so sweep workers receive it)."""
 
+    #: Its input is the resolved scenario, which says body.com and body.parts (docs/engines.md): an engine
+    #: file gets every body form, and one that ignores them is judged by the invariance checks.
+    body_forms = frozenset({"com_offset", "welded_parts"})
+
     def __init__(self, path: Path, name: str, version: str, description: str, timeout_s: float,
                  variants: dict, commands: dict, sha256: str, program_hashes: dict, folder_sha256: str = ""):
         self.path, self.name, self._version, self.description = Path(path), name, version, description

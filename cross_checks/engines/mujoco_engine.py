@@ -98,7 +98,7 @@ def build_world_model(scenarios, variant: str, dt_s: float):
         with _LOCK:
             prev = _clear_force_callbacks()
             try:
-                return mjw.build_model([body_spec(sc.problem.body) for sc in scenarios], forces.gravity_W,
+                return mjw.build_model([_body_entry(sc) for sc in scenarios], forces.gravity_W,
                                        variant, dt_s, name=f"rbcheck_{scenarios[0].name}")
             finally:
                 _restore_force_callbacks(prev)
@@ -116,6 +116,22 @@ def body_spec(body) -> tuple:
         return float(body.mass_kg), np.diag(body.inertia_B).copy(), [1.0, 0.0, 0.0, 0.0]
     moments, R_BP = body.principal_axes()
     return float(body.mass_kg), on_the_triangle(moments), quat_from_matrix(R_BP)
+
+
+def _body_entry(scenario) -> tuple:
+    """The scenario's body as :func:`cross_checks.engines.worlds.mujoco.build_model` takes it: its
+    :func:`body_spec`; a body whose frame origin is off its COM (scenario.body_com_B_m) with its inertial
+    frame there; a body of welded parts (scenario.body_parts) as the first part with the others as child
+    bodies without a joint, each with its own inertial frame (MuJoCo #3553's form)."""
+    from reference_sim.body import RigidBody
+    parts = getattr(scenario, "body_parts", ())
+    if parts:
+        first, *rest = [(*body_spec(RigidBody(float(q.mass_kg), q.inertia_B)),
+                         [float(v) for v in q.com_B_m]) for q in parts]
+        return (*first, rest)
+    com = getattr(scenario, "body_com_B_m", None)
+    spec = body_spec(scenario.problem.body)
+    return spec if com is None else (*spec, [float(v) for v in com], ())
 
 
 def on_the_triangle(moments_kg_m2) -> np.ndarray:
@@ -246,7 +262,7 @@ def _apply(xfrc, f, tau, weight):
     xfrc[3:6] = tau
 
 
-def _stage_force_writer(scenario, qpos, qvel, xfrc, weight):
+def _stage_force_writer(scenario, qpos, qvel, xfrc, weight, form=None):
     """Control callback body for one body, whose (stage) state is in the views ``qpos`` (7) and ``qvel`` (6)
     of the world's MjData: its forces into its row ``xfrc`` of xfrc_applied, as :func:`_apply` writes them,
     in plain floats (it runs at every RK4 stage). The torques fixed in body axes are not among them: MuJoCo
@@ -256,11 +272,63 @@ def _stage_force_writer(scenario, qpos, qvel, xfrc, weight):
     host = host_problem(scenario.problem, MujocoEngine.takes_body_torque)
     if host is not scenario.problem:
         scenario = dataclasses.replace(scenario, problem=host)
+    if form is not None:   # a body off its COM or of parts (BodyForm): the COM's state, the force shared
+        def control_form(_m, _d):
+            y = form.com_rows(np.concatenate((qpos, qvel))[None])[0]
+            f = np.array(stage_force_torque_floats(scenario, y.tolist()))
+            form.write(xfrc, (f[0:3] - weight)[None], f[3:6][None])
+        return control_form
 
     def control(_m, _d):
         fx, fy, fz, tx, ty, tz = stage_force_torque_floats(scenario, _packed1(qpos, qvel))
         xfrc[:] = (fx - w0, fy - w1, fz - w2, tx, ty, tz)
     return control
+
+
+class BodyForm:
+    """The bodies of a world whose frame origin is off their COM or that are welded parts: per scenario
+    body, its COM in its frame (``com_B`` (B, 3), m) and the rows of xfrc_applied its parts are (the first
+    its jointed body) with their shares of its mass. MuJoCo's qpos/qvel are the body frame origin's
+    (x_o, v_o) and xfrc_applied acts at each MuJoCo body's own COM: the world force f at the composite COM
+    is shared by mass (Σ (m_i/m) f at the parts' COMs has no torque about their composite COM), the torque
+    goes to the jointed body."""
+
+    def __init__(self, scenarios):
+        self.com_B = np.array([np.zeros(3) if getattr(sc, "body_com_B_m", None) is None
+                               else np.asarray(sc.body_com_B_m, dtype=float) for sc in scenarios])
+        self.rows, row = [], 0
+        for sc in scenarios:
+            parts = getattr(sc, "body_parts", ())
+            m = [q.mass_kg for q in parts] or [sc.problem.body.mass_kg]
+            self.rows.append((list(range(row, row + len(m))), np.array(m) / sum(m)))
+            row += len(m)
+
+    def com_rows(self, raw):
+        """Raw rows ``[qpos (7), qvel (6)]`` (..., B, 13) -> packed COM states (..., B, 13)."""
+        from reference_sim.body import com_state
+        y = to_packed(raw[..., 0:7], raw[..., 7:13])
+        return com_state(y[..., 0:3], y[..., 3:6], y[..., 6:10], y[..., 10:13], self.com_B)
+
+    def origin_rows(self, y):
+        """Packed COM states (B, 13) -> qpos (B, 7), qvel (B, 6) of the body frame origins."""
+        from reference_sim.body import origin_state
+        x_o, v_o = origin_state(y, self.com_B)
+        y = np.array(y, dtype=float)
+        y[:, 0:3], y[:, 3:6] = x_o, v_o
+        return to_qpos_qvel(y)
+
+    def write(self, xfrc, f_W, tau_W):
+        """World forces ``f_W`` and torques ``tau_W`` (B, 3) at the bodies' COMs into ``xfrc`` (the world's
+        rows of xfrc_applied, from its first body's)."""
+        f_W, tau_W = np.asarray(f_W, dtype=float), np.asarray(tau_W, dtype=float)
+        for (rows, share), f, tau in zip(self.rows, f_W, tau_W):
+            for i, w in zip(rows, share):
+                xfrc[i, 0:3] = w * f
+                xfrc[i, 3:6] = tau if i == rows[0] else 0.0
+
+    def span(self, k) -> slice:
+        """Body ``k``'s rows of xfrc_applied (from the world's first body's)."""
+        return slice(self.rows[k][0][0], self.rows[k][0][-1] + 1)
 
 
 #: Each thread's compiled world models: ``(scenarios, build_world_model, model)`` (the scenarios matched by
@@ -316,13 +384,20 @@ class MujocoWorld(mjw.Bodies, World):
         World.__init__(self)
         mjw.Bodies.__init__(self, _model([r.scenario for r in requests], variant, dt_s))
         d = self.data
+        scs = [r.scenario for r in requests]
+        self.form = (BodyForm(scs) if any(getattr(sc, "body_com_B_m", None) is not None for sc in scs)
+                     else None)
         self.per_stage = forces_per_stage(requests[0].scenario, variant)
         self.n = 0
         self.host_s = 0.0
         control = None
         if self.per_stage:
             writers = [_stage_force_writer(r.scenario, self.qpos[k], self.qvel[k], self.xfrc[k],
-                                           forces.weight_W(r.scenario)) for k, r in enumerate(requests)]
+                                           forces.weight_W(r.scenario)) if self.form is None else
+                       _stage_force_writer(r.scenario, self.qpos[k], self.qvel[k],
+                                           self.xfrc[self.form.span(k)], forces.weight_W(r.scenario),
+                                           BodyForm([r.scenario]))
+                       for k, r in enumerate(requests)]
             perf = time.perf_counter
 
             def control(m_, d_):
@@ -333,8 +408,32 @@ class MujocoWorld(mjw.Bodies, World):
         self.session = Session(d, control).__enter__()
 
     def set_state(self, y):
-        mjw.Bodies.set_state(self, y)
+        if self.form is None:
+            mjw.Bodies.set_state(self, y)
+        else:   # MuJoCo's state is the body frame origin's
+            self.data.time = 0.0
+            self.qpos[:], self.qvel[:] = self.form.origin_rows(y)
         self.n = 0
+
+    def apply(self, f_W, tau_W):
+        if self.form is None:
+            mjw.Bodies.apply(self, f_W, tau_W)
+        else:
+            self.form.write(self.xfrc, f_W, tau_W)
+
+    def decay(self, g_v, g_w):
+        if self.form is None:
+            mjw.Bodies.decay(self, g_v, g_w)
+            return
+        y = self.form.com_rows(self.read())   # the COM's v and ω decay: the origin's velocity is v − ω × R c
+        y[:, 3:6] *= g_v[:, None]
+        y[:, 10:13] *= g_w[:, None]
+        self.qpos[:], self.qvel[:] = self.form.origin_rows(y)
+
+    def packed(self, raw):
+        if self.form is None:
+            return mjw.Bodies.packed(self, raw)
+        return self.form.com_rows(np.asarray(raw, dtype=float))
 
     def step(self):
         self.n += 1
@@ -349,7 +448,8 @@ class MujocoWorld(mjw.Bodies, World):
                 self.warnings.append((k, self.n, f"MuJoCo: {words}"))
 
     def packed_row(self, raw):
-        if self.B > 4:   # many bodies: the vectorised conversion, the same numbers (tested)
+        # many bodies (or bodies off their COM): the vectorised conversion, the same numbers (tested)
+        if self.B > 4 or self.form is not None:
             return self.packed(np.asarray(raw, dtype=float)[None])[0]
         return [packed_floats(r[0:7], r[7:13]) for r in np.asarray(raw).tolist()]
 
@@ -395,6 +495,7 @@ class MujocoEngine(WorldEngine):
     distribution = "mujoco"
     keeps_forces = True     # xfrc_applied is never cleared by MuJoCo
     takes_body_torque = True   # a free joint's rotational DOFs are body axes: qfrc_applied holds τ_B itself
+    body_forms = frozenset({"com_offset", "welded_parts"})   # inertial frame off the body's; welded children
     chunk = 256
 
     def version(self) -> str:

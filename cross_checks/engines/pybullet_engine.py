@@ -103,7 +103,8 @@ class BulletWorld(pbw.Bodies, World):
             raise EngineError(f"PyBullet rejected the model of scenario {r.scenario.name!r}: {exc}") from None
 
     def _add(self, scenario):
-        if not self.add_body(*body_spec(scenario.problem.body), scenario.problem.initial_packed()):
+        if not self.add_body(*body_spec(scenario.problem.body), scenario.problem.initial_packed(),
+                             getattr(scenario, "body_com_B_m", None)):
             raise EngineError(f"pybullet.createMultiBody failed for scenario {scenario.name!r}")
 
     def packed_row(self, raw):
@@ -126,6 +127,8 @@ class PybulletEngine(WorldEngine):
     name = ENGINE
     variants = VARIANTS
     distribution = "pybullet"
+    #: a body frame off the COM: the base's inertial frame (its pose is what PyBullet's base state is)
+    body_forms = frozenset({"com_offset"})
 
     def version(self) -> str:
         return version()

@@ -7,7 +7,8 @@
    on the finest grid and its error, the amplification, the physics the expectations use, the exact
    one-step flows from reference states and their error, the conservation allowance. A case whose
    measured h L or A χ still exceeds its bound (× FUZZ_BOUND_SLACK) is skipped, never judged.
-3. :func:`evaluate` — every variant's runs (:mod:`cross_checks.fuzz.drivers`) and the four properties.
+3. :func:`evaluate` — every variant's runs (:mod:`cross_checks.fuzz.drivers`) and the five properties (the
+   invariance one under the transform drawn for the case: properties.case_transform).
 
 All cases of a batch share n0, the number of steps at their coarsest rung, so that they share the
 normalised time grid of the batched solves.
@@ -271,6 +272,17 @@ def _judge(ctx, variant, k, ladder, defects, tally, errors=None) -> list:
     return found
 
 
+def _invariance(ctx, variant, tally) -> list:
+    """The invariance property of one variant on one case: the sweep's check of the case under its drawn
+    transform (properties.case_transform), with the case's measured scales and amplification."""
+    from cross_checks.sweep.invariance import check_invariance
+    t = P.case_transform(ctx.scenario.name)
+    (row,) = check_invariance(ctx.scenario, variant, [t], scales=ctx.scales, amplification=ctx.amp)
+    recs, t_ = P.invariance(ctx, variant, row)
+    _add(tally, variant, t_)
+    return recs
+
+
 def evaluate(cases, contexts, members, y_end, variants) -> tuple:
     """Run every variant on the judged cases and check the properties: ([CaseOutcome], {variant: seconds})."""
     judged = [i for i, ctx in enumerate(contexts) if ctx is not None]
@@ -300,6 +312,9 @@ def evaluate(cases, contexts, members, y_end, variants) -> tuple:
             e_case = [{q: er[q][:, k] for q in QUANTITIES} for er in e_ladder]
             outcomes[i].violations += _judge(contexts[i], v, k, ladder, d, outcomes[i].tally, e_case)
         ladders[v] = ladder
+        for k, i in enumerate(judged):
+            if ladder[0].status[k] != drivers.NOT_EXPRESSIBLE:
+                outcomes[i].violations += _invariance(contexts[i], v, outcomes[i].tally)
         seconds[v] = time.perf_counter() - t0
     for pair in P.equivalent_pairs(variants):
         t0 = time.perf_counter()

@@ -1,4 +1,4 @@
-"""The four properties checked on every case, each with an allowance derived as the sweep derives its own
+"""The five properties checked on every case, each with an allowance derived as the sweep derives its own
 (docs/fuzz.md §2). For a case (its measured :class:`Context`) and a variant's runs:
 
 * ``free_running_order`` — the largest error over the run at h, h/2, h/4, per quantity, judged above its
@@ -9,6 +9,10 @@
   that physics: the largest drift within ``analysis.flow.conservation_allowance`` plus the run's round-off;
 * ``agreement`` — the pairs of ``analysis.expectations.EQUIVALENT_PAIRS`` agree to round-off over the
   run: ``max(SAME_SCHEME_REL, FUZZ_ROUNDINGS_PER_STEP · N ε · A)`` relative to each quantity's scale.
+* ``invariance`` — the case written another way (one transform of scenario.transforms drawn per case,
+  :func:`case_transform`) moves the same once mapped back: the sweep's check (sweep.invariance,
+  judged by ``analysis.judge.judge_invariance`` at h0, a broken one rerun finer); ``broken`` is a violation,
+  ``cannot express`` and ``refused`` count as no claim.
 
 Each function returns ``(violations, tally)``: violation records (with a sentence saying which property
 failed and by how much) and ``{property: [checked, no_claim]}`` counts.
@@ -34,9 +38,9 @@ from cross_checks.core.quantities import QUANTITIES, UNITS, state_errors
 from cross_checks.engines import resolve
 
 __all__ = ["Context", "ladder_errors", "free_running_order", "run_floor", "one_step_order", "conservation",
-           "agreement", "PROPERTIES", "equivalent_pairs"]
+           "agreement", "PROPERTIES", "equivalent_pairs", "invariance", "case_transform"]
 
-PROPERTIES = ("free_running_order", "one_step_order", "conservation", "agreement")
+PROPERTIES = ("free_running_order", "one_step_order", "conservation", "agreement", "invariance")
 _EPS = 2.0 ** -52
 
 
@@ -112,6 +116,41 @@ def lever_floor(ctx, q, h, t, n, amp=1.0, variant: str = "") -> float:
     if q == "velocity":
         return u * n * amp
     return u * n * h * amp
+
+
+def case_transform(name: str):
+    """The transform drawn for the case called ``name`` (scenario.transforms.default_transforms, uniformly):
+    from a generator seeded by the name alone, so a case and every shrunk version of it (which keeps its
+    name) are checked under the same transform."""
+    import hashlib
+
+    from cross_checks.scenario.transforms import default_transforms
+    seed = int.from_bytes(hashlib.sha256(f"invariance:{name}".encode()).digest()[:8], "little")
+    options = default_transforms()
+    return options[int(np.random.default_rng(seed).integers(len(options)))]
+
+
+def invariance(ctx: Context, variant: str, row: dict) -> tuple:
+    """The invariance property of one case from its check's row (sweep.invariance.check_invariance at the
+    case's h0): a violation where it is ``broken``; checked where it holds, loses precision as expected or
+    is the step's own; no claim where the engine cannot express it, rbcheck refuses it or the original's
+    run failed (its order property says why)."""
+    tally, out = _tally(), []
+    verdict = row["verdict"]
+    if verdict in ("cannot express", "refused", "not judged"):
+        tally["invariance"][1] += 1
+        return out, tally
+    tally["invariance"][0] += 1
+    if verdict == "broken":
+        ratio = row["worst_ratio"]
+        q = row["worst_quantity"] or "position"
+        out.append({"property": "invariance", "variants": [variant], "quantity": q,
+                    "transform": f"{row['transform']} {row['magnitude']}",
+                    "ratio": float(ratio) if isinstance(ratio, float) and math.isfinite(ratio) else None,
+                    "dt_s": float(ctx.scenario.dt_s),
+                    "sentence": (f"{variant}: under {row['transform']} {row['magnitude']} the case does not "
+                                 f"move the same: {row['assessment']}")})
+    return out, tally
 
 
 def _tally():

@@ -135,10 +135,23 @@ def check_physical_ranges(scenario) -> None:
 
 def _check_physical_ranges(scenario) -> None:
     p = scenario.problem
-    src = "body.particles" if scenario.com_offset_B_m is not None else "body.mass"
+    parts = getattr(scenario, "body_parts", ())
+    src = ("body.particles" if scenario.com_offset_B_m is not None else "body.parts" if parts
+           else "body.mass")
     _in_range(p.body.mass_kg, *tol.PHYSICAL_MASS_KG, src, "the mass", "kg")
+    for i, part in enumerate(parts):
+        _in_range(part.mass_kg, *tol.PHYSICAL_MASS_KG, f"body.parts[{i}].mass", "the part's mass", "kg")
+    body_com = getattr(scenario, "body_com_B_m", None)
+    if body_com is not None:
+        _in_range(float(np.linalg.norm(body_com)), 0.0, tol.PHYSICAL_MAX_DISTANCE_M,
+                  "body.parts" if parts else "body.com", "the distance |c| of the COM from the body frame's "
+                  "origin", "m")
+        _in_range(float(np.linalg.norm(scenario.raw.get("initial", {}).get("position", [0.0, 0.0, 0.0]))),
+                  0.0, tol.PHYSICAL_MAX_DISTANCE_M, "initial.position",
+                  "the distance of the body frame's origin from the world origin", "m")
     moments = np.linalg.eigvalsh(p.body.inertia_B)
-    where = "body.particles" if scenario.com_offset_B_m is not None else "body.inertia"
+    where = ("body.particles" if scenario.com_offset_B_m is not None else "body.parts" if parts
+             else "body.inertia")
     _in_range(float(moments[0]), *tol.PHYSICAL_INERTIA_KG_M2, where, "the smallest principal moment", "kg m²")
     _in_range(float(moments[-1]), *tol.PHYSICAL_INERTIA_KG_M2, where, "the largest principal moment", "kg m²")
     _in_range(float(moments[-1] / moments[0]), 1.0, tol.PHYSICAL_MAX_INERTIA_RATIO, where,

@@ -59,6 +59,12 @@ class Scenario:
     kind : one of SCENARIO_KINDS: ``"convergence"`` (a Δt ladder judged against a reference) or
         ``"long_run"`` (one Δt over a long duration, judged on what it conserves: docs/scenario.md,
         "Long runs").
+    body_com_B_m : for a body given with ``com`` or ``parts``, its COM in the body's own frame, from the
+        frame's origin (m, body axes): the origin is not at the COM (the COM-offset invariance check,
+        docs/invariance.md). The file's initial position and velocity are the origin's and its body points
+        are from the origin; the Problem's are the COM's (converted here). None: the origin is at the COM.
+    body_parts : for a body given as ``parts``, its welded parts (reference_sim.body.BodyPart, COMs from
+        the body frame's origin); the Problem's body is their composite. Empty otherwise.
     """
 
     name: str
@@ -72,6 +78,8 @@ class Scenario:
     raw: dict = field(repr=False)
     com_offset_B_m: np.ndarray | None = None
     kind: str = "convergence"
+    body_com_B_m: np.ndarray | None = None
+    body_parts: tuple = ()
 
     @property
     def long_run(self) -> bool:
@@ -219,7 +227,8 @@ def _show(v):
 
 _TOP = {"name", "description", "kind", "duration", "dt", "dt_ladder", "reference", "body", "initial",
         "forces"}
-_BODY = {"mass", "inertia", "particles"}
+_BODY = {"mass", "inertia", "particles", "com", "parts"}
+_PART = {"mass", "com", "inertia"}
 _INITIAL = {"position", "velocity", "orientation", "euler_zxy_deg",
             "angular_velocity", "angular_velocity_body"}
 _FORCES = {"gravity", "linear_drag", "velocity_decay", "angular_velocity_decay", "spring", "point", "torque"}
@@ -235,11 +244,17 @@ def parse_scenario(text: str, source: str = "<string>") -> Scenario:
     r.check_keys(raw, _TOP, "")
     name, description, duration, dt, ladder, reference = _parse_timing(r, raw)
     kind = r.string(raw, "kind", "kind", default="convergence", choices=SCENARIO_KINDS)
-    body, com_offset = _parse_body(r, raw)
-    problem = Problem(body, _parse_forces(r, raw, dt, com_offset), _parse_initial(r, raw))
+    body, com_offset, body_com, parts = _parse_body(r, raw)
+    shift = com_offset if body_com is None else body_com
+    initial = _parse_initial(r, raw)
+    if body_com is not None:   # the file's initial state is the origin's; the COM's: x_o + R c, v_o + ω × R c
+        from reference_sim.body import com_state
+        y = com_state(initial.x_W, initial.v_W, initial.q_WB, initial.w_W, body_com)
+        initial = State(y[0:3], y[3:6], y[6:10], y[10:13])
+    problem = Problem(body, _parse_forces(r, raw, dt, shift), initial)
     sc = Scenario(name=name, description=description, duration_s=duration, dt_s=dt, dt_ladder_s=ladder,
                   reference=reference, problem=problem, source=source, raw=raw, com_offset_B_m=com_offset,
-                  kind=kind)
+                  kind=kind, body_com_B_m=body_com, body_parts=parts)
     if sc.long_run:
         _check_long_run(r, raw, sc)
     _check_scenario(r, sc)
@@ -294,11 +309,25 @@ def _parse_timing(r, raw):
 
 
 def _parse_body(r, raw):
-    """The rigid body (mass, inertia in body axes about the COM) and, for a particle body, the COM in the
-    particles' coordinates (m; None for a body given by mass and inertia)."""
+    """``(body, com_offset, body_com, parts)``: the rigid body (mass, inertia in body axes about the COM); for
+    a particle body, the COM in the particles' coordinates (m; else None); for a body given with ``com`` or
+    ``parts``, the COM in the body's own frame from its origin (m; else None); the welded parts (BodyPart;
+    else empty)."""
     b = r.table(raw, "body")
     r.check_keys(b, _BODY, "body")
     com_offset = None
+    if "parts" in b:
+        for other in ("mass", "inertia", "particles", "com"):
+            if other in b:
+                raise r.err(f"body.{other}", "give either parts (each with its mass, com and inertia) or "
+                                             "mass + inertia (+ com) or particles, not both")
+        return _parse_parts(r, b)
+    body_com = None
+    if "com" in b:
+        if "particles" in b:
+            raise r.err("body.com", "a particle body's COM is where its particles put it; give com only "
+                                    "with mass + inertia")
+        body_com = r.vector(b, "com", "body.com", 3)
     if "particles" in b:
         if "mass" in b or "inertia" in b:
             raise r.err("body.particles", "give either particles or mass + inertia, not both")
@@ -335,7 +364,50 @@ def _parse_body(r, raw):
             raise r.err("body.inertia", str(exc)) from None
         body = RigidBody(mass, inertia)
 
-    return body, com_offset
+    return body, com_offset, body_com, ()
+
+
+def _inertia(r, d, fld):
+    """An inertia of the file at ``d[inertia]``: 3 principal moments or a 3×3 tensor (kg m²), checked."""
+    shape_msg = "must be 3 principal moments [A, B, C] or a 3x3 tensor [[..], [..], [..]] (kg m^2)"
+    if "inertia" not in d:
+        raise r.err(fld, "missing (required)")
+    I = d["inertia"]
+    if not isinstance(I, list):
+        raise r.err(fld, f"{shape_msg}, got {_show(I)}")
+    if any(isinstance(e, list) for e in I):
+        if len(I) != 3 or not all(isinstance(e, list) for e in I):
+            raise r.err(fld, f"{shape_msg}, got {len(I)} rows")
+        inertia = np.array([r.vector({"v": row}, "v", f"{fld}[{i}]", 3) for i, row in enumerate(I)])
+    else:
+        inertia = r.vector(d, "inertia", fld, 3)
+    try:
+        return check_inertia(inertia)
+    except ValueError as exc:
+        raise r.err(fld, str(exc)) from None
+
+
+def _parse_parts(r, b):
+    """A body given as welded parts (``[[body.parts]]``: mass, com from the body frame's origin, inertia
+    about the part's own COM): the composite body, its COM in the body frame, and the parts."""
+    from cross_checks.core.tolerances import MAX_BODY_PARTS
+    from reference_sim.body import BodyPart, compose_parts
+    entries = r.array_of_tables(b, "parts", "body.parts")
+    if not 1 <= len(entries) <= MAX_BODY_PARTS:
+        raise r.err("body.parts", f"must list 1 to {MAX_BODY_PARTS} parts, got {len(entries)}")
+    parts = []
+    for i, d in enumerate(entries):
+        where = f"body.parts[{i}]"
+        r.check_keys(d, _PART, where)
+        parts.append(BodyPart(r.number(d, "mass", f"{where}.mass", required=True, positive=True),
+                              r.vector(d, "com", f"{where}.com", 3, default=[0.0, 0.0, 0.0]),
+                              _inertia(r, d, f"{where}.inertia")))
+    mass, com, inertia = compose_parts(parts)
+    try:
+        body = RigidBody(mass, inertia)
+    except ValueError as exc:
+        raise r.err("body.parts", f"the inertia these parts make {exc}") from None
+    return body, None, com, tuple(parts)
 
 
 def _parse_initial(r, raw) -> State:
@@ -367,7 +439,8 @@ def _parse_initial(r, raw) -> State:
 
 
 def _parse_forces(r, raw, dt, com_offset) -> ForceModel:
-    """The [forces] table; body points are taken from the COM (particle bodies: shifted by ``com_offset``)."""
+    """The [forces] table; body points are taken from the COM (shifted by ``com_offset``: a particle body's
+    COM in the particles' coordinates, or the COM in the body frame of a body given with com or parts)."""
     fr = r.table(raw, "forces", required=False)
     r.check_keys(fr, _FORCES, "forces")
     gravity = r.vector(fr, "gravity", "forces.gravity", 3, default=[0.0, 0.0, 0.0])
@@ -381,7 +454,8 @@ def _parse_forces(r, raw, dt, com_offset) -> ForceModel:
 
     def body_point(d, key, fld):
         """A body point of the file (attach, point) -> from the COM (m, body axes). For a particle body
-        the file gives it in the particles' own coordinates: shifted by their COM. Omitted: the COM."""
+        the file gives it in the particles' own coordinates, for a body given with com or parts from the
+        body frame's origin: shifted by the COM. Omitted: the COM (0 before the shift)."""
         if key not in d:
             return np.zeros(3)
         p = r.vector(d, key, fld, 3)

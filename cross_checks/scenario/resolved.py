@@ -2,8 +2,11 @@
 
 :func:`resolved_scenario` turns a validated :class:`~cross_checks.scenario.Scenario` into a plain
 dict in the scenario TOML's own key names, every alternative resolved, at the Δt of one run (the decay
-factors too: e^(−kΔt) = γ^(Δt/dt)). Its keys, with their units and frames, and the informative extra keys:
-docs/engines.md, "The resolved scenario".
+factors too: e^(−kΔt) = γ^(Δt/dt)). A body whose frame origin is not at its COM (``body.com``, present only
+then: absent means [0, 0, 0]) has its initial position and velocity given for that origin and its body points
+from it; a body of welded parts lists them (``body.parts``, present only then).
+Its keys, with their units and frames, and the informative extra keys: docs/engines.md, "The resolved
+scenario".
 """
 from __future__ import annotations
 
@@ -35,7 +38,13 @@ def resolved_scenario(scenario, dt_s: float | None = None, duration_s: float | N
     fm = p.forces
     gv, gw = fm.decay_factors(dt)     # e^(−kΔt) = γ^(Δt/dt), what the reference variants apply
     kv, kw = fm.decay_rates_per_s()
-    return {
+    c = getattr(scenario, "body_com_B_m", None)
+    shift = np.zeros(3) if c is None else np.asarray(c, dtype=float)   # body points: from the frame's origin
+    x0, v0 = y0[X], y0[V]
+    if c is not None:
+        from reference_sim.body import origin_state
+        x0, v0 = origin_state(y0, c)
+    out = {
         "name": scenario.name,
         "description": scenario.description,
         "duration": T,
@@ -52,8 +61,8 @@ def resolved_scenario(scenario, dt_s: float | None = None, duration_s: float | N
             "principal_moments": _vec(np.linalg.eigvalsh(p.body.inertia_B)),
         },
         "initial": {
-            "position": _vec(y0[X]),
-            "velocity": _vec(y0[V]),
+            "position": _vec(x0),
+            "velocity": _vec(v0),
             "orientation": _vec(q0),
             "angular_velocity": _vec(y0[W]),
             "angular_velocity_body": _vec(rotate(quat_conj(q0), y0[W])),
@@ -65,14 +74,23 @@ def resolved_scenario(scenario, dt_s: float | None = None, duration_s: float | N
             "angular_velocity_decay": float(gw),
             "velocity_decay_rate": float(kv),
             "angular_velocity_decay_rate": float(kw),
-            "spring": [{"anchor": _vec(s.anchor_W), "attach": _vec(s.attach_B),
+            "spring": [{"anchor": _vec(s.anchor_W), "attach": _vec(s.attach_B + shift),
                         "stiffness": float(s.stiffness_N_per_m), "rest_length": float(s.rest_length_m)}
                        for s in fm.springs],
-            "point": [{"force": _vec(f.force), "point": _vec(f.point_B), "frame": f.frame}
+            "point": [{"force": _vec(f.force), "point": _vec(f.point_B + shift), "frame": f.frame}
                       for f in fm.point_forces],
             "torque": [{"torque": _vec(t.torque), "frame": t.frame} for t in fm.torques],
         },
     }
+    if c is not None:   # the body frame's origin is not at the COM: said only then (absent means [0, 0, 0])
+        out["body"]["com"] = _vec(c)
+        out["initial"]["com_position"] = _vec(y0[X])
+        out["initial"]["com_velocity"] = _vec(y0[V])
+    parts = getattr(scenario, "body_parts", ())
+    if parts:
+        out["body"]["parts"] = [{"mass": float(pt.mass_kg), "com": _vec(pt.com_B_m),
+                                 "inertia": [_vec(row) for row in pt.inertia_B]} for pt in parts]
+    return out
 
 
 def resolved_json(scenario, dt_s: float | None = None, duration_s: float | None = None) -> str:
@@ -108,6 +126,7 @@ def _triple(v) -> str:
 def format_resolved(r: dict) -> str:
     """The resolved scenario for a person setting up their own simulator (units and frames spelled out)."""
     b, i, f = r["body"], r["initial"], r["forces"]
+    origin = "COM" if "com" not in b else "body frame's origin"
     euler, locked = euler_zxy_from_quat(np.array(i["orientation"]))
     euler = np.round(euler, 12) + 0.0  # no "-0.0"
     lines = [f"{r['name']}: {r['description']}".rstrip(": "),
@@ -115,14 +134,22 @@ def format_resolved(r: dict) -> str:
              f"(t = 0 … {r['steps'] * r['dt']:.10g} s; scenario duration {_num(r['duration'])} s, "
              f"default dt {_num(r['scenario_dt'])} s)",
              f"            dt ladder {', '.join(_num(d) for d in r['dt_ladder'])} s",
-             "body (origin at the centre of mass)",
+             ("body (origin at the centre of mass)" if "com" not in b else
+              f"body (its frame's origin NOT at the centre of mass: the COM at {_triple(b['com'])} m in body "
+              "axes from it; the initial position and velocity are the origin's, body points from it)"),
              f"  mass      {_num(b['mass'])} kg",
              "  inertia   kg m², about the COM, body axes:"]
     lines += [f"            {_triple(row)}" for row in b["inertia"]]
+    for k, pt in enumerate(b.get("parts", ())):
+        lines.append(f"  part {k}    {_num(pt['mass'])} kg, its COM at {_triple(pt['com'])} m (body axes, "
+                     "from "
+                     f"the origin), inertia about it {', '.join(_triple(row) for row in pt['inertia'])} "
+                     "kg m² "
+                     "(welded: one rigid body)")
     lines += [f"  principal moments {_triple(b['principal_moments'])} kg m²",
               "initial state",
-              f"  position          {_triple(i['position'])} m (COM, world)",
-              f"  velocity          {_triple(i['velocity'])} m/s (COM, world)",
+              f"  position          {_triple(i['position'])} m ({origin}, world)",
+              f"  velocity          {_triple(i['velocity'])} m/s ({origin}, world)",
               f"  orientation       {_triple(i['orientation'])} (body→world quaternion w, x, y, z)",
               f"                    = Unity Euler angles (x, y, z) {_triple(euler)}° (rotation order Z, X, Y)"
               + (" — gimbal lock: z set to 0" if bool(locked) else ""),
@@ -137,11 +164,11 @@ def format_resolved(r: dict) -> str:
                          f"update (per step of {_num(r['dt'])} s; rate k = {f[key + '_rate']:.10g} 1/s)")
     for s in f["spring"]:
         lines.append(f"  spring            anchor {_triple(s['anchor'])} m (world), attached "
-                     f"at {_triple(s['attach'])} m (body, from the COM), "
+                     f"at {_triple(s['attach'])} m (body, from the {origin}), "
                      f"k = {_num(s['stiffness'])} N/m, rest length {_num(s['rest_length'])} m")
     for p in f["point"]:
         lines.append(f"  point force       {_triple(p['force'])} N ({p['frame']} "
-                     f"axes) at {_triple(p['point'])} m (body, from the COM)")
+                     f"axes) at {_triple(p['point'])} m (body, from the {origin})")
     for t in f["torque"]:
         lines.append(f"  torque            {_triple(t['torque'])} N m ({t['frame']} axes)")
     lines.append(f"trajectory CSV columns: {','.join(r['csv_columns'])}")

@@ -18,6 +18,14 @@ moves exactly as the original does, once its states are mapped back to the origi
   equations are exactly covariant: positions, velocities, gravity, anchors, attach points, rest lengths
   × k; ω, the decay factors and the orientation unchanged; forces × μk, torques and inertia × μk²,
   stiffness and drag × μ. Mapped back: ``x = x'/k``, ``v = v'/k``.
+* :class:`ComOffset`: the body's own frame origin moved off its COM (``body.com`` = c, ``radii`` radii of
+  gyration along a generic axis): the initial position and velocity become the origin's (``x − R c``,
+  ``v − ω × R c``) and body points are given from the origin (``+ c``). Engines still report the COM's state:
+  mapped back, nothing changes.
+* :class:`WeldedSplit`: the body given as two welded parts (``[[body.parts]]``) whose total mass, COM and
+  inertia are the original's (MuJoCo #3553's class: a free body with a massive fixed child): the child
+  takes ``child_mass`` of the mass and ``child_inertia`` of what the parallel-axis terms leave, the parts'
+  COMs ``separation`` radii of gyration apart on either side of the COM. Mapped back: nothing changes.
 
 :func:`apply` returns a validated :class:`~cross_checks.scenario.Scenario` (the transformed file is parsed
 like any scenario file, so engine files receive it as their resolved JSON), or raises
@@ -38,11 +46,12 @@ from cross_checks.scenario.parse import ScenarioError, parse_scenario
 from reference_sim.quaternion import matrix_from_quat, quat_conj, quat_from_axis_angle, quat_mul
 from reference_sim.state import Q, V, W, X
 
-__all__ = ["Transform", "Translation", "WorldRotation", "BodyFrame", "Scale", "TransformRefused",
+__all__ = ["Transform", "Translation", "WorldRotation", "BodyFrame", "Scale", "ComOffset", "WeldedSplit",
+           "TransformRefused",
            "TRANSFORM_KINDS", "default_transforms", "apply", "scenario_dict", "toml_text"]
 
 #: The kinds of transform, in the order the sweep runs and reports them.
-TRANSFORM_KINDS = ("translation", "rotation", "body_frame", "scale")
+TRANSFORM_KINDS = ("translation", "rotation", "body_frame", "scale", "com_offset", "welded_split")
 
 #: Directions and axes of the default transforms: integer vectors of exact length 7 (2² + 3² + 6² = 7²),
 #: so each is exact in binary after dividing by 7 only up to one rounding, and none lies along a coordinate
@@ -51,6 +60,8 @@ TRANSFORM_KINDS = ("translation", "rotation", "body_frame", "scale")
 _DIRECTION = np.array([2.0, -3.0, 6.0]) / 7.0
 _ROTATION_AXIS = np.array([6.0, 2.0, -3.0]) / 7.0
 _BODY_AXIS = np.array([-3.0, 6.0, 2.0]) / 7.0
+_COM_AXIS = np.array([6.0, -2.0, 3.0]) / 7.0
+_SPLIT_AXIS = np.array([3.0, 2.0, -6.0]) / 7.0
 
 
 class TransformRefused(ValueError):
@@ -259,14 +270,117 @@ class Scale(Transform):
         return y
 
 
+def _gyration_radius_m(body: dict) -> float:
+    """sqrt(I_max / m) of a scenario dict's body (m): the body's size, by its mass distribution."""
+    return math.sqrt(float(np.linalg.eigvalsh(np.asarray(body["inertia"], dtype=float))[-1]) / body["mass"])
+
+
+@dataclass(frozen=True)
+class ComOffset(Transform):
+    """The body frame's origin moved off the COM: the COM at ``radii`` radii of gyration (sqrt(I_max/m))
+    along a generic body axis from the origin (``body.com``)."""
+
+    radii: float = tol.INVARIANCE_COM_OFFSET_GYRATION_RADII
+
+    @property
+    def kind(self) -> str:
+        return "com_offset"
+
+    @property
+    def magnitude(self) -> str:
+        return f"{self.radii:g} gyration radii"
+
+    def com_B_m(self, d: dict) -> np.ndarray:
+        """The COM in the body frame (m, body axes, from the origin) this transform gives ``d``'s body."""
+        return self.radii * _gyration_radius_m(d["body"]) * _COM_AXIS
+
+    def rewrite(self, d: dict) -> dict:
+        c = self.com_B_m(d)
+        b, ini, fr = d["body"], d["initial"], d["forces"]
+        r_W = _rot(ini["orientation"]) @ c
+        b["com"] = list(c)
+        ini["position"] = list(np.asarray(ini["position"]) - r_W)
+        w_W = np.asarray(ini["angular_velocity"])
+        ini["velocity"] = list(np.asarray(ini["velocity"]) - np.cross(w_W, r_W))
+        for s in fr["spring"]:
+            s["attach"] = list(np.asarray(s["attach"]) + c)
+        for p in fr["point"]:
+            p["point"] = list(np.asarray(p["point"]) + c)
+        return d
+
+    def map_back(self, y) -> np.ndarray:
+        return np.array(y, dtype=float)
+
+
+@dataclass(frozen=True)
+class WeldedSplit(Transform):
+    """The body as two welded parts with its total mass, COM and inertia: a parent and a child taking
+    ``child_mass`` of the mass, their COMs ``separation`` radii of gyration apart along a generic axis (on
+    either side of the COM, so it stays at the origin), the inertia the parallel-axis terms leave shared
+    ``1 − child_inertia`` : ``child_inertia``. The parts lie apart perpendicular to the axis of the largest
+    moment (in a flat body's plane); the separation is halved until both parts' inertias are physical."""
+
+    child_mass: float = tol.INVARIANCE_SPLIT_CHILD_MASS_FRACTION
+    child_inertia: float = tol.INVARIANCE_SPLIT_CHILD_INERTIA_FRACTION
+    separation: float = tol.INVARIANCE_SPLIT_SEPARATION_GYRATION_RADII
+
+    @property
+    def kind(self) -> str:
+        return "welded_split"
+
+    @property
+    def magnitude(self) -> str:
+        return f"child {self.child_mass:g} of the mass"
+
+    def parts(self, d: dict) -> list:
+        """The two parts ``[parent, child]`` of the body of ``d``: dicts of mass (kg), com (m, body axes from
+        the COM) and inertia (3×3 kg m² about the part's COM)."""
+        from reference_sim.body import check_inertia
+        m, inertia = float(d["body"]["mass"]), np.asarray(d["body"]["inertia"], dtype=float)
+        f = float(self.child_mass)
+        # the parts apart along a generic direction perpendicular to the axis of the largest moment: in a flat
+        # body's plane (A + B = C: every part of a flat body is flat in that plane, or it is not physical)
+        axis = np.linalg.eigh(inertia)[1][:, -1]
+        u = _SPLIT_AXIS - float(_SPLIT_AXIS @ axis) * axis
+        u = u / float(np.linalg.norm(u))
+        s = self.separation * _gyration_radius_m(d["body"])
+        lam_min = float(np.linalg.eigvalsh(inertia)[0])
+        for _ in range(60):
+            J = m * f * (1.0 - f) * s * s * (np.eye(3) - np.outer(u, u))
+            rest = inertia - J
+            try:
+                check_inertia(rest)
+                if float(np.linalg.eigvalsh(rest)[0]) >= 0.25 * lam_min:
+                    break
+            except ValueError:
+                pass
+            s *= 0.5
+        a = float(self.child_inertia)
+        return [{"mass": m * (1.0 - f), "com": list(f * s * u),
+                 "inertia": [list(r) for r in (1.0 - a) * rest]},
+                {"mass": m * f, "com": list(-(1.0 - f) * s * u), "inertia": [list(r) for r in a * rest]}]
+
+    def rewrite(self, d: dict) -> dict:
+        parts = self.parts(d)
+        b = d["body"]
+        del b["mass"], b["inertia"]
+        b["parts"] = parts
+        return d
+
+    def map_back(self, y) -> np.ndarray:
+        return np.array(y, dtype=float)
+
+
 def default_transforms() -> list:
     """The transforms ``rbcheck sweep --invariance`` runs on every (variant, scenario): translations by
     tolerances.INVARIANCE_TRANSLATIONS_M, one rotation of the world frame and one of the body frame by
-    generic angles about generic axes, and the scales tolerances.INVARIANCE_SCALES."""
+    generic angles about generic axes, the scales tolerances.INVARIANCE_SCALES, the body frame's origin off
+    its COM and the body split into two welded parts."""
     out: list = [Translation(tuple(m * _DIRECTION)) for m in tol.INVARIANCE_TRANSLATIONS_M]
     out.append(WorldRotation(tuple(quat_from_axis_angle(_ROTATION_AXIS, math.radians(135.0)))))
     out.append(BodyFrame(tuple(quat_from_axis_angle(_BODY_AXIS, math.radians(41.0)))))
     out += [Scale(k, mu) for k, mu in tol.INVARIANCE_SCALES]
+    out += [ComOffset(), WeldedSplit()]
     return out
 
 
@@ -320,7 +434,9 @@ def toml_text(d: dict) -> str:
     lines = [f"{k} = {_toml_value(d[k])}" for k in ("name", "description", "kind", "duration", "dt",
                                                       "dt_ladder", "reference") if k in d]
     for table in ("body", "initial"):
-        lines += ["", f"[{table}]"] + [f"{k} = {_toml_value(v)}" for k, v in d[table].items()]
+        lines += ["", f"[{table}]"] + [f"{k} = {_toml_value(v)}" for k, v in d[table].items() if k != "parts"]
+    for part in d["body"].get("parts", ()):
+        lines += ["", "[[body.parts]]"] + [f"{k} = {_toml_value(v)}" for k, v in part.items()]
     fr = d["forces"]
     lines += ["", "[forces]"] + [f"{k} = {_toml_value(v)}" for k, v in fr.items()
                                  if not isinstance(v, list) or k == "gravity"]

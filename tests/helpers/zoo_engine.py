@@ -8,6 +8,11 @@ representation bug.
 MODE ``correct``: cbody.py's step as it is. ``diagonal_inertia``: uses only the diagonal of the inertia tensor
 (Avian #738's class: right for every diagonal body, wrong for every other). ``float32_positions``: stores the
 position in float32 after every step while the engine file declares float64 (MuJoCo Warp #1546's class).
+``ignores_com_offset``: reads the initial position and velocity and the body points as the COM's even when
+``body.com`` says the body frame's origin is elsewhere. ``drops_welded_child``: of a body of welded parts
+(``body.parts``), keeps every part's mass and the parallel-axis terms but drops the child parts' own inertia.
+The correct engine integrates the COM: it converts the origin's state (``x = x_o + R c``,
+``v = v_o + ω × R c``) and the points (``− c``), and composes the parts.
 """
 import math
 import struct
@@ -22,6 +27,21 @@ def f32(c: float) -> float:
     return struct.unpack("f", struct.pack("f", c))[0]
 
 
+def composite_inertia(parts, com, drop_child=False):
+    """The inertia about the composite COM ``com`` of welded parts (mass, com, 3×3 inertia each; their COMs
+    and ``com`` from the body frame's origin): Σ I_i + m_i (|d|² E − d dᵀ), d = com_i − com; ``drop_child``:
+    the parts after the first without their own inertia."""
+    out = [[0.0] * 3 for _ in range(3)]
+    for k, part in enumerate(parts):
+        d = [part["com"][i] - com[i] for i in range(3)]
+        dd = sum(e * e for e in d)
+        for i in range(3):
+            for j in range(3):
+                own = 0.0 if (drop_child and k > 0) else part["inertia"][i][j]
+                out[i][j] += own + part["mass"] * ((dd if i == j else 0.0) - d[i] * d[j])
+    return out
+
+
 def main(argv) -> int:
     import json
     mode, scenario_json, out_csv = argv
@@ -29,12 +49,23 @@ def main(argv) -> int:
         sc = json.load(fh)
     h, steps, m = sc["dt"], sc["steps"], sc["body"]["mass"]
     inertia = sc["body"]["inertia"]
+    body = sc["body"]
+    c = body.get("com", [0.0, 0.0, 0.0]) if mode != "ignores_com_offset" else [0.0, 0.0, 0.0]
+    if "parts" in body:
+        inertia = composite_inertia(body["parts"], c, drop_child=mode == "drops_welded_child")
+    for s in sc["forces"]["spring"]:
+        s["attach"] = [s["attach"][i] - c[i] for i in range(3)]
+    for p in sc["forces"]["point"]:
+        p["point"] = [p["point"][i] - c[i] for i in range(3)]
     if mode == "diagonal_inertia":
         inertia = [[inertia[i][i] if i == j else 0.0 for j in range(3)] for i in range(3)]
     inv = cbody.inverse3(inertia)
     ini, fr = sc["initial"], sc["forces"]
     x, v, q, w = (list(ini["position"]), list(ini["velocity"]), list(ini["orientation"]),
                   list(ini["angular_velocity"]))
+    r = cbody.matvec(cbody.quat_matrix(q), c)            # the origin's state -> the COM's
+    wr = cbody.cross(w, r)
+    x, v = [x[i] + r[i] for i in range(3)], [v[i] + wr[i] for i in range(3)]
     if mode == "float32_positions":
         x = [f32(c) for c in x]
     gv, gw = fr["velocity_decay"], fr["angular_velocity_decay"]

@@ -76,3 +76,28 @@ def test_triangle_equality_is_accepted():
 def test_inertia_from_colinear_particles_is_singular():
     _, _, I = inertia_from_particles([1.0, 1.0], [[0, 0, -1], [0, 0, 1]])
     assert np.linalg.eigvalsh(I)[0] == 0.0
+
+
+def test_compose_parts_is_the_parallel_axis_theorem_by_hand():
+    from reference_sim.body import BodyPart, compose_parts
+    # two unit-inertia parts of 1 and 3 kg at x = 1 and x = −1: COM at −0.5; d = 1.5, −0.5; Σ m d² = 3
+    mass, com, inertia = compose_parts([BodyPart(1.0, [1.0, 0.0, 0.0], np.eye(3)),
+                                        BodyPart(3.0, [-1.0, 0.0, 0.0], np.eye(3))])
+    assert mass == 4.0
+    np.testing.assert_array_equal(com, [-0.5, 0.0, 0.0])
+    np.testing.assert_allclose(inertia, np.diag([2.0, 5.0, 5.0]), atol=1e-15)
+
+
+def test_origin_and_com_states_are_inverse_and_move_the_com_with_the_rotation():
+    from reference_sim.body import com_state, origin_state
+    from reference_sim.quaternion import quat_from_axis_angle
+    c = np.array([0.3, -0.2, 0.5])
+    q = quat_from_axis_angle(np.array([1.0, 2.0, 2.0]) / 3.0, 0.7)
+    y = np.concatenate([[1.0, 2.0, 3.0], [0.1, 0.2, 0.3], q, [0.5, -1.0, 2.0]])
+    x_o, v_o = origin_state(y, c)
+    np.testing.assert_allclose(com_state(x_o, v_o, q, y[10:13], c), y, rtol=0, atol=1e-15)
+    # about the z axis at 2 rad/s, a COM 1 m along x from the origin moves at 2 m/s along y (by hand)
+    y2 = np.concatenate([[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 2.0]])
+    x_o, v_o = origin_state(y2, [1.0, 0.0, 0.0])
+    np.testing.assert_array_equal(x_o, [-1.0, 0.0, 0.0])
+    np.testing.assert_array_equal(v_o, [0.0, -2.0, 0.0])

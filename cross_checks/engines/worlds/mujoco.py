@@ -11,8 +11,10 @@ import numpy as np
 
 
 def build_model(bodies, gravity_W, variant, dt_s, name="rbcheck"):
-    """The compiled MjModel of ``bodies`` ((mass_kg, moments (3,), q_BP (w x y z)) each) for the integrator
-    ``variant`` ("euler", "rk4", "implicit", "implicitfast", "discrete") at step ``dt_s`` (s)."""
+    """The compiled MjModel of ``bodies`` ((mass_kg, moments (3,), q_BP (w x y z)) each; optionally also the
+    COM in the body frame (m) and welded parts: child bodies without a joint, each (mass_kg, moments, q_BP,
+    com)) for the integrator ``variant`` ("euler", "rk4", "implicit", "implicitfast", "discrete") at step
+    ``dt_s`` (s)."""
     spec = mujoco.MjSpec()
     spec.modelname = name
     spec.compiler.alignfree = False        # keep the joint (= qpos) on the body frame, not the inertial frame
@@ -24,16 +26,25 @@ def build_model(bodies, gravity_W, variant, dt_s, name="rbcheck"):
     spec.option.gravity = np.asarray(gravity_W, dtype=float)
     spec.option.integrator = getattr(mujoco.mjtIntegrator, f"mjINT_{variant.upper()}")
     spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_AUTORESET
-    for k, (mass_kg, moments, q_BP) in enumerate(bodies):
+    for k, body in enumerate(bodies):
         b = spec.worldbody.add_body()
         b.name = "body" if k == 0 else f"body{k}"
         b.add_freejoint()
-        b.explicitinertial = True
-        b.ipos = [0.0, 0.0, 0.0]           # explicit: unset (NaN) would let geoms override the inertial
-        b.mass = float(mass_kg)
-        b.iquat = q_BP                     # principal frame P in body coordinates (w x y z)
-        b.inertia = moments
+        _inertial(b, *body[:3], body[3] if len(body) > 3 else (0.0, 0.0, 0.0))
+        for j, part in enumerate(body[4] if len(body) > 4 else (), 1):
+            child = b.add_body()           # no joint: welded to the body, its frame the body frame
+            child.name = f"{b.name}_part{j}"
+            child.pos = [0.0, 0.0, 0.0]
+            _inertial(child, *part)
     return spec.compile()
+
+
+def _inertial(b, mass_kg, moments, q_BP, com_B):
+    b.explicitinertial = True
+    b.ipos = [float(v) for v in com_B]    # explicit: unset (NaN) would let geoms override the inertial
+    b.mass = float(mass_kg)
+    b.iquat = q_BP                         # principal frame P in body coordinates (w x y z)
+    b.inertia = moments
 
 
 def _cross(a, b):
@@ -70,7 +81,7 @@ class Bodies:
 
     def __init__(self, model):
         self.model, self.data = model, mujoco.MjData(model)
-        self.B = model.nbody - 1
+        self.B = model.nq // 7             # free bodies (welded parts have no joint)
         self.qpos, self.qvel = self.data.qpos.reshape(self.B, 7), self.data.qvel.reshape(self.B, 6)
         self.xfrc = self.data.xfrc_applied[1:]
 

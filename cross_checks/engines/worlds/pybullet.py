@@ -51,14 +51,20 @@ class Bodies:
         p.setGravity(*[float(g) for g in gravity_W], physicsClientId=c)
         p.setPhysicsEngineParameter(fixedTimeStep=float(dt_s), numSubSteps=0, physicsClientId=c)
 
-    def add_body(self, mass_kg, moments, q_BP, y0):
+    def add_body(self, mass_kg, moments, q_BP, y0, com_B=None):
         """A body of principal ``moments`` about the frame ``q_BP`` (w, x, y, z; None: the body frame), put at
-        packed state ``y0``; False when PyBullet refuses it."""
+        packed state ``y0`` (its COM's); ``com_B``: the COM in the body frame (m) when the body frame origin
+        is off it (the base's inertial frame there: PyBullet's base state is that frame's). False when
+        PyBullet refuses it."""
         self.q_BP.append(q_BP)
         x0, q0 = self._pose_in(y0, len(self.bodies))
+        inertial = {}
+        if com_B is not None:
+            inertial = {"baseInertialFramePosition": [float(v) for v in com_B],
+                        "baseInertialFrameOrientation": [0.0, 0.0, 0.0, 1.0] if q_BP is None else _xyzw(q_BP)}
         b = p.createMultiBody(baseMass=float(mass_kg), baseCollisionShapeIndex=-1, baseVisualShapeIndex=-1,
                               basePosition=x0, baseOrientation=q0, useMaximalCoordinates=self.maximal,
-                              physicsClientId=self.c)
+                              physicsClientId=self.c, **inertial)
         if b < 0:
             return False
         p.changeDynamics(b, -1, mass=float(mass_kg), localInertiaDiagonal=[float(v) for v in moments],

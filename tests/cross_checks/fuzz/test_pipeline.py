@@ -193,3 +193,45 @@ def test_a_plateau_or_a_growth_is_not_judged_again():
     assert PL._too_low_free_running_order(dict(rec, errors=[6.38e-7, 6.88e-7, 5.24e-7]))
     assert PL._too_low_free_running_order(dict(rec, errors=[1e-6, 0.9e-6, 0.8e-6]))
     assert PL._too_low_free_running_order(dict(rec, errors=[1e-6, 0.3e-6, 0.4e-6]))
+
+
+def _zoo_engine_file(folder, modes):
+    import sys
+
+    from tests.helpers.repo import ROOT
+    zoo = ROOT / "tests" / "helpers" / "zoo_engine.py"
+    lines = ['name = "zoo"', 'version = "1.0"', "timeout = 120"]
+    for mode in modes:
+        lines += ["", f"[variants.{mode}]", "order = 1", f'description = "{mode}"',
+                  f'command = ["{sys.executable}", "{zoo}", "{mode}", "{{scenario_json}}", "{{out_csv}}"]']
+    p = folder / "zoo.toml"
+    p.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return p
+
+
+def test_the_invariance_property_checks_the_drawn_transform_and_catches_a_planted_bug(tmp_path, monkeypatch):
+    """One more property per case (docs/fuzz.md §2): the case under its drawn transform. The zoo's engine file
+    that reads only the diagonal of the inertia tensor moves otherwise in a turned body frame: a violation;
+    the correct one holds there."""
+    import tomllib
+
+    from cross_checks.engines import engine_files_registered
+    from cross_checks.fuzz import properties as P
+    from cross_checks.fuzz.pipeline import evaluate_specs
+    from cross_checks.scenario.transforms import default_transforms
+    from tests.helpers.byo import TUMBLE
+    spec = tomllib.loads(TUMBLE)
+    spec.pop("dt_ladder")
+    spec["duration"], spec["dt"] = 0.1, 0.0025     # short and fine enough to be a fair case (A χ small)
+    drawn = {P.case_transform(f"fuzz_1_{i}").kind for i in range(40)}
+    assert drawn == {t.kind for t in default_transforms()}      # every kind is drawn
+    assert P.case_transform("fuzz_1_7") == P.case_transform("fuzz_1_7")   # by the name alone
+    body_frame = next(t for t in default_transforms() if t.kind == "body_frame")
+    monkeypatch.setattr(P, "case_transform", lambda name: body_frame)
+    with engine_files_registered([_zoo_engine_file(tmp_path, ["correct", "diagonal_inertia"])]):
+        (out,) = evaluate_specs([spec], ["zoo:correct", "zoo:diagonal_inertia"])
+    bad = [v for v in out.violations if v["property"] == "invariance"]
+    assert [v["variants"] for v in bad] == [["zoo:diagonal_inertia"]], out.violations
+    assert bad[0]["transform"] == "body_frame 41 deg" and "broken" in bad[0]["sentence"]
+    assert out.tally["zoo:correct"]["invariance"] == [1, 0]
+    assert out.tally["zoo:diagonal_inertia"]["invariance"] == [1, 0]

@@ -303,3 +303,78 @@ def test_a_long_run_refuses_a_ladder_and_forces_that_change_what_it_measures(ext
 def test_kind_must_be_known():
     with pytest.raises(ScenarioError, match="kind"):
         parse_scenario(LONG.replace('"long_run"', '"long"'))
+
+
+# --- a body frame off the COM (body.com) and welded parts (body.parts) --------------------------------------
+
+_HEAD = 'name = "b"\nduration = 1.0\ndt = 0.01\n'
+
+
+def test_a_body_com_makes_the_initial_state_and_points_the_origin_s():
+    sc = parse_scenario(_HEAD + """
+[body]
+mass = 2.0
+inertia = [1.0, 2.0, 2.5]
+com = [0.5, 0.0, 0.0]
+[initial]
+position = [1.0, 0.0, 0.0]
+velocity = [0.0, 0.0, 0.0]
+angular_velocity_body = [0.0, 0.0, 2.0]
+euler_zxy_deg = [0.0, 0.0, 90.0]
+[[forces.point]]
+force = [1.0, 0.0, 0.0]
+point = [0.5, 1.0, 0.0]
+frame = "body"
+""")
+    # turned 90° about z, the COM (0.5, 0, 0) in body axes is at (0, 0.5, 0) from the origin (1, 0, 0), and
+    # spinning at 2 rad/s about z it moves at ω × r = (−1, 0, 0) while the origin is at rest (by hand)
+    y = sc.problem.initial_packed()
+    np.testing.assert_allclose(y[0:3], [1.0, 0.5, 0.0], atol=1e-15)
+    np.testing.assert_allclose(y[3:6], [-1.0, 0.0, 0.0], atol=1e-15)
+    np.testing.assert_allclose(sc.problem.forces.point_forces[0].point_B, [0.0, 1.0, 0.0], atol=0)
+    np.testing.assert_array_equal(sc.body_com_B_m, [0.5, 0.0, 0.0])
+
+
+def test_welded_parts_make_their_composite_body():
+    sc = parse_scenario(_HEAD + """
+[[body.parts]]
+mass = 1.0
+com = [1.0, 0.0, 0.0]
+inertia = [0.1, 0.1, 0.1]
+[[body.parts]]
+mass = 3.0
+com = [-1.0, 0.0, 0.0]
+inertia = [0.2, 0.3, 0.4]
+[initial]
+""")
+    # COM at (1·1 + 3·(−1))/4 = −0.5 on x; parts at d = 1.5 and −0.5: Σ m d² = 2.25 + 0.75 = 3 about y and z
+    assert sc.problem.body.mass_kg == 4.0
+    np.testing.assert_allclose(sc.body_com_B_m, [-0.5, 0.0, 0.0], atol=0)
+    np.testing.assert_allclose(sc.problem.body.inertia_B, np.diag([0.3, 3.4, 3.5]), atol=1e-15)
+    assert len(sc.body_parts) == 2 and sc.body_parts[1].mass_kg == 3.0
+
+
+@pytest.mark.parametrize("body, field, words", [
+    ("mass = 1.0\ninertia = [1.0, 1.0, 1.0]\ncom = [1.0, 2.0]", "body.com", "3"),
+    ("particles = [[1.0, 0.0, 0.0, 0.0], [1.0, 1.0, 0.0, 0.0], [1.0, 0.0, 1.0, 0.0], [1.0, 0.0, 0.0, 1.0]]\n"
+     "com = [0.0, 0.0, 0.0]", "body.com", "particle body"),
+    ("mass = 1.0\ninertia = [1.0, 1.0, 1.0]\ncom = [2e6, 0.0, 0.0]", "body.com", "outside the range"),
+    ("mass = 1.0\n[[body.parts]]\nmass = 1.0\ninertia = [1.0, 1.0, 1.0]", "body.mass", "not both"),
+    ("[[body.parts]]\nmass = 1.0\ninertia = [1.0, 1.0, 3.0]", "body.parts[0].inertia", "triangle"),
+    ("[[body.parts]]\nmass = -1.0\ninertia = [1.0, 1.0, 1.0]", "body.parts[0].mass", "> 0"),
+    ("[[body.parts]]\nmass = 1.0\ninertia = [1.0, 1.0, 1.0]\ncolour = 1", "body.parts[0]", "colour"),
+    ("[[body.parts]]\nmass = 1.0", "body.parts[0].inertia", "missing"),
+])
+def test_a_bad_body_form_is_refused_naming_the_field(body, field, words):
+    with pytest.raises(ScenarioError) as info:
+        parse_scenario(_HEAD + "[body]\n" + body + "\n[initial]\n", "f.toml")
+    assert info.value.field.startswith(field) and words in str(info.value), str(info.value)
+
+
+def test_more_parts_than_the_limit_are_refused():
+    from cross_checks.core.tolerances import MAX_BODY_PARTS
+    one = "[[body.parts]]\nmass = 1.0\ninertia = [1.0, 1.0, 1.0]\n"
+    parts = one * (MAX_BODY_PARTS + 1)
+    with pytest.raises(ScenarioError) as info:
+        parse_scenario(_HEAD + parts + "[initial]\n", "f.toml")
+    assert info.value.field == "body.parts" and f"1 to {MAX_BODY_PARTS}" in info.value.reason

@@ -19,7 +19,7 @@ from tests.helpers.byo import TUMBLE
 from tests.helpers.repo import ROOT
 
 ZOO = ROOT / "tests" / "helpers" / "zoo_engine.py"
-MODES = ("correct", "diagonal_inertia", "float32_positions")
+MODES = ("correct", "diagonal_inertia", "float32_positions", "ignores_com_offset", "drops_welded_child")
 
 
 def _engine_file(folder):
@@ -51,7 +51,7 @@ def zoo_rows(zoo):
 
 def test_the_correct_engine_file_passes_every_transform(zoo_rows):
     rows = zoo_rows["correct"]
-    assert len(rows) == 7
+    assert len(rows) == 9
     for (kind, mag), r in rows.items():
         allowed = ("holds", "precision loss") if kind == "translation" else ("holds",)
         assert r["verdict"] in allowed, (kind, mag, r["assessment"])
@@ -59,6 +59,7 @@ def test_the_correct_engine_file_passes_every_transform(zoo_rows):
 
 
 def test_the_diagonal_only_inertia_is_caught_by_the_body_frame_alone(zoo_rows):
+    # (the welded split's composite is the original's diagonal tensor again: it holds there)
     rows = zoo_rows["diagonal_inertia"]
     broken = {k for k, r in rows.items() if r["verdict"] == "broken"}
     assert broken == {("body_frame", "41 deg")}, {k: r["assessment"] for k, r in rows.items()}
@@ -75,6 +76,25 @@ def test_float32_positions_declared_float64_are_caught_far_from_the_origin(zoo_r
     assert far["pos_dev"] > 1e3 * far["pos_allowance"]
 
 
+def test_an_engine_file_ignoring_the_com_offset_is_caught_by_it_alone(zoo_rows):
+    # it takes the body frame origin's initial position (1.5 radii of gyration from the COM) for the COM's
+    rows = zoo_rows["ignores_com_offset"]
+    broken = {k for k, r in rows.items() if r["verdict"] == "broken"}
+    assert broken == {("com_offset", "1.5 gyration radii")}, {k: r["assessment"] for k, r in rows.items()}
+    r = rows[("com_offset", "1.5 gyration radii")]
+    assert r["worst_ratio"] > 1e6 and "does not vanish as Δt shrinks" in r["assessment"], r["assessment"]
+
+
+def test_an_engine_file_dropping_the_welded_child_s_inertia_is_caught_by_the_split_alone(zoo_rows):
+    rows = zoo_rows["drops_welded_child"]
+    broken = {k for k, r in rows.items() if r["verdict"] == "broken"}
+    assert broken == {("welded_split", "child 0.75 of the mass")}, \
+        {k: r["assessment"] for k, r in rows.items()}
+    r = rows[("welded_split", "child 0.75 of the mass")]
+    assert r["worst_quantity"] in ("orientation", "angular_velocity"), r["assessment"]
+    assert r["worst_ratio"] > 1e6, r["assessment"]
+
+
 def test_sweep_invariance_end_to_end_then_compare(zoo, tmp_path, monkeypatch, capsys):
     monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "cache"))
     engine_file, scenario = zoo
@@ -89,9 +109,9 @@ def test_sweep_invariance_end_to_end_then_compare(zoo, tmp_path, monkeypatch, ca
         reader = csv.DictReader(fh)
         assert reader.fieldnames == INVARIANCE_COLUMNS
         rows = list(reader)
-    assert len(rows) == 14 and {r["engine"] for r in rows} == {"zoo:correct", "zoo:diagonal_inertia"}
+    assert len(rows) == 18 and {r["engine"] for r in rows} == {"zoo:correct", "zoo:diagonal_inertia"}
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["run"]["invariance"]["checks"] == 14 and summary["run"]["invariance"]["broken"] == 1
+    assert summary["run"]["invariance"]["checks"] == 18 and summary["run"]["invariance"]["broken"] == 1
     assert [r["transform"] for r in summary["invariance"] if r["verdict"] == "broken"] == ["body_frame"]
     from cross_checks.gates import ci
     junit = ci.junit_text(ci.sweep_junit(summary))
@@ -168,12 +188,38 @@ def test_the_pytest_fixture_takes_invariance(assert_engine, zoo):
     """The plugin's assert_engine passes ``invariance=True`` through (a user's suite: docs/invariance.md)."""
     engine_file, scenario = zoo
     summary = assert_engine("zoo:correct", [scenario], engine_file=engine_file, invariance=True)
-    assert summary["run"]["invariance"]["checks"] == 7 and summary["run"]["invariance"]["broken"] == 0
+    assert summary["run"]["invariance"]["checks"] == 9 and summary["run"]["invariance"]["broken"] == 0
 
 
 def test_an_error_of_the_harness_leaves_the_pair_not_judged():
     from cross_checks.sweep.invariance import _run_item
     sc = parse_scenario(TUMBLE, "t.toml")
     rows = _run_item((sc, "nosuchengine:x", None, None, []))
-    assert len(rows) == 7 and {r["verdict"] for r in rows} == {"not judged"}
+    assert len(rows) == 9 and {r["verdict"] for r in rows} == {"not judged"}
     assert "internal error while checking" in rows[0]["assessment"]
+
+
+def test_a_splitting_along_a_degenerate_eigenspace_is_step_dependent_not_broken():
+    """reference:dlm_splitting splits the kinetic energy along the principal axes eigh returns; a symmetric
+    top's two equal moments leave eigh free to return any pair in their plane, and a turned body frame gets
+    another pair: the split (rotations about different axes do not commute) parts the runs by its O(Δt²)
+    truncation error, not by round-off (measured 7.05e-9, 1.76e-9, 4.41e-10 rad/s at Δt, Δt/2, Δt/4)."""
+    from cross_checks.scenario import load_scenario
+    from cross_checks.scenario.transforms import default_transforms
+    t = [x for x in default_transforms() if x.kind == "body_frame"]
+    (r,) = check_invariance(load_scenario("symmetric_top"), "reference:dlm_splitting", t)
+    assert r["verdict"] == "step-dependent", r["assessment"]
+    assert "7.05e-09, 1.76e-09, 4.41e-10 rad/s" in r["assessment"], r["assessment"]
+    assert "order 2.00 (then within round-off), 2.00" in r["assessment"] and r["worst_ratio"] > 1.0
+    # a body whose principal axes are unique (1, 2, 3 kg m²): the same scheme holds to round-off
+    (r,) = check_invariance(load_scenario("tennis_racket"), "reference:dlm_splitting", t)
+    assert r["verdict"] == "holds", r["assessment"]
+
+
+def test_an_adapter_that_does_not_build_a_body_form_says_cannot_express():
+    from cross_checks.scenario.transforms import ComOffset, WeldedSplit
+    rows = check_invariance(parse_scenario(TUMBLE, "t.toml"), "reference:course_gyro",
+                            [ComOffset(), WeldedSplit()])
+    assert [r["verdict"] for r in rows] == ["cannot express"] * 2
+    assert "reference cannot express a body whose frame origin is not at its COM" in rows[0]["assessment"]
+    assert "reference cannot express a body of welded parts" in rows[1]["assessment"]
