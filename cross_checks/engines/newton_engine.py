@@ -1,29 +1,19 @@
-"""Newton (``newton``, the physics engine on NVIDIA Warp) as an engine adapter (``newton:VARIANT``); the
-interface is cross_checks.engines.base. What each solver does, the defaults neutralised (SOLVER_SETTINGS) and
-what was measured: docs/engine_conventions.md, "Newton 1.8.0".
+"""Newton (``newton``, the physics engine on NVIDIA Warp) as an engine (``newton:VARIANT``): a world of
+bodies for rbcheck's loop (cross_checks.engines.world, cross_checks.engines.loop). What each solver does, the
+defaults neutralised (SOLVER_SETTINGS) and what was measured: docs/engine_conventions.md, "Newton 1.8.0".
 
-Precision: float32 on Warp's CPU device (state, model and Δt are ``wp.float32``): each variant declares
-``Traits(precision="float32")``. Kernels are compiled into ``core.files.kernel_cache_dir("newton")``.
+Float32 on Warp's CPU device (state, model and Δt are ``wp.float32``: every variant's ``Traits``); kernels
+compiled into ``core.files.kernel_cache_dir("newton")``. Model (:func:`build_model`): one world per body, each
+with its own gravity; ``com = 0`` (body origin = COM), the scenario's mass and full inertia tensor (about the
+COM, body axes), checked after ``finalize``; no shape. ``semi_implicit`` and ``xpbd`` step jointless links
+(``State.body_q``/``body_qd``), ``featherstone`` and ``mujoco_cpu`` a FREE joint (``joint_q``/``joint_qd``).
+State at the boundary (:func:`to_newton_rows`, :func:`from_newton_rows`): ``[x_W, q_WB (x, y, z, w)]`` (Warp
+quaternions are xyzw) and ``[v_W (COM), ω_W]``, linear first, both world axes.
 
-Model (:func:`build_model`): one world per body, each with its own gravity; ``com = 0`` (body origin = COM),
-the scenario's mass and full inertia tensor (about the COM, body axes), checked after ``finalize``; no shape.
-``semi_implicit`` and ``xpbd`` step jointless links (``State.body_q``/``body_qd``), ``featherstone`` and
-``mujoco_cpu`` a FREE joint (``State.joint_q``/``joint_qd``).
-
-State at the boundary (:func:`to_newton_rows`, :func:`from_newton_rows`): ``[x_W, q_WB (x, y, z, w)]`` — Warp
-quaternions are xyzw — and ``[v_W (COM), ω_W]``, linear first, both world axes; the recorded quaternion kept
-sign-continuous from the scenario's.
-
-Forces: the harness's world force at the COM minus the weight ``m g`` (Newton applies gravity per world) and
-its world torque go into ``State.body_f`` of the step's input state, from the start-of-step state; the decay
-is applied to the velocities before the step.
-
-:func:`simulate_many` steps the runs that share a Δt as the bodies of one model (at most MAX_BATCH; one for
-``mujoco_cpu``, whose MuJoCo C takes one world); :func:`one_step` steps its rows as bodies. Warp and Newton
-are imported on first use only (never at import or in ``version()``).
-
-Divergence: the first recorded state that is non-finite or beyond BLOWUP_LIMIT ends the run
-(``diverged at t = …``).
+:class:`NewtonWorld`: the runs of one Δt as the bodies of models of at most MAX_BATCH bodies (one for
+``mujoco_cpu``: MuJoCo C takes one world); the loop's forces (the weight taken off: Newton applies gravity per
+world) go into ``State.body_f`` of each step's input state, the decay scales the float32 velocities before
+the step. Warp and Newton are imported on first use only (never at import or in ``version()``).
 """
 from __future__ import annotations
 
@@ -35,16 +25,14 @@ import warnings
 
 import numpy as np
 
-from cross_checks.engines import base, forces, install, runtimes
-from cross_checks.engines.base import EngineError, ModuleAdapter, Traits, Variant
+from cross_checks.engines import base, install, runtimes
+from cross_checks.engines.base import EngineError, Traits, Variant
 from cross_checks.engines.install import installed_version
-from cross_checks.engines.step_floats import harness_fn
-from reference_sim.quaternion import same_side, sign_continuous
-from reference_sim.simulate import Run, bad_rows, diverged, recorded_run
+from cross_checks.engines.world import World, WorldEngine
 
 __all__ = ["ENGINE", "VARIANTS", "SOLVERS", "SOLVER_SETTINGS", "EngineError", "version", "simulate",
            "simulate_many", "one_step", "build_model", "make_solver", "compile_stats", "to_newton_rows",
-           "from_newton_rows", "NewtonAdapter", "PIP_HINT"]
+           "from_newton_rows", "NewtonWorld", "NewtonAdapter", "PIP_HINT"]
 
 ENGINE = "newton"
 _DIST = "newton"
@@ -73,8 +61,8 @@ VARIANTS = {
     # MuJoCo C's float64 implicitfast step (Newton's default integrator) on Newton's float32 state, copied in
     # and out every step: mujoco:implicitfast's traits
     "mujoco_cpu": Variant(1, "Newton SolverMuJoCo on MuJoCo C (use_mujoco_cpu): implicitfast, Newton's "
-                             "default "
-                             "integrator, the state copied from and back to Newton's float32 every step",
+                             "default integrator, the state copied from and back to Newton's float32 every "
+                             "step",
                           traits=Traits(rotation_drift="body", rotation_sign=-1, precision="float32")),
 }
 
@@ -97,16 +85,12 @@ _GENERALIZED = frozenset({"featherstone", "mujoco_cpu"})
 #: Variants whose model takes one body only (SolverMuJoCo on MuJoCo C refuses a model of several worlds).
 _ONE_BODY = frozenset({"mujoco_cpu"})
 
-#: Bodies (runs or rows) per model: more run as several models.
-MAX_BATCH = 256
+MAX_BATCH = 256   # bodies (runs or rows) per model: more run as several models
 
 _LOCK = threading.RLock()
 
 
-# --- the engine, imported lazily (never at module import, never in version()) -----------------------------
-
-def _check_installed() -> None:
-    """install.check_installed for this engine and the Warp it runs on."""
+def _check_installed() -> None:   # install.check_installed for this engine and the Warp it runs on
     install.check_installed(_DIST, PIP_HINT, (("warp", "warp-lang"),), installed_version)
 
 
@@ -129,8 +113,6 @@ def _engine():
     return wp, newton
 
 
-# --- compile bookkeeping ----------------------------------------------------------------------------------
-
 _WARM: dict = {}    # variant -> seconds its first model build and step took (kernel compile or cache load)
 _STATS = runtimes.Stats(compilations=0, compile_seconds=0.0, build_seconds=0.0, step_seconds=0.0,
                         body_steps=0)
@@ -140,8 +122,8 @@ def compile_stats() -> dict:
     """This process's Newton costs so far: ``compilations`` (variants warmed up: their kernel modules
     compiled by Warp, or loaded from its cache), ``compile_seconds`` (wall s of those warm-ups: a one-body
     model's finalize, the solver's construction and one step), ``per_variant`` (the same per variant), and
-    apart from it ``build_seconds`` (model building of the runs), ``step_seconds`` (wall s in the step loops)
-    and ``body_steps`` (steps × bodies they advanced)."""
+    apart from it ``build_seconds`` (model building of the runs), ``step_seconds`` (wall s of the worlds'
+    steps) and ``body_steps`` (steps × bodies they advanced)."""
     return {**_STATS, "per_variant": dict(_WARM)}
 
 
@@ -160,8 +142,6 @@ def _warm(variant: str) -> None:
     _STATS["compilations"] += 1
     _STATS["compile_seconds"] += _WARM[variant]
 
-
-# --- model, solver, state -----------------------------------------------------------------------------------
 
 def build_model(variant: str, bodies):
     """A finalized Newton model on the CPU with one world per body of ``bodies`` (``(mass, I_B (3, 3),
@@ -229,198 +209,112 @@ def from_newton_rows(q, qd):
     return np.concatenate([q[..., 0:3], qd[..., 0:3], q[..., 6:7], q[..., 3:6], qd[..., 3:6]], axis=-1)
 
 
-class _Views:
-    """NumPy views (no copy: Warp's CPU arrays share their memory) of one State's pose, velocity and force
-    arrays, shaped (N, 7), (N, 6), (N, 6)."""
-
-    def __init__(self, state, generalized: bool):
-        n = state.body_count
-        if generalized:
-            self.q = state.joint_q.numpy().reshape(n, 7)
-            self.qd = state.joint_qd.numpy().reshape(n, 6)
-        else:
-            self.q = state.body_q.numpy()
-            self.qd = state.body_qd.numpy()
-        self.f = state.body_f.numpy()
-
-
 class _Batch:
-    """Bodies of one variant stepping together at one Δt: a model, its solver, two states (swapped each step)
-    and their views."""
+    """Bodies stepping together in one model: its solver, two states (swapped each step) and their zero-copy
+    NumPy views of the pose (N, 7), velocity (N, 6) and applied wrench (N, 6) (float32)."""
 
     def __init__(self, variant: str, bodies):
-        self.variant = variant
         with _STATS.timing("build_seconds"):
             self.model = build_model(variant, bodies)
             self.solver = make_solver(variant, self.model)
-            gen = variant in _GENERALIZED
             self.states = [self.model.state(), self.model.state()]
-            self.views = [_Views(s, gen) for s in self.states]
-            self.weights = np.array([np.asarray(g, dtype=float) * m for m, _, g in bodies])
+        q, qd = ("joint_q", "joint_qd") if variant in _GENERALIZED else ("body_q", "body_qd")
+        self.views = [(getattr(s, q).numpy().reshape(-1, 7), getattr(s, qd).numpy().reshape(-1, 6),
+                       s.body_f.numpy()) for s in self.states]   # (q, qd, f) of each state
 
-    def set_state(self, y) -> None:
-        """Put body i at packed state ``y[i]`` in the current input state (float32)."""
-        q, qd = to_newton_rows(y)
-        v = self.views[0]
-        v.q[:] = q
-        v.qd[:] = qd
-
-    def step(self, dt_s: float, ft) -> None:
-        """One step of every body: ``ft`` (N, 6) the harness force (at the COM, weight included) and torque,
-        world axes; Newton gets the force without the weight (it applies gravity itself)."""
-        vin = self.views[0]
-        vin.f[:, 0:3] = ft[:, 0:3] - self.weights
-        vin.f[:, 3:6] = ft[:, 3:6]
+    def step(self, dt_s: float) -> None:
         self.solver.step(self.states[0], self.states[1], None, None, dt_s)
         self.states.reverse()
         self.views.reverse()
 
-    def read(self) -> np.ndarray:
-        """The current state of every body, packed (N, 13) float64."""
-        v = self.views[0]
-        return from_newton_rows(v.q, v.qd)
 
+class NewtonWorld(World):
+    """The bodies of ``requests`` (one Δt) as :class:`_Batch` models, under the module's lock (held by the
+    caller, released by close). Raw rows: ``[q (x, q_xyzw), qd (v, ω)]`` (13 float32 values), world axes."""
 
-# --- adapter entry points ---------------------------------------------------------------------------------
+    exact_start = True   # the float32 round trip of the scenario's state is not the state
 
-def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
-    """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state, every step recorded (one
-    request of :func:`simulate_many`)."""
-    return base.one_request(simulate_many, scenario, variant, dt_s, n_steps)
-
-
-def _body(scenario):
-    b = scenario.problem.body
-    g = np.asarray(scenario.problem.forces.gravity_W, dtype=float)
-    return float(b.mass_kg), np.asarray(b.inertia_B, dtype=float), g
-
-
-def simulate_many(variant: str, requests) -> list:
-    """The runs of ``requests`` (``base.RunRequest``), each a Run (or its EngineError): those of one Δt step
-    together as the bodies of one model (at most MAX_BATCH per model)."""
-    base.check_variant(ENGINE, VARIANTS, variant)
-    try:
-        with _LOCK:
-            _warm(variant)
-    except EngineError as exc:
-        return [exc] * len(requests)
-    with _LOCK, _mujoco_warnings(variant):
-        return base.run_in_groups(requests, lambda r: float(r.dt_s),
-                             lambda reqs: _run_batch(variant, float(reqs[0].dt_s), reqs),
-                             1 if variant in _ONE_BODY else MAX_BATCH)
-
-
-class _mujoco_warnings:
-    """For the MuJoCo C variant: MuJoCo's warnings ("Nan, Inf or huge value in QACC") go to a handler for the
-    duration (else MuJoCo prints them and writes MUJOCO_LOG.TXT into the working directory); the state they
-    announce is non-finite or huge and ends the run as divergence. The previous handler is restored."""
-
-    def __init__(self, variant: str):
-        self.active = variant == "mujoco_cpu"
-
-    def __enter__(self):
-        if self.active:
+    def __init__(self, requests, variant: str, dt_s: float):
+        super().__init__()
+        self.dt_s, size = float(dt_s), 1 if variant in _ONE_BODY else MAX_BATCH
+        bodies = [(float(r.scenario.problem.body.mass_kg), np.asarray(r.scenario.problem.body.inertia_B),
+                   np.asarray(r.scenario.problem.forces.gravity_W, dtype=float)) for r in requests]
+        self.parts = [(slice(s, s + size), _Batch(variant, bodies[s:s + size]))
+                      for s in range(0, len(bodies), size)]
+        self.mujoco = None
+        if variant == "mujoco_cpu":
+            # MuJoCo's warnings ("Nan, Inf or huge value in QACC": the loop's divergence) to a handler until
+            # close(), else MuJoCo prints them and writes MUJOCO_LOG.TXT in the working directory
             import mujoco
-            self.prev = mujoco.get_mju_user_warning()
+            self.mujoco, self.prev = mujoco, mujoco.get_mju_user_warning()
             mujoco.set_mju_user_warning(lambda msg: None)
-        return self
 
-    def __exit__(self, *exc):
-        if self.active:
-            import mujoco
-            mujoco.set_mju_user_warning(self.prev)
-        return False
+    def set_state(self, y):
+        q, qd = to_newton_rows(y)
+        for part, b in self.parts:
+            b.views[0][0][:], b.views[0][1][:] = q[part], qd[part]
 
+    def apply(self, f_W, tau_W):   # into the input state's body_f (float32), for the next step
+        for part, b in self.parts:
+            f = b.views[0][2]
+            f[:, 0:3], f[:, 3:6] = f_W[part], tau_W[part]
 
-def _run_batch(variant: str, dt_s: float, reqs) -> list:
-    """The Runs of ``reqs`` (one Δt), stepped together."""
-    B = len(reqs)
-    batch = _Batch(variant, [_body(r.scenario) for r in reqs])
-    y0 = np.array([r.scenario.problem.initial_packed() for r in reqs])
-    batch.set_state(y0)
-    n_max = max(r.n_steps for r in reqs)
-    harness = [harness_fn(r.scenario, dt_s) for r in reqs]
-    varying = [k for k, r in enumerate(reqs) if r.scenario.problem.forces.state_dependent]
-    gains = np.array([[float(g) for g in forces.decay_factors(r.scenario, dt_s)] for r in reqs])   # (B, 2)
-    decay = [k for k, r in enumerate(reqs) if r.scenario.problem.forces.has_decay]
-    gv = np.repeat(gains[:, 0:1], 3, axis=1)
-    gw = np.repeat(gains[:, 1:2], 3, axis=1)
-    ft = np.array([harness[k](y0[k].tolist()) for k in range(B)], dtype=float)
-    hist_q = np.empty((n_max, B, 7), dtype=np.float32)
-    hist_qd = np.empty((n_max, B, 6), dtype=np.float32)
-    done = np.zeros(B, dtype=bool)
-    steps = 0
-    with _STATS.timing("step_seconds"), np.errstate(all="ignore"):
-        for i in range(n_max):
-            if i and varying:
-                v = batch.views[0]
-                rows = from_newton_rows(v.q[varying], v.qd[varying])
-                for k, row in zip(varying, rows.tolist()):
-                    ft[k] = harness[k](row)
-            if decay:
-                qd = batch.views[0].qd
-                qd[decay, 0:3] *= gv[decay]
-                qd[decay, 3:6] *= gw[decay]
-            batch.step(dt_s, ft)
-            v = batch.views[0]
-            hist_q[i] = v.q
-            hist_qd[i] = v.qd
-            steps += 1
-            if (i & 255) == 255 or i == n_max - 1:
-                done |= bad_rows(from_newton_rows(v.q, v.qd))
-                if done.all():
-                    break
-    _STATS["body_steps"] += steps * B
-    runs = []
-    with np.errstate(all="ignore"):
-        for k, r in enumerate(reqs):
-            n = min(r.n_steps, steps)
-            y = np.empty((n + 1, 13))
-            y[0] = y0[k]
-            y[1:] = from_newton_rows(hist_q[:n, k], hist_qd[:n, k])
-            y[1:, 6:10] = sign_continuous(y[1:, 6:10], first=y0[k, 6:10])
-            run = recorded_run(y, r.dt_s)
-            if run.diverged_at_s is None and n < r.n_steps:  # pragma: no cover - only when every run diverged
-                run = diverged(y, r.dt_s, "")
-            runs.append(run)
-    return runs
+    def decay(self, g_v, g_w):   # the float32 velocities scaled in float64, rounded to float32
+        for part, b in self.parts:
+            qd = b.views[0][1]
+            qd[:, 0:3] *= g_v[part, None]
+            qd[:, 3:6] *= g_w[part, None]
+
+    def step(self):
+        t0 = time.perf_counter()
+        for _, b in self.parts:
+            b.step(self.dt_s)
+        _STATS["step_seconds"] += time.perf_counter() - t0
+        _STATS["body_steps"] += sum(len(b.views[0][0]) for _, b in self.parts)
+
+    def read(self):
+        return np.concatenate([np.concatenate(b.views[0][0:2], axis=1) for _, b in self.parts]).astype(float)
+
+    def packed(self, raw):
+        raw = np.asarray(raw, dtype=float)
+        return from_newton_rows(raw[..., 0:7], raw[..., 7:13])
+
+    def close(self):
+        if self.mujoco is not None:
+            self.mujoco.set_mju_user_warning(self.prev)
+        _LOCK.release()
 
 
-@base.on_rows
-def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
-    """One step of ``dt_s`` from each row of ``y_start`` (T, 13), the rows stepped together as the bodies of
-    one model: the forces from the row, the pre-step decay. Rows the engine blows up come back as Newton left
-    them."""
-    base.check_variant(ENGINE, VARIANTS, variant)
-    T = len(y_start)
-    out = np.empty((T, 13))
-    harness = harness_fn(scenario, dt_s)
-    gv, gw = (float(g) for g in forces.decay_factors(scenario, dt_s))
-    with _LOCK, _mujoco_warnings(variant):
-        _warm(variant)
-        size = 1 if variant in _ONE_BODY else MAX_BATCH
-        for s in range(0, T, size):
-            rows = y_start[s:s + size]
-            batch = _Batch(variant, [_body(scenario)] * len(rows))
-            ft = np.array([harness(r) for r in rows.tolist()], dtype=float)
-            y_dec = rows.copy()
-            y_dec[:, 3:6] *= gv
-            y_dec[:, 10:13] *= gw
-            batch.set_state(y_dec)
-            with _STATS.timing("step_seconds"), np.errstate(all="ignore"):
-                batch.step(float(dt_s), ft)
-            _STATS["body_steps"] += len(rows)
-            out[s:s + len(rows)] = batch.read()
-    out[:, 6:10] = same_side(out[:, 6:10], y_start[:, 6:10])
-    return out
-
-
-class NewtonAdapter(ModuleAdapter):
+class NewtonEngine(WorldEngine):
     """``newton:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
     (``pip install 'rbcheck[newton]'``)."""
+
+    name, variants, distribution, extra = ENGINE, VARIANTS, _DIST, "newton"
+    sign_continuity = True   # the recorded quaternion kept on the previous one's side
+
+    version = staticmethod(version)   # the module's: from package metadata, Warp not started
+
+    def build(self, requests, variant, dt_s):
+        _LOCK.acquire()
+        try:
+            _warm(variant)
+            return NewtonWorld(requests, variant, dt_s)
+        except BaseException:
+            _LOCK.release()
+            raise
+
+    def group_key(self, request) -> tuple:
+        """One world per Δt, runs of any length (the bodies of a model are independent worlds)."""
+        return (float(request.dt_s),)
 
     def engine_files(self) -> list:
         """Newton's solver sources (found without importing Newton or Warp)."""
         return install.package_files("newton", *(f"_src/{p}" for p in (
             "solvers/solver.py", "solvers/semi_implicit", "solvers/xpbd", "solvers/featherstone",
             "solvers/mujoco", "sim/builder.py", "sim/model.py", "sim/state.py")))
+
+
+_ENGINE = NewtonEngine()
+#: The module's functions (tests and scripts call them): the engine's, through the host loop.
+simulate, simulate_many, one_step = _ENGINE.simulate, _ENGINE.simulate_many, _ENGINE.one_step
+NewtonAdapter = NewtonEngine

@@ -70,8 +70,11 @@ def test_the_expectation_carries_the_variants_precision_and_rounding_factor(monk
     sc = load_scenario("constant_spin")
     e = ex.expectation(sc, "reference:rk4", "angular_velocity", measure_physics=False)
     assert (e.precision, e.rounding_factor) == ("float64", 1.0)
+    from cross_checks.engines import Resolved, resolve
     declared = dataclasses.replace(ex.traits("reference:rk4"), precision="float32", rounding_factor=3.0)
-    monkeypatch.setattr(ex, "traits", lambda variant: declared)
+    r = resolve("reference:rk4")   # the same variant, resolved with other declared traits
+    fake = Resolved(str(r), **{**r.__dict__, "traits": declared, "precision": "float32"})
+    monkeypatch.setattr(ex, "resolve", lambda variant: fake)
     e = ex.expectation(sc, "reference:rk4", "angular_velocity", measure_physics=False)
     assert (e.precision, e.rounding_factor) == ("float32", 3.0)
 

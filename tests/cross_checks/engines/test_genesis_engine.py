@@ -4,6 +4,7 @@ against the hand-derived step of its scheme, its order on catalog scenarios, div
 process rules (lazy import, one gs.init per process, none before a fork). Scenes are built once per process
 and reused (the adapter's own cache); the first build compiles or loads Genesis's kernels."""
 
+import functools
 import math
 import subprocess
 import sys
@@ -83,6 +84,10 @@ def test_a_genesis_someone_else_initialised_is_taken_when_it_is_cpu_float64(monk
     monkeypatch.setitem(ge._STATE, "gs", None)
     monkeypatch.setattr(gs, "np_float", np.float32)     # ... and with single precision: refused, said why
     with pytest.raises(EngineError, match="rbcheck needs gs.init"):
+        ge.genesis()
+    monkeypatch.setattr(gs, "np_float", np.float64)     # ... or without zero-copy (the world's views need it)
+    monkeypatch.setattr(gs, "use_zerocopy", False)
+    with pytest.raises(EngineError, match=r"zero-copy False; rbcheck needs .* and zero-copy"):
         ge.genesis()
 
 
@@ -178,7 +183,7 @@ def test_qpos_is_position_then_the_quaternion_w_first(tilted):
     sc = scenario_from_parts(body=FULL_INERTIA, initial=YAW90 + "\nposition = [1.0, 2.0, 3.0]")
     B = ge.body(sc, "euler", 0.01)
     B.set_state(sc.problem.initial_packed())
-    qpos, _ = B.read()
+    qpos = B.read()[:, 0:7]
     np.testing.assert_allclose(
         qpos[0],
         [1.0, 2.0, 3.0, math.sqrt(0.5), 0.0, 0.0, math.sqrt(0.5)],
@@ -198,7 +203,7 @@ def test_dof_velocity_is_world_linear_then_body_angular_and_get_ang_is_world(til
     )
     np.testing.assert_allclose(B.entity.get_ang().numpy(), w, rtol=0, atol=tol.GENESIS_ROUND_TRIP)
     np.testing.assert_allclose(B.entity.get_vel().numpy(), v, rtol=0, atol=tol.GENESIS_ROUND_TRIP)
-    qpos, vel = B.read()  # the zero-copy read is the getters' numbers
+    qpos, vel = B.read()[:, 0:7], B.read()[:, 7:13]  # the zero-copy read is the getters' numbers
     np.testing.assert_array_equal(qpos[0], B.entity.get_qpos().numpy())
     np.testing.assert_array_equal(vel[0], B.entity.get_dofs_velocity().numpy())
     np.testing.assert_allclose(
@@ -232,13 +237,23 @@ def test_a_negative_w_quaternion_is_kept_as_given():
 # --- forces ------------------------------------------------------------------------------------------------
 
 
+def _api_wrench(B, f, tau):
+    """Genesis's own API for what the adapter's apply writes: a world force at the COM, a world torque."""
+    f, tau = np.asarray(f, dtype=float).reshape(B.n, 3), np.asarray(tau, dtype=float).reshape(B.n, 3)
+    if B.n_envs:
+        f, tau = f[:, None], tau[:, None]
+    B.solver.apply_links_external_wrench(force=f, torque=tau, links_idx=[B.link],
+                                         ref=B.gs.link_ref_frame.link_COM, local=False)
+
+
 def _wrench_of_one_step(B, sc, f, tau, fast=False):
     """The force (N) and torque about the COM (N m) one step from rest exerts: f = m Δv/Δt, τ = I_W Δω_W/Δt.
     """
     B.set_state(np.r_[1.0, -2.0, 0.5, np.zeros(3), Q_TILT, np.zeros(3)])
-    (B.apply_fast if fast else B.apply)(np.array([f]), np.array([tau]))
-    assert B.step() == ""
-    y = ge.to_packed(*B.read())[0]
+    (B.apply if fast else functools.partial(_api_wrench, B))(np.array([f]), np.array([tau]))
+    B.step()
+    assert not B.warnings
+    y = B.packed(B.read())[0]
     h = B.dt_s
     return 2.0 * y[3:6] / h, _world_inertia(sc, Q_TILT) @ y[10:13] / h
 
@@ -250,9 +265,10 @@ def test_the_wrench_is_a_world_force_at_the_com_and_a_world_torque_cleared_after
     f, tau = _wrench_of_one_step(B, sc, F, T)
     np.testing.assert_allclose(f, F, rtol=0, atol=tol.GENESIS_WRENCH)
     np.testing.assert_allclose(tau, T, rtol=0, atol=tol.GENESIS_WRENCH)
-    v1 = B.read()[1].copy()
-    assert B.step() == ""  # the next step has no wrench: v unchanged
-    np.testing.assert_array_equal(B.read()[1][0, 0:3], v1[0, 0:3])
+    v1 = B.read()[:, 7:13].copy()
+    B.step()  # the next step has no wrench: v unchanged
+    assert not B.warnings
+    np.testing.assert_array_equal(B.read()[0, 7:10], v1[0, 0:3])
     np.testing.assert_array_equal(
         B.solver.dyn_state.links.cfrc_applied_vel.to_numpy()[B.link], np.zeros((1, 3))
     )
@@ -264,9 +280,10 @@ def test_the_fast_wrench_write_is_the_apis_step_bit_for_bit(tilted):
     out = []
     for fast in (False, True):
         B.set_state(y0)
-        (B.apply_fast if fast else B.apply)(np.array([[1.0, 2.0, 3.0]]), np.array([[0.5, -0.3, 0.2]]))
+        (B.apply if fast else functools.partial(_api_wrench, B))(np.array([[1.0, 2.0, 3.0]]),
+                                                                 np.array([[0.5, -0.3, 0.2]]))
         B.step()
-        out.append(np.concatenate(B.read(), axis=1))
+        out.append(B.read())
     np.testing.assert_array_equal(out[0], out[1])
 
 
@@ -277,10 +294,10 @@ def test_a_velocity_set_without_the_forward_pass_gives_the_same_step(tilted):
     for skip in (False, True):
         B.set_state(y0)
         B.step()
-        vel = B.read()[1] * 0.9
+        vel = B.read()[:, 7:13] * 0.9
         B.entity.set_dofs_velocity(vel[0], skip_forward=skip)
         B.step()
-        out.append(np.concatenate(B.read(), axis=1))
+        out.append(B.read())
     np.testing.assert_array_equal(out[0], out[1])
 
 
