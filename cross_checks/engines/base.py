@@ -16,7 +16,6 @@ optional engines' install checks (:mod:`cross_checks.engines.install`) and the J
 from __future__ import annotations
 
 import abc
-import functools
 import importlib
 import inspect
 import math
@@ -29,7 +28,7 @@ import numpy as np
 __all__ = ["EngineAdapter", "Variant", "EngineError", "NotExpressible", "RunRequest", "Traits", "INVARIANTS",
            "SYMPLECTIC_EULER_EXPLICIT_GYRO", "SYMPLECTIC_EULER_IMPLICIT_GYRO", "WHOLE_STATE_EXPLICIT_EULER",
            "WHOLE_STATE_IMPLICIT_EULER", "HIGHER_ORDER", "DEFAULT_TRAITS", "ModuleAdapter", "one_request",
-           "check_variant", "run_in_groups", "on_rows"]
+           "check_variant"]
 
 
 class EngineError(RuntimeError):
@@ -181,41 +180,10 @@ class Variant:
         object.__setattr__(self, "order", float(o))
 
 
-def on_rows(one_step):
-    """An adapter's ``one_step(scenario, variant, dt_s, y_start)`` for ``y_start`` of any shape (..., 13):
-    ``one_step`` sees the states as float rows (T, 13) and its (T, 13) answer comes back in ``y_start``'s
-    shape."""
-    @functools.wraps(one_step)
-    def on_any_shape(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
-        rows = np.asarray(y_start, dtype=float).reshape(-1, 13)
-        return np.asarray(one_step(scenario, variant, dt_s, rows)).reshape(np.shape(y_start))
-    return on_any_shape
-
-
 def check_variant(engine: str, variants, variant: str) -> None:
     """ValueError naming ``engine``'s variants when ``variant`` is not one of them."""
     if variant not in variants:
         raise ValueError(f"unknown {engine} variant {variant!r}; variants: {', '.join(variants)}")
-
-
-def run_in_groups(requests, key, run_group, max_size: int | None = None) -> list:
-    """``simulate_many`` of an engine that steps requests together: the requests grouped by ``key(request)``
-    (in order, at most ``max_size`` per group), each group's runs from ``run_group(list of requests)``; an
-    :class:`EngineError` a group raises is the run of each of its requests."""
-    out: list = [None] * len(requests)
-    groups: dict = {}
-    for j, r in enumerate(requests):
-        groups.setdefault(key(r), []).append(j)
-    for idx in groups.values():
-        size = max_size or len(idx)
-        for part in (idx[s:s + size] for s in range(0, len(idx), size)):
-            try:
-                runs = run_group([requests[j] for j in part])
-            except EngineError as exc:
-                runs = [exc] * len(part)
-            for j, run in zip(part, runs):
-                out[j] = run
-    return out
 
 
 def one_request(simulate_many, scenario, variant: str, dt_s: float, n_steps: int):

@@ -21,7 +21,7 @@ import functools
 import numpy as np
 
 __all__ = ["float_forces", "decay_factors", "harness_force_torque", "harness_force_torque_floats",
-           "stage_force_torque", "stage_force_torque_floats", "apply_decay_prestep", "weight_W",
+           "stage_force_torque", "stage_force_torque_floats", "weight_W",
            "minus_weight"]
 
 
@@ -67,15 +67,6 @@ def stage_force_torque(scenario, y):
 def stage_force_torque_floats(scenario, y) -> tuple:
     """:func:`stage_force_torque` as 6 plain floats (for the per-stage callback)."""
     return float_forces(scenario).force_torque(y, stage=True)
-
-
-def apply_decay_prestep(scenario, y, dt_s: float):
-    """The state(s) ``y`` (..., 13) with the pre-step decay of a step of ``dt_s`` applied (a copy)."""
-    gv, gw = decay_factors(scenario, dt_s)
-    y = np.array(y, dtype=float)
-    y[..., 3:6] *= gv
-    y[..., 10:13] *= gw
-    return y
 
 
 def weight_W(scenario) -> np.ndarray:

@@ -16,22 +16,6 @@ def test_an_unknown_variant_is_refused_with_the_engine_s_variants():
         base.check_variant("mysim", {"euler": 1, "rk4": 2}, "rk2")
 
 
-def test_run_in_groups_keeps_the_order_splits_groups_and_gives_a_group_s_error_to_each_member():
-    reqs = list(range(7))                       # stand-ins: the key and the group runner see them as they are
-    calls = []
-
-    def run_group(group):
-        calls.append(group)
-        if 3 in group:
-            raise EngineError("three")
-        return [f"run {r}" for r in group]
-
-    out = base.run_in_groups(reqs, lambda r: r % 2, run_group, max_size=2)
-    assert calls == [[0, 2], [4, 6], [1, 3], [5]]
-    assert out[0::2] == ["run 0", "run 2", "run 4", "run 6"] and out[5] == "run 5"
-    assert isinstance(out[1], EngineError) and out[1] is out[3]
-
-
 def test_one_request_raises_the_engine_error_of_its_run():
     ok = base.one_request(lambda v, rs: [f"{v} {rs[0].dt_s} {rs[0].n_steps}"], "sc", "euler", 0.5, 3.0)
     assert ok == "euler 0.5 3"
@@ -57,16 +41,3 @@ def test_a_module_adapter_forwards_to_its_module_s_functions_looked_up_when_call
     assert a.simulate_many("euler", [RunRequest("a", 0.1, 1)] * 2) == ["batched", "batched"]
 
 
-def test_on_rows_gives_one_step_float_rows_and_returns_the_callers_shape():
-    seen = []
-
-    @base.on_rows
-    def one_step(scenario, variant, dt_s, y_start):
-        seen.append((y_start.shape, y_start.dtype))
-        return y_start + 1.0
-
-    for shape in [(13,), (2, 3, 13), (0, 13)]:
-        y = np.zeros(shape, dtype=np.float32)
-        out = one_step(None, "v", 0.1, y)
-        assert out.shape == shape and np.all(out == 1.0)
-        assert seen[-1] == ((int(np.prod(shape[:-1])), 13), np.float64)
