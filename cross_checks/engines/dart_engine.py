@@ -30,7 +30,7 @@ if _IMPORT_ERROR is None:   # the world (what rbcheck repro embeds) imports the 
     from cross_checks.engines.worlds import dart as dtw
     from cross_checks.engines.worlds.dart import JOINT_SETTINGS, from_dart_state, neutralise, to_dart_state
 else:   # not installed: the adapter still loads, and says so when used
-    dtw = types.SimpleNamespace(Body=object, Bodies=object)
+    dtw = types.SimpleNamespace(Body=type("Body", (), {}), Bodies=type("Bodies", (), {}))
 
 __all__ = ["ENGINE", "VARIANTS", "JOINT_SETTINGS", "EngineError", "version", "simulate", "simulate_many",
            "one_step", "DartBody", "DartWorld", "DartAdapter", "neutralise", "to_dart_state",

@@ -47,7 +47,7 @@ MAX_CSV_BYTES_PER_ROW = 1024
 FOLDER_MAX_FILES = 5000
 FOLDER_CONTENT_MAX_BYTES = 64 * 2 ** 20
 
-_TOP = {"name", "version", "description", "timeout", "variants"}
+_TOP = {"name", "version", "description", "timeout", "variants", "body_forms"}
 _VARIANT = {"order", "description", "command", "precision"}
 
 
@@ -269,6 +269,12 @@ def load_engine_file(path) -> ExternalEngine:
     timeout = (_number(path, raw, "timeout", "timeout", 0.0, MAX_TIMEOUT_S,
                        f"a number of seconds in (0, {MAX_TIMEOUT_S:g}]")
                if "timeout" in raw else DEFAULT_TIMEOUT_S)
+    forms = raw.get("body_forms", [])
+    from cross_checks.engines import BODY_FORMS
+    if not isinstance(forms, list) or any(not isinstance(f, str) or f not in BODY_FORMS for f in forms):
+        known = ", ".join(repr(f) for f in BODY_FORMS)
+        raise EngineFileError(path, "body_forms", "must be a list of the body forms the command reads from "
+                              f"the resolved scenario ({known}), got {forms!r}")
     if "variants" not in raw:
         raise EngineFileError(path, "variants", "missing (required): at least one [variants.NAME] table")
     vt = raw["variants"]
@@ -301,16 +307,20 @@ def load_engine_file(path) -> ExternalEngine:
         traits = None if precision == "float64" else dataclasses.replace(DEFAULT_TRAITS, precision=precision)
         variants[vname] = Variant(order, desc, traits=traits)
     sha = hashlib.sha256(data).hexdigest()
-    return ExternalEngine(path.resolve(), name, version, description, timeout, variants, commands, sha,
-                          _program_files(folder, commands), folder_fingerprint(folder))
+    engine = ExternalEngine(path.resolve(), name, version, description, timeout, variants, commands, sha,
+                            _program_files(folder, commands), folder_fingerprint(folder))
+    engine.body_forms = frozenset(forms)
+    return engine
 
 
 class ExternalEngine(EngineAdapter):
     """An engine file as an adapter (picklable: plain data, so sweep workers receive it)."""
 
-    #: Its input is the resolved scenario, which says body.com and body.parts (docs/engines.md): an engine
-    #: file gets every body form, and one that ignores them is judged by the invariance checks.
-    body_forms = frozenset({"com_offset", "welded_parts"})
+    #: The body forms its command reads from the resolved scenario (body.com, body.parts: docs/engines.md),
+    #: as its file declares them (``body_forms = [...]``); none by default: an engine file written before
+    #: they existed reads a body at its COM, and a scenario that needs another form is "cannot express" for
+    #: it (never a wrong motion blamed on it).
+    body_forms: frozenset = frozenset()
 
     def __init__(self, path: Path, name: str, version: str, description: str, timeout_s: float,
                  variants: dict, commands: dict, sha256: str, program_hashes: dict, folder_sha256: str = ""):

@@ -31,7 +31,7 @@ if _IMPORT_ERROR is None:   # the world (what rbcheck repro embeds) imports the 
     from cross_checks.engines.worlds import mujoco as mjw
     from cross_checks.engines.worlds.mujoco import to_packed, to_qpos_qvel
 else:   # not installed: the adapter still loads, and says so when used
-    mjw = types.SimpleNamespace(Bodies=object)
+    mjw = types.SimpleNamespace(Bodies=type("Bodies", (), {}))
 
 __all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate", "simulate_many", "one_step",
            "build_model", "packed_floats", "to_packed", "to_qpos_qvel"]

@@ -30,7 +30,7 @@ if _IMPORT_ERROR is None:   # the world (what rbcheck repro embeds) imports the 
     from cross_checks.engines.worlds import pybullet as pbw
     from cross_checks.engines.worlds.pybullet import DYNAMICS_SETTINGS
 else:   # not installed: the adapter still loads, and says so when used
-    pbw = types.SimpleNamespace(Bodies=object)
+    pbw = types.SimpleNamespace(Bodies=type("Bodies", (), {}))
 
 __all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate",
            "simulate_many", "one_step", "DYNAMICS_SETTINGS"]

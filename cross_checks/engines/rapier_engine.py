@@ -25,7 +25,7 @@ if _IMPORT_ERROR is None:   # the world (what rbcheck repro embeds) imports the 
     from cross_checks.engines.worlds import rapier as rpw
     from cross_checks.engines.worlds.rapier import BODY_SETTINGS, WORLD_SETTINGS
 else:   # not installed: the adapter still loads, and says so when used
-    rpw = types.SimpleNamespace(Bodies=object)
+    rpw = types.SimpleNamespace(Bodies=type("Bodies", (), {}))
 
 __all__ = ["ENGINE", "DIST", "VARIANTS", "WORLD_SETTINGS", "BODY_SETTINGS", "EngineError", "version",
            "simulate", "simulate_many", "one_step", "RapierWorld", "RapierAdapter"]

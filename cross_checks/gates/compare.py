@@ -185,7 +185,8 @@ def read_results_dir(d: Path):
     df = got.table.frame(["scenario", "engine", "dt", "status", *[m for m in METRIC_RULES if m in cols],
                           *(["energy_drift_kind"] if "energy_drift_kind" in cols else [])])
     if "energy_drift_kind" in cols:
-        df["energy_drift_kind"] = df["energy_drift_kind"].str.strip()
+        strip = (lambda v: v.strip() if isinstance(v, str) else v)   # an empty table's column is float
+        df["energy_drift_kind"] = df["energy_drift_kind"].map(strip)
     return df, got.summary
 
 

@@ -116,5 +116,5 @@ def test_check_sweep_assert_engine_and_fuzz_agree_on_an_engine_file(cbody, tmp_p
     outcomes["fuzz"] = main(["fuzz", "--engines", variant, "--engine-file", ef, "--budget", "3",
                              "--seed", "0", "--jobs", "1", "--no-cache", "--out", str(tmp_path / "fuzz")])
     engines.reset_registry()   # the engine files main() registered stay out of the next test
-    capsys.readouterr()
-    assert outcomes == {k: (0 if correct else 1) for k in outcomes}, outcomes
+    said = capsys.readouterr()
+    assert outcomes == {k: (0 if correct else 1) for k in outcomes}, (outcomes, said.out[-4000:])

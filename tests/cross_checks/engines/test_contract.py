@@ -244,7 +244,7 @@ def test_a_body_torque_the_engine_takes_itself_moves_the_body_as_the_harness_doe
     DOFs) moves applied_torque's body (a body-frame torque beside an off-COM world force) as the same engine
     driven by the harness alone (its torque R(q)τ_B at the start of each step, or each stage): the runs at
     two Δt and one step from the run's states agree to the round-off of the torque's other rotation
-    (tests/helpers/tolerances.SAME_SCHEME_REL; measured on MuJoCo: ≤ 1.6e-15 relative)."""
+    (the tests' SAME_SCHEME_REL; measured on MuJoCo: ≤ 1.6e-15 relative)."""
     if not getattr(adapter, "takes_body_torque", False):
         pytest.skip(f"{adapter.name} takes no body torque itself")
     sc = load_scenario("applied_torque")

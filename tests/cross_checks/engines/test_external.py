@@ -297,6 +297,10 @@ BAD_FILES = [
      "variants.v.command[1]", "did you mean 'engine.py'?"),
     ('name = "x"\n[variants.v]\norder = 1\ncommand = ["{exe}", "src/sim", "{{scenario_json}}", "{{out_csv}}"]\n',
      "variants.v.command[1]", "src/sim: no such file"),
+    ('name = "x"\nbody_forms = ["com_ofset"]\n[variants.v]\norder = 1\ncommand = ["{exe}", "e.py"]\n',
+     "body_forms", "must be a list of the body forms"),
+    ('name = "x"\nbody_forms = [["com_offset"]]\n[variants.v]\norder = 1\ncommand = ["{exe}", "e.py"]\n',
+     "body_forms", "must be a list of the body forms"),
 ]
 
 

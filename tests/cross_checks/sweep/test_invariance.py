@@ -23,7 +23,8 @@ MODES = ("correct", "diagonal_inertia", "float32_positions", "ignores_com_offset
 
 
 def _engine_file(folder):
-    lines = ['name = "zoo"', 'version = "1.0"', "timeout = 120"]
+    lines = ['name = "zoo"', 'version = "1.0"', "timeout = 120",
+             'body_forms = ["com_offset", "welded_parts"]']   # it reads body.com and body.parts
     for mode in MODES:
         lines += ["", f"[variants.{mode}]", "order = 1", f'description = "cbody.py\'s scheme, {mode}"',
                   f'command = ["{sys.executable}", "{ZOO}", "{mode}", "{{scenario_json}}", "{{out_csv}}"]']

@@ -89,7 +89,7 @@ def test_a_dop853_primary_of_slightly_wrong_gravity_is_caught():
 def test_a_second_reference_of_a_slightly_wrong_body_is_caught(monkeypatch):
     from cross_checks.engines import drake_engine
 
-    def wrong(body):    # every moment 1e-6 too large (applied_torque's inertia is diagonal)
+    def wrong(body, com_B_m=None):    # every moment 1e-6 too large (applied_torque's inertia is diagonal)
         from pydrake.multibody.tree import RotationalInertia, SpatialInertia
         return SpatialInertia.MakeFromCentralInertia(
             float(body.mass_kg), np.zeros(3), RotationalInertia(*(np.diag(body.inertia_B) * (1.0 + 1e-6))))
