@@ -264,7 +264,7 @@ def same_scheme_difference(differences: dict, scales: dict) -> tuple:
     difference, its unit} (core.quantities.state_errors): positions, velocities and angular velocities
     relative to ``scales`` (core.quantities.quantity_scales: at least 1), the orientation in rad."""
     rel = {q: float(differences[q]) / (1.0 if q == "orientation" else scales[q]) for q in QUANTITIES}
-    worst = max(rel, key=rel.get)
+    worst = max(rel, key=lambda q: rel[q])
     return rel[worst], worst
 
 
