@@ -23,6 +23,7 @@ import numpy as np
 from numba import njit
 
 from reference_sim.compiled import cache_wanted
+from reference_sim.quaternion import SINC_SERIES_BELOW_RAD
 
 # fastmath stays off: no reassociation, no contraction into fused multiply-adds; numba's on-disk cache unless
 # its folder proved unusable (reference_sim.compiled.load_compiled: then compiled in memory)
@@ -110,12 +111,21 @@ def _omega_times(wx, wy, wz, qw, qx, qy, qz):
             wz * qw + wx * qy - wy * qx)
 
 
+@njit(**_INLINE)
+def _half_angle_sinc(th, sin_half):
+    """sin(θ/2)/θ (quaternion.half_angle_sinc, its numba twin: equal to the last bit, tests/reference_sim),
+    given ``sin_half`` = sin(θ/2) (the lanes make their libm calls in a loop of their own)."""
+    if th < SINC_SERIES_BELOW_RAD:
+        t2 = th * th
+        return 0.5 - t2 / 48.0 + t2 * t2 / 3840.0
+    return sin_half / th
+
+
 @njit(**_JIT)
 def _exp_map_times(h, wx, wy, wz, qw, qx, qy, qz):
     """exp(h ω) ⊗ q (integrators.exp_map_times)."""
     th = h * math.sqrt(wx * wx + wy * wy + wz * wz)
-    t2 = th * th
-    s = h * (0.5 - t2 / 48.0 + t2 * t2 / 3840.0) if th < 1e-4 else h * (math.sin(0.5 * th) / th)
+    s = h * _half_angle_sinc(th, math.sin(0.5 * th))
     ew, ex, ey, ez = math.cos(0.5 * th), s * wx, s * wy, s * wz
     return (ew * qw - ex * qx - ey * qy - ez * qz, ew * qx + ex * qw + ey * qz - ez * qy,
             ew * qy + ey * qw + ez * qx - ex * qz, ew * qz + ez * qw + ex * qy - ey * qx)
@@ -668,8 +678,7 @@ def _course_lanes(nl, S, Pm, T, OK, limit, gyro, expmap):
         for k in range(nl):
             h, th = Pm[k], T[K + k]
             qw, qx, qy, qz = S[6 * K + k], S[7 * K + k], S[8 * K + k], S[9 * K + k]
-            t2 = th * th
-            s = h * (0.5 - t2 / 48.0 + t2 * t2 / 3840.0) if th < 1e-4 else h * (T[2 * K + k] / th)
+            s = h * _half_angle_sinc(th, T[2 * K + k])
             ew, ex, ey, ez = T[3 * K + k], s * S[10 * K + k], s * S[11 * K + k], s * S[12 * K + k]
             pw, px = ew * qw - ex * qx - ey * qy - ez * qz, ew * qx + ex * qw + ey * qz - ez * qy
             py, pz = ew * qy + ey * qw + ez * qx - ex * qz, ew * qz + ez * qw + ex * qy - ey * qx

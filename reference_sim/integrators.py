@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from reference_sim.forces import Members
-from reference_sim.quaternion import matrix_from_quat, quat_mul
+from reference_sim.quaternion import half_angle_sinc, matrix_from_quat, quat_mul
 from reference_sim.state import STATE_SIZE, Q, V, W, X
 from reference_sim.vec import cross3, floating, mat_t_vec3, matvec3
 
@@ -91,13 +91,11 @@ def _times(ax, ay, az, q, aw=None):
 
 
 def exp_map_times(h, w, q):
-    """``exp(h ω) ⊗ q`` (..., 4): the rotation by the angle ``θ = h |ω|`` about ω, then q; ``sin(θ/2)/θ`` from
-    its series ``1/2 − θ²/48 + θ⁴/3840`` below θ = 1e-4 (error < 1e-21 there)."""
+    """``exp(h ω) ⊗ q`` (..., 4): the rotation by the angle ``θ = h |ω|`` about ω, then q; ``sin(θ/2)/θ`` by
+    quaternion.half_angle_sinc (its series near θ = 0)."""
     wx, wy, wz = w[..., 0:1], w[..., 1:2], w[..., 2:3]
     th = h * np.sqrt(wx * wx + wy * wy + wz * wz)
-    t2 = th * th
-    with np.errstate(invalid="ignore", divide="ignore"):
-        s = h * np.where(th < 1e-4, 0.5 - t2 / 48.0 + t2 * t2 / 3840.0, np.sin(0.5 * th) / th)
+    s = h * half_angle_sinc(th)
     return _times(s * wx, s * wy, s * wz, q, np.cos(0.5 * th))
 
 

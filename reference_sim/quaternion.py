@@ -134,21 +134,35 @@ def quat_from_matrix(R):
     return quat_canonical(q / np.linalg.norm(q, axis=-1, keepdims=True))
 
 
+#: Below this angle (rad) ``sin(θ/2)/θ`` comes from its series ``1/2 − θ²/48 + θ⁴/3840``: the first term left
+#: out, θ⁶/645120, is < 2e-30 there (relative 3e-30), while sin(θ/2)/θ itself would lose digits to
+#: the division as θ → 0 and is 0/0 at 0.
+SINC_SERIES_BELOW_RAD = 1e-4
+
+
+def half_angle_sinc(theta):
+    """``sin(θ/2)/θ`` of angles ``θ ≥ 0`` (rad; array or scalar), from its Taylor series below
+    SINC_SERIES_BELOW_RAD (1/2 at θ = 0): the one definition of the exponential map's coefficient
+    (:func:`quat_exp`, integrators.exp_map_times; its numba twin is
+    ``reference_sim._compiled_kernels._half_angle_sinc``, equal to the last bit: tests/reference_sim)."""
+    theta = np.asarray(theta, dtype=float)
+    small = theta < SINC_SERIES_BELOW_RAD
+    t2 = theta * theta
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(small, 0.5 - t2 / 48.0 + t2 * t2 / 3840.0,
+                        np.sin(0.5 * theta) / np.where(small, 1.0, theta))
+
+
 def quat_exp(rotvec):
     """Exponential map: unit quaternion (w, x, y, z) of rotation vectors ``(..., 3)`` (rad).
 
-    ``quat_exp(θ u) = [cos(θ/2), u sin(θ/2)]``; uses a Taylor series near zero so it is exact to
-    round-off for tiny angles.
+    ``quat_exp(θ u) = [cos(θ/2), u sin(θ/2)]``, ``sin(θ/2)/θ`` by :func:`half_angle_sinc` (a Taylor series
+    near zero, so it is exact to round-off for tiny angles).
     """
     rotvec = np.asarray(rotvec, dtype=float)
     theta = np.linalg.norm(rotvec, axis=-1)
     half = 0.5 * theta
-    small = theta < 1e-4
-    # sin(θ/2)/θ; series 1/2 − θ²/48 + θ⁴/3840 has error < 1e-21 for θ < 1e-4.
-    t2 = theta * theta
-    sinc_half = np.where(small, 0.5 - t2 / 48.0 + t2 * t2 / 3840.0,
-                         np.sin(half) / np.where(small, 1.0, theta))
-    return np.concatenate([np.cos(half)[..., None], sinc_half[..., None] * rotvec], axis=-1)
+    return np.concatenate([np.cos(half)[..., None], half_angle_sinc(theta)[..., None] * rotvec], axis=-1)
 
 
 def quat_log(q):

@@ -68,10 +68,19 @@ PRE_ASYMPTOTIC_ORDER_DEV = 0.5
 #: deviations of the residual oscillation (and the round-off floor); otherwise "bounded". A sinusoid
 #: fitted over ≥ 1 period leaves a spurious trend below ~1.5 σ of itself; 2 σ keeps it bounded.
 SECULAR_TREND_VS_RESIDUAL = 2.0
+#: Roundings in a lever arm measured from the world origin (analysis.metrics.lever_roundoff, part of every
+#: run's floor for an engine with Traits.lever_arms, in the sweep and the fuzz alike): the COM and the frame
+#: origin each rounded (2), the cross product r × F two products and a difference (2 more): 4.
+LEVER_ROUNDINGS = 4.0
 #: Two variants implementing the same arithmetic (expectations.EQUIVALENT_PAIRS) must agree to this,
 #: relative to max(1, |state|): 4e4 steps × ~10 roundings × ε ≈ 1e-10, ×10 for the amplification
 #: near the tennis racket's separatrix.
 SAME_SCHEME_REL = 1e-9
+#: Roundings per step of a same-scheme pair's arithmetic (a quaternion product and normalisation, the
+#: force sums): 10, as in SAME_SCHEME_REL's derivation; the pair's allowance over N steps, grown by the
+#: measured amplification A, is max(SAME_SCHEME_REL, 10 N ε A) (analysis.metrics.same_scheme_allowance: the
+#: sweep's agreement records and the fuzz's agreement property).
+SAME_SCHEME_ROUNDINGS_PER_STEP = 10.0
 # --- Bring your own engine: any simulator in sweeps, baselines, reports and pytest gates ---
 
 #: Engine files: a first row farther than this from the scenario's initial state (relative to
@@ -269,10 +278,6 @@ FUZZ_LINEAR_MAX = 0.05
 #: keeps 13 significant digits and the fastest body-frame rate stays within the triangle inequality's
 #: |ω̇| ≤ |ω|² (torque-free); thinner bodies are redrawn.
 FUZZ_MIN_INERTIA_RATIO = 1e-3
-#: Roundings per step of a same-scheme pair's arithmetic (a quaternion product and normalisation, the
-#: force sums): 10, as in SAME_SCHEME_REL's derivation; the pair's allowance over N steps, grown by the
-#: case's measured amplification A, is max(SAME_SCHEME_REL, 10 N ε A).
-FUZZ_ROUNDINGS_PER_STEP = 10.0
 #: A case is measured after its step is chosen; a pilot solve at this tolerance (loose: only rates and
 #: the amplification's order of magnitude are needed from it) decides the step.
 FUZZ_PILOT_RTOL = 1e-6
@@ -287,9 +292,6 @@ FUZZ_TRIANGLE_MARGIN = 1e-6
 #: Bullet's btMatrix3x3::solve33 inverts det only when |det| > SIMD_EPSILON = DBL_EPSILON (2.22e-16, Bullet
 #: built in double precision as PyBullet is): below it PyBullet maximal's implicit gyroscopic step is wrong.
 BULLET_SOLVE33_DET_EPS = 2.220446049250313e-16
-#: Roundings in a lever arm measured from the world origin (fuzz.properties.lever_roundoff): the COM and the
-#: frame origin each rounded (2), the cross product r × F two products and a difference (2 more): 4.
-FUZZ_LEVER_ROUNDINGS = 4.0
 #: A free-running ladder is "two-term consistent" (analysis.judge.two_term_consistent) when the third
 #: difference of e/h^p is within this fraction of its size: an order-p error with its next term gives 0
 #: (plus the third term, ~0.4 (c₃/c₁) h² ≪ 0.25 in the asymptotic range); an order deficit of 0.5 gives 0.38,

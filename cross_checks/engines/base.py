@@ -98,6 +98,12 @@ class Traits:
     forces_held : the engine holds the applied force and torque over all the stages of a step (no per-stage
         evaluation): a multi-stage scheme is then first order where the forces change within a step
         (state-dependent forces, velocity decay).
+    lever_arms : the engine's arithmetic may hold lever arms measured from the world origin (MuJoCo's and
+        Featherstone's spatial algebra: torques r × F with r known to ε |x| only, momenta about the origin),
+        so its runs are given the round-off that grows with the distance from the origin
+        (analysis.metrics.lever_floor). True, the cautious default, for any engine whose algebra is not
+        known here; False for rbcheck's own schemes, which take torques about the COM and step ω itself
+        (a floor they do not pay would hide their order: docs/fuzz.md §5).
     """
 
     gyroscopic_term: bool = True
@@ -111,6 +117,7 @@ class Traits:
     rounding_factor: float = 1.0
     keeps: tuple = ()
     gyroscopic_clamp_N_m: float | None = None
+    lever_arms: bool = True
 
     def __post_init__(self):
         bad = [k for k in self.keeps if k not in INVARIANTS]

@@ -45,6 +45,9 @@ TRAITS = {
     "lp_midpoint": B.Traits(keeps=("energy", "angular_momentum")),
     "moser_veselov": B.Traits(keeps=("energy", "angular_momentum")),
 }
+#: ... and none holds a lever arm from the world origin: torques are r × F with r = R r_B from the COM, and ω
+#: is stepped itself, never recovered from a momentum about the origin (reference_sim/integrators.py).
+TRAITS = {v: dataclasses.replace(t, lever_arms=False) for v, t in TRAITS.items()}
 #: Declared variants: reference_sim.integrators.VARIANTS, the one registry (orders proven by its own tests).
 VARIANTS = {v: Variant(float(s.order), s.description, traits=TRAITS[v]) for v, s in SCHEMES.items()}
 

@@ -86,27 +86,19 @@ def reference(problems, durations_s, n_fine: int):
 def amplification(scenarios, scales, n_samples: int = 33, rtol: float = tol.AMPLIFICATION_RTOL):
     """{quantity: (M,)}: the largest relative change of each quantity over the run per unit of relative
     initial perturbation (≥ 1), over the 12 directions of ``references.perturbed_initial_states`` moved by
-    AMPLIFICATION_EPS × their scale.
+    AMPLIFICATION_EPS × their scale: ``references.amplification_of`` (the sweep's estimate) at ``n_samples``
+    times of the run instead of its end alone.
 
     scenarios : M Scenarios; scales : M dicts {quantity: scale} (core.quantities.quantity_scales).
     """
-    from cross_checks.scenario.references import perturbed_initial_states
+    from cross_checks.scenario.references import amplification_of, perturbed_initial_states
     eps = tol.AMPLIFICATION_EPS
     y0 = np.concatenate([perturbed_initial_states(sc, eps, sc_scales)
                          for sc, sc_scales in zip(scenarios, scales)])
     problems = [sc.problem for sc in scenarios for _ in range(13)]
     spans = np.repeat([sc.duration_s for sc in scenarios], 13)
     y = solve_members(problems, spans, np.linspace(0.0, 1.0, n_samples), rtol=rtol, y0=y0)
-    M = len(scenarios)
-    y = y.reshape(n_samples, M, 13, 13)
-    base = np.broadcast_to(y[:, :, :1, :], y.shape)
-    d = state_errors(y[:, :, 1:, :], base[:, :, 1:, :])
-    out = {}
-    for q in QUANTITIES:
-        sc_q = np.array([s[q] for s in scales])
-        worst = np.max(np.nan_to_num(d[q], nan=np.inf), axis=(0, 2))
-        out[q] = np.maximum(1.0, worst / sc_q / eps)
-    return out
+    return amplification_of(y.reshape(n_samples, len(scenarios), 13, 13), scales)
 
 
 def step_flows(problems, spans_s, y_start):

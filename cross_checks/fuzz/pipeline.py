@@ -172,7 +172,7 @@ def measure(cases) -> tuple:
                      if cons["energy"][0] or cons["angular_momentum"][0] else {})
         contexts.append(P.Context(sc, c.n0, y_ref[:, i], {q: float(ref_err[q][i]) for q in QUANTITIES}, amp_i,
                                   scales[i], phys, step_h, step_err, allowance,
-                                  P.lever_roundoff(sc, y_ref[:, i])))
+                                  M.lever_arms(sc.problem, y_ref[:, i])))
     return contexts, members, y_end
 
 
@@ -235,8 +235,7 @@ def _refined_ladder_shows_the_order(ctx, variant: str, k: int, rec) -> bool:
         h = float(runs.h_s[0])
         dts.append(h)
         errs.append(float(np.max(e)))
-        floors.append(P.run_floor(ctx, variant, q, n, h, ctx.ref_err[q], ctx.amp[q])
-                      + P.lever_floor(ctx, q, h, h * n, n, ctx.amp[q], variant))
+        floors.append(P.case_floor(ctx, variant, q, n, h, ctx.ref_err[q], ctx.amp[q]))
     # judged on the finest original rung and the refined ones (analysis.refinement)
     dts, errs, floors = dts[2:], errs[2:], floors[2:]
     exp = expectation(sc, variant, q, "free_running", physics=ctx.physics, measure_physics=False)

@@ -8,7 +8,8 @@
 * ``conservation`` — where the physics conserves energy or world angular momentum and the variant models
   that physics: the largest drift within ``analysis.flow.conservation_allowance`` plus the run's round-off;
 * ``agreement`` — the pairs of ``analysis.expectations.EQUIVALENT_PAIRS`` agree to round-off over the
-  run: ``max(SAME_SCHEME_REL, FUZZ_ROUNDINGS_PER_STEP · N ε · A)`` relative to each quantity's scale.
+  run, within ``analysis.metrics.same_scheme_allowance`` (the sweep's rule too) relative to each quantity's
+  scale.
 * ``invariance`` — the case written another way (one transform of scenario.transforms drawn per case,
   :func:`case_transform`) moves the same once mapped back: the sweep's check (sweep.invariance,
   judged by ``analysis.judge.judge_invariance`` at h0, a broken one rerun finer); ``broken`` is a violation,
@@ -37,7 +38,7 @@ from cross_checks.core import tolerances as tol
 from cross_checks.core.quantities import QUANTITIES, UNITS, state_errors
 from cross_checks.engines import resolve
 
-__all__ = ["Context", "ladder_errors", "free_running_order", "run_floor", "one_step_order", "conservation",
+__all__ = ["Context", "ladder_errors", "free_running_order", "case_floor", "one_step_order", "conservation",
            "agreement", "PROPERTIES", "equivalent_pairs", "invariance", "case_transform"]
 
 PROPERTIES = ("free_running_order", "one_step_order", "conservation", "agreement", "invariance")
@@ -66,56 +67,16 @@ class Context:
     step_h: np.ndarray
     step_err: dict
     allowance: dict
-    lever: dict = None
+    lever: dict = None    # analysis.metrics.lever_arms along y_ref (None: no lever-arm term)
 
 
-def lever_roundoff(scenario, y_ref) -> dict:
-    """An engine's round-off from lever arms measured from the world origin (MuJoCo's and Featherstone's
-    spatial algebra: the COM of a subtree recomputed as Σ m x / Σ m, torques as r × F with r known to
-    ε |x| only, momenta about the origin): ``{"acc_rad_s2": a, "velocity_m_s": u, "omega_rad_s": w}`` with
-    a = K ε |x|max (|m g| + |F|max) / I_min the angular acceleration it may add, u = K ε |x|max |ω|max the
-    velocity error of a spatial transform v − ω × x, and w = K ε m |x|max |v|max / I_min the angular
-    velocity error of recovering ω from a momentum about the origin that holds m x × v
-    (K = FUZZ_LEVER_ROUNDINGS; measured on MuJoCo: docs/fuzz.md §5)."""
-    from reference_sim.quaternion import matrix_from_quat
-    p = scenario.problem
-    q = y_ref[:, 6:10] / np.linalg.norm(y_ref[:, 6:10], axis=1, keepdims=True)
-    f, _ = p.forces.force_torque(p.body, y_ref[:, 0:3], y_ref[:, 3:6], q, matrix_from_quat(q))
-    weight = p.body.mass_kg * float(np.linalg.norm(p.forces.gravity_W))
-    F = weight + float(np.max(np.linalg.norm(f, axis=1)))
-    x = float(np.max(np.linalg.norm(y_ref[:, 0:3], axis=1)))
-    w = float(np.max(np.linalg.norm(y_ref[:, 10:13], axis=1)))
-    v = float(np.max(np.linalg.norm(y_ref[:, 3:6], axis=1)))
-    I_min = float(np.linalg.eigvalsh(p.body.inertia_B)[0])
-    k = tol.FUZZ_LEVER_ROUNDINGS * _EPS
-    return {"acc_rad_s2": k * x * F / I_min, "velocity_m_s": k * x * w,
-            "omega_rad_s": k * p.body.mass_kg * x * v / I_min}
-
-
-def pays_lever_roundoff(variant: str) -> bool:
-    """Whether ``variant``'s arithmetic may hold lever arms from the world origin (``lever_roundoff``).
-    rbcheck's own schemes do not: they take torques r × F with r = R r_B from the COM and step ω itself,
-    never recovering it from a momentum about the origin (reference_sim/integrators.py) — their round-off is
-    the ε-per-step of ``roundoff_floor``, and a floor they do not pay hides their order (docs/fuzz.md §5).
-    Every other engine, an engine file included, is assumed to (its algebra is not known here)."""
-    return not variant.startswith("reference:")
-
-
-def lever_floor(ctx, q, h, t, n, amp=1.0, variant: str = "") -> float:
-    """The lever-arm round-off (``lever_roundoff``) in quantity ``q`` after ``n`` steps of ``h`` (t = n h),
-    for a ``variant`` that pays it (:func:`pays_lever_roundoff`)."""
-    if not pays_lever_roundoff(variant):
-        return 0.0
-    lv = ctx.lever or {}
-    a, u, w = lv.get("acc_rad_s2", 0.0), lv.get("velocity_m_s", 0.0), lv.get("omega_rad_s", 0.0)
-    walk = 1.0 + math.sqrt(n)   # the ω representation error: re-made every step, adding like a random walk
-    if q == "angular_velocity":
-        return (a * t + w * walk) * amp
-    if q == "orientation":
-        return (0.5 * a * t * t + w * t * walk) * amp
-    if q == "velocity":
-        return u * n * amp
-    return u * n * h * amp
+def case_floor(ctx, variant: str, q: str, n: int, h_s: float, reference_error,
+               amplification: float = 1.0) -> float:
+    """The round-off floor of a run of ``n`` steps of ``h_s`` of case ``ctx`` for quantity ``q``: the one
+    rule of the sweep and the fuzz, :func:`cross_checks.analysis.metrics.run_floor`, with the case's
+    measured scales and lever arms (``ctx.lever``)."""
+    return M.run_floor(variant, q, n, h_s, ctx.scales, reference_error, amplification=amplification,
+                       lever=ctx.lever)
 
 
 def case_transform(name: str):
@@ -210,9 +171,7 @@ def free_running_order(ctx: Context, variant: str, i: int, ladder, errors=None) 
             v = e[q]
             errs[q].append(float(np.max(v))
                            if runs.status[i] == "ok" and np.all(np.isfinite(v)) else math.nan)
-            floors[q].append(run_floor(ctx, variant, q, n, float(runs.h_s[i]), ctx.ref_err[q], ctx.amp[q])
-                             + lever_floor(ctx, q, float(runs.h_s[i]),
-                                           float(runs.h_s[i]) * n, n, ctx.amp[q], variant))
+            floors[q].append(case_floor(ctx, variant, q, n, float(runs.h_s[i]), ctx.ref_err[q], ctx.amp[q]))
     for q in QUANTITIES:
         exp = expectation(sc, variant, q, "free_running", physics=ctx.physics, measure_physics=False)
         rec, claimed = _fit_record(ctx, variant, q, dts, errs[q], floors[q],
@@ -223,20 +182,6 @@ def free_running_order(ctx: Context, variant: str, i: int, ladder, errors=None) 
     return out, tally
 
 
-def run_floor(ctx, variant: str, q: str, n: int, h_s: float, reference_error,
-              amplification: float = 1.0) -> float:
-    """The round-off floor of a run of ``n`` steps of ``h_s`` for quantity ``q`` (metrics.roundoff_floor in
-    the variant's precision; plus metrics.differencing_floor for the velocity of a variant that recomputes it
-    from positions), as the sweep's convergence records have it (sweep.assemble.ladder_floors)."""
-    variant = resolve(variant)
-    eps = variant.rounding_unit
-    f = M.roundoff_floor(ctx.scales[q], n, reference_error=reference_error, amplification=amplification,
-                         quantity=q, eps=eps)
-    if q == "velocity" and variant.traits.velocity_from_positions:
-        f += M.differencing_floor(ctx.scales["position"], n, h_s, eps, amplification)
-    return f
-
-
 def one_step_order(ctx: Context, variant: str, i: int, defects) -> tuple:
     """The one-step order property of case ``i``; ``defects`` {quantity: (S,)} the largest defect per
     one-step rung (NaN where the engine failed), or None for an engine without a one-step mode."""
@@ -245,8 +190,7 @@ def one_step_order(ctx: Context, variant: str, i: int, defects) -> tuple:
         return out, tally
     dts = [float(h) for h in ctx.step_h]
     for q in QUANTITIES:
-        floors = [run_floor(ctx, variant, q, 1, dts[k], float(ctx.step_err[q][k]))
-                  + lever_floor(ctx, q, dts[k], dts[k], 1, variant=variant) for k in range(len(dts))]
+        floors = [case_floor(ctx, variant, q, 1, dts[k], float(ctx.step_err[q][k])) for k in range(len(dts))]
         errs = [float(v) for v in defects[q]]
         statuses = ["ok" if np.isfinite(v) else "failed" for v in errs]
         exp = expectation(ctx.scenario, variant, q, "one_step", physics=ctx.physics, measure_physics=False)
@@ -325,13 +269,13 @@ def conservation(ctx: Context, variant: str, i: int, ladder) -> tuple:
 
 
 def _lever_conservation(ctx, kind, I_max, t, n, variant: str = "") -> float:
-    """What the lever-arm round-off (``lever_roundoff``) may move world angular momentum (I_max × the ω it
+    """What the lever-arm round-off (metrics.lever_roundoff) may move world angular momentum (I_max × the ω it
     adds) or energy (that ω error against I_max |ω|max, and the spurious torque's work) by over time ``t``,
-    for a ``variant`` that pays it (:func:`pays_lever_roundoff`)."""
-    if not pays_lever_roundoff(variant):
+    for a ``variant`` that pays it (Traits.lever_arms)."""
+    if not ctx.lever or not resolve(variant).traits.lever_arms:
         return 0.0
-    lv = ctx.lever or {}
-    scale = resolve(variant).rounding_unit / _EPS if variant else 1.0   # ctx.lever is in float64's ε
+    lv = M.lever_roundoff(ctx.lever, _EPS)   # in float64's ε, scaled to the variant's rounding unit
+    scale = resolve(variant).rounding_unit / _EPS if variant else 1.0
     dw = scale * (lv.get("acc_rad_s2", 0.0) * t + lv.get("omega_rad_s", 0.0) * (1.0 + math.sqrt(n)))
     if kind == "angular_momentum":
         return I_max * dw
@@ -358,22 +302,19 @@ def agreement(ctx: Context, pair, i: int, ladder_a, ladder_b) -> tuple:
         n = len(ra.y) - 1
         h = float(ra.h_s[i])
         eps = max(resolve(a).rounding_unit, resolve(b).rounding_unit)   # the coarser of the pair's roundings
-        allowed = max(tol.SAME_SCHEME_REL, tol.FUZZ_ROUNDINGS_PER_STEP * n * eps * amp)
+        allowed = M.same_scheme_allowance(n, eps, amp)
         sa, sb = ra.status[i], rb.status[i]
         if "failed" in (sa, sb) or "not_expressible" in (sa, sb):
             continue    # a failed run is its own finding (the order property); an inexpressible one none
         if sa == "diverged" or sb == "diverged":
             ta, tb = ra.diverged_at_s[i], rb.diverged_at_s[i]
-            same = sa == sb and abs(ta - tb) <= 2.0 * h + 1e-12
+            same = sa == sb and M.diverged_together(ta, tb, h)
             rel = 0.0 if same else math.inf
             why = f"{a} {sa}" + (f" at t = {ta:.6g} s" if sa == "diverged" else "") + f", {b} {sb}" + (
                 f" at t = {tb:.6g} s" if sb == "diverged" else "")
         else:
             d = state_errors(ra.y[:, i], rb.y[:, i])
-            rel_q = {q: float(np.max(d[q])) / (1.0 if q == "orientation" else ctx.scales[q])
-                     for q in QUANTITIES}
-            q_worst = max(rel_q, key=rel_q.get)
-            rel = rel_q[q_worst]
+            rel, q_worst = M.same_scheme_difference({q: np.max(d[q]) for q in QUANTITIES}, ctx.scales)
             why = f"largest in {q_worst}"
         if worst is None or rel / allowed > worst[0]:
             worst = (rel / allowed, rel, allowed, h, why)

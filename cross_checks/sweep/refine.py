@@ -117,7 +117,7 @@ def rejudge(scenario, variant, rows, ref, records, fine) -> list:
         statuses = ["ok"] + [s for _, _, s, _ in fine]
         floors = ladder_floors([finest] + pseudo, q, ref.scales, "free_running",
                                finest["reference"] or "analytic",
-                               ref.measured or {})
+                               ref.measured or {}, variant)
         exp = expectation(scenario, variant, q, "free_running", physics=phys, measure_physics=False)
         shows, fit = refined_ladder_shows_the_order(dts, errs, floors, statuses, exp)
         if shows:

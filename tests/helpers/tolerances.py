@@ -278,3 +278,10 @@ POLHODE_CLOSED_FORM = 1e-12
 #: report's float32 series: q and ω each rounded to 6e-8 relative, the direction computed from them to ~10×
 #: that; 1e-5 leaves a margin of ~20×, and the reference's L turns by π (the flip) on tennis_racket.
 POLHODE_FIXED_RAD = 1e-5
+
+#: The fuzz's amplification estimate (stacked DOP853 at AMPLIFICATION_RTOL, sampled over the run) against the
+#: sweep's (references.error_amplification: its own batched DOP853 at the same rtol, at the final time) on a
+#: motion whose amplification peaks at the end: the same estimate (references.amplification_of) from two
+#: solves whose error, ~1e-8 of the state, is ~1e-2 of the 1e-6 perturbations; 4 digits agree
+#: (core/tolerances.py AMPLIFICATION_RTOL), 1e-3 relative.
+AMPLIFICATION_TWO_SOLVES_REL = 1e-3

@@ -412,3 +412,15 @@ def test_the_forces_of_many_bodies_at_once_are_each_bodys_own_bit_for_bit():
     got = rows.force_torque(Y)
     want = np.array([ForceEvaluator(p)._evaluate(y, False) for p, y in zip(problems, Y)])
     assert np.array_equal(got, want)
+
+
+def test_the_numba_half_angle_sinc_is_the_numpy_one_to_the_last_bit():
+    import math
+
+    from reference_sim._compiled_kernels import _half_angle_sinc
+    from reference_sim.quaternion import half_angle_sinc
+    from tests.reference_sim.test_quaternion import SINC_ANGLES
+    rng = np.random.default_rng(7)
+    angles = SINC_ANGLES + list(10.0 ** rng.uniform(-9, 2, 2000))
+    got = np.array([_half_angle_sinc(t, math.sin(0.5 * t)) for t in angles])
+    np.testing.assert_array_equal(got, half_angle_sinc(np.array(angles)))

@@ -193,3 +193,29 @@ def test_sign_continuous_leaves_a_non_finite_row_and_an_empty_array_alone():
     out = sign_continuous(q)
     assert out[0, 0] == 1.0 and np.isnan(out[1, 0]) and out[2, 0] == -1.0
     assert sign_continuous(np.empty((0, 4))).shape == (0, 4)
+
+
+#: Angles around every branch of sin(θ/2)/θ: 0, deep in the series, both sides of its threshold, ordinary
+#: and large angles, rad.
+SINC_ANGLES = [0.0, 1e-300, 1e-12, 3e-7, 9.999999999999999e-05, 1e-4, 1.0000000000000002e-4, 3e-4, 0.1,
+               1.0, 2.0, np.pi, 10.0, 1e6]
+
+
+def test_half_angle_sinc_is_the_exp_map_coefficient_everywhere():
+    from reference_sim.integrators import exp_map_times
+    from reference_sim.quaternion import SINC_SERIES_BELOW_RAD, half_angle_sinc
+    th = np.array(SINC_ANGLES)
+    got = half_angle_sinc(th)
+    assert got[0] == 0.5 and np.all(np.isfinite(got))
+    # sin(θ/2)/θ where the division loses nothing; the series where it would: within a few ulps of both
+    big = th >= SINC_SERIES_BELOW_RAD
+    np.testing.assert_allclose(got[big], np.sin(0.5 * th[big]) / th[big], rtol=0, atol=0)
+    small = (th > 0) & ~big
+    np.testing.assert_allclose(got[small], np.sin(0.5 * th[small]) / th[small], rtol=4e-16)
+    # the quaternion exponential and the integrators' exp-map update take it from here
+    w = np.array([0.3, -0.4, 1.2])
+    for h in (1e-9, 1e-5, 0.01, 1.0):
+        q = exp_map_times(h, w, np.array([1.0, 0.0, 0.0, 0.0]))
+        th_h = h * np.sqrt(np.sum(w * w))
+        np.testing.assert_array_equal(q[1:], (h * half_angle_sinc(th_h)) * w)
+        np.testing.assert_array_equal(quat_exp(h * w)[1:], half_angle_sinc(np.linalg.norm(h * w)) * (h * w))

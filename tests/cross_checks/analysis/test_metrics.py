@@ -92,3 +92,70 @@ def test_roundoff_floor_grows_with_the_steps_and_the_reference():
     assert b == pytest.approx(tol.ROUNDOFF_PER_STEP_REL * 1e6)
     assert (M.roundoff_floor(1.0, 100, "ground_truth (DOP853, rtol 1e-12)")
             == tol.REFERENCE_ACCURACY_REL["ground_truth"])
+
+
+# --- the one round-off floor of a run (sweep and fuzz) and the same-scheme allowance ------------------
+
+#: Lever arms of a small body 9 m from the origin (metrics.lever_arms' fields).
+FAR_LEVER = {"position_max_m": 9.0, "velocity_max_m_s": 3.0, "angular_velocity_max_rad_s": 12.0,
+             "force_max_N": 5.0, "mass_kg": 0.3, "inertia_min_kg_m2": 1.2e-4}
+SCALES = {"position": 9.0, "velocity": 3.0, "orientation": math.pi, "angular_velocity": 12.0}
+
+
+def test_lever_arms_are_measured_along_the_states():
+    sc = _scenario('gravity = [0.0, 0.0, -10.0]')
+    y = np.array([state(x=[3.0, 4.0, 0.0], v=[0.0, 1.0, 0.0], w=[0.0, 0.0, 2.0]),
+                  state(x=[0.0, 0.0, 1.0], v=[0.0, 0.0, -6.0], w=[0.0, 0.5, 0.0])])
+    lv = M.lever_arms(sc.problem, y)
+    assert lv == {"position_max_m": 5.0, "velocity_max_m_s": 6.0, "angular_velocity_max_rad_s": 2.0,
+                  "force_max_N": 2.0 * 10.0 + 2.0 * 10.0, "mass_kg": 2.0, "inertia_min_kg_m2": 1.0}
+
+
+@pytest.mark.parametrize("q", ["position", "velocity", "orientation", "angular_velocity"])
+def test_the_run_floor_of_an_engine_adds_its_lever_arms_and_rbcheck_s_own_schemes_do_not(q):
+    from cross_checks.engines import resolve
+    assert resolve("mujoco:rk4").traits.lever_arms and resolve("an_engine_file:any").traits.lever_arms
+    assert not any(resolve(f"reference:{v}").traits.lever_arms for v in ("rk4", "course", "jolt_gyro"))
+    n, h = 400, 2.5e-3
+    plain = M.run_floor("reference:rk4", q, n, h, SCALES, 1e-13, amplification=3.0, lever=FAR_LEVER)
+    assert plain == M.roundoff_floor(SCALES[q], n, reference_error=1e-13, amplification=3.0, quantity=q)
+    engine = M.run_floor("mujoco:rk4", q, n, h, SCALES, 1e-13, amplification=3.0, lever=FAR_LEVER)
+    lever = M.lever_floor(FAR_LEVER, q, h, n, 3.0, 2.0 ** -52)
+    assert lever > 0.0 and engine == plain + lever
+    # by hand: K ε |x| F / I_min integrated over t = n h (ω), twice (orientation); the ω representation error
+    # K ε m |x| |v| / I_min made each step (a random walk); K ε |x| |ω| per step in v, × h in x
+    k = tol.LEVER_ROUNDINGS * 2.0 ** -52
+    a, w, u, t = k * 9.0 * 5.0 / 1.2e-4, k * 0.3 * 9.0 * 3.0 / 1.2e-4, k * 9.0 * 12.0, n * h
+    walk = 1.0 + math.sqrt(n)
+    by_hand = {"angular_velocity": a * t + w * walk, "orientation": 0.5 * a * t * t + w * t * walk,
+               "velocity": u * n, "position": u * n * h}[q]
+    assert lever == pytest.approx(3.0 * by_hand, rel=1e-12)
+    # unmeasured lever arms add nothing (a failed reference's floors)
+    assert M.run_floor("mujoco:rk4", q, n, h, SCALES, 1e-13, amplification=3.0) == plain
+
+
+def test_a_float32_engine_s_lever_arms_round_at_float32_s_epsilon():
+    from cross_checks.engines import resolve
+    f32 = next((v for v in ("mujoco_warp:euler", "rapier:default", "newton:semi_implicit")
+                if resolve(v).known and resolve(v).precision == "float32"), None)
+    if f32 is None:
+        pytest.skip("no float32 engine installed here")
+    v = resolve(f32)
+    plain = M.run_floor(v, "angular_velocity", 100, 1e-3, SCALES, 0.0)
+    got = M.run_floor(v, "angular_velocity", 100, 1e-3, SCALES, 0.0, lever=FAR_LEVER) - plain
+    eps32 = 2.0 ** -23 * v.traits.rounding_factor
+    want = M.lever_floor(FAR_LEVER, "angular_velocity", 1e-3, 100, 1.0, eps32)
+    assert got == pytest.approx(want, rel=1e-9)
+
+
+def test_the_same_scheme_allowance_is_round_off_grown_by_the_steps_and_the_amplification():
+    eps = tol.ROUNDOFF_PER_STEP_REL
+    assert M.same_scheme_allowance(1000, eps) == tol.SAME_SCHEME_REL        # short runs: the fixed floor
+    n, amp = 40_000, 50.0
+    assert (M.same_scheme_allowance(n, eps, amp)
+            == pytest.approx(tol.SAME_SCHEME_ROUNDINGS_PER_STEP * n * eps * amp))
+    assert M.same_scheme_allowance(n, 2.0 ** -23) > M.same_scheme_allowance(n, eps)
+    rel, worst = M.same_scheme_difference({"position": 6e-9, "velocity": 1e-9, "orientation": 1e-10,
+                                           "angular_velocity": 1.2e-9}, SCALES)
+    assert worst == "position" and rel == pytest.approx(6e-9 / 9.0)
+    assert M.diverged_together(1.0, 1.002, 1e-3) and not M.diverged_together(1.0, 1.0021, 1e-3)

@@ -98,11 +98,17 @@ frame = "body"
 
 
 def test_rbcheck_s_own_schemes_are_not_given_an_engine_s_lever_arm_round_off(monkeypatch):
-    import cross_checks.fuzz.properties as P
-    assert not P.pays_lever_roundoff("reference:rk4") and P.pays_lever_roundoff("mujoco:rk4")
+    import dataclasses
+
+    from cross_checks.engines import get_adapter, resolve
+    assert not resolve("reference:rk4").traits.lever_arms and resolve("mujoco:rk4").traits.lever_arms
     (judged,) = evaluate_specs([FAR_SMALL_BODY], ["reference:rk4"])
     assert judged.violations == []
-    monkeypatch.setattr(P, "pays_lever_roundoff", lambda variant: True)   # the floor as it was
+    declared = get_adapter("reference").variants
+    rk4 = declared["rk4"]   # the floor as it was: rk4 declared to hold lever arms
+    monkeypatch.setitem(declared, "rk4", dataclasses.replace(
+        rk4, traits=dataclasses.replace(rk4.traits, lever_arms=True)))
+    assert resolve("reference:rk4").traits.lever_arms
     (with_floor,) = evaluate_specs([FAR_SMALL_BODY], ["reference:rk4"])
     assert with_floor.violations == []   # ... and order_within_floors alone leaves room for order 5 there too
     import cross_checks.analysis.judge as J

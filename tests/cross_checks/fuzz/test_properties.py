@@ -63,10 +63,10 @@ def test_a_finest_rung_within_its_floor_leaves_the_order_undecided():
 def test_the_lever_arm_floor_covers_mujocos_measured_round_off():
     """A tensor body at rest falling far from the origin: the true ω stays exactly 0, MuJoCo's picks up
     round-off from lever arms measured from the world origin — above the plain ε floor, below the
-    lever-arm term of fuzz.properties.lever_roundoff."""
+    lever-arm term of analysis.metrics.lever_roundoff."""
+    from cross_checks.analysis.metrics import lever_arms, lever_roundoff
     from cross_checks.engines import get_adapter
     from cross_checks.fuzz.pipeline import scenario_of
-    from cross_checks.fuzz.properties import lever_roundoff
     I = np.diag([0.00113, 0.0128, 0.0131])
     R = np.linalg.qr(np.array([[1.0, 0.3, 0.2], [0.1, 1.0, 0.4], [0.3, 0.2, 1.0]]))[0]
     spec = {"name": "lever", "duration": 0.4, "dt": 0.01,
@@ -77,7 +77,7 @@ def test_the_lever_arm_floor_covers_mujocos_measured_round_off():
     run = get_adapter("mujoco").simulate(sc, "euler", 0.01, 40)
     w_err = float(np.max(np.linalg.norm(np.asarray(run.y)[:, 10:13], axis=1)))
     y_ref = np.asarray(get_adapter("reference").simulate(sc, "rk4", 0.01, 40).y)
-    lv = lever_roundoff(sc, y_ref)
+    lv = lever_roundoff(lever_arms(sc.problem, y_ref), 2.0 ** -52)
     assert w_err > 10 * 2.0 ** -52           # above any ε |ω| (|ω| = 0 here): it is the lever arms
     assert w_err <= lv["acc_rad_s2"] * sc.duration_s
 

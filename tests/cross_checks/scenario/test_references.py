@@ -37,3 +37,28 @@ def test_ground_truth_requested_explicitly_is_used():
     sc = load_scenario("applied_torque")
     y, label = reference_solution(sc, np.array([0.0, 0.5]))
     assert label.startswith("ground_truth") and y.shape == (2, 13)
+
+
+def test_the_sweep_and_the_fuzz_estimate_the_amplification_alike():
+    from cross_checks.core.quantities import QUANTITIES, quantity_scales
+    from cross_checks.fuzz.exact import amplification
+    from cross_checks.scenario.references import error_amplification
+    from tests.helpers.tolerances import AMPLIFICATION_TWO_SOLVES_REL
+    sc = load_scenario("spring_pendulum")   # DOP853 in both; its amplification is largest at the end
+    y, _ = reference_solution(sc, np.linspace(0.0, sc.duration_s, 201))
+    scales = quantity_scales(y)
+    sweep = error_amplification(sc, scales)
+    fuzz = amplification([sc], [scales], n_samples=2)   # at t = 0 (relative change 1) and at the end
+    for q in QUANTITIES:
+        assert fuzz[q][0] == pytest.approx(sweep[q], rel=AMPLIFICATION_TWO_SOLVES_REL), q
+
+
+def test_a_perturbed_solution_that_blows_up_is_an_infinite_amplification():
+    from cross_checks.scenario.references import amplification_of
+    scales = {"position": 1.0, "velocity": 1.0, "orientation": np.pi, "angular_velocity": 1.0}
+    y = np.tile(np.array([0.0] * 6 + [1.0, 0.0, 0.0, 0.0] + [0.0] * 3), (1, 2, 13, 1))
+    y[0, :, 1, 0] += 3e-6     # a 1e-6 perturbation of x grown 3 times, in both scenarios ...
+    y[0, 1, 4, 3] = np.nan    # ... and the second's v-perturbed solution blew up
+    a = amplification_of(y, [scales, scales])
+    assert a["position"][0] == pytest.approx(3.0) and a["velocity"][0] == 1.0   # at least 1
+    assert a["velocity"][1] == np.inf
