@@ -13,7 +13,11 @@ repeats}}. Drake is measured on one trajectory only, beside MuJoCo through the s
 (``mujoco_adapter_single_us_per_step``). ``overhead``: per installed engine (default variant) ``{variant,
 engine_us_per_step, rbcheck_us_per_step}`` (the engine's own time per step, the whole cost through rbcheck);
 ``batched``: ``{variant, engine_body_steps_per_s, rbcheck_body_steps_per_s}`` (the engine's own batched
-throughput in this run beside simulate_many's at the same N).
+throughput in this run beside simulate_many's at the same N): MuJoCo (N bodies in one model, or a rollout),
+PyBullet (N bodies), and every installed engine of :data:`OWN_BATCHED` — PhysX and Rapier (one scene of N
+bodies), MJX, Brax and jaxsim (N bodies vmapped through one compiled loop of their own step; compilation
+timed apart, ``measurements["own_batched[V]"]["compile_s"]``) and MuJoCo Warp (N worlds);
+``own_batched_not_measured`` {variant: why} for a batching engine without one here.
 """
 from __future__ import annotations
 
@@ -319,6 +323,227 @@ def pybullet_bodies(n_bodies, n_steps, repeats):
         p.disconnect(cid)
 
 
+# --- the engines' own batched throughput (issue 43, item 4): the bench's body built by each adapter's own
+# model builder (its neutralised defaults, the same Δt), stepped by the engine's own API, not rbcheck's loop
+
+def _own_problem(n_bodies):
+    """The bench's scenario and the packed initial states (N, 13) of its N bodies (ω0 = _initial_w(N), world
+    axes = body axes at the identity attitude)."""
+    sc = _bench_scenario()
+    y0 = np.tile(sc.problem.initial_packed(), (n_bodies, 1))
+    y0[:, 10:13] = _initial_w(n_bodies)
+    return sc, y0
+
+
+def _with_compile(st: dict, compile_s) -> dict:
+    return {**st, "compile_s": compile_s}
+
+
+def physx_scene(n_bodies, n_steps, repeats, variant="tgs") -> dict:
+    """PhysX: ONE scene of N rigid dynamics (physx_engine.PhysxWorld's: the same mass properties and
+    neutralised settings, the variant's solver, Δt), stepped by ``PhysxCpuSystem.step()``; before each step
+    every body's attitude is read in one ``pack()`` and the body torque, turned to world axes, is added per
+    body (PhysX clears forces each step and takes world torques only)."""
+    from cross_checks.engines import physx_engine
+    from cross_checks.engines.base import RunRequest
+    from reference_sim.quaternion import rotate
+    sc, y0 = _own_problem(n_bodies)
+    world = physx_engine.PhysxWorld([RunRequest(sc, H, n_steps)] * n_bodies, variant, H)
+    system, comps, zero = world.system, world.comps, np.zeros(3, dtype=np.float32)
+    tau_B = np.tile(TORQUE_B, (n_bodies, 1))
+
+    def run():
+        world.set_state(y0)
+        for _ in range(n_steps):
+            q = np.frombuffer(system.pack(), dtype=np.float32).reshape(n_bodies, 13)[:, 0:4]   # w x y z
+            for c, t in zip(comps, rotate(q.astype(float), tau_B).astype(np.float32)):
+                c.add_force_torque(zero, t)
+            system.step()
+    return _with_compile(_rates(n_bodies * n_steps, run, repeats), None)
+
+
+def rapier_world(n_bodies, n_steps, repeats, variant="symplectic_euler") -> dict:
+    """Rapier: ONE ``PhysicsWorld`` of N dynamic bodies (rapier_engine.RapierWorld's: the same mass
+    properties, world and body settings, gyroscopic flag, Δt, one thread), stepped by ``world.step()``;
+    before each step every body's attitude is read and its torque replaced by the body torque turned to world
+    axes (Rapier keeps user forces and takes world torques only)."""
+    from cross_checks.engines import rapier_engine
+    from cross_checks.engines.base import RunRequest
+    from reference_sim.quaternion import rotate
+    sc, y0 = _own_problem(n_bodies)
+    world = rapier_engine.RapierWorld([RunRequest(sc, H, n_steps)] * n_bodies, variant, H)
+    bodies, w = world.bodies, world.world
+    tau_B = np.tile(TORQUE_B, (n_bodies, 1))
+
+    def run():
+        world.set_state(y0)
+        for _ in range(n_steps):
+            xyzw = np.array([rb.rotation.to_tuple() for rb in bodies])
+            for rb, t in zip(bodies, rotate(xyzw[:, [3, 0, 1, 2]], tau_B).tolist()):
+                rb.reset_torques(False)
+                rb.add_torque(tuple(t), False)
+            w.step()
+    return _with_compile(_rates(n_bodies * n_steps, run, repeats), None)
+
+
+def _jax_timed(compile_fn, args, work, repeats) -> dict:
+    """Compile ``compile_fn`` ahead of time for ``args`` (timed apart), then time its calls to completion."""
+    import jax
+    t0 = time.perf_counter()
+    exe = jax.jit(compile_fn).lower(*args).compile()
+    compile_s = time.perf_counter() - t0
+    return _with_compile(_rates(work, lambda: jax.block_until_ready(exe(*args)), repeats), compile_s)
+
+
+def mjx_vmapped(n_bodies, n_steps, repeats, variant="euler") -> dict:
+    """MJX: the model mjx_engine builds (mujoco_engine's, ``mjx.put_model``), N bodies vmapped through ONE
+    compiled ``jax.lax.fori_loop`` of ``mjx.step``; the body torque in ``qfrc_applied`` (the free joint's
+    rotational DOFs are body axes; it persists between steps). Compilation timed apart (``compile_s``)."""
+    from cross_checks.engines import mjx_engine
+    _, xm = mjx_engine.device_model(_bench_scenario(), variant, H)   # starts JAX (float64)
+    import jax
+    import jax.numpy as jnp
+    import mujoco
+    from mujoco import mjx
+
+    from cross_checks.engines import mujoco_engine
+    m = mujoco_engine.build_model(_bench_scenario(), variant, H)
+    d0 = mjx.put_data(m, mujoco.MjData(m))
+    d0 = d0.replace(qfrc_applied=d0.qfrc_applied.at[3:6].set(jnp.asarray(TORQUE_B)))
+    qvel0 = np.zeros((n_bodies, 6))
+    qvel0[:, 3:6] = _initial_w(n_bodies)
+
+    def member(model, qvel):
+        d = jax.lax.fori_loop(0, n_steps, lambda i, d: mjx.step(model, d), d0.replace(qvel=qvel))
+        return d.qpos, d.qvel
+    return _jax_timed(jax.vmap(member, in_axes=(None, 0)), (xm, jnp.asarray(qvel0)), n_bodies * n_steps,
+                      repeats)
+
+
+def brax_vmapped(n_bodies, n_steps, repeats, variant="generalized") -> dict:
+    """Brax (generalized pipeline): brax_engine's neutralised System of the bench's body at Δt (its six
+    DOF actuators: ``act`` is the generalized force [f_W, τ_B]; brax applies gravity), N bodies vmapped
+    through ONE compiled ``jax.lax.fori_loop`` of ``pipeline.step`` with ``act = [0, τ_B]``. Compilation timed
+    apart (``compile_s``)."""
+    from cross_checks.engines import brax_engine
+    sc, y0 = _own_problem(n_bodies)
+    sys = brax_engine.build_system(sc, variant, H)   # starts JAX (float64)
+    import importlib
+
+    import jax
+    import jax.numpy as jnp
+    pipeline = importlib.import_module(f"brax.{variant}.pipeline")
+    q, qd = brax_engine.to_q_qd(y0)
+    act = jnp.asarray(np.r_[np.zeros(3), TORQUE_B])
+
+    def member(s, q, qd):
+        st = jax.lax.fori_loop(0, n_steps, lambda i, st: pipeline.step(s, st, act), pipeline.init(s, q, qd))
+        return st.q, st.qd
+    return _jax_timed(jax.vmap(member, in_axes=(None, 0, 0)), (sys, jnp.asarray(q), jnp.asarray(qd)),
+                      n_bodies * n_steps, repeats)
+
+
+def jaxsim_vmapped(n_bodies, n_steps, repeats, variant="semi_implicit_euler") -> dict:
+    """jaxsim: jaxsim_engine's model of the bench's body (its SDF, gravity, integrator) at Δt, N bodies
+    vmapped through ONE compiled ``jax.lax.fori_loop`` of ``js.model.step`` on the body's own
+    ``JaxSimModelData`` (Mixed representation); the link force [0, R_WB τ_B] each step (jaxsim takes world
+    torques). Compilation timed apart (``compile_s``)."""
+    import dataclasses
+
+    from cross_checks.engines import jaxsim_engine
+    sc, y0 = _own_problem(n_bodies)
+    model = dataclasses.replace(jaxsim_engine.build_model(sc, variant), time_step=H)   # starts JAX
+    import jax
+    import jax.numpy as jnp
+    import jaxsim.api as js
+    from jaxsim import VelRepr
+    tau_B = jnp.asarray(TORQUE_B)
+
+    def member(model, y):
+        data = js.data.JaxSimModelData.build(model=model, base_position=y[0:3], base_quaternion=y[6:10],
+                                             base_linear_velocity=y[3:6], base_angular_velocity=y[10:13],
+                                             velocity_representation=VelRepr.Mixed)
+
+        def body(i, data):
+            w, x, y_, z = data.base_quaternion
+            R = jnp.array([[1 - 2 * (y_ * y_ + z * z), 2 * (x * y_ - w * z), 2 * (x * z + w * y_)],
+                           [2 * (x * y_ + w * z), 1 - 2 * (x * x + z * z), 2 * (y_ * z - w * x)],
+                           [2 * (x * z - w * y_), 2 * (y_ * z + w * x), 1 - 2 * (x * x + y_ * y_)]])
+            f6 = jnp.concatenate([jnp.zeros(3), R @ tau_B])[None, :]
+            return js.model.step(model, data, link_forces=f6)
+        data = jax.lax.fori_loop(0, n_steps, body, data)
+        return data.base_position, data.base_quaternion
+    return _jax_timed(jax.vmap(member, in_axes=(None, 0)), (model, jnp.asarray(y0)), n_bodies * n_steps,
+                      repeats)
+
+
+def mujoco_warp_worlds(n_bodies, n_steps, repeats, variant="euler") -> dict:
+    """MuJoCo Warp: the model mujoco_warp_engine builds (mujoco_engine's, autoreset cleared) as N worlds of
+    one ``mjw.put_data(..., nworld=N)`` on Warp's CPU device, one ``mjw.step`` captured as a Warp graph and
+    replayed per step (as the adapter does); the body torque in ``qfrc_applied`` (body axes, persists).
+    The first step, which loads or compiles the kernels, is timed apart (``compile_s``)."""
+    from cross_checks.engines import mujoco_warp_engine as mwe
+    m = mwe.host_model(_bench_scenario(), variant, H)   # starts Warp (its kernel cache)
+    import mujoco
+    import mujoco_warp as mjw
+    import warp as wp
+    with wp.ScopedDevice("cpu"):
+        wm = mwe.device_model(m, [H] * n_bodies)
+        wd = mjw.put_data(m, mujoco.MjData(m), nworld=n_bodies)
+    qpos0 = np.tile(np.r_[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0], (n_bodies, 1)).astype(np.float32)
+    qvel0 = np.zeros((n_bodies, 6), dtype=np.float32)
+    qvel0[:, 3:6] = _initial_w(n_bodies)
+    wd.qfrc_applied.assign(np.tile(np.r_[0.0, 0.0, 0.0, TORQUE_B], (n_bodies, 1)).astype(np.float32))
+    t0 = time.perf_counter()
+    with wp.ScopedDevice("cpu"):
+        mjw.step(wm, wd)            # loads (or compiles) every kernel of the step
+        wp.synchronize()
+        with wp.ScopedCapture() as cap:
+            mjw.step(wm, wd)
+    compile_s = time.perf_counter() - t0
+
+    def run():
+        wd.qpos.assign(qpos0)
+        wd.qvel.assign(qvel0)
+        with wp.ScopedDevice("cpu"):
+            for _ in range(n_steps):
+                wp.capture_launch(cap.graph)
+            wp.synchronize()
+    return _with_compile(_rates(n_bodies * n_steps, run, repeats), compile_s)
+
+
+#: The engine's own batched run, per engine (its function takes the engine's variant name): one scene or
+#: world of N bodies (PhysX, Rapier), N bodies vmapped in one compiled loop (MJX, Brax, jaxsim), N worlds
+#: (MuJoCo Warp). MuJoCo's and PyBullet's own rows are measured apart (mujoco_multibody, pybullet_bodies).
+OWN_BATCHED = {"physx": physx_scene, "rapier": rapier_world, "mjx": mjx_vmapped, "brax": brax_vmapped,
+               "jaxsim": jaxsim_vmapped, "mujoco_warp": mujoco_warp_worlds}
+#: What each engine's own batched run is, as the table prints it.
+OWN_HOW = {"mujoco": "N bodies in one model (best of it and a rollout)", "pybullet": "N bodies, states read",
+           "physx": "one scene of N bodies", "rapier": "one world of N bodies",
+           "mjx": "N vmapped, one compiled fori_loop", "brax": "N vmapped, one compiled fori_loop",
+           "jaxsim": "N vmapped, one compiled fori_loop", "mujoco_warp": "N worlds, one captured step"}
+
+
+def own_batched(variants, n_bodies, n_steps, repeats) -> tuple:
+    """``({variant: stats + compile_s}, {variant: why not measured})`` of the engine's own batched run
+    (:data:`OWN_BATCHED`) for each ``ENGINE:VARIANT`` of ``variants``: an engine without one here (Drake,
+    DART) or one that cannot run (not installed, its model refused) is not measured and says why."""
+    from cross_checks.engines import EngineError
+    measured, why = {}, {}
+    for v in variants:
+        engine, name = v.split(":", 1)
+        fn = OWN_BATCHED.get(engine)
+        if fn is None:
+            why[v] = (f"this bench has no batched run of {engine} by itself (the issue's goal names "
+                      "MuJoCo, PyBullet, PhysX, Rapier, MJX, Brax, jaxsim and MuJoCo Warp)")
+            continue
+        try:
+            measured[v] = fn(n_bodies, n_steps, repeats, name)
+        except (ImportError, EngineError) as exc:
+            why[v] = f"{type(exc).__name__}: {exc}"
+    return measured, why
+
+
 #: The quick bench's sweep: a light scenario and two of the heaviest (long, fine ladders; a DOP853 reference).
 QUICK_SCENARIOS = ("projectile", "tennis_racket", "spring_pendulum")
 #: The engines of "the default sweep" the floor ratio is defined on (what the README's main command runs,
@@ -427,8 +652,14 @@ def run_bench(quick: bool = False, repeats: int = 3, render=None, sweep: bool = 
         r["batched_adapters"][v] = st["median"]
     # the engines' own cost against the cost through rbcheck (its loop, forces and recording)
     r["overhead"] = overhead_rows(1000 if quick else 5000, repeats)
+    # the engines' own batched runs at the same N, after the sweep too (the JAX and Warp ones start their
+    # runtime in this process); an engine that cannot run here is skipped and says why
+    own_rates, r["own_batched_not_measured"] = own_batched(batching_variants(), n, steps, repeats)
+    for v, st in own_rates.items():
+        m[f"own_batched[{v}]"] = st
     own = {"mujoco:euler": max(r["mujoco_multibody_body_steps_per_s"], r["mujoco_rollout_body_steps_per_s"]),
-           "pybullet:multibody": r["pybullet_body_steps_per_s"]}
+           "pybullet:multibody": r["pybullet_body_steps_per_s"],
+           **{v: st["median"] for v, st in own_rates.items()}}
     r["batched"] = batched_rows(n, steps, repeats, own)
     r["versions"]["drake"] = _drake_version()
     r["reference_batched_body_steps_per_s"] = max(r["reference_course_body_steps_per_s"],
@@ -527,10 +758,19 @@ def format_table(r: dict) -> str:
             e, w = row["engine_us_per_step"], row["rbcheck_us_per_step"]
             out.append(f"{row['variant']:<42} {'n/a' if e is None else f'{e:.2f}':>10} {w:>16.2f} "
                        f"{'' if e is None else f'{w / e:.1f}x':>7}")
+    if r.get("batched"):
+        title = f"batched, N = {n}, body-steps/s"
+        out += ["", f"{title:<42} {'engine':>10} {'through rbcheck':>16} {'ratio':>7}  engine's own run"]
     for row in r.get("batched", []):
-        e, w = row["engine_body_steps_per_s"], row["rbcheck_body_steps_per_s"]
-        out.append(f"batched, N = {n}: {row['variant']} by itself {e:.3e} body-steps/s, through rbcheck "
-                   f"{w:.3e} ({w / e:.2f} of it)")
+        e, w, v = row["engine_body_steps_per_s"], row["rbcheck_body_steps_per_s"], row["variant"]
+        st = m.get(f"own_batched[{v}]", {})
+        how = OWN_HOW.get(v.split(":", 1)[0], "")
+        if st.get("compile_s") is not None:
+            how += f" (compiled in {st['compile_s']:.1f} s, not counted)"
+        out.append(f"{v:<42} {'n/a' if e is None else f'{e:.3e}':>10} {w:>16.3e} "
+                   f"{'' if not e else f'{w / e:.2f}':>7}  {how}")
+    for v, why in r.get("own_batched_not_measured", {}).items():
+        out.append(f"{v}: the engine's own batched run not measured: {why}")
     if "sweep" in r:
         out += ["", *_sweep_lines(r)]
     for name, ok in r["targets"].items():

@@ -133,11 +133,12 @@ def test_the_sweep_is_measured_before_any_engine_adapter_runs_in_the_process(mon
     monkeypatch.setattr(bench, "drake_single_us", lambda *a, **k: order.append("adapter") or (None, None))
     monkeypatch.setattr(bench, "adapter_batched", lambda *a, **k: order.append("adapter") or stat)
     monkeypatch.setattr(bench, "overhead_rows", lambda *a, **k: order.append("adapter") or [])
+    monkeypatch.setattr(bench, "own_batched", lambda *a, **k: order.append("own") or ({}, {}))
     monkeypatch.setattr(bench, "batching_variants", lambda *a, **k: ["jaxsim:semi_implicit_euler"])
     sweep = {"total_s": stat, "run_s": stat, "floor_s": 1.0}
     monkeypatch.setattr(bench, "sweep_floor", lambda *a, **k: order.append("sweep") or sweep)
     r = bench.run_bench(quick=True, repeats=1)
-    assert order[0] == "sweep" and order.count("sweep") == 1 and "adapter" in order
+    assert order[0] == "sweep" and order.count("sweep") == 1 and "adapter" in order and "own" in order
     assert r["sweep"] is sweep and r["targets"]["sweep (run + report) <= 8x its floor"]
 
 
@@ -154,7 +155,8 @@ def test_the_engines_own_time_is_measured_apart_from_rbchecks_and_both_are_print
     t["batched"] = [{"variant": "mujoco:euler", "engine_body_steps_per_s": 4e6,
                      "rbcheck_body_steps_per_s": 1e6}]
     text = bench.format_table(t)
-    assert "mujoco:euler" in text and "through rbcheck" in text and "(0.25 of it)" in text
+    assert "mujoco:euler" in text and "through rbcheck" in text
+    assert "4.000e+06        1.000e+06    0.25  N bodies in one model" in text
 
 
 def test_the_overhead_targets_are_read_from_the_rows_as_the_issue_words_them():
@@ -179,3 +181,78 @@ def test_the_overhead_targets_are_read_from_the_rows_as_the_issue_words_them():
         "pybullet:multibody: simulate_many >= 0.5x the engine's own batched throughput": False}
     assert not bench.overhead_targets(overhead[:1], [], mj_step_loop_us=0.33)[
         "mujoco:euler: engine_s per step <= 3x a Python loop of mj_step"]
+
+
+def test_every_engine_with_an_own_batched_run_gets_a_batched_row(monkeypatch):
+    """The engines' own batched throughputs (hand-made, as own_batched returns them) become one ``batched``
+    row each beside simulate_many's at the same N, and the targets read every row (no time asserted: the
+    adapter's rate is stubbed)."""
+    stat = {"median": 3e5, "min": 2e5, "max": 4e5, "repeats": 1}
+    seen = []
+    monkeypatch.setattr(bench, "adapter_batched", lambda v, n, s, r: seen.append((v, n, s)) or stat)
+    own = {"mujoco:euler": 4e6, "physx:tgs": 1e6, "rapier:symplectic_euler": 5e5, "mjx:euler": 4e5,
+           "brax:generalized": 2e5, "jaxsim:semi_implicit_euler": 1e5, "mujoco_warp:euler": 7e5}
+    rows = bench.batched_rows(50, 10, 1, own)
+    assert [r["variant"] for r in rows] == list(own) and all(n == 50 and s == 10 for _, n, s in seen)
+    assert all(set(r) == {"variant", "engine_body_steps_per_s", "rbcheck_body_steps_per_s"} for r in rows)
+    t = bench.overhead_targets([], rows, mj_step_loop_us=1.0)
+    goal = ": simulate_many >= 0.5x the engine's own batched throughput"
+    assert t == {v + goal: 3e5 >= 0.5 * e for v, e in own.items()}
+    assert [v for v in own if t[v + goal]] == ["rapier:symplectic_euler", "mjx:euler", "brax:generalized",
+                                               "jaxsim:semi_implicit_euler"]
+
+
+def test_an_engine_that_cannot_run_its_own_batch_is_skipped_and_says_why(monkeypatch):
+    """Not installed (EngineNotInstalled), its model refused (EngineError) or no own run here (Drake, DART):
+    no row, a reason each; the others are measured."""
+    from cross_checks.engines.base import EngineError, EngineNotInstalled
+
+    def absent(*a):
+        raise EngineNotInstalled("jaxsim is not installed (pip install 'rbcheck[jaxsim]')")
+
+    def refused(*a):
+        raise EngineError("MJX refused the model")
+    stat = {"median": 1.0, "min": 1.0, "max": 1.0, "repeats": 1, "compile_s": None}
+    calls = []
+    monkeypatch.setattr(bench, "OWN_BATCHED", {"jaxsim": absent, "mjx": refused,
+                                               "physx": lambda *a: calls.append(a) or stat})
+    measured, why = bench.own_batched(["jaxsim:semi_implicit_euler", "mjx:euler", "physx:pgs",
+                                       "drake:semi_explicit_euler"], 7, 3, 2)
+    assert measured == {"physx:pgs": stat} and calls == [(7, 3, 2, "pgs")]
+    assert "not installed" in why["jaxsim:semi_implicit_euler"] and "refused" in why["mjx:euler"]
+    assert "no batched run of drake by itself" in why["drake:semi_explicit_euler"]
+
+
+def test_the_table_prints_each_batched_row_with_what_the_engines_own_run_is():
+    t = _table_input()
+    t["measurements"]["own_batched[mjx:euler]"] = {"median": 4e5, "min": 4e5, "max": 4e5, "repeats": 1,
+                                                   "compile_s": 12.5}
+    t["batched"] = [{"variant": "mjx:euler", "engine_body_steps_per_s": 4e5, "rbcheck_body_steps_per_s": 1e5}]
+    t["own_batched_not_measured"] = {"dart:semi_implicit_euler": "no own run"}
+    text = bench.format_table(t)
+    assert "N vmapped, one compiled fori_loop (compiled in 12.5 s, not counted)" in text
+    assert "0.25" in text and "dart:semi_implicit_euler: the engine's own batched run not measured" in text
+
+
+#: The engines whose own run compiles (JAX) or loads kernels (Warp) first: tens of seconds each.
+COMPILED = ("mjx", "brax", "jaxsim", "mujoco_warp")
+
+
+def _installed(engine):
+    from cross_checks.engines import all_variants
+    return any(v.engine == engine and v.available for v in all_variants())
+
+
+@pytest.mark.parametrize("engine", [pytest.param(e, marks=pytest.mark.slow) if e in COMPILED else e
+                                    for e in bench.OWN_BATCHED])
+def test_each_engines_own_batched_run_steps_a_few_bodies(engine):
+    """Every own-throughput function runs for a tiny N on every installed engine (skipped when absent; the
+    JAX and Warp ones, which compile or load kernels for tens of seconds, are slow) and returns the
+    documented shape: rates over the repeats and the compile time apart (None for an engine that does not
+    compile)."""
+    if not _installed(engine):
+        pytest.skip(f"{engine} is not installed")
+    st = bench.OWN_BATCHED[engine](3, 4, 2)
+    assert set(st) == {"median", "min", "max", "repeats", "compile_s"} and st["repeats"] == 2
+    assert 0 < st["min"] <= st["median"] <= st["max"]
+    assert (st["compile_s"] is None) == (engine in ("physx", "rapier"))
