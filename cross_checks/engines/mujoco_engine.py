@@ -24,7 +24,6 @@ from cross_checks.engines.forces import stage_force_torque_floats
 from cross_checks.engines.loop import host_problem
 from cross_checks.engines.world import World, WorldEngine
 from reference_sim.quaternion import quat_from_matrix
-from reference_sim.simulate import Run
 
 mujoco, _IMPORT_ERROR = install.optional_import("mujoco")
 if _IMPORT_ERROR is None:   # the world (what rbcheck repro embeds) imports the engine itself
@@ -516,19 +515,8 @@ class MujocoEngine(WorldEngine):
 
 
 _ENGINE = MujocoEngine()
-
-
-def simulate(scenario, variant: str, dt_s: float, n_steps: int) -> Run:
-    """Free run of ``n_steps`` steps of ``dt_s`` from the scenario's initial state (the host loop's)."""
-    return _ENGINE.simulate(scenario, variant, dt_s, n_steps)
-
-
-def simulate_many(variant: str, requests) -> list:
-    return _ENGINE.simulate_many(variant, requests)
-
-
-def one_step(scenario, variant: str, dt_s: float, y_start) -> np.ndarray:
-    return _ENGINE.one_step(scenario, variant, dt_s, y_start)
+# the module's functions are the engine's (the host loop's runs: cross_checks.engines.loop)
+simulate, simulate_many, one_step = _ENGINE.simulate, _ENGINE.simulate_many, _ENGINE.one_step
 
 
 MujocoAdapter = MujocoEngine

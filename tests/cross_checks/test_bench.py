@@ -205,7 +205,8 @@ def test_every_engine_with_an_own_batched_run_gets_a_batched_row(monkeypatch):
 def test_an_engine_that_cannot_run_its_own_batch_is_skipped_and_says_why(monkeypatch):
     """Not installed (EngineNotInstalled), its model refused (EngineError) or no own run here (Drake, DART):
     no row, a reason each; the others are measured."""
-    from cross_checks.engines.base import EngineError, EngineNotInstalled
+    from cross_checks.engines.base import EngineError
+    from cross_checks.engines.install import EngineNotInstalled
 
     def absent(*a):
         raise EngineNotInstalled("jaxsim is not installed (pip install 'rbcheck[jaxsim]')")

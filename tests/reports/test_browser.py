@@ -264,10 +264,10 @@ def test_a_diverged_run_does_not_flatten_the_others(results, tmp_path, monkeypat
     (read from the series file, not from the plot), and its curve ends at its divergence."""
     import numpy as np
 
-    from reports import plots
+    from reports import canvas, plots
     from reports.data import load_results
     drawn = {}
-    monkeypatch.setattr(plots, "save_png", lambda fig, path: drawn.setdefault("fig", fig))
+    monkeypatch.setattr(canvas, "save_png", lambda fig, path, **kw: drawn.setdefault("fig", fig))
     res = load_results(results)
     assert plots.draw(res, "stiff_spring", "errors", tmp_path)[1] is not None
     ax = drawn["fig"].axes[0]                                   # position error, reference family
