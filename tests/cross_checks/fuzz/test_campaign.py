@@ -34,8 +34,9 @@ def _found(mutant, tmp_path, monkeypatch, budget_s, shrink_s):
     mutant.apply(monkeypatch)
     s = campaign.run_campaign([mutant.swept], tmp_path / "fz", budget_s=budget_s, seed=0, jobs=1,
                               use_cache=False, log=lambda _: None)
+    # found within the search's own budget (``budget_s`` bounds the search: no time is asserted here, the
+    # machine's load decides how many cases fit in it)
     assert s["counterexamples"], f"{mutant.name} not found in {s['cases']['judged']} cases"
-    assert s["cases"]["search_s"] <= 120.0
     return s
 
 
