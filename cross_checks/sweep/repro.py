@@ -151,7 +151,7 @@ def _measure_source(main: str) -> str:
                                                         for f in needs)
 
 
-def _constant_forces(scenario, adapter_mod) -> tuple:
+def _constant_forces(scenario, engine: str) -> tuple:
     """The force (minus the weight where the engine applies gravity) and torque held over a run, world axes
     (N, N m); ReproError when the scenario's forces change within the run."""
     from cross_checks.engines.loop import Harness
@@ -160,8 +160,8 @@ def _constant_forces(scenario, adapter_mod) -> tuple:
         raise ReproError(f"scenario {scenario.name}: its forces change with the state (springs, drag, "
                          "body-frame or point forces, decay); a reproducer holds the forces constant: "
                          "choose a torque-free or constant-force scenario")
-    engine = adapter_mod._ENGINE
-    h = Harness([scenario], scenario.dt_s, engine.applies_gravity)
+    from cross_checks.engines import get_adapter
+    h = Harness([scenario], scenario.dt_s, get_adapter(engine).applies_gravity)   # the registered engine's
     f, tau = h.wrench(scenario.problem.initial_packed()[None])
     return f[0], tau[0]
 
@@ -177,7 +177,7 @@ def reproducer(variant_name: str, scenario, claim_words, *, command: str = "", r
                          "not in a reproducer's reach: the script would have to rewrite the scenario); "
                          "claims: order QUANTITY, drift, gyroscopic")
     engine, variant, dists, world_mods, adapter_mod, spec_mod = _engine(variant_name)
-    f_W, tau_W = _constant_forces(scenario, adapter_mod)
+    f_W, tau_W = _constant_forces(scenario, engine)
     body = spec_mod.body_spec(scenario.problem.body)
     common = {"DIST": repr(dists), "VARIANT": repr(variant),
               "BODIES": "[(" + ", ".join(_floats(x) for x in body) + ")]",
