@@ -29,7 +29,8 @@ def test_a_claim_that_does_not_hold_is_written_and_said(tmp_path, capsys):
 @pytest.mark.parametrize("args,says", [
     (["mujoco:rk4", "tennis_racket", "--claim", "order", "speed"], "unknown quantity 'speed'"),
     (["mujoco:rk4", "tennis_racket", "--claim", "wobble"], "unknown claim 'wobble'"),
-    (["mujoco:rk4", "tennis_racket", "--claim", "invariance", "rotated"], "not supported yet"),
+    (["mujoco:rk4", "tennis_racket", "--claim", "invariance", "rotated"],
+     "unknown transform 'rotated'; known: translation 10 m;"),
     (["drake:semi_explicit_euler", "tennis_racket", "--claim", "gyroscopic"],
      "these can: mujoco, rapier, pybullet, mjx, brax, physx, dart"),
     (["mujoco:rk5", "tennis_racket", "--claim", "order", "orientation"], "unknown variant 'rk5'"),

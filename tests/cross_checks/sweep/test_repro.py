@@ -2,6 +2,7 @@
 defect holds and 0 when it does not, and decide as rbcheck did when it wrote them."""
 import ast
 import os
+import re
 import subprocess
 import sys
 
@@ -30,10 +31,13 @@ BLOCKED = ("import runpy, sys\n"
     (["order", "speed"], "unknown quantity 'speed'"),
     (["order", "orientation", "position"], "give one QUANTITY"),
     (["drift", "fast"], "takes no word"),
-    (["invariance"], "give one TRANSFORM"),
+    (["invariance"], "give a TRANSFORM"),
+    (["invariance", "spin"], "unknown transform 'spin'; known: translation 10 m; translation 1e+03 m"),
+    (["invariance", "scale", "k=0.5"], "unknown transform 'scale k=0.5'; known: "),
+    (["invariance", "translation"], "invariance translation: give its magnitude"),
 ])
 def test_a_bad_claim_is_one_line_naming_what_is_wrong(words, says):
-    with pytest.raises(ReproError, match=says) as e:
+    with pytest.raises(ReproError, match=re.escape(says)) as e:
         parse_claim(words)
     assert "\n" not in str(e.value)
 
@@ -41,10 +45,17 @@ def test_a_bad_claim_is_one_line_naming_what_is_wrong(words, says):
 def test_claims_parse():
     assert parse_claim(["order", "orientation"]) == ("order", "orientation")
     assert parse_claim(["drift"]) == ("drift", "")
+    # the transform as invariance.csv names it (transform, magnitude), its numbers in any spelling
+    assert parse_claim(["invariance", "translation", "1e4"]) == ("invariance", "translation 1e+04 m")
+    assert parse_claim(["invariance", "scale k=0.01 mu=0.01"]) == ("invariance", "scale k=0.01 mu=0.01")
+    assert parse_claim(["invariance", "rotation"]) == ("invariance", "rotation 135 deg")
 
 
 @pytest.mark.parametrize("variant,scenario,claim,says", [
-    ("mujoco:rk4", "tennis_racket", ["invariance", "rotated"], "not supported yet"),
+    ("mujoco:rk4", "tennis_racket", ["invariance", "rotated"], "unknown transform 'rotated'"),
+    ("rapier:symplectic_euler", "tennis_racket", ["invariance", "com_offset"], "cannot express com_offset"),
+    ("mujoco:euler", "tennis_racket", ["invariance", "welded_split"], "cannot write a body off its COM"),
+    ("mujoco:euler", "long_major_axis_spin", ["invariance", "rotation"], "does not transform long runs"),
     ("drake:semi_explicit_euler", "tennis_racket", ["gyroscopic"],
      "these can: mujoco, rapier, pybullet, mjx, brax, physx, dart"),
     ("mujoco:rk4", "spring_pendulum", ["order", "orientation"], "forces change with the state"),
@@ -103,12 +114,74 @@ def test_rapiers_drift_on_a_stable_major_axis_spin_holds_in_a_script_without_rbc
     assert done.stdout.strip().splitlines()[-1] == r.summary
 
 
-def test_the_script_embeds_the_adapters_world_as_it_is():
+def test_the_scripts_code_is_rbchecks_own_line_for_line():
+    """Compacted, not rewritten: every code line of the script is a line of the world or the measurement
+    (docstrings and comments left out), and the world's definitions the run needs are all there."""
     import inspect
 
     from cross_checks.engines.worlds import mujoco as mjw
-    r = reproducer("mujoco:rk4", load_scenario("tennis_racket"), ["order", "orientation"])
-    assert inspect.getsource(mjw).rstrip("\n") in r.text
+    from cross_checks.sweep import repro_measure
+    r = reproducer("mujoco:rk4", load_scenario("tennis_racket"), ["order", "orientation"], run=False)
+    ours = set(inspect.getsource(mjw).splitlines()) | set(inspect.getsource(repro_measure).splitlines())
+    ours |= {re.sub(r"\s+#.*$", "", line) for line in ours}   # a line's trailing comment cut off
+    code = r.text[r.text.index('"""\n', 3) + 4:r.text.index("# the scenario")]
+    lines = [line for line in code.splitlines() if line.strip() and not line.startswith(("import ", "from "))]
+    assert lines and [line for line in lines if line not in ours] == []
+    assert '"""' not in code and "#" not in code
+    for name in ("def build_model(", "class Bodies:", "def world(", "def to_qpos_qvel(", "def main_order("):
+        assert name in code
+    assert "def apply_body_torque(" not in code and "def main_drift(" not in code   # never reached
+
+
+def test_a_mujoco_order_script_is_short_and_prints_what_the_uncompacted_code_prints(tmp_path):
+    """Issue 47: short enough to paste into an issue (tolerances.REPRO_MUJOCO_ORDER_MAX_LINES); and the
+    compacted script, run without rbcheck, prints exactly what rbcheck's modules print run whole on its
+    numbers (the script before compaction was those modules' text)."""
+    import contextlib
+    import io
+
+    from cross_checks.core import tolerances as tol
+    from cross_checks.engines.worlds import mujoco as mjw
+    from cross_checks.sweep import repro_measure
+    r = reproducer("mujoco:rk4", load_scenario("tennis_racket"), ["order", "orientation"], run=False)
+    assert len(r.text.splitlines()) <= tol.REPRO_MUJOCO_ORDER_MAX_LINES
+    ns = {"__name__": "not_main"}
+    exec(compile(r.text, "repro", "exec"), ns)   # noqa: S102 - the numbers the script holds
+    numbers = {k: v for k, v in ns.items() if k.isupper()}
+    whole = io.StringIO()
+    with contextlib.redirect_stdout(whole):
+        code = repro_measure.main_order(mjw.world, numbers)
+    done = _run_alone(write_reproducer(r, tmp_path / "rk4.py"), tmp_path)
+    assert done.returncode == code, done.stderr
+    assert done.stdout == whole.getvalue()
+    assert "orientation order: measured 4.00" in done.stdout
+
+
+@pytest.mark.parametrize("variant,scenario,transform,holds", [
+    ("mujoco:euler", "tennis_racket", ["rotation", "135", "deg"], False),
+    ("pybullet:maximal", "tennis_racket", ["scale", "k=0.01", "mu=0.01"], True),   # solve33 threshold
+])
+def test_an_invariance_script_judges_as_the_sweep_does_without_rbcheck(variant, scenario, transform, holds,
+                                                                      tmp_path):
+    """The original and the transformed run (the transformed numbers from transforms.apply), mapped back,
+    each quantity's largest deviation beside the sweep's allowance; exit 1 where the sweep says broken."""
+    pytest.importorskip(variant.split(":")[0])
+    from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES
+    from cross_checks.sweep.invariance import check_invariance
+    from cross_checks.sweep.repro import _default_transforms
+    sc = load_scenario(scenario)
+    r = reproducer(variant, sc, ["invariance", *transform])
+    assert r.holds is holds
+    assert _imports(r.text) <= {"numpy", variant.split(":")[0], "sys", "importlib", "platform"}
+    done = _run_alone(write_reproducer(r, tmp_path / "inv.py"), tmp_path)
+    assert done.returncode == int(holds), done.stderr
+    assert done.stdout.strip().splitlines()[-1] == r.summary
+    row = check_invariance(sc, variant, [_default_transforms()[" ".join(transform)]])[0]
+    assert row["verdict"] == ("broken" if holds else "holds")
+    assert r.summary.split(": ")[1].startswith(row["verdict"])
+    if holds:   # a broken one's deviations are the model's, not round-off: the sweep's numbers
+        for q in QUANTITIES:
+            assert f"{q} largest deviation {row[COLUMN_STEM[q] + '_dev']:.3g}" in done.stdout
 
 
 def test_findings_claims_states_each_finding_once_with_the_preferred_quantity():
