@@ -413,7 +413,8 @@ def findings_claims(summary: dict, scenarios) -> list:
     diverged), every expected non-convergence of a variant without a gyroscopic term on a torque-free
     scenario (``gyroscopic``), and every order the variant's traits expect below the one it declares (an
     engine's known shortfall, e.g. MJX's RK4 attitude at order 2: ``order QUANTITY``) where the forces are
-    constant. The reference's own schemes (``reference:``) are rbcheck's: none."""
+    constant; and every broken invariance (``invariance TRANSFORM``, one per transform). The reference's own
+    schemes (``reference:``) are rbcheck's: none."""
     from cross_checks.analysis.expectations import traits
     from cross_checks.analysis.metrics import conserved
     by_name = {sc.name: sc for sc in scenarios}
@@ -441,7 +442,11 @@ def findings_claims(summary: dict, scenarios) -> list:
     for r in summary.get("long_runs") or []:
         if r.get("finding") or r.get("status") == "diverged":
             out.setdefault((r["engine"], r["scenario"]), ["drift"])
-    return [(v, by_name[s], claim) for (v, s), claim in out.items()
+    for r in summary.get("invariance") or []:   # a broken invariance: one per transform
+        if r.get("verdict") == "broken":
+            out[(r["engine"], r["scenario"], r["transform"], r["magnitude"])] = [
+                "invariance", r["transform"], *str(r["magnitude"]).split()]
+    return [(v, by_name[s], claim) for (v, s, *_), claim in out.items()
             if s in by_name and not v.startswith("reference:")]
 
 

@@ -203,12 +203,17 @@ def test_findings_claims_states_each_finding_once_with_the_preferred_quantity():
         "long_runs": [{"engine": "rapier:symplectic_euler", "scenario": "long_major_axis_spin",
                        "finding": "drifts toward the intermediate axis", "status": "ok"},
                       {"engine": "mujoco:rk4", "scenario": "long_major_axis_spin", "finding": "",
-                       "status": "ok"}]}
+                       "status": "ok"}],
+        "invariance": [{"engine": "pybullet:maximal", "scenario": "tennis_racket", "transform": "scale",
+                        "magnitude": "k=0.01 mu=0.01", "verdict": "broken"},
+                       {"engine": "mujoco:euler", "scenario": "tennis_racket", "transform": "com_offset",
+                        "magnitude": "1.5 gyration radii", "verdict": "step-dependent"}]}
     got = [(v, s.name, c) for v, s, c in findings_claims(summary, [sc, lr])]
     assert got == [("mujoco:rk4", "tennis_racket", ["order", "orientation"]),
                    ("rapier:symplectic_euler_no_gyro", "tennis_racket", ["gyroscopic"]),
                    ("mjx:rk4", "tennis_racket", ["order", "orientation"]),
-                   ("rapier:symplectic_euler", "long_major_axis_spin", ["drift"])]
+                   ("rapier:symplectic_euler", "long_major_axis_spin", ["drift"]),
+                   ("pybullet:maximal", "tennis_racket", ["invariance", "scale", "k=0.01", "mu=0.01"])]
 
 
 def test_the_sweep_writes_each_findings_reproducer_and_the_report_links_it(tmp_path, monkeypatch):
