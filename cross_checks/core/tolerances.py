@@ -381,15 +381,3 @@ INVARIANCE_SCALE_RANGE = (1e-2, 1e2)
 #: An invariance check compares two runs of the same variant, each with its own round-off
 #: (metrics.roundoff_floor's ε·scale·(b N + √N A) per run): the difference of two runs is bounded by the sum.
 INVARIANCE_RUNS_COMPARED = 2
-
-# --- `rbcheck repro`: standalone reproducers (docs/repro.md) ------------------------------------------------
-
-#: The most lines `rbcheck repro mujoco:rk4 tennis_racket --claim order orientation` may write. Issue 47 asks
-#: for "about 60 lines for MuJoCo" (MuJoCo #3553's report was under 30); measured: 214 lines with the world
-#: and the measurement embedded whole, 131 compacted (cross_checks/sweep/repro_text.py: docstrings, comments
-#: and unreached definitions left out, the numbers gathered). Of the 131, 57 are the MuJoCo world itself
-#: (worlds/mujoco.py's model, state conversion and Bodies: the adapter's code, which the script may not
-#: replace by a shorter hand-written copy), 37 the measurement (run, error, fit, verdict), the rest the
-#: header, imports and numbers. 4 lines of headroom let the world gain a line or two without this failing;
-#: more means the script grew and this number must be measured and justified again.
-REPRO_MUJOCO_ORDER_MAX_LINES = 135

@@ -1,14 +1,16 @@
 """Standalone reproducers (``rbcheck repro``; docs/repro.md): one Python script per claim about a variant on a
 scenario, importing only the engine and NumPy, that an engine's maintainers can run without rbcheck.
 
-The script is made of three parts, two of them rbcheck's own code placed as it is:
+The script is made of three parts, two of them rbcheck's own code placed line for line, compacted
+(:mod:`cross_checks.sweep.repro_text`: docstrings, comments and unreached definitions left out):
 
 1. the engine's world (cross_checks/engines/worlds/<engine>.py: the model the adapter builds, with the same
    neutralised defaults, in the engine's own API — the adapter imports it, so it is not a copy);
 2. the measurement (:mod:`cross_checks.sweep.repro_measure`: the run with the forces held, and the claim's
    number);
 3. the numbers: the scenario's body, initial state and forces, and the reference values the claim needs
-   (the exact final state at each Δt, the round-off floors, the invariants), then ``main()``.
+   (the exact final state at each Δt, the round-off floors, the invariants, the transformed scenario and the
+   allowances), then ``sys.exit(main_CLAIM(world, globals()))``.
 
 It prints the engine's, NumPy's and Python's versions and the platform, then the measured value beside the
 expected one, and exits 1 while the defect holds, 0 when it does not. Writing a script runs it here (in
@@ -16,7 +18,8 @@ this process, the same code): a claim that does not hold is written anyway and s
 
 Claims: ``order QUANTITY`` (the fitted order over the variant's judged Δt ladder against its declared
 order), ``drift`` (a long run: energy, |L|, the separatrix distance), ``gyroscopic`` (the torque-free flip of
-an intermediate-axis spin is missing). ``invariance TRANSFORM`` is not supported yet (:class:`ReproError`).
+an intermediate-axis spin is missing), ``invariance TRANSFORM`` (the transformed scenario, mapped back,
+moves as the original within the sweep's allowance; TRANSFORM as invariance.csv names it).
 """
 from __future__ import annotations
 
@@ -292,7 +295,7 @@ def _invariance_data(variant_name, scenario, label, engine, spec_mod) -> tuple:
         WorldRotation,
         apply,
     )
-    from cross_checks.sweep.invariance import _step_order
+    from cross_checks.sweep.invariance import step_order
     from reference_sim.quaternion import matrix_from_quat, quat_conj
     t = _default_transforms()[label]
     if scenario.long_run:
@@ -343,7 +346,7 @@ def _invariance_data(variant_name, scenario, label, engine, spec_mod) -> tuple:
             "BASE": "{" + ", ".join(f"{q!r}: {base0[q]!r}" for q in QUANTITIES) + "}",
             "ALLOWANCE": "[" + ", ".join("{" + ", ".join(f"{q!r}: {a[q]!r}" for q in QUANTITIES) + "}"
                                          for a in allowances) + "]",
-            "STEP_ORDER": "{" + ", ".join(f"{q!r}: {_step_order(scenario, variant_name, q)!r}"
+            "STEP_ORDER": "{" + ", ".join(f"{q!r}: {step_order(scenario, variant_name, q)!r}"
                                           for q in QUANTITIES) + "}",
             "UNITS": repr({q: UNITS[q] for q in QUANTITIES})}
     return data, (f"the same physics written another way ({label}: transforms.py) must move the same once "

@@ -1,10 +1,13 @@
 """What a standalone reproducer measures (NumPy and the standard library only: ``rbcheck repro`` embeds
-this file as it is, after the engine's world: cross_checks/sweep/repro.py, docs/repro.md).
+the functions a claim reaches, after the engine's world: cross_checks/sweep/repro.py, docs/repro.md).
 
 It runs ``world(BODIES, GRAVITY_W, VARIANT, dt_s)`` (cross_checks/engines/worlds/<engine>.py) from ``Y0``
 with ``F_W``, ``TAU_W`` held, and measures one claim against the values rbcheck embedded: an ORDER over a
 Δt ladder (errors from the exact final states, points above their round-off floors), a DRIFT of a long
-run (energy, |L|, the separatrix distance δ = (2E I₂ − |L|²)/|L|²), or a missing torque-free FLIP. States
+run (energy, |L|, the separatrix distance δ = (2E I₂ − |L|²)/|L|²), a missing torque-free FLIP, or an
+INVARIANCE: the run from ``Y0_T`` of the transformed body ``BODIES_T`` under ``GRAVITY_T`` with ``F_T``,
+``TAU_T`` held, mapped back (:func:`map_back`), its largest deviation from the original's per quantity against
+the sweep's ``ALLOWANCE`` at each of ``DT_S`` (the sweep's Δt, then its refinements). States
 are packed ``[x_W (m), v_W (m/s), q_WB (w, x, y, z), ω_W (rad/s, world axes)]``. Each ``main_*`` prints the
 versions and the measured value beside the expected one, and returns 1 while the defect holds, else 0.
 """

@@ -155,7 +155,8 @@ def compact(texts, tail: str) -> str:
     other = sorted((line for line, (b, s) in imports.items() if not s and b & used), key=_import_key)
     head = "\n".join(std) + ("\n\n" if std and other else "") + "\n".join(other)
     out = [line for _, code in body for line in code]
-    return head + "\n\n\n" + "\n".join(out) + "\n\n" + tail
+    gap = "\n\n\n" if body and body[0][0] else "\n\n"   # isort: two blank lines before a def, one otherwise
+    return head + gap + "\n".join(out) + "\n\n" + tail
 
 
 def _is_method(node) -> bool:
