@@ -37,7 +37,7 @@ from cross_checks.core.quantities import QUANTITIES
 from cross_checks.sweep.repro_text import compact
 
 __all__ = ["ENGINES", "CLAIMS", "ReproError", "Repro", "parse_claim", "reproducer", "write_reproducer",
-           "findings_claims", "write_sweep_reproducers", "file_name"]
+           "findings_claims", "write_sweep_reproducers", "file_name", "map_numbers", "TRANSFORM_NAMES"]
 
 #: Engines that can write reproducers: engine -> (the distributions whose versions the script prints, the
 #: world modules it embeds in order, the adapter module, the module whose ``body_spec`` gives the bodies).
@@ -288,15 +288,10 @@ def _invariance_data(variant_name, scenario, label, engine, spec_mod) -> tuple:
     from cross_checks.engines import declared_traits, not_expressible
     from cross_checks.scenario.references import error_amplification, reference_solution
     from cross_checks.scenario.transforms import (
-        BodyFrame,
-        Scale,
         TransformRefused,
-        Translation,
-        WorldRotation,
         apply,
     )
     from cross_checks.sweep.invariance import step_order
-    from reference_sim.quaternion import matrix_from_quat, quat_conj
     t = _default_transforms()[label]
     if scenario.long_run:
         raise ReproError(f"scenario {scenario.name} is a long run: the sweep does not transform long runs")
@@ -332,16 +327,11 @@ def _invariance_data(variant_name, scenario, label, engine, spec_mod) -> tuple:
                                          differenced=getattr(traits, "velocity_from_positions", False))
         base0 = base0 or base
         allowances.append({q: base[q] + off[q] for q in QUANTITIES})
-    one = np.array([1.0, 0.0, 0.0, 0.0])
-    r = np.asarray(t.r_wxyz, dtype=float) if isinstance(t, WorldRotation) else one
-    p = np.asarray(t.p_wxyz, dtype=float) if isinstance(t, BodyFrame) else one
     data = {"SCENARIO": repr(scenario.name), "TRANSFORM": repr(label),
             "BODIES_T": "[(" + ", ".join(_floats(x) for x in body_T) + ")]",
             "GRAVITY_T": _floats(tsc.problem.forces.gravity_W), "Y0_T": _floats(tsc.problem.initial_packed()),
             "F_T": _floats(f_T), "TAU_T": _floats(tau_T),
-            "MAP_D": _floats(t.d_W_m if isinstance(t, Translation) else np.zeros(3)),
-            "MAP_R": _floats(matrix_from_quat(r)), "MAP_R_INV": _floats(quat_conj(r)),
-            "MAP_P_INV": _floats(quat_conj(p)), "MAP_K": repr(float(t.k) if isinstance(t, Scale) else 1.0),
+            **{k: _floats(v) for k, v in map_numbers(t).items()},
             "DT_S": _floats(dts), "STEPS": repr(steps),
             "BASE": "{" + ", ".join(f"{q!r}: {base0[q]!r}" for q in QUANTITIES) + "}",
             "ALLOWANCE": "[" + ", ".join("{" + ", ".join(f"{q!r}: {a[q]!r}" for q in QUANTITIES) + "}"
@@ -352,6 +342,20 @@ def _invariance_data(variant_name, scenario, label, engine, spec_mod) -> tuple:
     return data, (f"the same physics written another way ({label}: transforms.py) must move the same once "
                   f"mapped back: judged as rbcheck sweep --invariance judges it at Δt = {dt:g} s (and at "
                   f"{', '.join(f'{h:g}' for h in dts[1:])} s where it fails there)")
+
+
+def map_numbers(t) -> dict:
+    """The numbers with which the script's ``map_back`` (repro_measure) undoes transform ``t``: ``MAP_D`` (m),
+    ``MAP_R`` = R(r), ``MAP_R_INV`` = r⁻¹, ``MAP_P_INV`` = p⁻¹, ``MAP_K``; each transform sets one of
+    d, r, p, k (a translation, a world rotation, a body frame, a scale), the others are the identity."""
+    from cross_checks.scenario.transforms import BodyFrame, Scale, Translation, WorldRotation
+    from reference_sim.quaternion import matrix_from_quat, quat_conj
+    one = np.array([1.0, 0.0, 0.0, 0.0])
+    r = np.asarray(t.r_wxyz, dtype=float) if isinstance(t, WorldRotation) else one
+    p = np.asarray(t.p_wxyz, dtype=float) if isinstance(t, BodyFrame) else one
+    return {"MAP_D": np.asarray(t.d_W_m, dtype=float) if isinstance(t, Translation) else np.zeros(3),
+            "MAP_R": matrix_from_quat(r), "MAP_R_INV": quat_conj(r), "MAP_P_INV": quat_conj(p),
+            "MAP_K": float(t.k) if isinstance(t, Scale) else 1.0}
 
 
 def _torque_free(scenario, what: str) -> None:
