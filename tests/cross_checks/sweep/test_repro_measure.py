@@ -16,7 +16,8 @@ QUANTITIES = ("position", "orientation", "velocity", "angular_velocity")
 def _planted(kind):
     """A world of one body at rest, stepped exactly (nothing moves), except the transformed one (mass 2 kg),
     whose position gains: ``dt²`` a step ("truncation": after T/dt steps T·dt, first order), a fixed 1e-3 m at
-    its first step ("plateau": a wrong model), nothing ("exact")."""
+    its first step ("plateau": a wrong model), 1e-10 m ("rounding": within the allowance, beyond the base
+    round-off), nothing ("exact")."""
     class World:
         def __init__(self, bodies, gravity_W, variant, dt_s):
             self.moved = bodies[0][0] == 2.0
@@ -31,8 +32,8 @@ def _planted(kind):
         def step(self):
             if self.moved and kind == "truncation":
                 self.y[0, 0] += self.dt ** 2
-            elif self.moved and kind == "plateau" and self.n == 0:
-                self.y[0, 0] += 1e-3
+            elif self.moved and kind in ("plateau", "rounding") and self.n == 0:
+                self.y[0, 0] += 1e-3 if kind == "plateau" else 1e-10
             self.n += 1
 
         def read(self):
@@ -53,13 +54,14 @@ def _numbers(step_order=0.7):
             "GRAVITY_W": [0.0] * 3, "GRAVITY_T": [0.0] * 3, "Y0": y0, "Y0_T": y0, "F_W": [0.0] * 3,
             "TAU_W": [0.0] * 3, "F_T": [0.0] * 3, "TAU_T": [0.0] * 3, "MAP_D": [0.0] * 3,
             "MAP_R": np.eye(3).tolist(), "MAP_R_INV": one, "MAP_P_INV": one, "MAP_K": 1.0,
-            "DT_S": dts, "STEPS": [int(round(1.0 / h)) for h in dts], "BASE": dict(allow),
+            "DT_S": dts, "STEPS": [int(round(1.0 / h)) for h in dts], "BASE": {q: 1e-12 for q in QUANTITIES},
             "ALLOWANCE": [dict(allow) for _ in dts], "STEP_ORDER": {q: step_order for q in QUANTITIES},
             "UNITS": {q: "u" for q in QUANTITIES}}
 
 
 @pytest.mark.parametrize("kind,step_order,code,verdict", [
     ("exact", 0.7, 0, "holds"),
+    ("rounding", 0.7, 0, "precision loss (expected)"),   # beyond the base 1e-12, within the allowance 1e-9
     ("truncation", 0.7, 0, "step-dependent"),   # 0.01, 0.005, 0.0025 m: order 1.00 each halving
     ("truncation", 1.7, 1, "broken"),           # ... but the variant's step is order 2: a lower order
     ("plateau", 0.7, 1, "broken"),              # 1e-3 m at every Δt: order 0
