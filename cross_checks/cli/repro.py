@@ -1,4 +1,4 @@
-"""``rbcheck repro VARIANT SCENARIO --claim CLAIM [WORD] --out FILE.py``: a standalone reproducer
+"""``rbcheck repro VARIANT SCENARIO --claim CLAIM [WORD ...] --out FILE.py``: a standalone reproducer
 (cross_checks.sweep.repro; docs/repro.md)."""
 from __future__ import annotations
 
