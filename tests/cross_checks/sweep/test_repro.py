@@ -265,3 +265,23 @@ def test_each_findings_script_is_exactly_what_rbcheck_repro_writes(path):
     now = reproducer(variant, load_scenario(scenario), claim, run=False).text
     assert text == now, (f"{path.name} differs from what rbcheck writes now: rbcheck repro {variant} "
                          f"{scenario} --claim {m.group(3)} --out {path.relative_to(ROOT)}")
+
+
+def test_a_sweeps_broken_invariance_gets_its_reproducer_and_the_report_links_it(tmp_path, monkeypatch):
+    """PyBullet's maximal coordinates at k = μ = 0.01 (docs/invariance.md, "In CI"): the sweep writes the
+    invariance claim's script into DIR/repro/, the report links the finding to it, and the script, run
+    without rbcheck, exits 1 as the sweep did."""
+    import json
+
+    from cross_checks.cli import main
+    monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "cache"))
+    out = tmp_path / "sweep"
+    assert main(["sweep", "tennis_racket", "--engines", "pybullet:maximal", "--invariance", "--no-long",
+                 "--jobs", "1", "--out", str(out)]) == 1
+    recs = json.loads((out / "summary.json").read_text())["reproducers"]
+    name = "repro/pybullet_maximal__tennis_racket__invariance_scale_k_0_01_mu_0_01.py"
+    assert recs == [{"engine": "pybullet:maximal", "scenario": "tennis_racket",
+                     "claim": "invariance scale k=0.01 mu=0.01", "file": name}]
+    assert f'href="{name}"' in (out / "index.html").read_text()
+    done = _run_alone(out / name, tmp_path)
+    assert done.returncode == 1 and "under scale k=0.01 mu=0.01: broken" in done.stdout, done.stderr
