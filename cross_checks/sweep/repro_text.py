@@ -27,13 +27,18 @@ def _stripped_lines(text: str, tree: ast.Module) -> list:
     ``None`` marks a line to leave out (a comment or docstring line, a blank line outside a string)."""
     lines = [""] + text.splitlines()
     keep = [True] * len(lines)
-    in_string = set()
+    in_string, fstrings = set(), []
+    f_start, f_end = getattr(tokenize, "FSTRING_START", None), getattr(tokenize, "FSTRING_END", None)
     for tok in tokenize.generate_tokens(io.StringIO(text).readline):
         if tok.type == tokenize.COMMENT:
             row, col = tok.start
             lines[row] = lines[row][:col].rstrip()
         elif tok.type == tokenize.STRING and tok.end[0] > tok.start[0]:
             in_string.update(range(tok.start[0] + 1, tok.end[0] + 1))   # lines inside a multi-line string
+        elif f_start is not None and tok.type == f_start:   # Python ≥ 3.12 splits an f-string in tokens
+            fstrings.append(tok.start[0])
+        elif f_end is not None and tok.type == f_end and fstrings:
+            in_string.update(range(fstrings.pop() + 1, tok.end[0] + 1))
     for node in ast.walk(tree):
         if isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef):
             body = node.body
@@ -150,11 +155,11 @@ def compact(texts, tail: str) -> str:
             rows = range(start, end + 1)
         code = [lines[r] for r in rows if lines[r] is not None]
         body.append((isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef), code))
-    used = set().union(*(_names(n) for (n, _, _), k in zip(live, kept) if k), _names(tail_tree))
+    out = [line for _, code in body for line in code]
+    used = _names(ast.parse("\n".join(out) + "\n" + tail))     # what the kept code uses (methods left out)
     std = sorted((line for line, (b, s) in imports.items() if s and b & used), key=_import_key)
     other = sorted((line for line, (b, s) in imports.items() if not s and b & used), key=_import_key)
     head = "\n".join(std) + ("\n\n" if std and other else "") + "\n".join(other)
-    out = [line for _, code in body for line in code]
     gap = "\n\n\n" if body and body[0][0] else "\n\n"   # isort: two blank lines before a def, one otherwise
     return head + gap + "\n".join(out) + "\n\n" + tail
 

@@ -285,3 +285,28 @@ def test_a_sweeps_broken_invariance_gets_its_reproducer_and_the_report_links_it(
     assert f'href="{name}"' in (out / "index.html").read_text()
     done = _run_alone(out / name, tmp_path)
     assert done.returncode == 1 and "under scale k=0.01 mu=0.01: broken" in done.stdout, done.stderr
+
+
+def test_compacting_keeps_what_runs_and_leaves_out_what_does_not():
+    """repro_text.compact on a planted module: docstrings and comments out (a '#' or a blank line inside a
+    multi-line string kept), unreached and shadowed definitions out, methods only as reached, imports once at
+    the top (standard library first), and the result runs."""
+    from cross_checks.sweep.repro_text import compact
+    first = ('"""Module doc."""\nimport math\nimport numpy as np\n\nUNUSED = 3\nK = 2.0  # a constant\n\n\n'
+             'def helper(x):\n    """Doc."""\n    # drop me\n    return float(np.float64(x) * K)\n\n\n'
+             'def world():\n    return "first"\n\n\n'
+             'class Thing:\n    """Doc."""\n    def __init__(self):\n        self.v = helper(1.0)\n\n'
+             '    def used(self):\n        return f"""{self.v}\n\n# not a comment"""\n\n'
+             '    def unused(self):\n        return math.pi\n')
+    second = "from .first import helper\nimport sys\n\n\ndef world():\n    return sys.version and Thing()\n"
+    code = compact([first, second], 'print(world().used())\n')
+    assert code.startswith("import sys\n\nimport numpy as np\n\nK = 2.0\n")   # math went with `unused`
+    assert "Doc" not in code and "drop me" not in code and "from .first" not in code
+    assert "UNUSED" not in code and "def unused" not in code and '"first"' not in code
+    assert "\n\n# not a comment" in code
+    import contextlib
+    import io
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        exec(compile(code, "compacted", "exec"), {"__name__": "x"})   # noqa: S102
+    assert out.getvalue() == "2.0\n\n# not a comment\n"
