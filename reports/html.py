@@ -205,9 +205,13 @@ def _finding_views(fs, res=None):
 
 
 def _repro_links(res) -> dict:
-    """``(ENGINE:VARIANT, scenario) -> repro/….py`` of summary.json's ``reproducers`` (those written)."""
-    return {(r["engine"], r["scenario"]): r["file"] for r in res.summary.get("reproducers") or []
-            if r.get("file")}
+    """``(ENGINE:VARIANT, scenario) -> repro/….py`` of summary.json's ``reproducers`` (those written; the
+    first of a pair: its order, drift or gyroscopic claim before its broken invariances)."""
+    links: dict = {}
+    for r in res.summary.get("reproducers") or []:
+        if r.get("file"):
+            links.setdefault((r["engine"], r["scenario"]), r["file"])
+    return links
 
 
 _SECTIONS = (("bad", "Results that contradict the expectations"),

@@ -1,4 +1,4 @@
-"""``rbcheck repro VARIANT SCENARIO --claim CLAIM [WORD] --out FILE.py``: a standalone reproducer
+"""``rbcheck repro VARIANT SCENARIO --claim CLAIM [WORD ...] --out FILE.py``: a standalone reproducer
 (cross_checks.sweep.repro; docs/repro.md)."""
 from __future__ import annotations
 
@@ -21,21 +21,25 @@ def add_repro(sub, engine_file_option) -> None:
         help="write a standalone Python script (the engine and NumPy only) that reproduces a claim about a "
              "variant on a scenario, for the engine's maintainers",
         description="Write FILE.py: one Python script that imports only the engine and NumPy (never "
-                    "rbcheck), builds the model as rbcheck's adapter does (its code, as it is), embeds the "
+                    "rbcheck), builds the model as rbcheck's adapter does (its code, without its docstrings, "
+                    "comments and what the script never reaches), embeds the "
                     "scenario's numbers and the reference values, runs the ladder or the long run, prints "
                     "the engine's, NumPy's and Python's versions and the platform, then the measured value "
                     "beside the expected one, and exits 1 while the defect holds, 0 when it does not. "
                     "CLAIM: 'order QUANTITY' (the fitted order against the declared one; QUANTITY: "
                     "position, orientation, velocity, angular_velocity), 'drift' (a long run's energy, |L| "
-                    "and separatrix distance), 'gyroscopic' (the torque-free flip is missing). A claim "
-                    "that does not hold here is written anyway and said so. Engines: mujoco, rapier, "
+                    "and separatrix distance), 'gyroscopic' (the torque-free flip is missing), 'invariance "
+                    "TRANSFORM' (the transformed scenario, mapped back, moves as the original within the "
+                    "sweep's allowance; TRANSFORM as invariance.csv names it, e.g. 'scale k=0.01 mu=0.01', "
+                    "'translation 1e4', 'rotation'). A claim that does not hold here is written anyway and "
+                    "said so. Engines: mujoco, rapier, "
                     "pybullet, mjx, brax, physx, dart; engine files cannot (their command is the "
                     "reproducer). Exit 0: written; 2: bad input (one line, nothing written). See "
                     "docs/repro.md.")
     r.add_argument("variant", metavar="VARIANT", help="ENGINE:VARIANT, e.g. mujoco:rk4")
     r.add_argument("scenario", metavar="SCENARIO", help="catalog name or scenario TOML file")
     r.add_argument("--claim", nargs="+", required=True, metavar="WORD",
-                   help="order QUANTITY | drift | gyroscopic")
+                   help="order QUANTITY | drift | gyroscopic | invariance TRANSFORM")
     r.add_argument("--out", required=True, metavar="FILE.py", help="the script to write")
     engine_file_option(r)
 

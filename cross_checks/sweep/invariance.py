@@ -17,7 +17,8 @@ from cross_checks.analysis.judge import invariance_allowance, judge_invariance
 from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, quantity_scales
 from cross_checks.scenario.transforms import TransformRefused, apply, default_transforms
 
-__all__ = ["INVARIANCE_COLUMNS", "check_invariance", "run_invariance", "invariance_summary", "broken_lines"]
+__all__ = ["INVARIANCE_COLUMNS", "check_invariance", "run_invariance", "invariance_summary", "broken_lines",
+           "step_order"]
 
 INVARIANCE_COLUMNS = (["engine", "scenario", "transform", "magnitude", "dt", "steps", "verdict",
                        "worst_quantity", "worst_ratio"]
@@ -157,7 +158,7 @@ def _refine(rows, refine, scenario, variant, allowance_at) -> None:
                             for o, v in zip(orders, vanished))
                 + " as Δt shrinks")
         row = rows[i]
-        need = _step_order(scenario, variant, q)
+        need = step_order(scenario, variant, q)
         if all(v or o >= need for o, v in zip(orders, vanished)):
             row["verdict"] = "step-dependent"
             ratio = j.deviation[q] / j.allowance[q]
@@ -173,7 +174,7 @@ def _refine(rows, refine, scenario, variant, allowance_at) -> None:
             row["assessment"] = f"{row['assessment']}; it does not vanish as Δt shrinks ({said})"
 
 
-def _step_order(scenario, variant, quantity) -> float:
+def step_order(scenario, variant, quantity) -> float:
     """The order each halving's deviation must shrink at to be the step's own truncation error: the order the
     expectations give the variant on this scenario and quantity (two runs of an order-p step differ by
     O(Δtᵖ)), read within SWEEP_ORDER_TOL; at least INVARIANCE_STEP_MIN_ORDER (a consistent scheme)."""

@@ -1,14 +1,16 @@
 """Standalone reproducers (``rbcheck repro``; docs/repro.md): one Python script per claim about a variant on a
 scenario, importing only the engine and NumPy, that an engine's maintainers can run without rbcheck.
 
-The script is made of three parts, two of them rbcheck's own code placed as it is:
+The script is made of three parts, two of them rbcheck's own code placed line for line, compacted
+(:mod:`cross_checks.sweep.repro_text`: docstrings, comments and unreached definitions left out):
 
 1. the engine's world (cross_checks/engines/worlds/<engine>.py: the model the adapter builds, with the same
    neutralised defaults, in the engine's own API — the adapter imports it, so it is not a copy);
 2. the measurement (:mod:`cross_checks.sweep.repro_measure`: the run with the forces held, and the claim's
    number);
 3. the numbers: the scenario's body, initial state and forces, and the reference values the claim needs
-   (the exact final state at each Δt, the round-off floors, the invariants), then ``main()``.
+   (the exact final state at each Δt, the round-off floors, the invariants, the transformed scenario and the
+   allowances), then ``sys.exit(main_CLAIM(world, globals()))``.
 
 It prints the engine's, NumPy's and Python's versions and the platform, then the measured value beside the
 expected one, and exits 1 while the defect holds, 0 when it does not. Writing a script runs it here (in
@@ -16,13 +18,13 @@ this process, the same code): a claim that does not hold is written anyway and s
 
 Claims: ``order QUANTITY`` (the fitted order over the variant's judged Δt ladder against its declared
 order), ``drift`` (a long run: energy, |L|, the separatrix distance), ``gyroscopic`` (the torque-free flip of
-an intermediate-axis spin is missing). ``invariance TRANSFORM`` is not supported yet (:class:`ReproError`).
+an intermediate-axis spin is missing), ``invariance TRANSFORM`` (the transformed scenario, mapped back,
+moves as the original within the sweep's allowance; TRANSFORM as invariance.csv names it).
 """
 from __future__ import annotations
 
 import contextlib
 import importlib
-import inspect
 import io
 import re
 from dataclasses import dataclass
@@ -32,9 +34,10 @@ import numpy as np
 
 from cross_checks.core import tolerances as tol
 from cross_checks.core.quantities import QUANTITIES
+from cross_checks.sweep.repro_text import compact
 
 __all__ = ["ENGINES", "CLAIMS", "ReproError", "Repro", "parse_claim", "reproducer", "write_reproducer",
-           "findings_claims", "write_sweep_reproducers", "file_name"]
+           "findings_claims", "write_sweep_reproducers", "file_name", "map_numbers", "TRANSFORM_NAMES"]
 
 #: Engines that can write reproducers: engine -> (the distributions whose versions the script prints, the
 #: world modules it embeds in order, the adapter module, the module whose ``body_spec`` gives the bodies).
@@ -49,8 +52,6 @@ ENGINES = {
     "physx": (("sapien",), (_W + "physx",), _A + "physx_engine", _A + "physx_engine"),
     "dart": (("dartpy",), (_W + "dart",), _A + "dart_engine", _A + "dart_engine"),
 }
-#: A line of a world module that a reproducer leaves out: the import of a sibling world embedded above it.
-_SIBLING_IMPORT = re.compile(r"^from \.\w+ import .*$\n", re.MULTILINE)
 #: claim -> the word it takes ("" for none).
 CLAIMS = {"order": "QUANTITY", "drift": "", "gyroscopic": "", "invariance": "TRANSFORM"}
 
@@ -87,15 +88,52 @@ def parse_claim(words) -> tuple:
         raise ReproError(f"--claim: unknown claim {kind!r}; claims: "
                          + ", ".join(f"{c} {w}".strip() for c, w in CLAIMS.items()))
     need = CLAIMS[kind]
+    if kind == "invariance":
+        if not rest:
+            raise ReproError(f"--claim invariance: give a TRANSFORM (as invariance.csv names it: "
+                             f"{'; '.join(TRANSFORM_NAMES)})")
+        return kind, _transform(rest).label
     if need and len(rest) != 1:
-        raise ReproError(f"--claim {kind}: give one {need} (e.g. --claim {kind} "
-                         f"{'orientation' if kind == 'order' else 'rotated'})")
+        raise ReproError(f"--claim {kind}: give one {need} (e.g. --claim {kind} orientation)")
     if not need and rest:
         raise ReproError(f"--claim {kind} takes no word, got {' '.join(rest)!r}")
     arg = rest[0] if rest else ""
     if kind == "order" and arg not in QUANTITIES:
         raise ReproError(f"--claim order: unknown quantity {arg!r}; quantities: {', '.join(QUANTITIES)}")
     return kind, arg
+
+
+def _default_transforms() -> dict:
+    """The sweep's transforms by their names (invariance.csv's ``transform magnitude``)."""
+    from cross_checks.scenario.transforms import default_transforms
+    return {t.label: t for t in default_transforms()}
+
+
+#: The invariance claim's TRANSFORM names: invariance.csv's transform and magnitude, as the sweep names them.
+TRANSFORM_NAMES = tuple(_default_transforms())
+_NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
+
+
+def _transform(words):
+    """The sweep's transform named by ``words`` (``["scale", "k=0.01", "mu=0.01"]``, ``["translation",
+    "1e4"]``: its kind, then its magnitude's numbers, the unit optional; the kind alone where the sweep has
+    one of it); ReproError (one line, naming the known ones) otherwise."""
+    from cross_checks.scenario.transforms import TRANSFORM_KINDS
+    words = " ".join(words).split()
+    known = _default_transforms()
+    said = f"known: {'; '.join(known)}"
+    if not words or words[0] not in TRANSFORM_KINDS:
+        raise ReproError(f"--claim invariance: unknown transform {' '.join(words)!r}; {said}")
+    same = [t for t in known.values() if t.kind == words[0]]
+    if len(words) == 1:
+        if len(same) == 1:
+            return same[0]
+        raise ReproError(f"--claim invariance {words[0]}: give its magnitude; {said}")
+    want = [float(v) for v in _NUMBER.findall(" ".join(words[1:]))]
+    for t in same:
+        if want and want == [float(v) for v in _NUMBER.findall(t.magnitude)]:
+            return t
+    raise ReproError(f"--claim invariance: unknown transform {' '.join(words)!r}; {said}")
 
 
 def _engine(variant_name: str):
@@ -131,24 +169,25 @@ def _floats(a) -> str:
     return repr(float(a))
 
 
+def _assignments(values: dict, width: int = 110) -> list:
+    """``NAME = value`` lines of ``values`` (name -> its literal), short ones gathered on a line as one tuple
+    assignment (``A, B = 1.0, 2.0``) while the line stays within ``width``: the numbers, compactly."""
+    lines, names, vals = [], [], []
+    for k, v in list(values.items()) + [("", "")]:
+        joined = f"{', '.join(names + [k])} = {', '.join(vals + [v])}"
+        if names and (not k or len(joined) > width or "\n" in v):
+            lines.append(f"{', '.join(names)} = {', '.join(vals)}")
+            names, vals = [], []
+        if k:
+            names.append(k)
+            vals.append(v)
+    return lines
+
+
 def _source(module: str) -> str:
-    """A world module's text, as it is (but the import of a sibling world embedded above it), without its
-    trailing newline; read from its file, not imported (a sweep's parent must not start JAX)."""
+    """A module's text, as it is; read from its file, not imported (a sweep's parent must not start JAX)."""
     import importlib.util
-    text = Path(importlib.util.find_spec(module).origin).read_text(encoding="utf-8")
-    return _SIBLING_IMPORT.sub("", text).rstrip("\n")
-
-
-def _measure_source(main: str) -> str:
-    """:mod:`repro_measure`'s module docstring and imports, and the functions ``main`` needs (its text)."""
-    from cross_checks.sweep import repro_measure as rm
-    text = inspect.getsource(rm)
-    head = text[text.index("\nimport "):text.index("\ndef ")].lstrip("\n")   # its imports
-    needs = {"order": ("versions", "run", "error", "fitted_order", "main_order"),
-             "drift": ("versions", "run", "invariants", "main_drift"),
-             "gyroscopic": ("versions", "run", "first_flip_s", "main_gyroscopic")}[main]
-    return head.rstrip("\n") + "\n\n\n" + "\n\n\n".join(inspect.getsource(getattr(rm, f)).rstrip("\n")
-                                                        for f in needs)
+    return Path(importlib.util.find_spec(module).origin).read_text(encoding="utf-8")
 
 
 def _constant_forces(scenario, engine: str) -> tuple:
@@ -172,10 +211,6 @@ def reproducer(variant_name: str, scenario, claim_words, *, command: str = "", r
     it already): a :class:`Repro`. ReproError for what it cannot be written for (one line)."""
     import reference_sim
     kind, arg = parse_claim(claim_words)
-    if kind == "invariance":
-        raise ReproError("--claim invariance: not supported yet (the invariance transforms of issue 46 are "
-                         "not in a reproducer's reach: the script would have to rewrite the scenario); "
-                         "claims: order QUANTITY, drift, gyroscopic")
     engine, variant, dists, world_mods, adapter_mod, spec_mod = _engine(variant_name)
     f_W, tau_W = _constant_forces(scenario, engine)
     body = spec_mod.body_spec(scenario.problem.body)
@@ -185,31 +220,31 @@ def reproducer(variant_name: str, scenario, claim_words, *, command: str = "", r
               "Y0": _floats(scenario.problem.initial_packed()),
               "F_W": _floats(f_W), "TAU_W": _floats(tau_W)}
     claim_text = f"{kind} {arg}".strip()
-    data, expect = {"order": _order_data, "drift": _drift_data, "gyroscopic": _gyro_data}[kind](
-        variant_name, scenario, arg)
+    if kind == "invariance":
+        data, expect = _invariance_data(variant_name, scenario, arg, engine, spec_mod)
+    else:
+        data, expect = {"order": _order_data, "drift": _drift_data, "gyroscopic": _gyro_data}[kind](
+            variant_name, scenario, arg)
     command = command or f"rbcheck repro {variant_name} {scenario.name} --claim {claim_text}"
-    header = (f'"""{variant_name} on {scenario.name}: {expect}\n\n'
-              f"Written by rbcheck {reference_sim.__version__} ({command}). Needs only numpy and "
-              f"{', '.join(dists)}.\n"
-              f"Exit 1 while the defect holds, 0 when it does not.\n"
-              f"The world below is rbcheck's adapter's (cross_checks/engines/worlds/{engine}.py), as it is;\n"
-              f'the measurement is cross_checks/sweep/repro_measure.py\'s."""\n'
-              "import sys\n")
-    lines = [f"{k} = {v}" for k, v in {**common, **data}.items()]
-    main = {"order": "main_order", "drift": "main_drift", "gyroscopic": "main_gyroscopic"}[kind]
-    text = (header + "\n" + "\n\n\n".join(_source(w) for w in world_mods) + "\n\n\n"
-            + _measure_source(kind) + "\n\n\n"
-            + "# the scenario (SI units; states [x_W, v_W, q_WB (w x y z), ω_W]) and the reference values\n"
-            + "\n".join(lines) + "\n\n\n"
-            + f"def main():\n    return {main}(world, globals())\n\n\n"
-            + 'if __name__ == "__main__":\n    sys.exit(main())\n')
+    header = (f'"""{variant_name} on {scenario.name}: {expect}\n'
+              f"Written by rbcheck {reference_sim.__version__} ({command}); needs only numpy and "
+              f"{', '.join(dists)}.\nExit 1 while the defect holds, 0 when it does not. The code is "
+              f"rbcheck's own (cross_checks/engines/worlds/{engine}.py,\n"
+              f'cross_checks/sweep/repro_measure.py) without its docstrings and comments."""\n')
+    lines = _assignments({**common, **data})
+    main = f"main_{kind}"
+    tail = ("# the scenario (SI units; states [x_W, v_W, q_WB (w x y z), ω_W]) and the reference values\n"
+            + "\n".join(lines) + "\n"
+            + f"if __name__ == \"__main__\":\n    sys.exit({main}(world, globals()))\n")
+    modules = [*world_mods, "cross_checks.sweep.repro_measure"]
+    text = header + compact(["import sys\n"] + [_source(m) for m in modules], tail)
     if not run:
         return Repro(text=text, holds=None, output="", claim=claim_text)
     ns = {"__name__": "rbcheck_repro"}
     out = io.StringIO()
     with contextlib.redirect_stdout(out):
         exec(compile(text, f"<repro {variant_name} {scenario.name}>", "exec"), ns)   # noqa: S102 - our own
-        code = ns["main"]()
+        code = ns[main](ns["world"], ns)
     return Repro(text=text, holds=bool(code), output=out.getvalue(), claim=claim_text)
 
 
@@ -236,11 +271,91 @@ def _order_data(variant_name, scenario, quantity) -> tuple:
         floors.append(M.roundoff_floor(scales[quantity], n, label, reference_error=ref_err, amplification=amp,
                                        quantity=quantity, eps=machine_epsilon(variant_name)))
     data = {"QUANTITY": repr(quantity), "DT_S": _floats(dts), "STEPS": repr(steps),
-            "Y_REF": "[" + ",\n         ".join(_floats(r) for r in refs) + "]",
+            "Y_REF": (f"[{_floats(refs[0])}] * {len(refs)}" if all(np.array_equal(r, refs[0]) for r in refs)
+                      else _floats(refs)),
             "FLOORS": _floats(floors), "DECLARED": repr(float(declared)),
             "ORDER_TOL": repr(tol.SWEEP_ORDER_TOL), "RESOLVED": repr(tol.RESOLVED_ABOVE_FLOOR)}
     return data, (f"{quantity} converges at order {declared:g} (declared) over Δt = "
                   f"{', '.join(f'{h:g}' for h in dts)} s? Reference: {label}.")
+
+
+def _invariance_data(variant_name, scenario, label, engine, spec_mod) -> tuple:
+    """The transformed scenario's numbers as the invariance machinery builds them (transforms.apply), the
+    map back, and the allowances and step orders the sweep judges with (sweep.invariance,
+    analysis.judge.invariance_allowance) at the scenario's Δt and its refinements."""
+    from cross_checks.analysis.judge import invariance_allowance
+    from cross_checks.core.quantities import QUANTITIES, UNITS, quantity_scales
+    from cross_checks.engines import declared_traits, not_expressible
+    from cross_checks.scenario.references import error_amplification, reference_solution
+    from cross_checks.scenario.transforms import (
+        TransformRefused,
+        apply,
+    )
+    from cross_checks.sweep.invariance import step_order
+    t = _default_transforms()[label]
+    if scenario.long_run:
+        raise ReproError(f"scenario {scenario.name} is a long run: the sweep does not transform long runs")
+    try:
+        tsc = apply(t, scenario)
+    except TransformRefused as exc:
+        raise ReproError(f"--claim invariance {label}: refused on {scenario.name}: {exc.field}: "
+                         f"{exc.reason}") from None
+    why = not_expressible(tsc, variant_name)
+    if why:
+        raise ReproError(f"{variant_name} cannot express {label} on {scenario.name} ({why}): the sweep says "
+                         "'cannot express', not a defect")
+    if getattr(tsc, "body_com_B_m", None) is not None or getattr(tsc, "body_parts", ()):
+        can = [k for k in TRANSFORM_NAMES if k.split()[0] not in ("com_offset", "welded_split")]
+        raise ReproError(f"--claim invariance {t.kind}: a reproducer cannot write a body off its COM or of "
+                         "welded parts yet (the adapter converts the state between the body origin and the "
+                         "COM and shares the forces among the parts, outside the engine's world); "
+                         f"reproducers state: {'; '.join(can)}")
+    f_T, tau_T = _constant_forces(tsc, engine)
+    body_T = spec_mod.body_spec(tsc.problem.body)
+    traits = declared_traits(variant_name)
+    dt, T = scenario.dt_s, scenario.duration_s
+    dts = [dt] + [dt / r for r in tol.INVARIANCE_REFINEMENTS]
+    steps = [scenario.n_steps(h, T) for h in dts]
+    y_ref, _ = reference_solution(scenario, dt * np.arange(scenario.n_steps() + 1))
+    scales = quantity_scales(y_ref)
+    amp = error_amplification(scenario, scales)
+    allowances, base0 = [], None
+    for h, n in zip(dts, steps):
+        base, off = invariance_allowance(scales, amp, n, precision=getattr(traits, "precision", "float64"),
+                                         rounding_factor=getattr(traits, "rounding_factor", 1.0),
+                                         offset_m=t.position_offset_m(), dt_s=h,
+                                         differenced=getattr(traits, "velocity_from_positions", False))
+        base0 = base0 or base
+        allowances.append({q: base[q] + off[q] for q in QUANTITIES})
+    data = {"SCENARIO": repr(scenario.name), "TRANSFORM": repr(label),
+            "BODIES_T": "[(" + ", ".join(_floats(x) for x in body_T) + ")]",
+            "GRAVITY_T": _floats(tsc.problem.forces.gravity_W), "Y0_T": _floats(tsc.problem.initial_packed()),
+            "F_T": _floats(f_T), "TAU_T": _floats(tau_T),
+            **{k: _floats(v) for k, v in map_numbers(t).items()},
+            "DT_S": _floats(dts), "STEPS": repr(steps),
+            "BASE": "{" + ", ".join(f"{q!r}: {base0[q]!r}" for q in QUANTITIES) + "}",
+            "ALLOWANCE": "[" + ", ".join("{" + ", ".join(f"{q!r}: {a[q]!r}" for q in QUANTITIES) + "}"
+                                         for a in allowances) + "]",
+            "STEP_ORDER": "{" + ", ".join(f"{q!r}: {step_order(scenario, variant_name, q)!r}"
+                                          for q in QUANTITIES) + "}",
+            "UNITS": repr({q: UNITS[q] for q in QUANTITIES})}
+    return data, (f"the same physics written another way ({label}: transforms.py) must move the same once "
+                  f"mapped back: judged as rbcheck sweep --invariance judges it at Δt = {dt:g} s (and at "
+                  f"{', '.join(f'{h:g}' for h in dts[1:])} s where it fails there)")
+
+
+def map_numbers(t) -> dict:
+    """The numbers with which the script's ``map_back`` (repro_measure) undoes transform ``t``: ``MAP_D`` (m),
+    ``MAP_R`` = R(r), ``MAP_R_INV`` = r⁻¹, ``MAP_P_INV`` = p⁻¹, ``MAP_K``; each transform sets one of
+    d, r, p, k (a translation, a world rotation, a body frame, a scale), the others are the identity."""
+    from cross_checks.scenario.transforms import BodyFrame, Scale, Translation, WorldRotation
+    from reference_sim.quaternion import matrix_from_quat, quat_conj
+    one = np.array([1.0, 0.0, 0.0, 0.0])
+    r = np.asarray(t.r_wxyz, dtype=float) if isinstance(t, WorldRotation) else one
+    p = np.asarray(t.p_wxyz, dtype=float) if isinstance(t, BodyFrame) else one
+    return {"MAP_D": np.asarray(t.d_W_m, dtype=float) if isinstance(t, Translation) else np.zeros(3),
+            "MAP_R": matrix_from_quat(r), "MAP_R_INV": quat_conj(r), "MAP_P_INV": quat_conj(p),
+            "MAP_K": float(t.k) if isinstance(t, Scale) else 1.0}
 
 
 def _torque_free(scenario, what: str) -> None:
@@ -305,7 +420,8 @@ def findings_claims(summary: dict, scenarios) -> list:
     diverged), every expected non-convergence of a variant without a gyroscopic term on a torque-free
     scenario (``gyroscopic``), and every order the variant's traits expect below the one it declares (an
     engine's known shortfall, e.g. MJX's RK4 attitude at order 2: ``order QUANTITY``) where the forces are
-    constant. The reference's own schemes (``reference:``) are rbcheck's: none."""
+    constant; and every broken invariance (``invariance TRANSFORM``, one per transform). The reference's own
+    schemes (``reference:``) are rbcheck's: none."""
     from cross_checks.analysis.expectations import traits
     from cross_checks.analysis.metrics import conserved
     by_name = {sc.name: sc for sc in scenarios}
@@ -333,7 +449,11 @@ def findings_claims(summary: dict, scenarios) -> list:
     for r in summary.get("long_runs") or []:
         if r.get("finding") or r.get("status") == "diverged":
             out.setdefault((r["engine"], r["scenario"]), ["drift"])
-    return [(v, by_name[s], claim) for (v, s), claim in out.items()
+    for r in summary.get("invariance") or []:   # a broken invariance: one per transform
+        if r.get("verdict") == "broken":
+            out[(r["engine"], r["scenario"], r["transform"], r["magnitude"])] = [
+                "invariance", r["transform"], *str(r["magnitude"]).split()]
+    return [(v, by_name[s], claim) for (v, s, *_), claim in out.items()
             if s in by_name and not v.startswith("reference:")]
 
 

@@ -1,10 +1,13 @@
 """What a standalone reproducer measures (NumPy and the standard library only: ``rbcheck repro`` embeds
-this file as it is, after the engine's world: cross_checks/sweep/repro.py, docs/repro.md).
+the functions a claim reaches, after the engine's world: cross_checks/sweep/repro.py, docs/repro.md).
 
 It runs ``world(BODIES, GRAVITY_W, VARIANT, dt_s)`` (cross_checks/engines/worlds/<engine>.py) from ``Y0``
 with ``F_W``, ``TAU_W`` held, and measures one claim against the values rbcheck embedded: an ORDER over a
 Δt ladder (errors from the exact final states, points above their round-off floors), a DRIFT of a long
-run (energy, |L|, the separatrix distance δ = (2E I₂ − |L|²)/|L|²), or a missing torque-free FLIP. States
+run (energy, |L|, the separatrix distance δ = (2E I₂ − |L|²)/|L|²), a missing torque-free FLIP, or an
+INVARIANCE: the run from ``Y0_T`` of the transformed body ``BODIES_T`` under ``GRAVITY_T`` with ``F_T``,
+``TAU_T`` held, mapped back (:func:`map_back`), its largest deviation from the original's per quantity against
+the sweep's ``ALLOWANCE`` at each of ``DT_S`` (the sweep's Δt, then its refinements). States
 are packed ``[x_W (m), v_W (m/s), q_WB (w, x, y, z), ω_W (rad/s, world axes)]``. Each ``main_*`` prints the
 versions and the measured value beside the expected one, and returns 1 while the defect holds, else 0.
 """
@@ -129,3 +132,71 @@ def main_gyroscopic(world, s):
           + f", expected t = {s['FLIP_S']:.4g} s (the torque-free flip): "
           + ("DEFECT" if t is None else "no defect"))
     return int(t is None)
+
+
+def quat_mul(a, b):
+    """Hamilton products of quaternions (..., 4) (w, x, y, z)."""
+    s = a[..., :1] * b[..., :1] - np.sum(a[..., 1:] * b[..., 1:], axis=-1, keepdims=True)
+    return np.concatenate([s, a[..., :1] * b[..., 1:] + b[..., :1] * a[..., 1:]
+                           + np.cross(a[..., 1:], b[..., 1:])], axis=-1)
+
+
+def map_back(y, s):
+    """States (n, 13) of the transformed run in the original's frames: ``x = Rᵀ(x' − d)/k``, ``v = Rᵀv'/k``,
+    ``q = r⁻¹ q' p⁻¹``, ``ω = Rᵀω'`` (``MAP_R`` = R(r), ``MAP_R_INV`` = r⁻¹, ``MAP_P_INV`` = p⁻¹, ``MAP_D``
+    (m), ``MAP_K``: a transform sets one of them; the others are the identity)."""
+    y, R = np.array(y, dtype=float), np.array(s["MAP_R"])
+    y[:, 0:3] = (y[:, 0:3] - np.array(s["MAP_D"])) @ R / s["MAP_K"]
+    y[:, 3:6] = y[:, 3:6] @ R / s["MAP_K"]
+    y[:, 10:13] = y[:, 10:13] @ R
+    y[:, 6:10] = quat_mul(quat_mul(np.array(s["MAP_R_INV"]), y[:, 6:10]), np.array(s["MAP_P_INV"]))
+    return y
+
+
+def deviations(y0, y1):
+    """The largest deviation over the run per quantity between runs ``y0`` and ``y1`` (n, 13) where ``y0`` is
+    finite (inf where ``y1`` is not): norms, the geodesic angle for orientation."""
+    a = y0[:, 6:10] / np.linalg.norm(y0[:, 6:10], axis=-1, keepdims=True)
+    b = y1[:, 6:10] / np.linalg.norm(y1[:, 6:10], axis=-1, keepdims=True)
+    d = quat_mul(a * np.array([1.0, -1.0, -1.0, -1.0]), b)
+    e = {"position": np.linalg.norm(y1[:, 0:3] - y0[:, 0:3], axis=-1),
+         "orientation": 2.0 * np.arctan2(np.linalg.norm(d[:, 1:], axis=-1), np.abs(d[:, 0])),
+         "velocity": np.linalg.norm(y1[:, 3:6] - y0[:, 3:6], axis=-1),
+         "angular_velocity": np.linalg.norm(y1[:, 10:13] - y0[:, 10:13], axis=-1)}
+    ok = np.all(np.isfinite(y0), axis=-1)
+    e = {q: np.where(ok, v, 0.0) for q, v in e.items()}
+    return {q: float(np.max(v, initial=0.0)) if np.all(np.isfinite(v)) else float("inf")
+            for q, v in e.items()}
+
+
+def main_invariance(world, s):
+    versions(s["DIST"])
+    t = dict(s, BODIES=s["BODIES_T"], GRAVITY_W=s["GRAVITY_T"], Y0=s["Y0_T"], F_W=s["F_T"], TAU_W=s["TAU_T"])
+    devs, allow, base = [], s["ALLOWANCE"][0], s["BASE"]
+    for h, n in zip(s["DT_S"], s["STEPS"]):
+        with np.errstate(all="ignore"):
+            devs.append(deviations(run(world, s, h, n), map_back(run(world, t, h, n), s)))
+        dev = devs[0]
+        if len(devs) == 1:
+            for q in allow:
+                print(f"dt = {h:g} s, {n} steps: {q} largest deviation {dev[q]:.3g} {s['UNITS'][q]}, allowed "
+                      f"{allow[q]:.3g} (round-off {base[q]:.3g})")
+            worst = max(allow, key=lambda q: dev[q] / allow[q] if allow[q] > 0 else float("inf"))
+            verdict = ("holds" if all(dev[q] <= base[q] for q in allow) else "precision loss (expected)"
+                       if all(dev[q] <= allow[q] for q in allow) else "broken")
+            if verdict != "broken" or not np.all(np.isfinite(list(dev.values()))):
+                break
+    if len(devs) > 1:   # broken at Δt: does the deviation vanish at the step's order as Δt shrinks?
+        d, dts = [v[worst] for v in devs], s["DT_S"]
+        with np.errstate(all="ignore"):
+            orders = [float(np.log(a / b) / np.log(h / g)) for a, b, h, g in zip(d, d[1:], dts, dts[1:])]
+        gone = [v[worst] <= a[worst] for v, a in zip(devs[1:], s["ALLOWANCE"][1:])]
+        print(f"{worst} largest deviation {', '.join(f'{v:.3g}' for v in d)} {s['UNITS'][worst]} at dt = "
+              f"{', '.join(f'{h:g}' for h in dts)} s: order {', '.join(f'{o:.2f}' for o in orders)} (the "
+              f"step's own truncation error vanishes at order {s['STEP_ORDER'][worst]:g} or more)")
+        if np.all(np.isfinite(d)) and all(g or o >= s["STEP_ORDER"][worst] for o, g in zip(orders, gone)):
+            verdict = "step-dependent (the step is not covariant under it; no defect of the model)"
+    holds = verdict == "broken"
+    print(f"{s['VARIANT']} on {s['SCENARIO']} under {s['TRANSFORM']}: {verdict}, expected it to hold: "
+          + ("DEFECT" if holds else "no defect"))
+    return int(holds)

@@ -1,6 +1,7 @@
 """Each engine's world of free bodies in the engine's own API, importing only NumPy and the engine (never
 rbcheck): the adapter (cross_checks/engines/<engine>_engine.py) builds on it, and ``rbcheck repro`` places the
-file's text, as it is, into a standalone reproducer (cross_checks/sweep/repro.py; docs/repro.md).
+file's code, line for line, into a standalone reproducer (cross_checks/sweep/repro.py; docs/repro.md), without
+its docstrings, comments and the definitions the script never reaches (cross_checks/sweep/repro_text.py).
 
 Every module defines ``world(bodies, gravity_W, variant, dt_s)``: a world of ``bodies`` — one
 ``(mass_kg, moments_kg_m2 (3,), q_BP (w, x, y, z))`` each (principal moments and the principal frame P in body
@@ -10,5 +11,5 @@ tau_W)``, ``step()``, ``read()`` and ``packed(raw)`` on packed states (B, 13)
 (MJX's ``world`` builds on worlds/mujoco.py's model; Brax's and DART's take the full inertia tensor as the
 second item.)
 tests/cross_checks/engines/worlds/ checks that none imports anything else, and that a reproducer's run of each
-is the adapter's run, bit for bit.
+(of that compacted code) is the adapter's run, bit for bit.
 """

@@ -1,4 +1,4 @@
-"""Brax's world (JAX, float64): numpy, jax and brax only (``rbcheck repro`` embeds this file as it is).
+"""Brax's world (JAX, float64): numpy, jax and brax only (``rbcheck repro`` embeds this file's code).
 
 The body as MJCF loaded by ``brax.io.mjcf.loads`` (:func:`mjcf_text`), every damping, scale and the
 approximate inverse neutralised (:data:`NEUTRAL_SYSTEM`, :data:`NEUTRAL_DOF`); the generalized pipeline takes

@@ -1,4 +1,4 @@
-"""DART's world (``dartpy``, float64): numpy and dartpy only (``rbcheck repro`` embeds this file as it is).
+"""DART's world (``dartpy``, float64): numpy and dartpy only (``rbcheck repro`` embeds this file's code).
 
 Each body alone in a DART ``World`` of its own: one ``FreeJoint``/``BodyNode`` pair, ``Inertia(m, com_B = 0,
 I_B)`` (the full tensor as given), every joint default neutralised (:data:`JOINT_SETTINGS`,

@@ -1,6 +1,7 @@
 """MJX's world (MuJoCo's physics in JAX, float64): numpy, jax and mujoco only. ``rbcheck repro`` embeds this
-file as it is after worlds/mujoco.py, whose MjSpec model and state conversion it uses (the relative import
-below is the only line it leaves out). The model is MuJoCo's ``build_model``, put on the device by
+file's code after worlds/mujoco.py, whose MjSpec model and state conversion it uses (it leaves out the
+relative import below, and MuJoCo's ``Bodies`` and ``world``, which this file redefines). The model is
+MuJoCo's ``build_model``, put on the device by
 ``mjx.put_model``; a step is :func:`step_one`: the pre-step decay as gains on qvel, the applied force and
 torque in ``xfrc_applied`` (world force at the COM, world torque), then ``mjx.step``. rbcheck's adapter
 (cross_checks/engines/mjx_engine.py) runs :func:`step_one` vmapped in a compiled loop."""

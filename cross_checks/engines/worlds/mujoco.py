@@ -1,4 +1,4 @@
-"""MuJoCo's world of free bodies (numpy and mujoco only: ``rbcheck repro`` embeds this file as it is).
+"""MuJoCo's world of free bodies (numpy and mujoco only: ``rbcheck repro`` embeds this file's code).
 
 One MjSpec body per body, with a free joint on the body frame and the mass and inertia exactly as given
 (alignfree, inertiafromgeom, balanceinertia, boundmass and boundinertia neutralised; no auto-reset).

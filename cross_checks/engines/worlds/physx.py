@@ -1,5 +1,5 @@
 """PhysX 5's world (CPU, through SAPIEN's ``sapien.physx``, float32): numpy and sapien only (``rbcheck repro``
-embeds this file as it is).
+embeds this file's code).
 
 A ``sapien.Scene`` with a ``PhysxCpuSystem`` of the variant's solver ("tgs": SAPIEN's default, or "pgs") at
 ``dt_s`` and float32 gravity; a ``PhysxRigidDynamicComponent`` per body, no shape, its principal moments and

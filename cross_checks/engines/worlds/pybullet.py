@@ -1,4 +1,4 @@
-"""PyBullet's world of free bodies (numpy and pybullet only: ``rbcheck repro`` embeds this file as it is).
+"""PyBullet's world of free bodies (numpy and pybullet only: ``rbcheck repro`` embeds this file's code).
 
 A body is a ``createMultiBody`` without collision shape (maximal coordinates for ``maximal``), damping zeroed,
 no velocity clamp, sleeping disabled (:data:`DYNAMICS_SETTINGS`). PyBullet takes a diagonal inertia and

@@ -1,4 +1,4 @@
-"""Rapier's world of free bodies (numpy and rapier3d only: ``rbcheck repro`` embeds this file as it is).
+"""Rapier's world of free bodies (numpy and rapier3d only: ``rbcheck repro`` embeds this file's code).
 
 One ``PhysicsWorld`` (one thread), a dynamic ``RigidBody`` per body without a collider, its mass properties
 about the COM (body origin = COM; principal moments and frame), Rapier's defaults neutralised

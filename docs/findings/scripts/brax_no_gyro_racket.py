@@ -1,59 +1,131 @@
-"""Brax spring and positional pipelines: a torque-free tennis racket never flips (no gyroscopic term).
-Free body I = (1, 2, 3) kg m^2, spin 2 rad/s about the intermediate axis (y) with 0.5 % on x and z, no
-gravity, dt = 1 ms, 30 s, float64. The physical motion flips (L's share on body y goes from +1 to -1)
-every ~9 s, first at t = 6.1 s. Usage: python brax_no_gyro_racket.py [spring|positional|generalized].
-Exit 1 while the body never flips."""
+"""brax:spring on tennis_racket: does the torque-free spin near the intermediate axis flip (at t = 6.06 s, analytic)?
+Written by rbcheck 0.1.0 (rbcheck repro brax:spring tennis_racket --claim gyroscopic); needs only numpy and brax, jax, mujoco.
+Exit 1 while the defect holds, 0 when it does not. The code is rbcheck's own (cross_checks/engines/worlds/brax.py,
+cross_checks/sweep/repro_measure.py) without its docstrings and comments."""
+import importlib.metadata
 import platform
 import sys
-import warnings
-from importlib.metadata import version
 
 import jax
+import jax.numpy as jp
+import numpy as np
+from brax import math as bmath
+from brax.base import Actuator
+from brax.generalized import pipeline as generalized
+from brax.io import mjcf
+from brax.positional import pipeline as positional
+from brax.spring import pipeline as spring
 
 jax.config.update("jax_enable_x64", True)
-import jax.numpy as jp  # noqa: E402
-import numpy as np  # noqa: E402
-from brax.io import mjcf  # noqa: E402
+PIPELINES = {"generalized": generalized, "positional": positional, "spring": spring}
+NEUTRAL_SYSTEM = (("vel_damping", 0.0), ("ang_damping", 0.0), ("spring_mass_scale", 0.0),
+                  ("spring_inertia_scale", 0.0), ("matrix_inv_iterations", 0))
+NEUTRAL_DOF = (("damping", 0.0), ("armature", 0.0))
+def _num(v):
+    return repr(float(v))
+def mjcf_text(mass_kg, inertia_B, gravity_W, dt_s, actuators):
+    I = np.asarray(inertia_B, dtype=float)
+    full = " ".join(_num(v) for v in (I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]))
+    g = " ".join(_num(v) for v in gravity_W)
+    motors = ""
+    if actuators:
+        gears = ["1 0 0 0 0 0", "0 1 0 0 0 0", "0 0 1 0 0 0", "0 0 0 1 0 0", "0 0 0 0 1 0", "0 0 0 0 0 1"]
+        motors = "".join(f'<motor joint="free" gear="{gr}" ctrllimited="false"/>' for gr in gears)
+        motors = f"<actuator>{motors}</actuator>"
+    return (f'<mujoco model="rbcheck"><compiler alignfree="false" inertiafromgeom="false" '
+            f'balanceinertia="false" boundmass="0" boundinertia="0"/>'
+            f'<option timestep="{_num(dt_s)}" gravity="{g}" viscosity="0" density="0" integrator="Euler"/>'
+            f'<worldbody><body name="body"><freejoint name="free"/>'
+            f'<inertial pos="0 0 0" mass="{_num(mass_kg)}" fullinertia="{full}"/>'
+            f'<geom type="sphere" size="0.01" contype="0" conaffinity="0" mass="0"/>'
+            f'</body></worldbody>{motors}</mujoco>')
+def neutralise(sys):
+    dof = sys.dof
+    for field, value in NEUTRAL_DOF:
+        dof = dof.replace(**{field: jp.full_like(getattr(dof, field), value)})
+    return sys.replace(dof=dof, **{k: v for k, v in NEUTRAL_SYSTEM})
+def six_dof_actuator(sys):
+    inf = jp.full((6, 2), jp.inf) * jp.array([-1.0, 1.0])
+    act = Actuator(q_id=jp.arange(6), qd_id=jp.arange(6), ctrl_range=inf, force_range=inf,
+                   gain=jp.ones(6), gear=jp.ones(6), bias_q=jp.zeros(6), bias_qd=jp.zeros(6))
+    return sys.replace(actuator=act)
+def system(mass_kg, inertia_B, gravity_W, variant):
+    gen = variant == "generalized"
+    sys = neutralise(mjcf.loads(mjcf_text(mass_kg, inertia_B, gravity_W, 0.01, actuators=gen)))
+    return six_dof_actuator(sys) if gen else sys
+def act(sys, state, f, tau, variant):
+    if variant != "generalized":
+        return jp.zeros(sys.act_size())
+    return jp.concatenate([f, bmath.inv_rotate(tau, state.x.rot[0])])
+def to_q_qd(y):
+    y = np.asarray(y, dtype=float)
+    s, u, w = y[..., 6:7], -y[..., 7:10], y[..., 10:13]
+    u0, u1, u2, w0, w1, w2 = u[..., 0], u[..., 1], u[..., 2], w[..., 0], w[..., 1], w[..., 2]
+    t = 2.0 * np.stack([u1 * w2 - u2 * w1, u2 * w0 - u0 * w2, u0 * w1 - u1 * w0], axis=-1)
+    t0, t1, t2 = t[..., 0], t[..., 1], t[..., 2]
+    w_B = w + s * t + np.stack([u1 * t2 - u2 * t1, u2 * t0 - u0 * t2, u0 * t1 - u1 * t0], axis=-1)
+    return np.concatenate([y[..., 0:3], y[..., 6:10]], axis=-1), np.concatenate([y[..., 3:6], w_B], axis=-1)
+def packed(state):
+    return jp.concatenate([state.x.pos[0], state.xd.vel[0], state.x.rot[0], state.xd.ang[0]])
+class Bodies:
+    def __init__(self, mass_kg, inertia_B, gravity_W, variant, dt_s):
+        sys = system(mass_kg, inertia_B, gravity_W, variant).replace(mj_model=None)
+        self.sys = sys.replace(opt=sys.opt.replace(timestep=jp.asarray(float(dt_s))))
+        self.variant, self.P, self.f = variant, PIPELINES[variant], (np.zeros(3), np.zeros(3))
+        P, v = self.P, variant
+        self._step = jax.jit(lambda sys, state, f, tau: P.step(sys, state, act(sys, state, f, tau, v)))
+    def set_state(self, y):
+        q, qd = to_q_qd(np.asarray(y, dtype=float)[0])
+        self.state = self.P.init(self.sys, jp.asarray(q), jp.asarray(qd))
+    def apply(self, f_W, tau_W):
+        self.f = (np.asarray(f_W, dtype=float)[0], np.asarray(tau_W, dtype=float)[0])
+    def step(self):
+        self.state = self._step(self.sys, self.state, *self.f)
+    def read(self):
+        return np.asarray(packed(self.state))[None]
+    def packed(self, raw):
+        return np.asarray(raw, dtype=float)
+def world(bodies, gravity_W, variant, dt_s):
+    (mass_kg, inertia_B, _), = bodies
+    return Bodies(mass_kg, inertia_B, gravity_W, variant, dt_s)
+def versions(dists):
+    print(", ".join(f"{d} {importlib.metadata.version(d)}" for d in dists)
+          + f", numpy {np.__version__}, Python {platform.python_version()}, {platform.platform()}")
+def run(world, s, dt_s, n_steps):
+    w = world(s["BODIES"], s["GRAVITY_W"], s["VARIANT"], dt_s)
+    w.set_state(np.array([s["Y0"]], dtype=float))
+    f, tau = np.array([s["F_W"]], dtype=float), np.array([s["TAU_W"]], dtype=float)
+    raw = [np.array(s["Y0"], dtype=float)]
+    w.read()
+    for _ in range(n_steps):
+        w.apply(f, tau)
+        w.step()
+        raw.append(w.packed(np.asarray(w.read(), dtype=float)[None])[0, 0])
+    return np.array(raw)
+def first_flip_s(y, q_BP, axis, dt_s):
+    q = y[:, 6:10] / np.linalg.norm(y[:, 6:10], axis=-1, keepdims=True)
+    qc = q * np.array([1.0, -1.0, -1.0, -1.0])
+    p = np.asarray(q_BP, dtype=float)
+    w = y[:, 10:13]
+    for qq in (qc, np.broadcast_to(p * np.array([1.0, -1.0, -1.0, -1.0]), qc.shape)):
+        t = 2.0 * np.cross(qq[:, 1:], w)
+        w = w + qq[:, :1] * t + np.cross(qq[:, 1:], t)
+    s = np.sign(w[:, axis])
+    flips = np.nonzero(s[1:] * s[0] < 0)[0]
+    return None if len(flips) == 0 else float((flips[0] + 1) * dt_s)
+def main_gyroscopic(world, s):
+    versions(s["DIST"])
+    t = first_flip_s(run(world, s, s["DT"], s["N"]), s["Q_BP"], s["AXIS"], s["DT"])
+    print(f"{s['N']} steps of {s['DT']:g} s: ω about the intermediate axis (body) first reverses at "
+          + ("no time (no flip)" if t is None else f"t = {t:.4g} s")
+          + f", expected t = {s['FLIP_S']:.4g} s (the torque-free flip): "
+          + ("DEFECT" if t is None else "no defect"))
+    return int(t is None)
 
-name = sys.argv[1] if len(sys.argv) > 1 else "spring"
-pipeline = {"spring": "brax.spring.pipeline", "positional": "brax.positional.pipeline",
-            "generalized": "brax.generalized.pipeline"}[name]
-P = __import__(pipeline, fromlist=["step"])
-XML = """<mujoco><compiler inertiafromgeom="false"/><option timestep="0.001" gravity="0 0 0"/>
-  <worldbody><body><freejoint/><inertial pos="0 0 0" mass="1" diaginertia="1 2 3"/>
-  <geom type="sphere" size="0.01" contype="0" conaffinity="0" mass="0"/></body></worldbody></mujoco>"""
-with warnings.catch_warnings():
-    warnings.simplefilter("ignore")           # "Brax System, piplines and environments are not actively ..."
-    sys_ = mjcf.loads(XML)
-sys_ = sys_.replace(vel_damping=0.0, ang_damping=0.0, matrix_inv_iterations=0)
-I_P, N = np.array([1.0, 2.0, 3.0]), 30000
-state = P.init(sys_, jp.zeros(7).at[3].set(1.0), jp.array([0, 0, 0, 0.01, 2.0, 0.01]))  # qd: v, omega_body
-
-
-def rollout(state):
-    def f(s, _):
-        s = P.step(sys_, s, jp.zeros(sys_.act_size()))
-        return s, (s.x.rot[0], s.xd.ang[0])
-    return jax.lax.scan(f, state, None, length=N)[1]
-
-
-rot, ang = map(np.asarray, jax.jit(rollout)(state))
-w, x, y, z = rot.T
-R = np.stack([np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
-              np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
-              np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1)], -2)
-w_B = np.einsum("nji,nj->ni", R, ang)                    # body-axes omega
-L_B = I_P * w_B
-share = L_B[:, 1] / np.linalg.norm(L_B, axis=1)
-flips, side = [], 1.0
-for k, s in enumerate(share):
-    if s * side < -0.5:
-        side = -side
-        flips.append((k + 1) * 1e-3)
-E = 0.5 * np.sum(w_B * L_B, axis=1)
-print(f"brax {version('brax')} ({name}), jax {jax.__version__}, numpy {np.__version__}, "
-      f"python {platform.python_version()}, {platform.platform()}")
-print(f"{len(flips)} flips in 30 s" + (f" (first at {flips[0]:.2f} s)" if flips else "")
-      + f", expected 3 (first at 6.06 s); L's body-y share from {share.min():+.4f} to {share.max():+.4f}; "
-      f"world omega moved by {np.abs(ang - ang[0]).max():.3g} rad/s; energy {E[-1] / E[0] - 1:+.2e}")
-sys.exit(0 if flips else 1)
+# the scenario (SI units; states [x_W, v_W, q_WB (w x y z), ω_W]) and the reference values
+DIST, VARIANT = ('brax', 'jax', 'mujoco'), 'spring'
+BODIES, GRAVITY_W = [(1.0, [[1.0, 0.0, 0.0], [0.0, 2.0, 0.0], [0.0, 0.0, 3.0]], None)], [0.0, 0.0, 0.0]
+Y0, F_W = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.01, 2.0, 0.01], [0.0, 0.0, 0.0]
+TAU_W, DT, N, Q_BP, AXIS, FLIP_S = [0.0, 0.0, 0.0], 0.001, 10000, [1.0, 0.0, 0.0, 0.0], 1, 6.0600000000000005
+if __name__ == "__main__":
+    sys.exit(main_gyroscopic(world, globals()))

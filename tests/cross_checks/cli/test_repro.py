@@ -26,10 +26,22 @@ def test_a_claim_that_does_not_hold_is_written_and_said(tmp_path, capsys):
     assert "import cross_checks" not in text and "import rbcheck" not in text
 
 
+def test_an_invariance_claim_is_written_with_the_transform_as_the_sweep_names_it(tmp_path, capsys):
+    out = tmp_path / "inv.py"
+    assert main(["repro", "mujoco:euler", "tennis_racket", "--claim", "invariance", "translation", "1e4",
+                 "--out", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert "invariance translation 1e+04 m" in said and "no defect here" in said and "holds" in said
+    assert "rbcheck repro mujoco:euler tennis_racket --claim invariance translation 1e4" in out.read_text()
+
+
 @pytest.mark.parametrize("args,says", [
     (["mujoco:rk4", "tennis_racket", "--claim", "order", "speed"], "unknown quantity 'speed'"),
     (["mujoco:rk4", "tennis_racket", "--claim", "wobble"], "unknown claim 'wobble'"),
-    (["mujoco:rk4", "tennis_racket", "--claim", "invariance", "rotated"], "not supported yet"),
+    (["mujoco:rk4", "tennis_racket", "--claim", "invariance", "rotated"],
+     "unknown transform 'rotated'; known: translation 10 m;"),
+    (["pybullet:maximal", "tennis_racket", "--claim", "invariance", "welded_split"],
+     "cannot express welded_split child 0.75 of the mass on tennis_racket"),
     (["drake:semi_explicit_euler", "tennis_racket", "--claim", "gyroscopic"],
      "these can: mujoco, rapier, pybullet, mjx, brax, physx, dart"),
     (["mujoco:rk5", "tennis_racket", "--claim", "order", "orientation"], "unknown variant 'rk5'"),

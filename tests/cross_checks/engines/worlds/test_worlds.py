@@ -52,17 +52,21 @@ def test_the_reproducers_run_of_the_world_is_the_adapters_bit_for_bit(engine, va
                          "dart": "dartpy"}.get(engine, engine))
     from cross_checks.engines import get_adapter
     from cross_checks.engines.loop import Harness
-    from cross_checks.sweep import repro_measure
-    from cross_checks.sweep.repro import ENGINES
+    from cross_checks.sweep.repro import ENGINES, _source
+    from cross_checks.sweep.repro_text import compact
     adapter_mod = importlib.import_module(ENGINES[engine][2])
     spec_mod = importlib.import_module(ENGINES[engine][3])
-    world_mod = importlib.import_module(ENGINES[engine][1][-1])
+    # what a reproducer embeds: the world and the measurement compacted (repro_text), not the modules
+    script = {"__name__": "repro"}
+    code = compact([_source(m) for m in [*ENGINES[engine][1], "cross_checks.sweep.repro_measure"]],
+                   "def reached():\n    return run, world\n")
+    exec(compile(code, f"<{engine} reproducer>", "exec"), script)   # noqa: S102
     sc = load_scenario(name)
     dt, n = sc.dt_ladder_s[0], 200
     f, tau = Harness([sc], dt, adapter_mod._ENGINE.applies_gravity).wrench(sc.problem.initial_packed()[None])
     s = {"BODIES": [spec_mod.body_spec(sc.problem.body)], "GRAVITY_W": sc.problem.forces.gravity_W,
          "VARIANT": variant, "Y0": sc.problem.initial_packed(), "F_W": f[0], "TAU_W": tau[0]}
-    mine = repro_measure.run(world_mod.world, s, dt, n)
+    mine = script["run"](script["world"], s, dt, n)
     theirs = get_adapter(engine).simulate_many(variant, [RunRequest(sc, dt, n)])[0].y
     if adapter_mod._ENGINE.sign_continuity:   # the loop picks each quaternion's sign; the script need not
         mine[:, 6:10] *= np.sign(np.sum(mine[:, 6:10] * theirs[:, 6:10], axis=-1))[:, None]
