@@ -29,9 +29,9 @@ def add_repro(sub, engine_file_option) -> None:
                     "position, orientation, velocity, angular_velocity), 'drift' (a long run's energy, |L| "
                     "and separatrix distance), 'gyroscopic' (the torque-free flip is missing). A claim "
                     "that does not hold here is written anyway and said so. Engines: mujoco, rapier, "
-                    "pybullet, mjx, brax, physx, dart; engine files cannot (their command is the "
-                    "reproducer). Exit 0: written; 2: bad input (one line, nothing written). See "
-                    "docs/repro.md.")
+                    "pybullet, mjx, brax, physx, dart, drake, mujoco_warp, jaxsim; engine files cannot "
+                    "(their command is the reproducer). Exit 0: written; 2: bad input (one line, nothing "
+                    "written). See docs/repro.md.")
     r.add_argument("variant", metavar="VARIANT", help="ENGINE:VARIANT, e.g. mujoco:rk4")
     r.add_argument("scenario", metavar="SCENARIO", help="catalog name or scenario TOML file")
     r.add_argument("--claim", nargs="+", required=True, metavar="WORD",

@@ -232,6 +232,7 @@ class DrakeWorld(dkw.Bodies, World):
     blow-up, that is a consequence (``first_cause_only``)."""
 
     first_cause_only = True
+    hold_failed = True   # the loop ends the body's run at the step Drake refused (its warning)
 
     def __init__(self, requests, variant: str, dt_s: float):
         World.__init__(self)

@@ -43,7 +43,7 @@ def to_drake_state(y):
 def from_drake_state(x):
     """Drake's states (..., 13) -> packed (..., 13), the quaternion normalised (Drake's is not unit)."""
     x = np.asarray(x, dtype=float)
-    with np.errstate(invalid="ignore", divide="ignore"):
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):   # a blown-up state stays inf/NaN
         q = x[..., 0:4] / np.linalg.norm(x[..., 0:4], axis=-1, keepdims=True)
     return np.concatenate([x[..., 4:7], x[..., 10:13], q, x[..., 7:10]], axis=-1)
 
@@ -104,12 +104,15 @@ class Body:
 
 class Bodies:
     """Bodies (each a :class:`Body` in fixed-step mode at ``dt_s``) stepped to ``n Δt`` in turn; raw rows
-    Drake's states ``[q_WB, x_W, ω_W, v_W]``. A step Drake refuses (NaN detected, Newton failed) raises,
-    unless the world keeps a ``warnings`` list: then it is noted there ``(body, step, words)`` and the body
-    keeps its last state."""
+    Drake's states ``[q_WB, x_W, ω_W, v_W]``. A step Drake refuses (it raises: NaN detected, Newton failed) is
+    noted in ``warnings`` as ``(body, step, words)``; that body is not stepped again and reads as NaN from
+    then on (``hold_failed``: as its last state)."""
+
+    hold_failed = False
 
     def __init__(self, models, dt_s):
         self.models, self.dt_s = models, dt_s
+        self.warnings = getattr(self, "warnings", [])
 
     def set_state(self, y):
         for m, row in zip(self.models, y):
@@ -124,22 +127,19 @@ class Bodies:
 
     def step(self):
         self.n += 1
-        warnings = getattr(self, "warnings", None)
         for k, m in enumerate(self.models):
             try:
                 if k not in self.failed:
                     m.simulator.AdvanceTo(self.n * self.dt_s)
             except RuntimeError as exc:
-                if warnings is None:
-                    raise
                 words = str(exc).strip().splitlines()
                 self.failed.add(k)
-                warnings.append((k, self.n, f"Drake: {words[0] if words else type(exc).__name__}"))
+                self.warnings.append((k, self.n, f"Drake: {words[0] if words else type(exc).__name__}"))
 
     def read(self):
         rows = np.array([m.drake_state() for m in self.models])
         for k in self.failed:
-            rows[k] = self.last[k]
+            rows[k] = self.last[k] if self.hold_failed else np.nan
         self.last = rows
         return rows
 

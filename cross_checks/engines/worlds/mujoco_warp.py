@@ -105,6 +105,8 @@ class Bodies(Worlds):
 
 
 def world(bodies, gravity_W, variant, dt_s):
+    # a reproducer prints its numbers: Warp's greeting and kernel-load lines (LOG_INFO) off, its warnings kept
+    wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
     m = host_model(build_model(bodies, gravity_W, variant, dt_s))
     warm_up(m)
     return Bodies(device_model(m, [dt_s]), m)

@@ -45,8 +45,6 @@ def test_claims_parse():
 
 @pytest.mark.parametrize("variant,scenario,claim,says", [
     ("mujoco:rk4", "tennis_racket", ["invariance", "rotated"], "not supported yet"),
-    ("drake:semi_explicit_euler", "tennis_racket", ["gyroscopic"],
-     "these can: mujoco, rapier, pybullet, mjx, brax, physx, dart"),
     ("mujoco:rk4", "spring_pendulum", ["order", "orientation"], "forces change with the state"),
     ("mujoco:rk4", "projectile", ["gyroscopic"], "does not flip"),
     ("mujoco:rk4", "long_major_axis_spin", ["order", "orientation"], "is a long run"),

@@ -16,8 +16,9 @@ WORLDS = Path(__file__).resolve().parents[4] / "cross_checks" / "engines" / "wor
 #: reproducer embeds above it)
 ENGINE_IMPORT = {"mujoco": {"mujoco"}, "rapier": {"rapier3d"}, "pybullet": {"pybullet"},
                  "mjx": {"jax", "mujoco", "."}, "brax": {"jax", "brax"},
-                 "physx": {"sapien"}, "dart": {"dartpy"}}
-STDLIB = {"math"}
+                 "physx": {"sapien"}, "dart": {"dartpy"}, "drake": {"pydrake"},
+                 "mujoco_warp": {"mujoco", "mujoco_warp", "warp", "."}, "jaxsim": {"jax", "jaxsim"}}
+STDLIB = {"math", "dataclasses"}
 
 
 def _imports(path: Path) -> set:
@@ -41,21 +42,28 @@ CASES = [("mujoco", "rk4", "tennis_racket"), ("mujoco", "euler", "tumbling_box")
          ("rapier", "symplectic_euler", "tennis_racket"), ("pybullet", "maximal", "tumbling_box"),
          ("pybullet", "multibody", "projectile"), ("physx", "tgs", "tumbling_box"),
          ("physx", "pgs", "projectile"), ("dart", "semi_implicit_euler", "tumbling_box"),
+         ("drake", "runge_kutta3", "tennis_racket"), ("drake", "semi_explicit_euler", "projectile"),
+         ("drake", "implicit_euler", "tumbling_box"),
+         ("mujoco_warp", "rk4", "tennis_racket"), ("mujoco_warp", "euler", "projectile"),
          pytest.param("mjx", "rk4", "tennis_racket", marks=pytest.mark.slow),   # ~1 min each: JAX compiles
          pytest.param("brax", "spring", "tennis_racket", marks=pytest.mark.slow),
-         pytest.param("brax", "generalized", "projectile", marks=pytest.mark.slow)]
+         pytest.param("brax", "generalized", "projectile", marks=pytest.mark.slow),
+         pytest.param("jaxsim", "rk4", "tennis_racket", marks=pytest.mark.slow),
+         pytest.param("jaxsim", "semi_implicit_euler", "projectile", marks=pytest.mark.slow)]
 
 
 @pytest.mark.parametrize("engine,variant,name", CASES)
 def test_the_reproducers_run_of_the_world_is_the_adapters_bit_for_bit(engine, variant, name):
     pytest.importorskip({"rapier": "rapier3d", "mjx": "mujoco.mjx", "physx": "sapien",
-                         "dart": "dartpy"}.get(engine, engine))
+                         "dart": "dartpy", "drake": "pydrake",
+                         "mujoco_warp": "mujoco_warp"}.get(engine, engine))
     from cross_checks.engines import get_adapter
     from cross_checks.engines.loop import Harness
     from cross_checks.sweep import repro_measure
     from cross_checks.sweep.repro import ENGINES
     adapter_mod = importlib.import_module(ENGINES[engine][2])
     spec_mod = importlib.import_module(ENGINES[engine][3])
+    getattr(adapter_mod, "start_for_repro", lambda: None)()   # Warp: started as the adapter starts it
     world_mod = importlib.import_module(ENGINES[engine][1][-1])
     sc = load_scenario(name)
     dt, n = sc.dt_ladder_s[0], 200
@@ -67,3 +75,10 @@ def test_the_reproducers_run_of_the_world_is_the_adapters_bit_for_bit(engine, va
     if adapter_mod._ENGINE.sign_continuity:   # the loop picks each quaternion's sign; the script need not
         mine[:, 6:10] *= np.sign(np.sum(mine[:, 6:10] * theirs[:, 6:10], axis=-1))[:, None]
     np.testing.assert_array_equal(mine[1:], theirs[1:])
+
+
+def test_jaxsims_adapter_declares_its_worlds_chunk_integrators_and_model_name():
+    pytest.importorskip("jaxsim")
+    from cross_checks.engines import jaxsim_engine as je
+    jsw = je._world()   # the adapter holds them without importing JAX; the world's loop is what runs
+    assert (je.CHUNK, je.INTEGRATORS, je.MODEL_NAME) == (jsw.CHUNK, jsw.INTEGRATORS, jsw.MODEL_NAME)
