@@ -82,3 +82,27 @@ def test_jaxsims_adapter_declares_its_worlds_chunk_integrators_and_model_name():
     from cross_checks.engines import jaxsim_engine as je
     jsw = je._world()   # the adapter holds them without importing JAX; the world's loop is what runs
     assert (je.CHUNK, je.INTEGRATORS, je.MODEL_NAME) == (jsw.CHUNK, jsw.INTEGRATORS, jsw.MODEL_NAME)
+
+
+def test_a_step_drake_refuses_reads_as_nan_in_a_reproducer_and_as_the_last_state_in_the_adapter():
+    pytest.importorskip("pydrake")
+    from cross_checks.engines import drake_engine as de
+    from cross_checks.engines.worlds import drake as dkw
+    sc = load_scenario("tennis_racket")
+    y0 = sc.problem.initial_packed()[None]
+    nan_force = np.array([[np.nan, 0.0, 0.0]])   # Drake refuses it: "Detected NaN in applied ... port"
+    w = dkw.world([de.body_spec(sc.problem.body)], sc.problem.forces.gravity_W, "runge_kutta3", 0.01)
+    w.set_state(y0)
+    w.apply(nan_force, np.zeros((1, 3)))
+    w.step()
+    assert np.isnan(w.packed(w.read())).all()             # a script's run: diverged at that step
+    assert w.warnings and w.warnings[0][:2] == (0, 1) and "NaN" in w.warnings[0][2]
+    w.step()                                              # not stepped again
+    assert len(w.warnings) == 1
+    a = de.DrakeWorld([RunRequest(sc, 0.01, 2)], "runge_kutta3", 0.01)
+    a.set_state(y0)
+    start = a.read().copy()
+    a.apply(nan_force, np.zeros((1, 3)))
+    a.step()
+    np.testing.assert_array_equal(a.read(), start)   # kept: the loop ends the run at the warning
+    assert a.warnings[0][:2] == (0, 1) and "NaN" in a.warnings[0][2]
