@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import functools
 import time
+import types
 
 import numpy as np
 
@@ -26,9 +27,13 @@ from cross_checks.engines.world import World, WorldEngine
 
 # imported without pydrake so that the registry can say why it is unavailable; its classes on first use
 pydrake, _IMPORT_ERROR = install.optional_import("pydrake")
+if _IMPORT_ERROR is None:   # the world (what rbcheck repro embeds) imports the engine itself
+    from cross_checks.engines.worlds import drake as dkw
+else:   # not installed: the adapter still loads, and says so when used
+    dkw = types.SimpleNamespace(Body=type("Body", (), {}), Bodies=type("Bodies", (), {}))
 
 __all__ = ["ENGINE", "VARIANTS", "version", "simulate", "simulate_many", "one_step", "DrakeModel",
-           "DrakeWorld", "DrakeAdapter", "to_drake_state", "from_drake_state"]
+           "DrakeWorld", "DrakeAdapter", "to_drake_state", "from_drake_state", "body_spec"]
 
 ENGINE = "drake"
 #: The variants, named after Drake's integrators (``ResetIntegratorFromFlags``), with what each step does
@@ -45,14 +50,6 @@ VARIANTS = {
     "implicit_euler": Variant(1.0, "Drake implicit Euler on the whole state (Newton iteration, "
                                    "finite-difference Jacobian)", traits=base.WHOLE_STATE_IMPLICIT_EULER),
 }
-#: The fixed step's maximum is Δt (1 + FIXED_STEP_SLACK): AdvanceTo(k Δt) from (k − 1) Δt is then one
-#: step even where k Δt − (k − 1) Δt exceeds Δt by a rounding.
-FIXED_STEP_SLACK = 1e-9
-#: Accuracy asked of the implicit Euler's Newton iteration (Drake uses the target accuracy to stop it
-#: in fixed-step mode too): far below the scheme's own O(Δt²) local error at every Δt of the catalog.
-NEWTON_ACCURACY = 1e-6
-
-
 def _require():
     install.require(pydrake, _IMPORT_ERROR, "drake", hint="pip install 'rbcheck[drake]'")
 
@@ -63,26 +60,38 @@ def version() -> str:
 
 
 def to_drake_state(y, com_B_m=None):
-    """Packed states (..., 13) ``[x_W, v_W, q_WB, ω_W]`` -> Drake's ``[q_WB, x_W, ω_W, v_W]`` (..., 13); for a
-    body whose COM is at ``com_B_m`` from its origin Bo, Drake's x and v are Bo's (x − R c, v − ω × R c)."""
+    """Packed states (..., 13) ``[x_W, v_W, q_WB, ω_W]`` -> Drake's ``[q_WB, x_W, ω_W, v_W]`` (..., 13)
+    (:func:`cross_checks.engines.worlds.drake.to_drake_state`); for a body whose COM is at ``com_B_m`` from
+    its origin Bo, Drake's x and v are Bo's (x − R c, v − ω × R c)."""
     y = np.asarray(y, dtype=float)
     if com_B_m is not None:
         from reference_sim.body import origin_state
         x_o, v_o = origin_state(y, com_B_m)
         y = np.concatenate([x_o, v_o, y[..., 6:13]], axis=-1)
-    return np.concatenate([y[..., 6:10], y[..., 0:3], y[..., 10:13], y[..., 3:6]], axis=-1)
+    return dkw.to_drake_state(y)
 
 
 def from_drake_state(x, com_B_m=None):
-    """Drake's states (..., 13) -> packed (..., 13), the quaternion normalised (Drake's is not unit); for a
-    body whose COM is at ``com_B_m`` from its origin, the COM's x and v (x_o + R c, v_o + ω × R c)."""
+    """Drake's states (..., 13) -> packed (..., 13), the quaternion normalised (Drake's is not unit)
+    (:func:`cross_checks.engines.worlds.drake.from_drake_state`); for a body whose COM is at ``com_B_m`` from
+    its origin, the COM's x and v (x_o + R c, v_o + ω × R c)."""
+    if com_B_m is None:
+        return dkw.from_drake_state(x)
     x = np.asarray(x, dtype=float)
     with np.errstate(invalid="ignore", divide="ignore"):
         q = x[..., 0:4] / np.linalg.norm(x[..., 0:4], axis=-1, keepdims=True)
-    if com_B_m is not None:
-        from reference_sim.body import com_state
-        return com_state(x[..., 4:7], x[..., 10:13], q, x[..., 7:10], com_B_m)
-    return np.concatenate([x[..., 4:7], x[..., 10:13], q, x[..., 7:10]], axis=-1)
+    from reference_sim.body import com_state
+    return com_state(x[..., 4:7], x[..., 10:13], q, x[..., 7:10], com_B_m)
+
+
+def body_spec(body) -> tuple:
+    """``(mass_kg, moments (3,), R_BP (3, 3) or None)`` of an rbcheck RigidBody as Drake's world takes it
+    (:func:`cross_checks.engines.worlds.drake.spatial_inertia`): a diagonal tensor as its diagonal (no frame
+    rotation), a full one as its principal moments along the columns of R_BP."""
+    if body.is_diagonal():
+        return float(body.mass_kg), np.diag(body.inertia_B).copy(), None
+    moments, R_BP = body.principal_axes()
+    return float(body.mass_kg), moments, R_BP
 
 
 @functools.lru_cache(maxsize=1)
@@ -121,16 +130,8 @@ def _force_system_class():
 
 def _spatial_inertia(body, com_B_m=None):
     """The body's spatial inertia about its origin Bo, in body axes (principal moments rotated by R_BP for a
-    full tensor), its COM at ``com_B_m`` from Bo (p_BoBcm_B; default: at Bo)."""
-    from pydrake.math import RotationMatrix
-    from pydrake.multibody.tree import RotationalInertia, SpatialInertia
-    if body.is_diagonal():
-        I = RotationalInertia(*np.diag(body.inertia_B))
-    else:
-        moments, R_BP = body.principal_axes()
-        I = RotationalInertia(*moments).ReExpress(RotationMatrix(R_BP))
-    com = np.zeros(3) if com_B_m is None else np.asarray(com_B_m, dtype=float)
-    return SpatialInertia.MakeFromCentralInertia(float(body.mass_kg), com, I)
+    full tensor: :func:`body_spec`), its COM at ``com_B_m`` from Bo (p_BoBcm_B; default: at Bo)."""
+    return dkw.spatial_inertia(*body_spec(body), com_B_m)
 
 
 def _com_of(scenario):
@@ -157,73 +158,62 @@ def _add_bodies(plant, scenario):
     return bodies[0]
 
 
-class DrakeModel:
-    """A scenario's free body in Drake, with a simulator whose integrator is ``integrator`` (a Drake
-    integrator name); ``set_state``/``state`` in the packed layout. ``constant_forces``: the scenario's
-    constant forces fixed on the plant here (False: by the caller, :meth:`apply`)."""
+class DrakeModel(dkw.Body):
+    """A scenario's free body in Drake (:class:`cross_checks.engines.worlds.drake.Body`, what
+    ``rbcheck repro`` embeds; its COM where the scenario puts it, its welded parts and the per-stage forces
+    added here), with a simulator whose integrator is ``integrator`` (a Drake integrator name);
+    ``set_state``/``state`` in the packed layout. ``constant_forces``: the scenario's constant forces fixed
+    on the plant here (False: by the caller, :meth:`apply`)."""
 
     def __init__(self, scenario, integrator: str, constant_forces: bool = True):
         _require()
-        from pydrake.multibody.plant import MultibodyPlant
-        from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
-        from pydrake.systems.framework import DiagramBuilder
-        p, self.plant = scenario.problem, (plant := MultibodyPlant(0.0))
-        self.com_B = _com_of(scenario)
-        try:
-            self.body = _add_bodies(plant, scenario)
-        except RuntimeError as exc:  # Drake's validity checks of the inertia
-            raise EngineError(
-                f"Drake {version()} rejected the inertia of scenario {scenario.name!r}: {exc}") from None
-        plant.mutable_gravity_field().set_gravity_vector(np.asarray(p.forces.gravity_W, dtype=float))
-        plant.Finalize()
+        p = scenario.problem
+        self.scenario, self.com_B = scenario, _com_of(scenario)
         self.per_stage = bool(p.forces.state_dependent or p.forces.has_decay)
-        system, self.stage_forces = plant, None
-        if self.per_stage:
-            builder = DiagramBuilder()
-            builder.AddSystem(plant)
-            fs = self.stage_forces = builder.AddSystem(_force_system_class()(scenario, self.com_B))
-            builder.Connect(plant.get_state_output_port(), fs.get_input_port(0))
-            builder.Connect(fs.get_output_port(0), plant.get_applied_generalized_force_input_port())
-            system = builder.Build()
-        self.simulator = Simulator(system)
-        self.context = plant.GetMyMutableContextFromRoot(self.simulator.get_mutable_context())
+        self.stage_forces = None
+        super().__init__(body_spec(p.body), p.forces.gravity_W, integrator)
         if constant_forces and not self.per_stage and (p.forces.point_forces or p.forces.torques):
             f, tau = stage_force_torque(scenario, p.initial_packed())     # constant: any state gives the same
             self.apply(f - forces.weight_W(scenario), tau)
-        self.integrator_name = integrator
-        self.integrator = ResetIntegratorFromFlags(self.simulator, integrator, 1.0)
+
+    def add_bodies(self, plant):
+        try:
+            return _add_bodies(plant, self.scenario)
+        except RuntimeError as exc:  # Drake's validity checks of the inertia
+            raise EngineError(
+                f"Drake {version()} rejected the inertia of scenario {self.scenario.name!r}: {exc}") from None
+
+    def system(self, plant):
+        """The plant, or with forces evaluated at every stage, a diagram of the plant and the LeafSystem
+        evaluating them from its state into its applied generalized force port."""
+        if not self.per_stage:
+            return plant
+        from pydrake.systems.framework import DiagramBuilder
+        builder = DiagramBuilder()
+        builder.AddSystem(plant)
+        fs = self.stage_forces = builder.AddSystem(_force_system_class()(self.scenario, self.com_B))
+        builder.Connect(plant.get_state_output_port(), fs.get_input_port(0))
+        builder.Connect(fs.get_output_port(0), plant.get_applied_generalized_force_input_port())
+        return builder.Build()
 
     def apply(self, f_W, tau_W) -> None:
         """The applied generalized force ``[τ_W, f_W]`` (N m, N, world axes; the force at the COM without the
         weight, which the plant applies) from now on. A body whose origin is off its COM: the spatial force
         at its COM (a point fixed in the body, p_BoBq_B = c) on the applied spatial force port: Drake moves
         it to Bo in every configuration (a generalized force is about Bo)."""
-        if self.com_B is not None:
-            from pydrake.common.value import AbstractValue
-            from pydrake.multibody.math import SpatialForce
-            from pydrake.multibody.plant import ExternallyAppliedSpatialForce
-            F = ExternallyAppliedSpatialForce()
-            F.body_index, F.p_BoBq_B = self.body.index(), self.com_B
-            F.F_Bq_W = SpatialForce(np.asarray(tau_W, dtype=float), np.asarray(f_W, dtype=float))
-            self.plant.get_applied_spatial_force_input_port().FixValue(self.context, AbstractValue.Make([F]))
+        if self.com_B is None:
+            super().apply(f_W, tau_W)
             return
-        port = self.plant.get_applied_generalized_force_input_port()
-        port.FixValue(self.context, np.concatenate([tau_W, f_W]))
-
-    def fixed_step(self, dt_s: float) -> None:
-        """Fixed-step mode at ``dt_s`` (see FIXED_STEP_SLACK)."""
-        self.integrator.set_maximum_step_size(float(dt_s) * (1.0 + FIXED_STEP_SLACK))
-        self.integrator.set_fixed_step_mode(True)
-        if self.integrator_name == "implicit_euler":  # its Newton tolerance (explicit ones refuse any)
-            self.integrator.set_target_accuracy(NEWTON_ACCURACY)
+        from pydrake.common.value import AbstractValue
+        from pydrake.multibody.math import SpatialForce
+        from pydrake.multibody.plant import ExternallyAppliedSpatialForce
+        F = ExternallyAppliedSpatialForce()
+        F.body_index, F.p_BoBq_B = self.body.index(), self.com_B
+        F.F_Bq_W = SpatialForce(np.asarray(tau_W, dtype=float), np.asarray(f_W, dtype=float))
+        self.plant.get_applied_spatial_force_input_port().FixValue(self.context, AbstractValue.Make([F]))
 
     def set_state(self, y, t_s: float = 0.0) -> None:
-        self.simulator.get_mutable_context().SetTime(float(t_s))
-        self.plant.SetPositionsAndVelocities(self.context, to_drake_state(y, self.com_B))
-        self.simulator.Initialize()
-
-    def drake_state(self) -> np.ndarray:
-        return self.plant.GetPositionsAndVelocities(self.context)
+        self.set_drake_state(to_drake_state(y, self.com_B), t_s)
 
     def state(self) -> np.ndarray:
         return from_drake_state(self.drake_state(), self.com_B)
@@ -235,50 +225,23 @@ def _model(scenario, variant: str, dt_s: float, constant_forces: bool = True) ->
     return model
 
 
-class DrakeWorld(World):
-    """B bodies, each a :class:`DrakeModel` (its constant forces the loop's), stepped to ``n Δt`` in turn.
-    Raw rows: Drake's states ``[q_WB, x_W, ω_W, v_W]``. A body whose step Drake refuses (NaN detected, Newton
-    failed) warns and keeps its last state; after a blow-up, that is a consequence (``first_cause_only``)."""
+class DrakeWorld(dkw.Bodies, World):
+    """B bodies, each a :class:`DrakeModel` (its constant forces the loop's), stepped to ``n Δt`` in turn
+    (:class:`cross_checks.engines.worlds.drake.Bodies`). Raw rows: Drake's states ``[q_WB, x_W, ω_W, v_W]``. A
+    body whose step Drake refuses (NaN detected, Newton failed) warns and keeps its last state; after a
+    blow-up, that is a consequence (``first_cause_only``)."""
 
     first_cause_only = True
+    hold_failed = True   # the loop ends the body's run at the step Drake refused (its warning)
 
     def __init__(self, requests, variant: str, dt_s: float):
-        super().__init__()
-        self.models = [_model(r.scenario, variant, dt_s, False) for r in requests]
-        self.per_stage, self.dt_s = self.models[0].per_stage, dt_s
+        World.__init__(self)
+        dkw.Bodies.__init__(self, [_model(r.scenario, variant, dt_s, False) for r in requests], dt_s)
+        self.per_stage = self.models[0].per_stage
 
     @property
     def host_s(self) -> float:
         return sum(m.stage_forces.host_s for m in self.models if m.stage_forces is not None)
-
-    def set_state(self, y):
-        for m, row in zip(self.models, y):
-            m.set_state(row)
-        self.n, self.failed, self.last = 0, set(), np.array([m.drake_state() for m in self.models])
-
-    def apply(self, f_W, tau_W):
-        """Fixed until fixed again (a zero wrench leaves the port unconnected)."""
-        for m, f, tau in zip(self.models, f_W, tau_W):
-            if f.any() or tau.any():
-                m.apply(f, tau)
-
-    def step(self):
-        self.n += 1
-        for k, m in enumerate(self.models):
-            try:
-                if k not in self.failed:
-                    m.simulator.AdvanceTo(self.n * self.dt_s)
-            except RuntimeError as exc:
-                words = str(exc).strip().splitlines()
-                self.failed.add(k)
-                self.warnings.append((k, self.n, f"Drake: {words[0] if words else type(exc).__name__}"))
-
-    def read(self):
-        rows = np.array([m.drake_state() for m in self.models])
-        for k in self.failed:
-            rows[k] = self.last[k]
-        self.last = rows
-        return rows
 
     def packed(self, raw):
         coms = [m.com_B for m in self.models]

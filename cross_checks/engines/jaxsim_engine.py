@@ -40,7 +40,7 @@ from cross_checks.engines.world import World, WorldEngine
 from reference_sim.simulate import bad_rows
 
 __all__ = ["ENGINE", "VARIANTS", "INTEGRATORS", "CHUNK", "ROW_BLOCK", "EngineError", "version", "simulate",
-           "simulate_many", "one_step", "build_model", "model_sdf", "engine_gravity", "timings",
+           "simulate_many", "one_step", "build_model", "model_sdf", "engine_gravity", "body_spec", "timings",
            "xla_cache_dir", "JaxsimWorld", "JaxsimEngine", "JaxsimAdapter"]
 
 ENGINE = "jaxsim"
@@ -119,6 +119,20 @@ def _jax():
     return jax, jnp, js
 
 
+def start_for_repro() -> None:
+    """JAX started as the adapter starts it (float64, rbcheck's XLA cache) before ``rbcheck repro`` runs a
+    reproducer in this process: the script's world imports jaxsim itself."""
+    install.engine_or_error(_jax)
+
+
+def _world():
+    """:mod:`cross_checks.engines.worlds.jaxsim` (what ``rbcheck repro`` embeds), imported after :func:`_jax`
+    started JAX rbcheck's way."""
+    _jax()
+    from cross_checks.engines.worlds import jaxsim as jsw
+    return jsw
+
+
 def _refuse_forked_jax() -> None:
     runtimes.refuse_forked_jax(
         "jaxsim cannot run in a process forked after JAX started in its parent (a running JAX backend "
@@ -138,23 +152,19 @@ def timings() -> dict:
 
 def engine_gravity(scenario) -> float:
     """The scalar gravity (m/s², along −z) given to jaxsim: g for a scenario gravity (0, 0, −g), else 0 (the
-    weight then goes into the link force)."""
+    weight then goes into the link force). (The world's ``engine_gravity``, without starting JAX.)"""
     g = np.asarray(scenario.problem.forces.gravity_W, dtype=float)
     return float(-g[2]) if g[0] == 0.0 and g[1] == 0.0 else 0.0
 
 
 def model_sdf(mass_kg: float, inertia_B) -> str:
-    """SDF 1.7 of one link named ``body``: an ``<inertial>`` at the link origin with ``mass_kg`` and the full
-    tensor ``inertia_B`` (kg m², about the COM, link axes), no ``<collision>``, no joint; every number with
-    Python's shortest round-trip repr (exactly the double)."""
-    inertia = np.asarray(inertia_B, dtype=float)
-    names = (("ixx", 0, 0), ("ixy", 0, 1), ("ixz", 0, 2), ("iyy", 1, 1), ("iyz", 1, 2), ("izz", 2, 2))
-    moments = "".join(f"<{n}>{float(inertia[i, j])!r}</{n}>" for n, i, j in names)
-    return (
-        '<?xml version="1.0"?>\n<sdf version="1.7"><model name="' + MODEL_NAME + '"><link name="body">'
-        f"<inertial><pose>0 0 0 0 0 0</pose><mass>{float(mass_kg)!r}</mass><inertia>{moments}</inertia>"
-        "</inertial></link></model></sdf>"
-    )
+    """SDF 1.7 of one link (:func:`cross_checks.engines.worlds.jaxsim.model_sdf`)."""
+    return _world().model_sdf(mass_kg, inertia_B)
+
+
+def body_spec(body) -> tuple:
+    """``(mass_kg, inertia_B (3, 3), None)``: jaxsim takes the full tensor (its SDF's ``<inertia>``)."""
+    return float(body.mass_kg), np.asarray(body.inertia_B, dtype=float), None
 
 
 def build_model(scenario, variant: str):
@@ -168,16 +178,8 @@ def build_model(scenario, variant: str):
 @functools.lru_cache(maxsize=64)
 def _model(mass_kg: float, inertia: tuple, gravity: float, variant: str):
     jax, jnp, js = _jax()
-    sdf = model_sdf(mass_kg, np.reshape(inertia, (3, 3)))
     try:
-        model = js.model.JaxSimModel.build_from_model_description(
-            sdf,
-            model_name=MODEL_NAME,
-            is_urdf=False,
-            time_step=0.001,
-            gravity=gravity,
-            integrator=getattr(js.model.IntegratorType, INTEGRATORS[variant]),
-        )
+        model = _world().build_model(mass_kg, np.reshape(inertia, (3, 3)), gravity, variant)
     except Exception as exc:  # noqa: BLE001 - jaxsim's parser and builder raise many types
         raise EngineError(f"jaxsim refused the model: {type(exc).__name__}: {exc}") from None
     if not model.floating_base() or model.number_of_links() != 1 or model.dofs() != 0:
@@ -196,9 +198,7 @@ def _model(mass_kg: float, inertia: tuple, gravity: float, variant: str):
             f"jaxsim's spatial inertia of the link is not the scenario's mass and inertia tensor "
             f"about the link origin: {M.tolist()}"
         )
-    # the SDF text (a static field) would make every scenario's model a new pytree structure: one compilation
-    # per scenario; the model's numbers are all in its arrays
-    return dataclasses.replace(model, built_from=MODEL_NAME)
+    return _world().compact(model)   # without its SDF text: one compilation for every scenario
 
 
 # --- the compiled functions ----------------------------------------------------------------------------
@@ -222,28 +222,19 @@ def _host_forces(key, y):
 
 
 def _step_fn(callback: bool):
-    """One jaxsim step of the packed state ``y`` (13,): pre-step decay ``scale`` (13,), link force ``f6`` (6,)
-    or, with ``callback``, the harness's at ``y`` (before the decay, as forces.harness_force_torque)."""
+    """One jaxsim step of the packed state ``y`` (13,) (:func:`cross_checks.engines.worlds.jaxsim.step`):
+    pre-step decay ``scale`` (13,), link force ``f6`` (6,) or, with ``callback``, the harness's at ``y``
+    (before the decay, as forces.harness_force_torque)."""
     jax, jnp, js = _jax()
-    from jaxsim import VelRepr
+    world_step = _world().step
+    if not callback:
+        return world_step
 
     def step(model, y, f6, scale, key):
-        if callback:
-            f6 = jax.pure_callback(
-                _host_forces, jax.ShapeDtypeStruct((6,), jnp.float64), key, y, vmap_method="broadcast_all"
-            )
-        y = y * scale
-        data = js.data.JaxSimModelData.build(
-            model=model,
-            base_position=y[0:3],
-            base_quaternion=y[6:10],
-            base_linear_velocity=y[3:6],
-            base_angular_velocity=y[10:13],
-            velocity_representation=VelRepr.Mixed,
+        f6 = jax.pure_callback(
+            _host_forces, jax.ShapeDtypeStruct((6,), jnp.float64), key, y, vmap_method="broadcast_all"
         )
-        data = js.model.step(model, data, link_forces=f6[None, :])
-        v = data.base_velocity
-        return jnp.concatenate([data.base_position, v[0:3], data.base_quaternion, v[3:6]])
+        return world_step(model, y, f6, scale)
 
     return step
 
@@ -254,20 +245,8 @@ def _with_dt(model, dt):
 
 
 def _run_fn(callback: bool):
-    jax, jnp, js = _jax()
-    step = _step_fn(callback)
-
-    def run(model, dt, y0, count, f6, scale, key):
-        model = _with_dt(model, dt)
-
-        def body(i, carry):
-            y, rows = carry
-            y = step(model, y, f6, scale, key)
-            return y, rows.at[i].set(y)
-
-        return jax.lax.fori_loop(0, count, body, (y0, jnp.zeros((CHUNK, 13))))
-
-    return run
+    """The world's compiled loop (:func:`cross_checks.engines.worlds.jaxsim.run_fn`) of :func:`_step_fn`."""
+    return _world().run_fn(_step_fn(callback))
 
 
 def _one_fn(callback: bool):

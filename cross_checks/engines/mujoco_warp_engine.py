@@ -102,6 +102,21 @@ def _engine():
     return wp, mjw, mujoco
 
 
+def start_for_repro() -> None:
+    """Warp started as the adapter starts it (rbcheck's kernel cache, its greeting and driver warning
+    silenced) before ``rbcheck repro`` runs a reproducer in this process: the script's world imports Warp
+    itself, which would otherwise start it with its defaults."""
+    install.engine_or_error(_engine)
+
+
+def _world():
+    """:mod:`cross_checks.engines.worlds.mujoco_warp` (what ``rbcheck repro`` embeds), imported after
+    :func:`_engine` started Warp with rbcheck's kernel cache."""
+    _engine()
+    from cross_checks.engines.worlds import mujoco_warp as mww
+    return mww
+
+
 # --- bookkeeping: compile time apart from stepping ------------------------------------------------
 
 _STATS = runtimes.Stats(compilations=0, compile_seconds=0.0, step_seconds=0.0, steps=0, body_steps=0,
@@ -130,15 +145,8 @@ def _warm_up(variant: str, m_host, callback=None) -> None:
     key = (variant, callback is not None)
     if key in _WARM:
         return
-    wp, mjw, mujoco = _engine()
     with _STATS.timing("compile_seconds"):
-        wm = mjw.put_model(m_host)
-        wd = mjw.put_data(m_host, mujoco.MjData(m_host), nworld=1)
-        if callback is not None:
-            wm.callback.control = callback
-        with wp.ScopedDevice("cpu"):
-            mjw.step(wm, wd)
-        wp.synchronize()
+        _world().warm_up(m_host, callback)
     _STATS["compilations"] += 1
     _WARM.add(key)
 
@@ -147,24 +155,20 @@ def _warm_up(variant: str, m_host, callback=None) -> None:
 
 def host_model(scenario, variant: str, dt_s: float):
     """The scenario's MjModel for ``variant`` at ``dt_s``: mujoco_engine's ``build_model`` with
-    ``mjDSBL_AUTORESET`` cleared (mujoco_warp refuses it; it never resets a world). EngineError with MuJoCo's
+    ``mjDSBL_AUTORESET`` cleared (mujoco_warp refuses it; it never resets a world: the world's
+    :func:`~cross_checks.engines.worlds.mujoco_warp.host_model`). EngineError with MuJoCo's
     words."""
     from cross_checks.engines import mujoco_engine
     base.check_variant(ENGINE, VARIANTS, variant)
-    _, _, mujoco = install.engine_or_error(_engine)
-    m = mujoco_engine.build_model(scenario, variant, dt_s)
-    m.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_AUTORESET)
-    return m
+    install.engine_or_error(_engine)
+    return _world().host_model(mujoco_engine.build_model(scenario, variant, dt_s))
 
 
 def device_model(m_host, dts):
     """``mjw.put_model(m_host)`` on the CPU device with ``opt.timestep`` one per world (``dts``). EngineError
     with mujoco_warp's words when it refuses the model."""
-    wp, mjw, _ = _engine()
     try:
-        with wp.ScopedDevice("cpu"):
-            wm = mjw.put_model(m_host)
-            wm.opt.timestep = wp.array(np.asarray(dts, dtype=np.float32), dtype=wp.float32)
+        wm = _world().device_model(m_host, dts)
     except Exception as exc:  # noqa: BLE001 - mujoco_warp refuses a model feature: its own words
         raise EngineError(f"mujoco_warp {version()} refused the model: {type(exc).__name__}: {exc}") from None
     return wm
@@ -177,46 +181,20 @@ def per_stage(scenario, variant: str) -> bool:
     return variant == "rk4" and bool(fm.state_dependent or fm.has_decay)
 
 
-class _Worlds:
-    """``N`` worlds of one scenario's model on the CPU device, world ``k`` stepping at ``dts[k]``, with
-    zero-copy NumPy views of their qpos, qvel and xfrc_applied (float32)."""
-
-    def __init__(self, scenario, variant: str, dts, qpos0, qvel0, callback=None):
-        wp, mjw, mujoco = install.engine_or_error(_engine)
-        m = host_model(scenario, variant, float(dts[0]))
-        _warm_up(variant, m, callback)
-        self.wp, self.mjw = wp, mjw
-        with wp.ScopedDevice("cpu"):
-            self.m = device_model(m, dts)
-            self.d = mjw.put_data(m, mujoco.MjData(m), nworld=len(dts))
-        self.qpos, self.qvel = self.d.qpos.numpy(), self.d.qvel.numpy()
-        self.xfrc = self.d.xfrc_applied.numpy()
-        if not (np.shares_memory(self.qpos, self.d.qpos.numpy()) and np.shares_memory(self.xfrc,
-                                                                                         self.d.xfrc_applied.numpy())):
-            raise EngineError("Warp's CPU arrays are not shared with NumPy here: the adapter cannot run")
-        self.qpos[:], self.qvel[:] = qpos0, qvel0
-        self.xfrc[:] = 0.0
-        self.graph = None
-        if callback is not None:
-            self.m.callback.control = callback
-
-    def capture(self) -> None:
-        """Record one step as a graph (replayed by :meth:`step`); the state is not advanced by recording
-        (tested)."""
-        wp = self.wp
-        saved = self.qpos.copy(), self.qvel.copy()
-        with wp.ScopedDevice("cpu"), wp.ScopedCapture() as cap:
-            self.mjw.step(self.m, self.d)
-        self.qpos[:], self.qvel[:] = saved
-        self.graph = cap.graph
-        _STATS["captures"] += 1
-
-    def step(self) -> None:
-        if self.graph is not None:
-            self.wp.capture_launch(self.graph)
-        else:
-            with self.wp.ScopedDevice("cpu"):
-                self.mjw.step(self.m, self.d)
+def _worlds(scenario, variant: str, dts, qpos0, qvel0, callback=None):
+    """``N`` worlds of one scenario's model on the CPU device, world ``k`` stepping at ``dts[k]``
+    (:class:`cross_checks.engines.worlds.mujoco_warp.Worlds`, what ``rbcheck repro`` embeds: its zero-copy
+    NumPy views ``qpos``, ``qvel``, ``xfrc`` (float32), its captured step), put at ``qpos0``, ``qvel0``, no
+    force applied."""
+    install.engine_or_error(_engine)
+    m = host_model(scenario, variant, float(dts[0]))
+    _warm_up(variant, m, callback)
+    W = _world().Worlds(device_model(m, dts), m, callback)
+    if not W.shared:
+        raise EngineError("Warp's CPU arrays are not shared with NumPy here: the adapter cannot run")
+    W.qpos[:], W.qvel[:] = qpos0, qvel0
+    W.xfrc[:] = 0.0
+    return W
 
 
 @functools.lru_cache(maxsize=1)
@@ -297,7 +275,7 @@ def stage_callback(scenario):
 
 
 class WarpWorld(World):
-    """The bodies of one scenario's requests as the worlds of :class:`_Worlds` batches (MAX_WORLDS at most),
+    """The bodies of one scenario's requests as the worlds of :func:`_worlds` batches (MAX_WORLDS at most),
     world k stepping at its request's Δt. Raw rows: ``[qpos (7), qvel (6)]`` per body (float32 values, ω in
     BODY axes). :meth:`rollout` captures one step as a Warp graph and replays it, taking every force itself:
     the loop's Harness at every step from the float32 state (state-dependent forces), the decay on qvel
@@ -311,12 +289,12 @@ class WarpWorld(World):
         sc = requests[0].scenario
         self.per_stage = per_stage(sc, variant)
         self.B, self.host_s = len(requests), 0.0
-        self.parts = []   # (slice of the bodies, _Worlds)
+        self.parts = []   # (slice of the bodies, its worlds: _worlds)
         for s in range(0, self.B, MAX_WORLDS):
             part = slice(s, min(s + MAX_WORLDS, self.B))
             dts = [float(r.dt_s) for r in requests[part]]
             zeros = np.zeros((len(dts), 7)), np.zeros((len(dts), 6))
-            self.parts.append((part, _Worlds(sc, variant, dts, *zeros,
+            self.parts.append((part, _worlds(sc, variant, dts, *zeros,
                                              stage_callback(sc) if self.per_stage else None)))
 
     def set_state(self, y):
@@ -364,6 +342,7 @@ class WarpWorld(World):
         per_step = harness.state_dependent and not self.per_stage
         decay = harness.decays and not self.per_stage
         W.capture()
+        _STATS["captures"] += 1
         N = len(bodies)
         qpos_out = np.empty((n_max, N, 7), dtype=np.float32)
         qvel_out = np.empty((n_max, N, 6), dtype=np.float32)

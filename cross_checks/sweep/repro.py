@@ -51,6 +51,10 @@ ENGINES = {
     "brax": (("brax", "jax", "mujoco"), (_W + "brax",), _A + "brax_engine", _A + "brax_engine"),
     "physx": (("sapien",), (_W + "physx",), _A + "physx_engine", _A + "physx_engine"),
     "dart": (("dartpy",), (_W + "dart",), _A + "dart_engine", _A + "dart_engine"),
+    "drake": (("drake",), (_W + "drake",), _A + "drake_engine", _A + "drake_engine"),
+    "mujoco_warp": (("mujoco-warp", "warp-lang", "mujoco"), (_W + "mujoco", _W + "mujoco_warp"),
+                    _A + "mujoco_warp_engine", _A + "mujoco_engine"),
+    "jaxsim": (("jaxsim", "jax"), (_W + "jaxsim",), _A + "jaxsim_engine", _A + "jaxsim_engine"),
 }
 #: claim -> the word it takes ("" for none).
 CLAIMS = {"order": "QUANTITY", "drift": "", "gyroscopic": "", "invariance": "TRANSFORM"}
@@ -240,6 +244,9 @@ def reproducer(variant_name: str, scenario, claim_words, *, command: str = "", r
     text = header + compact(["import sys\n"] + [_source(m) for m in modules], tail)
     if not run:
         return Repro(text=text, holds=None, output="", claim=claim_text)
+    start = getattr(adapter_mod, "start_for_repro", None)   # an engine rbcheck starts its own way first
+    if start is not None:
+        start()
     ns = {"__name__": "rbcheck_repro"}
     out = io.StringIO()
     with contextlib.redirect_stdout(out):

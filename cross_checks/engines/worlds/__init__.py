@@ -8,8 +8,9 @@ Every module defines ``world(bodies, gravity_W, variant, dt_s)``: a world of ``b
 coordinates) — under gravity ``gravity_W`` (m/s²) at step ``dt_s`` (s), with ``set_state(y)``, ``apply(f_W,
 tau_W)``, ``step()``, ``read()`` and ``packed(raw)`` on packed states (B, 13)
 ``[x_W (m), v_W (m/s), q_WB (w, x, y, z), ω_W (rad/s, world axes)]`` (cross_checks.engines.world's contract).
-(MJX's ``world`` builds on worlds/mujoco.py's model; Brax's and DART's take the full inertia tensor as the
-second item.)
+(MJX's and MuJoCo Warp's ``world`` build on worlds/mujoco.py's model; Brax's, DART's and jaxsim's take the
+full inertia tensor as the second item; Drake's takes the principal axes as a rotation matrix R_BP (3, 3), or
+None for a diagonal tensor, as the third.)
 tests/cross_checks/engines/worlds/ checks that none imports anything else, and that a reproducer's run of each
 (of that compacted code) is the adapter's run, bit for bit.
 """

@@ -331,8 +331,8 @@ def test_a_captured_step_replays_the_uncaptured_step_bit_for_bit_and_recording_d
     for variant in ("euler", "rk4"):
         y0 = sc.problem.initial_packed()
         qpos0, qvel0 = me.to_qpos_qvel(np.repeat(y0[None], 3, axis=0))
-        a = we._Worlds(sc, variant, [0.01, 0.005, 0.0025], qpos0, qvel0)
-        b = we._Worlds(sc, variant, [0.01, 0.005, 0.0025], qpos0, qvel0)
+        a = we._worlds(sc, variant, [0.01, 0.005, 0.0025], qpos0, qvel0)
+        b = we._worlds(sc, variant, [0.01, 0.005, 0.0025], qpos0, qvel0)
         a.capture()
         np.testing.assert_array_equal(a.qpos, b.qpos)         # recording the graph did not advance the state
         for _ in range(20):

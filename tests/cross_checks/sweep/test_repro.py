@@ -57,8 +57,6 @@ def test_claims_parse():
     ("pybullet:maximal", "tennis_racket", ["invariance", "welded_split"], "cannot express welded_split"),
     ("mujoco:euler", "tennis_racket", ["invariance", "welded_split"], "cannot write a body off its COM"),
     ("mujoco:euler", "long_major_axis_spin", ["invariance", "rotation"], "does not transform long runs"),
-    ("drake:semi_explicit_euler", "tennis_racket", ["gyroscopic"],
-     "these can: mujoco, rapier, pybullet, mjx, brax, physx, dart"),
     ("mujoco:rk4", "spring_pendulum", ["order", "orientation"], "forces change with the state"),
     ("mujoco:rk4", "projectile", ["gyroscopic"], "does not flip"),
     ("mujoco:rk4", "long_major_axis_spin", ["order", "orientation"], "is a long run"),

@@ -16,8 +16,9 @@ WORLDS = Path(__file__).resolve().parents[4] / "cross_checks" / "engines" / "wor
 #: reproducer embeds above it)
 ENGINE_IMPORT = {"mujoco": {"mujoco"}, "rapier": {"rapier3d"}, "pybullet": {"pybullet"},
                  "mjx": {"jax", "mujoco", "."}, "brax": {"jax", "brax"},
-                 "physx": {"sapien"}, "dart": {"dartpy"}}
-STDLIB = {"math"}
+                 "physx": {"sapien"}, "dart": {"dartpy"}, "drake": {"pydrake"},
+                 "mujoco_warp": {"mujoco", "mujoco_warp", "warp", "."}, "jaxsim": {"jax", "jaxsim"}}
+STDLIB = {"math", "dataclasses"}
 
 
 def _imports(path: Path) -> set:
@@ -41,21 +42,28 @@ CASES = [("mujoco", "rk4", "tennis_racket"), ("mujoco", "euler", "tumbling_box")
          ("rapier", "symplectic_euler", "tennis_racket"), ("pybullet", "maximal", "tumbling_box"),
          ("pybullet", "multibody", "projectile"), ("physx", "tgs", "tumbling_box"),
          ("physx", "pgs", "projectile"), ("dart", "semi_implicit_euler", "tumbling_box"),
+         ("drake", "runge_kutta3", "tennis_racket"), ("drake", "semi_explicit_euler", "projectile"),
+         ("drake", "implicit_euler", "tumbling_box"),
+         ("mujoco_warp", "rk4", "tennis_racket"), ("mujoco_warp", "euler", "projectile"),
          pytest.param("mjx", "rk4", "tennis_racket", marks=pytest.mark.slow),   # ~1 min each: JAX compiles
          pytest.param("brax", "spring", "tennis_racket", marks=pytest.mark.slow),
-         pytest.param("brax", "generalized", "projectile", marks=pytest.mark.slow)]
+         pytest.param("brax", "generalized", "projectile", marks=pytest.mark.slow),
+         pytest.param("jaxsim", "rk4", "tennis_racket", marks=pytest.mark.slow),
+         pytest.param("jaxsim", "semi_implicit_euler", "projectile", marks=pytest.mark.slow)]
 
 
 @pytest.mark.parametrize("engine,variant,name", CASES)
 def test_the_reproducers_run_of_the_world_is_the_adapters_bit_for_bit(engine, variant, name):
     pytest.importorskip({"rapier": "rapier3d", "mjx": "mujoco.mjx", "physx": "sapien",
-                         "dart": "dartpy"}.get(engine, engine))
+                         "dart": "dartpy", "drake": "pydrake",
+                         "mujoco_warp": "mujoco_warp"}.get(engine, engine))
     from cross_checks.engines import get_adapter
     from cross_checks.engines.loop import Harness
     from cross_checks.sweep.repro import ENGINES, _source
     from cross_checks.sweep.repro_text import compact
     adapter_mod = importlib.import_module(ENGINES[engine][2])
     spec_mod = importlib.import_module(ENGINES[engine][3])
+    getattr(adapter_mod, "start_for_repro", lambda: None)()   # Warp: started as the adapter starts it
     # what a reproducer embeds: the world and the measurement compacted (repro_text), not the modules
     script = {"__name__": "repro"}
     code = compact([_source(m) for m in [*ENGINES[engine][1], "cross_checks.sweep.repro_measure"]],
@@ -71,3 +79,34 @@ def test_the_reproducers_run_of_the_world_is_the_adapters_bit_for_bit(engine, va
     if adapter_mod._ENGINE.sign_continuity:   # the loop picks each quaternion's sign; the script need not
         mine[:, 6:10] *= np.sign(np.sum(mine[:, 6:10] * theirs[:, 6:10], axis=-1))[:, None]
     np.testing.assert_array_equal(mine[1:], theirs[1:])
+
+
+def test_jaxsims_adapter_declares_its_worlds_chunk_integrators_and_model_name():
+    pytest.importorskip("jaxsim")
+    from cross_checks.engines import jaxsim_engine as je
+    jsw = je._world()   # the adapter holds them without importing JAX; the world's loop is what runs
+    assert (je.CHUNK, je.INTEGRATORS, je.MODEL_NAME) == (jsw.CHUNK, jsw.INTEGRATORS, jsw.MODEL_NAME)
+
+
+def test_a_step_drake_refuses_reads_as_nan_in_a_reproducer_and_as_the_last_state_in_the_adapter():
+    pytest.importorskip("pydrake")
+    from cross_checks.engines import drake_engine as de
+    from cross_checks.engines.worlds import drake as dkw
+    sc = load_scenario("tennis_racket")
+    y0 = sc.problem.initial_packed()[None]
+    nan_force = np.array([[np.nan, 0.0, 0.0]])   # Drake refuses it: "Detected NaN in applied ... port"
+    w = dkw.world([de.body_spec(sc.problem.body)], sc.problem.forces.gravity_W, "runge_kutta3", 0.01)
+    w.set_state(y0)
+    w.apply(nan_force, np.zeros((1, 3)))
+    w.step()
+    assert np.isnan(w.packed(w.read())).all()             # a script's run: diverged at that step
+    assert w.warnings and w.warnings[0][:2] == (0, 1) and "NaN" in w.warnings[0][2]
+    w.step()                                              # not stepped again
+    assert len(w.warnings) == 1
+    a = de.DrakeWorld([RunRequest(sc, 0.01, 2)], "runge_kutta3", 0.01)
+    a.set_state(y0)
+    start = a.read().copy()
+    a.apply(nan_force, np.zeros((1, 3)))
+    a.step()
+    np.testing.assert_array_equal(a.read(), start)   # kept: the loop ends the run at the warning
+    assert a.warnings[0][:2] == (0, 1) and "NaN" in a.warnings[0][2]
