@@ -156,6 +156,9 @@ def _engine(variant_name: str):
     if isinstance(adapter, ExternalEngine):
         raise ReproError(f"{engine} is an engine file: it cannot write a reproducer; its command is the "
                          "reproducer (docs/repro.md)")
+    if engine == "reference":
+        raise ReproError("reference is rbcheck's own NumPy implementation, not an engine with maintainers to "
+                         "report to: `rbcheck check` and `rbcheck sweep` show its numbers (docs/repro.md)")
     if engine not in ENGINES:
         raise ReproError(f"{engine} cannot write reproducers yet; these can: {', '.join(ENGINES)} "
                          "(docs/repro.md)")

@@ -57,6 +57,7 @@ def test_claims_parse():
     ("pybullet:maximal", "tennis_racket", ["invariance", "welded_split"], "cannot express welded_split"),
     ("mujoco:euler", "tennis_racket", ["invariance", "welded_split"], "cannot write a body off its COM"),
     ("mujoco:euler", "long_major_axis_spin", ["invariance", "rotation"], "does not transform long runs"),
+    ("reference:rk4", "tennis_racket", ["order", "orientation"], "reference is rbcheck's own"),
     ("mujoco:rk4", "spring_pendulum", ["order", "orientation"], "forces change with the state"),
     ("mujoco:rk4", "projectile", ["gyroscopic"], "does not flip"),
     ("mujoco:rk4", "long_major_axis_spin", ["order", "orientation"], "is a long run"),
