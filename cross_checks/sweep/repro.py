@@ -144,8 +144,8 @@ def _measure_source(main: str) -> str:
     from cross_checks.sweep import repro_measure as rm
     text = inspect.getsource(rm)
     head = text[text.index("\nimport "):text.index("\ndef ")].lstrip("\n")   # its imports
-    needs = {"order": ("versions", "run", "error", "fitted_order", "main_order"),
-             "drift": ("versions", "run", "invariants", "main_drift"),
+    needs = {"order": ("versions", "run", "error", "fitted_order", "diverged_at", "main_order"),
+             "drift": ("versions", "run", "invariants", "diverged_at", "main_drift"),
              "gyroscopic": ("versions", "run", "first_flip_s", "main_gyroscopic")}[main]
     return head.rstrip("\n") + "\n\n\n" + "\n\n\n".join(inspect.getsource(getattr(rm, f)).rstrip("\n")
                                                         for f in needs)
