@@ -161,7 +161,7 @@ def test_body_f_is_read_and_kept_not_cleared_so_the_adapter_writes_it_before_eve
     np.testing.assert_array_equal(s0.body_f.numpy(), np.float32([[1.0, 2.0, 3.0, 0.1, 0.2, 0.3]]))
     np.testing.assert_array_equal(s1.body_f.numpy(), np.zeros((1, 6)))    # the output state's is not set
     # the adapter's views share the arrays' memory: writing them writes Newton's state, both states'
-    batch = ne._Batch("semi_implicit", [(1.0, np.eye(3), np.zeros(3))])
+    batch = ne.nw.Batch("semi_implicit", [(1.0, np.eye(3), np.zeros(3))])
     for (_, _, f), state in zip(batch.views, batch.states):
         f[0, 0] = 7.0
         assert state.body_f.numpy()[0, 0] == 7.0
