@@ -48,6 +48,9 @@ ENGINES = {
     "brax": (("brax", "jax", "mujoco"), (_W + "brax",), _A + "brax_engine", _A + "brax_engine"),
     "physx": (("sapien",), (_W + "physx",), _A + "physx_engine", _A + "physx_engine"),
     "dart": (("dartpy",), (_W + "dart",), _A + "dart_engine", _A + "dart_engine"),
+    "newton": (("newton", "warp-lang"), (_W + "newton",), _A + "newton_engine", _A + "newton_engine"),
+    "genesis": (("genesis-world", "quadrants", "torch"), (_W + "genesis",), _A + "genesis_engine",
+                _A + "genesis_engine"),
 }
 #: A line of a world module that a reproducer leaves out: the import of a sibling world embedded above it.
 _SIBLING_IMPORT = re.compile(r"^from \.\w+ import .*$\n", re.MULTILINE)
@@ -205,6 +208,9 @@ def reproducer(variant_name: str, scenario, claim_words, *, command: str = "", r
             + 'if __name__ == "__main__":\n    sys.exit(main())\n')
     if not run:
         return Repro(text=text, holds=None, output="", claim=claim_text)
+    # an engine whose adapter starts its runtime its own way (kernel cache, quiet start) is started so first:
+    # the script's run here then finds it started (run elsewhere, it starts it with the engine's defaults)
+    getattr(adapter_mod, "start_engine", lambda: None)()
     ns = {"__name__": "rbcheck_repro"}
     out = io.StringIO()
     with contextlib.redirect_stdout(out):

@@ -16,8 +16,9 @@ WORLDS = Path(__file__).resolve().parents[4] / "cross_checks" / "engines" / "wor
 #: reproducer embeds above it)
 ENGINE_IMPORT = {"mujoco": {"mujoco"}, "rapier": {"rapier3d"}, "pybullet": {"pybullet"},
                  "mjx": {"jax", "mujoco", "."}, "brax": {"jax", "brax"},
-                 "physx": {"sapien"}, "dart": {"dartpy"}}
-STDLIB = {"math"}
+                 "physx": {"sapien"}, "dart": {"dartpy"}, "newton": {"warp", "newton", "mujoco"},
+                 "genesis": {"genesis"}}
+STDLIB = {"math", "warnings"}
 
 
 def _imports(path: Path) -> set:
@@ -41,6 +42,9 @@ CASES = [("mujoco", "rk4", "tennis_racket"), ("mujoco", "euler", "tumbling_box")
          ("rapier", "symplectic_euler", "tennis_racket"), ("pybullet", "maximal", "tumbling_box"),
          ("pybullet", "multibody", "projectile"), ("physx", "tgs", "tumbling_box"),
          ("physx", "pgs", "projectile"), ("dart", "semi_implicit_euler", "tumbling_box"),
+         ("newton", "semi_implicit", "tumbling_box"), ("newton", "featherstone", "tennis_racket"),
+         ("newton", "mujoco_cpu", "projectile"), ("genesis", "euler", "tumbling_box"),
+         ("genesis", "implicitfast", "projectile"),
          pytest.param("mjx", "rk4", "tennis_racket", marks=pytest.mark.slow),   # ~1 min each: JAX compiles
          pytest.param("brax", "spring", "tennis_racket", marks=pytest.mark.slow),
          pytest.param("brax", "generalized", "projectile", marks=pytest.mark.slow)]
