@@ -34,7 +34,7 @@ from cross_checks.engines.world import World, WorldEngine
 from cross_checks.engines.worlds import genesis as gw  # numpy only at import: Genesis on first use
 
 __all__ = ["ENGINE", "DIST", "VARIANTS", "NEUTRAL_DOFS", "EngineError", "version", "genesis", "body",
-           "kernel_cache_dir", "mjcf_text", "scene_options", "GenesisBody", "body_spec", "start_engine",
+           "kernel_cache_dir", "mjcf_text", "scene_options", "GenesisBody", "body_spec", "start_for_repro",
            "simulate", "simulate_many", "one_step", "to_qpos_vel", "to_packed", "BUILD_SECONDS",
            "GenesisAdapter"]
 
@@ -118,7 +118,7 @@ def genesis():
     return gs
 
 
-def start_engine() -> None:
+def start_for_repro() -> None:
     """Genesis initialised as the adapter does (:func:`genesis`: rbcheck's kernel cache, quiet): ``rbcheck
     repro`` calls it before running a script's world here."""
     genesis()

@@ -34,7 +34,7 @@ from cross_checks.engines.worlds import newton as nw  # numpy only at import: Wa
 
 __all__ = ["ENGINE", "VARIANTS", "SOLVERS", "SOLVER_SETTINGS", "EngineError", "version", "simulate",
            "simulate_many", "one_step", "build_model", "make_solver", "compile_stats", "to_newton_rows",
-           "from_newton_rows", "body_spec", "start_engine", "NewtonWorld", "NewtonAdapter", "PIP_HINT"]
+           "from_newton_rows", "body_spec", "start_for_repro", "NewtonWorld", "NewtonAdapter", "PIP_HINT"]
 
 ENGINE = "newton"
 _DIST = "newton"
@@ -101,7 +101,7 @@ def _engine():
     return wp, newton
 
 
-def start_engine() -> None:
+def start_for_repro() -> None:
     """Warp and Newton started as the adapter starts them (its kernel cache, quiet): ``rbcheck repro`` calls
     it before running a script's world here (EngineError, with the engine's words, when it cannot)."""
     install.engine_or_error(_engine)

@@ -208,9 +208,9 @@ def reproducer(variant_name: str, scenario, claim_words, *, command: str = "", r
             + 'if __name__ == "__main__":\n    sys.exit(main())\n')
     if not run:
         return Repro(text=text, holds=None, output="", claim=claim_text)
-    # an engine whose adapter starts its runtime its own way (kernel cache, quiet start) is started so first:
-    # the script's run here then finds it started (run elsewhere, it starts it with the engine's defaults)
-    getattr(adapter_mod, "start_engine", lambda: None)()
+    start = getattr(adapter_mod, "start_for_repro", None)   # an engine rbcheck starts its own way first
+    if start is not None:
+        start()
     ns = {"__name__": "rbcheck_repro"}
     out = io.StringIO()
     with contextlib.redirect_stdout(out):
