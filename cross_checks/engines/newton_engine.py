@@ -10,10 +10,12 @@ COM, body axes), checked after ``finalize``; no shape. ``semi_implicit`` and ``x
 State at the boundary (:func:`to_newton_rows`, :func:`from_newton_rows`): ``[x_W, q_WB (x, y, z, w)]`` (Warp
 quaternions are xyzw) and ``[v_W (COM), ω_W]``, linear first, both world axes.
 
-:class:`NewtonWorld`: the runs of one Δt as the bodies of models of at most MAX_BATCH bodies (one for
-``mujoco_cpu``: MuJoCo C takes one world); the loop's forces (the weight taken off: Newton applies gravity per
-world) go into ``State.body_f`` of each step's input state, the decay scales the float32 velocities before
-the step. Warp and Newton are imported on first use only (never at import or in ``version()``).
+The model, solvers, views and conversions are cross_checks/engines/worlds/newton.py's (NumPy, Warp and Newton
+only: what ``rbcheck repro`` embeds). :class:`NewtonWorld`: the runs of one Δt as the bodies of models of at
+most MAX_BATCH bodies (one for ``mujoco_cpu``: MuJoCo C takes one world); the loop's forces (the weight taken
+off: Newton applies gravity per world) go into ``State.body_f`` of each step's input state, the decay scales
+the float32 velocities before the step. Warp and Newton are imported on first use only (never at import or in
+``version()``).
 """
 from __future__ import annotations
 
@@ -21,7 +23,6 @@ import dataclasses
 import functools
 import threading
 import time
-import warnings
 
 import numpy as np
 
@@ -29,10 +30,11 @@ from cross_checks.engines import base, install, runtimes
 from cross_checks.engines.base import EngineError, Traits, Variant
 from cross_checks.engines.install import installed_version
 from cross_checks.engines.world import World, WorldEngine
+from cross_checks.engines.worlds import newton as nw  # numpy only at import: Warp and Newton on first use
 
 __all__ = ["ENGINE", "VARIANTS", "SOLVERS", "SOLVER_SETTINGS", "EngineError", "version", "simulate",
            "simulate_many", "one_step", "build_model", "make_solver", "compile_stats", "to_newton_rows",
-           "from_newton_rows", "NewtonWorld", "NewtonAdapter", "PIP_HINT"]
+           "from_newton_rows", "body_spec", "start_for_repro", "NewtonWorld", "NewtonAdapter", "PIP_HINT"]
 
 ENGINE = "newton"
 _DIST = "newton"
@@ -66,24 +68,10 @@ VARIANTS = {
                           traits=Traits(rotation_drift="body", rotation_sign=-1, precision="float32")),
 }
 
-#: The solver class of each variant (``newton.solvers.<name>``).
-SOLVERS = {"semi_implicit": "SolverSemiImplicit", "xpbd": "SolverXPBD", "featherstone": "SolverFeatherstone",
-           "mujoco_cpu": "SolverMuJoCo"}
-
-#: Constructor arguments of each solver: every default that is not the scenario's physics, set explicitly
-#: (Newton 1.8.0's defaults: docs/engine_conventions.md, "Newton 1.8.0").
-SOLVER_SETTINGS = {
-    "semi_implicit": {"angular_damping": 0.0},
-    "xpbd": {"angular_damping": 0.0, "iterations": 2, "enable_restitution": False},
-    "featherstone": {"angular_damping": 0.0, "update_mass_matrix_interval": 1},
-    "mujoco_cpu": {"use_mujoco_cpu": True, "integrator": "implicitfast", "disable_contacts": True,
-                   "kinematic_switchable_roots": False},
-}
-
-#: Variants whose state is Newton's generalized coordinates (``joint_q``/``joint_qd`` of a FREE joint).
-_GENERALIZED = frozenset({"featherstone", "mujoco_cpu"})
-#: Variants whose model takes one body only (SolverMuJoCo on MuJoCo C refuses a model of several worlds).
-_ONE_BODY = frozenset({"mujoco_cpu"})
+#: The solver class and the settings of each variant, and the state conversions: the world's (what ``rbcheck
+#: repro`` embeds, cross_checks/engines/worlds/newton.py).
+SOLVERS, SOLVER_SETTINGS = nw.SOLVERS, nw.SOLVER_SETTINGS
+to_newton_rows, from_newton_rows = nw.to_newton_rows, nw.from_newton_rows
 
 MAX_BATCH = 256   # bodies (runs or rows) per model: more run as several models
 
@@ -111,6 +99,12 @@ def _engine():
         wp = runtimes.start_warp(ENGINE, "LOG_WARNING", quiet=True)
         import newton
     return wp, newton
+
+
+def start_for_repro() -> None:
+    """Warp and Newton started as the adapter starts them (its kernel cache, quiet): ``rbcheck repro`` calls
+    it before running a script's world here (EngineError, with the engine's words, when it cannot)."""
+    install.engine_or_error(_engine)
 
 
 _WARM: dict = {}    # variant -> seconds its first model build and step took (kernel compile or cache load)
@@ -145,102 +139,57 @@ def _warm(variant: str) -> None:
 
 def build_model(variant: str, bodies):
     """A finalized Newton model on the CPU with one world per body of ``bodies`` (``(mass, I_B (3, 3),
-    gravity_W (3,))`` each): jointless links for the maximal-coordinate solvers, FREE-jointed bodies for
-    Featherstone; com = 0, no shape. EngineError when ``finalize`` did not keep the mass or the inertia (its
-    inertia validation corrects a tensor it finds non-physical)."""
-    wp, newton = install.engine_or_error(_engine)
-    builder = newton.ModelBuilder(gravity=(0.0, 0.0, 0.0))
-    add = builder.add_body if variant in _GENERALIZED else builder.add_link
-    for mass, inertia, gravity in bodies:
-        builder.begin_world(gravity=tuple(float(g) for g in gravity))
-        add(xform=wp.transform(wp.vec3(0.0, 0.0, 0.0), wp.quat_identity()), com=wp.vec3(0.0, 0.0, 0.0),
-            mass=float(mass), inertia=wp.mat33(*(float(v) for v in np.asarray(inertia, dtype=float).ravel())))
-        builder.end_world()
+    gravity_W (3,))`` each): the world's (:func:`cross_checks.engines.worlds.newton.build_model`); EngineError
+    when ``finalize`` failed or did not keep the mass or the inertia (its inertia validation corrects a
+    tensor it finds non-physical)."""
+    install.engine_or_error(_engine)
     try:
-        # skip_validation_inertia: finalize would otherwise "correct" a tensor it finds non-physical (another
-        # body); rbcheck's own body check has already refused a bad one
-        with warnings.catch_warnings():
-            warnings.simplefilter("error", category=UserWarning)
-            model = builder.finalize(device="cpu", skip_validation_inertia=True)
-    except Exception as exc:  # noqa: BLE001 - Newton refuses the model: its own words
-        raise EngineError(f"Newton {version()} refused the model: {type(exc).__name__}: {exc}") from None
-    want_m = np.array([b[0] for b in bodies], dtype=np.float32)
-    want_i = np.array([np.asarray(b[1], dtype=float) for b in bodies], dtype=np.float32)
-    if not (np.array_equal(model.body_mass.numpy(), want_m)
-            and np.array_equal(model.body_inertia.numpy(), want_i)):
-        raise EngineError(f"Newton {version()} changed the body's mass or inertia when finalizing the model")
-    return model
+        return nw.build_model(variant, bodies)
+    except nw.Refused as exc:
+        raise _refused(exc) from None
 
 
 def make_solver(variant: str, model):
-    """The variant's Newton solver for ``model``, every setting of SOLVER_SETTINGS applied."""
-    _, newton = install.engine_or_error(_engine)
+    """The variant's Newton solver for ``model``, every setting of SOLVER_SETTINGS applied (the world's)."""
+    install.engine_or_error(_engine)
     base.check_variant(ENGINE, VARIANTS, variant)
-    with warnings.catch_warnings():
-        # SolverMuJoCo warns that MuJoCo 4.0.0 is not the ~=3.17.0 Newton declares (rbcheck pins 4.0.0)
-        warnings.filterwarnings("ignore", message="MuJoCo dependency version mismatch")
-        try:
-            solver = getattr(newton.solvers, SOLVERS[variant])(model, **SOLVER_SETTINGS[variant])
-        except (ImportError, ValueError) as exc:   # a missing backend, a model it refuses: its own words
-            hint = f" ({PIP_HINT} installs mujoco-warp)" if isinstance(exc, ImportError) else ""
-            raise EngineError(f"Newton {version()}'s {SOLVERS[variant]} refused the model: "
-                              f"{type(exc).__name__}: {exc}{hint}") from None
-    if variant == "mujoco_cpu":
-        # MuJoCo resets a run whose acceleration is non-finite or huge to the model's initial state
-        # (autoreset, with a warning): a blow-up would continue from rest; off: divergence is seen
-        import mujoco
-        solver.mj_model.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_AUTORESET)
-    return solver
+    try:
+        return nw.make_solver(variant, model)
+    except nw.Refused as exc:
+        raise _refused(exc) from None
 
 
-def to_newton_rows(y):
-    """Packed states (N, 13) ``[x_W, v_W, q_WB (w x y z), ω_W]`` -> ``(q (N, 7) [x, qx, qy, qz, qw],
-    qd (N, 6) [v_COM, ω], both world axes)``, float64 (the caller casts)."""
-    y = np.asarray(y, dtype=float).reshape(-1, 13)
-    q = np.concatenate([y[:, 0:3], y[:, 7:10], y[:, 6:7]], axis=1)
-    qd = np.concatenate([y[:, 3:6], y[:, 10:13]], axis=1)
-    return q, qd
+def _refused(exc) -> EngineError:
+    """The world's refusal as the engine's error: Newton's version (``'s`` solver) and its words, and what
+    to install when a backend is missing."""
+    hint = f" ({PIP_HINT} installs mujoco-warp)" if exc.backend else ""
+    whose = "'s" if exc.solver else ""
+    return EngineError(f"Newton {version()}{whose} {exc}{hint}")
 
 
-def from_newton_rows(q, qd):
-    """Newton's ``(q (..., 7) [x, qx, qy, qz, qw], qd (..., 6) [v, ω])`` -> packed (..., 13), float64."""
-    q = np.asarray(q, dtype=float)
-    qd = np.asarray(qd, dtype=float)
-    return np.concatenate([q[..., 0:3], qd[..., 0:3], q[..., 6:7], q[..., 3:6], qd[..., 3:6]], axis=-1)
+def body_spec(body) -> tuple:
+    """``(mass_kg, inertia_B (3, 3), None)``: Newton takes the full tensor (``add_link``/``add_body``'s
+    ``inertia``), as the world's ``world`` does (what ``rbcheck repro`` embeds)."""
+    return float(body.mass_kg), np.asarray(body.inertia_B, dtype=float), None
 
 
-class _Batch:
-    """Bodies stepping together in one model: its solver, two states (swapped each step) and their zero-copy
-    NumPy views of the pose (N, 7), velocity (N, 6) and applied wrench (N, 6) (float32)."""
-
-    def __init__(self, variant: str, bodies):
-        with _STATS.timing("build_seconds"):
-            self.model = build_model(variant, bodies)
-            self.solver = make_solver(variant, self.model)
-            self.states = [self.model.state(), self.model.state()]
-        q, qd = ("joint_q", "joint_qd") if variant in _GENERALIZED else ("body_q", "body_qd")
-        self.views = [(getattr(s, q).numpy().reshape(-1, 7), getattr(s, qd).numpy().reshape(-1, 6),
-                       s.body_f.numpy()) for s in self.states]   # (q, qd, f) of each state
-
-    def step(self, dt_s: float) -> None:
-        self.solver.step(self.states[0], self.states[1], None, None, dt_s)
-        self.states.reverse()
-        self.views.reverse()
-
-
-class NewtonWorld(World):
-    """The bodies of ``requests`` (one Δt) as :class:`_Batch` models, under the module's lock (held by the
-    caller, released by close). Raw rows: ``[q (x, q_xyzw), qd (v, ω)]`` (13 float32 values), world axes."""
+class NewtonWorld(nw.Bodies, World):
+    """The bodies of ``requests`` (one Δt) as the world's models of at most MAX_BATCH bodies
+    (:class:`cross_checks.engines.worlds.newton.Bodies`, what ``rbcheck repro`` embeds), under the module's
+    lock (held by the caller, released by close). Raw rows: ``[q (x, q_xyzw), qd (v, ω)]`` (13 float32
+    values), world axes."""
 
     exact_start = True   # the float32 round trip of the scenario's state is not the state
 
     def __init__(self, requests, variant: str, dt_s: float):
-        super().__init__()
-        self.dt_s, size = float(dt_s), 1 if variant in _ONE_BODY else MAX_BATCH
+        World.__init__(self)
         bodies = [(float(r.scenario.problem.body.mass_kg), np.asarray(r.scenario.problem.body.inertia_B),
                    np.asarray(r.scenario.problem.forces.gravity_W, dtype=float)) for r in requests]
-        self.parts = [(slice(s, s + size), _Batch(variant, bodies[s:s + size]))
-                      for s in range(0, len(bodies), size)]
+        try:
+            with _STATS.timing("build_seconds"):
+                nw.Bodies.__init__(self, variant, bodies, dt_s, MAX_BATCH)
+        except nw.Refused as exc:
+            raise _refused(exc) from None
         self.mujoco = None
         if variant == "mujoco_cpu":
             # MuJoCo's warnings ("Nan, Inf or huge value in QACC": the loop's divergence) to a handler until
@@ -249,35 +198,11 @@ class NewtonWorld(World):
             self.mujoco, self.prev = mujoco, mujoco.get_mju_user_warning()
             mujoco.set_mju_user_warning(lambda msg: None)
 
-    def set_state(self, y):
-        q, qd = to_newton_rows(y)
-        for part, b in self.parts:
-            b.views[0][0][:], b.views[0][1][:] = q[part], qd[part]
-
-    def apply(self, f_W, tau_W):   # into the input state's body_f (float32), for the next step
-        for part, b in self.parts:
-            f = b.views[0][2]
-            f[:, 0:3], f[:, 3:6] = f_W[part], tau_W[part]
-
-    def decay(self, g_v, g_w):   # the float32 velocities scaled in float64, rounded to float32
-        for part, b in self.parts:
-            qd = b.views[0][1]
-            qd[:, 0:3] *= g_v[part, None]
-            qd[:, 3:6] *= g_w[part, None]
-
     def step(self):
         t0 = time.perf_counter()
-        for _, b in self.parts:
-            b.step(self.dt_s)
+        nw.Bodies.step(self)
         _STATS["step_seconds"] += time.perf_counter() - t0
         _STATS["body_steps"] += sum(len(b.views[0][0]) for _, b in self.parts)
-
-    def read(self):
-        return np.concatenate([np.concatenate(b.views[0][0:2], axis=1) for _, b in self.parts]).astype(float)
-
-    def packed(self, raw):
-        raw = np.asarray(raw, dtype=float)
-        return from_newton_rows(raw[..., 0:7], raw[..., 7:13])
 
     def close(self):
         if self.mujoco is not None:

@@ -55,6 +55,9 @@ ENGINES = {
     "mujoco_warp": (("mujoco-warp", "warp-lang", "mujoco"), (_W + "mujoco", _W + "mujoco_warp"),
                     _A + "mujoco_warp_engine", _A + "mujoco_engine"),
     "jaxsim": (("jaxsim", "jax"), (_W + "jaxsim",), _A + "jaxsim_engine", _A + "jaxsim_engine"),
+    "newton": (("newton", "warp-lang"), (_W + "newton",), _A + "newton_engine", _A + "newton_engine"),
+    "genesis": (("genesis-world", "quadrants", "torch"), (_W + "genesis",), _A + "genesis_engine",
+                _A + "genesis_engine"),
 }
 #: claim -> the word it takes ("" for none).
 CLAIMS = {"order": "QUANTITY", "drift": "", "gyroscopic": "", "invariance": "TRANSFORM"}

@@ -109,12 +109,24 @@ def fitted_order(dt_s, errors, floors, resolved):
         return None
     x, y = np.log([dt_s[i] for i in use]), np.log([errors[i] for i in use])
     return float(np.sum((x - x.mean()) * (y - y.mean())) / np.sum((x - x.mean()) ** 2))
+def diverged_at(y, dt_s):
+    bad = np.nonzero(~np.all(np.isfinite(y), axis=1) | (np.abs(y).max(axis=1) > 1e8))[0]
+    return None if len(bad) == 0 else float(bad[0] * dt_s)
 def main_order(world, s):
     versions(s["DIST"])
-    errors = [error(s["QUANTITY"], run(world, s, h, n)[-1], np.array(r))
-              for h, n, r in zip(s["DT_S"], s["STEPS"], s["Y_REF"])]
-    for h, e, f in zip(s["DT_S"], errors, s["FLOORS"]):
-        print(f"dt = {h:g} s: {s['QUANTITY']} error {e:.3e} (round-off floor {f:.1e})")
+    errors, blown = [], []
+    for h, n, r in zip(s["DT_S"], s["STEPS"], s["Y_REF"]):
+        y = run(world, s, h, n)
+        errors.append(error(s["QUANTITY"], y[-1], np.array(r)))
+        blown.append(diverged_at(y, h))
+    for h, e, f, t in zip(s["DT_S"], errors, s["FLOORS"], blown):
+        print(f"dt = {h:g} s: " + (f"{s['QUANTITY']} error {e:.3e} (round-off floor {f:.1e})" if t is None
+                                   else f"the state diverged at t = {t:.4g} s"))
+    k = sum(t is not None for t in blown)
+    if k:
+        print(f"{s['VARIANT']} {s['QUANTITY']} order: the run diverged at {k} of {len(blown)} Δt, expected "
+              f"order {s['DECLARED']:g}: DEFECT")
+        return 1
     p = fitted_order(s["DT_S"], errors, s["FLOORS"], s["RESOLVED"])
     holds = p is not None and p < s["DECLARED"] - s["ORDER_TOL"]
     print(f"{s['VARIANT']} {s['QUANTITY']} order: measured "

@@ -91,6 +91,9 @@ def run(world, s, dt_s, n_steps):
         w.step()
         raw.append(w.packed(np.asarray(w.read(), dtype=float)[None])[0, 0])
     return np.array(raw)
+def diverged_at(y, dt_s):
+    bad = np.nonzero(~np.all(np.isfinite(y), axis=1) | (np.abs(y).max(axis=1) > 1e8))[0]
+    return None if len(bad) == 0 else float(bad[0] * dt_s)
 def invariants(y, inertia_B, I2):
     q = y[:, 6:10] / np.linalg.norm(y[:, 6:10], axis=-1, keepdims=True)
     w0, x, yy, z = q.T
@@ -104,9 +107,9 @@ def invariants(y, inertia_B, I2):
 def main_drift(world, s):
     versions(s["DIST"])
     y = run(world, s, s["DT"], s["N"])
-    bad = np.nonzero(~np.all(np.isfinite(y), axis=1) | (np.abs(y).max(axis=1) > 1e8))[0]
-    if len(bad):
-        print(f"{s['N']} steps of {s['DT']:g} s: the state diverged at t = {bad[0] * s['DT']:.4g} s; "
+    t = diverged_at(y, s["DT"])
+    if t is not None:
+        print(f"{s['N']} steps of {s['DT']:g} s: the state diverged at t = {t:.4g} s; "
               "expected the energy, |L| and δ conserved: DEFECT")
         return 1
     E, Lm, d = invariants(y, s["INERTIA_B"], s["I2"])

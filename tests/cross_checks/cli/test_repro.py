@@ -5,6 +5,7 @@ import sys
 import pytest
 
 from cross_checks.cli import main
+from cross_checks.sweep.repro import ENGINES
 
 pytest.importorskip("mujoco")
 

@@ -14,7 +14,7 @@ pytest.importorskip("newton", reason="newton is not installed (pip install -e '.
 from cross_checks.core.files import kernel_cache_dir  # noqa: E402
 from cross_checks.engines import newton_engine as ne  # noqa: E402
 from cross_checks.engines.base import EngineError, RunRequest  # noqa: E402
-from cross_checks.engines.forces import apply_decay_prestep, harness_force_torque  # noqa: E402
+from cross_checks.engines.forces import decay_factors, harness_force_torque  # noqa: E402
 from cross_checks.scenario import load_scenario  # noqa: E402
 from reference_sim.quaternion import matrix_from_quat, quat_mul  # noqa: E402
 from tests.helpers.scenarios import scenario_from_parts  # noqa: E402
@@ -161,7 +161,7 @@ def test_body_f_is_read_and_kept_not_cleared_so_the_adapter_writes_it_before_eve
     np.testing.assert_array_equal(s0.body_f.numpy(), np.float32([[1.0, 2.0, 3.0, 0.1, 0.2, 0.3]]))
     np.testing.assert_array_equal(s1.body_f.numpy(), np.zeros((1, 6)))    # the output state's is not set
     # the adapter's views share the arrays' memory: writing them writes Newton's state, both states'
-    batch = ne._Batch("semi_implicit", [(1.0, np.eye(3), np.zeros(3))])
+    batch = ne.nw.Batch("semi_implicit", [(1.0, np.eye(3), np.zeros(3))])
     for (_, _, f), state in zip(batch.views, batch.states):
         f[0, 0] = 7.0
         assert state.body_f.numpy()[0, 0] == 7.0
@@ -350,7 +350,10 @@ def test_decay_is_applied_before_the_step_with_that_steps_force_scaled(variant):
     sc = load_scenario("velocity_decay")
     dt = 0.02
     y0 = sc.problem.initial_packed()
-    y_dec = apply_decay_prestep(sc, y0, dt)
+    gv, gw = decay_factors(sc, dt)   # the pre-step decay, as the loop applies it (forces.py's, main 813d228)
+    y_dec = np.array(y0, dtype=float)
+    y_dec[3:6] *= gv
+    y_dec[10:13] *= gw
     f, tau = harness_force_torque(sc, y0, dt)                      # already scaled by the factors
     p = sc.problem
     g = np.asarray(p.forces.gravity_W, dtype=float)

@@ -17,8 +17,9 @@ WORLDS = Path(__file__).resolve().parents[4] / "cross_checks" / "engines" / "wor
 ENGINE_IMPORT = {"mujoco": {"mujoco"}, "rapier": {"rapier3d"}, "pybullet": {"pybullet"},
                  "mjx": {"jax", "mujoco", "."}, "brax": {"jax", "brax"},
                  "physx": {"sapien"}, "dart": {"dartpy"}, "drake": {"pydrake"},
-                 "mujoco_warp": {"mujoco", "mujoco_warp", "warp", "."}, "jaxsim": {"jax", "jaxsim"}}
-STDLIB = {"math", "dataclasses"}
+                 "mujoco_warp": {"mujoco", "mujoco_warp", "warp", "."}, "jaxsim": {"jax", "jaxsim"},
+                 "newton": {"warp", "newton", "mujoco"}, "genesis": {"genesis"}}
+STDLIB = {"math", "dataclasses", "warnings"}
 
 
 def _imports(path: Path) -> set:
@@ -45,6 +46,9 @@ CASES = [("mujoco", "rk4", "tennis_racket"), ("mujoco", "euler", "tumbling_box")
          ("drake", "runge_kutta3", "tennis_racket"), ("drake", "semi_explicit_euler", "projectile"),
          ("drake", "implicit_euler", "tumbling_box"),
          ("mujoco_warp", "rk4", "tennis_racket"), ("mujoco_warp", "euler", "projectile"),
+         ("newton", "semi_implicit", "tumbling_box"), ("newton", "featherstone", "tennis_racket"),
+         ("newton", "mujoco_cpu", "projectile"), ("genesis", "euler", "tumbling_box"),
+         ("genesis", "implicitfast", "projectile"),
          pytest.param("mjx", "rk4", "tennis_racket", marks=pytest.mark.slow),   # ~1 min each: JAX compiles
          pytest.param("brax", "spring", "tennis_racket", marks=pytest.mark.slow),
          pytest.param("brax", "generalized", "projectile", marks=pytest.mark.slow),
