@@ -241,21 +241,29 @@ def _run_world(engine, variant: str, reqs) -> list:
 
 
 def _steps(engine, variant, reqs, world, harness, rec, n_max, f, tau, ends, stopped, per_stage) -> float:
-    """The per-step loop (module docstring) into ``rec``; returns the seconds inside ``world.step()``."""
+    """The per-step loop (module docstring) into ``rec``; returns the seconds inside ``world.step()``. The
+    world's methods are bound once; a chunk's reads are kept as the world returns them and written into
+    ``rec`` at the chunk's end, in one conversion (the next step's forces use the last read as it is:
+    ``World.packed_row`` of it)."""
     engine_s = 0.0
     perf = time.perf_counter
-    step, read, apply, decay = world.step, world.read, world.apply, world.decay
+    step, read, apply, decay, packed_row = world.step, world.read, world.apply, world.decay, world.packed_row
+    wrench = harness.wrench
     state_dependent, decays = harness.state_dependent, harness.decays
     kept = engine.keeps_forces and not state_dependent
     if not per_stage and kept:
         apply(f, tau)
+    forces_each_step = not per_stage and (state_dependent or decays or not kept)
+    last = None   # the last read (none yet at step 1: the forces of step 1 are the requested state's)
     start = 1
     while start <= n_max:
         stop = min(start + engine.chunk, n_max + 1)
-        for n in range(start, stop):
-            if not per_stage:
-                if state_dependent and n > 1:
-                    f, tau = harness.wrench(world.packed_row(rec[n - 1]))
+        rows = []
+        keep = rows.append
+        for _ in range(start, stop):
+            if forces_each_step:
+                if state_dependent and last is not None:
+                    f, tau = wrench(packed_row(last))
                 if decays:
                     decay(harness.g_v, harness.g_w)
                 if not kept:
@@ -263,7 +271,9 @@ def _steps(engine, variant, reqs, world, harness, rec, n_max, f, tau, ends, stop
             t0 = perf()
             step()
             engine_s += perf() - t0
-            rec[n] = read()
+            last = read()
+            keep(last)
+        rec[start:stop] = rows
         _check(engine, variant, reqs, world, rec, start, stop, ends, stopped)
         if len(stopped) == len(reqs) or all(i in stopped or ends[i] < stop for i in range(len(reqs))):
             rec[stop:] = np.nan
