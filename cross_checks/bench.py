@@ -908,7 +908,8 @@ def format_table(r: dict) -> str:
             e, o, w = row["engine_us_per_step"], row.get("own_loop_us_per_step"), row["rbcheck_us_per_step"]
             out.append(f"{row['variant']:<42} {'n/a' if e is None else f'{e:.2f}':>10} "
                        f"{'n/a' if o is None else f'{o:.2f}':>9} {w:>16.2f} "
-                       f"{'' if e is None else f'{w / e:.2f}x':>7} {'' if o is None else f'{w / o:.2f}x':>12}")
+                       f"{'' if e is None else f'{w / e:.2f}x':>7} "
+                       f"{'' if o is None else f'{w / o:.2f}x':>12}")
         out.append("(engine: inside its step only; own loop: the engine's own minimal loop in its own API, "
                    "apply + step + read; ratio: through rbcheck / engine, the goal <= 2)")
     if r.get("batched"):
