@@ -9,7 +9,6 @@ body axes is given once (``apply_body_torque``) and re-applied by ``apply`` in t
 (``LINK_FRAME``: the inertial frame P's, so ``τ_P = R_BPᵀ τ_B``), turned by Bullet itself. A world resets the
 client's simulation. docs/engine_conventions.md, "PyBullet".
 """
-import functools
 
 import numpy as np
 import pybullet as p
@@ -55,10 +54,6 @@ class Bodies:
         self._plan_of = self._tau_of = None   # the (f_W, tau_W) arrays the plan below was made for
         self._plan = []             # per body: its force and torque calls for those arrays
         p.resetSimulation(physicsClientId=c)
-        # bound once: the per-step calls (one step costs Bullet about a microsecond)
-        self.step = functools.partial(p.stepSimulation, physicsClientId=c)
-        self._pose = functools.partial(p.getBasePositionAndOrientation, physicsClientId=c)
-        self._vel = functools.partial(p.getBaseVelocity, physicsClientId=c)
         p.setGravity(*[float(g) for g in gravity_W], physicsClientId=c)
         p.setPhysicsEngineParameter(fixedTimeStep=float(dt_s), numSubSteps=0, physicsClientId=c)
 
@@ -111,11 +106,11 @@ class Bodies:
                                 physicsClientId=c)
 
     def read(self):
-        pose, vel = self._pose, self._vel
+        c, pose, vel = self.c, p.getBasePositionAndOrientation, p.getBaseVelocity
         rows = []
         for b in self.bodies:
-            ps, orn = pose(b)
-            lin, ang = vel(b)
+            ps, orn = pose(b, c)   # (bodyUniqueId, physicsClientId)
+            lin, ang = vel(b, c)
             rows.append(ps + lin + orn + ang)
         self.last = rows
         return rows
@@ -170,6 +165,10 @@ class Bodies:
                 p.applyExternalTorque(b, -1, tau, p.WORLD_FRAME, physicsClientId=c)
             if tau_P is not None:
                 p.applyExternalTorque(b, -1, tau_P, p.LINK_FRAME, physicsClientId=c)
+
+
+    def step(self):
+        p.stepSimulation(physicsClientId=self.c)
 
 
 _CLIENT = []
