@@ -9,7 +9,9 @@ sign-continuous from the scenario's initial one, recorded as given (the rotation
 exact). The step is ``World::step`` (dart/simulation/World.cpp): semi-implicit Euler, explicit gyroscopic
 term, exponential-map rotation — MuJoCo Euler's scheme, DART's only integrator. Forces: the loop's, set
 before every step (DART clears them): the world force at the COM minus the weight ``m g``, then the world
-torque (``setExtForce`` replaces the whole wrench); the decay by setting the velocities last read, scaled.
+torque (``setExtForce`` replaces the whole wrench); a torque fixed in body axes is DART's own
+(``takes_body_torque``: ``setExtTorque(τ_B, isLocal=True)``, or added to the world torque, before every step);
+the decay by setting the velocities last read, scaled.
 Divergence: the loop's (DART goes on after a blow-up).
 Conventions, defaults neutralised and what pins them: docs/engine_conventions.md, "DART 6.x".
 """
@@ -22,6 +24,7 @@ import numpy as np
 
 from cross_checks.engines import base, install
 from cross_checks.engines.base import EngineError, Variant
+from cross_checks.engines.loop import host_problem
 from cross_checks.engines.step_floats import bad_floats
 from cross_checks.engines.world import World, WorldEngine
 
@@ -135,10 +138,11 @@ class DartWorld(dtw.Bodies, World):
     def __init__(self, requests, dt_s: float):
         World.__init__(self)
         dtw.Bodies.__init__(self, [DartBody(r.scenario, dt_s) for r in requests])
-        self.always = [r.scenario.problem.forces.state_dependent for r in requests]
+        # the forces the harness evaluates (the body-axes torques are DART's own: takes_body_torque)
+        self.always = [host_problem(r.scenario.problem, True).forces.state_dependent for r in requests]
 
     def read(self):
-        rows = dtw.Bodies.read(self)
+        rows = self.last = [pos().tolist() + vel().tolist() for pos, vel in self._reads]   # Bodies.read's
         self.live = [not bad_floats(row) for row in rows]   # DART's |r| ≤ π: the packed state's verdict
         return rows
 
@@ -154,7 +158,7 @@ class DartWorld(dtw.Bodies, World):
     def packed_row(self, raw):
         if any(b.com_B is not None for b in self.bodies):
             return self.packed(np.asarray(raw, dtype=float)[None])[0].tolist()
-        return [_packed_floats(r) for r in np.asarray(raw).tolist()]
+        return [_packed_floats(r) for r in (raw if isinstance(raw, list) else np.asarray(raw).tolist())]
 
     def decay(self, g_v, g_w):
         """The velocities last read, scaled (the pose is not set again: its round trip is not exact); a body
@@ -182,6 +186,10 @@ class DartEngine(WorldEngine):
     #: the COM off the body origin (Inertia's local COM); welded parts (WeldJoint children)
     body_forms = frozenset({"com_offset", "welded_parts"})
     sign_continuity = True
+    #: BodyNode.setExtTorque(τ, isLocal=True) takes a torque in the body's own axes (DART turns it): the world
+    #: sets the bodies' body-axes torques before every step (DART clears them), no harness evaluation
+    #: (pinned: tests/cross_checks/engines/test_dart_engine.py)
+    takes_body_torque = True
 
     def version(self) -> str:
         return version()

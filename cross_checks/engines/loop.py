@@ -71,25 +71,30 @@ class Harness:
     (B, 3) it is given); the harness's forces are then the rest (:func:`host_problem`)."""
 
     def __init__(self, scenarios, dt_s, applies_gravity: bool, body_torque: bool = False):
-        host = {}   # each scenario's problem as the harness evaluates it, once
+        # each distinct scenario's (and step's) numbers once: a batch is mostly copies of a few scenarios
+        host, each = {}, {}
         for sc in scenarios:
             if id(sc) not in host:
-                host[id(sc)] = host_problem(sc.problem, body_torque)
-        problems = [host[id(sc)] for sc in scenarios]
+                p = host_problem(sc.problem, body_torque)
+                host[id(sc)] = (p, forces.float_forces(sc if p is sc.problem else p).force_torque,
+                                forces.weight_W(sc) if applies_gravity else np.zeros(3),
+                                body_torque_B(sc.problem) if body_torque else None)
+        problems = [host[id(sc)][0] for sc in scenarios]
         # the scenario's own evaluator where the harness evaluates all of its forces
-        self.ft = [forces.float_forces(sc if p is sc.problem else p).force_torque
-                   for sc, p in zip(scenarios, problems)]
+        self.ft = [host[id(sc)][1] for sc in scenarios]
         # many bodies: one compiled call for all of them (the same numbers, member by member)
         self.rows = ForceRows.of(problems) if len(scenarios) > 4 else None
         dts = [dt_s] * len(scenarios) if np.ndim(dt_s) == 0 else list(dt_s)
-        g = [tuple(float(x) for x in forces.decay_factors(sc, h)) for sc, h in zip(scenarios, dts)]
+        for sc, h in zip(scenarios, dts):
+            if (id(sc), h) not in each:
+                each[id(sc), h] = tuple(float(x) for x in forces.decay_factors(sc, h))
+        g = [each[id(sc), h] for sc, h in zip(scenarios, dts)]
         self.g_v = np.array([a for a, _ in g])
         self.g_w = np.array([b for _, b in g])
-        self.weight = np.array([forces.weight_W(sc) if applies_gravity else np.zeros(3) for sc in scenarios])
-        self.state_dependent = any(p.forces.state_dependent for p in problems)
-        self.body_torque_B = (np.array([body_torque_B(sc.problem) for sc in scenarios]) if body_torque
-                              else None)
-        self.decays = any(sc.problem.forces.has_decay for sc in scenarios)
+        self.weight = np.array([host[id(sc)][2] for sc in scenarios])
+        self.state_dependent = any(p.forces.state_dependent for p, *_ in host.values())
+        self.body_torque_B = (np.array([host[id(sc)][3] for sc in scenarios]) if body_torque else None)
+        self.decays = any(sc.problem.forces.has_decay for sc in {id(sc): sc for sc in scenarios}.values())
         # a few bodies: per body, plain floats (ft, γ_v, γ_ω, the weight), two arrays built at the end
         self._floats = list(zip(self.ft, self.g_v.tolist(), self.g_w.tolist(), self.weight.tolist()))
 
@@ -142,8 +147,12 @@ def run(engine, variant: str, requests) -> list:
     base.check_variant(engine.name, engine.variants, variant)
     out: list = [None] * len(requests)
     groups: dict = {}
+    keys: dict = {}   # a request's world key, once per scenario, step and length (a batch repeats them)
     for j, r in enumerate(requests):
-        key = engine.world_key(r, variant)
+        rk = (id(r.scenario), float(r.dt_s), int(r.n_steps))
+        key = keys.get(rk)
+        if key is None:
+            key = keys[rk] = engine.world_key(r, variant)
         groups.setdefault(key, []).append(j)
     for idx in groups.values():
         for j, r in zip(idx, _run_group(engine, variant, [requests[j] for j in idx])):
@@ -200,12 +209,14 @@ def _run_world(engine, variant: str, reqs) -> list:
             ends = np.array([int(r.n_steps) for r in reqs])
             stopped: dict = {}   # body -> (step, words)
             rollout = getattr(world, "rollout", None)
+            y = None   # the packed states, once converted
             if getattr(world, "rollout_takes_all_forces", False) and n_max:
                 # the world's compiled loop takes every force itself (the harness, called back from it)
                 t0 = time.perf_counter()
                 rec[1:] = np.asarray(rollout(n_max, harness), dtype=float)
                 engine_s += time.perf_counter() - t0
-                _check(engine, variant, reqs, world, rec, 1, n_max + 1, ends, stopped)
+                y = _checked(engine, variant, reqs, world.packed(rec), B, "packed states")
+                _check(engine, variant, reqs, world, rec, 1, n_max + 1, ends, stopped, y[1:])
             elif (world.rollout_forces or (not per_stage and constant and not harness.decays)) \
                     and rollout is not None and n_max:
                 if not per_stage:
@@ -213,12 +224,14 @@ def _run_world(engine, variant: str, reqs) -> list:
                 t0 = time.perf_counter()
                 rec[1:] = np.asarray(rollout(n_max, harness), dtype=float)
                 engine_s += time.perf_counter() - t0
-                _check(engine, variant, reqs, world, rec, 1, n_max + 1, ends, stopped)
+                y = _checked(engine, variant, reqs, world.packed(rec), B, "packed states")
+                _check(engine, variant, reqs, world, rec, 1, n_max + 1, ends, stopped, y[1:])
             else:
                 engine_s = _steps(engine, variant, reqs, world, harness, rec, n_max, f, tau, ends, stopped,
                                   per_stage)
             engine_s -= float(world.host_s)
-            y = _checked(engine, variant, reqs, world.packed(rec), B, "packed states")
+            if y is None:
+                y = _checked(engine, variant, reqs, world.packed(rec), B, "packed states")
             if world.exact_start:
                 y[0] = y0
     finally:
@@ -227,35 +240,45 @@ def _run_world(engine, variant: str, reqs) -> list:
         y = _same_side(y)
     host_s = time.perf_counter() - t_all - engine_s
     runs = []
+    per_body = np.ascontiguousarray(np.swapaxes(y, 0, 1))   # (B, n + 1, 13): each run's rows, one copy
+    total = max(1, int(ends.sum()))
     for i, r in enumerate(reqs):
         n, dt = int(r.n_steps), dts[i]
         if i in stopped:
             n_bad, why = stopped[i]
-            run_i = diverged(y[:n_bad, i].copy(), dt, f" ({why})")
+            run_i = diverged(per_body[i, :n_bad], dt, f" ({why})")
         else:
-            run_i = Run(dt * np.arange(n + 1), y[:n + 1, i].copy())
-        share = (n / max(1, int(ends.sum())))
+            run_i = Run(dt * np.arange(n + 1), per_body[i, :n + 1])
+        share = n / total
         run_i.engine_s, run_i.host_s = engine_s * share, host_s * share
         runs.append(run_i)
     return runs
 
 
 def _steps(engine, variant, reqs, world, harness, rec, n_max, f, tau, ends, stopped, per_stage) -> float:
-    """The per-step loop (module docstring) into ``rec``; returns the seconds inside ``world.step()``."""
+    """The per-step loop (module docstring) into ``rec``; returns the seconds inside ``world.step()``. The
+    world's methods are bound once; a chunk's reads are kept as the world returns them and written into
+    ``rec`` at the chunk's end, in one conversion (the next step's forces use the last read as it is:
+    ``World.packed_row`` of it)."""
     engine_s = 0.0
     perf = time.perf_counter
-    step, read, apply, decay = world.step, world.read, world.apply, world.decay
+    step, read, apply, decay, packed_row = world.step, world.read, world.apply, world.decay, world.packed_row
+    wrench = harness.wrench
     state_dependent, decays = harness.state_dependent, harness.decays
     kept = engine.keeps_forces and not state_dependent
     if not per_stage and kept:
         apply(f, tau)
+    forces_each_step = not per_stage and (state_dependent or decays or not kept)
+    last = None   # the last read (none yet at step 1: the forces of step 1 are the requested state's)
     start = 1
     while start <= n_max:
         stop = min(start + engine.chunk, n_max + 1)
-        for n in range(start, stop):
-            if not per_stage:
-                if state_dependent and n > 1:
-                    f, tau = harness.wrench(world.packed_row(rec[n - 1]))
+        rows = []
+        keep = rows.append
+        for _ in range(start, stop):
+            if forces_each_step:
+                if state_dependent and last is not None:
+                    f, tau = wrench(packed_row(last))
                 if decays:
                     decay(harness.g_v, harness.g_w)
                 if not kept:
@@ -263,7 +286,9 @@ def _steps(engine, variant, reqs, world, harness, rec, n_max, f, tau, ends, stop
             t0 = perf()
             step()
             engine_s += perf() - t0
-            rec[n] = read()
+            last = read()
+            keep(last)
+        rec[start:stop] = rows
         _check(engine, variant, reqs, world, rec, start, stop, ends, stopped)
         if len(stopped) == len(reqs) or all(i in stopped or ends[i] < stop for i in range(len(reqs))):
             rec[stop:] = np.nan
@@ -281,23 +306,27 @@ def _body_torque(world, harness, per_stage: bool) -> None:
         world.apply_body_torque(tau_B if per_stage else tau_B * harness.g_w[:, None])
 
 
-def _check(engine, variant, reqs, world, rec, start: int, stop: int, ends, stopped: dict) -> None:
+def _check(engine, variant, reqs, world, rec, start: int, stop: int, ends, stopped: dict, y=None) -> None:
     """Bodies whose recorded states of steps ``start..stop-1`` (within their own runs) blew up, or whose
     engine warned there, into ``stopped`` as ``(first bad step, words)``: the words of everything found in
-    the chunk (``World.first_cause_only``: of what was found at that step only)."""
-    y = _checked(engine, variant, reqs, world.packed(rec[start:stop]), len(reqs), "states")
+    the chunk (``World.first_cause_only``: of what was found at that step only). ``y``: those steps' packed
+    states when already converted."""
+    if y is None:
+        y = _checked(engine, variant, reqs, world.packed(rec[start:stop]), len(reqs), "states")
     bad = bad_rows(y)
     warned: dict = {}
     for i, n, words in world.warnings:
         if start <= n < stop and i not in warned:
             warned[i] = (n, words)
+    # each body's first bad row of the chunk (its row count where none), for all bodies at once
+    first_bad = np.where(bad.any(axis=0), np.argmax(bad, axis=0), len(bad)).tolist()
     for i in range(len(reqs)):
         if i in stopped or ends[i] < start:
             continue
         last = min(stop, ends[i] + 1) - start
         candidates = []
-        if bad[:last, i].any():
-            k = int(np.argmax(bad[:last, i]))
+        if first_bad[i] < last:
+            k = first_bad[i]
             candidates.append((start + k, blowup_words(y[k, i])))
         if i in warned and warned[i][0] < start + last:
             candidates.append(warned[i])

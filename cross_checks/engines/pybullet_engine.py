@@ -6,9 +6,10 @@ without collision shape (maximal coordinates for ``maximal``), neutralised (:dat
 sleeping disabled). PyBullet takes a diagonal inertia and reports the inertial (principal) frame P as the base
 pose, so the boundary rotates: ``q_WP = q_WB ⊗ q_BP`` in, ``q_WB = q_WP ⊗ q_BP⁻¹`` out (quaternions (x, y, z,
 w) in PyBullet); position and velocity are the COM's, ω in WORLD axes. Forces: the loop's, applied before
-every step (PyBullet clears them), the weight ``m g`` taken off; the decay by setting the velocities last
-read, scaled. Conventions, defaults neutralised and what pins them: docs/engine_conventions.md, "PyBullet
-3.2.7".
+every step (PyBullet clears them), the weight ``m g`` taken off; a torque fixed in body axes is PyBullet's own
+(``takes_body_torque``: ``applyExternalTorque`` in ``LINK_FRAME``, the base's inertial axes, re-applied before
+every step); the decay by setting the velocities last read, scaled. Conventions, defaults neutralised and
+what pins them: docs/engine_conventions.md, "PyBullet 3.2.7".
 """
 from __future__ import annotations
 
@@ -109,7 +110,7 @@ class BulletWorld(pbw.Bodies, World):
     def packed_row(self, raw):
         """:meth:`packed` of one read in plain floats (the quaternion product: quat_mul_floats)."""
         out = []
-        for r, q_BP in zip(np.asarray(raw).tolist(), self.q_BP):
+        for r, q_BP in zip(raw if isinstance(raw, list) else np.asarray(raw).tolist(), self.q_BP):
             x0, x1, x2, v0, v1, v2, qx, qy, qz, qw, w0, w1, w2 = r
             q = ([qw, qx, qy, qz] if q_BP is None
                  else quat_mul_floats((qw, qx, qy, qz), quat_conj(q_BP).tolist()))
@@ -126,6 +127,10 @@ class PybulletEngine(WorldEngine):
     name = ENGINE
     variants = VARIANTS
     distribution = "pybullet"
+    #: applyExternalTorque(LINK_FRAME) takes a torque in the base's (inertial frame's) axes and Bullet turns
+    #: it with the body: the world re-applies the bodies' body-axes torques before every step, no harness
+    #: evaluation (pinned: tests/cross_checks/engines/test_pybullet_engine.py)
+    takes_body_torque = True
     #: a body frame off the COM: the base's inertial frame (its pose is what PyBullet's base state is)
     body_forms = frozenset({"com_offset"})
 

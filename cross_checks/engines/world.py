@@ -34,7 +34,8 @@ The world's contract (states packed as in reference_sim.state: ``[x_W (m), v_W (
   run of the world and for the one-step mode (``rollout(1, harness)`` after ``set_state(rows)``); the
   seconds of its host callbacks go to ``host_s``;
 * ``apply_body_torque(tau_B)``, for an engine that declares ``takes_body_torque``: the bodies' torques fixed
-  in body axes (B, 3) (N m), kept over every following step;
+  in body axes (B, 3) (N m), kept over every following step (by the engine, or re-applied by the world's
+  ``apply`` where the engine clears forces after a step);
 * optional ``warnings``: a list the world appends ``(body, step, words)`` to when the engine reports that a
   body's step failed (the step counted from 1 since the last ``set_state``);
 * optional ``per_stage``: True when the world evaluates the harness forces inside the engine's step, at every
@@ -130,9 +131,12 @@ class WorldEngine(base.EngineAdapter):
     #: Forces applied to a body stay applied over the next steps until changed (MuJoCo's xfrc_applied): the
     #: loop applies constant forces once. False: the engine clears them after every step (Bullet, PhysX).
     keeps_forces: bool = False
-    #: The engine applies a torque fixed in body axes itself, exactly, and keeps it (MuJoCo: a free joint's
-    #: rotational DOFs are body axes, so qfrc_applied holds it): the loop gives a world the bodies' body-axes
-    #: torques once (``World.apply_body_torque(tau_B)``, (B, 3) N m) and evaluates the other forces only.
+    #: The engine applies a torque fixed in body axes itself, turning it with the body (MuJoCo: a free joint's
+    #: rotational DOFs are body axes, so qfrc_applied holds it; PyBullet: applyExternalTorque in LINK_FRAME;
+    #: DART: setExtTorque(τ, isLocal=True)): the loop gives a world the bodies' body-axes torques once
+    #: (``World.apply_body_torque(tau_B)``, (B, 3) N m), which the world keeps applied over every following
+    #: step (MuJoCo keeps it; a world whose engine clears forces re-applies it in ``apply``), and evaluates
+    #: the other forces only.
     takes_body_torque: bool = False
     #: The quaternion the engine returns may change sign between steps: the loop picks, after each step, the
     #: sign on the previous state's side (reference_sim.quaternion.same_side).

@@ -159,6 +159,30 @@ def test_the_engines_own_time_is_measured_apart_from_rbchecks_and_both_are_print
     assert "4.000e+06        1.000e+06    0.25  N bodies in one model" in text
 
 
+def test_every_cpu_engine_has_its_own_minimal_loop_beside_the_engine_and_rbcheck():
+    """Each CPU engine's overhead row has its own minimal loop (apply + step + read in its own API) beside
+    its step alone and the cost through rbcheck, every installed one measured (a loop that fails to run
+    fails here); the table prints the three and both ratios."""
+    from cross_checks.engines import all_variants
+    assert set(bench.OWN_LOOP) == set(bench.CPU_ENGINES)
+    installed = {v.name for v in all_variants() if v.available and v.engine in bench.CPU_ENGINES}
+    defaults = {}
+    for v in all_variants():
+        if v.name in installed:
+            defaults.setdefault(v.engine, v.name)
+    rows = bench.overhead_rows(200, 1, variants=set(defaults.values()))
+    assert {r["variant"] for r in rows} == set(defaults.values())
+    for r in rows:
+        assert r["own_loop_us_per_step"] > 0 and 0 < r["engine_us_per_step"] <= r["rbcheck_us_per_step"]
+    t = _table_input()
+    t["overhead"] = [{"variant": "pybullet:multibody", "engine_us_per_step": 1.0, "own_loop_us_per_step": 2.5,
+                      "rbcheck_us_per_step": 4.0}]
+    text = bench.format_table(t)
+    assert "own loop" in text and "vs own loop" in text
+    assert "pybullet:multibody                               1.00      2.50             4.00   4.00x" in text
+    assert text.split("pybullet:multibody", 1)[1].split("\n")[0].endswith("1.60x")
+
+
 def test_the_overhead_targets_are_read_from_the_rows_as_the_issue_words_them():
     """Hand-made rows: a CPU engine at 1.9x / 2.1x its own time, a compiled engine (no single-run target), a
     batched row at 0.49x / 0.5x, and MuJoCo's own step against 3x a Python loop of mj_step."""

@@ -4,7 +4,9 @@ Each body alone in a DART ``World`` of its own: one ``FreeJoint``/``BodyNode`` p
 I_B)`` (the full tensor as given), every joint default neutralised (:data:`JOINT_SETTINGS`,
 :func:`neutralise`).
 FreeJoint positions ``[r, x_W]`` (``r`` the rotation vector of R_WB) and velocities ``[ω_W, v_W]``, world
-axes. Forces are cleared after every step (``apply`` before each one). docs/engine_conventions.md, "DART".
+axes. Forces are cleared after every step (``apply`` before each one); a torque fixed in body axes is given
+once (``apply_body_torque``) and set by ``apply`` before every step in the body's own axes
+(``setExtTorque(τ_B, isLocal=True)``: DART turns it itself). docs/engine_conventions.md, "DART".
 """
 import math
 
@@ -118,6 +120,12 @@ class Bodies:
 
     def __init__(self, bodies):
         self.bodies, self.always, self.live = bodies, [False] * len(bodies), [True] * len(bodies)
+        self.torque_B = [None] * len(bodies)   # per body: its body-axes torque (N m), or None
+        self._plan_of = self._tau_of = None     # the (f_W, tau_W) arrays the plan was made for
+        self._plan = []
+        # bound once: the per-step calls (a step of one body costs DART about 2 µs)
+        self._steps = [b.world.step for b in bodies]
+        self._reads = [(b.skeleton.getPositions, b.skeleton.getVelocities) for b in bodies]
 
     def set_state(self, y):
         for b, row in zip(self.bodies, y):
@@ -125,7 +133,7 @@ class Bodies:
         self.live = [True] * len(self.bodies)
 
     def read(self):
-        self.last = [b.read() for b in self.bodies]
+        self.last = [pos().tolist() + vel().tolist() for pos, vel in self._reads]
         return self.last
 
     def packed(self, raw):
@@ -136,17 +144,40 @@ class Bodies:
         for b, prev, gv, gw in zip(self.bodies, self.last, g_v.tolist(), g_w.tolist()):
             b.skeleton.setVelocities(np.array(prev[6:12]) * (gw, gw, gw, gv, gv, gv))
 
+    def apply_body_torque(self, tau_B):
+        """Torques fixed in body axes (B, 3) (N m), set with every following ``apply`` in the body's own
+        axes (DART clears them after every step); a zero torque is not set."""
+        self.torque_B = [np.array(t, dtype=float) if np.any(t != 0.0) else None
+                         for t in np.asarray(tau_B, dtype=float)]
+        self._plan_of = None
+
     def apply(self, f_W, tau_W):
-        """A zero wrench of state-independent forces is not set (DART clears them after every step)."""
-        for b, live, always, f, tau in zip(self.bodies, self.live, self.always, np.asarray(f_W, dtype=float),
-                                           np.asarray(tau_W, dtype=float)):
-            if live and (always or f.any() or tau.any()):
-                b.apply(f, tau)
+        """World forces at the COMs (N) and world torques (N m), (B, 3), and the body-axes torques of
+        ``apply_body_torque``, for the next step only. A zero wrench of state-independent forces is not set
+        (DART clears them after every step). Planned once for the arrays given (the host loop gives the same
+        arrays every step when the forces are constant)."""
+        if f_W is not self._plan_of or tau_W is not self._tau_of:
+            self._plan_of, self._tau_of = f_W, tau_W
+            self._plan = []
+            for k, (b, always, f, tau) in enumerate(zip(self.bodies, self.always,
+                                                        np.asarray(f_W, dtype=float),
+                                                        np.asarray(tau_W, dtype=float))):
+                world = always or f.any() or tau.any()
+                self._plan.append((k, b if world else None, f, tau, self.torque_B[k], b.node))
+        live = self.live
+        for k, b, f, tau, tau_B, node in self._plan:
+            if live[k]:
+                if b is not None:
+                    b.apply(f, tau)
+                    if tau_B is not None:
+                        node.addExtTorque(tau_B, True)
+                elif tau_B is not None:
+                    node.setExtTorque(tau_B, True)
 
     def step(self):
-        for b, live in zip(self.bodies, self.live):
+        for step, live in zip(self._steps, self.live):
             if live:
-                b.world.step()
+                step()
 
 
 def world(bodies, gravity_W, variant, dt_s):

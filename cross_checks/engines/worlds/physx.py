@@ -45,6 +45,8 @@ class Bodies:
         self.scene = sapien.Scene(systems=[self.system])
         self.system.set_timestep(float(dt_s))
         self.comps, self.always = [], np.zeros(0, dtype=bool)
+        self._add = []   # each body's add_force_torque, bound once
+        self.step = self.system.step
 
     def add_body(self, mass_kg, moments, q_BP):
         entity, c = sapien.Entity(), px.PhysxRigidDynamicComponent()
@@ -55,6 +57,7 @@ class Bodies:
         neutralise(c)
         self.scene.add_entity(entity)
         self.comps.append(c)
+        self._add.append(c.add_force_torque)
         self.always = np.zeros(len(self.comps), dtype=bool)
 
     def _put(self, k, y):   # body k at the packed state y (13,): pose, COM velocity, world ω
@@ -68,10 +71,15 @@ class Bodies:
             self._put(k, row)
         self.alive, self.raw = np.ones(len(self.comps), dtype=bool), self._pack()
 
-    def apply(self, f_W, tau_W):   # world forces at the COMs (N) and world torques (N m), float32
-        F, T = np.float32(f_W), np.float32(tau_W)
-        for k in np.flatnonzero(self.alive & (self.always | F.any(axis=1) | T.any(axis=1))):
-            self.comps[k].add_force_torque(F[k], T[k])
+    def apply(self, f_W, tau_W):
+        """World forces at the COMs (N) and world torques (N m), (B, 3), for the next step only; SAPIEN
+        rounds them to float32. A body not ``alive`` gets none; a zero wrench is not added unless the body
+        is in ``always``. Per body in plain floats (a few small NumPy operations cost more than the step)."""
+        alive, always, add = self.alive, self.always, self._add
+        for k, f, t in zip(range(len(add)), np.asarray(f_W, dtype=float).tolist(),
+                           np.asarray(tau_W, dtype=float).tolist()):
+            if alive[k] and (always[k] or f[0] or f[1] or f[2] or t[0] or t[1] or t[2]):
+                add[k](f, t)
 
     def decay(self, g_v, g_w):   # the float32 velocities last read, scaled in float32
         for k, (c, gv, gw) in enumerate(zip(self.comps, g_v.tolist(), g_w.tolist())):
@@ -79,15 +87,15 @@ class Bodies:
                 c.set_linear_velocity(self.raw[k, 7:10] * np.float32(gv))
                 c.set_angular_velocity(self.raw[k, 10:13] * np.float32(gw))
 
-    def step(self):
-        self.system.step()
-
     def read(self):
         self.raw = self._pack()
         return self.raw[:, PACK_TO_PACKED]
 
     def packed(self, raw):
         return np.asarray(raw, dtype=float)
+
+    def packed_row(self, raw):   # one read's rows as plain floats (float32 values, exactly)
+        return raw.tolist()
 
     def _pack(self):   # every body's ``pack()`` row [q (w x y z), p, v, ω] (B, 13) float32, a copy
         return np.frombuffer(self.system.pack(), dtype=np.float32).reshape(len(self.comps), 13).copy()

@@ -4,9 +4,12 @@ A body is a ``createMultiBody`` without collision shape (maximal coordinates for
 no velocity clamp, sleeping disabled (:data:`DYNAMICS_SETTINGS`). PyBullet takes a diagonal inertia and
 reports the inertial (principal) frame P as the base pose, so the boundary rotates: ``q_WP = q_WB ⊗ q_BP``
 in, ``q_WB = q_WP ⊗ q_BP⁻¹`` out (PyBullet's quaternions are (x, y, z, w)); position and velocity are the
-COM's, ω in WORLD axes. Forces are cleared after every step (``apply`` before each one). A world resets the
+COM's, ω in WORLD axes. Forces are cleared after every step (``apply`` before each one); a torque fixed in
+body axes is given once (``apply_body_torque``) and re-applied by ``apply`` in the base's own axes
+(``LINK_FRAME``: the inertial frame P's, so ``τ_P = R_BPᵀ τ_B``), turned by Bullet itself. A world resets the
 client's simulation. docs/engine_conventions.md, "PyBullet".
 """
+
 import numpy as np
 import pybullet as p
 
@@ -47,6 +50,9 @@ class Bodies:
         self.c = c = client
         self.maximal = variant == "maximal"
         self.q_BP, self.bodies, self.last = [], [], []
+        self.torque_P = []          # per body: the body-axes torque in P's axes (3 floats), or None
+        self._plan_of = self._tau_of = None   # the (f_W, tau_W) arrays the plan below was made for
+        self._plan = []             # per body: its force and torque calls for those arrays
         p.resetSimulation(physicsClientId=c)
         p.setGravity(*[float(g) for g in gravity_W], physicsClientId=c)
         p.setPhysicsEngineParameter(fixedTimeStep=float(dt_s), numSubSteps=0, physicsClientId=c)
@@ -71,6 +77,7 @@ class Bodies:
                          activationState=p.ACTIVATION_STATE_DISABLE_SLEEPING, physicsClientId=self.c,
                          **DYNAMICS_SETTINGS)
         self.bodies.append(b)
+        self.torque_P.append(None)
         return True
 
     def _pose_in(self, y, k):
@@ -102,8 +109,8 @@ class Bodies:
         c, pose, vel = self.c, p.getBasePositionAndOrientation, p.getBaseVelocity
         rows = []
         for b in self.bodies:
-            ps, orn = pose(b, physicsClientId=c)
-            lin, ang = vel(b, physicsClientId=c)
+            ps, orn = pose(b, c)   # (bodyUniqueId, physicsClientId)
+            lin, ang = vel(b, c)
             rows.append(ps + lin + orn + ang)
         self.last = rows
         return rows
@@ -124,16 +131,41 @@ class Bodies:
             p.resetBaseVelocity(b, (prev[3] * gv, prev[4] * gv, prev[5] * gv),
                                 (prev[10] * gw, prev[11] * gw, prev[12] * gw), physicsClientId=self.c)
 
+    def apply_body_torque(self, tau_B):
+        """Torques fixed in body axes (B, 3) (N m), applied with every following ``apply`` (Bullet clears
+        forces after each step): in the base's own axes (``LINK_FRAME``), P's, so ``τ_P = R_BPᵀ τ_B``; a zero
+        torque is not applied."""
+        self.torque_P = []
+        for tau, q_BP in zip(np.asarray(tau_B, dtype=float), self.q_BP):
+            if q_BP is not None:
+                q = np.asarray(q_BP, dtype=float)
+                s, u = q[0], -q[1:]                       # R_BPᵀ = R(q_BP⁻¹)
+                t = 2.0 * np.cross(u, tau)
+                tau = tau + s * t + np.cross(u, t)
+            self.torque_P.append(tuple(float(v) for v in tau) if np.any(tau != 0.0) else None)
+        self._plan_of = None
+
     def apply(self, f_W, tau_W):
         """World forces at the COMs (at their last read positions, N) and world torques (N m), (B, 3), for the
-        next step only. A zero force or torque is not applied (the same step)."""
-        c = self.c
-        for b, f, tau, prev in zip(self.bodies, np.asarray(f_W, dtype=float).tolist(),
-                                   np.asarray(tau_W, dtype=float).tolist(), self.last):
-            if f[0] != 0.0 or f[1] != 0.0 or f[2] != 0.0:
-                p.applyExternalForce(b, -1, f, prev[0:3], p.WORLD_FRAME, physicsClientId=c)
-            if tau[0] != 0.0 or tau[1] != 0.0 or tau[2] != 0.0:
+        next step only, and the body-axes torques given by ``apply_body_torque``. A zero force or torque is
+        not applied (the same step). The calls are planned once for the arrays given (the host loop gives
+        the same arrays every step when the forces are constant)."""
+        if f_W is not self._plan_of or tau_W is not self._tau_of:
+            self._plan_of, self._tau_of = f_W, tau_W
+            self._plan = [(b, f if (f[0] != 0.0 or f[1] != 0.0 or f[2] != 0.0) else None,
+                           tau if (tau[0] != 0.0 or tau[1] != 0.0 or tau[2] != 0.0) else None, tau_P, k)
+                          for k, (b, f, tau, tau_P) in enumerate(zip(
+                              self.bodies, np.asarray(f_W, dtype=float).tolist(),
+                              np.asarray(tau_W, dtype=float).tolist(), self.torque_P))]
+        c, last = self.c, self.last
+        for b, f, tau, tau_P, k in self._plan:
+            if f is not None:
+                p.applyExternalForce(b, -1, f, last[k][0:3], p.WORLD_FRAME, physicsClientId=c)
+            if tau is not None:
                 p.applyExternalTorque(b, -1, tau, p.WORLD_FRAME, physicsClientId=c)
+            if tau_P is not None:
+                p.applyExternalTorque(b, -1, tau_P, p.LINK_FRAME, physicsClientId=c)
+
 
     def step(self):
         p.stepSimulation(physicsClientId=self.c)

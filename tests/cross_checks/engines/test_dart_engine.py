@@ -6,6 +6,7 @@ import math
 import numpy as np
 import pytest
 
+from cross_checks.core.tolerances import SAME_SCHEME_REL
 from tests.helpers import tolerances as tol
 
 dart = pytest.importorskip("dartpy", reason="dartpy is not installed (pip install -e '.[dart]')")
@@ -437,3 +438,75 @@ def test_first_order_on_catalog_scenarios(assert_engine):
 def test_first_order_on_the_tumbling_and_state_dependent_scenarios(assert_engine):
     assert_engine("dart:semi_implicit_euler",
                   ["tennis_racket", "spring_pendulum", "velocity_decay", "tumbling_box"])
+
+
+# --- the body-axes torque is DART's own (DartEngine.takes_body_torque) ------------------------------------
+
+def test_a_local_ext_torque_is_in_body_axes_turns_with_the_body_and_is_cleared_after_the_step():
+    """Pins what the adapter relies on: ``setExtTorque(τ_B, isLocal=True)`` before every step moves a tilted,
+    spinning full-tensor body as the torque turned to world axes from each step's attitude does (to
+    round-off; τ_B given as a world torque does not), also added to a world wrench set before it
+    (``addExtTorque(τ_B, True)``); and DART clears it after the step."""
+    from reference_sim.quaternion import rotate
+    tau_B, tau_W, n = np.array([0.3, -0.2, 0.5]), np.array([0.1, 0.0, -0.1]), 400
+
+    def run(how):
+        sc = _tilted(angular_velocity=[1.0, -2.0, 0.5])
+        B = de.DartBody(sc, 1e-3)
+        B.set_state(sc.problem.initial_packed())
+        for _ in range(n):
+            q = de.from_dart_state(np.r_[B.skeleton.getPositions(), B.skeleton.getVelocities()])[6:10]
+            if how == "world":
+                B.apply(np.zeros(3), rotate(q, tau_B) + tau_W)
+            elif how == "local":
+                B.apply(np.zeros(3), tau_W)
+                B.node.addExtTorque(tau_B, True)
+            else:
+                B.apply(np.zeros(3), tau_B + tau_W)
+            B.world.step()
+        return np.r_[B.skeleton.getPositions(), B.skeleton.getVelocities()]
+    world, local, unturned = run("world"), run("local"), run("unturned")
+    scale = np.abs(world) + 1.0
+    assert np.max(np.abs(local - world) / scale) <= SAME_SCHEME_REL
+    assert np.max(np.abs(unturned - world) / scale) > 1e3 * SAME_SCHEME_REL
+    sc = _tilted()
+    B = de.DartBody(sc, 1e-3)
+    B.set_state(sc.problem.initial_packed())
+    B.node.setExtTorque(tau_B, True)
+    B.world.step()
+    np.testing.assert_array_equal(B.node.getExternalForceGlobal(), np.zeros(6))
+
+
+class _HarnessTorque(de.DartEngine):
+    """DART driven by the harness alone: the body-axes torques turned to world axes by rbcheck every step
+    (the adapter before it took them in the engine)."""
+    takes_body_torque = False
+
+
+def test_the_body_torque_taken_by_dart_moves_the_body_as_the_harness_s_world_torque(monkeypatch):
+    """The harness evaluates no body-axes torque for DART (the world's ``apply`` gets no torque on the
+    catalog's body-torque scenario without its point force), and the adapter's runs equal the
+    harness-driven runs to round-off there, on a decaying full-tensor body with every force kind, and on a
+    torque-free one (there bit for bit)."""
+    from pathlib import Path
+
+    from cross_checks.engines.worlds import dart as dtw
+    from cross_checks.scenario import catalog_path, parse_scenario
+    seen = []
+    apply = dtw.Bodies.apply
+    monkeypatch.setattr(dtw.Bodies, "apply", lambda self, f, tau: (seen.append(np.abs(tau).max()),
+                                                                   apply(self, f, tau)))
+    text = catalog_path("applied_torque").read_text()
+    sc = parse_scenario(text[:text.index("[[forces.point]]")], "<body torque only>")
+    de.simulate(sc, VARIANT, sc.dt_s, 20)
+    assert len(seen) == 20 and max(seen) == 0.0
+    monkeypatch.setattr(dtw.Bodies, "apply", apply)
+    skew = Path(__file__).resolve().parents[3] / "benchmarks" / "bit_identity" / "skew.toml"
+    for sc in (load_scenario("applied_torque"), load_scenario(str(skew)), load_scenario("tennis_racket")):
+        n = min(sc.n_steps(), 1500)
+        own = de.simulate(sc, VARIANT, sc.dt_s, n).y
+        harness = _HarnessTorque().simulate(sc, VARIANT, sc.dt_s, n).y
+        scale = np.max(np.abs(harness), axis=0) + 1.0
+        assert np.max(np.abs(own - harness) / scale) <= SAME_SCHEME_REL, sc.name
+        if not any(t.frame == "body" for t in sc.problem.forces.torques):
+            assert np.array_equal(own, harness), sc.name

@@ -343,3 +343,28 @@ def test_moments_beyond_the_triangle_by_round_off_only_are_put_on_it():
     np.testing.assert_array_equal(me.on_the_triangle([1.0, 2.0, 3.0 * (1 + 2 * eps)]), [1.0, 2.0, 3.0])
     np.testing.assert_array_equal(me.on_the_triangle([1.0, 2.0, 3.1]), [1.0, 2.0, 3.1])
     np.testing.assert_array_equal(me.on_the_triangle([1.0, 2.0, 2.5]), [1.0, 2.0, 2.5])
+
+
+@pytest.mark.parametrize("variant", sorted(me.VARIANTS))
+def test_a_world_of_many_bodies_steps_from_python_and_gives_each_run_alone_bit_for_bit(variant, monkeypatch):
+    """From STEP_LOOP_BODIES bodies on, a world whose forces are constant steps with mj_step from Python
+    instead of mujoco.rollout (faster for many bodies): every run of such a world equals the same run
+    alone (a world of one body: mujoco.rollout) bit for bit, a body torque included."""
+    from cross_checks.engines.base import RunRequest
+    text = catalog_path("applied_torque").read_text()
+    torque_only = parse_scenario(text[:text.index("[[forces.point]]")], "<body torque only>")
+    # one gravity (a world has one): the body-torque scenario, a projectile and a particle body
+    scs = [torque_only, load_scenario("projectile"), load_scenario("particle_body")]
+    assert not any(sc.problem.forces.has_decay or me.host_problem(sc.problem, True).forces.state_dependent
+                   for sc in scs)
+    reqs = [RunRequest(scs[k % len(scs)], 0.002, 60) for k in range(me.STEP_LOOP_BODIES + 3)]
+    stepped = []
+    original = me.MujocoWorld._stepped
+    monkeypatch.setattr(me.MujocoWorld, "_stepped",
+                        lambda self, n: stepped.append(self.B) or original(self, n))
+    many = me.simulate_many(variant, reqs)
+    assert stepped == [len(reqs)]
+    for r, run in zip(reqs, many):
+        alone = me.simulate(r.scenario, variant, r.dt_s, r.n_steps)
+        assert np.array_equal(run.y, alone.y) and run.diverged_at_s == alone.diverged_at_s, r.scenario.name
+    assert stepped == [len(reqs)]   # a world of one body: mujoco.rollout

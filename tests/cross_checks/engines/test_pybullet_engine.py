@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from cross_checks.core.tolerances import SAME_SCHEME_REL
 from tests.helpers import tolerances as tol
 
 p = pytest.importorskip("pybullet", reason="pybullet is not installed")
@@ -16,6 +17,8 @@ from reference_sim.quaternion import geodesic_angle, quat_from_axis_angle, quat_
 from tests.helpers.scenarios import SQ, YAW90  # noqa: E402,F401
 from tests.helpers.scenarios import scenario_from_parts as _scenario
 from tests.helpers.wrong_engines import BulletBody  # noqa: E402
+
+Q_TILT = np.array([0.9, 0.1, 0.3, -0.2]) / np.linalg.norm([0.9, 0.1, 0.3, -0.2])
 
 
 def test_version_and_engine_error():
@@ -233,3 +236,88 @@ def test_a_body_kept_for_the_runs_of_its_case_gives_the_runs_of_a_new_body(varia
                 want = adapter.one_step(copy.deepcopy(sc), variant, h, y)
                 adapter.one_step(sc, variant, h, y[:1])   # sc's body kept again for the next one
             assert np.array_equal(got, want), (sc.name, kind, h)
+
+
+# --- the body-axes torque is PyBullet's own (PybulletEngine.takes_body_torque) ----------------------------
+
+BIT_IDENTITY = catalog_path("applied_torque").parents[3] / "benchmarks" / "bit_identity"
+
+
+@pytest.mark.parametrize("variant", sorted(pe.VARIANTS))
+def test_a_link_frame_torque_is_in_the_inertial_frames_axes_turns_with_the_body_and_is_cleared(variant):
+    """Pins what the adapter relies on: ``applyExternalTorque(LINK_FRAME)`` on the base takes the torque in
+    the axes of the inertial frame P PyBullet reports as the base pose, so ``R_BPᵀ τ_B`` re-applied before
+    every step moves a tilted, spinning full-tensor body as the torque turned to world axes from each
+    step's attitude does (to round-off; τ_B itself, unturned by R_BP, does not); and Bullet clears it after
+    the step."""
+    from reference_sim.quaternion import rotate
+    full = "inertia = [[2.0, 0.3, 0.1], [0.3, 3.0, -0.2], [0.1, -0.2, 4.0]]"
+    sc = parse_scenario(catalog_path("applied_torque").read_text().replace("inertia = [1.0, 2.0, 3.0]", full),
+                        "<t>")
+    assert not sc.problem.body.is_diagonal()
+    tau_B, h, n = np.array([0.3, -0.2, 0.5]), 1e-3, 400
+
+    def run(how):
+        B = BulletBody(sc, variant, h, sc.problem.initial_packed())
+        y0 = sc.problem.initial_packed().copy()
+        y0[6:10] = Q_TILT
+        y0[10:13] = [1.0, -2.0, 0.5]
+        B.set_state(y0)
+        tau_P = pbw.Bodies.__new__(pbw.Bodies)   # the world's R_BPᵀ τ_B
+        tau_P.q_BP = [B.q_BP]
+        tau_P.apply_body_torque(tau_B[None])
+        for _ in range(n):
+            y = B.raw_to_packed(B.read_raw())
+            if how == "world":
+                p.applyExternalTorque(B.b, -1, rotate(y[6:10], tau_B).tolist(), p.WORLD_FRAME,
+                                      physicsClientId=B.c)
+            else:
+                t = tau_P.torque_P[0] if how == "link" else tau_B.tolist()
+                p.applyExternalTorque(B.b, -1, list(t), p.LINK_FRAME, physicsClientId=B.c)
+            p.stepSimulation(physicsClientId=B.c)
+        return B.raw_to_packed(B.read_raw())
+    world, link, unturned = run("world"), run("link"), run("unturned")
+    scale = np.abs(world) + 1.0
+    assert np.max(np.abs(link - world) / scale) <= SAME_SCHEME_REL
+    assert np.max(np.abs(unturned - world) / scale) > 1e3 * SAME_SCHEME_REL
+    # cleared: a sphere (no gyroscopic term) keeps its ω in the step after the torque's
+    B = BulletBody(_scenario(), variant, 0.01, _scenario().problem.initial_packed())
+    B.set_state(_scenario().problem.initial_packed())
+    p.applyExternalTorque(B.b, -1, [0.0, 0.0, 3.0], p.LINK_FRAME, physicsClientId=B.c)
+    p.stepSimulation(physicsClientId=B.c)
+    w1 = B.read_raw()[10:13]
+    p.stepSimulation(physicsClientId=B.c)
+    np.testing.assert_allclose(w1[2], 0.01, rtol=1e-14)   # one step of 3 N m about I_zz = 3
+    np.testing.assert_allclose(B.read_raw()[10:13], w1, rtol=tol.ADAPTER_ROUND_TRIP * 4)
+
+
+class _HarnessTorque(pe.PybulletEngine):
+    """PyBullet driven by the harness alone: the body-axes torques turned to world axes by rbcheck every step
+    (the adapter before it took them in the engine)."""
+    takes_body_torque = False
+
+
+@pytest.mark.parametrize("variant", sorted(pe.VARIANTS))
+def test_the_body_torque_taken_by_pybullet_moves_the_body_as_the_harness_s_world_torque(variant, monkeypatch):
+    """The harness evaluates no body-axes torque for PyBullet (the world's ``apply`` gets no torque on the
+    catalog's body-torque scenario without its point force: Bullet turns the torque itself), and the
+    adapter's runs equal the harness-driven runs to round-off there, on a decaying full-tensor body with
+    every force kind, and on a torque-free one (there bit for bit: nothing changes)."""
+    seen = []
+    apply = pbw.Bodies.apply
+    monkeypatch.setattr(pbw.Bodies, "apply", lambda self, f, tau: (seen.append(np.abs(tau).max()),
+                                                                   apply(self, f, tau)))
+    text = catalog_path("applied_torque").read_text()
+    sc = parse_scenario(text[:text.index("[[forces.point]]")], "<body torque only>")
+    pe.simulate(sc, variant, sc.dt_s, 20)
+    assert len(seen) == 20 and max(seen) == 0.0
+    monkeypatch.setattr(pbw.Bodies, "apply", apply)
+    for sc in (load_scenario("applied_torque"), load_scenario(str(BIT_IDENTITY / "skew.toml")),
+               load_scenario("tennis_racket")):
+        n = min(sc.n_steps(), 1500)
+        own = pe.simulate(sc, variant, sc.dt_s, n).y
+        harness = _HarnessTorque().simulate(sc, variant, sc.dt_s, n).y
+        scale = np.max(np.abs(harness), axis=0) + 1.0
+        assert np.max(np.abs(own - harness) / scale) <= SAME_SCHEME_REL, sc.name
+        if not any(t.frame == "body" for t in sc.problem.forces.torques):
+            assert np.array_equal(own, harness), sc.name

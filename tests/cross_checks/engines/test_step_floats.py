@@ -68,12 +68,18 @@ pe = pytest.importorskip("cross_checks.engines.pybullet_engine")
 
 
 def _pybullet_numpy_loop(sc, variant, h, n):
-    """The PyBullet run as the adapter's NumPy formulas give it, step by step."""
+    """The PyBullet run as the adapter's NumPy formulas give it, step by step; the torques fixed in body axes
+    given to PyBullet (applyExternalTorque in LINK_FRAME, re-applied every step), scaled by γ_ω."""
+    import dataclasses
+
+    from cross_checks.engines.loop import body_torque_B, host_problem
     from tests.helpers.wrong_engines import BulletBody
     y0 = sc.problem.initial_packed()
     B = BulletBody(sc, variant, h, y0)
     B.set_state(y0)
     gv, gw = forces.decay_factors(sc, h)
+    B.world.apply_body_torque((body_torque_B(sc.problem) * gw)[None])
+    sc = dataclasses.replace(sc, problem=host_problem(sc.problem, True))   # the other forces
     raw = np.empty((n + 1, 13))
     raw[0] = B.read_raw()
     y = y0
