@@ -291,6 +291,7 @@ AMPLIFICATION_TWO_SOLVES_REL = 1e-3
 #: and unreached definitions left out, the numbers gathered). Of the 131, 67 are the MuJoCo world itself
 #: (worlds/mujoco.py's model, state conversion and Bodies: the adapter's code, which the script may not
 #: replace by a shorter hand-written copy), 41 the measurement (run, error, fit, verdict), 23 the
-#: header, imports and numbers. 4 lines of headroom let the world gain a line or two without this failing;
-#: more means the script grew and this number must be measured and justified again.
-REPRO_MUJOCO_ORDER_MAX_LINES = 135
+#: header, imports and numbers. Then 143: the order claim says which Δt diverged (a blow-up is a DEFECT,
+#: not a fit: 12 lines of measurement). 4 lines of headroom let the world gain a line or two without this
+#: failing; more means the script grew and this number must be measured and justified again.
+REPRO_MUJOCO_ORDER_MAX_LINES = 147
