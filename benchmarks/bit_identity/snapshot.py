@@ -69,6 +69,11 @@ def snapshot(engines, only=None) -> dict:
 
 
 def main(argv) -> int:
+    if not argv or argv[0] in ("-h", "--help") or (argv[0] != "--diff" and (argv[0].startswith("-")
+                                                                           or len(argv) < 2)):
+        print(__doc__.strip().splitlines()[0] + "\n\nusage: snapshot.py OUT.json ENGINE [ENGINE ...] "
+              "[--scenarios a,b]\n       snapshot.py --diff BEFORE.json AFTER.json", file=sys.stderr)
+        return 0 if argv[:1] in (["-h"], ["--help"]) else 2
     if argv[:1] == ["--diff"]:
         a, b = (json.loads(Path(p).read_text()) for p in argv[1:3])
         engines = {k.split(":", 1)[0] for k in b}      # the engines the second file holds
