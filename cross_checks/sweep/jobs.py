@@ -326,8 +326,7 @@ def run_job_group(jobs, scenario, ref_path: str, cache_root: str | None = None, 
     None), ``series`` (dict of float32 arrays for the default Δt, else None). The runs not cached are asked
     of the engine in one call (:func:`_runs`). A run that finished (ok or diverged) is cached; a failed one
     is not."""
-    from cross_checks.engines import resolve
-    resolved = resolve(jobs[0].variant)   # the plan's Resolved (a name, when a caller gives one)
+    resolved = jobs[0].variant   # the plan's Resolved
     try:
         adapter = resolved.adapter
         version = adapter.version()

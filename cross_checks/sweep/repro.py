@@ -98,15 +98,12 @@ def parse_claim(words) -> tuple:
     return kind, arg
 
 
-def _engine(variant_name: str):
-    """(engine, variant, distributions, world module names, adapter module, body_spec's module); ReproError
-    when the engine cannot write one."""
-    from cross_checks.engines import UnknownVariant, get_adapter, split_variant
+def _engine(variant_name):
+    """(engine, variant, distributions, world module names, adapter module, body_spec's module) of a Resolved
+    ``variant_name``; ReproError when the engine cannot write one."""
+    from cross_checks.engines import get_adapter
     from cross_checks.engines.external import ExternalEngine
-    try:
-        engine, variant = split_variant(variant_name)
-    except UnknownVariant as exc:
-        raise ReproError(str(exc)) from None
+    engine, variant = variant_name.engine, variant_name.variant
     try:
         adapter = get_adapter(engine)
     except Exception as exc:  # noqa: BLE001 - EngineUnavailable: the engine's own words
@@ -171,11 +168,16 @@ def reproducer(variant_name: str, scenario, claim_words, *, command: str = "", r
     ``scenario`` (a parsed Scenario), run here (``run``; else ``holds`` is None: the sweep, which measured
     it already): a :class:`Repro`. ReproError for what it cannot be written for (one line)."""
     import reference_sim
+    from cross_checks.engines import UnknownVariant, resolve
     kind, arg = parse_claim(claim_words)
     if kind == "invariance":
         raise ReproError("--claim invariance: not supported yet (the invariance transforms of issue 46 are "
                          "not in a reproducer's reach: the script would have to rewrite the scenario); "
                          "claims: order QUANTITY, drift, gyroscopic")
+    try:
+        variant_name = resolve(variant_name, strict=True)   # once: every part below reads what it declares
+    except UnknownVariant as exc:
+        raise ReproError(str(exc)) from None
     engine, variant, dists, world_mods, adapter_mod, spec_mod = _engine(variant_name)
     f_W, tau_W = _constant_forces(scenario, engine)
     body = spec_mod.body_spec(scenario.problem.body)
@@ -306,8 +308,8 @@ def findings_claims(summary: dict, scenarios) -> list:
     scenario (``gyroscopic``), and every order the variant's traits expect below the one it declares (an
     engine's known shortfall, e.g. MJX's RK4 attitude at order 2: ``order QUANTITY``) where the forces are
     constant. The reference's own schemes (``reference:``) are rbcheck's: none."""
-    from cross_checks.analysis.expectations import traits
     from cross_checks.analysis.metrics import conserved
+    from cross_checks.engines import resolve
     by_name = {sc.name: sc for sc in scenarios}
     out: dict = {}
     recs = summary.get("convergence") or []
@@ -322,7 +324,8 @@ def findings_claims(summary: dict, scenarios) -> list:
             continue
         fm = sc.problem.forces
         c = conserved(fm)
-        if (r.get("expected_verdict") == "does_not_converge" and not traits(r["engine"]).gyroscopic_term
+        gyro = resolve(r["engine"]).traits.gyroscopic_term   # a name read from the sweep's summary
+        if (r.get("expected_verdict") == "does_not_converge" and not gyro
                 and c["energy"][0] and c["angular_momentum"][0]):
             out[key] = ["gyroscopic"]
         elif (r.get("expected_verdict") == "converges" and r.get("matches_expectation")

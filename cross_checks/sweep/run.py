@@ -286,8 +286,9 @@ def _write_results(staging, scenarios, variants, refs, records, *, started, skip
     summary = assemble.build_summary(
         provenance=provenance(started, variants), scenarios=scenario_records,
         variants=[variant_record(v, infos.get(v)) for v in variants], skipped=skipped,
-        convergence=convergence, local=local, agreement=assemble.agreement_records(scenarios, by_key, refs),
-        rows=rows, jobs=jobs, wall_s=time.perf_counter() - t_start, cannot=cannot)
+        convergence=convergence, local=local,
+        agreement=assemble.agreement_records(scenarios, variants, by_key, refs), rows=rows, jobs=jobs,
+        wall_s=time.perf_counter() - t_start, cannot=cannot)
     summary["run"]["compile_s"] = round(compile_s, 3)   # before the runs (wall_s): the reference's kernels
     if long_scenarios:
         _write_long_runs(staging, summary, long_scenarios, variants, long_records or {})
