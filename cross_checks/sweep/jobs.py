@@ -61,11 +61,11 @@ TIMING_COLUMNS = ("wall_s", "engine_s", "cached")
 
 @dataclass(frozen=True)
 class Job:
-    """One run: scenario index (into the sweep's list), variant, Δt, and its role."""
+    """One run: scenario index (into the sweep's list), variant (the plan's Resolved), Δt, and its role."""
 
     scenario_index: int
     scenario: str
-    variant: str
+    variant: str   # a Resolved (cross_checks.engines.resolve): the plan resolved it once
     dt_s: float
     in_ladder: bool
     default_dt: bool
