@@ -149,14 +149,12 @@ def as_list(x) -> list:
 
 
 def _variants(variant) -> list:
-    from cross_checks.engines import UnknownVariant, engine_variants, split_variant
+    from cross_checks.engines import UnknownVariant, engine_variants, resolve
     if not isinstance(variant, str) or not variant:
         raise ValueError(f"variant must be 'ENGINE:VARIANT' or an engine name, got {variant!r}")
     try:
-        if ":" in variant:
-            split_variant(variant)
-            return [variant]
-        names = [f"{variant}:{v}" for v in engine_variants(variant)]
+        names = ([variant] if ":" in variant else [f"{variant}:{v}" for v in engine_variants(variant)])
+        names = [resolve(n, strict=True) for n in names]
     except UnknownVariant as exc:
         raise ValueError(str(exc)) from None
     if not names:

@@ -239,3 +239,58 @@ def test_every_package_tolerance_is_used_by_the_package():
 def test_a_test_only_tolerance_in_the_package_is_found():
     names = _tolerance_names("#: a number\nTEST_ONLY_NUMBER = 1e-9\nUSED = 2\n")
     assert _unused_in_package(names, "x = tol.USED\n") == ["TEST_ONLY_NUMBER"]
+
+
+#: The registry's lookups that turn an "ENGINE:VARIANT" name into what its engine declares (issue 42: the name
+#: is resolved once, at the entry points, and the Resolved passed down; everything below reads its fields).
+VARIANT_LOOKUPS = {"resolve", "split_variant", "declared_variant", "declared_order", "declared_traits",
+                   "declared_imitation", "has_one_step", "default_variant", "not_expressible"}
+#: At most this many call sites outside the registry (cross_checks/engines/__init__.py) may look a name up.
+MAX_VARIANT_LOOKUP_SITES = 10
+
+
+def _variant_lookups(path: Path) -> list:
+    """(line, function) of every call in ``path`` to one of the registry's VARIANT_LOOKUPS: a name imported
+    from cross_checks.engines (under any alias) or an attribute of that module imported under a name."""
+    tree = ast.parse(path.read_text())
+    names, modules = {}, set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.module == "cross_checks.engines" and not node.level:
+            names.update({a.asname or a.name: a.name for a in node.names if a.name in VARIANT_LOOKUPS})
+        elif isinstance(node, ast.ImportFrom) and node.module == "cross_checks" and not node.level:
+            modules.update(a.asname or a.name for a in node.names if a.name == "engines")
+        elif isinstance(node, ast.Import):
+            modules.update(a.asname for a in node.names if a.name == "cross_checks.engines" and a.asname)
+    out = []
+    for node in ast.walk(tree):
+        if not isinstance(node, ast.Call):
+            continue
+        f = node.func
+        if isinstance(f, ast.Name) and f.id in names:
+            out.append((node.lineno, names[f.id]))
+        elif (isinstance(f, ast.Attribute) and f.attr in VARIANT_LOOKUPS and isinstance(f.value, ast.Name)
+              and f.value.id in modules):
+            out.append((node.lineno, f.attr))
+    return sorted(out)
+
+
+def variant_lookup_sites() -> list:
+    registry = ROOT / "cross_checks" / "engines" / "__init__.py"
+    return [f"{p.relative_to(ROOT)}:{line}: {what}" for p in SOURCES if p != registry
+            for line, what in _variant_lookups(p)]
+
+
+def test_variant_names_are_resolved_at_few_sites_outside_the_registry():
+    """The entry points (the CLI's user input, assert_engine, the sweep's and the fuzz's plans, repro, bench)
+    resolve an "ENGINE:VARIANT" once and pass the Resolved down; a module below them reads its fields and
+    never looks the name up again (issue 42)."""
+    sites = variant_lookup_sites()
+    assert len(sites) <= MAX_VARIANT_LOOKUP_SITES, "\n".join(sites)
+
+
+def test_a_planted_variant_lookup_is_counted(tmp_path):
+    planted = tmp_path / "planted.py"
+    planted.write_text("from cross_checks.engines import resolve as r, get_adapter\nfrom cross_checks "
+                       "import engines as E\n\n\ndef f(v):\n    get_adapter('x')\n    return r(v), "
+                       "E.split_variant(v), E.get_adapter(v)\n")
+    assert _variant_lookups(planted) == [(7, "resolve"), (7, "split_variant")]

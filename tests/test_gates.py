@@ -13,6 +13,7 @@ import pytest
 
 from cross_checks.analysis.expectations import EQUIVALENT_PAIRS, energy_drift_bound
 from cross_checks.core.tolerances import SAME_SCHEME_REL
+from cross_checks.engines import resolve
 from cross_checks.gates.compare import compare_dirs, to_text
 from cross_checks.scenario import catalog_names, load_scenario
 from cross_checks.sweep import run_sweep
@@ -59,7 +60,7 @@ def _check_energy_bounds(results, scenario):
     sc = load_scenario(scenario)
     over = []
     for _, r in results[(results["scenario"] == scenario) & (results["status"] == "ok")].iterrows():
-        bound = energy_drift_bound(sc, r["engine"], float(r["dt"]))
+        bound = energy_drift_bound(sc, resolve(r["engine"]), float(r["dt"]))
         if bound is not None and not r["energy_drift_max"] <= bound:
             over.append(f"{r['engine']} dt={r['dt']:g}: {r['energy_drift_max']:.3g} > {bound:.3g}")
     assert not over, "\n".join(over)

@@ -10,6 +10,10 @@ order otherwise (docs/verdicts.md §3).
 The reason strings end up, verbatim, in summary.json and in the report's findings, so they are
 written as sentences for users. Orders are global orders of the error at a fixed final time,
 ``e(Δt) ≈ C Δt^p``; in the one-step mode the local order is p + 1.
+
+Every ``variant`` here is a :class:`~cross_checks.engines.Resolved` (``cross_checks.engines.resolve``): the
+entry points (the CLI, assert_engine, the sweep's and the fuzz's plans) resolve a name once and pass it
+down; nothing here looks a name up again.
 """
 from __future__ import annotations
 
@@ -19,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cross_checks.core.quantities import QUANTITIES
-from cross_checks.engines import Resolved, resolve
+from cross_checks.engines import Resolved
 from cross_checks.engines.base import DEFAULT_TRAITS, Traits
 from reference_sim.analytic import EQUAL_MOMENTS_REL_TOL
 
@@ -32,10 +36,10 @@ __all__ = ["energy_drift_bound", "characteristic_rate_sq", "QUANTITIES",
            "INVARIANT_WORDS", "gyroscopic_clamp_acts"]
 
 
-def traits(variant: str | Resolved) -> Traits:
+def traits(variant: Resolved) -> Traits:
     """The traits ``ENGINE:VARIANT`` declares (Variant.traits), or those of the variant it declares it
     imitates (Variant.imitates); DEFAULT_TRAITS for one this module does not know (Resolved.traits)."""
-    return resolve(variant).traits
+    return variant.traits
 
 
 #: Pairs that implement the same arithmetic and must agree to round-off (tolerances.SAME_SCHEME_REL).
@@ -107,18 +111,18 @@ class Expectation:
         return {"expected_verdict": self.verdict, "expected_order": self.order, "reason": self.reason}
 
 
-def precision(variant: str | Resolved) -> str:
+def precision(variant: Resolved) -> str:
     """The floating-point format ``variant`` computes in (Traits.precision): "float64" or "float32"."""
-    return resolve(variant).precision
+    return variant.precision
 
 
-def machine_epsilon(variant: str | Resolved) -> float:
+def machine_epsilon(variant: Resolved) -> float:
     """ε of ``variant``'s precision (tolerances.MACHINE_EPSILON) times its declared Traits.rounding_factor:
     the unit of every round-off floor of its runs (and twice the unit roundoff of its one-step allowance)."""
-    return resolve(variant).rounding_unit
+    return variant.rounding_unit
 
 
-def judged_ladder_s(scenario, variant: str | Resolved) -> tuple:
+def judged_ladder_s(scenario, variant: Resolved) -> tuple:
     """The Δt ladder (s, descending) ``variant`` is judged on: the scenario's; for a variant whose precision
     leaves its finer rungs at round-off (float32), that ladder plus coarser rungs (each of half the steps of
     the last, ⌊N/2⌋, so that T/Δt stays whole) until PRECISION_LADDER_MIN_RESOLVED rungs are expected resolved
@@ -132,7 +136,7 @@ def judged_ladder_s(scenario, variant: str | Resolved) -> tuple:
     PRECISION_LADDER_STEP_ANGLE_PER_ORDER_RAD and the run keeps PRECISION_LADDER_MIN_STEPS steps; the finer
     rungs stay (the fit says which were at round-off)."""
     from cross_checks.core import tolerances as tol
-    v = resolve(variant)
+    v = variant
     dts = sorted({float(d) for d in scenario.dt_ladder_s}, reverse=True)
     eps = v.rounding_unit
     if eps <= tol.ROUNDOFF_PER_STEP_REL or not dts:
@@ -160,11 +164,11 @@ def judged_ladder_s(scenario, variant: str | Resolved) -> tuple:
     return tuple(dts)
 
 
-def nominal_order(variant: str | Resolved) -> float | None:
+def nominal_order(variant: Resolved) -> float | None:
     """The nominal global order of ``ENGINE:VARIANT``, the same for every quantity: the order its adapter
     declares (rbcheck's own adapters and a user's engine file or entry point alike; verdicts then check
     it); None for a name nobody declares."""
-    return resolve(variant).order
+    return variant.order
 
 
 def _isotropic(inertia_B) -> bool:
@@ -229,7 +233,7 @@ def characteristic_rate_sq(scenario) -> float:
     return max(rates)
 
 
-def expectation(scenario, variant: str | Resolved, quantity: str, mode: str = "free_running", physics=None, *,
+def expectation(scenario, variant: Resolved, quantity: str, mode: str = "free_running", physics=None, *,
                 measure_physics: bool = True) -> Expectation:
     """The expected verdict and order of ``variant`` on ``scenario`` for ``quantity``.
 
@@ -241,7 +245,6 @@ def expectation(scenario, variant: str | Resolved, quantity: str, mode: str = "f
     unless ``measure_physics`` is False: then no pre-asymptotic decision is made, e.g. for a scenario
     whose reference could not be computed, where every run is a failed row anyway).
     """
-    variant = resolve(variant)
     e = _expectation(scenario, variant, quantity, mode, physics, measure_physics)
     prec, factor = variant.precision, float(variant.traits.rounding_factor)
     return (e if (prec, factor) == (e.precision, e.rounding_factor)
@@ -280,13 +283,13 @@ def rotation_turns(scenario) -> bool:
                 or any(np.any(pf.point_B != 0) for pf in fm.point_forces))
 
 
-def gyroscopic_clamp_acts(scenario, variant: str | Resolved, physics=None,
+def gyroscopic_clamp_acts(scenario, variant: Resolved, physics=None,
                          measure_physics: bool = True) -> float | None:
     """The largest gyroscopic torque |ω × (I ω)| (N m) of the scenario's motion when ``variant``'s step clamps
     it (Traits.gyroscopic_clamp_N_m) below that — the clamp acts and the step solves another equation —
     else None. Measured on the reference (physics.MotionRates.gyroscopic_torque_max; ``physics`` measured here
     when omitted, unless ``measure_physics`` is False: then None)."""
-    limit = resolve(variant).traits.gyroscopic_clamp_N_m
+    limit = variant.traits.gyroscopic_clamp_N_m
     if limit is None or (physics is None and not measure_physics):
         return None
     if not gyroscopic_term_matters(scenario):
@@ -400,7 +403,7 @@ def _pre_asymptotic_reason(scenario, variant: Resolved, quantity, tr: Traits, ph
     return ""
 
 
-def expected_order(variant: str | Resolved, quantity: str, scenario=None) -> float | None:
+def expected_order(variant: Resolved, quantity: str, scenario=None) -> float | None:
     """The expected global order of ``variant`` for ``quantity`` (None where it is expected not to
     converge). ``scenario``: a Scenario, a catalog name, or None (then the nominal order)."""
     if scenario is None:
@@ -411,7 +414,7 @@ def expected_order(variant: str | Resolved, quantity: str, scenario=None) -> flo
     return expectation(scenario, variant, quantity).order
 
 
-def energy_drift_bound(scenario, variant: str | Resolved, dt_s: float) -> float | None:
+def energy_drift_bound(scenario, variant: Resolved, dt_s: float) -> float | None:
     """Upper bound on the maximum relative energy drift of ``variant`` on a conservative scenario.
 
     An order-p scheme's global error over T at step Δt on a motion of angular frequency ω is
@@ -422,7 +425,7 @@ def energy_drift_bound(scenario, variant: str | Resolved, dt_s: float) -> float 
     """
     if not scenario.problem.forces.conservative:
         return None
-    v = resolve(variant)
+    v = variant
     tr = v.traits
     if not tr.gyroscopic_term and gyroscopic_term_matters(scenario):
         return None
@@ -476,9 +479,9 @@ class LongRunExpectation:
                 "reason": self.reason}
 
 
-def long_run_expectation(variant: str | Resolved) -> LongRunExpectation:
+def long_run_expectation(variant: Resolved) -> LongRunExpectation:
     """The :class:`LongRunExpectation` of ``variant`` from its declared traits (nothing else)."""
-    tr = resolve(variant).traits
+    tr = variant.traits
     keeps = list(tr.keeps)
     norm_implied = tr.rotation_drift == "momentum" or "angular_momentum" in keeps
     if norm_implied and "angular_momentum_norm" not in keeps:

@@ -214,8 +214,8 @@ def run_floor(variant, quantity: str, n_steps: int, dt_s: float, scales: dict, r
               amplification: float = 1.0, lever: dict | None = None,
               reference_label: str = "analytic") -> float:
     """THE round-off floor of a run (the sweep's convergence records, its refinement and the fuzz's order
-    properties all take theirs from here): ``n_steps`` steps of ``dt_s`` of ``variant`` (an ENGINE:VARIANT,
-    resolved here unless it already is) in ``quantity``, in the unit of ``scales[quantity]``:
+    properties all take theirs from here): ``n_steps`` steps of ``dt_s`` of ``variant`` (a Resolved
+    ENGINE:VARIANT, cross_checks.engines.resolve) in ``quantity``, in the unit of ``scales[quantity]``:
 
     * :func:`roundoff_floor`: the reference's measured ``reference_error`` plus the run's own round-off in
       the variant's rounding unit (ε of its precision × its rounding factor), grown by ``amplification``;
@@ -226,8 +226,6 @@ def run_floor(variant, quantity: str, n_steps: int, dt_s: float, scales: dict, r
       (:func:`lever_arms` along the reference; None: not measured, no lever term), in its precision's ε.
 
     A one-step run is ``n_steps = 1`` with the reference's one-step error and ``amplification`` 1."""
-    from cross_checks.engines import resolve
-    variant = resolve(variant)
     eps = variant.rounding_unit
     f = roundoff_floor(scales[quantity], n_steps, reference_label, reference_error=reference_error,
                        amplification=amplification, quantity=quantity, eps=eps)

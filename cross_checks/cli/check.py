@@ -54,9 +54,9 @@ def run_check(args) -> int:
     results = []
     compare_with = _user_variants()
     if args.scheme is not None:
-        from cross_checks.engines import UnknownVariant, split_variant
+        from cross_checks.engines import UnknownVariant, resolve
         try:
-            split_variant(args.scheme)
+            args.scheme = resolve(args.scheme, strict=True)
         except UnknownVariant as exc:
             raise BadInput(f"--scheme: {exc}") from None
     for i, path in enumerate(args.trajectories):

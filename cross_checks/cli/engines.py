@@ -20,7 +20,7 @@ def use_engine_files(paths) -> None:
 def resolve_engines(specs):
     """``--engines`` values -> (variants to run, {variant: why skipped}) ; BadInput for unknown or
     explicitly requested unavailable ones."""
-    from cross_checks.engines import UnknownVariant, all_variants, engine_variants, split_variant
+    from cross_checks.engines import UnknownVariant, all_variants, engine_variants, resolve
 
     _refuse_unusable_required_engines()
     infos = {v.name: v for v in all_variants()}
@@ -38,7 +38,7 @@ def resolve_engines(specs):
             raise BadInput(f"--engines {spec}: {infos[spec + ':*'].reason}")
         for n in names:
             try:
-                split_variant(n)
+                n = resolve(n, strict=True)
             except UnknownVariant as exc:
                 raise BadInput(f"--engines: {exc}") from None
             if not infos[n].available:

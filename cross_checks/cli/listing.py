@@ -9,15 +9,6 @@ import sys
 from cross_checks.cli.errors import EXIT_OK
 
 
-def _default_or_none(engine: str):
-    """The default ``ENGINE:VARIANT`` of an engine, None for one that cannot be loaded."""
-    from cross_checks.engines import UnknownVariant, default_variant
-    try:
-        return default_variant(engine)
-    except UnknownVariant:
-        return None
-
-
 def _list_json() -> str:
     """``rbcheck list --json``: the catalog and every variant, machine-readable."""
     import json
@@ -30,15 +21,12 @@ def _list_json() -> str:
         sc = load_scenario(name)
         scenarios.append({"name": sc.name, "description": sc.description, "reference": sc.reference,
                           "duration_s": sc.duration_s, "dt_s": sc.dt_s, "dt_ladder_s": list(sc.dt_ladder_s)})
-    defaults = {}
     variants = []
     for v in all_variants():
-        if v.engine not in defaults:
-            defaults[v.engine] = _default_or_none(v.engine)
         variants.append({"name": v.name, "engine": v.engine, "variant": v.variant, "available": v.available,
                          "reason": v.reason, "version": v.version, "declared_order": v.order,
                          "description": v.description, "source": v.source,
-                         "default": v.name == defaults[v.engine]})
+                         "default": v.default})
     long_runs = []
     for name in long_run_names():
         sc = load_scenario(name)
@@ -63,15 +51,13 @@ def cmd_list(args) -> int:
         sc = load_scenario(name)
         print(f"  {name:<22} {sc.description}")
     print("\nEngine variants:")
-    shown, defaults = set(), {}
+    shown = set()
     for v in all_variants():
         if v.engine not in shown and not v.source.endswith("(rbcheck)"):
             print(f"  {v.engine}: from {v.source}")
         shown.add(v.engine)
         state = f"available ({v.engine} {v.version})" if v.available else f"UNAVAILABLE: {v.reason}"
-        if v.engine not in defaults:
-            defaults[v.engine] = _default_or_none(v.engine)
-        if v.name == defaults[v.engine]:
+        if v.default:
             state += f"; the default: run --engine {v.engine}"
         print(f"  {v.name:<26} {state}")
         text = v.description + (f" (order {v.order:g})" if v.order is not None else "")

@@ -107,6 +107,15 @@ def _add_list(sub) -> None:
     _add_engine_file_option(ls)
 
 
+def _add_dt_duration(p, dt_words: str) -> None:
+    """``--dt`` (``dt_words``, default the scenario's dt) and ``--duration``: the step and the simulated time
+    of a command that runs or resolves one scenario (show, run)."""
+    p.add_argument("--dt", type=_positive_float, metavar="DT",
+                   help=f"{dt_words} (default: the scenario's dt)")
+    p.add_argument("--duration", type=_positive_float, metavar="T",
+                   help="simulated time, s (default: the scenario's)")
+
+
 def _add_show(sub) -> None:
     sh = sub.add_parser(
         "show",
@@ -119,10 +128,7 @@ def _add_show(sub) -> None:
     sh.add_argument("scenario", metavar="SCENARIO")
     sh.add_argument("--json", action="store_true",
                     help="print the resolved scenario JSON instead of the text")
-    sh.add_argument("--dt", type=_positive_float, metavar="DT",
-                    help="resolve at this time step, s (default: the scenario's dt)")
-    sh.add_argument("--duration", type=_positive_float, metavar="T",
-                    help="simulated time, s (default: the scenario's)")
+    _add_dt_duration(sh, "resolve at this time step, s")
 
 
 def _add_run(sub) -> None:
@@ -132,10 +138,7 @@ def _add_run(sub) -> None:
                    help="e.g. reference:course, mujoco:rk4; an engine name alone runs its default "
                         "variant (the first `rbcheck list` shows: reference:course, mujoco:euler, "
                         "pybullet:multibody)")
-    r.add_argument("--dt", type=_positive_float, metavar="DT",
-                   help="time step, s (default: the scenario's dt)")
-    r.add_argument("--duration", type=_positive_float, metavar="T",
-                   help="simulated time, s (default: the scenario's)")
+    _add_dt_duration(r, "time step, s")
     r.add_argument("--out", required=True, metavar="FILE.csv",
                    help="trajectory CSV (sidecar FILE.json beside it)")
     _add_engine_file_option(r)

@@ -39,20 +39,11 @@ def _did_you_mean(name: str) -> str:
 
 
 def cmd_run(args) -> int:
-    from cross_checks.engines import (
-        EngineError,
-        EngineUnavailable,
-        UnknownVariant,
-        default_variant,
-        run_variant,
-        split_variant,
-    )
+    from cross_checks.engines import EngineError, EngineUnavailable, UnknownVariant, resolve, run_variant
     from cross_checks.scenario import load_scenario
 
     try:
-        if ":" not in args.engine:  # an engine name alone: its default variant
-            args.engine = default_variant(args.engine)
-        split_variant(args.engine)
+        args.engine = resolve(args.engine, strict=True, engine_alone=True)   # a name alone: its default
     except UnknownVariant as exc:
         raise BadInput(f"--engine: {exc}{_did_you_mean(args.engine)}") from None
     out = check_out_path(args.out)

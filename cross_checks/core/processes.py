@@ -23,9 +23,10 @@ import threading
 import time
 from pathlib import Path
 
-__all__ = ["CannotStart", "run_command", "supervised", "wait", "kill_group", "kill_strays", "TermKillsGroup",
-           "Tail", "become_subreaper", "die_with_parent", "children", "descendants", "start_ticks", "is_gone",
-           "end_processes", "kill_pool", "exit_words", "SUPERVISOR", "OUTPUT_TAIL_CHARS", "OUTPUT_TAIL_BYTES"]
+__all__ = ["CannotStart", "run_command", "supervised", "wait", "with_timer", "kill_group", "kill_strays",
+           "TermKillsGroup", "Tail", "become_subreaper", "die_with_parent", "children", "descendants",
+           "start_ticks", "is_gone", "end_processes", "kill_pool", "exit_words", "SUPERVISOR",
+           "OUTPUT_TAIL_CHARS", "OUTPUT_TAIL_BYTES"]
 
 #: Characters of a command's stderr/stdout kept for its message (:meth:`Tail.words`).
 OUTPUT_TAIL_CHARS = 600
@@ -359,27 +360,36 @@ def run_command(argv: list, cwd: Path, timeout_s: float, private: Path | None = 
     return proc.returncode, timed_out, err.words() or out.words()
 
 
+def with_timer(work, after_s: float, on_time) -> bool:
+    """Call ``work()``; when it has not returned after ``after_s`` seconds, ``on_time()`` runs once, from a
+    daemon timer thread, while it goes on (it may end it: kill the process ``work`` waits for). True when
+    ``on_time`` ran. The timer is cancelled however ``work`` ends."""
+    fired = threading.Event()
+
+    def fire():
+        fired.set()
+        on_time()
+
+    timer = threading.Timer(after_s, fire)
+    timer.daemon = True
+    timer.start()
+    try:
+        work()
+    finally:
+        timer.cancel()
+    return fired.is_set()
+
+
 def wait(proc, timeout_s: float) -> bool:
     """Wait for ``proc`` at most ``timeout_s``; True when the time ran out. A pidfd (Linux) wakes the
     instant the process exits; elsewhere a timer thread kills the group at the limit."""
     try:
         fd = os.pidfd_open(proc.pid)
     except (AttributeError, OSError):
-        expired = threading.Event()
-
-        def on_timeout():
-            expired.set()
+        def kill():
             with contextlib.suppress(ProcessLookupError, PermissionError):
                 os.killpg(proc.pid, signal.SIGKILL)
-
-        timer = threading.Timer(timeout_s, on_timeout)
-        timer.daemon = True
-        timer.start()
-        try:
-            proc.wait()
-        finally:
-            timer.cancel()
-        return expired.is_set()
+        return with_timer(proc.wait, timeout_s, kill)
     try:
         poller = select.poll()
         poller.register(fd, select.POLLIN)

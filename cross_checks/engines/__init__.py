@@ -64,6 +64,7 @@ class VariantInfo:
     source: str = ""             # where the engine comes from (entry point or engine file)
     installed: bool = True       # False: the engine's package is not installed at all (vs. failing to import)
     required: bool = False       # one of REQUIRED_ENGINES (rbcheck's own dependencies)
+    default: bool = False        # the variant the engine's name alone means (default_variant)
 
 
 @dataclass
@@ -365,6 +366,11 @@ class Resolved(str):
     def __repr__(self) -> str:
         return f"Resolved({str(self)!r})"
 
+    def cannot_express(self, scenario) -> str:
+        """:func:`not_expressible` of ``scenario`` for this variant: "" when its engine can run the scenario's
+        physics as written, else the engine's sentence."""
+        return not_expressible(scenario, self)
+
     @property
     def adapter(self) -> EngineAdapter:
         """The engine's adapter (:func:`get_adapter`: EngineUnavailable when it cannot run here)."""
@@ -375,15 +381,21 @@ def _rebuilt(name: str, fields: dict) -> Resolved:
     return Resolved(name, **fields)
 
 
-def resolve(name) -> Resolved:
-    """``name`` (``ENGINE:VARIANT``) as a :class:`Resolved` (itself when it already is one). Never raises: a
-    name no loadable engine declares resolves to the cautious defaults (no order, DEFAULT_TRAITS), as its
-    verdicts are then judged; :func:`split_variant` is the strict lookup for user input."""
-    if isinstance(name, Resolved):
+def resolve(name, *, strict: bool = False, engine_alone: bool = False) -> Resolved:
+    """``name`` (``ENGINE:VARIANT``) as a :class:`Resolved` (itself when it already is one). Without
+    ``strict`` it never raises: a name no loadable engine declares (one read from someone else's results)
+    resolves to the cautious defaults (no order, DEFAULT_TRAITS), as its verdicts are then judged. ``strict``
+    (a user's input): UnknownVariant, with :func:`split_variant`'s words, unless a loadable engine declares
+    the name; ``engine_alone``: an engine name alone means its default variant (:func:`default_variant`)."""
+    if isinstance(name, Resolved) and (name.known or not strict):
         return name
     from cross_checks.core.tolerances import MACHINE_EPSILON
     from cross_checks.engines.base import DEFAULT_TRAITS
     name = str(name)
+    if engine_alone and ":" not in name:
+        name = default_variant(name)
+    if strict:
+        split_variant(name)
     engine, _, variant = name.partition(":")
     spec = declared_variant(name)
     imitates = getattr(spec, "imitates", "") or ""
@@ -425,7 +437,7 @@ def not_expressible(scenario, name: str) -> str:
     """"" when engine variant ``name`` can run ``scenario``'s physics as written, else the engine's sentence
     saying what of it the engine cannot take (EngineAdapter.expressible). An engine that cannot be loaded
     here says nothing (its runs fail with the reason it cannot run)."""
-    engine, variant = split_variant(name)
+    engine, variant = (name.engine, name.variant) if isinstance(name, Resolved) else split_variant(name)
     try:
         adapter = get_adapter(engine)
     except Exception:  # noqa: BLE001 - unavailable: its runs say why
@@ -447,9 +459,9 @@ def all_variants() -> list[VariantInfo]:
             ok, reason, ver = True, "", _versions[e.name]
         except EngineUnavailable as exc:
             ok, reason, ver = False, str(exc), ""
-        for v, spec in e.adapter.variants.items():
+        for i, (v, spec) in enumerate(e.adapter.variants.items()):
             out.append(VariantInfo(f"{e.name}:{v}", e.name, v, ok, reason, spec.description, ver, spec.order,
-                                   e.source, e.name not in _absent, required))
+                                   e.source, e.name not in _absent, required, default=i == 0))
     return out
 
 
@@ -459,8 +471,9 @@ def unusable_required_engines() -> dict:
     return {v.engine: v.reason for v in all_variants() if v.required and not v.available}
 
 
-def available_variants() -> list[str]:
-    return [v.name for v in all_variants() if v.available]
+def available_variants() -> list[Resolved]:
+    """Every ENGINE:VARIANT that can run here, resolved (:class:`Resolved`)."""
+    return [resolve(v.name) for v in all_variants() if v.available]
 
 
 def engine_provenance(engine: str) -> dict:

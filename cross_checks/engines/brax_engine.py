@@ -33,7 +33,7 @@ import numpy as np
 
 from cross_checks.engines import base, forces, install, runtimes
 from cross_checks.engines.base import EngineError, Traits, Variant
-from cross_checks.engines.world import World, WorldEngine
+from cross_checks.engines.world import HostRowsWorld, WorldEngine
 from reference_sim.simulate import bad_rows
 
 __all__ = ["ENGINE", "VARIANTS", "CHUNK", "ONE_STEP_MIN_BATCH",
@@ -340,29 +340,18 @@ def _initial(variant: str, batch: int):
     return jax.jit(init)
 
 
-class BraxWorld(World):
+class BraxWorld(HostRowsWorld):
     """One scenario's runs (any Δt each) in one brax batch; raw rows are packed states. Its rollout takes
     every force (:func:`_mode_and_consts`; state-dependent ones called back from the compiled step) and the
     decay; compilation and callbacks are counted in ``host_s``."""
 
-    rollout_takes_all_forces = True
-
     def __init__(self, requests, variant: str):
-        super().__init__()
+        super().__init__(requests)
         self.lib = _usable()
         self.scenario, self.variant = requests[0].scenario, variant
         self.sys = _system_of(self.scenario, variant)
         self.dts = [float(r.dt_s) for r in requests]
         self.modes = [_mode_and_consts(self.scenario, variant, dt) for dt in self.dts]
-        self.ends = [int(r.n_steps) for r in requests]
-        self.host_s = 0.0
-        self.y = np.empty((len(requests), 13))
-
-    def set_state(self, y):
-        self.y = np.array(y, dtype=float)
-
-    def read(self):
-        return self.y
 
     def rollout(self, n_steps, harness):
         """The states (n_steps, B, 13) after each step (NaN after a run's last step or its first chunk with

@@ -36,7 +36,7 @@ from cross_checks.engines.base import EngineError, Traits, Variant
 from cross_checks.engines.world import World, WorldEngine
 
 __all__ = ["ENGINE", "VARIANTS", "CHUNK", "ONE_STEP_BATCH", "MAX_BATCH", "EngineError", "version", "simulate",
-           "simulate_many", "one_step", "device_model", "compile_stats", "reset_compiled", "jax_cache_dir",
+           "simulate_many", "one_step", "device_model", "compile_stats", "jax_cache_dir",
            "MjxWorld", "MjxAdapter"]
 
 ENGINE = "mjx"
@@ -80,11 +80,7 @@ def _check_installed() -> None:
     """EngineNotInstalled when mujoco-mjx is not installed; ImportError when it is but MJX or JAX cannot be
     found — from package metadata and import specs only (nothing imported, no JAX backend started)."""
     import importlib.util
-    install.check_installed(_DIST, _HINT)
-    for mod in ("jax", "jaxlib"):
-        if importlib.util.find_spec(mod) is None:
-            raise ImportError(f"{_DIST} {install.installed_version(_DIST)} is installed but cannot be "
-                              f"imported: {mod} is missing ({_HINT})")
+    install.check_installed(_DIST, _HINT, needs=(("jax", "jax"), ("jaxlib", "jaxlib")))
     if importlib.util.find_spec("mujoco.mjx") is None:
         raise ImportError(f"{_DIST} {install.installed_version(_DIST)} is installed but mujoco.mjx cannot be "
                           "found")
@@ -131,13 +127,6 @@ def compile_stats() -> dict:
     compile, wall s), and the stepping apart from it: ``step_seconds`` (wall s inside compiled loops) and
     ``body_steps`` (steps × bodies they advanced)."""
     return dict(_STATS)
-
-
-def reset_compiled() -> None:
-    """Forget the compiled executables and zero :func:`compile_stats` (the next run compiles again; JAX's
-    persistent cache may make that faster)."""
-    _COMPILED.clear()
-    _STATS.reset()
 
 
 def _executable(key, fn, *args):

@@ -55,7 +55,6 @@ VARIANTS = {
                         traits=base.SYMPLECTIC_EULER_IMPLICIT_GYRO),
 }
 
-_BODY = 1  # body id of the free body (0 is the world)
 #: From this many bodies in a world on, a rollout steps with ``mj_step`` from Python and copies each step's
 #: qpos and qvel (a few µs per step) instead of calling ``mujoco.rollout``, which records the full physics
 #: state of every step: 0.2 µs more per body-step, measured (docs/speed.md); the same numbers, bit for bit.
@@ -258,18 +257,11 @@ def forces_per_stage(scenario, variant) -> bool:
     return variant == "rk4" and (fm.state_dependent or fm.has_decay) and _RK4_STAGE_FORCES
 
 
-def _apply(xfrc, f, tau, weight):
-    """World force ``f`` at the COM minus the weight (MuJoCo applies gravity itself) and world torque
-    ``tau`` into the body's row of xfrc_applied (MuJoCo never clears it)."""
-    xfrc[0:3] = f - weight
-    xfrc[3:6] = tau
-
-
 def _stage_force_writer(scenario, qpos, qvel, xfrc, weight, form=None):
     """Control callback body for one body, whose (stage) state is in the views ``qpos`` (7) and ``qvel`` (6)
-    of the world's MjData: its forces into its row ``xfrc`` of xfrc_applied, as :func:`_apply` writes them,
-    in plain floats (it runs at every RK4 stage). The torques fixed in body axes are not among them: MuJoCo
-    holds them in qfrc_applied (MujocoEngine.takes_body_torque)."""
+    of the world's MjData: its forces into its row ``xfrc`` of xfrc_applied, the weight taken off (MuJoCo
+    applies gravity), in plain floats (it runs at every RK4 stage). The torques fixed in body axes are not
+    among them: MuJoCo holds them in qfrc_applied (MujocoEngine.takes_body_torque)."""
     import dataclasses
     w0, w1, w2 = (float(c) for c in weight)
     host = host_problem(scenario.problem, MujocoEngine.takes_body_torque)
@@ -340,13 +332,6 @@ class BodyForm:
 _LAST = threading.local()
 
 
-def _set_variant(m, variant, dt_s):
-    """Compiled model ``m`` set to ``variant``'s integrator and step ``dt_s`` (in place)."""
-    m.opt.integrator = integrator_of(variant)
-    m.opt.timestep = float(dt_s)
-    return m
-
-
 def _model(scenarios, variant, dt_s):
     """``build_world_model(scenarios, variant, dt_s)``, or the thread's model of those scenarios set to them
     (``scenarios``: one scenario, or a list)."""
@@ -357,7 +342,8 @@ def _model(scenarios, variant, dt_s):
     for scs, builder, m in kept:
         if builder is build_world_model and len(scs) == len(scenarios) and all(
                 a is b for a, b in zip(scs, scenarios)):
-            return _set_variant(m, variant, dt_s)
+            m.opt.integrator, m.opt.timestep = integrator_of(variant), float(dt_s)   # in place
+            return m
     m = build_world_model(scenarios, variant, dt_s)
     kept.append((scenarios, build_world_model, m))
     del kept[:-8]

@@ -58,7 +58,7 @@ import numpy as np
 
 from cross_checks.engines import base, install
 
-__all__ = ["World", "WorldEngine"]
+__all__ = ["World", "HostRowsWorld", "WorldEngine"]
 
 
 class World:
@@ -110,6 +110,26 @@ class World:
 
     def close(self) -> None:
         pass
+
+
+class HostRowsWorld(World):
+    """A world whose bodies' states are kept on the host as packed rows (B, 13) between calls of a compiled
+    ``rollout`` that takes every force itself (a JAX engine: Brax, jaxsim): ``set_state`` keeps a copy,
+    ``read`` gives it; ``ends`` holds each request's steps, ``host_s`` the seconds that are rbcheck's."""
+
+    rollout_takes_all_forces = True
+
+    def __init__(self, requests):
+        super().__init__()
+        self.ends = [int(r.n_steps) for r in requests]
+        self.host_s = 0.0
+        self.y = np.empty((len(requests), 13))
+
+    def set_state(self, y):
+        self.y = np.array(y, dtype=float)
+
+    def read(self):
+        return self.y
 
 
 class WorldEngine(base.EngineAdapter):

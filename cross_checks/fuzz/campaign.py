@@ -85,8 +85,8 @@ def _cache_path(cache_root, key):
 
 
 def compute_batch(seed, batch, variants) -> dict:
-    from cross_checks.engines import resolve
-    variants = [resolve(v) for v in variants]   # once per batch: every property reads what they declare
+    """One batch of ``variants`` (Resolved: :func:`run_campaign` resolves them once; every property reads
+    what they declare)."""
     n0 = N0_CYCLE[batch % len(N0_CYCLE)]
     draws = [generate.draw(seed, batch * BATCH + k) for k in range(BATCH)]
     from threadpoolctl import threadpool_limits
@@ -384,6 +384,7 @@ def run_campaign(variants, out_dir, *, budget_s: float, seed: int = 0, jobs: int
     """Search, shrink, confirm, and write DIR (``fuzz.json``, ``counterexamples/*.toml``; the caller adds the
     HTML page through ``finish(staging_dir)``, inside the atomic replacement). Returns the summary. Raises
     FuzzError on an unusable DIR."""
+    from cross_checks.engines import resolve
     from cross_checks.sweep.cache import cache_dir
     from cross_checks.sweep.results_dir import (
         ResultsDirError,
@@ -392,6 +393,7 @@ def run_campaign(variants, out_dir, *, budget_s: float, seed: int = 0, jobs: int
         staging_dir,
         write_marker,
     )
+    variants = [resolve(v) for v in variants]   # once: the batches, the shrinking and the summary use these
     log = log or (lambda s: print(s, file=sys.stderr))
     try:
         out = check_output_dir(str(out_dir))

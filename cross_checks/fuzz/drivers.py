@@ -13,7 +13,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from cross_checks.core import tolerances as tol
-from cross_checks.engines import resolve
 from cross_checks.engines.base import EngineError, RunRequest
 from cross_checks.sweep.lifecycle import each_within_limits
 
@@ -75,9 +74,9 @@ def _simulated(adapter, var, requests) -> list:
     return [f"EngineError: {r}" if isinstance(r, EngineError) else r for r in runs]
 
 
-def run_ladder(variant: str, scenarios, h0s, n0: int) -> list:
-    """The free runs of ``variant`` on every case at h0, h0/2, h0/4 (``n0``, 2 n0, 4 n0 steps): [Runs] × 3."""
-    variant = resolve(variant)   # the batch's Resolved (a name, when a caller gives one)
+def run_ladder(variant, scenarios, h0s, n0: int) -> list:
+    """The free runs of ``variant`` (a Resolved) on every case at h0, h0/2, h0/4 (``n0``, 2 n0, 4 n0 steps):
+    [Runs] × 3."""
     adapter, var = variant.adapter, variant.variant
     out = [_empty_runs(np.asarray(h0s, dtype=float) / 2 ** r, n0 * 2 ** r) for r in range(RUNGS)]
     cannot = [adapter.expressible(sc, var) for sc in scenarios]
@@ -92,10 +91,9 @@ def run_ladder(variant: str, scenarios, h0s, n0: int) -> list:
     return out
 
 
-def one_step(variant: str, scenarios, hs, y_start):
+def one_step(variant, scenarios, hs, y_start):
     """One step of ``hs[j]`` from ``y_start[j]`` (M, 13) for members of ``scenarios[j]``: (M, 13), NaN
     where the engine failed; None when the engine has no one-step mode."""
-    variant = resolve(variant)
     if not variant.one_step:
         return None
     adapter, var = variant.adapter, variant.variant

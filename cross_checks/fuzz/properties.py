@@ -36,7 +36,6 @@ from cross_checks.analysis.expectations import (
 from cross_checks.analysis.judge import judge_ladder
 from cross_checks.core import tolerances as tol
 from cross_checks.core.quantities import QUANTITIES, UNITS, state_errors
-from cross_checks.engines import resolve
 
 __all__ = ["Context", "ladder_errors", "free_running_order", "case_floor", "one_step_order", "conservation",
            "agreement", "PROPERTIES", "equivalent_pairs", "invariance", "case_transform"]
@@ -70,7 +69,7 @@ class Context:
     lever: dict = None    # analysis.metrics.lever_arms along y_ref (None: no lever-arm term)
 
 
-def case_floor(ctx, variant: str, q: str, n: int, h_s: float, reference_error,
+def case_floor(ctx, variant, q: str, n: int, h_s: float, reference_error,
                amplification: float = 1.0) -> float:
     """The round-off floor of a run of ``n`` steps of ``h_s`` of case ``ctx`` for quantity ``q``: the one
     rule of the sweep and the fuzz, :func:`cross_checks.analysis.metrics.run_floor`, with the case's
@@ -91,7 +90,7 @@ def case_transform(name: str):
     return options[int(np.random.default_rng(seed).integers(len(options)))]
 
 
-def invariance(ctx: Context, variant: str, row: dict) -> tuple:
+def invariance(ctx: Context, variant, row: dict) -> tuple:
     """The invariance property of one case from its check's row (sweep.invariance.check_invariance at the
     case's h0): a violation where it is ``broken``; checked where it holds, loses precision as expected or
     is the step's own; no claim where the engine cannot express it, rbcheck refuses it or the original's
@@ -153,7 +152,7 @@ def ladder_errors(ladder, y_ref, cols) -> list:
     return [state_errors(runs.y[:, cols], y_ref[::n_fine // (len(runs.y) - 1)]) for runs in ladder]
 
 
-def free_running_order(ctx: Context, variant: str, i: int, ladder, errors=None) -> tuple:
+def free_running_order(ctx: Context, variant, i: int, ladder, errors=None) -> tuple:
     """The free-running order property of case ``i`` (runs ``ladder``: [drivers.Runs] × rungs).
     ``errors``: case ``i``'s rows of :func:`ladder_errors` ([{quantity: (n + 1,)}] per rung), when
     measured for the batch at once; measured here otherwise."""
@@ -182,7 +181,7 @@ def free_running_order(ctx: Context, variant: str, i: int, ladder, errors=None) 
     return out, tally
 
 
-def one_step_order(ctx: Context, variant: str, i: int, defects) -> tuple:
+def one_step_order(ctx: Context, variant, i: int, defects) -> tuple:
     """The one-step order property of case ``i``; ``defects`` {quantity: (S,)} the largest defect per
     one-step rung (NaN where the engine failed), or None for an engine without a one-step mode."""
     tally, out = _tally(), []
@@ -204,13 +203,12 @@ def one_step_order(ctx: Context, variant: str, i: int, defects) -> tuple:
 def _models_physics(sc, variant, physics=None) -> bool:
     """The variant models the conserved motion: not the course update where the gyroscopic term matters, nor
     a step whose gyroscopic clamp acts on this motion (expectations.gyroscopic_clamp_acts)."""
-    variant = resolve(variant)
     if variant.traits.gyroscopic_term and gyroscopic_clamp_acts(sc, variant, physics, physics is not None):
         return False
     return variant.traits.gyroscopic_term or not gyroscopic_term_matters(sc)
 
 
-def conservation(ctx: Context, variant: str, i: int, ladder) -> tuple:
+def conservation(ctx: Context, variant, i: int, ladder) -> tuple:
     """Energy and world angular momentum drift of case ``i``'s runs, where the physics conserves them."""
     sc = ctx.scenario
     p = sc.problem
@@ -248,7 +246,7 @@ def conservation(ctx: Context, variant: str, i: int, ladder) -> tuple:
                 size = max(float(np.max(np.linalg.norm(L, axis=1))), momentum_scale)
                 unit = "kg m²/s"
             allowed = (ctx.allowance[kind] * float(runs.h_s[i]) / h0
-                       + n * tol.CHECK_ROUNDINGS_PER_STEP * resolve(variant).rounding_unit * size
+                       + n * tol.CHECK_ROUNDINGS_PER_STEP * variant.rounding_unit * size
                        + _lever_conservation(ctx, kind, I_max, float(runs.h_s[i]) * n, n, variant))
             ratio = drift / allowed if allowed > 0 else (math.inf if drift > 0 else 0.0)
             if worst is None or ratio > worst[0]:
@@ -268,14 +266,14 @@ def conservation(ctx: Context, variant: str, i: int, ladder) -> tuple:
     return out, tally
 
 
-def _lever_conservation(ctx, kind, I_max, t, n, variant: str = "") -> float:
+def _lever_conservation(ctx, kind, I_max, t, n, variant) -> float:
     """What the lever-arm round-off (metrics.lever_roundoff) may move world angular momentum (I_max × the ω it
     adds) or energy (that ω error against I_max |ω|max, and the spurious torque's work) by over time ``t``,
     for a ``variant`` that pays it (Traits.lever_arms)."""
-    if not ctx.lever or not resolve(variant).traits.lever_arms:
+    if not ctx.lever or not variant.traits.lever_arms:
         return 0.0
     lv = M.lever_roundoff(ctx.lever, _EPS)   # in float64's ε, scaled to the variant's rounding unit
-    scale = resolve(variant).rounding_unit / _EPS if variant else 1.0
+    scale = variant.rounding_unit / _EPS
     dw = scale * (lv.get("acc_rad_s2", 0.0) * t + lv.get("omega_rad_s", 0.0) * (1.0 + math.sqrt(n)))
     if kind == "angular_momentum":
         return I_max * dw
@@ -301,7 +299,7 @@ def agreement(ctx: Context, pair, i: int, ladder_a, ladder_b) -> tuple:
     for ra, rb in zip(ladder_a, ladder_b):
         n = len(ra.y) - 1
         h = float(ra.h_s[i])
-        eps = max(resolve(a).rounding_unit, resolve(b).rounding_unit)   # the coarser of the pair's roundings
+        eps = max(a.rounding_unit, b.rounding_unit)   # the coarser of the pair's roundings
         allowed = M.same_scheme_allowance(n, eps, amp)
         sa, sb = ra.status[i], rb.status[i]
         if "failed" in (sa, sb) or "not_expressible" in (sa, sb):

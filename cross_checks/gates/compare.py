@@ -205,7 +205,9 @@ def _expected_order(rec):
         return float(rec["expected_order"])
     try:
         from cross_checks.analysis.expectations import expected_order
-        return expected_order(rec["engine"], rec["quantity"], rec.get("scenario"))
+        from cross_checks.engines import resolve
+        # a name read from a results directory: resolved here, the cautious defaults for one nobody declares
+        return expected_order(resolve(rec["engine"]), rec["quantity"], rec.get("scenario"))
     except Exception:  # noqa: BLE001 - an unknown variant has no expected order
         return None
 

@@ -110,17 +110,16 @@ def _ladder_errors(ladder, q, mode):
     return errs, statuses
 
 
-def local_evidence(rows, variant: str = "") -> LocalEvidence | None:
+def local_evidence(rows, variant) -> LocalEvidence | None:
     """The worst one-step defect of the runs ``rows`` of one (scenario, ``variant``), measured on their own
     recorded states (results.csv's ``step_defect_*``), or None when no run has it."""
-    from cross_checks.engines import resolve
     have = [r for r in rows
             if isinstance(r.get("step_defect_ratio"), float) and math.isfinite(r["step_defect_ratio"])]
     if not have:
         return None
     worst = max(have, key=lambda r: r["step_defect_ratio"])
     return LocalEvidence(worst["step_defect_ratio"], worst["step_defect_quantity"],
-                         worst["dt"], resolve(variant).order)
+                         worst["dt"], variant.order)
 
 
 def convergence_records(scenario, variant, rows, scales, mode, measured=None) -> list:
@@ -130,8 +129,6 @@ def convergence_records(scenario, variant, rows, scales, mode, measured=None) ->
     ``fit_verdict``). ``mode`` is
     ``free_running`` (final errors) or ``one_step`` (local errors)."""
     from cross_checks.analysis.physics import physics_from_dict
-    from cross_checks.engines import resolve
-    variant = resolve(variant)   # the sweep's Resolved (a name, when a caller gives one)
     measured = measured or {}
     phys = physics_from_dict(measured["physics"]) if measured.get("physics") else None
     ladder = sorted([r for r in rows if r["in_ladder"]], key=lambda r: -r["dt"])
@@ -166,7 +163,6 @@ def _agreement(a, b, reason, sc, ra, rb, ref=None) -> dict:
     final states within :func:`cross_checks.analysis.metrics.same_scheme_allowance` (the fuzz's rule too) of
     the default Δt's steps, relative to the reference ``ref``'s scales and grown by its measured
     amplification (without ``ref``: the scales of b's final state, no amplification)."""
-    from cross_checks.engines import resolve
     rec = {"a": a, "b": b, "scenario": sc.name, "dt_s": sc.dt_s, "differences": None, "max_rel": None}
     ta, tb = ra["row"].get("diverged_at_s"), rb["row"].get("diverged_at_s")
     if ra["row"]["status"] == "diverged" == rb["row"]["status"] and ta is not None and tb is not None:
@@ -181,20 +177,24 @@ def _agreement(a, b, reason, sc, ra, rb, ref=None) -> dict:
     else:
         scales, amp = quantity_scales(yb), 1.0
     mx, _ = M.same_scheme_difference(d, scales)
-    allowed = M.same_scheme_allowance(sc.n_steps(), max(resolve(a).rounding_unit, resolve(b).rounding_unit),
-                                      amp)
+    allowed = M.same_scheme_allowance(sc.n_steps(), max(a.rounding_unit, b.rounding_unit), amp)
     return {**rec, "differences": d, "max_rel": mx, "agrees": bool(mx <= allowed),
             "reason": reason, "tolerance": allowed, "note": ""}
 
 
-def agreement_records(scenarios, records_by_key, refs=None) -> list:
-    """Final-state differences of the pairs that implement the same scheme, at each default Δt — only
-    between runs that both ran to the end (two failed runs, or one, make no claim either way: their
-    failures are rows of their own). ``refs``: each scenario's reference (execute.ScenarioReference, in
-    the order of ``scenarios``), whose scales and amplification the allowance is measured in."""
+def agreement_records(scenarios, variants, records_by_key, refs=None) -> list:
+    """Final-state differences of the pairs that implement the same scheme, both among the sweep's
+    ``variants`` (Resolved), at each default Δt — only between runs that both ran to the end (two failed
+    runs, or one, make no claim either way: their failures are rows of their own). ``refs``: each
+    scenario's reference (execute.ScenarioReference, in the order of ``scenarios``), whose scales and
+    amplification the allowance is measured in."""
     out = []
     refs = dict(zip((sc.name for sc in scenarios), refs)) if refs is not None else {}
+    have = {v: v for v in variants}   # the sweep's own Resolved variants, looked up by name
     for a, b, reason in EQUIVALENT_PAIRS:
+        if a not in have or b not in have:
+            continue
+        a, b = have[a], have[b]
         for sc in scenarios:
             ra = records_by_key.get((sc.name, a, sc.dt_s))
             rb = records_by_key.get((sc.name, b, sc.dt_s))

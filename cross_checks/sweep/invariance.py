@@ -43,13 +43,14 @@ def _row(variant, scenario, transform, verdict, assessment, dt="", steps="", jud
     return row
 
 
-def check_invariance(scenario, variant: str, transforms=None, *, scales: dict | None = None,
+def check_invariance(scenario, variant, transforms=None, *, scales: dict | None = None,
                      amplification: dict | None = None) -> list:
-    """The invariance rows of ``variant`` on ``scenario`` for ``transforms`` (default:
-    :func:`~cross_checks.scenario.transforms.default_transforms`). ``scales`` and ``amplification`` (per
-    quantity, as the sweep measures them for its floors); measured here when not given (the scales from the
-    variant's own run of the original, the amplification by references.error_amplification)."""
-    from cross_checks.engines import EngineError, NotExpressible, declared_traits, run_requests
+    """The invariance rows of ``variant`` (a Resolved ENGINE:VARIANT) on ``scenario`` for ``transforms``
+    (default: :func:`~cross_checks.scenario.transforms.default_transforms`). ``scales`` and
+    ``amplification`` (per quantity, as the sweep measures them for its floors); measured here when not given
+    (the scales from the variant's own run of the original, the amplification by
+    references.error_amplification)."""
+    from cross_checks.engines import EngineError, NotExpressible, run_requests
     from cross_checks.engines.base import RunRequest
     transforms = list(default_transforms() if transforms is None else transforms)
     dt, n = scenario.dt_s, scenario.n_steps()
@@ -71,8 +72,7 @@ def check_invariance(scenario, variant: str, transforms=None, *, scales: dict | 
         return rows + [_row(variant, scenario, t, "not judged",
                             f"not judged: the run of the original failed ({why}); see results.csv")
                        for t, _ in todo]
-    traits = declared_traits(variant)
-    precision = getattr(traits, "precision", "float64")
+    traits, precision = variant.traits, variant.precision
     if scales is None:
         scales = quantity_scales(original.y)
     if amplification is None:

@@ -61,11 +61,11 @@ TIMING_COLUMNS = ("wall_s", "engine_s", "cached")
 
 @dataclass(frozen=True)
 class Job:
-    """One run: scenario index (into the sweep's list), variant, Δt, and its role."""
+    """One run: scenario index (into the sweep's list), variant (the plan's Resolved), Δt, and its role."""
 
     scenario_index: int
     scenario: str
-    variant: str
+    variant: str   # a Resolved (cross_checks.engines.resolve): the plan resolved it once
     dt_s: float
     in_ladder: bool
     default_dt: bool
@@ -326,8 +326,7 @@ def run_job_group(jobs, scenario, ref_path: str, cache_root: str | None = None, 
     None), ``series`` (dict of float32 arrays for the default Δt, else None). The runs not cached are asked
     of the engine in one call (:func:`_runs`). A run that finished (ok or diverged) is cached; a failed one
     is not."""
-    from cross_checks.engines import resolve
-    resolved = resolve(jobs[0].variant)   # the plan's Resolved (a name, when a caller gives one)
+    resolved = jobs[0].variant   # the plan's Resolved
     try:
         adapter = resolved.adapter
         version = adapter.version()

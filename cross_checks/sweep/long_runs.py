@@ -113,9 +113,8 @@ def run_long_group(variant: str, scenarios, cache_root: str | None = None, use_c
     """The records of ``variant``'s long runs of ``scenarios`` (in order): cached ones verified and reused,
     the others run in one ``simulate_many`` call (engines.run_requests) within their time limits. A run that
     finished (ok or diverged) is cached; a failed one is not. ``row["cached"]`` says which were reused."""
-    from cross_checks.engines import EngineError, resolve, run_requests
+    from cross_checks.engines import EngineError, run_requests
     from cross_checks.engines.base import RunRequest
-    variant = resolve(variant)   # the sweep's Resolved (a name, when a caller gives one)
     try:
         version = variant.adapter.version()
     except Exception as exc:  # noqa: BLE001 - an engine that cannot run here: failed rows

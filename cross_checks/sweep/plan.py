@@ -35,13 +35,13 @@ def job_cost_s(scenario, variant: str, dt: float) -> float:
 
 
 def inexpressible(scenarios, variants) -> dict:
-    """``{(scenario name, variant): the engine's sentence}`` of every pair whose engine cannot take the
-    scenario's physics (EngineAdapter.expressible): the sweep runs nothing for them and says so."""
-    from cross_checks.engines import not_expressible
+    """``{(scenario name, variant): the engine's sentence}`` (``variants``: Resolved) of every pair whose
+    engine cannot take the scenario's physics (EngineAdapter.expressible): the sweep runs nothing for them
+    and says so."""
     out = {}
     for sc in scenarios:
         for v in variants:
-            why = not_expressible(sc, v)
+            why = v.cannot_express(sc)
             if why:
                 out[(sc.name, v)] = why
     return out

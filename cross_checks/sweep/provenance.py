@@ -90,8 +90,7 @@ def _engines_provenance(variants) -> dict:
 def variant_record(name: str, info) -> dict:
     """summary.json's record of a variant: description, version, declared order, whether it has a
     one-step mode, and where its engine comes from (an engine file with its SHA-256)."""
-    from cross_checks.engines import engine_provenance, resolve
-    name = resolve(name)   # the sweep's Resolved
+    from cross_checks.engines import engine_provenance
     out = {"name": str(name), "description": info.description if info else "",
            "version": info.version if info else "", "declared_order": info.order if info else None,
            "one_step": name.one_step}

@@ -143,15 +143,12 @@ def _transform(words):
     raise ReproError(f"--claim invariance: unknown transform {' '.join(words)!r}; {said}")
 
 
-def _engine(variant_name: str):
-    """(engine, variant, distributions, world module names, adapter module, body_spec's module); ReproError
-    when the engine cannot write one."""
-    from cross_checks.engines import UnknownVariant, get_adapter, split_variant
+def _engine(variant_name):
+    """(engine, variant, distributions, world module names, adapter module, body_spec's module) of a Resolved
+    ``variant_name``; ReproError when the engine cannot write one."""
+    from cross_checks.engines import get_adapter
     from cross_checks.engines.external import ExternalEngine
-    try:
-        engine, variant = split_variant(variant_name)
-    except UnknownVariant as exc:
-        raise ReproError(str(exc)) from None
+    engine, variant = variant_name.engine, variant_name.variant
     try:
         adapter = get_adapter(engine)
     except Exception as exc:  # noqa: BLE001 - EngineUnavailable: the engine's own words
@@ -220,7 +217,12 @@ def reproducer(variant_name: str, scenario, claim_words, *, command: str = "", r
     ``scenario`` (a parsed Scenario), run here (``run``; else ``holds`` is None: the sweep, which measured
     it already): a :class:`Repro`. ReproError for what it cannot be written for (one line)."""
     import reference_sim
+    from cross_checks.engines import UnknownVariant, resolve
     kind, arg = parse_claim(claim_words)
+    try:
+        variant_name = resolve(variant_name, strict=True)   # once: every part below reads what it declares
+    except UnknownVariant as exc:
+        raise ReproError(str(exc)) from None
     engine, variant, dists, world_mods, adapter_mod, spec_mod = _engine(variant_name)
     f_W, tau_W = _constant_forces(scenario, engine)
     body = spec_mod.body_spec(scenario.problem.body)
@@ -298,7 +300,6 @@ def _invariance_data(variant_name, scenario, label, engine, spec_mod) -> tuple:
     analysis.judge.invariance_allowance) at the scenario's Δt and its refinements."""
     from cross_checks.analysis.judge import invariance_allowance
     from cross_checks.core.quantities import QUANTITIES, UNITS, quantity_scales
-    from cross_checks.engines import declared_traits, not_expressible
     from cross_checks.scenario.references import error_amplification, reference_solution
     from cross_checks.scenario.transforms import (
         TransformRefused,
@@ -313,7 +314,7 @@ def _invariance_data(variant_name, scenario, label, engine, spec_mod) -> tuple:
     except TransformRefused as exc:
         raise ReproError(f"--claim invariance {label}: refused on {scenario.name}: {exc.field}: "
                          f"{exc.reason}") from None
-    why = not_expressible(tsc, variant_name)
+    why = variant_name.cannot_express(tsc)
     if why:
         raise ReproError(f"{variant_name} cannot express {label} on {scenario.name} ({why}): the sweep says "
                          "'cannot express', not a defect")
@@ -325,7 +326,7 @@ def _invariance_data(variant_name, scenario, label, engine, spec_mod) -> tuple:
                          f"reproducers state: {'; '.join(can)}")
     f_T, tau_T = _constant_forces(tsc, engine)
     body_T = spec_mod.body_spec(tsc.problem.body)
-    traits = declared_traits(variant_name)
+    traits = variant_name.traits
     dt, T = scenario.dt_s, scenario.duration_s
     dts = [dt] + [dt / r for r in tol.INVARIANCE_REFINEMENTS]
     steps = [scenario.n_steps(h, T) for h in dts]
@@ -435,8 +436,8 @@ def findings_claims(summary: dict, scenarios) -> list:
     engine's known shortfall, e.g. MJX's RK4 attitude at order 2: ``order QUANTITY``) where the forces are
     constant; and every broken invariance (``invariance TRANSFORM``, one per transform). The reference's own
     schemes (``reference:``) are rbcheck's: none."""
-    from cross_checks.analysis.expectations import traits
     from cross_checks.analysis.metrics import conserved
+    from cross_checks.engines import resolve
     by_name = {sc.name: sc for sc in scenarios}
     out: dict = {}
     recs = summary.get("convergence") or []
@@ -451,7 +452,8 @@ def findings_claims(summary: dict, scenarios) -> list:
             continue
         fm = sc.problem.forces
         c = conserved(fm)
-        if (r.get("expected_verdict") == "does_not_converge" and not traits(r["engine"]).gyroscopic_term
+        gyro = resolve(r["engine"]).traits.gyroscopic_term   # a name read from the sweep's summary
+        if (r.get("expected_verdict") == "does_not_converge" and not gyro
                 and c["energy"][0] and c["angular_momentum"][0]):
             out[key] = ["gyroscopic"]
         elif (r.get("expected_verdict") == "converges" and r.get("matches_expectation")

@@ -228,26 +228,17 @@ def warm_reference(prefix: str, show: bool, notice_after_s: float = tol.COMPILE_
     Loading cached kernels takes well under ``notice_after_s``; when it takes longer, they are being
     compiled: one line then says so, what and for about how long, while it happens (a cold first run
     would otherwise say nothing for a minute), and one more when it is done."""
-    import threading
-
+    from cross_checks.core.processes import with_timer
     from reference_sim import compiled
     t0 = time.perf_counter()
-    said = threading.Event()
 
     def notice():
-        said.set()
         stage(prefix, f"compiling the reference's {len(compiled.VARIANT_CODES)} integrators with numba, once "
                       f"per machine: {compiled.COMPILE_ESTIMATE_S}; cached for every later run", enabled=show,
               stream=stream)
-    timer = threading.Timer(notice_after_s, notice)
-    timer.daemon = True
-    timer.start()
-    try:
-        compiled.warm()
-    finally:
-        timer.cancel()
+    said = with_timer(compiled.warm, notice_after_s, notice)
     took = time.perf_counter() - t0
-    if said.is_set():
+    if said:
         stage(prefix, f"compiled the reference's integrators in {took:.0f} s", enabled=show, stream=stream)
         return took
     return 0.0
@@ -295,8 +286,9 @@ def _write_results(staging, scenarios, variants, refs, records, *, started, skip
     summary = assemble.build_summary(
         provenance=provenance(started, variants), scenarios=scenario_records,
         variants=[variant_record(v, infos.get(v)) for v in variants], skipped=skipped,
-        convergence=convergence, local=local, agreement=assemble.agreement_records(scenarios, by_key, refs),
-        rows=rows, jobs=jobs, wall_s=time.perf_counter() - t_start, cannot=cannot)
+        convergence=convergence, local=local,
+        agreement=assemble.agreement_records(scenarios, variants, by_key, refs), rows=rows, jobs=jobs,
+        wall_s=time.perf_counter() - t_start, cannot=cannot)
     summary["run"]["compile_s"] = round(compile_s, 3)   # before the runs (wall_s): the reference's kernels
     if long_scenarios:
         _write_long_runs(staging, summary, long_scenarios, variants, long_records or {})

@@ -10,6 +10,7 @@ the sweep judged each run on its own recorded states the sweep and assert_engine
 import pytest
 
 from cross_checks import engines
+from cross_checks.engines import resolve
 from cross_checks.scenario import load_scenario
 from tests.helpers.sweeps import gated_variants
 from tests.helpers.wrong_engines import UserEngine
@@ -74,7 +75,7 @@ def test_the_runs_own_defect_separates_every_correct_variant_from_the_wrong_buil
     for v in [*gated_variants(), *(v for v in available_variants() if v.startswith("userengine:"))]:
         # the wrong builds, and every step declared without the gyroscopic term (the course, Rapier's option)
         wrong = (v in ("userengine:no_rest_length", "userengine:inverse_inertia")
-                 or not traits(v).gyroscopic_term)
+                 or not traits(resolve(v)).gyroscopic_term)
         r = {dt: run_local_defect(sc, run_variant(sc, v, dt).y, dt, max_rows=64)[0] for dt in (coarse, fine)}
         if wrong:
             assert r[coarse] > 5.0 and r[fine] / r[coarse] > 0.5 * coarse / fine, (v, r)

@@ -97,8 +97,9 @@ def score_candidate(name, y_next, y_cand, allow, quantities, flow_end=None, solv
     return CandidateScore(name, mx, p99, same, own, worst)
 
 
-def score_variants(inp, scenario, y0, y_next, flow_end, allow):
-    """Scores of every reference variant, each stepped by the reference adapter's ``one_step``.
+def score_variants(inp, scenario, y0, y_next, flow_end, allow, refs):
+    """Scores of every reference variant (``refs``: variant -> its Resolved name), each stepped by the
+    reference adapter's ``one_step``.
 
     An iterative variant's step is its root only to IMPLICIT_TOL (1 + |y|) per component and step (two
     evaluations of the same step may stop at different iterates): that is added to its identity test."""
@@ -112,7 +113,7 @@ def score_variants(inp, scenario, y0, y_next, flow_end, allow):
     out = []
     for v, scheme in VARIANTS.items():
         y_c = step_rows(lambda z, hh, v=v: adapter.one_step(scenario, v, hh, z), y0, inp)
-        out.append(score_candidate(f"reference:{v}", y_next, y_c, allow, QUANTITIES, flow_end,
+        out.append(score_candidate(refs[v], y_next, y_c, allow, QUANTITIES, flow_end,
                                    solve if scheme.iterative else None))
     return out
 

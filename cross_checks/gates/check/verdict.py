@@ -134,7 +134,7 @@ def _one_step(inp, scenario):
     return flow, allow, distances(y1, flow.y_end)
 
 
-def _local_full(inp, scenario) -> _Local:
+def _local_full(inp, scenario, refs) -> _Local:
     """One-step defects of a full-state file, scheme scores and (lazily) mistake scores."""
     y0, y1 = inp.y[:-1], inp.y[1:]
     flow, allow, d = _one_step(inp, scenario)
@@ -151,7 +151,7 @@ def _local_full(inp, scenario) -> _Local:
     t1 = inp.t_s[1:]
     rows = [evidence_row("one-step defect", q, t1, d[q], allow.total[q], source,
                          decisive=None if model_ok.all() else model_ok) for q in QUANTITIES]
-    cands = score_variants(inp, scenario, y0, y1, flow.y_end, allow)
+    cands = score_variants(inp, scenario, y0, y1, flow.y_end, allow, refs)
     per_row = {q: allow.physics[q] + allow.arith[q] for q in QUANTITIES}
     return _Local(rows, allow, per_row, cands, notes, {q: ratio(d[q], allow.total[q]) for q in QUANTITIES},
                   int(np.sum(~model_ok)))
@@ -170,7 +170,7 @@ def _local_pose(inp, scenario, y_ref) -> _Local:
     return _Local(rows, allow, per_row, [], [], ratios)
 
 
-def _pose_candidates(inp, scenario, growth, per_arith):
+def _pose_candidates(inp, scenario, growth, per_arith, refs):
     """Free-running comparison of a pose-only file with every reference variant from the initial state."""
     from cross_checks.engines import run_variant
     from reference_sim.integrators import VARIANTS
@@ -180,7 +180,7 @@ def _pose_candidates(inp, scenario, growth, per_arith):
     tol_same = {q: sum(growth[(p, q)] * per_arith[p] for p in QUANTITIES) + inp.print_floor[q]
                 for q in inp.present}
     for v in VARIANTS:
-        name = f"reference:{v}"
+        name = refs[v]
         run = run_variant(scenario, name, inp.h_s, float(inp.t_s[-1]))
         idx = inp.n_steps
         if len(run.t_s) <= idx[-1]:
@@ -327,24 +327,31 @@ def check_trajectory(traj, scenario, source: str = "TRAJ.csv", *, dt_s: float | 
     simulation?" (a reference variant is compared step for step, any other engine run free and compared).
     Raises CheckError for input that cannot be checked.
     """
+    from cross_checks.engines import resolve
+    from reference_sim.integrators import VARIANTS
+    # every name the check asks about, resolved once: the reference's schemes, the extra engines, the scheme
+    named = {n: resolve(n) for n in [*(f"reference:{v}" for v in VARIANTS), *compare_with,
+                                     *([] if scheme is None else [scheme])]}
+    refs = {v: named[f"reference:{v}"] for v in VARIANTS}
+    compare_with, scheme = [named[n] for n in compare_with], None if scheme is None else named[scheme]
     if scheme is not None and not scheme.startswith("reference:") and scheme not in compare_with:
         compare_with = [*compare_with, scheme]
     with np.errstate(all="ignore"):   # blown-up or NaN states are judged, never warned about
         inp = prepare_input(traj, scenario, source, dt_s)
         if inp.n_rows < 2:
             return _no_step_result(inp, scenario)
-        return _check(inp, scenario, compare_with, scheme)
+        return _check(inp, scenario, compare_with, refs, scheme)
 
 
-def _check(inp, scenario, compare_with, scheme=None) -> CheckResult:
+def _check(inp, scenario, compare_with, refs, scheme=None) -> CheckResult:
     from cross_checks.scenario.references import reference_solution
 
     y_ref, label = reference_solution(scenario, inp.t_s)
-    local = _local_full(inp, scenario) if inp.full_state else _local_pose(inp, scenario, y_ref)
+    local = _local_full(inp, scenario, refs) if inp.full_state else _local_pose(inp, scenario, y_ref)
     cons = conserved_evidence(inp, scenario, local.allow)
     free, growth, _ = free_running_evidence(inp, scenario, y_ref, label, local.per_row)
     arith = {q: np.concatenate([[0.0], np.cumsum(local.allow.arith[q])]) for q in QUANTITIES}
-    candidates = local.candidates if inp.full_state else _pose_candidates(inp, scenario, growth, arith)
+    candidates = local.candidates if inp.full_state else _pose_candidates(inp, scenario, growth, arith, refs)
     engines = _engines(inp, scenario, list(compare_with), growth, arith) if compare_with else []
     off, init_words, slips = _initial_state(inp, scenario)
     evidence = local.rows + cons + free

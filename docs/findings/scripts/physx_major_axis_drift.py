@@ -33,6 +33,8 @@ class Bodies:
         self.scene = sapien.Scene(systems=[self.system])
         self.system.set_timestep(float(dt_s))
         self.comps, self.always = [], np.zeros(0, dtype=bool)
+        self._add = []
+        self.step = self.system.step
     def add_body(self, mass_kg, moments, q_BP):
         entity, c = sapien.Entity(), px.PhysxRigidDynamicComponent()
         entity.add_component(c)
@@ -42,6 +44,7 @@ class Bodies:
         neutralise(c)
         self.scene.add_entity(entity)
         self.comps.append(c)
+        self._add.append(c.add_force_torque)
         self.always = np.zeros(len(self.comps), dtype=bool)
     def _put(self, k, y):
         c = self.comps[k]
@@ -53,11 +56,11 @@ class Bodies:
             self._put(k, row)
         self.alive, self.raw = np.ones(len(self.comps), dtype=bool), self._pack()
     def apply(self, f_W, tau_W):
-        F, T = np.float32(f_W), np.float32(tau_W)
-        for k in np.flatnonzero(self.alive & (self.always | F.any(axis=1) | T.any(axis=1))):
-            self.comps[k].add_force_torque(F[k], T[k])
-    def step(self):
-        self.system.step()
+        alive, always, add = self.alive, self.always, self._add
+        for k, f, t in zip(range(len(add)), np.asarray(f_W, dtype=float).tolist(),
+                           np.asarray(tau_W, dtype=float).tolist()):
+            if alive[k] and (always[k] or f[0] or f[1] or f[2] or t[0] or t[1] or t[2]):
+                add[k](f, t)
     def read(self):
         self.raw = self._pack()
         return self.raw[:, PACK_TO_PACKED]

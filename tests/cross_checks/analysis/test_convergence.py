@@ -13,6 +13,7 @@ from cross_checks.analysis.convergence import (
 )
 from cross_checks.analysis.expectations import Expectation, expectation
 from cross_checks.core import tolerances as tol
+from cross_checks.engines import resolve
 from cross_checks.scenario import load_scenario
 
 LADDER = [0.02 / 2 ** k for k in range(5)]
@@ -128,14 +129,14 @@ def test_a_low_order_whose_finest_pair_reaches_the_expected_one_is_measured_pre_
 # --- comparison with an expectation (the expectations themselves: test_expectations.py) ----------
 
 def test_comparison_with_expectation():
-    conv = expectation(load_scenario("projectile"), "reference:midpoint", "position")
+    conv = expectation(load_scenario("projectile"), resolve("reference:midpoint"), "position")
     assert compare_with_expectation("converges", 2.05, conv)[0] is True
     assert compare_with_expectation("converges", 1.0, conv)[0] is False
     assert compare_with_expectation("converges", 3.0, conv) == (True, "order 3.00, above the nominal 2")
     assert compare_with_expectation("at_roundoff", None, conv)[0] is True
     assert compare_with_expectation("does_not_converge", 0.0, conv)[0] is False
     assert compare_with_expectation("diverged", None, conv)[0] is False
-    nc = expectation(load_scenario("tennis_racket"), "reference:course", "orientation")
+    nc = expectation(load_scenario("tennis_racket"), resolve("reference:course"), "orientation")
     assert compare_with_expectation("does_not_converge", 0.0, nc)[0] is True
     assert compare_with_expectation("converges", 1.0, nc)[0] is False
 

@@ -5,7 +5,7 @@ import pytest
 from cross_checks import engines
 from cross_checks.analysis.expectations import DEFAULT_TRAITS, expectation, nominal_order, traits
 from cross_checks.core.quantities import QUANTITIES
-from cross_checks.engines import all_variants, available_variants, declared_traits, run_variant
+from cross_checks.engines import all_variants, available_variants, declared_traits, resolve, run_variant
 from cross_checks.engines.base import EngineAdapter, Traits, Variant
 from cross_checks.scenario import catalog_names, catalog_path, load_scenario, parse_scenario
 
@@ -18,13 +18,13 @@ def test_every_built_in_variant_has_a_nominal_order_and_traits():
     built_in = [v.name for v in all_variants() if v.engine in ("reference", "mujoco", "pybullet")]
     assert len(built_in) == 23   # 16 reference variants (8 gyroscopic: docs/gyro_integrators.md)
     for v in built_in:
-        assert (nominal_order(v) in (1.0, 2.0, 4.0) and declared_traits(v) is not None
-                and traits(v) == declared_traits(v))
+        assert (nominal_order(resolve(v)) in (1.0, 2.0, 4.0) and declared_traits(v) is not None
+                and traits(resolve(v)) == declared_traits(v))
 
 
 def test_an_unknown_variant_gets_the_documented_default():
-    assert traits("mysim:euler") == DEFAULT_TRAITS and nominal_order("mysim:euler") is None
-    e = expectation(load_scenario("projectile"), "mysim:euler", "position")
+    assert traits(resolve("mysim:euler")) == DEFAULT_TRAITS and nominal_order(resolve("mysim:euler")) is None
+    e = expectation(load_scenario("projectile"), resolve("mysim:euler"), "position")
     assert e.verdict == "converges" and e.order is None
 
 
@@ -32,22 +32,23 @@ def test_an_unknown_variant_gets_the_documented_default():
 def test_course_is_expected_not_to_converge_in_rotation_on_gyroscopic_bodies(name):
     sc = load_scenario(name)
     for q in ("orientation", "angular_velocity"):
-        e = expectation(sc, "reference:course", q)
+        e = expectation(sc, resolve("reference:course"), q)
         assert e.verdict == "does_not_converge" and "gyroscopic" in e.reason
-    assert expectation(sc, "reference:course", "position").order == 1.0   # translation is decoupled
-    assert expectation(sc, "reference:course_gyro", "orientation").order == 1.0
+    assert expectation(sc, resolve("reference:course"), "position").order == 1.0   # translation is decoupled
+    assert expectation(sc, resolve("reference:course_gyro"), "orientation").order == 1.0
 
 
 def test_course_converges_where_the_gyroscopic_term_vanishes():
     for name in ("constant_spin", "projectile", "linear_drag", "spring_oscillator"):
         sc = load_scenario(name)
-        assert all(expectation(sc, "reference:course", q).verdict == "converges" for q in QUANTITIES)
+        assert all(expectation(sc, resolve("reference:course"), q).verdict == "converges" for q in QUANTITIES)
 
 
 def test_course_position_fails_when_rotation_drives_translation():
-    assert (expectation(load_scenario("spring_pendulum"), "reference:course", "position").verdict
+    assert (expectation(load_scenario("spring_pendulum"), resolve("reference:course"), "position").verdict
             == "does_not_converge")
-    assert expectation(load_scenario("applied_torque"), "reference:course", "position").verdict == "converges"
+    assert (expectation(load_scenario("applied_torque"), resolve("reference:course"), "position").verdict
+            == "converges")
 
 
 def test_every_variant_is_expected_to_converge_under_velocity_decay():
@@ -55,9 +56,9 @@ def test_every_variant_is_expected_to_converge_under_velocity_decay():
     # first order for an engine that holds the applied forces (the decay force among them) over its stages.
     sc = load_scenario("velocity_decay")
     for v in VARIANT_TRAITS:
-        order = 1.0 if VARIANT_TRAITS[v].forces_held else nominal_order(v)
+        order = 1.0 if VARIANT_TRAITS[v].forces_held else nominal_order(resolve(v))
         for q in QUANTITIES:
-            e = expectation(sc, v, q)
+            e = expectation(sc, resolve(v), q)
             assert e.verdict == "converges" and e.order == order, (v, q, e)
 
 
@@ -66,10 +67,10 @@ def test_every_catalog_scenario_has_an_expectation_for_every_variant(name):
     sc = load_scenario(name)
     for v in VARIANT_TRAITS:
         for q in QUANTITIES:
-            e = expectation(sc, v, q)
+            e = expectation(sc, resolve(v), q)
             assert e.verdict in ("converges", "does_not_converge", "pre_asymptotic"), (v, q, e)
             assert (e.order is not None) == (e.verdict == "converges")
-            local = expectation(sc, v, q, "one_step")
+            local = expectation(sc, resolve(v), q, "one_step")
             # the local order p + 1 is claimed wherever the variant has the physics, pre-asymptotic or not
             assert local.verdict == (None if e.verdict == "does_not_converge" else "converges")
 
@@ -89,7 +90,7 @@ def test_no_rule_names_a_scenario(name):
     a, b = load_scenario(name), _renamed(name, "my_own_body")
     for v in VARIANT_TRAITS:
         for q in QUANTITIES:
-            assert expectation(a, v, q) == expectation(b, v, q), (v, q)
+            assert expectation(a, resolve(v), q) == expectation(b, resolve(v), q), (v, q)
 
 
 def test_a_gentle_file_named_tumbling_box_gets_the_verdicts_its_physics_implies():
@@ -98,14 +99,15 @@ def test_a_gentle_file_named_tumbling_box_gets_the_verdicts_its_physics_implies(
         "duration = 10.0": "duration = 2.0"})
     for v in ("reference:explicit_euler", "reference:implicit_euler"):
         for q in QUANTITIES:
-            e = expectation(gentle, v, q)
+            e = expectation(gentle, resolve(v), q)
             assert e.verdict == "converges" and e.order == 1.0, (v, q, e.reason)
     wild = load_scenario("tumbling_box")
-    e = expectation(wild, "reference:explicit_euler", "orientation")
+    e = expectation(wild, resolve("reference:explicit_euler"), "orientation")
     assert e.verdict == "pre_asymptotic" and "separatrix" in e.reason and "amplifies" in e.reason
     # the body-frame Euler step keeps the separatrix distance (see test_engine_traits): its order is claimed
-    assert expectation(wild, "reference:expmap_gyro", "orientation").order == 1.0
-    assert expectation(wild, "reference:explicit_euler", "position").order == 1.0  # translation: a projectile
+    assert expectation(wild, resolve("reference:expmap_gyro"), "orientation").order == 1.0
+    # translation: a projectile
+    assert expectation(wild, resolve("reference:explicit_euler"), "position").order == 1.0
 
 
 def test_a_pure_spin_gives_no_amplitude_drift_however_fast():
@@ -115,7 +117,7 @@ def test_a_pure_spin_gives_no_amplitude_drift_however_fast():
                                                      "angular_velocity_body = [0.0, 0.0, 30.0]"})
     for v in ("reference:explicit_euler", "reference:implicit_euler", "mujoco:implicit", "pybullet:maximal"):
         for q in QUANTITIES:
-            assert expectation(fast, v, q).verdict == "converges", (v, q)
+            assert expectation(fast, resolve(v), q).verdict == "converges", (v, q)
 
 
 def test_chi_applies_to_every_first_order_variant_that_drifts():
@@ -125,18 +127,18 @@ def test_chi_applies_to_every_first_order_variant_that_drifts():
     top = load_scenario("symmetric_top")
     for v in ("reference:expmap_gyro", "mujoco:euler", "mujoco:implicit", "mujoco:implicitfast",
               "pybullet:multibody", "pybullet:maximal"):
-        assert expectation(top, v, "orientation").order == 1.0, v
+        assert expectation(top, resolve(v), "orientation").order == 1.0, v
     for v in ("reference:explicit_euler", "reference:implicit_euler"):
-        e = expectation(top, v, "orientation")
+        e = expectation(top, resolve(v), "orientation")
         assert e.verdict == "pre_asymptotic" and "χ = ω_c²ΔtT/2 from 3.3" in e.reason, e.reason
     # a faster wobble pushes the body-frame schemes out too: ω3 = 8 -> polhode at 8 rad/s, χ = 3.2
     faster = _renamed("symmetric_top", "fast_top", **{"angular_velocity_body = [1.0, 0.5, 4.0]":
                                                      "angular_velocity_body = [1.0, 0.5, 8.0]"})
     for v in ("mujoco:implicit", "pybullet:maximal", "mujoco:euler"):
-        assert expectation(faster, v, "orientation").verdict == "pre_asymptotic", v
+        assert expectation(faster, resolve(v), "orientation").verdict == "pre_asymptotic", v
     # symplectic (leapfrog) and higher-order schemes are never excused
-    assert expectation(faster, "reference:leapfrog", "orientation").order == 2.0
-    assert expectation(faster, "reference:rk4", "orientation").order == 4.0
+    assert expectation(faster, resolve("reference:leapfrog"), "orientation").order == 2.0
+    assert expectation(faster, resolve("reference:rk4"), "orientation").order == 4.0
 
 
 def test_an_oscillator_is_claimed_where_the_amplitude_model_allows_it():
@@ -144,17 +146,18 @@ def test_an_oscillator_is_claimed_where_the_amplitude_model_allows_it():
     # within 1 ± 0.15, so order 1 is claimed (the sweep measures 1.14 / 0.88); a stiffer spring is not.
     osc = load_scenario("spring_oscillator")
     for v in ("reference:explicit_euler", "reference:implicit_euler"):
-        assert expectation(osc, v, "position").order == 1.0
+        assert expectation(osc, resolve(v), "position").order == 1.0
     stiff = _renamed("spring_oscillator", "stiff", **{"stiffness = 40.0": "stiffness = 160.0"})
     for v in ("reference:explicit_euler", "reference:implicit_euler"):
-        assert expectation(stiff, v, "position").verdict == "pre_asymptotic"
-    assert expectation(stiff, "reference:expmap_gyro", "position").order == 1.0   # symplectic Euler: no drift
+        assert expectation(stiff, resolve(v), "position").verdict == "pre_asymptotic"
+    # symplectic Euler: no drift
+    assert expectation(stiff, resolve("reference:expmap_gyro"), "position").order == 1.0
 
 
 # --- the traits, pinned on the engines themselves -------------------------------------------------------
 
 FIRST_ORDER_WITH_GYRO = [v for v, tr in VARIANT_TRAITS.items()
-                         if nominal_order(v) == 1.0 and tr.gyroscopic_term]
+                         if nominal_order(resolve(v)) == 1.0 and tr.gyroscopic_term]
 
 
 def _invariants(sc, y):
@@ -173,7 +176,7 @@ def _momentum_rounding(variant: str, n_steps: int) -> float:
     |L|² doubles a relative error."""
     from cross_checks.analysis.expectations import precision
     from cross_checks.core import tolerances as tol
-    return 20.0 * n_steps * tol.MACHINE_EPSILON[precision(variant)]
+    return 20.0 * n_steps * tol.MACHINE_EPSILON[precision(resolve(variant))]
 
 
 @pytest.mark.parametrize("variant", FIRST_ORDER_WITH_GYRO)
@@ -280,7 +283,8 @@ def test_decisions_kept_on_the_physics_are_the_ones_computed_afresh():
     for name in sorted(set(catalog_names()) - {"spring_pendulum", "applied_torque"}):
         sc = load_scenario(name)
         phys = scenario_physics(sc)
-        keys = [(v, q, m) for v in variants for q in QUANTITIES for m in ("free_running", "one_step")]
+        keys = [(resolve(v), q, m) for v in variants for q in QUANTITIES
+                for m in ("free_running", "one_step")]
         fresh = {k: expectation(sc, *k, physics=physics_from_dict(phys.as_dict()), measure_physics=False)
                  for k in keys}
         assert not phys.decided
@@ -316,17 +320,18 @@ def test_held_forces_make_a_multi_stage_scheme_first_order_where_they_change_wit
     sc = load_scenario(name)
     assert sc.problem.forces.state_dependent or sc.problem.forces.has_decay
     for q in QUANTITIES:
-        free, local = expectation(sc, held_rk4, q), expectation(sc, held_rk4, q, "one_step")
+        free, local = expectation(sc, resolve(held_rk4), q), expectation(sc, resolve(held_rk4), q, "one_step")
         assert (free.verdict, free.order, local.order) == ("converges", 1.0, 2.0), (q, free, local)
         assert "holds the applied force" in free.reason
-        assert expectation(sc, "mujoco:rk4", q).order == 4.0   # MuJoCo's adapter evaluates them per stage
+        # MuJoCo's adapter evaluates them per stage
+        assert expectation(sc, resolve("mujoco:rk4"), q).order == 4.0
 
 
 @pytest.mark.parametrize("name", ["constant_spin", "projectile", "tennis_racket"])
 def test_held_forces_cost_nothing_where_the_forces_are_constant(held_rk4, name):
     sc = load_scenario(name)
     assert not (sc.problem.forces.state_dependent or sc.problem.forces.has_decay)
-    assert {expectation(sc, held_rk4, q).order for q in QUANTITIES} == {4.0}
+    assert {expectation(sc, resolve(held_rk4), q).order for q in QUANTITIES} == {4.0}
 
 
 class _SecondOrderAttitudeRK4(EngineAdapter):
@@ -349,12 +354,12 @@ def test_a_second_order_attitude_update_is_expected_where_the_body_axes_omega_tu
     for name in ("tennis_racket", "particle_body", "tumbling_box"):      # tumbling: ω_B turns
         sc = load_scenario(name)
         for q in ("orientation", "angular_velocity"):
-            e = expectation(sc, v, q)
-            assert (e.order, expectation(sc, v, q, "one_step").order) == (2.0, 3.0), (name, q, e)
+            e = expectation(sc, resolve(v), q)
+            assert (e.order, expectation(sc, resolve(v), q, "one_step").order) == (2.0, 3.0), (name, q, e)
             assert "attitude update is order 2" in e.reason
     for name in ("constant_spin", "projectile"):                          # a fixed rotation axis: order 4
         sc = load_scenario(name)
-        assert {expectation(sc, v, q).order for q in QUANTITIES} == {4.0}
+        assert {expectation(sc, resolve(v), q).order for q in QUANTITIES} == {4.0}
 
 
 # --- long runs (long_run_expectation: from the declared traits only) ---------------------------------------
@@ -370,7 +375,7 @@ def test_a_second_order_attitude_update_is_expected_where_the_body_axes_omega_tu
 ])
 def test_what_each_variant_is_expected_to_keep_on_a_long_run(variant, keeps, separatrix):
     from cross_checks.analysis.expectations import long_run_expectation
-    e = long_run_expectation(variant)
+    e = long_run_expectation(resolve(variant))
     assert (e.keeps, e.separatrix) == (keeps, separatrix), e.reason
     assert e.reason
 
@@ -401,15 +406,16 @@ def test_where_bullets_clamp_acts_the_clamped_step_is_expected_not_to_converge()
     from cross_checks.analysis.expectations import expectation, gyroscopic_clamp_acts
     from cross_checks.scenario import load_scenario, parse_scenario
     sc = parse_scenario(CLAMPED)
-    worst = gyroscopic_clamp_acts(sc, "reference:explicit_gyro_clamped")
+    worst = gyroscopic_clamp_acts(sc, resolve("reference:explicit_gyro_clamped"))
     # closed form at t = 0: |ω × I ω| with ω = (2, 10, 1), I ω = (20, 200, 30)
     assert worst >= float(np.linalg.norm(np.cross([2.0, 10.0, 1.0], [20.0, 200.0, 30.0]))) - 1e-9
-    e = expectation(sc, "reference:explicit_gyro_clamped", "angular_velocity")
+    e = expectation(sc, resolve("reference:explicit_gyro_clamped"), "angular_velocity")
     assert e.verdict == "does_not_converge" and "100 N m" in e.reason
-    assert expectation(sc, "reference:expmap_gyro", "angular_velocity").verdict != "does_not_converge"
-    assert gyroscopic_clamp_acts(sc, "reference:expmap_gyro") is None           # no clamp declared
+    expmap = resolve("reference:expmap_gyro")
+    assert expectation(sc, expmap, "angular_velocity").verdict != "does_not_converge"
+    assert gyroscopic_clamp_acts(sc, resolve("reference:expmap_gyro")) is None           # no clamp declared
     racket = load_scenario("tennis_racket")                                      # |ω × I ω| ≤ 14 N m there
-    assert gyroscopic_clamp_acts(racket, "reference:explicit_gyro_clamped") is None
+    assert gyroscopic_clamp_acts(racket, resolve("reference:explicit_gyro_clamped")) is None
 
 
 def test_the_sweep_agrees_that_the_clamped_step_does_not_converge_there(tmp_path):

@@ -4,6 +4,7 @@ import pytest
 from cross_checks.analysis.convergence import fit_convergence
 from cross_checks.analysis.expectations import Expectation
 from cross_checks.analysis.judge import judge_fit
+from cross_checks.engines import resolve
 
 
 def _judged(fit, exp):
@@ -62,20 +63,20 @@ def test_every_rung_within_its_floor_is_no_agreement_where_the_steps_are_wrong_i
             in judge_fit(fit, deeper).assessment)
 
 
-def test_the_expectation_carries_the_variants_precision_and_rounding_factor(monkeypatch):
+def test_the_expectation_carries_the_variants_precision_and_rounding_factor():
     import dataclasses
 
     from cross_checks.analysis import expectations as ex
     from cross_checks.scenario import load_scenario
     sc = load_scenario("constant_spin")
-    e = ex.expectation(sc, "reference:rk4", "angular_velocity", measure_physics=False)
+    e = ex.expectation(sc, resolve("reference:rk4"), "angular_velocity", measure_physics=False)
     assert (e.precision, e.rounding_factor) == ("float64", 1.0)
-    from cross_checks.engines import Resolved, resolve
-    declared = dataclasses.replace(ex.traits("reference:rk4"), precision="float32", rounding_factor=3.0)
+    from cross_checks.engines import Resolved
+    declared = dataclasses.replace(ex.traits(resolve("reference:rk4")), precision="float32",
+                                   rounding_factor=3.0)
     r = resolve("reference:rk4")   # the same variant, resolved with other declared traits
     fake = Resolved(str(r), **{**r.__dict__, "traits": declared, "precision": "float32"})
-    monkeypatch.setattr(ex, "resolve", lambda variant: fake)
-    e = ex.expectation(sc, "reference:rk4", "angular_velocity", measure_physics=False)
+    e = ex.expectation(sc, fake, "angular_velocity", measure_physics=False)
     assert (e.precision, e.rounding_factor) == ("float32", 3.0)
 
 

@@ -117,9 +117,9 @@ def test_the_run_floor_of_an_engine_adds_its_lever_arms_and_rbcheck_s_own_scheme
     assert resolve("mujoco:rk4").traits.lever_arms and resolve("an_engine_file:any").traits.lever_arms
     assert not any(resolve(f"reference:{v}").traits.lever_arms for v in ("rk4", "course", "jolt_gyro"))
     n, h = 400, 2.5e-3
-    plain = M.run_floor("reference:rk4", q, n, h, SCALES, 1e-13, amplification=3.0, lever=FAR_LEVER)
+    plain = M.run_floor(resolve("reference:rk4"), q, n, h, SCALES, 1e-13, amplification=3.0, lever=FAR_LEVER)
     assert plain == M.roundoff_floor(SCALES[q], n, reference_error=1e-13, amplification=3.0, quantity=q)
-    engine = M.run_floor("mujoco:rk4", q, n, h, SCALES, 1e-13, amplification=3.0, lever=FAR_LEVER)
+    engine = M.run_floor(resolve("mujoco:rk4"), q, n, h, SCALES, 1e-13, amplification=3.0, lever=FAR_LEVER)
     lever = M.lever_floor(FAR_LEVER, q, h, n, 3.0, 2.0 ** -52)
     assert lever > 0.0 and engine == plain + lever
     # by hand: K ε |x| F / I_min integrated over t = n h (ω), twice (orientation); the ω representation error
@@ -131,7 +131,7 @@ def test_the_run_floor_of_an_engine_adds_its_lever_arms_and_rbcheck_s_own_scheme
                "velocity": u * n, "position": u * n * h}[q]
     assert lever == pytest.approx(3.0 * by_hand, rel=1e-12)
     # unmeasured lever arms add nothing (a failed reference's floors)
-    assert M.run_floor("mujoco:rk4", q, n, h, SCALES, 1e-13, amplification=3.0) == plain
+    assert M.run_floor(resolve("mujoco:rk4"), q, n, h, SCALES, 1e-13, amplification=3.0) == plain
 
 
 def test_a_float32_engine_s_lever_arms_round_at_float32_s_epsilon():
@@ -141,8 +141,8 @@ def test_a_float32_engine_s_lever_arms_round_at_float32_s_epsilon():
     if f32 is None:
         pytest.skip("no float32 engine installed here")
     v = resolve(f32)
-    plain = M.run_floor(v, "angular_velocity", 100, 1e-3, SCALES, 0.0)
-    got = M.run_floor(v, "angular_velocity", 100, 1e-3, SCALES, 0.0, lever=FAR_LEVER) - plain
+    plain = M.run_floor(resolve(v), "angular_velocity", 100, 1e-3, SCALES, 0.0)
+    got = M.run_floor(resolve(v), "angular_velocity", 100, 1e-3, SCALES, 0.0, lever=FAR_LEVER) - plain
     eps32 = 2.0 ** -23 * v.traits.rounding_factor
     want = M.lever_floor(FAR_LEVER, "angular_velocity", 1e-3, 100, 1.0, eps32)
     assert got == pytest.approx(want, rel=1e-9)

@@ -21,7 +21,7 @@ from cross_checks.analysis.expectations import (
 )
 from cross_checks.cli.sweep import _gate_failures
 from cross_checks.core import tolerances as tol
-from cross_checks.engines import available_variants
+from cross_checks.engines import available_variants, resolve
 from cross_checks.engines.base import Traits
 from cross_checks.scenario import catalog_names, catalog_path, load_scenario, parse_scenario
 from cross_checks.sweep import run_sweep
@@ -76,19 +76,20 @@ FLOAT32_ENGINES = ("rapier", "physx", "mujoco_warp", "newton")
 def test_every_shipped_variant_declares_its_precision_and_float64_keeps_its_scenarios_ladder():
     for v in available_variants():
         engine = v.split(":", 1)[0]
-        if engine in FLOAT32_ENGINES and precision(v) == "float32":
-            assert machine_epsilon(v) == tol.MACHINE_EPSILON["float32"] * traits(v).rounding_factor
+        if engine in FLOAT32_ENGINES and precision(resolve(v)) == "float32":
+            r = resolve(v)
+            assert machine_epsilon(r) == tol.MACHINE_EPSILON["float32"] * traits(r).rounding_factor
             for name in catalog_names():   # the float32 ladder extends the scenario's to coarser steps only
                 sc = load_scenario(name)
-                ladder = judged_ladder_s(sc, v)
+                ladder = judged_ladder_s(sc, resolve(v))
                 assert ladder[-len(sc.dt_ladder_s):] == tuple(sorted(sc.dt_ladder_s, reverse=True))
             continue
         assert engine not in FLOAT32_ENGINES[:3], v   # Rapier, PhysX and MuJoCo Warp have no float64 step
-        assert precision(v) == "float64" and traits(v).rounding_factor == 1.0
-        assert machine_epsilon(v) == tol.ROUNDOFF_PER_STEP_REL
+        assert precision(resolve(v)) == "float64" and traits(resolve(v)).rounding_factor == 1.0
+        assert machine_epsilon(resolve(v)) == tol.ROUNDOFF_PER_STEP_REL
         for name in catalog_names():
             sc = load_scenario(name)
-            assert judged_ladder_s(sc, v) == tuple(sorted(sc.dt_ladder_s, reverse=True))
+            assert judged_ladder_s(sc, resolve(v)) == tuple(sorted(sc.dt_ladder_s, reverse=True))
 
 
 def test_the_floors_scale_with_the_precisions_epsilon():
@@ -108,12 +109,12 @@ def test_a_float32_ladder_adds_coarser_rungs_within_the_limits(scheme, monkeypat
     fastest motion by at most (p + 1) × 0.15 rad and keeps 16 steps; rungs are added until three are expected
     resolved or a limit stops them (checked here from the limits, not from the function's own arithmetic)."""
     v = register(monkeypatch, Float32Adapter("ok", scheme))
-    p = nominal_order(v)
+    p = nominal_order(resolve(v))
     extended = 0
     for name in catalog_names():
         sc = load_scenario(name)
         given = sorted(sc.dt_ladder_s, reverse=True)
-        ladder = judged_ladder_s(sc, v)
+        ladder = judged_ladder_s(sc, resolve(v))
         extra = ladder[:len(ladder) - len(given)]
         assert list(ladder[len(extra):]) == given and len(extra) <= tol.PRECISION_LADDER_MAX_EXTRA
         w = max(math.sqrt(characteristic_rate_sq(sc)), 1.0 / sc.duration_s)
@@ -166,7 +167,7 @@ def test_a_planted_bug_is_still_caught_where_the_step_declares_a_rounding_factor
     are of a lower order in Δt, not a few roundings, and are still caught."""
     m = BY_NAME[name]
     v = register(monkeypatch, Float32Adapter(f"{name}_x2", m.variant, m, rounding_factor=2.0))
-    assert machine_epsilon(v) == 2.0 * tol.MACHINE_EPSILON["float32"]
+    assert machine_epsilon(resolve(v)) == 2.0 * tol.MACHINE_EPSILON["float32"]
     summary = _sweep(tmp_path, m.exposed_by, [v])
     assert _gate_failures(summary), f"float32 {m.name} ({m.bug}), factor 2, not caught on {m.exposed_by}"
 
@@ -203,7 +204,7 @@ def test_the_fuzz_passes_a_correct_float32_scheme_and_catches_a_planted_bug(monk
     as64 = register(monkeypatch, Float32Adapter("fz_as64", "reference:expmap_gyro", precision="float64"))
     m = BY_NAME["gyroscopic_sign_flipped"]
     bad = register(monkeypatch, Float32Adapter("fz_bad", m.variant, m))
-    (judged,) = evaluate_specs([FUZZ_TUMBLE], [ok, as64, bad])
+    (judged,) = evaluate_specs([FUZZ_TUMBLE], [resolve(v) for v in [ok, as64, bad]])
     by = {v: [x for x in judged.violations if v in x["variants"]] for v in (ok, as64, bad)}
     assert by[ok] == [], by[ok]
     assert judged.tally[ok]["conservation"][0] >= 1   # energy and momentum were judged, with float32 ε

@@ -89,3 +89,27 @@ def test_a_process_is_gone_when_its_id_is_free_or_taken_by_a_later_one():
     child.start()
     child.join()
     assert processes.is_gone(child.pid, 12345)
+
+
+def test_with_timer_calls_on_time_once_while_the_work_outlasts_it_and_never_after_it_returns():
+    """The one timer pattern (a process wait without pidfd, the reference's compile notice): ``on_time`` runs
+    while ``work`` is still going (here it is what ends the work), and a work that returns first cancels it;
+    a work that raises cancels it too."""
+    import threading
+    done = threading.Event()
+    calls = []
+
+    def on_time():
+        calls.append(1)
+        done.set()
+    assert processes.with_timer(done.wait, 0.01, on_time) is True and calls == [1]
+    assert processes.with_timer(lambda: None, 3600.0, on_time) is False and calls == [1]
+
+    def boom():
+        raise KeyError("work failed")
+    with pytest.raises(KeyError):
+        processes.with_timer(boom, 3600.0, on_time)
+    timers = [t for t in threading.enumerate() if isinstance(t, threading.Timer)]
+    for t in timers:     # a cancelled timer's thread ends at once; an uncancelled one would wait an hour
+        t.join(30.0)
+    assert not any(t.is_alive() for t in timers) and calls == [1]

@@ -25,6 +25,7 @@ if importlib.util.find_spec("mujoco_warp") is None:
 
 from cross_checks.engines import mujoco_engine as me  # noqa: E402
 from cross_checks.engines import mujoco_warp_engine as we  # noqa: E402
+from cross_checks.engines import resolve
 from cross_checks.engines.base import EngineError, RunRequest  # noqa: E402
 from cross_checks.engines.forces import stage_force_torque_floats  # noqa: E402
 from cross_checks.scenario import load_scenario  # noqa: E402
@@ -490,8 +491,8 @@ def test_version_and_list_name_mujoco_warp_with_float32_traits():
     assert [info[f"mujoco_warp:{v}"].order for v in we.VARIANTS] == [1.0, 4.0, 1.0, 1.0, 1.0]
     assert info["mujoco_warp:euler"].available and not info["mujoco_warp:euler"].required
     for v in we.VARIANTS:
-        t = expectations.traits(f"mujoco_warp:{v}")
+        t = expectations.traits(resolve(f"mujoco_warp:{v}"))
         assert t.precision == "float32" and t.gyroscopic_term
         assert not t.forces_held and t.rotation_order is None
-    assert expectations.traits("mujoco_warp:euler").rotation_sign == +1
-    assert expectations.traits("mujoco_warp:implicit").rotation_sign == -1
+    assert expectations.traits(resolve("mujoco_warp:euler")).rotation_sign == +1
+    assert expectations.traits(resolve("mujoco_warp:implicit")).rotation_sign == -1

@@ -13,6 +13,7 @@ pytest.importorskip("newton", reason="newton is not installed (pip install -e '.
 
 from cross_checks.core.files import kernel_cache_dir  # noqa: E402
 from cross_checks.engines import newton_engine as ne  # noqa: E402
+from cross_checks.engines import resolve
 from cross_checks.engines.base import EngineError, RunRequest  # noqa: E402
 from cross_checks.engines.forces import decay_factors, harness_force_torque  # noqa: E402
 from cross_checks.scenario import load_scenario  # noqa: E402
@@ -541,11 +542,11 @@ def test_semi_implicit_rounds_omega_one_way_more_than_an_ordinary_step_and_withi
         worst[variant], bias[variant] = max(changes), max(means)
     budget = ctol.CHECK_ROUNDINGS_PER_STEP * u
     for variant in ("semi_implicit", "xpbd"):
-        factor = traits(f"newton:{variant}").rounding_factor
+        factor = traits(resolve(f"newton:{variant}")).rounding_factor
         assert budget < worst[variant] <= factor * budget, worst
         assert F32 < bias[variant] <= factor * F32, bias
     for variant in ("featherstone", "mujoco_cpu"):
-        assert traits(f"newton:{variant}").rounding_factor == 1.0
+        assert traits(resolve(f"newton:{variant}")).rounding_factor == 1.0
         assert worst[variant] <= budget and bias[variant] <= F32, (worst, bias)
 
 

@@ -15,6 +15,7 @@ from tests.helpers import tolerances as ctol
 pytest.importorskip("sapien", reason="sapien is not installed (pip install -e '.[physx]')")
 
 from cross_checks.engines import physx_engine as pe  # noqa: E402
+from cross_checks.engines import resolve
 from cross_checks.engines.base import RunRequest  # noqa: E402
 from cross_checks.scenario import load_scenario  # noqa: E402
 from reference_sim.quaternion import geodesic_angle, matrix_from_quat, quat_exp, quat_mul  # noqa: E402
@@ -547,5 +548,5 @@ def test_tgs_rounds_omega_more_than_an_ordinary_step_and_within_its_declared_fac
         worst[variant] = max(changes)
     budget = ctol.CHECK_ROUNDINGS_PER_STEP * u
     assert worst["pgs"] <= budget, worst
-    assert budget < worst["tgs"] <= traits("physx:tgs").rounding_factor * budget, worst
-    assert traits("physx:pgs").rounding_factor == 1.0
+    assert budget < worst["tgs"] <= traits(resolve("physx:tgs")).rounding_factor * budget, worst
+    assert traits(resolve("physx:pgs")).rounding_factor == 1.0

@@ -5,6 +5,7 @@ import pytest
 from cross_checks import engines
 from cross_checks.analysis.expectations import expectation, nominal_order
 from cross_checks.cli import main
+from cross_checks.engines import resolve
 from cross_checks.engines.base import EngineAdapter, Variant
 from cross_checks.scenario import load_scenario
 from tests.helpers.byo import make_fake_distribution
@@ -37,14 +38,14 @@ def test_a_user_engine_s_declared_order_is_the_order_its_verdicts_expect(tmp_pat
     (tmp_path / "e.toml").write_text('name = "second"\n[variants.mid]\norder = 2\ndescription = "mid-point"\n'
                                      'command = ["true", "{scenario_json}", "{out_csv}"]\n')
     sc = load_scenario("tennis_racket")
-    assert nominal_order("second:mid") is None
+    assert nominal_order(resolve("second:mid")) is None
     with engines.engine_files_registered([tmp_path / "e.toml"]):
-        assert nominal_order("second:mid") == 2.0
-        e = expectation(sc, "second:mid", "orientation")
+        assert nominal_order(resolve("second:mid")) == 2.0
+        e = expectation(sc, resolve("second:mid"), "orientation")
         assert (e.verdict, e.order) == ("converges", 2.0) and e.reason == "second:mid is an order-2 scheme"
-        assert expectation(sc, "second:mid", "orientation", "one_step").order == 3.0
+        assert expectation(sc, resolve("second:mid"), "orientation", "one_step").order == 3.0
         assert not engines.has_one_step("second:mid")
-    assert nominal_order("second:mid") is None
+    assert nominal_order(resolve("second:mid")) is None
 
 
 BROKEN_PLUGINS = "\n".join([

@@ -129,15 +129,18 @@ def _mujoco_numpy_loop(sc, variant, h, n):
     d.qfrc_applied[3:6] = body_torque_B(sc.problem) * (1.0 if per_stage else gw)
     sc = dataclasses.replace(sc, problem=host_problem(sc.problem, True))   # the other forces
 
+    def apply(f, tau):   # the world force at the COM minus the weight (MuJoCo adds gravity), the world torque
+        xfrc[0:3], xfrc[3:6] = f - weight, tau
+
     def control(_m, dd):
-        me._apply(xfrc, *forces.stage_force_torque(sc, me.to_packed(dd.qpos.copy(), dd.qvel.copy())), weight)
+        apply(*forces.stage_force_torque(sc, me.to_packed(dd.qpos.copy(), dd.qvel.copy())))
     qpos, qvel = [d.qpos.copy()], [d.qvel.copy()]
     prev = me._clear_force_callbacks()
     mujoco.set_mjcb_control(control if per_stage else None)
     try:
         for _ in range(n):
             if not per_stage:
-                me._apply(xfrc, *forces.harness_force_torque(sc, me.to_packed(d.qpos, d.qvel), h), weight)
+                apply(*forces.harness_force_torque(sc, me.to_packed(d.qpos, d.qvel), h))
                 d.qvel[0:3] *= gv
                 d.qvel[3:6] *= gw
             mujoco.mj_step(m, d)

@@ -43,3 +43,17 @@ def test_the_example_is_swept_beside_mujoco_with_every_verdict_as_expected(tmp_p
         a = engines.run_variant(sc, "expmap:euler").y
         b = engines.run_variant(sc, "reference:expmap_gyro").y
         assert np.max(np.abs(a - b)) <= tol.EXAMPLE_ENGINE_VS_ITS_SCHEME * max(1.0, np.max(np.abs(b)))
+
+
+def test_a_host_rows_world_keeps_a_copy_of_the_packed_rows_it_is_set_to():
+    """world.HostRowsWorld (Brax's world's base): the rows live on the host between compiled rollouts, so a
+    caller changing its array afterwards must not move the bodies; ``ends`` are the requests' steps."""
+    from types import SimpleNamespace
+
+    from cross_checks.engines.world import HostRowsWorld
+    w = HostRowsWorld([SimpleNamespace(n_steps=4), SimpleNamespace(n_steps=9)])
+    assert w.read().shape == (2, 13) and w.ends == [4, 9] and w.host_s == 0.0 and w.rollout_takes_all_forces
+    y = np.arange(26, dtype=float).reshape(2, 13)
+    w.set_state(y)
+    y[:] = -1.0
+    assert np.array_equal(w.read(), np.arange(26, dtype=float).reshape(2, 13))

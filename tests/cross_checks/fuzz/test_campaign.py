@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from cross_checks.cli import main
-from cross_checks.engines import get_adapter
+from cross_checks.engines import get_adapter, resolve
 from cross_checks.engines.base import EngineAdapter, Variant
 from cross_checks.fuzz import campaign
 from cross_checks.fuzz.generate import to_toml
@@ -52,7 +52,7 @@ def _reproduces(s, mutant, tmp_path, monkeypatch):
     monkeypatch.undo()
     monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "cache2"))
     from cross_checks.fuzz.shrink import confirm  # the same sweep's gates, without drawing its report
-    assert confirm(load_toml_spec(path), [mutant.variant]) == []
+    assert confirm(load_toml_spec(path), [resolve(v) for v in [resolve(mutant.variant)]]) == []
 
 
 def load_toml_spec(path):
@@ -114,11 +114,11 @@ def test_the_shipped_engines_raise_no_false_alarm_in_a_short_campaign(tmp_path, 
 
 def test_the_same_seed_gives_the_same_verdicts_and_the_cache_returns_them(tmp_path, cache, monkeypatch):
     monkeypatch.setattr(campaign, "BATCH", 4)
-    item = (5, 1, ["reference:course"], {}, str(cache), True, None)
+    item = (5, 1, [resolve("reference:course")], {}, str(cache), True, None)
     first, second = campaign.run_batch(item), campaign.run_batch(item)
     assert not first["cached"] and second["cached"]
     assert first["cases"] == second["cases"]
-    again = campaign.run_batch((5, 1, ["reference:course"], {}, None, False, None))   # computed anew
+    again = campaign.run_batch((5, 1, [resolve("reference:course")], {}, None, False, None))   # anew
     assert again["cases"] == first["cases"]
 
 
@@ -183,7 +183,9 @@ def test_a_batch_is_the_same_to_the_last_bit_whatever_the_blas_thread_count(tmp_
     import subprocess
     import sys
     code = ("import json, sys; from cross_checks.fuzz.campaign import compute_batch; "
-            "r = compute_batch(2026, 2, ['reference:rk4', 'reference:course', 'mujoco:euler']); "
+            "from cross_checks.engines import resolve; "
+            "r = compute_batch(2026, 2, [resolve(v) for v in ('reference:rk4', 'reference:course', "
+            "'mujoco:euler')]); "
             "r.pop('seconds'); json.dump(r, sys.stdout, sort_keys=True)")
     outs = []
     for threads in ("1", "2"):
@@ -215,7 +217,7 @@ def test_a_batch_whose_worker_dies_is_reported_as_such_and_the_others_are_judged
     from cross_checks import engines
     monkeypatch.setattr(campaign, "BATCH", 2)   # set before the pool forks: the workers inherit it
     engines.register_adapter(_CrashingEngine(), "tests/cross_checks/fuzz/test_campaign.py")
-    results = campaign.search(0, ["crashing:course"], budget_s=2.0, jobs=2,
+    results = campaign.search(0, [resolve("crashing:course")], budget_s=2.0, jobs=2,
                               cache_root=str(cache), use_cache=False)
     assert [r["batch"] for r in results][:2] == [0, 1]   # both started at once (a window of 2 workers)
     for r in results:
@@ -228,8 +230,9 @@ def test_a_batch_whose_worker_dies_is_reported_as_such_and_the_others_are_judged
 def test_batches_run_on_a_given_executor_give_the_verdicts_of_a_local_run(tmp_path, cache, monkeypatch):
     from concurrent.futures import ThreadPoolExecutor
     monkeypatch.setattr(campaign, "BATCH", 3)
-    local = campaign.search(4, ["reference:course", "mujoco:euler"], budget_s=0.0, jobs=1, use_cache=False)
+    two = [resolve("reference:course"), resolve("mujoco:euler")]
+    local = campaign.search(4, two, budget_s=0.0, jobs=1, use_cache=False)
     with ThreadPoolExecutor(max_workers=1) as pool:   # as a Dask client's get_executor() is used
-        remote = campaign.search(4, ["reference:course", "mujoco:euler"], budget_s=0.0, jobs=2, executor=pool,
+        remote = campaign.search(4, two, budget_s=0.0, jobs=2, executor=pool,
                                  use_cache=False)
     assert [r["batch"] for r in remote] == [0] and remote[0]["cases"] == local[0]["cases"]

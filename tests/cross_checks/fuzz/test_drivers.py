@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from cross_checks import engines
-from cross_checks.engines import get_adapter
+from cross_checks.engines import get_adapter, resolve
 from cross_checks.engines.base import EngineAdapter, EngineError, Variant
 from cross_checks.fuzz import drivers, generate
 from cross_checks.fuzz.pipeline import scenario_of
@@ -18,7 +18,7 @@ def _cases(n=6):
 def test_the_ladder_is_the_adapters_runs(variant):
     scs = _cases()
     h0s = [sc.dt_s for sc in scs]
-    ladder = drivers.run_ladder(variant, scs, h0s, 8)
+    ladder = drivers.run_ladder(resolve(variant), scs, h0s, 8)
     engine, var = variant.split(":")
     for r, runs in enumerate(ladder):
         for i, sc in enumerate(scs):
@@ -32,7 +32,7 @@ def test_one_steps_are_the_adapters_and_none_without_a_one_step_mode():
     members = [(sc, sc.dt_s / 2 ** r) for sc in scs for r in range(3)]
     ys = np.array([sc.problem.initial_packed() for sc, _ in members])
     for variant in ("reference:midpoint", "mujoco:euler", "pybullet:multibody"):
-        got = drivers.one_step(variant, [m[0] for m in members], [m[1] for m in members], ys)
+        got = drivers.one_step(resolve(variant), [m[0] for m in members], [m[1] for m in members], ys)
         engine, var = variant.split(":")
         want = np.array([get_adapter(engine).one_step(sc, var, h, y[None, :])[0]
                          for (sc, h), y in zip(members, ys)])
@@ -50,7 +50,7 @@ def test_members_that_blow_up_diverge_where_the_adapter_says_and_leave_the_other
     blown_at = set()
     for variant in ("reference:explicit_euler", "mujoco:euler"):
         engine, var = variant.split(":")
-        for r, runs in enumerate(drivers.run_ladder(variant, scs, h0s, 8)):
+        for r, runs in enumerate(drivers.run_ladder(resolve(variant), scs, h0s, 8)):
             for i, sc in enumerate(scs):
                 run = get_adapter(engine).simulate(sc, var, h0s[i] / 2 ** r, 8 * 2 ** r)
                 k = len(run.y)
@@ -99,7 +99,7 @@ def test_a_batch_that_fails_as_a_whole_runs_case_by_case_and_a_refused_run_is_th
     scs = _cases(3)
     h0s = [sc.dt_s for sc in scs]
     fragile.refused_below_s = min(h0s) / 3   # every case's finest rung, and the 2-cases' middle one
-    ladder = drivers.run_ladder("fragile:course", scs, h0s, 8)
+    ladder = drivers.run_ladder(resolve("fragile:course"), scs, h0s, 8)
     for r, runs in enumerate(ladder):
         for i, sc in enumerate(scs):
             h = h0s[i] / 2 ** r
@@ -110,4 +110,5 @@ def test_a_batch_that_fails_as_a_whole_runs_case_by_case_and_a_refused_run_is_th
                 want = get_adapter("reference").simulate(sc, "course", h, 8 * 2 ** r)
                 assert runs.status[i] == "ok" and np.array_equal(runs.y[:, i], want.y)
     assert "failed" in ladder[2].status and "ok" in ladder[0].status
-    assert drivers.one_step("fragile:course", scs, h0s, np.zeros((3, 13))) is None   # no one-step mode
+    # no one-step mode
+    assert drivers.one_step(resolve("fragile:course"), scs, h0s, np.zeros((3, 13))) is None

@@ -4,6 +4,7 @@ a scheme of the wrong order is still caught."""
 import tomllib
 
 import cross_checks.fuzz.pipeline as PL
+from cross_checks.engines import resolve
 from cross_checks.fuzz.pipeline import evaluate_specs
 from tests.helpers.scenarios import PRE_ASYMPTOTIC_ON_ITS_LADDER
 from tests.mutants import MUTANTS
@@ -40,20 +41,20 @@ def _velocity_order_violations(outcome):
 
 
 def test_a_pre_asymptotic_ladder_is_not_a_violation_when_the_refined_ladder_shows_the_order(monkeypatch):
-    (judged,) = evaluate_specs([PRE_ASYMPTOTIC], FIRST_ORDER)
+    (judged,) = evaluate_specs([PRE_ASYMPTOTIC], [resolve(v) for v in FIRST_ORDER])
     assert judged.violations == []
     monkeypatch.setattr(PL, "_refined_ladder_shows_the_order", lambda *a: False)
-    (unrefined,) = evaluate_specs([PRE_ASYMPTOTIC], FIRST_ORDER)
+    (unrefined,) = evaluate_specs([PRE_ASYMPTOTIC], [resolve(v) for v in FIRST_ORDER])
     bad = _velocity_order_violations(unrefined)
     assert {v["variants"][0] for v in bad} == set(FIRST_ORDER)
     assert all(0.4 < v["order"] < 0.7 for v in bad)
 
 
 def test_errors_that_shrink_but_not_at_every_halving_are_judged_on_the_refined_ladder(monkeypatch):
-    (judged,) = evaluate_specs([NOT_MONOTONIC], ["mujoco:implicit"])
+    (judged,) = evaluate_specs([NOT_MONOTONIC], [resolve(v) for v in ["mujoco:implicit"]])
     assert judged.violations == []
     monkeypatch.setattr(PL, "_refined_ladder_shows_the_order", lambda *a: False)
-    (unrefined,) = evaluate_specs([NOT_MONOTONIC], ["mujoco:implicit"])
+    (unrefined,) = evaluate_specs([NOT_MONOTONIC], [resolve(v) for v in ["mujoco:implicit"]])
     assert [v["verdict"] for v in _velocity_order_violations(unrefined)] == ["does_not_converge"]
 
 
@@ -66,7 +67,7 @@ def test_a_wrong_order_stays_a_violation_on_the_refined_ladder(monkeypatch):
     spec = dict(PRE_ASYMPTOTIC, duration=0.2, dt=0.01, dt_ladder=[0.01, 0.005, 0.0025])
     spec["initial"] = {"angular_velocity": [0.3, 1.0, 0.2]}
     spec["forces"] = {"gravity": [0.0, 0.0, -9.81], "torque": [{"torque": [0.0, 0.2, 0.05], "frame": "body"}]}
-    (judged,) = evaluate_specs([spec], [mutant.swept])
+    (judged,) = evaluate_specs([spec], [resolve(v) for v in [mutant.swept]])
     low = [v for v in judged.violations if v["property"] == "free_running_order"]
     assert calls, "the refinement was not consulted"
     assert low and all(v["order"] < 3.0 for v in low), judged.violations
@@ -102,18 +103,18 @@ def test_rbcheck_s_own_schemes_are_not_given_an_engine_s_lever_arm_round_off(mon
 
     from cross_checks.engines import get_adapter, resolve
     assert not resolve("reference:rk4").traits.lever_arms and resolve("mujoco:rk4").traits.lever_arms
-    (judged,) = evaluate_specs([FAR_SMALL_BODY], ["reference:rk4"])
+    (judged,) = evaluate_specs([FAR_SMALL_BODY], [resolve(v) for v in ["reference:rk4"]])
     assert judged.violations == []
     declared = get_adapter("reference").variants
     rk4 = declared["rk4"]   # the floor as it was: rk4 declared to hold lever arms
     monkeypatch.setitem(declared, "rk4", dataclasses.replace(
         rk4, traits=dataclasses.replace(rk4.traits, lever_arms=True)))
     assert resolve("reference:rk4").traits.lever_arms
-    (with_floor,) = evaluate_specs([FAR_SMALL_BODY], ["reference:rk4"])
+    (with_floor,) = evaluate_specs([FAR_SMALL_BODY], [resolve(v) for v in ["reference:rk4"]])
     assert with_floor.violations == []   # ... and order_within_floors alone leaves room for order 5 there too
     import cross_checks.analysis.judge as J
     monkeypatch.setattr(J, "order_within_floors", lambda fit: None)       # the rules as they were
-    (before,) = evaluate_specs([FAR_SMALL_BODY], ["reference:rk4"])
+    (before,) = evaluate_specs([FAR_SMALL_BODY], [resolve(v) for v in ["reference:rk4"]])
     assert ([(v["property"], v["quantity"]) for v in before.violations]
             == [("one_step_order", "angular_velocity")])
 
@@ -146,7 +147,7 @@ rest_length = 0.22
 
 
 def test_a_case_whose_spring_turns_faster_than_its_step_resolves_is_not_judged():
-    (judged,) = evaluate_specs([SPRING_PASSED_BY], ["reference:rk4"])
+    (judged,) = evaluate_specs([SPRING_PASSED_BY], [resolve(v) for v in ["reference:rk4"]])
     assert judged.violations == [] and judged.tally == {}
     assert judged.numbers["hL"] > 1.0 and judged.numbers["skipped"].startswith("measured h·L")
 
@@ -179,10 +180,10 @@ rest_length = 0.7312
 
 
 def test_errors_that_shrink_at_every_halving_but_slowly_are_judged_on_the_refined_ladder(monkeypatch):
-    (judged,) = evaluate_specs([NEAR_INTERMEDIATE_AXIS], ["reference:expmap_gyro"])
+    (judged,) = evaluate_specs([NEAR_INTERMEDIATE_AXIS], [resolve(v) for v in ["reference:expmap_gyro"]])
     assert judged.violations == []
     monkeypatch.setattr(PL, "_refined_ladder_shows_the_order", lambda *a: False)
-    (unrefined,) = evaluate_specs([NEAR_INTERMEDIATE_AXIS], ["reference:expmap_gyro"])
+    (unrefined,) = evaluate_specs([NEAR_INTERMEDIATE_AXIS], [resolve(v) for v in ["reference:expmap_gyro"]])
     (rec,) = [v for v in unrefined.violations if v["quantity"] == "orientation"]
     assert rec["verdict"] == "does_not_converge" and 0.4 < rec["order"] < 0.5
     # not a first-order halving overall: qualifies by shrinking
@@ -235,7 +236,7 @@ def test_the_invariance_property_checks_the_drawn_transform_and_catches_a_plante
     body_frame = next(t for t in default_transforms() if t.kind == "body_frame")
     monkeypatch.setattr(P, "case_transform", lambda name: body_frame)
     with engine_files_registered([_zoo_engine_file(tmp_path, ["correct", "diagonal_inertia"])]):
-        (out,) = evaluate_specs([spec], ["zoo:correct", "zoo:diagonal_inertia"])
+        (out,) = evaluate_specs([spec], [resolve(v) for v in ["zoo:correct", "zoo:diagonal_inertia"]])
     bad = [v for v in out.violations if v["property"] == "invariance"]
     assert [v["variants"] for v in bad] == [["zoo:diagonal_inertia"]], out.violations
     assert bad[0]["transform"] == "body_frame 41 deg" and "broken" in bad[0]["sentence"]

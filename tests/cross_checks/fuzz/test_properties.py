@@ -3,6 +3,7 @@ import numpy as np
 import pytest
 
 from cross_checks.analysis.judge import two_term_consistent
+from cross_checks.engines import resolve
 from tests.helpers.scenarios import RK4_PRE_ASYMPTOTIC_FROM_BELOW
 
 H = np.array([0.0377, 0.01885, 0.009425])
@@ -139,5 +140,5 @@ def test_the_fuzz_does_not_hold_a_clamped_step_to_the_physical_conservation_wher
     from tests.cross_checks.analysis.test_expectations import CLAMPED
     sc = parse_scenario(CLAMPED)
     phys = scenario_physics(sc)
-    assert not _models_physics(sc, "reference:explicit_gyro_clamped", phys)
-    assert _models_physics(sc, "reference:expmap_gyro", phys)
+    assert not _models_physics(sc, resolve("reference:explicit_gyro_clamped"), phys)
+    assert _models_physics(sc, resolve("reference:expmap_gyro"), phys)

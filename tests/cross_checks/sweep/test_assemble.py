@@ -8,6 +8,7 @@ import pytest
 
 from cross_checks.analysis import metrics as M
 from cross_checks.core import tolerances as tol
+from cross_checks.engines import resolve
 from cross_checks.fuzz import properties as P
 from cross_checks.scenario import load_scenario
 from cross_checks.sweep import assemble
@@ -22,6 +23,7 @@ AMP = {"position": 2.0, "velocity": 3.0, "orientation": 4.0, "angular_velocity":
 @pytest.mark.parametrize("variant", ["mujoco:euler", "reference:expmap_gyro"])
 @pytest.mark.parametrize("q", ["position", "velocity", "orientation", "angular_velocity"])
 def test_the_sweep_and_the_fuzz_give_a_ladder_the_same_floors(variant, q):
+    variant = resolve(variant)
     ladder = [{"dt": 0.01 / 2 ** k, "steps": 100 * 2 ** k} for k in range(3)]
     measured = {"reference_error": REF_ERR, "amplification": AMP, "lever_arms": LEVER,
                 "local_reference_error": {repr(r["dt"]): REF_ERR for r in ladder}}
@@ -59,6 +61,7 @@ def test_the_sweep_s_agreement_allows_the_amplified_round_off_the_fuzz_allows():
     for factor, agrees in ((0.5, True), (2.0, False)):
         yb = y.copy()
         yb[10] += factor * allowed * 5.0       # an angular velocity difference of factor × the allowance
-        rec = assemble._agreement("reference:expmap_gyro", "mujoco:euler", "same", sc, _rec(y), _rec(yb), ref)
+        rec = assemble._agreement(resolve("reference:expmap_gyro"), resolve("mujoco:euler"), "same", sc,
+                                  _rec(y), _rec(yb), ref)
         assert rec["agrees"] is agrees and rec["tolerance"] == allowed
         assert rec["max_rel"] == pytest.approx(factor * allowed, rel=1e-6)

@@ -6,6 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cross_checks.engines import resolve
 from cross_checks.scenario import parse_scenario
 from cross_checks.sweep import cache
 from cross_checks.sweep.cache import entry_path as _cache_file
@@ -14,8 +15,8 @@ from tests.helpers.scenarios import TINY
 from tests.helpers.sweeps import RUN_DEPENDENT_COLUMNS
 
 SC = parse_scenario(TINY, "tiny.toml")
-JOB = Job(0, "tiny", "reference:rk4", 0.01, True, True, 1.0)
-OTHER = Job(0, "tiny", "reference:course", 0.01, True, True, 1.0)
+JOB = Job(0, "tiny", resolve("reference:rk4"), 0.01, True, True, 1.0)
+OTHER = Job(0, "tiny", resolve("reference:course"), 0.01, True, True, 1.0)
 
 
 def run_job(job, *args):

@@ -11,7 +11,7 @@ import sys
 import pytest
 
 from cross_checks.cli import main
-from cross_checks.engines import engine_files_registered
+from cross_checks.engines import engine_files_registered, resolve
 from cross_checks.scenario import parse_scenario
 from cross_checks.sweep.invariance import INVARIANCE_COLUMNS, check_invariance
 from cross_checks.testing import assert_engine
@@ -46,8 +46,8 @@ def zoo_rows(zoo):
     engine_file, scenario = zoo
     sc = parse_scenario(TUMBLE, str(scenario))
     with engine_files_registered([engine_file]):
-        return {mode: {(r["transform"], r["magnitude"]): r for r in check_invariance(sc, f"zoo:{mode}")}
-                for mode in MODES}
+        return {mode: {(r["transform"], r["magnitude"]): r
+                       for r in check_invariance(sc, resolve(f"zoo:{mode}"))} for mode in MODES}
 
 
 def test_the_correct_engine_file_passes_every_transform(zoo_rows):
@@ -165,7 +165,7 @@ def test_assert_engine_with_invariance(zoo, tmp_path, monkeypatch):
 def test_a_refused_transform_is_a_row_naming_the_field(zoo):
     far = parse_scenario(TUMBLE.replace("velocity = [0.3, 0.0, 2.0]",
                                         "position = [999995.0, 0.0, 0.0]\nvelocity = [0.3, 0.0, 2.0]"), "far")
-    rows = check_invariance(far, "reference:course_gyro")
+    rows = check_invariance(far, resolve("reference:course_gyro"))
     refused = [r for r in rows if r["verdict"] == "refused"]
     # 10 m along (2, -3, 6)/7 moves x by 2.9 m only: within 1e6 m; 1 km, 10 km and the 100x scale are not
     assert [r["magnitude"] for r in refused] == ["1e+03 m", "1e+04 m", "k=100 mu=100"]
@@ -178,7 +178,7 @@ def test_a_declared_gyroscopic_clamp_makes_the_large_scale_cannot_express():
     small scale stays below the clamp and holds."""
     from cross_checks.scenario import load_scenario
     rows = {r["magnitude"]: r for r in check_invariance(load_scenario("tennis_racket"),
-                                                         "reference:explicit_gyro_clamped")
+                                                         resolve("reference:explicit_gyro_clamped"))
             if r["transform"] == "scale"}
     assert rows["k=100 mu=100"]["verdict"] == "cannot express"
     assert "clamps the gyroscopic torque to 100 N m" in rows["k=100 mu=100"]["assessment"]
@@ -208,18 +208,18 @@ def test_a_splitting_along_a_degenerate_eigenspace_is_step_dependent_not_broken(
     from cross_checks.scenario import load_scenario
     from cross_checks.scenario.transforms import default_transforms
     t = [x for x in default_transforms() if x.kind == "body_frame"]
-    (r,) = check_invariance(load_scenario("symmetric_top"), "reference:dlm_splitting", t)
+    (r,) = check_invariance(load_scenario("symmetric_top"), resolve("reference:dlm_splitting"), t)
     assert r["verdict"] == "step-dependent", r["assessment"]
     assert "7.05e-09, 1.76e-09, 4.41e-10 rad/s" in r["assessment"], r["assessment"]
     assert "order 2.00 (then within round-off), 2.00" in r["assessment"] and r["worst_ratio"] > 1.0
     # a body whose principal axes are unique (1, 2, 3 kg m²): the same scheme holds to round-off
-    (r,) = check_invariance(load_scenario("tennis_racket"), "reference:dlm_splitting", t)
+    (r,) = check_invariance(load_scenario("tennis_racket"), resolve("reference:dlm_splitting"), t)
     assert r["verdict"] == "holds", r["assessment"]
 
 
 def test_an_adapter_that_does_not_build_a_body_form_says_cannot_express():
     from cross_checks.scenario.transforms import ComOffset, WeldedSplit
-    rows = check_invariance(parse_scenario(TUMBLE, "t.toml"), "reference:course_gyro",
+    rows = check_invariance(parse_scenario(TUMBLE, "t.toml"), resolve("reference:course_gyro"),
                             [ComOffset(), WeldedSplit()])
     assert [r["verdict"] for r in rows] == ["cannot express"] * 2
     assert "reference cannot express a body whose frame origin is not at its COM" in rows[0]["assessment"]

@@ -9,6 +9,7 @@ failure, with its measured cause:
   moments (1, 2, 3)e-6 kg m² the gyroscopic term is dropped and ω stays at its initial value: the engine's."""
 import pytest
 
+from cross_checks.engines import resolve
 from cross_checks.scenario import load_scenario
 from cross_checks.sweep.invariance import check_invariance
 
@@ -31,7 +32,8 @@ KNOWN = {
 @pytest.fixture(scope="module")
 def rows():
     sc = load_scenario("tennis_racket")
-    return {v: check_invariance(sc, v) for v in ("mujoco:euler", "pybullet:multibody", "pybullet:maximal")}
+    return {v: check_invariance(sc, resolve(v))
+            for v in ("mujoco:euler", "pybullet:multibody", "pybullet:maximal")}
 
 
 def _cases():
@@ -61,7 +63,7 @@ def test_drake_and_dart_express_the_body_s_form(variant):
     engine = variant.split(":")[0]
     pytest.importorskip("pydrake" if engine == "drake" else "dartpy")
     from cross_checks.scenario.transforms import ComOffset, WeldedSplit
-    rows = check_invariance(load_scenario("spring_pendulum"), variant, [ComOffset(), WeldedSplit()])
+    rows = check_invariance(load_scenario("spring_pendulum"), resolve(variant), [ComOffset(), WeldedSplit()])
     assert [r["verdict"] for r in rows] == ["step-dependent", "holds"], [r["assessment"] for r in rows]
     # first order: the deviation halves with Δt (0.465–0.466, 0.231, 0.115 rad/s measured)
     assert ", 0.231, 0.115 rad/s" in rows[0]["assessment"], rows[0]["assessment"]

@@ -5,6 +5,7 @@ import math
 
 import pytest
 
+from cross_checks.engines import resolve
 from cross_checks.scenario import parse_scenario
 from cross_checks.sweep.long_runs import LONG_RUN_COLUMNS, judged_rows, run_long_group
 from tests.mutants import long_run_mutants
@@ -34,6 +35,7 @@ def planted(monkeypatch):
 
 def _judged(variants, scenarios=(MAJOR, MINOR)):
     records = {}
+    variants = [resolve(v) for v in variants]   # as the sweep passes them
     for v in variants:
         for sc, rec in zip(scenarios, run_long_group(v, list(scenarios), cache_root=None)):
             records[(sc.name, v)] = rec
@@ -87,8 +89,8 @@ def test_engines_run_the_long_runs_through_their_adapters():
 
 
 def test_a_long_run_is_cached(tmp_path):
-    first = run_long_group("reference:rk4", [MAJOR], cache_root=str(tmp_path))
-    again = run_long_group("reference:rk4", [MAJOR], cache_root=str(tmp_path))
+    first = run_long_group(resolve("reference:rk4"), [MAJOR], cache_root=str(tmp_path))
+    again = run_long_group(resolve("reference:rk4"), [MAJOR], cache_root=str(tmp_path))
     assert not first[0]["row"]["cached"] and again[0]["row"]["cached"]
     same = [k for k, v in first[0]["row"].items() if k not in ("cached", "wall_s")
             and not (v == again[0]["row"][k] or (isinstance(v, float) and math.isnan(v)

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from cross_checks import engines
+from cross_checks.engines import resolve
 from cross_checks.engines.base import EngineAdapter, NotExpressible, Variant
 from cross_checks.scenario import load_scenario
 
@@ -118,7 +119,7 @@ def test_compare_names_the_reason_when_a_baseline_had_rows_there(notorque, tmp_p
 def test_the_fuzz_runs_nothing_it_cannot_express_and_counts_it(notorque):
     from cross_checks.fuzz import drivers
     scs = [load_scenario("applied_torque"), load_scenario("projectile")]
-    ladder = drivers.run_ladder(notorque, scs, [sc.dt_s for sc in scs], 4)
+    ladder = drivers.run_ladder(resolve(notorque), scs, [sc.dt_s for sc in scs], 4)
     for runs in ladder:
         assert runs.status[0] == drivers.NOT_EXPRESSIBLE and runs.message[0] == REASON
         assert np.all(np.isnan(runs.y[:, 0]))

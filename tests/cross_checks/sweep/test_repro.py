@@ -176,7 +176,8 @@ def test_an_invariance_script_judges_as_the_sweep_does_without_rbcheck(variant, 
     done = _run_alone(write_reproducer(r, tmp_path / "inv.py"), tmp_path)
     assert done.returncode == int(holds), done.stderr
     assert done.stdout.strip().splitlines()[-1] == r.summary
-    row = check_invariance(sc, variant, [_default_transforms()[" ".join(transform)]])[0]
+    from cross_checks.engines import resolve
+    row = check_invariance(sc, resolve(variant), [_default_transforms()[" ".join(transform)]])[0]
     assert row["verdict"] == ("broken" if holds else "holds")
     assert r.summary.split(": ")[1].startswith(row["verdict"])
     if holds:   # a broken one's deviations are the model's, not round-off: the sweep's numbers

@@ -46,7 +46,9 @@ def _sweep_order_defect(variant, scenario, quantity) -> bool:
 
 def _sweep_long_run(variant, scenario):
     """The sweep's long-run row of ``variant`` on ``scenario`` (its stage, run here, judged as it judges)."""
+    from cross_checks.engines import resolve
     from cross_checks.sweep.long_runs import judged_rows, run_long_group
+    variant = resolve(variant)   # as the sweep hands its stages a resolved variant
     sc = load_scenario(scenario)
     recs = run_long_group(variant, [sc], None, False, None)
     rows, _ = judged_rows({(scenario, variant): recs[0]}, [sc], [variant])
