@@ -389,25 +389,34 @@ def _compare_agreement(old_recs, new_recs, out: Comparison):
 
 
 def _compare_invariance(old_recs, new_recs, out: Comparison):
-    """Invariance checks (summary.json ``invariance``: the checks that do not hold), matched by (scenario,
-    engine, transform, magnitude): a broken invariance the baseline does not have broken is a regression
-    (whether the baseline held it or did not run the checks: docs/invariance.md); one broken there and no
-    longer broken is an improvement. Without the checks in the new results nothing is compared."""
+    """Invariance checks (summary.json ``invariance``: the checks that do not hold, and those whose declared
+    finding no longer breaks), matched by (scenario, engine, transform, magnitude): a broken invariance the
+    baseline does not have broken is a regression (whether the baseline held it, declared it as a known
+    finding, or did not run the checks: docs/invariance.md); one broken or a known finding there and neither
+    here is an improvement ("no longer broken"), as is a broken one that is now a declared known finding.
+    Without the checks in the new results nothing is compared."""
     if new_recs is None:
         return
     key = lambda r: (r["scenario"], r["engine"], r["transform"], r["magnitude"])  # noqa: E731
     old = {key(r): r for r in old_recs or []}
     new = {key(r): r for r in new_recs}
+
+    def verdict(recs, k, ran):
+        return recs[k]["verdict"] if k in recs else ("holds" if ran else "not run")
+
     for k in sorted(set(old) | set(new)):
-        bo = k in old and old[k]["verdict"] == "broken"
-        bn = k in new and new[k]["verdict"] == "broken"
-        if bo == bn:
+        before, after = verdict(old, k, old_recs is not None), verdict(new, k, True)
+        bad = ("broken", "known finding")
+        if after == "broken" and before != "broken":
+            kind, note = "regression", new[k]["assessment"]
+        elif before == "broken" and after != "broken" or (before == "known finding" and after not in bad):
+            kind = "improvement"
+            note = (new[k]["assessment"] if after == "known finding" or k in new and new[k].get("declared")
+                    else f"no longer broken: {old[k]['assessment']}")
+        else:
             continue
-        before = old[k]["verdict"] if k in old else ("holds" if old_recs is not None else "not run")
-        after = new[k]["verdict"] if k in new else "holds"
-        out.changes.append(Change("regression" if bn else "improvement", k[0], k[1],
-                                  f"invariance under {k[2]} {k[3]}", before, after,
-                                  note=(new[k] if bn else old[k])["assessment"], area="invariance"))
+        out.changes.append(Change(kind, k[0], k[1], f"invariance under {k[2]} {k[3]}", before, after,
+                                  note=note, area="invariance"))
 
 
 def _order_change(ro, rn):

@@ -17,19 +17,26 @@ from cross_checks.analysis.judge import invariance_allowance, judge_invariance
 from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, quantity_scales
 from cross_checks.scenario.transforms import TransformRefused, apply, default_transforms
 
-__all__ = ["INVARIANCE_COLUMNS", "check_invariance", "run_invariance", "invariance_summary", "broken_lines"]
+__all__ = ["INVARIANCE_COLUMNS", "DECLARED", "check_invariance", "run_invariance", "invariance_summary",
+           "broken_lines", "no_longer_broken_lines"]
 
 INVARIANCE_COLUMNS = (["engine", "scenario", "transform", "magnitude", "dt", "steps", "verdict",
                        "worst_quantity", "worst_ratio"]
                       + [f"{COLUMN_STEM[q]}_dev" for q in QUANTITIES]
                       + [f"{COLUMN_STEM[q]}_allowance" for q in QUANTITIES]
-                      + ["assessment"])
+                      + ["declared", "assessment"])
+
+#: What the ``declared`` column says of a check the variant declares a finding for (engines.base.
+#: InvarianceFinding): "known finding" (it breaks as declared: verdict ``known finding``), "no longer broken"
+#: (it does not break: the declaration can go), "beyond the declaration" (it breaks in a quantity the
+#: declaration does not name: still ``broken``); "" where nothing is declared.
+DECLARED = ("known finding", "no longer broken", "beyond the declaration")
 
 
 def _row(variant, scenario, transform, verdict, assessment, dt="", steps="", judgement=None) -> dict:
     row = {"engine": variant, "scenario": scenario.name, "transform": transform.kind,
            "magnitude": transform.magnitude, "dt": dt, "steps": steps, "verdict": verdict,
-           "worst_quantity": "", "worst_ratio": math.nan,
+           "worst_quantity": "", "worst_ratio": math.nan, "declared": "",
            "assessment": " ".join(str(assessment).split())}   # an engine's multi-line message on one line
     for q in QUANTITIES:
         row[f"{COLUMN_STEM[q]}_dev"] = math.nan if judgement is None else judgement.deviation[q]
@@ -77,7 +84,7 @@ def check_invariance(scenario, variant: str, transforms=None, *, scales: dict | 
     if amplification is None:
         from cross_checks.scenario.references import error_amplification
         amplification = error_amplification(scenario, scales)
-    refine = []
+    refine, judged = [], []
     for (t, tsc), run in zip(todo, transformed):
         clamp = _clamped(traits, original, scenario, tsc)
         if clamp:
@@ -96,6 +103,7 @@ def check_invariance(scenario, variant: str, transforms=None, *, scales: dict | 
                              offset_m=t.position_offset_m(), dt_s=dt,
                              differenced=getattr(traits, "velocity_from_positions", False))
         rows.append(_row(variant, scenario, t, j.verdict, j.assessment, dt, n, j))
+        judged.append((len(rows) - 1, t, j))
         if j.verdict == "broken" and all(math.isfinite(v) for v in j.deviation.values()):
             refine.append((len(rows) - 1, t, tsc, j))
     if refine:
@@ -106,7 +114,42 @@ def check_invariance(scenario, variant: str, transforms=None, *, scales: dict | 
                                              differenced=getattr(traits, "velocity_from_positions", False))
             return {q: base[q] + off[q] for q in base}
         _refine(rows, refine, scenario, variant, allowance_at)
+    _declared(rows, judged, variant)
     return rows
+
+
+def _declared(rows, judged, variant) -> None:
+    """The variant's declared findings (engines.base.InvarianceFinding, read through
+    analysis.expectations.invariance_finding) applied to its judged rows ``judged`` ((row index, transform,
+    judgement)): a check that is still ``broken`` (after the refinement) in the declared quantities only
+    becomes ``known finding``, its sentence the declaration's reason and the measured numbers; one broken
+    beyond them stays broken, saying so; one that does not break is said "no longer broken". Every entry
+    point (the sweep, assert_engine, the fuzz) goes through here: one judge."""
+    from cross_checks.analysis.expectations import invariance_finding
+    from cross_checks.core.quantities import QUANTITIES
+    for i, t, j in judged:
+        finding = invariance_finding(variant, t)
+        if finding is None:
+            continue
+        row = rows[i]
+        declared = (f"{variant} declares this finding (under {t.kind} at {finding.range_text()}, in "
+                    f"{', '.join(q.replace('_', ' ') for q in finding.quantities)}): {finding.reason}")
+        if row["verdict"] != "broken":
+            row["declared"] = "no longer broken"
+            row["assessment"] += (f"; no longer broken: {declared}; it did not break here, its declaration "
+                                  "can go")
+            continue
+        beyond = [q for q in QUANTITIES if not j.deviation[q] <= j.allowance[q]]
+        outside = [q for q in beyond if q not in finding.quantities or not math.isfinite(j.deviation[q])]
+        if outside:
+            row["declared"] = "beyond the declaration"
+            row["assessment"] += (f"; beyond its declared finding, which names "
+                                  f"{', '.join(finding.quantities)} only, in {', '.join(outside)} "
+                                  f"({declared})")
+            continue
+        row["verdict"] = row["declared"] = "known finding"
+        measured = row["assessment"].removeprefix("broken: ")
+        row["assessment"] = f"known finding (declared, not a failure): {declared}; measured here: {measured}"
 
 
 def _refine(rows, refine, scenario, variant, allowance_at) -> None:
@@ -263,12 +306,15 @@ def invariance_summary(rows) -> tuple:
     keep = ("engine", "scenario", "transform", "magnitude", "verdict", "worst_quantity", "assessment")
     records = []
     for r in rows:
-        if r["verdict"] != "holds":
+        if r["verdict"] != "holds" or r.get("declared"):
             rec = {k: r[k] for k in keep}
+            if r.get("declared"):
+                rec["declared"] = r["declared"]
             ratio = r["worst_ratio"]
             rec["worst_ratio"] = float(ratio) if isinstance(ratio, float) and math.isfinite(ratio) else None
             records.append(rec)
-    counts = {"checks": len(rows), **{v: sum(r["verdict"] == v for r in rows) for v in INVARIANCE_VERDICTS}}
+    counts = {"checks": len(rows), **{v: sum(r["verdict"] == v for r in rows) for v in INVARIANCE_VERDICTS},
+              "no longer broken": sum(r.get("declared") == "no longer broken" for r in rows)}
     return records, counts
 
 
@@ -277,3 +323,11 @@ def broken_lines(summary) -> list:
     return [f"{r['engine']} on {r['scenario']}: invariance under {r['transform']} {r['magnitude']} "
             f"{r['assessment']}"
             for r in summary.get("invariance") or [] if r["verdict"] == "broken"]
+
+
+def no_longer_broken_lines(summary) -> list:
+    """One line per check whose declared finding did not appear (said, never a failure: the declaration in
+    the variant's traits or engine file can go)."""
+    return [f"{r['engine']} on {r['scenario']}: invariance under {r['transform']} {r['magnitude']}: "
+            "its declared finding no longer breaks (the declaration can go)"
+            for r in summary.get("invariance") or [] if r.get("declared") == "no longer broken"]

@@ -129,7 +129,8 @@ AGREEMENT = {"a": str, "b": str, "scenario": str, "dt_s": NUM, "agrees": bool, "
              "reason": str, "note?": str}
 #: An invariance check that does not hold (docs/invariance.md): summary.json's ``invariance`` list.
 INVARIANCE_RECORD = {"engine": str, "scenario": str, "transform": str, "magnitude": str, "verdict": str,
-                     "worst_quantity": str, "worst_ratio": Nullable(NUM), "assessment": str}
+                     "worst_quantity": str, "worst_ratio": Nullable(NUM), "assessment": str,
+                     "declared?": str}
 SUMMARY = {
     "schema_version": int,
     "provenance": {k + "?": Nullable(str)
