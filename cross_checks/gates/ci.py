@@ -269,6 +269,10 @@ def sweep_markdown(summary: dict, out_dir, rows=(), long_rows=()) -> str:
         md[2] += f" **{len(broken)} broken invariance(s)** (invariance.csv)."
         if ok:
             md[0] = "## rbcheck sweep: ❌ invariance broken"
+    inv = run.get("invariance") or {}
+    if inv.get("known finding") or inv.get("no longer broken"):   # declared: said, not failed
+        md[2] += (f" {inv.get('known finding', 0)} known invariance finding(s) (declared by their variants, "
+                  f"with the reason), {inv.get('no longer broken', 0)} declared one(s) no longer broken.")
     if contra:
         fold = len(contra) > 10
         md += (["<details><summary>Not as expected</summary>", ""] if fold else ["**Not as expected**", ""])

@@ -325,6 +325,9 @@ def test_the_entry_points_read_the_same_declarations(zood, zood_rows, tmp_path, 
     from cross_checks.gates import ci
     junit = ci.junit_text(ci.sweep_junit(summary))
     assert 'failures="0"' in junit and REASON in junit
+    md = ci.sweep_markdown(summary, out)
+    assert md.startswith("## rbcheck sweep: ✅") and "1 known invariance finding(s)" in md
+    assert "1 declared one(s) no longer broken" in md
     page = (out / "index.html").read_text(encoding="utf-8")
     assert "zood:declared on byo_tumble: under body_frame 41 deg, known finding" in page
     # compare: the known finding is no regression against a baseline where it held
