@@ -126,8 +126,13 @@ def _invariance(res, c) -> tuple:
             bad.append(Finding("bad", text, r["scenario"], r["engine"]))
         elif r["verdict"] == "known finding":
             explained.append(Finding("explained", text, r["scenario"], r["engine"]))
-        elif r["verdict"] in ("precision loss", "step-dependent") or r.get("declared"):
+        elif r["verdict"] in ("precision loss", "step-dependent"):
             info.append(Finding("info", text, r["scenario"], r["engine"]))
+    for d in res.summary.get("invariance_declared") or []:
+        if d["verdict"] == "no longer broken":
+            text = (f"{d['engine']}: its declared invariance finding under {d['transform']} broke on none "
+                    f"of the {d['checks']} check(s) it covers: no longer broken (the declaration can go).")
+            info.append(Finding("info", text, None, d["engine"]))
     return bad, info, explained
 
 

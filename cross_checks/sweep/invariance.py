@@ -18,7 +18,7 @@ from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, quantity_scale
 from cross_checks.scenario.transforms import TransformRefused, apply, default_transforms
 
 __all__ = ["INVARIANCE_COLUMNS", "DECLARED", "check_invariance", "run_invariance", "invariance_summary",
-           "broken_lines", "no_longer_broken_lines"]
+           "broken_lines", "no_longer_broken_lines", "declared_summary"]
 
 INVARIANCE_COLUMNS = (["engine", "scenario", "transform", "magnitude", "dt", "steps", "verdict",
                        "worst_quantity", "worst_ratio"]
@@ -27,10 +27,11 @@ INVARIANCE_COLUMNS = (["engine", "scenario", "transform", "magnitude", "dt", "st
                       + ["declared", "assessment"])
 
 #: What the ``declared`` column says of a check the variant declares a finding for (engines.base.
-#: InvarianceFinding): "known finding" (it breaks as declared: verdict ``known finding``), "no longer broken"
-#: (it does not break: the declaration can go), "beyond the declaration" (it breaks in a quantity the
-#: declaration does not name: still ``broken``); "" where nothing is declared.
-DECLARED = ("known finding", "no longer broken", "beyond the declaration")
+#: InvarianceFinding): "known finding" (it breaks as declared: verdict ``known finding``), "not broken here"
+#: (it does not break on this scenario), "beyond the declaration" (it breaks in a quantity the declaration
+#: does not name: still ``broken``); "" where nothing is declared. A declaration that breaks on none of the
+#: checks it covers is "no longer broken" (:func:`declared_summary`).
+DECLARED = ("known finding", "not broken here", "beyond the declaration")
 
 
 def _row(variant, scenario, transform, verdict, assessment, dt="", steps="", judgement=None) -> dict:
@@ -123,8 +124,9 @@ def _declared(rows, judged, variant) -> None:
     analysis.expectations.invariance_finding) applied to its judged rows ``judged`` ((row index, transform,
     judgement)): a check that is still ``broken`` (after the refinement) in the declared quantities only
     becomes ``known finding``, its sentence the declaration's reason and the measured numbers; one broken
-    beyond them stays broken, saying so; one that does not break is said "no longer broken". Every entry
-    point (the sweep, assert_engine, the fuzz) goes through here: one judge."""
+    beyond them stays broken, saying so; one that does not break is marked "not broken here" (a declaration
+    broken nowhere is "no longer broken": :func:`declared_summary`). Every entry point (the sweep,
+    assert_engine, the fuzz) goes through here: one judge."""
     from cross_checks.analysis.expectations import invariance_finding
     from cross_checks.core.quantities import QUANTITIES
     for i, t, j in judged:
@@ -135,9 +137,7 @@ def _declared(rows, judged, variant) -> None:
         declared = (f"{variant} declares this finding (under {t.kind} at {finding.range_text()}, in "
                     f"{', '.join(q.replace('_', ' ') for q in finding.quantities)}): {finding.reason}")
         if row["verdict"] != "broken":
-            row["declared"] = "no longer broken"
-            row["assessment"] += (f"; no longer broken: {declared}; it did not break here, its declaration "
-                                  "can go")
+            row["declared"] = "not broken here"
             continue
         beyond = [q for q in QUANTITIES if not j.deviation[q] <= j.allowance[q]]
         outside = [q for q in beyond if q not in finding.quantities or not math.isfinite(j.deviation[q])]
@@ -306,7 +306,7 @@ def invariance_summary(rows) -> tuple:
     keep = ("engine", "scenario", "transform", "magnitude", "verdict", "worst_quantity", "assessment")
     records = []
     for r in rows:
-        if r["verdict"] != "holds" or r.get("declared"):
+        if r["verdict"] != "holds":
             rec = {k: r[k] for k in keep}
             if r.get("declared"):
                 rec["declared"] = r["declared"]
@@ -314,8 +314,26 @@ def invariance_summary(rows) -> tuple:
             rec["worst_ratio"] = float(ratio) if isinstance(ratio, float) and math.isfinite(ratio) else None
             records.append(rec)
     counts = {"checks": len(rows), **{v: sum(r["verdict"] == v for r in rows) for v in INVARIANCE_VERDICTS},
-              "no longer broken": sum(r.get("declared") == "no longer broken" for r in rows)}
+              "no longer broken": sum(d["verdict"] == "no longer broken" for d in declared_summary(rows))}
     return records, counts
+
+
+def declared_summary(rows) -> list:
+    """summary.json's ``invariance_declared``: per variant and transform kind it declares a finding for (the
+    rows whose ``declared`` is set), the checks the declaration covers, how many are known findings and how
+    many broke beyond it, and the verdict: "known finding" (it broke as declared somewhere), "broken" (only
+    beyond it) or "no longer broken" (it broke on none of them: the declaration can go)."""
+    groups: dict = {}
+    for r in rows:
+        if r.get("declared"):
+            groups.setdefault((r["engine"], r["transform"]), []).append(r["declared"])
+    out = []
+    for (engine, kind), said in groups.items():
+        known, beyond = said.count("known finding"), said.count("beyond the declaration")
+        out.append({"engine": engine, "transform": kind, "checks": len(said), "known_findings": known,
+                    "beyond": beyond, "verdict": ("known finding" if known else "broken" if beyond
+                                                  else "no longer broken")})
+    return out
 
 
 def broken_lines(summary) -> list:
@@ -326,8 +344,8 @@ def broken_lines(summary) -> list:
 
 
 def no_longer_broken_lines(summary) -> list:
-    """One line per check whose declared finding did not appear (said, never a failure: the declaration in
-    the variant's traits or engine file can go)."""
-    return [f"{r['engine']} on {r['scenario']}: invariance under {r['transform']} {r['magnitude']}: "
-            "its declared finding no longer breaks (the declaration can go)"
-            for r in summary.get("invariance") or [] if r.get("declared") == "no longer broken"]
+    """One line per declared finding that broke on none of the checks it covers (said, never a failure: the
+    declaration in the variant's traits or engine file can go)."""
+    return [f"{d['engine']}: its declared invariance finding under {d['transform']} broke on none of the "
+            f"{d['checks']} check(s) it covers here: no longer broken (the declaration can go)"
+            for d in summary.get("invariance_declared") or [] if d["verdict"] == "no longer broken"]

@@ -292,11 +292,17 @@ def test_a_declaration_is_narrow_a_different_break_of_the_same_variant_is_caught
 
 def test_a_declared_finding_that_does_not_break_is_said_no_longer_broken(zood_rows):
     r = zood_rows["fixed"][("body_frame", "41 deg")]
-    assert r["verdict"] == "holds" and r["declared"] == "no longer broken", r["assessment"]
-    assert "no longer broken: zood:fixed declares this finding" in r["assessment"]
-    from cross_checks.sweep.invariance import invariance_summary
-    records, counts = invariance_summary([r])
-    assert counts["no longer broken"] == 1 and records[0]["declared"] == "no longer broken"
+    assert r["verdict"] == "holds" and r["declared"] == "not broken here", r["assessment"]
+    from cross_checks.sweep.invariance import declared_summary, invariance_summary, no_longer_broken_lines
+    rows = [x for v in ("fixed", "declared") for x in zood_rows[v].values()]
+    said = {d["engine"]: d for d in declared_summary(rows)}
+    assert said["zood:fixed"] == {"engine": "zood:fixed", "transform": "body_frame", "checks": 1,
+                                  "known_findings": 0, "beyond": 0, "verdict": "no longer broken"}
+    assert said["zood:declared"]["verdict"] == "known finding"
+    assert invariance_summary(rows)[1]["no longer broken"] == 1
+    assert no_longer_broken_lines({"invariance_declared": list(said.values())}) == [
+        "zood:fixed: its declared invariance finding under body_frame broke on none of the 1 check(s) it "
+        "covers here: no longer broken (the declaration can go)"]
 
 
 def test_the_entry_points_read_the_same_declarations(zood, zood_rows, tmp_path, monkeypatch, capsys):
@@ -311,8 +317,7 @@ def test_the_entry_points_read_the_same_declarations(zood, zood_rows, tmp_path, 
     text = capsys.readouterr()
     assert rc == 0, text.out[-2000:] + text.err[-2000:]
     assert "1 known finding" in text.out and "1 no longer broken" in text.out, text.out[-2000:]
-    assert ("zood:fixed on byo_tumble: invariance under body_frame 41 deg: its declared finding no longer "
-            "breaks") in text.out
+    assert "zood:fixed: its declared invariance finding under body_frame broke on none" in text.out
     with open(out / "invariance.csv", encoding="utf-8", newline="") as fh:
         rows = {(r["engine"], r["transform"]): r for r in csv.DictReader(fh)}
     known = rows[("zood:declared", "body_frame")]
@@ -321,7 +326,9 @@ def test_the_entry_points_read_the_same_declarations(zood, zood_rows, tmp_path, 
     assert summary["run"]["invariance"]["known finding"] == 1 and summary["run"]["invariance"]["broken"] == 0
     rec = {r["engine"]: r for r in summary["invariance"] if r["transform"] == "body_frame"}
     assert rec["zood:declared"]["verdict"] == "known finding" and REASON in rec["zood:declared"]["assessment"]
-    assert rec["zood:fixed"]["declared"] == "no longer broken"
+    assert "zood:fixed" not in rec          # it holds: not among the checks that do not hold
+    assert {d["engine"]: d["verdict"] for d in summary["invariance_declared"]} == {
+        "zood:declared": "known finding", "zood:fixed": "no longer broken"}
     from cross_checks.gates import ci
     junit = ci.junit_text(ci.sweep_junit(summary))
     assert 'failures="0"' in junit and REASON in junit
@@ -336,6 +343,8 @@ def test_the_entry_points_read_the_same_declarations(zood, zood_rows, tmp_path, 
     summary["invariance"] = [r for r in summary["invariance"] if r["verdict"] != "known finding"]
     (base / "summary.json").write_text(json.dumps(summary), encoding="utf-8")
     assert main(["compare", str(base), str(out)]) == 0
+    page = (out / "index.html").read_text(encoding="utf-8")
+    assert "zood:fixed: its declared invariance finding under body_frame broke on none" in page
 
     summary = assert_engine("zood:declared", [scenario], engine_file=engine_file, invariance=True)
     assert summary["run"]["invariance"]["known finding"] == 1
