@@ -441,3 +441,10 @@ def test_the_invariance_findings_declared_are_the_engines_measured_ones_and_narr
     assert invariance_finding("brax:positional", Translation((0.0, 0.0, 2e4))) is None
     f = invariance_finding("brax:positional", Translation((0.0, 0.0, 1e3)))
     assert f.quantities == ("position", "velocity") and "project_xd" in f.reason
+    # Drake's implicit Euler under the COM offset (its origin step; measured on tumbling_box), nothing else
+    from cross_checks.scenario.transforms import ComOffset
+    for t in default_transforms():
+        declared = invariance_finding("drake:implicit_euler", t) is not None
+        assert declared == (t.kind == "com_offset"), t.label
+        assert invariance_finding("drake:semi_explicit_euler", t) is None
+    assert invariance_finding("drake:implicit_euler", ComOffset(3.0)) is None
