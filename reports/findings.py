@@ -107,15 +107,16 @@ def findings(res) -> list:
     explained = _expected_non_convergence(res, c) + _pre_asymptotic(res, c)
     info = diverged + _exact_and_faster(res, c) + _conservation(res, c)
     disagree, agree = _same_schemes(res, c)
-    broken, lost = _invariance(res, c)
-    return bad + broken + disagree + explained + info + lost + agree + _not_measured(res, c)
+    broken, lost, known = _invariance(res, c)
+    return bad + broken + disagree + explained + known + info + lost + agree + _not_measured(res, c)
 
 
 def _invariance(res, c) -> tuple:
-    """Invariance checks (summary.json ``invariance``, docs/invariance.md): a broken one is bad; a precision
-    loss or a step-dependent one (the scheme's own truncation error) is information, with its number; what
-    an engine cannot express, said once per variant."""
-    bad, info = [], []
+    """Invariance checks (summary.json ``invariance``, docs/invariance.md): ``(bad, info, explained)``: a
+    broken one is bad; a known finding (declared by the variant with its reason) is explained, with its
+    number; a precision loss or a step-dependent one (the scheme's own truncation error) is information,
+    with its number, as is a declared finding that no longer breaks."""
+    bad, info, explained = [], [], []
     recs = sorted(res.summary.get("invariance") or [],
                   key=lambda r: (c.scen_order.get(r["scenario"], 99), c.var_order.get(r["engine"], 99)))
     for r in recs:
@@ -123,9 +124,16 @@ def _invariance(res, c) -> tuple:
                 f"{r['assessment']}.")
         if r["verdict"] == "broken":
             bad.append(Finding("bad", text, r["scenario"], r["engine"]))
+        elif r["verdict"] == "known finding":
+            explained.append(Finding("explained", text, r["scenario"], r["engine"]))
         elif r["verdict"] in ("precision loss", "step-dependent"):
             info.append(Finding("info", text, r["scenario"], r["engine"]))
-    return bad, info
+    for d in res.summary.get("invariance_declared") or []:
+        if d["verdict"] == "no longer broken":
+            text = (f"{d['engine']}: its declared invariance finding under {d['transform']} broke on none "
+                    f"of the {d['checks']} check(s) it covers: no longer broken (the declaration can go).")
+            info.append(Finding("info", text, None, d["engine"]))
+    return bad, info, explained
 
 
 def _contradictions(res, c) -> list:

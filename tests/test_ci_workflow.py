@@ -33,6 +33,8 @@ def test_workflow_parses_and_uses_the_readme_commands():
     full = [r for r in runs if 'pip install -q -e ".[drake,engines]"' in r and "rbcheck sweep" in r]
     assert full, "no sweep with Drake"
     full_out = re.search(r"rbcheck sweep .*--out (\S+)", full[0])[1]
+    # CI's full sweep runs the invariance checks (issue 46; docs/invariance.md "In CI")
+    assert " --invariance " in full[0]
     compare = [r for r in runs if f"rbcheck compare baselines/default {full_out}" in r]
     assert compare
     import json

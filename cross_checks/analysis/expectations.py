@@ -33,7 +33,7 @@ __all__ = ["energy_drift_bound", "characteristic_rate_sq", "QUANTITIES",
            "judged_ladder_s",
            "nominal_order", "gyroscopic_term_matters", "rotation_drives_translation",
            "translation_drives_rotation", "LongRunExpectation", "long_run_expectation",
-           "INVARIANT_WORDS", "gyroscopic_clamp_acts"]
+           "INVARIANT_WORDS", "gyroscopic_clamp_acts", "invariance_finding"]
 
 
 def traits(variant: Resolved) -> Traits:
@@ -507,3 +507,15 @@ def long_run_expectation(variant: Resolved) -> LongRunExpectation:
         why = (f"it declares no invariant it keeps by construction (rotation drift \"{tr.rotation_drift}\"): "
                "its drifts are measured and its finding named, never judged")
     return LongRunExpectation(tuple(order), sep, why, tr.precision, float(tr.rounding_factor))
+
+
+def invariance_finding(variant: Resolved, transform):
+    """The invariance finding ``variant`` declares for ``transform`` (a scenario.transforms.Transform): the
+    first of its Traits.invariance_findings (engines.base.InvarianceFinding: the transform's kind, the range
+    of its sizes and the quantities where it was measured, and the reason) that matches it; None when it
+    declares none there (then a broken check is a failure). The one place every invariance entry point
+    reads declarations from (cross_checks.sweep.invariance)."""
+    for f in variant.traits.invariance_findings:
+        if f.matches(transform):
+            return f
+    return None

@@ -301,10 +301,12 @@ def judge_long_run(variant: str, run_name: str, metrics, exp, status: str = "ok"
 #: covariant under the transform, and its truncation error parts the runs: the scheme's own, said with its
 #: numbers, never a failure; decided by cross_checks.sweep.invariance, which reruns the broken ones finer),
 #: ``cannot express`` (the engine cannot take the transformed scenario: said, never a failure) and
-#: ``refused`` (rbcheck refuses the transform on this scenario: it would leave the physical ranges) and
-#: ``not judged`` (the variant's run of the original failed or diverged: results.csv says why).
-INVARIANCE_VERDICTS = ("holds", "precision loss", "step-dependent", "broken", "cannot express", "refused",
-                       "not judged")
+#: ``refused`` (rbcheck refuses the transform on this scenario: it would leave the physical ranges),
+#: ``not judged`` (the variant's run of the original failed or diverged: results.csv says why) and
+#: ``known finding`` (broken as the variant declares it, beside its reason: engines.base.InvarianceFinding;
+#: said with its number, never a failure; decided by cross_checks.sweep.invariance after the refinement).
+INVARIANCE_VERDICTS = ("holds", "precision loss", "step-dependent", "broken", "known finding",
+                       "cannot express", "refused", "not judged")
 
 
 @dataclass(frozen=True)

@@ -243,6 +243,9 @@ def _sweep_outcome(summary, out, n_scenarios, n_variants, elapsed_s, scenarios=N
         say(f"rbcheck sweep: {inv['checks']} invariance checks: "
             + ", ".join(f"{n} {v}" for v, n in inv.items() if v != "checks" and n)
             + f" ({Path(out) / 'invariance.csv'})")
+        from cross_checks.sweep.invariance import no_longer_broken_lines
+        for line in no_longer_broken_lines(summary):
+            say(f"rbcheck sweep: {line}")
     if not wrong and not failed and not inv.get("broken"):
         say(f"rbcheck sweep: all {total} verdicts as expected")
     else:

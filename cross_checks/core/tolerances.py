@@ -381,3 +381,7 @@ INVARIANCE_SCALE_RANGE = (1e-2, 1e2)
 #: An invariance check compares two runs of the same variant, each with its own round-off
 #: (metrics.roundoff_floor's ε·scale·(b N + √N A) per run): the difference of two runs is bounded by the sum.
 INVARIANCE_RUNS_COMPARED = 2
+#: Relative slack of a declared invariance finding's size range (engines.base.InvarianceFinding.within): a
+#: transform's size is computed from its vector or quaternion (10 km along (2, −3, 6)/7 is
+#: 9999.999999999998 m): a few roundings, far below any range a finding declares.
+INVARIANCE_FINDING_RANGE_REL = 1e-9

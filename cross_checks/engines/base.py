@@ -28,7 +28,7 @@ import numpy as np
 __all__ = ["EngineAdapter", "Variant", "EngineError", "NotExpressible", "RunRequest", "Traits", "INVARIANTS",
            "SYMPLECTIC_EULER_EXPLICIT_GYRO", "SYMPLECTIC_EULER_IMPLICIT_GYRO", "WHOLE_STATE_EXPLICIT_EULER",
            "WHOLE_STATE_IMPLICIT_EULER", "HIGHER_ORDER", "DEFAULT_TRAITS", "ModuleAdapter", "one_request",
-           "check_variant"]
+           "check_variant", "InvarianceFinding"]
 
 
 class EngineError(RuntimeError):
@@ -58,6 +58,71 @@ ROTATION_DRIFTS = ("none", "body", "whole_state", "momentum")
 
 #: What Traits.keeps may name: invariants of the torque-free body a step keeps by construction.
 INVARIANTS = ("energy", "energy_bounded", "angular_momentum_norm", "angular_momentum")
+
+
+@dataclass(frozen=True)
+class InvarianceFinding:
+    """An invariance check a variant is known to break, declared beside its reason
+    (Traits.invariance_findings; an engine file's ``[[variants.NAME.invariance_findings]]``), the way the
+    traits declare a convergence
+    finding: the checks (sweep, assert_engine, fuzz: cross_checks.sweep.invariance) report a matching broken
+    check as a ``known finding``, with its number and this reason, instead of failing; a matching check that
+    no longer breaks is said ("no longer broken"). Narrow by construction (docs/invariance.md, "Declared
+    findings"):
+
+    transform : the kind of transform (scenario.transforms.TRANSFORM_KINDS).
+    within : ``((parameter, low, high), ...)``, at least one: a size of that kind
+        (scenario.transforms.TRANSFORM_PARAMETERS: translation ``distance_m``, rotation and body_frame
+        ``angle_deg``, scale ``k`` and ``mu``, com_offset ``gyration_radii``, welded_split ``child_mass``) and
+        the closed range where the finding was measured; a transform outside any of them is judged as usual.
+    reason : the sentence saying what the engine does and why, with what was measured.
+    quantities : the quantities (core.quantities.QUANTITIES) the finding moves; a deviation beyond the
+        allowance in any other keeps the check ``broken``.
+    """
+
+    transform: str
+    within: tuple
+    reason: str
+    quantities: tuple = ("position", "orientation", "velocity", "angular_velocity")
+
+    def __post_init__(self):
+        from cross_checks.core.quantities import QUANTITIES
+        from cross_checks.scenario.transforms import TRANSFORM_PARAMETERS
+        if self.transform not in TRANSFORM_PARAMETERS:
+            raise ValueError(f"transform must be one of {', '.join(TRANSFORM_PARAMETERS)}, "
+                             f"not {self.transform!r}")
+        names = TRANSFORM_PARAMETERS[self.transform]
+        if not isinstance(self.within, tuple) or not self.within:
+            raise ValueError(f"within must name at least one of {self.transform}'s sizes "
+                             f"({', '.join(names)}) with its range (never the whole transform), "
+                             f"not {self.within!r}")
+        for item in self.within:
+            ok = isinstance(item, tuple) and len(item) == 3 and item[0] in names
+            if not ok or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                                 for v in item[1:]) or not item[1] <= item[2]:
+                raise ValueError(f"within: each entry must be (size, low, high) with size one of "
+                                 f"{', '.join(names)} and finite low <= high, not {item!r}")
+        if not isinstance(self.reason, str) or not self.reason.strip():
+            raise ValueError("reason must be the sentence that explains the finding")
+        if (not isinstance(self.quantities, tuple) or not self.quantities
+                or any(q not in QUANTITIES for q in self.quantities)):
+            raise ValueError(f"quantities must be a non-empty tuple of {', '.join(QUANTITIES)}, "
+                             f"not {self.quantities!r}")
+
+    def matches(self, transform) -> bool:
+        """Whether ``transform`` (a scenario.transforms.Transform) is of this kind with every size in its
+        range (within tolerances.INVARIANCE_FINDING_RANGE_REL: a size computed from a vector or a quaternion
+        carries a few roundings)."""
+        from cross_checks.core import tolerances as tol
+        if transform.kind != self.transform:
+            return False
+        sizes, slack = transform.parameters, tol.INVARIANCE_FINDING_RANGE_REL
+        return all(name in sizes and lo * (1.0 - slack) <= sizes[name] <= hi * (1.0 + slack)
+                   for name, lo, hi in self.within)
+
+    def range_text(self) -> str:
+        """The ranges in words (``distance_m 1000–10000``)."""
+        return ", ".join(f"{n} {lo:g}" + (f"–{hi:g}" if hi != lo else "") for n, lo, hi in self.within)
 
 
 @dataclass(frozen=True)
@@ -95,6 +160,9 @@ class Traits:
     gyroscopic_clamp_N_m : the step cuts the gyroscopic torque |ω × I ω| to this length (N m) when it is
         longer (Bullet's ``m_maxGyroscopicForce``, reference:explicit_gyro_clamped); None: no clamp. Where
         the motion's gyroscopic torque exceeds it the variant is expected not to converge in rotation.
+    invariance_findings : the invariance checks the variant is known to break (:class:`InvarianceFinding`:
+        the transform, the range of its sizes and the quantities where it was measured, and the reason), each
+        reported as a known finding, not a failure (docs/invariance.md, "Declared findings"); () none.
     forces_held : the engine holds the applied force and torque over all the stages of a step (no per-stage
         evaluation): a multi-stage scheme is then first order where the forces change within a step
         (state-dependent forces, velocity decay).
@@ -118,8 +186,13 @@ class Traits:
     keeps: tuple = ()
     gyroscopic_clamp_N_m: float | None = None
     lever_arms: bool = True
+    invariance_findings: tuple = ()
 
     def __post_init__(self):
+        if not isinstance(self.invariance_findings, tuple) or not all(
+                isinstance(f, InvarianceFinding) for f in self.invariance_findings):
+            raise ValueError(f"invariance_findings must be a tuple of InvarianceFinding, "
+                             f"not {self.invariance_findings!r}")
         bad = [k for k in self.keeps if k not in INVARIANTS]
         if bad or not isinstance(self.keeps, tuple):
             raise ValueError(f"keeps must be a tuple of {', '.join(INVARIANTS)}, not {self.keeps!r}")

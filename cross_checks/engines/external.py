@@ -48,7 +48,8 @@ FOLDER_MAX_FILES = 5000
 FOLDER_CONTENT_MAX_BYTES = 64 * 2 ** 20
 
 _TOP = {"name", "version", "description", "timeout", "variants", "body_forms"}
-_VARIANT = {"order", "description", "command", "precision"}
+_VARIANT = {"order", "description", "command", "precision", "invariance_findings"}
+_FINDING = {"transform", "within", "quantities", "reason"}
 
 
 class EngineFileError(ValueError):
@@ -239,6 +240,54 @@ def folder_fingerprint(folder: Path) -> str:
     return h.hexdigest()
 
 
+def _invariance_findings(path, items, where: str) -> tuple:
+    """The variant's declared invariance findings (``[[variants.NAME.invariance_findings]]``: transform,
+    within = {SIZE = [low, high], ...}, quantities (optional), reason; engines.base.InvarianceFinding,
+    docs/invariance.md "Declared findings"); EngineFileError naming the entry's field when one is bad."""
+    from cross_checks.core.quantities import QUANTITIES
+    from cross_checks.engines.base import InvarianceFinding
+    from cross_checks.scenario.transforms import TRANSFORM_PARAMETERS
+    if not isinstance(items, list):
+        raise EngineFileError(path, where, "must be an array of tables [[" + where + "]], got " + repr(items))
+    out = []
+    for i, item in enumerate(items):
+        at = f"{where}[{i}]"
+        if not isinstance(item, dict):
+            raise EngineFileError(path, at, f"must be a table, got {item!r}")
+        _check_keys(path, item, _FINDING, at + ".")
+        kind = item.get("transform")
+        if kind not in TRANSFORM_PARAMETERS:
+            raise EngineFileError(path, f"{at}.transform",
+                                  f"must be one of {', '.join(TRANSFORM_PARAMETERS)}, got {kind!r}")
+        names = TRANSFORM_PARAMETERS[kind]
+        within = item.get("within")
+        if not isinstance(within, dict) or not within:
+            raise EngineFileError(path, f"{at}.within", f"must bound at least one of {kind}'s sizes "
+                                  f"({', '.join(names)}) as {{ SIZE = [low, high] }} (never the whole "
+                                  f"transform), got {within!r}")
+        ranges = []
+        for name, rng in within.items():
+            ok = (name in names and isinstance(rng, list) and len(rng) == 2
+                  and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                          for v in rng) and rng[0] <= rng[1])
+            if not ok:
+                raise EngineFileError(path, f"{at}.within.{name}", f"must be a size of {kind} "
+                                      f"({', '.join(names)}) with a range [low, high] of finite numbers, "
+                                      f"low <= high, got {rng!r}")
+            ranges.append((name, float(rng[0]), float(rng[1])))
+        quantities = item.get("quantities", list(QUANTITIES))
+        if (not isinstance(quantities, list) or not quantities
+                or any(q not in QUANTITIES for q in quantities)):
+            raise EngineFileError(path, f"{at}.quantities",
+                                  f"must be a non-empty list of {', '.join(QUANTITIES)}, got {quantities!r}")
+        reason = item.get("reason")
+        if not isinstance(reason, str) or not reason.strip():
+            raise EngineFileError(path, f"{at}.reason", "missing (required): the sentence that explains the "
+                                  "finding (what the engine does, what was measured)")
+        out.append(InvarianceFinding(kind, tuple(ranges), reason.strip(), tuple(quantities)))
+    return tuple(out)
+
+
 def load_engine_file(path) -> ExternalEngine:
     """Read and validate an engine file. Raises EngineFileError (``FILE: FIELD: REASON``)."""
     path = Path(path)
@@ -304,7 +353,10 @@ def load_engine_file(path) -> ExternalEngine:
             raise EngineFileError(path, f"{where}.precision",
                                   f"must be one of {', '.join(tol.MACHINE_EPSILON)} (the format its steps "
                                   f"compute in), got {precision!r}")
-        traits = None if precision == "float64" else dataclasses.replace(DEFAULT_TRAITS, precision=precision)
+        findings = _invariance_findings(path, spec.get("invariance_findings", []),
+                                        f"{where}.invariance_findings")
+        traits = (None if precision == "float64" and not findings
+                  else dataclasses.replace(DEFAULT_TRAITS, precision=precision, invariance_findings=findings))
         variants[vname] = Variant(order, desc, traits=traits)
     sha = hashlib.sha256(data).hexdigest()
     engine = ExternalEngine(path.resolve(), name, version, description, timeout, variants, commands, sha,

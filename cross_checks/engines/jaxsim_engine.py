@@ -40,8 +40,9 @@ from cross_checks.engines.world import World, WorldEngine
 from reference_sim.simulate import bad_rows
 
 __all__ = ["ENGINE", "VARIANTS", "INTEGRATORS", "CHUNK", "ROW_BLOCK", "EngineError", "version", "simulate",
-           "simulate_many", "one_step", "build_model", "model_sdf", "engine_gravity", "body_spec", "timings",
-           "xla_cache_dir", "JaxsimWorld", "JaxsimEngine", "JaxsimAdapter"]
+           "simulate_many", "one_step", "build_model", "model_sdf", "engine_gravity", "jaxsim_frame",
+           "turn_in", "turn_out", "repro_refuses", "body_spec", "timings", "xla_cache_dir", "JaxsimWorld",
+           "JaxsimEngine", "JaxsimAdapter"]
 
 ENGINE = "jaxsim"
 HINT = "pip install 'rbcheck[jaxsim]'"
@@ -150,11 +151,63 @@ def timings() -> dict:
 # --- the model -----------------------------------------------------------------------------------------
 
 
-def engine_gravity(scenario) -> float:
-    """The scalar gravity (m/s², along −z) given to jaxsim: g for a scenario gravity (0, 0, −g), else 0 (the
-    weight then goes into the link force). (The world's ``engine_gravity``, without starting JAX.)"""
+def jaxsim_frame(scenario):
+    """The unit quaternion r (w, x, y, z) of jaxsim's frame: jaxsim's vectors are the scenario's world vectors
+    turned by R(r), the shortest rotation that puts the scenario's gravity on the z axis (onto −z, or onto +z
+    when it points up more than down); None when the gravity is zero or already along z (no turn: the
+    scenario's frame itself, bit for bit)."""
     g = np.asarray(scenario.problem.forces.gravity_W, dtype=float)
-    return float(-g[2]) if g[0] == 0.0 and g[1] == 0.0 else 0.0
+    if g[0] == 0.0 and g[1] == 0.0:
+        return None
+    a = g / np.linalg.norm(g)
+    b = np.array([0.0, 0.0, -1.0 if a[2] <= 0.0 else 1.0])
+    r = np.concatenate([[1.0 + float(a @ b)], np.cross(a, b)])   # 1 + a·b ≥ 1: well conditioned
+    return r / np.linalg.norm(r)
+
+
+def engine_gravity(scenario) -> float:
+    """The scalar gravity (m/s², along −z of jaxsim's frame, :func:`jaxsim_frame`) given to jaxsim: g for a
+    scenario gravity (0, 0, −g); for any other direction its length along the z axis it is turned onto."""
+    g = np.asarray(scenario.problem.forces.gravity_W, dtype=float)
+    r = jaxsim_frame(scenario)
+    if r is None:
+        return float(-g[2])
+    return float(np.linalg.norm(g)) * (1.0 if g[2] <= 0.0 else -1.0)
+
+
+def repro_refuses(scenario) -> str:
+    """Why a reproducer (cross_checks.sweep.repro) cannot state ``scenario`` for jaxsim, "" when it can: a
+    gravity off the z axis, which this adapter runs in a frame turned onto jaxsim's z axis
+    (:func:`jaxsim_frame`) and the reproducer's world (worlds/jaxsim.py) does not."""
+    if jaxsim_frame(scenario) is None:
+        return ""
+    return ("its gravity is off the z axis: jaxsim takes gravity along z only, and rbcheck's adapter runs "
+            "such a scenario in a frame turned onto it, which a reproducer does not write yet")
+
+
+def turn_in(r, y):
+    """Packed states ``y`` (..., 13) of the scenario's frame in jaxsim's frame ``r`` (:func:`jaxsim_frame`):
+    x, v, ω turned by R(r), q_WB → r ⊗ q_WB."""
+    return _turned(r, y, inverse=False)
+
+
+def turn_out(r, y):
+    """Packed states ``y`` (..., 13) of jaxsim's frame ``r`` back in the scenario's frame (the inverse of
+    :func:`turn_in`)."""
+    return _turned(r, y, inverse=True)
+
+
+def _turned(r, y, inverse: bool):
+    from reference_sim.quaternion import matrix_from_quat, quat_conj, quat_mul
+    r = np.asarray(r, dtype=float)
+    if inverse:
+        r = quat_conj(r)
+    R = matrix_from_quat(r)
+    y = np.array(y, dtype=float)
+    for block in (slice(0, 3), slice(3, 6), slice(10, 13)):
+        y[..., block] = y[..., block] @ R.T
+    y[..., 6:10] = quat_mul(r, y[..., 6:10])
+    return y
 
 
 def model_sdf(mass_kg: float, inertia_B) -> str:
@@ -285,25 +338,45 @@ def _compiled(kind: str, callback: bool, model, *args):
 
 
 def _weight(scenario) -> tuple:
-    """The weight jaxsim applies itself (N, world): m (0, 0, −g_jaxsim)."""
-    return (0.0, 0.0, -float(scenario.problem.body.mass_kg) * engine_gravity(scenario))
+    """The weight jaxsim applies itself (N, the scenario's world axes): m g, the whole gravity (turned into
+    jaxsim's frame, :func:`jaxsim_frame`, where it is off the z axis)."""
+    if jaxsim_frame(scenario) is None:
+        return (0.0, 0.0, -float(scenario.problem.body.mass_kg) * engine_gravity(scenario))
+    return tuple(float(scenario.problem.body.mass_kg) * np.asarray(scenario.problem.forces.gravity_W, float))
+
+
+def _turned_wrench(r, wrench):
+    """``y -> link force`` in jaxsim's frame ``r`` of the scenario's ``wrench``: at the state turned back,
+    its force and torque turned in."""
+    from reference_sim.quaternion import matrix_from_quat
+    R = matrix_from_quat(np.asarray(r, dtype=float))
+
+    def turned(y):
+        f = np.asarray(wrench([float(v) for v in turn_out(r, y)]), dtype=float)
+        return tuple(float(v) for v in np.concatenate([R @ f[:3], R @ f[3:]]))
+    return turned
 
 
 def _inputs(scenario, harness, i: int):
     """(callback?, constant link force (6,), pre-step decay scale (13,), ``y -> link force`` (6 floats)) of
-    body ``i`` of ``harness`` (the loop's: its force evaluator and decay factors; jaxsim's own weight off)."""
+    body ``i`` of ``harness`` (the loop's: its force evaluator and decay factors; jaxsim's own weight off),
+    in jaxsim's frame (:func:`jaxsim_frame`): the link force of a state ``y`` of that frame."""
     ft, gv, gw = harness.ft[i], float(harness.g_v[i]), float(harness.g_w[i])
 
     def decayed(y):   # forces.harness_force_torque_floats, with the loop's evaluator
         fx, fy, fz, tx, ty, tz = ft(y)
         return gv * fx, gv * fy, gv * fz, gw * tx, gw * ty, gw * tz
     wrench = forces.minus_weight(decayed, _weight(scenario))
+    r = jaxsim_frame(scenario)
+    if r is not None:
+        wrench = _turned_wrench(r, wrench)
     scale = np.ones(13)
     scale[3:6] = gv
     scale[10:13] = gw
+    y0 = scenario.problem.initial_packed()
     if scenario.problem.forces.state_dependent:
         return True, np.zeros(6), scale, wrench
-    return False, np.array(wrench([float(v) for v in scenario.problem.initial_packed()])), scale, wrench
+    return False, np.array(wrench([float(v) for v in (y0 if r is None else turn_in(r, y0))])), scale, wrench
 
 
 class JaxsimWorld(World):
@@ -318,16 +391,34 @@ class JaxsimWorld(World):
         _refuse_forked_jax()
         self.scenarios = [r.scenario for r in requests]
         self.models = [build_model(sc, variant) for sc in self.scenarios]
+        self.frames = [jaxsim_frame(sc) for sc in self.scenarios]
+        self.turned = any(r is not None for r in self.frames)
+        #: a turned body's state read back is its requested one to round-off only: the loop records the latter
+        self.exact_start = self.turned
         self.ends = [int(r.n_steps) for r in requests]
         self.dt = np.float64(dt_s)
         self.host_s = 0.0
         self.y = np.empty((len(requests), 13))
 
     def set_state(self, y):
+        """Body i at the packed state ``y[i]`` of its scenario's frame (held in jaxsim's frame)."""
         self.y = np.array(y, dtype=float)
+        for i, r in enumerate(self.frames):
+            if r is not None:
+                self.y[i] = turn_in(r, self.y[i])
 
     def read(self):
         return self.y
+
+    def packed(self, raw) -> np.ndarray:
+        """Raw rows (..., B, 13) of jaxsim's frames as packed states of each body's scenario frame."""
+        y = np.asarray(raw, dtype=float)
+        if self.turned:
+            y = y.copy()
+            for i, r in enumerate(self.frames):
+                if r is not None:
+                    y[..., i, :] = turn_out(r, y[..., i, :])
+        return y
 
     def rollout(self, n_steps, harness):
         """The states (n_steps, B, 13) after each step: one step of every row in one vmapped call when the

@@ -110,11 +110,13 @@ def sweep_junit(summary: dict, rows=(), long_rows=()) -> ET.Element:
         else:
             x.case(v, f"rbcheck.{v}", f"{sc}: long run")
     for r in summary.get("invariance") or []:   # the checks that do not hold (docs/invariance.md)
+        name = f"{r['scenario']}: invariance under {r['transform']} {r['magnitude']}"
         if r["verdict"] == "broken":
-            x.case(r["engine"], f"rbcheck.{r['engine']}",
-                   f"{r['scenario']}: invariance under {r['transform']} {r['magnitude']}",
+            x.case(r["engine"], f"rbcheck.{r['engine']}", name,
                    failure=f"{r['engine']} on {r['scenario']}: invariance under {r['transform']} "
                            f"{r['magnitude']} {r['assessment']}", kind="contradiction")
+        elif r["verdict"] == "known finding":   # declared beside its reason: said, not failed
+            x.case(r["engine"], f"rbcheck.{r['engine']}", name, skipped=r["assessment"])
     for a in summary.get("agreement", []):
         sentence = (f"{a['a']} and {a['b']} differ on {a['scenario']} (should be the same scheme)"
                     if not a.get("agrees") else "")
@@ -267,6 +269,10 @@ def sweep_markdown(summary: dict, out_dir, rows=(), long_rows=()) -> str:
         md[2] += f" **{len(broken)} broken invariance(s)** (invariance.csv)."
         if ok:
             md[0] = "## rbcheck sweep: ❌ invariance broken"
+    inv = run.get("invariance") or {}
+    if inv.get("known finding") or inv.get("no longer broken"):   # declared: said, not failed
+        md[2] += (f" {inv.get('known finding', 0)} known invariance finding(s) (declared by their variants, "
+                  f"with the reason), {inv.get('no longer broken', 0)} declared one(s) no longer broken.")
     if contra:
         fold = len(contra) > 10
         md += (["<details><summary>Not as expected</summary>", ""] if fold else ["**Not as expected**", ""])

@@ -227,6 +227,7 @@ def compare_dirs(baseline_dir, new_dir, require=()) -> Comparison:
                          local=True)
     _compare_agreement(old_sum.get("agreement", []), new_sum.get("agreement", []), out)
     _compare_invariance(old_sum.get("invariance"), new_sum.get("invariance"), out)
+    _compare_declared(old_sum.get("invariance_declared"), new_sum.get("invariance_declared"), out)
     _compare_versions(old_sum.get("provenance", {}), new_sum.get("provenance", {}), out)
     return out
 
@@ -393,23 +394,45 @@ def _compare_agreement(old_recs, new_recs, out: Comparison):
 def _compare_invariance(old_recs, new_recs, out: Comparison):
     """Invariance checks (summary.json ``invariance``: the checks that do not hold), matched by (scenario,
     engine, transform, magnitude): a broken invariance the baseline does not have broken is a regression
-    (whether the baseline held it or did not run the checks: docs/invariance.md); one broken there and no
-    longer broken is an improvement. Without the checks in the new results nothing is compared."""
+    (whether the baseline held it, declared it as a known finding, or did not run the checks:
+    docs/invariance.md); one broken or a known finding there and neither here is an improvement ("no longer
+    broken"), as is a broken one that is now a declared known finding.
+    Without the checks in the new results nothing is compared."""
     if new_recs is None:
         return
     key = lambda r: (r["scenario"], r["engine"], r["transform"], r["magnitude"])  # noqa: E731
     old = {key(r): r for r in old_recs or []}
     new = {key(r): r for r in new_recs}
+
+    def verdict(recs, k, ran):
+        return recs[k]["verdict"] if k in recs else ("holds" if ran else "not run")
+
     for k in sorted(set(old) | set(new)):
-        bo = k in old and old[k]["verdict"] == "broken"
-        bn = k in new and new[k]["verdict"] == "broken"
-        if bo == bn:
+        before, after = verdict(old, k, old_recs is not None), verdict(new, k, True)
+        bad = ("broken", "known finding")
+        if after == "broken" and before != "broken":
+            kind, note = "regression", new[k]["assessment"]
+        elif before == "broken" and after != "broken" or (before == "known finding" and after not in bad):
+            kind = "improvement"
+            note = (new[k]["assessment"] if after == "known finding"
+                    else f"no longer broken: {old[k]['assessment']}")
+        else:
             continue
-        before = old[k]["verdict"] if k in old else ("holds" if old_recs is not None else "not run")
-        after = new[k]["verdict"] if k in new else "holds"
-        out.changes.append(Change("regression" if bn else "improvement", k[0], k[1],
-                                  f"invariance under {k[2]} {k[3]}", before, after,
-                                  note=(new[k] if bn else old[k])["assessment"], area="invariance"))
+        out.changes.append(Change(kind, k[0], k[1], f"invariance under {k[2]} {k[3]}", before, after,
+                                  note=note, area="invariance"))
+
+
+def _compare_declared(old_recs, new_recs, out: Comparison):
+    """Declared invariance findings (summary.json ``invariance_declared``), matched by (engine, transform): a
+    known finding there that broke on none of its checks here is an improvement ("no longer broken")."""
+    old = {(d["engine"], d["transform"]): d for d in old_recs or []}
+    for d in new_recs or []:
+        before = old.get((d["engine"], d["transform"]))
+        if before and before["verdict"] == "known finding" and d["verdict"] == "no longer broken":
+            out.changes.append(Change("improvement", "(every scenario)", d["engine"],
+                                      f"declared invariance finding under {d['transform']}", "known finding",
+                                      "no longer broken", area="invariance",
+                                      note=f"broke on none of the {d['checks']} check(s) it covers"))
 
 
 def _order_change(ro, rn):

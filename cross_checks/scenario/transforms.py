@@ -48,10 +48,19 @@ from reference_sim.state import Q, V, W, X
 
 __all__ = ["Transform", "Translation", "WorldRotation", "BodyFrame", "Scale", "ComOffset", "WeldedSplit",
            "TransformRefused",
-           "TRANSFORM_KINDS", "default_transforms", "apply", "scenario_dict", "toml_text"]
+           "TRANSFORM_KINDS", "TRANSFORM_PARAMETERS", "default_transforms", "apply", "scenario_dict",
+           "toml_text"]
 
 #: The kinds of transform, in the order the sweep runs and reports them.
 TRANSFORM_KINDS = ("translation", "rotation", "body_frame", "scale", "com_offset", "welded_split")
+
+#: The named sizes of each kind (``Transform.parameters``), which a declared invariance finding bounds
+#: (engines.base.InvarianceFinding): translation ``distance_m`` |d| (m); rotation and body_frame
+#: ``angle_deg``; scale ``k`` (lengths) and ``mu`` (masses); com_offset ``gyration_radii``; welded_split
+#: ``child_mass``.
+TRANSFORM_PARAMETERS = {"translation": ("distance_m",), "rotation": ("angle_deg",),
+                        "body_frame": ("angle_deg",), "scale": ("k", "mu"), "com_offset": ("gyration_radii",),
+                        "welded_split": ("child_mass",)}
 
 #: Directions and axes of the default transforms: integer vectors of exact length 7 (2² + 3² + 6² = 7²),
 #: so each is exact in binary after dividing by 7 only up to one rounding, and none lies along a coordinate
@@ -92,6 +101,12 @@ class Transform(abc.ABC):
     def label(self) -> str:
         return f"{self.kind} {self.magnitude}"
 
+    @property
+    def parameters(self) -> dict:
+        """The transform's sizes by name (TRANSFORM_PARAMETERS of its kind): what a declared invariance
+        finding's range is checked against."""
+        return {}
+
     @abc.abstractmethod
     def rewrite(self, d: dict) -> dict:
         """The transformed scenario dict (:func:`scenario_dict`'s keys) of ``d``."""
@@ -128,6 +143,10 @@ class Translation(Transform):
     def position_offset_m(self) -> float:
         return float(np.linalg.norm(self.d_W_m))
 
+    @property
+    def parameters(self) -> dict:
+        return {"distance_m": float(np.linalg.norm(self.d_W_m))}
+
     def rewrite(self, d: dict) -> dict:
         dv = np.asarray(self.d_W_m, dtype=float)
         d["initial"]["position"] = list(np.asarray(d["initial"]["position"]) + dv)
@@ -154,7 +173,11 @@ class WorldRotation(Transform):
 
     @property
     def magnitude(self) -> str:
-        return f"{math.degrees(2.0 * math.acos(min(1.0, abs(float(self.r_wxyz[0]))))):.3g} deg"
+        return f"{self.parameters['angle_deg']:.3g} deg"
+
+    @property
+    def parameters(self) -> dict:
+        return {"angle_deg": math.degrees(2.0 * math.acos(min(1.0, abs(float(self.r_wxyz[0])))))}
 
     def rewrite(self, d: dict) -> dict:
         R = _rot(self.r_wxyz)
@@ -195,7 +218,11 @@ class BodyFrame(Transform):
 
     @property
     def magnitude(self) -> str:
-        return f"{math.degrees(2.0 * math.acos(min(1.0, abs(float(self.p_wxyz[0]))))):.3g} deg"
+        return f"{self.parameters['angle_deg']:.3g} deg"
+
+    @property
+    def parameters(self) -> dict:
+        return {"angle_deg": math.degrees(2.0 * math.acos(min(1.0, abs(float(self.p_wxyz[0])))))}
 
     def rewrite(self, d: dict) -> dict:
         P = _rot(self.p_wxyz)
@@ -241,6 +268,10 @@ class Scale(Transform):
     @property
     def magnitude(self) -> str:
         return f"k={self.k:g} mu={self.mu:g}"
+
+    @property
+    def parameters(self) -> dict:
+        return {"k": float(self.k), "mu": float(self.mu)}
 
     def rewrite(self, d: dict) -> dict:
         k, mu = float(self.k), float(self.mu)
@@ -290,6 +321,10 @@ class ComOffset(Transform):
     def magnitude(self) -> str:
         return f"{self.radii:g} gyration radii"
 
+    @property
+    def parameters(self) -> dict:
+        return {"gyration_radii": float(self.radii)}
+
     def com_B_m(self, d: dict) -> np.ndarray:
         """The COM in the body frame (m, body axes, from the origin) this transform gives ``d``'s body."""
         return self.radii * _gyration_radius_m(d["body"]) * _COM_AXIS
@@ -331,6 +366,10 @@ class WeldedSplit(Transform):
     @property
     def magnitude(self) -> str:
         return f"child {self.child_mass:g} of the mass"
+
+    @property
+    def parameters(self) -> dict:
+        return {"child_mass": float(self.child_mass)}
 
     def parts(self, d: dict) -> list:
         """The two parts ``[parent, child]`` of the body of ``d``: dicts of mass (kg), com (m, body axes from

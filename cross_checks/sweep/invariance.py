@@ -17,20 +17,27 @@ from cross_checks.analysis.judge import invariance_allowance, judge_invariance
 from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES, quantity_scales
 from cross_checks.scenario.transforms import TransformRefused, apply, default_transforms
 
-__all__ = ["INVARIANCE_COLUMNS", "check_invariance", "run_invariance", "invariance_summary", "broken_lines",
-           "step_order"]
+__all__ = ["INVARIANCE_COLUMNS", "DECLARED", "check_invariance", "run_invariance", "invariance_summary",
+           "broken_lines", "no_longer_broken_lines", "declared_summary", "step_order"]
 
 INVARIANCE_COLUMNS = (["engine", "scenario", "transform", "magnitude", "dt", "steps", "verdict",
                        "worst_quantity", "worst_ratio"]
                       + [f"{COLUMN_STEM[q]}_dev" for q in QUANTITIES]
                       + [f"{COLUMN_STEM[q]}_allowance" for q in QUANTITIES]
-                      + ["assessment"])
+                      + ["declared", "assessment"])
+
+#: What the ``declared`` column says of a check the variant declares a finding for (engines.base.
+#: InvarianceFinding): "known finding" (it breaks as declared: verdict ``known finding``), "not broken here"
+#: (it does not break on this scenario), "beyond the declaration" (it breaks in a quantity the declaration
+#: does not name: still ``broken``); "" where nothing is declared. A declaration that breaks on none of the
+#: checks it covers is "no longer broken" (:func:`declared_summary`).
+DECLARED = ("known finding", "not broken here", "beyond the declaration")
 
 
 def _row(variant, scenario, transform, verdict, assessment, dt="", steps="", judgement=None) -> dict:
     row = {"engine": variant, "scenario": scenario.name, "transform": transform.kind,
            "magnitude": transform.magnitude, "dt": dt, "steps": steps, "verdict": verdict,
-           "worst_quantity": "", "worst_ratio": math.nan,
+           "worst_quantity": "", "worst_ratio": math.nan, "declared": "",
            "assessment": " ".join(str(assessment).split())}   # an engine's multi-line message on one line
     for q in QUANTITIES:
         row[f"{COLUMN_STEM[q]}_dev"] = math.nan if judgement is None else judgement.deviation[q]
@@ -78,7 +85,7 @@ def check_invariance(scenario, variant, transforms=None, *, scales: dict | None 
     if amplification is None:
         from cross_checks.scenario.references import error_amplification
         amplification = error_amplification(scenario, scales)
-    refine = []
+    refine, judged = [], []
     for (t, tsc), run in zip(todo, transformed):
         clamp = _clamped(traits, original, scenario, tsc)
         if clamp:
@@ -97,6 +104,7 @@ def check_invariance(scenario, variant, transforms=None, *, scales: dict | None 
                              offset_m=t.position_offset_m(), dt_s=dt,
                              differenced=getattr(traits, "velocity_from_positions", False))
         rows.append(_row(variant, scenario, t, j.verdict, j.assessment, dt, n, j))
+        judged.append((len(rows) - 1, t, j))
         if j.verdict == "broken" and all(math.isfinite(v) for v in j.deviation.values()):
             refine.append((len(rows) - 1, t, tsc, j))
     if refine:
@@ -107,7 +115,41 @@ def check_invariance(scenario, variant, transforms=None, *, scales: dict | None 
                                              differenced=getattr(traits, "velocity_from_positions", False))
             return {q: base[q] + off[q] for q in base}
         _refine(rows, refine, scenario, variant, allowance_at)
+    _declared(rows, judged, variant)
     return rows
+
+
+def _declared(rows, judged, variant) -> None:
+    """The variant's declared findings (engines.base.InvarianceFinding, read through
+    analysis.expectations.invariance_finding) applied to its judged rows ``judged`` ((row index, transform,
+    judgement)): a check that is still ``broken`` (after the refinement) in the declared quantities only
+    becomes ``known finding``, its sentence the declaration's reason and the measured numbers; one broken
+    beyond them stays broken, saying so; one that does not break is marked "not broken here" (a declaration
+    broken nowhere is "no longer broken": :func:`declared_summary`). Every entry point (the sweep,
+    assert_engine, the fuzz) goes through here: one judge."""
+    from cross_checks.analysis.expectations import invariance_finding
+    from cross_checks.core.quantities import QUANTITIES
+    for i, t, j in judged:
+        finding = invariance_finding(variant, t)
+        if finding is None:
+            continue
+        row = rows[i]
+        declared = (f"{variant} declares this finding (under {t.kind} at {finding.range_text()}, in "
+                    f"{', '.join(q.replace('_', ' ') for q in finding.quantities)}): {finding.reason}")
+        if row["verdict"] != "broken":
+            row["declared"] = "not broken here"
+            continue
+        beyond = [q for q in QUANTITIES if not j.deviation[q] <= j.allowance[q]]
+        outside = [q for q in beyond if q not in finding.quantities or not math.isfinite(j.deviation[q])]
+        if outside:
+            row["declared"] = "beyond the declaration"
+            row["assessment"] += (f"; beyond its declared finding, which names "
+                                  f"{', '.join(finding.quantities)} only, in {', '.join(outside)} "
+                                  f"({declared})")
+            continue
+        row["verdict"] = row["declared"] = "known finding"
+        measured = row["assessment"].removeprefix("broken: ")
+        row["assessment"] = f"known finding (declared, not a failure): {declared}; measured here: {measured}"
 
 
 def _refine(rows, refine, scenario, variant, allowance_at) -> None:
@@ -266,11 +308,32 @@ def invariance_summary(rows) -> tuple:
     for r in rows:
         if r["verdict"] != "holds":
             rec = {k: r[k] for k in keep}
+            if r.get("declared"):
+                rec["declared"] = r["declared"]
             ratio = r["worst_ratio"]
             rec["worst_ratio"] = float(ratio) if isinstance(ratio, float) and math.isfinite(ratio) else None
             records.append(rec)
-    counts = {"checks": len(rows), **{v: sum(r["verdict"] == v for r in rows) for v in INVARIANCE_VERDICTS}}
+    counts = {"checks": len(rows), **{v: sum(r["verdict"] == v for r in rows) for v in INVARIANCE_VERDICTS},
+              "no longer broken": sum(d["verdict"] == "no longer broken" for d in declared_summary(rows))}
     return records, counts
+
+
+def declared_summary(rows) -> list:
+    """summary.json's ``invariance_declared``: per variant and transform kind it declares a finding for (the
+    rows whose ``declared`` is set), the checks the declaration covers, how many are known findings and how
+    many broke beyond it, and the verdict: "known finding" (it broke as declared somewhere), "broken" (only
+    beyond it) or "no longer broken" (it broke on none of them: the declaration can go)."""
+    groups: dict = {}
+    for r in rows:
+        if r.get("declared"):
+            groups.setdefault((r["engine"], r["transform"]), []).append(r["declared"])
+    out = []
+    for (engine, kind), said in groups.items():
+        known, beyond = said.count("known finding"), said.count("beyond the declaration")
+        out.append({"engine": engine, "transform": kind, "checks": len(said), "known_findings": known,
+                    "beyond": beyond, "verdict": ("known finding" if known else "broken" if beyond
+                                                  else "no longer broken")})
+    return out
 
 
 def broken_lines(summary) -> list:
@@ -278,3 +341,11 @@ def broken_lines(summary) -> list:
     return [f"{r['engine']} on {r['scenario']}: invariance under {r['transform']} {r['magnitude']} "
             f"{r['assessment']}"
             for r in summary.get("invariance") or [] if r["verdict"] == "broken"]
+
+
+def no_longer_broken_lines(summary) -> list:
+    """One line per declared finding that broke on none of the checks it covers (said, never a failure: the
+    declaration in the variant's traits or engine file can go)."""
+    return [f"{d['engine']}: its declared invariance finding under {d['transform']} broke on none of the "
+            f"{d['checks']} check(s) it covers here: no longer broken (the declaration can go)"
+            for d in summary.get("invariance_declared") or [] if d["verdict"] == "no longer broken"]

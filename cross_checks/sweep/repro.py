@@ -206,6 +206,10 @@ def _constant_forces(scenario, engine: str) -> tuple:
         raise ReproError(f"scenario {scenario.name}: its forces change with the state (springs, drag, "
                          "body-frame or point forces, decay); a reproducer holds the forces constant: "
                          "choose a torque-free or constant-force scenario")
+    refuses = getattr(importlib.import_module(ENGINES[engine][2]), "repro_refuses", None)
+    why = refuses(scenario) if refuses else ""
+    if why:
+        raise ReproError(f"scenario {scenario.name}: {why}")
     from cross_checks.engines import get_adapter
     h = Harness([scenario], scenario.dt_s, get_adapter(engine).applies_gravity)   # the registered engine's
     f, tau = h.wrench(scenario.problem.initial_packed()[None])
@@ -434,7 +438,8 @@ def findings_claims(summary: dict, scenarios) -> list:
     diverged), every expected non-convergence of a variant without a gyroscopic term on a torque-free
     scenario (``gyroscopic``), and every order the variant's traits expect below the one it declares (an
     engine's known shortfall, e.g. MJX's RK4 attitude at order 2: ``order QUANTITY``) where the forces are
-    constant; and every broken invariance (``invariance TRANSFORM``, one per transform). The reference's own
+    constant; and every broken invariance, an engine's declared known finding included (``invariance
+    TRANSFORM``, one per transform). The reference's own
     schemes (``reference:``) are rbcheck's: none."""
     from cross_checks.analysis.metrics import conserved
     from cross_checks.engines import resolve
@@ -464,8 +469,8 @@ def findings_claims(summary: dict, scenarios) -> list:
     for r in summary.get("long_runs") or []:
         if r.get("finding") or r.get("status") == "diverged":
             out.setdefault((r["engine"], r["scenario"]), ["drift"])
-    for r in summary.get("invariance") or []:   # a broken invariance: one per transform
-        if r.get("verdict") == "broken":
+    for r in summary.get("invariance") or []:   # a broken invariance, declared or not: one per transform
+        if r.get("verdict") in ("broken", "known finding"):
             out[(r["engine"], r["scenario"], r["transform"], r["magnitude"])] = [
                 "invariance", r["transform"], *str(r["magnitude"]).split()]
     return [(v, by_name[s], claim) for (v, s, *_), claim in out.items()

@@ -306,10 +306,12 @@ def _write_invariance(staging, summary, scenarios, variants, refs, cannot, show,
     """invariance.csv, summary.json's ``invariance`` and ``run.invariance`` (docs/invariance.md): every
     variant on every convergence scenario it can express, on the sweep's workers, with the scales and error
     amplification the sweep measured for the scenario's floors."""
+    from cross_checks.sweep import invariance as inv
     from cross_checks.sweep.invariance import INVARIANCE_COLUMNS, invariance_summary, run_invariance
     rows = run_invariance(runner, scenarios, variants, refs, cannot, show)
     atomic_write_text(staging / "invariance.csv", assemble.results_csv_text(rows, INVARIANCE_COLUMNS))
     summary["invariance"], summary["run"]["invariance"] = invariance_summary(rows)
+    summary["invariance_declared"] = inv.declared_summary(rows)
     summary["files"]["invariance"] = "invariance.csv (docs/invariance.md)"
 
 

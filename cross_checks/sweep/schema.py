@@ -129,7 +129,11 @@ AGREEMENT = {"a": str, "b": str, "scenario": str, "dt_s": NUM, "agrees": bool, "
              "reason": str, "note?": str}
 #: An invariance check that does not hold (docs/invariance.md): summary.json's ``invariance`` list.
 INVARIANCE_RECORD = {"engine": str, "scenario": str, "transform": str, "magnitude": str, "verdict": str,
-                     "worst_quantity": str, "worst_ratio": Nullable(NUM), "assessment": str}
+                     "worst_quantity": str, "worst_ratio": Nullable(NUM), "assessment": str,
+                     "declared?": str}
+#: A declared invariance finding's outcome over the checks it covers: summary.json's ``invariance_declared``.
+INVARIANCE_DECLARED = {"engine": str, "transform": str, "checks": int, "known_findings": int, "beyond": int,
+                       "verdict": str}
 SUMMARY = {
     "schema_version": int,
     "provenance": {k + "?": Nullable(str)
@@ -145,6 +149,7 @@ SUMMARY = {
     "long_run_scenarios?": [LONG_RUN_SCENARIO],
     "long_runs?": [LONG_RUN_RECORD],
     "invariance?": [INVARIANCE_RECORD],
+    "invariance_declared?": [INVARIANCE_DECLARED],
     "reproducers?": [{"engine": str, "scenario": str, "claim": str, "file": str, "note?": str}],
     "run?": {k + "?": Nullable(NUM) for k in ("jobs", "runs", "cached_runs", "diverged_runs", "failed_runs",
                                                "wall_s", "cpu_s_in_runs", "engine_s_in_runs",
@@ -171,6 +176,7 @@ COMPACT_LISTS = {
     "agreement": {"a": str, "b": str, "scenario": str, "dt_s": NUM, "agrees": bool, "max_rel": Nullable(NUM),
                   "note?": str},
     "invariance": INVARIANCE_RECORD,
+    "invariance_declared": INVARIANCE_DECLARED,
 }
 COMPACT_SUMMARY = {"schema_version": int, "form": (COMPACT_FORM,), "provenance": SUMMARY["provenance"],
                    "convergence": [COMPACT_CONVERGENCE],

@@ -108,8 +108,9 @@ def run_fn(step_fn=step):
 class Bodies:
     """Bodies ``(mass_kg, inertia_B (3, 3), None)``, each its own model, under ``gravity_W``; raw rows packed
     states. A step is the compiled :func:`run_fn` loop run once (a count of 1). A weight jaxsim does not apply
-    (gravity off −z) is added to the applied force (rbcheck's adapter evaluates the force with it: equal to
-    a rounding of the force there, bit for bit where gravity is along −z or zero)."""
+    (gravity off −z) is added to the applied force here; rbcheck's adapter runs such a scenario in a frame
+    turned onto jaxsim's z axis instead (jaxsim_engine.jaxsim_frame: a link force is a wrench about the world
+    origin held over RK4's stages, first order), so a reproducer refuses it (jaxsim_engine.repro_refuses)."""
 
     def __init__(self, bodies, gravity_W, variant, dt_s):
         g = engine_gravity(gravity_W)

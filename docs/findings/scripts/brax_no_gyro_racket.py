@@ -23,9 +23,23 @@ NEUTRAL_SYSTEM = (("vel_damping", 0.0), ("ang_damping", 0.0), ("spring_mass_scal
 NEUTRAL_DOF = (("damping", 0.0), ("armature", 0.0))
 def _num(v):
     return repr(float(v))
-def mjcf_text(mass_kg, inertia_B, gravity_W, dt_s, actuators):
+def inertial(mass_kg, inertia_B):
     I = np.asarray(inertia_B, dtype=float)
+    mass = _num(mass_kg)
+    if I[0, 1] != 0.0 or I[0, 2] != 0.0 or I[1, 2] != 0.0:
+        moments, R = np.linalg.eigh(I)
+        if abs(moments[2] - moments[0] - moments[1]) <= 8 * np.finfo(float).eps * moments[2]:
+            import mujoco
+            if np.linalg.det(R) < 0:
+                R[:, 2] *= -1.0
+            moments[2] = min(moments[2], moments[0] + moments[1])
+            quat = np.zeros(4)
+            mujoco.mju_mat2Quat(quat, R.reshape(-1))
+            return (f'<inertial pos="0 0 0" quat="{" ".join(_num(v) for v in quat)}" mass="{mass}" '
+                    f'diaginertia="{" ".join(_num(v) for v in moments)}"/>')
     full = " ".join(_num(v) for v in (I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]))
+    return f'<inertial pos="0 0 0" mass="{mass}" fullinertia="{full}"/>'
+def mjcf_text(mass_kg, inertia_B, gravity_W, dt_s, actuators):
     g = " ".join(_num(v) for v in gravity_W)
     motors = ""
     if actuators:
@@ -36,7 +50,7 @@ def mjcf_text(mass_kg, inertia_B, gravity_W, dt_s, actuators):
             f'balanceinertia="false" boundmass="0" boundinertia="0"/>'
             f'<option timestep="{_num(dt_s)}" gravity="{g}" viscosity="0" density="0" integrator="Euler"/>'
             f'<worldbody><body name="body"><freejoint name="free"/>'
-            f'<inertial pos="0 0 0" mass="{_num(mass_kg)}" fullinertia="{full}"/>'
+            f'{inertial(mass_kg, inertia_B)}'
             f'<geom type="sphere" size="0.01" contype="0" conaffinity="0" mass="0"/>'
             f'</body></worldbody>{motors}</mujoco>')
 def neutralise(sys):

@@ -428,3 +428,29 @@ def test_the_sweep_agrees_that_the_clamped_step_does_not_converge_there(tmp_path
     recs = {r["quantity"]: r for r in summary["convergence"]}
     for q in ("orientation", "angular_velocity"):
         assert recs[q]["verdict"] == "does_not_converge" and recs[q]["matches_expectation"] is True, recs[q]
+
+
+def test_the_invariance_findings_declared_are_the_engines_measured_ones_and_narrow():
+    """PyBullet maximal declares its small-body gyroscopic drop at the small scale only (k = 0.01, μ ≤ 0.02:
+    Bullet's solve33 threshold), Brax positional its position drift 1–10 km out only (docs/engine_conventions
+    .md, "Invariance"); every other transform of theirs, and every other variant, declares nothing."""
+    from cross_checks.analysis.expectations import invariance_finding
+    from cross_checks.scenario.transforms import Scale, Translation, default_transforms
+    for t in default_transforms():
+        small = t.kind == "scale" and t.parameters["k"] == 0.01
+        far = t.kind == "translation" and t.parameters["distance_m"] >= 999.0
+        assert (invariance_finding(resolve("pybullet:maximal"), t) is not None) == small, t.label
+        assert (invariance_finding(resolve("brax:positional"), t) is not None) == far, t.label
+        for v in ("pybullet:multibody", "brax:generalized", "mujoco:euler", "jaxsim:rk4", "reference:rk4"):
+            assert invariance_finding(resolve(v), t) is None, (v, t.label)
+    assert invariance_finding(resolve("pybullet:maximal"), Scale(0.01, 0.05)) is None   # 0.05 keeps it
+    assert invariance_finding(resolve("brax:positional"), Translation((0.0, 0.0, 2e4))) is None
+    f = invariance_finding(resolve("brax:positional"), Translation((0.0, 0.0, 1e3)))
+    assert f.quantities == ("position", "velocity") and "project_xd" in f.reason
+    # Drake's implicit Euler under the COM offset (its origin step; measured on tumbling_box), nothing else
+    from cross_checks.scenario.transforms import ComOffset
+    for t in default_transforms():
+        declared = invariance_finding(resolve("drake:implicit_euler"), t) is not None
+        assert declared == (t.kind == "com_offset"), t.label
+        assert invariance_finding(resolve("drake:semi_explicit_euler"), t) is None
+    assert invariance_finding(resolve("drake:implicit_euler"), ComOffset(3.0)) is None

@@ -5,7 +5,6 @@ import sys
 import pytest
 
 from cross_checks.cli import main
-from cross_checks.sweep.repro import ENGINES
 
 pytest.importorskip("mujoco")
 

@@ -41,3 +41,26 @@ def test_a_module_adapter_forwards_to_its_module_s_functions_looked_up_when_call
     assert a.simulate_many("euler", [RunRequest("a", 0.1, 1)] * 2) == ["batched", "batched"]
 
 
+
+
+def test_an_invariance_finding_is_narrow_and_says_why():
+    """engines.base.InvarianceFinding: one transform kind, at least one size range of that kind, the
+    quantities it moves and the reason; matched only within its ranges (a size computed from a vector carries
+    a few roundings: 10 km along (2, −3, 6)/7 is 9999.999999999998 m)."""
+    from cross_checks.scenario.transforms import Scale, Translation
+    f = base.InvarianceFinding("translation", (("distance_m", 1e3, 1e4),), "why", ("position",))
+    d = np.array([2.0, -3.0, 6.0]) / 7.0
+    assert f.matches(Translation(tuple(1e4 * d))) and f.matches(Translation(tuple(1e3 * d)))
+    assert not f.matches(Translation(tuple(10.0 * d))) and not f.matches(Scale(0.01, 0.01))
+    assert f.range_text() == "distance_m 1000–10000"
+    bad = [(("rotate", (("angle_deg", 0, 1),), "why"), "transform must be one of"),
+           (("scale", (), "why"), "within must name at least one of scale's sizes"),
+           (("scale", (("angle_deg", 0, 1),), "why"), "size one of k, mu"),
+           (("scale", (("k", 1.0, 0.1),), "why"), "low <= high"),
+           (("scale", (("k", 0.1, 1.0),), " "), "reason must be the sentence"),
+           (("scale", (("k", 0.1, 1.0),), "why", ("speed",)), "quantities must be a non-empty tuple")]
+    for args, words in bad:
+        with pytest.raises(ValueError, match=words):
+            base.InvarianceFinding(*args)
+    with pytest.raises(ValueError, match="invariance_findings must be a tuple of InvarianceFinding"):
+        base.Traits(invariance_findings=["scale"])

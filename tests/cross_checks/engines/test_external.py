@@ -514,6 +514,31 @@ def test_a_variant_declares_the_precision_its_steps_compute_in(tmp_path):
         load_engine_file(path)
 
 
+def test_a_variant_declares_its_invariance_findings(tmp_path):
+    """``[[variants.NAME.invariance_findings]]`` (transform, within = { SIZE = [low, high] }, quantities,
+    reason) become the variant's Traits.invariance_findings (docs/invariance.md, "Declared findings"); a bad
+    entry is refused naming its field."""
+    path = _engine_file(tmp_path / "a", modes=["ok"])
+    entry = ('[[variants.ok.invariance_findings]]\ntransform = "translation"\n'
+             'within = { distance_m = [1e3, 1e4] }\nquantities = ["position"]\nreason = "far out"\n')
+    path.write_text(path.read_text() + entry)
+    (f,) = load_engine_file(path).variants["ok"].traits.invariance_findings
+    assert (f.transform, f.within, f.quantities, f.reason) == ("translation", (("distance_m", 1e3, 1e4),),
+                                                               ("position",), "far out")
+    bad = [('transform = "translation"', 'transform = "shift"', r"invariance_findings\[0\]\.transform: must be"),
+           ("within = { distance_m = [1e3, 1e4] }", "within = {}", r"\[0\]\.within: must bound at least one"),
+           ("distance_m = [1e3, 1e4]", "k = [1e3, 1e4]", r"\[0\]\.within\.k: must be a size of translation"),
+           ("[1e3, 1e4]", "[1e4, 1e3]", r"\[0\]\.within\.distance_m: .*low <= high"),
+           ('["position"]', '["place"]', r"\[0\]\.quantities: must be a non-empty list"),
+           ('reason = "far out"', 'reason = ""', r"\[0\]\.reason: missing \(required\)"),
+           ('reason = "far out"', 'reason = "far out"\nowner = "me"', r"\[0\]\.owner")]
+    for old, new, words in bad:
+        path.write_text(path.read_text().replace(entry, entry.replace(old, new)))
+        with pytest.raises(EngineFileError, match=words):
+            load_engine_file(path)
+        path.write_text(path.read_text().replace(entry.replace(old, new), entry))
+
+
 # --- what outlives rbcheck (issue 45) -------------------------------------------------------------------------
 
 #: A process that runs an engine file's hanging command as a pool worker would (SIGTERM at its default; the

@@ -224,3 +224,139 @@ def test_an_adapter_that_does_not_build_a_body_form_says_cannot_express():
     assert [r["verdict"] for r in rows] == ["cannot express"] * 2
     assert "reference cannot express a body whose frame origin is not at its COM" in rows[0]["assessment"]
     assert "reference cannot express a body of welded parts" in rows[1]["assessment"]
+
+
+# --- declared findings (engines.base.InvarianceFinding; docs/invariance.md "Declared findings") -------------
+
+#: zood's variants: the zoo's scheme (MODE) with what each declares under [[variants.V.invariance_findings]].
+DECLARING = {
+    # the diagonal-only inertia's body-frame break, declared where it is measured: a known finding
+    "declared": ("diagonal_inertia", [("body_frame", "angle_deg = [40.0, 42.0]", "")]),
+    # declared, but for another transform and for another range of the same one: still caught
+    "declared_elsewhere": ("diagonal_inertia", [("translation", "distance_m = [1e3, 1e4]", ""),
+                                                ("body_frame", "angle_deg = [0.0, 10.0]", "")]),
+    # declared for the right transform but in position only: its rotation break is beyond it, still caught
+    "declared_in_position": ("diagonal_inertia", [("body_frame", "angle_deg = [40.0, 42.0]",
+                                                   'quantities = ["position"]')]),
+    # a correct scheme that declares the finding: "no longer broken"
+    "fixed": ("correct", [("body_frame", "angle_deg = [40.0, 42.0]", "")]),
+}
+REASON = "the zoo's planted bug: its step reads only the diagonal of the inertia tensor"
+
+
+@pytest.fixture(scope="module")
+def zood(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("zood")
+    lines = ['name = "zood"', 'version = "1.0"', "timeout = 120"]
+    for name, (mode, findings) in DECLARING.items():
+        lines += ["", f"[variants.{name}]", "order = 1",
+                  f'command = ["{sys.executable}", "{ZOO}", "{mode}", "{{scenario_json}}", "{{out_csv}}"]']
+        for kind, within, extra in findings:
+            lines += [f"[[variants.{name}.invariance_findings]]", f'transform = "{kind}"',
+                      f"within = {{ {within} }}", f'reason = "{REASON}"', extra]
+    p = folder / "zood.toml"
+    p.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    scenario = folder / "byo_tumble.toml"
+    scenario.write_text(TUMBLE, encoding="utf-8")
+    return p, scenario
+
+
+@pytest.fixture(scope="module")
+def zood_rows(zood):
+    from cross_checks.scenario.transforms import default_transforms
+    engine_file, scenario = zood
+    sc = parse_scenario(TUMBLE, str(scenario))
+    t = [x for x in default_transforms() if x.kind in ("body_frame", "translation")]
+    with engine_files_registered([engine_file]):
+        return {v: {(r["transform"], r["magnitude"]): r
+                    for r in check_invariance(sc, resolve(f"zood:{v}"), t)} for v in DECLARING}
+
+
+def test_a_declared_finding_is_a_known_finding_with_its_number_and_reason(zood_rows):
+    r = zood_rows["declared"][("body_frame", "41 deg")]
+    assert r["verdict"] == "known finding" and r["declared"] == "known finding", r["assessment"]
+    assert REASON in r["assessment"] and "under body_frame at angle_deg 40–42" in r["assessment"]
+    assert r["worst_ratio"] > 1e6 and "measured here: largest deviation" in r["assessment"], r["assessment"]
+    # the other transforms of the variant are judged as usual
+    assert {k: x["verdict"] for k, x in zood_rows["declared"].items() if k[0] == "translation"} == {
+        k: x["verdict"] for k, x in zood_rows["fixed"].items() if k[0] == "translation"}
+
+
+def test_a_declaration_is_narrow_a_different_break_of_the_same_variant_is_caught(zood_rows):
+    r = zood_rows["declared_elsewhere"][("body_frame", "41 deg")]
+    assert r["verdict"] == "broken" and r["declared"] == "", r["assessment"]      # 41° is outside [0, 10]
+    r = zood_rows["declared_in_position"][("body_frame", "41 deg")]
+    assert r["verdict"] == "broken" and r["declared"] == "beyond the declaration", r["assessment"]
+    assert "beyond its declared finding, which names position only" in r["assessment"]
+
+
+def test_a_declared_finding_that_does_not_break_is_said_no_longer_broken(zood_rows):
+    r = zood_rows["fixed"][("body_frame", "41 deg")]
+    assert r["verdict"] == "holds" and r["declared"] == "not broken here", r["assessment"]
+    from cross_checks.sweep.invariance import declared_summary, invariance_summary, no_longer_broken_lines
+    rows = [x for v in ("fixed", "declared") for x in zood_rows[v].values()]
+    said = {d["engine"]: d for d in declared_summary(rows)}
+    assert said["zood:fixed"] == {"engine": "zood:fixed", "transform": "body_frame", "checks": 1,
+                                  "known_findings": 0, "beyond": 0, "verdict": "no longer broken"}
+    assert said["zood:declared"]["verdict"] == "known finding"
+    assert invariance_summary(rows)[1]["no longer broken"] == 1
+    assert no_longer_broken_lines({"invariance_declared": list(said.values())}) == [
+        "zood:fixed: its declared invariance finding under body_frame broke on none of the 1 check(s) it "
+        "covers here: no longer broken (the declaration can go)"]
+
+
+def test_the_entry_points_read_the_same_declarations(zood, zood_rows, tmp_path, monkeypatch, capsys):
+    """The sweep (invariance.csv, summary.json, the report, JUnit, exit code), assert_engine(invariance=True)
+    and the fuzz's invariance property agree: the declared break is a known finding, not a failure; the
+    undeclared one fails each of them."""
+    monkeypatch.setenv("RBCHECK_CACHE_DIR", str(tmp_path / "cache"))
+    engine_file, scenario = zood
+    out = tmp_path / "res"
+    rc = main(["sweep", str(scenario), "--engines", "zood:declared", "zood:fixed", "--engine-file",
+               str(engine_file), "--invariance", "--out", str(out), "--jobs", "1"])
+    text = capsys.readouterr()
+    assert rc == 0, text.out[-2000:] + text.err[-2000:]
+    assert "1 known finding" in text.out and "1 no longer broken" in text.out, text.out[-2000:]
+    assert "zood:fixed: its declared invariance finding under body_frame broke on none" in text.out
+    with open(out / "invariance.csv", encoding="utf-8", newline="") as fh:
+        rows = {(r["engine"], r["transform"]): r for r in csv.DictReader(fh)}
+    known = rows[("zood:declared", "body_frame")]
+    assert known["verdict"] == "known finding" and REASON in known["assessment"]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["run"]["invariance"]["known finding"] == 1 and summary["run"]["invariance"]["broken"] == 0
+    rec = {r["engine"]: r for r in summary["invariance"] if r["transform"] == "body_frame"}
+    assert rec["zood:declared"]["verdict"] == "known finding" and REASON in rec["zood:declared"]["assessment"]
+    assert "zood:fixed" not in rec          # it holds: not among the checks that do not hold
+    assert {d["engine"]: d["verdict"] for d in summary["invariance_declared"]} == {
+        "zood:declared": "known finding", "zood:fixed": "no longer broken"}
+    from cross_checks.gates import ci
+    junit = ci.junit_text(ci.sweep_junit(summary))
+    assert 'failures="0"' in junit and REASON in junit
+    md = ci.sweep_markdown(summary, out)
+    assert md.startswith("## rbcheck sweep: ✅") and "1 known invariance finding(s)" in md
+    assert "1 declared one(s) no longer broken" in md
+    page = (out / "index.html").read_text(encoding="utf-8")
+    assert "zood:declared on byo_tumble: under body_frame 41 deg, known finding" in page
+    # compare: the known finding is no regression against a baseline where it held
+    base = tmp_path / "base"
+    shutil.copytree(out, base)
+    summary["invariance"] = [r for r in summary["invariance"] if r["verdict"] != "known finding"]
+    (base / "summary.json").write_text(json.dumps(summary), encoding="utf-8")
+    assert main(["compare", str(base), str(out)]) == 0
+    page = (out / "index.html").read_text(encoding="utf-8")
+    assert "zood:fixed: its declared invariance finding under body_frame broke on none" in page
+
+    summary = assert_engine("zood:declared", [scenario], engine_file=engine_file, invariance=True)
+    assert summary["run"]["invariance"]["known finding"] == 1
+    with pytest.raises(AssertionError) as exc:
+        assert_engine("zood:declared_elsewhere", [scenario], engine_file=engine_file, invariance=True)
+    assert "invariance under body_frame 41 deg broken" in str(exc.value)
+
+    import types
+
+    from cross_checks.fuzz import properties
+    ctx = types.SimpleNamespace(scenario=parse_scenario(TUMBLE, str(scenario)))
+    for variant, violations in (("declared", 0), ("declared_elsewhere", 1), ("declared_in_position", 1)):
+        row = zood_rows[variant][("body_frame", "41 deg")]
+        out_, tally = properties.invariance(ctx, f"zood:{variant}", row)
+        assert len(out_) == violations and tally["invariance"] == [1, 0], (variant, out_)
