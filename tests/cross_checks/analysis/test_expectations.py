@@ -432,8 +432,9 @@ def test_the_sweep_agrees_that_the_clamped_step_does_not_converge_there(tmp_path
 
 def test_the_invariance_findings_declared_are_the_engines_measured_ones_and_narrow():
     """PyBullet maximal declares its small-body gyroscopic drop at the small scale only (k = 0.01, μ ≤ 0.02:
-    Bullet's solve33 threshold), Brax positional its position drift 1–10 km out only (docs/engine_conventions
-    .md, "Invariance"); every other transform of theirs, and every other variant, declares nothing."""
+    Bullet's solve33 threshold), Brax positional its position drift 1–10 km out only
+    (docs/engine_conventions.md, "Invariance"); every other transform of theirs, and every other variant,
+    declares nothing."""
     from cross_checks.analysis.expectations import invariance_finding
     from cross_checks.scenario.transforms import Scale, Translation, default_transforms
     for t in default_transforms():

@@ -15,7 +15,7 @@ WORLDS = Path(__file__).resolve().parents[4] / "cross_checks" / "engines" / "wor
 #: the modules each world may import besides numpy and the standard library ("." : a sibling world, which a
 #: reproducer embeds above it)
 ENGINE_IMPORT = {"mujoco": {"mujoco"}, "rapier": {"rapier3d"}, "pybullet": {"pybullet"},
-                 "mjx": {"jax", "mujoco", "."}, "brax": {"jax", "brax"},
+                 "mjx": {"jax", "mujoco", "."}, "brax": {"jax", "brax", "mujoco"},
                  "physx": {"sapien"}, "dart": {"dartpy"}, "drake": {"pydrake"},
                  "mujoco_warp": {"mujoco", "mujoco_warp", "warp", "."}, "jaxsim": {"jax", "jaxsim"},
                  "newton": {"warp", "newton", "mujoco"}, "genesis": {"genesis"}}
