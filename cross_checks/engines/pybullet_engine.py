@@ -22,7 +22,6 @@ import numpy as np
 
 from cross_checks.engines import base, install
 from cross_checks.engines.base import EngineError, Variant
-from cross_checks.engines.step_floats import quat_mul_floats
 from cross_checks.engines.world import World, WorldEngine
 from reference_sim.quaternion import quat_conj, quat_from_matrix
 
@@ -120,12 +119,12 @@ class BulletWorld(pbw.Bodies, World):
             raise EngineError(f"pybullet.createMultiBody failed for scenario {scenario.name!r}")
 
     def packed_row(self, raw):
-        """:meth:`packed` of one read in plain floats (the quaternion product: quat_mul_floats)."""
+        """:meth:`packed` of one read in plain floats (the world's quaternion product)."""
         out = []
         for r, q_BP in zip(raw if isinstance(raw, list) else np.asarray(raw).tolist(), self.q_BP):
             x0, x1, x2, v0, v1, v2, qx, qy, qz, qw, w0, w1, w2 = r
             q = ([qw, qx, qy, qz] if q_BP is None
-                 else quat_mul_floats((qw, qx, qy, qz), quat_conj(q_BP).tolist()))
+                 else pbw.qmul((qw, qx, qy, qz), quat_conj(q_BP).tolist()))
             out.append([x0, x1, x2, v0, v1, v2, *q, w0, w1, w2])
         return out
 

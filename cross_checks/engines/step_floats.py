@@ -10,7 +10,7 @@ from __future__ import annotations
 from cross_checks.engines import forces
 from reference_sim.simulate import BLOWUP_LIMIT
 
-__all__ = ["harness_fn", "quat_mul_floats", "bad_floats"]
+__all__ = ["harness_fn", "bad_floats"]
 
 
 def harness_fn(scenario, dt_s: float):
@@ -24,18 +24,6 @@ def harness_fn(scenario, dt_s: float):
         fx, fy, fz, tx, ty, tz = ft(y)
         return gv * fx, gv * fy, gv * fz, gw * tx, gw * ty, gw * tz
     return harness
-
-
-def quat_mul_floats(a, b) -> list:
-    """``reference_sim.quaternion.quat_mul(a, b)`` for two quaternions (w, x, y, z) of 4 floats each, with
-    NumPy's order of operations: the dot product summed left to right (``np.sum`` of 3 terms), then
-    ``s1 v2 + s2 v1`` plus the cross product ``v1 × v2`` (reference_sim.vec.cross3)."""
-    s1, x1, y1, z1 = a
-    s2, x2, y2, z2 = b
-    return [s1 * s2 - (x1 * x2 + y1 * y2 + z1 * z2),
-            s1 * x2 + s2 * x1 + (y1 * z2 - z1 * y2),
-            s1 * y2 + s2 * y1 + (z1 * x2 - x1 * z2),
-            s1 * z2 + s2 * z1 + (x1 * y2 - y1 * x2)]
 
 
 def bad_floats(row) -> bool:

@@ -22,7 +22,7 @@ def _xyzw(q):
     return [float(q[1]), float(q[2]), float(q[3]), float(q[0])]
 
 
-def _qmul(a, b):
+def qmul(a, b):
     """Hamilton product of two quaternions (w, x, y, z) of 4 floats each."""
     s1, x1, y1, z1 = a
     s2, x2, y2, z2 = b
@@ -83,7 +83,7 @@ class Bodies:
     def _pose_in(self, y, k):
         q_WB = [float(v) for v in y[6:10]]
         q_BP = self.q_BP[k]
-        q_WP = q_WB if q_BP is None else _qmul(q_WB, [float(v) for v in q_BP])
+        q_WP = q_WB if q_BP is None else qmul(q_WB, [float(v) for v in q_BP])
         return [float(v) for v in y[0:3]], _xyzw(q_WP)
 
     def set_state(self, y):

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from cross_checks.engines import base, forces
-from cross_checks.engines.step_floats import bad_floats, harness_fn, quat_mul_floats
+from cross_checks.engines.step_floats import bad_floats, harness_fn
+from cross_checks.engines.worlds.pybullet import qmul as quat_mul_floats
 from cross_checks.fuzz import generate
 from cross_checks.fuzz.pipeline import scenario_of
 from reference_sim.quaternion import quat_mul
@@ -28,7 +29,7 @@ def _states(sc, rng, k=8):
     return y
 
 
-def test_quaternion_product_is_numpys_bit_for_bit():
+def test_the_pybullet_worlds_quaternion_product_is_numpys_bit_for_bit():
     rng = np.random.default_rng(0)
     a = rng.standard_normal((20000, 4)) * 10.0 ** rng.integers(-6, 6, (20000, 4))
     b = rng.standard_normal((20000, 4)) * 10.0 ** rng.integers(-6, 6, (20000, 4))
