@@ -169,14 +169,22 @@ def _rhs(i, y, out, P):
 
 
 @njit(**_INLINE)
+def _start_symplectic(i, y, P):
+    """The start of member i's symplectic steps (integrators.course_type, _engine_gyro_step): R(q_WB), the
+    world torque (N m) and the new velocity v' = gv (v + h f/m) (m/s, world)."""
+    sc = P[0]
+    h, m, gv = sc[i, 0], sc[i, 1], sc[i, 3]
+    R = _rot(y[6], y[7], y[8], y[9])
+    fx, fy, fz, tx, ty, tz = _force_torque(i, y, R, P)
+    return R, tx, ty, tz, gv * (y[3] + h * (fx / m)), gv * (y[4] + h * (fy / m)), gv * (y[5] + h * (fz / m))
+
+
+@njit(**_INLINE)
 def _course_type(i, y, out, gyro, expmap, P):
     """integrators.course_type of member i."""
-    sc = P[0]
-    h, m, gv, gw = sc[i, 0], sc[i, 1], sc[i, 3], sc[i, 4]
+    h, gw = P[0][i, 0], P[0][i, 4]
     qw, qx, qy, qz = y[6], y[7], y[8], y[9]
-    R = _rot(qw, qx, qy, qz)
-    fx, fy, fz, tx, ty, tz = _force_torque(i, y, R, P)
-    vx, vy, vz = gv * (y[3] + h * (fx / m)), gv * (y[4] + h * (fy / m)), gv * (y[5] + h * (fz / m))
+    R, tx, ty, tz, vx, vy, vz = _start_symplectic(i, y, P)
     ax, ay, az = _angular_acceleration(i, R, y[10], y[11], y[12], tx, ty, tz, gyro, P)
     wx, wy, wz = gw * (y[10] + h * ax), gw * (y[11] + h * ay), gw * (y[12] + h * az)
     if expmap:
@@ -424,12 +432,9 @@ def _gyro_update(kind, R, wx, wy, wz, h, I9, J9, max_torque):
 def _engine_gyro_step(i, y, out, kind, max_torque, P):
     """integrators._engine_gyro_step of member i with the gyroscopic update ``kind``
     (:func:`_gyro_update`)."""
-    sc = P[0]
-    h, m, gv, gw = sc[i, 0], sc[i, 1], sc[i, 3], sc[i, 4]
+    h, gw = P[0][i, 0], P[0][i, 4]
     qw, qx, qy, qz = y[6], y[7], y[8], y[9]
-    R = _rot(qw, qx, qy, qz)
-    fx, fy, fz, tx, ty, tz = _force_torque(i, y, R, P)
-    vx, vy, vz = gv * (y[3] + h * (fx / m)), gv * (y[4] + h * (fy / m)), gv * (y[5] + h * (fz / m))
+    R, tx, ty, tz, vx, vy, vz = _start_symplectic(i, y, P)
     G0, G1, G2 = _gyro_update(kind, R, y[10], y[11], y[12], h, _m9(P[1][i]), _m9(P[2][i]), max_torque)
     ax, ay, az = _angular_acceleration(i, R, y[10], y[11], y[12], tx, ty, tz, False, P)
     wx, wy, wz = gw * (G0 + h * ax), gw * (G1 + h * ay), gw * (G2 + h * az)
