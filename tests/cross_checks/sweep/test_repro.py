@@ -321,6 +321,23 @@ def test_each_findings_script_is_exactly_what_rbcheck_repro_writes(path):
                          f"{scenario} --claim {m.group(3)} --out {path.relative_to(ROOT)}")
 
 
+def test_a_sweeps_com_offset_finding_gets_a_reproducer_not_a_note(tmp_path):
+    """The sweep's invariance row of a body off its COM (Drake implicit Euler's declared finding on
+    tumbling_box, as summary.json holds it) is written into DIR/repro/ like any other, the script's world
+    form_world (before: a note saying a reproducer could not write the body)."""
+    pytest.importorskip("pydrake")
+    from cross_checks.sweep.repro import write_sweep_reproducers
+    summary = {"invariance": [{"engine": "drake:implicit_euler", "scenario": "tumbling_box",
+                               "transform": "com_offset", "magnitude": "1.5 gyration radii",
+                               "verdict": "known finding"}]}
+    recs = write_sweep_reproducers(tmp_path, summary, [load_scenario("tumbling_box")])
+    name = "repro/drake_implicit_euler__tumbling_box__invariance_com_offset_1_5_gyration_radii.py"
+    assert recs == [{"engine": "drake:implicit_euler", "scenario": "tumbling_box",
+                     "claim": "invariance com_offset 1.5 gyration radii", "file": name}]
+    text = (tmp_path / name).read_text()
+    assert "sys.exit(main_invariance(form_world, globals()))" in text and "def com_state(" in text
+
+
 def test_a_sweeps_broken_invariance_gets_its_reproducer_and_the_report_links_it(tmp_path, monkeypatch):
     """PyBullet's maximal coordinates at k = μ = 0.01 (docs/invariance.md, "In CI"): the sweep writes the
     invariance claim's script into DIR/repro/, the report links the finding to it, and the script, run
