@@ -31,9 +31,11 @@ def add_repro(sub, engine_file_option) -> None:
                     "and separatrix distance), 'gyroscopic' (the torque-free flip is missing), 'invariance "
                     "TRANSFORM' (the transformed scenario, mapped back, moves as the original within the "
                     "sweep's allowance; TRANSFORM as invariance.csv names it, e.g. 'scale k=0.01 mu=0.01', "
-                    "'translation 1e4', 'rotation'). A claim that does not hold here is written anyway and "
-                    "said so. Every built-in engine can write one (not reference: it is rbcheck's own); "
-                    "engine files cannot (their command is the reproducer). Exit 0: written; 2: bad "
+                    "'translation 1e4', 'rotation', 'com_offset' (a body off its COM: MuJoCo, Drake, DART, "
+                    "PyBullet), 'welded_split' (welded parts: MuJoCo, Drake, DART)). A claim that does not "
+                    "hold here is written anyway and said so. Every built-in engine can write one (not "
+                    "reference: it is rbcheck's own); engine files cannot (their command is the "
+                    "reproducer). Exit 0: written; 2: bad "
                     "input (one line, nothing written). See docs/repro.md.")
     r.add_argument("variant", metavar="VARIANT", help="ENGINE:VARIANT, e.g. mujoco:rk4")
     r.add_argument("scenario", metavar="SCENARIO", help="catalog name or scenario TOML file")

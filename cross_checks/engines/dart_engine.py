@@ -33,7 +33,7 @@ if _IMPORT_ERROR is None:   # the world (what rbcheck repro embeds) imports the 
     from cross_checks.engines.worlds import dart as dtw
     from cross_checks.engines.worlds.dart import JOINT_SETTINGS, from_dart_state, neutralise, to_dart_state
 else:   # not installed: the adapter still loads, and says so when used
-    dtw = types.SimpleNamespace(Body=type("Body", (), {}), Bodies=type("Bodies", (), {}))
+    dtw = types.SimpleNamespace(FormBody=type("FormBody", (), {}), FormBodies=type("FormBodies", (), {}))
 
 __all__ = ["ENGINE", "VARIANTS", "JOINT_SETTINGS", "EngineError", "version", "simulate", "simulate_many",
            "one_step", "DartBody", "DartWorld", "DartAdapter", "neutralise", "to_dart_state",
@@ -76,59 +76,35 @@ def body_spec(body) -> tuple:
     return float(body.mass_kg), np.asarray(body.inertia_B, dtype=float), None
 
 
-class DartBody(dtw.Body):
+def body_entry(scenario) -> tuple:
+    """The scenario's body as :class:`cross_checks.engines.worlds.dart.FormBody` takes it: its
+    :func:`body_spec`; a body whose origin is off its COM (scenario.body_com_B_m) also with that COM (m)
+    and its welded parts (scenario.body_parts; none: no fifth item), each ``(mass_kg, inertia_B, None, com)``.
+    ``rbcheck repro`` writes the same entry into a script."""
+    com = getattr(scenario, "body_com_B_m", None)
+    spec = body_spec(scenario.problem.body)
+    if com is None:
+        return spec
+    parts = [(float(q.mass_kg), np.asarray(q.inertia_B, dtype=float), None, [float(v) for v in q.com_B_m])
+             for q in getattr(scenario, "body_parts", ())]
+    return (*spec, [float(v) for v in com], *([parts] if parts else []))
+
+
+class DartBody(dtw.FormBody):
     """A scenario's free body alone in a DART world stepping at ``dt_s``
-    (:class:`cross_checks.engines.worlds.dart.Body`, what ``rbcheck repro`` embeds); ``set_state``/``read``
-    at the boundary."""
+    (:class:`cross_checks.engines.worlds.dart.FormBody`, what ``rbcheck repro`` embeds: its COM off the
+    origin and its welded parts too); ``set_state``/``read`` at the boundary."""
 
     def __init__(self, scenario, dt_s: float):
         _require()
-        p = scenario.problem
-        super().__init__(p.body.mass_kg, p.body.inertia_B, p.forces.gravity_W, dt_s)
-        c = getattr(scenario, "body_com_B_m", None)
-        self.com_B = None if c is None else np.asarray(c, dtype=float)   # the body origin off the COM
-        parts = getattr(scenario, "body_parts", ())
-        if parts or c is not None:   # Inertia's local COM; welded parts: WeldJoint children at the body frame
-            inertias = ([(q.mass_kg, q.com_B_m, q.inertia_B) for q in parts] if parts else
-                        [(p.body.mass_kg, self.com_B, p.body.inertia_B)])
-            nodes = [self.node]
-            for _ in inertias[1:]:
-                _, child = self.skeleton.createWeldJointAndBodyNodePair(self.node)
-                child.setCollidable(False)
-                nodes.append(child)
-            for n, (m, com, inertia_B) in zip(nodes, inertias):
-                inertia = dart.dynamics.Inertia(float(m), np.asarray(com, dtype=float),
-                                                np.asarray(inertia_B, dtype=float))
-                self.ok = self.ok and inertia.verify()
-                n.setInertia(inertia)
+        super().__init__(body_entry(scenario), scenario.problem.forces.gravity_W, dt_s)
         if not self.ok:
             raise EngineError(f"DART {version()} rejects the inertia of scenario "
                               f"{scenario.name!r} (dart::dynamics::Inertia::verify "
                               "is false: a mass or moment that is not positive)")
 
-    def set_state(self, y) -> None:
-        """Put the body at the packed state ``y`` (13,); DART's state is the body origin's: x − R c,
-        v − ω × R c where it is off the COM."""
-        if self.com_B is not None:
-            from reference_sim.body import origin_state
-            y = np.array(y, dtype=float)
-            y[0:3], y[3:6] = origin_state(y, self.com_B)
-        super().set_state(y)
 
-    def apply(self, f_W, tau_W) -> None:
-        """World force ``f_W`` (N) at the COM and world torque ``tau_W`` (N m), for the next step only. With
-        the body origin off the COM, setExtTorque replaces the wrench's whole moment about the origin (the one
-        setExtForce's offset made too), so the moment of f at the COM is added to it."""
-        if self.com_B is None:
-            super().apply(f_W, tau_W)
-            return
-        r_W = self.node.getWorldTransform().rotation() @ self.com_B
-        self.node.setExtForce(f_W, np.zeros(3), False, True)
-        self.node.setExtTorque(np.asarray(tau_W, dtype=float) + np.cross(r_W, np.asarray(f_W, dtype=float)),
-                               False)
-
-
-class DartWorld(dtw.Bodies, World):
+class DartWorld(dtw.FormBodies, World):
     """B bodies, each a :class:`DartBody`, stepped in turn. Raw rows: DART's ``[r, x_W, ω_W, v_W]`` (12). A
     body whose state blew up is not stepped again (DART would go on, warning on stderr; the loop ends its
     run)."""
@@ -137,7 +113,7 @@ class DartWorld(dtw.Bodies, World):
 
     def __init__(self, requests, dt_s: float):
         World.__init__(self)
-        dtw.Bodies.__init__(self, [DartBody(r.scenario, dt_s) for r in requests])
+        dtw.FormBodies.__init__(self, [DartBody(r.scenario, dt_s) for r in requests])
         # the forces the harness evaluates (the body-axes torques are DART's own: takes_body_torque)
         self.always = [host_problem(r.scenario.problem, True).forces.state_dependent for r in requests]
 
@@ -145,15 +121,6 @@ class DartWorld(dtw.Bodies, World):
         rows = self.last = [pos().tolist() + vel().tolist() for pos, vel in self._reads]   # Bodies.read's
         self.live = [not bad_floats(row) for row in rows]   # DART's |r| ≤ π: the packed state's verdict
         return rows
-
-    def packed(self, raw):
-        y = from_dart_state(raw)
-        for k, b in enumerate(self.bodies):
-            if b.com_B is not None:   # the COM's x and v from the body origin's
-                from reference_sim.body import com_state
-                yk = y[..., k, :]
-                y[..., k, :] = com_state(yk[..., 0:3], yk[..., 3:6], yk[..., 6:10], yk[..., 10:13], b.com_B)
-        return y
 
     def packed_row(self, raw):
         if any(b.com_B is not None for b in self.bodies):
@@ -164,7 +131,7 @@ class DartWorld(dtw.Bodies, World):
         """The velocities last read, scaled (the pose is not set again: its round trip is not exact); a body
         whose origin is off its COM: the COM's v and ω scaled, the origin's v = v − ω × R c set."""
         if all(b.com_B is None for b in self.bodies):
-            dtw.Bodies.decay(self, g_v, g_w)
+            dtw.FormBodies.decay(self, g_v, g_w)
             return
         y_all = self.packed(np.asarray(self.last, dtype=float)[None])[0]
         for k, (b, prev, gv, gw) in enumerate(zip(self.bodies, self.last, g_v.tolist(), g_w.tolist())):

@@ -31,7 +31,8 @@ pydrake, _IMPORT_ERROR = install.optional_import("pydrake")
 if _IMPORT_ERROR is None:   # the world (what rbcheck repro embeds) imports the engine itself
     from cross_checks.engines.worlds import drake as dkw
 else:   # not installed: the adapter still loads, and says so when used
-    dkw = types.SimpleNamespace(Body=type("Body", (), {}), Bodies=type("Bodies", (), {}))
+    dkw = types.SimpleNamespace(FormBody=type("FormBody", (), {}), FormBodies=type("FormBodies", (), {}))
+from cross_checks.engines.worlds.com import com_state, origin_state
 
 __all__ = ["ENGINE", "VARIANTS", "version", "simulate", "simulate_many", "one_step", "DrakeModel",
            "DrakeWorld", "DrakeAdapter", "to_drake_state", "from_drake_state", "body_spec"]
@@ -77,25 +78,15 @@ def to_drake_state(y, com_B_m=None):
     """Packed states (..., 13) ``[x_W, v_W, q_WB, ω_W]`` -> Drake's ``[q_WB, x_W, ω_W, v_W]`` (..., 13)
     (:func:`cross_checks.engines.worlds.drake.to_drake_state`); for a body whose COM is at ``com_B_m`` from
     its origin Bo, Drake's x and v are Bo's (x − R c, v − ω × R c)."""
-    y = np.asarray(y, dtype=float)
-    if com_B_m is not None:
-        from reference_sim.body import origin_state
-        x_o, v_o = origin_state(y, com_B_m)
-        y = np.concatenate([x_o, v_o, y[..., 6:13]], axis=-1)
-    return dkw.to_drake_state(y)
+    return dkw.to_drake_state(y if com_B_m is None else origin_state(y, com_B_m))
 
 
 def from_drake_state(x, com_B_m=None):
     """Drake's states (..., 13) -> packed (..., 13), the quaternion normalised (Drake's is not unit)
     (:func:`cross_checks.engines.worlds.drake.from_drake_state`); for a body whose COM is at ``com_B_m`` from
     its origin, the COM's x and v (x_o + R c, v_o + ω × R c)."""
-    if com_B_m is None:
-        return dkw.from_drake_state(x)
-    x = np.asarray(x, dtype=float)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        q = x[..., 0:4] / np.linalg.norm(x[..., 0:4], axis=-1, keepdims=True)
-    from reference_sim.body import com_state
-    return com_state(x[..., 4:7], x[..., 10:13], q, x[..., 7:10], com_B_m)
+    y = dkw.from_drake_state(x)
+    return y if com_B_m is None else com_state(y, com_B_m)
 
 
 def body_spec(body) -> tuple:
@@ -142,39 +133,24 @@ def _force_system_class():
     return StageForces
 
 
-def _spatial_inertia(body, com_B_m=None):
-    """The body's spatial inertia about its origin Bo, in body axes (principal moments rotated by R_BP for a
-    full tensor: :func:`body_spec`), its COM at ``com_B_m`` from Bo (p_BoBcm_B; default: at Bo)."""
-    return dkw.spatial_inertia(*body_spec(body), com_B_m)
-
-
-def _com_of(scenario):
-    """The COM in the scenario's body frame from its origin (m; None: at the origin)."""
-    c = getattr(scenario, "body_com_B_m", None)
-    return None if c is None else np.asarray(c, dtype=float)
-
-
-def _add_bodies(plant, scenario):
-    """The scenario's body in ``plant``: one rigid body with its COM where the scenario puts it (p_BoBcm), or
-    its welded parts (WeldJoint from the first part's frame, the body frame, to each other's: the same
-    frame), each with its own COM and inertia. Returns the first (the floating) body."""
-    from pydrake.math import RigidTransform
-
+def body_entry(scenario) -> tuple:
+    """The scenario's body as :class:`cross_checks.engines.worlds.drake.FormBody` takes it: its
+    :func:`body_spec`; a body whose origin Bo is off its COM (scenario.body_com_B_m) also with that COM
+    (p_BoBcm, m) and its welded parts (scenario.body_parts; none: no fifth item), each ``(*body_spec, com)``.
+    ``rbcheck repro`` writes the same entry into a script."""
     from reference_sim.body import RigidBody
-    parts = getattr(scenario, "body_parts", ())
-    if not parts:
-        return plant.AddRigidBody("body", _spatial_inertia(scenario.problem.body, _com_of(scenario)))
-    bodies = [plant.AddRigidBody("body" if k == 0 else f"body_part{k}",
-                                 _spatial_inertia(RigidBody(p.mass_kg, p.inertia_B), p.com_B_m))
-              for k, p in enumerate(parts)]
-    for child in bodies[1:]:
-        plant.WeldFrames(bodies[0].body_frame(), child.body_frame(), RigidTransform())
-    return bodies[0]
+    com = getattr(scenario, "body_com_B_m", None)
+    spec = body_spec(scenario.problem.body)
+    if com is None:
+        return spec
+    parts = [(*body_spec(RigidBody(p.mass_kg, p.inertia_B)), [float(v) for v in p.com_B_m])
+             for p in getattr(scenario, "body_parts", ())]
+    return (*spec, [float(v) for v in com], *([parts] if parts else []))
 
 
-class DrakeModel(dkw.Body):
-    """A scenario's free body in Drake (:class:`cross_checks.engines.worlds.drake.Body`, what
-    ``rbcheck repro`` embeds; its COM where the scenario puts it, its welded parts and the per-stage forces
+class DrakeModel(dkw.FormBody):
+    """A scenario's free body in Drake (:class:`cross_checks.engines.worlds.drake.FormBody`, what
+    ``rbcheck repro`` embeds: its COM where the scenario puts it, its welded parts; the per-stage forces
     added here), with a simulator whose integrator is ``integrator`` (a Drake integrator name);
     ``set_state``/``state`` in the packed layout. ``constant_forces``: the scenario's constant forces fixed
     on the plant here (False: by the caller, :meth:`apply`)."""
@@ -182,17 +158,17 @@ class DrakeModel(dkw.Body):
     def __init__(self, scenario, integrator: str, constant_forces: bool = True):
         _require()
         p = scenario.problem
-        self.scenario, self.com_B = scenario, _com_of(scenario)
+        self.scenario = scenario
         self.per_stage = bool(p.forces.state_dependent or p.forces.has_decay)
         self.stage_forces = None
-        super().__init__(body_spec(p.body), p.forces.gravity_W, integrator)
+        super().__init__(body_entry(scenario), p.forces.gravity_W, integrator)   # sets com_B
         if constant_forces and not self.per_stage and (p.forces.point_forces or p.forces.torques):
             f, tau = stage_force_torque(scenario, p.initial_packed())     # constant: any state gives the same
             self.apply(f - forces.weight_W(scenario), tau)
 
     def add_bodies(self, plant):
         try:
-            return _add_bodies(plant, self.scenario)
+            return dkw.FormBody.add_bodies(self, plant)
         except RuntimeError as exc:  # Drake's validity checks of the inertia
             raise EngineError(
                 f"Drake {version()} rejected the inertia of scenario {self.scenario.name!r}: {exc}") from None
@@ -210,25 +186,6 @@ class DrakeModel(dkw.Body):
         builder.Connect(fs.get_output_port(0), plant.get_applied_generalized_force_input_port())
         return builder.Build()
 
-    def apply(self, f_W, tau_W) -> None:
-        """The applied generalized force ``[τ_W, f_W]`` (N m, N, world axes; the force at the COM without the
-        weight, which the plant applies) from now on. A body whose origin is off its COM: the spatial force
-        at its COM (a point fixed in the body, p_BoBq_B = c) on the applied spatial force port: Drake moves
-        it to Bo in every configuration (a generalized force is about Bo)."""
-        if self.com_B is None:
-            super().apply(f_W, tau_W)
-            return
-        from pydrake.common.value import AbstractValue
-        from pydrake.multibody.math import SpatialForce
-        from pydrake.multibody.plant import ExternallyAppliedSpatialForce
-        F = ExternallyAppliedSpatialForce()
-        F.body_index, F.p_BoBq_B = self.body.index(), self.com_B
-        F.F_Bq_W = SpatialForce(np.asarray(tau_W, dtype=float), np.asarray(f_W, dtype=float))
-        self.plant.get_applied_spatial_force_input_port().FixValue(self.context, AbstractValue.Make([F]))
-
-    def set_state(self, y, t_s: float = 0.0) -> None:
-        self.set_drake_state(to_drake_state(y, self.com_B), t_s)
-
     def state(self) -> np.ndarray:
         return from_drake_state(self.drake_state(), self.com_B)
 
@@ -239,9 +196,10 @@ def _model(scenario, variant: str, dt_s: float, constant_forces: bool = True) ->
     return model
 
 
-class DrakeWorld(dkw.Bodies, World):
+class DrakeWorld(dkw.FormBodies, World):
     """B bodies, each a :class:`DrakeModel` (its constant forces the loop's), stepped to ``n Δt`` in turn
-    (:class:`cross_checks.engines.worlds.drake.Bodies`). Raw rows: Drake's states ``[q_WB, x_W, ω_W, v_W]``. A
+    (:class:`cross_checks.engines.worlds.drake.FormBodies`). Raw rows: Drake's states ``[q_WB, x_W, ω_W,
+    v_W]``. A
     body whose step Drake refuses (NaN detected, Newton failed) warns and keeps its last state; after a
     blow-up, that is a consequence (``first_cause_only``)."""
 
@@ -250,7 +208,7 @@ class DrakeWorld(dkw.Bodies, World):
 
     def __init__(self, requests, variant: str, dt_s: float):
         World.__init__(self)
-        dkw.Bodies.__init__(self, [_model(r.scenario, variant, dt_s, False) for r in requests], dt_s)
+        dkw.FormBodies.__init__(self, [_model(r.scenario, variant, dt_s, False) for r in requests], dt_s)
         self.per_stage = self.models[0].per_stage
 
     @property
@@ -258,11 +216,9 @@ class DrakeWorld(dkw.Bodies, World):
         return sum(m.stage_forces.host_s for m in self.models if m.stage_forces is not None)
 
     def packed(self, raw):
-        coms = [m.com_B for m in self.models]
-        if all(c is None for c in coms):
+        if all(m.com_B is None for m in self.models):
             return from_drake_state(raw)
-        raw = np.asarray(raw, dtype=float)
-        return np.stack([from_drake_state(raw[..., k, :], c) for k, c in enumerate(coms)], axis=-2)
+        return dkw.FormBodies.packed(self, raw)
 
 
 class DrakeEngine(WorldEngine):

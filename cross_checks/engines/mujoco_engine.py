@@ -30,7 +30,7 @@ if _IMPORT_ERROR is None:   # the world (what rbcheck repro embeds) imports the 
     from cross_checks.engines.worlds import mujoco as mjw
     from cross_checks.engines.worlds.mujoco import to_packed, to_qpos_qvel
 else:   # not installed: the adapter still loads, and says so when used
-    mjw = types.SimpleNamespace(Bodies=type("Bodies", (), {}))
+    mjw = types.SimpleNamespace(Bodies=type("Bodies", (), {}), FormBodies=type("FormBodies", (), {}))
 
 __all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate", "simulate_many", "one_step",
            "build_model", "packed_floats", "to_packed", "to_qpos_qvel"]
@@ -100,7 +100,7 @@ def build_world_model(scenarios, variant: str, dt_s: float):
         with _LOCK:
             prev = _clear_force_callbacks()
             try:
-                return mjw.build_model([_body_entry(sc) for sc in scenarios], forces.gravity_W,
+                return mjw.build_model([body_entry(sc) for sc in scenarios], forces.gravity_W,
                                        variant, dt_s, name=f"rbcheck_{scenarios[0].name}")
             finally:
                 _restore_force_callbacks(prev)
@@ -120,20 +120,21 @@ def body_spec(body) -> tuple:
     return float(body.mass_kg), on_the_triangle(moments), quat_from_matrix(R_BP)
 
 
-def _body_entry(scenario) -> tuple:
+def body_entry(scenario) -> tuple:
     """The scenario's body as :func:`cross_checks.engines.worlds.mujoco.build_model` takes it: its
-    :func:`body_spec`; a body whose frame origin is off its COM (scenario.body_com_B_m) with its inertial
-    frame there; a body of welded parts (scenario.body_parts) as the first part with the others as child
-    bodies without a joint, each with its own inertial frame (MuJoCo #3553's form)."""
+    :func:`body_spec`; a body whose frame origin is off its COM (scenario.body_com_B_m) also with that COM
+    (its inertial frame there) and its welded parts (scenario.body_parts; none: no fifth item), each
+    ``(*body_spec, com)``: the first the jointed body's inertial, the others child bodies without a joint,
+    each with its own inertial frame (MuJoCo #3553's form). ``rbcheck repro`` writes the same entry into a
+    script."""
     from reference_sim.body import RigidBody
-    parts = getattr(scenario, "body_parts", ())
-    if parts:
-        first, *rest = [(*body_spec(RigidBody(float(q.mass_kg), q.inertia_B)),
-                         [float(v) for v in q.com_B_m]) for q in parts]
-        return (*first, rest)
     com = getattr(scenario, "body_com_B_m", None)
     spec = body_spec(scenario.problem.body)
-    return spec if com is None else (*spec, [float(v) for v in com], ())
+    if com is None:
+        return spec
+    parts = [(*body_spec(RigidBody(float(q.mass_kg), q.inertia_B)), [float(v) for v in q.com_B_m])
+             for q in getattr(scenario, "body_parts", ())]
+    return (*spec, [float(v) for v in com], *([parts] if parts else []))
 
 
 def on_the_triangle(moments_kg_m2) -> np.ndarray:
@@ -267,7 +268,7 @@ def _stage_force_writer(scenario, qpos, qvel, xfrc, weight, form=None):
     host = host_problem(scenario.problem, MujocoEngine.takes_body_torque)
     if host is not scenario.problem:
         scenario = dataclasses.replace(scenario, problem=host)
-    if form is not None:   # a body off its COM or of parts (BodyForm): the COM's state, the force shared
+    if form is not None:   # a body off its COM or of parts (worlds.mujoco.Form): the COM's state, shared
         def control_form(_m, _d):
             y = form.com_rows(np.concatenate((qpos, qvel))[None])[0]
             f = np.array(stage_force_torque_floats(scenario, y.tolist()))
@@ -278,52 +279,6 @@ def _stage_force_writer(scenario, qpos, qvel, xfrc, weight, form=None):
         fx, fy, fz, tx, ty, tz = stage_force_torque_floats(scenario, _packed1(qpos, qvel))
         xfrc[:] = (fx - w0, fy - w1, fz - w2, tx, ty, tz)
     return control
-
-
-class BodyForm:
-    """The bodies of a world whose frame origin is off their COM or that are welded parts: per scenario
-    body, its COM in its frame (``com_B`` (B, 3), m) and the rows of xfrc_applied its parts are (the first
-    its jointed body) with their shares of its mass. MuJoCo's qpos/qvel are the body frame origin's
-    (x_o, v_o) and xfrc_applied acts at each MuJoCo body's own COM: the world force f at the composite COM
-    is shared by mass (Σ (m_i/m) f at the parts' COMs has no torque about their composite COM), the torque
-    goes to the jointed body."""
-
-    def __init__(self, scenarios):
-        self.com_B = np.array([np.zeros(3) if getattr(sc, "body_com_B_m", None) is None
-                               else np.asarray(sc.body_com_B_m, dtype=float) for sc in scenarios])
-        self.rows, row = [], 0
-        for sc in scenarios:
-            parts = getattr(sc, "body_parts", ())
-            m = [q.mass_kg for q in parts] or [sc.problem.body.mass_kg]
-            self.rows.append((list(range(row, row + len(m))), np.array(m) / sum(m)))
-            row += len(m)
-
-    def com_rows(self, raw):
-        """Raw rows ``[qpos (7), qvel (6)]`` (..., B, 13) -> packed COM states (..., B, 13)."""
-        from reference_sim.body import com_state
-        y = to_packed(raw[..., 0:7], raw[..., 7:13])
-        return com_state(y[..., 0:3], y[..., 3:6], y[..., 6:10], y[..., 10:13], self.com_B)
-
-    def origin_rows(self, y):
-        """Packed COM states (B, 13) -> qpos (B, 7), qvel (B, 6) of the body frame origins."""
-        from reference_sim.body import origin_state
-        x_o, v_o = origin_state(y, self.com_B)
-        y = np.array(y, dtype=float)
-        y[:, 0:3], y[:, 3:6] = x_o, v_o
-        return to_qpos_qvel(y)
-
-    def write(self, xfrc, f_W, tau_W):
-        """World forces ``f_W`` and torques ``tau_W`` (B, 3) at the bodies' COMs into ``xfrc`` (the world's
-        rows of xfrc_applied, from its first body's)."""
-        f_W, tau_W = np.asarray(f_W, dtype=float), np.asarray(tau_W, dtype=float)
-        for (rows, share), f, tau in zip(self.rows, f_W, tau_W):
-            for i, w in zip(rows, share):
-                xfrc[i, 0:3] = w * f
-                xfrc[i, 3:6] = tau if i == rows[0] else 0.0
-
-    def span(self, k) -> slice:
-        """Body ``k``'s rows of xfrc_applied (from the world's first body's)."""
-        return slice(self.rows[k][0][0], self.rows[k][0][-1] + 1)
 
 
 #: Each thread's compiled world models: ``(scenarios, build_world_model, model)`` (the scenarios matched by
@@ -363,7 +318,7 @@ def _body_of_warning(msg: str, n_bodies: int):
     return min(i // width, n_bodies - 1), msg[:m.start(2)] + str(i % width) + msg[m.end(2):]
 
 
-class MujocoWorld(mjw.Bodies, World):
+class MujocoWorld(mjw.FormBodies, World):
     """B free bodies in one MjModel (one kinematic tree each) and one MjData, stepped by ``mj_step`` or, with
     the forces held, by ``mujoco.rollout``. Raw rows: ``[qpos (7), qvel (6)]`` per body, ω in BODY axes. The
     warning handler (and RK4's stage-force callback) are installed for the world's lifetime
@@ -374,8 +329,8 @@ class MujocoWorld(mjw.Bodies, World):
         mjw.Bodies.__init__(self, _model([r.scenario for r in requests], variant, dt_s))
         d = self.data
         scs = [r.scenario for r in requests]
-        self.form = (BodyForm(scs) if any(getattr(sc, "body_com_B_m", None) is not None for sc in scs)
-                     else None)
+        entries = [body_entry(sc) for sc in scs]
+        self.form = mjw.Form(entries) if any(len(e) > 3 for e in entries) else None
         self.per_stage = forces_per_stage(requests[0].scenario, variant)
         self.n = 0
         self.host_s = 0.0
@@ -385,7 +340,7 @@ class MujocoWorld(mjw.Bodies, World):
                                            forces.weight_W(r.scenario)) if self.form is None else
                        _stage_force_writer(r.scenario, self.qpos[k], self.qvel[k],
                                            self.xfrc[self.form.span(k)], forces.weight_W(r.scenario),
-                                           BodyForm([r.scenario]))
+                                           mjw.Form([body_entry(r.scenario)]))
                        for k, r in enumerate(requests)]
             perf = time.perf_counter
 
@@ -397,18 +352,12 @@ class MujocoWorld(mjw.Bodies, World):
         self.session = Session(d, control).__enter__()
 
     def set_state(self, y):
-        if self.form is None:
-            mjw.Bodies.set_state(self, y)
-        else:   # MuJoCo's state is the body frame origin's
-            self.data.time = 0.0
-            self.qpos[:], self.qvel[:] = self.form.origin_rows(y)
+        # MuJoCo's state is the body frame origin's (worlds.mujoco.FormBodies, what a reproducer runs)
+        (mjw.Bodies if self.form is None else mjw.FormBodies).set_state(self, y)
         self.n = 0
 
     def apply(self, f_W, tau_W):
-        if self.form is None:
-            mjw.Bodies.apply(self, f_W, tau_W)
-        else:
-            self.form.write(self.xfrc, f_W, tau_W)
+        (mjw.Bodies if self.form is None else mjw.FormBodies).apply(self, f_W, tau_W)
 
     def decay(self, g_v, g_w):
         if self.form is None:
@@ -420,9 +369,7 @@ class MujocoWorld(mjw.Bodies, World):
         self.qpos[:], self.qvel[:] = self.form.origin_rows(y)
 
     def packed(self, raw):
-        if self.form is None:
-            return mjw.Bodies.packed(self, raw)
-        return self.form.com_rows(np.asarray(raw, dtype=float))
+        return (mjw.Bodies if self.form is None else mjw.FormBodies).packed(self, raw)
 
     def step(self):
         self.n += 1

@@ -97,6 +97,16 @@ def body_spec(body) -> tuple:
     return float(body.mass_kg), moments, quat_from_matrix(R_BP)
 
 
+def body_entry(scenario) -> tuple:
+    """The scenario's body as :meth:`cross_checks.engines.worlds.pybullet.Bodies.add_body` takes it: its
+    :func:`body_spec`, and for a body whose frame origin is off its COM (scenario.body_com_B_m) that COM
+    (m, body axes from the origin: the base's inertial frame there). ``rbcheck repro`` writes the same entry
+    into a script (:func:`cross_checks.engines.worlds.pybullet.form_world`)."""
+    com = getattr(scenario, "body_com_B_m", None)
+    spec = body_spec(scenario.problem.body)
+    return spec if com is None else (*spec, [float(v) for v in com])
+
+
 class BulletWorld(pbw.Bodies, World):
     """The bodies of one run group in the process's (reset) PyBullet world, with the boundary conversions
     (:class:`cross_checks.engines.worlds.pybullet.Bodies`, what ``rbcheck repro`` embeds). Raw rows:
@@ -114,8 +124,8 @@ class BulletWorld(pbw.Bodies, World):
             raise EngineError(f"PyBullet rejected the model of scenario {r.scenario.name!r}: {exc}") from None
 
     def _add(self, scenario):
-        if not self.add_body(*body_spec(scenario.problem.body), scenario.problem.initial_packed(),
-                             getattr(scenario, "body_com_B_m", None)):
+        entry = body_entry(scenario)
+        if not self.add_body(*entry[:3], scenario.problem.initial_packed(), *entry[3:4]):
             raise EngineError(f"pybullet.createMultiBody failed for scenario {scenario.name!r}")
 
     def packed_row(self, raw):

@@ -40,18 +40,21 @@ __all__ = ["ENGINES", "CLAIMS", "ReproError", "Repro", "parse_claim", "reproduce
            "findings_claims", "write_sweep_reproducers", "file_name", "map_numbers", "TRANSFORM_NAMES"]
 
 #: Engines that can write reproducers: engine -> (the distributions whose versions the script prints, the
-#: world modules it embeds in order, the adapter module, the module whose ``body_spec`` gives the bodies).
+#: world modules it embeds in order, the adapter module, the module whose ``body_spec`` gives the bodies and,
+#: where the engine takes a body off its COM or of welded parts, ``body_entry`` the scenario's body then:
+#: the script's world is then ``form_world``; worlds/com.py holds the conversions between the COM and the
+#: body origin that these worlds share).
 _W, _A = "cross_checks.engines.worlds.", "cross_checks.engines."
 ENGINES = {
-    "mujoco": (("mujoco",), (_W + "mujoco",), _A + "mujoco_engine", _A + "mujoco_engine"),
+    "mujoco": (("mujoco",), (_W + "com", _W + "mujoco"), _A + "mujoco_engine", _A + "mujoco_engine"),
     "rapier": (("rapier3d",), (_W + "rapier",), _A + "rapier_engine", _A + "rapier_engine"),
     "pybullet": (("pybullet",), (_W + "pybullet",), _A + "pybullet_engine", _A + "pybullet_engine"),
     "mjx": (("mujoco-mjx", "mujoco", "jax"), (_W + "mujoco", _W + "mjx"), _A + "mjx_engine",
             _A + "mujoco_engine"),
     "brax": (("brax", "jax", "mujoco"), (_W + "brax",), _A + "brax_engine", _A + "brax_engine"),
     "physx": (("sapien",), (_W + "physx",), _A + "physx_engine", _A + "physx_engine"),
-    "dart": (("dartpy",), (_W + "dart",), _A + "dart_engine", _A + "dart_engine"),
-    "drake": (("drake",), (_W + "drake",), _A + "drake_engine", _A + "drake_engine"),
+    "dart": (("dartpy",), (_W + "com", _W + "dart"), _A + "dart_engine", _A + "dart_engine"),
+    "drake": (("drake",), (_W + "com", _W + "drake"), _A + "drake_engine", _A + "drake_engine"),
     "mujoco_warp": (("mujoco-warp", "warp-lang", "mujoco"), (_W + "mujoco", _W + "mujoco_warp"),
                     _A + "mujoco_warp_engine", _A + "mujoco_engine"),
     "jaxsim": (("jaxsim", "jax"), (_W + "jaxsim",), _A + "jaxsim_engine", _A + "jaxsim_engine"),
@@ -236,8 +239,9 @@ def reproducer(variant_name: str, scenario, claim_words, *, command: str = "", r
               "Y0": _floats(scenario.problem.initial_packed()),
               "F_W": _floats(f_W), "TAU_W": _floats(tau_W)}
     claim_text = f"{kind} {arg}".strip()
+    world_fn = "world"
     if kind == "invariance":
-        data, expect = _invariance_data(variant_name, scenario, arg, engine, spec_mod)
+        data, expect, world_fn = _invariance_data(variant_name, scenario, arg, engine, spec_mod)
     else:
         data, expect = {"order": _order_data, "drift": _drift_data, "gyroscopic": _gyro_data}[kind](
             variant_name, scenario, arg)
@@ -246,12 +250,13 @@ def reproducer(variant_name: str, scenario, claim_words, *, command: str = "", r
               f"Written by rbcheck {reference_sim.__version__} ({command}); needs only numpy and "
               f"{', '.join(dists)}.\nExit 1 while the defect holds, 0 when it does not. The code is "
               f"rbcheck's own (cross_checks/engines/worlds/{engine}.py,\n"
-              f'cross_checks/sweep/repro_measure.py) without its docstrings and comments."""\n')
+              + ("cross_checks/engines/worlds/com.py, " if world_fn == "form_world" else "")
+              + 'cross_checks/sweep/repro_measure.py) without its docstrings and comments."""\n')
     lines = _assignments({**common, **data})
     main = f"main_{kind}"
     tail = ("# the scenario (SI units; states [x_W, v_W, q_WB (w x y z), ω_W]) and the reference values\n"
             + "\n".join(lines) + "\n"
-            + f"if __name__ == \"__main__\":\n    sys.exit({main}(world, globals()))\n")
+            + f"if __name__ == \"__main__\":\n    sys.exit({main}({world_fn}, globals()))\n")
     modules = [*world_mods, "cross_checks.sweep.repro_measure"]
     text = header + compact(["import sys\n"] + [_source(m) for m in modules], tail)
     if not run:
@@ -263,7 +268,7 @@ def reproducer(variant_name: str, scenario, claim_words, *, command: str = "", r
     out = io.StringIO()
     with contextlib.redirect_stdout(out):
         exec(compile(text, f"<repro {variant_name} {scenario.name}>", "exec"), ns)   # noqa: S102 - our own
-        code = ns[main](ns["world"], ns)
+        code = ns[main](ns[world_fn], ns)
     return Repro(text=text, holds=bool(code), output=out.getvalue(), claim=claim_text)
 
 
@@ -298,10 +303,17 @@ def _order_data(variant_name, scenario, quantity) -> tuple:
                   f"{', '.join(f'{h:g}' for h in dts)} s? Reference: {label}.")
 
 
+def _has_form_world(engine: str) -> bool:
+    """Whether ``engine``'s world (the last module it embeds) builds a body off its COM or of welded parts."""
+    return "\ndef form_world(" in _source(ENGINES[engine][1][-1])
+
+
 def _invariance_data(variant_name, scenario, label, engine, spec_mod) -> tuple:
-    """The transformed scenario's numbers as the invariance machinery builds them (transforms.apply), the
-    map back, and the allowances and step orders the sweep judges with (sweep.invariance,
-    analysis.judge.invariance_allowance) at the scenario's Δt and its refinements."""
+    """``(numbers, expectation, world function)``: the transformed scenario's numbers as the invariance
+    machinery builds them (transforms.apply), the map back, and the allowances and step orders the sweep
+    judges with (sweep.invariance, analysis.judge.invariance_allowance) at the scenario's Δt and its
+    refinements; the script's world is ``form_world`` where the transformed body is off its COM or of
+    welded parts (the adapter's ``body_entry`` of it, as the adapter builds it), else ``world``."""
     from cross_checks.analysis.judge import invariance_allowance
     from cross_checks.core.quantities import QUANTITIES, UNITS, quantity_scales
     from cross_checks.scenario.references import error_amplification, reference_solution
@@ -322,14 +334,18 @@ def _invariance_data(variant_name, scenario, label, engine, spec_mod) -> tuple:
     if why:
         raise ReproError(f"{variant_name} cannot express {label} on {scenario.name} ({why}): the sweep says "
                          "'cannot express', not a defect")
-    if getattr(tsc, "body_com_B_m", None) is not None or getattr(tsc, "body_parts", ()):
-        can = [k for k in TRANSFORM_NAMES if k.split()[0] not in ("com_offset", "welded_split")]
-        raise ReproError(f"--claim invariance {t.kind}: a reproducer cannot write a body off its COM or of "
-                         "welded parts yet (the adapter converts the state between the body origin and the "
-                         "COM and shares the forces among the parts, outside the engine's world); "
-                         f"reproducers state: {'; '.join(can)}")
-    f_T, tau_T = _constant_forces(tsc, engine)
+    world_fn = "world"
     body_T = spec_mod.body_spec(tsc.problem.body)
+    if getattr(tsc, "body_com_B_m", None) is not None or getattr(tsc, "body_parts", ()):
+        # the body off its COM or of welded parts: the world's form_world takes it as the adapter builds it
+        # (body_entry), converting the state between the COM and the body origin (worlds/com.py)
+        entry = getattr(spec_mod, "body_entry", None)
+        if entry is None or not _has_form_world(engine):   # an adapter that builds it, a world that does not
+            can = [e for e in ENGINES if _has_form_world(e)]
+            raise ReproError(f"--claim invariance {t.kind}: {engine}'s world cannot build a body off its COM "
+                             f"or of welded parts; these can: {', '.join(can)}")
+        world_fn, body_T = "form_world", entry(tsc)
+    f_T, tau_T = _constant_forces(tsc, engine)
     traits = variant_name.traits
     dt, T = scenario.dt_s, scenario.duration_s
     dts = [dt] + [dt / r for r in tol.INVARIANCE_REFINEMENTS]
@@ -359,7 +375,7 @@ def _invariance_data(variant_name, scenario, label, engine, spec_mod) -> tuple:
             "UNITS": repr({q: UNITS[q] for q in QUANTITIES})}
     return data, (f"the same physics written another way ({label}: transforms.py) must move the same once "
                   f"mapped back: judged as rbcheck sweep --invariance judges it at Δt = {dt:g} s (and at "
-                  f"{', '.join(f'{h:g}' for h in dts[1:])} s where it fails there)")
+                  f"{', '.join(f'{h:g}' for h in dts[1:])} s where it fails there)"), world_fn
 
 
 def map_numbers(t) -> dict:

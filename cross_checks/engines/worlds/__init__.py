@@ -11,6 +11,9 @@ tau_W)``, ``step()``, ``read()`` and ``packed(raw)`` on packed states (B, 13)
 (MJX's and MuJoCo Warp's ``world`` build on worlds/mujoco.py's model; Brax's, DART's and jaxsim's take the
 full inertia tensor as the second item; Drake's takes the principal axes as a rotation matrix R_BP (3, 3), or
 None for a diagonal tensor, as the third.)
+MuJoCo's, Drake's, DART's and PyBullet's also define ``form_world``: the same with bodies that may also give
+their COM in the body frame (m, from its origin) and welded parts (``body_entry`` in the adapter), the
+state converted between the COM and the body origin by :mod:`.com` (which imports only NumPy).
 tests/cross_checks/engines/worlds/ checks that none imports anything else, and that a reproducer's run of each
 (of that compacted code) is the adapter's run, bit for bit.
 """

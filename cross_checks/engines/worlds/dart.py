@@ -6,12 +6,16 @@ I_B)`` (the full tensor as given), every joint default neutralised (:data:`JOINT
 FreeJoint positions ``[r, x_W]`` (``r`` the rotation vector of R_WB) and velocities ``[ω_W, v_W]``, world
 axes. Forces are cleared after every step (``apply`` before each one); a torque fixed in body axes is given
 once (``apply_body_torque``) and set by ``apply`` before every step in the body's own axes
-(``setExtTorque(τ_B, isLocal=True)``: DART turns it itself). docs/engine_conventions.md, "DART".
+(``setExtTorque(τ_B, isLocal=True)``: DART turns it itself). A body whose origin is off its COM, or of
+welded parts, is a :class:`FormBody` (:func:`form_world`): DART's x and v are then the origin's.
+docs/engine_conventions.md, "DART".
 """
 import math
 
 import dartpy as dart
 import numpy as np
+
+from .com import com_state, origin_state
 
 #: FreeJoint settings every body gets, set explicitly so that no release's default changes the physics:
 #: (dartpy Joint setter, value for each of the 6 DOFs).
@@ -182,3 +186,61 @@ class Bodies:
 
 def world(bodies, gravity_W, variant, dt_s):
     return Bodies([Body(mass_kg, inertia_B, gravity_W, dt_s) for mass_kg, inertia_B, _ in bodies])
+
+
+class FormBody(Body):
+    """:class:`Body` of ``body`` = ``(mass_kg, inertia_B (3, 3), None)`` that may also give its COM
+    ``com_B`` (m, body axes from the body origin; None: at it) and welded parts (each ``(mass_kg, inertia_B,
+    None, com_B)``: ``WeldJoint`` children at the body frame, each with its ``Inertia``'s local COM). DART's
+    x and v are the origin's: the packed state's (the COM's) converted (worlds/com.py)."""
+
+    def __init__(self, body, gravity_W, dt_s):
+        super().__init__(body[0], body[1], gravity_W, dt_s)
+        com = body[3] if len(body) > 3 else None
+        self.com_B = None if com is None else np.asarray(com, dtype=float)
+        parts = body[4] if len(body) > 4 else ()
+        if parts or com is not None:
+            inertias = [(p[0], p[3], p[1]) for p in parts] if parts else [(body[0], self.com_B, body[1])]
+            nodes = [self.node]
+            for _ in inertias[1:]:
+                _, child = self.skeleton.createWeldJointAndBodyNodePair(self.node)
+                child.setCollidable(False)
+                nodes.append(child)
+            for n, (m, c, inertia_B) in zip(nodes, inertias):
+                inertia = dart.dynamics.Inertia(float(m), np.asarray(c, dtype=float),
+                                                np.asarray(inertia_B, dtype=float))
+                self.ok = self.ok and inertia.verify()
+                n.setInertia(inertia)
+
+    def set_state(self, y):
+        """Put the body at the packed state ``y`` (13,) of its COM (DART's is the origin's)."""
+        super().set_state(y if self.com_B is None else origin_state(y, self.com_B))
+
+    def apply(self, f_W, tau_W):
+        """World force ``f_W`` (N) at the COM and world torque ``tau_W`` (N m), for the next step only. With
+        the origin off the COM, setExtTorque replaces the wrench's whole moment about the origin (the one
+        setExtForce's offset made too), so the moment of f at the COM is added to it."""
+        if self.com_B is None:
+            super().apply(f_W, tau_W)
+            return
+        r_W = self.node.getWorldTransform().rotation() @ self.com_B
+        self.node.setExtForce(f_W, _ZERO3, False, True)
+        self.node.setExtTorque(np.asarray(tau_W, dtype=float) + np.cross(r_W, np.asarray(f_W, dtype=float)),
+                               False)
+
+
+class FormBodies(Bodies):
+    """:class:`Bodies` of :class:`FormBody` (and :class:`Body`): a body whose origin is off its COM reads as
+    its COM's state."""
+
+    def packed(self, raw):
+        y = from_dart_state(raw)
+        for k, b in enumerate(self.bodies):
+            if getattr(b, "com_B", None) is not None:
+                y[..., k, :] = com_state(y[..., k, :], b.com_B)
+        return y
+
+
+def form_world(bodies, gravity_W, variant, dt_s):
+    """:func:`world` of bodies that may have a COM off their origin or welded parts (:class:`FormBody`)."""
+    return FormBodies([FormBody(b, gravity_W, dt_s) for b in bodies])

@@ -7,13 +7,19 @@ of its own whose integrator is the variant (``ResetIntegratorFromFlags``: "semi_
 Drake's state is ``q = [q_WB (w x y z), x_W]``, ``v = [ω_W, v_W]`` (angular first, both in WORLD axes); Drake
 does not renormalise the quaternion, so the packed one is ``q/|q|``. Forces: ``[τ_W, f_W]`` (world torque,
 world force at the COM without the weight, which the plant applies) fixed on the applied generalized force
-port, where they stay until fixed again. docs/engine_conventions.md, "Drake 1.51.1".
+port, where they stay until fixed again. A body whose origin Bo is off its COM, or of welded parts, is a
+:class:`FormBody` (:func:`form_world`): Drake's x and v are then Bo's, and the force at the COM goes on the
+applied spatial force port. docs/engine_conventions.md, "Drake 1.51.1".
 """
 import numpy as np
-from pydrake.math import RotationMatrix
-from pydrake.multibody.plant import MultibodyPlant
+from pydrake.common.value import AbstractValue
+from pydrake.math import RigidTransform, RotationMatrix
+from pydrake.multibody.math import SpatialForce
+from pydrake.multibody.plant import ExternallyAppliedSpatialForce, MultibodyPlant
 from pydrake.multibody.tree import RotationalInertia, SpatialInertia
 from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
+
+from .com import com_state, origin_state
 
 #: The fixed step's maximum is Δt (1 + FIXED_STEP_SLACK): AdvanceTo(k Δt) from (k − 1) Δt is then one
 #: step even where k Δt − (k − 1) Δt exceeds Δt by a rounding.
@@ -152,3 +158,60 @@ def world(bodies, gravity_W, variant, dt_s):
     for m in models:
         m.fixed_step(dt_s)
     return Bodies(models, dt_s)
+
+
+class FormBody(Body):
+    """:class:`Body` of a spec that may also give the COM ``com_B`` (m, body axes from the body origin Bo;
+    None: at Bo) and welded parts (each ``(mass_kg, moments, R_BP, com_B)``, their COMs from the first's
+    frame: a ``WeldJoint`` from the first part's frame to each other's, the same frame). Drake's x and v
+    are Bo's: the packed state's (the COM's) converted (worlds/com.py); the world force at the COM goes on
+    the applied spatial force port at the point c of the body (Drake moves it to Bo in every
+    configuration)."""
+
+    def __init__(self, spec, gravity_W, variant):
+        com = spec[3] if len(spec) > 3 else None
+        self.com_B = None if com is None else np.asarray(com, dtype=float)
+        super().__init__(spec, gravity_W, variant)
+
+    def add_bodies(self, plant):
+        parts = self.spec[4] if len(self.spec) > 4 else ()
+        if not parts:
+            return plant.AddRigidBody("body", spatial_inertia(*self.spec[:3], self.com_B))
+        bodies = [plant.AddRigidBody("body" if k == 0 else f"body_part{k}", spatial_inertia(*part))
+                  for k, part in enumerate(parts)]
+        for child in bodies[1:]:
+            plant.WeldFrames(bodies[0].body_frame(), child.body_frame(), RigidTransform())
+        return bodies[0]
+
+    def apply(self, f_W, tau_W):
+        """World force (N) at the COM, without the weight, and world torque (N m), from now on."""
+        if self.com_B is None:
+            super().apply(f_W, tau_W)
+            return
+        F = ExternallyAppliedSpatialForce()
+        F.body_index, F.p_BoBq_B = self.body.index(), self.com_B
+        F.F_Bq_W = SpatialForce(np.asarray(tau_W, dtype=float), np.asarray(f_W, dtype=float))
+        self.plant.get_applied_spatial_force_input_port().FixValue(self.context, AbstractValue.Make([F]))
+
+    def set_state(self, y, t_s=0.0):
+        """The packed state ``y`` (13,) of the COM at time ``t_s`` (s)."""
+        self.set_drake_state(to_drake_state(y if self.com_B is None else origin_state(y, self.com_B)), t_s)
+
+
+class FormBodies(Bodies):
+    """:class:`Bodies` of :class:`FormBody` (and :class:`Body`) models: a body whose origin is off its COM
+    reads as its COM's state."""
+
+    def packed(self, raw):
+        raw = np.asarray(raw, dtype=float)
+        return np.stack([from_drake_state(raw[..., k, :]) if getattr(m, "com_B", None) is None
+                         else com_state(from_drake_state(raw[..., k, :]), m.com_B)
+                         for k, m in enumerate(self.models)], axis=-2)
+
+
+def form_world(bodies, gravity_W, variant, dt_s):
+    """:func:`world` of bodies that may have a COM off their origin or welded parts (:class:`FormBody`)."""
+    models = [FormBody(spec, gravity_W, variant) for spec in bodies]
+    for m in models:
+        m.fixed_step(dt_s)
+    return FormBodies(models, dt_s)

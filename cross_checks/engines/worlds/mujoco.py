@@ -4,17 +4,21 @@ One MjSpec body per body, with a free joint on the body frame and the mass and i
 (alignfree, inertiafromgeom, balanceinertia, boundmass and boundinertia neutralised; no auto-reset).
 MuJoCo's state is ``qpos = [x_W, q_WB (w x y z)]``, ``qvel = [v_W, ω_B (BODY axes)]``; forces go into
 ``xfrc_applied`` (world force at the COM, world torque; MuJoCo keeps them), a torque fixed in body axes into
-``qfrc_applied`` (a free joint's rotational DOFs are body axes). docs/engine_conventions.md.
+``qfrc_applied`` (a free joint's rotational DOFs are body axes). A body whose frame origin is off its COM, or
+of welded parts, is :class:`FormBodies`' (:func:`form_world`): qpos/qvel are then the frame origin's, and a
+world force at the COM is shared among the parts. docs/engine_conventions.md.
 """
 import mujoco
 import numpy as np
 
+from .com import com_state, origin_state
+
 
 def build_model(bodies, gravity_W, variant, dt_s, name="rbcheck"):
     """The compiled MjModel of ``bodies`` ((mass_kg, moments (3,), q_BP (w x y z)) each; optionally also the
-    COM in the body frame (m) and welded parts: child bodies without a joint, each (mass_kg, moments, q_BP,
-    com)) for the integrator ``variant`` ("euler", "rk4", "implicit", "implicitfast", "discrete") at step
-    ``dt_s`` (s)."""
+    COM in the body frame (m, from its origin) and welded parts, each (mass_kg, moments, q_BP, com (m)): the
+    first part the jointed body's inertial, the others child bodies without a joint) for the integrator
+    ``variant`` ("euler", "rk4", "implicit", "implicitfast", "discrete") at step ``dt_s`` (s)."""
     spec = mujoco.MjSpec()
     spec.modelname = name
     spec.compiler.alignfree = False        # keep the joint (= qpos) on the body frame, not the inertial frame
@@ -30,8 +34,9 @@ def build_model(bodies, gravity_W, variant, dt_s, name="rbcheck"):
         b = spec.worldbody.add_body()
         b.name = "body" if k == 0 else f"body{k}"
         b.add_freejoint()
-        _inertial(b, *body[:3], body[3] if len(body) > 3 else (0.0, 0.0, 0.0))
-        for j, part in enumerate(body[4] if len(body) > 4 else (), 1):
+        parts = body[4] if len(body) > 4 else [(*body[:3], body[3] if len(body) > 3 else (0.0, 0.0, 0.0))]
+        _inertial(b, *parts[0])
+        for j, part in enumerate(parts[1:], 1):
             child = b.add_body()           # no joint: welded to the body, its frame the body frame
             child.name = f"{b.name}_part{j}"
             child.pos = [0.0, 0.0, 0.0]
@@ -113,3 +118,69 @@ class Bodies:
 
 def world(bodies, gravity_W, variant, dt_s):
     return Bodies(build_model(bodies, gravity_W, variant, dt_s))
+
+
+class Form:
+    """Per body (:func:`build_model`'s items), its COM in its frame (``com_B`` (B, 3), m from the origin) and
+    the rows of xfrc_applied its parts are (the first its jointed body) with their shares of its mass.
+    MuJoCo's qpos/qvel are the body frame origin's (x_o, v_o), and xfrc_applied acts at each MuJoCo body's
+    own COM: the world force f at the composite COM is shared by mass (Σ (m_i/m) f at the parts' COMs has no
+    torque about their composite COM), the torque goes to the jointed body."""
+
+    def __init__(self, bodies):
+        self.com_B = np.array([np.zeros(3) if len(b) < 4 else np.asarray(b[3], dtype=float)
+                               for b in bodies])
+        self.rows, row = [], 0
+        for b in bodies:
+            m = [part[0] for part in b[4]] if len(b) > 4 else [b[0]]
+            self.rows.append((list(range(row, row + len(m))), np.array(m) / sum(m)))
+            row += len(m)
+
+    def com_rows(self, raw):
+        """Raw rows ``[qpos (7), qvel (6)]`` (..., B, 13) -> packed COM states (..., B, 13)."""
+        return com_state(to_packed(raw[..., 0:7], raw[..., 7:13]), self.com_B)
+
+    def origin_rows(self, y):
+        """Packed COM states (B, 13) -> qpos (B, 7), qvel (B, 6) of the body frame origins."""
+        return to_qpos_qvel(origin_state(y, self.com_B))
+
+    def write(self, xfrc, f_W, tau_W):
+        """World forces ``f_W`` and torques ``tau_W`` (B, 3) at the bodies' COMs into ``xfrc`` (the world's
+        rows of xfrc_applied, from its first body's)."""
+        f_W, tau_W = np.asarray(f_W, dtype=float), np.asarray(tau_W, dtype=float)
+        for (rows, share), f, tau in zip(self.rows, f_W, tau_W):
+            for i, w in zip(rows, share):
+                xfrc[i, 0:3] = w * f
+                xfrc[i, 3:6] = tau if i == rows[0] else 0.0
+
+    def span(self, k) -> slice:
+        """Body ``k``'s rows of xfrc_applied (from the world's first body's)."""
+        return slice(self.rows[k][0][0], self.rows[k][0][-1] + 1)
+
+
+class FormBodies(Bodies):
+    """:class:`Bodies` some of which have their frame origin off their COM or are welded parts (``form``, a
+    :class:`Form`): the state set and read is the COM's, the forces shared among the parts."""
+
+    def __init__(self, model, form):
+        super().__init__(model)
+        self.form = form
+
+    def set_state(self, y):
+        self.data.time = 0.0
+        self.qpos[:], self.qvel[:] = self.form.origin_rows(y)
+
+    def apply(self, f_W, tau_W):
+        self.form.write(self.xfrc, f_W, tau_W)
+
+    def packed(self, raw):
+        return self.form.com_rows(np.asarray(raw, dtype=float))
+
+
+def form_world(bodies, gravity_W, variant, dt_s):
+    """:func:`world` of bodies that may have a COM off their frame origin or welded parts
+    (:func:`build_model`'s fourth and fifth items)."""
+    model = build_model(bodies, gravity_W, variant, dt_s)
+    if all(len(b) < 4 for b in bodies):
+        return Bodies(model)
+    return FormBodies(model, Form(bodies))

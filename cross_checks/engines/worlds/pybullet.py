@@ -182,3 +182,12 @@ def world(bodies, gravity_W, variant, dt_s):
     for mass_kg, moments, q_BP in bodies:
         w.add_body(mass_kg, moments, q_BP, [0.0] * 6 + [1.0, 0.0, 0.0, 0.0] + [0.0] * 3)
     return w
+
+
+def form_world(bodies, gravity_W, variant, dt_s):
+    """:func:`world` of bodies that may also give their COM (m, body axes from the frame origin; None: at it)
+    as a fourth item: the base's inertial frame there (PyBullet's base state is that frame's, the COM's)."""
+    w = world([], gravity_W, variant, dt_s)
+    for body in bodies:
+        w.add_body(*body[:3], [0.0] * 6 + [1.0, 0.0, 0.0, 0.0] + [0.0] * 3, *body[3:4])
+    return w

@@ -26,8 +26,9 @@ def build_model(bodies, gravity_W, variant, dt_s, name="rbcheck"):
         b = spec.worldbody.add_body()
         b.name = "body" if k == 0 else f"body{k}"
         b.add_freejoint()
-        _inertial(b, *body[:3], body[3] if len(body) > 3 else (0.0, 0.0, 0.0))
-        for j, part in enumerate(body[4] if len(body) > 4 else (), 1):
+        parts = body[4] if len(body) > 4 else [(*body[:3], body[3] if len(body) > 3 else (0.0, 0.0, 0.0))]
+        _inertial(b, *parts[0])
+        for j, part in enumerate(parts[1:], 1):
             child = b.add_body()
             child.name = f"{b.name}_part{j}"
             child.pos = [0.0, 0.0, 0.0]

@@ -55,7 +55,7 @@ def test_claims_parse():
 @pytest.mark.parametrize("variant,scenario,claim,says", [
     ("mujoco:rk4", "tennis_racket", ["invariance", "rotated"], "unknown transform 'rotated'"),
     ("pybullet:maximal", "tennis_racket", ["invariance", "welded_split"], "cannot express welded_split"),
-    ("mujoco:euler", "tennis_racket", ["invariance", "welded_split"], "cannot write a body off its COM"),
+    ("pybullet:multibody", "tumbling_box", ["invariance", "welded_split"], "cannot express welded_split"),
     ("mujoco:euler", "long_major_axis_spin", ["invariance", "rotation"], "does not transform long runs"),
     ("reference:rk4", "tennis_racket", ["order", "orientation"], "reference is rbcheck's own"),
     ("mujoco:rk4", "spring_pendulum", ["order", "orientation"], "forces change with the state"),
@@ -157,34 +157,85 @@ def test_a_mujoco_order_script_is_short_and_prints_what_the_uncompacted_code_pri
     assert "orientation order: measured 4.00" in done.stdout
 
 
+#: the module each engine's script imports
+_ENGINE_MODULE = {"drake": "pydrake", "dart": "dartpy"}
+
+
 @pytest.mark.parametrize("variant,scenario,transform,holds", [
     ("mujoco:euler", "tennis_racket", ["rotation", "135", "deg"], False),
     ("pybullet:maximal", "tennis_racket", ["scale", "k=0.01", "mu=0.01"], True),   # solve33 threshold
+    # a body off its COM, and of welded parts (MuJoCo #3553's class): MuJoCo's RK4 holds under both
+    ("mujoco:rk4", "tennis_racket", ["com_offset"], False),
+    ("mujoco:rk4", "tennis_racket", ["welded_split"], False),
+    # Drake's implicit Euler steps the body origin: off the COM on the near-separatrix box its deviation
+    # does not vanish at order 0.7 at the second halving (drake_engine.ORIGIN_STEP_FINDING, declared)
+    ("drake:implicit_euler", "tumbling_box", ["com_offset", "1.5"], True),
+    ("dart:semi_implicit_euler", "tennis_racket", ["welded_split"], False),
 ])
 def test_an_invariance_script_judges_as_the_sweep_does_without_rbcheck(variant, scenario, transform, holds,
                                                                       tmp_path):
     """The original and the transformed run (the transformed numbers from transforms.apply), mapped back,
     each quantity's largest deviation beside the sweep's allowance; exit 1 where the sweep says broken."""
-    pytest.importorskip(variant.split(":")[0])
+    engine = variant.split(":")[0]
+    module = _ENGINE_MODULE.get(engine, engine)
+    pytest.importorskip(module)
     from cross_checks.core.quantities import COLUMN_STEM, QUANTITIES
     from cross_checks.sweep.invariance import check_invariance
-    from cross_checks.sweep.repro import _default_transforms
+    from cross_checks.sweep.repro import _transform
     sc = load_scenario(scenario)
     r = reproducer(variant, sc, ["invariance", *transform])
     assert r.holds is holds
-    assert _imports(r.text) <= {"numpy", variant.split(":")[0], "sys", "importlib", "platform"}
+    assert _imports(r.text) <= {"numpy", module, "sys", "importlib", "platform", "math"}
     done = _run_alone(write_reproducer(r, tmp_path / "inv.py"), tmp_path)
     assert done.returncode == int(holds), done.stderr
     assert done.stdout.strip().splitlines()[-1] == r.summary
     from cross_checks.engines import resolve
-    row = check_invariance(sc, resolve(variant), [_default_transforms()[" ".join(transform)]])[0]
-    # a break the engine declares (PyBullet maximal's small body: Traits.invariance_findings) is the sweep's
-    # `known finding`, not a failure of the sweep; to its maintainers the script still says broken, exit 1
+    row = check_invariance(sc, resolve(variant), [_transform(transform)])[0]
+    # a break the engine declares (PyBullet maximal's small body, Drake's origin step: Traits.
+    # invariance_findings) is the sweep's `known finding`, not a failure of the sweep; to its maintainers
+    # the script still says broken, exit 1
     assert row["verdict"] == ("known finding" if holds else "holds")
     assert r.summary.split(": ")[1].startswith("broken" if holds else "holds")
     if holds:   # a broken one's deviations are the model's, not round-off: the sweep's numbers
         for q in QUANTITIES:
             assert f"{q} largest deviation {row[COLUMN_STEM[q] + '_dev']:.3g}" in done.stdout
+
+
+#: What a reproducer's form_world is planted with, per transform: the conversion between the COM and the body
+#: origin with the velocity's ω × R c left out both ways (the origin then starts with the COM's velocity: a
+#: different motion); the welded child's frame 5 cm off the body frame, its COM given from the wrong origin
+#: (welded_split keeps the composite COM at the origin, so the conversion alone would not show).
+_PLANTED = {"com_offset": (("y_o[..., 3:6] + np.cross(y_o[..., 10:13], r_W)", "y_o[..., 3:6]"),
+                           ("y[..., 3:6] - np.cross(y[..., 10:13], r_W)", "y[..., 3:6]")),
+            "welded_split": (("child.pos = [0.0, 0.0, 0.0]", "child.pos = [0.0, 0.0, 0.05]"),)}
+
+
+@pytest.mark.parametrize("transform", sorted(_PLANTED))
+def test_a_form_world_planted_wrong_is_broken_in_its_script(transform, tmp_path):
+    """The script's form_world converts the state between the COM and the body origin with worlds/com.py's
+    code and builds the welded parts as the adapter does (its code): planted wrong in the script, the
+    transformed run is another motion, and the script, run without rbcheck, says broken and exits 1."""
+    r = reproducer("mujoco:rk4", load_scenario("tennis_racket"), ["invariance", transform], run=False)
+    text = r.text
+    for good, bad in _PLANTED[transform]:
+        assert text.count(good) == 1
+        text = text.replace(good, bad)
+    done = _run_alone(write_reproducer(type(r)(text, None, "", r.claim), tmp_path / "planted.py"), tmp_path)
+    assert done.returncode == 1, done.stdout + done.stderr
+    last = done.stdout.strip().splitlines()[-1]
+    assert f"under {r.claim.removeprefix('invariance ')}: broken" in last and last.endswith("DEFECT")
+    assert _run_alone(write_reproducer(r, tmp_path / "right.py"), tmp_path).returncode == 0   # as written
+
+
+def test_an_engine_whose_world_cannot_build_the_form_is_refused_in_one_line(monkeypatch):
+    """An adapter that builds a body off its COM while its world has no form_world (a reproducer would run
+    another body): refused, naming the engines whose worlds can."""
+    from cross_checks.sweep import repro
+    monkeypatch.setattr(repro, "_has_form_world", lambda engine: engine != "mujoco")
+    with pytest.raises(ReproError, match="mujoco's world cannot build a body off its COM .* these can: "
+                                         "rapier, pybullet") as e:
+        reproducer("mujoco:rk4", load_scenario("tennis_racket"), ["invariance", "com_offset"], run=False)
+    assert "\n" not in str(e.value)
 
 
 def test_findings_claims_states_each_finding_once_with_the_preferred_quantity():
@@ -268,6 +319,23 @@ def test_each_findings_script_is_exactly_what_rbcheck_repro_writes(path):
     now = reproducer(variant, load_scenario(scenario), claim, run=False).text
     assert text == now, (f"{path.name} differs from what rbcheck writes now: rbcheck repro {variant} "
                          f"{scenario} --claim {m.group(3)} --out {path.relative_to(ROOT)}")
+
+
+def test_a_sweeps_com_offset_finding_gets_a_reproducer_not_a_note(tmp_path):
+    """The sweep's invariance row of a body off its COM (Drake implicit Euler's declared finding on
+    tumbling_box, as summary.json holds it) is written into DIR/repro/ like any other, the script's world
+    form_world (before: a note saying a reproducer could not write the body)."""
+    pytest.importorskip("pydrake")
+    from cross_checks.sweep.repro import write_sweep_reproducers
+    summary = {"invariance": [{"engine": "drake:implicit_euler", "scenario": "tumbling_box",
+                               "transform": "com_offset", "magnitude": "1.5 gyration radii",
+                               "verdict": "known finding"}]}
+    recs = write_sweep_reproducers(tmp_path, summary, [load_scenario("tumbling_box")])
+    name = "repro/drake_implicit_euler__tumbling_box__invariance_com_offset_1_5_gyration_radii.py"
+    assert recs == [{"engine": "drake:implicit_euler", "scenario": "tumbling_box",
+                     "claim": "invariance com_offset 1.5 gyration radii", "file": name}]
+    text = (tmp_path / name).read_text()
+    assert "sys.exit(main_invariance(form_world, globals()))" in text and "def com_state(" in text
 
 
 def test_a_sweeps_broken_invariance_gets_its_reproducer_and_the_report_links_it(tmp_path, monkeypatch):

@@ -87,14 +87,14 @@ def test_a_dop853_primary_of_slightly_wrong_gravity_is_caught():
 
 
 def test_a_second_reference_of_a_slightly_wrong_body_is_caught(monkeypatch):
-    from cross_checks.engines import drake_engine
+    from cross_checks.engines.worlds import drake as dkw
 
-    def wrong(body, com_B_m=None):    # every moment 1e-6 too large (applied_torque's inertia is diagonal)
+    def wrong(mass_kg, moments, R_BP=None, com_B=None):   # every moment 1e-6 too large (diagonal inertia)
         from pydrake.multibody.tree import RotationalInertia, SpatialInertia
         return SpatialInertia.MakeFromCentralInertia(
-            float(body.mass_kg), np.zeros(3), RotationalInertia(*(np.diag(body.inertia_B) * (1.0 + 1e-6))))
+            float(mass_kg), np.zeros(3), RotationalInertia(*(np.asarray(moments) * (1.0 + 1e-6))))
 
-    monkeypatch.setattr(drake_engine, "_spatial_inertia", wrong)
+    monkeypatch.setattr(dkw, "spatial_inertia", wrong)   # the adapter's body is its world's
     rec = _record(load_scenario("applied_torque"))
     assert not rec["agrees"] and {"orientation", "angular_velocity"} <= set(rec["disagreeing"])
 
