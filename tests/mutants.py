@@ -282,24 +282,24 @@ def _pybullet_torque_in_link_frame(mp):
 
 
 def _drake_omega_in_body_axes(mp):
-    from cross_checks.engines import drake_engine as de
+    from cross_checks.engines.worlds import drake as dkw
     from reference_sim.quaternion import quat_conj, rotate
 
     def to_drake_state(y):
         y = np.asarray(y, dtype=float)
         w_B = rotate(quat_conj(y[..., 6:10]), y[..., 10:13])   # BUG: ω in body axes where Drake wants ω_W
         return np.concatenate([y[..., 6:10], y[..., 0:3], w_B, y[..., 3:6]], axis=-1)
-    mp.setattr(de, "to_drake_state", to_drake_state)
+    mp.setattr(dkw, "to_drake_state", to_drake_state)
 
 
 def _drake_quaternion_order(mp):
-    from cross_checks.engines import drake_engine as de
+    from cross_checks.engines.worlds import drake as dkw
 
     def to_drake_state(y):
         y = np.asarray(y, dtype=float)
         q = y[..., [7, 8, 9, 6]]                                 # BUG: (x, y, z, w) given as (w, x, y, z)
         return np.concatenate([q, y[..., 0:3], y[..., 10:13], y[..., 3:6]], axis=-1)
-    mp.setattr(de, "to_drake_state", to_drake_state)
+    mp.setattr(dkw, "to_drake_state", to_drake_state)
 
 
 def _drake_decay_twice(mp):

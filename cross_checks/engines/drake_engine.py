@@ -32,10 +32,10 @@ if _IMPORT_ERROR is None:   # the world (what rbcheck repro embeds) imports the 
     from cross_checks.engines.worlds import drake as dkw
 else:   # not installed: the adapter still loads, and says so when used
     dkw = types.SimpleNamespace(FormBody=type("FormBody", (), {}), FormBodies=type("FormBodies", (), {}))
-from cross_checks.engines.worlds.com import com_state, origin_state
+from cross_checks.engines.worlds.com import com_state
 
 __all__ = ["ENGINE", "VARIANTS", "version", "simulate", "simulate_many", "one_step", "DrakeModel",
-           "DrakeWorld", "DrakeAdapter", "to_drake_state", "from_drake_state", "body_spec"]
+           "DrakeWorld", "DrakeAdapter", "from_drake_state", "body_spec"]
 
 ENGINE = "drake"
 #: Drake's invariance finding under a COM offset (docs/engine_conventions.md, "Invariance"): found by CI's
@@ -72,13 +72,6 @@ def _require():
 def version() -> str:
     _require()
     return install.installed_version("drake") or getattr(pydrake, "__version__", "unknown")   # from source
-
-
-def to_drake_state(y, com_B_m=None):
-    """Packed states (..., 13) ``[x_W, v_W, q_WB, ω_W]`` -> Drake's ``[q_WB, x_W, ω_W, v_W]`` (..., 13)
-    (:func:`cross_checks.engines.worlds.drake.to_drake_state`); for a body whose COM is at ``com_B_m`` from
-    its origin Bo, Drake's x and v are Bo's (x − R c, v − ω × R c)."""
-    return dkw.to_drake_state(y if com_B_m is None else origin_state(y, com_B_m))
 
 
 def from_drake_state(x, com_B_m=None):
