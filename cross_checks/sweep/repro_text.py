@@ -20,6 +20,8 @@ import io
 import sys
 import tokenize
 
+from cross_checks.sweep import repro_slice
+
 __all__ = ["compact"]
 
 
@@ -90,7 +92,20 @@ def _bound(node) -> set:
     return {(a.asname or a.name).split(".")[0] for a in node.names}
 
 
-def compact(texts, tail: str) -> str:
+def compact(texts, tail: str, prune: bool = True) -> str:
+    """The code of modules ``texts`` compacted (:func:`_compact`), then (``prune``) sliced to what the
+    script's numbers reach (cross_checks/sweep/repro_slice.py) and compacted again: a definition reached only
+    from what the slice removed goes too."""
+    text = _compact(texts, tail)
+    if not prune:
+        return text
+    cut = repro_slice.prune(text)
+    if cut == text or not cut.endswith(tail):
+        return text
+    return _compact([cut[:len(cut) - len(tail)]], tail)
+
+
+def _compact(texts, tail: str) -> str:
     """The code of modules ``texts`` (in order, as one script) followed by ``tail`` (the script's own code:
     its numbers and ``main``), compacted as the module docstring says: the imports the kept code uses
     (standard library first, then the others: :func:`_import_group`), a blank line, the kept definitions in

@@ -1,0 +1,131 @@
+"""cross_checks.sweep.repro_slice: a reproducer's code sliced to what its fixed numbers reach, and only that;
+the sliced script prints what the unsliced one prints, to the character, with the same exit code."""
+import functools
+import os
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+from cross_checks.scenario import load_scenario
+from cross_checks.sweep import repro as R
+from cross_checks.sweep.repro_slice import prune
+from cross_checks.sweep.repro_text import compact
+
+PLANTED = textwrap.dedent('''\
+    import numpy as np
+    def build(bodies, variant):
+        out = []
+        for body in bodies:
+            out.append(body[0])
+            for part in (body[2] if len(body) > 2 else ()):
+                out.append(part)
+        if variant == "maximal":
+            out.append(1.0)
+        else:
+            out.append(2.0)
+        return out
+    def measure(quantity, y):
+        if quantity == "orientation":
+            return 2.0 * y
+        k = {"position": 0}[quantity]
+        return y + k
+    def main(s):
+        y = float(np.sum(build(s["BODIES"], s["VARIANT"])))
+        e = measure(s["QUANTITY"], y)
+        if e > 1.0:
+            print("large")
+        print(e)
+        return 0
+    BODIES, VARIANT, QUANTITY = [(1.0, 2.0)], "maximal", "orientation"
+    main(globals())
+    ''')
+
+
+def _printed(code):
+    import contextlib
+    import io
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        exec(compile(code, "planted", "exec"), {"__name__": "x"})   # noqa: S102 - the planted module
+    return out.getvalue()
+
+
+def test_the_numbers_decide_what_goes_and_the_runs_values_never_do():
+    cut = prune(PLANTED)
+    assert "for part in" not in cut and "out.append(part)" not in cut          # no body has parts
+    assert "    out.append(1.0)\n    return out" in cut and "out.append(2.0)" not in cut   # "maximal"
+    assert "    return 2.0 * y\n" in cut and "k = " not in cut and "y + k" not in cut   # and what follows
+    assert 'if e > 1.0:\n        print("large")' in cut     # decided by what the run computes: kept
+    assert _printed(cut) == _printed(PLANTED) == "large\n4.0\n"
+
+
+@pytest.mark.parametrize("change", [
+    # the function escapes into code the analysis does not follow: any value may reach it
+    ("e = measure(", "e = np.vectorize(measure)("),
+    # a followed value mutated by the script: nothing is sliced
+    ("    return 0\n", "    s['BODIES'].append((3.0, 4.0, [5.0]))\n    return 0\n"),
+    # a value the analysis cannot evaluate (a call into a library)
+    ('if variant == "maximal":', 'if np.str_(variant) == "maximal":'),
+])
+def test_what_the_analysis_cannot_vouch_for_stays(change):
+    planted = PLANTED.replace(*change)
+    cut = prune(planted)
+    if change[0] == "e = measure(":
+        assert 'if quantity == "orientation":' in cut and "k = " in cut
+    elif "append((3.0" in change[1]:
+        assert cut == planted
+    else:
+        assert "out.append(2.0)" in cut and "for part in" not in cut
+
+
+def test_a_block_that_would_be_left_empty_and_an_elif_stay():
+    planted = (PLANTED.replace("    e = measure(", "    alone()\n    e = measure(")
+               .replace("    if e > 1.0:", '    if VARIANT == "x":\n        pass\n    elif e > 1.0:')
+               .replace("def main(s):", 'def alone():\n    if QUANTITY == "position":\n        print("p")\n'
+                        "def main(s):"))
+    cut = prune(planted)
+    assert 'if VARIANT == "x":' in cut and "elif e > 1.0" in cut     # the elif chain as it is
+    assert 'if QUANTITY == "position":' in cut                        # alone() is not left empty
+    assert "for part in" not in cut
+    assert _printed(cut) == _printed(planted)
+
+
+#: Runs the script with rbcheck's packages unimportable (as test_repro.py does).
+BLOCKED = ("import runpy, sys\n"
+           + "".join(f"sys.modules[{m!r}] = None\n" for m in ("rbcheck", "cross_checks", "reference_sim"))
+           + "sys.argv = [sys.argv[1]]\nrunpy.run_path(sys.argv[0], run_name='__main__')\n")
+
+
+def _run_alone(path, tmp_path):
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONSTARTUP")}
+    return subprocess.run([sys.executable, "-c", BLOCKED, str(path)], cwd=tmp_path, env=env,
+                          capture_output=True, text=True, timeout=900)
+
+
+@pytest.mark.parametrize("variant,scenario,claim", [
+    ("mujoco:rk4", "tennis_racket", ["order", "orientation"]),
+    ("mujoco:euler", "projectile", ["order", "velocity"]),
+    ("mujoco:euler", "long_major_axis_spin", ["drift"]),                     # diverges: exit 1
+    ("mujoco:implicit", "tennis_racket", ["gyroscopic"]),
+    ("mujoco:euler", "tennis_racket", ["invariance", "rotation"]),
+    ("rapier:symplectic_euler_no_gyro", "tennis_racket", ["gyroscopic"]),   # no flip: exit 1
+    ("rapier:symplectic_euler", "projectile", ["order", "position"]),
+    ("pybullet:multibody", "tennis_racket", ["order", "angular_velocity"]),
+    ("pybullet:maximal", "tennis_racket", ["invariance", "scale", "k=0.01", "mu=0.01"]),   # broken: exit 1
+])
+def test_a_sliced_script_prints_what_the_unsliced_one_prints(variant, scenario, claim, tmp_path, monkeypatch):
+    pytest.importorskip({"rapier": "rapier3d"}.get(variant.split(":")[0], variant.split(":")[0]))
+    sc = load_scenario(scenario)
+    sliced = R.reproducer(variant, sc, claim, run=False).text
+    monkeypatch.setattr(R, "compact", functools.partial(compact, prune=False))
+    whole = R.reproducer(variant, sc, claim, run=False).text
+    if variant == "mujoco:rk4":   # it does slice: the welded parts' loop, the other quantities' error
+        assert len(sliced.splitlines()) < len(whole.splitlines())
+        assert "for j, part in" in whole and "for j, part in" not in sliced
+    (tmp_path / "sliced.py").write_text(sliced)
+    (tmp_path / "whole.py").write_text(whole)
+    a, b = _run_alone(tmp_path / "sliced.py", tmp_path), _run_alone(tmp_path / "whole.py", tmp_path)
+    assert a.returncode in (0, 1), a.stderr
+    assert (a.returncode, a.stdout) == (b.returncode, b.stdout)
