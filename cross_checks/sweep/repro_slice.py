@@ -11,25 +11,32 @@ a divergence, a state), which another engine version may decide the other way.
 How it decides (a sound, conservative static analysis of the script's own text; it runs nothing):
 
 * values are followed from the script's module-level constants (its numbers and the worlds' constants) and
-  ``globals()`` through the parameters of its top-level functions: a parameter's possible values are the
-  union of what every call site passes (its default where a call leaves it out), a local's the union of
-  every assignment to it (flow-insensitive). Only pure operations are evaluated: literals, names,
-  subscripts, comparisons, ``and``/``or``/``not``, arithmetic, conditional expressions, a few builtins
-  (:data:`_BUILTINS`) and the methods of strings, numbers and tuples. Anything else (a call into the engine,
-  NumPy, a method of an object, an attribute, the return value of a function) is unknown;
-* a function that escapes (passed to code the analysis does not follow, stored, returned), a method, a
-  nested function or a lambda, or one called with ``*args``/``**kwargs``: its parameters are unknown;
+  ``globals()`` through the parameters of its functions and of its classes' methods: a parameter's possible
+  values are the union of what every call site passes (its default where a call leaves it out; a method's,
+  every ``x.name(...)`` of that name, whatever ``x``), a local's the union of every assignment to it
+  (flow-insensitive; a comprehension's variables count as the function's), an attribute's (``self.x``) the
+  union of every store to ``.x`` anywhere in the script. Only pure operations are evaluated: literals,
+  names, subscripts, comparisons, ``and``/``or``/``not``, arithmetic, conditional expressions, a few
+  builtins (:data:`_BUILTINS`) and the methods of strings, numbers and tuples. Anything else (a call into the
+  engine, NumPy, an object's attribute but the instance's own, the return value of a function) is unknown;
+* a function or method that escapes (passed to code the analysis does not follow, stored, returned, a bound
+  method taken), a decorated one, a special method, a nested function or a lambda, one called with
+  ``*args``/``**kwargs``, and every method and attribute of a script that reaches attributes by computed
+  names (``getattr`` on anything but a module, ``setattr``, ``vars``): its parameters are unknown; a
+  parameter some running call passes a value with no possible value found for (a binding the analysis does
+  not model) is unknown too;
 * the script's own code must not mutate a value it follows (``x.append``, ``x[i] = …``, ``x += …`` on a
-  followed list or dict): a fresh container built in the function (``errors = []``) is then unknown, and any
-  other such mutation leaves the script unsliced. Libraries (the engine, NumPy) are taken not to mutate the
-  Python lists they are given (they copy them into their own types);
+  followed list or dict): a fresh container (a local, an attribute or a module constant every assignment
+  of which builds a new one: ``errors = []``) is then unknown, and any other such mutation leaves the script
+  unsliced. Libraries (the engine, NumPy) are taken not to mutate the Python lists they are given (they
+  copy them into their own types);
 * an ``if`` is sliced when every value its test can take is false (its ``else`` block, if any, stays, one
-  indentation level out) or every one is true (its body stays, and the statements after it in its block go
-  when that body always ends in ``return`` or ``raise``); a ``for`` when every iterable it can loop over is
+  indentation level out) or every one is true (its body stays); the statements after it in its block go
+  when the block kept ends in ``return`` or ``raise``; a ``for`` goes when every iterable it can loop over is
   empty. An ``elif`` chain, a block that would be left empty, a block holding a multi-line string (whose text
   its indentation is part of), and a statement whose test the analysis cannot evaluate are left as they are.
 
-tests/cross_checks/sweep/test_repro.py checks that each sliced script prints what the unsliced one prints, to
+tests/cross_checks/sweep/test_repro_slice.py checks that sliced scripts print what the unsliced ones print, to
 the character, with the same exit code, for every claim and several engines.
 """
 from __future__ import annotations
@@ -94,38 +101,75 @@ def _same(a, b) -> bool:
 
 
 def _scope_nodes(fn):
-    """The nodes of a function's own scope (not of nested functions, classes, lambdas, comprehensions)."""
+    """The nodes of a function's own scope, its comprehensions' included (their variables are taken as the
+    function's: a union, so no less than either), not those of nested functions, classes or lambdas."""
     stack = list(fn.body) if isinstance(fn, ast.FunctionDef | ast.AsyncFunctionDef) else [fn]
     while stack:
         node = stack.pop()
         yield node
         for child in ast.iter_child_nodes(node):
-            if not isinstance(child, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef | ast.Lambda
-                              | ast.ListComp | ast.SetComp | ast.DictComp | ast.GeneratorExp):
+            if not isinstance(child, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef | ast.Lambda):
                 stack.append(child)
 
 
 class _Analysis:
     def __init__(self, tree: ast.Module):
         self.tree = tree
+        names = {n.name for n in tree.body if isinstance(n, ast.ClassDef)}
+        #: classes followed: undecorated, their bases the script's own classes (no library sets their
+        #: attributes or calls their methods)
+        self.classes = {n.name: n for n in tree.body if isinstance(n, ast.ClassDef) and not n.decorator_list
+                        and not n.keywords and all(isinstance(b, ast.Name) and b.id in names | {"object"}
+                                                   for b in n.bases)}
+        #: functions and methods ("Class.method"), each a scope of its own
         self.defs = {n.name: n for n in tree.body if isinstance(n, ast.FunctionDef)}
+        self.defs.update({f"{c}.{m.name}": m for c, cls in self.classes.items() for m in cls.body
+                          if isinstance(m, ast.FunctionDef)})
         self.params = {name: {} for name in self.defs}       # function -> param -> value set
         self.locals = {name: {} for name in self.defs}       # function -> local -> value set
         self.local_names = {name: self._assigned(fn) for name, fn in self.defs.items()}
         self.forced_top = {name: set() for name in self.defs}
-        self.escaped: set = set()
+        self.called: set = set()                             # functions some call site binds
+        self.attrs: dict = {}                                # attribute name -> value set
+        self.forced_attrs: set = set()
+        # decorated (a wrapper calls it), or a special method the language calls: its parameters unknown
+        self.escaped = {k for k, fn in self.defs.items() if fn.decorator_list
+                        or ("." in k and fn.name.startswith("__") and fn.name != "__init__")}
         self.consts: dict = {}
         self.consts = self._module_constants()
         self.parents = {}
         for node in ast.walk(tree):
             for child in ast.iter_child_nodes(node):
                 self.parents[child] = node
+        self.dynamic = self._dynamic()
+
+    def _dynamic(self) -> bool:
+        """True where the script reaches attributes by computed names (getattr/setattr/delattr with a name
+        that is no constant, on anything but a module's attribute; vars(), __dict__): then no method's
+        parameters and no attribute are followed."""
+        imported = {t.id for node in self.tree.body if isinstance(node, ast.Import | ast.ImportFrom)
+                    for t in self._targets(node)}
+        for node in ast.walk(self.tree):
+            if isinstance(node, ast.Attribute) and node.attr == "__dict__":
+                return True
+            if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)):
+                continue
+            if node.func.id == "vars":
+                return True
+            if node.func.id in ("getattr", "setattr", "delattr", "hasattr") and (
+                    len(node.args) < 2 or not isinstance(node.args[1], ast.Constant)):
+                root = node.args[0] if node.args else None
+                while isinstance(root, ast.Attribute):
+                    root = root.value
+                if not (isinstance(root, ast.Name) and root.id in imported):
+                    return True
+        return False
 
     # --- scopes -------------------------------------------------------------------------------------
     def _assigned(self, fn) -> set:
         names = {a.arg for a in fn.args.args + fn.args.posonlyargs + fn.args.kwonlyargs}
         names |= {a.arg for a in (fn.args.vararg, fn.args.kwarg) if a is not None}
-        for node in ast.walk(fn):
+        for node in _scope_nodes(fn):
             if isinstance(node, ast.Name) and isinstance(node.ctx, ast.Store | ast.Del):
                 names.add(node.id)
             elif isinstance(node, ast.Global | ast.Nonlocal):
@@ -156,8 +200,9 @@ class _Analysis:
         for name in list(consts):
             if counts.get(name, 0) > 1 or name in declared_global:
                 consts[name] = _TOP
-        for name in self.defs:
-            consts[name] = [_Ref(name)]
+        for name in list(self.defs) + list(self.classes):
+            if "." not in name:
+                consts[name] = [_Ref(name)]
         return consts
 
     @staticmethod
@@ -288,6 +333,13 @@ class _Analysis:
             return out
         if isinstance(node, ast.Call):
             return self._call(node, fn, env)
+        if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and fn in self.defs
+                and "." in fn and self.defs[fn].args.args and node.value.id == self.defs[fn].args.args[0].arg
+                and not self.dynamic):
+            vals = self.attrs.get(node.attr, _TOP)    # an attribute of the instance (self.x)
+            if vals is _TOP or node.attr in self.method_names():
+                raise _Unknown
+            return vals
         raise _Unknown
 
     def _boolop(self, node, fn, env):
@@ -348,28 +400,74 @@ class _Analysis:
     def run(self) -> bool:
         """Compute every function's parameter and local values; False where the script mutates a value
         the analysis follows (then nothing is sliced)."""
-        for _ in range(40):
-            before = repr([(self.params, self.locals, sorted(self.escaped))])
+        for _ in range(60):
+            before = self._state()
             self._calls()
             for name, fn in self.defs.items():
                 self._locals(name, fn)
+            self._attributes()
             if not self._mutations():
                 return False
-            if repr([(self.params, self.locals, sorted(self.escaped))]) == before:
+            if self._state() == before and not self._bottom_arguments():
                 return True
         return False
+
+    def _bottom_arguments(self) -> bool:
+        """Once the values are stable: a call in code that runs (the module, or a function some call binds
+        or that escaped) passing a value with no possible value found (a binding the analysis does not
+        model) makes that parameter unknown; True when one did (the fixpoint goes on)."""
+        grew = False
+        for node in ast.walk(self.tree):
+            if not isinstance(node, ast.Call):
+                continue
+            scope = self._callee_scope(node)
+            if scope in self.defs and scope not in self.called and scope not in self.escaped:
+                continue
+            if (any(isinstance(x, ast.Starred) for x in node.args)
+                    or any(k.arg is None for k in node.keywords)):
+                continue   # its callees' parameters are unknown already
+            if isinstance(node.func, ast.Attribute):
+                keys = [k for k in self.defs if k.endswith("." + node.func.attr)]
+                shift = 1
+            else:
+                funcs = self._eval_in(node.func, scope)
+                refs = [] if funcs is _TOP else [f.name for f in funcs if isinstance(f, _Ref)]
+                keys = [r for r in refs if r in self.defs] + [f"{r}.__init__" for r in refs
+                                                              if f"{r}.__init__" in self.defs]
+                shift = None
+            for key in keys:
+                a = self.defs[key].args
+                names = [p.arg for p in a.posonlyargs + a.args][(1 if shift or "." in key else 0):]
+                pairs = list(zip(names, node.args)) + [(k.arg, k.value) for k in node.keywords]
+                for p, x in pairs:
+                    if self._eval_in(x, scope) == [] and self.params[key].get(p) is not _TOP:
+                        self.params[key][p] = _TOP
+                        grew = True
+        return grew
+
+    def _state(self) -> str:
+        return repr((self.params, self.locals, sorted(self.escaped), self.attrs,
+                     {k: v for k, v in self.consts.items() if v is _TOP}))
 
     def _callee_scope(self, node):
         """The analysed function whose own scope holds ``node`` (None: module level or a nested scope)."""
         p = self.parents.get(node)
         while p is not None:
-            if isinstance(p, ast.Lambda | ast.ListComp | ast.SetComp | ast.DictComp | ast.GeneratorExp
-                          | ast.ClassDef):
+            if isinstance(p, ast.Lambda | ast.ClassDef):
                 return "nested"
             if isinstance(p, ast.FunctionDef | ast.AsyncFunctionDef):
-                return p.name if self.parents.get(p) is self.tree and p.name in self.defs else "nested"
+                up = self.parents.get(p)
+                if up is self.tree and p.name in self.defs:
+                    return p.name
+                if (isinstance(up, ast.ClassDef) and self.parents.get(up) is self.tree
+                        and f"{up.name}.{p.name}" in self.defs):
+                    return f"{up.name}.{p.name}"
+                return "nested"
             p = self.parents.get(p)
         return None
+
+    def method_names(self) -> set:
+        return {k.split(".", 1)[1] for k in self.defs if "." in k}
 
     def _env(self, scope):
         if scope is None:
@@ -388,40 +486,67 @@ class _Analysis:
         return self._eval(node, fn, env)
 
     def _calls(self) -> None:
+        methods = self.method_names()
         for node in ast.walk(self.tree):
             if isinstance(node, ast.Name) and isinstance(node.ctx, ast.Load):
                 self._escapes(node)
+            if (isinstance(node, ast.Attribute) and node.attr in methods
+                    and not (isinstance(self.parents.get(node), ast.Call)
+                             and self.parents[node].func is node)):
+                self.escaped |= {k for k in self.defs if k.endswith("." + node.attr)}   # a bound method
             if not isinstance(node, ast.Call):
                 continue
             scope = self._callee_scope(node)
+            if isinstance(node.func, ast.Attribute):     # obj.m(...): every method m of the script's classes
+                if node.func.attr not in methods:
+                    continue
+                keys = [k for k in self.defs if k.endswith("." + node.func.attr)]
+                recv = self._eval_in(node.func.value, scope)
+                if self.dynamic or (recv is not _TOP and any(isinstance(v, _Ref) for v in recv)):
+                    self.escaped |= set(keys)    # Class.m(obj, ...): unbound, its first argument not self
+                self._bind_call(node, scope, keys, skip_self=True)
+                continue
             funcs = self._eval_in(node.func, scope)
             if funcs is _TOP:
                 continue
-            for f in funcs:
-                if not isinstance(f, _Ref):
-                    continue
-                fn = self.defs[f.name]
-                a = fn.args
-                names = [p.arg for p in a.posonlyargs + a.args]
-                starred = (any(isinstance(x, ast.Starred) for x in node.args)
-                           or any(k.arg is None for k in node.keywords) or a.vararg or a.kwarg
-                           or a.kwonlyargs or len(node.args) > len(names))
-                got: dict = {}
-                if not starred:
-                    for p, x in zip(names, node.args):
-                        got[p] = self._eval_in(x, scope)
-                    for k in node.keywords:
-                        if k.arg not in names:
-                            starred = True
-                            break
-                        got[k.arg] = self._eval_in(k.value, scope)
-                    defaults = dict(zip(names[len(names) - len(a.defaults):], a.defaults))
-                    for p in names:
-                        if p not in got:
-                            got[p] = self._eval(defaults[p], None, self.consts) if p in defaults else _TOP
-                for p in names + [x.arg for x in a.kwonlyargs]:
-                    self.params[f.name][p] = _union(self.params[f.name].get(p, []),
-                                                    _TOP if starred else got.get(p, _TOP))
+            refs = [f.name for f in funcs if isinstance(f, _Ref)]
+            self._bind_call(node, scope, [r for r in refs if r in self.defs], skip_self=False)
+            self._bind_call(node, scope, [f"{r}.__init__" for r in refs if f"{r}.__init__" in self.defs],
+                            skip_self=True)
+        for k in self.escaped:
+            for p in self.defs[k].args.args + self.defs[k].args.kwonlyargs:
+                self.params[k][p.arg] = _TOP
+
+    def _bind_call(self, node, scope, keys, skip_self) -> None:
+        """Add the values call ``node`` passes to the parameters of each function ``keys``."""
+        for key in keys:
+            self.called.add(key)
+            fn = self.defs[key]
+            a = fn.args
+            names = [p.arg for p in a.posonlyargs + a.args]
+            if skip_self:
+                if names:
+                    self.params[key][names[0]] = _TOP
+                names = names[1:]
+            starred = (any(isinstance(x, ast.Starred) for x in node.args)
+                       or any(k.arg is None for k in node.keywords) or a.vararg or a.kwarg
+                       or a.kwonlyargs or len(node.args) > len(names))
+            got: dict = {}
+            if not starred:
+                for p, x in zip(names, node.args):
+                    got[p] = self._eval_in(x, scope)
+                for k in node.keywords:
+                    if k.arg not in names:
+                        starred = True
+                        break
+                    got[k.arg] = self._eval_in(k.value, scope)
+                defaults = dict(zip(names[len(names) - len(a.defaults):], a.defaults))
+                for p in names:
+                    if p not in got:
+                        got[p] = self._eval(defaults[p], None, self.consts) if p in defaults else _TOP
+            for p in names + [x.arg for x in a.kwonlyargs]:
+                self.params[key][p] = _union(self.params[key].get(p, []),
+                                             _TOP if starred else got.get(p, _TOP))
 
     def _escapes(self, name_node) -> None:
         """Mark the functions a name's value may hold as escaped, unless it is called, or passed straight
@@ -444,11 +569,8 @@ class _Analysis:
             ok = funcs is not _TOP and all(isinstance(f, _Ref) for f in funcs)
         if not ok:
             for r in refs:
-                if r.name not in self.escaped:
-                    self.escaped.add(r.name)
-        for r in self.escaped:
-            for p in list(self.params[r]) + [x.arg for x in self.defs[r].args.args]:
-                self.params[r][p] = _TOP
+                self.escaped |= {r.name} & set(self.defs)
+                self.escaped |= {k for k in self.defs if k.startswith(r.name + ".")}   # a class: any call
 
     def _locals(self, name, fn) -> None:
         env = {**self.params[name], **self.locals[name]}
@@ -461,7 +583,7 @@ class _Analysis:
                 self._bind(node.target, self._eval(node.value, name, env), env)
             elif isinstance(node, ast.NamedExpr):
                 self._bind(node.target, self._eval(node.value, name, env), env)
-            elif isinstance(node, ast.For | ast.AsyncFor):
+            elif isinstance(node, ast.For | ast.AsyncFor | ast.comprehension):
                 it = self._eval(node.iter, name, env)
                 try:
                     items = _TOP if it is _TOP else [x for v in it for x in list(v)[:_CAP + 1]]
@@ -486,11 +608,6 @@ class _Analysis:
                     for n in ast.walk(t):
                         if isinstance(n, ast.Name):
                             env[n.id] = _TOP
-        for comp in ast.walk(fn):   # a walrus in a comprehension binds in the function: unknown
-            if isinstance(comp, ast.ListComp | ast.SetComp | ast.DictComp | ast.GeneratorExp | ast.Lambda):
-                for n in ast.walk(comp):
-                    if isinstance(n, ast.NamedExpr):
-                        env[n.target.id] = _TOP
         self.locals[name] = {k: v for k, v in env.items() if k not in self.params[name] or k in
                              self._rebound(fn)}
 
@@ -498,9 +615,61 @@ class _Analysis:
     def _rebound(fn) -> set:
         return {n.id for n in ast.walk(fn) if isinstance(n, ast.Name) and isinstance(n.ctx, ast.Store)}
 
+    def _attributes(self) -> None:
+        """The values each attribute name can take: the union of every store to ``.name`` in the script
+        (any object's: stores are matched by name), and of a class-level assignment in the script's
+        classes; unknown for a store the analysis cannot evaluate, and for a name never stored."""
+        if self.dynamic:
+            return
+        for node in ast.walk(self.tree):
+            if isinstance(node, ast.Assign):
+                scope = self._callee_scope(node)
+                vals = self._eval_in(node.value, scope)
+                for t in node.targets:
+                    self._attr_bind(t, vals)
+            elif isinstance(node, ast.AugAssign | ast.AnnAssign | ast.For | ast.AsyncFor | ast.With
+                            | ast.AsyncWith | ast.Delete | ast.NamedExpr):
+                for t in (node.targets if isinstance(node, ast.Delete) else self._targets(node)
+                          if not isinstance(node, ast.NamedExpr) else [node.target]):
+                    for n in ast.walk(t):
+                        if isinstance(n, ast.Attribute):
+                            self.attrs[n.attr] = _TOP
+        for cls in self.classes.values():
+            for stmt in cls.body:
+                if isinstance(stmt, ast.Assign):
+                    vals = self._eval(stmt.value, None, self.consts)
+                    for t in stmt.targets:
+                        for n in ast.walk(t):
+                            if isinstance(n, ast.Name):
+                                self.attrs[n.id] = _union(self.attrs.get(n.id, []), _TOP if len(
+                                    stmt.targets) > 1 or not isinstance(t, ast.Name) else vals)
+        for a in self.forced_attrs:
+            self.attrs[a] = _TOP
+
+    def _attr_bind(self, target, vals) -> None:
+        if isinstance(target, ast.Attribute):
+            self.attrs[target.attr] = _union(self.attrs.get(target.attr, []), vals)
+        elif isinstance(target, ast.Tuple | ast.List):
+            parts: list = [[] for _ in target.elts]
+            if vals is _TOP or any(isinstance(e, ast.Starred) for e in target.elts):
+                parts = [_TOP] * len(target.elts)
+            else:
+                for v in vals:
+                    try:
+                        items = list(v)
+                    except TypeError:
+                        items = []
+                    for i in range(len(parts)):
+                        parts[i] = _union(parts[i], [items[i]] if len(items) == len(parts) else _TOP)
+            for e, part in zip(target.elts, parts):
+                self._attr_bind(e.value if isinstance(e, ast.Starred) else e, part)
+        elif isinstance(target, ast.Starred):
+            self._attr_bind(target.value, _TOP)
+
     def _mutations(self) -> bool:
-        """Unknown: each fresh container the script mutates; False when it mutates any other value the
-        analysis follows."""
+        """Unknown: each fresh container the script mutates (a local, an attribute or a module constant
+        every assignment of which builds a new one); False when it mutates any other value the analysis
+        follows."""
         for node in ast.walk(self.tree):
             base = None
             if isinstance(node, ast.Subscript | ast.Attribute) and isinstance(node.ctx, ast.Store | ast.Del):
@@ -510,20 +679,54 @@ class _Analysis:
             elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
                   and node.func.attr in _MUTATORS):
                 base = node.func.value
+            first = None
             while isinstance(base, ast.Subscript | ast.Attribute):
-                base = base.value
+                first, base = base, base.value
+            if isinstance(first, ast.Attribute) and not self.dynamic:   # x.attr…: attr's value mutated
+                vals = self.attrs.get(first.attr, _TOP)
+                if vals is not _TOP and any(isinstance(v, list | dict | set) for v in vals):
+                    if not self._fresh_attr(first.attr):
+                        return False
+                    self.forced_attrs.add(first.attr)
+                    self.attrs[first.attr] = _TOP
             if not isinstance(base, ast.Name):
                 continue
             scope = self._callee_scope(node)
             vals = self._eval_in(base, scope)
             if vals is _TOP or not any(isinstance(v, list | dict | set) for v in vals):
                 continue
-            if scope in self.defs and self._fresh(self.defs[scope], base.id):
+            if scope in self.defs and base.id in self.local_names[scope]:
+                if not self._fresh(self.defs[scope], base.id):
+                    return False
                 self.forced_top[scope].add(base.id)
                 self.locals[scope][base.id] = _TOP
-                continue
-            return False
+            elif self._fresh_global(base.id):
+                self.consts[base.id] = _TOP
+            else:
+                return False
         return True
+
+    def _fresh_attr(self, attr) -> bool:
+        """Every store to ``.attr`` in the script builds a new container."""
+        for node in ast.walk(self.tree):
+            if not isinstance(node, ast.Assign):
+                continue
+            for t in node.targets:
+                pairs = ([(t, node.value)] if isinstance(t, ast.Attribute) else
+                         list(zip(t.elts, node.value.elts)) if isinstance(t, ast.Tuple)
+                         and isinstance(node.value, ast.Tuple) and len(t.elts) == len(node.value.elts)
+                         else [(n, None) for n in ast.walk(t) if isinstance(n, ast.Attribute)])
+                for target, value in pairs:
+                    if isinstance(target, ast.Attribute) and target.attr == attr and not _is_fresh(value):
+                        return False
+        return True
+
+    def _fresh_global(self, name) -> bool:
+        """``name`` is a module constant assigned once, to a new container, and never from a function."""
+        stores = [node for node in self.tree.body if isinstance(node, ast.Assign)
+                  and any(isinstance(t, ast.Name) and t.id == name for t in node.targets)]
+        return (len(stores) == 1 and len(stores[0].targets) == 1 and _is_fresh(stores[0].value)
+                and not any(isinstance(n, ast.Global) and name in n.names for n in ast.walk(self.tree)))
 
     @staticmethod
     def _fresh(fn, name) -> bool:
@@ -544,10 +747,7 @@ class _Analysis:
                     value = node.value if not isinstance(node, ast.For) else None
                     if isinstance(t, ast.Tuple):
                         value = value.elts[i] if isinstance(value, ast.Tuple) else None
-                    if not (isinstance(value, ast.List | ast.Dict | ast.Set | ast.ListComp | ast.DictComp
-                                       | ast.SetComp)
-                            or (isinstance(value, ast.Call) and isinstance(value.func, ast.Name)
-                                and value.func.id in _FRESH_CALLS)):
+                    if not _is_fresh(value):
                         return False
         return seen
 
@@ -569,6 +769,13 @@ class _Analysis:
             return False if all(len(list(v)) == 0 for v in vals) else None
         except TypeError:
             return None
+
+
+def _is_fresh(value) -> bool:
+    """``value`` builds a new container: a display, a comprehension, list()/dict()/set()."""
+    return (isinstance(value, ast.List | ast.Dict | ast.Set | ast.ListComp | ast.DictComp | ast.SetComp)
+            or (isinstance(value, ast.Call) and isinstance(value.func, ast.Name)
+                and value.func.id in _FRESH_CALLS))
 
 
 def _index(v, i):

@@ -61,6 +61,45 @@ def test_the_numbers_decide_what_goes_and_the_runs_values_never_do():
     assert _printed(cut) == _printed(PLANTED) == "large\n4.0\n"
 
 
+CLASS = textwrap.dedent('''\
+    class World:
+        def __init__(self, variant, parts):
+            self.maximal = variant == "maximal"
+            self.parts = []
+            for part in parts:
+                self.parts.append(part)
+            self.offsets = [p for p in parts if p > 10.0]
+        def step(self, x):
+            if self.maximal:
+                x = x + 1.0
+            for part in self.parts:
+                x = x + part
+            if self.offsets:
+                x = -x
+            return x
+    def world(variant, parts):
+        return World(variant, [float(p) for p in parts])
+    def main(s):
+        w = world(s["VARIANT"], s["PARTS"])
+        print(w.step(1.0))
+    VARIANT, PARTS = "multibody", [2.0]
+    main(globals())
+    ''')
+
+
+def test_a_methods_branch_on_an_attribute_set_from_the_numbers_goes():
+    cut = prune(CLASS)
+    assert "if self.maximal:" not in cut and "x + 1.0" not in cut     # "multibody"
+    assert "for part in self.parts:" in cut     # a list the script fills (append): its content unknown
+    assert "if self.offsets:" in cut            # built by a comprehension over a call's result: unknown
+    assert _printed(cut) == _printed(CLASS) == "3.0\n"
+    escaped = CLASS.replace("print(w.step(1.0))", "print(list(map(w.step, [1.0])))")   # a bound method
+    assert "if self.maximal:" not in prune(escaped)   # the attribute is still the numbers'
+    mutated = CLASS.replace("    print(w.step(1.0))", "    w.maximal = s['VARIANT'] == 'multibody'\n"
+                            "    print(w.step(1.0))")   # stored again from outside: both values possible
+    assert "if self.maximal:" in prune(mutated)
+
+
 @pytest.mark.parametrize("change", [
     # the function escapes into code the analysis does not follow: any value may reach it
     ("e = measure(", "e = np.vectorize(measure)("),
@@ -114,16 +153,22 @@ def _run_alone(path, tmp_path):
     ("rapier:symplectic_euler", "projectile", ["order", "position"]),
     ("pybullet:multibody", "tennis_racket", ["order", "angular_velocity"]),
     ("pybullet:maximal", "tennis_racket", ["invariance", "scale", "k=0.01", "mu=0.01"]),   # broken: exit 1
+    ("drake:implicit_euler", "projectile", ["order", "velocity"]),   # its Newton accuracy set: hoisted
 ])
 def test_a_sliced_script_prints_what_the_unsliced_one_prints(variant, scenario, claim, tmp_path, monkeypatch):
-    pytest.importorskip({"rapier": "rapier3d"}.get(variant.split(":")[0], variant.split(":")[0]))
+    pytest.importorskip({"rapier": "rapier3d", "drake": "pydrake"}.get(variant.split(":")[0],
+                                                                         variant.split(":")[0]))
     sc = load_scenario(scenario)
     sliced = R.reproducer(variant, sc, claim, run=False).text
     monkeypatch.setattr(R, "compact", functools.partial(compact, prune=False))
     whole = R.reproducer(variant, sc, claim, run=False).text
-    if variant == "mujoco:rk4":   # it does slice: the welded parts' loop, the other quantities' error
+    if claim[0] == "order":   # another quantity's error goes
         assert len(sliced.splitlines()) < len(whole.splitlines())
+    if variant == "mujoco:rk4":   # the welded parts' loop
         assert "for j, part in" in whole and "for j, part in" not in sliced
+    if variant.startswith("pybullet"):   # the frame of a body off its COM, the variant's branch
+        assert "if com_B is not None:" in whole and "if com_B is not None:" not in sliced
+        assert "if self.maximal:" in whole and "if self.maximal:" not in sliced
     (tmp_path / "sliced.py").write_text(sliced)
     (tmp_path / "whole.py").write_text(whole)
     a, b = _run_alone(tmp_path / "sliced.py", tmp_path), _run_alone(tmp_path / "whole.py", tmp_path)
