@@ -103,7 +103,7 @@ def _same(a, b) -> bool:
 def _scope_nodes(fn):
     """The nodes of a function's own scope, its comprehensions' included (their variables are taken as the
     function's: a union, so no less than either), not those of nested functions, classes or lambdas."""
-    stack = list(fn.body) if isinstance(fn, ast.FunctionDef | ast.AsyncFunctionDef) else [fn]
+    stack = list(fn.body) if isinstance(fn, ast.FunctionDef | ast.AsyncFunctionDef | ast.Module) else [fn]
     while stack:
         node = stack.pop()
         yield node
@@ -142,6 +142,24 @@ class _Analysis:
             for child in ast.iter_child_nodes(node):
                 self.parents[child] = node
         self.dynamic = self._dynamic()
+        #: code that may rebind anything (exec, eval, a store into globals()): nothing is sliced
+        self.opaque = any(
+            (isinstance(n, ast.Call) and isinstance(n.func, ast.Name) and n.func.id in ("exec", "eval"))
+            or (isinstance(n, ast.Subscript) and not isinstance(n.ctx, ast.Load)
+                and isinstance(n.value, ast.Call) and isinstance(n.value.func, ast.Name)
+                and n.value.func.id == "globals")
+            or (isinstance(n, ast.Call) and isinstance(n.func, ast.Attribute) and n.func.attr in _MUTATORS
+                and isinstance(n.func.value, ast.Call) and isinstance(n.func.value.func, ast.Name)
+                and n.func.value.func.id == "globals")
+            for n in ast.walk(tree))
+        # an instance made without naming its class (type(x)(…), x.__class__(…)): no __init__ is followed
+        def made_unnamed(n) -> bool:
+            f = getattr(n, "func", None)
+            return isinstance(n, ast.Call) and (
+                (isinstance(f, ast.Call) and isinstance(f.func, ast.Name) and f.func.id == "type")
+                or (isinstance(f, ast.Attribute) and f.attr == "__class__"))
+        if any(made_unnamed(n) for n in ast.walk(tree)):
+            self.escaped |= {k for k in self.defs if k.endswith(".__init__")}
 
     def _dynamic(self) -> bool:
         """True where the script reaches attributes by computed names (getattr/setattr/delattr with a name
@@ -180,12 +198,15 @@ class _Analysis:
 
     def _module_constants(self) -> dict:
         declared_global = {n for fn in ast.walk(self.tree) if isinstance(fn, ast.Global) for n in fn.names}
-        counts: dict = {}
-        for node in self.tree.body:
-            for t in self._targets(node):
-                for n in ast.walk(t):
-                    if isinstance(n, ast.Name):
-                        counts[n.id] = counts.get(n.id, 0) + 1
+        counts: dict = {}   # every binding at module scope (in an if, a loop, a with, a del too)
+        for node in _scope_nodes(self.tree):
+            if isinstance(node, ast.Name) and isinstance(node.ctx, ast.Store | ast.Del):
+                counts[node.id] = counts.get(node.id, 0) + 1
+            if isinstance(node, ast.Import | ast.ImportFrom | ast.ClassDef):
+                for t in self._targets(node):
+                    counts[t.id] = counts.get(t.id, 0) + 1
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+                counts[node.name] = counts.get(node.name, 0) + 1
         consts: dict = {}
         for node in self.tree.body:
             if isinstance(node, ast.Assign) and len(node.targets) == 1:
@@ -202,7 +223,7 @@ class _Analysis:
                 consts[name] = _TOP
         for name in list(self.defs) + list(self.classes):
             if "." not in name:
-                consts[name] = [_Ref(name)]
+                consts[name] = [_Ref(name)] if counts.get(name, 0) <= 1 else _TOP
         return consts
 
     @staticmethod
@@ -399,7 +420,9 @@ class _Analysis:
     # --- the fixpoint ---------------------------------------------------------------------------------
     def run(self) -> bool:
         """Compute every function's parameter and local values; False where the script mutates a value
-        the analysis follows (then nothing is sliced)."""
+        the analysis follows, or runs code that may rebind anything (then nothing is sliced)."""
+        if self.opaque:
+            return False
         for _ in range(60):
             before = self._state()
             self._calls()
@@ -510,6 +533,9 @@ class _Analysis:
             if funcs is _TOP:
                 continue
             refs = [f.name for f in funcs if isinstance(f, _Ref)]
+            if any(r in self.classes and f"{r}.__init__" not in self.defs and self.classes[r].bases
+                   for r in refs):   # an inherited __init__: which one, the analysis does not resolve
+                self.escaped |= {k for k in self.defs if k.endswith(".__init__")}
             self._bind_call(node, scope, [r for r in refs if r in self.defs], skip_self=False)
             self._bind_call(node, scope, [f"{r}.__init__" for r in refs if f"{r}.__init__" in self.defs],
                             skip_self=True)
@@ -634,6 +660,11 @@ class _Analysis:
                     for n in ast.walk(t):
                         if isinstance(n, ast.Attribute):
                             self.attrs[n.attr] = _TOP
+        for node in ast.walk(self.tree):   # setattr(x, "name", …), delattr(x, "name")
+            if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
+                    and node.func.id in ("setattr", "delattr") and len(node.args) >= 2
+                    and isinstance(node.args[1], ast.Constant)):
+                self.attrs[node.args[1].value] = _TOP
         for cls in self.classes.values():
             for stmt in cls.body:
                 if isinstance(stmt, ast.Assign):

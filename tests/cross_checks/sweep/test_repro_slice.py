@@ -100,6 +100,26 @@ def test_a_methods_branch_on_an_attribute_set_from_the_numbers_goes():
     assert "if self.maximal:" in prune(mutated)
 
 
+@pytest.mark.parametrize("change,kept", [
+    # code that may rebind anything: nothing is sliced
+    (("main(globals())", "exec('VARIANT = \"maximal\"')\nmain(globals())"), "all"),
+    (("main(globals())", "globals()['VARIANT'] = 'maximal'\nmain(globals())"), "all"),
+    # a constant bound again at module level (in an if): not the numbers' alone
+    (("main(globals())", "if len(PARTS) > 5:\n    VARIANT = 'maximal'\nmain(globals())"), "if self.maximal:"),
+    # an attribute set by name, an instance made without naming its class
+    (("    print(w.step(1.0))", "    setattr(w, 'maximal', True)\n    print(w.step(1.0))"), "if self.maximal:"),
+    (("    print(w.step(1.0))", "    w = type(w)('maximal', [2.0])\n    print(w.step(1.0))"), "if self.maximal:"),
+    (("    print(w.step(1.0))", "    w = w.__class__('maximal', [2.0])\n    print(w.step(1.0))"),
+     "if self.maximal:"),
+])
+def test_a_class_whose_values_the_analysis_cannot_vouch_for_keeps_its_branches(change, kept):
+    planted = CLASS.replace(*change)
+    assert planted != CLASS
+    cut = prune(planted)
+    assert cut == planted if kept == "all" else kept in cut
+    assert _printed(cut) == _printed(planted)
+
+
 @pytest.mark.parametrize("change", [
     # the function escapes into code the analysis does not follow: any value may reach it
     ("e = measure(", "e = np.vectorize(measure)("),
