@@ -2,7 +2,8 @@
 scenario, importing only the engine and NumPy, that an engine's maintainers can run without rbcheck.
 
 The script is made of three parts, two of them rbcheck's own code placed line for line, compacted
-(:mod:`cross_checks.sweep.repro_text`: docstrings, comments and unreached definitions left out):
+(:mod:`cross_checks.sweep.repro_text`: docstrings, comments and unreached definitions left out, and what the
+script's numbers never reach, :mod:`cross_checks.sweep.repro_slice`):
 
 1. the engine's world (cross_checks/engines/worlds/<engine>.py: the model the adapter builds, with the same
    neutralised defaults, in the engine's own API — the adapter imports it, so it is not a copy);

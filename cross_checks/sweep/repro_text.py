@@ -1,5 +1,5 @@
 """The code of a standalone reproducer (cross_checks/sweep/repro.py; docs/repro.md, "Length"): rbcheck's own
-modules (the engine's world, the measurement) placed in the script line for line, with three things left
+modules (the engine's world, the measurement) placed in the script line for line, with four things left
 out so that it is short enough to paste into an issue:
 
 * docstrings and comments (tokenize: the code lines themselves are the module's, unchanged);
@@ -8,10 +8,13 @@ out so that it is short enough to paste into an issue:
   ``step``), transitively; a definition a later module redefines is shadowed, so it goes too;
 * the modules' imports, gathered once at the top, a line for the standard library's ``import x`` and one for
   the others' (a relative import of a sibling world embedded above it goes: its names are the sibling's,
-  defined in the script).
+  defined in the script);
+* what the script's own numbers never reach (:mod:`cross_checks.sweep.repro_slice`: an ``if`` or ``for``
+  they decide, its kept branch one indentation level out), then the definitions only that reached.
 
 What is left runs exactly as the modules do (tests/cross_checks/engines/worlds/test_worlds.py runs the
-compacted text of every world against its adapter, bit for bit).
+compacted text of every world against its adapter, bit for bit; tests/cross_checks/sweep/test_repro_slice.py
+runs scripts sliced and unsliced and compares what they print).
 """
 from __future__ import annotations
 
