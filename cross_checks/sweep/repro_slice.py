@@ -830,12 +830,17 @@ _BINOPS = {ast.Add: lambda a, b: a + b, ast.Sub: lambda a, b: a - b, ast.Mult: l
 
 def _string_rows(text: str) -> set:
     """Rows inside (or ending) a multi-line string token: their indentation is the string's."""
-    rows = set()
+    rows, fstrings = set(), []
+    f_start, f_end = getattr(tokenize, "FSTRING_START", None), getattr(tokenize, "FSTRING_END", None)
     for tok in tokenize.generate_tokens(io.StringIO(text).readline):
         if tok.type == tokenize.STRING and tok.end[0] > tok.start[0]:
             rows.update(range(tok.start[0], tok.end[0] + 1))
-        elif getattr(tokenize, "FSTRING_START", None) == tok.type:
-            rows.add(tok.start[0])
+        elif f_start is not None and tok.type == f_start:   # Python >= 3.12 splits an f-string in tokens
+            fstrings.append(tok.start[0])
+        elif f_end is not None and tok.type == f_end and fstrings:
+            first = fstrings.pop()
+            if tok.end[0] > first:
+                rows.update(range(first, tok.end[0] + 1))
     return rows
 
 

@@ -100,6 +100,9 @@ def test_a_methods_branch_on_an_attribute_set_from_the_numbers_goes():
     assert "if self.maximal:" in prune(mutated)
 
 
+_P = "    print(w.step(1.0))"
+
+
 @pytest.mark.parametrize("change,kept", [
     # code that may rebind anything: nothing is sliced
     (("main(globals())", "exec('VARIANT = \"maximal\"')\nmain(globals())"), "all"),
@@ -107,10 +110,9 @@ def test_a_methods_branch_on_an_attribute_set_from_the_numbers_goes():
     # a constant bound again at module level (in an if): not the numbers' alone
     (("main(globals())", "if len(PARTS) > 5:\n    VARIANT = 'maximal'\nmain(globals())"), "if self.maximal:"),
     # an attribute set by name, an instance made without naming its class
-    (("    print(w.step(1.0))", "    setattr(w, 'maximal', True)\n    print(w.step(1.0))"), "if self.maximal:"),
-    (("    print(w.step(1.0))", "    w = type(w)('maximal', [2.0])\n    print(w.step(1.0))"), "if self.maximal:"),
-    (("    print(w.step(1.0))", "    w = w.__class__('maximal', [2.0])\n    print(w.step(1.0))"),
-     "if self.maximal:"),
+    ((_P, "    setattr(w, 'maximal', True)\n" + _P), "if self.maximal:"),
+    ((_P, "    w = type(w)('maximal', [2.0])\n" + _P), "if self.maximal:"),
+    ((_P, "    w = w.__class__('maximal', [2.0])\n" + _P), "if self.maximal:"),
 ])
 def test_a_class_whose_values_the_analysis_cannot_vouch_for_keeps_its_branches(change, kept):
     planted = CLASS.replace(*change)
@@ -148,6 +150,16 @@ def test_a_block_that_would_be_left_empty_and_an_elif_stay():
     assert 'if VARIANT == "x":' in cut and "elif e > 1.0" in cut     # the elif chain as it is
     assert 'if QUANTITY == "position":' in cut                        # alone() is not left empty
     assert "for part in" not in cut
+    assert _printed(cut) == _printed(planted)
+
+
+@pytest.mark.parametrize("text", ['"""two\n        lines"""', 'f"""{y}\n        lines"""'])
+def test_a_kept_block_holding_a_multi_line_string_keeps_its_indentation(text):
+    """Dedenting it would change the string: the if stays as written."""
+    ret = "        return 2.0 * y\n"
+    planted = PLANTED.replace(ret, f"        print({text})\n{ret}")
+    cut = prune(planted)
+    assert 'if quantity == "orientation":' in cut and "for part in" not in cut
     assert _printed(cut) == _printed(planted)
 
 
