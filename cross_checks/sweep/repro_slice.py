@@ -57,13 +57,12 @@ _BUILTINS = {"len": len, "enumerate": lambda *a: list(enumerate(*a)), "zip": lam
              "range": range, "float": float, "int": int, "str": str, "bool": bool, "tuple": tuple,
              "list": list, "dict": dict, "min": min, "max": max, "abs": abs, "any": any, "all": all,
              "sorted": sorted, "isinstance": isinstance, "reversed": lambda a: list(reversed(a))}
-_TYPES = {"list": list, "tuple": tuple, "dict": dict, "float": float, "int": int, "str": str, "bool": bool,
-          "type": type(None)}
+_TYPES = {"list": list, "tuple": tuple, "dict": dict, "float": float, "int": int, "str": str, "bool": bool}
 _FRESH_CALLS = {"list", "dict", "set"}
 
 
 class _Ref:
-    """A top-level function of the script, as a value."""
+    """A top-level function or class of the script, as a value."""
 
     def __init__(self, name):
         self.name = name
@@ -397,7 +396,7 @@ class _Analysis:
         keys, n = [k.arg for k in node.keywords], len(node.args)
         out: list = []
         for f in funcs:
-            if isinstance(f, _Ref) or f is type(None):
+            if isinstance(f, _Ref):
                 raise _Unknown    # a function's return value is not followed
             if f == "globals":
                 out = _union(out, [self.globals_dict()])
