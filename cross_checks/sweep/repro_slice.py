@@ -314,9 +314,12 @@ class _Analysis:
             return [node.value]
         if isinstance(node, ast.Name):
             return self._lookup(node.id, fn, env)
-        if isinstance(node, ast.Tuple | ast.List) and not any(isinstance(e, ast.Starred) for e in node.elts):
+        if isinstance(node, ast.Tuple | ast.List):   # a starred element spliced in: (*body[:3], com)
             make = tuple if isinstance(node, ast.Tuple) else list
-            return self._apply(self._each(node.elts, fn, env), lambda *v: make(v))
+            starred = [isinstance(e, ast.Starred) for e in node.elts]
+            parts = [e.value if isinstance(e, ast.Starred) else e for e in node.elts]
+            return self._apply(self._each(parts, fn, env), lambda *v: make(
+                x for value, star in zip(v, starred) for x in (_splice(value) if star else (value,))))
         if isinstance(node, ast.Dict) and None not in node.keys:
             n = len(node.keys)
             return self._apply(self._each(node.keys + node.values, fn, env),
@@ -806,6 +809,12 @@ def _is_fresh(value) -> bool:
     return (isinstance(value, ast.List | ast.Dict | ast.Set | ast.ListComp | ast.DictComp | ast.SetComp)
             or (isinstance(value, ast.Call) and isinstance(value.func, ast.Name)
                 and value.func.id in _FRESH_CALLS))
+
+
+def _splice(value):
+    if not isinstance(value, list | tuple | str | range):
+        raise _Unknown
+    return tuple(value)
 
 
 def _index(v, i):

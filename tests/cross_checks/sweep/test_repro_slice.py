@@ -52,6 +52,15 @@ def _printed(code):
     return out.getvalue()
 
 
+def test_a_starred_display_is_followed():
+    """A list built with a starred element ([(*body[:2], 0.0)]): its length, hence the loop over its tail,
+    is the numbers'."""
+    planted = PLANTED.replace("        for part in (body[2] if len(body) > 2 else ()):",
+                              "        for part in [(*body[:2], 0.0)][1:]:")
+    cut = prune(planted)
+    assert "for part in" not in cut and _printed(cut) == _printed(planted)
+
+
 def test_the_numbers_decide_what_goes_and_the_runs_values_never_do():
     cut = prune(PLANTED)
     assert "for part in" not in cut and "out.append(part)" not in cut          # no body has parts
