@@ -28,8 +28,11 @@ def build_model(bodies, gravity_W, variant, dt_s, name="rbcheck"):
         b = spec.worldbody.add_body(name="body" if k == 0 else f"body{k}")
         b.add_freejoint()
         _inertial(b, *body[:3], body[3] if len(body) > 3 else (0.0, 0.0, 0.0))
-        for j, part in enumerate(body[4] if len(body) > 4 else (), 1):   # welded: no joint, the body's frame
-            _inertial(b.add_body(name=f"{b.name}_part{j}", pos=[0.0, 0.0, 0.0]), *part)
+        for j, part in enumerate(body[4] if len(body) > 4 else (), 1):
+            child = b.add_body()           # no joint: welded to the body, its frame the body frame
+            child.name = f"{b.name}_part{j}"
+            child.pos = [0.0, 0.0, 0.0]
+            _inertial(child, *part)
     return spec.compile()
 
 
