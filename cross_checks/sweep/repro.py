@@ -2,7 +2,8 @@
 scenario, importing only the engine and NumPy, that an engine's maintainers can run without rbcheck.
 
 The script is made of three parts, two of them rbcheck's own code placed line for line, compacted
-(:mod:`cross_checks.sweep.repro_text`: docstrings, comments and unreached definitions left out):
+(:mod:`cross_checks.sweep.repro_text`: docstrings, comments and unreached definitions left out, and what the
+script's numbers never reach, :mod:`cross_checks.sweep.repro_slice`):
 
 1. the engine's world (cross_checks/engines/worlds/<engine>.py: the model the adapter builds, with the same
    neutralised defaults, in the engine's own API — the adapter imports it, so it is not a copy);
@@ -248,15 +249,15 @@ def reproducer(variant_name: str, scenario, claim_words, *, command: str = "", r
     command = command or f"rbcheck repro {variant_name} {scenario.name} --claim {claim_text}"
     header = (f'"""{variant_name} on {scenario.name}: {expect}\n'
               f"Written by rbcheck {reference_sim.__version__} ({command}); needs only numpy and "
-              f"{', '.join(dists)}.\nExit 1 while the defect holds, 0 when it does not. The code is "
-              f"rbcheck's own (cross_checks/engines/worlds/{engine}.py,\n"
-              + ("cross_checks/engines/worlds/com.py, " if world_fn == "form_world" else "")
-              + 'cross_checks/sweep/repro_measure.py) without its docstrings and comments."""\n')
+              f"{', '.join(dists)}.\nExit 1 while the defect holds, 0 when it does not. The code: rbcheck's "
+              f"engines/worlds/{engine}.py, "
+              + ("engines/worlds/com.py, " if world_fn == "form_world" else "")
+              + 'sweep/repro_measure.py, compacted."""\n')
     lines = _assignments({**common, **data})
     main = f"main_{kind}"
     tail = ("# the scenario (SI units; states [x_W, v_W, q_WB (w x y z), ω_W]) and the reference values\n"
             + "\n".join(lines) + "\n"
-            + f"if __name__ == \"__main__\":\n    sys.exit({main}({world_fn}, globals()))\n")
+            + f"if __name__ == \"__main__\": sys.exit({main}({world_fn}, globals()))\n")
     modules = [*world_mods, "cross_checks.sweep.repro_measure"]
     text = header + compact(["import sys\n"] + [_source(m) for m in modules], tail)
     if not run:

@@ -67,24 +67,19 @@ def diverged_at(y, dt_s):
 def main_order(world, s):
     versions(s["DIST"])
     errors, blown = [], []
-    for h, n, r in zip(s["DT_S"], s["STEPS"], s["Y_REF"]):
+    for h, n, r, f in zip(s["DT_S"], s["STEPS"], s["Y_REF"], s["FLOORS"]):
         y = run(world, s, h, n)
         errors.append(error(s["QUANTITY"], y[-1], np.array(r)))
-        blown.append(diverged_at(y, h))
-    for h, e, f, t in zip(s["DT_S"], errors, s["FLOORS"], blown):
-        print(f"dt = {h:g} s: " + (f"{s['QUANTITY']} error {e:.3e} (round-off floor {f:.1e})" if t is None
-                                   else f"the state diverged at t = {t:.4g} s"))
-    k = sum(t is not None for t in blown)
-    if k:   # a blow-up has no order: the run does not converge
-        print(f"{s['VARIANT']} {s['QUANTITY']} order: the run diverged at {k} of {len(blown)} Δt, expected "
-              f"order {s['DECLARED']:g}: DEFECT")
-        return 1
-    p = fitted_order(s["DT_S"], errors, s["FLOORS"], s["RESOLVED"])
-    holds = p is not None and p < s["DECLARED"] - s["ORDER_TOL"]
-    print(f"{s['VARIANT']} {s['QUANTITY']} order: measured "
-          + ("at round-off (exact)" if p is None else f"{p:.2f}")
-          + f", expected {s['DECLARED']:g} (defect when below {s['DECLARED'] - s['ORDER_TOL']:g}): "
-          + ("DEFECT" if holds else "no defect"))
+        blown.append(t := diverged_at(y, h))
+        print(f"dt = {h:g} s: " + (f"{s['QUANTITY']} error {errors[-1]:.3e} (round-off floor {f:.1e})"
+                                   if t is None else f"the state diverged at t = {t:.4g} s"))
+    k = sum(t is not None for t in blown)   # a blow-up has no order: the run does not converge
+    p = None if k else fitted_order(s["DT_S"], errors, s["FLOORS"], s["RESOLVED"])
+    holds = k > 0 or (p is not None and p < s["DECLARED"] - s["ORDER_TOL"])
+    print(f"{s['VARIANT']} {s['QUANTITY']} order: " + (
+        f"the run diverged at {k} of {len(blown)} Δt, expected order {s['DECLARED']:g}" if k else "measured "
+        + ("at round-off (exact)" if p is None else f"{p:.2f}") + f", expected {s['DECLARED']:g} (defect "
+        f"when below {s['DECLARED'] - s['ORDER_TOL']:g})") + (": DEFECT" if holds else ": no defect"))
     return int(holds)
 
 

@@ -1,16 +1,20 @@
 """The code of a standalone reproducer (cross_checks/sweep/repro.py; docs/repro.md, "Length"): rbcheck's own
-modules (the engine's world, the measurement) placed in the script line for line, with three things left
+modules (the engine's world, the measurement) placed in the script line for line, with four things left
 out so that it is short enough to paste into an issue:
 
 * docstrings and comments (tokenize: the code lines themselves are the module's, unchanged);
 * every definition the script never reaches: a top-level function, class, method or constant is kept when
   its name is reached from the script's ``main`` (a name, or an attribute: ``w.step()`` reaches every
   ``step``), transitively; a definition a later module redefines is shadowed, so it goes too;
-* the modules' imports, gathered once at the top (a relative import of a sibling world embedded above it
-  goes: its names are the sibling's, defined in the script).
+* the modules' imports, gathered once at the top, a line for the standard library's ``import x`` and one for
+  the others' (a relative import of a sibling world embedded above it goes: its names are the sibling's,
+  defined in the script);
+* what the script's own numbers never reach (:mod:`cross_checks.sweep.repro_slice`: an ``if`` or ``for``
+  they decide, its kept branch one indentation level out), then the definitions only that reached.
 
 What is left runs exactly as the modules do (tests/cross_checks/engines/worlds/test_worlds.py runs the
-compacted text of every world against its adapter, bit for bit).
+compacted text of every world against its adapter, bit for bit; tests/cross_checks/sweep/test_repro_slice.py
+runs scripts sliced and unsliced and compares what they print).
 """
 from __future__ import annotations
 
@@ -18,6 +22,8 @@ import ast
 import io
 import sys
 import tokenize
+
+from cross_checks.sweep import repro_slice
 
 __all__ = ["compact"]
 
@@ -89,11 +95,24 @@ def _bound(node) -> set:
     return {(a.asname or a.name).split(".")[0] for a in node.names}
 
 
-def compact(texts, tail: str) -> str:
+def compact(texts, tail: str, prune: bool = True) -> str:
+    """The code of modules ``texts`` compacted (:func:`_compact`), then (``prune``) sliced to what the
+    script's numbers reach (cross_checks/sweep/repro_slice.py) and compacted again: a definition reached only
+    from what the slice removed goes too."""
+    text = _compact(texts, tail)
+    if not prune:
+        return text
+    cut = repro_slice.prune(text)
+    if cut == text or not cut.endswith(tail):
+        return text
+    return _compact([cut[:len(cut) - len(tail)]], tail)
+
+
+def _compact(texts, tail: str) -> str:
     """The code of modules ``texts`` (in order, as one script) followed by ``tail`` (the script's own code:
     its numbers and ``main``), compacted as the module docstring says: the imports the kept code uses
-    (standard library first, then the others, each group sorted as isort does), then the kept definitions
-    in the modules' order, one blank line between top-level ones, then ``tail``."""
+    (standard library first, then the others: :func:`_import_group`), a blank line, the kept definitions in
+    the modules' order, a blank line, then ``tail``."""
     units = []          # (node, its stripped lines, defines)
     imports = {}        # import line -> (bound names, is stdlib)
     for text in texts:
@@ -102,8 +121,11 @@ def compact(texts, tail: str) -> str:
         for node in tree.body:
             if _is_import(node):
                 if not (isinstance(node, ast.ImportFrom) and node.level):
-                    top = (node.names[0].name if isinstance(node, ast.Import) else node.module).split(".")[0]
-                    imports[_import_line(node)] = (_bound(node), top in sys.stdlib_module_names)
+                    for alias in node.names:   # one entry per name: a line keeps only the names used
+                        one = type(node)(names=[alias], **({"module": node.module, "level": 0}
+                                                           if isinstance(node, ast.ImportFrom) else {}))
+                        top = (alias.name if isinstance(node, ast.Import) else node.module).split(".")[0]
+                        imports[_import_line(one)] = (_bound(one), top in sys.stdlib_module_names)
                 continue
             if isinstance(node, ast.Expr) and isinstance(node.value, ast.Constant):
                 continue    # the module docstring
@@ -157,15 +179,28 @@ def compact(texts, tail: str) -> str:
         body.append((isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef), code))
     out = [line for _, code in body for line in code]
     used = _names(ast.parse("\n".join(out) + "\n" + tail))     # what the kept code uses (methods left out)
-    std = sorted((line for line, (b, s) in imports.items() if s and b & used), key=_import_key)
-    other = sorted((line for line, (b, s) in imports.items() if not s and b & used), key=_import_key)
-    head = "\n".join(std) + ("\n\n" if std and other else "") + "\n".join(other)
-    gap = "\n\n\n" if body and body[0][0] else "\n\n"   # isort: two blank lines before a def, one otherwise
-    return head + gap + "\n".join(out) + "\n\n" + tail
+    head = [line for std in (True, False) for line in _import_group(
+        [line for line, (b, s) in imports.items() if s is std and b & used])]
+    return "\n".join(head) + "\n\n" + "\n".join(out) + "\n\n" + tail
 
 
 def _is_method(node) -> bool:
     return isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef)
+
+
+def _import_group(lines) -> list:
+    """One group's import lines (the standard library's, or the others'), as short as they read: every
+    ``import x`` of the group on one line (``import importlib.metadata, platform, sys``), then each ``from x
+    import y``, each part in isort's order."""
+    lines = sorted(lines, key=_import_key)
+    plain = [line.removeprefix("import ") for line in lines if line.startswith("import ")]
+    froms: dict = {}
+    for line in lines:
+        if line.startswith("from "):
+            module, name = line.removeprefix("from ").split(" import ")
+            froms.setdefault(module, []).append(name)
+    return ([f"import {', '.join(plain)}"] if plain else []) + [
+        f"from {m} import {', '.join(sorted(names, key=str.lower))}" for m, names in froms.items()]
 
 
 def _import_key(line: str) -> tuple:

@@ -20,19 +20,16 @@ def build_model(bodies, gravity_W, variant, dt_s, name="rbcheck"):
     first part the jointed body's inertial, the others child bodies without a joint) for the integrator
     ``variant`` ("euler", "rk4", "implicit", "implicitfast", "discrete") at step ``dt_s`` (s)."""
     spec = mujoco.MjSpec()
-    spec.modelname = name
-    spec.compiler.alignfree = False        # keep the joint (= qpos) on the body frame, not the inertial frame
-    spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
-    spec.compiler.balanceinertia = False   # never alter the inertia silently
-    spec.compiler.boundmass = 0.0
-    spec.compiler.boundinertia = 0.0
-    spec.option.timestep = float(dt_s)
+    spec.modelname, spec.option.timestep = name, float(dt_s)
     spec.option.gravity = np.asarray(gravity_W, dtype=float)
+    # keep the joint (= qpos) on the body frame, not the inertial frame; never alter the inertia silently
+    spec.compiler.alignfree = spec.compiler.balanceinertia = False
+    spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
+    spec.compiler.boundmass = spec.compiler.boundinertia = 0.0
     spec.option.integrator = getattr(mujoco.mjtIntegrator, f"mjINT_{variant.upper()}")
     spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_AUTORESET
     for k, body in enumerate(bodies):
-        b = spec.worldbody.add_body()
-        b.name = "body" if k == 0 else f"body{k}"
+        b = spec.worldbody.add_body(name="body" if k == 0 else f"body{k}")
         b.add_freejoint()
         parts = body[4] if len(body) > 4 else [(*body[:3], body[3] if len(body) > 3 else (0.0, 0.0, 0.0))]
         _inertial(b, *parts[0])
@@ -45,11 +42,9 @@ def build_model(bodies, gravity_W, variant, dt_s, name="rbcheck"):
 
 
 def _inertial(b, mass_kg, moments, q_BP, com_B):
-    b.explicitinertial = True
-    b.ipos = [float(v) for v in com_B]    # explicit: unset (NaN) would let geoms override the inertial
-    b.mass = float(mass_kg)
-    b.iquat = q_BP                         # principal frame P in body coordinates (w x y z)
-    b.inertia = moments
+    # explicit, ipos set (unset, NaN, would let geoms override it); iquat: the principal frame P in body axes
+    b.explicitinertial, b.mass, b.iquat, b.inertia = True, float(mass_kg), q_BP, moments
+    b.ipos = [float(v) for v in com_B]
 
 
 def _cross(a, b):
@@ -67,11 +62,8 @@ def rotate(q, v):
 def to_qpos_qvel(y):
     """Packed states (..., 13) -> qpos (..., 7), qvel (..., 6) with ω in BODY axes."""
     y = np.asarray(y, dtype=float)
-    q = y[..., 6:10]
-    qpos = np.concatenate([y[..., 0:3], q], axis=-1)
-    w_B = rotate(q * np.array([1.0, -1.0, -1.0, -1.0]), y[..., 10:13])   # R(q)ᵀ ω_W
-    qvel = np.concatenate([y[..., 3:6], w_B], axis=-1)
-    return qpos, qvel
+    w_B = rotate(y[..., 6:10] * np.array([1.0, -1.0, -1.0, -1.0]), y[..., 10:13])   # R(q)ᵀ ω_W
+    return np.concatenate([y[..., 0:3], y[..., 6:10]], axis=-1), np.concatenate([y[..., 3:6], w_B], axis=-1)
 
 
 def to_packed(qpos, qvel):
@@ -95,8 +87,7 @@ class Bodies:
         self.qpos[:], self.qvel[:] = to_qpos_qvel(y)
 
     def apply(self, f_W, tau_W):   # world force at the COM (N; MuJoCo adds the weight), world torque (N m)
-        self.xfrc[:, 0:3] = f_W
-        self.xfrc[:, 3:6] = tau_W
+        self.xfrc[:, 0:3], self.xfrc[:, 3:6] = f_W, tau_W
 
     def apply_body_torque(self, tau_B):   # torques fixed in body axes (N m, (B, 3)), kept by MuJoCo
         self.data.qfrc_applied.reshape(self.B, 6)[:, 3:6] = tau_B

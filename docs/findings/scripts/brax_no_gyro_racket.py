@@ -1,14 +1,8 @@
 """brax:spring on tennis_racket: does the torque-free spin near the intermediate axis flip (at t = 6.06 s, analytic)?
 Written by rbcheck 0.1.0 (rbcheck repro brax:spring tennis_racket --claim gyroscopic); needs only numpy and brax, jax, mujoco.
-Exit 1 while the defect holds, 0 when it does not. The code is rbcheck's own (cross_checks/engines/worlds/brax.py,
-cross_checks/sweep/repro_measure.py) without its docstrings and comments."""
-import importlib.metadata
-import platform
-import sys
-
-import jax
-import jax.numpy as jp
-import numpy as np
+Exit 1 while the defect holds, 0 when it does not. The code: rbcheck's engines/worlds/brax.py, sweep/repro_measure.py, compacted."""
+import importlib.metadata, platform, sys
+import jax, jax.numpy as jp, numpy as np
 from brax import math as bmath
 from brax.base import Actuator
 from brax.generalized import pipeline as generalized
@@ -42,10 +36,6 @@ def inertial(mass_kg, inertia_B):
 def mjcf_text(mass_kg, inertia_B, gravity_W, dt_s, actuators):
     g = " ".join(_num(v) for v in gravity_W)
     motors = ""
-    if actuators:
-        gears = ["1 0 0 0 0 0", "0 1 0 0 0 0", "0 0 1 0 0 0", "0 0 0 1 0 0", "0 0 0 0 1 0", "0 0 0 0 0 1"]
-        motors = "".join(f'<motor joint="free" gear="{gr}" ctrllimited="false"/>' for gr in gears)
-        motors = f"<actuator>{motors}</actuator>"
     return (f'<mujoco model="rbcheck"><compiler alignfree="false" inertiafromgeom="false" '
             f'balanceinertia="false" boundmass="0" boundinertia="0"/>'
             f'<option timestep="{_num(dt_s)}" gravity="{g}" viscosity="0" density="0" integrator="Euler"/>'
@@ -141,5 +131,4 @@ DIST, VARIANT = ('brax', 'jax', 'mujoco'), 'spring'
 BODIES, GRAVITY_W = [(1.0, [[1.0, 0.0, 0.0], [0.0, 2.0, 0.0], [0.0, 0.0, 3.0]], None)], [0.0, 0.0, 0.0]
 Y0, F_W = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.01, 2.0, 0.01], [0.0, 0.0, 0.0]
 TAU_W, DT, N, Q_BP, AXIS, FLIP_S = [0.0, 0.0, 0.0], 0.001, 10000, [1.0, 0.0, 0.0, 0.0], 1, 6.0600000000000005
-if __name__ == "__main__":
-    sys.exit(main_gyroscopic(world, globals()))
+if __name__ == "__main__": sys.exit(main_gyroscopic(world, globals()))

@@ -1,47 +1,28 @@
 """mjx:rk4 on tennis_racket: orientation converges at order 4 (declared) over Δt = 0.01, 0.005, 0.0025, 0.00125, 0.000625 s? Reference: analytic.
 Written by rbcheck 0.1.0 (rbcheck repro mjx:rk4 tennis_racket --claim order orientation); needs only numpy and mujoco-mjx, mujoco, jax.
-Exit 1 while the defect holds, 0 when it does not. The code is rbcheck's own (cross_checks/engines/worlds/mjx.py,
-cross_checks/sweep/repro_measure.py) without its docstrings and comments."""
-import importlib.metadata
-import platform
-import sys
-
-import jax
-import mujoco
-import numpy as np
+Exit 1 while the defect holds, 0 when it does not. The code: rbcheck's engines/worlds/mjx.py, sweep/repro_measure.py, compacted."""
+import importlib.metadata, platform, sys
+import jax, mujoco, numpy as np
 from mujoco import mjx
-
 
 def build_model(bodies, gravity_W, variant, dt_s, name="rbcheck"):
     spec = mujoco.MjSpec()
-    spec.modelname = name
-    spec.compiler.alignfree = False
-    spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
-    spec.compiler.balanceinertia = False
-    spec.compiler.boundmass = 0.0
-    spec.compiler.boundinertia = 0.0
-    spec.option.timestep = float(dt_s)
+    spec.modelname, spec.option.timestep = name, float(dt_s)
     spec.option.gravity = np.asarray(gravity_W, dtype=float)
+    spec.compiler.alignfree = spec.compiler.balanceinertia = False
+    spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
+    spec.compiler.boundmass = spec.compiler.boundinertia = 0.0
     spec.option.integrator = getattr(mujoco.mjtIntegrator, f"mjINT_{variant.upper()}")
     spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_AUTORESET
     for k, body in enumerate(bodies):
-        b = spec.worldbody.add_body()
-        b.name = "body" if k == 0 else f"body{k}"
+        b = spec.worldbody.add_body(name="body" if k == 0 else f"body{k}")
         b.add_freejoint()
         parts = body[4] if len(body) > 4 else [(*body[:3], body[3] if len(body) > 3 else (0.0, 0.0, 0.0))]
         _inertial(b, *parts[0])
-        for j, part in enumerate(parts[1:], 1):
-            child = b.add_body()
-            child.name = f"{b.name}_part{j}"
-            child.pos = [0.0, 0.0, 0.0]
-            _inertial(child, *part)
     return spec.compile()
 def _inertial(b, mass_kg, moments, q_BP, com_B):
-    b.explicitinertial = True
+    b.explicitinertial, b.mass, b.iquat, b.inertia = True, float(mass_kg), q_BP, moments
     b.ipos = [float(v) for v in com_B]
-    b.mass = float(mass_kg)
-    b.iquat = q_BP
-    b.inertia = moments
 def _cross(a, b):
     a0, a1, a2, b0, b1, b2 = a[..., 0], a[..., 1], a[..., 2], b[..., 0], b[..., 1], b[..., 2]
     return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
@@ -51,11 +32,8 @@ def rotate(q, v):
     return v + s * t + _cross(u, t)
 def to_qpos_qvel(y):
     y = np.asarray(y, dtype=float)
-    q = y[..., 6:10]
-    qpos = np.concatenate([y[..., 0:3], q], axis=-1)
-    w_B = rotate(q * np.array([1.0, -1.0, -1.0, -1.0]), y[..., 10:13])
-    qvel = np.concatenate([y[..., 3:6], w_B], axis=-1)
-    return qpos, qvel
+    w_B = rotate(y[..., 6:10] * np.array([1.0, -1.0, -1.0, -1.0]), y[..., 10:13])
+    return np.concatenate([y[..., 0:3], y[..., 6:10]], axis=-1), np.concatenate([y[..., 3:6], w_B], axis=-1)
 def to_packed(qpos, qvel):
     q = qpos[..., 3:7]
     return np.concatenate([qpos[..., 0:3], qvel[..., 0:3], q, rotate(q, qvel[..., 3:6])], axis=-1)
@@ -97,13 +75,10 @@ def run(world, s, dt_s, n_steps):
         raw.append(w.packed(np.asarray(w.read(), dtype=float)[None])[0, 0])
     return np.array(raw)
 def error(quantity, y, y_ref):
-    if quantity == "orientation":
-        a, b = y_ref[6:10] / np.linalg.norm(y_ref[6:10]), y[6:10] / np.linalg.norm(y[6:10])
-        w = a[0] * b[0] + a[1:] @ b[1:]
-        v = a[0] * b[1:] - b[0] * a[1:] - np.cross(a[1:], b[1:])
-        return float(2.0 * np.arctan2(np.linalg.norm(v), abs(w)))
-    k = {"position": 0, "velocity": 3, "angular_velocity": 10}[quantity]
-    return float(np.linalg.norm(y[k:k + 3] - y_ref[k:k + 3]))
+    a, b = y_ref[6:10] / np.linalg.norm(y_ref[6:10]), y[6:10] / np.linalg.norm(y[6:10])
+    w = a[0] * b[0] + a[1:] @ b[1:]
+    v = a[0] * b[1:] - b[0] * a[1:] - np.cross(a[1:], b[1:])
+    return float(2.0 * np.arctan2(np.linalg.norm(v), abs(w)))
 def fitted_order(dt_s, errors, floors, resolved):
     use = [i for i, (e, f) in enumerate(zip(errors, floors)) if np.isfinite(e) and e > resolved * f]
     if len(use) < 2:
@@ -116,24 +91,19 @@ def diverged_at(y, dt_s):
 def main_order(world, s):
     versions(s["DIST"])
     errors, blown = [], []
-    for h, n, r in zip(s["DT_S"], s["STEPS"], s["Y_REF"]):
+    for h, n, r, f in zip(s["DT_S"], s["STEPS"], s["Y_REF"], s["FLOORS"]):
         y = run(world, s, h, n)
         errors.append(error(s["QUANTITY"], y[-1], np.array(r)))
-        blown.append(diverged_at(y, h))
-    for h, e, f, t in zip(s["DT_S"], errors, s["FLOORS"], blown):
-        print(f"dt = {h:g} s: " + (f"{s['QUANTITY']} error {e:.3e} (round-off floor {f:.1e})" if t is None
-                                   else f"the state diverged at t = {t:.4g} s"))
+        blown.append(t := diverged_at(y, h))
+        print(f"dt = {h:g} s: " + (f"{s['QUANTITY']} error {errors[-1]:.3e} (round-off floor {f:.1e})"
+                                   if t is None else f"the state diverged at t = {t:.4g} s"))
     k = sum(t is not None for t in blown)
-    if k:
-        print(f"{s['VARIANT']} {s['QUANTITY']} order: the run diverged at {k} of {len(blown)} Δt, expected "
-              f"order {s['DECLARED']:g}: DEFECT")
-        return 1
-    p = fitted_order(s["DT_S"], errors, s["FLOORS"], s["RESOLVED"])
-    holds = p is not None and p < s["DECLARED"] - s["ORDER_TOL"]
-    print(f"{s['VARIANT']} {s['QUANTITY']} order: measured "
-          + ("at round-off (exact)" if p is None else f"{p:.2f}")
-          + f", expected {s['DECLARED']:g} (defect when below {s['DECLARED'] - s['ORDER_TOL']:g}): "
-          + ("DEFECT" if holds else "no defect"))
+    p = None if k else fitted_order(s["DT_S"], errors, s["FLOORS"], s["RESOLVED"])
+    holds = k > 0 or (p is not None and p < s["DECLARED"] - s["ORDER_TOL"])
+    print(f"{s['VARIANT']} {s['QUANTITY']} order: " + (
+        f"the run diverged at {k} of {len(blown)} Δt, expected order {s['DECLARED']:g}" if k else "measured "
+        + ("at round-off (exact)" if p is None else f"{p:.2f}") + f", expected {s['DECLARED']:g} (defect "
+        f"when below {s['DECLARED'] - s['ORDER_TOL']:g})") + (": DEFECT" if holds else ": no defect"))
     return int(holds)
 
 # the scenario (SI units; states [x_W, v_W, q_WB (w x y z), ω_W]) and the reference values
@@ -144,5 +114,4 @@ DT_S, STEPS = [0.01, 0.005, 0.0025, 0.00125, 0.000625], [1000, 2000, 4000, 8000,
 Y_REF = [[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -0.012931118997544178, 0.9985483074461181, -0.0066656724317143215, -0.05186166859056298, -0.014116769655821641, 1.99991335660909, 0.0295913753400584]] * 5
 FLOORS = [3.388118376433995e-13, 4.232233327369145e-13, 5.425992139183532e-13, 7.114222041053831e-13, 9.501739664682605e-13]
 DECLARED, ORDER_TOL, RESOLVED = 4.0, 0.3, 10.0
-if __name__ == "__main__":
-    sys.exit(main_order(world, globals()))
+if __name__ == "__main__": sys.exit(main_order(world, globals()))

@@ -1,45 +1,27 @@
 """mujoco:implicitfast on long_tennis_racket: does a torque-free run of 62832 steps of 0.05 s keep its energy, |L| and its separatrix distance δ = (2E I₂ − |L|²)/|L|²?
 Written by rbcheck 0.1.0 (rbcheck repro mujoco:implicitfast long_tennis_racket --claim drift); needs only numpy and mujoco.
-Exit 1 while the defect holds, 0 when it does not. The code is rbcheck's own (cross_checks/engines/worlds/mujoco.py,
-cross_checks/sweep/repro_measure.py) without its docstrings and comments."""
-import importlib.metadata
-import platform
-import sys
-
-import mujoco
-import numpy as np
-
+Exit 1 while the defect holds, 0 when it does not. The code: rbcheck's engines/worlds/mujoco.py, sweep/repro_measure.py, compacted."""
+import importlib.metadata, platform, sys
+import mujoco, numpy as np
 
 def build_model(bodies, gravity_W, variant, dt_s, name="rbcheck"):
     spec = mujoco.MjSpec()
-    spec.modelname = name
-    spec.compiler.alignfree = False
-    spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
-    spec.compiler.balanceinertia = False
-    spec.compiler.boundmass = 0.0
-    spec.compiler.boundinertia = 0.0
-    spec.option.timestep = float(dt_s)
+    spec.modelname, spec.option.timestep = name, float(dt_s)
     spec.option.gravity = np.asarray(gravity_W, dtype=float)
+    spec.compiler.alignfree = spec.compiler.balanceinertia = False
+    spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
+    spec.compiler.boundmass = spec.compiler.boundinertia = 0.0
     spec.option.integrator = getattr(mujoco.mjtIntegrator, f"mjINT_{variant.upper()}")
     spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_AUTORESET
     for k, body in enumerate(bodies):
-        b = spec.worldbody.add_body()
-        b.name = "body" if k == 0 else f"body{k}"
+        b = spec.worldbody.add_body(name="body" if k == 0 else f"body{k}")
         b.add_freejoint()
         parts = body[4] if len(body) > 4 else [(*body[:3], body[3] if len(body) > 3 else (0.0, 0.0, 0.0))]
         _inertial(b, *parts[0])
-        for j, part in enumerate(parts[1:], 1):
-            child = b.add_body()
-            child.name = f"{b.name}_part{j}"
-            child.pos = [0.0, 0.0, 0.0]
-            _inertial(child, *part)
     return spec.compile()
 def _inertial(b, mass_kg, moments, q_BP, com_B):
-    b.explicitinertial = True
+    b.explicitinertial, b.mass, b.iquat, b.inertia = True, float(mass_kg), q_BP, moments
     b.ipos = [float(v) for v in com_B]
-    b.mass = float(mass_kg)
-    b.iquat = q_BP
-    b.inertia = moments
 def _cross(a, b):
     a0, a1, a2, b0, b1, b2 = a[..., 0], a[..., 1], a[..., 2], b[..., 0], b[..., 1], b[..., 2]
     return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
@@ -49,11 +31,8 @@ def rotate(q, v):
     return v + s * t + _cross(u, t)
 def to_qpos_qvel(y):
     y = np.asarray(y, dtype=float)
-    q = y[..., 6:10]
-    qpos = np.concatenate([y[..., 0:3], q], axis=-1)
-    w_B = rotate(q * np.array([1.0, -1.0, -1.0, -1.0]), y[..., 10:13])
-    qvel = np.concatenate([y[..., 3:6], w_B], axis=-1)
-    return qpos, qvel
+    w_B = rotate(y[..., 6:10] * np.array([1.0, -1.0, -1.0, -1.0]), y[..., 10:13])
+    return np.concatenate([y[..., 0:3], y[..., 6:10]], axis=-1), np.concatenate([y[..., 3:6], w_B], axis=-1)
 def to_packed(qpos, qvel):
     q = qpos[..., 3:7]
     return np.concatenate([qpos[..., 0:3], qvel[..., 0:3], q, rotate(q, qvel[..., 3:6])], axis=-1)
@@ -67,8 +46,7 @@ class Bodies:
         self.data.time = 0.0
         self.qpos[:], self.qvel[:] = to_qpos_qvel(y)
     def apply(self, f_W, tau_W):
-        self.xfrc[:, 0:3] = f_W
-        self.xfrc[:, 3:6] = tau_W
+        self.xfrc[:, 0:3], self.xfrc[:, 3:6] = f_W, tau_W
     def step(self):
         mujoco.mj_step(self.model, self.data)
     def read(self):
@@ -134,5 +112,4 @@ GRAVITY_W, Y0 = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0
 F_W, TAU_W, DT, N = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], 0.05, 62832
 INERTIA_B, I2, END_FRACTION, MIN_CHANGE = [[1.0, 0.0, 0.0], [0.0, 2.0, 0.0], [0.0, 0.0, 3.0]], 2.0, 0.05, 0.02
 TREND_TO_SCATTER = 3.0
-if __name__ == "__main__":
-    sys.exit(main_drift(world, globals()))
+if __name__ == "__main__": sys.exit(main_drift(world, globals()))

@@ -1,12 +1,7 @@
 """newton:featherstone on tumbling_box: the same physics written another way (translation 1e+04 m: transforms.py) must move the same once mapped back: judged as rbcheck sweep --invariance judges it at Δt = 0.001 s (and at 0.0005, 0.00025 s where it fails there)
-Written by rbcheck 0.1.0 (rbcheck repro newton:featherstone tumbling_box --claim invariance translation 1e4); needs only numpy and newton, warp-lang.
-Exit 1 while the defect holds, 0 when it does not. The code is rbcheck's own (cross_checks/engines/worlds/newton.py,
-cross_checks/sweep/repro_measure.py) without its docstrings and comments."""
-import importlib.metadata
-import platform
-import sys
-import warnings
-
+Written by rbcheck 0.1.0 (rbcheck repro newton:featherstone tumbling_box --claim invariance translation 1e+04 m); needs only numpy and newton, warp-lang.
+Exit 1 while the defect holds, 0 when it does not. The code: rbcheck's engines/worlds/newton.py and sweep/repro_measure.py, compacted."""
+import importlib.metadata, platform, sys, warnings
 import numpy as np
 
 SOLVERS = {"semi_implicit": "SolverSemiImplicit", "xpbd": "SolverXPBD", "featherstone": "SolverFeatherstone",
@@ -192,5 +187,4 @@ BASE = {'position': 80.10461713951858, 'orientation': 5.677582779436438, 'veloci
 ALLOWANCE = [{'position': 2029.2432265186562, 'orientation': 129.246615170913, 'velocity': 21.525356492017334, 'angular_velocity': 370.5114004659046}, {'position': 4033.000386016213, 'orientation': 183.13332588627281, 'velocity': 40.50210628192467, 'angular_velocity': 524.6871355683905}, {'position': 8029.958030399637, 'orientation': 259.6916528323616, 'velocity': 77.39993840057039, 'angular_velocity': 743.4294391548267}]
 STEP_ORDER = {'position': 0.7, 'orientation': 0.7, 'velocity': 0.7, 'angular_velocity': 0.7}
 UNITS = {'position': 'm', 'orientation': 'rad', 'velocity': 'm/s', 'angular_velocity': 'rad/s'}
-if __name__ == "__main__":
-    sys.exit(main_invariance(world, globals()))
+if __name__ == "__main__": sys.exit(main_invariance(world, globals()))

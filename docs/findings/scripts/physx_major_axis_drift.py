@@ -1,14 +1,8 @@
 """physx:pgs on long_major_axis_spin: does a torque-free run of 62832 steps of 0.05 s keep its energy, |L| and its separatrix distance δ = (2E I₂ − |L|²)/|L|²?
 Written by rbcheck 0.1.0 (rbcheck repro physx:pgs long_major_axis_spin --claim drift); needs only numpy and sapien.
-Exit 1 while the defect holds, 0 when it does not. The code is rbcheck's own (cross_checks/engines/worlds/physx.py,
-cross_checks/sweep/repro_measure.py) without its docstrings and comments."""
-import importlib.metadata
-import platform
-import sys
-
-import numpy as np
-import sapien
-import sapien.physx as px
+Exit 1 while the defect holds, 0 when it does not. The code: rbcheck's engines/worlds/physx.py, sweep/repro_measure.py, compacted."""
+import importlib.metadata, platform, sys
+import numpy as np, sapien, sapien.physx as px
 
 BODY_SETTINGS = (("set_linear_damping", 0.0), ("set_angular_damping", 0.0), ("set_max_linear_velocity", 1e16),
                  ("set_max_angular_velocity", 1e16), ("set_max_depenetration_velocity", 1e16),
@@ -129,5 +123,4 @@ GRAVITY_W, Y0 = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0
 F_W, TAU_W, DT, N = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], 0.05, 62832
 INERTIA_B, I2, END_FRACTION, MIN_CHANGE = [[1.0, 0.0, 0.0], [0.0, 2.0, 0.0], [0.0, 0.0, 3.0]], 2.0, 0.05, 0.02
 TREND_TO_SCATTER = 3.0
-if __name__ == "__main__":
-    sys.exit(main_drift(world, globals()))
+if __name__ == "__main__": sys.exit(main_drift(world, globals()))

@@ -1,14 +1,8 @@
 """rapier:symplectic_euler on long_major_axis_spin: does a torque-free run of 62832 steps of 0.05 s keep its energy, |L| and its separatrix distance δ = (2E I₂ − |L|²)/|L|²?
 Written by rbcheck 0.1.0 (rbcheck repro rapier:symplectic_euler long_major_axis_spin --claim drift); needs only numpy and rapier3d.
-Exit 1 while the defect holds, 0 when it does not. The code is rbcheck's own (cross_checks/engines/worlds/rapier.py,
-cross_checks/sweep/repro_measure.py) without its docstrings and comments."""
-import importlib.metadata
-import math
-import platform
-import sys
-
-import numpy as np
-import rapier3d as rapier
+Exit 1 while the defect holds, 0 when it does not. The code: rbcheck's engines/worlds/rapier.py, sweep/repro_measure.py, compacted."""
+import importlib.metadata, math, platform, sys
+import numpy as np, rapier3d as rapier
 
 GYROSCOPIC = {"symplectic_euler": True, "symplectic_euler_no_gyro": False}
 WORLD_SETTINGS = (
@@ -125,5 +119,4 @@ GRAVITY_W, Y0 = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0
 F_W, TAU_W, DT, N = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], 0.05, 62832
 INERTIA_B, I2, END_FRACTION, MIN_CHANGE = [[1.0, 0.0, 0.0], [0.0, 2.0, 0.0], [0.0, 0.0, 3.0]], 2.0, 0.05, 0.02
 TREND_TO_SCATTER = 3.0
-if __name__ == "__main__":
-    sys.exit(main_drift(world, globals()))
+if __name__ == "__main__": sys.exit(main_drift(world, globals()))

@@ -116,7 +116,8 @@ def test_rapiers_drift_on_a_stable_major_axis_spin_holds_in_a_script_without_rbc
 
 def test_the_scripts_code_is_rbchecks_own_line_for_line():
     """Compacted, not rewritten: every code line of the script is a line of the world or the measurement
-    (docstrings and comments left out), and the world's definitions the run needs are all there."""
+    (docstrings and comments left out; one indentation level out where the slice kept one branch of an
+    `if`, cross_checks/sweep/repro_slice.py), and the world's definitions the run needs are all there."""
     import inspect
 
     from cross_checks.engines.worlds import mujoco as mjw
@@ -124,8 +125,10 @@ def test_the_scripts_code_is_rbchecks_own_line_for_line():
     r = reproducer("mujoco:rk4", load_scenario("tennis_racket"), ["order", "orientation"], run=False)
     ours = set(inspect.getsource(mjw).splitlines()) | set(inspect.getsource(repro_measure).splitlines())
     ours |= {re.sub(r"\s+#.*$", "", line) for line in ours}   # a line's trailing comment cut off
+    ours = {line.strip() for line in ours}
     code = r.text[r.text.index('"""\n', 3) + 4:r.text.index("# the scenario")]
-    lines = [line for line in code.splitlines() if line.strip() and not line.startswith(("import ", "from "))]
+    lines = [line.strip() for line in code.splitlines()
+             if line.strip() and not line.startswith(("import ", "from "))]
     assert lines and [line for line in lines if line not in ours] == []
     assert '"""' not in code and "#" not in code
     for name in ("def build_model(", "class Bodies:", "def world(", "def to_qpos_qvel(", "def main_order("):
@@ -371,7 +374,7 @@ def test_compacting_keeps_what_runs_and_leaves_out_what_does_not():
              '    def unused(self):\n        return math.pi\n')
     second = "from .first import helper\nimport sys\n\n\ndef world():\n    return sys.version and Thing()\n"
     code = compact([first, second], 'print(world().used())\n')
-    assert code.startswith("import sys\n\nimport numpy as np\n\nK = 2.0\n")   # math went with `unused`
+    assert code.startswith("import sys\nimport numpy as np\n\nK = 2.0\n")   # math went with `unused`
     assert "Doc" not in code and "drop me" not in code and "from .first" not in code
     assert "UNUSED" not in code and "def unused" not in code and '"first"' not in code
     assert "\n\n# not a comment" in code
