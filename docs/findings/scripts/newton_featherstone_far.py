@@ -1,6 +1,6 @@
 """newton:featherstone on tumbling_box: the same physics written another way (translation 1e+04 m: transforms.py) must move the same once mapped back: judged as rbcheck sweep --invariance judges it at Δt = 0.001 s (and at 0.0005, 0.00025 s where it fails there)
 Written by rbcheck 0.1.0 (rbcheck repro newton:featherstone tumbling_box --claim invariance translation 1e+04 m); needs only numpy and newton, warp-lang.
-Exit 1 while the defect holds, 0 when it does not. The code: rbcheck's engines/worlds/newton.py and sweep/repro_measure.py, compacted."""
+Exit 1 while the defect holds, 0 when it does not. The code: rbcheck's engines/worlds/newton.py, sweep/repro_measure.py, compacted."""
 import importlib.metadata, platform, sys, warnings
 import numpy as np
 
