@@ -17,6 +17,8 @@ Conventions, defaults neutralised and what pins them: docs/engine_conventions.md
 """
 from __future__ import annotations
 
+import functools
+import itertools
 import math
 import types
 
@@ -27,6 +29,7 @@ from cross_checks.engines.base import EngineError, Variant
 from cross_checks.engines.loop import host_problem
 from cross_checks.engines.step_floats import bad_floats
 from cross_checks.engines.world import World, WorldEngine
+from reference_sim.simulate import BLOWUP_LIMIT
 
 dart, _IMPORT_ERROR = install.optional_import("dartpy")
 if _IMPORT_ERROR is None:   # the world (what rbcheck repro embeds) imports the engine itself
@@ -129,9 +132,13 @@ class DartBody(dtw.Body):
 
 
 class DartWorld(dtw.Bodies, World):
-    """B bodies, each a :class:`DartBody`, stepped in turn. Raw rows: DART's ``[r, x_W, ω_W, v_W]`` (12). A
-    body whose state blew up is not stepped again (DART would go on, warning on stderr; the loop ends its
-    run)."""
+    """B bodies, each a :class:`DartBody`, stepped in turn by ``World.step(False)``, which keeps the external
+    wrench set before it (World::step's resetCommand; the default, True, clears it). DART holds that wrench
+    in body axes (``setExtForce``/``setExtTorque`` turn a world one at the call), so only the body-axes
+    torques stay right over later steps: a world whose only constant forces are those sets them once
+    (:meth:`applier`); world forces are set before every step, as before. Raw rows: DART's ``[r, x_W, ω_W,
+    v_W]`` (12). A body whose state blew up is parked at rest, its forces cleared, and gets no force from then
+    on (DART would go on from the bad state, warning on stderr; the loop ends its run)."""
 
     exact_start = True
 
@@ -140,11 +147,61 @@ class DartWorld(dtw.Bodies, World):
         dtw.Bodies.__init__(self, [DartBody(r.scenario, dt_s) for r in requests])
         # the forces the harness evaluates (the body-axes torques are DART's own: takes_body_torque)
         self.always = [host_problem(r.scenario.problem, True).forces.state_dependent for r in requests]
+        steps = [functools.partial(b.world.step, False) for b in self.bodies]   # keep the external wrench
+        if len(steps) == 1:
+            self.step = steps[0]   # the engine's call itself: no Python frame per step
+            (pos, vel), = self._reads
+
+            def read():   # read() of one body, its calls bound
+                row = pos().tolist() + vel().tolist()
+                rows = self.last = [row]
+                if not math.hypot(*row) <= BLOWUP_LIMIT:
+                    self._bad(rows)
+                return rows
+            self.read = read
+        else:
+            def step():
+                for one in steps:
+                    one()
+            self.step = step
+
+    def applier(self, f_W, tau_W):
+        """Constant forces: where no body has a world force or torque, the body-axes torques set once, here
+        (``step(False)`` keeps them), and None; otherwise :meth:`apply` before every step (DART would keep
+        a world wrench in body axes, turning with the body)."""
+        if np.any(np.asarray(f_W, dtype=float)) or np.any(np.asarray(tau_W, dtype=float)) or any(self.always):
+            return functools.partial(self.apply, f_W, tau_W)
+        self.apply(f_W, tau_W)
+        return None
 
     def read(self):
-        rows = self.last = [pos().tolist() + vel().tolist() for pos, vel in self._reads]   # Bodies.read's
-        self.live = [not bad_floats(row) for row in rows]   # DART's |r| ≤ π: the packed state's verdict
+        """Every body's state, 12 floats ``[r, x_W, ω_W, v_W]`` (Bodies.read's); a body whose state is
+        non-finite or beyond BLOWUP_LIMIT is parked (:meth:`_bad`)."""
+        rows = self.last = [pos().tolist() + vel().tolist() for pos, vel in self._reads]
+        if not math.hypot(*itertools.chain.from_iterable(rows)) <= BLOWUP_LIMIT:   # (NaN compares False)
+            self._bad(rows)
         return rows
+
+    def _bad(self, rows):
+        """Park each live body whose row is non-finite or beyond BLOWUP_LIMIT (DART's |r| ≤ π: the packed
+        state's verdict)."""
+        for k, row in enumerate(rows):
+            if self.live[k] and bad_floats(row):
+                self._park(k)
+
+    def _park(self, k):
+        """Body k at rest at the origin with no force, never given one again (``live``)."""
+        b = self.bodies[k]
+        self.live[k] = False
+        b.skeleton.setPositions(np.zeros(6))
+        b.skeleton.setVelocities(np.zeros(6))
+        b.node.clearExternalForces()
+
+    def rows(self, reads):
+        """A chunk's reads (per step, B lists of 12 floats) as an array (n, B, 12), in one pass."""
+        n, B = len(reads), len(self.bodies)
+        flat = itertools.chain.from_iterable(itertools.chain.from_iterable(reads))
+        return np.fromiter(flat, dtype=float, count=n * B * 12).reshape(n, B, 12)
 
     def packed(self, raw):
         y = from_dart_state(raw)
