@@ -7,12 +7,13 @@ inertia ``Inertia(m, com_B = 0, I_B)`` (body origin = COM, the scenario's tensor
 the rotation vector of R_WB) and velocities ``[ω_W, v_W]``, both in WORLD axes; the recorded quaternion is
 sign-continuous from the scenario's initial one, recorded as given (the rotation vector's round trip is not
 exact). The step is ``World::step`` (dart/simulation/World.cpp): semi-implicit Euler, explicit gyroscopic
-term, exponential-map rotation — MuJoCo Euler's scheme, DART's only integrator. Forces: the loop's, set
-before every step (DART clears them): the world force at the COM minus the weight ``m g``, then the world
-torque (``setExtForce`` replaces the whole wrench); a torque fixed in body axes is DART's own
-(``takes_body_torque``: ``setExtTorque(τ_B, isLocal=True)``, or added to the world torque, before every step);
-the decay by setting the velocities last read, scaled.
-Divergence: the loop's (DART goes on after a blow-up).
+term, exponential-map rotation — MuJoCo Euler's scheme, DART's only integrator, called as ``step(False)``
+(which keeps the wrench set before it). Forces: the loop's, set before every step (DART would hold a world
+wrench in body axes): the world force at the COM minus the weight ``m g``, then the world torque
+(``setExtForce`` replaces the whole wrench); a torque fixed in body axes is DART's own
+(``takes_body_torque``: ``setExtTorque(τ_B, isLocal=True)`` once where it is a body's only constant force,
+else added to the world torque before every step); the decay by setting the velocities last read, scaled.
+Divergence: the loop's (DART goes on after a blow-up, warning: the world parks a blown-up body at rest).
 Conventions, defaults neutralised and what pins them: docs/engine_conventions.md, "DART 6.x".
 """
 from __future__ import annotations
