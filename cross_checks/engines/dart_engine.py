@@ -148,6 +148,8 @@ class DartWorld(dtw.Bodies, World):
         dtw.Bodies.__init__(self, [DartBody(r.scenario, dt_s) for r in requests])
         # the forces the harness evaluates (the body-axes torques are DART's own: takes_body_torque)
         self.always = [host_problem(r.scenario.problem, True).forces.state_dependent for r in requests]
+        # the free joint's getters: the skeleton's numbers (welded parts have no DOF), ~5 % cheaper a call
+        self._reads = [(b.joint.getPositions, b.joint.getVelocities) for b in self.bodies]
         steps = [functools.partial(b.world.step, False) for b in self.bodies]   # keep the external wrench
         if len(steps) == 1:
             self.step = steps[0]   # the engine's call itself: no Python frame per step
