@@ -601,3 +601,15 @@ def test_the_body_torque_taken_by_dart_moves_the_body_as_the_harness_s_world_tor
         assert np.max(np.abs(own - harness) / scale) <= SAME_SCHEME_REL, sc.name
         if not any(t.frame == "body" for t in sc.problem.forces.torques):
             assert np.array_equal(own, harness), sc.name
+
+
+def test_positions_and_velocities_take_two_calls_no_state_getter_is_bound():
+    """What the single-run floor (docs/speed.md) rests on: dartpy binds no getter of a skeleton's whole state
+    (``getState`` and ``getConfiguration`` return types pybind11 cannot convert), so a driver recording every
+    step makes ``getPositions`` and ``getVelocities`` (the free joint's give the same numbers)."""
+    b = de.DartBody(_tilted(angular_velocity=[1.0, -2.0, 0.5]), 1e-3)
+    for getter in (b.skeleton.getState, b.skeleton.getConfiguration):
+        with pytest.raises(TypeError, match="Unable to convert function return value"):
+            getter()
+    np.testing.assert_array_equal(b.joint.getPositions(), b.skeleton.getPositions())
+    np.testing.assert_array_equal(b.joint.getVelocities(), b.skeleton.getVelocities())

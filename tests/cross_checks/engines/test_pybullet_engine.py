@@ -351,3 +351,19 @@ def test_constant_torques_are_reapplied_by_pybullets_own_call_with_its_arguments
         assert again.func == world.apply
     finally:
         world.close()
+
+
+def test_the_base_state_takes_two_calls_getlinkstate_refuses_the_base():
+    """What the single-run floor (docs/speed.md) rests on: PyBullet has no call giving the base's pose and
+    velocity together — ``getLinkState`` refuses the base's index −1 (``getLinkStates`` gives a tuple
+    holding a NULL for it, not touched here) — so a driver recording every step makes
+    ``getBasePositionAndOrientation`` and ``getBaseVelocity``."""
+    c = p.connect(p.DIRECT)
+    try:
+        b = p.createMultiBody(baseMass=1.0, physicsClientId=c)
+        with pytest.raises(p.error, match="invalid linkIndex"):
+            p.getLinkState(b, -1, 1, 1, physicsClientId=c)
+        assert len(p.getBasePositionAndOrientation(b, physicsClientId=c)) == 2
+        assert len(p.getBaseVelocity(b, physicsClientId=c)) == 2
+    finally:
+        p.disconnect(c)
