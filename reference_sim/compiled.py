@@ -18,6 +18,8 @@ State layout as everywhere: [x_W (3) m, v_W (3) m/s, q_WB (w, x, y, z), w_W (3) 
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from reference_sim.forces import Members
@@ -199,6 +201,14 @@ class ForceEvaluator:
         fm = problem.forces
         self._constant = {False: not fm.state_dependent, True: not fm.state_dependent and not fm.has_decay}
         self._known: dict = {}
+        # where only torques fixed in body axes depend on the state (no spring, point force or drag; at a
+        # stage, no decay): the kernel's few operations in plain floats (a call of the compiled kernel with
+        # its 14 arguments costs more than the arithmetic): the constant force, the world torque and τ_B, once
+        sc, _, _, mg, fW, tW, tB, springs, wp, bp = self.params[:10]
+        rotating = springs.shape[1] == 0 and wp.shape[1] == 0 and bp.shape[1] == 0 and sc[0, 2] == 0.0
+        self._rotating = {False: bool(rotating), True: bool(rotating and sc[0, 5] == 0.0 and sc[0, 6] == 0.0)}
+        self._f = tuple(float(mg[0, k] + fW[0, k]) for k in range(3))
+        self._tW, self._tB = tuple(float(t) for t in tW[0]), tuple(float(t) for t in tB[0])
 
     def force_torque(self, y, stage: bool = False) -> tuple:
         """World force at the COM (N) and world torque about it (N m), 6 floats, at state ``y`` (13 numbers),
@@ -209,7 +219,32 @@ class ForceEvaluator:
             if known is None:
                 known = self._known[stage] = self._evaluate(y, stage)
             return known
+        if self._rotating[stage]:
+            floats = y if isinstance(y, (list, tuple)) else np.asarray(y, dtype=float).tolist()
+            return self._body_torque(floats, stage)
         return self._evaluate(y, stage)
+
+    def _body_torque(self, y, stage: bool) -> tuple:
+        """``_compiled_kernels.force_torque_at`` where only body-axes torques depend on the state, operation
+        for operation in plain floats (its IEEE results): the rotation of q/|q| (``_rot``), ``R τ_B``
+        (``_mv``) added to the world torque; the force constant. A zero quaternion (a division by zero, which
+        Python floats raise on) goes to the kernel."""
+        qw, qx, qy, qz = y[6], y[7], y[8], y[9]
+        n = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+        if n == 0.0:
+            return self._evaluate(y, stage)
+        qw, qx, qy, qz = qw / n, qx / n, qy / n, qz / n
+        fx, fy, fz = self._f
+        tx, ty, tz = self._tW
+        a0, a1, a2 = self._tB
+        if a0 != 0.0 or a1 != 0.0 or a2 != 0.0:
+            tx = tx + ((1.0 - 2.0 * (qy * qy + qz * qz)) * a0 + 2.0 * (qx * qy - qw * qz) * a1
+                       + 2.0 * (qx * qz + qw * qy) * a2)
+            ty = ty + (2.0 * (qx * qy + qw * qz) * a0 + (1.0 - 2.0 * (qx * qx + qz * qz)) * a1
+                       + 2.0 * (qy * qz - qw * qx) * a2)
+            tz = tz + (2.0 * (qx * qz - qw * qy) * a0 + 2.0 * (qy * qz + qw * qx) * a1
+                       + (1.0 - 2.0 * (qx * qx + qy * qy)) * a2)
+        return fx, fy, fz, tx, ty, tz
 
     def _evaluate(self, y, stage: bool) -> tuple:
         if self._at is not None:

@@ -7,16 +7,19 @@ inertia ``Inertia(m, com_B = 0, I_B)`` (body origin = COM, the scenario's tensor
 the rotation vector of R_WB) and velocities ``[ω_W, v_W]``, both in WORLD axes; the recorded quaternion is
 sign-continuous from the scenario's initial one, recorded as given (the rotation vector's round trip is not
 exact). The step is ``World::step`` (dart/simulation/World.cpp): semi-implicit Euler, explicit gyroscopic
-term, exponential-map rotation — MuJoCo Euler's scheme, DART's only integrator. Forces: the loop's, set
-before every step (DART clears them): the world force at the COM minus the weight ``m g``, then the world
-torque (``setExtForce`` replaces the whole wrench); a torque fixed in body axes is DART's own
-(``takes_body_torque``: ``setExtTorque(τ_B, isLocal=True)``, or added to the world torque, before every step);
-the decay by setting the velocities last read, scaled.
-Divergence: the loop's (DART goes on after a blow-up).
+term, exponential-map rotation — MuJoCo Euler's scheme, DART's only integrator, called as ``step(False)``
+(which keeps the wrench set before it). Forces: the loop's, set before every step (DART would hold a world
+wrench in body axes): the world force at the COM minus the weight ``m g``, then the world torque
+(``setExtForce`` replaces the whole wrench); a torque fixed in body axes is DART's own
+(``takes_body_torque``: ``setExtTorque(τ_B, isLocal=True)`` once where it is a body's only constant force,
+else added to the world torque before every step); the decay by setting the velocities last read, scaled.
+Divergence: the loop's (DART goes on after a blow-up, warning: the world parks a blown-up body at rest).
 Conventions, defaults neutralised and what pins them: docs/engine_conventions.md, "DART 6.x".
 """
 from __future__ import annotations
 
+import functools
+import itertools
 import math
 import types
 
@@ -27,6 +30,7 @@ from cross_checks.engines.base import EngineError, Variant
 from cross_checks.engines.loop import host_problem
 from cross_checks.engines.step_floats import bad_floats
 from cross_checks.engines.world import World, WorldEngine
+from reference_sim.simulate import BLOWUP_LIMIT
 
 dart, _IMPORT_ERROR = install.optional_import("dartpy")
 if _IMPORT_ERROR is None:   # the world (what rbcheck repro embeds) imports the engine itself
@@ -105,9 +109,13 @@ class DartBody(dtw.FormBody):
 
 
 class DartWorld(dtw.FormBodies, World):
-    """B bodies, each a :class:`DartBody`, stepped in turn. Raw rows: DART's ``[r, x_W, ω_W, v_W]`` (12). A
-    body whose state blew up is not stepped again (DART would go on, warning on stderr; the loop ends its
-    run)."""
+    """B bodies, each a :class:`DartBody`, stepped in turn by ``World.step(False)``, which keeps the external
+    wrench set before it (World::step's resetCommand; the default, True, clears it). DART holds that wrench
+    in body axes (``setExtForce``/``setExtTorque`` turn a world one at the call), so only the body-axes
+    torques stay right over later steps: a world whose only constant forces are those sets them once
+    (:meth:`applier`); world forces are set before every step, as before. Raw rows: DART's ``[r, x_W, ω_W,
+    v_W]`` (12). A body whose state blew up is parked at rest, its forces cleared, and gets no force from then
+    on (DART would go on from the bad state, warning on stderr; the loop ends its run)."""
 
     exact_start = True
 
@@ -116,11 +124,63 @@ class DartWorld(dtw.FormBodies, World):
         dtw.FormBodies.__init__(self, [DartBody(r.scenario, dt_s) for r in requests])
         # the forces the harness evaluates (the body-axes torques are DART's own: takes_body_torque)
         self.always = [host_problem(r.scenario.problem, True).forces.state_dependent for r in requests]
+        # the free joint's getters: the skeleton's numbers (welded parts have no DOF), ~5 % cheaper a call
+        self._reads = [(b.joint.getPositions, b.joint.getVelocities) for b in self.bodies]
+        steps = [functools.partial(b.world.step, False) for b in self.bodies]   # keep the external wrench
+        if len(steps) == 1:
+            self.step = steps[0]   # the engine's call itself: no Python frame per step
+            (pos, vel), = self._reads
+
+            def read():   # read() of one body, its calls bound
+                row = pos().tolist() + vel().tolist()
+                rows = self.last = [row]
+                if not math.hypot(*row) <= BLOWUP_LIMIT:
+                    self._bad(rows)
+                return rows
+            self.read = read
+        else:
+            def step():
+                for one in steps:
+                    one()
+            self.step = step
+
+    def applier(self, f_W, tau_W):
+        """Constant forces: where no body has a world force or torque, the body-axes torques set once, here
+        (``step(False)`` keeps them), and None; otherwise :meth:`apply` before every step (DART would keep
+        a world wrench in body axes, turning with the body)."""
+        if np.any(np.asarray(f_W, dtype=float)) or np.any(np.asarray(tau_W, dtype=float)) or any(self.always):
+            return functools.partial(self.apply, f_W, tau_W)
+        self.apply(f_W, tau_W)
+        return None
 
     def read(self):
-        rows = self.last = [pos().tolist() + vel().tolist() for pos, vel in self._reads]   # Bodies.read's
-        self.live = [not bad_floats(row) for row in rows]   # DART's |r| ≤ π: the packed state's verdict
+        """Every body's state, 12 floats ``[r, x_W, ω_W, v_W]`` (Bodies.read's); a body whose state is
+        non-finite or beyond BLOWUP_LIMIT is parked (:meth:`_bad`)."""
+        rows = self.last = [pos().tolist() + vel().tolist() for pos, vel in self._reads]
+        if not math.hypot(*itertools.chain.from_iterable(rows)) <= BLOWUP_LIMIT:   # (NaN compares False)
+            self._bad(rows)
         return rows
+
+    def _bad(self, rows):
+        """Park each live body whose row is non-finite or beyond BLOWUP_LIMIT (DART's |r| ≤ π: the packed
+        state's verdict)."""
+        for k, row in enumerate(rows):
+            if self.live[k] and bad_floats(row):
+                self._park(k)
+
+    def _park(self, k):
+        """Body k at rest at the origin with no force, never given one again (``live``)."""
+        b = self.bodies[k]
+        self.live[k] = False
+        b.skeleton.setPositions(np.zeros(6))
+        b.skeleton.setVelocities(np.zeros(6))
+        b.node.clearExternalForces()
+
+    def rows(self, reads):
+        """A chunk's reads (per step, B lists of 12 floats) as an array (n, B, 12), in one pass."""
+        n, B = len(reads), len(self.bodies)
+        flat = itertools.chain.from_iterable(itertools.chain.from_iterable(reads))
+        return np.fromiter(flat, dtype=float, count=n * B * 12).reshape(n, B, 12)
 
     def packed_row(self, raw):
         if any(b.com_B is not None for b in self.bodies):

@@ -34,6 +34,7 @@ An engine that raises, returns the wrong shape, or returns a non-finite state wi
 from __future__ import annotations
 
 import dataclasses
+import gc
 import time
 
 import numpy as np
@@ -107,13 +108,7 @@ class Harness:
             w = np.array([self.ft[i](row) for i, row in zip(bodies.tolist(), np.asarray(y).tolist())])
             g_v, g_w, weight = self.g_v[bodies], self.g_w[bodies], self.weight[bodies]
         elif self.rows is None:
-            # the same IEEE operations as the array path below (γ_v f − w, γ_ω τ), in plain floats: a few
-            # bodies' arrays cost more than the engine's step
-            f_rows, tau_rows = [], []
-            for (ft, gv, gw, (wx, wy, wz)), row in zip(self._floats, y):
-                fx, fy, fz, tx, ty, tz = ft(row)
-                f_rows.append((gv * fx - wx, gv * fy - wy, gv * fz - wz))
-                tau_rows.append((gw * tx, gw * ty, gw * tz))
+            f_rows, tau_rows = self.wrench_rows(y)
             return np.array(f_rows), np.array(tau_rows)
         else:   # many bodies: the same operations in place, on the compiled call's own (B, 6) array
             w = self.rows.force_torque(y)
@@ -125,6 +120,19 @@ class Harness:
         f = w[:, 0:3] * g_v[:, None] - weight
         tau = w[:, 3:6] * g_w[:, None]
         return f, tau
+
+
+    def wrench_rows(self, y) -> tuple:
+        """:meth:`wrench` of a few bodies (no compiled call for all: ``rows`` None) as B rows of 3 plain
+        floats each: the same IEEE operations as the array path (γ_v f − w, γ_ω τ), without the arrays (a few
+        bodies' arrays cost more than the engine's step), for a world whose ``apply`` takes such rows
+        (``World.float_rows``)."""
+        f_rows, tau_rows = [], []
+        for (ft, gv, gw, (wx, wy, wz)), row in zip(self._floats, y):
+            fx, fy, fz, tx, ty, tz = ft(row)
+            f_rows.append((gv * fx - wx, gv * fy - wy, gv * fz - wz))
+            tau_rows.append((gw * tx, gw * ty, gw * tz))
+        return f_rows, tau_rows
 
 
 def _words(engine, variant: str, requests) -> str:
@@ -227,8 +235,8 @@ def _run_world(engine, variant: str, reqs) -> list:
                 y = _checked(engine, variant, reqs, world.packed(rec), B, "packed states")
                 _check(engine, variant, reqs, world, rec, 1, n_max + 1, ends, stopped, y[1:])
             else:
-                engine_s = _steps(engine, variant, reqs, world, harness, rec, n_max, f, tau, ends, stopped,
-                                  per_stage)
+                engine_s, y = _steps(engine, variant, reqs, world, harness, rec, n_max, f, tau, ends,
+                                     stopped, per_stage)
             engine_s -= float(world.host_s)
             if y is None:
                 y = _checked(engine, variant, reqs, world.packed(rec), B, "packed states")
@@ -255,46 +263,79 @@ def _run_world(engine, variant: str, reqs) -> list:
     return runs
 
 
-def _steps(engine, variant, reqs, world, harness, rec, n_max, f, tau, ends, stopped, per_stage) -> float:
-    """The per-step loop (module docstring) into ``rec``; returns the seconds inside ``world.step()``. The
+def _steps(engine, variant, reqs, world, harness, rec, n_max, f, tau, ends, stopped, per_stage) -> tuple:
+    """The per-step loop (module docstring) into ``rec``; returns the seconds inside ``world.step()`` and the
+    packed states (n_max + 1, B, 13), each chunk's as its divergence check converted them (rows after the
+    last chunk, which no run reaches, NaN). The
     world's methods are bound once; a chunk's reads are kept as the world returns them and written into
-    ``rec`` at the chunk's end, in one conversion (the next step's forces use the last read as it is:
-    ``World.packed_row`` of it)."""
+    ``rec`` at the chunk's end, in one conversion (``World.rows``; the next step's forces use the last read
+    as it is: ``World.packed_row`` of it). Constant forces that the engine clears after each step are
+    re-applied by one call the world makes once for them (``World.applier``), and a step with nothing to
+    apply or evaluate is the engine's step, timed, and the read only."""
     engine_s = 0.0
     perf = time.perf_counter
     step, read, apply, decay, packed_row = world.step, world.read, world.apply, world.decay, world.packed_row
-    wrench = harness.wrench
+    rows_of = world.rows
+    wrench = harness.wrench_rows if world.float_rows and harness.rows is None else harness.wrench
     state_dependent, decays = harness.state_dependent, harness.decays
     kept = engine.keeps_forces and not state_dependent
     if not per_stage and kept:
         apply(f, tau)
     forces_each_step = not per_stage and (state_dependent or decays or not kept)
+    again = None   # constant forces the engine clears: re-applied by one call per step (None: nothing to)
+    if forces_each_step and not state_dependent and not decays:
+        forces_each_step = False
+        again = world.applier(f, tau)
     last = None   # the last read (none yet at step 1: the forces of step 1 are the requested state's)
     start = 1
+    y = np.empty((n_max + 1, len(reqs), 13))
+    y[0] = _checked(engine, variant, reqs, world.packed(rec[0:1]), len(reqs), "first state")[0]
+    collecting = gc.isenabled()
     while start <= n_max:
         stop = min(start + engine.chunk, n_max + 1)
         rows = []
         keep = rows.append
-        for _ in range(start, stop):
+        # the steps make no reference cycles: no collector pass over a chunk's reads, collected after it
+        gc.disable()
+        try:
             if forces_each_step:
-                if state_dependent and last is not None:
-                    f, tau = wrench(packed_row(last))
-                if decays:
-                    decay(harness.g_v, harness.g_w)
-                if not kept:
-                    apply(f, tau)
-            t0 = perf()
-            step()
-            engine_s += perf() - t0
-            last = read()
-            keep(last)
-        rec[start:stop] = rows
-        _check(engine, variant, reqs, world, rec, start, stop, ends, stopped)
+                for _ in range(start, stop):
+                    if state_dependent and last is not None:
+                        f, tau = wrench(packed_row(last))
+                    if decays:
+                        decay(harness.g_v, harness.g_w)
+                    if not kept:
+                        apply(f, tau)
+                    t0 = perf()
+                    step()
+                    engine_s += perf() - t0
+                    last = read()
+                    keep(last)
+            elif again is not None:
+                for _ in range(start, stop):
+                    again()
+                    t0 = perf()
+                    step()
+                    engine_s += perf() - t0
+                    keep(read())
+            else:
+                for _ in range(start, stop):
+                    t0 = perf()
+                    step()
+                    engine_s += perf() - t0
+                    keep(read())
+            rec[start:stop] = rows_of(rows)
+            del rows, keep
+        finally:
+            if collecting:
+                gc.enable()
+        y[start:stop] = _check(engine, variant, reqs, world, rec, start, stop, ends, stopped)
         if len(stopped) == len(reqs) or all(i in stopped or ends[i] < stop for i in range(len(reqs))):
             rec[stop:] = np.nan
+            y[stop:] = np.nan
             break
         start = stop
-    return engine_s
+    return engine_s, y
 
 
 def _body_torque(world, harness, per_stage: bool) -> None:
@@ -306,11 +347,11 @@ def _body_torque(world, harness, per_stage: bool) -> None:
         world.apply_body_torque(tau_B if per_stage else tau_B * harness.g_w[:, None])
 
 
-def _check(engine, variant, reqs, world, rec, start: int, stop: int, ends, stopped: dict, y=None) -> None:
+def _check(engine, variant, reqs, world, rec, start: int, stop: int, ends, stopped: dict, y=None):
     """Bodies whose recorded states of steps ``start..stop-1`` (within their own runs) blew up, or whose
     engine warned there, into ``stopped`` as ``(first bad step, words)``: the words of everything found in
     the chunk (``World.first_cause_only``: of what was found at that step only). ``y``: those steps' packed
-    states when already converted."""
+    states when already converted. Returns those packed states."""
     if y is None:
         y = _checked(engine, variant, reqs, world.packed(rec[start:stop]), len(reqs), "states")
     bad = bad_rows(y)
@@ -334,6 +375,7 @@ def _check(engine, variant, reqs, world, rec, start: int, stop: int, ends, stopp
             first = min(c[0] for c in candidates)
             stopped[i] = (first, "; ".join(c[1] for c in sorted(candidates)
                                            if c[0] == first or not world.first_cause_only))
+    return y
 
 
 def _same_side(y) -> np.ndarray:
@@ -379,7 +421,7 @@ def one_step(engine, scenario, variant: str, dt_s: float, y_start) -> np.ndarray
                     world.set_state(y_dec)
                     world.apply(*harness.wrench(rows))
                 world.step()
-                raw1 = np.asarray(world.read(), dtype=float)[None]
+                raw1 = world.rows([world.read()])
             y1 = _checked(engine, variant, reqs, world.packed(raw1), len(rows), "states")[0]
             for i, _, _ in world.warnings:   # a step the engine reported failed has no state
                 y1[i] = np.nan

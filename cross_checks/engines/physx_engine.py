@@ -13,7 +13,11 @@ from __future__ import annotations
 import dataclasses
 import functools
 import importlib.util
+import itertools
+import math
+import operator
 import re
+import struct
 import threading
 import warnings
 from pathlib import Path
@@ -23,6 +27,7 @@ import numpy as np
 from cross_checks.engines import install
 from cross_checks.engines.base import EngineError, Traits, Variant
 from cross_checks.engines.install import installed_version
+from cross_checks.engines.step_floats import bad_floats
 from cross_checks.engines.world import World, WorldEngine
 from reference_sim.quaternion import quat_from_matrix
 from reference_sim.simulate import BLOWUP_LIMIT
@@ -132,24 +137,76 @@ def _world_class():
                                           f"{type(exc).__name__}: {exc}") from None
                 self.always = np.array([r.scenario.problem.forces.state_dependent for r in requests],
                                        dtype=bool)
+                # one pack() as plain floats, and each body's packed row of it (PACK_TO_PACKED) in one call
+                self._unpack = struct.Struct(f"{13 * len(self.comps)}f").unpack
+                self._packed_of = [operator.itemgetter(*(13 * k + W.PACK_TO_PACKED).tolist())
+                                   for k in range(len(self.comps))]
+
+            float_rows = True   # apply takes the harness's rows of plain floats
 
             def first(self, y0):   # the scenario's own first row, not its float32 round trip
                 return y0
 
+            def set_state(self, y):
+                W.Bodies.set_state(self, y)
+                self.last = self._unpack(self.system.pack())
+
             def read(self):
-                """The packed rows; a body whose state is non-finite or beyond BLOWUP_LIMIT is parked at rest
-                once read (so that PhysX never steps a NaN), with no force and no decay from then on."""
-                rows = W.Bodies.read(self)
-                raw = self.raw
-                fine = np.abs(raw).max() <= BLOWUP_LIMIT          # (NaN compares False)
-                if not fine:
-                    for k in np.flatnonzero(self.alive & ~(np.abs(raw).max(axis=1) <= BLOWUP_LIMIT)):
-                        self.alive[k] = False
-                        self._put(k, _REST)
+                """Every body's packed row, 13 plain floats (float32 values), from one ``pack()``; a body
+                whose state is non-finite or beyond BLOWUP_LIMIT is parked at rest once read (so that PhysX
+                never steps a NaN), with no force and no decay from then on."""
+                vals = self.last = self._unpack(self.system.pack())
+                rows = [g(vals) for g in self._packed_of]
+                if not math.hypot(*vals) <= BLOWUP_LIMIT:   # (NaN compares False) any body's state may be bad
+                    for k, row in enumerate(rows):
+                        if self.alive[k] and bad_floats(row):
+                            self.alive[k] = False
+                            self._put(k, _REST)
                 return rows
+
+            def rows(self, reads):
+                n, B = len(reads), len(self.comps)
+                flat = itertools.chain.from_iterable(itertools.chain.from_iterable(reads))
+                return np.fromiter(flat, dtype=float, count=n * B * 13).reshape(n, B, 13)
+
+            def packed_row(self, raw):   # a read is packed rows of plain floats already
+                return raw
+
+            def decay(self, g_v, g_w):   # the float32 velocities last read (Bodies.decay's raw), scaled
+                self.raw = np.array(self.last, dtype=np.float32).reshape(len(self.comps), 13)
+                W.Bodies.decay(self, g_v, g_w)
+
+            def apply(self, f_W, tau_W):
+                """:meth:`Bodies.apply` of (B, 3) arrays, or of the harness's rows of plain floats as they
+                are."""
+                alive, always, add = self.alive, self.always, self._add
+                for k, f, t in zip(range(len(add)), _float_rows(f_W), _float_rows(tau_W)):
+                    if alive[k] and (always[k] or f[0] or f[1] or f[2] or t[0] or t[1] or t[2]):
+                        add[k](f, t)
+
+            def applier(self, f_W, tau_W):
+                """The constant forces' ``add_force_torque`` calls with their arguments made once (per step
+                only the bodies' ``alive`` checked), or None when no body gets any."""
+                alive, always, add = self.alive, self.always, self._add
+                calls = [(k, add[k], f, t) for k, f, t in zip(range(len(add)), _float_rows(f_W),
+                                                               _float_rows(tau_W))
+                         if always[k] or f[0] or f[1] or f[2] or t[0] or t[1] or t[2]]
+                if not calls:
+                    return None
+
+                def again():
+                    for k, add_k, f, t in calls:
+                        if alive[k]:
+                            add_k(f, t)
+                return again
 
         _Bodies = PhysxWorld
     return _Bodies
+
+
+def _float_rows(a) -> list:
+    """(B, 3) forces as B rows of 3 plain floats: an array's, or the harness's rows as they are."""
+    return a.tolist() if isinstance(a, np.ndarray) else a
 
 
 def PhysxWorld(requests, variant: str, dt_s: float):

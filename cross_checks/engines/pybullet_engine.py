@@ -14,6 +14,8 @@ what pins them: docs/engine_conventions.md, "PyBullet 3.2.7".
 from __future__ import annotations
 
 import dataclasses
+import functools
+import itertools
 import os
 import threading
 import types
@@ -122,6 +124,44 @@ class BulletWorld(pbw.Bodies, World):
                 self._add(r.scenario)
         except p.error as exc:
             raise EngineError(f"PyBullet rejected the model of scenario {r.scenario.name!r}: {exc}") from None
+        self.step = functools.partial(p.stepSimulation, self.c)   # Bodies.step's call, no Python frame
+        if len(self.bodies) == 1:   # Bodies.read of one body, its calls bound
+            b, c, pose, vel = self.bodies[0], self.c, p.getBasePositionAndOrientation, p.getBaseVelocity
+
+            def read():
+                ps, orn = pose(b, c)
+                lin, ang = vel(b, c)
+                rows = self.last = [ps + lin + orn + ang]
+                return rows
+            self.read = read
+
+    def applier(self, f_W, tau_W):
+        """:meth:`apply` of constant forces as the engine's own calls with their arguments bound (one
+        ``applyExternalTorque`` per torque: no Python frame per step when there is one), or None when there
+        is nothing to apply. World forces at the COM go through :meth:`apply` (their point is the COM's last
+        read position)."""
+        f_rows = np.asarray(f_W, dtype=float).tolist()
+        if any(f[0] != 0.0 or f[1] != 0.0 or f[2] != 0.0 for f in f_rows):
+            return functools.partial(self.apply, f_W, tau_W)
+        calls = []
+        for b, tau, tau_P in zip(self.bodies, np.asarray(tau_W, dtype=float).tolist(), self.torque_P):
+            if tau[0] != 0.0 or tau[1] != 0.0 or tau[2] != 0.0:   # apply's calls, in its order
+                calls.append(functools.partial(p.applyExternalTorque, b, -1, tau, p.WORLD_FRAME, self.c))
+            if tau_P is not None:
+                calls.append(functools.partial(p.applyExternalTorque, b, -1, tau_P, p.LINK_FRAME, self.c))
+        if len(calls) < 2:
+            return calls[0] if calls else None
+
+        def again():
+            for call in calls:
+                call()
+        return again
+
+    def rows(self, reads):
+        """A chunk's reads (per step, B tuples of 13 floats) as an array (n, B, 13), in one pass."""
+        n, B = len(reads), len(self.bodies)
+        flat = itertools.chain.from_iterable(itertools.chain.from_iterable(reads))
+        return np.fromiter(flat, dtype=float, count=n * B * 13).reshape(n, B, 13)
 
     def _add(self, scenario):
         entry = body_entry(scenario)

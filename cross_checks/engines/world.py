@@ -12,15 +12,24 @@ The world's contract (states packed as in reference_sim.state: ``[x_W (m), v_W (
 
 * ``set_state(y)``: put body i at ``y[i]`` (B, 13).
 * ``apply(f_W, tau_W)``: the world force at the COM (N) and world torque (N m), (B, 3) each, for the next
-  step (the weight already taken off when the engine applies gravity itself).
+  step (the weight already taken off when the engine applies gravity itself); with ``float_rows`` True,
+  also B rows of 3 plain floats each (what the loop then gives it per step, without building arrays).
 * ``step()``: one step of every body. Only this (and ``rollout``) is timed as the engine's own work.
-* ``read()``: the bodies' current states in the engine's own layout (B, R) (a cheap copy), and
-  ``packed(raw)``: such rows (..., B, R) as packed states (..., B, 13) (identity by default);
+* ``read()``: the bodies' current states in the engine's own layout (B, R) (a cheap copy; or in a form of the
+  world's own that its ``rows`` turns into such rows), and ``packed(raw)``: such rows (..., B, R) as packed
+  states (..., B, 13) (identity by default);
 * optional ``first(y0)``: the raw rows recorded as step 0 after ``set_state(y0)`` (by default what ``read()``
   gives; a float32 engine gives ``y0`` itself, so that a run starts at the scenario's state exactly and its
   quaternion sign follows the scenario's);
 * optional ``decay(g_v, g_w)``: scale every body's velocities by (B,) factors before a step (by default the
   packed state is read, scaled and set again);
+* optional ``applier(f_W, tau_W)``: a callable of no argument that applies those constant forces (and the
+  body-axes torques of ``apply_body_torque``) for the next step, as ``apply(f_W, tau_W)`` does, or None when
+  that applies nothing: what the loop calls before every step of an engine that clears forces (by default
+  ``apply`` itself, the arrays bound);
+* optional ``rows(reads)``: a chunk's reads (a list of what ``read()`` gave, one per step) as an array (n, B,
+  R) (by default NumPy's conversion of the list; a world whose reads are plain floats may flatten them in
+  one pass);
 * optional ``rollout(n_steps, harness)``: ``n_steps`` steps with the applied forces held, the raw states
   (n_steps, B, R) after each, in the engine's compiled loop (used when nothing changes between steps: no
   state-dependent force, no decay); with ``rollout_forces`` True, a rollout that takes every kind of force
@@ -53,6 +62,7 @@ engine of a few dozen lines is in docs/engines.md.
 from __future__ import annotations
 
 import abc
+import functools
 
 import numpy as np
 
@@ -67,6 +77,7 @@ class World:
     per-stage forces and nothing to close."""
 
     per_stage = False
+    float_rows = False
     rollout_takes_all_forces = False
     host_s = 0.0
     rollout_forces = False
@@ -92,7 +103,7 @@ class World:
 
     def first(self, y0):
         """The raw rows (B, R) recorded as step 0 after ``set_state(y0)``: what :meth:`read` gives."""
-        return self.read()
+        return self.rows([self.read()])[0]
 
     def packed(self, raw) -> np.ndarray:
         return np.asarray(raw, dtype=float)
@@ -100,10 +111,19 @@ class World:
     def packed_row(self, raw) -> list:
         """One read's raw rows (B, R) as packed states (B rows of 13 numbers): :meth:`packed` of them, bit for
         bit; a world may give it in plain floats, for the loop's per-step forces."""
-        return self.packed(np.asarray(raw, dtype=float)[None])[0]
+        return self.packed(self.rows([raw]))[0]
+
+    def applier(self, f_W, tau_W):
+        """A callable of no argument applying the constant forces ``f_W``, ``tau_W`` (B, 3) for the next step
+        (and the body-axes torques of ``apply_body_torque``), or None when that applies nothing."""
+        return functools.partial(self.apply, f_W, tau_W)
+
+    def rows(self, reads):
+        """A chunk's reads (a list of ``read()``'s results, one per step) as raw rows (n, B, R)."""
+        return np.asarray(reads, dtype=float)
 
     def decay(self, g_v, g_w) -> None:
-        y = self.packed(self.read()).copy()
+        y = self.packed(self.rows([self.read()]))[0].copy()
         y[:, 3:6] *= np.asarray(g_v, dtype=float)[:, None]
         y[:, 10:13] *= np.asarray(g_w, dtype=float)[:, None]
         self.set_state(y)

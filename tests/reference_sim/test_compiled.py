@@ -398,6 +398,47 @@ def test_the_compiled_forces_are_the_definitions(monkeypatch):
             assert fast.force_torque(row, stage) == slow.force_torque(row, stage)
 
 
+def _torques_only(decay, world_torque, gravity):
+    """A full-tensor body whose only state-dependent forces are torques fixed in body axes (two), beside a
+    world torque and gravity when asked, and both decays at ``decay``."""
+    fm = ForceModel(gravity_W=np.array(gravity), velocity_decay=decay, angular_velocity_decay=decay,
+                    decay_dt_s=2e-3,
+                    torques=(Torque(np.array([0.3, -0.1, 0.2]), "body"),
+                             Torque(np.array([0.0, 0.05, 0.0]), "body"),
+                             *((Torque(np.array(world_torque), "world"),) if world_torque else ())))
+    body = RigidBody(1.5, [[0.05, 0.01, 0.0], [0.01, 0.06, 0.005], [0.0, 0.005, 0.08]])
+    init = State(np.zeros(3), np.zeros(3), quat_normalize([1.0, 0.2, -0.1, 0.3]), np.array([0.5, -1.0, 2.0]))
+    return Problem(body, fm, init)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(st.floats(-1e3, 1e3), min_size=13, max_size=13), st.sampled_from([1.0, 0.99]),
+       st.sampled_from([None, [0.1, 0.0, -0.3]]), st.sampled_from([[0.0, 0.0, -9.81], [0.0, 0.0, 0.0]]))
+def test_body_axes_torques_alone_are_evaluated_in_plain_floats_as_the_kernel_does(y, decay, tau_W, g):
+    """Where only body-axes torques depend on the state (no spring, point force or drag), ForceEvaluator
+    gives the compiled kernel's six numbers bit for bit without calling it (its 14-argument dispatch costs
+    more than the arithmetic), at any state (a quaternion of any norm, lists or arrays); at a stage with
+    decay, and at a zero quaternion, it calls the kernel."""
+    problem = _torques_only(decay, tau_W, g)
+    ev = compiled.ForceEvaluator(problem)
+    y = np.array(y)
+    want = {stage: ev._at(y, stage, *ev.params) for stage in (False, True)}
+
+    def no_kernel(*args):
+        raise AssertionError("the compiled kernel (or the definition in its place) was called")
+    ev._evaluate = no_kernel
+    for stage in (False, True):
+        if (stage and decay != 1.0) or not np.any(y[6:10]):
+            continue
+        assert ev.force_torque(y.tolist(), stage) == tuple(want[stage])
+        assert ev.force_torque(y, stage) == tuple(want[stage])
+    del ev._evaluate
+    if decay != 1.0:
+        assert ev.force_torque(y, True) == tuple(want[True])
+    zero = np.r_[y[:6], 0.0, 0.0, 0.0, 0.0, y[10:]]
+    assert np.array_equal(ev.force_torque(zero), ev._at(zero, False, *ev.params), equal_nan=True)
+
+
 def test_the_forces_of_many_bodies_at_once_are_each_bodys_own_bit_for_bit():
     """compiled.ForceRows (one compiled call for N bodies of different problems: padded spring and point
     arrays) gives each body exactly ForceEvaluator's numbers at its own state."""

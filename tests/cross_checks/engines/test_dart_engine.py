@@ -237,6 +237,97 @@ def test_external_forces_are_cleared_after_each_step():
     np.testing.assert_array_equal(B.skeleton.getVelocities()[3:6], v1[3:6])   # no force in the second step
 
 
+def test_step_false_keeps_a_local_torque_and_step_clears_it():
+    """Pins what the world's ``step(False)`` relies on (World::step's resetCommand): the wrench set before it
+    stays set after it, so a body-axes torque set once moves a spinning full-tensor body exactly as the same
+    torque set before every ``step()`` (which clears it) does, bit for bit."""
+    sc = _tilted(angular_velocity=[1.0, -2.0, 0.5])
+    tau_B = np.array([0.3, -0.2, 0.5])
+    kept, reset = de.DartBody(sc, 1e-3), de.DartBody(sc, 1e-3)
+    for b in (kept, reset):
+        b.set_state(sc.problem.initial_packed())
+    kept.node.setExtTorque(tau_B, True)
+    for _ in range(200):
+        kept.world.step(False)
+        reset.node.setExtTorque(tau_B, True)
+        reset.world.step()
+    assert np.any(kept.node.getExternalForceGlobal() != 0.0)
+    np.testing.assert_array_equal(reset.node.getExternalForceGlobal(), np.zeros(6))
+    np.testing.assert_array_equal(np.r_[kept.skeleton.getPositions(), kept.skeleton.getVelocities()],
+                                  np.r_[reset.skeleton.getPositions(), reset.skeleton.getVelocities()])
+    kept.world.step()
+    np.testing.assert_array_equal(kept.node.getExternalForceGlobal(), np.zeros(6))
+
+
+def test_a_wrench_set_in_world_axes_is_held_in_body_axes_so_the_world_sets_it_before_every_step():
+    """DART turns a world torque into body axes when it is set: kept over ``step(False)``s it turns with the
+    body (no longer the world torque asked for), which is why the world sets world forces and torques before
+    every step and keeps only the body-axes torques; its runs with a world torque are those of the wrench set
+    before every ``step()``, bit for bit."""
+    sc = _tilted(angular_velocity=[1.0, -2.0, 0.5])
+    tau_W = np.array([0.1, 0.0, -0.2])
+    b = de.DartBody(sc, 1e-3)
+    b.set_state(sc.problem.initial_packed())
+    b.node.setExtTorque(tau_W, False)
+    np.testing.assert_allclose(b.node.getExternalForceGlobal()[0:3], tau_W, rtol=0, atol=1e-15)
+    for _ in range(300):
+        b.world.step(False)
+    assert np.max(np.abs(b.node.getExternalForceGlobal()[0:3] - tau_W)) > 0.01
+    fm = "[[forces.torque]]\ntorque = [0.1, 0.0, -0.2]\nframe = \"world\"\n[[forces.torque]]\n" \
+         "torque = [0.3, -0.2, 0.5]\nframe = \"body\""
+    sc = _tilted(forces=fm, angular_velocity=[1.0, -2.0, 0.5])
+    run = de.simulate(sc, VARIANT, 1e-3, 300)
+    hand = de.DartBody(sc, 1e-3)
+    hand.set_state(sc.problem.initial_packed())
+    rows = []
+    for _ in range(300):
+        hand.apply(np.zeros(3), tau_W)
+        hand.node.addExtTorque(np.array([0.3, -0.2, 0.5]), True)
+        hand.world.step()
+        rows.append(np.r_[hand.skeleton.getPositions(), hand.skeleton.getVelocities()])
+    np.testing.assert_array_equal(run.y[1:, 0:3], de.from_dart_state(np.array(rows))[:, 0:3])
+    np.testing.assert_array_equal(run.y[1:, 10:13], de.from_dart_state(np.array(rows))[:, 10:13])
+
+
+def test_a_lone_body_is_stepped_with_darts_own_call_and_its_torque_set_once(monkeypatch):
+    """The world of one body steps with ``World.step(False)`` itself (no Python frame per step), and a
+    body-axes torque alone is set once per run, not before every step."""
+    import functools
+
+    from cross_checks.engines.base import RunRequest
+    from cross_checks.scenario import catalog_path, parse_scenario
+    text = catalog_path("applied_torque").read_text()
+    sc = parse_scenario(text[:text.index("[[forces.point]]")], "<body torque only>")
+    world = de.DartEngine().build([RunRequest(sc, sc.dt_s, 10)], VARIANT, sc.dt_s)
+    assert isinstance(world.step, functools.partial) and world.step.args == (False,)
+    assert world.step.func == world.bodies[0].world.step
+    calls = []
+    real = dart.dynamics.BodyNode.setExtTorque
+    monkeypatch.setattr(dart.dynamics.BodyNode, "setExtTorque",
+                        lambda self, *a: (calls.append(a), real(self, *a)))
+    run = de.simulate(sc, VARIANT, sc.dt_s, 50)
+    assert len(calls) == 1 and calls[0][1] is True and len(run.y) == 51
+
+
+def test_a_blown_up_body_is_parked_at_rest_and_the_body_beside_it_runs_as_alone():
+    """A body whose state blows up is parked at rest with no force (never stepped from a bad state), its run
+    ending at the blow-up; a calm body in the same world runs as it does alone, bit for bit."""
+    from cross_checks.engines.base import RunRequest
+    spring = "[[forces.spring]]\nanchor = [0.0, 0.0, 0.0]\nattach = [0.0, 0.0, 0.0]\nstiffness = 1e6"
+    blow = scenario_from_parts(initial="position = [0.1, 0.0, 0.0]", forces=spring, dt=0.01, duration=1.0)
+    calm = load_scenario("tennis_racket")
+    reqs = [RunRequest(blow, 0.01, 100), RunRequest(calm, 0.01, 100)]
+    world = de.DartEngine().build(reqs, VARIANT, 0.01)
+    world.set_state(np.array([blow.problem.initial_packed(), calm.problem.initial_packed()]))
+    world._bad([[np.nan] * 12, world.read()[1]])
+    assert world.live == [False, True]
+    np.testing.assert_array_equal(world.read()[0], np.zeros(12))
+    np.testing.assert_array_equal(world.bodies[0].node.getExternalForceGlobal(), np.zeros(6))
+    run, other = de.simulate_many(VARIANT, reqs)
+    assert run.diverged_at_s is not None and run.diverged_at_s < 0.2
+    np.testing.assert_array_equal(other.y, de.simulate(calm, VARIANT, 0.01, 100).y)
+
+
 def test_body_frame_point_forces_and_springs_reach_dart_as_the_force_models_wrench():
     # a state-dependent scenario (a body-frame force off the COM, a spring off the COM): one
     # step from a tumbling state changes v by Δt f/m and ω by Δt I_W⁻¹(τ − ω × I_W ω), f and τ
@@ -485,9 +576,9 @@ class _HarnessTorque(de.DartEngine):
 
 def test_the_body_torque_taken_by_dart_moves_the_body_as_the_harness_s_world_torque(monkeypatch):
     """The harness evaluates no body-axes torque for DART (the world's ``apply`` gets no torque on the
-    catalog's body-torque scenario without its point force), and the adapter's runs equal the
-    harness-driven runs to round-off there, on a decaying full-tensor body with every force kind, and on a
-    torque-free one (there bit for bit)."""
+    catalog's body-torque scenario without its point force, once: DART keeps the forces over its
+    ``step(False)``s), and the adapter's runs equal the harness-driven runs to round-off there, on a decaying
+    full-tensor body with every force kind, and on a torque-free one (there bit for bit)."""
     from pathlib import Path
 
     from cross_checks.engines.worlds import dart as dtw
@@ -499,7 +590,7 @@ def test_the_body_torque_taken_by_dart_moves_the_body_as_the_harness_s_world_tor
     text = catalog_path("applied_torque").read_text()
     sc = parse_scenario(text[:text.index("[[forces.point]]")], "<body torque only>")
     de.simulate(sc, VARIANT, sc.dt_s, 20)
-    assert len(seen) == 20 and max(seen) == 0.0
+    assert len(seen) == 1 and max(seen) == 0.0
     monkeypatch.setattr(dtw.Bodies, "apply", apply)
     skew = Path(__file__).resolve().parents[3] / "benchmarks" / "bit_identity" / "skew.toml"
     for sc in (load_scenario("applied_torque"), load_scenario(str(skew)), load_scenario("tennis_racket")):
@@ -510,3 +601,15 @@ def test_the_body_torque_taken_by_dart_moves_the_body_as_the_harness_s_world_tor
         assert np.max(np.abs(own - harness) / scale) <= SAME_SCHEME_REL, sc.name
         if not any(t.frame == "body" for t in sc.problem.forces.torques):
             assert np.array_equal(own, harness), sc.name
+
+
+def test_positions_and_velocities_take_two_calls_no_state_getter_is_bound():
+    """What the single-run floor (docs/speed.md) rests on: dartpy binds no getter of a skeleton's whole state
+    (``getState`` and ``getConfiguration`` return types pybind11 cannot convert), so a driver recording every
+    step makes ``getPositions`` and ``getVelocities`` (the free joint's give the same numbers)."""
+    b = de.DartBody(_tilted(angular_velocity=[1.0, -2.0, 0.5]), 1e-3)
+    for getter in (b.skeleton.getState, b.skeleton.getConfiguration):
+        with pytest.raises(TypeError, match="Unable to convert function return value"):
+            getter()
+    np.testing.assert_array_equal(b.joint.getPositions(), b.skeleton.getPositions())
+    np.testing.assert_array_equal(b.joint.getVelocities(), b.skeleton.getVelocities())

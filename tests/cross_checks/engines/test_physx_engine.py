@@ -550,3 +550,28 @@ def test_tgs_rounds_omega_more_than_an_ordinary_step_and_within_its_declared_fac
     assert worst["pgs"] <= budget, worst
     assert budget < worst["tgs"] <= traits(resolve("physx:tgs")).rounding_factor * budget, worst
     assert traits(resolve("physx:pgs")).rounding_factor == 1.0
+
+
+def test_the_world_reads_every_body_from_one_pack_as_plain_floats_and_takes_forces_as_rows():
+    """One ``pack()`` per read, given as each body's packed row of plain floats (the float32 values exactly:
+    no arrays per step), which ``rows`` turns into the chunk's (n, B, 13) float64 array; ``apply`` takes the
+    harness's rows of plain floats (``float_rows``) as it takes (B, 3) arrays: the same step."""
+    scs = [_tilted(angular_velocity="[0.4, 1.5, -0.7]"), load_scenario("tennis_racket")]
+    W = pe.PhysxWorld([RunRequest(sc, 0.01, 10) for sc in scs], "tgs", 0.01)
+    W.set_state(np.array([sc.problem.initial_packed() for sc in scs]))
+    assert W.float_rows
+    rows = W.read()
+    packs = np.frombuffer(W.system.pack(), dtype=np.float32).reshape(2, 13)[:, pe.PACK_TO_PACKED]
+    assert all(type(r) is tuple and all(type(v) is float for v in r) for r in rows)
+    np.testing.assert_array_equal(np.array(rows), packs)
+    block = W.rows([rows, rows])
+    assert block.shape == (2, 2, 13) and block.dtype == np.float64
+    np.testing.assert_array_equal(block[1], packs)
+    f, tau = [(0.5, -1.0, 2.0), (0.0, 0.0, 0.0)], [(0.1, 0.2, -0.3), (0.0, 0.3, 0.0)]
+    W.apply(f, tau)
+    W.step()
+    by_rows = W.rows([W.read()])
+    W.set_state(np.array([sc.problem.initial_packed() for sc in scs]))
+    W.apply(np.array(f), np.array(tau))
+    W.step()
+    np.testing.assert_array_equal(W.rows([W.read()]), by_rows)

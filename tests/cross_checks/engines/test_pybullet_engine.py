@@ -299,19 +299,20 @@ class _HarnessTorque(pe.PybulletEngine):
 
 @pytest.mark.parametrize("variant", sorted(pe.VARIANTS))
 def test_the_body_torque_taken_by_pybullet_moves_the_body_as_the_harness_s_world_torque(variant, monkeypatch):
-    """The harness evaluates no body-axes torque for PyBullet (the world's ``apply`` gets no torque on the
-    catalog's body-torque scenario without its point force: Bullet turns the torque itself), and the
-    adapter's runs equal the harness-driven runs to round-off there, on a decaying full-tensor body with
-    every force kind, and on a torque-free one (there bit for bit: nothing changes)."""
-    seen = []
-    apply = pbw.Bodies.apply
-    monkeypatch.setattr(pbw.Bodies, "apply", lambda self, f, tau: (seen.append(np.abs(tau).max()),
-                                                                   apply(self, f, tau)))
+    """The harness evaluates no body-axes torque for PyBullet (on the catalog's body-torque scenario without
+    its point force, PyBullet's only torque calls are one ``applyExternalTorque`` in ``LINK_FRAME`` before
+    every step, the same τ_P each time: Bullet turns the torque itself), and the adapter's runs equal the
+    harness-driven runs to round-off there, on a decaying full-tensor body with every force kind, and on a
+    torque-free one (there bit for bit: nothing changes)."""
+    calls = []
+    torque = pe.p.applyExternalTorque
+    monkeypatch.setattr(pe.p, "applyExternalTorque", lambda *a, **k: (calls.append((tuple(a[2]), a[3])),
+                                                                      torque(*a, **k)))
     text = catalog_path("applied_torque").read_text()
     sc = parse_scenario(text[:text.index("[[forces.point]]")], "<body torque only>")
     pe.simulate(sc, variant, sc.dt_s, 20)
-    assert len(seen) == 20 and max(seen) == 0.0
-    monkeypatch.setattr(pbw.Bodies, "apply", apply)
+    assert len(calls) == 20 and len(set(calls)) == 1 and calls[0][1] == pe.p.LINK_FRAME
+    monkeypatch.setattr(pe.p, "applyExternalTorque", torque)
     for sc in (load_scenario("applied_torque"), load_scenario(str(BIT_IDENTITY / "skew.toml")),
                load_scenario("tennis_racket")):
         n = min(sc.n_steps(), 1500)
@@ -321,3 +322,48 @@ def test_the_body_torque_taken_by_pybullet_moves_the_body_as_the_harness_s_world
         assert np.max(np.abs(own - harness) / scale) <= SAME_SCHEME_REL, sc.name
         if not any(t.frame == "body" for t in sc.problem.forces.torques):
             assert np.array_equal(own, harness), sc.name
+
+
+@pytest.mark.parametrize("variant", sorted(pe.VARIANTS))
+def test_constant_torques_are_reapplied_by_pybullets_own_call_with_its_arguments_bound(variant):
+    """The world's per-step calls have no Python frame of rbcheck's where PyBullet offers the call itself:
+    the step is ``stepSimulation`` with the client bound, and constant torques (the body-axes one in
+    ``LINK_FRAME``, a world one in ``WORLD_FRAME``, in ``apply``'s order) are re-applied by
+    ``applyExternalTorque`` with its arguments bound; nothing to apply is None, and a world force at the COM
+    goes through ``apply`` (its point is the COM's last read position)."""
+    import functools
+
+    from cross_checks.engines.base import RunRequest
+    sc = load_scenario("tennis_racket")
+    world = pe.PybulletEngine().build([RunRequest(sc, sc.dt_s, 10)], variant, sc.dt_s)
+    try:
+        b, c = world.bodies[0], world.c
+        assert isinstance(world.step, functools.partial) and world.step.func is p.stepSimulation
+        assert world.step.args == (c,)
+        zero = np.zeros((1, 3))
+        assert world.applier(zero, zero) is None
+        world.apply_body_torque(np.array([[0.0, 0.0, 0.2]]))
+        again = world.applier(zero, zero)
+        assert again.func is p.applyExternalTorque and again.args == (b, -1, (0.0, 0.0, 0.2), p.LINK_FRAME, c)
+        both = world.applier(zero, np.array([[0.1, 0.0, 0.0]]))
+        both()   # the world torque, then the body-axes one: apply's calls
+        again = world.applier(np.array([[1.0, 0.0, 0.0]]), zero)
+        assert again.func == world.apply
+    finally:
+        world.close()
+
+
+def test_the_base_state_takes_two_calls_getlinkstate_refuses_the_base():
+    """What the single-run floor (docs/speed.md) rests on: PyBullet has no call giving the base's pose and
+    velocity together — ``getLinkState`` refuses the base's index −1 (``getLinkStates`` gives a tuple
+    holding a NULL for it, not touched here) — so a driver recording every step makes
+    ``getBasePositionAndOrientation`` and ``getBaseVelocity``."""
+    c = p.connect(p.DIRECT)
+    try:
+        b = p.createMultiBody(baseMass=1.0, physicsClientId=c)
+        with pytest.raises(p.error, match="invalid linkIndex"):
+            p.getLinkState(b, -1, 1, 1, physicsClientId=c)
+        assert len(p.getBasePositionAndOrientation(b, physicsClientId=c)) == 2
+        assert len(p.getBaseVelocity(b, physicsClientId=c)) == 2
+    finally:
+        p.disconnect(c)
