@@ -42,7 +42,7 @@ from cross_checks.engines import base, forces
 from cross_checks.engines.base import EngineError
 from reference_sim.compiled import ForceRows
 from reference_sim.quaternion import same_side
-from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
+from reference_sim.simulate import Run, bad_rows, blowup_words, diverged, none_bad
 
 __all__ = ["run", "one_step", "Harness", "host_problem"]
 
@@ -213,7 +213,7 @@ def _run_world(engine, variant: str, reqs) -> list:
             if getattr(world, "rollout_takes_all_forces", False) and n_max:
                 # the world's compiled loop takes every force itself (the harness, called back from it)
                 t0 = time.perf_counter()
-                rec[1:] = np.asarray(rollout(n_max, harness), dtype=float)
+                _rollout(world, n_max, harness, rec)
                 engine_s += time.perf_counter() - t0
                 y = _checked(engine, variant, reqs, world.packed(rec), B, "packed states")
                 _check(engine, variant, reqs, world, rec, 1, n_max + 1, ends, stopped, y[1:])
@@ -222,7 +222,7 @@ def _run_world(engine, variant: str, reqs) -> list:
                 if not per_stage:
                     world.apply(f, tau)
                 t0 = time.perf_counter()
-                rec[1:] = np.asarray(rollout(n_max, harness), dtype=float)
+                _rollout(world, n_max, harness, rec)
                 engine_s += time.perf_counter() - t0
                 y = _checked(engine, variant, reqs, world.packed(rec), B, "packed states")
                 _check(engine, variant, reqs, world, rec, 1, n_max + 1, ends, stopped, y[1:])
@@ -297,6 +297,15 @@ def _steps(engine, variant, reqs, world, harness, rec, n_max, f, tau, ends, stop
     return engine_s
 
 
+def _rollout(world, n_max: int, harness, rec) -> None:
+    """``world.rollout``'s raw states of steps 1..n_max into ``rec[1:]``: written there by the world itself
+    when it takes an ``out`` (``World.rollout_into``: no copy of the whole record), else copied."""
+    if world.rollout_into:
+        world.rollout(n_max, harness, out=rec[1:])
+    else:
+        rec[1:] = np.asarray(world.rollout(n_max, harness), dtype=float)
+
+
 def _body_torque(world, harness, per_stage: bool) -> None:
     """Give a world that takes the body-axes torques itself (``WorldEngine.takes_body_torque``) its bodies'
     torques, once (it keeps them): scaled by the pre-step decay factor γ_ω as the harness's own torques are,
@@ -313,6 +322,8 @@ def _check(engine, variant, reqs, world, rec, start: int, stop: int, ends, stopp
     states when already converted."""
     if y is None:
         y = _checked(engine, variant, reqs, world.packed(rec[start:stop]), len(reqs), "states")
+    if not world.warnings and none_bad(y):   # the common case, in two passes over the chunk
+        return
     bad = bad_rows(y)
     warned: dict = {}
     for i, n, words in world.warnings:
@@ -345,7 +356,7 @@ def _same_side(y) -> np.ndarray:
         dots = np.einsum("nbi,nbi->nb", q[1:], q[:-1])
     flips = np.where(dots < 0.0, -1.0, 1.0)
     sign = np.concatenate([np.ones((1, y.shape[1])), np.cumprod(flips, axis=0)])
-    out = y.copy()
+    out = y.copy(order="K")   # in y's layout (a world may give it per run: packed_rows)
     out[..., 6:10] = q * sign[..., None]
     return out
 

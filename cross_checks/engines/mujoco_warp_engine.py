@@ -323,8 +323,9 @@ class WarpWorld(World):
 
     def packed(self, raw):
         from cross_checks.engines.mujoco_engine import to_packed
-        raw = np.asarray(raw, dtype=float)
-        return to_packed(raw[..., 0:7], raw[..., 7:13])
+        from cross_checks.engines.packed_rows import qpos_qvel_packed
+        # a whole record: in each run's own layout, to_packed's numbers (packed_rows)
+        return qpos_qvel_packed(raw, lambda r: to_packed(r[..., 0:7], r[..., 7:13]))
 
     def rollout(self, n_steps, harness):
         """``n_steps`` steps of every world, batch by batch, the step captured once and replayed; a batch
@@ -395,6 +396,10 @@ class MujocoWarpEngine(WorldEngine):
 
     def per_stage(self, scenario, variant):
         return per_stage(scenario, variant)
+
+    def source_files(self) -> list:
+        from cross_checks.engines import packed_rows
+        return [*super().source_files(), *packed_rows.source_files()]
 
     def engine_files(self) -> list:
         """mujoco_warp's Python sources (found without importing them: the parent of a sweep must not start

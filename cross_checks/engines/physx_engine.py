@@ -48,6 +48,10 @@ VARIANTS = {
 }
 
 _REST = np.eye(1, 13, 6)[0]   # where a body whose run blew up is parked: at rest at the origin
+#: Above this many bodies a world takes its forces as arrays (one compiled evaluation for all, float32 rows
+#: to SAPIEN); at or below it, as plain floats per body (a few bodies' arrays cost more than their step).
+#: The same numbers either way (tests/cross_checks/engines/test_physx_engine.py).
+MANY_BODIES = 4
 _LOCK = threading.RLock()
 
 
@@ -124,17 +128,44 @@ def _world_class():
                 World.__init__(self)
                 with _LOCK:   # the scene config is SAPIEN's process-global default
                     W.Bodies.__init__(self, requests[0].scenario.problem.forces.gravity_W, variant, dt_s)
+                specs: dict = {}   # each distinct body's spec once: a batch is mostly copies of a few
                 for r in requests:
+                    body = r.scenario.problem.body
+                    spec = specs.get(id(body))
+                    if spec is None:
+                        spec = specs[id(body)] = body_spec(body)
                     try:
-                        self.add_body(*body_spec(r.scenario.problem.body))
+                        self.add_body(*spec)
                     except Exception as exc:  # noqa: BLE001 - PhysX/SAPIEN refuses the mass properties
                         raise EngineError(f"PhysX (sapien {installed_version(_DIST)}) refuses the body: "
                                           f"{type(exc).__name__}: {exc}") from None
                 self.always = np.array([r.scenario.problem.forces.state_dependent for r in requests],
                                        dtype=bool)
+                self.many = len(requests) > MANY_BODIES
 
             def first(self, y0):   # the scenario's own first row, not its float32 round trip
                 return y0
+
+            def packed_row(self, raw):
+                """Many bodies: the read itself (float32 values), whose forces the harness evaluates in one
+                compiled call on the whole array (a few: plain floats, per body)."""
+                return raw if self.many else W.Bodies.packed_row(self, raw)
+
+            def apply(self, f_W, tau_W):
+                """Many bodies: :meth:`Bodies.apply`'s calls with the same float32 numbers (rounded once for
+                all by NumPy, as SAPIEN rounds each; both to nearest), the bodies that get one chosen in one
+                vectorised pass, each given its float32 rows (SAPIEN takes them faster than lists)."""
+                if not self.many:
+                    return W.Bodies.apply(self, f_W, tau_W)
+                f_W, tau_W = np.asarray(f_W, dtype=float), np.asarray(tau_W, dtype=float)
+                get = self.alive & (self.always | f_W.any(axis=1) | tau_W.any(axis=1))
+                f32, t32 = f_W.astype(np.float32), tau_W.astype(np.float32)
+                if get.all():
+                    for add, f, t in zip(self._add, f32, t32):
+                        add(f, t)
+                else:
+                    for k in np.flatnonzero(get).tolist():
+                        self._add[k](f32[k], t32[k])
 
             def read(self):
                 """The packed rows; a body whose state is non-finite or beyond BLOWUP_LIMIT is parked at rest
