@@ -248,11 +248,13 @@ class ForceRows:
         k = _kernels()
         return None if k is None else cls(problems, k.force_torque_rows)
 
-    def force_torque(self, Y) -> np.ndarray:
-        """World force at the COM (N) and world torque (N m) of each body, (N, 6), at states ``Y`` (N, 13)."""
+    def force_torque(self, Y, part: slice | None = None) -> np.ndarray:
+        """World force at the COM (N) and world torque (N m) of each body, (N, 6), at states ``Y`` (N, 13);
+        ``part``: the bodies (a slice of them, in order) whose states ``Y`` holds, when not all."""
         Y = np.ascontiguousarray(Y, dtype=np.float64)
         out = np.empty((len(Y), 6))
-        self._rows(Y, out, *self.params)
+        params = self.params if part is None else tuple(a[part] for a in self.params)
+        self._rows(Y, out, *params)
         return out
 
 

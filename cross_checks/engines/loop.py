@@ -100,8 +100,18 @@ class Harness:
 
     def wrench(self, y, bodies=None) -> tuple:
         """``(f_W, tau_W)`` (B, 3) each at packed states ``y`` (B, 13): the harness's force minus the weight
-        the engine applies, and its torque. ``bodies``: the bodies (indices) whose states the rows of ``y``
-        are, when not all of them in order (each row then evaluated alone, in plain floats)."""
+        the engine applies, and its torque. ``bodies``: the bodies whose states the rows of ``y`` are, when
+        not all of them in order: a slice of them (many bodies: one compiled call, as for all), or indices
+        (each row then evaluated alone, in plain floats)."""
+        if isinstance(bodies, slice) and self.rows is not None:   # the same operations as for all, below
+            w = self.rows.force_torque(y, bodies)
+            f, tau = w[:, 0:3], w[:, 3:6]
+            f *= self.g_v[bodies, None]
+            f -= self.weight[bodies]
+            tau *= self.g_w[bodies, None]
+            return f, tau
+        if isinstance(bodies, slice):
+            bodies = np.arange(len(self.ft))[bodies]
         if bodies is not None:
             bodies = np.asarray(bodies, dtype=int)
             w = np.array([self.ft[i](row) for i, row in zip(bodies.tolist(), np.asarray(y).tolist())])

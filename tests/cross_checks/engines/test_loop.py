@@ -314,3 +314,23 @@ def test_a_world_that_takes_the_body_torque_itself_moves_as_the_harness_drives_i
     body_torque = any(t.frame == "body" for t in sc.problem.forces.torques)
     wrong = _body_torque_engine(True).simulate(sc, "euler", sc.dt_s, n).y
     assert (np.max(np.abs(wrong - plain) / scale) > 1e3 * tol.SAME_SCHEME_REL) == body_torque
+
+
+def test_the_forces_of_a_slice_of_many_bodies_are_each_bodys_own_bit_for_bit():
+    """Harness.wrench of a slice of the bodies (one compiled call on their parameters: MuJoCo Warp's batches)
+    gives the numbers of the same bodies evaluated one by one in plain floats (indices) and of all at
+    once."""
+    from cross_checks.engines.loop import Harness
+    names = ["spring_pendulum", "applied_torque", "velocity_decay", "tennis_racket", "projectile"]
+    scs = [load_scenario(n) for n in names] * 3
+    h = Harness(scs, [0.01 * (1 + k % 3) for k in range(len(scs))], True)
+    assert h.rows is not None
+    rng = np.random.default_rng(11)
+    y = rng.normal(size=(len(scs), 13))
+    y[:, 6:10] /= np.linalg.norm(y[:, 6:10], axis=1, keepdims=True)
+    whole = h.wrench(y)
+    for part in (slice(0, 4), slice(3, 11), slice(9, len(scs))):
+        f, tau = h.wrench(y[part], part)
+        f1, tau1 = h.wrench(y[part], np.arange(len(scs))[part])
+        assert np.array_equal(f, f1) and np.array_equal(tau, tau1)
+        assert np.array_equal(f, whole[0][part]) and np.array_equal(tau, whole[1][part])
