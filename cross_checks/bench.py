@@ -887,7 +887,9 @@ def run_bench(quick: bool = False, repeats: int = 3, render=None, sweep: bool = 
     # every engine's own batched run and its simulate_many at the same N, timed alternately (after the sweep:
     # the JAX and Warp ones start their runtime in this process); an engine without an own run here is
     # measured through its adapter alone and says why
-    batching = batching_variants()
+    # the CPU engines' rows first: a JAX or Warp runtime started in this process (its worker threads, its
+    # memory) must not weigh on them
+    batching = sorted(batching_variants(), key=lambda v: v.split(":", 1)[0] not in CPU_ENGINES)
     r["batched"], own_m, r["own_batched_not_measured"] = batched_rows(
         ["mujoco:euler", "pybullet:multibody", *batching], n, steps, repeats)
     m.update(own_m)

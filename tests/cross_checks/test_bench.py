@@ -134,12 +134,18 @@ def test_the_sweep_is_measured_before_any_engine_adapter_runs_in_the_process(mon
     monkeypatch.setattr(bench, "drake_single_us", lambda *a, **k: order.append("adapter") or (None, None))
     monkeypatch.setattr(bench, "adapter_batched", lambda *a, **k: order.append("adapter") or stat)
     monkeypatch.setattr(bench, "overhead_rows", lambda *a, **k: order.append("adapter") or [])
-    monkeypatch.setattr(bench, "batched_rows", lambda *a, **k: order.append("own") or ([], {}, {}))
-    monkeypatch.setattr(bench, "batching_variants", lambda *a, **k: ["jaxsim:semi_implicit_euler"])
+    rows_of = []
+    monkeypatch.setattr(bench, "batched_rows",
+                        lambda vs, *a, **k: order.append("own") or rows_of.append(vs) or ([], {}, {}))
+    monkeypatch.setattr(bench, "batching_variants",
+                        lambda *a, **k: ["jaxsim:semi_implicit_euler", "rapier:symplectic_euler"])
     sweep = {"total_s": stat, "run_s": stat, "floor_s": 1.0}
     monkeypatch.setattr(bench, "sweep_floor", lambda *a, **k: order.append("sweep") or sweep)
     r = bench.run_bench(quick=True, repeats=1)
     assert order[0] == "sweep" and order.count("sweep") == 1 and "adapter" in order and "own" in order
+    # the CPU engines' batched rows before any JAX or Warp one
+    assert rows_of == [["mujoco:euler", "pybullet:multibody", "rapier:symplectic_euler",
+                        "jaxsim:semi_implicit_euler"]]
     assert r["sweep"] is sweep and r["targets"]["sweep (run + report) <= 8x its floor"]
 
 
