@@ -71,30 +71,32 @@ class Harness:
     (B, 3) it is given); the harness's forces are then the rest (:func:`host_problem`)."""
 
     def __init__(self, scenarios, dt_s, applies_gravity: bool, body_torque: bool = False):
-        # each distinct scenario's (and step's) numbers once: a batch is mostly copies of a few scenarios
-        host, each = {}, {}
-        for sc in scenarios:
-            if id(sc) not in host:
-                p = host_problem(sc.problem, body_torque)
-                host[id(sc)] = (p, forces.float_forces(sc if p is sc.problem else p).force_torque,
-                                forces.weight_W(sc) if applies_gravity else np.zeros(3),
-                                body_torque_B(sc.problem) if body_torque else None)
-        problems = [host[id(sc)][0] for sc in scenarios]
+        # each distinct scenario's (and step's) numbers once, gathered per body by index: a batch is mostly
+        # copies of a few scenarios
+        first: dict = {}
+        which = [first.setdefault(id(sc), len(first)) for sc in scenarios]
+        unique = list({id(sc): sc for sc in scenarios}.values())
+        host = []
+        for sc in unique:
+            p = host_problem(sc.problem, body_torque)
+            host.append((p, forces.float_forces(sc if p is sc.problem else p).force_torque,
+                         forces.weight_W(sc) if applies_gravity else np.zeros(3),
+                         body_torque_B(sc.problem) if body_torque else None))
+        index = np.array(which, dtype=int)
         # the scenario's own evaluator where the harness evaluates all of its forces
-        self.ft = [host[id(sc)][1] for sc in scenarios]
+        self.ft = [host[k][1] for k in which]
         # many bodies: one compiled call for all of them (the same numbers, member by member)
-        self.rows = ForceRows.of(problems) if len(scenarios) > 4 else None
+        self.rows = ForceRows.of([h[0] for h in host], index) if len(scenarios) > 4 else None
         dts = [dt_s] * len(scenarios) if np.ndim(dt_s) == 0 else list(dt_s)
-        for sc, h in zip(scenarios, dts):
-            if (id(sc), h) not in each:
-                each[id(sc), h] = tuple(float(x) for x in forces.decay_factors(sc, h))
-        g = [each[id(sc), h] for sc, h in zip(scenarios, dts)]
-        self.g_v = np.array([a for a, _ in g])
-        self.g_w = np.array([b for _, b in g])
-        self.weight = np.array([host[id(sc)][2] for sc in scenarios])
-        self.state_dependent = any(p.forces.state_dependent for p, *_ in host.values())
-        self.body_torque_B = (np.array([host[id(sc)][3] for sc in scenarios]) if body_torque else None)
-        self.decays = any(sc.problem.forces.has_decay for sc in {id(sc): sc for sc in scenarios}.values())
+        each: dict = {}
+        pair = [each.setdefault((k, h), len(each)) for k, h in zip(which, dts)]
+        g = np.array([[float(x) for x in forces.decay_factors(unique[k], h)] for k, h in each]).reshape(-1, 2)
+        self.g_v = g[pair, 0]
+        self.g_w = g[pair, 1]
+        self.weight = np.array([h[2] for h in host]).reshape(-1, 3)[index]
+        self.state_dependent = any(p.forces.state_dependent for p, *_ in host)
+        self.body_torque_B = np.array([h[3] for h in host]).reshape(-1, 3)[index] if body_torque else None
+        self.decays = any(sc.problem.forces.has_decay for sc in unique)
         # a few bodies: per body, plain floats (ft, γ_v, γ_ω, the weight), two arrays built at the end
         self._floats = list(zip(self.ft, self.g_v.tolist(), self.g_w.tolist(), self.weight.tolist()))
 
