@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["qpos_qvel_packed", "source_files"]
+__all__ = ["qpos_qvel_packed", "source_files", "warm"]
 
 #: ``cache=`` of the kernels (numba's on-disk cache), False once its folder proved unusable
 #: (reference_sim.compiled.load_compiled: the kernels are then compiled in memory).
@@ -43,6 +43,12 @@ def _kernels():
         from reference_sim.compiled import load_compiled
         _KERNELS.append(load_compiled("cross_checks.engines._packed_kernels", _first_calls, _CACHE))
     return _KERNELS[0]
+
+
+def warm() -> bool:
+    """Load (the first time on a machine: compile) the kernels in this process — before a process pool
+    forks, so that every worker inherits them. True when they are available."""
+    return _kernels() is not None
 
 
 def qpos_qvel_packed(raw, numpy_packed) -> np.ndarray:
