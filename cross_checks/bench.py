@@ -14,12 +14,13 @@ repeats}}. Drake is measured on one trajectory only, beside MuJoCo through the s
 engine_us_per_step, own_loop_us_per_step, rbcheck_us_per_step}`` (the engine's own time per step, its own
 minimal loop of apply + step + read in its own API (:data:`OWN_LOOP`; None without one), the whole cost
 through rbcheck);
-``batched``: ``{variant, engine_body_steps_per_s, rbcheck_body_steps_per_s}`` (the engine's own batched
-throughput in this run beside simulate_many's at the same N): MuJoCo (N bodies in one model, or a rollout),
-PyBullet (N bodies), and every installed engine of :data:`OWN_BATCHED` — PhysX and Rapier (one scene of N
-bodies), MJX, Brax and jaxsim (N bodies vmapped through one compiled loop of their own step; compilation
-timed apart, ``measurements["own_batched[V]"]["compile_s"]``) and MuJoCo Warp (N worlds);
-``own_batched_not_measured`` {variant: why} for a batching engine without one here.
+``batched``: ``{variant, engine_body_steps_per_s, rbcheck_body_steps_per_s, ratio}`` (the engine's own
+batched throughput beside simulate_many's at the same N, the two timed alternately in rounds
+(:func:`interleaved`): medians of the rounds, and the median of the rounds' ratios): every installed engine
+of :data:`OWN_BATCHED` — MuJoCo (N bodies in one model, or a rollout), PyBullet (N bodies), PhysX and
+Rapier (one scene of N bodies), MJX, Brax and jaxsim (N bodies vmapped through one compiled loop of their
+own step; compilation timed apart, ``measurements["own_batched[V]"]["compile_s"]``) and MuJoCo Warp (N
+worlds); ``own_batched_not_measured`` {variant: why} for a batching engine without one here.
 """
 from __future__ import annotations
 
@@ -61,6 +62,44 @@ def _rates(work, fn, repeats) -> dict:
 
 def _per_step_us(n_steps, fn, repeats) -> dict:
     return stats([1e6 * t / n_steps for t in _times(fn, repeats)])
+
+
+class Runner:
+    """One batched measurement made ready to be timed: ``run()`` does ``work`` body-steps (its set-up —
+    a scene built, a loop compiled — done before, ``compile_s`` seconds of it a compilation, None where
+    nothing compiles), ``close()`` frees what it holds."""
+
+    def __init__(self, run, work: int, compile_s=None, close=None):
+        self.run, self.work, self.compile_s = run, int(work), compile_s
+        self._close = close
+
+    def close(self) -> None:
+        if self._close is not None:
+            self._close()
+
+
+def interleaved(runners: dict, repeats: int) -> dict:
+    """Time the ``runners`` ({name: Runner}) alternately: one untimed warm-up call of each, then ``repeats``
+    rounds in which every runner runs once, the order reversed every other round (neither side always
+    runs right after the other). ``{name: [body-steps/s of each round]}``: a round's figures are taken
+    within seconds of each other, so the load a row's ratio sees is the same on both sides (a median of
+    the rounds' ratios, :func:`paired_ratio`), where timing each side's repeats apart takes them minutes
+    apart on a shared machine."""
+    names = list(runners)
+    for name in names:
+        runners[name].run()
+    rates: dict = {name: [] for name in names}
+    for k in range(repeats):
+        for name in (names if k % 2 == 0 else names[::-1]):
+            t0 = time.perf_counter()
+            runners[name].run()
+            rates[name].append(runners[name].work / (time.perf_counter() - t0))
+    return rates
+
+
+def paired_ratio(num: list, den: list) -> float:
+    """The median over rounds of ``num[k] / den[k]`` (two sides' rates of :func:`interleaved`'s round k)."""
+    return float(np.median(np.asarray(num, dtype=float) / np.asarray(den, dtype=float)))
 
 
 def _initial_w(n, seed=0):
@@ -105,6 +144,12 @@ def _mujoco_model(n_bodies):
 
 
 def mujoco_multibody(n_bodies, n_steps, repeats):
+    return _rates(n_bodies * n_steps, mujoco_multibody_runner(n_bodies, n_steps).run, repeats)
+
+
+def mujoco_multibody_runner(n_bodies, n_steps) -> Runner:
+    """MuJoCo's own batched run: N free bodies in one model, ``mj_step(nstep=n_steps)`` from rest with the
+    body torque in ``qfrc_applied``."""
     import mujoco
     m = _mujoco_model(n_bodies)
     d = mujoco.MjData(m)
@@ -115,10 +160,15 @@ def mujoco_multibody(n_bodies, n_steps, repeats):
         d.qvel.reshape(n_bodies, 6)[:, 3:6] = w
         d.qfrc_applied.reshape(n_bodies, 6)[:, 3:6] = TORQUE_B  # body-axes torque, persists
         mujoco.mj_step(m, d, nstep=n_steps)
-    return _rates(n_bodies * n_steps, run, repeats)
+    return Runner(run, n_bodies * n_steps)
 
 
 def mujoco_rollout(n_bodies, n_steps, repeats):
+    return _rates(n_bodies * n_steps, mujoco_rollout_runner(n_bodies, n_steps).run, repeats)
+
+
+def mujoco_rollout_runner(n_bodies, n_steps) -> Runner:
+    """MuJoCo's own batched run as a ``mujoco.rollout`` of N single-body states (one thread per core)."""
     import mujoco
     from mujoco import rollout
     m = _mujoco_model(1)
@@ -132,7 +182,7 @@ def mujoco_rollout(n_bodies, n_steps, repeats):
         mujoco.mj_getState(m, d, states[i], spec)
     control = np.tile(np.concatenate([np.zeros(3), TORQUE_B]), (n_bodies, 1, 1))
     kw = dict(control_spec=mujoco.mjtState.mjSTATE_QFRC_APPLIED, nstep=n_steps)
-    return _rates(n_bodies * n_steps, lambda: rollout.rollout(m, datas, states, control, **kw), repeats)
+    return Runner(lambda: rollout.rollout(m, datas, states, control, **kw), n_bodies * n_steps)
 
 
 def mujoco_single_us(n_steps, repeats):
@@ -207,6 +257,11 @@ def batching_variants(engines=None) -> list:
 
 
 def adapter_batched(variant, n_bodies, n_steps, repeats) -> dict:
+    """:func:`adapter_runner`'s body-steps/s over ``repeats``."""
+    return _rates(n_bodies * n_steps, adapter_runner(variant, n_bodies, n_steps).run, repeats)
+
+
+def adapter_runner(variant, n_bodies, n_steps) -> Runner:
     """Body-steps/s of N trajectories of the benchmark's body (one scenario, N requests: the adapters build
     their model — MJX's put_model, a Brax system, a Genesis scene — once per scenario, which a sweep's
     ladder shares too) in ONE ``simulate_many`` call of an engine's adapter, every state recorded. The
@@ -223,7 +278,7 @@ def adapter_batched(variant, n_bodies, n_steps, repeats) -> dict:
         for res in adapter.simulate_many(name, requests):
             if isinstance(res, Exception):
                 raise res
-    return _rates(n_bodies * n_steps, run, repeats)
+    return Runner(run, n_bodies * n_steps)
 
 
 # --- each CPU engine's own minimal loop (issue 43, item 5): one body of the bench (the adapter's model
@@ -403,17 +458,47 @@ def overhead_rows(n_steps, repeats, variants=None) -> list:
     return out
 
 
-def batched_rows(n_bodies, n_steps, repeats, own: dict) -> list:
-    """``{variant, engine_body_steps_per_s, rbcheck_body_steps_per_s}``: N trajectories of the benchmark's
-    body in one ``simulate_many`` call through rbcheck (:func:`adapter_batched`) beside the engine's own
-    batched throughput measured in this run (``own``: {variant: body-steps/s}; None where this bench has no
-    measurement of the engine by itself)."""
-    out = []
-    for v, engine_rate in own.items():
-        st = adapter_batched(v, n_bodies, n_steps, repeats)
-        out.append({"variant": v, "engine_body_steps_per_s": engine_rate,
-                    "rbcheck_body_steps_per_s": st["median"]})
-    return out
+def batched_rows(variants, n_bodies, n_steps, repeats) -> tuple:
+    """``(rows, measurements, why)``: per ``ENGINE:VARIANT`` of ``variants`` with an own batched run here
+    (:data:`OWN_BATCHED`), the engine's own run and N trajectories of the benchmark's body in one
+    ``simulate_many`` call (:func:`adapter_runner`), at the same N and steps (PyBullet's: :data:`OWN_STEPS`),
+    timed alternately (:func:`interleaved`, ``repeats`` rounds). A row ``{variant, engine_body_steps_per_s,
+    rbcheck_body_steps_per_s, ratio}``: the medians of the rounds (the engine's own: the better of its runs
+    in each round, where it has two) and the median of the rounds' ratios (rbcheck ÷ engine);
+    ``measurements`` ``{"own_batched[V]": stats + compile_s, "adapter_batched[V]": stats}``; ``why``
+    ``{variant: why not measured}`` for an engine without an own run here (Drake, DART) or one that cannot
+    run (not installed, its model refused)."""
+    from cross_checks.engines import EngineError
+    rows, measured, why = [], {}, {}
+    for v in variants:
+        engine, name = v.split(":", 1)
+        fn = OWN_BATCHED.get(engine)
+        if fn is None:
+            why[v] = (f"this bench has no batched run of {engine} by itself (the issue's goal names "
+                      "MuJoCo, PyBullet, PhysX, Rapier, MJX, Brax, jaxsim and MuJoCo Warp)")
+            continue
+        steps = OWN_STEPS.get(engine, lambda k: k)(n_steps)
+        try:
+            own = fn(n_bodies, steps, name)
+        except (ImportError, EngineError) as exc:
+            why[v] = f"{type(exc).__name__}: {exc}"
+            continue
+        own = own if isinstance(own, tuple) else (own,)
+        try:
+            runners = {("own", k): r for k, r in enumerate(own)}
+            runners["rbcheck"] = adapter_runner(v, n_bodies, steps)
+            rates = interleaved(runners, repeats)
+        finally:
+            for r in own:
+                r.close()
+        best = np.max([rates["own", k] for k in range(len(own))], axis=0).tolist()
+        compile_s = [r.compile_s for r in own if r.compile_s is not None]
+        measured[f"own_batched[{v}]"] = _with_compile(stats(best), sum(compile_s) if compile_s else None)
+        measured[f"adapter_batched[{v}]"] = stats(rates["rbcheck"])
+        rows.append({"variant": v, "engine_body_steps_per_s": float(np.median(best)),
+                     "rbcheck_body_steps_per_s": float(np.median(rates["rbcheck"])),
+                     "ratio": paired_ratio(rates["rbcheck"], best)})
+    return rows, measured, why
 
 
 def drake_single_us(n_steps, repeats):
@@ -441,6 +526,16 @@ def drake_single_us(n_steps, repeats):
 
 
 def pybullet_bodies(n_bodies, n_steps, repeats):
+    runner = pybullet_bodies_runner(n_bodies, n_steps)
+    try:
+        return _rates(runner.work, runner.run, repeats)
+    finally:
+        runner.close()
+
+
+def pybullet_bodies_runner(n_bodies, n_steps) -> Runner:
+    """PyBullet's own batched run: N bodies in one client, per step the body torque applied to each
+    (``LINK_FRAME``), ``stepSimulation``, every state read back."""
     import pybullet as p
 
     from cross_checks.engines import pybullet_engine  # noqa: F401  (silences pybullet's banner)
@@ -467,9 +562,10 @@ def pybullet_bodies(n_bodies, n_steps, repeats):
                 for b in ids:  # read every state back, as a recorder must
                     p.getBasePositionAndOrientation(b, physicsClientId=cid)
                     p.getBaseVelocity(b, physicsClientId=cid)
-        return _rates(n_bodies * n_steps, run, repeats)
-    finally:
+    except BaseException:
         p.disconnect(cid)
+        raise
+    return Runner(run, n_bodies * n_steps, close=lambda: p.disconnect(cid))
 
 
 # --- the engines' own batched throughput (issue 43, item 4): the bench's body built by each adapter's own
@@ -488,7 +584,7 @@ def _with_compile(st: dict, compile_s) -> dict:
     return {**st, "compile_s": compile_s}
 
 
-def physx_scene(n_bodies, n_steps, repeats, variant="tgs") -> dict:
+def physx_scene(n_bodies, n_steps, variant="tgs") -> Runner:
     """PhysX: ONE scene of N rigid dynamics (physx_engine.PhysxWorld's: the same mass properties and
     neutralised settings, the variant's solver, Δt), stepped by ``PhysxCpuSystem.step()``; before each step
     every body's attitude is read in one ``pack()`` and the body torque, turned to world axes, is added per
@@ -508,10 +604,10 @@ def physx_scene(n_bodies, n_steps, repeats, variant="tgs") -> dict:
             for c, t in zip(comps, rotate(q.astype(float), tau_B).astype(np.float32)):
                 c.add_force_torque(zero, t)
             system.step()
-    return _with_compile(_rates(n_bodies * n_steps, run, repeats), None)
+    return Runner(run, n_bodies * n_steps, close=world.close)
 
 
-def rapier_world(n_bodies, n_steps, repeats, variant="symplectic_euler") -> dict:
+def rapier_world(n_bodies, n_steps, variant="symplectic_euler") -> Runner:
     """Rapier: ONE ``PhysicsWorld`` of N dynamic bodies (rapier_engine.RapierWorld's: the same mass
     properties, world and body settings, gyroscopic flag, Δt, one thread), stepped by ``world.step()``;
     before each step every body's attitude is read and its torque replaced by the body torque turned to world
@@ -532,19 +628,20 @@ def rapier_world(n_bodies, n_steps, repeats, variant="symplectic_euler") -> dict
                 rb.reset_torques(False)
                 rb.add_torque(tuple(t), False)
             w.step()
-    return _with_compile(_rates(n_bodies * n_steps, run, repeats), None)
+    return Runner(run, n_bodies * n_steps, close=world.close)
 
 
-def _jax_timed(compile_fn, args, work, repeats) -> dict:
-    """Compile ``compile_fn`` ahead of time for ``args`` (timed apart), then time its calls to completion."""
+def _jax_timed(compile_fn, args, work) -> Runner:
+    """``compile_fn`` compiled ahead of time for ``args`` (timed apart: ``compile_s``), its calls run to
+    completion."""
     import jax
     t0 = time.perf_counter()
     exe = jax.jit(compile_fn).lower(*args).compile()
     compile_s = time.perf_counter() - t0
-    return _with_compile(_rates(work, lambda: jax.block_until_ready(exe(*args)), repeats), compile_s)
+    return Runner(lambda: jax.block_until_ready(exe(*args)), work, compile_s)
 
 
-def mjx_vmapped(n_bodies, n_steps, repeats, variant="euler") -> dict:
+def mjx_vmapped(n_bodies, n_steps, variant="euler") -> Runner:
     """MJX: the model mjx_engine builds (mujoco_engine's, ``mjx.put_model``), N bodies vmapped through ONE
     compiled ``jax.lax.fori_loop`` of ``mjx.step``; the body torque in ``qfrc_applied`` (the free joint's
     rotational DOFs are body axes; it persists between steps). Compilation timed apart (``compile_s``)."""
@@ -565,11 +662,10 @@ def mjx_vmapped(n_bodies, n_steps, repeats, variant="euler") -> dict:
     def member(model, qvel):
         d = jax.lax.fori_loop(0, n_steps, lambda i, d: mjx.step(model, d), d0.replace(qvel=qvel))
         return d.qpos, d.qvel
-    return _jax_timed(jax.vmap(member, in_axes=(None, 0)), (xm, jnp.asarray(qvel0)), n_bodies * n_steps,
-                      repeats)
+    return _jax_timed(jax.vmap(member, in_axes=(None, 0)), (xm, jnp.asarray(qvel0)), n_bodies * n_steps)
 
 
-def brax_vmapped(n_bodies, n_steps, repeats, variant="generalized") -> dict:
+def brax_vmapped(n_bodies, n_steps, variant="generalized") -> Runner:
     """Brax (generalized pipeline): brax_engine's neutralised System of the bench's body at Δt (its six
     DOF actuators: ``act`` is the generalized force [f_W, τ_B]; brax applies gravity), N bodies vmapped
     through ONE compiled ``jax.lax.fori_loop`` of ``pipeline.step`` with ``act = [0, τ_B]``. Compilation timed
@@ -589,10 +685,10 @@ def brax_vmapped(n_bodies, n_steps, repeats, variant="generalized") -> dict:
         st = jax.lax.fori_loop(0, n_steps, lambda i, st: pipeline.step(s, st, act), pipeline.init(s, q, qd))
         return st.q, st.qd
     return _jax_timed(jax.vmap(member, in_axes=(None, 0, 0)), (sys, jnp.asarray(q), jnp.asarray(qd)),
-                      n_bodies * n_steps, repeats)
+                      n_bodies * n_steps)
 
 
-def jaxsim_vmapped(n_bodies, n_steps, repeats, variant="semi_implicit_euler") -> dict:
+def jaxsim_vmapped(n_bodies, n_steps, variant="semi_implicit_euler") -> Runner:
     """jaxsim: jaxsim_engine's model of the bench's body (its SDF, gravity, integrator) at Δt, N bodies
     vmapped through ONE compiled ``jax.lax.fori_loop`` of ``js.model.step`` on the body's own
     ``JaxSimModelData`` (Mixed representation); the link force [0, R_WB τ_B] each step (jaxsim takes world
@@ -622,11 +718,10 @@ def jaxsim_vmapped(n_bodies, n_steps, repeats, variant="semi_implicit_euler") ->
             return js.model.step(model, data, link_forces=f6)
         data = jax.lax.fori_loop(0, n_steps, body, data)
         return data.base_position, data.base_quaternion
-    return _jax_timed(jax.vmap(member, in_axes=(None, 0)), (model, jnp.asarray(y0)), n_bodies * n_steps,
-                      repeats)
+    return _jax_timed(jax.vmap(member, in_axes=(None, 0)), (model, jnp.asarray(y0)), n_bodies * n_steps)
 
 
-def mujoco_warp_worlds(n_bodies, n_steps, repeats, variant="euler") -> dict:
+def mujoco_warp_worlds(n_bodies, n_steps, variant="euler") -> Runner:
     """MuJoCo Warp: the model mujoco_warp_engine builds (mujoco_engine's, autoreset cleared) as N worlds of
     one ``mjw.put_data(..., nworld=N)`` on Warp's CPU device, one ``mjw.step`` captured as a Warp graph and
     replayed per step (as the adapter does); the body torque in ``qfrc_applied`` (body axes, persists).
@@ -658,39 +753,36 @@ def mujoco_warp_worlds(n_bodies, n_steps, repeats, variant="euler") -> dict:
             for _ in range(n_steps):
                 wp.capture_launch(cap.graph)
             wp.synchronize()
-    return _with_compile(_rates(n_bodies * n_steps, run, repeats), compile_s)
+    return Runner(run, n_bodies * n_steps, compile_s)
 
 
-#: The engine's own batched run, per engine (its function takes the engine's variant name): one scene or
-#: world of N bodies (PhysX, Rapier), N bodies vmapped in one compiled loop (MJX, Brax, jaxsim), N worlds
-#: (MuJoCo Warp). MuJoCo's and PyBullet's own rows are measured apart (mujoco_multibody, pybullet_bodies).
-OWN_BATCHED = {"physx": physx_scene, "rapier": rapier_world, "mjx": mjx_vmapped, "brax": brax_vmapped,
-               "jaxsim": jaxsim_vmapped, "mujoco_warp": mujoco_warp_worlds}
+def mujoco_own_runners(n_bodies, n_steps, variant="euler") -> tuple:
+    """MuJoCo's two own batched runs (N bodies in one model; a rollout of N single bodies): the row takes
+    the better in each round. The bench's body model is Euler's, as ``mujoco:euler``."""
+    return mujoco_multibody_runner(n_bodies, n_steps), mujoco_rollout_runner(n_bodies, n_steps)
+
+
+def pybullet_own_runner(n_bodies, n_steps, variant="multibody") -> Runner:
+    """PyBullet's own batched run (:func:`pybullet_bodies_runner`; its maximal-coordinates body is the
+    same free body)."""
+    return pybullet_bodies_runner(n_bodies, n_steps)
+
+
+#: The engine's own batched run, per engine (``fn(n_bodies, n_steps, variant)``: a Runner, or a tuple of
+#: them of which each round takes the better): N bodies in one model or a rollout (MuJoCo), N bodies of one
+#: client (PyBullet), one scene or world of N bodies (PhysX, Rapier), N bodies vmapped in one compiled
+#: loop (MJX, Brax, jaxsim), N worlds (MuJoCo Warp).
+OWN_BATCHED = {"mujoco": mujoco_own_runners, "pybullet": pybullet_own_runner, "physx": physx_scene,
+               "rapier": rapier_world, "mjx": mjx_vmapped, "brax": brax_vmapped, "jaxsim": jaxsim_vmapped,
+               "mujoco_warp": mujoco_warp_worlds}
+#: The steps of an engine's batched row when not the table's (both sides of the row): PyBullet's N bodies
+#: step at a few thousand body-steps/s, so its row has a quarter of the steps, as its throughput row.
+OWN_STEPS = {"pybullet": lambda n_steps: max(n_steps // 4, 5)}
 #: What each engine's own batched run is, as the table prints it.
 OWN_HOW = {"mujoco": "N bodies in one model (best of it and a rollout)", "pybullet": "N bodies, states read",
            "physx": "one scene of N bodies", "rapier": "one world of N bodies",
            "mjx": "N vmapped, one compiled fori_loop", "brax": "N vmapped, one compiled fori_loop",
            "jaxsim": "N vmapped, one compiled fori_loop", "mujoco_warp": "N worlds, one captured step"}
-
-
-def own_batched(variants, n_bodies, n_steps, repeats) -> tuple:
-    """``({variant: stats + compile_s}, {variant: why not measured})`` of the engine's own batched run
-    (:data:`OWN_BATCHED`) for each ``ENGINE:VARIANT`` of ``variants``: an engine without one here (Drake,
-    DART) or one that cannot run (not installed, its model refused) is not measured and says why."""
-    from cross_checks.engines import EngineError
-    measured, why = {}, {}
-    for v in variants:
-        engine, name = v.split(":", 1)
-        fn = OWN_BATCHED.get(engine)
-        if fn is None:
-            why[v] = (f"this bench has no batched run of {engine} by itself (the issue's goal names "
-                      "MuJoCo, PyBullet, PhysX, Rapier, MJX, Brax, jaxsim and MuJoCo Warp)")
-            continue
-        try:
-            measured[v] = fn(n_bodies, n_steps, repeats, name)
-        except (ImportError, EngineError) as exc:
-            why[v] = f"{type(exc).__name__}: {exc}"
-    return measured, why
 
 
 #: The quick bench's sweep: a light scenario and two of the heaviest (long, fine ladders; a DOP853 reference).
@@ -767,13 +859,13 @@ def run_bench(quick: bool = False, repeats: int = 3, render=None, sweep: bool = 
         "reference_expmap_gyro_body_steps_per_s": reference_batched(n, steps, "expmap_gyro", repeats),
         "mujoco_multibody_body_steps_per_s": mujoco_multibody(n, steps, repeats),
         "mujoco_rollout_body_steps_per_s": mujoco_rollout(n, steps, repeats),
-        "pybullet_body_steps_per_s": pybullet_bodies(n, max(steps // 4, 5), repeats),
+        "pybullet_body_steps_per_s": pybullet_bodies(n, OWN_STEPS["pybullet"](steps), repeats),
         "reference_single_us_per_step": reference_single_us(500 if quick else 2000, repeats),
         "mujoco_single_us_per_step": mujoco_single_us(5000 if quick else 20000, repeats),
         "mujoco_bare_step_us": mujoco_bare_step_us(20_000 if quick else 100_000, max(repeats, 5)),
     }
     r = {
-        "quick": quick, "repeats": repeats, "n_bodies": n,
+        "quick": quick, "repeats": repeats, "n_bodies": n, "n_steps": steps,
         "versions": {"mujoco": mujoco.__version__, "pybullet": pybullet_engine.version(),
                      "numpy": np.__version__, "python": platform.python_version()},
         "cpu_count": os.cpu_count(),
@@ -792,24 +884,23 @@ def run_bench(quick: bool = False, repeats: int = 3, render=None, sweep: bool = 
             m[k] = st
         r[k] = None if st is None else st["median"]
     r["mujoco_adapter_single_us_per_step"] = m["mujoco_adapter_single_us_per_step"]["median"]
-    # the engines that batch, through their adapter's simulate_many at the same N (MuJoCo's rollout through
-    # its adapter beside them, the same path measured the same way)
+    # every engine's own batched run and its simulate_many at the same N, timed alternately (after the sweep:
+    # the JAX and Warp ones start their runtime in this process); an engine without an own run here is
+    # measured through its adapter alone and says why
+    # the CPU engines' rows first: a JAX or Warp runtime started in this process (its worker threads, its
+    # memory) must not weigh on them
+    batching = sorted(batching_variants(), key=lambda v: v.split(":", 1)[0] not in CPU_ENGINES)
+    r["batched"], own_m, r["own_batched_not_measured"] = batched_rows(
+        ["mujoco:euler", "pybullet:multibody", *batching], n, steps, repeats)
+    m.update(own_m)
+    # the throughput table's simulate_many rows: the batched rows' own figures, or measured alone
     r["batched_adapters"] = {}
-    for v in ["mujoco:euler", *batching_variants()]:
-        st = adapter_batched(v, n, steps, repeats)
-        m[f"adapter_batched[{v}]"] = st
-        r["batched_adapters"][v] = st["median"]
+    for v in ["mujoco:euler", *batching]:
+        if f"adapter_batched[{v}]" not in m:
+            m[f"adapter_batched[{v}]"] = adapter_batched(v, n, steps, repeats)
+        r["batched_adapters"][v] = m[f"adapter_batched[{v}]"]["median"]
     # the engines' own cost against the cost through rbcheck (its loop, forces and recording)
     r["overhead"] = overhead_rows(1000 if quick else 5000, repeats)
-    # the engines' own batched runs at the same N, after the sweep too (the JAX and Warp ones start their
-    # runtime in this process); an engine that cannot run here is skipped and says why
-    own_rates, r["own_batched_not_measured"] = own_batched(batching_variants(), n, steps, repeats)
-    for v, st in own_rates.items():
-        m[f"own_batched[{v}]"] = st
-    own = {"mujoco:euler": max(r["mujoco_multibody_body_steps_per_s"], r["mujoco_rollout_body_steps_per_s"]),
-           "pybullet:multibody": r["pybullet_body_steps_per_s"],
-           **{v: st["median"] for v, st in own_rates.items()}}
-    r["batched"] = batched_rows(n, steps, repeats, own)
     r["versions"]["drake"] = _drake_version()
     r["reference_batched_body_steps_per_s"] = max(r["reference_course_body_steps_per_s"],
                                                   r["reference_expmap_gyro_body_steps_per_s"])
@@ -851,10 +942,18 @@ def overhead_targets(overhead: list, batched: list, mj_step_loop_us: float) -> d
         if row["variant"] == "mujoco:euler" and e:
             out["mujoco:euler: engine_s per step <= 3x a Python loop of mj_step"] = e <= 3.0 * mj_step_loop_us
     for row in batched:
-        e, w = row["engine_body_steps_per_s"], row["rbcheck_body_steps_per_s"]
-        if e:
-            out[f"{row['variant']}: simulate_many >= 0.5x the engine's own batched throughput"] = w >= 0.5 * e
+        if row["engine_body_steps_per_s"]:
+            out[f"{row['variant']}: simulate_many >= 0.5x the engine's own batched throughput"] = (
+                batched_ratio(row) >= 0.5)
     return out
+
+
+def batched_ratio(row: dict) -> float:
+    """A ``batched`` row's ratio, rbcheck ÷ engine: the median of its interleaved rounds' ratios (``ratio``),
+    or, for a row without one, the ratio of its two medians."""
+    if row.get("ratio") is not None:
+        return row["ratio"]
+    return row["rbcheck_body_steps_per_s"] / row["engine_body_steps_per_s"]
 
 
 def _spread(st: dict, fmt: str = ".3g") -> str:
@@ -922,7 +1021,11 @@ def format_table(r: dict) -> str:
         if st.get("compile_s") is not None:
             how += f" (compiled in {st['compile_s']:.1f} s, not counted)"
         out.append(f"{v:<42} {'n/a' if e is None else f'{e:.3e}':>10} {w:>16.3e} "
-                   f"{'' if not e else f'{w / e:.2f}':>7}  {how}")
+                   f"{'' if not e else f'{batched_ratio(row):.2f}':>7}  {how}")
+    if r.get("batched"):
+        out.append(f"(a row's two runs timed alternately, {r['repeats']} rounds after a warm-up each; ratio: "
+                   "the median of the rounds' through rbcheck / engine, the goal >= 0.5; PyBullet's "
+                   f"row {OWN_STEPS['pybullet'](r.get('n_steps', 100))} steps)")
     for v, why in r.get("own_batched_not_measured", {}).items():
         out.append(f"{v}: the engine's own batched run not measured: {why}")
     if "sweep" in r:

@@ -267,27 +267,33 @@ class ForceRows:
     together: the compiled ``Members.force_torque`` of each member (the numbers of :class:`ForceEvaluator`,
     member by member), or None where numba is missing (:meth:`of`)."""
 
-    def __init__(self, problems, kernel):
+    def __init__(self, problems, kernel, index=None):
         # each distinct problem stacked once, its parameters gathered per body (the same values, member by
         # member: a batch of one scenario's copies costs one member's stacking)
-        first: dict = {}
-        for p in problems:
-            first.setdefault(id(p), (len(first), p))
-        index = np.array([first[id(p)][0] for p in problems])
-        unique = parameters(Members.stack([p for _, p in first.values()]), np.ones(len(first)))
+        if index is None:
+            first: dict = {}
+            for p in problems:
+                first.setdefault(id(p), (len(first), p))
+            index = np.array([first[id(p)][0] for p in problems])
+            problems = [p for _, p in first.values()]
+        unique = parameters(Members.stack(list(problems)), np.ones(len(problems)))
         self.params = tuple(np.ascontiguousarray(a[index]) for a in unique)
         self._rows = kernel
 
     @classmethod
-    def of(cls, problems):
+    def of(cls, problems, index=None):
+        """The rows of ``problems`` (one per body), or, with ``index`` (N,) int, of ``problems[index[i]]``
+        for body i (``problems`` then each distinct problem once)."""
         k = _kernels()
-        return None if k is None else cls(problems, k.force_torque_rows)
+        return None if k is None else cls(problems, k.force_torque_rows, index)
 
-    def force_torque(self, Y) -> np.ndarray:
-        """World force at the COM (N) and world torque (N m) of each body, (N, 6), at states ``Y`` (N, 13)."""
+    def force_torque(self, Y, part: slice | None = None) -> np.ndarray:
+        """World force at the COM (N) and world torque (N m) of each body, (N, 6), at states ``Y`` (N, 13);
+        ``part``: the bodies (a slice of them, in order) whose states ``Y`` holds, when not all."""
         Y = np.ascontiguousarray(Y, dtype=np.float64)
         out = np.empty((len(Y), 6))
-        self._rows(Y, out, *self.params)
+        params = self.params if part is None else tuple(a[part] for a in self.params)
+        self._rows(Y, out, *params)
         return out
 
 

@@ -11,7 +11,7 @@ from reference_sim.integrators import ImplicitSolveError, get_step
 from reference_sim.state import Problem
 
 __all__ = ["Run", "simulate", "run_members", "BLOWUP_LIMIT",
-           "COMPILED_CHUNK", "bad_rows", "blowup_words", "diverged", "recorded_run"]
+           "COMPILED_CHUNK", "bad_rows", "none_bad", "blowup_words", "diverged", "recorded_run"]
 
 #: A state component beyond this magnitude (m, m/s, rad/s) counts as a blow-up: far outside the catalog's
 #: runs (below 1e3) yet well below float overflow, so an exponential instability is caught before it turns
@@ -46,6 +46,17 @@ def bad_rows(y):
     the one divergence test of every engine's run (shape (...))."""
     with np.errstate(invalid="ignore"):
         return ~np.all(np.isfinite(y), axis=-1) | (np.max(np.abs(y), axis=-1) > BLOWUP_LIMIT)
+
+
+def none_bad(y) -> bool:
+    """True when :func:`bad_rows` flags no state of ``y``: every component finite and within BLOWUP_LIMIT,
+    in two reductions over the whole array (NaN propagates through both, and compares false) and no
+    temporary the size of ``y``."""
+    y = np.asarray(y)
+    if y.size == 0:
+        return True
+    with np.errstate(invalid="ignore"):
+        return bool(y.max() <= BLOWUP_LIMIT) and bool(y.min() >= -BLOWUP_LIMIT)
 
 
 def blowup_words(y) -> str:

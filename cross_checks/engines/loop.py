@@ -43,7 +43,7 @@ from cross_checks.engines import base, forces
 from cross_checks.engines.base import EngineError
 from reference_sim.compiled import ForceRows
 from reference_sim.quaternion import same_side
-from reference_sim.simulate import Run, bad_rows, blowup_words, diverged
+from reference_sim.simulate import Run, bad_rows, blowup_words, diverged, none_bad
 
 __all__ = ["run", "one_step", "Harness", "host_problem"]
 
@@ -72,37 +72,49 @@ class Harness:
     (B, 3) it is given); the harness's forces are then the rest (:func:`host_problem`)."""
 
     def __init__(self, scenarios, dt_s, applies_gravity: bool, body_torque: bool = False):
-        # each distinct scenario's (and step's) numbers once: a batch is mostly copies of a few scenarios
-        host, each = {}, {}
-        for sc in scenarios:
-            if id(sc) not in host:
-                p = host_problem(sc.problem, body_torque)
-                host[id(sc)] = (p, forces.float_forces(sc if p is sc.problem else p).force_torque,
-                                forces.weight_W(sc) if applies_gravity else np.zeros(3),
-                                body_torque_B(sc.problem) if body_torque else None)
-        problems = [host[id(sc)][0] for sc in scenarios]
+        # each distinct scenario's (and step's) numbers once, gathered per body by index: a batch is mostly
+        # copies of a few scenarios
+        first: dict = {}
+        which = [first.setdefault(id(sc), len(first)) for sc in scenarios]
+        unique = list({id(sc): sc for sc in scenarios}.values())
+        host = []
+        for sc in unique:
+            p = host_problem(sc.problem, body_torque)
+            host.append((p, forces.float_forces(sc if p is sc.problem else p).force_torque,
+                         forces.weight_W(sc) if applies_gravity else np.zeros(3),
+                         body_torque_B(sc.problem) if body_torque else None))
+        index = np.array(which, dtype=int)
         # the scenario's own evaluator where the harness evaluates all of its forces
-        self.ft = [host[id(sc)][1] for sc in scenarios]
+        self.ft = [host[k][1] for k in which]
         # many bodies: one compiled call for all of them (the same numbers, member by member)
-        self.rows = ForceRows.of(problems) if len(scenarios) > 4 else None
+        self.rows = ForceRows.of([h[0] for h in host], index) if len(scenarios) > 4 else None
         dts = [dt_s] * len(scenarios) if np.ndim(dt_s) == 0 else list(dt_s)
-        for sc, h in zip(scenarios, dts):
-            if (id(sc), h) not in each:
-                each[id(sc), h] = tuple(float(x) for x in forces.decay_factors(sc, h))
-        g = [each[id(sc), h] for sc, h in zip(scenarios, dts)]
-        self.g_v = np.array([a for a, _ in g])
-        self.g_w = np.array([b for _, b in g])
-        self.weight = np.array([host[id(sc)][2] for sc in scenarios])
-        self.state_dependent = any(p.forces.state_dependent for p, *_ in host.values())
-        self.body_torque_B = (np.array([host[id(sc)][3] for sc in scenarios]) if body_torque else None)
-        self.decays = any(sc.problem.forces.has_decay for sc in {id(sc): sc for sc in scenarios}.values())
+        each: dict = {}
+        pair = [each.setdefault((k, h), len(each)) for k, h in zip(which, dts)]
+        g = np.array([[float(x) for x in forces.decay_factors(unique[k], h)] for k, h in each]).reshape(-1, 2)
+        self.g_v = g[pair, 0]
+        self.g_w = g[pair, 1]
+        self.weight = np.array([h[2] for h in host]).reshape(-1, 3)[index]
+        self.state_dependent = any(p.forces.state_dependent for p, *_ in host)
+        self.body_torque_B = np.array([h[3] for h in host]).reshape(-1, 3)[index] if body_torque else None
+        self.decays = any(sc.problem.forces.has_decay for sc in unique)
         # a few bodies: per body, plain floats (ft, γ_v, γ_ω, the weight), two arrays built at the end
         self._floats = list(zip(self.ft, self.g_v.tolist(), self.g_w.tolist(), self.weight.tolist()))
 
     def wrench(self, y, bodies=None) -> tuple:
         """``(f_W, tau_W)`` (B, 3) each at packed states ``y`` (B, 13): the harness's force minus the weight
-        the engine applies, and its torque. ``bodies``: the bodies (indices) whose states the rows of ``y``
-        are, when not all of them in order (each row then evaluated alone, in plain floats)."""
+        the engine applies, and its torque. ``bodies``: the bodies whose states the rows of ``y`` are, when
+        not all of them in order: a slice of them (many bodies: one compiled call, as for all), or indices
+        (each row then evaluated alone, in plain floats)."""
+        if isinstance(bodies, slice) and self.rows is not None:   # the same operations as for all, below
+            w = self.rows.force_torque(y, bodies)
+            f, tau = w[:, 0:3], w[:, 3:6]
+            f *= self.g_v[bodies, None]
+            f -= self.weight[bodies]
+            tau *= self.g_w[bodies, None]
+            return f, tau
+        if isinstance(bodies, slice):
+            bodies = np.arange(len(self.ft))[bodies]
         if bodies is not None:
             bodies = np.asarray(bodies, dtype=int)
             w = np.array([self.ft[i](row) for i, row in zip(bodies.tolist(), np.asarray(y).tolist())])
@@ -221,7 +233,7 @@ def _run_world(engine, variant: str, reqs) -> list:
             if getattr(world, "rollout_takes_all_forces", False) and n_max:
                 # the world's compiled loop takes every force itself (the harness, called back from it)
                 t0 = time.perf_counter()
-                rec[1:] = np.asarray(rollout(n_max, harness), dtype=float)
+                _rollout(world, n_max, harness, rec)
                 engine_s += time.perf_counter() - t0
                 y = _checked(engine, variant, reqs, world.packed(rec), B, "packed states")
                 _check(engine, variant, reqs, world, rec, 1, n_max + 1, ends, stopped, y[1:])
@@ -230,7 +242,7 @@ def _run_world(engine, variant: str, reqs) -> list:
                 if not per_stage:
                     world.apply(f, tau)
                 t0 = time.perf_counter()
-                rec[1:] = np.asarray(rollout(n_max, harness), dtype=float)
+                _rollout(world, n_max, harness, rec)
                 engine_s += time.perf_counter() - t0
                 y = _checked(engine, variant, reqs, world.packed(rec), B, "packed states")
                 _check(engine, variant, reqs, world, rec, 1, n_max + 1, ends, stopped, y[1:])
@@ -338,6 +350,15 @@ def _steps(engine, variant, reqs, world, harness, rec, n_max, f, tau, ends, stop
     return engine_s, y
 
 
+def _rollout(world, n_max: int, harness, rec) -> None:
+    """``world.rollout``'s raw states of steps 1..n_max into ``rec[1:]``: written there by the world itself
+    when it takes an ``out`` (``World.rollout_into``: no copy of the whole record), else copied."""
+    if world.rollout_into:
+        world.rollout(n_max, harness, out=rec[1:])
+    else:
+        rec[1:] = np.asarray(world.rollout(n_max, harness), dtype=float)
+
+
 def _body_torque(world, harness, per_stage: bool) -> None:
     """Give a world that takes the body-axes torques itself (``WorldEngine.takes_body_torque``) its bodies'
     torques, once (it keeps them): scaled by the pre-step decay factor γ_ω as the harness's own torques are,
@@ -354,6 +375,8 @@ def _check(engine, variant, reqs, world, rec, start: int, stop: int, ends, stopp
     states when already converted. Returns those packed states."""
     if y is None:
         y = _checked(engine, variant, reqs, world.packed(rec[start:stop]), len(reqs), "states")
+    if not world.warnings and none_bad(y):   # the common case, in two passes over the chunk
+        return
     bad = bad_rows(y)
     warned: dict = {}
     for i, n, words in world.warnings:
@@ -387,7 +410,7 @@ def _same_side(y) -> np.ndarray:
         dots = np.einsum("nbi,nbi->nb", q[1:], q[:-1])
     flips = np.where(dots < 0.0, -1.0, 1.0)
     sign = np.concatenate([np.ones((1, y.shape[1])), np.cumprod(flips, axis=0)])
-    out = y.copy()
+    out = y.copy(order="K")   # in y's layout (a world may give it per run: packed_rows)
     out[..., 6:10] = q * sign[..., None]
     return out
 

@@ -22,6 +22,7 @@ from cross_checks.engines import base, forces, install
 from cross_checks.engines.base import EngineError, Variant
 from cross_checks.engines.forces import stage_force_torque_floats
 from cross_checks.engines.loop import host_problem
+from cross_checks.engines.packed_rows import qpos_qvel_packed
 from cross_checks.engines.world import World, WorldEngine
 from reference_sim.quaternion import quat_from_matrix
 
@@ -369,7 +370,9 @@ class MujocoWorld(mjw.FormBodies, World):
         self.qpos[:], self.qvel[:] = self.form.origin_rows(y)
 
     def packed(self, raw):
-        return (mjw.Bodies if self.form is None else mjw.FormBodies).packed(self, raw)
+        if self.form is None:   # a whole record: in each run's own layout, the same numbers (packed_rows)
+            return qpos_qvel_packed(raw, lambda r: mjw.Bodies.packed(self, r))
+        return mjw.FormBodies.packed(self, raw)
 
     def step(self):
         self.n += 1
@@ -389,12 +392,17 @@ class MujocoWorld(mjw.FormBodies, World):
             return self.packed(np.asarray(raw, dtype=float)[None])[0]
         return [packed_floats(r[0:7], r[7:13]) for r in np.asarray(raw).tolist()]
 
-    def rollout(self, n_steps, harness=None):
+    rollout_into = True
+
+    def rollout(self, n_steps, harness=None, out=None):
         """``n_steps`` steps in ``mujoco.rollout`` with the applied forces (xfrc_applied, and the body-axes
-        torques in qfrc_applied) held; if MuJoCo warned, the steps again one by one (:meth:`step`), which
-        attribute the warning to its body."""
+        torques in qfrc_applied) held, their rows (n_steps, B, 13) written into ``out`` (a new array when
+        None) and returned; if MuJoCo warned, the steps again one by one (:meth:`step`), which attribute the
+        warning to its body."""
+        if out is None:
+            out = np.empty((n_steps, self.B, 13))
         if self.B >= STEP_LOOP_BODIES:
-            return self._stepped(n_steps)
+            return self._stepped(n_steps, out)
         from mujoco import rollout
         t_all = time.perf_counter()
         m, d = self.model, self.data
@@ -408,8 +416,8 @@ class MujocoWorld(mjw.FormBodies, World):
         t0 = time.perf_counter()
         states, _ = rollout.rollout(m, datas, state, control[None, None], control_spec=spec, nstep=n_steps)
         t1 = time.perf_counter()
-        out = np.concatenate((states[0, :, 1:1 + m.nq].reshape(n_steps, self.B, 7),
-                              states[0, :, 1 + m.nq:].reshape(n_steps, self.B, 6)), axis=2)
+        out[..., 0:7] = states[0, :, 1:1 + m.nq].reshape(n_steps, self.B, 7)
+        out[..., 7:13] = states[0, :, 1 + m.nq:].reshape(n_steps, self.B, 6)
         # the engine's own time is the rollout call's; the set-up and the rows' layout are rbcheck's
         self.host_s += time.perf_counter() - t_all - (t1 - t0)
         if len(self.session.warnings) == seen:
@@ -421,13 +429,12 @@ class MujocoWorld(mjw.FormBodies, World):
             out[k] = self.read()
         return out
 
-    def _stepped(self, n_steps):
+    def _stepped(self, n_steps, out):
         """:meth:`rollout` of many bodies: ``n_steps`` of :meth:`step` (``mj_step``, each warning attributed
-        to its body) with the applied forces held, every step's qpos and qvel copied into the rows (B, 13);
-        the copies are rbcheck's time (``host_s``), the steps the engine's."""
+        to its body) with the applied forces held, every step's qpos and qvel copied into ``out``'s rows
+        (n_steps, B, 13); the copies are rbcheck's time (``host_s``), the steps the engine's."""
         perf = time.perf_counter
         t_all, inside = perf(), 0.0
-        out = np.empty((n_steps, self.B, 13))
         qpos, qvel, step = self.qpos, self.qvel, self.step
         for k in range(n_steps):
             t0 = perf()
@@ -468,6 +475,10 @@ class MujocoEngine(WorldEngine):
 
     def per_stage(self, scenario, variant):
         return forces_per_stage(scenario, variant)
+
+    def source_files(self) -> list:
+        from cross_checks.engines import packed_rows
+        return [*super().source_files(), *packed_rows.source_files()]
 
 
 _ENGINE = MujocoEngine()

@@ -70,8 +70,11 @@ VARIANTS = {
 }
 
 _BODY = 1   # body id of the free body (0 is the world)
-#: Worlds of one batch at most (a scenario's ladder is 5-10 rungs; one_step's rows are 64 at a time).
-MAX_WORLDS = 256
+#: Worlds of one batch at most: a step's kernel launches cost about the same for 256 worlds as for 4096 on
+#: the CPU device, so a batch is as large as MuJoCo Warp's own run of N worlds (``rbcheck bench``: N = 1000,
+#: one batch); about 50 kB of Data a world (4096: ~200 MB). A sweep's batches are a scenario's ladder (5-10
+#: rungs) or one_step's rows (64 at a time).
+MAX_WORLDS = 4096
 
 _LOCK = threading.RLock()
 
@@ -323,8 +326,9 @@ class WarpWorld(World):
 
     def packed(self, raw):
         from cross_checks.engines.mujoco_engine import to_packed
-        raw = np.asarray(raw, dtype=float)
-        return to_packed(raw[..., 0:7], raw[..., 7:13])
+        from cross_checks.engines.packed_rows import qpos_qvel_packed
+        # a whole record: in each run's own layout, to_packed's numbers (packed_rows)
+        return qpos_qvel_packed(raw, lambda r: to_packed(r[..., 0:7], r[..., 7:13]))
 
     def rollout(self, n_steps, harness):
         """``n_steps`` steps of every world, batch by batch, the step captured once and replayed; a batch
@@ -333,17 +337,20 @@ class WarpWorld(World):
         out = np.empty((n_steps, self.B, 13))
         with _LOCK:
             for part, W in self.parts:
-                out[:, part] = self._run(W, np.arange(self.B)[part], n_steps, harness)
+                out[:, part] = self._run(W, part, n_steps, harness)
         return out
 
-    def _run(self, W, bodies, n_max, harness):
-        from cross_checks.engines.mujoco_engine import packed_floats
+    def _run(self, W, bodies: slice, n_max, harness):
+        from cross_checks.engines.mujoco_engine import packed_floats, to_packed
         t_all, t_steps = time.perf_counter(), 0.0
         per_step = harness.state_dependent and not self.per_stage
         decay = harness.decays and not self.per_stage
         W.capture()
         _STATS["captures"] += 1
-        N = len(bodies)
+        N = len(W.qpos)
+        # many bodies: their packed states and forces for all at once (one compiled evaluation; the same
+        # numbers as a body's own in plain floats, tested)
+        vectorised = harness.rows is not None
         qpos_out = np.empty((n_max, N, 7), dtype=np.float32)
         qvel_out = np.empty((n_max, N, 6), dtype=np.float32)
         qpos, qvel, xfrc = W.qpos, W.qvel, W.xfrc
@@ -352,7 +359,10 @@ class WarpWorld(World):
         perf = time.perf_counter
         with _STATS.timing("step_seconds"), np.errstate(all="ignore"):
             for n in range(1, n_max + 1):
-                if per_step:
+                if per_step and vectorised:
+                    f, tau = harness.wrench(to_packed(qpos.astype(float), qvel.astype(float)), bodies)
+                    xfrc[:, _BODY, 0:3], xfrc[:, _BODY, 3:6] = f, tau
+                elif per_step:
                     qp, qv = qpos.tolist(), qvel.tolist()
                     f, tau = harness.wrench([packed_floats(qp[k], qv[k]) for k in range(N)], bodies)
                     xfrc[:, _BODY, 0:3], xfrc[:, _BODY, 3:6] = f, tau
@@ -395,6 +405,10 @@ class MujocoWarpEngine(WorldEngine):
 
     def per_stage(self, scenario, variant):
         return per_stage(scenario, variant)
+
+    def source_files(self) -> list:
+        from cross_checks.engines import packed_rows
+        return [*super().source_files(), *packed_rows.source_files()]
 
     def engine_files(self) -> list:
         """mujoco_warp's Python sources (found without importing them: the parent of a sweep must not start

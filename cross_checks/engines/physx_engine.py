@@ -53,6 +53,10 @@ VARIANTS = {
 }
 
 _REST = np.eye(1, 13, 6)[0]   # where a body whose run blew up is parked: at rest at the origin
+#: Above this many bodies a world takes its forces as arrays (one compiled evaluation for all, float32 rows
+#: to SAPIEN); at or below it, as plain floats per body (a few bodies' arrays cost more than their step).
+#: The same numbers either way (tests/cross_checks/engines/test_physx_engine.py).
+MANY_BODIES = 4
 _LOCK = threading.RLock()
 
 
@@ -129,32 +133,42 @@ def _world_class():
                 World.__init__(self)
                 with _LOCK:   # the scene config is SAPIEN's process-global default
                     W.Bodies.__init__(self, requests[0].scenario.problem.forces.gravity_W, variant, dt_s)
+                specs: dict = {}   # each distinct body's spec once: a batch is mostly copies of a few
                 for r in requests:
+                    body = r.scenario.problem.body
+                    spec = specs.get(id(body))
+                    if spec is None:
+                        spec = specs[id(body)] = body_spec(body)
                     try:
-                        self.add_body(*body_spec(r.scenario.problem.body))
+                        self.add_body(*spec)
                     except Exception as exc:  # noqa: BLE001 - PhysX/SAPIEN refuses the mass properties
                         raise EngineError(f"PhysX (sapien {installed_version(_DIST)}) refuses the body: "
                                           f"{type(exc).__name__}: {exc}") from None
                 self.always = np.array([r.scenario.problem.forces.state_dependent for r in requests],
                                        dtype=bool)
-                # one pack() as plain floats, and each body's packed row of it (PACK_TO_PACKED) in one call
+                self.many = len(requests) > MANY_BODIES
+                # a few bodies: one pack() as plain floats, and each body's packed row of it
+                # (PACK_TO_PACKED) in one call
                 self._unpack = struct.Struct(f"{13 * len(self.comps)}f").unpack
                 self._packed_of = [operator.itemgetter(*(13 * k + W.PACK_TO_PACKED).tolist())
                                    for k in range(len(self.comps))]
 
-            float_rows = True   # apply takes the harness's rows of plain floats
+            float_rows = True   # apply takes the harness's rows of plain floats (a few bodies)
 
             def first(self, y0):   # the scenario's own first row, not its float32 round trip
                 return y0
 
             def set_state(self, y):
                 W.Bodies.set_state(self, y)
-                self.last = self._unpack(self.system.pack())
+                if not self.many:
+                    self.last = self._unpack(self.system.pack())
 
             def read(self):
                 """Every body's packed row, 13 plain floats (float32 values), from one ``pack()``; a body
                 whose state is non-finite or beyond BLOWUP_LIMIT is parked at rest once read (so that PhysX
                 never steps a NaN), with no force and no decay from then on."""
+                if self.many:
+                    return self._read_many()
                 vals = self.last = self._unpack(self.system.pack())
                 rows = [g(vals) for g in self._packed_of]
                 if not math.hypot(*vals) <= BLOWUP_LIMIT:   # (NaN compares False) any body's state may be bad
@@ -164,21 +178,44 @@ def _world_class():
                             self._put(k, _REST)
                 return rows
 
+            def _read_many(self):
+                """Many bodies: the packed rows as one float32 array (:meth:`Bodies.read`), whose forces the
+                harness evaluates in one compiled call; bad bodies parked as :meth:`read` parks them."""
+                rows = W.Bodies.read(self)
+                raw = self.raw
+                if not np.abs(raw).max() <= BLOWUP_LIMIT:          # (NaN compares False)
+                    for k in np.flatnonzero(self.alive & ~(np.abs(raw).max(axis=1) <= BLOWUP_LIMIT)):
+                        self.alive[k] = False
+                        self._put(k, _REST)
+                return rows
+
             def rows(self, reads):
+                if self.many:
+                    return World.rows(self, reads)
                 n, B = len(reads), len(self.comps)
                 flat = itertools.chain.from_iterable(itertools.chain.from_iterable(reads))
                 return np.fromiter(flat, dtype=float, count=n * B * 13).reshape(n, B, 13)
 
-            def packed_row(self, raw):   # a read is packed rows of plain floats already
+            def packed_row(self, raw):   # a read is packed rows already (a few: plain floats; many: float32)
                 return raw
 
             def decay(self, g_v, g_w):   # the float32 velocities last read (Bodies.decay's raw), scaled
-                self.raw = np.array(self.last, dtype=np.float32).reshape(len(self.comps), 13)
+                if not self.many:
+                    self.raw = np.array(self.last, dtype=np.float32).reshape(len(self.comps), 13)
                 W.Bodies.decay(self, g_v, g_w)
 
             def apply(self, f_W, tau_W):
                 """:meth:`Bodies.apply` of (B, 3) arrays, or of the harness's rows of plain floats as they
-                are."""
+                are. Many bodies' arrays: the same float32 numbers (rounded once for all by NumPy, as SAPIEN
+                rounds each; both to nearest), the bodies that get one chosen in one vectorised pass, each
+                given its float32 rows (SAPIEN takes them faster than lists)."""
+                if self.many and isinstance(f_W, np.ndarray):
+                    f_W, tau_W = np.asarray(f_W, dtype=float), np.asarray(tau_W, dtype=float)
+                    get = self.alive & (self.always | f_W.any(axis=1) | tau_W.any(axis=1))
+                    f32, t32 = f_W.astype(np.float32), tau_W.astype(np.float32)
+                    for k in (range(len(self._add)) if get.all() else np.flatnonzero(get).tolist()):
+                        self._add[k](f32[k], t32[k])
+                    return
                 alive, always, add = self.alive, self.always, self._add
                 for k, f, t in zip(range(len(add)), _float_rows(f_W), _float_rows(tau_W)):
                     if alive[k] and (always[k] or f[0] or f[1] or f[2] or t[0] or t[1] or t[2]):

@@ -10,6 +10,8 @@ what pins them: docs/engine_conventions.md, "Rapier 0.36.1".
 """
 from __future__ import annotations
 
+import functools
+import math
 import types
 
 import numpy as np
@@ -19,6 +21,7 @@ from cross_checks.engines.base import EngineError, Traits, Variant
 from cross_checks.engines.step_floats import bad_floats
 from cross_checks.engines.world import World, WorldEngine
 from reference_sim.quaternion import quat_from_matrix
+from reference_sim.simulate import BLOWUP_LIMIT
 
 rapier, _IMPORT_ERROR = install.optional_import("rapier3d")
 if _IMPORT_ERROR is None:   # the world (what rbcheck repro embeds) imports the engine itself
@@ -50,6 +53,86 @@ VARIANTS = {
                                                       precision="float32")),
 }
 
+#: Above this many bodies a world reads its bodies' states from one serialisation per body (``RigidBody.
+#: to_bytes``, decoded for all at once: :func:`state_bytes_layout`) and takes its forces as arrays, giving a
+#: body a force or torque only where it changed; at or below it, per body through the getters, in plain
+#: floats. The same numbers either way (tests/cross_checks/engines/test_rapier_engine.py).
+MANY_BODIES = 4
+
+
+def _f32(values) -> np.ndarray:
+    return np.asarray(values, dtype=np.float32)
+
+
+def _decode(blobs: bytes, n: int, layout) -> np.ndarray:
+    """``n`` bodies' serialisations of one length (``blobs``, joined) as packed rows (n, 13) in float64:
+    ``[x_W, v_W, q (w x y z), ω_W]``, the quaternion normalised as ``Rotation3.to_tuple`` normalises it (in
+    float32: q / sqrt((x² + z²) + (y² + w²)))."""
+    length, cols = layout
+    raw = np.frombuffer(blobs, dtype=np.uint8).reshape(n, length)[:, cols]
+    v = np.ascontiguousarray(raw).view("<f4")                      # x, y, z, vx, vy, vz, qx, qy, qz, qw, ω
+    qx, qy, qz, qw = v[:, 6], v[:, 7], v[:, 8], v[:, 9]
+    norm = np.sqrt((qx * qx + qz * qz) + (qy * qy + qw * qw))
+    out = np.empty((n, 13))
+    out[:, 0:6] = v[:, 0:6]
+    out[:, 6] = qw / norm
+    out[:, 7] = qx / norm
+    out[:, 8] = qy / norm
+    out[:, 9] = qz / norm
+    out[:, 10:13] = v[:, 10:13]
+    return out
+
+
+@functools.lru_cache(maxsize=1)
+def state_bytes_layout():
+    """Where a body's state sits in ``RigidBody.to_bytes()`` (rapier3d's own serialisation): ``(length,
+    byte columns of [x, v, q (x y z w), ω] as float32)``, found on a probe body given distinct values (each
+    component's first place) and then checked on 256 bodies of random states stepped under random torques:
+    :func:`_decode` of their serialisations must equal what the getters return, bit for bit. None where
+    anything differs (another rapier3d may lay its bodies out otherwise): the getters then, per body."""
+    if rapier is None:
+        return None
+    try:
+        return _find_layout()
+    except Exception:  # noqa: BLE001 - an unexpected serialisation: the getters are always right
+        return None
+
+
+def _find_layout():
+    probe = rpw.Bodies([(1.0, np.array([1.0, 2.0, 3.0]), np.array([1.0, 0.0, 0.0, 0.0]))], (0.0, 0.0, 0.0),
+                       "symplectic_euler", 1e-3)
+    rb = probe.bodies[0]
+    rb.position = rapier.Isometry3((1.25, 2.375, 3.5), rapier.Rotation3(0.9, 0.1, -0.2, 0.3))
+    rb.linvel, rb.angvel = (4.625, 5.75, 6.875), (7.125, 8.25, 9.375)
+    rot = rb.rotation.to_bytes()
+    stored_q = np.frombuffer(rot[len(rot) - 16:], dtype="<f4")     # the rotation as kept: x, y, z, w
+    blob = rb.to_bytes()
+    want = [*_f32([1.25, 2.375, 3.5, 4.625, 5.75, 6.875]), *stored_q, *_f32([7.125, 8.25, 9.375])]
+    offsets = [blob.find(c.tobytes()) for c in want]
+    if min(offsets) < 0 or len({*offsets}) != 13:
+        return None
+    layout = (len(blob), np.concatenate([np.arange(o, o + 4) for o in offsets]))
+    rng = np.random.default_rng(20260)
+    n = 256
+    y = np.zeros((n, 13))
+    y[:, 0:6], y[:, 10:13] = rng.normal(size=(n, 6)) * 10.0, rng.normal(size=(n, 3)) * 5.0
+    q = rng.normal(size=(n, 4))
+    y[:, 6:10] = q / np.linalg.norm(q, axis=1, keepdims=True)
+    check = rpw.Bodies([(1.0, np.array([1.0, 2.0, 3.0]), np.array([1.0, 0.0, 0.0, 0.0]))] * n,
+                       (0.0, 0.0, -9.81), "symplectic_euler", 1e-2)
+    check.set_state(y)
+    for _ in range(4):
+        check.apply(np.zeros((n, 3)), rng.normal(size=(n, 3)))
+        blobs = [b.to_bytes() for b in check.bodies]
+        if {len(b) for b in blobs} != {layout[0]}:
+            return None
+        got = _decode(b"".join(blobs), n, layout)
+        if not np.array_equal(got, np.asarray(rpw.Bodies.read(check), dtype=float)):
+            return None
+        check.step()
+    return layout
+
+
 def body_spec(body) -> tuple:
     """``(mass_kg, principal moments (3,), q_BP (w x y z))`` of an rbcheck RigidBody as Rapier takes it: COM
     at the origin, the rotation of the principal axes in body coordinates (identity for a diagonal tensor)."""
@@ -66,14 +149,68 @@ class RapierWorld(rpw.Bodies, World):
 
     def __init__(self, requests, variant: str, dt_s: float):
         World.__init__(self)
-        rpw.Bodies.__init__(self, [body_spec(r.scenario.problem.body) for r in requests],
+        specs: dict = {}   # each distinct body's spec once: a batch is mostly copies of a few
+        for r in requests:
+            if id(r.scenario.problem.body) not in specs:
+                specs[id(r.scenario.problem.body)] = body_spec(r.scenario.problem.body)
+        rpw.Bodies.__init__(self, [specs[id(r.scenario.problem.body)] for r in requests],
                             requests[0].scenario.problem.forces.gravity_W, variant, dt_s)
         self.ends = [int(r.n_steps) for r in requests]
         self.n = 0
+        self.layout = state_bytes_layout() if len(requests) > MANY_BODIES else None
+        if self.layout is not None:
+            self._to_bytes = [rb.to_bytes for rb in self.bodies]
+            self._ends = np.array(self.ends)
+            self._given = None   # the (f_W, τ_W) last given to the bodies (Rapier keeps them)
 
     def set_state(self, y):
         rpw.Bodies.set_state(self, y)
         self.n = 0
+        if self.layout is not None:
+            self._given = None
+
+    def packed_row(self, raw):   # many bodies: the read itself, for the harness's one compiled evaluation
+        return raw if self.layout is not None else World.packed_row(self, raw)
+
+    def apply(self, f_W, tau_W):
+        """Many bodies: :meth:`Bodies.apply`'s replacement, made only where a body's force or torque
+        changed, bit for bit, since the last (Rapier keeps them; the same Python floats reach it)."""
+        if self.layout is None:
+            return rpw.Bodies.apply(self, f_W, tau_W)
+        f_W, tau_W = np.asarray(f_W, dtype=float), np.asarray(tau_W, dtype=float)
+        if self._given is None:
+            new_f = new_t = np.ones(len(f_W), dtype=bool)
+        else:
+            new_f = (f_W.view(np.uint64) != self._given[0].view(np.uint64)).any(axis=1)
+            new_t = (tau_W.view(np.uint64) != self._given[1].view(np.uint64)).any(axis=1)
+        self._given = (f_W.copy(), tau_W.copy())
+        bodies, dead = self.bodies, self.dead
+        if new_f.any():
+            for k, f in zip(np.flatnonzero(new_f).tolist(), f_W[new_f].tolist()):
+                if k not in dead:
+                    bodies[k].reset_forces(False)
+                    bodies[k].add_force(tuple(f), False)
+        if new_t.all() and not dead:
+            for rb, t in zip(bodies, tau_W.tolist()):
+                rb.reset_torques(False)
+                rb.add_torque(tuple(t), False)
+        elif new_t.any():
+            for k, t in zip(np.flatnonzero(new_t).tolist(), tau_W[new_t].tolist()):
+                if k not in dead:
+                    bodies[k].reset_torques(False)
+                    bodies[k].add_torque(tuple(t), False)
+
+    def decay(self, g_v, g_w):
+        """Many bodies: :meth:`Bodies.decay`'s velocities (the last read's, scaled: the same products),
+        computed for all at once."""
+        if self.layout is None:
+            return rpw.Bodies.decay(self, g_v, g_w)
+        last = np.asarray(self.last, dtype=float)
+        v = (np.asarray(g_v, dtype=float)[:, None] * last[:, 3:6]).tolist()
+        w = (np.asarray(g_w, dtype=float)[:, None] * last[:, 10:13]).tolist()
+        for k, (rb, vk, wk) in enumerate(zip(self.bodies, v, w)):
+            if k not in self.dead:
+                rb.linvel, rb.angvel = tuple(vk), tuple(wk)
 
     def first(self, y0):   # the scenario's own first row, not its float32 round trip
         return y0
@@ -90,11 +227,31 @@ class RapierWorld(rpw.Bodies, World):
     def read(self):
         """The packed rows (a dead body's non-finite). A body whose run is over (its last step, or a state
         non-finite or beyond BLOWUP_LIMIT) is dead from then on: disabled, no force, no decay."""
+        if self.layout is not None:
+            return self._read_many()
         rows = rpw.Bodies.read(self)
         for k, rb in enumerate(self.bodies):
             if k not in self.dead and (self.n >= self.ends[k] or bad_floats(rows[k])):
                 self.dead.add(k)
                 rb.is_enabled = False
+        return rows
+
+
+    def _read_many(self):
+        """:meth:`read` of many bodies: one serialisation per body, decoded for all at once (the getters'
+        numbers: :func:`state_bytes_layout`), the runs that end here found in one pass."""
+        blobs = [f() for f in self._to_bytes]
+        rows = _decode(b"".join(blobs), len(blobs), self.layout)
+        if self.dead:
+            rows[sorted(self.dead)] = math.nan
+        with np.errstate(invalid="ignore"):
+            ends = (self.n >= self._ends) | ~(np.abs(rows) <= BLOWUP_LIMIT).all(axis=1)
+        if ends.any():
+            for k in np.flatnonzero(ends).tolist():
+                if k not in self.dead:
+                    self.dead.add(k)
+                    self.bodies[k].is_enabled = False
+        self.last = rows
         return rows
 
 

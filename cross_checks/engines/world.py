@@ -37,6 +37,8 @@ The world's contract (states packed as in reference_sim.state: ``[x_W (m), v_W (
   states, the decay factors ``g_v``, ``g_w``) per step or stage as its compiled loop needs them (the loop
   then runs every run there, after ``apply`` of the start forces unless ``per_stage``; the seconds of those
   callbacks go to ``host_s``);
+* optional ``rollout_into``: True when ``rollout`` also takes ``out=`` (an (n_steps, B, R) float64 array view)
+  and writes the raw states there, returning nothing the loop needs (no copy of the whole record);
 * optional ``rollout_takes_all_forces``: True when ``rollout(n_steps, harness)`` takes every kind of force
   itself (the loop's :class:`~cross_checks.engines.loop.Harness`: its compiled loop calls ``harness``'s
   evaluators back from the host per step or stage, and applies the decay): the loop then uses it for every
@@ -81,6 +83,7 @@ class World:
     rollout_takes_all_forces = False
     host_s = 0.0
     rollout_forces = False
+    rollout_into = False
     exact_start = False
     first_cause_only = False
 

@@ -168,8 +168,10 @@ def search(seed, variants, budget_s, *, jobs=1, executor=None, cache_root=None, 
     extra = user_engines()
     deadline = time.monotonic() + float(budget_s)
     if jobs > 1 and executor is None:
+        from cross_checks.engines import packed_rows
         from reference_sim import compiled
         compiled.warm()   # the compiled reference steps, loaded once here: the forked workers inherit them
+        packed_rows.warm()   # and MuJoCo's conversion of a record (engines.packed_rows)
     runner = Runner(max(1, int(jobs)), executor)
     results = []
     with tempfile.TemporaryDirectory(prefix="rbcheck-fuzz-") as inflight:

@@ -210,11 +210,16 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
 
 def _load_before_forking(variants, show: bool = False) -> float:
     """What every worker needs, computed once here so that forked workers inherit it: each engine's code
-    fingerprint and, when the reference runs, its compiled steps. Returns the seconds spent compiling them
-    (0 when they were cached); the first time on a machine a line says what is compiled and for about how
-    long (:func:`warm_reference`)."""
-    for engine in dict.fromkeys(["reference", *(v.split(":", 1)[0] for v in variants)]):
+    fingerprint, when the reference runs, its compiled steps, and, when MuJoCo or MuJoCo Warp runs, the
+    compiled conversion of their records (engines.packed_rows: a fraction of a second). Returns the seconds
+    spent compiling the reference's (0 when they were cached); the first time on a machine a line says what
+    is compiled and for about how long (:func:`warm_reference`)."""
+    engines = list(dict.fromkeys(["reference", *(v.split(":", 1)[0] for v in variants)]))
+    for engine in engines:
         code_fingerprint(engine)
+    if {"mujoco", "mujoco_warp"} & set(engines):
+        from cross_checks.engines import packed_rows
+        packed_rows.warm()
     if any(v.startswith("reference:") for v in variants):
         return warm_reference("rbcheck sweep", show)
     return 0.0

@@ -3,6 +3,7 @@ the scenarios themselves (no timing is asserted: speed lives in the benchmark's 
 single-trajectory cost beside MuJoCo's through the same adapter interface (None when Drake is absent)."""
 import math
 
+import numpy as np
 import pytest
 
 from cross_checks import bench, engines
@@ -133,12 +134,18 @@ def test_the_sweep_is_measured_before_any_engine_adapter_runs_in_the_process(mon
     monkeypatch.setattr(bench, "drake_single_us", lambda *a, **k: order.append("adapter") or (None, None))
     monkeypatch.setattr(bench, "adapter_batched", lambda *a, **k: order.append("adapter") or stat)
     monkeypatch.setattr(bench, "overhead_rows", lambda *a, **k: order.append("adapter") or [])
-    monkeypatch.setattr(bench, "own_batched", lambda *a, **k: order.append("own") or ({}, {}))
-    monkeypatch.setattr(bench, "batching_variants", lambda *a, **k: ["jaxsim:semi_implicit_euler"])
+    rows_of = []
+    monkeypatch.setattr(bench, "batched_rows",
+                        lambda vs, *a, **k: order.append("own") or rows_of.append(vs) or ([], {}, {}))
+    monkeypatch.setattr(bench, "batching_variants",
+                        lambda *a, **k: ["jaxsim:semi_implicit_euler", "rapier:symplectic_euler"])
     sweep = {"total_s": stat, "run_s": stat, "floor_s": 1.0}
     monkeypatch.setattr(bench, "sweep_floor", lambda *a, **k: order.append("sweep") or sweep)
     r = bench.run_bench(quick=True, repeats=1)
     assert order[0] == "sweep" and order.count("sweep") == 1 and "adapter" in order and "own" in order
+    # the CPU engines' batched rows before any JAX or Warp one
+    assert rows_of == [["mujoco:euler", "pybullet:multibody", "rapier:symplectic_euler",
+                        "jaxsim:semi_implicit_euler"]]
     assert r["sweep"] is sweep and r["targets"]["sweep (run + report) <= 8x its floor"]
 
 
@@ -207,45 +214,128 @@ def test_the_overhead_targets_are_read_from_the_rows_as_the_issue_words_them():
         "mujoco:euler: engine_s per step <= 3x a Python loop of mj_step"]
 
 
+class _Rate:
+    """A stand-in runner whose call sets the clock: ``clock.now += seconds(call number)``."""
+
+    def __init__(self, clock, name, seconds):
+        self.clock, self.name, self.seconds, self.calls = clock, name, seconds, 0
+
+    def __call__(self):
+        self.calls += 1
+        self.clock.log.append(self.name)
+        self.clock.now += self.seconds(self.calls)
+
+
+class _Clock:
+    def __init__(self):
+        self.now, self.log = 0.0, []
+
+    def __call__(self):
+        return self.now
+
+
+def test_the_two_sides_of_a_row_are_timed_alternately_in_rounds(monkeypatch):
+    """After one warm-up call each, every round runs each side once, the order reversed every other round;
+    each side's rates are its own calls' (work / seconds)."""
+    clock = _Clock()
+    monkeypatch.setattr(bench.time, "perf_counter", clock)
+    a = _Rate(clock, "a", lambda k: 1.0)
+    b = _Rate(clock, "b", lambda k: 0.5 * k)
+    rates = bench.interleaved({"a": bench.Runner(a, 10), "b": bench.Runner(b, 10)}, 4)
+    assert clock.log == ["a", "b", "a", "b", "b", "a", "a", "b", "b", "a"]
+    assert rates == {"a": [10.0] * 4, "b": [10 / 1.0, 10 / 1.5, 10 / 2.0, 10 / 2.5]}
+
+
+def test_a_load_that_moves_between_rounds_leaves_the_paired_ratio_where_it_is(monkeypatch):
+    """A machine whose load slows everything 5x after the first two rounds: timed side after side (all of one,
+    then all of the other) the ratio of medians is a fifth of the truth; the median of the interleaved
+    rounds' ratios keeps the true ratio 0.5 (the rbcheck side takes twice the engine's time in every
+    round)."""
+    clock = _Clock()
+    monkeypatch.setattr(bench.time, "perf_counter", clock)
+    slow = {"factor": 1.0}
+    own = _Rate(clock, "own", lambda k: 1.0 * slow["factor"])
+    rb = _Rate(clock, "rbcheck", lambda k: 2.0 * slow["factor"])
+
+    def loaded(runner):
+        def run():
+            runner()
+            if len(clock.log) >= 6:          # after the warm-ups and two rounds: the load goes up
+                slow["factor"] = 5.0
+        return run
+    rates = bench.interleaved({"own": bench.Runner(loaded(own), 100),
+                               "rbcheck": bench.Runner(loaded(rb), 100)}, 5)
+    assert bench.paired_ratio(rates["rbcheck"], rates["own"]) == pytest.approx(0.5)
+    # the same load change met by the old scheme (the engine's repeats first, then rbcheck's) misleads
+    slow["factor"], side_by_side = 1.0, {"own": [], "rbcheck": []}
+    for name, runner in (("own", own), ("rbcheck", rb)):
+        for _ in range(3):
+            t0 = clock()
+            runner()
+            side_by_side[name].append(100 / (clock() - t0))
+        slow["factor"] = 5.0
+    old = np.median(side_by_side["rbcheck"]) / np.median(side_by_side["own"])
+    assert old == pytest.approx(0.1)
+
+
 def test_every_engine_with_an_own_batched_run_gets_a_batched_row(monkeypatch):
-    """The engines' own batched throughputs (hand-made, as own_batched returns them) become one ``batched``
-    row each beside simulate_many's at the same N, and the targets read every row (no time asserted: the
-    adapter's rate is stubbed)."""
-    stat = {"median": 3e5, "min": 2e5, "max": 4e5, "repeats": 1}
-    seen = []
-    monkeypatch.setattr(bench, "adapter_batched", lambda v, n, s, r: seen.append((v, n, s)) or stat)
-    own = {"mujoco:euler": 4e6, "physx:tgs": 1e6, "rapier:symplectic_euler": 5e5, "mjx:euler": 4e5,
-           "brax:generalized": 2e5, "jaxsim:semi_implicit_euler": 1e5, "mujoco_warp:euler": 7e5}
-    rows = bench.batched_rows(50, 10, 1, own)
-    assert [r["variant"] for r in rows] == list(own) and all(n == 50 and s == 10 for _, n, s in seen)
-    assert all(set(r) == {"variant", "engine_body_steps_per_s", "rbcheck_body_steps_per_s"} for r in rows)
-    t = bench.overhead_targets([], rows, mj_step_loop_us=1.0)
-    goal = ": simulate_many >= 0.5x the engine's own batched throughput"
-    assert t == {v + goal: 3e5 >= 0.5 * e for v, e in own.items()}
-    assert [v for v in own if t[v + goal]] == ["rapier:symplectic_euler", "mjx:euler", "brax:generalized",
-                                               "jaxsim:semi_implicit_euler"]
-
-
-def test_an_engine_that_cannot_run_its_own_batch_is_skipped_and_says_why(monkeypatch):
-    """Not installed (EngineNotInstalled), its model refused (EngineError) or no own run here (Drake, DART):
-    no row, a reason each; the others are measured."""
+    """Each engine's own batched run (hand-made runners: MuJoCo's two, of which a round takes the better)
+    beside simulate_many's at the same N, timed alternately, is one ``batched`` row with its medians and the
+    median of its rounds' ratios; an engine without an own run here, not installed or refusing its model is
+    not a row and says why; the targets read the rows' ratios."""
     from cross_checks.engines.base import EngineError
     from cross_checks.engines.install import EngineNotInstalled
+    seen = []
 
     def absent(*a):
         raise EngineNotInstalled("jaxsim is not installed (pip install 'rbcheck[jaxsim]')")
 
     def refused(*a):
         raise EngineError("MJX refused the model")
-    stat = {"median": 1.0, "min": 1.0, "max": 1.0, "repeats": 1, "compile_s": None}
-    calls = []
-    monkeypatch.setattr(bench, "OWN_BATCHED", {"jaxsim": absent, "mjx": refused,
-                                               "physx": lambda *a: calls.append(a) or stat})
-    measured, why = bench.own_batched(["jaxsim:semi_implicit_euler", "mjx:euler", "physx:pgs",
-                                       "drake:semi_explicit_euler"], 7, 3, 2)
-    assert measured == {"physx:pgs": stat} and calls == [(7, 3, 2, "pgs")]
+    own = {"mujoco": lambda n, s, v: (bench.Runner(lambda: None, n * s),
+                                      bench.Runner(lambda: None, n * s, 2.0)),
+           "physx": lambda n, s, v: seen.append(("own", n, s, v)) or bench.Runner(lambda: None, n * s),
+           "jaxsim": absent, "mjx": refused}
+    monkeypatch.setattr(bench, "OWN_BATCHED", own)
+    monkeypatch.setattr(bench, "adapter_runner",
+                        lambda v, n, s: seen.append((v, n, s)) or bench.Runner(lambda: None, n * s))
+    # the rates of each round, as interleaved returns them: (own 0, own 1, rbcheck) per variant
+    fake = {"mujoco:euler": ([4e6, 2e6, 4e6], [1e6, 5e6, 1e6], [2e6, 2e6, 1.9e6]),
+            "physx:pgs": ([1e6, 1e6, 1e6], None, [4e5, 6e5, 4.9e5])}
+
+    def rounds(runners, repeats):
+        v = "mujoco:euler" if len(runners) == 3 else "physx:pgs"
+        o0, o1, rb = fake[v]
+        return {("own", 0): o0, "rbcheck": rb, **({("own", 1): o1} if o1 else {})}
+    monkeypatch.setattr(bench, "interleaved", rounds)
+    rows, m, why = bench.batched_rows(["mujoco:euler", "physx:pgs", "jaxsim:semi_implicit_euler", "mjx:euler",
+                                       "drake:semi_explicit_euler"], 50, 10, 3)
+    assert [r["variant"] for r in rows] == ["mujoco:euler", "physx:pgs"]
+    assert ("own", 50, 10, "pgs") in seen and ("physx:pgs", 50, 10) in seen
+    mj, px = rows
+    assert mj["engine_body_steps_per_s"] == 4e6 and mj["rbcheck_body_steps_per_s"] == 2e6
+    assert mj["ratio"] == pytest.approx(0.475)     # rounds' best 4, 5, 4; ratios 2/4, 2/5, 1.9/4
+    assert m["own_batched[mujoco:euler]"]["compile_s"] == 2.0
+    assert m["own_batched[physx:pgs]"]["compile_s"] is None
+    assert m["adapter_batched[physx:pgs]"]["median"] == 4.9e5 and px["ratio"] == pytest.approx(0.49)
+    assert set(why) == {"jaxsim:semi_implicit_euler", "mjx:euler", "drake:semi_explicit_euler"}
     assert "not installed" in why["jaxsim:semi_implicit_euler"] and "refused" in why["mjx:euler"]
     assert "no batched run of drake by itself" in why["drake:semi_explicit_euler"]
+    goal = ": simulate_many >= 0.5x the engine's own batched throughput"
+    assert bench.overhead_targets([], rows, mj_step_loop_us=1.0) == {"mujoco:euler" + goal: False,
+                                                                    "physx:pgs" + goal: False}
+    rows[1]["ratio"] = 0.5
+    assert bench.overhead_targets([], rows, mj_step_loop_us=1.0)["physx:pgs" + goal]
+
+
+def test_pybullets_row_has_a_quarter_of_the_steps_on_both_sides(monkeypatch):
+    seen = []
+    monkeypatch.setattr(bench, "OWN_BATCHED", {"pybullet": lambda n, s, v: seen.append(("own", s))
+                                               or bench.Runner(lambda: None, n * s)})
+    monkeypatch.setattr(bench, "adapter_runner",
+                        lambda v, n, s: seen.append(("rbcheck", s)) or bench.Runner(lambda: None, n * s))
+    rows, _, _ = bench.batched_rows(["pybullet:multibody"], 20, 100, 2)
+    assert seen == [("own", 25), ("rbcheck", 25)] and rows[0]["ratio"] > 0
 
 
 def test_the_table_prints_each_batched_row_with_what_the_engines_own_run_is():
@@ -272,12 +362,21 @@ def _installed(engine):
                                     for e in bench.OWN_BATCHED])
 def test_each_engines_own_batched_run_steps_a_few_bodies(engine):
     """Every own-throughput function runs for a tiny N on every installed engine (skipped when absent; the
-    JAX and Warp ones, which compile or load kernels for tens of seconds, are slow) and returns the
-    documented shape: rates over the repeats and the compile time apart (None for an engine that does not
-    compile)."""
+    JAX and Warp ones, which compile or load kernels for tens of seconds, are slow) and gives runners of
+    the documented shape: the body-steps of a call and the compile time apart (None for an engine that
+    does not compile), timed alternately with simulate_many's through batched_rows."""
     if not _installed(engine):
         pytest.skip(f"{engine} is not installed")
-    st = bench.OWN_BATCHED[engine](3, 4, 2)
-    assert set(st) == {"median", "min", "max", "repeats", "compile_s"} and st["repeats"] == 2
-    assert 0 < st["min"] <= st["median"] <= st["max"]
-    assert (st["compile_s"] is None) == (engine in ("physx", "rapier"))
+    from cross_checks.engines import all_variants
+    variant = next(v.name for v in all_variants() if v.engine == engine and v.available)
+    rows, m, why = bench.batched_rows([variant], 3, 8, 2)
+    assert why == {} and [r["variant"] for r in rows] == [variant]
+    steps = bench.OWN_STEPS.get(engine, lambda k: k)(8)
+    st, rb = m[f"own_batched[{variant}]"], m[f"adapter_batched[{variant}]"]
+    assert st["repeats"] == rb["repeats"] == 2 and 0 < st["min"] <= st["median"] <= st["max"]
+    assert (st["compile_s"] is None) == (engine in ("mujoco", "pybullet", "physx", "rapier"))
+    assert rows[0]["ratio"] > 0
+    own = bench.OWN_BATCHED[engine](3, steps, variant.split(":", 1)[1])
+    for r in own if isinstance(own, tuple) else (own,):
+        assert r.work == 3 * steps
+        r.close()

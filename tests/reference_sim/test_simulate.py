@@ -3,7 +3,7 @@ import numpy as np
 
 from reference_sim.body import RigidBody
 from reference_sim.forces import ForceModel, Spring
-from reference_sim.simulate import BLOWUP_LIMIT, recorded_run, simulate
+from reference_sim.simulate import BLOWUP_LIMIT, bad_rows, none_bad, recorded_run, simulate
 from reference_sim.state import Problem, State
 
 
@@ -79,3 +79,18 @@ def test_recorded_run_stops_at_the_first_bad_state_and_keeps_the_ones_before():
     assert cut.message == "diverged at t = 0.3 s (non-finite state)"
     y[3, 0] = 2 * BLOWUP_LIMIT
     assert recorded_run(y, 0.1).message.endswith(f"(state beyond {BLOWUP_LIMIT:g})")
+
+
+def test_none_bad_is_true_exactly_when_bad_rows_flags_nothing():
+    """The loop's fast divergence check of a chunk: every single bad component (non-finite, beyond the
+    limit either side) in an otherwise fine array turns it false; values at the limit, -0.0 and an empty
+    array do not."""
+    rng = np.random.default_rng(3)
+    fine = rng.standard_normal((5, 4, 13))
+    fine[0, 0, 0], fine[1, 1, 1], fine[2, 2, 2] = BLOWUP_LIMIT, -BLOWUP_LIMIT, -0.0
+    assert none_bad(fine) and not bad_rows(fine).any() and none_bad(np.empty((0, 3, 13)))
+    for value in (np.nan, np.inf, -np.inf, np.nextafter(BLOWUP_LIMIT, np.inf), -2.0 * BLOWUP_LIMIT):
+        for idx in ((0, 0, 0), (4, 3, 12), (2, 1, 7)):
+            y = fine.copy()
+            y[idx] = value
+            assert not none_bad(y) and bad_rows(y).any(), (value, idx)

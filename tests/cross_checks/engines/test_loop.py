@@ -417,3 +417,23 @@ def test_the_collector_is_off_during_the_steps_and_back_on_after_every_run():
     assert len(run.y) == 21 and not any(seen) and gc.isenabled()
     assert isinstance(engine.simulate_many("euler", [RunRequest(sc, sc.dt_s, 20)])[0], EngineError)
     assert gc.isenabled()
+
+
+def test_the_forces_of_a_slice_of_many_bodies_are_each_bodys_own_bit_for_bit():
+    """Harness.wrench of a slice of the bodies (one compiled call on their parameters: MuJoCo Warp's batches)
+    gives the numbers of the same bodies evaluated one by one in plain floats (indices) and of all at
+    once."""
+    from cross_checks.engines.loop import Harness
+    names = ["spring_pendulum", "applied_torque", "velocity_decay", "tennis_racket", "projectile"]
+    scs = [load_scenario(n) for n in names] * 3
+    h = Harness(scs, [0.01 * (1 + k % 3) for k in range(len(scs))], True)
+    assert h.rows is not None
+    rng = np.random.default_rng(11)
+    y = rng.normal(size=(len(scs), 13))
+    y[:, 6:10] /= np.linalg.norm(y[:, 6:10], axis=1, keepdims=True)
+    whole = h.wrench(y)
+    for part in (slice(0, 4), slice(3, 11), slice(9, len(scs))):
+        f, tau = h.wrench(y[part], part)
+        f1, tau1 = h.wrench(y[part], np.arange(len(scs))[part])
+        assert np.array_equal(f, f1) and np.array_equal(tau, tau1)
+        assert np.array_equal(f, whole[0][part]) and np.array_equal(tau, whole[1][part])

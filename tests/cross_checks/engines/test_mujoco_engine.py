@@ -361,7 +361,7 @@ def test_a_world_of_many_bodies_steps_from_python_and_gives_each_run_alone_bit_f
     stepped = []
     original = me.MujocoWorld._stepped
     monkeypatch.setattr(me.MujocoWorld, "_stepped",
-                        lambda self, n: stepped.append(self.B) or original(self, n))
+                        lambda self, n, out: stepped.append(self.B) or original(self, n, out))
     many = me.simulate_many(variant, reqs)
     assert stepped == [len(reqs)]
     for r, run in zip(reqs, many):

@@ -359,6 +359,21 @@ def test_simulate_many_runs_a_ladder_as_worlds_of_one_batch_equal_to_single_runs
         assert len(run.t_s) == r.n_steps + 1 and run.diverged_at_s is None
 
 
+@pytest.mark.parametrize("name", ["spring_pendulum", "applied_torque", "tennis_racket"])
+def test_a_batch_of_many_worlds_takes_its_forces_at_once_and_equals_each_run_alone(name):
+    """A batch of more than 4 worlds evaluates its state-dependent forces (springs, a body torque turned
+    with the body) for all at once, from the vectorised packed states; a run alone, from its own in plain
+    floats: the same numbers, and every world in one batch (one capture) up to MAX_WORLDS."""
+    sc = load_scenario(name)
+    hs = [0.02, 0.015, 0.01, 0.008, 0.005, 0.004]
+    reqs = [RunRequest(sc, h, int(round(0.2 / h))) for h in hs]
+    before = we.compile_stats()
+    runs = we.simulate_many("euler", reqs)
+    assert we.compile_stats()["captures"] - before["captures"] == 1
+    for r, run in zip(reqs, runs):
+        assert np.array_equal(run.y, we.simulate(sc, "euler", r.dt_s, r.n_steps).y)
+
+
 @pytest.mark.parametrize("name", ["spring_pendulum", "velocity_decay", "applied_torque"])
 @pytest.mark.parametrize("variant", ["euler", "rk4"])
 def test_one_step_replays_the_run(name, variant):

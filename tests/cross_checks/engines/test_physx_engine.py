@@ -447,6 +447,23 @@ def test_simulate_many_steps_runs_of_one_dt_and_gravity_together_bit_for_bit(mon
             np.testing.assert_array_equal(run.t_s, alone.t_s)
 
 
+def test_a_scene_of_many_bodies_takes_array_forces_and_gives_each_run_alone_bit_for_bit():
+    """Above MANY_BODIES bodies a scene takes its forces as arrays (one compiled evaluation, float32 rows to
+    SAPIEN, the bodies to give one chosen in one pass); alone, a run takes them as plain floats per body:
+    the same numbers for every force kind (none beyond gravity, a body torque, springs, decay, a tumble),
+    every variant."""
+    names = ["projectile", "applied_torque", "spring_pendulum", "velocity_decay", "tennis_racket"]
+    scs = [load_scenario(n) for n in names]
+    # two scenes (two gravities), each of more than MANY_BODIES bodies
+    reqs = [RunRequest(scs[k % len(scs)], 0.01, 25 + k) for k in range(3 * pe.MANY_BODIES + 3)]
+    assert min(sum(1 for r in reqs if bool(r.scenario.problem.forces.gravity_W.any()) is g)
+               for g in (True, False)) > pe.MANY_BODIES
+    for variant in BOTH:
+        for r, run in zip(reqs, pe.simulate_many(variant, reqs)):
+            alone = pe.simulate(r.scenario, variant, r.dt_s, r.n_steps)
+            assert np.array_equal(run.y, alone.y) and run.message == alone.message, r.scenario.name
+
+
 def test_the_first_row_is_the_scenarios_and_quaternions_stay_continuous():
     sc = scenario_from_parts(body="mass = 1.0\ninertia = [1.0, 1.0, 1.0]",
                              initial=f"orientation = {(-Q_TILT).tolist()}\n"

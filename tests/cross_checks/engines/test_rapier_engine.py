@@ -456,6 +456,80 @@ def test_simulate_many_runs_each_request_as_it_runs_alone_bit_for_bit(monkeypatc
     assert len(keys) == 4 and sorted(worlds) == sorted(keys.values()) == [2, 2, 3, 3]
 
 
+def test_the_state_is_read_from_one_serialisation_per_body_as_the_getters_give_it():
+    """rapier3d's own serialisation of a body (``RigidBody.to_bytes``) holds its state at fixed places
+    (:func:`state_bytes_layout`, found and checked on this rapier3d); decoded, it is what the getters give bit
+    for bit — the quaternion normalised as ``Rotation3.to_tuple`` does — for bodies with a principal frame,
+    at random states and after steps under random torques."""
+    layout = ra.state_bytes_layout()
+    assert layout is not None
+    rng = np.random.default_rng(7)
+    n = 40
+    spec = ra.body_spec(scenario_from_parts(body=FULL_INERTIA).problem.body)
+    assert not np.array_equal(spec[2], [1.0, 0.0, 0.0, 0.0])
+    W = rpw.Bodies([spec] * n, (0.0, 0.0, -9.81), GYRO, 0.01)
+    y = np.zeros((n, 13))
+    y[:, 0:6], y[:, 10:13] = rng.normal(size=(n, 6)) * 100.0, rng.normal(size=(n, 3)) * 20.0
+    q = rng.normal(size=(n, 4))
+    y[:, 6:10] = q / np.linalg.norm(q, axis=1, keepdims=True)
+    W.set_state(y)
+    for _ in range(5):
+        got = ra._decode(b"".join(rb.to_bytes() for rb in W.bodies), n, layout)
+        assert np.array_equal(got, np.asarray(rpw.Bodies.read(W), dtype=float))
+        W.apply(rng.normal(size=(n, 3)), rng.normal(size=(n, 3)) * 10.0)
+        W.step()
+
+
+@pytest.mark.parametrize("variant", [GYRO, NO_GYRO])
+def test_a_world_of_many_bodies_reads_serialisations_and_gives_each_run_alone_bit_for_bit(variant):
+    """Above MANY_BODIES bodies a world reads its states from the bodies' serialisations and gives a body a
+    force or torque only where it changed; alone, a run reads the getters and replaces both every step: the
+    same numbers for every force kind (none beyond gravity, springs, a body torque, decay, a full inertia
+    tensor) and runs of different lengths (a finished body disabled while the others go on)."""
+    names = ["spring_pendulum", "tennis_racket", "applied_torque", "velocity_decay", "projectile"]
+    scs = [load_scenario(n) for n in names] + [scenario_from_parts(body=FULL_INERTIA)]
+    reqs = [RunRequest(scs[k % len(scs)], 0.01, 20 + 3 * k) for k in range(4 * len(scs))]
+    worlds = {(r.dt_s, tuple(r.scenario.problem.forces.gravity_W)) for r in reqs}
+    assert all(sum(1 for r in reqs if (r.dt_s, tuple(r.scenario.problem.forces.gravity_W)) == w)
+               > ra.MANY_BODIES for w in worlds)
+    many = ra.simulate_many(variant, reqs)
+    for r, run in zip(reqs, many):
+        alone = ra.simulate(r.scenario, variant, r.dt_s, r.n_steps)
+        assert np.array_equal(run.y, alone.y) and run.message == alone.message, r.scenario.name
+
+
+def test_a_world_of_many_bodies_ends_the_runs_the_getters_would_end(monkeypatch):
+    """A body at a state beyond BLOWUP_LIMIT, one non-finite, one at its last step and one already dead:
+    the serialisations' read gives the rows, the dead bodies and the disabled ones the getters' read
+    gives."""
+    sc = load_scenario("tennis_racket")
+    n = ra.MANY_BODIES + 4
+    reqs = [RunRequest(sc, 0.01, 3 if k == 2 else 10) for k in range(n)]
+    y = np.tile(sc.problem.initial_packed(), (n, 1))
+    y[0, 0], y[1, 11] = 2e8, np.nan
+    worlds = []
+    for layout in (ra.state_bytes_layout(), None):
+        monkeypatch.setattr(ra, "state_bytes_layout", lambda layout=layout: layout)
+        W = ra.RapierWorld(reqs, GYRO, 0.01)
+        assert (W.layout is None) == (layout is None)
+        W.set_state(y)
+        W.dead.add(3)
+        W.bodies[3].is_enabled = False
+        W.n = 3
+        worlds.append((np.asarray(W.read(), dtype=float), set(W.dead), [rb.is_enabled for rb in W.bodies]))
+    (a, dead_a, on_a), (b, dead_b, on_b) = worlds
+    assert np.array_equal(a, b, equal_nan=True) and dead_a == dead_b == {0, 1, 2, 3} and on_a == on_b
+
+
+def test_without_a_layout_a_world_of_many_bodies_reads_the_getters(monkeypatch):
+    monkeypatch.setattr(ra, "state_bytes_layout", lambda: None)
+    sc = load_scenario("tennis_racket")
+    W = ra.RapierWorld([RunRequest(sc, 0.01, 5)] * (ra.MANY_BODIES + 2), GYRO, 0.01)
+    assert W.layout is None
+    monkeypatch.undo()
+    assert ra.RapierWorld([RunRequest(sc, 0.01, 5)] * (ra.MANY_BODIES + 2), GYRO, 0.01).layout is not None
+
+
 def test_the_first_row_is_the_scenarios_and_quaternions_stay_continuous():
     # w < 0 at t = 0 and a spin of 3 rad/s for 2 s (through q → −q)
     sc = scenario_from_parts(body="mass = 1.0\ninertia = [1.0, 1.0, 1.0]",

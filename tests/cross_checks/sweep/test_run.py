@@ -364,3 +364,15 @@ def test_run_and_check_say_a_cold_compile_on_stderr(tmp_path, monkeypatch, capsy
     assert said.is_set()
     assert err.startswith(f"rbcheck {command}: compiling the reference's 16 integrators with numba")
     assert "compiling" not in out
+
+
+def test_mujocos_record_conversion_is_loaded_before_the_workers_fork(monkeypatch):
+    """A sweep with MuJoCo (or MuJoCo Warp) loads engines.packed_rows' kernel in the parent, which its forked
+    workers inherit; a sweep without them does not."""
+    from cross_checks.engines import packed_rows
+    from cross_checks.sweep import run as run_mod
+    calls = []
+    monkeypatch.setattr(packed_rows, "warm", lambda: calls.append(1) or True)
+    run_mod._load_before_forking(["mujoco:euler"])
+    run_mod._load_before_forking(["pybullet:multibody"])
+    assert calls == [1]
