@@ -376,7 +376,7 @@ def _check(engine, variant, reqs, world, rec, start: int, stop: int, ends, stopp
     if y is None:
         y = _checked(engine, variant, reqs, world.packed(rec[start:stop]), len(reqs), "states")
     if not world.warnings and none_bad(y):   # the common case, in two passes over the chunk
-        return
+        return y
     bad = bad_rows(y)
     warned: dict = {}
     for i, n, words in world.warnings:
