@@ -80,6 +80,8 @@ class Harness:
                                 forces.weight_W(sc) if applies_gravity else np.zeros(3),
                                 body_torque_B(sc.problem) if body_torque else None)
         problems = [host[id(sc)][0] for sc in scenarios]
+        #: each body's problem as the harness evaluates its forces (the one of ``ft``; jax_forces' arrays)
+        self.problems = problems
         # the scenario's own evaluator where the harness evaluates all of its forces
         self.ft = [host[id(sc)][1] for sc in scenarios]
         # many bodies: one compiled call for all of them (the same numbers, member by member)
