@@ -236,7 +236,7 @@ def _chunk_fn(d0, forces_in_loop: bool, rows: int):
         def body(i, carry):
             d, out = carry
             if forces_in_loop:   # the start-of-step state, before the decay (as the loop's harness)
-                f = jax_forces.wrench(fa, d.qpos[0:3], d.qvel[0:3], d.qpos[3:7], z)
+                f = jax_forces.wrench_apart(fa, d.qpos[0:3], d.qvel[0:3], d.qpos[3:7], z)
             else:
                 f = xfrc
             d = step_one(m, d, gain, f)

@@ -1,6 +1,6 @@
-"""cross_checks.engines.jax_forces: the loop's harness forces evaluated inside compiled JAX code are the host's
-(Harness.wrench: the compiled definition, the decay factors, the weight taken off), bit for bit, for every kind
-of force, compiled alone and inside a vmapped loop whose other arithmetic XLA fuses with them."""
+"""cross_checks.engines.jax_forces: the loop's harness forces evaluated inside compiled JAX code are the
+host's (Harness.wrench: the compiled definition, the decay factors, the weight taken off), bit for bit, for
+every kind of force, compiled alone and inside a vmapped loop whose other arithmetic XLA fuses with them."""
 import importlib.util
 from pathlib import Path
 
@@ -63,7 +63,7 @@ def _wrench_fn(jax):
 def test_the_wrench_evaluated_by_jax_is_the_harness_s_bit_for_bit(applies_gravity):
     jax = _jax()
     scenarios = _every_force_kind()
-    dts = [sc.dt_s * (0.5 if i % 2 else 1.0) for i, sc in enumerate(scenarios)]   # decay factors off the dt too
+    dts = [sc.dt_s * (0.5 if i % 2 else 1.0) for i, sc in enumerate(scenarios)]   # decay off the dt too
     harness = Harness(scenarios, dts, applies_gravity)
     fa = jax_forces.BodyForces(harness)
     assert fa.key[0] == 2 and fa.key[1] >= 1 and fa.key[2] >= 1   # the world pads every kind of entry
@@ -103,7 +103,9 @@ def test_inside_a_vmapped_loop_whose_arithmetic_xla_fuses_with_them_too():
             y, ys, ws = carry
             w = jax_forces.wrench(a, y[0:3], y[3:6], y[6:10], z)
             y = y * 1.001 + jnp.concatenate([w, w, jnp.zeros(1)]) * 1e-3
-            return y, ys.at[i].set(y), ws.at[i + 1].set(jax_forces.wrench(a, y[0:3], y[3:6], y[6:10], z))
+            # recorded as the engines evaluate them: apart from their step (a conditional of its own)
+            w1 = jax_forces.wrench_apart(a, y[0:3], y[3:6], y[6:10], z)
+            return y, ys.at[i].set(y), ws.at[i + 1].set(w1)
         return jax.lax.fori_loop(0, 20, body, (y0, jnp.zeros((20, 13)), jnp.zeros((21, 6))))[1:]
 
     y0 = _states(np.random.default_rng(11), len(scenarios))
