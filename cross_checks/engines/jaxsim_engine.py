@@ -317,11 +317,12 @@ def _with_dt(model, dt):
     return dataclasses.replace(model, time_step=dt)
 
 
-def _run_fn(mode: str, rows: int):
+def _run_fn(mode: str, rows: int, vmapped: bool = True):
     """``run(models, dt, y0 (B, 13), count, f6 (B, 6), scale (B, 13), key (B,), fa, z)``: ``count`` (≤ rows,
     traced) steps of :func:`_step_fn` of B bodies vmapped (each its own model: runtimes.stack_trees) from
     ``y0`` at ``dt`` (s, traced), in one ``lax.fori_loop``; returns the last states (B, 13) and the recorded
-    rows (B, rows, 13) (the first ``count`` are the states after each step)."""
+    rows (B, rows, 13) (the first ``count`` are the states after each step). Not ``vmapped``: one body, each
+    argument without its batch axis: the loop of worlds/jaxsim.py ``run_fn`` (what a reproducer runs)."""
     jax, jnp, js = _jax()
     step = _step_fn(mode)
 
@@ -335,7 +336,7 @@ def _run_fn(mode: str, rows: int):
 
         return jax.lax.fori_loop(0, count, body, (y0, jnp.zeros((rows, 13))))
 
-    return jax.vmap(one, in_axes=(0, None, 0, None, 0, 0, 0, 0, None))
+    return jax.vmap(one, in_axes=(0, None, 0, None, 0, 0, 0, 0, None)) if vmapped else one
 
 
 def _one_fn(mode: str):
@@ -488,9 +489,9 @@ class JaxsimWorld(World):
         """The bodies ``idx`` (of one model structure and force mode) vmapped, padded to a power of two."""
         from cross_checks.engines import jax_forces
         t0, compiled = time.perf_counter(), _TIMES["compile_seconds"]
-        # at least two: XLA compiles a batch of one without its batch axis, whose rounding differs (by ~1e-14
-        # relative) from every batch of two or more; so a run's numbers do not depend on the batch it is in
-        B, M = len(idx), max(2, runtimes.power_of_two(len(idx)))
+        # one body runs the reproducer's loop (worlds/jaxsim.py), not vmapped: its numbers to the bit; XLA
+        # rounds a vmapped batch's (of any size) differently, by ~1e-14 relative
+        B, M = len(idx), runtimes.power_of_two(len(idx))
         pad = list(idx) + [idx[0]] * (M - B)
         distinct = list(dict.fromkeys(id(self.models[i]) for i in idx))
         trees = {id(self.models[i]): self.models[i] for i in idx}
@@ -506,7 +507,13 @@ class JaxsimWorld(World):
             keys = np.array([stack.enter_context(hold((self, inputs[i][3]))) if mode == "callback"
                              else np.int64(0) for i in pad], dtype=np.int64)
             args = (self.dt, y, np.int64(0), f6, scale, keys, fa.take(pad), jax_forces.zero())
-            fn = _compiled("run", mode, models, (rows, fa.key), lambda: _run_fn(mode, rows), *args)
+            if M == 1:   # without the batch axis (see above)
+                models = self.models[idx[0]]
+                args = (self.dt, y[0], np.int64(0), f6[0], scale[0], keys[0], fa.take(pad[0]),
+                        jax_forces.zero())
+                y = y[0]
+            fn = _compiled("run", mode, models, (rows, fa.key, M == 1),
+                           lambda: _run_fn(mode, rows, vmapped=M > 1), *args)
             # stacking the models and the inputs (the compilation is added by rollout)
             self.host_s += time.perf_counter() - t0 - (_TIMES["compile_seconds"] - compiled)
             done, k = np.zeros(B, dtype=bool), 0
@@ -514,7 +521,7 @@ class JaxsimWorld(World):
                 count = min(rows, n_max - k)
                 with _TIMES.timing("run_seconds"):
                     y, chunk = fn(models, self.dt, y, np.int64(count), *args[3:])
-                    chunk = np.asarray(chunk)[:B, :count]
+                    chunk = np.asarray(chunk).reshape(M, rows, 13)[:B, :count]
                 _TIMES["steps"] += count * B
                 out[k:k + count, idx] = chunk.transpose(1, 0, 2)
                 done |= bad_rows(chunk).any(axis=1) | (ends <= k + count)
