@@ -17,7 +17,8 @@ from cross_checks.scenario import load_scenario  # noqa: E402
 from cross_checks.scenario.parse import catalog_names  # noqa: E402
 from tests.helpers.scenarios import scenario_from_parts  # noqa: E402
 
-EXTRAS = sorted(Path(__file__).resolve().parents[3].glob("benchmarks/bit_identity/skew*.toml"))
+#: the snapshot's extras with every force kind (benchmarks/bit_identity/skew.toml and skew2.toml)
+EXTRAS = sorted((Path(__file__).resolve().parents[3] / "benchmarks" / "bit_identity").glob("skew*.toml"))
 
 
 def _jax():
