@@ -692,7 +692,10 @@ def jaxsim_vmapped(n_bodies, n_steps, variant="semi_implicit_euler") -> Runner:
     """jaxsim: jaxsim_engine's model of the bench's body (its SDF, gravity, integrator) at Δt, N bodies
     vmapped through ONE compiled ``jax.lax.fori_loop`` of ``js.model.step`` on the body's own
     ``JaxSimModelData`` (Mixed representation); the link force [0, R_WB τ_B] each step (jaxsim takes world
-    torques). Compilation timed apart (``compile_s``)."""
+    torques). The model is stacked per body (vmapped on its first axis, as the adapter does): jaxsim's
+    vmapped step runs 7-10x faster that way than with one model shared by the N bodies (``in_axes=None``;
+    measured interleaved in one process at N = 1024: 0.15 against 1.0 CPU s for 100 steps). Compilation timed apart
+    (``compile_s``)."""
     import dataclasses
 
     from cross_checks.engines import jaxsim_engine
@@ -718,7 +721,8 @@ def jaxsim_vmapped(n_bodies, n_steps, variant="semi_implicit_euler") -> Runner:
             return js.model.step(model, data, link_forces=f6)
         data = jax.lax.fori_loop(0, n_steps, body, data)
         return data.base_position, data.base_quaternion
-    return _jax_timed(jax.vmap(member, in_axes=(None, 0)), (model, jnp.asarray(y0)), n_bodies * n_steps)
+    stacked = jax.tree.map(lambda x: np.stack([np.asarray(x)] * n_bodies), model)
+    return _jax_timed(jax.vmap(member, in_axes=(0, 0)), (stacked, jnp.asarray(y0)), n_bodies * n_steps)
 
 
 def mujoco_warp_worlds(n_bodies, n_steps, variant="euler") -> Runner:

@@ -11,13 +11,14 @@ State at the boundary: ``pipeline.init(sys, q, qd)`` with ``q = [x_W, q_WB (w x 
 
 Forces: brax has no external-wrench input. The generalized pipeline gets them as
 ``act = [f − m g, R_WBᵀ τ_W]`` through six actuators on the free joint's DOFs (:func:`six_dof_actuator`; brax
-applies gravity itself), from the start-of-step state (state-dependent ones from the loop's harness on the
-host through ``jax.pure_callback``); the positional and spring pipelines take gravity only
-(:func:`expressible`). The decay is applied to ``qd`` before each step.
+applies gravity itself), from the start-of-step state (state-dependent ones evaluated inside the compiled
+loop: cross_checks.engines.jax_forces, the loop's harness in JAX, bit for bit); the positional and spring
+pipelines take gravity only (:func:`expressible`). The decay is applied to ``qd`` before each step.
 
 A :class:`BraxWorld` holds one scenario's runs at any Δt (``WorldEngine.mixed_steps``) and takes every force
-itself (``World.rollout_takes_all_forces``): its rollout vmaps the runs (their Δt ladder) through compiled
-``jax.lax.scan`` chunks of CHUNK steps, and one step of many rows is one vmapped call. JAX is imported on
+itself (``World.rollout_takes_all_forces``): its rollout vmaps the runs (their Δt ladder) through a compiled
+``jax.lax.fori_loop`` that records every state (runtimes.chunk_rows steps a call, at most CHUNK), and one step
+of many rows is one vmapped call. JAX is imported on
 first use only (never at import or in ``version()``): a sweep's parent must not start it before forking.
 """
 from __future__ import annotations
@@ -74,8 +75,9 @@ VARIANTS = {
 }
 
 
-#: Steps per compiled scan chunk: a run of n steps runs ceil(n / CHUNK) chunks (the steps past n are dropped).
-CHUNK = 512
+#: Steps of one call of the compiled loop at most (its count traced: a shorter call runs its own steps only; a
+#: batch of many runs records fewer a call: runtimes.chunk_rows).
+CHUNK = 2048
 #: one_step batches are padded to at least this many rows (a power of two): one step of 64 bodies costs about
 #: what one costs, and every small batch shares one executable.
 ONE_STEP_MIN_BATCH = 64
@@ -83,7 +85,6 @@ ONE_STEP_MIN_BATCH = 64
 _LOCK = threading.RLock()
 _COMPILED: dict = {}         # key -> compiled executable
 _COMPILE_S: dict = {}        # key -> seconds spent compiling it (lower + compile)
-_CALLBACK_WORLDS = runtimes.Registry()  # token -> (world, harness, {Δt: y -> 6 floats}): the force callback's
 
 
 def version() -> str:
@@ -137,7 +138,7 @@ def _usable():
 
 def compile_seconds() -> dict:
     """Seconds spent compiling (lowering + XLA compile) each executable this process built, by
-    ``"kind:variant:mode:batch"`` (kind ``run`` = a CHUNK-step scan, ``one_step``); apart from stepping
+    ``"kind:variant:mode:batch"`` (kind ``run`` = the chunk loop, ``one_step``); apart from stepping
     time."""
     with _LOCK:
         return dict(_COMPILE_S)
@@ -225,68 +226,42 @@ def _packed(state):
 
 # --- the compiled step ------------------------------------------------------------------------------------
 
-def _host_forces(token, y, dt):
-    """The force callback (host): forces.harness_force_torque_floats of each row of ``y`` (B, 13) at its step
-    ``dt`` (B,) — the loop's harness (force evaluator, decay factors) of the world's body at that Δt, looked
-    up once per rollout and Δt — for the world registered under ``token`` (its seconds the world's
-    ``host_s``)."""
-    t0 = time.perf_counter()
-    token = np.asarray(token).reshape(-1)
-    y = np.asarray(y, dtype=float).reshape(-1, 13)
-    dt = np.broadcast_to(np.asarray(dt, dtype=float).reshape(-1), (len(y),)).tolist()
-    world, harness, fns = _CALLBACK_WORLDS[int(token[0])]
-    out = np.empty((len(y), 6))
-    for i, row in enumerate(y.tolist()):
-        h = fns.get(dt[i])
-        if h is None:
-            h = fns[dt[i]] = _decayed_forces(harness, world.dts.index(dt[i]))
-        out[i] = h(row)
-    world.host_s += time.perf_counter() - t0
-    return out
-
-
-def _decayed_forces(harness, j: int):
-    """``y -> 6 floats``: body ``j``'s harness force and torque scaled by its pre-step decay factors
-    (forces.harness_force_torque_floats, with the loop's evaluator)."""
-    ft, gv, gw = harness.ft[j], float(harness.g_v[j]), float(harness.g_w[j])
-
-    def forces(y):
-        fx, fy, fz, tx, ty, tz = ft(y)
-        return gv * fx, gv * fy, gv * fz, gw * tx, gw * ty, gw * tz
-    return forces
-
-
 def _step_fn(variant: str, mode: str):
-    """One step of one body: ``(sys, state, consts, token, decay) -> state``. ``mode``: "none" (no applied
-    force), "const" (consts = [f_W − m g, τ_W, γ_v, γ_ω, decay]), "callback" (consts = [−m g, 0, γ_v, γ_ω,
-    decay]; forces from the host). With decay (1, passed unbatched: under vmap a batched predicate would turn
-    the cond into a select that runs both branches) the state is re-initialised from the decayed ``q, qd`` (a
-    ``lax.cond``: one executable serves runs with and without decay; without it the state is carried as
-    is)."""
+    """One step of one body: ``(sys, state, consts, fa, zero, decay) -> state``. ``mode``: "none" (no applied
+    force), "const" (consts = [f_W − m g, τ_W, γ_v, γ_ω, decay]), "state" (consts = [−m g, 0, γ_v, γ_ω,
+    decay]; the forces evaluated in the loop: cross_checks.engines.jax_forces of the body's arrays ``fa``,
+    ``zero`` its traced integer zero, at the state after the decay: where the host callback evaluated them
+    before, so the numbers are the same; the harness's definition is the state before it, which differs
+    where a force depends on the velocity and the velocity decays). With decay (1, passed unbatched: under
+    vmap a batched predicate would turn the cond into a select that runs both branches) the state is
+    re-initialised from the decayed ``q, qd`` (a ``lax.cond``: one executable serves runs with and without
+    decay; without it the state is carried as is)."""
+    from cross_checks.engines import jax_forces
     lib = _lib()
     jax, jp = lib["jax"], lib["jp"]
     P, W = lib["pipelines"][variant], lib["world"]
 
-    def step(sys, state, consts, token, decay):
+    def step(sys, state, consts, fa, z, decay):
         factors = jp.concatenate([jp.full(3, consts[6]), jp.full(3, consts[7])])
         state = jax.lax.cond(decay > 0.0, lambda s: P.init(sys, s.q, s.qd * factors), lambda s: s, state)
         if mode == "none":
             f = tau = None
         elif mode == "const":
             f, tau = consts[0:3], consts[3:6]
-        else:
-            ft = jax.pure_callback(_host_forces, jax.ShapeDtypeStruct((6,), jp.float64), token,
-                                   _packed(state), sys.opt.timestep, vmap_method="broadcast_all")
-            f, tau = ft[0:3] + consts[0:3], ft[3:6]
+        else:   # at the state after the decay, where the host callback evaluated them before (bit for bit)
+            ft = jax_forces.wrench_apart(fa, state.x.pos[0], state.xd.vel[0], state.x.rot[0], z)
+            f, tau = ft[0:3], ft[3:6]
         return P.step(sys, state, W.act(sys, state, f, tau, variant))   # the act rbcheck repro embeds
     return step
 
 
-def _compiled(kind: str, variant: str, mode: str, batch: int, args):
-    """The ahead-of-time compiled executable for these arguments (cached; compile time recorded)."""
+def _compiled(kind: str, variant: str, mode: str, batch: int, rows: int, args):
+    """The ahead-of-time compiled executable for these arguments (cached; compile time recorded): ``run``, a
+    chunk of a run (``rows`` steps recorded at most, the count traced), or ``one_step``."""
     lib = _lib()
-    jax = lib["jax"]
-    key = (kind, variant, mode, batch, jax.tree_util.tree_structure(args))
+    jax, jp = lib["jax"], lib["jp"]
+    key = (kind, variant, mode, batch, rows, jax.tree_util.tree_structure(args),
+           tuple(np.shape(a) for a in jax.tree_util.tree_leaves(args)))
     with _LOCK:
         hit = _COMPILED.get(key)
     if hit is not None:
@@ -298,19 +273,20 @@ def _compiled(kind: str, variant: str, mode: str, batch: int, args):
         return sys.replace(opt=sys.opt.replace(timestep=dt))
 
     if kind == "run":
-        def one(sys, state, dt, consts, token, decay):
+        def one(sys, state, dt, consts, fa, z, decay, n):
             s = with_dt(sys, dt)
 
-            def body(st, _):
-                st = step(s, st, consts, token, decay)
-                return st, _packed(st)
-            return jax.lax.scan(body, state, None, length=CHUNK)
-        fn = jax.vmap(one, in_axes=(None, 0, 0, 0, None, None))
+            def body(i, carry):
+                st, out = carry
+                st = step(s, st, consts, fa, z, decay)
+                return st, out.at[i].set(_packed(st))
+            return jax.lax.fori_loop(0, n, body, (state, jp.zeros((rows, 13))))
+        fn = jax.vmap(one, in_axes=(None, 0, 0, 0, 0, None, None, None))
     else:
-        def one(sys, q, qd, dt, consts, token, decay):
+        def one(sys, q, qd, dt, consts, fa, z, decay):
             s = with_dt(sys, dt)
-            return _packed(step(s, P.init(s, q, qd), consts, token, decay))
-        fn = jax.vmap(one, in_axes=(None, 0, 0, 0, 0, None, None))
+            return _packed(step(s, P.init(s, q, qd), consts, fa, z, decay))
+        fn = jax.vmap(one, in_axes=(None, 0, 0, 0, 0, 0, None, None))
     t0 = time.perf_counter()
     exe = jax.jit(fn).lower(*args).compile()
     seconds = time.perf_counter() - t0
@@ -334,7 +310,7 @@ def _mode_and_consts(scenario, variant: str, dt_s: float):
     if variant != "generalized":
         return "none", np.r_[np.zeros(6), gv, gw, decay]
     if fm.state_dependent:
-        return "callback", np.r_[-weight, np.zeros(3), gv, gw, decay]
+        return "state", np.r_[-weight, np.zeros(3), gv, gw, decay]
     f, tau = forces.harness_force_torque(scenario, p.initial_packed(), dt_s)
     return "const", np.r_[f - weight, tau, gv, gw, decay]
 
@@ -354,8 +330,8 @@ def _initial(variant: str, batch: int):
 
 class BraxWorld(HostRowsWorld):
     """One scenario's runs (any Δt each) in one brax batch; raw rows are packed states. Its rollout takes
-    every force (:func:`_mode_and_consts`; state-dependent ones called back from the compiled step) and the
-    decay; compilation and callbacks are counted in ``host_s``."""
+    every force (:func:`_mode_and_consts`; state-dependent ones evaluated inside the compiled loop:
+    cross_checks.engines.jax_forces) and the decay; compilation is counted in ``host_s``."""
 
     def __init__(self, requests, variant: str):
         super().__init__(requests)
@@ -368,47 +344,58 @@ class BraxWorld(HostRowsWorld):
     def rollout(self, n_steps, harness):
         """The states (n_steps, B, 13) after each step (NaN after a run's last step or its first chunk with
         a blown-up state); one step of one Δt from each row (the one-step mode) in one vmapped call."""
+        from cross_checks.engines import jax_forces
         seconds = sum(_COMPILE_S.values())
+        t0 = time.perf_counter()
+        fa = jax_forces.BodyForces(harness)
+        self.host_s += time.perf_counter() - t0
         try:
-            with _CALLBACK_WORLDS.holding((self, harness, {})) as token:
-                if n_steps == 1 and len(set(self.dts)) == 1:
-                    return self._one(token)[None]
-                return self._run(n_steps, token)
+            if n_steps == 1 and len(set(self.dts)) == 1:
+                return self._one(fa)[None]
+            return self._run(n_steps, fa)
         finally:   # compiling is not stepping: counted apart, with the host's seconds
             self.host_s += sum(_COMPILE_S.values()) - seconds
 
-    def _run(self, n_max: int, token):
+    def _run(self, n_max: int, fa):
+        from cross_checks.engines import jax_forces
         jp, n = self.lib["jp"], len(self.dts)
         mode = self.modes[0][0]
         B = runtimes.power_of_two(n)
-        dts = np.array(self.dts + [self.dts[0]] * (B - n), dtype=float)
-        consts = np.stack([m[1] for m in self.modes] + [self.modes[0][1]] * (B - n))
+        rows = runtimes.chunk_rows(B, CHUNK)
+        pad = list(range(n)) + [0] * (B - n)
+        dts = np.array([self.dts[i] for i in pad], dtype=float)
+        consts = np.stack([self.modes[i][1] for i in pad])
         q0, qd0 = to_q_qd(self.y[0])    # every run starts at its scenario's state
         state = _initial(self.variant, B)(self.sys, jp.asarray(q0), jp.asarray(qd0))
         out = np.full((n_max, n, 13), np.nan)
         done = np.zeros(n, dtype=bool)
-        args = (self.sys, state, jp.asarray(dts), jp.asarray(consts), token, jp.asarray(consts[0, 8]))
-        exe = _compiled("run", self.variant, mode, B, args)
+        args = (self.sys, state, jp.asarray(dts), jp.asarray(consts), fa.take(pad) if mode == "state" else {},
+                jax_forces.zero(),
+                jp.asarray(consts[0, 8]), np.int32(0))
+        exe = _compiled("run", self.variant, mode, B, rows, args)
         k = 0
         while k < n_max and not done.all():
-            state, ys = exe(self.sys, state, *args[2:])
+            m = min(rows, n_max - k)
+            state, ys = exe(self.sys, state, *args[2:7], np.int32(m))
             ys = np.asarray(ys)
-            m = min(CHUNK, n_max - k)
             out[k:k + m] = ys[:n, :m].transpose(1, 0, 2)
             bad = bad_rows(ys[:n, :m])
             done |= bad.any(axis=1) | (k + m >= np.array(self.ends))
             k += m
         return out
 
-    def _one(self, token):
+    def _one(self, fa):
+        from cross_checks.engines import jax_forces
         jp, T = self.lib["jp"], len(self.y)
         mode, consts = self.modes[0]
         B = runtimes.power_of_two(max(T, ONE_STEP_MIN_BATCH))
         pad = np.concatenate([self.y, np.broadcast_to(self.scenario.problem.initial_packed(), (B - T, 13))])
         q, qd = to_q_qd(pad)
         args = (self.sys, jp.asarray(q), jp.asarray(qd), jp.full(B, self.dts[0]),
-                jp.asarray(np.tile(consts, (B, 1))), token, jp.asarray(consts[8]))
-        exe = _compiled("one_step", self.variant, mode, B, args)
+                jp.asarray(np.tile(consts, (B, 1))),
+                fa.take(np.r_[np.arange(T), np.zeros(B - T, dtype=int)]) if mode == "state" else {},
+                jax_forces.zero(), jp.asarray(consts[8]))
+        exe = _compiled("one_step", self.variant, mode, B, 1, args)
         return np.array(exe(*args))[:T]
 
 

@@ -24,6 +24,7 @@ parent must not start it before forking.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import threading
@@ -68,6 +69,9 @@ VARIANTS = {
 CHUNK = 1024
 #: one_step pads its rows to a multiple of this (one compiled shape for the sweep's 64 local samples).
 ROW_BLOCK = 64
+#: Bodies per vmapped batch of a rollout at most (padded to a power of two, so that batch sizes share
+#: executables): a thousand bodies in one call, as an engine's own vmapped loop runs them.
+MAX_BATCH = 1024
 MODEL_NAME = "rbcheck_body"
 
 _LOCK = threading.RLock()
@@ -274,19 +278,35 @@ def _host_forces(key, y):
     return out.reshape(y.shape[:-1] + (6,))
 
 
-def _step_fn(callback: bool):
+#: The modes of a body's forces in the compiled loop: none but constant ones (``f6`` held), state-dependent
+#: ones evaluated in the loop (cross_checks.engines.jax_forces), or called back from the host where the loop
+#: cannot evaluate them bit for bit (:data:`HOST_FORCES_REASON`).
+MODES = ("const", "state", "callback")
+#: Why the forces of a scenario whose gravity is off the z axis are called back from the host at every step
+#: rather than evaluated in the compiled loop.
+HOST_FORCES_REASON = (
+    "its gravity is off the z axis: the adapter runs it in a frame turned onto jaxsim's (jaxsim_frame), and "
+    "the harness's forces are evaluated at the state turned back and turned in with NumPy's matrix products, "
+    "whose rounding the compiled loop does not reproduce; they are called back from the host at every step")
+
+
+def _step_fn(mode: str):
     """One jaxsim step of the packed state ``y`` (13,) (:func:`cross_checks.engines.worlds.jaxsim.step`):
-    pre-step decay ``scale`` (13,), link force ``f6`` (6,) or, with ``callback``, the harness's at ``y``
-    (before the decay, as forces.harness_force_torque)."""
+    ``(model, y, f6, scale, key, fa, z) -> y``, the pre-step decay ``scale`` (13,), the link force the
+    constant ``f6`` (6,) ("const"), the harness's at ``y`` (before the decay, as forces.harness_force_torque)
+    evaluated in the loop from the body's arrays ``fa`` ("state": jax_forces.wrench, ``z`` its traced zero),
+    or called back from the host ("callback", the rollout ``key``'s)."""
+    from cross_checks.engines import jax_forces
     jax, jnp, js = _jax()
     world_step = _world().step
-    if not callback:
-        return world_step
 
-    def step(model, y, f6, scale, key):
-        f6 = jax.pure_callback(
-            _host_forces, jax.ShapeDtypeStruct((6,), jnp.float64), key, y, vmap_method="broadcast_all"
-        )
+    def step(model, y, f6, scale, key, fa, z):
+        if mode == "state":
+            f6 = jax_forces.wrench_apart(fa, y[0:3], y[3:6], y[6:10], z)
+        elif mode == "callback":
+            f6 = jax.pure_callback(
+                _host_forces, jax.ShapeDtypeStruct((6,), jnp.float64), key, y, vmap_method="broadcast_all"
+            )
         return world_step(model, y, f6, scale)
 
     return step
@@ -297,18 +317,35 @@ def _with_dt(model, dt):
     return dataclasses.replace(model, time_step=dt)
 
 
-def _run_fn(callback: bool):
-    """The world's compiled loop (:func:`cross_checks.engines.worlds.jaxsim.run_fn`) of :func:`_step_fn`."""
-    return _world().run_fn(_step_fn(callback))
-
-
-def _one_fn(callback: bool):
+def _run_fn(mode: str, rows: int, vmapped: bool = True):
+    """``run(models, dt, y0 (B, 13), count, f6 (B, 6), scale (B, 13), key (B,), fa, z)``: ``count`` (≤ rows,
+    traced) steps of :func:`_step_fn` of B bodies vmapped (each its own model: runtimes.stack_trees) from
+    ``y0`` at ``dt`` (s, traced), in one ``lax.fori_loop``; returns the last states (B, 13) and the recorded
+    rows (B, rows, 13) (the first ``count`` are the states after each step). Not ``vmapped``: one body, each
+    argument without its batch axis: the loop of worlds/jaxsim.py ``run_fn`` (what a reproducer runs)."""
     jax, jnp, js = _jax()
-    step = _step_fn(callback)
+    step = _step_fn(mode)
 
-    def one(model, dt, ys, f6, scale, key):
+    def one(model, dt, y0, count, f6, scale, key, fa, z):
         model = _with_dt(model, dt)
-        return jax.vmap(lambda y: step(model, y, f6, scale, key))(ys)
+
+        def body(i, carry):
+            y, out = carry
+            y = step(model, y, f6, scale, key, fa, z)
+            return y, out.at[i].set(y)
+
+        return jax.lax.fori_loop(0, count, body, (y0, jnp.zeros((rows, 13))))
+
+    return jax.vmap(one, in_axes=(0, None, 0, None, 0, 0, 0, 0, None)) if vmapped else one
+
+
+def _one_fn(mode: str):
+    jax, jnp, js = _jax()
+    step = _step_fn(mode)
+
+    def one(model, dt, ys, f6, scale, key, fa, z):
+        model = _with_dt(model, dt)
+        return jax.vmap(lambda y, a: step(model, y, f6, scale, key, a, z))(ys, fa)
 
     return one
 
@@ -316,18 +353,19 @@ def _one_fn(callback: bool):
 _COMPILED: dict = {}
 
 
-def _compiled(kind: str, callback: bool, model, *args):
-    """The ahead-of-time compiled ``kind`` ("run" or "one") function for these arguments' shapes and the
-    model's static fields (jaxsim's gravity and integrator); compiled once per process, the time counted."""
+def _compiled(kind: str, mode: str, model, static: tuple, make, *args):
+    """The ahead-of-time compiled ``make()`` for these arguments' shapes, the model's static fields (jaxsim's
+    gravity and integrator) and ``static`` (what else decides the computation); compiled once per process,
+    the time counted."""
     jax, jnp, js = _jax()
-    key = (kind, callback, model.integrator, model.gravity, tuple(np.shape(a) for a in args))
+    key = (kind, mode, model.integrator, model.gravity, static,
+           tuple(np.shape(a) for a in jax.tree_util.tree_leaves(args)))
     with _LOCK:
         fn = _COMPILED.get(key)
         if fn is None:
-            make = _run_fn if kind == "run" else _one_fn
             try:
                 with _TIMES.timing("compile_seconds"):
-                    fn = jax.jit(make(callback)).lower(model, *args).compile()
+                    fn = jax.jit(make()).lower(model, *args).compile()
             except Exception as exc:  # noqa: BLE001 - jaxsim or XLA refusing the computation
                 raise EngineError(
                     f"jaxsim/XLA could not compile the step: {type(exc).__name__}: {exc}"
@@ -358,9 +396,9 @@ def _turned_wrench(r, wrench):
 
 
 def _inputs(scenario, harness, i: int):
-    """(callback?, constant link force (6,), pre-step decay scale (13,), ``y -> link force`` (6 floats)) of
-    body ``i`` of ``harness`` (the loop's: its force evaluator and decay factors; jaxsim's own weight off),
-    in jaxsim's frame (:func:`jaxsim_frame`): the link force of a state ``y`` of that frame."""
+    """(mode (:data:`MODES`), constant link force (6,), pre-step decay scale (13,), ``y -> link force`` (6
+    floats)) of body ``i`` of ``harness`` (the loop's: its force evaluator and decay factors; jaxsim's own
+    weight off), in jaxsim's frame (:func:`jaxsim_frame`): the link force of a state ``y`` of that frame."""
     ft, gv, gw = harness.ft[i], float(harness.g_v[i]), float(harness.g_w[i])
 
     def decayed(y):   # forces.harness_force_torque_floats, with the loop's evaluator
@@ -375,14 +413,15 @@ def _inputs(scenario, harness, i: int):
     scale[10:13] = gw
     y0 = scenario.problem.initial_packed()
     if scenario.problem.forces.state_dependent:
-        return True, np.zeros(6), scale, wrench
-    return False, np.array(wrench([float(v) for v in (y0 if r is None else turn_in(r, y0))])), scale, wrench
+        return ("callback" if r is not None else "state"), np.zeros(6), scale, wrench
+    return "const", np.array(wrench([float(v) for v in (y0 if r is None else turn_in(r, y0))])), scale, wrench
 
 
 class JaxsimWorld(World):
     """B bodies, each its own jaxsim model, stepped by the compiled functions above; raw rows are packed
-    states. Its rollout takes every force (``rollout_takes_all_forces``): the harness's, constant or called
-    back from the compiled step, and the decay; compilation and callbacks are counted in ``host_s``."""
+    states. Its rollout takes every force (``rollout_takes_all_forces``): the harness's, constant,
+    evaluated in the compiled loop (cross_checks.engines.jax_forces) or called back from it
+    (:data:`HOST_FORCES_REASON`), and the decay; compilation and callbacks are counted in ``host_s``."""
 
     rollout_takes_all_forces = True
 
@@ -422,47 +461,85 @@ class JaxsimWorld(World):
 
     def rollout(self, n_steps, harness):
         """The states (n_steps, B, 13) after each step: one step of every row in one vmapped call when the
-        bodies are one scenario's (the one-step mode), else each body's run in compiled chunks (NaN after
-        its last step or its first chunk with a blown-up state)."""
+        bodies are one scenario's (the one-step mode), else the bodies vmapped in compiled chunks, a batch
+        per model structure and kind of forces (NaN after a body's last step; a batch stops at the first
+        chunk after which every body has ended or blown up)."""
+        from cross_checks.engines import jax_forces
         compiled = _TIMES["compile_seconds"]
+        t0 = time.perf_counter()
         try:
+            inputs = [_inputs(sc, harness, i) for i, sc in enumerate(self.scenarios)]
+            fa = jax_forces.BodyForces(harness)
+            fa.arrays["weight"] = np.array([_weight(sc) for sc in self.scenarios], dtype=float)
+            self.host_s += time.perf_counter() - t0
             if n_steps == 1 and all(sc is self.scenarios[0] for sc in self.scenarios):
-                return self._one(harness)[None]
+                return self._one(inputs, fa)[None]
             out = np.full((n_steps, len(self.y), 13), np.nan)
-            for i in range(len(self.y)):
-                self._run(i, min(n_steps, self.ends[i]), harness, out[:, i])
+            groups: dict = {}
+            for i, (mode, *_rest) in enumerate(inputs):
+                groups.setdefault((mode, self.models[i].integrator, self.models[i].gravity), []).append(i)
+            for (mode, *_), idx in groups.items():
+                for s in range(0, len(idx), MAX_BATCH):
+                    self._run(idx[s:s + MAX_BATCH], mode, n_steps, inputs, fa, out)
             return out
         finally:   # compiling is not stepping: counted apart, with the host's seconds
             self.host_s += _TIMES["compile_seconds"] - compiled
 
-    def _run(self, i: int, n_steps: int, harness, out) -> None:
-        model, dt = self.models[i], self.dt
-        callback, f6, scale, wrench = _inputs(self.scenarios[i], harness, i)
-        y = self.y[i]
-        done = 0
-        with _CONTEXTS.holding((self, wrench)) as key:
-            fn = _compiled("run", callback, model, dt, y, np.int64(0), f6, scale, key)
-            while done < n_steps:
-                count = min(CHUNK, n_steps - done)
+    def _run(self, idx, mode: str, n_max: int, inputs, fa, out) -> None:
+        """The bodies ``idx`` (of one model structure and force mode) vmapped, padded to a power of two."""
+        from cross_checks.engines import jax_forces
+        t0, compiled = time.perf_counter(), _TIMES["compile_seconds"]
+        # one body runs the reproducer's loop (worlds/jaxsim.py), not vmapped: its numbers to the bit; XLA
+        # rounds a vmapped batch's (of any size) differently, by ~1e-14 relative
+        B, M = len(idx), runtimes.power_of_two(len(idx))
+        pad = list(idx) + [idx[0]] * (M - B)
+        distinct = list(dict.fromkeys(id(self.models[i]) for i in idx))
+        trees = {id(self.models[i]): self.models[i] for i in idx}
+        models = runtimes.stack_trees([trees[k] for k in distinct],
+                                      [distinct.index(id(self.models[i])) for i in pad])
+        rows = runtimes.chunk_rows(M, CHUNK)
+        f6 = np.array([inputs[i][1] for i in pad])
+        scale = np.array([inputs[i][2] for i in pad])
+        y = self.y[pad]
+        ends = np.array([self.ends[i] for i in idx])
+        with contextlib.ExitStack() as stack:
+            hold = _CONTEXTS.holding
+            keys = np.array([stack.enter_context(hold((self, inputs[i][3]))) if mode == "callback"
+                             else np.int64(0) for i in pad], dtype=np.int64)
+            args = (self.dt, y, np.int64(0), f6, scale, keys, fa.take(pad), jax_forces.zero())
+            if M == 1:   # without the batch axis (see above)
+                models = self.models[idx[0]]
+                args = (self.dt, y[0], np.int64(0), f6[0], scale[0], keys[0], fa.take(pad[0]),
+                        jax_forces.zero())
+                y = y[0]
+            fn = _compiled("run", mode, models, (rows, fa.key, M == 1),
+                           lambda: _run_fn(mode, rows, vmapped=M > 1), *args)
+            # stacking the models and the inputs (the compilation is added by rollout)
+            self.host_s += time.perf_counter() - t0 - (_TIMES["compile_seconds"] - compiled)
+            done, k = np.zeros(B, dtype=bool), 0
+            while k < n_max and not done.all():
+                count = min(rows, n_max - k)
                 with _TIMES.timing("run_seconds"):
-                    y, chunk = fn(model, dt, y, np.int64(count), f6, scale, key)
-                    chunk = np.asarray(chunk)[:count]
-                _TIMES["steps"] += count
-                out[done:done + count] = chunk
-                done += count
-                if bad_rows(chunk).any():
-                    return
+                    y, chunk = fn(models, self.dt, y, np.int64(count), *args[3:])
+                    chunk = np.asarray(chunk).reshape(M, rows, 13)[:B, :count]
+                _TIMES["steps"] += count * B
+                out[k:k + count, idx] = chunk.transpose(1, 0, 2)
+                done |= bad_rows(chunk).any(axis=1) | (ends <= k + count)
+                k += count
 
-    def _one(self, harness):
+    def _one(self, inputs, fa):
+        from cross_checks.engines import jax_forces
         n = len(self.y)
         model, dt = self.models[0], self.dt
-        callback, f6, scale, wrench = _inputs(self.scenarios[0], harness, 0)
+        mode, f6, scale, wrench = inputs[0]
         pad = -n % ROW_BLOCK
         padded = np.concatenate([self.y, np.repeat(self.y[:1], pad, axis=0)]) if pad else self.y
+        rows = fa.take(np.r_[np.arange(n), np.zeros(pad, dtype=int)])
         with _CONTEXTS.holding((self, wrench)) as key:
-            fn = _compiled("one", callback, model, dt, padded, f6, scale, key)
+            args = (dt, padded, f6, scale, key, rows, jax_forces.zero())
+            fn = _compiled("one", mode, model, (fa.key,), lambda: _one_fn(mode), *args)
             with _TIMES.timing("run_seconds"):
-                out = np.asarray(fn(model, dt, padded, f6, scale, key))[:n]
+                out = np.asarray(fn(model, *args))[:n]
             _TIMES["steps"] += n
         return out
 

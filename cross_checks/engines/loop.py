@@ -84,6 +84,8 @@ class Harness:
                          forces.weight_W(sc) if applies_gravity else np.zeros(3),
                          body_torque_B(sc.problem) if body_torque else None))
         index = np.array(which, dtype=int)
+        #: each body's problem as the harness evaluates its forces (the one of ``ft``; jax_forces' arrays)
+        self.problems = [host[k][0] for k in which]
         # the scenario's own evaluator where the harness evaluates all of its forces
         self.ft = [host[k][1] for k in which]
         # many bodies: one compiled call for all of them (the same numbers, member by member)

@@ -9,15 +9,16 @@ State at the boundary (MuJoCo's, converted by mujoco_engine's ``to_qpos_qvel``/`
 ``qpos = [x_W, q_WB (w x y z)]``, ``qvel = [v_W (COM, world axes), ω_B (body axes)]``.
 
 Forces: the harness's world force at the COM minus the weight ``m g`` (MJX applies gravity) and its world
-torque go into the body's row of ``xfrc_applied``, from the start-of-step state (state-dependent ones by the
-loop's harness on the host through ``jax.pure_callback``), the decay applied before the step; RK4 holds them
-over its stages (MJX has no per-stage hook).
+torque go into the body's row of ``xfrc_applied``, from the start-of-step state (state-dependent ones
+evaluated inside the compiled loop by cross_checks.engines.jax_forces: the loop's harness in JAX, bit for
+bit), the decay applied before the step; RK4 holds them over its stages (MJX has no per-stage hook).
 
 A world of rbcheck's loop (cross_checks.engines.world, cross_checks.engines.loop): :class:`MjxWorld`, the
-requests of one model structure whatever their Δt, vmapped through one compiled loop (CHUNK steps a call)
-per structure in batches of at most MAX_BATCH, its ``rollout``, which takes every force itself; the loop's
-one-step mode vmaps the rows. JAX is imported on first use only (never at import or in ``version()``): a
-sweep's parent must not start it before forking. Divergence is the loop's.
+requests of one model structure whatever their Δt, vmapped through one compiled loop per structure in
+batches of at most MAX_BATCH, its ``rollout``, which takes every force itself and records every state in the
+compiled loop (runtimes.chunk_rows steps a call, at most CHUNK); the loop's one-step mode vmaps the rows.
+JAX is imported on first use only (never at import or in ``version()``): a sweep's parent must not start it
+before forking. Divergence is the loop's.
 """
 from __future__ import annotations
 
@@ -56,12 +57,14 @@ VARIANTS = {
                             traits=base.SYMPLECTIC_EULER_EXPLICIT_GYRO),
 }
 
-#: Steps per call of the compiled loop (a run longer than this calls it again from its last state).
+#: Steps per call of the compiled loop at most (a run longer than this calls it again from its last state;
+#: a batch of many bodies records fewer a call: runtimes.chunk_rows).
 CHUNK = 2048
 #: Rows of one one_step call (the sweep's local-error mode asks 64 at a time); more rows run in several calls.
 ONE_STEP_BATCH = 64
-#: Runs per compiled batch of simulate_many (padded to a power of two, so that batch sizes share executables).
-MAX_BATCH = 64
+#: Runs per compiled batch of simulate_many (padded to a power of two, so that batch sizes share executables):
+#: a thousand bodies in one call, as an engine's own vmapped loop runs them.
+MAX_BATCH = 1024
 _BODY = 1   # body id of the free body (0 is the world)
 _DIST = "mujoco-mjx"
 _HINT = "pip install 'rbcheck[mjx]'"
@@ -167,6 +170,7 @@ def _meta_key(obj, prefix="") -> tuple:
 
 
 _TEMPLATES: dict = {}   # structure key -> (template MJX Model, its MjModel)
+_NUMBERS: dict = {}     # structure key -> a small number (a world's key)
 
 
 #: The last models put on the device: ``(id(scenario), variant) -> (scenario, key, MJX Model)`` (the scenario
@@ -213,54 +217,38 @@ def _stack(models):
     return jax.tree.map(lambda *xs: np.stack([np.asarray(x) for x in xs]), *models)
 
 
-# --- the host side of the force callback -------------------------------------------------------------------
-
-#: The world whose compiled loop is running (under _LOCK): its ``forces(y (R, 13), bodies (R,))`` gives the
-#: xfrc_applied rows (R, 6) of those bodies at those packed states.
-_HOST: dict = {}
-
-
-def _host_forces(qpos, qvel, ids):
-    """xfrc_applied rows (..., 6) for the states ``qpos`` (..., 7), ``qvel`` (..., 6) of the bodies ``ids`` of
-    the running world: each body's harness force (minus its weight) and torque, from the package's force
-    model (the loop's Harness, called back from the compiled loop)."""
-    from cross_checks.engines.mujoco_engine import to_packed
-    qpos, qvel, ids = np.asarray(qpos), np.asarray(qvel), np.asarray(ids)
-    shape = ids.shape
-    with np.errstate(all="ignore"):
-        y = to_packed(qpos.reshape(-1, 7), qvel.reshape(-1, 6))
-    return _HOST["world"].forces(y, ids.reshape(-1)).reshape(*shape, 6)
-
-
 # --- the compiled functions ---------------------------------------------------------------------------------
 
-def _chunk_fn(d0, callback: bool):
-    """``run(models, qpos (B, 7), qvel (B, 6), gains (B, 6), xfrc (B, 6), ids (B,), n)`` -> states (B, CHUNK,
-    13) ``[qpos, qvel]`` after each of the first ``n`` steps (the rest zeros): the chunk of a free run,
-    vmapped over B runs. ``gains``: the pre-step decay factors on qvel; ``xfrc``: the constant applied
-    row, or with ``callback`` the host force model's at every step (of the bodies ``ids``)."""
+def _chunk_fn(d0, forces_in_loop: bool, rows: int):
+    """``run(models, qpos (B, 7), qvel (B, 6), gains (B, 6), xfrc (B, 6), fa, zero, n)`` -> states (B,
+    rows, 13) ``[qpos, qvel]`` after each of the first ``n`` steps (the rest zeros): the chunk of a free run,
+    vmapped over B runs (each its own model: runtimes.stack_trees). ``gains``: the pre-step decay factors on
+    qvel; ``xfrc``: the constant applied row, or with ``forces_in_loop`` the harness's at the start of every
+    step, evaluated in the loop (jax_forces.wrench of the arrays ``fa``, each body's row; ``zero`` its traced
+    integer zero)."""
     jax, jnp, mjx = _engine()
-    f64 = jax.ShapeDtypeStruct((6,), jnp.float64)
 
+    from cross_checks.engines import jax_forces
     from cross_checks.engines.worlds.mjx import step_one  # the step rbcheck repro embeds
 
-    def member(m, qpos, qvel, gain, xfrc, cb_id, n):
+    def member(m, qpos, qvel, gain, xfrc, fa, z, n):
         d = d0.replace(qpos=qpos, qvel=qvel)
 
         def body(i, carry):
             d, out = carry
-            if callback:
-                f = jax.pure_callback(_host_forces, f64, d.qpos, d.qvel, cb_id, vmap_method="broadcast_all")
+            if forces_in_loop:   # the start-of-step state, before the decay (as the loop's harness)
+                f = jax_forces.wrench_apart(fa, d.qpos[0:3], d.qvel[0:3], d.qpos[3:7], z)
             else:
                 f = xfrc
             d = step_one(m, d, gain, f)
             return d, out.at[i].set(jnp.concatenate([d.qpos, d.qvel]))
 
-        _, out = jax.lax.fori_loop(0, n, body, (d, jnp.zeros((CHUNK, 13))))
+        _, out = jax.lax.fori_loop(0, n, body, (d, jnp.zeros((rows, 13))))
         return out
 
-    def run(models, qpos, qvel, gains, xfrc, ids, n):
-        return jax.vmap(member, in_axes=(0, 0, 0, 0, 0, 0, None))(models, qpos, qvel, gains, xfrc, ids, n)
+    def run(models, qpos, qvel, gains, xfrc, fa, z, n):
+        vmapped = jax.vmap(member, in_axes=(0, 0, 0, 0, 0, 0, None, None))
+        return vmapped(models, qpos, qvel, gains, xfrc, fa, z, n)
     return run
 
 
@@ -291,10 +279,11 @@ def _data0(key):
 class MjxWorld(World):
     """B free bodies of one model structure (:func:`device_model`, each at its request's Δt). Raw rows:
     ``[qpos (7), qvel (6)]`` per body, ω in BODY axes. :meth:`rollout` vmaps the bodies through the compiled
-    chunk loop (CHUNK steps a call) in batches of at most MAX_BATCH, padded to a power of two, taking every
-    force itself (constant: the applied rows; state-dependent: the loop's Harness through
-    ``jax.pure_callback``; the decay as gains on qvel before each step); :meth:`step` (the one-step mode)
-    vmaps the bodies of one model through the one-step executable, ONE_STEP_BATCH at a time."""
+    chunk loop in batches of at most MAX_BATCH, padded to a power of two, taking every force itself
+    (constant: the applied rows; state-dependent: the loop's harness evaluated inside the compiled loop,
+    cross_checks.engines.jax_forces, bit for bit the host's; the decay as gains on qvel before each step);
+    :meth:`step` (the one-step mode) vmaps the bodies of one model through the one-step executable,
+    ONE_STEP_BATCH at a time."""
 
     rollout_forces = True
 
@@ -306,10 +295,11 @@ class MjxWorld(World):
                 k = (id(r.scenario), float(r.dt_s))
                 if k not in held:
                     held[k] = device_model(r.scenario, variant, r.dt_s)
-        self.models = [held[id(r.scenario), float(r.dt_s)][1] for r in requests]
+        self.models = [xm for _, xm in held.values()]   # the distinct models
         self.same = [list(held).index((id(r.scenario), float(r.dt_s))) for r in requests]
         self.key = held[id(requests[0].scenario), float(requests[0].dt_s)][0]
-        self.callback = bool(requests[0].scenario.problem.forces.state_dependent)
+        self.state_dependent = bool(requests[0].scenario.problem.forces.state_dependent)
+        self.ends = [int(r.n_steps) for r in requests]
         B = self.B = len(requests)
         self.qpos, self.qvel, self.xfrc = np.zeros((B, 7)), np.zeros((B, 6)), np.zeros((B, 6))
         self.host_s = 0.0
@@ -329,21 +319,15 @@ class MjxWorld(World):
         raw = np.asarray(raw, dtype=float)
         return to_packed(raw[..., 0:7], raw[..., 7:13])
 
-    def forces(self, y, bodies):
-        """xfrc_applied rows (R, 6) of ``bodies`` at packed states ``y`` (R, 13) (the host callback)."""
-        t0 = time.perf_counter()
-        f, tau = self.harness.wrench(y, bodies)
-        self.host_s += time.perf_counter() - t0
-        return np.concatenate([f, tau], axis=1)
-
     def step(self):
         """One step of every body, the bodies of one model (scenario and Δt) vmapped together."""
         jax, _, _ = _engine_or_error()
         out = np.empty((self.B, 13))
+        same = np.asarray(self.same)
         with _LOCK:
             for model in dict.fromkeys(self.same):
-                idx = np.flatnonzero(np.asarray(self.same) == model)
-                host_model = jax.tree.map(np.asarray, self.models[idx[0]])
+                idx = np.flatnonzero(same == model)
+                host_model = jax.tree.map(np.asarray, self.models[model])
                 fn = None
                 for s in range(0, len(idx), ONE_STEP_BATCH):
                     rows = idx[s:s + ONE_STEP_BATCH]
@@ -359,42 +343,45 @@ class MjxWorld(World):
 
     def rollout(self, n_steps, harness):
         """``n_steps`` steps of every body in the compiled chunk loop, batch by batch; a batch whose bodies
-        all ended non-finite stops there (its later rows NaN)."""
-        _, jnp, _ = _engine_or_error()
+        all ended (non-finite, or at their run's last step) stops there (its later rows NaN)."""
+        from cross_checks.engines import jax_forces
+        _engine_or_error()
         gains = np.concatenate([np.repeat(harness.g_v[:, None], 3, 1), np.repeat(harness.g_w[:, None], 3, 1)],
                                axis=1)
         out = np.full((n_steps, self.B, 13), np.nan)
-        self.harness = harness
+        t0 = time.perf_counter()
+        fa = jax_forces.BodyForces(harness) if self.state_dependent else None
+        self.host_s += time.perf_counter() - t0
         with _LOCK:
-            if self.callback:
-                _HOST["world"] = self
-            try:
-                for s in range(0, self.B, MAX_BATCH):
-                    self._batch(list(range(s, min(s + MAX_BATCH, self.B))), n_steps, gains, out, jnp)
-            finally:
-                _HOST.clear()
+            for s in range(0, self.B, MAX_BATCH):
+                self._batch(list(range(s, min(s + MAX_BATCH, self.B))), n_steps, gains, fa, out)
         return out
 
-    def _batch(self, idx, n_max, gains, out, jnp):
+    def _batch(self, idx, n_max, gains, fa, out):
+        from cross_checks.engines import jax_forces
+        _, jnp, _ = _engine()
         B, M = len(idx), runtimes.power_of_two(len(idx))
         pad = idx + [idx[0]] * (M - B)
         t0 = time.perf_counter()
-        stacked = _stack([self.models[k] for k in pad])
-        qpos, qvel = jnp.asarray(self.qpos[pad]), jnp.asarray(self.qvel[pad])
-        args = (stacked, qpos, qvel, jnp.asarray(gains[pad]), jnp.asarray(self.xfrc[pad]),
-                jnp.asarray(np.asarray(pad)), jnp.asarray(0, dtype=jnp.int32))
-        exe = _executable(("chunk", self.key, self.callback, M), _chunk_fn(_data0(self.key), self.callback),
-                          *args)
-        self.host_s += time.perf_counter() - t0   # putting the models on the device, compiling: not stepping
-        done = np.zeros(B, dtype=bool)   # diverged (the rest of its run is not needed)
-        for s in range(0, n_max, CHUNK):
-            n = min(CHUNK, n_max - s)
+        models = runtimes.stack_trees(self.models, [self.same[k] for k in pad])
+        rows = runtimes.chunk_rows(M, CHUNK)
+        fargs = {} if fa is None else fa.take(pad)
+        args = (models, jnp.asarray(self.qpos[pad]), jnp.asarray(self.qvel[pad]), jnp.asarray(gains[pad]),
+                jnp.asarray(self.xfrc[pad]), fargs, jax_forces.zero(), jnp.asarray(0, dtype=jnp.int32))
+        exe = _executable(("chunk", self.key, fa is not None and fa.key, M, rows),
+                          _chunk_fn(_data0(self.key), fa is not None, rows), *args)
+        self.host_s += time.perf_counter() - t0   # stacking the models, compiling: not stepping
+        qpos, qvel = args[1], args[2]
+        ends = np.array([self.ends[k] for k in idx])
+        done = np.zeros(B, dtype=bool)   # diverged or at its end (the rest of its run is not needed)
+        for s in range(0, n_max, rows):
+            n = min(rows, n_max - s)
             with _STATS.timing("step_seconds"):
-                chunk = np.asarray(exe(stacked, qpos, qvel, *args[3:6], jnp.asarray(n, dtype=jnp.int32)))
+                chunk = np.asarray(exe(models, qpos, qvel, *args[3:7], jnp.asarray(n, dtype=jnp.int32)))
             _STATS["body_steps"] += n * M
             out[s:s + n, idx] = chunk[:B, :n].transpose(1, 0, 2)
             with np.errstate(all="ignore"):
-                done |= ~np.all(np.isfinite(chunk[:B, n - 1]), axis=-1)
+                done |= ~np.all(np.isfinite(chunk[:B, n - 1]), axis=-1) | (ends <= s + n)
             if done.all():
                 break
             qpos, qvel = jnp.asarray(chunk[:, n - 1, 0:7]), jnp.asarray(chunk[:, n - 1, 7:13])
@@ -414,14 +401,17 @@ class MjxEngine(WorldEngine):
         return MjxWorld(requests, variant)
 
     def world_key(self, request, variant):
-        """One world per model structure and force callback, whatever the steps (each body's model carries
+        """One world per model structure and kind of forces, whatever the steps (each body's model carries
         its Δt); a request whose model is refused in a world of its scenario, whose build then says why."""
         try:
             with _LOCK:
                 key, _ = device_model(request.scenario, variant, request.dt_s)
         except EngineError:
             return ("refused", id(request.scenario))
-        return (key, bool(request.scenario.problem.forces.state_dependent))
+        # the structure's number, not its key (a tuple of every static field: hashing it once per request
+        # cost ~50 µs, 50 ms of a thousand-run batch)
+        number = _NUMBERS.setdefault(key, len(_NUMBERS))
+        return (number, bool(request.scenario.problem.forces.state_dependent))
 
     def engine_files(self) -> list:
         """MJX's Python sources (found without importing them: the parent of a sweep must not start JAX)."""

@@ -23,7 +23,8 @@ from cross_checks.core.files import kernel_cache_dir
 from cross_checks.engines.base import EngineError
 from cross_checks.engines.install import quiet_fd2
 
-__all__ = ["start_jax", "refuse_forked_jax", "start_warp", "Stats", "Registry", "power_of_two"]
+__all__ = ["start_jax", "refuse_forked_jax", "start_warp", "Stats", "Registry", "power_of_two",
+           "stack_trees", "chunk_rows"]
 
 
 @functools.lru_cache(maxsize=1)
@@ -154,3 +155,29 @@ def power_of_two(n: int) -> int:
     """The batch size ``n`` (≥ 1) runs or rows are padded to: the next power of two, so that a handful of
     compiled executables serve every batch size."""
     return 1 << (int(n) - 1).bit_length()
+
+
+def stack_trees(trees, which):
+    """A batch of pytrees of one structure (a JAX engine's models: MJX Models, jaxsim models) for
+    ``jax.vmap`` over its first axis: ``which`` (B,) indexes each body's tree in the distinct ``trees``; every
+    leaf is stacked per body on the host (one transfer per leaf when the executable is called). Every leaf
+    batched, even where all bodies share it: one executable serves any mix of bodies of a structure (Δt, mass,
+    inertia traced), and jaxsim's vmapped step runs ~10x faster that way than with its model shared
+    (measured at N
+    = 1024, interleaved in one process: 0.17 against 1.6 CPU s for 100 steps; MJX's the same either way)."""
+    import jax
+    which = np.asarray(which, dtype=int)
+    return jax.tree.map(lambda *xs: np.stack([np.asarray(x) for x in xs])[which], *trees)
+
+
+#: Rows (body-steps) a compiled chunk records at most: its states buffer is (bodies, steps, 13) float64, so
+#: 2**17 rows are 13.6 MB, written and copied to the host per call.
+CHUNK_ROWS = 1 << 17
+
+
+def chunk_rows(batch: int, longest: int) -> int:
+    """The steps of a compiled chunk's states buffer for ``batch`` bodies: at most ``longest`` (the engine's
+    longest chunk), at most :data:`CHUNK_ROWS` rows in all (a power of two, at least 64): a batch of a
+    thousand bodies records 128 steps a call, a sweep's ladder of a few runs ``longest``."""
+    fit = max(64, 1 << max(0, (CHUNK_ROWS // max(1, int(batch))).bit_length() - 1))
+    return int(min(int(longest), fit))

@@ -33,7 +33,7 @@ COMPILED = {"jaxsim", "brax", "mjx", "mujoco_warp", "genesis", "newton"}
 #: a step's sums otherwise than a batch of one: their batched runs are their single ones to the round-off
 #: allowed below (_same), not bit for bit (measured: the MJX adapter before its port onto the loop,
 #: bit-identical to it, did the same).
-VECTORISED = {"mjx"}
+VECTORISED = {"mjx", "jaxsim"}   # jaxsim: its world vmaps its bodies (one body alone: unvmapped)
 
 
 def _python_engine():

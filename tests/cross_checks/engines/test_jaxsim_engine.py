@@ -634,3 +634,19 @@ def test_a_process_forked_after_jax_started_refuses_with_an_engine_error(monkeyp
         je.simulate(sc, SIE, 0.01, 3)
     with pytest.raises(je.EngineError, match=said):
         je.one_step(sc, SIE, 0.01, np.ones((2, 13)))
+
+
+def test_the_vmapped_rollout_gives_each_run_its_single_runs_numbers_to_round_off():
+    # before: the bodies of a world ran one after the other, their forces called back from the host per step;
+    # now vmapped with the forces inside the compiled loop (one body alone: the reproducer's loop, unvmapped)
+    names = ["applied_torque", "tennis_racket", "spring_pendulum", "projectile", "velocity_decay"]
+    reqs = [RunRequest(load_scenario(n), 0.01, 30 + 7 * i) for i, n in enumerate(names)]
+    pairs = je.simulate_many("semi_implicit_euler", reqs[:2])             # a batch of 2
+    many = je.simulate_many("semi_implicit_euler", reqs * 3)             # of 15, padded to 16
+    for r, run, again in zip(reqs, many, pairs + many[len(pairs):len(reqs)]):
+        one = je.simulate(r.scenario, "semi_implicit_euler", r.dt_s, r.n_steps)
+        np.testing.assert_array_equal(run.t_s, one.t_s)
+        assert run.diverged_at_s is None and len(run.y) == r.n_steps + 1
+        scale = np.maximum(1.0, np.abs(one.y))
+        for batched in (run, again):
+            assert np.max(np.abs(batched.y - one.y) / scale) <= tol.JAXSIM_BATCH_VS_SINGLE

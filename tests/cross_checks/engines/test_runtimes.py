@@ -43,6 +43,26 @@ def test_batches_are_padded_to_the_next_power_of_two():
     assert [runtimes.power_of_two(n) for n in (1, 2, 3, 4, 5, 64, 65)] == [1, 2, 4, 4, 8, 64, 128]
 
 
+def test_a_chunk_records_at_most_chunk_rows_rows_and_at_least_64_steps():
+    # a thousand bodies record 128 steps a call (13.6 MB), a sweep's ladder of a few runs the longest chunk
+    assert [runtimes.chunk_rows(b, 2048) for b in (1, 8, 64, 128, 1024, 1 << 20)] == [2048, 2048, 2048, 1024,
+                                                                                      128, 64]
+    assert runtimes.chunk_rows(4, 512) == 512
+    assert all(runtimes.chunk_rows(b, 4096) * b <= runtimes.CHUNK_ROWS for b in (64, 256, 1024, 2048))
+
+
+def test_stacked_trees_give_each_body_its_own_tree_s_leaves():
+    import importlib.util
+    if importlib.util.find_spec("jax") is None:
+        pytest.skip("jax is not installed")
+    runtimes.start_jax()
+    a = {"m": np.array([1.0, 2.0]), "dt": np.float64(0.01)}
+    b = {"m": np.array([3.0, 4.0]), "dt": np.float64(0.02)}
+    out = runtimes.stack_trees([a, b], [1, 0, 0])
+    np.testing.assert_array_equal(out["m"], [[3.0, 4.0], [1.0, 2.0], [1.0, 2.0]])
+    np.testing.assert_array_equal(out["dt"], [0.02, 0.01, 0.01])
+
+
 def test_warp_with_a_kernel_cache_it_cannot_write_compiles_elsewhere_and_says_so(tmp_path):
     """Before: MuJoCo Warp with a read-only kernel cache failed every row."""
     from pathlib import Path
