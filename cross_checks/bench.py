@@ -694,8 +694,8 @@ def jaxsim_vmapped(n_bodies, n_steps, variant="semi_implicit_euler") -> Runner:
     ``JaxSimModelData`` (Mixed representation); the link force [0, R_WB τ_B] each step (jaxsim takes world
     torques). The model is stacked per body (vmapped on its first axis, as the adapter does): jaxsim's
     vmapped step runs 7-10x faster that way than with one model shared by the N bodies (``in_axes=None``;
-    measured interleaved in one process at N = 1024: 0.15 against 1.0 CPU s for 100 steps). Compilation timed apart
-    (``compile_s``)."""
+    measured interleaved in one process at N = 1024: 0.15 against 1.0 CPU s for 100 steps). Compilation
+    timed apart (``compile_s``)."""
     import dataclasses
 
     from cross_checks.engines import jaxsim_engine

@@ -21,7 +21,6 @@ from __future__ import annotations
 import functools
 import itertools
 import math
-import types
 
 import numpy as np
 
@@ -32,12 +31,9 @@ from cross_checks.engines.step_floats import bad_floats
 from cross_checks.engines.world import World, WorldEngine
 from reference_sim.simulate import BLOWUP_LIMIT
 
-dart, _IMPORT_ERROR = install.optional_import("dartpy")
-if _IMPORT_ERROR is None:   # the world (what rbcheck repro embeds) imports the engine itself
-    from cross_checks.engines.worlds import dart as dtw
+dart, _IMPORT_ERROR, dtw = install.optional_world("dartpy", "dart", "FormBody", "FormBodies")
+if _IMPORT_ERROR is None:
     from cross_checks.engines.worlds.dart import JOINT_SETTINGS, from_dart_state, neutralise, to_dart_state
-else:   # not installed: the adapter still loads, and says so when used
-    dtw = types.SimpleNamespace(FormBody=type("FormBody", (), {}), FormBodies=type("FormBodies", (), {}))
 
 __all__ = ["ENGINE", "VARIANTS", "JOINT_SETTINGS", "EngineError", "version", "simulate", "simulate_many",
            "one_step", "DartBody", "DartWorld", "DartAdapter", "neutralise", "to_dart_state",

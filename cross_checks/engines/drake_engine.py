@@ -17,7 +17,6 @@ from __future__ import annotations
 import dataclasses
 import functools
 import time
-import types
 
 import numpy as np
 
@@ -27,11 +26,7 @@ from cross_checks.engines.forces import stage_force_torque
 from cross_checks.engines.world import World, WorldEngine
 
 # imported without pydrake so that the registry can say why it is unavailable; its classes on first use
-pydrake, _IMPORT_ERROR = install.optional_import("pydrake")
-if _IMPORT_ERROR is None:   # the world (what rbcheck repro embeds) imports the engine itself
-    from cross_checks.engines.worlds import drake as dkw
-else:   # not installed: the adapter still loads, and says so when used
-    dkw = types.SimpleNamespace(FormBody=type("FormBody", (), {}), FormBodies=type("FormBodies", (), {}))
+pydrake, _IMPORT_ERROR, dkw = install.optional_world("pydrake", "drake", "FormBody", "FormBodies")
 from cross_checks.engines.worlds.com import com_state
 
 __all__ = ["ENGINE", "VARIANTS", "version", "simulate", "simulate_many", "one_step", "DrakeModel",

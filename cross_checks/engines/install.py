@@ -11,13 +11,14 @@ import functools
 import importlib
 import os
 import sys
+import types
 from pathlib import Path
 
 from cross_checks.engines.base import EngineError
 
-__all__ = ["EngineNotInstalled", "quiet_fd2", "optional_import", "package_root", "package_files",
-           "installed_version", "release", "library_files", "require", "check_installed", "first_import",
-           "engine_or_error"]
+__all__ = ["EngineNotInstalled", "quiet_fd2", "optional_import", "optional_world", "package_root",
+           "package_files", "installed_version", "release", "library_files", "require", "check_installed",
+           "first_import", "engine_or_error"]
 
 
 class EngineNotInstalled(ImportError):
@@ -54,6 +55,18 @@ def optional_import(name: str, *, quiet_stderr: bool = False):
             return importlib.import_module(name), None
         except ImportError as exc:  # pragma: no cover - exercised only where the engine is missing
             return None, exc
+
+
+def optional_world(name: str, world: str, *placeholders: str, quiet_stderr: bool = False):
+    """``(engine module, None, world module)`` for an adapter built on ``cross_checks.engines.worlds.<world>``
+    (the rbcheck-free model that ``rbcheck repro`` embeds, which imports the engine itself), or, where
+    ``name`` cannot be imported, ``(None, the ImportError, a namespace of empty classes named
+    placeholders)``: the adapter's classes built on the world's still load, and the registry says why the
+    engine is unavailable (:func:`optional_import`)."""
+    module, error = optional_import(name, quiet_stderr=quiet_stderr)
+    if error is None:
+        return module, None, importlib.import_module(f"cross_checks.engines.worlds.{world}")
+    return None, error, types.SimpleNamespace(**{k: type(k, (), {}) for k in placeholders})
 
 
 def package_root(module: str) -> Path | None:

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import threading
 import time
-import types
 
 import numpy as np
 
@@ -26,12 +25,9 @@ from cross_checks.engines.packed_rows import qpos_qvel_packed
 from cross_checks.engines.world import World, WorldEngine
 from reference_sim.quaternion import quat_from_matrix
 
-mujoco, _IMPORT_ERROR = install.optional_import("mujoco")
-if _IMPORT_ERROR is None:   # the world (what rbcheck repro embeds) imports the engine itself
-    from cross_checks.engines.worlds import mujoco as mjw
+mujoco, _IMPORT_ERROR, mjw = install.optional_world("mujoco", "mujoco", "Bodies", "FormBodies")
+if _IMPORT_ERROR is None:
     from cross_checks.engines.worlds.mujoco import to_packed, to_qpos_qvel
-else:   # not installed: the adapter still loads, and says so when used
-    mjw = types.SimpleNamespace(Bodies=type("Bodies", (), {}), FormBodies=type("FormBodies", (), {}))
 
 __all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate", "simulate_many", "one_step",
            "build_model", "packed_floats", "to_packed", "to_qpos_qvel"]

@@ -18,7 +18,6 @@ import functools
 import itertools
 import os
 import threading
-import types
 
 import numpy as np
 
@@ -27,12 +26,10 @@ from cross_checks.engines.base import EngineError, Variant
 from cross_checks.engines.world import World, WorldEngine
 from reference_sim.quaternion import quat_conj, quat_from_matrix
 
-p, _IMPORT_ERROR = install.optional_import("pybullet", quiet_stderr=True)   # prints its build time at import
-if _IMPORT_ERROR is None:   # the world (what rbcheck repro embeds) imports the engine itself
-    from cross_checks.engines.worlds import pybullet as pbw
+# (pybullet prints its build time at import)
+p, _IMPORT_ERROR, pbw = install.optional_world("pybullet", "pybullet", "Bodies", quiet_stderr=True)
+if _IMPORT_ERROR is None:
     from cross_checks.engines.worlds.pybullet import DYNAMICS_SETTINGS
-else:   # not installed: the adapter still loads, and says so when used
-    pbw = types.SimpleNamespace(Bodies=type("Bodies", (), {}))
 
 __all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate",
            "simulate_many", "one_step", "DYNAMICS_SETTINGS"]

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import functools
 import math
-import types
 
 import numpy as np
 
@@ -23,12 +22,9 @@ from cross_checks.engines.world import World, WorldEngine
 from reference_sim.quaternion import quat_from_matrix
 from reference_sim.simulate import BLOWUP_LIMIT
 
-rapier, _IMPORT_ERROR = install.optional_import("rapier3d")
-if _IMPORT_ERROR is None:   # the world (what rbcheck repro embeds) imports the engine itself
-    from cross_checks.engines.worlds import rapier as rpw
+rapier, _IMPORT_ERROR, rpw = install.optional_world("rapier3d", "rapier", "Bodies")
+if _IMPORT_ERROR is None:
     from cross_checks.engines.worlds.rapier import BODY_SETTINGS, WORLD_SETTINGS
-else:   # not installed: the adapter still loads, and says so when used
-    rpw = types.SimpleNamespace(Bodies=type("Bodies", (), {}))
 
 __all__ = ["ENGINE", "DIST", "VARIANTS", "WORLD_SETTINGS", "BODY_SETTINGS", "EngineError", "version",
            "simulate", "simulate_many", "one_step", "RapierWorld", "RapierAdapter"]

@@ -63,3 +63,17 @@ def test_release_reads_the_installed_versions_from_package_metadata():
     on_scipy = f"{dist_version('numpy')} (scipy {dist_version('scipy')})"
     assert install.release("numpy", ("scipy", "scipy")) == on_scipy
     assert install.release("no-such-distribution-rbcheck") == "unknown"
+
+
+def test_optional_world_gives_the_world_module_or_empty_classes_to_build_on():
+    import importlib
+    module, error, world = install.optional_world("mujoco", "mujoco", "Bodies")
+    assert error is None and module is importlib.import_module("mujoco")
+    assert world is importlib.import_module("cross_checks.engines.worlds.mujoco")
+    module, error, world = install.optional_world("rbcheck_no_such_engine", "mujoco", "Bodies", "FormBodies")
+    assert module is None and isinstance(error, ImportError)
+    assert isinstance(world.Bodies, type) and isinstance(world.FormBodies, type)
+
+    class Built(world.Bodies):   # an adapter's class still loads on the placeholder
+        pass
+    assert issubclass(Built, world.Bodies) and not hasattr(world, "world")
