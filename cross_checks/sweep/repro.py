@@ -250,7 +250,8 @@ def reproducer(variant_name: str, scenario, claim_words, *, command: str = "", r
     header = (f'"""{variant_name} on {scenario.name}: {expect}\n'
               f"Written by rbcheck {reference_sim.__version__} ({command}); needs only numpy and "
               f"{', '.join(dists)}.\nExit 1 while the defect holds, 0 when it does not. The code: rbcheck's "
-              f"engines/worlds/{engine}.py, "
+              + "".join(f"engines/worlds/{m.rsplit('.', 1)[1]}.py, " for m in world_mods
+                        if not m.endswith(".com"))
               + ("engines/worlds/com.py, " if world_fn == "form_world" else "")
               + 'sweep/repro_measure.py, compacted."""\n')
     lines = _assignments({**common, **data})

@@ -1,6 +1,6 @@
 """mjx:rk4 on tennis_racket: orientation converges at order 4 (declared) over Δt = 0.01, 0.005, 0.0025, 0.00125, 0.000625 s? Reference: analytic.
 Written by rbcheck 0.1.0 (rbcheck repro mjx:rk4 tennis_racket --claim order orientation); needs only numpy and mujoco-mjx, mujoco, jax.
-Exit 1 while the defect holds, 0 when it does not. The code: rbcheck's engines/worlds/mjx.py, sweep/repro_measure.py, compacted."""
+Exit 1 while the defect holds, 0 when it does not. The code: rbcheck's engines/worlds/mujoco.py, engines/worlds/mjx.py, sweep/repro_measure.py, compacted."""
 import importlib.metadata, platform, sys
 import jax, mujoco, numpy as np
 from mujoco import mjx
