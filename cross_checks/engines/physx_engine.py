@@ -116,6 +116,96 @@ def body_spec(body) -> tuple:
     return float(body.mass_kg), moments, quat_from_matrix(R_BP)
 
 
+class _SceneLoop:
+    """The per-step side of a PhysX world (:func:`_world_class` puts it before the world module's ``Bodies``):
+    a few bodies read as plain floats from one ``pack()`` and given plain-float forces; many bodies read as
+    one float32 array and given float32 rows (the harness's one compiled evaluation)."""
+
+    float_rows = True   # apply takes the harness's rows of plain floats (a few bodies)
+
+    def first(self, y0):   # the scenario's own first row, not its float32 round trip
+        return y0
+
+    def set_state(self, y):
+        super().set_state(y)
+        if not self.many:
+            self.last = self._unpack(self.system.pack())
+
+    def read(self):
+        """Every body's packed row, 13 plain floats (float32 values), from one ``pack()``; a body
+        whose state is non-finite or beyond BLOWUP_LIMIT is parked at rest once read (so that PhysX
+        never steps a NaN), with no force and no decay from then on."""
+        if self.many:
+            return self._read_many()
+        vals = self.last = self._unpack(self.system.pack())
+        rows = [g(vals) for g in self._packed_of]
+        if not math.hypot(*vals) <= BLOWUP_LIMIT:   # (NaN compares False) any body's state may be bad
+            for k, row in enumerate(rows):
+                if self.alive[k] and bad_floats(row):
+                    self.alive[k] = False
+                    self._put(k, _REST)
+        return rows
+
+    def _read_many(self):
+        """Many bodies: the packed rows as one float32 array (:meth:`Bodies.read`), whose forces the
+        harness evaluates in one compiled call; bad bodies parked as :meth:`read` parks them."""
+        rows = super().read()
+        raw = self.raw
+        if not np.abs(raw).max() <= BLOWUP_LIMIT:          # (NaN compares False)
+            for k in np.flatnonzero(self.alive & ~(np.abs(raw).max(axis=1) <= BLOWUP_LIMIT)):
+                self.alive[k] = False
+                self._put(k, _REST)
+        return rows
+
+    def rows(self, reads):
+        if self.many:
+            return World.rows(self, reads)
+        n, B = len(reads), len(self.comps)
+        flat = itertools.chain.from_iterable(itertools.chain.from_iterable(reads))
+        return np.fromiter(flat, dtype=float, count=n * B * 13).reshape(n, B, 13)
+
+    def packed_row(self, raw):   # a read is packed rows already (a few: plain floats; many: float32)
+        return raw
+
+    def decay(self, g_v, g_w):   # the float32 velocities last read (Bodies.decay's raw), scaled
+        if not self.many:
+            self.raw = np.array(self.last, dtype=np.float32).reshape(len(self.comps), 13)
+        super().decay(g_v, g_w)
+
+    def apply(self, f_W, tau_W):
+        """:meth:`Bodies.apply` of (B, 3) arrays, or of the harness's rows of plain floats as they
+        are. Many bodies' arrays: the same float32 numbers (rounded once for all by NumPy, as SAPIEN
+        rounds each; both to nearest), the bodies that get one chosen in one vectorised pass, each
+        given its float32 rows (SAPIEN takes them faster than lists)."""
+        if self.many and isinstance(f_W, np.ndarray):
+            f_W, tau_W = np.asarray(f_W, dtype=float), np.asarray(tau_W, dtype=float)
+            get = self.alive & (self.always | f_W.any(axis=1) | tau_W.any(axis=1))
+            f32, t32 = f_W.astype(np.float32), tau_W.astype(np.float32)
+            for k in (range(len(self._add)) if get.all() else np.flatnonzero(get).tolist()):
+                self._add[k](f32[k], t32[k])
+            return
+        alive, always, add = self.alive, self.always, self._add
+        for k, f, t in zip(range(len(add)), _float_rows(f_W), _float_rows(tau_W)):
+            if alive[k] and (always[k] or f[0] or f[1] or f[2] or t[0] or t[1] or t[2]):
+                add[k](f, t)
+
+    def applier(self, f_W, tau_W):
+        """The constant forces' ``add_force_torque`` calls with their arguments made once (per step
+        only the bodies' ``alive`` checked), or None when no body gets any."""
+        alive, always, add = self.alive, self.always, self._add
+        calls = [(k, add[k], f, t) for k, f, t in zip(range(len(add)), _float_rows(f_W),
+                                                       _float_rows(tau_W))
+                 if always[k] or f[0] or f[1] or f[2] or t[0] or t[1] or t[2]]
+        if not calls:
+            return None
+
+        def again():
+            for k, add_k, f, t in calls:
+                if alive[k]:
+                    add_k(f, t)
+        return again
+
+
 _Bodies = None   # the world module's Bodies, once sapien is imported (PhysxWorld's base)
 
 
@@ -124,7 +214,7 @@ def _world_class():
     if _Bodies is None:
         W = _world_module()
 
-        class PhysxWorld(W.Bodies, World):
+        class PhysxWorld(_SceneLoop, W.Bodies, World):
             """The bodies of ``requests`` in one scene of ``variant``'s solver at ``dt_s`` under the first
             request's gravity (:class:`cross_checks.engines.worlds.physx.Bodies`). Raw rows are packed states
             (float32 values); a body whose state blew up is parked at rest."""
@@ -152,90 +242,6 @@ def _world_class():
                 self._unpack = struct.Struct(f"{13 * len(self.comps)}f").unpack
                 self._packed_of = [operator.itemgetter(*(13 * k + W.PACK_TO_PACKED).tolist())
                                    for k in range(len(self.comps))]
-
-            float_rows = True   # apply takes the harness's rows of plain floats (a few bodies)
-
-            def first(self, y0):   # the scenario's own first row, not its float32 round trip
-                return y0
-
-            def set_state(self, y):
-                W.Bodies.set_state(self, y)
-                if not self.many:
-                    self.last = self._unpack(self.system.pack())
-
-            def read(self):
-                """Every body's packed row, 13 plain floats (float32 values), from one ``pack()``; a body
-                whose state is non-finite or beyond BLOWUP_LIMIT is parked at rest once read (so that PhysX
-                never steps a NaN), with no force and no decay from then on."""
-                if self.many:
-                    return self._read_many()
-                vals = self.last = self._unpack(self.system.pack())
-                rows = [g(vals) for g in self._packed_of]
-                if not math.hypot(*vals) <= BLOWUP_LIMIT:   # (NaN compares False) any body's state may be bad
-                    for k, row in enumerate(rows):
-                        if self.alive[k] and bad_floats(row):
-                            self.alive[k] = False
-                            self._put(k, _REST)
-                return rows
-
-            def _read_many(self):
-                """Many bodies: the packed rows as one float32 array (:meth:`Bodies.read`), whose forces the
-                harness evaluates in one compiled call; bad bodies parked as :meth:`read` parks them."""
-                rows = W.Bodies.read(self)
-                raw = self.raw
-                if not np.abs(raw).max() <= BLOWUP_LIMIT:          # (NaN compares False)
-                    for k in np.flatnonzero(self.alive & ~(np.abs(raw).max(axis=1) <= BLOWUP_LIMIT)):
-                        self.alive[k] = False
-                        self._put(k, _REST)
-                return rows
-
-            def rows(self, reads):
-                if self.many:
-                    return World.rows(self, reads)
-                n, B = len(reads), len(self.comps)
-                flat = itertools.chain.from_iterable(itertools.chain.from_iterable(reads))
-                return np.fromiter(flat, dtype=float, count=n * B * 13).reshape(n, B, 13)
-
-            def packed_row(self, raw):   # a read is packed rows already (a few: plain floats; many: float32)
-                return raw
-
-            def decay(self, g_v, g_w):   # the float32 velocities last read (Bodies.decay's raw), scaled
-                if not self.many:
-                    self.raw = np.array(self.last, dtype=np.float32).reshape(len(self.comps), 13)
-                W.Bodies.decay(self, g_v, g_w)
-
-            def apply(self, f_W, tau_W):
-                """:meth:`Bodies.apply` of (B, 3) arrays, or of the harness's rows of plain floats as they
-                are. Many bodies' arrays: the same float32 numbers (rounded once for all by NumPy, as SAPIEN
-                rounds each; both to nearest), the bodies that get one chosen in one vectorised pass, each
-                given its float32 rows (SAPIEN takes them faster than lists)."""
-                if self.many and isinstance(f_W, np.ndarray):
-                    f_W, tau_W = np.asarray(f_W, dtype=float), np.asarray(tau_W, dtype=float)
-                    get = self.alive & (self.always | f_W.any(axis=1) | tau_W.any(axis=1))
-                    f32, t32 = f_W.astype(np.float32), tau_W.astype(np.float32)
-                    for k in (range(len(self._add)) if get.all() else np.flatnonzero(get).tolist()):
-                        self._add[k](f32[k], t32[k])
-                    return
-                alive, always, add = self.alive, self.always, self._add
-                for k, f, t in zip(range(len(add)), _float_rows(f_W), _float_rows(tau_W)):
-                    if alive[k] and (always[k] or f[0] or f[1] or f[2] or t[0] or t[1] or t[2]):
-                        add[k](f, t)
-
-            def applier(self, f_W, tau_W):
-                """The constant forces' ``add_force_torque`` calls with their arguments made once (per step
-                only the bodies' ``alive`` checked), or None when no body gets any."""
-                alive, always, add = self.alive, self.always, self._add
-                calls = [(k, add[k], f, t) for k, f, t in zip(range(len(add)), _float_rows(f_W),
-                                                               _float_rows(tau_W))
-                         if always[k] or f[0] or f[1] or f[2] or t[0] or t[1] or t[2]]
-                if not calls:
-                    return None
-
-                def again():
-                    for k, add_k, f, t in calls:
-                        if alive[k]:
-                            add_k(f, t)
-                return again
 
         _Bodies = PhysxWorld
     return _Bodies
