@@ -399,7 +399,9 @@ def family_grid(nrows, nfam, title, panel_h=2.1, log=False, layout="time", legen
     extra = 0.2 * title.count("\n")
     h = 0.75 + extra + area + 0.5 + strip
     fig.set_size_inches(w, h)
-    fig.suptitle(title, fontsize=11, x=0.01, ha="left")
+    # its top 0.1 in below the figure's (matplotlib's default, 2 % of the height, put a tall figure's title
+    # over the first row's panel titles)
+    fig.suptitle(title, fontsize=11, x=0.01, y=1.0 - 0.1 / h, ha="left", va="top")
     mean_cell = (area - gap * (n_grid - 1)) / n_grid
     fig.subplots_adjust(left=0.09 if w > 8 else 0.14, right=0.98, top=1.0 - (0.75 + extra) / h,
                         bottom=(0.5 + strip) / h, hspace=gap / mean_cell, wspace=0.08)
