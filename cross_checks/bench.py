@@ -419,8 +419,8 @@ def rapier_own_loop(variant, n_steps) -> OwnLoop:
 def drake_own_loop(variant, n_steps) -> OwnLoop:
     """Drake: the bench's body in a MultibodyPlant (drake_engine.DrakeModel, the variant's integrator at a
     fixed step), per step the body torque turned to world axes by the plant's quaternion normalised (Drake's
-    drifts off unit length; plain floats, :func:`_turn`) and fixed on the generalized-force input ([τ_W, f_W]), ``Simulator.AdvanceTo``, the
-    state read."""
+    drifts off unit length; plain floats, :func:`_turn`) and fixed on the generalized-force input
+    ([τ_W, f_W]), ``Simulator.AdvanceTo``, the state read."""
     from cross_checks.engines import drake_engine
     model = drake_engine.DrakeModel(_bench_scenario(), variant)
     model.fixed_step(H)
@@ -432,7 +432,8 @@ def drake_own_loop(variant, n_steps) -> OwnLoop:
     def run():
         model.set_state(y0)
         for k in range(1, n_steps + 1):
-            w, x, y, z = plant.GetPositionsAndVelocities(ctx)[0:4].tolist()   # [q_WB (w x y z), x_W, ω_W, v_W]
+            # Drake's state: [q_WB (w x y z), x_W, ω_W, v_W]
+            w, x, y, z = plant.GetPositionsAndVelocities(ctx)[0:4].tolist()
             n = math.sqrt(w * w + x * x + y * y + z * z)
             wrench[0:3] = _turn((w / n, x / n, y / n, z / n), tau)
             port.FixValue(ctx, wrench)
