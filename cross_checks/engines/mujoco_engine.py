@@ -46,17 +46,16 @@ VARIANTS = {
                         traits=base.SYMPLECTIC_EULER_IMPLICIT_GYRO),
 }
 
-#: From this many bodies in a world on, the loop steps it with ``mj_step`` from Python (a few µs per step)
-#: instead of ``mujoco.rollout``, which records the full physics state of every step: 0.2 µs more per
-#: body-step, measured (docs/speed.md); the same numbers, bit for bit.
+#: From this many bodies in a world on, a rollout steps with ``mj_step`` from Python, copying each step's qpos
+#: and qvel (a few µs per step), instead of calling ``mujoco.rollout``, which records the full physics state
+#: of every step: 0.2 µs more per body-step, measured (docs/speed.md); the same numbers, bit for bit.
 STEP_LOOP_BODIES = 32
 
 #: MuJoCo's callbacks and warning handler are process-global: this adapter's compiles and worlds hold them
 #: under this lock (another thread calling MuJoCo meanwhile would see a world's handlers).
 _LOCK = threading.RLock()
 
-#: Evaluate state-dependent forces at every RK4 stage (True) or hold the start-of-step value over the
-#: step like the other variants (False: first order in the force; kept for the tests that show why).
+#: RK4's changing forces at every stage (False: held over the step, first order; for the tests that show why).
 _RK4_STAGE_FORCES = True
 
 
@@ -170,8 +169,6 @@ class MujocoWorld(mjw.FormBodies, World):
         self.form = mjw.Form(entries) if any(len(e) > 3 for e in entries) else None
         self.per_stage = forces_per_stage(requests[0].scenario, variant)
         self.n, self.host_s, self.said, self.failed = 0, 0.0, [], None
-        if self.B >= STEP_LOOP_BODIES:
-            self.rollout = None   # the loop's steps (mj_step): faster than mujoco.rollout for many bodies
         control = self._control(requests, entries) if self.per_stage else None
         _LOCK.acquire()
         try:
@@ -255,31 +252,35 @@ class MujocoWorld(mjw.FormBodies, World):
 
     def rollout(self, n_steps, harness, out):
         """``n_steps`` steps with the applied forces (xfrc_applied, qfrc_applied) held, their raw rows
-        (n_steps, B, 13) into ``out``: one ``mujoco.rollout`` call (its set-up and the rows' layout are
-        rbcheck's time), or where MuJoCo warned, the steps again by :meth:`step` (which names the body)."""
-        from mujoco import rollout
-        t_all = time.perf_counter()
-        m, d = self.model, self.data
-        start = self.read()
-        state = np.concatenate([[0.0], d.qpos, d.qvel])[None]    # [time, qpos, qvel]
-        spec = mujoco.mjtState.mjSTATE_QFRC_APPLIED | mujoco.mjtState.mjSTATE_XFRC_APPLIED
-        control = np.empty(mujoco.mj_stateSize(m, spec))
-        mujoco.mj_getState(m, d, control, spec)                  # in MuJoCo's own order of the two
-        seen = len(self.said)
-        t0 = time.perf_counter()
-        states, _ = rollout.rollout(m, [mujoco.MjData(m)], state, control[None, None], control_spec=spec,
-                                    nstep=n_steps)
-        t1 = time.perf_counter()
-        out[..., 0:7] = states[0, :, 1:1 + m.nq].reshape(n_steps, self.B, 7)
-        out[..., 7:13] = states[0, :, 1 + m.nq:].reshape(n_steps, self.B, 6)
-        self.host_s += time.perf_counter() - t_all - (t1 - t0)
-        if len(self.said) == seen:
-            return out
-        self.qpos[:], self.qvel[:] = start[:, 0:7], start[:, 7:13]
-        self.data.time, self.n = 0.0, 0
+        (n_steps, B, 13) into ``out``: one ``mujoco.rollout`` call, or for STEP_LOOP_BODIES bodies or more,
+        and again where MuJoCo warned, ``mj_step`` from Python (:meth:`step`, which names the warned body);
+        the set-up and the rows' copies are rbcheck's time (``host_s``)."""
+        perf = time.perf_counter
+        t_all, inside, start, seen = perf(), 0.0, self.read(), len(self.said)
+        if self.B < STEP_LOOP_BODIES:
+            from mujoco import rollout
+            m, d = self.model, self.data
+            state = np.concatenate([[0.0], d.qpos, d.qvel])[None]    # [time, qpos, qvel]
+            spec = mujoco.mjtState.mjSTATE_QFRC_APPLIED | mujoco.mjtState.mjSTATE_XFRC_APPLIED
+            control = np.empty(mujoco.mj_stateSize(m, spec))
+            mujoco.mj_getState(m, d, control, spec)                  # in MuJoCo's own order of the two
+            t0 = perf()
+            states, _ = rollout.rollout(m, [mujoco.MjData(m)], state, control[None, None], control_spec=spec,
+                                        nstep=n_steps)
+            inside = perf() - t0
+            out[..., 0:7] = states[0, :, 1:1 + m.nq].reshape(n_steps, self.B, 7)
+            out[..., 7:13] = states[0, :, 1 + m.nq:].reshape(n_steps, self.B, 6)
+            if len(self.said) == seen:
+                self.host_s += perf() - t_all - inside
+                return out
+            self.qpos[:], self.qvel[:] = start[:, 0:7], start[:, 7:13]
+            self.data.time, self.n = 0.0, 0
         for k in range(n_steps):
+            t0 = perf()
             self.step()
-            out[k] = self.read()
+            inside += perf() - t0
+            out[k, :, 0:7], out[k, :, 7:13] = self.qpos, self.qvel
+        self.host_s += perf() - t_all - inside
         return out
 
     def close(self):
@@ -303,8 +304,7 @@ class MujocoEngine(WorldEngine):
     def build(self, requests, variant, dt_s):
         return MujocoWorld(requests, variant, dt_s)   # build_model checks the install (version())
 
-    def group_key(self, request) -> tuple:
-        """One world per step and gravity (a model has one of each), runs of any length."""
+    def group_key(self, request) -> tuple:   # one world per step and gravity (a model has one of each)
         return (float(request.dt_s), tuple(float(g) for g in request.scenario.problem.forces.gravity_W))
 
     def per_stage(self, scenario, variant):
