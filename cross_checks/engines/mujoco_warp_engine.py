@@ -1,30 +1,14 @@
-"""MuJoCo Warp (``mujoco-warp``, MuJoCo's physics as NVIDIA Warp kernels) as an engine adapter
-(``mujoco_warp:VARIANT``); the interface is cross_checks.engines.base. What mujoco_warp does, the defaults
-neutralised and what was measured: docs/engine_conventions.md, "MuJoCo Warp 4.0.0".
-
-Precision: float32 on Warp's CPU device (every Model and Data array is ``wp.float32``): each variant declares
-``Traits(precision="float32")``.
-
-Model: ``mujoco_engine.build_model``'s with ``mjDSBL_AUTORESET`` cleared (``mjw.put_model`` refuses it), put
-on the CPU device; ``opt.timestep`` is per world, so a scenario's Δt rungs run as the worlds of one batch.
-
-State at the boundary (MuJoCo's, converted in float64 by mujoco_engine's ``to_qpos_qvel``/``to_packed``):
-``qpos = [x_W, q_WB (w x y z)]``, ``qvel = [v_W (COM, world axes), ω_B (body axes)]``.
-
-Forces: the harness's world force at the COM minus the weight ``m g`` (mujoco_warp applies gravity) and its
-world torque go into the body's row of ``Data.xfrc_applied``, from the start-of-step state, the decay applied
-to qvel before the step — except RK4 with forces that change within a step, which evaluates them at every
-stage through ``Model.callback.control`` (:func:`stage_callback`, the decay as damping).
-
-A world of rbcheck's loop (cross_checks.engines.world, cross_checks.engines.loop): :class:`WarpWorld`, one
-scenario's requests whatever their Δt as the worlds of one batch (at most MAX_WORLDS), one step captured as a
-Warp graph and replayed in its ``rollout``, which takes every force itself; the loop's one-step mode steps its
-rows as worlds, uncaptured. Warp is imported on first use only (never at import or in ``version()``); its
-kernels are compiled into ``kernel_cache_dir("mujoco_warp")``. Divergence, the recorded state at t = 0 and the
-quaternion's sign are the loop's.
+"""MuJoCo Warp (``mujoco-warp``: MuJoCo's physics as NVIDIA Warp kernels) as an engine
+(``mujoco_warp:VARIANT``, float32 on Warp's CPU device): a world of rbcheck's loop on
+cross_checks/engines/worlds/mujoco_warp.py (what ``rbcheck repro`` embeds: ``mujoco_engine.build_model``'s
+model without ``mjDSBL_AUTORESET``, ``opt.timestep`` one per world, so that a scenario's Δt rungs are the
+worlds of one batch, one step captured as a Warp graph and replayed; MuJoCo's state and ``xfrc_applied``).
+RK4 with forces that change within a step evaluates them at every stage (:func:`stage_callback`). What
+mujoco_warp does, the defaults neutralised and what was measured: docs/engine_conventions.md, "MuJoCo Warp".
 """
 from __future__ import annotations
 
+import dataclasses
 import functools
 import threading
 import time
@@ -36,37 +20,29 @@ from cross_checks.engines.base import EngineError, Traits, Variant
 from cross_checks.engines.world import World, WorldEngine
 
 __all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate", "simulate_many", "one_step",
-           "host_model", "device_model", "compile_stats", "reset_stats", "WarpWorld", "MujocoWarpAdapter"]
+           "host_model", "device_model", "compile_stats", "WarpWorld", "MujocoWarpAdapter"]
 
 ENGINE = "mujoco_warp"
-_DIST = "mujoco-warp"
-_HINT = "pip install 'rbcheck[mujoco_warp]'"
 _F32 = "float32"
-
-
-def _traits(base: Traits) -> Traits:
-    import dataclasses
-    return dataclasses.replace(base, precision=_F32)
-
 
 #: mujoco_warp's integrators (``IntegratorType``), orders from MuJoCo's documentation, traits read in
 #: mujoco_warp/_src/forward.py, all float32.
 VARIANTS = {
     "euler": Variant(1, "MuJoCo Warp Euler (float32): semi-implicit Euler, explicit gyroscopic term, "
                         "quaternion by the exponential map (mujoco:euler's scheme)",
-                     traits=_traits(base.SYMPLECTIC_EULER_EXPLICIT_GYRO)),
+                     traits=dataclasses.replace(base.SYMPLECTIC_EULER_EXPLICIT_GYRO, precision=_F32)),
     "rk4": Variant(4, "MuJoCo Warp RK4 (float32): classical 4th-order Runge-Kutta, Munthe-Kaas attitude "
                       "update; state-dependent forces evaluated at every stage (control callback)",
                    traits=Traits(precision=_F32)),
     "implicit": Variant(1, "MuJoCo Warp implicit (float32): velocity-implicit Euler, the free body's "
                            "gyroscopic derivative in the solve",
-                        traits=_traits(base.SYMPLECTIC_EULER_IMPLICIT_GYRO)),
+                        traits=dataclasses.replace(base.SYMPLECTIC_EULER_IMPLICIT_GYRO, precision=_F32)),
     "implicitfast": Variant(1, "MuJoCo Warp implicitfast (float32): on a free body the same solve as "
                                "implicit (MuJoCo 4.0's free-body gyroscopic derivative)",
-                            traits=_traits(base.SYMPLECTIC_EULER_IMPLICIT_GYRO)),
+                            traits=dataclasses.replace(base.SYMPLECTIC_EULER_IMPLICIT_GYRO, precision=_F32)),
     "discrete": Variant(1, "MuJoCo Warp discrete (float32): qacc in the effective metric with the free "
                            "body's gyroscopic derivative (implicitfast's step for a lone body)",
-                        traits=_traits(base.SYMPLECTIC_EULER_IMPLICIT_GYRO)),
+                        traits=dataclasses.replace(base.SYMPLECTIC_EULER_IMPLICIT_GYRO, precision=_F32)),
 }
 
 _BODY = 1   # body id of the free body (0 is the world)
@@ -79,88 +55,25 @@ MAX_WORLDS = 4096
 _LOCK = threading.RLock()
 
 
-# --- the engine, imported lazily (never at module import, never in version()) -----------------------------
-
-def _check_installed() -> None:
-    """install.check_installed for this engine and the Warp it runs on."""
-    install.check_installed(_DIST, _HINT, (("warp", "warp-lang"),))
-
-
-def version() -> str:
-    """mujoco_warp's version and the Warp release it runs on, e.g. ``4.0.0 (warp 1.19.0)``, from package
-    metadata (EngineNotInstalled when mujoco-warp is absent)."""
-    _check_installed()
-    return install.release(_DIST, ("warp", "warp-lang"))
-
-
-@functools.lru_cache(maxsize=1)
-def _engine():
-    """``(warp, mujoco_warp, mujoco)``, imported on first use (runtimes.start_warp: the kernel cache in
-    ``kernel_cache_dir("mujoco_warp")``). ImportError with the engine's words when the import fails."""
-    _check_installed()
-    with install.first_import(_DIST), install.quiet_fd2():
-        wp = runtimes.start_warp(ENGINE, "LOG_ERROR")
-        import mujoco
-        import mujoco_warp as mjw
-    return wp, mjw, mujoco
-
-
-def start_for_repro() -> None:
-    """Warp started as the adapter starts it (rbcheck's kernel cache, its greeting and driver warning
-    silenced) before ``rbcheck repro`` runs a reproducer in this process: the script's world imports Warp
-    itself, which would otherwise start it with its defaults."""
-    install.engine_or_error(_engine)
-
-
 def _world():
-    """:mod:`cross_checks.engines.worlds.mujoco_warp` (what ``rbcheck repro`` embeds), imported after
-    :func:`_engine` started Warp with rbcheck's kernel cache."""
+    """:mod:`cross_checks.engines.worlds.mujoco_warp`, imported after :func:`_engine` started Warp."""
     _engine()
     from cross_checks.engines.worlds import mujoco_warp as mww
     return mww
 
 
-# --- bookkeeping: compile time apart from stepping ------------------------------------------------
-
+#: This process's kernel work (:func:`compile_stats`): ``compilations`` (variants whose kernels were compiled
+#: or loaded from the kernel cache), ``compile_seconds`` (wall s of their first, uncaptured step on a scratch
+#: world), and apart from it ``step_seconds`` (wall s of the runs' steps), ``steps`` (engine steps, each
+#: advancing every world of its batch), ``body_steps`` (steps × worlds) and ``captures`` (graphs recorded).
 _STATS = runtimes.Stats(compilations=0, compile_seconds=0.0, step_seconds=0.0, steps=0, body_steps=0,
                         captures=0)
-_WARM: set = set()   # (variant, callback) whose kernels this process has loaded
 
-
-def compile_stats() -> dict:
-    """This process's kernel work so far: ``compilations`` (variants whose kernels were compiled or loaded
-    from the kernel cache) and ``compile_seconds`` (wall s of their first, uncaptured step on a scratch
-    world), and the stepping apart from it: ``step_seconds`` (wall s of the steps of runs), ``steps`` (engine
-    steps, each advancing every world of its batch), ``body_steps`` (steps × worlds) and ``captures``
-    (graphs recorded)."""
-    return dict(_STATS)
-
-
-def reset_stats() -> None:
-    """Zero :func:`compile_stats` (Warp keeps its loaded modules: a variant is not recompiled)."""
-    _STATS.reset()
-
-
-def _warm_up(variant: str, m_host, callback=None) -> None:
-    """Load (compile on first use ever, else read from the kernel cache) every kernel a step of ``variant``
-    launches (with the stage-force ``callback``, if any), by one uncaptured step of a scratch world of
-    ``m_host``; its wall time is the compile time."""
-    key = (variant, callback is not None)
-    if key in _WARM:
-        return
-    with _STATS.timing("compile_seconds"):
-        _world().warm_up(m_host, callback)
-    _STATS["compilations"] += 1
-    _WARM.add(key)
-
-
-# --- models ---------------------------------------------------------------------------------------
 
 def host_model(scenario, variant: str, dt_s: float):
     """The scenario's MjModel for ``variant`` at ``dt_s``: mujoco_engine's ``build_model`` with
-    ``mjDSBL_AUTORESET`` cleared (mujoco_warp refuses it; it never resets a world: the world's
-    :func:`~cross_checks.engines.worlds.mujoco_warp.host_model`). EngineError with MuJoCo's
-    words."""
+    ``mjDSBL_AUTORESET`` cleared (the world's ``host_model``: mujoco_warp refuses it). EngineError with
+    MuJoCo's words."""
     from cross_checks.engines import mujoco_engine
     base.check_variant(ENGINE, VARIANTS, variant)
     install.engine_or_error(_engine)
@@ -171,27 +84,18 @@ def device_model(m_host, dts):
     """``mjw.put_model(m_host)`` on the CPU device with ``opt.timestep`` one per world (``dts``). EngineError
     with mujoco_warp's words when it refuses the model."""
     try:
-        wm = _world().device_model(m_host, dts)
+        return _world().device_model(m_host, dts)
     except Exception as exc:  # noqa: BLE001 - mujoco_warp refuses a model feature: its own words
         raise EngineError(f"mujoco_warp {version()} refused the model: {type(exc).__name__}: {exc}") from None
-    return wm
-
-
-def per_stage(scenario, variant: str) -> bool:
-    """RK4 with forces that change within a step (state-dependent forces or velocity decay): evaluated at
-    every stage through ``Model.callback.control`` (like mujoco:rk4)."""
-    fm = scenario.problem.forces
-    return variant == "rk4" and bool(fm.state_dependent or fm.has_decay)
 
 
 def _worlds(scenario, variant: str, dts, qpos0, qvel0, callback=None):
-    """``N`` worlds of one scenario's model on the CPU device, world ``k`` stepping at ``dts[k]``
-    (:class:`cross_checks.engines.worlds.mujoco_warp.Worlds`, what ``rbcheck repro`` embeds: its zero-copy
-    NumPy views ``qpos``, ``qvel``, ``xfrc`` (float32), its captured step), put at ``qpos0``, ``qvel0``, no
+    """``N`` worlds of one scenario's model, world ``k`` stepping at ``dts[k]`` (the world's ``Worlds``: its
+    zero-copy float32 views ``qpos``, ``qvel``, ``xfrc``, its captured step), put at ``qpos0``, ``qvel0``, no
     force applied."""
     install.engine_or_error(_engine)
-    m = host_model(scenario, variant, float(dts[0]))
-    _warm_up(variant, m, callback)
+    m = host_model(scenario, variant, float(dts[0]))   # the kernels loaded by a scratch world's step:
+    _ENGINE.warm((variant, callback is not None), lambda: _world().warm_up(m, callback))   # compile time
     W = _world().Worlds(device_model(m, dts), m, callback)
     if not W.shared:
         raise EngineError("Warp's CPU arrays are not shared with NumPy here: the adapter cannot run")
@@ -280,9 +184,9 @@ def stage_callback(scenario):
 class WarpWorld(World):
     """The bodies of one scenario's requests as the worlds of :func:`_worlds` batches (MAX_WORLDS at most),
     world k stepping at its request's Δt. Raw rows: ``[qpos (7), qvel (6)]`` per body (float32 values, ω in
-    BODY axes). :meth:`rollout` captures one step as a Warp graph and replays it, taking every force itself:
-    the loop's Harness at every step from the float32 state (state-dependent forces), the decay on qvel
-    before the step, or RK4's stage callback; :meth:`step` (the one-step mode) steps uncaptured."""
+    BODY axes). :meth:`rollout` captures one step as a Warp graph and replays it, taking every force itself
+    (``rollout_forces``): the loop's Harness at every step from the float32 state, the decay on qvel before
+    the step, or RK4's stage callback; :meth:`step` (the one-step mode) steps uncaptured."""
 
     exact_start = True
     rollout_forces = True
@@ -290,7 +194,7 @@ class WarpWorld(World):
     def __init__(self, requests, variant: str):
         super().__init__()
         sc = requests[0].scenario
-        self.per_stage = per_stage(sc, variant)
+        self.per_stage = _ENGINE.per_stage(sc, variant)
         self.B, self.host_s = len(requests), 0.0
         self.parts = []   # (slice of the bodies, its worlds: _worlds)
         for s in range(0, self.B, MAX_WORLDS):
@@ -341,16 +245,12 @@ class WarpWorld(World):
         return out
 
     def _run(self, W, bodies: slice, n_max, harness):
-        from cross_checks.engines.mujoco_engine import packed_floats, to_packed
         t_all, t_steps = time.perf_counter(), 0.0
         per_step = harness.state_dependent and not self.per_stage
         decay = harness.decays and not self.per_stage
         W.capture()
         _STATS["captures"] += 1
         N = len(W.qpos)
-        # many bodies: their packed states and forces for all at once (one compiled evaluation; the same
-        # numbers as a body's own in plain floats, tested)
-        vectorised = harness.rows is not None
         qpos_out = np.empty((n_max, N, 7), dtype=np.float32)
         qvel_out = np.empty((n_max, N, 6), dtype=np.float32)
         qpos, qvel, xfrc = W.qpos, W.qvel, W.xfrc
@@ -359,13 +259,9 @@ class WarpWorld(World):
         perf = time.perf_counter
         with _STATS.timing("step_seconds"), np.errstate(all="ignore"):
             for n in range(1, n_max + 1):
-                if per_step and vectorised:
-                    f, tau = harness.wrench(to_packed(qpos.astype(float), qvel.astype(float)), bodies)
-                    xfrc[:, _BODY, 0:3], xfrc[:, _BODY, 3:6] = f, tau
-                elif per_step:
-                    qp, qv = qpos.tolist(), qvel.tolist()
-                    f, tau = harness.wrench([packed_floats(qp[k], qv[k]) for k in range(N)], bodies)
-                    xfrc[:, _BODY, 0:3], xfrc[:, _BODY, 3:6] = f, tau
+                if per_step:   # the packed states of every world at once (packed_rows: to_packed's numbers)
+                    y = self.packed(np.concatenate((qpos, qvel), axis=1)[None].astype(float))[0]
+                    xfrc[:, _BODY, 0:3], xfrc[:, _BODY, 3:6] = harness.wrench(y, bodies)
                 if decay:
                     qvel[:, 0:3] *= gv
                     qvel[:, 3:6] *= gw
@@ -384,15 +280,14 @@ class WarpWorld(World):
         return np.concatenate((qpos_out, qvel_out), axis=2).astype(float)
 
 
-class MujocoWarpEngine(WorldEngine):
+class MujocoWarpEngine(runtimes.WarpEngine):
     """``mujoco_warp:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
     (``pip install 'rbcheck[mujoco_warp]'``)."""
 
-    name, variants, distribution, extra = ENGINE, VARIANTS, _DIST, "mujoco_warp"
-    harness = (*WorldEngine.harness, "cross_checks.engines.mujoco_engine")
+    name, variants, distribution, extra = ENGINE, VARIANTS, "mujoco-warp", "mujoco_warp"
+    imports, warp_log, stats = ("mujoco_warp", "mujoco"), "LOG_ERROR", _STATS
+    harness = (*WorldEngine.harness, "cross_checks.engines.mujoco_engine", "cross_checks.engines.packed_rows")
     sign_continuity = True   # the recorded quaternion kept on the previous one's side
-
-    version = staticmethod(version)   # the module's: from package metadata, Warp not started
 
     def build(self, requests, variant, dt_s):
         install.engine_or_error(_engine)
@@ -401,22 +296,23 @@ class MujocoWarpEngine(WorldEngine):
 
     def world_key(self, request, variant):
         """One world per scenario, whatever the steps (``opt.timestep`` is per world)."""
-        return (id(request.scenario), per_stage(request.scenario, variant))
+        return (id(request.scenario), self.per_stage(request.scenario, variant))
 
-    def per_stage(self, scenario, variant):
-        return per_stage(scenario, variant)
-
-    def source_files(self) -> list:
-        from cross_checks.engines import packed_rows
-        return [*super().source_files(), *packed_rows.source_files()]
+    def per_stage(self, scenario, variant: str) -> bool:
+        """RK4 with forces that change within a step (state-dependent forces or velocity decay): evaluated at
+        every stage through ``Model.callback.control`` (like mujoco:rk4)."""
+        fm = scenario.problem.forces
+        return variant == "rk4" and bool(fm.state_dependent or fm.has_decay)
 
     def engine_files(self) -> list:
-        """mujoco_warp's Python sources (found without importing them: the parent of a sweep must not start
-        Warp)."""
+        """mujoco_warp's Python sources (found without importing them: Warp not started)."""
         return install.package_files("mujoco_warp", "_src")
 
 
 _ENGINE = MujocoWarpEngine()
 #: The module's functions (tests and scripts call them): the engine's, through the host loop.
-simulate, simulate_many, one_step = _ENGINE.simulate, _ENGINE.simulate_many, _ENGINE.one_step
+version, simulate, simulate_many, one_step = _ENGINE.version, _ENGINE.simulate, _ENGINE.simulate_many, \
+    _ENGINE.one_step
+_engine, start_for_repro = _ENGINE.modules, _ENGINE.start_for_repro   # (warp, mujoco_warp, mujoco)
+compile_stats = _ENGINE.stats.copy
 MujocoWarpAdapter = MujocoWarpEngine

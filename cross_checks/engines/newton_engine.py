@@ -20,7 +20,6 @@ the float32 velocities before the step. Warp and Newton are imported on first us
 from __future__ import annotations
 
 import dataclasses
-import functools
 import threading
 import time
 
@@ -28,8 +27,7 @@ import numpy as np
 
 from cross_checks.engines import base, install, runtimes
 from cross_checks.engines.base import EngineError, Traits, Variant
-from cross_checks.engines.install import installed_version
-from cross_checks.engines.world import World, WorldEngine
+from cross_checks.engines.world import World
 from cross_checks.engines.worlds import newton as nw  # numpy only at import: Warp and Newton on first use
 
 __all__ = ["ENGINE", "VARIANTS", "SOLVERS", "SOLVER_SETTINGS", "EngineError", "version", "simulate",
@@ -78,63 +76,29 @@ MAX_BATCH = 256   # bodies (runs or rows) per model: more run as several models
 _LOCK = threading.RLock()
 
 
-def _check_installed() -> None:   # install.check_installed for this engine and the Warp it runs on
-    install.check_installed(_DIST, PIP_HINT, (("warp", "warp-lang"),), installed_version)
-
-
-def version() -> str:
-    """Newton's version and the Warp release it runs on, e.g. ``1.8.0 (warp 1.19.0)``, from package metadata
-    (EngineNotInstalled when newton is absent)."""
-    _check_installed()
-    return install.release(_DIST, ("warp", "warp-lang"))
-
-
-@functools.lru_cache(maxsize=1)
-def _engine():
-    """``(warp, newton)``, imported on first use (runtimes.start_warp: the kernel cache in
-    ``kernel_cache_dir("newton")``, the device banner and module loads off). ImportError with the engine's
-    words when the import fails."""
-    _check_installed()
-    with install.first_import(_DIST, installed_version):
-        wp = runtimes.start_warp(ENGINE, "LOG_WARNING", quiet=True)
-        import newton
-    return wp, newton
-
-
-def start_for_repro() -> None:
-    """Warp and Newton started as the adapter starts them (its kernel cache, quiet): ``rbcheck repro`` calls
-    it before running a script's world here (EngineError, with the engine's words, when it cannot)."""
-    install.engine_or_error(_engine)
-
-
-_WARM: dict = {}    # variant -> seconds its first model build and step took (kernel compile or cache load)
+#: This process's Newton costs (:func:`compile_stats`, with ``per_variant``: the seconds of each variant's
+#: warm-up): ``compilations`` (variants warmed up: their kernel modules compiled by Warp, or loaded from its
+#: cache), ``compile_seconds`` (wall s of those warm-ups: a one-body model's finalize, the solver's
+#: construction and one step), and apart from it ``build_seconds`` (model building of the runs),
+#: ``step_seconds`` (wall s of the worlds' steps) and ``body_steps`` (steps × bodies they advanced).
 _STATS = runtimes.Stats(compilations=0, compile_seconds=0.0, build_seconds=0.0, step_seconds=0.0,
                         body_steps=0)
 
 
 def compile_stats() -> dict:
-    """This process's Newton costs so far: ``compilations`` (variants warmed up: their kernel modules
-    compiled by Warp, or loaded from its cache), ``compile_seconds`` (wall s of those warm-ups: a one-body
-    model's finalize, the solver's construction and one step), ``per_variant`` (the same per variant), and
-    apart from it ``build_seconds`` (model building of the runs), ``step_seconds`` (wall s of the worlds'
-    steps) and ``body_steps`` (steps × bodies they advanced)."""
-    return {**_STATS, "per_variant": dict(_WARM)}
+    return {**_STATS, "per_variant": dict(NewtonEngine.warmed)}
 
 
 def _warm(variant: str) -> None:
     """Compile (or load) every kernel module ``variant`` uses, once per process, timed apart from the runs."""
-    if variant in _WARM:
-        return
     wp, newton = install.engine_or_error(_engine)
-    t0 = time.perf_counter()
-    model = build_model(variant, [(1.0, np.eye(3), np.zeros(3))])
-    solver = make_solver(variant, model)
-    s0, s1 = model.state(), model.state()
-    solver.step(s0, s1, None, None, 1e-3)
-    wp.synchronize()
-    _WARM[variant] = time.perf_counter() - t0
-    _STATS["compilations"] += 1
-    _STATS["compile_seconds"] += _WARM[variant]
+
+    def load():
+        model = build_model(variant, [(1.0, np.eye(3), np.zeros(3))])
+        solver, s0, s1 = make_solver(variant, model), model.state(), model.state()
+        solver.step(s0, s1, None, None, 1e-3)
+        wp.synchronize()
+    _ENGINE.warm(variant, load)
 
 
 def build_model(variant: str, bodies):
@@ -210,14 +174,13 @@ class NewtonWorld(nw.Bodies, World):
         _LOCK.release()
 
 
-class NewtonEngine(WorldEngine):
+class NewtonEngine(runtimes.WarpEngine):
     """``newton:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
     (``pip install 'rbcheck[newton]'``)."""
 
     name, variants, distribution, extra = ENGINE, VARIANTS, _DIST, "newton"
+    imports, warp_quiet, stats = ("newton",), True, _STATS   # Warp's device banner and module loads off
     sign_continuity = True   # the recorded quaternion kept on the previous one's side
-
-    version = staticmethod(version)   # the module's: from package metadata, Warp not started
 
     def build(self, requests, variant, dt_s):
         _LOCK.acquire()
@@ -240,6 +203,7 @@ class NewtonEngine(WorldEngine):
 
 
 _ENGINE = NewtonEngine()
-#: The module's functions (tests and scripts call them): the engine's, through the host loop.
+#: The module's functions (tests and scripts call them): the engine's (``_engine()``: ``(warp, newton)``).
 simulate, simulate_many, one_step = _ENGINE.simulate, _ENGINE.simulate_many, _ENGINE.one_step
+version, _engine, start_for_repro = _ENGINE.version, _ENGINE.modules, _ENGINE.start_for_repro
 NewtonAdapter = NewtonEngine

@@ -2,7 +2,8 @@
 and refused in a process forked after it started, Warp initialised once (its kernel cache, its output
 silenced, a damaged cache entry compiled again), and what their adapters share: counters of compilations
 and seconds (:class:`Stats`), the values a host callback inside compiled code looks up (:class:`Registry`),
-batch sizes padded to a power of two (a handful of compiled executables serve every batch size).
+batch sizes padded to a power of two (a handful of compiled executables serve every batch size), and the
+Warp engines' shared machinery (:class:`WarpEngine`).
 
 Both are started on first use only: a sweep's parent forks its workers, and a running JAX backend or Warp
 runtime does not survive a fork.
@@ -11,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import importlib
 import itertools
 import os
 import sys
@@ -20,11 +22,13 @@ import time
 import numpy as np
 
 from cross_checks.core.files import kernel_cache_dir
+from cross_checks.engines import install
 from cross_checks.engines.base import EngineError
 from cross_checks.engines.install import quiet_fd2
+from cross_checks.engines.world import WorldEngine
 
 __all__ = ["start_jax", "refuse_forked_jax", "start_warp", "Stats", "Registry", "power_of_two",
-           "stack_trees", "chunk_rows"]
+           "stack_trees", "chunk_rows", "WarpEngine"]
 
 
 @functools.lru_cache(maxsize=1)
@@ -181,3 +185,51 @@ def chunk_rows(batch: int, longest: int) -> int:
     thousand bodies records 128 steps a call, a sweep's ladder of a few runs ``longest``."""
     fit = max(64, 1 << max(0, (CHUNK_ROWS // max(1, int(batch))).bit_length() - 1))
     return int(min(int(longest), fit))
+
+
+class WarpEngine(WorldEngine):
+    """A :class:`~cross_checks.engines.world.WorldEngine` on NVIDIA Warp (MuJoCo Warp, Newton), declared by
+    its fields: :meth:`version` and the install checks from package metadata and import specs only (Warp
+    not started: a sweep's parent forks its workers); on first use (:meth:`modules`) Warp started by
+    :func:`start_warp` (the kernel cache named after the engine, ``warp_log``, ``warp_quiet``), then
+    ``imports``; ``stats``, the subclass's counters (a :class:`Stats` with ``compilations`` and
+    ``compile_seconds``), and ``warmed``, the seconds of each kernel load (:meth:`warm`)."""
+
+    runs_on = ("warp", "warp-lang")
+    warp_log: str = "LOG_WARNING"
+    warp_quiet: bool = False
+    imports: tuple = ()
+    stats: Stats
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        cls._modules, cls.warmed = [], {}
+
+    def version(self) -> str:
+        install.check_installed(self.distribution, f"pip install 'rbcheck[{self.extra}]'", (self.runs_on,))
+        return install.release(self.distribution, self.runs_on)
+
+    def modules(self) -> tuple:
+        """``(warp, *imports)``, imported once, fd 2 silenced (an import failure an ImportError with the
+        distribution's version: install.first_import)."""
+        if not self._modules:
+            self.version()
+            with install.first_import(self.distribution), quiet_fd2():
+                wp = start_warp(self.name, self.warp_log, self.warp_quiet)
+                self._modules[:] = [wp, *map(importlib.import_module, self.imports)]
+        return tuple(self._modules)
+
+    def start_for_repro(self) -> None:
+        """Warp and the engine started as the adapter starts them before ``rbcheck repro`` runs a script's
+        world in this process (the world imports Warp itself); EngineError with the engine's words."""
+        install.engine_or_error(self.modules)
+
+    def warm(self, key, load) -> None:
+        """``load()`` (a variant's kernels compiled, or loaded from Warp's kernel cache) once per ``key`` in
+        this process, its wall seconds kept in ``warmed`` and counted in ``stats``."""
+        if key not in self.warmed:
+            t0 = time.perf_counter()
+            load()
+            self.warmed[key] = time.perf_counter() - t0
+            self.stats["compilations"] += 1
+            self.stats["compile_seconds"] += self.warmed[key]

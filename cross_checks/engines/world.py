@@ -244,5 +244,8 @@ class WorldEngine(base.EngineAdapter):
     def source_files(self) -> list:
         import importlib
         from pathlib import Path
-        harness = [Path(importlib.import_module(m).__file__ or "") for m in self.harness]
+        # a harness module may list its files itself (packed_rows: with its kernels', numba not imported)
+        mods = [importlib.import_module(m) for m in self.harness]
+        harness = [f for m in mods
+                   for f in getattr(m, "source_files", lambda m=m: [Path(m.__file__ or "")])()]
         return [*super().source_files(), *harness, *self.engine_files()]

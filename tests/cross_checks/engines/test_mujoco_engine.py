@@ -71,7 +71,7 @@ def test_state_round_trip_and_quaternion_order():
     np.testing.assert_array_equal(qpos[:, 3:7], y[:, 6:10])          # (w, x, y, z) in both
     np.testing.assert_allclose(me.to_packed(qpos, qvel), y, atol=tol.ADAPTER_ROUND_TRIP * 10)
     for i in range(3):
-        np.testing.assert_allclose(me._packed1(qpos[i], qvel[i]),
+        np.testing.assert_allclose(me.packed_floats(qpos[i].tolist(), qvel[i].tolist()),
                                    me.to_packed(qpos[i], qvel[i]), atol=tol.ADAPTER_ROUND_TRIP)
     # MuJoCo itself reads qpos[3:7] as (w, x, y, z): its body pose after mj_forward is that rotation
     sc = _scenario(initial=YAW90)
@@ -358,13 +358,14 @@ def test_a_world_of_many_bodies_steps_from_python_and_gives_each_run_alone_bit_f
     assert not any(sc.problem.forces.has_decay or me.host_problem(sc.problem, True).forces.state_dependent
                    for sc in scs)
     reqs = [RunRequest(scs[k % len(scs)], 0.002, 60) for k in range(me.STEP_LOOP_BODIES + 3)]
-    stepped = []
-    original = me.MujocoWorld._stepped
-    monkeypatch.setattr(me.MujocoWorld, "_stepped",
-                        lambda self, n, out: stepped.append(self.B) or original(self, n, out))
+    from mujoco import rollout
+    rolled = []
+    original = rollout.rollout
+    monkeypatch.setattr(rollout, "rollout",
+                        lambda m, *a, **k: rolled.append(m.nq // 7) or original(m, *a, **k))
     many = me.simulate_many(variant, reqs)
-    assert stepped == [len(reqs)]
+    assert rolled == []                     # the many bodies: the loop's steps
     for r, run in zip(reqs, many):
         alone = me.simulate(r.scenario, variant, r.dt_s, r.n_steps)
         assert np.array_equal(run.y, alone.y) and run.diverged_at_s == alone.diverged_at_s, r.scenario.name
-    assert stepped == [len(reqs)]   # a world of one body: mujoco.rollout
+    assert rolled == [1] * len(reqs)        # a world of one body: mujoco.rollout

@@ -101,7 +101,7 @@ OPTIONAL = {o.engine: o for o in [
              "newton 1.8.0 is installed but cannot be imported: warp-lang is missing"),
 ]}
 #: Adapter modules that read the metadata through their own name for installed_version.
-_OWN_INSTALLED_VERSION = (newton_engine, physx_engine)
+_OWN_INSTALLED_VERSION = (physx_engine,)
 #: Caches of what an adapter read from the metadata once per process.
 _CACHES = (brax_engine._lib, physx_engine._dist_version)
 

@@ -29,6 +29,40 @@ def test_stats_time_blocks_and_reset_to_their_zeros():
     assert dict(stats) == {"compilations": 0, "step_seconds": 0.0}
 
 
+def test_a_warp_engine_is_declared_by_its_fields_and_loads_each_variant_s_kernels_once(monkeypatch):
+    """A WarpEngine subclass: its version and install checks from package metadata (Warp not imported), the
+    pip extra named when it is absent, Warp what it runs on; its modules imported once after Warp started
+    (start_warp with the engine's kernel cache, log level and quiet flag); ``warm`` runs a load once per key,
+    its seconds kept and counted in the subclass's own stats."""
+    from cross_checks.engines import install
+
+    class Planted(runtimes.WarpEngine):
+        name, distribution, extra = "planted", "planted-dist", "planted"
+        imports, warp_log = ("json",), "LOG_X"
+        stats = runtimes.Stats(compilations=0, compile_seconds=0.0)
+
+        def build(self, requests, variant, dt_s):   # pragma: no cover - never run here
+            raise AssertionError
+
+    versions = {"planted-dist": "1.2", "warp-lang": "9.9"}
+    monkeypatch.setattr(install, "installed_version", versions.get)
+    monkeypatch.setattr(install, "release", lambda d, on=(): f"{versions[d]} ({on[0]} {versions[on[1]]})")
+    assert Planted().version() == "1.2 (warp 9.9)"
+    started = []
+    monkeypatch.setattr(runtimes, "start_warp", lambda *a: started.append(a) or "wp")
+    import json
+    assert Planted().modules() == ("wp", json) and Planted().modules() == ("wp", json)
+    assert started == [("planted", "LOG_X", False)]
+    loads = []
+    Planted().warm("euler", lambda: loads.append(1))
+    Planted().warm("euler", lambda: loads.append(2))
+    assert loads == [1] and set(Planted.warmed) == {"euler"}
+    assert Planted.stats["compilations"] == 1 and Planted.stats["compile_seconds"] == Planted.warmed["euler"]
+    del versions["planted-dist"]
+    with pytest.raises(install.EngineNotInstalled, match=r"planted-dist is not installed .*\[planted\]"):
+        Planted().version()
+
+
 def test_a_registry_holds_a_value_under_a_fresh_key_for_the_block_only():
     reg = runtimes.Registry()
     with reg.holding("a") as ka, reg.holding("b") as kb:

@@ -136,8 +136,7 @@ def _mujoco_numpy_loop(sc, variant, h, n):
     def control(_m, dd):
         apply(*forces.stage_force_torque(sc, me.to_packed(dd.qpos.copy(), dd.qvel.copy())))
     qpos, qvel = [d.qpos.copy()], [d.qvel.copy()]
-    prev = me._clear_force_callbacks()
-    mujoco.set_mjcb_control(control if per_stage else None)
+    prev = me._set_force_callbacks(control if per_stage else None)
     try:
         for _ in range(n):
             if not per_stage:
@@ -148,7 +147,7 @@ def _mujoco_numpy_loop(sc, variant, h, n):
             qpos.append(d.qpos.copy())
             qvel.append(d.qvel.copy())
     finally:
-        me._restore_force_callbacks(prev)
+        me._set_force_callbacks(*prev)
     return me.to_packed(np.array(qpos), np.array(qvel))
 
 
