@@ -27,12 +27,18 @@ __all__ = ["ENGINE", "VARIANTS", "ROW_BLOCK", "EngineError", "version", "simulat
 ENGINE = "jaxsim"
 #: Schemes read in jaxsim/api/integrators.py (``semi_implicit_euler_integration``, ``rk4_integration``).
 VARIANTS = {
-    "semi_implicit_euler": Variant(1, "jaxsim SemiImplicitEuler: symplectic Euler in the inertial "
-                                      "representation, explicit gyroscopic term, q += Δt q̇ then normalised",
-                                   traits=base.SYMPLECTIC_EULER_EXPLICIT_GYRO),
-    "rk4": Variant(4, "jaxsim RungeKutta4: classical 4th-order Runge-Kutta; the applied force and torque "
-                      "held over the step (first order where they change within it)",
-                   traits=dataclasses.replace(base.HIGHER_ORDER, forces_held=True)),
+    "semi_implicit_euler": Variant(
+        1,
+        "jaxsim SemiImplicitEuler: symplectic Euler in the inertial representation, "
+        "explicit gyroscopic term, q += Δt q̇ then normalised",
+        traits=base.SYMPLECTIC_EULER_EXPLICIT_GYRO,
+    ),
+    "rk4": Variant(
+        4,
+        "jaxsim RungeKutta4: classical 4th-order Runge-Kutta; the applied force and torque held over "
+        "the step (first order where they change within it)",
+        traits=dataclasses.replace(base.HIGHER_ORDER, forces_held=True),
+    ),
 }
 #: The one-step mode pads its rows to a multiple of this (one compiled shape for the sweep's 64 samples).
 ROW_BLOCK = 64
@@ -45,8 +51,7 @@ class JaxsimEngine(runtimes.JaxEngine):
     """``jaxsim:VARIANT`` (entry point ``rbcheck.engines``; optional: ``pip install 'rbcheck[jaxsim]'``)."""
 
     name, variants, distribution, module, extra = ENGINE, VARIANTS, "jaxsim", "jaxsim", "jaxsim"
-    #: the latter the SDF, the model of each variant's ``IntegratorType``, the step and the CHUNK steps of a
-    #: compiled call: what rbcheck repro embeds
+    #: the latter: the SDF, the INTEGRATORS, the step and CHUNK (a compiled call's steps); what repro embeds
     imports = ("jaxsim.api", "cross_checks.engines.worlds.jaxsim")
 
     def build(self, requests, variant, dt_s):
@@ -165,11 +170,10 @@ def _step_fn(mode: str):
 
 
 def _compiled(kind: str, mode: str, model, static: tuple, *args):
-    """The compiled ``run(models, dt, y0 (B, 13), count, f6 (B, 6), scale (B, 13), key (B,), fa, z)`` ->
-    (last states, rows (B, static[0], 13)): ``count`` (traced) steps of :func:`_step_fn` of B bodies vmapped
-    (each its own model; ``static[2]``: one body, without the batch axis: worlds/jaxsim.py ``run_fn``'s
-    loop) at ``dt`` (s, traced); or ``one(model, dt, ys, f6, scale, key, fa, z)``: one step of each row of
-    ``ys``. Keyed by the model's static fields (jaxsim's gravity and integrator) and ``static``."""
+    """The compiled ``run(models, dt (s), y0 (B, 13), count, f6 (B, 6), scale (B, 13), key (B,), fa, z)`` ->
+    (last states, rows (B, static[0], 13)): ``count`` steps of :func:`_step_fn` of B bodies vmapped (each its
+    own model; ``static[2]``: one body unbatched, worlds/jaxsim.py ``run_fn``'s loop); or ``one(model, dt,
+    ys, ...)``: one step of each row of ``ys``. Keyed by ``static`` and the model's gravity and integrator."""
     jax = _ENGINE.modules()[0]
 
     def make():
@@ -199,9 +203,8 @@ def _weight(scenario) -> tuple:
 
 
 def _inputs(scenario, harness, i: int):
-    """(mode ("const", "state" or "callback": :func:`_step_fn`), constant link force (6,), pre-step decay
-    scale (13,), ``y -> link force`` (6 floats)) of body ``i`` of ``harness`` (the loop's: its force
-    evaluator and decay factors; jaxsim's own weight off), of states ``y`` of jaxsim's frame."""
+    """(mode (:func:`_step_fn`), constant link force (6,), decay scale (13,), ``y -> link force`` (6 floats))
+    of body ``i`` of the loop's ``harness``, jaxsim's own weight off, for states ``y`` of jaxsim's frame."""
     ft, gv, gw = harness.ft[i], float(harness.g_v[i]), float(harness.g_w[i])
 
     def decayed(y):   # forces.harness_force_torque_floats, with the loop's evaluator
