@@ -3,7 +3,8 @@ and refused in a process forked after it started, Warp initialised once (its ker
 silenced, a damaged cache entry compiled again), and what their adapters share: counters of compilations
 and seconds (:class:`Stats`), the values a host callback inside compiled code looks up (:class:`Registry`),
 batch sizes padded to a power of two (a handful of compiled executables serve every batch size), and the
-Warp engines' shared machinery (:class:`WarpEngine`).
+Warp engines' shared machinery (:class:`WarpEngine`) and the JAX engines' (:class:`JaxEngine`,
+:class:`JaxWorld`).
 
 Both are started on first use only: a sweep's parent forks its workers, and a running JAX backend or Warp
 runtime does not survive a fork.
@@ -13,11 +14,13 @@ from __future__ import annotations
 import contextlib
 import functools
 import importlib
+import io
 import itertools
 import os
 import sys
 import threading
 import time
+import warnings
 
 import numpy as np
 
@@ -25,10 +28,11 @@ from cross_checks.core.files import kernel_cache_dir
 from cross_checks.engines import install
 from cross_checks.engines.base import EngineError
 from cross_checks.engines.install import quiet_fd2
-from cross_checks.engines.world import WorldEngine
+from cross_checks.engines.world import World, WorldEngine
+from reference_sim.simulate import bad_rows
 
 __all__ = ["start_jax", "refuse_forked_jax", "start_warp", "Stats", "Registry", "power_of_two",
-           "stack_trees", "chunk_rows", "WarpEngine"]
+           "stack_trees", "recorded", "chunk_rows", "WarpEngine", "JaxEngine", "JaxWorld"]
 
 
 @functools.lru_cache(maxsize=1)
@@ -174,6 +178,21 @@ def stack_trees(trees, which):
     return jax.tree.map(lambda *xs: np.stack([np.asarray(x) for x in xs])[which], *trees)
 
 
+def recorded(step, read, rows: int):
+    """``loop(state, count) -> (state, records (rows, 13))``: ``count`` (traced, at most ``rows``) steps of
+    ``step(state)`` in one ``lax.fori_loop``, ``read(state)`` (13,) recorded after each (the rest zeros): the
+    compiled loop of a JAX engine's chunk."""
+    import jax
+
+    def loop(state, count):
+        def body(i, carry):
+            state, out = carry
+            state = step(state)
+            return state, out.at[i].set(read(state))
+        return jax.lax.fori_loop(0, count, body, (state, jax.numpy.zeros((rows, 13))))
+    return loop
+
+
 #: Rows (body-steps) a compiled chunk records at most: its states buffer is (bodies, steps, 13) float64, so
 #: 2**17 rows are 13.6 MB, written and copied to the host per call.
 CHUNK_ROWS = 1 << 17
@@ -233,3 +252,126 @@ class WarpEngine(WorldEngine):
             self.warmed[key] = time.perf_counter() - t0
             self.stats["compilations"] += 1
             self.stats["compile_seconds"] += self.warmed[key]
+
+
+class JaxEngine(WorldEngine):
+    """A :class:`~cross_checks.engines.world.WorldEngine` on JAX (jaxsim, Brax, MJX), declared by its fields:
+    ``version()`` and the install checks from package metadata and import specs only (``module``, and
+    ``needs``: the (module, distribution) pairs it runs on; nothing imported: a sweep's parent must not start
+    JAX before it forks); JAX started rbcheck's way and ``imports`` imported on first use (:meth:`modules`);
+    a process forked after JAX started in its parent refused (:meth:`usable`); the executables compiled
+    ahead of time once per key (:meth:`compiled`), and the counters of each subclass in this process
+    (``stats``, :meth:`timings`): ``compilations``, ``compile_seconds`` (tracing, lowering and XLA
+    compilation, persistent-cache loads included), ``step_seconds`` (inside compiled calls, host callbacks
+    included), ``body_steps`` (steps × the bodies they advanced); ``per_executable``: the compile seconds
+    of each executable by name."""
+
+    needs: tuple = (("jax", "jax"), ("jaxlib", "jaxlib"))
+    #: Modules imported on first use, after JAX started (their stdout silenced: mujoco.mjx's "Failed to
+    #: import warp"), and their warnings too with ``quiet_warnings`` (brax's "not actively maintained").
+    imports: tuple = ()
+    quiet_warnings: bool = False
+    #: Bodies per vmapped batch of a rollout at most (padded to a power of two, so that batch sizes share
+    #: executables): a thousand bodies in one call, as an engine's own vmapped loop runs them.
+    max_batch: int = 1024
+    harness = (*WorldEngine.harness, "cross_checks.engines.jax_forces")
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        cls.stats = Stats(compilations=0, compile_seconds=0.0, step_seconds=0.0, body_steps=0)
+        cls.per_executable, cls._executables, cls._modules = {}, {}, []
+        cls.lock = threading.RLock()
+
+    def version(self) -> str:
+        install.check_installed(self.distribution, f"pip install 'rbcheck[{self.extra}]'",
+                                needs=((self.module or self.distribution, self.distribution), *self.needs))
+        return install.release(self.distribution, self.runs_on)
+
+    def modules(self) -> tuple:
+        """``(jax, jax.numpy, *imports)``, imported once (:meth:`version` first; an import failure an
+        ImportError with the distribution's version: install.first_import), float64 checked on after them
+        (``import jaxsim`` sets it too)."""
+        if not self._modules:
+            self.version()
+            with install.first_import(self.distribution), contextlib.redirect_stdout(io.StringIO()), \
+                    warnings.catch_warnings() if self.quiet_warnings else contextlib.nullcontext():
+                if self.quiet_warnings:
+                    warnings.simplefilter("ignore")
+                jax = start_jax()
+                self._modules[:] = [jax, importlib.import_module("jax.numpy"),
+                                    *map(importlib.import_module, self.imports)]
+            if not jax.config.jax_enable_x64:
+                raise EngineError(f"{self.name}: jax_enable_x64 is off after the engine's import; rbcheck "
+                                  "needs float64")
+        return tuple(self._modules)
+
+    def usable(self) -> tuple:
+        """:meth:`modules` (an ImportError as an EngineError), or EngineError in a process forked after JAX
+        started in its parent (a running JAX backend does not survive fork: its first computation would
+        hang)."""
+        refuse_forked_jax(f"{self.name} cannot run in a process forked after JAX started in its parent (a "
+                          "running JAX backend does not survive fork: it would hang); run the sweep with "
+                          "--jobs 1 from there, or from a process that has not run JAX")
+        return install.engine_or_error(self.modules)
+
+    def compiled(self, key, make, *args, name: str = ""):
+        """``jax.jit(make()).lower(*args).compile()``, once per ``key`` and shapes of the arguments' leaves
+        (its time counted, under ``name`` too); EngineError with XLA's words when it refuses."""
+        jax = start_jax()
+        key = (key, tuple(np.shape(a) for a in jax.tree_util.tree_leaves(args)))
+        with self.lock:
+            exe = self._executables.get(key)
+            if exe is None:
+                t0 = time.perf_counter()
+                try:
+                    exe = jax.jit(make()).lower(*args).compile()
+                except Exception as exc:  # noqa: BLE001 - the engine or XLA refusing the computation
+                    raise EngineError(f"{self.name}/XLA could not compile the step: {type(exc).__name__}: "
+                                      f"{exc}") from None
+                seconds = time.perf_counter() - t0
+                self.stats["compile_seconds"] += seconds
+                self.stats["compilations"] += 1
+                self.per_executable[name] = self.per_executable.get(name, 0.0) + seconds
+                self._executables[key] = exe
+        return exe
+
+    def timings(self) -> dict:
+        """This process's counters (see the class docstring)."""
+        return dict(self.stats)
+
+    @property
+    def compile_seconds(self) -> float:
+        return self.stats["compile_seconds"]
+
+
+class JaxWorld(World):
+    """A world of a :class:`JaxEngine` (``engine``) whose ``rollout`` is its compiled loop: ``run(n_steps,
+    harness)``, whose seconds outside the compiled calls (the forces' arrays, stacking the models,
+    compiling) are rbcheck's (``host_s``), the calls' own (``engine.stats["step_seconds"]``) the engine's."""
+
+    engine: JaxEngine
+
+    def rollout(self, n_steps, harness):
+        t0, stepped = time.perf_counter(), self.engine.stats["step_seconds"]
+        try:
+            return self.run(n_steps, harness)
+        finally:
+            self.host_s += time.perf_counter() - t0 - (self.engine.stats["step_seconds"] - stepped)
+
+    def chunks(self, call, n_max: int, rows: int, idx, out, finite_only: bool = False) -> None:
+        """Steps 1..n_max of the bodies ``idx`` (B) into ``out[:, idx]``, ``rows`` a call of ``call(count)``
+        (``count`` steps of the compiled loop, its state carried) -> the chunk's states (≥ B, ≥ count, 13),
+        timed and counted; the batch stops after the chunk after which each body has ended (its request's
+        steps: ``self.ends``) or blown up (``bad_rows`` in the chunk; ``finite_only``: a non-finite last
+        row)."""
+        ends, done, k = np.array([self.ends[i] for i in idx]), np.zeros(len(idx), dtype=bool), 0
+        while k < n_max and not done.all():
+            count = min(rows, n_max - k)
+            with self.engine.stats.timing("step_seconds"):
+                chunk = np.asarray(call(count))[:len(idx), :count]
+            self.engine.stats["body_steps"] += count * len(idx)
+            out[k:k + count, idx] = chunk.transpose(1, 0, 2)
+            with np.errstate(all="ignore"):
+                bad = ~np.isfinite(chunk[:, -1]).all(-1) if finite_only else bad_rows(chunk).any(axis=1)
+            done |= bad | (ends <= k + count)
+            k += count

@@ -70,7 +70,14 @@ import numpy as np
 
 from cross_checks.engines import base, install
 
-__all__ = ["World", "HostRowsWorld", "WorldEngine"]
+__all__ = ["World", "HostRowsWorld", "WorldEngine", "body_spec"]
+
+
+def body_spec(body) -> tuple:
+    """``(mass_kg, inertia_B (3, 3) kg m², None)``: the body as given to an engine that takes the full tensor
+    about the COM in body axes, no frame rotation (what ``rbcheck repro`` writes of it: an adapter's
+    ``body_spec``)."""
+    return float(body.mass_kg), np.asarray(body.inertia_B, dtype=float), None
 
 
 class World:

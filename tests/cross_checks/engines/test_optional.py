@@ -85,7 +85,8 @@ OPTIONAL = {o.engine: o for o in [
              "genesis-world 1.4.5 is installed but cannot be imported: no module named 'torch'"),
     # brax without jax and jaxlib (their metadata absent): told apart from an absent brax
     Optional("brax", brax_engine, "brax", "brax", "0.14.2", lambda mp, m: None,
-             r"brax 0.14.2 is installed but jax or jaxlib is not \(pip install 'rbcheck\[brax\]'\)",
+             r"brax 0.14.2 is installed but cannot be imported: jax is missing "
+             r"\(pip install 'rbcheck\[brax\]'\)",
              broken_metadata_only=True),
     Optional("mjx", mjx_engine, "mujoco-mjx", "mjx", "3.17.0", _spec_missing("jaxlib"),
              "mujoco-mjx 3.17.0 is installed but cannot be imported: jaxlib is missing"),

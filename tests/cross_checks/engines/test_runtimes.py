@@ -158,3 +158,120 @@ def test_warp_kernel_objects_cut_in_half_are_compiled_again(tmp_path):
     [line] = [ln for ln in again.stderr.splitlines() if ln.startswith("rbcheck:")]
     assert "kernel cache entry" in line and str(tmp_path / "kernels") in line and "compiling it again" in line
     assert run().stderr.count("rbcheck:") == 0   # the entry compiled again is whole
+
+
+def _jax_or_skip():
+    import importlib.util
+    if importlib.util.find_spec("jax") is None:
+        pytest.skip("jax is not installed")
+    return runtimes.start_jax()
+
+
+def test_jaxs_persistent_cache_is_rbchecks_kernel_cache_never_the_result_cache(tmp_path):
+    """What the JAX engines share (it was each adapter's own ``xla_cache_dir``/``jax_cache_dir``)."""
+    from pathlib import Path
+    _jax_or_skip()
+    env = {**os.environ, "RBCHECK_KERNEL_CACHE_DIR": str(tmp_path / "k"),
+           "RBCHECK_CACHE_DIR": str(tmp_path / "r")}
+    code = ("from cross_checks.engines.runtimes import start_jax\n"
+            "print(start_jax().config.jax_compilation_cache_dir)")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600, env=env,
+                          cwd=Path(runtimes.__file__).parents[2])
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stdout.strip() == str(tmp_path / "k" / "jax")
+
+
+class _Planted(runtimes.JaxEngine):
+    name, variants, distribution, module, extra, needs = "planted", {}, "numpy", "numpy", "planted", ()
+
+    def build(self, requests, variant, dt_s):   # pragma: no cover - never stepped here
+        raise NotImplementedError
+
+
+def test_a_jax_engines_version_and_install_checks_come_from_its_declarations(monkeypatch):
+    from cross_checks.engines import install
+    assert _Planted().version() == install.installed_version("numpy")
+    monkeypatch.setattr(_Planted, "needs", (("no_such_module_rbcheck", "numpy"),))
+    with pytest.raises(ImportError, match="numpy .* is installed but cannot be imported: numpy is missing"):
+        _Planted().version()
+    monkeypatch.setattr(_Planted, "distribution", "no-such-dist-rbcheck")
+    with pytest.raises(install.EngineNotInstalled,
+                       match=r"^no-such-dist-rbcheck is not installed \(pip install 'rbcheck\[planted\]'\)$"):
+        _Planted().version()
+
+
+def test_each_jax_engine_counts_its_own_compilations_once_per_key_and_shape():
+    _jax_or_skip()
+
+    class Other(_Planted):
+        pass
+    engine, calls = _Planted(), []
+
+    def make():
+        calls.append(1)
+        return lambda x: 2.0 * x
+    double = engine.compiled("double", make, np.ones(3), name="double")
+    np.testing.assert_array_equal(np.asarray(double(np.arange(3.0))), [0.0, 2.0, 4.0])
+    assert engine.compiled("double", make, np.zeros(3), name="double") is double        # same key and shape
+    assert engine.compiled("double", make, np.ones(4), name="double") is not double     # another shape
+    assert len(calls) == 2 and engine.timings()["compilations"] == 2
+    assert engine.per_executable["double"] == engine.compile_seconds > 0.0
+    assert Other().timings()["compilations"] == 0                                        # counters per engine
+    with pytest.raises(EngineError, match=r"^planted/XLA could not compile the step: TypeError"):
+        engine.compiled("bad", lambda: (lambda x: x + "a"), np.ones(3))
+
+
+def test_a_recorded_loop_runs_its_count_and_records_each_state():
+    jax = _jax_or_skip()
+    loop = jax.jit(runtimes.recorded(lambda s: s + 1.0, lambda s: s * np.ones(13), 8))
+    state, rows = loop(np.float64(10.0), np.int64(3))
+    assert float(state) == 13.0
+    np.testing.assert_array_equal(np.asarray(rows)[:, 0], [11.0, 12.0, 13.0, 0, 0, 0, 0, 0])
+
+
+class _Chunked(runtimes.JaxWorld):
+    engine = _Planted
+
+    def __init__(self, ends):
+        super().__init__()
+        self.ends, self.host_s = ends, 0.0
+
+
+def test_a_batch_stops_after_the_chunk_in_which_every_body_ended_or_blew_up():
+    world, asked = _Chunked([3, 100, 100]), []
+    before = dict(_Planted.stats)
+
+    def call(count):   # body 1 blows up (beyond 1e8) at its 5th step, body 2 becomes NaN at its 6th
+        k = sum(asked)
+        asked.append(count)
+        steps = np.arange(k + 1, k + count + 1, dtype=float)[None, :, None] * np.ones((4, 1, 13))
+        steps[1, steps[1, :, 0] >= 5] = 1e9
+        steps[2, steps[2, :, 0] >= 6] = np.nan
+        return steps
+    out = np.full((20, 3, 13), -1.0)
+    world.chunks(call, 20, 4, [0, 1, 2], out)
+    assert asked == [4, 4]                               # all three ended in the second chunk: no third
+    np.testing.assert_array_equal(out[:8, 0, 0], np.arange(1.0, 9.0))
+    assert np.all(out[8:] == -1.0)                       # rows never computed are left as they were
+    assert _Planted.stats["body_steps"] - before["body_steps"] == 24
+    # finite_only: a body beyond 1e8 but finite goes on (MJX's raw rows are not the packed state)
+    world, asked = _Chunked([100, 100, 100]), []
+    world.chunks(call, 12, 4, [0, 1, 2], out, finite_only=True)
+    assert asked == [4, 4, 4]
+
+
+def test_a_jax_worlds_rollout_gives_what_is_not_a_compiled_call_to_the_host(monkeypatch):
+    clock = iter(np.arange(0.0, 100.0))
+    monkeypatch.setattr(runtimes.time, "perf_counter", lambda: float(next(clock)))
+
+    class World(_Chunked):
+        def run(self, n_steps, harness):   # two ticks of host work, then a compiled call of one tick
+            runtimes.time.perf_counter()
+            out = np.zeros((n_steps, 1, 13))
+            self.chunks(lambda count: np.zeros((1, count, 13)), n_steps, n_steps, [0], out)
+            return out
+    world = World([5])
+    monkeypatch.setattr(_Planted, "stats", runtimes.Stats(compilations=0, compile_seconds=0.0,
+                                                          step_seconds=0.0, body_steps=0))
+    assert world.rollout(5, None).shape == (5, 1, 13)   # 0 start, 1 host, 2-3 the call, 4 end
+    assert _Planted.stats["step_seconds"] == 1.0 and world.host_s == 3.0

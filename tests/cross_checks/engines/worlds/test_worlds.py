@@ -89,13 +89,6 @@ def test_the_reproducers_run_of_the_world_is_the_adapters_bit_for_bit(engine, va
     np.testing.assert_array_equal(mine[1:], theirs[1:])
 
 
-def test_jaxsims_adapter_declares_its_worlds_chunk_integrators_and_model_name():
-    pytest.importorskip("jaxsim")
-    from cross_checks.engines import jaxsim_engine as je
-    jsw = je._world()   # the adapter holds them without importing JAX; the world's loop is what runs
-    assert (je.CHUNK, je.INTEGRATORS, je.MODEL_NAME) == (jsw.CHUNK, jsw.INTEGRATORS, jsw.MODEL_NAME)
-
-
 def test_a_step_drake_refuses_reads_as_nan_in_a_reproducer_and_as_the_last_state_in_the_adapter():
     pytest.importorskip("pydrake")
     from cross_checks.engines import drake_engine as de
