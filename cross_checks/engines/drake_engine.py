@@ -1,16 +1,11 @@
-"""Drake as an engine (``drake:VARIANT``, float64): a world of free bodies for rbcheck's loop
-(cross_checks.engines.world, cross_checks.engines.loop).
-
-A body is a continuous ``MultibodyPlant`` with one free body (:class:`DrakeModel`), its spatial inertia about
-the body origin = COM in body axes, gravity the plant's own, and a ``Simulator`` of its own in fixed-step
-mode: step n is ``AdvanceTo(n Δt)``. State at the boundary: ``q = [q_WB (w x y z), x_W]``, ``v = [ω_W, v_W]``
-(angular first, both in WORLD axes); Drake does not renormalise the quaternion, so the recorded one is
-``q/|q|``. Forces: the loop's constant ``[τ_W, f_W − m g]`` fixed once on the applied generalized force port
-(Drake keeps it); state-dependent forces or decay are a LeafSystem evaluating ``forces.stage_force_torque``
-(the decay as damping in the right-hand side) at every derivative evaluation, so every stage of a
-multi-stage scheme sees its own stage state (the loop applies neither; that evaluation's time is rbcheck's).
-Divergence: the loop's, and an exception Drake raises while stepping ends its body's run at that step.
-Conventions and what pins them: docs/engine_conventions.md, "Drake 1.51.1".
+"""Drake as an engine (``drake:VARIANT``, float64): the free bodies of cross_checks.engines.worlds.drake (each
+a continuous ``MultibodyPlant`` with a ``Simulator`` of its own in fixed-step mode; ``q = [q_WB (w x y z),
+x_W]``, ``v = [ω_W, v_W]``, the quaternion not renormalised by Drake: recorded as ``q/|q|``) for the loop.
+Forces: the loop's constant ``[τ_W, f_W − m g]`` fixed once on the applied generalized force port (Drake keeps
+it); state-dependent forces or decay are a LeafSystem evaluating ``forces.stage_force_torque`` at every
+derivative evaluation, so every stage of a multi-stage scheme sees its own state (the loop applies neither;
+that evaluation's time is rbcheck's). A step Drake refuses ends its body's run there. Conventions and what
+pins them: docs/engine_conventions.md, "Drake 1.51.1".
 """
 from __future__ import annotations
 
@@ -20,7 +15,7 @@ import time
 
 import numpy as np
 
-from cross_checks.engines import base, forces, install
+from cross_checks.engines import base, forces, install, world
 from cross_checks.engines.base import EngineError, Variant
 from cross_checks.engines.forces import stage_force_torque
 from cross_checks.engines.world import World, WorldEngine
@@ -60,27 +55,18 @@ VARIANTS = {
                               traits=dataclasses.replace(base.WHOLE_STATE_IMPLICIT_EULER,
                                                          invariance_findings=(ORIGIN_STEP_FINDING,))),
 }
-def _require():
-    install.require(pydrake, _IMPORT_ERROR, "drake", hint="pip install 'rbcheck[drake]'")
-
-
-def version() -> str:
-    _require()
-    return install.installed_version("drake") or getattr(pydrake, "__version__", "unknown")   # from source
 
 
 def from_drake_state(x, com_B_m=None):
-    """Drake's states (..., 13) -> packed (..., 13), the quaternion normalised (Drake's is not unit)
-    (:func:`cross_checks.engines.worlds.drake.from_drake_state`); for a body whose COM is at ``com_B_m`` from
-    its origin, the COM's x and v (x_o + R c, v_o + ω × R c)."""
+    """Drake's states (..., 13) -> packed (..., 13) (worlds.drake.from_drake_state); for a body whose COM is
+    at ``com_B_m`` from its origin, the COM's x and v (x_o + R c, v_o + ω × R c)."""
     y = dkw.from_drake_state(x)
     return y if com_B_m is None else com_state(y, com_B_m)
 
 
 def body_spec(body) -> tuple:
-    """``(mass_kg, moments (3,), R_BP (3, 3) or None)`` of an rbcheck RigidBody as Drake's world takes it
-    (:func:`cross_checks.engines.worlds.drake.spatial_inertia`): a diagonal tensor as its diagonal (no frame
-    rotation), a full one as its principal moments along the columns of R_BP."""
+    """``(mass_kg, moments (3,), R_BP (3, 3) or None)`` as worlds.drake.spatial_inertia takes them: a diagonal
+    tensor as its diagonal (no frame rotation), a full one as its principal moments along R_BP's columns."""
     if body.is_diagonal():
         return float(body.mass_kg), np.diag(body.inertia_B).copy(), None
     moments, R_BP = body.principal_axes()
@@ -122,29 +108,17 @@ def _force_system_class():
 
 
 def body_entry(scenario) -> tuple:
-    """The scenario's body as :class:`cross_checks.engines.worlds.drake.FormBody` takes it: its
-    :func:`body_spec`; a body whose origin Bo is off its COM (scenario.body_com_B_m) also with that COM
-    (p_BoBcm, m) and its welded parts (scenario.body_parts; none: no fifth item), each ``(*body_spec, com)``.
-    ``rbcheck repro`` writes the same entry into a script."""
-    from reference_sim.body import RigidBody
-    com = getattr(scenario, "body_com_B_m", None)
-    spec = body_spec(scenario.problem.body)
-    if com is None:
-        return spec
-    parts = [(*body_spec(RigidBody(p.mass_kg, p.inertia_B)), [float(v) for v in p.com_B_m])
-             for p in getattr(scenario, "body_parts", ())]
-    return (*spec, [float(v) for v in com], *([parts] if parts else []))
+    """The scenario's body as worlds.drake.FormBody takes it (world.body_entry: its COM is p_BoBcm)."""
+    return world.body_entry(scenario, body_spec)
 
 
 class DrakeModel(dkw.FormBody):
-    """A scenario's free body in Drake (:class:`cross_checks.engines.worlds.drake.FormBody`, what
-    ``rbcheck repro`` embeds: its COM where the scenario puts it, its welded parts; the per-stage forces
-    added here), with a simulator whose integrator is ``integrator`` (a Drake integrator name);
-    ``set_state``/``state`` in the packed layout. ``constant_forces``: the scenario's constant forces fixed
-    on the plant here (False: by the caller, :meth:`apply`)."""
+    """A scenario's free body (worlds.drake.FormBody: its COM, its welded parts; the per-stage forces added
+    here) simulated by the Drake integrator ``integrator``; ``set_state``/``state`` packed. With
+    ``constant_forces``, the scenario's constant forces fixed on the plant here (else by :meth:`apply`)."""
 
     def __init__(self, scenario, integrator: str, constant_forces: bool = True):
-        _require()
+        _ENGINE._installed()
         p = scenario.problem
         self.scenario = scenario
         self.per_stage = bool(p.forces.state_dependent or p.forces.has_decay)
@@ -185,11 +159,9 @@ def _model(scenario, variant: str, dt_s: float, constant_forces: bool = True) ->
 
 
 class DrakeWorld(dkw.FormBodies, World):
-    """B bodies, each a :class:`DrakeModel` (its constant forces the loop's), stepped to ``n Δt`` in turn
-    (:class:`cross_checks.engines.worlds.drake.FormBodies`). Raw rows: Drake's states ``[q_WB, x_W, ω_W,
-    v_W]``. A
-    body whose step Drake refuses (NaN detected, Newton failed) warns and keeps its last state; after a
-    blow-up, that is a consequence (``first_cause_only``)."""
+    """B :class:`DrakeModel` bodies (their constant forces the loop's), stepped to ``n Δt`` in turn
+    (worlds.drake.FormBodies; raw rows ``[q_WB, x_W, ω_W, v_W]``). A step Drake refuses (NaN detected, Newton
+    failed) warns and keeps the body's last state; after a blow-up, a consequence (``first_cause_only``)."""
 
     first_cause_only = True
     hold_failed = True   # the loop ends the body's run at the step Drake refused (its warning)
@@ -212,24 +184,22 @@ class DrakeWorld(dkw.FormBodies, World):
 class DrakeEngine(WorldEngine):
     """``drake:VARIANT`` — registered under the entry-point group ``rbcheck.engines``."""
 
-    name, variants = ENGINE, VARIANTS
-    distribution, module = "drake", "pydrake"
+    name, variants, world = ENGINE, VARIANTS, DrakeWorld
+    distribution, module, extra = "drake", "pydrake", "drake"
     #: the COM off the body origin (SpatialInertia with p_BoBcm); welded parts (WeldJoint)
     body_forms = frozenset({"com_offset", "welded_parts"})
     keeps_forces = True     # a fixed input port value stays until it is fixed again
     chunk = 256
 
-    def version(self) -> str:
-        return version()
-
-    def build(self, requests, variant, dt_s):
-        _require()
-        return DrakeWorld(requests, variant, dt_s)
+    def version(self) -> str:   # the metadata's, else pydrake's own (a build from source)
+        self._installed()
+        return install.installed_version("drake") or getattr(pydrake, "__version__", "unknown")
 
     def per_stage(self, scenario, variant):
         return bool(scenario.problem.forces.state_dependent or scenario.problem.forces.has_decay)
 
 
 _ENGINE = DrakeEngine()
-simulate, simulate_many, one_step = _ENGINE.simulate, _ENGINE.simulate_many, _ENGINE.one_step
+version, simulate, simulate_many, one_step = (_ENGINE.version, _ENGINE.simulate, _ENGINE.simulate_many,
+                                              _ENGINE.one_step)
 DrakeAdapter = DrakeEngine

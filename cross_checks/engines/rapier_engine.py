@@ -1,12 +1,8 @@
-"""Rapier (``rapier3d``, dimforge's Python bindings, 3D, float32) as an engine (``rapier:VARIANT``): a world
-of bodies for rbcheck's loop (cross_checks.engines.world, cross_checks.engines.loop).
-
-One ``PhysicsWorld`` per Δt and gravity, a dynamic ``RigidBody`` per run, no collider, mass properties about
-the COM (body origin = COM, the scenario's body frame; principal moments and frame R_BP); defaults neutralised
-(:data:`WORLD_SETTINGS`, :data:`BODY_SETTINGS`, one thread). At the boundary: COM position and velocity, ω in
-WORLD axes, ``Rotation3`` built (w, x, y, z) but read (x, y, z, w); user forces ACCUMULATE and are kept (the
-loop's replace them); the decay sets the velocities last read, scaled. Conventions, defaults neutralised and
-what pins them: docs/engine_conventions.md, "Rapier 0.36.1".
+"""Rapier (``rapier3d``, dimforge's Python bindings, 3D, float32) as an engine (``rapier:VARIANT``): the
+bodies of cross_checks.engines.worlds.rapier (one ``PhysicsWorld`` per Δt and gravity, a dynamic
+``RigidBody`` per run, its mass properties about the COM; user forces accumulate and are kept: the loop's
+replace them) for rbcheck's loop. Conventions, defaults neutralised and what pins them:
+docs/engine_conventions.md, "Rapier 0.36.1".
 """
 from __future__ import annotations
 
@@ -15,7 +11,7 @@ import math
 
 import numpy as np
 
-from cross_checks.engines import install
+from cross_checks.engines import install, world
 from cross_checks.engines.base import EngineError, Traits, Variant
 from cross_checks.engines.step_floats import bad_floats
 from cross_checks.engines.world import World, WorldEngine
@@ -56,10 +52,6 @@ VARIANTS = {
 MANY_BODIES = 4
 
 
-def _f32(values) -> np.ndarray:
-    return np.asarray(values, dtype=np.float32)
-
-
 def _decode(blobs: bytes, n: int, layout) -> np.ndarray:
     """``n`` bodies' serialisations of one length (``blobs``, joined) as packed rows (n, 13) in float64:
     ``[x_W, v_W, q (w x y z), ω_W]``, the quaternion normalised as ``Rotation3.to_tuple`` normalises it (in
@@ -70,12 +62,8 @@ def _decode(blobs: bytes, n: int, layout) -> np.ndarray:
     qx, qy, qz, qw = v[:, 6], v[:, 7], v[:, 8], v[:, 9]
     norm = np.sqrt((qx * qx + qz * qz) + (qy * qy + qw * qw))
     out = np.empty((n, 13))
-    out[:, 0:6] = v[:, 0:6]
-    out[:, 6] = qw / norm
-    out[:, 7] = qx / norm
-    out[:, 8] = qy / norm
-    out[:, 9] = qz / norm
-    out[:, 10:13] = v[:, 10:13]
+    out[:, 0:6], out[:, 10:13] = v[:, 0:6], v[:, 10:13]
+    out[:, 6:10] = v[:, [9, 6, 7, 8]] / norm[:, None]   # (w, x, y, z), each divided in float32
     return out
 
 
@@ -103,7 +91,7 @@ def _find_layout():
     rot = rb.rotation.to_bytes()
     stored_q = np.frombuffer(rot[len(rot) - 16:], dtype="<f4")     # the rotation as kept: x, y, z, w
     blob = rb.to_bytes()
-    want = [*_f32([1.25, 2.375, 3.5, 4.625, 5.75, 6.875]), *stored_q, *_f32([7.125, 8.25, 9.375])]
+    want = [*np.float32([1.25, 2.375, 3.5, 4.625, 5.75, 6.875]), *stored_q, *np.float32([7.125, 8.25, 9.375])]
     offsets = [blob.find(c.tobytes()) for c in want]
     if min(offsets) < 0 or len({*offsets}) != 13:
         return None
@@ -145,11 +133,7 @@ class RapierWorld(rpw.Bodies, World):
 
     def __init__(self, requests, variant: str, dt_s: float):
         World.__init__(self)
-        specs: dict = {}   # each distinct body's spec once: a batch is mostly copies of a few
-        for r in requests:
-            if id(r.scenario.problem.body) not in specs:
-                specs[id(r.scenario.problem.body)] = body_spec(r.scenario.problem.body)
-        rpw.Bodies.__init__(self, [specs[id(r.scenario.problem.body)] for r in requests],
+        rpw.Bodies.__init__(self, world.body_specs(requests, body_spec),
                             requests[0].scenario.problem.forces.gravity_W, variant, dt_s)
         self.ends = [int(r.n_steps) for r in requests]
         self.n = 0
@@ -173,28 +157,15 @@ class RapierWorld(rpw.Bodies, World):
         changed, bit for bit, since the last (Rapier keeps them; the same Python floats reach it)."""
         if self.layout is None:
             return rpw.Bodies.apply(self, f_W, tau_W)
-        f_W, tau_W = np.asarray(f_W, dtype=float), np.asarray(tau_W, dtype=float)
-        if self._given is None:
-            new_f = new_t = np.ones(len(f_W), dtype=bool)
-        else:
-            new_f = (f_W.view(np.uint64) != self._given[0].view(np.uint64)).any(axis=1)
-            new_t = (tau_W.view(np.uint64) != self._given[1].view(np.uint64)).any(axis=1)
-        self._given = (f_W.copy(), tau_W.copy())
-        bodies, dead = self.bodies, self.dead
-        if new_f.any():
-            for k, f in zip(np.flatnonzero(new_f).tolist(), f_W[new_f].tolist()):
-                if k not in dead:
-                    bodies[k].reset_forces(False)
-                    bodies[k].add_force(tuple(f), False)
-        if new_t.all() and not dead:
-            for rb, t in zip(bodies, tau_W.tolist()):
-                rb.reset_torques(False)
-                rb.add_torque(tuple(t), False)
-        elif new_t.any():
-            for k, t in zip(np.flatnonzero(new_t).tolist(), tau_W[new_t].tolist()):
-                if k not in dead:
-                    bodies[k].reset_torques(False)
-                    bodies[k].add_torque(tuple(t), False)
+        given, self._given = self._given, (np.array(f_W, dtype=float), np.array(tau_W, dtype=float))
+        for j, (reset, add) in enumerate((("reset_forces", "add_force"), ("reset_torques", "add_torque"))):
+            a = self._given[j]
+            new = (np.ones(len(a), dtype=bool) if given is None
+                   else (a.view(np.uint64) != given[j].view(np.uint64)).any(axis=1))
+            for k, v in zip(np.flatnonzero(new).tolist(), a[new].tolist()):
+                if k not in self.dead:
+                    getattr(self.bodies[k], reset)(False)
+                    getattr(self.bodies[k], add)(tuple(v), False)
 
     def decay(self, g_v, g_w):
         """Many bodies: :meth:`Bodies.decay`'s velocities (the last read's, scaled: the same products),
@@ -232,7 +203,6 @@ class RapierWorld(rpw.Bodies, World):
                 rb.is_enabled = False
         return rows
 
-
     def _read_many(self):
         """:meth:`read` of many bodies: one serialisation per body, decoded for all at once (the getters'
         numbers: :func:`state_bytes_layout`), the runs that end here found in one pass."""
@@ -254,24 +224,12 @@ class RapierWorld(rpw.Bodies, World):
 class RapierEngine(WorldEngine):
     """``rapier:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional."""
 
-    name = ENGINE
-    variants = VARIANTS
-    distribution = DIST
+    name, variants, world, distribution, extra = ENGINE, VARIANTS, RapierWorld, DIST, "rapier"
     keeps_forces = True
     sign_continuity = True
 
-    def _installed(self):
-        install.require(rapier, _IMPORT_ERROR, DIST, hint="pip install 'rbcheck[rapier]'")
-
-    def build(self, requests, variant, dt_s):
-        self._installed()
-        return RapierWorld(requests, variant, dt_s)
-
     def group_key(self, request) -> tuple:   # one world per Δt and gravity; runs of any length share it
         return (float(request.dt_s), tuple(float(g) for g in request.scenario.problem.forces.gravity_W))
-
-    def engine_files(self) -> list:   # rapier3d's compiled module (a rebuilt wheel is a new engine)
-        return [] if rapier is None else install.library_files(getattr(rapier, "_rapier3d", None))
 
 
 _ENGINE = RapierEngine()
