@@ -13,10 +13,8 @@ import numpy as np
 
 from cross_checks.engines import install, world
 from cross_checks.engines.base import EngineError, Traits, Variant
-from cross_checks.engines.step_floats import bad_floats
 from cross_checks.engines.world import World, WorldEngine
 from reference_sim.quaternion import quat_from_matrix
-from reference_sim.simulate import BLOWUP_LIMIT
 
 rapier, _IMPORT_ERROR, rpw = install.optional_world("rapier3d", "rapier", "Bodies")
 if _IMPORT_ERROR is None:
@@ -136,18 +134,13 @@ class RapierWorld(rpw.Bodies, World):
         rpw.Bodies.__init__(self, world.body_specs(requests, body_spec),
                             requests[0].scenario.problem.forces.gravity_W, variant, dt_s)
         self.ends = [int(r.n_steps) for r in requests]
-        self.n = 0
         self.layout = state_bytes_layout() if len(requests) > MANY_BODIES else None
-        if self.layout is not None:
-            self._to_bytes = [rb.to_bytes for rb in self.bodies]
-            self._ends = np.array(self.ends)
-            self._given = None   # the (f_W, τ_W) last given to the bodies (Rapier keeps them)
+        self._to_bytes = [rb.to_bytes for rb in self.bodies]
 
     def set_state(self, y):
         rpw.Bodies.set_state(self, y)
-        self.n = 0
-        if self.layout is not None:
-            self._given = None
+        self.n, self.live, self._next_end = 0, [True] * len(self.bodies), min(self.ends, default=math.inf)
+        self._given = None   # many bodies: the (f_W, τ_W) last given to the bodies (Rapier keeps them)
 
     def packed_row(self, raw):   # many bodies: the read itself, for the harness's one compiled evaluation
         return raw if self.layout is not None else World.packed_row(self, raw)
@@ -189,35 +182,28 @@ class RapierWorld(rpw.Bodies, World):
         bad = self.world.quarantine.bodies
         for k in [k for k, h in enumerate(self.handles) if h in bad] if bad else ():
             self.dead.add(k)
+            self.live[k] = False
             self.warnings.append((k, self.n, "Rapier quarantined the body"))
 
     def read(self):
-        """The packed rows (a dead body's non-finite). A body whose run is over (its last step, or a state
-        non-finite or beyond BLOWUP_LIMIT) is dead from then on: disabled, no force, no decay."""
-        if self.layout is not None:
-            return self._read_many()
-        rows = rpw.Bodies.read(self)
-        for k, rb in enumerate(self.bodies):
-            if k not in self.dead and (self.n >= self.ends[k] or bad_floats(rows[k])):
-                self.dead.add(k)
-                rb.is_enabled = False
-        return rows
-
-    def _read_many(self):
-        """:meth:`read` of many bodies: one serialisation per body, decoded for all at once (the getters'
-        numbers: :func:`state_bytes_layout`), the runs that end here found in one pass."""
-        blobs = [f() for f in self._to_bytes]
-        rows = _decode(b"".join(blobs), len(blobs), self.layout)
-        if self.dead:
-            rows[sorted(self.dead)] = math.nan
-        with np.errstate(invalid="ignore"):
-            ends = (self.n >= self._ends) | ~(np.abs(rows) <= BLOWUP_LIMIT).all(axis=1)
-        if ends.any():
-            for k in np.flatnonzero(ends).tolist():
-                if k not in self.dead:
-                    self.dead.add(k)
-                    self.bodies[k].is_enabled = False
-        self.last = rows
+        """The packed rows (a dead body's non-finite): a few bodies' through the getters, many bodies' from
+        one serialisation each, decoded for all at once (the getters' numbers: :func:`state_bytes_layout`). A
+        body whose run is over (its last step, or its state blown up: world.blown_up) is dead from then on:
+        disabled, no force, no decay."""
+        if self.layout is None:
+            rows = rpw.Bodies.read(self)
+        else:
+            rows = self.last = _decode(b"".join([f() for f in self._to_bytes]), len(self.bodies), self.layout)
+            if self.dead:
+                rows[sorted(self.dead)] = math.nan
+        over = world.blown_up(rows, self.live)
+        if self.n >= self._next_end:   # some runs end at this step
+            over += [k for k, end in enumerate(self.ends) if end <= self.n and self.live[k]]
+            self._next_end = min([end for end in self.ends if end > self.n], default=math.inf)
+        for k in over:
+            self.live[k] = False
+            self.dead.add(k)
+            self.bodies[k].is_enabled = False
         return rows
 
 
