@@ -74,27 +74,22 @@ def _dist_version() -> str:
 
 
 @functools.lru_cache(maxsize=1)
-def _engine():
-    """``(sapien, sapien.physx)``, imported once after :func:`version`'s checks; SAPIEN's warning at import
-    ("Failed to find system libvulkan": no rendering here) silenced."""
+def _world_module():
+    """cross_checks.engines.worlds.physx (what rbcheck repro embeds; it imports sapien), imported once after
+    :func:`version`'s checks, SAPIEN's warning at import ("Failed to find system libvulkan") silenced."""
     version()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        import sapien
-        import sapien.physx as px
-    return sapien, px
-
-
-def _world_module():
-    """cross_checks.engines.worlds.physx (what rbcheck repro embeds), after :func:`_engine`."""
-    _engine()
-    from cross_checks.engines.worlds import physx
+        from cross_checks.engines.worlds import physx
     return physx
 
 
+def _engine():   # (sapien, sapien.physx), as the world module imported them
+    return _world_module().sapien, _world_module().px
+
+
 def __getattr__(name):
-    """``BODY_SETTINGS``, ``PACK_TO_PACKED`` and ``neutralise``: cross_checks.engines.worlds.physx's (sapien
-    imported then)."""
+    """``BODY_SETTINGS``, ``PACK_TO_PACKED`` and ``neutralise``: worlds.physx's (sapien imported then)."""
     if name in ("BODY_SETTINGS", "PACK_TO_PACKED", "neutralise"):
         return getattr(_world_module(), name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
@@ -115,6 +110,7 @@ class _SceneLoop:
     compiled evaluation). A body whose state blew up is parked at rest."""
 
     float_rows = True   # apply takes the harness's rows of plain floats (a few bodies)
+    exact_start = True   # the scenario's own first row, not its float32 round trip
 
     def __init__(self, requests, variant: str, dt_s: float):
         World.__init__(self)
@@ -135,14 +131,6 @@ class _SceneLoop:
         self._packed_of = [operator.itemgetter(*(13 * k + W.PACK_TO_PACKED).tolist())
                            for k in range(len(self.comps))]
 
-    def first(self, y0):   # the scenario's own first row, not its float32 round trip
-        return y0
-
-    def set_state(self, y):
-        super().set_state(y)
-        if not self.many:
-            self.last = self._unpack(self.system.pack())
-
     def read(self):
         """Every body's packed row: a few bodies' as 13 plain floats (float32 values) each, from one
         ``pack()``; many bodies' as one float32 array (:meth:`Bodies.read`). A body whose state blew up
@@ -153,7 +141,7 @@ class _SceneLoop:
             bad = world.blown_up(self.raw, self.alive)
         else:
             vals = self.last = self._unpack(self.system.pack())
-            rows = [g(vals) for g in self._packed_of]
+            rows, self.raw = [g(vals) for g in self._packed_of], None   # raw: made by a decay of them
             bad = world.blown_up(rows, self.alive)
         for k in bad:
             self.alive[k] = False
@@ -163,8 +151,8 @@ class _SceneLoop:
     def packed_row(self, raw):   # a read is packed rows already (a few: plain floats; many: float32)
         return raw
 
-    def decay(self, g_v, g_w):   # the float32 velocities last read (Bodies.decay's raw), scaled
-        if not self.many:
+    def decay(self, g_v, g_w):   # the float32 velocities last read or set (Bodies.decay's raw), scaled
+        if self.raw is None:
             self.raw = np.array(self.last, dtype=np.float32).reshape(len(self.comps), 13)
         super().decay(g_v, g_w)
 

@@ -33,14 +33,12 @@ VARIANTS = {
     "symplectic_euler": Variant(1, "Rapier's step (gyroscopic forces on, its default): semi-implicit Euler "
                                    "in float32, explicit gyroscopic step in the principal frame rescaled to "
                                    "keep |L|, linearised normalised quaternion update with the new ω",
-                                traits=Traits(gyroscopic_term=True, translation_drift=0, rotation_sign=None,
-                                              rotation_drift="momentum", precision="float32")),
+                                traits=Traits(rotation_drift="momentum", rotation_sign=None,
+                                              precision="float32")),
     "symplectic_euler_no_gyro": Variant(1, "Rapier's step with gyroscopic_forces(False): semi-implicit Euler "
                                            "in float32 without the gyroscopic term (ω_W changes only by the "
                                            "torque)",
-                                        traits=Traits(gyroscopic_term=False, translation_drift=0,
-                                                      rotation_drift="none", rotation_sign=0,
-                                                      precision="float32")),
+                                        traits=Traits(gyroscopic_term=False, precision="float32")),
 }
 
 #: Above this many bodies a world reads its bodies' states from one serialisation per body (``RigidBody.
@@ -72,18 +70,23 @@ def state_bytes_layout():
     component's first place) and then checked on 256 bodies of random states stepped under random torques:
     :func:`_decode` of their serialisations must equal what the getters return, bit for bit. None where
     anything differs (another rapier3d may lay its bodies out otherwise): the getters then, per body."""
-    if rapier is None:
-        return None
     try:
-        return _find_layout()
+        return None if rapier is None else _find_layout()
     except Exception:  # noqa: BLE001 - an unexpected serialisation: the getters are always right
         return None
 
 
 def _find_layout():
-    probe = rpw.Bodies([(1.0, np.array([1.0, 2.0, 3.0]), np.array([1.0, 0.0, 0.0, 0.0]))], (0.0, 0.0, 0.0),
-                       "symplectic_euler", 1e-3)
-    rb = probe.bodies[0]
+    rng = np.random.default_rng(20260)
+    n = 256
+    y = np.zeros((n, 13))
+    y[:, 0:6], y[:, 10:13] = rng.normal(size=(n, 6)) * 10.0, rng.normal(size=(n, 3)) * 5.0
+    q = rng.normal(size=(n, 4))
+    y[:, 6:10] = q / np.linalg.norm(q, axis=1, keepdims=True)
+    check = rpw.Bodies([(1.0, np.array([1.0, 2.0, 3.0]), np.array([1.0, 0.0, 0.0, 0.0]))] * n,
+                       (0.0, 0.0, -9.81), "symplectic_euler", 1e-2)
+    check.set_state(y)
+    rb = check.bodies[0]   # the probe, its state distinct values
     rb.position = rapier.Isometry3((1.25, 2.375, 3.5), rapier.Rotation3(0.9, 0.1, -0.2, 0.3))
     rb.linvel, rb.angvel = (4.625, 5.75, 6.875), (7.125, 8.25, 9.375)
     rot = rb.rotation.to_bytes()
@@ -94,15 +97,6 @@ def _find_layout():
     if min(offsets) < 0 or len({*offsets}) != 13:
         return None
     layout = (len(blob), np.concatenate([np.arange(o, o + 4) for o in offsets]))
-    rng = np.random.default_rng(20260)
-    n = 256
-    y = np.zeros((n, 13))
-    y[:, 0:6], y[:, 10:13] = rng.normal(size=(n, 6)) * 10.0, rng.normal(size=(n, 3)) * 5.0
-    q = rng.normal(size=(n, 4))
-    y[:, 6:10] = q / np.linalg.norm(q, axis=1, keepdims=True)
-    check = rpw.Bodies([(1.0, np.array([1.0, 2.0, 3.0]), np.array([1.0, 0.0, 0.0, 0.0]))] * n,
-                       (0.0, 0.0, -9.81), "symplectic_euler", 1e-2)
-    check.set_state(y)
     for _ in range(4):
         check.apply(np.zeros((n, 3)), rng.normal(size=(n, 3)))
         blobs = [b.to_bytes() for b in check.bodies]
@@ -160,17 +154,10 @@ class RapierWorld(rpw.Bodies, World):
                     getattr(self.bodies[k], reset)(False)
                     getattr(self.bodies[k], add)(tuple(v), False)
 
-    def decay(self, g_v, g_w):
-        """Many bodies: :meth:`Bodies.decay`'s velocities (the last read's, scaled: the same products),
-        computed for all at once."""
-        if self.layout is None:
-            return rpw.Bodies.decay(self, g_v, g_w)
-        last = np.asarray(self.last, dtype=float)
-        v = (np.asarray(g_v, dtype=float)[:, None] * last[:, 3:6]).tolist()
-        w = (np.asarray(g_w, dtype=float)[:, None] * last[:, 10:13]).tolist()
-        for k, (rb, vk, wk) in enumerate(zip(self.bodies, v, w)):
-            if k not in self.dead:
-                rb.linvel, rb.angvel = tuple(vk), tuple(wk)
+    def decay(self, g_v, g_w):   # Bodies.decay of the last read, many bodies' (an array) as plain floats
+        if isinstance(self.last, np.ndarray):
+            self.last = self.last.tolist()
+        rpw.Bodies.decay(self, g_v, g_w)
 
     def first(self, y0):   # the scenario's own first row, not its float32 round trip
         return y0
@@ -219,7 +206,6 @@ class RapierEngine(WorldEngine):
 
 
 _ENGINE = RapierEngine()
-#: The module's functions (tests and scripts call them): the engine's, through the host loop.
 version, simulate, simulate_many, one_step = (_ENGINE.version, _ENGINE.simulate, _ENGINE.simulate_many,
                                               _ENGINE.one_step)
 RapierAdapter = RapierEngine
