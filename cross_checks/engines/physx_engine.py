@@ -174,20 +174,12 @@ class _SceneLoop:
                 add[k](f, t)
 
     def applier(self, f_W, tau_W):
-        """The constant forces' ``add_force_torque`` calls with their arguments made once (per step
-        only the bodies' ``alive`` checked), or None when no body gets any."""
-        alive, always, add = self.alive, self.always, self._add
-        calls = [(k, add[k], f, t) for k, f, t in zip(range(len(add)), _float_rows(f_W),
-                                                       _float_rows(tau_W))
-                 if always[k] or f[0] or f[1] or f[2] or t[0] or t[1] or t[2]]
-        if not calls:
-            return None
-
-        def again():
-            for k, add_k, f, t in calls:
-                if alive[k]:
-                    add_k(f, t)
-        return again
+        """:meth:`apply` of the constant forces as rows of plain floats, made once, or None when no body gets
+        any (SAPIEN takes the rows as lists either way)."""
+        f, t = _float_rows(f_W), _float_rows(tau_W)
+        if self.always.any() or any(map(any, f)) or any(map(any, t)):
+            return functools.partial(self.apply, f, t)
+        return None
 
 
 @functools.lru_cache(maxsize=1)
