@@ -163,7 +163,7 @@ class DartEngine(WorldEngine):
     (``pip install 'rbcheck[dart]'``)."""
 
     name, variants, world = ENGINE, VARIANTS, DartWorld
-    distribution, extra = "dartpy", "dart"
+    distribution, extra, imported = "dartpy", "dart", "dart"
     #: the COM off the body origin (Inertia's local COM); welded parts (WeldJoint children)
     body_forms = frozenset({"com_offset", "welded_parts"})
     sign_continuity = True

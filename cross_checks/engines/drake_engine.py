@@ -185,7 +185,7 @@ class DrakeEngine(WorldEngine):
     """``drake:VARIANT`` — registered under the entry-point group ``rbcheck.engines``."""
 
     name, variants, world = ENGINE, VARIANTS, DrakeWorld
-    distribution, module, extra = "drake", "pydrake", "drake"
+    distribution, module, extra, imported = "drake", "pydrake", "drake", "pydrake"
     #: the COM off the body origin (SpatialInertia with p_BoBcm); welded parts (WeldJoint)
     body_forms = frozenset({"com_offset", "welded_parts"})
     keeps_forces = True     # a fixed input port value stays until it is fixed again

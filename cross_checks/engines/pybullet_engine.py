@@ -150,7 +150,7 @@ class BulletWorld(pbw.Bodies, World):
 class PybulletEngine(WorldEngine):
     """``pybullet:VARIANT`` — registered under the entry-point group ``rbcheck.engines``."""
 
-    name, variants, distribution = ENGINE, VARIANTS, "pybullet"
+    name, variants, distribution, imported = ENGINE, VARIANTS, "pybullet", "p"
     #: applyExternalTorque(LINK_FRAME) takes a torque in the base's (inertial frame's) axes and Bullet turns
     #: it with the body: the world re-applies the bodies' body-axes torques before every step, no harness
     #: evaluation (pinned: tests/cross_checks/engines/test_pybullet_engine.py)

@@ -198,6 +198,7 @@ class RapierEngine(WorldEngine):
     """``rapier:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional."""
 
     name, variants, world, distribution, extra = ENGINE, VARIANTS, RapierWorld, DIST, "rapier"
+    imported = "rapier"
     keeps_forces = True
     sign_continuity = True
 

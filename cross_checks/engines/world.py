@@ -206,19 +206,22 @@ def body_entry(scenario, spec_of) -> tuple:
 
 class WorldEngine(base.EngineAdapter):
     """An engine adapter whose engine supplies a :class:`World` and whose runs are the host loop's
-    (:mod:`cross_checks.engines.loop`). Subclass it, declare the fields below and implement :meth:`build`.
+    (:mod:`cross_checks.engines.loop`). Subclass it, declare the fields below and ``world`` or :meth:`build`.
 
     ``distribution`` (the pip distribution whose version every result records), ``module`` (its import name,
     default ``distribution``), ``extra`` (rbcheck's pip extra that installs it, "" for a required engine) and
     ``runs_on`` (``(label, distribution)`` of what it runs on, recorded beside its version) give
-    :meth:`version`, the install checks and :meth:`engine_files`; ``world``, the class (or a function) that
-    :meth:`build` makes a world of, ``world(requests, variant, dt_s)``.
+    :meth:`version`, the install checks and :meth:`engine_files`; ``imported``, where the adapter module
+    imported its engine at its own import (install.optional_world), the name of its global that holds the
+    engine module (None there: not importable, its ``_IMPORT_ERROR`` says why); ``world``, the class (or a
+    function) that :meth:`build` makes a world of, ``world(requests, variant, dt_s)``.
     """
 
     distribution: str = ""
     module: str = ""
     extra: str = ""
     runs_on: tuple = ()
+    imported: str = ""
     world = None
     #: The engine adds gravity itself (the loop takes the weight off the harness force).
     applies_gravity: bool = True
@@ -271,11 +274,12 @@ class WorldEngine(base.EngineAdapter):
         return False
 
     def _installed(self):
-        """install.require of the engine (its words name ``distribution``): of the import error the adapter
-        module met importing it at its own import (its ``_IMPORT_ERROR``: install.optional_world), else of
+        """install.require of the engine (its words name ``distribution``): of the adapter module's global
+        ``imported`` and its ``_IMPORT_ERROR`` where it imported the engine at its own import, else of
         importing ``module`` now."""
-        error = getattr(sys.modules[type(self).__module__], "_IMPORT_ERROR", None)
-        found = (None, error) if error else install.optional_import(self.module or self.distribution)
+        adapter = vars(sys.modules[type(self).__module__])
+        found = ((adapter[self.imported], adapter.get("_IMPORT_ERROR")) if self.imported
+                 else install.optional_import(self.module or self.distribution))
         hint = f"pip install 'rbcheck[{self.extra}]'" if self.extra else ""
         install.require(*found, self.distribution, hint=hint)
 

@@ -132,9 +132,10 @@ def test_a_body_entry_carries_the_com_and_each_welded_parts_spec_as_the_worlds_t
 
 
 def test_an_engine_builds_its_declared_world_once_installed_and_names_what_is_missing(monkeypatch):
-    """WorldEngine.build makes the declared ``world`` after the install check; the check reads the import
-    error the adapter module met at its own import (``_IMPORT_ERROR``), naming the distribution and the
-    extra that installs it; an engine with neither a world nor a build of its own says so."""
+    """WorldEngine.build makes the declared ``world`` after the install check; where the adapter module
+    imported its engine at its own import (``imported``: the global holding it, None there when it failed,
+    ``_IMPORT_ERROR`` saying why) the check reads those, naming the distribution and the extra that installs
+    it; an engine with neither a world nor a build of its own says so."""
     import pytest
 
     from cross_checks.engines import install
@@ -146,9 +147,13 @@ def test_an_engine_builds_its_declared_world_once_installed_and_names_what_is_mi
 
     class Declared(WorldEngine):
         name, variants, world, distribution, extra = "declared", {}, Made, "numpy", "declared"
+        imported = "_ENGINE_MODULE"
+    here = sys.modules[__name__]
+    monkeypatch.setattr(here, "_ENGINE_MODULE", np, raising=False)
+    monkeypatch.setattr(here, "_IMPORT_ERROR", None, raising=False)
     assert Declared().build(["r"], "v", 0.5).args == (["r"], "v", 0.5)
-    monkeypatch.setattr(sys.modules[__name__], "_IMPORT_ERROR", ImportError("No module named 'x'"),
-                        raising=False)
+    monkeypatch.setattr(here, "_ENGINE_MODULE", None)
+    monkeypatch.setattr(here, "_IMPORT_ERROR", ImportError("No module named 'x'"))
     with pytest.raises(ImportError, match=r"^numpy \S+ is installed but cannot be imported: ImportError: "
                                           r"No module named 'x'$") as e:
         Declared().build(["r"], "v", 0.5)
