@@ -173,7 +173,5 @@ class DartEngine(WorldEngine):
     takes_body_torque = True
 
 
-_ENGINE = DartEngine()
-version, simulate, simulate_many, one_step = (_ENGINE.version, _ENGINE.simulate, _ENGINE.simulate_many,
-                                              _ENGINE.one_step)
+_ENGINE, version, simulate, simulate_many, one_step = DartEngine.exported()
 DartAdapter = DartEngine

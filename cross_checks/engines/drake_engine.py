@@ -65,12 +65,9 @@ def from_drake_state(x, com_B_m=None):
 
 
 def body_spec(body) -> tuple:
-    """``(mass_kg, moments (3,), R_BP (3, 3) or None)`` as worlds.drake.spatial_inertia takes them: a diagonal
-    tensor as its diagonal (no frame rotation), a full one as its principal moments along R_BP's columns."""
-    if body.is_diagonal():
-        return float(body.mass_kg), np.diag(body.inertia_B).copy(), None
-    moments, R_BP = body.principal_axes()
-    return float(body.mass_kg), moments, R_BP
+    """``(mass_kg, moments (3,), R_BP (3, 3) or None)`` as worlds.drake.spatial_inertia takes them
+    (world.principal_spec: a diagonal tensor as its diagonal, no frame rotation)."""
+    return world.principal_spec(body, frame=lambda R_BP: R_BP)
 
 
 @functools.lru_cache(maxsize=1)
@@ -199,7 +196,5 @@ class DrakeEngine(WorldEngine):
         return bool(scenario.problem.forces.state_dependent or scenario.problem.forces.has_decay)
 
 
-_ENGINE = DrakeEngine()
-version, simulate, simulate_many, one_step = (_ENGINE.version, _ENGINE.simulate, _ENGINE.simulate_many,
-                                              _ENGINE.one_step)
+_ENGINE, version, simulate, simulate_many, one_step = DrakeEngine.exported()
 DrakeAdapter = DrakeEngine

@@ -218,6 +218,5 @@ class PhysxEngine(WorldEngine):
                 *install.package_files("sapien", "../sapien.libs", pattern="libsapien*")]
 
 
-_ENGINE = PhysxEngine()
-simulate, simulate_many, one_step = _ENGINE.simulate, _ENGINE.simulate_many, _ENGINE.one_step
+_ENGINE, version, simulate, simulate_many, one_step = PhysxEngine.exported()
 PhysxAdapter = PhysxEngine

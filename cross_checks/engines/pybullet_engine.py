@@ -17,7 +17,7 @@ import numpy as np
 from cross_checks.engines import base, install, world
 from cross_checks.engines.base import EngineError, Variant
 from cross_checks.engines.world import World, WorldEngine
-from reference_sim.quaternion import quat_conj, quat_from_matrix
+from reference_sim.quaternion import quat_conj
 
 # (pybullet prints its build time at import)
 p, _IMPORT_ERROR, pbw = install.optional_world("pybullet", "pybullet", "Bodies", quiet_stderr=True)
@@ -67,12 +67,9 @@ def _connect() -> int:
 
 
 def body_spec(body) -> tuple:
-    """``(mass_kg, principal moments (3,), q_BP (w x y z) or None)`` as PyBullet takes them: a diagonal tensor
-    as it is (None: no frame rotation), a full one as its principal moments and frame."""
-    if body.is_diagonal():
-        return float(body.mass_kg), np.diag(body.inertia_B).copy(), None
-    moments, R_BP = body.principal_axes()
-    return float(body.mass_kg), moments, quat_from_matrix(R_BP)
+    """``(mass_kg, principal moments (3,), q_BP (w x y z) or None)``: PyBullet takes a diagonal inertia
+    (world.principal_spec: None, no frame rotation, for a diagonal tensor)."""
+    return world.principal_spec(body)
 
 
 def body_entry(scenario) -> tuple:
@@ -173,7 +170,5 @@ class PybulletEngine(WorldEngine):
                 tuple(float(g) for g in request.scenario.problem.forces.gravity_W))
 
 
-_ENGINE = PybulletEngine()
-version, simulate, simulate_many, one_step = (_ENGINE.version, _ENGINE.simulate, _ENGINE.simulate_many,
-                                              _ENGINE.one_step)
+_ENGINE, version, simulate, simulate_many, one_step = PybulletEngine.exported()
 PybulletAdapter = PybulletEngine

@@ -14,7 +14,6 @@ import numpy as np
 from cross_checks.engines import install, world
 from cross_checks.engines.base import EngineError, Traits, Variant
 from cross_checks.engines.world import World, WorldEngine
-from reference_sim.quaternion import quat_from_matrix
 
 rapier, _IMPORT_ERROR, rpw = install.optional_world("rapier3d", "rapier", "Bodies")
 if _IMPORT_ERROR is None:
@@ -110,12 +109,9 @@ def _find_layout():
 
 
 def body_spec(body) -> tuple:
-    """``(mass_kg, principal moments (3,), q_BP (w x y z))`` of an rbcheck RigidBody as Rapier takes it: COM
-    at the origin, the rotation of the principal axes in body coordinates (identity for a diagonal tensor)."""
-    if body.is_diagonal():
-        return float(body.mass_kg), np.diag(body.inertia_B).copy(), np.array([1.0, 0.0, 0.0, 0.0])
-    moments, R_BP = body.principal_axes()
-    return float(body.mass_kg), moments, quat_from_matrix(R_BP)
+    """``(mass_kg, principal moments (3,), q_BP (w x y z))`` as Rapier takes them, COM at the origin
+    (world.principal_spec; the identity q_BP for a diagonal tensor)."""
+    return world.principal_spec(body, diagonal=np.array([1.0, 0.0, 0.0, 0.0]))
 
 
 class RapierWorld(rpw.Bodies, World):
@@ -206,7 +202,5 @@ class RapierEngine(WorldEngine):
         return (float(request.dt_s), tuple(float(g) for g in request.scenario.problem.forces.gravity_W))
 
 
-_ENGINE = RapierEngine()
-version, simulate, simulate_many, one_step = (_ENGINE.version, _ENGINE.simulate, _ENGINE.simulate_many,
-                                              _ENGINE.one_step)
+_ENGINE, version, simulate, simulate_many, one_step = RapierEngine.exported()
 RapierAdapter = RapierEngine

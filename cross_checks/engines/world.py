@@ -72,9 +72,10 @@ import numpy as np
 
 from cross_checks.engines import base, install
 from cross_checks.engines.step_floats import bad_floats
+from reference_sim.quaternion import quat_from_matrix
 from reference_sim.simulate import BLOWUP_LIMIT
 
-__all__ = ["World", "HostRowsWorld", "WorldEngine", "blown_up", "body_specs", "body_entry"]
+__all__ = ["World", "HostRowsWorld", "WorldEngine", "blown_up", "body_specs", "body_entry", "principal_spec"]
 
 
 class World:
@@ -189,6 +190,17 @@ def body_specs(requests, spec_of) -> list:
     return [specs[id(r.scenario.problem.body)] for r in requests]
 
 
+def principal_spec(body, frame=quat_from_matrix, diagonal=None) -> tuple:
+    """``(mass_kg, principal moments (3,) kg m², principal frame)`` of a RigidBody for an engine that takes a
+    diagonal inertia (PyBullet, Rapier, Drake): a diagonal tensor as its diagonal, ``diagonal`` its frame (its
+    axes kept in their order); a full one as its principal moments and ``frame(R_BP)``
+    (reference_sim.body.principal_axes; by default q_BP (w, x, y, z))."""
+    if body.is_diagonal():
+        return float(body.mass_kg), np.diag(body.inertia_B).copy(), diagonal
+    moments, R_BP = body.principal_axes()
+    return float(body.mass_kg), moments, frame(R_BP)
+
+
 def body_entry(scenario, spec_of) -> tuple:
     """The scenario's body as the worlds' ``FormBody``/``form_world`` take it (worlds/dart.py, drake.py,
     pybullet.py; ``rbcheck repro`` writes the same entry into a script): ``spec_of(body)``; a body whose
@@ -286,6 +298,13 @@ class WorldEngine(base.EngineAdapter):
     def version(self) -> str:
         self._installed()
         return install.release(self.distribution, self.runs_on)
+
+    @classmethod
+    def exported(cls) -> tuple:
+        """``(engine, version, simulate, simulate_many, one_step)``: an instance and its methods, what an
+        adapter module exports as its functions (tests and scripts call them)."""
+        engine = cls()
+        return engine, engine.version, engine.simulate, engine.simulate_many, engine.one_step
 
     def simulate(self, scenario, variant: str, dt_s: float, n_steps: int):
         from cross_checks.engines import loop

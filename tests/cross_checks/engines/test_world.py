@@ -167,3 +167,38 @@ def test_an_engine_builds_its_declared_world_once_installed_and_names_what_is_mi
         name, variants = "nothing", {}
     with pytest.raises(TypeError, match="Nothing declares no world and does not define build"):
         Nothing().build([], "v", 0.1)
+
+
+def test_a_principal_spec_keeps_a_diagonal_tensors_axes_and_rotates_a_full_one_into_its_principal_frame():
+    """world.principal_spec (PyBullet's, Rapier's, Drake's body): a diagonal tensor as its diagonal in the
+    given order (principal_axes would sort it), with the frame the engine gives no rotation; a full tensor as
+    its principal moments and frame, R_BP diag(moments) R_BPᵀ = I_B to round-off, q_BP (w, x, y, z) by
+    default or R_BP itself."""
+    from cross_checks.engines.world import principal_spec
+    from reference_sim.body import RigidBody
+    from reference_sim.quaternion import matrix_from_quat
+    diag = RigidBody(2.0, np.diag([3.0, 1.0, 2.5]))
+    m, moments, frame = principal_spec(diag)
+    assert m == 2.0 and type(m) is float and moments.tolist() == [3.0, 1.0, 2.5] and frame is None
+    identity = np.array([1.0, 0.0, 0.0, 0.0])
+    assert principal_spec(diag, diagonal=identity)[2] is identity
+    full = RigidBody(1.5, [[2.0, 0.1, 0.05], [0.1, 3.0, -0.2], [0.05, -0.2, 4.0]])
+    m, moments, q_BP = principal_spec(full)
+    R_BP = full.principal_axes()[1]
+    assert m == 1.5 and np.array_equal(moments, full.principal_axes()[0])
+    assert np.array_equal(principal_spec(full, frame=lambda R: R)[2], R_BP)
+    assert np.allclose(matrix_from_quat(q_BP), R_BP, rtol=0.0, atol=tol.PRINCIPAL_FRAME_ROUND_TRIP)
+    back = R_BP @ np.diag(moments) @ R_BP.T
+    assert np.allclose(back, full.inertia_B, rtol=0.0, atol=tol.PRINCIPAL_FRAME_ROUND_TRIP * 4.0)
+
+
+def test_an_adapter_module_exports_one_instances_version_and_runs():
+    """WorldEngine.exported: one instance and its bound methods, what each adapter module exports."""
+    from cross_checks.engines.world import WorldEngine
+
+    class Declared(WorldEngine):
+        name, variants, distribution = "declared", {}, "numpy"
+    engine, version, simulate, simulate_many, one_step = Declared.exported()
+    assert type(engine) is Declared and version() == engine.version()
+    for f, name in ((simulate, "simulate"), (simulate_many, "simulate_many"), (one_step, "one_step")):
+        assert f.__self__ is engine and f.__func__ is getattr(WorldEngine, name)
