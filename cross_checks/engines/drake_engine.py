@@ -172,11 +172,6 @@ class DrakeWorld(dkw.FormBodies, World):
     def host_s(self) -> float:
         return sum(m.stage_forces.host_s for m in self.models if m.stage_forces is not None)
 
-    def packed(self, raw):
-        if all(m.com_B is None for m in self.models):
-            return from_drake_state(raw)
-        return dkw.FormBodies.packed(self, raw)
-
 
 class DrakeEngine(WorldEngine):
     """``drake:VARIANT`` — registered under the entry-point group ``rbcheck.engines``."""
