@@ -40,10 +40,9 @@ VARIANTS = {
                                         traits=Traits(gyroscopic_term=False, precision="float32")),
 }
 
-#: Above this many bodies a world reads its bodies' states from one serialisation per body (``RigidBody.
-#: to_bytes``, decoded for all at once: :func:`state_bytes_layout`) and takes its forces as arrays, giving a
-#: body a force or torque only where it changed; at or below it, per body through the getters, in plain
-#: floats. The same numbers either way (tests/cross_checks/engines/test_rapier_engine.py).
+#: Above this many bodies a world reads them from their serialisations (:func:`state_bytes_layout`) and gives
+#: a body a force or torque only where it changed; at or below it, through the getters in plain floats. The
+#: same numbers either way (tests/cross_checks/engines/test_rapier_engine.py).
 MANY_BODIES = 4
 
 
@@ -76,12 +75,10 @@ def state_bytes_layout():
 
 
 def _find_layout():
-    rng = np.random.default_rng(20260)
     n = 256
-    y = np.zeros((n, 13))
-    y[:, 0:6], y[:, 10:13] = rng.normal(size=(n, 6)) * 10.0, rng.normal(size=(n, 3)) * 5.0
-    q = rng.normal(size=(n, 4))
-    y[:, 6:10] = q / np.linalg.norm(q, axis=1, keepdims=True)
+    rng = np.random.default_rng(20260)
+    y = rng.normal(size=(n, 13)) * 5.0
+    y[:, 6:10] /= np.linalg.norm(y[:, 6:10], axis=1, keepdims=True)
     check = rpw.Bodies([(1.0, np.array([1.0, 2.0, 3.0]), np.array([1.0, 0.0, 0.0, 0.0]))] * n,
                        (0.0, 0.0, -9.81), "symplectic_euler", 1e-2)
     check.set_state(y)
