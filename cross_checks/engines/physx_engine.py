@@ -157,26 +157,26 @@ class _SceneLoop:
         super().decay(g_v, g_w)
 
     def apply(self, f_W, tau_W):
-        """:meth:`Bodies.apply` of (B, 3) arrays, or of the harness's rows of plain floats as they
-        are. Many bodies' arrays: the same float32 numbers (rounded once for all by NumPy, as SAPIEN
-        rounds each; both to nearest), the bodies that get one chosen in one vectorised pass, each
-        given its float32 rows (SAPIEN takes them faster than lists)."""
+        """:meth:`Bodies.apply` of (B, 3) arrays, or of rows of plain floats as they are (the harness's).
+        Many bodies' arrays: the same float32 numbers (rounded once for all by NumPy, as SAPIEN rounds each;
+        both to nearest), the bodies that get one chosen in one vectorised pass, given float32 rows."""
         if self.many and isinstance(f_W, np.ndarray):
-            f_W, tau_W = np.asarray(f_W, dtype=float), np.asarray(tau_W, dtype=float)
             get = self.alive & (self.always | f_W.any(axis=1) | tau_W.any(axis=1))
             f32, t32 = f_W.astype(np.float32), tau_W.astype(np.float32)
             for k in (range(len(self._add)) if get.all() else np.flatnonzero(get).tolist()):
                 self._add[k](f32[k], t32[k])
             return
+        if isinstance(f_W, np.ndarray):
+            f_W, tau_W = f_W.tolist(), np.asarray(tau_W).tolist()
         alive, always, add = self.alive, self.always, self._add
-        for k, f, t in zip(range(len(add)), _float_rows(f_W), _float_rows(tau_W)):
+        for k, f, t in zip(range(len(add)), f_W, tau_W):
             if alive[k] and (always[k] or f[0] or f[1] or f[2] or t[0] or t[1] or t[2]):
                 add[k](f, t)
 
     def applier(self, f_W, tau_W):
-        """:meth:`apply` of the constant forces as rows of plain floats, made once, or None when no body gets
-        any (SAPIEN takes the rows as lists either way)."""
-        f, t = _float_rows(f_W), _float_rows(tau_W)
+        """:meth:`apply` of the constant forces as rows of plain floats (SAPIEN takes lists either way), made
+        once, or None when no body gets any."""
+        f, t = np.asarray(f_W, dtype=float).tolist(), np.asarray(tau_W, dtype=float).tolist()
         if self.always.any() or any(map(any, f)) or any(map(any, t)):
             return functools.partial(self.apply, f, t)
         return None
@@ -188,14 +188,8 @@ def _world_class():
     return type("PhysxWorld", (_SceneLoop, _world_module().Bodies, World), {"__doc__": _SceneLoop.__doc__})
 
 
-def _float_rows(a) -> list:
-    """(B, 3) forces as B rows of 3 plain floats: an array's, or the harness's rows as they are."""
-    return a.tolist() if isinstance(a, np.ndarray) else a
-
-
 def PhysxWorld(requests, variant: str, dt_s: float):
-    """A world of ``requests`` (the class built on cross_checks.engines.worlds.physx.Bodies once sapien is
-    imported: sapien's import starts a thread, never at this module's import)."""
+    """A world of ``requests``, its class made once sapien is imported (the import starts a thread)."""
     return _world_class()(requests, variant, dt_s)
 
 
