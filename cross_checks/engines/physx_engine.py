@@ -103,11 +103,9 @@ def body_spec(body) -> tuple:
 
 
 class _SceneLoop:
-    """A PhysX world of the bodies of ``requests`` in one scene of ``variant``'s solver at ``dt_s`` under the
+    """A PhysX world: the bodies of ``requests`` in one scene of ``variant``'s solver at ``dt_s`` under the
     first request's gravity (:func:`_world_class` puts it before worlds.physx's ``Bodies``). Raw rows are
-    packed states (float32 values): a few bodies' read as plain floats from one ``pack()`` and given
-    plain-float forces; many bodies' read as one float32 array and given float32 rows (the harness's one
-    compiled evaluation). A body whose state blew up is parked at rest."""
+    packed states (float32 values), a few bodies' as plain floats (:data:`MANY_BODIES`)."""
 
     float_rows = True   # apply takes the harness's rows of plain floats (a few bodies)
     exact_start = True   # the scenario's own first row, not its float32 round trip
@@ -132,10 +130,9 @@ class _SceneLoop:
                            for k in range(len(self.comps))]
 
     def read(self):
-        """Every body's packed row: a few bodies' as 13 plain floats (float32 values) each, from one
-        ``pack()``; many bodies' as one float32 array (:meth:`Bodies.read`). A body whose state blew up
-        (world.blown_up) is parked at rest once read (PhysX must never step a NaN), with no force and no
-        decay from then on."""
+        """Every body's packed row: a few bodies' as 13 plain floats each from one ``pack()``, many bodies' as
+        one float32 array (:meth:`Bodies.read`). A body whose state blew up (world.blown_up) is parked at rest
+        once read (PhysX must never step a NaN), with no force and no decay from then on."""
         if self.many:
             rows = super().read()
             bad = world.blown_up(self.raw, self.alive)
