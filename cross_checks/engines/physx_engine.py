@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import importlib.util
+import math
 import operator
 import re
 import struct
@@ -23,6 +24,7 @@ from cross_checks.engines.base import EngineError, Traits, Variant
 from cross_checks.engines.install import installed_version
 from cross_checks.engines.world import World, WorldEngine
 from reference_sim.quaternion import quat_from_matrix
+from reference_sim.simulate import BLOWUP_LIMIT
 
 __all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate", "simulate_many", "one_step",
            "PhysxWorld", "PhysxAdapter"]
@@ -139,7 +141,7 @@ class _SceneLoop:
         else:
             vals = self.last = self._unpack(self.system.pack())
             rows, self.raw = [g(vals) for g in self._packed_of], None   # raw: made by a decay of them
-            bad = world.blown_up(rows, self.alive)
+            bad = () if math.hypot(*vals) <= BLOWUP_LIMIT else world.blown_up(rows, self.alive)
         for k in bad:
             self.alive[k] = False
             self._put(k, _REST)

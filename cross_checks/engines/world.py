@@ -171,10 +171,10 @@ def blown_up(rows, live) -> list:
     non-finite or beyond BLOWUP_LIMIT (reference_sim.simulate.bad_rows): what a world whose engine would step
     on from a bad state stops once read (PhysX, DART, Rapier). [] after one pass in the common case."""
     if isinstance(rows, np.ndarray):
-        big = np.abs(rows).max(axis=1)
-        if big.max() <= BLOWUP_LIMIT:   # (NaN compares False)
+        size = np.abs(rows)
+        if size.max() <= BLOWUP_LIMIT:   # (NaN compares False)
             return []
-        return np.flatnonzero(np.asarray(live, dtype=bool) & ~(big <= BLOWUP_LIMIT)).tolist()
+        return np.flatnonzero(np.asarray(live, dtype=bool) & ~(size.max(axis=1) <= BLOWUP_LIMIT)).tolist()
     if math.hypot(*itertools.chain.from_iterable(rows)) <= BLOWUP_LIMIT:   # at least every |component|
         return []
     return [k for k, row in enumerate(rows) if live[k] and bad_floats(row)]
