@@ -35,10 +35,8 @@ _DIST = "sapien"
 #: PhysX's rigid-body step: the renormalisation keeps |L| exactly while the rotational energy drifts at first
 #: order, either sign (docs/verdicts.md §3). TGS keeps ω in √I space and converts it back with two float32 3×3
 #: products every step: four ordinary steps' rounding (docs/verdicts.md, ``rounding_factor``).
-_TRAITS = Traits(gyroscopic_term=True, translation_drift=0, rotation_drift="momentum", rotation_sign=None,
-                 precision="float32")
+_TRAITS = Traits(rotation_drift="momentum", rotation_sign=None, precision="float32")
 VARIANTS = {
-    # sapien's default solver (PhysxSceneConfig.enable_tgs = True)
     "tgs": Variant(1, "PhysX 5 TGS (SAPIEN's default): semi-implicit Euler, explicit gyroscopic term "
                       "renormalised to |L|, exponential-map attitude; float32; ω kept in sqrt-inertia space",
                    traits=dataclasses.replace(_TRAITS, rounding_factor=4.0)),
