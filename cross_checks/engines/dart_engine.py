@@ -1,33 +1,23 @@
-"""DART (``dartpy``) as an engine (``dart:VARIANT``, float64): a world of free bodies for rbcheck's loop
-(cross_checks.engines.world, cross_checks.engines.loop).
-
-Each body alone in a DART ``World`` of its own (:class:`DartBody`): one ``FreeJoint``/``BodyNode`` pair, its
-inertia ``Inertia(m, com_B = 0, I_B)`` (body origin = COM, the scenario's tensor as given), neutralised
-(:data:`JOINT_SETTINGS`, :func:`neutralise`). State at the boundary: FreeJoint positions ``[r, x_W]`` (``r``
-the rotation vector of R_WB) and velocities ``[ω_W, v_W]``, both in WORLD axes; the recorded quaternion is
-sign-continuous from the scenario's initial one, recorded as given (the rotation vector's round trip is not
-exact). The step is ``World::step`` (dart/simulation/World.cpp): semi-implicit Euler, explicit gyroscopic
-term, exponential-map rotation — MuJoCo Euler's scheme, DART's only integrator, called as ``step(False)``
-(which keeps the wrench set before it). Forces: the loop's, set before every step (DART would hold a world
-wrench in body axes): the world force at the COM minus the weight ``m g``, then the world torque
-(``setExtForce`` replaces the whole wrench); a torque fixed in body axes is DART's own
-(``takes_body_torque``: ``setExtTorque(τ_B, isLocal=True)`` once where it is a body's only constant force,
-else added to the world torque before every step); the decay by setting the velocities last read, scaled.
-Divergence: the loop's (DART goes on after a blow-up, warning: the world parks a blown-up body at rest).
-Conventions, defaults neutralised and what pins them: docs/engine_conventions.md, "DART 6.x".
+"""DART (``dartpy``) as an engine (``dart:VARIANT``, float64): the free bodies of
+cross_checks.engines.worlds.dart (each alone in a DART ``World``: FreeJoint positions ``[r, x_W]``, ``r`` the
+rotation vector of R_WB, velocities ``[ω_W, v_W]`` in WORLD axes) for rbcheck's loop. ``World::step``, DART's
+only integrator (semi-implicit Euler, explicit gyroscopic term, exponential map: MuJoCo Euler's scheme),
+called as ``step(False)``, which keeps the wrench set before it. Forces: the loop's (the weight taken off),
+set before every step; a torque fixed in body axes is DART's own (``takes_body_torque``). The recorded
+quaternion is sign-continuous from the scenario's, the state at t = 0 the scenario's (the rotation vector's
+round trip is not exact); a blown-up body is parked at rest (DART would step on, warning). Conventions,
+defaults neutralised and what pins them: docs/engine_conventions.md, "DART 6.x".
 """
 from __future__ import annotations
 
 import functools
-import itertools
 import math
 
 import numpy as np
 
-from cross_checks.engines import base, install
+from cross_checks.engines import base, install, world
 from cross_checks.engines.base import EngineError, Variant
 from cross_checks.engines.loop import host_problem
-from cross_checks.engines.step_floats import bad_floats
 from cross_checks.engines.world import World, WorldEngine
 from reference_sim.simulate import BLOWUP_LIMIT
 
@@ -46,15 +36,6 @@ VARIANTS = {
                                       "own articulated-body dynamics), exponential-map rotation update with "
                                       "the new ω", traits=base.SYMPLECTIC_EULER_EXPLICIT_GYRO),
 }
-
-def _require():
-    install.require(dart, _IMPORT_ERROR, "dartpy", hint="pip install 'rbcheck[dart]'")
-
-
-def version() -> str:
-    """The installed dartpy distribution's version (EngineNotInstalled when it is absent)."""
-    _require()
-    return install.release("dartpy")
 
 
 def _packed_floats(row) -> list:
@@ -77,17 +58,8 @@ def body_spec(body) -> tuple:
 
 
 def body_entry(scenario) -> tuple:
-    """The scenario's body as :class:`cross_checks.engines.worlds.dart.FormBody` takes it: its
-    :func:`body_spec`; a body whose origin is off its COM (scenario.body_com_B_m) also with that COM (m)
-    and its welded parts (scenario.body_parts; none: no fifth item), each ``(mass_kg, inertia_B, None, com)``.
-    ``rbcheck repro`` writes the same entry into a script."""
-    com = getattr(scenario, "body_com_B_m", None)
-    spec = body_spec(scenario.problem.body)
-    if com is None:
-        return spec
-    parts = [(float(q.mass_kg), np.asarray(q.inertia_B, dtype=float), None, [float(v) for v in q.com_B_m])
-             for q in getattr(scenario, "body_parts", ())]
-    return (*spec, [float(v) for v in com], *([parts] if parts else []))
+    """The scenario's body as worlds.dart.FormBody takes it (world.body_entry)."""
+    return world.body_entry(scenario, body_spec)
 
 
 class DartBody(dtw.FormBody):
@@ -96,7 +68,7 @@ class DartBody(dtw.FormBody):
     origin and its welded parts too); ``set_state``/``read`` at the boundary."""
 
     def __init__(self, scenario, dt_s: float):
-        _require()
+        _ENGINE._installed()
         super().__init__(body_entry(scenario), scenario.problem.forces.gravity_W, dt_s)
         if not self.ok:
             raise EngineError(f"DART {version()} rejects the inertia of scenario "
@@ -105,17 +77,16 @@ class DartBody(dtw.FormBody):
 
 
 class DartWorld(dtw.FormBodies, World):
-    """B bodies, each a :class:`DartBody`, stepped in turn by ``World.step(False)``, which keeps the external
-    wrench set before it (World::step's resetCommand; the default, True, clears it). DART holds that wrench
-    in body axes (``setExtForce``/``setExtTorque`` turn a world one at the call), so only the body-axes
-    torques stay right over later steps: a world whose only constant forces are those sets them once
-    (:meth:`applier`); world forces are set before every step, as before. Raw rows: DART's ``[r, x_W, ω_W,
-    v_W]`` (12). A body whose state blew up is parked at rest, its forces cleared, and gets no force from then
-    on (DART would go on from the bad state, warning on stderr; the loop ends its run)."""
+    """B bodies, each a :class:`DartBody`, stepped in turn by ``World.step(False)`` (World::step's
+    resetCommand false: the external wrench set before it kept). DART holds that wrench in body axes
+    (``setExtForce``/``setExtTorque`` turn a world one at the call), so only body-axes torques are set once
+    (:meth:`applier`). Raw rows: ``[r, x_W, ω_W, v_W]`` (12). A blown-up body is parked at rest, its forces
+    cleared, and gets none from then on (DART would go on from the bad state; the loop ends its run)."""
 
     exact_start = True
+    float_reads = True
 
-    def __init__(self, requests, dt_s: float):
+    def __init__(self, requests, variant: str, dt_s: float):
         World.__init__(self)
         dtw.FormBodies.__init__(self, [DartBody(r.scenario, dt_s) for r in requests])
         # the forces the harness evaluates (the body-axes torques are DART's own: takes_body_torque)
@@ -130,7 +101,7 @@ class DartWorld(dtw.FormBodies, World):
             def read():   # read() of one body, its calls bound
                 row = pos().tolist() + vel().tolist()
                 rows = self.last = [row]
-                if not math.hypot(*row) <= BLOWUP_LIMIT:
+                if not math.hypot(*row) <= BLOWUP_LIMIT:   # (NaN compares False)
                     self._bad(rows)
                 return rows
             self.read = read
@@ -150,33 +121,20 @@ class DartWorld(dtw.FormBodies, World):
         return None
 
     def read(self):
-        """Every body's state, 12 floats ``[r, x_W, ω_W, v_W]`` (Bodies.read's); a body whose state is
-        non-finite or beyond BLOWUP_LIMIT is parked (:meth:`_bad`)."""
+        """Every body's state, 12 floats ``[r, x_W, ω_W, v_W]`` (Bodies.read's); a blown-up body parked."""
         rows = self.last = [pos().tolist() + vel().tolist() for pos, vel in self._reads]
-        if not math.hypot(*itertools.chain.from_iterable(rows)) <= BLOWUP_LIMIT:   # (NaN compares False)
-            self._bad(rows)
+        self._bad(rows)
         return rows
 
     def _bad(self, rows):
-        """Park each live body whose row is non-finite or beyond BLOWUP_LIMIT (DART's |r| ≤ π: the packed
-        state's verdict)."""
-        for k, row in enumerate(rows):
-            if self.live[k] and bad_floats(row):
-                self._park(k)
-
-    def _park(self, k):
-        """Body k at rest at the origin with no force, never given one again (``live``)."""
-        b = self.bodies[k]
-        self.live[k] = False
-        b.skeleton.setPositions(np.zeros(6))
-        b.skeleton.setVelocities(np.zeros(6))
-        b.node.clearExternalForces()
-
-    def rows(self, reads):
-        """A chunk's reads (per step, B lists of 12 floats) as an array (n, B, 12), in one pass."""
-        n, B = len(reads), len(self.bodies)
-        flat = itertools.chain.from_iterable(itertools.chain.from_iterable(reads))
-        return np.fromiter(flat, dtype=float, count=n * B * 12).reshape(n, B, 12)
+        """Each live body whose row blew up (world.blown_up; DART's |r| ≤ π: the packed state's verdict) at
+        rest at the origin with no force, never given one again (``live``)."""
+        for k in world.blown_up(rows, self.live):
+            b = self.bodies[k]
+            self.live[k] = False
+            b.skeleton.setPositions(np.zeros(6))
+            b.skeleton.setVelocities(np.zeros(6))
+            b.node.clearExternalForces()
 
     def packed_row(self, raw):
         if any(b.com_B is not None for b in self.bodies):
@@ -204,8 +162,8 @@ class DartEngine(WorldEngine):
     """``dart:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional
     (``pip install 'rbcheck[dart]'``)."""
 
-    name, variants = ENGINE, VARIANTS
-    distribution, module, extra = "dartpy", "dartpy", "dart"
+    name, variants, world = ENGINE, VARIANTS, DartWorld
+    distribution, extra, imported = "dartpy", "dart", "dart"
     #: the COM off the body origin (Inertia's local COM); welded parts (WeldJoint children)
     body_forms = frozenset({"com_offset", "welded_parts"})
     sign_continuity = True
@@ -214,14 +172,6 @@ class DartEngine(WorldEngine):
     #: (pinned: tests/cross_checks/engines/test_dart_engine.py)
     takes_body_torque = True
 
-    def version(self) -> str:
-        return version()
 
-    def build(self, requests, variant, dt_s):
-        _require()
-        return DartWorld(requests, dt_s)
-
-
-_ENGINE = DartEngine()
-simulate, simulate_many, one_step = _ENGINE.simulate, _ENGINE.simulate_many, _ENGINE.one_step
+_ENGINE, version, simulate, simulate_many, one_step = DartEngine.exported()
 DartAdapter = DartEngine

@@ -1,16 +1,8 @@
-"""Drake as an engine (``drake:VARIANT``, float64): a world of free bodies for rbcheck's loop
-(cross_checks.engines.world, cross_checks.engines.loop).
-
-A body is a continuous ``MultibodyPlant`` with one free body (:class:`DrakeModel`), its spatial inertia about
-the body origin = COM in body axes, gravity the plant's own, and a ``Simulator`` of its own in fixed-step
-mode: step n is ``AdvanceTo(n Δt)``. State at the boundary: ``q = [q_WB (w x y z), x_W]``, ``v = [ω_W, v_W]``
-(angular first, both in WORLD axes); Drake does not renormalise the quaternion, so the recorded one is
-``q/|q|``. Forces: the loop's constant ``[τ_W, f_W − m g]`` fixed once on the applied generalized force port
-(Drake keeps it); state-dependent forces or decay are a LeafSystem evaluating ``forces.stage_force_torque``
-(the decay as damping in the right-hand side) at every derivative evaluation, so every stage of a
-multi-stage scheme sees its own stage state (the loop applies neither; that evaluation's time is rbcheck's).
-Divergence: the loop's, and an exception Drake raises while stepping ends its body's run at that step.
-Conventions and what pins them: docs/engine_conventions.md, "Drake 1.51.1".
+"""Drake as an engine (``drake:VARIANT``, float64): the free bodies of cross_checks.engines.worlds.drake for
+rbcheck's loop. Constant forces are fixed once on the plant's applied generalized force port (Drake keeps
+them); state-dependent forces or decay are a LeafSystem evaluating ``forces.stage_force_torque`` at every
+derivative evaluation, each stage of a multi-stage scheme at its own state (that time is rbcheck's). A step
+Drake refuses ends its body's run. Conventions and what pins them: docs/engine_conventions.md, "Drake 1.51.1".
 """
 from __future__ import annotations
 
@@ -20,21 +12,19 @@ import time
 
 import numpy as np
 
-from cross_checks.engines import base, forces, install
+from cross_checks.engines import base, forces, install, world
 from cross_checks.engines.base import EngineError, Variant
 from cross_checks.engines.forces import stage_force_torque
 from cross_checks.engines.world import World, WorldEngine
 
-# imported without pydrake so that the registry can say why it is unavailable; its classes on first use
 pydrake, _IMPORT_ERROR, dkw = install.optional_world("pydrake", "drake", "FormBody", "FormBodies")
 from cross_checks.engines.worlds.com import com_state
 
 __all__ = ["ENGINE", "VARIANTS", "version", "simulate", "simulate_many", "one_step", "DrakeModel",
-           "DrakeWorld", "DrakeAdapter", "from_drake_state", "body_spec"]
+           "DrakeWorld", "DrakeAdapter", "body_spec"]
 
 ENGINE = "drake"
-#: Drake's invariance finding under a COM offset (docs/engine_conventions.md, "Invariance"): found by CI's
-#: sweep with --invariance on tumbling_box; on every other catalog scenario the check is step-dependent.
+#: Drake's invariance finding under a COM offset (docs/engine_conventions.md, "Invariance"; CI's sweep).
 ORIGIN_STEP_FINDING = base.InvarianceFinding(
     "com_offset", (("gyration_radii", 1.5, 1.5),),
     "the engine's, by design: Drake steps the free body's origin and turns the body about it (as its "
@@ -44,8 +34,7 @@ ORIGIN_STEP_FINDING = base.InvarianceFinding(
     "~850×), the implicit Euler's deviation shrinks 0.00937, 0.00364, 0.00231 m/s at Δt, Δt/2, Δt/4 — "
     "order 1.01 over the two halvings, but 0.66 at the second, below the 0.7 the refinement asks of each",
     ("position", "velocity"))
-#: The variants, named after Drake's integrators (``ResetIntegratorFromFlags``), with what each step does
-#: besides its order (cross_checks.engines.base.Traits; docs/engine_conventions.md).
+#: The variants, named after Drake's integrators (``ResetIntegratorFromFlags``; docs/engine_conventions.md).
 VARIANTS = {
     "semi_explicit_euler": Variant(1.0, "Drake semi-explicit Euler: v from the start-of-step forces "
                                         "(explicit gyroscopic term), then q from the new v; quaternion "
@@ -60,31 +49,12 @@ VARIANTS = {
                               traits=dataclasses.replace(base.WHOLE_STATE_IMPLICIT_EULER,
                                                          invariance_findings=(ORIGIN_STEP_FINDING,))),
 }
-def _require():
-    install.require(pydrake, _IMPORT_ERROR, "drake", hint="pip install 'rbcheck[drake]'")
-
-
-def version() -> str:
-    _require()
-    return install.installed_version("drake") or getattr(pydrake, "__version__", "unknown")   # from source
-
-
-def from_drake_state(x, com_B_m=None):
-    """Drake's states (..., 13) -> packed (..., 13), the quaternion normalised (Drake's is not unit)
-    (:func:`cross_checks.engines.worlds.drake.from_drake_state`); for a body whose COM is at ``com_B_m`` from
-    its origin, the COM's x and v (x_o + R c, v_o + ω × R c)."""
-    y = dkw.from_drake_state(x)
-    return y if com_B_m is None else com_state(y, com_B_m)
 
 
 def body_spec(body) -> tuple:
-    """``(mass_kg, moments (3,), R_BP (3, 3) or None)`` of an rbcheck RigidBody as Drake's world takes it
-    (:func:`cross_checks.engines.worlds.drake.spatial_inertia`): a diagonal tensor as its diagonal (no frame
-    rotation), a full one as its principal moments along the columns of R_BP."""
-    if body.is_diagonal():
-        return float(body.mass_kg), np.diag(body.inertia_B).copy(), None
-    moments, R_BP = body.principal_axes()
-    return float(body.mass_kg), moments, R_BP
+    """``(mass_kg, moments (3,), R_BP (3, 3) or None)`` as worlds.drake.spatial_inertia takes them
+    (world.principal_spec: a diagonal tensor as its diagonal, no frame rotation)."""
+    return world.principal_spec(body, frame=lambda R_BP: R_BP)
 
 
 @functools.lru_cache(maxsize=1)
@@ -93,9 +63,8 @@ def _force_system_class():
     from pydrake.systems.framework import LeafSystem
 
     class StageForces(LeafSystem):
-        """Input: the plant's state (13); output: the generalized force ``[τ_W, f_W − m g]`` (6) of the
-        scenario's forces and decay at that state (gravity is the plant's own); ``host_s``: the seconds spent
-        evaluating it (rbcheck's, not Drake's)."""
+        """The plant's state (13) in, the generalized force ``[τ_W, f_W − m g]`` (6) of the scenario's forces
+        and decay there out (gravity is the plant's own); ``host_s``: the seconds of it (rbcheck's)."""
 
         def __init__(self, scenario, com_B_m=None):
             super().__init__()
@@ -110,7 +79,7 @@ def _force_system_class():
             x = self._x.Eval(context).tolist()
             y = [x[4], x[5], x[6], x[10], x[11], x[12], x[0], x[1], x[2], x[3], x[7], x[8], x[9]]
             if self._com is not None:
-                y = from_drake_state(np.array(x), self._com)
+                y = com_state(dkw.from_drake_state(np.array(x)), self._com)
             f, tau = stage_force_torque(self._scenario, y)
             w = self._weight
             if self._com is not None:   # f − m g at the COM: f − m g at Bo and the torque (R c) × (f − m g)
@@ -122,29 +91,17 @@ def _force_system_class():
 
 
 def body_entry(scenario) -> tuple:
-    """The scenario's body as :class:`cross_checks.engines.worlds.drake.FormBody` takes it: its
-    :func:`body_spec`; a body whose origin Bo is off its COM (scenario.body_com_B_m) also with that COM
-    (p_BoBcm, m) and its welded parts (scenario.body_parts; none: no fifth item), each ``(*body_spec, com)``.
-    ``rbcheck repro`` writes the same entry into a script."""
-    from reference_sim.body import RigidBody
-    com = getattr(scenario, "body_com_B_m", None)
-    spec = body_spec(scenario.problem.body)
-    if com is None:
-        return spec
-    parts = [(*body_spec(RigidBody(p.mass_kg, p.inertia_B)), [float(v) for v in p.com_B_m])
-             for p in getattr(scenario, "body_parts", ())]
-    return (*spec, [float(v) for v in com], *([parts] if parts else []))
+    """The scenario's body as worlds.drake.FormBody takes it (world.body_entry: its COM is p_BoBcm)."""
+    return world.body_entry(scenario, body_spec)
 
 
 class DrakeModel(dkw.FormBody):
-    """A scenario's free body in Drake (:class:`cross_checks.engines.worlds.drake.FormBody`, what
-    ``rbcheck repro`` embeds: its COM where the scenario puts it, its welded parts; the per-stage forces
-    added here), with a simulator whose integrator is ``integrator`` (a Drake integrator name);
-    ``set_state``/``state`` in the packed layout. ``constant_forces``: the scenario's constant forces fixed
-    on the plant here (False: by the caller, :meth:`apply`)."""
+    """A scenario's free body (worlds.drake.FormBody: its COM, its welded parts; the per-stage forces added
+    here) simulated by the Drake integrator ``integrator``; ``set_state``/``state`` packed. With
+    ``constant_forces``, the scenario's constant forces fixed on the plant here (else by :meth:`apply`)."""
 
     def __init__(self, scenario, integrator: str, constant_forces: bool = True):
-        _require()
+        _ENGINE._installed()
         p = scenario.problem
         self.scenario = scenario
         self.per_stage = bool(p.forces.state_dependent or p.forces.has_decay)
@@ -162,8 +119,7 @@ class DrakeModel(dkw.FormBody):
                 f"Drake {version()} rejected the inertia of scenario {self.scenario.name!r}: {exc}") from None
 
     def system(self, plant):
-        """The plant, or with forces evaluated at every stage, a diagram of the plant and the LeafSystem
-        evaluating them from its state into its applied generalized force port."""
+        """The plant; with forces at every stage, a diagram: its state into the LeafSystem, into its port."""
         if not self.per_stage:
             return plant
         from pydrake.systems.framework import DiagramBuilder
@@ -174,8 +130,9 @@ class DrakeModel(dkw.FormBody):
         builder.Connect(fs.get_output_port(0), plant.get_applied_generalized_force_input_port())
         return builder.Build()
 
-    def state(self) -> np.ndarray:
-        return from_drake_state(self.drake_state(), self.com_B)
+    def state(self) -> np.ndarray:   # packed; the COM's where the origin is off it (worlds.com.com_state)
+        y = dkw.from_drake_state(self.drake_state())
+        return y if self.com_B is None else com_state(y, self.com_B)
 
 
 def _model(scenario, variant: str, dt_s: float, constant_forces: bool = True) -> DrakeModel:
@@ -185,11 +142,8 @@ def _model(scenario, variant: str, dt_s: float, constant_forces: bool = True) ->
 
 
 class DrakeWorld(dkw.FormBodies, World):
-    """B bodies, each a :class:`DrakeModel` (its constant forces the loop's), stepped to ``n Δt`` in turn
-    (:class:`cross_checks.engines.worlds.drake.FormBodies`). Raw rows: Drake's states ``[q_WB, x_W, ω_W,
-    v_W]``. A
-    body whose step Drake refuses (NaN detected, Newton failed) warns and keeps its last state; after a
-    blow-up, that is a consequence (``first_cause_only``)."""
+    """B :class:`DrakeModel` bodies, constant forces the loop's, stepped in turn (worlds.drake.FormBodies). A
+    step Drake refuses warns and keeps the body's last state; after a blow-up, a consequence."""
 
     first_cause_only = True
     hold_failed = True   # the loop ends the body's run at the step Drake refused (its warning)
@@ -203,33 +157,24 @@ class DrakeWorld(dkw.FormBodies, World):
     def host_s(self) -> float:
         return sum(m.stage_forces.host_s for m in self.models if m.stage_forces is not None)
 
-    def packed(self, raw):
-        if all(m.com_B is None for m in self.models):
-            return from_drake_state(raw)
-        return dkw.FormBodies.packed(self, raw)
-
 
 class DrakeEngine(WorldEngine):
     """``drake:VARIANT`` — registered under the entry-point group ``rbcheck.engines``."""
 
-    name, variants = ENGINE, VARIANTS
-    distribution, module = "drake", "pydrake"
+    name, variants, world = ENGINE, VARIANTS, DrakeWorld
+    distribution, module, extra, imported = "drake", "pydrake", "drake", "pydrake"
     #: the COM off the body origin (SpatialInertia with p_BoBcm); welded parts (WeldJoint)
     body_forms = frozenset({"com_offset", "welded_parts"})
     keeps_forces = True     # a fixed input port value stays until it is fixed again
     chunk = 256
 
-    def version(self) -> str:
-        return version()
-
-    def build(self, requests, variant, dt_s):
-        _require()
-        return DrakeWorld(requests, variant, dt_s)
+    def version(self) -> str:   # the metadata's, else pydrake's own (a build from source)
+        self._installed()
+        return install.installed_version("drake") or getattr(pydrake, "__version__", "unknown")
 
     def per_stage(self, scenario, variant):
         return bool(scenario.problem.forces.state_dependent or scenario.problem.forces.has_decay)
 
 
-_ENGINE = DrakeEngine()
-simulate, simulate_many, one_step = _ENGINE.simulate, _ENGINE.simulate_many, _ENGINE.one_step
+_ENGINE, version, simulate, simulate_many, one_step = DrakeEngine.exported()
 DrakeAdapter = DrakeEngine

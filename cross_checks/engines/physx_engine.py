@@ -1,10 +1,6 @@
-"""NVIDIA PhysX 5 (CPU, through SAPIEN's ``sapien.physx``) as an engine (``physx:VARIANT``, float32): a world
-of bodies for rbcheck's loop (cross_checks.engines.world, cross_checks.engines.loop).
-
-A ``sapien.Scene`` with a ``PhysxCpuSystem`` (PhysX 5.3.1 in SAPIEN 3.0.3, on the calling thread) per Δt and
-float32 gravity; a ``PhysxRigidDynamicComponent`` per run, no shape, the tensor as principal moments and mass
-frame R_BP (the actor frame stays the body frame), neutralised (:data:`BODY_SETTINGS`). At the boundary: the
-actor pose ``Pose(p, q (w x y z))``, the COM's velocity, ω in WORLD axes, one ``pack()`` per step; forces
+"""NVIDIA PhysX 5 (CPU, through SAPIEN's ``sapien.physx``) as an engine (``physx:VARIANT``, float32): the
+bodies of cross_checks.engines.worlds.physx (a ``PhysxCpuSystem`` scene per Δt and float32 gravity, on the
+calling thread; a rigid dynamic per run, its principal moments and mass frame q_BP) for rbcheck's loop, forces
 before every step (PhysX clears them). Conventions, defaults neutralised and what pins them:
 docs/engine_conventions.md, "PhysX 5.3.1 (SAPIEN 3.0.3)".
 """
@@ -13,7 +9,6 @@ from __future__ import annotations
 import dataclasses
 import functools
 import importlib.util
-import itertools
 import math
 import operator
 import re
@@ -24,10 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
-from cross_checks.engines import install
+from cross_checks.engines import install, world
 from cross_checks.engines.base import EngineError, Traits, Variant
 from cross_checks.engines.install import installed_version
-from cross_checks.engines.step_floats import bad_floats
 from cross_checks.engines.world import World, WorldEngine
 from reference_sim.quaternion import quat_from_matrix
 from reference_sim.simulate import BLOWUP_LIMIT
@@ -41,10 +35,8 @@ _DIST = "sapien"
 #: PhysX's rigid-body step: the renormalisation keeps |L| exactly while the rotational energy drifts at first
 #: order, either sign (docs/verdicts.md §3). TGS keeps ω in √I space and converts it back with two float32 3×3
 #: products every step: four ordinary steps' rounding (docs/verdicts.md, ``rounding_factor``).
-_TRAITS = Traits(gyroscopic_term=True, translation_drift=0, rotation_drift="momentum", rotation_sign=None,
-                 precision="float32")
+_TRAITS = Traits(rotation_drift="momentum", rotation_sign=None, precision="float32")
 VARIANTS = {
-    # sapien's default solver (PhysxSceneConfig.enable_tgs = True)
     "tgs": Variant(1, "PhysX 5 TGS (SAPIEN's default): semi-implicit Euler, explicit gyroscopic term "
                       "renormalised to |L|, exponential-map attitude; float32; ω kept in sqrt-inertia space",
                    traits=dataclasses.replace(_TRAITS, rounding_factor=4.0)),
@@ -82,28 +74,22 @@ def _dist_version() -> str:
 
 
 @functools.lru_cache(maxsize=1)
-def _engine():
-    """``(sapien, sapien.physx)``, imported once after :func:`version`'s checks; SAPIEN's warning at import
-    ("Failed to find system libvulkan": no rendering here) silenced."""
+def _world_module():
+    """cross_checks.engines.worlds.physx (what rbcheck repro embeds; it imports sapien), imported once after
+    :func:`version`'s checks, SAPIEN's warning at import ("Failed to find system libvulkan") silenced."""
     version()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        import sapien
-        import sapien.physx as px
-    return sapien, px
+        from cross_checks.engines.worlds import physx
+    return physx
 
 
-@functools.lru_cache(maxsize=1)
-def _world_module():
-    """cross_checks.engines.worlds.physx (what rbcheck repro embeds), after :func:`_engine`."""
-    _engine()
-    from cross_checks.engines.worlds import physx as world
-    return world
+def _engine():   # (sapien, sapien.physx), as the world module imported them
+    return _world_module().sapien, _world_module().px
 
 
 def __getattr__(name):
-    """``BODY_SETTINGS``, ``PACK_TO_PACKED`` and ``neutralise``: cross_checks.engines.worlds.physx's (sapien
-    imported then)."""
+    """``BODY_SETTINGS``, ``PACK_TO_PACKED`` and ``neutralise``: worlds.physx's (sapien imported then)."""
     if name in ("BODY_SETTINGS", "PACK_TO_PACKED", "neutralise"):
         return getattr(_world_module(), name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
@@ -117,157 +103,103 @@ def body_spec(body) -> tuple:
 
 
 class _SceneLoop:
-    """The per-step side of a PhysX world (:func:`_world_class` puts it before the world module's ``Bodies``):
-    a few bodies read as plain floats from one ``pack()`` and given plain-float forces; many bodies read as
-    one float32 array and given float32 rows (the harness's one compiled evaluation)."""
+    """A PhysX world: the bodies of ``requests`` in one scene of ``variant``'s solver at ``dt_s`` under the
+    first request's gravity (:func:`_world_class` puts it before worlds.physx's ``Bodies``). Raw rows are
+    packed states (float32 values), a few bodies' as plain floats (:data:`MANY_BODIES`)."""
 
     float_rows = True   # apply takes the harness's rows of plain floats (a few bodies)
+    exact_start = True   # the scenario's own first row, not its float32 round trip
 
-    def first(self, y0):   # the scenario's own first row, not its float32 round trip
-        return y0
-
-    def set_state(self, y):
-        super().set_state(y)
-        if not self.many:
-            self.last = self._unpack(self.system.pack())
+    def __init__(self, requests, variant: str, dt_s: float):
+        World.__init__(self)
+        W = _world_module()
+        with _LOCK:   # the scene config is SAPIEN's process-global default
+            W.Bodies.__init__(self, requests[0].scenario.problem.forces.gravity_W, variant, dt_s)
+        for spec in world.body_specs(requests, body_spec):
+            try:
+                self.add_body(*spec)
+            except Exception as exc:  # noqa: BLE001 - PhysX/SAPIEN refuses the mass properties
+                raise EngineError(f"PhysX (sapien {installed_version(_DIST)}) refuses the body: "
+                                  f"{type(exc).__name__}: {exc}") from None
+        self.always = np.array([r.scenario.problem.forces.state_dependent for r in requests], dtype=bool)
+        self.many = len(requests) > MANY_BODIES
+        self.float_reads = not self.many
+        # a few bodies: one pack() as plain floats, each body's packed row of it (PACK_TO_PACKED) in one call
+        self._unpack = struct.Struct(f"{13 * len(self.comps)}f").unpack
+        self._packed_of = [operator.itemgetter(*(13 * k + W.PACK_TO_PACKED).tolist())
+                           for k in range(len(self.comps))]
 
     def read(self):
-        """Every body's packed row, 13 plain floats (float32 values), from one ``pack()``; a body
-        whose state is non-finite or beyond BLOWUP_LIMIT is parked at rest once read (so that PhysX
-        never steps a NaN), with no force and no decay from then on."""
+        """Every body's packed row: a few bodies' as 13 plain floats each from one ``pack()``, many bodies' as
+        one float32 array (:meth:`Bodies.read`). A body whose state blew up (world.blown_up) is parked at rest
+        once read (PhysX must never step a NaN), with no force and no decay from then on."""
         if self.many:
-            return self._read_many()
-        vals = self.last = self._unpack(self.system.pack())
-        rows = [g(vals) for g in self._packed_of]
-        if not math.hypot(*vals) <= BLOWUP_LIMIT:   # (NaN compares False) any body's state may be bad
-            for k, row in enumerate(rows):
-                if self.alive[k] and bad_floats(row):
-                    self.alive[k] = False
-                    self._put(k, _REST)
+            rows = super().read()
+            bad = world.blown_up(self.raw, self.alive)
+        else:
+            vals = self.last = self._unpack(self.system.pack())
+            rows, self.raw = [g(vals) for g in self._packed_of], None   # raw: made by a decay of them
+            bad = () if math.hypot(*vals) <= BLOWUP_LIMIT else world.blown_up(rows, self.alive)
+        for k in bad:
+            self.alive[k] = False
+            self._put(k, _REST)
         return rows
-
-    def _read_many(self):
-        """Many bodies: the packed rows as one float32 array (:meth:`Bodies.read`), whose forces the
-        harness evaluates in one compiled call; bad bodies parked as :meth:`read` parks them."""
-        rows = super().read()
-        raw = self.raw
-        if not np.abs(raw).max() <= BLOWUP_LIMIT:          # (NaN compares False)
-            for k in np.flatnonzero(self.alive & ~(np.abs(raw).max(axis=1) <= BLOWUP_LIMIT)):
-                self.alive[k] = False
-                self._put(k, _REST)
-        return rows
-
-    def rows(self, reads):
-        if self.many:
-            return World.rows(self, reads)
-        n, B = len(reads), len(self.comps)
-        flat = itertools.chain.from_iterable(itertools.chain.from_iterable(reads))
-        return np.fromiter(flat, dtype=float, count=n * B * 13).reshape(n, B, 13)
 
     def packed_row(self, raw):   # a read is packed rows already (a few: plain floats; many: float32)
         return raw
 
-    def decay(self, g_v, g_w):   # the float32 velocities last read (Bodies.decay's raw), scaled
-        if not self.many:
+    def decay(self, g_v, g_w):   # the float32 velocities last read or set (Bodies.decay's raw), scaled
+        if self.raw is None:
             self.raw = np.array(self.last, dtype=np.float32).reshape(len(self.comps), 13)
         super().decay(g_v, g_w)
 
     def apply(self, f_W, tau_W):
-        """:meth:`Bodies.apply` of (B, 3) arrays, or of the harness's rows of plain floats as they
-        are. Many bodies' arrays: the same float32 numbers (rounded once for all by NumPy, as SAPIEN
-        rounds each; both to nearest), the bodies that get one chosen in one vectorised pass, each
-        given its float32 rows (SAPIEN takes them faster than lists)."""
+        """:meth:`Bodies.apply` of (B, 3) arrays, or of rows of plain floats as they are (the harness's).
+        Many bodies' arrays: the same float32 numbers (rounded once for all by NumPy, as SAPIEN rounds each;
+        both to nearest), the bodies that get one chosen in one vectorised pass, given float32 rows."""
         if self.many and isinstance(f_W, np.ndarray):
-            f_W, tau_W = np.asarray(f_W, dtype=float), np.asarray(tau_W, dtype=float)
             get = self.alive & (self.always | f_W.any(axis=1) | tau_W.any(axis=1))
             f32, t32 = f_W.astype(np.float32), tau_W.astype(np.float32)
             for k in (range(len(self._add)) if get.all() else np.flatnonzero(get).tolist()):
                 self._add[k](f32[k], t32[k])
             return
+        if isinstance(f_W, np.ndarray):
+            f_W, tau_W = f_W.tolist(), np.asarray(tau_W).tolist()
         alive, always, add = self.alive, self.always, self._add
-        for k, f, t in zip(range(len(add)), _float_rows(f_W), _float_rows(tau_W)):
+        for k, f, t in zip(range(len(add)), f_W, tau_W):
             if alive[k] and (always[k] or f[0] or f[1] or f[2] or t[0] or t[1] or t[2]):
                 add[k](f, t)
 
     def applier(self, f_W, tau_W):
-        """The constant forces' ``add_force_torque`` calls with their arguments made once (per step
-        only the bodies' ``alive`` checked), or None when no body gets any."""
-        alive, always, add = self.alive, self.always, self._add
-        calls = [(k, add[k], f, t) for k, f, t in zip(range(len(add)), _float_rows(f_W),
-                                                       _float_rows(tau_W))
-                 if always[k] or f[0] or f[1] or f[2] or t[0] or t[1] or t[2]]
-        if not calls:
-            return None
-
-        def again():
-            for k, add_k, f, t in calls:
-                if alive[k]:
-                    add_k(f, t)
-        return again
+        """:meth:`apply` of the constant forces as rows of plain floats (SAPIEN takes lists either way), made
+        once, or None when no body gets any."""
+        f, t = np.asarray(f_W, dtype=float).tolist(), np.asarray(tau_W, dtype=float).tolist()
+        if self.always.any() or any(map(any, f)) or any(map(any, t)):
+            return functools.partial(self.apply, f, t)
+        return None
 
 
-_Bodies = None   # the world module's Bodies, once sapien is imported (PhysxWorld's base)
-
-
+@functools.lru_cache(maxsize=1)
 def _world_class():
-    global _Bodies
-    if _Bodies is None:
-        W = _world_module()
-
-        class PhysxWorld(_SceneLoop, W.Bodies, World):
-            """The bodies of ``requests`` in one scene of ``variant``'s solver at ``dt_s`` under the first
-            request's gravity (:class:`cross_checks.engines.worlds.physx.Bodies`). Raw rows are packed states
-            (float32 values); a body whose state blew up is parked at rest."""
-
-            def __init__(self, requests, variant: str, dt_s: float):
-                World.__init__(self)
-                with _LOCK:   # the scene config is SAPIEN's process-global default
-                    W.Bodies.__init__(self, requests[0].scenario.problem.forces.gravity_W, variant, dt_s)
-                specs: dict = {}   # each distinct body's spec once: a batch is mostly copies of a few
-                for r in requests:
-                    body = r.scenario.problem.body
-                    spec = specs.get(id(body))
-                    if spec is None:
-                        spec = specs[id(body)] = body_spec(body)
-                    try:
-                        self.add_body(*spec)
-                    except Exception as exc:  # noqa: BLE001 - PhysX/SAPIEN refuses the mass properties
-                        raise EngineError(f"PhysX (sapien {installed_version(_DIST)}) refuses the body: "
-                                          f"{type(exc).__name__}: {exc}") from None
-                self.always = np.array([r.scenario.problem.forces.state_dependent for r in requests],
-                                       dtype=bool)
-                self.many = len(requests) > MANY_BODIES
-                # a few bodies: one pack() as plain floats, and each body's packed row of it
-                # (PACK_TO_PACKED) in one call
-                self._unpack = struct.Struct(f"{13 * len(self.comps)}f").unpack
-                self._packed_of = [operator.itemgetter(*(13 * k + W.PACK_TO_PACKED).tolist())
-                                   for k in range(len(self.comps))]
-
-        _Bodies = PhysxWorld
-    return _Bodies
-
-
-def _float_rows(a) -> list:
-    """(B, 3) forces as B rows of 3 plain floats: an array's, or the harness's rows as they are."""
-    return a.tolist() if isinstance(a, np.ndarray) else a
+    """The PhysX world's class: :class:`_SceneLoop` before worlds.physx's ``Bodies`` (sapien imported)."""
+    return type("PhysxWorld", (_SceneLoop, _world_module().Bodies, World), {"__doc__": _SceneLoop.__doc__})
 
 
 def PhysxWorld(requests, variant: str, dt_s: float):
-    """A world of ``requests`` (the class built on cross_checks.engines.worlds.physx.Bodies once sapien is
-    imported: sapien's import starts a thread, never at this module's import)."""
+    """A world of ``requests``, its class made once sapien is imported (the import starts a thread)."""
     return _world_class()(requests, variant, dt_s)
 
 
 class PhysxEngine(WorldEngine):
     """``physx:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional."""
 
-    name, variants, distribution = ENGINE, VARIANTS, _DIST
+    name, variants, distribution, extra = ENGINE, VARIANTS, _DIST, "physx"
     sign_continuity = True
-
     version = staticmethod(version)   # the module's: sapien is not imported
+    world = staticmethod(PhysxWorld)
 
-    def build(self, requests, variant, dt_s):
-        return PhysxWorld(requests, variant, dt_s)
+    def _installed(self):   # version()'s checks: SAPIEN imported by the world, its warning silenced
+        version()
 
     def group_key(self, request) -> tuple:   # one scene per Δt and float32 gravity; runs of any length
         return (float(request.dt_s), np.float32(request.scenario.problem.forces.gravity_W).tobytes())
@@ -277,7 +209,5 @@ class PhysxEngine(WorldEngine):
                 *install.package_files("sapien", "../sapien.libs", pattern="libsapien*")]
 
 
-_ENGINE = PhysxEngine()
-#: The module's functions (tests and scripts call them): the engine's, through the host loop.
-simulate, simulate_many, one_step = _ENGINE.simulate, _ENGINE.simulate_many, _ENGINE.one_step
+_ENGINE, version, simulate, simulate_many, one_step = PhysxEngine.exported()
 PhysxAdapter = PhysxEngine

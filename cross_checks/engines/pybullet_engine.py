@@ -1,30 +1,23 @@
-"""PyBullet as an engine (``pybullet:VARIANT``, float64): a world of bodies for rbcheck's loop
-(cross_checks.engines.world, cross_checks.engines.loop).
-
-One ``DIRECT`` client per process, its world reset for each world of bodies; a body is a ``createMultiBody``
-without collision shape (maximal coordinates for ``maximal``), neutralised (:data:`DYNAMICS_SETTINGS`,
-sleeping disabled). PyBullet takes a diagonal inertia and reports the inertial (principal) frame P as the base
-pose, so the boundary rotates: ``q_WP = q_WB ⊗ q_BP`` in, ``q_WB = q_WP ⊗ q_BP⁻¹`` out (quaternions (x, y, z,
-w) in PyBullet); position and velocity are the COM's, ω in WORLD axes. Forces: the loop's, applied before
-every step (PyBullet clears them), the weight ``m g`` taken off; a torque fixed in body axes is PyBullet's own
-(``takes_body_torque``: ``applyExternalTorque`` in ``LINK_FRAME``, the base's inertial axes, re-applied before
-every step); the decay by setting the velocities last read, scaled. Conventions, defaults neutralised and
-what pins them: docs/engine_conventions.md, "PyBullet 3.2.7".
+"""PyBullet as an engine (``pybullet:VARIANT``, float64): the bodies of cross_checks.engines.worlds.pybullet
+(one ``DIRECT`` client per process, its world reset for each world of bodies; a ``createMultiBody`` per body,
+maximal coordinates for ``maximal``; the inertial frame P as the base pose: ``q_WP = q_WB ⊗ q_BP`` in,
+``q_WB = q_WP ⊗ q_BP⁻¹`` out) for rbcheck's loop. Forces: the loop's (the weight taken off), before every
+step (PyBullet clears them); a torque fixed in body axes is PyBullet's own (``takes_body_torque``).
+Conventions, defaults neutralised and what pins them: docs/engine_conventions.md, "PyBullet 3.2.7".
 """
 from __future__ import annotations
 
 import dataclasses
 import functools
-import itertools
 import os
 import threading
 
 import numpy as np
 
-from cross_checks.engines import base, install
+from cross_checks.engines import base, install, world
 from cross_checks.engines.base import EngineError, Variant
 from cross_checks.engines.world import World, WorldEngine
-from reference_sim.quaternion import quat_conj, quat_from_matrix
+from reference_sim.quaternion import quat_conj
 
 # (pybullet prints its build time at import)
 p, _IMPORT_ERROR, pbw = install.optional_world("pybullet", "pybullet", "Bodies", quiet_stderr=True)
@@ -47,13 +40,10 @@ SMALL_BODY_GYROSCOPIC_FINDING = base.InvarianceFinding(
     "0.05 keeps it)")
 #: Both modes are semi-implicit Euler: explicit gyroscopic term in multibody, implicit in maximal coordinates.
 VARIANTS = {
-    "multibody": Variant(1,
-                         "PyBullet Featherstone multibody (default): "
-                         "semi-implicit Euler, explicit gyroscopic term",
-                         traits=base.SYMPLECTIC_EULER_EXPLICIT_GYRO),
-    "maximal": Variant(1,
-                       "PyBullet maximal coordinates (btRigidBody): "
-                       "semi-implicit Euler, implicit gyroscopic term",
+    "multibody": Variant(1, "PyBullet Featherstone multibody (default): semi-implicit Euler, explicit "
+                            "gyroscopic term", traits=base.SYMPLECTIC_EULER_EXPLICIT_GYRO),
+    "maximal": Variant(1, "PyBullet maximal coordinates (btRigidBody): semi-implicit Euler, implicit "
+                          "gyroscopic term",
                        traits=dataclasses.replace(base.SYMPLECTIC_EULER_IMPLICIT_GYRO,
                                                   invariance_findings=(SMALL_BODY_GYROSCOPIC_FINDING,))),
 }
@@ -63,20 +53,10 @@ _client: int | None = None
 _client_pid: int | None = None
 
 
-def _require():
-    install.require(p, _IMPORT_ERROR, "pybullet")
-
-
-def version() -> str:
-    """The installed pybullet distribution's version (read from its metadata once per process)."""
-    _require()
-    return install.release("pybullet")
-
-
 def _connect() -> int:
     """The process's DIRECT client (reconnected after a fork or if it was closed)."""
     global _client, _client_pid
-    _require()
+    _ENGINE._installed()
     if _client is not None and _client_pid == os.getpid() and p.isConnected(physicsClientId=_client):
         return _client
     cid = p.connect(p.DIRECT)
@@ -87,29 +67,22 @@ def _connect() -> int:
 
 
 def body_spec(body) -> tuple:
-    """``(mass_kg, principal moments (3,), q_BP (w x y z) or None)`` of an rbcheck RigidBody as PyBullet
-    takes it: a diagonal tensor as it is (None: no frame rotation), a full one as its principal moments and
-    frame."""
-    if body.is_diagonal():
-        return float(body.mass_kg), np.diag(body.inertia_B).copy(), None
-    moments, R_BP = body.principal_axes()
-    return float(body.mass_kg), moments, quat_from_matrix(R_BP)
+    """``(mass_kg, principal moments (3,), q_BP (w x y z) or None)``: PyBullet takes a diagonal inertia
+    (world.principal_spec: None, no frame rotation, for a diagonal tensor)."""
+    return world.principal_spec(body)
 
 
 def body_entry(scenario) -> tuple:
-    """The scenario's body as :meth:`cross_checks.engines.worlds.pybullet.Bodies.add_body` takes it: its
-    :func:`body_spec`, and for a body whose frame origin is off its COM (scenario.body_com_B_m) that COM
-    (m, body axes from the origin: the base's inertial frame there). ``rbcheck repro`` writes the same entry
-    into a script (:func:`cross_checks.engines.worlds.pybullet.form_world`)."""
-    com = getattr(scenario, "body_com_B_m", None)
-    spec = body_spec(scenario.problem.body)
-    return spec if com is None else (*spec, [float(v) for v in com])
+    """The scenario's body as worlds.pybullet's ``add_body`` takes it (world.body_entry: its COM, where the
+    base's inertial frame is)."""
+    return world.body_entry(scenario, body_spec)
 
 
 class BulletWorld(pbw.Bodies, World):
-    """The bodies of one run group in the process's (reset) PyBullet world, with the boundary conversions
-    (:class:`cross_checks.engines.worlds.pybullet.Bodies`, what ``rbcheck repro`` embeds). Raw rows:
+    """The bodies of one run group in the process's (reset) PyBullet world (worlds.pybullet.Bodies). Raw rows:
     ``[x_W (COM), v_W, q_WP (x, y, z, w), ω_W]`` as PyBullet reports them (P: the inertial frame)."""
+
+    float_reads = True
 
     def __init__(self, requests, variant: str, dt_s: float):
         """The bodies in the adapter's world, reset first; the caller holds ``LOCK``."""
@@ -128,15 +101,13 @@ class BulletWorld(pbw.Bodies, World):
             def read():
                 ps, orn = pose(b, c)
                 lin, ang = vel(b, c)
-                rows = self.last = [ps + lin + orn + ang]
-                return rows
+                self.last = [ps + lin + orn + ang]
+                return self.last
             self.read = read
 
     def applier(self, f_W, tau_W):
-        """:meth:`apply` of constant forces as the engine's own calls with their arguments bound (one
-        ``applyExternalTorque`` per torque: no Python frame per step when there is one), or None when there
-        is nothing to apply. World forces at the COM go through :meth:`apply` (their point is the COM's last
-        read position)."""
+        """:meth:`apply` of constant forces as the engine's own calls, arguments bound (one: no Python frame
+        a step), or None; world forces at the COM go through :meth:`apply` (at the COM last read)."""
         f_rows = np.asarray(f_W, dtype=float).tolist()
         if any(f[0] != 0.0 or f[1] != 0.0 or f[2] != 0.0 for f in f_rows):
             return functools.partial(self.apply, f_W, tau_W)
@@ -153,12 +124,6 @@ class BulletWorld(pbw.Bodies, World):
             for call in calls:
                 call()
         return again
-
-    def rows(self, reads):
-        """A chunk's reads (per step, B tuples of 13 floats) as an array (n, B, 13), in one pass."""
-        n, B = len(reads), len(self.bodies)
-        flat = itertools.chain.from_iterable(itertools.chain.from_iterable(reads))
-        return np.fromiter(flat, dtype=float, count=n * B * 13).reshape(n, B, 13)
 
     def _add(self, scenario):
         entry = body_entry(scenario)
@@ -182,9 +147,7 @@ class BulletWorld(pbw.Bodies, World):
 class PybulletEngine(WorldEngine):
     """``pybullet:VARIANT`` — registered under the entry-point group ``rbcheck.engines``."""
 
-    name = ENGINE
-    variants = VARIANTS
-    distribution = "pybullet"
+    name, variants, distribution, imported = ENGINE, VARIANTS, "pybullet", "p"
     #: applyExternalTorque(LINK_FRAME) takes a torque in the base's (inertial frame's) axes and Bullet turns
     #: it with the body: the world re-applies the bodies' body-axes torques before every step, no harness
     #: evaluation (pinned: tests/cross_checks/engines/test_pybullet_engine.py)
@@ -192,11 +155,8 @@ class PybulletEngine(WorldEngine):
     #: a body frame off the COM: the base's inertial frame (its pose is what PyBullet's base state is)
     body_forms = frozenset({"com_offset"})
 
-    def version(self) -> str:
-        return version()
-
     def build(self, requests, variant, dt_s):
-        _require()
+        self._installed()
         LOCK.acquire()
         try:
             return BulletWorld(requests, variant, dt_s)
@@ -209,14 +169,6 @@ class PybulletEngine(WorldEngine):
         return (float(request.dt_s), int(request.n_steps),
                 tuple(float(g) for g in request.scenario.problem.forces.gravity_W))
 
-    def engine_files(self) -> list:
-        """PyBullet's compiled module."""
-        return install.library_files(p)
 
-
-_ENGINE = PybulletEngine()
-# the module's functions are the engine's (the host loop's runs: cross_checks.engines.loop)
-simulate, simulate_many, one_step = _ENGINE.simulate, _ENGINE.simulate_many, _ENGINE.one_step
-
-
+_ENGINE, version, simulate, simulate_many, one_step = PybulletEngine.exported()
 PybulletAdapter = PybulletEngine

@@ -1,12 +1,8 @@
-"""Rapier (``rapier3d``, dimforge's Python bindings, 3D, float32) as an engine (``rapier:VARIANT``): a world
-of bodies for rbcheck's loop (cross_checks.engines.world, cross_checks.engines.loop).
-
-One ``PhysicsWorld`` per Δt and gravity, a dynamic ``RigidBody`` per run, no collider, mass properties about
-the COM (body origin = COM, the scenario's body frame; principal moments and frame R_BP); defaults neutralised
-(:data:`WORLD_SETTINGS`, :data:`BODY_SETTINGS`, one thread). At the boundary: COM position and velocity, ω in
-WORLD axes, ``Rotation3`` built (w, x, y, z) but read (x, y, z, w); user forces ACCUMULATE and are kept (the
-loop's replace them); the decay sets the velocities last read, scaled. Conventions, defaults neutralised and
-what pins them: docs/engine_conventions.md, "Rapier 0.36.1".
+"""Rapier (``rapier3d``, dimforge's Python bindings, 3D, float32) as an engine (``rapier:VARIANT``): the
+bodies of cross_checks.engines.worlds.rapier (one ``PhysicsWorld`` per Δt and gravity, a dynamic
+``RigidBody`` per run, its mass properties about the COM; user forces accumulate and are kept: the loop's
+replace them) for rbcheck's loop. Conventions, defaults neutralised and what pins them:
+docs/engine_conventions.md, "Rapier 0.36.1".
 """
 from __future__ import annotations
 
@@ -15,12 +11,9 @@ import math
 
 import numpy as np
 
-from cross_checks.engines import install
+from cross_checks.engines import install, world
 from cross_checks.engines.base import EngineError, Traits, Variant
-from cross_checks.engines.step_floats import bad_floats
 from cross_checks.engines.world import World, WorldEngine
-from reference_sim.quaternion import quat_from_matrix
-from reference_sim.simulate import BLOWUP_LIMIT
 
 rapier, _IMPORT_ERROR, rpw = install.optional_world("rapier3d", "rapier", "Bodies")
 if _IMPORT_ERROR is None:
@@ -39,25 +32,18 @@ VARIANTS = {
     "symplectic_euler": Variant(1, "Rapier's step (gyroscopic forces on, its default): semi-implicit Euler "
                                    "in float32, explicit gyroscopic step in the principal frame rescaled to "
                                    "keep |L|, linearised normalised quaternion update with the new ω",
-                                traits=Traits(gyroscopic_term=True, translation_drift=0, rotation_sign=None,
-                                              rotation_drift="momentum", precision="float32")),
+                                traits=Traits(rotation_drift="momentum", rotation_sign=None,
+                                              precision="float32")),
     "symplectic_euler_no_gyro": Variant(1, "Rapier's step with gyroscopic_forces(False): semi-implicit Euler "
                                            "in float32 without the gyroscopic term (ω_W changes only by the "
                                            "torque)",
-                                        traits=Traits(gyroscopic_term=False, translation_drift=0,
-                                                      rotation_drift="none", rotation_sign=0,
-                                                      precision="float32")),
+                                        traits=Traits(gyroscopic_term=False, precision="float32")),
 }
 
-#: Above this many bodies a world reads its bodies' states from one serialisation per body (``RigidBody.
-#: to_bytes``, decoded for all at once: :func:`state_bytes_layout`) and takes its forces as arrays, giving a
-#: body a force or torque only where it changed; at or below it, per body through the getters, in plain
-#: floats. The same numbers either way (tests/cross_checks/engines/test_rapier_engine.py).
+#: Above this many bodies a world reads them from their serialisations (:func:`state_bytes_layout`) and gives
+#: a body a force or torque only where it changed; at or below it, through the getters in plain floats. The
+#: same numbers either way (tests/cross_checks/engines/test_rapier_engine.py).
 MANY_BODIES = 4
-
-
-def _f32(values) -> np.ndarray:
-    return np.asarray(values, dtype=np.float32)
 
 
 def _decode(blobs: bytes, n: int, layout) -> np.ndarray:
@@ -70,12 +56,8 @@ def _decode(blobs: bytes, n: int, layout) -> np.ndarray:
     qx, qy, qz, qw = v[:, 6], v[:, 7], v[:, 8], v[:, 9]
     norm = np.sqrt((qx * qx + qz * qz) + (qy * qy + qw * qw))
     out = np.empty((n, 13))
-    out[:, 0:6] = v[:, 0:6]
-    out[:, 6] = qw / norm
-    out[:, 7] = qx / norm
-    out[:, 8] = qy / norm
-    out[:, 9] = qz / norm
-    out[:, 10:13] = v[:, 10:13]
+    out[:, 0:6], out[:, 10:13] = v[:, 0:6], v[:, 10:13]
+    out[:, 6:10] = v[:, [9, 6, 7, 8]] / norm[:, None]   # (w, x, y, z), each divided in float32
     return out
 
 
@@ -86,37 +68,31 @@ def state_bytes_layout():
     component's first place) and then checked on 256 bodies of random states stepped under random torques:
     :func:`_decode` of their serialisations must equal what the getters return, bit for bit. None where
     anything differs (another rapier3d may lay its bodies out otherwise): the getters then, per body."""
-    if rapier is None:
-        return None
     try:
-        return _find_layout()
+        return None if rapier is None else _find_layout()
     except Exception:  # noqa: BLE001 - an unexpected serialisation: the getters are always right
         return None
 
 
 def _find_layout():
-    probe = rpw.Bodies([(1.0, np.array([1.0, 2.0, 3.0]), np.array([1.0, 0.0, 0.0, 0.0]))], (0.0, 0.0, 0.0),
-                       "symplectic_euler", 1e-3)
-    rb = probe.bodies[0]
+    n = 256
+    rng = np.random.default_rng(20260)
+    y = rng.normal(size=(n, 13)) * 5.0
+    y[:, 6:10] /= np.linalg.norm(y[:, 6:10], axis=1, keepdims=True)
+    check = rpw.Bodies([(1.0, np.array([1.0, 2.0, 3.0]), np.array([1.0, 0.0, 0.0, 0.0]))] * n,
+                       (0.0, 0.0, -9.81), "symplectic_euler", 1e-2)
+    check.set_state(y)
+    rb = check.bodies[0]   # the probe, its state distinct values
     rb.position = rapier.Isometry3((1.25, 2.375, 3.5), rapier.Rotation3(0.9, 0.1, -0.2, 0.3))
     rb.linvel, rb.angvel = (4.625, 5.75, 6.875), (7.125, 8.25, 9.375)
     rot = rb.rotation.to_bytes()
     stored_q = np.frombuffer(rot[len(rot) - 16:], dtype="<f4")     # the rotation as kept: x, y, z, w
     blob = rb.to_bytes()
-    want = [*_f32([1.25, 2.375, 3.5, 4.625, 5.75, 6.875]), *stored_q, *_f32([7.125, 8.25, 9.375])]
+    want = [*np.float32([1.25, 2.375, 3.5, 4.625, 5.75, 6.875]), *stored_q, *np.float32([7.125, 8.25, 9.375])]
     offsets = [blob.find(c.tobytes()) for c in want]
     if min(offsets) < 0 or len({*offsets}) != 13:
         return None
     layout = (len(blob), np.concatenate([np.arange(o, o + 4) for o in offsets]))
-    rng = np.random.default_rng(20260)
-    n = 256
-    y = np.zeros((n, 13))
-    y[:, 0:6], y[:, 10:13] = rng.normal(size=(n, 6)) * 10.0, rng.normal(size=(n, 3)) * 5.0
-    q = rng.normal(size=(n, 4))
-    y[:, 6:10] = q / np.linalg.norm(q, axis=1, keepdims=True)
-    check = rpw.Bodies([(1.0, np.array([1.0, 2.0, 3.0]), np.array([1.0, 0.0, 0.0, 0.0]))] * n,
-                       (0.0, 0.0, -9.81), "symplectic_euler", 1e-2)
-    check.set_state(y)
     for _ in range(4):
         check.apply(np.zeros((n, 3)), rng.normal(size=(n, 3)))
         blobs = [b.to_bytes() for b in check.bodies]
@@ -130,12 +106,9 @@ def _find_layout():
 
 
 def body_spec(body) -> tuple:
-    """``(mass_kg, principal moments (3,), q_BP (w x y z))`` of an rbcheck RigidBody as Rapier takes it: COM
-    at the origin, the rotation of the principal axes in body coordinates (identity for a diagonal tensor)."""
-    if body.is_diagonal():
-        return float(body.mass_kg), np.diag(body.inertia_B).copy(), np.array([1.0, 0.0, 0.0, 0.0])
-    moments, R_BP = body.principal_axes()
-    return float(body.mass_kg), moments, quat_from_matrix(R_BP)
+    """``(mass_kg, principal moments (3,), q_BP (w x y z))`` as Rapier takes them, COM at the origin
+    (world.principal_spec; the identity q_BP for a diagonal tensor)."""
+    return world.principal_spec(body, diagonal=np.array([1.0, 0.0, 0.0, 0.0]))
 
 
 class RapierWorld(rpw.Bodies, World):
@@ -145,25 +118,16 @@ class RapierWorld(rpw.Bodies, World):
 
     def __init__(self, requests, variant: str, dt_s: float):
         World.__init__(self)
-        specs: dict = {}   # each distinct body's spec once: a batch is mostly copies of a few
-        for r in requests:
-            if id(r.scenario.problem.body) not in specs:
-                specs[id(r.scenario.problem.body)] = body_spec(r.scenario.problem.body)
-        rpw.Bodies.__init__(self, [specs[id(r.scenario.problem.body)] for r in requests],
+        rpw.Bodies.__init__(self, world.body_specs(requests, body_spec),
                             requests[0].scenario.problem.forces.gravity_W, variant, dt_s)
         self.ends = [int(r.n_steps) for r in requests]
-        self.n = 0
         self.layout = state_bytes_layout() if len(requests) > MANY_BODIES else None
-        if self.layout is not None:
-            self._to_bytes = [rb.to_bytes for rb in self.bodies]
-            self._ends = np.array(self.ends)
-            self._given = None   # the (f_W, τ_W) last given to the bodies (Rapier keeps them)
+        self._to_bytes = [rb.to_bytes for rb in self.bodies]
 
     def set_state(self, y):
         rpw.Bodies.set_state(self, y)
-        self.n = 0
-        if self.layout is not None:
-            self._given = None
+        self.n, self.live, self._next_end = 0, [True] * len(self.bodies), min(self.ends, default=math.inf)
+        self._given = None   # many bodies: the (f_W, τ_W) last given to the bodies (Rapier keeps them)
 
     def packed_row(self, raw):   # many bodies: the read itself, for the harness's one compiled evaluation
         return raw if self.layout is not None else World.packed_row(self, raw)
@@ -173,40 +137,20 @@ class RapierWorld(rpw.Bodies, World):
         changed, bit for bit, since the last (Rapier keeps them; the same Python floats reach it)."""
         if self.layout is None:
             return rpw.Bodies.apply(self, f_W, tau_W)
-        f_W, tau_W = np.asarray(f_W, dtype=float), np.asarray(tau_W, dtype=float)
-        if self._given is None:
-            new_f = new_t = np.ones(len(f_W), dtype=bool)
-        else:
-            new_f = (f_W.view(np.uint64) != self._given[0].view(np.uint64)).any(axis=1)
-            new_t = (tau_W.view(np.uint64) != self._given[1].view(np.uint64)).any(axis=1)
-        self._given = (f_W.copy(), tau_W.copy())
-        bodies, dead = self.bodies, self.dead
-        if new_f.any():
-            for k, f in zip(np.flatnonzero(new_f).tolist(), f_W[new_f].tolist()):
-                if k not in dead:
-                    bodies[k].reset_forces(False)
-                    bodies[k].add_force(tuple(f), False)
-        if new_t.all() and not dead:
-            for rb, t in zip(bodies, tau_W.tolist()):
-                rb.reset_torques(False)
-                rb.add_torque(tuple(t), False)
-        elif new_t.any():
-            for k, t in zip(np.flatnonzero(new_t).tolist(), tau_W[new_t].tolist()):
-                if k not in dead:
-                    bodies[k].reset_torques(False)
-                    bodies[k].add_torque(tuple(t), False)
+        given, self._given = self._given, (np.array(f_W, dtype=float), np.array(tau_W, dtype=float))
+        for j, (reset, add) in enumerate((("reset_forces", "add_force"), ("reset_torques", "add_torque"))):
+            a = self._given[j]
+            new = (np.ones(len(a), dtype=bool) if given is None
+                   else (a.view(np.uint64) != given[j].view(np.uint64)).any(axis=1))
+            for k, v in zip(np.flatnonzero(new).tolist(), a[new].tolist()):
+                if k not in self.dead:
+                    getattr(self.bodies[k], reset)(False)
+                    getattr(self.bodies[k], add)(tuple(v), False)
 
-    def decay(self, g_v, g_w):
-        """Many bodies: :meth:`Bodies.decay`'s velocities (the last read's, scaled: the same products),
-        computed for all at once."""
-        if self.layout is None:
-            return rpw.Bodies.decay(self, g_v, g_w)
-        last = np.asarray(self.last, dtype=float)
-        v = (np.asarray(g_v, dtype=float)[:, None] * last[:, 3:6]).tolist()
-        w = (np.asarray(g_w, dtype=float)[:, None] * last[:, 10:13]).tolist()
-        for k, (rb, vk, wk) in enumerate(zip(self.bodies, v, w)):
-            if k not in self.dead:
-                rb.linvel, rb.angvel = tuple(vk), tuple(wk)
+    def decay(self, g_v, g_w):   # Bodies.decay of the last read, many bodies' (an array) as plain floats
+        if isinstance(self.last, np.ndarray):
+            self.last = self.last.tolist()
+        rpw.Bodies.decay(self, g_v, g_w)
 
     def first(self, y0):   # the scenario's own first row, not its float32 round trip
         return y0
@@ -218,64 +162,42 @@ class RapierWorld(rpw.Bodies, World):
         bad = self.world.quarantine.bodies
         for k in [k for k, h in enumerate(self.handles) if h in bad] if bad else ():
             self.dead.add(k)
+            self.live[k] = False
             self.warnings.append((k, self.n, "Rapier quarantined the body"))
 
     def read(self):
-        """The packed rows (a dead body's non-finite). A body whose run is over (its last step, or a state
-        non-finite or beyond BLOWUP_LIMIT) is dead from then on: disabled, no force, no decay."""
-        if self.layout is not None:
-            return self._read_many()
-        rows = rpw.Bodies.read(self)
-        for k, rb in enumerate(self.bodies):
-            if k not in self.dead and (self.n >= self.ends[k] or bad_floats(rows[k])):
-                self.dead.add(k)
-                rb.is_enabled = False
-        return rows
-
-
-    def _read_many(self):
-        """:meth:`read` of many bodies: one serialisation per body, decoded for all at once (the getters'
-        numbers: :func:`state_bytes_layout`), the runs that end here found in one pass."""
-        blobs = [f() for f in self._to_bytes]
-        rows = _decode(b"".join(blobs), len(blobs), self.layout)
-        if self.dead:
-            rows[sorted(self.dead)] = math.nan
-        with np.errstate(invalid="ignore"):
-            ends = (self.n >= self._ends) | ~(np.abs(rows) <= BLOWUP_LIMIT).all(axis=1)
-        if ends.any():
-            for k in np.flatnonzero(ends).tolist():
-                if k not in self.dead:
-                    self.dead.add(k)
-                    self.bodies[k].is_enabled = False
-        self.last = rows
+        """The packed rows (a dead body's non-finite): a few bodies' through the getters, many bodies' from
+        one serialisation each, decoded for all at once (the getters' numbers: :func:`state_bytes_layout`). A
+        body whose run is over (its last step, or its state blown up: world.blown_up) is dead from then on:
+        disabled, no force, no decay."""
+        if self.layout is None:
+            rows = rpw.Bodies.read(self)
+        else:
+            rows = self.last = _decode(b"".join([f() for f in self._to_bytes]), len(self.bodies), self.layout)
+            if self.dead:
+                rows[sorted(self.dead)] = math.nan
+        over = world.blown_up(rows, self.live)
+        if self.n >= self._next_end:   # some runs end at this step
+            over += [k for k, end in enumerate(self.ends) if end <= self.n and self.live[k]]
+            self._next_end = min([end for end in self.ends if end > self.n], default=math.inf)
+        for k in over:
+            self.live[k] = False
+            self.dead.add(k)
+            self.bodies[k].is_enabled = False
         return rows
 
 
 class RapierEngine(WorldEngine):
     """``rapier:VARIANT`` — registered under the entry-point group ``rbcheck.engines``; optional."""
 
-    name = ENGINE
-    variants = VARIANTS
-    distribution = DIST
+    name, variants, world, distribution, extra = ENGINE, VARIANTS, RapierWorld, DIST, "rapier"
+    imported = "rapier"
     keeps_forces = True
     sign_continuity = True
-
-    def _installed(self):
-        install.require(rapier, _IMPORT_ERROR, DIST, hint="pip install 'rbcheck[rapier]'")
-
-    def build(self, requests, variant, dt_s):
-        self._installed()
-        return RapierWorld(requests, variant, dt_s)
 
     def group_key(self, request) -> tuple:   # one world per Δt and gravity; runs of any length share it
         return (float(request.dt_s), tuple(float(g) for g in request.scenario.problem.forces.gravity_W))
 
-    def engine_files(self) -> list:   # rapier3d's compiled module (a rebuilt wheel is a new engine)
-        return [] if rapier is None else install.library_files(getattr(rapier, "_rapier3d", None))
 
-
-_ENGINE = RapierEngine()
-#: The module's functions (tests and scripts call them): the engine's, through the host loop.
-version, simulate, simulate_many, one_step = (_ENGINE.version, _ENGINE.simulate, _ENGINE.simulate_many,
-                                              _ENGINE.one_step)
+_ENGINE, version, simulate, simulate_many, one_step = RapierEngine.exported()
 RapierAdapter = RapierEngine

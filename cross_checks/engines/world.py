@@ -28,8 +28,8 @@ The world's contract (states packed as in reference_sim.state: ``[x_W (m), v_W (
   that applies nothing: what the loop calls before every step of an engine that clears forces (by default
   ``apply`` itself, the arrays bound);
 * optional ``rows(reads)``: a chunk's reads (a list of what ``read()`` gave, one per step) as an array (n, B,
-  R) (by default NumPy's conversion of the list; a world whose reads are plain floats may flatten them in
-  one pass);
+  R) (by default NumPy's conversion of the list; with ``float_reads`` True, reads of B rows of R plain
+  floats, flattened in one pass);
 * optional ``rollout(n_steps, harness)``: ``n_steps`` steps with the applied forces held, the raw states
   (n_steps, B, R) after each, in the engine's compiled loop (used when nothing changes between steps: no
   state-dependent force, no decay); with ``rollout_forces`` True, a rollout that takes every kind of force
@@ -63,14 +63,20 @@ engine of a few dozen lines is in docs/engines.md.
 """
 from __future__ import annotations
 
-import abc
 import functools
+import itertools
+import math
+import sys
 
 import numpy as np
 
 from cross_checks.engines import base, install
+from cross_checks.engines.step_floats import bad_floats
+from reference_sim.quaternion import quat_from_matrix
+from reference_sim.simulate import BLOWUP_LIMIT
 
-__all__ = ["World", "HostRowsWorld", "WorldEngine", "body_spec"]
+__all__ = ["World", "HostRowsWorld", "WorldEngine", "body_spec", "blown_up", "body_specs", "body_entry",
+           "principal_spec"]
 
 
 def body_spec(body) -> tuple:
@@ -87,6 +93,7 @@ class World:
 
     per_stage = False
     float_rows = False
+    float_reads = False
     rollout_takes_all_forces = False
     host_s = 0.0
     rollout_forces = False
@@ -129,8 +136,13 @@ class World:
         return functools.partial(self.apply, f_W, tau_W)
 
     def rows(self, reads):
-        """A chunk's reads (a list of ``read()``'s results, one per step) as raw rows (n, B, R)."""
-        return np.asarray(reads, dtype=float)
+        """A chunk's reads (a list of ``read()``'s results, one per step) as raw rows (n, B, R): where they
+        are B rows of R plain floats each (``float_reads``), all in one pass."""
+        if not self.float_reads:
+            return np.asarray(reads, dtype=float)
+        n, B, R = len(reads), len(reads[0]), len(reads[0][0])
+        flat = itertools.chain.from_iterable(itertools.chain.from_iterable(reads))
+        return np.fromiter(flat, dtype=float, count=n * B * R).reshape(n, B, R)
 
     def decay(self, g_v, g_w) -> None:
         y = self.packed(self.rows([self.read()]))[0].copy()
@@ -162,20 +174,75 @@ class HostRowsWorld(World):
         return self.y
 
 
+def blown_up(rows, live) -> list:
+    """The bodies k with ``live[k]`` whose row of ``rows`` (B rows of plain floats, or a (B, R) array) is
+    non-finite or beyond BLOWUP_LIMIT (reference_sim.simulate.bad_rows): what a world whose engine would step
+    on from a bad state stops once read (PhysX, DART, Rapier). [] after one pass in the common case."""
+    if isinstance(rows, np.ndarray):
+        size = np.abs(rows)
+        if size.max() <= BLOWUP_LIMIT:   # (NaN compares False)
+            return []
+        return np.flatnonzero(np.asarray(live, dtype=bool) & ~(size.max(axis=1) <= BLOWUP_LIMIT)).tolist()
+    if math.hypot(*itertools.chain.from_iterable(rows)) <= BLOWUP_LIMIT:   # at least every |component|
+        return []
+    return [k for k, row in enumerate(rows) if live[k] and bad_floats(row)]
+
+
+def body_specs(requests, spec_of) -> list:
+    """``spec_of(body)`` of each request's body, computed once per distinct body (a batch is mostly copies of
+    a few)."""
+    specs: dict = {}
+    for r in requests:
+        if id(r.scenario.problem.body) not in specs:
+            specs[id(r.scenario.problem.body)] = spec_of(r.scenario.problem.body)
+    return [specs[id(r.scenario.problem.body)] for r in requests]
+
+
+def principal_spec(body, frame=quat_from_matrix, diagonal=None) -> tuple:
+    """``(mass_kg, principal moments (3,) kg m², principal frame)`` of a RigidBody for an engine that takes a
+    diagonal inertia (PyBullet, Rapier, Drake): a diagonal tensor as its diagonal, ``diagonal`` its frame (its
+    axes kept in their order); a full one as its principal moments and ``frame(R_BP)``
+    (reference_sim.body.principal_axes; by default q_BP (w, x, y, z))."""
+    if body.is_diagonal():
+        return float(body.mass_kg), np.diag(body.inertia_B).copy(), diagonal
+    moments, R_BP = body.principal_axes()
+    return float(body.mass_kg), moments, frame(R_BP)
+
+
+def body_entry(scenario, spec_of) -> tuple:
+    """The scenario's body as the worlds' ``FormBody``/``form_world`` take it (worlds/dart.py, drake.py,
+    pybullet.py; ``rbcheck repro`` writes the same entry into a script): ``spec_of(body)``; a body whose
+    origin is off its COM (scenario.body_com_B_m) also with that COM (m, body axes from the origin) and its
+    welded parts (scenario.body_parts; none: no fifth item), each ``(*spec_of(part), its COM)``."""
+    from reference_sim.body import RigidBody
+    com = getattr(scenario, "body_com_B_m", None)
+    spec = spec_of(scenario.problem.body)
+    if com is None:
+        return spec
+    parts = [(*spec_of(RigidBody(p.mass_kg, p.inertia_B)), [float(v) for v in p.com_B_m])
+             for p in getattr(scenario, "body_parts", ())]
+    return (*spec, [float(v) for v in com], *([parts] if parts else []))
+
+
 class WorldEngine(base.EngineAdapter):
     """An engine adapter whose engine supplies a :class:`World` and whose runs are the host loop's
-    (:mod:`cross_checks.engines.loop`). Subclass it, declare the fields below and implement :meth:`build`.
+    (:mod:`cross_checks.engines.loop`). Subclass it, declare the fields below and ``world`` or :meth:`build`.
 
     ``distribution`` (the pip distribution whose version every result records), ``module`` (its import name,
     default ``distribution``), ``extra`` (rbcheck's pip extra that installs it, "" for a required engine) and
     ``runs_on`` (``(label, distribution)`` of what it runs on, recorded beside its version) give
-    :meth:`version`, the install checks and :meth:`engine_files`.
+    :meth:`version`, the install checks and :meth:`engine_files`; ``imported``, where the adapter module
+    imported its engine at its own import (install.optional_world), the name of its global that holds the
+    engine module (None there: not importable, its ``_IMPORT_ERROR`` says why); ``world``, the class (or a
+    function) that :meth:`build` makes a world of, ``world(requests, variant, dt_s)``.
     """
 
     distribution: str = ""
     module: str = ""
     extra: str = ""
     runs_on: tuple = ()
+    imported: str = ""
+    world = None
     #: The engine adds gravity itself (the loop takes the weight off the harness force).
     applies_gravity: bool = True
     #: Forces applied to a body stay applied over the next steps until changed (MuJoCo's xfrc_applied): the
@@ -201,10 +268,14 @@ class WorldEngine(base.EngineAdapter):
     harness: tuple = ("cross_checks.engines.forces", "cross_checks.engines.loop",
                       "cross_checks.engines.world")
 
-    @abc.abstractmethod
     def build(self, requests, variant: str, dt_s: float) -> World:
         """A world of the bodies of ``requests`` (base.RunRequest, at step ``dt_s``) for ``variant``. Raise
-        :class:`~cross_checks.engines.base.EngineError` with the engine's words when it rejects a model."""
+        :class:`~cross_checks.engines.base.EngineError` with the engine's words when it rejects a model.
+        By default ``world(requests, variant, dt_s)`` once the engine is installed (:meth:`_installed`)."""
+        if self.world is None:
+            raise TypeError(f"{type(self).__name__} declares no world and does not define build")
+        self._installed()
+        return type(self).world(requests, variant, dt_s)
 
     def group_key(self, request) -> tuple:
         """Requests with equal keys are run in one world (default: equal step and step count)."""
@@ -223,13 +294,25 @@ class WorldEngine(base.EngineAdapter):
         return False
 
     def _installed(self):
-        install.require(*install.optional_import(self.module or self.distribution),
-                        name=self.module or self.distribution, dist=self.distribution,
-                        hint=f'pip install -e ".[{self.extra}]"' if self.extra else "")
+        """install.require of the engine (its words name ``distribution``): of the adapter module's global
+        ``imported`` and its ``_IMPORT_ERROR`` where it imported the engine at its own import, else of
+        importing ``module`` now."""
+        adapter = vars(sys.modules[type(self).__module__])
+        found = ((adapter[self.imported], adapter.get("_IMPORT_ERROR")) if self.imported
+                 else install.optional_import(self.module or self.distribution))
+        hint = f"pip install 'rbcheck[{self.extra}]'" if self.extra else ""
+        install.require(*found, self.distribution, hint=hint)
 
     def version(self) -> str:
         self._installed()
         return install.release(self.distribution, self.runs_on)
+
+    @classmethod
+    def exported(cls) -> tuple:
+        """``(engine, version, simulate, simulate_many, one_step)``: an instance and its methods, what an
+        adapter module exports as its functions (tests and scripts call them)."""
+        engine = cls()
+        return engine, engine.version, engine.simulate, engine.simulate_many, engine.one_step
 
     def simulate(self, scenario, variant: str, dt_s: float, n_steps: int):
         from cross_checks.engines import loop

@@ -48,6 +48,10 @@ AGREE_INITIAL_ROW = 1e-14
 #: Same-arithmetic conversions at an adapter's boundary (MuJoCo: qpos/qvel <-> packed state, one rotation
 #: of a unit vector; PyBullet: quaternion order, principal-frame rotation): a few ε.
 ADAPTER_ROUND_TRIP = 1e-15
+#: A full inertia tensor through its principal frame (world.principal_spec): R_BP diag(moments) R_BPᵀ of
+#: LAPACK's eigh (backward error a few ε ‖I‖) and R_BP through q_BP and back (a few roundings of entries ≤ 1),
+#: relative to ‖I‖ and 1: 1e-14.
+PRINCIPAL_FRAME_ROUND_TRIP = 1e-14
 #: The contract suite (tests/cross_checks/engines/test_contract.py), in units of the variant's rounding unit ε
 #: (float64 or float32), relative to max(1, |state|): the state set then read back goes through the engine's
 #: own layout (ω rotated into body axes and back: two products with a rotation built from q, ~8 roundings

@@ -279,5 +279,9 @@ def test_an_engine_that_is_missing_says_how_to_install_it(adapter):
         mp.setattr(install, "installed_version", lambda dist: None)
         mp.setattr(install, "optional_import",
                    lambda name, **kw: (None, ImportError(f"No module named {name!r}")))
+        if adapter.imported:   # the adapter module imported its engine at its own import: that import failed
+            module = sys.modules[type(adapter).__module__]
+            mp.setattr(module, adapter.imported, None)
+            mp.setattr(module, "_IMPORT_ERROR", ImportError(f"No module named {adapter.imported!r}"))
         with pytest.raises(install.EngineNotInstalled, match=rf"\[{adapter.extra}\]"):
             adapter.version()

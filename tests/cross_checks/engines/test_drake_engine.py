@@ -41,7 +41,7 @@ def test_positions_are_the_quaternion_w_x_y_z_then_the_position():
     np.testing.assert_allclose(model.plant.GetPositions(model.context),
                                np.r_[Q_TILT, 1.0, 2.0, 3.0], rtol=0, atol=1e-15)
     y = np.r_[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, Q_TILT, 0.1, 0.2, 0.3]
-    np.testing.assert_array_equal(de.from_drake_state(de.dkw.to_drake_state(y)), y)
+    np.testing.assert_array_equal(de.dkw.from_drake_state(de.dkw.to_drake_state(y)), y)
 
 
 def test_velocities_are_angular_first_both_in_world_axes():
