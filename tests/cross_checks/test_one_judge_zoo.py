@@ -93,6 +93,7 @@ def cbody(tmp_path_factory):
     return built, write_scenarios(folder / "scen")["byo_tumble"]
 
 
+@pytest.mark.first   # among the longest tests (tests/conftest.py)
 @pytest.mark.parametrize("which", ["good", "broken"])
 def test_check_sweep_assert_engine_and_fuzz_agree_on_an_engine_file(cbody, tmp_path, capsys, which):
     """The same engine file through `rbcheck check` (a CSV of its run), `rbcheck sweep`, `assert_engine` and

@@ -41,6 +41,7 @@ velocity = [1.0, 0.0, 0.0]
 """
 
 
+@pytest.mark.first   # one of the longest tests (tests/conftest.py)
 def test_real_sigint_keeps_previous_results_and_the_rerun_reuses_finished_runs(tmp_path):
     files = []
     # enough runs of the fast compiled schemes to be still running at the interrupt: 4 scenarios x 16
@@ -124,6 +125,7 @@ def test_written_files_have_the_users_usual_permissions(tmp_path):
     assert (out.with_suffix(".json").stat().st_mode & 0o777) == (0o666 & ~mask)
 
 
+@pytest.mark.first   # one of the longest tests (tests/conftest.py)
 def test_reruns_are_bit_identical_across_engines(tmp_path, isolated_cache):
     pytest.importorskip("mujoco")
     pytest.importorskip("pybullet")

@@ -172,7 +172,8 @@ _ENGINE_MODULE = {"drake": "pydrake", "dart": "dartpy"}
     ("mujoco:rk4", "tennis_racket", ["welded_split"], False),
     # Drake's implicit Euler steps the body origin: off the COM on the near-separatrix box its deviation
     # does not vanish at order 0.7 at the second halving (drake_engine.ORIGIN_STEP_FINDING, declared)
-    ("drake:implicit_euler", "tumbling_box", ["com_offset", "1.5"], True),
+    pytest.param("drake:implicit_euler", "tumbling_box", ["com_offset", "1.5"], True,
+                 marks=pytest.mark.first),   # one of the longest tests (tests/conftest.py)
     ("dart:semi_implicit_euler", "tennis_racket", ["welded_split"], False),
 ])
 def test_an_invariance_script_judges_as_the_sweep_does_without_rbcheck(variant, scenario, transform, holds,
