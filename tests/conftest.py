@@ -11,6 +11,17 @@ matplotlib.use("Agg")
 os.environ.setdefault("MPLBACKEND", "Agg")
 
 
+def pytest_collection_modifyitems(config, items):
+    """Tests marked ``first`` ahead of the others, each group in its collected order (a stable sort).
+
+    pytest-xdist's default scheduling (``-n 2``, ``--dist load``) hands the first quarter of the collected
+    tests out in turn, one to each worker, and the rest to whichever worker runs short. Collected in file
+    order, the longest test and the longest shared build (tests/test_gates.py's sweep) came last: one worker
+    built while the other waited for it. Marked, they start at once, one worker each, and the short tests
+    fill in around them."""
+    items.sort(key=lambda item: item.get_closest_marker("first") is None)
+
+
 @pytest.fixture(autouse=True)
 def _no_job_summary(monkeypatch):
     """No test appends to the job summary of the CI run that runs the tests ($GITHUB_STEP_SUMMARY: sweep and

@@ -12,7 +12,7 @@ import pytest
 from cross_checks import engines
 from cross_checks.engines import resolve
 from cross_checks.scenario import load_scenario
-from tests.helpers.sweeps import gated_variants
+from tests.helpers.sweeps import gated_variants, private_cache
 from tests.helpers.wrong_engines import UserEngine
 
 BUILDS = {"correct": True, "no_rest_length": False, "inverse_inertia": False}
@@ -31,8 +31,19 @@ CASES = [("spring_pendulum", b) for b in BUILDS] + [("symmetric_top", "correct")
                                                     ("symmetric_top", "inverse_inertia")]
 
 
+@pytest.fixture(scope="module")
+def cases_cache(tmp_path_factory):
+    """One private rbcheck cache for the cases below (not the user's: nothing from an earlier test run is
+    read). A scenario's references (DOP853 and Drake's second reference: most of a spring_pendulum case's
+    time) are computed by its first case and read by the others; runs are keyed by variant, and no two
+    cases sweep the same build on the same scenario, so each case's sweep runs its build itself (and its
+    assert_engine reads those runs back, as it read them from the user's cache before)."""
+    with private_cache(tmp_path_factory.mktemp("cases_cache")) as path:
+        yield path
+
+
 @pytest.mark.parametrize("scenario, build", CASES)
-def test_check_sweep_and_assert_engine_agree(user_engine, tmp_path, capsys, scenario, build):
+def test_check_sweep_and_assert_engine_agree(user_engine, cases_cache, tmp_path, capsys, scenario, build):
     from cross_checks.cli import main
     from cross_checks.cli.sweep import _gate_failures
     from cross_checks.sweep import run_sweep
@@ -41,7 +52,8 @@ def test_check_sweep_and_assert_engine_agree(user_engine, tmp_path, capsys, scen
     sc = load_scenario(scenario)
     correct = BUILDS[build]
     # 1. the sweep
-    summary = run_sweep([sc], [variant], tmp_path / "sweep", jobs=1, use_cache=False, progress=False)
+    summary = run_sweep([sc], [variant], tmp_path / "sweep", jobs=1, progress=False)
+    assert summary["run"]["cached_runs"] == 0   # the build's own runs, stepped here
     failures = _gate_failures(summary)
     assert (not failures) == correct, failures
     if not correct:
@@ -93,6 +105,7 @@ def cbody(tmp_path_factory):
     return built, write_scenarios(folder / "scen")["byo_tumble"]
 
 
+@pytest.mark.first   # among the longest tests (tests/conftest.py)
 @pytest.mark.parametrize("which", ["good", "broken"])
 def test_check_sweep_assert_engine_and_fuzz_agree_on_an_engine_file(cbody, tmp_path, capsys, which):
     """The same engine file through `rbcheck check` (a CSV of its run), `rbcheck sweep`, `assert_engine` and

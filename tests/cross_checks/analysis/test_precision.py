@@ -126,6 +126,7 @@ def test_a_float32_ladder_adds_coarser_rungs_within_the_limits(scheme, monkeypat
     assert extended >= (0 if p == 1 else 5)   # the higher orders need coarser rungs on most of the catalog
 
 
+@pytest.mark.first   # one of the longest tests (tests/conftest.py)
 def test_the_correct_float32_schemes_pass_the_sweeps_gates(tmp_path, monkeypatch):
     vs = [register(monkeypatch, Float32Adapter(f"ok_{s.split(':')[1]}", s)) for s in SCHEMES]
     summary = _sweep(tmp_path, QUICK_SCENARIOS, vs)

@@ -24,9 +24,9 @@ def correct_csv(tmp_path_factory):
 @pytest.fixture(scope="module")
 def short(tmp_path_factory):
     """tennis_racket cut to 0.5 s (its scenario file with that duration) and its reference:rk4 run at
-    Δt = 0.005 s: 101 rows, so 101 frames instead of MAX_FRAMES = 200 (each frame is a matplotlib draw, then
-    an encode), for the tests of a format or of a divergence, which need frames, not the frame cap (the GIF
-    test keeps the 10 s run, whose 2001 rows the cap must bring down to 200)."""
+    Δt = 0.005 s: 101 rows, for the tests of a format (drawn at FEW_FRAMES) or of a divergence (every row
+    before it a frame), which need frames, not the 10 s run (the GIF test keeps it: its 2001 rows the cap
+    must bring down)."""
     from cross_checks.scenario import parse_scenario
     folder = tmp_path_factory.mktemp("anim_short")
     toml = folder / "tennis_racket_short.toml"
@@ -49,13 +49,27 @@ def _frames(path):
     return out
 
 
-def test_a_correct_file_animates_to_a_gif_of_frames_that_differ(correct_csv, tmp_path, capsys):
+#: The frame cap of these tests (reports.animation.MAX_FRAMES, 200, patched): each frame is a matplotlib
+#: draw and an encode (about 70 ms), and what is tested is that the writer caps a long run's rows at the cap
+#: and draws what moves, not the cap's value (tests/reports/test_animation.py: 30 <= MAX_FRAMES <= 400, and
+#: frame_indices uniform in time under it).
+FEW_FRAMES = 40
+
+
+@pytest.fixture
+def few_frames(monkeypatch):
+    import reports.animation
+    monkeypatch.setattr(reports.animation, "MAX_FRAMES", FEW_FRAMES)
+    return FEW_FRAMES
+
+
+def test_a_correct_file_animates_to_a_gif_of_frames_that_differ(correct_csv, tmp_path, capsys, few_frames):
     out = tmp_path / "out.gif"
     assert main(["check", str(correct_csv), "--scenario", "tennis_racket", "--animate", str(out)]) == 0
     err = capsys.readouterr().err
     assert f"animation -> {out}" in err and "frames, one every" in err
     frames = _frames(out)
-    assert 30 <= len(frames) <= 400
+    assert len(frames) == few_frames      # the 10 s run's 2001 rows brought down to the cap
     # the body turns: frames a quarter of the run apart differ in many pixels
     q = len(frames) // 4
     for a, b in ((0, q), (q, 2 * q), (2 * q, 3 * q)):
@@ -80,7 +94,7 @@ def test_bad_formats_are_one_line_exit_2_and_nothing_written(correct_csv, tmp_pa
 
 
 @pytest.mark.parametrize("suffix", [".mp4", ".webm"])
-def test_an_mp4_or_webm_is_written_where_ffmpeg_is_installed(short, tmp_path, suffix):
+def test_an_mp4_or_webm_is_written_where_ffmpeg_is_installed(short, tmp_path, suffix, few_frames):
     from matplotlib import animation
     if not animation.writers.is_available("ffmpeg"):
         pytest.skip("ffmpeg is not installed here (MP4/WebM need it; the GIF path is tested above)")

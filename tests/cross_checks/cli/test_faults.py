@@ -41,11 +41,15 @@ velocity = [1.0, 0.0, 0.0]
 """
 
 
+@pytest.mark.first   # one of the longest tests (tests/conftest.py)
 def test_real_sigint_keeps_previous_results_and_the_rerun_reuses_finished_runs(tmp_path):
     files = []
-    for i in range(12):   # enough runs of the fast compiled schemes to be still running at the interrupt
+    # enough runs of the fast compiled schemes to be still running at the interrupt: 4 scenarios x 16
+    # variants x 5 rungs, 320 runs, of which 8 are done when the interrupt comes, then the analysis and the
+    # report; the rerun does the rest (1 s of the spin, not 4: a quarter of the steps)
+    for i in range(4):
         f = tmp_path / f"spin_{i}.toml"
-        f.write_text(TINY.format(name=f"spin_{i}"))
+        f.write_text(TINY.format(name=f"spin_{i}").replace("duration = 4.0", "duration = 1.0"))
         files.append(str(f))
     out, cache = tmp_path / "res", tmp_path / "cache"
     env = {**os.environ, "RBCHECK_CACHE_DIR": str(cache), "MPLBACKEND": "Agg"}
@@ -121,6 +125,7 @@ def test_written_files_have_the_users_usual_permissions(tmp_path):
     assert (out.with_suffix(".json").stat().st_mode & 0o777) == (0o666 & ~mask)
 
 
+@pytest.mark.first   # one of the longest tests (tests/conftest.py)
 def test_reruns_are_bit_identical_across_engines(tmp_path, isolated_cache):
     pytest.importorskip("mujoco")
     pytest.importorskip("pybullet")
@@ -130,11 +135,18 @@ def test_reruns_are_bit_identical_across_engines(tmp_path, isolated_cache):
     from cross_checks.scenario import parse_scenario
     from cross_checks.sweep import run_sweep
     from tests.helpers.sweeps import gated_variants
-    sc = parse_scenario(TINY.format(name="spin").replace("duration = 4.0", "duration = 0.5"), "spin.toml")
+    # 0.5 s on the ladder's three coarsest rungs: every variant's whole pipeline (its steps, reference and
+    # metrics); the finer rungs would only repeat the same steps longer
+    text = TINY.format(name="spin").replace("duration = 4.0", "duration = 0.5")
+    sc = parse_scenario(text.replace("[0.004, 0.002, 0.001, 0.0005, 0.00025]", "[0.004, 0.002, 0.001]"),
+                        "spin.toml")
+    assert sc.dt_ladder_s == (0.004, 0.002, 0.001)
     texts = []
-    for k in range(2):
+    # first in a pool of 2 fresh workers (runs land on either, finish in any order), then in this process
+    # after the first sweep's runs (an engine's state left over from an earlier run would show here)
+    for k, jobs in enumerate((2, 1)):
         out = tmp_path / f"r{k}"
-        run_sweep([sc], gated_variants(), out, jobs=2, use_cache=False, progress=False)
+        run_sweep([sc], gated_variants(), out, jobs=jobs, use_cache=False, progress=False)
         with open(out / "results.csv", newline="") as fh:
             rows = [{c: v for c, v in r.items() if c not in ("wall_s", "engine_s", "cached")}
                     for r in csv.DictReader(fh)]
