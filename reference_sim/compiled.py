@@ -227,8 +227,9 @@ class ForceEvaluator:
     def _body_torque(self, y, stage: bool) -> tuple:
         """``_compiled_kernels.force_torque_at`` where only body-axes torques depend on the state, operation
         for operation in plain floats (its IEEE results): the rotation of q/|q| (``_rot``), ``R τ_B``
-        (``_mv``) added to the world torque; the force constant. A zero quaternion (a division by zero, which
-        Python floats raise on) goes to the kernel."""
+        (``_mv``) added to the world torque; the force constant. A quaternion whose norm is zero in floats
+        (all zero, or its squares underflowing: a division by zero, which Python floats raise on) goes to
+        the kernel."""
         qw, qx, qy, qz = y[6], y[7], y[8], y[9]
         n = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
         if n == 0.0:
