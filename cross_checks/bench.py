@@ -439,7 +439,7 @@ def drake_own_loop(variant, n_steps) -> OwnLoop:
             port.FixValue(ctx, wrench)
             sim.AdvanceTo(k * H)
         plant.GetPositionsAndVelocities(ctx)
-    return OwnLoop(run, lambda: drake_engine.from_drake_state(model.drake_state()[None])[0])
+    return OwnLoop(run, lambda: drake_engine.dkw.from_drake_state(model.drake_state()[None])[0])
 
 
 #: Each CPU engine's own minimal loop (its function takes the engine's variant name and the step count).
