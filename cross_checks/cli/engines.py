@@ -4,6 +4,7 @@ variants to run (unknown, unavailable or broken required engines refused), and `
 from __future__ import annotations
 
 import contextlib
+import socket
 
 from cross_checks.cli.errors import BadInput
 
@@ -60,6 +61,21 @@ def _refuse_unusable_required_engines() -> None:
                        "install -e . in a clone, installs the tested versions)")
 
 
+def _refused_at_once(address: str) -> None:
+    """Raise ConnectionRefusedError when nothing listens at a ``tcp://host:port`` scheduler address (Dask's
+    client would retry a refused connection for its whole timeout, 10 s, before saying so); any other
+    address, or any other outcome of the probe, is left to the client."""
+    host, sep, port = address.removeprefix("tcp://").rpartition(":")
+    if not address.startswith("tcp://") or not sep or not port.isdigit():
+        return
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=2).close()
+    except ConnectionRefusedError:
+        raise
+    except OSError:
+        return
+
+
 @contextlib.contextmanager
 def dask_executor(address: str | None):
     """The executor of a client of the Dask scheduler at ``address`` (None without one), closed after."""
@@ -72,6 +88,7 @@ def dask_executor(address: str | None):
         raise BadInput("--dask: the 'distributed' package is not installed; install the optional extra: "
                        "pip install -e '.[dask]'") from None
     try:
+        _refused_at_once(address)
         client = Client(address, timeout=10)
     except (OSError, TimeoutError, ValueError) as exc:
         raise BadInput(f"--dask {address}: cannot connect to the Dask scheduler: {exc}") from None
