@@ -1,8 +1,7 @@
-"""jaxsim (JAX) as an engine (``jaxsim:VARIANT``): a :class:`JaxsimWorld` of the host loop whose compiled
-rollout takes every force. What jaxsim does, the defaults neutralised, the compile time and what was
-measured: docs/engine_conventions.md, "jaxsim 0.9"; the model, the state (Mixed velocities: the packed
-state's own quantities) and the step: worlds/jaxsim.py. The link force: [f_W (N) at the COM minus the weight
-jaxsim applies, τ_W (N m)] from the start-of-step state, held over RK4's stages.
+"""jaxsim (JAX) as an engine (``jaxsim:VARIANT``): a :class:`JaxsimWorld` whose compiled rollout takes every
+force, the link force [f_W (N) at the COM less jaxsim's weight, τ_W (N m)] of the start-of-step state held
+over RK4's stages. jaxsim, its defaults neutralised and its compile time: docs/engine_conventions.md, "jaxsim
+0.9"; the model, the state (Mixed velocities: the packed state's quantities) and the step: worlds/jaxsim.py.
 """
 
 from __future__ import annotations
@@ -13,6 +12,7 @@ import functools
 import time
 
 import numpy as np
+from scipy.linalg import block_diag
 
 from cross_checks.core import tolerances as tol
 from cross_checks.engines import base, forces, install, jax_forces, runtimes
@@ -129,9 +129,7 @@ def _model(mass_kg: float, inertia: tuple, gravity: float, variant: str):
     if len(model.kin_dyn_parameters.contact_parameters.body):
         raise EngineError("jaxsim gave the link collidable points; rbcheck's free body must have none")
     M = np.asarray(js.model.link_spatial_inertia_matrices(model))[0]
-    want = np.zeros((6, 6))
-    want[:3, :3] = mass_kg * np.eye(3)
-    want[3:, 3:] = np.reshape(inertia, (3, 3))
+    want = block_diag(mass_kg * np.eye(3), np.reshape(inertia, (3, 3)))
     if not np.all(np.abs(M - want) <= tol.ENGINE_MODEL_PARAMETER_REL * np.max(np.abs(want))):
         raise EngineError("jaxsim's spatial inertia of the link is not the scenario's mass and inertia "
                           f"tensor about the link origin: {M.tolist()}")
@@ -277,7 +275,9 @@ class JaxsimWorld(runtimes.JaxWorld, HostRowsWorld):
         """The bodies ``idx`` (of one model structure and force mode) vmapped, padded to a power of two."""
         M = runtimes.power_of_two(len(idx))
         pad = list(idx) + [idx[0]] * (M - len(idx))
-        models = runtimes.stack_trees([self.models[i] for i in pad], range(M))
+        trees = {id(self.models[i]): self.models[i] for i in idx}   # each distinct model's leaves read once
+        at = {key: k for k, key in enumerate(trees)}
+        models = runtimes.stack_trees(list(trees.values()), [at[id(self.models[i])] for i in pad])
         rows = runtimes.chunk_rows(M, _ENGINE.modules()[3].CHUNK)
         f6 = np.array([inputs[i][1] for i in pad])
         scale = np.array([inputs[i][2] for i in pad])
