@@ -101,7 +101,7 @@ class DrakeModel(dkw.FormBody):
     ``constant_forces``, the scenario's constant forces fixed on the plant here (else by :meth:`apply`)."""
 
     def __init__(self, scenario, integrator: str, constant_forces: bool = True):
-        _ENGINE._installed()
+        _ENGINE.require_installed()
         p = scenario.problem
         self.scenario = scenario
         self.per_stage = bool(p.forces.state_dependent or p.forces.has_decay)
@@ -169,7 +169,7 @@ class DrakeEngine(WorldEngine):
     chunk = 256
 
     def version(self) -> str:   # the metadata's, else pydrake's own (a build from source)
-        self._installed()
+        self.require_installed()
         return install.installed_version("drake") or getattr(pydrake, "__version__", "unknown")
 
     def per_stage(self, scenario, variant):

@@ -56,7 +56,7 @@ _client_pid: int | None = None
 def _connect() -> int:
     """The process's DIRECT client (reconnected after a fork or if it was closed)."""
     global _client, _client_pid
-    _ENGINE._installed()
+    _ENGINE.require_installed()
     if _client is not None and _client_pid == os.getpid() and p.isConnected(physicsClientId=_client):
         return _client
     cid = p.connect(p.DIRECT)
@@ -156,7 +156,7 @@ class PybulletEngine(WorldEngine):
     body_forms = frozenset({"com_offset"})
 
     def build(self, requests, variant, dt_s):
-        self._installed()
+        self.require_installed()
         LOCK.acquire()
         try:
             return BulletWorld(requests, variant, dt_s)

@@ -271,10 +271,11 @@ class WorldEngine(base.EngineAdapter):
     def build(self, requests, variant: str, dt_s: float) -> World:
         """A world of the bodies of ``requests`` (base.RunRequest, at step ``dt_s``) for ``variant``. Raise
         :class:`~cross_checks.engines.base.EngineError` with the engine's words when it rejects a model.
-        By default ``world(requests, variant, dt_s)`` once the engine is installed (:meth:`_installed`)."""
+        By default ``world(requests, variant, dt_s)`` once the engine is installed
+        (:meth:`require_installed`)."""
         if self.world is None:
             raise TypeError(f"{type(self).__name__} declares no world and does not define build")
-        self._installed()
+        self.require_installed()
         return type(self).world(requests, variant, dt_s)
 
     def group_key(self, request) -> tuple:
@@ -293,7 +294,7 @@ class WorldEngine(base.EngineAdapter):
         does: ``World.per_stage``), so the loop applies neither forces nor decay before the step."""
         return False
 
-    def _installed(self):
+    def require_installed(self):
         """install.require of the engine (its words name ``distribution``): of the adapter module's global
         ``imported`` and its ``_IMPORT_ERROR`` where it imported the engine at its own import, else of
         importing ``module`` now."""
@@ -304,7 +305,7 @@ class WorldEngine(base.EngineAdapter):
         install.require(*found, self.distribution, hint=hint)
 
     def version(self) -> str:
-        self._installed()
+        self.require_installed()
         return install.release(self.distribution, self.runs_on)
 
     @classmethod
