@@ -52,9 +52,8 @@ def _packed_floats(row) -> list:
     return [x0, x1, x2, v0, v1, v2, math.cos(0.5 * theta), s * r0, s * r1, s * r2, w0, w1, w2]
 
 
-def body_spec(body) -> tuple:
-    """``(mass_kg, inertia_B (3, 3), None)``: DART takes the full tensor (``Inertia(m, 0, I_B)``)."""
-    return float(body.mass_kg), np.asarray(body.inertia_B, dtype=float), None
+#: ``(mass_kg, inertia_B (3, 3), None)``: DART takes the full tensor (``Inertia(m, 0, I_B)``)
+body_spec = world.body_spec
 
 
 def body_entry(scenario) -> tuple:
@@ -68,7 +67,7 @@ class DartBody(dtw.FormBody):
     origin and its welded parts too); ``set_state``/``read`` at the boundary."""
 
     def __init__(self, scenario, dt_s: float):
-        _ENGINE._installed()
+        _ENGINE.require_installed()
         super().__init__(body_entry(scenario), scenario.problem.forces.gravity_W, dt_s)
         if not self.ok:
             raise EngineError(f"DART {version()} rejects the inertia of scenario "

@@ -30,7 +30,7 @@ import numpy as np
 from cross_checks.core import files
 from cross_checks.engines import base, install
 from cross_checks.engines.base import EngineError, Traits, Variant
-from cross_checks.engines.world import World, WorldEngine
+from cross_checks.engines.world import World, WorldEngine, body_spec  # the full tensor (fullinertia)
 from cross_checks.engines.worlds import genesis as gw  # numpy only at import: Genesis on first use
 
 __all__ = ["ENGINE", "DIST", "VARIANTS", "NEUTRAL_DOFS", "EngineError", "version", "genesis", "body",
@@ -227,12 +227,6 @@ def body(scenario, variant: str, dt_s: float, n_envs: int = 0) -> GenesisBody:
 #: The state conversions at the boundary: the world's (qpos ``[x_W, q_WB]``, DOF velocity ``[v_W, ω_B]``).
 to_qpos_vel, to_packed = gw.to_qpos_vel, gw.to_packed
 NEUTRAL_DOFS = gw.NEUTRAL_DOFS
-
-
-def body_spec(body) -> tuple:
-    """``(mass_kg, inertia_B (3, 3), None)``: Genesis takes the full tensor (MJCF ``fullinertia``), as the
-    world's ``world`` does (what ``rbcheck repro`` embeds)."""
-    return float(body.mass_kg), np.asarray(body.inertia_B, dtype=float), None
 
 
 class GenesisEngine(WorldEngine):

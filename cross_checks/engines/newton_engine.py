@@ -27,7 +27,7 @@ import numpy as np
 
 from cross_checks.engines import base, install, runtimes
 from cross_checks.engines.base import EngineError, Traits, Variant
-from cross_checks.engines.world import World
+from cross_checks.engines.world import World, body_spec  # Newton takes the full tensor (add_body's inertia)
 from cross_checks.engines.worlds import newton as nw  # numpy only at import: Warp and Newton on first use
 
 __all__ = ["ENGINE", "VARIANTS", "SOLVERS", "SOLVER_SETTINGS", "EngineError", "version", "simulate",
@@ -129,12 +129,6 @@ def _refused(exc) -> EngineError:
     hint = f" ({PIP_HINT} installs mujoco-warp)" if exc.backend else ""
     whose = "'s" if exc.solver else ""
     return EngineError(f"Newton {version()}{whose} {exc}{hint}")
-
-
-def body_spec(body) -> tuple:
-    """``(mass_kg, inertia_B (3, 3), None)``: Newton takes the full tensor (``add_link``/``add_body``'s
-    ``inertia``), as the world's ``world`` does (what ``rbcheck repro`` embeds)."""
-    return float(body.mass_kg), np.asarray(body.inertia_B, dtype=float), None
 
 
 class NewtonWorld(nw.Bodies, World):
