@@ -291,17 +291,14 @@ def adapter_runner(variant, n_bodies, n_steps) -> Runner:
 # its final state, which tests/cross_checks/test_bench.py holds equal to rbcheck's run of the same steps:
 # a loop that skipped the work a trajectory needs would not reach it.
 
-class OwnLoop:
-    """One engine's own minimal loop of ``n_steps`` from the bench's initial state: ``run()`` steps it,
-    ``final()`` the packed state (13,) (x_W m, v_W m/s, q_WB (w x y z), ω_W rad/s) after the last ``run``,
-    ``close()`` frees the world."""
+class OwnLoop(Runner):
+    """One engine's own minimal loop of ``n_steps`` from the bench's initial state: a :class:`Runner`
+    (``run()`` steps it, ``close()`` frees the world) whose ``final()`` is the packed state (13,) (x_W m,
+    v_W m/s, q_WB (w x y z), ω_W rad/s) after the last ``run``."""
 
-    def __init__(self, run, final, close=None):
-        self.run, self.final, self._close = run, final, close
-
-    def close(self) -> None:
-        if self._close is not None:
-            self._close()
+    def __init__(self, run, final, n_steps: int, close=None):
+        super().__init__(run, n_steps, close=close)
+        self.final = final
 
 
 def _turn(q, v) -> tuple:
@@ -322,9 +319,9 @@ def _own_world(engine, variant):
     return world, sc.problem.initial_packed()
 
 
-def _world_loop(world, run) -> OwnLoop:
+def _world_loop(world, run, n_steps: int) -> OwnLoop:
     """An :class:`OwnLoop` over an adapter world: its final state is the world's own read, converted."""
-    return OwnLoop(run, lambda: world.packed(world.rows([world.read()]))[0, 0], world.close)
+    return OwnLoop(run, lambda: world.packed(world.rows([world.read()]))[0, 0], n_steps, world.close)
 
 
 def mujoco_own_loop(variant, n_steps) -> OwnLoop:
@@ -341,7 +338,7 @@ def mujoco_own_loop(variant, n_steps) -> OwnLoop:
             mujoco.mj_step(m, d)
             d.qpos.copy()
             d.qvel.copy()
-    return _world_loop(world, run)
+    return _world_loop(world, run, n_steps)
 
 
 def pybullet_own_loop(variant, n_steps) -> OwnLoop:
@@ -358,7 +355,7 @@ def pybullet_own_loop(variant, n_steps) -> OwnLoop:
             p.stepSimulation(physicsClientId=c)
             p.getBasePositionAndOrientation(b, physicsClientId=c)
             p.getBaseVelocity(b, physicsClientId=c)
-    return _world_loop(world, run)
+    return _world_loop(world, run, n_steps)
 
 
 def dart_own_loop(variant, n_steps) -> OwnLoop:
@@ -375,7 +372,7 @@ def dart_own_loop(variant, n_steps) -> OwnLoop:
             w.step()
             skel.getPositions()
             skel.getVelocities()
-    return _world_loop(world, run)
+    return _world_loop(world, run, n_steps)
 
 
 def physx_own_loop(variant, n_steps) -> OwnLoop:
@@ -393,7 +390,7 @@ def physx_own_loop(variant, n_steps) -> OwnLoop:
             c.add_force_torque(zero, np.array(_turn(row[0:4].tolist(), tau), dtype=np.float32))
             system.step()
         system.pack()
-    return _world_loop(world, run)
+    return _world_loop(world, run, n_steps)
 
 
 def rapier_own_loop(variant, n_steps) -> OwnLoop:
@@ -413,7 +410,7 @@ def rapier_own_loop(variant, n_steps) -> OwnLoop:
             rb.translation.to_tuple()
             rb.linvel.to_tuple()
             rb.angvel.to_tuple()
-    return _world_loop(world, run)
+    return _world_loop(world, run, n_steps)
 
 
 def drake_own_loop(variant, n_steps) -> OwnLoop:
@@ -439,7 +436,7 @@ def drake_own_loop(variant, n_steps) -> OwnLoop:
             port.FixValue(ctx, wrench)
             sim.AdvanceTo(k * H)
         plant.GetPositionsAndVelocities(ctx)
-    return OwnLoop(run, lambda: drake_engine.dkw.from_drake_state(model.drake_state()[None])[0])
+    return OwnLoop(run, lambda: drake_engine.dkw.from_drake_state(model.drake_state()[None])[0], n_steps)
 
 
 #: Each CPU engine's own minimal loop (its function takes the engine's variant name and the step count).
