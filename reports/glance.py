@@ -168,8 +168,40 @@ def verdict_box(res) -> dict:
     what is pre-asymptotic, each with a one-line reason."""
     recs = res.summary.get("convergence", [])
     order = {s["name"]: i for i, s in enumerate(res.scenarios)}
-    groups = []
+    long_recs = res.summary.get("long_runs") or []
+    noconv = [r for r in recs if r["expected_verdict"] == "does_not_converge" and r["matches_expectation"]]
+    pre = [r for r in recs if r["verdict"] == "pre_asymptotic"]
+    groups = [
+        {"title": "Contradicts the expectations", "cls": "bad",
+         "lines": _contradiction_lines(res, recs, order, long_recs)},
+        {"title": "Failures", "cls": "bad", "lines": _failure_lines(res, long_recs)},
+        {"title": "Diverged runs (left out of the order fits; long runs judged as diverged)",
+         "cls": "diverged", "lines": _divergence_lines(res, long_recs)},
+        {"title": "Does not converge, as expected (why)", "cls": "noconv", "lines": _noconv_lines(noconv)},
+        {"title": "Pre-asymptotic on this ladder: no order claimed (why)", "cls": "pre",
+         "lines": _pre_lines(pre, order)}]
 
+    # counted as the terminal counts them: verdicts not as expected (cross_checks.sweep.assemble), runs failed
+    # and runs diverged, the long runs' included
+    _, wrong = verdict_count(res.summary)
+    n_failed = (sum(r["status"] == "failed" for r in res.rows)
+                + sum(r.get("status") == "failed" for r in long_recs))
+    n_div = (sum(r["status"] == "diverged" for r in res.rows)
+             + sum(r.get("status") == "diverged" for r in long_recs))
+    headline = [(wrong, "verdict(s) not as expected", "bad"),
+                (n_failed, "failed run(s)", "bad"), (n_div, "diverged run(s)", "diverged"),
+                (len({(r['engine'], r['scenario']) for r in noconv}),
+                 "expected non-convergence(s)", "noconv"),
+                (len({(r['engine'], r['scenario']) for r in pre}), "pre-asymptotic", "pre")]
+    for g, (n, label, _) in zip(groups, headline):   # each group says the count of its badge
+        g["count"] = f"{n} {label}"
+    return {"headline": headline, "groups": [g for g in groups if g["lines"]],
+            "all_clear": not groups[0]["lines"] and not groups[1]["lines"]}
+
+
+def _contradiction_lines(res, recs, order, long_recs) -> list:
+    """The verdicts not as expected (per variant and scenario), the same-scheme agreements that do not hold,
+    the second references that disagree, and the long runs not as expected."""
     contra = [r for r in recs if r["matches_expectation"] is False]
     lines = []
     for (v, sc), rs in sorted(group_by(contra, lambda r: (r["engine"], r["scenario"])).items(),
@@ -185,13 +217,15 @@ def verdict_box(res) -> dict:
             sr = s["second_reference"]
             lines.append(f"{s['name']}: the second reference ({sr.get('label', '?')}) "
                          "disagrees with the reference beyond their stated accuracy")
-    long_recs = res.summary.get("long_runs") or []
     lines += [f"{r['engine']} on {r['scenario']} (long run): {r.get('assessment', 'not as expected')}"
               for r in long_recs if r.get("matches_expectation") is False]
-    groups.append({"title": "Contradicts the expectations", "cls": "bad", "lines": lines})
+    return lines
 
+
+def _failure_lines(res, long_recs) -> list:
+    """The failed runs per variant (the command's words, without the run's name and private paths: the
+    file it names is kept), the failed second references and the failed long runs."""
     failed = [r for r in res.rows if r["status"] == "failed"]
-    # the command's words, without the run's name and private paths (the file it names is kept)
     lines = [f"{v}: {len(rs)} run(s) on {_scen_list(r['scenario'] for r in rs)} "
              f"— {_first_sentence(normalise_message(rs[0]['message']), 240)}"
              for v, rs in group_by(failed, lambda r: r["engine"]).items()]
@@ -202,10 +236,13 @@ def verdict_box(res) -> dict:
     lines += [f"{v}: {len(rs)} long run(s) on {_scen_list(r['scenario'] for r in rs)} "
               f"— {_first_sentence(str(rs[0].get('message') or 'failed'))}"
               for v, rs in group_by(long_failed, lambda r: r["engine"]).items()]
-    groups.append({"title": "Failures", "cls": "bad", "lines": lines})
+    return lines
 
+
+def _divergence_lines(res, long_recs) -> list:
+    """The diverged runs per variant (each scenario's smallest Δt that diverged; whether its verdicts are
+    still as expected) and the diverged long runs (when)."""
     div = [r for r in res.rows if r["status"] == "diverged"]
-    long_div = [r for r in long_recs if r.get("status") == "diverged"]
     lines = []
     for v, rs in group_by(div, lambda r: r["engine"]).items():
         scs = list(dict.fromkeys(r["scenario"] for r in rs))
@@ -213,46 +250,34 @@ def verdict_box(res) -> dict:
         per = [f"{sc} (Δt ≥ {fmt_dt(min(r['dt'] for r in rs if r['scenario'] == sc))} s)" for sc in scs]
         lines.append(f"{v}: {len(rs)} run(s) — " + _scen_list(per, 5)
                      + ("" if unexpected else "; every verdict of these scenarios is still as expected"))
+    long_div = [r for r in long_recs if r.get("status") == "diverged"]
     for v, rs in group_by(long_div, lambda r: r["engine"]).items():
         lines.append(f"{v}: {len(rs)} long run(s) — " + _scen_list(
             [f"{r['scenario']} (at t = {fmt(r.get('diverged_at_s'), '', 3)} s)" for r in rs], 5))
-    groups.append({"title": "Diverged runs (left out of the order fits; long runs judged as diverged)",
-                   "cls": "diverged", "lines": lines})
+    return lines
 
-    noconv = [r for r in recs if r["expected_verdict"] == "does_not_converge" and r["matches_expectation"]]
+
+def _noconv_lines(noconv) -> list:
+    """The expected non-convergences, grouped by their reason (the commonest first)."""
     lines = []
     for reason, rs in sorted(group_by(noconv, lambda r: _first_sentence(r["reason"] or "")).items(),
                              key=lambda kv: -len(kv[1])):
         by_v = group_by(rs, lambda r: r["engine"])
         lines.append(f"{reason or 'no reason recorded'} — " + "; ".join(
             f"{v} on {_scen_list(r['scenario'] for r in vr)}" for v, vr in by_v.items()))
-    groups.append({"title": "Does not converge, as expected (why)", "cls": "noconv", "lines": lines})
+    return lines
 
-    pre = [r for r in recs if r["verdict"] == "pre_asymptotic"]
-    lines = []
 
+def _pre_lines(pre, order) -> list:
+    """The pre-asymptotic records per variant and reason, with their scenarios and quantities."""
     def why(r):
         text = r["reason"] if r["expected_verdict"] == "pre_asymptotic" else r["assessment"]
         return _first_sentence(text.removeprefix("pre-asymptotic on this ladder: "), 140)
+    lines = []
     for (v, reason), rs in group_by(pre, lambda r: (r["engine"], why(r))).items():
         per = group_by(rs, lambda r: r["scenario"])
         lines.append(f"{v} on "
                      + _scen_list([f"{sc} ({', '.join(LABELS[r['quantity']] for r in x)})"
                                    for sc, x in sorted(per.items(), key=lambda kv: order.get(kv[0], 99))], 5)
                      + f" — {reason}")
-    groups.append({"title": "Pre-asymptotic on this ladder: no order claimed (why)",
-                   "cls": "pre", "lines": lines})
-
-    # counted as the terminal counts them: verdicts not as expected (cross_checks.sweep.assemble), runs failed
-    # and runs diverged, the long runs' included
-    _, wrong = verdict_count(res.summary)
-    n_failed = sum(r["status"] == "failed" for r in res.rows) + len(long_failed)
-    headline = [(wrong, "verdict(s) not as expected", "bad"),
-                (n_failed, "failed run(s)", "bad"), (len(div) + len(long_div), "diverged run(s)", "diverged"),
-                (len({(r['engine'], r['scenario']) for r in noconv}),
-                 "expected non-convergence(s)", "noconv"),
-                (len({(r['engine'], r['scenario']) for r in pre}), "pre-asymptotic", "pre")]
-    for g, (n, label, _) in zip(groups, headline):   # each group says the count of its badge
-        g["count"] = f"{n} {label}"
-    return {"headline": headline, "groups": [g for g in groups if g["lines"]],
-            "all_clear": not groups[0]["lines"] and not groups[1]["lines"]}
+    return lines
