@@ -1,5 +1,11 @@
-"""Rapier's step of one body, timed alone, with k floats of Python work made between steps (docs/speed.md,
-"Where it stands": its step grows from ~20 µs with nothing between steps to ~50 µs with 1000 floats).
+"""Rapier's step of one body, timed alone, with k floats of Python work made between steps, in a world with a
+pool of one worker of its own (``set_num_threads(1)``, what rbcheck's worlds had until 2026-11-29) and on the
+calling thread (``set_num_threads(None)``, rayon's global pool, which rapier3d gives no work for a few bodies:
+what a world of up to worlds.rapier.OWN_POOL_ABOVE bodies does now). docs/speed.md, "Where it stands".
+
+With a pool of its own every step is handed to the worker and back: ~20 us with nothing between steps (the
+worker still spinning), ~45-60 us with 1000 floats between (asleep, woken). On the calling thread: ~3 us, the
+same with or without work between steps.
 
     python benchmarks/rapier_step_between.py
 """
@@ -27,7 +33,9 @@ def step_us(world, y0, k: int) -> float:
 if __name__ == "__main__":
     world, y0 = bench._own_world("rapier", "symplectic_euler")   # the adapter's world of the bench's body
     try:
-        for k in (0, 50, 200, 1000, 0):
-            print(f"{k:5d} floats between steps: {step_us(world, y0, k):6.1f} us per step")
+        for threads, label in ((1, "a pool of one of its own"), (None, "the calling thread")):
+            world.world.set_num_threads(threads)
+            for k in (0, 50, 200, 1000, 0):
+                print(f"{label:>24}: {k:5d} floats between steps: {step_us(world, y0, k):6.1f} us per step")
     finally:
         world.close()

@@ -1,6 +1,6 @@
 """Rapier's world of free bodies (numpy and rapier3d only: ``rbcheck repro`` embeds this file's code).
 
-One ``PhysicsWorld`` (one thread), a dynamic ``RigidBody`` per body without a collider, its mass properties
+One ``PhysicsWorld`` (stepped on the calling thread; see :data:`OWN_POOL_ABOVE`), a dynamic ``RigidBody`` per body without a collider, its mass properties
 about the COM (body origin = COM; principal moments and frame), Rapier's defaults neutralised
 (:data:`WORLD_SETTINGS`, :data:`BODY_SETTINGS`). ``Rotation3`` is built (w, x, y, z) but read (x, y, z, w);
 ω in WORLD axes; user forces accumulate and are kept between steps (``apply`` replaces them). Rapier computes
@@ -20,6 +20,12 @@ WORLD_SETTINGS = (
     ("max_ccd_substeps", 0),                              # continuous collision detection (default 1)
     ("length_unit", 1.0),                                 # scales the speed cap and the contact tolerances
 )
+#: A world of more bodies than this gets a pool of one worker of its own (``set_num_threads(1)``); up to it, a
+#: world steps on the calling thread (``set_num_threads(None)``: rayon's global pool, which rapier3d 0.36.1
+#: gives no work up to 256 free bodies, measured). A pool of its own hands every step to its worker and back,
+#: 15-50 us per step (one body steps in ~3 us on the calling thread); the global pool gives a body of >256 work
+#: to threads that a forked process does not have (it hangs) and uses every core (the sweep runs its own).
+OWN_POOL_ABOVE = 64
 #: RigidBodyBuilder settings every body gets (builder method, value); the gyroscopic flag is the variant's.
 BODY_SETTINGS = (
     ("can_sleep", False),                  # default True: asleep after 0.5 s below 0.05 m/s and 0.05 rad/s
@@ -43,7 +49,7 @@ class Bodies:
 
     def __init__(self, bodies, gravity_W, variant, dt_s):
         self.world = w = rapier.PhysicsWorld(gravity=tuple(float(g) for g in gravity_W))
-        w.set_num_threads(1)
+        w.set_num_threads(1 if len(bodies) > OWN_POOL_ABOVE else None)
         for attr, value in (("dt", float(dt_s)), *WORLD_SETTINGS):
             setattr(w.integration_parameters, attr, value)      # a live view: modified in place
         self.handles, self.bodies, self.dead, self.last = [], [], set(), []

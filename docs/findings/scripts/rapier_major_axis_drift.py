@@ -11,6 +11,7 @@ WORLD_SETTINGS = (
     ("max_ccd_substeps", 0),
     ("length_unit", 1.0),
 )
+OWN_POOL_ABOVE = 64
 BODY_SETTINGS = (
     ("can_sleep", False),
     ("allow_fast_rotation", True),
@@ -24,7 +25,7 @@ def mass_properties(mass_kg, moments, q_BP):
 class Bodies:
     def __init__(self, bodies, gravity_W, variant, dt_s):
         self.world = w = rapier.PhysicsWorld(gravity=tuple(float(g) for g in gravity_W))
-        w.set_num_threads(1)
+        w.set_num_threads(1 if len(bodies) > OWN_POOL_ABOVE else None)
         for attr, value in (("dt", float(dt_s)), *WORLD_SETTINGS):
             setattr(w.integration_parameters, attr, value)
         self.handles, self.bodies, self.dead, self.last = [], [], set(), []

@@ -7,6 +7,10 @@ Rapier computes in float32: a comparison with a float64 hand computation allows 
 other scheme is farther than that by a wide margin."""
 import math
 import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -343,7 +347,7 @@ def test_rapiers_own_defaults():
     a = rb.activation
     assert (a.linear_threshold, a.angular_threshold, a.time_until_sleep) == (
         pytest.approx(0.05), pytest.approx(0.5), pytest.approx(0.5))
-    assert w.num_threads == os.cpu_count()              # rayon's pool: every core (set to 1 per world)
+    assert w.num_threads == os.cpu_count()              # rayon's global pool: every core
 
 
 def test_a_world_has_the_scenarios_gravity_and_step_and_neutral_settings():
@@ -358,9 +362,62 @@ def test_a_world_has_the_scenarios_gravity_and_step_and_neutral_settings():
     assert (rb.linear_damping, rb.angular_damping, rb.gravity_scale) == (0.0, 0.0, 1.0)
     assert rb.allow_fast_rotation and not rb.ccd_enabled and rb.additional_solver_iterations == 0
     assert rb.is_dynamic and rb.colliders == [] and len(W.world.colliders) == 0   # nothing to touch
-    assert W.world.num_threads == 1
     W.step()
     assert not rb.is_sleeping
+
+
+def _pool_workers() -> set:
+    """This process's threads that a world's own pool started (rapier3d names them ``rapier-worker-N``)."""
+    tasks = Path(f"/proc/{os.getpid()}/task")
+    return {t.name for t in tasks.iterdir() if (t / "comm").read_text().startswith("rapier-worker")}
+
+
+def _bodies(n: int):
+    """A world of ``n`` free bodies (worlds.rapier.Bodies), stepped 5 times."""
+    W = rpw.Bodies([(1.0, np.array([1.0, 2.0, 3.0]), np.array([1.0, 0.0, 0.0, 0.0]))] * n,
+                   (0.0, 0.0, -9.81), "symplectic_euler", 1e-2)
+    for _ in range(5):
+        W.step()
+    return W
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="reads the threads from /proc")
+def test_a_few_bodies_step_on_the_calling_thread_and_many_on_a_pool_of_their_own():
+    """Up to OWN_POOL_ABOVE bodies no worker thread is started: a pool of one's own hands each step to its
+    worker and back (15-50 us a step against ~3 us: benchmarks/rapier_step_between.py); more bodies get one
+    (rayon's global pool would use every core and hang a forked process)."""
+    before = _pool_workers()
+    few = _bodies(rpw.OWN_POOL_ABOVE)
+    assert _pool_workers() - before == set()
+    many = _bodies(rpw.OWN_POOL_ABOVE + 1)
+    assert len(_pool_workers() - before) == 1
+    del few, many
+
+
+def test_a_process_forked_after_rapier_ran_steps_new_worlds_of_any_size():
+    """The sweep forks its workers, maybe from a process that ran Rapier. Rayon's global pool gives work to
+    threads a fork does not copy from 257 bodies on (rapier3d 0.36.1, measured: the child then hangs); a world
+    of 300 bodies has a pool of its own, and the few-body worlds that use the global pool give it none."""
+    code = ("import os, sys\nimport numpy as np\nfrom cross_checks.engines.worlds import rapier as rpw\n"
+            "def world(n):\n"
+            "    W = rpw.Bodies([(1.0, np.array([1.0, 2.0, 3.0]), np.eye(4)[0])] * n, (0.0, 0.0, -9.81),\n"
+            "                   'symplectic_euler', 1e-2)\n"
+            "    for _ in range(5):\n"
+            "        W.step()\n"
+            "    return W\n"
+            f"sizes = (1, {rpw.OWN_POOL_ABOVE}, 300)\n"
+            "kept = [world(n) for n in sizes]\n"
+            "pid = os.fork()\n"
+            "if pid == 0:\n"
+            "    [world(n) for n in sizes]\n"
+            "    os._exit(0)\n"
+            "sys.exit(os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1]))\n")
+    proc = subprocess.Popen([sys.executable, "-c", code], start_new_session=True)
+    try:
+        assert proc.wait(timeout=60) == 0
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)   # the forked child hung: it and its parent
 
 
 def _lone_world(dt, nsi=None, fast_rotation=True, max_lin=math.inf, can_sleep=False):
