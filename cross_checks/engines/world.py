@@ -75,8 +75,13 @@ from cross_checks.engines.step_floats import bad_floats
 from reference_sim.quaternion import quat_from_matrix
 from reference_sim.simulate import BLOWUP_LIMIT
 
-__all__ = ["World", "HostRowsWorld", "WorldEngine", "body_spec", "blown_up", "body_specs", "body_entry",
-           "principal_spec"]
+__all__ = ["World", "HostRowsWorld", "WorldEngine", "MANY_BODIES", "body_spec", "blown_up", "body_specs",
+           "body_entry", "principal_spec"]
+
+#: Above this many bodies a world is "many bodies": the harness evaluates their forces in one compiled call
+#: (loop.Harness.rows) and a world may take them and give its reads as arrays; at or below it, per body in
+#: plain floats (a few bodies' arrays cost more than the engine's step). The same numbers either way.
+MANY_BODIES = 4
 
 
 def body_spec(body) -> tuple:

@@ -202,3 +202,24 @@ def test_an_adapter_module_exports_one_instances_version_and_runs():
     assert type(engine) is Declared and version() == engine.version()
     for f, name in ((simulate, "simulate"), (simulate_many, "simulate_many"), (one_step, "one_step")):
         assert f.__self__ is engine and f.__func__ is getattr(WorldEngine, name)
+
+
+
+def test_many_bodies_is_one_number_for_the_harness_and_the_worlds(monkeypatch):
+    """Above world.MANY_BODIES bodies the harness evaluates the forces in one compiled call, and the worlds
+    that take them as arrays switch at the same count, read from that one constant (Rapier's serialisation
+    reads, PhysX's array forces)."""
+    import pytest
+
+    from cross_checks.engines import world
+    from cross_checks.engines.base import RunRequest
+    from cross_checks.engines.loop import Harness
+    sc = load_scenario("spring_pendulum")
+    assert Harness([sc] * world.MANY_BODIES, 0.01, True).rows is None
+    assert Harness([sc] * (world.MANY_BODIES + 1), 0.01, True).rows is not None
+    monkeypatch.setattr(world, "MANY_BODIES", 1)
+    two = [RunRequest(sc, 0.01, 3)] * 2
+    pytest.importorskip("rapier3d")
+    from cross_checks.engines import rapier_engine
+    assert rapier_engine.RapierWorld(two, "symplectic_euler", 0.01).layout is not None
+    assert rapier_engine.RapierWorld(two[:1], "symplectic_euler", 0.01).layout is None
