@@ -220,6 +220,9 @@ def test_many_bodies_is_one_number_for_the_harness_and_the_worlds(monkeypatch):
     monkeypatch.setattr(world, "MANY_BODIES", 1)
     two = [RunRequest(sc, 0.01, 3)] * 2
     pytest.importorskip("rapier3d")
-    from cross_checks.engines import rapier_engine
+    pytest.importorskip("sapien")
+    from cross_checks.engines import physx_engine, rapier_engine
     assert rapier_engine.RapierWorld(two, "symplectic_euler", 0.01).layout is not None
     assert rapier_engine.RapierWorld(two[:1], "symplectic_euler", 0.01).layout is None
+    assert physx_engine.PhysxWorld(two, "tgs", 0.01).many
+    assert not physx_engine.PhysxWorld(two[:1], "tgs", 0.01).many
