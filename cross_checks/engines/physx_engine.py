@@ -164,12 +164,10 @@ class PhysxEngine(WorldEngine):
 
     name, variants, distribution, extra = ENGINE, VARIANTS, _DIST, "physx"
     sign_continuity = True
+    any_length = True   # one scene per Δt and float32 gravity, whatever the runs' lengths
     version = staticmethod(version)   # the module's: sapien is not imported
     require_installed = staticmethod(version)   # sapien imported by the world, its warning silenced
     world = staticmethod(PhysxWorld)
-
-    def group_key(self, request) -> tuple:   # one scene per Δt and float32 gravity; runs of any length
-        return (float(request.dt_s), np.float32(request.scenario.problem.forces.gravity_W).tobytes())
 
     def engine_files(self) -> list:   # SAPIEN's compiled module and library (PhysX linked in), not imported
         return [*install.package_files("sapien", pattern="pysapien*.so"),

@@ -267,6 +267,9 @@ class WorldEngine(base.EngineAdapter):
     #: harness has each body's own decay factors, and ``build`` gets the first request's Δt; each request
     #: keeps its own): for an engine that batches a Δt ladder in one compiled call (Brax).
     mixed_steps: bool = False
+    #: Runs of any length share a world of one Δt and float32 gravity (:meth:`group_key`), the world ending
+    #: each body's run itself (bodies that never interact, an engine that computes in float32: Rapier, PhysX).
+    any_length: bool = False
     #: Steps between the loop's divergence checks.
     chunk: int = 1024
     #: Harness modules whose code decides the results besides the engine's own (the result cache's key).
@@ -284,7 +287,10 @@ class WorldEngine(base.EngineAdapter):
         return type(self).world(requests, variant, dt_s)
 
     def group_key(self, request) -> tuple:
-        """Requests with equal keys are run in one world (default: equal step and step count)."""
+        """Requests with equal keys are run in one world: equal step and step count, or with ``any_length``,
+        equal step and float32 gravity."""
+        if self.any_length:
+            return (float(request.dt_s), np.float32(request.scenario.problem.forces.gravity_W).tobytes())
         return (float(request.dt_s), int(request.n_steps))
 
     def world_key(self, request, variant: str) -> tuple:

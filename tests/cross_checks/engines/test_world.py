@@ -226,3 +226,19 @@ def test_many_bodies_is_one_number_for_the_harness_and_the_worlds(monkeypatch):
     assert rapier_engine.RapierWorld(two[:1], "symplectic_euler", 0.01).layout is None
     assert physx_engine.PhysxWorld(two, "tgs", 0.01).many
     assert not physx_engine.PhysxWorld(two[:1], "tgs", 0.01).many
+
+
+def test_an_engine_whose_runs_may_differ_in_length_groups_them_by_step_and_float32_gravity():
+    """``any_length`` (Rapier, PhysX): one world per Δt and float32 gravity, whatever the runs' lengths (a
+    gravity that float32 does not tell apart is the same world's); otherwise one per Δt and length."""
+    from cross_checks.engines.base import RunRequest
+    from cross_checks.engines.world import WorldEngine
+    from tests.helpers.scenarios import scenario_from_parts
+    g = [scenario_from_parts(forces=f"gravity = [0.0, 0.0, {z!r}]")
+         for z in (-9.81, -9.81 * (1 + 1e-12), -9.0)]
+    reqs = [RunRequest(g[0], 0.01, 10), RunRequest(g[1], 0.01, 20), RunRequest(g[2], 0.01, 10),
+            RunRequest(g[0], 0.02, 10)]
+    keys = [type("Any", (WorldEngine,), {"any_length": True})().group_key(r) for r in reqs]
+    assert keys[0] == keys[1] and len(set(keys)) == 3
+    by_length = [WorldEngine().group_key(r) for r in reqs]
+    assert by_length[0] == by_length[2] != by_length[1] and len(set(by_length)) == 3
