@@ -166,7 +166,7 @@ class PhysxEngine(WorldEngine):
     sign_continuity = True
     any_length = True   # one scene per Δt and float32 gravity, whatever the runs' lengths
     version = staticmethod(version)   # the module's: sapien is not imported
-    require_installed = staticmethod(version)   # sapien imported by the world, its warning silenced
+    require_installed = staticmethod(_world_class)   # version()'s checks and sapien's quiet import, once
     world = staticmethod(PhysxWorld)
 
     def engine_files(self) -> list:   # SAPIEN's compiled module and library (PhysX linked in), not imported

@@ -540,6 +540,18 @@ def test_a_run_where_sapien_finds_no_system_libvulkan_prints_nothing_of_it():
     assert done.stdout == "4\n" and "libvulkan" not in done.stderr, done.stderr
 
 
+def test_a_world_build_reads_no_package_metadata_once_sapien_is_imported(monkeypatch):
+    """The install checks (package metadata and import specs, ~0.5 ms) run once per process, with sapien's
+    import, not at every world build (a sweep builds one per run group and per one-step record)."""
+    from cross_checks.engines import install
+    reqs = [RunRequest(load_scenario("projectile"), 0.01, 1)]
+    pe.PhysxAdapter().build(reqs, "pgs", 0.01).close()
+    calls = []
+    monkeypatch.setattr(install, "installed_version", lambda dist: calls.append(dist) or "3.0.3")
+    pe.PhysxAdapter().build(reqs, "pgs", 0.01).close()
+    assert calls == []
+
+
 def test_version_and_list_name_physx():
     from cross_checks.cli.parser import _version_text
     from cross_checks.engines import all_variants
