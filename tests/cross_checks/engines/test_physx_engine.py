@@ -514,14 +514,19 @@ def test_nothing_is_compiled_or_cached_at_run_time(tmp_path, monkeypatch):
     assert not kernel_cache_dir("physx").exists() and list(tmp_path.iterdir()) == []
 
 
+def _python(code: str) -> subprocess.CompletedProcess:
+    """``code`` run by a fresh Python (nothing imported yet), its output captured."""
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                          env={**os.environ, "MPLBACKEND": "Agg"})
+
+
 def test_importing_the_adapter_and_asking_its_version_import_no_sapien():
     code = ("import sys\nfrom cross_checks.engines import physx_engine as pe\n"
             "from cross_checks.engines import all_variants\n"
             "print(pe.version(), pe.PhysxAdapter().source_files()[-1].name, "
             "[v.name for v in all_variants() if v.engine == 'physx'])\n"
             "print('sapien' in sys.modules)\n")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
-                         env={**os.environ, "MPLBACKEND": "Agg"}).stdout.split("\n")
+    out = _python(code).stdout.split("\n")
     assert out[0].startswith("3.0.3 (PhysX 5.3.1) libsapien.so ['physx:tgs', 'physx:pgs']")
     assert out[1] == "False"
 
@@ -535,8 +540,7 @@ def test_a_run_where_sapien_finds_no_system_libvulkan_prints_nothing_of_it():
             "from cross_checks.engines import physx_engine as pe\n"
             "from cross_checks.scenario import load_scenario\n"
             "print(len(pe.simulate(load_scenario('projectile'), 'pgs', 0.01, 3).y))\n")
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
-                          env={**os.environ, "MPLBACKEND": "Agg"})
+    done = _python(code)
     assert done.stdout == "4\n" and "libvulkan" not in done.stderr, done.stderr
 
 
