@@ -191,7 +191,8 @@ def test_every_cpu_engine_has_its_own_minimal_loop_beside_the_engine_and_rbcheck
         assert r["rbcheck_own_us_per_step"] == r["rbcheck_us_per_step"] - r["own_loop_us_per_step"]
     t = _table_input()
     t["overhead"] = [{"variant": "pybullet:multibody", "engine_us_per_step": 2.5,
-                      "engine_step_us_per_step": 1.0, "own_loop_us_per_step": 2.5, "rbcheck_us_per_step": 4.0}]
+                      "engine_step_us_per_step": 1.0, "own_loop_us_per_step": 2.5,
+                      "rbcheck_us_per_step": 4.0}]
     text = bench.format_table(t)
     assert "own loop" in text and "rbcheck own" in text
     assert "pybullet:multibody                      1.00      2.50             4.00   1.60x   4.00x" in text
@@ -231,7 +232,8 @@ def test_the_overhead_targets_are_read_from_the_rows_as_the_issue_words_them():
                 {"variant": "physx:tgs", "engine_us_per_step": 4.0, "engine_step_us_per_step": 4.0,
                  "rbcheck_us_per_step": 8.4, "own_loop_us_per_step": 4.0},
                 {"variant": "dart:semi_implicit_euler", "engine_us_per_step": 1.5,
-                 "engine_step_us_per_step": 1.0, "rbcheck_us_per_step": 2.4, "own_loop_us_per_step": 1.5, "rbcheck_own_us_per_step": 1.1},
+                 "engine_step_us_per_step": 1.0, "rbcheck_us_per_step": 2.4, "own_loop_us_per_step": 1.5,
+                 "rbcheck_own_us_per_step": 1.1},
                 {"variant": "mjx:euler", "engine_us_per_step": 100.0, "rbcheck_us_per_step": 900.0},
                 {"variant": "drake:semi_explicit_euler", "engine_us_per_step": None,
                  "rbcheck_us_per_step": 9.0}]

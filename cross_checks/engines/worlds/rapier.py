@@ -1,10 +1,11 @@
 """Rapier's world of free bodies (numpy and rapier3d only: ``rbcheck repro`` embeds this file's code).
 
 One ``PhysicsWorld`` (a few bodies stepped on the calling thread: :data:`OWN_POOL_ABOVE`), a dynamic
-``RigidBody`` per body without a collider, its mass properties about the COM (body origin = COM; principal moments and frame), Rapier's defaults neutralised
-(:data:`WORLD_SETTINGS`, :data:`BODY_SETTINGS`). ``Rotation3`` is built (w, x, y, z) but read (x, y, z, w);
-ω in WORLD axes; user forces accumulate and are kept between steps (``apply`` replaces them). Rapier computes
-in float32. docs/engine_conventions.md, "Rapier".
+``RigidBody`` per body without a collider, its mass properties about the COM (body origin = COM; principal
+moments and frame), Rapier's defaults neutralised (:data:`WORLD_SETTINGS`, :data:`BODY_SETTINGS`).
+``Rotation3`` is built (w, x, y, z) but read (x, y, z, w); ω in WORLD axes; user forces accumulate and are
+kept between steps (``apply`` replaces them). Rapier computes in float32. docs/engine_conventions.md,
+"Rapier".
 """
 import math
 
