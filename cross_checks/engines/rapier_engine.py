@@ -101,12 +101,17 @@ class RapierWorld(rpw.Bodies, World):
                             requests[0].scenario.problem.forces.gravity_W, variant, dt_s)
         self.ends = [int(r.n_steps) for r in requests]
         self.layout = state_bytes_layout() if len(requests) > world.MANY_BODIES else None
+        # a few bodies: the harness's rows and the reads (packed rows already) in plain floats, no arrays
+        self.float_rows = self.float_reads = len(requests) <= world.MANY_BODIES
         self._to_bytes = [rb.to_bytes for rb in self.bodies]
 
     def set_state(self, y):
         rpw.Bodies.set_state(self, y)
         self.n, self.live, self._next_end = 0, [True] * len(self.bodies), min(self.ends, default=math.inf)
         self._given = None   # many bodies: the (f_W, τ_W) last given to the bodies (Rapier keeps them)
+
+    def packed_row(self, raw):   # the read itself: a few bodies' plain floats, many bodies' decoded array
+        return raw if self.layout is not None or self.float_reads else World.packed_row(self, raw)
 
     def apply(self, f_W, tau_W):
         """Many bodies: :meth:`Bodies.apply`'s replacement, made only where a body's force or torque

@@ -150,13 +150,14 @@ def test_the_sweep_is_measured_before_any_engine_adapter_runs_in_the_process(mon
 
 
 def test_the_engines_own_time_is_measured_apart_from_rbchecks_and_both_are_printed():
-    """One trajectory through rbcheck: the engine's own time per step (inside its step) and the whole cost
-    per step through rbcheck, engine included; the first never exceeds the second, and the table prints
-    both and their ratio."""
+    """One trajectory through rbcheck: the time inside the engine's step and the whole cost per step through
+    rbcheck, engine included; the first never exceeds the second, and the table prints both and their
+    ratio. The engine's own cost per step is its own minimal loop (a CPU engine's)."""
     rows = bench.overhead_rows(300, 1, variants={"mujoco:euler", "pybullet:multibody"})
     assert {r["variant"] for r in rows} == {"mujoco:euler", "pybullet:multibody"}
     for r in rows:
-        assert 0 < r["engine_us_per_step"] <= r["rbcheck_us_per_step"]
+        assert 0 < r["engine_step_us_per_step"] <= r["rbcheck_us_per_step"]
+        assert r["engine_us_per_step"] == r["own_loop_us_per_step"]
     t = _table_input()
     t["overhead"] = rows
     t["batched"] = [{"variant": "mujoco:euler", "engine_body_steps_per_s": 4e6,
@@ -185,14 +186,16 @@ def test_every_cpu_engine_has_its_own_minimal_loop_beside_the_engine_and_rbcheck
     rows = bench.overhead_rows(200, 1, variants=set(defaults.values()))
     assert {r["variant"] for r in rows} == set(defaults.values())
     for r in rows:
-        assert r["own_loop_us_per_step"] > 0 and 0 < r["engine_us_per_step"] <= r["rbcheck_us_per_step"]
+        assert r["own_loop_us_per_step"] > 0 and 0 < r["engine_step_us_per_step"] <= r["rbcheck_us_per_step"]
+        assert r["engine_us_per_step"] == r["own_loop_us_per_step"]
         assert r["rbcheck_own_us_per_step"] == r["rbcheck_us_per_step"] - r["own_loop_us_per_step"]
     t = _table_input()
-    t["overhead"] = [{"variant": "pybullet:multibody", "engine_us_per_step": 1.0, "own_loop_us_per_step": 2.5,
+    t["overhead"] = [{"variant": "pybullet:multibody", "engine_us_per_step": 2.5,
+                      "engine_step_us_per_step": 1.0, "own_loop_us_per_step": 2.5,
                       "rbcheck_us_per_step": 4.0}]
     text = bench.format_table(t)
     assert "own loop" in text and "rbcheck own" in text
-    assert "pybullet:multibody                               1.00      2.50             4.00   4.00x" in text
+    assert "pybullet:multibody                      1.00      2.50             4.00   1.60x   4.00x" in text
     assert text.split("pybullet:multibody", 1)[1].split("\n")[0].endswith("+1.50")
 
 
@@ -219,15 +222,18 @@ def test_an_engines_own_loop_reaches_rbchecks_final_state_bit_for_bit(engine):
 
 
 def test_the_overhead_targets_are_read_from_the_rows_as_the_issue_words_them():
-    """Hand-made rows: a CPU engine at 1.9x / 2.1x its step, rbcheck's own time beside its step (1.4 below
-    4.0; 1.1 above 1.0, from the rounds' median where the row has one, else from the two medians), a compiled
-    engine (no single-run target), a batched row at 0.49x / 0.5x, and MuJoCo's own step against 3x a Python
-    loop of mj_step."""
+    """Hand-made rows: CPU engines at 1.9x / 2.1x / 2.4x their own cost per step (the own loop), rbcheck's own
+    time beside the step alone (1.4 below 4.0; 1.1 above 1.0, from the rounds' median where the row has one,
+    else from the two medians), a compiled engine (no single-run target), a batched row at 0.49x / 0.5x, and
+    MuJoCo's time inside its step against 3x a Python loop of mj_step."""
     overhead = [{"variant": "mujoco:euler", "engine_us_per_step": 1.0, "rbcheck_us_per_step": 1.9},
-                {"variant": "pybullet:multibody", "engine_us_per_step": 4.0, "rbcheck_us_per_step": 8.4,
-                 "own_loop_us_per_step": 7.0},
-                {"variant": "dart:semi_implicit_euler", "engine_us_per_step": 1.0, "rbcheck_us_per_step": 2.4,
-                 "own_loop_us_per_step": 1.5, "rbcheck_own_us_per_step": 1.1},
+                {"variant": "pybullet:multibody", "engine_us_per_step": 7.0, "engine_step_us_per_step": 4.0,
+                 "rbcheck_us_per_step": 8.4, "own_loop_us_per_step": 7.0},
+                {"variant": "physx:tgs", "engine_us_per_step": 4.0, "engine_step_us_per_step": 4.0,
+                 "rbcheck_us_per_step": 8.4, "own_loop_us_per_step": 4.0},
+                {"variant": "dart:semi_implicit_euler", "engine_us_per_step": 1.5,
+                 "engine_step_us_per_step": 1.0, "rbcheck_us_per_step": 2.4, "own_loop_us_per_step": 1.5,
+                 "rbcheck_own_us_per_step": 1.1},
                 {"variant": "mjx:euler", "engine_us_per_step": 100.0, "rbcheck_us_per_step": 900.0},
                 {"variant": "drake:semi_explicit_euler", "engine_us_per_step": None,
                  "rbcheck_us_per_step": 9.0}]
@@ -238,12 +244,14 @@ def test_the_overhead_targets_are_read_from_the_rows_as_the_issue_words_them():
                 "rbcheck_body_steps_per_s": 1.0}]
     t = bench.overhead_targets(overhead, batched, mj_step_loop_us=0.34)
     assert t == {
-        "mujoco:euler: through rbcheck <= 2x the engine's step": True,
+        "mujoco:euler: through rbcheck <= 2x the engine's own cost per step": True,
         "mujoco:euler: engine_s per step <= 3x a Python loop of mj_step": True,
-        "pybullet:multibody: rbcheck's own time per step <= the engine's step": True,
-        "pybullet:multibody: through rbcheck <= 2x the engine's step": False,
-        "dart:semi_implicit_euler: rbcheck's own time per step <= the engine's step": False,
-        "dart:semi_implicit_euler: through rbcheck <= 2x the engine's step": False,
+        "pybullet:multibody: rbcheck's own time per step <= the engine's step alone": True,
+        "pybullet:multibody: through rbcheck <= 2x the engine's own cost per step": True,
+        "physx:tgs: rbcheck's own time per step <= the engine's step alone": False,
+        "physx:tgs: through rbcheck <= 2x the engine's own cost per step": False,
+        "dart:semi_implicit_euler: rbcheck's own time per step <= the engine's step alone": False,
+        "dart:semi_implicit_euler: through rbcheck <= 2x the engine's own cost per step": True,
         "mujoco:euler: simulate_many >= 0.5x the engine's own batched throughput": True,
         "pybullet:multibody: simulate_many >= 0.5x the engine's own batched throughput": False}
     assert not bench.overhead_targets(overhead[:1], [], mj_step_loop_us=0.33)[

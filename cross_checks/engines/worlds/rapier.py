@@ -1,10 +1,11 @@
 """Rapier's world of free bodies (numpy and rapier3d only: ``rbcheck repro`` embeds this file's code).
 
-One ``PhysicsWorld`` (stepped on the calling thread; see :data:`OWN_POOL_ABOVE`), a dynamic ``RigidBody`` per body without a collider, its mass properties
-about the COM (body origin = COM; principal moments and frame), Rapier's defaults neutralised
-(:data:`WORLD_SETTINGS`, :data:`BODY_SETTINGS`). ``Rotation3`` is built (w, x, y, z) but read (x, y, z, w);
-ω in WORLD axes; user forces accumulate and are kept between steps (``apply`` replaces them). Rapier computes
-in float32. docs/engine_conventions.md, "Rapier".
+One ``PhysicsWorld`` (a few bodies stepped on the calling thread: :data:`OWN_POOL_ABOVE`), a dynamic
+``RigidBody`` per body without a collider, its mass properties about the COM (body origin = COM; principal
+moments and frame), Rapier's defaults neutralised (:data:`WORLD_SETTINGS`, :data:`BODY_SETTINGS`).
+``Rotation3`` is built (w, x, y, z) but read (x, y, z, w); ω in WORLD axes; user forces accumulate and are
+kept between steps (``apply`` replaces them). Rapier computes in float32. docs/engine_conventions.md,
+"Rapier".
 """
 import math
 
@@ -20,11 +21,11 @@ WORLD_SETTINGS = (
     ("max_ccd_substeps", 0),                              # continuous collision detection (default 1)
     ("length_unit", 1.0),                                 # scales the speed cap and the contact tolerances
 )
-#: A world of more bodies than this gets a pool of one worker of its own (``set_num_threads(1)``); up to it, a
-#: world steps on the calling thread (``set_num_threads(None)``: rayon's global pool, which rapier3d 0.36.1
-#: gives no work up to 256 free bodies, measured). A pool of its own hands every step to its worker and back,
-#: 15-50 us per step (one body steps in ~3 us on the calling thread); the global pool gives a body of >256 work
-#: to threads that a forked process does not have (it hangs) and uses every core (the sweep runs its own).
+#: A world of more bodies than this gets a pool of one worker of its own (``set_num_threads(1)``); up to it,
+#: a world steps on the calling thread (``set_num_threads(None)``: rayon's global pool, which rapier3d 0.36.1
+#: gives no work up to 256 free bodies, measured). A pool of its own hands every step to its worker and
+#: back, 15-50 us per step (one body steps in ~3 us on the calling thread); the global pool gives a world of
+#: over 256 bodies work on threads a forked process does not have (it hangs), and uses every core.
 OWN_POOL_ABOVE = 64
 #: RigidBodyBuilder settings every body gets (builder method, value); the gyroscopic flag is the variant's.
 BODY_SETTINGS = (
@@ -70,8 +71,10 @@ class Bodies:
         self.dead = set()
 
     def apply(self, f_W, tau_W):
-        """Replace the user forces (world, at the COM, N) and torques (world, N m): Rapier keeps them."""
-        f_W, tau_W = np.asarray(f_W, dtype=float).tolist(), np.asarray(tau_W, dtype=float).tolist()
+        """Replace the user forces (world, at the COM, N) and torques (world, N m), (B, 3) arrays or B rows
+        of 3 plain floats: Rapier keeps them."""
+        if isinstance(f_W, np.ndarray) or isinstance(tau_W, np.ndarray):
+            f_W, tau_W = np.asarray(f_W, dtype=float).tolist(), np.asarray(tau_W, dtype=float).tolist()
         for k, (rb, f, tau) in enumerate(zip(self.bodies, f_W, tau_W)):
             if k not in self.dead:
                 rb.reset_forces(False)

@@ -43,7 +43,8 @@ class Bodies:
             rb.linvel, rb.angvel = (r[3], r[4], r[5]), (r[10], r[11], r[12])
         self.dead = set()
     def apply(self, f_W, tau_W):
-        f_W, tau_W = np.asarray(f_W, dtype=float).tolist(), np.asarray(tau_W, dtype=float).tolist()
+        if isinstance(f_W, np.ndarray) or isinstance(tau_W, np.ndarray):
+            f_W, tau_W = np.asarray(f_W, dtype=float).tolist(), np.asarray(tau_W, dtype=float).tolist()
         for k, (rb, f, tau) in enumerate(zip(self.bodies, f_W, tau_W)):
             if k not in self.dead:
                 rb.reset_forces(False)
