@@ -624,3 +624,23 @@ def test_the_world_reads_every_body_from_one_pack_as_plain_floats_and_takes_forc
     W.apply(np.array(f), np.array(tau))
     W.step()
     np.testing.assert_array_equal(W.rows([W.read()]), by_rows)
+
+
+def test_a_body_physx_refuses_fails_its_own_runs_with_physxs_words(monkeypatch):
+    """A body whose mass properties PhysX refuses (none of the schema's: docs/hardening.md's ranges are
+    float32 PhysX's) is an EngineError with SAPIEN's version and PhysX's words, for its own runs only: the
+    other runs of its scene go on."""
+    cls = pe._world_class()
+    real = cls.add_body
+
+    def add_body(self, mass_kg, moments, q_BP):
+        if mass_kg == 7.0:
+            raise RuntimeError("invalid mass")
+        return real(self, mass_kg, moments, q_BP)
+    monkeypatch.setattr(cls, "add_body", add_body)
+    ok, bad = (scenario_from_parts(body=f"mass = {m}\ninertia = [1.0, 2.0, 3.0]") for m in (2.0, 7.0))
+    runs = pe.simulate_many("pgs", [RunRequest(ok, 0.01, 5), RunRequest(bad, 0.01, 5),
+                                    RunRequest(ok, 0.01, 3)])
+    assert [len(runs[0].y), len(runs[2].y)] == [6, 4]
+    assert isinstance(runs[1], pe.EngineError)
+    assert "PhysX (sapien 3.0.3) refuses the body: RuntimeError: invalid mass" in str(runs[1])
