@@ -1,8 +1,6 @@
 """NVIDIA PhysX 5 (CPU, through SAPIEN's ``sapien.physx``) as an engine (``physx:VARIANT``, float32): the
-bodies of cross_checks.engines.worlds.physx (a ``PhysxCpuSystem`` scene per Δt and float32 gravity, on the
-calling thread; a rigid dynamic per run, its principal moments and mass frame q_BP) for rbcheck's loop, forces
-before every step (PhysX clears them). Conventions, defaults neutralised and what pins them:
-docs/engine_conventions.md, "PhysX 5.3.1 (SAPIEN 3.0.3)".
+bodies of cross_checks.engines.worlds.physx for rbcheck's loop. Conventions, defaults neutralised, the
+scheme of each variant and what pins them: docs/engine_conventions.md, "PhysX 5.3.1 (SAPIEN 3.0.3)".
 """
 from __future__ import annotations
 
@@ -21,7 +19,6 @@ import numpy as np
 
 from cross_checks.engines import install, world
 from cross_checks.engines.base import EngineError, Traits, Variant
-from cross_checks.engines.install import installed_version
 from cross_checks.engines.world import World, WorldEngine
 from reference_sim.quaternion import quat_from_matrix
 from reference_sim.simulate import BLOWUP_LIMIT
@@ -32,9 +29,7 @@ __all__ = ["ENGINE", "VARIANTS", "EngineError", "version", "simulate", "simulate
 ENGINE = "physx"
 _DIST = "sapien"
 
-#: PhysX's rigid-body step: the renormalisation keeps |L| exactly while the rotational energy drifts at first
-#: order, either sign (docs/verdicts.md §3). TGS keeps ω in √I space and converts it back with two float32 3×3
-#: products every step: four ordinary steps' rounding (docs/verdicts.md, ``rounding_factor``).
+#: What each variant's step does and why it declares these traits: docs/engine_conventions.md, "PhysX".
 _TRAITS = Traits(rotation_drift="momentum", rotation_sign=None, precision="float32")
 VARIANTS = {
     "tgs": Variant(1, "PhysX 5 TGS (SAPIEN's default): semi-implicit Euler, explicit gyroscopic term "
@@ -44,22 +39,13 @@ VARIANTS = {
                       "exponential-map attitude; float32", traits=_TRAITS),
 }
 
-_REST = np.eye(1, 13, 6)[0]   # where a body whose run blew up is parked: at rest at the origin
-#: Above this many bodies a world takes its forces as arrays (one compiled evaluation for all, float32 rows
-#: to SAPIEN); at or below it, as plain floats per body (a few bodies' arrays cost more than their step).
-#: The same numbers either way (tests/cross_checks/engines/test_physx_engine.py).
-MANY_BODIES = 4
 _LOCK = threading.RLock()
 
 
 def version() -> str:
     """SAPIEN's version and the PhysX release it bundles, e.g. ``3.0.3 (PhysX 5.3.1)``, without importing
-    sapien (its import starts a thread; the sweep forks): EngineNotInstalled, or ImportError if not found."""
-    if installed_version(_DIST) is None:
-        raise install.EngineNotInstalled("sapien is not installed (pip install 'rbcheck[physx]')")
-    if importlib.util.find_spec("sapien") is None:
-        raise ImportError(f"sapien {installed_version(_DIST)} is installed but cannot be imported: "
-                          "no module named 'sapien'")
+    sapien (its import starts a thread; the sweep forks): install.check_installed's errors."""
+    install.check_installed(_DIST, "pip install 'rbcheck[physx]'", (("sapien", _DIST),))
     return _dist_version()
 
 
@@ -70,29 +56,7 @@ def _dist_version() -> str:
     header = root / "include" / "physx" / "include" / "foundation" / "PxPhysicsVersion.h"
     text = header.read_text(errors="replace") if header.is_file() else ""
     parts = re.findall(r"#define PX_PHYSICS_VERSION_(?:MAJOR|MINOR|BUGFIX)\s+(\d+)", text)
-    return f"{installed_version(_DIST)} (PhysX {'.'.join(parts) if len(parts) == 3 else 'unknown'})"
-
-
-@functools.lru_cache(maxsize=1)
-def _world_module():
-    """cross_checks.engines.worlds.physx (what rbcheck repro embeds; it imports sapien), imported once after
-    :func:`version`'s checks, SAPIEN's warning at import ("Failed to find system libvulkan") silenced."""
-    version()
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        from cross_checks.engines.worlds import physx
-    return physx
-
-
-def _engine():   # (sapien, sapien.physx), as the world module imported them
-    return _world_module().sapien, _world_module().px
-
-
-def __getattr__(name):
-    """``BODY_SETTINGS``, ``PACK_TO_PACKED`` and ``neutralise``: worlds.physx's (sapien imported then)."""
-    if name in ("BODY_SETTINGS", "PACK_TO_PACKED", "neutralise"):
-        return getattr(_world_module(), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return f"{install.installed_version(_DIST)} (PhysX {'.'.join(parts) if len(parts) == 3 else 'unknown'})"
 
 
 def body_spec(body) -> tuple:
@@ -104,35 +68,34 @@ def body_spec(body) -> tuple:
 
 class _SceneLoop:
     """A PhysX world: the bodies of ``requests`` in one scene of ``variant``'s solver at ``dt_s`` under the
-    first request's gravity (:func:`_world_class` puts it before worlds.physx's ``Bodies``). Raw rows are
-    packed states (float32 values), a few bodies' as plain floats (:data:`MANY_BODIES`)."""
+    first request's gravity (:func:`_world_class` puts it before worlds.physx's ``Bodies``, its ``W``). Raw
+    rows are packed states (float32 values), up to world.MANY_BODIES bodies' as plain floats."""
 
     float_rows = True   # apply takes the harness's rows of plain floats (a few bodies)
     exact_start = True   # the scenario's own first row, not its float32 round trip
 
     def __init__(self, requests, variant: str, dt_s: float):
         World.__init__(self)
-        W = _world_module()
         with _LOCK:   # the scene config is SAPIEN's process-global default
-            W.Bodies.__init__(self, requests[0].scenario.problem.forces.gravity_W, variant, dt_s)
+            super().__init__(requests[0].scenario.problem.forces.gravity_W, variant, dt_s)
         for spec in world.body_specs(requests, body_spec):
             try:
                 self.add_body(*spec)
             except Exception as exc:  # noqa: BLE001 - PhysX/SAPIEN refuses the mass properties
-                raise EngineError(f"PhysX (sapien {installed_version(_DIST)}) refuses the body: "
+                raise EngineError(f"PhysX (sapien {install.installed_version(_DIST)}) refuses the body: "
                                   f"{type(exc).__name__}: {exc}") from None
         self.always = np.array([r.scenario.problem.forces.state_dependent for r in requests], dtype=bool)
-        self.many = len(requests) > MANY_BODIES
+        self.many = len(requests) > world.MANY_BODIES
         self.float_reads = not self.many
         # a few bodies: one pack() as plain floats, each body's packed row of it (PACK_TO_PACKED) in one call
         self._unpack = struct.Struct(f"{13 * len(self.comps)}f").unpack
-        self._packed_of = [operator.itemgetter(*(13 * k + W.PACK_TO_PACKED).tolist())
+        self._packed_of = [operator.itemgetter(*(13 * k + self.W.PACK_TO_PACKED).tolist())
                            for k in range(len(self.comps))]
 
     def read(self):
         """Every body's packed row: a few bodies' as 13 plain floats each from one ``pack()``, many bodies' as
         one float32 array (:meth:`Bodies.read`). A body whose state blew up (world.blown_up) is parked at rest
-        once read (PhysX must never step a NaN), with no force and no decay from then on."""
+        at the origin once read (PhysX must never step a NaN), with no force and no decay from then on."""
         if self.many:
             rows = super().read()
             bad = world.blown_up(self.raw, self.alive)
@@ -142,7 +105,7 @@ class _SceneLoop:
             bad = () if math.hypot(*vals) <= BLOWUP_LIMIT else world.blown_up(rows, self.alive)
         for k in bad:
             self.alive[k] = False
-            self._put(k, _REST)
+            self._put(k, np.eye(1, 13, 6)[0])   # x = 0, v = 0, q = (1, 0, 0, 0), ω = 0
         return rows
 
     def packed_row(self, raw):   # a read is packed rows already (a few: plain floats; many: float32)
@@ -181,8 +144,14 @@ class _SceneLoop:
 
 @functools.lru_cache(maxsize=1)
 def _world_class():
-    """The PhysX world's class: :class:`_SceneLoop` before worlds.physx's ``Bodies`` (sapien imported)."""
-    return type("PhysxWorld", (_SceneLoop, _world_module().Bodies, World), {"__doc__": _SceneLoop.__doc__})
+    """The world's class, :class:`_SceneLoop` before ``W.Bodies``; ``W``: worlds.physx (what rbcheck repro
+    embeds; it imports sapien), imported once after :func:`version`'s checks (install.first_import), SAPIEN's
+    warning at import ("Failed to find system libvulkan") silenced."""
+    version()
+    with install.first_import(_DIST), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        from cross_checks.engines.worlds import physx as W
+    return type("PhysxWorld", (_SceneLoop, W.Bodies, World), {"__doc__": _SceneLoop.__doc__, "W": W})
 
 
 def PhysxWorld(requests, variant: str, dt_s: float):
@@ -195,14 +164,10 @@ class PhysxEngine(WorldEngine):
 
     name, variants, distribution, extra = ENGINE, VARIANTS, _DIST, "physx"
     sign_continuity = True
+    any_length = True   # one scene per Δt and float32 gravity, whatever the runs' lengths
     version = staticmethod(version)   # the module's: sapien is not imported
+    require_installed = staticmethod(_world_class)   # version()'s checks and sapien's quiet import, once
     world = staticmethod(PhysxWorld)
-
-    def _installed(self):   # version()'s checks: SAPIEN imported by the world, its warning silenced
-        version()
-
-    def group_key(self, request) -> tuple:   # one scene per Δt and float32 gravity; runs of any length
-        return (float(request.dt_s), np.float32(request.scenario.problem.forces.gravity_W).tobytes())
 
     def engine_files(self) -> list:   # SAPIEN's compiled module and library (PhysX linked in), not imported
         return [*install.package_files("sapien", pattern="pysapien*.so"),

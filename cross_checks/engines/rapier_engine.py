@@ -1,8 +1,6 @@
 """Rapier (``rapier3d``, dimforge's Python bindings, 3D, float32) as an engine (``rapier:VARIANT``): the
-bodies of cross_checks.engines.worlds.rapier (one ``PhysicsWorld`` per Δt and gravity, a dynamic
-``RigidBody`` per run, its mass properties about the COM; user forces accumulate and are kept: the loop's
-replace them) for rbcheck's loop. Conventions, defaults neutralised and what pins them:
-docs/engine_conventions.md, "Rapier 0.36.1".
+bodies of cross_checks.engines.worlds.rapier for rbcheck's loop. Conventions, defaults neutralised, the
+scheme of each variant and what pins them: docs/engine_conventions.md, "Rapier 0.36.1".
 """
 from __future__ import annotations
 
@@ -16,18 +14,14 @@ from cross_checks.engines.base import EngineError, Traits, Variant
 from cross_checks.engines.world import World, WorldEngine
 
 rapier, _IMPORT_ERROR, rpw = install.optional_world("rapier3d", "rapier", "Bodies")
-if _IMPORT_ERROR is None:
-    from cross_checks.engines.worlds.rapier import BODY_SETTINGS, WORLD_SETTINGS
 
-__all__ = ["ENGINE", "DIST", "VARIANTS", "WORLD_SETTINGS", "BODY_SETTINGS", "EngineError", "version",
-           "simulate", "simulate_many", "one_step", "RapierWorld", "RapierAdapter"]
+__all__ = ["ENGINE", "DIST", "VARIANTS", "EngineError", "version", "simulate", "simulate_many", "one_step",
+           "RapierWorld", "RapierAdapter"]
 
 ENGINE = "rapier"
 DIST = "rapier3d"
 
-#: Rapier's one integrator (symplectic Euler: rigid_body_components.rs, ``integrate_forces_and_velocities``),
-#: its gyroscopic forces on (its default, first: |L| kept exactly, the energy drifting towards the separatrix,
-#: either sign) and off (ω_W changes only by the torque: constant without one).
+#: Rapier's one integrator, its gyroscopic forces on (its default, first) and off.
 VARIANTS = {
     "symplectic_euler": Variant(1, "Rapier's step (gyroscopic forces on, its default): semi-implicit Euler "
                                    "in float32, explicit gyroscopic step in the principal frame rescaled to "
@@ -40,11 +34,6 @@ VARIANTS = {
                                         traits=Traits(gyroscopic_term=False, precision="float32")),
 }
 
-#: Above this many bodies a world reads them from their serialisations (:func:`state_bytes_layout`) and gives
-#: a body a force or torque only where it changed; at or below it, through the getters in plain floats. The
-#: same numbers either way (tests/cross_checks/engines/test_rapier_engine.py).
-MANY_BODIES = 4
-
 
 def _decode(blobs: bytes, n: int, layout) -> np.ndarray:
     """``n`` bodies' serialisations of one length (``blobs``, joined) as packed rows (n, 13) in float64:
@@ -55,54 +44,44 @@ def _decode(blobs: bytes, n: int, layout) -> np.ndarray:
     v = np.ascontiguousarray(raw).view("<f4")                      # x, y, z, vx, vy, vz, qx, qy, qz, qw, ω
     qx, qy, qz, qw = v[:, 6], v[:, 7], v[:, 8], v[:, 9]
     norm = np.sqrt((qx * qx + qz * qz) + (qy * qy + qw * qw))
-    out = np.empty((n, 13))
-    out[:, 0:6], out[:, 10:13] = v[:, 0:6], v[:, 10:13]
+    out = v[:, [0, 1, 2, 3, 4, 5, 9, 6, 7, 8, 10, 11, 12]].astype(float)
     out[:, 6:10] = v[:, [9, 6, 7, 8]] / norm[:, None]   # (w, x, y, z), each divided in float32
     return out
 
 
 @functools.lru_cache(maxsize=1)
+@np.errstate(all="ignore")   # a layout that is wrong decodes garbage: refused, not warned about
 def state_bytes_layout():
     """Where a body's state sits in ``RigidBody.to_bytes()`` (rapier3d's own serialisation): ``(length,
     byte columns of [x, v, q (x y z w), ω] as float32)``, found on a probe body given distinct values (each
-    component's first place) and then checked on 256 bodies of random states stepped under random torques:
-    :func:`_decode` of their serialisations must equal what the getters return, bit for bit. None where
-    anything differs (another rapier3d may lay its bodies out otherwise): the getters then, per body."""
+    component's first place); None unless :func:`_decode` of 256 bodies' serialisations (random states
+    stepped under random torques) is what the getters return, bit for bit (another rapier3d may lay its
+    bodies out otherwise: a value not found, another length): the getters then, per body."""
     try:
-        return None if rapier is None else _find_layout()
+        n = 256
+        rng = np.random.default_rng(20260)
+        y = rng.normal(size=(n, 13)) * 5.0   # (Rotation3 normalises the quaternion)
+        check = rpw.Bodies([(1.0, np.array([1.0, 2.0, 3.0]), np.array([1.0, 0.0, 0.0, 0.0]))] * n,
+                           (0.0, 0.0, -9.81), "symplectic_euler", 1e-2)
+        check.set_state(y)
+        rb = check.bodies[0]   # the probe, its state distinct values
+        rb.position = rapier.Isometry3((1.25, 2.375, 3.5), rapier.Rotation3(0.9, 0.1, -0.2, 0.3))
+        rb.linvel, rb.angvel = (4.625, 5.75, 6.875), (7.125, 8.25, 9.375)
+        rot = rb.rotation.to_bytes()
+        want = np.float32([1.25, 2.375, 3.5, 4.625, 5.75, 6.875, 0, 0, 0, 0, 7.125, 8.25, 9.375])
+        want[6:10] = np.frombuffer(rot[len(rot) - 16:], dtype="<f4")   # the rotation as kept: x, y, z, w
+        blob = rb.to_bytes()
+        offsets = [blob.find(c.tobytes()) for c in want]   # one not found (-1) reads garbage: refused below
+        layout = (len(blob), np.concatenate([np.arange(o, o + 4) for o in offsets]))
+        for _ in range(4):
+            check.apply(np.zeros((n, 3)), rng.normal(size=(n, 3)))
+            got = _decode(b"".join([b.to_bytes() for b in check.bodies]), n, layout)
+            if not np.array_equal(got, np.asarray(rpw.Bodies.read(check), dtype=float)):
+                return None
+            check.step()
+        return layout
     except Exception:  # noqa: BLE001 - an unexpected serialisation: the getters are always right
         return None
-
-
-def _find_layout():
-    n = 256
-    rng = np.random.default_rng(20260)
-    y = rng.normal(size=(n, 13)) * 5.0
-    y[:, 6:10] /= np.linalg.norm(y[:, 6:10], axis=1, keepdims=True)
-    check = rpw.Bodies([(1.0, np.array([1.0, 2.0, 3.0]), np.array([1.0, 0.0, 0.0, 0.0]))] * n,
-                       (0.0, 0.0, -9.81), "symplectic_euler", 1e-2)
-    check.set_state(y)
-    rb = check.bodies[0]   # the probe, its state distinct values
-    rb.position = rapier.Isometry3((1.25, 2.375, 3.5), rapier.Rotation3(0.9, 0.1, -0.2, 0.3))
-    rb.linvel, rb.angvel = (4.625, 5.75, 6.875), (7.125, 8.25, 9.375)
-    rot = rb.rotation.to_bytes()
-    stored_q = np.frombuffer(rot[len(rot) - 16:], dtype="<f4")     # the rotation as kept: x, y, z, w
-    blob = rb.to_bytes()
-    want = [*np.float32([1.25, 2.375, 3.5, 4.625, 5.75, 6.875]), *stored_q, *np.float32([7.125, 8.25, 9.375])]
-    offsets = [blob.find(c.tobytes()) for c in want]
-    if min(offsets) < 0 or len({*offsets}) != 13:
-        return None
-    layout = (len(blob), np.concatenate([np.arange(o, o + 4) for o in offsets]))
-    for _ in range(4):
-        check.apply(np.zeros((n, 3)), rng.normal(size=(n, 3)))
-        blobs = [b.to_bytes() for b in check.bodies]
-        if {len(b) for b in blobs} != {layout[0]}:
-            return None
-        got = _decode(b"".join(blobs), n, layout)
-        if not np.array_equal(got, np.asarray(rpw.Bodies.read(check), dtype=float)):
-            return None
-        check.step()
-    return layout
 
 
 def body_spec(body) -> tuple:
@@ -121,9 +100,9 @@ class RapierWorld(rpw.Bodies, World):
         rpw.Bodies.__init__(self, world.body_specs(requests, body_spec),
                             requests[0].scenario.problem.forces.gravity_W, variant, dt_s)
         self.ends = [int(r.n_steps) for r in requests]
-        self.layout = state_bytes_layout() if len(requests) > MANY_BODIES else None
+        self.layout = state_bytes_layout() if len(requests) > world.MANY_BODIES else None
         # a few bodies: the harness's rows and the reads (packed rows already) in plain floats, no arrays
-        self.float_rows = self.float_reads = len(requests) <= MANY_BODIES
+        self.float_rows = self.float_reads = len(requests) <= world.MANY_BODIES
         self._to_bytes = [rb.to_bytes for rb in self.bodies]
 
     def set_state(self, y):
@@ -157,8 +136,7 @@ class RapierWorld(rpw.Bodies, World):
     def first(self, y0):   # the scenario's own first row, not its float32 round trip
         return y0
 
-    def step(self):
-        """One step; a body Rapier quarantines (rolled back, disabled) is dead, with Rapier's words."""
+    def step(self):   # a body Rapier quarantines (rolled back, disabled) is dead, with Rapier's words
         self.world.step()
         self.n += 1
         bad = self.world.quarantine.bodies
@@ -168,10 +146,10 @@ class RapierWorld(rpw.Bodies, World):
             self.warnings.append((k, self.n, "Rapier quarantined the body"))
 
     def read(self):
-        """The packed rows (a dead body's non-finite): a few bodies' through the getters, many bodies' from
-        one serialisation each, decoded for all at once (the getters' numbers: :func:`state_bytes_layout`). A
-        body whose run is over (its last step, or its state blown up: world.blown_up) is dead from then on:
-        disabled, no force, no decay."""
+        """The packed rows (a dead body's non-finite): up to world.MANY_BODIES bodies' through the getters,
+        more from one serialisation each, decoded for all at once (the getters' numbers, bit for bit:
+        :func:`state_bytes_layout`). A body whose run is over (its last step, or its state blown up:
+        world.blown_up) is dead from then on: disabled, no force, no decay."""
         if self.layout is None:
             rows = rpw.Bodies.read(self)
         else:
@@ -196,10 +174,7 @@ class RapierEngine(WorldEngine):
     imported = "rapier"
     keeps_forces = True
     sign_continuity = True
-
-    def group_key(self, request) -> tuple:   # one world per Δt and gravity; runs of any length share it
-        return (float(request.dt_s), tuple(float(g) for g in request.scenario.problem.forces.gravity_W))
-
+    any_length = True   # one world per Δt and float32 gravity, whatever the runs' lengths
 
 _ENGINE, version, simulate, simulate_many, one_step = RapierEngine.exported()
 RapierAdapter = RapierEngine

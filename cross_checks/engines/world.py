@@ -75,8 +75,13 @@ from cross_checks.engines.step_floats import bad_floats
 from reference_sim.quaternion import quat_from_matrix
 from reference_sim.simulate import BLOWUP_LIMIT
 
-__all__ = ["World", "HostRowsWorld", "WorldEngine", "body_spec", "blown_up", "body_specs", "body_entry",
-           "principal_spec"]
+__all__ = ["World", "HostRowsWorld", "WorldEngine", "MANY_BODIES", "body_spec", "blown_up", "body_specs",
+           "body_entry", "principal_spec"]
+
+#: Above this many bodies a world is "many bodies": the harness evaluates their forces in one compiled call
+#: (loop.Harness.rows) and a world may take them and give its reads as arrays; at or below it, per body in
+#: plain floats (a few bodies' arrays cost more than the engine's step). The same numbers either way.
+MANY_BODIES = 4
 
 
 def body_spec(body) -> tuple:
@@ -262,6 +267,9 @@ class WorldEngine(base.EngineAdapter):
     #: harness has each body's own decay factors, and ``build`` gets the first request's Δt; each request
     #: keeps its own): for an engine that batches a Δt ladder in one compiled call (Brax).
     mixed_steps: bool = False
+    #: Runs of any length share a world of one Δt and float32 gravity (:meth:`group_key`), the world ending
+    #: each body's run itself (bodies that never interact, an engine that computes in float32: Rapier, PhysX).
+    any_length: bool = False
     #: Steps between the loop's divergence checks.
     chunk: int = 1024
     #: Harness modules whose code decides the results besides the engine's own (the result cache's key).
@@ -279,7 +287,10 @@ class WorldEngine(base.EngineAdapter):
         return type(self).world(requests, variant, dt_s)
 
     def group_key(self, request) -> tuple:
-        """Requests with equal keys are run in one world (default: equal step and step count)."""
+        """Requests with equal keys are run in one world: equal step and step count, or with ``any_length``,
+        equal step and float32 gravity."""
+        if self.any_length:
+            return (float(request.dt_s), np.float32(request.scenario.problem.forces.gravity_W).tobytes())
         return (float(request.dt_s), int(request.n_steps))
 
     def world_key(self, request, variant: str) -> tuple:

@@ -95,14 +95,12 @@ OPTIONAL = {o.engine: o for o in [
              "rapier3d 0.36.1 is installed but cannot be imported: ImportError: _rapier3d",
              absent=_import_stand_in("rapier", "No module named 'rapier3d'")),
     Optional("physx", physx_engine, "sapien", "physx", "3.0.3", _spec_missing("sapien"),
-             "sapien 3.0.3 is installed but cannot be imported: no module named 'sapien'"),
+             "sapien 3.0.3 is installed but cannot be imported: sapien is missing"),
     Optional("mujoco_warp", mujoco_warp_engine, "mujoco-warp", "mujoco_warp", "4.0.0", _spec_missing("warp"),
              "mujoco-warp 4.0.0 is installed but cannot be imported: warp-lang is missing", n_variants=5),
     Optional("newton", newton_engine, "newton", "newton", "1.8.0", _spec_missing("warp"),
              "newton 1.8.0 is installed but cannot be imported: warp-lang is missing"),
 ]}
-#: Adapter modules that read the metadata through their own name for installed_version.
-_OWN_INSTALLED_VERSION = (physx_engine,)
 #: Caches of what an adapter read from the metadata once per process.
 _CACHES = (brax_engine._lib, physx_engine._dist_version)
 
@@ -116,8 +114,6 @@ def test_every_registered_engine_is_required_or_listed_here():
 
 def _metadata(mp, fake):
     mp.setattr(install, "installed_version", fake)
-    for module in _OWN_INSTALLED_VERSION:
-        mp.setattr(module, "installed_version", fake)
 
 
 def _clear():

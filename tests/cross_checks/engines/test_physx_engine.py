@@ -17,11 +17,13 @@ pytest.importorskip("sapien", reason="sapien is not installed (pip install -e '.
 from cross_checks.engines import physx_engine as pe  # noqa: E402
 from cross_checks.engines import resolve
 from cross_checks.engines.base import RunRequest  # noqa: E402
+from cross_checks.engines.world import MANY_BODIES  # noqa: E402
 from cross_checks.scenario import load_scenario  # noqa: E402
 from reference_sim.quaternion import geodesic_angle, matrix_from_quat, quat_exp, quat_mul  # noqa: E402
 from tests.helpers.scenarios import YAW90, scenario_from_parts  # noqa: E402
 
-sapien, px = pe._engine()
+pw = pe._world_class().W   # worlds.physx, imported as the adapter imports it
+sapien, px = pw.sapien, pw.px
 
 Q_TILT = np.array([0.9, 0.1, 0.3, -0.2]) / np.linalg.norm([0.9, 0.1, 0.3, -0.2])
 FULL_INERTIA = "mass = 2.0\ninertia = [[2.0, 0.1, 0.05], [0.1, 3.0, -0.2], [0.05, -0.2, 4.0]]"
@@ -127,7 +129,7 @@ def test_a_model_has_the_scenarios_gravity_step_solver_and_neutral_settings():
         np.testing.assert_array_equal(cfg.gravity, np.float32([1.0, -2.0, 0.5]))
         assert cfg.enable_tgs == (variant == "tgs")
         assert S.system.timestep == np.float32(0.004)                   # PhysX keeps Δt in float32
-        for setter, value in pe.BODY_SETTINGS:
+        for setter, value in pw.BODY_SETTINGS:
             got = getattr(c, "get_" + setter[4:])() if setter != "set_kinematic" else c.kinematic
             assert got == pytest.approx(value), setter
         assert not c.auto_compute_mass and c.collision_shapes == [] and c.locked_motion_axes == [False] * 6
@@ -147,11 +149,11 @@ def test_neutralise_sets_every_setting_whatever_it_was():
                "set_max_contact_impulse": 0.1, "set_sleep_threshold": 10.0,
                "set_solver_position_iterations": 7, "set_solver_velocity_iterations": 3,
                "set_disable_gravity": True, "set_kinematic": True}
-    assert set(hostile) == {s for s, _ in pe.BODY_SETTINGS}
+    assert set(hostile) == {s for s, _ in pw.BODY_SETTINGS}
     for setter, value in hostile.items():
         getattr(c, setter)(value)
-    pe.neutralise(c)
-    for setter, value in pe.BODY_SETTINGS:
+    pw.neutralise(c)
+    for setter, value in pw.BODY_SETTINGS:
         got = getattr(c, "get_" + setter[4:])() if setter != "set_kinematic" else c.kinematic
         assert got == pytest.approx(value), setter
 
@@ -170,7 +172,7 @@ def test_default_angular_damping_and_clamp_change_a_spin_and_neutralised_they_do
     S.step()
     assert c.angular_velocity[2] == pytest.approx(50.0 * (1 - 0.05 * 0.01), rel=1e-6)
     S, c = _raw_body()
-    pe.neutralise(c)
+    pw.neutralise(c)
     c.set_angular_velocity(np.float32([0.0, 0.0, 500.0]))
     for _ in range(10):
         S.step()
@@ -186,7 +188,7 @@ def test_a_slow_spin_falls_asleep_with_the_default_threshold_and_never_with_zero
         S, c = _raw_body()
         c.set_angular_damping(0.0)
         if neutral:
-            pe.neutralise(c)
+            pw.neutralise(c)
         c.set_angular_velocity(np.float32([0.0, 0.0, 1e-3]))
         for _ in range(300):
             S.step()
@@ -229,8 +231,8 @@ def test_pack_is_quaternion_w_first_then_position_velocity_and_world_angular_vel
     np.testing.assert_allclose(row[4:7], [1.0, -2.0, 0.5], rtol=0, atol=1e-7)
     np.testing.assert_array_equal(row[7:10], c.linear_velocity)
     np.testing.assert_array_equal(row[10:13], c.angular_velocity)
-    np.testing.assert_allclose(row[pe.PACK_TO_PACKED], y, rtol=0, atol=3e-7)
-    np.testing.assert_array_equal(S.read()[0], row[pe.PACK_TO_PACKED])      # what the world reads
+    np.testing.assert_allclose(row[pw.PACK_TO_PACKED], y, rtol=0, atol=3e-7)
+    np.testing.assert_array_equal(S.read()[0], row[pw.PACK_TO_PACKED])      # what the world reads
 
 
 def test_quaternion_order_at_the_boundary():
@@ -258,7 +260,7 @@ def test_linear_velocity_is_the_coms_not_the_actor_origins():
     # a mass frame offset by 0.5 m along body x: a pure spin about the COM leaves the COM in place while the
     # actor origin circles it; linear_velocity is the COM's (0)
     S, c = _raw_body()
-    pe.neutralise(c)
+    pw.neutralise(c)
     c.set_cmass_local_pose(sapien.Pose(np.float32([0.5, 0.0, 0.0])))
     c.set_angular_velocity(np.float32([0.0, 0.0, 2.0]))
     for _ in range(20):
@@ -455,9 +457,9 @@ def test_a_scene_of_many_bodies_takes_array_forces_and_gives_each_run_alone_bit_
     names = ["projectile", "applied_torque", "spring_pendulum", "velocity_decay", "tennis_racket"]
     scs = [load_scenario(n) for n in names]
     # two scenes (two gravities), each of more than MANY_BODIES bodies
-    reqs = [RunRequest(scs[k % len(scs)], 0.01, 25 + k) for k in range(3 * pe.MANY_BODIES + 3)]
+    reqs = [RunRequest(scs[k % len(scs)], 0.01, 25 + k) for k in range(3 * MANY_BODIES + 3)]
     assert min(sum(1 for r in reqs if bool(r.scenario.problem.forces.gravity_W.any()) is g)
-               for g in (True, False)) > pe.MANY_BODIES
+               for g in (True, False)) > MANY_BODIES
     for variant in BOTH:
         for r, run in zip(reqs, pe.simulate_many(variant, reqs)):
             alone = pe.simulate(r.scenario, variant, r.dt_s, r.n_steps)
@@ -512,16 +514,46 @@ def test_nothing_is_compiled_or_cached_at_run_time(tmp_path, monkeypatch):
     assert not kernel_cache_dir("physx").exists() and list(tmp_path.iterdir()) == []
 
 
+def _python(code: str) -> subprocess.CompletedProcess:
+    """``code`` run by a fresh Python (nothing imported yet), its output captured."""
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                          env={**os.environ, "MPLBACKEND": "Agg"})
+
+
 def test_importing_the_adapter_and_asking_its_version_import_no_sapien():
     code = ("import sys\nfrom cross_checks.engines import physx_engine as pe\n"
             "from cross_checks.engines import all_variants\n"
             "print(pe.version(), pe.PhysxAdapter().source_files()[-1].name, "
             "[v.name for v in all_variants() if v.engine == 'physx'])\n"
             "print('sapien' in sys.modules)\n")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
-                         env={**os.environ, "MPLBACKEND": "Agg"}).stdout.split("\n")
+    out = _python(code).stdout.split("\n")
     assert out[0].startswith("3.0.3 (PhysX 5.3.1) libsapien.so ['physx:tgs', 'physx:pgs']")
     assert out[1] == "False"
+
+
+def test_a_run_where_sapien_finds_no_system_libvulkan_prints_nothing_of_it():
+    """SAPIEN warns at its import when it finds no system libvulkan (it falls back to its own; a fresh
+    machine); the adapter imports sapien at a run's world build with that warning silenced, so a run (and
+    every sweep worker's first) prints nothing of it."""
+    code = ("import os\nreal = os.path.isfile\n"
+            "os.path.isfile = lambda p: False if 'libvulkan' in str(p) else real(p)\n"
+            "from cross_checks.engines import physx_engine as pe\n"
+            "from cross_checks.scenario import load_scenario\n"
+            "print(len(pe.simulate(load_scenario('projectile'), 'pgs', 0.01, 3).y))\n")
+    done = _python(code)
+    assert done.stdout == "4\n" and "libvulkan" not in done.stderr, done.stderr
+
+
+def test_a_world_build_reads_no_package_metadata_once_sapien_is_imported(monkeypatch):
+    """The install checks (package metadata and import specs, ~0.5 ms) run once per process, with sapien's
+    import, not at every world build (a sweep builds one per run group and per one-step record)."""
+    from cross_checks.engines import install
+    reqs = [RunRequest(load_scenario("projectile"), 0.01, 1)]
+    pe.PhysxAdapter().build(reqs, "pgs", 0.01).close()
+    calls = []
+    monkeypatch.setattr(install, "installed_version", lambda dist: calls.append(dist) or "3.0.3")
+    pe.PhysxAdapter().build(reqs, "pgs", 0.01).close()
+    assert calls == []
 
 
 def test_version_and_list_name_physx():
@@ -578,7 +610,7 @@ def test_the_world_reads_every_body_from_one_pack_as_plain_floats_and_takes_forc
     W.set_state(np.array([sc.problem.initial_packed() for sc in scs]))
     assert W.float_rows
     rows = W.read()
-    packs = np.frombuffer(W.system.pack(), dtype=np.float32).reshape(2, 13)[:, pe.PACK_TO_PACKED]
+    packs = np.frombuffer(W.system.pack(), dtype=np.float32).reshape(2, 13)[:, pw.PACK_TO_PACKED]
     assert all(type(r) is tuple and all(type(v) is float for v in r) for r in rows)
     np.testing.assert_array_equal(np.array(rows), packs)
     block = W.rows([rows, rows])
@@ -592,3 +624,23 @@ def test_the_world_reads_every_body_from_one_pack_as_plain_floats_and_takes_forc
     W.apply(np.array(f), np.array(tau))
     W.step()
     np.testing.assert_array_equal(W.rows([W.read()]), by_rows)
+
+
+def test_a_body_physx_refuses_fails_its_own_runs_with_physxs_words(monkeypatch):
+    """A body whose mass properties PhysX refuses (none of the schema's: docs/hardening.md's ranges are
+    float32 PhysX's) is an EngineError with SAPIEN's version and PhysX's words, for its own runs only: the
+    other runs of its scene go on."""
+    cls = pe._world_class()
+    real = cls.add_body
+
+    def add_body(self, mass_kg, moments, q_BP):
+        if mass_kg == 7.0:
+            raise RuntimeError("invalid mass")
+        return real(self, mass_kg, moments, q_BP)
+    monkeypatch.setattr(cls, "add_body", add_body)
+    ok, bad = (scenario_from_parts(body=f"mass = {m}\ninertia = [1.0, 2.0, 3.0]") for m in (2.0, 7.0))
+    runs = pe.simulate_many("pgs", [RunRequest(ok, 0.01, 5), RunRequest(bad, 0.01, 5),
+                                    RunRequest(ok, 0.01, 3)])
+    assert [len(runs[0].y), len(runs[2].y)] == [6, 4]
+    assert isinstance(runs[1], pe.EngineError)
+    assert "PhysX (sapien 3.0.3) refuses the body: RuntimeError: invalid mass" in str(runs[1])

@@ -10,6 +10,7 @@ import os
 import signal
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +20,7 @@ rapier = pytest.importorskip("rapier3d", reason="rapier3d is not installed (pip 
 
 from cross_checks.engines import rapier_engine as ra  # noqa: E402
 from cross_checks.engines.base import RunRequest  # noqa: E402
+from cross_checks.engines.world import MANY_BODIES  # noqa: E402
 from cross_checks.engines.worlds import rapier as rpw  # noqa: E402
 from cross_checks.scenario import load_scenario  # noqa: E402
 from reference_sim.quaternion import (  # noqa: E402
@@ -356,7 +358,7 @@ def test_a_world_has_the_scenarios_gravity_and_step_and_neutral_settings():
     assert W.world.gravity.to_tuple() == (1.0, -2.0, 0.5)
     ip = W.world.integration_parameters
     assert ip.dt == float(np.float32(0.004))
-    for attr, value in ra.WORLD_SETTINGS:
+    for attr, value in rpw.WORLD_SETTINGS:
         assert getattr(ip, attr) == value, attr
     rb = W.bodies[0]
     assert (rb.linear_damping, rb.angular_damping, rb.gravity_scale) == (0.0, 0.0, 1.0)
@@ -511,6 +513,13 @@ def test_simulate_many_runs_each_request_as_it_runs_alone_bit_for_bit(monkeypatc
     from collections import Counter
     keys = Counter((r.dt_s, tuple(r.scenario.problem.forces.gravity_W)) for r in reqs)
     assert len(keys) == 4 and sorted(worlds) == sorted(keys.values()) == [2, 2, 3, 3]
+    # gravities that float32 does not tell apart share a world (Rapier's is float32), as each runs alone
+    twins = [scenario_from_parts(forces=f"gravity = [0.0, 0.0, {z!r}]") for z in (-9.81, -9.81 * (1 + 1e-12))]
+    worlds.clear()
+    many = ra.simulate_many(GYRO, [RunRequest(sc, 0.01, 30 + 5 * k) for k, sc in enumerate(twins)])
+    assert worlds == [2]
+    for k, (sc, run) in enumerate(zip(twins, many)):
+        assert np.array_equal(run.y, ra.simulate(sc, GYRO, 0.01, 30 + 5 * k).y)
 
 
 def test_the_state_is_read_from_one_serialisation_per_body_as_the_getters_give_it():
@@ -548,7 +557,7 @@ def test_a_world_of_many_bodies_reads_serialisations_and_gives_each_run_alone_bi
     reqs = [RunRequest(scs[k % len(scs)], 0.01, 20 + 3 * k) for k in range(4 * len(scs))]
     worlds = {(r.dt_s, tuple(r.scenario.problem.forces.gravity_W)) for r in reqs}
     assert all(sum(1 for r in reqs if (r.dt_s, tuple(r.scenario.problem.forces.gravity_W)) == w)
-               > ra.MANY_BODIES for w in worlds)
+               > MANY_BODIES for w in worlds)
     many = ra.simulate_many(variant, reqs)
     for r, run in zip(reqs, many):
         alone = ra.simulate(r.scenario, variant, r.dt_s, r.n_steps)
@@ -560,7 +569,7 @@ def test_a_world_of_many_bodies_ends_the_runs_the_getters_would_end(monkeypatch)
     the serialisations' read gives the rows, the dead bodies and the disabled ones the getters' read
     gives."""
     sc = load_scenario("tennis_racket")
-    n = ra.MANY_BODIES + 4
+    n = MANY_BODIES + 4
     reqs = [RunRequest(sc, 0.01, 3 if k == 2 else 10) for k in range(n)]
     y = np.tile(sc.problem.initial_packed(), (n, 1))
     y[0, 0], y[1, 11] = 2e8, np.nan
@@ -578,13 +587,36 @@ def test_a_world_of_many_bodies_ends_the_runs_the_getters_would_end(monkeypatch)
     assert np.array_equal(a, b, equal_nan=True) and dead_a == dead_b == {0, 1, 2, 3} and on_a == on_b
 
 
+@pytest.mark.parametrize("decode", ["reversed", "raises", "not found"])
+def test_a_serialisation_laid_out_otherwise_is_refused_and_the_getters_read(monkeypatch, decode):
+    """The layout the probe finds is kept only if it decodes 256 random bodies as the getters read them: one
+    whose decoding differs, fails, or whose probe values are not in the serialisation (another rapier3d) is
+    None, and a world of many bodies then reads the getters."""
+    real = ra._decode
+    wrong = {"reversed": lambda blobs, n, layout: real(blobs, n, layout)[::-1],
+             "raises": lambda blobs, n, layout: real(blobs[1:], n, layout),
+             "not found": lambda blobs, n, layout: real(blobs, n, (layout[0], layout[1] * 0 - 1))}
+    monkeypatch.setattr(ra, "_decode", wrong[decode])
+    ra.state_bytes_layout.cache_clear()
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")   # garbage decoded is refused, not warned about
+            assert ra.state_bytes_layout() is None
+        sc = load_scenario("tennis_racket")
+        assert ra.RapierWorld([RunRequest(sc, 0.01, 5)] * (MANY_BODIES + 2), GYRO, 0.01).layout is None
+    finally:
+        ra.state_bytes_layout.cache_clear()
+    monkeypatch.undo()
+    assert ra.state_bytes_layout() is not None
+
+
 def test_without_a_layout_a_world_of_many_bodies_reads_the_getters(monkeypatch):
     monkeypatch.setattr(ra, "state_bytes_layout", lambda: None)
     sc = load_scenario("tennis_racket")
-    W = ra.RapierWorld([RunRequest(sc, 0.01, 5)] * (ra.MANY_BODIES + 2), GYRO, 0.01)
+    W = ra.RapierWorld([RunRequest(sc, 0.01, 5)] * (MANY_BODIES + 2), GYRO, 0.01)
     assert W.layout is None
     monkeypatch.undo()
-    assert ra.RapierWorld([RunRequest(sc, 0.01, 5)] * (ra.MANY_BODIES + 2), GYRO, 0.01).layout is not None
+    assert ra.RapierWorld([RunRequest(sc, 0.01, 5)] * (MANY_BODIES + 2), GYRO, 0.01).layout is not None
 
 
 def test_the_first_row_is_the_scenarios_and_quaternions_stay_continuous():

@@ -202,3 +202,43 @@ def test_an_adapter_module_exports_one_instances_version_and_runs():
     assert type(engine) is Declared and version() == engine.version()
     for f, name in ((simulate, "simulate"), (simulate_many, "simulate_many"), (one_step, "one_step")):
         assert f.__self__ is engine and f.__func__ is getattr(WorldEngine, name)
+
+
+
+def test_many_bodies_is_one_number_for_the_harness_and_the_worlds(monkeypatch):
+    """Above world.MANY_BODIES bodies the harness evaluates the forces in one compiled call, and the worlds
+    that take them as arrays switch at the same count, read from that one constant (Rapier's serialisation
+    reads, PhysX's array forces)."""
+    import pytest
+
+    from cross_checks.engines import world
+    from cross_checks.engines.base import RunRequest
+    from cross_checks.engines.loop import Harness
+    sc = load_scenario("spring_pendulum")
+    assert Harness([sc] * world.MANY_BODIES, 0.01, True).rows is None
+    assert Harness([sc] * (world.MANY_BODIES + 1), 0.01, True).rows is not None
+    monkeypatch.setattr(world, "MANY_BODIES", 1)
+    two = [RunRequest(sc, 0.01, 3)] * 2
+    pytest.importorskip("rapier3d")
+    pytest.importorskip("sapien")
+    from cross_checks.engines import physx_engine, rapier_engine
+    assert rapier_engine.RapierWorld(two, "symplectic_euler", 0.01).layout is not None
+    assert rapier_engine.RapierWorld(two[:1], "symplectic_euler", 0.01).layout is None
+    assert physx_engine.PhysxWorld(two, "tgs", 0.01).many
+    assert not physx_engine.PhysxWorld(two[:1], "tgs", 0.01).many
+
+
+def test_an_engine_whose_runs_may_differ_in_length_groups_them_by_step_and_float32_gravity():
+    """``any_length`` (Rapier, PhysX): one world per Δt and float32 gravity, whatever the runs' lengths (a
+    gravity that float32 does not tell apart is the same world's); otherwise one per Δt and length."""
+    from cross_checks.engines.base import RunRequest
+    from cross_checks.engines.world import WorldEngine
+    from tests.helpers.scenarios import scenario_from_parts
+    g = [scenario_from_parts(forces=f"gravity = [0.0, 0.0, {z!r}]")
+         for z in (-9.81, -9.81 * (1 + 1e-12), -9.0)]
+    reqs = [RunRequest(g[0], 0.01, 10), RunRequest(g[1], 0.01, 20), RunRequest(g[2], 0.01, 10),
+            RunRequest(g[0], 0.02, 10)]
+    keys = [type("Any", (WorldEngine,), {"any_length": True})().group_key(r) for r in reqs]
+    assert keys[0] == keys[1] and len(set(keys)) == 3
+    by_length = [WorldEngine().group_key(r) for r in reqs]
+    assert by_length[0] == by_length[2] != by_length[1] and len(set(by_length)) == 3
