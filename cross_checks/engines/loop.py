@@ -41,6 +41,7 @@ import numpy as np
 
 from cross_checks.engines import base, forces
 from cross_checks.engines.base import EngineError
+from cross_checks.engines.world import MANY_BODIES
 from reference_sim.compiled import ForceRows
 from reference_sim.quaternion import same_side
 from reference_sim.simulate import Run, bad_rows, blowup_words, diverged, none_bad
@@ -89,7 +90,7 @@ class Harness:
         # the scenario's own evaluator where the harness evaluates all of its forces
         self.ft = [host[k][1] for k in which]
         # many bodies: one compiled call for all of them (the same numbers, member by member)
-        self.rows = ForceRows.of([h[0] for h in host], index) if len(scenarios) > 4 else None
+        self.rows = ForceRows.of([h[0] for h in host], index) if len(scenarios) > MANY_BODIES else None
         dts = [dt_s] * len(scenarios) if np.ndim(dt_s) == 0 else list(dt_s)
         each: dict = {}
         pair = [each.setdefault((k, h), len(each)) for k, h in zip(which, dts)]

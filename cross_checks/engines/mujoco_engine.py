@@ -19,7 +19,7 @@ from cross_checks.engines.base import EngineError, Variant
 from cross_checks.engines.forces import stage_force_torque_floats
 from cross_checks.engines.loop import host_problem
 from cross_checks.engines.packed_rows import qpos_qvel_packed
-from cross_checks.engines.world import World, WorldEngine
+from cross_checks.engines.world import MANY_BODIES, World, WorldEngine
 from reference_sim.body import RigidBody
 from reference_sim.quaternion import quat_from_matrix
 
@@ -228,7 +228,7 @@ class MujocoWorld(mjw.FormBodies, World):
         return mjw.FormBodies.packed(self, raw)
 
     def packed_row(self, raw):   # a few bodies: packed_floats (the same numbers, 2 µs faster per step)
-        if self.B > 4 or self.form is not None:
+        if self.B > MANY_BODIES or self.form is not None:
             return self.packed(np.asarray(raw, dtype=float)[None])[0]
         return [packed_floats(r[0:7], r[7:13]) for r in np.asarray(raw).tolist()]
 
