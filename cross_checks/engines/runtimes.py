@@ -290,11 +290,14 @@ class JaxEngine(WorldEngine):
     def modules(self) -> tuple:
         """``(jax, jax.numpy, *imports)``, imported once (:meth:`version` first; an import failure an
         ImportError with the distribution's version: install.first_import), float64 checked on after them
-        (``import jaxsim`` sets it too)."""
+        (``import jaxsim`` sets it too). The process's warning filters and ``warnings.showwarning`` are
+        restored after the imports: ``import jaxsim`` sets a filter "once" for every warning and a
+        ``showwarning`` that prints any site-packages module's warning to stdout (Brax's deprecations among
+        them, in the middle of a sweep's output)."""
         if not self._modules:
             self.version()
             with install.first_import(self.distribution), contextlib.redirect_stdout(io.StringIO()), \
-                    warnings.catch_warnings() if self.quiet_warnings else contextlib.nullcontext():
+                    warnings.catch_warnings():
                 if self.quiet_warnings:
                     warnings.simplefilter("ignore")
                 jax = start_jax()

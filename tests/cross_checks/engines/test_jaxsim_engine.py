@@ -107,6 +107,24 @@ def test_version_is_the_pinned_release_and_read_without_importing_jax():
     assert out.stdout.strip() == "[]"  # listing and cache keys never start JAX (fork safety)
 
 
+def test_importing_jaxsim_leaves_the_processs_warnings_as_they_were():
+    """``import jaxsim`` sets a filter "once" for every warning and a ``warnings.showwarning`` that prints any
+    site-packages module's warning to stdout in its own colours (jaxsim/logging.py: its root is site-packages
+    itself); the adapter imports it with the process's filters and ``showwarning`` restored after. Checked in
+    a fresh interpreter, where the import runs jaxsim's module code."""
+    code = (
+        "import warnings\nfrom cross_checks.engines import jaxsim_engine as je\n"
+        "show, filters = warnings.showwarning, list(warnings.filters)\n"
+        "je._ENGINE.modules()\n"
+        "import jaxsim.logging\n"   # imported: the module that replaces them ran
+        "print(warnings.showwarning is show, warnings.filters == filters)"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120
+    )
+    assert out.stdout.strip().splitlines()[-1] == "True True"
+
+
 def test_float64_is_on_process_wide(jx):
     jax, jnp, js = jx
     assert jax.config.jax_enable_x64 and jnp.zeros(1).dtype == jnp.float64
