@@ -206,21 +206,24 @@ class Progress:
         elapsed = now - self.t0
         pct = f" ({100 * self.done / self.total:.0f}%)" if self.total else ""
         tail = f", {final}" if final else ""
-        if not final and 0 < self.done < self.total:
-            tail = f", ~{_seconds(self._time_left(elapsed))} left"
+        left = self._time_left(elapsed) if not final and 0 < self.done < self.total else None
+        if left is not None:
+            tail = f", ~{_seconds(left)} left"
         if self.last and not final:
             tail += f"; last: {self.last}"
         say(f"{self.prefix}: {self.what} {self.done}/{self.total}{pct} in {_seconds(elapsed)}{tail}",
             self.stream)
 
-    def _time_left(self, elapsed: float) -> float:
+    def _time_left(self, elapsed: float) -> float | None:
         """Seconds left: the times at which items finished fitted as ``start + a × items + b × work``
         (non-negative least squares), carried over what remains.
 
         A cost per item (a process, a reference, the metrics of a run) beside the cost per unit of work
         (steps) keeps a sweep's many short runs after its long ones from reading "~0 s left"; the start
         term keeps a slow first item (imports, a font cache) from being multiplied by every item left.
-        Until there are more finishing times than terms: proportional to the work (or the count) done."""
+        Until there are more finishing times than terms: proportional to the work done, or, for a count
+        alone, None (no estimate: the first items' times hold the start-up, which would be multiplied by
+        every item left: "~7.2 min left" after the report's first figure, done 6 s later)."""
         total_work = self.total_work or 0.0
         work = total_work > 0 and self.work_done > 0
         rest_n = self.total - self.done
@@ -236,7 +239,7 @@ class Progress:
             return float(coef[1] * rest_n + (coef[2] * rest_w if work else 0.0))
         if work:
             return elapsed * rest_w / self.work_done
-        return elapsed * rest_n / self.done
+        return None
 
     def close(self, finished: bool = True) -> None:
         """End the stage: the bar closes; without a terminal a last line says it is done. A stage

@@ -97,6 +97,28 @@ def test_a_slow_first_item_is_not_multiplied_by_every_item_left():
     assert _left_s(out.getvalue().splitlines()[0]) == round(50 * 0.1)
 
 
+def test_a_count_alone_gives_no_estimate_before_it_can_tell_the_start_up_from_the_items():
+    """The report's first figure took 12 s (imports), the next 76 take 0.1 s each: after one or two figures a
+    line says how far it is, not "~7.2 min left" (the start-up times every figure left); from the third on,
+    the fitted estimate."""
+    clock, out = Clock(), Flushed()
+    with Progress("rbcheck report", "figures", 77, stream=out, tty=False, clock=clock, interval_s=1e9) as p:
+        clock.t += 12.0
+        p.update(1, "first")
+        p._line(clock())
+        clock.t += 0.1
+        p.update(1, "second")
+        p._line(clock())
+        for _ in range(8):
+            clock.t += 0.1
+            p.update(1)
+        p._line(clock())
+    lines = out.getvalue().splitlines()
+    assert lines[0] == "rbcheck report: figures 1/77 (1%) in 12 s; last: first"
+    assert "left" not in lines[1]
+    assert _left_s(lines[2]) == round(67 * 0.1)
+
+
 def test_in_a_terminal_a_bar_and_no_log_lines():
     out = io.StringIO()
     with Progress("rbcheck sweep", "runs", 3, stream=out, tty=True) as p:
