@@ -333,4 +333,4 @@ def test_a_planted_collection_import_of_jax_is_found(tmp_path, monkeypatch):
     f = ROOT / "tests" / "x.py"
     monkeypatch.setattr(Path, "read_text", lambda self: 'import pytest\npytest.importorskip("brax")\n'
                         'def f():\n    import jax\n')
-    assert _collection_imports_of_jax(f) == ["tests/x.py:2 brax"]
+    assert _collection_imports_of_jax(f) == [f"{f.relative_to(ROOT)}:2 brax"]
