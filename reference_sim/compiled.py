@@ -19,6 +19,7 @@ State layout as everywhere: [x_W (3) m, v_W (3) m/s, q_WB (w, x, y, z), w_W (3) 
 from __future__ import annotations
 
 import math
+from contextlib import contextmanager
 
 import numpy as np
 
@@ -87,7 +88,8 @@ def load_compiled(name: str, first_calls, flag: list):
         first_calls(module)
         return module
     try:
-        first_calls(module)
+        with _compiling_alone(module):
+            first_calls(module)
     except Exception as exc:  # noqa: BLE001 - whatever the cache's files did, compile in memory
         flag[0] = False
         _say_skipped(_cache_folder(module) or folder or "numba's cache folder",
@@ -113,6 +115,52 @@ def unwritable(folder) -> str:
     except OSError as exc:
         return exc.strerror or str(exc)
     return ""
+
+
+#: How long a process waits for another one compiling the same kernels (:func:`_compiling_alone`) before it
+#: compiles them itself: several times the longest compile measured (COMPILE_ESTIMATE_S), so that only a
+#: process that stopped while compiling (suspended, not killed: a kill releases the lock) is not waited for.
+COMPILE_WAIT_S = 900.0
+
+
+@contextmanager
+def _compiling_alone(module):
+    """Held while ``module``'s first calls load its functions from numba's cache or compile them: a second
+    process doing the same on this machine (both workers of ``pytest -n 2`` in a fresh clone, the sweeps its
+    tests start meanwhile, two rbcheck commands started together) waits until the first has compiled and
+    written the cache, then loads it, instead of compiling the same kernels again (about a minute of CPU
+    each). An exclusive ``flock`` on a file beside numba's cache files, released when the first calls return
+    or the process ends; where there is no cache folder or no lock can be taken there, or after
+    :data:`COMPILE_WAIT_S`, each process loads or compiles on its own, as before."""
+    import os
+    import time
+    try:
+        import fcntl
+    except ImportError:   # no flock here
+        yield
+        return
+    folder, fd = _cache_folder(module), None
+    if folder:
+        try:
+            os.makedirs(folder, exist_ok=True)   # numba makes it when it writes the first file
+            fd = os.open(os.path.join(folder, f"{module.__name__}.rbcheck-compile.lock"),
+                         os.O_CREAT | os.O_RDWR, 0o666)
+            deadline = time.monotonic() + COMPILE_WAIT_S
+            while True:
+                try:
+                    fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                    break
+                except BlockingIOError:
+                    if time.monotonic() > deadline:
+                        break
+                    time.sleep(0.1)
+        except OSError:
+            pass
+    try:
+        yield
+    finally:
+        if fd is not None:
+            os.close(fd)   # the lock goes with the descriptor
 
 
 def _cache_folder(module) -> str:

@@ -154,6 +154,19 @@ def _unchanged(m):
     return m
 
 
+def batched(requests, knob, step) -> list:
+    """The runs of ``requests`` (RunRequest) as the members of one ``run_members`` call, ``knob`` applied to
+    the stacked members, with ``step`` (a variant name or a step function): each run is the request's run
+    alone, bit for bit (every row of the definition advances on its own:
+    test_mutants_run_batched_as_they_run_alone), and a ladder's Python steps are taken once for all its
+    rungs, not once per rung."""
+    problems = [r.scenario.problem for r in requests]
+    if not problems:
+        return []
+    return run_members(knob(Members.stack(problems)), step, [r.dt_s for r in requests],
+                       [r.n_steps for r in requests], np.array([p.initial_packed() for p in problems]))
+
+
 class MutantAdapter(EngineAdapter):
     """``mutant_NAME:VARIANT``: the reference scheme VARIANT with one bug (``members``: a knob on the
     parameters; ``step``: a broken step of the definition's signature), declared as imitating it."""
@@ -178,6 +191,11 @@ class MutantAdapter(EngineAdapter):
         p = scenario.problem
         return run_members(self.knob(p.members), self.step or variant,
                            [dt_s], [n_steps], p.initial_packed()[None])[0]
+
+    def simulate_many(self, variant: str, requests) -> list:
+        """The runs of ``requests`` as the members of one run, as the reference adapter batches its own
+        (:func:`batched`)."""
+        return batched(requests, self.knob, self.step or variant)
 
     def one_step(self, scenario, variant: str, dt_s: float, y_start):
         step = self.step or get_step(variant)
@@ -437,6 +455,9 @@ class LongRunMutant(EngineAdapter):
         p = scenario.problem
         return run_members(p.members, energy_to_intermediate_step, [dt_s], [n_steps],
                            p.initial_packed()[None])[0]
+
+    def simulate_many(self, variant: str, requests) -> list:
+        return batched(requests, _unchanged, energy_to_intermediate_step)
 
 
 def long_run_mutants() -> dict:

@@ -294,3 +294,43 @@ def test_a_planted_variant_lookup_is_counted(tmp_path):
                        "import engines as E\n\n\ndef f(v):\n    get_adapter('x')\n    return r(v), "
                        "E.split_variant(v), E.get_adapter(v)\n")
     assert _variant_lookups(planted) == [(7, "resolve"), (7, "split_variant")]
+
+
+#: Distributions whose import starts JAX (its threads, its compiler): a test module importing one at its top
+#: does so at collection, in every pytest-xdist worker, and before the sweeps that later tests fork.
+JAX_IMPORTS = ("jax", "jaxlib", "jaxsim", "brax", "mujoco.mjx", "genesis")
+
+
+def _collection_imports_of_jax(path: Path) -> list:
+    """The module-level statements of a test file that import a JAX distribution: ``import``/``from`` and
+    ``pytest.importorskip(...)`` outside any function or class."""
+    found = []
+    for node in ast.parse(path.read_text()).body:
+        for sub in ast.walk(node):
+            if isinstance(sub, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef, ast.Lambda)):
+                break
+            names = []
+            if isinstance(sub, ast.Import):
+                names = [a.name for a in sub.names]
+            elif isinstance(sub, ast.ImportFrom) and sub.module and not sub.level:
+                names = [sub.module]
+            elif (isinstance(sub, ast.Call) and getattr(sub.func, "attr", "") == "importorskip" and sub.args
+                  and isinstance(sub.args[0], ast.Constant)):
+                names = [sub.args[0].value]
+            found += [f"{path.relative_to(ROOT)}:{sub.lineno} {n}" for n in names
+                      if any(n == j or n.startswith(j + ".") for j in JAX_IMPORTS)]
+    return found
+
+
+def test_no_test_module_starts_jax_at_collection():
+    """JAX-based engines are imported by the tests that run them (importlib.util.find_spec to skip where one
+    is not installed), never at a test module's top (brax's importorskip cost every worker 4 CPU s)."""
+    found = [f for p in sorted((ROOT / "tests").rglob("*.py")) for f in _collection_imports_of_jax(p)]
+    assert not found, found
+
+
+def test_a_planted_collection_import_of_jax_is_found(tmp_path, monkeypatch):
+    f = ROOT / "tests" / "x.py"
+    monkeypatch.setattr(Path, "read_text", lambda self: 'import pytest\npytest.importorskip("brax")\n'
+                        'def f():\n    import jax\n')
+    assert _collection_imports_of_jax(f) == [f"{f.relative_to(ROOT)}:2 brax"]

@@ -4,6 +4,7 @@
 The default run plants a few bugs, each swept on the scenario that exposes it; ``-m slow`` sweeps the
 whole catalog for every mutant and reports the mutation score.
 """
+import numpy as np
 import pytest
 
 from cross_checks.cli.sweep import _gate_failures
@@ -69,3 +70,24 @@ def test_every_planted_bug_is_caught_by_a_catalog_sweep(name, tmp_path, monkeypa
     _need(m.swept)
     fails = _gate_failures_of_sweep(tmp_path, catalog_names(), m.swept, jobs=2)
     assert fails, f"{m.name} ({m.bug}) was not caught by a sweep of the catalog"
+
+
+def test_mutants_run_batched_as_they_run_alone():
+    """A sweep hands a reference mutant a ladder at once (MutantAdapter.simulate_many, mutants.batched, one
+    batch as the reference adapter's own); every run of it is the run alone, bit for bit, for every reference
+    mutant (its broken step or knob) and the long-run mutants: rungs of different lengths on each scenario
+    that exposes it, and two scenarios in one batch."""
+    from cross_checks.engines.base import RunRequest
+
+    from .mutants import LongRunMutant
+    adapters = [(m.adapter, m.exposed_by) for m in MUTANTS if m.adapter is not None]
+    adapters.append((LongRunMutant("planted", None, "a batch"), ("tennis_racket", "spring_pendulum")))
+    for adapter, exposed in adapters:
+        (variant,) = adapter.variants
+        scs = [load_scenario(s) for s in exposed] + [load_scenario("spring_pendulum")]
+        reqs = [RunRequest(sc, dt, min(sc.n_steps(dt), 20 + 9 * k))
+                for sc in scs for k, dt in enumerate(sc.dt_ladder_s[:3])]
+        for r, run in zip(reqs, adapter.simulate_many(variant, reqs)):
+            alone = adapter.simulate(r.scenario, variant, r.dt_s, r.n_steps)
+            assert run.message == alone.message and run.diverged_at_s == alone.diverged_at_s
+            assert np.array_equal(run.t_s, alone.t_s) and np.array_equal(run.y, alone.y), (adapter.name, r)

@@ -107,11 +107,21 @@ def cbody(tmp_path_factory):
 
 @pytest.mark.first   # among the longest tests (tests/conftest.py)
 @pytest.mark.parametrize("which", ["good", "broken"])
-def test_check_sweep_assert_engine_and_fuzz_agree_on_an_engine_file(cbody, tmp_path, capsys, which):
+def test_check_sweep_assert_engine_and_fuzz_agree_on_an_engine_file(cbody, tmp_path, capsys, which,
+                                                                    monkeypatch):
     """The same engine file through `rbcheck check` (a CSV of its run), `rbcheck sweep`, `assert_engine` and
     `rbcheck fuzz`: the correct build passes all four, the broken one fails all four."""
     from cross_checks.cli import main
+    from cross_checks.fuzz import campaign
     from cross_checks.testing import assert_engine
+    # the fuzz's one batch of 16 cases, not 64, and one failure shrunk for at most 1 s, not up to 6 for 60 s
+    # each (each case a ladder of the engine file's runs, a process each: most of this test's time): the sign
+    # flip of the broken build shows in every case that tumbles, a failure found is exit 1 however far it was
+    # shrunk, and what the fuzz's search finds and how it shrinks it is tests/cross_checks/fuzz's to test
+    # (test_campaign.py sets these too)
+    monkeypatch.setattr(campaign, "BATCH", 16)
+    monkeypatch.setattr(campaign, "MAX_SHRUNK", 1)
+    monkeypatch.setattr(campaign, "SHRINK_S", 1.0)
     built, scen = cbody
     name = "cbody" if which == "good" else "cbody_broken"
     ef, variant, correct = str(built[which]), f"{name}:euler", which == "good"

@@ -16,6 +16,7 @@ from cross_checks import engines
 from cross_checks.engines import declared_traits
 from cross_checks.engines.base import EngineAdapter, Variant
 from cross_checks.engines.reference import ReferenceAdapter
+from reference_sim.forces import Members
 from reference_sim.integrators import ImplicitSolveError, get_step
 from reference_sim.simulate import run_members
 
@@ -62,6 +63,19 @@ class Float32Adapter(EngineAdapter):
         p = scenario.problem
         y0 = to_float32(p.initial_packed()[None])
         return run_members(self.knob(p.members), self._f32_step, [dt_s], [n_steps], y0)[0]
+
+    def simulate_many(self, variant: str, requests) -> list:
+        """The runs of ``requests`` as the members of one run (``run_members``), as the reference adapter
+        batches its own: each member's run is :meth:`simulate`'s, bit for bit (every row of the definition
+        advances on its own; tests/cross_checks/analysis/test_precision.py asserts it for these schemes), and
+        the definition's Python steps are taken once for all the runs of a ladder instead of once per run (a
+        ladder's rungs are steps of T/Δt: the finest alone is half of the steps of all of them)."""
+        problems = [r.scenario.problem for r in requests]
+        if not problems:
+            return []
+        y0 = to_float32(np.array([p.initial_packed() for p in problems]))
+        return run_members(self.knob(Members.stack(problems)), self._f32_step, [r.dt_s for r in requests],
+                           [r.n_steps for r in requests], y0)
 
     def one_step(self, scenario, variant: str, dt_s: float, y_start):
         with np.errstate(all="ignore"):

@@ -6,6 +6,7 @@ import os
 import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 
 import pytest
@@ -99,3 +100,36 @@ def test_the_reference_s_kernels_with_their_cache_cut_in_half_give_the_same_traj
     assert cut.returncode == 0, cut.stderr
     assert (tmp_path / "cut.csv").read_text() == (tmp_path / "whole.csv").read_text()
     assert [ln for ln in cut.stderr.splitlines() if "numba's cache folder" in ln and "skipped" in ln]
+
+
+#: Loads tinyk like RUN, its first call made after ``sys.argv[3]`` seconds (a slow compile, as the reference's
+#: kernels' minute), and prints whether this process compiled f or loaded it from the cache.
+RACE = textwrap.dedent("""
+    import sys, time
+    sys.path.insert(0, sys.argv[1])
+    import tinyk_flag
+    from reference_sim.compiled import load_compiled
+    open(sys.argv[2], "w").close()   # started
+    m = load_compiled("tinyk", lambda m: (time.sleep(float(sys.argv[3])), m.f(1.0)), tinyk_flag.FLAG)
+    s = m.f.stats
+    print("compiled" if s.cache_misses else "loaded" if s.cache_hits else "?")
+""")
+
+
+def test_a_process_that_starts_while_another_compiles_waits_and_loads_its_cache(module, tmp_path):
+    """Both workers of `pytest -n 2` in a fresh clone (and the sweeps their tests start) used to compile the
+    reference's kernels each (a minute of CPU each): the second to come now waits for the first's cache
+    (load_compiled's lock beside the cache files) and loads it. Here the first takes 2 s to compile and the
+    second starts during that time."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    cwd = Path(__file__).parents[2]
+    first = subprocess.Popen([sys.executable, "-c", RACE, str(module), str(tmp_path / "a"), "2.0"], env=env,
+                             cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    while not (tmp_path / "a").exists() and first.poll() is None:
+        time.sleep(0.01)
+    time.sleep(0.5)   # the first is inside its first calls
+    second = subprocess.run([sys.executable, "-c", RACE, str(module), str(tmp_path / "b"), "0"], env=env,
+                            cwd=cwd, capture_output=True, text=True, timeout=120)
+    out, err = first.communicate(timeout=120)
+    assert first.returncode == 0 and second.returncode == 0, err + second.stderr
+    assert (out.strip(), second.stdout.strip()) == ("compiled", "loaded"), err + second.stderr

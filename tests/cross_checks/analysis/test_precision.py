@@ -180,6 +180,21 @@ def test_a_correct_float32_scheme_passes_on_the_whole_catalog(scheme, tmp_path, 
     assert _gate_failures(_sweep(tmp_path, catalog_names(), [v], load=load_scenario)) == []
 
 
+@pytest.mark.parametrize("name", [*SCHEMES, *F32_MUTANTS])
+def test_a_float32_schemes_runs_batched_are_its_runs_one_by_one(name, monkeypatch):
+    """The sweeps above run each ladder as one batch (Float32Adapter.simulate_many); every run of it is the
+    run alone, bit for bit: rungs of different lengths on the scheme's or the mutant's scenario."""
+    from cross_checks.engines.base import RunRequest
+    m = BY_NAME.get(name)
+    adapter = Float32Adapter("batched", m.variant, m) if m else Float32Adapter("batched", name)
+    sc = load_scenario(m.exposed_by[0] if m else "applied_torque")
+    reqs = [RunRequest(sc, dt, min(sc.n_steps(dt), 30 + 17 * k)) for k, dt in enumerate(sc.dt_ladder_s)]
+    for r, run in zip(reqs, adapter.simulate_many(adapter.scheme, reqs)):
+        alone = adapter.simulate(r.scenario, adapter.scheme, r.dt_s, r.n_steps)
+        assert run.message == alone.message and run.diverged_at_s == alone.diverged_at_s
+        assert np.array_equal(run.t_s, alone.t_s) and np.array_equal(run.y, alone.y), (name, r.dt_s)
+
+
 def test_the_float32_state_is_float32():
     y = np.array([0.1, 1.0 / 3.0, 2.0 ** 30 + 1.0])
     assert np.array_equal(to_float32(y).astype(np.float32).astype(np.float64), to_float32(y))

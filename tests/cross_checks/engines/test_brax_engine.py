@@ -3,6 +3,7 @@
 its hand-derived step, the forces brax can and cannot take, divergence, batching, the compile time it reports,
 and the declared order on catalog scenarios. JAX compiles each executable once per process (and keeps it in
 rbcheck's persistent cache), so the tests share batch sizes (one_step pads to 64 rows, runs to 1)."""
+import importlib.util
 import math
 import os
 import subprocess
@@ -14,7 +15,11 @@ import pytest
 
 from tests.helpers import tolerances as tol
 
-pytest.importorskip("brax", reason="brax is not installed (pip install -e '.[brax]')")
+# never `importorskip("brax")`: that imports JAX at COLLECTION (4 CPU s, in every xdist worker, also the one
+# that runs none of these tests), in the process whose later tests fork sweeps; JAX starts in the tests below
+# that need it (tests/test_architecture.py::test_no_test_module_starts_jax_at_collection)
+if importlib.util.find_spec("brax") is None:
+    pytest.skip("brax is not installed (pip install -e '.[brax]')", allow_module_level=True)
 
 from cross_checks.engines import brax_engine as be  # noqa: E402
 from cross_checks.engines.base import RunRequest  # noqa: E402

@@ -215,9 +215,14 @@ class _CrashingEngine(EngineAdapter):
 def test_a_batch_whose_worker_dies_is_reported_as_such_and_the_others_are_judged(tmp_path, cache, monkeypatch,
                                                                                   clean_registry):
     from cross_checks import engines
+    from reference_sim import compiled
     monkeypatch.setattr(campaign, "BATCH", 2)   # set before the pool forks: the workers inherit it
     engines.register_adapter(_CrashingEngine(), "tests/cross_checks/fuzz/test_campaign.py")
-    results = campaign.search(0, [resolve("crashing:course")], budget_s=2.0, jobs=2,
+    # the budget counts from before search loads the reference's kernels (a minute where numba compiles
+    # them): loaded here first, 0.5 s is ample for the window's two batches to start, and the search stops
+    # soon after instead of keeping both workers busy with batches 2, 3, … for 2 s
+    compiled.warm()
+    results = campaign.search(0, [resolve("crashing:course")], budget_s=0.5, jobs=2,
                               cache_root=str(cache), use_cache=False)
     assert [r["batch"] for r in results][:2] == [0, 1]   # both started at once (a window of 2 workers)
     for r in results:
