@@ -49,7 +49,8 @@ _FIG_CAPTIONS = {
                    "triangles show slopes 1, 2 and 4. The legends list the fitted orders.",
     "local": "One-step (local) error against Δt: every step restarted from the reference state; an "
              "order-p scheme shows slope p + 1.",
-    "work": "Work-precision: final error against the wall time of each run of the ladder, every variant "
+    "work": "Work-precision: final error against the engine's own time of each run of the ladder (the "
+            "ranking's cost: the time inside its steps, rbcheck's own left out), every variant "
             "on one axis in its own style (hue: engine family). The ranking page reads these curves: "
             "which variant is most accurate at a common cost, and cheapest at a common accuracy.",
     "polhode": "The polhode: the angular momentum L seen from the body (in its principal axes e1 minor, "

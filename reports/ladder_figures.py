@@ -3,7 +3,8 @@ each variant in its style: reports.canvas), drawn only when the scenario ran a l
 
 ``convergence``    final error vs Δt (log-log) with the fitted points and slope triangles
 ``local``          one-step (local) error vs Δt (log-log), same layout
-``work``           work-precision: final error vs wall time, every variant on one axis
+``work``           work-precision: final error vs the engine's own time (the ranking's cost), every variant
+                   on one axis
 
 Each ``fig_*(res, sc, styles, path[, mode])`` draws its figure and returns whether it carried anything;
 what it left out is said in ``canvas.NOTES[(sc, kind)]`` (docs/results.md, "The report").
@@ -39,6 +40,7 @@ from reports.canvas import (
 )
 from reports.data import LABELS
 from reports.glance import families, order_text
+from reports.ranking import run_cost_s
 
 __all__ = ["fig_ladder", "fig_work"]
 
@@ -197,7 +199,7 @@ def fig_work(res, sc, styles, path):
     axes_h = 3.6
     h = 0.75 + axes_h + 0.6 + leg_h + 0.15
     fig.set_size_inches(width, h)
-    fig.suptitle(f"{sc}: work-precision — final error vs wall time of each run of the ladder", fontsize=11,
+    fig.suptitle(f"{sc}: work-precision — final error vs the engine's time of each run", fontsize=11,
                  x=0.01, ha="left")
     same = []
     for ax, q in zip(axes[0], qs):
@@ -206,7 +208,7 @@ def fig_work(res, sc, styles, path):
         for v in drawn_vs:
             rows = sorted([r for r in res.rows_for(sc, v) if r["in_ladder"] and r["status"] == "ok"],
                           key=lambda r: -r["dt"])
-            w = np.array([r["wall_s"] for r in rows], dtype=float)
+            w = np.array([run_cost_s(r) for r in rows], dtype=float)   # the ranking's cost, not wall_s
             e = np.array([r[col] for r in rows], dtype=float)
             ok = np.isfinite(w) & np.isfinite(e) & (w > 0)
             if not ok.any():
@@ -223,7 +225,7 @@ def fig_work(res, sc, styles, path):
         if ax.has_data():
             ax.autoscale_view()
         panel_title(ax, LABELS[q])
-        ax.set_xlabel("wall time of the run (s)", fontsize=8)
+        ax.set_xlabel("time inside the engine, whole run (s)", fontsize=8)
         ax.set_ylabel(f"final {LABELS[q]} error ({UNITS[q]})", fontsize=8)
     fig.subplots_adjust(left=0.75 / width, right=1.0 - 0.2 / width, top=1.0 - 0.75 / h,
                         bottom=(0.6 + leg_h + 0.15) / h, wspace=0.22)

@@ -7,8 +7,8 @@ Figures (``plots/<scenario>__<kind>.png``), by module:
   reference), ``errors`` (error vs time, log–log) and ``conservation`` (|relative drift| of the conserved
   quantities vs time, log–log), at the default Δt;
 - reports.ladder_figures: ``convergence`` (final error vs Δt, log–log, with the fitted points and slope
-  triangles), ``local`` (one-step error vs Δt) and ``work`` (work-precision: final error vs wall time,
-  every variant on one axis), for a scenario with a Δt ladder.
+  triangles), ``local`` (one-step error vs Δt) and ``work`` (work-precision: final error vs the engine's own
+  time, every variant on one axis), for a scenario with a Δt ladder.
 
 (The polhode figure, ``plots/<scenario>__polhode.png``, is reports.polhode's, on the same canvas.)
 

@@ -18,6 +18,7 @@ from PIL import Image
 import reports
 from reports import canvas, plots
 from reports.data import load_results
+from reports.ranking import run_cost_s
 from tests.helpers.sweeps import built_once
 from tests.reports.test_browser import _browser_sweep
 from tests.reports.test_report import _hostile_sweep
@@ -105,6 +106,22 @@ def test_a_figure_drawn_after_one_of_more_or_fewer_rows_has_the_pixels_of_a_fres
     bottom = min(ax.get_position().y0 for ax in shown)
     assert [ax.xaxis.get_tick_params()["labelbottom"] for ax in shown] == \
         [ax.get_position().y0 == bottom for ax in shown]      # x labels under the bottom row only
+
+
+def test_the_work_figure_puts_each_run_at_the_engines_own_time_as_the_ranking_does(browser_results, tmp_path,
+                                                                                   monkeypatch):
+    """Issue 43: a run's cost is the time inside the engine (ranking.run_cost_s: ``engine_s``), not its wall
+    time, which holds rbcheck's own; a scenario's work-precision figure reads the cost the ranking reads."""
+    res = load_results(browser_results)
+    plots.release()
+    _, fig = _draw_keeping(res, "spin_only", "work", tmp_path, monkeypatch)
+    rows = [r for v in res.variants for r in res.rows_for("spin_only", v)
+            if r["in_ladder"] and r["status"] == "ok"]
+    assert all(r["wall_s"] > run_cost_s(r) for r in rows)   # the two differ: the figure tells which it drew
+    cost = [run_cost_s(r) for r in rows]
+    for ax in fig.axes[:1]:
+        assert (ax.dataLim.x0, ax.dataLim.x1) == (pytest.approx(min(cost)), pytest.approx(max(cost)))
+        assert ax.get_xlabel().startswith("time inside the engine")
 
 
 def test_a_ladder_row_at_round_off_is_said_and_a_row_above_its_floor_is_drawn(hostile_results, tmp_path):
