@@ -133,7 +133,8 @@ def test_check_sweep_assert_engine_and_fuzz_agree_on_an_engine_file(cbody, tmp_p
     outcomes["sweep"] = main(["sweep", str(scen), "--engines", variant, "--engine-file", ef, "--jobs", "1",
                               "--no-cache", "--out", str(tmp_path / "sweep")])
     try:
-        assert_engine(variant, [scen], engine_file=ef)
+        with private_cache(tmp_path / "cache"):   # not the user's rbcheck cache: nothing read or left
+            assert_engine(variant, [scen], engine_file=ef)
         outcomes["assert_engine"] = 0
     except AssertionError:
         outcomes["assert_engine"] = 1
