@@ -487,10 +487,9 @@ def overhead_rows(n_steps, repeats, variants=None) -> list:
         finally:
             if loop is not None:
                 loop.close()
-        step = None if None in own else med(own)
-        out.append({"variant": name, "engine_us_per_step": med(mine) if mine else step,
-                    "engine_step_us_per_step": step,
-                    "own_loop_us_per_step": med(mine) if mine else None,
+        step, loop_us = (None if None in own else med(own)), (med(mine) if mine else None)
+        out.append({"variant": name, "engine_us_per_step": step if loop_us is None else loop_us,
+                    "engine_step_us_per_step": step, "own_loop_us_per_step": loop_us,
                     "rbcheck_us_per_step": med(whole),
                     "rbcheck_own_us_per_step": (med(np.subtract(whole, mine)) if mine else None)})
     return out

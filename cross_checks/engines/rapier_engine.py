@@ -110,8 +110,8 @@ class RapierWorld(rpw.Bodies, World):
         self.n, self.live, self._next_end = 0, [True] * len(self.bodies), min(self.ends, default=math.inf)
         self._given = None   # many bodies: the (f_W, τ_W) last given to the bodies (Rapier keeps them)
 
-    def packed_row(self, raw):   # the read itself: a few bodies' plain floats, many bodies' decoded array
-        return raw if self.layout is not None or self.float_reads else World.packed_row(self, raw)
+    def packed_row(self, raw):   # a read is packed rows already (plain floats, or many bodies' decoded array)
+        return raw
 
     def apply(self, f_W, tau_W):
         """Many bodies: :meth:`Bodies.apply`'s replacement, made only where a body's force or torque
