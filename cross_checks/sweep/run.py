@@ -175,37 +175,51 @@ def run_sweep(scenarios, variants, out_dir, *, jobs: int | None = None, use_cach
                                  compile_s=compile_s, invariance=invariance, show=show)
         runner.close()
         runner = None
-        report_error = None
-        if finish is not None:  # e.g. the report, drawn from the saved files only
-            try:
-                finish(staging)
-            except Exception as exc:  # noqa: BLE001 - a report-side bug never throws the results away
-                if interrupted_by():   # a signal's exception Python turned into another (in an import)
-                    raise interrupted_exception(interrupted_by()) from None
-                report_error = exc
-        write_marker(staging)
-        fix_permissions(staging)
-        replace_dir(staging, out)
+        report_error = _publish(staging, out, finish)
         staging = None
         if report_error is not None:
             raise ReportFailed(summary, out, report_error) from report_error
         return summary
     except BaseException as exc:
-        # the clean-up runs to its end whatever signal comes meanwhile (timeout forwarding Ctrl-C, a worker
-        # killed by the same SIGTERM breaking the pool before the signal reached this line)
-        with signals_deferred() as pending:
-            if runner is not None:
-                runner.close(kill=True)
-            replaced = staging is None or not staging.exists()   # after the swap: the new results complete
-            if staging is not None:
-                shutil.rmtree(staging, ignore_errors=True)
-            if isinstance(exc, BrokenProcessPool) and not pending:
-                await_group_signal(pending)   # workers killed by a SIGTERM sent to the whole group
-        if isinstance(exc, KeyboardInterrupt) or pending:
-            terminated = isinstance(exc, Terminated) or (not isinstance(exc, KeyboardInterrupt)
-                                                         and pending[0] == signal.SIGTERM)
-            raise SweepInterrupted(terminated, replaced=replaced) from None
+        _clean_up(exc, runner, staging)   # SweepInterrupted for a signal
         raise
+
+
+def _publish(staging, out, finish):
+    """Draw the report in the complete results ``staging`` (``finish``, from the saved files only), mark them
+    and put them in place of ``out``. Returns the report's error, or None: a report-side bug never throws the
+    results away (a signal's exception that Python turned into another, in an import, is the signal's)."""
+    report_error = None
+    if finish is not None:
+        try:
+            finish(staging)
+        except Exception as exc:  # noqa: BLE001 - kept, raised by the caller once the results are in place
+            if interrupted_by():
+                raise interrupted_exception(interrupted_by()) from None
+            report_error = exc
+    write_marker(staging)
+    fix_permissions(staging)
+    replace_dir(staging, out)
+    return report_error
+
+
+def _clean_up(exc, runner, staging) -> None:
+    """After ``exc`` stopped the sweep: the workers killed and the staging directory removed (``out`` as it
+    was, or already the complete new results), to its end whatever signal comes meanwhile (timeout forwarding
+    Ctrl-C, a worker killed by the same SIGTERM breaking the pool before the signal reached here). Raises
+    SweepInterrupted for Ctrl-C or a signal; otherwise returns, for the caller to re-raise ``exc``."""
+    with signals_deferred() as pending:
+        if runner is not None:
+            runner.close(kill=True)
+        replaced = staging is None or not staging.exists()   # after the swap: the new results complete
+        if staging is not None:
+            shutil.rmtree(staging, ignore_errors=True)
+        if isinstance(exc, BrokenProcessPool) and not pending:
+            await_group_signal(pending)   # workers killed by a SIGTERM sent to the whole group
+    if isinstance(exc, KeyboardInterrupt) or pending:
+        terminated = isinstance(exc, Terminated) or (not isinstance(exc, KeyboardInterrupt)
+                                                     and pending[0] == signal.SIGTERM)
+        raise SweepInterrupted(terminated, replaced=replaced) from None
 
 
 def _load_before_forking(variants, show: bool = False) -> float:
